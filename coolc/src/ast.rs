@@ -1,0 +1,837 @@
+//! The abstract syntax tree of `.cool` descriptions.
+//!
+//! The parser (`syntax`) builds these types from pest pairs; everything after it
+//! (`resolve`, `check`, `lower`) reads them. The tree is deliberately permissive: it
+//! can hold things the language forbids (an `instance` inside an `atomic`, two
+//! `timing` blocks, a `when` rule in an atomic automaton) so that the checker, not the
+//! parser, rejects them with a precise diagnostic.
+//!
+//! **Invariant:** every node that a diagnostic may point at carries a [`Span`] of byte
+//! offsets into the text of the file it came from ([`File::id`]).
+
+use std::fmt;
+
+/// Identifies one source file inside a [`crate::source::SourceMap`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct FileId(pub u32);
+
+/// A half-open byte range `start..end` in one source file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct Span {
+    /// First byte of the node.
+    pub start: usize,
+    /// One past the last byte of the node.
+    pub end: usize,
+}
+
+impl Span {
+    /// A span from `start` to `end`.
+    pub fn new(start: usize, end: usize) -> Self {
+        Span { start, end }
+    }
+
+    /// The smallest span covering both `self` and `other`.
+    pub fn join(self, other: Span) -> Span {
+        Span::new(self.start.min(other.start), self.end.max(other.end))
+    }
+
+    /// Length in bytes.
+    pub fn len(self) -> usize {
+        self.end - self.start
+    }
+
+    /// True for an empty span.
+    pub fn is_empty(self) -> bool {
+        self.start == self.end
+    }
+}
+
+impl From<Span> for miette::SourceSpan {
+    fn from(span: Span) -> Self {
+        (span.start, span.len()).into()
+    }
+}
+
+/// A name as written, with where it was written.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct Ident {
+    /// The identifier text.
+    pub name: String,
+    /// Where it appears.
+    pub span: Span,
+}
+
+impl fmt::Display for Ident {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+/// `///` doc comment lines attached to the next item or member, without the `///`
+/// and with one leading space removed. Empty when there is none.
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
+pub struct Doc(pub Vec<String>);
+
+impl Doc {
+    /// True when no doc comment was written.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+/// A string literal, unescaped, with its span (quotes included).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StrLit {
+    /// The unescaped contents.
+    pub value: String,
+    /// Where it appears, quotes included.
+    pub span: Span,
+}
+
+/// A non-negative integer literal used where only a count or size makes sense.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct IntLit {
+    /// The value as written.
+    pub value: u64,
+    /// Where it appears.
+    pub span: Span,
+}
+
+/// One parsed source file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct File {
+    /// The file within the source map.
+    pub id: FileId,
+    /// The items in source order.
+    pub items: Vec<Item>,
+}
+
+/// A top-level item.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Item {
+    /// `import "other.cool";`
+    Import(Import),
+    /// `packet Name { field: Type, ... }`
+    Packet(Packet),
+    /// `enum Name { A, B }`
+    Enum(EnumDef),
+    /// `extern packet Name = "rust::Path";`
+    ExternPacket(ExternPacket),
+    /// `converter Name: From -> To;`
+    Converter(Converter),
+    /// `atomic Name { ... }` or `compound Name { ... }`
+    Component(Component),
+}
+
+/// `import "path.cool";`: the path is relative to the importing file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Import {
+    /// The path as written.
+    pub path: StrLit,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// `packet Name { field: Type = default, ... }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Packet {
+    /// Doc comment.
+    pub doc: Doc,
+    /// The packet type name.
+    pub name: Ident,
+    /// Fields in declaration order.
+    pub fields: Vec<Field>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// `name: Type` or `name: Type = default`, in packets and `configuration` blocks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Field name.
+    pub name: Ident,
+    /// Declared type.
+    pub ty: Type,
+    /// Default value, if written.
+    pub default: Option<Expr>,
+    /// The whole field.
+    pub span: Span,
+}
+
+/// `enum Name { A, B, C }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnumDef {
+    /// Doc comment.
+    pub doc: Doc,
+    /// The enum type name.
+    pub name: Ident,
+    /// Variants in declaration order.
+    pub variants: Vec<Variant>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// One enum variant.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Variant name.
+    pub name: Ident,
+}
+
+/// `extern packet Name = "crate::Type";`
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExternPacket {
+    /// Doc comment.
+    pub doc: Doc,
+    /// The name used in descriptions.
+    pub name: Ident,
+    /// The Rust type path it stands for.
+    pub rust_path: StrLit,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// `converter Name: From -> To;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Converter {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Converter name.
+    pub name: Ident,
+    /// Packet type it reads.
+    pub from: Type,
+    /// Packet type it produces.
+    pub to: Type,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// A type as written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Type {
+    /// What kind of type.
+    pub kind: TypeKind,
+    /// Where it appears.
+    pub span: Span,
+}
+
+/// The shapes a type can take.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TypeKind {
+    /// A primitive type.
+    Prim(Prim),
+    /// A packet, enum or extern packet, by name.
+    Named(Ident),
+    /// `[T]`
+    List(Box<Type>),
+    /// `[T; N]`
+    Array(Box<Type>, IntLit),
+    /// `T?`
+    Optional(Box<Type>),
+}
+
+/// The primitive types of the language.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Prim {
+    /// `bool`
+    Bool,
+    /// `i8`
+    I8,
+    /// `i16`
+    I16,
+    /// `i32`
+    I32,
+    /// `i64`
+    I64,
+    /// `u8`
+    U8,
+    /// `u16`
+    U16,
+    /// `u32`
+    U32,
+    /// `u64`
+    U64,
+    /// `f32`
+    F32,
+    /// `f64`
+    F64,
+    /// `String`
+    String,
+    /// `Time`: a point in time.
+    Time,
+    /// `Duration`: a span of time.
+    Duration,
+}
+
+/// `atomic Name { ... }` or `compound Name { ... }`.
+///
+/// Both kinds share one member list; the checker reports members that the kind does
+/// not allow (an `instance` in an atomic, an `automaton` in a compound).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Component {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Atomic or compound.
+    pub kind: ComponentKind,
+    /// Span of the `atomic`/`compound` keyword.
+    pub kind_span: Span,
+    /// Component type name.
+    pub name: Ident,
+    /// Members in source order.
+    pub members: Vec<Member>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// The two kinds of component.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ComponentKind {
+    /// Embodied as one thread.
+    Atomic,
+    /// A composition of instances under a supervisor.
+    Compound,
+}
+
+/// One member of a component body.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Member {
+    /// `link crate "name" = "version";` / `link crate "name" = { ... };` / `link system "m";`
+    Link(Link),
+    /// `configuration { field: Type = default; ... }`
+    Configuration(Configuration),
+    /// `observable`/`controllable`/`local` variables, own or mapped.
+    Variable(Variable),
+    /// `input name: kind<T>(...) [pull];` or, in a compound, `input name = inst.port;`
+    Input(Input),
+    /// `output name: kind<T> [pull];` or, in a compound, `output name = inst.port;`
+    Output(Output),
+    /// `timing { ... }`
+    Timing(Timing),
+    /// `exception name ["description"] [{ plan }];`
+    Exception(Exception),
+    /// `automaton { ... }` (atomic) or `supervisor { ... }` (compound).
+    Automaton(Automaton),
+    /// `instance name: Component [substitutes other] [on "node"] [{ overrides }];`
+    Instance(Instance),
+    /// `redundant a, b, ...;`
+    Redundant(Redundant),
+    /// `connect a.out -> b.in [via Converter];`
+    Connect(Connect),
+    /// `on error instance: policy;`
+    OnError(OnError),
+    /// `recovery { retry every D; deadline D; }`
+    Recovery(Recovery),
+}
+
+/// A `link` member: a dependency of the generated crate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Link {
+    /// Crate or system library.
+    pub kind: LinkKind,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// What a `link` names.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LinkKind {
+    /// `link crate "name" = spec;`: a Cargo dependency.
+    Crate {
+        /// Crate name.
+        name: StrLit,
+        /// Version requirement or inline table.
+        spec: CrateSpec,
+    },
+    /// `link system "m";`: a native library, linked from a build script.
+    System {
+        /// Library name as given to the linker.
+        name: StrLit,
+    },
+}
+
+/// The right-hand side of `link crate "name" = ...`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CrateSpec {
+    /// `"4"`: a version requirement.
+    Version(StrLit),
+    /// `{ version = "0.33", features = ["x"] }`: TOML-like key/value pairs.
+    Table(Vec<TableEntry>, Span),
+}
+
+/// `key = value` inside an inline crate table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableEntry {
+    /// The key.
+    pub key: Ident,
+    /// The value: a string, bool, integer or list of strings.
+    pub value: Expr,
+    /// The whole entry.
+    pub span: Span,
+}
+
+/// `configuration { field: Type = default; ... }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Configuration {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Configuration fields.
+    pub fields: Vec<Field>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// How a variable is exposed (paper 3.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VarKind {
+    /// Published on the monitoring port `m`.
+    Observable,
+    /// Set through the control port `c`.
+    Controllable,
+    /// Internal.
+    Local,
+}
+
+/// `observable name: Type [= default];`, or in a compound `observable name = inst.var;`.
+///
+/// An own variable has `ty`; a mapped one has no `ty` and a path `value`. The checker
+/// decides which it is and rejects other combinations.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variable {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Observable, controllable or local.
+    pub kind: VarKind,
+    /// Span of the kind keyword.
+    pub kind_span: Span,
+    /// Variable name.
+    pub name: Ident,
+    /// Declared type, if any.
+    pub ty: Option<Type>,
+    /// Default value or mapping path, if any.
+    pub value: Option<Expr>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// An input port declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Input {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Port name.
+    pub name: Ident,
+    /// The port's kind, or the exported port it maps to.
+    pub def: InputDef,
+    /// Span of `pull`, when the input uses the pull model.
+    pub pull: Option<Span>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// What an input port is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InputDef {
+    /// `tick`
+    Tick,
+    /// `fifo<T>(n)` or `fifo<T>(n, policy)`
+    Fifo {
+        /// Packet type.
+        ty: Type,
+        /// Queue length.
+        size: IntLit,
+        /// Overflow policy name (`reject`, `drop_oldest`, `block`), if written.
+        policy: Option<Ident>,
+    },
+    /// `ufifo<T>(n)` or `ufifo<T>(n, max m)`
+    Ufifo {
+        /// Initial queue length (and growth step).
+        size: IntLit,
+        /// Packet type.
+        ty: Type,
+        /// Optional cap on growth.
+        max: Option<IntLit>,
+    },
+    /// `last<T>`
+    Last(Type),
+    /// `poster<T>`
+    Poster(Type),
+    /// `= instance.port` in a compound: an exported input.
+    Export(PortRef),
+}
+
+/// An output port declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Port name.
+    pub name: Ident,
+    /// The port's kind, or the exported port it maps to.
+    pub def: OutputDef,
+    /// Span of `pull`, when the output answers pull requests (a user stub computes
+    /// each answer).
+    pub pull: Option<Span>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// What an output port is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum OutputDef {
+    /// `tick`
+    Tick,
+    /// `data<T>`: connects to `last`, `fifo` and `ufifo` inputs.
+    Data(Type),
+    /// `poster<T>`
+    Poster(Type),
+    /// `= instance.port` in a compound: an exported output.
+    Export(PortRef),
+}
+
+/// `instance.port`, or a bare `port` meaning the compound's own port.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PortRef {
+    /// The instance, when written.
+    pub instance: Option<Ident>,
+    /// The port.
+    pub port: Ident,
+    /// The whole reference.
+    pub span: Span,
+}
+
+/// `timing { period ...; max_response ...; priority ...; quality ...; }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Timing {
+    /// Entries in source order.
+    pub entries: Vec<TimingEntry>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// One entry of a `timing` block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TimingEntry {
+    /// `period 10ms;` or `period 10ms..40ms;` (frequencies allowed).
+    Period(Interval),
+    /// `max_response 20ms;`
+    MaxResponse(Expr),
+    /// `priority 5;`
+    Priority(Expr),
+    /// `quality full, reduced, minimal;` best first.
+    Quality(Vec<Ident>, Span),
+}
+
+/// `lo` or `lo..hi`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Interval {
+    /// Nominal (lower) bound.
+    pub lo: Expr,
+    /// Upper bound, if an interval was written.
+    pub hi: Option<Expr>,
+    /// The whole interval.
+    pub span: Span,
+}
+
+/// `exception name ["description"] [{ plan }];`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Exception {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Exception name.
+    pub name: Ident,
+    /// Human description, if written.
+    pub description: Option<StrLit>,
+    /// Continuity plan steps, tried in order; empty when there is no plan.
+    pub plan: Vec<PlanStep>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// One step of a continuity plan (paper 3.5).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanStep {
+    /// What the step does.
+    pub kind: PlanKind,
+    /// The whole step.
+    pub span: Span,
+}
+
+/// The continuity plan actions.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PlanKind {
+    /// `retry N every D;`: run the failing section again.
+    Retry {
+        /// How many times.
+        count: IntLit,
+        /// Delay between attempts.
+        every: Expr,
+    },
+    /// `goto STATE;`: move the user automaton.
+    Goto(Ident),
+    /// `ignore;`: log and go on.
+    Ignore,
+    /// `degrade;`: ask adaptation for a lower quality level.
+    Degrade,
+}
+
+/// The user automaton: `automaton { ... }` in an atomic, `supervisor { ... }` in a
+/// compound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Automaton {
+    /// `automaton` or `supervisor`.
+    pub keyword: AutomatonKeyword,
+    /// Span of the keyword.
+    pub keyword_span: Span,
+    /// Every `initial NAME;` written (the checker wants exactly one).
+    pub initial: Vec<Ident>,
+    /// States in source order.
+    pub states: Vec<State>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// Which keyword opened an automaton block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AutomatonKeyword {
+    /// `automaton`
+    Automaton,
+    /// `supervisor`
+    Supervisor,
+}
+
+/// `state name { ... }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// Doc comment.
+    pub doc: Doc,
+    /// State name.
+    pub name: Ident,
+    /// Sections and transitions in source order.
+    pub members: Vec<StateMember>,
+    /// The whole state.
+    pub span: Span,
+}
+
+/// Sections and transitions inside a state.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StateMember {
+    /// `entry;`
+    Entry(Span),
+    /// `exit;`
+    Exit(Span),
+    /// `periodic;` or `periodic 20ms;`
+    Periodic {
+        /// A state-specific period, if written.
+        period: Option<Expr>,
+        /// The whole member.
+        span: Span,
+    },
+    /// `on port -> target;`
+    On {
+        /// The input port whose packet fires the transition.
+        port: Ident,
+        /// Target state.
+        target: Ident,
+        /// The whole member.
+        span: Span,
+    },
+    /// `after D -> target;` or `after D without port -> target;`
+    After {
+        /// The delay.
+        delay: Expr,
+        /// The watched input port, for a watchdog.
+        without: Option<Ident>,
+        /// Target state.
+        target: Ident,
+        /// The whole member.
+        span: Span,
+    },
+    /// `may -> a, b;`: targets the section code itself may choose.
+    May {
+        /// The allowed targets.
+        targets: Vec<Ident>,
+        /// The whole member.
+        span: Span,
+    },
+    /// `when condition -> target;`: a supervisor rule.
+    When {
+        /// A boolean expression over variables.
+        condition: Expr,
+        /// Target state.
+        target: Ident,
+        /// The whole member.
+        span: Span,
+    },
+}
+
+/// `instance name: Component [substitutes other] [on "node"] [{ overrides }];`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// Doc comment.
+    pub doc: Doc,
+    /// Instance name.
+    pub name: Ident,
+    /// The component type instantiated.
+    pub component: Ident,
+    /// The instance this one substitutes, if any.
+    pub substitutes: Option<Ident>,
+    /// The node it runs on, for remote instantiation.
+    pub node: Option<StrLit>,
+    /// `name = value;` overrides of configuration fields or controllable variables.
+    pub overrides: Vec<Override>,
+    /// A `timing { ... }` override.
+    pub timing: Option<Timing>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `name = value;` inside an instance body.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Override {
+    /// Configuration field or controllable variable.
+    pub name: Ident,
+    /// New value.
+    pub value: Expr,
+    /// The whole override.
+    pub span: Span,
+}
+
+/// `redundant a, b;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Redundant {
+    /// The redundant instances.
+    pub members: Vec<Ident>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `connect from -> to [via Converter];`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Connect {
+    /// The output end.
+    pub from: PortRef,
+    /// The input end.
+    pub to: PortRef,
+    /// The converter, if any.
+    pub via: Option<Ident>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `on error instance: policy;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct OnError {
+    /// The instance.
+    pub instance: Ident,
+    /// `propagate`, `restart`, `substitute` or `ignore` (checked later).
+    pub policy: Ident,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `recovery { retry every D; deadline D; }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recovery {
+    /// How often instances in the recovery queue are restarted.
+    pub retry_every: Option<Expr>,
+    /// How long an instance may stay in the queue.
+    pub deadline: Option<Expr>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// An expression: default values, rule conditions, timing values, overrides.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Expr {
+    /// What kind of expression.
+    pub kind: ExprKind,
+    /// Where it appears.
+    pub span: Span,
+}
+
+/// The expression forms.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ExprKind {
+    /// An integer literal (sign is a [`UnaryOp::Neg`]).
+    Int(u64),
+    /// A floating-point literal.
+    Float(f64),
+    /// A string literal, unescaped.
+    Str(String),
+    /// `true` / `false`.
+    Bool(bool),
+    /// A duration literal, in nanoseconds (`250ns 500us 10ms 2s 1min`).
+    Duration(u128),
+    /// A frequency literal, in hertz (`10Hz 1kHz`).
+    Frequency(f64),
+    /// `a`, `a.b`: a variable, instance variable, state or result name, resolved by
+    /// context.
+    Path(Vec<Ident>),
+    /// `Enum::Variant`
+    EnumValue {
+        /// The enum type.
+        enum_name: Ident,
+        /// The variant.
+        variant: Ident,
+    },
+    /// `[a, b, c]`
+    List(Vec<Expr>),
+    /// `[value; n]`
+    Repeat(Box<Expr>, IntLit),
+    /// `none`: the empty optional value.
+    None,
+    /// `!e`, `-e`
+    Unary(UnaryOp, Box<Expr>),
+    /// `a op b`
+    Binary(BinaryOp, Box<Expr>, Box<Expr>),
+}
+
+/// Prefix operators.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum UnaryOp {
+    /// `!`
+    Not,
+    /// `-`
+    Neg,
+}
+
+/// Infix operators, loosest first: `||`, `&&`, comparisons.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BinaryOp {
+    /// `||`
+    Or,
+    /// `&&`
+    And,
+    /// `==`
+    Eq,
+    /// `!=`
+    Ne,
+    /// `<`
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+}
+
+impl BinaryOp {
+    /// The operator as written in `.cool` (and in Rust).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            BinaryOp::Or => "||",
+            BinaryOp::And => "&&",
+            BinaryOp::Eq => "==",
+            BinaryOp::Ne => "!=",
+            BinaryOp::Lt => "<",
+            BinaryOp::Le => "<=",
+            BinaryOp::Gt => ">",
+            BinaryOp::Ge => ">=",
+        }
+    }
+}
