@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}
+{% call m::header(krate.sources_text()) %}{% endcall %}
 //! Generated code of atomic component `{{ c.type_name }}`.
 //!
 //! Implement [`Behavior`] (the user file `src/{{ c.module }}.rs` holds the stubs) and
@@ -16,7 +16,7 @@
 #[serde(default)]
 pub struct Config {
 {%- for f in c.config %}
-    {% call m::doc(f.doc) %}
+    {% call m::doc(&f.doc) %}{% endcall %}
     {% if f.renamed() %}#[serde(rename = "{{ f.cool_name }}")]{% endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
@@ -36,7 +36,7 @@ impl ::core::default::Default for Config {
 #[derive(Clone, Debug)]
 pub struct Vars {
 {%- for v in c.vars %}
-    {% call m::doc(v.field.doc) %}
+    {% call m::doc(&v.field.doc) %}{% endcall %}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
     pub {{ v.field.name }}: {{ v.field.ty }},
 {%- endfor %}
@@ -55,7 +55,7 @@ impl ::core::default::Default for Vars {
 /// The input ports, in declaration order.
 pub struct Inputs {
 {%- for p in c.inputs %}
-    {% call m::doc(p.doc) %}
+    {% call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -63,7 +63,7 @@ pub struct Inputs {
 /// The output ports, in declaration order.
 pub struct Outputs {
 {%- for p in c.outputs %}
-    {% call m::doc(p.doc) %}
+    {% call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -72,7 +72,7 @@ pub struct Outputs {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum UserState {
 {%- for s in c.states %}
-    {% call m::doc(s.doc) %}
+    {% call m::doc(&s.doc) %}{% endcall %}
     {{ s.variant }},
 {%- endfor %}
 }
@@ -129,7 +129,7 @@ impl {{ may_enum }} {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Exception {
 {%- for e in c.exceptions %}
-    {% call m::doc(e.doc) %}
+    {% call m::doc(&e.doc) %}{% endcall %}
     {{ e.variant }},
 {%- endfor %}
 }
@@ -183,7 +183,7 @@ pub trait Behavior: ::core::marker::Send + 'static {
         let _ = cx;
     }
 {% for method in c.methods %}
-    {% call m::doc(method.doc) %}
+    {% call m::doc(&method.doc) %}{% endcall %}
     {{ method.signature }};
 {%- endfor %}
 }

@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}
+{% call m::header(krate.sources_text()) %}{% endcall %}
 //! Links the native libraries the descriptions name with `link system`.
 
 fn main() {

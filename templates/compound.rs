@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}
+{% call m::header(krate.sources_text()) %}{% endcall %}
 //! Generated code of compound component `{{ c.type_name }}` (partial).
 //!
 //! This module lists the compound's instances and connections and wires the
@@ -32,7 +32,8 @@ pub const CONNECTIONS: &[(&str, &str)] = &[
 ];
 
 /// Connects the instances, added to `system` under the names `{prefix}{instance}`
-/// (for example `prefix = "base."`... or `""`), as the description says.
+/// (`prefix` is `""` for plain instance names, or e.g. `"base_"`), as the
+/// description says.
 pub fn connect{% if c.uses_converters %}<C: super::types::Converters>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
 {%- if c.connections.is_empty() %}
     let _ = (system, prefix);

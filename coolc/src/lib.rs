@@ -27,7 +27,13 @@
 
 pub mod ast;
 pub mod check;
+pub mod cli;
 pub mod diagnostics;
+pub mod emit;
+pub mod ident;
+pub mod ir;
+pub mod lower;
+pub mod merge;
 pub mod resolve;
 pub mod source;
 pub mod syntax;

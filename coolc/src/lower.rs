@@ -310,7 +310,7 @@ impl<'a> Lowerer<'a> {
                         format!(
                             "// Converter `{}`: build the output packet from `from`.\n\
                              let _ = from;\n\
-                             ::core::default::Default::default()",
+                             Default::default()",
                             c.name.name
                         )
                     } else {
@@ -477,7 +477,7 @@ impl<'a> Lowerer<'a> {
                     ast::StateMember::Exit(_) => exit = true,
                     ast::StateMember::Periodic { period, .. } => {
                         periodic = Some(format!(
-                            "::coolbot::PeriodicSpec {{ period: {} }}",
+                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
                             option_duration(period.as_ref())
                         ));
                     }
