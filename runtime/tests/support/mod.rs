@@ -255,7 +255,11 @@ impl Rig {
 
     /// Add and start the worker, and wait for it to leave `starting`.
     pub fn started(script: Arc<Script>) -> Rig {
-        let mut rig = Rig::unstarted(script);
+        Rig::start(Rig::unstarted(script))
+    }
+
+    /// Start a rig made with `unstarted_with`.
+    pub fn start(mut rig: Rig) -> Rig {
         rig.system.start().expect("start");
         rig.handle
             .wait_for(|m| m.state != State::Starting, WAIT)

@@ -260,6 +260,8 @@ pub static SPEC: Spec = Spec {
 
 /// The glue: implements the runtime's index-based automaton over `Behavior`.
 struct Glue<B> {
+    /// `&SPEC` in generated code; tests may swap in a variant with other timings.
+    spec: &'static Spec,
     behavior: B,
     config: Config,
     vars: Vars,
@@ -282,7 +284,7 @@ impl<B: Behavior> Glue<B> {
 
 impl<B: Behavior> Automaton for Glue<B> {
     fn spec(&self) -> &'static Spec {
-        &SPEC
+        self.spec
     }
 
     fn start(&mut self, rt: &mut Context) -> Result<(), Fault> {
@@ -355,29 +357,38 @@ impl<B: Behavior> Automaton for Glue<B> {
     }
 }
 
-/// The ports, for tests that feed or read them directly.
-pub fn ports() -> (Inputs, Outputs) {
-    (
-        Inputs {
-            data: FifoIn::new(4, OverflowPolicy::Reject),
-            kick: TickIn::new(),
-            feed: LastIn::new(),
-        },
-        Outputs {
-            out: DataOut::new(),
-        },
+/// An unstarted Worker named `name`; also returns clones of its ports.
+pub fn component(name: &str, behavior: impl Behavior) -> (Component, Inputs, Outputs) {
+    component_with(
+        name,
+        behavior,
+        &SPEC,
+        FifoIn::new(4, OverflowPolicy::Reject),
     )
 }
 
-/// An unstarted Worker named `name`; also returns clones of its ports.
-pub fn component(name: &str, behavior: impl Behavior) -> (Component, Inputs, Outputs) {
-    let (inputs, outputs) = ports();
+/// A Worker with another spec (same states and ports, other timings) and data fifo.
+pub fn component_with(
+    name: &str,
+    behavior: impl Behavior,
+    spec: &'static Spec,
+    data: FifoIn<u64>,
+) -> (Component, Inputs, Outputs) {
+    let inputs = Inputs {
+        data,
+        kick: TickIn::new(),
+        feed: LastIn::new(),
+    };
+    let outputs = Outputs {
+        out: DataOut::new(),
+    };
     let ports = PortSet::new()
         .input(&inputs.data)
         .input(&inputs.kick)
         .input(&inputs.feed)
         .output(&outputs.out);
     let glue = Glue {
+        spec,
         behavior,
         config: Config::default(),
         vars: Vars::default(),
@@ -385,4 +396,13 @@ pub fn component(name: &str, behavior: impl Behavior) -> (Component, Inputs, Out
         outputs: outputs.clone(),
     };
     (Component::new(name, Box::new(glue), ports), inputs, outputs)
+}
+
+/// A copy of SPEC whose `busy` state has other `after` transitions (leaked).
+pub fn spec_with_busy_after(after: Vec<AfterSpec>) -> &'static Spec {
+    let mut states = SPEC.states.to_vec();
+    states[BUSY].after = Box::leak(after.into_boxed_slice());
+    let mut spec = SPEC;
+    spec.states = Box::leak(states.into_boxed_slice());
+    Box::leak(Box::new(spec))
 }
