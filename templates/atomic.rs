@@ -12,7 +12,7 @@
 {%- endif %}
 
 /// The `configuration` block: the default controllable variable `configuration`.
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if c.config_derives_default() %}, Default{% endif %})]
 #[serde(default)]
 pub struct Config {
 {%- for f in c.config %}
@@ -22,6 +22,7 @@ pub struct Config {
 {%- endfor %}
 }
 
+{% if !c.config_derives_default() %}
 impl ::core::default::Default for Config {
     fn default() -> Self {
         Self {
@@ -31,9 +32,10 @@ impl ::core::default::Default for Config {
         }
     }
 }
+{% endif %}
 
 /// The component's own variables: observable, controllable and local.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
 pub struct Vars {
 {%- for v in c.vars %}
     {% call m::doc(&v.field.doc) %}{% endcall %}
@@ -42,6 +44,7 @@ pub struct Vars {
 {%- endfor %}
 }
 
+{% if !c.vars_derive_default() %}
 impl ::core::default::Default for Vars {
     fn default() -> Self {
         Self {
@@ -51,6 +54,7 @@ impl ::core::default::Default for Vars {
         }
     }
 }
+{% endif %}
 
 /// The input ports, in declaration order.
 pub struct Inputs {
@@ -358,7 +362,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         {%- for v in c.vars %}
         {%- if v.controllable() %}
             {{ v.spec_index.unwrap_or_default() }} => {
-                self.vars.{{ v.field.name }} = super::__cool_from_value(value)?;
+                self.vars.{{ v.field.name }} = {{ v.from_value }}?;
                 Ok(())
             }
         {%- endif %}
@@ -376,7 +380,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         match variable {
         {%- for v in c.vars %}
         {%- if let Some(index) = v.spec_index %}
-            {{ index }} => super::__cool_to_value(&self.vars.{{ v.field.name }}),
+            {{ index }} => {{ v.to_value }},
         {%- endif %}
         {%- endfor %}
             _ => ::coolbot::Value::Unit,

@@ -7,7 +7,7 @@ pub type {{ e.name }} = {{ e.path }};
 {% endfor %}
 {%- for p in types.packets %}
 {% call m::doc(&p.doc) %}{% endcall %}
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %})]
 pub struct {{ p.name }} {
 {%- for f in p.fields %}
     {% call m::doc(&f.doc) %}{% endcall %}
@@ -15,7 +15,7 @@ pub struct {{ p.name }} {
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
 }
-{% if p.has_default %}
+{% if p.writes_default() %}
 impl ::core::default::Default for {{ p.name }} {
     fn default() -> Self {
         Self {
