@@ -16,8 +16,10 @@
 #[serde(default)]
 pub struct Config {
 {%- for f in c.config %}
-    {% call m::doc(&f.doc) %}{% endcall %}
-    {% if f.renamed() %}#[serde(rename = "{{ f.cool_name }}")]{% endif %}
+{%- call m::doc(&f.doc) %}{% endcall %}
+    {%- if f.renamed() %}
+    #[serde(rename = "{{ f.cool_name }}")]
+    {%- endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
 }
@@ -38,7 +40,7 @@ impl ::core::default::Default for Config {
 #[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
 pub struct Vars {
 {%- for v in c.vars %}
-    {% call m::doc(&v.field.doc) %}{% endcall %}
+{%- call m::doc(&v.field.doc) %}{% endcall %}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
     pub {{ v.field.name }}: {{ v.field.ty }},
 {%- endfor %}
@@ -59,7 +61,7 @@ impl ::core::default::Default for Vars {
 /// The input ports, in declaration order.
 pub struct Inputs {
 {%- for p in c.inputs %}
-    {% call m::doc(&p.doc) %}{% endcall %}
+{%- call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -67,7 +69,7 @@ pub struct Inputs {
 /// The output ports, in declaration order.
 pub struct Outputs {
 {%- for p in c.outputs %}
-    {% call m::doc(&p.doc) %}{% endcall %}
+{%- call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -76,7 +78,7 @@ pub struct Outputs {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum UserState {
 {%- for s in c.states %}
-    {% call m::doc(&s.doc) %}{% endcall %}
+{%- call m::doc(&s.doc) %}{% endcall %}
     {{ s.variant }},
 {%- endfor %}
 }
@@ -133,7 +135,7 @@ impl {{ may_enum }} {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Exception {
 {%- for e in c.exceptions %}
-    {% call m::doc(&e.doc) %}{% endcall %}
+{%- call m::doc(&e.doc) %}{% endcall %}
     {{ e.variant }},
 {%- endfor %}
 }
@@ -187,7 +189,9 @@ pub trait Behavior: ::core::marker::Send + 'static {
         let _ = cx;
     }
 {% for method in c.methods %}
-    {% call m::doc(&method.doc) %}{% endcall %}
+
+
+{% call m::doc(&method.doc) %}{% endcall %}
     {{ method.signature }};
 {%- endfor %}
 }
