@@ -34,7 +34,7 @@ pub const CONNECTIONS: &[(&str, &str)] = &[
 /// Connects the instances, added to `system` under the names `{prefix}{instance}`
 /// (`prefix` is `""` for plain instance names, or e.g. `"base_"`), as the
 /// description says.
-pub fn connect{% if c.uses_converters %}<C: super::types::Converters>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
+pub fn connect{% if c.uses_converters %}<C: super::types::Converters + 'static>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
 {%- if c.connections.is_empty() %}
     let _ = (system, prefix);
 {%- endif %}

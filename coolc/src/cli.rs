@@ -260,7 +260,7 @@ pub fn starter_description(type_name: &str) -> String {
 atomic {type_name} {{
     configuration {{
         /// How many periods to count before finishing.
-        limit: u64 = 20;
+        limit: u64 = 10;
     }}
 
     /// How many periods have elapsed.

@@ -139,10 +139,50 @@ pub struct Field {
     pub default: String,
 }
 
+/// Whether `#[derive(Default)]` gives the same values as the written defaults (a
+/// hand-written impl would then trip clippy's `derivable_impls`).
+pub fn derive_default(fields: &[Field]) -> bool {
+    fields.iter().all(|f| default_equivalent(&f.default))
+}
+
+/// Whether a default expression equals its type's `Default::default()`.
+fn default_equivalent(expr: &str) -> bool {
+    if let Some(inner) = expr.strip_prefix('[').and_then(|e| e.strip_suffix(']')) {
+        return match inner.rsplit_once("; ") {
+            Some((item, count)) if count.chars().all(|c| c.is_ascii_digit()) => {
+                default_equivalent(item)
+            }
+            _ => false,
+        };
+    }
+    matches!(
+        expr,
+        "::core::default::Default::default()"
+            | "0"
+            | "0.0"
+            | "false"
+            | "::core::option::Option::None"
+            | "::std::string::String::from(\"\")"
+            | "::std::vec![]"
+    )
+}
+
 impl Field {
     /// Whether the Rust name differs from the `.cool` name (serde needs a rename).
     pub fn renamed(&self) -> bool {
         self.name.trim_start_matches("r#") != self.cool_name
+    }
+}
+
+impl Packet {
+    /// Whether the packet derives `Default` (rather than a written impl).
+    pub fn derives_default(&self) -> bool {
+        self.has_default && derive_default(&self.fields)
+    }
+
+    /// Whether a hand-written `Default` impl is emitted.
+    pub fn writes_default(&self) -> bool {
+        self.has_default && !derive_default(&self.fields)
     }
 }
 
@@ -243,6 +283,17 @@ pub fn doc_literal(doc: &Doc) -> String {
 }
 
 impl Atomic {
+    /// Whether `Config` derives `Default`.
+    pub fn config_derives_default(&self) -> bool {
+        derive_default(&self.config)
+    }
+
+    /// Whether `Vars` derives `Default`.
+    pub fn vars_derive_default(&self) -> bool {
+        let fields: Vec<Field> = self.vars.iter().map(|v| v.field.clone()).collect();
+        derive_default(&fields)
+    }
+
     /// The doc comment as a Rust string literal.
     pub fn doc_literal(&self) -> String {
         doc_literal(&self.doc)
@@ -270,6 +321,11 @@ pub struct Var {
     pub spec_index: Option<usize>,
     /// The variable's type as written in `.cool`.
     pub cool_ty: String,
+    /// Rust expression turning `self.vars.<field>` into a `coolbot::Value`.
+    pub to_value: String,
+    /// Rust expression turning `value: &coolbot::Value` into
+    /// `Result<field type, String>`.
+    pub from_value: String,
 }
 
 impl Var {

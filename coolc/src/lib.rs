@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 pub mod ast;
+pub mod builder;
 pub mod check;
 pub mod cli;
 pub mod diagnostics;
@@ -41,6 +42,7 @@ pub mod syntax;
 use std::path::Path;
 
 pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
+pub use builder::Builder;
 pub use source::SourceMap;
 
 /// The result of [`analyze`]: what was read, what was parsed, what is wrong.

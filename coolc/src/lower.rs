@@ -406,13 +406,14 @@ impl<'a> Lowerer<'a> {
                     } else {
                         Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
                     };
-                    let (rust_ty, default) = match default {
+                    let (rust_ty, default_expr) = match default.clone() {
                         Some(d) => (self.rust_type(ty, GEN_TYPES), d),
                         None => (
                             format!("::core::option::Option<{}>", self.rust_type(ty, GEN_TYPES)),
                             "::core::option::Option::None".to_owned(),
                         ),
                     };
+                    let has_default = default.is_some();
                     let kind = match v.kind {
                         ast::VarKind::Observable => "Observable",
                         ast::VarKind::Controllable => "Controllable",
@@ -422,13 +423,33 @@ impl<'a> Lowerer<'a> {
                         spec_index += 1;
                         spec_index - 1
                     });
+                    let field = ident::snake(&v.name.name);
+                    let (to_value, from_value) = match &ty.kind {
+                        TypeKind::Prim(p) if has_default => (
+                            if *p == Prim::String {
+                                format!("::coolbot::Value::from(self.vars.{field}.clone())")
+                            } else {
+                                format!("::coolbot::Value::from(self.vars.{field})")
+                            },
+                            format!(
+                                "<{}>::try_from(value).map_err(|error| error.to_string())",
+                                prim_rust(*p)
+                            ),
+                        ),
+                        _ => (
+                            format!("super::__cool_to_value(&self.vars.{field})"),
+                            "super::__cool_from_value(value)".to_owned(),
+                        ),
+                    };
                     vars.push(ir::Var {
+                        to_value,
+                        from_value,
                         field: ir::Field {
                             doc: doc(&v.doc),
                             name: ident::snake(&v.name.name),
                             cool_name: v.name.name.clone(),
                             ty: rust_ty,
-                            default,
+                            default: default_expr,
                         },
                         kind: kind.to_owned(),
                         spec_index: index,

@@ -259,14 +259,15 @@ fn syntax_error(
             }
         }
     }
-    if let Some(attempts) = error.parse_attempts() {
-        if attempts.max_position == position {
-            for token in attempts.expected_tokens() {
-                let token = token.to_string();
-                let is_punctuation = token.chars().all(|c| c.is_ascii_punctuation() && c != '_');
-                if !token.is_empty() && is_punctuation && token != "///" {
-                    expected.push(format!("`{token}`"));
-                }
+    if let Some(attempts) = error.parse_attempts()
+        && attempts.max_position == position
+    {
+        for token in attempts.expected_tokens() {
+            let token = token.to_string();
+            let is_punctuation = token.chars().all(|c| c.is_ascii_punctuation() && c != '_');
+            let is_comment = matches!(token.as_str(), "//" | "///" | "/*" | "*/");
+            if !token.is_empty() && is_punctuation && !is_comment {
+                expected.push(format!("`{token}`"));
             }
         }
     }
@@ -290,7 +291,10 @@ fn syntax_error(
 }
 
 /// Collapses long keyword lists into what they mean.
-fn summarize(expected: Vec<String>) -> Vec<String> {
+fn summarize(mut expected: Vec<String>) -> Vec<String> {
+    if expected.iter().any(|e| e == "a type") {
+        expected.retain(|e| e != "`[`");
+    }
     let has = |name: &str| expected.iter().any(|e| e == name);
     if has("`input`") && has("`connect`") && has("`timing`") {
         let mut rest: Vec<String> = expected
