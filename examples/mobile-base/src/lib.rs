@@ -135,7 +135,11 @@ impl fmt::Display for Summary {
             f,
             "summary after {:.1} s{}:",
             self.elapsed.as_secs_f64(),
-            if self.interrupted { " (interrupted)" } else { "" }
+            if self.interrupted {
+                " (interrupted)"
+            } else {
+                ""
+            }
         )?;
         writeln!(
             f,
@@ -152,15 +156,22 @@ impl fmt::Display for Summary {
             "  emergencies          {} raised, {} emergency stops; {} avoidance turns",
             self.emergencies, self.halts, self.avoidances
         )?;
-        writeln!(f, "  scans                ranges {}, sim_ranges {}", self.scans.0, self.scans.1)?;
+        writeln!(
+            f,
+            "  scans                ranges {}, sim_ranges {}",
+            self.scans.0, self.scans.1
+        )?;
         writeln!(
             f,
             "  faults               {} (substitutions {}, recoveries {}, retired {})",
             self.faults, self.substitutions, self.recoveries, self.retired
         )?;
         writeln!(f, "  supervisor           {}", self.supervisor)?;
-        let before: Vec<String> =
-            self.states_before_shutdown.iter().map(|(n, s)| format!("{n}={s}")).collect();
+        let before: Vec<String> = self
+            .states_before_shutdown
+            .iter()
+            .map(|(n, s)| format!("{n}={s}"))
+            .collect();
         writeln!(f, "  states at the end    {}", before.join(" "))?;
         let after: Vec<String> = self
             .final_states
@@ -171,7 +182,11 @@ impl fmt::Display for Summary {
         write!(
             f,
             "  shutdown             {}",
-            if self.clean_shutdown { "clean: every component dead, every thread joined" } else { "NOT clean" }
+            if self.clean_shutdown {
+                "clean: every component dead, every thread joined"
+            } else {
+                "NOT clean"
+            }
         )
     }
 }
@@ -187,7 +202,13 @@ fn number(value: Option<&coolbot::Value>) -> f64 {
 }
 
 fn variable(monitor: &coolbot::Monitor, name: &str) -> f64 {
-    number(monitor.variables.iter().find(|(n, _)| n == name).map(|(_, v)| v))
+    number(
+        monitor
+            .variables
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v),
+    )
 }
 
 /// Builds the robot, runs it for `options.duration` (or until `options.stop`), shuts
@@ -198,15 +219,32 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         outage: options.outage,
         kind: options.fault_kind,
     });
-    let platform = Arc::new(Platform::new(World::example(), World::example_start(), fault));
-    let setup = Setup { noise: options.noise, seed: options.seed, goal: options.goal };
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        fault,
+    ));
+    let setup = Setup {
+        noise: options.noise,
+        seed: options.seed,
+        goal: options.goal,
+    };
     let mut system = robot::wire_robot(&platform, &setup)?;
     let names = [MOTION, RANGES, SIM_RANGES, WANDERER];
     let handles: Vec<coolbot::Handle> = names
         .iter()
-        .map(|name| system.handle(name).ok_or_else(|| format!("no component {name}")))
+        .map(|name| {
+            system
+                .handle(name)
+                .ok_or_else(|| format!("no component {name}"))
+        })
         .collect::<Result<_, _>>()?;
-    let types = ["MotionController", "RangeServer", "SimRangeServer", "Wanderer"];
+    let types = [
+        "MotionController",
+        "RangeServer",
+        "SimRangeServer",
+        "Wanderer",
+    ];
     let events: Vec<_> = handles.iter().map(coolbot::Handle::subscribe).collect();
 
     let display = match options.display {
@@ -276,7 +314,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     let monitor = handle.snapshot();
                     let load = monitor.cpu_time.saturating_sub(*cpu).as_secs_f64() / wall;
                     *cpu = monitor.cpu_time;
-                    status::Row { type_name, monitor, load }
+                    status::Row {
+                        type_name,
+                        monitor,
+                        load,
+                    }
                 })
                 .collect();
             let truth = platform.truth();
@@ -313,10 +355,16 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let states_before_shutdown = monitors.iter().map(|m| (m.name.clone(), m.state)).collect();
     let elapsed = started.elapsed();
     let report = system.shutdown();
-    let final_states: Vec<(String, State, bool)> =
-        report.components.iter().map(|c| (c.name.clone(), c.state, c.joined)).collect();
+    let final_states: Vec<(String, State, bool)> = report
+        .components
+        .iter()
+        .map(|c| (c.name.clone(), c.state, c.joined))
+        .collect();
     let clean_shutdown = report.clean()
-        && report.components.iter().all(|c| c.joined && c.state == State::Dead);
+        && report
+            .components
+            .iter()
+            .all(|c| c.joined && c.state == State::Dead);
     let truth = platform.truth();
     let [motion, ranges, sim, wanderer] = [&monitors[0], &monitors[1], &monitors[2], &monitors[3]];
     Ok(Summary {
@@ -329,7 +377,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         emergencies: (variable(ranges, "emergencies") + variable(sim, "emergencies")) as u64,
         halts: variable(motion, "halts") as u64,
         avoidances: variable(wanderer, "avoidances") as u64,
-        scans: (variable(ranges, "scans") as u64, variable(sim, "scans") as u64),
+        scans: (
+            variable(ranges, "scans") as u64,
+            variable(sim, "scans") as u64,
+        ),
         faults,
         substitutions: supervisor.substitutions,
         recoveries: supervisor.recoveries,

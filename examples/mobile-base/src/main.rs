@@ -77,7 +77,11 @@ fn parse_duration(text: &str) -> Result<Duration, String> {
 /// Parses `x,y`.
 fn parse_goal(text: &str) -> Result<(f64, f64), String> {
     let (x, y) = text.split_once(',').ok_or("expected `x,y`, e.g. `5,3`")?;
-    let parse = |s: &str| s.trim().parse::<f64>().map_err(|_| format!("`{s}` is not a number"));
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("`{s}` is not a number"))
+    };
     Ok((parse(x)?, parse(y)?))
 }
 
@@ -118,7 +122,11 @@ fn main() -> ExitCode {
     match mobile_base::run(&options) {
         Ok(summary) => {
             println!("\n{summary}");
-            if summary.clean_shutdown { ExitCode::SUCCESS } else { ExitCode::FAILURE }
+            if summary.clean_shutdown {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            }
         }
         Err(error) => {
             eprintln!("error: {error}");

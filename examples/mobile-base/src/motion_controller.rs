@@ -22,7 +22,10 @@ pub struct MotionController {
 impl MotionController {
     /// A controller driving `platform`.
     pub fn new(platform: Arc<Platform>) -> MotionController {
-        MotionController { platform, last_step: None }
+        MotionController {
+            platform,
+            last_step: None,
+        }
     }
 
     /// One integration step towards `target` under the speed, acceleration and turn
@@ -35,10 +38,18 @@ impl MotionController {
             .min(MAX_STEP);
         self.last_step = Some(now);
 
-        let near = cx.inputs.obstacles.latest().map(|scan| sensing::front(&scan));
+        let near = cx
+            .inputs
+            .obstacles
+            .latest()
+            .map(|scan| sensing::front(&scan));
         let cautious = near.is_some_and(|d| f64::from(d) < cx.config.cautious_distance);
         if cx.vars.mode != DriveMode::Halted {
-            cx.vars.mode = if cautious { DriveMode::Cautious } else { DriveMode::Normal };
+            cx.vars.mode = if cautious {
+                DriveMode::Cautious
+            } else {
+                DriveMode::Normal
+            };
         }
         let mut limit = cx.vars.max_speed.max(0.0);
         if cautious {
@@ -53,10 +64,17 @@ impl MotionController {
 
         let drive = self.platform.drive(linear, angular, dt);
         cx.vars.distance += drive.moved;
-        cx.vars.odometry = Pose2D { x: drive.pose.x, y: drive.pose.y, theta: drive.pose.theta };
+        cx.vars.odometry = Pose2D {
+            x: drive.pose.x,
+            y: drive.pose.y,
+            theta: drive.pose.theta,
+        };
         cx.outputs.pose.send(cx.vars.odometry.clone());
         if drive.blocked {
-            cx.vars.speed = Twist { linear: 0.0, angular: 0.0 };
+            cx.vars.speed = Twist {
+                linear: 0.0,
+                angular: 0.0,
+            };
             return Err(Exception::WheelStall.raise(format!(
                 "blocked at ({:.2}, {:.2}) while commanded {linear:.2} m/s",
                 drive.pose.x, drive.pose.y
@@ -68,13 +86,20 @@ impl MotionController {
 }
 
 fn still() -> Twist {
-    Twist { linear: 0.0, angular: 0.0 }
+    Twist {
+        linear: 0.0,
+        angular: 0.0,
+    }
 }
 
 impl Behavior for MotionController {
     fn start(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let pose = self.platform.truth().pose;
-        cx.vars.odometry = Pose2D { x: pose.x, y: pose.y, theta: pose.theta };
+        cx.vars.odometry = Pose2D {
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+        };
         self.last_step = None;
         Ok(())
     }

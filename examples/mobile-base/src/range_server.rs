@@ -20,15 +20,19 @@ pub struct RangeServer {
 impl RangeServer {
     /// A server reading `platform`'s sensors.
     pub fn new(platform: Arc<Platform>) -> RangeServer {
-        RangeServer { platform, rng: None, last: None }
+        RangeServer {
+            platform,
+            rng: None,
+            last: None,
+        }
     }
 
     /// Reads the sensors once and publishes the scan.
     fn read(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        if let Some(period) = sensing::period_for(cx.vars.frequency) {
-            if cx.rt.period() != Some(period) {
-                cx.rt.set_period(period);
-            }
+        if let Some(period) = sensing::period_for(cx.vars.frequency)
+            && cx.rt.period() != Some(period)
+        {
+            cx.rt.set_period(period);
         }
         let config = cx.config;
         let rng = self.rng.get_or_insert_with(|| Rng::new(config.seed));
@@ -39,7 +43,11 @@ impl RangeServer {
             rng,
         );
         let Some(readings) = readings else {
-            if self.platform.fault().is_some_and(|f| f.kind == FaultKind::Panic) {
+            if self
+                .platform
+                .fault()
+                .is_some_and(|f| f.kind == FaultKind::Panic)
+            {
                 panic!("sensor driver crashed: the ir/us board reset");
             }
             return Err(Exception::SensorTimeout.raise("no answer from the ir/us board"));
@@ -75,7 +83,10 @@ impl Behavior for RangeServer {
 
     fn streaming_choose(&mut self, cx: &mut Cx<'_>) -> Option<StreamingMay> {
         let distance = cx.vars.emergency_distance;
-        let danger = self.last.as_ref().is_some_and(|s| sensing::too_close(s, distance));
+        let danger = self
+            .last
+            .as_ref()
+            .is_some_and(|s| sensing::too_close(s, distance));
         danger.then_some(StreamingMay::Alarm)
     }
 
@@ -91,7 +102,10 @@ impl Behavior for RangeServer {
 
     fn alarm_choose(&mut self, cx: &mut Cx<'_>) -> Option<AlarmMay> {
         let distance = cx.vars.emergency_distance;
-        let clear = self.last.as_ref().is_some_and(|s| sensing::clear_again(s, distance));
+        let clear = self
+            .last
+            .as_ref()
+            .is_some_and(|s| sensing::clear_again(s, distance));
         clear.then_some(AlarmMay::Streaming)
     }
 

@@ -85,29 +85,44 @@ pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, Str
         &mut system,
         motion_controller::component(MOTION, MotionController::new(Arc::clone(platform))),
     )?;
-    add(&mut system, range_server::component(RANGES, RangeServer::new(Arc::clone(platform))))?;
+    add(
+        &mut system,
+        range_server::component(RANGES, RangeServer::new(Arc::clone(platform))),
+    )?;
     add(
         &mut system,
         sim_range_server::component(SIM_RANGES, SimRangeServer::new(Arc::clone(platform))),
     )?;
-    add(&mut system, wanderer::component(WANDERER, Wanderer::default()))?;
+    add(
+        &mut system,
+        wanderer::component(WANDERER, Wanderer::default()),
+    )?;
     mobile_base::connect(&mut system, "").map_err(|e| e.to_string())?;
     for (from, to) in robot::CONNECTIONS {
-        system.connect(&resolve(from), &resolve(to)).map_err(|e| e.to_string())?;
+        system
+            .connect(&resolve(from), &resolve(to))
+            .map_err(|e| e.to_string())?;
     }
 
     system.start().map_err(|e| e.to_string())?;
     for name in [MOTION, RANGES, SIM_RANGES, WANDERER] {
-        let handle = system.handle(name).ok_or_else(|| format!("no component {name}"))?;
+        let handle = system
+            .handle(name)
+            .ok_or_else(|| format!("no component {name}"))?;
         handle
             .wait_for(|m| m.state != State::Starting, Duration::from_secs(5))
             .map_err(|e| e.to_string())?;
     }
     let command = |name: &str, command: Command| -> Result<(), String> {
-        let handle = system.handle(name).ok_or_else(|| format!("no component {name}"))?;
+        let handle = system
+            .handle(name)
+            .ok_or_else(|| format!("no component {name}"))?;
         handle.command(command).map_err(|e| e.to_string())
     };
-    command(RANGES, Command::Configure(ranges_overrides(setup.noise, setup.seed)))?;
+    command(
+        RANGES,
+        Command::Configure(ranges_overrides(setup.noise, setup.seed)),
+    )?;
     let mut wanderer_config = serde_json::json!({ "seed": setup.seed });
     if let Some((x, y)) = setup.goal {
         wanderer_config["goal_x"] = x.into();
@@ -218,7 +233,9 @@ fn reroute(system: &mut System, from: &str, to: &str) -> Result<usize, String> {
     };
     for (out, input) in &moved {
         system.disconnect(out, input).map_err(|e| e.to_string())?;
-        system.connect(&swap(out), &swap(input)).map_err(|e| e.to_string())?;
+        system
+            .connect(&swap(out), &swap(input))
+            .map_err(|e| e.to_string())?;
     }
     Ok(moved.len())
 }
@@ -240,7 +257,8 @@ impl MobileBaseSupervisor {
     }
 
     fn note(&mut self, at: Duration, text: String) {
-        self.log.push(format!("{:6.2}s base: {text}", at.as_secs_f64()));
+        self.log
+            .push(format!("{:6.2}s base: {text}", at.as_secs_f64()));
     }
 
     /// One turn: error policies, the recovery queue, then the supervisor's rules.
@@ -285,7 +303,10 @@ impl MobileBaseSupervisor {
                 self.recoveries += 1;
                 if self.substituted {
                     match self.restore(system) {
-                        Ok(()) => self.note(at, "ranges recovered; sim_ranges back to standby".to_owned()),
+                        Ok(()) => self.note(
+                            at,
+                            "ranges recovered; sim_ranges back to standby".to_owned(),
+                        ),
                         Err(error) => self.note(at, format!("restoring ranges failed: {error}")),
                     }
                     self.substituted = false;
@@ -296,13 +317,19 @@ impl MobileBaseSupervisor {
                 if let Some(handle) = system.handle(entry.instance) {
                     let _ = handle.command(Command::SetState(Controllable::Dead));
                 }
-                self.note(at, format!("{} missed its recovery deadline; retired", entry.instance));
+                self.note(
+                    at,
+                    format!("{} missed its recovery deadline; retired", entry.instance),
+                );
             } else if now >= entry.next_try {
                 if let Some(handle) = system.handle(entry.instance) {
                     // A restart runs `start` again (it fails while the board is down).
                     let _ = handle.command(Command::SetState(Controllable::Running));
                 }
-                self.recovering = Some(Recovering { next_try: now + self.retry_every, ..entry });
+                self.recovering = Some(Recovering {
+                    next_try: now + self.retry_every,
+                    ..entry
+                });
             }
         }
 
@@ -312,7 +339,10 @@ impl MobileBaseSupervisor {
                 "motion: {}",
                 motion.error.as_deref().unwrap_or("running_error")
             ));
-            self.note(at, "motion failed; the error propagates to the base".to_owned());
+            self.note(
+                at,
+                "motion failed; the error propagates to the base".to_owned(),
+            );
         }
 
         self.rules(&motion, &ranges, at);
@@ -343,7 +373,10 @@ impl MobileBaseSupervisor {
             SupervisorState::Stopped => None,
         };
         if let Some(next) = next {
-            self.note(at, format!("supervisor {} -> {}", self.state.name(), next.name()));
+            self.note(
+                at,
+                format!("supervisor {} -> {}", self.state.name(), next.name()),
+            );
             self.state = next;
             // The states' entry sections.
             self.mode = match next {
@@ -384,7 +417,10 @@ mod tests {
         // Every `base.*` address the generated Robot connections use is exported.
         for (from, to) in robot::CONNECTIONS {
             for address in [from, to] {
-                assert!(!resolve(address).starts_with("base."), "{address} is not exported");
+                assert!(
+                    !resolve(address).starts_with("base."),
+                    "{address} is not exported"
+                );
             }
         }
     }

@@ -21,7 +21,11 @@ pub fn scan(stamp: Time, readings: &Readings) -> RangeScan {
 
 /// The nearest range of a scan, every beam together (m).
 pub fn nearest(scan: &RangeScan) -> f32 {
-    scan.ir.iter().chain(scan.us.iter()).copied().fold(f32::INFINITY, f32::min)
+    scan.ir
+        .iter()
+        .chain(scan.us.iter())
+        .copied()
+        .fold(f32::INFINITY, f32::min)
 }
 
 /// The nearest range ahead: the front infrared beams and the front ultrasonic beam.
@@ -53,7 +57,11 @@ mod tests {
     use super::*;
 
     fn scan_with(front_ir: f64, bumpers: [bool; 4]) -> RangeScan {
-        let mut readings = Readings { ir: [0.8; IR_BEAMS], us: [3.0; 8], bumpers };
+        let mut readings = Readings {
+            ir: [0.8; IR_BEAMS],
+            us: [3.0; 8],
+            bumpers,
+        };
         readings.ir[3] = front_ir;
         scan(Time::from_nanos(1), &readings)
     }
@@ -62,7 +70,10 @@ mod tests {
     fn an_obstacle_ahead_or_a_bumper_is_too_close() {
         assert!(too_close(&scan_with(0.1, [false; 4]), 0.25));
         assert!(!too_close(&scan_with(0.5, [false; 4]), 0.25));
-        assert!(too_close(&scan_with(0.5, [false, false, true, false]), 0.25));
+        assert!(too_close(
+            &scan_with(0.5, [false, false, true, false]),
+            0.25
+        ));
     }
 
     #[test]

@@ -20,15 +20,18 @@ pub struct SimRangeServer {
 impl SimRangeServer {
     /// A server computing ranges in `platform`'s map.
     pub fn new(platform: Arc<Platform>) -> SimRangeServer {
-        SimRangeServer { platform, last: None }
+        SimRangeServer {
+            platform,
+            last: None,
+        }
     }
 
     /// Computes one scan from the map at the odometry pose and publishes it.
     fn read(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        if let Some(period) = sensing::period_for(cx.vars.frequency) {
-            if cx.rt.period() != Some(period) {
-                cx.rt.set_period(period);
-            }
+        if let Some(period) = sensing::period_for(cx.vars.frequency)
+            && cx.rt.period() != Some(period)
+        {
+            cx.rt.set_period(period);
         }
         // The odometry pose (in this simulation, odometry does not drift).
         let pose = self.platform.truth().pose;
@@ -58,7 +61,10 @@ impl Behavior for SimRangeServer {
 
     fn streaming_choose(&mut self, cx: &mut Cx<'_>) -> Option<StreamingMay> {
         let distance = cx.vars.emergency_distance;
-        let danger = self.last.as_ref().is_some_and(|s| sensing::too_close(s, distance));
+        let danger = self
+            .last
+            .as_ref()
+            .is_some_and(|s| sensing::too_close(s, distance));
         danger.then_some(StreamingMay::Alarm)
     }
 
@@ -74,7 +80,10 @@ impl Behavior for SimRangeServer {
 
     fn alarm_choose(&mut self, cx: &mut Cx<'_>) -> Option<AlarmMay> {
         let distance = cx.vars.emergency_distance;
-        let clear = self.last.as_ref().is_some_and(|s| sensing::clear_again(s, distance));
+        let clear = self
+            .last
+            .as_ref()
+            .is_some_and(|s| sensing::clear_again(s, distance));
         clear.then_some(AlarmMay::Streaming)
     }
 }

@@ -22,9 +22,14 @@ pub struct Row {
 pub fn value(value: &Value) -> String {
     fn json(v: &serde_json::Value) -> String {
         match v {
-            serde_json::Value::Number(n) if n.is_f64() => format!("{:.2}", n.as_f64().unwrap_or(0.0)),
+            serde_json::Value::Number(n) if n.is_f64() => {
+                format!("{:.2}", n.as_f64().unwrap_or(0.0))
+            }
             serde_json::Value::Object(fields) => {
-                let parts: Vec<String> = fields.iter().map(|(k, v)| format!("{k}:{}", json(v))).collect();
+                let parts: Vec<String> = fields
+                    .iter()
+                    .map(|(k, v)| format!("{k}:{}", json(v)))
+                    .collect();
                 format!("{{{}}}", parts.join(" "))
             }
             serde_json::Value::Array(items) => {
@@ -65,8 +70,8 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     let _ = writeln!(out, "{header}");
     let _ = writeln!(
         out,
-        "{:<11} {:<15} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  {}",
-        "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL", "ERROR"
+        "{:<11} {:<15} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
+        "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL",
     );
     for row in rows {
         let m = &row.monitor;
@@ -107,7 +112,9 @@ pub fn line(at: Duration, rows: &[Row], extra: &str) -> String {
         .map(|row| {
             let m = &row.monitor;
             match &m.user_state {
-                Some(user) if m.state == coolbot::State::Running => format!("{}={}/{user}", m.name, m.state),
+                Some(user) if m.state == coolbot::State::Running => {
+                    format!("{}={}/{user}", m.name, m.state)
+                }
                 _ => format!("{}={}", m.name, m.state),
             }
         })

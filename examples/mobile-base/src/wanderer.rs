@@ -28,13 +28,23 @@ pub struct Wanderer {
 
 impl Default for Wanderer {
     fn default() -> Self {
-        Wanderer { rng: None, drift: 0.0, drift_left: 0, turn: 1.0, blocked: false }
+        Wanderer {
+            rng: None,
+            drift: 0.0,
+            drift_left: 0,
+            turn: 1.0,
+            blocked: false,
+        }
     }
 }
 
 /// Mean of the ultrasonic ranges on one side (beams at 45 and 90 degrees).
 fn side(scan: &RangeScan, left: bool) -> f32 {
-    if left { (scan.us[1] + scan.us[2]) / 2.0 } else { (scan.us[7] + scan.us[6]) / 2.0 }
+    if left {
+        (scan.us[1] + scan.us[2]) / 2.0
+    } else {
+        (scan.us[7] + scan.us[6]) / 2.0
+    }
 }
 
 impl Behavior for Wanderer {
@@ -47,13 +57,19 @@ impl Behavior for Wanderer {
     fn wandering_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let Some(scan) = cx.inputs.scan.latest() else {
             // No scan yet: do not drive blind.
-            cx.outputs.command.send(Twist { linear: 0.0, angular: 0.0 });
+            cx.outputs.command.send(Twist {
+                linear: 0.0,
+                angular: 0.0,
+            });
             return Ok(());
         };
         let front = sensing::front(&scan);
         if front < cx.config.clearance {
             self.blocked = true;
-            cx.outputs.command.send(Twist { linear: 0.0, angular: 0.0 });
+            cx.outputs.command.send(Twist {
+                linear: 0.0,
+                angular: 0.0,
+            });
             return Ok(());
         }
         let seed = cx.config.seed;
@@ -99,22 +115,28 @@ impl Behavior for Wanderer {
         cx.vars.avoidances += 1;
         // Turn towards the more open side.
         if let Some(scan) = cx.inputs.scan.latest() {
-            self.turn = if side(&scan, true) >= side(&scan, false) { 1.0 } else { -1.0 };
+            self.turn = if side(&scan, true) >= side(&scan, false) {
+                1.0
+            } else {
+                -1.0
+            };
         }
         Ok(())
     }
 
     fn avoiding_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        cx.outputs.command.send(Twist { linear: 0.0, angular: self.turn * cx.config.turn_speed });
+        cx.outputs.command.send(Twist {
+            linear: 0.0,
+            angular: self.turn * cx.config.turn_speed,
+        });
         Ok(())
     }
 
     fn avoiding_choose(&mut self, cx: &mut Cx<'_>) -> Option<AvoidingMay> {
-        let clear = cx
-            .inputs
-            .scan
-            .latest()
-            .is_some_and(|scan| sensing::front(&scan) > CLEAR_AHEAD.min(1.8 * cx.config.clearance));
+        let clear =
+            cx.inputs.scan.latest().is_some_and(|scan| {
+                sensing::front(&scan) > CLEAR_AHEAD.min(1.8 * cx.config.clearance)
+            });
         clear.then_some(AvoidingMay::Wandering)
     }
 }

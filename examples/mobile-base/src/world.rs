@@ -161,21 +161,49 @@ impl World {
             width: w,
             height: h,
             obstacles: vec![
-                Obstacle::Box { min: (-t, -t), max: (w + t, 0.0) },
-                Obstacle::Box { min: (-t, h), max: (w + t, h + t) },
-                Obstacle::Box { min: (-t, -t), max: (0.0, h + t) },
-                Obstacle::Box { min: (w, -t), max: (w + t, h + t) },
-                Obstacle::Box { min: (2.0, 1.3), max: (2.7, 2.0) },
-                Obstacle::Box { min: (4.2, 2.6), max: (4.4, h) },
-                Obstacle::Pillar { center: (1.2, 3.0), radius: 0.25 },
-                Obstacle::Pillar { center: (4.6, 1.1), radius: 0.3 },
+                Obstacle::Box {
+                    min: (-t, -t),
+                    max: (w + t, 0.0),
+                },
+                Obstacle::Box {
+                    min: (-t, h),
+                    max: (w + t, h + t),
+                },
+                Obstacle::Box {
+                    min: (-t, -t),
+                    max: (0.0, h + t),
+                },
+                Obstacle::Box {
+                    min: (w, -t),
+                    max: (w + t, h + t),
+                },
+                Obstacle::Box {
+                    min: (2.0, 1.3),
+                    max: (2.7, 2.0),
+                },
+                Obstacle::Box {
+                    min: (4.2, 2.6),
+                    max: (4.4, h),
+                },
+                Obstacle::Pillar {
+                    center: (1.2, 3.0),
+                    radius: 0.25,
+                },
+                Obstacle::Pillar {
+                    center: (4.6, 1.1),
+                    radius: 0.3,
+                },
             ],
         }
     }
 
     /// Where the robot starts in [`World::example`].
     pub fn example_start() -> Pose {
-        Pose { x: 0.8, y: 0.8, theta: 0.35 }
+        Pose {
+            x: 0.8,
+            y: 0.8,
+            theta: 0.35,
+        }
     }
 
     /// Distance from `(x, y)` to the nearest obstacle surface (negative inside one).
@@ -381,13 +409,21 @@ impl Platform {
         let clearance = self.world.clearance(next);
         if clearance < 0.0 {
             truth.contacts += 1;
-            return Drive { pose: p, moved: 0.0, blocked: true };
+            return Drive {
+                pose: p,
+                moved: 0.0,
+                blocked: true,
+            };
         }
         let moved = ((next.x - p.x).powi(2) + (next.y - p.y).powi(2)).sqrt();
         truth.pose = next;
         truth.distance += moved;
         truth.min_clearance = truth.min_clearance.min(clearance);
-        Drive { pose: next, moved, blocked: false }
+        Drive {
+            pose: next,
+            moved,
+            blocked: false,
+        }
     }
 
     /// Whether the sensor suite answers now (false during an injected outage).
@@ -408,7 +444,13 @@ impl Platform {
 
     /// Reads the sensor suite at the robot's true pose, with Gaussian noise of
     /// standard deviation `noise` on every range. `None` during an outage.
-    pub fn read_sensors(&self, ir_max: f64, us_max: f64, noise: f64, rng: &mut Rng) -> Option<Readings> {
+    pub fn read_sensors(
+        &self,
+        ir_max: f64,
+        us_max: f64,
+        noise: f64,
+        rng: &mut Rng,
+    ) -> Option<Readings> {
         if !self.sensors_answering() {
             return None;
         }
@@ -443,7 +485,11 @@ mod tests {
 
     #[test]
     fn a_step_into_a_wall_is_refused_and_counted() {
-        let start = Pose { x: 0.2, y: 2.0, theta: PI };
+        let start = Pose {
+            x: 0.2,
+            y: 2.0,
+            theta: PI,
+        };
         let platform = Platform::new(World::example(), start, None);
         let step = platform.drive(1.0, 0.0, 0.1);
         assert!(step.blocked);
@@ -451,16 +497,34 @@ mod tests {
         assert_eq!(platform.truth().contacts, 1);
         let step = platform.drive(1.0, 0.0, 0.1);
         assert!(step.blocked);
-        let back = Platform::new(World::example(), Pose { theta: 0.0, ..start }, None);
+        let back = Platform::new(
+            World::example(),
+            Pose {
+                theta: 0.0,
+                ..start
+            },
+            None,
+        );
         assert!(!back.drive(1.0, 0.0, 0.1).blocked);
     }
 
     #[test]
     fn bumpers_press_on_contact_only() {
         let world = World::example();
-        let touching = Pose { x: ROBOT_RADIUS + 0.001, y: 2.0, theta: PI };
-        assert_eq!(world.sense(touching, 0.8, 3.0).bumpers, [true, false, false, false]);
-        let free = Pose { x: 1.0, y: 2.0, theta: PI };
+        let touching = Pose {
+            x: ROBOT_RADIUS + 0.001,
+            y: 2.0,
+            theta: PI,
+        };
+        assert_eq!(
+            world.sense(touching, 0.8, 3.0).bumpers,
+            [true, false, false, false]
+        );
+        let free = Pose {
+            x: 1.0,
+            y: 2.0,
+            theta: PI,
+        };
         assert_eq!(world.sense(free, 0.8, 3.0).bumpers, [false; 4]);
     }
 
