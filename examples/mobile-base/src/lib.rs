@@ -298,7 +298,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             }
         }
         log.extend(fresh);
-        let keep = log.len().saturating_sub(8);
+        let keep = log.len().saturating_sub(10);
         log.drain(..keep);
 
         let frame_due = last_frame.elapsed() >= Duration::from_millis(250);

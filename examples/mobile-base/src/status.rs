@@ -70,18 +70,27 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     let _ = writeln!(out, "{header}");
     let _ = writeln!(
         out,
-        "{:<11} {:<15} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
+        "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
         "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL",
     );
     for row in rows {
         let m = &row.monitor;
         let _ = writeln!(
             out,
-            "{:<11} {:<15} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
+            "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
             clip(&m.name, 11),
-            clip(row.type_name, 15),
+            clip(row.type_name, 16),
             m.state.to_string(),
-            clip(m.user_state.as_deref().unwrap_or("-"), 11),
+            // The user automaton's state matters only while it can run.
+            clip(
+                match m.state {
+                    coolbot::State::Running | coolbot::State::Suspended => {
+                        m.user_state.as_deref().unwrap_or("-")
+                    }
+                    _ => "-",
+                },
+                11
+            ),
             rate(m.period),
             row.load * 100.0,
             m.missed_deadlines,
@@ -94,7 +103,7 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
             .iter()
             .map(|(name, v)| format!("{name}={}", value(v)))
             .collect();
-        let _ = writeln!(out, "  {}", clip(&vars.join("  "), 110));
+        let _ = writeln!(out, "  {}", clip(&vars.join("  "), 120));
     }
     if !log.is_empty() {
         let _ = writeln!(out, "events:");
