@@ -413,7 +413,8 @@ impl Handle {
     }
 
     /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),
-    /// for at most `timeout`.
+    /// for at most `timeout`. `pred` is evaluated on each event, so it should depend on
+    /// the monitor only (a change nobody announces does not wake the wait).
     pub fn wait_for(
         &self,
         pred: impl Fn(&Monitor) -> bool,

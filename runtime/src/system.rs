@@ -99,6 +99,15 @@ pub enum Error {
     /// A name that cannot be used in `instance.port` addresses.
     #[error("`{0}` is not a valid component name (non-empty, no `.`)")]
     InvalidName(String),
+    /// The component's spec is inconsistent (a bug in the generator or a hand-written
+    /// spec).
+    #[error("component `{component}`: invalid spec: {detail}")]
+    InvalidSpec {
+        /// The component.
+        component: String,
+        /// What is wrong.
+        detail: String,
+    },
     /// The registered ports do not match the spec.
     #[error("component `{component}`: {detail}")]
     PortMismatch {
@@ -373,6 +382,12 @@ impl System {
             return Err(Error::DuplicateName(name));
         }
         let spec = automaton.spec();
+        if let Err(detail) = spec.validate() {
+            return Err(Error::InvalidSpec {
+                component: name,
+                detail,
+            });
+        }
         let mismatch = |detail: String| Error::PortMismatch {
             component: name.clone(),
             detail,
