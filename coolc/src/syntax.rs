@@ -155,24 +155,24 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 prefix_run = 0;
             }
         }
-        if let Some((level, what)) = deepest {
-            if level > MAX_DEPTH {
-                let start = index.min(text.len());
-                let end = text[start..]
-                    .chars()
-                    .next()
-                    .map_or(start, |c| start + c.len_utf8());
-                return Some(
-                    Diagnostic::error(
-                        Code::TooDeep,
-                        file,
-                        Span::new(start, end),
-                        format!("{what} nest deeper than {MAX_DEPTH} levels"),
-                    )
-                    .with_label("too deep")
-                    .with_help("simplify this part of the file; nothing after it was parsed"),
-                );
-            }
+        if let Some((level, what)) = deepest
+            && level > MAX_DEPTH
+        {
+            let start = index.min(text.len());
+            let end = text[start..]
+                .chars()
+                .next()
+                .map_or(start, |c| start + c.len_utf8());
+            return Some(
+                Diagnostic::error(
+                    Code::TooDeep,
+                    file,
+                    Span::new(start, end),
+                    format!("{what} nest deeper than {MAX_DEPTH} levels"),
+                )
+                .with_label("too deep")
+                .with_help("simplify this part of the file; nothing after it was parsed"),
+            );
         }
         index += 1;
     }
