@@ -8,7 +8,7 @@
 //! }
 //! ```
 //!
-//! ```ignore
+//! ```text
 //! // src/lib.rs
 //! pub mod generated {
 //!     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
