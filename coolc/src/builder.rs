@@ -2,10 +2,8 @@
 //! and `tonic-build` do for their inputs.
 //!
 //! ```no_run
-//! // build.rs
-//! fn main() {
-//!     coolc::Builder::new().compile(&["components/base.cool"]).unwrap();
-//! }
+//! // build.rs: `main` of the build script.
+//! coolc::Builder::new().compile(&["components/base.cool"]).unwrap();
 //! ```
 //!
 //! ```text
@@ -58,7 +56,11 @@ pub struct Builder {
 impl Builder {
     /// A builder writing `cool.rs` into `OUT_DIR` and printing `cargo:` directives.
     pub fn new() -> Builder {
-        Builder { out_dir: None, file_name: None, cargo_output: true }
+        Builder {
+            out_dir: None,
+            file_name: None,
+            cargo_output: true,
+        }
     }
 
     /// Writes into `dir` instead of `OUT_DIR`.
@@ -91,7 +93,9 @@ impl Builder {
             }
         }
         if analysis.has_errors() {
-            return Err(BuildError::Diagnostics(analysis.render(RenderOptions::plain())));
+            return Err(BuildError::Diagnostics(
+                analysis.render(RenderOptions::plain()),
+            ));
         }
         if self.cargo_output && !analysis.diagnostics.is_empty() {
             for line in analysis.render(RenderOptions::plain()).lines() {
@@ -113,12 +117,17 @@ impl Builder {
         }
         let dir = match &self.out_dir {
             Some(dir) => dir.clone(),
-            None => std::env::var_os("OUT_DIR").map(PathBuf::from).ok_or(BuildError::NoOutDir)?,
+            None => std::env::var_os("OUT_DIR")
+                .map(PathBuf::from)
+                .ok_or(BuildError::NoOutDir)?,
         };
         let path = dir.join(self.file_name.as_deref().unwrap_or("cool.rs"));
         std::fs::create_dir_all(&dir)
             .and_then(|()| std::fs::write(&path, emit::single_file(&krate)))
-            .map_err(|source| BuildError::Io { path: path.clone(), source })?;
+            .map_err(|source| BuildError::Io {
+                path: path.clone(),
+                source,
+            })?;
         Ok(path)
     }
 }

@@ -181,13 +181,22 @@ fn format_stub(stub: &str) -> String {
 pub fn generated_modules(krate: &ir::Crate) -> Vec<(String, String)> {
     let mut modules = vec![(
         krate.types.module.clone(),
-        format_generated(&render(&TypesRs { krate, types: &krate.types })),
+        format_generated(&render(&TypesRs {
+            krate,
+            types: &krate.types,
+        })),
     )];
     for c in &krate.atomics {
-        modules.push((c.module.clone(), format_generated(&render(&AtomicRs { krate, c }))));
+        modules.push((
+            c.module.clone(),
+            format_generated(&render(&AtomicRs { krate, c })),
+        ));
     }
     for c in &krate.compounds {
-        modules.push((c.module.clone(), format_generated(&render(&CompoundRs { krate, c }))));
+        modules.push((
+            c.module.clone(),
+            format_generated(&render(&CompoundRs { krate, c })),
+        ));
     }
     modules
 }
@@ -249,7 +258,12 @@ pub fn user_modules(krate: &ir::Crate) -> Vec<String> {
 
 /// The stubs of every user file, for merging.
 pub fn stub_sets(krate: &ir::Crate) -> Vec<StubSet> {
-    let stub = |m: &ir::Method| (m.name.clone(), format_stub(&render(&UserStub { method: m })));
+    let stub = |m: &ir::Method| {
+        (
+            m.name.clone(),
+            format_stub(&render(&UserStub { method: m })),
+        )
+    };
     let mut sets: Vec<StubSet> = krate
         .atomics
         .iter()
@@ -281,16 +295,31 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         contents,
         kind: FileKind::User,
     };
-    let mut files = vec![generated("Cargo.toml".to_owned(), render(&CargoToml { krate }) + "\n")];
+    let mut files = vec![generated(
+        "Cargo.toml".to_owned(),
+        render(&CargoToml { krate }) + "\n",
+    )];
     if !krate.system_libs.is_empty() {
-        files.push(generated("build.rs".to_owned(), format_generated(&render(&BuildRs { krate }))));
+        files.push(generated(
+            "build.rs".to_owned(),
+            format_generated(&render(&BuildRs { krate })),
+        ));
     }
-    files.push(generated("src/generated/mod.rs".to_owned(), generated_mod_rs(krate)));
+    files.push(generated(
+        "src/generated/mod.rs".to_owned(),
+        generated_mod_rs(krate),
+    ));
     for (module, text) in generated_modules(krate) {
-        files.push(generated(format!("src/generated/{}.rs", module.trim_start_matches("r#")), text));
+        files.push(generated(
+            format!("src/generated/{}.rs", module.trim_start_matches("r#")),
+            text,
+        ));
     }
     let modules = user_modules(krate);
-    files.push(user("src/lib.rs".to_owned(), format_user(&render(&UserLib { modules: &modules }))));
+    files.push(user(
+        "src/lib.rs".to_owned(),
+        format_user(&render(&UserLib { modules: &modules })),
+    ));
     for c in &krate.atomics {
         files.push(user(
             format!("src/{}.rs", c.module.trim_start_matches("r#")),

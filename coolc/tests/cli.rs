@@ -34,7 +34,10 @@ fn help_everywhere() {
     for command in ["check", "compile", "new"] {
         let out = coolc(&[command, "--help"], dir.path());
         assert_eq!(out.status.code(), Some(0), "{command} --help");
-        assert!(text(&out.stdout).contains("Usage: coolc"), "{command} --help");
+        assert!(
+            text(&out.stdout).contains("Usage: coolc"),
+            "{command} --help"
+        );
     }
     let out = coolc(&["compile", "--help"], dir.path());
     for option in ["--out", "--name", "--runtime-path", "--runtime-version"] {
@@ -62,7 +65,12 @@ fn exit_codes() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("missing.cool"));
 
-    for usage in [&["frobnicate"][..], &["check"], &["compile", ok], &["--message-format", "xml", "check", ok]] {
+    for usage in [
+        &["frobnicate"][..],
+        &["check"],
+        &["compile", ok],
+        &["--message-format", "xml", "check", ok],
+    ] {
         let out = coolc(usage, dir.path());
         assert_eq!(out.status.code(), Some(2), "{usage:?}");
     }
@@ -76,7 +84,10 @@ fn exit_codes() {
 fn json_diagnostics() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("broken.cool"), BROKEN).unwrap();
-    let out = coolc(&["check", "--message-format", "json", "broken.cool"], dir.path());
+    let out = coolc(
+        &["check", "--message-format", "json", "broken.cool"],
+        dir.path(),
+    );
     assert_eq!(out.status.code(), Some(1));
     let stdout = text(&out.stdout);
     let lines: Vec<&str> = stdout.lines().collect();
@@ -93,18 +104,35 @@ fn compile_writes_a_crate() {
     let dir = tempfile::tempdir().unwrap();
     let ok = data("mobile_base.cool");
     let out = coolc(
-        &["compile", ok.to_str().unwrap(), "-o", "base", "--name", "my-base", "--runtime-version", "0.1"],
+        &[
+            "compile",
+            ok.to_str().unwrap(),
+            "-o",
+            "base",
+            "--name",
+            "my-base",
+            "--runtime-version",
+            "0.1",
+        ],
         dir.path(),
     );
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let manifest = std::fs::read_to_string(dir.path().join("base/Cargo.toml")).unwrap();
     assert!(manifest.contains("name = \"my-base\""), "{manifest}");
     assert!(manifest.contains("coolbot = \"0.1\""), "{manifest}");
-    for file in ["src/lib.rs", "src/generated/motion_controller.rs", "src/motion_controller.rs", "build.rs"] {
+    for file in [
+        "src/lib.rs",
+        "src/generated/motion_controller.rs",
+        "src/motion_controller.rs",
+        "build.rs",
+    ] {
         assert!(dir.path().join("base").join(file).exists(), "{file}");
     }
     // By default the runtime is this repository's, by path.
-    let out = coolc(&["compile", ok.to_str().unwrap(), "-o", "base2"], dir.path());
+    let out = coolc(
+        &["compile", ok.to_str().unwrap(), "-o", "base2"],
+        dir.path(),
+    );
     assert_eq!(out.status.code(), Some(0));
     let manifest = std::fs::read_to_string(dir.path().join("base2/Cargo.toml")).unwrap();
     assert!(manifest.contains("name = \"base2\""), "{manifest}");
@@ -124,7 +152,10 @@ fn new_crate_builds_and_runs() {
     let user_file = std::fs::read_to_string(krate.join("src/blinker.rs")).unwrap();
     let out = coolc(&["compile", "components/blinker.cool", "-o", "."], &krate);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    assert_eq!(std::fs::read_to_string(krate.join("src/blinker.rs")).unwrap(), user_file);
+    assert_eq!(
+        std::fs::read_to_string(krate.join("src/blinker.rs")).unwrap(),
+        user_file
+    );
 
     let stdout = cargo(&krate, &["run", "--quiet"]);
     assert!(stdout.contains("\"done\""), "{stdout}");

@@ -18,14 +18,25 @@ fn generated_crate_builds_and_runs() {
     compile(&descriptions.join("mobile_base.cool"), &krate, "fleet");
 
     // The untouched stubs (SimRangeServer, Gyro) must build as generated.
-    for name in ["range_server.rs", "planner.rs", "converters.rs", "motion_controller.rs"] {
+    for name in [
+        "range_server.rs",
+        "planner.rs",
+        "converters.rs",
+        "motion_controller.rs",
+    ] {
         std::fs::copy(data("filled").join(name), krate.join("src").join(name)).unwrap();
     }
     std::fs::create_dir_all(krate.join("tests")).unwrap();
     std::fs::copy(data("filled/run.rs"), krate.join("tests/run.rs")).unwrap();
 
     cargo(&krate, &["fmt", "--check"]);
-    cargo(&krate, &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
     let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(output.contains("test mobile_base_instances_run_and_talk ... ok"), "{output}");
+    assert!(
+        output.contains("test mobile_base_instances_run_and_talk ... ok"),
+        "{output}"
+    );
 }

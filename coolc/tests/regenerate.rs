@@ -57,13 +57,19 @@ fn fill_off_entry(text: &str) -> String {
     filled.push_str(FILLED_BODY);
     filled.push_str(&text[close..]);
     // Plus code of the user's own outside the impl block.
-    filled.push_str("\n/// A helper of mine.\npub fn brightness(level: u32) -> u32 {\n    level * 10\n}\n");
+    filled.push_str(
+        "\n/// A helper of mine.\npub fn brightness(level: u32) -> u32 {\n    level * 10\n}\n",
+    );
     filled
 }
 
 /// Asserts that `new` is `old` with text inserted at one place only.
 fn assert_only_inserted(old: &str, new: &str) -> String {
-    let prefix = old.bytes().zip(new.bytes()).take_while(|(a, b)| a == b).count();
+    let prefix = old
+        .bytes()
+        .zip(new.bytes())
+        .take_while(|(a, b)| a == b)
+        .count();
     let suffix = old
         .bytes()
         .rev()
@@ -115,13 +121,20 @@ fn regeneration_keeps_user_code_and_adds_new_stubs() {
             ("src/lib.rs".into(), vec!["switch".to_owned()]),
             (
                 "src/lamp.rs".into(),
-                vec!["lit_entry".to_owned(), "lit_periodic".to_owned(), "on_flicker".to_owned()]
+                vec![
+                    "lit_entry".to_owned(),
+                    "lit_periodic".to_owned(),
+                    "on_flicker".to_owned()
+                ]
             ),
         ]
     );
     // The new component gets its module declared and its user file written.
     let lib_after = std::fs::read_to_string(krate.join("src/lib.rs")).unwrap();
-    assert_eq!(assert_only_inserted(&lib_before, &lib_after), "pub mod switch;\n");
+    assert_eq!(
+        assert_only_inserted(&lib_before, &lib_after),
+        "pub mod switch;\n"
+    );
     assert!(krate.join("src/switch.rs").exists());
     // The latest stubs are kept for reference.
     assert!(
@@ -138,7 +151,11 @@ fn regeneration_keeps_user_code_and_adds_new_stubs() {
     assert!(report.added.is_empty());
     assert_eq!(std::fs::read_to_string(&user_file).unwrap(), regenerated);
     assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
-    assert!(report.warnings[0].contains("on_flicker"), "{:?}", report.warnings);
+    assert!(
+        report.warnings[0].contains("on_flicker"),
+        "{:?}",
+        report.warnings
+    );
 
     // Compiling again with nothing changed rewrites nothing.
     let report = compile(&description, &krate, "lamp");

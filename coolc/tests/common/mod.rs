@@ -9,7 +9,9 @@ use coolc::{lower, merge};
 
 /// `coolc/tests/data/<name>`.
 pub fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
 }
 
 /// The repository's runtime crate, by path.
@@ -22,7 +24,12 @@ pub fn runtime() -> RuntimeDep {
 /// (`serialport` needs libudev and `nalgebra` takes minutes to build; neither is
 /// used by the test code).
 pub fn copy_descriptions(dir: &Path) {
-    for name in ["types.cool", "motion_controller.cool", "range_server.cool", "mobile_base.cool"] {
+    for name in [
+        "types.cool",
+        "motion_controller.cool",
+        "range_server.cool",
+        "mobile_base.cool",
+    ] {
         let text = std::fs::read_to_string(data(name)).unwrap();
         let text: String = text
             .lines()
@@ -36,7 +43,11 @@ pub fn copy_descriptions(dir: &Path) {
 /// Analyzes `root`, lowers it and writes (or merges into) the crate `out`.
 pub fn compile(root: &Path, out: &Path, package: &str) -> merge::Report {
     let analysis = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p));
-    assert!(!analysis.has_errors(), "{}", analysis.render(coolc::RenderOptions::plain()));
+    assert!(
+        !analysis.has_errors(),
+        "{}",
+        analysis.render(coolc::RenderOptions::plain())
+    );
     let options = lower::Options {
         package: package.to_owned(),
         runtime: runtime(),
