@@ -17,6 +17,10 @@ use crate::spec::{InputKind, OutputKind, Spec};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+/// How many commands may wait at one component's control port; a command beyond that
+/// is rejected at once.
+pub const CONTROL_CAPACITY: usize = 32;
+
 /// How long [`System::shutdown`] (and dropping a system) waits for each thread.
 pub const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -500,7 +504,7 @@ impl System {
                 });
             }
         }
-        let (control_sender, control) = crossbeam_channel::bounded(256);
+        let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
         let (exit_guard, exited) = crossbeam_channel::bounded(1);
         let handle = Handle {
             name: Arc::from(name.as_str()),
