@@ -1796,7 +1796,11 @@ mod tests {
     #[test]
     fn keyword_rules_are_exactly_the_kw_rules() {
         for rule in Rule::all_rules() {
-            assert_eq!(is_keyword(*rule), format!("{rule:?}").starts_with("kw_"), "{rule:?}");
+            assert_eq!(
+                is_keyword(*rule),
+                format!("{rule:?}").starts_with("kw_"),
+                "{rule:?}"
+            );
             if is_keyword(*rule) {
                 assert!(rule_name(*rule).is_some(), "{rule:?} has no readable name");
             }
