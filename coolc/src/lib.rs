@@ -26,14 +26,22 @@
 #![deny(missing_docs)]
 
 pub mod ast;
+pub mod builder;
 pub mod check;
+pub mod cli;
 pub mod diagnostics;
+pub mod emit;
+pub mod ident;
+pub mod ir;
+pub mod lower;
+pub mod merge;
 pub mod resolve;
 pub mod source;
 pub mod syntax;
 
 use std::path::Path;
 
+pub use builder::Builder;
 pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
 pub use source::SourceMap;
 
