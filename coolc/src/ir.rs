@@ -74,6 +74,11 @@ impl Crate {
         }
     }
 
+    /// Whether a `link crate` names `name`.
+    pub fn links_crate(&self, name: &str) -> bool {
+        self.dependencies.iter().any(|d| d.key == name)
+    }
+
     /// The generated modules, in emission order (`types` first).
     pub fn module_names(&self) -> Vec<String> {
         let mut names = vec![self.types.module.clone()];

@@ -1102,8 +1102,15 @@ mod tests {
     /// rejects them; lowering escapes them anyway, as defence in depth).
     fn lower_keywords(text: &str) -> ir::Crate {
         let analysis = crate::analyze_text("t.cool", text);
-        let codes: Vec<&str> = analysis.diagnostics.iter().map(|d| d.code.as_str()).collect();
-        assert!(codes.iter().all(|c| *c == "coolc::check::rust_keyword"), "{codes:?}");
+        let codes: Vec<&str> = analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect();
+        assert!(
+            codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+            "{codes:?}"
+        );
         lower(&analysis.files, &Options::default())
     }
 
