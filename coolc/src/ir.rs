@@ -461,10 +461,28 @@ pub struct Compound {
 pub struct Instance {
     /// Instance name as written.
     pub name: String,
+    /// Its method on the `Parts` trait.
+    pub method: String,
     /// Component type name.
     pub component: String,
-    /// Whether the component is atomic.
-    pub atomic: bool,
+    /// The generated module of the component, when it is atomic.
+    pub module: Option<String>,
+    /// The instance it substitutes, if any (not built at start).
+    pub substitutes: Option<String>,
+}
+
+impl Instance {
+    /// Whether `build` adds it to the system: an atomic that substitutes nothing.
+    pub fn built(&self) -> bool {
+        self.module.is_some() && self.substitutes.is_none()
+    }
+}
+
+impl Compound {
+    /// Whether any instance is built.
+    pub fn builds_any(&self) -> bool {
+        self.instances.iter().any(Instance::built)
+    }
 }
 
 /// One `connect` of a compound.

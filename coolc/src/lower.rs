@@ -47,6 +47,8 @@ enum TypeDef<'a> {
 struct Lowerer<'a> {
     types: BTreeMap<&'a str, TypeDef<'a>>,
     components: BTreeMap<&'a str, &'a ast::Component>,
+    /// Generated module name of every component.
+    modules: BTreeMap<&'a str, String>,
 }
 
 /// Lowers a set of checked files (imports included) to the IR of one crate.
@@ -54,6 +56,7 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
     let mut lowerer = Lowerer {
         types: BTreeMap::new(),
         components: BTreeMap::new(),
+        modules: BTreeMap::new(),
     };
     for item in files.iter().flat_map(|f| &f.items) {
         match item {
@@ -76,6 +79,20 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
                 lowerer.components.entry(&c.name.name).or_insert(c);
             }
             ast::Item::Import(_) | ast::Item::Converter(_) => {}
+        }
+    }
+    // Module names in source order; names coolc uses itself are taken.
+    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"].map(str::to_owned).into_iter().collect();
+    for item in files.iter().flat_map(|f| &f.items) {
+        if let ast::Item::Component(c) = item {
+            if lowerer.modules.contains_key(c.name.name.as_str()) {
+                continue;
+            }
+            let mut module = ident::snake_raw(&c.name.name);
+            while !taken.insert(module.clone()) {
+                module.push_str("_component");
+            }
+            lowerer.modules.insert(&c.name.name, ident::escape(&module));
         }
     }
     lowerer.lower_crate(files, options)
@@ -306,7 +323,6 @@ impl<'a> Lowerer<'a> {
         let mut system_libs: Vec<String> = Vec::new();
         let mut seen_types = BTreeSet::new();
         let mut seen_components = BTreeSet::new();
-        let mut modules: BTreeSet<String> = ["types".to_owned()].into_iter().collect();
         for item in files.iter().flat_map(|f| &f.items) {
             match item {
                 ast::Item::Packet(p) if seen_types.insert(p.name.name.clone()) => {
@@ -394,11 +410,7 @@ impl<'a> Lowerer<'a> {
                             }
                         }
                     }
-                    let mut module = ident::snake_raw(&c.name.name);
-                    while !modules.insert(module.clone()) || module == "support" {
-                        module.push_str("_component");
-                    }
-                    let module = ident::escape(&module);
+                    let module = self.modules[c.name.name.as_str()].clone();
                     match c.kind {
                         ast::ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
                         ast::ComponentKind::Compound => compounds.push(self.compound(c, module)),
@@ -970,11 +982,14 @@ impl<'a> Lowerer<'a> {
             match member {
                 ast::Member::Instance(i) => instances.push(ir::Instance {
                     name: i.name.name.clone(),
+                    method: ident::snake(&i.name.name),
                     component: i.component.name.clone(),
-                    atomic: self
+                    module: self
                         .components
                         .get(i.component.name.as_str())
-                        .is_some_and(|c| c.kind == ast::ComponentKind::Atomic),
+                        .filter(|c| c.kind == ast::ComponentKind::Atomic)
+                        .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
+                    substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {

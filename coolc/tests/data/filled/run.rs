@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use coolbot::{System, Value};
 use fleet::converters::Convert;
-use fleet::generated::{mobile_base, motion_controller, planner, range_server};
+use fleet::generated::{gyro, mobile_base, motion_controller, planner, range_server};
 
 const WAIT: Duration = Duration::from_secs(20);
 
@@ -17,28 +17,40 @@ fn variable(monitor: &coolbot::Monitor, name: &str) -> Option<Value> {
         .map(|(_, v)| v.clone())
 }
 
+/// The behaviors of the compound's instances.
+struct Fleet;
+
+impl mobile_base::Parts for Fleet {
+    fn motion(&mut self) -> impl motion_controller::Behavior {
+        fleet::motion_controller::MotionController::default()
+    }
+
+    fn ranges(&mut self) -> impl range_server::Behavior {
+        fleet::range_server::RangeServer::default()
+    }
+
+    fn gyro_a(&mut self) -> impl gyro::Behavior {
+        fleet::gyro::Gyro::default()
+    }
+
+    fn gyro_b(&mut self) -> impl gyro::Behavior {
+        fleet::gyro::Gyro::default()
+    }
+
+    fn planner(&mut self) -> impl planner::Behavior {
+        fleet::planner::Planner::default()
+    }
+}
+
 #[test]
 fn mobile_base_instances_run_and_talk() {
     let mut system = System::new();
-    let motion = system
-        .add(motion_controller::component(
-            "motion",
-            fleet::motion_controller::MotionController::default(),
-        ))
-        .unwrap();
-    let ranges = system
-        .add(range_server::component(
-            "ranges",
-            fleet::range_server::RangeServer::default(),
-        ))
-        .unwrap();
-    system
-        .add(planner::component(
-            "planner",
-            fleet::planner::Planner::default(),
-        ))
-        .unwrap();
-    mobile_base::connect::<Convert>(&mut system, "").unwrap();
+    let handles = mobile_base::build::<Convert>(&mut system, "", &mut Fleet).unwrap();
+    let names: Vec<&str> = handles.iter().map(|h| h.name()).collect();
+    // The substitute `sim_ranges` is not started.
+    assert_eq!(names, ["motion", "ranges", "gyro_a", "gyro_b", "planner"]);
+    let motion = system.handle("motion").unwrap();
+    let ranges = system.handle("ranges").unwrap();
     system.run_all().unwrap();
 
     // The range server leaves `calibrating` through its `may` choice and streams.
