@@ -454,6 +454,10 @@ pub struct Compound {
     pub connections: Vec<Connection>,
     /// Whether any connection goes through a converter (the builder is then generic).
     pub uses_converters: bool,
+    /// Name of the user struct implementing `Parts` in the user file.
+    pub user_struct: String,
+    /// The `Parts` methods with their user stubs.
+    pub parts: Vec<Method>,
 }
 
 /// One instance of a compound.

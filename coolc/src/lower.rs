@@ -82,7 +82,10 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
         }
     }
     // Module names in source order; names coolc uses itself are taken.
-    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"].map(str::to_owned).into_iter().collect();
+    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
+        .map(str::to_owned)
+        .into_iter()
+        .collect();
     for item in files.iter().flat_map(|f| &f.items) {
         if let ast::Item::Component(c) = item {
             if lowerer.modules.contains_key(c.name.name.as_str()) {
@@ -1005,7 +1008,29 @@ impl<'a> Lowerer<'a> {
                 _ => {}
             }
         }
+        let parts = instances
+            .iter()
+            .filter(|i| i.built())
+            .filter_map(|i| {
+                let module = i.module.as_ref()?;
+                Some(ir::Method {
+                    name: i.method.clone(),
+                    doc: Vec::new(),
+                    signature: String::new(),
+                    user_signature: format!(
+                        "fn {}(&mut self) -> impl crate::generated::{module}::Behavior",
+                        i.method
+                    ),
+                    stub_body: vec![
+                        format!("// Instance `{}`: the behavior it runs.", i.name),
+                        format!("crate::{module}::{}::default()", ident::camel(&i.component)),
+                    ],
+                })
+            })
+            .collect();
         ir::Compound {
+            user_struct: format!("{}Parts", ident::camel_raw(&c.name.name)),
+            parts,
             doc: doc(&c.doc),
             type_name: c.name.name.clone(),
             module,

@@ -1,11 +1,12 @@
 //! Runs the generated components on the runtime, wired by the generated compound
-//! `MobileBase::connect`.
+//! `MobileBase::build` with the user file's `MobileBaseParts`.
 
 use std::time::Duration;
 
 use coolbot::{System, Value};
 use fleet::converters::Convert;
-use fleet::generated::{gyro, mobile_base, motion_controller, planner, range_server};
+use fleet::generated::mobile_base;
+use fleet::mobile_base::MobileBaseParts;
 
 const WAIT: Duration = Duration::from_secs(20);
 
@@ -17,35 +18,10 @@ fn variable(monitor: &coolbot::Monitor, name: &str) -> Option<Value> {
         .map(|(_, v)| v.clone())
 }
 
-/// The behaviors of the compound's instances.
-struct Fleet;
-
-impl mobile_base::Parts for Fleet {
-    fn motion(&mut self) -> impl motion_controller::Behavior {
-        fleet::motion_controller::MotionController::default()
-    }
-
-    fn ranges(&mut self) -> impl range_server::Behavior {
-        fleet::range_server::RangeServer::default()
-    }
-
-    fn gyro_a(&mut self) -> impl gyro::Behavior {
-        fleet::gyro::Gyro::default()
-    }
-
-    fn gyro_b(&mut self) -> impl gyro::Behavior {
-        fleet::gyro::Gyro::default()
-    }
-
-    fn planner(&mut self) -> impl planner::Behavior {
-        fleet::planner::Planner::default()
-    }
-}
-
 #[test]
 fn mobile_base_instances_run_and_talk() {
     let mut system = System::new();
-    let handles = mobile_base::build::<Convert>(&mut system, "", &mut Fleet).unwrap();
+    let handles = mobile_base::build::<Convert>(&mut system, "", &mut MobileBaseParts).unwrap();
     let names: Vec<&str> = handles.iter().map(|h| h.name()).collect();
     // The substitute `sim_ranges` is not started.
     assert_eq!(names, ["motion", "ranges", "gyro_a", "gyro_b", "planner"]);
