@@ -2,13 +2,11 @@
 //! and `tonic-build` do for their inputs.
 //!
 //! ```no_run
-//! // build.rs
-//! fn main() {
-//!     coolc::Builder::new().compile(&["components/base.cool"]).unwrap();
-//! }
+//! // build.rs: `main` of the build script.
+//! coolc::Builder::new().compile(&["components/base.cool"]).unwrap();
 //! ```
 //!
-//! ```ignore
+//! ```text
 //! // src/lib.rs
 //! pub mod generated {
 //!     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
@@ -28,8 +26,9 @@ use std::path::{Path, PathBuf};
 
 use crate::{RenderOptions, emit, lower};
 
-/// Why a [`Builder`] failed.
-#[derive(Debug, thiserror::Error)]
+/// Why a [`Builder`] failed. Its `Debug` is its `Display`, so that
+/// `Builder::compile(..).unwrap()` in a build script shows the diagnostics as rendered.
+#[derive(thiserror::Error)]
 pub enum BuildError {
     /// The descriptions have errors; the rendered diagnostics are inside.
     #[error("the .cool descriptions have errors:\n{0}")]
@@ -47,6 +46,12 @@ pub enum BuildError {
     },
 }
 
+impl std::fmt::Debug for BuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(self, f)
+    }
+}
+
 /// Compiles descriptions into `$OUT_DIR/cool.rs` from a build script.
 #[derive(Clone, Debug, Default)]
 pub struct Builder {
@@ -58,7 +63,11 @@ pub struct Builder {
 impl Builder {
     /// A builder writing `cool.rs` into `OUT_DIR` and printing `cargo:` directives.
     pub fn new() -> Builder {
-        Builder { out_dir: None, file_name: None, cargo_output: true }
+        Builder {
+            out_dir: None,
+            file_name: None,
+            cargo_output: true,
+        }
     }
 
     /// Writes into `dir` instead of `OUT_DIR`.
@@ -91,7 +100,9 @@ impl Builder {
             }
         }
         if analysis.has_errors() {
-            return Err(BuildError::Diagnostics(analysis.render(RenderOptions::plain())));
+            return Err(BuildError::Diagnostics(
+                analysis.render(RenderOptions::plain()),
+            ));
         }
         if self.cargo_output && !analysis.diagnostics.is_empty() {
             for line in analysis.render(RenderOptions::plain()).lines() {
@@ -113,12 +124,17 @@ impl Builder {
         }
         let dir = match &self.out_dir {
             Some(dir) => dir.clone(),
-            None => std::env::var_os("OUT_DIR").map(PathBuf::from).ok_or(BuildError::NoOutDir)?,
+            None => std::env::var_os("OUT_DIR")
+                .map(PathBuf::from)
+                .ok_or(BuildError::NoOutDir)?,
         };
         let path = dir.join(self.file_name.as_deref().unwrap_or("cool.rs"));
         std::fs::create_dir_all(&dir)
             .and_then(|()| std::fs::write(&path, emit::single_file(&krate)))
-            .map_err(|source| BuildError::Io { path: path.clone(), source })?;
+            .map_err(|source| BuildError::Io {
+                path: path.clone(),
+                source,
+            })?;
         Ok(path)
     }
 }

@@ -109,7 +109,9 @@ impl RuntimeArgs {
 pub fn default_runtime() -> RuntimeDep {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
     match path.canonicalize() {
-        Ok(path) if path.join("Cargo.toml").exists() => RuntimeDep::Path(path.display().to_string()),
+        Ok(path) if path.join("Cargo.toml").exists() => {
+            RuntimeDep::Path(path.display().to_string())
+        }
         _ => RuntimeDep::Version("0.1".to_owned()),
     }
 }
@@ -118,7 +120,12 @@ pub fn default_runtime() -> RuntimeDep {
 pub fn run(cli: Cli) -> ExitCode {
     let result = match &cli.command {
         Commands::Check { files } => check(&cli, files).map(|_| ()),
-        Commands::Compile { files, out, name, runtime } => {
+        Commands::Compile {
+            files,
+            out,
+            name,
+            runtime,
+        } => {
             let package = name.clone().unwrap_or_else(|| dir_name(out));
             compile(&cli, files, out, &package, runtime.dep()).map(|_| ())
         }
@@ -163,7 +170,10 @@ fn render_options(cli: &Cli) -> RenderOptions {
 fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     for file in files {
         if let Err(error) = std::fs::metadata(file) {
-            return Err(Failure::Usage(format!("cannot read {}: {error}", file.display())));
+            return Err(Failure::Usage(format!(
+                "cannot read {}: {error}",
+                file.display()
+            )));
         }
     }
     let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
@@ -196,7 +206,12 @@ fn compile(
         runtime,
         sources: files
             .iter()
-            .map(|f| f.file_name().map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into_owned()))
+            .map(|f| {
+                f.file_name().map_or_else(
+                    || f.display().to_string(),
+                    |n| n.to_string_lossy().into_owned(),
+                )
+            })
             .collect(),
     };
     let krate = lower::lower(&analysis.files, &options);
@@ -230,7 +245,9 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     std::fs::write(&cool, description).map_err(io)?;
     let krate = compile(cli, &[cool], dir, &name, runtime)?;
     let Some(atomic) = krate.atomics.first() else {
-        return Err(Failure::Usage("the starter description has no component".to_owned()));
+        return Err(Failure::Usage(
+            "the starter description has no component".to_owned(),
+        ));
     };
     let module = atomic.module.trim_start_matches("r#");
     std::fs::write(
@@ -243,8 +260,12 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     eprintln!(
         "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",
         dir.display(),
-        Path::new("components").join(cool_file_name(&type_name)).display(),
-        Path::new("components").join(cool_file_name(&type_name)).display(),
+        Path::new("components")
+            .join(cool_file_name(&type_name))
+            .display(),
+        Path::new("components")
+            .join(cool_file_name(&type_name))
+            .display(),
     );
     Ok(())
 }

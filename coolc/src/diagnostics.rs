@@ -26,6 +26,8 @@ pub enum Severity {
     Error,
     /// The description compiles, but something looks wrong.
     Warning,
+    /// Context for another diagnostic (e.g. an earlier definition in another file).
+    Note,
 }
 
 macro_rules! codes {
@@ -57,6 +59,8 @@ codes! {
     InvalidEscape => "coolc::syntax::invalid_escape",
     /// A number literal does not fit its type.
     InvalidNumber => "coolc::syntax::invalid_number",
+    /// Brackets, comments or prefix operators nest deeper than the parser allows.
+    TooDeep => "coolc::syntax::too_deep",
     /// An imported file could not be read.
     ImportNotFound => "coolc::resolve::import_not_found",
     /// Files import each other in a cycle.
@@ -214,7 +218,7 @@ impl Diagnostic {
         } else {
             let message = message.into();
             let note = Diagnostic {
-                severity: self.severity,
+                severity: Severity::Note,
                 ..Diagnostic::error(self.code, file, span, message.clone())
             }
             .with_label(message);
@@ -398,6 +402,7 @@ impl miette::Diagnostic for Rendered {
         Some(match self.severity {
             Severity::Error => miette::Severity::Error,
             Severity::Warning => miette::Severity::Warning,
+            Severity::Note => miette::Severity::Advice,
         })
     }
 

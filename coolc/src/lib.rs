@@ -41,8 +41,8 @@ pub mod syntax;
 
 use std::path::Path;
 
-pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
 pub use builder::Builder;
+pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
 pub use source::SourceMap;
 
 /// The result of [`analyze`]: what was read, what was parsed, what is wrong.

@@ -9,7 +9,9 @@ use coolc::ir::RuntimeDep;
 use coolc::lower;
 
 fn data(name: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
 }
 
 fn lower_fixture(root: &str, package: &str) -> coolc::ir::Crate {
@@ -54,9 +56,12 @@ fn mobile_base_and_its_components() {
 
 #[test]
 fn starter_component() {
-    let analysis =
-        coolc::analyze_text("starter.cool", &coolc::cli::starter_description("Starter"));
-    assert!(!analysis.has_errors(), "{}", analysis.render(coolc::RenderOptions::plain()));
+    let analysis = coolc::analyze_text("starter.cool", &coolc::cli::starter_description("Starter"));
+    assert!(
+        !analysis.has_errors(),
+        "{}",
+        analysis.render(coolc::RenderOptions::plain())
+    );
     let krate = lower::lower(
         &analysis.files,
         &lower::Options {
@@ -83,7 +88,10 @@ fn builder_single_file_holds_every_module() {
     let krate = lower_fixture("mobile_base.cool", "mobile-base");
     let text = emit::single_file(&krate);
     for module in krate.module_names() {
-        assert!(text.contains(&format!("pub mod {module} {{")), "module {module} missing");
+        assert!(
+            text.contains(&format!("pub mod {module} {{")),
+            "module {module} missing"
+        );
     }
     assert!(text.contains("pub fn __cool_from_value"));
     let out = tempfile::tempdir().unwrap();
@@ -111,4 +119,79 @@ fn builder_reports_diagnostics() {
         panic!("expected diagnostics, got {error:?}");
     };
     assert!(text.contains("bad.cool"), "{text}");
+}
+
+#[test]
+fn rust_keywords_as_names_emit_valid_rust() {
+    // The checker rejects Rust keywords as names (`coolc::check::rust_keyword`);
+    // lowering escapes them anyway, as defence in depth. Every emitted Rust file is
+    // parsed by `syn` while emitting: a keyword that is not escaped would panic here.
+    let analysis = coolc::analyze_text(
+        "k.cool",
+        "packet Self { type: u8, loop: bool = true }\n\
+         enum Kind { Self, Fn }\n\
+         atomic Loop {\n\
+             configuration { use: u8 = 1; }\n\
+             observable match: Self;\n\
+             controllable move: u8 = 2;\n\
+             input in: fifo<Self>(2);\n\
+             output ref: data<Kind> pull;\n\
+             exception break;\n\
+             automaton { initial self; state self { entry; may -> super; } state super { periodic 10ms; } }\n\
+         }\n",
+    );
+    let codes: Vec<&str> = analysis
+        .diagnostics
+        .iter()
+        .map(|d| d.code.as_str())
+        .collect();
+    assert!(
+        codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+        "{codes:?}"
+    );
+    let krate = lower::lower(&analysis.files, &lower::Options::default());
+    let files = emit::emit_crate(&krate);
+    let module = files
+        .iter()
+        .find(|f| f.path == Path::new("src/generated/loop.rs"))
+        .expect("module file named after the component");
+    assert!(
+        module
+            .contents
+            .contains("pub r#match: super::types::Self_,"),
+        "{}",
+        module.contents
+    );
+    assert!(module.contents.contains("fn self_entry"));
+    assert!(module.contents.contains("fn on_break"));
+}
+
+#[test]
+fn every_ok_fixture_emits() {
+    // The front end's fixture suite: every description that checks must emit (emission
+    // parses every Rust file it writes, so a template bug panics here).
+    insta::glob!("../../tests/data/ok", "*.cool", |path| {
+        let analysis = coolc::analyze(&[path], &|p: &Path| std::fs::read_to_string(p));
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(coolc::RenderOptions::plain())
+        );
+        let krate = lower::lower(&analysis.files, &lower::Options::default());
+        let files = emit::emit_crate(&krate);
+        let manifest = &files[0];
+        assert_eq!(manifest.path, Path::new("Cargo.toml"));
+        assert_eq!(
+            manifest.contents.matches("\nserde = ").count()
+                + manifest.contents.matches("\nserde=").count(),
+            usize::from(!krate.links_crate("serde"))
+        );
+        for atomic in &krate.atomics {
+            let module = format!("src/generated/{}.rs", atomic.module);
+            assert!(
+                files.iter().any(|f| f.path == Path::new(&module)),
+                "{module}"
+            );
+        }
+    });
 }

@@ -28,7 +28,7 @@ pub const DEFAULT_BLOCK_TIMEOUT: Duration = Duration::from_millis(100);
 
 /// How many pull requests may wait at one output before further requests fail with
 /// [`PullError::RequestQueueFull`].
-pub const PULL_REQUEST_CAPACITY: usize = 1024;
+pub const PULL_REQUEST_CAPACITY: usize = 64;
 
 /// What a port carries: any clonable, sendable, shareable `'static` type.
 pub trait Packet: Clone + Send + Sync + 'static {}
@@ -421,6 +421,13 @@ impl<T: Packet> FifoIn<T> {
     /// Every packet queued now, oldest first.
     pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
         self.inner.receiver.try_iter()
+    }
+
+    /// Wait up to `timeout` for a packet. This blocks the calling thread: meant for
+    /// threads outside the system (tests, tools), not for sections, which should
+    /// react to arrivals with `on` transitions instead.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<T> {
+        self.inner.receiver.recv_timeout(timeout).ok()
     }
 
     /// The number of queued packets.

@@ -58,11 +58,24 @@ pub(super) fn field(checker: &mut Checker<'_, '_>, field: &ast::Field) {
 /// The Rust path of an extern packet must not be empty.
 pub(super) fn extern_path(checker: &mut Checker<'_, '_>, def: &ast::ExternPacket) {
     let path = def.rust_path.value.trim();
-    let valid = !path.is_empty()
-        && path.split("::").all(|segment| {
-            let segment = segment.split('<').next().unwrap_or(segment).trim();
-            !segment.is_empty() && segment.chars().all(|c| c.is_alphanumeric() || c == '_')
-        });
+    let mut depth = 0i32;
+    let balanced = path.chars().all(|c| {
+        match c {
+            '<' => depth += 1,
+            '>' => depth -= 1,
+            _ => {}
+        }
+        depth >= 0
+    }) && depth == 0;
+    let valid = balanced
+        && path
+            .chars()
+            .next()
+            .is_some_and(|c| c.is_alphabetic() || c == '_' || c == ':')
+        && path
+            .chars()
+            .all(|c| c.is_alphanumeric() || "_:<>, &'[];".contains(c))
+        && !path.ends_with(':');
     if !valid {
         let diagnostic = checker
             .error(

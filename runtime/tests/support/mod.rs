@@ -23,6 +23,19 @@ use worker::{Behavior, BusyMay, Cx, Exception};
 /// How long tests wait for anything (generous: the machine is shared).
 pub const WAIT: Duration = Duration::from_secs(10);
 
+/// Wait until `condition` holds, checking every millisecond (for conditions on test
+/// state that no monitoring event announces); panics with `what` after `WAIT`.
+pub fn eventually(condition: impl Fn() -> bool, what: &str) {
+    let deadline = std::time::Instant::now() + WAIT;
+    while !condition() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for: {what}"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
 /// A fault to inject: in which hook, as which exception (None: undeclared), how often.
 #[derive(Debug, Clone)]
 pub struct Injected {
@@ -220,14 +233,23 @@ pub struct Feeder {
 impl Rig {
     /// Add the worker without starting the system.
     pub fn unstarted(script: Arc<Script>) -> Rig {
+        let data = coolbot::port::FifoIn::new(4, coolbot::OverflowPolicy::Reject);
+        Rig::unstarted_with(script, &worker::SPEC, data, None)
+    }
+
+    /// Like `unstarted`, with another spec, data fifo and drop token.
+    pub fn unstarted_with(
+        script: Arc<Script>,
+        spec: &'static coolbot::Spec,
+        data: coolbot::port::FifoIn<u64>,
+        token: Option<Arc<()>>,
+    ) -> Rig {
         let mut system = System::new();
-        let (component, inputs, outputs) = worker::component(
-            "w",
-            Scripted {
-                script: Arc::clone(&script),
-                token: None,
-            },
-        );
+        let behavior = Scripted {
+            script: Arc::clone(&script),
+            token,
+        };
+        let (component, inputs, outputs) = worker::component_with("w", behavior, spec, data);
         let handle = system.add(component).expect("add");
         let feeder = Feeder {
             kick: TickOut::new(),
@@ -278,6 +300,13 @@ impl Rig {
         self.wait_user("idle");
         self.feeder.kick.emit();
         self.wait_user("busy");
+        self.sync();
+    }
+
+    /// A round trip through the control port: the worker's thread answers it only
+    /// after the call it is in (here, `busy`'s entry section) has returned.
+    pub fn sync(&self) {
+        self.handle.command(Command::SetPriority(0)).expect("sync");
     }
 
     pub fn wait_state(&self, state: State) -> coolbot::Monitor {
