@@ -99,6 +99,8 @@ pub struct Summary {
     pub odometry_distance: f64,
     /// The smallest distance between the robot's rim and an obstacle (m).
     pub min_clearance: f64,
+    /// The same, ahead of the robot only (along the beams the emergency stop uses).
+    pub min_front_clearance: f64,
     /// Moves refused because the robot touched an obstacle.
     pub contacts: u64,
     /// Emergencies raised by the range servers (real and simulated).
@@ -107,6 +109,8 @@ pub struct Summary {
     pub halts: u64,
     /// Times the wanderer turned away from an obstacle.
     pub avoidances: u64,
+    /// Goals the wanderer reached (with `goal`).
+    pub goals_reached: u64,
     /// Scans published by `ranges` and by `sim_ranges`.
     pub scans: (u64, u64),
     /// Components entering `running_error` or `starting_error`, all together.
@@ -148,14 +152,17 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  nearest approach     {:.3} m from an obstacle; contacts {}",
-            self.min_clearance, self.contacts
+            "  nearest approach     {:.3} m from an obstacle, {:.3} m ahead; contacts {}",
+            self.min_clearance, self.min_front_clearance, self.contacts
         )?;
         writeln!(
             f,
             "  emergencies          {} raised, {} emergency stops; {} avoidance turns",
             self.emergencies, self.halts, self.avoidances
         )?;
+        if self.goals_reached > 0 {
+            writeln!(f, "  goals reached        {}", self.goals_reached)?;
+        }
         writeln!(
             f,
             "  scans                ranges {}, sim_ranges {}",
@@ -373,10 +380,12 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         distance: truth.distance,
         odometry_distance: variable(motion, "distance"),
         min_clearance: truth.min_clearance,
+        min_front_clearance: truth.min_front_clearance,
         contacts: truth.contacts,
         emergencies: (variable(ranges, "emergencies") + variable(sim, "emergencies")) as u64,
         halts: variable(motion, "halts") as u64,
         avoidances: variable(wanderer, "avoidances") as u64,
+        goals_reached: variable(wanderer, "goals_reached") as u64,
         scans: (
             variable(ranges, "scans") as u64,
             variable(sim, "scans") as u64,

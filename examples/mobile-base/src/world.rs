@@ -228,6 +228,17 @@ impl World {
         self.distance(pose.x, pose.y) - ROBOT_RADIUS
     }
 
+    /// The clearance ahead of a robot at `pose`: the nearest obstacle from the rim
+    /// along the beams that watch the way ahead (the front infrared beams and
+    /// straight ahead), up to 10 m.
+    pub fn front_clearance(&self, pose: Pose) -> f64 {
+        (1..IR_BEAMS - 1)
+            .map(ir_angle)
+            .chain([0.0])
+            .map(|angle| self.ray(pose.x, pose.y, pose.theta + angle, 10.0) - ROBOT_RADIUS)
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// What the sensor suite of a robot at `pose` reads, noise-free: ranges from the
     /// rim, capped at the sensors' maximum ranges.
     pub fn sense(&self, pose: Pose, ir_max: f64, us_max: f64) -> Readings {
@@ -324,6 +335,9 @@ pub struct Truth {
     pub distance: f64,
     /// The smallest clearance seen (m).
     pub min_clearance: f64,
+    /// The smallest clearance seen ahead (m): along the front beams, as the emergency
+    /// stop sees it.
+    pub min_front_clearance: f64,
     /// Moves refused because the robot would have entered an obstacle (contacts).
     pub contacts: u64,
 }
@@ -353,6 +367,7 @@ impl Platform {
     /// A platform at `start` in `world`, with an optional sensor fault.
     pub fn new(world: World, start: Pose, fault: Option<SensorFault>) -> Platform {
         let clearance = world.clearance(start);
+        let front = world.front_clearance(start);
         Platform {
             world,
             epoch: Instant::now(),
@@ -361,6 +376,7 @@ impl Platform {
                 pose: start,
                 distance: 0.0,
                 min_clearance: clearance,
+                min_front_clearance: front,
                 contacts: 0,
             }),
         }
@@ -419,6 +435,9 @@ impl Platform {
         truth.pose = next;
         truth.distance += moved;
         truth.min_clearance = truth.min_clearance.min(clearance);
+        truth.min_front_clearance = truth
+            .min_front_clearance
+            .min(self.world.front_clearance(next));
         Drive {
             pose: next,
             moved,
