@@ -45,6 +45,12 @@ pub const BASE_EXPORTS: &[(&str, &str)] = &[
     ("pose", "motion.pose"),
 ];
 
+/// `instance motion: MotionController { cautious_distance = 0.6; ... }`: the
+/// configuration override.
+fn motion_overrides() -> Value {
+    Value::Json(serde_json::json!({ "cautious_distance": 0.6 }))
+}
+
 /// `instance ranges: RangeServer { noise = 0.005; }`: the override (the noise and
 /// seed of a run replace the description's), as a configuration value.
 fn ranges_overrides(noise: f64, seed: u64) -> Value {
@@ -119,6 +125,11 @@ pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, Str
             .ok_or_else(|| format!("no component {name}"))?;
         handle.command(command).map_err(|e| e.to_string())
     };
+    // `instance motion: MotionController { cautious_distance = 0.6; timing { priority 7;
+    // period 20ms..40ms; } }` and `instance ranges: RangeServer { noise = ...; }`.
+    command(MOTION, Command::Configure(motion_overrides()))?;
+    command(MOTION, Command::SetPriority(7))?;
+    command(MOTION, Command::SetPeriod(Duration::from_millis(20)))?;
     command(
         RANGES,
         Command::Configure(ranges_overrides(setup.noise, setup.seed)),
