@@ -285,6 +285,8 @@ pub struct Handle {
     pub(crate) name: Arc<str>,
     pub(crate) shared: Arc<Shared>,
     pub(crate) control: Sender<ControlMessage>,
+    /// The component's doorbell: rung after each command is queued.
+    pub(crate) bell: Sender<()>,
     pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
@@ -348,6 +350,7 @@ impl Handle {
                 "the component's thread has ended or its control queue is full",
             ));
         }
+        let _ = self.bell.try_send(());
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),

@@ -423,6 +423,13 @@ impl<T: Packet> FifoIn<T> {
         self.inner.receiver.try_iter()
     }
 
+    /// Wait up to `timeout` for a packet. This blocks the calling thread: meant for
+    /// threads outside the system (tests, tools), not for sections, which should
+    /// react to arrivals with `on` transitions instead.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<T> {
+        self.inner.receiver.recv_timeout(timeout).ok()
+    }
+
     /// The number of queued packets.
     pub fn len(&self) -> usize {
         self.inner.receiver.len()

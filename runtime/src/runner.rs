@@ -1,9 +1,9 @@
 //! The component thread: one loop that drives the default automaton ([`crate::table`])
 //! and the user automaton of one component.
 //!
-//! The loop blocks in one `select_biased!` over the control port, the component's
-//! doorbell (rung by every delivery to its inputs and every pull request to its
-//! outputs) and the nearest timer deadline. Each turn handles at most one thing, in
+//! The loop blocks in one wait on the component's doorbell (a `bounded(1)` channel
+//! rung by every command, every delivery to its inputs and every pull request to its
+//! outputs), with the nearest timer deadline as its timeout. Each turn handles at most one thing, in
 //! this priority order, then looks at the control port again:
 //!
 //! 1. control commands (all that are waiting);
@@ -21,13 +21,13 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Sender, select_biased};
+use crossbeam_channel::{Receiver, Sender};
 
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
 use crate::port::{InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
-use crate::table::{Action, Controllable, Event, Outcome, State, next};
+use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::panic_message;
 
 /// How user code failed.
@@ -138,12 +138,11 @@ impl Runner {
                 break;
             }
             if self.state != State::Running {
+                // Nothing runs: wait for the next ring (a command, or an arrival that
+                // only needs to stay where it is).
                 self.cx.end_requested = false;
                 self.update_cpu(true);
-                match self.control.recv() {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                }
+                let _ = self.bell.recv();
                 continue;
             }
             // 2. The task finished.
@@ -176,12 +175,6 @@ impl Runner {
         self.state != State::Dead
     }
 
-    fn force_dead(&mut self) {
-        if self.state != State::Dead {
-            self.apply(Event::Command(Controllable::Dead));
-        }
-    }
-
     /// Wait for a command, an arrival or the nearest timer.
     fn block(&mut self, now: Instant) {
         let state_spec = &self.spec.states[self.user];
@@ -191,23 +184,15 @@ impl Runner {
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
         self.update_cpu(false);
-        // Priority when several are ready: control, then the doorbell, then the timer.
+        // One wait on the doorbell, rung by commands, deliveries and pull requests; the
+        // loop then looks at the control port first (the priority rule above).
         match deadline {
-            Some(deadline) => select_biased! {
-                recv(self.control) -> message => match message {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                },
-                recv(self.bell) -> _ => {}
-                default(deadline.saturating_duration_since(now)) => {}
-            },
-            None => select_biased! {
-                recv(self.control) -> message => match message {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                },
-                recv(self.bell) -> _ => {}
-            },
+            Some(deadline) => {
+                let _ = self.bell.recv_deadline(deadline.max(now));
+            }
+            None => {
+                let _ = self.bell.recv();
+            }
         }
     }
 
@@ -372,11 +357,12 @@ impl Runner {
     }
 
     fn publish_user(&self, state: Option<usize>) {
-        let name = state.map(|index| self.spec.states[index].name.to_owned());
+        let name = state.map(|index| self.spec.states[index].name);
         self.shared.update(|monitor| {
-            if monitor.user_state == name {
+            if monitor.user_state.as_deref() == name {
                 return Vec::new();
             }
+            let name = name.map(str::to_owned);
             monitor.user_state.clone_from(&name);
             vec![MonitorEvent::UserState(name)]
         });

@@ -491,6 +491,7 @@ impl System {
             name: Arc::from(name.as_str()),
             shared: Arc::clone(&shared),
             control: control_sender,
+            bell: bell_sender.clone(),
             exited,
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
@@ -816,6 +817,7 @@ impl System {
                         reply,
                         claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
                     });
+                let _ = slot.handle.bell.try_send(());
             }
         }
         let deadline = Instant::now() + SHUTDOWN_TIMEOUT;

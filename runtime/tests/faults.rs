@@ -169,7 +169,11 @@ fn a_goto_plan_moves_the_user_automaton() {
         times: 1,
     }));
     rig.wait_user("idle");
-    assert_eq!(rig.script.log(), vec!["busy.exit", "idle.entry"]);
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
     assert_eq!(rig.handle.snapshot().error, None);
 }
 

@@ -34,7 +34,11 @@ fn after_fires_on_time_in_state() {
     rig.run_busy();
     rig.script.clear_log();
     rig.wait_user("idle");
-    assert_eq!(rig.script.log(), vec!["busy.exit", "idle.entry"]);
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
 }
 
 #[test]
@@ -81,7 +85,11 @@ fn choose_takes_a_may_transition() {
     rig.script.clear_log();
     rig.script.choose_idle.store(true, Ordering::SeqCst);
     rig.wait_user("idle");
-    assert_eq!(rig.script.log(), vec!["busy.exit", "idle.entry"]);
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
 }
 
 #[test]

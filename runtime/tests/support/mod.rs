@@ -300,6 +300,13 @@ impl Rig {
         self.wait_user("idle");
         self.feeder.kick.emit();
         self.wait_user("busy");
+        self.sync();
+    }
+
+    /// A round trip through the control port: the worker's thread answers it only
+    /// after the call it is in (here, `busy`'s entry section) has returned.
+    pub fn sync(&self) {
+        self.handle.command(Command::SetPriority(0)).expect("sync");
     }
 
     pub fn wait_state(&self, state: State) -> coolbot::Monitor {
