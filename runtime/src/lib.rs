@@ -22,13 +22,16 @@ pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, Rejected,
     Timeout,
 };
-pub use crate::port::{InputPort, OutputPort, Packet, PullError};
+pub use crate::port::{
+    DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,
+};
 pub use crate::spec::{
     AfterSpec, ExceptionSpec, InputKind, InputSpec, OnSpec, OutputKind, OutputSpec, OverflowPolicy,
     PeriodicSpec, PlanStep, Spec, StateSpec, TimingSpec, VarKind, VarSpec,
 };
 pub use crate::system::{
-    Component, ComponentReport, ConnectError, Error, PortSet, Report, SHUTDOWN_TIMEOUT, System,
+    CONTROL_CAPACITY, Component, ComponentReport, ConnectError, Error, PortSet, Report,
+    SHUTDOWN_TIMEOUT, System,
 };
 pub use crate::table::{Controllable, State};
 pub use crate::value::{Time, Value, ValueError};

@@ -28,7 +28,7 @@ pub const DEFAULT_BLOCK_TIMEOUT: Duration = Duration::from_millis(100);
 
 /// How many pull requests may wait at one output before further requests fail with
 /// [`PullError::RequestQueueFull`].
-pub const PULL_REQUEST_CAPACITY: usize = 1024;
+pub const PULL_REQUEST_CAPACITY: usize = 64;
 
 /// What a port carries: any clonable, sendable, shareable `'static` type.
 pub trait Packet: Clone + Send + Sync + 'static {}

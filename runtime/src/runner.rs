@@ -158,6 +158,14 @@ impl Runner {
             }
         }
         self.update_cpu(true);
+        // Commands that arrived while the component went dead get their answer.
+        while let Ok(message) = self.control.try_recv() {
+            if message.take() {
+                let _ = message.reply.try_send(Reply::Rejected(
+                    "the component is dead: its thread has ended".to_owned(),
+                ));
+            }
+        }
     }
 
     /// Handle every waiting command; false once the component is dead.
