@@ -73,8 +73,12 @@ mod tests {
 fn builder_in_a_build_script() {
     let dir = tempfile::tempdir().unwrap();
     let krate = dir.path();
-    let RuntimeDep::Path(runtime) = runtime() else { unreachable!() };
-    let coolc = Path::new(env!("CARGO_MANIFEST_DIR")).canonicalize().unwrap();
+    let RuntimeDep::Path(runtime) = runtime() else {
+        unreachable!()
+    };
+    let coolc = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .canonicalize()
+        .unwrap();
     std::fs::write(
         krate.join("Cargo.toml"),
         format!(
@@ -96,10 +100,17 @@ fn builder_in_a_build_script() {
     std::fs::write(krate.join("src/lib.rs"), LIB).unwrap();
 
     let output = cargo(krate, &["test", "--lib"]);
-    assert!(output.contains("test tests::lamp_lights_up ... ok"), "{output}");
+    assert!(
+        output.contains("test tests::lamp_lights_up ... ok"),
+        "{output}"
+    );
 
     // A broken description fails the build with the rendered diagnostic.
-    std::fs::write(krate.join("lamp.cool"), LAMP.replace("initial dark;", "initial dark")).unwrap();
+    std::fs::write(
+        krate.join("lamp.cool"),
+        LAMP.replace("initial dark;", "initial dark"),
+    )
+    .unwrap();
     let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests");
     let cargo_bin = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let failed = Command::new(cargo_bin)

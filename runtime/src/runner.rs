@@ -141,7 +141,7 @@ impl Runner {
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
-                self.update_cpu(true);
+                self.update_cpu(false);
                 let _ = self.bell.recv();
                 continue;
             }
@@ -345,6 +345,7 @@ impl Runner {
             return;
         }
         self.state = to;
+        self.update_cpu(true);
         self.shared.update(|monitor| {
             monitor.state = to;
             vec![MonitorEvent::State { from, to }]
