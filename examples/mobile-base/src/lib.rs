@@ -64,6 +64,10 @@ pub struct Options {
     pub seed: u64,
     /// A goal for the wanderer to seek.
     pub goal: Option<(f64, f64)>,
+    /// The motion controller's speed limit (m/s), if not the description's.
+    pub max_speed: Option<f64>,
+    /// The range servers' scan frequency (Hz), if not the description's.
+    pub scan_rate: Option<f64>,
     /// How the run shows itself.
     pub display: Display,
     /// Set to stop the run early (Ctrl-C).
@@ -80,6 +84,8 @@ impl Default for Options {
             noise: 0.005,
             seed: 1,
             goal: None,
+            max_speed: None,
+            scan_rate: None,
             display: Display::Auto,
             stop: Arc::new(AtomicBool::new(false)),
         }
@@ -235,6 +241,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         noise: options.noise,
         seed: options.seed,
         goal: options.goal,
+        max_speed: options.max_speed,
+        scan_rate: options.scan_rate,
     };
     let mut system = robot::wire_robot(&platform, &setup)?;
     let names = [MOTION, RANGES, SIM_RANGES, WANDERER];

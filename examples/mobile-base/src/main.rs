@@ -36,6 +36,12 @@ struct Args {
     /// Seek this goal (`x,y` in metres; the room is 6 by 4) instead of wandering.
     #[arg(long, value_parser = parse_goal)]
     goal: Option<(f64, f64)>,
+    /// The motion controller's speed limit in m/s (its controllable `max_speed`).
+    #[arg(long)]
+    max_speed: Option<f64>,
+    /// The range servers' scan frequency in Hz (their controllable `frequency`).
+    #[arg(long)]
+    scan_rate: Option<f64>,
     /// Output: the live table, status lines, or auto (the table on a terminal).
     #[arg(long, value_enum, default_value_t = Output::Auto)]
     output: Output,
@@ -98,6 +104,8 @@ fn main() -> ExitCode {
         noise: args.noise,
         seed: args.seed,
         goal: args.goal,
+        max_speed: args.max_speed,
+        scan_rate: args.scan_rate,
         display: match args.output {
             Output::Auto => Display::Auto,
             Output::Table => Display::Table,

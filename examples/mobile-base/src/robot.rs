@@ -78,6 +78,10 @@ pub struct Setup {
     pub seed: u64,
     /// A goal to seek, if any.
     pub goal: Option<(f64, f64)>,
+    /// The motion controller's controllable `max_speed` (m/s), if not the default.
+    pub max_speed: Option<f64>,
+    /// The range servers' controllable `frequency` (Hz), if not the default.
+    pub scan_rate: Option<f64>,
 }
 
 /// Adds the instances of `MobileBase` (`motion`, `ranges`, `sim_ranges`) and of
@@ -142,6 +146,21 @@ pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, Str
     command(WANDERER, Command::Configure(Value::Json(wanderer_config)))?;
     if setup.goal.is_some() {
         command(WANDERER, Command::Set("seek".to_owned(), Value::Bool(true)))?;
+    }
+    // Controllable variables, through the control port.
+    if let Some(speed) = setup.max_speed {
+        command(
+            MOTION,
+            Command::Set("max_speed".to_owned(), Value::Float(speed)),
+        )?;
+    }
+    if let Some(rate) = setup.scan_rate {
+        for name in [RANGES, SIM_RANGES] {
+            command(
+                name,
+                Command::Set("frequency".to_owned(), Value::Float(rate)),
+            )?;
+        }
     }
     // The substitute stays `ready` (a warm standby) until the supervisor needs it.
     for name in [MOTION, RANGES, WANDERER] {

@@ -112,3 +112,25 @@ fn a_range_server_that_does_not_recover_is_retired_and_the_substitute_stays() {
     assert_eq!(summary.supervisor, "degraded");
     assert_clean_shutdown(&summary);
 }
+
+#[test]
+fn a_stop_request_ends_the_run_early_and_cleanly() {
+    let options = Options {
+        duration: Duration::from_secs(30),
+        max_speed: Some(0.3),
+        scan_rate: Some(10.0),
+        ..Options::default()
+    };
+    let stop = options.stop.clone();
+    let stopper = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(1500));
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    });
+    let summary = run(options);
+    stopper.join().unwrap();
+    assert!(summary.interrupted);
+    assert!(summary.elapsed < Duration::from_secs(10), "{summary}");
+    // At 10 Hz, about 15 scans in 1.5 s (not the 30 of the default 20 Hz).
+    assert!((5..=22).contains(&summary.scans.0), "{summary}");
+    assert_clean_shutdown(&summary);
+}
