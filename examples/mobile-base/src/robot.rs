@@ -45,10 +45,10 @@ pub const BASE_EXPORTS: &[(&str, &str)] = &[
     ("pose", "motion.pose"),
 ];
 
-/// `instance motion: MotionController { cautious_distance = 0.6; ... }`: the
+/// `instance motion: MotionController { cautious_distance = 0.45; ... }`: the
 /// configuration override.
 fn motion_overrides() -> Value {
-    Value::Json(serde_json::json!({ "cautious_distance": 0.6 }))
+    Value::Json(serde_json::json!({ "cautious_distance": 0.45 }))
 }
 
 /// `instance ranges: RangeServer { noise = 0.005; }`: the override (the noise and
@@ -129,7 +129,7 @@ pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, Str
             .ok_or_else(|| format!("no component {name}"))?;
         handle.command(command).map_err(|e| e.to_string())
     };
-    // `instance motion: MotionController { cautious_distance = 0.6; timing { priority 7;
+    // `instance motion: MotionController { cautious_distance = 0.45; timing { priority 7;
     // period 20ms..40ms; } }` and `instance ranges: RangeServer { noise = ...; }`.
     command(MOTION, Command::Configure(motion_overrides()))?;
     command(MOTION, Command::SetPriority(7))?;
