@@ -95,8 +95,8 @@ fn a_failed_range_server_is_substituted_then_recovered() {
 #[test]
 fn a_range_server_that_does_not_recover_is_retired_and_the_substitute_stays() {
     let summary = run(Options {
-        duration: Duration::from_secs(6),
-        fault_after: Some(Duration::from_millis(300)),
+        duration: Duration::from_millis(6500),
+        fault_after: Some(Duration::from_millis(200)),
         outage: Duration::from_secs(60),
         fault_kind: mobile_base::world::FaultKind::Panic,
         ..Options::default()
