@@ -255,10 +255,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         })
         .collect::<Result<_, _>>()?;
     let types = [
-        "MotionController",
-        "RangeServer",
-        "SimRangeServer",
-        "Wanderer",
+        generated::motion_controller::SPEC.type_name,
+        generated::range_server::SPEC.type_name,
+        generated::sim_range_server::SPEC.type_name,
+        generated::wanderer::SPEC.type_name,
     ];
     let events: Vec<_> = handles.iter().map(coolbot::Handle::subscribe).collect();
 
@@ -273,7 +273,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let mut previous_cpu: Vec<Duration> = vec![Duration::ZERO; handles.len()];
     let mut last_frame = Instant::now();
     let mut last_line = Duration::ZERO;
-    let started = Instant::now();
+    // The run's clock is the platform's: injected faults and events agree.
+    let started = platform.uptime();
     let stdout = std::io::stdout();
     if display == Display::Table {
         // Clear the screen once; frames then redraw from the top.
@@ -281,11 +282,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     }
 
     let interrupted = loop {
-        let at = started.elapsed();
+        let at = platform.uptime();
         if options.stop.load(Ordering::Relaxed) {
             break true;
         }
-        if at >= options.duration {
+        if at.saturating_sub(started) >= options.duration {
             break false;
         }
         supervisor.tick(&mut system, at);
@@ -368,7 +369,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
 
     let monitors: Vec<coolbot::Monitor> = handles.iter().map(coolbot::Handle::snapshot).collect();
     let states_before_shutdown = monitors.iter().map(|m| (m.name.clone(), m.state)).collect();
-    let elapsed = started.elapsed();
+    let elapsed = platform.uptime().saturating_sub(started);
     let report = system.shutdown();
     let final_states: Vec<(String, State, bool)> = report
         .components
