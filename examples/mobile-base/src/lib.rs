@@ -119,8 +119,10 @@ pub struct Summary {
     pub goals_reached: u64,
     /// Scans published by `ranges` and by `sim_ranges`.
     pub scans: (u64, u64),
-    /// Components entering `running_error` or `starting_error`, all together.
+    /// Faults: components entering `running_error`, all together.
     pub faults: u64,
+    /// Restarts that failed: components entering `starting_error`.
+    pub failed_restarts: u64,
     /// Substitutions by the supervisor.
     pub substitutions: u32,
     /// Recoveries from the recovery queue.
@@ -176,8 +178,8 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  faults               {} (substitutions {}, recoveries {}, retired {})",
-            self.faults, self.substitutions, self.recoveries, self.retired
+            "  faults               {} (failed restarts {}, substitutions {}, recoveries {}, retired {})",
+            self.faults, self.failed_restarts, self.substitutions, self.recoveries, self.retired
         )?;
         writeln!(f, "  supervisor           {}", self.supervisor)?;
         let before: Vec<String> = self
@@ -269,6 +271,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     };
     let mut supervisor = MobileBaseSupervisor::default();
     let mut faults = 0u64;
+    let mut failed_restarts = 0u64;
     let mut log: Vec<String> = Vec::new();
     let mut previous_cpu: Vec<Duration> = vec![Duration::ZERO; handles.len()];
     let mut last_frame = Instant::now();
@@ -295,8 +298,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             for event in receiver.try_iter() {
                 match event {
                     MonitorEvent::State { from, to } => {
-                        if matches!(to, State::RunningError | State::StartingError) {
-                            faults += 1;
+                        match to {
+                            State::RunningError => faults += 1,
+                            State::StartingError => failed_restarts += 1,
+                            _ => {}
                         }
                         fresh.push(format!("{:6.2}s {name}: {from} -> {to}", at.as_secs_f64()));
                     }
@@ -400,6 +405,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             variable(sim, "scans") as u64,
         ),
         faults,
+        failed_restarts,
         substitutions: supervisor.substitutions,
         recoveries: supervisor.recoveries,
         retired: supervisor.retired,

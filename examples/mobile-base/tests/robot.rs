@@ -60,7 +60,11 @@ fn the_robot_wanders_without_touching_anything_and_stops_cleanly() {
         summary.scans.1, 0,
         "the standby substitute ran without a fault"
     );
-    assert_eq!(summary.faults, 0, "{summary}");
+    assert_eq!(
+        (summary.faults, summary.failed_restarts),
+        (0, 0),
+        "{summary}"
+    );
     assert_eq!(summary.supervisor, "operating");
     assert!(!summary.interrupted);
     assert_clean_shutdown(&summary);
@@ -82,7 +86,11 @@ fn a_failed_range_server_is_substituted_then_recovered() {
     );
     assert_eq!(summary.recoveries, 1, "{summary}");
     assert_eq!(summary.retired, 0);
-    assert!(summary.faults >= 1);
+    assert_eq!(summary.faults, 1, "{summary}");
+    assert!(
+        summary.failed_restarts >= 1,
+        "the board was still down: {summary}"
+    );
     // Back to normal: the real server runs again, the substitute is on standby.
     let before: std::collections::HashMap<_, _> =
         summary.states_before_shutdown.iter().cloned().collect();
@@ -105,6 +113,8 @@ fn a_range_server_that_does_not_recover_is_retired_and_the_substitute_stays() {
     assert_eq!(summary.substitutions, 1, "{summary}");
     assert_eq!(summary.recoveries, 0, "{summary}");
     assert_eq!(summary.retired, 1, "{summary}");
+    // Restarted every 500 ms for 5 s, and the board never came back.
+    assert!(summary.failed_restarts >= 5, "{summary}");
     let before: std::collections::HashMap<_, _> =
         summary.states_before_shutdown.iter().cloned().collect();
     assert_eq!(before["ranges"], State::Dead, "{summary}");
