@@ -26,7 +26,7 @@ pub const OBSERVER_CAPACITY: usize = 4096;
 pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A command through the control port `c`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Command {
     /// Force a controllable state (the default controllable variable `new_state`).
     SetState(Controllable),

@@ -1,6 +1,10 @@
 //! Every connection kind: semantics, overflow policies with their counters and events,
 //! cardinality, kind and type errors, converters, disconnecting, and what inputs do
 //! while their component is not running.
+//!
+//! The consumer shells of these tests stay in `ready` (nothing is ever set running),
+//! so each kind's test also shows what it does while its component is not running:
+//! it works exactly the same; only the reading differs, which no section does then.
 
 mod support;
 
