@@ -214,13 +214,13 @@ fn handles_and_ports_can_cross_threads() {
     send_sync::<coolbot::Handle>();
     send_sync::<coolbot::port::TickIn>();
     send_sync::<coolbot::port::TickOut>();
-    send_sync::<coolbot::port::FifoIn<String>>();
+    send_sync::<FifoIn<String>>();
     send_sync::<coolbot::port::UfifoIn<String>>();
     send_sync::<coolbot::port::LastIn<String>>();
     send_sync::<coolbot::port::PosterIn<String>>();
     send_sync::<coolbot::port::DataOut<String>>();
     send_sync::<coolbot::port::PosterOut<String>>();
     fn send<T: Send>() {}
-    send::<coolbot::System>();
+    send::<System>();
     send::<coolbot::Component>();
 }
