@@ -83,7 +83,8 @@ pub struct Monitor {
     pub error: Option<String>,
     /// User variables (observable and controllable), in declaration order.
     pub variables: Vec<(String, Value)>,
-    /// The component thread's CPU time (updated at least every millisecond of activity).
+    /// The component thread's CPU time (read on state changes and before the thread
+    /// waits, at most every 10 ms while it is busy).
     pub cpu_time: Duration,
     /// Wall-clock time spent in user code (hooks and sections).
     pub elapsed_time: Duration,

@@ -30,6 +30,10 @@ use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::panic_message;
 
+/// How often, at most, a busy thread reads its CPU time (a system call) for the
+/// monitor; state changes always read it.
+const CPU_TIME_REFRESH: Duration = Duration::from_millis(10);
+
 /// How user code failed.
 enum Failure {
     Fault(Fault),
@@ -566,9 +570,9 @@ impl Runner {
     }
 
     /// Publish the elapsed time (if it changed) and the thread's CPU time (a system
-    /// call: at most once a millisecond unless `force`).
+    /// call: at most once per `CPU_TIME_REFRESH` unless `force`).
     fn update_cpu(&mut self, force: bool) {
-        let refresh_cpu = force || self.cpu_updated.elapsed() >= Duration::from_millis(1);
+        let refresh_cpu = force || self.cpu_updated.elapsed() >= CPU_TIME_REFRESH;
         let cpu = if refresh_cpu {
             self.cpu_updated = Instant::now();
             cpu_time::ThreadTime::try_now()
