@@ -473,6 +473,8 @@ pub struct Instance {
     pub module: Option<String>,
     /// The instance it substitutes, if any (not built at start).
     pub substitutes: Option<String>,
+    /// Overrides as Rust statements on `config` / `vars` (empty: none).
+    pub overrides: Vec<String>,
 }
 
 impl Instance {

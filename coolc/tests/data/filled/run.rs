@@ -77,15 +77,17 @@ fn mobile_base_instances_run_and_talk() {
             |m| {
                 variable(m, "odometry")
                     .and_then(|v| v.to_serde::<fleet::generated::types::Pose2D>().ok())
-                    .is_some_and(|pose| pose.x > 0.5)
+                    .is_some_and(|pose| pose.x > 0.0)
             },
             WAIT,
         )
         .unwrap();
     let pose: fleet::generated::types::Pose2D =
         variable(&monitor, "odometry").unwrap().to_serde().unwrap();
-    assert_eq!(pose.x, 0.8, "the command is clamped to max_speed");
-    assert!(matches!(variable(&monitor, "max_speed"), Some(Value::Float(s)) if s == 0.8));
+    // `instance motion: MotionController { max_speed = 0.5; }` overrides the
+    // controllable variable (default 0.8), which clamps the 1 m/s command.
+    assert_eq!(pose.x, 0.5, "the command is clamped to max_speed");
+    assert!(matches!(variable(&monitor, "max_speed"), Some(Value::Float(s)) if s == 0.5));
 
     // With no further command, the watchdog (`after 500ms without command`) brings it
     // back to `idle`.
