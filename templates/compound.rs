@@ -76,8 +76,8 @@ pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% 
 {%- else %}
         {
             // Instance overrides from the description.
-            let mut config = super::{{ module }}::Config::default();
-            let mut vars = super::{{ module }}::Vars::default();
+            let {% if i.sets_config() %}mut {% endif %}config = super::{{ module }}::Config::default();
+            let {% if i.sets_vars() %}mut {% endif %}vars = super::{{ module }}::Vars::default();
             {%- for statement in i.overrides %}
             {{ statement }}
             {%- endfor %}

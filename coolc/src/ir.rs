@@ -482,6 +482,16 @@ impl Instance {
     pub fn built(&self) -> bool {
         self.module.is_some() && self.substitutes.is_none()
     }
+
+    /// Whether an override sets a configuration field.
+    pub fn sets_config(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("config."))
+    }
+
+    /// Whether an override sets a variable.
+    pub fn sets_vars(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("vars."))
+    }
 }
 
 impl Compound {
