@@ -5,7 +5,7 @@
 //! [`build`] adds the compound's atomic instances to a `coolbot::System` (their
 //! behaviors come from your [`Parts`]) and wires the declared connections. Not
 //! generated yet: the supervisor automaton and its rules, exported ports, mapped
-//! variables, instance overrides, error policies and the recovery queue, substitutes
+//! variables, instance timing overrides, error policies and the recovery queue, substitutes
 //! (listed, not started), remote nodes (instances run locally) and compound instances
 //! (nested compounds).
 {%- if !c.doc.is_empty() %}
@@ -71,7 +71,19 @@ pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% 
 {%- for i in c.instances %}
 {%- if i.built() %}
 {%- if let Some(module) = i.module %}
+{%- if i.overrides.is_empty() %}
         system.add(super::{{ module }}::component(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}()))?,
+{%- else %}
+        {
+            // Instance overrides from the description.
+            let {% if i.sets_config() %}mut {% endif %}config = super::{{ module }}::Config::default();
+            let {% if i.sets_vars() %}mut {% endif %}vars = super::{{ module }}::Vars::default();
+            {%- for statement in i.overrides %}
+            {{ statement }}
+            {%- endfor %}
+            system.add(super::{{ module }}::component_with(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}(), config, vars))?
+        },
+{%- endif %}
 {%- endif %}
 {%- endif %}
 {%- endfor %}

@@ -473,12 +473,24 @@ pub struct Instance {
     pub module: Option<String>,
     /// The instance it substitutes, if any (not built at start).
     pub substitutes: Option<String>,
+    /// Overrides as Rust statements on `config` / `vars` (empty: none).
+    pub overrides: Vec<String>,
 }
 
 impl Instance {
     /// Whether `build` adds it to the system: an atomic that substitutes nothing.
     pub fn built(&self) -> bool {
         self.module.is_some() && self.substitutes.is_none()
+    }
+
+    /// Whether an override sets a configuration field.
+    pub fn sets_config(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("config."))
+    }
+
+    /// Whether an override sets a variable.
+    pub fn sets_vars(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("vars."))
     }
 }
 

@@ -993,6 +993,7 @@ impl<'a> Lowerer<'a> {
                         .filter(|c| c.kind == ast::ComponentKind::Atomic)
                         .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
                     substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
+                    overrides: self.overrides(i),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -1052,6 +1053,49 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
         .map(|n| format!("{name}_{n}"))
         .find(|c| !taken(c))
         .unwrap_or(name)
+}
+
+impl Lowerer<'_> {
+    /// `config.x = value;` / `vars.x = value;` for an instance's overrides: a name
+    /// that is both a configuration field and a controllable variable sets both.
+    fn overrides(&self, instance: &ast::Instance) -> Vec<String> {
+        let Some(component) = self
+            .components
+            .get(instance.component.name.as_str())
+            .filter(|c| c.kind == ast::ComponentKind::Atomic)
+        else {
+            return Vec::new();
+        };
+        let mut statements = Vec::new();
+        for o in &instance.overrides {
+            for member in &component.members {
+                match member {
+                    ast::Member::Configuration(cfg) => {
+                        for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
+                            statements.push(format!(
+                                "config.{} = {};",
+                                ident::snake(&f.name.name),
+                                self.value(&o.value, Some(&f.ty), GEN_TYPES)
+                            ));
+                        }
+                    }
+                    ast::Member::Variable(v)
+                        if v.kind == ast::VarKind::Controllable && v.name.name == o.name.name =>
+                    {
+                        if let Some(ty) = &v.ty {
+                            statements.push(format!(
+                                "vars.{} = {};",
+                                ident::snake(&v.name.name),
+                                self.value(&o.value, Some(ty), GEN_TYPES)
+                            ));
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        statements
+    }
 }
 
 fn int_value(expr: &ast::Expr) -> Option<i64> {

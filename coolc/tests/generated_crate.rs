@@ -23,6 +23,7 @@ fn generated_crate_builds_and_runs() {
         "planner.rs",
         "converters.rs",
         "motion_controller.rs",
+        "follower.rs",
     ] {
         std::fs::copy(data("filled").join(name), krate.join("src").join(name)).unwrap();
     }

@@ -26,7 +26,7 @@ pub const OBSERVER_CAPACITY: usize = 4096;
 pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A command through the control port `c`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Command {
     /// Force a controllable state (the default controllable variable `new_state`).
     SetState(Controllable),
@@ -83,7 +83,8 @@ pub struct Monitor {
     pub error: Option<String>,
     /// User variables (observable and controllable), in declaration order.
     pub variables: Vec<(String, Value)>,
-    /// The component thread's CPU time (updated at least every millisecond of activity).
+    /// The component thread's CPU time (read on state changes and before the thread
+    /// waits, at most every 10 ms while it is busy).
     pub cpu_time: Duration,
     /// Wall-clock time spent in user code (hooks and sections).
     pub elapsed_time: Duration,
