@@ -1,15 +1,18 @@
 //! The `Robot` and `MobileBase` compounds of `examples/components/mobile_base.cool`,
 //! assembled on a `coolbot::System`, and the mobile base's supervisor.
 //!
-//! **Hand-written for now.** coolc's compound code generation is partial: for a
-//! compound it emits its `INSTANCES`, its `CONNECTIONS` and `connect()`, which wires
-//! the connections between instances already added to a system. It does not yet emit
-//! the instances themselves, the configuration overrides, the exported ports, the
-//! error policies (`on error ranges: substitute`), the recovery queue or the
-//! supervisor. [`wire_robot`] does the first part and uses the generated
-//! `mobile_base::connect` and `robot::CONNECTIONS`; [`MobileBaseSupervisor`] does the
-//! rest, rule for rule as the description says. Both go away when coolc generates
-//! compounds in full.
+//! **Partly hand-written for now.** coolc's compound code generation is partial. For
+//! `MobileBase` it generates `mobile_base::build`, which adds the atomic instances
+//! `motion` and `ranges` with their configuration overrides (behaviours from our
+//! [`mobile_base::Parts`]) and makes the compound's connections; [`wire_robot`] uses
+//! it. Not generated yet, so done here by hand and mirroring the description: the
+//! substitute `sim_ranges` (generated code only lists it in `SUBSTITUTES`), the
+//! instance timing overrides, the nested compound `Robot` (its instance `base` is a
+//! compound, so `robot::build` cannot wire it: [`wire_robot`] resolves its generated
+//! `robot::CONNECTIONS` through `MobileBase`'s exported ports), and the supervisor
+//! with its error policies and recovery queue ([`MobileBaseSupervisor`], rule for
+//! rule as the description says). These go away when coolc generates compounds in
+//! full.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -45,14 +48,8 @@ pub const BASE_EXPORTS: &[(&str, &str)] = &[
     ("pose", "motion.pose"),
 ];
 
-/// `instance motion: MotionController { cautious_distance = 0.45; ... }`: the
-/// configuration override.
-fn motion_overrides() -> Value {
-    Value::Json(serde_json::json!({ "cautious_distance": 0.45 }))
-}
-
-/// `instance ranges: RangeServer { noise = 0.005; }`: the override (the noise and
-/// seed of a run replace the description's), as a configuration value.
+/// The range server's configuration for a run: the description's override
+/// (`noise = 0.005`) replaced by the run's noise, and the run's seed.
 fn ranges_overrides(noise: f64, seed: u64) -> Value {
     Value::Json(serde_json::json!({ "noise": noise, "seed": seed }))
 }
@@ -84,30 +81,40 @@ pub struct Setup {
     pub scan_rate: Option<f64>,
 }
 
-/// Adds the instances of `MobileBase` (`motion`, `ranges`, `sim_ranges`) and of
-/// `Robot` (`wanderer`) to a new system and makes the connections of both compounds:
-/// `MobileBase`'s with the generated `mobile_base::connect`, `Robot`'s from the
+/// The behaviours of `MobileBase`'s atomic instances, for the generated
+/// `mobile_base::build`.
+struct BaseParts<'a> {
+    platform: &'a Arc<Platform>,
+}
+
+impl mobile_base::Parts for BaseParts<'_> {
+    fn motion(&mut self) -> impl motion_controller::Behavior {
+        MotionController::new(Arc::clone(self.platform))
+    }
+
+    fn ranges(&mut self) -> impl range_server::Behavior {
+        RangeServer::new(Arc::clone(self.platform))
+    }
+}
+
+/// Builds the robot on a new system and starts it: `MobileBase`'s instances and
+/// connections with the generated `mobile_base::build`, its substitute `sim_ranges`
+/// (left `ready`, a standby), `Robot`'s `wanderer`, and `Robot`'s connections from the
 /// generated `robot::CONNECTIONS` with `base.*` resolved through [`BASE_EXPORTS`].
 pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, String> {
     let mut system = System::new();
-    let add = |system: &mut System, component| system.add(component).map_err(|e| e.to_string());
-    add(
-        &mut system,
-        motion_controller::component(MOTION, MotionController::new(Arc::clone(platform))),
-    )?;
-    add(
-        &mut system,
-        range_server::component(RANGES, RangeServer::new(Arc::clone(platform))),
-    )?;
-    add(
-        &mut system,
-        sim_range_server::component(SIM_RANGES, SimRangeServer::new(Arc::clone(platform))),
-    )?;
-    add(
-        &mut system,
-        wanderer::component(WANDERER, Wanderer::default()),
-    )?;
-    mobile_base::connect(&mut system, "").map_err(|e| e.to_string())?;
+    mobile_base::build(&mut system, "", &mut BaseParts { platform }).map_err(|e| e.to_string())?;
+    // `instance sim_ranges: SimRangeServer substitutes ranges;`
+    system
+        .add(sim_range_server::component(
+            SIM_RANGES,
+            SimRangeServer::new(Arc::clone(platform)),
+        ))
+        .map_err(|e| e.to_string())?;
+    // `compound Robot { instance base: MobileBase; instance wanderer: Wanderer; ... }`
+    system
+        .add(wanderer::component(WANDERER, Wanderer::default()))
+        .map_err(|e| e.to_string())?;
     for (from, to) in robot::CONNECTIONS {
         system
             .connect(&resolve(from), &resolve(to))
@@ -129,11 +136,11 @@ pub fn wire_robot(platform: &Arc<Platform>, setup: &Setup) -> Result<System, Str
             .ok_or_else(|| format!("no component {name}"))?;
         handle.command(command).map_err(|e| e.to_string())
     };
-    // `instance motion: MotionController { cautious_distance = 0.45; timing { priority 7;
-    // period 20ms..40ms; } }` and `instance ranges: RangeServer { noise = ...; }`.
-    command(MOTION, Command::Configure(motion_overrides()))?;
+    // Not generated yet: `motion`'s timing override `timing { priority 7; period
+    // 20ms..40ms; }`, through the control port.
     command(MOTION, Command::SetPriority(7))?;
     command(MOTION, Command::SetPeriod(Duration::from_millis(20)))?;
+    // The run's noise and seed (the description's `noise = 0.005` is the default).
     command(
         RANGES,
         Command::Configure(ranges_overrides(setup.noise, setup.seed)),
@@ -438,6 +445,17 @@ impl MobileBaseSupervisor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_hand_wired_parts_match_the_description() {
+        assert_eq!(mobile_base::SUBSTITUTES, &[(SIM_RANGES, RANGES)]);
+        let names: Vec<&str> = mobile_base::INSTANCES.iter().map(|(n, _)| *n).collect();
+        assert_eq!(names, [MOTION, RANGES, SIM_RANGES]);
+        assert_eq!(
+            robot::INSTANCES,
+            &[(BASE, "MobileBase"), (WANDERER, "Wanderer")]
+        );
+    }
 
     #[test]
     fn exported_ports_resolve_to_member_ports() {
