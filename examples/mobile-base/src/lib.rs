@@ -292,8 +292,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         if at.saturating_sub(started) >= options.duration {
             break false;
         }
-        supervisor.tick(&mut system, at);
-        let mut fresh = supervisor.take_log();
+        // What the components reported, then what the supervisor made of it.
+        let mut fresh = Vec::new();
         for (name, receiver) in names.iter().zip(&events) {
             for event in receiver.try_iter() {
                 match event {
@@ -312,6 +312,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                 }
             }
         }
+        supervisor.tick(&mut system, at);
+        fresh.extend(supervisor.take_log());
         if display == Display::Lines {
             let mut out = stdout.lock();
             for line in &fresh {
