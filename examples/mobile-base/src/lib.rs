@@ -329,7 +329,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         if (display == Display::Table && frame_due) || (display == Display::Lines && line_due) {
             let wall = last_frame.elapsed().as_secs_f64().max(1e-3);
             last_frame = Instant::now();
-            let rows: Vec<status::Row> = handles
+            let mut rows: Vec<status::Row> = handles
                 .iter()
                 .zip(types)
                 .zip(previous_cpu.iter_mut())
@@ -344,6 +344,15 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     }
                 })
                 .collect();
+            // The compound first, as the supervisor publishes it.
+            rows.insert(
+                0,
+                status::Row {
+                    type_name: generated::mobile_base::TYPE_NAME,
+                    monitor: supervisor.monitor(&rows[0].monitor),
+                    load: 0.0,
+                },
+            );
             let truth = platform.truth();
             let mut out = stdout.lock();
             if display == Display::Table {

@@ -288,6 +288,46 @@ impl MobileBaseSupervisor {
         self.substituted
     }
 
+    /// What the compound's own monitoring port would publish: its default automaton
+    /// state (`running`, or `running_error` once a member's error propagated), the
+    /// supervisor's state as its user state, and its variables: the mapped
+    /// `odometry = motion.odometry` and `max_speed = motion.max_speed`, and its own
+    /// `mode` (its local `faults` is not observable). Built from `motion`'s snapshot,
+    /// whose timing fields the compound does not have (they are zeroed).
+    pub fn monitor(&self, motion: &Monitor) -> Monitor {
+        let mapped = |name: &str| {
+            motion
+                .variables
+                .iter()
+                .find(|(n, _)| n == name)
+                .map_or(Value::Unit, |(_, v)| v.clone())
+        };
+        let mut monitor = motion.clone();
+        monitor.name = BASE.to_owned();
+        monitor.state = if self.error.is_some() {
+            State::RunningError
+        } else {
+            State::Running
+        };
+        monitor.user_state = Some(self.state.name().to_owned());
+        monitor.error = self.error.clone();
+        monitor.result = TaskResult::None;
+        monitor.variables = vec![
+            ("odometry".to_owned(), mapped("odometry")),
+            ("max_speed".to_owned(), mapped("max_speed")),
+            ("mode".to_owned(), Value::Enum(format!("{:?}", self.mode))),
+        ];
+        monitor.cpu_time = Duration::ZERO;
+        monitor.elapsed_time = Duration::ZERO;
+        monitor.missed_deadlines = 0;
+        monitor.overruns = 0;
+        monitor.overflows = 0;
+        monitor.port_overflows = Vec::new();
+        // The supervisor is evaluated every turn of the run loop.
+        monitor.period = Some(Duration::from_millis(20));
+        monitor
+    }
+
     /// Takes the log lines written since the last call.
     pub fn take_log(&mut self) -> Vec<String> {
         std::mem::take(&mut self.log)

@@ -64,6 +64,27 @@ fn clip(text: &str, width: usize) -> String {
     }
 }
 
+/// Joins `items` with two spaces into lines of at most `width` characters (an item
+/// longer than that is clipped).
+fn wrap(items: &[String], width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for item in items {
+        let item = clip(item, width);
+        if !line.is_empty() && line.chars().count() + 2 + item.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push_str("  ");
+        }
+        line.push_str(&item);
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
 /// The table: a header line, one row per component, then its variables.
 pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     let mut out = String::new();
@@ -103,7 +124,9 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
             .iter()
             .map(|(name, v)| format!("{name}={}", value(v)))
             .collect();
-        let _ = writeln!(out, "  {}", clip(&vars.join("  "), 120));
+        for line in wrap(&vars, 110) {
+            let _ = writeln!(out, "  {line}");
+        }
     }
     if !log.is_empty() {
         let _ = writeln!(out, "events:");
@@ -141,6 +164,14 @@ mod tests {
         let pose = Value::Json(serde_json::json!({ "x": 1.0, "y": 2.5, "theta": 0.25 }));
         assert_eq!(value(&pose), "{theta:0.25 x:1.00 y:2.50}");
         assert_eq!(value(&Value::UInt(7)), "7");
+    }
+
+    #[test]
+    fn variables_wrap_at_the_width() {
+        let items: Vec<String> = ["aaaa", "bbbb", "cccc"].map(String::from).to_vec();
+        assert_eq!(wrap(&items, 10), ["aaaa  bbbb", "cccc"]);
+        assert_eq!(wrap(&items, 100), ["aaaa  bbbb  cccc"]);
+        assert_eq!(wrap(&[], 10), Vec::<String>::new());
     }
 
     #[test]
