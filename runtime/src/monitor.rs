@@ -173,6 +173,8 @@ pub(crate) struct Shared {
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// The component's thread, once spawned.
+    pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
 
 impl Shared {
@@ -183,6 +185,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            thread: std::sync::OnceLock::new(),
         }
     }
 
@@ -335,6 +338,13 @@ impl Handle {
             return Err(self.rejected(
                 &command,
                 "the component has not been started (System::start)",
+            ));
+        }
+        if self.shared.thread.get() == Some(&std::thread::current().id()) {
+            // The thread would wait for itself until the timeout.
+            return Err(self.rejected(
+                &command,
+                "a component cannot command itself from its own thread (use Context::end to finish)",
             ));
         }
         let deadline = Instant::now() + self.command_timeout;

@@ -552,6 +552,7 @@ impl System {
                 source,
             }
         })?;
+        let _ = slot.handle.shared.thread.set(join.thread().id());
         *slot
             .handle
             .join
