@@ -347,7 +347,7 @@ impl Handle {
                 "a component cannot command itself from its own thread (use Context::end to finish)",
             ));
         }
-        let deadline = Instant::now() + self.command_timeout;
+        let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let is_dead = command == Command::SetState(Controllable::Dead);
@@ -382,7 +382,7 @@ impl Handle {
                 }
                 // Taken just now: the transition is under way.
                 if answers
-                    .recv_deadline(Instant::now() + self.command_timeout)
+                    .recv_deadline(crate::thread::later(Instant::now(), self.command_timeout))
                     .is_err()
                     && !is_dead
                 {
@@ -432,7 +432,7 @@ impl Handle {
         pred: impl Fn(&Monitor) -> bool,
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

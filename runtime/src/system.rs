@@ -840,7 +840,7 @@ impl System {
                 let _ = slot.handle.bell.try_send(());
             }
         }
-        let deadline = Instant::now() + SHUTDOWN_TIMEOUT;
+        let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);
         for slot in &mut self.slots {
             let mut joined = false;
             let mut thread_panic = None;
