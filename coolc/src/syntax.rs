@@ -88,7 +88,6 @@ pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
 const PARSER_STACK: usize = 64 << 20;
 
 fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
-    pest::set_error_detail(true);
     let mut parser = FileParser {
         file,
         text,
@@ -96,6 +95,20 @@ fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     };
     let items = parser.items();
     (ast::File { id: file, items }, parser.diagnostics)
+}
+
+/// Parses with `rule`; on failure, parses again with pest's error detail (expected
+/// tokens) switched on, which slows parsing, so it stays off until the first error.
+/// The switch is process-wide and only ever turned on, so every error is reported
+/// from a detailed parse, whatever other threads do.
+fn parse_detailed(
+    rule: Rule,
+    input: &str,
+) -> Result<pest::iterators::Pairs<'_, Rule>, Box<pest::error::Error<Rule>>> {
+    CoolParser::parse(rule, input).or_else(|_| {
+        pest::set_error_detail(true);
+        CoolParser::parse(rule, input).map_err(Box::new)
+    })
 }
 
 /// How deep brackets, block comments and runs of prefix operators may nest. Real
@@ -202,7 +215,7 @@ impl<'t> FileParser<'t> {
         let mut offset = 0;
         while offset <= self.text.len() {
             let rest = &self.text[offset..];
-            match CoolParser::parse(Rule::item_step, rest) {
+            match parse_detailed(Rule::item_step, rest) {
                 Ok(mut pairs) => {
                     let Some(pair) = pairs.next() else { break };
                     if pair.as_rule() == Rule::EOI {
@@ -271,7 +284,7 @@ impl<'t> FileParser<'t> {
         let mut offset = start + head.as_span().end();
         let mut members = Vec::new();
         let end = loop {
-            match CoolParser::parse(Rule::member_step, &self.text[offset..]) {
+            match parse_detailed(Rule::member_step, &self.text[offset..]) {
                 Ok(mut pairs) => {
                     let pair = pairs.next()?;
                     let pair_end = offset + pair.as_span().end();
@@ -749,8 +762,59 @@ struct Builder<'d> {
 
 type P<'i> = Pair<'i, Rule>;
 
+/// True for the `kw_*` keyword rules.
 fn is_keyword(rule: Rule) -> bool {
-    format!("{rule:?}").starts_with("kw_")
+    matches!(
+        rule,
+        Rule::kw_import
+            | Rule::kw_packet
+            | Rule::kw_enum
+            | Rule::kw_extern
+            | Rule::kw_converter
+            | Rule::kw_link
+            | Rule::kw_crate
+            | Rule::kw_system
+            | Rule::kw_configuration
+            | Rule::kw_input
+            | Rule::kw_output
+            | Rule::kw_pull
+            | Rule::kw_tick
+            | Rule::kw_fifo
+            | Rule::kw_ufifo
+            | Rule::kw_last
+            | Rule::kw_poster
+            | Rule::kw_data
+            | Rule::kw_max
+            | Rule::kw_timing
+            | Rule::kw_period
+            | Rule::kw_max_response
+            | Rule::kw_priority
+            | Rule::kw_quality
+            | Rule::kw_exception
+            | Rule::kw_retry
+            | Rule::kw_every
+            | Rule::kw_goto
+            | Rule::kw_ignore
+            | Rule::kw_degrade
+            | Rule::kw_initial
+            | Rule::kw_state
+            | Rule::kw_entry
+            | Rule::kw_exit
+            | Rule::kw_periodic
+            | Rule::kw_on
+            | Rule::kw_after
+            | Rule::kw_without
+            | Rule::kw_may
+            | Rule::kw_when
+            | Rule::kw_instance
+            | Rule::kw_substitutes
+            | Rule::kw_redundant
+            | Rule::kw_connect
+            | Rule::kw_via
+            | Rule::kw_error
+            | Rule::kw_recovery
+            | Rule::kw_deadline
+    )
 }
 
 /// The children of a pair, keywords and doc lines removed.
@@ -1727,6 +1791,20 @@ mod tests {
             panic!("not a component")
         };
         assert_eq!(component.members.len(), 2);
+    }
+
+    #[test]
+    fn keyword_rules_are_exactly_the_kw_rules() {
+        for rule in Rule::all_rules() {
+            assert_eq!(
+                is_keyword(*rule),
+                format!("{rule:?}").starts_with("kw_"),
+                "{rule:?}"
+            );
+            if is_keyword(*rule) {
+                assert!(rule_name(*rule).is_some(), "{rule:?} has no readable name");
+            }
+        }
     }
 
     #[test]
