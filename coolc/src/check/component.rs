@@ -235,8 +235,87 @@ fn link(checker: &mut Checker<'_, '_>, link: &ast::Link) {
     };
     if name.value.trim().is_empty() {
         let diagnostic = checker
-            .error(Code::TypeMismatch, name.span, "a link needs a name")
+            .error(Code::BadLink, name.span, "a link needs a name")
             .with_label("empty name");
+        checker.push(diagnostic);
+    }
+    if let ast::LinkKind::Crate {
+        spec: ast::CrateSpec::Table(entries, span),
+        ..
+    } = &link.kind
+    {
+        crate_table(checker, entries, *span);
+    }
+}
+
+/// The keys an inline crate table may use, with the kind of value each takes.
+const CRATE_KEYS: &[(&str, &str)] = &[
+    ("version", "string"),
+    ("path", "string"),
+    ("git", "string"),
+    ("branch", "string"),
+    ("tag", "string"),
+    ("rev", "string"),
+    ("package", "string"),
+    ("registry", "string"),
+    ("features", "list"),
+    ("default_features", "bool"),
+    ("optional", "bool"),
+];
+
+/// `{ version = "0.33", features = ["x"] }`: known keys, each once, with values of
+/// the right kind, and a source (`version`, `path` or `git`).
+fn crate_table(checker: &mut Checker<'_, '_>, entries: &[ast::TableEntry], span: Span) {
+    names::duplicates(checker, entries.iter().map(|e| &e.key), "crate table key");
+    for entry in entries {
+        let Some((_, kind)) = CRATE_KEYS.iter().find(|(key, _)| *key == entry.key.name) else {
+            checker.unknown(
+                Code::BadLink,
+                &entry.key,
+                "crate table key",
+                "",
+                CRATE_KEYS.iter().map(|(key, _)| *key),
+            );
+            continue;
+        };
+        let fits = match *kind {
+            "string" => matches!(entry.value.kind, ast::ExprKind::Str(_)),
+            "bool" => matches!(entry.value.kind, ast::ExprKind::Bool(_)),
+            _ => match &entry.value.kind {
+                ast::ExprKind::List(items) => items
+                    .iter()
+                    .all(|item| matches!(item.kind, ast::ExprKind::Str(_))),
+                _ => false,
+            },
+        };
+        if !fits {
+            let expected = match *kind {
+                "string" => "a string",
+                "bool" => "`true` or `false`",
+                _ => "a list of strings",
+            };
+            let diagnostic = checker
+                .error(
+                    Code::BadLink,
+                    entry.value.span,
+                    format!("`{}` takes {expected}", entry.key.name),
+                )
+                .with_label(format!("expected {expected}"));
+            checker.push(diagnostic);
+        }
+    }
+    if !entries
+        .iter()
+        .any(|e| matches!(e.key.name.as_str(), "version" | "path" | "git"))
+    {
+        let diagnostic = checker
+            .error(
+                Code::BadLink,
+                span,
+                "a crate table needs `version`, `path` or `git`",
+            )
+            .with_label("no source for the crate")
+            .with_help("add `version = \"1\"`");
         checker.push(diagnostic);
     }
 }

@@ -57,29 +57,36 @@ pub(super) fn value_name(checker: &mut Checker<'_, '_>, name: &ast::Ident) {
     }
 }
 
-/// Reports a Rust keyword used as a name; true when it was one.
+/// Warns about a Rust keyword used as a name: the generated code escapes it
+/// (`r#type`, or `self_` for the keywords that cannot be raw), which the developer
+/// then has to write in their own code. Returns true when it was one.
 fn keyword(checker: &mut Checker<'_, '_>, name: &ast::Ident) -> bool {
     if !RUST_KEYWORDS.contains(&name.name.as_str()) {
         return false;
     }
+    let escaped = if NOT_RAW.contains(&name.name.as_str()) {
+        format!("{}_", name.name)
+    } else {
+        format!("r#{}", name.name)
+    };
     checker.push(
-        checker
-            .error(
-                Code::RustKeyword,
-                name.span,
-                format!(
-                    "`{}` is a Rust keyword and cannot be used as a name",
-                    name.name
-                ),
-            )
-            .with_label("reserved in Rust")
-            .with_help(format!(
-                "choose another name, for example `{}_` or a more specific word",
-                name.name.to_lowercase()
-            )),
+        Diagnostic::warning(
+            Code::RustKeyword,
+            checker.file,
+            name.span,
+            format!(
+                "`{}` is a Rust keyword: the generated code calls it `{escaped}`",
+                name.name
+            ),
+        )
+        .with_label("reserved in Rust")
+        .with_help("rename it to keep escaped identifiers out of the code you write"),
     );
     true
 }
+
+/// Keywords that cannot be raw identifiers; the generated code appends `_`.
+const NOT_RAW: &[&str] = &["self", "Self", "super", "crate"];
 
 /// Reports every name declared twice among `names` (one scope).
 pub(super) fn duplicates<'n>(

@@ -146,7 +146,11 @@ fn value_error(
         (Ty::Float(_), E::Unary(ast::UnaryOp::Neg, inner)) if matches!(inner.kind, E::Float(_)) => {
             Ok(())
         }
-        (Ty::Float(_), E::Int(n)) => Err(mismatch(expr, expected, Some(format!("write `{n}.0`")))),
+        // An integer literal is a whole float: `max_speed: f64 = 1` means `1.0`.
+        (Ty::Float(_), E::Int(_)) => Ok(()),
+        (Ty::Float(_), E::Unary(ast::UnaryOp::Neg, inner)) if matches!(inner.kind, E::Int(_)) => {
+            Ok(())
+        }
         (Ty::Int(prim), E::Int(n)) => {
             int_fits(*prim, i128::from(*n)).map_err(|message| (expr.span, message, None))
         }
