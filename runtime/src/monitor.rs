@@ -26,7 +26,7 @@ pub const OBSERVER_CAPACITY: usize = 4096;
 pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A command through the control port `c`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Command {
     /// Force a controllable state (the default controllable variable `new_state`).
     SetState(Controllable),
@@ -83,7 +83,8 @@ pub struct Monitor {
     pub error: Option<String>,
     /// User variables (observable and controllable), in declaration order.
     pub variables: Vec<(String, Value)>,
-    /// The component thread's CPU time (updated at least every millisecond of activity).
+    /// The component thread's CPU time (read on state changes and before the thread
+    /// waits, at most every 10 ms while it is busy).
     pub cpu_time: Duration,
     /// Wall-clock time spent in user code (hooks and sections).
     pub elapsed_time: Duration,
@@ -172,6 +173,8 @@ pub(crate) struct Shared {
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// The component's thread, once spawned.
+    pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
 
 impl Shared {
@@ -182,6 +185,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            thread: std::sync::OnceLock::new(),
         }
     }
 
@@ -336,7 +340,14 @@ impl Handle {
                 "the component has not been started (System::start)",
             ));
         }
-        let deadline = Instant::now() + self.command_timeout;
+        if self.shared.thread.get() == Some(&std::thread::current().id()) {
+            // The thread would wait for itself until the timeout.
+            return Err(self.rejected(
+                &command,
+                "a component cannot command itself from its own thread (use Context::end to finish)",
+            ));
+        }
+        let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let is_dead = command == Command::SetState(Controllable::Dead);
@@ -371,7 +382,7 @@ impl Handle {
                 }
                 // Taken just now: the transition is under way.
                 if answers
-                    .recv_deadline(Instant::now() + self.command_timeout)
+                    .recv_deadline(crate::thread::later(Instant::now(), self.command_timeout))
                     .is_err()
                     && !is_dead
                 {
@@ -421,7 +432,7 @@ impl Handle {
         pred: impl Fn(&Monitor) -> bool,
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

@@ -1,6 +1,10 @@
 //! Every connection kind: semantics, overflow policies with their counters and events,
 //! cardinality, kind and type errors, converters, disconnecting, and what inputs do
 //! while their component is not running.
+//!
+//! The consumer shells of these tests stay in `ready` (nothing is ever set running),
+//! so each kind's test also shows what it does while its component is not running:
+//! it works exactly the same; only the reading differs, which no section does then.
 
 mod support;
 
@@ -32,6 +36,10 @@ impl Pair {
         system.add(producer.build()).expect("add p");
         system.add(consumer.build()).expect("add c");
         system.start().expect("start");
+        for name in ["p", "c"] {
+            let handle = system.handle(name).expect(name);
+            handle.wait_state(State::Ready, WAIT).expect("ready");
+        }
         Pair { system }
     }
 }
@@ -625,4 +633,31 @@ fn arrivals_while_suspended_fire_on_resume() {
         .wait_for(|m| m.variables[0].1 == coolbot::Value::UInt(2), WAIT)
         .expect("count");
     assert_eq!(rig.script.log(), vec!["busy.entry"]);
+}
+
+#[test]
+fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::new(1, OverflowPolicy::Reject);
+    let pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(input("q", fifo(1), false), &q),
+    );
+    let mut pair = pair;
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let handle = pair.system.handle("c").unwrap();
+    handle.wait_state(State::Ready, WAIT).expect("ready");
+    let (first, second) = (handle.subscribe(), handle.subscribe());
+    let sent = coolbot::OBSERVER_CAPACITY as u64 + 100;
+    // One packet fills the queue; every other one overflows and is announced.
+    // `first` keeps up; `second` never reads.
+    let mut first_got = 0;
+    for packet in 0..=sent {
+        out.send(packet);
+        first_got += first.try_iter().count() as u64;
+    }
+    assert_eq!(q.overflows(), sent);
+    assert_eq!(first_got, sent);
+    assert_eq!(second.try_iter().count(), coolbot::OBSERVER_CAPACITY);
+    assert_eq!(handle.snapshot().dropped_events, 100);
 }

@@ -207,3 +207,20 @@ fn registered_ports_must_match_the_declared_kinds() {
         "component `w`: input `kick` is declared Tick but registered as fifo"
     );
 }
+
+#[test]
+fn handles_and_ports_can_cross_threads() {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<coolbot::Handle>();
+    send_sync::<coolbot::port::TickIn>();
+    send_sync::<coolbot::port::TickOut>();
+    send_sync::<FifoIn<String>>();
+    send_sync::<coolbot::port::UfifoIn<String>>();
+    send_sync::<coolbot::port::LastIn<String>>();
+    send_sync::<coolbot::port::PosterIn<String>>();
+    send_sync::<coolbot::port::DataOut<String>>();
+    send_sync::<coolbot::port::PosterOut<String>>();
+    fn send<T: Send>() {}
+    send::<System>();
+    send::<coolbot::Component>();
+}
