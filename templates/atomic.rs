@@ -367,7 +367,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     }
 
     fn configure(&mut self, configuration: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
-        self.config = super::__cool_from_value(configuration)?;
+        self.config = super::__cool_configure(&self.config, configuration)?;
         Ok(())
     }
 

@@ -58,14 +58,12 @@ const MEMBER_KEYWORDS: &[&str] = &[
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
 pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
-    if let Some(diagnostic) = too_deep(file, text) {
-        return (
-            ast::File {
-                id: file,
-                items: Vec::new(),
-            },
-            vec![diagnostic],
-        );
+    let deepest = match nesting(file, text) {
+        Ok(deepest) => deepest,
+        Err(diagnostic) => return (ast::File { id: file, items: Vec::new() }, vec![*diagnostic]),
+    };
+    if deepest <= SHALLOW {
+        return parse_items(file, text);
     }
     // The generated parser recurses once per nesting level with large frames (in
     // debug builds especially); a dedicated thread with a roomy stack keeps
@@ -86,6 +84,10 @@ pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
 
 /// Stack size of the parsing thread.
 const PARSER_STACK: usize = 64 << 20;
+
+/// Up to this nesting level a file is parsed on the caller's thread (a few hundred
+/// KiB of stack even in debug builds); deeper files get the parsing thread.
+const SHALLOW: usize = 12;
 
 fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     let mut parser = FileParser {
@@ -116,8 +118,10 @@ fn parse_detailed(
 /// within the stack on any input.
 pub const MAX_DEPTH: usize = 64;
 
-/// Reports nesting beyond [`MAX_DEPTH`] (the file is then not parsed further).
-fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
+/// The deepest nesting level of brackets, block comments and prefix operator runs, or
+/// a diagnostic for nesting beyond [`MAX_DEPTH`] (the file is then not parsed).
+fn nesting(file: FileId, text: &str) -> Result<usize, Box<Diagnostic>> {
+    let mut max_level = 0;
     let bytes = text.as_bytes();
     let mut depth = 0usize;
     let mut comment_depth = 0usize;
@@ -168,6 +172,9 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 prefix_run = 0;
             }
         }
+        if let Some((level, _)) = deepest {
+            max_level = max_level.max(level);
+        }
         if let Some((level, what)) = deepest
             && level > MAX_DEPTH
         {
@@ -176,7 +183,7 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 .chars()
                 .next()
                 .map_or(start, |c| start + c.len_utf8());
-            return Some(
+            return Err(Box::new(
                 Diagnostic::error(
                     Code::TooDeep,
                     file,
@@ -185,11 +192,11 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 )
                 .with_label("too deep")
                 .with_help("simplify this part of the file; nothing after it was parsed"),
-            );
+            ));
         }
         index += 1;
     }
-    None
+    Ok(max_level)
 }
 
 /// Parses `input` with `rule` in full (for grammar tests): true when the whole input

@@ -173,6 +173,8 @@ pub(crate) struct Shared {
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// The component's thread, once spawned.
+    pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
 
 impl Shared {
@@ -183,6 +185,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            thread: std::sync::OnceLock::new(),
         }
     }
 
@@ -337,7 +340,14 @@ impl Handle {
                 "the component has not been started (System::start)",
             ));
         }
-        let deadline = Instant::now() + self.command_timeout;
+        if self.shared.thread.get() == Some(&std::thread::current().id()) {
+            // The thread would wait for itself until the timeout.
+            return Err(self.rejected(
+                &command,
+                "a component cannot command itself from its own thread (use Context::end to finish)",
+            ));
+        }
+        let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let is_dead = command == Command::SetState(Controllable::Dead);
@@ -372,7 +382,7 @@ impl Handle {
                 }
                 // Taken just now: the transition is under way.
                 if answers
-                    .recv_deadline(Instant::now() + self.command_timeout)
+                    .recv_deadline(crate::thread::later(Instant::now(), self.command_timeout))
                     .is_err()
                     && !is_dead
                 {
@@ -422,7 +432,7 @@ impl Handle {
         pred: impl Fn(&Monitor) -> bool,
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

@@ -157,7 +157,7 @@ impl InputCore {
         timeout: Duration,
         mut ready: impl FnMut() -> Option<R>,
     ) -> Result<R, PullError> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         self.pull_waiting.store(true, Ordering::Release);
         while self.pull_signal.1.try_recv().is_ok() {}
         let result = self.request().and_then(|()| {

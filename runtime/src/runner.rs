@@ -28,7 +28,7 @@ use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
 use crate::port::{InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
-use crate::thread::panic_message;
+use crate::thread::{later, panic_message};
 
 /// How often, at most, a busy thread reads its CPU time (a system call) for the
 /// monitor; state changes always read it.
@@ -270,7 +270,7 @@ impl Runner {
                 .map_or(self.entered_at, |t| (*t).max(self.entered_at)),
             None => self.entered_at,
         };
-        base + after.delay
+        later(base, after.delay)
     }
 
     fn period_of(&self, state: usize) -> Option<Duration> {
@@ -348,7 +348,7 @@ impl Runner {
                 *arrival += pause;
             }
         }
-        self.next_periodic = self.period_of(self.user).map(|period| now + period);
+        self.next_periodic = self.period_of(self.user).map(|period| later(now, period));
     }
 
     fn set_state(&mut self, to: State) {
@@ -749,7 +749,7 @@ impl Runner {
             self.pending[index] = false;
             self.last_arrival[index] = now;
         }
-        self.next_periodic = self.period_of(target).map(|period| now + period);
+        self.next_periodic = self.period_of(target).map(|period| later(now, period));
         self.publish_user(Some(target));
         if self.spec.states[target].entry {
             match self.section_with_plan(target, Section::Entry) {
@@ -789,7 +789,7 @@ impl Runner {
         if !self.reanchored {
             // Absolute deadlines: the next one is a period after this one, not after now.
             let now = Instant::now();
-            let mut next = deadline + period;
+            let mut next = later(deadline, period);
             if next <= now {
                 let late = now.duration_since(next).as_nanos();
                 let missed = u64::try_from(late / period.as_nanos().max(1))
@@ -802,7 +802,7 @@ impl Runner {
                         total: monitor.missed_deadlines,
                     }]
                 });
-                next = now + period;
+                next = later(now, period);
             }
             self.next_periodic = Some(next);
         }
@@ -816,7 +816,7 @@ impl Runner {
         if self.user_entered && self.state == State::Running {
             self.next_periodic = self
                 .period_of(self.user)
-                .map(|period| Instant::now() + period);
+                .map(|period| later(Instant::now(), period));
             self.reanchored = true;
         }
     }

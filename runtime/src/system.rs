@@ -552,6 +552,7 @@ impl System {
                 source,
             }
         })?;
+        let _ = slot.handle.shared.thread.set(join.thread().id());
         *slot
             .handle
             .join
@@ -839,7 +840,7 @@ impl System {
                 let _ = slot.handle.bell.try_send(());
             }
         }
-        let deadline = Instant::now() + SHUTDOWN_TIMEOUT;
+        let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);
         for slot in &mut self.slots {
             let mut joined = false;
             let mut thread_panic = None;

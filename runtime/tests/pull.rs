@@ -216,3 +216,44 @@ fn a_failing_answer_takes_the_producer_to_running_error() {
         "the consumer goes on"
     );
 }
+
+#[test]
+fn a_component_commanding_itself_is_refused_at_once() {
+    let value = DataOut::<u64>::new();
+    let goal = LastIn::<u64>::new();
+    let own: Arc<std::sync::Mutex<Option<coolbot::Handle>>> = Arc::default();
+    let answers = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let shell = {
+        let (value, own, answers) = (value.clone(), Arc::clone(&own), Arc::clone(&answers));
+        ShellBuilder::new("p")
+            .output(output("value", OutputKind::Data, true), &value)
+            .answer(move |_| {
+                let handle = own.lock().unwrap().clone().expect("handle installed");
+                let answer = handle.command(Command::SetState(Controllable::Ready));
+                answers.lock().unwrap().push(answer.map_err(|e| e.reason));
+                value.send(1);
+                Ok(())
+            })
+    };
+    let mut system = System::new();
+    let handle = system.add(shell.build()).expect("p");
+    *own.lock().unwrap() = Some(handle.clone());
+    system
+        .add(
+            ShellBuilder::new("c")
+                .input(input("goal", InputKind::Last, true), &goal)
+                .build(),
+        )
+        .expect("c");
+    system.run_all().expect("run");
+    system.connect("p.value", "c.goal").expect("connect");
+    assert_eq!(goal.pull(WAIT), Ok(1));
+    assert_eq!(
+        *answers.lock().unwrap(),
+        vec![Err(
+            "a component cannot command itself from its own thread (use Context::end to finish)"
+                .to_owned()
+        )]
+    );
+    assert_eq!(handle.state(), State::Running);
+}

@@ -263,3 +263,25 @@ fn timing_is_measured() {
         "sleeping costs no CPU"
     );
 }
+
+#[test]
+fn absurd_durations_mean_never_and_do_not_panic() {
+    let rig = rig_with_after(vec![AfterSpec {
+        delay: Duration::MAX,
+        without: Some(FEED),
+        target: IDLE,
+    }]);
+    rig.run_busy();
+    let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
+    patient
+        .command(Command::SetPeriod(Duration::MAX))
+        .expect("a period of Duration::MAX");
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.period == Some(Duration::MAX), Duration::MAX)
+        .expect("waited");
+    assert_eq!(monitor.user_state.as_deref(), Some("busy"));
+    patient
+        .command(Command::SetState(Controllable::Suspended))
+        .expect("suspend");
+}

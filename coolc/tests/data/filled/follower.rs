@@ -12,7 +12,8 @@ impl Behavior for Follower {
     fn following_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         // Pull model: ask the producer, which answers with `answer_path`.
         if let Ok(path) = cx.inputs.path.pull(Duration::from_secs(5)) {
-            cx.vars.waypoints = u32::try_from(path.poses.len()).unwrap_or(u32::MAX);
+            let poses = u32::try_from(path.poses.len()).unwrap_or(u32::MAX);
+            cx.vars.waypoints = poses * cx.config.scale;
         }
         Ok(())
     }

@@ -69,6 +69,19 @@ fn mobile_base_instances_run_and_talk() {
             WAIT,
         )
         .unwrap();
+    // A partial configuration through the control port changes only what it names.
+    follower
+        .command(coolbot::Command::Configure(Value::Record(vec![(
+            "scale".to_owned(),
+            Value::UInt(3),
+        )])))
+        .unwrap();
+    follower
+        .wait_for(
+            |m| matches!(variable(m, "waypoints"), Some(Value::UInt(6))),
+            WAIT,
+        )
+        .unwrap();
 
     // The planner's path reaches the motion controller through the converter: it
     // moves (`on command -> moving`) and integrates the command into its odometry.
