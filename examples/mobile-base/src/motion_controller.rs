@@ -2,7 +2,7 @@
 //! simulated differential-drive platform every period.
 
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::generated::motion_controller::*;
 use crate::generated::types::{DriveMode, Pose2D, Twist};
@@ -11,6 +11,9 @@ use crate::world::Platform;
 
 /// The longest step integrated at once (s): a late period does not teleport the robot.
 const MAX_STEP: f64 = 0.1;
+/// The platform's set-point watchdog: without a new set-point for this long, it stops
+/// the wheels.
+const WATCHDOG: Duration = Duration::from_millis(250);
 
 /// The motion controller's code: it owns the platform's drive.
 #[derive(Debug)]
@@ -32,11 +35,18 @@ impl MotionController {
     /// limits; publishes the odometry.
     fn step(&mut self, cx: &mut Cx<'_>, target: Twist) -> coolbot::SectionResult {
         let now = Instant::now();
-        let dt = self
+        let gap = self
             .last_step
-            .map_or(0.0, |last| now.duration_since(last).as_secs_f64())
-            .min(MAX_STEP);
+            .map_or(Duration::ZERO, |last| now.duration_since(last));
         self.last_step = Some(now);
+        if gap > WATCHDOG && cx.vars.speed != still() {
+            // The wheels were stopped by the platform; the plan retries this section.
+            cx.vars.speed = still();
+            return Err(
+                Exception::Watchdog.raise(format!("no set-point for {} ms", gap.as_millis()))
+            );
+        }
+        let dt = gap.as_secs_f64().min(MAX_STEP);
 
         let near = cx
             .inputs
@@ -170,9 +180,9 @@ impl Behavior for MotionController {
         cx.vars.mode = DriveMode::Halted;
     }
 
-    fn on_platform_lost(&mut self, cx: &mut Cx<'_>, message: &str) {
-        // The plan retries the section; stop commanding speed meanwhile.
+    fn on_watchdog(&mut self, cx: &mut Cx<'_>, message: &str) {
+        // The wheels stopped: the retry starts again from standstill.
         let _ = message;
-        cx.vars.target = still();
+        cx.vars.speed = still();
     }
 }
