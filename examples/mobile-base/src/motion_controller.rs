@@ -183,6 +183,7 @@ impl Behavior for MotionController {
     fn on_watchdog(&mut self, cx: &mut Cx<'_>, message: &str) {
         // The wheels stopped: the retry starts again from standstill.
         let _ = message;
+        cx.vars.watchdog_trips += 1;
         cx.vars.speed = still();
     }
 }

@@ -152,3 +152,62 @@ fn a_stop_request_ends_the_run_early_and_cleanly() {
     assert!((5..=22).contains(&summary.scans.0), "{summary}");
     assert_clean_shutdown(&summary);
 }
+
+#[test]
+fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
+    use coolbot::{Command, Controllable};
+    use mobile_base::robot::{self, MOTION, Setup};
+    use mobile_base::world::{Platform, World};
+    use std::sync::Arc;
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let setup = Setup {
+        noise: 0.0,
+        seed: 1,
+        goal: None,
+        max_speed: None,
+        scan_rate: None,
+    };
+    let system = robot::wire_robot(&platform, &setup).expect("the robot starts");
+    let motion = system.handle(MOTION).unwrap();
+    let moving = |m: &coolbot::Monitor| {
+        m.variables.iter().any(|(name, value)| {
+            name == "speed" && value.to_json()["linear"].as_f64().is_some_and(|v| v > 0.05)
+        })
+    };
+    motion
+        .wait_for(moving, Duration::from_secs(3))
+        .expect("the base gets going");
+    // Freeze the controller mid-motion for longer than the platform's watchdog.
+    motion
+        .command(Command::SetState(Controllable::Suspended))
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    motion
+        .command(Command::SetState(Controllable::Running))
+        .unwrap();
+    let trips = |m: &coolbot::Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "watchdog_trips")
+            .and_then(|(_, value)| value.to_json().as_u64())
+            .unwrap_or(0)
+    };
+    let after = motion
+        .wait_for(|m| trips(m) >= 1, Duration::from_secs(2))
+        .expect("the watchdog exception was raised");
+    // The plan (`retry 3 every 20ms`) recovered: still running, no error, moving on.
+    assert_eq!(after.state, State::Running);
+    assert_eq!(after.error, None);
+    let distance = platform.truth().distance;
+    motion
+        .wait_for(moving, Duration::from_secs(3))
+        .expect("moving again");
+    assert!(platform.truth().distance > distance);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
