@@ -37,10 +37,11 @@ struct Args {
     #[arg(long, value_parser = parse_goal)]
     goal: Option<(f64, f64)>,
     /// The motion controller's speed limit in m/s (its controllable `max_speed`).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_speed)]
     max_speed: Option<f64>,
-    /// The range servers' scan frequency in Hz (their controllable `frequency`).
-    #[arg(long)]
+    /// The range servers' scan frequency in Hz, 0.5 to 200 (their controllable
+    /// `frequency`).
+    #[arg(long, value_parser = parse_rate)]
     scan_rate: Option<f64>,
     /// Output: the live table, status lines, or auto (the table on a terminal).
     #[arg(long, value_enum, default_value_t = Output::Auto)]
@@ -78,6 +79,22 @@ fn parse_duration(text: &str) -> Result<Duration, String> {
         _ => return Err(format!("unknown unit `{unit}` (use us, ms, s or min)")),
     };
     Duration::try_from_secs_f64(seconds).map_err(|e| format!("`{text}`: {e}"))
+}
+
+/// Parses a speed limit: 0 to 2 m/s.
+fn parse_speed(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(speed) if (0.0..=2.0).contains(&speed) => Ok(speed),
+        _ => Err(format!("`{text}` is not a speed from 0 to 2 (m/s)")),
+    }
+}
+
+/// Parses a scan frequency the range servers accept: 0.5 to 200 Hz.
+fn parse_rate(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(rate) if mobile_base::sensing::period_for(rate).is_some() => Ok(rate),
+        _ => Err(format!("`{text}` is not a frequency from 0.5 to 200 (Hz)")),
+    }
 }
 
 /// Parses `x,y`.
@@ -156,6 +173,16 @@ mod tests {
         assert!(parse_duration("10").is_err());
         assert!(parse_duration("10h").is_err());
         assert!(parse_duration("s").is_err());
+    }
+
+    #[test]
+    fn limits_are_checked() {
+        assert_eq!(parse_speed("0.3"), Ok(0.3));
+        assert!(parse_speed("-1").is_err());
+        assert!(parse_speed("fast").is_err());
+        assert_eq!(parse_rate("10"), Ok(10.0));
+        assert!(parse_rate("1000").is_err());
+        assert!(parse_rate("0").is_err());
     }
 
     #[test]
