@@ -72,6 +72,7 @@ impl Checker<'_, '_> {
                 for field in &packet.fields {
                     values::field(self, field);
                 }
+                values::recursive_packet(self, packet);
             }
             ast::Item::Enum(def) => {
                 names::type_name(self, &def.name);
