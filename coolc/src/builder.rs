@@ -26,8 +26,9 @@ use std::path::{Path, PathBuf};
 
 use crate::{RenderOptions, emit, lower};
 
-/// Why a [`Builder`] failed.
-#[derive(Debug, thiserror::Error)]
+/// Why a [`Builder`] failed. Its `Debug` is its `Display`, so that
+/// `Builder::compile(..).unwrap()` in a build script shows the diagnostics as rendered.
+#[derive(thiserror::Error)]
 pub enum BuildError {
     /// The descriptions have errors; the rendered diagnostics are inside.
     #[error("the .cool descriptions have errors:\n{0}")]
@@ -43,6 +44,12 @@ pub enum BuildError {
         /// The error.
         source: std::io::Error,
     },
+}
+
+impl std::fmt::Debug for BuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(self, f)
+    }
 }
 
 /// Compiles descriptions into `$OUT_DIR/cool.rs` from a build script.

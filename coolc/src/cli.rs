@@ -92,28 +92,73 @@ pub struct RuntimeArgs {
 }
 
 impl RuntimeArgs {
-    fn dep(&self) -> RuntimeDep {
-        if let Some(path) = &self.runtime_path {
-            let path = std::path::absolute(path).unwrap_or_else(|_| path.clone());
-            return RuntimeDep::Path(path.display().to_string());
-        }
+    /// The runtime dependency of a crate written to `out`.
+    fn dep(&self, out: &Path) -> RuntimeDep {
         if let Some(version) = &self.runtime_version {
             return RuntimeDep::Version(version.clone());
         }
-        default_runtime()
+        let path = match &self.runtime_path {
+            Some(path) => std::path::absolute(path).unwrap_or_else(|_| path.clone()),
+            None => match repository_runtime() {
+                Some(path) => path,
+                None => return RuntimeDep::Version("0.1".to_owned()),
+            },
+        };
+        RuntimeDep::Path(runtime_path_from(&path, out).display().to_string())
     }
 }
 
-/// The runtime this coolc was built beside, if its sources still exist; else the
-/// published version.
-pub fn default_runtime() -> RuntimeDep {
+/// The `runtime/` directory of the repository this coolc was built from, if it still
+/// exists.
+pub fn repository_runtime() -> Option<PathBuf> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
-    match path.canonicalize() {
-        Ok(path) if path.join("Cargo.toml").exists() => {
-            RuntimeDep::Path(path.display().to_string())
-        }
-        _ => RuntimeDep::Version("0.1".to_owned()),
+    let path = path.canonicalize().ok()?;
+    path.join("Cargo.toml").exists().then_some(path)
+}
+
+/// The runtime dependency used when none is given: the repository's runtime by
+/// path, else `coolbot = "0.1"`.
+pub fn default_runtime() -> RuntimeDep {
+    match repository_runtime() {
+        Some(path) => RuntimeDep::Path(path.display().to_string()),
+        None => RuntimeDep::Version("0.1".to_owned()),
     }
+}
+
+/// How the manifest in `out` names `runtime`: relative when `out` lies inside the
+/// directory holding the runtime (a crate inside the repository stays relocatable),
+/// absolute otherwise.
+pub fn runtime_path_from(runtime: &Path, out: &Path) -> PathBuf {
+    let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+    let out = normalize(&out);
+    let runtime = normalize(runtime);
+    let Some(root) = runtime.parent() else {
+        return runtime;
+    };
+    let Ok(below) = out.strip_prefix(root) else {
+        return runtime;
+    };
+    let mut relative = PathBuf::new();
+    for _ in below.components() {
+        relative.push("..");
+    }
+    relative.push(runtime.file_name().unwrap_or_default());
+    relative
+}
+
+/// Removes `.` and resolves `..` lexically.
+fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// Runs the CLI on parsed arguments.
@@ -127,9 +172,9 @@ pub fn run(cli: Cli) -> ExitCode {
             runtime,
         } => {
             let package = name.clone().unwrap_or_else(|| dir_name(out));
-            compile(&cli, files, out, &package, runtime.dep()).map(|_| ())
+            compile(&cli, files, out, &package, runtime.dep(out)).map(|_| ())
         }
-        Commands::New { name, runtime } => new(&cli, name, runtime.dep()),
+        Commands::New { name, runtime } => new(&cli, name, runtime.dep(name)),
     };
     match result {
         Ok(()) => ExitCode::from(EXIT_OK),
@@ -306,4 +351,26 @@ atomic {type_name} {{
 }}
 "#
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runtime_path_is_relative_inside_the_repository() {
+        let runtime = Path::new("/repo/runtime");
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/repo/examples/motion")),
+            Path::new("../../runtime")
+        );
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/repo/x/../demo")),
+            Path::new("../runtime")
+        );
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/tmp/demo")),
+            Path::new("/repo/runtime")
+        );
+    }
 }

@@ -95,6 +95,12 @@ struct UserComponent<'a> {
 }
 
 #[derive(Template)]
+#[template(path = "user_compound.rs", escape = "none")]
+struct UserCompound<'a> {
+    c: &'a ir::Compound,
+}
+
+#[derive(Template)]
 #[template(path = "user_converters.rs", escape = "none")]
 struct UserConverters<'a> {
     methods: &'a [ir::Method],
@@ -253,6 +259,7 @@ pub fn user_modules(krate: &ir::Crate) -> Vec<String> {
         modules.push("converters".to_owned());
     }
     modules.extend(krate.atomics.iter().map(|a| a.module.clone()));
+    modules.extend(krate.compounds.iter().map(|c| c.module.clone()));
     modules
 }
 
@@ -273,6 +280,11 @@ pub fn stub_sets(krate: &ir::Crate) -> Vec<StubSet> {
             stubs: c.methods.iter().map(stub).collect(),
         })
         .collect();
+    sets.extend(krate.compounds.iter().map(|c| StubSet {
+        path: PathBuf::from(format!("src/{}.rs", c.module.trim_start_matches("r#"))),
+        trait_name: "Parts".to_owned(),
+        stubs: c.parts.iter().map(stub).collect(),
+    }));
     if !krate.types.converters.is_empty() {
         sets.push(StubSet {
             path: PathBuf::from("src/converters.rs"),
@@ -324,6 +336,12 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         files.push(user(
             format!("src/{}.rs", c.module.trim_start_matches("r#")),
             format_user(&render(&UserComponent { c })),
+        ));
+    }
+    for c in &krate.compounds {
+        files.push(user(
+            format!("src/{}.rs", c.module.trim_start_matches("r#")),
+            format_user(&render(&UserCompound { c })),
         ));
     }
     if !krate.types.converters.is_empty() {

@@ -74,6 +74,11 @@ impl Crate {
         }
     }
 
+    /// Whether a `link crate` names `name`.
+    pub fn links_crate(&self, name: &str) -> bool {
+        self.dependencies.iter().any(|d| d.key == name)
+    }
+
     /// The generated modules, in emission order (`types` first).
     pub fn module_names(&self) -> Vec<String> {
         let mut names = vec![self.types.module.clone()];
@@ -449,6 +454,10 @@ pub struct Compound {
     pub connections: Vec<Connection>,
     /// Whether any connection goes through a converter (the builder is then generic).
     pub uses_converters: bool,
+    /// Name of the user struct implementing `Parts` in the user file.
+    pub user_struct: String,
+    /// The `Parts` methods with their user stubs.
+    pub parts: Vec<Method>,
 }
 
 /// One instance of a compound.
@@ -456,10 +465,28 @@ pub struct Compound {
 pub struct Instance {
     /// Instance name as written.
     pub name: String,
+    /// Its method on the `Parts` trait.
+    pub method: String,
     /// Component type name.
     pub component: String,
-    /// Whether the component is atomic.
-    pub atomic: bool,
+    /// The generated module of the component, when it is atomic.
+    pub module: Option<String>,
+    /// The instance it substitutes, if any (not built at start).
+    pub substitutes: Option<String>,
+}
+
+impl Instance {
+    /// Whether `build` adds it to the system: an atomic that substitutes nothing.
+    pub fn built(&self) -> bool {
+        self.module.is_some() && self.substitutes.is_none()
+    }
+}
+
+impl Compound {
+    /// Whether any instance is built.
+    pub fn builds_any(&self) -> bool {
+        self.instances.iter().any(Instance::built)
+    }
 }
 
 /// One `connect` of a compound.

@@ -47,6 +47,8 @@ enum TypeDef<'a> {
 struct Lowerer<'a> {
     types: BTreeMap<&'a str, TypeDef<'a>>,
     components: BTreeMap<&'a str, &'a ast::Component>,
+    /// Generated module name of every component.
+    modules: BTreeMap<&'a str, String>,
 }
 
 /// Lowers a set of checked files (imports included) to the IR of one crate.
@@ -54,6 +56,7 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
     let mut lowerer = Lowerer {
         types: BTreeMap::new(),
         components: BTreeMap::new(),
+        modules: BTreeMap::new(),
     };
     for item in files.iter().flat_map(|f| &f.items) {
         match item {
@@ -76,6 +79,23 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
                 lowerer.components.entry(&c.name.name).or_insert(c);
             }
             ast::Item::Import(_) | ast::Item::Converter(_) => {}
+        }
+    }
+    // Module names in source order; names coolc uses itself are taken.
+    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
+        .map(str::to_owned)
+        .into_iter()
+        .collect();
+    for item in files.iter().flat_map(|f| &f.items) {
+        if let ast::Item::Component(c) = item {
+            if lowerer.modules.contains_key(c.name.name.as_str()) {
+                continue;
+            }
+            let mut module = ident::snake_raw(&c.name.name);
+            while !taken.insert(module.clone()) {
+                module.push_str("_component");
+            }
+            lowerer.modules.insert(&c.name.name, ident::escape(&module));
         }
     }
     lowerer.lower_crate(files, options)
@@ -306,7 +326,6 @@ impl<'a> Lowerer<'a> {
         let mut system_libs: Vec<String> = Vec::new();
         let mut seen_types = BTreeSet::new();
         let mut seen_components = BTreeSet::new();
-        let mut modules: BTreeSet<String> = ["types".to_owned()].into_iter().collect();
         for item in files.iter().flat_map(|f| &f.items) {
             match item {
                 ast::Item::Packet(p) if seen_types.insert(p.name.name.clone()) => {
@@ -394,11 +413,7 @@ impl<'a> Lowerer<'a> {
                             }
                         }
                     }
-                    let mut module = ident::snake_raw(&c.name.name);
-                    while !modules.insert(module.clone()) || module == "support" {
-                        module.push_str("_component");
-                    }
-                    let module = ident::escape(&module);
+                    let module = self.modules[c.name.name.as_str()].clone();
                     match c.kind {
                         ast::ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
                         ast::ComponentKind::Compound => compounds.push(self.compound(c, module)),
@@ -970,11 +985,14 @@ impl<'a> Lowerer<'a> {
             match member {
                 ast::Member::Instance(i) => instances.push(ir::Instance {
                     name: i.name.name.clone(),
+                    method: ident::snake(&i.name.name),
                     component: i.component.name.clone(),
-                    atomic: self
+                    module: self
                         .components
                         .get(i.component.name.as_str())
-                        .is_some_and(|c| c.kind == ast::ComponentKind::Atomic),
+                        .filter(|c| c.kind == ast::ComponentKind::Atomic)
+                        .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
+                    substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -990,7 +1008,29 @@ impl<'a> Lowerer<'a> {
                 _ => {}
             }
         }
+        let parts = instances
+            .iter()
+            .filter(|i| i.built())
+            .filter_map(|i| {
+                let module = i.module.as_ref()?;
+                Some(ir::Method {
+                    name: i.method.clone(),
+                    doc: Vec::new(),
+                    signature: String::new(),
+                    user_signature: format!(
+                        "fn {}(&mut self) -> impl crate::generated::{module}::Behavior",
+                        i.method
+                    ),
+                    stub_body: vec![
+                        format!("// Instance `{}`: the behavior it runs.", i.name),
+                        format!("crate::{module}::{}::default()", ident::camel(&i.component)),
+                    ],
+                })
+            })
+            .collect();
         ir::Compound {
+            user_struct: format!("{}Parts", ident::camel_raw(&c.name.name)),
+            parts,
             doc: doc(&c.doc),
             type_name: c.name.name.clone(),
             module,
@@ -1098,9 +1138,25 @@ mod tests {
         assert_eq!(names, ["on_entry", "on_exit", "on_exit_2"]);
     }
 
+    /// Lowers text whose only errors are Rust keywords used as names (the checker
+    /// rejects them; lowering escapes them anyway, as defence in depth).
+    fn lower_keywords(text: &str) -> ir::Crate {
+        let analysis = crate::analyze_text("t.cool", text);
+        let codes: Vec<&str> = analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect();
+        assert!(
+            codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+            "{codes:?}"
+        );
+        lower(&analysis.files, &Options::default())
+    }
+
     #[test]
     fn keywords_and_casing_become_rust_names() {
-        let krate = lower_text(
+        let krate = lower_keywords(
             "packet P { type: u8 }\natomic Loop { observable match: u8 = 1; automaton { initial move; state move { entry; } } }",
         );
         let packet = &krate.types.packets[0];
@@ -1115,7 +1171,7 @@ mod tests {
     #[test]
     fn defaults_follow_the_declared_type() {
         let krate = lower_text(
-            "packet P { a: f64 = 1, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2] }",
+            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2] }",
         );
         let defaults: Vec<&str> = krate.types.packets[0]
             .fields
@@ -1125,7 +1181,7 @@ mod tests {
         assert_eq!(
             defaults,
             [
-                "1.0",
+                "1.5",
                 "::std::time::Duration::from_nanos(10000000)",
                 "[true; 2]",
                 "::core::option::Option::Some(3)",

@@ -123,8 +123,9 @@ fn builder_reports_diagnostics() {
 
 #[test]
 fn rust_keywords_as_names_emit_valid_rust() {
-    // Every emitted Rust file is parsed by `syn` while emitting: a keyword that is
-    // not escaped would panic here.
+    // The checker rejects Rust keywords as names (`coolc::check::rust_keyword`);
+    // lowering escapes them anyway, as defence in depth. Every emitted Rust file is
+    // parsed by `syn` while emitting: a keyword that is not escaped would panic here.
     let analysis = coolc::analyze_text(
         "k.cool",
         "packet Self { type: u8, loop: bool = true }\n\
@@ -139,10 +140,14 @@ fn rust_keywords_as_names_emit_valid_rust() {
              automaton { initial self; state self { entry; may -> super; } state super { periodic 10ms; } }\n\
          }\n",
     );
+    let codes: Vec<&str> = analysis
+        .diagnostics
+        .iter()
+        .map(|d| d.code.as_str())
+        .collect();
     assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
+        codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+        "{codes:?}"
     );
     let krate = lower::lower(&analysis.files, &lower::Options::default());
     let files = emit::emit_crate(&krate);
@@ -159,4 +164,34 @@ fn rust_keywords_as_names_emit_valid_rust() {
     );
     assert!(module.contents.contains("fn self_entry"));
     assert!(module.contents.contains("fn on_break"));
+}
+
+#[test]
+fn every_ok_fixture_emits() {
+    // The front end's fixture suite: every description that checks must emit (emission
+    // parses every Rust file it writes, so a template bug panics here).
+    insta::glob!("../../tests/data/ok", "*.cool", |path| {
+        let analysis = coolc::analyze(&[path], &|p: &Path| std::fs::read_to_string(p));
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(coolc::RenderOptions::plain())
+        );
+        let krate = lower::lower(&analysis.files, &lower::Options::default());
+        let files = emit::emit_crate(&krate);
+        let manifest = &files[0];
+        assert_eq!(manifest.path, Path::new("Cargo.toml"));
+        assert_eq!(
+            manifest.contents.matches("\nserde = ").count()
+                + manifest.contents.matches("\nserde=").count(),
+            usize::from(!krate.links_crate("serde"))
+        );
+        for atomic in &krate.atomics {
+            let module = format!("src/generated/{}.rs", atomic.module);
+            assert!(
+                files.iter().any(|f| f.path == Path::new(&module)),
+                "{module}"
+            );
+        }
+    });
 }

@@ -5,7 +5,7 @@
 //! written by the component's thread at each change) plus the observers' channels.
 //! Every change is sent to every observer as it happens; nobody polls.
 
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -170,6 +170,7 @@ pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
     inputs: Vec<(&'static str, ErasedInput)>,
+    dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
 }
 
@@ -179,14 +180,16 @@ impl Shared {
             monitor: Mutex::new(monitor),
             observers: Mutex::new(Vec::new()),
             inputs,
+            dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
         }
     }
 
-    /// Change the monitor with `f`, then send the events `f` returned.
+    /// Change the monitor with `f`, and send the events `f` returned before anyone can
+    /// see the change: a snapshot that shows a change implies its event is queued.
     pub(crate) fn update(&self, f: impl FnOnce(&mut Monitor) -> Vec<MonitorEvent>) {
-        let events = f(&mut lock(&self.monitor));
-        for event in events {
+        let mut monitor = lock(&self.monitor);
+        for event in f(&mut monitor) {
             self.publish(event);
         }
     }
@@ -196,24 +199,21 @@ impl Shared {
         f(&mut lock(&self.monitor));
     }
 
+    /// Send `event` to every observer. Lock order: the monitor (if held) before the
+    /// observers; this never takes the monitor lock.
     pub(crate) fn publish(&self, event: MonitorEvent) {
         let mut observers = lock(&self.observers);
         if observers.is_empty() {
             return;
         }
-        let mut dropped = 0;
         observers.retain(|observer| match observer.try_send(event.clone()) {
             Ok(()) => true,
             Err(TrySendError::Full(_)) => {
-                dropped += 1;
+                self.dropped.fetch_add(1, Ordering::Relaxed);
                 true
             }
             Err(TrySendError::Disconnected(_)) => false,
         });
-        drop(observers);
-        if dropped > 0 {
-            lock(&self.monitor).dropped_events += dropped;
-        }
     }
 
     pub(crate) fn announce_overflow(&self, port: &'static str, lost: u64, total: u64) {
@@ -238,6 +238,7 @@ impl Shared {
             .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
             .collect();
         monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
+        monitor.dropped_events = self.dropped.load(Ordering::Relaxed);
         monitor
     }
 
@@ -413,7 +414,8 @@ impl Handle {
     }
 
     /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),
-    /// for at most `timeout`.
+    /// for at most `timeout`. `pred` is evaluated on each event, so it should depend on
+    /// the monitor only (a change nobody announces does not wake the wait).
     pub fn wait_for(
         &self,
         pred: impl Fn(&Monitor) -> bool,

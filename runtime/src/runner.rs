@@ -141,7 +141,7 @@ impl Runner {
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
-                self.update_cpu(true);
+                self.update_cpu(false);
                 let _ = self.bell.recv();
                 continue;
             }
@@ -158,6 +158,14 @@ impl Runner {
             }
         }
         self.update_cpu(true);
+        // Commands that arrived while the component went dead get their answer.
+        while let Ok(message) = self.control.try_recv() {
+            if message.take() {
+                let _ = message.reply.try_send(Reply::Rejected(
+                    "the component is dead: its thread has ended".to_owned(),
+                ));
+            }
+        }
     }
 
     /// Handle every waiting command; false once the component is dead.
@@ -337,6 +345,7 @@ impl Runner {
             return;
         }
         self.state = to;
+        self.update_cpu(true);
         self.shared.update(|monitor| {
             monitor.state = to;
             vec![MonitorEvent::State { from, to }]

@@ -107,20 +107,17 @@ fn a_periodic_section_longer_than_its_period_misses_deadlines() {
         State::Running,
         "a missed deadline is not a fault"
     );
-    let announced: u64 = events
-        .try_iter()
-        .filter_map(|event| {
-            if let MonitorEvent::MissedDeadline { missed, .. } = event {
-                Some(missed)
-            } else {
-                None
+    // Each miss is announced: wait for the announcements to add up.
+    let mut announced = 0;
+    for event in events.iter() {
+        if let MonitorEvent::MissedDeadline { missed, .. } = event {
+            announced += missed;
+            if announced >= 2 {
+                break;
             }
-        })
-        .sum();
-    assert!(
-        announced >= 2 && announced <= rig.handle.snapshot().missed_deadlines,
-        "{announced}"
-    );
+        }
+    }
+    assert!(announced <= rig.handle.snapshot().missed_deadlines);
 }
 
 #[test]
@@ -137,9 +134,12 @@ fn the_period_changes_while_running() {
         .command(Command::SetPeriod(Duration::from_millis(1)))
         .expect("period");
     assert_eq!(rig.handle.snapshot().period, Some(Duration::from_millis(1)));
-    assert_eq!(
-        events.recv_timeout(WAIT),
-        Ok(MonitorEvent::Period(Some(Duration::from_millis(1))))
+    // Published before the command's answer; other events (missed deadlines on a
+    // busy machine) may come first.
+    assert!(
+        events
+            .try_iter()
+            .any(|event| event == MonitorEvent::Period(Some(Duration::from_millis(1))))
     );
     let before = rig.script.periodics.load(Ordering::SeqCst);
     eventually(

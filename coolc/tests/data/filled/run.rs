@@ -1,11 +1,12 @@
 //! Runs the generated components on the runtime, wired by the generated compound
-//! `MobileBase::connect`.
+//! `MobileBase::build` with the user file's `MobileBaseParts`.
 
 use std::time::Duration;
 
 use coolbot::{System, Value};
 use fleet::converters::Convert;
-use fleet::generated::{mobile_base, motion_controller, planner, range_server};
+use fleet::generated::mobile_base;
+use fleet::mobile_base::MobileBaseParts;
 
 const WAIT: Duration = Duration::from_secs(20);
 
@@ -20,25 +21,12 @@ fn variable(monitor: &coolbot::Monitor, name: &str) -> Option<Value> {
 #[test]
 fn mobile_base_instances_run_and_talk() {
     let mut system = System::new();
-    let motion = system
-        .add(motion_controller::component(
-            "motion",
-            fleet::motion_controller::MotionController::default(),
-        ))
-        .unwrap();
-    let ranges = system
-        .add(range_server::component(
-            "ranges",
-            fleet::range_server::RangeServer::default(),
-        ))
-        .unwrap();
-    system
-        .add(planner::component(
-            "planner",
-            fleet::planner::Planner::default(),
-        ))
-        .unwrap();
-    mobile_base::connect::<Convert>(&mut system, "").unwrap();
+    let handles = mobile_base::build::<Convert>(&mut system, "", &mut MobileBaseParts).unwrap();
+    let names: Vec<&str> = handles.iter().map(|h| h.name()).collect();
+    // The substitute `sim_ranges` is not started.
+    assert_eq!(names, ["motion", "ranges", "gyro_a", "gyro_b", "planner"]);
+    let motion = system.handle("motion").unwrap();
+    let ranges = system.handle("ranges").unwrap();
     system.run_all().unwrap();
 
     // The range server leaves `calibrating` through its `may` choice and streams.
