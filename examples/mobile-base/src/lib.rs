@@ -383,10 +383,15 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         std::thread::sleep(Duration::from_millis(20));
     };
 
-    let monitors: Vec<coolbot::Monitor> = handles.iter().map(coolbot::Handle::snapshot).collect();
-    let states_before_shutdown = monitors.iter().map(|m| (m.name.clone(), m.state)).collect();
+    let states_before_shutdown = handles
+        .iter()
+        .map(|h| (h.name().to_owned(), h.state()))
+        .collect();
     let elapsed = platform.uptime().saturating_sub(started);
     let report = system.shutdown();
+    // The variables as the components left them: read after the last section ran, so
+    // that they agree with the platform's ground truth.
+    let monitors: Vec<coolbot::Monitor> = handles.iter().map(coolbot::Handle::snapshot).collect();
     let final_states: Vec<(String, State, bool)> = report
         .components
         .iter()
