@@ -233,6 +233,17 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.
 pub fn component(name: impl ::core::convert::Into<::std::string::String>, behavior: impl Behavior) -> ::coolbot::Component {
+    component_with(name, behavior, Config::default(), Vars::default())
+}
+
+/// Like [`component`], starting from the given configuration and variables (a
+/// compound's instance overrides use it).
+pub fn component_with(
+    name: impl ::core::convert::Into<::std::string::String>,
+    behavior: impl Behavior,
+    config: Config,
+    vars: Vars,
+) -> ::coolbot::Component {
     let inputs = Inputs {
     {%- for p in c.inputs %}
         {{ p.field }}: {{ p.ctor }},
@@ -252,8 +263,8 @@ pub fn component(name: impl ::core::convert::Into<::std::string::String>, behavi
     {%- endfor %};
     let glue = __CoolGlue {
         behavior,
-        config: Config::default(),
-        vars: Vars::default(),
+        config,
+        vars,
         inputs,
         outputs,
     };
@@ -356,7 +367,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     }
 
     fn configure(&mut self, configuration: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
-        self.config = super::__cool_from_value(configuration)?;
+        self.config = super::__cool_configure(&self.config, configuration)?;
         Ok(())
     }
 

@@ -5,7 +5,7 @@
 //! [`build`] adds the compound's atomic instances to a `coolbot::System` (their
 //! behaviors come from your [`Parts`]) and wires the declared connections. Not
 //! generated yet: the supervisor automaton and its rules, exported ports, mapped
-//! variables, instance overrides, error policies and the recovery queue, substitutes
+//! variables, instance timing overrides, error policies and the recovery queue, substitutes
 //! (listed, not started), remote nodes (instances run locally) and compound instances
 //! (nested compounds).
 {%- if !c.doc.is_empty() %}
@@ -71,7 +71,35 @@ pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% 
 {%- for i in c.instances %}
 {%- if i.built() %}
 {%- if let Some(module) = i.module %}
+{%- if !i.has_overrides() %}
         system.add(super::{{ module }}::component(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}()))?,
+{%- else %}
+        // Instance `{{ i.name }}` with the overrides of the description.
+        system.add(super::{{ module }}::component_with(
+            ::std::format!("{prefix}{{ i.name }}"),
+            parts.{{ i.method }}(),
+            {%- if i.config_overrides.is_empty() %}
+            super::{{ module }}::Config::default(),
+            {%- else %}
+            super::{{ module }}::Config {
+                {%- for (field, value) in i.config_overrides %}
+                {{ field }}: {{ value }},
+                {%- endfor %}
+                ..super::{{ module }}::Config::default()
+            },
+            {%- endif %}
+            {%- if i.var_overrides.is_empty() %}
+            super::{{ module }}::Vars::default(),
+            {%- else %}
+            super::{{ module }}::Vars {
+                {%- for (field, value) in i.var_overrides %}
+                {{ field }}: {{ value }},
+                {%- endfor %}
+                ..super::{{ module }}::Vars::default()
+            },
+            {%- endif %}
+        ))?,
+{%- endif %}
 {%- endif %}
 {%- endif %}
 {%- endfor %}

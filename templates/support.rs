@@ -11,3 +11,29 @@ pub fn __cool_from_value<T: ::serde::de::DeserializeOwned>(
 ) -> ::core::result::Result<T, ::std::string::String> {
     value.to_serde()
 }
+
+/// The configuration after applying `value`: the fields it names replace the current
+/// ones, the others keep their values.
+#[doc(hidden)]
+pub fn __cool_configure<T: ::serde::Serialize + ::serde::de::DeserializeOwned>(
+    current: &T,
+    value: &::coolbot::Value,
+) -> ::core::result::Result<T, ::std::string::String> {
+    let given = value.to_json();
+    let mut merged = match ::coolbot::Value::from_serde(current)? {
+        ::coolbot::Value::Json(json) => json,
+        other => other.to_json(),
+    };
+    let merged_fields = match (merged.as_object_mut(), given.as_object()) {
+        (Some(fields), Some(given)) => {
+            fields.extend(given.clone());
+            true
+        }
+        _ => false,
+    };
+    if merged_fields {
+        ::coolbot::Value::Json(merged).to_serde()
+    } else {
+        value.to_serde()
+    }
+}

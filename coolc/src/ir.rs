@@ -473,12 +473,21 @@ pub struct Instance {
     pub module: Option<String>,
     /// The instance it substitutes, if any (not built at start).
     pub substitutes: Option<String>,
+    /// Configuration overrides: `(field, Rust value)`.
+    pub config_overrides: Vec<(String, String)>,
+    /// Controllable variable overrides: `(field, Rust value)`.
+    pub var_overrides: Vec<(String, String)>,
 }
 
 impl Instance {
     /// Whether `build` adds it to the system: an atomic that substitutes nothing.
     pub fn built(&self) -> bool {
         self.module.is_some() && self.substitutes.is_none()
+    }
+
+    /// Whether the instance has overrides.
+    pub fn has_overrides(&self) -> bool {
+        !self.config_overrides.is_empty() || !self.var_overrides.is_empty()
     }
 }
 

@@ -24,6 +24,11 @@ impl Behavior for RangeServer {
 
     fn streaming_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         cx.vars.scans += 1;
+        if cx.vars.scans == 4 && cx.vars.timeouts == 0 {
+            // Once: the continuity plan (`retry 2 every 50ms`) runs this section again.
+            cx.vars.scans -= 1;
+            return Err(Exception::SensorTimeout.raise("no reading at scan 4"));
+        }
         let scan = RangeScan {
             stamp: cx.rt.now(),
             ranges: [cx.config.emergency_distance * 10.0; 16],
@@ -34,6 +39,7 @@ impl Behavior for RangeServer {
     }
 
     fn on_sensor_timeout(&mut self, cx: &mut Cx<'_>, message: &str) {
-        let _ = (cx, message);
+        assert_eq!(message, "no reading at scan 4");
+        cx.vars.timeouts += 1;
     }
 }

@@ -25,6 +25,14 @@ fn mobile_base_instances_run_and_talk() {
     let names: Vec<&str> = handles.iter().map(|h| h.name()).collect();
     // The substitute `sim_ranges` is not started.
     assert_eq!(names, ["motion", "ranges", "gyro_a", "gyro_b", "planner"]);
+    // An instance outside the compound, pulling from the planner.
+    let follower = system
+        .add(fleet::generated::follower::component(
+            "follower",
+            fleet::follower::Follower::default(),
+        ))
+        .unwrap();
+    system.connect("planner.path", "follower.path").unwrap();
     let motion = system.handle("motion").unwrap();
     let ranges = system.handle("ranges").unwrap();
     system.run_all().unwrap();
@@ -41,6 +49,40 @@ fn mobile_base_instances_run_and_talk() {
         .unwrap();
     assert_eq!(monitor.state, coolbot::State::Running);
 
+    // A section raised `sensor_timeout`: the handler ran, the plan retried the
+    // section, and the component goes on running.
+    let monitor = ranges
+        .wait_for(
+            |m| {
+                matches!(variable(m, "timeouts"), Some(Value::UInt(1)))
+                    && matches!(variable(m, "scans"), Some(Value::UInt(n)) if n >= 6)
+            },
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.state, coolbot::State::Running);
+
+    // The follower's pulls are answered by the planner's `answer_path`.
+    follower
+        .wait_for(
+            |m| matches!(variable(m, "waypoints"), Some(Value::UInt(2))),
+            WAIT,
+        )
+        .unwrap();
+    // A partial configuration through the control port changes only what it names.
+    follower
+        .command(coolbot::Command::Configure(Value::Record(vec![(
+            "scale".to_owned(),
+            Value::UInt(3),
+        )])))
+        .unwrap();
+    follower
+        .wait_for(
+            |m| matches!(variable(m, "waypoints"), Some(Value::UInt(6))),
+            WAIT,
+        )
+        .unwrap();
+
     // The planner's path reaches the motion controller through the converter: it
     // moves (`on command -> moving`) and integrates the command into its odometry.
     let monitor = motion
@@ -48,15 +90,17 @@ fn mobile_base_instances_run_and_talk() {
             |m| {
                 variable(m, "odometry")
                     .and_then(|v| v.to_serde::<fleet::generated::types::Pose2D>().ok())
-                    .is_some_and(|pose| pose.x > 0.5)
+                    .is_some_and(|pose| pose.x > 0.0)
             },
             WAIT,
         )
         .unwrap();
     let pose: fleet::generated::types::Pose2D =
         variable(&monitor, "odometry").unwrap().to_serde().unwrap();
-    assert_eq!(pose.x, 0.8, "the command is clamped to max_speed");
-    assert!(matches!(variable(&monitor, "max_speed"), Some(Value::Float(s)) if s == 0.8));
+    // `instance motion: MotionController { max_speed = 0.5; }` overrides the
+    // controllable variable (default 0.8), which clamps the 1 m/s command.
+    assert_eq!(pose.x, 0.5, "the command is clamped to max_speed");
+    assert!(matches!(variable(&monitor, "max_speed"), Some(Value::Float(s)) if s == 0.5));
 
     // With no further command, the watchdog (`after 500ms without command`) brings it
     // back to `idle`.
