@@ -397,10 +397,13 @@ impl<'a> Lowerer<'a> {
                         if let ast::Member::Link(link) = member {
                             match &link.kind {
                                 ast::LinkKind::Crate { name, spec } => {
-                                    if !dependencies.iter().any(|d| d.key == toml_key(&name.value))
+                                    // The runtime dependency is coolc's to write.
+                                    let key = toml_key(&name.value);
+                                    if key != "coolbot"
+                                        && !dependencies.iter().any(|d| d.key == key)
                                     {
                                         dependencies.push(ir::Dependency {
-                                            key: toml_key(&name.value),
+                                            key,
                                             value: crate_spec(spec),
                                         });
                                     }
@@ -993,7 +996,8 @@ impl<'a> Lowerer<'a> {
                         .filter(|c| c.kind == ast::ComponentKind::Atomic)
                         .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
                     substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
-                    overrides: self.overrides(i),
+                    config_overrides: self.overrides(i, true),
+                    var_overrides: self.overrides(i, false),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -1056,9 +1060,9 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
 }
 
 impl Lowerer<'_> {
-    /// `config.x = value;` / `vars.x = value;` for an instance's overrides: a name
-    /// that is both a configuration field and a controllable variable sets both.
-    fn overrides(&self, instance: &ast::Instance) -> Vec<String> {
+    /// An instance's overrides of configuration fields (`config`) or controllable
+    /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
         let Some(component) = self
             .components
             .get(instance.component.name.as_str())
@@ -1066,27 +1070,27 @@ impl Lowerer<'_> {
         else {
             return Vec::new();
         };
-        let mut statements = Vec::new();
+        let mut overrides = Vec::new();
         for o in &instance.overrides {
             for member in &component.members {
                 match member {
-                    ast::Member::Configuration(cfg) => {
+                    ast::Member::Configuration(cfg) if config => {
                         for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
-                            statements.push(format!(
-                                "config.{} = {};",
+                            overrides.push((
                                 ident::snake(&f.name.name),
-                                self.value(&o.value, Some(&f.ty), GEN_TYPES)
+                                self.value(&o.value, Some(&f.ty), GEN_TYPES),
                             ));
                         }
                     }
                     ast::Member::Variable(v)
-                        if v.kind == ast::VarKind::Controllable && v.name.name == o.name.name =>
+                        if !config
+                            && v.kind == ast::VarKind::Controllable
+                            && v.name.name == o.name.name =>
                     {
                         if let Some(ty) = &v.ty {
-                            statements.push(format!(
-                                "vars.{} = {};",
+                            overrides.push((
                                 ident::snake(&v.name.name),
-                                self.value(&o.value, Some(ty), GEN_TYPES)
+                                self.value(&o.value, Some(ty), GEN_TYPES),
                             ));
                         }
                     }
@@ -1094,7 +1098,7 @@ impl Lowerer<'_> {
                 }
             }
         }
-        statements
+        overrides
     }
 }
 
@@ -1148,7 +1152,15 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
         ast::CrateSpec::Table(entries, _) => {
             let entries: Vec<String> = entries
                 .iter()
-                .map(|e| format!("{} = {}", toml_key(&e.key.name), toml_value(&e.value)))
+                .map(|e| {
+                    // `.cool` names cannot hold `-`: Cargo's `default-features` is
+                    // written `default_features`, which edition 2024 rejects as is.
+                    let key = match e.key.name.as_str() {
+                        "default_features" => "default-features",
+                        other => other,
+                    };
+                    format!("{} = {}", toml_key(key), toml_value(&e.value))
+                })
                 .collect();
             format!("{{ {} }}", entries.join(", "))
         }
@@ -1167,6 +1179,23 @@ mod tests {
             analysis.render(crate::RenderOptions::plain())
         );
         lower(&analysis.files, &Options::default())
+    }
+
+    #[test]
+    fn link_crate_tables_become_cargo_tables() {
+        let krate = lower_text(
+            "atomic A { link crate \"serde_json\" = { version = \"1\", default_features = false, features = [\"std\"] }; link crate \"coolbot\" = \"9\"; link system \"m\"; }",
+        );
+        assert_eq!(
+            krate.dependencies,
+            [ir::Dependency {
+                key: "serde_json".to_owned(),
+                value: "{ version = \"1\", default-features = false, features = [\"std\"] }"
+                    .to_owned(),
+            }]
+        );
+        assert_eq!(krate.system_libs, ["m"]);
+        assert_eq!(ir::toml_string("a\"b\\c"), "\"a\\\"b\\\\c\"");
     }
 
     #[test]

@@ -194,7 +194,7 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
     write_files(
         dir,
         &files,
-        &emit::stub_sets(krate),
+        &emit::stub_sets(krate, &files),
         &emit::user_modules(krate),
     )
 }
