@@ -2,6 +2,116 @@
 //!
 //! The pipeline is `syntax` -> `resolve` -> `check` -> `lower` -> `emit`; see
 //! `ARCHITECTURE.md` at the repository root.
+//!
+//! The front end is one call, [`analyze`]: it loads the root files through a loader
+//! closure (only the CLI and the `Builder` pass one that reads the filesystem; tests
+//! pass in-memory files), follows `import`s relative to the importing file, parses,
+//! resolves and checks everything, and returns an [`Analysis`]: the [`SourceMap`], one
+//! [`ast::File`] per loaded file (`files[i].id == FileId(i)`) and every diagnostic,
+//! in a deterministic order.
+//!
+//! ```
+//! use std::path::Path;
+//! let files = [("main.cool", "packet Pose { x: f64, y: f64 }")];
+//! let loader = |path: &Path| -> std::io::Result<String> {
+//!     files
+//!         .iter()
+//!         .find(|(name, _)| Path::new(name) == path)
+//!         .map(|(_, text)| text.to_string())
+//!         .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+//! };
+//! let analysis = coolc::analyze(&["main.cool"], &loader);
+//! assert!(!analysis.has_errors(), "{}", analysis.render(coolc::RenderOptions::plain()));
+//! ```
 #![deny(missing_docs)]
 
 pub mod ast;
+pub mod check;
+pub mod cli;
+pub mod diagnostics;
+pub mod emit;
+pub mod ident;
+pub mod ir;
+pub mod lower;
+pub mod merge;
+pub mod resolve;
+pub mod source;
+pub mod syntax;
+
+use std::path::Path;
+
+pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
+pub use source::SourceMap;
+
+/// The result of [`analyze`]: what was read, what was parsed, what is wrong.
+#[derive(Clone, Debug)]
+pub struct Analysis {
+    /// Every loaded file; `FileId(i)` is `sources.files()[i]`.
+    pub sources: SourceMap,
+    /// One syntax tree per loaded file, in `FileId` order (roots first, then imports
+    /// depth first).
+    pub files: Vec<ast::File>,
+    /// Every diagnostic: syntax errors per file in file order, then resolution and
+    /// check diagnostics.
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl Analysis {
+    /// True when at least one diagnostic is an error.
+    pub fn has_errors(&self) -> bool {
+        self.diagnostics
+            .iter()
+            .any(|d| d.severity == Severity::Error)
+    }
+
+    /// The number of errors.
+    pub fn error_count(&self) -> usize {
+        self.diagnostics
+            .iter()
+            .filter(|d| d.severity == Severity::Error)
+            .count()
+    }
+
+    /// Renders every diagnostic (graphical or JSON, see [`RenderOptions`]).
+    pub fn render(&self, options: RenderOptions) -> String {
+        diagnostics::render(&self.sources, &self.diagnostics, options)
+    }
+}
+
+/// Loads, parses, resolves and checks `roots` and everything they import.
+///
+/// `loader` reads one file; it receives the root paths as given and import paths
+/// joined to the importing file's directory (lexically normalised). A root or import
+/// it cannot read is a diagnostic, never a panic.
+pub fn analyze<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+) -> Analysis {
+    let mut loaded = resolve::load(roots, loader);
+    let symbols = resolve::Symbols::build(
+        &loaded.sources,
+        &loaded.files,
+        &loaded.imports,
+        &mut loaded.diagnostics,
+    );
+    check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
+    Analysis {
+        sources: loaded.sources,
+        files: loaded.files,
+        diagnostics: loaded.diagnostics,
+    }
+}
+
+/// Analyzes in-memory text as one root file named `path` (imports resolve against
+/// nothing and fail). Handy for tests and editors.
+pub fn analyze_text(path: &str, text: &str) -> Analysis {
+    let text = text.to_owned();
+    let root = Path::new(path).to_owned();
+    analyze(&[path], &move |p: &Path| {
+        if p == root {
+            Ok(text.clone())
+        } else {
+            Err(std::io::Error::from(std::io::ErrorKind::NotFound))
+        }
+    })
+}

@@ -1,6 +1,7 @@
-//! The `coolc` command-line front end.
+//! The `coolc` command-line front end (see `coolc::cli`).
 
-fn main() {
-    eprintln!("coolc: not built yet");
-    std::process::exit(2);
+use clap::Parser;
+
+fn main() -> std::process::ExitCode {
+    coolc::cli::run(coolc::cli::Cli::parse())
 }

@@ -1,0 +1,288 @@
+//! The `coolc` command line: `check`, `compile` and `new`.
+//!
+//! Exit codes: 0 when there is no error, 1 when the descriptions have errors
+//! (diagnostics), 2 for usage and I/O errors. Diagnostics go to stderr rendered for a
+//! person (colour only when stderr is a terminal and `NO_COLOR` is unset), or to
+//! stdout as JSON lines with `--message-format json`.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::ir::RuntimeDep;
+use crate::{Analysis, RenderFormat, RenderOptions, emit, ident, lower, merge};
+
+/// Exit code: no error.
+pub const EXIT_OK: u8 = 0;
+/// Exit code: the descriptions have errors.
+pub const EXIT_DIAGNOSTICS: u8 = 1;
+/// Exit code: bad usage or an I/O error.
+pub const EXIT_USAGE: u8 = 2;
+
+/// Compile CoolBOT `.cool` component descriptions into Rust crates.
+#[derive(Debug, Parser)]
+#[command(name = "coolc", version, about, propagate_version = true)]
+pub struct Cli {
+    /// How diagnostics are printed: `human` (stderr) or `json` (one object per line
+    /// on stdout).
+    #[arg(long, value_enum, default_value_t = MessageFormat::Human, global = true)]
+    pub message_format: MessageFormat,
+
+    /// The command.
+    #[command(subcommand)]
+    pub command: Commands,
+}
+
+/// Diagnostic output formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MessageFormat {
+    /// Rendered for a person, on stderr.
+    Human,
+    /// JSON lines on stdout, for editors and CI.
+    Json,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Commands {
+    /// Check descriptions and report every error, without writing anything.
+    Check {
+        /// The `.cool` files (their imports are followed).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// Compile descriptions into a crate directory (generated code and user stubs).
+    Compile {
+        /// The `.cool` files (their imports are followed).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// The crate directory to write (created when missing; user code in it is kept).
+        #[arg(short, long)]
+        out: PathBuf,
+        /// The Cargo package name (default: the output directory's name).
+        #[arg(long)]
+        name: Option<String>,
+        /// Where the runtime is found.
+        #[command(flatten)]
+        runtime: RuntimeArgs,
+    },
+    /// Create a new component crate with a starter description that builds and runs.
+    New {
+        /// The crate directory and package name (e.g. `blinker`).
+        name: PathBuf,
+        /// Where the runtime is found.
+        #[command(flatten)]
+        runtime: RuntimeArgs,
+    },
+}
+
+/// How the generated `Cargo.toml` names the runtime crate `coolbot`.
+#[derive(Debug, Args)]
+#[group(multiple = false)]
+pub struct RuntimeArgs {
+    /// Depend on the runtime by path (default: this coolc's own `runtime/` directory
+    /// when it exists).
+    #[arg(long)]
+    pub runtime_path: Option<PathBuf>,
+    /// Depend on the runtime by version from crates.io.
+    #[arg(long)]
+    pub runtime_version: Option<String>,
+}
+
+impl RuntimeArgs {
+    fn dep(&self) -> RuntimeDep {
+        if let Some(path) = &self.runtime_path {
+            let path = std::path::absolute(path).unwrap_or_else(|_| path.clone());
+            return RuntimeDep::Path(path.display().to_string());
+        }
+        if let Some(version) = &self.runtime_version {
+            return RuntimeDep::Version(version.clone());
+        }
+        default_runtime()
+    }
+}
+
+/// The runtime this coolc was built beside, if its sources still exist; else the
+/// published version.
+pub fn default_runtime() -> RuntimeDep {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
+    match path.canonicalize() {
+        Ok(path) if path.join("Cargo.toml").exists() => RuntimeDep::Path(path.display().to_string()),
+        _ => RuntimeDep::Version("0.1".to_owned()),
+    }
+}
+
+/// Runs the CLI on parsed arguments.
+pub fn run(cli: Cli) -> ExitCode {
+    let result = match &cli.command {
+        Commands::Check { files } => check(&cli, files).map(|_| ()),
+        Commands::Compile { files, out, name, runtime } => {
+            let package = name.clone().unwrap_or_else(|| dir_name(out));
+            compile(&cli, files, out, &package, runtime.dep()).map(|_| ())
+        }
+        Commands::New { name, runtime } => new(&cli, name, runtime.dep()),
+    };
+    match result {
+        Ok(()) => ExitCode::from(EXIT_OK),
+        Err(Failure::Diagnostics) => ExitCode::from(EXIT_DIAGNOSTICS),
+        Err(Failure::Usage(message)) => {
+            eprintln!("error: {message}");
+            ExitCode::from(EXIT_USAGE)
+        }
+    }
+}
+
+enum Failure {
+    /// Already rendered.
+    Diagnostics,
+    /// A usage or I/O error message.
+    Usage(String),
+}
+
+fn dir_name(path: &Path) -> String {
+    std::path::absolute(path)
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "cool-components".to_owned())
+}
+
+fn render_options(cli: &Cli) -> RenderOptions {
+    match cli.message_format {
+        MessageFormat::Json => RenderOptions::json(),
+        MessageFormat::Human => RenderOptions {
+            format: RenderFormat::Graphical,
+            colour: std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none(),
+            width: 100,
+        },
+    }
+}
+
+/// Analyzes `files`, prints the diagnostics, fails when there are errors.
+fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
+    for file in files {
+        if let Err(error) = std::fs::metadata(file) {
+            return Err(Failure::Usage(format!("cannot read {}: {error}", file.display())));
+        }
+    }
+    let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
+    if !analysis.diagnostics.is_empty() {
+        let rendered = analysis.render(render_options(cli));
+        match cli.message_format {
+            MessageFormat::Json => print!("{rendered}"),
+            MessageFormat::Human => eprint!("{rendered}"),
+        }
+    }
+    if analysis.has_errors() {
+        if cli.message_format == MessageFormat::Human {
+            eprintln!("coolc: {} error(s)", analysis.error_count());
+        }
+        return Err(Failure::Diagnostics);
+    }
+    Ok(analysis)
+}
+
+fn compile(
+    cli: &Cli,
+    files: &[PathBuf],
+    out: &Path,
+    package: &str,
+    runtime: RuntimeDep,
+) -> Result<crate::ir::Crate, Failure> {
+    let analysis = check(cli, files)?;
+    let options = lower::Options {
+        package: package.to_owned(),
+        runtime,
+        sources: files
+            .iter()
+            .map(|f| f.file_name().map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into_owned()))
+            .collect(),
+    };
+    let krate = lower::lower(&analysis.files, &options);
+    let report = merge::write_crate(out, &krate)
+        .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
+    for (file, methods) in &report.added {
+        eprintln!("coolc: added to {}: {}", file.display(), methods.join(", "));
+    }
+    for warning in &report.warnings {
+        eprintln!("warning: {warning}");
+    }
+    eprintln!(
+        "coolc: wrote {} ({} file(s) changed)",
+        out.display(),
+        report.written.len()
+    );
+    Ok(krate)
+}
+
+fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
+    if dir.exists() {
+        return Err(Failure::Usage(format!("{} already exists", dir.display())));
+    }
+    let name = dir_name(dir);
+    let type_name = ident::camel_raw(&name.replace('-', "_"));
+    let description = starter_description(&type_name);
+    let components = dir.join("components");
+    let io = |e: std::io::Error| Failure::Usage(format!("cannot write {}: {e}", dir.display()));
+    std::fs::create_dir_all(&components).map_err(io)?;
+    let cool = components.join(format!("{}.cool", ident::snake_raw(&type_name)));
+    std::fs::write(&cool, description).map_err(io)?;
+    let krate = compile(cli, &[cool], dir, &name, runtime)?;
+    let Some(atomic) = krate.atomics.first() else {
+        return Err(Failure::Usage("the starter description has no component".to_owned()));
+    };
+    let module = atomic.module.trim_start_matches("r#");
+    std::fs::write(
+        dir.join(format!("src/{module}.rs")),
+        emit::starter_component(atomic),
+    )
+    .map_err(io)?;
+    std::fs::write(dir.join("src/main.rs"), emit::starter_main(&krate, atomic)).map_err(io)?;
+    std::fs::write(dir.join(".gitignore"), "/target\n").map_err(io)?;
+    eprintln!(
+        "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",
+        dir.display(),
+        Path::new("components").join(cool_file_name(&type_name)).display(),
+        Path::new("components").join(cool_file_name(&type_name)).display(),
+    );
+    Ok(())
+}
+
+fn cool_file_name(type_name: &str) -> String {
+    format!("{}.cool", ident::snake_raw(type_name))
+}
+
+/// The description `coolc new` starts from: an atomic with a periodic state.
+pub fn starter_description(type_name: &str) -> String {
+    format!(
+        r#"/// A starter component: counts its periods and stops after `limit` of them.
+atomic {type_name} {{
+    configuration {{
+        /// How many periods to count before finishing.
+        limit: u64 = 20;
+    }}
+
+    /// How many periods have elapsed.
+    observable count: u64 = 0;
+
+    /// Ticks once per period.
+    output beat: tick;
+
+    timing {{ period 100ms; }}
+
+    automaton {{
+        initial counting;
+        /// Counting periods.
+        state counting {{
+            entry;
+            periodic;
+            may -> done;
+        }}
+        /// The count reached the limit.
+        state done {{ entry; }}
+    }}
+}}
+"#
+    )
+}

@@ -1,0 +1,418 @@
+//! The intermediate representation the templates print.
+//!
+//! `lower` builds it from checked ASTs. **Invariant:** every string here is final
+//! Rust (an identifier, a type path, an expression, a literal) or final TOML; the
+//! templates only loop over these structures and print them. Orders are source
+//! orders.
+
+/// Where the generated crate finds the runtime crate `coolbot`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RuntimeDep {
+    /// `coolbot = { path = "..." }`
+    Path(String),
+    /// `coolbot = "..."`
+    Version(String),
+}
+
+impl RuntimeDep {
+    /// The right-hand side of the `coolbot = ...` line in `Cargo.toml`.
+    pub fn toml(&self) -> String {
+        match self {
+            RuntimeDep::Path(path) => format!("{{ path = {} }}", toml_string(path)),
+            RuntimeDep::Version(version) => toml_string(version),
+        }
+    }
+}
+
+/// A TOML basic string literal.
+pub fn toml_string(text: &str) -> String {
+    let mut out = String::from("\"");
+    for c in text.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\t' => out.push_str("\\t"),
+            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// Everything emitted for one set of descriptions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Crate {
+    /// Cargo package name.
+    pub package: String,
+    /// The library target name (`package` with `-` replaced).
+    pub lib_name: String,
+    /// The runtime dependency.
+    pub runtime: RuntimeDep,
+    /// `link crate` dependencies, deduplicated by name, first wins.
+    pub dependencies: Vec<Dependency>,
+    /// `link system` libraries, deduplicated.
+    pub system_libs: Vec<String>,
+    /// Source file names, for the generated-file header.
+    pub sources: Vec<String>,
+    /// Packets, enums, extern packets and converters.
+    pub types: Types,
+    /// Atomic components, in source order.
+    pub atomics: Vec<Atomic>,
+    /// Compound components, in source order.
+    pub compounds: Vec<Compound>,
+}
+
+impl Crate {
+    /// The source file names for the generated-file header.
+    pub fn sources_text(&self) -> String {
+        if self.sources.is_empty() {
+            "the .cool descriptions".to_owned()
+        } else {
+            self.sources.join(", ")
+        }
+    }
+
+    /// The generated modules, in emission order (`types` first).
+    pub fn module_names(&self) -> Vec<String> {
+        let mut names = vec![self.types.module.clone()];
+        names.extend(self.atomics.iter().map(|a| a.module.clone()));
+        names.extend(self.compounds.iter().map(|c| c.module.clone()));
+        names
+    }
+}
+
+/// One Cargo dependency from `link crate`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Dependency {
+    /// Crate name (a TOML key, quoted when needed).
+    pub key: String,
+    /// The TOML value: a version string or an inline table.
+    pub value: String,
+}
+
+/// Doc comment lines (without `///`).
+pub type Doc = Vec<String>;
+
+/// The shared types module.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Types {
+    /// Module name (`types`).
+    pub module: String,
+    /// Data packets.
+    pub packets: Vec<Packet>,
+    /// Enums.
+    pub enums: Vec<Enum>,
+    /// Extern packets (type aliases).
+    pub externs: Vec<Extern>,
+    /// Converters, as methods of the `Converters` trait.
+    pub converters: Vec<Converter>,
+}
+
+/// A packet struct.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Packet {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust type name.
+    pub name: String,
+    /// Fields in declaration order.
+    pub fields: Vec<Field>,
+    /// Whether a `Default` impl is emitted (every field has a default or a defaultable
+    /// type).
+    pub has_default: bool,
+}
+
+/// A struct field (packets, `Config`, `Vars`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust field name.
+    pub name: String,
+    /// The name as written in `.cool` (for serde renames and messages).
+    pub cool_name: String,
+    /// Rust type.
+    pub ty: String,
+    /// Rust expression of its default value.
+    pub default: String,
+}
+
+impl Field {
+    /// Whether the Rust name differs from the `.cool` name (serde needs a rename).
+    pub fn renamed(&self) -> bool {
+        self.name.trim_start_matches("r#") != self.cool_name
+    }
+}
+
+/// An enum.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Enum {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust type name.
+    pub name: String,
+    /// Variants: doc, Rust name, `.cool` name.
+    pub variants: Vec<EnumVariant>,
+}
+
+/// One enum variant.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnumVariant {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust variant name.
+    pub name: String,
+    /// The name as written.
+    pub cool_name: String,
+}
+
+/// `extern packet Name = "path";`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extern {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust type name.
+    pub name: String,
+    /// The Rust type path.
+    pub path: String,
+}
+
+/// A converter method.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Converter {
+    /// Doc lines.
+    pub doc: Doc,
+    /// The converter name as written.
+    pub cool_name: String,
+    /// Method name.
+    pub method: String,
+    /// Input type, as seen from the generated types module.
+    pub from: String,
+    /// Output type, as seen from the generated types module.
+    pub to: String,
+    /// Input type, as seen from user code.
+    pub user_from: String,
+    /// Output type, as seen from user code.
+    pub user_to: String,
+    /// The stub body of the user implementation (statements).
+    pub stub_body: String,
+}
+
+/// An atomic component's generated module.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Atomic {
+    /// Doc lines.
+    pub doc: Doc,
+    /// The component type name as written.
+    pub type_name: String,
+    /// Module name.
+    pub module: String,
+    /// Name of the user struct in the user file.
+    pub user_struct: String,
+    /// `Config` fields.
+    pub config: Vec<Field>,
+    /// `Vars` fields with their exposure.
+    pub vars: Vec<Var>,
+    /// Input ports in declaration order.
+    pub inputs: Vec<Port>,
+    /// Output ports in declaration order.
+    pub outputs: Vec<Port>,
+    /// User automaton states (index = state id).
+    pub states: Vec<State>,
+    /// Index of the initial state.
+    pub initial: usize,
+    /// Declared exceptions (index = exception id).
+    pub exceptions: Vec<ExceptionIr>,
+    /// Rust expression of the `coolbot::TimingSpec`.
+    pub timing: String,
+    /// Behavior trait methods (the stubs), in a stable order.
+    pub methods: Vec<Method>,
+    /// `section` dispatch arms: `(pattern, call)`.
+    pub section_arms: Vec<(String, String)>,
+    /// `choose` dispatch arms: `(state index, state name, may enum)`.
+    pub choose_arms: Vec<ChooseArm>,
+    /// `answer` dispatch arms: `(output index, method, send call)`.
+    pub answer_arms: Vec<AnswerArm>,
+}
+
+/// The doc lines as one Rust string literal.
+pub fn doc_literal(doc: &Doc) -> String {
+    crate::ident::string_literal(&doc.join("\n"))
+}
+
+impl Atomic {
+    /// The doc comment as a Rust string literal.
+    pub fn doc_literal(&self) -> String {
+        doc_literal(&self.doc)
+    }
+
+    /// Whether any variable is controllable.
+    pub fn has_controllable(&self) -> bool {
+        self.vars.iter().any(Var::controllable)
+    }
+
+    /// Whether any variable is observable or controllable.
+    pub fn has_exposed(&self) -> bool {
+        self.vars.iter().any(|v| v.spec_index.is_some())
+    }
+}
+
+/// One `Vars` field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Var {
+    /// The field.
+    pub field: Field,
+    /// `Observable`, `Controllable` or `Local`.
+    pub kind: String,
+    /// Index into `SPEC.variables` (observable and controllable only).
+    pub spec_index: Option<usize>,
+    /// The variable's type as written in `.cool`.
+    pub cool_ty: String,
+}
+
+impl Var {
+    /// The doc comment as a Rust string literal.
+    pub fn doc_literal(&self) -> String {
+        doc_literal(&self.field.doc)
+    }
+
+    /// Whether it can be set through the control port.
+    pub fn controllable(&self) -> bool {
+        self.kind == "Controllable"
+    }
+}
+
+/// A port.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Port {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Port name as written.
+    pub cool_name: String,
+    /// Rust field name.
+    pub field: String,
+    /// Rust handle type.
+    pub handle: String,
+    /// Rust expression building the handle.
+    pub ctor: String,
+    /// Rust expression of its `InputKind`/`OutputKind`.
+    pub kind: String,
+    /// Packet type as written (empty for ticks).
+    pub packet: String,
+    /// Pull model.
+    pub pull: bool,
+}
+
+/// A state of the user automaton.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Name as written.
+    pub cool_name: String,
+    /// `UserState` variant.
+    pub variant: String,
+    /// The `<State>May` enum, when the state has `may`.
+    pub may_enum: Option<String>,
+    /// `may` targets: (variant in the may enum, target state index, target name).
+    pub may: Vec<(String, usize, String)>,
+    /// Rust expression of its `coolbot::StateSpec`.
+    pub spec: String,
+}
+
+/// A declared exception.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExceptionIr {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Name as written.
+    pub cool_name: String,
+    /// `Exception` variant.
+    pub variant: String,
+    /// Handler method name.
+    pub handler: String,
+    /// Rust expression of its `coolbot::ExceptionSpec`.
+    pub spec: String,
+}
+
+/// One required method of `Behavior`, with its user stub.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Method {
+    /// Method name.
+    pub name: String,
+    /// Doc lines for the trait declaration.
+    pub doc: Doc,
+    /// The signature in the generated module (`fn ...(...) -> ...`).
+    pub signature: String,
+    /// The signature in the user file.
+    pub user_signature: String,
+    /// The stub body (statements, one per line).
+    pub stub_body: Vec<String>,
+}
+
+/// One `choose` dispatch arm.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChooseArm {
+    /// State index.
+    pub state: usize,
+    /// The choose method.
+    pub method: String,
+    /// The may enum.
+    pub may_enum: String,
+    /// (variant, target index).
+    pub targets: Vec<(String, usize)>,
+}
+
+/// One `answer` dispatch arm.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AnswerArm {
+    /// Output index.
+    pub output: usize,
+    /// The answer method.
+    pub method: String,
+    /// The output field.
+    pub field: String,
+    /// `send` or `post`.
+    pub send: String,
+}
+
+/// A compound component's generated module (partial: see `docs/`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Compound {
+    /// Doc lines.
+    pub doc: Doc,
+    /// The component type name as written.
+    pub type_name: String,
+    /// Module name.
+    pub module: String,
+    /// Instances: (name, component type name, module of the component if atomic).
+    pub instances: Vec<Instance>,
+    /// Connections.
+    pub connections: Vec<Connection>,
+    /// Whether any connection goes through a converter (the builder is then generic).
+    pub uses_converters: bool,
+}
+
+/// One instance of a compound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// Instance name as written.
+    pub name: String,
+    /// Component type name.
+    pub component: String,
+    /// Whether the component is atomic.
+    pub atomic: bool,
+}
+
+/// One `connect` of a compound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Connection {
+    /// `instance.port` of the output end, relative to the compound.
+    pub from: String,
+    /// `instance.port` of the input end.
+    pub to: String,
+    /// Converter method on `Converters`, if any.
+    pub via: Option<String>,
+}

@@ -1,0 +1,929 @@
+//! Lowering: checked ASTs to the IR the templates print.
+//!
+//! **Precondition:** the files passed the checker without errors. Lowering looks
+//! names up across all files by name; anything the checker would have rejected is
+//! lowered to something harmless rather than panicking (a dangling name becomes index
+//! 0, an unknown type becomes `()`), so lowering never fails.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::ast::{self, ExprKind, Prim, TypeKind};
+use crate::ident;
+use crate::ir::{self, RuntimeDep};
+
+/// What the caller decides about the emitted crate.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Cargo package name.
+    pub package: String,
+    /// Where the runtime crate comes from.
+    pub runtime: RuntimeDep,
+    /// Source file names shown in the generated-file header.
+    pub sources: Vec<String>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            package: "cool-components".to_owned(),
+            runtime: RuntimeDep::Version("0.1".to_owned()),
+            sources: Vec::new(),
+        }
+    }
+}
+
+/// Path of the types module as seen from a component module.
+const GEN_TYPES: &str = "super::types::";
+/// Path of the types module as seen from user files.
+const USER_TYPES: &str = "crate::generated::types::";
+
+#[derive(Clone, Copy)]
+enum TypeDef<'a> {
+    Packet(&'a ast::Packet),
+    Enum(&'a ast::EnumDef),
+    Extern,
+}
+
+struct Lowerer<'a> {
+    types: BTreeMap<&'a str, TypeDef<'a>>,
+    components: BTreeMap<&'a str, &'a ast::Component>,
+}
+
+/// Lowers a set of checked files (imports included) to the IR of one crate.
+pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
+    let mut lowerer = Lowerer { types: BTreeMap::new(), components: BTreeMap::new() };
+    for item in files.iter().flat_map(|f| &f.items) {
+        match item {
+            ast::Item::Packet(p) => {
+                lowerer.types.entry(&p.name.name).or_insert(TypeDef::Packet(p));
+            }
+            ast::Item::Enum(e) => {
+                lowerer.types.entry(&e.name.name).or_insert(TypeDef::Enum(e));
+            }
+            ast::Item::ExternPacket(e) => {
+                lowerer.types.entry(&e.name.name).or_insert(TypeDef::Extern);
+            }
+            ast::Item::Component(c) => {
+                lowerer.components.entry(&c.name.name).or_insert(c);
+            }
+            ast::Item::Import(_) | ast::Item::Converter(_) => {}
+        }
+    }
+    lowerer.lower_crate(files, options)
+}
+
+/// A Cargo package name made from `name` (lowercase, `-` separated).
+pub fn package_name(name: &str) -> String {
+    let snake = ident::snake_raw(name);
+    let cleaned: String = snake
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+        .collect();
+    let trimmed = cleaned.trim_matches('-');
+    if trimmed.is_empty() { "cool-components".to_owned() } else { trimmed.to_owned() }
+}
+
+fn doc(doc: &ast::Doc) -> ir::Doc {
+    doc.0.clone()
+}
+
+/// Nanoseconds of a duration or frequency expression.
+fn duration_ns(expr: &ast::Expr) -> Option<u64> {
+    match &expr.kind {
+        ExprKind::Duration(ns) => Some(u64::try_from(*ns).unwrap_or(u64::MAX)),
+        ExprKind::Frequency(hz) if *hz > 0.0 => Some((1e9 / hz).round() as u64),
+        _ => None,
+    }
+}
+
+fn duration_rust(ns: u64) -> String {
+    format!("::std::time::Duration::from_nanos({ns})")
+}
+
+fn option_duration(expr: Option<&ast::Expr>) -> String {
+    match expr.and_then(duration_ns) {
+        Some(ns) => format!("Some({})", duration_rust(ns)),
+        None => "None".to_owned(),
+    }
+}
+
+fn cool_type(ty: &ast::Type) -> String {
+    match &ty.kind {
+        TypeKind::Prim(p) => prim_cool(*p).to_owned(),
+        TypeKind::Named(name) => name.name.clone(),
+        TypeKind::List(inner) => format!("[{}]", cool_type(inner)),
+        TypeKind::Array(inner, n) => format!("[{}; {}]", cool_type(inner), n.value),
+        TypeKind::Optional(inner) => format!("{}?", cool_type(inner)),
+    }
+}
+
+fn prim_cool(p: Prim) -> &'static str {
+    match p {
+        Prim::Bool => "bool",
+        Prim::I8 => "i8",
+        Prim::I16 => "i16",
+        Prim::I32 => "i32",
+        Prim::I64 => "i64",
+        Prim::U8 => "u8",
+        Prim::U16 => "u16",
+        Prim::U32 => "u32",
+        Prim::U64 => "u64",
+        Prim::F32 => "f32",
+        Prim::F64 => "f64",
+        Prim::String => "String",
+        Prim::Time => "Time",
+        Prim::Duration => "Duration",
+    }
+}
+
+fn prim_rust(p: Prim) -> &'static str {
+    match p {
+        Prim::String => "::std::string::String",
+        Prim::Time => "::coolbot::Time",
+        Prim::Duration => "::std::time::Duration",
+        other => prim_cool(other),
+    }
+}
+
+impl<'a> Lowerer<'a> {
+    fn rust_type(&self, ty: &ast::Type, prefix: &str) -> String {
+        match &ty.kind {
+            TypeKind::Prim(p) => prim_rust(*p).to_owned(),
+            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+                Some(_) => format!("{prefix}{}", ident::camel(&name.name)),
+                None => "()".to_owned(),
+            },
+            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", self.rust_type(inner, prefix)),
+            TypeKind::Array(inner, n) => format!("[{}; {}]", self.rust_type(inner, prefix), n.value),
+            TypeKind::Optional(inner) => {
+                format!("::core::option::Option<{}>", self.rust_type(inner, prefix))
+            }
+        }
+    }
+
+    /// Whether `T::default()` exists for the emitted type.
+    fn defaultable(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> bool {
+        match &ty.kind {
+            TypeKind::Prim(_) | TypeKind::List(_) | TypeKind::Optional(_) => true,
+            TypeKind::Array(inner, n) => n.value <= 32 && self.defaultable(inner, visiting),
+            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+                Some(TypeDef::Enum(e)) => !e.variants.is_empty(),
+                Some(TypeDef::Packet(p)) => self.packet_defaultable(p, visiting),
+                Some(TypeDef::Extern) | None => false,
+            },
+        }
+    }
+
+    fn packet_defaultable(&self, packet: &ast::Packet, visiting: &mut BTreeSet<String>) -> bool {
+        if !visiting.insert(packet.name.name.clone()) {
+            return false;
+        }
+        let result = packet
+            .fields
+            .iter()
+            .all(|f| f.default.is_some() || self.defaultable(&f.ty, visiting));
+        visiting.remove(&packet.name.name);
+        result
+    }
+
+    /// The Rust expression of a field default: the written value, or `Default`.
+    fn field_default(&self, field_ty: &ast::Type, value: Option<&ast::Expr>, prefix: &str) -> String {
+        match value {
+            Some(expr) => self.value(expr, Some(field_ty), prefix),
+            None => "::core::default::Default::default()".to_owned(),
+        }
+    }
+
+    /// A Rust expression for a constant `.cool` value of type `ty`.
+    fn value(&self, expr: &ast::Expr, ty: Option<&ast::Type>, prefix: &str) -> String {
+        let kind = ty.map(|t| &t.kind);
+        if let Some(TypeKind::Optional(inner)) = kind {
+            return match &expr.kind {
+                ExprKind::None => "::core::option::Option::None".to_owned(),
+                _ => format!("::core::option::Option::Some({})", self.value(expr, Some(inner), prefix)),
+            };
+        }
+        match &expr.kind {
+            ExprKind::Int(n) => match kind {
+                Some(TypeKind::Prim(Prim::F32 | Prim::F64)) => format!("{n}.0"),
+                Some(TypeKind::Prim(Prim::Duration)) => duration_rust(*n),
+                _ => n.to_string(),
+            },
+            ExprKind::Float(x) => format!("{x:?}"),
+            ExprKind::Str(s) => format!("::std::string::String::from({})", ident::string_literal(s)),
+            ExprKind::Bool(b) => b.to_string(),
+            ExprKind::Duration(_) | ExprKind::Frequency(_) => {
+                duration_rust(duration_ns(expr).unwrap_or_default())
+            }
+            ExprKind::EnumValue { enum_name, variant } => {
+                format!("{prefix}{}::{}", ident::camel(&enum_name.name), ident::camel(&variant.name))
+            }
+            ExprKind::List(items) => {
+                let inner = match kind {
+                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                    _ => None,
+                };
+                let items: Vec<String> = items.iter().map(|e| self.value(e, inner, prefix)).collect();
+                match kind {
+                    Some(TypeKind::Array(..)) => format!("[{}]", items.join(", ")),
+                    _ => format!("::std::vec![{}]", items.join(", ")),
+                }
+            }
+            ExprKind::Repeat(item, n) => {
+                let inner = match kind {
+                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                    _ => None,
+                };
+                let item = self.value(item, inner, prefix);
+                match kind {
+                    Some(TypeKind::List(_)) => format!("::std::vec![{item}; {}]", n.value),
+                    _ => format!("[{item}; {}]", n.value),
+                }
+            }
+            ExprKind::None => "::core::option::Option::None".to_owned(),
+            ExprKind::Unary(ast::UnaryOp::Neg, inner) => format!("-{}", self.value(inner, ty, prefix)),
+            ExprKind::Unary(ast::UnaryOp::Not, inner) => format!("!{}", self.value(inner, ty, prefix)),
+            // Paths and comparisons are not constant values; the checker rejects them
+            // as defaults.
+            ExprKind::Path(_) | ExprKind::Binary(..) => "::core::default::Default::default()".to_owned(),
+        }
+    }
+
+    fn field(&self, field: &ast::Field, prefix: &str) -> ir::Field {
+        ir::Field {
+            doc: doc(&field.doc),
+            name: ident::snake(&field.name.name),
+            cool_name: field.name.name.clone(),
+            ty: self.rust_type(&field.ty, prefix),
+            default: self.field_default(&field.ty, field.default.as_ref(), prefix),
+        }
+    }
+
+    fn lower_crate(&self, files: &[ast::File], options: &Options) -> ir::Crate {
+        let mut types = ir::Types { module: "types".to_owned(), ..Default::default() };
+        let mut atomics = Vec::new();
+        let mut compounds = Vec::new();
+        let mut dependencies: Vec<ir::Dependency> = Vec::new();
+        let mut system_libs: Vec<String> = Vec::new();
+        let mut seen_types = BTreeSet::new();
+        let mut seen_components = BTreeSet::new();
+        let mut modules: BTreeSet<String> = ["types".to_owned()].into_iter().collect();
+        for item in files.iter().flat_map(|f| &f.items) {
+            match item {
+                ast::Item::Packet(p) if seen_types.insert(p.name.name.clone()) => {
+                    types.packets.push(ir::Packet {
+                        doc: doc(&p.doc),
+                        name: ident::camel(&p.name.name),
+                        fields: p.fields.iter().map(|f| self.field(f, "")).collect(),
+                        has_default: self.packet_defaultable(p, &mut BTreeSet::new()),
+                    });
+                }
+                ast::Item::Enum(e) if seen_types.insert(e.name.name.clone()) => {
+                    types.enums.push(ir::Enum {
+                        doc: doc(&e.doc),
+                        name: ident::camel(&e.name.name),
+                        variants: e
+                            .variants
+                            .iter()
+                            .map(|v| ir::EnumVariant {
+                                doc: doc(&v.doc),
+                                name: ident::camel(&v.name.name),
+                                cool_name: v.name.name.clone(),
+                            })
+                            .collect(),
+                    });
+                }
+                ast::Item::ExternPacket(e) if seen_types.insert(e.name.name.clone()) => {
+                    types.externs.push(ir::Extern {
+                        doc: doc(&e.doc),
+                        name: ident::camel(&e.name.name),
+                        path: e.rust_path.value.clone(),
+                    });
+                }
+                ast::Item::Converter(c) => {
+                    if types.converters.iter().any(|x| x.cool_name == c.name.name) {
+                        continue;
+                    }
+                    let to_default = self.defaultable(&c.to, &mut BTreeSet::new());
+                    let method = ident::snake(&c.name.name);
+                    let stub_body = if to_default {
+                        format!(
+                            "// Converter `{}`: build the output packet from `from`.\n\
+                             let _ = from;\n\
+                             Default::default()",
+                            c.name.name
+                        )
+                    } else {
+                        format!(
+                            "let _ = from;\n\
+                             panic!({})",
+                            ident::string_literal(&format!(
+                                "converter `{}` is not written yet: fill in `{}` in src/converters.rs",
+                                c.name.name, method
+                            ))
+                        )
+                    };
+                    types.converters.push(ir::Converter {
+                        doc: doc(&c.doc),
+                        cool_name: c.name.name.clone(),
+                        method,
+                        from: self.rust_type(&c.from, ""),
+                        to: self.rust_type(&c.to, ""),
+                        user_from: self.rust_type(&c.from, USER_TYPES),
+                        user_to: self.rust_type(&c.to, USER_TYPES),
+                        stub_body,
+                    });
+                }
+                ast::Item::Component(c) if seen_components.insert(c.name.name.clone()) => {
+                    for member in &c.members {
+                        if let ast::Member::Link(link) = member {
+                            match &link.kind {
+                                ast::LinkKind::Crate { name, spec } => {
+                                    if !dependencies.iter().any(|d| d.key == toml_key(&name.value)) {
+                                        dependencies.push(ir::Dependency {
+                                            key: toml_key(&name.value),
+                                            value: crate_spec(spec),
+                                        });
+                                    }
+                                }
+                                ast::LinkKind::System { name } => {
+                                    if !system_libs.contains(&name.value) {
+                                        system_libs.push(name.value.clone());
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    let mut module = ident::snake_raw(&c.name.name);
+                    while !modules.insert(module.clone()) || module == "support" {
+                        module.push_str("_component");
+                    }
+                    let module = ident::escape(&module);
+                    match c.kind {
+                        ast::ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
+                        ast::ComponentKind::Compound => compounds.push(self.compound(c, module)),
+                    }
+                }
+                _ => {}
+            }
+        }
+        let package = package_name(&options.package);
+        ir::Crate {
+            lib_name: package.replace('-', "_"),
+            package,
+            runtime: options.runtime.clone(),
+            dependencies,
+            system_libs,
+            sources: options.sources.clone(),
+            types,
+            atomics,
+            compounds,
+        }
+    }
+
+    fn atomic(&self, c: &'a ast::Component, module: String) -> ir::Atomic {
+        let mut config = Vec::new();
+        let mut vars = Vec::new();
+        let mut inputs: Vec<(&ast::Input, ir::Port)> = Vec::new();
+        let mut outputs: Vec<(&ast::Output, ir::Port)> = Vec::new();
+        let mut timing = None;
+        let mut exceptions_ast = Vec::new();
+        let mut automaton = None;
+        let mut spec_index = 0;
+        for member in &c.members {
+            match member {
+                ast::Member::Configuration(cfg) => {
+                    config.extend(cfg.fields.iter().map(|f| self.field(f, GEN_TYPES)));
+                }
+                ast::Member::Variable(v) => {
+                    let Some(ty) = &v.ty else { continue };
+                    let default = if v.value.is_none()
+                        && !self.defaultable(ty, &mut BTreeSet::new())
+                    {
+                        // No default and no `Default`: the variable has no value
+                        // until set.
+                        None
+                    } else {
+                        Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
+                    };
+                    let (rust_ty, default) = match default {
+                        Some(d) => (self.rust_type(ty, GEN_TYPES), d),
+                        None => (
+                            format!("::core::option::Option<{}>", self.rust_type(ty, GEN_TYPES)),
+                            "::core::option::Option::None".to_owned(),
+                        ),
+                    };
+                    let kind = match v.kind {
+                        ast::VarKind::Observable => "Observable",
+                        ast::VarKind::Controllable => "Controllable",
+                        ast::VarKind::Local => "Local",
+                    };
+                    let index = (v.kind != ast::VarKind::Local).then(|| {
+                        spec_index += 1;
+                        spec_index - 1
+                    });
+                    vars.push(ir::Var {
+                        field: ir::Field {
+                            doc: doc(&v.doc),
+                            name: ident::snake(&v.name.name),
+                            cool_name: v.name.name.clone(),
+                            ty: rust_ty,
+                            default,
+                        },
+                        kind: kind.to_owned(),
+                        spec_index: index,
+                        cool_ty: cool_type(ty),
+                    });
+                }
+                ast::Member::Input(input) => {
+                    if let Some(port) = self.input(input) {
+                        inputs.push((input, port));
+                    }
+                }
+                ast::Member::Output(output) => {
+                    if let Some(port) = self.output(output) {
+                        outputs.push((output, port));
+                    }
+                }
+                ast::Member::Timing(t) => {
+                    timing.get_or_insert(t);
+                }
+                ast::Member::Exception(e) => exceptions_ast.push(e),
+                ast::Member::Automaton(a) => {
+                    automaton.get_or_insert(a);
+                }
+                _ => {}
+            }
+        }
+        let states_ast: Vec<&ast::State> = automaton.map(|a| a.states.iter().collect()).unwrap_or_default();
+        let state_index = |name: &str| states_ast.iter().position(|s| s.name.name == name).unwrap_or(0);
+        let input_index = |name: &str| inputs.iter().position(|(i, _)| i.name.name == name).unwrap_or(0);
+        let initial = automaton
+            .and_then(|a| a.initial.first())
+            .map(|i| state_index(&i.name))
+            .unwrap_or(0);
+
+        let mut states = Vec::new();
+        let mut methods = Vec::new();
+        let mut section_arms = Vec::new();
+        let mut choose_arms = Vec::new();
+        for (index, state) in states_ast.iter().enumerate() {
+            let name = &state.name.name;
+            let (mut entry, mut exit, mut periodic) = (false, false, None);
+            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
+            for member in &state.members {
+                match member {
+                    ast::StateMember::Entry(_) => entry = true,
+                    ast::StateMember::Exit(_) => exit = true,
+                    ast::StateMember::Periodic { period, .. } => {
+                        periodic = Some(format!(
+                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
+                            option_duration(period.as_ref())
+                        ));
+                    }
+                    ast::StateMember::On { port, target, .. } => on.push(format!(
+                        "::coolbot::OnSpec {{ port: {}, target: {} }}",
+                        input_index(&port.name),
+                        state_index(&target.name)
+                    )),
+                    ast::StateMember::After { delay, without, target, .. } => after.push(format!(
+                        "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
+                        duration_rust(duration_ns(delay).unwrap_or_default()),
+                        match without {
+                            Some(port) => format!("Some({})", input_index(&port.name)),
+                            None => "None".to_owned(),
+                        },
+                        state_index(&target.name)
+                    )),
+                    ast::StateMember::May { targets, .. } => {
+                        for target in targets {
+                            if !may.iter().any(|(_, _, n): &(String, usize, String)| *n == target.name) {
+                                may.push((ident::camel(&target.name), state_index(&target.name), target.name.clone()));
+                            }
+                        }
+                    }
+                    ast::StateMember::When { .. } => {}
+                }
+            }
+            let variant = ident::camel(name);
+            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
+            let section_kinds = [
+                (entry, "entry", "Entry", "runs once each time the automaton enters the state"),
+                (periodic.is_some(), "periodic", "Periodic", "runs once per period while in the state"),
+                (exit, "exit", "Exit", "runs once each time the automaton leaves the state"),
+            ];
+            for (present, suffix, section, when) in section_kinds {
+                if !present {
+                    continue;
+                }
+                let method = ident::method("", name, &format!("_{suffix}"));
+                methods.push(ir::Method {
+                    name: method.clone(),
+                    doc: vec![format!("The {suffix} section of state `{name}`: {when}.")],
+                    signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"),
+                    user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"),
+                    stub_body: vec![
+                        format!("// State `{name}`, {suffix} section: {when}."),
+                        "let _ = cx;".to_owned(),
+                        "Ok(())".to_owned(),
+                    ],
+                });
+                section_arms.push((
+                    format!("({index}, ::coolbot::Section::{section})"),
+                    format!("behavior.{method}(&mut cx)"),
+                ));
+            }
+            if let Some(may_enum) = &may_enum {
+                let method = ident::method("", name, "_choose");
+                let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
+                methods.push(ir::Method {
+                    name: method.clone(),
+                    doc: vec![
+                        format!(
+                            "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
+                            targets.join(", ")
+                        ),
+                    ],
+                    signature: format!(
+                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
+                    ),
+                    user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
+                    stub_body: vec![
+                        format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
+                        "let _ = cx;".to_owned(),
+                        "None".to_owned(),
+                    ],
+                });
+                choose_arms.push(ir::ChooseArm {
+                    state: index,
+                    method,
+                    may_enum: may_enum.clone(),
+                    targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
+                });
+            }
+            let spec = format!(
+                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
+                ident::string_literal(name),
+                periodic.unwrap_or_else(|| "None".to_owned()),
+                on.join(", "),
+                after.join(", "),
+                may.iter().map(|(_, i, _)| i.to_string()).collect::<Vec<_>>().join(", ")
+            );
+            states.push(ir::State {
+                doc: doc(&state.doc),
+                cool_name: name.clone(),
+                variant,
+                may_enum,
+                may,
+                spec,
+            });
+        }
+
+        let mut exceptions = Vec::new();
+        for e in exceptions_ast {
+            let name = &e.name.name;
+            let handler = ident::method("on_", name, "");
+            let plan: Vec<String> = e
+                .plan
+                .iter()
+                .map(|step| match &step.kind {
+                    ast::PlanKind::Retry { count, every } => format!(
+                        "::coolbot::PlanStep::Retry {{ count: {}, every: {} }}",
+                        u32::try_from(count.value).unwrap_or(u32::MAX),
+                        duration_rust(duration_ns(every).unwrap_or_default())
+                    ),
+                    ast::PlanKind::Goto(target) => {
+                        format!("::coolbot::PlanStep::Goto({})", state_index(&target.name))
+                    }
+                    ast::PlanKind::Ignore => "::coolbot::PlanStep::Ignore".to_owned(),
+                    ast::PlanKind::Degrade => "::coolbot::PlanStep::Degrade".to_owned(),
+                })
+                .collect();
+            let description = e.description.as_ref().map(|d| d.value.as_str()).unwrap_or("");
+            methods.push(ir::Method {
+                name: handler.clone(),
+                doc: vec![format!(
+                    "Called when exception `{name}` is raised, before its continuity plan runs."
+                )],
+                signature: format!("fn {handler}(&mut self, cx: &mut Cx<'_>, message: &str)"),
+                user_signature: format!("fn {handler}(&mut self, cx: &mut Cx<'_>, message: &str)"),
+                stub_body: vec![
+                    format!("// Exception `{name}` was raised; its continuity plan runs next."),
+                    "let _ = (cx, message);".to_owned(),
+                ],
+            });
+            exceptions.push(ir::ExceptionIr {
+                doc: doc(&e.doc),
+                cool_name: name.clone(),
+                variant: ident::camel(name),
+                handler,
+                spec: format!(
+                    "::coolbot::ExceptionSpec {{ name: {}, description: {}, plan: &[{}] }}",
+                    ident::string_literal(name),
+                    ident::string_literal(description),
+                    plan.join(", ")
+                ),
+            });
+        }
+
+        let mut answer_arms = Vec::new();
+        for (index, (output, port)) in outputs.iter().enumerate() {
+            if output.pull.is_none() {
+                continue;
+            }
+            let (ty, send) = match &output.def {
+                ast::OutputDef::Data(ty) => (ty, "send"),
+                ast::OutputDef::Poster(ty) => (ty, "post"),
+                ast::OutputDef::Tick | ast::OutputDef::Export(_) => continue,
+            };
+            let method = ident::method("answer_", &output.name.name, "");
+            let name = &output.name.name;
+            let stub_body = if self.defaultable(ty, &mut BTreeSet::new()) {
+                vec![
+                    format!("// A consumer pulled from output `{name}`: compute the packet to answer with."),
+                    "let _ = cx;".to_owned(),
+                    "Ok(Default::default())".to_owned(),
+                ]
+            } else {
+                vec![
+                    "let _ = cx;".to_owned(),
+                    format!(
+                        "Err(coolbot::Fault::message({}))",
+                        ident::string_literal(&format!("the pull answer `{method}` is not written yet"))
+                    ),
+                ]
+            };
+            methods.push(ir::Method {
+                name: method.clone(),
+                doc: vec![format!("Called when a consumer pulls from output `{name}`: the packet to send.")],
+                signature: format!(
+                    "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::result::Result<{}, ::coolbot::Fault>",
+                    self.rust_type(ty, GEN_TYPES)
+                ),
+                user_signature: format!(
+                    "fn {method}(&mut self, cx: &mut Cx<'_>) -> Result<{}, coolbot::Fault>",
+                    self.rust_type(ty, USER_TYPES)
+                ),
+                stub_body,
+            });
+            answer_arms.push(ir::AnswerArm {
+                output: index,
+                method,
+                field: port.field.clone(),
+                send: send.to_owned(),
+            });
+        }
+
+        ir::Atomic {
+            doc: doc(&c.doc),
+            type_name: c.name.name.clone(),
+            user_struct: ident::camel(&c.name.name),
+            module,
+            config,
+            vars,
+            inputs: inputs.into_iter().map(|(_, p)| p).collect(),
+            outputs: outputs.into_iter().map(|(_, p)| p).collect(),
+            states,
+            initial,
+            exceptions,
+            timing: self.timing(timing),
+            methods,
+            section_arms,
+            choose_arms,
+            answer_arms,
+        }
+    }
+
+    fn timing(&self, timing: Option<&ast::Timing>) -> String {
+        let (mut period, mut max_period, mut max_response, mut priority) =
+            (None, None, None, 0i64);
+        let mut qualities = Vec::new();
+        for entry in timing.map(|t| t.entries.as_slice()).unwrap_or_default() {
+            match entry {
+                ast::TimingEntry::Period(interval) => {
+                    period = duration_ns(&interval.lo);
+                    max_period = interval.hi.as_ref().and_then(duration_ns);
+                }
+                ast::TimingEntry::MaxResponse(e) => max_response = duration_ns(e),
+                ast::TimingEntry::Priority(e) => priority = int_value(e).unwrap_or(0),
+                ast::TimingEntry::Quality(names, _) => {
+                    qualities = names.iter().map(|n| ident::string_literal(&n.name)).collect();
+                }
+            }
+        }
+        let opt = |ns: Option<u64>| match ns {
+            Some(ns) => format!("Some({})", duration_rust(ns)),
+            None => "None".to_owned(),
+        };
+        format!(
+            "::coolbot::TimingSpec {{ period: {}, max_period: {}, max_response: {}, priority: {}, qualities: &[{}] }}",
+            opt(period),
+            opt(max_period),
+            opt(max_response),
+            priority.clamp(i32::MIN.into(), i32::MAX.into()),
+            qualities.join(", ")
+        )
+    }
+
+    fn packet_type(&self, ty: &ast::Type) -> (String, String) {
+        (self.rust_type(ty, GEN_TYPES), cool_type(ty))
+    }
+
+    fn input(&self, input: &ast::Input) -> Option<ir::Port> {
+        let field = ident::snake(&input.name.name);
+        let (handle, ctor, kind, packet) = match &input.def {
+            ast::InputDef::Tick => (
+                "::coolbot::port::TickIn".to_owned(),
+                "::coolbot::port::TickIn::new()".to_owned(),
+                "::coolbot::InputKind::Tick".to_owned(),
+                String::new(),
+            ),
+            ast::InputDef::Fifo { ty, size, policy } => {
+                let (rust, cool) = self.packet_type(ty);
+                let policy = match policy.as_ref().map(|p| p.name.as_str()) {
+                    Some("drop_oldest") => "DropOldest",
+                    Some("block") => "Block",
+                    _ => "Reject",
+                };
+                (
+                    format!("::coolbot::port::FifoIn<{rust}>"),
+                    format!(
+                        "::coolbot::port::FifoIn::new({}, ::coolbot::OverflowPolicy::{policy})",
+                        size.value
+                    ),
+                    format!(
+                        "::coolbot::InputKind::Fifo {{ capacity: {}, policy: ::coolbot::OverflowPolicy::{policy} }}",
+                        size.value
+                    ),
+                    cool,
+                )
+            }
+            ast::InputDef::Ufifo { size, ty, max } => {
+                let (rust, cool) = self.packet_type(ty);
+                let max = match max {
+                    Some(m) => format!("Some({})", m.value),
+                    None => "None".to_owned(),
+                };
+                (
+                    format!("::coolbot::port::UfifoIn<{rust}>"),
+                    format!("::coolbot::port::UfifoIn::new({}, {max})", size.value),
+                    format!("::coolbot::InputKind::Ufifo {{ initial: {}, max: {max} }}", size.value),
+                    cool,
+                )
+            }
+            ast::InputDef::Last(ty) => {
+                let (rust, cool) = self.packet_type(ty);
+                (
+                    format!("::coolbot::port::LastIn<{rust}>"),
+                    "::coolbot::port::LastIn::new()".to_owned(),
+                    "::coolbot::InputKind::Last".to_owned(),
+                    cool,
+                )
+            }
+            ast::InputDef::Poster(ty) => {
+                let (rust, cool) = self.packet_type(ty);
+                (
+                    format!("::coolbot::port::PosterIn<{rust}>"),
+                    "::coolbot::port::PosterIn::new()".to_owned(),
+                    "::coolbot::InputKind::Poster".to_owned(),
+                    cool,
+                )
+            }
+            ast::InputDef::Export(_) => return None,
+        };
+        Some(ir::Port {
+            doc: doc(&input.doc),
+            cool_name: input.name.name.clone(),
+            field,
+            handle,
+            ctor,
+            kind,
+            packet,
+            pull: input.pull.is_some(),
+        })
+    }
+
+    fn output(&self, output: &ast::Output) -> Option<ir::Port> {
+        let field = ident::snake(&output.name.name);
+        let (handle, ctor, kind, packet) = match &output.def {
+            ast::OutputDef::Tick => (
+                "::coolbot::port::TickOut".to_owned(),
+                "::coolbot::port::TickOut::new()".to_owned(),
+                "::coolbot::OutputKind::Tick".to_owned(),
+                String::new(),
+            ),
+            ast::OutputDef::Data(ty) => {
+                let (rust, cool) = self.packet_type(ty);
+                (
+                    format!("::coolbot::port::DataOut<{rust}>"),
+                    "::coolbot::port::DataOut::new()".to_owned(),
+                    "::coolbot::OutputKind::Data".to_owned(),
+                    cool,
+                )
+            }
+            ast::OutputDef::Poster(ty) => {
+                let (rust, cool) = self.packet_type(ty);
+                (
+                    format!("::coolbot::port::PosterOut<{rust}>"),
+                    "::coolbot::port::PosterOut::new()".to_owned(),
+                    "::coolbot::OutputKind::Poster".to_owned(),
+                    cool,
+                )
+            }
+            ast::OutputDef::Export(_) => return None,
+        };
+        Some(ir::Port {
+            doc: doc(&output.doc),
+            cool_name: output.name.name.clone(),
+            field,
+            handle,
+            ctor,
+            kind,
+            packet,
+            pull: output.pull.is_some(),
+        })
+    }
+
+    fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
+        let mut instances = Vec::new();
+        let mut connections = Vec::new();
+        for member in &c.members {
+            match member {
+                ast::Member::Instance(i) => instances.push(ir::Instance {
+                    name: i.name.name.clone(),
+                    component: i.component.name.clone(),
+                    atomic: self
+                        .components
+                        .get(i.component.name.as_str())
+                        .is_some_and(|c| c.kind == ast::ComponentKind::Atomic),
+                }),
+                ast::Member::Connect(connect) => {
+                    let end = |p: &ast::PortRef| match &p.instance {
+                        Some(i) => format!("{}.{}", i.name, p.port.name),
+                        None => p.port.name.clone(),
+                    };
+                    connections.push(ir::Connection {
+                        from: end(&connect.from),
+                        to: end(&connect.to),
+                        via: connect.via.as_ref().map(|v| ident::snake(&v.name)),
+                    });
+                }
+                _ => {}
+            }
+        }
+        ir::Compound {
+            doc: doc(&c.doc),
+            type_name: c.name.name.clone(),
+            module,
+            uses_converters: connections.iter().any(|c| c.via.is_some()),
+            instances,
+            connections,
+        }
+    }
+}
+
+fn int_value(expr: &ast::Expr) -> Option<i64> {
+    match &expr.kind {
+        ExprKind::Int(n) => i64::try_from(*n).ok(),
+        ExprKind::Unary(ast::UnaryOp::Neg, inner) => int_value(inner).map(|n| -n),
+        _ => None,
+    }
+}
+
+/// A TOML key: bare when possible, quoted otherwise.
+fn toml_key(name: &str) -> String {
+    if !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+        name.to_owned()
+    } else {
+        ir::toml_string(name)
+    }
+}
+
+fn toml_value(expr: &ast::Expr) -> String {
+    match &expr.kind {
+        ExprKind::Str(s) => ir::toml_string(s),
+        ExprKind::Bool(b) => b.to_string(),
+        ExprKind::Int(n) => n.to_string(),
+        ExprKind::Float(x) => format!("{x:?}"),
+        ExprKind::List(items) => {
+            format!("[{}]", items.iter().map(toml_value).collect::<Vec<_>>().join(", "))
+        }
+        ExprKind::Path(parts) => ir::toml_string(
+            &parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("."),
+        ),
+        _ => "\"\"".to_owned(),
+    }
+}
+
+fn crate_spec(spec: &ast::CrateSpec) -> String {
+    match spec {
+        ast::CrateSpec::Version(v) => ir::toml_string(&v.value),
+        ast::CrateSpec::Table(entries, _) => {
+            let entries: Vec<String> = entries
+                .iter()
+                .map(|e| format!("{} = {}", toml_key(&e.key.name), toml_value(&e.value)))
+                .collect();
+            format!("{{ {} }}", entries.join(", "))
+        }
+    }
+}

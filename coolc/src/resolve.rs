@@ -1,0 +1,404 @@
+//! Resolution: imports followed, top-level names to definitions.
+//!
+//! [`load`] reads the roots and, depth first, every file they import (paths relative
+//! to the importing file, lexically normalised), parsing each as it is read; an
+//! import cycle is reported with the whole cycle. [`Symbols`] is the table of
+//! top-level items (packets, enums, extern packets, converters, components): one
+//! namespace across all files, because they all end up in one generated crate. A file
+//! sees its own items and those of the files it imports, directly or not.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Component, Path, PathBuf};
+
+use crate::ast::{self, FileId, Span};
+use crate::diagnostics::{Code, Diagnostic, closest};
+use crate::source::SourceMap;
+use crate::syntax;
+
+/// What [`load`] produced.
+#[derive(Debug, Default)]
+pub struct Loaded {
+    /// Every file read.
+    pub sources: SourceMap,
+    /// Parsed files, in id order.
+    pub files: Vec<ast::File>,
+    /// For each file, the files it imports (that could be read).
+    pub imports: Vec<Vec<FileId>>,
+    /// Load and syntax diagnostics.
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+/// Reads and parses `roots` and everything they import.
+pub fn load<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+) -> Loaded {
+    let mut loaded = Loaded::default();
+    for root in roots {
+        let path = normalize(root.as_ref());
+        if loaded.sources.find(&path).is_some() {
+            continue;
+        }
+        match loader(&path) {
+            Ok(text) => {
+                let mut stack = Vec::new();
+                load_file(&mut loaded, path, text, loader, &mut stack);
+            }
+            Err(error) => {
+                let id = add_file(&mut loaded, path.clone(), String::new());
+                loaded.diagnostics.push(
+                    Diagnostic::error(
+                        Code::ImportNotFound,
+                        id,
+                        Span::default(),
+                        format!("cannot read `{}`: {error}", path.display()),
+                    )
+                    .with_help(
+                        "check the path of the file given on the command line or to the builder",
+                    ),
+                );
+            }
+        }
+    }
+    loaded
+}
+
+fn add_file(loaded: &mut Loaded, path: PathBuf, text: String) -> FileId {
+    let id = loaded.sources.add(path, text);
+    loaded.files.push(ast::File {
+        id,
+        items: Vec::new(),
+    });
+    loaded.imports.push(Vec::new());
+    id
+}
+
+/// Loads one file, then its imports. `stack` holds the files being loaded, with the
+/// import (file and span) that led to each, to report cycles.
+fn load_file(
+    loaded: &mut Loaded,
+    path: PathBuf,
+    text: String,
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    stack: &mut Vec<FileId>,
+) -> FileId {
+    let id = add_file(loaded, path.clone(), text);
+    let (file, diagnostics) = syntax::parse(id, loaded.sources.text(id));
+    loaded.diagnostics.extend(diagnostics);
+    let imports: Vec<ast::Import> = file
+        .items
+        .iter()
+        .filter_map(|item| match item {
+            ast::Item::Import(import) => Some(import.clone()),
+            _ => None,
+        })
+        .collect();
+    loaded.files[id.0 as usize] = file;
+    stack.push(id);
+    for import in imports {
+        let target = normalize(
+            &path
+                .parent()
+                .unwrap_or(Path::new(""))
+                .join(&import.path.value),
+        );
+        if let Some(existing) = loaded.sources.find(&target) {
+            if let Some(position) = stack.iter().position(|f| *f == existing) {
+                let mut chain: Vec<String> = stack[position..]
+                    .iter()
+                    .map(|f| loaded.sources.display_path(*f))
+                    .collect();
+                chain.push(loaded.sources.display_path(existing));
+                loaded.diagnostics.push(
+                    Diagnostic::error(
+                        Code::ImportCycle,
+                        id,
+                        import.path.span,
+                        format!("import cycle: {}", chain.join(" -> ")),
+                    )
+                    .with_label("this import closes the cycle")
+                    .with_help("move the shared items into a file that both import"),
+                );
+            }
+            if !loaded.imports[id.0 as usize].contains(&existing) {
+                loaded.imports[id.0 as usize].push(existing);
+            }
+            continue;
+        }
+        match loader(&target) {
+            Ok(text) => {
+                let imported = load_file(loaded, target, text, loader, stack);
+                loaded.imports[id.0 as usize].push(imported);
+            }
+            Err(error) => loaded.diagnostics.push(
+                Diagnostic::error(
+                    Code::ImportNotFound,
+                    id,
+                    import.path.span,
+                    format!("cannot read imported file `{}`: {error}", target.display()),
+                )
+                .with_label("imported here")
+                .with_help("import paths are relative to the importing file"),
+            ),
+        }
+    }
+    stack.pop();
+    id
+}
+
+/// Removes `.` and resolves `..` lexically (never touching the filesystem).
+pub fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                let last = out.components().next_back();
+                if matches!(last, Some(Component::Normal(_))) {
+                    out.pop();
+                } else {
+                    out.push("..");
+                }
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+/// What a top-level name refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DefKind {
+    /// `packet`
+    Packet,
+    /// `enum`
+    Enum,
+    /// `extern packet`
+    ExternPacket,
+    /// `converter`
+    Converter,
+    /// `atomic` or `compound`
+    Component,
+}
+
+impl DefKind {
+    /// How the kind is named in messages.
+    pub fn describe(self) -> &'static str {
+        match self {
+            DefKind::Packet => "packet",
+            DefKind::Enum => "enum",
+            DefKind::ExternPacket => "extern packet",
+            DefKind::Converter => "converter",
+            DefKind::Component => "component",
+        }
+    }
+
+    /// True for kinds usable as a type.
+    pub fn is_type(self) -> bool {
+        matches!(
+            self,
+            DefKind::Packet | DefKind::Enum | DefKind::ExternPacket
+        )
+    }
+}
+
+/// A top-level definition: where it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Def {
+    /// What it is.
+    pub kind: DefKind,
+    /// The file it is in.
+    pub file: FileId,
+    /// Its index in that file's items.
+    pub item: usize,
+    /// The span of its name.
+    pub name_span: Span,
+}
+
+/// The top-level symbol table.
+#[derive(Clone, Debug, Default)]
+pub struct Symbols {
+    /// Every top-level name, first definition wins.
+    pub defs: BTreeMap<String, Def>,
+    /// For each file, the files whose items it sees (itself included).
+    pub visible: Vec<BTreeSet<FileId>>,
+    /// Display paths by file id, for messages.
+    pub paths: Vec<String>,
+}
+
+/// The outcome of looking a name up from one file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lookup {
+    /// Defined and visible.
+    Found(Def),
+    /// Defined in a file this one does not import.
+    NotImported(Def),
+    /// Not defined anywhere.
+    Missing,
+}
+
+impl Symbols {
+    /// Builds the table, reporting duplicate top-level names.
+    pub fn build(
+        sources: &SourceMap,
+        files: &[ast::File],
+        imports: &[Vec<FileId>],
+        diagnostics: &mut Vec<Diagnostic>,
+    ) -> Symbols {
+        let mut symbols = Symbols {
+            paths: sources
+                .files()
+                .iter()
+                .map(|file| sources.display_path(file.id))
+                .collect(),
+            ..Symbols::default()
+        };
+        for file in files {
+            for (index, item) in file.items.iter().enumerate() {
+                let (kind, name) = match item {
+                    ast::Item::Import(_) => continue,
+                    ast::Item::Packet(packet) => (DefKind::Packet, &packet.name),
+                    ast::Item::Enum(def) => (DefKind::Enum, &def.name),
+                    ast::Item::ExternPacket(def) => (DefKind::ExternPacket, &def.name),
+                    ast::Item::Converter(def) => (DefKind::Converter, &def.name),
+                    ast::Item::Component(def) => (DefKind::Component, &def.name),
+                };
+                let def = Def {
+                    kind,
+                    file: file.id,
+                    item: index,
+                    name_span: name.span,
+                };
+                match symbols.defs.get(&name.name) {
+                    Some(first) => diagnostics.push(
+                        Diagnostic::error(
+                            Code::Duplicate,
+                            file.id,
+                            name.span,
+                            format!("`{}` is defined more than once", name.name),
+                        )
+                        .with_label(format!("{} `{}` defined again here", kind.describe(), name.name))
+                        .with_other(first.file, first.name_span, format!("first defined here as a {}", first.kind.describe()))
+                        .with_help("every packet, enum, converter and component needs its own name, across all files"),
+                    ),
+                    None => {
+                        symbols.defs.insert(name.name.clone(), def);
+                    }
+                }
+            }
+        }
+        for file in files {
+            let mut seen = BTreeSet::new();
+            let mut todo = vec![file.id];
+            while let Some(next) = todo.pop() {
+                if seen.insert(next) {
+                    todo.extend(imports.get(next.0 as usize).into_iter().flatten().copied());
+                }
+            }
+            symbols.visible.push(seen);
+        }
+        symbols
+    }
+
+    /// Looks `name` up as seen from `from`.
+    pub fn lookup(&self, from: FileId, name: &str) -> Lookup {
+        match self.defs.get(name) {
+            None => Lookup::Missing,
+            Some(def)
+                if self
+                    .visible
+                    .get(from.0 as usize)
+                    .is_none_or(|v| v.contains(&def.file)) =>
+            {
+                Lookup::Found(*def)
+            }
+            Some(def) => Lookup::NotImported(*def),
+        }
+    }
+
+    /// Resolves `name` to a definition of an accepted kind, or reports why not.
+    pub fn resolve(
+        &self,
+        from: FileId,
+        name: &ast::Ident,
+        accept: &[DefKind],
+        code: Code,
+        what: &str,
+        diagnostics: &mut Vec<Diagnostic>,
+    ) -> Option<Def> {
+        match self.lookup(from, &name.name) {
+            Lookup::Found(def) if accept.contains(&def.kind) => Some(def),
+            Lookup::Found(def) => {
+                diagnostics.push(
+                    Diagnostic::error(
+                        code,
+                        from,
+                        name.span,
+                        format!("`{}` is a {}, not a {what}", name.name, def.kind.describe()),
+                    )
+                    .with_label(format!("expected a {what}"))
+                    .with_other(
+                        def.file,
+                        def.name_span,
+                        format!("`{}` is defined here", name.name),
+                    ),
+                );
+                None
+            }
+            Lookup::NotImported(def) => {
+                let path = self
+                    .paths
+                    .get(def.file.0 as usize)
+                    .cloned()
+                    .unwrap_or_default();
+                diagnostics.push(
+                    Diagnostic::error(
+                        code,
+                        from,
+                        name.span,
+                        format!("unknown {what} `{}`", name.name),
+                    )
+                    .with_label("not visible from this file")
+                    .with_help(format!("`{}` is defined in `{path}`: import it", name.name)),
+                );
+                None
+            }
+            Lookup::Missing => {
+                let candidates = self
+                    .defs
+                    .iter()
+                    .filter(|(_, def)| accept.contains(&def.kind))
+                    .map(|(name, _)| name.as_str());
+                let mut diagnostic = Diagnostic::error(
+                    code,
+                    from,
+                    name.span,
+                    format!("unknown {what} `{}`", name.name),
+                )
+                .with_label("not found");
+                if let Some(near) = closest(&name.name, candidates) {
+                    diagnostic = diagnostic.with_help(format!("did you mean `{near}`?"));
+                }
+                diagnostics.push(diagnostic);
+                None
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalize_is_lexical() {
+        assert_eq!(
+            normalize(Path::new("a/./b/../c.cool")),
+            PathBuf::from("a/c.cool")
+        );
+        assert_eq!(
+            normalize(Path::new("../x.cool")),
+            PathBuf::from("../x.cool")
+        );
+    }
+}

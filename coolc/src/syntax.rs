@@ -1,0 +1,1589 @@
+//! Parsing: `.cool` text to [`ast::File`] with byte spans.
+//!
+//! **Invariant:** parsing never fails. [`parse`] returns the items it could build plus
+//! every syntax error. The text is parsed one item at a time (`item_step`); when an
+//! item does not parse, a component is retried member by member (`component_head`,
+//! then `member_step`), and whatever still fails is reported and skipped up to the
+//! next plausible item or member start, so one typo does not hide the rest of the
+//! file.
+
+use pest::Parser as _;
+use pest::error::{ErrorVariant, InputLocation};
+use pest::iterators::Pair;
+
+use crate::ast::{self, FileId, Span};
+use crate::diagnostics::{Code, Diagnostic};
+
+pub use grammar::{CoolParser, Rule};
+
+/// The parser derived from `grammar/cool.pest`; `Rule` has one variant per rule.
+#[allow(missing_docs)]
+mod grammar {
+    /// The parser derived from `grammar/cool.pest`.
+    #[derive(pest_derive::Parser)]
+    #[grammar = "../../grammar/cool.pest"]
+    pub struct CoolParser;
+}
+
+/// Keywords that start an item, for recovery.
+const ITEM_KEYWORDS: &[&str] = &[
+    "import",
+    "packet",
+    "enum",
+    "extern",
+    "converter",
+    "atomic",
+    "compound",
+];
+
+/// Keywords that start a component member, for recovery.
+const MEMBER_KEYWORDS: &[&str] = &[
+    "link",
+    "configuration",
+    "observable",
+    "controllable",
+    "local",
+    "input",
+    "output",
+    "timing",
+    "exception",
+    "automaton",
+    "supervisor",
+    "instance",
+    "redundant",
+    "connect",
+    "on",
+    "recovery",
+];
+
+/// Parses one file. Never fails: returns what it could build and every syntax error.
+pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
+    pest::set_error_detail(true);
+    let mut parser = FileParser {
+        file,
+        text,
+        diagnostics: Vec::new(),
+    };
+    let items = parser.items();
+    (ast::File { id: file, items }, parser.diagnostics)
+}
+
+/// Parses `input` with `rule` in full (for grammar tests): true when the whole input
+/// matches.
+pub fn matches_rule(rule: Rule, input: &str) -> bool {
+    match CoolParser::parse(rule, input) {
+        Ok(mut pairs) => pairs
+            .next()
+            .is_some_and(|pair| pair.as_span().end() == input.len()),
+        Err(_) => false,
+    }
+}
+
+struct FileParser<'t> {
+    file: FileId,
+    text: &'t str,
+    diagnostics: Vec<Diagnostic>,
+}
+
+impl<'t> FileParser<'t> {
+    fn items(&mut self) -> Vec<ast::Item> {
+        let mut items = Vec::new();
+        let mut offset = 0;
+        while offset <= self.text.len() {
+            let rest = &self.text[offset..];
+            match CoolParser::parse(Rule::item_step, rest) {
+                Ok(mut pairs) => {
+                    let Some(pair) = pairs.next() else { break };
+                    if pair.as_rule() == Rule::EOI {
+                        break;
+                    }
+                    let end = offset + pair.as_span().end();
+                    let mut builder = Builder {
+                        base: offset,
+                        file: self.file,
+                        diagnostics: &mut self.diagnostics,
+                    };
+                    if let Some(item) = builder.item(pair) {
+                        items.push(item);
+                    }
+                    offset = if end > offset {
+                        end
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+                Err(error) => {
+                    if let Some((component, end)) = self.component_by_members(offset) {
+                        items.push(ast::Item::Component(component));
+                        offset = end;
+                        continue;
+                    }
+                    let at = self.report(&error, offset);
+                    let next = next_start(self.text, offset, at, ITEM_KEYWORDS, false);
+                    offset = if next > offset {
+                        next
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+            }
+        }
+        items
+    }
+
+    /// Parses a component member by member, recovering at member boundaries. Returns
+    /// `None` when not even the component's head parses.
+    fn component_by_members(&mut self, start: usize) -> Option<(ast::Component, usize)> {
+        let head = CoolParser::parse(Rule::component_head, &self.text[start..])
+            .ok()?
+            .next()?;
+        let builder = Builder {
+            base: start,
+            file: self.file,
+            diagnostics: &mut self.diagnostics,
+        };
+        let mut doc = Vec::new();
+        let mut kind = None;
+        let mut name = None;
+        for part in head.clone().into_inner() {
+            match part.as_rule() {
+                Rule::doc_line => doc.push(doc_text(part.as_str())),
+                Rule::component_kind => {
+                    kind = Some((component_kind(part.as_str()), builder.span(&part)))
+                }
+                Rule::ident => name = Some(builder.ident(&part)),
+                _ => {}
+            }
+        }
+        let (kind, kind_span) = kind?;
+        let name = name?;
+        let mut offset = start + head.as_span().end();
+        let mut members = Vec::new();
+        let end = loop {
+            match CoolParser::parse(Rule::member_step, &self.text[offset..]) {
+                Ok(mut pairs) => {
+                    let pair = pairs.next()?;
+                    let pair_end = offset + pair.as_span().end();
+                    match pair.as_rule() {
+                        Rule::member => {
+                            let mut builder = Builder {
+                                base: offset,
+                                file: self.file,
+                                diagnostics: &mut self.diagnostics,
+                            };
+                            if let Some(member) = builder.member(pair) {
+                                members.push(member);
+                            }
+                            offset = if pair_end > offset {
+                                pair_end
+                            } else {
+                                next_char(self.text, offset)
+                            };
+                        }
+                        Rule::component_end => break pair_end,
+                        _ => {
+                            // End of input inside the component: the missing `}` was
+                            // reported by the failed item parse; report it here.
+                            let at = self.text.len();
+                            self.diagnostics.push(
+                                Diagnostic::error(
+                                    Code::UnexpectedToken,
+                                    self.file,
+                                    Span::new(at, at),
+                                    format!(
+                                        "expected `}}` closing component `{}`, found end of file",
+                                        name.name
+                                    ),
+                                )
+                                .with_label("the file ends here")
+                                .with_other(
+                                    self.file,
+                                    name.span,
+                                    "component opened here",
+                                ),
+                            );
+                            break at;
+                        }
+                    }
+                }
+                Err(error) => {
+                    let at = self.report(&error, offset);
+                    let next = next_start(self.text, offset, at, MEMBER_KEYWORDS, true);
+                    if next >= self.text.len() {
+                        break self.text.len();
+                    }
+                    offset = if next > offset {
+                        next
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+            }
+        };
+        let component = ast::Component {
+            doc: ast::Doc(doc),
+            kind,
+            kind_span,
+            name,
+            members,
+            span: Span::new(start + head.as_span().start(), end),
+        };
+        Some((component, end))
+    }
+
+    /// Records a pest error as a diagnostic; returns the absolute error offset.
+    fn report(&mut self, error: &pest::error::Error<Rule>, base: usize) -> usize {
+        let diagnostic = syntax_error(self.file, self.text, error, base);
+        let at = diagnostic.primary_span().start;
+        self.diagnostics.push(diagnostic);
+        at
+    }
+}
+
+/// Turns a pest error into a readable diagnostic.
+fn syntax_error(
+    file: FileId,
+    text: &str,
+    error: &pest::error::Error<Rule>,
+    base: usize,
+) -> Diagnostic {
+    let position = match error.location {
+        InputLocation::Pos(pos) => pos,
+        InputLocation::Span((start, _)) => start,
+    };
+    let mut expected: Vec<String> = Vec::new();
+    if let ErrorVariant::ParsingError { positives, .. } = &error.variant {
+        for rule in positives {
+            if let Some(name) = rule_name(*rule) {
+                expected.push(name.to_owned());
+            }
+        }
+    }
+    if let Some(attempts) = error.parse_attempts() {
+        if attempts.max_position == position {
+            for token in attempts.expected_tokens() {
+                let token = token.to_string();
+                let is_punctuation = token.chars().all(|c| c.is_ascii_punctuation() && c != '_');
+                if !token.is_empty() && is_punctuation && token != "///" {
+                    expected.push(format!("`{token}`"));
+                }
+            }
+        }
+    }
+    expected.sort();
+    expected.dedup();
+    let expected = summarize(expected);
+    let at = (base + position).min(text.len());
+    let (found, len) = describe_found(&text[at..]);
+    let message = if expected.is_empty() {
+        format!("unexpected {found}")
+    } else {
+        format!("expected {}, found {found}", join_or(&expected))
+    };
+    Diagnostic::error(
+        Code::UnexpectedToken,
+        file,
+        Span::new(at, at + len),
+        message,
+    )
+    .with_label("unexpected here")
+}
+
+/// Collapses long keyword lists into what they mean.
+fn summarize(expected: Vec<String>) -> Vec<String> {
+    let has = |name: &str| expected.iter().any(|e| e == name);
+    if has("`input`") && has("`connect`") && has("`timing`") {
+        let mut rest: Vec<String> = expected
+            .into_iter()
+            .filter(|e| !is_member_start(e))
+            .collect();
+        rest.insert(0, "a component member".to_owned());
+        return rest;
+    }
+    if has("`import`") && has("`packet`") && has("`atomic`/`compound`") {
+        let mut rest: Vec<String> = expected.into_iter().filter(|e| !is_item_start(e)).collect();
+        rest.insert(0, "an item (`import`, `packet`, `enum`, `extern packet`, `converter`, `atomic`, `compound`)".to_owned());
+        return rest;
+    }
+    if has("`entry`") && has("`on`") && has("`may`") {
+        let mut rest: Vec<String> = expected
+            .into_iter()
+            .filter(|e| {
+                ![
+                    "`entry`",
+                    "`exit`",
+                    "`periodic`",
+                    "`on`",
+                    "`after`",
+                    "`may`",
+                    "`when`",
+                ]
+                .contains(&e.as_str())
+            })
+            .collect();
+        rest.insert(
+            0,
+            "a section or transition (`entry`, `exit`, `periodic`, `on`, `after`, `may`, `when`)"
+                .to_owned(),
+        );
+        return rest;
+    }
+    if has("an integer") && has("a string") && has("a name") {
+        let mut rest: Vec<String> = expected.into_iter().filter(|e| !is_expr_start(e)).collect();
+        rest.insert(0, "an expression".to_owned());
+        return rest;
+    }
+    expected
+}
+
+fn is_member_start(name: &str) -> bool {
+    name == "a `///` doc comment"
+        || name == "`observable`/`controllable`/`local`"
+        || name == "`automaton`/`supervisor`"
+        || MEMBER_KEYWORDS.iter().any(|kw| name == format!("`{kw}`"))
+}
+
+fn is_item_start(name: &str) -> bool {
+    name == "a `///` doc comment"
+        || name == "`atomic`/`compound`"
+        || ITEM_KEYWORDS.iter().any(|kw| name == format!("`{kw}`"))
+}
+
+fn is_expr_start(name: &str) -> bool {
+    [
+        "an integer",
+        "a string",
+        "a name",
+        "a float",
+        "a duration",
+        "a frequency",
+        "`true`/`false`",
+        "`none`",
+        "`!` or `-`",
+        "`(`",
+        "`[`",
+        "a list",
+        "`Enum::Variant`",
+    ]
+    .contains(&name)
+}
+
+fn join_or(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [init @ .., last] => format!("{} or {last}", init.join(", ")),
+    }
+}
+
+/// Describes the text at an error position: `` `word` ``, `` `;` `` or end of file.
+fn describe_found(rest: &str) -> (String, usize) {
+    let Some(first) = rest.chars().next() else {
+        return ("end of file".to_owned(), 0);
+    };
+    if first.is_alphanumeric() || first == '_' {
+        let len = rest
+            .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+            .unwrap_or(rest.len());
+        return (format!("`{}`", &rest[..len]), len);
+    }
+    if first == '"' {
+        return ("a string".to_owned(), first.len_utf8());
+    }
+    (format!("`{}`", first.escape_debug()), first.len_utf8())
+}
+
+/// A readable name for a rule in "expected ..." messages; `None` for rules that never
+/// help a reader.
+fn rule_name(rule: Rule) -> Option<&'static str> {
+    use Rule::*;
+    Some(match rule {
+        doc_line => "a `///` doc comment",
+        ident | path | port_ref => "a name",
+        string => "a string",
+        integer => "an integer",
+        float => "a float",
+        duration => "a duration",
+        frequency => "a frequency",
+        bool_lit => "`true`/`false`",
+        none_lit => "`none`",
+        ty | prim | list_ty => "a type",
+        optional_mark => "`?`",
+        component_kind => "`atomic`/`compound`",
+        var_kind => "`observable`/`controllable`/`local`",
+        automaton_kw => "`automaton`/`supervisor`",
+        unary_op => "`!` or `-`",
+        cmp_op => "a comparison",
+        or_op => "`||`",
+        and_op => "`&&`",
+        repeat_lit | list_lit => "a list",
+        enum_value => "`Enum::Variant`",
+        component_end => "`}`",
+        duration_unit => "a duration unit",
+        frequency_unit => "a frequency unit",
+        kw_import => "`import`",
+        kw_packet => "`packet`",
+        kw_enum => "`enum`",
+        kw_extern => "`extern`",
+        kw_converter => "`converter`",
+        kw_link => "`link`",
+        kw_crate => "`crate`",
+        kw_system => "`system`",
+        kw_configuration => "`configuration`",
+        kw_input => "`input`",
+        kw_output => "`output`",
+        kw_pull => "`pull`",
+        kw_tick => "`tick`",
+        kw_fifo => "`fifo`",
+        kw_ufifo => "`ufifo`",
+        kw_last => "`last`",
+        kw_poster => "`poster`",
+        kw_data => "`data`",
+        kw_max => "`max`",
+        kw_timing => "`timing`",
+        kw_period => "`period`",
+        kw_max_response => "`max_response`",
+        kw_priority => "`priority`",
+        kw_quality => "`quality`",
+        kw_exception => "`exception`",
+        kw_retry => "`retry`",
+        kw_every => "`every`",
+        kw_goto => "`goto`",
+        kw_ignore => "`ignore`",
+        kw_degrade => "`degrade`",
+        kw_initial => "`initial`",
+        kw_state => "`state`",
+        kw_entry => "`entry`",
+        kw_exit => "`exit`",
+        kw_periodic => "`periodic`",
+        kw_on => "`on`",
+        kw_after => "`after`",
+        kw_without => "`without`",
+        kw_may => "`may`",
+        kw_when => "`when`",
+        kw_instance => "`instance`",
+        kw_substitutes => "`substitutes`",
+        kw_redundant => "`redundant`",
+        kw_connect => "`connect`",
+        kw_via => "`via`",
+        kw_error => "`error`",
+        kw_recovery => "`recovery`",
+        kw_deadline => "`deadline`",
+        _ => return None,
+    })
+}
+
+/// Where to resume after an error at `error_at` in text that started at `start`:
+/// the next line whose first word is one of `keywords`, at brace depth 0 relative to
+/// `start` (or, failing that, at column 0), after the error. In member mode, a `}`
+/// at depth 0 (the component's end) and the end of a `;`- or `}`-terminated member
+/// also stop the scan.
+fn next_start(
+    text: &str,
+    start: usize,
+    error_at: usize,
+    keywords: &[&str],
+    member_mode: bool,
+) -> usize {
+    let bytes = text.as_bytes();
+    let mut depth: i64 = 0;
+    let mut index = start;
+    let mut line_start = true;
+    let mut fallback = None;
+    while index < bytes.len() {
+        let byte = bytes[index];
+        match byte {
+            b'\n' => {
+                line_start = true;
+                index += 1;
+                continue;
+            }
+            b' ' | b'\t' | b'\r' => {
+                index += 1;
+                continue;
+            }
+            b'/' if bytes.get(index + 1) == Some(&b'/') && bytes.get(index + 2) != Some(&b'/') => {
+                while index < bytes.len() && bytes[index] != b'\n' {
+                    index += 1;
+                }
+                continue;
+            }
+            b'/' if bytes.get(index + 1) == Some(&b'*') => {
+                index += 2;
+                while index < bytes.len()
+                    && !(bytes[index] == b'*' && bytes.get(index + 1) == Some(&b'/'))
+                {
+                    index += 1;
+                }
+                index = (index + 2).min(bytes.len());
+                line_start = false;
+                continue;
+            }
+            _ => {}
+        }
+        let at_line_start = std::mem::replace(&mut line_start, false);
+        if index >= error_at && index > start && at_line_start {
+            let word_end = text[index..]
+                .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .map_or(text.len(), |n| index + n);
+            let word = &text[index..word_end];
+            let is_doc = text[index..].starts_with("///");
+            if keywords.contains(&word) || is_doc {
+                if depth == 0 {
+                    return index;
+                }
+                if fallback.is_none() && (index == 0 || bytes[index - 1] == b'\n') && !member_mode {
+                    fallback = Some(index);
+                }
+            }
+        }
+        match byte {
+            b'"' => {
+                index += 1;
+                while index < bytes.len() && bytes[index] != b'"' && bytes[index] != b'\n' {
+                    index += if bytes[index] == b'\\' { 2 } else { 1 };
+                }
+                index += 1;
+                continue;
+            }
+            b'{' | b'[' | b'(' => depth += 1,
+            b'}' | b']' | b')' => {
+                depth -= 1;
+                if member_mode && byte == b'}' {
+                    if depth < 0 {
+                        // The component's closing brace: resume there.
+                        return index;
+                    }
+                    if depth == 0 && index >= error_at {
+                        return index + 1;
+                    }
+                }
+            }
+            b';' if member_mode && depth == 0 && index >= error_at => return index + 1,
+            _ => {}
+        }
+        index += 1;
+    }
+    fallback.unwrap_or(text.len()).min(text.len())
+}
+
+/// The offset of the char after the one at `offset` (or one past the end).
+fn next_char(text: &str, offset: usize) -> usize {
+    text[offset.min(text.len())..]
+        .chars()
+        .next()
+        .map_or(text.len() + 1, |c| offset + c.len_utf8())
+}
+
+fn doc_text(line: &str) -> String {
+    let body = line
+        .strip_prefix("///")
+        .unwrap_or(line)
+        .trim_end_matches('\r');
+    body.strip_prefix(' ').unwrap_or(body).to_owned()
+}
+
+fn component_kind(text: &str) -> ast::ComponentKind {
+    if text == "compound" {
+        ast::ComponentKind::Compound
+    } else {
+        ast::ComponentKind::Atomic
+    }
+}
+
+/// Builds AST nodes from pairs of one parse that started at byte `base`.
+struct Builder<'d> {
+    base: usize,
+    file: FileId,
+    diagnostics: &'d mut Vec<Diagnostic>,
+}
+
+type P<'i> = Pair<'i, Rule>;
+
+fn is_keyword(rule: Rule) -> bool {
+    format!("{rule:?}").starts_with("kw_")
+}
+
+/// The children of a pair, keywords and doc lines removed.
+fn children(pair: P<'_>) -> Vec<P<'_>> {
+    pair.into_inner()
+        .filter(|p| !is_keyword(p.as_rule()) && p.as_rule() != Rule::doc_line)
+        .collect()
+}
+
+fn docs(pair: &P<'_>) -> ast::Doc {
+    ast::Doc(
+        pair.clone()
+            .into_inner()
+            .filter(|p| p.as_rule() == Rule::doc_line)
+            .map(|p| doc_text(p.as_str()))
+            .collect(),
+    )
+}
+
+impl Builder<'_> {
+    fn span(&self, pair: &P<'_>) -> Span {
+        let span = pair.as_span();
+        Span::new(self.base + span.start(), self.base + span.end())
+    }
+
+    fn ident(&self, pair: &P<'_>) -> ast::Ident {
+        ast::Ident {
+            name: pair.as_str().to_owned(),
+            span: self.span(pair),
+        }
+    }
+
+    fn error(&mut self, code: Code, span: Span, message: String) {
+        self.diagnostics
+            .push(Diagnostic::error(code, self.file, span, message));
+    }
+
+    fn item(&mut self, pair: P<'_>) -> Option<ast::Item> {
+        let doc = docs(&pair);
+        let inner = children(pair).into_iter().next()?;
+        let span = self.span(&inner);
+        let item = match inner.as_rule() {
+            Rule::import => {
+                let path = self.string(&children(inner).into_iter().next()?);
+                ast::Item::Import(ast::Import { path, span })
+            }
+            Rule::packet => {
+                let mut parts = children(inner).into_iter();
+                let name = self.ident(&parts.next()?);
+                let fields = parts.filter_map(|p| self.field(p)).collect();
+                ast::Item::Packet(ast::Packet {
+                    doc,
+                    name,
+                    fields,
+                    span,
+                })
+            }
+            Rule::enum_def => {
+                let mut parts = children(inner).into_iter();
+                let name = self.ident(&parts.next()?);
+                let variants = parts
+                    .filter_map(|p| {
+                        let doc = docs(&p);
+                        let name = self.ident(&children(p).into_iter().next()?);
+                        Some(ast::Variant { doc, name })
+                    })
+                    .collect();
+                ast::Item::Enum(ast::EnumDef {
+                    doc,
+                    name,
+                    variants,
+                    span,
+                })
+            }
+            Rule::extern_packet => {
+                let parts = children(inner);
+                let name = self.ident(parts.first()?);
+                let rust_path = self.string(parts.get(1)?);
+                ast::Item::ExternPacket(ast::ExternPacket {
+                    doc,
+                    name,
+                    rust_path,
+                    span,
+                })
+            }
+            Rule::converter => {
+                let parts = children(inner);
+                let name = self.ident(parts.first()?);
+                let from = self.ty(parts.get(1)?.clone())?;
+                let to = self.ty(parts.get(2)?.clone())?;
+                ast::Item::Converter(ast::Converter {
+                    doc,
+                    name,
+                    from,
+                    to,
+                    span,
+                })
+            }
+            Rule::component => {
+                let mut kind = ast::ComponentKind::Atomic;
+                let mut kind_span = span;
+                let mut name = None;
+                let mut members = Vec::new();
+                for part in children(inner) {
+                    match part.as_rule() {
+                        Rule::component_kind => {
+                            kind = component_kind(part.as_str());
+                            kind_span = self.span(&part);
+                        }
+                        Rule::ident => name = Some(self.ident(&part)),
+                        Rule::member => members.extend(self.member(part)),
+                        _ => {}
+                    }
+                }
+                ast::Item::Component(ast::Component {
+                    doc,
+                    kind,
+                    kind_span,
+                    name: name?,
+                    members,
+                    span,
+                })
+            }
+            _ => return None,
+        };
+        Some(item)
+    }
+
+    fn field(&mut self, pair: P<'_>) -> Option<ast::Field> {
+        let span = self.span(&pair);
+        let doc = docs(&pair);
+        let parts = children(pair);
+        let name = self.ident(parts.first()?);
+        let ty = self.ty(parts.get(1)?.clone())?;
+        let default = match parts.get(2) {
+            Some(p) => Some(self.expr(p.clone())?),
+            None => None,
+        };
+        Some(ast::Field {
+            doc,
+            name,
+            ty,
+            default,
+            span,
+        })
+    }
+
+    fn string(&mut self, pair: &P<'_>) -> ast::StrLit {
+        let span = self.span(pair);
+        let raw = pair.as_str();
+        let body = &raw[1..raw.len().saturating_sub(1).max(1)];
+        let value = self.unescape(body, span.start + 1);
+        ast::StrLit { value, span }
+    }
+
+    fn unescape(&mut self, body: &str, start: usize) -> String {
+        let mut out = String::with_capacity(body.len());
+        let mut chars = body.char_indices().peekable();
+        while let Some((index, ch)) = chars.next() {
+            if ch != '\\' {
+                out.push(ch);
+                continue;
+            }
+            let Some((_, escaped)) = chars.next() else {
+                break;
+            };
+            match escaped {
+                'n' => out.push('\n'),
+                'r' => out.push('\r'),
+                't' => out.push('\t'),
+                '0' => out.push('\0'),
+                '\\' => out.push('\\'),
+                '"' => out.push('"'),
+                '\'' => out.push('\''),
+                'u' => {
+                    let rest = &body[index + 2..];
+                    let parsed = rest
+                        .strip_prefix('{')
+                        .and_then(|r| r.find('}').map(|end| &r[..end]))
+                        .and_then(|hex| u32::from_str_radix(hex, 16).ok().map(|v| (v, hex.len())))
+                        .and_then(|(v, len)| char::from_u32(v).map(|c| (c, len)));
+                    match parsed {
+                        Some((c, len)) => {
+                            out.push(c);
+                            for _ in 0..len + 2 {
+                                chars.next();
+                            }
+                        }
+                        None => self.error(
+                            Code::InvalidEscape,
+                            Span::new(start + index, start + index + 2),
+                            "invalid unicode escape: write `\\u{1F600}` with 1 to 6 hex digits"
+                                .to_owned(),
+                        ),
+                    }
+                }
+                other => self.error(
+                    Code::InvalidEscape,
+                    Span::new(start + index, start + index + 1 + other.len_utf8()),
+                    format!(
+                        "unknown escape `\\{}` (known: \\n \\r \\t \\0 \\\\ \\\" \\u{{…}})",
+                        other.escape_debug()
+                    ),
+                ),
+            }
+        }
+        out
+    }
+
+    fn int_lit(&mut self, pair: &P<'_>) -> ast::IntLit {
+        let span = self.span(pair);
+        let text = pair.as_str().replace('_', "");
+        let parsed = match text.strip_prefix("0x") {
+            Some(hex) => u64::from_str_radix(hex, 16),
+            None => text.parse::<u64>(),
+        };
+        let value = parsed.unwrap_or_else(|_| {
+            self.error(
+                Code::InvalidNumber,
+                span,
+                format!("integer `{}` does not fit in 64 bits", pair.as_str()),
+            );
+            0
+        });
+        ast::IntLit { value, span }
+    }
+
+    fn ty(&mut self, pair: P<'_>) -> Option<ast::Type> {
+        let span = self.span(&pair);
+        let mut parts = children(pair).into_iter();
+        let base = parts.next()?;
+        let base_span = self.span(&base);
+        let kind = match base.as_rule() {
+            Rule::prim => ast::TypeKind::Prim(prim(base.as_str())?),
+            Rule::ident => ast::TypeKind::Named(self.ident(&base)),
+            Rule::list_ty => {
+                let inner = children(base);
+                let element = self.ty(inner.first()?.clone())?;
+                match inner.get(1) {
+                    Some(size) => ast::TypeKind::Array(Box::new(element), self.int_lit(size)),
+                    None => ast::TypeKind::List(Box::new(element)),
+                }
+            }
+            _ => return None,
+        };
+        let mut ty = ast::Type {
+            kind,
+            span: base_span,
+        };
+        for mark in parts {
+            let end = self.span(&mark).end;
+            ty = ast::Type {
+                kind: ast::TypeKind::Optional(Box::new(ty)),
+                span: Span::new(span.start, end),
+            };
+        }
+        Some(ty)
+    }
+
+    fn member(&mut self, pair: P<'_>) -> Option<ast::Member> {
+        let doc = docs(&pair);
+        let inner = children(pair).into_iter().next()?;
+        let span = self.span(&inner);
+        let member = match inner.as_rule() {
+            Rule::link => {
+                let part = children(inner).into_iter().next()?;
+                let kind = match part.as_rule() {
+                    Rule::link_crate => {
+                        let parts = children(part);
+                        let name = self.string(parts.first()?);
+                        let spec_pair = parts.get(1)?.clone();
+                        let spec = if spec_pair.as_rule() == Rule::string {
+                            ast::CrateSpec::Version(self.string(&spec_pair))
+                        } else {
+                            let table_span = self.span(&spec_pair);
+                            let mut entries = Vec::new();
+                            for entry in children(spec_pair) {
+                                let entry_span = self.span(&entry);
+                                let parts = children(entry);
+                                let key = self.ident(parts.first()?);
+                                let value = self.expr(parts.get(1)?.clone())?;
+                                entries.push(ast::TableEntry {
+                                    key,
+                                    value,
+                                    span: entry_span,
+                                });
+                            }
+                            ast::CrateSpec::Table(entries, table_span)
+                        };
+                        ast::LinkKind::Crate { name, spec }
+                    }
+                    _ => ast::LinkKind::System {
+                        name: self.string(children(part).first()?),
+                    },
+                };
+                ast::Member::Link(ast::Link { kind, span })
+            }
+            Rule::configuration => {
+                let fields = children(inner)
+                    .into_iter()
+                    .filter_map(|p| self.field(p))
+                    .collect();
+                ast::Member::Configuration(ast::Configuration { doc, fields, span })
+            }
+            Rule::variable => {
+                let parts = children(inner);
+                let kind_pair = parts.first()?;
+                let kind = match kind_pair.as_str() {
+                    "observable" => ast::VarKind::Observable,
+                    "controllable" => ast::VarKind::Controllable,
+                    _ => ast::VarKind::Local,
+                };
+                let kind_span = self.span(kind_pair);
+                let name = self.ident(parts.get(1)?);
+                let mut ty = None;
+                let mut value = None;
+                for part in &parts[2..] {
+                    if part.as_rule() == Rule::ty {
+                        ty = Some(self.ty(part.clone())?);
+                    } else {
+                        value = Some(self.expr(part.clone())?);
+                    }
+                }
+                ast::Member::Variable(ast::Variable {
+                    doc,
+                    kind,
+                    kind_span,
+                    name,
+                    ty,
+                    value,
+                    span,
+                })
+            }
+            Rule::input => {
+                let pull = inner
+                    .clone()
+                    .into_inner()
+                    .find(|p| p.as_rule() == Rule::kw_pull)
+                    .map(|p| self.span(&p));
+                let parts = children(inner);
+                let name = self.ident(parts.first()?);
+                let def_pair = parts.get(1)?.clone();
+                let def = match def_pair.as_rule() {
+                    Rule::port_ref => ast::InputDef::Export(self.port_ref(def_pair)?),
+                    Rule::tick_kind => ast::InputDef::Tick,
+                    Rule::fifo_kind => {
+                        let parts = children(def_pair);
+                        ast::InputDef::Fifo {
+                            ty: self.ty(parts.first()?.clone())?,
+                            size: self.int_lit(parts.get(1)?),
+                            policy: parts.get(2).map(|p| self.ident(p)),
+                        }
+                    }
+                    Rule::ufifo_kind => {
+                        let parts = children(def_pair);
+                        ast::InputDef::Ufifo {
+                            ty: self.ty(parts.first()?.clone())?,
+                            size: self.int_lit(parts.get(1)?),
+                            max: parts.get(2).map(|p| self.int_lit(p)),
+                        }
+                    }
+                    Rule::last_kind => {
+                        ast::InputDef::Last(self.ty(children(def_pair).first()?.clone())?)
+                    }
+                    Rule::poster_kind => {
+                        ast::InputDef::Poster(self.ty(children(def_pair).first()?.clone())?)
+                    }
+                    _ => return None,
+                };
+                ast::Member::Input(ast::Input {
+                    doc,
+                    name,
+                    def,
+                    pull,
+                    span,
+                })
+            }
+            Rule::output => {
+                let pull = inner
+                    .clone()
+                    .into_inner()
+                    .find(|p| p.as_rule() == Rule::kw_pull)
+                    .map(|p| self.span(&p));
+                let parts = children(inner);
+                let name = self.ident(parts.first()?);
+                let def_pair = parts.get(1)?.clone();
+                let def = match def_pair.as_rule() {
+                    Rule::port_ref => ast::OutputDef::Export(self.port_ref(def_pair)?),
+                    Rule::tick_kind => ast::OutputDef::Tick,
+                    Rule::data_kind => {
+                        ast::OutputDef::Data(self.ty(children(def_pair).first()?.clone())?)
+                    }
+                    Rule::poster_kind => {
+                        ast::OutputDef::Poster(self.ty(children(def_pair).first()?.clone())?)
+                    }
+                    _ => return None,
+                };
+                ast::Member::Output(ast::Output {
+                    doc,
+                    name,
+                    def,
+                    pull,
+                    span,
+                })
+            }
+            Rule::timing => ast::Member::Timing(self.timing(inner)?),
+            Rule::exception => {
+                let mut name = None;
+                let mut description = None;
+                let mut plan = Vec::new();
+                for part in children(inner) {
+                    match part.as_rule() {
+                        Rule::ident => name = Some(self.ident(&part)),
+                        Rule::string => description = Some(self.string(&part)),
+                        _ => plan.extend(self.plan_step(part)),
+                    }
+                }
+                ast::Member::Exception(ast::Exception {
+                    doc,
+                    name: name?,
+                    description,
+                    plan,
+                    span,
+                })
+            }
+            Rule::automaton => {
+                let mut keyword = ast::AutomatonKeyword::Automaton;
+                let mut keyword_span = span;
+                let mut initial = Vec::new();
+                let mut states = Vec::new();
+                for part in children(inner) {
+                    match part.as_rule() {
+                        Rule::automaton_kw => {
+                            if part.as_str() == "supervisor" {
+                                keyword = ast::AutomatonKeyword::Supervisor;
+                            }
+                            keyword_span = self.span(&part);
+                        }
+                        Rule::initial => initial.push(self.ident(children(part).first()?)),
+                        Rule::state => states.extend(self.state(part)),
+                        _ => {}
+                    }
+                }
+                ast::Member::Automaton(ast::Automaton {
+                    keyword,
+                    keyword_span,
+                    initial,
+                    states,
+                    span,
+                })
+            }
+            Rule::instance => {
+                let parts = children(inner);
+                let name = self.ident(parts.first()?);
+                let component = self.ident(parts.get(1)?);
+                let mut instance = ast::Instance {
+                    doc,
+                    name,
+                    component,
+                    substitutes: None,
+                    node: None,
+                    overrides: Vec::new(),
+                    timing: None,
+                    span,
+                };
+                for part in parts.into_iter().skip(2) {
+                    match part.as_rule() {
+                        Rule::substitutes_clause => {
+                            instance.substitutes = Some(self.ident(children(part).first()?))
+                        }
+                        Rule::node_clause => {
+                            instance.node = Some(self.string(children(part).first()?))
+                        }
+                        Rule::override_entry => {
+                            let override_span = self.span(&part);
+                            let parts = children(part);
+                            let name = self.ident(parts.first()?);
+                            let value = self.expr(parts.get(1)?.clone())?;
+                            instance.overrides.push(ast::Override {
+                                name,
+                                value,
+                                span: override_span,
+                            });
+                        }
+                        Rule::timing => {
+                            // A second timing block is merged: entries keep their order.
+                            let timing = self.timing(part)?;
+                            match &mut instance.timing {
+                                Some(existing) => {
+                                    existing.entries.extend(timing.entries);
+                                    existing.span = existing.span.join(timing.span);
+                                }
+                                None => instance.timing = Some(timing),
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+                ast::Member::Instance(instance)
+            }
+            Rule::redundant => {
+                let members = children(inner).iter().map(|p| self.ident(p)).collect();
+                ast::Member::Redundant(ast::Redundant { members, span })
+            }
+            Rule::connect => {
+                let parts = children(inner);
+                let from = self.port_ref(parts.first()?.clone())?;
+                let to = self.port_ref(parts.get(1)?.clone())?;
+                let via = parts.get(2).map(|p| self.ident(p));
+                ast::Member::Connect(ast::Connect {
+                    from,
+                    to,
+                    via,
+                    span,
+                })
+            }
+            Rule::on_error => {
+                let parts = children(inner);
+                let instance = self.ident(parts.first()?);
+                let policy = self.ident(parts.get(1)?);
+                ast::Member::OnError(ast::OnError {
+                    instance,
+                    policy,
+                    span,
+                })
+            }
+            Rule::recovery => {
+                let mut recovery = ast::Recovery {
+                    retry_every: None,
+                    deadline: None,
+                    span,
+                };
+                for part in children(inner) {
+                    let rule = part.as_rule();
+                    let value = self.expr(children(part).first()?.clone())?;
+                    if rule == Rule::recovery_retry {
+                        recovery.retry_every = Some(value);
+                    } else {
+                        recovery.deadline = Some(value);
+                    }
+                }
+                ast::Member::Recovery(recovery)
+            }
+            _ => return None,
+        };
+        Some(member)
+    }
+
+    fn port_ref(&mut self, pair: P<'_>) -> Option<ast::PortRef> {
+        let span = self.span(&pair);
+        let parts = children(pair);
+        Some(match parts.as_slice() {
+            [port] => ast::PortRef {
+                instance: None,
+                port: self.ident(port),
+                span,
+            },
+            [instance, port] => ast::PortRef {
+                instance: Some(self.ident(instance)),
+                port: self.ident(port),
+                span,
+            },
+            _ => return None,
+        })
+    }
+
+    fn timing(&mut self, pair: P<'_>) -> Option<ast::Timing> {
+        let span = self.span(&pair);
+        let mut entries = Vec::new();
+        for entry in children(pair) {
+            let entry_span = self.span(&entry);
+            let rule = entry.as_rule();
+            let parts = children(entry);
+            let timing_entry = match rule {
+                Rule::period_entry => {
+                    let interval = parts.first()?.clone();
+                    let interval_span = self.span(&interval);
+                    let bounds = children(interval);
+                    let lo = self.expr(bounds.first()?.clone())?;
+                    let hi = match bounds.get(1) {
+                        Some(hi) => Some(self.expr(hi.clone())?),
+                        None => None,
+                    };
+                    ast::TimingEntry::Period(ast::Interval {
+                        lo,
+                        hi,
+                        span: interval_span,
+                    })
+                }
+                Rule::max_response_entry => {
+                    ast::TimingEntry::MaxResponse(self.expr(parts.first()?.clone())?)
+                }
+                Rule::priority_entry => {
+                    ast::TimingEntry::Priority(self.expr(parts.first()?.clone())?)
+                }
+                Rule::quality_entry => ast::TimingEntry::Quality(
+                    parts.iter().map(|p| self.ident(p)).collect(),
+                    entry_span,
+                ),
+                _ => continue,
+            };
+            entries.push(timing_entry);
+        }
+        Some(ast::Timing { entries, span })
+    }
+
+    fn plan_step(&mut self, pair: P<'_>) -> Option<ast::PlanStep> {
+        let span = self.span(&pair);
+        let rule = pair.as_rule();
+        let parts = children(pair);
+        let kind = match rule {
+            Rule::retry_step => ast::PlanKind::Retry {
+                count: self.int_lit(parts.first()?),
+                every: self.expr(parts.get(1)?.clone())?,
+            },
+            Rule::goto_step => ast::PlanKind::Goto(self.ident(parts.first()?)),
+            Rule::ignore_step => ast::PlanKind::Ignore,
+            Rule::degrade_step => ast::PlanKind::Degrade,
+            _ => return None,
+        };
+        Some(ast::PlanStep { kind, span })
+    }
+
+    fn state(&mut self, pair: P<'_>) -> Option<ast::State> {
+        let span = self.span(&pair);
+        let doc = docs(&pair);
+        let mut parts = children(pair).into_iter();
+        let name = self.ident(&parts.next()?);
+        let mut members = Vec::new();
+        for part in parts {
+            let member_span = self.span(&part);
+            let rule = part.as_rule();
+            let inner = part.clone().into_inner().collect::<Vec<_>>();
+            let values = children(part);
+            let member = match rule {
+                Rule::entry_section => ast::StateMember::Entry(member_span),
+                Rule::exit_section => ast::StateMember::Exit(member_span),
+                Rule::periodic_section => ast::StateMember::Periodic {
+                    period: match values.first() {
+                        Some(p) => Some(self.expr(p.clone())?),
+                        None => None,
+                    },
+                    span: member_span,
+                },
+                Rule::on_rule => ast::StateMember::On {
+                    port: self.ident(values.first()?),
+                    target: self.ident(values.get(1)?),
+                    span: member_span,
+                },
+                Rule::after_rule => {
+                    let has_without = inner.iter().any(|p| p.as_rule() == Rule::kw_without);
+                    let delay = self.expr(values.first()?.clone())?;
+                    let (without, target) = if has_without {
+                        (Some(self.ident(values.get(1)?)), self.ident(values.get(2)?))
+                    } else {
+                        (None, self.ident(values.get(1)?))
+                    };
+                    ast::StateMember::After {
+                        delay,
+                        without,
+                        target,
+                        span: member_span,
+                    }
+                }
+                Rule::may_rule => ast::StateMember::May {
+                    targets: values.iter().map(|p| self.ident(p)).collect(),
+                    span: member_span,
+                },
+                Rule::when_rule => ast::StateMember::When {
+                    condition: self.expr(values.first()?.clone())?,
+                    target: self.ident(values.get(1)?),
+                    span: member_span,
+                },
+                _ => continue,
+            };
+            members.push(member);
+        }
+        Some(ast::State {
+            doc,
+            name,
+            members,
+            span,
+        })
+    }
+
+    fn expr(&mut self, pair: P<'_>) -> Option<ast::Expr> {
+        let span = self.span(&pair);
+        match pair.as_rule() {
+            Rule::expr | Rule::and_expr => {
+                let op = if pair.as_rule() == Rule::expr {
+                    ast::BinaryOp::Or
+                } else {
+                    ast::BinaryOp::And
+                };
+                let mut parts = pair
+                    .into_inner()
+                    .filter(|p| !matches!(p.as_rule(), Rule::or_op | Rule::and_op));
+                let mut left = self.expr(parts.next()?)?;
+                for right in parts {
+                    let right = self.expr(right)?;
+                    let joined = left.span.join(right.span);
+                    left = ast::Expr {
+                        kind: ast::ExprKind::Binary(op, Box::new(left), Box::new(right)),
+                        span: joined,
+                    };
+                }
+                Some(left)
+            }
+            Rule::cmp_expr => {
+                let parts: Vec<_> = pair.into_inner().collect();
+                let left = self.expr(parts.first()?.clone())?;
+                match (parts.get(1), parts.get(2)) {
+                    (Some(op), Some(right)) => {
+                        let op = match op.as_str() {
+                            "==" => ast::BinaryOp::Eq,
+                            "!=" => ast::BinaryOp::Ne,
+                            "<=" => ast::BinaryOp::Le,
+                            ">=" => ast::BinaryOp::Ge,
+                            "<" => ast::BinaryOp::Lt,
+                            _ => ast::BinaryOp::Gt,
+                        };
+                        let right = self.expr(right.clone())?;
+                        Some(ast::Expr {
+                            kind: ast::ExprKind::Binary(op, Box::new(left), Box::new(right)),
+                            span,
+                        })
+                    }
+                    _ => Some(left),
+                }
+            }
+            Rule::unary => {
+                let parts: Vec<_> = pair.into_inner().collect();
+                let (operand, ops) = parts.split_last()?;
+                let mut value = self.expr(operand.clone())?;
+                for op in ops.iter().rev() {
+                    let op_kind = if op.as_str() == "!" {
+                        ast::UnaryOp::Not
+                    } else {
+                        ast::UnaryOp::Neg
+                    };
+                    let start = self.span(op).start;
+                    let joined = Span::new(start, value.span.end);
+                    value = ast::Expr {
+                        kind: ast::ExprKind::Unary(op_kind, Box::new(value)),
+                        span: joined,
+                    };
+                }
+                Some(value)
+            }
+            Rule::integer => {
+                let literal = self.int_lit(&pair);
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Int(literal.value),
+                    span,
+                })
+            }
+            Rule::float => {
+                let value = pair.as_str().replace('_', "").parse::<f64>().unwrap_or(0.0);
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Float(value),
+                    span,
+                })
+            }
+            Rule::string => {
+                let literal = self.string(&pair);
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Str(literal.value),
+                    span,
+                })
+            }
+            Rule::bool_lit => Some(ast::Expr {
+                kind: ast::ExprKind::Bool(pair.as_str() == "true"),
+                span,
+            }),
+            Rule::none_lit => Some(ast::Expr {
+                kind: ast::ExprKind::None,
+                span,
+            }),
+            Rule::duration => {
+                let text = pair.as_str();
+                let unit = pair.into_inner().next()?.as_str();
+                let number = text[..text.len() - unit.len()].replace('_', "");
+                let factor: u128 = match unit {
+                    "ns" => 1,
+                    "us" => 1_000,
+                    "ms" => 1_000_000,
+                    "s" => 1_000_000_000,
+                    _ => 60_000_000_000,
+                };
+                let nanos = if number.contains('.') {
+                    let value = number.parse::<f64>().unwrap_or(0.0) * factor as f64;
+                    (value.is_finite() && value < 1e30).then(|| value.round() as u128)
+                } else {
+                    number
+                        .parse::<u128>()
+                        .ok()
+                        .and_then(|n| n.checked_mul(factor))
+                };
+                let nanos = nanos.unwrap_or_else(|| {
+                    self.error(
+                        Code::InvalidNumber,
+                        span,
+                        format!("duration `{text}` is too large"),
+                    );
+                    0
+                });
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Duration(nanos),
+                    span,
+                })
+            }
+            Rule::frequency => {
+                let text = pair.as_str();
+                let unit = pair.into_inner().next()?.as_str();
+                let number = text[..text.len() - unit.len()].replace('_', "");
+                let factor = match unit {
+                    "Hz" => 1.0,
+                    "kHz" => 1e3,
+                    _ => 1e6,
+                };
+                let hertz = number.parse::<f64>().unwrap_or(0.0) * factor;
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Frequency(hertz),
+                    span,
+                })
+            }
+            Rule::repeat_lit => {
+                let parts = children(pair);
+                let value = self.expr(parts.first()?.clone())?;
+                let count = self.int_lit(parts.get(1)?);
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Repeat(Box::new(value), count),
+                    span,
+                })
+            }
+            Rule::list_lit => {
+                let mut items = Vec::new();
+                for part in children(pair) {
+                    items.push(self.expr(part)?);
+                }
+                Some(ast::Expr {
+                    kind: ast::ExprKind::List(items),
+                    span,
+                })
+            }
+            Rule::enum_value => {
+                let parts = children(pair);
+                Some(ast::Expr {
+                    kind: ast::ExprKind::EnumValue {
+                        enum_name: self.ident(parts.first()?),
+                        variant: self.ident(parts.get(1)?),
+                    },
+                    span,
+                })
+            }
+            Rule::path => {
+                let segments = children(pair).iter().map(|p| self.ident(p)).collect();
+                Some(ast::Expr {
+                    kind: ast::ExprKind::Path(segments),
+                    span,
+                })
+            }
+            _ => None,
+        }
+    }
+}
+
+fn prim(text: &str) -> Option<ast::Prim> {
+    use ast::Prim::*;
+    Some(match text {
+        "bool" => Bool,
+        "i8" => I8,
+        "i16" => I16,
+        "i32" => I32,
+        "i64" => I64,
+        "u8" => U8,
+        "u16" => U16,
+        "u32" => U32,
+        "u64" => U64,
+        "f32" => F32,
+        "f64" => F64,
+        "String" => String,
+        "Time" => Time,
+        "Duration" => Duration,
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_ok(text: &str) -> ast::File {
+        let (file, diagnostics) = parse(FileId(0), text);
+        assert!(diagnostics.is_empty(), "{diagnostics:#?}");
+        file
+    }
+
+    #[test]
+    fn builds_items_with_docs_and_spans() {
+        let text = "/// A pose.\npacket Pose { x: f64, y: f64 = 1.5 }\nenum Mode { A, B }";
+        let file = parse_ok(text);
+        assert_eq!(file.items.len(), 2);
+        let ast::Item::Packet(packet) = &file.items[0] else {
+            panic!("not a packet")
+        };
+        assert_eq!(packet.doc.0, vec!["A pose.".to_owned()]);
+        assert_eq!(&text[packet.name.span.start..packet.name.span.end], "Pose");
+        assert_eq!(
+            packet.fields[1].default.as_ref().map(|d| &d.kind),
+            Some(&ast::ExprKind::Float(1.5))
+        );
+    }
+
+    #[test]
+    fn durations_and_frequencies_are_normalised() {
+        let file =
+            parse_ok("atomic A { timing { period 1min..2s; max_response 250us; priority 10Hz; } }");
+        let ast::Item::Component(component) = &file.items[0] else {
+            panic!("not a component")
+        };
+        let ast::Member::Timing(timing) = &component.members[0] else {
+            panic!("not timing")
+        };
+        let ast::TimingEntry::Period(interval) = &timing.entries[0] else {
+            panic!("not period")
+        };
+        assert_eq!(interval.lo.kind, ast::ExprKind::Duration(60_000_000_000));
+        assert_eq!(
+            interval.hi.as_ref().map(|e| &e.kind),
+            Some(&ast::ExprKind::Duration(2_000_000_000))
+        );
+        assert_eq!(
+            timing.entries[2],
+            ast::TimingEntry::Priority(ast::Expr {
+                kind: ast::ExprKind::Frequency(10.0),
+                span: Span::new(66, 70)
+            })
+        );
+    }
+
+    #[test]
+    fn precedence_or_below_and_below_comparison() {
+        let file =
+            parse_ok("compound C { supervisor { state s { when !a == b && c || d -> s; } } }");
+        let ast::Item::Component(component) = &file.items[0] else {
+            panic!("not a component")
+        };
+        let ast::Member::Automaton(automaton) = &component.members[0] else {
+            panic!("not automaton")
+        };
+        let ast::StateMember::When { condition, .. } = &automaton.states[0].members[0] else {
+            panic!("not when")
+        };
+        let ast::ExprKind::Binary(ast::BinaryOp::Or, left, _) = &condition.kind else {
+            panic!("{condition:?}")
+        };
+        let ast::ExprKind::Binary(ast::BinaryOp::And, left, _) = &left.kind else {
+            panic!("{left:?}")
+        };
+        assert!(matches!(
+            left.kind,
+            ast::ExprKind::Binary(ast::BinaryOp::Eq, _, _)
+        ));
+    }
+
+    #[test]
+    fn recovers_at_items_and_members() {
+        let text = "packet A { x: }\npacket B { y: f64 }\natomic C {\n input a: tick\n input b: tick;\n output c: data<B>;\n}\nenum E { X }";
+        let (file, diagnostics) = parse(FileId(0), text);
+        assert_eq!(diagnostics.len(), 2, "{diagnostics:#?}");
+        assert_eq!(file.items.len(), 3, "{:#?}", file.items);
+        let ast::Item::Component(component) = &file.items[1] else {
+            panic!("not a component")
+        };
+        assert_eq!(component.members.len(), 2);
+    }
+
+    #[test]
+    fn unknown_escape_is_reported() {
+        let (_, diagnostics) = parse(FileId(0), r#"import "a\qb";"#);
+        assert_eq!(diagnostics.len(), 1);
+        assert_eq!(diagnostics[0].code, Code::InvalidEscape);
+    }
+}

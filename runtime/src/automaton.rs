@@ -1,0 +1,219 @@
+//! The interface between the runtime and a component's code: the [`Automaton`] trait
+//! that generated glue implements, the [`Context`] every hook and section receives, and
+//! [`Fault`], what user code returns when it fails.
+
+use std::fmt;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use crate::spec::Spec;
+use crate::value::{Time, Value};
+
+/// Which section of a user state to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Section {
+    /// Run each time the user automaton enters the state.
+    Entry,
+    /// Run each time the user automaton is about to leave the state.
+    Exit,
+    /// Run on the state's period while the automaton stays in the state.
+    Periodic,
+}
+
+/// What a section returns.
+pub type SectionResult = Result<(), Fault>;
+
+/// A fault raised by user code: a declared exception (its index and a message), or any
+/// other error (an undeclared fault takes the component to `running_error`).
+///
+/// `Fault` deliberately does not implement [`std::error::Error`], so that every error
+/// type converts into it and `?` works in sections.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Fault {
+    exception: Option<usize>,
+    message: String,
+}
+
+impl Fault {
+    /// A declared exception, by index into [`Spec::exceptions`].
+    pub fn exception(index: usize, message: impl Into<String>) -> Fault {
+        Fault {
+            exception: Some(index),
+            message: message.into(),
+        }
+    }
+
+    /// An undeclared fault with a message.
+    pub fn message(message: impl Into<String>) -> Fault {
+        Fault {
+            exception: None,
+            message: message.into(),
+        }
+    }
+
+    /// The declared exception's index, if this is one.
+    pub fn exception_index(&self) -> Option<usize> {
+        self.exception
+    }
+
+    /// The message.
+    pub fn text(&self) -> &str {
+        &self.message
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.exception {
+            Some(index) => write!(f, "exception #{index}: {}", self.message),
+            None => f.write_str(&self.message),
+        }
+    }
+}
+
+impl<E: std::error::Error + Send + Sync + 'static> From<E> for Fault {
+    fn from(error: E) -> Fault {
+        Fault::message(error.to_string())
+    }
+}
+
+/// The default observable variable `result`: whether the task has finished and how.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum TaskResult {
+    /// No result yet.
+    #[default]
+    None,
+    /// The task succeeded, with complementary information.
+    Success(String),
+    /// The task failed, with complementary information.
+    Fail(String),
+}
+
+/// The code of one component, as the runtime drives it. `coolc` generates a glue type
+/// implementing this over the user's `Behavior`; the runtime calls it only on the
+/// component's own thread, each call under `catch_unwind`.
+pub trait Automaton: Send + 'static {
+    /// The component's static shape.
+    fn spec(&self) -> &'static Spec;
+
+    /// Called in `starting` (on the first start and on every restart from an error or
+    /// `end`): acquire resources, read the configuration. `Err` (or a panic) leads to
+    /// `starting_error`.
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault>;
+
+    /// Called when the component leaves the started world (`ready`, `running`,
+    /// `suspended`) for `dead`, `end` or `running_error`: release what `start` acquired.
+    fn stop(&mut self, cx: &mut Context);
+
+    /// Run one section of one user state.
+    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault>;
+
+    /// For states with `may`: after each entry or periodic section, the target (an index
+    /// into [`Spec::states`], one of the state's `may` targets) to go to, if any.
+    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize>;
+
+    /// The user's handler for a raised declared exception, called before its plan runs.
+    fn exception(&mut self, exception: usize, message: &str, cx: &mut Context);
+
+    /// A pull request arrived for output `output` (declared `pull`): compute the answer
+    /// and send it on the output port; while this runs, a data output sends only to the
+    /// requesting input.
+    fn answer(&mut self, output: usize, cx: &mut Context) -> Result<(), Fault>;
+
+    /// A new configuration through the control port.
+    fn configure(&mut self, configuration: &Value) -> Result<(), String>;
+
+    /// Set controllable variable `variable` (an index into [`Spec::variables`]).
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String>;
+
+    /// The current value of variable `variable`, for the monitoring port.
+    fn get(&self, variable: usize) -> Value;
+}
+
+/// What a hook or section sees of the runtime: time, `result`, `end`, period, quality.
+///
+/// The runtime owns one per component and passes it to every call on the component's
+/// thread; changes (result, end, period) take effect when the call returns.
+#[derive(Debug)]
+pub struct Context {
+    pub(crate) name: String,
+    pub(crate) entered_at: Instant,
+    pub(crate) result: TaskResult,
+    pub(crate) result_changed: bool,
+    pub(crate) end_requested: bool,
+    pub(crate) period: Option<Duration>,
+    pub(crate) period_changed: bool,
+    pub(crate) quality: usize,
+}
+
+impl Context {
+    /// A context for component `name` (the runtime makes these; tests of user code may
+    /// too).
+    pub fn new(name: impl Into<String>, period: Option<Duration>) -> Context {
+        Context {
+            name: name.into(),
+            entered_at: Instant::now(),
+            result: TaskResult::None,
+            result_changed: false,
+            end_requested: false,
+            period,
+            period_changed: false,
+            quality: 0,
+        }
+    }
+
+    /// The wall-clock time now.
+    pub fn now(&self) -> Time {
+        Time::now()
+    }
+
+    /// The time since the user automaton entered its current state.
+    pub fn in_state_for(&self) -> Duration {
+        self.entered_at.elapsed()
+    }
+
+    /// Set the observable `result`.
+    pub fn set_result(&mut self, result: TaskResult) {
+        if self.result != result {
+            self.result = result;
+            self.result_changed = true;
+        }
+    }
+
+    /// The current `result`.
+    pub fn result(&self) -> &TaskResult {
+        &self.result
+    }
+
+    /// Finish the task: when the current call returns, the exit section of the current
+    /// user state runs and the default automaton goes to `end`.
+    pub fn end(&mut self) {
+        self.end_requested = true;
+    }
+
+    /// The component period.
+    pub fn period(&self) -> Option<Duration> {
+        self.period
+    }
+
+    /// Change the component period; periodic deadlines re-anchor on the new period when
+    /// the current call returns. A zero period is ignored.
+    pub fn set_period(&mut self, period: Duration) {
+        if !period.is_zero() && self.period != Some(period) {
+            self.period = Some(period);
+            self.period_changed = true;
+        }
+    }
+
+    /// The current quality level: an index into the timing block's `quality` list
+    /// (0 = best).
+    pub fn quality(&self) -> usize {
+        self.quality
+    }
+
+    /// The component instance's name.
+    pub fn component_name(&self) -> &str {
+        &self.name
+    }
+}

@@ -1,0 +1,446 @@
+//! The default ports: the control port `c` ([`Handle::command`]) and the monitoring
+//! port `m` ([`Handle::snapshot`], [`Handle::subscribe`], [`Handle::wait_for`]).
+//!
+//! The monitoring state of a component lives in one [`Shared`] (a `Mutex<Monitor>`
+//! written by the component's thread at each change) plus the observers' channels.
+//! Every change is sent to every observer as it happens; nobody polls.
+
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use serde::{Deserialize, Serialize};
+
+use crate::automaton::TaskResult;
+use crate::port::ErasedInput;
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+/// How many events an observer's channel holds; events beyond that are dropped for
+/// that observer (and counted in [`Monitor::dropped_events`]).
+pub const OBSERVER_CAPACITY: usize = 4096;
+
+/// How long [`Handle::command`] waits for the component by default.
+pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// A command through the control port `c`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    /// Force a controllable state (the default controllable variable `new_state`).
+    SetState(Controllable),
+    /// A new configuration (the default controllable variable `configuration`).
+    Configure(Value),
+    /// Set a user controllable variable by name.
+    Set(String, Value),
+    /// The component period (`period`).
+    SetPeriod(Duration),
+    /// The longest a section may run (`max_response`).
+    SetMaxResponse(Duration),
+    /// The priority (`priority`; recorded and published, not applied to the OS thread).
+    SetPriority(i32),
+    /// The quality level: an index into the timing block's qualities (0 = best).
+    SetQuality(usize),
+}
+
+/// Why a command was rejected.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("component `{component}` rejected {command}: {reason}")]
+pub struct Rejected {
+    /// The component's name.
+    pub component: String,
+    /// The command, rendered.
+    pub command: String,
+    /// Why.
+    pub reason: String,
+}
+
+/// A [`Handle::wait_for`] that did not see its condition in time.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("component `{}` did not reach the condition within {waited:?} (state {})", last.name, last.state)]
+pub struct Timeout {
+    /// How long it waited.
+    pub waited: Duration,
+    /// The last snapshot seen.
+    pub last: Box<Monitor>,
+}
+
+/// What the monitoring port `m` publishes: the default observable variables and the
+/// user's observable and controllable variables.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Monitor {
+    /// The component instance's name.
+    pub name: String,
+    /// The default automaton state.
+    pub state: State,
+    /// The user automaton's current state, while it has one.
+    pub user_state: Option<String>,
+    /// The task result.
+    pub result: TaskResult,
+    /// The last error (set on `starting_error` and `running_error`, kept until a
+    /// restart succeeds).
+    pub error: Option<String>,
+    /// User variables (observable and controllable), in declaration order.
+    pub variables: Vec<(String, Value)>,
+    /// The component thread's CPU time (updated at least every millisecond of activity).
+    pub cpu_time: Duration,
+    /// Wall-clock time spent in user code (hooks and sections).
+    pub elapsed_time: Duration,
+    /// Periodic deadlines missed (see `docs/runtime.md`, "Periodic sections").
+    pub missed_deadlines: u64,
+    /// User calls that ran longer than `max_response`.
+    pub overruns: u64,
+    /// Packets lost at this component's inputs, all ports together.
+    pub overflows: u64,
+    /// Packets lost per input port, in declaration order.
+    pub port_overflows: Vec<(String, u64)>,
+    /// The quality level (0 = best).
+    pub quality: usize,
+    /// The component period.
+    pub period: Option<Duration>,
+    /// The response bound.
+    pub max_response: Option<Duration>,
+    /// The priority.
+    pub priority: i32,
+    /// Monitoring events dropped because an observer's channel was full.
+    pub dropped_events: u64,
+}
+
+/// One change on the monitoring port.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum MonitorEvent {
+    /// The default automaton changed state.
+    State {
+        /// The previous state.
+        from: State,
+        /// The new state.
+        to: State,
+    },
+    /// The user automaton changed state (`None`: it has no current state).
+    UserState(Option<String>),
+    /// `result` changed.
+    Result(TaskResult),
+    /// `error` changed.
+    Error(Option<String>),
+    /// A user variable changed.
+    Variable {
+        /// Its name.
+        name: String,
+        /// Its new value.
+        value: Value,
+    },
+    /// Packets were lost at an input.
+    Overflow {
+        /// The input port.
+        port: String,
+        /// How many were lost now.
+        lost: u64,
+        /// How many were lost at this port in all.
+        total: u64,
+    },
+    /// Periodic deadlines were missed.
+    MissedDeadline {
+        /// How many now.
+        missed: u64,
+        /// How many in all.
+        total: u64,
+    },
+    /// A user call ran longer than `max_response`.
+    Overrun {
+        /// How long it ran.
+        took: Duration,
+        /// How many overruns in all.
+        total: u64,
+    },
+    /// The period changed.
+    Period(Option<Duration>),
+    /// The quality level changed.
+    Quality(usize),
+    /// The configuration changed (through the control port).
+    Configured,
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The monitoring state of one component, shared by its thread and its handles.
+pub(crate) struct Shared {
+    monitor: Mutex<Monitor>,
+    observers: Mutex<Vec<Sender<MonitorEvent>>>,
+    inputs: Vec<(&'static str, ErasedInput)>,
+    pub(crate) spawned: AtomicBool,
+}
+
+impl Shared {
+    pub(crate) fn new(monitor: Monitor, inputs: Vec<(&'static str, ErasedInput)>) -> Shared {
+        Shared {
+            monitor: Mutex::new(monitor),
+            observers: Mutex::new(Vec::new()),
+            inputs,
+            spawned: AtomicBool::new(false),
+        }
+    }
+
+    /// Change the monitor with `f`, then send the events `f` returned.
+    pub(crate) fn update(&self, f: impl FnOnce(&mut Monitor) -> Vec<MonitorEvent>) {
+        let events = f(&mut lock(&self.monitor));
+        for event in events {
+            self.publish(event);
+        }
+    }
+
+    /// Change the monitor with `f` without announcing anything (timing counters).
+    pub(crate) fn quietly(&self, f: impl FnOnce(&mut Monitor)) {
+        f(&mut lock(&self.monitor));
+    }
+
+    pub(crate) fn publish(&self, event: MonitorEvent) {
+        let mut observers = lock(&self.observers);
+        if observers.is_empty() {
+            return;
+        }
+        let mut dropped = 0;
+        observers.retain(|observer| match observer.try_send(event.clone()) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_)) => {
+                dropped += 1;
+                true
+            }
+            Err(TrySendError::Disconnected(_)) => false,
+        });
+        drop(observers);
+        if dropped > 0 {
+            lock(&self.monitor).dropped_events += dropped;
+        }
+    }
+
+    pub(crate) fn announce_overflow(&self, port: &'static str, lost: u64, total: u64) {
+        self.publish(MonitorEvent::Overflow {
+            port: port.to_owned(),
+            lost,
+            total,
+        });
+    }
+
+    pub(crate) fn subscribe(&self) -> Receiver<MonitorEvent> {
+        let (sender, receiver) = crossbeam_channel::bounded(OBSERVER_CAPACITY);
+        lock(&self.observers).push(sender);
+        receiver
+    }
+
+    pub(crate) fn snapshot(&self) -> Monitor {
+        let mut monitor = lock(&self.monitor).clone();
+        monitor.port_overflows = self
+            .inputs
+            .iter()
+            .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
+            .collect();
+        monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
+        monitor
+    }
+
+    pub(crate) fn state(&self) -> State {
+        lock(&self.monitor).state
+    }
+}
+
+/// A command on its way to the component, with the channel for its answer.
+pub(crate) struct ControlMessage {
+    pub(crate) command: Command,
+    pub(crate) reply: Sender<Reply>,
+    /// `PENDING`, then `TAKEN` by the component or `WITHDRAWN` by the sender.
+    pub(crate) claim: Arc<AtomicU8>,
+}
+
+pub(crate) const PENDING: u8 = 0;
+pub(crate) const TAKEN: u8 = 1;
+pub(crate) const WITHDRAWN: u8 = 2;
+
+impl ControlMessage {
+    /// Claim the message for execution; false if the sender withdrew it.
+    pub(crate) fn take(&self) -> bool {
+        self.claim
+            .compare_exchange(PENDING, TAKEN, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+}
+
+/// The component's answers to one command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Reply {
+    /// The command is legal; for a state change, the transition starts now.
+    Accepted,
+    /// The transition finished.
+    Done,
+    /// The command was rejected.
+    Rejected(String),
+}
+
+/// The control port `c` and monitoring port `m` of one component. Cheap to clone,
+/// `Send`; any number of handles may exist.
+#[derive(Clone)]
+pub struct Handle {
+    pub(crate) name: Arc<str>,
+    pub(crate) shared: Arc<Shared>,
+    pub(crate) control: Sender<ControlMessage>,
+    pub(crate) exited: Receiver<()>,
+    pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
+    pub(crate) command_timeout: Duration,
+}
+
+impl std::fmt::Debug for Handle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Handle({})", self.name)
+    }
+}
+
+impl Handle {
+    /// The component instance's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// A handle whose commands wait at most `timeout` for the component.
+    pub fn with_command_timeout(mut self, timeout: Duration) -> Handle {
+        self.command_timeout = timeout;
+        self
+    }
+
+    fn rejected(&self, command: &Command, reason: impl Into<String>) -> Rejected {
+        Rejected {
+            component: self.name.to_string(),
+            command: format!("{command:?}"),
+            reason: reason.into(),
+        }
+    }
+
+    /// Send a command through the control port and wait for its answer.
+    ///
+    /// The component answers when its thread next looks at its control port: at once
+    /// if it is waiting, or when the user section it is running returns. A state change
+    /// returns after the transition has run (its sections and hooks), so the monitor
+    /// shows the new state; `SetState(Dead)` also joins the thread. If the component does
+    /// not take the command within the handle's command timeout (a section running
+    /// longer than that), the command is withdrawn and rejected as busy; if it took it
+    /// but the transition is still running at the timeout, `Ok` is returned and the
+    /// transition completes later.
+    pub fn command(&self, command: Command) -> Result<(), Rejected> {
+        if !self.shared.spawned.load(Ordering::Acquire) {
+            return Err(self.rejected(
+                &command,
+                "the component has not been started (System::start)",
+            ));
+        }
+        let deadline = Instant::now() + self.command_timeout;
+        let (reply, answers) = crossbeam_channel::bounded(2);
+        let claim = Arc::new(AtomicU8::new(PENDING));
+        let is_dead = command == Command::SetState(Controllable::Dead);
+        let message = ControlMessage {
+            command: command.clone(),
+            reply,
+            claim: Arc::clone(&claim),
+        };
+        if self.control.try_send(message).is_err() {
+            return Err(self.rejected(
+                &command,
+                "the component's thread has ended or its control queue is full",
+            ));
+        }
+        match answers.recv_deadline(deadline) {
+            Ok(Reply::Accepted) => {}
+            Ok(Reply::Done) => return Ok(()),
+            Ok(Reply::Rejected(reason)) => return Err(self.rejected(&command, reason)),
+            Err(_) => {
+                if claim
+                    .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+                    .is_ok()
+                {
+                    return Err(self.rejected(
+                        &command,
+                        format!(
+                            "busy: the component did not take the command within {:?}; withdrawn",
+                            self.command_timeout
+                        ),
+                    ));
+                }
+                // Taken just now: the transition is under way.
+                if answers
+                    .recv_deadline(Instant::now() + self.command_timeout)
+                    .is_err()
+                    && !is_dead
+                {
+                    return Ok(());
+                }
+            }
+        }
+        // Accepted: wait for the transition to finish.
+        let _ = answers.recv_deadline(deadline);
+        if is_dead {
+            self.join_if_exited(deadline);
+        }
+        Ok(())
+    }
+
+    /// Wait (until `deadline`) for the thread to end, then join it.
+    pub(crate) fn join_if_exited(&self, deadline: Instant) -> Option<Result<(), String>> {
+        // The thread holds the sender of `exited`; the channel disconnects when it ends.
+        match self.exited.recv_deadline(deadline) {
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {}
+            _ => return None,
+        }
+        let handle = lock(&self.join).take()?;
+        Some(crate::thread::join(handle))
+    }
+
+    /// A copy of everything the monitoring port publishes now.
+    pub fn snapshot(&self) -> Monitor {
+        self.shared.snapshot()
+    }
+
+    /// The default automaton state now.
+    pub fn state(&self) -> State {
+        self.shared.state()
+    }
+
+    /// A new observer: every change from now on, as it happens.
+    pub fn subscribe(&self) -> Receiver<MonitorEvent> {
+        self.shared.subscribe()
+    }
+
+    /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),
+    /// for at most `timeout`.
+    pub fn wait_for(
+        &self,
+        pred: impl Fn(&Monitor) -> bool,
+        timeout: Duration,
+    ) -> Result<Monitor, Timeout> {
+        let deadline = Instant::now() + timeout;
+        let events = self.subscribe();
+        loop {
+            let monitor = self.snapshot();
+            if pred(&monitor) {
+                return Ok(monitor);
+            }
+            match events.recv_deadline(deadline) {
+                Ok(_) => {}
+                Err(_) => {
+                    let monitor = self.snapshot();
+                    if pred(&monitor) {
+                        return Ok(monitor);
+                    }
+                    return Err(Timeout {
+                        waited: timeout,
+                        last: Box::new(monitor),
+                    });
+                }
+            }
+        }
+    }
+
+    /// Shorthand: wait until the default automaton is in `state`.
+    pub fn wait_state(&self, state: State, timeout: Duration) -> Result<Monitor, Timeout> {
+        self.wait_for(|monitor| monitor.state == state, timeout)
+    }
+}

@@ -1,0 +1,1287 @@
+//! Typed port handles and the connections between them (paper 3.2, Figure 3).
+//!
+//! Every handle is cheap to clone (an `Arc` inside). Generated code creates one handle
+//! per declared port, registers it with [`crate::PortSet`], and keeps clones for the
+//! user's sections. The packet buffer of a connection lives at its input end; an
+//! output keeps a snapshot of its connected inputs (`RwLock<Arc<[..]>>`, replaced only
+//! on connect and disconnect), so sending takes no global lock and allocates nothing
+//! beyond the clone of the packet for each extra consumer.
+//!
+//! Each delivery bumps the input's arrival counter and rings its component's doorbell
+//! (a `bounded(1)` channel: a full bell means the component is already woken).
+
+use std::any::{Any, TypeId};
+use std::collections::VecDeque;
+use std::fmt;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError, RwLock, Weak};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+
+use crate::monitor::Shared;
+use crate::spec::OverflowPolicy;
+
+/// How long a producer waits on a full [`OverflowPolicy::Block`] fifo before the
+/// packet is rejected and counted, unless the port sets its own timeout.
+pub const DEFAULT_BLOCK_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// How many pull requests may wait at one output before further requests fail with
+/// [`PullError::RequestQueueFull`].
+pub const PULL_REQUEST_CAPACITY: usize = 1024;
+
+/// What a port carries: any clonable, sendable, shareable `'static` type.
+pub trait Packet: Clone + Send + Sync + 'static {}
+
+impl<T: Clone + Send + Sync + 'static> Packet for T {}
+
+/// Why a pull did not return a packet.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PullError {
+    /// The input is not connected to any producer.
+    #[error("the input is not connected to a producer")]
+    NotConnected,
+    /// No answer arrived in time.
+    #[error("no answer within {0:?}")]
+    Timeout(Duration),
+    /// The producer already has too many requests waiting.
+    #[error("the producer has {PULL_REQUEST_CAPACITY} requests waiting")]
+    RequestQueueFull,
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // A panic while holding one of these short locks cannot leave the data half-updated
+    // (every critical section is a single assignment or push), so poisoning is ignored.
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+fn read<T>(lock: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
+    lock.read().unwrap_or_else(PoisonError::into_inner)
+}
+
+fn write<T>(lock: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
+    lock.write().unwrap_or_else(PoisonError::into_inner)
+}
+
+static NEXT_PORT_ID: AtomicUsize = AtomicUsize::new(1);
+
+fn next_port_id() -> usize {
+    NEXT_PORT_ID.fetch_add(1, Ordering::Relaxed)
+}
+
+/// The component a port belongs to: its doorbell, its monitor, the port's name.
+pub(crate) struct Owner {
+    pub(crate) bell: Sender<()>,
+    pub(crate) shared: Weak<Shared>,
+    pub(crate) port_name: &'static str,
+}
+
+/// The kind-independent part of every input end.
+pub(crate) struct InputCore {
+    pub(crate) id: usize,
+    pub(crate) owner: OnceLock<Owner>,
+    arrivals: AtomicU64,
+    overflows: AtomicU64,
+    pull_waiting: AtomicBool,
+    pull_signal: (Sender<()>, Receiver<()>),
+    /// The producers this input is connected to (for pull requests).
+    sources: Mutex<Vec<Arc<OutputCore>>>,
+}
+
+impl InputCore {
+    fn new() -> Arc<InputCore> {
+        Arc::new(InputCore {
+            id: next_port_id(),
+            owner: OnceLock::new(),
+            arrivals: AtomicU64::new(0),
+            overflows: AtomicU64::new(0),
+            pull_waiting: AtomicBool::new(false),
+            pull_signal: crossbeam_channel::bounded(1),
+            sources: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// A packet or event was stored: count it, wake the component and any puller.
+    #[inline]
+    fn arrived(&self) {
+        self.arrivals.fetch_add(1, Ordering::Release);
+        if let Some(owner) = self.owner.get() {
+            let _ = owner.bell.try_send(());
+        }
+        if self.pull_waiting.load(Ordering::Acquire) {
+            let _ = self.pull_signal.0.try_send(());
+        }
+    }
+
+    /// `lost` packets were lost at this input: count them and announce it.
+    #[cold]
+    fn overflowed(&self, lost: u64) {
+        let total = self.overflows.fetch_add(lost, Ordering::AcqRel) + lost;
+        if let Some(owner) = self.owner.get()
+            && let Some(shared) = owner.shared.upgrade()
+        {
+            shared.announce_overflow(owner.port_name, lost, total);
+        }
+    }
+
+    pub(crate) fn arrivals(&self) -> u64 {
+        self.arrivals.load(Ordering::Acquire)
+    }
+
+    pub(crate) fn overflows(&self) -> u64 {
+        self.overflows.load(Ordering::Acquire)
+    }
+
+    pub(crate) fn add_source(&self, source: Arc<OutputCore>) {
+        lock(&self.sources).push(source);
+    }
+
+    pub(crate) fn remove_source(&self, source_id: usize) {
+        lock(&self.sources).retain(|source| source.id != source_id);
+    }
+
+    fn request(&self) -> Result<(), PullError> {
+        let sources = lock(&self.sources);
+        if sources.is_empty() {
+            return Err(PullError::NotConnected);
+        }
+        for source in sources.iter() {
+            source.request(self.id)?;
+        }
+        Ok(())
+    }
+
+    /// Request a packet and wait until `ready` finds one, up to `timeout`.
+    fn pull_with<R>(
+        &self,
+        timeout: Duration,
+        mut ready: impl FnMut() -> Option<R>,
+    ) -> Result<R, PullError> {
+        let deadline = Instant::now() + timeout;
+        self.pull_waiting.store(true, Ordering::Release);
+        while self.pull_signal.1.try_recv().is_ok() {}
+        let result = self.request().and_then(|()| {
+            loop {
+                if let Some(packet) = ready() {
+                    break Ok(packet);
+                }
+                if self.pull_signal.1.recv_deadline(deadline).is_err() {
+                    break ready().ok_or(PullError::Timeout(timeout));
+                }
+            }
+        });
+        self.pull_waiting.store(false, Ordering::Release);
+        result
+    }
+}
+
+/// The kind-independent part of every output end.
+pub(crate) struct OutputCore {
+    pub(crate) id: usize,
+    pub(crate) owner: OnceLock<Owner>,
+    requests: (Sender<usize>, Receiver<usize>),
+    /// While the producer answers a pull request: the requesting input's id (0: none).
+    answering_to: AtomicUsize,
+}
+
+impl OutputCore {
+    fn new() -> Arc<OutputCore> {
+        Arc::new(OutputCore {
+            id: next_port_id(),
+            owner: OnceLock::new(),
+            requests: crossbeam_channel::bounded(PULL_REQUEST_CAPACITY),
+            answering_to: AtomicUsize::new(0),
+        })
+    }
+
+    fn request(&self, input_id: usize) -> Result<(), PullError> {
+        match self.requests.0.try_send(input_id) {
+            Ok(()) => {
+                if let Some(owner) = self.owner.get() {
+                    let _ = owner.bell.try_send(());
+                }
+                Ok(())
+            }
+            Err(TrySendError::Full(_)) => Err(PullError::RequestQueueFull),
+            Err(TrySendError::Disconnected(_)) => Err(PullError::NotConnected),
+        }
+    }
+
+    /// The next waiting pull request (the requesting input's id).
+    pub(crate) fn next_request(&self) -> Option<usize> {
+        self.requests.1.try_recv().ok()
+    }
+
+    pub(crate) fn begin_answer(&self, input_id: usize) {
+        self.answering_to.store(input_id, Ordering::Relaxed);
+    }
+
+    pub(crate) fn end_answer(&self) {
+        self.answering_to.store(0, Ordering::Relaxed);
+    }
+}
+
+/// Something that accepts packets of type `T`: an input end, or a converter in front of
+/// one.
+pub(crate) trait Deliver<T>: Send + Sync {
+    fn deliver(&self, packet: T);
+}
+
+/// A converter on a connection, in front of the input end.
+struct Converted<A, B> {
+    convert: Arc<dyn Fn(&A) -> B + Send + Sync>,
+    target: Arc<dyn Deliver<B>>,
+}
+
+impl<A: Packet, B: Packet> Deliver<A> for Converted<A, B> {
+    fn deliver(&self, packet: A) {
+        self.target.deliver((self.convert)(&packet));
+    }
+}
+
+/// One connected input of a data output.
+struct Sink<T> {
+    input_id: usize,
+    target: Arc<dyn Deliver<T>>,
+}
+
+impl<T> Clone for Sink<T> {
+    fn clone(&self) -> Self {
+        Sink {
+            input_id: self.input_id,
+            target: Arc::clone(&self.target),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Input ends.
+
+/// A tick input: counts event packets.
+#[derive(Clone)]
+pub struct TickIn {
+    inner: Arc<TickInner>,
+}
+
+pub(crate) struct TickInner {
+    core: Arc<InputCore>,
+    count: AtomicU64,
+}
+
+impl TickInner {
+    fn tick(&self) {
+        self.count.fetch_add(1, Ordering::AcqRel);
+        self.core.arrived();
+    }
+}
+
+impl TickIn {
+    /// A new, unconnected tick input.
+    pub fn new() -> TickIn {
+        TickIn {
+            inner: Arc::new(TickInner {
+                core: InputCore::new(),
+                count: AtomicU64::new(0),
+            }),
+        }
+    }
+
+    /// The number of events since the last `take`, resetting it to zero.
+    pub fn take(&self) -> u64 {
+        self.inner.count.swap(0, Ordering::AcqRel)
+    }
+
+    /// Whether events are waiting to be taken.
+    pub fn pending(&self) -> bool {
+        self.inner.count.load(Ordering::Acquire) > 0
+    }
+
+    /// Ask the producer for an event (pull model); it arrives as a normal event.
+    pub fn request(&self) -> Result<(), PullError> {
+        self.inner.core.request()
+    }
+
+    /// Request an event and wait for it: returns the events taken.
+    pub fn pull(&self, timeout: Duration) -> Result<u64, PullError> {
+        self.inner.core.pull_with(timeout, || match self.take() {
+            0 => None,
+            n => Some(n),
+        })
+    }
+
+    /// Events lost at this input (always zero: ticks are counted, never lost).
+    pub fn overflows(&self) -> u64 {
+        self.inner.core.overflows()
+    }
+}
+
+impl Default for TickIn {
+    fn default() -> Self {
+        TickIn::new()
+    }
+}
+
+/// A fifo input: a bounded queue at the input end, with an [`OverflowPolicy`].
+pub struct FifoIn<T> {
+    inner: Arc<FifoInner<T>>,
+}
+
+impl<T> Clone for FifoIn<T> {
+    fn clone(&self) -> Self {
+        FifoIn {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct FifoInner<T> {
+    core: Arc<InputCore>,
+    sender: Sender<T>,
+    receiver: Receiver<T>,
+    policy: OverflowPolicy,
+    capacity: usize,
+    block_timeout: Duration,
+}
+
+impl<T: Packet> Deliver<T> for FifoInner<T> {
+    #[inline]
+    fn deliver(&self, packet: T) {
+        match self.sender.try_send(packet) {
+            Ok(()) => {}
+            Err(TrySendError::Full(packet)) => self.deliver_full(packet),
+            // The receiver lives in `self`, so the channel cannot be disconnected.
+            Err(TrySendError::Disconnected(_)) => return,
+        }
+        self.core.arrived();
+    }
+}
+
+impl<T: Packet> FifoInner<T> {
+    #[cold]
+    fn deliver_full(&self, packet: T) {
+        match self.policy {
+            OverflowPolicy::Reject => self.core.overflowed(1),
+            OverflowPolicy::DropOldest => {
+                let mut packet = packet;
+                loop {
+                    if self.receiver.try_recv().is_ok() {
+                        self.core.overflowed(1);
+                    }
+                    match self.sender.try_send(packet) {
+                        Ok(()) => break,
+                        Err(TrySendError::Full(back)) => packet = back,
+                        Err(TrySendError::Disconnected(_)) => break,
+                    }
+                }
+            }
+            OverflowPolicy::Block => {
+                if self
+                    .sender
+                    .send_timeout(packet, self.block_timeout)
+                    .is_err()
+                {
+                    self.core.overflowed(1);
+                }
+            }
+        }
+    }
+}
+
+impl<T: Packet> FifoIn<T> {
+    /// A fifo of `capacity` packets (at least 1) with `policy` when full.
+    pub fn new(capacity: usize, policy: OverflowPolicy) -> FifoIn<T> {
+        FifoIn::with_block_timeout(capacity, policy, DEFAULT_BLOCK_TIMEOUT)
+    }
+
+    /// Like [`FifoIn::new`], with the producer's wait for [`OverflowPolicy::Block`].
+    pub fn with_block_timeout(
+        capacity: usize,
+        policy: OverflowPolicy,
+        block_timeout: Duration,
+    ) -> FifoIn<T> {
+        let capacity = capacity.max(1);
+        let (sender, receiver) = crossbeam_channel::bounded(capacity);
+        FifoIn {
+            inner: Arc::new(FifoInner {
+                core: InputCore::new(),
+                sender,
+                receiver,
+                policy,
+                capacity,
+                block_timeout,
+            }),
+        }
+    }
+
+    /// The oldest queued packet.
+    pub fn recv(&self) -> Option<T> {
+        self.inner.receiver.try_recv().ok()
+    }
+
+    /// Every packet queued now, oldest first.
+    pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
+        self.inner.receiver.try_iter()
+    }
+
+    /// The number of queued packets.
+    pub fn len(&self) -> usize {
+        self.inner.receiver.len()
+    }
+
+    /// Whether the queue is empty.
+    pub fn is_empty(&self) -> bool {
+        self.inner.receiver.is_empty()
+    }
+
+    /// The queue's capacity.
+    pub fn capacity(&self) -> usize {
+        self.inner.capacity
+    }
+
+    /// The overflow policy.
+    pub fn policy(&self) -> OverflowPolicy {
+        self.inner.policy
+    }
+
+    /// Packets lost at this input so far.
+    pub fn overflows(&self) -> u64 {
+        self.inner.core.overflows()
+    }
+
+    /// Ask the producer(s) for a packet (pull model); it arrives as a normal packet.
+    pub fn request(&self) -> Result<(), PullError> {
+        self.inner.core.request()
+    }
+
+    /// Request a packet and wait for the next queued one.
+    pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
+        self.inner.core.pull_with(timeout, || self.recv())
+    }
+}
+
+/// A ufifo input: a queue that grows by its initial size when full, up to an optional
+/// cap; packets beyond the cap are rejected and counted.
+pub struct UfifoIn<T> {
+    inner: Arc<UfifoInner<T>>,
+}
+
+impl<T> Clone for UfifoIn<T> {
+    fn clone(&self) -> Self {
+        UfifoIn {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct UfifoInner<T> {
+    core: Arc<InputCore>,
+    queue: Mutex<UfifoQueue<T>>,
+    step: usize,
+    max: Option<usize>,
+}
+
+struct UfifoQueue<T> {
+    packets: VecDeque<T>,
+    capacity: usize,
+    growths: u64,
+}
+
+impl<T: Packet> Deliver<T> for UfifoInner<T> {
+    fn deliver(&self, packet: T) {
+        let stored = {
+            let mut queue = lock(&self.queue);
+            if queue.packets.len() >= queue.capacity {
+                let grown = queue.capacity.saturating_add(self.step);
+                let grown = self.max.map_or(grown, |max| grown.min(max));
+                if grown > queue.capacity {
+                    queue.capacity = grown;
+                    queue.growths += 1;
+                }
+            }
+            if queue.packets.len() < queue.capacity {
+                queue.packets.push_back(packet);
+                true
+            } else {
+                false
+            }
+        };
+        if stored {
+            self.core.arrived();
+        } else {
+            self.core.overflowed(1);
+        }
+    }
+}
+
+impl<T: Packet> UfifoIn<T> {
+    /// A ufifo starting at `initial` packets (at least 1), growing by `initial` when
+    /// full, never beyond `max` if given.
+    pub fn new(initial: usize, max: Option<usize>) -> UfifoIn<T> {
+        let step = initial.max(1);
+        let capacity = max.map_or(step, |max| step.min(max.max(1)));
+        UfifoIn {
+            inner: Arc::new(UfifoInner {
+                core: InputCore::new(),
+                queue: Mutex::new(UfifoQueue {
+                    packets: VecDeque::with_capacity(capacity),
+                    capacity,
+                    growths: 0,
+                }),
+                step,
+                max,
+            }),
+        }
+    }
+
+    /// The oldest queued packet.
+    pub fn recv(&self) -> Option<T> {
+        lock(&self.inner.queue).packets.pop_front()
+    }
+
+    /// Every packet queued now, oldest first.
+    pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
+        let packets = std::mem::take(&mut lock(&self.inner.queue).packets);
+        packets.into_iter()
+    }
+
+    /// The number of queued packets.
+    pub fn len(&self) -> usize {
+        lock(&self.inner.queue).packets.len()
+    }
+
+    /// Whether the queue is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The current capacity (grows by steps of the initial size).
+    pub fn capacity(&self) -> usize {
+        lock(&self.inner.queue).capacity
+    }
+
+    /// How many times the queue has grown.
+    pub fn growths(&self) -> u64 {
+        lock(&self.inner.queue).growths
+    }
+
+    /// Packets lost at this input (only beyond the cap).
+    pub fn overflows(&self) -> u64 {
+        self.inner.core.overflows()
+    }
+
+    /// Ask the producer(s) for a packet (pull model).
+    pub fn request(&self) -> Result<(), PullError> {
+        self.inner.core.request()
+    }
+
+    /// Request a packet and wait for the next queued one.
+    pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
+        self.inner.core.pull_with(timeout, || self.recv())
+    }
+}
+
+/// A last input: a local copy of the latest packet received.
+pub struct LastIn<T> {
+    inner: Arc<LastInner<T>>,
+}
+
+impl<T> Clone for LastIn<T> {
+    fn clone(&self) -> Self {
+        LastIn {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct LastInner<T> {
+    core: Arc<InputCore>,
+    /// The latest packet and its sequence number (1 for the first packet).
+    slot: Mutex<(Option<T>, u64)>,
+    /// The sequence number the consumer last read with `take_new`.
+    read_seq: AtomicU64,
+}
+
+impl<T: Packet> Deliver<T> for LastInner<T> {
+    #[inline]
+    fn deliver(&self, packet: T) {
+        {
+            let mut slot = lock(&self.slot);
+            slot.0 = Some(packet);
+            slot.1 += 1;
+        }
+        self.core.arrived();
+    }
+}
+
+impl<T: Packet> LastIn<T> {
+    /// A new, empty last input.
+    pub fn new() -> LastIn<T> {
+        LastIn {
+            inner: Arc::new(LastInner {
+                core: InputCore::new(),
+                slot: Mutex::new((None, 0)),
+                read_seq: AtomicU64::new(0),
+            }),
+        }
+    }
+
+    /// The latest packet received, if any (a clone of the local copy).
+    pub fn latest(&self) -> Option<T> {
+        lock(&self.inner.slot).0.clone()
+    }
+
+    /// The latest packet, only if it is newer than the last one `take_new` returned.
+    pub fn take_new(&self) -> Option<T> {
+        let slot = lock(&self.inner.slot);
+        if slot.1 > self.inner.read_seq.load(Ordering::Acquire) {
+            self.inner.read_seq.store(slot.1, Ordering::Release);
+            slot.0.clone()
+        } else {
+            None
+        }
+    }
+
+    /// How many packets have been received in all.
+    pub fn received(&self) -> u64 {
+        lock(&self.inner.slot).1
+    }
+
+    /// Ask the producer for a packet (pull model).
+    pub fn request(&self) -> Result<(), PullError> {
+        self.inner.core.request()
+    }
+
+    /// Request a packet and wait until a newer one than the last `take_new` arrives.
+    pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
+        self.inner.core.pull_with(timeout, || self.take_new())
+    }
+}
+
+impl<T: Packet> Default for LastIn<T> {
+    fn default() -> Self {
+        LastIn::new()
+    }
+}
+
+/// Where a poster input reads from: a producer's post, maybe through a converter.
+pub(crate) trait PosterSource<T>: Send + Sync {
+    fn read(&self) -> Option<T>;
+    fn seq(&self) -> u64;
+}
+
+/// A poster input: reads the value its producer posted.
+pub struct PosterIn<T> {
+    inner: Arc<PosterInInner<T>>,
+}
+
+impl<T> Clone for PosterIn<T> {
+    fn clone(&self) -> Self {
+        PosterIn {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct PosterInInner<T> {
+    core: Arc<InputCore>,
+    source: RwLock<Option<Arc<dyn PosterSource<T>>>>,
+    seen: AtomicU64,
+}
+
+impl<T: Packet> PosterIn<T> {
+    /// A new, unconnected poster input.
+    pub fn new() -> PosterIn<T> {
+        PosterIn {
+            inner: Arc::new(PosterInInner {
+                core: InputCore::new(),
+                source: RwLock::new(None),
+                seen: AtomicU64::new(0),
+            }),
+        }
+    }
+
+    /// The producer's currently posted value (`None` if unconnected or nothing posted).
+    pub fn read(&self) -> Option<T> {
+        let source = read(&self.inner.source);
+        let source = source.as_ref()?;
+        self.inner.seen.store(source.seq(), Ordering::Release);
+        source.read()
+    }
+
+    /// Whether the producer posted since the last `read`.
+    pub fn is_new(&self) -> bool {
+        read(&self.inner.source)
+            .as_ref()
+            .is_some_and(|source| source.seq() > self.inner.seen.load(Ordering::Acquire))
+    }
+
+    /// Ask the producer to post (pull model).
+    pub fn request(&self) -> Result<(), PullError> {
+        self.inner.core.request()
+    }
+
+    /// Request a post and wait for it.
+    pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
+        self.inner
+            .core
+            .pull_with(timeout, || if self.is_new() { self.read() } else { None })
+    }
+}
+
+impl<T: Packet> Default for PosterIn<T> {
+    fn default() -> Self {
+        PosterIn::new()
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Output ends.
+
+/// A tick output: emits event packets to every connected tick input.
+#[derive(Clone)]
+pub struct TickOut {
+    inner: Arc<TickOutInner>,
+}
+
+pub(crate) struct TickOutInner {
+    core: Arc<OutputCore>,
+    targets: RwLock<Arc<[Arc<TickInner>]>>,
+}
+
+impl TickOut {
+    /// A new, unconnected tick output.
+    pub fn new() -> TickOut {
+        TickOut {
+            inner: Arc::new(TickOutInner {
+                core: OutputCore::new(),
+                targets: RwLock::new(Arc::from([])),
+            }),
+        }
+    }
+
+    /// Emit one event to every connected input (only the requester while answering a
+    /// pull request).
+    pub fn emit(&self) {
+        let answering = self.inner.core.answering_to.load(Ordering::Relaxed);
+        for target in read(&self.inner.targets).iter() {
+            if answering == 0 || target.core.id == answering {
+                target.tick();
+            }
+        }
+    }
+}
+
+impl Default for TickOut {
+    fn default() -> Self {
+        TickOut::new()
+    }
+}
+
+/// A data output: sends packets to connected last, fifo and ufifo inputs.
+pub struct DataOut<T> {
+    inner: Arc<DataOutInner<T>>,
+}
+
+impl<T> Clone for DataOut<T> {
+    fn clone(&self) -> Self {
+        DataOut {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct DataOutInner<T> {
+    core: Arc<OutputCore>,
+    sinks: RwLock<Arc<[Sink<T>]>>,
+}
+
+impl<T: Packet> DataOut<T> {
+    /// A new, unconnected data output.
+    pub fn new() -> DataOut<T> {
+        DataOut {
+            inner: Arc::new(DataOutInner {
+                core: OutputCore::new(),
+                sinks: RwLock::new(Arc::from([])),
+            }),
+        }
+    }
+
+    /// Send a packet to every connected input: each gets a clone, the last one the
+    /// packet itself. While the component answers a pull request, only the requesting
+    /// input gets it.
+    #[inline]
+    pub fn send(&self, packet: T) {
+        let sinks = read(&self.inner.sinks);
+        let answering = self.inner.core.answering_to.load(Ordering::Relaxed);
+        if answering != 0 {
+            if let Some(sink) = sinks.iter().find(|sink| sink.input_id == answering) {
+                sink.target.deliver(packet);
+            }
+            return;
+        }
+        if let Some((last, rest)) = sinks.split_last() {
+            for sink in rest {
+                sink.target.deliver(packet.clone());
+            }
+            last.target.deliver(packet);
+        }
+    }
+
+    /// How many inputs are connected.
+    pub fn consumers(&self) -> usize {
+        read(&self.inner.sinks).len()
+    }
+}
+
+impl<T: Packet> Default for DataOut<T> {
+    fn default() -> Self {
+        DataOut::new()
+    }
+}
+
+/// A poster output: posts a value that connected poster inputs read.
+pub struct PosterOut<T> {
+    inner: Arc<PosterOutInner<T>>,
+}
+
+impl<T> Clone for PosterOut<T> {
+    fn clone(&self) -> Self {
+        PosterOut {
+            inner: Arc::clone(&self.inner),
+        }
+    }
+}
+
+pub(crate) struct PosterOutInner<T> {
+    core: Arc<OutputCore>,
+    slot: RwLock<Option<T>>,
+    seq: AtomicU64,
+    readers: RwLock<Arc<[Arc<InputCore>]>>,
+}
+
+impl<T: Packet> PosterSource<T> for PosterOutInner<T> {
+    fn read(&self) -> Option<T> {
+        read(&self.slot).clone()
+    }
+
+    fn seq(&self) -> u64 {
+        self.seq.load(Ordering::Acquire)
+    }
+}
+
+struct ConvertedPoster<A, B> {
+    convert: Arc<dyn Fn(&A) -> B + Send + Sync>,
+    source: Arc<PosterOutInner<A>>,
+}
+
+impl<A: Packet, B: Packet> PosterSource<B> for ConvertedPoster<A, B> {
+    fn read(&self) -> Option<B> {
+        read(&self.source.slot)
+            .as_ref()
+            .map(|value| (self.convert)(value))
+    }
+
+    fn seq(&self) -> u64 {
+        self.source.seq()
+    }
+}
+
+impl<T: Packet> PosterOut<T> {
+    /// A new poster output with nothing posted.
+    pub fn new() -> PosterOut<T> {
+        PosterOut {
+            inner: Arc::new(PosterOutInner {
+                core: OutputCore::new(),
+                slot: RwLock::new(None),
+                seq: AtomicU64::new(0),
+                readers: RwLock::new(Arc::from([])),
+            }),
+        }
+    }
+
+    /// Post a value: connected poster inputs read it from now on and are woken.
+    pub fn post(&self, packet: T) {
+        *write(&self.inner.slot) = Some(packet);
+        self.inner.seq.fetch_add(1, Ordering::AcqRel);
+        for reader in read(&self.inner.readers).iter() {
+            reader.arrived();
+        }
+    }
+
+    /// The value posted now.
+    pub fn posted(&self) -> Option<T> {
+        read(&self.inner.slot).clone()
+    }
+}
+
+impl<T: Packet> Default for PosterOut<T> {
+    fn default() -> Self {
+        PosterOut::new()
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Type-erased ports, for `PortSet`, `System::connect` and the runner.
+
+/// The kind of an input end, erased of its packet type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum InKind {
+    Tick,
+    Fifo,
+    Ufifo,
+    Last,
+    Poster,
+}
+
+impl InKind {
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            InKind::Tick => "tick",
+            InKind::Fifo => "fifo",
+            InKind::Ufifo => "ufifo",
+            InKind::Last => "last",
+            InKind::Poster => "poster",
+        }
+    }
+}
+
+/// The kind of an output end, erased of its packet type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum OutKind {
+    Tick,
+    Data,
+    Poster,
+}
+
+impl OutKind {
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            OutKind::Tick => "tick",
+            OutKind::Data => "data",
+            OutKind::Poster => "poster",
+        }
+    }
+}
+
+/// An input port with its packet type erased (see [`InputPort`]).
+#[derive(Clone)]
+pub struct ErasedInput {
+    pub(crate) kind: InKind,
+    pub(crate) type_id: TypeId,
+    pub(crate) type_name: &'static str,
+    pub(crate) core: Arc<InputCore>,
+    pub(crate) any: Arc<dyn Any + Send + Sync>,
+    clear_source: fn(&ErasedInput),
+}
+
+fn clear_nothing(_: &ErasedInput) {}
+
+fn clear_poster_source<T: Packet>(input: &ErasedInput) {
+    if let Some(reader) = input.any.downcast_ref::<PosterInInner<T>>() {
+        *write(&reader.source) = None;
+    }
+}
+
+impl fmt::Debug for ErasedInput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} input of {}", self.kind.name(), self.type_name)
+    }
+}
+
+type LinkFn = fn(&ErasedOutput, &ErasedInput) -> bool;
+type UnlinkFn = fn(&ErasedOutput, &ErasedInput);
+
+/// An output port with its packet type erased (see [`OutputPort`]).
+#[derive(Clone)]
+pub struct ErasedOutput {
+    pub(crate) kind: OutKind,
+    pub(crate) type_id: TypeId,
+    pub(crate) type_name: &'static str,
+    pub(crate) core: Arc<OutputCore>,
+    pub(crate) any: Arc<dyn Any + Send + Sync>,
+    link: LinkFn,
+    unlink: UnlinkFn,
+}
+
+impl fmt::Debug for ErasedOutput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} output of {}", self.kind.name(), self.type_name)
+    }
+}
+
+impl ErasedOutput {
+    /// Connect to `input`, whose kind and packet type were already checked. Returns
+    /// false if the input is not of this output's packet type after all.
+    pub(crate) fn link(&self, input: &ErasedInput) -> bool {
+        (self.link)(self, input)
+    }
+
+    /// Disconnect from `input`. Packets already queued at the input stay there.
+    pub(crate) fn unlink(&self, input: &ErasedInput) {
+        (self.unlink)(self, input)
+    }
+}
+
+/// A typed input handle that can be registered with [`crate::PortSet`].
+pub trait InputPort {
+    /// The handle with its packet type erased.
+    fn erased(&self) -> ErasedInput;
+}
+
+/// A typed output handle that can be registered with [`crate::PortSet`].
+pub trait OutputPort {
+    /// The handle with its packet type erased.
+    fn erased(&self) -> ErasedOutput;
+}
+
+/// Packet type of event ports.
+struct Event;
+
+impl InputPort for TickIn {
+    fn erased(&self) -> ErasedInput {
+        ErasedInput {
+            kind: InKind::Tick,
+            type_id: TypeId::of::<Event>(),
+            type_name: "event",
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            clear_source: clear_nothing,
+        }
+    }
+}
+
+impl<T: Packet> InputPort for FifoIn<T> {
+    fn erased(&self) -> ErasedInput {
+        ErasedInput {
+            kind: InKind::Fifo,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            clear_source: clear_nothing,
+        }
+    }
+}
+
+impl<T: Packet> InputPort for UfifoIn<T> {
+    fn erased(&self) -> ErasedInput {
+        ErasedInput {
+            kind: InKind::Ufifo,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            clear_source: clear_nothing,
+        }
+    }
+}
+
+impl<T: Packet> InputPort for LastIn<T> {
+    fn erased(&self) -> ErasedInput {
+        ErasedInput {
+            kind: InKind::Last,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            clear_source: clear_nothing,
+        }
+    }
+}
+
+impl<T: Packet> InputPort for PosterIn<T> {
+    fn erased(&self) -> ErasedInput {
+        ErasedInput {
+            kind: InKind::Poster,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            clear_source: clear_poster_source::<T>,
+        }
+    }
+}
+
+impl OutputPort for TickOut {
+    fn erased(&self) -> ErasedOutput {
+        ErasedOutput {
+            kind: OutKind::Tick,
+            type_id: TypeId::of::<Event>(),
+            type_name: "event",
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            link: link_tick,
+            unlink: unlink_tick,
+        }
+    }
+}
+
+impl<T: Packet> OutputPort for DataOut<T> {
+    fn erased(&self) -> ErasedOutput {
+        ErasedOutput {
+            kind: OutKind::Data,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            link: link_data::<T>,
+            unlink: unlink_data::<T>,
+        }
+    }
+}
+
+impl<T: Packet> OutputPort for PosterOut<T> {
+    fn erased(&self) -> ErasedOutput {
+        ErasedOutput {
+            kind: OutKind::Poster,
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            core: Arc::clone(&self.inner.core),
+            any: self.inner.clone(),
+            link: link_poster::<T>,
+            unlink: unlink_poster::<T>,
+        }
+    }
+}
+
+fn downcast<X: Any + Send + Sync>(any: &Arc<dyn Any + Send + Sync>) -> Option<Arc<X>> {
+    Arc::clone(any).downcast::<X>().ok()
+}
+
+/// Replace a snapshot list with `f` applied to a copy of it.
+fn update_list<X: Clone>(list: &RwLock<Arc<[X]>>, f: impl FnOnce(&mut Vec<X>)) {
+    let mut guard = write(list);
+    let mut items: Vec<X> = guard.iter().cloned().collect();
+    f(&mut items);
+    *guard = Arc::from(items);
+}
+
+fn link_tick(output: &ErasedOutput, input: &ErasedInput) -> bool {
+    let (Some(out), Some(target)) = (
+        downcast::<TickOutInner>(&output.any),
+        downcast::<TickInner>(&input.any),
+    ) else {
+        return false;
+    };
+    update_list(&out.targets, |targets| targets.push(target));
+    input.core.add_source(Arc::clone(&output.core));
+    true
+}
+
+fn unlink_tick(output: &ErasedOutput, input: &ErasedInput) {
+    if let Some(out) = downcast::<TickOutInner>(&output.any) {
+        update_list(&out.targets, |targets| {
+            targets.retain(|t| t.core.id != input.core.id)
+        });
+    }
+    input.core.remove_source(output.core.id);
+}
+
+/// The data-receiving end of `input` as a `Deliver<T>`, if it is a last, fifo or ufifo
+/// input of `T`.
+fn data_target<T: Packet>(input: &ErasedInput) -> Option<Arc<dyn Deliver<T>>> {
+    match input.kind {
+        InKind::Fifo => downcast::<FifoInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Ufifo => downcast::<UfifoInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Last => downcast::<LastInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Tick | InKind::Poster => None,
+    }
+}
+
+fn add_sink<T: Packet>(
+    output: &ErasedOutput,
+    input: &ErasedInput,
+    target: Arc<dyn Deliver<T>>,
+) -> bool {
+    let Some(out) = downcast::<DataOutInner<T>>(&output.any) else {
+        return false;
+    };
+    update_list(&out.sinks, |sinks| {
+        sinks.push(Sink {
+            input_id: input.core.id,
+            target,
+        })
+    });
+    input.core.add_source(Arc::clone(&output.core));
+    true
+}
+
+fn link_data<T: Packet>(output: &ErasedOutput, input: &ErasedInput) -> bool {
+    match data_target::<T>(input) {
+        Some(target) => add_sink(output, input, target),
+        None => false,
+    }
+}
+
+fn unlink_data<T: Packet>(output: &ErasedOutput, input: &ErasedInput) {
+    if let Some(out) = downcast::<DataOutInner<T>>(&output.any) {
+        update_list(&out.sinks, |sinks| {
+            sinks.retain(|sink| sink.input_id != input.core.id)
+        });
+    }
+    input.core.remove_source(output.core.id);
+}
+
+fn set_poster_source<T: Packet>(
+    output: &ErasedOutput,
+    input: &ErasedInput,
+    source: Arc<dyn PosterSource<T>>,
+    out_readers: &RwLock<Arc<[Arc<InputCore>]>>,
+) -> bool {
+    let Some(reader) = downcast::<PosterInInner<T>>(&input.any) else {
+        return false;
+    };
+    *write(&reader.source) = Some(source);
+    update_list(out_readers, |readers| readers.push(Arc::clone(&input.core)));
+    input.core.add_source(Arc::clone(&output.core));
+    true
+}
+
+fn link_poster<T: Packet>(output: &ErasedOutput, input: &ErasedInput) -> bool {
+    let Some(out) = downcast::<PosterOutInner<T>>(&output.any) else {
+        return false;
+    };
+    let source: Arc<dyn PosterSource<T>> = out.clone();
+    set_poster_source(output, input, source, &out.readers)
+}
+
+fn unlink_poster<T: Packet>(output: &ErasedOutput, input: &ErasedInput) {
+    if let Some(out) = downcast::<PosterOutInner<T>>(&output.any) {
+        update_list(&out.readers, |readers| {
+            readers.retain(|r| r.id != input.core.id)
+        });
+    }
+    // The input's packet type may differ from T (a converter): clear its source through
+    // the hook the input registered for its own type.
+    (input.clear_source)(input);
+    input.core.remove_source(output.core.id);
+}
+
+/// Connect a data or poster output of `A` to an input of `B` through `convert`.
+/// Returns false if the kinds or types do not match `A` and `B`.
+pub(crate) fn link_converted<A: Packet, B: Packet>(
+    output: &ErasedOutput,
+    input: &ErasedInput,
+    convert: Arc<dyn Fn(&A) -> B + Send + Sync>,
+) -> bool {
+    match output.kind {
+        OutKind::Data => match data_target::<B>(input) {
+            Some(target) => {
+                let converted: Arc<dyn Deliver<A>> = Arc::new(Converted { convert, target });
+                add_sink(output, input, converted)
+            }
+            None => false,
+        },
+        OutKind::Poster => {
+            let Some(out) = downcast::<PosterOutInner<A>>(&output.any) else {
+                return false;
+            };
+            let source: Arc<dyn PosterSource<B>> = Arc::new(ConvertedPoster {
+                convert,
+                source: Arc::clone(&out),
+            });
+            set_poster_source(output, input, source, &out.readers)
+        }
+        OutKind::Tick => false,
+    }
+}

@@ -1,0 +1,857 @@
+//! The component thread: one loop that drives the default automaton ([`crate::table`])
+//! and the user automaton of one component.
+//!
+//! The loop blocks in one `select_biased!` over the control port, the component's
+//! doorbell (rung by every delivery to its inputs and every pull request to its
+//! outputs) and the nearest timer deadline. Each turn handles at most one thing, in
+//! this priority order, then looks at the control port again:
+//!
+//! 1. control commands (all that are waiting);
+//! 2. `Context::end` requested by the last user call;
+//! 3. timers: a `may` choice made by the last section, then `after` transitions in
+//!    declaration order, then the periodic section;
+//! 4. inputs: `on port -> target` transitions, by input declaration order;
+//! 5. pull requests to the component's outputs, by output declaration order.
+//!
+//! Every user call (hooks, sections, `choose`, handlers, `answer`, `configure`, `set`)
+//! runs under `catch_unwind`.
+
+use std::collections::VecDeque;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender, select_biased};
+
+use crate::automaton::{Automaton, Context, Fault, Section};
+use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
+use crate::port::{InputCore, OutputCore};
+use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
+use crate::table::{Action, Controllable, Event, Outcome, State, next};
+use crate::thread::panic_message;
+
+/// How user code failed.
+enum Failure {
+    Fault(Fault),
+    Panic(String),
+}
+
+/// What a continuity plan achieved.
+enum Recovery {
+    Recovered,
+    Goto(usize),
+    Failed(String),
+}
+
+/// Everything one component thread owns.
+pub(crate) struct Runner {
+    automaton: Box<dyn Automaton>,
+    spec: &'static Spec,
+    cx: Context,
+    shared: Arc<Shared>,
+    control: Receiver<ControlMessage>,
+    bell: Receiver<()>,
+    inputs: Vec<Arc<InputCore>>,
+    outputs: Vec<Arc<OutputCore>>,
+    state: State,
+    /// The current user state.
+    user: usize,
+    /// Whether the current user state's entry has run (its exit is due on leaving).
+    user_entered: bool,
+    /// Arrival counters already looked at, per input.
+    seen: Vec<u64>,
+    /// Inputs with arrivals since the current user state was entered, not yet used by an
+    /// `on` transition.
+    pending: Vec<bool>,
+    /// When each input last had an arrival (or the state was entered), for watchdogs.
+    last_arrival: Vec<Instant>,
+    entered_at: Instant,
+    suspended_at: Option<Instant>,
+    next_periodic: Option<Instant>,
+    reanchored: bool,
+    pending_choice: Option<usize>,
+    deferred: VecDeque<ControlMessage>,
+    max_response: Option<Duration>,
+    cpu_updated: Instant,
+    /// Dropped last, when the thread ends: handles see their `exited` channel close.
+    _exit_guard: Sender<()>,
+}
+
+impl Runner {
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one constructor wiring the thread's parts"
+    )]
+    pub(crate) fn new(
+        name: &str,
+        automaton: Box<dyn Automaton>,
+        shared: Arc<Shared>,
+        control: Receiver<ControlMessage>,
+        bell: Receiver<()>,
+        inputs: Vec<Arc<InputCore>>,
+        outputs: Vec<Arc<OutputCore>>,
+        exit_guard: Sender<()>,
+    ) -> Runner {
+        let spec = automaton.spec();
+        let now = Instant::now();
+        let count = inputs.len();
+        Runner {
+            cx: Context::new(name, spec.timing.period),
+            automaton,
+            spec,
+            shared,
+            control,
+            bell,
+            inputs,
+            outputs,
+            state: State::Starting,
+            user: spec.initial,
+            user_entered: false,
+            seen: vec![0; count],
+            pending: vec![false; count],
+            last_arrival: vec![now; count],
+            entered_at: now,
+            suspended_at: None,
+            next_periodic: None,
+            reanchored: false,
+            pending_choice: None,
+            deferred: VecDeque::new(),
+            max_response: spec.timing.max_response,
+            cpu_updated: now,
+            _exit_guard: exit_guard,
+        }
+    }
+
+    /// The thread's body.
+    pub(crate) fn run(mut self) {
+        self.publish_variables();
+        match self.run_start() {
+            Ok(()) => self.apply(Event::StartOk),
+            Err(message) => {
+                self.set_error(Some(message));
+                self.apply(Event::StartFailed);
+            }
+        }
+        loop {
+            // 1. Control first.
+            if !self.drain_control() {
+                break;
+            }
+            if self.state != State::Running {
+                self.cx.end_requested = false;
+                self.update_cpu(true);
+                match self.control.recv() {
+                    Ok(message) => self.handle_control(message),
+                    Err(_) => self.force_dead(),
+                }
+                continue;
+            }
+            // 2. The task finished.
+            if self.cx.end_requested {
+                self.cx.end_requested = false;
+                self.apply(Event::Finished);
+                continue;
+            }
+            let now = Instant::now();
+            self.notice_arrivals(now);
+            if !self.step(now) {
+                self.block(now);
+            }
+        }
+        self.update_cpu(true);
+    }
+
+    /// Handle every waiting command; false once the component is dead.
+    fn drain_control(&mut self) -> bool {
+        while self.state != State::Starting
+            && let Some(message) = self.deferred.pop_front()
+        {
+            self.handle_control(message);
+        }
+        while self.state != State::Dead
+            && let Ok(message) = self.control.try_recv()
+        {
+            self.handle_control(message);
+        }
+        self.state != State::Dead
+    }
+
+    fn force_dead(&mut self) {
+        if self.state != State::Dead {
+            self.apply(Event::Command(Controllable::Dead));
+        }
+    }
+
+    /// Wait for a command, an arrival or the nearest timer.
+    fn block(&mut self, now: Instant) {
+        let state_spec = &self.spec.states[self.user];
+        let mut deadline = self.next_periodic;
+        for after in state_spec.after {
+            let due = self.after_due(after);
+            deadline = Some(deadline.map_or(due, |d| d.min(due)));
+        }
+        self.update_cpu(false);
+        // Priority when several are ready: control, then the doorbell, then the timer.
+        match deadline {
+            Some(deadline) => select_biased! {
+                recv(self.control) -> message => match message {
+                    Ok(message) => self.handle_control(message),
+                    Err(_) => self.force_dead(),
+                },
+                recv(self.bell) -> _ => {}
+                default(deadline.saturating_duration_since(now)) => {}
+            },
+            None => select_biased! {
+                recv(self.control) -> message => match message {
+                    Ok(message) => self.handle_control(message),
+                    Err(_) => self.force_dead(),
+                },
+                recv(self.bell) -> _ => {}
+            },
+        }
+    }
+
+    /// Do the most urgent piece of user-automaton work; false if there was none.
+    fn step(&mut self, now: Instant) -> bool {
+        let state_spec = &self.spec.states[self.user];
+        // 3. Timers.
+        if let Some(target) = self.pending_choice.take() {
+            self.goto(target);
+            return true;
+        }
+        for after in state_spec.after {
+            if now >= self.after_due(after) {
+                self.goto(after.target);
+                return true;
+            }
+        }
+        if let Some(deadline) = self.next_periodic
+            && now >= deadline
+        {
+            self.periodic(deadline);
+            return true;
+        }
+        // 4. Inputs, in declaration order.
+        let fired = state_spec
+            .on
+            .iter()
+            .filter(|on| self.pending.get(on.port) == Some(&true))
+            .min_by_key(|on| on.port);
+        if let Some(on) = fired {
+            self.pending[on.port] = false;
+            self.goto(on.target);
+            return true;
+        }
+        // 5. Pull requests.
+        self.serve_pulls()
+    }
+
+    fn notice_arrivals(&mut self, now: Instant) {
+        for (index, input) in self.inputs.iter().enumerate() {
+            let arrivals = input.arrivals();
+            if arrivals != self.seen[index] {
+                self.seen[index] = arrivals;
+                self.pending[index] = true;
+                self.last_arrival[index] = now;
+            }
+        }
+    }
+
+    fn after_due(&self, after: &AfterSpec) -> Instant {
+        let base = match after.without {
+            Some(port) => self
+                .last_arrival
+                .get(port)
+                .map_or(self.entered_at, |t| (*t).max(self.entered_at)),
+            None => self.entered_at,
+        };
+        base + after.delay
+    }
+
+    fn period_of(&self, state: usize) -> Option<Duration> {
+        self.spec.states[state]
+            .periodic
+            .and_then(|periodic| periodic.period.or(self.cx.period))
+    }
+
+    // -----------------------------------------------------------------------------
+    // The default automaton.
+
+    /// Run the table's outcome for `event`.
+    fn apply(&mut self, event: Event) {
+        let Outcome::Go { to, actions } = next(self.state, event) else {
+            return;
+        };
+        for action in actions {
+            match action {
+                Action::Start => {
+                    self.set_state(State::Starting);
+                    if let Err(message) = self.run_start() {
+                        self.set_error(Some(message));
+                        self.set_state(State::StartingError);
+                        return;
+                    }
+                }
+                Action::Stop => self.run_stop(),
+                Action::ExitUser => {
+                    if let Err(message) = self.exit_user() {
+                        self.set_error(Some(message));
+                        if to != State::Dead {
+                            self.run_stop();
+                            self.set_state(State::RunningError);
+                            return;
+                        }
+                    }
+                }
+                Action::ResetUser => {
+                    self.user = self.spec.initial;
+                    self.user_entered = false;
+                    self.pending_choice = None;
+                    self.publish_user(Some(self.spec.initial));
+                }
+                // The user automaton runs inside `running`: set the state first.
+                Action::EnterUser => {
+                    self.set_state(to);
+                    self.enter(self.spec.initial);
+                    return;
+                }
+                Action::ResumeUser => {
+                    self.set_state(to);
+                    self.resume();
+                    return;
+                }
+            }
+        }
+        if to == State::Suspended && self.state == State::Running {
+            self.suspended_at = Some(Instant::now());
+        }
+        self.set_state(to);
+    }
+
+    fn resume(&mut self) {
+        if !self.user_entered {
+            self.enter(self.user);
+            return;
+        }
+        // Time in a state stops while suspended: shift the timers by the pause.
+        let now = Instant::now();
+        if let Some(since) = self.suspended_at.take() {
+            let pause = now.saturating_duration_since(since);
+            self.entered_at += pause;
+            self.cx.entered_at = self.entered_at;
+            for arrival in &mut self.last_arrival {
+                *arrival += pause;
+            }
+        }
+        self.next_periodic = self.period_of(self.user).map(|period| now + period);
+    }
+
+    fn set_state(&mut self, to: State) {
+        let from = self.state;
+        if from == to {
+            return;
+        }
+        self.state = to;
+        self.shared.update(|monitor| {
+            monitor.state = to;
+            vec![MonitorEvent::State { from, to }]
+        });
+    }
+
+    fn set_error(&mut self, error: Option<String>) {
+        if let Some(message) = &error {
+            tracing::warn!(component = %self.cx.name, "{message}");
+        }
+        self.shared.update(|monitor| {
+            if monitor.error == error {
+                return Vec::new();
+            }
+            monitor.error.clone_from(&error);
+            vec![MonitorEvent::Error(error)]
+        });
+    }
+
+    fn publish_user(&self, state: Option<usize>) {
+        let name = state.map(|index| self.spec.states[index].name.to_owned());
+        self.shared.update(|monitor| {
+            if monitor.user_state == name {
+                return Vec::new();
+            }
+            monitor.user_state.clone_from(&name);
+            vec![MonitorEvent::UserState(name)]
+        });
+    }
+
+    // -----------------------------------------------------------------------------
+    // Control port.
+
+    fn handle_control(&mut self, message: ControlMessage) {
+        if !message.take() {
+            return; // Withdrawn by a sender that gave up waiting.
+        }
+        let reply = |answer: Reply| {
+            let _ = message.reply.try_send(answer);
+        };
+        match &message.command {
+            Command::SetState(target) => match next(self.state, Event::Command(*target)) {
+                Outcome::Go { .. } => {
+                    reply(Reply::Accepted);
+                    self.apply(Event::Command(*target));
+                    reply(Reply::Done);
+                }
+                Outcome::Stay => reply(Reply::Done),
+                Outcome::Reject(reason) => reply(Reply::Rejected(reason.to_owned())),
+                // The loop never reads commands while `start` runs, so this is not
+                // reached; answering keeps the sender from waiting anyway.
+                Outcome::Defer | Outcome::Impossible => reply(Reply::Rejected(format!(
+                    "not applicable in state {}",
+                    self.state
+                ))),
+            },
+            Command::Configure(configuration) => {
+                let configuration = configuration.clone();
+                match self.call(|automaton, _| automaton.configure(&configuration)) {
+                    Ok(Ok(())) => {
+                        self.shared.publish(MonitorEvent::Configured);
+                        reply(Reply::Done);
+                    }
+                    Ok(Err(reason)) => {
+                        reply(Reply::Rejected(format!("invalid configuration: {reason}")))
+                    }
+                    Err(panic) => reply(Reply::Rejected(format!("panic in configure: {panic}"))),
+                }
+            }
+            Command::Set(name, value) => match self.spec.variable_index(name) {
+                None => reply(Reply::Rejected(format!("no variable `{name}`"))),
+                Some(index) if self.spec.variables[index].kind != VarKind::Controllable => reply(
+                    Reply::Rejected(format!("`{name}` is observable, not controllable")),
+                ),
+                Some(index) => {
+                    let value = value.clone();
+                    match self.call(|automaton, _| automaton.set(index, &value)) {
+                        Ok(Ok(())) => reply(Reply::Done),
+                        Ok(Err(reason)) => reply(Reply::Rejected(format!(
+                            "invalid value for `{name}`: {reason}"
+                        ))),
+                        Err(panic) => reply(Reply::Rejected(format!("panic in set: {panic}"))),
+                    }
+                }
+            },
+            Command::SetPeriod(period) => {
+                if period.is_zero() {
+                    reply(Reply::Rejected("a period must be positive".to_owned()));
+                } else {
+                    self.cx.set_period(*period);
+                    self.after_call();
+                    reply(Reply::Done);
+                }
+            }
+            Command::SetMaxResponse(bound) => {
+                self.max_response = Some(*bound);
+                let bound = *bound;
+                self.shared
+                    .quietly(|monitor| monitor.max_response = Some(bound));
+                reply(Reply::Done);
+            }
+            Command::SetPriority(priority) => {
+                let priority = *priority;
+                self.shared.quietly(|monitor| monitor.priority = priority);
+                reply(Reply::Done);
+            }
+            Command::SetQuality(quality) => {
+                let levels = self.spec.timing.qualities.len().max(1);
+                if *quality >= levels {
+                    reply(Reply::Rejected(format!(
+                        "quality {quality} out of range: {levels} level(s)"
+                    )));
+                } else {
+                    self.set_quality(*quality);
+                    reply(Reply::Done);
+                }
+            }
+        }
+    }
+
+    fn set_quality(&mut self, quality: usize) {
+        self.cx.quality = quality;
+        self.shared.update(|monitor| {
+            monitor.quality = quality;
+            vec![MonitorEvent::Quality(quality)]
+        });
+    }
+
+    // -----------------------------------------------------------------------------
+    // User calls.
+
+    /// Run one user call under `catch_unwind`, account its time, publish its changes.
+    fn call<R>(
+        &mut self,
+        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+    ) -> Result<R, String> {
+        let started = Instant::now();
+        let automaton = &mut *self.automaton;
+        let cx = &mut self.cx;
+        let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
+        let took = started.elapsed();
+        let overrun = self.max_response.is_some_and(|bound| took > bound);
+        self.shared.update(|monitor| {
+            monitor.elapsed_time += took;
+            if overrun {
+                monitor.overruns += 1;
+                vec![MonitorEvent::Overrun {
+                    took,
+                    total: monitor.overruns,
+                }]
+            } else {
+                Vec::new()
+            }
+        });
+        self.after_call();
+        result.map_err(|payload| panic_message(payload.as_ref()))
+    }
+
+    /// Publish what the last call changed in the context and the variables.
+    fn after_call(&mut self) {
+        if self.cx.result_changed {
+            self.cx.result_changed = false;
+            let result = self.cx.result.clone();
+            self.shared.update(|monitor| {
+                monitor.result = result.clone();
+                vec![MonitorEvent::Result(result)]
+            });
+        }
+        if self.cx.period_changed {
+            self.cx.period_changed = false;
+            let period = self.cx.period;
+            self.reanchor();
+            self.shared.update(|monitor| {
+                monitor.period = period;
+                vec![MonitorEvent::Period(period)]
+            });
+        }
+        self.publish_variables();
+    }
+
+    fn publish_variables(&mut self) {
+        if self.spec.variables.is_empty() {
+            return;
+        }
+        let automaton = &*self.automaton;
+        let values: Vec<_> = (0..self.spec.variables.len())
+            .map(|index| catch_unwind(AssertUnwindSafe(|| automaton.get(index))).ok())
+            .collect();
+        let spec = self.spec;
+        self.shared.update(|monitor| {
+            let mut events = Vec::new();
+            for (index, value) in values.into_iter().enumerate() {
+                let (Some(value), Some(slot)) = (value, monitor.variables.get_mut(index)) else {
+                    continue;
+                };
+                if slot.1 != value {
+                    slot.1 = value.clone();
+                    events.push(MonitorEvent::Variable {
+                        name: spec.variables[index].name.to_owned(),
+                        value,
+                    });
+                }
+            }
+            events
+        });
+    }
+
+    fn update_cpu(&mut self, force: bool) {
+        if !force && self.cpu_updated.elapsed() < Duration::from_millis(1) {
+            return;
+        }
+        self.cpu_updated = Instant::now();
+        if let Ok(time) = cpu_time::ThreadTime::try_now() {
+            let time = time.as_duration();
+            self.shared.quietly(|monitor| monitor.cpu_time = time);
+        }
+    }
+
+    fn run_start(&mut self) -> Result<(), String> {
+        match self.call(|automaton, cx| automaton.start(cx)) {
+            Ok(Ok(())) => {
+                self.set_error(None);
+                Ok(())
+            }
+            Ok(Err(fault)) => Err(format!("start failed: {fault}")),
+            Err(panic) => Err(format!("panic in start: {panic}")),
+        }
+    }
+
+    fn run_stop(&mut self) {
+        if let Err(panic) = self.call(|automaton, cx| automaton.stop(cx)) {
+            self.set_error(Some(format!("panic in stop: {panic}")));
+        }
+    }
+
+    fn run_section(&mut self, state: usize, section: Section) -> Result<(), Failure> {
+        match self.call(|automaton, cx| automaton.section(state, section, cx)) {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(fault)) => Err(Failure::Fault(fault)),
+            Err(panic) => Err(Failure::Panic(panic)),
+        }
+    }
+
+    /// Run a section and its continuity plan if it fails.
+    fn section_with_plan(&mut self, state: usize, section: Section) -> Recovery {
+        match self.run_section(state, section) {
+            Ok(()) => Recovery::Recovered,
+            Err(failure) => self.recover(state, Some(section), failure),
+        }
+    }
+
+    /// Run the continuity plan for a failure in `state` (paper 3.5).
+    fn recover(&mut self, state: usize, section: Option<Section>, failure: Failure) -> Recovery {
+        let place = match section {
+            Some(section) => format!(
+                "state `{}` ({section:?} section)",
+                self.spec.states[state].name
+            ),
+            None => format!("state `{}`", self.spec.states[state].name),
+        };
+        let fault = match failure {
+            Failure::Panic(message) => {
+                return Recovery::Failed(format!("panic in {place}: {message}"));
+            }
+            Failure::Fault(fault) => fault,
+        };
+        let Some(index) = fault
+            .exception_index()
+            .filter(|index| *index < self.spec.exceptions.len())
+        else {
+            return Recovery::Failed(format!("fault in {place}: {}", fault.text()));
+        };
+        let exception = &self.spec.exceptions[index];
+        let message = fault.text().to_owned();
+        if let Err(panic) = self.call(|automaton, cx| automaton.exception(index, &message, cx)) {
+            return Recovery::Failed(format!(
+                "panic in the handler of exception `{}`: {panic}",
+                exception.name
+            ));
+        }
+        for step in exception.plan {
+            match *step {
+                PlanStep::Ignore => {
+                    tracing::warn!(component = %self.cx.name, "exception `{}` in {place} ignored: {message}", exception.name);
+                    return Recovery::Recovered;
+                }
+                PlanStep::Goto(target) if target < self.spec.states.len() => {
+                    return Recovery::Goto(target);
+                }
+                PlanStep::Goto(_) => {}
+                PlanStep::Degrade => {
+                    if self.cx.quality + 1 < self.spec.timing.qualities.len() {
+                        self.set_quality(self.cx.quality + 1);
+                        return Recovery::Recovered;
+                    }
+                }
+                PlanStep::Retry { count, every } => {
+                    let Some(section) = section else { continue };
+                    for _ in 0..count {
+                        std::thread::sleep(every);
+                        if self.run_section(state, section).is_ok() {
+                            return Recovery::Recovered;
+                        }
+                    }
+                }
+            }
+        }
+        Recovery::Failed(format!(
+            "exception `{}` in {place}: {message}",
+            exception.name
+        ))
+    }
+
+    /// A failure no plan recovered: `running_error`.
+    fn fail(&mut self, message: String) {
+        self.set_error(Some(message));
+        self.apply(Event::Fault);
+    }
+
+    // -----------------------------------------------------------------------------
+    // The user automaton.
+
+    /// Leave the current user state (its exit section), as part of a default-automaton
+    /// transition.
+    fn exit_user(&mut self) -> Result<(), String> {
+        let result = if self.user_entered && self.spec.states[self.user].exit {
+            match self.section_with_plan(self.user, Section::Exit) {
+                Recovery::Failed(message) => Err(message),
+                Recovery::Recovered | Recovery::Goto(_) => Ok(()),
+            }
+        } else {
+            Ok(())
+        };
+        self.user_entered = false;
+        self.next_periodic = None;
+        self.pending_choice = None;
+        self.publish_user(None);
+        result
+    }
+
+    /// A user transition to `target`: the exit section of the current state, then the
+    /// entry of `target`.
+    fn goto(&mut self, target: usize) {
+        if target >= self.spec.states.len() {
+            self.fail(format!("transition to unknown user state #{target}"));
+            return;
+        }
+        if self.user_entered && self.spec.states[self.user].exit {
+            if let Recovery::Failed(message) = self.section_with_plan(self.user, Section::Exit) {
+                self.fail(message);
+                return;
+            }
+            if self.state != State::Running {
+                return;
+            }
+        }
+        self.enter(target);
+    }
+
+    /// Enter user state `target` and run its entry section.
+    fn enter(&mut self, target: usize) {
+        let now = Instant::now();
+        self.user = target;
+        self.user_entered = true;
+        self.entered_at = now;
+        self.cx.entered_at = now;
+        self.suspended_at = None;
+        self.pending_choice = None;
+        for (index, input) in self.inputs.iter().enumerate() {
+            self.seen[index] = input.arrivals();
+            self.pending[index] = false;
+            self.last_arrival[index] = now;
+        }
+        self.next_periodic = self.period_of(target).map(|period| now + period);
+        self.publish_user(Some(target));
+        if self.spec.states[target].entry {
+            match self.section_with_plan(target, Section::Entry) {
+                Recovery::Recovered => {}
+                Recovery::Goto(state) => {
+                    self.pending_choice = Some(state);
+                    return;
+                }
+                Recovery::Failed(message) => {
+                    self.fail(message);
+                    return;
+                }
+            }
+        }
+        self.choose(target);
+    }
+
+    /// Run the periodic section due at `deadline`; schedule the next one.
+    fn periodic(&mut self, deadline: Instant) {
+        let state = self.user;
+        let Some(period) = self.period_of(state) else {
+            self.next_periodic = None;
+            return;
+        };
+        self.reanchored = false;
+        match self.section_with_plan(state, Section::Periodic) {
+            Recovery::Recovered => {}
+            Recovery::Goto(target) => self.pending_choice = Some(target),
+            Recovery::Failed(message) => {
+                self.fail(message);
+                return;
+            }
+        }
+        if self.state != State::Running || self.user != state {
+            return;
+        }
+        if !self.reanchored {
+            // Absolute deadlines: the next one is a period after this one, not after now.
+            let now = Instant::now();
+            let mut next = deadline + period;
+            if next <= now {
+                let late = now.duration_since(next).as_nanos();
+                let missed = u64::try_from(late / period.as_nanos().max(1))
+                    .unwrap_or(u64::MAX)
+                    .saturating_add(1);
+                self.shared.update(|monitor| {
+                    monitor.missed_deadlines += missed;
+                    vec![MonitorEvent::MissedDeadline {
+                        missed,
+                        total: monitor.missed_deadlines,
+                    }]
+                });
+                next = now + period;
+            }
+            self.next_periodic = Some(next);
+        }
+        if self.pending_choice.is_none() {
+            self.choose(state);
+        }
+    }
+
+    /// Re-anchor the periodic deadline on the current period, from now.
+    fn reanchor(&mut self) {
+        if self.user_entered && self.state == State::Running {
+            self.next_periodic = self
+                .period_of(self.user)
+                .map(|period| Instant::now() + period);
+            self.reanchored = true;
+        }
+    }
+
+    /// Ask the user's `choose` for a `may` target.
+    fn choose(&mut self, state: usize) {
+        let may = self.spec.states[state].may;
+        if may.is_empty() || self.state != State::Running || self.user != state {
+            return;
+        }
+        match self.call(|automaton, cx| automaton.choose(state, cx)) {
+            Ok(None) => {}
+            Ok(Some(target)) if may.contains(&target) => self.pending_choice = Some(target),
+            Ok(Some(target)) => self.fail(format!(
+                "choose in state `{}` returned #{target}, not one of its `may` targets",
+                self.spec.states[state].name
+            )),
+            Err(panic) => self.fail(format!(
+                "panic in choose of state `{}`: {panic}",
+                self.spec.states[state].name
+            )),
+        }
+    }
+
+    /// Answer waiting pull requests; true if there were any.
+    fn serve_pulls(&mut self) -> bool {
+        let mut served = false;
+        for index in 0..self.outputs.len() {
+            let output = Arc::clone(&self.outputs[index]);
+            let answers = self.spec.outputs.get(index).is_some_and(|spec| spec.pull);
+            while let Some(requester) = output.next_request() {
+                served = true;
+                if !answers {
+                    continue; // Not a pull output: the request is dropped.
+                }
+                output.begin_answer(requester);
+                let result = self.call(|automaton, cx| automaton.answer(index, cx));
+                output.end_answer();
+                let failure = match result {
+                    Ok(Ok(())) => continue,
+                    Ok(Err(fault)) => Failure::Fault(fault),
+                    Err(panic) => Failure::Panic(panic),
+                };
+                match self.recover(self.user, None, failure) {
+                    Recovery::Recovered => {}
+                    Recovery::Goto(target) => {
+                        self.pending_choice = Some(target);
+                        return true;
+                    }
+                    Recovery::Failed(message) => {
+                        self.fail(format!(
+                            "answering a pull request on `{}`: {message}",
+                            self.spec.outputs[index].name
+                        ));
+                        return true;
+                    }
+                }
+            }
+        }
+        served
+    }
+}

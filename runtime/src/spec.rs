@@ -1,0 +1,257 @@
+//! The static shape of a component, as `coolc` emits it (`pub static SPEC: coolbot::Spec`).
+//!
+//! Every type here is const-constructible: only `&'static` slices and strings,
+//! [`Duration`], [`Option`], integers and booleans. Indices are positions in the
+//! corresponding slices (a state id is an index into [`Spec::states`], an input port id
+//! an index into [`Spec::inputs`], and so on), in declaration order.
+
+use std::time::Duration;
+
+/// The static description of one component type.
+#[derive(Debug, Clone, Copy)]
+pub struct Spec {
+    /// The component type's name, as written in the `.cool` file.
+    pub type_name: &'static str,
+    /// The `///` documentation of the component.
+    pub doc: &'static str,
+    /// The user automaton (index = user state id).
+    pub states: &'static [StateSpec],
+    /// Index of the initial user state.
+    pub initial: usize,
+    /// Input ports, in declaration order (index = input port id).
+    pub inputs: &'static [InputSpec],
+    /// Output ports, in declaration order (index = output port id).
+    pub outputs: &'static [OutputSpec],
+    /// Observable and controllable user variables (index = variable id).
+    pub variables: &'static [VarSpec],
+    /// Declared exceptions (index = exception id).
+    pub exceptions: &'static [ExceptionSpec],
+    /// The `timing` block.
+    pub timing: TimingSpec,
+}
+
+impl Spec {
+    /// The index of the user state called `name`.
+    pub fn state_index(&self, name: &str) -> Option<usize> {
+        self.states.iter().position(|state| state.name == name)
+    }
+
+    /// The index of the input port called `name`.
+    pub fn input_index(&self, name: &str) -> Option<usize> {
+        self.inputs.iter().position(|input| input.name == name)
+    }
+
+    /// The index of the output port called `name`.
+    pub fn output_index(&self, name: &str) -> Option<usize> {
+        self.outputs.iter().position(|output| output.name == name)
+    }
+
+    /// The index of the variable called `name`.
+    pub fn variable_index(&self, name: &str) -> Option<usize> {
+        self.variables
+            .iter()
+            .position(|variable| variable.name == name)
+    }
+}
+
+/// One state of the user automaton.
+#[derive(Debug, Clone, Copy)]
+pub struct StateSpec {
+    /// The state's name.
+    pub name: &'static str,
+    /// Whether the state has an entry section.
+    pub entry: bool,
+    /// Whether the state has an exit section.
+    pub exit: bool,
+    /// The periodic section, if the state has one.
+    pub periodic: Option<PeriodicSpec>,
+    /// `on port -> target` transitions, in declaration order.
+    pub on: &'static [OnSpec],
+    /// `after D [without port] -> target` transitions, in declaration order.
+    pub after: &'static [AfterSpec],
+    /// The targets the state's `choose` may return (`may -> a, b;`).
+    pub may: &'static [usize],
+}
+
+/// A periodic section.
+#[derive(Debug, Clone, Copy)]
+pub struct PeriodicSpec {
+    /// The state's own period (`periodic 20ms;`), or `None` for the component period.
+    pub period: Option<Duration>,
+}
+
+/// `on port -> target`: a packet or event arriving on input `port` moves the user
+/// automaton to `target`.
+#[derive(Debug, Clone, Copy)]
+pub struct OnSpec {
+    /// The input port id.
+    pub port: usize,
+    /// The target user state id.
+    pub target: usize,
+}
+
+/// `after delay -> target` (time in state) or `after delay without port -> target`
+/// (a watchdog: no packet on `port` for `delay`).
+#[derive(Debug, Clone, Copy)]
+pub struct AfterSpec {
+    /// The delay.
+    pub delay: Duration,
+    /// The watched input port id, for a watchdog.
+    pub without: Option<usize>,
+    /// The target user state id.
+    pub target: usize,
+}
+
+/// One input port.
+#[derive(Debug, Clone, Copy)]
+pub struct InputSpec {
+    /// The port's name.
+    pub name: &'static str,
+    /// The kind of input end.
+    pub kind: InputKind,
+    /// The packet type's name as written in the description (informational).
+    pub packet: &'static str,
+    /// Whether the input uses the pull model.
+    pub pull: bool,
+}
+
+/// The kinds of input port (paper 3.2, Figure 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// Events only: a counter of event packets.
+    Tick,
+    /// A bounded queue.
+    Fifo {
+        /// The queue's capacity in packets.
+        capacity: usize,
+        /// What a full queue does with a new packet.
+        policy: OverflowPolicy,
+    },
+    /// A queue that grows by `initial` packets when full, up to `max` if given.
+    Ufifo {
+        /// The initial capacity, also the growth step.
+        initial: usize,
+        /// The largest capacity, if any.
+        max: Option<usize>,
+    },
+    /// A local copy of the latest packet.
+    Last,
+    /// Reads the producer's posted value.
+    Poster,
+}
+
+/// What a full fifo does with a new packet. Every lost packet is counted on the
+/// monitoring port and announced as a [`crate::MonitorEvent::Overflow`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OverflowPolicy {
+    /// The new packet is rejected (lost) and counted. The default.
+    #[default]
+    Reject,
+    /// The oldest queued packet is dropped (lost, counted) to make room.
+    DropOldest,
+    /// The producer blocks until there is room, up to a timeout
+    /// ([`crate::port::DEFAULT_BLOCK_TIMEOUT`] unless set on the port); then the new
+    /// packet is rejected and counted.
+    Block,
+}
+
+/// One output port.
+#[derive(Debug, Clone, Copy)]
+pub struct OutputSpec {
+    /// The port's name.
+    pub name: &'static str,
+    /// The kind of output end.
+    pub kind: OutputKind,
+    /// The packet type's name as written in the description (informational).
+    pub packet: &'static str,
+    /// Whether the output answers pull requests.
+    pub pull: bool,
+}
+
+/// The kinds of output port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputKind {
+    /// Event packets to tick inputs.
+    Tick,
+    /// Data packets to last, fifo and ufifo inputs.
+    Data,
+    /// A posted value read by poster inputs.
+    Poster,
+}
+
+/// A user variable published on the monitoring port or set through the control port.
+#[derive(Debug, Clone, Copy)]
+pub struct VarSpec {
+    /// The variable's name.
+    pub name: &'static str,
+    /// Observable or controllable.
+    pub kind: VarKind,
+    /// The variable's type as written in the description (informational).
+    pub ty: &'static str,
+    /// The variable's documentation.
+    pub doc: &'static str,
+}
+
+/// Whether a variable is read-only from outside or also settable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VarKind {
+    /// Published on the monitoring port.
+    Observable,
+    /// Published on the monitoring port and set through the control port.
+    Controllable,
+}
+
+/// A declared exception and its continuity plan.
+#[derive(Debug, Clone, Copy)]
+pub struct ExceptionSpec {
+    /// The exception's name.
+    pub name: &'static str,
+    /// Its description.
+    pub description: &'static str,
+    /// The continuity plan, run in order; an empty plan means running error.
+    pub plan: &'static [PlanStep],
+}
+
+/// One step of a continuity plan (paper 3.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlanStep {
+    /// Run the failing section again, up to `count` times, `every` apart.
+    Retry {
+        /// How many more attempts.
+        count: u32,
+        /// The pause before each attempt.
+        every: Duration,
+    },
+    /// Move the user automaton to this state.
+    Goto(usize),
+    /// Log the exception and go on.
+    Ignore,
+    /// Lower the quality level by one (fails at the lowest level).
+    Degrade,
+}
+
+/// The `timing` block.
+#[derive(Debug, Clone, Copy)]
+pub struct TimingSpec {
+    /// The nominal period.
+    pub period: Option<Duration>,
+    /// The longest period degradation may stretch to.
+    pub max_period: Option<Duration>,
+    /// The longest a section may run (the maximum delay to handle an input event).
+    pub max_response: Option<Duration>,
+    /// The priority (recorded and published; not applied to the OS thread yet).
+    pub priority: i32,
+    /// Quality levels, best first.
+    pub qualities: &'static [&'static str],
+}
+
+impl TimingSpec {
+    /// A timing block with nothing set.
+    pub const NONE: TimingSpec = TimingSpec {
+        period: None,
+        max_period: None,
+        max_response: None,
+        priority: 0,
+        qualities: &[],
+    };
+}

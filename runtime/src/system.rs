@@ -1,0 +1,867 @@
+//! Components and the [`System`] that runs them: adding, connecting (with the kind,
+//! cardinality and packet-type rules of the contract), starting and shutting down.
+
+use std::any::TypeId;
+use std::collections::HashMap;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use crate::automaton::{Automaton, TaskResult};
+use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
+use crate::port::{
+    ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
+};
+use crate::runner::Runner;
+use crate::spec::{InputKind, OutputKind, Spec};
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+/// How long [`System::shutdown`] (and dropping a system) waits for each thread.
+pub const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The typed port handles of one component, registered in declaration order.
+#[derive(Debug, Default)]
+pub struct PortSet {
+    inputs: Vec<ErasedInput>,
+    outputs: Vec<ErasedOutput>,
+}
+
+impl PortSet {
+    /// An empty set.
+    pub fn new() -> PortSet {
+        PortSet::default()
+    }
+
+    /// Register the next input port (declaration order, matching the spec).
+    pub fn input(mut self, port: &impl InputPort) -> PortSet {
+        self.inputs.push(port.erased());
+        self
+    }
+
+    /// Register the next output port (declaration order, matching the spec).
+    pub fn output(mut self, port: &impl OutputPort) -> PortSet {
+        self.outputs.push(port.erased());
+        self
+    }
+}
+
+/// An unstarted component: a name, its code and its ports.
+pub struct Component {
+    name: String,
+    automaton: Box<dyn Automaton>,
+    ports: PortSet,
+}
+
+impl std::fmt::Debug for Component {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Component({}: {})",
+            self.name,
+            self.automaton.spec().type_name
+        )
+    }
+}
+
+impl Component {
+    /// A component named `name` running `automaton` with `ports` (in the spec's
+    /// declaration order). Generated `component(name, behavior)` functions call this.
+    pub fn new(
+        name: impl Into<String>,
+        automaton: Box<dyn Automaton>,
+        ports: PortSet,
+    ) -> Component {
+        Component {
+            name: name.into(),
+            automaton,
+            ports,
+        }
+    }
+
+    /// The instance name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The component's static shape.
+    pub fn spec(&self) -> &'static Spec {
+        self.automaton.spec()
+    }
+}
+
+/// Errors of [`System`] operations other than connecting.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Two components with one name.
+    #[error("a component named `{0}` already exists")]
+    DuplicateName(String),
+    /// A name that cannot be used in `instance.port` addresses.
+    #[error("`{0}` is not a valid component name (non-empty, no `.`)")]
+    InvalidName(String),
+    /// The registered ports do not match the spec.
+    #[error("component `{component}`: {detail}")]
+    PortMismatch {
+        /// The component.
+        component: String,
+        /// What does not match.
+        detail: String,
+    },
+    /// A port handle already belongs to another component.
+    #[error("component `{component}`: port `{port}` already belongs to another component")]
+    PortInUse {
+        /// The component.
+        component: String,
+        /// The port.
+        port: String,
+    },
+    /// No component with this name.
+    #[error("no component named `{0}`")]
+    UnknownComponent(String),
+    /// The OS refused a thread.
+    #[error("component `{component}`: cannot spawn its thread: {source}")]
+    Spawn {
+        /// The component.
+        component: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A component did not reach a state in time.
+    #[error("component `{component}` is {state}, did not become {wanted} within {waited:?}")]
+    Timeout {
+        /// The component.
+        component: String,
+        /// Its state when the wait ended.
+        state: State,
+        /// The state waited for.
+        wanted: State,
+        /// How long.
+        waited: Duration,
+    },
+    /// A command was rejected.
+    #[error(transparent)]
+    Rejected(#[from] crate::monitor::Rejected),
+}
+
+/// Why a connection could not be made or removed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConnectError {
+    /// Not `instance.port`.
+    #[error("`{address}` is not an `instance.port` address")]
+    BadAddress {
+        /// The address.
+        address: String,
+    },
+    /// No such component.
+    #[error("`{address}`: no component named `{instance}`")]
+    UnknownInstance {
+        /// The address.
+        address: String,
+        /// The instance name.
+        instance: String,
+    },
+    /// No such port.
+    #[error("`{address}`: component `{instance}` ({type_name}) has no {direction} port `{port}`")]
+    UnknownPort {
+        /// The address.
+        address: String,
+        /// The instance.
+        instance: String,
+        /// Its type.
+        type_name: String,
+        /// `input` or `output`.
+        direction: &'static str,
+        /// The port name.
+        port: String,
+    },
+    /// The kinds cannot form a connection.
+    #[error(
+        "cannot connect {from_kind} output `{from}` to {to_kind} input `{to}`: a {from_kind} output connects only to {allowed} inputs"
+    )]
+    KindMismatch {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The output kind.
+        from_kind: &'static str,
+        /// The input kind.
+        to_kind: &'static str,
+        /// What the output connects to.
+        allowed: &'static str,
+    },
+    /// The connection breaks a cardinality rule.
+    #[error("cannot connect `{from}` to `{to}`: {rule}")]
+    Cardinality {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The rule and how it is broken.
+        rule: String,
+    },
+    /// The packet types differ.
+    #[error(
+        "cannot connect `{from}` to `{to}`: the output carries `{from_type}` but the input expects `{to_type}` (use a converter: connect_via)"
+    )]
+    TypeMismatch {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The output's packet type.
+        from_type: String,
+        /// The input's packet type.
+        to_type: String,
+    },
+    /// A converter's types do not match the ports.
+    #[error(
+        "cannot connect `{from}` to `{to}` via a converter `{converter}`: the ports carry `{ports}`"
+    )]
+    ConverterMismatch {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The converter's types, `A -> B`.
+        converter: String,
+        /// The ports' packet types, `output type -> input type`.
+        ports: String,
+    },
+    /// A pull input needs an output that answers pull requests.
+    #[error("cannot connect `{from}` to pull input `{to}`: `{from}` is not declared `pull`")]
+    PullMismatch {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+    },
+    /// Already connected.
+    #[error("`{from}` is already connected to `{to}`")]
+    AlreadyConnected {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+    },
+    /// Not connected.
+    #[error("`{from}` is not connected to `{to}`")]
+    NotConnected {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+    },
+}
+
+/// How one component ended, in a [`Report`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComponentReport {
+    /// The instance name.
+    pub name: String,
+    /// Its last default-automaton state.
+    pub state: State,
+    /// Its last result.
+    pub result: TaskResult,
+    /// Its last error.
+    pub error: Option<String>,
+    /// Whether its thread was joined (false: never started, or still stuck in a
+    /// section when the shutdown timeout expired).
+    pub joined: bool,
+    /// A panic that escaped the runtime's own code on that thread (a bug).
+    pub thread_panic: Option<String>,
+}
+
+/// What [`System::shutdown`] returns.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Report {
+    /// One entry per component, in the order they were added.
+    pub components: Vec<ComponentReport>,
+}
+
+impl Report {
+    /// Whether every started thread was joined without a runtime panic.
+    pub fn clean(&self) -> bool {
+        self.components
+            .iter()
+            .all(|c| c.thread_panic.is_none() && (c.joined || c.state == State::Starting))
+    }
+}
+
+/// One component inside a system.
+struct Slot {
+    name: String,
+    spec: &'static Spec,
+    handle: Handle,
+    inputs: Vec<ErasedInput>,
+    outputs: Vec<ErasedOutput>,
+    runner: Option<Runner>,
+}
+
+/// One connection.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Link {
+    from: (usize, usize),
+    to: (usize, usize),
+}
+
+/// Runs components: each added component gets its own named thread when started.
+pub struct System {
+    slots: Vec<Slot>,
+    names: HashMap<String, usize>,
+    links: Vec<Link>,
+    started: bool,
+}
+
+impl Default for System {
+    fn default() -> Self {
+        System::new()
+    }
+}
+
+impl std::fmt::Debug for System {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("System")
+            .field("components", &self.names.keys().collect::<Vec<_>>())
+            .finish()
+    }
+}
+
+fn kind_matches_input(spec: InputKind, erased: InKind) -> bool {
+    matches!(
+        (spec, erased),
+        (InputKind::Tick, InKind::Tick)
+            | (InputKind::Fifo { .. }, InKind::Fifo)
+            | (InputKind::Ufifo { .. }, InKind::Ufifo)
+            | (InputKind::Last, InKind::Last)
+            | (InputKind::Poster, InKind::Poster)
+    )
+}
+
+fn kind_matches_output(spec: OutputKind, erased: OutKind) -> bool {
+    matches!(
+        (spec, erased),
+        (OutputKind::Tick, OutKind::Tick)
+            | (OutputKind::Data, OutKind::Data)
+            | (OutputKind::Poster, OutKind::Poster)
+    )
+}
+
+impl System {
+    /// An empty system.
+    pub fn new() -> System {
+        System {
+            slots: Vec::new(),
+            names: HashMap::new(),
+            links: Vec::new(),
+            started: false,
+        }
+    }
+
+    /// Add a component; it starts with the system (or at once if the system has
+    /// started). Duplicate names and ports that do not match the spec are rejected.
+    pub fn add(&mut self, component: Component) -> Result<Handle, Error> {
+        let Component {
+            name,
+            automaton,
+            ports,
+        } = component;
+        if name.is_empty() || name.contains('.') {
+            return Err(Error::InvalidName(name));
+        }
+        if self.names.contains_key(&name) {
+            return Err(Error::DuplicateName(name));
+        }
+        let spec = automaton.spec();
+        let mismatch = |detail: String| Error::PortMismatch {
+            component: name.clone(),
+            detail,
+        };
+        if ports.inputs.len() != spec.inputs.len() {
+            return Err(mismatch(format!(
+                "{} input ports registered, the spec declares {}",
+                ports.inputs.len(),
+                spec.inputs.len()
+            )));
+        }
+        if ports.outputs.len() != spec.outputs.len() {
+            return Err(mismatch(format!(
+                "{} output ports registered, the spec declares {}",
+                ports.outputs.len(),
+                spec.outputs.len()
+            )));
+        }
+        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+            if !kind_matches_input(declared.kind, port.kind) {
+                return Err(mismatch(format!(
+                    "input `{}` is declared {:?} but registered as {}",
+                    declared.name,
+                    declared.kind,
+                    port.kind.name()
+                )));
+            }
+        }
+        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+            if !kind_matches_output(declared.kind, port.kind) {
+                return Err(mismatch(format!(
+                    "output `{}` is declared {:?} but registered as {}",
+                    declared.name,
+                    declared.kind,
+                    port.kind.name()
+                )));
+            }
+        }
+        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+            if port.core.owner.get().is_some() {
+                return Err(Error::PortInUse {
+                    component: name.clone(),
+                    port: declared.name.to_owned(),
+                });
+            }
+        }
+        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+            if port.core.owner.get().is_some() {
+                return Err(Error::PortInUse {
+                    component: name.clone(),
+                    port: declared.name.to_owned(),
+                });
+            }
+        }
+
+        let monitor = Monitor {
+            name: name.clone(),
+            state: State::Starting,
+            user_state: None,
+            result: TaskResult::None,
+            error: None,
+            variables: spec
+                .variables
+                .iter()
+                .map(|v| (v.name.to_owned(), Value::Unit))
+                .collect(),
+            cpu_time: Duration::ZERO,
+            elapsed_time: Duration::ZERO,
+            missed_deadlines: 0,
+            overruns: 0,
+            overflows: 0,
+            port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
+            quality: 0,
+            period: spec.timing.period,
+            max_response: spec.timing.max_response,
+            priority: spec.timing.priority,
+            dropped_events: 0,
+        };
+        let named_inputs = spec
+            .inputs
+            .iter()
+            .map(|i| i.name)
+            .zip(ports.inputs.iter().cloned())
+            .collect();
+        let shared = Arc::new(Shared::new(monitor, named_inputs));
+        let (bell_sender, bell) = crossbeam_channel::bounded(1);
+        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+            let owner = Owner {
+                bell: bell_sender.clone(),
+                shared: Arc::downgrade(&shared),
+                port_name: declared.name,
+            };
+            if port.core.owner.set(owner).is_err() {
+                return Err(Error::PortInUse {
+                    component: name.clone(),
+                    port: declared.name.to_owned(),
+                });
+            }
+        }
+        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+            let owner = Owner {
+                bell: bell_sender.clone(),
+                shared: Arc::downgrade(&shared),
+                port_name: declared.name,
+            };
+            if port.core.owner.set(owner).is_err() {
+                return Err(Error::PortInUse {
+                    component: name.clone(),
+                    port: declared.name.to_owned(),
+                });
+            }
+        }
+        let (control_sender, control) = crossbeam_channel::bounded(256);
+        let (exit_guard, exited) = crossbeam_channel::bounded(1);
+        let handle = Handle {
+            name: Arc::from(name.as_str()),
+            shared: Arc::clone(&shared),
+            control: control_sender,
+            exited,
+            join: Arc::new(Mutex::new(None)),
+            command_timeout: DEFAULT_COMMAND_TIMEOUT,
+        };
+        let runner = Runner::new(
+            &name,
+            automaton,
+            shared,
+            control,
+            bell,
+            ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
+            ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
+            exit_guard,
+        );
+        let index = self.slots.len();
+        self.names.insert(name.clone(), index);
+        self.slots.push(Slot {
+            name,
+            spec,
+            handle: handle.clone(),
+            inputs: ports.inputs,
+            outputs: ports.outputs,
+            runner: Some(runner),
+        });
+        if self.started {
+            self.spawn(index)?;
+        }
+        Ok(handle)
+    }
+
+    fn spawn(&mut self, index: usize) -> Result<(), Error> {
+        let slot = &mut self.slots[index];
+        let Some(runner) = slot.runner.take() else {
+            return Ok(());
+        };
+        let join = crate::thread::spawn(&slot.name, move || runner.run()).map_err(|source| {
+            Error::Spawn {
+                component: slot.name.clone(),
+                source,
+            }
+        })?;
+        *slot
+            .handle
+            .join
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = Some(join);
+        slot.handle.shared.spawned.store(true, Ordering::Release);
+        Ok(())
+    }
+
+    /// Spawn every component's thread. Each runs its `start` hook and goes to `ready`
+    /// (or `starting_error`); send `running` through its handle, or call
+    /// [`System::run_all`], to run the user automata.
+    pub fn start(&mut self) -> Result<(), Error> {
+        self.started = true;
+        for index in 0..self.slots.len() {
+            self.spawn(index)?;
+        }
+        Ok(())
+    }
+
+    /// Start (if needed), wait for every component to leave `starting`, and command
+    /// every `ready` component to `running`.
+    pub fn run_all(&mut self) -> Result<(), Error> {
+        self.start()?;
+        for slot in &self.slots {
+            let monitor = slot
+                .handle
+                .wait_for(|m| m.state != State::Starting, SHUTDOWN_TIMEOUT)
+                .map_err(|t| Error::Timeout {
+                    component: slot.name.clone(),
+                    state: t.last.state,
+                    wanted: State::Ready,
+                    waited: t.waited,
+                })?;
+            if monitor.state == State::Ready {
+                slot.handle
+                    .command(crate::Command::SetState(Controllable::Running))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The control and monitoring ports of component `name`.
+    pub fn handle(&self, name: &str) -> Option<Handle> {
+        self.names
+            .get(name)
+            .map(|&index| self.slots[index].handle.clone())
+    }
+
+    /// The names of the components, in the order they were added.
+    pub fn names(&self) -> Vec<&str> {
+        self.slots.iter().map(|slot| slot.name.as_str()).collect()
+    }
+
+    fn parse(&self, address: &str, output: bool) -> Result<(usize, usize), ConnectError> {
+        let Some((instance, port)) = address.split_once('.') else {
+            return Err(ConnectError::BadAddress {
+                address: address.to_owned(),
+            });
+        };
+        let Some(&index) = self.names.get(instance) else {
+            return Err(ConnectError::UnknownInstance {
+                address: address.to_owned(),
+                instance: instance.to_owned(),
+            });
+        };
+        let spec = self.slots[index].spec;
+        let port_index = if output {
+            spec.output_index(port)
+        } else {
+            spec.input_index(port)
+        };
+        match port_index {
+            Some(port_index) => Ok((index, port_index)),
+            None => Err(ConnectError::UnknownPort {
+                address: address.to_owned(),
+                instance: instance.to_owned(),
+                type_name: spec.type_name.to_owned(),
+                direction: if output { "output" } else { "input" },
+                port: port.to_owned(),
+            }),
+        }
+    }
+
+    /// Resolve both ends and check every rule except the packet types.
+    fn check(&self, from: &str, to: &str) -> Result<Link, ConnectError> {
+        let (out_slot, out_port) = self.parse(from, true)?;
+        let (in_slot, in_port) = self.parse(to, false)?;
+        let link = Link {
+            from: (out_slot, out_port),
+            to: (in_slot, in_port),
+        };
+        let output = &self.slots[out_slot].outputs[out_port];
+        let input = &self.slots[in_slot].inputs[in_port];
+        let (from, to) = (from.to_owned(), to.to_owned());
+        let allowed = match output.kind {
+            OutKind::Tick => "tick",
+            OutKind::Data => "last, fifo and ufifo",
+            OutKind::Poster => "poster",
+        };
+        let kinds_ok = matches!(
+            (output.kind, input.kind),
+            (OutKind::Tick, InKind::Tick)
+                | (OutKind::Poster, InKind::Poster)
+                | (OutKind::Data, InKind::Last | InKind::Fifo | InKind::Ufifo)
+        );
+        if !kinds_ok {
+            return Err(ConnectError::KindMismatch {
+                from,
+                to,
+                from_kind: output.kind.name(),
+                to_kind: input.kind.name(),
+                allowed,
+            });
+        }
+        if self.links.contains(&link) {
+            return Err(ConnectError::AlreadyConnected { from, to });
+        }
+        let address = |(slot, port): (usize, usize), output: bool| {
+            let spec = self.slots[slot].spec;
+            let port = if output {
+                spec.outputs[port].name
+            } else {
+                spec.inputs[port].name
+            };
+            format!("{}.{}", self.slots[slot].name, port)
+        };
+        match input.kind {
+            InKind::Last | InKind::Poster => {
+                if let Some(existing) = self.links.iter().find(|l| l.to == link.to) {
+                    return Err(ConnectError::Cardinality {
+                        from,
+                        to,
+                        rule: format!(
+                            "a {} connection is 1 output to N inputs, and `{}` is already fed by `{}`",
+                            input.kind.name(),
+                            address(existing.to, false),
+                            address(existing.from, true)
+                        ),
+                    });
+                }
+            }
+            InKind::Fifo | InKind::Ufifo => {
+                let queue_input = |l: &Link| {
+                    matches!(
+                        self.slots[l.to.0].inputs[l.to.1].kind,
+                        InKind::Fifo | InKind::Ufifo
+                    )
+                };
+                if let Some(existing) = self
+                    .links
+                    .iter()
+                    .find(|l| l.from == link.from && queue_input(l))
+                {
+                    return Err(ConnectError::Cardinality {
+                        from,
+                        to,
+                        rule: format!(
+                            "a {} connection is N outputs to 1 input, and `{}` already feeds `{}`",
+                            input.kind.name(),
+                            address(existing.from, true),
+                            address(existing.to, false)
+                        ),
+                    });
+                }
+            }
+            InKind::Tick => {}
+        }
+        let input_pull = self.slots[in_slot].spec.inputs[in_port].pull;
+        let output_pull = self.slots[out_slot].spec.outputs[out_port].pull;
+        if input_pull && !output_pull {
+            return Err(ConnectError::PullMismatch { from, to });
+        }
+        Ok(link)
+    }
+
+    /// Connect output `from` to input `to` (both `instance.port`). Kinds, cardinality,
+    /// the pull model and the packet types are checked. Works before and while running;
+    /// no packet already queued is lost.
+    pub fn connect(&mut self, from: &str, to: &str) -> Result<(), ConnectError> {
+        let link = self.check(from, to)?;
+        let output = &self.slots[link.from.0].outputs[link.from.1];
+        let input = &self.slots[link.to.0].inputs[link.to.1];
+        if output.type_id != input.type_id || !output.link(input) {
+            return Err(ConnectError::TypeMismatch {
+                from: from.to_owned(),
+                to: to.to_owned(),
+                from_type: output.type_name.to_owned(),
+                to_type: input.type_name.to_owned(),
+            });
+        }
+        self.links.push(link);
+        Ok(())
+    }
+
+    /// Connect output `from` (packets of `A`) to input `to` (packets of `B`) through
+    /// `convert` (a `.cool` `converter`), applied on the producer's thread at each send
+    /// (data) or on the consumer's thread at each read (poster).
+    pub fn connect_via<A: Packet, B: Packet>(
+        &mut self,
+        from: &str,
+        to: &str,
+        convert: impl Fn(&A) -> B + Send + Sync + 'static,
+    ) -> Result<(), ConnectError> {
+        let link = self.check(from, to)?;
+        let output = &self.slots[link.from.0].outputs[link.from.1];
+        let input = &self.slots[link.to.0].inputs[link.to.1];
+        let linked = output.type_id == TypeId::of::<A>()
+            && input.type_id == TypeId::of::<B>()
+            && output.kind != OutKind::Tick
+            && crate::port::link_converted::<A, B>(output, input, Arc::new(convert));
+        if !linked {
+            return Err(ConnectError::ConverterMismatch {
+                from: from.to_owned(),
+                to: to.to_owned(),
+                converter: format!(
+                    "{} -> {}",
+                    std::any::type_name::<A>(),
+                    std::any::type_name::<B>()
+                ),
+                ports: format!("{} -> {}", output.type_name, input.type_name),
+            });
+        }
+        self.links.push(link);
+        Ok(())
+    }
+
+    /// Remove the connection from `from` to `to`. Packets already queued at the input
+    /// stay there; a last input keeps its local copy.
+    pub fn disconnect(&mut self, from: &str, to: &str) -> Result<(), ConnectError> {
+        let (out_slot, out_port) = self.parse(from, true)?;
+        let (in_slot, in_port) = self.parse(to, false)?;
+        let link = Link {
+            from: (out_slot, out_port),
+            to: (in_slot, in_port),
+        };
+        let Some(position) = self.links.iter().position(|l| *l == link) else {
+            return Err(ConnectError::NotConnected {
+                from: from.to_owned(),
+                to: to.to_owned(),
+            });
+        };
+        self.links.remove(position);
+        let output = &self.slots[out_slot].outputs[out_port];
+        let input = &self.slots[in_slot].inputs[in_port];
+        output.unlink(input);
+        Ok(())
+    }
+
+    /// The connections, as `(output address, input address)` pairs.
+    pub fn connections(&self) -> Vec<(String, String)> {
+        self.links
+            .iter()
+            .map(|link| {
+                let out = &self.slots[link.from.0];
+                let inp = &self.slots[link.to.0];
+                (
+                    format!("{}.{}", out.name, out.spec.outputs[link.from.1].name),
+                    format!("{}.{}", inp.name, inp.spec.inputs[link.to.1].name),
+                )
+            })
+            .collect()
+    }
+
+    /// Take every component to `dead` and join every thread. Dropping the system does
+    /// the same.
+    pub fn shutdown(mut self) -> Report {
+        self.stop_all()
+    }
+
+    fn stop_all(&mut self) -> Report {
+        let mut report = Report::default();
+        // Tell everyone first, so that components stop in parallel.
+        for slot in &self.slots {
+            if slot.runner.is_none() {
+                let (reply, _answers) = crossbeam_channel::bounded(2);
+                let _ = slot
+                    .handle
+                    .control
+                    .try_send(crate::monitor::ControlMessage {
+                        command: crate::Command::SetState(Controllable::Dead),
+                        reply,
+                        claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
+                    });
+            }
+        }
+        let deadline = Instant::now() + SHUTDOWN_TIMEOUT;
+        for slot in &mut self.slots {
+            let mut joined = false;
+            let mut thread_panic = None;
+            if slot.runner.take().is_none() {
+                match slot.handle.join_if_exited(deadline) {
+                    Some(Ok(())) => joined = true,
+                    Some(Err(message)) => {
+                        joined = true;
+                        thread_panic = Some(message);
+                    }
+                    // Already joined by a `dead` command, or stuck past the deadline.
+                    None => {
+                        joined = slot
+                            .handle
+                            .join
+                            .lock()
+                            .unwrap_or_else(PoisonError::into_inner)
+                            .is_none()
+                            && slot.handle.shared.state() == State::Dead
+                    }
+                }
+            }
+            let monitor = slot.handle.snapshot();
+            report.components.push(ComponentReport {
+                name: slot.name.clone(),
+                state: monitor.state,
+                result: monitor.result,
+                error: monitor.error,
+                joined,
+                thread_panic,
+            });
+        }
+        self.slots.clear();
+        self.names.clear();
+        self.links.clear();
+        report
+    }
+}
+
+impl Drop for System {
+    fn drop(&mut self) {
+        if !self.slots.is_empty() {
+            let _ = self.stop_all();
+        }
+    }
+}

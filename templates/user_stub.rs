@@ -1,0 +1,5 @@
+    {{ method.user_signature }} {
+    {%- for line in method.stub_body %}
+        {{ line }}
+    {%- endfor %}
+    }
