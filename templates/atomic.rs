@@ -12,16 +12,19 @@
 {%- endif %}
 
 /// The `configuration` block: the default controllable variable `configuration`.
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if c.config_derives_default() %}, Default{% endif %})]
 #[serde(default)]
 pub struct Config {
 {%- for f in c.config %}
-    {% call m::doc(&f.doc) %}{% endcall %}
-    {% if f.renamed() %}#[serde(rename = "{{ f.cool_name }}")]{% endif %}
+{%- call m::doc(&f.doc) %}{% endcall %}
+    {%- if f.renamed() %}
+    #[serde(rename = "{{ f.cool_name }}")]
+    {%- endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
 }
 
+{% if !c.config_derives_default() %}
 impl ::core::default::Default for Config {
     fn default() -> Self {
         Self {
@@ -31,17 +34,19 @@ impl ::core::default::Default for Config {
         }
     }
 }
+{% endif %}
 
 /// The component's own variables: observable, controllable and local.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
 pub struct Vars {
 {%- for v in c.vars %}
-    {% call m::doc(&v.field.doc) %}{% endcall %}
+{%- call m::doc(&v.field.doc) %}{% endcall %}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
     pub {{ v.field.name }}: {{ v.field.ty }},
 {%- endfor %}
 }
 
+{% if !c.vars_derive_default() %}
 impl ::core::default::Default for Vars {
     fn default() -> Self {
         Self {
@@ -51,11 +56,12 @@ impl ::core::default::Default for Vars {
         }
     }
 }
+{% endif %}
 
 /// The input ports, in declaration order.
 pub struct Inputs {
 {%- for p in c.inputs %}
-    {% call m::doc(&p.doc) %}{% endcall %}
+{%- call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -63,7 +69,7 @@ pub struct Inputs {
 /// The output ports, in declaration order.
 pub struct Outputs {
 {%- for p in c.outputs %}
-    {% call m::doc(&p.doc) %}{% endcall %}
+{%- call m::doc(&p.doc) %}{% endcall %}
     pub {{ p.field }}: {{ p.handle }},
 {%- endfor %}
 }
@@ -72,7 +78,7 @@ pub struct Outputs {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum UserState {
 {%- for s in c.states %}
-    {% call m::doc(&s.doc) %}{% endcall %}
+{%- call m::doc(&s.doc) %}{% endcall %}
     {{ s.variant }},
 {%- endfor %}
 }
@@ -129,7 +135,7 @@ impl {{ may_enum }} {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Exception {
 {%- for e in c.exceptions %}
-    {% call m::doc(&e.doc) %}{% endcall %}
+{%- call m::doc(&e.doc) %}{% endcall %}
     {{ e.variant }},
 {%- endfor %}
 }
@@ -183,7 +189,9 @@ pub trait Behavior: ::core::marker::Send + 'static {
         let _ = cx;
     }
 {% for method in c.methods %}
-    {% call m::doc(&method.doc) %}{% endcall %}
+
+
+{% call m::doc(&method.doc) %}{% endcall %}
     {{ method.signature }};
 {%- endfor %}
 }
@@ -225,6 +233,17 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.
 pub fn component(name: impl ::core::convert::Into<::std::string::String>, behavior: impl Behavior) -> ::coolbot::Component {
+    component_with(name, behavior, Config::default(), Vars::default())
+}
+
+/// Like [`component`], starting from the given configuration and variables (a
+/// compound's instance overrides use it).
+pub fn component_with(
+    name: impl ::core::convert::Into<::std::string::String>,
+    behavior: impl Behavior,
+    config: Config,
+    vars: Vars,
+) -> ::coolbot::Component {
     let inputs = Inputs {
     {%- for p in c.inputs %}
         {{ p.field }}: {{ p.ctor }},
@@ -244,8 +263,8 @@ pub fn component(name: impl ::core::convert::Into<::std::string::String>, behavi
     {%- endfor %};
     let glue = __CoolGlue {
         behavior,
-        config: Config::default(),
-        vars: Vars::default(),
+        config,
+        vars,
         inputs,
         outputs,
     };
@@ -348,7 +367,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     }
 
     fn configure(&mut self, configuration: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
-        self.config = super::__cool_from_value(configuration)?;
+        self.config = super::__cool_configure(&self.config, configuration)?;
         Ok(())
     }
 
@@ -358,7 +377,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         {%- for v in c.vars %}
         {%- if v.controllable() %}
             {{ v.spec_index.unwrap_or_default() }} => {
-                self.vars.{{ v.field.name }} = super::__cool_from_value(value)?;
+                self.vars.{{ v.field.name }} = {{ v.from_value }}?;
                 Ok(())
             }
         {%- endif %}
@@ -376,7 +395,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         match variable {
         {%- for v in c.vars %}
         {%- if let Some(index) = v.spec_index %}
-            {{ index }} => super::__cool_to_value(&self.vars.{{ v.field.name }}),
+            {{ index }} => {{ v.to_value }},
         {%- endif %}
         {%- endfor %}
             _ => ::coolbot::Value::Unit,

@@ -2,16 +2,95 @@
 {% call m::header(krate.sources_text()) %}{% endcall %}
 //! Generated code of compound component `{{ c.type_name }}` (partial).
 //!
-//! This module lists the compound's instances and connections and wires the
-//! connections between instances already added to a `coolbot::System`. The
-//! supervisor, exported ports, mapped variables and error policies are not generated
-//! yet.
+//! [`build`] adds the compound's atomic instances to a `coolbot::System` (their
+//! behaviors come from your [`Parts`]) and wires the declared connections. Not
+//! generated yet: the supervisor automaton and its rules, exported ports, mapped
+//! variables, instance timing overrides, error policies and the recovery queue, substitutes
+//! (listed, not started), remote nodes (instances run locally) and compound instances
+//! (nested compounds).
 {%- if !c.doc.is_empty() %}
 //!
 {%- for line in c.doc %}
 //! {{ line }}
 {%- endfor %}
 {%- endif %}
+
+/// The behaviors of the compound's atomic instances, one method per instance that
+/// [`build`] starts.
+pub trait Parts {
+{%- for i in c.instances %}
+{%- if i.built() %}
+{%- if let Some(module) = i.module %}
+    /// The behavior of instance `{{ i.name }}`, a `{{ i.component }}`.
+    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Behavior;
+{%- endif %}
+{%- endif %}
+{%- endfor %}
+}
+
+/// Why [`build`] failed.
+#[derive(Debug)]
+pub enum BuildError {
+    /// An instance could not be added.
+    Add(::coolbot::Error),
+    /// A connection was refused.
+    Connect(::coolbot::ConnectError),
+}
+
+impl ::core::fmt::Display for BuildError {
+    fn fmt(&self, f: &mut ::core::fmt::Formatter<'_>) -> ::core::fmt::Result {
+        match self {
+            BuildError::Add(error) => ::core::write!(f, "building {{ c.type_name }}: {error}"),
+            BuildError::Connect(error) => ::core::write!(f, "connecting {{ c.type_name }}: {error}"),
+        }
+    }
+}
+
+impl ::std::error::Error for BuildError {}
+
+impl ::core::convert::From<::coolbot::Error> for BuildError {
+    fn from(error: ::coolbot::Error) -> Self {
+        BuildError::Add(error)
+    }
+}
+
+impl ::core::convert::From<::coolbot::ConnectError> for BuildError {
+    fn from(error: ::coolbot::ConnectError) -> Self {
+        BuildError::Connect(error)
+    }
+}
+
+/// Adds the atomic instances to `system` as `{prefix}{instance}` with the behaviors
+/// `parts` gives, then connects them as the description says. Returns their
+/// handles in declaration order.
+pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% endif %}(system: &mut ::coolbot::System, prefix: &str, parts: &mut impl Parts) -> ::core::result::Result<::std::vec::Vec<::coolbot::Handle>, BuildError> {
+{%- if !c.builds_any() %}
+    let _ = parts;
+{%- endif %}
+    let handles = ::std::vec![
+{%- for i in c.instances %}
+{%- if i.built() %}
+{%- if let Some(module) = i.module %}
+{%- if i.overrides.is_empty() %}
+        system.add(super::{{ module }}::component(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}()))?,
+{%- else %}
+        {
+            // Instance overrides from the description.
+            let {% if i.sets_config() %}mut {% endif %}config = super::{{ module }}::Config::default();
+            let {% if i.sets_vars() %}mut {% endif %}vars = super::{{ module }}::Vars::default();
+            {%- for statement in i.overrides %}
+            {{ statement }}
+            {%- endfor %}
+            system.add(super::{{ module }}::component_with(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}(), config, vars))?
+        },
+{%- endif %}
+{%- endif %}
+{%- endif %}
+{%- endfor %}
+    ];
+    connect{% if c.uses_converters %}::<C>{% endif %}(system, prefix)?;
+    Ok(handles)
+}
 
 /// The compound's component type name.
 pub const TYPE_NAME: &str = "{{ c.type_name }}";
@@ -20,6 +99,15 @@ pub const TYPE_NAME: &str = "{{ c.type_name }}";
 pub const INSTANCES: &[(&str, &str)] = &[
 {%- for i in c.instances %}
     ("{{ i.name }}", "{{ i.component }}"),
+{%- endfor %}
+];
+
+/// The substitutes: `(instance, the instance it substitutes)`.
+pub const SUBSTITUTES: &[(&str, &str)] = &[
+{%- for i in c.instances %}
+{%- if let Some(other) = i.substitutes %}
+    ("{{ i.name }}", "{{ other }}"),
+{%- endif %}
 {%- endfor %}
 ];
 
@@ -34,7 +122,7 @@ pub const CONNECTIONS: &[(&str, &str)] = &[
 /// Connects the instances, added to `system` under the names `{prefix}{instance}`
 /// (`prefix` is `""` for plain instance names, or e.g. `"base_"`), as the
 /// description says.
-pub fn connect{% if c.uses_converters %}<C: super::types::Converters>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
+pub fn connect{% if c.uses_converters %}<C: super::types::Converters + 'static>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
 {%- if c.connections.is_empty() %}
     let _ = (system, prefix);
 {%- endif %}

@@ -8,4 +8,5 @@
 {% for module in krate.module_names() %}
 pub mod {{ module }};
 {%- endfor %}
+
 {% include "support.rs" %}

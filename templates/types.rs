@@ -2,20 +2,26 @@
 {% call m::header(krate.sources_text()) %}{% endcall %}
 //! Packets, enums, extern packets and converters of the descriptions.
 {% for e in types.externs %}
+
+
 {% call m::doc(&e.doc) %}{% endcall %}
 pub type {{ e.name }} = {{ e.path }};
 {% endfor %}
 {%- for p in types.packets %}
+
+
 {% call m::doc(&p.doc) %}{% endcall %}
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %})]
 pub struct {{ p.name }} {
 {%- for f in p.fields %}
-    {% call m::doc(&f.doc) %}{% endcall %}
-    {% if f.renamed() %}#[serde(rename = "{{ f.cool_name }}")]{% endif %}
+{%- call m::doc(&f.doc) %}{% endcall %}
+    {%- if f.renamed() %}
+    #[serde(rename = "{{ f.cool_name }}")]
+    {%- endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
 }
-{% if p.has_default %}
+{% if p.writes_default() %}
 impl ::core::default::Default for {{ p.name }} {
     fn default() -> Self {
         Self {
@@ -28,13 +34,19 @@ impl ::core::default::Default for {{ p.name }} {
 {% endif %}
 {%- endfor %}
 {%- for e in types.enums %}
+
+
 {% call m::doc(&e.doc) %}{% endcall %}
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, ::serde::Serialize, ::serde::Deserialize{% if !e.variants.is_empty() %}, Default{% endif %})]
 pub enum {{ e.name }} {
 {%- for v in e.variants %}
-    {% call m::doc(&v.doc) %}{% endcall %}
-    {% if loop.first %}#[default]{% endif %}
-    {% if v.name != v.cool_name %}#[serde(rename = "{{ v.cool_name }}")]{% endif %}
+{%- call m::doc(&v.doc) %}{% endcall %}
+    {%- if loop.first %}
+    #[default]
+    {%- endif %}
+    {%- if v.name != v.cool_name %}
+    #[serde(rename = "{{ v.cool_name }}")]
+    {%- endif %}
     {{ v.name }},
 {%- endfor %}
 }
@@ -45,7 +57,7 @@ pub enum {{ e.name }} {
 /// A connection declared `via` a converter calls its method on every packet.
 pub trait Converters {
 {%- for c in types.converters %}
-    {% call m::doc(&c.doc) %}{% endcall %}
+{%- call m::doc(&c.doc) %}{% endcall %}
     /// Converter `{{ c.cool_name }}`.
     fn {{ c.method }}(from: &{{ c.from }}) -> {{ c.to }};
 {%- endfor %}

@@ -92,37 +92,89 @@ pub struct RuntimeArgs {
 }
 
 impl RuntimeArgs {
-    fn dep(&self) -> RuntimeDep {
-        if let Some(path) = &self.runtime_path {
-            let path = std::path::absolute(path).unwrap_or_else(|_| path.clone());
-            return RuntimeDep::Path(path.display().to_string());
-        }
+    /// The runtime dependency of a crate written to `out`.
+    fn dep(&self, out: &Path) -> RuntimeDep {
         if let Some(version) = &self.runtime_version {
             return RuntimeDep::Version(version.clone());
         }
-        default_runtime()
+        let path = match &self.runtime_path {
+            Some(path) => std::path::absolute(path).unwrap_or_else(|_| path.clone()),
+            None => match repository_runtime() {
+                Some(path) => path,
+                None => return RuntimeDep::Version("0.1".to_owned()),
+            },
+        };
+        RuntimeDep::Path(runtime_path_from(&path, out).display().to_string())
     }
 }
 
-/// The runtime this coolc was built beside, if its sources still exist; else the
-/// published version.
-pub fn default_runtime() -> RuntimeDep {
+/// The `runtime/` directory of the repository this coolc was built from, if it still
+/// exists.
+pub fn repository_runtime() -> Option<PathBuf> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
-    match path.canonicalize() {
-        Ok(path) if path.join("Cargo.toml").exists() => RuntimeDep::Path(path.display().to_string()),
-        _ => RuntimeDep::Version("0.1".to_owned()),
+    let path = path.canonicalize().ok()?;
+    path.join("Cargo.toml").exists().then_some(path)
+}
+
+/// The runtime dependency used when none is given: the repository's runtime by
+/// path, else `coolbot = "0.1"`.
+pub fn default_runtime() -> RuntimeDep {
+    match repository_runtime() {
+        Some(path) => RuntimeDep::Path(path.display().to_string()),
+        None => RuntimeDep::Version("0.1".to_owned()),
     }
+}
+
+/// How the manifest in `out` names `runtime`: relative when `out` lies inside the
+/// directory holding the runtime (a crate inside the repository stays relocatable),
+/// absolute otherwise.
+pub fn runtime_path_from(runtime: &Path, out: &Path) -> PathBuf {
+    let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+    let out = normalize(&out);
+    let runtime = normalize(runtime);
+    let Some(root) = runtime.parent() else {
+        return runtime;
+    };
+    let Ok(below) = out.strip_prefix(root) else {
+        return runtime;
+    };
+    let mut relative = PathBuf::new();
+    for _ in below.components() {
+        relative.push("..");
+    }
+    relative.push(runtime.file_name().unwrap_or_default());
+    relative
+}
+
+/// Removes `.` and resolves `..` lexically.
+fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// Runs the CLI on parsed arguments.
 pub fn run(cli: Cli) -> ExitCode {
     let result = match &cli.command {
         Commands::Check { files } => check(&cli, files).map(|_| ()),
-        Commands::Compile { files, out, name, runtime } => {
+        Commands::Compile {
+            files,
+            out,
+            name,
+            runtime,
+        } => {
             let package = name.clone().unwrap_or_else(|| dir_name(out));
-            compile(&cli, files, out, &package, runtime.dep()).map(|_| ())
+            compile(&cli, files, out, &package, runtime.dep(out)).map(|_| ())
         }
-        Commands::New { name, runtime } => new(&cli, name, runtime.dep()),
+        Commands::New { name, runtime } => new(&cli, name, runtime.dep(name)),
     };
     match result {
         Ok(()) => ExitCode::from(EXIT_OK),
@@ -163,7 +215,10 @@ fn render_options(cli: &Cli) -> RenderOptions {
 fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     for file in files {
         if let Err(error) = std::fs::metadata(file) {
-            return Err(Failure::Usage(format!("cannot read {}: {error}", file.display())));
+            return Err(Failure::Usage(format!(
+                "cannot read {}: {error}",
+                file.display()
+            )));
         }
     }
     let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
@@ -196,7 +251,12 @@ fn compile(
         runtime,
         sources: files
             .iter()
-            .map(|f| f.file_name().map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into_owned()))
+            .map(|f| {
+                f.file_name().map_or_else(
+                    || f.display().to_string(),
+                    |n| n.to_string_lossy().into_owned(),
+                )
+            })
             .collect(),
     };
     let krate = lower::lower(&analysis.files, &options);
@@ -230,7 +290,9 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     std::fs::write(&cool, description).map_err(io)?;
     let krate = compile(cli, &[cool], dir, &name, runtime)?;
     let Some(atomic) = krate.atomics.first() else {
-        return Err(Failure::Usage("the starter description has no component".to_owned()));
+        return Err(Failure::Usage(
+            "the starter description has no component".to_owned(),
+        ));
     };
     let module = atomic.module.trim_start_matches("r#");
     std::fs::write(
@@ -243,8 +305,12 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     eprintln!(
         "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",
         dir.display(),
-        Path::new("components").join(cool_file_name(&type_name)).display(),
-        Path::new("components").join(cool_file_name(&type_name)).display(),
+        Path::new("components")
+            .join(cool_file_name(&type_name))
+            .display(),
+        Path::new("components")
+            .join(cool_file_name(&type_name))
+            .display(),
     );
     Ok(())
 }
@@ -260,7 +326,7 @@ pub fn starter_description(type_name: &str) -> String {
 atomic {type_name} {{
     configuration {{
         /// How many periods to count before finishing.
-        limit: u64 = 20;
+        limit: u64 = 10;
     }}
 
     /// How many periods have elapsed.
@@ -285,4 +351,26 @@ atomic {type_name} {{
 }}
 "#
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runtime_path_is_relative_inside_the_repository() {
+        let runtime = Path::new("/repo/runtime");
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/repo/examples/motion")),
+            Path::new("../../runtime")
+        );
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/repo/x/../demo")),
+            Path::new("../runtime")
+        );
+        assert_eq!(
+            runtime_path_from(runtime, Path::new("/tmp/demo")),
+            Path::new("/repo/runtime")
+        );
+    }
 }

@@ -26,6 +26,8 @@ pub enum Severity {
     Error,
     /// The description compiles, but something looks wrong.
     Warning,
+    /// Context for another diagnostic (e.g. an earlier definition in another file).
+    Note,
 }
 
 macro_rules! codes {
@@ -57,6 +59,8 @@ codes! {
     InvalidEscape => "coolc::syntax::invalid_escape",
     /// A number literal does not fit its type.
     InvalidNumber => "coolc::syntax::invalid_number",
+    /// Brackets, comments or prefix operators nest deeper than the parser allows.
+    TooDeep => "coolc::syntax::too_deep",
     /// An imported file could not be read.
     ImportNotFound => "coolc::resolve::import_not_found",
     /// Files import each other in a cycle.
@@ -85,6 +89,8 @@ codes! {
     RustKeyword => "coolc::check::rust_keyword",
     /// A member is not allowed in this kind of component or block.
     MisplacedMember => "coolc::check::misplaced_member",
+    /// A `link` is malformed (empty name, unknown or ill-typed crate table key).
+    BadLink => "coolc::check::bad_link",
     /// A block that may appear once appears twice.
     RepeatedBlock => "coolc::check::repeated_block",
     /// An automaton has no `initial`, or several.
@@ -214,7 +220,7 @@ impl Diagnostic {
         } else {
             let message = message.into();
             let note = Diagnostic {
-                severity: self.severity,
+                severity: Severity::Note,
                 ..Diagnostic::error(self.code, file, span, message.clone())
             }
             .with_label(message);
@@ -240,6 +246,58 @@ impl Diagnostic {
             .first()
             .map(|label| label.span)
             .unwrap_or_default()
+    }
+}
+
+/// A diagnostic is a `miette::Diagnostic` on its own too (without source text: use
+/// [`render`] to show the code it points at).
+impl miette::Diagnostic for Diagnostic {
+    fn code<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
+        Some(Box::new(self.code.as_str()))
+    }
+
+    fn severity(&self) -> Option<miette::Severity> {
+        Some(miette_severity(self.severity))
+    }
+
+    fn help<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
+        self.help
+            .as_ref()
+            .map(|help| Box::new(help) as Box<dyn fmt::Display>)
+    }
+
+    fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
+        Some(Box::new(self.labels.iter().enumerate().map(
+            |(index, label)| {
+                let text = (!label.message.is_empty()).then(|| label.message.clone());
+                let span: SourceSpan = label.span.into();
+                if index == 0 {
+                    LabeledSpan::new_primary_with_span(text, span)
+                } else {
+                    LabeledSpan::new_with_span(text, span)
+                }
+            },
+        )))
+    }
+
+    fn related<'a>(&'a self) -> Option<Box<dyn Iterator<Item = &'a dyn miette::Diagnostic> + 'a>> {
+        if self.related.is_empty() {
+            None
+        } else {
+            Some(Box::new(
+                self.related
+                    .iter()
+                    .map(|related| related as &dyn miette::Diagnostic),
+            ))
+        }
+    }
+}
+
+fn miette_severity(severity: Severity) -> miette::Severity {
+    match severity {
+        Severity::Error => miette::Severity::Error,
+        Severity::Warning => miette::Severity::Warning,
+        Severity::Note => miette::Severity::Advice,
     }
 }
 
@@ -395,10 +453,7 @@ impl miette::Diagnostic for Rendered {
     }
 
     fn severity(&self) -> Option<miette::Severity> {
-        Some(match self.severity {
-            Severity::Error => miette::Severity::Error,
-            Severity::Warning => miette::Severity::Warning,
-        })
+        Some(miette_severity(self.severity))
     }
 
     fn help<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {

@@ -95,6 +95,12 @@ struct UserComponent<'a> {
 }
 
 #[derive(Template)]
+#[template(path = "user_compound.rs", escape = "none")]
+struct UserCompound<'a> {
+    c: &'a ir::Compound,
+}
+
+#[derive(Template)]
 #[template(path = "user_converters.rs", escape = "none")]
 struct UserConverters<'a> {
     methods: &'a [ir::Method],
@@ -181,13 +187,22 @@ fn format_stub(stub: &str) -> String {
 pub fn generated_modules(krate: &ir::Crate) -> Vec<(String, String)> {
     let mut modules = vec![(
         krate.types.module.clone(),
-        format_generated(&render(&TypesRs { krate, types: &krate.types })),
+        format_generated(&render(&TypesRs {
+            krate,
+            types: &krate.types,
+        })),
     )];
     for c in &krate.atomics {
-        modules.push((c.module.clone(), format_generated(&render(&AtomicRs { krate, c }))));
+        modules.push((
+            c.module.clone(),
+            format_generated(&render(&AtomicRs { krate, c })),
+        ));
     }
     for c in &krate.compounds {
-        modules.push((c.module.clone(), format_generated(&render(&CompoundRs { krate, c }))));
+        modules.push((
+            c.module.clone(),
+            format_generated(&render(&CompoundRs { krate, c })),
+        ));
     }
     modules
 }
@@ -244,12 +259,18 @@ pub fn user_modules(krate: &ir::Crate) -> Vec<String> {
         modules.push("converters".to_owned());
     }
     modules.extend(krate.atomics.iter().map(|a| a.module.clone()));
+    modules.extend(krate.compounds.iter().map(|c| c.module.clone()));
     modules
 }
 
 /// The stubs of every user file, for merging.
 pub fn stub_sets(krate: &ir::Crate) -> Vec<StubSet> {
-    let stub = |m: &ir::Method| (m.name.clone(), format_stub(&render(&UserStub { method: m })));
+    let stub = |m: &ir::Method| {
+        (
+            m.name.clone(),
+            format_stub(&render(&UserStub { method: m })),
+        )
+    };
     let mut sets: Vec<StubSet> = krate
         .atomics
         .iter()
@@ -259,6 +280,11 @@ pub fn stub_sets(krate: &ir::Crate) -> Vec<StubSet> {
             stubs: c.methods.iter().map(stub).collect(),
         })
         .collect();
+    sets.extend(krate.compounds.iter().map(|c| StubSet {
+        path: PathBuf::from(format!("src/{}.rs", c.module.trim_start_matches("r#"))),
+        trait_name: "Parts".to_owned(),
+        stubs: c.parts.iter().map(stub).collect(),
+    }));
     if !krate.types.converters.is_empty() {
         sets.push(StubSet {
             path: PathBuf::from("src/converters.rs"),
@@ -281,20 +307,41 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         contents,
         kind: FileKind::User,
     };
-    let mut files = vec![generated("Cargo.toml".to_owned(), render(&CargoToml { krate }) + "\n")];
+    let mut files = vec![generated(
+        "Cargo.toml".to_owned(),
+        render(&CargoToml { krate }) + "\n",
+    )];
     if !krate.system_libs.is_empty() {
-        files.push(generated("build.rs".to_owned(), format_generated(&render(&BuildRs { krate }))));
+        files.push(generated(
+            "build.rs".to_owned(),
+            format_generated(&render(&BuildRs { krate })),
+        ));
     }
-    files.push(generated("src/generated/mod.rs".to_owned(), generated_mod_rs(krate)));
+    files.push(generated(
+        "src/generated/mod.rs".to_owned(),
+        generated_mod_rs(krate),
+    ));
     for (module, text) in generated_modules(krate) {
-        files.push(generated(format!("src/generated/{}.rs", module.trim_start_matches("r#")), text));
+        files.push(generated(
+            format!("src/generated/{}.rs", module.trim_start_matches("r#")),
+            text,
+        ));
     }
     let modules = user_modules(krate);
-    files.push(user("src/lib.rs".to_owned(), format_user(&render(&UserLib { modules: &modules }))));
+    files.push(user(
+        "src/lib.rs".to_owned(),
+        format_user(&render(&UserLib { modules: &modules })),
+    ));
     for c in &krate.atomics {
         files.push(user(
             format!("src/{}.rs", c.module.trim_start_matches("r#")),
             format_user(&render(&UserComponent { c })),
+        ));
+    }
+    for c in &krate.compounds {
+        files.push(user(
+            format!("src/{}.rs", c.module.trim_start_matches("r#")),
+            format_user(&render(&UserCompound { c })),
         ));
     }
     if !krate.types.converters.is_empty() {

@@ -13,11 +13,11 @@ pub const RESERVED_PREFIX: &str = "__cool_";
 
 /// Keywords of Rust 2024 (strict and reserved) that need escaping as identifiers.
 const KEYWORDS: &[&str] = &[
-    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum",
-    "extern", "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod",
-    "move", "mut", "pub", "ref", "return", "self", "Self", "static", "struct", "super", "trait",
-    "true", "type", "unsafe", "use", "where", "while", "abstract", "become", "box", "do",
-    "final", "macro", "override", "priv", "try", "typeof", "unsized", "virtual", "yield",
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut",
+    "pub", "ref", "return", "self", "Self", "static", "struct", "super", "trait", "true", "type",
+    "unsafe", "use", "where", "while", "abstract", "become", "box", "do", "final", "macro",
+    "override", "priv", "try", "typeof", "unsized", "virtual", "yield",
 ];
 
 /// Keywords that cannot be written as raw identifiers.
@@ -65,7 +65,10 @@ fn words(name: &str) -> Vec<String> {
 /// `snake_case` form of a name, unescaped. A name that is already snake case is
 /// returned as is (digits and single underscores kept).
 pub fn snake_raw(name: &str) -> String {
-    if name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_') {
+    if name
+        .chars()
+        .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+    {
         return name.trim_start_matches('_').to_owned().or_if_empty("x");
     }
     words(name).join("_").or_if_empty("x")
@@ -121,7 +124,11 @@ trait OrIfEmpty {
 
 impl OrIfEmpty for String {
     fn or_if_empty(self, fallback: &str) -> String {
-        if self.is_empty() { fallback.to_owned() } else { self }
+        if self.is_empty() {
+            fallback.to_owned()
+        } else {
+            self
+        }
     }
 }
 

@@ -74,6 +74,11 @@ impl Crate {
         }
     }
 
+    /// Whether a `link crate` names `name`.
+    pub fn links_crate(&self, name: &str) -> bool {
+        self.dependencies.iter().any(|d| d.key == name)
+    }
+
     /// The generated modules, in emission order (`types` first).
     pub fn module_names(&self) -> Vec<String> {
         let mut names = vec![self.types.module.clone()];
@@ -139,10 +144,50 @@ pub struct Field {
     pub default: String,
 }
 
+/// Whether `#[derive(Default)]` gives the same values as the written defaults (a
+/// hand-written impl would then trip clippy's `derivable_impls`).
+pub fn derive_default(fields: &[Field]) -> bool {
+    fields.iter().all(|f| default_equivalent(&f.default))
+}
+
+/// Whether a default expression equals its type's `Default::default()`.
+fn default_equivalent(expr: &str) -> bool {
+    if let Some(inner) = expr.strip_prefix('[').and_then(|e| e.strip_suffix(']')) {
+        return match inner.rsplit_once("; ") {
+            Some((item, count)) if count.chars().all(|c| c.is_ascii_digit()) => {
+                default_equivalent(item)
+            }
+            _ => false,
+        };
+    }
+    matches!(
+        expr,
+        "::core::default::Default::default()"
+            | "0"
+            | "0.0"
+            | "false"
+            | "::core::option::Option::None"
+            | "::std::string::String::from(\"\")"
+            | "::std::vec![]"
+    )
+}
+
 impl Field {
     /// Whether the Rust name differs from the `.cool` name (serde needs a rename).
     pub fn renamed(&self) -> bool {
         self.name.trim_start_matches("r#") != self.cool_name
+    }
+}
+
+impl Packet {
+    /// Whether the packet derives `Default` (rather than a written impl).
+    pub fn derives_default(&self) -> bool {
+        self.has_default && derive_default(&self.fields)
+    }
+
+    /// Whether a hand-written `Default` impl is emitted.
+    pub fn writes_default(&self) -> bool {
+        self.has_default && !derive_default(&self.fields)
     }
 }
 
@@ -243,6 +288,17 @@ pub fn doc_literal(doc: &Doc) -> String {
 }
 
 impl Atomic {
+    /// Whether `Config` derives `Default`.
+    pub fn config_derives_default(&self) -> bool {
+        derive_default(&self.config)
+    }
+
+    /// Whether `Vars` derives `Default`.
+    pub fn vars_derive_default(&self) -> bool {
+        let fields: Vec<Field> = self.vars.iter().map(|v| v.field.clone()).collect();
+        derive_default(&fields)
+    }
+
     /// The doc comment as a Rust string literal.
     pub fn doc_literal(&self) -> String {
         doc_literal(&self.doc)
@@ -270,6 +326,11 @@ pub struct Var {
     pub spec_index: Option<usize>,
     /// The variable's type as written in `.cool`.
     pub cool_ty: String,
+    /// Rust expression turning `self.vars.<field>` into a `coolbot::Value`.
+    pub to_value: String,
+    /// Rust expression turning `value: &coolbot::Value` into
+    /// `Result<field type, String>`.
+    pub from_value: String,
 }
 
 impl Var {
@@ -393,6 +454,10 @@ pub struct Compound {
     pub connections: Vec<Connection>,
     /// Whether any connection goes through a converter (the builder is then generic).
     pub uses_converters: bool,
+    /// Name of the user struct implementing `Parts` in the user file.
+    pub user_struct: String,
+    /// The `Parts` methods with their user stubs.
+    pub parts: Vec<Method>,
 }
 
 /// One instance of a compound.
@@ -400,10 +465,40 @@ pub struct Compound {
 pub struct Instance {
     /// Instance name as written.
     pub name: String,
+    /// Its method on the `Parts` trait.
+    pub method: String,
     /// Component type name.
     pub component: String,
-    /// Whether the component is atomic.
-    pub atomic: bool,
+    /// The generated module of the component, when it is atomic.
+    pub module: Option<String>,
+    /// The instance it substitutes, if any (not built at start).
+    pub substitutes: Option<String>,
+    /// Overrides as Rust statements on `config` / `vars` (empty: none).
+    pub overrides: Vec<String>,
+}
+
+impl Instance {
+    /// Whether `build` adds it to the system: an atomic that substitutes nothing.
+    pub fn built(&self) -> bool {
+        self.module.is_some() && self.substitutes.is_none()
+    }
+
+    /// Whether an override sets a configuration field.
+    pub fn sets_config(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("config."))
+    }
+
+    /// Whether an override sets a variable.
+    pub fn sets_vars(&self) -> bool {
+        self.overrides.iter().any(|s| s.starts_with("vars."))
+    }
+}
+
+impl Compound {
+    /// Whether any instance is built.
+    pub fn builds_any(&self) -> bool {
+        self.instances.iter().any(Instance::built)
+    }
 }
 
 /// One `connect` of a compound.

@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 pub mod ast;
+pub mod builder;
 pub mod check;
 pub mod cli;
 pub mod diagnostics;
@@ -40,6 +41,7 @@ pub mod syntax;
 
 use std::path::Path;
 
+pub use builder::Builder;
 pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
 pub use source::SourceMap;
 

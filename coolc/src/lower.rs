@@ -47,18 +47,30 @@ enum TypeDef<'a> {
 struct Lowerer<'a> {
     types: BTreeMap<&'a str, TypeDef<'a>>,
     components: BTreeMap<&'a str, &'a ast::Component>,
+    /// Generated module name of every component.
+    modules: BTreeMap<&'a str, String>,
 }
 
 /// Lowers a set of checked files (imports included) to the IR of one crate.
 pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
-    let mut lowerer = Lowerer { types: BTreeMap::new(), components: BTreeMap::new() };
+    let mut lowerer = Lowerer {
+        types: BTreeMap::new(),
+        components: BTreeMap::new(),
+        modules: BTreeMap::new(),
+    };
     for item in files.iter().flat_map(|f| &f.items) {
         match item {
             ast::Item::Packet(p) => {
-                lowerer.types.entry(&p.name.name).or_insert(TypeDef::Packet(p));
+                lowerer
+                    .types
+                    .entry(&p.name.name)
+                    .or_insert(TypeDef::Packet(p));
             }
             ast::Item::Enum(e) => {
-                lowerer.types.entry(&e.name.name).or_insert(TypeDef::Enum(e));
+                lowerer
+                    .types
+                    .entry(&e.name.name)
+                    .or_insert(TypeDef::Enum(e));
             }
             ast::Item::ExternPacket(e) => {
                 lowerer.types.entry(&e.name.name).or_insert(TypeDef::Extern);
@@ -67,6 +79,23 @@ pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
                 lowerer.components.entry(&c.name.name).or_insert(c);
             }
             ast::Item::Import(_) | ast::Item::Converter(_) => {}
+        }
+    }
+    // Module names in source order; names coolc uses itself are taken.
+    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
+        .map(str::to_owned)
+        .into_iter()
+        .collect();
+    for item in files.iter().flat_map(|f| &f.items) {
+        if let ast::Item::Component(c) = item {
+            if lowerer.modules.contains_key(c.name.name.as_str()) {
+                continue;
+            }
+            let mut module = ident::snake_raw(&c.name.name);
+            while !taken.insert(module.clone()) {
+                module.push_str("_component");
+            }
+            lowerer.modules.insert(&c.name.name, ident::escape(&module));
         }
     }
     lowerer.lower_crate(files, options)
@@ -80,7 +109,11 @@ pub fn package_name(name: &str) -> String {
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
         .collect();
     let trimmed = cleaned.trim_matches('-');
-    if trimmed.is_empty() { "cool-components".to_owned() } else { trimmed.to_owned() }
+    if trimmed.is_empty() {
+        "cool-components".to_owned()
+    } else {
+        trimmed.to_owned()
+    }
 }
 
 fn doc(doc: &ast::Doc) -> ir::Doc {
@@ -154,7 +187,9 @@ impl<'a> Lowerer<'a> {
                 None => "()".to_owned(),
             },
             TypeKind::List(inner) => format!("::std::vec::Vec<{}>", self.rust_type(inner, prefix)),
-            TypeKind::Array(inner, n) => format!("[{}; {}]", self.rust_type(inner, prefix), n.value),
+            TypeKind::Array(inner, n) => {
+                format!("[{}; {}]", self.rust_type(inner, prefix), n.value)
+            }
             TypeKind::Optional(inner) => {
                 format!("::core::option::Option<{}>", self.rust_type(inner, prefix))
             }
@@ -187,7 +222,12 @@ impl<'a> Lowerer<'a> {
     }
 
     /// The Rust expression of a field default: the written value, or `Default`.
-    fn field_default(&self, field_ty: &ast::Type, value: Option<&ast::Expr>, prefix: &str) -> String {
+    fn field_default(
+        &self,
+        field_ty: &ast::Type,
+        value: Option<&ast::Expr>,
+        prefix: &str,
+    ) -> String {
         match value {
             Some(expr) => self.value(expr, Some(field_ty), prefix),
             None => "::core::default::Default::default()".to_owned(),
@@ -200,7 +240,10 @@ impl<'a> Lowerer<'a> {
         if let Some(TypeKind::Optional(inner)) = kind {
             return match &expr.kind {
                 ExprKind::None => "::core::option::Option::None".to_owned(),
-                _ => format!("::core::option::Option::Some({})", self.value(expr, Some(inner), prefix)),
+                _ => format!(
+                    "::core::option::Option::Some({})",
+                    self.value(expr, Some(inner), prefix)
+                ),
             };
         }
         match &expr.kind {
@@ -210,20 +253,27 @@ impl<'a> Lowerer<'a> {
                 _ => n.to_string(),
             },
             ExprKind::Float(x) => format!("{x:?}"),
-            ExprKind::Str(s) => format!("::std::string::String::from({})", ident::string_literal(s)),
+            ExprKind::Str(s) => {
+                format!("::std::string::String::from({})", ident::string_literal(s))
+            }
             ExprKind::Bool(b) => b.to_string(),
             ExprKind::Duration(_) | ExprKind::Frequency(_) => {
                 duration_rust(duration_ns(expr).unwrap_or_default())
             }
             ExprKind::EnumValue { enum_name, variant } => {
-                format!("{prefix}{}::{}", ident::camel(&enum_name.name), ident::camel(&variant.name))
+                format!(
+                    "{prefix}{}::{}",
+                    ident::camel(&enum_name.name),
+                    ident::camel(&variant.name)
+                )
             }
             ExprKind::List(items) => {
                 let inner = match kind {
                     Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
-                let items: Vec<String> = items.iter().map(|e| self.value(e, inner, prefix)).collect();
+                let items: Vec<String> =
+                    items.iter().map(|e| self.value(e, inner, prefix)).collect();
                 match kind {
                     Some(TypeKind::Array(..)) => format!("[{}]", items.join(", ")),
                     _ => format!("::std::vec![{}]", items.join(", ")),
@@ -241,11 +291,17 @@ impl<'a> Lowerer<'a> {
                 }
             }
             ExprKind::None => "::core::option::Option::None".to_owned(),
-            ExprKind::Unary(ast::UnaryOp::Neg, inner) => format!("-{}", self.value(inner, ty, prefix)),
-            ExprKind::Unary(ast::UnaryOp::Not, inner) => format!("!{}", self.value(inner, ty, prefix)),
+            ExprKind::Unary(ast::UnaryOp::Neg, inner) => {
+                format!("-{}", self.value(inner, ty, prefix))
+            }
+            ExprKind::Unary(ast::UnaryOp::Not, inner) => {
+                format!("!{}", self.value(inner, ty, prefix))
+            }
             // Paths and comparisons are not constant values; the checker rejects them
             // as defaults.
-            ExprKind::Path(_) | ExprKind::Binary(..) => "::core::default::Default::default()".to_owned(),
+            ExprKind::Path(_) | ExprKind::Binary(..) => {
+                "::core::default::Default::default()".to_owned()
+            }
         }
     }
 
@@ -260,14 +316,16 @@ impl<'a> Lowerer<'a> {
     }
 
     fn lower_crate(&self, files: &[ast::File], options: &Options) -> ir::Crate {
-        let mut types = ir::Types { module: "types".to_owned(), ..Default::default() };
+        let mut types = ir::Types {
+            module: "types".to_owned(),
+            ..Default::default()
+        };
         let mut atomics = Vec::new();
         let mut compounds = Vec::new();
         let mut dependencies: Vec<ir::Dependency> = Vec::new();
         let mut system_libs: Vec<String> = Vec::new();
         let mut seen_types = BTreeSet::new();
         let mut seen_components = BTreeSet::new();
-        let mut modules: BTreeSet<String> = ["types".to_owned()].into_iter().collect();
         for item in files.iter().flat_map(|f| &f.items) {
             match item {
                 ast::Item::Packet(p) if seen_types.insert(p.name.name.clone()) => {
@@ -339,7 +397,8 @@ impl<'a> Lowerer<'a> {
                         if let ast::Member::Link(link) = member {
                             match &link.kind {
                                 ast::LinkKind::Crate { name, spec } => {
-                                    if !dependencies.iter().any(|d| d.key == toml_key(&name.value)) {
+                                    if !dependencies.iter().any(|d| d.key == toml_key(&name.value))
+                                    {
                                         dependencies.push(ir::Dependency {
                                             key: toml_key(&name.value),
                                             value: crate_spec(spec),
@@ -354,11 +413,7 @@ impl<'a> Lowerer<'a> {
                             }
                         }
                     }
-                    let mut module = ident::snake_raw(&c.name.name);
-                    while !modules.insert(module.clone()) || module == "support" {
-                        module.push_str("_component");
-                    }
-                    let module = ident::escape(&module);
+                    let module = self.modules[c.name.name.as_str()].clone();
                     match c.kind {
                         ast::ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
                         ast::ComponentKind::Compound => compounds.push(self.compound(c, module)),
@@ -397,22 +452,22 @@ impl<'a> Lowerer<'a> {
                 }
                 ast::Member::Variable(v) => {
                     let Some(ty) = &v.ty else { continue };
-                    let default = if v.value.is_none()
-                        && !self.defaultable(ty, &mut BTreeSet::new())
-                    {
-                        // No default and no `Default`: the variable has no value
-                        // until set.
-                        None
-                    } else {
-                        Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
-                    };
-                    let (rust_ty, default) = match default {
+                    let default =
+                        if v.value.is_none() && !self.defaultable(ty, &mut BTreeSet::new()) {
+                            // No default and no `Default`: the variable has no value
+                            // until set.
+                            None
+                        } else {
+                            Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
+                        };
+                    let (rust_ty, default_expr) = match default.clone() {
                         Some(d) => (self.rust_type(ty, GEN_TYPES), d),
                         None => (
                             format!("::core::option::Option<{}>", self.rust_type(ty, GEN_TYPES)),
                             "::core::option::Option::None".to_owned(),
                         ),
                     };
+                    let has_default = default.is_some();
                     let kind = match v.kind {
                         ast::VarKind::Observable => "Observable",
                         ast::VarKind::Controllable => "Controllable",
@@ -422,13 +477,33 @@ impl<'a> Lowerer<'a> {
                         spec_index += 1;
                         spec_index - 1
                     });
+                    let field = ident::snake(&v.name.name);
+                    let (to_value, from_value) = match &ty.kind {
+                        TypeKind::Prim(p) if has_default => (
+                            if *p == Prim::String {
+                                format!("::coolbot::Value::from(self.vars.{field}.clone())")
+                            } else {
+                                format!("::coolbot::Value::from(self.vars.{field})")
+                            },
+                            format!(
+                                "<{}>::try_from(value).map_err(|error| error.to_string())",
+                                prim_rust(*p)
+                            ),
+                        ),
+                        _ => (
+                            format!("super::__cool_to_value(&self.vars.{field})"),
+                            "super::__cool_from_value(value)".to_owned(),
+                        ),
+                    };
                     vars.push(ir::Var {
+                        to_value,
+                        from_value,
                         field: ir::Field {
                             doc: doc(&v.doc),
                             name: ident::snake(&v.name.name),
                             cool_name: v.name.name.clone(),
                             ty: rust_ty,
-                            default,
+                            default: default_expr,
                         },
                         kind: kind.to_owned(),
                         spec_index: index,
@@ -455,9 +530,21 @@ impl<'a> Lowerer<'a> {
                 _ => {}
             }
         }
-        let states_ast: Vec<&ast::State> = automaton.map(|a| a.states.iter().collect()).unwrap_or_default();
-        let state_index = |name: &str| states_ast.iter().position(|s| s.name.name == name).unwrap_or(0);
-        let input_index = |name: &str| inputs.iter().position(|(i, _)| i.name.name == name).unwrap_or(0);
+        let states_ast: Vec<&ast::State> = automaton
+            .map(|a| a.states.iter().collect())
+            .unwrap_or_default();
+        let state_index = |name: &str| {
+            states_ast
+                .iter()
+                .position(|s| s.name.name == name)
+                .unwrap_or(0)
+        };
+        let input_index = |name: &str| {
+            inputs
+                .iter()
+                .position(|(i, _)| i.name.name == name)
+                .unwrap_or(0)
+        };
         let initial = automaton
             .and_then(|a| a.initial.first())
             .map(|i| state_index(&i.name))
@@ -486,7 +573,12 @@ impl<'a> Lowerer<'a> {
                         input_index(&port.name),
                         state_index(&target.name)
                     )),
-                    ast::StateMember::After { delay, without, target, .. } => after.push(format!(
+                    ast::StateMember::After {
+                        delay,
+                        without,
+                        target,
+                        ..
+                    } => after.push(format!(
                         "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
                         duration_rust(duration_ns(delay).unwrap_or_default()),
                         match without {
@@ -497,8 +589,15 @@ impl<'a> Lowerer<'a> {
                     )),
                     ast::StateMember::May { targets, .. } => {
                         for target in targets {
-                            if !may.iter().any(|(_, _, n): &(String, usize, String)| *n == target.name) {
-                                may.push((ident::camel(&target.name), state_index(&target.name), target.name.clone()));
+                            if !may
+                                .iter()
+                                .any(|(_, _, n): &(String, usize, String)| *n == target.name)
+                            {
+                                may.push((
+                                    ident::camel(&target.name),
+                                    state_index(&target.name),
+                                    target.name.clone(),
+                                ));
                             }
                         }
                     }
@@ -508,9 +607,24 @@ impl<'a> Lowerer<'a> {
             let variant = ident::camel(name);
             let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
             let section_kinds = [
-                (entry, "entry", "Entry", "runs once each time the automaton enters the state"),
-                (periodic.is_some(), "periodic", "Periodic", "runs once per period while in the state"),
-                (exit, "exit", "Exit", "runs once each time the automaton leaves the state"),
+                (
+                    entry,
+                    "entry",
+                    "Entry",
+                    "runs once each time the automaton enters the state",
+                ),
+                (
+                    periodic.is_some(),
+                    "periodic",
+                    "Periodic",
+                    "runs once per period while in the state",
+                ),
+                (
+                    exit,
+                    "exit",
+                    "Exit",
+                    "runs once each time the automaton leaves the state",
+                ),
             ];
             for (present, suffix, section, when) in section_kinds {
                 if !present {
@@ -520,8 +634,12 @@ impl<'a> Lowerer<'a> {
                 methods.push(ir::Method {
                     name: method.clone(),
                     doc: vec![format!("The {suffix} section of state `{name}`: {when}.")],
-                    signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"),
-                    user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"),
+                    signature: format!(
+                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
+                    ),
+                    user_signature: format!(
+                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
+                    ),
                     stub_body: vec![
                         format!("// State `{name}`, {suffix} section: {when}."),
                         "let _ = cx;".to_owned(),
@@ -567,7 +685,10 @@ impl<'a> Lowerer<'a> {
                 periodic.unwrap_or_else(|| "None".to_owned()),
                 on.join(", "),
                 after.join(", "),
-                may.iter().map(|(_, i, _)| i.to_string()).collect::<Vec<_>>().join(", ")
+                may.iter()
+                    .map(|(_, i, _)| i.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             states.push(ir::State {
                 doc: doc(&state.doc),
@@ -582,7 +703,7 @@ impl<'a> Lowerer<'a> {
         let mut exceptions = Vec::new();
         for e in exceptions_ast {
             let name = &e.name.name;
-            let handler = ident::method("on_", name, "");
+            let handler = unique(ident::method("on_", name, ""), &methods);
             let plan: Vec<String> = e
                 .plan
                 .iter()
@@ -599,7 +720,11 @@ impl<'a> Lowerer<'a> {
                     ast::PlanKind::Degrade => "::coolbot::PlanStep::Degrade".to_owned(),
                 })
                 .collect();
-            let description = e.description.as_ref().map(|d| d.value.as_str()).unwrap_or("");
+            let description = e
+                .description
+                .as_ref()
+                .map(|d| d.value.as_str())
+                .unwrap_or("");
             methods.push(ir::Method {
                 name: handler.clone(),
                 doc: vec![format!(
@@ -636,11 +761,13 @@ impl<'a> Lowerer<'a> {
                 ast::OutputDef::Poster(ty) => (ty, "post"),
                 ast::OutputDef::Tick | ast::OutputDef::Export(_) => continue,
             };
-            let method = ident::method("answer_", &output.name.name, "");
+            let method = unique(ident::method("answer_", &output.name.name, ""), &methods);
             let name = &output.name.name;
             let stub_body = if self.defaultable(ty, &mut BTreeSet::new()) {
                 vec![
-                    format!("// A consumer pulled from output `{name}`: compute the packet to answer with."),
+                    format!(
+                        "// A consumer pulled from output `{name}`: compute the packet to answer with."
+                    ),
                     "let _ = cx;".to_owned(),
                     "Ok(Default::default())".to_owned(),
                 ]
@@ -649,7 +776,9 @@ impl<'a> Lowerer<'a> {
                     "let _ = cx;".to_owned(),
                     format!(
                         "Err(coolbot::Fault::message({}))",
-                        ident::string_literal(&format!("the pull answer `{method}` is not written yet"))
+                        ident::string_literal(&format!(
+                            "the pull answer `{method}` is not written yet"
+                        ))
                     ),
                 ]
             };
@@ -695,8 +824,7 @@ impl<'a> Lowerer<'a> {
     }
 
     fn timing(&self, timing: Option<&ast::Timing>) -> String {
-        let (mut period, mut max_period, mut max_response, mut priority) =
-            (None, None, None, 0i64);
+        let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0i64);
         let mut qualities = Vec::new();
         for entry in timing.map(|t| t.entries.as_slice()).unwrap_or_default() {
             match entry {
@@ -707,7 +835,10 @@ impl<'a> Lowerer<'a> {
                 ast::TimingEntry::MaxResponse(e) => max_response = duration_ns(e),
                 ast::TimingEntry::Priority(e) => priority = int_value(e).unwrap_or(0),
                 ast::TimingEntry::Quality(names, _) => {
-                    qualities = names.iter().map(|n| ident::string_literal(&n.name)).collect();
+                    qualities = names
+                        .iter()
+                        .map(|n| ident::string_literal(&n.name))
+                        .collect();
                 }
             }
         }
@@ -767,7 +898,10 @@ impl<'a> Lowerer<'a> {
                 (
                     format!("::coolbot::port::UfifoIn<{rust}>"),
                     format!("::coolbot::port::UfifoIn::new({}, {max})", size.value),
-                    format!("::coolbot::InputKind::Ufifo {{ initial: {}, max: {max} }}", size.value),
+                    format!(
+                        "::coolbot::InputKind::Ufifo {{ initial: {}, max: {max} }}",
+                        size.value
+                    ),
                     cool,
                 )
             }
@@ -851,11 +985,15 @@ impl<'a> Lowerer<'a> {
             match member {
                 ast::Member::Instance(i) => instances.push(ir::Instance {
                     name: i.name.name.clone(),
+                    method: ident::snake(&i.name.name),
                     component: i.component.name.clone(),
-                    atomic: self
+                    module: self
                         .components
                         .get(i.component.name.as_str())
-                        .is_some_and(|c| c.kind == ast::ComponentKind::Atomic),
+                        .filter(|c| c.kind == ast::ComponentKind::Atomic)
+                        .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
+                    substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
+                    overrides: self.overrides(i),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -871,7 +1009,29 @@ impl<'a> Lowerer<'a> {
                 _ => {}
             }
         }
+        let parts = instances
+            .iter()
+            .filter(|i| i.built())
+            .filter_map(|i| {
+                let module = i.module.as_ref()?;
+                Some(ir::Method {
+                    name: i.method.clone(),
+                    doc: Vec::new(),
+                    signature: String::new(),
+                    user_signature: format!(
+                        "fn {}(&mut self) -> impl crate::generated::{module}::Behavior",
+                        i.method
+                    ),
+                    stub_body: vec![
+                        format!("// Instance `{}`: the behavior it runs.", i.name),
+                        format!("crate::{module}::{}::default()", ident::camel(&i.component)),
+                    ],
+                })
+            })
+            .collect();
         ir::Compound {
+            user_struct: format!("{}Parts", ident::camel_raw(&c.name.name)),
+            parts,
             doc: doc(&c.doc),
             type_name: c.name.name.clone(),
             module,
@@ -879,6 +1039,62 @@ impl<'a> Lowerer<'a> {
             instances,
             connections,
         }
+    }
+}
+
+/// `name`, or `name_2`, `name_3`... when a method of that name exists (a state `on`
+/// with an exit section and an exception `exit` would both want `on_exit`).
+fn unique(name: String, methods: &[ir::Method]) -> String {
+    let taken = |candidate: &str| methods.iter().any(|m| m.name == candidate);
+    if !taken(&name) {
+        return name;
+    }
+    (2..)
+        .map(|n| format!("{name}_{n}"))
+        .find(|c| !taken(c))
+        .unwrap_or(name)
+}
+
+impl Lowerer<'_> {
+    /// `config.x = value;` / `vars.x = value;` for an instance's overrides: a name
+    /// that is both a configuration field and a controllable variable sets both.
+    fn overrides(&self, instance: &ast::Instance) -> Vec<String> {
+        let Some(component) = self
+            .components
+            .get(instance.component.name.as_str())
+            .filter(|c| c.kind == ast::ComponentKind::Atomic)
+        else {
+            return Vec::new();
+        };
+        let mut statements = Vec::new();
+        for o in &instance.overrides {
+            for member in &component.members {
+                match member {
+                    ast::Member::Configuration(cfg) => {
+                        for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
+                            statements.push(format!(
+                                "config.{} = {};",
+                                ident::snake(&f.name.name),
+                                self.value(&o.value, Some(&f.ty), GEN_TYPES)
+                            ));
+                        }
+                    }
+                    ast::Member::Variable(v)
+                        if v.kind == ast::VarKind::Controllable && v.name.name == o.name.name =>
+                    {
+                        if let Some(ty) = &v.ty {
+                            statements.push(format!(
+                                "vars.{} = {};",
+                                ident::snake(&v.name.name),
+                                self.value(&o.value, Some(ty), GEN_TYPES)
+                            ));
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        statements
     }
 }
 
@@ -892,7 +1108,11 @@ fn int_value(expr: &ast::Expr) -> Option<i64> {
 
 /// A TOML key: bare when possible, quoted otherwise.
 fn toml_key(name: &str) -> String {
-    if !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+    if !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
         name.to_owned()
     } else {
         ir::toml_string(name)
@@ -906,10 +1126,17 @@ fn toml_value(expr: &ast::Expr) -> String {
         ExprKind::Int(n) => n.to_string(),
         ExprKind::Float(x) => format!("{x:?}"),
         ExprKind::List(items) => {
-            format!("[{}]", items.iter().map(toml_value).collect::<Vec<_>>().join(", "))
+            format!(
+                "[{}]",
+                items.iter().map(toml_value).collect::<Vec<_>>().join(", ")
+            )
         }
         ExprKind::Path(parts) => ir::toml_string(
-            &parts.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join("."),
+            &parts
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join("."),
         ),
         _ => "\"\"".to_owned(),
     }
@@ -925,5 +1152,85 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
                 .collect();
             format!("{{ {} }}", entries.join(", "))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lower_text(text: &str) -> ir::Crate {
+        let analysis = crate::analyze_text("t.cool", text);
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(crate::RenderOptions::plain())
+        );
+        lower(&analysis.files, &Options::default())
+    }
+
+    #[test]
+    fn colliding_method_names_get_a_suffix() {
+        let krate = lower_text(
+            "atomic A { exception exit; automaton { initial on; state on { entry; exit; } } }",
+        );
+        let names: Vec<&str> = krate.atomics[0]
+            .methods
+            .iter()
+            .map(|m| m.name.as_str())
+            .collect();
+        assert_eq!(names, ["on_entry", "on_exit", "on_exit_2"]);
+    }
+
+    /// Lowers text whose only errors are Rust keywords used as names (the checker
+    /// rejects them; lowering escapes them anyway, as defence in depth).
+    fn lower_keywords(text: &str) -> ir::Crate {
+        let analysis = crate::analyze_text("t.cool", text);
+        let codes: Vec<&str> = analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect();
+        assert!(
+            codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+            "{codes:?}"
+        );
+        lower(&analysis.files, &Options::default())
+    }
+
+    #[test]
+    fn keywords_and_casing_become_rust_names() {
+        let krate = lower_keywords(
+            "packet P { type: u8 }\natomic Loop { observable match: u8 = 1; automaton { initial move; state move { entry; } } }",
+        );
+        let packet = &krate.types.packets[0];
+        assert_eq!(packet.fields[0].name, "r#type");
+        assert!(!packet.fields[0].renamed());
+        let atomic = &krate.atomics[0];
+        assert_eq!(atomic.module, "r#loop");
+        assert_eq!(atomic.states[0].variant, "Move");
+        assert_eq!(atomic.methods[0].name, "move_entry");
+    }
+
+    #[test]
+    fn defaults_follow_the_declared_type() {
+        let krate = lower_text(
+            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2] }",
+        );
+        let defaults: Vec<&str> = krate.types.packets[0]
+            .fields
+            .iter()
+            .map(|f| f.default.as_str())
+            .collect();
+        assert_eq!(
+            defaults,
+            [
+                "1.5",
+                "::std::time::Duration::from_nanos(10000000)",
+                "[true; 2]",
+                "::core::option::Option::Some(3)",
+                "::std::vec![1, 2]"
+            ]
+        );
     }
 }

@@ -98,7 +98,11 @@ pub fn merge_stubs(text: &str, set: &StubSet) -> Result<Merged, MergeError> {
         })
         .collect();
     if missing.is_empty() {
-        return Ok(Merged { text: text.to_owned(), added: Vec::new(), stale });
+        return Ok(Merged {
+            text: text.to_owned(),
+            added: Vec::new(),
+            stale,
+        });
     }
     let close = block.brace_token.span.close().span().start();
     let brace = byte_offset(text, close.line, close.column);
@@ -140,7 +144,10 @@ fn byte_offset(text: &str, line: usize, column: usize) -> usize {
 }
 
 /// Adds `pub mod m;` lines for `modules` not declared in `lib_rs`.
-pub fn merge_modules(lib_rs: &str, modules: &[String]) -> Result<(String, Vec<String>), MergeError> {
+pub fn merge_modules(
+    lib_rs: &str,
+    modules: &[String],
+) -> Result<(String, Vec<String>), MergeError> {
     let file = syn::parse_file(lib_rs).map_err(|e| MergeError::Parse(e.to_string()))?;
     let declared: Vec<String> = file
         .items
@@ -150,8 +157,11 @@ pub fn merge_modules(lib_rs: &str, modules: &[String]) -> Result<(String, Vec<St
             _ => None,
         })
         .collect();
-    let missing: Vec<String> =
-        modules.iter().filter(|m| !declared.contains(m)).cloned().collect();
+    let missing: Vec<String> = modules
+        .iter()
+        .filter(|m| !declared.contains(m))
+        .cloned()
+        .collect();
     let mut text = lib_rs.to_owned();
     if !missing.is_empty() && !text.ends_with('\n') {
         text.push('\n');
@@ -176,7 +186,12 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
 /// Writes the crate for `krate` into `dir`, merging into existing user files.
 pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
     let files = emit::emit_crate(krate);
-    write_files(dir, &files, &emit::stub_sets(krate), &emit::user_modules(krate))
+    write_files(
+        dir,
+        &files,
+        &emit::stub_sets(krate),
+        &emit::user_modules(krate),
+    )
 }
 
 /// Writes emitted `files` into `dir` (see the module doc).
@@ -288,12 +303,18 @@ mod tests {
     #[test]
     fn empty_impl_on_one_line() {
         let merged = merge_stubs("struct X;\nimpl m::Behavior for X {}\n", &set(&["a"])).unwrap();
-        assert_eq!(merged.text, "struct X;\nimpl m::Behavior for X {\n\n    fn a(&mut self) {}\n}\n");
+        assert_eq!(
+            merged.text,
+            "struct X;\nimpl m::Behavior for X {\n\n    fn a(&mut self) {}\n}\n"
+        );
     }
 
     #[test]
     fn unparsable_or_missing_impl_is_an_error() {
-        assert!(matches!(merge_stubs("fn (", &set(&["a"])), Err(MergeError::Parse(_))));
+        assert!(matches!(
+            merge_stubs("fn (", &set(&["a"])),
+            Err(MergeError::Parse(_))
+        ));
         assert_eq!(
             merge_stubs("struct X;", &set(&["a"])),
             Err(MergeError::NoImpl("Behavior".to_owned()))
@@ -302,8 +323,11 @@ mod tests {
 
     #[test]
     fn modules_are_appended() {
-        let (text, added) =
-            merge_modules("pub mod generated;\npub mod a;", &["a".to_owned(), "b".to_owned()]).unwrap();
+        let (text, added) = merge_modules(
+            "pub mod generated;\npub mod a;",
+            &["a".to_owned(), "b".to_owned()],
+        )
+        .unwrap();
         assert_eq!(added, ["b"]);
         assert_eq!(text, "pub mod generated;\npub mod a;\npub mod b;\n");
     }

@@ -253,7 +253,12 @@ impl Symbols {
                 .collect(),
             ..Symbols::default()
         };
-        for file in files {
+        // Imported files first, so a clash is reported in the file that imports (and
+        // so sees) the earlier definition.
+        for file in dependency_order(files.len(), imports)
+            .into_iter()
+            .filter_map(|index| files.get(index))
+        {
             for (index, item) in file.items.iter().enumerate() {
                 let (kind, name) = match item {
                     ast::Item::Import(_) => continue,
@@ -384,6 +389,26 @@ impl Symbols {
             }
         }
     }
+}
+
+/// File indices with every file after the files it imports (cycles cut).
+fn dependency_order(count: usize, imports: &[Vec<FileId>]) -> Vec<usize> {
+    fn visit(index: usize, imports: &[Vec<FileId>], seen: &mut Vec<bool>, order: &mut Vec<usize>) {
+        if index >= seen.len() || seen[index] {
+            return;
+        }
+        seen[index] = true;
+        for imported in imports.get(index).into_iter().flatten() {
+            visit(imported.0 as usize, imports, seen, order);
+        }
+        order.push(index);
+    }
+    let mut seen = vec![false; count];
+    let mut order = Vec::with_capacity(count);
+    for index in 0..count {
+        visit(index, imports, &mut seen, &mut order);
+    }
+    order
 }
 
 #[cfg(test)]

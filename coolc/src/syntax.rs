@@ -58,7 +58,36 @@ const MEMBER_KEYWORDS: &[&str] = &[
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
 pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
-    pest::set_error_detail(true);
+    if let Some(diagnostic) = too_deep(file, text) {
+        return (
+            ast::File {
+                id: file,
+                items: Vec::new(),
+            },
+            vec![diagnostic],
+        );
+    }
+    // The generated parser recurses once per nesting level with large frames (in
+    // debug builds especially); a dedicated thread with a roomy stack keeps
+    // `MAX_DEPTH` levels far from the caller's stack limit.
+    std::thread::scope(|scope| {
+        let worker = std::thread::Builder::new()
+            .name("coolc-parse".to_owned())
+            .stack_size(PARSER_STACK)
+            .spawn_scoped(scope, || parse_items(file, text));
+        match worker {
+            Ok(handle) => handle
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+            Err(_) => parse_items(file, text),
+        }
+    })
+}
+
+/// Stack size of the parsing thread.
+const PARSER_STACK: usize = 64 << 20;
+
+fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     let mut parser = FileParser {
         file,
         text,
@@ -66,6 +95,101 @@ pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     };
     let items = parser.items();
     (ast::File { id: file, items }, parser.diagnostics)
+}
+
+/// Parses with `rule`; on failure, parses again with pest's error detail (expected
+/// tokens) switched on, which slows parsing, so it stays off until the first error.
+/// The switch is process-wide and only ever turned on, so every error is reported
+/// from a detailed parse, whatever other threads do.
+fn parse_detailed(
+    rule: Rule,
+    input: &str,
+) -> Result<pest::iterators::Pairs<'_, Rule>, Box<pest::error::Error<Rule>>> {
+    CoolParser::parse(rule, input).or_else(|_| {
+        pest::set_error_detail(true);
+        CoolParser::parse(rule, input).map_err(Box::new)
+    })
+}
+
+/// How deep brackets, block comments and runs of prefix operators may nest. Real
+/// descriptions stay far below; the limit keeps the recursive parser and the checks
+/// within the stack on any input.
+pub const MAX_DEPTH: usize = 64;
+
+/// Reports nesting beyond [`MAX_DEPTH`] (the file is then not parsed further).
+fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
+    let bytes = text.as_bytes();
+    let mut depth = 0usize;
+    let mut comment_depth = 0usize;
+    let mut prefix_run = 0usize;
+    let mut index = 0;
+    while index < bytes.len() {
+        let byte = bytes[index];
+        let next = bytes.get(index + 1).copied();
+        let mut deepest = None;
+        if comment_depth > 0 {
+            if byte == b'/' && next == Some(b'*') {
+                comment_depth += 1;
+                deepest = Some((comment_depth, "block comments"));
+                index += 1;
+            } else if byte == b'*' && next == Some(b'/') {
+                comment_depth -= 1;
+                index += 1;
+            }
+        } else {
+            match byte {
+                b'/' if next == Some(b'/') => {
+                    while index < bytes.len() && bytes[index] != b'\n' {
+                        index += 1;
+                    }
+                    continue;
+                }
+                b'/' if next == Some(b'*') => {
+                    comment_depth = 1;
+                    index += 1;
+                }
+                b'"' => {
+                    index += 1;
+                    while index < bytes.len() && bytes[index] != b'"' && bytes[index] != b'\n' {
+                        index += if bytes[index] == b'\\' { 2 } else { 1 };
+                    }
+                }
+                b'(' | b'[' | b'{' => {
+                    depth += 1;
+                    deepest = Some((depth, "brackets"));
+                }
+                b')' | b']' | b'}' => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+            if matches!(byte, b'!' | b'-') && next != Some(b'>') && next != Some(b'=') {
+                prefix_run += 1;
+                deepest = deepest.or(Some((prefix_run, "prefix operators")));
+            } else if !byte.is_ascii_whitespace() {
+                prefix_run = 0;
+            }
+        }
+        if let Some((level, what)) = deepest
+            && level > MAX_DEPTH
+        {
+            let start = index.min(text.len());
+            let end = text[start..]
+                .chars()
+                .next()
+                .map_or(start, |c| start + c.len_utf8());
+            return Some(
+                Diagnostic::error(
+                    Code::TooDeep,
+                    file,
+                    Span::new(start, end),
+                    format!("{what} nest deeper than {MAX_DEPTH} levels"),
+                )
+                .with_label("too deep")
+                .with_help("simplify this part of the file; nothing after it was parsed"),
+            );
+        }
+        index += 1;
+    }
+    None
 }
 
 /// Parses `input` with `rule` in full (for grammar tests): true when the whole input
@@ -91,7 +215,7 @@ impl<'t> FileParser<'t> {
         let mut offset = 0;
         while offset <= self.text.len() {
             let rest = &self.text[offset..];
-            match CoolParser::parse(Rule::item_step, rest) {
+            match parse_detailed(Rule::item_step, rest) {
                 Ok(mut pairs) => {
                     let Some(pair) = pairs.next() else { break };
                     if pair.as_rule() == Rule::EOI {
@@ -160,7 +284,7 @@ impl<'t> FileParser<'t> {
         let mut offset = start + head.as_span().end();
         let mut members = Vec::new();
         let end = loop {
-            match CoolParser::parse(Rule::member_step, &self.text[offset..]) {
+            match parse_detailed(Rule::member_step, &self.text[offset..]) {
                 Ok(mut pairs) => {
                     let pair = pairs.next()?;
                     let pair_end = offset + pair.as_span().end();
@@ -247,24 +371,44 @@ fn syntax_error(
     error: &pest::error::Error<Rule>,
     base: usize,
 ) -> Diagnostic {
-    let position = match error.location {
+    let mut position = match error.location {
         InputLocation::Pos(pos) => pos,
         InputLocation::Span((start, _)) => start,
     };
     let mut expected: Vec<String> = Vec::new();
-    if let ErrorVariant::ParsingError { positives, .. } = &error.variant {
-        for rule in positives {
-            if let Some(name) = rule_name(*rule) {
-                expected.push(name.to_owned());
+    let attempts = error.parse_attempts();
+    let further = attempts
+        .as_ref()
+        .filter(|attempts| attempts.max_position > position);
+    if let Some(attempts) = further {
+        // A literal token was expected further on than any rule: point there.
+        position = attempts.max_position;
+        let tokens: Vec<String> = attempts
+            .expected_tokens()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        let punctuation: Vec<&String> = tokens.iter().filter(|t| is_punctuation_token(t)).collect();
+        if punctuation.is_empty() {
+            let words = tokens
+                .iter()
+                .filter(|t| !t.is_empty() && t.chars().all(|c| c.is_alphanumeric() || c == '_'));
+            expected.extend(words.map(|t| format!("`{t}`")));
+        } else {
+            expected.extend(punctuation.into_iter().map(|t| format!("`{t}`")));
+        }
+    } else {
+        if let ErrorVariant::ParsingError { positives, .. } = &error.variant {
+            for rule in positives {
+                if let Some(name) = rule_name(*rule) {
+                    expected.push(name.to_owned());
+                }
             }
         }
-    }
-    if let Some(attempts) = error.parse_attempts() {
-        if attempts.max_position == position {
+        if let Some(attempts) = attempts.filter(|attempts| attempts.max_position == position) {
             for token in attempts.expected_tokens() {
                 let token = token.to_string();
-                let is_punctuation = token.chars().all(|c| c.is_ascii_punctuation() && c != '_');
-                if !token.is_empty() && is_punctuation && token != "///" {
+                if is_punctuation_token(&token) {
                     expected.push(format!("`{token}`"));
                 }
             }
@@ -289,8 +433,23 @@ fn syntax_error(
     .with_label("unexpected here")
 }
 
+/// True for a punctuation token worth naming (not a comment opener).
+fn is_punctuation_token(token: &str) -> bool {
+    !token.is_empty()
+        && token.chars().all(|c| c.is_ascii_punctuation() && c != '_')
+        && !matches!(token, "//" | "///" | "/*" | "*/")
+}
+
 /// Collapses long keyword lists into what they mean.
-fn summarize(expected: Vec<String>) -> Vec<String> {
+fn summarize(mut expected: Vec<String>) -> Vec<String> {
+    if expected.iter().any(|e| e == "a type") {
+        expected.retain(|e| e != "`[`");
+    }
+    let starts_expression = |e: &String| ["`(`", "`[`", "`!`", "`-`", "`\"`"].contains(&e.as_str());
+    if expected.iter().any(|e| e == "`(`") && expected.iter().any(|e| e == "`!`" || e == "`-`") {
+        expected.retain(|e| !starts_expression(e));
+        expected.insert(0, "an expression".to_owned());
+    }
     let has = |name: &str| expected.iter().any(|e| e == name);
     if has("`input`") && has("`connect`") && has("`timing`") {
         let mut rest: Vec<String> = expected
@@ -490,6 +649,7 @@ fn next_start(
     let mut index = start;
     let mut line_start = true;
     let mut fallback = None;
+    let mut first_token: Option<usize> = None;
     while index < bytes.len() {
         let byte = bytes[index];
         match byte {
@@ -522,7 +682,9 @@ fn next_start(
             _ => {}
         }
         let at_line_start = std::mem::replace(&mut line_start, false);
-        if index >= error_at && index > start && at_line_start {
+        let is_first_token = first_token.is_none();
+        first_token.get_or_insert(index);
+        if index >= error_at && !is_first_token && at_line_start {
             let word_end = text[index..]
                 .find(|c: char| !(c.is_alphanumeric() || c == '_'))
                 .map_or(text.len(), |n| index + n);
@@ -600,8 +762,59 @@ struct Builder<'d> {
 
 type P<'i> = Pair<'i, Rule>;
 
+/// True for the `kw_*` keyword rules.
 fn is_keyword(rule: Rule) -> bool {
-    format!("{rule:?}").starts_with("kw_")
+    matches!(
+        rule,
+        Rule::kw_import
+            | Rule::kw_packet
+            | Rule::kw_enum
+            | Rule::kw_extern
+            | Rule::kw_converter
+            | Rule::kw_link
+            | Rule::kw_crate
+            | Rule::kw_system
+            | Rule::kw_configuration
+            | Rule::kw_input
+            | Rule::kw_output
+            | Rule::kw_pull
+            | Rule::kw_tick
+            | Rule::kw_fifo
+            | Rule::kw_ufifo
+            | Rule::kw_last
+            | Rule::kw_poster
+            | Rule::kw_data
+            | Rule::kw_max
+            | Rule::kw_timing
+            | Rule::kw_period
+            | Rule::kw_max_response
+            | Rule::kw_priority
+            | Rule::kw_quality
+            | Rule::kw_exception
+            | Rule::kw_retry
+            | Rule::kw_every
+            | Rule::kw_goto
+            | Rule::kw_ignore
+            | Rule::kw_degrade
+            | Rule::kw_initial
+            | Rule::kw_state
+            | Rule::kw_entry
+            | Rule::kw_exit
+            | Rule::kw_periodic
+            | Rule::kw_on
+            | Rule::kw_after
+            | Rule::kw_without
+            | Rule::kw_may
+            | Rule::kw_when
+            | Rule::kw_instance
+            | Rule::kw_substitutes
+            | Rule::kw_redundant
+            | Rule::kw_connect
+            | Rule::kw_via
+            | Rule::kw_error
+            | Rule::kw_recovery
+            | Rule::kw_deadline
+    )
 }
 
 /// The children of a pair, keywords and doc lines removed.
@@ -1578,6 +1791,20 @@ mod tests {
             panic!("not a component")
         };
         assert_eq!(component.members.len(), 2);
+    }
+
+    #[test]
+    fn keyword_rules_are_exactly_the_kw_rules() {
+        for rule in Rule::all_rules() {
+            assert_eq!(
+                is_keyword(*rule),
+                format!("{rule:?}").starts_with("kw_"),
+                "{rule:?}"
+            );
+            if is_keyword(*rule) {
+                assert!(rule_name(*rule).is_some(), "{rule:?} has no readable name");
+            }
+        }
     }
 
     #[test]

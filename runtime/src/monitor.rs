@@ -5,7 +5,7 @@
 //! written by the component's thread at each change) plus the observers' channels.
 //! Every change is sent to every observer as it happens; nobody polls.
 
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -26,7 +26,7 @@ pub const OBSERVER_CAPACITY: usize = 4096;
 pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A command through the control port `c`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Command {
     /// Force a controllable state (the default controllable variable `new_state`).
     SetState(Controllable),
@@ -83,7 +83,8 @@ pub struct Monitor {
     pub error: Option<String>,
     /// User variables (observable and controllable), in declaration order.
     pub variables: Vec<(String, Value)>,
-    /// The component thread's CPU time (updated at least every millisecond of activity).
+    /// The component thread's CPU time (read on state changes and before the thread
+    /// waits, at most every 10 ms while it is busy).
     pub cpu_time: Duration,
     /// Wall-clock time spent in user code (hooks and sections).
     pub elapsed_time: Duration,
@@ -170,7 +171,10 @@ pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
     inputs: Vec<(&'static str, ErasedInput)>,
+    dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// The component's thread, once spawned.
+    pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
 
 impl Shared {
@@ -179,14 +183,17 @@ impl Shared {
             monitor: Mutex::new(monitor),
             observers: Mutex::new(Vec::new()),
             inputs,
+            dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            thread: std::sync::OnceLock::new(),
         }
     }
 
-    /// Change the monitor with `f`, then send the events `f` returned.
+    /// Change the monitor with `f`, and send the events `f` returned before anyone can
+    /// see the change: a snapshot that shows a change implies its event is queued.
     pub(crate) fn update(&self, f: impl FnOnce(&mut Monitor) -> Vec<MonitorEvent>) {
-        let events = f(&mut lock(&self.monitor));
-        for event in events {
+        let mut monitor = lock(&self.monitor);
+        for event in f(&mut monitor) {
             self.publish(event);
         }
     }
@@ -196,24 +203,21 @@ impl Shared {
         f(&mut lock(&self.monitor));
     }
 
+    /// Send `event` to every observer. Lock order: the monitor (if held) before the
+    /// observers; this never takes the monitor lock.
     pub(crate) fn publish(&self, event: MonitorEvent) {
         let mut observers = lock(&self.observers);
         if observers.is_empty() {
             return;
         }
-        let mut dropped = 0;
         observers.retain(|observer| match observer.try_send(event.clone()) {
             Ok(()) => true,
             Err(TrySendError::Full(_)) => {
-                dropped += 1;
+                self.dropped.fetch_add(1, Ordering::Relaxed);
                 true
             }
             Err(TrySendError::Disconnected(_)) => false,
         });
-        drop(observers);
-        if dropped > 0 {
-            lock(&self.monitor).dropped_events += dropped;
-        }
     }
 
     pub(crate) fn announce_overflow(&self, port: &'static str, lost: u64, total: u64) {
@@ -238,6 +242,7 @@ impl Shared {
             .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
             .collect();
         monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
+        monitor.dropped_events = self.dropped.load(Ordering::Relaxed);
         monitor
     }
 
@@ -285,6 +290,8 @@ pub struct Handle {
     pub(crate) name: Arc<str>,
     pub(crate) shared: Arc<Shared>,
     pub(crate) control: Sender<ControlMessage>,
+    /// The component's doorbell: rung after each command is queued.
+    pub(crate) bell: Sender<()>,
     pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
@@ -333,7 +340,14 @@ impl Handle {
                 "the component has not been started (System::start)",
             ));
         }
-        let deadline = Instant::now() + self.command_timeout;
+        if self.shared.thread.get() == Some(&std::thread::current().id()) {
+            // The thread would wait for itself until the timeout.
+            return Err(self.rejected(
+                &command,
+                "a component cannot command itself from its own thread (use Context::end to finish)",
+            ));
+        }
+        let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let is_dead = command == Command::SetState(Controllable::Dead);
@@ -348,6 +362,7 @@ impl Handle {
                 "the component's thread has ended or its control queue is full",
             ));
         }
+        let _ = self.bell.try_send(());
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),
@@ -367,7 +382,7 @@ impl Handle {
                 }
                 // Taken just now: the transition is under way.
                 if answers
-                    .recv_deadline(Instant::now() + self.command_timeout)
+                    .recv_deadline(crate::thread::later(Instant::now(), self.command_timeout))
                     .is_err()
                     && !is_dead
                 {
@@ -410,13 +425,14 @@ impl Handle {
     }
 
     /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),
-    /// for at most `timeout`.
+    /// for at most `timeout`. `pred` is evaluated on each event, so it should depend on
+    /// the monitor only (a change nobody announces does not wake the wait).
     pub fn wait_for(
         &self,
         pred: impl Fn(&Monitor) -> bool,
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

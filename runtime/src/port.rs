@@ -28,7 +28,7 @@ pub const DEFAULT_BLOCK_TIMEOUT: Duration = Duration::from_millis(100);
 
 /// How many pull requests may wait at one output before further requests fail with
 /// [`PullError::RequestQueueFull`].
-pub const PULL_REQUEST_CAPACITY: usize = 1024;
+pub const PULL_REQUEST_CAPACITY: usize = 64;
 
 /// What a port carries: any clonable, sendable, shareable `'static` type.
 pub trait Packet: Clone + Send + Sync + 'static {}
@@ -157,7 +157,7 @@ impl InputCore {
         timeout: Duration,
         mut ready: impl FnMut() -> Option<R>,
     ) -> Result<R, PullError> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::thread::later(Instant::now(), timeout);
         self.pull_waiting.store(true, Ordering::Release);
         while self.pull_signal.1.try_recv().is_ok() {}
         let result = self.request().and_then(|()| {
@@ -423,6 +423,13 @@ impl<T: Packet> FifoIn<T> {
         self.inner.receiver.try_iter()
     }
 
+    /// Wait up to `timeout` for a packet. This blocks the calling thread: meant for
+    /// threads outside the system (tests, tools), not for sections, which should
+    /// react to arrivals with `on` transitions instead.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<T> {
+        self.inner.receiver.recv_timeout(timeout).ok()
+    }
+
     /// The number of queued packets.
     pub fn len(&self) -> usize {
         self.inner.receiver.len()
@@ -665,7 +672,8 @@ impl<T: Packet> Default for LastIn<T> {
 
 /// Where a poster input reads from: a producer's post, maybe through a converter.
 pub(crate) trait PosterSource<T>: Send + Sync {
-    fn read(&self) -> Option<T>;
+    /// The posted value and its sequence number, read together.
+    fn read(&self) -> (Option<T>, u64);
     fn seq(&self) -> u64;
 }
 
@@ -703,9 +711,9 @@ impl<T: Packet> PosterIn<T> {
     /// The producer's currently posted value (`None` if unconnected or nothing posted).
     pub fn read(&self) -> Option<T> {
         let source = read(&self.inner.source);
-        let source = source.as_ref()?;
-        self.inner.seen.store(source.seq(), Ordering::Release);
-        source.read()
+        let (value, seq) = source.as_ref()?.read();
+        self.inner.seen.store(seq, Ordering::Release);
+        value
     }
 
     /// Whether the producer posted since the last `read`.
@@ -860,8 +868,10 @@ pub(crate) struct PosterOutInner<T> {
 }
 
 impl<T: Packet> PosterSource<T> for PosterOutInner<T> {
-    fn read(&self) -> Option<T> {
-        read(&self.slot).clone()
+    fn read(&self) -> (Option<T>, u64) {
+        // `post` bumps the sequence number under the write lock: consistent here.
+        let slot = read(&self.slot);
+        (slot.clone(), self.seq.load(Ordering::Acquire))
     }
 
     fn seq(&self) -> u64 {
@@ -875,10 +885,10 @@ struct ConvertedPoster<A, B> {
 }
 
 impl<A: Packet, B: Packet> PosterSource<B> for ConvertedPoster<A, B> {
-    fn read(&self) -> Option<B> {
-        read(&self.source.slot)
-            .as_ref()
-            .map(|value| (self.convert)(value))
+    fn read(&self) -> (Option<B>, u64) {
+        let slot = read(&self.source.slot);
+        let seq = self.source.seq.load(Ordering::Acquire);
+        (slot.as_ref().map(|value| (self.convert)(value)), seq)
     }
 
     fn seq(&self) -> u64 {
@@ -901,8 +911,11 @@ impl<T: Packet> PosterOut<T> {
 
     /// Post a value: connected poster inputs read it from now on and are woken.
     pub fn post(&self, packet: T) {
-        *write(&self.inner.slot) = Some(packet);
-        self.inner.seq.fetch_add(1, Ordering::AcqRel);
+        {
+            let mut slot = write(&self.inner.slot);
+            *slot = Some(packet);
+            self.inner.seq.fetch_add(1, Ordering::AcqRel);
+        }
         for reader in read(&self.inner.readers).iter() {
             reader.arrived();
         }

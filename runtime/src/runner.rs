@@ -1,9 +1,9 @@
 //! The component thread: one loop that drives the default automaton ([`crate::table`])
 //! and the user automaton of one component.
 //!
-//! The loop blocks in one `select_biased!` over the control port, the component's
-//! doorbell (rung by every delivery to its inputs and every pull request to its
-//! outputs) and the nearest timer deadline. Each turn handles at most one thing, in
+//! The loop blocks in one wait on the component's doorbell (a `bounded(1)` channel
+//! rung by every command, every delivery to its inputs and every pull request to its
+//! outputs), with the nearest timer deadline as its timeout. Each turn handles at most one thing, in
 //! this priority order, then looks at the control port again:
 //!
 //! 1. control commands (all that are waiting);
@@ -21,14 +21,18 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Sender, select_biased};
+use crossbeam_channel::{Receiver, Sender};
 
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
 use crate::port::{InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
-use crate::table::{Action, Controllable, Event, Outcome, State, next};
-use crate::thread::panic_message;
+use crate::table::{Action, Event, Outcome, State, next};
+use crate::thread::{later, panic_message};
+
+/// How often, at most, a busy thread reads its CPU time (a system call) for the
+/// monitor; state changes always read it.
+const CPU_TIME_REFRESH: Duration = Duration::from_millis(10);
 
 /// How user code failed.
 enum Failure {
@@ -73,6 +77,11 @@ pub(crate) struct Runner {
     deferred: VecDeque<ControlMessage>,
     max_response: Option<Duration>,
     cpu_updated: Instant,
+    /// Wall-clock time spent in user calls, and the value last published.
+    elapsed: Duration,
+    elapsed_published: Duration,
+    /// The user state last published on the monitor.
+    published_user: Option<usize>,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -118,6 +127,9 @@ impl Runner {
             deferred: VecDeque::new(),
             max_response: spec.timing.max_response,
             cpu_updated: now,
+            elapsed: Duration::ZERO,
+            elapsed_published: Duration::ZERO,
+            published_user: None,
             _exit_guard: exit_guard,
         }
     }
@@ -138,12 +150,11 @@ impl Runner {
                 break;
             }
             if self.state != State::Running {
+                // Nothing runs: wait for the next ring (a command, or an arrival that
+                // only needs to stay where it is).
                 self.cx.end_requested = false;
-                self.update_cpu(true);
-                match self.control.recv() {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                }
+                self.update_cpu(false);
+                let _ = self.bell.recv();
                 continue;
             }
             // 2. The task finished.
@@ -159,6 +170,14 @@ impl Runner {
             }
         }
         self.update_cpu(true);
+        // Commands that arrived while the component went dead get their answer.
+        while let Ok(message) = self.control.try_recv() {
+            if message.take() {
+                let _ = message.reply.try_send(Reply::Rejected(
+                    "the component is dead: its thread has ended".to_owned(),
+                ));
+            }
+        }
     }
 
     /// Handle every waiting command; false once the component is dead.
@@ -176,12 +195,6 @@ impl Runner {
         self.state != State::Dead
     }
 
-    fn force_dead(&mut self) {
-        if self.state != State::Dead {
-            self.apply(Event::Command(Controllable::Dead));
-        }
-    }
-
     /// Wait for a command, an arrival or the nearest timer.
     fn block(&mut self, now: Instant) {
         let state_spec = &self.spec.states[self.user];
@@ -191,23 +204,15 @@ impl Runner {
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
         self.update_cpu(false);
-        // Priority when several are ready: control, then the doorbell, then the timer.
+        // One wait on the doorbell, rung by commands, deliveries and pull requests; the
+        // loop then looks at the control port first (the priority rule above).
         match deadline {
-            Some(deadline) => select_biased! {
-                recv(self.control) -> message => match message {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                },
-                recv(self.bell) -> _ => {}
-                default(deadline.saturating_duration_since(now)) => {}
-            },
-            None => select_biased! {
-                recv(self.control) -> message => match message {
-                    Ok(message) => self.handle_control(message),
-                    Err(_) => self.force_dead(),
-                },
-                recv(self.bell) -> _ => {}
-            },
+            Some(deadline) => {
+                let _ = self.bell.recv_deadline(deadline.max(now));
+            }
+            None => {
+                let _ = self.bell.recv();
+            }
         }
     }
 
@@ -265,7 +270,7 @@ impl Runner {
                 .map_or(self.entered_at, |t| (*t).max(self.entered_at)),
             None => self.entered_at,
         };
-        base + after.delay
+        later(base, after.delay)
     }
 
     fn period_of(&self, state: usize) -> Option<Duration> {
@@ -343,7 +348,7 @@ impl Runner {
                 *arrival += pause;
             }
         }
-        self.next_periodic = self.period_of(self.user).map(|period| now + period);
+        self.next_periodic = self.period_of(self.user).map(|period| later(now, period));
     }
 
     fn set_state(&mut self, to: State) {
@@ -352,6 +357,7 @@ impl Runner {
             return;
         }
         self.state = to;
+        self.update_cpu(true);
         self.shared.update(|monitor| {
             monitor.state = to;
             vec![MonitorEvent::State { from, to }]
@@ -371,12 +377,17 @@ impl Runner {
         });
     }
 
-    fn publish_user(&self, state: Option<usize>) {
-        let name = state.map(|index| self.spec.states[index].name.to_owned());
+    fn publish_user(&mut self, state: Option<usize>) {
+        if self.published_user == state {
+            return;
+        }
+        self.published_user = state;
+        let name = state.map(|index| self.spec.states[index].name);
         self.shared.update(|monitor| {
-            if monitor.user_state == name {
+            if monitor.user_state.as_deref() == name {
                 return Vec::new();
             }
+            let name = name.map(str::to_owned);
             monitor.user_state.clone_from(&name);
             vec![MonitorEvent::UserState(name)]
         });
@@ -493,19 +504,18 @@ impl Runner {
         let cx = &mut self.cx;
         let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
         let took = started.elapsed();
-        let overrun = self.max_response.is_some_and(|bound| took > bound);
-        self.shared.update(|monitor| {
-            monitor.elapsed_time += took;
-            if overrun {
+        // Elapsed time is accumulated here and published with the CPU time (see
+        // `update_timing`), keeping the monitor lock off the per-call path.
+        self.elapsed += took;
+        if self.max_response.is_some_and(|bound| took > bound) {
+            self.shared.update(|monitor| {
                 monitor.overruns += 1;
                 vec![MonitorEvent::Overrun {
                     took,
                     total: monitor.overruns,
                 }]
-            } else {
-                Vec::new()
-            }
-        });
+            });
+        }
         self.after_call();
         result.map_err(|payload| panic_message(payload.as_ref()))
     }
@@ -559,15 +569,29 @@ impl Runner {
         });
     }
 
+    /// Publish the elapsed time (if it changed) and the thread's CPU time (a system
+    /// call: at most once per `CPU_TIME_REFRESH` unless `force`).
     fn update_cpu(&mut self, force: bool) {
-        if !force && self.cpu_updated.elapsed() < Duration::from_millis(1) {
+        let refresh_cpu = force || self.cpu_updated.elapsed() >= CPU_TIME_REFRESH;
+        let cpu = if refresh_cpu {
+            self.cpu_updated = Instant::now();
+            cpu_time::ThreadTime::try_now()
+                .ok()
+                .map(|time| time.as_duration())
+        } else {
+            None
+        };
+        if cpu.is_none() && self.elapsed == self.elapsed_published {
             return;
         }
-        self.cpu_updated = Instant::now();
-        if let Ok(time) = cpu_time::ThreadTime::try_now() {
-            let time = time.as_duration();
-            self.shared.quietly(|monitor| monitor.cpu_time = time);
-        }
+        self.elapsed_published = self.elapsed;
+        let elapsed = self.elapsed;
+        self.shared.quietly(|monitor| {
+            monitor.elapsed_time = elapsed;
+            if let Some(cpu) = cpu {
+                monitor.cpu_time = cpu;
+            }
+        });
     }
 
     fn run_start(&mut self) -> Result<(), String> {
@@ -725,7 +749,7 @@ impl Runner {
             self.pending[index] = false;
             self.last_arrival[index] = now;
         }
-        self.next_periodic = self.period_of(target).map(|period| now + period);
+        self.next_periodic = self.period_of(target).map(|period| later(now, period));
         self.publish_user(Some(target));
         if self.spec.states[target].entry {
             match self.section_with_plan(target, Section::Entry) {
@@ -765,7 +789,7 @@ impl Runner {
         if !self.reanchored {
             // Absolute deadlines: the next one is a period after this one, not after now.
             let now = Instant::now();
-            let mut next = deadline + period;
+            let mut next = later(deadline, period);
             if next <= now {
                 let late = now.duration_since(next).as_nanos();
                 let missed = u64::try_from(late / period.as_nanos().max(1))
@@ -778,7 +802,7 @@ impl Runner {
                         total: monitor.missed_deadlines,
                     }]
                 });
-                next = now + period;
+                next = later(now, period);
             }
             self.next_periodic = Some(next);
         }
@@ -792,7 +816,7 @@ impl Runner {
         if self.user_entered && self.state == State::Running {
             self.next_periodic = self
                 .period_of(self.user)
-                .map(|period| Instant::now() + period);
+                .map(|period| later(Instant::now(), period));
             self.reanchored = true;
         }
     }

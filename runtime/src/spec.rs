@@ -52,6 +52,99 @@ impl Spec {
             .iter()
             .position(|variable| variable.name == name)
     }
+
+    /// Check that every index in the spec points at something that exists and that
+    /// every periodic section has a period. `System::add` refuses a spec that fails.
+    pub fn validate(&self) -> Result<(), String> {
+        let states = self.states.len();
+        if states == 0 {
+            return Err("the user automaton has no state".to_owned());
+        }
+        if self.initial >= states {
+            return Err(format!(
+                "initial state #{} does not exist ({states} states)",
+                self.initial
+            ));
+        }
+        for state in self.states {
+            let name = state.name;
+            for on in state.on {
+                if on.port >= self.inputs.len() {
+                    return Err(format!(
+                        "state `{name}`: `on` names input #{}, which does not exist",
+                        on.port
+                    ));
+                }
+                if on.target >= states {
+                    return Err(format!(
+                        "state `{name}`: `on` targets state #{}, which does not exist",
+                        on.target
+                    ));
+                }
+            }
+            for after in state.after {
+                if after.target >= states {
+                    return Err(format!(
+                        "state `{name}`: `after` targets state #{}, which does not exist",
+                        after.target
+                    ));
+                }
+                if after.without.is_some_and(|port| port >= self.inputs.len()) {
+                    return Err(format!(
+                        "state `{name}`: `after ... without` names an input that does not exist"
+                    ));
+                }
+            }
+            if let Some(target) = state.may.iter().find(|target| **target >= states) {
+                return Err(format!(
+                    "state `{name}`: `may` targets state #{target}, which does not exist"
+                ));
+            }
+            if let Some(periodic) = state.periodic {
+                match periodic.period.or(self.timing.period) {
+                    None => {
+                        return Err(format!(
+                            "state `{name}` has a periodic section but neither it nor the component has a period"
+                        ));
+                    }
+                    Some(period) if period.is_zero() => {
+                        return Err(format!("state `{name}`: a period must be positive"));
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+        for exception in self.exceptions {
+            for step in exception.plan {
+                if let PlanStep::Goto(target) = step
+                    && *target >= states
+                {
+                    return Err(format!(
+                        "exception `{}`: `goto` targets state #{target}, which does not exist",
+                        exception.name
+                    ));
+                }
+            }
+        }
+        for input in self.inputs {
+            match input.kind {
+                InputKind::Fifo { capacity: 0, .. } => {
+                    return Err(format!(
+                        "input `{}`: a fifo needs a capacity of at least 1",
+                        input.name
+                    ));
+                }
+                InputKind::Ufifo { initial: 0, .. } => {
+                    return Err(format!(
+                        "input `{}`: a ufifo needs an initial size of at least 1",
+                        input.name
+                    ));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One state of the user automaton.

@@ -17,6 +17,10 @@ use crate::spec::{InputKind, OutputKind, Spec};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+/// How many commands may wait at one component's control port; a command beyond that
+/// is rejected at once.
+pub const CONTROL_CAPACITY: usize = 32;
+
 /// How long [`System::shutdown`] (and dropping a system) waits for each thread.
 pub const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -99,6 +103,15 @@ pub enum Error {
     /// A name that cannot be used in `instance.port` addresses.
     #[error("`{0}` is not a valid component name (non-empty, no `.`)")]
     InvalidName(String),
+    /// The component's spec is inconsistent (a bug in the generator or a hand-written
+    /// spec).
+    #[error("component `{component}`: invalid spec: {detail}")]
+    InvalidSpec {
+        /// The component.
+        component: String,
+        /// What is wrong.
+        detail: String,
+    },
     /// The registered ports do not match the spec.
     #[error("component `{component}`: {detail}")]
     PortMismatch {
@@ -373,6 +386,12 @@ impl System {
             return Err(Error::DuplicateName(name));
         }
         let spec = automaton.spec();
+        if let Err(detail) = spec.validate() {
+            return Err(Error::InvalidSpec {
+                component: name,
+                detail,
+            });
+        }
         let mismatch = |detail: String| Error::PortMismatch {
             component: name.clone(),
             detail,
@@ -485,12 +504,13 @@ impl System {
                 });
             }
         }
-        let (control_sender, control) = crossbeam_channel::bounded(256);
+        let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
         let (exit_guard, exited) = crossbeam_channel::bounded(1);
         let handle = Handle {
             name: Arc::from(name.as_str()),
             shared: Arc::clone(&shared),
             control: control_sender,
+            bell: bell_sender.clone(),
             exited,
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
@@ -532,6 +552,7 @@ impl System {
                 source,
             }
         })?;
+        let _ = slot.handle.shared.thread.set(join.thread().id());
         *slot
             .handle
             .join
@@ -816,9 +837,10 @@ impl System {
                         reply,
                         claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
                     });
+                let _ = slot.handle.bell.try_send(());
             }
         }
-        let deadline = Instant::now() + SHUTDOWN_TIMEOUT;
+        let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);
         for slot in &mut self.slots {
             let mut joined = false;
             let mut thread_panic = None;

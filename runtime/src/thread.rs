@@ -3,6 +3,7 @@
 use std::any::Any;
 use std::io;
 use std::thread::{Builder, JoinHandle};
+use std::time::{Duration, Instant};
 
 /// Spawn a named thread (`cool:<name>`; the OS may truncate the name).
 pub(crate) fn spawn(
@@ -29,4 +30,11 @@ pub(crate) fn panic_message(payload: &(dyn Any + Send)) -> String {
     } else {
         "panic with a non-string payload".to_owned()
     }
+}
+
+/// `start + delay`, saturating at about a century from `start` instead of panicking on
+/// an absurd delay (a `Duration::MAX` timeout means "practically never").
+pub(crate) fn later(start: Instant, delay: Duration) -> Instant {
+    const CENTURY: Duration = Duration::from_secs(100 * 365 * 24 * 3600);
+    start.checked_add(delay.min(CENTURY)).unwrap_or(start)
 }

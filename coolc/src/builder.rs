@@ -1,0 +1,140 @@
+//! [`Builder`]: compiling `.cool` descriptions from a `build.rs`, as `prost-build`
+//! and `tonic-build` do for their inputs.
+//!
+//! ```no_run
+//! // build.rs: `main` of the build script.
+//! coolc::Builder::new().compile(&["components/base.cool"]).unwrap();
+//! ```
+//!
+//! ```text
+//! // src/lib.rs
+//! pub mod generated {
+//!     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
+//! }
+//! ```
+//!
+//! The generated modules (`types` and one per component) land in one file,
+//! `$OUT_DIR/cool.rs`; include it inside a module named `generated` so that user code
+//! refers to `crate::generated::<component>::Behavior` exactly as in crates written
+//! by `coolc compile`. The crate needs `coolbot`, `serde` (with `derive`) and
+//! `serde_json` as dependencies, and the crates named by `link crate`; the builder
+//! prints `cargo:rustc-link-lib` for every `link system`. It writes no user stub files:
+//! `coolc compile` (or the rustc error naming each missing `Behavior` method) tells
+//! you what to implement.
+
+use std::path::{Path, PathBuf};
+
+use crate::{RenderOptions, emit, lower};
+
+/// Why a [`Builder`] failed. Its `Debug` is its `Display`, so that
+/// `Builder::compile(..).unwrap()` in a build script shows the diagnostics as rendered.
+#[derive(thiserror::Error)]
+pub enum BuildError {
+    /// The descriptions have errors; the rendered diagnostics are inside.
+    #[error("the .cool descriptions have errors:\n{0}")]
+    Diagnostics(String),
+    /// `OUT_DIR` is not set and no output directory was given.
+    #[error("OUT_DIR is not set: call Builder::out_dir or run from a build script")]
+    NoOutDir,
+    /// Writing the output failed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+impl std::fmt::Debug for BuildError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(self, f)
+    }
+}
+
+/// Compiles descriptions into `$OUT_DIR/cool.rs` from a build script.
+#[derive(Clone, Debug, Default)]
+pub struct Builder {
+    out_dir: Option<PathBuf>,
+    file_name: Option<String>,
+    cargo_output: bool,
+}
+
+impl Builder {
+    /// A builder writing `cool.rs` into `OUT_DIR` and printing `cargo:` directives.
+    pub fn new() -> Builder {
+        Builder {
+            out_dir: None,
+            file_name: None,
+            cargo_output: true,
+        }
+    }
+
+    /// Writes into `dir` instead of `OUT_DIR`.
+    pub fn out_dir(mut self, dir: impl Into<PathBuf>) -> Builder {
+        self.out_dir = Some(dir.into());
+        self
+    }
+
+    /// Names the output file (default `cool.rs`).
+    pub fn file_name(mut self, name: impl Into<String>) -> Builder {
+        self.file_name = Some(name.into());
+        self
+    }
+
+    /// Whether to print `cargo:rerun-if-changed` and `cargo:rustc-link-lib` lines
+    /// (default true; turn off outside build scripts).
+    pub fn cargo_output(mut self, on: bool) -> Builder {
+        self.cargo_output = on;
+        self
+    }
+
+    /// Compiles `files` (and their imports). On success returns the written path; on
+    /// errors returns them rendered, and a build script that unwraps fails the build
+    /// showing them.
+    pub fn compile<P: AsRef<Path>>(&self, files: &[P]) -> Result<PathBuf, BuildError> {
+        let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
+        if self.cargo_output {
+            for file in analysis.sources.files() {
+                println!("cargo:rerun-if-changed={}", file.path.display());
+            }
+        }
+        if analysis.has_errors() {
+            return Err(BuildError::Diagnostics(
+                analysis.render(RenderOptions::plain()),
+            ));
+        }
+        if self.cargo_output && !analysis.diagnostics.is_empty() {
+            for line in analysis.render(RenderOptions::plain()).lines() {
+                println!("cargo:warning={line}");
+            }
+        }
+        let options = lower::Options {
+            sources: files
+                .iter()
+                .map(|f| f.as_ref().display().to_string())
+                .collect(),
+            ..lower::Options::default()
+        };
+        let krate = lower::lower(&analysis.files, &options);
+        if self.cargo_output {
+            for lib in &krate.system_libs {
+                println!("cargo:rustc-link-lib={lib}");
+            }
+        }
+        let dir = match &self.out_dir {
+            Some(dir) => dir.clone(),
+            None => std::env::var_os("OUT_DIR")
+                .map(PathBuf::from)
+                .ok_or(BuildError::NoOutDir)?,
+        };
+        let path = dir.join(self.file_name.as_deref().unwrap_or("cool.rs"));
+        std::fs::create_dir_all(&dir)
+            .and_then(|()| std::fs::write(&path, emit::single_file(&krate)))
+            .map_err(|source| BuildError::Io {
+                path: path.clone(),
+                source,
+            })?;
+        Ok(path)
+    }
+}

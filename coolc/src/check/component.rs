@@ -1,0 +1,435 @@
+//! Component members: placement (what an atomic or a compound may hold), blocks that
+//! may appear once, per-scope duplicates, variables, ports and exceptions.
+
+use super::model::DEFAULT_CONTROLLABLES;
+use super::model::DEFAULT_OBSERVABLES;
+use super::{Checker, automaton, compound, names, values};
+use crate::ast::{self, ComponentKind, Span};
+use crate::diagnostics::Code;
+
+/// Every check of one component.
+pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    names::type_name(checker, &component.name);
+    placement(checker, component);
+    repeated_blocks(checker, component);
+    scopes(checker, component);
+    for member in &component.members {
+        match member {
+            ast::Member::Link(link) => self::link(checker, link),
+            ast::Member::Configuration(configuration) => {
+                for field in &configuration.fields {
+                    values::field(checker, field);
+                }
+            }
+            ast::Member::Variable(variable) => self::variable(checker, component, variable),
+            ast::Member::Input(input) => self::input(checker, input),
+            ast::Member::Output(output) => self::output(checker, output),
+            ast::Member::Timing(timing) => values::timing(checker, timing),
+            ast::Member::Exception(exception) => self::exception(checker, exception),
+            ast::Member::Recovery(recovery) => {
+                if let Some(every) = &recovery.retry_every {
+                    values::duration(checker, every, "`retry every`");
+                }
+                if let Some(deadline) = &recovery.deadline {
+                    values::duration(checker, deadline, "`deadline`");
+                }
+            }
+            ast::Member::Automaton(_)
+            | ast::Member::Instance(_)
+            | ast::Member::Redundant(_)
+            | ast::Member::Connect(_)
+            | ast::Member::OnError(_) => {}
+        }
+    }
+    automaton::automata(checker, component);
+    if component.kind == ComponentKind::Compound {
+        compound::compound(checker, component);
+    }
+}
+
+/// Members that the component's kind does not allow.
+fn placement(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let atomic = component.kind == ComponentKind::Atomic;
+    for member in &component.members {
+        let problem: Option<(Span, &str, &str)> = match member {
+            ast::Member::Instance(m) if atomic => Some((
+                m.span,
+                "an `instance`",
+                "instances live in compounds: declare `compound` instead of `atomic`",
+            )),
+            ast::Member::Redundant(m) if atomic => Some((
+                m.span,
+                "`redundant`",
+                "redundancy groups instances of a compound",
+            )),
+            ast::Member::Connect(m) if atomic => Some((
+                m.span,
+                "`connect`",
+                "connections join instances of a compound",
+            )),
+            ast::Member::OnError(m) if atomic => Some((
+                m.span,
+                "`on error`",
+                "error policies apply to instances of a compound; use `exception` plans here",
+            )),
+            ast::Member::Recovery(m) if atomic => Some((
+                m.span,
+                "`recovery`",
+                "the recovery queue belongs to a compound",
+            )),
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(_),
+                span,
+                ..
+            }) if atomic => Some((
+                *span,
+                "an exported input",
+                "an atomic declares its own ports: `input name: fifo<T>(16);`",
+            )),
+            ast::Member::Output(ast::Output {
+                def: ast::OutputDef::Export(_),
+                span,
+                ..
+            }) if atomic => Some((
+                *span,
+                "an exported output",
+                "an atomic declares its own ports: `output name: data<T>;`",
+            )),
+            ast::Member::Input(input)
+                if !atomic && !matches!(input.def, ast::InputDef::Export(_)) =>
+            {
+                Some((
+                    input.span,
+                    "an input of its own",
+                    "a compound exports its instances' ports: `input name = instance.port;`",
+                ))
+            }
+            ast::Member::Output(output)
+                if !atomic && !matches!(output.def, ast::OutputDef::Export(_)) =>
+            {
+                Some((
+                    output.span,
+                    "an output of its own",
+                    "a compound exports its instances' ports: `output name = instance.port;`",
+                ))
+            }
+            ast::Member::Automaton(a)
+                if atomic && a.keyword == ast::AutomatonKeyword::Supervisor =>
+            {
+                Some((
+                    a.keyword_span,
+                    "a `supervisor`",
+                    "an atomic component's user automaton is written `automaton { ... }`",
+                ))
+            }
+            ast::Member::Automaton(a)
+                if !atomic && a.keyword == ast::AutomatonKeyword::Automaton =>
+            {
+                Some((
+                    a.keyword_span,
+                    "an `automaton`",
+                    "a compound's user automaton is its supervisor: write `supervisor { ... }`",
+                ))
+            }
+            ast::Member::Exception(m) if !atomic => Some((
+                m.span,
+                "an `exception`",
+                "exceptions are raised by atomic components; use `on error` here",
+            )),
+            ast::Member::Link(m) if !atomic => Some((
+                m.span,
+                "a `link`",
+                "links belong to the atomic components that use the dependency",
+            )),
+            _ => None,
+        };
+        if let Some((span, what, help)) = problem {
+            let kind = if atomic { "an atomic" } else { "a compound" };
+            let diagnostic = checker
+                .error(
+                    Code::MisplacedMember,
+                    span,
+                    format!("{what} is not allowed in {kind} component"),
+                )
+                .with_label("not allowed here")
+                .with_secondary(
+                    component.kind_span,
+                    format!("`{}` is declared here", component.name.name),
+                )
+                .with_help(help);
+            checker.push(diagnostic);
+        }
+    }
+}
+
+/// `configuration`, `timing`, `automaton`/`supervisor` and `recovery` appear at most
+/// once.
+fn repeated_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let mut seen: Vec<(&str, Span)> = Vec::new();
+    for member in &component.members {
+        let (name, span) = match member {
+            ast::Member::Configuration(m) => ("configuration", m.span),
+            ast::Member::Timing(m) => ("timing", m.span),
+            ast::Member::Automaton(m) => ("automaton", m.keyword_span),
+            ast::Member::Recovery(m) => ("recovery", m.span),
+            _ => continue,
+        };
+        if let Some((_, first)) = seen.iter().find(|(seen_name, _)| *seen_name == name) {
+            let diagnostic = checker
+                .error(
+                    Code::RepeatedBlock,
+                    span,
+                    format!("a component has at most one `{name}` block"),
+                )
+                .with_label("second block")
+                .with_secondary(*first, "first block")
+                .with_help("merge the two blocks");
+            checker.push(diagnostic);
+        } else {
+            seen.push((name, span));
+        }
+    }
+}
+
+/// Duplicates per scope: ports (inputs and outputs share one), variables (which also
+/// may not reuse a default variable's name), configuration fields, exceptions,
+/// instances.
+fn scopes(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let mut ports = Vec::new();
+    let mut variables = Vec::new();
+    let mut fields = Vec::new();
+    let mut exceptions = Vec::new();
+    let mut instances = Vec::new();
+    for member in &component.members {
+        match member {
+            ast::Member::Input(m) => ports.push(&m.name),
+            ast::Member::Output(m) => ports.push(&m.name),
+            ast::Member::Variable(m) => variables.push(&m.name),
+            ast::Member::Configuration(m) => fields.extend(m.fields.iter().map(|f| &f.name)),
+            ast::Member::Exception(m) => exceptions.push(&m.name),
+            ast::Member::Instance(m) => instances.push(&m.name),
+            _ => {}
+        }
+    }
+    names::duplicates(checker, ports, "port");
+    names::duplicates(checker, variables.iter().copied(), "variable");
+    names::duplicates(checker, fields, "configuration field");
+    names::duplicates(checker, exceptions, "exception");
+    names::duplicates(checker, instances, "instance");
+    for name in variables {
+        if DEFAULT_OBSERVABLES.contains(&name.name.as_str())
+            || DEFAULT_CONTROLLABLES.contains(&name.name.as_str())
+        {
+            let diagnostic = checker
+                .error(Code::Duplicate, name.span, format!("`{}` is a default variable of every component", name.name))
+                .with_label("clashes with the default variable")
+                .with_help("choose another name; the default variables are state, user_state, result, error, cpu_time, elapsed_time, quality, new_state, configuration, period, max_response and priority");
+            checker.push(diagnostic);
+        }
+    }
+}
+
+fn link(checker: &mut Checker<'_, '_>, link: &ast::Link) {
+    let name = match &link.kind {
+        ast::LinkKind::Crate { name, .. } | ast::LinkKind::System { name } => name,
+    };
+    if name.value.trim().is_empty() {
+        let diagnostic = checker
+            .error(Code::BadLink, name.span, "a link needs a name")
+            .with_label("empty name");
+        checker.push(diagnostic);
+    }
+    if let ast::LinkKind::Crate {
+        spec: ast::CrateSpec::Table(entries, span),
+        ..
+    } = &link.kind
+    {
+        crate_table(checker, entries, *span);
+    }
+}
+
+/// The keys an inline crate table may use, with the kind of value each takes.
+const CRATE_KEYS: &[(&str, &str)] = &[
+    ("version", "string"),
+    ("path", "string"),
+    ("git", "string"),
+    ("branch", "string"),
+    ("tag", "string"),
+    ("rev", "string"),
+    ("package", "string"),
+    ("registry", "string"),
+    ("features", "list"),
+    ("default_features", "bool"),
+    ("optional", "bool"),
+];
+
+/// `{ version = "0.33", features = ["x"] }`: known keys, each once, with values of
+/// the right kind, and a source (`version`, `path` or `git`).
+fn crate_table(checker: &mut Checker<'_, '_>, entries: &[ast::TableEntry], span: Span) {
+    names::duplicates(checker, entries.iter().map(|e| &e.key), "crate table key");
+    for entry in entries {
+        let Some((_, kind)) = CRATE_KEYS.iter().find(|(key, _)| *key == entry.key.name) else {
+            checker.unknown(
+                Code::BadLink,
+                &entry.key,
+                "crate table key",
+                "",
+                CRATE_KEYS.iter().map(|(key, _)| *key),
+            );
+            continue;
+        };
+        let fits = match *kind {
+            "string" => matches!(entry.value.kind, ast::ExprKind::Str(_)),
+            "bool" => matches!(entry.value.kind, ast::ExprKind::Bool(_)),
+            _ => match &entry.value.kind {
+                ast::ExprKind::List(items) => items
+                    .iter()
+                    .all(|item| matches!(item.kind, ast::ExprKind::Str(_))),
+                _ => false,
+            },
+        };
+        if !fits {
+            let expected = match *kind {
+                "string" => "a string",
+                "bool" => "`true` or `false`",
+                _ => "a list of strings",
+            };
+            let diagnostic = checker
+                .error(
+                    Code::BadLink,
+                    entry.value.span,
+                    format!("`{}` takes {expected}", entry.key.name),
+                )
+                .with_label(format!("expected {expected}"));
+            checker.push(diagnostic);
+        }
+    }
+    if !entries
+        .iter()
+        .any(|e| matches!(e.key.name.as_str(), "version" | "path" | "git"))
+    {
+        let diagnostic = checker
+            .error(
+                Code::BadLink,
+                span,
+                "a crate table needs `version`, `path` or `git`",
+            )
+            .with_label("no source for the crate")
+            .with_help("add `version = \"1\"`");
+        checker.push(diagnostic);
+    }
+}
+
+/// Own variables have a type (and maybe a default of that type); mapped ones (in a
+/// compound) name an instance's variable of the same kind and have no type.
+fn variable(checker: &mut Checker<'_, '_>, component: &ast::Component, variable: &ast::Variable) {
+    names::value_name(checker, &variable.name);
+    match (&variable.ty, &variable.value) {
+        (Some(ty), Some(value)) => {
+            values::ty(checker, ty);
+            if matches!(&value.kind, ast::ExprKind::Path(segments) if segments.len() == 2) {
+                let diagnostic = checker
+                    .error(Code::BadVariable, variable.span, format!("variable `{}` has a type and a mapping", variable.name.name))
+                    .with_label("typed and mapped")
+                    .with_help("a mapped variable takes its type from the instance's variable: remove the `: Type`");
+                checker.push(diagnostic);
+                return;
+            }
+            let expected = checker.model.ty(ty);
+            values::value(checker, value, &expected);
+        }
+        (Some(ty), None) => values::ty(checker, ty),
+        (None, None) => {
+            let diagnostic = checker
+                .error(
+                    Code::BadVariable,
+                    variable.span,
+                    format!("variable `{}` has no type", variable.name.name),
+                )
+                .with_label("missing `: Type`")
+                .with_help(format!(
+                    "write `{}: f64;` (any type), or in a compound map it: `= instance.variable`",
+                    variable.name.name
+                ));
+            checker.push(diagnostic);
+        }
+        (None, Some(value)) => compound::mapped_variable(checker, component, variable, value),
+    }
+}
+
+fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
+    names::value_name(checker, &input.name);
+    match &input.def {
+        ast::InputDef::Tick | ast::InputDef::Export(_) => {}
+        ast::InputDef::Fifo { ty, size, policy } => {
+            values::ty(checker, ty);
+            values::positive(checker, size, "a fifo size");
+            if let Some(policy) = policy
+                && !FIFO_POLICIES.contains(&policy.name.as_str())
+            {
+                checker.unknown(
+                    Code::UnknownPolicy,
+                    policy,
+                    "fifo policy",
+                    "",
+                    FIFO_POLICIES.iter().copied(),
+                );
+            }
+        }
+        ast::InputDef::Ufifo { ty, size, max } => {
+            values::ty(checker, ty);
+            values::positive(checker, size, "a ufifo size");
+            if let Some(max) = max
+                && max.value < size.value
+            {
+                let diagnostic = checker
+                    .error(
+                        Code::UfifoCap,
+                        max.span,
+                        format!(
+                            "the cap {} is below the initial size {}",
+                            max.value, size.value
+                        ),
+                    )
+                    .with_label("cap below initial size")
+                    .with_secondary(size.span, "initial size")
+                    .with_help(format!("write a cap of at least {}", size.value));
+                checker.push(diagnostic);
+            }
+        }
+        ast::InputDef::Last(ty) | ast::InputDef::Poster(ty) => values::ty(checker, ty),
+    }
+}
+
+/// The overflow policies of a full `fifo` input.
+pub(super) const FIFO_POLICIES: &[&str] = &["reject", "drop_oldest", "block"];
+
+fn output(checker: &mut Checker<'_, '_>, output: &ast::Output) {
+    names::value_name(checker, &output.name);
+    match &output.def {
+        ast::OutputDef::Tick | ast::OutputDef::Export(_) => {
+            if let (Some(pull), ast::OutputDef::Tick) = (output.pull, &output.def) {
+                let diagnostic = checker
+                    .error(
+                        Code::ConnectKind,
+                        pull,
+                        "a `tick` output carries no data and cannot answer pull requests",
+                    )
+                    .with_label("`pull` on a tick output")
+                    .with_help("remove `pull`, or make the output `data<T> pull`");
+                checker.push(diagnostic);
+            }
+        }
+        ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => values::ty(checker, ty),
+    }
+}
+
+fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
+    names::value_name(checker, &exception.name);
+    for step in &exception.plan {
+        if let ast::PlanKind::Retry { count, every } = &step.kind {
+            values::positive(checker, count, "a retry count");
+            values::duration(checker, every, "`retry ... every`");
+        }
+    }
+}

@@ -1,0 +1,962 @@
+//! Compounds: instances and their overrides, substitutes and redundancy (equal
+//! interfaces), connections (kinds, directions, cardinalities, packet types and
+//! converters per the port typology table), exported ports, mapped variables, error
+//! policies, unconnected transition inputs, and compounds that contain themselves.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use super::model::{Interface, Model, Port, PortKind, Ty};
+use super::{Checker, names, values};
+use crate::ast::{self, ComponentKind, Span};
+use crate::diagnostics::{Code, Diagnostic};
+use crate::resolve::DefKind;
+
+/// Every compound-specific check of `component`.
+pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let instances = instances(checker, component);
+    for member in &component.members {
+        match member {
+            ast::Member::Instance(instance) => {
+                self::instance(checker, component, instance, &instances)
+            }
+            ast::Member::Redundant(redundant) => self::redundant(checker, &instances, redundant),
+            ast::Member::Connect(connect) => self::connect(checker, component, &instances, connect),
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(target),
+                ..
+            }) => {
+                endpoint(
+                    checker,
+                    &instances,
+                    target,
+                    Direction::Input,
+                    "exported input",
+                );
+            }
+            ast::Member::Output(ast::Output {
+                def: ast::OutputDef::Export(target),
+                ..
+            }) => {
+                endpoint(
+                    checker,
+                    &instances,
+                    target,
+                    Direction::Output,
+                    "exported output",
+                );
+            }
+            ast::Member::OnError(on_error) => {
+                self::on_error(checker, component, &instances, on_error)
+            }
+            _ => {}
+        }
+    }
+    cardinality(checker, component, &instances);
+    duplicate_policies(checker, component);
+    unconnected_transition_inputs(checker, component, &instances);
+}
+
+/// The instances of a compound by name, with the interface of their component
+/// (`None` when the component is unknown, already reported).
+type Instances<'c> = BTreeMap<&'c str, (&'c ast::Instance, Option<std::rc::Rc<Interface>>)>;
+
+fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -> Instances<'c> {
+    let mut out = BTreeMap::new();
+    for member in &component.members {
+        let ast::Member::Instance(instance) = member else {
+            continue;
+        };
+        let symbols = checker.model.symbols;
+        let def = symbols.resolve(
+            checker.file,
+            &instance.component,
+            &[DefKind::Component],
+            Code::UnknownComponent,
+            "component",
+            checker.diagnostics,
+        );
+        let interface = def.map(|_| checker.model.interface(&instance.component.name));
+        out.entry(instance.name.name.as_str())
+            .or_insert((instance, interface));
+    }
+    out
+}
+
+fn instance(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instance: &ast::Instance,
+    instances: &Instances<'_>,
+) {
+    names::value_name(checker, &instance.name);
+    if let Some(node) = &instance.node
+        && node.value.trim().is_empty()
+    {
+        let diagnostic = checker
+            .error(Code::TypeMismatch, node.span, "a node name cannot be empty")
+            .with_label("empty");
+        checker.push(diagnostic);
+    }
+    if let Some(original) = &instance.substitutes {
+        substitute(checker, instance, original, instances);
+    }
+    let interface = instances
+        .get(instance.name.name.as_str())
+        .and_then(|(_, interface)| interface.clone());
+    names::duplicates(
+        checker,
+        instance.overrides.iter().map(|o| &o.name),
+        "override",
+    );
+    for override_ in &instance.overrides {
+        let Some(interface) = &interface else {
+            continue;
+        };
+        let controllable = interface
+            .variables
+            .get(&override_.name.name)
+            .filter(|var| var.kind == ast::VarKind::Controllable);
+        let expected = interface
+            .config
+            .get(&override_.name.name)
+            .or(controllable.map(|var| &var.ty));
+        match expected {
+            Some(expected) => values::value(checker, &override_.value, expected),
+            None => {
+                let candidates: Vec<&str> = interface
+                    .config
+                    .keys()
+                    .map(String::as_str)
+                    .chain(
+                        interface
+                            .variables
+                            .iter()
+                            .filter(|(_, var)| var.kind == ast::VarKind::Controllable)
+                            .map(|(name, _)| name.as_str()),
+                    )
+                    .collect();
+                checker.unknown(
+                    Code::UnknownOverride,
+                    &override_.name,
+                    "configuration field or controllable variable",
+                    &format!(" in `{}`", instance.component.name),
+                    candidates,
+                );
+            }
+        }
+    }
+    if let Some(timing) = &instance.timing {
+        values::timing(checker, timing);
+    }
+    let _ = component;
+}
+
+/// `substitutes other`: another instance of this compound with the same interface.
+fn substitute(
+    checker: &mut Checker<'_, '_>,
+    instance: &ast::Instance,
+    original: &ast::Ident,
+    instances: &Instances<'_>,
+) {
+    if original.name == instance.name.name {
+        let diagnostic = checker
+            .error(
+                Code::UnknownInstance,
+                original.span,
+                format!("instance `{}` cannot substitute itself", original.name),
+            )
+            .with_label("itself");
+        checker.push(diagnostic);
+        return;
+    }
+    let Some((original_instance, original_interface)) = instances.get(original.name.as_str())
+    else {
+        checker.unknown(
+            Code::UnknownInstance,
+            original,
+            "instance",
+            "",
+            instances.keys().copied(),
+        );
+        return;
+    };
+    let this = instances
+        .get(instance.name.name.as_str())
+        .and_then(|(_, interface)| interface.clone());
+    if let (Some(this), Some(other)) = (this, original_interface) {
+        let differences = interface_differences(&this, other);
+        if !differences.is_empty() {
+            let diagnostic = checker
+                .error(
+                    Code::InterfaceMismatch,
+                    instance.component.span,
+                    format!(
+                        "`{}` ({}) cannot substitute `{}` ({}): their interfaces differ",
+                        instance.name.name,
+                        instance.component.name,
+                        original.name,
+                        original_instance.component.name
+                    ),
+                )
+                .with_label("different interface")
+                .with_secondary(
+                    original_instance.component.span,
+                    "the substituted instance's component",
+                )
+                .with_help(differences.join("; "));
+            checker.push(diagnostic);
+        }
+    }
+}
+
+/// What differs between two interfaces: ports (direction, kind, packet type) and
+/// observable variables.
+fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
+    let mut out = Vec::new();
+    for (direction, ours, theirs) in [
+        ("input", &a.inputs, &b.inputs),
+        ("output", &a.outputs, &b.outputs),
+    ] {
+        let names: BTreeSet<&String> = ours.keys().chain(theirs.keys()).collect();
+        for name in names {
+            match (ours.get(name), theirs.get(name)) {
+                (Some(p), Some(q)) if !same_port(p, q) => {
+                    out.push(format!(
+                        "{direction} `{name}` is `{}` here but `{}` there",
+                        describe_port(p),
+                        describe_port(q)
+                    ));
+                }
+                (Some(_), None) => out.push(format!("extra {direction} `{name}`")),
+                (None, Some(_)) => out.push(format!("missing {direction} `{name}`")),
+                _ => {}
+            }
+        }
+    }
+    let observable = |i: &Interface| -> BTreeMap<String, Ty> {
+        i.variables
+            .iter()
+            .filter(|(_, v)| v.kind == ast::VarKind::Observable)
+            .map(|(n, v)| (n.clone(), v.ty.clone()))
+            .collect()
+    };
+    let (ours, theirs) = (observable(a), observable(b));
+    let names: BTreeSet<&String> = ours.keys().chain(theirs.keys()).collect();
+    for name in names {
+        match (ours.get(name), theirs.get(name)) {
+            (Some(p), Some(q)) if !p.same(q) => {
+                out.push(format!("observable `{name}` is `{p}` here but `{q}` there"))
+            }
+            (Some(_), None) => out.push(format!("extra observable `{name}`")),
+            (None, Some(_)) => out.push(format!("missing observable `{name}`")),
+            _ => {}
+        }
+    }
+    out
+}
+
+fn same_port(a: &Port, b: &Port) -> bool {
+    a.kind == b.kind
+        && a.pull == b.pull
+        && match (&a.ty, &b.ty) {
+            (Some(x), Some(y)) => x.same(y),
+            (None, None) => true,
+            _ => false,
+        }
+}
+
+fn describe_port(port: &Port) -> String {
+    let pull = if port.pull { " pull" } else { "" };
+    match &port.ty {
+        Some(ty) => format!("{}<{ty}>{pull}", port.kind.as_str()),
+        None => format!("{}{pull}", port.kind.as_str()),
+    }
+}
+
+/// `redundant a, b;`: distinct instances of this compound with equal interfaces.
+fn redundant(checker: &mut Checker<'_, '_>, instances: &Instances<'_>, redundant: &ast::Redundant) {
+    names::duplicates(checker, redundant.members.iter(), "redundant member");
+    let mut first: Option<(&ast::Ident, std::rc::Rc<Interface>)> = None;
+    for member in &redundant.members {
+        let Some((instance, interface)) = instances.get(member.name.as_str()) else {
+            checker.unknown(
+                Code::UnknownInstance,
+                member,
+                "instance",
+                "",
+                instances.keys().copied(),
+            );
+            continue;
+        };
+        let Some(interface) = interface else { continue };
+        match &first {
+            None => first = Some((member, interface.clone())),
+            Some((first_member, first_interface)) => {
+                let differences = interface_differences(interface, first_interface);
+                if !differences.is_empty() {
+                    let diagnostic = checker
+                        .error(
+                            Code::InterfaceMismatch,
+                            member.span,
+                            format!(
+                                "redundant instances need equal interfaces, but `{}` ({}) differs from `{}`",
+                                member.name, instance.component.name, first_member.name
+                            ),
+                        )
+                        .with_label("different interface")
+                        .with_secondary(first_member.span, "compared with this instance")
+                        .with_help(differences.join("; "));
+                    checker.push(diagnostic);
+                }
+            }
+        }
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Direction {
+    Input,
+    Output,
+}
+
+/// Resolves `instance.port` to a port of the given direction, reporting what is wrong.
+fn endpoint(
+    checker: &mut Checker<'_, '_>,
+    instances: &Instances<'_>,
+    target: &ast::PortRef,
+    direction: Direction,
+    what: &str,
+) -> Option<Port> {
+    let Some(instance_name) = &target.instance else {
+        let diagnostic = checker
+            .error(
+                Code::UnknownInstance,
+                target.span,
+                format!("the {what} must name an instance's port"),
+            )
+            .with_label("no instance")
+            .with_help(format!("write `instance.{}`", target.port.name));
+        checker.push(diagnostic);
+        return None;
+    };
+    let Some((instance, interface)) = instances.get(instance_name.name.as_str()) else {
+        checker.unknown(
+            Code::UnknownInstance,
+            instance_name,
+            "instance",
+            "",
+            instances.keys().copied(),
+        );
+        return None;
+    };
+    let interface = interface.as_ref()?;
+    let (wanted, other, wanted_name, other_name) = match direction {
+        Direction::Input => (&interface.inputs, &interface.outputs, "input", "output"),
+        Direction::Output => (&interface.outputs, &interface.inputs, "output", "input"),
+    };
+    if let Some(port) = wanted.get(&target.port.name) {
+        return Some(port.clone());
+    }
+    if other.contains_key(&target.port.name) {
+        let help = match direction {
+            Direction::Input => {
+                "a connection goes from an output to an input: `connect a.out -> b.in;`"
+            }
+            Direction::Output => {
+                "a connection goes from an output to an input: `connect a.out -> b.in;`"
+            }
+        };
+        let diagnostic = checker
+            .error(
+                Code::ConnectDirection,
+                target.span,
+                format!(
+                    "`{}` is an {other_name} of `{}`, but the {what} needs an {wanted_name}",
+                    target.port.name, instance.component.name
+                ),
+            )
+            .with_label(format!("an {other_name}"))
+            .with_help(help);
+        checker.push(diagnostic);
+        return None;
+    }
+    checker.unknown(
+        Code::UnknownPort,
+        &target.port,
+        &format!("{wanted_name} port"),
+        &format!(
+            " in `{}` (component `{}`)",
+            instance_name.name, instance.component.name
+        ),
+        wanted.keys().map(String::as_str),
+    );
+    None
+}
+
+/// `connect a.out -> b.in [via C];` against the typology table.
+fn connect(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+    connect: &ast::Connect,
+) {
+    let from = endpoint(
+        checker,
+        instances,
+        &connect.from,
+        Direction::Output,
+        "connection's source",
+    );
+    let to = endpoint(
+        checker,
+        instances,
+        &connect.to,
+        Direction::Input,
+        "connection's destination",
+    );
+    let converter = connect.via.as_ref().and_then(|via| {
+        let symbols = checker.model.symbols;
+        symbols.resolve(
+            checker.file,
+            via,
+            &[DefKind::Converter],
+            Code::UnknownConverter,
+            "converter",
+            checker.diagnostics,
+        )?;
+        checker.model.converter(&via.name)
+    });
+    let (Some(from), Some(to)) = (from, to) else {
+        return;
+    };
+    let allowed = matches!(
+        (from.kind, to.kind),
+        (PortKind::Tick, PortKind::Tick)
+            | (PortKind::Poster, PortKind::Poster)
+            | (
+                PortKind::Data,
+                PortKind::Last | PortKind::Fifo | PortKind::Ufifo
+            )
+    );
+    if !allowed {
+        let help = match from.kind {
+            PortKind::Tick => "a `tick` output connects to `tick` inputs",
+            PortKind::Poster => "a `poster` output connects to `poster` inputs",
+            _ => "a `data` output connects to `last`, `fifo` and `ufifo` inputs",
+        };
+        let diagnostic = checker
+            .error(
+                Code::ConnectKind,
+                connect.span,
+                format!(
+                    "cannot connect a `{}` output to a `{}` input",
+                    from.kind.as_str(),
+                    to.kind.as_str()
+                ),
+            )
+            .with_label("incompatible port kinds")
+            .with_help(help);
+        checker.push(diagnostic);
+        return;
+    }
+    if to.pull && !from.pull {
+        let diagnostic = checker
+            .error(
+                Code::ConnectKind,
+                connect.to.span,
+                "a `pull` input needs a producer that answers pull requests",
+            )
+            .with_label("pull input")
+            .with_secondary(
+                connect.from.span,
+                "this output does not answer pull requests",
+            )
+            .with_help("add `pull` to the output's declaration");
+        checker.push(diagnostic);
+    }
+    let (Some(out_ty), Some(in_ty)) = (&from.ty, &to.ty) else {
+        if let Some(via) = &connect.via {
+            let diagnostic = checker
+                .error(
+                    Code::ConverterMismatch,
+                    via.span,
+                    "a tick connection carries no data to convert",
+                )
+                .with_label("converter on a tick connection")
+                .with_help("remove `via ...`");
+            checker.push(diagnostic);
+        }
+        return;
+    };
+    match (&connect.via, converter) {
+        (Some(via), Some((converter_file, converter))) => {
+            let converter_from = checker.model.ty(&converter.from);
+            let converter_to = checker.model.ty(&converter.to);
+            let mut problems = Vec::new();
+            if !converter_from.same(out_ty) {
+                problems.push(format!(
+                    "it reads `{converter_from}` but the output carries `{out_ty}`"
+                ));
+            }
+            if !converter_to.same(in_ty) {
+                problems.push(format!(
+                    "it produces `{converter_to}` but the input takes `{in_ty}`"
+                ));
+            }
+            if !problems.is_empty() {
+                let diagnostic = checker
+                    .error(
+                        Code::ConverterMismatch,
+                        via.span,
+                        format!(
+                            "converter `{}` does not fit this connection: {}",
+                            via.name,
+                            problems.join(" and ")
+                        ),
+                    )
+                    .with_label("mismatched converter")
+                    .with_other(converter_file, converter.span, "converter declared here");
+                checker.push(diagnostic);
+            }
+        }
+        (Some(_), None) => {}
+        (None, _) => {
+            if !out_ty.same(in_ty) {
+                let diagnostic = checker
+                    .error(
+                        Code::PacketMismatch,
+                        connect.span,
+                        format!("`{}` carries `{out_ty}` but `{}` takes `{in_ty}`", path(&connect.from), path(&connect.to)),
+                    )
+                    .with_label("packet types differ")
+                    .with_help(format!(
+                        "declare `converter {}To{}: {out_ty} -> {in_ty};` and add `via {}To{}` to this connection",
+                        type_word(out_ty),
+                        type_word(in_ty),
+                        type_word(out_ty),
+                        type_word(in_ty)
+                    ));
+                checker.push(diagnostic);
+            }
+        }
+    }
+    let _ = component;
+}
+
+fn type_word(ty: &Ty) -> String {
+    let text = ty.to_string();
+    let word: String = text.chars().filter(|c| c.is_alphanumeric()).collect();
+    let mut chars = word.chars();
+    chars
+        .next()
+        .map(|c| c.to_ascii_uppercase().to_string() + chars.as_str())
+        .unwrap_or_default()
+}
+
+fn path(port: &ast::PortRef) -> String {
+    match &port.instance {
+        Some(instance) => format!("{}.{}", instance.name, port.port.name),
+        None => port.port.name.clone(),
+    }
+}
+
+/// `last` and `poster` inputs take one producer (a connection or an export from the
+/// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number.
+fn cardinality(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+) {
+    let mut producers: BTreeMap<(String, String), Vec<Span>> = BTreeMap::new();
+    let mut seen_connections: BTreeMap<(String, String), Span> = BTreeMap::new();
+    for member in &component.members {
+        let (target, span) = match member {
+            ast::Member::Connect(connect) => {
+                let key = (path(&connect.from), path(&connect.to));
+                if let Some(first) = seen_connections.get(&key) {
+                    let diagnostic = checker
+                        .error(
+                            Code::Duplicate,
+                            connect.span,
+                            format!("`{}` is connected to `{}` twice", key.0, key.1),
+                        )
+                        .with_label("second connection")
+                        .with_secondary(*first, "first connection");
+                    checker.push(diagnostic);
+                    continue;
+                }
+                seen_connections.insert(key, connect.span);
+                (&connect.to, connect.span)
+            }
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(target),
+                span,
+                ..
+            }) => (target, *span),
+            _ => continue,
+        };
+        let Some(instance) = &target.instance else {
+            continue;
+        };
+        producers
+            .entry((instance.name.clone(), target.port.name.clone()))
+            .or_default()
+            .push(span);
+    }
+    for ((instance, port_name), spans) in producers {
+        if spans.len() < 2 {
+            continue;
+        }
+        let Some((_, Some(interface))) = instances.get(instance.as_str()) else {
+            continue;
+        };
+        let Some(port) = interface.inputs.get(&port_name) else {
+            continue;
+        };
+        if matches!(port.kind, PortKind::Last | PortKind::Poster) {
+            for extra in &spans[1..] {
+                let diagnostic = checker
+                    .error(
+                        Code::ConnectCardinality,
+                        *extra,
+                        format!("`{instance}.{port_name}` is a `{}` input and takes exactly one producer", port.kind.as_str()),
+                    )
+                    .with_label("second producer")
+                    .with_secondary(spans[0], "first producer")
+                    .with_help("use a `fifo` or `ufifo` input to merge several producers");
+                checker.push(diagnostic);
+            }
+        }
+    }
+}
+
+/// One `on error` per instance.
+fn duplicate_policies(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let targets = component.members.iter().filter_map(|member| match member {
+        ast::Member::OnError(on_error) => Some(&on_error.instance),
+        _ => None,
+    });
+    names::duplicates(checker, targets, "`on error` for instance");
+}
+
+/// The error policies a compound may apply to an instance.
+const POLICIES: &[&str] = &["propagate", "restart", "substitute", "ignore"];
+
+/// `on error instance: policy;`: a known instance and policy; `substitute` needs an
+/// instance declared `substitutes` it.
+fn on_error(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+    on_error: &ast::OnError,
+) {
+    if !instances.contains_key(on_error.instance.name.as_str()) {
+        checker.unknown(
+            Code::UnknownInstance,
+            &on_error.instance,
+            "instance",
+            "",
+            instances.keys().copied(),
+        );
+    }
+    let policy = on_error.policy.name.as_str();
+    if !POLICIES.contains(&policy) {
+        checker.unknown(
+            Code::BadPolicy,
+            &on_error.policy,
+            "error policy",
+            "",
+            POLICIES.iter().copied(),
+        );
+        return;
+    }
+    if policy == "substitute" {
+        let has_substitute = instances.values().any(|(instance, _)| {
+            instance
+                .substitutes
+                .as_ref()
+                .is_some_and(|original| original.name == on_error.instance.name)
+        });
+        if !has_substitute {
+            let diagnostic = checker
+                .error(
+                    Code::BadPolicy,
+                    on_error.policy.span,
+                    format!(
+                        "`substitute` needs an instance that substitutes `{}`",
+                        on_error.instance.name
+                    ),
+                )
+                .with_label("no substitute declared")
+                .with_help(format!(
+                    "declare one: `instance spare: {} substitutes {};`",
+                    instances
+                        .get(on_error.instance.name.as_str())
+                        .map(|(i, _)| i.component.name.as_str())
+                        .unwrap_or("Component"),
+                    on_error.instance.name
+                ));
+            checker.push(diagnostic);
+        }
+    }
+    let _ = component;
+}
+
+/// A mapped variable `observable x = instance.variable;`: the instance exists and has
+/// a variable of the same kind (observable for observable, controllable for
+/// controllable); `local` cannot be mapped.
+pub(super) fn mapped_variable(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    variable: &ast::Variable,
+    value: &ast::Expr,
+) {
+    let segments = match &value.kind {
+        ast::ExprKind::Path(segments) if segments.len() == 2 => segments,
+        _ => {
+            let diagnostic = checker
+                .error(Code::BadVariable, variable.span, format!("variable `{}` has a value but no type", variable.name.name))
+                .with_label("missing `: Type`")
+                .with_help("write `name: Type = value;`, or map an instance's variable with `= instance.variable`");
+            checker.push(diagnostic);
+            return;
+        }
+    };
+    if component.kind == ComponentKind::Atomic {
+        let diagnostic = checker
+            .error(
+                Code::MisplacedMember,
+                variable.span,
+                "only a compound can map an instance's variable",
+            )
+            .with_label("mapped variable in an atomic")
+            .with_help("give the variable a type: `name: Type = default;`");
+        checker.push(diagnostic);
+        return;
+    }
+    if variable.kind == ast::VarKind::Local {
+        let diagnostic = checker
+            .error(
+                Code::BadVariable,
+                variable.kind_span,
+                "a `local` variable cannot be mapped",
+            )
+            .with_label("local")
+            .with_help("map it as `observable` or `controllable`, or give it a type");
+        checker.push(diagnostic);
+        return;
+    }
+    let (instance_name, variable_name) = (&segments[0], &segments[1]);
+    let Some(instance) = Model::instance(component, &instance_name.name) else {
+        let names: Vec<&str> = component
+            .members
+            .iter()
+            .filter_map(|m| match m {
+                ast::Member::Instance(i) => Some(i.name.name.as_str()),
+                _ => None,
+            })
+            .collect();
+        checker.unknown(Code::UnknownInstance, instance_name, "instance", "", names);
+        return;
+    };
+    if checker.model.component(&instance.component.name).is_none() {
+        return;
+    }
+    let interface = checker.model.interface(&instance.component.name);
+    match interface.variables.get(&variable_name.name) {
+        Some(var) if var.kind == variable.kind => {}
+        Some(var) => {
+            let diagnostic = checker
+                .error(
+                    Code::BadVariable,
+                    variable_name.span,
+                    format!(
+                        "`{}` is {} in `{}`, but this mapping is {}",
+                        variable_name.name,
+                        kind_word(var.kind),
+                        instance.component.name,
+                        kind_word(variable.kind)
+                    ),
+                )
+                .with_label("kind differs")
+                .with_help("map an observable variable as `observable` and a controllable one as `controllable`");
+            checker.push(diagnostic);
+        }
+        None => {
+            let candidates: Vec<&str> = interface
+                .variables
+                .iter()
+                .filter(|(_, var)| var.kind == variable.kind)
+                .map(|(name, _)| name.as_str())
+                .collect();
+            checker.unknown(
+                Code::UnknownVariable,
+                variable_name,
+                &format!("{} variable", kind_word(variable.kind)),
+                &format!(
+                    " in `{}` (component `{}`)",
+                    instance_name.name, instance.component.name
+                ),
+                candidates,
+            );
+        }
+    }
+}
+
+fn kind_word(kind: ast::VarKind) -> &'static str {
+    match kind {
+        ast::VarKind::Observable => "observable",
+        ast::VarKind::Controllable => "controllable",
+        ast::VarKind::Local => "local",
+    }
+}
+
+/// Warns about an instance input that a transition of its component waits on (`on`
+/// or `after ... without`) but that nothing feeds: that transition can never fire.
+/// Substitute instances are skipped: they take over the original's connections.
+fn unconnected_transition_inputs(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+) {
+    let mut fed: BTreeSet<(String, String)> = BTreeSet::new();
+    for member in &component.members {
+        let target = match member {
+            ast::Member::Connect(connect) => &connect.to,
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(target),
+                ..
+            }) => target,
+            _ => continue,
+        };
+        if let Some(instance) = &target.instance {
+            fed.insert((instance.name.clone(), target.port.name.clone()));
+        }
+    }
+    for (name, (instance, _)) in instances {
+        if instance.substitutes.is_some() {
+            continue;
+        }
+        let Some((_, inner)) = checker.model.component(&instance.component.name) else {
+            continue;
+        };
+        let mut waited: Vec<&ast::Ident> = Vec::new();
+        for member in &inner.members {
+            let ast::Member::Automaton(automaton) = member else {
+                continue;
+            };
+            for state in &automaton.states {
+                for state_member in &state.members {
+                    match state_member {
+                        ast::StateMember::On { port, .. } => waited.push(port),
+                        ast::StateMember::After {
+                            without: Some(port),
+                            ..
+                        } => waited.push(port),
+                        _ => {}
+                    }
+                }
+            }
+        }
+        let mut warned = BTreeSet::new();
+        for port in waited {
+            if fed.contains(&(name.to_string(), port.name.clone()))
+                || !warned.insert(port.name.clone())
+            {
+                continue;
+            }
+            let diagnostic = Diagnostic::warning(
+                Code::UnconnectedPort,
+                checker.file,
+                instance.name.span,
+                format!(
+                    "input `{}` of `{name}` is never fed, but its automaton waits on it",
+                    port.name
+                ),
+            )
+            .with_label(format!("`{name}.{}` has no producer", port.name))
+            .with_help(format!(
+                "connect an output to it (`connect x.out -> {name}.{};`) or export it",
+                port.name
+            ));
+            checker.push(diagnostic);
+        }
+    }
+}
+
+/// Reports every compound that contains itself, directly or through other compounds,
+/// once per cycle, with the chain.
+pub(super) fn self_containing(checker: &mut Checker<'_, '_>, files: &[ast::File]) {
+    let model = checker.model;
+    let mut reported: BTreeSet<Vec<String>> = BTreeSet::new();
+    for file in files {
+        for item in &file.items {
+            let ast::Item::Component(component) = item else {
+                continue;
+            };
+            if component.kind != ComponentKind::Compound {
+                continue;
+            }
+            let mut chain = vec![component.name.name.clone()];
+            let mut first_member: Option<Span> = None;
+            if let Some(cycle) = find_cycle(
+                model,
+                &component.name.name,
+                &mut chain,
+                &mut first_member,
+                &mut BTreeSet::new(),
+            ) {
+                let mut key = cycle.clone();
+                key.sort();
+                if !reported.insert(key) {
+                    continue;
+                }
+                let span = first_member.unwrap_or(component.name.span);
+                let diagnostic = Diagnostic::error(
+                    Code::SelfContaining,
+                    file.id,
+                    span,
+                    format!("compound `{}` contains itself: {}", component.name.name, cycle.join(" -> ")),
+                )
+                .with_label("this instance leads back to the compound")
+                .with_secondary(component.name.span, "the compound")
+                .with_help("a compound cannot be an instance of itself, directly or through other compounds");
+                checker.push(diagnostic);
+            }
+        }
+    }
+}
+
+/// Depth-first search for a path from `chain[0]` back to itself.
+fn find_cycle(
+    model: &Model<'_>,
+    current: &str,
+    chain: &mut Vec<String>,
+    first_member: &mut Option<Span>,
+    visited: &mut BTreeSet<String>,
+) -> Option<Vec<String>> {
+    if !visited.insert(current.to_owned()) {
+        return None;
+    }
+    let (_, component) = model.component(current)?;
+    for member in &component.members {
+        let ast::Member::Instance(instance) = member else {
+            continue;
+        };
+        let next = &instance.component.name;
+        if chain.len() == 1 {
+            *first_member = Some(instance.component.span);
+        }
+        if *next == chain[0] {
+            let mut cycle = chain.clone();
+            cycle.push(next.clone());
+            return Some(cycle);
+        }
+        chain.push(next.clone());
+        if let Some(cycle) = find_cycle(model, next, chain, first_member, visited) {
+            return Some(cycle);
+        }
+        chain.pop();
+    }
+    None
+}

@@ -1,0 +1,461 @@
+//! What each component offers to the others, computed from the AST.
+//!
+//! An [`Interface`] lists a component's ports (with kinds and packet types), its
+//! variables, configuration fields, user states and quality levels. A compound's
+//! exported ports and mapped variables are looked up through its instances, so the
+//! interface of a compound is what its users see. Containment cycles are cut (the
+//! inner interface is empty); `compound::self_containing` reports them.
+
+use std::cell::RefCell;
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::rc::Rc;
+
+use crate::ast::{self, FileId, Span};
+use crate::resolve::{DefKind, Symbols};
+
+/// A resolved type.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Ty {
+    /// `bool`
+    Bool,
+    /// An integer primitive.
+    Int(ast::Prim),
+    /// `f32` or `f64`.
+    Float(ast::Prim),
+    /// `String`
+    Str,
+    /// `Time`
+    Time,
+    /// `Duration`
+    Duration,
+    /// A packet, by name.
+    Packet(String),
+    /// An enum, by name.
+    Enum(String),
+    /// An extern packet, by name.
+    Extern(String),
+    /// `[T]`
+    List(Box<Ty>),
+    /// `[T; N]`
+    Array(Box<Ty>, u64),
+    /// `T?`
+    Optional(Box<Ty>),
+    /// A name that did not resolve (already reported): matches everything.
+    Unknown,
+}
+
+impl Ty {
+    /// Equality where an unknown type matches anything.
+    pub fn same(&self, other: &Ty) -> bool {
+        match (self, other) {
+            (Ty::Unknown, _) | (_, Ty::Unknown) => true,
+            (Ty::List(a), Ty::List(b)) | (Ty::Optional(a), Ty::Optional(b)) => a.same(b),
+            (Ty::Array(a, n), Ty::Array(b, m)) => n == m && a.same(b),
+            _ => self == other,
+        }
+    }
+}
+
+impl fmt::Display for Ty {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Ty::Bool => f.write_str("bool"),
+            Ty::Int(prim) | Ty::Float(prim) => f.write_str(prim_name(*prim)),
+            Ty::Str => f.write_str("String"),
+            Ty::Time => f.write_str("Time"),
+            Ty::Duration => f.write_str("Duration"),
+            Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) => f.write_str(name),
+            Ty::List(inner) => write!(f, "[{inner}]"),
+            Ty::Array(inner, n) => write!(f, "[{inner}; {n}]"),
+            Ty::Optional(inner) => write!(f, "{inner}?"),
+            Ty::Unknown => f.write_str("{unknown}"),
+        }
+    }
+}
+
+/// The name of a primitive type as written.
+pub fn prim_name(prim: ast::Prim) -> &'static str {
+    use ast::Prim::*;
+    match prim {
+        Bool => "bool",
+        I8 => "i8",
+        I16 => "i16",
+        I32 => "i32",
+        I64 => "i64",
+        U8 => "u8",
+        U16 => "u16",
+        U32 => "u32",
+        U64 => "u64",
+        F32 => "f32",
+        F64 => "f64",
+        String => "String",
+        Time => "Time",
+        Duration => "Duration",
+    }
+}
+
+/// The kinds of port (paper Figure 3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum PortKind {
+    /// `tick` (input or output)
+    Tick,
+    /// `fifo<T>(n)` input
+    Fifo,
+    /// `ufifo<T>(n)` input
+    Ufifo,
+    /// `last<T>` input
+    Last,
+    /// `poster<T>` (input or output)
+    Poster,
+    /// `data<T>` output
+    Data,
+}
+
+impl PortKind {
+    /// The kind as written.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PortKind::Tick => "tick",
+            PortKind::Fifo => "fifo",
+            PortKind::Ufifo => "ufifo",
+            PortKind::Last => "last",
+            PortKind::Poster => "poster",
+            PortKind::Data => "data",
+        }
+    }
+}
+
+/// A port as seen from outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Port {
+    /// Its kind.
+    pub kind: PortKind,
+    /// Its packet type (`None` for ticks).
+    pub ty: Option<Ty>,
+    /// `pull` was written.
+    pub pull: bool,
+    /// Where it is declared (in the component's file).
+    pub span: Span,
+}
+
+/// A variable as seen from outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Var {
+    /// Observable, controllable or local.
+    pub kind: ast::VarKind,
+    /// Its type.
+    pub ty: Ty,
+    /// Where it is declared.
+    pub span: Span,
+}
+
+/// What a component offers.
+#[derive(Clone, Debug, Default)]
+pub struct Interface {
+    /// The file of the component.
+    pub file: FileId,
+    /// Input ports by name.
+    pub inputs: BTreeMap<String, Port>,
+    /// Output ports by name.
+    pub outputs: BTreeMap<String, Port>,
+    /// Own and mapped variables by name.
+    pub variables: BTreeMap<String, Var>,
+    /// Configuration fields by name.
+    pub config: BTreeMap<String, Ty>,
+    /// User automaton states, in source order.
+    pub states: Vec<String>,
+    /// Quality levels, best first.
+    pub quality: Vec<String>,
+}
+
+/// The names of the default automaton's states (paper Figure 2).
+pub const DEFAULT_STATES: &[&str] = &[
+    "starting",
+    "ready",
+    "running",
+    "suspended",
+    "dead",
+    "starting_error",
+    "running_error",
+    "end",
+];
+
+/// The values of the default variable `result`.
+pub const RESULTS: &[&str] = &["none", "success", "fail"];
+
+/// The default observable variables of every component.
+pub const DEFAULT_OBSERVABLES: &[&str] = &[
+    "state",
+    "user_state",
+    "result",
+    "error",
+    "cpu_time",
+    "elapsed_time",
+    "quality",
+];
+
+/// The default controllable variables of every component.
+pub const DEFAULT_CONTROLLABLES: &[&str] = &[
+    "new_state",
+    "configuration",
+    "period",
+    "max_response",
+    "priority",
+];
+
+/// The AST plus lookups and memoised interfaces.
+pub struct Model<'a> {
+    /// All files.
+    pub files: &'a [ast::File],
+    /// The top-level symbols.
+    pub symbols: &'a Symbols,
+    interfaces: RefCell<BTreeMap<String, Rc<Interface>>>,
+    in_progress: RefCell<BTreeSet<String>>,
+}
+
+impl<'a> Model<'a> {
+    /// A model over `files`.
+    pub fn new(files: &'a [ast::File], symbols: &'a Symbols) -> Self {
+        Model {
+            files,
+            symbols,
+            interfaces: RefCell::default(),
+            in_progress: RefCell::default(),
+        }
+    }
+
+    /// The component named `name`, with its file.
+    pub fn component(&self, name: &str) -> Option<(FileId, &'a ast::Component)> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Component(component) => Some((def.file, component)),
+            _ => None,
+        }
+    }
+
+    /// The enum named `name`.
+    pub fn enum_def(&self, name: &str) -> Option<&'a ast::EnumDef> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Enum(def) => Some(def),
+            _ => None,
+        }
+    }
+
+    /// The converter named `name`.
+    pub fn converter(&self, name: &str) -> Option<(FileId, &'a ast::Converter)> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Converter(converter) => Some((def.file, converter)),
+            _ => None,
+        }
+    }
+
+    /// Resolves a written type (unknown names give [`Ty::Unknown`]).
+    pub fn ty(&self, ty: &ast::Type) -> Ty {
+        match &ty.kind {
+            ast::TypeKind::Prim(prim) => match prim {
+                ast::Prim::Bool => Ty::Bool,
+                ast::Prim::F32 | ast::Prim::F64 => Ty::Float(*prim),
+                ast::Prim::String => Ty::Str,
+                ast::Prim::Time => Ty::Time,
+                ast::Prim::Duration => Ty::Duration,
+                other => Ty::Int(*other),
+            },
+            ast::TypeKind::Named(name) => {
+                match self.symbols.defs.get(&name.name).map(|def| def.kind) {
+                    Some(DefKind::Packet) => Ty::Packet(name.name.clone()),
+                    Some(DefKind::Enum) => Ty::Enum(name.name.clone()),
+                    Some(DefKind::ExternPacket) => Ty::Extern(name.name.clone()),
+                    _ => Ty::Unknown,
+                }
+            }
+            ast::TypeKind::List(inner) => Ty::List(Box::new(self.ty(inner))),
+            ast::TypeKind::Array(inner, size) => Ty::Array(Box::new(self.ty(inner)), size.value),
+            ast::TypeKind::Optional(inner) => Ty::Optional(Box::new(self.ty(inner))),
+        }
+    }
+
+    /// The interface of component `name` (empty when unknown or when asked again
+    /// while being computed, i.e. inside a containment cycle).
+    pub fn interface(&self, name: &str) -> Rc<Interface> {
+        if let Some(found) = self.interfaces.borrow().get(name) {
+            return found.clone();
+        }
+        let Some((file, component)) = self.component(name) else {
+            return Rc::new(Interface::default());
+        };
+        if !self.in_progress.borrow_mut().insert(name.to_owned()) {
+            return Rc::new(Interface {
+                file,
+                ..Interface::default()
+            });
+        }
+        let interface = Rc::new(self.compute(file, component));
+        self.in_progress.borrow_mut().remove(name);
+        self.interfaces
+            .borrow_mut()
+            .insert(name.to_owned(), interface.clone());
+        interface
+    }
+
+    /// The component type of instance `instance` inside `component`.
+    pub fn instance<'c>(
+        component: &'c ast::Component,
+        instance: &str,
+    ) -> Option<&'c ast::Instance> {
+        component.members.iter().find_map(|member| match member {
+            ast::Member::Instance(found) if found.name.name == instance => Some(found),
+            _ => None,
+        })
+    }
+
+    fn compute(&self, file: FileId, component: &ast::Component) -> Interface {
+        let mut interface = Interface {
+            file,
+            ..Interface::default()
+        };
+        for member in &component.members {
+            match member {
+                ast::Member::Input(input) => {
+                    let port = match &input.def {
+                        ast::InputDef::Tick => {
+                            Some(self.port(PortKind::Tick, None, input.pull, input.span))
+                        }
+                        ast::InputDef::Fifo { ty, .. } => {
+                            Some(self.port(PortKind::Fifo, Some(ty), input.pull, input.span))
+                        }
+                        ast::InputDef::Ufifo { ty, .. } => {
+                            Some(self.port(PortKind::Ufifo, Some(ty), input.pull, input.span))
+                        }
+                        ast::InputDef::Last(ty) => {
+                            Some(self.port(PortKind::Last, Some(ty), input.pull, input.span))
+                        }
+                        ast::InputDef::Poster(ty) => {
+                            Some(self.port(PortKind::Poster, Some(ty), input.pull, input.span))
+                        }
+                        ast::InputDef::Export(target) => {
+                            self.exported(component, target, true).map(|mut port| {
+                                port.span = input.span;
+                                port
+                            })
+                        }
+                    };
+                    if let Some(port) = port {
+                        interface
+                            .inputs
+                            .entry(input.name.name.clone())
+                            .or_insert(port);
+                    }
+                }
+                ast::Member::Output(output) => {
+                    let port = match &output.def {
+                        ast::OutputDef::Tick => {
+                            Some(self.port(PortKind::Tick, None, output.pull, output.span))
+                        }
+                        ast::OutputDef::Data(ty) => {
+                            Some(self.port(PortKind::Data, Some(ty), output.pull, output.span))
+                        }
+                        ast::OutputDef::Poster(ty) => {
+                            Some(self.port(PortKind::Poster, Some(ty), output.pull, output.span))
+                        }
+                        ast::OutputDef::Export(target) => {
+                            self.exported(component, target, false).map(|mut port| {
+                                port.span = output.span;
+                                port
+                            })
+                        }
+                    };
+                    if let Some(port) = port {
+                        interface
+                            .outputs
+                            .entry(output.name.name.clone())
+                            .or_insert(port);
+                    }
+                }
+                ast::Member::Variable(variable) => {
+                    let ty = match (&variable.ty, &variable.value) {
+                        (Some(ty), _) => self.ty(ty),
+                        (None, Some(value)) => self
+                            .mapped_variable(component, value)
+                            .unwrap_or(Ty::Unknown),
+                        (None, None) => Ty::Unknown,
+                    };
+                    interface
+                        .variables
+                        .entry(variable.name.name.clone())
+                        .or_insert(Var {
+                            kind: variable.kind,
+                            ty,
+                            span: variable.span,
+                        });
+                }
+                ast::Member::Configuration(configuration) => {
+                    for field in &configuration.fields {
+                        interface
+                            .config
+                            .entry(field.name.name.clone())
+                            .or_insert_with(|| self.ty(&field.ty));
+                    }
+                }
+                ast::Member::Automaton(automaton) => {
+                    for state in &automaton.states {
+                        if !interface.states.contains(&state.name.name) {
+                            interface.states.push(state.name.name.clone());
+                        }
+                    }
+                }
+                ast::Member::Timing(timing) => {
+                    for entry in &timing.entries {
+                        if let ast::TimingEntry::Quality(levels, _) = entry {
+                            interface
+                                .quality
+                                .extend(levels.iter().map(|level| level.name.clone()));
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        interface
+    }
+
+    fn port(&self, kind: PortKind, ty: Option<&ast::Type>, pull: Option<Span>, span: Span) -> Port {
+        Port {
+            kind,
+            ty: ty.map(|ty| self.ty(ty)),
+            pull: pull.is_some(),
+            span,
+        }
+    }
+
+    /// The port an export names, through the instance's component.
+    pub fn exported(
+        &self,
+        component: &ast::Component,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<Port> {
+        let instance = Self::instance(component, &target.instance.as_ref()?.name)?;
+        let inner = self.interface(&instance.component.name);
+        let ports = if input { &inner.inputs } else { &inner.outputs };
+        ports.get(&target.port.name).cloned()
+    }
+
+    /// The type of the instance variable a mapped variable names.
+    pub fn mapped_variable(&self, component: &ast::Component, value: &ast::Expr) -> Option<Ty> {
+        let ast::ExprKind::Path(segments) = &value.kind else {
+            return None;
+        };
+        let [instance, variable] = segments.as_slice() else {
+            return None;
+        };
+        let instance = Self::instance(component, &instance.name)?;
+        let inner = self.interface(&instance.component.name);
+        inner
+            .variables
+            .get(&variable.name)
+            .map(|var| var.ty.clone())
+    }
+}

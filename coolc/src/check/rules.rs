@@ -1,0 +1,479 @@
+//! Typed supervisor rules: `when` conditions are boolean expressions over the
+//! compound's own variables and its instances' observable variables, including the
+//! default ones. `state` compares with the default automaton's states, `user_state`
+//! with the instance's user states, `result` with `none`/`success`/`fail`, `quality`
+//! with the instance's quality levels; `error` is a `String`, `cpu_time` and
+//! `elapsed_time` are durations. A bare name that is not a variable is a symbol,
+//! resolved against the other side of the comparison.
+
+use std::fmt;
+
+use super::Checker;
+use super::model::{DEFAULT_OBSERVABLES, DEFAULT_STATES, Interface, Model, RESULTS, Ty};
+use crate::ast::{self, BinaryOp};
+use crate::diagnostics::Code;
+
+/// The type of a rule expression.
+#[derive(Clone, Debug, PartialEq)]
+enum RTy {
+    Bool,
+    Int,
+    Float,
+    Str,
+    Duration,
+    Time,
+    Enum(String),
+    Optional(Box<RTy>),
+    /// A default automaton state.
+    State,
+    /// A user state of the named component, with its states.
+    UserState(String, Vec<String>),
+    /// `none`, `success` or `fail`.
+    Result,
+    /// A quality level of the named component.
+    Quality(String, Vec<String>),
+    /// The `none` literal.
+    NoneLit,
+    /// A bare name that is not a variable.
+    Symbol(ast::Ident),
+    /// Anything else, described.
+    Other(String),
+    /// Already reported.
+    Unknown,
+}
+
+impl fmt::Display for RTy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RTy::Bool => f.write_str("bool"),
+            RTy::Int => f.write_str("an integer"),
+            RTy::Float => f.write_str("a float"),
+            RTy::Str => f.write_str("String"),
+            RTy::Duration => f.write_str("Duration"),
+            RTy::Time => f.write_str("Time"),
+            RTy::Enum(name) => f.write_str(name),
+            RTy::Optional(inner) => write!(f, "{inner}?"),
+            RTy::State => f.write_str("a default automaton state"),
+            RTy::UserState(component, _) => write!(f, "a user state of `{component}`"),
+            RTy::Result => f.write_str("a result"),
+            RTy::Quality(component, _) => write!(f, "a quality level of `{component}`"),
+            RTy::NoneLit => f.write_str("`none`"),
+            RTy::Symbol(name) => write!(f, "`{}`", name.name),
+            RTy::Other(description) => f.write_str(description),
+            RTy::Unknown => f.write_str("an unknown type"),
+        }
+    }
+}
+
+fn from_ty(ty: &Ty) -> RTy {
+    match ty {
+        Ty::Bool => RTy::Bool,
+        Ty::Int(_) => RTy::Int,
+        Ty::Float(_) => RTy::Float,
+        Ty::Str => RTy::Str,
+        Ty::Duration => RTy::Duration,
+        Ty::Time => RTy::Time,
+        Ty::Enum(name) => RTy::Enum(name.clone()),
+        Ty::Optional(inner) => RTy::Optional(Box::new(from_ty(inner))),
+        Ty::Unknown => RTy::Unknown,
+        other => RTy::Other(format!("`{other}`")),
+    }
+}
+
+/// Checks one `when` condition of `component`'s supervisor.
+pub(super) fn rule(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    condition: &ast::Expr,
+) {
+    let own = checker.model.interface(&component.name.name);
+    let mut typer = Typer {
+        checker,
+        component,
+        own: &own,
+    };
+    let ty = typer.infer(condition);
+    match ty {
+        RTy::Bool | RTy::Unknown => {}
+        RTy::Symbol(name) => typer.unknown_variable(&name),
+        other => {
+            let diagnostic = typer
+                .checker
+                .error(
+                    Code::RuleType,
+                    condition.span,
+                    format!("a rule must be a boolean expression, but this is {other}"),
+                )
+                .with_label("not a bool")
+                .with_help("compare it: `x == value`, `x > 3`");
+            typer.checker.push(diagnostic);
+        }
+    }
+}
+
+struct Typer<'c, 'a, 'd> {
+    checker: &'c mut Checker<'a, 'd>,
+    component: &'c ast::Component,
+    own: &'c Interface,
+}
+
+impl Typer<'_, '_, '_> {
+    fn infer(&mut self, expr: &ast::Expr) -> RTy {
+        use ast::ExprKind as E;
+        match &expr.kind {
+            E::Int(_) => RTy::Int,
+            E::Float(_) => RTy::Float,
+            E::Str(_) => RTy::Str,
+            E::Bool(_) => RTy::Bool,
+            E::Duration(_) => RTy::Duration,
+            E::Frequency(_) => RTy::Other("a frequency".into()),
+            E::None => RTy::NoneLit,
+            E::List(_) | E::Repeat(..) => RTy::Other("a list".into()),
+            E::EnumValue { enum_name, variant } => self.enum_value(enum_name, variant),
+            E::Path(segments) => self.path(expr, segments),
+            E::Unary(op, operand) => {
+                let ty = self.operand(operand);
+                match (op, &ty) {
+                    (_, RTy::Unknown) => RTy::Unknown,
+                    (ast::UnaryOp::Not, RTy::Bool) => RTy::Bool,
+                    (ast::UnaryOp::Neg, RTy::Int | RTy::Float | RTy::Duration) => ty,
+                    (ast::UnaryOp::Not, _) => {
+                        self.mismatch(expr, format!("`!` needs a bool, found {ty}"))
+                    }
+                    (ast::UnaryOp::Neg, _) => {
+                        self.mismatch(expr, format!("`-` needs a number, found {ty}"))
+                    }
+                }
+            }
+            E::Binary(op @ (BinaryOp::And | BinaryOp::Or), left, right) => {
+                for side in [left, right] {
+                    let ty = self.operand(side);
+                    if !matches!(ty, RTy::Bool | RTy::Unknown) {
+                        self.mismatch(
+                            side,
+                            format!("`{}` needs bool operands, found {ty}", op.as_str()),
+                        );
+                    }
+                }
+                RTy::Bool
+            }
+            E::Binary(op, left, right) => self.comparison(expr, *op, left, right),
+        }
+    }
+
+    /// Infers an operand; a bare symbol on its own is an unknown variable.
+    fn operand(&mut self, expr: &ast::Expr) -> RTy {
+        match self.infer(expr) {
+            RTy::Symbol(name) => {
+                self.unknown_variable(&name);
+                RTy::Unknown
+            }
+            other => other,
+        }
+    }
+
+    fn mismatch(&mut self, expr: &ast::Expr, message: String) -> RTy {
+        let diagnostic = self
+            .checker
+            .error(Code::RuleType, expr.span, message)
+            .with_label("ill-typed");
+        self.checker.push(diagnostic);
+        RTy::Unknown
+    }
+
+    fn enum_value(&mut self, enum_name: &ast::Ident, variant: &ast::Ident) -> RTy {
+        let Some(def) = self.checker.model.enum_def(&enum_name.name) else {
+            let candidates: Vec<&str> = self
+                .checker
+                .model
+                .symbols
+                .defs
+                .iter()
+                .filter(|(_, def)| def.kind == crate::resolve::DefKind::Enum)
+                .map(|(name, _)| name.as_str())
+                .collect();
+            self.checker
+                .unknown(Code::UnknownType, enum_name, "enum", "", candidates);
+            return RTy::Unknown;
+        };
+        if !def.variants.iter().any(|v| v.name.name == variant.name) {
+            let variants: Vec<&str> = def.variants.iter().map(|v| v.name.name.as_str()).collect();
+            self.checker.unknown(
+                Code::UnknownVariant,
+                variant,
+                "variant",
+                &format!(" in enum `{}`", enum_name.name),
+                variants,
+            );
+        }
+        RTy::Enum(enum_name.name.clone())
+    }
+
+    /// `name` (own variable or own default variable) or `instance.variable`.
+    fn path(&mut self, expr: &ast::Expr, segments: &[ast::Ident]) -> RTy {
+        match segments {
+            [name] => {
+                if let Some(var) = self.own.variables.get(&name.name) {
+                    return from_ty(&var.ty);
+                }
+                default_variable(&name.name, &self.component.name.name, self.own)
+                    .unwrap_or_else(|| RTy::Symbol(name.clone()))
+            }
+            [instance, variable] => self.instance_variable(instance, variable),
+            _ => self.mismatch(
+                expr,
+                "a rule names `variable` or `instance.variable`".into(),
+            ),
+        }
+    }
+
+    fn instance_variable(&mut self, instance_name: &ast::Ident, variable: &ast::Ident) -> RTy {
+        let Some(instance) = Model::instance(self.component, &instance_name.name) else {
+            let instances: Vec<&str> = self
+                .component
+                .members
+                .iter()
+                .filter_map(|m| match m {
+                    ast::Member::Instance(i) => Some(i.name.name.as_str()),
+                    _ => None,
+                })
+                .collect();
+            self.checker.unknown(
+                Code::UnknownInstance,
+                instance_name,
+                "instance",
+                "",
+                instances,
+            );
+            return RTy::Unknown;
+        };
+        if self
+            .checker
+            .model
+            .component(&instance.component.name)
+            .is_none()
+        {
+            return RTy::Unknown;
+        }
+        let interface = self.checker.model.interface(&instance.component.name);
+        match interface.variables.get(&variable.name) {
+            Some(var) if var.kind == ast::VarKind::Observable => return from_ty(&var.ty),
+            Some(_) => {
+                let diagnostic = self
+                    .checker
+                    .error(
+                        Code::UnknownVariable,
+                        variable.span,
+                        format!(
+                            "`{}` is not observable in `{}`",
+                            variable.name, instance.component.name
+                        ),
+                    )
+                    .with_label("not observable")
+                    .with_help("rules read observable variables only: declare it `observable`");
+                self.checker.push(diagnostic);
+                return RTy::Unknown;
+            }
+            None => {}
+        }
+        if let Some(ty) = default_variable(&variable.name, &instance.component.name, &interface) {
+            return ty;
+        }
+        let candidates: Vec<&str> = interface
+            .variables
+            .iter()
+            .filter(|(_, v)| v.kind == ast::VarKind::Observable)
+            .map(|(n, _)| n.as_str())
+            .chain(DEFAULT_OBSERVABLES.iter().copied())
+            .collect();
+        self.checker.unknown(
+            Code::UnknownVariable,
+            variable,
+            "observable variable",
+            &format!(
+                " in `{}` (component `{}`)",
+                instance_name.name, instance.component.name
+            ),
+            candidates,
+        );
+        RTy::Unknown
+    }
+
+    fn unknown_variable(&mut self, name: &ast::Ident) {
+        let mut candidates: Vec<String> = self.own.variables.keys().cloned().collect();
+        candidates.extend(DEFAULT_OBSERVABLES.iter().map(|s| s.to_string()));
+        let context = format!(" in `{}`", self.component.name.name);
+        self.checker.unknown(
+            Code::UnknownVariable,
+            name,
+            "variable",
+            &context,
+            candidates.iter().map(String::as_str),
+        );
+    }
+
+    fn comparison(
+        &mut self,
+        expr: &ast::Expr,
+        op: BinaryOp,
+        left: &ast::Expr,
+        right: &ast::Expr,
+    ) -> RTy {
+        let left_ty = self.infer(left);
+        let right_ty = self.infer(right);
+        let (left_ty, right_ty) = match (left_ty, right_ty) {
+            (RTy::Symbol(a), RTy::Symbol(_)) => {
+                self.unknown_variable(&a);
+                return RTy::Bool;
+            }
+            (RTy::Symbol(symbol), other) => {
+                let resolved = self.symbol(&symbol, &other);
+                (resolved, other)
+            }
+            (other, RTy::Symbol(symbol)) => {
+                let resolved = self.symbol(&symbol, &other);
+                (other, resolved)
+            }
+            pair => pair,
+        };
+        if matches!(left_ty, RTy::Unknown) || matches!(right_ty, RTy::Unknown) {
+            return RTy::Bool;
+        }
+        if !compatible(&left_ty, &right_ty) {
+            let help = match (&left_ty, &right_ty) {
+                (RTy::Float, RTy::Int) | (RTy::Int, RTy::Float) => {
+                    Some("write float literals with a point, e.g. `3.0`")
+                }
+                _ => None,
+            };
+            let mut diagnostic = self
+                .checker
+                .error(
+                    Code::RuleType,
+                    expr.span,
+                    format!("cannot compare {left_ty} with {right_ty}"),
+                )
+                .with_label("different types")
+                .with_secondary(left.span, format!("{left_ty}"))
+                .with_secondary(right.span, format!("{right_ty}"));
+            if let Some(help) = help {
+                diagnostic = diagnostic.with_help(help);
+            }
+            self.checker.push(diagnostic);
+            return RTy::Bool;
+        }
+        let ordered = matches!(
+            op,
+            BinaryOp::Lt | BinaryOp::Le | BinaryOp::Gt | BinaryOp::Ge
+        );
+        if ordered
+            && !matches!(
+                strip(&left_ty),
+                RTy::Int | RTy::Float | RTy::Duration | RTy::Time
+            )
+        {
+            self.mismatch(
+                expr,
+                format!(
+                    "`{}` orders numbers, durations and times, not {left_ty}",
+                    op.as_str()
+                ),
+            );
+        }
+        RTy::Bool
+    }
+
+    /// Resolves a bare name against the type it is compared with.
+    fn symbol(&mut self, symbol: &ast::Ident, other: &RTy) -> RTy {
+        let (domain, what, context): (Vec<String>, &str, String) = match strip(other) {
+            RTy::State => (
+                DEFAULT_STATES.iter().map(|s| s.to_string()).collect(),
+                "default state",
+                String::new(),
+            ),
+            RTy::UserState(component, states) => {
+                (states.clone(), "user state", format!(" of `{component}`"))
+            }
+            RTy::Result => (
+                RESULTS.iter().map(|s| s.to_string()).collect(),
+                "result",
+                String::new(),
+            ),
+            RTy::Quality(component, levels) => (
+                levels.clone(),
+                "quality level",
+                format!(" of `{component}`"),
+            ),
+            RTy::Enum(name) => {
+                let diagnostic = self
+                    .checker
+                    .error(
+                        Code::RuleType,
+                        symbol.span,
+                        format!(
+                            "enum values are written with their type: `{name}::{}`",
+                            symbol.name
+                        ),
+                    )
+                    .with_label("bare name")
+                    .with_help(format!("write `{name}::{}`", symbol.name));
+                self.checker.push(diagnostic);
+                return RTy::Unknown;
+            }
+            RTy::Unknown => return RTy::Unknown,
+            _ => {
+                self.unknown_variable(symbol);
+                return RTy::Unknown;
+            }
+        };
+        if domain.contains(&symbol.name) {
+            return other.clone();
+        }
+        let code = if matches!(strip(other), RTy::State | RTy::UserState(..)) {
+            Code::UnknownState
+        } else {
+            Code::RuleType
+        };
+        self.checker.unknown(
+            code,
+            symbol,
+            what,
+            &context,
+            domain.iter().map(String::as_str),
+        );
+        RTy::Unknown
+    }
+}
+
+fn strip(ty: &RTy) -> &RTy {
+    match ty {
+        RTy::Optional(inner) => strip(inner),
+        other => other,
+    }
+}
+
+fn compatible(a: &RTy, b: &RTy) -> bool {
+    match (a, b) {
+        (RTy::Optional(_), RTy::NoneLit) | (RTy::NoneLit, RTy::Optional(_)) => true,
+        (RTy::Result, RTy::NoneLit) | (RTy::NoneLit, RTy::Result) => true,
+        (RTy::Optional(x), y) | (y, RTy::Optional(x)) => compatible(x, y),
+        (RTy::UserState(x, _), RTy::UserState(y, _)) | (RTy::Quality(x, _), RTy::Quality(y, _)) => {
+            x == y
+        }
+        (RTy::Other(_), _) | (_, RTy::Other(_)) => false,
+        _ => a == b,
+    }
+}
+
+/// The type of a default observable variable of `component`.
+fn default_variable(name: &str, component: &str, interface: &Interface) -> Option<RTy> {
+    Some(match name {
+        "state" => RTy::State,
+        "user_state" => RTy::UserState(component.to_owned(), interface.states.clone()),
+        "result" => RTy::Result,
+        "error" => RTy::Str,
+        "cpu_time" | "elapsed_time" => RTy::Duration,
+        "quality" => RTy::Quality(component.to_owned(), interface.quality.clone()),
+        _ => return None,
+    })
+}

@@ -1,0 +1,167 @@
+//! The `coolc` binary: `--help`, exit codes 0 / 1 / 2, JSON diagnostics, `compile`
+//! options, and `coolc new` producing a crate that builds and runs.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::{cargo, data};
+
+fn coolc(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_coolc"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+const BROKEN: &str = "atomic Broken {\n    input x: fifo<f64>(4)\n}\n";
+
+#[test]
+fn help_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = coolc(&["--help"], dir.path());
+    assert_eq!(out.status.code(), Some(0));
+    let help = text(&out.stdout);
+    for command in ["check", "compile", "new", "--message-format"] {
+        assert!(help.contains(command), "{command} missing from:\n{help}");
+    }
+    for command in ["check", "compile", "new"] {
+        let out = coolc(&[command, "--help"], dir.path());
+        assert_eq!(out.status.code(), Some(0), "{command} --help");
+        assert!(
+            text(&out.stdout).contains("Usage: coolc"),
+            "{command} --help"
+        );
+    }
+    let out = coolc(&["compile", "--help"], dir.path());
+    for option in ["--out", "--name", "--runtime-path", "--runtime-version"] {
+        assert!(text(&out.stdout).contains(option), "{option}");
+    }
+}
+
+#[test]
+fn exit_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("broken.cool"), BROKEN).unwrap();
+    let ok = data("mobile_base.cool");
+    let ok = ok.to_str().unwrap();
+
+    let out = coolc(&["check", ok], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+
+    let out = coolc(&["check", "broken.cool"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("broken.cool"), "{stderr}");
+    assert!(!stderr.contains('\u{1b}'), "colour on a pipe: {stderr}");
+
+    let out = coolc(&["check", "missing.cool"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("missing.cool"));
+
+    for usage in [
+        &["frobnicate"][..],
+        &["check"],
+        &["compile", ok],
+        &["--message-format", "xml", "check", ok],
+    ] {
+        let out = coolc(usage, dir.path());
+        assert_eq!(out.status.code(), Some(2), "{usage:?}");
+    }
+    // A failed compile writes nothing.
+    let out = coolc(&["compile", "broken.cool", "-o", "out"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(!dir.path().join("out").exists());
+}
+
+#[test]
+fn json_diagnostics() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("broken.cool"), BROKEN).unwrap();
+    let out = coolc(
+        &["check", "--message-format", "json", "broken.cool"],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = text(&out.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert!(!lines.is_empty());
+    for line in lines {
+        let value: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert!(value.is_object(), "{line}");
+        assert!(line.contains("broken.cool"), "{line}");
+    }
+}
+
+#[test]
+fn compile_writes_a_crate() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = data("mobile_base.cool");
+    let out = coolc(
+        &[
+            "compile",
+            ok.to_str().unwrap(),
+            "-o",
+            "base",
+            "--name",
+            "my-base",
+            "--runtime-version",
+            "0.1",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let manifest = std::fs::read_to_string(dir.path().join("base/Cargo.toml")).unwrap();
+    assert!(manifest.contains("name = \"my-base\""), "{manifest}");
+    assert!(manifest.contains("coolbot = \"0.1\""), "{manifest}");
+    for file in [
+        "src/lib.rs",
+        "src/generated/motion_controller.rs",
+        "src/motion_controller.rs",
+        "build.rs",
+    ] {
+        assert!(dir.path().join("base").join(file).exists(), "{file}");
+    }
+    // By default the runtime is this repository's, by path.
+    let out = coolc(
+        &["compile", ok.to_str().unwrap(), "-o", "base2"],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0));
+    let manifest = std::fs::read_to_string(dir.path().join("base2/Cargo.toml")).unwrap();
+    assert!(manifest.contains("name = \"base2\""), "{manifest}");
+    assert!(manifest.contains("coolbot = { path = "), "{manifest}");
+}
+
+#[test]
+fn new_crate_builds_and_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = coolc(&["new", "blinker"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let krate = dir.path().join("blinker");
+    assert!(krate.join("components/blinker.cool").exists());
+
+    // The starter description checks and recompiles in place without changes to the
+    // filled-in user file.
+    let user_file = std::fs::read_to_string(krate.join("src/blinker.rs")).unwrap();
+    let out = coolc(&["compile", "components/blinker.cool", "-o", "."], &krate);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(
+        std::fs::read_to_string(krate.join("src/blinker.rs")).unwrap(),
+        user_file
+    );
+
+    let stdout = cargo(&krate, &["run", "--quiet"]);
+    assert!(stdout.contains("\"done\""), "{stdout}");
+    assert!(stdout.contains("counted 10 periods"), "{stdout}");
+
+    // A second `new` on the same directory is a usage error.
+    let out = coolc(&["new", "blinker"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+}

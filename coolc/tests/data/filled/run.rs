@@ -1,0 +1,130 @@
+//! Runs the generated components on the runtime, wired by the generated compound
+//! `MobileBase::build` with the user file's `MobileBaseParts`.
+
+use std::time::Duration;
+
+use coolbot::{System, Value};
+use fleet::converters::Convert;
+use fleet::generated::mobile_base;
+use fleet::mobile_base::MobileBaseParts;
+
+const WAIT: Duration = Duration::from_secs(20);
+
+fn variable(monitor: &coolbot::Monitor, name: &str) -> Option<Value> {
+    monitor
+        .variables
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| v.clone())
+}
+
+#[test]
+fn mobile_base_instances_run_and_talk() {
+    let mut system = System::new();
+    let handles = mobile_base::build::<Convert>(&mut system, "", &mut MobileBaseParts).unwrap();
+    let names: Vec<&str> = handles.iter().map(|h| h.name()).collect();
+    // The substitute `sim_ranges` is not started.
+    assert_eq!(names, ["motion", "ranges", "gyro_a", "gyro_b", "planner"]);
+    // An instance outside the compound, pulling from the planner.
+    let follower = system
+        .add(fleet::generated::follower::component(
+            "follower",
+            fleet::follower::Follower::default(),
+        ))
+        .unwrap();
+    system.connect("planner.path", "follower.path").unwrap();
+    let motion = system.handle("motion").unwrap();
+    let ranges = system.handle("ranges").unwrap();
+    system.run_all().unwrap();
+
+    // The range server leaves `calibrating` through its `may` choice and streams.
+    let monitor = ranges
+        .wait_for(
+            |m| {
+                m.user_state.as_deref() == Some("streaming")
+                    && matches!(variable(m, "scans"), Some(Value::UInt(n)) if n >= 3)
+            },
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.state, coolbot::State::Running);
+
+    // A section raised `sensor_timeout`: the handler ran, the plan retried the
+    // section, and the component goes on running.
+    let monitor = ranges
+        .wait_for(
+            |m| {
+                matches!(variable(m, "timeouts"), Some(Value::UInt(1)))
+                    && matches!(variable(m, "scans"), Some(Value::UInt(n)) if n >= 6)
+            },
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.state, coolbot::State::Running);
+
+    // The follower's pulls are answered by the planner's `answer_path`.
+    follower
+        .wait_for(
+            |m| matches!(variable(m, "waypoints"), Some(Value::UInt(2))),
+            WAIT,
+        )
+        .unwrap();
+    // A partial configuration through the control port changes only what it names.
+    follower
+        .command(coolbot::Command::Configure(Value::Record(vec![(
+            "scale".to_owned(),
+            Value::UInt(3),
+        )])))
+        .unwrap();
+    follower
+        .wait_for(
+            |m| matches!(variable(m, "waypoints"), Some(Value::UInt(6))),
+            WAIT,
+        )
+        .unwrap();
+
+    // The planner's path reaches the motion controller through the converter: it
+    // moves (`on command -> moving`) and integrates the command into its odometry.
+    let monitor = motion
+        .wait_for(
+            |m| {
+                variable(m, "odometry")
+                    .and_then(|v| v.to_serde::<fleet::generated::types::Pose2D>().ok())
+                    .is_some_and(|pose| pose.x > 0.0)
+            },
+            WAIT,
+        )
+        .unwrap();
+    let pose: fleet::generated::types::Pose2D =
+        variable(&monitor, "odometry").unwrap().to_serde().unwrap();
+    // `instance motion: MotionController { max_speed = 0.5; }` overrides the
+    // controllable variable (default 0.8), which clamps the 1 m/s command.
+    assert_eq!(pose.x, 0.5, "the command is clamped to max_speed");
+    assert!(matches!(variable(&monitor, "max_speed"), Some(Value::Float(s)) if s == 0.5));
+
+    // With no further command, the watchdog (`after 500ms without command`) brings it
+    // back to `idle`.
+    motion
+        .wait_for(|m| m.user_state.as_deref() == Some("idle"), WAIT)
+        .unwrap();
+
+    // The controllable variable is set through the control port.
+    motion
+        .command(coolbot::Command::Set(
+            "max_speed".to_owned(),
+            Value::Float(0.3),
+        ))
+        .unwrap();
+    motion
+        .wait_for(
+            |m| matches!(variable(m, "max_speed"), Some(Value::Float(s)) if s == 0.3),
+            WAIT,
+        )
+        .unwrap();
+
+    let report = system.shutdown();
+    assert!(
+        report.components.iter().all(|c| c.thread_panic.is_none()),
+        "{report:?}"
+    );
+}

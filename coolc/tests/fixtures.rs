@@ -1,0 +1,122 @@
+//! Fixture suites: every `tests/data/ok/*.cool` analyzes without a diagnostic, every
+//! `tests/data/err/*.cool` yields at least one error, and the rendered diagnostics of
+//! each err fixture (no colour, 80 columns) are snapshotted.
+
+use std::path::{Path, PathBuf};
+
+use coolc::{Analysis, RenderOptions};
+
+fn data_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data")
+}
+
+/// Analyzes `path` (absolute) with paths shown relative to `tests/data`.
+fn analyze_fixture(path: &Path) -> Analysis {
+    let base = data_dir().canonicalize().expect("tests/data exists");
+    let path = path.canonicalize().expect("fixture exists");
+    let relative = path
+        .strip_prefix(&base)
+        .expect("fixture under tests/data")
+        .to_owned();
+    coolc::analyze(&[relative], &|p: &Path| {
+        std::fs::read_to_string(base.join(p))
+    })
+}
+
+#[test]
+fn ok_fixtures_have_no_diagnostics() {
+    insta::glob!("../../tests/data", "ok/*.cool", |path| {
+        let analysis = analyze_fixture(path);
+        assert!(
+            analysis.diagnostics.is_empty(),
+            "{}:\n{}",
+            path.display(),
+            analysis.render(RenderOptions::plain())
+        );
+    });
+}
+
+#[test]
+fn err_fixtures_report_errors() {
+    insta::glob!("../../tests/data", "err/*.cool", |path| {
+        let analysis = analyze_fixture(path);
+        assert!(analysis.has_errors(), "{} yields no error", path.display());
+        // The fixture is named after the code it exercises.
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default();
+        let expected_code = stem.split("__").next().unwrap_or(stem);
+        assert!(
+            analysis
+                .diagnostics
+                .iter()
+                .any(|d| d.code.as_str().ends_with(&format!("::{expected_code}"))),
+            "{} does not report a `{expected_code}` diagnostic:\n{}",
+            path.display(),
+            analysis.render(RenderOptions::plain())
+        );
+        insta::assert_snapshot!(analysis.render(RenderOptions::plain()));
+    });
+}
+
+#[test]
+fn warn_fixtures_report_warnings_only() {
+    insta::glob!("../../tests/data", "warn/*.cool", |path| {
+        let analysis = analyze_fixture(path);
+        assert!(
+            !analysis.has_errors(),
+            "{}:\n{}",
+            path.display(),
+            analysis.render(RenderOptions::plain())
+        );
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default();
+        assert!(
+            analysis
+                .diagnostics
+                .iter()
+                .any(|d| d.code.as_str().ends_with(&format!("::{stem}"))),
+            "{} does not warn `{stem}`",
+            path.display()
+        );
+        insta::assert_snapshot!(analysis.render(RenderOptions::plain()));
+    });
+}
+
+#[test]
+fn every_check_code_has_a_fixture() {
+    let mut missing = Vec::new();
+    for code in coolc::diagnostics::Code::ALL {
+        let name = code.as_str().rsplit("::").next().unwrap_or_default();
+        let has_fixture = ["err", "warn"].iter().any(|dir| {
+            std::fs::read_dir(data_dir().join(dir))
+                .into_iter()
+                .flatten()
+                .flatten()
+                .any(|entry| {
+                    let file = entry.file_name().to_string_lossy().into_owned();
+                    file == format!("{name}.cool") || file.starts_with(&format!("{name}__"))
+                })
+        });
+        if !has_fixture {
+            missing.push(code.as_str());
+        }
+    }
+    assert!(missing.is_empty(), "codes without a fixture: {missing:?}");
+}
+
+#[test]
+fn json_rendering_carries_code_file_and_position() {
+    let path = data_dir().join("err/unexpected_token.cool");
+    let analysis = analyze_fixture(&path);
+    let json = analysis.render(RenderOptions::json());
+    let first: serde_json::Value =
+        serde_json::from_str(json.lines().next().expect("one line")).expect("valid json");
+    assert_eq!(first["code"], "coolc::syntax::unexpected_token");
+    assert_eq!(first["severity"], "error");
+    assert_eq!(first["file"], "err/unexpected_token.cool");
+    assert!(first["line"].as_u64().is_some_and(|line| line > 0));
+}

@@ -1,0 +1,163 @@
+//! Regeneration never destroys user code: generate, fill in a stub, add a state (and
+//! an exception and a component) to the description, regenerate. The filled code is
+//! byte-for-byte intact, the new stubs are there, and the crate builds.
+
+mod common;
+
+use std::path::Path;
+
+use common::{cargo, compile};
+
+const V1: &str = "\
+/// A lamp.
+atomic Lamp {
+    observable level: u32 = 0;
+    timing { period 20ms; }
+    automaton {
+        initial off;
+        state off { entry; }
+    }
+}
+";
+
+const V2: &str = "\
+/// A lamp.
+atomic Lamp {
+    observable level: u32 = 0;
+    timing { period 20ms; }
+    exception flicker \"the bulb flickers\";
+    automaton {
+        initial off;
+        state off { entry; after 50ms -> lit; }
+        state lit { entry; periodic; }
+    }
+}
+
+/// A switch.
+atomic Switch {
+    output toggle: tick;
+    automaton { initial idle; state idle { entry; } }
+}
+";
+
+/// V2 without the exception.
+fn v3() -> String {
+    V2.replace("    exception flicker \"the bulb flickers\";\n", "")
+}
+
+const FILLED_BODY: &str = "        // Filled in by hand: keep me exactly as I am.\n        cx.vars.level = 7 ;   // odd spacing on purpose\n        Ok(())\n";
+
+/// Replaces the body of the generated `off_entry` stub with hand-written code.
+fn fill_off_entry(text: &str) -> String {
+    let start = text.find("fn off_entry").expect("off_entry stub");
+    let open = start + text[start..].find("{\n").unwrap() + 2;
+    let close = open + text[open..].find("    }\n").unwrap();
+    let mut filled = String::new();
+    filled.push_str(&text[..open]);
+    filled.push_str(FILLED_BODY);
+    filled.push_str(&text[close..]);
+    // Plus code of the user's own outside the impl block.
+    filled.push_str(
+        "\n/// A helper of mine.\npub fn brightness(level: u32) -> u32 {\n    level * 10\n}\n",
+    );
+    filled
+}
+
+/// Asserts that `new` is `old` with text inserted at one place only.
+fn assert_only_inserted(old: &str, new: &str) -> String {
+    let prefix = old
+        .bytes()
+        .zip(new.bytes())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let suffix = old
+        .bytes()
+        .rev()
+        .zip(new.bytes().rev())
+        .take_while(|(a, b)| a == b)
+        .count();
+    assert!(
+        prefix + suffix >= old.len(),
+        "user text was changed, not only added to:\n--- old\n{old}\n--- new\n{new}"
+    );
+    let prefix = prefix.min(old.len());
+    new[prefix..new.len() - (old.len() - prefix)].to_owned()
+}
+
+fn write(path: &Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn regeneration_keeps_user_code_and_adds_new_stubs() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let krate = dir.path().join("lamp");
+
+    write(&description, V1);
+    let report = compile(&description, &krate, "lamp");
+    assert!(report.added.is_empty());
+    let user_file = krate.join("src/lamp.rs");
+    let generated = std::fs::read_to_string(&user_file).unwrap();
+    assert!(generated.contains("fn off_entry"));
+    assert!(!generated.contains("fn lit_entry"));
+
+    let filled = fill_off_entry(&generated);
+    write(&user_file, &filled);
+    let lib_before = std::fs::read_to_string(krate.join("src/lib.rs")).unwrap();
+
+    write(&description, V2);
+    let report = compile(&description, &krate, "lamp");
+    let regenerated = std::fs::read_to_string(&user_file).unwrap();
+    let inserted = assert_only_inserted(&filled, &regenerated);
+    assert!(regenerated.contains(FILLED_BODY));
+    for stub in ["fn lit_entry", "fn lit_periodic", "fn on_flicker"] {
+        assert!(inserted.contains(stub), "{stub} not inserted: {inserted}");
+    }
+    assert!(!inserted.contains("fn off_entry"));
+    assert_eq!(
+        report.added,
+        [
+            ("src/lib.rs".into(), vec!["switch".to_owned()]),
+            (
+                "src/lamp.rs".into(),
+                vec![
+                    "lit_entry".to_owned(),
+                    "lit_periodic".to_owned(),
+                    "on_flicker".to_owned()
+                ]
+            ),
+        ]
+    );
+    // The new component gets its module declared and its user file written.
+    let lib_after = std::fs::read_to_string(krate.join("src/lib.rs")).unwrap();
+    assert_eq!(
+        assert_only_inserted(&lib_before, &lib_after),
+        "pub mod switch;\n"
+    );
+    assert!(krate.join("src/switch.rs").exists());
+    // The latest stubs are kept for reference.
+    assert!(
+        std::fs::read_to_string(krate.join(".coolc/stubs/src/lamp.rs"))
+            .unwrap()
+            .contains("fn lit_periodic")
+    );
+
+    cargo(&krate, &["build", "--quiet"]);
+
+    // A member removed from the description is reported; the user's method stays.
+    write(&description, &v3());
+    let report = compile(&description, &krate, "lamp");
+    assert!(report.added.is_empty());
+    assert_eq!(std::fs::read_to_string(&user_file).unwrap(), regenerated);
+    assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+    assert!(
+        report.warnings[0].contains("on_flicker"),
+        "{:?}",
+        report.warnings
+    );
+
+    // Compiling again with nothing changed rewrites nothing.
+    let report = compile(&description, &krate, "lamp");
+    assert!(report.written.is_empty(), "{:?}", report.written);
+}

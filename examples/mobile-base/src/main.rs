@@ -1,0 +1,159 @@
+//! `mobile-base`: runs the simulated mobile robot of the CoolBOT paper and shows its
+//! components live. See `examples/README.md`.
+
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use clap::{Parser, ValueEnum};
+use mobile_base::world::FaultKind;
+use mobile_base::{Display, Options};
+
+/// Run the CoolBOT paper's mobile robot (MotionController, RangeServer, MobileBase)
+/// in a simulated room.
+#[derive(Debug, Parser)]
+#[command(name = "mobile-base", version, about)]
+struct Args {
+    /// How long to run (e.g. `10s`, `1500ms`, `1min`); Ctrl-C stops earlier.
+    #[arg(long, default_value = "10s", value_parser = parse_duration)]
+    duration: Duration,
+    /// Make the range sensors fail after this time (e.g. `3s`).
+    #[arg(long, value_parser = parse_duration)]
+    fault_after: Option<Duration>,
+    /// How long the sensors stay down after the fault (past 5 s the recovery deadline
+    /// expires and the range server is retired).
+    #[arg(long, default_value = "1500ms", value_parser = parse_duration)]
+    outage: Duration,
+    /// How the range server fails: it raises its `sensor_timeout` exception, or panics.
+    #[arg(long, value_enum, default_value_t = Fault::Raise)]
+    fault: Fault,
+    /// Range noise of the real sensors: standard deviation in metres (0: noise-free).
+    #[arg(long, default_value_t = 0.005)]
+    noise: f64,
+    /// Seed of the range noise and the wandering.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seek this goal (`x,y` in metres; the room is 6 by 4) instead of wandering.
+    #[arg(long, value_parser = parse_goal)]
+    goal: Option<(f64, f64)>,
+    /// Output: the live table, status lines, or auto (the table on a terminal).
+    #[arg(long, value_enum, default_value_t = Output::Auto)]
+    output: Output,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Fault {
+    Raise,
+    Panic,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Output {
+    Auto,
+    Table,
+    Lines,
+}
+
+/// Parses `250ms`, `10s`, `1.5s`, `2min`, `500us`.
+fn parse_duration(text: &str) -> Result<Duration, String> {
+    let text = text.trim();
+    let split = text
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .ok_or_else(|| format!("`{text}` needs a unit: ms, s or min"))?;
+    let (number, unit) = text.split_at(split);
+    let value: f64 = number
+        .parse()
+        .map_err(|_| format!("`{text}` does not start with a number"))?;
+    let seconds = match unit {
+        "us" => value / 1e6,
+        "ms" => value / 1e3,
+        "s" => value,
+        "min" => value * 60.0,
+        _ => return Err(format!("unknown unit `{unit}` (use us, ms, s or min)")),
+    };
+    Duration::try_from_secs_f64(seconds).map_err(|e| format!("`{text}`: {e}"))
+}
+
+/// Parses `x,y`.
+fn parse_goal(text: &str) -> Result<(f64, f64), String> {
+    let (x, y) = text.split_once(',').ok_or("expected `x,y`, e.g. `5,3`")?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("`{s}` is not a number"))
+    };
+    Ok((parse(x)?, parse(y)?))
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let options = Options {
+        duration: args.duration,
+        fault_after: args.fault_after,
+        outage: args.outage,
+        fault_kind: match args.fault {
+            Fault::Raise => FaultKind::Raise,
+            Fault::Panic => FaultKind::Panic,
+        },
+        noise: args.noise,
+        seed: args.seed,
+        goal: args.goal,
+        display: match args.output {
+            Output::Auto => Display::Auto,
+            Output::Table => Display::Table,
+            Output::Lines => Display::Lines,
+        },
+        ..Options::default()
+    };
+    let stop = options.stop.clone();
+    if let Err(error) = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed)) {
+        eprintln!("warning: Ctrl-C will not stop the robot cleanly: {error}");
+    }
+    if matches!(args.fault, Fault::Panic) {
+        // The runtime catches the range server's panic and shows it in the table;
+        // keep the default hook from printing it over the table (other panics print).
+        let default_hook = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if std::thread::current().name() != Some("cool:ranges") {
+                default_hook(info);
+            }
+        }));
+    }
+    match mobile_base::run(&options) {
+        Ok(summary) => {
+            println!("\n{summary}");
+            if summary.clean_shutdown {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            }
+        }
+        Err(error) => {
+            eprintln!("error: {error}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_parse_with_units() {
+        assert_eq!(parse_duration("10s"), Ok(Duration::from_secs(10)));
+        assert_eq!(parse_duration("1500ms"), Ok(Duration::from_millis(1500)));
+        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
+        assert_eq!(parse_duration("2min"), Ok(Duration::from_secs(120)));
+        assert!(parse_duration("10").is_err());
+        assert!(parse_duration("10h").is_err());
+        assert!(parse_duration("s").is_err());
+    }
+
+    #[test]
+    fn goals_parse() {
+        assert_eq!(parse_goal("5,3"), Ok((5.0, 3.0)));
+        assert!(parse_goal("5").is_err());
+        assert!(parse_goal("a,3").is_err());
+    }
+}

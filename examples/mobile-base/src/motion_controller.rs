@@ -1,0 +1,178 @@
+//! `MotionController` (paper Figure 4, left): executes motion commands on the
+//! simulated differential-drive platform every period.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::generated::motion_controller::*;
+use crate::generated::types::{DriveMode, Pose2D, Twist};
+use crate::sensing;
+use crate::world::Platform;
+
+/// The longest step integrated at once (s): a late period does not teleport the robot.
+const MAX_STEP: f64 = 0.1;
+
+/// The motion controller's code: it owns the platform's drive.
+#[derive(Debug)]
+pub struct MotionController {
+    platform: Arc<Platform>,
+    last_step: Option<Instant>,
+}
+
+impl MotionController {
+    /// A controller driving `platform`.
+    pub fn new(platform: Arc<Platform>) -> MotionController {
+        MotionController {
+            platform,
+            last_step: None,
+        }
+    }
+
+    /// One integration step towards `target` under the speed, acceleration and turn
+    /// limits; publishes the odometry.
+    fn step(&mut self, cx: &mut Cx<'_>, target: Twist) -> coolbot::SectionResult {
+        let now = Instant::now();
+        let dt = self
+            .last_step
+            .map_or(0.0, |last| now.duration_since(last).as_secs_f64())
+            .min(MAX_STEP);
+        self.last_step = Some(now);
+
+        let near = cx
+            .inputs
+            .obstacles
+            .latest()
+            .map(|scan| sensing::front(&scan));
+        let cautious = near.is_some_and(|d| f64::from(d) < cx.config.cautious_distance);
+        if cx.vars.mode != DriveMode::Halted {
+            cx.vars.mode = if cautious {
+                DriveMode::Cautious
+            } else {
+                DriveMode::Normal
+            };
+        }
+        let mut limit = cx.vars.max_speed.max(0.0);
+        if cautious {
+            limit *= cx.config.cautious_factor;
+        }
+        let wanted = target.linear.clamp(-limit, limit);
+        let accel = cx.config.max_accel * dt;
+        let linear = cx.vars.speed.linear + (wanted - cx.vars.speed.linear).clamp(-accel, accel);
+        let angular = target
+            .angular
+            .clamp(-cx.config.max_turn_rate, cx.config.max_turn_rate);
+
+        let drive = self.platform.drive(linear, angular, dt);
+        cx.vars.distance += drive.moved;
+        cx.vars.odometry = Pose2D {
+            x: drive.pose.x,
+            y: drive.pose.y,
+            theta: drive.pose.theta,
+        };
+        cx.outputs.pose.send(cx.vars.odometry.clone());
+        if drive.blocked {
+            cx.vars.speed = Twist {
+                linear: 0.0,
+                angular: 0.0,
+            };
+            return Err(Exception::WheelStall.raise(format!(
+                "blocked at ({:.2}, {:.2}) while commanded {linear:.2} m/s",
+                drive.pose.x, drive.pose.y
+            )));
+        }
+        cx.vars.speed = Twist { linear, angular };
+        Ok(())
+    }
+}
+
+fn still() -> Twist {
+    Twist {
+        linear: 0.0,
+        angular: 0.0,
+    }
+}
+
+impl Behavior for MotionController {
+    fn start(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let pose = self.platform.truth().pose;
+        cx.vars.odometry = Pose2D {
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+        };
+        self.last_step = None;
+        Ok(())
+    }
+
+    fn idle_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.target = still();
+        if cx.vars.mode == DriveMode::Halted {
+            cx.vars.mode = DriveMode::Normal;
+        }
+        Ok(())
+    }
+
+    fn idle_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        // Standing still (braking if still rolling); the odometry is still published.
+        self.step(cx, still())
+    }
+
+    fn moving_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        // Emergencies signalled before moving are stale. The command that woke the
+        // controller is the first target.
+        cx.inputs.halt.take();
+        if let Some(command) = cx.inputs.command.recv() {
+            cx.vars.target = command;
+        }
+        Ok(())
+    }
+
+    fn moving_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        // One command per period, in order; without a new one the last one holds.
+        if let Some(command) = cx.inputs.command.recv() {
+            cx.vars.target = command;
+        }
+        let target = cx.vars.target.clone();
+        self.step(cx, target)
+    }
+
+    fn moving_exit(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.target = still();
+        Ok(())
+    }
+
+    fn moving_choose(&mut self, cx: &mut Cx<'_>) -> Option<MovingMay> {
+        // Told to stand still and standing still: back to idle.
+        let resting = cx.vars.target == still() && cx.vars.speed.linear.abs() < 1e-3;
+        resting.then_some(MovingMay::Idle)
+    }
+
+    fn stopped_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        // Emergency brake: the platform stops at once.
+        cx.vars.halts += 1;
+        cx.vars.mode = DriveMode::Halted;
+        cx.vars.target = still();
+        cx.vars.speed = still();
+        cx.inputs.halt.take();
+        Ok(())
+    }
+
+    fn stopped_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        // Commands that arrive while stopped are discarded, not queued for later.
+        cx.inputs.command.drain().for_each(drop);
+        cx.inputs.halt.take();
+        self.step(cx, still())
+    }
+
+    fn on_wheel_stall(&mut self, cx: &mut Cx<'_>, message: &str) {
+        // The plan (`goto stopped`) stops the platform; remember why.
+        let _ = message;
+        cx.vars.mode = DriveMode::Halted;
+    }
+
+    fn on_platform_lost(&mut self, cx: &mut Cx<'_>, message: &str) {
+        // The plan retries the section; stop commanding speed meanwhile.
+        let _ = message;
+        cx.vars.target = still();
+    }
+}

@@ -1,0 +1,151 @@
+//! The live status table: every component's monitoring port, one row each, plus the
+//! variables it publishes; and the one-line form for logs and pipes.
+
+use std::fmt::Write as _;
+use std::time::Duration;
+
+use coolbot::{Monitor, Value};
+
+/// What one row shows: the monitor, its component type and the CPU load since the
+/// previous frame.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// The component type (from its spec).
+    pub type_name: &'static str,
+    /// A snapshot of its monitoring port.
+    pub monitor: Monitor,
+    /// CPU time over wall time since the previous frame (0..1).
+    pub load: f64,
+}
+
+/// Formats a variable compactly: floats with two decimals, records as `{k:v ...}`.
+pub fn value(value: &Value) -> String {
+    fn json(v: &serde_json::Value) -> String {
+        match v {
+            serde_json::Value::Number(n) if n.is_f64() => {
+                format!("{:.2}", n.as_f64().unwrap_or(0.0))
+            }
+            serde_json::Value::Object(fields) => {
+                let parts: Vec<String> = fields
+                    .iter()
+                    .map(|(k, v)| format!("{k}:{}", json(v)))
+                    .collect();
+                format!("{{{}}}", parts.join(" "))
+            }
+            serde_json::Value::Array(items) => {
+                let parts: Vec<String> = items.iter().map(json).collect();
+                format!("[{}]", parts.join(","))
+            }
+            serde_json::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        }
+    }
+    match value {
+        Value::Float(x) => format!("{x:.2}"),
+        Value::Json(v) => json(v),
+        other => json(&other.to_json()),
+    }
+}
+
+fn rate(period: Option<Duration>) -> String {
+    match period {
+        Some(p) if !p.is_zero() => format!("{:.0}", 1.0 / p.as_secs_f64()),
+        _ => "-".to_owned(),
+    }
+}
+
+fn clip(text: &str, width: usize) -> String {
+    if text.chars().count() <= width {
+        text.to_owned()
+    } else {
+        let mut s: String = text.chars().take(width.saturating_sub(1)).collect();
+        s.push('~');
+        s
+    }
+}
+
+/// The table: a header line, one row per component, then its variables.
+pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "{header}");
+    let _ = writeln!(
+        out,
+        "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
+        "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL",
+    );
+    for row in rows {
+        let m = &row.monitor;
+        let _ = writeln!(
+            out,
+            "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
+            clip(&m.name, 11),
+            clip(row.type_name, 16),
+            m.state.to_string(),
+            // The user automaton's state matters only while it can run.
+            clip(
+                match m.state {
+                    coolbot::State::Running | coolbot::State::Suspended => {
+                        m.user_state.as_deref().unwrap_or("-")
+                    }
+                    _ => "-",
+                },
+                11
+            ),
+            rate(m.period),
+            row.load * 100.0,
+            m.missed_deadlines,
+            m.overruns,
+            m.overflows,
+            clip(m.error.as_deref().unwrap_or(""), 48),
+        );
+        let vars: Vec<String> = m
+            .variables
+            .iter()
+            .map(|(name, v)| format!("{name}={}", value(v)))
+            .collect();
+        let _ = writeln!(out, "  {}", clip(&vars.join("  "), 120));
+    }
+    if !log.is_empty() {
+        let _ = writeln!(out, "events:");
+        for line in log {
+            let _ = writeln!(out, "  {line}");
+        }
+    }
+    out
+}
+
+/// One line for non-terminal output: each component's state and user state.
+pub fn line(at: Duration, rows: &[Row], extra: &str) -> String {
+    let parts: Vec<String> = rows
+        .iter()
+        .map(|row| {
+            let m = &row.monitor;
+            match &m.user_state {
+                Some(user) if m.state == coolbot::State::Running => {
+                    format!("{}={}/{user}", m.name, m.state)
+                }
+                _ => format!("{}={}", m.name, m.state),
+            }
+        })
+        .collect();
+    format!("[{:6.2}s] {} {extra}", at.as_secs_f64(), parts.join(" "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_print_compactly() {
+        assert_eq!(value(&Value::Float(0.123_456)), "0.12");
+        let pose = Value::Json(serde_json::json!({ "x": 1.0, "y": 2.5, "theta": 0.25 }));
+        assert_eq!(value(&pose), "{theta:0.25 x:1.00 y:2.50}");
+        assert_eq!(value(&Value::UInt(7)), "7");
+    }
+
+    #[test]
+    fn long_cells_are_clipped() {
+        assert_eq!(clip("abcdef", 4), "abc~");
+        assert_eq!(clip("abc", 4), "abc");
+    }
+}

@@ -1,0 +1,663 @@
+//! Every connection kind: semantics, overflow policies with their counters and events,
+//! cardinality, kind and type errors, converters, disconnecting, and what inputs do
+//! while their component is not running.
+//!
+//! The consumer shells of these tests stay in `ready` (nothing is ever set running),
+//! so each kind's test also shows what it does while its component is not running:
+//! it works exactly the same; only the reading differs, which no section does then.
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
+use coolbot::{
+    ConnectError, Controllable, InputKind, MonitorEvent, OutputKind, OverflowPolicy, State, System,
+};
+use support::shell::{ShellBuilder, input, output};
+use support::{Rig, Script, WAIT};
+
+fn fifo(capacity: usize) -> InputKind {
+    InputKind::Fifo {
+        capacity,
+        policy: OverflowPolicy::Reject,
+    }
+}
+
+/// A system with a producer shell `p` and a consumer shell `c`, started.
+struct Pair {
+    system: System,
+}
+
+impl Pair {
+    fn new(producer: ShellBuilder, consumer: ShellBuilder) -> Pair {
+        let mut system = System::new();
+        system.add(producer.build()).expect("add p");
+        system.add(consumer.build()).expect("add c");
+        system.start().expect("start");
+        for name in ["p", "c"] {
+            let handle = system.handle(name).expect(name);
+            handle.wait_state(State::Ready, WAIT).expect("ready");
+        }
+        Pair { system }
+    }
+}
+
+#[test]
+fn tick_is_n_to_m_and_counts_events() {
+    let (a, b) = (TickOut::new(), TickOut::new());
+    let (x, y) = (TickIn::new(), TickIn::new());
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("a", OutputKind::Tick, false), &a)
+            .output(output("b", OutputKind::Tick, false), &b),
+        ShellBuilder::new("c")
+            .input(input("x", InputKind::Tick, false), &x)
+            .input(input("y", InputKind::Tick, false), &y),
+    );
+    for (from, to) in [
+        ("p.a", "c.x"),
+        ("p.a", "c.y"),
+        ("p.b", "c.x"),
+        ("p.b", "c.y"),
+    ] {
+        pair.system.connect(from, to).expect(from);
+    }
+    a.emit();
+    a.emit();
+    b.emit();
+    assert!(x.pending());
+    assert_eq!(x.take(), 3);
+    assert_eq!(x.take(), 0);
+    assert!(!x.pending());
+    assert_eq!(y.take(), 3);
+}
+
+#[test]
+fn fifo_keeps_order_and_accepts_n_producers() {
+    let (a, b) = (DataOut::<u64>::new(), DataOut::<u64>::new());
+    let q = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("a", OutputKind::Data, false), &a)
+            .output(output("b", OutputKind::Data, false), &b),
+        ShellBuilder::new("c").input(input("q", fifo(8), false), &q),
+    );
+    pair.system.connect("p.a", "c.q").expect("a");
+    pair.system.connect("p.b", "c.q").expect("b");
+    a.send(1);
+    b.send(2);
+    a.send(3);
+    assert_eq!(q.len(), 3);
+    assert_eq!(q.drain().collect::<Vec<_>>(), vec![1, 2, 3]);
+    assert!(q.is_empty());
+    assert_eq!(q.recv(), None);
+}
+
+/// Send `sent` packets into a fifo of 4 with `policy`; return the consumer's handle.
+fn overflow_case(policy: OverflowPolicy, sent: u64) -> (Pair, FifoIn<u64>, Vec<MonitorEvent>) {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::with_block_timeout(4, policy, Duration::from_millis(1));
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(
+            input(
+                "q",
+                InputKind::Fifo {
+                    capacity: 4,
+                    policy,
+                },
+                false,
+            ),
+            &q,
+        ),
+    );
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let events = pair.system.handle("c").expect("c").subscribe();
+    for packet in 0..sent {
+        out.send(packet);
+    }
+    let events = events.try_iter().collect();
+    (pair, q, events)
+}
+
+fn lost_in(events: &[MonitorEvent]) -> u64 {
+    events
+        .iter()
+        .map(|event| {
+            if let MonitorEvent::Overflow { lost, .. } = event {
+                *lost
+            } else {
+                0
+            }
+        })
+        .sum()
+}
+
+#[test]
+fn fifo_reject_drops_the_newest_and_counts_it() {
+    let (pair, q, events) = overflow_case(OverflowPolicy::Reject, 10);
+    assert_eq!(q.drain().collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+    assert_eq!(q.overflows(), 6);
+    let monitor = pair.system.handle("c").unwrap().snapshot();
+    assert_eq!(monitor.overflows, 6);
+    assert_eq!(monitor.port_overflows, vec![("q".to_owned(), 6)]);
+    assert_eq!(lost_in(&events), 6);
+    assert!(
+        matches!(events.last(), Some(MonitorEvent::Overflow { port, total: 6, .. }) if port == "q")
+    );
+}
+
+#[test]
+fn fifo_drop_oldest_keeps_the_newest_and_counts_the_dropped() {
+    let (_pair, q, events) = overflow_case(OverflowPolicy::DropOldest, 10);
+    assert_eq!(q.drain().collect::<Vec<_>>(), vec![6, 7, 8, 9]);
+    assert_eq!(q.overflows(), 6);
+    assert_eq!(lost_in(&events), 6);
+}
+
+#[test]
+fn fifo_block_waits_then_rejects_and_counts() {
+    let (_pair, q, events) = overflow_case(OverflowPolicy::Block, 6);
+    assert_eq!(q.drain().collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+    assert_eq!(q.overflows(), 2);
+    assert_eq!(lost_in(&events), 2);
+}
+
+#[test]
+fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::with_block_timeout(2, OverflowPolicy::Block, WAIT);
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(
+            input(
+                "q",
+                InputKind::Fifo {
+                    capacity: 2,
+                    policy: OverflowPolicy::Block,
+                },
+                false,
+            ),
+            &q,
+        ),
+    );
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let reader = {
+        let q = q.clone();
+        std::thread::spawn(move || {
+            let mut got = Vec::new();
+            while got.len() < 1000 {
+                match q.recv() {
+                    Some(packet) => got.push(packet),
+                    None => std::thread::yield_now(),
+                }
+            }
+            got
+        })
+    };
+    for packet in 0..1000 {
+        out.send(packet);
+    }
+    assert_eq!(reader.join().unwrap(), (0..1000).collect::<Vec<_>>());
+    assert_eq!(q.overflows(), 0);
+}
+
+#[test]
+fn ufifo_grows_by_steps_up_to_its_cap_then_counts() {
+    let out = DataOut::<u64>::new();
+    let capped = UfifoIn::<u64>::new(2, Some(6));
+    let open = UfifoIn::<u64>::new(2, None);
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c")
+            .input(
+                input(
+                    "capped",
+                    InputKind::Ufifo {
+                        initial: 2,
+                        max: Some(6),
+                    },
+                    false,
+                ),
+                &capped,
+            )
+            .input(
+                input(
+                    "open",
+                    InputKind::Ufifo {
+                        initial: 2,
+                        max: None,
+                    },
+                    false,
+                ),
+                &open,
+            ),
+    );
+    let events = pair.system.handle("c").unwrap().subscribe();
+    pair.system.connect("p.out", "c.capped").expect("capped");
+    // One data output feeds at most one queue input: a second producer for `open`.
+    let err = pair.system.connect("p.out", "c.open").unwrap_err();
+    assert!(matches!(err, ConnectError::Cardinality { .. }), "{err}");
+    assert_eq!(capped.capacity(), 2);
+    for packet in 0..10 {
+        out.send(packet);
+    }
+    assert_eq!(capped.capacity(), 6);
+    assert_eq!(capped.growths(), 2);
+    assert_eq!(capped.len(), 6);
+    assert_eq!(capped.overflows(), 4);
+    assert_eq!(lost_in(&events.try_iter().collect::<Vec<_>>()), 4);
+    assert_eq!(
+        capped.drain().collect::<Vec<_>>(),
+        (0..6).collect::<Vec<_>>()
+    );
+    assert!(capped.is_empty());
+}
+
+#[test]
+fn ufifo_without_cap_keeps_everything() {
+    let out = DataOut::<u64>::new();
+    let open = UfifoIn::<u64>::new(3, None);
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(
+            input(
+                "open",
+                InputKind::Ufifo {
+                    initial: 3,
+                    max: None,
+                },
+                false,
+            ),
+            &open,
+        ),
+    );
+    pair.system.connect("p.out", "c.open").expect("open");
+    for packet in 0..100 {
+        out.send(packet);
+    }
+    assert_eq!(open.len(), 100);
+    assert_eq!(open.capacity(), 102);
+    assert_eq!(open.overflows(), 0);
+    assert_eq!(open.recv(), Some(0));
+}
+
+#[test]
+fn last_keeps_a_local_copy_at_each_of_n_inputs() {
+    let out = DataOut::<u64>::new();
+    let (x, y) = (LastIn::<u64>::new(), LastIn::<u64>::new());
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c")
+            .input(input("x", InputKind::Last, false), &x)
+            .input(input("y", InputKind::Last, false), &y),
+    );
+    pair.system.connect("p.out", "c.x").expect("x");
+    pair.system.connect("p.out", "c.y").expect("y");
+    assert_eq!(out.consumers(), 2);
+    assert_eq!(x.latest(), None);
+    out.send(1);
+    out.send(2);
+    assert_eq!(x.latest(), Some(2));
+    assert_eq!(x.take_new(), Some(2));
+    assert_eq!(x.take_new(), None);
+    assert_eq!(x.latest(), Some(2), "the local copy stays");
+    assert_eq!(y.take_new(), Some(2), "each input has its own copy");
+    assert_eq!(x.received(), 2);
+}
+
+#[test]
+fn last_and_poster_inputs_have_one_producer() {
+    let (a, b) = (DataOut::<u64>::new(), DataOut::<u64>::new());
+    let (pa, pb) = (PosterOut::<u64>::new(), PosterOut::<u64>::new());
+    let x = LastIn::<u64>::new();
+    let r = PosterIn::<u64>::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("a", OutputKind::Data, false), &a)
+            .output(output("b", OutputKind::Data, false), &b)
+            .output(output("pa", OutputKind::Poster, false), &pa)
+            .output(output("pb", OutputKind::Poster, false), &pb),
+        ShellBuilder::new("c")
+            .input(input("x", InputKind::Last, false), &x)
+            .input(input("r", InputKind::Poster, false), &r),
+    );
+    pair.system.connect("p.a", "c.x").expect("a");
+    let err = pair.system.connect("p.b", "c.x").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "cannot connect `p.b` to `c.x`: a last connection is 1 output to N inputs, and `c.x` is already fed by `p.a`"
+    );
+    pair.system.connect("p.pa", "c.r").expect("pa");
+    let err = pair.system.connect("p.pb", "c.r").unwrap_err();
+    assert!(
+        matches!(&err, ConnectError::Cardinality { rule, .. } if rule.contains("poster connection is 1 output to N inputs")),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_data_output_feeds_one_queue_input() {
+    let out = DataOut::<u64>::new();
+    let (q1, q2) = (
+        FifoIn::<u64>::new(4, OverflowPolicy::Reject),
+        FifoIn::<u64>::new(4, OverflowPolicy::Reject),
+    );
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c")
+            .input(input("q1", fifo(4), false), &q1)
+            .input(input("q2", fifo(4), false), &q2),
+    );
+    pair.system.connect("p.out", "c.q1").expect("q1");
+    let err = pair.system.connect("p.out", "c.q2").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "cannot connect `p.out` to `c.q2`: a fifo connection is N outputs to 1 input, and `p.out` already feeds `c.q1`"
+    );
+}
+
+#[test]
+fn poster_inputs_read_the_producers_latest_post() {
+    let post = PosterOut::<String>::new();
+    let (r1, r2) = (PosterIn::<String>::new(), PosterIn::<String>::new());
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("map", OutputKind::Poster, false), &post),
+        ShellBuilder::new("c")
+            .input(input("r1", InputKind::Poster, false), &r1)
+            .input(input("r2", InputKind::Poster, false), &r2),
+    );
+    assert_eq!(r1.read(), None, "unconnected");
+    pair.system.connect("p.map", "c.r1").expect("r1");
+    pair.system.connect("p.map", "c.r2").expect("r2");
+    assert_eq!(r1.read(), None, "nothing posted");
+    post.post("v1".to_owned());
+    post.post("v2".to_owned());
+    assert!(r1.is_new());
+    assert_eq!(r1.read().as_deref(), Some("v2"));
+    assert!(!r1.is_new());
+    assert_eq!(r1.read().as_deref(), Some("v2"), "reading does not consume");
+    assert_eq!(r2.read().as_deref(), Some("v2"));
+    assert_eq!(post.posted().as_deref(), Some("v2"));
+    pair.system.disconnect("p.map", "c.r1").expect("disconnect");
+    assert_eq!(r1.read(), None, "a disconnected poster input reads nothing");
+    assert_eq!(r2.read().as_deref(), Some("v2"));
+}
+
+#[test]
+fn kinds_that_cannot_connect_are_rejected() {
+    let tick = TickOut::new();
+    let data = DataOut::<u64>::new();
+    let post = PosterOut::<u64>::new();
+    let q = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
+    let r = PosterIn::<u64>::new();
+    let t = TickIn::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("tick", OutputKind::Tick, false), &tick)
+            .output(output("data", OutputKind::Data, false), &data)
+            .output(output("post", OutputKind::Poster, false), &post),
+        ShellBuilder::new("c")
+            .input(input("q", fifo(4), false), &q)
+            .input(input("r", InputKind::Poster, false), &r)
+            .input(input("t", InputKind::Tick, false), &t),
+    );
+    let err = pair.system.connect("p.tick", "c.q").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "cannot connect tick output `p.tick` to fifo input `c.q`: a tick output connects only to tick inputs"
+    );
+    let err = pair.system.connect("p.data", "c.r").unwrap_err();
+    assert!(
+        matches!(
+            err,
+            ConnectError::KindMismatch {
+                from_kind: "data",
+                to_kind: "poster",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let err = pair.system.connect("p.post", "c.t").unwrap_err();
+    assert!(
+        matches!(
+            err,
+            ConnectError::KindMismatch {
+                from_kind: "poster",
+                to_kind: "tick",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Addresses.
+    assert!(matches!(
+        pair.system.connect("ptick", "c.q"),
+        Err(ConnectError::BadAddress { .. })
+    ));
+    assert!(matches!(
+        pair.system.connect("x.tick", "c.q"),
+        Err(ConnectError::UnknownInstance { .. })
+    ));
+    let err = pair.system.connect("p.nope", "c.q").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "`p.nope`: component `p` (Shell) has no output port `nope`"
+    );
+    let err = pair.system.connect("p.data", "c.tick").unwrap_err();
+    assert!(
+        matches!(
+            err,
+            ConnectError::UnknownPort {
+                direction: "input",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // An input given as the source is not an output.
+    assert!(matches!(
+        pair.system.connect("c.q", "c.q"),
+        Err(ConnectError::UnknownPort {
+            direction: "output",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn packet_types_are_checked_and_converters_bridge_them() {
+    let text = DataOut::<String>::new();
+    let numbers = DataOut::<u64>::new();
+    let post = PosterOut::<u64>::new();
+    let q = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
+    let l = LastIn::<String>::new();
+    let r = PosterIn::<String>::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("text", OutputKind::Data, false), &text)
+            .output(output("numbers", OutputKind::Data, false), &numbers)
+            .output(output("post", OutputKind::Poster, false), &post),
+        ShellBuilder::new("c")
+            .input(input("q", fifo(4), false), &q)
+            .input(input("l", InputKind::Last, false), &l)
+            .input(input("r", InputKind::Poster, false), &r),
+    );
+    let err = pair.system.connect("p.text", "c.q").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "cannot connect `p.text` to `c.q`: the output carries `alloc::string::String` but the input expects `u64` (use a converter: connect_via)"
+    );
+    assert!(matches!(
+        pair.system.connect("p.post", "c.r"),
+        Err(ConnectError::TypeMismatch { .. })
+    ));
+    // A converter with the wrong types is refused, naming them.
+    let err = pair
+        .system
+        .connect_via("p.numbers", "c.l", |n: &u32| n.to_string())
+        .unwrap_err();
+    assert!(
+        matches!(&err, ConnectError::ConverterMismatch { converter, .. } if converter == "u32 -> alloc::string::String"),
+        "{err}"
+    );
+    // Converters on a data connection (producer side) and a poster (reader side).
+    pair.system
+        .connect_via("p.text", "c.q", |s: &String| s.len() as u64)
+        .expect("text -> q");
+    pair.system
+        .connect_via("p.numbers", "c.l", |n: &u64| format!("#{n}"))
+        .expect("numbers -> l");
+    pair.system
+        .connect_via("p.post", "c.r", |n: &u64| format!("post {n}"))
+        .expect("post -> r");
+    text.send("hello".to_owned());
+    numbers.send(7);
+    post.post(3);
+    assert_eq!(q.recv(), Some(5));
+    assert_eq!(l.latest().as_deref(), Some("#7"));
+    assert_eq!(r.read().as_deref(), Some("post 3"));
+    // Converted connections disconnect like any other.
+    pair.system
+        .disconnect("p.numbers", "c.l")
+        .expect("disconnect");
+    numbers.send(8);
+    assert_eq!(l.latest().as_deref(), Some("#7"));
+    pair.system
+        .disconnect("p.post", "c.r")
+        .expect("disconnect poster");
+    assert_eq!(r.read(), None);
+}
+
+#[test]
+fn disconnecting_while_running_keeps_queued_packets() {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
+    let x = LastIn::<u64>::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c")
+            .input(input("q", fifo(8), false), &q)
+            .input(input("x", InputKind::Last, false), &x),
+    );
+    pair.system.run_all().expect("run");
+    pair.system.connect("p.out", "c.q").expect("q");
+    pair.system.connect("p.out", "c.x").expect("x");
+    let err = pair.system.connect("p.out", "c.q").unwrap_err();
+    assert_eq!(
+        err,
+        ConnectError::AlreadyConnected {
+            from: "p.out".to_owned(),
+            to: "c.q".to_owned()
+        }
+    );
+    out.send(1);
+    out.send(2);
+    pair.system
+        .disconnect("p.out", "c.q")
+        .expect("disconnect q");
+    pair.system
+        .disconnect("p.out", "c.x")
+        .expect("disconnect x");
+    out.send(3);
+    assert_eq!(
+        q.drain().collect::<Vec<_>>(),
+        vec![1, 2],
+        "queued packets stay, later ones do not arrive"
+    );
+    assert_eq!(x.latest(), Some(2));
+    let err = pair.system.disconnect("p.out", "c.q").unwrap_err();
+    assert_eq!(err.to_string(), "`p.out` is not connected to `c.q`");
+    // Reconnecting works and the queue goes on.
+    pair.system.connect("p.out", "c.q").expect("reconnect");
+    out.send(4);
+    assert_eq!(q.recv(), Some(4));
+    assert_eq!(
+        pair.system.connections(),
+        vec![("p.out".to_owned(), "c.q".to_owned())]
+    );
+}
+
+#[test]
+fn inputs_keep_working_while_the_component_is_ready_and_no_section_runs() {
+    let rig = Rig::started(Script::new());
+    assert_eq!(rig.handle.state(), State::Ready);
+    for packet in 0..6 {
+        rig.feeder.data.send(packet);
+    }
+    rig.feeder.kick.emit();
+    rig.feeder.feed.send(41);
+    rig.feeder.feed.send(42);
+    assert_eq!(rig.inputs.data.len(), 4, "the fifo keeps queueing");
+    assert_eq!(
+        rig.inputs.data.overflows(),
+        2,
+        "and overflows by its policy"
+    );
+    assert!(rig.inputs.kick.pending(), "the tick counts");
+    assert_eq!(rig.inputs.feed.latest(), Some(42), "last keeps the latest");
+    assert_eq!(rig.script.log(), vec!["start"], "no section ran");
+    // Going running enters `idle` afresh: earlier arrivals do not fire `on data`.
+    rig.command(Controllable::Running).expect("running");
+    let monitor = rig.wait_user("idle");
+    assert_eq!(monitor.user_state.as_deref(), Some("idle"));
+    assert_eq!(rig.script.received.load(Ordering::SeqCst), 0);
+    // A new arrival does, and `busy` reads everything queued.
+    rig.feeder.data.send(100);
+    rig.wait_user("busy");
+    rig.handle
+        .wait_for(|m| m.variables[0].1 == coolbot::Value::UInt(4), WAIT)
+        .expect("count");
+    assert_eq!(rig.script.received.load(Ordering::SeqCst), 4);
+}
+
+#[test]
+fn arrivals_while_suspended_fire_on_resume() {
+    let rig = Rig::started(Script::new());
+    rig.command(Controllable::Running).expect("running");
+    rig.wait_user("idle");
+    rig.command(Controllable::Suspended).expect("suspend");
+    rig.script.clear_log();
+    rig.feeder.data.send(7);
+    rig.feeder.data.send(8);
+    // The packets wait; nothing runs while suspended.
+    std::thread::sleep(Duration::from_millis(30));
+    assert_eq!(rig.script.log(), Vec::<String>::new());
+    assert_eq!(rig.inputs.data.len(), 2);
+    rig.command(Controllable::Running).expect("resume");
+    rig.wait_user("busy");
+    rig.handle
+        .wait_for(|m| m.variables[0].1 == coolbot::Value::UInt(2), WAIT)
+        .expect("count");
+    assert_eq!(rig.script.log(), vec!["busy.entry"]);
+}
+
+#[test]
+fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::new(1, OverflowPolicy::Reject);
+    let pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(input("q", fifo(1), false), &q),
+    );
+    let mut pair = pair;
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let handle = pair.system.handle("c").unwrap();
+    handle.wait_state(State::Ready, WAIT).expect("ready");
+    let (first, second) = (handle.subscribe(), handle.subscribe());
+    let sent = coolbot::OBSERVER_CAPACITY as u64 + 100;
+    // One packet fills the queue; every other one overflows and is announced.
+    // `first` keeps up; `second` never reads.
+    let mut first_got = 0;
+    for packet in 0..=sent {
+        out.send(packet);
+        first_got += first.try_iter().count() as u64;
+    }
+    assert_eq!(q.overflows(), sent);
+    assert_eq!(first_got, sent);
+    assert_eq!(second.try_iter().count(), coolbot::OBSERVER_CAPACITY);
+    assert_eq!(handle.snapshot().dropped_events, 100);
+}

@@ -1,0 +1,413 @@
+//! Fault containment and continuity plans: panics and faults lead to `running_error`
+//! with the message in `error`, other components go on, restarts work, plans recover,
+//! `dead` joins the thread, and dropping a system leaves no thread behind.
+
+mod support;
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use coolbot::port::FifoIn;
+use coolbot::{Command, Controllable, OverflowPolicy, State, System};
+use support::worker::{self, Exception};
+use support::{Injected, Rig, Script, Scripted, WAIT, eventually};
+
+#[test]
+fn a_panic_goes_to_running_error_and_the_others_go_on() {
+    let rig = Rig::started(Script::new());
+    // A second, independent worker in the same system.
+    let mut rig = rig;
+    let other_script = Script::new();
+    let (other, _, _) = worker::component(
+        "other",
+        Scripted {
+            script: Arc::clone(&other_script),
+            token: None,
+        },
+    );
+    let other = rig.system.add(other).expect("add other");
+    other.wait_state(State::Ready, WAIT).expect("other ready");
+    rig.run_busy();
+    other
+        .command(Command::SetState(Controllable::Running))
+        .expect("other running");
+    rig.script.panic_in(Some("busy.periodic"));
+    let monitor = rig.wait_state(State::RunningError);
+    assert_eq!(
+        monitor.error.as_deref(),
+        Some("panic in state `busy` (Periodic section): boom in busy.periodic")
+    );
+    assert_eq!(
+        monitor.user_state.as_deref(),
+        Some("busy"),
+        "the failing state stays visible"
+    );
+    assert!(
+        rig.script.log().ends_with(&["stop".to_owned()]),
+        "stop released the resources"
+    );
+    assert_eq!(other.state(), State::Running);
+    // Restart through the control port.
+    rig.script.panic_in(None);
+    rig.command(Controllable::Running).expect("restart");
+    let monitor = rig.wait_user("idle");
+    assert_eq!(monitor.error, None, "a successful start clears the error");
+    rig.feeder.kick.emit();
+    rig.wait_user("busy");
+    let before = rig.script.periodics.load(Ordering::SeqCst);
+    eventually(
+        || rig.script.periodics.load(Ordering::SeqCst) > before + 2,
+        "periodic again",
+    );
+}
+
+#[test]
+fn a_panicking_start_goes_to_starting_error() {
+    let script = Script::new();
+    script.panic_in(Some("start"));
+    let rig = Rig::started(script);
+    let monitor = rig.wait_state(State::StartingError);
+    assert_eq!(
+        monitor.error.as_deref(),
+        Some("panic in start: boom in start")
+    );
+    rig.script.panic_in(None);
+    rig.command(Controllable::Ready).expect("retry start");
+    assert_eq!(rig.handle.state(), State::Ready);
+}
+
+#[test]
+fn an_undeclared_fault_goes_to_running_error() {
+    let rig = Rig::started(Script::new());
+    rig.script.inject(Some(Injected {
+        hook: "busy.entry",
+        exception: None,
+        times: 1,
+    }));
+    rig.command(Controllable::Running).expect("running");
+    rig.feeder.kick.emit();
+    let monitor = rig.wait_state(State::RunningError);
+    assert_eq!(
+        monitor.error.as_deref(),
+        Some("fault in state `busy` (Entry section): injected in busy.entry")
+    );
+}
+
+#[test]
+fn a_retry_plan_recovers_when_a_retry_succeeds() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Flaky),
+        times: 2,
+    }));
+    eventually(
+        || rig.script.injected.load(Ordering::SeqCst) == 2,
+        "injected twice",
+    );
+    let before = rig.script.periodics.load(Ordering::SeqCst);
+    eventually(
+        || rig.script.periodics.load(Ordering::SeqCst) > before + 2,
+        "goes on",
+    );
+    assert_eq!(rig.handle.state(), State::Running);
+    assert_eq!(
+        *rig.script.handled.lock().unwrap(),
+        vec!["flaky: injected in busy.periodic"],
+        "the handler ran once"
+    );
+}
+
+#[test]
+fn a_retry_plan_that_keeps_failing_goes_to_running_error() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Flaky),
+        times: 3,
+    }));
+    let monitor = rig.wait_state(State::RunningError);
+    assert_eq!(
+        monitor.error.as_deref(),
+        Some("exception `flaky` in state `busy` (Periodic section): injected in busy.periodic")
+    );
+    assert_eq!(
+        rig.script.injected.load(Ordering::SeqCst),
+        3,
+        "the first run and two retries"
+    );
+}
+
+#[test]
+fn an_exception_without_a_plan_goes_to_running_error_after_its_handler() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Fatal),
+        times: 1,
+    }));
+    let monitor = rig.wait_state(State::RunningError);
+    assert!(monitor.error.unwrap().starts_with("exception `fatal`"));
+    assert_eq!(
+        *rig.script.handled.lock().unwrap(),
+        vec!["fatal: injected in busy.periodic"]
+    );
+}
+
+#[test]
+fn a_goto_plan_moves_the_user_automaton() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.clear_log();
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Detour),
+        times: 1,
+    }));
+    rig.wait_user("idle");
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
+    assert_eq!(rig.handle.snapshot().error, None);
+}
+
+#[test]
+fn a_degrade_plan_lowers_the_quality_until_there_is_no_lower_level() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    let events = rig.handle.subscribe();
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Wobbly),
+        times: 1,
+    }));
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.quality == 1, WAIT)
+        .expect("degraded");
+    assert_eq!(monitor.state, State::Running);
+    assert!(
+        events
+            .iter()
+            .any(|event| event == coolbot::MonitorEvent::Quality(1))
+    );
+    rig.script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Wobbly),
+        times: 1,
+    }));
+    let monitor = rig.wait_state(State::RunningError);
+    assert!(monitor.error.unwrap().starts_with("exception `wobbly`"));
+}
+
+#[test]
+fn a_failing_exit_section_leads_to_a_defined_state() {
+    // Leaving for `ready`: running_error.
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.panic_in(Some("busy.exit"));
+    rig.command(Controllable::Ready).expect("accepted");
+    let monitor = rig.wait_state(State::RunningError);
+    assert!(monitor.error.unwrap().contains("boom in busy.exit"));
+    // Leaving for `dead`: dead, with the error recorded.
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.panic_in(Some("busy.exit"));
+    rig.command(Controllable::Dead).expect("accepted");
+    let monitor = rig.wait_state(State::Dead);
+    assert!(monitor.error.unwrap().contains("boom in busy.exit"));
+    assert!(
+        rig.script
+            .log()
+            .ends_with(&["busy.exit".to_owned(), "stop".to_owned()])
+    );
+}
+
+#[test]
+fn a_panicking_stop_is_recorded_and_the_transition_completes() {
+    let rig = Rig::started(Script::new());
+    rig.script.panic_in(Some("stop"));
+    rig.command(Controllable::Dead).expect("dead");
+    let monitor = rig.handle.snapshot();
+    assert_eq!(monitor.state, State::Dead);
+    assert_eq!(
+        monitor.error.as_deref(),
+        Some("panic in stop: boom in stop")
+    );
+}
+
+fn rig_with_token() -> (Rig, Arc<()>) {
+    let token = Arc::new(());
+    let data = FifoIn::new(4, OverflowPolicy::Reject);
+    let rig = Rig::start(Rig::unstarted_with(
+        Script::new(),
+        &worker::SPEC,
+        data,
+        Some(Arc::clone(&token)),
+    ));
+    (rig, token)
+}
+
+#[test]
+fn dead_joins_the_thread() {
+    let (rig, token) = rig_with_token();
+    rig.run_busy();
+    assert_eq!(
+        Arc::strong_count(&token),
+        2,
+        "the behaviour lives on the thread"
+    );
+    rig.command(Controllable::Dead).expect("dead");
+    assert_eq!(
+        Arc::strong_count(&token),
+        1,
+        "the thread ended and dropped the behaviour"
+    );
+    let err = rig.command(Controllable::Running).unwrap_err();
+    assert!(err.reason.contains("ended"), "{err}");
+}
+
+#[test]
+fn dropping_a_running_system_leaves_no_thread_behind() {
+    let (rig, token) = rig_with_token();
+    rig.run_busy();
+    let handle = rig.handle.clone();
+    drop(rig);
+    assert_eq!(Arc::strong_count(&token), 1, "the thread was joined");
+    assert_eq!(handle.state(), State::Dead);
+    assert!(rig_with_token_shutdown_report().clean());
+}
+
+fn rig_with_token_shutdown_report() -> coolbot::Report {
+    let (rig, token) = rig_with_token();
+    rig.run_busy();
+    let report = rig.system.shutdown();
+    assert_eq!(Arc::strong_count(&token), 1);
+    assert_eq!(report.components.len(), 2);
+    for component in &report.components {
+        assert!(component.joined, "{component:?}");
+        assert_eq!(component.state, State::Dead);
+    }
+    report
+}
+
+#[test]
+fn a_system_that_never_started_drops_cleanly() {
+    let token = Arc::new(());
+    {
+        let data = FifoIn::new(4, OverflowPolicy::Reject);
+        let rig = Rig::unstarted_with(Script::new(), &worker::SPEC, data, Some(Arc::clone(&token)));
+        let err = rig.command(Controllable::Running).unwrap_err();
+        assert!(err.reason.contains("not been started"), "{err}");
+        let report = rig.system.shutdown();
+        assert!(
+            report
+                .components
+                .iter()
+                .all(|c| !c.joined && c.state == State::Starting)
+        );
+    }
+    assert_eq!(Arc::strong_count(&token), 1);
+}
+
+#[test]
+fn a_command_is_withdrawn_if_a_long_section_outlasts_the_command_timeout() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(300));
+    // Wait until a long periodic section is under way.
+    let before = rig.script.periodics.load(Ordering::SeqCst);
+    eventually(
+        || rig.script.periodics.load(Ordering::SeqCst) > before,
+        "in a long section",
+    );
+    let impatient = rig
+        .handle
+        .clone()
+        .with_command_timeout(Duration::from_millis(20));
+
+    let err = impatient
+        .command(Command::SetState(Controllable::Ready))
+        .unwrap_err();
+    assert!(err.reason.starts_with("busy"), "{err}");
+    // A patient command is applied when the section returns.
+    *rig.script.sleep_in_periodic.lock().unwrap() = None;
+    rig.command(Controllable::Suspended)
+        .expect("applied after the section");
+    assert_eq!(
+        rig.handle.state(),
+        State::Suspended,
+        "the withdrawn `ready` was never applied"
+    );
+}
+
+#[test]
+fn a_section_longer_than_max_response_is_an_overrun() {
+    let rig = Rig::started(Script::new());
+    rig.handle
+        .command(Command::SetMaxResponse(Duration::from_millis(1)))
+        .expect("max_response");
+    rig.run_busy();
+    let events = rig.handle.subscribe();
+    *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(3));
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.overruns > 0, WAIT)
+        .expect("overrun");
+    assert_eq!(monitor.state, State::Running, "an overrun is not a fault");
+    assert_eq!(monitor.max_response, Some(Duration::from_millis(1)));
+    assert!(
+        events
+            .iter()
+            .any(|event| matches!(event, coolbot::MonitorEvent::Overrun { .. }))
+    );
+}
+
+#[test]
+fn components_with_the_same_name_or_bad_ports_are_refused() {
+    let mut system = System::new();
+    let (a, _, _) = worker::component(
+        "w",
+        Scripted {
+            script: Script::new(),
+            token: None,
+        },
+    );
+    let (b, _, _) = worker::component(
+        "w",
+        Scripted {
+            script: Script::new(),
+            token: None,
+        },
+    );
+    let (c, _, _) = worker::component(
+        "x.y",
+        Scripted {
+            script: Script::new(),
+            token: None,
+        },
+    );
+    system.add(a).expect("first");
+    assert_eq!(
+        system.add(b).unwrap_err().to_string(),
+        "a component named `w` already exists"
+    );
+    assert!(matches!(system.add(c), Err(coolbot::Error::InvalidName(_))));
+    // Ports that do not match the spec.
+    let empty = coolbot::Component::new(
+        "empty",
+        Box::new(support::shell::ShellBuilder::new("z").build_automaton_for(&worker::SPEC)),
+        coolbot::PortSet::new(),
+    );
+    let err = system.add(empty).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "component `empty`: 0 input ports registered, the spec declares 3"
+    );
+}

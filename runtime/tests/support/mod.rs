@@ -1,0 +1,326 @@
+//! Test support: a hand-written component shaped like generated code (`worker`) and a
+//! scriptable behaviour for it.
+#![allow(
+    dead_code,
+    reason = "each test binary uses a different part of the support module"
+)]
+
+pub mod shell;
+pub mod worker;
+
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use coolbot::crossbeam_channel::Receiver;
+use coolbot::{Handle, SectionResult, State, System, TaskResult};
+
+use coolbot::port::{DataOut, TickOut};
+use coolbot::{Command, Controllable, OutputKind};
+use shell::ShellBuilder;
+use worker::{Behavior, BusyMay, Cx, Exception};
+
+/// How long tests wait for anything (generous: the machine is shared).
+pub const WAIT: Duration = Duration::from_secs(10);
+
+/// Wait until `condition` holds, checking every millisecond (for conditions on test
+/// state that no monitoring event announces); panics with `what` after `WAIT`.
+pub fn eventually(condition: impl Fn() -> bool, what: &str) {
+    let deadline = std::time::Instant::now() + WAIT;
+    while !condition() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for: {what}"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+/// A fault to inject: in which hook, as which exception (None: undeclared), how often.
+#[derive(Debug, Clone)]
+pub struct Injected {
+    pub hook: &'static str,
+    pub exception: Option<Exception>,
+    pub times: u32,
+}
+
+/// What the scripted behaviour does; tests change it while the component runs.
+#[derive(Default)]
+pub struct Script {
+    pub log: Mutex<Vec<String>>,
+    pub start_fails: AtomicBool,
+    pub start_gate: Mutex<Option<Receiver<()>>>,
+    pub panic_in: Mutex<Option<&'static str>>,
+    pub fault: Mutex<Option<Injected>>,
+    pub end_in_periodic: AtomicBool,
+    pub sleep_in_periodic: Mutex<Option<Duration>>,
+    pub choose_idle: AtomicBool,
+    pub received: AtomicU64,
+    pub periodics: AtomicU64,
+    pub handled: Mutex<Vec<String>>,
+    pub injected: AtomicU32,
+}
+
+impl Script {
+    pub fn new() -> Arc<Script> {
+        Arc::new(Script::default())
+    }
+
+    /// The log, without periodic sections (their number depends on timing).
+    pub fn log(&self) -> Vec<String> {
+        self.log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|entry| !entry.ends_with(".periodic"))
+            .cloned()
+            .collect()
+    }
+
+    pub fn clear_log(&self) {
+        self.log.lock().unwrap().clear();
+    }
+
+    pub fn panic_in(&self, hook: Option<&'static str>) {
+        *self.panic_in.lock().unwrap() = hook;
+    }
+
+    pub fn inject(&self, fault: Option<Injected>) {
+        *self.fault.lock().unwrap() = fault;
+    }
+
+    /// Record a hook call; panic or fail if the script says so.
+    fn hit(&self, hook: &'static str) -> SectionResult {
+        self.log.lock().unwrap().push(hook.to_owned());
+        if *self.panic_in.lock().unwrap() == Some(hook) {
+            panic!("boom in {hook}");
+        }
+        let mut fault = self.fault.lock().unwrap();
+        if let Some(injected) = fault.as_mut()
+            && injected.hook == hook
+            && injected.times > 0
+        {
+            injected.times -= 1;
+            self.injected.fetch_add(1, Ordering::SeqCst);
+            return Err(match injected.exception {
+                Some(exception) => exception.raise(format!("injected in {hook}")),
+                None => coolbot::Fault::message(format!("injected in {hook}")),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The scripted Worker behaviour.
+pub struct Scripted {
+    pub script: Arc<Script>,
+    /// Dropped with the behaviour: lets tests see that the thread released it.
+    pub token: Option<Arc<()>>,
+}
+
+impl Scripted {
+    fn drain(&self, cx: &mut Cx<'_>) {
+        let drained = cx.inputs.data.drain().count() as u64;
+        self.script.received.fetch_add(drained, Ordering::SeqCst);
+        cx.vars.count += drained;
+    }
+}
+
+impl Behavior for Scripted {
+    fn start(&mut self, _cx: &mut Cx<'_>) -> SectionResult {
+        self.script.hit("start")?;
+        let gate = self.script.start_gate.lock().unwrap().take();
+        if let Some(gate) = gate {
+            let _ = gate.recv_timeout(WAIT);
+        }
+        if self.script.start_fails.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("no device"));
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Cx<'_>) {
+        let _ = self.script.hit("stop");
+    }
+
+    fn idle_entry(&mut self, _cx: &mut Cx<'_>) -> SectionResult {
+        self.script.hit("idle.entry")
+    }
+
+    fn busy_entry(&mut self, cx: &mut Cx<'_>) -> SectionResult {
+        self.script.hit("busy.entry")?;
+        self.drain(cx);
+        Ok(())
+    }
+
+    fn busy_periodic(&mut self, cx: &mut Cx<'_>) -> SectionResult {
+        self.script.hit("busy.periodic")?;
+        self.script.periodics.fetch_add(1, Ordering::SeqCst);
+        self.drain(cx);
+        let sleep = *self.script.sleep_in_periodic.lock().unwrap();
+        if let Some(sleep) = sleep {
+            std::thread::sleep(sleep);
+        }
+        if self.script.end_in_periodic.load(Ordering::SeqCst) {
+            cx.rt.set_result(TaskResult::Success("done".to_owned()));
+            cx.rt.end();
+        }
+        Ok(())
+    }
+
+    fn busy_exit(&mut self, _cx: &mut Cx<'_>) -> SectionResult {
+        self.script.hit("busy.exit")
+    }
+
+    fn busy_choose(&mut self, _cx: &mut Cx<'_>) -> Option<BusyMay> {
+        self.script
+            .choose_idle
+            .swap(false, Ordering::SeqCst)
+            .then_some(BusyMay::Idle)
+    }
+
+    fn on_flaky(&mut self, _cx: &mut Cx<'_>, message: &str) {
+        self.script
+            .handled
+            .lock()
+            .unwrap()
+            .push(format!("flaky: {message}"));
+    }
+
+    fn on_fatal(&mut self, _cx: &mut Cx<'_>, message: &str) {
+        self.script
+            .handled
+            .lock()
+            .unwrap()
+            .push(format!("fatal: {message}"));
+    }
+
+    fn on_detour(&mut self, _cx: &mut Cx<'_>, message: &str) {
+        self.script
+            .handled
+            .lock()
+            .unwrap()
+            .push(format!("detour: {message}"));
+    }
+
+    fn on_wobbly(&mut self, _cx: &mut Cx<'_>, message: &str) {
+        self.script
+            .handled
+            .lock()
+            .unwrap()
+            .push(format!("wobbly: {message}"));
+    }
+}
+
+/// A system with one started Worker named `w` (in `ready`, or wherever `start` led).
+pub struct Rig {
+    pub system: System,
+    pub handle: Handle,
+    pub script: Arc<Script>,
+    pub inputs: worker::Inputs,
+    pub outputs: worker::Outputs,
+    pub feeder: Feeder,
+}
+
+/// A shell `f` whose outputs feed the worker: `f.kick -> w.kick`, `f.data -> w.data`,
+/// `f.feed -> w.feed`. Tests send on these handles directly.
+pub struct Feeder {
+    pub kick: TickOut,
+    pub data: DataOut<u64>,
+    pub feed: DataOut<u64>,
+}
+
+impl Rig {
+    /// Add the worker without starting the system.
+    pub fn unstarted(script: Arc<Script>) -> Rig {
+        let data = coolbot::port::FifoIn::new(4, coolbot::OverflowPolicy::Reject);
+        Rig::unstarted_with(script, &worker::SPEC, data, None)
+    }
+
+    /// Like `unstarted`, with another spec, data fifo and drop token.
+    pub fn unstarted_with(
+        script: Arc<Script>,
+        spec: &'static coolbot::Spec,
+        data: coolbot::port::FifoIn<u64>,
+        token: Option<Arc<()>>,
+    ) -> Rig {
+        let mut system = System::new();
+        let behavior = Scripted {
+            script: Arc::clone(&script),
+            token,
+        };
+        let (component, inputs, outputs) = worker::component_with("w", behavior, spec, data);
+        let handle = system.add(component).expect("add");
+        let feeder = Feeder {
+            kick: TickOut::new(),
+            data: DataOut::new(),
+            feed: DataOut::new(),
+        };
+        let shell = ShellBuilder::new("f")
+            .output(shell::output("kick", OutputKind::Tick, false), &feeder.kick)
+            .output(shell::output("data", OutputKind::Data, false), &feeder.data)
+            .output(shell::output("feed", OutputKind::Data, false), &feeder.feed)
+            .build();
+        system.add(shell).expect("add feeder");
+        system.connect("f.kick", "w.kick").expect("connect kick");
+        system.connect("f.data", "w.data").expect("connect data");
+        system.connect("f.feed", "w.feed").expect("connect feed");
+        Rig {
+            system,
+            handle,
+            script,
+            inputs,
+            outputs,
+            feeder,
+        }
+    }
+
+    /// Add and start the worker, and wait for it to leave `starting`.
+    pub fn started(script: Arc<Script>) -> Rig {
+        Rig::start(Rig::unstarted(script))
+    }
+
+    /// Start a rig made with `unstarted_with`.
+    pub fn start(mut rig: Rig) -> Rig {
+        rig.system.start().expect("start");
+        rig.handle
+            .wait_for(|m| m.state != State::Starting, WAIT)
+            .expect("left starting");
+        rig
+    }
+
+    /// Command the worker.
+    pub fn command(&self, target: Controllable) -> Result<(), coolbot::Rejected> {
+        self.handle.command(Command::SetState(target))
+    }
+
+    /// From `ready`: running, then a kick into `busy`.
+    pub fn run_busy(&self) {
+        self.command(Controllable::Running).expect("running");
+        self.wait_user("idle");
+        self.feeder.kick.emit();
+        self.wait_user("busy");
+        self.sync();
+    }
+
+    /// A round trip through the control port: the worker's thread answers it only
+    /// after the call it is in (here, `busy`'s entry section) has returned.
+    pub fn sync(&self) {
+        self.handle.command(Command::SetPriority(0)).expect("sync");
+    }
+
+    pub fn wait_state(&self, state: State) -> coolbot::Monitor {
+        self.handle
+            .wait_state(state, WAIT)
+            .unwrap_or_else(|t| panic!("{t}"))
+    }
+
+    pub fn wait_user(&self, user: &str) -> coolbot::Monitor {
+        self.handle
+            .wait_for(
+                |m| m.user_state.as_deref() == Some(user) && m.state == State::Running,
+                WAIT,
+            )
+            .unwrap_or_else(|t| panic!("{t}"))
+    }
+}

@@ -1,0 +1,156 @@
+//! A component with ports and no behaviour, for feeding and reading ports from tests:
+//! its spec is built at run time (and leaked, as a `&'static Spec` must be).
+
+use std::sync::{Arc, Mutex};
+
+use coolbot::{
+    Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Section, Spec, StateSpec,
+    TimingSpec, Value,
+};
+
+type AnswerFn = Box<dyn FnMut(usize) -> Result<(), Fault> + Send>;
+
+/// The shell's code: one state, no sections; pull answers through a closure.
+pub struct Shell {
+    spec: &'static Spec,
+    answer: Arc<Mutex<Option<AnswerFn>>>,
+}
+
+impl Automaton for Shell {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+    fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        match self.answer.lock().unwrap().as_mut() {
+            Some(answer) => answer(output),
+            None => Err(Fault::message("no answer installed")),
+        }
+    }
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("no variables".to_owned())
+    }
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+fn leak<T>(items: Vec<T>) -> &'static [T] {
+    Box::leak(items.into_boxed_slice())
+}
+
+/// Builds a shell component port by port.
+pub struct ShellBuilder {
+    name: String,
+    inputs: Vec<InputSpec>,
+    outputs: Vec<OutputSpec>,
+    ports: PortSet,
+    answer: Arc<Mutex<Option<AnswerFn>>>,
+}
+
+impl ShellBuilder {
+    pub fn new(name: &str) -> ShellBuilder {
+        ShellBuilder {
+            name: name.to_owned(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            ports: PortSet::new(),
+            answer: Arc::new(Mutex::new(None)),
+        }
+    }
+
+    pub fn input(mut self, spec: InputSpec, port: &impl coolbot::InputPort) -> ShellBuilder {
+        self.inputs.push(spec);
+        self.ports = self.ports.input(port);
+        self
+    }
+
+    pub fn output(mut self, spec: OutputSpec, port: &impl coolbot::OutputPort) -> ShellBuilder {
+        self.outputs.push(spec);
+        self.ports = self.ports.output(port);
+        self
+    }
+
+    /// Install the pull answer: called with the output index on the shell's thread.
+    pub fn answer(
+        self,
+        answer: impl FnMut(usize) -> Result<(), Fault> + Send + 'static,
+    ) -> ShellBuilder {
+        *self.answer.lock().unwrap() = Some(Box::new(answer));
+        self
+    }
+
+    /// The shell's code alone, claiming another component's spec (to test port checks).
+    pub fn build_automaton_for(self, spec: &'static Spec) -> Shell {
+        Shell {
+            spec,
+            answer: self.answer,
+        }
+    }
+
+    pub fn build(self) -> Component {
+        let spec: &'static Spec = Box::leak(Box::new(Spec {
+            type_name: "Shell",
+            doc: "",
+            states: leak(vec![StateSpec {
+                name: "idle",
+                entry: false,
+                exit: false,
+                periodic: None,
+                on: &[],
+                after: &[],
+                may: &[],
+            }]),
+            initial: 0,
+            inputs: leak(self.inputs),
+            outputs: leak(self.outputs),
+            variables: &[],
+            exceptions: &[],
+            timing: TimingSpec::NONE,
+        }));
+        Component::new(
+            self.name,
+            Box::new(Shell {
+                spec,
+                answer: self.answer,
+            }),
+            self.ports,
+        )
+    }
+}
+
+pub fn input(name: &'static str, kind: coolbot::InputKind, pull: bool) -> InputSpec {
+    InputSpec {
+        name,
+        kind,
+        packet: "",
+        pull,
+    }
+}
+
+pub fn output(name: &'static str, kind: coolbot::OutputKind, pull: bool) -> OutputSpec {
+    OutputSpec {
+        name,
+        kind,
+        packet: "",
+        pull,
+    }
+}

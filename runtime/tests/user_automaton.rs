@@ -1,0 +1,287 @@
+//! The user automaton inside `running`: `after` timers and watchdogs, `may` choices,
+//! periodic sections (missed deadlines, period changes), `end` and `result`, and the
+//! control port's variables, configuration and quality.
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use coolbot::port::FifoIn;
+use coolbot::{
+    AfterSpec, Command, Controllable, MonitorEvent, OverflowPolicy, State, TaskResult, Value,
+};
+use support::worker::{self, FEED, IDLE};
+use support::{Rig, Script, WAIT, eventually};
+
+fn rig_with_after(after: Vec<AfterSpec>) -> Rig {
+    let spec = worker::spec_with_busy_after(after);
+    Rig::start(Rig::unstarted_with(
+        Script::new(),
+        spec,
+        FifoIn::new(4, OverflowPolicy::Reject),
+        None,
+    ))
+}
+
+#[test]
+fn after_fires_on_time_in_state() {
+    let rig = rig_with_after(vec![AfterSpec {
+        delay: Duration::from_millis(30),
+        without: None,
+        target: IDLE,
+    }]);
+    rig.run_busy();
+    rig.script.clear_log();
+    rig.wait_user("idle");
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
+}
+
+#[test]
+fn a_watchdog_fires_only_when_its_port_is_quiet() {
+    let rig = rig_with_after(vec![AfterSpec {
+        delay: Duration::from_millis(300),
+        without: Some(FEED),
+        target: IDLE,
+    }]);
+    rig.run_busy();
+    // Feeding every 10 ms for 200 ms keeps the watchdog quiet.
+    for packet in 0..20 {
+        rig.feeder.feed.send(packet);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("busy"));
+    assert_eq!(rig.inputs.feed.latest(), Some(19));
+    rig.wait_user("idle");
+}
+
+#[test]
+fn after_timers_pause_while_suspended() {
+    let rig = rig_with_after(vec![AfterSpec {
+        delay: Duration::from_millis(100),
+        without: None,
+        target: IDLE,
+    }]);
+    rig.run_busy();
+    rig.command(Controllable::Suspended).expect("suspend");
+    std::thread::sleep(Duration::from_millis(150));
+    rig.command(Controllable::Running).expect("resume");
+    assert_eq!(
+        rig.handle.snapshot().user_state.as_deref(),
+        Some("busy"),
+        "the pause does not count"
+    );
+    rig.wait_user("idle");
+}
+
+#[test]
+fn choose_takes_a_may_transition() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    rig.script.clear_log();
+    rig.script.choose_idle.store(true, Ordering::SeqCst);
+    rig.wait_user("idle");
+    // `user_state` changes before the entry section runs: wait for the section too.
+    eventually(
+        || rig.script.log() == ["busy.exit", "idle.entry"],
+        "busy.exit then idle.entry",
+    );
+}
+
+#[test]
+fn a_periodic_section_longer_than_its_period_misses_deadlines() {
+    let rig = Rig::started(Script::new());
+    let events = rig.handle.subscribe();
+    *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(12));
+    rig.run_busy();
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.missed_deadlines >= 2, WAIT)
+        .expect("missed");
+    assert_eq!(
+        monitor.state,
+        State::Running,
+        "a missed deadline is not a fault"
+    );
+    // Each miss is announced: wait for the announcements to add up.
+    let mut announced = 0;
+    for event in events.iter() {
+        if let MonitorEvent::MissedDeadline { missed, .. } = event {
+            announced += missed;
+            if announced >= 2 {
+                break;
+            }
+        }
+    }
+    assert!(announced <= rig.handle.snapshot().missed_deadlines);
+}
+
+#[test]
+fn the_period_changes_while_running() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    let events = rig.handle.subscribe();
+    let err = rig
+        .handle
+        .command(Command::SetPeriod(Duration::ZERO))
+        .unwrap_err();
+    assert_eq!(err.reason, "a period must be positive");
+    rig.handle
+        .command(Command::SetPeriod(Duration::from_millis(1)))
+        .expect("period");
+    assert_eq!(rig.handle.snapshot().period, Some(Duration::from_millis(1)));
+    // Published before the command's answer; other events (missed deadlines on a
+    // busy machine) may come first.
+    assert!(
+        events
+            .try_iter()
+            .any(|event| event == MonitorEvent::Period(Some(Duration::from_millis(1))))
+    );
+    let before = rig.script.periodics.load(Ordering::SeqCst);
+    eventually(
+        || rig.script.periodics.load(Ordering::SeqCst) > before + 10,
+        "faster periodic sections",
+    );
+}
+
+#[test]
+fn end_finishes_the_task_with_its_result() {
+    let rig = Rig::started(Script::new());
+    let events = rig.handle.subscribe();
+    rig.run_busy();
+    rig.script.end_in_periodic.store(true, Ordering::SeqCst);
+    let monitor = rig.wait_state(State::End);
+    assert_eq!(monitor.result, TaskResult::Success("done".to_owned()));
+    assert!(
+        rig.script
+            .log()
+            .ends_with(&["busy.exit".to_owned(), "stop".to_owned()])
+    );
+    let events: Vec<_> = events.try_iter().collect();
+    assert!(events.contains(&MonitorEvent::Result(TaskResult::Success(
+        "done".to_owned()
+    ))));
+    assert!(events.contains(&MonitorEvent::State {
+        from: State::Running,
+        to: State::End
+    }));
+}
+
+#[test]
+fn variables_are_published_and_controllable_ones_set() {
+    let rig = Rig::started(Script::new());
+    let events = rig.handle.subscribe();
+    rig.command(Controllable::Running).expect("running");
+    rig.feeder.data.send(1);
+    rig.feeder.data.send(2);
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.variables[0].1 == Value::UInt(2), WAIT)
+        .expect("count");
+    assert_eq!(monitor.variables[1], ("gain".to_owned(), Value::Int(1)));
+    rig.handle
+        .command(Command::Set("gain".to_owned(), Value::Int(5)))
+        .expect("set gain");
+    assert_eq!(rig.handle.snapshot().variables[1].1, Value::Int(5));
+    let events: Vec<_> = events.try_iter().collect();
+    assert!(
+        events.contains(&MonitorEvent::Variable {
+            name: "gain".to_owned(),
+            value: Value::Int(5)
+        }),
+        "{events:?}"
+    );
+    let err = rig
+        .handle
+        .command(Command::Set("count".to_owned(), Value::UInt(0)))
+        .unwrap_err();
+    assert_eq!(err.reason, "`count` is observable, not controllable");
+    let err = rig
+        .handle
+        .command(Command::Set("speed".to_owned(), Value::UInt(0)))
+        .unwrap_err();
+    assert_eq!(err.reason, "no variable `speed`");
+    let err = rig
+        .handle
+        .command(Command::Set("gain".to_owned(), Value::Str("x".to_owned())))
+        .unwrap_err();
+    assert_eq!(
+        err.reason,
+        "invalid value for `gain`: expected i64, got string"
+    );
+}
+
+#[test]
+fn configuration_and_quality_go_through_the_control_port() {
+    let rig = Rig::started(Script::new());
+    let configuration = Value::Json(serde_json::json!({ "scale": 3 }));
+    rig.handle
+        .command(Command::Configure(configuration))
+        .expect("configure");
+    let err = rig
+        .handle
+        .command(Command::Configure(Value::Json(
+            serde_json::json!({ "scale": "big" }),
+        )))
+        .unwrap_err();
+    assert!(err.reason.starts_with("invalid configuration:"), "{err}");
+    rig.handle
+        .command(Command::SetQuality(1))
+        .expect("quality 1");
+    assert_eq!(rig.handle.snapshot().quality, 1);
+    let err = rig.handle.command(Command::SetQuality(2)).unwrap_err();
+    assert_eq!(err.reason, "quality 2 out of range: 2 level(s)");
+    rig.handle
+        .command(Command::SetPriority(9))
+        .expect("priority");
+    assert_eq!(rig.handle.snapshot().priority, 9);
+}
+
+#[test]
+fn timing_is_measured() {
+    let rig = Rig::started(Script::new());
+    *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(2));
+    rig.run_busy();
+    eventually(
+        || rig.script.periodics.load(Ordering::SeqCst) > 3,
+        "periodic sections",
+    );
+    rig.command(Controllable::Suspended).expect("suspend");
+    let monitor = rig.handle.snapshot();
+    assert!(
+        monitor.elapsed_time >= Duration::from_millis(6),
+        "{:?}",
+        monitor.elapsed_time
+    );
+    assert!(monitor.cpu_time > Duration::ZERO);
+    assert!(
+        monitor.cpu_time < monitor.elapsed_time,
+        "sleeping costs no CPU"
+    );
+}
+
+#[test]
+fn absurd_durations_mean_never_and_do_not_panic() {
+    let rig = rig_with_after(vec![AfterSpec {
+        delay: Duration::MAX,
+        without: Some(FEED),
+        target: IDLE,
+    }]);
+    rig.run_busy();
+    let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
+    patient
+        .command(Command::SetPeriod(Duration::MAX))
+        .expect("a period of Duration::MAX");
+    let monitor = rig
+        .handle
+        .wait_for(|m| m.period == Some(Duration::MAX), Duration::MAX)
+        .expect("waited");
+    assert_eq!(monitor.user_state.as_deref(), Some("busy"));
+    patient
+        .command(Command::SetState(Controllable::Suspended))
+        .expect("suspend");
+}
