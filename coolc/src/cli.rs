@@ -265,6 +265,9 @@ fn compile(
     for (file, methods) in &report.added {
         eprintln!("coolc: added to {}: {}", file.display(), methods.join(", "));
     }
+    for file in &report.removed {
+        eprintln!("coolc: removed {} (no longer generated)", file.display());
+    }
     for warning in &report.warnings {
         eprintln!("warning: {warning}");
     }

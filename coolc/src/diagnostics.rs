@@ -127,6 +127,8 @@ codes! {
     InterfaceMismatch => "coolc::check::interface_mismatch",
     /// A compound contains itself.
     SelfContaining => "coolc::check::self_containing",
+    /// A packet contains itself by value (an infinitely large type).
+    RecursivePacket => "coolc::check::recursive_packet",
     /// An `on error` policy is unknown or unusable.
     BadPolicy => "coolc::check::bad_policy",
     /// A port of an instance is not connected or exported (warning).

@@ -119,17 +119,18 @@ fn render(template: &impl Template) -> String {
     }
 }
 
-/// Formats generated Rust: parse with `syn` (a failure is a template bug), then
-/// `rustfmt` when it is installed (keeping the templates' blank lines), else
-/// `prettyplease`. Leading `//` comment lines are kept as the header.
-pub fn format_generated(code: &str) -> String {
-    let file = match syn::parse_file(code) {
+/// Checks that generated Rust parses; a failure is a template bug.
+fn check_parses(code: &str) -> syn::File {
+    match syn::parse_file(code) {
         Ok(file) => file,
-        Err(error) => panic!("coolc bug: generated code does not parse ({error}):\n{code}"),
-    };
-    if let Some(formatted) = rustfmt(code) {
-        return formatted;
+        Err(error) => panic!("coolc bug: emitted Rust does not parse ({error}):\n{code}"),
     }
+}
+
+/// Formats generated Rust without `rustfmt`: `prettyplease`, keeping the leading `//`
+/// header lines (which `syn` drops).
+fn pretty(code: &str) -> String {
+    let file = check_parses(code);
     let header: String = code
         .lines()
         .take_while(|l| l.starts_with("//") && !l.starts_with("//!") && !l.starts_with("///"))
@@ -138,20 +139,21 @@ pub fn format_generated(code: &str) -> String {
     format!("{header}{}", prettyplease::unparse(&file))
 }
 
-/// Formats hand-laid-out Rust (user files: comments matter) with `rustfmt` when it is
-/// available; checks that it parses either way.
-fn format_user(code: &str) -> String {
-    if let Err(error) = syn::parse_file(code) {
-        panic!("coolc bug: a user stub file does not parse ({error}):\n{code}");
-    }
-    rustfmt(code).unwrap_or_else(|| code.to_owned())
+/// Formats one piece of generated Rust: checks it parses, then `rustfmt` when it is
+/// installed (keeping the templates' blank lines), else `prettyplease`.
+pub fn format_generated(code: &str) -> String {
+    check_parses(code);
+    rustfmt_stdin(code).unwrap_or_else(|| pretty(code))
+}
+
+fn rustfmt_program() -> std::ffi::OsString {
+    std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
 
 /// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed or fails.
-fn rustfmt(code: &str) -> Option<String> {
+fn rustfmt_stdin(code: &str) -> Option<String> {
     use std::io::Write;
-    let program = std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into());
-    let mut child = Command::new(program)
+    let mut child = Command::new(rustfmt_program())
         .args(["--edition", "2024", "--emit", "stdout", "--quiet"])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -170,46 +172,64 @@ fn rustfmt(code: &str) -> Option<String> {
     }
 }
 
-/// Formats one stub method as it sits in an impl block (indented by four spaces).
-fn format_stub(stub: &str) -> String {
-    let wrapped = format!("impl T for U {{\n{stub}\n}}\n");
-    match rustfmt(&wrapped) {
-        Some(formatted) => {
-            let lines: Vec<&str> = formatted.lines().collect();
-            let inner = &lines[1.min(lines.len())..lines.len().saturating_sub(1)];
-            inner.iter().map(|l| format!("{l}\n")).collect()
+/// Formats a whole crate's Rust files with ONE `rustfmt` run: they are written to a
+/// scratch directory with the crate's layout, `rustfmt` formats the roots and every
+/// module they declare, and the results are read back. `None` when `rustfmt` is not
+/// installed or fails (the caller falls back to per-file formatting).
+fn rustfmt_tree(files: &[(PathBuf, String)], roots: &[&str]) -> Option<Vec<String>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static SCRATCH: AtomicUsize = AtomicUsize::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "coolc-fmt-{}-{}",
+        std::process::id(),
+        SCRATCH.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        for (path, text) in files {
+            let path = dir.join(path);
+            std::fs::create_dir_all(path.parent()?).ok()?;
+            std::fs::write(&path, text).ok()?;
         }
-        None => stub.to_owned(),
-    }
+        let roots: Vec<PathBuf> = roots
+            .iter()
+            .map(|r| dir.join(r))
+            .filter(|r| r.exists())
+            .collect();
+        let status = Command::new(rustfmt_program())
+            .args(["--edition", "2024", "--quiet"])
+            .args(&roots)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .ok()?;
+        if !status.success() {
+            return None;
+        }
+        files
+            .iter()
+            .map(|(path, _)| std::fs::read_to_string(dir.join(path)).ok())
+            .collect::<Option<Vec<String>>>()
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
 }
 
-/// The generated module texts: `(module name, formatted contents)`, `types` first.
-pub fn generated_modules(krate: &ir::Crate) -> Vec<(String, String)> {
+/// The generated module texts, unformatted: `(module name, text)`, `types` first.
+fn render_modules(krate: &ir::Crate) -> Vec<(String, String)> {
     let mut modules = vec![(
         krate.types.module.clone(),
-        format_generated(&render(&TypesRs {
+        render(&TypesRs {
             krate,
             types: &krate.types,
-        })),
+        }),
     )];
     for c in &krate.atomics {
-        modules.push((
-            c.module.clone(),
-            format_generated(&render(&AtomicRs { krate, c })),
-        ));
+        modules.push((c.module.clone(), render(&AtomicRs { krate, c })));
     }
     for c in &krate.compounds {
-        modules.push((
-            c.module.clone(),
-            format_generated(&render(&CompoundRs { krate, c })),
-        ));
+        modules.push((c.module.clone(), render(&CompoundRs { krate, c })));
     }
     modules
-}
-
-/// The contents of `generated/mod.rs`.
-pub fn generated_mod_rs(krate: &ir::Crate) -> String {
-    format_generated(&render(&GeneratedMod { krate }))
 }
 
 /// Every generated module in one file, for `include!` from `OUT_DIR` (the
@@ -220,7 +240,7 @@ pub fn single_file(krate: &ir::Crate) -> String {
         "// @generated by coolc from {}. Do not edit: coolc overwrites this file.\n",
         krate.sources_text()
     );
-    for (module, text) in generated_modules(krate) {
+    for (module, text) in render_modules(krate) {
         let body: String = text
             .lines()
             .filter(|l| !l.starts_with("// @generated"))
@@ -233,7 +253,8 @@ pub fn single_file(krate: &ir::Crate) -> String {
     if let Some(start) = mod_rs.find("/// Converts a variable") {
         out.push_str(&mod_rs[start..]);
     }
-    format_generated(&out)
+    // Nobody reads this file: `prettyplease` is enough (and needs no process).
+    pretty(&out)
 }
 
 /// The converter stubs as user-file methods.
@@ -263,95 +284,154 @@ pub fn user_modules(krate: &ir::Crate) -> Vec<String> {
     modules
 }
 
-/// The stubs of every user file, for merging.
-pub fn stub_sets(krate: &ir::Crate) -> Vec<StubSet> {
-    let stub = |m: &ir::Method| {
-        (
-            m.name.clone(),
-            format_stub(&render(&UserStub { method: m })),
-        )
+/// The text of method `name` in a formatted user file: from its `    fn name(` line to
+/// the closing `    }` line, both included.
+fn extract_stub(text: &str, name: &str) -> Option<String> {
+    let start = text.find(&format!("\n    fn {name}("))? + 1;
+    let end = start + text[start..].find("\n    }\n")? + "\n    }\n".len();
+    Some(text[start..end].to_owned())
+}
+
+/// The stubs of every user file, for merging, taken from the emitted user files
+/// `files` (so they are formatted like a fresh file).
+pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
+    let set = |path: PathBuf, trait_name: &str, methods: &[ir::Method]| {
+        let text = files
+            .iter()
+            .find(|f| f.path == path)
+            .map(|f| f.contents.as_str());
+        StubSet {
+            trait_name: trait_name.to_owned(),
+            stubs: methods
+                .iter()
+                .map(|m| {
+                    let stub = text
+                        .and_then(|t| extract_stub(t, &m.name))
+                        .unwrap_or_else(|| render(&UserStub { method: m }));
+                    (m.name.clone(), stub)
+                })
+                .collect(),
+            path,
+        }
     };
     let mut sets: Vec<StubSet> = krate
         .atomics
         .iter()
-        .map(|c| StubSet {
-            path: PathBuf::from(format!("src/{}.rs", c.module.trim_start_matches("r#"))),
-            trait_name: "Behavior".to_owned(),
-            stubs: c.methods.iter().map(stub).collect(),
-        })
+        .map(|c| set(user_path(&c.module), "Behavior", &c.methods))
         .collect();
-    sets.extend(krate.compounds.iter().map(|c| StubSet {
-        path: PathBuf::from(format!("src/{}.rs", c.module.trim_start_matches("r#"))),
-        trait_name: "Parts".to_owned(),
-        stubs: c.parts.iter().map(stub).collect(),
-    }));
+    sets.extend(
+        krate
+            .compounds
+            .iter()
+            .map(|c| set(user_path(&c.module), "Parts", &c.parts)),
+    );
     if !krate.types.converters.is_empty() {
-        sets.push(StubSet {
-            path: PathBuf::from("src/converters.rs"),
-            trait_name: "Converters".to_owned(),
-            stubs: converter_methods(krate).iter().map(stub).collect(),
-        });
+        sets.push(set(
+            PathBuf::from("src/converters.rs"),
+            "Converters",
+            &converter_methods(krate),
+        ));
     }
     sets
 }
 
-/// Every file of the crate directory for `krate`.
+fn user_path(module: &str) -> PathBuf {
+    PathBuf::from(format!("src/{}.rs", module.trim_start_matches("r#")))
+}
+
+/// Every file of the crate directory for `krate`, formatted (one `rustfmt` run for
+/// the whole crate when it is installed, `prettyplease` for generated files
+/// otherwise).
 pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
-    let generated = |path: String, contents: String| EmittedFile {
-        path: PathBuf::from(path),
-        contents,
-        kind: FileKind::Generated,
-    };
-    let user = |path: String, contents: String| EmittedFile {
-        path: PathBuf::from(path),
-        contents,
-        kind: FileKind::User,
-    };
-    let mut files = vec![generated(
-        "Cargo.toml".to_owned(),
+    let mut files: Vec<(PathBuf, String, FileKind)> = Vec::new();
+    let mut push = |path: PathBuf, text: String, kind: FileKind| files.push((path, text, kind));
+    push(
+        PathBuf::from("Cargo.toml"),
         render(&CargoToml { krate }) + "\n",
-    )];
+        FileKind::Generated,
+    );
     if !krate.system_libs.is_empty() {
-        files.push(generated(
-            "build.rs".to_owned(),
-            format_generated(&render(&BuildRs { krate })),
-        ));
+        push(
+            PathBuf::from("build.rs"),
+            render(&BuildRs { krate }),
+            FileKind::Generated,
+        );
     }
-    files.push(generated(
-        "src/generated/mod.rs".to_owned(),
-        generated_mod_rs(krate),
-    ));
-    for (module, text) in generated_modules(krate) {
-        files.push(generated(
-            format!("src/generated/{}.rs", module.trim_start_matches("r#")),
-            text,
-        ));
+    push(
+        PathBuf::from("src/generated/mod.rs"),
+        render(&GeneratedMod { krate }),
+        FileKind::Generated,
+    );
+    for (module, text) in render_modules(krate) {
+        let path = format!("src/generated/{}.rs", module.trim_start_matches("r#"));
+        push(PathBuf::from(path), text, FileKind::Generated);
     }
     let modules = user_modules(krate);
-    files.push(user(
-        "src/lib.rs".to_owned(),
-        format_user(&render(&UserLib { modules: &modules })),
-    ));
+    push(
+        PathBuf::from("src/lib.rs"),
+        render(&UserLib { modules: &modules }),
+        FileKind::User,
+    );
     for c in &krate.atomics {
-        files.push(user(
-            format!("src/{}.rs", c.module.trim_start_matches("r#")),
-            format_user(&render(&UserComponent { c })),
-        ));
+        push(
+            user_path(&c.module),
+            render(&UserComponent { c }),
+            FileKind::User,
+        );
     }
     for c in &krate.compounds {
-        files.push(user(
-            format!("src/{}.rs", c.module.trim_start_matches("r#")),
-            format_user(&render(&UserCompound { c })),
-        ));
+        push(
+            user_path(&c.module),
+            render(&UserCompound { c }),
+            FileKind::User,
+        );
     }
     if !krate.types.converters.is_empty() {
         let methods = converter_methods(krate);
-        files.push(user(
-            "src/converters.rs".to_owned(),
-            format_user(&render(&UserConverters { methods: &methods })),
-        ));
+        push(
+            PathBuf::from("src/converters.rs"),
+            render(&UserConverters { methods: &methods }),
+            FileKind::User,
+        );
     }
+
+    let rust: Vec<(PathBuf, String)> = files
+        .iter()
+        .filter(|(path, _, _)| path.extension().is_some_and(|e| e == "rs"))
+        .map(|(path, text, _)| {
+            check_parses(text);
+            (path.clone(), text.clone())
+        })
+        .collect();
+    let mut formatted = rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]).map(|v| v.into_iter());
     files
+        .into_iter()
+        .map(|(path, text, kind)| {
+            let contents = if path.extension().is_some_and(|e| e == "rs") {
+                match formatted.as_mut().and_then(Iterator::next) {
+                    Some(text) => text,
+                    None if kind == FileKind::Generated => pretty(&text),
+                    // Without rustfmt, user files keep the templates' own layout
+                    // (`prettyplease` would drop their comments).
+                    None => text,
+                }
+            } else {
+                text
+            };
+            EmittedFile {
+                path,
+                contents,
+                kind,
+            }
+        })
+        .collect()
+}
+
+/// Formats one hand-laid-out user file (comments matter) with `rustfmt` when it is
+/// installed; checks that it parses either way.
+fn format_user(code: &str) -> String {
+    check_parses(code);
+    rustfmt_stdin(code).unwrap_or_else(|| code.to_owned())
 }
 
 #[derive(Template)]

@@ -397,10 +397,13 @@ impl<'a> Lowerer<'a> {
                         if let ast::Member::Link(link) = member {
                             match &link.kind {
                                 ast::LinkKind::Crate { name, spec } => {
-                                    if !dependencies.iter().any(|d| d.key == toml_key(&name.value))
+                                    // The runtime dependency is coolc's to write.
+                                    let key = toml_key(&name.value);
+                                    if key != "coolbot"
+                                        && !dependencies.iter().any(|d| d.key == key)
                                     {
                                         dependencies.push(ir::Dependency {
-                                            key: toml_key(&name.value),
+                                            key,
                                             value: crate_spec(spec),
                                         });
                                     }
@@ -1148,7 +1151,15 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
         ast::CrateSpec::Table(entries, _) => {
             let entries: Vec<String> = entries
                 .iter()
-                .map(|e| format!("{} = {}", toml_key(&e.key.name), toml_value(&e.value)))
+                .map(|e| {
+                    // `.cool` names cannot hold `-`: Cargo's `default-features` is
+                    // written `default_features`, which edition 2024 rejects as is.
+                    let key = match e.key.name.as_str() {
+                        "default_features" => "default-features",
+                        other => other,
+                    };
+                    format!("{} = {}", toml_key(key), toml_value(&e.value))
+                })
                 .collect();
             format!("{{ {} }}", entries.join(", "))
         }
@@ -1167,6 +1178,23 @@ mod tests {
             analysis.render(crate::RenderOptions::plain())
         );
         lower(&analysis.files, &Options::default())
+    }
+
+    #[test]
+    fn link_crate_tables_become_cargo_tables() {
+        let krate = lower_text(
+            "atomic A { link crate \"serde_json\" = { version = \"1\", default_features = false, features = [\"std\"] }; link crate \"coolbot\" = \"9\"; link system \"m\"; }",
+        );
+        assert_eq!(
+            krate.dependencies,
+            [ir::Dependency {
+                key: "serde_json".to_owned(),
+                value: "{ version = \"1\", default-features = false, features = [\"std\"] }"
+                    .to_owned(),
+            }]
+        );
+        assert_eq!(krate.system_libs, ["m"]);
+        assert_eq!(ir::toml_string("a\"b\\c"), "\"a\\\"b\\\\c\"");
     }
 
     #[test]

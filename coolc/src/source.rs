@@ -4,6 +4,7 @@
 //! first), so ids, and therefore diagnostic order, are deterministic. The source map
 //! never touches the filesystem: the caller of [`crate::analyze`] passes a loader.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -24,6 +25,7 @@ pub struct SourceFile {
 #[derive(Clone, Debug, Default)]
 pub struct SourceMap {
     files: Vec<SourceFile>,
+    by_path: HashMap<PathBuf, FileId>,
 }
 
 impl SourceMap {
@@ -35,9 +37,11 @@ impl SourceMap {
     /// Adds a file and returns its id.
     pub fn add(&mut self, path: impl Into<PathBuf>, text: impl Into<Arc<str>>) -> FileId {
         let id = FileId(u32::try_from(self.files.len()).unwrap_or(u32::MAX));
+        let path = path.into();
+        self.by_path.entry(path.clone()).or_insert(id);
         self.files.push(SourceFile {
             id,
-            path: path.into(),
+            path,
             text: text.into(),
         });
         id
@@ -45,10 +49,7 @@ impl SourceMap {
 
     /// The id of an already loaded path.
     pub fn find(&self, path: &Path) -> Option<FileId> {
-        self.files
-            .iter()
-            .find(|file| file.path == path)
-            .map(|file| file.id)
+        self.by_path.get(path).copied()
     }
 
     /// All files in id order.

@@ -3,9 +3,11 @@
 //! **Invariant:** parsing never fails. [`parse`] returns the items it could build plus
 //! every syntax error. The text is parsed one item at a time (`item_step`); when an
 //! item does not parse, a component is retried member by member (`component_head`,
-//! then `member_step`), and whatever still fails is reported and skipped up to the
-//! next plausible item or member start, so one typo does not hide the rest of the
-//! file.
+//! then `member_step`), an automaton state by state (`automaton_head`,
+//! `automaton_step`) and a state section by section (`state_head`, `state_step`).
+//! Whatever still fails is reported and skipped up to the next plausible start (an
+//! item or member keyword at the start of a line, or past the next `;` or block), so
+//! one typo does not hide the rest of the file.
 
 use pest::Parser as _;
 use pest::error::{ErrorVariant, InputLocation};
@@ -58,14 +60,20 @@ const MEMBER_KEYWORDS: &[&str] = &[
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
 pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
-    if let Some(diagnostic) = too_deep(file, text) {
-        return (
-            ast::File {
-                id: file,
-                items: Vec::new(),
-            },
-            vec![diagnostic],
-        );
+    let deepest = match nesting(file, text) {
+        Ok(deepest) => deepest,
+        Err(diagnostic) => {
+            return (
+                ast::File {
+                    id: file,
+                    items: Vec::new(),
+                },
+                vec![*diagnostic],
+            );
+        }
+    };
+    if deepest <= SHALLOW {
+        return parse_items(file, text);
     }
     // The generated parser recurses once per nesting level with large frames (in
     // debug builds especially); a dedicated thread with a roomy stack keeps
@@ -86,6 +94,10 @@ pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
 
 /// Stack size of the parsing thread.
 const PARSER_STACK: usize = 64 << 20;
+
+/// Up to this nesting level a file is parsed on the caller's thread (a few hundred
+/// KiB of stack even in debug builds); deeper files get the parsing thread.
+const SHALLOW: usize = 12;
 
 fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     let mut parser = FileParser {
@@ -116,8 +128,10 @@ fn parse_detailed(
 /// within the stack on any input.
 pub const MAX_DEPTH: usize = 64;
 
-/// Reports nesting beyond [`MAX_DEPTH`] (the file is then not parsed further).
-fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
+/// The deepest nesting level of brackets, block comments and prefix operator runs, or
+/// a diagnostic for nesting beyond [`MAX_DEPTH`] (the file is then not parsed).
+fn nesting(file: FileId, text: &str) -> Result<usize, Box<Diagnostic>> {
+    let mut max_level = 0;
     let bytes = text.as_bytes();
     let mut depth = 0usize;
     let mut comment_depth = 0usize;
@@ -168,6 +182,9 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 prefix_run = 0;
             }
         }
+        if let Some((level, _)) = deepest {
+            max_level = max_level.max(level);
+        }
         if let Some((level, what)) = deepest
             && level > MAX_DEPTH
         {
@@ -176,7 +193,7 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 .chars()
                 .next()
                 .map_or(start, |c| start + c.len_utf8());
-            return Some(
+            return Err(Box::new(
                 Diagnostic::error(
                     Code::TooDeep,
                     file,
@@ -185,11 +202,11 @@ fn too_deep(file: FileId, text: &str) -> Option<Diagnostic> {
                 )
                 .with_label("too deep")
                 .with_help("simplify this part of the file; nothing after it was parsed"),
-            );
+            ));
         }
         index += 1;
     }
-    None
+    Ok(max_level)
 }
 
 /// Parses `input` with `rule` in full (for grammar tests): true when the whole input
@@ -331,6 +348,11 @@ impl<'t> FileParser<'t> {
                     }
                 }
                 Err(error) => {
+                    if let Some((automaton, end)) = self.automaton_by_states(offset) {
+                        members.push(ast::Member::Automaton(automaton));
+                        offset = end;
+                        continue;
+                    }
                     let at = self.report(&error, offset);
                     let next = next_start(self.text, offset, at, MEMBER_KEYWORDS, true);
                     if next >= self.text.len() {
@@ -353,6 +375,147 @@ impl<'t> FileParser<'t> {
             span: Span::new(start + head.as_span().start(), end),
         };
         Some((component, end))
+    }
+
+    /// Parses an automaton state by state, recovering at `state` and `initial`.
+    /// Returns `None` when not even its head parses.
+    fn automaton_by_states(&mut self, start: usize) -> Option<(ast::Automaton, usize)> {
+        let head = CoolParser::parse(Rule::automaton_head, &self.text[start..])
+            .ok()?
+            .next()?;
+        let builder = Builder {
+            base: start,
+            file: self.file,
+            diagnostics: &mut self.diagnostics,
+        };
+        let keyword_pair = head
+            .clone()
+            .into_inner()
+            .find(|p| p.as_rule() == Rule::automaton_kw)?;
+        let keyword = if keyword_pair.as_str() == "supervisor" {
+            ast::AutomatonKeyword::Supervisor
+        } else {
+            ast::AutomatonKeyword::Automaton
+        };
+        let keyword_span = builder.span(&keyword_pair);
+        let mut automaton = ast::Automaton {
+            keyword,
+            keyword_span,
+            initial: Vec::new(),
+            states: Vec::new(),
+            span: Span::default(),
+        };
+        let mut offset = start + head.as_span().end();
+        let end = loop {
+            match parse_detailed(Rule::automaton_step, &self.text[offset..]) {
+                Ok(mut pairs) => {
+                    let pair = pairs.next()?;
+                    let pair_end = offset + pair.as_span().end();
+                    let mut builder = Builder {
+                        base: offset,
+                        file: self.file,
+                        diagnostics: &mut self.diagnostics,
+                    };
+                    match pair.as_rule() {
+                        Rule::initial => {
+                            if let Some(name) = children(pair).first() {
+                                automaton.initial.push(builder.ident(name));
+                            }
+                        }
+                        Rule::state => automaton.states.extend(builder.state(pair)),
+                        Rule::automaton_end => break pair_end,
+                        // The end of the input: the component reports the missing brace.
+                        _ => break self.text.len(),
+                    }
+                    offset = if pair_end > offset {
+                        pair_end
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+                Err(error) => {
+                    if let Some((state, end)) = self.state_by_members(offset) {
+                        automaton.states.push(state);
+                        offset = end;
+                        continue;
+                    }
+                    let at = self.report(&error, offset);
+                    let next = next_start(self.text, offset, at, &["state", "initial"], true);
+                    if next >= self.text.len() {
+                        break self.text.len();
+                    }
+                    offset = if next > offset {
+                        next
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+            }
+        };
+        automaton.span = Span::new(keyword_span.start, end);
+        Some((automaton, end))
+    }
+
+    /// Parses a state member by member, recovering after the next `;`. Returns `None`
+    /// when not even its head parses.
+    fn state_by_members(&mut self, start: usize) -> Option<(ast::State, usize)> {
+        let head = CoolParser::parse(Rule::state_head, &self.text[start..])
+            .ok()?
+            .next()?;
+        let builder = Builder {
+            base: start,
+            file: self.file,
+            diagnostics: &mut self.diagnostics,
+        };
+        let doc = docs(&head);
+        let name = builder.ident(children(head.clone()).first()?);
+        let head_start = start + head.as_span().start();
+        let mut offset = start + head.as_span().end();
+        let mut members = Vec::new();
+        let end = loop {
+            match parse_detailed(Rule::state_step, &self.text[offset..]) {
+                Ok(mut pairs) => {
+                    let pair = pairs.next()?;
+                    let pair_end = offset + pair.as_span().end();
+                    match pair.as_rule() {
+                        Rule::state_end => break pair_end,
+                        Rule::EOI => break self.text.len(),
+                        _ => {
+                            let mut builder = Builder {
+                                base: offset,
+                                file: self.file,
+                                diagnostics: &mut self.diagnostics,
+                            };
+                            members.extend(builder.state_member(pair));
+                        }
+                    }
+                    offset = if pair_end > offset {
+                        pair_end
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+                Err(error) => {
+                    let at = self.report(&error, offset);
+                    let next = next_start(self.text, offset, at, &[], true);
+                    if next >= self.text.len() {
+                        break self.text.len();
+                    }
+                    offset = if next > offset {
+                        next
+                    } else {
+                        next_char(self.text, offset)
+                    };
+                }
+            }
+        };
+        let state = ast::State {
+            doc,
+            name,
+            members,
+            span: Span::new(head_start, end),
+        };
+        Some((state, end))
     }
 
     /// Records a pest error as a diagnostic; returns the absolute error offset.
@@ -577,7 +740,7 @@ fn rule_name(rule: Rule) -> Option<&'static str> {
         and_op => "`&&`",
         repeat_lit | list_lit => "a list",
         enum_value => "`Enum::Variant`",
-        component_end => "`}`",
+        component_end | automaton_end | state_end => "`}`",
         duration_unit => "a duration unit",
         frequency_unit => "a frequency unit",
         kw_import => "`import`",
@@ -1443,61 +1606,64 @@ impl Builder<'_> {
         let doc = docs(&pair);
         let mut parts = children(pair).into_iter();
         let name = self.ident(&parts.next()?);
-        let mut members = Vec::new();
-        for part in parts {
-            let member_span = self.span(&part);
-            let rule = part.as_rule();
-            let inner = part.clone().into_inner().collect::<Vec<_>>();
-            let values = children(part);
-            let member = match rule {
-                Rule::entry_section => ast::StateMember::Entry(member_span),
-                Rule::exit_section => ast::StateMember::Exit(member_span),
-                Rule::periodic_section => ast::StateMember::Periodic {
-                    period: match values.first() {
-                        Some(p) => Some(self.expr(p.clone())?),
-                        None => None,
-                    },
-                    span: member_span,
-                },
-                Rule::on_rule => ast::StateMember::On {
-                    port: self.ident(values.first()?),
-                    target: self.ident(values.get(1)?),
-                    span: member_span,
-                },
-                Rule::after_rule => {
-                    let has_without = inner.iter().any(|p| p.as_rule() == Rule::kw_without);
-                    let delay = self.expr(values.first()?.clone())?;
-                    let (without, target) = if has_without {
-                        (Some(self.ident(values.get(1)?)), self.ident(values.get(2)?))
-                    } else {
-                        (None, self.ident(values.get(1)?))
-                    };
-                    ast::StateMember::After {
-                        delay,
-                        without,
-                        target,
-                        span: member_span,
-                    }
-                }
-                Rule::may_rule => ast::StateMember::May {
-                    targets: values.iter().map(|p| self.ident(p)).collect(),
-                    span: member_span,
-                },
-                Rule::when_rule => ast::StateMember::When {
-                    condition: self.expr(values.first()?.clone())?,
-                    target: self.ident(values.get(1)?),
-                    span: member_span,
-                },
-                _ => continue,
-            };
-            members.push(member);
-        }
+        let members = parts.filter_map(|part| self.state_member(part)).collect();
         Some(ast::State {
             doc,
             name,
             members,
             span,
         })
+    }
+
+    fn state_member(&mut self, part: P<'_>) -> Option<ast::StateMember> {
+        let member_span = self.span(&part);
+        let rule = part.as_rule();
+        let has_without = part
+            .clone()
+            .into_inner()
+            .any(|p| p.as_rule() == Rule::kw_without);
+        let values = children(part);
+        let member = match rule {
+            Rule::entry_section => ast::StateMember::Entry(member_span),
+            Rule::exit_section => ast::StateMember::Exit(member_span),
+            Rule::periodic_section => ast::StateMember::Periodic {
+                period: match values.first() {
+                    Some(p) => Some(self.expr(p.clone())?),
+                    None => None,
+                },
+                span: member_span,
+            },
+            Rule::on_rule => ast::StateMember::On {
+                port: self.ident(values.first()?),
+                target: self.ident(values.get(1)?),
+                span: member_span,
+            },
+            Rule::after_rule => {
+                let delay = self.expr(values.first()?.clone())?;
+                let (without, target) = if has_without {
+                    (Some(self.ident(values.get(1)?)), self.ident(values.get(2)?))
+                } else {
+                    (None, self.ident(values.get(1)?))
+                };
+                ast::StateMember::After {
+                    delay,
+                    without,
+                    target,
+                    span: member_span,
+                }
+            }
+            Rule::may_rule => ast::StateMember::May {
+                targets: values.iter().map(|p| self.ident(p)).collect(),
+                span: member_span,
+            },
+            Rule::when_rule => ast::StateMember::When {
+                condition: self.expr(values.first()?.clone())?,
+                target: self.ident(values.get(1)?),
+                span: member_span,
+            },
+            _ => return None,
+        };
+        Some(member)
     }
 
     fn expr(&mut self, pair: P<'_>) -> Option<ast::Expr> {

@@ -157,6 +157,19 @@ fn regeneration_keeps_user_code_and_adds_new_stubs() {
         report.warnings
     );
 
+    // A component removed from the description loses its generated module; its user
+    // file stays.
+    write(&description, &v3().replace("atomic Switch", "atomic Other"));
+    let report = compile(&description, &krate, "lamp");
+    assert_eq!(report.removed, [Path::new("src/generated/switch.rs")]);
+    assert!(
+        report.warnings.iter().any(|w| w.contains("src/switch.rs")),
+        "{:?}",
+        report.warnings
+    );
+    assert!(krate.join("src/switch.rs").exists());
+    assert!(krate.join("src/generated/other.rs").exists());
+
     // Compiling again with nothing changed rewrites nothing.
     let report = compile(&description, &krate, "lamp");
     assert!(report.written.is_empty(), "{:?}", report.written);

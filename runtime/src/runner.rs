@@ -291,6 +291,10 @@ impl Runner {
             match action {
                 Action::Start => {
                     self.set_state(State::Starting);
+                    // A restart leaves the user automaton of the failed run behind.
+                    self.user_entered = false;
+                    self.pending_choice = None;
+                    self.publish_user(None);
                     if let Err(message) = self.run_start() {
                         self.set_error(Some(message));
                         self.set_state(State::StartingError);

@@ -818,7 +818,13 @@ impl System {
     }
 
     /// Take every component to `dead` and join every thread. Dropping the system does
-    /// the same.
+    /// the same. The system is consumed: nothing can be added or connected afterwards.
+    ///
+    /// ```compile_fail
+    /// let system = coolbot::System::new();
+    /// let report = system.shutdown();
+    /// system.handle("motion"); // error: the system was moved into `shutdown`
+    /// ```
     pub fn shutdown(mut self) -> Report {
         self.stop_all()
     }

@@ -95,6 +95,12 @@ fn check(state: State, command: Controllable) {
                 "{context}: error {:?}",
                 monitor.error
             );
+            if to == State::Ready {
+                assert_eq!(
+                    monitor.user_state, None,
+                    "{context}: no user state in ready"
+                );
+            }
             if to == State::Running {
                 assert_eq!(
                     monitor.user_state.as_deref(),

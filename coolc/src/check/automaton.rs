@@ -252,6 +252,9 @@ fn reachability(
     component: &ast::Component,
     automaton: &ast::Automaton,
 ) {
+    if checker.incomplete {
+        return;
+    }
     let Some(initial) = automaton.initial.first() else {
         return;
     };

@@ -20,6 +20,8 @@ mod names;
 mod rules;
 mod values;
 
+use std::collections::BTreeSet;
+
 use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
 use crate::resolve::Symbols;
@@ -27,13 +29,22 @@ use crate::resolve::Symbols;
 /// Runs every check over every file.
 pub fn check(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagnostic>) {
     let model = model::Model::new(files, symbols);
+    // A file with syntax errors lost what failed to parse: checks that need the whole
+    // picture (reachability) would only report the loss again.
+    let incomplete: BTreeSet<FileId> = diagnostics
+        .iter()
+        .filter(|d| d.code.as_str().starts_with("coolc::syntax::"))
+        .map(|d| d.file)
+        .collect();
     let mut checker = Checker {
         model: &model,
         diagnostics,
         file: FileId(0),
+        incomplete: false,
     };
     for file in files {
         checker.file = file.id;
+        checker.incomplete = incomplete.contains(&file.id);
         for item in &file.items {
             checker.item(item);
         }
@@ -47,6 +58,8 @@ pub(crate) struct Checker<'a, 'd> {
     pub(crate) diagnostics: &'d mut Vec<Diagnostic>,
     /// The file being checked.
     pub(crate) file: FileId,
+    /// The file being checked has syntax errors (parts of it are missing).
+    pub(crate) incomplete: bool,
 }
 
 impl Checker<'_, '_> {
@@ -59,6 +72,7 @@ impl Checker<'_, '_> {
                 for field in &packet.fields {
                     values::field(self, field);
                 }
+                values::recursive_packet(self, packet);
             }
             ast::Item::Enum(def) => {
                 names::type_name(self, &def.name);

@@ -408,3 +408,78 @@ fn interval(checker: &mut Checker<'_, '_>, interval: &ast::Interval) {
         checker.push(diagnostic);
     }
 }
+
+/// A packet may not contain itself by value, directly or through other packets'
+/// fields, arrays or optionals (a list `[T]` is a heap allocation and breaks the
+/// cycle): the generated struct would be infinitely large.
+pub(super) fn recursive_packet(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
+    for field in &packet.fields {
+        let mut chain = vec![packet.name.name.clone()];
+        let mut visited = std::collections::BTreeSet::new();
+        if contains_by_value(
+            checker,
+            &field.ty,
+            &packet.name.name,
+            &mut chain,
+            &mut visited,
+        ) {
+            let diagnostic = checker
+                .error(
+                    Code::RecursivePacket,
+                    field.ty.span,
+                    format!(
+                        "packet `{}` contains itself: {}",
+                        packet.name.name,
+                        chain.join(" -> ")
+                    ),
+                )
+                .with_label("contains the packet by value")
+                .with_help("hold it in a list (`[T]`), which is allocated on the heap");
+            checker.push(diagnostic);
+            return;
+        }
+    }
+}
+
+fn contains_by_value(
+    checker: &Checker<'_, '_>,
+    ty: &ast::Type,
+    target: &str,
+    chain: &mut Vec<String>,
+    visited: &mut std::collections::BTreeSet<String>,
+) -> bool {
+    match &ty.kind {
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => false,
+        ast::TypeKind::Array(inner, _) | ast::TypeKind::Optional(inner) => {
+            contains_by_value(checker, inner, target, chain, visited)
+        }
+        ast::TypeKind::Named(name) => {
+            if name.name == target {
+                chain.push(name.name.clone());
+                return true;
+            }
+            if !visited.insert(name.name.clone()) {
+                return false;
+            }
+            let Some(def) = checker.model.symbols.defs.get(&name.name) else {
+                return false;
+            };
+            let Some(ast::Item::Packet(inner)) = checker
+                .model
+                .files
+                .get(def.file.0 as usize)
+                .and_then(|file| file.items.get(def.item))
+            else {
+                return false;
+            };
+            chain.push(name.name.clone());
+            for field in &inner.fields {
+                if contains_by_value(checker, &field.ty, target, chain, visited) {
+                    return true;
+                }
+            }
+            chain.pop();
+            false
+        }
+    }
+}
