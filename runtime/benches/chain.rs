@@ -23,7 +23,7 @@ use common::{Figure, Glue, Goal, Mode, Samples, Table};
 const HOPS: usize = 8;
 const PERIOD: Duration = Duration::from_millis(1);
 const CAPACITY: usize = 16;
-const ROUNDS: usize = 4;
+const ROUNDS: usize = 20;
 const WARMUP: usize = 20;
 
 one_state_spec! {

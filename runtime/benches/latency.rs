@@ -23,7 +23,7 @@ use common::{Figure, Glue, Goal, Mode, Samples, Table};
 /// Round trips discarded at the start of every round (thread wake-up, caches).
 const WARMUP: usize = 200;
 /// Rounds of project and baseline, alternated.
-const ROUNDS: usize = 4;
+const ROUNDS: usize = 10;
 
 one_state_spec! {
     static FIFO_SPEC = "FifoEcho",

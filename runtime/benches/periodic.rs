@@ -22,7 +22,7 @@ use crossbeam_channel::{Sender, bounded};
 use common::{Figure, Glue, Goal, Mode, Samples, Table};
 
 const PERIOD: Duration = Duration::from_millis(1);
-const ROUNDS: usize = 4;
+const ROUNDS: usize = 20;
 /// Activations discarded at the start of each round.
 const WARMUP: usize = 20;
 
