@@ -71,18 +71,34 @@ pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% 
 {%- for i in c.instances %}
 {%- if i.built() %}
 {%- if let Some(module) = i.module %}
-{%- if i.overrides.is_empty() %}
+{%- if !i.has_overrides() %}
         system.add(super::{{ module }}::component(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}()))?,
 {%- else %}
-        {
-            // Instance overrides from the description.
-            let {% if i.sets_config() %}mut {% endif %}config = super::{{ module }}::Config::default();
-            let {% if i.sets_vars() %}mut {% endif %}vars = super::{{ module }}::Vars::default();
-            {%- for statement in i.overrides %}
-            {{ statement }}
-            {%- endfor %}
-            system.add(super::{{ module }}::component_with(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}(), config, vars))?
-        },
+        // Instance `{{ i.name }}` with the overrides of the description.
+        system.add(super::{{ module }}::component_with(
+            ::std::format!("{prefix}{{ i.name }}"),
+            parts.{{ i.method }}(),
+            {%- if i.config_overrides.is_empty() %}
+            super::{{ module }}::Config::default(),
+            {%- else %}
+            super::{{ module }}::Config {
+                {%- for (field, value) in i.config_overrides %}
+                {{ field }}: {{ value }},
+                {%- endfor %}
+                ..super::{{ module }}::Config::default()
+            },
+            {%- endif %}
+            {%- if i.var_overrides.is_empty() %}
+            super::{{ module }}::Vars::default(),
+            {%- else %}
+            super::{{ module }}::Vars {
+                {%- for (field, value) in i.var_overrides %}
+                {{ field }}: {{ value }},
+                {%- endfor %}
+                ..super::{{ module }}::Vars::default()
+            },
+            {%- endif %}
+        ))?,
 {%- endif %}
 {%- endif %}
 {%- endif %}

@@ -304,7 +304,7 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     )
     .map_err(io)?;
     std::fs::write(dir.join("src/main.rs"), emit::starter_main(&krate, atomic)).map_err(io)?;
-    std::fs::write(dir.join(".gitignore"), "/target\n").map_err(io)?;
+    std::fs::write(dir.join(".gitignore"), "/target\n/.coolc\n").map_err(io)?;
     eprintln!(
         "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",
         dir.display(),

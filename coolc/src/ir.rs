@@ -473,8 +473,10 @@ pub struct Instance {
     pub module: Option<String>,
     /// The instance it substitutes, if any (not built at start).
     pub substitutes: Option<String>,
-    /// Overrides as Rust statements on `config` / `vars` (empty: none).
-    pub overrides: Vec<String>,
+    /// Configuration overrides: `(field, Rust value)`.
+    pub config_overrides: Vec<(String, String)>,
+    /// Controllable variable overrides: `(field, Rust value)`.
+    pub var_overrides: Vec<(String, String)>,
 }
 
 impl Instance {
@@ -483,14 +485,9 @@ impl Instance {
         self.module.is_some() && self.substitutes.is_none()
     }
 
-    /// Whether an override sets a configuration field.
-    pub fn sets_config(&self) -> bool {
-        self.overrides.iter().any(|s| s.starts_with("config."))
-    }
-
-    /// Whether an override sets a variable.
-    pub fn sets_vars(&self) -> bool {
-        self.overrides.iter().any(|s| s.starts_with("vars."))
+    /// Whether the instance has overrides.
+    pub fn has_overrides(&self) -> bool {
+        !self.config_overrides.is_empty() || !self.var_overrides.is_empty()
     }
 }
 

@@ -996,7 +996,8 @@ impl<'a> Lowerer<'a> {
                         .filter(|c| c.kind == ast::ComponentKind::Atomic)
                         .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
                     substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
-                    overrides: self.overrides(i),
+                    config_overrides: self.overrides(i, true),
+                    var_overrides: self.overrides(i, false),
                 }),
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -1059,9 +1060,9 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
 }
 
 impl Lowerer<'_> {
-    /// `config.x = value;` / `vars.x = value;` for an instance's overrides: a name
-    /// that is both a configuration field and a controllable variable sets both.
-    fn overrides(&self, instance: &ast::Instance) -> Vec<String> {
+    /// An instance's overrides of configuration fields (`config`) or controllable
+    /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
         let Some(component) = self
             .components
             .get(instance.component.name.as_str())
@@ -1069,27 +1070,27 @@ impl Lowerer<'_> {
         else {
             return Vec::new();
         };
-        let mut statements = Vec::new();
+        let mut overrides = Vec::new();
         for o in &instance.overrides {
             for member in &component.members {
                 match member {
-                    ast::Member::Configuration(cfg) => {
+                    ast::Member::Configuration(cfg) if config => {
                         for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
-                            statements.push(format!(
-                                "config.{} = {};",
+                            overrides.push((
                                 ident::snake(&f.name.name),
-                                self.value(&o.value, Some(&f.ty), GEN_TYPES)
+                                self.value(&o.value, Some(&f.ty), GEN_TYPES),
                             ));
                         }
                     }
                     ast::Member::Variable(v)
-                        if v.kind == ast::VarKind::Controllable && v.name.name == o.name.name =>
+                        if !config
+                            && v.kind == ast::VarKind::Controllable
+                            && v.name.name == o.name.name =>
                     {
                         if let Some(ty) = &v.ty {
-                            statements.push(format!(
-                                "vars.{} = {};",
+                            overrides.push((
                                 ident::snake(&v.name.name),
-                                self.value(&o.value, Some(ty), GEN_TYPES)
+                                self.value(&o.value, Some(ty), GEN_TYPES),
                             ));
                         }
                     }
@@ -1097,7 +1098,7 @@ impl Lowerer<'_> {
                 }
             }
         }
-        statements
+        overrides
     }
 }
 

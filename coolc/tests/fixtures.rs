@@ -120,3 +120,61 @@ fn json_rendering_carries_code_file_and_position() {
     assert_eq!(first["file"], "err/unexpected_token.cool");
     assert!(first["line"].as_u64().is_some_and(|line| line > 0));
 }
+
+#[test]
+fn a_missing_root_is_a_diagnostic_not_a_panic() {
+    let analysis = coolc::analyze(&["nowhere.cool"], &|_: &Path| {
+        Err(std::io::Error::from(std::io::ErrorKind::NotFound))
+    });
+    assert_eq!(analysis.diagnostics.len(), 1);
+    assert_eq!(
+        analysis.diagnostics[0].code,
+        coolc::diagnostics::Code::ImportNotFound
+    );
+    assert_eq!(analysis.files.len(), analysis.sources.files().len());
+}
+
+#[test]
+fn shared_imports_load_once_and_ids_follow_load_order() {
+    let files = [
+        (
+            "root.cool",
+            "import \"a/left.cool\";\nimport \"a/right.cool\";\n",
+        ),
+        (
+            "a/left.cool",
+            "import \"../shared.cool\";\npacket Left { s: Shared }\n",
+        ),
+        (
+            "a/right.cool",
+            "import \"./../shared.cool\";\npacket Right { s: Shared }\n",
+        ),
+        ("shared.cool", "packet Shared { x: f64 }\n"),
+    ];
+    let loader = |path: &Path| -> std::io::Result<String> {
+        files
+            .iter()
+            .find(|(name, _)| Path::new(name) == path)
+            .map(|(_, text)| text.to_string())
+            .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+    };
+    let analysis = coolc::analyze(&["root.cool"], &loader);
+    assert!(
+        analysis.diagnostics.is_empty(),
+        "{}",
+        analysis.render(RenderOptions::plain())
+    );
+    let paths: Vec<String> = analysis
+        .sources
+        .files()
+        .iter()
+        .map(|f| analysis.sources.display_path(f.id))
+        .collect();
+    assert_eq!(
+        paths,
+        ["root.cool", "a/left.cool", "shared.cool", "a/right.cool"]
+    );
+    for (index, file) in analysis.files.iter().enumerate() {
+        assert_eq!(file.id.0 as usize, index);
+    }
+}
