@@ -1,0 +1,559 @@
+//! `coolc` on the example descriptions and on a generated description set: check time
+//! (`coolc::analyze`: parse, resolve, check) and full compile time (analyze, lower,
+//! emit every file of the crate to memory; and the same writing the crate to a
+//! temporary directory, as `coolc compile` does), not counting cargo.
+//!
+//! The generated set has 1,000 atomic and 100 compound components, one file each,
+//! plus a shared types file (see [`generate`]). The scaling run does the same with ten
+//! times the input (10,000 + 1,000). Goals (issue 2, item 10): the 1,000 set checks and
+//! emits in under one second, and ten times the input costs at most twelve times the
+//! time. The baseline of the scaling figure is the 1x run in the same process.
+//!
+//! coolc formats generated code with the `rustfmt` program when it is installed, and
+//! with `prettyplease` otherwise. Both are measured: each row runs in a child process
+//! of this benchmark, with `RUSTFMT` pointing at a missing program for the built-in
+//! rows. The 10x set runs with the built-in formatter only.
+//!
+//! `cargo bench -p coolc --bench compile` (add `-- --quick` to skip the 10x run and
+//! the rustfmt run of the 1,000 set).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// In-memory description files.
+type Files = BTreeMap<PathBuf, String>;
+
+/// Shared packets and enums of the generated set.
+const TYPES: &str = r#"/// Pose of the platform in the odometry frame.
+packet Pose2D { x: f64, y: f64, theta: f64 }
+
+/// A velocity command.
+packet Twist { linear: f64, angular: f64 }
+
+/// One reading of a ring of range sensors.
+packet RangeScan { stamp: Time, ranges: [f32; 16], bumpers: [bool; 8] = [false; 8] }
+
+/// Operating modes.
+enum Mode { Normal, Degraded, Stopped }
+"#;
+
+fn atomic_name(index: usize) -> String {
+    format!("Worker{index:05}")
+}
+
+fn atomic_file(index: usize) -> String {
+    format!("atomic_{index:05}.cool")
+}
+
+/// A realistically sized atomic component: configuration, variables of every kind,
+/// six ports of five kinds, timing, three exceptions with plans and a four-state
+/// automaton with entry, exit and periodic sections, `on`, `after`, a watchdog and
+/// `may` transitions.
+fn atomic(index: usize) -> String {
+    let name = atomic_name(index);
+    format!(
+        r#"import "types.cool";
+
+/// Generated worker number {index}: follows commands and reports its pose.
+atomic {name} {{
+    configuration {{
+        device: String = "/dev/ttyUSB{port}";
+        max_speed: f64 = 0.8;
+        retries: u32 = 3;
+    }}
+
+    observable odometry: Pose2D;
+    observable battery: f32 = 12.0;
+    controllable max_speed: f64 = 0.8;
+    local last_command: Time?;
+    local count: u64 = 0;
+
+    input command: fifo<Twist>(16);
+    input scan: last<RangeScan>;
+    input target: last<Pose2D>;
+    input halt: tick;
+    output command_out: data<Twist>;
+    output pose: data<Pose2D>;
+    output alarm: tick;
+
+    timing {{
+        period 10ms..40ms;
+        max_response 20ms;
+        priority {priority};
+        quality full, reduced;
+    }}
+
+    exception link_lost "link lost" {{ retry 3 every 100ms; }}
+    exception stalled {{ goto stopped; }}
+    exception overheated;
+
+    automaton {{
+        initial idle;
+        state idle {{
+            entry;
+            on command -> moving;
+        }}
+        state moving {{
+            entry; periodic; exit;
+            on halt -> stopped;
+            after 500ms without command -> idle;
+            may -> idle, stopped;
+        }}
+        state stopped {{ entry; after 2s -> recovering; }}
+        state recovering {{
+            entry; periodic 20ms;
+            may -> idle;
+        }}
+    }}
+}}
+"#,
+        port = index % 8,
+        priority = index % 10,
+    )
+}
+
+fn compound_file(index: usize) -> String {
+    format!("compound_{index:04}.cool")
+}
+
+/// A compound of 5 to 10 instances of generated atomics, chained by fifo, last and
+/// tick connections, with exported ports, mapped and own variables, error policies,
+/// a recovery block and a three-state supervisor with rules.
+fn compound(index: usize, atomics: usize) -> String {
+    let size = 5 + index % 6;
+    let members: Vec<usize> = (0..size).map(|k| (index * 10 + k) % atomics).collect();
+    let mut text = String::new();
+    text.push_str("import \"types.cool\";\n");
+    let mut imported = std::collections::BTreeSet::new();
+    for &member in &members {
+        if imported.insert(member) {
+            let _ = writeln!(text, "import \"{}\";", atomic_file(member));
+        }
+    }
+    let _ = writeln!(
+        text,
+        "\n/// Generated assembly number {index}.\ncompound Assembly{index:04} {{"
+    );
+    for (k, &member) in members.iter().enumerate() {
+        if k == 0 {
+            let _ = writeln!(
+                text,
+                "    instance w{k}: {} {{\n        max_speed = 0.5;\n        timing {{ priority 7; period 20ms..50ms; }}\n    }}",
+                atomic_name(member)
+            );
+        } else {
+            let _ = writeln!(text, "    instance w{k}: {};", atomic_name(member));
+        }
+    }
+    text.push('\n');
+    for k in 0..size - 1 {
+        let next = k + 1;
+        let _ = writeln!(text, "    connect w{k}.command_out -> w{next}.command;");
+        let _ = writeln!(text, "    connect w{k}.pose -> w{next}.target;");
+        let _ = writeln!(text, "    connect w{k}.alarm -> w{next}.halt;");
+    }
+    let last = size - 1;
+    let _ = write!(
+        text,
+        r#"
+    input command = w0.command;
+    output pose = w{last}.pose;
+    observable odometry = w0.odometry;
+    controllable max_speed = w0.max_speed;
+    observable mode: Mode = Mode::Normal;
+    local faults: u32 = 0;
+
+    on error w0: propagate;
+    on error w1: restart;
+    recovery {{ retry every 500ms; deadline 5s; }}
+
+    supervisor {{
+        initial operating;
+        state operating {{
+            entry;
+            when w1.state == running_error -> degraded;
+            when w0.result == fail || faults > 3 -> stopped;
+        }}
+        state degraded {{
+            entry;
+            when w1.state == running && w1.user_state == moving -> operating;
+        }}
+        state stopped {{ entry; }}
+    }}
+}}
+"#
+    );
+    text
+}
+
+/// The generated set: `atomics` atomic and `compounds` compound components.
+fn generate(atomics: usize, compounds: usize) -> Files {
+    let mut files = Files::new();
+    files.insert(PathBuf::from("types.cool"), TYPES.to_owned());
+    for index in 0..atomics {
+        files.insert(PathBuf::from(atomic_file(index)), atomic(index));
+    }
+    for index in 0..compounds {
+        files.insert(
+            PathBuf::from(compound_file(index)),
+            compound(index, atomics),
+        );
+    }
+    files
+}
+
+/// The `.cool` files under `dir` (relative to the workspace root), recursively.
+fn descriptions(dir: &str) -> Files {
+    // coolc normalises import paths lexically: give it a path without `..`.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the workspace root")
+        .join(dir);
+    let mut files = Files::new();
+    let mut dirs = vec![root];
+    while let Some(dir) = dirs.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if path.is_dir() && !path.ends_with("target") {
+                dirs.push(path);
+            } else if path.extension().is_some_and(|e| e == "cool")
+                && let Ok(text) = std::fs::read_to_string(&path)
+            {
+                files.insert(path, text);
+            }
+        }
+    }
+    files
+}
+
+fn loader(files: &Files) -> impl Fn(&Path) -> std::io::Result<String> + '_ {
+    move |path: &Path| {
+        files
+            .get(path)
+            .cloned()
+            .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+    }
+}
+
+/// Wall-clock and CPU time (this process, all threads; not child processes) of one
+/// stage.
+#[derive(Debug, Clone, Copy, Default)]
+struct Cost {
+    wall: Duration,
+    cpu: Duration,
+}
+
+impl std::ops::Add for Cost {
+    type Output = Cost;
+    fn add(self, other: Cost) -> Cost {
+        Cost {
+            wall: self.wall + other.wall,
+            cpu: self.cpu + other.cpu,
+        }
+    }
+}
+
+impl std::iter::Sum for Cost {
+    fn sum<I: Iterator<Item = Cost>>(iter: I) -> Cost {
+        iter.fold(Cost::default(), |a, b| a + b)
+    }
+}
+
+fn measure<R>(f: impl FnOnce() -> R) -> (Cost, R) {
+    let cpu = cpu_time::ProcessTime::now();
+    let wall = Instant::now();
+    let result = f();
+    let cost = Cost {
+        wall: wall.elapsed(),
+        cpu: cpu.elapsed(),
+    };
+    (cost, result)
+}
+
+/// The times of one run over a set.
+#[derive(Debug, Clone, Copy)]
+struct Times {
+    check: Cost,
+    lower: Cost,
+    emit: Cost,
+    write: Cost,
+    files: usize,
+    bytes: usize,
+}
+
+impl Times {
+    fn compile(self) -> Cost {
+        self.check + self.lower + self.emit
+    }
+}
+
+/// Check, lower and emit `roots`, then write the crate to a temporary directory.
+fn run(files: &Files, roots: &[PathBuf], write_crate: bool) -> Times {
+    let load = loader(files);
+    let (check, analysis) = measure(|| coolc::analyze(roots, &load));
+    assert!(
+        !analysis.has_errors(),
+        "the benchmark's descriptions must be valid:\n{}",
+        analysis.render(coolc::RenderOptions::plain())
+    );
+    let options = coolc::lower::Options::default();
+    let (lower, krate) = measure(|| coolc::lower::lower(&analysis.files, &options));
+    let (emit, emitted) = measure(|| coolc::emit::emit_crate(&krate));
+    let mut write = Cost::default();
+    if write_crate {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let (cost, written) = measure(|| coolc::merge::write_crate(dir.path(), &krate));
+        written.expect("write the crate");
+        write = cost;
+    }
+    Times {
+        check,
+        lower,
+        emit,
+        write,
+        files: emitted.len(),
+        bytes: emitted.iter().map(|f| f.contents.len()).sum(),
+    }
+}
+
+/// The median run of `rounds` by compile time.
+fn median_run(rounds: usize, files: &Files, roots: &[PathBuf]) -> Times {
+    // Writing the 10x crate adds minutes and no figure the goals use.
+    let write = roots.len() < 5_000;
+    let mut times: Vec<Times> = (0..rounds).map(|_| run(files, roots, write)).collect();
+    times.sort_by_key(|t| t.compile().wall);
+    times[times.len() / 2]
+}
+
+fn ms(d: Duration) -> String {
+    format!("{:.1} ms", d.as_secs_f64() * 1e3)
+}
+
+fn cost(c: Cost) -> String {
+    format!("{} (cpu {})", ms(c.wall), ms(c.cpu))
+}
+
+/// The input sets, by name.
+fn input(set: &str) -> Files {
+    match set {
+        "examples" => descriptions("examples"),
+        "fixtures" => descriptions("tests/data/ok"),
+        "slice" => generate(10, 1),
+        "1x" => generate(1_000, 100),
+        "10x" => generate(10_000, 1_000),
+        other => panic!("unknown set {other}"),
+    }
+}
+
+/// Child mode: `--child SET ROUNDS`; prints `check lower emit write files bytes`
+/// (seconds, counts) of the median round.
+fn child(set: &str, rounds: usize) {
+    let files = input(set);
+    let roots: Vec<PathBuf> = files.keys().cloned().collect();
+    let t = if set == "fixtures" {
+        // Each fixture is a description set of its own: compile them one by one.
+        let runs: Vec<Times> = roots
+            .iter()
+            .map(|root| median_run(rounds, &files, std::slice::from_ref(root)))
+            .collect();
+        Times {
+            check: runs.iter().map(|t| t.check).sum(),
+            lower: runs.iter().map(|t| t.lower).sum(),
+            emit: runs.iter().map(|t| t.emit).sum(),
+            write: runs.iter().map(|t| t.write).sum(),
+            files: runs.iter().map(|t| t.files).sum(),
+            bytes: runs.iter().map(|t| t.bytes).sum(),
+        }
+    } else {
+        median_run(rounds, &files, &roots)
+    };
+    let mut line = String::new();
+    for c in [t.check, t.lower, t.emit, t.write] {
+        let _ = write!(line, "{} {} ", c.wall.as_secs_f64(), c.cpu.as_secs_f64());
+    }
+    println!("{line}{} {}", t.files, t.bytes);
+}
+
+/// How generated code is formatted in a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Formatter {
+    /// As shipped: coolc runs the `rustfmt` program once per file and per stub.
+    Rustfmt,
+    /// `RUSTFMT` names a program that does not exist, so coolc formats with its
+    /// built-in fallback (`prettyplease`, in process).
+    Builtin,
+}
+
+/// Run one set in a child process (the formatter is chosen through the `RUSTFMT`
+/// environment variable, which a process cannot safely change for itself).
+fn in_child(set: &str, rounds: usize, formatter: Formatter) -> Times {
+    let exe = std::env::current_exe().expect("current exe");
+    let mut command = std::process::Command::new(exe);
+    command.args(["--child", set, &rounds.to_string()]);
+    if formatter == Formatter::Builtin {
+        command.env("RUSTFMT", "/nonexistent/coolc-bench-no-rustfmt");
+    }
+    let output = command.output().expect("run the child");
+    assert!(
+        output.status.success(),
+        "child {set} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let text = String::from_utf8_lossy(&output.stdout);
+    let n: Vec<f64> = text
+        .split_whitespace()
+        .map(|x| x.parse().expect("child output"))
+        .collect();
+    let [cw, cc, lw, lc, ew, ec, ww, wc, files, bytes] = n[..] else {
+        panic!("child {set} printed {text:?}");
+    };
+    let c = |wall: f64, cpu: f64| Cost {
+        wall: Duration::from_secs_f64(wall),
+        cpu: Duration::from_secs_f64(cpu),
+    };
+    Times {
+        check: c(cw, cc),
+        lower: c(lw, lc),
+        emit: c(ew, ec),
+        write: c(ww, wc),
+        files: files as usize,
+        bytes: bytes as usize,
+    }
+}
+
+fn row(name: &str, set: &str, formatter: Formatter, t: Times) {
+    let input = input(set);
+    let lines: usize = input.values().map(|text| text.lines().count()).sum();
+    println!(
+        "| {name} | {} files, {lines} lines | {formatter:?} | {} | {} | {} | {} | {} | {} files, {:.1} MiB |",
+        input.len(),
+        cost(t.check),
+        cost(t.lower),
+        cost(t.emit),
+        cost(t.compile()),
+        cost(t.write),
+        t.files,
+        t.bytes as f64 / (1024.0 * 1024.0)
+    );
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(at) = args.iter().position(|a| a == "--check-only") {
+        // For profiling the front end: `--check-only SET`.
+        let files = input(&args[at + 1]);
+        let roots: Vec<PathBuf> = files.keys().cloned().collect();
+        let (took, analysis) = {
+            let started = Instant::now();
+            let analysis = coolc::analyze(&roots, &loader(&files));
+            (started.elapsed(), analysis)
+        };
+        println!(
+            "check {} ({} diagnostics)",
+            ms(took),
+            analysis.diagnostics.len()
+        );
+        return;
+    }
+    if let Some(at) = args.iter().position(|a| a == "--child") {
+        child(&args[at + 1], args[at + 2].parse().expect("rounds"));
+        return;
+    }
+    let quick = args.iter().any(|a| a == "--quick")
+        || std::env::var("COOLBOT_BENCH_QUICK").is_ok_and(|v| !v.is_empty() && v != "0");
+    let rounds = if quick { 1 } else { 3 };
+    println!(
+        "### coolc: check and compile times ({} run, median of {rounds} per example row, one round per generated set)\n",
+        if quick { "quick" } else { "full" }
+    );
+    println!(
+        "| input | size | formatter | check (analyze) | lower | emit to memory | check + lower + emit | write crate to disk (emit again + stubs + files) | output |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+
+    for (set, name) in [
+        ("examples", "examples/ (one crate)"),
+        ("fixtures", "tests/data/ok (one crate each)"),
+    ] {
+        if input(set).is_empty() {
+            println!("| {name} | none found | | | | | | | |");
+            continue;
+        }
+        for formatter in [Formatter::Rustfmt, Formatter::Builtin] {
+            let t = in_child(set, rounds, formatter);
+            row(name, set, formatter, t);
+        }
+    }
+    // The shipped path (rustfmt over the whole crate) on the 1,000 set.
+    if !quick {
+        let t = in_child("1x", 1, Formatter::Rustfmt);
+        row("1,000 atomic + 100 compound", "1x", Formatter::Rustfmt, t);
+    }
+    // One round each for the generated sets: a round of the 1x set takes tens of
+    // seconds, and the CPU times vary little between rounds.
+    let small = in_child("1x", 1, Formatter::Builtin);
+    row(
+        "1,000 atomic + 100 compound",
+        "1x",
+        Formatter::Builtin,
+        small,
+    );
+    let large = if quick {
+        None
+    } else {
+        let t = in_child("10x", 1, Formatter::Builtin);
+        row(
+            "10,000 atomic + 1,000 compound",
+            "10x",
+            Formatter::Builtin,
+            t,
+        );
+        Some(t)
+    };
+
+    println!();
+    let verdict = |ok: bool| if ok { "pass" } else { "MISS" };
+    let second = Duration::from_secs(1);
+    println!(
+        "- 1,000 set, check + lower + emit (built-in formatter): {} (goal < 1 s): wall {}, cpu {}",
+        cost(small.compile()),
+        verdict(small.compile().wall < second),
+        verdict(small.compile().cpu < second)
+    );
+    println!(
+        "- 1,000 set, check alone: {} (goal < 1 s): wall {}, cpu {}",
+        cost(small.check),
+        verdict(small.check.wall < second),
+        verdict(small.check.cpu < second)
+    );
+    match large {
+        Some(large) => {
+            let ratio = |a: Duration, b: Duration| a.as_secs_f64() / b.as_secs_f64();
+            for (what, pick) in [
+                ("wall", (|c: Cost| c.wall) as fn(Cost) -> Duration),
+                ("cpu", |c: Cost| c.cpu),
+            ] {
+                let scaling = ratio(pick(large.compile()), pick(small.compile()));
+                println!(
+                    "- {what}: 10x input costs {scaling:.2}x the time of check + lower + emit (goal <= 12x): {}",
+                    verdict(scaling <= 12.0)
+                );
+                println!(
+                    "- {what}: 10x input, per stage: check {:.2}x, lower {:.2}x, emit {:.2}x, write {:.2}x",
+                    ratio(pick(large.check), pick(small.check)),
+                    ratio(pick(large.lower), pick(small.lower)),
+                    ratio(pick(large.emit), pick(small.emit)),
+                    ratio(pick(large.write), pick(small.write)),
+                );
+            }
+        }
+        None => {
+            println!("- quick run: the 10x set and the rustfmt run of the 1,000 set were skipped")
+        }
+    }
+}
