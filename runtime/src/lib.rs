@@ -118,6 +118,7 @@
 #![deny(missing_docs)]
 
 mod automaton;
+pub mod compound;
 mod monitor;
 pub mod port;
 mod runner;
@@ -127,7 +128,8 @@ pub mod table;
 mod thread;
 mod value;
 
-pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
+pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, Rejected,
     Timeout,
