@@ -19,6 +19,11 @@ use crossbeam_channel::Receiver;
 
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
 use crate::monitor::{Command, Handle, Monitor, MonitorEvent};
+use crate::port::{
+    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
+    TickOut, UfifoIn,
+};
+use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
 use crate::spec::{Spec, VarKind, VarSpec};
 use crate::system::{Component, PortSet, System};
 use crate::table::{Controllable, State};
@@ -236,6 +241,128 @@ struct Mapped {
     variable: String,
 }
 
+/// An exported port: the compound's own port, following the instance port it stands
+/// for (or whoever stands for that instance now).
+trait Export: Send {
+    /// The instance port, as declared (`instance.port`).
+    fn target(&self) -> &str;
+    /// Inputs: move what arrived at the compound's port on to the instance's.
+    fn forward(&mut self) {}
+    /// Follow the instance port now at `address`.
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String>;
+}
+
+/// The compound's own end of an exported data input.
+enum Twin<T> {
+    Fifo(FifoIn<T>),
+    Ufifo(UfifoIn<T>),
+    Last(LastIn<T>),
+}
+
+/// An exported data input: packets arriving at the compound's port are sent on
+/// through a relay output connected to the instance's input.
+struct InputExport<T> {
+    target: String,
+    twin: Twin<T>,
+    relay: DataOut<T>,
+    linked: Option<ErasedInput>,
+}
+
+/// Connect `relay` to `new`, or move it there from `linked` with what is queued.
+fn follow_input(
+    relay: &ErasedOutput,
+    linked: &mut Option<ErasedInput>,
+    new: ErasedInput,
+) -> Result<(), String> {
+    let done = match linked.as_ref() {
+        Some(old) if old.core.id == new.core.id => true,
+        Some(old) => relay.relink(old, &new),
+        None => relay.link(&new),
+    };
+    if !done {
+        return Err("the exported input does not match the instance's".to_owned());
+    }
+    *linked = Some(new);
+    Ok(())
+}
+
+impl<T: Packet> Export for InputExport<T> {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn forward(&mut self) {
+        match &self.twin {
+            Twin::Fifo(input) => input.drain().for_each(|p| self.relay.send(p)),
+            Twin::Ufifo(input) => input.drain().for_each(|p| self.relay.send(p)),
+            Twin::Last(input) => {
+                if let Some(packet) = input.take_new() {
+                    self.relay.send(packet);
+                }
+            }
+        }
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.input_port(address).map_err(|e| e.to_string())?;
+        follow_input(&self.relay.erased(), &mut self.linked, new)
+    }
+}
+
+/// An exported tick input.
+struct TickExport {
+    target: String,
+    twin: TickIn,
+    relay: TickOut,
+    linked: Option<ErasedInput>,
+}
+
+impl Export for TickExport {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn forward(&mut self) {
+        for _ in 0..self.twin.take() {
+            self.relay.emit();
+        }
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.input_port(address).map_err(|e| e.to_string())?;
+        follow_input(&self.relay.erased(), &mut self.linked, new)
+    }
+}
+
+/// An exported data output: what the instance sends is sent on the compound's port
+/// too, synchronously on the instance's thread.
+struct OutputExport<T> {
+    target: String,
+    twin: DataOut<T>,
+    source: Option<(ErasedOutput, usize)>,
+}
+
+impl<T: Packet> Export for OutputExport<T> {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.output_port(address).map_err(|e| e.to_string())?;
+        if let Some((old, id)) = &self.source {
+            if old.core.id == new.core.id {
+                return Ok(());
+            }
+            crate::port::unforward_data::<T>(old, *id);
+        }
+        self.source = None;
+        let id = crate::port::forward_data::<T>(&new, &self.twin)
+            .ok_or_else(|| "the exported output does not match the instance's".to_owned())?;
+        self.source = Some((new, id));
+        Ok(())
+    }
+}
+
 /// Builds a compound component: instances, connections, mappings, policies,
 /// supervisor rules. See the module documentation and `docs/runtime.md`.
 pub struct CompoundBuilder {
@@ -252,6 +379,10 @@ pub struct CompoundBuilder {
     retry_every: Duration,
     deadline: Duration,
     errors: Vec<CompoundError>,
+    exports: Vec<Box<dyn Export>>,
+    inputs: Vec<InputSpec>,
+    outputs: Vec<OutputSpec>,
+    ports: PortSet,
 }
 
 impl std::fmt::Debug for CompoundBuilder {
@@ -277,7 +408,141 @@ impl CompoundBuilder {
             retry_every: Duration::from_millis(500),
             deadline: Duration::from_secs(5),
             errors: Vec::new(),
+            exports: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            ports: PortSet::new(),
         }
+    }
+
+    /// The declared input at `target` and its erased port, if `T` is its packet type.
+    fn exported_input<T: 'static>(
+        &mut self,
+        target: &str,
+        tick: bool,
+    ) -> Option<(InputSpec, ErasedInput)> {
+        let found = self.system.input_port(target).ok().and_then(|port| {
+            let (instance, name) = target.split_once('.')?;
+            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
+            let declared = *spec.inputs.iter().find(|i| i.name == name)?;
+            Some((declared, port))
+        });
+        let fits = found.as_ref().is_some_and(|(declared, port)| {
+            (declared.kind == InputKind::Tick) == tick
+                && (tick || port.type_id == std::any::TypeId::of::<T>())
+                && !matches!(declared.kind, InputKind::Poster)
+                && !declared.pull
+        });
+        if !fits {
+            self.errors.push(CompoundError::Connect {
+                compound: self.name.clone(),
+                detail: format!(
+                    "cannot export `{target}`: no such input, or not a {} input{}",
+                    if tick { "tick" } else { "fifo, ufifo or last" },
+                    if tick {
+                        String::new()
+                    } else {
+                        format!(" of `{}` (push model)", std::any::type_name::<T>())
+                    }
+                ),
+            });
+            return None;
+        }
+        found
+    }
+
+    /// `input name = instance.port;` for a fifo, ufifo or last input of packets `T`:
+    /// the compound gets an input of the same kind; what arrives there is passed on
+    /// to the instance (or its stand-in) while the compound runs.
+    pub fn export_input<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let Some((declared, _)) = self.exported_input::<T>(target, false) else {
+            return self;
+        };
+        let (twin, port): (Twin<T>, ErasedInput) = match declared.kind {
+            InputKind::Fifo { capacity, policy } => {
+                let input = FifoIn::new(capacity, policy);
+                let erased = input.erased();
+                (Twin::Fifo(input), erased)
+            }
+            InputKind::Ufifo { initial, max } => {
+                let input = UfifoIn::new(initial, max);
+                let erased = input.erased();
+                (Twin::Ufifo(input), erased)
+            }
+            _ => {
+                let input = LastIn::new();
+                let erased = input.erased();
+                (Twin::Last(input), erased)
+            }
+        };
+        self.ports = std::mem::take(&mut self.ports).erased_input(port);
+        self.inputs.push(InputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(InputExport {
+            target: target.to_owned(),
+            twin,
+            relay: DataOut::new(),
+            linked: None,
+        }));
+        self
+    }
+
+    /// `input name = instance.port;` for a tick input.
+    pub fn export_tick_input(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let Some((declared, _)) = self.exported_input::<()>(target, true) else {
+            return self;
+        };
+        let twin = TickIn::new();
+        self.ports = std::mem::take(&mut self.ports).input(&twin);
+        self.inputs.push(InputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(TickExport {
+            target: target.to_owned(),
+            twin,
+            relay: TickOut::new(),
+            linked: None,
+        }));
+        self
+    }
+
+    /// `output name = instance.port;` for a data output of packets `T`: what the
+    /// instance (or its stand-in) sends goes out of the compound's port.
+    pub fn export_output<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let declared = target.split_once('.').and_then(|(instance, port)| {
+            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
+            spec.outputs.iter().find(|o| o.name == port).copied()
+        });
+        let fits = declared.is_some_and(|d| d.kind == OutputKind::Data && !d.pull)
+            && self
+                .system
+                .output_port(target)
+                .is_ok_and(|port| port.type_id == std::any::TypeId::of::<T>());
+        let Some(declared) = declared.filter(|_| fits) else {
+            self.errors.push(CompoundError::Connect {
+                compound: self.name.clone(),
+                detail: format!(
+                    "cannot export `{target}`: no such output, or not a data output of `{}` (push model)",
+                    std::any::type_name::<T>()
+                ),
+            });
+            return self;
+        };
+        let twin = DataOut::<T>::new();
+        self.ports = std::mem::take(&mut self.ports).output(&twin);
+        self.outputs.push(OutputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(OutputExport {
+            target: target.to_owned(),
+            twin,
+            source: None,
+        }));
+        self
     }
 
     /// A local instance (an atomic component or another compound).
@@ -560,8 +825,8 @@ impl CompoundBuilder {
         }
         let mut spec = *own;
         spec.variables = Box::leak(variables.into_boxed_slice());
-        spec.inputs = &[];
-        spec.outputs = &[];
+        spec.inputs = Box::leak(std::mem::take(&mut self.inputs).into_boxed_slice());
+        spec.outputs = Box::leak(std::mem::take(&mut self.outputs).into_boxed_slice());
         spec.exceptions = &[];
         let spec: &'static Spec = Box::leak(Box::new(spec));
         let view = View {
@@ -592,12 +857,9 @@ impl CompoundBuilder {
             retry_every: self.retry_every,
             deadline: self.deadline,
             started: false,
+            exports: self.exports,
         };
-        Ok(Component::new(
-            self.name,
-            Box::new(compound),
-            PortSet::new(),
-        ))
+        Ok(Component::new(self.name, Box::new(compound), self.ports))
     }
 
     fn check_read(&self, read: &str, own: &Spec) -> Result<(), CompoundError> {
@@ -649,6 +911,7 @@ struct Compound {
     retry_every: Duration,
     deadline: Duration,
     started: bool,
+    exports: Vec<Box<dyn Export>>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -745,6 +1008,14 @@ impl Compound {
             system.connect(from, to).map_err(error)?;
         }
         self.wired = wanted;
+        for index in 0..self.exports.len() {
+            let address = self.routed(self.exports[index].target());
+            if let Some(system) = self.system.as_ref() {
+                self.exports[index].follow(system, &address).map_err(|e| {
+                    Fault::message(format!("compound `{}`: `{address}`: {e}", self.name))
+                })?;
+            }
+        }
         Ok(())
     }
 
@@ -1093,6 +1364,9 @@ impl Automaton for Compound {
     }
 
     fn supervise(&mut self, state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+        for export in &mut self.exports {
+            export.forward();
+        }
         let mut changed = self.take_events()?;
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;

@@ -1439,3 +1439,34 @@ fn relink_poster(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) ->
     output.unlink(old);
     true
 }
+
+/// Forward every packet `from` sends to `to` as well (a compound's exported output
+/// following the instance behind it), synchronously on the sender's thread. Returns
+/// the forwarding's id for [`unforward_data`], or `None` if `from` is not a data
+/// output of `T`.
+pub(crate) fn forward_data<T: Packet>(from: &ErasedOutput, to: &DataOut<T>) -> Option<usize> {
+    struct Forward<T> {
+        to: DataOut<T>,
+    }
+    impl<T: Packet> Deliver<T> for Forward<T> {
+        fn deliver(&self, packet: T) {
+            self.to.send(packet);
+        }
+    }
+    let out = downcast::<DataOutInner<T>>(&from.any)?;
+    let id = next_port_id();
+    update_list(&out.sinks, |sinks| {
+        sinks.push(Sink {
+            input_id: id,
+            target: Arc::new(Forward { to: to.clone() }),
+        })
+    });
+    Some(id)
+}
+
+/// Stop a forwarding made by [`forward_data`].
+pub(crate) fn unforward_data<T: Packet>(from: &ErasedOutput, id: usize) {
+    if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
+        update_list(&out.sinks, |sinks| sinks.retain(|sink| sink.input_id != id));
+    }
+}

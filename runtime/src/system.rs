@@ -43,6 +43,12 @@ impl PortSet {
         self
     }
 
+    /// Register the next input port, already erased.
+    pub(crate) fn erased_input(mut self, port: ErasedInput) -> PortSet {
+        self.inputs.push(port);
+        self
+    }
+
     /// Register the next output port (declaration order, matching the spec).
     pub fn output(mut self, port: &impl OutputPort) -> PortSet {
         self.outputs.push(port.erased());
@@ -800,6 +806,18 @@ impl System {
         let input = &self.slots[in_slot].inputs[in_port];
         output.unlink(input);
         Ok(())
+    }
+
+    /// The input port at `instance.port`.
+    pub(crate) fn input_port(&self, address: &str) -> Result<ErasedInput, ConnectError> {
+        let (slot, port) = self.parse(address, false)?;
+        Ok(self.slots[slot].inputs[port].clone())
+    }
+
+    /// The output port at `instance.port`.
+    pub(crate) fn output_port(&self, address: &str) -> Result<ErasedOutput, ConnectError> {
+        let (slot, port) = self.parse(address, true)?;
+        Ok(self.slots[slot].outputs[port].clone())
     }
 
     /// Move the connection from `from` to `old_to` over to `new_to` (an input of the

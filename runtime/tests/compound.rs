@@ -643,3 +643,125 @@ fn malformed_compounds_are_rejected_with_clear_errors() {
     );
     assert!(system.shutdown().clean());
 }
+
+/// The worker's spec with a deeper data fifo (so that a steady stream never overflows
+/// on a shared machine); the same for every instance, so interfaces match.
+fn deep_worker_spec() -> &'static Spec {
+    static DEEP: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
+    DEEP.get_or_init(|| {
+        let mut inputs = worker::SPEC.inputs.to_vec();
+        inputs[worker::DATA].kind = coolbot::InputKind::Fifo {
+            capacity: 1024,
+            policy: coolbot::OverflowPolicy::Reject,
+        };
+        let mut spec = worker::SPEC;
+        spec.inputs = Box::leak(inputs.into_boxed_slice());
+        Box::leak(Box::new(spec))
+    })
+}
+
+fn deep_worker(name: &str) -> (Component, Arc<Script>) {
+    let script = Script::new();
+    let (component, _, _) = worker::component_with(
+        name,
+        Scripted {
+            script: Arc::clone(&script),
+            token: None,
+        },
+        deep_worker_spec(),
+        coolbot::port::FifoIn::new(1024, coolbot::OverflowPolicy::Reject),
+    );
+    (component, script)
+}
+
+#[test]
+fn exported_ports_follow_the_substitute_and_no_packet_is_lost() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = deep_worker("w");
+    let (b, b_script) = deep_worker("b");
+    let source = DataOut::<u64>::new();
+    let src = ShellBuilder::new("src")
+        .output(shell::output("out", OutputKind::Data, false), &source)
+        .build();
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(src)
+        .substitute("b", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30))
+        .export_input::<u64>("data", "w.data")
+        .export_tick_input("kick", "w.kick")
+        .export_output::<u64>("scan", "src.out");
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let base = builder.build().expect("build");
+    assert_eq!(base.spec().inputs.len(), 2);
+    assert_eq!(base.spec().outputs[0].name, "scan");
+
+    // Outside: a feeder into the compound's inputs, a sink on its output.
+    let (f, feed) = feeder("f");
+    let scans = coolbot::port::FifoIn::<u64>::new(64, coolbot::OverflowPolicy::Reject);
+    let sink = ShellBuilder::new("sink")
+        .input(
+            shell::input(
+                "scans",
+                coolbot::InputKind::Fifo {
+                    capacity: 64,
+                    policy: coolbot::OverflowPolicy::Reject,
+                },
+                false,
+            ),
+            &scans,
+        )
+        .build();
+    let mut system = System::new();
+    let base = system.add(base).expect("add");
+    system.add(f).expect("feeder");
+    system.add(sink).expect("sink");
+    system.connect("f.data", "base.data").expect("data");
+    system.connect("f.kick", "base.kick").expect("kick");
+    system.connect("base.scan", "sink.scans").expect("scan");
+    system.start().expect("start");
+    wait(&base, State::Ready);
+
+    // While the compound is ready, packets wait at its own input.
+    for packet in 0..5 {
+        feed.data.send(packet);
+    }
+    system.run_all().expect("run");
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == 5,
+        "queued packets reach w once the compound runs",
+    );
+    source.send(42);
+    assert_eq!(scans.recv_timeout(WAIT), Some(42), "the exported output");
+
+    // A steady stream while w fails and b takes over.
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let sent = 300;
+    for packet in 5..sent {
+        feed.data.send(packet);
+        if packet % 10 == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    wait(&b, State::Running);
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst) + b_script.received.load(Ordering::SeqCst)
+                == sent
+        },
+        "every packet reached w or b",
+    );
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    for handle in [&base, &w, &b] {
+        assert_eq!(handle.snapshot().overflows, 0, "{}", handle.name());
+    }
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
