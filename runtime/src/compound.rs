@@ -1084,7 +1084,14 @@ impl Compound {
                 }
             }
         }
+        // A destroyed instance's substitute keeps standing for it.
         for index in 0..self.instances.len() {
+            if self.instances[index].status == Status::Destroyed
+                && let Some(substitute) = self.instances[index].substitute
+                && self.instances[substitute].status == Status::Standby
+            {
+                self.instances[substitute].status = Status::Active;
+            }
             self.refresh(index);
         }
         self.rewire()
@@ -1333,6 +1340,8 @@ impl Automaton for Compound {
     }
 
     fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        // The supervisor enters (or resumes) a state: its rules are evaluated afresh.
+        self.evaluated_in = None;
         for instance in &self.instances {
             if instance.status == Status::Active
                 && matches!(instance.handle.state(), State::Ready | State::Suspended)

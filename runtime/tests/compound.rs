@@ -446,6 +446,16 @@ fn at_the_deadline_the_original_is_destroyed_and_the_substitute_stays() {
         || rig.b_script.received.load(Ordering::SeqCst) == 1,
         "the substitute goes on",
     );
+    // Stopped and run again, the compound keeps the substitute in the dead one's place.
+    run(&rig.base, Controllable::Ready);
+    assert_eq!(rig.b.state(), State::Ready);
+    run(&rig.base, Controllable::Running);
+    wait_user(&rig.b, "idle");
+    rig.feed.data.send(10);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 2,
+        "the substitute still has the connections",
+    );
     assert!(rig.system.shutdown().clean());
 }
 
