@@ -775,3 +775,79 @@ fn exported_ports_follow_the_substitute_and_no_packet_is_lost() {
     assert_eq!(base.state(), State::Running);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
+    const FAULTS: u32 = 10_000;
+    let (sup, _) = Sup::new(&["operating"]);
+    let (flaky, flaky_script) = worker("flaky");
+    let (steady, steady_script) = deep_worker("steady");
+    let (f, feed) = feeder("f");
+    // Every run of `flaky` fails in its first entry, alternately by a declared
+    // exception and by a panic, until the faults are used up.
+    flaky_script.inject(Some(Injected {
+        hook: "idle.entry",
+        exception: Some(Exception::Fatal),
+        times: FAULTS / 2,
+    }));
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(flaky)
+        .instance(steady)
+        .instance(f)
+        .connect("f.data", "steady.data")
+        .on_error("flaky", Policy::Restart);
+    let (flaky, steady) = (
+        builder.instance_handle("flaky").expect("flaky"),
+        builder.instance_handle("steady").expect("steady"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    let mut sent = 0;
+    let deadline = std::time::Instant::now() + Duration::from_secs(15);
+    let stalled = |phase: &str| {
+        format!(
+            "{phase} stalled: {:?} {:?}",
+            base.snapshot(),
+            flaky.snapshot()
+        )
+    };
+    // Panics first (a panic comes before the injected exception in the script).
+    flaky_script.panic_in(Some("idle.entry"));
+    loop {
+        let starts = flaky_script.log().iter().filter(|e| *e == "start").count();
+        if starts > usize::try_from(FAULTS / 2).unwrap() {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            stalled("panics")
+        );
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    flaky_script.panic_in(None);
+    // Then the declared exceptions, until they are used up.
+    while flaky_script.injected.load(Ordering::SeqCst) < FAULTS / 2 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            stalled("exceptions")
+        );
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    wait_user(&flaky, "idle");
+    assert_eq!(base.state(), State::Running);
+    eventually(
+        || steady_script.received.load(Ordering::SeqCst) == sent,
+        "every packet of the stream arrived",
+    );
+    assert_eq!(steady.snapshot().overflows, 0);
+    assert_eq!(steady.state(), State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
