@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 
 use crate::spec::Spec;
+use crate::table::State;
 use crate::value::{Time, Value};
 
 /// Which section of a user state to run.
@@ -129,6 +130,53 @@ pub trait Automaton: Send + 'static {
 
     /// The current value of variable `variable`, for the monitoring port.
     fn get(&self, variable: usize) -> Value;
+
+    /// Compound components only (atomic code keeps the default, which does nothing):
+    /// called on the component's thread right before the user automaton is entered or
+    /// resumed (the compound's instances go to `running` first). An `Err` ends the
+    /// transition in `running_error` (after `stop`), with the fault's message in
+    /// `error`.
+    fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    /// Compound components only: called after a default-automaton transition from
+    /// `from` ended in `to`.
+    fn after_transition(&mut self, _from: State, _to: State, _cx: &mut Context) {}
+
+    /// Compound components only: whether [`Automaton::supervise`] and
+    /// [`Automaton::wake_at`] are to be called at all.
+    fn supervises(&self) -> bool {
+        false
+    }
+
+    /// Compound components only: called on every turn of the thread loop while the
+    /// component is `running` and `state` is the current user state, before timers and
+    /// inputs. `Ok(Some(target))` asks for a user transition to `target`; `Err` is a
+    /// fault (`running_error`).
+    fn supervise(&mut self, _state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+        Ok(None)
+    }
+
+    /// Compound components only: the next instant the thread must wake for
+    /// [`Automaton::supervise`] (a timer of its own), if any.
+    fn wake_at(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// Rings a component's doorbell: the thread wakes and looks for work (see
+/// [`Context::waker`]).
+#[derive(Debug, Clone)]
+pub struct Waker {
+    pub(crate) bell: crossbeam_channel::Sender<()>,
+}
+
+impl Waker {
+    /// Wake the component's thread (a no-op if it is already due to wake).
+    pub fn wake(&self) {
+        let _ = self.bell.try_send(());
+    }
 }
 
 /// What a hook or section sees of the runtime: time, `result`, `end`, period, quality.
@@ -145,6 +193,7 @@ pub struct Context {
     pub(crate) period: Option<Duration>,
     pub(crate) period_changed: bool,
     pub(crate) quality: usize,
+    pub(crate) waker: Option<Waker>,
 }
 
 impl Context {
@@ -160,7 +209,15 @@ impl Context {
             period,
             period_changed: false,
             quality: 0,
+            waker: None,
         }
+    }
+
+    /// The component's own doorbell (none in a context made outside a system): ringing
+    /// it wakes the component's thread. Compound components hand it to the monitoring
+    /// ports of their instances.
+    pub fn waker(&self) -> Option<Waker> {
+        self.waker.clone()
     }
 
     /// The wall-clock time now.

@@ -170,6 +170,8 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
+    /// Doorbells rung after every event (compound supervisors watching this component).
+    wakers: Mutex<Vec<crate::automaton::Waker>>,
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
@@ -182,6 +184,7 @@ impl Shared {
         Shared {
             monitor: Mutex::new(monitor),
             observers: Mutex::new(Vec::new()),
+            wakers: Mutex::new(Vec::new()),
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
@@ -210,6 +213,7 @@ impl Shared {
         if observers.is_empty() {
             return;
         }
+        let ring = !lock(&self.wakers).is_empty();
         observers.retain(|observer| match observer.try_send(event.clone()) {
             Ok(()) => true,
             Err(TrySendError::Full(_)) => {
@@ -218,6 +222,12 @@ impl Shared {
             }
             Err(TrySendError::Disconnected(_)) => false,
         });
+        drop(observers);
+        if ring {
+            for waker in lock(&self.wakers).iter() {
+                waker.wake();
+            }
+        }
     }
 
     pub(crate) fn announce_overflow(&self, port: &'static str, lost: u64, total: u64) {
@@ -231,6 +241,15 @@ impl Shared {
     pub(crate) fn subscribe(&self) -> Receiver<MonitorEvent> {
         let (sender, receiver) = crossbeam_channel::bounded(OBSERVER_CAPACITY);
         lock(&self.observers).push(sender);
+        receiver
+    }
+
+    pub(crate) fn subscribe_waking(
+        &self,
+        waker: crate::automaton::Waker,
+    ) -> Receiver<MonitorEvent> {
+        let receiver = self.subscribe();
+        lock(&self.wakers).push(waker);
         receiver
     }
 
@@ -422,6 +441,12 @@ impl Handle {
     /// A new observer: every change from now on, as it happens.
     pub fn subscribe(&self) -> Receiver<MonitorEvent> {
         self.shared.subscribe()
+    }
+
+    /// A new observer whose every event also rings `waker` (a compound's supervisor
+    /// watching one of its instances: its thread wakes on each change, no polling).
+    pub fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Receiver<MonitorEvent> {
+        self.shared.subscribe_waking(waker)
     }
 
     /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),

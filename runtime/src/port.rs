@@ -985,6 +985,8 @@ pub struct ErasedInput {
     pub(crate) core: Arc<InputCore>,
     pub(crate) any: Arc<dyn Any + Send + Sync>,
     clear_source: fn(&ErasedInput),
+    /// Move what is queued at this input into another input of the same kind and type.
+    transfer: fn(&ErasedInput, &ErasedInput) -> u64,
 }
 
 fn clear_nothing(_: &ErasedInput) {}
@@ -1003,6 +1005,7 @@ impl fmt::Debug for ErasedInput {
 
 type LinkFn = fn(&ErasedOutput, &ErasedInput) -> bool;
 type UnlinkFn = fn(&ErasedOutput, &ErasedInput);
+type RelinkFn = fn(&ErasedOutput, &ErasedInput, &ErasedInput) -> bool;
 
 /// An output port with its packet type erased (see [`OutputPort`]).
 #[derive(Clone)]
@@ -1014,6 +1017,7 @@ pub struct ErasedOutput {
     pub(crate) any: Arc<dyn Any + Send + Sync>,
     link: LinkFn,
     unlink: UnlinkFn,
+    relink: RelinkFn,
 }
 
 impl fmt::Debug for ErasedOutput {
@@ -1032,6 +1036,13 @@ impl ErasedOutput {
     /// Disconnect from `input`. Packets already queued at the input stay there.
     pub(crate) fn unlink(&self, input: &ErasedInput) {
         (self.unlink)(self, input)
+    }
+
+    /// Move this output's connection from input `old` to input `new` (of the same kind
+    /// and type, checked by the caller) in one step, with what is queued at `old`:
+    /// while it runs no packet is sent, so none is lost, duplicated or reordered.
+    pub(crate) fn relink(&self, old: &ErasedInput, new: &ErasedInput) -> bool {
+        (self.relink)(self, old, new)
     }
 }
 
@@ -1059,6 +1070,7 @@ impl InputPort for TickIn {
             core: Arc::clone(&self.inner.core),
             any: self.inner.clone(),
             clear_source: clear_nothing,
+            transfer: transfer_ticks,
         }
     }
 }
@@ -1072,6 +1084,7 @@ impl<T: Packet> InputPort for FifoIn<T> {
             core: Arc::clone(&self.inner.core),
             any: self.inner.clone(),
             clear_source: clear_nothing,
+            transfer: transfer_fifo::<T>,
         }
     }
 }
@@ -1085,6 +1098,7 @@ impl<T: Packet> InputPort for UfifoIn<T> {
             core: Arc::clone(&self.inner.core),
             any: self.inner.clone(),
             clear_source: clear_nothing,
+            transfer: transfer_ufifo::<T>,
         }
     }
 }
@@ -1098,6 +1112,7 @@ impl<T: Packet> InputPort for LastIn<T> {
             core: Arc::clone(&self.inner.core),
             any: self.inner.clone(),
             clear_source: clear_nothing,
+            transfer: transfer_last::<T>,
         }
     }
 }
@@ -1111,6 +1126,7 @@ impl<T: Packet> InputPort for PosterIn<T> {
             core: Arc::clone(&self.inner.core),
             any: self.inner.clone(),
             clear_source: clear_poster_source::<T>,
+            transfer: transfer_nothing,
         }
     }
 }
@@ -1125,6 +1141,7 @@ impl OutputPort for TickOut {
             any: self.inner.clone(),
             link: link_tick,
             unlink: unlink_tick,
+            relink: relink_tick,
         }
     }
 }
@@ -1139,6 +1156,7 @@ impl<T: Packet> OutputPort for DataOut<T> {
             any: self.inner.clone(),
             link: link_data::<T>,
             unlink: unlink_data::<T>,
+            relink: relink_data::<T>,
         }
     }
 }
@@ -1153,6 +1171,7 @@ impl<T: Packet> OutputPort for PosterOut<T> {
             any: self.inner.clone(),
             link: link_poster::<T>,
             unlink: unlink_poster::<T>,
+            relink: relink_poster,
         }
     }
 }
@@ -1296,5 +1315,158 @@ pub(crate) fn link_converted<A: Packet, B: Packet>(
             set_poster_source(output, input, source, &out.readers)
         }
         OutKind::Tick => false,
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Moving a connection's input end (compound substitution and recovery).
+
+fn transfer_nothing(_: &ErasedInput, _: &ErasedInput) -> u64 {
+    0
+}
+
+fn transfer_ticks(from: &ErasedInput, to: &ErasedInput) -> u64 {
+    let (Some(from), Some(to)) = (
+        downcast::<TickInner>(&from.any),
+        downcast::<TickInner>(&to.any),
+    ) else {
+        return 0;
+    };
+    let count = from.count.swap(0, Ordering::AcqRel);
+    if count > 0 {
+        to.count.fetch_add(count, Ordering::AcqRel);
+        to.core.arrived();
+    }
+    count
+}
+
+fn transfer_queue<T: Packet>(packets: Vec<T>, to: &ErasedInput) -> u64 {
+    let count = packets.len() as u64;
+    if let Some(target) = data_target::<T>(to) {
+        for packet in packets {
+            target.deliver(packet);
+        }
+    }
+    count
+}
+
+fn transfer_fifo<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
+    let Some(from) = downcast::<FifoInner<T>>(&from.any) else {
+        return 0;
+    };
+    transfer_queue(from.receiver.try_iter().collect::<Vec<T>>(), to)
+}
+
+fn transfer_ufifo<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
+    let Some(from) = downcast::<UfifoInner<T>>(&from.any) else {
+        return 0;
+    };
+    let packets: Vec<T> = std::mem::take(&mut lock(&from.queue).packets).into();
+    transfer_queue(packets, to)
+}
+
+fn transfer_last<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
+    let Some(from) = downcast::<LastInner<T>>(&from.any) else {
+        return 0;
+    };
+    // Only a packet the old consumer has not taken yet is handed on.
+    let unread = {
+        let slot = lock(&from.slot);
+        (slot.1 > from.read_seq.load(Ordering::Acquire))
+            .then(|| slot.0.clone())
+            .flatten()
+    };
+    match unread {
+        Some(packet) => transfer_queue(vec![packet], to),
+        None => 0,
+    }
+}
+
+fn relink_tick(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+    let (Some(out), Some(target)) = (
+        downcast::<TickOutInner>(&output.any),
+        downcast::<TickInner>(&new.any),
+    ) else {
+        return false;
+    };
+    let mut targets = write(&out.targets);
+    let mut items: Vec<_> = targets
+        .iter()
+        .filter(|t| t.core.id != old.core.id)
+        .cloned()
+        .collect();
+    items.push(target);
+    *targets = Arc::from(items);
+    (old.transfer)(old, new);
+    drop(targets);
+    old.core.remove_source(output.core.id);
+    new.core.add_source(Arc::clone(&output.core));
+    true
+}
+
+fn relink_data<T: Packet>(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+    let (Some(out), Some(target)) = (
+        downcast::<DataOutInner<T>>(&output.any),
+        data_target::<T>(new),
+    ) else {
+        return false;
+    };
+    // Senders hold the read lock while delivering: under the write lock nothing is in
+    // flight, so the queued packets move before any newer one arrives at `new`.
+    let mut sinks = write(&out.sinks);
+    let mut items: Vec<_> = sinks
+        .iter()
+        .filter(|sink| sink.input_id != old.core.id)
+        .cloned()
+        .collect();
+    items.push(Sink {
+        input_id: new.core.id,
+        target,
+    });
+    *sinks = Arc::from(items);
+    (old.transfer)(old, new);
+    drop(sinks);
+    old.core.remove_source(output.core.id);
+    new.core.add_source(Arc::clone(&output.core));
+    true
+}
+
+fn relink_poster(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+    // A poster input holds no queue: it reads the producer's post.
+    if !output.link(new) {
+        return false;
+    }
+    output.unlink(old);
+    true
+}
+
+/// Forward every packet `from` sends to `to` as well (a compound's exported output
+/// following the instance behind it), synchronously on the sender's thread. Returns
+/// the forwarding's id for [`unforward_data`], or `None` if `from` is not a data
+/// output of `T`.
+pub(crate) fn forward_data<T: Packet>(from: &ErasedOutput, to: &DataOut<T>) -> Option<usize> {
+    struct Forward<T> {
+        to: DataOut<T>,
+    }
+    impl<T: Packet> Deliver<T> for Forward<T> {
+        fn deliver(&self, packet: T) {
+            self.to.send(packet);
+        }
+    }
+    let out = downcast::<DataOutInner<T>>(&from.any)?;
+    let id = next_port_id();
+    update_list(&out.sinks, |sinks| {
+        sinks.push(Sink {
+            input_id: id,
+            target: Arc::new(Forward { to: to.clone() }),
+        })
+    });
+    Some(id)
+}
+
+/// Stop a forwarding made by [`forward_data`].
+pub(crate) fn unforward_data<T: Packet>(from: &ErasedOutput, id: usize) {
+    if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
+        update_list(&out.sinks, |sinks| sinks.retain(|sink| sink.input_id != id));
     }
 }

@@ -82,6 +82,8 @@ pub(crate) struct Runner {
     elapsed_published: Duration,
     /// The user state last published on the monitor.
     published_user: Option<usize>,
+    /// Whether the automaton is a compound's (its supervision hooks are called).
+    supervised: bool,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -96,15 +98,17 @@ impl Runner {
         automaton: Box<dyn Automaton>,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
-        bell: Receiver<()>,
+        bell: (Sender<()>, Receiver<()>),
         inputs: Vec<Arc<InputCore>>,
         outputs: Vec<Arc<OutputCore>>,
         exit_guard: Sender<()>,
     ) -> Runner {
+        let (bell_sender, bell) = bell;
         let spec = automaton.spec();
         let now = Instant::now();
         let count = inputs.len();
-        Runner {
+        let supervised = automaton.supervises();
+        let mut runner = Runner {
             cx: Context::new(name, spec.timing.period),
             automaton,
             spec,
@@ -130,8 +134,11 @@ impl Runner {
             elapsed: Duration::ZERO,
             elapsed_published: Duration::ZERO,
             published_user: None,
+            supervised,
             _exit_guard: exit_guard,
-        }
+        };
+        runner.cx.waker = Some(crate::automaton::Waker { bell: bell_sender });
+        runner
     }
 
     /// The thread's body.
@@ -203,6 +210,11 @@ impl Runner {
             let due = self.after_due(after);
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
+        if self.supervised
+            && let Some(due) = self.automaton.wake_at()
+        {
+            deadline = Some(deadline.map_or(due, |d| d.min(due)));
+        }
         self.update_cpu(false);
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
         // loop then looks at the control port first (the priority rule above).
@@ -218,6 +230,24 @@ impl Runner {
 
     /// Do the most urgent piece of user-automaton work; false if there was none.
     fn step(&mut self, now: Instant) -> bool {
+        if self.supervised {
+            let state = self.user;
+            match self.call(|automaton, cx| automaton.supervise(state, cx)) {
+                Ok(Ok(None)) => {}
+                Ok(Ok(Some(target))) => {
+                    self.goto(target);
+                    return true;
+                }
+                Ok(Err(fault)) => {
+                    self.fail(fault.text().to_owned());
+                    return true;
+                }
+                Err(panic) => {
+                    self.fail(format!("panic in the supervisor: {panic}"));
+                    return true;
+                }
+            }
+        }
         let state_spec = &self.spec.states[self.user];
         // 3. Timers.
         if let Some(target) = self.pending_choice.take() {
@@ -287,6 +317,35 @@ impl Runner {
         let Outcome::Go { to, actions } = next(self.state, event) else {
             return;
         };
+        let from = self.state;
+        self.run_actions(to, actions);
+        if self.supervised {
+            let now = self.state;
+            if let Err(panic) = self.call(|automaton, cx| automaton.after_transition(from, now, cx))
+            {
+                self.set_error(Some(format!("panic after a transition: {panic}")));
+            }
+        }
+    }
+
+    /// Compound components: let the instances run before the user automaton is entered
+    /// or resumed; false (and `running_error`) if they could not.
+    fn before_running(&mut self) -> bool {
+        if !self.supervised {
+            return true;
+        }
+        let message = match self.call(|automaton, cx| automaton.before_running(cx)) {
+            Ok(Ok(())) => return true,
+            Ok(Err(fault)) => fault.text().to_owned(),
+            Err(panic) => format!("panic before running: {panic}"),
+        };
+        self.set_error(Some(message));
+        self.run_stop();
+        self.set_state(State::RunningError);
+        false
+    }
+
+    fn run_actions(&mut self, to: State, actions: &[Action]) {
         for action in actions {
             match action {
                 Action::Start => {
@@ -320,11 +379,17 @@ impl Runner {
                 }
                 // The user automaton runs inside `running`: set the state first.
                 Action::EnterUser => {
+                    if !self.before_running() {
+                        return;
+                    }
                     self.set_state(to);
                     self.enter(self.spec.initial);
                     return;
                 }
                 Action::ResumeUser => {
+                    if !self.before_running() {
+                        return;
+                    }
                     self.set_state(to);
                     self.resume();
                     return;

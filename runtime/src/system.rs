@@ -43,6 +43,12 @@ impl PortSet {
         self
     }
 
+    /// Register the next input port, already erased.
+    pub(crate) fn erased_input(mut self, port: ErasedInput) -> PortSet {
+        self.inputs.push(port);
+        self
+    }
+
     /// Register the next output port (declaration order, matching the spec).
     pub fn output(mut self, port: &impl OutputPort) -> PortSet {
         self.outputs.push(port.erased());
@@ -520,7 +526,7 @@ impl System {
             automaton,
             shared,
             control,
-            bell,
+            (bell_sender.clone(), bell),
             ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             exit_guard,
@@ -800,6 +806,71 @@ impl System {
         let input = &self.slots[in_slot].inputs[in_port];
         output.unlink(input);
         Ok(())
+    }
+
+    /// The input port at `instance.port`.
+    pub(crate) fn input_port(&self, address: &str) -> Result<ErasedInput, ConnectError> {
+        let (slot, port) = self.parse(address, false)?;
+        Ok(self.slots[slot].inputs[port].clone())
+    }
+
+    /// The output port at `instance.port`.
+    pub(crate) fn output_port(&self, address: &str) -> Result<ErasedOutput, ConnectError> {
+        let (slot, port) = self.parse(address, true)?;
+        Ok(self.slots[slot].outputs[port].clone())
+    }
+
+    /// Move the connection from `from` to `old_to` over to `new_to` (an input of the
+    /// same kind and packet type) in one step, with the packets queued at `old_to`: no
+    /// packet sent meanwhile is lost, duplicated or reordered. Compounds use it to
+    /// put a substitute in an instance's place and back.
+    pub(crate) fn move_input(
+        &mut self,
+        from: &str,
+        old_to: &str,
+        new_to: &str,
+    ) -> Result<(), ConnectError> {
+        let (out_slot, out_port) = self.parse(from, true)?;
+        let (old_slot, old_port) = self.parse(old_to, false)?;
+        let old = Link {
+            from: (out_slot, out_port),
+            to: (old_slot, old_port),
+        };
+        let Some(position) = self.links.iter().position(|l| *l == old) else {
+            return Err(ConnectError::NotConnected {
+                from: from.to_owned(),
+                to: old_to.to_owned(),
+            });
+        };
+        self.links.remove(position);
+        let checked = self.check(from, new_to).and_then(|link| {
+            let output = &self.slots[out_slot].outputs[out_port];
+            let old_input = &self.slots[old_slot].inputs[old_port];
+            let new_input = &self.slots[link.to.0].inputs[link.to.1];
+            if output.type_id == new_input.type_id
+                && old_input.kind == new_input.kind
+                && output.relink(old_input, new_input)
+            {
+                Ok(link)
+            } else {
+                Err(ConnectError::TypeMismatch {
+                    from: from.to_owned(),
+                    to: new_to.to_owned(),
+                    from_type: output.type_name.to_owned(),
+                    to_type: new_input.type_name.to_owned(),
+                })
+            }
+        });
+        match checked {
+            Ok(link) => {
+                self.links.push(link);
+                Ok(())
+            }
+            Err(error) => {
+                self.links.insert(position, old);
+                Err(error)
+            }
+        }
     }
 
     /// The connections, as `(output address, input address)` pairs.

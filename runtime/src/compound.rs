@@ -1,0 +1,1410 @@
+//! Compound components (paper 3.4, 3.5): local instances, their connections, a
+//! supervisor whose rules watch the instances, and the fault policies (propagate,
+//! restart, substitute, ignore) with the recovery queue and redundant groups.
+//!
+//! A compound is built by [`CompoundBuilder::build`] into an ordinary [`Component`]:
+//! it runs on its own thread through the same runner, default automaton
+//! ([`crate::table::next`]), control and monitoring ports as an atomic component, so
+//! nothing outside can tell them apart. Its code is a `Compound` automaton that owns
+//! an inner [`System`] with the instances; the runner's compound hooks
+//! ([`Automaton::before_running`], [`Automaton::after_transition`],
+//! [`Automaton::supervise`], [`Automaton::wake_at`]) let the instances follow the
+//! compound's state and let the supervisor react to their monitoring events.
+//! `docs/runtime.md` ("Compound components and supervisors") tells the semantics.
+
+use std::collections::HashSet;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::Receiver;
+
+use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
+use crate::monitor::{Command, Handle, Monitor, MonitorEvent};
+use crate::port::{
+    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
+    TickOut, UfifoIn,
+};
+use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
+use crate::spec::{Spec, VarKind, VarSpec};
+use crate::system::{Component, PortSet, System};
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+/// How long a compound waits for one of its instances to leave `starting`.
+pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// What a compound does when one of its instances goes to `running_error`
+/// (`on error inst: <policy>;`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Policy {
+    /// The compound goes to `running_error` too; its own supervisor (its parent) hears
+    /// it on the compound's monitoring port. The default.
+    #[default]
+    Propagate,
+    /// The instance is commanded back to `running` (a restart through `start`).
+    Restart,
+    /// The declared substitute takes the instance's place and the instance goes into
+    /// the recovery queue (without a substitute: the recovery queue only).
+    Substitute,
+    /// Nothing happens; the instance stays in `running_error` (rules can see it).
+    Ignore,
+}
+
+/// The supervisor of a compound: its user automaton (states and sections, like an
+/// atomic component's) and its own variables. Transitions are fired by rules
+/// ([`CompoundBuilder::rule`]), not by ports.
+pub trait Supervisor: Send + 'static {
+    /// The supervisor's shape: `states`, `initial`, its own `variables` and `timing`
+    /// (a period for periodic sections). Ports, `on`, `may` and exceptions are not
+    /// used.
+    fn spec(&self) -> &'static Spec;
+
+    /// Run one section of one supervisor state.
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        Ok(())
+    }
+
+    /// The value of own variable `variable` (an index into `spec().variables`).
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+
+    /// Set own controllable variable `variable`.
+    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
+        Err(format!("variable #{variable} cannot be set"))
+    }
+}
+
+/// What a supervisor section sees: the runtime context and the view of the
+/// instances' monitors.
+pub struct SupervisorCx<'a> {
+    /// Time, result, end, period of the compound.
+    pub rt: &'a mut Context,
+    /// The instances' monitors and the supervisor's own variables, as last seen.
+    pub view: &'a View,
+}
+
+/// The variables rules read: every instance's monitor (its `state`, `user_state`,
+/// `result`, `error` and variables) and the supervisor's own variables.
+#[derive(Debug, Clone, Default)]
+pub struct View {
+    instances: Vec<Monitor>,
+    own: Vec<(String, Value)>,
+}
+
+impl View {
+    /// The monitor of instance `instance`, as last seen.
+    pub fn monitor(&self, instance: &str) -> Option<&Monitor> {
+        self.instances.iter().find(|m| m.name == instance)
+    }
+
+    /// `instance.state`.
+    pub fn state(&self, instance: &str) -> Option<State> {
+        self.monitor(instance).map(|m| m.state)
+    }
+
+    /// `instance.user_state`.
+    pub fn user_state(&self, instance: &str) -> Option<&str> {
+        self.monitor(instance).and_then(|m| m.user_state.as_deref())
+    }
+
+    /// `instance.result`.
+    pub fn result(&self, instance: &str) -> Option<&TaskResult> {
+        self.monitor(instance).map(|m| &m.result)
+    }
+
+    /// `instance.error`.
+    pub fn error(&self, instance: &str) -> Option<&str> {
+        self.monitor(instance).and_then(|m| m.error.as_deref())
+    }
+
+    /// A user variable of an instance.
+    pub fn var(&self, instance: &str, variable: &str) -> Option<&Value> {
+        self.monitor(instance)?
+            .variables
+            .iter()
+            .find(|(name, _)| name == variable)
+            .map(|(_, value)| value)
+    }
+
+    /// One of the supervisor's own variables.
+    pub fn own(&self, variable: &str) -> Option<&Value> {
+        self.own
+            .iter()
+            .find(|(name, _)| name == variable)
+            .map(|(_, value)| value)
+    }
+}
+
+type Test = Box<dyn Fn(&View) -> bool + Send>;
+
+/// One rule: in supervisor state `state`, when `test` holds, go to `target`.
+struct Rule {
+    state: usize,
+    target: usize,
+    reads: Vec<String>,
+    test: Test,
+}
+
+/// Why a compound could not be built.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CompoundError {
+    /// The supervisor's spec is inconsistent.
+    #[error("compound `{compound}`: supervisor: {detail}")]
+    Supervisor {
+        /// The compound.
+        compound: String,
+        /// What is wrong.
+        detail: String,
+    },
+    /// An instance could not be added (duplicate name, bad spec, ports).
+    #[error("compound `{compound}`: {detail}")]
+    Instance {
+        /// The compound.
+        compound: String,
+        /// The system's error.
+        detail: String,
+    },
+    /// A name that does not resolve.
+    #[error("compound `{compound}`: {what} `{name}` does not exist")]
+    Unknown {
+        /// The compound.
+        compound: String,
+        /// What kind of thing (`instance`, `state`, `variable`, ...).
+        what: &'static str,
+        /// The name.
+        name: String,
+    },
+    /// A connection breaks the connection rules.
+    #[error("compound `{compound}`: {detail}")]
+    Connect {
+        /// The compound.
+        compound: String,
+        /// The connection error.
+        detail: String,
+    },
+    /// A substitution or redundancy whose members differ in interface, or that
+    /// overlaps another.
+    #[error("compound `{compound}`: {detail}")]
+    Arrangement {
+        /// The compound.
+        compound: String,
+        /// What is wrong.
+        detail: String,
+    },
+}
+
+/// Where an instance stands in the compound's arrangement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Status {
+    /// Part of the arrangement: runs when the compound runs.
+    Active,
+    /// A declared substitute not in use: started (`ready`), not running.
+    Standby,
+    /// In the recovery queue.
+    Recovering,
+    /// Its recovery deadline expired: commanded to `dead`.
+    Destroyed,
+}
+
+struct Instance {
+    name: String,
+    spec: &'static Spec,
+    handle: Handle,
+    policy: Policy,
+    /// The instance this one substitutes.
+    substitutes: Option<usize>,
+    /// This instance's substitute.
+    substitute: Option<usize>,
+    /// Its redundant group.
+    group: Option<usize>,
+    status: Status,
+}
+
+/// An entry of the recovery queue.
+#[derive(Debug, Clone, Copy)]
+struct Recovering {
+    instance: usize,
+    since: Instant,
+    next: Instant,
+    /// Restarted at the last retry: recovered if still running at the next one.
+    probation: bool,
+}
+
+/// A variable of the compound mapped onto an instance's.
+struct Mapped {
+    instance: usize,
+    variable: String,
+}
+
+/// An exported port: the compound's own port, following the instance port it stands
+/// for (or whoever stands for that instance now).
+trait Export: Send {
+    /// The instance port, as declared (`instance.port`).
+    fn target(&self) -> &str;
+    /// Inputs: move what arrived at the compound's port on to the instance's.
+    fn forward(&mut self) {}
+    /// Follow the instance port now at `address`.
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String>;
+}
+
+/// The compound's own end of an exported data input.
+enum Twin<T> {
+    Fifo(FifoIn<T>),
+    Ufifo(UfifoIn<T>),
+    Last(LastIn<T>),
+}
+
+/// An exported data input: packets arriving at the compound's port are sent on
+/// through a relay output connected to the instance's input.
+struct InputExport<T> {
+    target: String,
+    twin: Twin<T>,
+    relay: DataOut<T>,
+    linked: Option<ErasedInput>,
+}
+
+/// Connect `relay` to `new`, or move it there from `linked` with what is queued.
+fn follow_input(
+    relay: &ErasedOutput,
+    linked: &mut Option<ErasedInput>,
+    new: ErasedInput,
+) -> Result<(), String> {
+    let done = match linked.as_ref() {
+        Some(old) if old.core.id == new.core.id => true,
+        Some(old) => relay.relink(old, &new),
+        None => relay.link(&new),
+    };
+    if !done {
+        return Err("the exported input does not match the instance's".to_owned());
+    }
+    *linked = Some(new);
+    Ok(())
+}
+
+impl<T: Packet> Export for InputExport<T> {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn forward(&mut self) {
+        match &self.twin {
+            Twin::Fifo(input) => input.drain().for_each(|p| self.relay.send(p)),
+            Twin::Ufifo(input) => input.drain().for_each(|p| self.relay.send(p)),
+            Twin::Last(input) => {
+                if let Some(packet) = input.take_new() {
+                    self.relay.send(packet);
+                }
+            }
+        }
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.input_port(address).map_err(|e| e.to_string())?;
+        follow_input(&self.relay.erased(), &mut self.linked, new)
+    }
+}
+
+/// An exported tick input.
+struct TickExport {
+    target: String,
+    twin: TickIn,
+    relay: TickOut,
+    linked: Option<ErasedInput>,
+}
+
+impl Export for TickExport {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn forward(&mut self) {
+        for _ in 0..self.twin.take() {
+            self.relay.emit();
+        }
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.input_port(address).map_err(|e| e.to_string())?;
+        follow_input(&self.relay.erased(), &mut self.linked, new)
+    }
+}
+
+/// An exported data output: what the instance sends is sent on the compound's port
+/// too, synchronously on the instance's thread.
+struct OutputExport<T> {
+    target: String,
+    twin: DataOut<T>,
+    source: Option<(ErasedOutput, usize)>,
+}
+
+impl<T: Packet> Export for OutputExport<T> {
+    fn target(&self) -> &str {
+        &self.target
+    }
+
+    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
+        let new = system.output_port(address).map_err(|e| e.to_string())?;
+        if let Some((old, id)) = &self.source {
+            if old.core.id == new.core.id {
+                return Ok(());
+            }
+            crate::port::unforward_data::<T>(old, *id);
+        }
+        self.source = None;
+        let id = crate::port::forward_data::<T>(&new, &self.twin)
+            .ok_or_else(|| "the exported output does not match the instance's".to_owned())?;
+        self.source = Some((new, id));
+        Ok(())
+    }
+}
+
+/// Builds a compound component: instances, connections, mappings, policies,
+/// supervisor rules. See the module documentation and `docs/runtime.md`.
+pub struct CompoundBuilder {
+    name: String,
+    supervisor: Box<dyn Supervisor>,
+    system: System,
+    instances: Vec<Instance>,
+    links: Vec<(String, String)>,
+    mapped: Vec<(String, String, VarKind)>,
+    policies: Vec<(String, Policy)>,
+    substitutes: Vec<(String, String)>,
+    groups: Vec<Vec<String>>,
+    rules: Vec<(String, String, Vec<String>, Test)>,
+    retry_every: Duration,
+    deadline: Duration,
+    errors: Vec<CompoundError>,
+    exports: Vec<Box<dyn Export>>,
+    inputs: Vec<InputSpec>,
+    outputs: Vec<OutputSpec>,
+    ports: PortSet,
+}
+
+impl std::fmt::Debug for CompoundBuilder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "CompoundBuilder({})", self.name)
+    }
+}
+
+impl CompoundBuilder {
+    /// A compound instance named `name` whose supervisor is `supervisor`.
+    pub fn new(name: impl Into<String>, supervisor: impl Supervisor) -> CompoundBuilder {
+        CompoundBuilder {
+            name: name.into(),
+            supervisor: Box::new(supervisor),
+            system: System::new(),
+            instances: Vec::new(),
+            links: Vec::new(),
+            mapped: Vec::new(),
+            policies: Vec::new(),
+            substitutes: Vec::new(),
+            groups: Vec::new(),
+            rules: Vec::new(),
+            retry_every: Duration::from_millis(500),
+            deadline: Duration::from_secs(5),
+            errors: Vec::new(),
+            exports: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            ports: PortSet::new(),
+        }
+    }
+
+    /// The declared input at `target` and its erased port, if `T` is its packet type.
+    fn exported_input<T: 'static>(
+        &mut self,
+        target: &str,
+        tick: bool,
+    ) -> Option<(InputSpec, ErasedInput)> {
+        let found = self.system.input_port(target).ok().and_then(|port| {
+            let (instance, name) = target.split_once('.')?;
+            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
+            let declared = *spec.inputs.iter().find(|i| i.name == name)?;
+            Some((declared, port))
+        });
+        let fits = found.as_ref().is_some_and(|(declared, port)| {
+            (declared.kind == InputKind::Tick) == tick
+                && (tick || port.type_id == std::any::TypeId::of::<T>())
+                && !matches!(declared.kind, InputKind::Poster)
+                && !declared.pull
+        });
+        if !fits {
+            self.errors.push(CompoundError::Connect {
+                compound: self.name.clone(),
+                detail: format!(
+                    "cannot export `{target}`: no such input, or not a {} input{}",
+                    if tick { "tick" } else { "fifo, ufifo or last" },
+                    if tick {
+                        String::new()
+                    } else {
+                        format!(" of `{}` (push model)", std::any::type_name::<T>())
+                    }
+                ),
+            });
+            return None;
+        }
+        found
+    }
+
+    /// `input name = instance.port;` for a fifo, ufifo or last input of packets `T`:
+    /// the compound gets an input of the same kind; what arrives there is passed on
+    /// to the instance (or its stand-in) while the compound runs.
+    pub fn export_input<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let Some((declared, _)) = self.exported_input::<T>(target, false) else {
+            return self;
+        };
+        let (twin, port): (Twin<T>, ErasedInput) = match declared.kind {
+            InputKind::Fifo { capacity, policy } => {
+                let input = FifoIn::new(capacity, policy);
+                let erased = input.erased();
+                (Twin::Fifo(input), erased)
+            }
+            InputKind::Ufifo { initial, max } => {
+                let input = UfifoIn::new(initial, max);
+                let erased = input.erased();
+                (Twin::Ufifo(input), erased)
+            }
+            _ => {
+                let input = LastIn::new();
+                let erased = input.erased();
+                (Twin::Last(input), erased)
+            }
+        };
+        self.ports = std::mem::take(&mut self.ports).erased_input(port);
+        self.inputs.push(InputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(InputExport {
+            target: target.to_owned(),
+            twin,
+            relay: DataOut::new(),
+            linked: None,
+        }));
+        self
+    }
+
+    /// `input name = instance.port;` for a tick input.
+    pub fn export_tick_input(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let Some((declared, _)) = self.exported_input::<()>(target, true) else {
+            return self;
+        };
+        let twin = TickIn::new();
+        self.ports = std::mem::take(&mut self.ports).input(&twin);
+        self.inputs.push(InputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(TickExport {
+            target: target.to_owned(),
+            twin,
+            relay: TickOut::new(),
+            linked: None,
+        }));
+        self
+    }
+
+    /// `output name = instance.port;` for a data output of packets `T`: what the
+    /// instance (or its stand-in) sends goes out of the compound's port.
+    pub fn export_output<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
+        let declared = target.split_once('.').and_then(|(instance, port)| {
+            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
+            spec.outputs.iter().find(|o| o.name == port).copied()
+        });
+        let fits = declared.is_some_and(|d| d.kind == OutputKind::Data && !d.pull)
+            && self
+                .system
+                .output_port(target)
+                .is_ok_and(|port| port.type_id == std::any::TypeId::of::<T>());
+        let Some(declared) = declared.filter(|_| fits) else {
+            self.errors.push(CompoundError::Connect {
+                compound: self.name.clone(),
+                detail: format!(
+                    "cannot export `{target}`: no such output, or not a data output of `{}` (push model)",
+                    std::any::type_name::<T>()
+                ),
+            });
+            return self;
+        };
+        let twin = DataOut::<T>::new();
+        self.ports = std::mem::take(&mut self.ports).output(&twin);
+        self.outputs.push(OutputSpec {
+            name: leak_str(name),
+            ..declared
+        });
+        self.exports.push(Box::new(OutputExport {
+            target: target.to_owned(),
+            twin,
+            source: None,
+        }));
+        self
+    }
+
+    /// A local instance (an atomic component or another compound).
+    pub fn instance(mut self, component: Component) -> CompoundBuilder {
+        let name = component.name().to_owned();
+        let spec = component.spec();
+        match self.system.add(component) {
+            Ok(handle) => self.instances.push(Instance {
+                name,
+                spec,
+                handle,
+                policy: Policy::Propagate,
+                substitutes: None,
+                substitute: None,
+                group: None,
+                status: Status::Active,
+            }),
+            Err(error) => self.errors.push(CompoundError::Instance {
+                compound: self.name.clone(),
+                detail: error.to_string(),
+            }),
+        }
+        self
+    }
+
+    /// The control and monitoring ports of instance `name` (added with
+    /// [`CompoundBuilder::instance`]): for tools and tests that watch a level below.
+    pub fn instance_handle(&self, name: &str) -> Option<Handle> {
+        self.instances
+            .iter()
+            .find(|i| i.name == name)
+            .map(|i| i.handle.clone())
+    }
+
+    /// `connect from -> to;` between two instances (`instance.port` addresses).
+    pub fn connect(mut self, from: &str, to: &str) -> CompoundBuilder {
+        self.links.push((from.to_owned(), to.to_owned()));
+        self
+    }
+
+    /// `observable name = instance.variable;`
+    pub fn map_observable(mut self, name: &str, target: &str) -> CompoundBuilder {
+        self.mapped
+            .push((name.to_owned(), target.to_owned(), VarKind::Observable));
+        self
+    }
+
+    /// `controllable name = instance.variable;` (set through the compound's control
+    /// port, forwarded to the instance's).
+    pub fn map_controllable(mut self, name: &str, target: &str) -> CompoundBuilder {
+        self.mapped
+            .push((name.to_owned(), target.to_owned(), VarKind::Controllable));
+        self
+    }
+
+    /// `on error instance: policy;` (instances without one propagate).
+    pub fn on_error(mut self, instance: &str, policy: Policy) -> CompoundBuilder {
+        self.policies.push((instance.to_owned(), policy));
+        self
+    }
+
+    /// `instance substitute: ... substitutes primary;`
+    pub fn substitute(mut self, substitute: &str, primary: &str) -> CompoundBuilder {
+        self.substitutes
+            .push((substitute.to_owned(), primary.to_owned()));
+        self
+    }
+
+    /// `redundant a, b, ...;`
+    pub fn redundant(mut self, members: &[&str]) -> CompoundBuilder {
+        self.groups
+            .push(members.iter().map(|m| (*m).to_owned()).collect());
+        self
+    }
+
+    /// `recovery { retry every R; deadline D; }` (defaults: 500 ms, 5 s).
+    pub fn recovery(mut self, retry_every: Duration, deadline: Duration) -> CompoundBuilder {
+        self.retry_every = retry_every.max(Duration::from_millis(1));
+        self.deadline = deadline;
+        self
+    }
+
+    /// `when <test> -> target;` in supervisor state `state`. `reads` names every
+    /// variable the test reads (`instance.state`, `instance.user_state`,
+    /// `instance.result`, `instance.error`, `instance.<variable>`, or an own variable
+    /// `name`): the rule is evaluated when one of them changes, and when the
+    /// supervisor enters `state`.
+    pub fn rule(
+        mut self,
+        state: &str,
+        target: &str,
+        reads: &[&str],
+        test: impl Fn(&View) -> bool + Send + 'static,
+    ) -> CompoundBuilder {
+        self.rules.push((
+            state.to_owned(),
+            target.to_owned(),
+            reads.iter().map(|r| (*r).to_owned()).collect(),
+            Box::new(test),
+        ));
+        self
+    }
+
+    fn unknown(&self, what: &'static str, name: &str) -> CompoundError {
+        CompoundError::Unknown {
+            compound: self.name.clone(),
+            what,
+            name: name.to_owned(),
+        }
+    }
+
+    fn instance_index(&self, name: &str) -> Result<usize, CompoundError> {
+        self.instances
+            .iter()
+            .position(|i| i.name == name)
+            .ok_or_else(|| self.unknown("instance", name))
+    }
+
+    fn arrangement(&self, detail: String) -> CompoundError {
+        CompoundError::Arrangement {
+            compound: self.name.clone(),
+            detail,
+        }
+    }
+
+    fn same_interface(&self, a: usize, b: usize) -> Result<(), CompoundError> {
+        let (x, y) = (self.instances[a].spec, self.instances[b].spec);
+        let inputs = |s: &Spec| {
+            s.inputs
+                .iter()
+                .map(|i| (i.name, format!("{:?}", i.kind), i.packet))
+                .collect::<Vec<_>>()
+        };
+        let outputs = |s: &Spec| {
+            s.outputs
+                .iter()
+                .map(|o| (o.name, format!("{:?}", o.kind), o.packet))
+                .collect::<Vec<_>>()
+        };
+        let variables = |s: &Spec| s.variables.iter().map(|v| v.name).collect::<Vec<_>>();
+        if inputs(x) != inputs(y) || outputs(x) != outputs(y) || variables(x) != variables(y) {
+            return Err(self.arrangement(format!(
+                "`{}` ({}) and `{}` ({}) do not have the same interface (ports, their kinds and packets, variables)",
+                self.instances[a].name, x.type_name, self.instances[b].name, y.type_name
+            )));
+        }
+        Ok(())
+    }
+
+    /// The compound as a component, ready for [`System::add`] (or for another
+    /// compound's [`CompoundBuilder::instance`]).
+    pub fn build(mut self) -> Result<Component, CompoundError> {
+        if let Some(error) = self.errors.first() {
+            return Err(error.clone());
+        }
+        let own = self.supervisor.spec();
+        if let Err(detail) = own.validate() {
+            return Err(CompoundError::Supervisor {
+                compound: self.name.clone(),
+                detail,
+            });
+        }
+        // Policies.
+        for (name, policy) in std::mem::take(&mut self.policies) {
+            let index = self.instance_index(&name)?;
+            self.instances[index].policy = policy;
+        }
+        // Substitutes.
+        for (substitute, primary) in std::mem::take(&mut self.substitutes) {
+            let s = self.instance_index(&substitute)?;
+            let p = self.instance_index(&primary)?;
+            if s == p
+                || self.instances[p].substitute.is_some()
+                || self.instances[s].substitutes.is_some()
+                || self.instances[s].substitute.is_some()
+            {
+                return Err(self.arrangement(format!(
+                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, and a substitute has none of its own"
+                )));
+            }
+            self.same_interface(p, s)?;
+            self.instances[p].substitute = Some(s);
+            self.instances[s].substitutes = Some(p);
+            self.instances[s].status = Status::Standby;
+        }
+        // Redundant groups.
+        let groups = std::mem::take(&mut self.groups);
+        let mut group_members = Vec::new();
+        for (group, members) in groups.iter().enumerate() {
+            let mut indices = Vec::new();
+            for member in members {
+                let index = self.instance_index(member)?;
+                let instance = &self.instances[index];
+                if instance.group.is_some()
+                    || instance.substitute.is_some()
+                    || instance.substitutes.is_some()
+                {
+                    return Err(self.arrangement(format!(
+                        "`{member}` cannot be in a redundant group: it is already in one, or in a substitution"
+                    )));
+                }
+                if let Some(first) = indices.first() {
+                    self.same_interface(*first, index)?;
+                }
+                indices.push(index);
+            }
+            if indices.len() < 2 {
+                return Err(
+                    self.arrangement("a redundant group needs at least two members".to_owned())
+                );
+            }
+            for index in &indices {
+                self.instances[*index].group = Some(group);
+            }
+            group_members.push(indices);
+        }
+        // Connections: resolve the instances; the system checks the rest when wiring.
+        for (from, to) in &self.links {
+            for address in [from, to] {
+                let Some((instance, _)) = address.split_once('.') else {
+                    return Err(CompoundError::Connect {
+                        compound: self.name.clone(),
+                        detail: format!("`{address}` is not an `instance.port` address"),
+                    });
+                };
+                self.instance_index(instance)?;
+            }
+        }
+        // Mapped variables, then the supervisor's own.
+        let mut variables = Vec::new();
+        let mut mapped = Vec::new();
+        for (name, target, kind) in &self.mapped {
+            let Some((instance, variable)) = target.split_once('.') else {
+                return Err(self.unknown("variable", target));
+            };
+            let index = self.instance_index(instance)?;
+            let Some(declared) = self.instances[index]
+                .spec
+                .variables
+                .iter()
+                .find(|v| v.name == variable)
+            else {
+                return Err(self.unknown("variable", target));
+            };
+            if *kind == VarKind::Controllable && declared.kind != VarKind::Controllable {
+                return Err(self.arrangement(format!(
+                    "`{name}` is mapped as controllable onto `{target}`, which is observable"
+                )));
+            }
+            variables.push(VarSpec {
+                name: leak_str(name),
+                kind: *kind,
+                ty: declared.ty,
+                doc: declared.doc,
+            });
+            mapped.push(Mapped {
+                instance: index,
+                variable: variable.to_owned(),
+            });
+        }
+        variables.extend(own.variables.iter().copied());
+        // Rules.
+        let mut rules = Vec::new();
+        for (state, target, reads, test) in std::mem::take(&mut self.rules) {
+            let state_index = own
+                .state_index(&state)
+                .ok_or_else(|| self.unknown("supervisor state", &state))?;
+            let target_index = own
+                .state_index(&target)
+                .ok_or_else(|| self.unknown("supervisor state", &target))?;
+            for read in &reads {
+                self.check_read(read, own)?;
+            }
+            rules.push(Rule {
+                state: state_index,
+                target: target_index,
+                reads,
+                test,
+            });
+        }
+        let mut spec = *own;
+        spec.variables = Box::leak(variables.into_boxed_slice());
+        spec.inputs = Box::leak(std::mem::take(&mut self.inputs).into_boxed_slice());
+        spec.outputs = Box::leak(std::mem::take(&mut self.outputs).into_boxed_slice());
+        spec.exceptions = &[];
+        let spec: &'static Spec = Box::leak(Box::new(spec));
+        let view = View {
+            instances: self.instances.iter().map(|i| i.handle.snapshot()).collect(),
+            own: own
+                .variables
+                .iter()
+                .enumerate()
+                .map(|(index, v)| (v.name.to_owned(), self.supervisor.get(index)))
+                .collect(),
+        };
+        let compound = Compound {
+            name: self.name.clone(),
+            spec,
+            own_offset: mapped.len(),
+            system: Some(self.system),
+            instances: self.instances,
+            groups: group_members,
+            links: self.links,
+            wired: Vec::new(),
+            mapped,
+            supervisor: self.supervisor,
+            rules,
+            events: Vec::new(),
+            view,
+            evaluated_in: None,
+            queue: Vec::new(),
+            retry_every: self.retry_every,
+            deadline: self.deadline,
+            started: false,
+            exports: self.exports,
+        };
+        Ok(Component::new(self.name, Box::new(compound), self.ports))
+    }
+
+    fn check_read(&self, read: &str, own: &Spec) -> Result<(), CompoundError> {
+        match read.split_once('.') {
+            None => own
+                .variable_index(read)
+                .map(|_| ())
+                .ok_or_else(|| self.unknown("variable", read)),
+            Some((instance, field)) => {
+                let index = self.instance_index(instance)?;
+                let default = matches!(field, "state" | "user_state" | "result" | "error");
+                if default || self.instances[index].spec.variable_index(field).is_some() {
+                    Ok(())
+                } else {
+                    Err(self.unknown("variable", read))
+                }
+            }
+        }
+    }
+}
+
+fn leak_str(text: &str) -> &'static str {
+    Box::leak(text.to_owned().into_boxed_str())
+}
+
+/// The code of a compound component, driven by the runner like any automaton.
+struct Compound {
+    name: String,
+    spec: &'static Spec,
+    /// Index of the first own variable in `spec.variables` (mapped ones come first).
+    own_offset: usize,
+    system: Option<System>,
+    instances: Vec<Instance>,
+    groups: Vec<Vec<usize>>,
+    /// Declared connections.
+    links: Vec<(String, String)>,
+    /// The connections made now (declared ones with each instance routed to whoever
+    /// stands for it).
+    wired: Vec<(String, String)>,
+    mapped: Vec<Mapped>,
+    supervisor: Box<dyn Supervisor>,
+    rules: Vec<Rule>,
+    /// Monitoring events of each instance (subscribed at the first start).
+    events: Vec<Receiver<MonitorEvent>>,
+    view: View,
+    /// The supervisor state whose rules were last evaluated.
+    evaluated_in: Option<usize>,
+    queue: Vec<Recovering>,
+    retry_every: Duration,
+    deadline: Duration,
+    started: bool,
+    exports: Vec<Box<dyn Export>>,
+}
+
+fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
+    handle
+        .command(Command::SetState(target))
+        .map_err(|rejected| Fault::message(rejected.to_string()))
+}
+
+impl Compound {
+    fn fault(&self, message: String) -> Fault {
+        tracing::warn!(compound = %self.name, "{message}");
+        Fault::message(message)
+    }
+
+    /// Who stands for instance `index` now.
+    fn route(&self, index: usize) -> usize {
+        let instance = &self.instances[index];
+        if let Some(group) = instance.group {
+            let members = &self.groups[group];
+            return members
+                .iter()
+                .copied()
+                .find(|m| self.instances[*m].status == Status::Active)
+                .unwrap_or(members[0]);
+        }
+        if let Some(substitute) = instance.substitute
+            && instance.status != Status::Active
+            && self.instances[substitute].status == Status::Active
+        {
+            return substitute;
+        }
+        index
+    }
+
+    fn routed(&self, address: &str) -> String {
+        let Some((instance, port)) = address.split_once('.') else {
+            return address.to_owned();
+        };
+        match self.instances.iter().position(|i| i.name == instance) {
+            Some(index) => format!("{}.{port}", self.instances[self.route(index)].name),
+            None => address.to_owned(),
+        }
+    }
+
+    /// Make the connections match the arrangement: each declared connection between
+    /// the instances standing for its ends now. Removed first, then added.
+    fn rewire(&mut self) -> Result<(), Fault> {
+        let mut wanted: Vec<(String, String)> = Vec::new();
+        for (from, to) in &self.links {
+            let link = (self.routed(from), self.routed(to));
+            if !wanted.contains(&link) {
+                wanted.push(link);
+            }
+        }
+        let Some(system) = self.system.as_mut() else {
+            return Ok(());
+        };
+        let error = |e: crate::system::ConnectError| {
+            Fault::message(format!("compound `{}`: {e}", self.name))
+        };
+        let mut removed: Vec<_> = self
+            .wired
+            .iter()
+            .filter(|link| !wanted.contains(link))
+            .cloned()
+            .collect();
+        let mut added: Vec<_> = wanted
+            .iter()
+            .filter(|link| !self.wired.contains(link))
+            .cloned()
+            .collect();
+        // An input end moving from one instance to its stand-in (same producer, same
+        // port): moved in one step with the packets queued there.
+        let port = |address: &str| address.split_once('.').map(|(_, p)| p.to_owned());
+        let mut index = 0;
+        while index < removed.len() {
+            let (from, old_to) = removed[index].clone();
+            match added
+                .iter()
+                .position(|(f, new_to)| *f == from && port(new_to) == port(&old_to))
+            {
+                Some(position) => {
+                    let (_, new_to) = added.remove(position);
+                    system.move_input(&from, &old_to, &new_to).map_err(error)?;
+                    removed.remove(index);
+                }
+                None => index += 1,
+            }
+        }
+        for (from, to) in &removed {
+            system.disconnect(from, to).map_err(error)?;
+        }
+        for (from, to) in &added {
+            system.connect(from, to).map_err(error)?;
+        }
+        self.wired = wanted;
+        for index in 0..self.exports.len() {
+            let address = self.routed(self.exports[index].target());
+            if let Some(system) = self.system.as_ref() {
+                self.exports[index].follow(system, &address).map_err(|e| {
+                    Fault::message(format!("compound `{}`: `{address}`: {e}", self.name))
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    fn refresh(&mut self, index: usize) {
+        self.view.instances[index] = self.instances[index].handle.snapshot();
+    }
+
+    fn refresh_own(&mut self, changed: &mut HashSet<String>) {
+        for (index, (name, value)) in self.view.own.iter_mut().enumerate() {
+            let now = self.supervisor.get(index);
+            if *value != now {
+                *value = now;
+                changed.insert(name.clone());
+            }
+        }
+    }
+
+    /// Start the instances (first start) or bring them back to `ready` (a restart),
+    /// and restore the declared arrangement.
+    fn start_instances(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        if !self.started {
+            if let Some(waker) = cx.waker() {
+                self.events = self
+                    .instances
+                    .iter()
+                    .map(|i| i.handle.subscribe_waking(waker.clone()))
+                    .collect();
+            }
+            if let Some(system) = self.system.as_mut() {
+                system
+                    .start()
+                    .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+            }
+            self.started = true;
+        }
+        self.queue.clear();
+        for index in 0..self.instances.len() {
+            let instance = &mut self.instances[index];
+            if instance.status == Status::Destroyed {
+                continue;
+            }
+            instance.status = if instance.substitutes.is_some() {
+                Status::Standby
+            } else {
+                Status::Active
+            };
+            let monitor = instance
+                .handle
+                .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
+                .map_err(|t| Fault::message(t.to_string()))?;
+            if monitor.state == State::StartingError {
+                return Err(Fault::message(format!(
+                    "instance `{}` could not start: {}",
+                    instance.name,
+                    monitor.error.unwrap_or_default()
+                )));
+            }
+            if monitor.state != State::Ready {
+                command(&instance.handle, Controllable::Ready)?;
+                let state = instance.handle.state();
+                if state != State::Ready {
+                    return Err(Fault::message(format!(
+                        "instance `{}` could not restart: it is {state}",
+                        instance.name
+                    )));
+                }
+            }
+        }
+        // A destroyed instance's substitute keeps standing for it.
+        for index in 0..self.instances.len() {
+            if self.instances[index].status == Status::Destroyed
+                && let Some(substitute) = self.instances[index].substitute
+                && self.instances[substitute].status == Status::Standby
+            {
+                self.instances[substitute].status = Status::Active;
+            }
+            self.refresh(index);
+        }
+        self.rewire()
+    }
+
+    /// Bring every instance that runs (or is suspended) to `target`, last declared
+    /// first.
+    fn instances_to(&mut self, target: Controllable) {
+        for instance in self.instances.iter().rev() {
+            let state = instance.handle.state();
+            let follows = match target {
+                Controllable::Ready => matches!(state, State::Running | State::Suspended),
+                Controllable::Suspended => {
+                    state == State::Running
+                        || (state == State::Ready && instance.status == Status::Active)
+                }
+                Controllable::Running | Controllable::Dead => false,
+            };
+            if follows && let Err(fault) = command(&instance.handle, target) {
+                tracing::warn!(compound = %self.name, "{fault}");
+            }
+        }
+    }
+
+    fn enqueue(&mut self, index: usize) {
+        let now = Instant::now();
+        self.instances[index].status = Status::Recovering;
+        self.queue.push(Recovering {
+            instance: index,
+            since: now,
+            next: crate::thread::later(now, self.retry_every),
+            probation: false,
+        });
+    }
+
+    /// Whether the arrangement can go on without instance `index`.
+    fn covered(&self, index: usize) -> bool {
+        let instance = &self.instances[index];
+        if let Some(group) = instance.group {
+            return self.groups[group]
+                .iter()
+                .any(|m| self.instances[*m].status == Status::Active);
+        }
+        instance
+            .substitute
+            .is_some_and(|s| self.instances[s].status == Status::Active)
+    }
+
+    /// Instance `index` went to `running_error` (or `starting_error`): its policy.
+    fn failed(&mut self, index: usize) -> Result<(), Fault> {
+        let monitor = self.view.instances[index].clone();
+        let name = self.instances[index].name.clone();
+        let error = monitor.error.clone().unwrap_or_default();
+        if self.instances[index].group.is_some() {
+            // A redundant member: the next live member takes the group's connections.
+            self.enqueue(index);
+            if !self.covered(index) {
+                return Err(self.fault(format!(
+                    "every member of the redundant group of `{name}` failed; last: {error}"
+                )));
+            }
+            return self.rewire();
+        }
+        let policy = if self.instances[index].substitutes.is_some() {
+            // A substitute in use fails: nothing stands for it.
+            Policy::Propagate
+        } else {
+            self.instances[index].policy
+        };
+        match policy {
+            Policy::Ignore => {
+                tracing::warn!(compound = %self.name, "instance `{name}` failed (ignored): {error}");
+                Ok(())
+            }
+            Policy::Propagate => Err(self.fault(format!("instance `{name}` failed: {error}"))),
+            Policy::Restart if monitor.state == State::RunningError => {
+                command(&self.instances[index].handle, Controllable::Running)
+            }
+            Policy::Restart => {
+                Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
+            }
+            Policy::Substitute => {
+                self.enqueue(index);
+                if let Some(substitute) = self.instances[index].substitute
+                    && self.instances[substitute].status == Status::Standby
+                {
+                    self.instances[substitute].status = Status::Active;
+                    self.rewire()?;
+                    command(&self.instances[substitute].handle, Controllable::Running)?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The recovery queue's due work: restart, recognize recoveries, destroy at the
+    /// deadline.
+    fn recover(&mut self, now: Instant) -> Result<(), Fault> {
+        let mut position = 0;
+        while position < self.queue.len() {
+            let entry = self.queue[position];
+            if now < entry.next && now < crate::thread::later(entry.since, self.deadline) {
+                position += 1;
+                continue;
+            }
+            let index = entry.instance;
+            let state = self.instances[index].handle.state();
+            if entry.probation && state == State::Running {
+                // Recovered: the arrangement before the fault comes back.
+                self.queue.remove(position);
+                self.instances[index].status = Status::Active;
+                if let Some(substitute) = self.instances[index].substitute
+                    && self.instances[substitute].status == Status::Active
+                {
+                    self.instances[substitute].status = Status::Standby;
+                    self.rewire()?;
+                    command(&self.instances[substitute].handle, Controllable::Ready)?;
+                } else {
+                    self.rewire()?;
+                }
+                tracing::info!(compound = %self.name, "instance `{}` recovered", self.instances[index].name);
+                continue;
+            }
+            if now >= crate::thread::later(entry.since, self.deadline) {
+                self.queue.remove(position);
+                let name = self.instances[index].name.clone();
+                self.instances[index].status = Status::Destroyed;
+                if let Err(fault) = command(&self.instances[index].handle, Controllable::Dead) {
+                    tracing::warn!(compound = %self.name, "{fault}");
+                }
+                self.refresh(index);
+                if !self.covered(index) {
+                    return Err(self.fault(format!(
+                        "instance `{name}` did not recover within {:?} and nothing stands for it",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            // Due for a retry: restart it, on probation until the next retry.
+            let restarted = command(&self.instances[index].handle, Controllable::Running).is_ok()
+                && self.instances[index].handle.state() == State::Running;
+            let entry = &mut self.queue[position];
+            entry.probation = restarted;
+            entry.next = crate::thread::later(now, self.retry_every);
+            position += 1;
+        }
+        Ok(())
+    }
+
+    /// Take the instances' events; run policies; return the variables that changed.
+    fn take_events(&mut self) -> Result<HashSet<String>, Fault> {
+        let mut changed = HashSet::new();
+        for index in 0..self.events.len() {
+            let mut seen = false;
+            while let Ok(event) = self.events[index].try_recv() {
+                seen = true;
+                let name = &self.instances[index].name;
+                let key = match event {
+                    MonitorEvent::State { .. } => format!("{name}.state"),
+                    MonitorEvent::UserState(_) => format!("{name}.user_state"),
+                    MonitorEvent::Result(_) => format!("{name}.result"),
+                    MonitorEvent::Error(_) => format!("{name}.error"),
+                    MonitorEvent::Variable { name: variable, .. } => format!("{name}.{variable}"),
+                    _ => continue,
+                };
+                changed.insert(key);
+            }
+            if !seen {
+                continue;
+            }
+            self.refresh(index);
+            let state = self.view.instances[index].state;
+            let failed = matches!(state, State::RunningError | State::StartingError);
+            match self.instances[index].status {
+                Status::Active if failed => self.failed(index)?,
+                Status::Recovering if failed => {
+                    if let Some(entry) = self.queue.iter_mut().find(|e| e.instance == index) {
+                        entry.probation = false;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(changed)
+    }
+}
+
+impl Automaton for Compound {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        self.evaluated_in = None;
+        self.start_instances(cx)
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {
+        self.instances_to(Controllable::Ready);
+    }
+
+    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+        };
+        self.supervisor.section(state, section, &mut scx)
+    }
+
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("a compound has no configuration of its own; configure its instances".to_owned())
+    }
+
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.instances[target]
+                .handle
+                .command(Command::Set(mapped.variable.clone(), value.clone()))
+                .map_err(|rejected| rejected.reason);
+        }
+        self.supervisor.set(variable - self.own_offset, value)
+    }
+
+    fn get(&self, variable: usize) -> Value {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.view.instances[target]
+                .variables
+                .iter()
+                .find(|(name, _)| *name == mapped.variable)
+                .map_or(Value::Unit, |(_, value)| value.clone());
+        }
+        self.supervisor.get(variable - self.own_offset)
+    }
+
+    fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        // The supervisor enters (or resumes) a state: its rules are evaluated afresh.
+        self.evaluated_in = None;
+        for instance in &self.instances {
+            if instance.status == Status::Active
+                && matches!(instance.handle.state(), State::Ready | State::Suspended)
+            {
+                command(&instance.handle, Controllable::Running)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn after_transition(&mut self, _from: State, to: State, _cx: &mut Context) {
+        match to {
+            State::Ready => self.instances_to(Controllable::Ready),
+            State::Suspended => self.instances_to(Controllable::Suspended),
+            State::Dead => {
+                if let Some(system) = self.system.take() {
+                    let report = system.shutdown();
+                    if !report.clean() {
+                        tracing::warn!(compound = %self.name, "instances not joined: {report:?}");
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn supervises(&self) -> bool {
+        true
+    }
+
+    fn supervise(&mut self, state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+        for export in &mut self.exports {
+            export.forward();
+        }
+        let mut changed = self.take_events()?;
+        if !self.queue.is_empty() {
+            self.recover(Instant::now())?;
+        }
+        self.refresh_own(&mut changed);
+        let entered = self.evaluated_in != Some(state);
+        if !entered && changed.is_empty() {
+            return Ok(None);
+        }
+        self.evaluated_in = Some(state);
+        let view = &self.view;
+        let fired = self
+            .rules
+            .iter()
+            .filter(|rule| rule.state == state)
+            .filter(|rule| entered || rule.reads.iter().any(|read| changed.contains(read)))
+            .find(|rule| (rule.test)(view))
+            .map(|rule| rule.target);
+        Ok(fired)
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        self.queue
+            .iter()
+            .map(|entry| {
+                entry
+                    .next
+                    .min(crate::thread::later(entry.since, self.deadline))
+            })
+            .min()
+    }
+}

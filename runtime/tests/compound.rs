@@ -1,0 +1,853 @@
+//! Compound components: driven like atomic ones, instances following the compound's
+//! state, supervisor rules on instance changes, and the fault policies (restart,
+//! substitute with the recovery queue, deadline expiry, redundancy, propagation up a
+//! three-level hierarchy), with faults injected as panics and declared exceptions.
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use coolbot::port::{DataOut, TickOut};
+use coolbot::{
+    Command, Component, CompoundBuilder, CompoundError, Controllable, Handle, OutputKind, Policy,
+    Section, SectionResult, Spec, State, StateSpec, Supervisor, SupervisorCx, System, TimingSpec,
+    Value, VarKind, VarSpec,
+};
+use support::shell::{self, ShellBuilder};
+use support::worker::{self, Exception};
+use support::{Injected, Script, Scripted, WAIT, eventually};
+
+/// A supervisor whose states each have an entry section that logs; one own
+/// observable variable `faults`, counted up by the `degraded` entry if it exists.
+struct Sup {
+    spec: &'static Spec,
+    log: Arc<Mutex<Vec<String>>>,
+    faults: u64,
+}
+
+impl Sup {
+    fn new(states: &[&'static str]) -> (Sup, Arc<Mutex<Vec<String>>>) {
+        let states: Vec<StateSpec> = states
+            .iter()
+            .map(|name| StateSpec {
+                name,
+                entry: true,
+                exit: false,
+                periodic: None,
+                on: &[],
+                after: &[],
+                may: &[],
+            })
+            .collect();
+        let spec = Box::leak(Box::new(Spec {
+            type_name: "TestCompound",
+            doc: "",
+            states: Box::leak(states.into_boxed_slice()),
+            initial: 0,
+            inputs: &[],
+            outputs: &[],
+            variables: &[VarSpec {
+                name: "faults",
+                kind: VarKind::Observable,
+                ty: "u64",
+                doc: "",
+            }],
+            exceptions: &[],
+            timing: TimingSpec::NONE,
+        }));
+        let log = Arc::new(Mutex::new(Vec::new()));
+        (
+            Sup {
+                spec,
+                log: Arc::clone(&log),
+                faults: 0,
+            },
+            log,
+        )
+    }
+}
+
+impl Supervisor for Sup {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn section(
+        &mut self,
+        state: usize,
+        section: Section,
+        _cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        let name = self.spec.states[state].name;
+        if name == "degraded" && section == Section::Entry {
+            self.faults += 1;
+        }
+        self.log.lock().unwrap().push(format!("{name}.{section:?}"));
+        Ok(())
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::from(self.faults)
+    }
+}
+
+/// A worker instance with its script.
+fn worker(name: &str) -> (Component, Arc<Script>) {
+    let script = Script::new();
+    let (component, _, _) = worker::component(
+        name,
+        Scripted {
+            script: Arc::clone(&script),
+            token: None,
+        },
+    );
+    (component, script)
+}
+
+/// A feeder instance `f` with a tick output `kick` and data outputs `data`, `feed`.
+struct Feeder {
+    kick: TickOut,
+    data: DataOut<u64>,
+}
+
+fn feeder(name: &str) -> (Component, Feeder) {
+    let feeder = Feeder {
+        kick: TickOut::new(),
+        data: DataOut::new(),
+    };
+    let component = ShellBuilder::new(name)
+        .output(shell::output("kick", OutputKind::Tick, false), &feeder.kick)
+        .output(shell::output("data", OutputKind::Data, false), &feeder.data)
+        .build();
+    (component, feeder)
+}
+
+fn run(handle: &Handle, target: Controllable) {
+    handle
+        .command(Command::SetState(target))
+        .unwrap_or_else(|e| panic!("{e}"));
+}
+
+fn wait(handle: &Handle, state: State) -> coolbot::Monitor {
+    handle
+        .wait_state(state, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"))
+}
+
+fn wait_user(handle: &Handle, user: &str) -> coolbot::Monitor {
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some(user), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"))
+}
+
+fn periodic_fault(script: &Script) {
+    script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Fatal),
+        times: 1,
+    }));
+}
+
+#[test]
+fn a_compound_is_driven_and_observed_like_an_atomic_component() {
+    let (sup, log) = Sup::new(&["operating", "degraded"]);
+    let (a, _) = worker("a");
+    let (b, _) = worker("b");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(a)
+        .instance(b)
+        .map_observable("count", "a.count")
+        .map_controllable("gain", "b.gain");
+    let a = builder.instance_handle("a").expect("a");
+    let b = builder.instance_handle("b").expect("b");
+    let compound = builder.build().expect("build");
+    assert_eq!(compound.spec().type_name, "TestCompound");
+
+    // An atomic worker beside it, driven by the same commands.
+    let (atomic, _) = worker("atomic");
+    let mut system = System::new();
+    let base = system.add(compound).expect("add compound");
+    let atomic = system.add(atomic).expect("add atomic");
+    system.start().expect("start");
+    wait(&base, State::Ready);
+    wait(&atomic, State::Ready);
+    assert_eq!(a.state(), State::Ready, "instances start with the compound");
+
+    let sequence = [
+        Controllable::Running,
+        Controllable::Suspended,
+        Controllable::Running,
+        Controllable::Ready,
+        Controllable::Suspended,
+        Controllable::Ready,
+        Controllable::Running,
+    ];
+    for target in sequence {
+        run(&base, target);
+        run(&atomic, target);
+        assert_eq!(base.state(), atomic.state(), "after {target:?}");
+        let expected = target.state();
+        assert_eq!(base.state(), expected);
+        for instance in [&a, &b] {
+            assert_eq!(instance.state(), expected, "{} follows", instance.name());
+        }
+    }
+    let monitor = wait_user(&base, "operating");
+    assert_eq!(monitor.state, State::Running);
+    let names: Vec<&str> = monitor.variables.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["count", "gain", "faults"]);
+    assert_eq!(monitor.variables[0].1, Value::UInt(0));
+
+    // Mapped controllable: set through the compound, seen on the instance.
+    base.command(Command::Set("gain".to_owned(), Value::Int(7)))
+        .expect("set gain");
+    b.wait_for(|m| m.variables[1].1 == Value::Int(7), WAIT)
+        .expect("b's gain");
+    base.wait_for(|m| m.variables[1].1 == Value::Int(7), WAIT)
+        .expect("the compound republishes it");
+    let rejected = base
+        .command(Command::Set("count".to_owned(), Value::UInt(1)))
+        .expect_err("observable");
+    assert!(rejected.reason.contains("observable"), "{rejected}");
+    for command in [
+        Command::SetPriority(3),
+        Command::SetPeriod(Duration::from_millis(20)),
+        Command::SetMaxResponse(Duration::from_millis(20)),
+        Command::SetQuality(0),
+    ] {
+        base.command(command.clone()).expect("accepted");
+        atomic.command(command).expect("accepted");
+    }
+    assert!(
+        log.lock().unwrap().iter().all(|e| e == "operating.Entry"),
+        "only the initial supervisor state was entered: {:?}",
+        log.lock().unwrap()
+    );
+
+    // dead: the supervisor first, then the instances; the threads are joined.
+    run(&base, Controllable::Dead);
+    assert_eq!(base.state(), State::Dead);
+    assert_eq!(a.state(), State::Dead);
+    assert_eq!(b.state(), State::Dead);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn rules_fire_when_an_instance_changes_state() {
+    let (sup, log) = Sup::new(&["operating", "degraded"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Ignore)
+        .rule("operating", "degraded", &["w.state"], |v| {
+            v.state("w") == Some(State::RunningError)
+        })
+        .rule("degraded", "operating", &["w.state", "w.user_state"], |v| {
+            v.state("w") == Some(State::Running) && v.user_state("w") == Some("idle")
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&base, "operating");
+    wait_user(&w, "idle");
+
+    // A declared exception without a plan: w goes to running_error.
+    periodic_fault(&script);
+    feed.kick.emit();
+    let monitor = wait_user(&base, "degraded");
+    assert_eq!(
+        monitor.state,
+        State::Running,
+        "ignored: the compound goes on"
+    );
+    assert_eq!(w.state(), State::RunningError);
+    base.wait_for(|m| m.variables[0].1 == Value::UInt(1), WAIT)
+        .expect("own variable published");
+
+    // Restarting w by hand fires the second rule.
+    run(&w, Controllable::Running);
+    wait_user(&base, "operating");
+    assert_eq!(
+        *log.lock().unwrap(),
+        ["operating.Entry", "degraded.Entry", "operating.Entry"]
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn rules_are_evaluated_in_declaration_order_and_on_entry() {
+    // Both rules hold when `operating` is entered: the first declared fires.
+    let (sup, log) = Sup::new(&["operating", "first", "second"]);
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .rule("operating", "first", &["w.state"], |v| {
+            v.state("w") == Some(State::Running)
+        })
+        .rule("operating", "second", &["w.state"], |v| {
+            v.state("w") == Some(State::Running)
+        });
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&base, "first");
+    assert_eq!(*log.lock().unwrap(), ["operating.Entry", "first.Entry"]);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn restart_policy_brings_the_instance_back_and_the_compound_runs_on() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Restart);
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let events = base.subscribe();
+
+    script.panic_in(Some("busy.exit"));
+    script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: None,
+        times: 1,
+    }));
+    feed.kick.emit();
+    eventually(
+        || script.log().iter().filter(|e| *e == "start").count() == 2,
+        "w restarted",
+    );
+    let monitor = wait_user(&w, "idle");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(script.injected.load(Ordering::SeqCst), 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(
+        events
+            .try_iter()
+            .all(|e| !matches!(e, coolbot::MonitorEvent::State { .. })),
+        "the compound never left running"
+    );
+    assert!(system.shutdown().clean());
+}
+
+/// A compound `base` with primary `w` (policy substitute), its substitute `b`, and a
+/// feeder `f` whose data goes to `w.data`.
+struct Substitution {
+    system: System,
+    base: Handle,
+    w: Handle,
+    b: Handle,
+    w_script: Arc<Script>,
+    b_script: Arc<Script>,
+    feed: Feeder,
+}
+
+fn substitution(deadline: Duration) -> Substitution {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.data", "w.data")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .map_observable("count", "w.count")
+        .recovery(Duration::from_millis(40), deadline);
+    let w = builder.instance_handle("w").expect("w");
+    let b = builder.instance_handle("b").expect("b");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    assert_eq!(b.state(), State::Ready, "a substitute waits in ready");
+    Substitution {
+        system,
+        base,
+        w,
+        b,
+        w_script,
+        b_script,
+        feed,
+    }
+}
+
+impl Substitution {
+    /// w fails (a panic) and cannot restart until `start_fails` is cleared.
+    fn fail_primary(&self) {
+        self.w_script.start_fails.store(true, Ordering::SeqCst);
+        self.w_script.panic_in(Some("busy.periodic"));
+        self.feed.kick.emit();
+        wait(&self.b, State::Running);
+        assert_eq!(self.base.state(), State::Running);
+        assert_ne!(self.w.state(), State::Running);
+    }
+}
+
+#[test]
+fn a_substitute_takes_over_and_the_recovered_original_takes_its_place_back() {
+    let rig = substitution(Duration::from_secs(10));
+    rig.fail_primary();
+    // The connections moved: packets go to the substitute.
+    rig.feed.data.send(1);
+    rig.feed.data.send(2);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 2,
+        "the substitute received both packets",
+    );
+    rig.base
+        .wait_for(|m| m.variables[0].1 == Value::UInt(2), WAIT)
+        .expect("the mapped variable follows the substitute");
+    // The recovery queue keeps retrying w; it fails in `start` meanwhile.
+    rig.w
+        .wait_state(State::StartingError, WAIT)
+        .expect("retried");
+    rig.w_script.panic_in(None);
+    rig.w_script.start_fails.store(false, Ordering::SeqCst);
+    // w recovers: the arrangement before the fault comes back.
+    wait(&rig.b, State::Ready);
+    assert_eq!(rig.w.state(), State::Running);
+    let before = rig.w_script.received.load(Ordering::SeqCst);
+    rig.feed.data.send(3);
+    eventually(
+        || rig.w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w receives again",
+    );
+    assert_eq!(rig.b_script.received.load(Ordering::SeqCst), 2);
+    assert_eq!(rig.base.state(), State::Running);
+    assert!(rig.system.shutdown().clean());
+}
+
+#[test]
+fn at_the_deadline_the_original_is_destroyed_and_the_substitute_stays() {
+    let rig = substitution(Duration::from_millis(200));
+    rig.fail_primary();
+    wait(&rig.w, State::Dead);
+    assert_eq!(rig.b.state(), State::Running);
+    assert_eq!(rig.base.state(), State::Running);
+    rig.feed.data.send(9);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 1,
+        "the substitute goes on",
+    );
+    // Stopped and run again, the compound keeps the substitute in the dead one's place.
+    run(&rig.base, Controllable::Ready);
+    assert_eq!(rig.b.state(), State::Ready);
+    run(&rig.base, Controllable::Running);
+    wait_user(&rig.b, "idle");
+    rig.feed.data.send(10);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 2,
+        "the substitute still has the connections",
+    );
+    assert!(rig.system.shutdown().clean());
+}
+
+#[test]
+fn at_the_deadline_without_a_substitute_the_compound_fails() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(30), Duration::from_millis(150));
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    script.start_fails.store(true, Ordering::SeqCst);
+    script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("`w` did not recover"),
+        "the error says why: {error}"
+    );
+    assert_eq!(w.state(), State::Dead);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_redundant_group_runs_while_one_member_survives() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (a, a_script) = worker("a");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(a)
+        .instance(b)
+        .instance(f)
+        .redundant(&["a", "b"])
+        .connect("f.data", "a.data")
+        .recovery(Duration::from_millis(40), Duration::from_secs(10));
+    let (a, b) = (
+        builder.instance_handle("a").expect("a"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&a, "idle");
+    wait_user(&b, "idle");
+    // One stream: only the first live member is connected.
+    feed.data.send(1);
+    eventually(|| a_script.received.load(Ordering::SeqCst) == 1, "a got it");
+    // a fails (a panic; its restarts fail): b takes the stream, the compound goes on.
+    a_script.start_fails.store(true, Ordering::SeqCst);
+    a_script.panic_in(Some("busy.periodic"));
+    wait(&a, State::RunningError);
+    // Sent while the compound moves the connection: queued at a, or delivered to b.
+    feed.data.send(2);
+    feed.data.send(3);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 2,
+        "b gets the stream, with what was queued at a",
+    );
+    assert_eq!(base.state(), State::Running);
+    // b fails too: nobody is left.
+    b_script.panic_in(Some("busy.periodic"));
+    let monitor = wait(&base, State::RunningError);
+    assert!(
+        monitor.error.as_deref().unwrap_or("").contains("redundant"),
+        "{monitor:?}"
+    );
+    assert_eq!(a_script.received.load(Ordering::SeqCst), 1);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn faults_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
+    // mid: leaf1 (restart), leaf2 (propagate), fed by f.
+    let (mid_sup, _) = Sup::new(&["operating"]);
+    let (leaf1, script1) = worker("leaf1");
+    let (leaf2, script2) = worker("leaf2");
+    let (f, feed) = feeder("f");
+    let mid = CompoundBuilder::new("mid", mid_sup)
+        .instance(leaf1)
+        .instance(leaf2)
+        .instance(f)
+        .connect("f.kick", "leaf1.kick")
+        .connect("f.data", "leaf2.data")
+        .on_error("leaf1", Policy::Restart)
+        .on_error("leaf2", Policy::Propagate);
+    let leaf1 = mid.instance_handle("leaf1").expect("leaf1");
+    let leaf2 = mid.instance_handle("leaf2").expect("leaf2");
+    // top: mid (propagate) and a sibling, with a rule on mid's state.
+    let (top_sup, top_log) = Sup::new(&["operating", "degraded"]);
+    let (sibling, _) = worker("sibling");
+    let top = CompoundBuilder::new("top", top_sup)
+        .instance(mid.build().expect("mid"))
+        .instance(sibling)
+        .on_error("mid", Policy::Propagate);
+    let mid = top.instance_handle("mid").expect("mid");
+    let mut system = System::new();
+    let top = system.add(top.build().expect("top")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&leaf1, "idle");
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+
+    // leaf1 fails: handled in the middle.
+    periodic_fault(&script1);
+    feed.kick.emit();
+    eventually(
+        || script1.log().iter().filter(|e| *e == "start").count() == 2,
+        "leaf1 restarted by mid",
+    );
+    wait_user(&leaf1, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(top.state(), State::Running);
+
+    // leaf2 fails: mid goes to running_error, top hears it and fails too.
+    script2.panic_in(Some("busy.entry"));
+    feed.data.send(1);
+    let monitor = wait(&top, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `mid` failed") && error.contains("instance `leaf2` failed"),
+        "{error}"
+    );
+    assert_eq!(mid.state(), State::RunningError);
+    assert_eq!(leaf2.state(), State::RunningError);
+    assert_eq!(
+        leaf1.state(),
+        State::Ready,
+        "mid's stop brought its running instances to ready"
+    );
+    assert_eq!(*top_log.lock().unwrap(), ["operating.Entry"]);
+
+    // The top restarts the whole hierarchy through its control port.
+    script2.panic_in(None);
+    run(&top, Controllable::Running);
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn malformed_compounds_are_rejected_with_clear_errors() {
+    let build = |f: fn(CompoundBuilder) -> CompoundBuilder| {
+        let (sup, _) = Sup::new(&["operating"]);
+        let (w, _) = worker("w");
+        let (f2, _) = feeder("f");
+        f(CompoundBuilder::new("base", sup).instance(w).instance(f2)).build()
+    };
+    let unknown = build(|b| b.on_error("nobody", Policy::Restart)).expect_err("unknown");
+    assert_eq!(
+        unknown,
+        CompoundError::Unknown {
+            compound: "base".to_owned(),
+            what: "instance",
+            name: "nobody".to_owned()
+        }
+    );
+    let rule =
+        build(|b| b.rule("operating", "nowhere", &["w.state"], |_| true)).expect_err("state");
+    assert!(rule.to_string().contains("`nowhere`"), "{rule}");
+    let read =
+        build(|b| b.rule("operating", "operating", &["w.speed"], |_| true)).expect_err("var");
+    assert!(read.to_string().contains("`w.speed`"), "{read}");
+    let substitute = build(|b| b.substitute("f", "w")).expect_err("interface");
+    assert!(
+        substitute.to_string().contains("same interface"),
+        "{substitute}"
+    );
+    let group = build(|b| b.redundant(&["w"])).expect_err("group of one");
+    assert!(group.to_string().contains("at least two"), "{group}");
+    let mapped = build(|b| b.map_controllable("c", "w.count")).expect_err("observable");
+    assert!(mapped.to_string().contains("observable"), "{mapped}");
+    // A bad connection is found when the compound wires it, at start.
+    let component = build(|b| b.connect("f.kick", "w.data")).expect("builds");
+    let mut system = System::new();
+    let base = system.add(component).expect("add");
+    system.start().expect("start");
+    let monitor = wait(&base, State::StartingError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .unwrap_or("")
+            .contains("cannot connect"),
+        "{monitor:?}"
+    );
+    assert!(system.shutdown().clean());
+}
+
+/// The worker's spec with a deeper data fifo (so that a steady stream never overflows
+/// on a shared machine); the same for every instance, so interfaces match.
+fn deep_worker_spec() -> &'static Spec {
+    static DEEP: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
+    DEEP.get_or_init(|| {
+        let mut inputs = worker::SPEC.inputs.to_vec();
+        inputs[worker::DATA].kind = coolbot::InputKind::Fifo {
+            capacity: 1024,
+            policy: coolbot::OverflowPolicy::Reject,
+        };
+        let mut spec = worker::SPEC;
+        spec.inputs = Box::leak(inputs.into_boxed_slice());
+        Box::leak(Box::new(spec))
+    })
+}
+
+fn deep_worker(name: &str) -> (Component, Arc<Script>) {
+    let script = Script::new();
+    let (component, _, _) = worker::component_with(
+        name,
+        Scripted {
+            script: Arc::clone(&script),
+            token: None,
+        },
+        deep_worker_spec(),
+        coolbot::port::FifoIn::new(1024, coolbot::OverflowPolicy::Reject),
+    );
+    (component, script)
+}
+
+#[test]
+fn exported_ports_follow_the_substitute_and_no_packet_is_lost() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = deep_worker("w");
+    let (b, b_script) = deep_worker("b");
+    let source = DataOut::<u64>::new();
+    let src = ShellBuilder::new("src")
+        .output(shell::output("out", OutputKind::Data, false), &source)
+        .build();
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(src)
+        .substitute("b", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30))
+        .export_input::<u64>("data", "w.data")
+        .export_tick_input("kick", "w.kick")
+        .export_output::<u64>("scan", "src.out");
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let base = builder.build().expect("build");
+    assert_eq!(base.spec().inputs.len(), 2);
+    assert_eq!(base.spec().outputs[0].name, "scan");
+
+    // Outside: a feeder into the compound's inputs, a sink on its output.
+    let (f, feed) = feeder("f");
+    let scans = coolbot::port::FifoIn::<u64>::new(64, coolbot::OverflowPolicy::Reject);
+    let sink = ShellBuilder::new("sink")
+        .input(
+            shell::input(
+                "scans",
+                coolbot::InputKind::Fifo {
+                    capacity: 64,
+                    policy: coolbot::OverflowPolicy::Reject,
+                },
+                false,
+            ),
+            &scans,
+        )
+        .build();
+    let mut system = System::new();
+    let base = system.add(base).expect("add");
+    system.add(f).expect("feeder");
+    system.add(sink).expect("sink");
+    system.connect("f.data", "base.data").expect("data");
+    system.connect("f.kick", "base.kick").expect("kick");
+    system.connect("base.scan", "sink.scans").expect("scan");
+    system.start().expect("start");
+    wait(&base, State::Ready);
+
+    // While the compound is ready, packets wait at its own input.
+    for packet in 0..5 {
+        feed.data.send(packet);
+    }
+    system.run_all().expect("run");
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == 5,
+        "queued packets reach w once the compound runs",
+    );
+    source.send(42);
+    assert_eq!(scans.recv_timeout(WAIT), Some(42), "the exported output");
+
+    // A steady stream while w fails and b takes over.
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let sent = 300;
+    for packet in 5..sent {
+        feed.data.send(packet);
+        if packet % 10 == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    wait(&b, State::Running);
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst) + b_script.received.load(Ordering::SeqCst)
+                == sent
+        },
+        "every packet reached w or b",
+    );
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    for handle in [&base, &w, &b] {
+        assert_eq!(handle.snapshot().overflows, 0, "{}", handle.name());
+    }
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
+    const FAULTS: u32 = 10_000;
+    let (sup, _) = Sup::new(&["operating"]);
+    let (flaky, flaky_script) = worker("flaky");
+    let (steady, steady_script) = deep_worker("steady");
+    let (f, feed) = feeder("f");
+    // Every run of `flaky` fails in its first entry, alternately by a declared
+    // exception and by a panic, until the faults are used up.
+    flaky_script.inject(Some(Injected {
+        hook: "idle.entry",
+        exception: Some(Exception::Fatal),
+        times: FAULTS / 2,
+    }));
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(flaky)
+        .instance(steady)
+        .instance(f)
+        .connect("f.data", "steady.data")
+        .on_error("flaky", Policy::Restart);
+    let (flaky, steady) = (
+        builder.instance_handle("flaky").expect("flaky"),
+        builder.instance_handle("steady").expect("steady"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    let mut sent = 0;
+    let deadline = std::time::Instant::now() + Duration::from_secs(15);
+    let stalled = |phase: &str| {
+        format!(
+            "{phase} stalled: {:?} {:?}",
+            base.snapshot(),
+            flaky.snapshot()
+        )
+    };
+    // Panics first (a panic comes before the injected exception in the script).
+    flaky_script.panic_in(Some("idle.entry"));
+    loop {
+        let starts = flaky_script.log().iter().filter(|e| *e == "start").count();
+        if starts > usize::try_from(FAULTS / 2).unwrap() {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            stalled("panics")
+        );
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    flaky_script.panic_in(None);
+    // Then the declared exceptions, until they are used up.
+    while flaky_script.injected.load(Ordering::SeqCst) < FAULTS / 2 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            stalled("exceptions")
+        );
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    wait_user(&flaky, "idle");
+    assert_eq!(base.state(), State::Running);
+    eventually(
+        || steady_script.received.load(Ordering::SeqCst) == sent,
+        "every packet of the stream arrived",
+    );
+    assert_eq!(steady.snapshot().overflows, 0);
+    assert_eq!(steady.state(), State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
