@@ -291,7 +291,7 @@ pub struct Handle {
     pub(crate) shared: Arc<Shared>,
     pub(crate) control: Sender<ControlMessage>,
     /// The component's doorbell: rung after each command is queued.
-    pub(crate) bell: Sender<()>,
+    pub(crate) bell: Arc<crate::port::Doorbell>,
     pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
@@ -362,7 +362,7 @@ impl Handle {
                 "the component's thread has ended or its control queue is full",
             ));
         }
-        let _ = self.bell.try_send(());
+        self.bell.ring_strong();
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),

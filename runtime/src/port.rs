@@ -7,8 +7,10 @@
 //! on connect and disconnect), so sending takes no global lock and allocates nothing
 //! beyond the clone of the packet for each extra consumer.
 //!
-//! Each delivery bumps the input's arrival counter and rings its component's doorbell
-//! (a `bounded(1)` channel: a full bell means the component is already woken).
+//! Each delivery bumps the input's arrival counter and rings its component's
+//! [`Doorbell`] (a flag beside a wake-up channel: a rung bell means the component is
+//! already due to look, so a burst of arrivals costs one wake-up and, per packet, one
+//! load of the flag).
 
 use std::any::{Any, TypeId};
 use std::collections::VecDeque;
@@ -69,9 +71,92 @@ fn next_port_id() -> usize {
     NEXT_PORT_ID.fetch_add(1, Ordering::Relaxed)
 }
 
+/// The wake-up of one component thread: rung by every command, every delivery to its
+/// inputs and every pull request to its outputs; the thread clears it at the start of
+/// each turn and waits on it when a turn finds nothing to do.
+///
+/// Why no wake-up is lost (the classic lost-wakeup race: a ringer sees the bell already
+/// rung and skips the wake-up, while the thread has just cleared it and is about to look
+/// at stale state, then sleeps):
+///
+/// - The thread's turn is: `clear` (a `SeqCst` swap to false), then look at everything
+///   (control queue, arrival counters, pull queues), then, if nothing was found,
+///   `wait`, which returns at once while the flag is true and otherwise sleeps until
+///   woken. A ringer that moves the flag from false to true always sends the wake-up
+///   (a token in a `bounded(1)` channel, which persists until received), so the thread
+///   cannot sleep through a ring that came after its `clear`.
+/// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
+///   always swaps. A swap reads the newest value of the flag: if it reads false, this
+///   ringer sends the wake-up; if it reads true, the thread's next `clear` reads this
+///   swap's write (or a later swap's, all writes being swaps), synchronises with it, and
+///   the look that follows sees the queued payload.
+/// - [`Doorbell::ring`] (arrivals, the per-packet path) first does a plain load and
+///   skips the swap when the flag reads true. A plain load may read a stale true that a
+///   `clear` has already overwritten; that is what makes the race possible in general.
+///   Here the arrival counter's increment, this load, the thread's `clear` and its load
+///   of the counter are all `SeqCst`, so they fall in one total order: a load that reads
+///   a true older than a `clear` comes before that `clear` in the order, hence the
+///   increment (before the load in program order) comes before the `clear` and before
+///   the thread's load of the counter after it, which therefore sees the increment. If
+///   the load reads a true written after the thread's last `clear`, that ringer's
+///   wake-up makes the thread run another turn, whose `clear` and look come after it,
+///   by the same argument. On x86-64 and AArch64 a `SeqCst` load costs the same as an
+///   acquire load, so the fast path stays one load of a cache line that stays shared
+///   while the consumer is busy.
+pub(crate) struct Doorbell {
+    rung: AtomicBool,
+    wake: (Sender<()>, Receiver<()>),
+}
+
+impl Doorbell {
+    pub(crate) fn new() -> Arc<Doorbell> {
+        Arc::new(Doorbell {
+            rung: AtomicBool::new(false),
+            wake: crossbeam_channel::bounded(1),
+        })
+    }
+
+    /// Ring after a `SeqCst` increment of an arrival counter (see the type's doc).
+    #[inline]
+    pub(crate) fn ring(&self) {
+        if !self.rung.load(Ordering::SeqCst) {
+            self.ring_strong();
+        }
+    }
+
+    /// Ring after queueing a command or a pull request.
+    #[inline]
+    pub(crate) fn ring_strong(&self) {
+        if !self.rung.swap(true, Ordering::SeqCst) {
+            let _ = self.wake.0.try_send(());
+        }
+    }
+
+    /// The thread starts a turn: rings from now on wake it again.
+    #[inline]
+    pub(crate) fn clear(&self) {
+        self.rung.swap(false, Ordering::SeqCst);
+    }
+
+    /// Wait until rung or until `deadline`.
+    pub(crate) fn wait(&self, deadline: Option<Instant>) {
+        if self.rung.load(Ordering::SeqCst) {
+            return;
+        }
+        match deadline {
+            Some(deadline) => {
+                let _ = self.wake.1.recv_deadline(deadline);
+            }
+            None => {
+                let _ = self.wake.1.recv();
+            }
+        }
+    }
+}
+
 /// The component a port belongs to: its doorbell, its monitor, the port's name.
 pub(crate) struct Owner {
-    pub(crate) bell: Sender<()>,
+    pub(crate) bell: Arc<Doorbell>,
     pub(crate) shared: Weak<Shared>,
     pub(crate) port_name: &'static str,
 }
@@ -104,9 +189,10 @@ impl InputCore {
     /// A packet or event was stored: count it, wake the component and any puller.
     #[inline]
     fn arrived(&self) {
-        self.arrivals.fetch_add(1, Ordering::Release);
+        // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
+        self.arrivals.fetch_add(1, Ordering::SeqCst);
         if let Some(owner) = self.owner.get() {
-            let _ = owner.bell.try_send(());
+            owner.bell.ring();
         }
         if self.pull_waiting.load(Ordering::Acquire) {
             let _ = self.pull_signal.0.try_send(());
@@ -125,7 +211,7 @@ impl InputCore {
     }
 
     pub(crate) fn arrivals(&self) -> u64 {
-        self.arrivals.load(Ordering::Acquire)
+        self.arrivals.load(Ordering::SeqCst)
     }
 
     pub(crate) fn overflows(&self) -> u64 {
@@ -198,7 +284,7 @@ impl OutputCore {
         match self.requests.0.try_send(input_id) {
             Ok(()) => {
                 if let Some(owner) = self.owner.get() {
-                    let _ = owner.bell.try_send(());
+                    owner.bell.ring_strong();
                 }
                 Ok(())
             }

@@ -1,10 +1,12 @@
 //! The component thread: one loop that drives the default automaton ([`crate::table`])
 //! and the user automaton of one component.
 //!
-//! The loop blocks in one wait on the component's doorbell (a `bounded(1)` channel
-//! rung by every command, every delivery to its inputs and every pull request to its
-//! outputs), with the nearest timer deadline as its timeout. Each turn handles at most one thing, in
-//! this priority order, then looks at the control port again:
+//! The loop blocks in one wait on the component's doorbell ([`Doorbell`]: rung by every
+//! command, every delivery to its inputs and every pull request to its outputs), with
+//! the nearest timer deadline as its timeout. Each turn clears the doorbell before it
+//! looks at anything (so a ring during the turn makes the next wait return at once),
+//! handles at most one thing, in this priority order, then looks at the control port
+//! again:
 //!
 //! 1. control commands (all that are waiting);
 //! 2. `Context::end` requested by the last user call;
@@ -25,7 +27,7 @@ use crossbeam_channel::{Receiver, Sender};
 
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
-use crate::port::{InputCore, OutputCore};
+use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{later, panic_message};
@@ -54,7 +56,7 @@ pub(crate) struct Runner {
     cx: Context,
     shared: Arc<Shared>,
     control: Receiver<ControlMessage>,
-    bell: Receiver<()>,
+    bell: Arc<Doorbell>,
     inputs: Vec<Arc<InputCore>>,
     outputs: Vec<Arc<OutputCore>>,
     state: State,
@@ -96,7 +98,7 @@ impl Runner {
         automaton: Box<dyn Automaton>,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
-        bell: Receiver<()>,
+        bell: Arc<Doorbell>,
         inputs: Vec<Arc<InputCore>>,
         outputs: Vec<Arc<OutputCore>>,
         exit_guard: Sender<()>,
@@ -145,6 +147,8 @@ impl Runner {
             }
         }
         loop {
+            // Before looking at anything: a ring from now on wakes the next wait.
+            self.bell.clear();
             // 1. Control first.
             if !self.drain_control() {
                 break;
@@ -154,7 +158,7 @@ impl Runner {
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
                 self.update_cpu(false);
-                let _ = self.bell.recv();
+                self.bell.wait(None);
                 continue;
             }
             // 2. The task finished.
@@ -206,14 +210,7 @@ impl Runner {
         self.update_cpu(false);
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
         // loop then looks at the control port first (the priority rule above).
-        match deadline {
-            Some(deadline) => {
-                let _ = self.bell.recv_deadline(deadline.max(now));
-            }
-            None => {
-                let _ = self.bell.recv();
-            }
-        }
+        self.bell.wait(deadline.map(|deadline| deadline.max(now)));
     }
 
     /// Do the most urgent piece of user-automaton work; false if there was none.

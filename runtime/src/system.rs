@@ -477,10 +477,10 @@ impl System {
             .zip(ports.inputs.iter().cloned())
             .collect();
         let shared = Arc::new(Shared::new(monitor, named_inputs));
-        let (bell_sender, bell) = crossbeam_channel::bounded(1);
+        let bell = crate::port::Doorbell::new();
         for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
             let owner = Owner {
-                bell: bell_sender.clone(),
+                bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
             };
@@ -493,7 +493,7 @@ impl System {
         }
         for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
             let owner = Owner {
-                bell: bell_sender.clone(),
+                bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
             };
@@ -510,7 +510,7 @@ impl System {
             name: Arc::from(name.as_str()),
             shared: Arc::clone(&shared),
             control: control_sender,
-            bell: bell_sender.clone(),
+            bell: Arc::clone(&bell),
             exited,
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
@@ -843,7 +843,7 @@ impl System {
                         reply,
                         claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
                     });
-                let _ = slot.handle.bell.try_send(());
+                slot.handle.bell.ring_strong();
             }
         }
         let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);
