@@ -138,6 +138,13 @@ impl Doorbell {
         self.rung.swap(false, Ordering::SeqCst);
     }
 
+    /// Whether anything rang since the last `clear` (may read a stale false: a wait
+    /// that follows is still woken).
+    #[inline]
+    pub(crate) fn is_rung(&self) -> bool {
+        self.rung.load(Ordering::SeqCst)
+    }
+
     /// Wait until rung or until `deadline`.
     pub(crate) fn wait(&self, deadline: Option<Instant>) {
         if self.rung.load(Ordering::SeqCst) {
@@ -265,7 +272,9 @@ impl InputCore {
 pub(crate) struct OutputCore {
     pub(crate) id: usize,
     pub(crate) owner: OnceLock<Owner>,
-    requests: (Sender<usize>, Receiver<usize>),
+    /// The pull-request queue: created by [`OutputCore::accept_pulls`] for outputs
+    /// declared `pull` only; a request to any other output is dropped.
+    requests: OnceLock<(Sender<usize>, Receiver<usize>)>,
     /// While the producer answers a pull request: the requesting input's id (0: none).
     answering_to: AtomicUsize,
 }
@@ -275,13 +284,23 @@ impl OutputCore {
         Arc::new(OutputCore {
             id: next_port_id(),
             owner: OnceLock::new(),
-            requests: crossbeam_channel::bounded(PULL_REQUEST_CAPACITY),
+            requests: OnceLock::new(),
             answering_to: AtomicUsize::new(0),
         })
     }
 
+    /// Give this output its pull-request queue (it is declared `pull`).
+    pub(crate) fn accept_pulls(&self) {
+        self.requests
+            .get_or_init(|| crossbeam_channel::bounded(PULL_REQUEST_CAPACITY));
+    }
+
     fn request(&self, input_id: usize) -> Result<(), PullError> {
-        match self.requests.0.try_send(input_id) {
+        let Some(requests) = self.requests.get() else {
+            // Not a pull output: nobody answers, as if the producer dropped it.
+            return Ok(());
+        };
+        match requests.0.try_send(input_id) {
             Ok(()) => {
                 if let Some(owner) = self.owner.get() {
                     owner.bell.ring_strong();
@@ -295,7 +314,14 @@ impl OutputCore {
 
     /// The next waiting pull request (the requesting input's id).
     pub(crate) fn next_request(&self) -> Option<usize> {
-        self.requests.1.try_recv().ok()
+        self.requests.get()?.1.try_recv().ok()
+    }
+
+    /// Whether pull requests are waiting.
+    pub(crate) fn has_requests(&self) -> bool {
+        self.requests
+            .get()
+            .is_some_and(|requests| !requests.1.is_empty())
     }
 
     pub(crate) fn begin_answer(&self, input_id: usize) {

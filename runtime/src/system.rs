@@ -504,6 +504,11 @@ impl System {
                 });
             }
         }
+        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+            if declared.pull {
+                port.core.accept_pulls();
+            }
+        }
         let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
         let (exit_guard, exited) = crossbeam_channel::bounded(1);
         let handle = Handle {
