@@ -81,10 +81,12 @@ fn next_port_id() -> usize {
 ///
 /// - The thread's turn is: `clear` (a `SeqCst` swap to false), then look at everything
 ///   (control queue, arrival counters, pull queues), then, if nothing was found,
-///   `wait`, which returns at once while the flag is true and otherwise sleeps until
-///   woken. A ringer that moves the flag from false to true always sends the wake-up
-///   (a token in a `bounded(1)` channel, which persists until received), so the thread
-///   cannot sleep through a ring that came after its `clear`.
+///   `wait`, which returns at once while the flag is true and otherwise parks until
+///   woken. A ringer that moves the flag from false to true always unparks the thread
+///   (an unpark before the park makes the park return at once: the token persists), so
+///   the thread cannot sleep through a ring that came after its `clear`. Other code on
+///   the thread that parks (channels) may consume the token or wake spuriously: `wait`
+///   rechecks the flag after every return from `park`, and so do those channels.
 /// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
 ///   always swaps. A swap reads the newest value of the flag: if it reads false, this
 ///   ringer sends the wake-up; if it reads true, the thread's next `clear` reads this
@@ -103,17 +105,37 @@ fn next_port_id() -> usize {
 ///   by the same argument. On x86-64 and AArch64 a `SeqCst` load costs the same as an
 ///   acquire load, so the fast path stays one load of a cache line that stays shared
 ///   while the consumer is busy.
+///
+/// Waiting parks the thread (`std::thread::park`/`park_timeout`): with a timer due,
+/// it parks at once, so a periodic component sleeps like a thread in `nanosleep` and
+/// never yields its core to another process before its deadline; waiting for input
+/// only, it first spins briefly on the flag, then yields a few times (as a
+/// crossbeam-channel `recv` does before it parks), so that a packet that comes back
+/// within a few microseconds costs no futex wake-up.
 pub(crate) struct Doorbell {
     rung: AtomicBool,
-    wake: (Sender<()>, Receiver<()>),
+    /// The component's thread, once it runs.
+    thread: OnceLock<std::thread::Thread>,
 }
+
+/// Spin rounds (`2^k` spin hints each, `k` below this) before parking when no timer is
+/// due: 127 hints, about a microsecond.
+const SPIN_ROUNDS: u32 = 7;
+
+/// `yield_now` rounds after the spin rounds, before parking, when no timer is due.
+const YIELD_ROUNDS: u32 = 4;
 
 impl Doorbell {
     pub(crate) fn new() -> Arc<Doorbell> {
         Arc::new(Doorbell {
             rung: AtomicBool::new(false),
-            wake: crossbeam_channel::bounded(1),
+            thread: OnceLock::new(),
         })
+    }
+
+    /// Called by the component's thread before its first turn.
+    pub(crate) fn attach(&self) {
+        let _ = self.thread.set(std::thread::current());
     }
 
     /// Ring after a `SeqCst` increment of an arrival counter (see the type's doc).
@@ -127,8 +149,10 @@ impl Doorbell {
     /// Ring after queueing a command or a pull request.
     #[inline]
     pub(crate) fn ring_strong(&self) {
-        if !self.rung.swap(true, Ordering::SeqCst) {
-            let _ = self.wake.0.try_send(());
+        if !self.rung.swap(true, Ordering::SeqCst)
+            && let Some(thread) = self.thread.get()
+        {
+            thread.unpark();
         }
     }
 
@@ -145,17 +169,36 @@ impl Doorbell {
         self.rung.load(Ordering::SeqCst)
     }
 
-    /// Wait until rung or until `deadline`.
+    /// Wait until rung or until `deadline` (on the component's thread).
     pub(crate) fn wait(&self, deadline: Option<Instant>) {
-        if self.rung.load(Ordering::SeqCst) {
-            return;
-        }
         match deadline {
-            Some(deadline) => {
-                let _ = self.wake.1.recv_deadline(deadline);
-            }
             None => {
-                let _ = self.wake.1.recv();
+                for round in 0..SPIN_ROUNDS {
+                    if self.rung.load(Ordering::SeqCst) {
+                        return;
+                    }
+                    for _ in 0..1u32 << round {
+                        std::hint::spin_loop();
+                    }
+                }
+                for _ in 0..YIELD_ROUNDS {
+                    if self.rung.load(Ordering::SeqCst) {
+                        return;
+                    }
+                    std::thread::yield_now();
+                }
+                while !self.rung.load(Ordering::SeqCst) {
+                    std::thread::park();
+                }
+            }
+            Some(deadline) => {
+                while !self.rung.load(Ordering::SeqCst) {
+                    let now = Instant::now();
+                    if now >= deadline {
+                        return;
+                    }
+                    std::thread::park_timeout(deadline - now);
+                }
             }
         }
     }

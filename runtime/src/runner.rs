@@ -145,6 +145,7 @@ impl Runner {
 
     /// The thread's body.
     pub(crate) fn run(mut self) {
+        self.bell.attach();
         self.publish_variables();
         match self.run_start() {
             Ok(()) => self.apply(Event::StartOk),
