@@ -19,7 +19,8 @@ use crate::table::{Controllable, State};
 use crate::value::Value;
 
 /// How many events an observer's channel holds; events beyond that are dropped for
-/// that observer (and counted in [`Monitor::dropped_events`]).
+/// that observer (and counted in [`Monitor::dropped_events`]). The channel grows as
+/// events wait in it, up to this bound: an observer that keeps up costs little memory.
 pub const OBSERVER_CAPACITY: usize = 4096;
 
 /// How long [`Handle::command`] waits for the component by default.
@@ -210,13 +211,23 @@ impl Shared {
         if observers.is_empty() {
             return;
         }
-        observers.retain(|observer| match observer.try_send(event.clone()) {
-            Ok(()) => true,
-            Err(TrySendError::Full(_)) => {
+        observers.retain(|observer| {
+            // The channels are unbounded (they grow only as events wait): the bound is
+            // applied here. Every send happens under this lock, so the length cannot
+            // grow between the check and the send. A disconnected observer's channel is
+            // emptied when its receiver goes, so the send below finds it.
+            if observer.len() >= OBSERVER_CAPACITY {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
-                true
+                return true;
             }
-            Err(TrySendError::Disconnected(_)) => false,
+            match observer.try_send(event.clone()) {
+                Ok(()) => true,
+                Err(TrySendError::Full(_)) => {
+                    self.dropped.fetch_add(1, Ordering::Relaxed);
+                    true
+                }
+                Err(TrySendError::Disconnected(_)) => false,
+            }
         });
     }
 
@@ -229,7 +240,7 @@ impl Shared {
     }
 
     pub(crate) fn subscribe(&self) -> Receiver<MonitorEvent> {
-        let (sender, receiver) = crossbeam_channel::bounded(OBSERVER_CAPACITY);
+        let (sender, receiver) = crossbeam_channel::unbounded();
         lock(&self.observers).push(sender);
         receiver
     }
@@ -433,6 +444,14 @@ impl Handle {
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
         let deadline = crate::thread::later(Instant::now(), timeout);
+        // Most waits are already satisfied: look before subscribing (a subscription
+        // allocates a channel and costs every publication a send until it is dropped).
+        let monitor = self.snapshot();
+        if pred(&monitor) {
+            return Ok(monitor);
+        }
+        // Subscribe, then look again: a change between the two looks is either in the
+        // second snapshot or announced on the channel.
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

@@ -218,7 +218,8 @@ pub(crate) struct InputCore {
     arrivals: AtomicU64,
     overflows: AtomicU64,
     pull_waiting: AtomicBool,
-    pull_signal: (Sender<()>, Receiver<()>),
+    /// Wakes a thread waiting in `pull`: created by the first `pull` on this input.
+    pull_signal: OnceLock<(Sender<()>, Receiver<()>)>,
     /// The producers this input is connected to (for pull requests).
     sources: Mutex<Vec<Arc<OutputCore>>>,
 }
@@ -231,7 +232,7 @@ impl InputCore {
             arrivals: AtomicU64::new(0),
             overflows: AtomicU64::new(0),
             pull_waiting: AtomicBool::new(false),
-            pull_signal: crossbeam_channel::bounded(1),
+            pull_signal: OnceLock::new(),
             sources: Mutex::new(Vec::new()),
         })
     }
@@ -244,8 +245,10 @@ impl InputCore {
         if let Some(owner) = self.owner.get() {
             owner.bell.ring();
         }
-        if self.pull_waiting.load(Ordering::Acquire) {
-            let _ = self.pull_signal.0.try_send(());
+        if self.pull_waiting.load(Ordering::Acquire)
+            && let Some(signal) = self.pull_signal.get()
+        {
+            let _ = signal.0.try_send(());
         }
     }
 
@@ -294,14 +297,17 @@ impl InputCore {
         mut ready: impl FnMut() -> Option<R>,
     ) -> Result<R, PullError> {
         let deadline = crate::thread::later(Instant::now(), timeout);
+        let signal = self
+            .pull_signal
+            .get_or_init(|| crossbeam_channel::bounded(1));
         self.pull_waiting.store(true, Ordering::Release);
-        while self.pull_signal.1.try_recv().is_ok() {}
+        while signal.1.try_recv().is_ok() {}
         let result = self.request().and_then(|()| {
             loop {
                 if let Some(packet) = ready() {
                     break Ok(packet);
                 }
-                if self.pull_signal.1.recv_deadline(deadline).is_err() {
+                if signal.1.recv_deadline(deadline).is_err() {
                     break ready().ok_or(PullError::Timeout(timeout));
                 }
             }
