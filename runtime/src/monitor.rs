@@ -283,6 +283,14 @@ impl ControlMessage {
     }
 }
 
+/// A command queued by [`Handle::post`], whose answers [`Handle::finish`] waits for.
+pub(crate) struct Posted {
+    command: Command,
+    answers: Receiver<Reply>,
+    claim: Arc<AtomicU8>,
+    deadline: Instant,
+}
+
 /// The component's answers to one command.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) enum Reply {
@@ -345,6 +353,14 @@ impl Handle {
     /// but the transition is still running at the timeout, `Ok` is returned and the
     /// transition completes later.
     pub fn command(&self, command: Command) -> Result<(), Rejected> {
+        let posted = self.post(command)?;
+        self.finish(posted)
+    }
+
+    /// The first half of [`Handle::command`]: queue the command and ring the
+    /// component, without waiting ([`System::run_all`](crate::System::run_all) posts to
+    /// every component before it waits for any).
+    pub(crate) fn post(&self, command: Command) -> Result<Posted, Rejected> {
         if !self.shared.spawned.load(Ordering::Acquire) {
             return Err(self.rejected(
                 &command,
@@ -361,7 +377,6 @@ impl Handle {
         let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
-        let is_dead = command == Command::SetState(Controllable::Dead);
         let message = ControlMessage {
             command: command.clone(),
             reply,
@@ -374,6 +389,23 @@ impl Handle {
             ));
         }
         self.bell.ring_strong();
+        Ok(Posted {
+            command,
+            answers,
+            claim,
+            deadline,
+        })
+    }
+
+    /// The second half of [`Handle::command`]: wait for the answers to `posted`.
+    pub(crate) fn finish(&self, posted: Posted) -> Result<(), Rejected> {
+        let Posted {
+            command,
+            answers,
+            claim,
+            deadline,
+        } = posted;
+        let is_dead = command == Command::SetState(Controllable::Dead);
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),

@@ -582,6 +582,9 @@ impl System {
     /// every `ready` component to `running`.
     pub fn run_all(&mut self) -> Result<(), Error> {
         self.start()?;
+        // The commands go out as the components become ready and are all answered
+        // afterwards, so that the components run their transitions in parallel.
+        let mut posted = Vec::new();
         for slot in &self.slots {
             let monitor = slot
                 .handle
@@ -593,9 +596,15 @@ impl System {
                     waited: t.waited,
                 })?;
             if monitor.state == State::Ready {
-                slot.handle
-                    .command(crate::Command::SetState(Controllable::Running))?;
+                posted.push((
+                    &slot.handle,
+                    slot.handle
+                        .post(crate::Command::SetState(Controllable::Running))?,
+                ));
             }
+        }
+        for (handle, posted) in posted {
+            handle.finish(posted)?;
         }
         Ok(())
     }
