@@ -81,12 +81,13 @@ fn next_port_id() -> usize {
 ///
 /// - The thread's turn is: `clear` (a `SeqCst` swap to false), then look at everything
 ///   (control queue, arrival counters, pull queues), then, if nothing was found,
-///   `wait`, which returns at once while the flag is true and otherwise parks until
-///   woken. A ringer that moves the flag from false to true always unparks the thread
-///   (an unpark before the park makes the park return at once: the token persists), so
-///   the thread cannot sleep through a ring that came after its `clear`. Other code on
-///   the thread that parks (channels) may consume the token or wake spuriously: `wait`
-///   rechecks the flag after every return from `park`, and so do those channels.
+///   waits (`spin`, `park_until`), which returns at once while the flag is true and
+///   otherwise parks until woken. A ringer that moves the flag from false to true
+///   always unparks the thread (an unpark before the park makes the park return at
+///   once: the token persists), so the thread cannot sleep through a ring that came
+///   after its `clear`. Other code on the thread that parks (channels) may consume the
+///   token or wake spuriously: `park_until` rechecks the flag after every return from
+///   `park`, and so do those channels.
 /// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
 ///   always swaps. A swap reads the newest value of the flag: if it reads false, this
 ///   ringer sends the wake-up; if it reads true, the thread's next `clear` reads this
@@ -169,30 +170,32 @@ impl Doorbell {
         self.rung.load(Ordering::SeqCst)
     }
 
-    /// Wait until rung or until `deadline` (on the component's thread).
-    pub(crate) fn wait(&self, deadline: Option<Instant>) {
-        match deadline {
-            None => {
-                for round in 0..SPIN_ROUNDS {
-                    if self.rung.load(Ordering::SeqCst) {
-                        return;
-                    }
-                    for _ in 0..1u32 << round {
-                        std::hint::spin_loop();
-                    }
-                }
-                for _ in 0..YIELD_ROUNDS {
-                    if self.rung.load(Ordering::SeqCst) {
-                        return;
-                    }
-                    std::thread::yield_now();
-                }
-                while !self.rung.load(Ordering::SeqCst) {
-                    std::thread::park();
-                }
+    /// Spin, then yield, briefly, until rung: true if it rang (on the component's
+    /// thread, before `park_until` when no timer is due).
+    pub(crate) fn spin(&self) -> bool {
+        for round in 0..SPIN_ROUNDS {
+            if self.rung.load(Ordering::SeqCst) {
+                return true;
             }
-            Some(deadline) => {
-                while !self.rung.load(Ordering::SeqCst) {
+            for _ in 0..1u32 << round {
+                std::hint::spin_loop();
+            }
+        }
+        for _ in 0..YIELD_ROUNDS {
+            if self.rung.load(Ordering::SeqCst) {
+                return true;
+            }
+            std::thread::yield_now();
+        }
+        self.rung.load(Ordering::SeqCst)
+    }
+
+    /// Park until rung or until `deadline` (on the component's thread).
+    pub(crate) fn park_until(&self, deadline: Option<Instant>) {
+        while !self.rung.load(Ordering::SeqCst) {
+            match deadline {
+                None => std::thread::park(),
+                Some(deadline) => {
                     let now = Instant::now();
                     if now >= deadline {
                         return;

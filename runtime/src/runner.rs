@@ -165,9 +165,11 @@ impl Runner {
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
-                self.clock = Instant::now();
-                self.update_cpu(false);
-                self.bell.wait(None);
+                if !self.bell.spin() {
+                    self.clock = Instant::now();
+                    self.update_cpu(false);
+                    self.bell.park_until(None);
+                }
                 continue;
             }
             // 2. The task finished.
@@ -237,10 +239,15 @@ impl Runner {
             let due = self.after_due(after);
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
-        self.update_cpu(false);
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
-        // loop then looks at the control port first (the priority rule above).
-        self.bell.wait(deadline);
+        // loop then looks at the control port first (the priority rule above). Waiting
+        // for input only, a brief spin first; the timing counters are published (a lock
+        // of the monitor) only when the thread is about to sleep.
+        if deadline.is_none() && self.bell.spin() {
+            return;
+        }
+        self.update_cpu(false);
+        self.bell.park_until(deadline);
     }
 
     /// Do the most urgent piece of user-automaton work; false if there was none.
