@@ -167,15 +167,21 @@ pub trait Automaton: Send + 'static {
 
 /// Rings a component's doorbell: the thread wakes and looks for work (see
 /// [`Context::waker`]).
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct Waker {
-    pub(crate) bell: crossbeam_channel::Sender<()>,
+    pub(crate) bell: std::sync::Arc<crate::port::Doorbell>,
+}
+
+impl fmt::Debug for Waker {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Waker").finish_non_exhaustive()
+    }
 }
 
 impl Waker {
     /// Wake the component's thread (a no-op if it is already due to wake).
     pub fn wake(&self) {
-        let _ = self.bell.try_send(());
+        self.bell.ring_strong();
     }
 }
 

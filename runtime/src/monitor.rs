@@ -19,7 +19,8 @@ use crate::table::{Controllable, State};
 use crate::value::Value;
 
 /// How many events an observer's channel holds; events beyond that are dropped for
-/// that observer (and counted in [`Monitor::dropped_events`]).
+/// that observer (and counted in [`Monitor::dropped_events`]). The channel grows as
+/// events wait in it, up to this bound: an observer that keeps up costs little memory.
 pub const OBSERVER_CAPACITY: usize = 4096;
 
 /// How long [`Handle::command`] waits for the component by default.
@@ -214,13 +215,23 @@ impl Shared {
             return;
         }
         let ring = !lock(&self.wakers).is_empty();
-        observers.retain(|observer| match observer.try_send(event.clone()) {
-            Ok(()) => true,
-            Err(TrySendError::Full(_)) => {
+        observers.retain(|observer| {
+            // The channels are unbounded (they grow only as events wait): the bound is
+            // applied here. Every send happens under this lock, so the length cannot
+            // grow between the check and the send. A disconnected observer's channel is
+            // emptied when its receiver goes, so the send below finds it.
+            if observer.len() >= OBSERVER_CAPACITY {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
-                true
+                return true;
             }
-            Err(TrySendError::Disconnected(_)) => false,
+            match observer.try_send(event.clone()) {
+                Ok(()) => true,
+                Err(TrySendError::Full(_)) => {
+                    self.dropped.fetch_add(1, Ordering::Relaxed);
+                    true
+                }
+                Err(TrySendError::Disconnected(_)) => false,
+            }
         });
         drop(observers);
         if ring {
@@ -239,7 +250,7 @@ impl Shared {
     }
 
     pub(crate) fn subscribe(&self) -> Receiver<MonitorEvent> {
-        let (sender, receiver) = crossbeam_channel::bounded(OBSERVER_CAPACITY);
+        let (sender, receiver) = crossbeam_channel::unbounded();
         lock(&self.observers).push(sender);
         receiver
     }
@@ -291,6 +302,14 @@ impl ControlMessage {
     }
 }
 
+/// A command queued by [`Handle::post`], whose answers [`Handle::finish`] waits for.
+pub(crate) struct Posted {
+    command: Command,
+    answers: Receiver<Reply>,
+    claim: Arc<AtomicU8>,
+    deadline: Instant,
+}
+
 /// The component's answers to one command.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) enum Reply {
@@ -310,7 +329,7 @@ pub struct Handle {
     pub(crate) shared: Arc<Shared>,
     pub(crate) control: Sender<ControlMessage>,
     /// The component's doorbell: rung after each command is queued.
-    pub(crate) bell: Sender<()>,
+    pub(crate) bell: Arc<crate::port::Doorbell>,
     pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
@@ -353,6 +372,14 @@ impl Handle {
     /// but the transition is still running at the timeout, `Ok` is returned and the
     /// transition completes later.
     pub fn command(&self, command: Command) -> Result<(), Rejected> {
+        let posted = self.post(command)?;
+        self.finish(posted)
+    }
+
+    /// The first half of [`Handle::command`]: queue the command and ring the
+    /// component, without waiting ([`System::run_all`](crate::System::run_all) posts to
+    /// every component before it waits for any).
+    pub(crate) fn post(&self, command: Command) -> Result<Posted, Rejected> {
         if !self.shared.spawned.load(Ordering::Acquire) {
             return Err(self.rejected(
                 &command,
@@ -369,7 +396,6 @@ impl Handle {
         let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
-        let is_dead = command == Command::SetState(Controllable::Dead);
         let message = ControlMessage {
             command: command.clone(),
             reply,
@@ -381,7 +407,24 @@ impl Handle {
                 "the component's thread has ended or its control queue is full",
             ));
         }
-        let _ = self.bell.try_send(());
+        self.bell.ring_strong();
+        Ok(Posted {
+            command,
+            answers,
+            claim,
+            deadline,
+        })
+    }
+
+    /// The second half of [`Handle::command`]: wait for the answers to `posted`.
+    pub(crate) fn finish(&self, posted: Posted) -> Result<(), Rejected> {
+        let Posted {
+            command,
+            answers,
+            claim,
+            deadline,
+        } = posted;
+        let is_dead = command == Command::SetState(Controllable::Dead);
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),
@@ -458,6 +501,14 @@ impl Handle {
         timeout: Duration,
     ) -> Result<Monitor, Timeout> {
         let deadline = crate::thread::later(Instant::now(), timeout);
+        // Most waits are already satisfied: look before subscribing (a subscription
+        // allocates a channel and costs every publication a send until it is dropped).
+        let monitor = self.snapshot();
+        if pred(&monitor) {
+            return Ok(monitor);
+        }
+        // Subscribe, then look again: a change between the two looks is either in the
+        // second snapshot or announced on the channel.
         let events = self.subscribe();
         loop {
             let monitor = self.snapshot();

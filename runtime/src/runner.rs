@@ -1,10 +1,12 @@
 //! The component thread: one loop that drives the default automaton ([`crate::table`])
 //! and the user automaton of one component.
 //!
-//! The loop blocks in one wait on the component's doorbell (a `bounded(1)` channel
-//! rung by every command, every delivery to its inputs and every pull request to its
-//! outputs), with the nearest timer deadline as its timeout. Each turn handles at most one thing, in
-//! this priority order, then looks at the control port again:
+//! The loop blocks in one wait on the component's doorbell ([`Doorbell`]: rung by every
+//! command, every delivery to its inputs and every pull request to its outputs), with
+//! the nearest timer deadline as its timeout. Each turn clears the doorbell before it
+//! looks at anything (so a ring during the turn makes the next wait return at once),
+//! handles at most one thing, in this priority order, then looks at the control port
+//! again:
 //!
 //! 1. control commands (all that are waiting);
 //! 2. `Context::end` requested by the last user call;
@@ -25,7 +27,7 @@ use crossbeam_channel::{Receiver, Sender};
 
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
-use crate::port::{InputCore, OutputCore};
+use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{later, panic_message};
@@ -54,7 +56,7 @@ pub(crate) struct Runner {
     cx: Context,
     shared: Arc<Shared>,
     control: Receiver<ControlMessage>,
-    bell: Receiver<()>,
+    bell: Arc<Doorbell>,
     inputs: Vec<Arc<InputCore>>,
     outputs: Vec<Arc<OutputCore>>,
     state: State,
@@ -77,6 +79,11 @@ pub(crate) struct Runner {
     deferred: VecDeque<ControlMessage>,
     max_response: Option<Duration>,
     cpu_updated: Instant,
+    /// The latest clock reading: taken once per turn and at the end of each user call,
+    /// and passed down instead of reading the clock again.
+    clock: Instant,
+    /// Whether the spec declares a `pull` output (otherwise no pull queue is looked at).
+    has_pull: bool,
     /// Wall-clock time spent in user calls, and the value last published.
     elapsed: Duration,
     elapsed_published: Duration,
@@ -98,12 +105,11 @@ impl Runner {
         automaton: Box<dyn Automaton>,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
-        bell: (Sender<()>, Receiver<()>),
+        bell: Arc<Doorbell>,
         inputs: Vec<Arc<InputCore>>,
         outputs: Vec<Arc<OutputCore>>,
         exit_guard: Sender<()>,
     ) -> Runner {
-        let (bell_sender, bell) = bell;
         let spec = automaton.spec();
         let now = Instant::now();
         let count = inputs.len();
@@ -131,18 +137,23 @@ impl Runner {
             deferred: VecDeque::new(),
             max_response: spec.timing.max_response,
             cpu_updated: now,
+            clock: now,
+            has_pull: spec.outputs.iter().any(|output| output.pull),
             elapsed: Duration::ZERO,
             elapsed_published: Duration::ZERO,
             published_user: None,
             supervised,
             _exit_guard: exit_guard,
         };
-        runner.cx.waker = Some(crate::automaton::Waker { bell: bell_sender });
+        runner.cx.waker = Some(crate::automaton::Waker {
+            bell: Arc::clone(&runner.bell),
+        });
         runner
     }
 
     /// The thread's body.
     pub(crate) fn run(mut self) {
+        self.bell.attach();
         self.publish_variables();
         match self.run_start() {
             Ok(()) => self.apply(Event::StartOk),
@@ -152,6 +163,8 @@ impl Runner {
             }
         }
         loop {
+            // Before looking at anything: a ring from now on wakes the next wait.
+            self.bell.clear();
             // 1. Control first.
             if !self.drain_control() {
                 break;
@@ -160,8 +173,11 @@ impl Runner {
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
-                self.update_cpu(false);
-                let _ = self.bell.recv();
+                if !self.bell.spin() {
+                    self.clock = Instant::now();
+                    self.update_cpu(false);
+                    self.bell.park_until(None);
+                }
                 continue;
             }
             // 2. The task finished.
@@ -171,9 +187,14 @@ impl Runner {
                 continue;
             }
             let now = Instant::now();
+            self.clock = now;
             self.notice_arrivals(now);
-            if !self.step(now) {
-                self.block(now);
+            // After a piece of work, wait at once when nothing else is known to be
+            // waiting, instead of going round for a second full look: anything that
+            // arrived since the `clear` above rang the bell, so the wait returns at once
+            // for it, and a timer already due makes the wait's deadline past.
+            if !self.step(now) || self.idle() {
+                self.block();
             }
         }
         self.update_cpu(true);
@@ -202,8 +223,24 @@ impl Runner {
         self.state != State::Dead
     }
 
+    /// Whether the last turn left nothing known to be waiting: no ring since the turn
+    /// began, no input pending, no choice or end to act on, no pull request queued.
+    fn idle(&self) -> bool {
+        self.state == State::Running
+            && !self.cx.end_requested
+            && self.pending_choice.is_none()
+            && !self.bell.is_rung()
+            && !self.pending.contains(&true)
+            && !self.pull_requests_waiting()
+    }
+
+    /// Whether a pull request waits at one of the component's pull outputs.
+    fn pull_requests_waiting(&self) -> bool {
+        self.has_pull && self.outputs.iter().any(|output| output.has_requests())
+    }
+
     /// Wait for a command, an arrival or the nearest timer.
-    fn block(&mut self, now: Instant) {
+    fn block(&mut self) {
         let state_spec = &self.spec.states[self.user];
         let mut deadline = self.next_periodic;
         for after in state_spec.after {
@@ -215,17 +252,15 @@ impl Runner {
         {
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
-        self.update_cpu(false);
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
-        // loop then looks at the control port first (the priority rule above).
-        match deadline {
-            Some(deadline) => {
-                let _ = self.bell.recv_deadline(deadline.max(now));
-            }
-            None => {
-                let _ = self.bell.recv();
-            }
+        // loop then looks at the control port first (the priority rule above). Waiting
+        // for input only, a brief spin first; the timing counters are published (a lock
+        // of the monitor) only when the thread is about to sleep.
+        if deadline.is_none() && self.bell.spin() {
+            return;
         }
+        self.update_cpu(false);
+        self.bell.park_until(deadline);
     }
 
     /// Do the most urgent piece of user-automaton work; false if there was none.
@@ -235,7 +270,7 @@ impl Runner {
             match self.call(|automaton, cx| automaton.supervise(state, cx)) {
                 Ok(Ok(None)) => {}
                 Ok(Ok(Some(target))) => {
-                    self.goto(target);
+                    self.goto(target, Instant::now());
                     return true;
                 }
                 Ok(Err(fault)) => {
@@ -251,12 +286,12 @@ impl Runner {
         let state_spec = &self.spec.states[self.user];
         // 3. Timers.
         if let Some(target) = self.pending_choice.take() {
-            self.goto(target);
+            self.goto(target, now);
             return true;
         }
         for after in state_spec.after {
             if now >= self.after_due(after) {
-                self.goto(after.target);
+                self.goto(after.target, now);
                 return true;
             }
         }
@@ -274,11 +309,11 @@ impl Runner {
             .min_by_key(|on| on.port);
         if let Some(on) = fired {
             self.pending[on.port] = false;
-            self.goto(on.target);
+            self.goto(on.target, now);
             return true;
         }
         // 5. Pull requests.
-        self.serve_pulls()
+        self.has_pull && self.serve_pulls()
     }
 
     fn notice_arrivals(&mut self, now: Instant) {
@@ -383,7 +418,7 @@ impl Runner {
                         return;
                     }
                     self.set_state(to);
-                    self.enter(self.spec.initial);
+                    self.enter(self.spec.initial, Instant::now());
                     return;
                 }
                 Action::ResumeUser => {
@@ -404,7 +439,7 @@ impl Runner {
 
     fn resume(&mut self) {
         if !self.user_entered {
-            self.enter(self.user);
+            self.enter(self.user, Instant::now());
             return;
         }
         // Time in a state stops while suspended: shift the timers by the pause.
@@ -572,7 +607,8 @@ impl Runner {
         let automaton = &mut *self.automaton;
         let cx = &mut self.cx;
         let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
-        let took = started.elapsed();
+        self.clock = Instant::now();
+        let took = self.clock.saturating_duration_since(started);
         // Elapsed time is accumulated here and published with the CPU time (see
         // `update_timing`), keeping the monitor lock off the per-call path.
         self.elapsed += took;
@@ -641,7 +677,8 @@ impl Runner {
     /// Publish the elapsed time (if it changed) and the thread's CPU time (a system
     /// call: at most once per `CPU_TIME_REFRESH` unless `force`).
     fn update_cpu(&mut self, force: bool) {
-        let refresh_cpu = force || self.cpu_updated.elapsed() >= CPU_TIME_REFRESH;
+        let refresh_cpu =
+            force || self.clock.saturating_duration_since(self.cpu_updated) >= CPU_TIME_REFRESH;
         let cpu = if refresh_cpu {
             self.cpu_updated = Instant::now();
             cpu_time::ThreadTime::try_now()
@@ -787,7 +824,7 @@ impl Runner {
 
     /// A user transition to `target`: the exit section of the current state, then the
     /// entry of `target`.
-    fn goto(&mut self, target: usize) {
+    fn goto(&mut self, target: usize, now: Instant) {
         if target >= self.spec.states.len() {
             self.fail(format!("transition to unknown user state #{target}"));
             return;
@@ -801,12 +838,11 @@ impl Runner {
                 return;
             }
         }
-        self.enter(target);
+        self.enter(target, now);
     }
 
     /// Enter user state `target` and run its entry section.
-    fn enter(&mut self, target: usize) {
-        let now = Instant::now();
+    fn enter(&mut self, target: usize, now: Instant) {
         self.user = target;
         self.user_entered = true;
         self.entered_at = now;
@@ -856,8 +892,9 @@ impl Runner {
             return;
         }
         if !self.reanchored {
-            // Absolute deadlines: the next one is a period after this one, not after now.
-            let now = Instant::now();
+            // Absolute deadlines: the next one is a period after this one, not after now
+            // (the clock as the section's call ended).
+            let now = self.clock;
             let mut next = later(deadline, period);
             if next <= now {
                 let late = now.duration_since(next).as_nanos();

@@ -483,10 +483,10 @@ impl System {
             .zip(ports.inputs.iter().cloned())
             .collect();
         let shared = Arc::new(Shared::new(monitor, named_inputs));
-        let (bell_sender, bell) = crossbeam_channel::bounded(1);
+        let bell = crate::port::Doorbell::new();
         for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
             let owner = Owner {
-                bell: bell_sender.clone(),
+                bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
             };
@@ -499,7 +499,7 @@ impl System {
         }
         for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
             let owner = Owner {
-                bell: bell_sender.clone(),
+                bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
             };
@@ -510,13 +510,18 @@ impl System {
                 });
             }
         }
+        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+            if declared.pull {
+                port.core.accept_pulls();
+            }
+        }
         let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
         let (exit_guard, exited) = crossbeam_channel::bounded(1);
         let handle = Handle {
             name: Arc::from(name.as_str()),
             shared: Arc::clone(&shared),
             control: control_sender,
-            bell: bell_sender.clone(),
+            bell: Arc::clone(&bell),
             exited,
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
@@ -526,7 +531,7 @@ impl System {
             automaton,
             shared,
             control,
-            (bell_sender.clone(), bell),
+            bell,
             ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             exit_guard,
@@ -583,6 +588,9 @@ impl System {
     /// every `ready` component to `running`.
     pub fn run_all(&mut self) -> Result<(), Error> {
         self.start()?;
+        // The commands go out as the components become ready and are all answered
+        // afterwards, so that the components run their transitions in parallel.
+        let mut posted = Vec::new();
         for slot in &self.slots {
             let monitor = slot
                 .handle
@@ -594,9 +602,15 @@ impl System {
                     waited: t.waited,
                 })?;
             if monitor.state == State::Ready {
-                slot.handle
-                    .command(crate::Command::SetState(Controllable::Running))?;
+                posted.push((
+                    &slot.handle,
+                    slot.handle
+                        .post(crate::Command::SetState(Controllable::Running))?,
+                ));
             }
+        }
+        for (handle, posted) in posted {
+            handle.finish(posted)?;
         }
         Ok(())
     }
@@ -914,7 +928,7 @@ impl System {
                         reply,
                         claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
                     });
-                let _ = slot.handle.bell.try_send(());
+                slot.handle.bell.ring_strong();
             }
         }
         let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);

@@ -212,12 +212,13 @@ fn check_starting(command: Controllable) {
     *script.start_gate.lock().unwrap() = Some(gate);
     let mut rig = Rig::unstarted(script);
     rig.system.start().expect("start");
-    rig.handle
-        .wait_for(
-            |_| rig.script.log.lock().unwrap().contains(&"start".to_owned()),
-            WAIT,
-        )
-        .expect("start hook entered");
+    // The start hook's log is not on the monitor (nothing is announced while the hook
+    // waits at its gate), so `wait_for` cannot be woken by it: poll the log.
+    let waiting_since = std::time::Instant::now();
+    while !rig.script.log.lock().unwrap().contains(&"start".to_owned()) {
+        assert!(waiting_since.elapsed() < WAIT, "start hook entered");
+        std::thread::sleep(Duration::from_millis(1));
+    }
     assert_eq!(rig.handle.state(), State::Starting);
     let handle = rig.handle.clone();
     let sender = std::thread::spawn(move || handle.command(coolbot::Command::SetState(command)));
