@@ -1,11 +1,15 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
-//! **Invariant:** emission cannot fail on user input. Every generated Rust file is
-//! parsed with `syn` and printed with `prettyplease` (then `rustfmt` when it is
-//! installed, so the files are `cargo fmt` clean); a file that does not parse is a
-//! template bug and panics with the offending text. Output depends only on the IR.
+//! **Invariant:** emission cannot fail on user input. Generated Rust is formatted with
+//! `rustfmt` when it is installed (one run over the whole crate, so the files are
+//! `cargo fmt` clean), else printed with `prettyplease`; user files keep the
+//! templates' layout without `rustfmt`. Each file is parsed at most once: by
+//! `rustfmt` or by `syn` for `prettyplease`, and by `syn` in debug builds where no
+//! formatter parses it. A file that does not parse is a template bug and panics with
+//! the offending text (the test suite also compiles every generated crate). Output
+//! depends only on the IR.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use askama::Template;
@@ -127,23 +131,38 @@ fn check_parses(code: &str) -> syn::File {
     }
 }
 
-/// Formats generated Rust without `rustfmt`: `prettyplease`, keeping the leading `//`
-/// header lines (which `syn` drops).
-fn pretty(code: &str) -> String {
-    let file = check_parses(code);
-    let header: String = code
-        .lines()
-        .take_while(|l| l.starts_with("//") && !l.starts_with("//!") && !l.starts_with("///"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    format!("{header}{}", prettyplease::unparse(&file))
+/// [`check_parses`] in debug builds (and so in the test suite, which also compiles
+/// every generated crate); nothing in release builds, where the parse would cost as
+/// much as the rest of emission and only ever finds template bugs.
+fn debug_check_parses(code: &str) {
+    if cfg!(debug_assertions) {
+        check_parses(code);
+    }
 }
 
-/// Formats one piece of generated Rust: checks it parses, then `rustfmt` when it is
-/// installed (keeping the templates' blank lines), else `prettyplease`.
+/// Formats generated Rust without `rustfmt`: `prettyplease`, keeping the leading `//`
+/// header lines (which `syn` drops). Its parse doubles as the template check.
+fn pretty(code: &str) -> String {
+    let file = check_parses(code);
+    let mut out = String::with_capacity(code.len() + code.len() / 4);
+    for line in code
+        .lines()
+        .take_while(|l| l.starts_with("//") && !l.starts_with("//!") && !l.starts_with("///"))
+    {
+        out.push_str(line);
+        out.push('\n');
+    }
+    out.push_str(&prettyplease::unparse(&file));
+    out
+}
+
+/// Formats one piece of generated Rust: `rustfmt` when it is installed (keeping the
+/// templates' blank lines), else `prettyplease`; either way it must parse.
 pub fn format_generated(code: &str) -> String {
-    check_parses(code);
-    rustfmt_stdin(code).unwrap_or_else(|| pretty(code))
+    match rustfmt_stdin(code) {
+        Some(text) => text,
+        None => pretty(code),
+    }
 }
 
 fn rustfmt_program() -> std::ffi::OsString {
@@ -176,7 +195,7 @@ fn rustfmt_stdin(code: &str) -> Option<String> {
 /// scratch directory with the crate's layout, `rustfmt` formats the roots and every
 /// module they declare, and the results are read back. `None` when `rustfmt` is not
 /// installed or fails (the caller falls back to per-file formatting).
-fn rustfmt_tree(files: &[(PathBuf, String)], roots: &[&str]) -> Option<Vec<String>> {
+fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
     static SCRATCH: AtomicUsize = AtomicUsize::new(0);
     let dir = std::env::temp_dir().join(format!(
@@ -241,12 +260,14 @@ pub fn single_file(krate: &ir::Crate) -> String {
         krate.sources_text()
     );
     for (module, text) in render_modules(krate) {
-        let body: String = text
-            .lines()
-            .filter(|l| !l.starts_with("// @generated"))
-            .map(|l| format!("{l}\n"))
-            .collect();
-        out.push_str(&format!("pub mod {module} {{\n{body}}}\n"));
+        out.push_str("pub mod ");
+        out.push_str(&module);
+        out.push_str(" {\n");
+        for line in text.lines().filter(|l| !l.starts_with("// @generated")) {
+            out.push_str(line);
+            out.push('\n');
+        }
+        out.push_str("}\n");
     }
     // The support functions, taken from the generated `mod.rs`.
     let mod_rs = render(&GeneratedMod { krate });
@@ -395,25 +416,28 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         );
     }
 
-    let rust: Vec<(PathBuf, String)> = files
+    let is_rust = |path: &Path| path.extension().is_some_and(|e| e == "rs");
+    let rust: Vec<(&Path, &str)> = files
         .iter()
-        .filter(|(path, _, _)| path.extension().is_some_and(|e| e == "rs"))
-        .map(|(path, text, _)| {
-            check_parses(text);
-            (path.clone(), text.clone())
-        })
+        .filter(|(path, _, _)| is_rust(path))
+        .map(|(path, text, _)| (path.as_path(), text.as_str()))
         .collect();
-    let mut formatted = rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]).map(|v| v.into_iter());
+    // rustfmt fails on Rust that does not parse, and then the fallback below parses
+    // every file: a template bug is caught on both paths.
+    let mut formatted = rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]).map(Vec::into_iter);
     files
         .into_iter()
         .map(|(path, text, kind)| {
-            let contents = if path.extension().is_some_and(|e| e == "rs") {
+            let contents = if is_rust(&path) {
                 match formatted.as_mut().and_then(Iterator::next) {
                     Some(text) => text,
                     None if kind == FileKind::Generated => pretty(&text),
                     // Without rustfmt, user files keep the templates' own layout
                     // (`prettyplease` would drop their comments).
-                    None => text,
+                    None => {
+                        debug_check_parses(&text);
+                        text
+                    }
                 }
             } else {
                 text
@@ -428,10 +452,13 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
 }
 
 /// Formats one hand-laid-out user file (comments matter) with `rustfmt` when it is
-/// installed; checks that it parses either way.
+/// installed (which fails on Rust that does not parse); checked in debug builds
+/// otherwise.
 fn format_user(code: &str) -> String {
-    check_parses(code);
-    rustfmt_stdin(code).unwrap_or_else(|| code.to_owned())
+    rustfmt_stdin(code).unwrap_or_else(|| {
+        debug_check_parses(code);
+        code.to_owned()
+    })
 }
 
 #[derive(Template)]
