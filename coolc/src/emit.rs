@@ -169,9 +169,29 @@ fn rustfmt_program() -> std::ffi::OsString {
     std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
 
-/// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed or fails.
+/// Whether `rustfmt` (or the program `RUSTFMT` names) runs: probed once per process
+/// with `--version`, so that without it no scratch tree is written and no process is
+/// spawned per file.
+fn rustfmt_installed() -> bool {
+    static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *INSTALLED.get_or_init(|| {
+        Command::new(rustfmt_program())
+            .arg("--version")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|status| status.success())
+    })
+}
+
+/// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed (see
+/// [`rustfmt_installed`]) or fails.
 fn rustfmt_stdin(code: &str) -> Option<String> {
     use std::io::Write;
+    if !rustfmt_installed() {
+        return None;
+    }
     let mut child = Command::new(rustfmt_program())
         .args(["--edition", "2024", "--emit", "stdout", "--quiet"])
         .stdin(Stdio::piped())
@@ -193,10 +213,14 @@ fn rustfmt_stdin(code: &str) -> Option<String> {
 
 /// Formats a whole crate's Rust files with ONE `rustfmt` run: they are written to a
 /// scratch directory with the crate's layout, `rustfmt` formats the roots and every
-/// module they declare, and the results are read back. `None` when `rustfmt` is not
-/// installed or fails (the caller falls back to per-file formatting).
+/// module they declare, and the results are read back. `None`, without writing
+/// anything, when `rustfmt` is not installed; `None` when it fails (the caller falls
+/// back to per-file formatting).
 fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
+    if !rustfmt_installed() {
+        return None;
+    }
     static SCRATCH: AtomicUsize = AtomicUsize::new(0);
     let dir = std::env::temp_dir().join(format!(
         "coolc-fmt-{}-{}",
