@@ -448,31 +448,80 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         .collect();
     // rustfmt fails on Rust that does not parse, and then the fallback below parses
     // every file: a template bug is caught on both paths.
-    let mut formatted = rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]).map(Vec::into_iter);
+    let new_contents: Vec<Option<String>> = match rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]) {
+        Some(formatted) => {
+            let mut formatted = formatted.into_iter();
+            files
+                .iter()
+                .map(|(path, _, _)| {
+                    if is_rust(path) {
+                        formatted.next()
+                    } else {
+                        None
+                    }
+                })
+                .collect()
+        }
+        // The files are independent: print them on every core.
+        None => par_map(&files, |(path, text, kind)| {
+            if !is_rust(path) {
+                None
+            } else if *kind == FileKind::Generated {
+                Some(pretty(text))
+            } else {
+                // Without rustfmt, user files keep the templates' own layout
+                // (`prettyplease` would drop their comments).
+                debug_check_parses(text);
+                None
+            }
+        }),
+    };
     files
         .into_iter()
-        .map(|(path, text, kind)| {
-            let contents = if is_rust(&path) {
-                match formatted.as_mut().and_then(Iterator::next) {
-                    Some(text) => text,
-                    None if kind == FileKind::Generated => pretty(&text),
-                    // Without rustfmt, user files keep the templates' own layout
-                    // (`prettyplease` would drop their comments).
-                    None => {
-                        debug_check_parses(&text);
-                        text
-                    }
-                }
-            } else {
-                text
-            };
-            EmittedFile {
-                path,
-                contents,
-                kind,
-            }
+        .zip(new_contents)
+        .map(|((path, text, kind), new)| EmittedFile {
+            path,
+            contents: new.unwrap_or(text),
+            kind,
         })
         .collect()
+}
+
+/// `f` applied to every item on `std::thread::available_parallelism` threads (which
+/// take the next item as they finish one), results in the items' order. A panic in
+/// `f` is propagated.
+fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .min(items.len());
+    if threads <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let index = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(index) else {
+                break;
+            };
+            done.push((index, f(item)));
+        }
+        done
+    };
+    let mut done: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads).map(|_| scope.spawn(work)).collect();
+        workers
+            .into_iter()
+            .flat_map(|worker| match worker.join() {
+                Ok(done) => done,
+                Err(panic) => std::panic::resume_unwind(panic),
+            })
+            .collect()
+    });
+    done.sort_unstable_by_key(|(index, _)| *index);
+    done.into_iter().map(|(_, result)| result).collect()
 }
 
 /// Formats one hand-laid-out user file (comments matter) with `rustfmt` when it is
