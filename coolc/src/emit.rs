@@ -1,7 +1,7 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
 //! **Invariant:** emission cannot fail on user input. Generated Rust is formatted with
-//! `rustfmt` when it is installed (a few runs over the whole crate, so the files are
+//! `rustfmt` when it is installed (one run over the whole crate, so the files are
 //! `cargo fmt` clean), else printed with `prettyplease`; user files keep the
 //! templates' layout without `rustfmt`. Each file is parsed at most once: by
 //! `rustfmt` or by `syn` for `prettyplease`, and by `syn` in debug builds where no
@@ -226,83 +226,47 @@ fn rustfmt_stdin(code: &str) -> Option<String> {
     }
 }
 
-/// Whether `code` declares an out-of-line module (`mod name;`), which `rustfmt`
-/// would go on to format when given the file's path.
-fn declares_modules(code: &str) -> bool {
-    code.lines().any(|line| {
-        let line = line.trim();
-        let line = line
-            .strip_prefix("pub(crate) ")
-            .or_else(|| line.strip_prefix("pub "))
-            .unwrap_or(line);
-        line.starts_with("mod ") && line.ends_with(';')
-    })
-}
-
-/// Formats a whole crate's Rust files with `rustfmt` in a few processes: the files
-/// that declare out-of-line modules (`src/lib.rs`, `src/generated/mod.rs`) from
-/// stdin, so that `rustfmt` does not descend into their modules; every other file is
-/// written to a scratch directory with the crate's layout and formatted in place,
-/// split across `std::thread::available_parallelism` `rustfmt` processes running at
-/// once, and read back. `None`, without writing anything, when `rustfmt` is not
-/// installed; `None` when it fails (the caller falls back to per-file formatting).
-fn rustfmt_tree(files: &[(&Path, &str)]) -> Option<Vec<String>> {
+/// Formats a whole crate's Rust files with ONE `rustfmt` run: they are written to a
+/// scratch directory with the crate's layout, `rustfmt` formats the roots and every
+/// module they declare, and the results are read back. `None`, without writing
+/// anything, when `rustfmt` is not installed; `None` when it fails (the caller falls
+/// back to per-file formatting).
+fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
-    static SCRATCH: AtomicUsize = AtomicUsize::new(0);
     if !rustfmt_installed() {
         return None;
     }
+    static SCRATCH: AtomicUsize = AtomicUsize::new(0);
     let dir = std::env::temp_dir().join(format!(
         "coolc-fmt-{}-{}",
         std::process::id(),
         SCRATCH.fetch_add(1, Ordering::Relaxed)
     ));
     let result = (|| {
-        let mut formatted: Vec<Option<String>> = vec![None; files.len()];
-        let mut leaves: Vec<(usize, PathBuf)> = Vec::new();
-        for (index, (path, text)) in files.iter().enumerate() {
-            if declares_modules(text) {
-                formatted[index] = Some(rustfmt_stdin(text)?);
-            } else {
-                let path = dir.join(path);
-                std::fs::create_dir_all(path.parent()?).ok()?;
-                std::fs::write(&path, text).ok()?;
-                leaves.push((index, path));
-            }
+        for (path, text) in files {
+            let path = dir.join(path);
+            std::fs::create_dir_all(path.parent()?).ok()?;
+            std::fs::write(&path, text).ok()?;
         }
-        let processes = std::thread::available_parallelism()
-            .map_or(1, std::num::NonZero::get)
-            .clamp(1, leaves.len().max(1));
-        let mut children = Vec::new();
-        let mut spawned = true;
-        for chunk in leaves.chunks(leaves.len().div_ceil(processes).max(1)) {
-            let child = Command::new(rustfmt_program())
-                .args(["--edition", "2024", "--quiet"])
-                .args(chunk.iter().map(|(_, path)| path))
-                .stdin(Stdio::null())
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn();
-            match child {
-                Ok(child) => children.push(child),
-                Err(_) => {
-                    spawned = false;
-                    break;
-                }
-            }
-        }
-        // Wait for every process started, even when one failed.
-        let succeeded = children
-            .into_iter()
-            .map(|mut child| child.wait().is_ok_and(|status| status.success()))
-            .fold(spawned, |all, ok| all && ok);
-        if !succeeded {
+        let roots: Vec<PathBuf> = roots
+            .iter()
+            .map(|r| dir.join(r))
+            .filter(|r| r.exists())
+            .collect();
+        let status = Command::new(rustfmt_program())
+            .args(["--edition", "2024", "--quiet"])
+            .args(&roots)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .ok()?;
+        if !status.success() {
             return None;
         }
-        for (index, path) in &leaves {
-            formatted[*index] = Some(std::fs::read_to_string(path).ok()?);
-        }
-        formatted.into_iter().collect::<Option<Vec<String>>>()
+        files
+            .iter()
+            .map(|(path, _)| std::fs::read_to_string(dir.join(path)).ok())
+            .collect::<Option<Vec<String>>>()
     })();
     let _ = std::fs::remove_dir_all(&dir);
     result
@@ -457,9 +421,9 @@ fn user_path(module: &str) -> PathBuf {
     PathBuf::from(format!("src/{}.rs", module.trim_start_matches("r#")))
 }
 
-/// Every file of the crate directory for `krate`, formatted (`rustfmt` over the
-/// whole crate, one process per core, when it is installed; `prettyplease` for
-/// generated files, one thread per core, otherwise).
+/// Every file of the crate directory for `krate`, formatted (one `rustfmt` run for
+/// the whole crate when it is installed, `prettyplease` for generated files
+/// otherwise).
 pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
     emit_crate_with(krate, Formatting::Formatted)
 }
@@ -527,7 +491,7 @@ pub fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<Emitted
     // rustfmt fails on Rust that does not parse, and then the fallback below parses
     // every file: a template bug is caught on both paths.
     let formatted = match formatting {
-        Formatting::Formatted => rustfmt_tree(&rust),
+        Formatting::Formatted => rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]),
         Formatting::Unformatted => None,
     };
     let new_contents: Vec<Option<String>> = match formatted {
