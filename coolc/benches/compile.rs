@@ -9,10 +9,12 @@
 //! emits in under one second, and ten times the input costs at most twelve times the
 //! time. The baseline of the scaling figure is the 1x run in the same process.
 //!
-//! coolc formats generated code with the `rustfmt` program when it is installed, and
-//! with `prettyplease` otherwise. Both are measured: each row runs in a child process
-//! of this benchmark, with `RUSTFMT` pointing at a missing program for the built-in
-//! rows. The 10x set runs with the built-in formatter only.
+//! `coolc compile` formats generated code with the `rustfmt` program when it is
+//! installed, and with `prettyplease` otherwise; the `Builder` (build scripts) writes
+//! one unformatted file by default. All three paths are measured: each row runs in a
+//! child process of this benchmark, with `RUSTFMT` pointing at a missing program for
+//! the in-process rows (`Builtin`, `Unformatted`). The 10x set runs on the two
+//! in-process paths only.
 //!
 //! `cargo bench -p coolc --bench compile` (add `-- --quick` to skip the 10x run and
 //! the rustfmt run of the 1,000 set).
@@ -292,8 +294,10 @@ impl Times {
     }
 }
 
-/// Check, lower and emit `roots`, then write the crate to a temporary directory.
-fn run(files: &Files, roots: &[PathBuf], write_crate: bool) -> Times {
+/// Check, lower and emit `roots`, then write the output to a temporary directory: the
+/// crate as `coolc compile` does, or for [`Formatter::Unformatted`] the single
+/// unformatted file the `Builder` writes into `OUT_DIR`.
+fn run(files: &Files, roots: &[PathBuf], write_crate: bool, formatter: Formatter) -> Times {
     let load = loader(files);
     let (check, analysis) = measure(|| coolc::analyze(roots, &load));
     assert!(
@@ -303,11 +307,26 @@ fn run(files: &Files, roots: &[PathBuf], write_crate: bool) -> Times {
     );
     let options = coolc::lower::Options::default();
     let (lower, krate) = measure(|| coolc::lower::lower(&analysis.files, &options));
+    if formatter == Formatter::Unformatted {
+        let (emit, text) =
+            measure(|| coolc::emit::single_file_with(&krate, coolc::emit::Formatting::Unformatted));
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let (write, written) = measure(|| std::fs::write(dir.path().join("cool.rs"), &text));
+        written.expect("write the file");
+        return Times {
+            check,
+            lower,
+            emit,
+            write,
+            files: 1,
+            bytes: text.len(),
+        };
+    }
     let (emit, emitted) = measure(|| coolc::emit::emit_crate(&krate));
     let mut write = Cost::default();
     if write_crate {
         let dir = tempfile::tempdir().expect("temporary directory");
-        let (cost, written) = measure(|| coolc::merge::write_crate(dir.path(), &krate));
+        let (cost, written) = measure(|| coolc::merge::write_emitted(dir.path(), &krate, &emitted));
         written.expect("write the crate");
         write = cost;
     }
@@ -322,10 +341,12 @@ fn run(files: &Files, roots: &[PathBuf], write_crate: bool) -> Times {
 }
 
 /// The median run of `rounds` by compile time.
-fn median_run(rounds: usize, files: &Files, roots: &[PathBuf]) -> Times {
+fn median_run(rounds: usize, files: &Files, roots: &[PathBuf], formatter: Formatter) -> Times {
     // Writing the 10x crate adds minutes and no figure the goals use.
     let write = roots.len() < 5_000;
-    let mut times: Vec<Times> = (0..rounds).map(|_| run(files, roots, write)).collect();
+    let mut times: Vec<Times> = (0..rounds)
+        .map(|_| run(files, roots, write, formatter))
+        .collect();
     times.sort_by_key(|t| t.compile().wall);
     times[times.len() / 2]
 }
@@ -350,16 +371,16 @@ fn input(set: &str) -> Files {
     }
 }
 
-/// Child mode: `--child SET ROUNDS`; prints `check lower emit write files bytes`
-/// (seconds, counts) of the median round.
-fn child(set: &str, rounds: usize) {
+/// Child mode: `--child SET ROUNDS FORMATTER`; prints `check lower emit write files
+/// bytes` (seconds, counts) of the median round.
+fn child(set: &str, rounds: usize, formatter: Formatter) {
     let files = input(set);
     let roots: Vec<PathBuf> = files.keys().cloned().collect();
     let t = if set == "fixtures" {
         // Each fixture is a description set of its own: compile them one by one.
         let runs: Vec<Times> = roots
             .iter()
-            .map(|root| median_run(rounds, &files, std::slice::from_ref(root)))
+            .map(|root| median_run(rounds, &files, std::slice::from_ref(root), formatter))
             .collect();
         Times {
             check: runs.iter().map(|t| t.check).sum(),
@@ -370,7 +391,7 @@ fn child(set: &str, rounds: usize) {
             bytes: runs.iter().map(|t| t.bytes).sum(),
         }
     } else {
-        median_run(rounds, &files, &roots)
+        median_run(rounds, &files, &roots, formatter)
     };
     let mut line = String::new();
     for c in [t.check, t.lower, t.emit, t.write] {
@@ -387,6 +408,19 @@ enum Formatter {
     /// `RUSTFMT` names a program that does not exist, so coolc formats with its
     /// built-in fallback (`prettyplease`, in process).
     Builtin,
+    /// The `Builder` path: one unformatted file (`Builder` default), no user files.
+    Unformatted,
+}
+
+impl Formatter {
+    fn parse(name: &str) -> Formatter {
+        match name {
+            "Rustfmt" => Formatter::Rustfmt,
+            "Builtin" => Formatter::Builtin,
+            "Unformatted" => Formatter::Unformatted,
+            other => panic!("unknown formatter {other}"),
+        }
+    }
 }
 
 /// Run one set in a child process (the formatter is chosen through the `RUSTFMT`
@@ -394,8 +428,13 @@ enum Formatter {
 fn in_child(set: &str, rounds: usize, formatter: Formatter) -> Times {
     let exe = std::env::current_exe().expect("current exe");
     let mut command = std::process::Command::new(exe);
-    command.args(["--child", set, &rounds.to_string()]);
-    if formatter == Formatter::Builtin {
+    command.args([
+        "--child",
+        set,
+        &rounds.to_string(),
+        &format!("{formatter:?}"),
+    ]);
+    if formatter != Formatter::Rustfmt {
         command.env("RUSTFMT", "/nonexistent/coolc-bench-no-rustfmt");
     }
     let output = command.output().expect("run the child");
@@ -461,7 +500,11 @@ fn main() {
         return;
     }
     if let Some(at) = args.iter().position(|a| a == "--child") {
-        child(&args[at + 1], args[at + 2].parse().expect("rounds"));
+        child(
+            &args[at + 1],
+            args[at + 2].parse().expect("rounds"),
+            Formatter::parse(&args[at + 3]),
+        );
         return;
     }
     let quick = args.iter().any(|a| a == "--quick")
@@ -472,7 +515,7 @@ fn main() {
         if quick { "quick" } else { "full" }
     );
     println!(
-        "| input | size | formatter | check (analyze) | lower | emit to memory | check + lower + emit | write crate to disk (emit again + stubs + files) | output |"
+        "| input | size | formatter | check (analyze) | lower | emit to memory | check + lower + emit | write the emitted crate to disk (stubs + files) | output |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
 
@@ -489,71 +532,65 @@ fn main() {
             row(name, set, formatter, t);
         }
     }
-    // The shipped path (rustfmt over the whole crate) on the 1,000 set.
+    // The 1,000 set on each path: `coolc compile` with rustfmt (the shipped path when
+    // rustfmt is installed; skipped in quick runs), `coolc compile` with the built-in
+    // formatter, and the `Builder` (unformatted). One round each: a round takes
+    // seconds, and the CPU times vary little between rounds. The 10x set (full runs)
+    // on the two in-process paths.
+    let mut paths = vec![Formatter::Builtin, Formatter::Unformatted];
     if !quick {
-        let t = in_child("1x", 1, Formatter::Rustfmt);
-        row("1,000 atomic + 100 compound", "1x", Formatter::Rustfmt, t);
+        paths.insert(0, Formatter::Rustfmt);
     }
-    // One round each for the generated sets: a round of the 1x set takes tens of
-    // seconds, and the CPU times vary little between rounds.
-    let small = in_child("1x", 1, Formatter::Builtin);
-    row(
-        "1,000 atomic + 100 compound",
-        "1x",
-        Formatter::Builtin,
-        small,
-    );
-    let large = if quick {
-        None
-    } else {
-        let t = in_child("10x", 1, Formatter::Builtin);
-        row(
-            "10,000 atomic + 1,000 compound",
-            "10x",
-            Formatter::Builtin,
-            t,
-        );
-        Some(t)
-    };
+    let mut results = Vec::new();
+    for formatter in paths {
+        let small = in_child("1x", 1, formatter);
+        row("1,000 atomic + 100 compound", "1x", formatter, small);
+        let large = (!quick && formatter != Formatter::Rustfmt).then(|| {
+            let t = in_child("10x", 1, formatter);
+            row("10,000 atomic + 1,000 compound", "10x", formatter, t);
+            t
+        });
+        results.push((formatter, small, large));
+    }
 
     println!();
     let verdict = |ok: bool| if ok { "pass" } else { "MISS" };
     let second = Duration::from_secs(1);
-    println!(
-        "- 1,000 set, check + lower + emit (built-in formatter): {} (goal < 1 s): wall {}, cpu {}",
-        cost(small.compile()),
-        verdict(small.compile().wall < second),
-        verdict(small.compile().cpu < second)
-    );
-    println!(
-        "- 1,000 set, check alone: {} (goal < 1 s): wall {}, cpu {}",
-        cost(small.check),
-        verdict(small.check.wall < second),
-        verdict(small.check.cpu < second)
-    );
-    match large {
-        Some(large) => {
-            let ratio = |a: Duration, b: Duration| a.as_secs_f64() / b.as_secs_f64();
-            for (what, pick) in [
-                ("wall", (|c: Cost| c.wall) as fn(Cost) -> Duration),
-                ("cpu", |c: Cost| c.cpu),
-            ] {
-                let scaling = ratio(pick(large.compile()), pick(small.compile()));
-                println!(
-                    "- {what}: 10x input costs {scaling:.2}x the time of check + lower + emit (goal <= 12x): {}",
-                    verdict(scaling <= 12.0)
-                );
-                println!(
-                    "- {what}: 10x input, per stage: check {:.2}x, lower {:.2}x, emit {:.2}x, write {:.2}x",
-                    ratio(pick(large.check), pick(small.check)),
-                    ratio(pick(large.lower), pick(small.lower)),
-                    ratio(pick(large.emit), pick(small.emit)),
-                    ratio(pick(large.write), pick(small.write)),
-                );
-            }
+    for (formatter, small, large) in results {
+        println!(
+            "- {formatter:?}: 1,000 set, check + lower + emit: {} (goal < 1 s): wall {}, cpu {}",
+            cost(small.compile()),
+            verdict(small.compile().wall < second),
+            verdict(small.compile().cpu < second)
+        );
+        println!(
+            "- {formatter:?}: 1,000 set, check alone: {} (goal < 1 s): wall {}, cpu {}",
+            cost(small.check),
+            verdict(small.check.wall < second),
+            verdict(small.check.cpu < second)
+        );
+        let Some(large) = large else {
+            continue;
+        };
+        let ratio = |a: Duration, b: Duration| a.as_secs_f64() / b.as_secs_f64();
+        for (what, pick) in [
+            ("wall", (|c: Cost| c.wall) as fn(Cost) -> Duration),
+            ("cpu", |c: Cost| c.cpu),
+        ] {
+            let scaling = ratio(pick(large.compile()), pick(small.compile()));
+            println!(
+                "- {formatter:?}, {what}: 10x input costs {scaling:.2}x the time of check + lower + emit (goal <= 12x): {}",
+                verdict(scaling <= 12.0)
+            );
+            println!(
+                "- {formatter:?}, {what}: 10x input, per stage: check {:.2}x, lower {:.2}x, emit {:.2}x",
+                ratio(pick(large.check), pick(small.check)),
+                ratio(pick(large.lower), pick(small.lower)),
+                ratio(pick(large.emit), pick(small.emit)),
+            );
         }
-        None => {
-            println!("- quick run: the 10x set and the rustfmt run of the 1,000 set were skipped")
-        }
+    }
+    if quick {
+        println!("- quick run: the 10x set and the rustfmt run of the 1,000 set were skipped");
     }
 }

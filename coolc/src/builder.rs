@@ -21,9 +21,16 @@
 //! prints `cargo:rustc-link-lib` for every `link system`. It writes no user stub files:
 //! `coolc compile` (or the rustc error naming each missing `Behavior` method) tells
 //! you what to implement.
+//!
+//! The file is not formatted by default: nobody reads it, and formatting is most of
+//! the cost of emission (the 1,000-component benchmark set emits several times
+//! faster unformatted; see `docs/performance.md`). It is the same Rust either way.
+//! Turn formatting on with [`Builder::format`] to read the file (`prettyplease`, in
+//! process).
 
 use std::path::{Path, PathBuf};
 
+use crate::emit::Formatting;
 use crate::{RenderOptions, emit, lower};
 
 /// Why a [`Builder`] failed. Its `Debug` is its `Display`, so that
@@ -58,6 +65,7 @@ pub struct Builder {
     out_dir: Option<PathBuf>,
     file_name: Option<String>,
     cargo_output: bool,
+    format: bool,
 }
 
 impl Builder {
@@ -67,6 +75,7 @@ impl Builder {
             out_dir: None,
             file_name: None,
             cargo_output: true,
+            format: false,
         }
     }
 
@@ -86,6 +95,14 @@ impl Builder {
     /// (default true; turn off outside build scripts).
     pub fn cargo_output(mut self, on: bool) -> Builder {
         self.cargo_output = on;
+        self
+    }
+
+    /// Whether to format the output file with `prettyplease` (default false: the
+    /// file is valid, warning-free Rust either way, and unformatted it is written
+    /// several times faster; turn it on to read the generated code).
+    pub fn format(mut self, on: bool) -> Builder {
+        self.format = on;
         self
     }
 
@@ -129,8 +146,13 @@ impl Builder {
                 .ok_or(BuildError::NoOutDir)?,
         };
         let path = dir.join(self.file_name.as_deref().unwrap_or("cool.rs"));
+        let formatting = if self.format {
+            Formatting::Formatted
+        } else {
+            Formatting::Unformatted
+        };
         std::fs::create_dir_all(&dir)
-            .and_then(|()| std::fs::write(&path, emit::single_file(&krate)))
+            .and_then(|()| std::fs::write(&path, emit::single_file_with(&krate, formatting)))
             .map_err(|source| BuildError::Io {
                 path: path.clone(),
                 source,

@@ -1,11 +1,15 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
-//! **Invariant:** emission cannot fail on user input. Every generated Rust file is
-//! parsed with `syn` and printed with `prettyplease` (then `rustfmt` when it is
-//! installed, so the files are `cargo fmt` clean); a file that does not parse is a
-//! template bug and panics with the offending text. Output depends only on the IR.
+//! **Invariant:** emission cannot fail on user input. Generated Rust is formatted with
+//! `rustfmt` when it is installed (one run over the whole crate, so the files are
+//! `cargo fmt` clean), else printed with `prettyplease`; user files keep the
+//! templates' layout without `rustfmt`. Each file is parsed at most once: by
+//! `rustfmt` or by `syn` for `prettyplease`, and by `syn` in debug builds where no
+//! formatter parses it. A file that does not parse is a template bug and panics with
+//! the offending text (the test suite also compiles every generated crate). Output
+//! depends only on the IR.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use askama::Template;
@@ -41,6 +45,21 @@ pub struct StubSet {
     pub trait_name: String,
     /// `(method name, stub text)` in order; the text is indented for an impl block.
     pub stubs: Vec<(String, String)>,
+}
+
+/// How emission lays out the Rust files it writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Formatting {
+    /// Formatted for people: `rustfmt` when it is installed (the files are `cargo fmt`
+    /// clean), else `prettyplease` for generated files. What `coolc compile` writes.
+    #[default]
+    Formatted,
+    /// The templates' own layout: the same tokens, so the same Rust (it compiles and
+    /// is warning-free exactly when the formatted files are), only not laid out for
+    /// reading. Checked with `syn` in debug builds only. For output nobody reads, such
+    /// as the [`crate::builder::Builder`]'s file in `OUT_DIR`; several times faster,
+    /// since formatting is most of emission's cost.
+    Unformatted,
 }
 
 #[derive(Template)]
@@ -127,32 +146,67 @@ fn check_parses(code: &str) -> syn::File {
     }
 }
 
-/// Formats generated Rust without `rustfmt`: `prettyplease`, keeping the leading `//`
-/// header lines (which `syn` drops).
-fn pretty(code: &str) -> String {
-    let file = check_parses(code);
-    let header: String = code
-        .lines()
-        .take_while(|l| l.starts_with("//") && !l.starts_with("//!") && !l.starts_with("///"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    format!("{header}{}", prettyplease::unparse(&file))
+/// [`check_parses`] in debug builds (and so in the test suite, which also compiles
+/// every generated crate); nothing in release builds, where the parse would cost as
+/// much as the rest of emission and only ever finds template bugs.
+fn debug_check_parses(code: &str) {
+    if cfg!(debug_assertions) {
+        check_parses(code);
+    }
 }
 
-/// Formats one piece of generated Rust: checks it parses, then `rustfmt` when it is
-/// installed (keeping the templates' blank lines), else `prettyplease`.
+/// Formats generated Rust without `rustfmt`: `prettyplease`, keeping the leading `//`
+/// header lines (which `syn` drops). Its parse doubles as the template check.
+fn pretty(code: &str) -> String {
+    let file = check_parses(code);
+    let mut out = String::with_capacity(code.len() + code.len() / 4);
+    for line in code
+        .lines()
+        .take_while(|l| l.starts_with("//") && !l.starts_with("//!") && !l.starts_with("///"))
+    {
+        out.push_str(line);
+        out.push('\n');
+    }
+    out.push_str(&prettyplease::unparse(&file));
+    out
+}
+
+/// Formats one piece of generated Rust: `rustfmt` when it is installed (keeping the
+/// templates' blank lines), else `prettyplease`; either way it must parse.
 pub fn format_generated(code: &str) -> String {
-    check_parses(code);
-    rustfmt_stdin(code).unwrap_or_else(|| pretty(code))
+    match rustfmt_stdin(code) {
+        Some(text) => text,
+        None => pretty(code),
+    }
 }
 
 fn rustfmt_program() -> std::ffi::OsString {
     std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
 
-/// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed or fails.
+/// Whether `rustfmt` (or the program `RUSTFMT` names) runs: probed once per process
+/// with `--version`, so that without it no scratch tree is written and no process is
+/// spawned per file.
+fn rustfmt_installed() -> bool {
+    static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *INSTALLED.get_or_init(|| {
+        Command::new(rustfmt_program())
+            .arg("--version")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|status| status.success())
+    })
+}
+
+/// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed (see
+/// [`rustfmt_installed`]) or fails.
 fn rustfmt_stdin(code: &str) -> Option<String> {
     use std::io::Write;
+    if !rustfmt_installed() {
+        return None;
+    }
     let mut child = Command::new(rustfmt_program())
         .args(["--edition", "2024", "--emit", "stdout", "--quiet"])
         .stdin(Stdio::piped())
@@ -174,10 +228,14 @@ fn rustfmt_stdin(code: &str) -> Option<String> {
 
 /// Formats a whole crate's Rust files with ONE `rustfmt` run: they are written to a
 /// scratch directory with the crate's layout, `rustfmt` formats the roots and every
-/// module they declare, and the results are read back. `None` when `rustfmt` is not
-/// installed or fails (the caller falls back to per-file formatting).
-fn rustfmt_tree(files: &[(PathBuf, String)], roots: &[&str]) -> Option<Vec<String>> {
+/// module they declare, and the results are read back. `None`, without writing
+/// anything, when `rustfmt` is not installed; `None` when it fails (the caller falls
+/// back to per-file formatting).
+fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
+    if !rustfmt_installed() {
+        return None;
+    }
     static SCRATCH: AtomicUsize = AtomicUsize::new(0);
     let dir = std::env::temp_dir().join(format!(
         "coolc-fmt-{}-{}",
@@ -234,27 +292,51 @@ fn render_modules(krate: &ir::Crate) -> Vec<(String, String)> {
 
 /// Every generated module in one file, for `include!` from `OUT_DIR` (the
 /// [`crate::builder::Builder`] output): `pub mod x { ... }` per module plus the
-/// support functions.
+/// support functions, formatted with `prettyplease` (no process is needed).
 pub fn single_file(krate: &ir::Crate) -> String {
+    single_file_with(krate, Formatting::Formatted)
+}
+
+/// [`single_file`], formatted with `prettyplease` (one module per thread) or not at
+/// all ([`Formatting::Unformatted`]).
+pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
+    let mut parts: Vec<String> = render_modules(krate)
+        .into_iter()
+        .map(|(module, text)| {
+            let mut part = String::with_capacity(text.len() + module.len() + 16);
+            part.push_str("pub mod ");
+            part.push_str(&module);
+            part.push_str(" {\n");
+            for line in text.lines().filter(|l| !l.starts_with("// @generated")) {
+                part.push_str(line);
+                part.push('\n');
+            }
+            part.push_str("}\n");
+            part
+        })
+        .collect();
+    // The support functions, taken from the generated `mod.rs`.
+    let mod_rs = render(&GeneratedMod { krate });
+    if let Some(start) = mod_rs.find("/// Converts a variable") {
+        parts.push(mod_rs[start..].to_owned());
+    }
+    let parts = match formatting {
+        Formatting::Formatted => par_map(&parts, |part| prettyplease::unparse(&check_parses(part))),
+        Formatting::Unformatted => {
+            if cfg!(debug_assertions) {
+                par_map(&parts, |part| debug_check_parses(part));
+            }
+            parts
+        }
+    };
     let mut out = format!(
         "// @generated by coolc from {}. Do not edit: coolc overwrites this file.\n",
         krate.sources_text()
     );
-    for (module, text) in render_modules(krate) {
-        let body: String = text
-            .lines()
-            .filter(|l| !l.starts_with("// @generated"))
-            .map(|l| format!("{l}\n"))
-            .collect();
-        out.push_str(&format!("pub mod {module} {{\n{body}}}\n"));
+    for part in parts {
+        out.push_str(&part);
     }
-    // The support functions, taken from the generated `mod.rs`.
-    let mod_rs = render(&GeneratedMod { krate });
-    if let Some(start) = mod_rs.find("/// Converts a variable") {
-        out.push_str(&mod_rs[start..]);
-    }
-    // Nobody reads this file: `prettyplease` is enough (and needs no process).
-    pretty(&out)
+    out
 }
 
 /// The converter stubs as user-file methods.
@@ -343,6 +425,11 @@ fn user_path(module: &str) -> PathBuf {
 /// the whole crate when it is installed, `prettyplease` for generated files
 /// otherwise).
 pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
+    emit_crate_with(krate, Formatting::Formatted)
+}
+
+/// [`emit_crate`], formatted or not (see [`Formatting`]).
+pub fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<EmittedFile> {
     let mut files: Vec<(PathBuf, String, FileKind)> = Vec::new();
     let mut push = |path: PathBuf, text: String, kind: FileKind| files.push((path, text, kind));
     push(
@@ -395,43 +482,102 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
         );
     }
 
-    let rust: Vec<(PathBuf, String)> = files
+    let is_rust = |path: &Path| path.extension().is_some_and(|e| e == "rs");
+    let rust: Vec<(&Path, &str)> = files
         .iter()
-        .filter(|(path, _, _)| path.extension().is_some_and(|e| e == "rs"))
-        .map(|(path, text, _)| {
-            check_parses(text);
-            (path.clone(), text.clone())
-        })
+        .filter(|(path, _, _)| is_rust(path))
+        .map(|(path, text, _)| (path.as_path(), text.as_str()))
         .collect();
-    let mut formatted = rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]).map(|v| v.into_iter());
+    // rustfmt fails on Rust that does not parse, and then the fallback below parses
+    // every file: a template bug is caught on both paths.
+    let formatted = match formatting {
+        Formatting::Formatted => rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]),
+        Formatting::Unformatted => None,
+    };
+    let new_contents: Vec<Option<String>> = match formatted {
+        Some(formatted) => {
+            let mut formatted = formatted.into_iter();
+            files
+                .iter()
+                .map(|(path, _, _)| {
+                    if is_rust(path) {
+                        formatted.next()
+                    } else {
+                        None
+                    }
+                })
+                .collect()
+        }
+        // The files are independent: print them on every core.
+        None => par_map(&files, |(path, text, kind)| {
+            if !is_rust(path) {
+                None
+            } else if *kind == FileKind::Generated && formatting == Formatting::Formatted {
+                Some(pretty(text))
+            } else {
+                // Without rustfmt, user files keep the templates' own layout
+                // (`prettyplease` would drop their comments); unformatted, all do.
+                debug_check_parses(text);
+                None
+            }
+        }),
+    };
     files
         .into_iter()
-        .map(|(path, text, kind)| {
-            let contents = if path.extension().is_some_and(|e| e == "rs") {
-                match formatted.as_mut().and_then(Iterator::next) {
-                    Some(text) => text,
-                    None if kind == FileKind::Generated => pretty(&text),
-                    // Without rustfmt, user files keep the templates' own layout
-                    // (`prettyplease` would drop their comments).
-                    None => text,
-                }
-            } else {
-                text
-            };
-            EmittedFile {
-                path,
-                contents,
-                kind,
-            }
+        .zip(new_contents)
+        .map(|((path, text, kind), new)| EmittedFile {
+            path,
+            contents: new.unwrap_or(text),
+            kind,
         })
         .collect()
 }
 
+/// `f` applied to every item on `std::thread::available_parallelism` threads (which
+/// take the next item as they finish one), results in the items' order. A panic in
+/// `f` is propagated.
+fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .min(items.len());
+    if threads <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let index = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(index) else {
+                break;
+            };
+            done.push((index, f(item)));
+        }
+        done
+    };
+    let mut done: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads).map(|_| scope.spawn(work)).collect();
+        workers
+            .into_iter()
+            .flat_map(|worker| match worker.join() {
+                Ok(done) => done,
+                Err(panic) => std::panic::resume_unwind(panic),
+            })
+            .collect()
+    });
+    done.sort_unstable_by_key(|(index, _)| *index);
+    done.into_iter().map(|(_, result)| result).collect()
+}
+
 /// Formats one hand-laid-out user file (comments matter) with `rustfmt` when it is
-/// installed; checks that it parses either way.
+/// installed (which fails on Rust that does not parse); checked in debug builds
+/// otherwise.
 fn format_user(code: &str) -> String {
-    check_parses(code);
-    rustfmt_stdin(code).unwrap_or_else(|| code.to_owned())
+    rustfmt_stdin(code).unwrap_or_else(|| {
+        debug_check_parses(code);
+        code.to_owned()
+    })
 }
 
 #[derive(Template)]

@@ -188,13 +188,19 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
     Ok(true)
 }
 
-/// Writes the crate for `krate` into `dir`, merging into existing user files.
+/// Writes the crate for `krate` into `dir`, merging into existing user files: emits
+/// it ([`emit::emit_crate`]) and writes the files ([`write_emitted`]).
 pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
-    let files = emit::emit_crate(krate);
+    write_emitted(dir, krate, &emit::emit_crate(krate))
+}
+
+/// Writes `files`, already emitted for `krate` by [`emit::emit_crate`], into `dir`,
+/// merging into existing user files (no second emission).
+pub fn write_emitted(dir: &Path, krate: &ir::Crate, files: &[EmittedFile]) -> io::Result<Report> {
     write_files(
         dir,
-        &files,
-        &emit::stub_sets(krate, &files),
+        files,
+        &emit::stub_sets(krate, files),
         &emit::user_modules(krate),
     )
 }

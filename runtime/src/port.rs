@@ -8,9 +8,9 @@
 //! beyond the clone of the packet for each extra consumer.
 //!
 //! Each delivery bumps the input's arrival counter and rings its component's
-//! [`Doorbell`] (a flag beside a wake-up channel: a rung bell means the component is
-//! already due to look, so a burst of arrivals costs one wake-up and, per packet, one
-//! load of the flag).
+//! `Doorbell` (one three-state atomic beside the component's thread handle: a rung
+//! bell means the component is already due to look, so a burst of arrivals costs one
+//! wake-up and, per packet, one load of the flag).
 
 use std::any::{Any, TypeId};
 use std::collections::VecDeque;
