@@ -1,6 +1,7 @@
 //! Snapshots of every file `coolc` emits for the example descriptions (the spec's
 //! `MotionController`, the ir/us/bumper `RangeServer` and the compound `MobileBase`,
-//! plus the `coolc new` starter), and determinism of emission.
+//! plus the `coolc new` starter, and the example robot's own descriptions in
+//! `examples/components`), and determinism of emission.
 
 use std::path::Path;
 
@@ -15,7 +16,11 @@ fn data(name: &str) -> std::path::PathBuf {
 }
 
 fn lower_fixture(root: &str, package: &str) -> coolc::ir::Crate {
-    let analysis = coolc::analyze(&[data(root)], &|p: &Path| std::fs::read_to_string(p));
+    lower_file(&data(root), package)
+}
+
+fn lower_file(root: &Path, package: &str) -> coolc::ir::Crate {
+    let analysis = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p));
     assert!(
         !analysis.has_errors(),
         "{}",
@@ -24,7 +29,7 @@ fn lower_fixture(root: &str, package: &str) -> coolc::ir::Crate {
     let options = lower::Options {
         package: package.to_owned(),
         runtime: RuntimeDep::Version("0.1".to_owned()),
-        sources: vec![root.to_owned()],
+        sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
     };
     lower::lower(&analysis.files, &options)
 }
@@ -52,6 +57,16 @@ fn snapshot_crate(prefix: &str, krate: &coolc::ir::Crate) {
 fn mobile_base_and_its_components() {
     let krate = lower_fixture("mobile_base.cool", "mobile-base");
     snapshot_crate("mobile_base", &krate);
+}
+
+/// The example robot's own descriptions (`examples/components`, compiled by the
+/// `mobile-base` crate's build script), as `coolc compile` would emit them.
+#[test]
+fn example_robot() {
+    let root =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/components/mobile_base.cool");
+    let krate = lower_file(&root, "mobile-base");
+    snapshot_crate("example_robot", &krate);
 }
 
 #[test]
