@@ -32,6 +32,18 @@ use crate::value::Value;
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// The default restart budget ([`CompoundBuilder::restart_budget`]): at most this many
+/// restarts of one instance ...
+pub const DEFAULT_RESTARTS: u32 = 5;
+/// ... within this window; one more failure in the window propagates.
+pub const DEFAULT_RESTART_WINDOW: Duration = Duration::from_secs(10);
+/// The default restart backoff ([`CompoundBuilder::restart_backoff`]): the first
+/// restart in a window is immediate, the second waits this long, each further one
+/// twice as long as the one before ...
+pub const DEFAULT_BACKOFF: Duration = Duration::from_millis(10);
+/// ... up to this.
+pub const DEFAULT_BACKOFF_MAX: Duration = Duration::from_secs(1);
+
 /// What a compound does when one of its instances goes to `running_error`
 /// (`on error inst: <policy>;`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -40,7 +52,11 @@ pub enum Policy {
     /// it on the compound's monitoring port. The default.
     #[default]
     Propagate,
-    /// The instance is commanded back to `running` (a restart through `start`).
+    /// The instance is commanded back to `running` (a restart through `start`), within
+    /// the compound's restart budget ([`CompoundBuilder::restart_budget`], with a
+    /// backoff: [`CompoundBuilder::restart_backoff`]); a failure beyond the budget
+    /// propagates. An instance stuck in a section that overran `max_response` is
+    /// restarted when the section returns.
     Restart,
     /// The declared substitute takes the instance's place and the instance goes into
     /// the recovery queue (without a substitute: the recovery queue only).
@@ -223,6 +239,41 @@ struct Instance {
     /// Its redundant group.
     group: Option<usize>,
     status: Status,
+    /// When the `restart` policy last restarted it (within the budget's window).
+    restarts: std::collections::VecDeque<Instant>,
+    /// A restart decided but not done yet (backoff, or the instance is stuck).
+    pending: Option<PendingRestart>,
+}
+
+/// A restart the `restart` policy has decided.
+#[derive(Debug, Clone, Copy)]
+struct PendingRestart {
+    /// When the fault was seen.
+    since: Instant,
+    /// Not before then (the backoff).
+    due: Instant,
+}
+
+/// The `restart` policy's limits.
+#[derive(Debug, Clone, Copy)]
+struct Budget {
+    restarts: u32,
+    window: Duration,
+    backoff: Duration,
+    backoff_max: Duration,
+}
+
+impl Budget {
+    /// The backoff before restart number `done + 1` within the window.
+    fn delay(&self, done: usize) -> Duration {
+        if done == 0 {
+            return Duration::ZERO;
+        }
+        let doublings = u32::try_from(done - 1).unwrap_or(u32::MAX).min(30);
+        self.backoff
+            .saturating_mul(1 << doublings)
+            .min(self.backoff_max)
+    }
 }
 
 /// An entry of the recovery queue.
@@ -378,6 +429,7 @@ pub struct CompoundBuilder {
     rules: Vec<(String, String, Vec<String>, Test)>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     errors: Vec<CompoundError>,
     exports: Vec<Box<dyn Export>>,
     inputs: Vec<InputSpec>,
@@ -407,6 +459,12 @@ impl CompoundBuilder {
             rules: Vec::new(),
             retry_every: Duration::from_millis(500),
             deadline: Duration::from_secs(5),
+            budget: Budget {
+                restarts: DEFAULT_RESTARTS,
+                window: DEFAULT_RESTART_WINDOW,
+                backoff: DEFAULT_BACKOFF,
+                backoff_max: DEFAULT_BACKOFF_MAX,
+            },
             errors: Vec::new(),
             exports: Vec::new(),
             inputs: Vec::new(),
@@ -559,6 +617,8 @@ impl CompoundBuilder {
                 substitute: None,
                 group: None,
                 status: Status::Active,
+                restarts: std::collections::VecDeque::new(),
+                pending: None,
             }),
             Err(error) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
@@ -622,6 +682,28 @@ impl CompoundBuilder {
     pub fn recovery(mut self, retry_every: Duration, deadline: Duration) -> CompoundBuilder {
         self.retry_every = retry_every.max(Duration::from_millis(1));
         self.deadline = deadline;
+        self
+    }
+
+    /// The `restart` policy's budget: at most `restarts` restarts of one instance
+    /// within any `window` (defaults [`DEFAULT_RESTARTS`] in
+    /// [`DEFAULT_RESTART_WINDOW`]); a failure beyond that propagates (the compound goes
+    /// to `running_error`, its error saying the budget is spent). `u32::MAX` restarts:
+    /// no limit.
+    pub fn restart_budget(mut self, restarts: u32, window: Duration) -> CompoundBuilder {
+        self.budget.restarts = restarts;
+        self.budget.window = window;
+        self
+    }
+
+    /// The `restart` policy's backoff: within the budget's window the first restart of
+    /// an instance is immediate, the second waits `initial`, each further one twice as
+    /// long as the one before, at most `max` (defaults [`DEFAULT_BACKOFF`],
+    /// [`DEFAULT_BACKOFF_MAX`]; zero: no backoff). The compound's thread does not
+    /// sleep meanwhile: the restart is a timer.
+    pub fn restart_backoff(mut self, initial: Duration, max: Duration) -> CompoundBuilder {
+        self.budget.backoff = initial;
+        self.budget.backoff_max = max.max(initial);
         self
     }
 
@@ -856,6 +938,7 @@ impl CompoundBuilder {
             queue: Vec::new(),
             retry_every: self.retry_every,
             deadline: self.deadline,
+            budget: self.budget,
             started: false,
             exports: self.exports,
         };
@@ -910,6 +993,7 @@ struct Compound {
     queue: Vec<Recovering>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     started: bool,
     exports: Vec<Box<dyn Export>>,
 }
@@ -1054,8 +1138,16 @@ impl Compound {
         self.queue.clear();
         for index in 0..self.instances.len() {
             let instance = &mut self.instances[index];
+            instance.pending = None;
+            instance.restarts.clear();
             if instance.status == Status::Destroyed {
                 continue;
+            }
+            if instance.handle.is_stuck() {
+                return Err(Fault::message(format!(
+                    "instance `{}` cannot restart: it is stuck in a section that overran its max_response",
+                    instance.name
+                )));
             }
             instance.status = if instance.substitutes.is_some() {
                 Status::Standby
@@ -1168,7 +1260,7 @@ impl Compound {
             }
             Policy::Propagate => Err(self.fault(format!("instance `{name}` failed: {error}"))),
             Policy::Restart if monitor.state == State::RunningError => {
-                command(&self.instances[index].handle, Controllable::Running)
+                self.schedule_restart(index, &error)
             }
             Policy::Restart => {
                 Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
@@ -1185,6 +1277,70 @@ impl Compound {
                 Ok(())
             }
         }
+    }
+
+    /// The `restart` policy for instance `index`, which failed with `error`: a restart
+    /// now or after the backoff, or the fault propagates once the budget is spent.
+    fn schedule_restart(&mut self, index: usize, error: &str) -> Result<(), Fault> {
+        let now = Instant::now();
+        let budget = self.budget;
+        let instance = &mut self.instances[index];
+        if instance.pending.is_some() {
+            return Ok(()); // Already decided (another event of the same fault).
+        }
+        while instance
+            .restarts
+            .front()
+            .is_some_and(|t| now.saturating_duration_since(*t) >= budget.window)
+        {
+            instance.restarts.pop_front();
+        }
+        let done = instance.restarts.len();
+        if u32::try_from(done).unwrap_or(u32::MAX) >= budget.restarts {
+            let name = instance.name.clone();
+            return Err(self.fault(format!(
+                "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
+                budget.window
+            )));
+        }
+        instance.pending = Some(PendingRestart {
+            since: now,
+            due: crate::thread::later(now, budget.delay(done)),
+        });
+        self.restarts_due(now)
+    }
+
+    /// Do the decided restarts that are due; propagate a stuck instance's fault once
+    /// it has been stuck for the recovery deadline.
+    fn restarts_due(&mut self, now: Instant) -> Result<(), Fault> {
+        for index in 0..self.instances.len() {
+            let Some(pending) = self.instances[index].pending else {
+                continue;
+            };
+            let instance = &self.instances[index];
+            if instance.handle.is_stuck() {
+                if now >= crate::thread::later(pending.since, self.deadline) {
+                    let name = instance.name.clone();
+                    self.instances[index].pending = None;
+                    return Err(self.fault(format!(
+                        "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            if now < pending.due {
+                continue;
+            }
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            if instance.handle.state() != State::RunningError {
+                continue; // Someone else brought it back meanwhile.
+            }
+            instance.restarts.push_back(now);
+            command(&instance.handle, Controllable::Running)?;
+        }
+        Ok(())
     }
 
     /// The recovery queue's due work: restart, recognize recoveries, destroy at the
@@ -1219,7 +1375,13 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                if let Err(fault) = command(&self.instances[index].handle, Controllable::Dead) {
+                let handle = &self.instances[index].handle;
+                if handle.is_stuck() {
+                    // Its thread takes the command when (if) the section returns.
+                    if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
+                        tracing::warn!(compound = %self.name, "{rejected}");
+                    }
+                } else if let Err(fault) = command(handle, Controllable::Dead) {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
                 self.refresh(index);
@@ -1231,8 +1393,10 @@ impl Compound {
                 }
                 continue;
             }
-            // Due for a retry: restart it, on probation until the next retry.
-            let restarted = command(&self.instances[index].handle, Controllable::Running).is_ok()
+            // Due for a retry: restart it, on probation until the next retry (not while
+            // it is stuck in an overrun section: a command would wait for it).
+            let restarted = !self.instances[index].handle.is_stuck()
+                && command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
             let entry = &mut self.queue[position];
             entry.probation = restarted;
@@ -1380,6 +1544,9 @@ impl Automaton for Compound {
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;
         }
+        if self.instances.iter().any(|i| i.pending.is_some()) {
+            self.restarts_due(Instant::now())?;
+        }
         self.refresh_own(&mut changed);
         let entered = self.evaluated_in != Some(state);
         if !entered && changed.is_empty() {
@@ -1398,13 +1565,20 @@ impl Automaton for Compound {
     }
 
     fn wake_at(&self) -> Option<Instant> {
-        self.queue
-            .iter()
-            .map(|entry| {
-                entry
-                    .next
-                    .min(crate::thread::later(entry.since, self.deadline))
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
             })
-            .min()
+        });
+        queue.chain(restarts).min()
     }
 }

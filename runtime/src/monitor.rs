@@ -176,6 +176,9 @@ pub(crate) struct Shared {
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// Whether the component's thread is inside a section the max_response watchdog
+    /// tripped (it has not returned yet).
+    pub(crate) stuck: AtomicBool,
     /// The component's thread, once spawned.
     pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
@@ -189,6 +192,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
         }
     }
@@ -479,6 +483,13 @@ impl Handle {
     /// The default automaton state now.
     pub fn state(&self) -> State {
         self.shared.state()
+    }
+
+    /// Whether the component's thread is inside a section that overran its
+    /// `max_response` and has not returned yet (the watchdog moved the component to
+    /// `running_error`; commands wait until the section returns).
+    pub fn is_stuck(&self) -> bool {
+        self.shared.stuck.load(Ordering::Acquire)
     }
 
     /// A new observer: every change from now on, as it happens.

@@ -795,7 +795,10 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
         .instance(steady)
         .instance(f)
         .connect("f.data", "steady.data")
-        .on_error("flaky", Policy::Restart);
+        .on_error("flaky", Policy::Restart)
+        // Every fault is restarted: no budget, no backoff.
+        .restart_budget(u32::MAX, Duration::from_secs(1))
+        .restart_backoff(Duration::ZERO, Duration::ZERO);
     let (flaky, steady) = (
         builder.instance_handle("flaky").expect("flaky"),
         builder.instance_handle("steady").expect("steady"),

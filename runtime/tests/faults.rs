@@ -348,25 +348,60 @@ fn a_command_is_withdrawn_if_a_long_section_outlasts_the_command_timeout() {
 }
 
 #[test]
-fn a_section_longer_than_max_response_is_an_overrun() {
+fn a_section_that_returns_after_max_response_is_a_fault() {
     let rig = Rig::started(Script::new());
     rig.handle
         .command(Command::SetMaxResponse(Duration::from_millis(1)))
         .expect("max_response");
     rig.run_busy();
     let events = rig.handle.subscribe();
+    // The section also asks to end the task: an overrun section's requests are
+    // discarded, so the component goes to running_error, not to end.
+    rig.script.end_in_periodic.store(true, Ordering::SeqCst);
     *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(3));
+    // The watchdog may trip the section before it returns (`still running after`);
+    // once it has returned, the error says so and the outcome is gone.
     let monitor = rig
         .handle
-        .wait_for(|m| m.overruns > 0, WAIT)
-        .expect("overrun");
-    assert_eq!(monitor.state, State::Running, "an overrun is not a fault");
+        .wait_for(
+            |m| {
+                m.state == State::RunningError
+                    && m.error.as_deref().is_some_and(|e| e.ends_with("discarded"))
+            },
+            WAIT,
+        )
+        .expect("running_error once the section returned");
+    assert!(monitor.overruns >= 1);
+    assert!(!rig.handle.is_stuck());
     assert_eq!(monitor.max_response, Some(Duration::from_millis(1)));
+    let error = monitor.error.expect("error");
+    assert!(
+        error.starts_with("overrun in state `busy` (Periodic section): ")
+            && error.ends_with("max_response 1ms; its outcome was discarded")
+            && (error.contains(": ran ") || error.contains(": returned after ")),
+        "{error}"
+    );
+    eventually(
+        || rig.script.log().ends_with(&["stop".to_owned()]),
+        "the fault runs stop",
+    );
+    let events: Vec<_> = events.try_iter().collect();
     assert!(
         events
             .iter()
-            .any(|event| matches!(event, coolbot::MonitorEvent::Overrun { .. }))
+            .any(|event| matches!(event, coolbot::MonitorEvent::Overrun { .. })),
+        "{events:?}"
     );
+    assert!(!events.contains(&coolbot::MonitorEvent::State {
+        from: State::Running,
+        to: State::End
+    }));
+    // A restart works.
+    *rig.script.sleep_in_periodic.lock().unwrap() = None;
+    rig.script.end_in_periodic.store(false, Ordering::SeqCst);
+    rig.command(Controllable::Running).expect("restart");
+    let monitor = rig.wait_user("idle");
+    assert_eq!(monitor.error, None);
 }
 
 #[test]
