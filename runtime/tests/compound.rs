@@ -854,3 +854,184 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+/// The worker's timing with a short `max_response` (20 ms), for an instance.
+fn fast_response() -> TimingSpec {
+    TimingSpec {
+        max_response: Some(Duration::from_millis(20)),
+        ..worker::SPEC.timing
+    }
+}
+
+fn starts(script: &Script) -> usize {
+    script.log().iter().filter(|e| *e == "start").count()
+}
+
+#[test]
+fn an_instance_hanging_past_max_response_is_substituted_and_recovers_once_it_returns() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.data", "w.data")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let release = w_script.hang_in("busy.periodic");
+    feed.kick.emit();
+    // The watchdog moves w to running_error while its section still hangs; the
+    // compound substitutes it at once.
+    wait_user(&b, "idle");
+    assert!(w.is_stuck());
+    assert!(w_script.hanging.load(Ordering::SeqCst));
+    let monitor = w.snapshot();
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("still running after") && e.contains("max_response 20ms")),
+        "{monitor:?}"
+    );
+    assert_eq!(base.state(), State::Running);
+    feed.data.send(1);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 1,
+        "the substitute gets the stream",
+    );
+    // The section returns: the recovery queue restarts w, which takes its place back.
+    assert_eq!(starts(&w_script), 1, "no restart while the section hangs");
+    drop(release);
+    wait(&b, State::Ready);
+    assert_eq!(w.state(), State::Running);
+    assert_eq!(w_script.returned.load(Ordering::SeqCst), 1);
+    assert_eq!(starts(&w_script), 2);
+    let before = w_script.received.load(Ordering::SeqCst);
+    feed.data.send(2);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w has its connections back",
+    );
+    assert_eq!(b_script.received.load(Ordering::SeqCst), 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+/// A compound `base` whose instance `w` (with a 20 ms max_response) is restarted on
+/// error, within `budget` restarts in a minute (backoff 1 ms..4 ms), with a recovery
+/// deadline of `deadline`.
+fn restarting(budget: u32, deadline: Duration) -> (System, Handle, Handle, Arc<Script>, Feeder) {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Restart)
+        .restart_budget(budget, Duration::from_secs(60))
+        .restart_backoff(Duration::from_millis(1), Duration::from_millis(4))
+        .recovery(Duration::from_millis(20), deadline);
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    (system, base, w, script, feed)
+}
+
+#[test]
+fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
+    let (system, base, w, script, feed) = restarting(5, Duration::from_secs(30));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    assert!(w.is_stuck());
+    assert_eq!(base.state(), State::Running, "the compound runs on");
+    assert_eq!(starts(&script), 1);
+    drop(release);
+    eventually(|| starts(&script) == 2, "w restarted once it returned");
+    let monitor = wait_user(&w, "idle");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(monitor.overruns, 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn an_instance_stuck_longer_than_the_recovery_deadline_is_propagated() {
+    let (system, base, w, script, feed) = restarting(5, Duration::from_millis(150));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `w` cannot be restarted: it is stuck"),
+        "{error}"
+    );
+    assert!(w.is_stuck());
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn restart_stops_at_the_budget_and_the_fault_propagates() {
+    let (system, base, w, script, _feed) = {
+        // w fails in its first entry at every run.
+        let (sup, _) = Sup::new(&["operating"]);
+        let (w, script) = worker("w");
+        script.inject(Some(Injected {
+            hook: "idle.entry",
+            exception: Some(Exception::Fatal),
+            times: 1000,
+        }));
+        let (f, feed) = feeder("f");
+        let builder = CompoundBuilder::new("base", sup)
+            .instance(w)
+            .instance(f)
+            .on_error("w", Policy::Restart)
+            .restart_budget(3, Duration::from_secs(60))
+            .restart_backoff(Duration::from_millis(1), Duration::from_millis(4));
+        let w = builder.instance_handle("w").expect("w");
+        let mut system = System::new();
+        let base = system.add(builder.build().expect("build")).expect("add");
+        system.start().expect("start");
+        wait(&base, State::Ready);
+        (system, base, w, script, feed)
+    };
+    base.command(Command::SetState(Controllable::Running))
+        .expect("running");
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains(
+            "instance `w` failed again after 3 restart(s) within 60s (restart budget spent)"
+        ) && error.contains("exception `fatal`"),
+        "{error}"
+    );
+    assert_eq!(starts(&script), 4, "the first run and three restarts");
+    assert_eq!(script.injected.load(Ordering::SeqCst), 4);
+    assert_eq!(w.state(), State::RunningError);
+    // The budget starts afresh when the compound is restarted.
+    script.inject(None);
+    base.command(Command::SetState(Controllable::Running))
+        .expect("restart the compound");
+    wait_user(&w, "idle");
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}

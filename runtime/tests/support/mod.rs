@@ -95,8 +95,8 @@ impl Script {
     }
 
     /// Make `hook` hang (once) until the returned sender sends or is dropped.
-    pub fn hang_in(&self, hook: &'static str) -> coolbot::crossbeam_channel::Sender<()> {
-        let (release, gate) = coolbot::crossbeam_channel::bounded(1);
+    pub fn hang_in(&self, hook: &'static str) -> crossbeam_channel::Sender<()> {
+        let (release, gate) = crossbeam_channel::bounded(1);
         *self.hang.lock().unwrap() = Some((hook, gate));
         release
     }
