@@ -1035,3 +1035,147 @@ fn restart_stops_at_the_budget_and_the_fault_propagates() {
     assert_eq!(base.state(), State::Running);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn ignore_leaves_the_instance_in_running_error_where_rules_see_it() {
+    let (sup, log) = Sup::new(&["operating", "degraded"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Ignore)
+        .rule("operating", "degraded", &["w.state"], |v| {
+            v.state("w") == Some(State::RunningError)
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    periodic_fault(&script);
+    feed.kick.emit();
+    wait_user(&base, "degraded");
+    assert_eq!(base.state(), State::Running);
+    assert_eq!(w.state(), State::RunningError, "nobody restarted it");
+    assert_eq!(starts(&script), 1);
+    assert_eq!(*log.lock().unwrap(), ["operating.Entry", "degraded.Entry"]);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn without_a_substitute_the_recovery_queue_restarts_the_instance_until_it_recovers() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .connect("f.data", "w.data")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // w fails and cannot start again for a while: the queue keeps retrying it.
+    script.start_fails.store(true, Ordering::SeqCst);
+    periodic_fault(&script);
+    feed.kick.emit();
+    w.wait_state(State::StartingError, WAIT).expect("retried");
+    assert_eq!(base.state(), State::Running, "the compound waits for it");
+    // Packets sent meanwhile wait at w's input.
+    feed.data.send(7);
+    script.start_fails.store(false, Ordering::SeqCst);
+    wait_user(&w, "idle");
+    // (Packets queued before a state is entered do not fire its `on` transitions: a
+    // kick takes w to `busy`, whose entry drains the queue.)
+    feed.kick.emit();
+    eventually(
+        || script.received.load(Ordering::SeqCst) == 1,
+        "the queued packet reaches the recovered instance",
+    );
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
+    const CYCLES: usize = 200;
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = deep_worker("w");
+    let (b, b_script) = deep_worker("b");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .substitute("b", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(1), Duration::from_secs(60))
+        .export_input::<u64>("data", "w.data");
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let (f, feed) = feeder("f");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.add(f).expect("feeder");
+    system.connect("f.data", "base.data").expect("data");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let mut sent = 0u64;
+    for cycle in 0..CYCLES {
+        // w fails in its next section (half panics, half declared exceptions) while
+        // the stream goes on; b takes over; the queue restarts w, which takes the
+        // stream back.
+        if cycle % 2 == 0 {
+            w_script.panic_in(Some("busy.entry"));
+        } else {
+            w_script.inject(Some(Injected {
+                hook: "busy.entry",
+                exception: Some(Exception::Fatal),
+                times: 1,
+            }));
+        }
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        w.wait_for(|m| m.state != State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w_script.panic_in(None);
+        b.wait_state(State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        // Recovered: b back on standby, w running with the stream.
+        b.wait_state(State::Ready, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_state(State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        assert_eq!(base.state(), State::Running, "cycle {cycle}");
+    }
+    // Every packet reached w or b, or is counted as lost at an input.
+    let lost = || base.snapshot().overflows + w.snapshot().overflows + b.snapshot().overflows;
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst)
+                + b_script.received.load(Ordering::SeqCst)
+                + lost()
+                == sent
+        },
+        "every packet delivered or counted",
+    );
+    assert_eq!(lost(), 0, "deep queues: nothing overflowed");
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    assert_eq!(
+        w_script.log().iter().filter(|e| *e == "start").count(),
+        CYCLES + 1
+    );
+    assert!(system.shutdown().clean());
+}
