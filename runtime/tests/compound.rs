@@ -1128,14 +1128,16 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
     wait_user(&w, "idle");
     let mut sent = 0u64;
     for cycle in 0..CYCLES {
-        // w fails in its next section (half panics, half declared exceptions) while
-        // the stream goes on; b takes over; the queue restarts w, which takes the
-        // stream back.
+        // w fails in its next periodic section (half panics, half declared exceptions)
+        // while the stream goes on; b takes over; the queue restarts w, and once it
+        // runs on, w takes the stream back. (The restart can be quick: w's failure is
+        // seen through its script, not through a state that may last a millisecond.)
+        let starts_before = starts(&w_script);
         if cycle % 2 == 0 {
-            w_script.panic_in(Some("busy.entry"));
+            w_script.panic_in(Some("busy.periodic"));
         } else {
             w_script.inject(Some(Injected {
-                hook: "busy.entry",
+                hook: "busy.periodic",
                 exception: Some(Exception::Fatal),
                 times: 1,
             }));
@@ -1144,20 +1146,24 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
             feed.data.send(sent);
             sent += 1;
         }
-        w.wait_for(|m| m.state != State::Running, WAIT)
-            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        eventually(
+            || starts(&w_script) > starts_before,
+            &format!("cycle {cycle}: w failed and was restarted"),
+        );
         w_script.panic_in(None);
-        b.wait_state(State::Running, WAIT)
-            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
         for _ in 0..5 {
             feed.data.send(sent);
             sent += 1;
         }
-        // Recovered: b back on standby, w running with the stream.
+        // Recovered: b back on standby, w running with the stream, in its initial
+        // state (packets from then on fire its `on` transitions).
         b.wait_state(State::Ready, WAIT)
             .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
-        w.wait_state(State::Running, WAIT)
-            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_for(
+            |m| m.state == State::Running && m.user_state.is_some(),
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
         assert_eq!(base.state(), State::Running, "cycle {cycle}");
     }
     // Every packet reached w or b, or is counted as lost at an input.
@@ -1173,9 +1179,6 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
     );
     assert_eq!(lost(), 0, "deep queues: nothing overflowed");
     assert!(b_script.received.load(Ordering::SeqCst) > 0);
-    assert_eq!(
-        w_script.log().iter().filter(|e| *e == "start").count(),
-        CYCLES + 1
-    );
+    assert!(w_script.log().iter().filter(|e| *e == "start").count() > CYCLES);
     assert!(system.shutdown().clean());
 }
