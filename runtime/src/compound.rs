@@ -1582,3 +1582,25 @@ impl Automaton for Compound {
         queue.chain(restarts).min()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backoff_doubles_from_the_second_restart_up_to_its_maximum() {
+        let budget = Budget {
+            restarts: 10,
+            window: Duration::from_secs(10),
+            backoff: Duration::from_millis(10),
+            backoff_max: Duration::from_millis(50),
+        };
+        let delays: Vec<_> = (0..6).map(|done| budget.delay(done)).collect();
+        assert_eq!(
+            delays,
+            [0, 10, 20, 40, 50, 50].map(Duration::from_millis).to_vec()
+        );
+        // No overflow however many restarts were done.
+        assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
+    }
+}
