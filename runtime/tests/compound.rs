@@ -1182,3 +1182,73 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
     assert!(w_script.log().iter().filter(|e| *e == "start").count() > CYCLES);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn overruns_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
+    // mid: leaf1 (substitute: spare), leaf2 (propagate), both with a 20 ms
+    // max_response, fed by f.
+    let (mid_sup, _) = Sup::new(&["operating"]);
+    let (leaf1, script1) = worker("leaf1");
+    let (spare, _) = worker("spare");
+    let (leaf2, script2) = worker("leaf2");
+    let (f, feed) = feeder("f");
+    let mid = CompoundBuilder::new("mid", mid_sup)
+        .instance(leaf1.with_timing(fast_response()))
+        .instance(spare)
+        .instance(leaf2.with_timing(fast_response()))
+        .instance(f)
+        .substitute("spare", "leaf1")
+        .connect("f.kick", "leaf1.kick")
+        .connect("f.data", "leaf2.data")
+        .on_error("leaf1", Policy::Substitute)
+        .on_error("leaf2", Policy::Propagate)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let leaf1 = mid.instance_handle("leaf1").expect("leaf1");
+    let spare = mid.instance_handle("spare").expect("spare");
+    let leaf2 = mid.instance_handle("leaf2").expect("leaf2");
+    let (top_sup, _) = Sup::new(&["operating"]);
+    let top = CompoundBuilder::new("top", top_sup)
+        .instance(mid.build().expect("mid"))
+        .on_error("mid", Policy::Propagate);
+    let mid = top.instance_handle("mid").expect("mid");
+    let mut system = System::new();
+    let top = system.add(top.build().expect("top")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&leaf1, "idle");
+    wait_user(&leaf2, "idle");
+
+    // leaf1 hangs: the middle substitutes it; the top does not notice.
+    let release1 = script1.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&spare, State::Running);
+    assert!(leaf1.is_stuck());
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(top.state(), State::Running);
+
+    // leaf2 hangs: the middle propagates, the top fails with the whole chain named.
+    let release2 = script2.hang_in("busy.periodic");
+    feed.data.send(1);
+    let monitor = wait(&top, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `mid` failed")
+            && error.contains("instance `leaf2` failed")
+            && error.contains("still running after"),
+        "{error}"
+    );
+    assert!(leaf2.is_stuck());
+    drop(release1);
+    drop(release2);
+    for (handle, script) in [(&leaf1, &script1), (&leaf2, &script2)] {
+        eventually(
+            || !handle.is_stuck() && script.returned.load(Ordering::SeqCst) == 1,
+            "the sections returned",
+        );
+    }
+    // Restarted from the top once the sections returned, the whole hierarchy runs.
+    run(&top, Controllable::Running);
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(leaf1.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
