@@ -12,7 +12,9 @@
 //! compound's state and let the supervisor react to their monitoring events.
 //! `docs/runtime.md` ("Compound components and supervisors") tells the semantics.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::Receiver;
@@ -905,6 +907,15 @@ impl CompoundBuilder {
                 test,
             });
         }
+        let mut by_read: HashMap<String, Vec<usize>> = HashMap::new();
+        for (index, rule) in rules.iter().enumerate() {
+            for read in &rule.reads {
+                let readers = by_read.entry(read.clone()).or_default();
+                if readers.last() != Some(&index) {
+                    readers.push(index);
+                }
+            }
+        }
         let mut spec = *own;
         spec.variables = Box::leak(variables.into_boxed_slice());
         spec.inputs = Box::leak(std::mem::take(&mut self.inputs).into_boxed_slice());
@@ -931,10 +942,12 @@ impl CompoundBuilder {
             wired: Vec::new(),
             mapped,
             supervisor: self.supervisor,
+            by_read,
             rules,
             events: Vec::new(),
             view,
             evaluated_in: None,
+            fresh: false,
             queue: Vec::new(),
             retry_every: self.retry_every,
             deadline: self.deadline,
@@ -985,11 +998,18 @@ struct Compound {
     mapped: Vec<Mapped>,
     supervisor: Box<dyn Supervisor>,
     rules: Vec<Rule>,
-    /// Monitoring events of each instance (subscribed at the first start).
-    events: Vec<Receiver<MonitorEvent>>,
+    /// Monitoring events of each instance (subscribed at the first start), with a
+    /// flag its publisher sets before ringing the compound: a turn looks only at the
+    /// instances that have news.
+    events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
+    /// The rules reading each variable (`inst.field` or an own variable), by index.
+    by_read: HashMap<String, Vec<usize>>,
     view: View,
     /// The supervisor state whose rules were last evaluated.
     evaluated_in: Option<usize>,
+    /// A rule moved the supervisor to another state: the thread takes one more turn at
+    /// once to evaluate the new state's rules (nothing else may wake it).
+    fresh: bool,
     queue: Vec<Recovering>,
     retry_every: Duration,
     deadline: Duration,
@@ -1125,7 +1145,15 @@ impl Compound {
                 self.events = self
                     .instances
                     .iter()
-                    .map(|i| i.handle.subscribe_waking(waker.clone()))
+                    .map(|i| {
+                        // Set: look at whatever came before the subscription too.
+                        let flag = Arc::new(AtomicBool::new(true));
+                        let events = i
+                            .handle
+                            .shared
+                            .subscribe_flagged(waker.clone(), Arc::clone(&flag));
+                        (events, flag)
+                    })
                     .collect();
             }
             if let Some(system) = self.system.as_mut() {
@@ -1410,8 +1438,14 @@ impl Compound {
     fn take_events(&mut self) -> Result<HashSet<String>, Fault> {
         let mut changed = HashSet::new();
         for index in 0..self.events.len() {
+            // Cleared before the channel is read: an event sent after the read sets it
+            // again (it is set before the ring).
+            let flag = &self.events[index].1;
+            if !flag.load(Ordering::Acquire) || !flag.swap(false, Ordering::AcqRel) {
+                continue;
+            }
             let mut seen = false;
-            while let Ok(event) = self.events[index].try_recv() {
+            while let Ok(event) = self.events[index].0.try_recv() {
                 seen = true;
                 let name = &self.instances[index].name;
                 let key = match event {
@@ -1540,6 +1574,7 @@ impl Automaton for Compound {
         for export in &mut self.exports {
             export.forward();
         }
+        self.fresh = false;
         let mut changed = self.take_events()?;
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;
@@ -1554,13 +1589,26 @@ impl Automaton for Compound {
         }
         self.evaluated_in = Some(state);
         let view = &self.view;
-        let fired = self
-            .rules
-            .iter()
-            .filter(|rule| rule.state == state)
-            .filter(|rule| entered || rule.reads.iter().any(|read| changed.contains(read)))
-            .find(|rule| (rule.test)(view))
-            .map(|rule| rule.target);
+        let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
+        let fired = if entered {
+            self.rules.iter().find(holds).map(|rule| rule.target)
+        } else {
+            // Only the rules reading a changed variable, in declaration order.
+            let mut candidates: Vec<usize> = changed
+                .iter()
+                .filter_map(|read| self.by_read.get(read))
+                .flatten()
+                .copied()
+                .collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            candidates
+                .into_iter()
+                .map(|index| &self.rules[index])
+                .find(holds)
+                .map(|rule| rule.target)
+        };
+        self.fresh = fired.is_some_and(|target| target != state);
         Ok(fired)
     }
 
@@ -1579,7 +1627,8 @@ impl Automaton for Compound {
                 pending.due
             })
         });
-        queue.chain(restarts).min()
+        let fresh = self.fresh.then(Instant::now);
+        queue.chain(restarts).chain(fresh).min()
     }
 }
 

@@ -172,7 +172,8 @@ pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
     /// Doorbells rung after every event (compound supervisors watching this component).
-    wakers: Mutex<Vec<crate::automaton::Waker>>,
+    /// With, for each, a flag set before it is rung (which subscription has news).
+    wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
@@ -239,7 +240,10 @@ impl Shared {
         });
         drop(observers);
         if ring {
-            for waker in lock(&self.wakers).iter() {
+            for (waker, flag) in lock(&self.wakers).iter() {
+                if let Some(flag) = flag {
+                    flag.store(true, Ordering::Release);
+                }
                 waker.wake();
             }
         }
@@ -264,7 +268,18 @@ impl Shared {
         waker: crate::automaton::Waker,
     ) -> Receiver<MonitorEvent> {
         let receiver = self.subscribe();
-        lock(&self.wakers).push(waker);
+        lock(&self.wakers).push((waker, None));
+        receiver
+    }
+
+    /// [`Shared::subscribe_waking`], also setting `flag` before each ring.
+    pub(crate) fn subscribe_flagged(
+        &self,
+        waker: crate::automaton::Waker,
+        flag: Arc<AtomicBool>,
+    ) -> Receiver<MonitorEvent> {
+        let receiver = self.subscribe();
+        lock(&self.wakers).push((waker, Some(flag)));
         receiver
     }
 

@@ -142,6 +142,15 @@ fn wait_user(handle: &Handle, user: &str) -> coolbot::Monitor {
         .unwrap_or_else(|t| panic!("{t}"))
 }
 
+/// Wait until the supervisor's log is `expected` (`user_state` changes before the
+/// entry section runs: a state wait alone does not see the section).
+fn wait_log(log: &Mutex<Vec<String>>, expected: &[&str]) {
+    eventually(
+        || *log.lock().unwrap() == expected,
+        &format!("the supervisor's log becomes {expected:?}"),
+    );
+}
+
 fn periodic_fault(script: &Script) {
     script.inject(Some(Injected {
         hook: "busy.periodic",
@@ -274,9 +283,9 @@ fn rules_fire_when_an_instance_changes_state() {
     // Restarting w by hand fires the second rule.
     run(&w, Controllable::Running);
     wait_user(&base, "operating");
-    assert_eq!(
-        *log.lock().unwrap(),
-        ["operating.Entry", "degraded.Entry", "operating.Entry"]
+    wait_log(
+        &log,
+        &["operating.Entry", "degraded.Entry", "operating.Entry"],
     );
     assert!(system.shutdown().clean());
 }
@@ -298,7 +307,7 @@ fn rules_are_evaluated_in_declaration_order_and_on_entry() {
     let base = system.add(builder.build().expect("build")).expect("add");
     system.run_all().expect("run");
     wait_user(&base, "first");
-    assert_eq!(*log.lock().unwrap(), ["operating.Entry", "first.Entry"]);
+    wait_log(&log, &["operating.Entry", "first.Entry"]);
     assert!(system.shutdown().clean());
 }
 
@@ -1060,7 +1069,7 @@ fn ignore_leaves_the_instance_in_running_error_where_rules_see_it() {
     assert_eq!(base.state(), State::Running);
     assert_eq!(w.state(), State::RunningError, "nobody restarted it");
     assert_eq!(starts(&script), 1);
-    assert_eq!(*log.lock().unwrap(), ["operating.Entry", "degraded.Entry"]);
+    wait_log(&log, &["operating.Entry", "degraded.Entry"]);
     assert!(system.shutdown().clean());
 }
 
@@ -1250,5 +1259,39 @@ fn overruns_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels()
     wait_user(&leaf2, "idle");
     assert_eq!(mid.state(), State::Running);
     assert_eq!(leaf1.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_rule_that_already_holds_when_its_state_is_entered_fires_without_another_event() {
+    let (sup, log) = Sup::new(&["first", "second", "third"]);
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .rule("first", "second", &["w.state"], |v| {
+            v.state("w") == Some(State::Suspended)
+        })
+        // Already true when `second` is entered; w (suspended: no section runs)
+        // publishes nothing afterwards.
+        .rule("second", "third", &["w.user_state"], |v| {
+            v.user_state("w") == Some("idle")
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let events = w.subscribe();
+    run(&w, Controllable::Suspended);
+    wait_user(&base, "third");
+    wait_log(&log, &["first.Entry", "second.Entry", "third.Entry"]);
+    assert_eq!(
+        events.try_iter().collect::<Vec<_>>(),
+        [coolbot::MonitorEvent::State {
+            from: State::Running,
+            to: State::Suspended
+        }],
+        "the only event w published"
+    );
     assert!(system.shutdown().clean());
 }
