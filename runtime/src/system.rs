@@ -475,6 +475,8 @@ impl System {
             max_response: spec.timing.max_response,
             priority: spec.timing.priority,
             dropped_events: 0,
+            supervision: Vec::new(),
+            supervision_steps: 0,
         };
         let named_inputs = spec
             .inputs
