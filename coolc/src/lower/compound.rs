@@ -514,7 +514,16 @@ impl<'a> Lowerer<'a> {
                 ))
             }
         };
-        let timing = i.timing.as_ref().map(|t| self.timing(Some(t)));
+        let timing = match (&module, &i.timing) {
+            (Some(module), Some(t)) => {
+                Some(self.timing_override(t, &format!("super::{module}::SPEC.timing")))
+            }
+            _ => None,
+        };
+        let component = match (component, &timing) {
+            (Some(build), Some(timing)) => Some(format!("{build}.with_timing({timing})")),
+            (build, _) => build,
+        };
         ir::Instance {
             name: i.name.name.clone(),
             method,
@@ -528,6 +537,58 @@ impl<'a> Lowerer<'a> {
             config_overrides,
             var_overrides,
         }
+    }
+
+    /// An instance's `timing { ... }`: the entries it names replace those of the
+    /// component's block (`base`), the others are kept.
+    fn timing_override(&self, timing: &ast::Timing, base: &str) -> String {
+        let mut fields = Vec::new();
+        let option = |ns: Option<u64>| match ns {
+            Some(ns) => format!("::core::option::Option::Some({})", duration_rust(ns)),
+            None => "::core::option::Option::None".to_owned(),
+        };
+        for entry in &timing.entries {
+            match entry {
+                ast::TimingEntry::Period(interval) => {
+                    fields.push(("period", option(duration_ns(&interval.lo))));
+                    fields.push((
+                        "max_period",
+                        option(interval.hi.as_ref().and_then(duration_ns)),
+                    ));
+                }
+                ast::TimingEntry::MaxResponse(e) => {
+                    fields.push(("max_response", option(duration_ns(e))));
+                }
+                ast::TimingEntry::Priority(e) => {
+                    let priority = super::int_value(e)
+                        .unwrap_or(0)
+                        .clamp(i32::MIN.into(), i32::MAX.into());
+                    fields.push(("priority", priority.to_string()));
+                }
+                ast::TimingEntry::Quality(names, _) => {
+                    let names: Vec<String> = names
+                        .iter()
+                        .map(|n| ident::string_literal(&n.name))
+                        .collect();
+                    fields.push(("qualities", format!("&[{}]", names.join(", "))));
+                }
+            }
+        }
+        // A later entry of the same kind wins, as in a component's block.
+        let mut text = String::from("::coolbot::TimingSpec { ");
+        let mut named = Vec::new();
+        for (index, (field, value)) in fields.iter().enumerate() {
+            if fields[index + 1..].iter().any(|(f, _)| f == field) {
+                continue;
+            }
+            named.push(*field);
+            text.push_str(&format!("{field}: {value}, "));
+        }
+        if named.len() < 5 {
+            text.push_str(&format!("..{base}"));
+        }
+        text.push_str(" }");
+        text
     }
 
     /// The `Parts` method of an instance, with its user stub.
@@ -755,7 +816,13 @@ fn show(expr: &ast::Expr) -> String {
         ExprKind::Float(x) => format!("{x:?}"),
         ExprKind::Str(s) => format!("{s:?}"),
         ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Duration(ns) => format!("{ns}ns"),
+        ExprKind::Duration(ns) => match *ns {
+            ns if ns > 0 && ns % 60_000_000_000 == 0 => format!("{}min", ns / 60_000_000_000),
+            ns if ns > 0 && ns % 1_000_000_000 == 0 => format!("{}s", ns / 1_000_000_000),
+            ns if ns > 0 && ns % 1_000_000 == 0 => format!("{}ms", ns / 1_000_000),
+            ns if ns > 0 && ns % 1_000 == 0 => format!("{}us", ns / 1_000),
+            ns => format!("{ns}ns"),
+        },
         ExprKind::Frequency(hz) => format!("{hz}Hz"),
         ExprKind::Path(parts) => parts
             .iter()
@@ -773,6 +840,16 @@ fn show(expr: &ast::Expr) -> String {
         ExprKind::None => "none".to_owned(),
         ExprKind::Unary(UnaryOp::Not, inner) => format!("!{}", show_operand(inner)),
         ExprKind::Unary(UnaryOp::Neg, inner) => format!("-{}", show_operand(inner)),
+        ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
+            let side = |e: &ast::Expr| {
+                if needs_parens(*op, e) {
+                    format!("({})", show(e))
+                } else {
+                    show(e)
+                }
+            };
+            format!("{} {} {}", side(l), op.as_str(), side(r))
+        }
         ExprKind::Binary(op, l, r) => {
             format!("{} {} {}", show_operand(l), op.as_str(), show_operand(r))
         }
@@ -784,6 +861,13 @@ fn show_operand(expr: &ast::Expr) -> String {
         ExprKind::Binary(..) => format!("({})", show(expr)),
         _ => show(expr),
     }
+}
+
+/// Whether `operand` of logical operator `op` needs parentheses: an `||` inside an
+/// `&&` (comparisons and `&&` bind tighter than `||`, comparisons tighter than
+/// `&&`).
+fn needs_parens(op: BinaryOp, operand: &ast::Expr) -> bool {
+    op == BinaryOp::And && matches!(operand.kind, ExprKind::Binary(BinaryOp::Or, ..))
 }
 
 impl Scope<'_, '_> {
@@ -798,12 +882,16 @@ impl Scope<'_, '_> {
     fn boolean(&mut self, expr: &ast::Expr) -> String {
         match &expr.kind {
             ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-                let (l, r) = (self.boolean_operand(l), self.boolean_operand(r));
+                let (l, r) = (self.logic_operand(*op, l), self.logic_operand(*op, r));
                 format!("{l} {} {r}", op.as_str())
             }
             ExprKind::Binary(op, l, r) => self.comparison(*op, l, r),
             ExprKind::Unary(UnaryOp::Not, inner) => {
-                format!("!{}", self.boolean_operand(inner))
+                let text = self.boolean(inner);
+                match &inner.kind {
+                    ExprKind::Binary(..) => format!("!({text})"),
+                    _ => format!("!{text}"),
+                }
             }
             _ => {
                 let operand = self.operand(expr);
@@ -816,12 +904,14 @@ impl Scope<'_, '_> {
         }
     }
 
-    /// [`Scope::boolean`], parenthesized when it is not atomic.
-    fn boolean_operand(&mut self, expr: &ast::Expr) -> String {
+    /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
+    /// would read it otherwise (an `||` inside an `&&`).
+    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr) -> String {
         let text = self.boolean(expr);
-        match &expr.kind {
-            ExprKind::Binary(..) => format!("({text})"),
-            _ => text,
+        if needs_parens(op, expr) {
+            format!("({text})")
+        } else {
+            text
         }
     }
 
@@ -1063,7 +1153,10 @@ impl Scope<'_, '_> {
         let l_opt = matches!(l.ty, RTy::Optional(_));
         let r_opt = matches!(r.ty, RTy::Optional(_));
         let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
-            let value = if operand.maybe {
+            let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
+            let value = if operand.maybe && owned_text {
+                format!("{name}.as_deref()")
+            } else if operand.maybe {
                 name.to_owned()
             } else {
                 operand.code.clone()
@@ -1219,6 +1312,8 @@ fn view_value(raw: &str, ty: &RTy) -> Option<String> {
             RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
             RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
             RTy::Enum(path) => serde(&format!("::core::option::Option<{path}>")),
+            // Owned: compared through `as_deref` (see `Scope::comparison`).
+            RTy::Str => serde("::core::option::Option<::std::string::String>"),
             _ => return None,
         },
         _ => return None,
@@ -1231,5 +1326,132 @@ fn is_f64(ty: &ast::Type) -> bool {
         TypeKind::Prim(p) => *p == Prim::F64,
         TypeKind::Optional(inner) => is_f64(inner),
         _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::ir;
+    use crate::lower::{Options, lower};
+
+    const TEXT: &str = "
+        enum Mode { Normal, Backup }
+        atomic Leaf {
+            observable level: u32 = 0;
+            controllable gain: f64 = 1.0;
+            output out: data<u32>;
+            input input: fifo<u32>(4);
+            timing { period 10ms; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Box {
+            instance a: Leaf { timing { priority 3; } }
+            instance b: Leaf substitutes a;
+            input input = a.input;
+            output out = a.out;
+            observable level = a.level;
+            controllable gain = a.gain;
+            observable mode: Mode = Mode::Normal;
+            local faults: u32 = 0;
+            on error a: substitute;
+            supervisor {
+                initial on;
+                state on {
+                    entry;
+                    when (a.state == running_error || faults > 2) && mode == Mode::Normal -> off;
+                    when level > 3 && !(a.user_state == on) -> off;
+                }
+                state off { exit; }
+            }
+        }
+        compound Outer { instance inner: Box; }
+    ";
+
+    fn compounds() -> Vec<ir::Compound> {
+        let analysis = crate::analyze_text("t.cool", TEXT);
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(crate::RenderOptions::plain())
+        );
+        lower(&analysis.files, &Options::default()).compounds
+    }
+
+    #[test]
+    fn rules_compile_with_their_reads() {
+        let c = &compounds()[0];
+        let reads: Vec<&str> = c.rules.iter().map(|r| r.reads.as_str()).collect();
+        // A local variable is not in the supervisor's spec: not a read.
+        assert_eq!(
+            reads,
+            [r#"&["a.state", "mode"]"#, r#"&["a.level", "a.user_state"]"#]
+        );
+        assert!(c.rules[0].expr.starts_with("(view"), "{}", c.rules[0].expr);
+        assert!(
+            c.rules[0].expr.contains("|| i128::from(vars.faults) > 2)"),
+            "{}",
+            c.rules[0].expr
+        );
+        assert_eq!(c.rules[0].vars_param.as_deref(), Some("vars"));
+        // A mapped variable reads the instance's.
+        assert!(c.rules[1].expr.contains(r#"view.var("a", "level")"#));
+        assert!(c.rules[1].expr.contains("!(view"));
+        assert_eq!(c.rules[1].vars_param, None);
+        assert_eq!(c.rules[1].call, "__cool_rule_1");
+    }
+
+    #[test]
+    fn builder_steps_follow_the_description() {
+        let c = &compounds()[0];
+        assert_eq!(
+            c.steps,
+            [
+                r#".export_input::<u32>("input", "a.input")"#,
+                r#".export_output::<u32>("out", "a.out")"#,
+                r#".map_observable("level", "a.level")"#,
+                r#".map_controllable("gain", "a.gain")"#,
+                r#".on_error("a", ::coolbot::Policy::Substitute)"#,
+                r#".substitute("b", "a")"#,
+            ]
+        );
+        let a = &c.instances[0];
+        let build = a.build.as_deref().unwrap();
+        assert!(
+            build.ends_with(
+                ".with_timing(::coolbot::TimingSpec { priority: 3, ..super::leaf::SPEC.timing })"
+            ),
+            "{build}"
+        );
+        // Only `mode` is in the supervisor's spec; `faults` is local.
+        let exposed: Vec<&str> = c
+            .vars
+            .iter()
+            .filter(|v| v.spec_index.is_some())
+            .map(|v| v.field.name.as_str())
+            .collect();
+        assert_eq!(exposed, ["mode"]);
+        let parts: Vec<&str> = c.parts.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(parts, ["supervisor", "a", "b"]);
+        let sections: Vec<&str> = c.methods.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(sections, ["on_entry", "off_exit"]);
+    }
+
+    #[test]
+    fn nested_compounds_and_implicit_supervisors() {
+        let outer = &compounds()[1];
+        assert_eq!(
+            outer.instances[0].build.as_deref(),
+            Some(r#"super::r#box::component("inner", parts.inner())?"#)
+        );
+        assert!(outer.instances[0].compound);
+        assert!(
+            outer.parts[1]
+                .user_signature
+                .ends_with("impl crate::generated::r#box::Parts")
+        );
+        // No supervisor block: one state without sections.
+        assert_eq!(outer.states.len(), 1);
+        assert_eq!(outer.states[0].cool_name, "supervising");
+        assert!(outer.methods.is_empty());
     }
 }

@@ -88,3 +88,25 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn rules_read_every_kind_of_value() {
+    let component =
+        plant::generated::probe::component("probe", plant::probe::ProbeParts::default()).unwrap();
+    let mut system = System::new();
+    let probe = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `waiting` -> `seen` (the one rule that holds once the gauge is ready) ->
+    // `done` (the gauge's result); none of the rules to `failed` ever holds.
+    let monitor = probe
+        .wait_for(
+            |m| matches!(m.user_state.as_deref(), Some("done" | "failed")),
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("done"));
+    assert_eq!(count(&monitor, "count"), 1);
+    assert!(count(&monitor, "seen_level") >= 3);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
