@@ -168,14 +168,25 @@ pub fn component{{ c.generics() }}(name: impl ::core::convert::Into<::std::strin
     builder{{ c.turbofish() }}(name, parts)?.build()
 }
 
+/// Like [`component`], starting from the given own variables (an enclosing
+/// compound's instance overrides use it).
+pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, vars)?.build()
+}
+
 /// The runtime's builder for compound `{{ c.type_name }}` named `name`, with
 /// everything the description says: the instances (behaviours from `parts`, with
 /// their overrides), the connections, the exported ports, the mapped variables, the
 /// `on error` policies, the substitutes, the redundant groups, the recovery queue and
 /// the supervisor's rules. Fails when a nested compound cannot be built.
-pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, Vars::default())
+}
+
+/// Like [`builder`], starting from the given own variables.
+pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
     let name = name.into();
-    let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(Vars::default()));
+    let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(vars));
     let supervisor = __CoolSupervisor {
         supervisor: parts.supervisor(),
         vars{% if c.rules_use_vars() %}: ::std::sync::Arc::clone(&vars){% endif %},
@@ -185,6 +196,9 @@ pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string:
 {%- if let Some(build) = i.build %}
     {%- if let Some(node) = i.node %}
         // Instance `{{ i.name }}` is declared `on "{{ node }}"`: it runs here (remote nodes are not supported yet).
+    {%- endif %}
+    {%- if !i.unapplied.is_empty() %}
+        // Not applied: overrides of `{{ i.name }}`'s mapped variables {{ i.unapplied_text() }} (set them through its control port once it runs).
     {%- endif %}
         .instance({{ build }})
 {%- endif %}

@@ -482,6 +482,14 @@ pub struct Compound {
     pub rules: Vec<Rule>,
 }
 
+impl Instance {
+    /// The unapplied overrides as one line of text (`a`, `b`).
+    pub fn unapplied_text(&self) -> String {
+        let names: Vec<String> = self.unapplied.iter().map(|n| format!("`{n}`")).collect();
+        names.join(", ")
+    }
+}
+
 impl Compound {
     /// The doc comment as a Rust string literal.
     pub fn doc_literal(&self) -> String {
@@ -555,6 +563,9 @@ pub struct Instance {
     pub build: Option<String>,
     /// Rust expression of its `timing { ... }` override, if any.
     pub timing: Option<String>,
+    /// Overrides the generated code cannot apply (a nested compound's mapped
+    /// controllable variables), by name.
+    pub unapplied: Vec<String>,
     /// Configuration overrides: `(field, Rust value)`.
     pub config_overrides: Vec<(String, String)>,
     /// Controllable variable overrides: `(field, Rust value)`.

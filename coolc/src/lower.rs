@@ -1013,12 +1013,10 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
 impl Lowerer<'_> {
     /// An instance's overrides of configuration fields (`config`) or controllable
     /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    /// A compound's own controllable variables count; its mapped ones do not (they
+    /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self
-            .components
-            .get(instance.component.name.as_str())
-            .filter(|c| c.kind == ast::ComponentKind::Atomic)
-        else {
+        let Some(component) = self.components.get(instance.component.name.as_str()) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();

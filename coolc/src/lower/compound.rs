@@ -482,9 +482,23 @@ impl<'a> Lowerer<'a> {
         let var_overrides = self.overrides(i, false);
         let component = match &module {
             None => None,
-            Some(module) if compound => Some(format!(
+            Some(module) if compound && var_overrides.is_empty() => Some(format!(
                 "super::{module}::component({name}, parts.{method}())?"
             )),
+            Some(module) if compound => {
+                let (_, var_fields) = target.map(field_counts).unwrap_or_default();
+                let mut vars = format!("super::{module}::Vars {{ ");
+                for (field, value) in &var_overrides {
+                    vars.push_str(&format!("{field}: {value}, "));
+                }
+                if var_overrides.len() < var_fields {
+                    vars.push_str(&format!("..super::{module}::Vars::default()"));
+                }
+                vars.push_str(" }");
+                Some(format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {vars})?"
+                ))
+            }
             Some(module) if config_overrides.is_empty() && var_overrides.is_empty() => Some(
                 format!("super::{module}::component({name}, parts.{method}())"),
             ),
@@ -514,6 +528,17 @@ impl<'a> Lowerer<'a> {
                 ))
             }
         };
+        let applied: BTreeSet<&str> = config_overrides
+            .iter()
+            .chain(&var_overrides)
+            .map(|(field, _)| field.as_str())
+            .collect();
+        let unapplied: Vec<String> = i
+            .overrides
+            .iter()
+            .filter(|o| !applied.contains(ident::snake(&o.name.name).as_str()))
+            .map(|o| o.name.name.clone())
+            .collect();
         let timing = match (&module, &i.timing) {
             (Some(module), Some(t)) => {
                 Some(self.timing_override(t, &format!("super::{module}::SPEC.timing")))
@@ -534,6 +559,7 @@ impl<'a> Lowerer<'a> {
             node: i.node.as_ref().map(|n| n.value.clone()),
             build: component,
             timing,
+            unapplied,
             config_overrides,
             var_overrides,
         }

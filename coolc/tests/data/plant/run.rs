@@ -35,7 +35,14 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     let names: Vec<&str> = component.spec().variables.iter().map(|v| v.name).collect();
     assert_eq!(
         names,
-        ["received", "switches", "cell_mode", "fail", "alarms"]
+        [
+            "received",
+            "switches",
+            "cell_mode",
+            "fail",
+            "cell_limit",
+            "alarms"
+        ]
     );
     let mut system = System::new();
     let plant = system.add(component).unwrap();
@@ -47,6 +54,8 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     assert_eq!(monitor.state, State::Running);
     assert_eq!(monitor.user_state.as_deref(), Some("watching"));
     assert_eq!(count(&monitor, "alarms"), 0);
+    // `instance cell: Cell { limit = 5; }`, seen through the mapped `cell_limit`.
+    assert_eq!(count(&monitor, "cell_limit"), 5);
 
     // The fault, set through the plant's control port down to the primary worker.
     plant
