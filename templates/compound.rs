@@ -97,8 +97,9 @@ impl UserState {
 }
 
 /// The supervisor's shape: its states, its own observable and controllable
-/// variables and its timing. The compound's exported ports and mapped variables are
-/// added by `coolbot::CompoundBuilder::build`.
+/// variables, its timing, and the exported ports as the compound will have them
+/// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
+/// adds the mapped variables).
 pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     type_name: "{{ c.type_name }}",
     doc: {{ c.doc_literal() }},
@@ -108,8 +109,16 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     {%- endfor %}
     ],
     initial: {{ c.initial }},
-    inputs: &[],
-    outputs: &[],
+    inputs: &[
+    {%- for spec in c.input_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
+    outputs: &[
+    {%- for spec in c.output_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
     variables: &[
     {%- for v in c.vars %}
     {%- if v.spec_index.is_some() %}

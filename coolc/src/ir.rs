@@ -466,6 +466,12 @@ pub struct Compound {
     /// mapped variables, policies, redundant groups, substitutes, recovery), each a
     /// Rust method call starting with `.`.
     pub steps: Vec<String>,
+    /// `coolbot::InputSpec` expressions of the exported inputs, in order (what the
+    /// builder gives the compound; listed in `SPEC` so that a supervisor's `on` and
+    /// `without` validate).
+    pub input_specs: Vec<String>,
+    /// `coolbot::OutputSpec` expressions of the exported outputs, in order.
+    pub output_specs: Vec<String>,
     /// The compound's own variables (`Vars`), read through the guard `vars`.
     pub vars: Vec<Var>,
     /// Supervisor states (index = state id).

@@ -95,6 +95,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "plant.rs",
         "gauge.rs",
         "probe.rs",
+        "gate.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -110,6 +111,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     for test in [
         "a_failed_leaf_is_substituted_and_the_supervisors_follow",
         "rules_read_every_kind_of_value",
+        "a_supervisor_moves_on_a_packet_at_an_exported_input",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

@@ -105,16 +105,15 @@ impl<'a> Lowerer<'a> {
             .copied()
     }
 
-    /// The packet type of input (`input`) or output port `port` of `component`,
-    /// through exports of nested compounds: `Some(None)` for a tick port, `None` when
-    /// it does not resolve.
-    fn port_type(
+    /// The input or output (`input`) port `port` of `component`, followed through
+    /// the exports of nested compounds to the atomic port that implements it.
+    fn leaf_port(
         &self,
         component: &'a ast::Component,
         port: &str,
         input: bool,
         depth: usize,
-    ) -> Option<Option<&'a ast::Type>> {
+    ) -> Option<LeafPort<'a>> {
         if depth > 64 {
             return None;
         }
@@ -122,23 +121,18 @@ impl<'a> Lowerer<'a> {
             match member {
                 ast::Member::Input(i) if input && i.name.name == port => {
                     return match &i.def {
-                        ast::InputDef::Tick => Some(None),
-                        ast::InputDef::Fifo { ty, .. }
-                        | ast::InputDef::Ufifo { ty, .. }
-                        | ast::InputDef::Last(ty)
-                        | ast::InputDef::Poster(ty) => Some(Some(ty)),
                         ast::InputDef::Export(target) => {
-                            self.export_type(component, target, true, depth)
+                            self.exported_port(component, target, true, depth)
                         }
+                        _ => Some(LeafPort::Input(i)),
                     };
                 }
                 ast::Member::Output(o) if !input && o.name.name == port => {
                     return match &o.def {
-                        ast::OutputDef::Tick => Some(None),
-                        ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(Some(ty)),
                         ast::OutputDef::Export(target) => {
-                            self.export_type(component, target, false, depth)
+                            self.exported_port(component, target, false, depth)
                         }
+                        _ => Some(LeafPort::Output(o)),
                     };
                 }
                 _ => {}
@@ -147,16 +141,63 @@ impl<'a> Lowerer<'a> {
         None
     }
 
-    fn export_type(
+    /// The atomic port an export of `component` names.
+    fn exported_port(
         &self,
         component: &'a ast::Component,
         target: &ast::PortRef,
         input: bool,
         depth: usize,
-    ) -> Option<Option<&'a ast::Type>> {
+    ) -> Option<LeafPort<'a>> {
         let instance = Self::instance_of(component, &target.instance.as_ref()?.name)?;
         let inner = self.component_of(instance)?;
-        self.port_type(inner, &target.port.name, input, depth + 1)
+        self.leaf_port(inner, &target.port.name, input, depth + 1)
+    }
+
+    /// The packet type of the port an export names: `Some(None)` for a tick port,
+    /// `None` when it does not resolve.
+    fn export_type(
+        &self,
+        component: &'a ast::Component,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<Option<&'a ast::Type>> {
+        Some(match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => match &i.def {
+                ast::InputDef::Fifo { ty, .. }
+                | ast::InputDef::Ufifo { ty, .. }
+                | ast::InputDef::Last(ty)
+                | ast::InputDef::Poster(ty) => Some(ty),
+                ast::InputDef::Tick | ast::InputDef::Export(_) => None,
+            },
+            LeafPort::Output(o) => match &o.def {
+                ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(ty),
+                ast::OutputDef::Tick | ast::OutputDef::Export(_) => None,
+            },
+        })
+    }
+
+    /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
+    /// atomic port's, under the compound's name for it.
+    fn export_spec(
+        &self,
+        component: &'a ast::Component,
+        name: &str,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<String> {
+        let port = match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => self.input(i),
+            LeafPort::Output(o) => self.output(o),
+        }?;
+        let kind = if input { "InputSpec" } else { "OutputSpec" };
+        Some(format!(
+            "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
+            ident::string_literal(name),
+            port.kind,
+            ident::string_literal(&port.packet),
+            port.pull
+        ))
     }
 
     /// The declared type of variable `name` of `component` (through mapped variables
@@ -251,6 +292,8 @@ impl<'a> Lowerer<'a> {
         let mut timing = None;
         let mut recovery = None;
         let mut uses_converters = false;
+        let mut input_specs = Vec::new();
+        let mut output_specs = Vec::new();
         let mut part_names: Vec<ir::Method> = vec![ir::Method {
             name: "supervisor".to_owned(),
             doc: Vec::new(),
@@ -291,7 +334,7 @@ impl<'a> Lowerer<'a> {
                         let address = port_address(target);
                         let name = ident::string_literal(&input.name.name);
                         let target_lit = ident::string_literal(&address);
-                        let step = match self.export_type(c, target, true, 0) {
+                        let step = match self.export_type(c, target, true) {
                             Some(None) => format!(".export_tick_input({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_input::<{}>({name}, {target_lit})",
@@ -300,11 +343,13 @@ impl<'a> Lowerer<'a> {
                             None => format!(".export_input::<()>({name}, {target_lit})"),
                         };
                         steps.push(step);
+                        input_specs.extend(self.export_spec(c, &input.name.name, target, true));
                     }
                 }
                 ast::Member::Output(output) => {
                     if let ast::OutputDef::Export(target) = &output.def {
-                        let ty = match self.export_type(c, target, false, 0) {
+                        output_specs.extend(self.export_spec(c, &output.name.name, target, false));
+                        let ty = match self.export_type(c, target, false) {
                             Some(Some(ty)) => self.rust_type(ty, GEN_TYPES),
                             _ => "()".to_owned(),
                         };
@@ -462,6 +507,8 @@ impl<'a> Lowerer<'a> {
             instances,
             connections,
             steps,
+            input_specs,
+            output_specs,
             vars,
             states: supervisor.states,
             initial: supervisor.initial,
@@ -649,6 +696,12 @@ impl<'a> Lowerer<'a> {
             ],
         }
     }
+}
+
+/// An atomic port an export leads to.
+enum LeafPort<'a> {
+    Input(&'a ast::Input),
+    Output(&'a ast::Output),
 }
 
 /// The lowered supervisor automaton.
@@ -1440,6 +1493,13 @@ mod tests {
                 r#".substitute("b", "a")"#,
             ]
         );
+        assert_eq!(
+            c.input_specs,
+            [
+                "::coolbot::InputSpec { name: \"input\", kind: ::coolbot::InputKind::Fifo { capacity: 4, policy: ::coolbot::OverflowPolicy::Reject }, packet: \"u32\", pull: false }"
+            ]
+        );
+        assert_eq!(c.output_specs.len(), 1);
         let a = &c.instances[0];
         let build = a.build.as_deref().unwrap();
         assert!(

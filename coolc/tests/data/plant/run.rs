@@ -119,3 +119,28 @@ fn rules_read_every_kind_of_value() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
+    let gate =
+        plant::generated::gate::component("gate", plant::gate::GateParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(gate).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    system.run_all().unwrap();
+    let monitor = handle
+        .wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("closed"));
+    system.connect("source.out", "gate.input").unwrap();
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some("open"), WAIT)
+        .unwrap();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
