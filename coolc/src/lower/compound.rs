@@ -11,30 +11,23 @@ use std::collections::BTreeSet;
 
 use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique};
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
+use crate::check::model::{DEFAULT_STATES, RESULTS};
 use crate::ident;
 use crate::ir;
-
-/// The default automaton's states, as written and as `coolbot::State` variants.
-const DEFAULT_STATES: &[(&str, &str)] = &[
-    ("starting", "Starting"),
-    ("ready", "Ready"),
-    ("running", "Running"),
-    ("suspended", "Suspended"),
-    ("dead", "Dead"),
-    ("starting_error", "StartingError"),
-    ("running_error", "RunningError"),
-    ("end", "End"),
-];
 
 /// The supervisor state of a compound that declares none.
 const IMPLICIT_STATE: &str = "supervising";
 
-/// The `result` symbols and the `coolbot::TaskResult` patterns they stand for.
-const RESULTS: &[(&str, &str)] = &[
-    ("none", "::coolbot::TaskResult::None"),
-    ("success", "::coolbot::TaskResult::Success(_)"),
-    ("fail", "::coolbot::TaskResult::Fail(_)"),
-];
+/// The `coolbot::TaskResult` pattern a `result` symbol (`check::model::RESULTS`)
+/// stands for.
+fn result_pattern(symbol: &str) -> Option<&'static str> {
+    match symbol {
+        "none" => Some("::coolbot::TaskResult::None"),
+        "success" => Some("::coolbot::TaskResult::Success(_)"),
+        "fail" => Some("::coolbot::TaskResult::Fail(_)"),
+        _ => None,
+    }
+}
 
 /// The type of a rule operand, as the generated Rust holds it.
 #[derive(Clone, Debug, PartialEq)]
@@ -1300,15 +1293,16 @@ fn symbol(name: &str, other: &RTy) -> Operand {
         other => other,
     };
     match other {
-        RTy::State => match DEFAULT_STATES.iter().find(|(n, _)| *n == name) {
-            Some((_, variant)) => plain(format!("::coolbot::State::{variant}"), RTy::State),
-            None => plain(String::new(), RTy::Unreadable),
-        },
+        // The checker's names; `coolbot::State` variants are their camel case.
+        RTy::State if DEFAULT_STATES.contains(&name) => plain(
+            format!("::coolbot::State::{}", ident::camel(name)),
+            RTy::State,
+        ),
         RTy::UserState(states) if states.iter().any(|s| s == name) => {
             plain(ident::string_literal(name), other.clone())
         }
-        RTy::Result => match RESULTS.iter().find(|(n, _)| *n == name) {
-            Some((_, pattern)) => plain((*pattern).to_owned(), RTy::Result),
+        RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
+            Some(pattern) => plain(pattern.to_owned(), RTy::Result),
             None => plain(String::new(), RTy::Unreadable),
         },
         RTy::Quality(levels) => match levels.iter().position(|l| l == name) {
