@@ -64,6 +64,16 @@ impl ::core::default::Default for Vars {
 }
 {% endif %}
 
+/// Initial values of the mapped controllable variables, for an enclosing compound's
+/// instance overrides (`None`: the instance's own value).
+#[derive(Clone, Debug, Default)]
+pub struct Mapped {
+{%- for m in c.mapped %}
+    /// `controllable {{ m.cool_name }} = {{ m.target }};`
+    pub {{ m.name }}: ::core::option::Option<{{ m.ty }}>,
+{%- endfor %}
+}
+
 /// The supervisor's states (its user automaton).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum UserState {
@@ -177,10 +187,10 @@ pub fn component{{ c.generics() }}(name: impl ::core::convert::Into<::std::strin
     builder{{ c.turbofish() }}(name, parts)?.build()
 }
 
-/// Like [`component`], starting from the given own variables (an enclosing
-/// compound's instance overrides use it).
-pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
-    builder_with{{ c.turbofish() }}(name, parts, vars)?.build()
+/// Like [`component`], starting from the given own variables and initial values of
+/// the mapped controllable ones (an enclosing compound's instance overrides use it).
+pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, vars, mapped)?.build()
 }
 
 /// The runtime's builder for compound `{{ c.type_name }}` named `name`, with
@@ -189,11 +199,15 @@ pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::
 /// `on error` policies, the substitutes, the redundant groups, the recovery queue and
 /// the supervisor's rules. Fails when a nested compound cannot be built.
 pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
-    builder_with{{ c.turbofish() }}(name, parts, Vars::default())
+    builder_with{{ c.turbofish() }}(name, parts, Vars::default(), Mapped::default())
 }
 
-/// Like [`builder`], starting from the given own variables.
-pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+/// Like [`builder`], starting from the given own variables and initial values of the
+/// mapped controllable ones.
+pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    {%- if c.mapped.is_empty() %}
+    let _ = mapped;
+    {%- endif %}
     let name = name.into();
     let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(vars));
     let supervisor = __CoolSupervisor {

@@ -466,6 +466,8 @@ pub struct Compound {
     /// mapped variables, policies, redundant groups, substitutes, recovery), each a
     /// Rust method call starting with `.`.
     pub steps: Vec<String>,
+    /// The `Mapped` fields: one per mapped controllable variable.
+    pub mapped: Vec<MappedField>,
     /// `coolbot::InputSpec` expressions of the exported inputs, in order (what the
     /// builder gives the compound; listed in `SPEC` so that a supervisor's `on` and
     /// `without` validate).
@@ -545,6 +547,19 @@ impl Compound {
     pub fn turbofish(&self) -> &'static str {
         if self.uses_converters { "::<C>" } else { "" }
     }
+}
+
+/// A mapped controllable variable's initial value, a field of `Mapped`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MappedField {
+    /// Rust field name.
+    pub name: String,
+    /// The variable's name as written.
+    pub cool_name: String,
+    /// The instance variable it maps (`instance.variable`).
+    pub target: String,
+    /// The instance variable's Rust type (the field is an `Option` of it).
+    pub ty: String,
 }
 
 /// One instance of a compound.

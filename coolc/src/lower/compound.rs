@@ -295,6 +295,7 @@ impl<'a> Lowerer<'a> {
             stub_body: Vec::new(),
         }];
         let mut spec_index = 0;
+        let mapped_controllables = Self::mapped_controllables(c);
         for member in &c.members {
             match member {
                 ast::Member::Instance(i) => {
@@ -306,7 +307,7 @@ impl<'a> Lowerer<'a> {
                         user_signature: String::new(),
                         stub_body: Vec::new(),
                     });
-                    instances.push(self.instance(i, method));
+                    instances.push(self.instance(i, method, &mapped_controllables));
                 }
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -500,6 +501,7 @@ impl<'a> Lowerer<'a> {
             instances,
             connections,
             steps,
+            mapped: self.mapped_fields(c),
             input_specs,
             output_specs,
             vars,
@@ -512,62 +514,165 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    /// One instance: how the builder makes its component.
-    fn instance(&self, i: &'a ast::Instance, method: String) -> ir::Instance {
+    /// The mapped controllable variables of compound `c`: `(name, instance,
+    /// variable)`, in declaration order.
+    fn mapped_controllables(c: &'a ast::Component) -> Vec<(&'a str, &'a str, &'a str)> {
+        c.members
+            .iter()
+            .filter_map(|m| match m {
+                ast::Member::Variable(v)
+                    if v.ty.is_none() && v.kind == ast::VarKind::Controllable =>
+                {
+                    match &v.value.as_ref()?.kind {
+                        ExprKind::Path(segments) => match segments.as_slice() {
+                            [instance, variable] => Some((
+                                v.name.name.as_str(),
+                                instance.name.as_str(),
+                                variable.name.as_str(),
+                            )),
+                            _ => None,
+                        },
+                        _ => None,
+                    }
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The `Mapped` fields of compound `c`: one per mapped controllable variable,
+    /// typed like the instance variable it names.
+    fn mapped_fields(&self, c: &'a ast::Component) -> Vec<ir::MappedField> {
+        Self::mapped_controllables(c)
+            .into_iter()
+            .map(|(name, instance, variable)| {
+                let ty = Self::instance_of(c, instance)
+                    .and_then(|i| self.component_of(i))
+                    .and_then(|t| self.variable_type(t, variable, 0))
+                    .map(|(ty, _)| {
+                        let rust = self.rust_type(ty, GEN_TYPES);
+                        if self.defaultable(ty, &mut BTreeSet::new()) {
+                            rust
+                        } else {
+                            // Its `Vars` field has no default: an `Option` itself.
+                            format!("::core::option::Option<{rust}>")
+                        }
+                    })
+                    .unwrap_or_else(|| "()".to_owned());
+                ir::MappedField {
+                    name: ident::snake(name),
+                    cool_name: name.to_owned(),
+                    target: format!("{instance}.{variable}"),
+                    ty,
+                }
+            })
+            .collect()
+    }
+
+    /// One instance: how the builder makes its component. `mapped` are the mapped
+    /// controllable variables of the enclosing compound (their initial values,
+    /// given to `builder_with`, go to the instance).
+    fn instance(
+        &self,
+        i: &'a ast::Instance,
+        method: String,
+        mapped: &[(&str, &str, &str)],
+    ) -> ir::Instance {
         let target = self.component_of(i);
         let module = target.and_then(|t| self.modules.get(t.name.name.as_str()).cloned());
         let compound = target.is_some_and(|t| t.kind == ast::ComponentKind::Compound);
         let name = ident::string_literal(&i.name.name);
         let config_overrides = self.overrides(i, true);
         let var_overrides = self.overrides(i, false);
-        let component = match &module {
-            None => None,
-            Some(module) if compound && var_overrides.is_empty() => Some(format!(
-                "super::{module}::component({name}, parts.{method}())?"
-            )),
-            Some(module) if compound => {
-                let (_, var_fields) = target.map(field_counts).unwrap_or_default();
-                let mut vars = format!("super::{module}::Vars {{ ");
-                for (field, value) in &var_overrides {
-                    vars.push_str(&format!("{field}: {value}, "));
-                }
-                if var_overrides.len() < var_fields {
-                    vars.push_str(&format!("..super::{module}::Vars::default()"));
-                }
-                vars.push_str(" }");
-                Some(format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {vars})?"
-                ))
-            }
-            Some(module) if config_overrides.is_empty() && var_overrides.is_empty() => Some(
-                format!("super::{module}::component({name}, parts.{method}())"),
-            ),
-            Some(module) => {
-                let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
-                let fields = |kind: &str, overrides: &[(String, String)], all: usize| {
-                    if overrides.is_empty() {
-                        return format!("super::{module}::{kind}::default()");
-                    }
-                    let mut text = format!("super::{module}::{kind} {{ ");
-                    let mut named = BTreeSet::new();
-                    for (field, value) in overrides {
-                        named.insert(field);
-                        text.push_str(&format!("{field}: {value}, "));
-                    }
-                    // Every field named: no struct update (clippy's `needless_update`).
-                    if named.len() < all {
-                        text.push_str(&format!("..super::{module}::{kind}::default()"));
-                    }
-                    text.push_str(" }");
-                    text
-                };
-                Some(format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {}, {})",
-                    fields("Config", &config_overrides, config_fields),
-                    fields("Vars", &var_overrides, var_fields)
-                ))
-            }
+        // The enclosing compound's mapped controllables that name this instance:
+        // `(instance variable, field of the enclosing `Mapped`)`.
+        let from_mapped: Vec<(String, String)> = mapped
+            .iter()
+            .filter(|(_, instance, _)| *instance == i.name.name)
+            .map(|(name, _, variable)| (ident::snake(variable), ident::snake(name)))
+            .collect();
+        // A nested compound's own mapped controllables, overridden here or fed from
+        // the enclosing `Mapped`.
+        let inner_mapped: Vec<(&str, &str, &str)> = match target {
+            Some(t) if compound => Self::mapped_controllables(t),
+            _ => Vec::new(),
         };
+        let is_inner_mapped = |field: &str| {
+            inner_mapped
+                .iter()
+                .any(|(n, _, _)| ident::snake(n) == field)
+        };
+        let mut mapped_overrides: Vec<(String, String)> = Vec::new();
+        if let Some(t) = target.filter(|_| compound) {
+            for o in &i.overrides {
+                let field = ident::snake(&o.name.name);
+                if !is_inner_mapped(&field) {
+                    continue;
+                }
+                if let Some((ty, _)) = self.variable_type(t, &o.name.name, 0) {
+                    let value = self.value(&o.value, Some(ty), GEN_TYPES);
+                    let value = if self.defaultable(ty, &mut BTreeSet::new()) {
+                        value
+                    } else {
+                        format!("::core::option::Option::Some({value})")
+                    };
+                    mapped_overrides.push((field, value));
+                }
+            }
+        }
+        let component = module.as_ref().map(|module| {
+            let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
+            let vars_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| !is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let mapped_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let config = fields(
+                module,
+                "Config",
+                &config_overrides,
+                &[],
+                config_fields,
+                false,
+            );
+            let vars = fields(
+                module,
+                "Vars",
+                &var_overrides,
+                &vars_from_mapped,
+                var_fields,
+                false,
+            );
+            let nested = fields(
+                module,
+                "Mapped",
+                &mapped_overrides,
+                &mapped_from_mapped,
+                inner_mapped.len(),
+                true,
+            );
+            let plain = config_overrides.is_empty()
+                && var_overrides.is_empty()
+                && from_mapped.is_empty()
+                && mapped_overrides.is_empty();
+            match (compound, plain) {
+                (true, true) => format!("super::{module}::component({name}, parts.{method}())?"),
+                (true, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {vars}, {nested})?"
+                ),
+                (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
+                (false, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {config}, {vars})"
+                ),
+            }
+        });
+        let var_overrides: Vec<(String, String)> =
+            var_overrides.into_iter().chain(mapped_overrides).collect();
         let applied: BTreeSet<&str> = config_overrides
             .iter()
             .chain(&var_overrides)
@@ -858,6 +963,70 @@ impl Lowerer<'_> {
             when,
         }
     }
+}
+
+/// A struct expression `super::<module>::<kind> { ... }` setting `overrides`
+/// (`(field, value)`) and fields fed from the enclosing compound's `Mapped`
+/// (`(field, Mapped field)`), the others from `Default` (no struct update when every
+/// one of the `all` fields is named: clippy's `needless_update`). `optional`: the
+/// fields are `Option`s (a `Mapped`), so a given value wins over the written one
+/// with `or`, not `unwrap_or`.
+fn fields(
+    module: &str,
+    kind: &str,
+    overrides: &[(String, String)],
+    from_mapped: &[(String, String)],
+    all: usize,
+    optional: bool,
+) -> String {
+    let path = format!("super::{module}::{kind}");
+    let mut named: Vec<&str> = Vec::new();
+    for (field, _) in overrides.iter().chain(from_mapped) {
+        if !named.contains(&field.as_str()) {
+            named.push(field);
+        }
+    }
+    if named.is_empty() {
+        return format!("{path}::default()");
+    }
+    let mut entries = Vec::new();
+    for field in &named {
+        let written = overrides.iter().find(|(f, _)| f == field).map(|(_, v)| {
+            if optional {
+                format!("::core::option::Option::Some({v})")
+            } else {
+                v.clone()
+            }
+        });
+        let given: Vec<String> = from_mapped
+            .iter()
+            .filter(|(f, _)| f == field)
+            .map(|(_, m)| format!("mapped.{m}"))
+            .collect();
+        let value = match (given.split_first(), written.as_ref()) {
+            (None, Some(written)) => written.clone(),
+            (None, None) => format!("{path}::default().{field}"),
+            (Some((first, rest)), written) => {
+                let mut chain = first.clone();
+                for other in rest {
+                    chain.push_str(&format!(".or({other})"));
+                }
+                match (optional, written) {
+                    (true, Some(written)) => format!("{chain}.or({written})"),
+                    (true, None) => chain,
+                    (false, Some(written)) => format!("{chain}.unwrap_or({written})"),
+                    (false, None) => {
+                        format!("{chain}.unwrap_or_else(|| {path}::default().{field})")
+                    }
+                }
+            }
+        };
+        entries.push(format!("{field}: {value}"));
+    }
+    if named.len() < all {
+        entries.push(format!("..{path}::default()"));
+    }
+    format!("{path} {{ {} }}", entries.join(", "))
 }
 
 /// How many fields an atomic component's `Config` and `Vars` have.
@@ -1437,7 +1606,7 @@ mod tests {
                 state off { exit; }
             }
         }
-        compound Outer { instance inner: Box; }
+        compound Outer { instance inner: Box { gain = 2.0; } }
     ";
 
     fn compounds() -> Vec<ir::Compound> {
@@ -1519,9 +1688,26 @@ mod tests {
     #[test]
     fn nested_compounds_and_implicit_supervisors() {
         let outer = &compounds()[1];
+        // An override of the nested compound's mapped controllable `gain`.
         assert_eq!(
             outer.instances[0].build.as_deref(),
-            Some(r#"super::r#box::component("inner", parts.inner())?"#)
+            Some(
+                r#"super::r#box::component_with("inner", parts.inner(), super::r#box::Vars::default(), super::r#box::Mapped { gain: ::core::option::Option::Some(2.0) })?"#
+            )
+        );
+        assert!(outer.instances[0].unapplied.is_empty());
+        // Box's own `Mapped` feeds its instance `a`.
+        let inner = &compounds()[0];
+        assert_eq!(inner.mapped.len(), 1);
+        assert_eq!(inner.mapped[0].ty, "f64");
+        assert!(
+            inner.instances[0]
+                .build
+                .as_deref()
+                .unwrap()
+                .contains("gain: mapped.gain.unwrap_or_else(|| super::leaf::Vars::default().gain)"),
+            "{:?}",
+            inner.instances[0].build
         );
         assert!(outer.instances[0].compound);
         assert!(

@@ -37,6 +37,7 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
         names,
         [
             "received",
+            "last",
             "switches",
             "cell_mode",
             "fail",
@@ -54,8 +55,12 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     assert_eq!(monitor.state, State::Running);
     assert_eq!(monitor.user_state.as_deref(), Some("watching"));
     assert_eq!(count(&monitor, "alarms"), 0);
-    // `instance cell: Cell { limit = 5; }`, seen through the mapped `cell_limit`.
+    // `instance cell: Cell { limit = 5; scale = 3; }`: the cell's own `limit`, seen
+    // through the mapped `cell_limit`, and its mapped `scale`, which reaches the
+    // primary worker (`gain = 2`): every count arrives multiplied by 6.
     assert_eq!(count(&monitor, "cell_limit"), 5);
+    let last = count(&monitor, "last");
+    assert!(last > 0 && last.is_multiple_of(6), "last = {last}");
 
     // The fault, set through the plant's control port down to the primary worker.
     plant
