@@ -80,8 +80,9 @@ fn every_construct_generates_a_clippy_clean_crate() {
 fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     // `Plant` nests the `Cell` compound (a substitute, exported ports, mapped
     // variables, supervisor rules over own and instance variables); `Probe` has rules
-    // of every form over every readable type. The filled user files and the run
-    // tests are in `tests/data/plant`.
+    // of every form over every readable type; `Gate` moves on a packet at an exported
+    // input; `Pair` is a redundant group. The filled user files and the run tests are
+    // in `tests/data/plant`.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("plant.cool");
     std::fs::copy(data("plant/plant.cool"), &description).unwrap();
@@ -96,6 +97,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "gauge.rs",
         "probe.rs",
         "gate.rs",
+        "pair.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -112,6 +114,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "a_failed_leaf_is_substituted_and_the_supervisors_follow",
         "rules_read_every_kind_of_value",
         "a_supervisor_moves_on_a_packet_at_an_exported_input",
+        "a_redundant_group_keeps_the_stream_when_a_member_fails",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

@@ -149,3 +149,37 @@ fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn a_redundant_group_keeps_the_stream_when_a_member_fails() {
+    let pair =
+        plant::generated::pair::component("pair", plant::pair::PairParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(pair).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    let sink = system
+        .add(plant::generated::sink::component(
+            "sink",
+            plant::sink::Sink::default(),
+        ))
+        .unwrap();
+    system.connect("source.out", "pair.input").unwrap();
+    system.connect("pair.out", "sink.input").unwrap();
+    system.run_all().unwrap();
+    let monitor = sink.wait_for(|m| count(m, "received") >= 5, WAIT).unwrap();
+    let received = count(&monitor, "received");
+    handle
+        .command(Command::Set("fail_a".to_owned(), Value::Bool(true)))
+        .unwrap();
+    // The other member takes the group's connections: packets keep coming.
+    sink.wait_for(|m| count(m, "received") >= received + 10, WAIT)
+        .unwrap();
+    assert_eq!(handle.snapshot().state, State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
