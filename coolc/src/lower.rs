@@ -1000,7 +1000,12 @@ impl<'a> Lowerer<'a> {
 /// `name`, or `name_2`, `name_3`... when a method of that name exists (a state `on`
 /// with an exit section and an exception `exit` would both want `on_exit`).
 fn unique(name: String, methods: &[ir::Method]) -> String {
-    let taken = |candidate: &str| methods.iter().any(|m| m.name == candidate);
+    unique_among(name, methods.iter().map(|m| m.name.as_str()))
+}
+
+/// `name`, or `name_2`, `name_3`... when `taken` holds it.
+fn unique_among<'t>(name: String, taken: impl Iterator<Item = &'t str> + Clone) -> String {
+    let taken = |candidate: &str| taken.clone().any(|t| t == candidate);
     if !taken(&name) {
         return name;
     }

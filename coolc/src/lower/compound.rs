@@ -9,7 +9,7 @@
 
 use std::collections::BTreeSet;
 
-use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique};
+use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique_among};
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS};
 use crate::ident;
@@ -287,26 +287,18 @@ impl<'a> Lowerer<'a> {
         let mut uses_converters = false;
         let mut input_specs = Vec::new();
         let mut output_specs = Vec::new();
-        let mut part_names: Vec<ir::Method> = vec![ir::Method {
-            name: "supervisor".to_owned(),
-            doc: Vec::new(),
-            signature: String::new(),
-            user_signature: String::new(),
-            stub_body: Vec::new(),
-        }];
+        // `Parts` method names: `supervisor`, then one per instance.
+        let mut part_names: Vec<String> = vec!["supervisor".to_owned()];
         let mut spec_index = 0;
         let mapped_controllables = Self::mapped_controllables(c);
         for member in &c.members {
             match member {
                 ast::Member::Instance(i) => {
-                    let method = unique(ident::snake(&i.name.name), &part_names);
-                    part_names.push(ir::Method {
-                        name: method.clone(),
-                        doc: Vec::new(),
-                        signature: String::new(),
-                        user_signature: String::new(),
-                        stub_body: Vec::new(),
-                    });
+                    let method = unique_among(
+                        ident::snake(&i.name.name),
+                        part_names.iter().map(String::as_str),
+                    );
+                    part_names.push(method.clone());
                     instances.push(self.instance(i, method, &mapped_controllables));
                 }
                 ast::Member::Connect(connect) => {
@@ -1683,6 +1675,22 @@ mod tests {
         assert_eq!(parts, ["supervisor", "a", "b"]);
         let sections: Vec<&str> = c.methods.iter().map(|m| m.name.as_str()).collect();
         assert_eq!(sections, ["on_entry", "off_exit"]);
+    }
+
+    #[test]
+    fn an_instance_named_supervisor_gets_another_method() {
+        let analysis = crate::analyze_text(
+            "t.cool",
+            "atomic Leaf { automaton { initial on; state on { entry; } } }\ncompound Top { instance supervisor: Leaf; }",
+        );
+        assert!(!analysis.has_errors());
+        let krate = lower(&analysis.files, &Options::default());
+        let parts: Vec<&str> = krate.compounds[0]
+            .parts
+            .iter()
+            .map(|m| m.name.as_str())
+            .collect();
+        assert_eq!(parts, ["supervisor", "supervisor_2"]);
     }
 
     #[test]
