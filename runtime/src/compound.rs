@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::Receiver;
 
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
-use crate::monitor::{Command, Handle, Monitor, MonitorEvent};
+use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
     TickOut, UfifoIn,
@@ -954,6 +954,7 @@ impl CompoundBuilder {
             budget: self.budget,
             started: false,
             exports: self.exports,
+            steps: Vec::new(),
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports))
     }
@@ -1016,6 +1017,8 @@ struct Compound {
     budget: Budget,
     started: bool,
     exports: Vec<Box<dyn Export>>,
+    /// Supervision steps taken since the last call returned (published by the runner).
+    steps: Vec<Supervision>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -1025,6 +1028,18 @@ fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
 }
 
 impl Compound {
+    /// Record a supervision step about instance `index` for the monitoring port.
+    fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
+        let detail = detail.into();
+        let instance = self.instances[index].name.clone();
+        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
+        self.steps.push(Supervision {
+            instance,
+            step,
+            detail,
+        });
+    }
+
     fn fault(&self, message: String) -> Fault {
         tracing::warn!(compound = %self.name, "{message}");
         Fault::message(message)
@@ -1265,13 +1280,27 @@ impl Compound {
         let monitor = self.view.instances[index].clone();
         let name = self.instances[index].name.clone();
         let error = monitor.error.clone().unwrap_or_default();
-        if self.instances[index].group.is_some() {
+        self.step(index, Step::Failed, error.clone());
+        if let Some(group) = self.instances[index].group {
             // A redundant member: the next live member takes the group's connections.
             self.enqueue(index);
             if !self.covered(index) {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "no member of its redundant group is left",
+                );
                 return Err(self.fault(format!(
                     "every member of the redundant group of `{name}` failed; last: {error}"
                 )));
+            }
+            let standing = self.groups[group]
+                .iter()
+                .copied()
+                .find(|m| self.instances[*m].status == Status::Active);
+            if let Some(member) = standing {
+                let by = self.instances[member].name.clone();
+                self.step(index, Step::Substituted { by }, "");
             }
             return self.rewire();
         }
@@ -1283,24 +1312,35 @@ impl Compound {
         };
         match policy {
             Policy::Ignore => {
-                tracing::warn!(compound = %self.name, "instance `{name}` failed (ignored): {error}");
+                self.step(index, Step::Ignored, "");
                 Ok(())
             }
-            Policy::Propagate => Err(self.fault(format!("instance `{name}` failed: {error}"))),
+            Policy::Propagate => {
+                self.step(index, Step::Propagated, "");
+                Err(self.fault(format!("instance `{name}` failed: {error}")))
+            }
             Policy::Restart if monitor.state == State::RunningError => {
                 self.schedule_restart(index, &error)
             }
             Policy::Restart => {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "it cannot restart from starting_error",
+                );
                 Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
             }
             Policy::Substitute => {
                 self.enqueue(index);
+                self.step(index, Step::Enqueued, "");
                 if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Standby
                 {
                     self.instances[substitute].status = Status::Active;
                     self.rewire()?;
                     command(&self.instances[substitute].handle, Controllable::Running)?;
+                    let by = self.instances[substitute].name.clone();
+                    self.step(index, Step::Substituted { by }, "");
                 }
                 Ok(())
             }
@@ -1326,6 +1366,14 @@ impl Compound {
         let done = instance.restarts.len();
         if u32::try_from(done).unwrap_or(u32::MAX) >= budget.restarts {
             let name = instance.name.clone();
+            self.step(
+                index,
+                Step::Propagated,
+                format!(
+                    "restart budget spent: {done} restart(s) within {:?}",
+                    budget.window
+                ),
+            );
             return Err(self.fault(format!(
                 "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
                 budget.window
@@ -1350,6 +1398,11 @@ impl Compound {
                 if now >= crate::thread::later(pending.since, self.deadline) {
                     let name = instance.name.clone();
                     self.instances[index].pending = None;
+                    self.step(
+                        index,
+                        Step::Propagated,
+                        "stuck in a section that overran its max_response",
+                    );
                     return Err(self.fault(format!(
                         "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
                         self.deadline
@@ -1366,7 +1419,15 @@ impl Compound {
                 continue; // Someone else brought it back meanwhile.
             }
             instance.restarts.push_back(now);
-            command(&instance.handle, Controllable::Running)?;
+            let handle = instance.handle.clone();
+            let waited = now.saturating_duration_since(pending.since);
+            let detail = if waited.is_zero() {
+                String::new()
+            } else {
+                format!("after {waited:?}")
+            };
+            self.step(index, Step::Restarted, detail);
+            command(&handle, Controllable::Running)?;
         }
         Ok(())
     }
@@ -1396,7 +1457,7 @@ impl Compound {
                 } else {
                     self.rewire()?;
                 }
-                tracing::info!(compound = %self.name, "instance `{}` recovered", self.instances[index].name);
+                self.step(index, Step::Recovered, "");
                 continue;
             }
             if now >= crate::thread::later(entry.since, self.deadline) {
@@ -1413,7 +1474,13 @@ impl Compound {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
                 self.refresh(index);
+                self.step(
+                    index,
+                    Step::Retired,
+                    format!("not recovered within {:?}", self.deadline),
+                );
                 if !self.covered(index) {
+                    self.step(index, Step::Propagated, "nothing stands for it");
                     return Err(self.fault(format!(
                         "instance `{name}` did not recover within {:?} and nothing stands for it",
                         self.deadline
@@ -1426,6 +1493,9 @@ impl Compound {
             let restarted = !self.instances[index].handle.is_stuck()
                 && command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
+            if restarted {
+                self.step(index, Step::Retried, "");
+            }
             let entry = &mut self.queue[position];
             entry.probation = restarted;
             entry.next = crate::thread::later(now, self.retry_every);
@@ -1570,7 +1640,36 @@ impl Automaton for Compound {
         true
     }
 
-    fn supervise(&mut self, state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        let outcome = self.supervise_turn(state);
+        cx.supervision.append(&mut self.steps);
+        outcome
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
+            })
+        });
+        let fresh = self.fresh.then(Instant::now);
+        queue.chain(restarts).chain(fresh).min()
+    }
+}
+
+impl Compound {
+    /// One supervision turn: exports, instance events and policies, the recovery
+    /// queue, then the rules of supervisor state `state`.
+    fn supervise_turn(&mut self, state: usize) -> Result<Option<usize>, Fault> {
         for export in &mut self.exports {
             export.forward();
         }
@@ -1610,25 +1709,6 @@ impl Automaton for Compound {
         };
         self.fresh = fired.is_some_and(|target| target != state);
         Ok(fired)
-    }
-
-    fn wake_at(&self) -> Option<Instant> {
-        let queue = self.queue.iter().map(|entry| {
-            entry
-                .next
-                .min(crate::thread::later(entry.since, self.deadline))
-        });
-        // A stuck instance's return is an event; its deadline is a timer.
-        let restarts = self.instances.iter().filter_map(|i| {
-            let pending = i.pending?;
-            Some(if i.handle.is_stuck() {
-                crate::thread::later(pending.since, self.deadline)
-            } else {
-                pending.due
-            })
-        });
-        let fresh = self.fresh.then(Instant::now);
-        queue.chain(restarts).chain(fresh).min()
     }
 }
 

@@ -703,6 +703,19 @@ impl Runner {
 
     /// Publish what the last call changed in the context and the variables.
     fn after_call(&mut self) {
+        if !self.cx.supervision.is_empty() {
+            let steps = std::mem::take(&mut self.cx.supervision);
+            self.shared.update(|monitor| {
+                monitor.supervision_steps += steps.len() as u64;
+                monitor.supervision.extend(steps.iter().cloned());
+                let excess = monitor
+                    .supervision
+                    .len()
+                    .saturating_sub(crate::monitor::SUPERVISION_HISTORY);
+                monitor.supervision.drain(..excess);
+                steps.into_iter().map(MonitorEvent::Supervision).collect()
+            });
+        }
         if self.cx.result_changed {
             self.cx.result_changed = false;
             let result = self.cx.result.clone();

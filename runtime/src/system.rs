@@ -497,6 +497,8 @@ impl System {
             max_response: timing.max_response,
             priority: timing.priority,
             dropped_events: 0,
+            supervision: Vec::new(),
+            supervision_steps: 0,
         };
         let named_inputs = spec
             .inputs
