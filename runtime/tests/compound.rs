@@ -1074,6 +1074,23 @@ fn restart_stops_at_the_budget_and_the_fault_propagates() {
         "{error}"
     );
     assert_eq!(starts(&script), 4, "the first run and three restarts");
+    let steps: Vec<_> = monitor
+        .supervision
+        .iter()
+        .map(|s| (s.step.clone(), s.detail.starts_with("restart budget spent")))
+        .filter(|(step, _)| *step != Step::Failed)
+        .collect();
+    assert_eq!(
+        steps,
+        [
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Propagated, true)
+        ],
+        "{:?}",
+        monitor.supervision
+    );
     assert_eq!(script.injected.load(Ordering::SeqCst), 4);
     assert_eq!(w.state(), State::RunningError);
     // The budget starts afresh when the compound is restarted.
