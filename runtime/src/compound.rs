@@ -31,6 +31,10 @@ use crate::system::{Component, ConnectError, PortSet, System};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+/// The period of a supervisor's `periodic;` sections when neither the state nor the
+/// supervisor's `timing` gives one (`docs/language.md`, "The supervisor").
+pub const DEFAULT_SUPERVISION_PERIOD: Duration = Duration::from_millis(100);
+
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -801,21 +805,36 @@ impl CompoundBuilder {
         }
     }
 
+    /// Whether instances `a` and `b` can stand for each other: the same ports (by name,
+    /// with their kind, packet type and pull model; queue sizes may differ) and the
+    /// same observable and controllable variables (by name, with their kind and
+    /// type), in any order. `coolc` checks the same (`coolc::check::interface_mismatch`).
     fn same_interface(&self, a: usize, b: usize) -> Result<(), CompoundError> {
         let (x, y) = (self.instances[a].spec, self.instances[b].spec);
         let inputs = |s: &Spec| {
-            s.inputs
+            let mut ports: Vec<_> = s
+                .inputs
                 .iter()
-                .map(|i| (i.name, format!("{:?}", i.kind), i.packet))
-                .collect::<Vec<_>>()
+                .map(|i| (i.name, std::mem::discriminant(&i.kind), i.packet, i.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
         let outputs = |s: &Spec| {
-            s.outputs
+            let mut ports: Vec<_> = s
+                .outputs
                 .iter()
-                .map(|o| (o.name, format!("{:?}", o.kind), o.packet))
-                .collect::<Vec<_>>()
+                .map(|o| (o.name, o.kind, o.packet, o.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
-        let variables = |s: &Spec| s.variables.iter().map(|v| v.name).collect::<Vec<_>>();
+        let variables = |s: &Spec| {
+            let mut variables: Vec<_> =
+                s.variables.iter().map(|v| (v.name, v.kind, v.ty)).collect();
+            variables.sort_by_key(|v| v.0);
+            variables
+        };
         if inputs(x) != inputs(y) || outputs(x) != outputs(y) || variables(x) != variables(y) {
             return Err(self.arrangement(format!(
                 "`{}` ({}) and `{}` ({}) do not have the same interface (ports, their kinds and packets, variables)",
@@ -831,7 +850,15 @@ impl CompoundBuilder {
         if let Some(error) = self.errors.first() {
             return Err(error.clone());
         }
-        let own = self.supervisor.spec();
+        let mut own = *self.supervisor.spec();
+        let unperiodic = own
+            .states
+            .iter()
+            .any(|state| state.periodic.is_some_and(|p| p.period.is_none()));
+        if unperiodic && own.timing.period.is_none() {
+            own.timing.period = Some(DEFAULT_SUPERVISION_PERIOD);
+        }
+        let own = &own;
         if let Err(detail) = own.validate() {
             return Err(CompoundError::Supervisor {
                 compound: self.name.clone(),
@@ -849,11 +876,12 @@ impl CompoundBuilder {
             let p = self.instance_index(&primary)?;
             if s == p
                 || self.instances[p].substitute.is_some()
+                || self.instances[p].substitutes.is_some()
                 || self.instances[s].substitutes.is_some()
                 || self.instances[s].substitute.is_some()
             {
                 return Err(self.arrangement(format!(
-                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, and a substitute has none of its own"
+                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, a substitute substitutes one instance, and neither end of a substitution is in another"
                 )));
             }
             self.same_interface(p, s)?;

@@ -1550,3 +1550,81 @@ fn a_rule_reading_what_a_section_changed_is_evaluated_after_the_section() {
     assert_eq!(base.state(), State::Running);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn a_supervisor_periodic_section_without_a_period_runs_at_the_default_supervision_period() {
+    static UNTIMED: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
+    let spec = *UNTIMED.get_or_init(|| {
+        let mut states = COUNTING.states.to_vec();
+        states[0].periodic = Some(coolbot::PeriodicSpec { period: None });
+        let mut spec = COUNTING;
+        spec.states = Box::leak(states.into_boxed_slice());
+        Box::leak(Box::new(spec))
+    });
+    struct Untimed(Counting, &'static Spec);
+    impl Supervisor for Untimed {
+        fn spec(&self) -> &'static Spec {
+            self.1
+        }
+        fn section(
+            &mut self,
+            state: usize,
+            section: Section,
+            cx: &mut SupervisorCx<'_>,
+        ) -> SectionResult {
+            self.0.section(state, section, cx)
+        }
+    }
+    let count = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let seen = Arc::clone(&count);
+    let (w, _) = worker("w");
+    let component = CompoundBuilder::new("base", Untimed(Counting { count }, spec))
+        .instance(w)
+        .rule("counting", "stopped", &[], move |_| {
+            seen.load(Ordering::SeqCst) >= 2
+        })
+        .build()
+        .expect("a supervisor's periodic section needs no period");
+    assert_eq!(
+        component.spec().timing.period,
+        Some(coolbot::compound::DEFAULT_SUPERVISION_PERIOD)
+    );
+    let mut system = System::new();
+    let base = system.add(component).expect("add");
+    system.run_all().expect("run");
+    wait_user(&base, "stopped");
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn substitution_chains_are_refused_in_either_order_and_interfaces_compare_by_name() {
+    let build = |f: fn(CompoundBuilder) -> CompoundBuilder| {
+        let (sup, _) = Sup::new(&["operating"]);
+        let (a, _) = worker("a");
+        let (b, _) = worker("b");
+        let (c, _) = worker("c");
+        f(CompoundBuilder::new("base", sup)
+            .instance(a)
+            .instance(b)
+            .instance(c))
+        .build()
+    };
+    for chain in [
+        build(|b| b.substitute("b", "a").substitute("c", "b")),
+        build(|b| b.substitute("c", "b").substitute("b", "a")),
+        build(|b| b.substitute("b", "a").substitute("c", "a")),
+    ] {
+        let error = chain.expect_err("a chain or two substitutes");
+        assert!(error.to_string().contains("one substitute"), "{error}");
+    }
+    // A substitute whose data fifo is deeper: the same interface.
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, _) = worker("w");
+    let (deep, _) = deep_worker("deep");
+    CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(deep)
+        .substitute("deep", "w")
+        .build()
+        .expect("queue sizes may differ");
+}
