@@ -125,6 +125,8 @@ codes! {
     RuleType => "coolc::check::rule_type",
     /// A substitute or redundant instance has a different interface.
     InterfaceMismatch => "coolc::check::interface_mismatch",
+    /// An instance takes part in more than one substitution or redundant group.
+    Arrangement => "coolc::check::arrangement",
     /// A compound contains itself.
     SelfContaining => "coolc::check::self_containing",
     /// A packet contains itself by value (an infinitely large type).

@@ -51,6 +51,7 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
             _ => {}
         }
     }
+    arrangement(checker, component, &instances);
     cardinality(checker, component, &instances);
     queue_fan_out(checker, component, &instances);
     duplicate_policies(checker, component);
@@ -234,22 +235,26 @@ fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
             }
         }
     }
-    let observable = |i: &Interface| -> BTreeMap<String, Ty> {
+    // Observable and controllable variables (mapped ones and `Set` commands follow
+    // whoever stands for the instance).
+    let exposed = |i: &Interface| -> BTreeMap<String, (ast::VarKind, Ty)> {
         i.variables
             .iter()
-            .filter(|(_, v)| v.kind == ast::VarKind::Observable)
-            .map(|(n, v)| (n.clone(), v.ty.clone()))
+            .filter(|(_, v)| v.kind != ast::VarKind::Local)
+            .map(|(n, v)| (n.clone(), (v.kind, v.ty.clone())))
             .collect()
     };
-    let (ours, theirs) = (observable(a), observable(b));
+    let (ours, theirs) = (exposed(a), exposed(b));
     let names: BTreeSet<&String> = ours.keys().chain(theirs.keys()).collect();
     for name in names {
         match (ours.get(name), theirs.get(name)) {
-            (Some(p), Some(q)) if !p.same(q) => {
-                out.push(format!("observable `{name}` is `{p}` here but `{q}` there"))
-            }
-            (Some(_), None) => out.push(format!("extra observable `{name}`")),
-            (None, Some(_)) => out.push(format!("missing observable `{name}`")),
+            (Some((k, p)), Some((l, q))) if k != l || !p.same(q) => out.push(format!(
+                "variable `{name}` is {} `{p}` here but {} `{q}` there",
+                kind_word(*k),
+                kind_word(*l)
+            )),
+            (Some((k, _)), None) => out.push(format!("extra {} `{name}`", kind_word(*k))),
+            (None, Some((l, _))) => out.push(format!("missing {} `{name}`", kind_word(*l))),
             _ => {}
         }
     }
@@ -308,6 +313,69 @@ fn redundant(checker: &mut Checker<'_, '_>, instances: &Instances<'_>, redundant
                         .with_secondary(first_member.span, "compared with this instance")
                         .with_help(differences.join("; "));
                     checker.push(diagnostic);
+                }
+            }
+        }
+    }
+}
+
+/// Substitutions and redundant groups the runtime can arrange: each instance takes
+/// part in at most one of them, once (one substitute per instance, a substitute
+/// substitutes one instance and has none of its own, no instance both in a
+/// substitution and in a redundant group or in two groups).
+fn arrangement(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+) {
+    // Where each instance was first placed, and as what.
+    let mut placed: BTreeMap<String, (Span, String)> = BTreeMap::new();
+    let mut place = |checker: &mut Checker<'_, '_>, ident: &ast::Ident, role: String| {
+        if !instances.contains_key(ident.name.as_str()) {
+            return;
+        }
+        let Some((earlier, was)) = placed.get(ident.name.as_str()) else {
+            placed.insert(ident.name.clone(), (ident.span, role));
+            return;
+        };
+        let diagnostic = checker
+            .error(
+                Code::Arrangement,
+                ident.span,
+                format!("`{}` cannot be {role}: it is already {was}", ident.name),
+            )
+            .with_label(role.clone())
+            .with_secondary(*earlier, format!("{was} here"))
+            .with_help(
+                "an instance takes part in one substitution (as the substitute or the substituted \
+                 instance) or one redundant group: the runtime could not tell who stands for it",
+            );
+        checker.push(diagnostic);
+    };
+    for member in &component.members {
+        if let ast::Member::Instance(instance) = member
+            && let Some(original) = &instance.substitutes
+            && original.name != instance.name.name
+        {
+            place(
+                checker,
+                &instance.name,
+                format!("the substitute of `{}`", original.name),
+            );
+            place(
+                checker,
+                original,
+                format!("substituted by `{}`", instance.name.name),
+            );
+        }
+    }
+    for member in &component.members {
+        if let ast::Member::Redundant(redundant) = member {
+            let mut seen = BTreeSet::new();
+            for ident in &redundant.members {
+                // A name twice in one group is `duplicate`.
+                if seen.insert(ident.name.as_str()) {
+                    place(checker, ident, "in a redundant group".to_owned());
                 }
             }
         }
@@ -876,6 +944,22 @@ fn unconnected_transition_inputs(
         };
         if let Some(instance) = &target.instance {
             fed.insert((instance.name.clone(), target.port.name.clone()));
+        }
+    }
+    // What feeds one member of a redundant group feeds whichever member stands for
+    // the group.
+    for member in &component.members {
+        if let ast::Member::Redundant(redundant) = member {
+            let ports: Vec<String> = fed
+                .iter()
+                .filter(|(i, _)| redundant.members.iter().any(|m| m.name == *i))
+                .map(|(_, port)| port.clone())
+                .collect();
+            for m in &redundant.members {
+                for port in &ports {
+                    fed.insert((m.name.clone(), port.clone()));
+                }
+            }
         }
     }
     for (name, (instance, _)) in instances {
