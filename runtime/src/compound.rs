@@ -115,13 +115,18 @@ pub struct SupervisorCx<'a> {
 #[derive(Debug, Clone, Default)]
 pub struct View {
     instances: Vec<Monitor>,
+    /// Each instance's position in `instances`, by name: a rule's lookup costs one
+    /// hash, not a scan of every instance.
+    positions: HashMap<String, usize>,
     own: Vec<(String, Value)>,
 }
 
 impl View {
     /// The monitor of instance `instance`, as last seen.
     pub fn monitor(&self, instance: &str) -> Option<&Monitor> {
-        self.instances.iter().find(|m| m.name == instance)
+        self.positions
+            .get(instance)
+            .and_then(|index| self.instances.get(*index))
     }
 
     /// `instance.state`.
@@ -1002,6 +1007,12 @@ impl CompoundBuilder {
         let spec: &'static Spec = Box::leak(Box::new(spec));
         let view = View {
             instances: self.instances.iter().map(|i| i.handle.snapshot()).collect(),
+            positions: self
+                .instances
+                .iter()
+                .enumerate()
+                .map(|(index, i)| (i.name.clone(), index))
+                .collect(),
             own: own
                 .variables
                 .iter()
