@@ -26,11 +26,11 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender};
 
 use crate::automaton::{Automaton, Context, Fault, Section};
-use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
+use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
-use crate::thread::{later, panic_message};
+use crate::thread::{Scheduling, later, panic_message};
 
 /// How often, at most, a busy thread reads its CPU time (a system call) for the
 /// monitor; state changes always read it.
@@ -91,6 +91,8 @@ pub(crate) struct Runner {
     published_user: Option<usize>,
     /// Whether the automaton is a compound's (its supervision hooks are called).
     supervised: bool,
+    /// The thread's OS scheduling (`priority`), once the thread runs.
+    scheduling: Option<Scheduling>,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -143,6 +145,7 @@ impl Runner {
             elapsed_published: Duration::ZERO,
             published_user: None,
             supervised,
+            scheduling: None,
             _exit_guard: exit_guard,
         };
         runner.cx.waker = Some(crate::automaton::Waker {
@@ -154,6 +157,11 @@ impl Runner {
     /// The thread's body.
     pub(crate) fn run(mut self) {
         self.bell.attach();
+        crate::thread::set_timer_slack();
+        self.scheduling = Some(Scheduling::of_current_thread());
+        let mut priority = 0;
+        self.shared.quietly(|monitor| priority = monitor.priority);
+        self.apply_priority(priority);
         self.publish_variables();
         match self.run_start() {
             Ok(()) => self.apply(Event::StartOk),
@@ -571,6 +579,7 @@ impl Runner {
             Command::SetPriority(priority) => {
                 let priority = *priority;
                 self.shared.quietly(|monitor| monitor.priority = priority);
+                self.apply_priority(priority);
                 reply(Reply::Done);
             }
             Command::SetQuality(quality) => {
@@ -585,6 +594,30 @@ impl Runner {
                 }
             }
         }
+    }
+
+    /// Apply `priority` to this thread and publish what holds (an event and a log line
+    /// when it changed; a refusal never fails the component).
+    fn apply_priority(&mut self, priority: i32) {
+        let Some(scheduling) = self.scheduling.as_mut() else {
+            return;
+        };
+        let applied = scheduling.apply(priority);
+        match &applied {
+            OsPriority::Inherited => {}
+            OsPriority::NotApplied(why) => tracing::warn!(
+                component = %self.cx.name,
+                "priority {priority} not applied to the thread: {why}"
+            ),
+            how => tracing::info!(component = %self.cx.name, "priority {priority} applied: {how:?}"),
+        }
+        self.shared.update(|monitor| {
+            if monitor.os_priority == applied {
+                return Vec::new();
+            }
+            monitor.os_priority = applied.clone();
+            vec![MonitorEvent::OsPriority(applied)]
+        });
     }
 
     fn set_quality(&mut self, quality: usize) {

@@ -474,6 +474,7 @@ impl System {
             period: spec.timing.period,
             max_response: spec.timing.max_response,
             priority: spec.timing.priority,
+            os_priority: crate::monitor::OsPriority::Inherited,
             dropped_events: 0,
         };
         let named_inputs = spec
