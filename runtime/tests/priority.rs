@@ -14,9 +14,8 @@ use std::time::Duration;
 
 use coolbot::crossbeam_channel::Receiver;
 use coolbot::{
-    Automaton, Command, Component, Context, Fault, Handle, MonitorEvent, OsPriority,
-    PeriodicSpec, PortSet, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec,
-    Value,
+    Automaton, Command, Component, Context, Fault, Handle, MonitorEvent, OsPriority, PeriodicSpec,
+    PortSet, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec, Value,
 };
 use rustix::process::getpriority_process;
 use rustix::thread::gettid;
@@ -40,7 +39,10 @@ impl Seen {
         let from = self.activations.load(Ordering::SeqCst);
         let deadline = std::time::Instant::now() + WAIT;
         while self.activations.load(Ordering::SeqCst) < from + 2 {
-            assert!(std::time::Instant::now() < deadline, "the component stopped");
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the component stopped"
+            );
             std::thread::sleep(Duration::from_millis(1));
         }
         (
@@ -141,7 +143,11 @@ fn run(spec: &'static Spec) -> (System, Handle, Arc<Seen>) {
     };
     let mut system = System::new();
     let handle = system
-        .add(Component::new("reporter", Box::new(reporter), PortSet::new()))
+        .add(Component::new(
+            "reporter",
+            Box::new(reporter),
+            PortSet::new(),
+        ))
         .expect("add");
     system.run_all().expect("run");
     (system, handle, seen)
@@ -179,7 +185,9 @@ fn negative_priority_raises_the_nice_value_and_set_priority_changes_it() {
 
     // At run time, through the control port: published with an event.
     let events = handle.subscribe();
-    handle.command(Command::SetPriority(-7)).expect("set priority");
+    handle
+        .command(Command::SetPriority(-7))
+        .expect("set priority");
     let expected = (base + 7).min(19);
     let snapshot = handle.snapshot();
     assert_eq!(snapshot.priority, -7);
@@ -218,7 +226,9 @@ fn positive_priority_is_applied_or_its_refusal_published() {
 
     // Back to 0: normal scheduling at the nice value the thread was created with
     // (always permitted after SCHED_RR or a lower nice value was granted).
-    handle.command(Command::SetPriority(0)).expect("set priority");
+    handle
+        .command(Command::SetPriority(0))
+        .expect("set priority");
     // (After a refusal nothing had changed, and setting the same nice value is
     // permitted too.)
     assert_eq!(handle.snapshot().os_priority, OsPriority::Nice(base));
