@@ -5,8 +5,9 @@
 //! command, every delivery to its inputs and every pull request to its outputs), with
 //! the nearest timer deadline as its timeout. Each turn clears the doorbell before it
 //! looks at anything (so a ring during the turn makes the next wait return at once),
-//! handles at most one thing, in this priority order, then looks at the control port
-//! again:
+//! except a turn that follows a spin which found its work by looking at the sources of
+//! work directly (see `Runner::wait_for_input`), handles at most one thing, in this
+//! priority order, then looks at the control port again:
 //!
 //! 1. control commands (all that are waiting);
 //! 2. `Context::end` requested by the last user call;
