@@ -32,7 +32,7 @@ use crossbeam_channel::{Receiver, Sender, bounded};
 use common::{Figure, Glue, Goal, Mode, Samples, Table};
 
 const PERIOD: Duration = Duration::from_millis(1);
-const ROUNDS: usize = 10;
+const ROUNDS: usize = 20;
 /// Activations discarded at the start of each round.
 const WARMUP: usize = 20;
 /// The runtime's timer slack for component threads (`runtime/src/thread.rs`).
