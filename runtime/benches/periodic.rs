@@ -46,8 +46,8 @@ one_state_spec! {
     periodic: Some(PeriodicSpec { period: Some(PERIOD) }),
 }
 
-/// Lateness samples and misses of one round.
-type Round = (Vec<Duration>, u64);
+/// Lateness samples, misses and the thread's CPU time of one round.
+type Round = (Vec<Duration>, u64, Duration);
 
 /// The component; its first activation sends the instant its deadlines count from on
 /// `anchors` (once per bare thread).
@@ -82,7 +82,8 @@ fn ticker(count: usize, done: Sender<Round>, anchors: Sender<Instant>) -> Compon
         if samples.len() >= count + WARMUP
             && let Some(done) = done.take()
         {
-            let _ = done.send((samples.split_off(WARMUP), misses));
+            let cpu = cpu_time::ThreadTime::now().as_duration();
+            let _ = done.send((samples.split_off(WARMUP), misses, cpu));
         }
         Ok(())
     });
@@ -136,7 +137,8 @@ fn bare_loop(count: usize, sleep: Sleep, anchor: Receiver<Instant>, offset: Dura
             next = now + PERIOD;
         }
     }
-    (samples.split_off(WARMUP), misses)
+    let cpu = cpu_time::ThreadTime::now().as_duration();
+    (samples.split_off(WARMUP), misses, cpu)
 }
 
 /// One round: the component and both bare loops at once.
@@ -177,8 +179,11 @@ fn main() {
     }
     let [project, baseline, classic] = sides.map(|rounds| {
         let misses = rounds.iter().map(|r| r.1).sum::<u64>();
+        let cpu = rounds.iter().map(|r| r.2).sum::<Duration>();
         let samples = Samples::new(rounds.into_iter().flat_map(|r| r.0).collect());
-        (samples, misses)
+        // Thread CPU time per activation, warm-up and start-up included.
+        let per = cpu / u32::try_from(samples.len()).unwrap_or(u32::MAX).max(1);
+        (samples, misses, per)
     });
     table.row(
         "lateness p50",
@@ -206,14 +211,18 @@ fn main() {
     );
     table.note(&format!(
         "{} activations per side, the three sides at once; missed deadlines: project {}, \
-         baseline {}, classic {}; max lateness project {:?}, baseline {:?}, classic {:?}",
+         baseline {}, classic {}; max lateness project {:?}, baseline {:?}, classic {:?}; \
+         thread CPU time per activation project {:?}, baseline {:?}, classic {:?}",
         project.0.len(),
         project.1,
         baseline.1,
         classic.1,
         project.0.max(),
         baseline.0.max(),
-        classic.0.max()
+        classic.0.max(),
+        project.2,
+        baseline.2,
+        classic.2
     ));
     table.print();
 }
