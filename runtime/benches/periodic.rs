@@ -26,7 +26,7 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use coolbot::{Component, PeriodicSpec, PortSet, Section, System};
+use coolbot::{Component, OsPriority, PeriodicSpec, PortSet, Section, System, TimingSpec};
 use crossbeam_channel::{Receiver, Sender, bounded};
 
 use common::{Figure, Glue, Goal, Mode, Samples, Table};
@@ -35,6 +35,8 @@ const PERIOD: Duration = Duration::from_millis(1);
 const ROUNDS: usize = 20;
 /// Activations discarded at the start of each round.
 const WARMUP: usize = 20;
+/// The priority of the second measurement.
+const PRIORITY: u8 = 10;
 /// The runtime's timer slack for component threads (`runtime/src/thread.rs`).
 const TIMER_SLACK_NS: u64 = 1_000;
 
@@ -100,10 +102,29 @@ enum Sleep {
 }
 
 /// A bare sleep-to-deadline loop; its deadlines are `anchor + offset + k * period`.
-fn bare_loop(count: usize, sleep: Sleep, anchor: Receiver<Instant>, offset: Duration) -> Round {
+fn bare_loop(
+    count: usize,
+    sleep: Sleep,
+    anchor: Receiver<Instant>,
+    offset: Duration,
+    priority: u8,
+) -> Round {
     if matches!(sleep, Sleep::LikeComponent) {
         rustix::thread::set_current_timer_slack(std::num::NonZeroU64::new(TIMER_SLACK_NS))
             .expect("timer slack");
+        if priority > 0 {
+            // As the runtime does for `priority N`: SCHED_RR at N (may be refused; the
+            // rows are printed only if the component's was applied).
+            let _ = thread_priority::set_thread_priority_and_policy(
+                thread_priority::thread_native_id(),
+                thread_priority::ThreadPriority::Crossplatform(
+                    priority.try_into().expect("priority in range"),
+                ),
+                thread_priority::ThreadSchedulePolicy::Realtime(
+                    thread_priority::RealtimeThreadSchedulePolicy::RoundRobin,
+                ),
+            );
+        }
     }
     let anchor = anchor.recv().expect("the component's anchor");
     let mut samples = Vec::with_capacity(count + WARMUP);
@@ -141,21 +162,30 @@ fn bare_loop(count: usize, sleep: Sleep, anchor: Receiver<Instant>, offset: Dura
     (samples.split_off(WARMUP), misses, cpu)
 }
 
-/// One round: the component and both bare loops at once.
-fn round(count: usize) -> [Round; 3] {
+/// One round: the component and both bare loops at once; with a `priority`, the
+/// component's timing block asks for it and the baseline thread gets the same
+/// scheduling (the classic loop stays a normal thread). Also returns how the
+/// component's priority was applied.
+fn round(count: usize, priority: u8) -> ([Round; 3], OsPriority) {
     let (anchor_out, anchor_in) = bounded(2);
     let spawn = |sleep: Sleep, offset: Duration| {
         let anchor = anchor_in.clone();
-        std::thread::spawn(move || bare_loop(count, sleep, anchor, offset))
+        std::thread::spawn(move || bare_loop(count, sleep, anchor, offset, priority))
     };
     let baseline = spawn(Sleep::LikeComponent, PERIOD / 3);
     let classic = spawn(Sleep::Classic, PERIOD * 2 / 3);
     let (done, rounds) = bounded(1);
     let mut system = System::new();
-    let handle = system.add(ticker(count, done, anchor_out)).expect("add");
+    let timing = TimingSpec {
+        priority: i32::from(priority),
+        ..TICKER.timing
+    };
+    let component = ticker(count, done, anchor_out).with_timing(timing);
+    let handle = system.add(component).expect("add");
     system.run_all().expect("run");
     let project = common::expect(&rounds, Duration::from_secs(60), "ticker");
-    let runtime_misses = handle.snapshot().missed_deadlines;
+    let snapshot = handle.snapshot();
+    let runtime_misses = snapshot.missed_deadlines;
     assert!(system.shutdown().clean());
     assert!(
         runtime_misses >= project.1,
@@ -164,20 +194,24 @@ fn round(count: usize) -> [Round; 3] {
     );
     let baseline = baseline.join().expect("baseline thread");
     let classic = classic.join().expect("classic thread");
-    [project, baseline, classic]
+    ([project, baseline, classic], snapshot.os_priority)
 }
 
-fn main() {
-    let mode = Mode::from_env();
-    let per_round = mode.scale(10_000, 100) / ROUNDS;
-    let mut table = Table::new("Activation lateness of a 1 kHz periodic section", mode);
+/// Each side's pooled samples, misses and CPU time per activation.
+type Side = (Samples, u64, Duration);
+
+/// `rounds` rounds of `count` activations per side.
+fn measure(rounds: usize, count: usize, priority: u8) -> ([Side; 3], OsPriority) {
     let mut sides: [Vec<Round>; 3] = Default::default();
-    for _ in 0..ROUNDS {
-        for (side, round) in sides.iter_mut().zip(round(per_round)) {
+    let mut applied = OsPriority::Inherited;
+    for _ in 0..rounds {
+        let (round, os_priority) = round(count, priority);
+        applied = os_priority;
+        for (side, round) in sides.iter_mut().zip(round) {
             side.push(round);
         }
     }
-    let [project, baseline, classic] = sides.map(|rounds| {
+    let sides = sides.map(|rounds| {
         let misses = rounds.iter().map(|r| r.1).sum::<u64>();
         let cpu = rounds.iter().map(|r| r.2).sum::<Duration>();
         let samples = Samples::new(rounds.into_iter().flat_map(|r| r.0).collect());
@@ -185,6 +219,14 @@ fn main() {
         let per = cpu / u32::try_from(samples.len()).unwrap_or(u32::MAX).max(1);
         (samples, misses, per)
     });
+    (sides, applied)
+}
+
+fn main() {
+    let mode = Mode::from_env();
+    let per_round = mode.scale(10_000, 100) / ROUNDS;
+    let mut table = Table::new("Activation lateness of a 1 kHz periodic section", mode);
+    let ([project, baseline, classic], _) = measure(ROUNDS, per_round, 0);
     table.row(
         "lateness p50",
         Figure::Time(project.0.p50()),
@@ -224,5 +266,41 @@ fn main() {
         baseline.2,
         classic.2
     ));
+
+    // The same with `priority 10` (SCHED_RR where permitted) on the component and the
+    // baseline thread: what applying the priority buys on a loaded machine.
+    let ([project, baseline, classic], applied) = measure(ROUNDS / 2, per_round, PRIORITY);
+    if applied == OsPriority::RoundRobin(i32::from(PRIORITY)) {
+        table.row(
+            &format!("priority {PRIORITY}: lateness p50"),
+            Figure::Time(project.0.p50()),
+            Figure::Time(baseline.0.p50()),
+            Goal::None,
+        );
+        table.row(
+            &format!("priority {PRIORITY}: lateness p99"),
+            Figure::Time(project.0.p99()),
+            Figure::Time(baseline.0.p99()),
+            Goal::None,
+        );
+        table.row(
+            &format!("priority {PRIORITY}: lateness p99, against a classic loop (normal)"),
+            Figure::Time(project.0.p99()),
+            Figure::Time(classic.0.p99()),
+            Goal::None,
+        );
+        table.note(&format!(
+            "priority {PRIORITY} (SCHED_RR, component and baseline): {} activations per side; \
+             missed deadlines: project {}, baseline {}, classic {}",
+            project.0.len(),
+            project.1,
+            baseline.1,
+            classic.1
+        ));
+    } else {
+        table.note(&format!(
+            "priority {PRIORITY} rows skipped: the component's priority was {applied:?}"
+        ));
+    }
     table.print();
 }
