@@ -214,13 +214,21 @@ impl Runner {
             // (`wait_for_input`): the bell then stays rung, so that producers only read
             // it, until the thread is about to park.
             self.polled = std::mem::take(&mut self.found_by_polling);
-            if !self.polled {
+            // Whether anything rang since the last clear. If not, the bell is already
+            // quiet and needs no clearing (the clear would write the value it reads:
+            // a ring after this load still leaves the bell rung for the next wait),
+            // and the control queue needs no reading: a command rings after it is
+            // queued, so one queued but not rung yet rings before the next wait, which
+            // then returns at once. Saves an atomic swap and the read of a cold
+            // channel on every timer wake-up.
+            let rung = self.polled || self.bell.is_rung();
+            if rung && !self.polled {
                 self.bell.clear();
             }
             // One clock reading per turn (user calls start from it, and end with another).
             self.clock = Instant::now();
             // 1. Control first.
-            if !self.drain_control() {
+            if (rung || !self.deferred.is_empty()) && !self.drain_control() {
                 break;
             }
             if self.state != State::Running {
