@@ -401,12 +401,10 @@ pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
         .iter()
         .map(|c| set(user_path(&c.module), "Behavior", &c.methods))
         .collect();
-    sets.extend(
-        krate
-            .compounds
-            .iter()
-            .map(|c| set(user_path(&c.module), "Parts", &c.parts)),
-    );
+    for c in &krate.compounds {
+        sets.push(set(user_path(&c.module), "Supervisor", &c.methods));
+        sets.push(set(user_path(&c.module), "Parts", &c.parts));
+    }
     if !krate.types.converters.is_empty() {
         sets.push(set(
             PathBuf::from("src/converters.rs"),

@@ -242,28 +242,33 @@ pub fn write_files(
                     }
                     continue;
                 }
-                let Some(set) = stub_sets.iter().find(|s| s.path == file.path) else {
-                    continue;
-                };
-                match merge_stubs(&text, set) {
-                    Ok(merged) => {
-                        if !merged.added.is_empty() {
-                            fs::write(&path, &merged.text)?;
-                            report.added.push((file.path.clone(), merged.added));
+                // A compound's file has two blocks (`impl Supervisor`, `impl Parts`):
+                // every set of the file is merged in turn.
+                let mut merged_text = text.clone();
+                let mut added = Vec::new();
+                for set in stub_sets.iter().filter(|s| s.path == file.path) {
+                    match merge_stubs(&merged_text, set) {
+                        Ok(merged) => {
+                            added.extend(merged.added);
+                            merged_text = merged.text;
+                            if !merged.stale.is_empty() {
+                                report.warnings.push(format!(
+                                    "{} has methods the description no longer asks for (kept, remove them when done): {}",
+                                    file.path.display(),
+                                    merged.stale.join(", ")
+                                ));
+                            }
                         }
-                        if !merged.stale.is_empty() {
-                            report.warnings.push(format!(
-                                "{} has methods the description no longer asks for (kept, remove them when done): {}",
-                                file.path.display(),
-                                merged.stale.join(", ")
-                            ));
-                        }
+                        Err(error) => report.warnings.push(format!(
+                            "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
+                            file.path.display(),
+                            file.path.display()
+                        )),
                     }
-                    Err(error) => report.warnings.push(format!(
-                        "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
-                        file.path.display(),
-                        file.path.display()
-                    )),
+                }
+                if !added.is_empty() {
+                    fs::write(&path, &merged_text)?;
+                    report.added.push((file.path.clone(), added));
                 }
             }
         }
