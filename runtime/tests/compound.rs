@@ -223,7 +223,7 @@ fn a_compound_is_driven_and_observed_like_an_atomic_component() {
     for command in [
         Command::SetPriority(3),
         Command::SetPeriod(Duration::from_millis(20)),
-        Command::SetMaxResponse(Duration::from_millis(20)),
+        Command::SetMaxResponse(Duration::from_millis(500)),
         Command::SetQuality(0),
     ] {
         base.command(command.clone()).expect("accepted");
@@ -418,7 +418,7 @@ impl Substitution {
 
 #[test]
 fn a_substitute_takes_over_and_the_recovered_original_takes_its_place_back() {
-    let rig = substitution(Duration::from_secs(10));
+    let rig = substitution(Duration::from_secs(60));
     rig.fail_primary();
     // The connections moved: packets go to the substitute.
     rig.feed.data.send(1);
@@ -549,7 +549,7 @@ fn a_redundant_group_runs_while_one_member_survives() {
         .instance(f)
         .redundant(&["a", "b"])
         .connect("f.data", "a.data")
-        .recovery(Duration::from_millis(40), Duration::from_secs(10));
+        .recovery(Duration::from_millis(40), Duration::from_secs(60));
     let (a, b) = (
         builder.instance_handle("a").expect("a"),
         builder.instance_handle("b").expect("b"),
@@ -856,14 +856,16 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
     let base = system.add(builder.build().expect("build")).expect("add");
     system.run_all().expect("run");
     let mut sent = 0;
-    let deadline = std::time::Instant::now() + Duration::from_secs(15);
+    // No overall time limit (the machine may be loaded): each phase fails only if it
+    // makes no progress for `WAIT`.
     let stalled = |phase: &str| {
         format!(
-            "{phase} stalled: {:?} {:?}",
+            "{phase} stalled for {WAIT:?}: {:?} {:?}",
             base.snapshot(),
             flaky.snapshot()
         )
     };
+    let mut progress = Progress::new();
     // Panics first (a panic comes before the injected exception in the script).
     flaky_script.panic_in(Some("idle.entry"));
     loop {
@@ -871,20 +873,21 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
         if starts > usize::try_from(FAULTS / 2).unwrap() {
             break;
         }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{}",
-            stalled("panics")
-        );
+        assert!(progress.check(starts), "{}", stalled("panics"));
         feed.data.send(sent);
         sent += 1;
         std::thread::sleep(Duration::from_micros(200));
     }
     flaky_script.panic_in(None);
     // Then the declared exceptions, until they are used up.
-    while flaky_script.injected.load(Ordering::SeqCst) < FAULTS / 2 {
+    let mut progress = Progress::new();
+    loop {
+        let injected = flaky_script.injected.load(Ordering::SeqCst);
+        if injected >= FAULTS / 2 {
+            break;
+        }
         assert!(
-            std::time::Instant::now() < deadline,
+            progress.check(usize::try_from(injected).unwrap()),
             "{}",
             stalled("exceptions")
         );
@@ -904,10 +907,35 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
     assert!(report.clean(), "{report:?}");
 }
 
-/// The worker's timing with a short `max_response` (20 ms), for an instance.
+/// A stall check for soak loops: fails only when a counter has not moved for `WAIT`.
+struct Progress {
+    last: Option<usize>,
+    since: std::time::Instant,
+}
+
+impl Progress {
+    fn new() -> Progress {
+        Progress {
+            last: None,
+            since: std::time::Instant::now(),
+        }
+    }
+
+    /// Whether `count` moved within the last `WAIT`.
+    fn check(&mut self, count: usize) -> bool {
+        if self.last != Some(count) {
+            self.last = Some(count);
+            self.since = std::time::Instant::now();
+        }
+        self.since.elapsed() < WAIT
+    }
+}
+
+/// The worker's timing with a `max_response` (500 ms) that only a deliberately hung
+/// section overruns (ordinary sections stay far below it even on a loaded machine).
 fn fast_response() -> TimingSpec {
     TimingSpec {
-        max_response: Some(Duration::from_millis(20)),
+        max_response: Some(Duration::from_millis(500)),
         ..worker::SPEC.timing
     }
 }
@@ -952,7 +980,7 @@ fn an_instance_hanging_past_max_response_is_substituted_and_recovers_once_it_ret
         monitor
             .error
             .as_deref()
-            .is_some_and(|e| e.contains("still running after") && e.contains("max_response 20ms")),
+            .is_some_and(|e| e.contains("still running after") && e.contains("max_response 500ms")),
         "{monitor:?}"
     );
     assert_eq!(base.state(), State::Running);
@@ -979,7 +1007,7 @@ fn an_instance_hanging_past_max_response_is_substituted_and_recovers_once_it_ret
     assert!(system.shutdown().clean());
 }
 
-/// A compound `base` whose instance `w` (with a 20 ms max_response) is restarted on
+/// A compound `base` whose instance `w` (with a 500 ms max_response) is restarted on
 /// error, within `budget` restarts in a minute (backoff 1 ms..4 ms), with a recovery
 /// deadline of `deadline`.
 fn restarting(budget: u32, deadline: Duration) -> (System, Handle, Handle, Arc<Script>, Feeder) {
@@ -1251,7 +1279,7 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
 
 #[test]
 fn overruns_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
-    // mid: leaf1 (substitute: spare), leaf2 (propagate), both with a 20 ms
+    // mid: leaf1 (substitute: spare), leaf2 (propagate), both with a 500 ms
     // max_response, fed by f.
     let (mid_sup, _) = Sup::new(&["operating"]);
     let (leaf1, script1) = worker("leaf1");
@@ -1428,7 +1456,7 @@ fn a_converter_between_equal_types_is_applied_and_follows_the_substitute() {
         })
         .connect("f.kick", "w.kick")
         .on_error("w", Policy::Substitute)
-        .recovery(Duration::from_millis(40), Duration::from_secs(10));
+        .recovery(Duration::from_millis(40), Duration::from_secs(60));
     let w = builder.instance_handle("w").expect("w");
     let b = builder.instance_handle("b").expect("b");
     let mut system = System::new();

@@ -21,7 +21,7 @@ static UNTIMED: Spec = Spec {
 const OVERRIDE: TimingSpec = TimingSpec {
     period: Some(Duration::from_millis(20)),
     max_period: Some(Duration::from_millis(40)),
-    max_response: Some(Duration::from_millis(1)),
+    max_response: Some(Duration::from_millis(300)),
     priority: 7,
     qualities: &["full", "reduced", "minimal"],
 };
@@ -51,7 +51,7 @@ fn a_spec_without_a_period_is_accepted_with_an_instance_period() {
     let handle = system.add(component).expect("accepted with the override");
     let monitor = handle.snapshot();
     assert_eq!(monitor.period, Some(Duration::from_millis(20)));
-    assert_eq!(monitor.max_response, Some(Duration::from_millis(1)));
+    assert_eq!(monitor.max_response, Some(Duration::from_millis(300)));
     assert_eq!(monitor.priority, 7);
 }
 
@@ -76,9 +76,10 @@ fn the_runner_uses_the_instance_timing() {
         .expect("quality 2 of 3");
     assert!(handle.command(Command::SetQuality(3)).is_err());
 
-    // A periodic section sleeping 5 ms overruns the override's 1 ms max_response (the
-    // spec's 500 ms would not be overrun): a fault.
-    *script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(5));
+    // A periodic section sleeping 400 ms overruns the override's 300 ms max_response
+    // (the spec's 500 ms would not be overrun): a fault. (Ordinary sections stay far
+    // below 300 ms even on a loaded machine.)
+    *script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(400));
     handle
         .wait_for(|m| m.user_state.as_deref() == Some("idle"), WAIT)
         .expect("idle");
@@ -94,7 +95,7 @@ fn the_runner_uses_the_instance_timing() {
         monitor
             .error
             .as_deref()
-            .is_some_and(|e| e.contains("max_response 1ms")),
+            .is_some_and(|e| e.contains("max_response 300ms")),
         "{monitor:?}"
     );
     assert_eq!(monitor.period, Some(Duration::from_millis(20)));

@@ -44,12 +44,13 @@ fn after_fires_on_time_in_state() {
 #[test]
 fn a_watchdog_fires_only_when_its_port_is_quiet() {
     let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::from_millis(300),
+        delay: Duration::from_secs(2),
         without: Some(FEED),
         target: IDLE,
     }]);
     rig.run_busy();
-    // Feeding every 10 ms for 200 ms keeps the watchdog quiet.
+    // Feeding every 10 ms for 200 ms keeps the watchdog quiet (its 2 s leave room for
+    // the test thread being preempted on a loaded machine).
     for packet in 0..20 {
         rig.feeder.feed.send(packet);
         std::thread::sleep(Duration::from_millis(10));
@@ -62,13 +63,14 @@ fn a_watchdog_fires_only_when_its_port_is_quiet() {
 #[test]
 fn after_timers_pause_while_suspended() {
     let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::from_millis(100),
+        delay: Duration::from_secs(1),
         without: None,
         target: IDLE,
     }]);
     rig.run_busy();
     rig.command(Controllable::Suspended).expect("suspend");
-    std::thread::sleep(Duration::from_millis(150));
+    // Longer than the delay: had the pause counted, `busy` would be over on resume.
+    std::thread::sleep(Duration::from_millis(1200));
     rig.command(Controllable::Running).expect("resume");
     assert_eq!(
         rig.handle.snapshot().user_state.as_deref(),
