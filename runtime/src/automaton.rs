@@ -163,6 +163,12 @@ pub trait Automaton: Send + 'static {
     fn wake_at(&self) -> Option<Instant> {
         None
     }
+
+    /// Compound components only: the runner entered user state `state` (by any user
+    /// transition: a rule, `after`, `on`, `may`, a plan's `goto`, or the initial
+    /// state), before its entry section runs. The supervisor evaluates the rules of
+    /// `state` on its next turn, which the runner takes at once.
+    fn entered(&mut self, _state: usize) {}
 }
 
 /// Rings a component's doorbell: the thread wakes and looks for work (see

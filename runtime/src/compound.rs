@@ -1098,8 +1098,9 @@ struct Compound {
     view: View,
     /// The supervisor state whose rules were last evaluated.
     evaluated_in: Option<usize>,
-    /// A rule moved the supervisor to another state: the thread takes one more turn at
-    /// once to evaluate the new state's rules (nothing else may wake it).
+    /// The supervisor entered a state (by a rule, `after`, `on`, ...): the thread takes
+    /// one more turn at once to evaluate the new state's rules (nothing else may wake
+    /// it).
     fresh: bool,
     /// A supervisor section ran since the last turn: it may have changed variables the
     /// runtime cannot see (`local` ones, or any state of a hand-written supervisor), so
@@ -1751,6 +1752,17 @@ impl Automaton for Compound {
         outcome
     }
 
+    fn entered(&mut self, state: usize) {
+        // Whatever led there (a rule, `after`, `on`, `may`), the next turn, taken at
+        // once, evaluates every rule of the entered state. (Re-entering the state
+        // whose rules were evaluated last changes nothing they read: as before, only
+        // changes make them evaluated again, so a rule leading back to its own state
+        // does not fire in a loop.)
+        if self.evaluated_in != Some(state) {
+            self.fresh = true;
+        }
+    }
+
     fn wake_at(&self) -> Option<Instant> {
         let queue = self.queue.iter().map(|entry| {
             entry
@@ -1815,7 +1827,6 @@ impl Compound {
                 .find(holds)
                 .map(|rule| rule.target)
         };
-        self.fresh = fired.is_some_and(|target| target != state);
         Ok(fired)
     }
 }

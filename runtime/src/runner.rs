@@ -1121,6 +1121,11 @@ impl Runner {
             self.last_arrival[index] = now;
         }
         self.next_periodic = self.period_of(target).map(|period| later(now, period));
+        if self.supervised {
+            // The supervisor evaluates the new state's rules on its next turn (its
+            // `wake_at` asks for that turn at once).
+            self.automaton.entered(target);
+        }
         self.publish_user(Some(target));
         if self.spec.states[target].entry {
             match self.section_with_plan(target, Section::Entry) {

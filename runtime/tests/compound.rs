@@ -1656,3 +1656,82 @@ fn substitution_chains_are_refused_in_either_order_and_interfaces_compare_by_nam
         .build()
         .expect("queue sizes may differ");
 }
+
+/// A supervisor without sections: `first` leaves for `second` after 20 ms; `second`
+/// has only a rule (to `fired`).
+struct Stepping;
+
+static STEPPING: Spec = Spec {
+    type_name: "Stepping",
+    doc: "",
+    states: &[
+        StateSpec {
+            name: "first",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[coolbot::AfterSpec {
+                delay: Duration::from_millis(20),
+                without: None,
+                target: 1,
+            }],
+            may: &[],
+        },
+        StateSpec {
+            name: "second",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        },
+        StateSpec {
+            name: "fired",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        },
+    ],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl Supervisor for Stepping {
+    fn spec(&self) -> &'static Spec {
+        &STEPPING
+    }
+
+    fn section(&mut self, _: usize, _: Section, _: &mut SupervisorCx<'_>) -> SectionResult {
+        Ok(())
+    }
+}
+
+#[test]
+fn rules_are_evaluated_on_entering_a_state_reached_by_after() {
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", Stepping).instance(w).rule(
+        "second",
+        "fired",
+        &["w.state"],
+        |view| view.state("w") == Some(State::Running),
+    );
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    // w runs long before `second` is entered: no change of w announces anything
+    // there; entering the state is what makes its rule evaluated.
+    wait_user(&w, "idle");
+    wait_user(&base, "fired");
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
