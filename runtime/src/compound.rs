@@ -272,6 +272,11 @@ struct Instance {
     restarts: std::collections::VecDeque<Instant>,
     /// A restart decided but not done yet (backoff, or the instance is stuck).
     pending: Option<PendingRestart>,
+    /// Its current fault was handled (its policy ran): cleared when it leaves
+    /// `running_error`/`starting_error`, or is commanded back to `running`. Later
+    /// events of the same fault (a watchdog trip, then the section's return) are not
+    /// a new fault.
+    handled: bool,
 }
 
 /// A restart the `restart` policy has decided.
@@ -648,6 +653,7 @@ impl CompoundBuilder {
                 status: Status::Active,
                 restarts: std::collections::VecDeque::new(),
                 pending: None,
+                handled: false,
             }),
             Err(error) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
@@ -769,9 +775,11 @@ impl CompoundBuilder {
 
     /// `when <test> -> target;` in supervisor state `state`. `reads` names every
     /// variable the test reads (`instance.state`, `instance.user_state`,
-    /// `instance.result`, `instance.error`, `instance.<variable>`, or an own variable
-    /// `name`): the rule is evaluated when one of them changes, and when the
-    /// supervisor enters `state`.
+    /// `instance.result`, `instance.error`, `instance.quality`, `instance.<variable>`,
+    /// or an own variable `name`): the rule is evaluated when one of them changes, and
+    /// when the supervisor enters `state` (however it got there). An instance's
+    /// `cpu_time` and `elapsed_time` announce no change: a test reading them sees
+    /// their values when it is evaluated for another reason.
     pub fn rule(
         mut self,
         state: &str,
@@ -1057,7 +1065,10 @@ impl CompoundBuilder {
                 .ok_or_else(|| self.unknown("variable", read)),
             Some((instance, field)) => {
                 let index = self.instance_index(instance)?;
-                let default = matches!(field, "state" | "user_state" | "result" | "error");
+                let default = matches!(
+                    field,
+                    "state" | "user_state" | "result" | "error" | "quality"
+                );
                 if default || self.instances[index].spec.variable_index(field).is_some() {
                     Ok(())
                 } else {
@@ -1133,6 +1144,20 @@ impl Compound {
             step,
             detail,
         });
+    }
+
+    /// A fault raised while handling instance `index` (a rewiring or a command that
+    /// failed after a step was recorded): recorded as `Propagated` with the reason,
+    /// unless the last step recorded is that fault's `Propagated` already.
+    fn propagated(&mut self, index: usize, fault: Fault) -> Fault {
+        let recorded = self
+            .steps
+            .last()
+            .is_some_and(|last| last.step == Step::Propagated);
+        if !recorded {
+            self.step(index, Step::Propagated, fault.text().to_owned());
+        }
+        fault
     }
 
     fn fault(&self, message: String) -> Fault {
@@ -1288,6 +1313,7 @@ impl Compound {
             let instance = &mut self.instances[index];
             instance.pending = None;
             instance.restarts.clear();
+            instance.handled = false;
             if instance.status == Status::Destroyed {
                 continue;
             }
@@ -1387,8 +1413,11 @@ impl Compound {
         let error = monitor.error.clone().unwrap_or_default();
         self.step(index, Step::Failed, error.clone());
         if let Some(group) = self.instances[index].group {
-            // A redundant member: the next live member takes the group's connections.
+            // A redundant member: the next live member takes the group's connections
+            // (if it was the one standing for the group: the leader).
+            let leader = self.route(index) == index;
             self.enqueue(index);
+            self.step(index, Step::Enqueued, "");
             if !self.covered(index) {
                 self.step(
                     index,
@@ -1403,11 +1432,13 @@ impl Compound {
                 .iter()
                 .copied()
                 .find(|m| self.instances[*m].status == Status::Active);
-            if let Some(member) = standing {
+            if leader && let Some(member) = standing {
                 let by = self.instances[member].name.clone();
+                self.rewire()
+                    .map_err(|fault| self.propagated(index, fault))?;
                 self.step(index, Step::Substituted { by }, "");
             }
-            return self.rewire();
+            return Ok(());
         }
         let policy = if self.instances[index].substitutes.is_some() {
             // A substitute in use fails: nothing stands for it.
@@ -1442,8 +1473,12 @@ impl Compound {
                     && self.instances[substitute].status == Status::Standby
                 {
                     self.instances[substitute].status = Status::Active;
-                    self.rewire()?;
-                    command(&self.instances[substitute].handle, Controllable::Running)?;
+                    self.instances[substitute].handled = false;
+                    self.rewire()
+                        .and_then(|()| {
+                            command(&self.instances[substitute].handle, Controllable::Running)
+                        })
+                        .map_err(|fault| self.propagated(index, fault))?;
                     let by = self.instances[substitute].name.clone();
                     self.step(index, Step::Substituted { by }, "");
                 }
@@ -1532,7 +1567,9 @@ impl Compound {
                 format!("after {waited:?}")
             };
             self.step(index, Step::Restarted, detail);
-            command(&handle, Controllable::Running)?;
+            command(&handle, Controllable::Running)
+                .map_err(|fault| self.propagated(index, fault))?;
+            self.instances[index].handled = false;
         }
         Ok(())
     }
@@ -1553,15 +1590,17 @@ impl Compound {
                 // Recovered: the arrangement before the fault comes back.
                 self.queue.remove(position);
                 self.instances[index].status = Status::Active;
-                if let Some(substitute) = self.instances[index].substitute
+                let rewired = if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Active
                 {
                     self.instances[substitute].status = Status::Standby;
-                    self.rewire()?;
-                    command(&self.instances[substitute].handle, Controllable::Ready)?;
+                    self.rewire().and_then(|()| {
+                        command(&self.instances[substitute].handle, Controllable::Ready)
+                    })
                 } else {
-                    self.rewire()?;
-                }
+                    self.rewire()
+                };
+                rewired.map_err(|fault| self.propagated(index, fault))?;
                 self.step(index, Step::Recovered, "");
                 continue;
             }
@@ -1599,6 +1638,7 @@ impl Compound {
                 && command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
             if restarted {
+                self.instances[index].handled = false;
                 self.step(index, Step::Retried, "");
             }
             let entry = &mut self.queue[position];
@@ -1620,11 +1660,21 @@ impl Compound {
                 continue;
             }
             let mut seen = false;
+            let failure =
+                |state: State| matches!(state, State::RunningError | State::StartingError);
             while let Ok(event) = self.events[index].0.try_recv() {
                 seen = true;
-                let name = &self.instances[index].name;
+                let instance = &mut self.instances[index];
+                let name = &instance.name;
                 let key = match event {
-                    MonitorEvent::State { .. } => format!("{name}.state"),
+                    MonitorEvent::State { from, to } => {
+                        if failure(from) && !failure(to) {
+                            // It left its fault: the next one is a new fault.
+                            instance.handled = false;
+                        }
+                        format!("{name}.state")
+                    }
+                    MonitorEvent::Quality(_) => format!("{name}.quality"),
                     MonitorEvent::UserState(_) => format!("{name}.user_state"),
                     MonitorEvent::Result(_) => format!("{name}.result"),
                     MonitorEvent::Error(_) => format!("{name}.error"),
@@ -1638,9 +1688,16 @@ impl Compound {
             }
             self.refresh(index);
             let state = self.view.instances[index].state;
-            let failed = matches!(state, State::RunningError | State::StartingError);
+            let failed = failure(state);
+            if !failed {
+                self.instances[index].handled = false;
+            }
             match self.instances[index].status {
-                Status::Active if failed => self.failed(index)?,
+                Status::Active if failed && !self.instances[index].handled => {
+                    self.instances[index].handled = true;
+                    let outcome = self.failed(index);
+                    outcome.map_err(|fault| self.propagated(index, fault))?;
+                }
                 Status::Recovering if failed => {
                     if let Some(entry) = self.queue.iter_mut().find(|e| e.instance == index) {
                         entry.probation = false;

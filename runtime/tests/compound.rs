@@ -1735,3 +1735,159 @@ fn rules_are_evaluated_on_entering_a_state_reached_by_after() {
     assert_eq!(base.state(), State::Running);
     assert!(system.shutdown().clean());
 }
+
+/// The steps of `monitor` about `instance`, with their details.
+fn steps_of(monitor: &coolbot::Monitor, instance: &str) -> Vec<(Step, String)> {
+    monitor
+        .supervision
+        .iter()
+        .filter(|s| s.instance == instance)
+        .map(|s| (s.step.clone(), s.detail.clone()))
+        .collect()
+}
+
+#[test]
+fn a_fault_is_handled_once_though_the_watchdog_trips_it_before_the_section_returns() {
+    let (sup, _) = Sup::new(&["operating", "degraded"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Ignore)
+        // Fires once the compound has seen the section return (the second event of
+        // the same fault).
+        .rule("operating", "degraded", &["w.error"], |v| {
+            v.error("w").is_some_and(|e| e.ends_with("discarded"))
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    assert!(w.is_stuck());
+    drop(release);
+    let monitor = wait_user(&base, "degraded");
+    let steps: Vec<Step> = steps_of(&monitor, "w")
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    assert_eq!(steps, [Step::Failed, Step::Ignored]);
+    assert_eq!(w.state(), State::RunningError);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_failed_member_that_did_not_lead_its_redundant_group_is_not_substituted() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (a, _) = worker("a");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(a)
+        .instance(b)
+        .instance(f)
+        .redundant(&["a", "b"])
+        .connect("f.kick", "a.kick")
+        .recovery(Duration::from_millis(40), Duration::from_secs(60));
+    let (a, b) = (
+        builder.instance_handle("a").expect("a"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&a, "idle");
+    wait_user(&b, "idle");
+    // b (not the leader: a has the connections) fails in its entry, commanded
+    // through its own port.
+    b_script.start_fails.store(true, Ordering::SeqCst);
+    b_script.panic_in(Some("idle.entry"));
+    run(&b, Controllable::Ready);
+    run(&b, Controllable::Running);
+    let monitor = base
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == "b" && s.step == Step::Enqueued)
+            },
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("{t}"));
+    let steps: Vec<Step> = steps_of(&monitor, "b")
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    assert_eq!(steps, [Step::Failed, Step::Enqueued]);
+    // a keeps the stream.
+    feed.kick.emit();
+    wait_user(&a, "busy");
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_substitution_that_cannot_be_done_is_recorded_as_propagated_with_the_reason() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, _) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(40), Duration::from_secs(60));
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // The substitute is gone (killed through its own port): it cannot run.
+    run(&b, Controllable::Dead);
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let steps = steps_of(&monitor, "w");
+    let kinds: Vec<Step> = steps.iter().map(|(s, _)| s.clone()).collect();
+    assert_eq!(kinds, [Step::Failed, Step::Enqueued, Step::Propagated]);
+    let reason = &steps[2].1;
+    assert!(
+        reason.contains("`b` rejected SetState(Running)"),
+        "{reason}"
+    );
+    assert_eq!(monitor.error.as_deref(), Some(reason.as_str()));
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_rule_reading_an_instance_quality_is_evaluated_when_it_changes() {
+    let (sup, log) = Sup::new(&["operating", "degraded"]);
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", sup).instance(w).rule(
+        "operating",
+        "degraded",
+        &["w.quality"],
+        |v| v.monitor("w").is_some_and(|m| m.quality == 1),
+    );
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    wait_log(&log, &["operating.Entry"]);
+    w.command(Command::SetQuality(1)).expect("quality");
+    wait_user(&base, "degraded");
+    assert!(system.shutdown().clean());
+}
