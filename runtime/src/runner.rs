@@ -29,7 +29,7 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
-use crate::spec::{AfterSpec, PlanStep, Spec, TimingSpec, VarKind};
+use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{Scheduling, later, panic_message};
 use crate::watchdog::Watch;
@@ -125,6 +125,9 @@ pub(crate) struct Runner {
     published_user: Option<usize>,
     /// Whether the automaton is a compound's (its supervision hooks are called).
     supervised: bool,
+    /// The next [`Runner::enter`] is the initial state's as the component starts
+    /// running: arrivals it has not seen at its data inputs count as arrivals there.
+    arrivals_count_on_entry: bool,
     /// The last wait found work by looking at the sources (`wait_for_input`), not at
     /// the bell: the next turn does not clear the bell.
     found_by_polling: bool,
@@ -190,6 +193,7 @@ impl Runner {
             elapsed_published: Duration::ZERO,
             published_user: None,
             supervised,
+            arrivals_count_on_entry: false,
             found_by_polling: false,
             polled: false,
             scheduling: None,
@@ -569,6 +573,10 @@ impl Runner {
                         return;
                     }
                     self.set_state(to);
+                    // Packets that came while it did not run (queued while `ready`,
+                    // or moved to it as a substitute) are arrivals in its initial
+                    // state.
+                    self.arrivals_count_on_entry = true;
                     self.enter(self.spec.initial, Instant::now());
                     return;
                 }
@@ -1115,9 +1123,17 @@ impl Runner {
         self.cx.entered_at = now;
         self.suspended_at = None;
         self.pending_choice = None;
+        let unseen_count = std::mem::take(&mut self.arrivals_count_on_entry);
         for (index, input) in self.inputs.iter().enumerate() {
-            self.seen[index] = input.arrivals();
-            self.pending[index] = false;
+            let arrivals = input.arrivals();
+            // (Not on an event input: a tick count moved to it with a connection may
+            // hold events that its previous consumer already acted on.)
+            let data = !matches!(
+                self.spec.inputs.get(index).map(|spec| spec.kind),
+                Some(InputKind::Tick) | None
+            );
+            self.pending[index] = unseen_count && data && arrivals != self.seen[index];
+            self.seen[index] = arrivals;
             self.last_arrival[index] = now;
         }
         self.next_periodic = self.period_of(target).map(|period| later(now, period));

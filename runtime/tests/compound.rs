@@ -403,14 +403,8 @@ impl Substitution {
         self.w_script.start_fails.store(true, Ordering::SeqCst);
         self.w_script.panic_in(Some("busy.periodic"));
         self.feed.kick.emit();
-        // Running and in its initial state: packets from now on fire its `on`
-        // transitions (arrivals before the state is entered do not).
-        self.b
-            .wait_for(
-                |m| m.state == State::Running && m.user_state.is_some(),
-                WAIT,
-            )
-            .unwrap_or_else(|t| panic!("{t}"));
+        // Packets moved to b before its initial state is entered are arrivals there.
+        wait(&self.b, State::Running);
         assert_eq!(self.base.state(), State::Running);
         assert_ne!(self.w.state(), State::Running);
     }
@@ -1184,10 +1178,9 @@ fn without_a_substitute_the_recovery_queue_restarts_the_instance_until_it_recove
     // Packets sent meanwhile wait at w's input.
     feed.data.send(7);
     script.start_fails.store(false, Ordering::SeqCst);
-    wait_user(&w, "idle");
-    // (Packets queued before a state is entered do not fire its `on` transitions: a
-    // kick takes w to `busy`, whose entry drains the queue.)
-    feed.kick.emit();
+    // The queued packet is an arrival in the initial state of the recovered instance:
+    // it takes w to `busy`, whose entry reads it.
+    wait_user(&w, "busy");
     eventually(
         || script.received.load(Ordering::SeqCst) == 1,
         "the queued packet reaches the recovered instance",
@@ -1249,15 +1242,11 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
             feed.data.send(sent);
             sent += 1;
         }
-        // Recovered: b back on standby, w running with the stream, in its initial
-        // state (packets from then on fire its `on` transitions).
+        // Recovered: b back on standby, w running with the stream.
         b.wait_state(State::Ready, WAIT)
             .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
-        w.wait_for(
-            |m| m.state == State::Running && m.user_state.is_some(),
-            WAIT,
-        )
-        .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_state(State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
         assert_eq!(base.state(), State::Running, "cycle {cycle}");
     }
     // Every packet reached w or b, or is counted as lost at an input.
@@ -1890,4 +1879,50 @@ fn a_rule_reading_an_instance_quality_is_evaluated_when_it_changes() {
     w.command(Command::SetQuality(1)).expect("quality");
     wait_user(&base, "degraded");
     assert!(system.shutdown().clean());
+}
+
+#[test]
+fn packets_moved_to_a_standby_substitute_are_handled_in_its_initial_state() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.data", "w.data")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(60));
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // w hangs in a section: packets queue at its input, unread.
+    let release = w_script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(
+        || w_script.hanging.load(Ordering::SeqCst),
+        "w hangs in its section",
+    );
+    for packet in 0..3 {
+        feed.data.send(packet);
+    }
+    // The watchdog fails w; b takes over with the three packets, which fire its
+    // `on data` with nothing sent after them.
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 3,
+        "the substitute handled the packets moved to it",
+    );
+    assert_eq!(w_script.received.load(Ordering::SeqCst), 0);
+    assert_eq!(b.snapshot().user_state.as_deref(), Some("busy"));
+    drop(release);
+    assert!(system.shutdown().clean());
+    assert_eq!(base.snapshot().overflows, 0);
 }
