@@ -169,9 +169,12 @@ impl View {
 
 type Test = Box<dyn Fn(&View) -> bool + Send>;
 
-/// How a converted connection is made: `System::connect_via` with the converter's
-/// packet types and function captured.
-type Via = Arc<dyn Fn(&mut System, &str, &str) -> Result<(), ConnectError> + Send + Sync>;
+/// How a converted connection is made, with the converter's packet types and function
+/// captured: `System::connect_via` (no old connection), or in place of the connection
+/// `Some((from, to))` in one step (`System::replace_link`).
+type Via = Arc<
+    dyn Fn(&mut System, Option<(&str, &str)>, &str, &str) -> Result<(), ConnectError> + Send + Sync,
+>;
 
 /// A declared connection (`instance.port` ends), through a converter or not.
 #[derive(Clone)]
@@ -687,8 +690,8 @@ impl CompoundBuilder {
     /// [`System::connect_via`] does (applied on the producer's thread at each send, or
     /// on the consumer's thread at each read of a poster). The converter stays on the
     /// connection when substitution or recovery moves one of its ends to another
-    /// instance; such an input end is reconnected rather than moved, so packets queued
-    /// at the replaced instance's input stay there. The packet types are checked when
+    /// instance, and the move loses no packet (the packets queued at a replaced input
+    /// move with it, as for [`CompoundBuilder::connect`]). The packet types are checked when
     /// the compound starts (a mismatch takes it to `running_error` with the reason).
     pub fn connect_via<A: Packet, B: Packet>(
         mut self,
@@ -696,11 +699,25 @@ impl CompoundBuilder {
         to: &str,
         convert: impl Fn(&A) -> B + Send + Sync + 'static,
     ) -> CompoundBuilder {
-        let convert = Arc::new(convert);
-        let via: Via = Arc::new(move |system: &mut System, from: &str, to: &str| {
-            let convert = Arc::clone(&convert);
-            system.connect_via::<A, B>(from, to, move |packet: &A| convert(packet))
-        });
+        let convert: Arc<dyn Fn(&A) -> B + Send + Sync> = Arc::new(convert);
+        let via: Via = Arc::new(
+            move |system: &mut System, old: Option<(&str, &str)>, from: &str, to: &str| {
+                let Some(old) = old else {
+                    let convert = Arc::clone(&convert);
+                    return system.connect_via::<A, B>(from, to, move |packet: &A| convert(packet));
+                };
+                system.replace_link(old, from, to, &|output, input, old_input| {
+                    output.type_id == std::any::TypeId::of::<A>()
+                        && input.type_id == std::any::TypeId::of::<B>()
+                        && crate::port::relink_converted::<A, B>(
+                            output,
+                            old_input,
+                            input,
+                            Arc::clone(&convert),
+                        )
+                })
+            },
+        );
         self.links.push(Link {
             from: from.to_owned(),
             to: to.to_owned(),
@@ -1096,7 +1113,10 @@ struct Compound {
     links: Vec<Link>,
     /// The connections made now (declared ones with each instance routed to whoever
     /// stands for it, with their converters).
-    wired: Vec<Link>,
+    /// The connection made for each declared link (`links`, same order), between the
+    /// instances standing for its ends; `None` where none is (not made yet, or the
+    /// same ends as an earlier link's).
+    wired: Vec<Option<Link>>,
     mapped: Vec<Mapped>,
     supervisor: Box<dyn Supervisor>,
     rules: Vec<Rule>,
@@ -1196,67 +1216,79 @@ impl Compound {
     }
 
     /// Make the connections match the arrangement: each declared connection between
-    /// the instances standing for its ends now. Removed first, then added.
+    /// the instances standing for its ends now. A connection whose end moved (to a
+    /// stand-in, or back) is replaced in one step, with the packets queued at a
+    /// replaced input (`System::replace_link`): no packet is lost meanwhile.
     fn rewire(&mut self) -> Result<(), Fault> {
-        let mut wanted: Vec<Link> = Vec::new();
+        let mut wanted: Vec<Option<Link>> = Vec::with_capacity(self.links.len());
         for link in &self.links {
             let routed = Link {
                 from: self.routed(&link.from),
                 to: self.routed(&link.to),
                 via: link.via.clone(),
             };
-            if !wanted.iter().any(|w| w.ends() == routed.ends()) {
-                wanted.push(routed);
-            }
+            let duplicate = wanted.iter().flatten().any(|w| w.ends() == routed.ends());
+            wanted.push((!duplicate).then_some(routed));
         }
+        self.wired.resize(self.links.len(), None);
         let Some(system) = self.system.as_mut() else {
             return Ok(());
         };
-        let error = |e: ConnectError| Fault::message(format!("compound `{}`: {e}", self.name));
-        let mut removed: Vec<Link> = self
-            .wired
-            .iter()
-            .filter(|link| !wanted.iter().any(|w| w.ends() == link.ends()))
-            .cloned()
-            .collect();
-        let mut added: Vec<Link> = wanted
-            .iter()
-            .filter(|link| !self.wired.iter().any(|w| w.ends() == link.ends()))
-            .cloned()
-            .collect();
-        // An input end moving from one instance to its stand-in (same producer, same
-        // port, no converter): moved in one step with the packets queued there. A
-        // converted connection is disconnected and connected again, converter and all.
-        let port = |address: &str| address.split_once('.').map(|(_, p)| p.to_owned());
-        let mut index = 0;
-        while index < removed.len() {
-            let old = removed[index].clone();
-            let moved = old.via.is_none().then(|| {
-                added.iter().position(|new| {
-                    new.via.is_none() && new.from == old.from && port(&new.to) == port(&old.to)
-                })
-            });
-            match moved.flatten() {
-                Some(position) => {
-                    let new = added.remove(position);
-                    system
-                        .move_input(&old.from, &old.to, &new.to)
-                        .map_err(error)?;
-                    removed.remove(index);
+        let name = &self.name;
+        let error = |e: ConnectError| Fault::message(format!("compound `{name}`: {e}"));
+        let plain = |output: &ErasedOutput, input: &ErasedInput, old: Option<&ErasedInput>| {
+            output.type_id == input.type_id
+                && match old {
+                    Some(old) => old.kind == input.kind && output.relink(old, input),
+                    None => output.link(input),
                 }
-                None => index += 1,
+        };
+        // A connection whose link now has the same ends as an earlier link's goes
+        // first (unless another link still wants it); then each link's connection is
+        // kept, replaced in one step, or made.
+        for index in 0..self.wired.len() {
+            if wanted[index].is_none()
+                && let Some(link) = self.wired[index].take()
+                && !wanted.iter().flatten().any(|w| w.ends() == link.ends())
+            {
+                system.disconnect(&link.from, &link.to).map_err(error)?;
             }
         }
-        for link in &removed {
-            system.disconnect(&link.from, &link.to).map_err(error)?;
-        }
-        for link in &added {
-            match &link.via {
-                Some(via) => via(system, &link.from, &link.to).map_err(error)?,
-                None => system.connect(&link.from, &link.to).map_err(error)?,
+        for (index, new) in wanted.iter().enumerate() {
+            let Some(new) = new else {
+                continue;
+            };
+            let old = self.wired[index].take();
+            // The same connection may have been made for another link (whose ends it
+            // had before): it is kept as it is.
+            let made = self.wired.iter().flatten().any(|w| w.ends() == new.ends());
+            match old {
+                Some(old) if old.ends() == new.ends() => {}
+                Some(old) if !made => {
+                    let ends = (old.from.as_str(), old.to.as_str());
+                    match &new.via {
+                        Some(via) => via(system, Some(ends), &new.from, &new.to),
+                        None => system.replace_link(ends, &new.from, &new.to, &plain),
+                    }
+                    .map_err(error)?;
+                }
+                old => {
+                    if let Some(old) = old
+                        && !wanted.iter().flatten().any(|w| w.ends() == old.ends())
+                    {
+                        system.disconnect(&old.from, &old.to).map_err(error)?;
+                    }
+                    if !made {
+                        match &new.via {
+                            Some(via) => via(system, None, &new.from, &new.to),
+                            None => system.connect(&new.from, &new.to),
+                        }
+                        .map_err(error)?;
+                    }
+                }
             }
+            self.wired[index] = Some(new.clone());
         }
-        self.wired = wanted;
         for index in 0..self.exports.len() {
             let address = self.routed(self.exports[index].target());
             if let Some(system) = self.system.as_ref() {
@@ -1617,12 +1649,18 @@ impl Compound {
                 } else if let Err(fault) = command(handle, Controllable::Dead) {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
+                // What is still queued at its inputs will never be read: lost there,
+                // counted and announced (on its monitoring port).
+                let lost = self
+                    .system
+                    .as_ref()
+                    .map_or(0, |system| system.discard_queued(&name));
                 self.refresh(index);
-                self.step(
-                    index,
-                    Step::Retired,
-                    format!("not recovered within {:?}", self.deadline),
-                );
+                let mut detail = format!("not recovered within {:?}", self.deadline);
+                if lost > 0 {
+                    detail.push_str(&format!("; {lost} packet(s) left at its inputs lost"));
+                }
+                self.step(index, Step::Retired, detail);
                 if !self.covered(index) {
                     self.step(index, Step::Propagated, "nothing stands for it");
                     return Err(self.fault(format!(

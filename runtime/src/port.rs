@@ -1181,6 +1181,45 @@ pub struct ErasedInput {
     clear_source: fn(&ErasedInput),
     /// Move what is queued at this input into another input of the same kind and type.
     transfer: fn(&ErasedInput, &ErasedInput) -> u64,
+    /// Empty this input's queue (fifo, ufifo): how many packets were in it.
+    discard: fn(&ErasedInput) -> u64,
+}
+
+impl ErasedInput {
+    /// Move what is queued at this input to `to`, if it is of the same kind and packet
+    /// type (otherwise nothing moves). Returns how many packets (or events) moved.
+    pub(crate) fn transfer_to(&self, to: &ErasedInput) -> u64 {
+        if self.type_id == to.type_id && self.kind == to.kind {
+            (self.transfer)(self, to)
+        } else {
+            0
+        }
+    }
+
+    /// Empty this input's queue, counting the packets as lost at it (overflows, with a
+    /// `MonitorEvent::Overflow`): its component is retired and will never read them.
+    /// Returns how many there were.
+    pub(crate) fn discard_queued(&self) -> u64 {
+        let lost = (self.discard)(self);
+        if lost > 0 {
+            self.core.overflowed(lost);
+        }
+        lost
+    }
+}
+
+fn discard_nothing(_: &ErasedInput) -> u64 {
+    0
+}
+
+fn discard_fifo<T: Packet>(input: &ErasedInput) -> u64 {
+    downcast::<FifoInner<T>>(&input.any).map_or(0, |inner| inner.receiver.try_iter().count() as u64)
+}
+
+fn discard_ufifo<T: Packet>(input: &ErasedInput) -> u64 {
+    downcast::<UfifoInner<T>>(&input.any).map_or(0, |inner| {
+        std::mem::take(&mut lock(&inner.queue).packets).len() as u64
+    })
 }
 
 fn clear_nothing(_: &ErasedInput) {}
@@ -1265,6 +1304,7 @@ impl InputPort for TickIn {
             any: self.inner.clone(),
             clear_source: clear_nothing,
             transfer: transfer_ticks,
+            discard: discard_nothing,
         }
     }
 }
@@ -1279,6 +1319,7 @@ impl<T: Packet> InputPort for FifoIn<T> {
             any: self.inner.clone(),
             clear_source: clear_nothing,
             transfer: transfer_fifo::<T>,
+            discard: discard_fifo::<T>,
         }
     }
 }
@@ -1293,6 +1334,7 @@ impl<T: Packet> InputPort for UfifoIn<T> {
             any: self.inner.clone(),
             clear_source: clear_nothing,
             transfer: transfer_ufifo::<T>,
+            discard: discard_ufifo::<T>,
         }
     }
 }
@@ -1307,6 +1349,7 @@ impl<T: Packet> InputPort for LastIn<T> {
             any: self.inner.clone(),
             clear_source: clear_nothing,
             transfer: transfer_last::<T>,
+            discard: discard_nothing,
         }
     }
 }
@@ -1321,6 +1364,7 @@ impl<T: Packet> InputPort for PosterIn<T> {
             any: self.inner.clone(),
             clear_source: clear_poster_source::<T>,
             transfer: transfer_nothing,
+            discard: discard_nothing,
         }
     }
 }
@@ -1599,10 +1643,22 @@ fn relink_tick(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> b
 }
 
 fn relink_data<T: Packet>(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
-    let (Some(out), Some(target)) = (
-        downcast::<DataOutInner<T>>(&output.any),
-        data_target::<T>(new),
-    ) else {
+    match data_target::<T>(new) {
+        Some(target) => swap_sink(output, old, new, target),
+        None => false,
+    }
+}
+
+/// Replace, in one write of `output`'s sinks, its sink at input `old` by `target`
+/// (delivering to input `new`, directly or through a converter), and move what is
+/// queued at `old` to `new` (if both take the same packet type).
+fn swap_sink<T: Packet>(
+    output: &ErasedOutput,
+    old: &ErasedInput,
+    new: &ErasedInput,
+    target: Arc<dyn Deliver<T>>,
+) -> bool {
+    let Some(out) = downcast::<DataOutInner<T>>(&output.any) else {
         return false;
     };
     // Senders hold the read lock while delivering: under the write lock nothing is in
@@ -1618,11 +1674,45 @@ fn relink_data<T: Packet>(output: &ErasedOutput, old: &ErasedInput, new: &Erased
         target,
     });
     *sinks = Arc::from(items);
-    (old.transfer)(old, new);
+    if old.type_id == new.type_id && old.kind == new.kind {
+        (old.transfer)(old, new);
+    }
     drop(sinks);
     old.core.remove_source(output.core.id);
     new.core.add_source(Arc::clone(&output.core));
     true
+}
+
+/// [`link_converted`], replacing `output`'s connection to input `old` (if given) in
+/// one step: a data output's sink is swapped under one write of its sinks, with the
+/// packets queued at `old` moved to `input` (no packet sent meanwhile is lost); a
+/// poster's readers are switched (a poster input holds no queue).
+pub(crate) fn relink_converted<A: Packet, B: Packet>(
+    output: &ErasedOutput,
+    old: Option<&ErasedInput>,
+    input: &ErasedInput,
+    convert: Arc<dyn Fn(&A) -> B + Send + Sync>,
+) -> bool {
+    let Some(old) = old else {
+        return link_converted(output, input, convert);
+    };
+    match output.kind {
+        OutKind::Data => match data_target::<B>(input) {
+            Some(target) => {
+                let converted: Arc<dyn Deliver<A>> = Arc::new(Converted { convert, target });
+                swap_sink(output, old, input, converted)
+            }
+            None => false,
+        },
+        OutKind::Poster => {
+            if !link_converted(output, input, convert) {
+                return false;
+            }
+            output.unlink(old);
+            true
+        }
+        OutKind::Tick => false,
+    }
 }
 
 fn relink_poster(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {

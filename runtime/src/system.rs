@@ -860,57 +860,76 @@ impl System {
         Ok(self.slots[slot].outputs[port].clone())
     }
 
-    /// Move the connection from `from` to `old_to` over to `new_to` (an input of the
-    /// same kind and packet type) in one step, with the packets queued at `old_to`: no
-    /// packet sent meanwhile is lost, duplicated or reordered. Compounds use it to
-    /// put a substitute in an instance's place and back.
-    pub(crate) fn move_input(
+    /// Replace the connection `old` (`(output, input)` addresses) by one from `from`
+    /// to `to`, made by `make(output, input, same_output_old_input)`, so that no
+    /// packet is lost: with the same output, `make` swaps the sink in one step and
+    /// moves the packets queued at the old input (`ErasedOutput::relink`,
+    /// `port::relink_converted`); with another output (a producer replaced), the new
+    /// connection is made before the old one is removed, and the packets queued at
+    /// the old input, if it changed too, are moved to the new one. Compounds use it
+    /// when an instance's stand-in changes.
+    pub(crate) fn replace_link(
         &mut self,
+        old: (&str, &str),
         from: &str,
-        old_to: &str,
-        new_to: &str,
+        to: &str,
+        make: &dyn Fn(&ErasedOutput, &ErasedInput, Option<&ErasedInput>) -> bool,
     ) -> Result<(), ConnectError> {
-        let (out_slot, out_port) = self.parse(from, true)?;
-        let (old_slot, old_port) = self.parse(old_to, false)?;
-        let old = Link {
-            from: (out_slot, out_port),
-            to: (old_slot, old_port),
+        let old_link = Link {
+            from: self.parse(old.0, true)?,
+            to: self.parse(old.1, false)?,
         };
-        let Some(position) = self.links.iter().position(|l| *l == old) else {
+        let Some(position) = self.links.iter().position(|l| *l == old_link) else {
             return Err(ConnectError::NotConnected {
-                from: from.to_owned(),
-                to: old_to.to_owned(),
+                from: old.0.to_owned(),
+                to: old.1.to_owned(),
             });
         };
         self.links.remove(position);
-        let checked = self.check(from, new_to).and_then(|link| {
-            let output = &self.slots[out_slot].outputs[out_port];
-            let old_input = &self.slots[old_slot].inputs[old_port];
-            let new_input = &self.slots[link.to.0].inputs[link.to.1];
-            if output.type_id == new_input.type_id
-                && old_input.kind == new_input.kind
-                && output.relink(old_input, new_input)
-            {
-                Ok(link)
-            } else {
-                Err(ConnectError::TypeMismatch {
-                    from: from.to_owned(),
-                    to: new_to.to_owned(),
-                    from_type: output.type_name.to_owned(),
-                    to_type: new_input.type_name.to_owned(),
-                })
-            }
-        });
-        match checked {
-            Ok(link) => {
-                self.links.push(link);
-                Ok(())
-            }
+        let link = match self.check(from, to) {
+            Ok(link) => link,
             Err(error) => {
-                self.links.insert(position, old);
-                Err(error)
+                self.links.insert(position, old_link);
+                return Err(error);
             }
+        };
+        let output = &self.slots[link.from.0].outputs[link.from.1];
+        let input = &self.slots[link.to.0].inputs[link.to.1];
+        let old_output = &self.slots[old_link.from.0].outputs[old_link.from.1];
+        let old_input = &self.slots[old_link.to.0].inputs[old_link.to.1];
+        let made = if old_link.from == link.from {
+            old_link.to == link.to || make(output, input, Some(old_input))
+        } else if make(output, input, None) {
+            old_output.unlink(old_input);
+            if old_link.to != link.to {
+                old_input.transfer_to(input);
+            }
+            true
+        } else {
+            false
+        };
+        if !made {
+            self.links.insert(position, old_link);
+            return Err(ConnectError::TypeMismatch {
+                from: from.to_owned(),
+                to: to.to_owned(),
+                from_type: output.type_name.to_owned(),
+                to_type: input.type_name.to_owned(),
+            });
         }
+        self.links.push(link);
+        Ok(())
+    }
+
+    /// Empty the queues at every input of component `name` (retired by a compound),
+    /// counting their packets as lost there (overflows, announced). Returns how many.
+    pub(crate) fn discard_queued(&self, name: &str) -> u64 {
+        self.slots
+            .iter()
+            .filter(|slot| slot.name == name)
+            .flat_map(|slot| &slot.inputs)
+            .map(ErasedInput::discard_queued)
+            .sum()
     }
 
     /// The connections, as `(output address, input address)` pairs.

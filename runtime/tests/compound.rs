@@ -1926,3 +1926,127 @@ fn packets_moved_to_a_standby_substitute_are_handled_in_its_initial_state() {
     assert!(system.shutdown().clean());
     assert_eq!(base.snapshot().overflows, 0);
 }
+
+#[test]
+fn soak_substitution_cycles_lose_no_packet_on_a_converted_connection() {
+    const CYCLES: usize = 60;
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = deep_worker("w");
+    let (b, b_script) = deep_worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(1), Duration::from_secs(60))
+        .connect_via::<u64, u64>("f.data", "w.data", |packet| packet + 1);
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // A stream from another thread, through the converter, all along.
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let sender = {
+        let stop = Arc::clone(&stop);
+        let data = feed.data.clone();
+        std::thread::spawn(move || {
+            let mut sent = 0u64;
+            while !stop.load(Ordering::SeqCst) {
+                data.send(sent);
+                sent += 1;
+                if sent.is_multiple_of(8) {
+                    std::thread::sleep(Duration::from_micros(100));
+                }
+            }
+            sent
+        })
+    };
+    for cycle in 0..CYCLES {
+        let starts_before = starts(&w_script);
+        w_script.inject(Some(Injected {
+            hook: "busy.periodic",
+            exception: Some(Exception::Fatal),
+            times: 1,
+        }));
+        eventually(
+            || starts(&w_script) > starts_before,
+            &format!("cycle {cycle}: w failed and was restarted"),
+        );
+        b.wait_state(State::Ready, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_state(State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+    }
+    stop.store(true, Ordering::SeqCst);
+    let sent = sender.join().expect("sender");
+    let lost = || w.snapshot().overflows + b.snapshot().overflows;
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst)
+                + b_script.received.load(Ordering::SeqCst)
+                + lost()
+                == sent
+        },
+        "every packet delivered or counted",
+    );
+    assert_eq!(lost(), 0, "deep queues: nothing overflowed");
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn packets_left_at_a_retired_instance_are_counted_as_lost() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .connect("f.data", "w.data")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_millis(100));
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // w hangs: three packets queue at its input, unread, and nothing stands for it.
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(|| script.hanging.load(Ordering::SeqCst), "w hangs");
+    let events = w.subscribe();
+    for packet in 0..3 {
+        feed.data.send(packet);
+    }
+    let monitor = wait(&base, State::RunningError);
+    let retired = monitor
+        .supervision
+        .iter()
+        .find(|s| s.step == Step::Retired)
+        .expect("w retired");
+    assert!(
+        retired
+            .detail
+            .ends_with("; 3 packet(s) left at its inputs lost"),
+        "{retired:?}"
+    );
+    assert_eq!(w.snapshot().overflows, 3);
+    let lost: u64 = events
+        .try_iter()
+        .filter_map(|event| match event {
+            MonitorEvent::Overflow { lost, .. } => Some(lost),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(lost, 3);
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert!(system.shutdown().clean());
+}
