@@ -31,6 +31,10 @@ use crate::system::{Component, ConnectError, PortSet, System};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+/// How soon the compound's thread retries passing on packets that an instance's full
+/// `Block` fifo could not take (they wait at the compound's exported input).
+const EXPORT_RETRY: Duration = Duration::from_millis(1);
+
 /// The period of a supervisor's `periodic;` sections when neither the state nor the
 /// supervisor's `timing` gives one (`docs/language.md`, "The supervisor").
 pub const DEFAULT_SUPERVISION_PERIOD: Duration = Duration::from_millis(100);
@@ -334,8 +338,14 @@ struct Mapped {
 trait Export: Send {
     /// The instance port, as declared (`instance.port`).
     fn target(&self) -> &str;
-    /// Inputs: move what arrived at the compound's port on to the instance's.
+    /// Inputs: move what arrived at the compound's port on to the instance's, without
+    /// waiting: what a full `Block` fifo cannot take now stays at the compound's port.
     fn forward(&mut self) {}
+    /// Inputs: packets stayed at the compound's port at the last `forward` (the
+    /// compound's thread retries soon).
+    fn held(&self) -> bool {
+        false
+    }
     /// Follow the instance port now at `address`.
     fn follow(&mut self, system: &System, address: &str) -> Result<(), String>;
 }
@@ -354,6 +364,8 @@ struct InputExport<T> {
     twin: Twin<T>,
     relay: DataOut<T>,
     linked: Option<ErasedInput>,
+    /// Packets stayed at the compound's port at the last `forward`.
+    held: bool,
 }
 
 /// Connect `relay` to `new`, or move it there from `linked` with what is queued.
@@ -380,15 +392,46 @@ impl<T: Packet> Export for InputExport<T> {
     }
 
     fn forward(&mut self) {
-        match &self.twin {
-            Twin::Fifo(input) => input.drain().for_each(|p| self.relay.send(p)),
-            Twin::Ufifo(input) => input.drain().for_each(|p| self.relay.send(p)),
+        // A fifo with the `Block` policy would make the compound's thread wait while
+        // it is full (its instance may hang): only what it has room for goes now.
+        let mut room = self
+            .linked
+            .as_ref()
+            .and_then(ErasedInput::room)
+            .unwrap_or(usize::MAX);
+        self.held = match &self.twin {
+            Twin::Fifo(input) => {
+                while room > 0
+                    && let Some(packet) = input.recv()
+                {
+                    room -= 1;
+                    self.relay.send(packet);
+                }
+                !input.is_empty()
+            }
+            Twin::Ufifo(input) => {
+                while room > 0
+                    && let Some(packet) = input.recv()
+                {
+                    room -= 1;
+                    self.relay.send(packet);
+                }
+                !input.is_empty()
+            }
+            // (Whether a new packet waits is not known without taking it: held while
+            // the instance's input is full.)
+            Twin::Last(_) if room == 0 => true,
             Twin::Last(input) => {
                 if let Some(packet) = input.take_new() {
                     self.relay.send(packet);
                 }
+                false
             }
-        }
+        };
+    }
+
+    fn held(&self) -> bool {
+        self.held
     }
 
     fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
@@ -580,6 +623,7 @@ impl CompoundBuilder {
             twin,
             relay: DataOut::new(),
             linked: None,
+            held: false,
         }));
         self
     }
@@ -1874,7 +1918,14 @@ impl Automaton for Compound {
             })
         });
         let fresh = (self.fresh || self.sectioned).then(Instant::now);
-        queue.chain(restarts).chain(fresh).min()
+        // Packets held at an exported input (the instance's `Block` fifo was full):
+        // retried soon.
+        let held = self
+            .exports
+            .iter()
+            .any(|export| export.held())
+            .then(|| crate::thread::later(Instant::now(), EXPORT_RETRY));
+        queue.chain(restarts).chain(fresh).chain(held).min()
     }
 }
 

@@ -1183,9 +1183,28 @@ pub struct ErasedInput {
     transfer: fn(&ErasedInput, &ErasedInput) -> u64,
     /// Empty this input's queue (fifo, ufifo): how many packets were in it.
     discard: fn(&ErasedInput) -> u64,
+    /// Room left in a fifo whose policy is `Block` (`None` for every other input: a
+    /// delivery to it never waits).
+    room: fn(&ErasedInput) -> Option<usize>,
+}
+
+fn room_unbounded(_: &ErasedInput) -> Option<usize> {
+    None
+}
+
+fn room_fifo<T: Packet>(input: &ErasedInput) -> Option<usize> {
+    let inner = downcast::<FifoInner<T>>(&input.any)?;
+    (inner.policy == OverflowPolicy::Block)
+        .then(|| inner.capacity.saturating_sub(inner.receiver.len()))
 }
 
 impl ErasedInput {
+    /// How many packets a delivery can add without waiting, if a delivery to this
+    /// input can wait at all (a fifo with the `Block` policy); `None` otherwise.
+    pub(crate) fn room(&self) -> Option<usize> {
+        (self.room)(self)
+    }
+
     /// Move what is queued at this input to `to`, if it is of the same kind and packet
     /// type (otherwise nothing moves). Returns how many packets (or events) moved.
     pub(crate) fn transfer_to(&self, to: &ErasedInput) -> u64 {
@@ -1305,6 +1324,7 @@ impl InputPort for TickIn {
             clear_source: clear_nothing,
             transfer: transfer_ticks,
             discard: discard_nothing,
+            room: room_unbounded,
         }
     }
 }
@@ -1320,6 +1340,7 @@ impl<T: Packet> InputPort for FifoIn<T> {
             clear_source: clear_nothing,
             transfer: transfer_fifo::<T>,
             discard: discard_fifo::<T>,
+            room: room_fifo::<T>,
         }
     }
 }
@@ -1335,6 +1356,7 @@ impl<T: Packet> InputPort for UfifoIn<T> {
             clear_source: clear_nothing,
             transfer: transfer_ufifo::<T>,
             discard: discard_ufifo::<T>,
+            room: room_unbounded,
         }
     }
 }
@@ -1350,6 +1372,7 @@ impl<T: Packet> InputPort for LastIn<T> {
             clear_source: clear_nothing,
             transfer: transfer_last::<T>,
             discard: discard_nothing,
+            room: room_unbounded,
         }
     }
 }
@@ -1365,6 +1388,7 @@ impl<T: Packet> InputPort for PosterIn<T> {
             clear_source: clear_poster_source::<T>,
             transfer: transfer_nothing,
             discard: discard_nothing,
+            room: room_unbounded,
         }
     }
 }

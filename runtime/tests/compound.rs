@@ -2050,3 +2050,64 @@ fn packets_left_at_a_retired_instance_are_counted_as_lost() {
     w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
+    static BLOCKING: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
+    let spec = *BLOCKING.get_or_init(|| {
+        let mut inputs = worker::SPEC.inputs.to_vec();
+        inputs[worker::DATA].kind = coolbot::InputKind::Fifo {
+            capacity: 4,
+            policy: coolbot::OverflowPolicy::Block,
+        };
+        let mut spec = worker::SPEC;
+        spec.inputs = Box::leak(inputs.into_boxed_slice());
+        Box::leak(Box::new(spec))
+    });
+    let script = Script::new();
+    let (w, _, _) = worker::component_with(
+        "w",
+        Scripted {
+            script: Arc::clone(&script),
+            token: None,
+        },
+        spec,
+        coolbot::port::FifoIn::new(4, coolbot::OverflowPolicy::Block),
+    );
+    let (sup, _) = Sup::new(&["operating"]);
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .on_error("w", Policy::Ignore)
+        .export_input::<u64>("data", "w.data")
+        .export_tick_input("kick", "w.kick");
+    let w = builder.instance_handle("w").expect("w");
+    let (f, feed) = feeder("f");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.add(f).expect("feeder");
+    system.connect("f.data", "base.data").expect("data");
+    system.connect("f.kick", "base.kick").expect("kick");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // w hangs in a section: its blocking queue fills with four packets, and four more
+    // wait at the compound's own input (also four deep).
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(|| script.hanging.load(Ordering::SeqCst), "w hangs");
+    for packet in 0..8 {
+        feed.data.send(packet);
+    }
+    // Two round trips through the compound's control port: its turns went on, and
+    // none of them waited to push a packet into w's full queue until it gave up.
+    for _ in 0..2 {
+        base.command(Command::SetPriority(0)).expect("sync");
+    }
+    assert_eq!(w.snapshot().overflows, 0, "nothing given up at w");
+    assert_eq!(base.snapshot().overflows, 0);
+    // The section returns (w is failed and ignored): nothing was lost meanwhile.
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert_eq!(w.snapshot().overflows, 0);
+    assert_eq!(base.snapshot().overflows, 0);
+    assert!(system.shutdown().clean());
+}
