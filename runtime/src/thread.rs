@@ -58,7 +58,7 @@ pub(crate) fn set_timer_slack() -> bool {
     }
 }
 
-pub(crate) use os::Scheduling;
+pub(crate) use os::{Scheduling, highest_realtime};
 
 /// How `priority` maps onto the OS (`docs/runtime.md`, "Priority").
 #[cfg(target_os = "linux")]
@@ -182,6 +182,22 @@ mod os {
         }
     }
 
+    /// Put the calling thread under `SCHED_RR` at the highest priority it is allowed
+    /// (99 when privileged, else the `RLIMIT_RTPRIO` soft limit); leave it as it is if
+    /// both are refused. Returns the level applied.
+    pub(crate) fn highest_realtime() -> Option<i32> {
+        let mut scheduling = Scheduling::of_current_thread();
+        let limit = rustix::process::getrlimit(rustix::process::Resource::Rtprio)
+            .current
+            .map_or(RR_MAX, |limit| {
+                i32::try_from(limit).unwrap_or(RR_MAX).min(RR_MAX)
+            });
+        [RR_MAX, limit]
+            .into_iter()
+            .filter(|level| *level > 0)
+            .find(|level| scheduling.round_robin(*level).is_ok())
+    }
+
     fn normal_policy() -> ThreadSchedulePolicy {
         ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other)
     }
@@ -198,6 +214,11 @@ mod os {
 #[cfg(not(target_os = "linux"))]
 mod os {
     use crate::monitor::OsPriority;
+
+    /// Real-time scheduling is not applied on this platform.
+    pub(crate) fn highest_realtime() -> Option<i32> {
+        None
+    }
 
     /// A component thread's scheduling (not changed on this platform).
     pub(crate) struct Scheduling;

@@ -2,7 +2,7 @@
 //! past its component's `max_response` without needing the section to return.
 //!
 //! Each component with a `max_response` has a [`Watch`]: the runner stores the start of
-//! every section in it (one atomic store before the call, one swap after: no lock, no
+//! every section in it (two atomic stores before the call, one swap after: no lock, no
 //! message), and the watchdog thread, which holds a list of every live watch, wakes at
 //! the earliest deadline of the sections under way. A section still running at its
 //! deadline is *tripped*: the watchdog publishes the overrun on the component's
@@ -11,6 +11,10 @@
 //! supervisor's policy acts at once. The component's thread, still inside the section,
 //! finds the trip when the section returns; the runner then discards the call's outcome
 //! and completes the fault (see `docs/runtime.md`, "max_response").
+//!
+//! The watchdog thread asks for the highest real-time priority the OS allows it
+//! (`SCHED_RR` 99, or the `RLIMIT_RTPRIO` limit), and stays at normal priority if
+//! refused.
 //!
 //! While no section is under way, the watchdog sleeps for the smallest registered
 //! `max_response` (at least [`IDLE_POLL_FLOOR`]): a section that starts while it
@@ -108,11 +112,15 @@ impl Watch {
             return;
         }
         let registry = registry();
+        let mut entries = lock(&registry.entries);
         if !self.registered.swap(true, Ordering::AcqRel) {
-            lock(&registry.entries).push(Arc::downgrade(self));
+            entries.push(Arc::downgrade(self));
         }
-        // The watchdog may be asleep for a longer limit: let it look again.
+        // The watchdog may be asleep for a longer limit: let it look again. Notified
+        // under the lock, so it is either waiting (and wakes) or about to look at the
+        // entries (and sees the new limit): the notification cannot fall in between.
         registry.wake.notify_one();
+        drop(entries);
         registry.spawn();
     }
 
@@ -217,6 +225,12 @@ impl Registry {
     }
 
     fn run(&self) {
+        // Above every component thread it watches, if the OS allows: hung `SCHED_RR`
+        // sections on every core must not starve it.
+        match crate::thread::highest_realtime() {
+            Some(level) => tracing::debug!("max_response watchdog under SCHED_RR {level}"),
+            None => tracing::debug!("max_response watchdog at normal priority"),
+        }
         let mut entries = lock(&self.entries);
         loop {
             let now = Instant::now();
