@@ -123,6 +123,11 @@ pub struct View {
     /// hash, not a scan of every instance.
     positions: HashMap<String, usize>,
     own: Vec<(String, Value)>,
+    /// The compound's mapped variables: name -> (declared instance, its variable).
+    mapped: HashMap<String, (usize, String)>,
+    /// The instance standing for each instance now (itself, its substitute, or its
+    /// redundant group's live member).
+    standing: Vec<usize>,
 }
 
 impl View {
@@ -156,6 +161,23 @@ impl View {
     /// A user variable of an instance.
     pub fn var(&self, instance: &str, variable: &str) -> Option<&Value> {
         self.monitor(instance)?
+            .variables
+            .iter()
+            .find(|(name, _)| name == variable)
+            .map(|(_, value)| value)
+    }
+
+    /// A mapped variable of the compound (`observable odometry = motion.odometry;`),
+    /// read from the instance standing for the declared one now: the instance itself,
+    /// its substitute while the substitute stands in, or its redundant group's live
+    /// member. `None` if `name` is not a mapped variable. A rule reading it lists
+    /// `name` in its `reads`: it is evaluated when the variable changes at the
+    /// instance standing in, and when another instance starts standing in.
+    pub fn mapped(&self, name: &str) -> Option<&Value> {
+        let (declared, variable) = self.mapped.get(name)?;
+        let standing = self.standing.get(*declared).copied().unwrap_or(*declared);
+        self.instances
+            .get(standing)?
             .variables
             .iter()
             .find(|(name, _)| name == variable)
@@ -837,7 +859,7 @@ impl CompoundBuilder {
     /// `when <test> -> target;` in supervisor state `state`. `reads` names every
     /// variable the test reads (`instance.state`, `instance.user_state`,
     /// `instance.result`, `instance.error`, `instance.quality`, `instance.<variable>`,
-    /// or an own variable `name`): the rule is evaluated when one of them changes, and
+    /// an own variable `name`, or a mapped variable `name` read with [`View::mapped`]): the rule is evaluated when one of them changes, and
     /// when the supervisor enters `state` (however it got there). An instance's
     /// `cpu_time` and `elapsed_time` announce no change: a test reading them sees
     /// their values when it is evaluated for another reason.
@@ -1088,6 +1110,13 @@ impl CompoundBuilder {
                 .enumerate()
                 .map(|(index, v)| (v.name.to_owned(), self.supervisor.get(index)))
                 .collect(),
+            mapped: self
+                .mapped
+                .iter()
+                .zip(&mapped)
+                .map(|((name, _, _), m)| (name.clone(), (m.instance, m.variable.clone())))
+                .collect(),
+            standing: (0..self.instances.len()).collect(),
         };
         let compound = Compound {
             name: self.name.clone(),
@@ -1114,6 +1143,7 @@ impl CompoundBuilder {
             started: false,
             exports: self.exports,
             steps: Vec::new(),
+            restood: false,
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports))
     }
@@ -1123,6 +1153,12 @@ impl CompoundBuilder {
             None => own
                 .variable_index(read)
                 .map(|_| ())
+                .or_else(|| {
+                    self.mapped
+                        .iter()
+                        .any(|(name, _, _)| name == read)
+                        .then_some(())
+                })
                 .ok_or_else(|| self.unknown("variable", read)),
             Some((instance, field)) => {
                 let index = self.instance_index(instance)?;
@@ -1189,6 +1225,9 @@ struct Compound {
     exports: Vec<Box<dyn Export>>,
     /// Supervision steps taken since the last call returned (published by the runner).
     steps: Vec<Supervision>,
+    /// Another instance started standing for one with mapped variables: rules reading
+    /// them are evaluated on the next turn.
+    restood: bool,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -1264,6 +1303,7 @@ impl Compound {
     /// stand-in, or back) is replaced in one step, with the packets queued at a
     /// replaced input (`System::replace_link`): no packet is lost meanwhile.
     fn rewire(&mut self) -> Result<(), Fault> {
+        self.update_standing();
         let mut wanted: Vec<Option<Link>> = Vec::with_capacity(self.links.len());
         for link in &self.links {
             let routed = Link {
@@ -1342,6 +1382,16 @@ impl Compound {
             }
         }
         Ok(())
+    }
+
+    /// Record who stands for each instance now in the view (for mapped variables);
+    /// if that changed, rules reading mapped variables are evaluated on this turn.
+    fn update_standing(&mut self) {
+        let standing: Vec<usize> = (0..self.instances.len()).map(|i| self.route(i)).collect();
+        if standing != self.view.standing {
+            self.view.standing = standing;
+            self.restood = true;
+        }
     }
 
     fn refresh(&mut self, index: usize) {
@@ -1684,6 +1734,7 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
+                self.update_standing();
                 let handle = &self.instances[index].handle;
                 if handle.is_stuck() {
                     // Its thread takes the command when (if) the section returns.
@@ -1760,7 +1811,18 @@ impl Compound {
                     MonitorEvent::UserState(_) => format!("{name}.user_state"),
                     MonitorEvent::Result(_) => format!("{name}.result"),
                     MonitorEvent::Error(_) => format!("{name}.error"),
-                    MonitorEvent::Variable { name: variable, .. } => format!("{name}.{variable}"),
+                    MonitorEvent::Variable { name: variable, .. } => {
+                        // A mapped variable changes with it if this instance stands
+                        // for the declared one.
+                        for (mapped, (declared, target)) in &self.view.mapped {
+                            if *target == variable
+                                && self.view.standing.get(*declared) == Some(&index)
+                            {
+                                changed.insert(mapped.clone());
+                            }
+                        }
+                        format!("{name}.{variable}")
+                    }
                     _ => continue,
                 };
                 changed.insert(key);
@@ -1945,6 +2007,9 @@ impl Compound {
             self.restarts_due(Instant::now())?;
         }
         self.refresh_own(&mut changed);
+        if std::mem::take(&mut self.restood) {
+            changed.extend(self.view.mapped.keys().cloned());
+        }
         let entered = self.evaluated_in != Some(state);
         // After a supervisor section every rule of the state is evaluated: the section
         // may have changed what no `reads` names (its `local` variables).

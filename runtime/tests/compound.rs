@@ -2111,3 +2111,42 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
     assert_eq!(base.snapshot().overflows, 0);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn a_rule_reads_a_mapped_variable_at_the_instance_standing_in() {
+    let (sup, _) = Sup::new(&["operating", "degraded"]);
+    let (w, w_script) = worker("w");
+    let (b, _) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.data", "w.data")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .map_observable("count", "w.count")
+        .recovery(Duration::from_millis(40), Duration::from_secs(60))
+        // `count` is w's while w runs, b's while b stands in.
+        .rule("operating", "degraded", &["count"], |v| {
+            v.mapped("count") == Some(&Value::UInt(2)) && v.var("w", "count") != v.mapped("count")
+        });
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    wait(&b, State::Running);
+    feed.data.send(1);
+    feed.data.send(2);
+    let monitor = wait_user(&base, "degraded");
+    assert_eq!(monitor.variables[0], ("count".to_owned(), Value::UInt(2)));
+    assert!(system.shutdown().clean());
+}
