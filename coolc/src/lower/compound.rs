@@ -1400,15 +1400,15 @@ impl Scope<'_, '_> {
         }
         // An `f32` compared with a float literal: the literal rounded to `f32`, as the
         // variable holds it.
-        if l.narrow {
-            if let Some(literal) = f32_literal(right) {
-                r.code = literal;
-            }
+        if l.narrow
+            && let Some(literal) = f32_literal(right)
+        {
+            r.code = literal;
         }
-        if r.narrow {
-            if let Some(literal) = f32_literal(left) {
-                l.code = literal;
-            }
+        if r.narrow
+            && let Some(literal) = f32_literal(left)
+        {
+            l.code = literal;
         }
         // `user_state == on`: a missing user state (the automaton has not started)
         // differs from every state, for `!=` too.
