@@ -499,6 +499,17 @@ fn main() {
         );
         return;
     }
+    if let Some(at) = args.iter().position(|a| a == "--write-set") {
+        // For profiling `coolc compile` itself: `--write-set SET DIR` writes the
+        // description files of a set into DIR.
+        let dir = Path::new(&args[at + 2]);
+        for (path, text) in input(&args[at + 1]) {
+            let path = dir.join(path.file_name().expect("a file name"));
+            std::fs::create_dir_all(dir).expect("create the directory");
+            std::fs::write(path, text).expect("write a description");
+        }
+        return;
+    }
     if let Some(at) = args.iter().position(|a| a == "--child") {
         child(
             &args[at + 1],

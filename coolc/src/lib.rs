@@ -33,6 +33,7 @@ pub mod diagnostics;
 pub mod emit;
 pub mod ident;
 pub mod ir;
+mod layout;
 pub mod lower;
 pub mod merge;
 pub mod resolve;
