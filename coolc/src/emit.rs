@@ -469,11 +469,12 @@ fn extract_stub(text: &str, name: &str) -> Option<String> {
 /// The stubs of every user file, for merging, taken from the emitted user files
 /// `files` (so they are formatted like a fresh file).
 pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
+    let by_path: std::collections::HashMap<&Path, &str> = files
+        .iter()
+        .map(|f| (f.path.as_path(), f.contents.as_str()))
+        .collect();
     let set = |path: PathBuf, trait_name: &str, methods: &[ir::Method]| {
-        let text = files
-            .iter()
-            .find(|f| f.path == path)
-            .map(|f| f.contents.as_str());
+        let text = by_path.get(path.as_path()).copied();
         StubSet {
             trait_name: trait_name.to_owned(),
             stubs: methods

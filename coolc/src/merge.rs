@@ -10,7 +10,17 @@
 //!
 //! The last generated stubs are kept in `.coolc/stubs/` inside the crate, so the
 //! user can diff what coolc would write today against their code.
+//!
+//! Files that need a formatter (those not emitted in rustfmt's layout: see `emit`)
+//! are formatted once per change: `.coolc/format-cache` records, per file, a
+//! fingerprint of the text as rendered and of the text as formatted and written (for
+//! user files, the copy in `.coolc/stubs/`). When both still match, the file on disk
+//! is the formatted text and the formatter does not run. The cache names the
+//! formatter (`rustfmt` and its version, or the built-in printer); another one
+//! starts it afresh. A file whose bytes would not change is not written, so cargo
+//! rebuilds nothing after a compile that changed nothing.
 
+use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -188,10 +198,106 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
     Ok(true)
 }
 
-/// Writes the crate for `krate` into `dir`, merging into existing user files: emits
-/// it ([`emit::emit_crate`]) and writes the files ([`write_emitted`]).
+/// Where the format cache lives inside the crate.
+const FORMAT_CACHE: &str = ".coolc/format-cache";
+/// Its first line, before the formatter's name.
+const FORMAT_CACHE_HEADER: &str = "coolc format cache 1";
+
+/// A stable fingerprint of `text`: 64-bit FNV-1a and the length, in hex.
+fn fingerprint(text: &str) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for byte in text.bytes() {
+        hash ^= u64::from(byte);
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{hash:016x}-{:x}", text.len())
+}
+
+/// The format cache of the crate in `dir` for `formatter`: path -> (fingerprint as
+/// rendered, fingerprint as written). Empty when missing, unreadable or written for
+/// another formatter.
+fn load_format_cache(dir: &Path, formatter: &str) -> HashMap<PathBuf, (String, String)> {
+    let Ok(text) = fs::read_to_string(dir.join(FORMAT_CACHE)) else {
+        return HashMap::new();
+    };
+    let mut lines = text.lines();
+    if lines.next() != Some(&format!("{FORMAT_CACHE_HEADER}\t{formatter}")) {
+        return HashMap::new();
+    }
+    lines
+        .filter_map(|line| {
+            let mut parts = line.split('\t');
+            let path = parts.next()?;
+            let rendered = parts.next()?;
+            let written = parts.next()?;
+            Some((
+                PathBuf::from(path),
+                (rendered.to_owned(), written.to_owned()),
+            ))
+        })
+        .collect()
+}
+
+/// Where the formatted text of an emitted file is kept: the generated file itself, or
+/// a user file's copy in `.coolc/stubs/`.
+fn formatted_home(dir: &Path, file: &EmittedFile) -> PathBuf {
+    match file.kind {
+        FileKind::Generated => dir.join(&file.path),
+        FileKind::User => dir.join(".coolc/stubs").join(&file.path),
+    }
+}
+
+/// Writes the crate for `krate` into `dir`, merging into existing user files: renders
+/// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
+/// last compile (see the module doc), and writes the files ([`write_emitted`]).
 pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
-    write_emitted(dir, krate, &emit::emit_crate(krate))
+    let (mut files, laid_out) = emit::render_crate(krate);
+    let formatter = emit::formatter_id();
+    let cache = load_format_cache(dir, &formatter);
+    let indices: Vec<usize> = (0..files.len()).collect();
+    let is_rust = |f: &EmittedFile| f.path.extension().is_some_and(|e| e == "rs");
+    // For each file that needs formatting: its fingerprint, and the formatted text
+    // when the cache still holds it.
+    let looked_up: Vec<Option<(String, Option<String>)>> = emit::par_map(&indices, |&i| {
+        let file = &files[i];
+        if laid_out[i] || !is_rust(file) {
+            return None;
+        }
+        let rendered = fingerprint(&file.contents);
+        let cached = cache
+            .get(&file.path)
+            .filter(|(was_rendered, _)| *was_rendered == rendered)
+            .and_then(|(_, written)| {
+                let text = fs::read_to_string(formatted_home(dir, file)).ok()?;
+                (fingerprint(&text) == *written).then_some(text)
+            });
+        Some((rendered, cached))
+    });
+    let mut needs = vec![false; files.len()];
+    let mut rendered_prints = vec![None; files.len()];
+    for (i, entry) in looked_up.into_iter().enumerate() {
+        if let Some((rendered, cached)) = entry {
+            match cached {
+                Some(text) => files[i].contents = text,
+                None => needs[i] = true,
+            }
+            rendered_prints[i] = Some(rendered);
+        }
+    }
+    emit::format_files(&mut files, &needs);
+    let report = write_emitted(dir, krate, &files)?;
+    let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
+    for (file, rendered) in files.iter().zip(rendered_prints) {
+        if let Some(rendered) = rendered {
+            text.push_str(&format!(
+                "{}\t{rendered}\t{}\n",
+                file.path.display(),
+                fingerprint(&file.contents)
+            ));
+        }
+    }
+    write_if_changed(&dir.join(FORMAT_CACHE), &text)?;
+    Ok(report)
 }
 
 /// Writes `files`, already emitted for `krate` by [`emit::emit_crate`], into `dir`,
@@ -213,14 +319,24 @@ pub fn write_files(
     user_modules: &[String],
 ) -> io::Result<Report> {
     let mut report = Report::default();
-    for file in files {
+    let sets: HashMap<&Path, &StubSet> = stub_sets.iter().map(|s| (s.path.as_path(), s)).collect();
+    // Generated files are independent: written (when changed) on every core.
+    let generated: Vec<&EmittedFile> = files
+        .iter()
+        .filter(|f| f.kind == FileKind::Generated)
+        .collect();
+    let written = emit::par_map(&generated, |file| {
+        write_if_changed(&dir.join(&file.path), &file.contents)
+    });
+    for (file, written) in generated.iter().zip(written) {
+        if written? {
+            report.written.push(file.path.clone());
+        }
+    }
+    for file in files.iter().filter(|f| f.kind == FileKind::User) {
         let path = dir.join(&file.path);
         match file.kind {
-            FileKind::Generated => {
-                if write_if_changed(&path, &file.contents)? {
-                    report.written.push(file.path.clone());
-                }
-            }
+            FileKind::Generated => {}
             FileKind::User if !path.exists() => {
                 write_if_changed(&path, &file.contents)?;
                 report.written.push(file.path.clone());
@@ -242,7 +358,7 @@ pub fn write_files(
                     }
                     continue;
                 }
-                let Some(set) = stub_sets.iter().find(|s| s.path == file.path) else {
+                let Some(set) = sets.get(file.path.as_path()) else {
                     continue;
                 };
                 match merge_stubs(&text, set) {
@@ -278,8 +394,9 @@ pub fn write_files(
         }
     }
     candidates.sort();
+    let emitted: HashSet<&Path> = files.iter().map(|f| f.path.as_path()).collect();
     for candidate in candidates {
-        if files.iter().any(|f| f.path == candidate) {
+        if emitted.contains(candidate.as_path()) {
             continue;
         }
         let path = dir.join(&candidate);
@@ -303,8 +420,11 @@ pub fn write_files(
         }
     }
     // Keep the latest stubs for reference (what coolc would write today).
-    for file in files.iter().filter(|f| f.kind == FileKind::User) {
-        write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)?;
+    let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
+    for written in emit::par_map(&users, |file| {
+        write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
+    }) {
+        written?;
     }
     Ok(report)
 }
