@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout (`l`: coolc/src/layout.rs), like atomic.rs. -#}
 //! The parts of compound `{{ c.type_name }}`: which behavior each atomic instance runs.
 //!
 //! `coolc` wrote this file once and never overwrites it; new instances get new
@@ -14,6 +15,6 @@ impl Parts for {{ c.user_struct }} {
 {%- for method in c.parts %}
 {%- if !loop.first %}
 {% endif %}
-{% include "user_stub.rs" %}
+{{ l.stub(method) }}
 {%- endfor %}
 }

@@ -139,6 +139,7 @@ struct UserComponent<'a> {
 #[template(path = "user_compound.rs", escape = "none")]
 struct UserCompound<'a> {
     c: &'a ir::Compound,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -605,12 +606,12 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
         push(path, text, FileKind::User, laid_out);
     }
     for c in &krate.compounds {
-        push(
-            user_path(&c.module),
-            render(&UserCompound { c }),
-            FileKind::User,
-            false,
-        );
+        let template = UserCompound {
+            c,
+            l: Layout::default(),
+        };
+        let (text, laid_out) = render_laid_out(&template, &template.l);
+        push(user_path(&c.module), text, FileKind::User, laid_out);
     }
     if !krate.types.converters.is_empty() {
         let methods = converter_methods(krate);

@@ -198,6 +198,78 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
     Ok(true)
 }
 
+/// What merging into one user file did.
+enum UserMerge {
+    /// The file was missing and has been written.
+    Created,
+    /// Nothing to add.
+    Unchanged,
+    /// Stubs or module declarations were added.
+    Added(Vec<String>),
+    /// Stubs may have been added; methods the description no longer asks for remain.
+    Stale(Vec<String>, Vec<String>),
+    /// The file could not be merged: the warning.
+    Failed(String),
+}
+
+/// Writes the user file `file` when it is missing, else merges new stubs (or module
+/// declarations, for `src/lib.rs`) into it.
+fn merge_user_file(
+    dir: &Path,
+    file: &EmittedFile,
+    sets: &HashMap<&Path, &StubSet>,
+    user_modules: &[String],
+) -> io::Result<UserMerge> {
+    let path = dir.join(&file.path);
+    let text = match fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(error) if error.kind() == io::ErrorKind::NotFound => {
+            write_if_changed(&path, &file.contents)?;
+            return Ok(UserMerge::Created);
+        }
+        Err(error) => return Err(error),
+    };
+    // Still exactly as coolc would write it today: every stub (or module) is there
+    // and none is stale, without parsing it.
+    if text == file.contents {
+        return Ok(UserMerge::Unchanged);
+    }
+    if file.path == Path::new("src/lib.rs") {
+        return Ok(match merge_modules(&text, user_modules) {
+            Ok((merged, added)) if !added.is_empty() => {
+                fs::write(&path, merged)?;
+                UserMerge::Added(added)
+            }
+            Ok(_) => UserMerge::Unchanged,
+            Err(error) => UserMerge::Failed(format!(
+                "{} was not updated: {error}; declare these modules yourself: {}",
+                file.path.display(),
+                user_modules.join(", ")
+            )),
+        });
+    }
+    let Some(set) = sets.get(file.path.as_path()) else {
+        return Ok(UserMerge::Unchanged);
+    };
+    Ok(match merge_stubs(&text, set) {
+        Ok(merged) => {
+            if !merged.added.is_empty() {
+                fs::write(&path, &merged.text)?;
+            }
+            match (merged.added.is_empty(), merged.stale.is_empty()) {
+                (_, false) => UserMerge::Stale(merged.added, merged.stale),
+                (false, true) => UserMerge::Added(merged.added),
+                (true, true) => UserMerge::Unchanged,
+            }
+        }
+        Err(error) => UserMerge::Failed(format!(
+            "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
+            file.path.display(),
+            file.path.display()
+        )),
+    })
+}
+
 /// Where the format cache lives inside the crate.
 const FORMAT_CACHE: &str = ".coolc/format-cache";
 /// Its first line, before the formatter's name.
@@ -251,6 +323,7 @@ fn formatted_home(dir: &Path, file: &EmittedFile) -> PathBuf {
 /// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
 /// last compile (see the module doc), and writes the files ([`write_emitted`]).
 pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
+    let mut timings = crate::Timings::from_env();
     let (mut files, laid_out) = emit::render_crate(krate);
     let formatter = emit::formatter_id();
     let cache = load_format_cache(dir, &formatter);
@@ -284,8 +357,48 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
             rendered_prints[i] = Some(rendered);
         }
     }
-    emit::format_files(&mut files, &needs);
-    let report = write_emitted(dir, krate, &files)?;
+    timings.span("render, format cache");
+    // The formatter (a rustfmt process, or prettyplease on a thread) runs while the
+    // generated files that need none are written.
+    let pending: Vec<usize> = (0..files.len()).filter(|&i| needs[i]).collect();
+    let ready: Vec<&EmittedFile> = files
+        .iter()
+        .zip(&needs)
+        .filter(|(f, needs)| f.kind == FileKind::Generated && !**needs)
+        .map(|(f, _)| f)
+        .collect();
+    let (formatted, written) = std::thread::scope(|scope| {
+        let formatting = scope.spawn(|| {
+            let mut pending: Vec<EmittedFile> = pending.iter().map(|&i| files[i].clone()).collect();
+            let all = vec![true; pending.len()];
+            emit::format_files(&mut pending, &all);
+            pending
+        });
+        let written = emit::par_map(&ready, |file| {
+            write_if_changed(&dir.join(&file.path), &file.contents)
+        });
+        let formatted = match formatting.join() {
+            Ok(formatted) => formatted,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
+        (formatted, written)
+    });
+    let mut done: HashMap<PathBuf, bool> = HashMap::new();
+    for (file, written) in ready.iter().zip(written) {
+        done.insert(file.path.clone(), written?);
+    }
+    for (i, file) in pending.into_iter().zip(formatted) {
+        files[i] = file;
+    }
+    timings.span("format, write generated files");
+    let report = write_files_except(
+        dir,
+        &files,
+        &emit::stub_sets(krate, &files),
+        &emit::user_modules(krate),
+        &done,
+    )?;
+    timings.span("merge user files, write stubs");
     let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
     for (file, rendered) in files.iter().zip(rendered_prints) {
         if let Some(rendered) = rendered {
@@ -297,6 +410,7 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
         }
     }
     write_if_changed(&dir.join(FORMAT_CACHE), &text)?;
+    timings.span("format cache written");
     Ok(report)
 }
 
@@ -318,6 +432,18 @@ pub fn write_files(
     stub_sets: &[StubSet],
     user_modules: &[String],
 ) -> io::Result<Report> {
+    write_files_except(dir, files, stub_sets, user_modules, &HashMap::new())
+}
+
+/// [`write_files`], except the generated files in `done`, already written (or found
+/// unchanged: the flag says which).
+fn write_files_except(
+    dir: &Path,
+    files: &[EmittedFile],
+    stub_sets: &[StubSet],
+    user_modules: &[String],
+    done: &HashMap<PathBuf, bool>,
+) -> io::Result<Report> {
     let mut report = Report::default();
     let sets: HashMap<&Path, &StubSet> = stub_sets.iter().map(|s| (s.path.as_path(), s)).collect();
     // Generated files are independent: written (when changed) on every core.
@@ -325,63 +451,36 @@ pub fn write_files(
         .iter()
         .filter(|f| f.kind == FileKind::Generated)
         .collect();
-    let written = emit::par_map(&generated, |file| {
-        write_if_changed(&dir.join(&file.path), &file.contents)
+    let written = emit::par_map(&generated, |file| match done.get(&file.path) {
+        Some(written) => Ok(*written),
+        None => write_if_changed(&dir.join(&file.path), &file.contents),
     });
     for (file, written) in generated.iter().zip(written) {
         if written? {
             report.written.push(file.path.clone());
         }
     }
-    for file in files.iter().filter(|f| f.kind == FileKind::User) {
-        let path = dir.join(&file.path);
-        match file.kind {
-            FileKind::Generated => {}
-            FileKind::User if !path.exists() => {
-                write_if_changed(&path, &file.contents)?;
-                report.written.push(file.path.clone());
-            }
-            FileKind::User => {
-                let text = fs::read_to_string(&path)?;
-                if file.path == Path::new("src/lib.rs") {
-                    match merge_modules(&text, user_modules) {
-                        Ok((merged, added)) if !added.is_empty() => {
-                            fs::write(&path, merged)?;
-                            report.added.push((file.path.clone(), added));
-                        }
-                        Ok(_) => {}
-                        Err(error) => report.warnings.push(format!(
-                            "{} was not updated: {error}; declare these modules yourself: {}",
-                            file.path.display(),
-                            user_modules.join(", ")
-                        )),
-                    }
-                    continue;
+    // User files: each read and merged on every core, the results applied in order.
+    let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
+    let merged = emit::par_map(&users, |file| {
+        merge_user_file(dir, file, &sets, user_modules)
+    });
+    for (file, merged) in users.iter().zip(merged) {
+        match merged? {
+            UserMerge::Created => report.written.push(file.path.clone()),
+            UserMerge::Unchanged => {}
+            UserMerge::Added(added) => report.added.push((file.path.clone(), added)),
+            UserMerge::Stale(added, stale) => {
+                if !added.is_empty() {
+                    report.added.push((file.path.clone(), added));
                 }
-                let Some(set) = sets.get(file.path.as_path()) else {
-                    continue;
-                };
-                match merge_stubs(&text, set) {
-                    Ok(merged) => {
-                        if !merged.added.is_empty() {
-                            fs::write(&path, &merged.text)?;
-                            report.added.push((file.path.clone(), merged.added));
-                        }
-                        if !merged.stale.is_empty() {
-                            report.warnings.push(format!(
-                                "{} has methods the description no longer asks for (kept, remove them when done): {}",
-                                file.path.display(),
-                                merged.stale.join(", ")
-                            ));
-                        }
-                    }
-                    Err(error) => report.warnings.push(format!(
-                        "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
-                        file.path.display(),
-                        file.path.display()
-                    )),
-                }
+                report.warnings.push(format!(
+                    "{} has methods the description no longer asks for (kept, remove them when done): {}",
+                    file.path.display(),
+                    stale.join(", ")
+                ));
             }
+            UserMerge::Failed(warning) => report.warnings.push(warning),
         }
     }
     // Generated files no description asks for any more (a removed component, the
