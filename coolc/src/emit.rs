@@ -265,8 +265,11 @@ fn declares_modules(text: &str) -> bool {
     })
 }
 
-/// Formats Rust files with `rustfmt`: the files that declare no modules with ONE run
-/// over a scratch copy (given by path: no module of theirs is followed), the others
+/// From how many files [`rustfmt_files`] splits the work over several processes.
+const PATHS_PER_RUSTFMT: usize = 32;
+
+/// Formats Rust files with `rustfmt`: the files that declare no modules with one run
+/// (one per core for many files) over a scratch copy (given by path: no module of theirs is followed), the others
 /// (`src/lib.rs`, a `mod.rs`) one by one from stdin. `None`, without writing
 /// anything, when `rustfmt` is not installed; `None` when it fails (the caller falls
 /// back to per-file formatting).
@@ -297,15 +300,35 @@ fn rustfmt_files(files: &[(&Path, &str)]) -> Option<Vec<String>> {
             for (index, path) in &paths {
                 std::fs::write(path, files[*index].1).ok()?;
             }
-            let status = Command::new(rustfmt_program())
-                .args(["--edition", "2024", "--quiet"])
-                .args(paths.iter().map(|(_, path)| path))
-                .current_dir(&dir)
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .status()
+            // Many files: one rustfmt per core, started together (each start costs
+            // tens of milliseconds, so a few files go to one process).
+            let processes = if paths.len() >= PATHS_PER_RUSTFMT {
+                std::thread::available_parallelism()
+                    .map_or(1, std::num::NonZero::get)
+                    .min(paths.len() / (PATHS_PER_RUSTFMT / 2))
+                    .max(1)
+            } else {
+                1
+            };
+            let chunk = paths.len().div_ceil(processes);
+            let children: Vec<std::process::Child> = paths
+                .chunks(chunk)
+                .map(|part| {
+                    Command::new(rustfmt_program())
+                        .args(["--edition", "2024", "--quiet"])
+                        .args(part.iter().map(|(_, path)| path))
+                        .current_dir(&dir)
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .spawn()
+                })
+                .collect::<Result<_, _>>()
                 .ok()?;
-            if !status.success() {
+            let mut ok = true;
+            for mut child in children {
+                ok &= child.wait().is_ok_and(|status| status.success());
+            }
+            if !ok {
                 return None;
             }
         }
@@ -356,29 +379,66 @@ fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool)
     (text, layout.ok())
 }
 
+/// Which files of a crate to render: all, those whose templates need a formatter,
+/// or those whose templates are written in rustfmt's layout (see `layout`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// Every file.
+    All,
+    /// The files a formatter lays out: `types.rs`, compound modules, `build.rs`,
+    /// `src/converters.rs`.
+    NeedsFormatter,
+    /// The others (some of which may still turn out to need the formatter).
+    LaidOut,
+}
+
+impl Part {
+    /// Whether a file whose template is (`laid_out`) or is not in rustfmt's layout
+    /// belongs to this part.
+    fn wants(self, laid_out: bool) -> bool {
+        match self {
+            Part::All => true,
+            Part::NeedsFormatter => !laid_out,
+            Part::LaidOut => laid_out,
+        }
+    }
+}
+
 /// The generated module texts as rendered: `(module name, text, already in rustfmt's
 /// layout)`, `types` first.
 fn render_modules(krate: &ir::Crate) -> Vec<(String, String, bool)> {
-    let mut modules = vec![(
-        krate.types.module.clone(),
-        render(&TypesRs {
-            krate,
-            types: &krate.types,
-        }),
-        false,
-    )];
-    let atomics = par_map(&krate.atomics, |c| {
-        let template = AtomicRs {
-            krate,
-            c,
-            l: Layout::default(),
-        };
-        let (text, laid_out) = render_laid_out(&template, &template.l);
-        (c.module.clone(), text, laid_out)
-    });
-    modules.extend(atomics);
-    for c in &krate.compounds {
-        modules.push((c.module.clone(), render(&CompoundRs { krate, c }), false));
+    render_modules_part(krate, Part::All)
+}
+
+/// [`render_modules`] of one [`Part`].
+fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bool)> {
+    let mut modules = Vec::new();
+    if part.wants(false) {
+        modules.push((
+            krate.types.module.clone(),
+            render(&TypesRs {
+                krate,
+                types: &krate.types,
+            }),
+            false,
+        ));
+    }
+    if part.wants(true) {
+        let atomics = par_map(&krate.atomics, |c| {
+            let template = AtomicRs {
+                krate,
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            (c.module.clone(), text, laid_out)
+        });
+        modules.extend(atomics);
+    }
+    if part.wants(false) {
+        for c in &krate.compounds {
+            modules.push((c.module.clone(), render(&CompoundRs { krate, c }), false));
+        }
     }
     modules
 }
@@ -551,6 +611,11 @@ fn is_rust(path: &Path) -> bool {
 /// whether it is already in `rustfmt`'s layout (so needs no formatter; non-Rust files
 /// count as laid out).
 pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
+    render_crate_part(krate, Part::All)
+}
+
+/// [`render_crate`] of one [`Part`] (the files in the same order).
+pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
     let mut files: Vec<(EmittedFile, bool)> = Vec::new();
     let mut push = |path: PathBuf, contents: String, kind: FileKind, laid_out: bool| {
         files.push((
@@ -562,13 +627,15 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
             laid_out,
         ));
     };
-    push(
-        PathBuf::from("Cargo.toml"),
-        render(&CargoToml { krate }),
-        FileKind::Generated,
-        true,
-    );
-    if !krate.system_libs.is_empty() {
+    if part.wants(true) {
+        push(
+            PathBuf::from("Cargo.toml"),
+            render(&CargoToml { krate }),
+            FileKind::Generated,
+            true,
+        );
+    }
+    if !krate.system_libs.is_empty() && part.wants(false) {
         push(
             PathBuf::from("build.rs"),
             render(&BuildRs { krate }),
@@ -576,44 +643,48 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
             false,
         );
     }
-    let (generated_mod, certain) = GeneratedMod::new(krate);
-    push(
-        PathBuf::from("src/generated/mod.rs"),
-        render(&generated_mod),
-        FileKind::Generated,
-        certain,
-    );
-    for (module, text, laid_out) in render_modules(krate) {
+    if part.wants(true) {
+        let (generated_mod, certain) = GeneratedMod::new(krate);
+        push(
+            PathBuf::from("src/generated/mod.rs"),
+            render(&generated_mod),
+            FileKind::Generated,
+            certain,
+        );
+    }
+    for (module, text, laid_out) in render_modules_part(krate, part) {
         let path = format!("src/generated/{}.rs", module.trim_start_matches("r#"));
         push(PathBuf::from(path), text, FileKind::Generated, laid_out);
     }
-    let (modules, certain) = rustfmt_module_order(user_modules(krate));
-    push(
-        PathBuf::from("src/lib.rs"),
-        render(&UserLib { modules: &modules }),
-        FileKind::User,
-        certain,
-    );
-    let users = par_map(&krate.atomics, |c| {
-        let template = UserComponent {
-            c,
-            l: Layout::default(),
-        };
-        let (text, laid_out) = render_laid_out(&template, &template.l);
-        (user_path(&c.module), text, laid_out)
-    });
-    for (path, text, laid_out) in users {
-        push(path, text, FileKind::User, laid_out);
+    if part.wants(true) {
+        let (modules, certain) = rustfmt_module_order(user_modules(krate));
+        push(
+            PathBuf::from("src/lib.rs"),
+            render(&UserLib { modules: &modules }),
+            FileKind::User,
+            certain,
+        );
+        let users = par_map(&krate.atomics, |c| {
+            let template = UserComponent {
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            (user_path(&c.module), text, laid_out)
+        });
+        for (path, text, laid_out) in users {
+            push(path, text, FileKind::User, laid_out);
+        }
+        for c in &krate.compounds {
+            let template = UserCompound {
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            push(user_path(&c.module), text, FileKind::User, laid_out);
+        }
     }
-    for c in &krate.compounds {
-        let template = UserCompound {
-            c,
-            l: Layout::default(),
-        };
-        let (text, laid_out) = render_laid_out(&template, &template.l);
-        push(user_path(&c.module), text, FileKind::User, laid_out);
-    }
-    if !krate.types.converters.is_empty() {
+    if !krate.types.converters.is_empty() && part.wants(false) {
         let methods = converter_methods(krate);
         push(
             PathBuf::from("src/converters.rs"),

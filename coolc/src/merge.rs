@@ -319,33 +319,39 @@ fn formatted_home(dir: &Path, file: &EmittedFile) -> PathBuf {
     }
 }
 
-/// Writes the crate for `krate` into `dir`, merging into existing user files: renders
-/// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
-/// last compile (see the module doc), and writes the files ([`write_emitted`]).
-pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
-    let mut timings = crate::Timings::from_env();
-    let (mut files, laid_out) = emit::render_crate(krate);
-    let formatter = emit::formatter_id();
-    let cache = load_format_cache(dir, &formatter);
+/// For a file that needs formatting: its fingerprint as rendered, and its formatted
+/// text when the format cache still holds it (see the module doc). `None` for a file
+/// that needs no formatter.
+fn look_up(
+    dir: &Path,
+    cache: &HashMap<PathBuf, (String, String)>,
+    file: &EmittedFile,
+    laid_out: bool,
+) -> Option<(String, Option<String>)> {
+    if laid_out || file.path.extension().is_none_or(|e| e != "rs") {
+        return None;
+    }
+    let rendered = fingerprint(&file.contents);
+    let cached = cache
+        .get(&file.path)
+        .filter(|(was_rendered, _)| *was_rendered == rendered)
+        .and_then(|(_, written)| {
+            let text = fs::read_to_string(formatted_home(dir, file)).ok()?;
+            (fingerprint(&text) == *written).then_some(text)
+        });
+    Some((rendered, cached))
+}
+
+/// `files` with the formatted text of each one that needs it (from the cache, else
+/// from the formatter), and the fingerprints as rendered of those.
+fn format_with_cache(
+    dir: &Path,
+    cache: &HashMap<PathBuf, (String, String)>,
+    mut files: Vec<EmittedFile>,
+    laid_out: &[bool],
+) -> (Vec<EmittedFile>, Vec<Option<String>>) {
     let indices: Vec<usize> = (0..files.len()).collect();
-    let is_rust = |f: &EmittedFile| f.path.extension().is_some_and(|e| e == "rs");
-    // For each file that needs formatting: its fingerprint, and the formatted text
-    // when the cache still holds it.
-    let looked_up: Vec<Option<(String, Option<String>)>> = emit::par_map(&indices, |&i| {
-        let file = &files[i];
-        if laid_out[i] || !is_rust(file) {
-            return None;
-        }
-        let rendered = fingerprint(&file.contents);
-        let cached = cache
-            .get(&file.path)
-            .filter(|(was_rendered, _)| *was_rendered == rendered)
-            .and_then(|(_, written)| {
-                let text = fs::read_to_string(formatted_home(dir, file)).ok()?;
-                (fingerprint(&text) == *written).then_some(text)
-            });
-        Some((rendered, cached))
-    });
+    let looked_up = emit::par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
     let mut needs = vec![false; files.len()];
     let mut rendered_prints = vec![None; files.len()];
     for (i, entry) in looked_up.into_iter().enumerate() {
@@ -357,40 +363,51 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
             rendered_prints[i] = Some(rendered);
         }
     }
-    timings.span("render, format cache");
-    // The formatter (a rustfmt process, or prettyplease on a thread) runs while the
-    // generated files that need none are written.
-    let pending: Vec<usize> = (0..files.len()).filter(|&i| needs[i]).collect();
-    let ready: Vec<&EmittedFile> = files
-        .iter()
-        .zip(&needs)
-        .filter(|(f, needs)| f.kind == FileKind::Generated && !**needs)
-        .map(|(f, _)| f)
-        .collect();
-    let (formatted, written) = std::thread::scope(|scope| {
-        let formatting = scope.spawn(|| {
-            let mut pending: Vec<EmittedFile> = pending.iter().map(|&i| files[i].clone()).collect();
-            let all = vec![true; pending.len()];
-            emit::format_files(&mut pending, &all);
-            pending
+    emit::format_files(&mut files, &needs);
+    (files, rendered_prints)
+}
+
+/// Writes the crate for `krate` into `dir`, merging into existing user files: renders
+/// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
+/// last compile (see the module doc), and writes the files ([`write_emitted`]). The
+/// files whose templates need a formatter are rendered and formatted on a thread of
+/// their own (the formatter is a `rustfmt` process) while the others are rendered and
+/// written.
+pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
+    let mut timings = crate::Timings::from_env();
+    let formatter = emit::formatter_id();
+    let cache = load_format_cache(dir, &formatter);
+    let ((formatted, formatted_prints), (laid, laid_prints), written) =
+        std::thread::scope(|scope| {
+            let formatting = scope.spawn(|| {
+                let (files, laid_out) = emit::render_crate_part(krate, emit::Part::NeedsFormatter);
+                format_with_cache(dir, &cache, files, &laid_out)
+            });
+            let (files, laid_out) = emit::render_crate_part(krate, emit::Part::LaidOut);
+            // Generated files already in rustfmt's layout are written at once.
+            let indices: Vec<usize> = (0..files.len()).collect();
+            let written = emit::par_map(&indices, |&i| {
+                let file = &files[i];
+                (laid_out[i] && file.kind == FileKind::Generated)
+                    .then(|| write_if_changed(&dir.join(&file.path), &file.contents))
+            });
+            // Any that turned out to need the formatter (unusual descriptions).
+            let laid = format_with_cache(dir, &cache, files, &laid_out);
+            let formatted = match formatting.join() {
+                Ok(formatted) => formatted,
+                Err(panic) => std::panic::resume_unwind(panic),
+            };
+            (formatted, laid, written)
         });
-        let written = emit::par_map(&ready, |file| {
-            write_if_changed(&dir.join(&file.path), &file.contents)
-        });
-        let formatted = match formatting.join() {
-            Ok(formatted) => formatted,
-            Err(panic) => std::panic::resume_unwind(panic),
-        };
-        (formatted, written)
-    });
     let mut done: HashMap<PathBuf, bool> = HashMap::new();
-    for (file, written) in ready.iter().zip(written) {
-        done.insert(file.path.clone(), written?);
+    for (file, written) in laid.iter().zip(written) {
+        if let Some(written) = written {
+            done.insert(file.path.clone(), written?);
+        }
     }
-    for (i, file) in pending.into_iter().zip(formatted) {
-        files[i] = file;
-    }
-    timings.span("format, write generated files");
+    timings.span("render, format, write generated files");
+    let files: Vec<EmittedFile> = laid.into_iter().chain(formatted).collect();
+    let prints: Vec<Option<String>> = laid_prints.into_iter().chain(formatted_prints).collect();
     let report = write_files_except(
         dir,
         &files,
@@ -400,7 +417,7 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
     )?;
     timings.span("merge user files, write stubs");
     let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
-    for (file, rendered) in files.iter().zip(rendered_prints) {
+    for (file, rendered) in files.iter().zip(prints) {
         if let Some(rendered) = rendered {
             text.push_str(&format!(
                 "{}\t{rendered}\t{}\n",
