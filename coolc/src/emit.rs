@@ -214,20 +214,30 @@ fn rustfmt_program() -> std::ffi::OsString {
     std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
 
-/// Whether `rustfmt` (or the program `RUSTFMT` names) runs: probed once per process
-/// with `--version`, so that without it no scratch tree is written and no process is
-/// spawned per file.
+/// The version line of `rustfmt` (or of the program `RUSTFMT` names), `None` when it
+/// does not run: probed once per process with `--version`, so that without it no
+/// scratch tree is written and no process is spawned per file.
+fn rustfmt_version() -> Option<&'static str> {
+    static VERSION: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    VERSION
+        .get_or_init(|| {
+            let output = Command::new(rustfmt_program())
+                .arg("--version")
+                .stdin(Stdio::null())
+                .stderr(Stdio::null())
+                .output()
+                .ok()?;
+            output
+                .status
+                .success()
+                .then(|| String::from_utf8_lossy(&output.stdout).trim().to_owned())
+        })
+        .as_deref()
+}
+
+/// Whether `rustfmt` runs (see [`rustfmt_version`]).
 fn rustfmt_installed() -> bool {
-    static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *INSTALLED.get_or_init(|| {
-        Command::new(rustfmt_program())
-            .arg("--version")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|status| status.success())
-    })
+    rustfmt_version().is_some()
 }
 
 /// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed (see
@@ -352,25 +362,10 @@ fn rustfmt_files(files: &[(&Path, &str)]) -> Option<Vec<String>> {
 /// Who formats generated code in this process, for caches of formatted files:
 /// `rustfmt` and its version, or the built-in printer.
 pub fn formatter_id() -> String {
-    static ID: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    ID.get_or_init(|| {
-        let version = rustfmt_installed()
-            .then(|| {
-                Command::new(rustfmt_program())
-                    .arg("--version")
-                    .stdin(Stdio::null())
-                    .stderr(Stdio::null())
-                    .output()
-                    .ok()
-            })
-            .flatten()
-            .map(|output| String::from_utf8_lossy(&output.stdout).trim().to_owned());
-        match version {
-            Some(version) => version,
-            None => format!("prettyplease {}", env!("CARGO_PKG_VERSION")),
-        }
-    })
-    .clone()
+    match rustfmt_version() {
+        Some(version) => version.to_owned(),
+        None => format!("prettyplease (coolc {})", env!("CARGO_PKG_VERSION")),
+    }
 }
 
 /// A rendered template and whether it is already in `rustfmt`'s layout.

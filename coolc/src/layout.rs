@@ -12,8 +12,8 @@
 //! comes near the edge of them (a line over 100 columns, a list of short items that
 //! rustfmt would pack several per line), clears [`Layout::ok`]: the caller then runs
 //! the real formatter over the file. So a strange description costs time, never a
-//! file that `cargo fmt` would change. The `fast_path` test in `coolc/tests/emit.rs`
-//! checks the claim against `rustfmt` on every fixture and example.
+//! file that `cargo fmt` would change. `coolc/tests/rustfmt_clean.rs` checks the claim
+//! against `rustfmt` on every fixture and example.
 
 use std::cell::Cell;
 
