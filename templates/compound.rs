@@ -1,112 +1,18 @@
 {%- import "macros.rs" as m -%}
 {% call m::header(krate.sources_text()) %}{% endcall %}
-//! Generated code of compound component `{{ c.type_name }}` (partial).
+//! Generated code of compound component `{{ c.type_name }}`.
 //!
-//! [`build`] adds the compound's atomic instances to a `coolbot::System` (their
-//! behaviors come from your [`Parts`]) and wires the declared connections. Not
-//! generated yet: the supervisor automaton and its rules, exported ports, mapped
-//! variables, instance timing overrides, error policies and the recovery queue, substitutes
-//! (listed, not started), remote nodes (instances run locally) and compound instances
-//! (nested compounds).
+//! Implement [`Supervisor`] (the supervisor's sections) and [`Parts`] (which
+//! supervisor and which behaviours the instances run; the user file
+//! `src/{{ c.module }}.rs` holds starters), then call [`component`] for a
+//! `coolbot::Component` that runs the whole hierarchy, or [`builder`] to add to it
+//! first. The supervisor's `when` rules are compiled below, one function each.
 {%- if !c.doc.is_empty() %}
 //!
 {%- for line in c.doc %}
 //! {{ line }}
 {%- endfor %}
 {%- endif %}
-
-/// The behaviors of the compound's atomic instances, one method per instance that
-/// [`build`] starts.
-pub trait Parts {
-{%- for i in c.instances %}
-{%- if i.built() %}
-{%- if let Some(module) = i.module %}
-    /// The behavior of instance `{{ i.name }}`, a `{{ i.component }}`.
-    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Behavior;
-{%- endif %}
-{%- endif %}
-{%- endfor %}
-}
-
-/// Why [`build`] failed.
-#[derive(Debug)]
-pub enum BuildError {
-    /// An instance could not be added.
-    Add(::coolbot::Error),
-    /// A connection was refused.
-    Connect(::coolbot::ConnectError),
-}
-
-impl ::core::fmt::Display for BuildError {
-    fn fmt(&self, f: &mut ::core::fmt::Formatter<'_>) -> ::core::fmt::Result {
-        match self {
-            BuildError::Add(error) => ::core::write!(f, "building {{ c.type_name }}: {error}"),
-            BuildError::Connect(error) => ::core::write!(f, "connecting {{ c.type_name }}: {error}"),
-        }
-    }
-}
-
-impl ::std::error::Error for BuildError {}
-
-impl ::core::convert::From<::coolbot::Error> for BuildError {
-    fn from(error: ::coolbot::Error) -> Self {
-        BuildError::Add(error)
-    }
-}
-
-impl ::core::convert::From<::coolbot::ConnectError> for BuildError {
-    fn from(error: ::coolbot::ConnectError) -> Self {
-        BuildError::Connect(error)
-    }
-}
-
-/// Adds the atomic instances to `system` as `{prefix}{instance}` with the behaviors
-/// `parts` gives, then connects them as the description says. Returns their
-/// handles in declaration order.
-pub fn build{% if c.uses_converters %}<C: super::types::Converters + 'static>{% endif %}(system: &mut ::coolbot::System, prefix: &str, parts: &mut impl Parts) -> ::core::result::Result<::std::vec::Vec<::coolbot::Handle>, BuildError> {
-{%- if !c.builds_any() %}
-    let _ = parts;
-{%- endif %}
-    let handles = ::std::vec![
-{%- for i in c.instances %}
-{%- if i.built() %}
-{%- if let Some(module) = i.module %}
-{%- if !i.has_overrides() %}
-        system.add(super::{{ module }}::component(::std::format!("{prefix}{{ i.name }}"), parts.{{ i.method }}()))?,
-{%- else %}
-        // Instance `{{ i.name }}` with the overrides of the description.
-        system.add(super::{{ module }}::component_with(
-            ::std::format!("{prefix}{{ i.name }}"),
-            parts.{{ i.method }}(),
-            {%- if i.config_overrides.is_empty() %}
-            super::{{ module }}::Config::default(),
-            {%- else %}
-            super::{{ module }}::Config {
-                {%- for (field, value) in i.config_overrides %}
-                {{ field }}: {{ value }},
-                {%- endfor %}
-                ..super::{{ module }}::Config::default()
-            },
-            {%- endif %}
-            {%- if i.var_overrides.is_empty() %}
-            super::{{ module }}::Vars::default(),
-            {%- else %}
-            super::{{ module }}::Vars {
-                {%- for (field, value) in i.var_overrides %}
-                {{ field }}: {{ value }},
-                {%- endfor %}
-                ..super::{{ module }}::Vars::default()
-            },
-            {%- endif %}
-        ))?,
-{%- endif %}
-{%- endif %}
-{%- endif %}
-{%- endfor %}
-    ];
-    connect{% if c.uses_converters %}::<C>{% endif %}(system, prefix)?;
-    Ok(handles)
-}
 
 /// The compound's component type name.
 pub const TYPE_NAME: &str = "{{ c.type_name }}";
@@ -135,19 +41,281 @@ pub const CONNECTIONS: &[(&str, &str)] = &[
 {%- endfor %}
 ];
 
-/// Connects the instances, added to `system` under the names `{prefix}{instance}`
-/// (`prefix` is `""` for plain instance names, or e.g. `"base_"`), as the
-/// description says.
-pub fn connect{% if c.uses_converters %}<C: super::types::Converters + 'static>{% endif %}(system: &mut ::coolbot::System, prefix: &str) -> ::core::result::Result<(), ::coolbot::ConnectError> {
-{%- if c.connections.is_empty() %}
-    let _ = (system, prefix);
-{%- endif %}
-{%- for k in c.connections %}
-    {%- if let Some(via) = k.via %}
-    system.connect_via(&::std::format!("{prefix}{{ k.from }}"), &::std::format!("{prefix}{{ k.to }}"), C::{{ via }})?;
+/// The supervisor's own variables: observable, controllable and local (mapped
+/// variables are the instances': the runtime reads and sets them there).
+#[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
+pub struct Vars {
+{%- for v in c.vars %}
+{%- call m::doc(&v.field.doc) %}{% endcall %}
+    /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
+    pub {{ v.field.name }}: {{ v.field.ty }},
+{%- endfor %}
+}
+
+{% if !c.vars_derive_default() %}
+impl ::core::default::Default for Vars {
+    fn default() -> Self {
+        Self {
+        {%- for v in c.vars %}
+            {{ v.field.name }}: {{ v.field.default }},
+        {%- endfor %}
+        }
+    }
+}
+{% endif %}
+
+/// Initial values of the mapped controllable variables, for an enclosing compound's
+/// instance overrides (`None`: the instance's own value).
+#[derive(Clone, Debug, Default)]
+pub struct Mapped {
+{%- for m in c.mapped %}
+    /// `controllable {{ m.cool_name }} = {{ m.target }};`
+    pub {{ m.name }}: ::core::option::Option<{{ m.ty }}>,
+{%- endfor %}
+}
+
+/// The supervisor's states (its user automaton).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum UserState {
+{%- for s in c.states %}
+{%- call m::doc(&s.doc) %}{% endcall %}
+    {{ s.variant }},
+{%- endfor %}
+}
+
+impl UserState {
+    /// Every state, in declaration order.
+    pub const ALL: [UserState; {{ c.states.len() }}] = [{% for s in c.states %}UserState::{{ s.variant }},{% endfor %}];
+
+    /// The state's index in [`SPEC`]`.states`.
+    pub fn index(self) -> usize {
+        match self {
+        {%- for s in c.states %}
+            UserState::{{ s.variant }} => {{ loop.index0 }},
+        {%- endfor %}
+        }
+    }
+
+    /// The state's name as written in the description.
+    pub fn name(self) -> &'static str {
+        match self {
+        {%- for s in c.states %}
+            UserState::{{ s.variant }} => "{{ s.cool_name }}",
+        {%- endfor %}
+        }
+    }
+}
+
+/// The supervisor's shape: its states, its own observable and controllable
+/// variables, its timing, and the exported ports as the compound will have them
+/// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
+/// adds the mapped variables).
+pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
+    type_name: "{{ c.type_name }}",
+    doc: {{ c.doc_literal() }},
+    states: &[
+    {%- for s in c.states %}
+        {{ s.spec }},
+    {%- endfor %}
+    ],
+    initial: {{ c.initial }},
+    inputs: &[
+    {%- for spec in c.input_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
+    outputs: &[
+    {%- for spec in c.output_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
+    variables: &[
+    {%- for v in c.vars %}
+    {%- if v.spec_index.is_some() %}
+        ::coolbot::VarSpec { name: "{{ v.field.cool_name }}", kind: ::coolbot::VarKind::{{ v.kind }}, ty: "{{ v.cool_ty }}", doc: {{ v.doc_literal() }} },
+    {%- endif %}
+    {%- endfor %}
+    ],
+    exceptions: &[],
+    timing: {{ c.timing }},
+};
+
+/// What a supervisor section sees.
+pub struct Cx<'a> {
+    /// The supervisor's own variables.
+    pub vars: &'a mut Vars,
+    /// The runtime side: time, result, end of task, period.
+    pub rt: &'a mut ::coolbot::Context,
+    /// The instances' monitors (their `state`, `user_state`, `result`, `error` and
+    /// variables) as last seen.
+    pub view: &'a ::coolbot::View,
+}
+
+/// The supervisor's code: one required method per section of its states. Its
+/// transitions are the description's `when` rules; a section that fails takes the
+/// compound to `running_error`.
+pub trait Supervisor: ::core::marker::Send + 'static {
+{%- for method in c.methods %}
+{%- if !loop.first %}
+{% endif %}
+{%- call m::doc(&method.doc) %}{% endcall %}
+    {{ method.signature }};
+{%- endfor %}
+}
+
+/// Where the compound's behaviours come from: its supervisor and one method per
+/// instance (substitutes and redundant members included: every instance is built).
+pub trait Parts {
+    /// The supervisor.
+    fn supervisor(&mut self) -> impl Supervisor;
+{%- for i in c.instances %}
+{%- if let Some(module) = i.module %}
+
+    /// Instance `{{ i.name }}`, a `{{ i.component }}`.
+    {%- if i.compound %}
+    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Parts;
     {%- else %}
-    system.connect(&::std::format!("{prefix}{{ k.from }}"), &::std::format!("{prefix}{{ k.to }}"))?;
+    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Behavior;
+    {%- endif %}
+{%- endif %}
+{%- endfor %}
+}
+
+/// The compound `{{ c.type_name }}` named `name`, with its supervisor and instances
+/// from `parts`: [`builder`], built.
+pub fn component{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+    builder{{ c.turbofish() }}(name, parts)?.build()
+}
+
+/// Like [`component`], starting from the given own variables and initial values of
+/// the mapped controllable ones (an enclosing compound's instance overrides use it).
+pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, vars, mapped)?.build()
+}
+
+/// The runtime's builder for compound `{{ c.type_name }}` named `name`, with
+/// everything the description says: the instances (behaviours from `parts`, with
+/// their overrides), the connections, the exported ports, the mapped variables, the
+/// `on error` policies, the substitutes, the redundant groups, the recovery queue and
+/// the supervisor's rules. Fails when a nested compound cannot be built.
+pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, Vars::default(), Mapped::default())
+}
+
+/// Like [`builder`], starting from the given own variables and initial values of the
+/// mapped controllable ones.
+pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    {%- if c.mapped.is_empty() %}
+    let _ = mapped;
+    {%- endif %}
+    let name = name.into();
+    let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(vars));
+    let supervisor = __CoolSupervisor {
+        supervisor: parts.supervisor(),
+        vars{% if c.rules_use_vars() %}: ::std::sync::Arc::clone(&vars){% endif %},
+    };
+    Ok(::coolbot::CompoundBuilder::new(name, supervisor)
+{%- for i in c.instances %}
+{%- if let Some(build) = i.build %}
+    {%- if let Some(node) = i.node %}
+        // Instance `{{ i.name }}` is declared `on "{{ node }}"`: it runs here (remote nodes are not supported yet).
+    {%- endif %}
+    {%- if !i.unapplied.is_empty() %}
+        // Not applied: overrides of `{{ i.name }}`'s mapped variables {{ i.unapplied_text() }} (set them through its control port once it runs).
+    {%- endif %}
+        .instance({{ build }})
+{%- endif %}
+{%- endfor %}
+{%- for k in c.connections %}
+    {%- if let Some(method) = k.via %}
+        .connect_via("{{ k.from }}", "{{ k.to }}", <C as super::types::Converters>::{{ method }})
+    {%- else %}
+        .connect("{{ k.from }}", "{{ k.to }}")
     {%- endif %}
 {%- endfor %}
-    Ok(())
+{%- for step in c.steps %}
+        {{ step }}
+{%- endfor %}
+{%- for r in c.rules %}
+        .rule({{ r.state }}, {{ r.target }}, {{ r.reads }}, {{ r.call }})
+{%- endfor %})
+}
+{% for r in c.rules %}
+/// Rule {{ r.doc }}.
+#[allow(clippy::eq_op, clippy::nonminimal_bool, clippy::bool_comparison, clippy::overly_complex_bool_expr, clippy::neg_cmp_op_on_partial_ord)]
+fn {{ r.function }}({{ r.view_param }}: &::coolbot::View{% if let Some(vars) = r.vars_param %}, {{ vars }}: &Vars{% endif %}) -> bool {
+    {{ r.expr }}
+}
+{% endfor %}
+{%- if c.locks() %}
+/// The supervisor's variables, shared with the rules that read them.
+fn __cool_lock(vars: &::std::sync::Mutex<Vars>) -> ::std::sync::MutexGuard<'_, Vars> {
+    vars.lock().unwrap_or_else(::std::sync::PoisonError::into_inner)
+}
+{%- endif %}
+
+/// Adapts a [`Supervisor`] to the runtime's index-based `coolbot::Supervisor`.
+struct __CoolSupervisor<S> {
+    supervisor: S,
+    vars: ::std::sync::Arc<::std::sync::Mutex<Vars>>,
+}
+
+impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
+    fn spec(&self) -> &'static ::coolbot::Spec {
+        &SPEC
+    }
+
+    fn section(&mut self, state: usize, section: ::coolbot::Section, cx: &mut ::coolbot::SupervisorCx<'_>) -> ::coolbot::SectionResult {
+    {%- if c.section_arms.is_empty() %}
+        let _ = (state, section, cx, &self.supervisor);
+        Ok(())
+    {%- else %}
+        let Self { supervisor, vars } = self;
+        let mut vars = __cool_lock(vars);
+        let mut cx = Cx { vars: &mut vars, rt: &mut *cx.rt, view: cx.view };
+        match (state, section) {
+        {%- for (pattern, call) in c.section_arms %}
+            {{ pattern }} => {{ call }},
+        {%- endfor %}
+            _ => Ok(()),
+        }
+    {%- endif %}
+    }
+
+    fn get(&self, variable: usize) -> ::coolbot::Value {
+    {%- if c.has_exposed() %}
+        let vars = __cool_lock(&self.vars);
+        match variable {
+        {%- for v in c.vars %}
+        {%- if let Some(index) = v.spec_index %}
+            {{ index }} => {{ v.to_value }},
+        {%- endif %}
+        {%- endfor %}
+            _ => ::coolbot::Value::Unit,
+        }
+    {%- else %}
+        let _ = (variable, &self.vars);
+        ::coolbot::Value::Unit
+    {%- endif %}
+    }
+
+    fn set(&mut self, variable: usize, value: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
+    {%- if c.has_controllable() %}
+        let mut vars = __cool_lock(&self.vars);
+        match variable {
+        {%- for v in c.vars %}
+        {%- if v.controllable() %}
+            {{ v.spec_index.unwrap_or_default() }} => {
+                vars.{{ v.field.name }} = {{ v.from_value }}?;
+                Ok(())
+            }
+        {%- endif %}
+        {%- endfor %}
+            _ => Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable")),
+        }
+    {%- else %}
+        let _ = value;
+        Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable"))
+    {%- endif %}
+    }
 }

@@ -1,20 +1,34 @@
-{#- Written in rustfmt's layout (`l`: coolc/src/layout.rs), like atomic.rs. -#}
-//! The parts of compound `{{ c.type_name }}`: which behavior each atomic instance runs.
+//! The parts of compound `{{ c.type_name }}`: its supervisor's sections and which
+//! behaviour each instance runs.
 //!
-//! `coolc` wrote this file once and never overwrites it; new instances get new
-//! methods at the end of the `impl Parts` block. Start the compound with
-//! `crate::generated::{{ c.module }}::build{% if c.uses_converters %}::<crate::converters::Convert>{% endif %}(&mut system, "", &mut {{ c.user_struct }})`.
+//! `coolc` wrote this file once and never overwrites it: new supervisor sections get
+//! stubs at the end of the `impl Supervisor` block, new instances new methods at the
+//! end of the `impl Parts` block. Build the compound with
+//! `crate::generated::{{ c.module }}::component{% if c.uses_converters %}::<crate::converters::Convert>{% endif %}("name", {{ c.user_struct }}::default())`
+//! and add it to a `coolbot::System` (or to another compound).
 
 use crate::generated::{{ c.module }}::*;
 
-/// The behaviors `{{ c.type_name }}`'s instances run: by default this crate's own.
+/// What `{{ c.type_name }}`'s supervisor keeps between sections.
 #[derive(Debug, Default)]
-pub struct {{ c.user_struct }};
+pub struct {{ c.supervisor_struct }} {}
+
+impl Supervisor for {{ c.supervisor_struct }} {
+{%- for method in c.methods %}
+{%- if !loop.first %}
+{% endif %}
+{% include "user_stub.rs" %}
+{%- endfor %}
+}
+
+/// The behaviours `{{ c.type_name }}`'s instances run: by default this crate's own.
+#[derive(Debug, Default)]
+pub struct {{ c.user_struct }} {}
 
 impl Parts for {{ c.user_struct }} {
 {%- for method in c.parts %}
 {%- if !loop.first %}
 {% endif %}
-{{ l.stub(method) }}
+{% include "user_stub.rs" %}
 {%- endfor %}
 }

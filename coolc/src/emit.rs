@@ -139,7 +139,6 @@ struct UserComponent<'a> {
 #[template(path = "user_compound.rs", escape = "none")]
 struct UserCompound<'a> {
     c: &'a ir::Compound,
-    l: Layout,
 }
 
 #[derive(Template)]
@@ -380,8 +379,8 @@ fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool)
 pub enum Part {
     /// Every file.
     All,
-    /// The files a formatter lays out: `types.rs`, compound modules, `build.rs`,
-    /// `src/converters.rs`.
+    /// The files a formatter lays out: `types.rs`, compound modules and their user
+    /// files, `build.rs`, `src/converters.rs`.
     NeedsFormatter,
     /// The others (some of which may still turn out to need the formatter).
     LaidOut,
@@ -550,12 +549,10 @@ pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
         .iter()
         .map(|c| set(user_path(&c.module), "Behavior", &c.methods))
         .collect();
-    sets.extend(
-        krate
-            .compounds
-            .iter()
-            .map(|c| set(user_path(&c.module), "Parts", &c.parts)),
-    );
+    for c in &krate.compounds {
+        sets.push(set(user_path(&c.module), "Supervisor", &c.methods));
+        sets.push(set(user_path(&c.module), "Parts", &c.parts));
+    }
     if !krate.types.converters.is_empty() {
         sets.push(set(
             PathBuf::from("src/converters.rs"),
@@ -670,13 +667,15 @@ pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Ve
         for (path, text, laid_out) in users {
             push(path, text, FileKind::User, laid_out);
         }
+    }
+    if part.wants(false) {
         for c in &krate.compounds {
-            let template = UserCompound {
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            push(user_path(&c.module), text, FileKind::User, laid_out);
+            push(
+                user_path(&c.module),
+                render(&UserCompound { c }),
+                FileKind::User,
+                false,
+            );
         }
     }
     if !krate.types.converters.is_empty() && part.wants(false) {

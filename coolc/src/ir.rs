@@ -449,7 +449,7 @@ pub struct AnswerArm {
     pub send: String,
 }
 
-/// A compound component's generated module (partial: see `docs/`).
+/// A compound component's generated module.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Compound {
     /// Doc lines.
@@ -458,16 +458,118 @@ pub struct Compound {
     pub type_name: String,
     /// Module name.
     pub module: String,
-    /// Instances: (name, component type name, module of the component if atomic).
+    /// Instances, in declaration order.
     pub instances: Vec<Instance>,
     /// Connections.
     pub connections: Vec<Connection>,
-    /// Whether any connection goes through a converter (the builder is then generic).
+    /// Whether any connection goes through a converter (the builder is then generic
+    /// over the converters).
     pub uses_converters: bool,
     /// Name of the user struct implementing `Parts` in the user file.
     pub user_struct: String,
-    /// The `Parts` methods with their user stubs.
+    /// Name of the user struct implementing `Supervisor` in the user file.
+    pub supervisor_struct: String,
+    /// The `Parts` methods (`supervisor` first, then one per instance) with their
+    /// user stubs.
     pub parts: Vec<Method>,
+    /// The builder calls after the instances and connections, in order (exports,
+    /// mapped variables, policies, redundant groups, substitutes, recovery), each a
+    /// Rust method call starting with `.`.
+    pub steps: Vec<String>,
+    /// The `Mapped` fields: one per mapped controllable variable.
+    pub mapped: Vec<MappedField>,
+    /// `coolbot::InputSpec` expressions of the exported inputs, in order (what the
+    /// builder gives the compound; listed in `SPEC` so that a supervisor's `on` and
+    /// `without` validate).
+    pub input_specs: Vec<String>,
+    /// `coolbot::OutputSpec` expressions of the exported outputs, in order.
+    pub output_specs: Vec<String>,
+    /// The compound's own variables (`Vars`), read through the guard `vars`.
+    pub vars: Vec<Var>,
+    /// Supervisor states (index = state id).
+    pub states: Vec<State>,
+    /// Index of the initial supervisor state.
+    pub initial: usize,
+    /// The `Supervisor` trait methods (one per section), with their user stubs.
+    pub methods: Vec<Method>,
+    /// `section` dispatch arms: `(pattern, call)`.
+    pub section_arms: Vec<(String, String)>,
+    /// Rust expression of the supervisor's `coolbot::TimingSpec`.
+    pub timing: String,
+    /// The `when` rules, in declaration order.
+    pub rules: Vec<Rule>,
+}
+
+impl Instance {
+    /// The unapplied overrides as one line of text (`a`, `b`).
+    pub fn unapplied_text(&self) -> String {
+        let names: Vec<String> = self.unapplied.iter().map(|n| format!("`{n}`")).collect();
+        names.join(", ")
+    }
+}
+
+impl Compound {
+    /// The doc comment as a Rust string literal.
+    pub fn doc_literal(&self) -> String {
+        doc_literal(&self.doc)
+    }
+
+    /// Whether `Vars` derives `Default`.
+    pub fn vars_derive_default(&self) -> bool {
+        let fields: Vec<Field> = self.vars.iter().map(|v| v.field.clone()).collect();
+        derive_default(&fields)
+    }
+
+    /// Whether any own variable is controllable.
+    pub fn has_controllable(&self) -> bool {
+        self.vars.iter().any(Var::controllable)
+    }
+
+    /// Whether any own variable is observable or controllable.
+    pub fn has_exposed(&self) -> bool {
+        self.vars.iter().any(|v| v.spec_index.is_some())
+    }
+
+    /// Whether any rule reads the own variables (the builder then shares them).
+    pub fn rules_use_vars(&self) -> bool {
+        self.rules.iter().any(|r| r.vars_param.is_some())
+    }
+
+    /// Whether the generated code locks the shared variables (`__cool_lock` is
+    /// emitted only then).
+    pub fn locks(&self) -> bool {
+        !self.section_arms.is_empty()
+            || self.has_exposed()
+            || self.has_controllable()
+            || self.rules_use_vars()
+    }
+
+    /// The builder's generic parameters (`<C: ...>` when converters are used).
+    pub fn generics(&self) -> &'static str {
+        if self.uses_converters {
+            "<C: super::types::Converters + 'static>"
+        } else {
+            ""
+        }
+    }
+
+    /// The turbofish passing the converters on (`::<C>`), or nothing.
+    pub fn turbofish(&self) -> &'static str {
+        if self.uses_converters { "::<C>" } else { "" }
+    }
+}
+
+/// A mapped controllable variable's initial value, a field of `Mapped`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MappedField {
+    /// Rust field name.
+    pub name: String,
+    /// The variable's name as written.
+    pub cool_name: String,
+    /// The instance variable it maps (`instance.variable`).
+    pub target: String,
+    /// The instance variable's Rust type (the field is an `Option` of it).
+    pub ty: String,
 }
 
 /// One instance of a compound.
@@ -479,33 +581,26 @@ pub struct Instance {
     pub method: String,
     /// Component type name.
     pub component: String,
-    /// The generated module of the component, when it is atomic.
+    /// The generated module of the component.
     pub module: Option<String>,
-    /// The instance it substitutes, if any (not built at start).
+    /// Whether the component is a compound.
+    pub compound: bool,
+    /// The instance it substitutes, if any.
     pub substitutes: Option<String>,
+    /// The node of `on "node"` (instances run locally for now).
+    pub node: Option<String>,
+    /// Rust expression building its `coolbot::Component` (`?` applies to nested
+    /// compounds); `None` when the component is unknown.
+    pub build: Option<String>,
+    /// Rust expression of its `timing { ... }` override, if any.
+    pub timing: Option<String>,
+    /// Overrides the generated code cannot apply (a nested compound's mapped
+    /// controllable variables), by name.
+    pub unapplied: Vec<String>,
     /// Configuration overrides: `(field, Rust value)`.
     pub config_overrides: Vec<(String, String)>,
     /// Controllable variable overrides: `(field, Rust value)`.
     pub var_overrides: Vec<(String, String)>,
-}
-
-impl Instance {
-    /// Whether `build` adds it to the system: an atomic that substitutes nothing.
-    pub fn built(&self) -> bool {
-        self.module.is_some() && self.substitutes.is_none()
-    }
-
-    /// Whether the instance has overrides.
-    pub fn has_overrides(&self) -> bool {
-        !self.config_overrides.is_empty() || !self.var_overrides.is_empty()
-    }
-}
-
-impl Compound {
-    /// Whether any instance is built.
-    pub fn builds_any(&self) -> bool {
-        self.instances.iter().any(Instance::built)
-    }
 }
 
 /// One `connect` of a compound.
@@ -517,4 +612,29 @@ pub struct Connection {
     pub to: String,
     /// Converter method on `Converters`, if any.
     pub via: Option<String>,
+    /// The converter's name as written, if any.
+    pub converter: Option<String>,
+}
+
+/// One `when condition -> target;` of a supervisor state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rule {
+    /// The supervisor state, as a Rust string literal.
+    pub state: String,
+    /// The target state, as a Rust string literal.
+    pub target: String,
+    /// The `reads` slice expression (`&["ranges.state", "faults"]`).
+    pub reads: String,
+    /// The rule function's name.
+    pub function: String,
+    /// Its `&coolbot::View` parameter name (`view`, or `_` when unused).
+    pub view_param: String,
+    /// Its `&Vars` parameter name, when the rule reads own variables.
+    pub vars_param: Option<String>,
+    /// The condition as a Rust `bool` expression.
+    pub expr: String,
+    /// The test passed to `CompoundBuilder::rule`.
+    pub call: String,
+    /// A line documenting the rule.
+    pub doc: String,
 }

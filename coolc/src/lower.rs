@@ -11,6 +11,8 @@ use crate::ast::{self, ExprKind, Prim, TypeKind};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
+mod compound;
+
 /// What the caller decides about the emitted crate.
 #[derive(Clone, Debug)]
 pub struct Options {
@@ -454,64 +456,9 @@ impl<'a> Lowerer<'a> {
                     config.extend(cfg.fields.iter().map(|f| self.field(f, GEN_TYPES)));
                 }
                 ast::Member::Variable(v) => {
-                    let Some(ty) = &v.ty else { continue };
-                    let default =
-                        if v.value.is_none() && !self.defaultable(ty, &mut BTreeSet::new()) {
-                            // No default and no `Default`: the variable has no value
-                            // until set.
-                            None
-                        } else {
-                            Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
-                        };
-                    let (rust_ty, default_expr) = match default.clone() {
-                        Some(d) => (self.rust_type(ty, GEN_TYPES), d),
-                        None => (
-                            format!("::core::option::Option<{}>", self.rust_type(ty, GEN_TYPES)),
-                            "::core::option::Option::None".to_owned(),
-                        ),
-                    };
-                    let has_default = default.is_some();
-                    let kind = match v.kind {
-                        ast::VarKind::Observable => "Observable",
-                        ast::VarKind::Controllable => "Controllable",
-                        ast::VarKind::Local => "Local",
-                    };
-                    let index = (v.kind != ast::VarKind::Local).then(|| {
-                        spec_index += 1;
-                        spec_index - 1
-                    });
-                    let field = ident::snake(&v.name.name);
-                    let (to_value, from_value) = match &ty.kind {
-                        TypeKind::Prim(p) if has_default => (
-                            if *p == Prim::String {
-                                format!("::coolbot::Value::from(self.vars.{field}.clone())")
-                            } else {
-                                format!("::coolbot::Value::from(self.vars.{field})")
-                            },
-                            format!(
-                                "<{}>::try_from(value).map_err(|error| error.to_string())",
-                                prim_rust(*p)
-                            ),
-                        ),
-                        _ => (
-                            format!("super::__cool_to_value(&self.vars.{field})"),
-                            "super::__cool_from_value(value)".to_owned(),
-                        ),
-                    };
-                    vars.push(ir::Var {
-                        to_value,
-                        from_value,
-                        field: ir::Field {
-                            doc: doc(&v.doc),
-                            name: ident::snake(&v.name.name),
-                            cool_name: v.name.name.clone(),
-                            ty: rust_ty,
-                            default: default_expr,
-                        },
-                        kind: kind.to_owned(),
-                        spec_index: index,
-                        cool_ty: cool_type(ty),
-                    });
+                    if let Some(var) = self.variable(v, &mut spec_index, "self.vars") {
+                        vars.push(var);
+                    }
                 }
                 ast::Member::Input(input) => {
                     if let Some(port) = self.input(input) {
@@ -826,6 +773,74 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// A declared variable (`observable`/`controllable`/`local` with a type) as a
+    /// `Vars` field; `receiver` is the Rust expression holding the `Vars` in the glue
+    /// (`self.vars`). Observable and controllable ones take the next `spec_index`.
+    fn variable(
+        &self,
+        v: &ast::Variable,
+        spec_index: &mut usize,
+        receiver: &str,
+    ) -> Option<ir::Var> {
+        let ty = v.ty.as_ref()?;
+        let default = if v.value.is_none() && !self.defaultable(ty, &mut BTreeSet::new()) {
+            // No default and no `Default`: the variable has no value
+            // until set.
+            None
+        } else {
+            Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
+        };
+        let (rust_ty, default_expr) = match default.clone() {
+            Some(d) => (self.rust_type(ty, GEN_TYPES), d),
+            None => (
+                format!("::core::option::Option<{}>", self.rust_type(ty, GEN_TYPES)),
+                "::core::option::Option::None".to_owned(),
+            ),
+        };
+        let has_default = default.is_some();
+        let kind = match v.kind {
+            ast::VarKind::Observable => "Observable",
+            ast::VarKind::Controllable => "Controllable",
+            ast::VarKind::Local => "Local",
+        };
+        let index = (v.kind != ast::VarKind::Local).then(|| {
+            *spec_index += 1;
+            *spec_index - 1
+        });
+        let field = ident::snake(&v.name.name);
+        let (to_value, from_value) = match &ty.kind {
+            TypeKind::Prim(p) if has_default => (
+                if *p == Prim::String {
+                    format!("::coolbot::Value::from({receiver}.{field}.clone())")
+                } else {
+                    format!("::coolbot::Value::from({receiver}.{field})")
+                },
+                format!(
+                    "<{}>::try_from(value).map_err(|error| error.to_string())",
+                    prim_rust(*p)
+                ),
+            ),
+            _ => (
+                format!("super::__cool_to_value(&{receiver}.{field})"),
+                "super::__cool_from_value(value)".to_owned(),
+            ),
+        };
+        Some(ir::Var {
+            to_value,
+            from_value,
+            field: ir::Field {
+                doc: doc(&v.doc),
+                name: ident::snake(&v.name.name),
+                cool_name: v.name.name.clone(),
+                ty: rust_ty,
+                default: default_expr,
+            },
+            kind: kind.to_owned(),
+            spec_index: index,
+            cool_ty: cool_type(ty),
+        })
+    }
+
     fn timing(&self, timing: Option<&ast::Timing>) -> String {
         let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0i64);
         let mut qualities = Vec::new();
@@ -980,76 +995,17 @@ impl<'a> Lowerer<'a> {
             pull: output.pull.is_some(),
         })
     }
-
-    fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
-        let mut instances = Vec::new();
-        let mut connections = Vec::new();
-        for member in &c.members {
-            match member {
-                ast::Member::Instance(i) => instances.push(ir::Instance {
-                    name: i.name.name.clone(),
-                    method: ident::snake(&i.name.name),
-                    component: i.component.name.clone(),
-                    module: self
-                        .components
-                        .get(i.component.name.as_str())
-                        .filter(|c| c.kind == ast::ComponentKind::Atomic)
-                        .and_then(|c| self.modules.get(c.name.name.as_str()).cloned()),
-                    substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
-                    config_overrides: self.overrides(i, true),
-                    var_overrides: self.overrides(i, false),
-                }),
-                ast::Member::Connect(connect) => {
-                    let end = |p: &ast::PortRef| match &p.instance {
-                        Some(i) => format!("{}.{}", i.name, p.port.name),
-                        None => p.port.name.clone(),
-                    };
-                    connections.push(ir::Connection {
-                        from: end(&connect.from),
-                        to: end(&connect.to),
-                        via: connect.via.as_ref().map(|v| ident::snake(&v.name)),
-                    });
-                }
-                _ => {}
-            }
-        }
-        let parts = instances
-            .iter()
-            .filter(|i| i.built())
-            .filter_map(|i| {
-                let module = i.module.as_ref()?;
-                Some(ir::Method {
-                    name: i.method.clone(),
-                    doc: Vec::new(),
-                    signature: String::new(),
-                    user_signature: format!(
-                        "fn {}(&mut self) -> impl crate::generated::{module}::Behavior",
-                        i.method
-                    ),
-                    stub_body: vec![
-                        format!("// Instance `{}`: the behavior it runs.", i.name),
-                        format!("crate::{module}::{}::default()", ident::camel(&i.component)),
-                    ],
-                })
-            })
-            .collect();
-        ir::Compound {
-            user_struct: format!("{}Parts", ident::camel_raw(&c.name.name)),
-            parts,
-            doc: doc(&c.doc),
-            type_name: c.name.name.clone(),
-            module,
-            uses_converters: connections.iter().any(|c| c.via.is_some()),
-            instances,
-            connections,
-        }
-    }
 }
 
 /// `name`, or `name_2`, `name_3`... when a method of that name exists (a state `on`
 /// with an exit section and an exception `exit` would both want `on_exit`).
 fn unique(name: String, methods: &[ir::Method]) -> String {
-    let taken = |candidate: &str| methods.iter().any(|m| m.name == candidate);
+    unique_among(name, methods.iter().map(|m| m.name.as_str()))
+}
+
+/// `name`, or `name_2`, `name_3`... when `taken` holds it.
+fn unique_among<'t>(name: String, taken: impl Iterator<Item = &'t str> + Clone) -> String {
+    let taken = |candidate: &str| taken.clone().any(|t| t == candidate);
     if !taken(&name) {
         return name;
     }
@@ -1062,12 +1018,10 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
 impl Lowerer<'_> {
     /// An instance's overrides of configuration fields (`config`) or controllable
     /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    /// A compound's own controllable variables count; its mapped ones do not (they
+    /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self
-            .components
-            .get(instance.component.name.as_str())
-            .filter(|c| c.kind == ast::ComponentKind::Atomic)
-        else {
+        let Some(component) = self.components.get(instance.component.name.as_str()) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();

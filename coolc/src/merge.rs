@@ -146,6 +146,54 @@ pub fn merge_stubs(text: &str, set: &StubSet) -> Result<Merged, MergeError> {
     })
 }
 
+/// The `impl <trait_name> for X` block of the freshly generated user file `fresh`,
+/// preceded by the definition of `X` (with its doc and attributes) unless `user`
+/// already has an item named `X`: what a user file written before that block existed
+/// gets appended. `None` when `fresh` has no such block.
+fn missing_block(fresh: &str, trait_name: &str, user: &str) -> Option<String> {
+    use syn::spanned::Spanned;
+    let file = syn::parse_file(fresh).ok()?;
+    let block = file.items.iter().find_map(|item| match item {
+        syn::Item::Impl(block) => {
+            let (_, path, _) = block.trait_.as_ref()?;
+            (path.segments.last()?.ident == trait_name).then_some(block)
+        }
+        _ => None,
+    })?;
+    let syn::Type::Path(self_ty) = block.self_ty.as_ref() else {
+        return None;
+    };
+    let name = self_ty.path.segments.last()?.ident.to_string();
+    let user_has = syn::parse_file(user).is_ok_and(|file| {
+        file.items.iter().any(|item| match item {
+            syn::Item::Struct(s) => s.ident == name,
+            syn::Item::Enum(e) => e.ident == name,
+            syn::Item::Type(t) => t.ident == name,
+            _ => false,
+        })
+    });
+    let definition = file.items.iter().find_map(|item| match item {
+        syn::Item::Struct(s) if s.ident == name && !user_has => Some(s),
+        _ => None,
+    });
+    let start = match definition {
+        Some(s) => s
+            .attrs
+            .first()
+            .map_or_else(|| s.span().start(), |a| a.pound_token.span.start()),
+        None => block
+            .attrs
+            .first()
+            .map_or(block.impl_token.span.start(), |a| {
+                a.pound_token.span.start()
+            }),
+    };
+    let end = block.brace_token.span.close().span().end();
+    let from = byte_offset(fresh, start.line, start.column);
+    let to = byte_offset(fresh, end.line, end.column);
+    (from < to).then(|| fresh[from..to].to_owned())
+}
+
 /// The byte offset of a 1-based line and 0-based character column.
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
     let mut offset = 0;
@@ -199,17 +247,14 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
 }
 
 /// What merging into one user file did.
-enum UserMerge {
+#[derive(Default)]
+struct UserMerge {
     /// The file was missing and has been written.
-    Created,
-    /// Nothing to add.
-    Unchanged,
-    /// Stubs or module declarations were added.
-    Added(Vec<String>),
-    /// Stubs may have been added; methods the description no longer asks for remain.
-    Stale(Vec<String>, Vec<String>),
-    /// The file could not be merged: the warning.
-    Failed(String),
+    created: bool,
+    /// Stubs or module declarations added.
+    added: Vec<String>,
+    /// Warnings: stale methods, a file that could not be merged.
+    warnings: Vec<String>,
 }
 
 /// Writes the user file `file` when it is missing, else merges new stubs (or module
@@ -217,57 +262,83 @@ enum UserMerge {
 fn merge_user_file(
     dir: &Path,
     file: &EmittedFile,
-    sets: &HashMap<&Path, &StubSet>,
+    sets: &HashMap<&Path, Vec<&StubSet>>,
     user_modules: &[String],
 ) -> io::Result<UserMerge> {
     let path = dir.join(&file.path);
+    let mut result = UserMerge::default();
     let text = match fs::read_to_string(&path) {
         Ok(text) => text,
         Err(error) if error.kind() == io::ErrorKind::NotFound => {
             write_if_changed(&path, &file.contents)?;
-            return Ok(UserMerge::Created);
+            result.created = true;
+            return Ok(result);
         }
         Err(error) => return Err(error),
     };
     // Still exactly as coolc would write it today: every stub (or module) is there
     // and none is stale, without parsing it.
     if text == file.contents {
-        return Ok(UserMerge::Unchanged);
+        return Ok(result);
     }
     if file.path == Path::new("src/lib.rs") {
-        return Ok(match merge_modules(&text, user_modules) {
+        match merge_modules(&text, user_modules) {
             Ok((merged, added)) if !added.is_empty() => {
                 fs::write(&path, merged)?;
-                UserMerge::Added(added)
+                result.added = added;
             }
-            Ok(_) => UserMerge::Unchanged,
-            Err(error) => UserMerge::Failed(format!(
+            Ok(_) => {}
+            Err(error) => result.warnings.push(format!(
                 "{} was not updated: {error}; declare these modules yourself: {}",
                 file.path.display(),
                 user_modules.join(", ")
             )),
-        });
-    }
-    let Some(set) = sets.get(file.path.as_path()) else {
-        return Ok(UserMerge::Unchanged);
-    };
-    Ok(match merge_stubs(&text, set) {
-        Ok(merged) => {
-            if !merged.added.is_empty() {
-                fs::write(&path, &merged.text)?;
-            }
-            match (merged.added.is_empty(), merged.stale.is_empty()) {
-                (_, false) => UserMerge::Stale(merged.added, merged.stale),
-                (false, true) => UserMerge::Added(merged.added),
-                (true, true) => UserMerge::Unchanged,
-            }
         }
-        Err(error) => UserMerge::Failed(format!(
-            "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
-            file.path.display(),
-            file.path.display()
-        )),
-    })
+        return Ok(result);
+    }
+    // A compound's file has two blocks (`impl Supervisor`, `impl Parts`): every set
+    // of the file is merged in turn.
+    let mut merged_text = text;
+    for set in sets.get(file.path.as_path()).into_iter().flatten() {
+        match merge_stubs(&merged_text, set) {
+            Ok(merged) => {
+                result.added.extend(merged.added);
+                merged_text = merged.text;
+                if !merged.stale.is_empty() {
+                    result.warnings.push(format!(
+                        "{} has methods the description no longer asks for (kept, remove them when done): {}",
+                        file.path.display(),
+                        merged.stale.join(", ")
+                    ));
+                }
+            }
+            Err(MergeError::NoImpl(_))
+                if let Some(block) =
+                    missing_block(&file.contents, &set.trait_name, &merged_text) =>
+            {
+                // A block the file predates (a compound's `impl Supervisor` from an
+                // older coolc): appended whole.
+                if !merged_text.ends_with('\n') {
+                    merged_text.push('\n');
+                }
+                merged_text.push('\n');
+                merged_text.push_str(&block);
+                merged_text.push('\n');
+                result
+                    .added
+                    .extend(set.stubs.iter().map(|(name, _)| name.clone()));
+            }
+            Err(error) => result.warnings.push(format!(
+                "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
+                file.path.display(),
+                file.path.display()
+            )),
+        }
+    }
+    if !result.added.is_empty() {
+        fs::write(&path, &merged_text)?;
+    }
+    Ok(result)
 }
 
 /// Where the format cache lives inside the crate.
@@ -462,7 +533,10 @@ fn write_files_except(
     done: &HashMap<PathBuf, bool>,
 ) -> io::Result<Report> {
     let mut report = Report::default();
-    let sets: HashMap<&Path, &StubSet> = stub_sets.iter().map(|s| (s.path.as_path(), s)).collect();
+    let mut sets: HashMap<&Path, Vec<&StubSet>> = HashMap::new();
+    for set in stub_sets {
+        sets.entry(set.path.as_path()).or_default().push(set);
+    }
     // Generated files are independent: written (when changed) on every core.
     let generated: Vec<&EmittedFile> = files
         .iter()
@@ -483,22 +557,14 @@ fn write_files_except(
         merge_user_file(dir, file, &sets, user_modules)
     });
     for (file, merged) in users.iter().zip(merged) {
-        match merged? {
-            UserMerge::Created => report.written.push(file.path.clone()),
-            UserMerge::Unchanged => {}
-            UserMerge::Added(added) => report.added.push((file.path.clone(), added)),
-            UserMerge::Stale(added, stale) => {
-                if !added.is_empty() {
-                    report.added.push((file.path.clone(), added));
-                }
-                report.warnings.push(format!(
-                    "{} has methods the description no longer asks for (kept, remove them when done): {}",
-                    file.path.display(),
-                    stale.join(", ")
-                ));
-            }
-            UserMerge::Failed(warning) => report.warnings.push(warning),
+        let merged = merged?;
+        if merged.created {
+            report.written.push(file.path.clone());
         }
+        if !merged.added.is_empty() {
+            report.added.push((file.path.clone(), merged.added));
+        }
+        report.warnings.extend(merged.warnings);
     }
     // Generated files no description asks for any more (a removed component, the
     // build script of a removed `link system`) would linger: remove them, but only

@@ -174,3 +174,133 @@ fn regeneration_keeps_user_code_and_adds_new_stubs() {
     let report = compile(&description, &krate, "lamp");
     assert!(report.written.is_empty(), "{:?}", report.written);
 }
+
+const COMPOUND_V1: &str = "\
+/// A lamp.
+atomic Lamp {
+    observable level: u32 = 0;
+    timing { period 20ms; }
+    automaton { initial off; state off { entry; } }
+}
+
+/// Lamps under a supervisor.
+compound Room {
+    instance main: Lamp;
+    supervisor {
+        initial dark;
+        state dark { entry; when main.level > 3 -> lit; }
+        state lit { }
+    }
+}
+";
+
+/// A supervisor section filled in by hand.
+const MINE: &str = "        let _ = cx.view.state(\"main\"); // mine\n        Ok(())\n";
+
+/// V1 with a new supervisor section, a new state and a new instance.
+fn compound_v2() -> String {
+    COMPOUND_V1
+        .replace("state lit { }", "state lit { exit; periodic 50ms; }")
+        .replace(
+            "    instance main: Lamp;\n",
+            "    instance main: Lamp;\n    instance spare: Lamp substitutes main;\n",
+        )
+}
+
+#[test]
+fn regeneration_adds_supervisor_sections_and_parts_to_compounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("room.cool");
+    let krate = dir.path().join("room");
+
+    write(&description, COMPOUND_V1);
+    compile(&description, &krate, "room");
+    let user_file = krate.join("src/room.rs");
+    let generated = std::fs::read_to_string(&user_file).unwrap();
+    assert!(generated.contains("impl Supervisor for RoomSupervisor"));
+    assert!(generated.contains("fn dark_entry"));
+    assert!(!generated.contains("fn lit_exit"));
+
+    // The user fills in the supervisor's entry section.
+    let start = generated.find("fn dark_entry").unwrap();
+    let open = start + generated[start..].find("{\n").unwrap() + 2;
+    let close = open + generated[open..].find("    }\n").unwrap();
+    let filled = format!("{}{MINE}{}", &generated[..open], &generated[close..]);
+    write(&user_file, &filled);
+
+    write(&description, &compound_v2());
+    let report = compile(&description, &krate, "room");
+    let regenerated = std::fs::read_to_string(&user_file).unwrap();
+    assert!(regenerated.contains(MINE));
+    // Two insertion points (the two impl blocks); everything else is kept.
+    let supervisor_end = regenerated.find("impl Parts for").unwrap();
+    let (supervisor_part, parts_part) = regenerated.split_at(supervisor_end);
+    let (old_supervisor, old_parts) = filled.split_at(filled.find("impl Parts for").unwrap());
+    let inserted = assert_only_inserted(old_supervisor, supervisor_part);
+    assert!(inserted.contains("fn lit_periodic"), "{inserted}");
+    assert!(inserted.contains("fn lit_exit"), "{inserted}");
+    let inserted = assert_only_inserted(old_parts, parts_part);
+    assert!(inserted.contains("fn spare"), "{inserted}");
+    assert_eq!(
+        report.added,
+        [(
+            "src/room.rs".into(),
+            vec![
+                "lit_periodic".to_owned(),
+                "lit_exit".to_owned(),
+                "spare".to_owned()
+            ]
+        )]
+    );
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    cargo(&krate, &["build", "--quiet"]);
+}
+
+#[test]
+fn a_compound_user_file_without_a_supervisor_block_gets_one_appended() {
+    // A user file as the previous coolc wrote it: `impl Parts` only, no supervisor.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("room.cool");
+    let krate = dir.path().join("room");
+    write(&description, COMPOUND_V1);
+    compile(&description, &krate, "room");
+    let user_file = krate.join("src/room.rs");
+    let generated = std::fs::read_to_string(&user_file).unwrap();
+    let struct_start = generated
+        .find("/// What `Room`'s supervisor keeps")
+        .expect("the supervisor struct");
+    let parts_start = generated.find("/// The behaviours").expect("the parts");
+    let supervisor_stub = generated.find("    fn supervisor(&mut self)").unwrap();
+    let stub_end = supervisor_stub + generated[supervisor_stub..].find("    }\n").unwrap() + 6;
+    let old = format!(
+        "{}{}{}\n// A helper of mine.\npub fn mine() -> u32 {{\n    7\n}}\n",
+        &generated[..struct_start],
+        &generated[parts_start..supervisor_stub],
+        &generated[stub_end..].trim_start_matches('\n'),
+    );
+    assert!(!old.contains("Supervisor for"), "{old}");
+    write(&user_file, &old);
+
+    let report = compile(&description, &krate, "room");
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    let regenerated = std::fs::read_to_string(&user_file).unwrap();
+    // The supervisor's struct and block appended at the end; the `supervisor()` stub
+    // inserted into `impl Parts`; nothing else changed.
+    let appended_at = regenerated
+        .rfind("/// What `Room`'s supervisor keeps")
+        .expect("appended");
+    let (head, appended) = regenerated.split_at(appended_at);
+    assert!(appended.contains("pub struct RoomSupervisor"), "{appended}");
+    assert!(
+        appended.contains("impl Supervisor for RoomSupervisor"),
+        "{appended}"
+    );
+    assert!(appended.contains("fn dark_entry"), "{appended}");
+    let head = head
+        .strip_suffix('\n')
+        .expect("a blank line before the block");
+    let inserted = assert_only_inserted(&old, head);
+    assert!(inserted.contains("fn supervisor(&mut self)"), "{inserted}");
+    assert!(!inserted.contains("Supervisor for"), "{inserted}");
+    cargo(&krate, &["build", "--quiet"]);
+}

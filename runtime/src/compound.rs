@@ -12,25 +12,43 @@
 //! compound's state and let the supervisor react to their monitoring events.
 //! `docs/runtime.md` ("Compound components and supervisors") tells the semantics.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::Receiver;
 
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
-use crate::monitor::{Command, Handle, Monitor, MonitorEvent};
+use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
     TickOut, UfifoIn,
 };
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
 use crate::spec::{Spec, VarKind, VarSpec};
-use crate::system::{Component, PortSet, System};
+use crate::system::{Component, ConnectError, PortSet, System};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+/// The period of a supervisor's `periodic;` sections when neither the state nor the
+/// supervisor's `timing` gives one (`docs/language.md`, "The supervisor").
+pub const DEFAULT_SUPERVISION_PERIOD: Duration = Duration::from_millis(100);
+
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The default restart budget ([`CompoundBuilder::restart_budget`]): at most this many
+/// restarts of one instance ...
+pub const DEFAULT_RESTARTS: u32 = 5;
+/// ... within this window; one more failure in the window propagates.
+pub const DEFAULT_RESTART_WINDOW: Duration = Duration::from_secs(10);
+/// The default restart backoff ([`CompoundBuilder::restart_backoff`]): the first
+/// restart in a window is immediate, the second waits this long, each further one
+/// twice as long as the one before ...
+pub const DEFAULT_BACKOFF: Duration = Duration::from_millis(10);
+/// ... up to this.
+pub const DEFAULT_BACKOFF_MAX: Duration = Duration::from_secs(1);
 
 /// What a compound does when one of its instances goes to `running_error`
 /// (`on error inst: <policy>;`).
@@ -40,7 +58,11 @@ pub enum Policy {
     /// it on the compound's monitoring port. The default.
     #[default]
     Propagate,
-    /// The instance is commanded back to `running` (a restart through `start`).
+    /// The instance is commanded back to `running` (a restart through `start`), within
+    /// the compound's restart budget ([`CompoundBuilder::restart_budget`], with a
+    /// backoff: [`CompoundBuilder::restart_backoff`]); a failure beyond the budget
+    /// propagates. An instance stuck in a section that overran `max_response` is
+    /// restarted when the section returns.
     Restart,
     /// The declared substitute takes the instance's place and the instance goes into
     /// the recovery queue (without a substitute: the recovery queue only).
@@ -93,13 +115,18 @@ pub struct SupervisorCx<'a> {
 #[derive(Debug, Clone, Default)]
 pub struct View {
     instances: Vec<Monitor>,
+    /// Each instance's position in `instances`, by name: a rule's lookup costs one
+    /// hash, not a scan of every instance.
+    positions: HashMap<String, usize>,
     own: Vec<(String, Value)>,
 }
 
 impl View {
     /// The monitor of instance `instance`, as last seen.
     pub fn monitor(&self, instance: &str) -> Option<&Monitor> {
-        self.instances.iter().find(|m| m.name == instance)
+        self.positions
+            .get(instance)
+            .and_then(|index| self.instances.get(*index))
     }
 
     /// `instance.state`.
@@ -141,6 +168,24 @@ impl View {
 }
 
 type Test = Box<dyn Fn(&View) -> bool + Send>;
+
+/// How a converted connection is made: `System::connect_via` with the converter's
+/// packet types and function captured.
+type Via = Arc<dyn Fn(&mut System, &str, &str) -> Result<(), ConnectError> + Send + Sync>;
+
+/// A declared connection (`instance.port` ends), through a converter or not.
+#[derive(Clone)]
+struct Link {
+    from: String,
+    to: String,
+    via: Option<Via>,
+}
+
+impl Link {
+    fn ends(&self) -> (&str, &str) {
+        (&self.from, &self.to)
+    }
+}
 
 /// One rule: in supervisor state `state`, when `test` holds, go to `target`.
 struct Rule {
@@ -223,6 +268,41 @@ struct Instance {
     /// Its redundant group.
     group: Option<usize>,
     status: Status,
+    /// When the `restart` policy last restarted it (within the budget's window).
+    restarts: std::collections::VecDeque<Instant>,
+    /// A restart decided but not done yet (backoff, or the instance is stuck).
+    pending: Option<PendingRestart>,
+}
+
+/// A restart the `restart` policy has decided.
+#[derive(Debug, Clone, Copy)]
+struct PendingRestart {
+    /// When the fault was seen.
+    since: Instant,
+    /// Not before then (the backoff).
+    due: Instant,
+}
+
+/// The `restart` policy's limits.
+#[derive(Debug, Clone, Copy)]
+struct Budget {
+    restarts: u32,
+    window: Duration,
+    backoff: Duration,
+    backoff_max: Duration,
+}
+
+impl Budget {
+    /// The backoff before restart number `done + 1` within the window.
+    fn delay(&self, done: usize) -> Duration {
+        if done == 0 {
+            return Duration::ZERO;
+        }
+        let doublings = u32::try_from(done - 1).unwrap_or(u32::MAX).min(30);
+        self.backoff
+            .saturating_mul(1 << doublings)
+            .min(self.backoff_max)
+    }
 }
 
 /// An entry of the recovery queue.
@@ -370,7 +450,7 @@ pub struct CompoundBuilder {
     supervisor: Box<dyn Supervisor>,
     system: System,
     instances: Vec<Instance>,
-    links: Vec<(String, String)>,
+    links: Vec<Link>,
     mapped: Vec<(String, String, VarKind)>,
     policies: Vec<(String, Policy)>,
     substitutes: Vec<(String, String)>,
@@ -378,6 +458,7 @@ pub struct CompoundBuilder {
     rules: Vec<(String, String, Vec<String>, Test)>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     errors: Vec<CompoundError>,
     exports: Vec<Box<dyn Export>>,
     inputs: Vec<InputSpec>,
@@ -407,6 +488,12 @@ impl CompoundBuilder {
             rules: Vec::new(),
             retry_every: Duration::from_millis(500),
             deadline: Duration::from_secs(5),
+            budget: Budget {
+                restarts: DEFAULT_RESTARTS,
+                window: DEFAULT_RESTART_WINDOW,
+                backoff: DEFAULT_BACKOFF,
+                backoff_max: DEFAULT_BACKOFF_MAX,
+            },
             errors: Vec::new(),
             exports: Vec::new(),
             inputs: Vec::new(),
@@ -559,6 +646,8 @@ impl CompoundBuilder {
                 substitute: None,
                 group: None,
                 status: Status::Active,
+                restarts: std::collections::VecDeque::new(),
+                pending: None,
             }),
             Err(error) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
@@ -579,7 +668,38 @@ impl CompoundBuilder {
 
     /// `connect from -> to;` between two instances (`instance.port` addresses).
     pub fn connect(mut self, from: &str, to: &str) -> CompoundBuilder {
-        self.links.push((from.to_owned(), to.to_owned()));
+        self.links.push(Link {
+            from: from.to_owned(),
+            to: to.to_owned(),
+            via: None,
+        });
+        self
+    }
+
+    /// `connect from -> to via converter;` between two instances: output `from`
+    /// (packets of `A`) feeds input `to` (packets of `B`) through `convert`, as
+    /// [`System::connect_via`] does (applied on the producer's thread at each send, or
+    /// on the consumer's thread at each read of a poster). The converter stays on the
+    /// connection when substitution or recovery moves one of its ends to another
+    /// instance; such an input end is reconnected rather than moved, so packets queued
+    /// at the replaced instance's input stay there. The packet types are checked when
+    /// the compound starts (a mismatch takes it to `running_error` with the reason).
+    pub fn connect_via<A: Packet, B: Packet>(
+        mut self,
+        from: &str,
+        to: &str,
+        convert: impl Fn(&A) -> B + Send + Sync + 'static,
+    ) -> CompoundBuilder {
+        let convert = Arc::new(convert);
+        let via: Via = Arc::new(move |system: &mut System, from: &str, to: &str| {
+            let convert = Arc::clone(&convert);
+            system.connect_via::<A, B>(from, to, move |packet: &A| convert(packet))
+        });
+        self.links.push(Link {
+            from: from.to_owned(),
+            to: to.to_owned(),
+            via: Some(via),
+        });
         self
     }
 
@@ -622,6 +742,28 @@ impl CompoundBuilder {
     pub fn recovery(mut self, retry_every: Duration, deadline: Duration) -> CompoundBuilder {
         self.retry_every = retry_every.max(Duration::from_millis(1));
         self.deadline = deadline;
+        self
+    }
+
+    /// The `restart` policy's budget: at most `restarts` restarts of one instance
+    /// within any `window` (defaults [`DEFAULT_RESTARTS`] in
+    /// [`DEFAULT_RESTART_WINDOW`]); a failure beyond that propagates (the compound goes
+    /// to `running_error`, its error saying the budget is spent). `u32::MAX` restarts:
+    /// no limit.
+    pub fn restart_budget(mut self, restarts: u32, window: Duration) -> CompoundBuilder {
+        self.budget.restarts = restarts;
+        self.budget.window = window;
+        self
+    }
+
+    /// The `restart` policy's backoff: within the budget's window the first restart of
+    /// an instance is immediate, the second waits `initial`, each further one twice as
+    /// long as the one before, at most `max` (defaults [`DEFAULT_BACKOFF`],
+    /// [`DEFAULT_BACKOFF_MAX`]; zero: no backoff). The compound's thread does not
+    /// sleep meanwhile: the restart is a timer.
+    pub fn restart_backoff(mut self, initial: Duration, max: Duration) -> CompoundBuilder {
+        self.budget.backoff = initial;
+        self.budget.backoff_max = max.max(initial);
         self
     }
 
@@ -668,21 +810,36 @@ impl CompoundBuilder {
         }
     }
 
+    /// Whether instances `a` and `b` can stand for each other: the same ports (by name,
+    /// with their kind, packet type and pull model; queue sizes may differ) and the
+    /// same observable and controllable variables (by name, with their kind and
+    /// type), in any order. `coolc` checks the same (`coolc::check::interface_mismatch`).
     fn same_interface(&self, a: usize, b: usize) -> Result<(), CompoundError> {
         let (x, y) = (self.instances[a].spec, self.instances[b].spec);
         let inputs = |s: &Spec| {
-            s.inputs
+            let mut ports: Vec<_> = s
+                .inputs
                 .iter()
-                .map(|i| (i.name, format!("{:?}", i.kind), i.packet))
-                .collect::<Vec<_>>()
+                .map(|i| (i.name, std::mem::discriminant(&i.kind), i.packet, i.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
         let outputs = |s: &Spec| {
-            s.outputs
+            let mut ports: Vec<_> = s
+                .outputs
                 .iter()
-                .map(|o| (o.name, format!("{:?}", o.kind), o.packet))
-                .collect::<Vec<_>>()
+                .map(|o| (o.name, o.kind, o.packet, o.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
-        let variables = |s: &Spec| s.variables.iter().map(|v| v.name).collect::<Vec<_>>();
+        let variables = |s: &Spec| {
+            let mut variables: Vec<_> =
+                s.variables.iter().map(|v| (v.name, v.kind, v.ty)).collect();
+            variables.sort_by_key(|v| v.0);
+            variables
+        };
         if inputs(x) != inputs(y) || outputs(x) != outputs(y) || variables(x) != variables(y) {
             return Err(self.arrangement(format!(
                 "`{}` ({}) and `{}` ({}) do not have the same interface (ports, their kinds and packets, variables)",
@@ -698,7 +855,15 @@ impl CompoundBuilder {
         if let Some(error) = self.errors.first() {
             return Err(error.clone());
         }
-        let own = self.supervisor.spec();
+        let mut own = *self.supervisor.spec();
+        let unperiodic = own
+            .states
+            .iter()
+            .any(|state| state.periodic.is_some_and(|p| p.period.is_none()));
+        if unperiodic && own.timing.period.is_none() {
+            own.timing.period = Some(DEFAULT_SUPERVISION_PERIOD);
+        }
+        let own = &own;
         if let Err(detail) = own.validate() {
             return Err(CompoundError::Supervisor {
                 compound: self.name.clone(),
@@ -716,11 +881,12 @@ impl CompoundBuilder {
             let p = self.instance_index(&primary)?;
             if s == p
                 || self.instances[p].substitute.is_some()
+                || self.instances[p].substitutes.is_some()
                 || self.instances[s].substitutes.is_some()
                 || self.instances[s].substitute.is_some()
             {
                 return Err(self.arrangement(format!(
-                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, and a substitute has none of its own"
+                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, a substitute substitutes one instance, and neither end of a substitution is in another"
                 )));
             }
             self.same_interface(p, s)?;
@@ -760,7 +926,8 @@ impl CompoundBuilder {
             group_members.push(indices);
         }
         // Connections: resolve the instances; the system checks the rest when wiring.
-        for (from, to) in &self.links {
+        for link in &self.links {
+            let (from, to) = link.ends();
             for address in [from, to] {
                 let Some((instance, _)) = address.split_once('.') else {
                     return Err(CompoundError::Connect {
@@ -823,6 +990,15 @@ impl CompoundBuilder {
                 test,
             });
         }
+        let mut by_read: HashMap<String, Vec<usize>> = HashMap::new();
+        for (index, rule) in rules.iter().enumerate() {
+            for read in &rule.reads {
+                let readers = by_read.entry(read.clone()).or_default();
+                if readers.last() != Some(&index) {
+                    readers.push(index);
+                }
+            }
+        }
         let mut spec = *own;
         spec.variables = Box::leak(variables.into_boxed_slice());
         spec.inputs = Box::leak(std::mem::take(&mut self.inputs).into_boxed_slice());
@@ -831,6 +1007,12 @@ impl CompoundBuilder {
         let spec: &'static Spec = Box::leak(Box::new(spec));
         let view = View {
             instances: self.instances.iter().map(|i| i.handle.snapshot()).collect(),
+            positions: self
+                .instances
+                .iter()
+                .enumerate()
+                .map(|(index, i)| (i.name.clone(), index))
+                .collect(),
             own: own
                 .variables
                 .iter()
@@ -849,15 +1031,20 @@ impl CompoundBuilder {
             wired: Vec::new(),
             mapped,
             supervisor: self.supervisor,
+            by_read,
             rules,
             events: Vec::new(),
             view,
             evaluated_in: None,
+            fresh: false,
+            sectioned: false,
             queue: Vec::new(),
             retry_every: self.retry_every,
             deadline: self.deadline,
+            budget: self.budget,
             started: false,
             exports: self.exports,
+            steps: Vec::new(),
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports))
     }
@@ -895,23 +1082,37 @@ struct Compound {
     instances: Vec<Instance>,
     groups: Vec<Vec<usize>>,
     /// Declared connections.
-    links: Vec<(String, String)>,
+    links: Vec<Link>,
     /// The connections made now (declared ones with each instance routed to whoever
-    /// stands for it).
-    wired: Vec<(String, String)>,
+    /// stands for it, with their converters).
+    wired: Vec<Link>,
     mapped: Vec<Mapped>,
     supervisor: Box<dyn Supervisor>,
     rules: Vec<Rule>,
-    /// Monitoring events of each instance (subscribed at the first start).
-    events: Vec<Receiver<MonitorEvent>>,
+    /// Monitoring events of each instance (subscribed at the first start), with a
+    /// flag its publisher sets before ringing the compound: a turn looks only at the
+    /// instances that have news.
+    events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
+    /// The rules reading each variable (`inst.field` or an own variable), by index.
+    by_read: HashMap<String, Vec<usize>>,
     view: View,
     /// The supervisor state whose rules were last evaluated.
     evaluated_in: Option<usize>,
+    /// A rule moved the supervisor to another state: the thread takes one more turn at
+    /// once to evaluate the new state's rules (nothing else may wake it).
+    fresh: bool,
+    /// A supervisor section ran since the last turn: it may have changed variables the
+    /// runtime cannot see (`local` ones, or any state of a hand-written supervisor), so
+    /// the next turn, taken at once, evaluates every rule of the current state.
+    sectioned: bool,
     queue: Vec<Recovering>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     started: bool,
     exports: Vec<Box<dyn Export>>,
+    /// Supervision steps taken since the last call returned (published by the runner).
+    steps: Vec<Supervision>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -921,6 +1122,18 @@ fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
 }
 
 impl Compound {
+    /// Record a supervision step about instance `index` for the monitoring port.
+    fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
+        let detail = detail.into();
+        let instance = self.instances[index].name.clone();
+        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
+        self.steps.push(Supervision {
+            instance,
+            step,
+            detail,
+        });
+    }
+
     fn fault(&self, message: String) -> Fault {
         tracing::warn!(compound = %self.name, "{message}");
         Fault::message(message)
@@ -959,53 +1172,63 @@ impl Compound {
     /// Make the connections match the arrangement: each declared connection between
     /// the instances standing for its ends now. Removed first, then added.
     fn rewire(&mut self) -> Result<(), Fault> {
-        let mut wanted: Vec<(String, String)> = Vec::new();
-        for (from, to) in &self.links {
-            let link = (self.routed(from), self.routed(to));
-            if !wanted.contains(&link) {
-                wanted.push(link);
+        let mut wanted: Vec<Link> = Vec::new();
+        for link in &self.links {
+            let routed = Link {
+                from: self.routed(&link.from),
+                to: self.routed(&link.to),
+                via: link.via.clone(),
+            };
+            if !wanted.iter().any(|w| w.ends() == routed.ends()) {
+                wanted.push(routed);
             }
         }
         let Some(system) = self.system.as_mut() else {
             return Ok(());
         };
-        let error = |e: crate::system::ConnectError| {
-            Fault::message(format!("compound `{}`: {e}", self.name))
-        };
-        let mut removed: Vec<_> = self
+        let error = |e: ConnectError| Fault::message(format!("compound `{}`: {e}", self.name));
+        let mut removed: Vec<Link> = self
             .wired
             .iter()
-            .filter(|link| !wanted.contains(link))
+            .filter(|link| !wanted.iter().any(|w| w.ends() == link.ends()))
             .cloned()
             .collect();
-        let mut added: Vec<_> = wanted
+        let mut added: Vec<Link> = wanted
             .iter()
-            .filter(|link| !self.wired.contains(link))
+            .filter(|link| !self.wired.iter().any(|w| w.ends() == link.ends()))
             .cloned()
             .collect();
         // An input end moving from one instance to its stand-in (same producer, same
-        // port): moved in one step with the packets queued there.
+        // port, no converter): moved in one step with the packets queued there. A
+        // converted connection is disconnected and connected again, converter and all.
         let port = |address: &str| address.split_once('.').map(|(_, p)| p.to_owned());
         let mut index = 0;
         while index < removed.len() {
-            let (from, old_to) = removed[index].clone();
-            match added
-                .iter()
-                .position(|(f, new_to)| *f == from && port(new_to) == port(&old_to))
-            {
+            let old = removed[index].clone();
+            let moved = old.via.is_none().then(|| {
+                added.iter().position(|new| {
+                    new.via.is_none() && new.from == old.from && port(&new.to) == port(&old.to)
+                })
+            });
+            match moved.flatten() {
                 Some(position) => {
-                    let (_, new_to) = added.remove(position);
-                    system.move_input(&from, &old_to, &new_to).map_err(error)?;
+                    let new = added.remove(position);
+                    system
+                        .move_input(&old.from, &old.to, &new.to)
+                        .map_err(error)?;
                     removed.remove(index);
                 }
                 None => index += 1,
             }
         }
-        for (from, to) in &removed {
-            system.disconnect(from, to).map_err(error)?;
+        for link in &removed {
+            system.disconnect(&link.from, &link.to).map_err(error)?;
         }
-        for (from, to) in &added {
-            system.connect(from, to).map_err(error)?;
+        for link in &added {
+            match &link.via {
+                Some(via) => via(system, &link.from, &link.to).map_err(error)?,
+                None => system.connect(&link.from, &link.to).map_err(error)?,
+            }
         }
         self.wired = wanted;
         for index in 0..self.exports.len() {
@@ -1041,7 +1264,15 @@ impl Compound {
                 self.events = self
                     .instances
                     .iter()
-                    .map(|i| i.handle.subscribe_waking(waker.clone()))
+                    .map(|i| {
+                        // Set: look at whatever came before the subscription too.
+                        let flag = Arc::new(AtomicBool::new(true));
+                        let events = i
+                            .handle
+                            .shared
+                            .subscribe_flagged(waker.clone(), Arc::clone(&flag));
+                        (events, flag)
+                    })
                     .collect();
             }
             if let Some(system) = self.system.as_mut() {
@@ -1054,8 +1285,16 @@ impl Compound {
         self.queue.clear();
         for index in 0..self.instances.len() {
             let instance = &mut self.instances[index];
+            instance.pending = None;
+            instance.restarts.clear();
             if instance.status == Status::Destroyed {
                 continue;
+            }
+            if instance.handle.is_stuck() {
+                return Err(Fault::message(format!(
+                    "instance `{}` cannot restart: it is stuck in a section that overran its max_response",
+                    instance.name
+                )));
             }
             instance.status = if instance.substitutes.is_some() {
                 Status::Standby
@@ -1145,13 +1384,27 @@ impl Compound {
         let monitor = self.view.instances[index].clone();
         let name = self.instances[index].name.clone();
         let error = monitor.error.clone().unwrap_or_default();
-        if self.instances[index].group.is_some() {
+        self.step(index, Step::Failed, error.clone());
+        if let Some(group) = self.instances[index].group {
             // A redundant member: the next live member takes the group's connections.
             self.enqueue(index);
             if !self.covered(index) {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "no member of its redundant group is left",
+                );
                 return Err(self.fault(format!(
                     "every member of the redundant group of `{name}` failed; last: {error}"
                 )));
+            }
+            let standing = self.groups[group]
+                .iter()
+                .copied()
+                .find(|m| self.instances[*m].status == Status::Active);
+            if let Some(member) = standing {
+                let by = self.instances[member].name.clone();
+                self.step(index, Step::Substituted { by }, "");
             }
             return self.rewire();
         }
@@ -1163,28 +1416,124 @@ impl Compound {
         };
         match policy {
             Policy::Ignore => {
-                tracing::warn!(compound = %self.name, "instance `{name}` failed (ignored): {error}");
+                self.step(index, Step::Ignored, "");
                 Ok(())
             }
-            Policy::Propagate => Err(self.fault(format!("instance `{name}` failed: {error}"))),
+            Policy::Propagate => {
+                self.step(index, Step::Propagated, "");
+                Err(self.fault(format!("instance `{name}` failed: {error}")))
+            }
             Policy::Restart if monitor.state == State::RunningError => {
-                command(&self.instances[index].handle, Controllable::Running)
+                self.schedule_restart(index, &error)
             }
             Policy::Restart => {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "it cannot restart from starting_error",
+                );
                 Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
             }
             Policy::Substitute => {
                 self.enqueue(index);
+                self.step(index, Step::Enqueued, "");
                 if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Standby
                 {
                     self.instances[substitute].status = Status::Active;
                     self.rewire()?;
                     command(&self.instances[substitute].handle, Controllable::Running)?;
+                    let by = self.instances[substitute].name.clone();
+                    self.step(index, Step::Substituted { by }, "");
                 }
                 Ok(())
             }
         }
+    }
+
+    /// The `restart` policy for instance `index`, which failed with `error`: a restart
+    /// now or after the backoff, or the fault propagates once the budget is spent.
+    fn schedule_restart(&mut self, index: usize, error: &str) -> Result<(), Fault> {
+        let now = Instant::now();
+        let budget = self.budget;
+        let instance = &mut self.instances[index];
+        if instance.pending.is_some() {
+            return Ok(()); // Already decided (another event of the same fault).
+        }
+        while instance
+            .restarts
+            .front()
+            .is_some_and(|t| now.saturating_duration_since(*t) >= budget.window)
+        {
+            instance.restarts.pop_front();
+        }
+        let done = instance.restarts.len();
+        if u32::try_from(done).unwrap_or(u32::MAX) >= budget.restarts {
+            let name = instance.name.clone();
+            self.step(
+                index,
+                Step::Propagated,
+                format!(
+                    "restart budget spent: {done} restart(s) within {:?}",
+                    budget.window
+                ),
+            );
+            return Err(self.fault(format!(
+                "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
+                budget.window
+            )));
+        }
+        instance.pending = Some(PendingRestart {
+            since: now,
+            due: crate::thread::later(now, budget.delay(done)),
+        });
+        self.restarts_due(now)
+    }
+
+    /// Do the decided restarts that are due; propagate a stuck instance's fault once
+    /// it has been stuck for the recovery deadline.
+    fn restarts_due(&mut self, now: Instant) -> Result<(), Fault> {
+        for index in 0..self.instances.len() {
+            let Some(pending) = self.instances[index].pending else {
+                continue;
+            };
+            let instance = &self.instances[index];
+            if instance.handle.is_stuck() {
+                if now >= crate::thread::later(pending.since, self.deadline) {
+                    let name = instance.name.clone();
+                    self.instances[index].pending = None;
+                    self.step(
+                        index,
+                        Step::Propagated,
+                        "stuck in a section that overran its max_response",
+                    );
+                    return Err(self.fault(format!(
+                        "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            if now < pending.due {
+                continue;
+            }
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            if instance.handle.state() != State::RunningError {
+                continue; // Someone else brought it back meanwhile.
+            }
+            instance.restarts.push_back(now);
+            let handle = instance.handle.clone();
+            let waited = now.saturating_duration_since(pending.since);
+            let detail = if waited.is_zero() {
+                String::new()
+            } else {
+                format!("after {waited:?}")
+            };
+            self.step(index, Step::Restarted, detail);
+            command(&handle, Controllable::Running)?;
+        }
+        Ok(())
     }
 
     /// The recovery queue's due work: restart, recognize recoveries, destroy at the
@@ -1212,18 +1561,30 @@ impl Compound {
                 } else {
                     self.rewire()?;
                 }
-                tracing::info!(compound = %self.name, "instance `{}` recovered", self.instances[index].name);
+                self.step(index, Step::Recovered, "");
                 continue;
             }
             if now >= crate::thread::later(entry.since, self.deadline) {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                if let Err(fault) = command(&self.instances[index].handle, Controllable::Dead) {
+                let handle = &self.instances[index].handle;
+                if handle.is_stuck() {
+                    // Its thread takes the command when (if) the section returns.
+                    if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
+                        tracing::warn!(compound = %self.name, "{rejected}");
+                    }
+                } else if let Err(fault) = command(handle, Controllable::Dead) {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
                 self.refresh(index);
+                self.step(
+                    index,
+                    Step::Retired,
+                    format!("not recovered within {:?}", self.deadline),
+                );
                 if !self.covered(index) {
+                    self.step(index, Step::Propagated, "nothing stands for it");
                     return Err(self.fault(format!(
                         "instance `{name}` did not recover within {:?} and nothing stands for it",
                         self.deadline
@@ -1231,9 +1592,14 @@ impl Compound {
                 }
                 continue;
             }
-            // Due for a retry: restart it, on probation until the next retry.
-            let restarted = command(&self.instances[index].handle, Controllable::Running).is_ok()
+            // Due for a retry: restart it, on probation until the next retry (not while
+            // it is stuck in an overrun section: a command would wait for it).
+            let restarted = !self.instances[index].handle.is_stuck()
+                && command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
+            if restarted {
+                self.step(index, Step::Retried, "");
+            }
             let entry = &mut self.queue[position];
             entry.probation = restarted;
             entry.next = crate::thread::later(now, self.retry_every);
@@ -1246,8 +1612,14 @@ impl Compound {
     fn take_events(&mut self) -> Result<HashSet<String>, Fault> {
         let mut changed = HashSet::new();
         for index in 0..self.events.len() {
+            // Cleared before the channel is read: an event sent after the read sets it
+            // again (it is set before the ring).
+            let flag = &self.events[index].1;
+            if !flag.load(Ordering::Acquire) || !flag.swap(false, Ordering::AcqRel) {
+                continue;
+            }
             let mut seen = false;
-            while let Ok(event) = self.events[index].try_recv() {
+            while let Ok(event) = self.events[index].0.try_recv() {
                 seen = true;
                 let name = &self.instances[index].name;
                 let key = match event {
@@ -1295,6 +1667,7 @@ impl Automaton for Compound {
     }
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        self.sectioned = true;
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,
@@ -1372,39 +1745,99 @@ impl Automaton for Compound {
         true
     }
 
-    fn supervise(&mut self, state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        let outcome = self.supervise_turn(state);
+        cx.supervision.append(&mut self.steps);
+        outcome
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
+            })
+        });
+        let fresh = (self.fresh || self.sectioned).then(Instant::now);
+        queue.chain(restarts).chain(fresh).min()
+    }
+}
+
+impl Compound {
+    /// One supervision turn: exports, instance events and policies, the recovery
+    /// queue, then the rules of supervisor state `state`.
+    fn supervise_turn(&mut self, state: usize) -> Result<Option<usize>, Fault> {
         for export in &mut self.exports {
             export.forward();
         }
+        self.fresh = false;
         let mut changed = self.take_events()?;
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;
         }
+        if self.instances.iter().any(|i| i.pending.is_some()) {
+            self.restarts_due(Instant::now())?;
+        }
         self.refresh_own(&mut changed);
         let entered = self.evaluated_in != Some(state);
-        if !entered && changed.is_empty() {
+        // After a supervisor section every rule of the state is evaluated: the section
+        // may have changed what no `reads` names (its `local` variables).
+        let sectioned = std::mem::take(&mut self.sectioned);
+        if !entered && !sectioned && changed.is_empty() {
             return Ok(None);
         }
         self.evaluated_in = Some(state);
         let view = &self.view;
-        let fired = self
-            .rules
-            .iter()
-            .filter(|rule| rule.state == state)
-            .filter(|rule| entered || rule.reads.iter().any(|read| changed.contains(read)))
-            .find(|rule| (rule.test)(view))
-            .map(|rule| rule.target);
+        let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
+        let fired = if entered || sectioned {
+            self.rules.iter().find(holds).map(|rule| rule.target)
+        } else {
+            // Only the rules reading a changed variable, in declaration order.
+            let mut candidates: Vec<usize> = changed
+                .iter()
+                .filter_map(|read| self.by_read.get(read))
+                .flatten()
+                .copied()
+                .collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            candidates
+                .into_iter()
+                .map(|index| &self.rules[index])
+                .find(holds)
+                .map(|rule| rule.target)
+        };
+        self.fresh = fired.is_some_and(|target| target != state);
         Ok(fired)
     }
+}
 
-    fn wake_at(&self) -> Option<Instant> {
-        self.queue
-            .iter()
-            .map(|entry| {
-                entry
-                    .next
-                    .min(crate::thread::later(entry.since, self.deadline))
-            })
-            .min()
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backoff_doubles_from_the_second_restart_up_to_its_maximum() {
+        let budget = Budget {
+            restarts: 10,
+            window: Duration::from_secs(10),
+            backoff: Duration::from_millis(10),
+            backoff_max: Duration::from_millis(50),
+        };
+        let delays: Vec<_> = (0..6).map(|done| budget.delay(done)).collect();
+        assert_eq!(
+            delays,
+            [0, 10, 20, 40, 50, 50].map(Duration::from_millis).to_vec()
+        );
+        // No overflow however many restarts were done.
+        assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
     }
 }

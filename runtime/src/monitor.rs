@@ -39,7 +39,8 @@ pub enum Command {
     SetPeriod(Duration),
     /// The longest a section may run (`max_response`).
     SetMaxResponse(Duration),
-    /// The priority (`priority`; recorded and published, not applied to the OS thread).
+    /// The priority (`priority`): applied to the component's OS thread at once (see
+    /// [`OsPriority`]; a refusal by the OS does not reject the command).
     SetPriority(i32),
     /// The quality level: an index into the timing block's qualities (0 = best).
     SetQuality(usize),
@@ -105,8 +106,79 @@ pub struct Monitor {
     pub max_response: Option<Duration>,
     /// The priority.
     pub priority: i32,
+    /// How `priority` is applied to the component's OS thread.
+    pub os_priority: OsPriority,
     /// Monitoring events dropped because an observer's channel was full.
     pub dropped_events: u64,
+    /// Compound components only: the last [`SUPERVISION_HISTORY`] steps the supervisor
+    /// took about its instances (failures, substitutions, restarts, recoveries), oldest
+    /// first. Empty for atomic components.
+    pub supervision: Vec<Supervision>,
+    /// Compound components only: how many supervision steps were taken in all.
+    pub supervision_steps: u64,
+}
+
+/// How many supervision steps [`Monitor::supervision`] keeps.
+pub const SUPERVISION_HISTORY: usize = 32;
+
+/// One step a compound's supervisor took about one of its instances, published on the
+/// compound's monitoring port ([`MonitorEvent::Supervision`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Supervision {
+    /// The instance concerned (a local instance name of the compound).
+    pub instance: String,
+    /// What happened.
+    pub step: Step,
+    /// The instance's error or the reason, when there is one.
+    pub detail: String,
+}
+
+impl std::fmt::Display for Supervision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let instance = &self.instance;
+        match &self.step {
+            Step::Failed => write!(f, "{instance} failed")?,
+            Step::Ignored => write!(f, "{instance} failed; ignored")?,
+            Step::Propagated => write!(f, "{instance} failed; propagated")?,
+            Step::Restarted => write!(f, "{instance} restarted")?,
+            Step::Substituted { by } => write!(f, "{instance} substituted by {by}")?,
+            Step::Enqueued => write!(f, "{instance} entered the recovery queue")?,
+            Step::Retried => write!(f, "{instance} retried")?,
+            Step::Recovered => write!(f, "{instance} recovered")?,
+            Step::Retired => write!(f, "{instance} retired (recovery deadline)")?,
+        }
+        if !self.detail.is_empty() {
+            write!(f, ": {}", self.detail)?;
+        }
+        Ok(())
+    }
+}
+
+/// What a supervisor did (see [`Supervision`] and `docs/runtime.md`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Step {
+    /// The instance went to `running_error` or `starting_error`.
+    Failed,
+    /// Its policy is `ignore`: it stays failed.
+    Ignored,
+    /// Its policy is `propagate` (or nothing could stand for it): the compound fails.
+    Propagated,
+    /// Its policy is `restart`: it was commanded back to `running`.
+    Restarted,
+    /// Its substitute took its place (connections moved to `by`).
+    Substituted {
+        /// The substitute (or, in a redundant group, the member now standing).
+        by: String,
+    },
+    /// It went into the recovery queue.
+    Enqueued,
+    /// The recovery queue restarted it (it is on probation until the next retry).
+    Retried,
+    /// It recovered and took its place back (the arrangement before the fault).
+    Recovered,
+    /// Its recovery deadline expired: it was destroyed (`dead`).
+    Retired,
 }
 
 /// One change on the monitoring port.
@@ -161,6 +233,30 @@ pub enum MonitorEvent {
     Quality(usize),
     /// The configuration changed (through the control port).
     Configured,
+    /// Compound components: the supervisor took a step about an instance.
+    Supervision(Supervision),
+    /// `priority` was applied to the component's thread, or could not be.
+    OsPriority(OsPriority),
+}
+
+/// How a component's `priority` is applied to its OS thread (`docs/runtime.md`,
+/// "Priority"). Applying can fail (no `CAP_SYS_NICE` in a container): the component
+/// runs on regardless, and this says what holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OsPriority {
+    /// Nothing applied: the thread has not started, or the priority is 0 and the thread
+    /// keeps the scheduling it was created with.
+    Inherited,
+    /// Real-time round-robin scheduling (Linux `SCHED_RR`) at this static priority
+    /// (1 to 99).
+    RoundRobin(i32),
+    /// Normal time-sharing scheduling at this nice value (-20, highest, to 19): a
+    /// negative priority, a priority of 0 restored, or a positive priority when
+    /// real-time scheduling was refused.
+    Nice(i32),
+    /// The OS refused, or the platform is not supported: why. The thread keeps its
+    /// previous scheduling.
+    NotApplied(String),
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -172,10 +268,14 @@ pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
     /// Doorbells rung after every event (compound supervisors watching this component).
-    wakers: Mutex<Vec<crate::automaton::Waker>>,
+    /// With, for each, a flag set before it is rung (which subscription has news).
+    wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// Whether the component's thread is inside a section the max_response watchdog
+    /// tripped (it has not returned yet).
+    pub(crate) stuck: AtomicBool,
     /// The component's thread, once spawned.
     pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
@@ -189,6 +289,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
         }
     }
@@ -235,7 +336,10 @@ impl Shared {
         });
         drop(observers);
         if ring {
-            for waker in lock(&self.wakers).iter() {
+            for (waker, flag) in lock(&self.wakers).iter() {
+                if let Some(flag) = flag {
+                    flag.store(true, Ordering::Release);
+                }
                 waker.wake();
             }
         }
@@ -260,7 +364,18 @@ impl Shared {
         waker: crate::automaton::Waker,
     ) -> Receiver<MonitorEvent> {
         let receiver = self.subscribe();
-        lock(&self.wakers).push(waker);
+        lock(&self.wakers).push((waker, None));
+        receiver
+    }
+
+    /// [`Shared::subscribe_waking`], also setting `flag` before each ring.
+    pub(crate) fn subscribe_flagged(
+        &self,
+        waker: crate::automaton::Waker,
+        flag: Arc<AtomicBool>,
+    ) -> Receiver<MonitorEvent> {
+        let receiver = self.subscribe();
+        lock(&self.wakers).push((waker, Some(flag)));
         receiver
     }
 
@@ -479,6 +594,13 @@ impl Handle {
     /// The default automaton state now.
     pub fn state(&self) -> State {
         self.shared.state()
+    }
+
+    /// Whether the component's thread is inside a section that overran its
+    /// `max_response` and has not returned yet (the watchdog moved the component to
+    /// `running_error`; commands wait until the section returns).
+    pub fn is_stuck(&self) -> bool {
+        self.shared.stuck.load(Ordering::Acquire)
     }
 
     /// A new observer: every change from now on, as it happens.

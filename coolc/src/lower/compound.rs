@@ -1,0 +1,1731 @@
+//! Lowering of compound components: the supervisor (states, sections, own variables),
+//! the instances and everything the runtime's `coolbot::CompoundBuilder` is told
+//! (connections, exports, mapped variables, policies, substitutes, redundant groups,
+//! recovery) and the `when` rules, compiled to typed Rust over `coolbot::View`.
+//!
+//! Like the rest of lowering, this never fails: the checker has accepted the
+//! description, and anything it would have rejected lowers to something harmless
+//! (an unknown type reads as a missing value, which makes a comparison `false`).
+
+use std::collections::BTreeSet;
+
+use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique_among};
+use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
+use crate::check::model::{DEFAULT_STATES, RESULTS};
+use crate::ident;
+use crate::ir;
+
+/// The supervisor state of a compound that declares none.
+const IMPLICIT_STATE: &str = "supervising";
+
+/// The `coolbot::TaskResult` pattern a `result` symbol (`check::model::RESULTS`)
+/// stands for.
+fn result_pattern(symbol: &str) -> Option<&'static str> {
+    match symbol {
+        "none" => Some("::coolbot::TaskResult::None"),
+        "success" => Some("::coolbot::TaskResult::Success(_)"),
+        "fail" => Some("::coolbot::TaskResult::Fail(_)"),
+        _ => None,
+    }
+}
+
+/// The type of a rule operand, as the generated Rust holds it.
+#[derive(Clone, Debug, PartialEq)]
+enum RTy {
+    Bool,
+    /// Held as `i128` (every `.cool` integer widens to it).
+    Int,
+    /// Held as `f64`.
+    Float,
+    /// Held as `&str`.
+    Str,
+    Duration,
+    Time,
+    /// An enum, by its Rust path.
+    Enum(String),
+    /// `T?`: held as `Option<T>` (a string as `Option<&str>`).
+    Optional(Box<RTy>),
+    /// A default automaton state (`coolbot::State`).
+    State,
+    /// A user state of an instance (`&str`), with the states it has.
+    UserState(Vec<String>),
+    /// `&coolbot::TaskResult`.
+    Result,
+    /// A quality level (`usize`), with the levels.
+    Quality(Vec<String>),
+    /// `none`.
+    NoneLit,
+    /// A bare name to resolve against the other side of a comparison.
+    Symbol(String),
+    /// Nothing the generated code can read (a packet, a list, an error the checker
+    /// reported): comparisons with it are `false`.
+    Unreadable,
+}
+
+/// A rule operand: Rust text and its type.
+#[derive(Clone, Debug)]
+struct Operand {
+    code: String,
+    ty: RTy,
+    /// `code` is an `Option` of the value (a read from the view that may be
+    /// missing); `false` when `code` is the value itself.
+    maybe: bool,
+}
+
+/// A compound's scope for rules and exports.
+struct Scope<'a, 'b> {
+    lowerer: &'b Lowerer<'a>,
+    component: &'a ast::Component,
+    /// The rule's supervisor state (own `user_state` is known statically).
+    state: String,
+    reads: Vec<String>,
+    uses_view: bool,
+    uses_vars: bool,
+}
+
+impl<'a> Lowerer<'a> {
+    /// The instance `name` of `component`.
+    fn instance_of(component: &'a ast::Component, name: &str) -> Option<&'a ast::Instance> {
+        component.members.iter().find_map(|m| match m {
+            ast::Member::Instance(i) if i.name.name == name => Some(i),
+            _ => None,
+        })
+    }
+
+    fn component_of(&self, instance: &ast::Instance) -> Option<&'a ast::Component> {
+        self.components
+            .get(instance.component.name.as_str())
+            .copied()
+    }
+
+    /// The input or output (`input`) port `port` of `component`, followed through
+    /// the exports of nested compounds to the atomic port that implements it.
+    fn leaf_port(
+        &self,
+        component: &'a ast::Component,
+        port: &str,
+        input: bool,
+        depth: usize,
+    ) -> Option<LeafPort<'a>> {
+        if depth > 64 {
+            return None;
+        }
+        for member in &component.members {
+            match member {
+                ast::Member::Input(i) if input && i.name.name == port => {
+                    return match &i.def {
+                        ast::InputDef::Export(target) => {
+                            self.exported_port(component, target, true, depth)
+                        }
+                        _ => Some(LeafPort::Input(i)),
+                    };
+                }
+                ast::Member::Output(o) if !input && o.name.name == port => {
+                    return match &o.def {
+                        ast::OutputDef::Export(target) => {
+                            self.exported_port(component, target, false, depth)
+                        }
+                        _ => Some(LeafPort::Output(o)),
+                    };
+                }
+                _ => {}
+            }
+        }
+        None
+    }
+
+    /// The atomic port an export of `component` names.
+    fn exported_port(
+        &self,
+        component: &'a ast::Component,
+        target: &ast::PortRef,
+        input: bool,
+        depth: usize,
+    ) -> Option<LeafPort<'a>> {
+        let instance = Self::instance_of(component, &target.instance.as_ref()?.name)?;
+        let inner = self.component_of(instance)?;
+        self.leaf_port(inner, &target.port.name, input, depth + 1)
+    }
+
+    /// The packet type of the port an export names: `Some(None)` for a tick port,
+    /// `None` when it does not resolve.
+    fn export_type(
+        &self,
+        component: &'a ast::Component,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<Option<&'a ast::Type>> {
+        Some(match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => match &i.def {
+                ast::InputDef::Fifo { ty, .. }
+                | ast::InputDef::Ufifo { ty, .. }
+                | ast::InputDef::Last(ty)
+                | ast::InputDef::Poster(ty) => Some(ty),
+                ast::InputDef::Tick | ast::InputDef::Export(_) => None,
+            },
+            LeafPort::Output(o) => match &o.def {
+                ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(ty),
+                ast::OutputDef::Tick | ast::OutputDef::Export(_) => None,
+            },
+        })
+    }
+
+    /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
+    /// atomic port's, under the compound's name for it.
+    fn export_spec(
+        &self,
+        component: &'a ast::Component,
+        name: &str,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<String> {
+        let port = match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => self.input(i),
+            LeafPort::Output(o) => self.output(o),
+        }?;
+        let kind = if input { "InputSpec" } else { "OutputSpec" };
+        Some(format!(
+            "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
+            ident::string_literal(name),
+            port.kind,
+            ident::string_literal(&port.packet),
+            port.pull
+        ))
+    }
+
+    /// The declared type of variable `name` of `component` (through mapped variables
+    /// of nested compounds), and whether it is observable (or controllable).
+    fn variable_type(
+        &self,
+        component: &'a ast::Component,
+        name: &str,
+        depth: usize,
+    ) -> Option<(&'a ast::Type, ast::VarKind)> {
+        if depth > 64 {
+            return None;
+        }
+        let variable = component.members.iter().find_map(|m| match m {
+            ast::Member::Variable(v) if v.name.name == name => Some(v),
+            _ => None,
+        })?;
+        match (&variable.ty, &variable.value) {
+            (Some(ty), _) => Some((ty, variable.kind)),
+            (None, Some(value)) => {
+                let ExprKind::Path(segments) = &value.kind else {
+                    return None;
+                };
+                let [instance, inner_var] = segments.as_slice() else {
+                    return None;
+                };
+                let instance = Self::instance_of(component, &instance.name)?;
+                let inner = self.component_of(instance)?;
+                self.variable_type(inner, &inner_var.name, depth + 1)
+                    .map(|(ty, _)| (ty, variable.kind))
+            }
+            (None, None) => None,
+        }
+    }
+
+    /// The user states and quality levels of `component` (a compound's supervisor
+    /// states are its user states).
+    fn states_and_qualities(component: &ast::Component) -> (Vec<String>, Vec<String>) {
+        let mut states = Vec::new();
+        let mut qualities = Vec::new();
+        for member in &component.members {
+            match member {
+                ast::Member::Automaton(a) if states.is_empty() => {
+                    states = a.states.iter().map(|s| s.name.name.clone()).collect();
+                }
+                ast::Member::Timing(t) => {
+                    for entry in &t.entries {
+                        if let ast::TimingEntry::Quality(names, _) = entry {
+                            qualities = names.iter().map(|n| n.name.clone()).collect();
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        (states, qualities)
+    }
+
+    /// The rule type of a declared `.cool` type.
+    fn rule_type(&self, ty: &ast::Type) -> RTy {
+        match &ty.kind {
+            TypeKind::Prim(p) => match p {
+                Prim::Bool => RTy::Bool,
+                Prim::F32 | Prim::F64 => RTy::Float,
+                Prim::String => RTy::Str,
+                Prim::Time => RTy::Time,
+                Prim::Duration => RTy::Duration,
+                _ => RTy::Int,
+            },
+            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+                Some(super::TypeDef::Enum(_)) => {
+                    RTy::Enum(format!("{GEN_TYPES}{}", ident::camel(&name.name)))
+                }
+                _ => RTy::Unreadable,
+            },
+            TypeKind::Optional(inner) => match self.rule_type(inner) {
+                RTy::Unreadable => RTy::Unreadable,
+                RTy::Optional(inner) => RTy::Optional(inner),
+                inner => RTy::Optional(Box::new(inner)),
+            },
+            TypeKind::List(_) | TypeKind::Array(..) => RTy::Unreadable,
+        }
+    }
+
+    /// Lowers compound `c` into the IR of its generated module.
+    pub(super) fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
+        let mut instances = Vec::new();
+        let mut connections = Vec::new();
+        let mut steps = Vec::new();
+        let mut vars = Vec::new();
+        let mut automaton = None;
+        let mut timing = None;
+        let mut recovery = None;
+        let mut uses_converters = false;
+        let mut input_specs = Vec::new();
+        let mut output_specs = Vec::new();
+        // `Parts` method names: `supervisor`, then one per instance.
+        let mut part_names: Vec<String> = vec!["supervisor".to_owned()];
+        let mut spec_index = 0;
+        let mapped_controllables = Self::mapped_controllables(c);
+        for member in &c.members {
+            match member {
+                ast::Member::Instance(i) => {
+                    let method = unique_among(
+                        ident::snake(&i.name.name),
+                        part_names.iter().map(String::as_str),
+                    );
+                    part_names.push(method.clone());
+                    instances.push(self.instance(i, method, &mapped_controllables));
+                }
+                ast::Member::Connect(connect) => {
+                    let end = |p: &ast::PortRef| match &p.instance {
+                        Some(i) => format!("{}.{}", i.name, p.port.name),
+                        None => p.port.name.clone(),
+                    };
+                    let via = connect.via.as_ref().map(|v| ident::snake(&v.name));
+                    uses_converters |= via.is_some();
+                    connections.push(ir::Connection {
+                        from: end(&connect.from),
+                        to: end(&connect.to),
+                        via,
+                        converter: connect.via.as_ref().map(|v| v.name.clone()),
+                    });
+                }
+                ast::Member::Input(input) => {
+                    if let ast::InputDef::Export(target) = &input.def {
+                        let address = port_address(target);
+                        let name = ident::string_literal(&input.name.name);
+                        let target_lit = ident::string_literal(&address);
+                        let step = match self.export_type(c, target, true) {
+                            Some(None) => format!(".export_tick_input({name}, {target_lit})"),
+                            Some(Some(ty)) => format!(
+                                ".export_input::<{}>({name}, {target_lit})",
+                                self.rust_type(ty, GEN_TYPES)
+                            ),
+                            None => format!(".export_input::<()>({name}, {target_lit})"),
+                        };
+                        steps.push(step);
+                        input_specs.extend(self.export_spec(c, &input.name.name, target, true));
+                    }
+                }
+                ast::Member::Output(output) => {
+                    if let ast::OutputDef::Export(target) = &output.def {
+                        output_specs.extend(self.export_spec(c, &output.name.name, target, false));
+                        let ty = match self.export_type(c, target, false) {
+                            Some(Some(ty)) => self.rust_type(ty, GEN_TYPES),
+                            _ => "()".to_owned(),
+                        };
+                        steps.push(format!(
+                            ".export_output::<{ty}>({}, {})",
+                            ident::string_literal(&output.name.name),
+                            ident::string_literal(&port_address(target))
+                        ));
+                    }
+                }
+                ast::Member::Variable(v) => match (&v.ty, &v.value) {
+                    (None, Some(value)) => {
+                        if let ExprKind::Path(segments) = &value.kind {
+                            let target: Vec<&str> =
+                                segments.iter().map(|s| s.name.as_str()).collect();
+                            let call = match v.kind {
+                                ast::VarKind::Controllable => "map_controllable",
+                                _ => "map_observable",
+                            };
+                            steps.push(format!(
+                                ".{call}({}, {})",
+                                ident::string_literal(&v.name.name),
+                                ident::string_literal(&target.join("."))
+                            ));
+                        }
+                    }
+                    (Some(_), _) => {
+                        if let Some(var) = self.variable(v, &mut spec_index, "vars") {
+                            vars.push(var);
+                        }
+                    }
+                    (None, None) => {}
+                },
+                ast::Member::OnError(on) => {
+                    let policy = match on.policy.name.as_str() {
+                        "restart" => "Restart",
+                        "substitute" => "Substitute",
+                        "ignore" => "Ignore",
+                        _ => "Propagate",
+                    };
+                    steps.push(format!(
+                        ".on_error({}, ::coolbot::Policy::{policy})",
+                        ident::string_literal(&on.instance.name)
+                    ));
+                }
+                ast::Member::Redundant(r) => {
+                    let members: Vec<String> = r
+                        .members
+                        .iter()
+                        .map(|m| ident::string_literal(&m.name))
+                        .collect();
+                    steps.push(format!(".redundant(&[{}])", members.join(", ")));
+                }
+                ast::Member::Recovery(r) => {
+                    recovery.get_or_insert(r);
+                }
+                ast::Member::Automaton(a) => {
+                    automaton.get_or_insert(a);
+                }
+                ast::Member::Timing(t) => {
+                    timing.get_or_insert(t);
+                }
+                _ => {}
+            }
+        }
+        // Substitutes after every instance (a substitute may be declared before the
+        // instance it stands for).
+        for i in &instances {
+            if let Some(primary) = &i.substitutes {
+                steps.push(format!(
+                    ".substitute({}, {})",
+                    ident::string_literal(&i.name),
+                    ident::string_literal(primary)
+                ));
+            }
+        }
+        if let Some(r) = recovery {
+            let ns =
+                |e: Option<&ast::Expr>, default: u64| e.and_then(duration_ns).unwrap_or(default);
+            steps.push(format!(
+                ".recovery({}, {})",
+                duration_rust(ns(r.retry_every.as_ref(), 500_000_000)),
+                duration_rust(ns(r.deadline.as_ref(), 5_000_000_000))
+            ));
+        }
+
+        let supervisor = self.supervisor(c, automaton);
+        let mut rules = Vec::new();
+        for (state, condition, target) in &supervisor.when {
+            let mut scope = Scope {
+                lowerer: self,
+                component: c,
+                state: state.clone(),
+                reads: Vec::new(),
+                uses_view: false,
+                uses_vars: false,
+            };
+            let expr = scope.boolean(condition);
+            let function = format!("__cool_rule_{}", rules.len());
+            let reads: Vec<String> = scope
+                .reads
+                .iter()
+                .map(|r| ident::string_literal(r))
+                .collect();
+            let call = match (scope.uses_view, scope.uses_vars) {
+                (_, true) => format!(
+                    "{{ let vars = ::std::sync::Arc::clone(&vars); move |view: &::coolbot::View| {function}(view, &__cool_lock(&vars)) }}"
+                ),
+                (_, false) => function.clone(),
+            };
+            rules.push(ir::Rule {
+                state: ident::string_literal(state),
+                target: ident::string_literal(target),
+                reads: format!("&[{}]", reads.join(", ")),
+                view_param: if scope.uses_view { "view" } else { "_" }.to_owned(),
+                vars_param: if scope.uses_vars {
+                    Some("vars".to_owned())
+                } else {
+                    None
+                },
+                function,
+                expr,
+                call,
+                doc: format!(
+                    "`when {}` in state `{state}` -> `{target}`",
+                    show(condition)
+                ),
+            });
+        }
+
+        let name = ident::camel_raw(&c.name.name);
+        let parts = instances
+            .iter()
+            .map(|i| self.part_stub(i))
+            .collect::<Vec<_>>();
+        let mut all_parts = vec![ir::Method {
+            name: "supervisor".to_owned(),
+            doc: Vec::new(),
+            signature: String::new(),
+            user_signature: "fn supervisor(&mut self) -> impl Supervisor".to_owned(),
+            stub_body: vec![
+                "// The supervisor: its sections are the `impl Supervisor` above.".to_owned(),
+                format!("{name}Supervisor::default()"),
+            ],
+        }];
+        all_parts.extend(parts);
+        ir::Compound {
+            doc: doc(&c.doc),
+            type_name: c.name.name.clone(),
+            module,
+            user_struct: format!("{name}Parts"),
+            supervisor_struct: format!("{name}Supervisor"),
+            parts: all_parts,
+            uses_converters,
+            instances,
+            connections,
+            steps,
+            mapped: self.mapped_fields(c),
+            input_specs,
+            output_specs,
+            vars,
+            states: supervisor.states,
+            initial: supervisor.initial,
+            methods: supervisor.methods,
+            section_arms: supervisor.section_arms,
+            timing: self.timing(timing),
+            rules,
+        }
+    }
+
+    /// The mapped controllable variables of compound `c`: `(name, instance,
+    /// variable)`, in declaration order.
+    fn mapped_controllables(c: &'a ast::Component) -> Vec<(&'a str, &'a str, &'a str)> {
+        c.members
+            .iter()
+            .filter_map(|m| match m {
+                ast::Member::Variable(v)
+                    if v.ty.is_none() && v.kind == ast::VarKind::Controllable =>
+                {
+                    match &v.value.as_ref()?.kind {
+                        ExprKind::Path(segments) => match segments.as_slice() {
+                            [instance, variable] => Some((
+                                v.name.name.as_str(),
+                                instance.name.as_str(),
+                                variable.name.as_str(),
+                            )),
+                            _ => None,
+                        },
+                        _ => None,
+                    }
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The `Mapped` fields of compound `c`: one per mapped controllable variable,
+    /// typed like the instance variable it names.
+    fn mapped_fields(&self, c: &'a ast::Component) -> Vec<ir::MappedField> {
+        Self::mapped_controllables(c)
+            .into_iter()
+            .map(|(name, instance, variable)| {
+                let ty = Self::instance_of(c, instance)
+                    .and_then(|i| self.component_of(i))
+                    .and_then(|t| self.variable_type(t, variable, 0))
+                    .map(|(ty, _)| {
+                        let rust = self.rust_type(ty, GEN_TYPES);
+                        if self.defaultable(ty, &mut BTreeSet::new()) {
+                            rust
+                        } else {
+                            // Its `Vars` field has no default: an `Option` itself.
+                            format!("::core::option::Option<{rust}>")
+                        }
+                    })
+                    .unwrap_or_else(|| "()".to_owned());
+                ir::MappedField {
+                    name: ident::snake(name),
+                    cool_name: name.to_owned(),
+                    target: format!("{instance}.{variable}"),
+                    ty,
+                }
+            })
+            .collect()
+    }
+
+    /// One instance: how the builder makes its component. `mapped` are the mapped
+    /// controllable variables of the enclosing compound (their initial values,
+    /// given to `builder_with`, go to the instance).
+    fn instance(
+        &self,
+        i: &'a ast::Instance,
+        method: String,
+        mapped: &[(&str, &str, &str)],
+    ) -> ir::Instance {
+        let target = self.component_of(i);
+        let module = target.and_then(|t| self.modules.get(t.name.name.as_str()).cloned());
+        let compound = target.is_some_and(|t| t.kind == ast::ComponentKind::Compound);
+        let name = ident::string_literal(&i.name.name);
+        let config_overrides = self.overrides(i, true);
+        let var_overrides = self.overrides(i, false);
+        // The enclosing compound's mapped controllables that name this instance:
+        // `(instance variable, field of the enclosing `Mapped`)`.
+        let from_mapped: Vec<(String, String)> = mapped
+            .iter()
+            .filter(|(_, instance, _)| *instance == i.name.name)
+            .map(|(name, _, variable)| (ident::snake(variable), ident::snake(name)))
+            .collect();
+        // A nested compound's own mapped controllables, overridden here or fed from
+        // the enclosing `Mapped`.
+        let inner_mapped: Vec<(&str, &str, &str)> = match target {
+            Some(t) if compound => Self::mapped_controllables(t),
+            _ => Vec::new(),
+        };
+        let is_inner_mapped = |field: &str| {
+            inner_mapped
+                .iter()
+                .any(|(n, _, _)| ident::snake(n) == field)
+        };
+        let mut mapped_overrides: Vec<(String, String)> = Vec::new();
+        if let Some(t) = target.filter(|_| compound) {
+            for o in &i.overrides {
+                let field = ident::snake(&o.name.name);
+                if !is_inner_mapped(&field) {
+                    continue;
+                }
+                if let Some((ty, _)) = self.variable_type(t, &o.name.name, 0) {
+                    let value = self.value(&o.value, Some(ty), GEN_TYPES);
+                    let value = if self.defaultable(ty, &mut BTreeSet::new()) {
+                        value
+                    } else {
+                        format!("::core::option::Option::Some({value})")
+                    };
+                    mapped_overrides.push((field, value));
+                }
+            }
+        }
+        let component = module.as_ref().map(|module| {
+            let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
+            let vars_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| !is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let mapped_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let config = fields(
+                module,
+                "Config",
+                &config_overrides,
+                &[],
+                config_fields,
+                false,
+            );
+            let vars = fields(
+                module,
+                "Vars",
+                &var_overrides,
+                &vars_from_mapped,
+                var_fields,
+                false,
+            );
+            let nested = fields(
+                module,
+                "Mapped",
+                &mapped_overrides,
+                &mapped_from_mapped,
+                inner_mapped.len(),
+                true,
+            );
+            let plain = config_overrides.is_empty()
+                && var_overrides.is_empty()
+                && from_mapped.is_empty()
+                && mapped_overrides.is_empty();
+            match (compound, plain) {
+                (true, true) => format!("super::{module}::component({name}, parts.{method}())?"),
+                (true, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {vars}, {nested})?"
+                ),
+                (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
+                (false, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {config}, {vars})"
+                ),
+            }
+        });
+        let var_overrides: Vec<(String, String)> =
+            var_overrides.into_iter().chain(mapped_overrides).collect();
+        let applied: BTreeSet<&str> = config_overrides
+            .iter()
+            .chain(&var_overrides)
+            .map(|(field, _)| field.as_str())
+            .collect();
+        let unapplied: Vec<String> = i
+            .overrides
+            .iter()
+            .filter(|o| !applied.contains(ident::snake(&o.name.name).as_str()))
+            .map(|o| o.name.name.clone())
+            .collect();
+        let timing = match (&module, &i.timing) {
+            (Some(module), Some(t)) => {
+                Some(self.timing_override(t, &format!("super::{module}::SPEC.timing")))
+            }
+            _ => None,
+        };
+        let component = match (component, &timing) {
+            (Some(build), Some(timing)) => Some(format!("{build}.with_timing({timing})")),
+            (build, _) => build,
+        };
+        ir::Instance {
+            name: i.name.name.clone(),
+            method,
+            component: i.component.name.clone(),
+            module,
+            compound,
+            substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
+            node: i.node.as_ref().map(|n| n.value.clone()),
+            build: component,
+            timing,
+            unapplied,
+            config_overrides,
+            var_overrides,
+        }
+    }
+
+    /// An instance's `timing { ... }`: the entries it names replace those of the
+    /// component's block (`base`), the others are kept.
+    fn timing_override(&self, timing: &ast::Timing, base: &str) -> String {
+        let mut fields = Vec::new();
+        let option = |ns: Option<u64>| match ns {
+            Some(ns) => format!("::core::option::Option::Some({})", duration_rust(ns)),
+            None => "::core::option::Option::None".to_owned(),
+        };
+        for entry in &timing.entries {
+            match entry {
+                ast::TimingEntry::Period(interval) => {
+                    fields.push(("period", option(duration_ns(&interval.lo))));
+                    fields.push((
+                        "max_period",
+                        option(interval.hi.as_ref().and_then(duration_ns)),
+                    ));
+                }
+                ast::TimingEntry::MaxResponse(e) => {
+                    fields.push(("max_response", option(duration_ns(e))));
+                }
+                ast::TimingEntry::Priority(e) => {
+                    let priority = super::int_value(e)
+                        .unwrap_or(0)
+                        .clamp(i32::MIN.into(), i32::MAX.into());
+                    fields.push(("priority", priority.to_string()));
+                }
+                ast::TimingEntry::Quality(names, _) => {
+                    let names: Vec<String> = names
+                        .iter()
+                        .map(|n| ident::string_literal(&n.name))
+                        .collect();
+                    fields.push(("qualities", format!("&[{}]", names.join(", "))));
+                }
+            }
+        }
+        // A later entry of the same kind wins, as in a component's block.
+        let mut text = String::from("::coolbot::TimingSpec { ");
+        let mut named = Vec::new();
+        for (index, (field, value)) in fields.iter().enumerate() {
+            if fields[index + 1..].iter().any(|(f, _)| f == field) {
+                continue;
+            }
+            named.push(*field);
+            text.push_str(&format!("{field}: {value}, "));
+        }
+        if named.len() < 5 {
+            text.push_str(&format!("..{base}"));
+        }
+        text.push_str(" }");
+        text
+    }
+
+    /// The `Parts` method of an instance, with its user stub.
+    fn part_stub(&self, i: &ir::Instance) -> ir::Method {
+        let module = i.module.clone().unwrap_or_else(|| "types".to_owned());
+        let (returns, body) = if i.compound {
+            (
+                format!("impl crate::generated::{module}::Parts"),
+                format!(
+                    "crate::{module}::{}Parts::default()",
+                    ident::camel_raw(&i.component)
+                ),
+            )
+        } else {
+            (
+                format!("impl crate::generated::{module}::Behavior"),
+                format!("crate::{module}::{}::default()", ident::camel(&i.component)),
+            )
+        };
+        ir::Method {
+            name: i.method.clone(),
+            doc: Vec::new(),
+            signature: String::new(),
+            user_signature: format!("fn {}(&mut self) -> {returns}", i.method),
+            stub_body: vec![
+                format!(
+                    "// Instance `{}`: the {} it runs.",
+                    i.name,
+                    if i.compound { "parts" } else { "behavior" }
+                ),
+                body,
+            ],
+        }
+    }
+}
+
+/// An atomic port an export leads to.
+enum LeafPort<'a> {
+    Input(&'a ast::Input),
+    Output(&'a ast::Output),
+}
+
+/// The lowered supervisor automaton.
+struct Supervisor {
+    states: Vec<ir::State>,
+    initial: usize,
+    methods: Vec<ir::Method>,
+    section_arms: Vec<(String, String)>,
+    /// `(state, condition, target)` of every `when`, in order.
+    when: Vec<(String, ast::Expr, String)>,
+}
+
+impl Lowerer<'_> {
+    fn supervisor(&self, c: &ast::Component, automaton: Option<&ast::Automaton>) -> Supervisor {
+        let states_ast: Vec<&ast::State> = automaton
+            .map(|a| a.states.iter().collect())
+            .unwrap_or_default();
+        let state_index = |name: &str| {
+            states_ast
+                .iter()
+                .position(|s| s.name.name == name)
+                .unwrap_or(0)
+        };
+        let input_index = |name: &str| {
+            c.members
+                .iter()
+                .filter(|m| matches!(m, ast::Member::Input(_)))
+                .position(|m| matches!(m, ast::Member::Input(i) if i.name.name == name))
+                .unwrap_or(0)
+        };
+        let initial = automaton
+            .and_then(|a| a.initial.first())
+            .map(|i| state_index(&i.name))
+            .unwrap_or(0);
+        let mut states = Vec::new();
+        let mut methods = Vec::new();
+        let mut section_arms = Vec::new();
+        let mut when = Vec::new();
+        for (index, state) in states_ast.iter().enumerate() {
+            let name = &state.name.name;
+            let (mut entry, mut exit, mut periodic) = (false, false, None);
+            let (mut on, mut after) = (Vec::new(), Vec::new());
+            for member in &state.members {
+                match member {
+                    ast::StateMember::Entry(_) => entry = true,
+                    ast::StateMember::Exit(_) => exit = true,
+                    ast::StateMember::Periodic { period, .. } => {
+                        periodic = Some(format!(
+                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
+                            super::option_duration(period.as_ref())
+                        ));
+                    }
+                    ast::StateMember::On { port, target, .. } => on.push(format!(
+                        "::coolbot::OnSpec {{ port: {}, target: {} }}",
+                        input_index(&port.name),
+                        state_index(&target.name)
+                    )),
+                    ast::StateMember::After {
+                        delay,
+                        without,
+                        target,
+                        ..
+                    } => after.push(format!(
+                        "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
+                        duration_rust(duration_ns(delay).unwrap_or_default()),
+                        match without {
+                            Some(port) => format!("Some({})", input_index(&port.name)),
+                            None => "None".to_owned(),
+                        },
+                        state_index(&target.name)
+                    )),
+                    ast::StateMember::When {
+                        condition, target, ..
+                    } => when.push((name.clone(), condition.clone(), target.name.clone())),
+                    ast::StateMember::May { .. } => {}
+                }
+            }
+            let sections = [
+                (
+                    entry,
+                    "entry",
+                    "Entry",
+                    "runs once each time the supervisor enters the state",
+                ),
+                (
+                    periodic.is_some(),
+                    "periodic",
+                    "Periodic",
+                    "runs once per period while in the state",
+                ),
+                (
+                    exit,
+                    "exit",
+                    "Exit",
+                    "runs once each time the supervisor leaves the state",
+                ),
+            ];
+            for (present, suffix, section, when_text) in sections {
+                if !present {
+                    continue;
+                }
+                let method = ident::method("", name, &format!("_{suffix}"));
+                methods.push(ir::Method {
+                    name: method.clone(),
+                    doc: vec![format!(
+                        "The {suffix} section of supervisor state `{name}`: {when_text}."
+                    )],
+                    signature: format!(
+                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
+                    ),
+                    user_signature: format!(
+                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
+                    ),
+                    stub_body: vec![
+                        format!("// Supervisor state `{name}`, {suffix} section: {when_text}."),
+                        "let _ = cx;".to_owned(),
+                        "Ok(())".to_owned(),
+                    ],
+                });
+                section_arms.push((
+                    format!("({index}, ::coolbot::Section::{section})"),
+                    format!("supervisor.{method}(&mut cx)"),
+                ));
+            }
+            let spec = format!(
+                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[] }}",
+                ident::string_literal(name),
+                periodic.unwrap_or_else(|| "None".to_owned()),
+                on.join(", "),
+                after.join(", "),
+            );
+            states.push(ir::State {
+                doc: doc(&state.doc),
+                cool_name: name.clone(),
+                variant: ident::camel(name),
+                may_enum: None,
+                may: Vec::new(),
+                spec,
+            });
+        }
+        if states.is_empty() {
+            // No `supervisor { ... }`: one state without sections, so the compound
+            // has a user automaton like every component.
+            states.push(ir::State {
+                doc: vec!["The only state of a compound without a `supervisor` block.".to_owned()],
+                cool_name: IMPLICIT_STATE.to_owned(),
+                variant: ident::camel(IMPLICIT_STATE),
+                may_enum: None,
+                may: Vec::new(),
+                spec: format!(
+                    "::coolbot::StateSpec {{ name: {}, entry: false, exit: false, periodic: None, on: &[], after: &[], may: &[] }}",
+                    ident::string_literal(IMPLICIT_STATE)
+                ),
+            });
+        }
+        Supervisor {
+            states,
+            initial,
+            methods,
+            section_arms,
+            when,
+        }
+    }
+}
+
+/// A struct expression `super::<module>::<kind> { ... }` setting `overrides`
+/// (`(field, value)`) and fields fed from the enclosing compound's `Mapped`
+/// (`(field, Mapped field)`), the others from `Default` (no struct update when every
+/// one of the `all` fields is named: clippy's `needless_update`). `optional`: the
+/// fields are `Option`s (a `Mapped`), so a given value wins over the written one
+/// with `or`, not `unwrap_or`.
+fn fields(
+    module: &str,
+    kind: &str,
+    overrides: &[(String, String)],
+    from_mapped: &[(String, String)],
+    all: usize,
+    optional: bool,
+) -> String {
+    let path = format!("super::{module}::{kind}");
+    let mut named: Vec<&str> = Vec::new();
+    for (field, _) in overrides.iter().chain(from_mapped) {
+        if !named.contains(&field.as_str()) {
+            named.push(field);
+        }
+    }
+    if named.is_empty() {
+        return format!("{path}::default()");
+    }
+    let mut entries = Vec::new();
+    for field in &named {
+        let written = overrides.iter().find(|(f, _)| f == field).map(|(_, v)| {
+            if optional {
+                format!("::core::option::Option::Some({v})")
+            } else {
+                v.clone()
+            }
+        });
+        let given: Vec<String> = from_mapped
+            .iter()
+            .filter(|(f, _)| f == field)
+            .map(|(_, m)| format!("mapped.{m}"))
+            .collect();
+        let value = match (given.split_first(), written.as_ref()) {
+            (None, Some(written)) => written.clone(),
+            (None, None) => format!("{path}::default().{field}"),
+            (Some((first, rest)), written) => {
+                let mut chain = first.clone();
+                for other in rest {
+                    chain.push_str(&format!(".or({other})"));
+                }
+                match (optional, written) {
+                    (true, Some(written)) => format!("{chain}.or({written})"),
+                    (true, None) => chain,
+                    (false, Some(written)) => format!("{chain}.unwrap_or({written})"),
+                    (false, None) => {
+                        format!("{chain}.unwrap_or_else(|| {path}::default().{field})")
+                    }
+                }
+            }
+        };
+        entries.push(format!("{field}: {value}"));
+    }
+    if named.len() < all {
+        entries.push(format!("..{path}::default()"));
+    }
+    format!("{path} {{ {} }}", entries.join(", "))
+}
+
+/// How many fields an atomic component's `Config` and `Vars` have.
+fn field_counts(component: &ast::Component) -> (usize, usize) {
+    let mut config = 0;
+    let mut vars = 0;
+    for member in &component.members {
+        match member {
+            ast::Member::Configuration(c) => config += c.fields.len(),
+            ast::Member::Variable(v) if v.ty.is_some() => vars += 1,
+            _ => {}
+        }
+    }
+    (config, vars)
+}
+
+fn port_address(target: &ast::PortRef) -> String {
+    match &target.instance {
+        Some(i) => format!("{}.{}", i.name, target.port.name),
+        None => target.port.name.clone(),
+    }
+}
+
+/// A rule condition as written (for the generated documentation).
+fn show(expr: &ast::Expr) -> String {
+    match &expr.kind {
+        ExprKind::Int(n) => n.to_string(),
+        ExprKind::Float(x) => format!("{x:?}"),
+        ExprKind::Str(s) => format!("{s:?}"),
+        ExprKind::Bool(b) => b.to_string(),
+        ExprKind::Duration(ns) => match *ns {
+            ns if ns > 0 && ns % 60_000_000_000 == 0 => format!("{}min", ns / 60_000_000_000),
+            ns if ns > 0 && ns % 1_000_000_000 == 0 => format!("{}s", ns / 1_000_000_000),
+            ns if ns > 0 && ns % 1_000_000 == 0 => format!("{}ms", ns / 1_000_000),
+            ns if ns > 0 && ns % 1_000 == 0 => format!("{}us", ns / 1_000),
+            ns => format!("{ns}ns"),
+        },
+        ExprKind::Frequency(hz) => format!("{hz}Hz"),
+        ExprKind::Path(parts) => parts
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect::<Vec<_>>()
+            .join("."),
+        ExprKind::EnumValue { enum_name, variant } => {
+            format!("{}::{}", enum_name.name, variant.name)
+        }
+        ExprKind::List(items) => format!(
+            "[{}]",
+            items.iter().map(show).collect::<Vec<_>>().join(", ")
+        ),
+        ExprKind::Repeat(item, n) => format!("[{}; {}]", show(item), n.value),
+        ExprKind::None => "none".to_owned(),
+        ExprKind::Unary(UnaryOp::Not, inner) => format!("!{}", show_operand(inner)),
+        ExprKind::Unary(UnaryOp::Neg, inner) => format!("-{}", show_operand(inner)),
+        ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
+            let side = |e: &ast::Expr| {
+                if needs_parens(*op, e) {
+                    format!("({})", show(e))
+                } else {
+                    show(e)
+                }
+            };
+            format!("{} {} {}", side(l), op.as_str(), side(r))
+        }
+        ExprKind::Binary(op, l, r) => {
+            format!("{} {} {}", show_operand(l), op.as_str(), show_operand(r))
+        }
+    }
+}
+
+fn show_operand(expr: &ast::Expr) -> String {
+    match &expr.kind {
+        ExprKind::Binary(..) => format!("({})", show(expr)),
+        _ => show(expr),
+    }
+}
+
+/// Whether `operand` of logical operator `op` needs parentheses: an `||` inside an
+/// `&&` (comparisons and `&&` bind tighter than `||`, comparisons tighter than
+/// `&&`).
+fn needs_parens(op: BinaryOp, operand: &ast::Expr) -> bool {
+    op == BinaryOp::And && matches!(operand.kind, ExprKind::Binary(BinaryOp::Or, ..))
+}
+
+impl Scope<'_, '_> {
+    fn read(&mut self, name: String) {
+        if !self.reads.contains(&name) {
+            self.reads.push(name);
+        }
+    }
+
+    /// A boolean Rust expression for `expr` (a missing or unreadable value makes the
+    /// comparison that reads it `false`).
+    fn boolean(&mut self, expr: &ast::Expr) -> String {
+        match &expr.kind {
+            ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
+                let (l, r) = (self.logic_operand(*op, l), self.logic_operand(*op, r));
+                format!("{l} {} {r}", op.as_str())
+            }
+            ExprKind::Binary(op, l, r) => self.comparison(*op, l, r),
+            ExprKind::Unary(UnaryOp::Not, inner) => {
+                let text = self.boolean(inner);
+                match &inner.kind {
+                    ExprKind::Binary(..) => format!("!({text})"),
+                    _ => format!("!{text}"),
+                }
+            }
+            _ => {
+                let operand = self.operand(expr);
+                match (operand.ty, operand.maybe) {
+                    (RTy::Bool, false) => operand.code,
+                    (RTy::Bool, true) => format!("{}.unwrap_or(false)", operand.code),
+                    _ => "false".to_owned(),
+                }
+            }
+        }
+    }
+
+    /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
+    /// would read it otherwise (an `||` inside an `&&`).
+    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr) -> String {
+        let text = self.boolean(expr);
+        if needs_parens(op, expr) {
+            format!("({text})")
+        } else {
+            text
+        }
+    }
+
+    /// An operand of a comparison (or a bare boolean).
+    fn operand(&mut self, expr: &ast::Expr) -> Operand {
+        let known = |code: String, ty: RTy| Operand {
+            code,
+            ty,
+            maybe: false,
+        };
+        match &expr.kind {
+            ExprKind::Int(n) => known(n.to_string(), RTy::Int),
+            ExprKind::Float(x) => known(format!("{x:?}"), RTy::Float),
+            ExprKind::Str(s) => known(ident::string_literal(s), RTy::Str),
+            ExprKind::Bool(b) => known(b.to_string(), RTy::Bool),
+            ExprKind::Duration(_) => known(
+                duration_rust(duration_ns(expr).unwrap_or_default()),
+                RTy::Duration,
+            ),
+            ExprKind::None => known(String::new(), RTy::NoneLit),
+            ExprKind::EnumValue { enum_name, variant } => {
+                let path = format!("{GEN_TYPES}{}", ident::camel(&enum_name.name));
+                known(
+                    format!("{path}::{}", ident::camel(&variant.name)),
+                    RTy::Enum(path),
+                )
+            }
+            ExprKind::Unary(UnaryOp::Neg, inner) => match self.operand(inner) {
+                Operand {
+                    code,
+                    ty: ty @ (RTy::Int | RTy::Float),
+                    maybe: false,
+                } => known(format!("-{code}"), ty),
+                Operand {
+                    code,
+                    ty: ty @ (RTy::Int | RTy::Float),
+                    maybe: true,
+                } => Operand {
+                    code: format!("{code}.map(|value| -value)"),
+                    ty,
+                    maybe: true,
+                },
+                _ => known(String::new(), RTy::Unreadable),
+            },
+            ExprKind::Unary(UnaryOp::Not, _) | ExprKind::Binary(..) => {
+                known(format!("({})", self.boolean(expr)), RTy::Bool)
+            }
+            ExprKind::Path(segments) => match segments.as_slice() {
+                [name] => self.own(&name.name),
+                [instance, variable] => self.instance_variable(&instance.name, &variable.name),
+                _ => known(String::new(), RTy::Unreadable),
+            },
+            ExprKind::Frequency(_) | ExprKind::List(_) | ExprKind::Repeat(..) => {
+                known(String::new(), RTy::Unreadable)
+            }
+        }
+    }
+
+    /// A bare name: an own variable, a mapped one, an own default variable, or a
+    /// symbol.
+    fn own(&mut self, name: &str) -> Operand {
+        let component = self.component;
+        let variable = component.members.iter().find_map(|m| match m {
+            ast::Member::Variable(v) if v.name.name == name => Some(v),
+            _ => None,
+        });
+        if let Some(v) = variable {
+            return match (&v.ty, &v.value) {
+                (Some(ty), _) => {
+                    if v.kind != ast::VarKind::Local {
+                        self.read(name.to_owned());
+                    }
+                    self.uses_vars = true;
+                    let field = format!("vars.{}", ident::snake(name));
+                    let has_default =
+                        v.value.is_some() || self.lowerer.defaultable(ty, &mut BTreeSet::new());
+                    let f64_field = is_f64(ty);
+                    let ty = self.lowerer.rule_type(ty);
+                    if !has_default {
+                        // Held as `Option<T>` until set: read it as a missing value.
+                        return own_value(&format!("{field}.as_ref()"), &ty, true, f64_field);
+                    }
+                    own_value(&field, &ty, false, f64_field)
+                }
+                (None, Some(value)) => match &value.kind {
+                    ExprKind::Path(segments) => match segments.as_slice() {
+                        [instance, variable] => {
+                            self.instance_variable(&instance.name, &variable.name)
+                        }
+                        _ => Operand {
+                            code: String::new(),
+                            ty: RTy::Unreadable,
+                            maybe: false,
+                        },
+                    },
+                    _ => Operand {
+                        code: String::new(),
+                        ty: RTy::Unreadable,
+                        maybe: false,
+                    },
+                },
+                (None, None) => Operand {
+                    code: String::new(),
+                    ty: RTy::Unreadable,
+                    maybe: false,
+                },
+            };
+        }
+        match name {
+            // Rules are evaluated while the compound runs.
+            "state" => Operand {
+                code: "::coolbot::State::Running".to_owned(),
+                ty: RTy::State,
+                maybe: false,
+            },
+            // A rule is evaluated in its own supervisor state.
+            "user_state" => {
+                let (states, _) = Lowerer::states_and_qualities(component);
+                Operand {
+                    code: ident::string_literal(&self.state),
+                    ty: RTy::UserState(states),
+                    maybe: false,
+                }
+            }
+            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => Operand {
+                code: String::new(),
+                ty: RTy::Unreadable,
+                maybe: false,
+            },
+            _ => Operand {
+                code: String::new(),
+                ty: RTy::Symbol(name.to_owned()),
+                maybe: false,
+            },
+        }
+    }
+
+    /// `instance.variable`, read from the view.
+    fn instance_variable(&mut self, instance: &str, variable: &str) -> Operand {
+        let unreadable = Operand {
+            code: String::new(),
+            ty: RTy::Unreadable,
+            maybe: false,
+        };
+        let Some(target) = Lowerer::instance_of(self.component, instance)
+            .and_then(|i| self.lowerer.component_of(i))
+        else {
+            return unreadable;
+        };
+        let lit = ident::string_literal(instance);
+        let maybe = |code: String, ty: RTy| Operand {
+            code,
+            ty,
+            maybe: true,
+        };
+        if let Some((ty, _)) = self.lowerer.variable_type(target, variable, 0) {
+            self.read(format!("{instance}.{variable}"));
+            self.uses_view = true;
+            let raw = format!("view.var({lit}, {})", ident::string_literal(variable));
+            let ty = self.lowerer.rule_type(ty);
+            return match view_value(&raw, &ty) {
+                Some(code) => maybe(code, ty),
+                None => unreadable,
+            };
+        }
+        let (states, qualities) = Lowerer::states_and_qualities(target);
+        let (code, ty) = match variable {
+            "state" => (format!("view.state({lit})"), RTy::State),
+            "user_state" => (format!("view.user_state({lit})"), RTy::UserState(states)),
+            "result" => (format!("view.result({lit})"), RTy::Result),
+            "error" => (format!("view.error({lit})"), RTy::Str),
+            "cpu_time" | "elapsed_time" => (
+                format!("view.monitor({lit}).map(|monitor| monitor.{variable})"),
+                RTy::Duration,
+            ),
+            "quality" => (
+                format!("view.monitor({lit}).map(|monitor| monitor.quality)"),
+                RTy::Quality(qualities),
+            ),
+            _ => return unreadable,
+        };
+        // The runtime names monitor fields other than these four by their variable.
+        let read = match variable {
+            "state" | "user_state" | "result" | "error" => format!("{instance}.{variable}"),
+            _ => format!("{instance}.state"),
+        };
+        self.read(read);
+        self.uses_view = true;
+        maybe(code, ty)
+    }
+
+    /// `left op right`.
+    fn comparison(&mut self, op: BinaryOp, left: &ast::Expr, right: &ast::Expr) -> String {
+        let mut l = self.operand(left);
+        let mut r = self.operand(right);
+        // Symbols take the type of the other side.
+        if let RTy::Symbol(name) = &l.ty {
+            l = symbol(name, &r.ty);
+        }
+        if let RTy::Symbol(name) = &r.ty {
+            r = symbol(name, &l.ty);
+        }
+        if matches!(l.ty, RTy::Unreadable | RTy::Symbol(_))
+            || matches!(r.ty, RTy::Unreadable | RTy::Symbol(_))
+        {
+            return "false".to_owned();
+        }
+        let rust_op = op.as_str();
+        // `x == none`, `x != none`.
+        if r.ty == RTy::NoneLit {
+            std::mem::swap(&mut l, &mut r);
+        }
+        if l.ty == RTy::NoneLit {
+            let test = match op {
+                BinaryOp::Ne => "is_some",
+                _ => "is_none",
+            };
+            return match (&r.ty, r.maybe) {
+                (RTy::Optional(_), false) => format!("{}.{test}()", r.code),
+                (RTy::Optional(_), true) => {
+                    format!("{}.is_some_and(|value| value.{test}())", r.code)
+                }
+                (RTy::Result, _) => {
+                    let pattern = "::coolbot::TaskResult::None";
+                    let negate = if op == BinaryOp::Ne { "!" } else { "" };
+                    format!(
+                        "{}.is_some_and(|result| {negate}::core::matches!(result, {pattern}))",
+                        r.code
+                    )
+                }
+                _ => "false".to_owned(),
+            };
+        }
+        // `result == fail`: a pattern match.
+        if l.ty == RTy::Result && r.ty == RTy::Result {
+            return self.result_comparison(op, &l, &r);
+        }
+        // One optional side and one plain side: the plain side is wrapped in `Some`.
+        let l_opt = matches!(l.ty, RTy::Optional(_));
+        let r_opt = matches!(r.ty, RTy::Optional(_));
+        let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
+            let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
+            let value = if operand.maybe && owned_text {
+                format!("{name}.as_deref()")
+            } else if operand.maybe {
+                name.to_owned()
+            } else {
+                operand.code.clone()
+            };
+            let value = if wrap {
+                format!("::core::option::Option::Some({value})")
+            } else {
+                value
+            };
+            (operand.code.clone(), value)
+        };
+        let (l_source, l_value) = bind(&l, "left", r_opt && !l_opt);
+        let (r_source, r_value) = bind(&r, "right", l_opt && !r_opt);
+        let test = format!("{l_value} {rust_op} {r_value}");
+        match (l.maybe, r.maybe) {
+            (false, false) => test,
+            (true, false) => format!("{l_source}.is_some_and(|left| {test})"),
+            (false, true) => format!("{r_source}.is_some_and(|right| {test})"),
+            (true, true) => {
+                format!("{l_source}.zip({r_source}).is_some_and(|(left, right)| {test})")
+            }
+        }
+    }
+
+    /// A comparison of two results: by kind (`none`, `success`, `fail`).
+    fn result_comparison(&mut self, op: BinaryOp, l: &Operand, r: &Operand) -> String {
+        let negate = if op == BinaryOp::Ne { "!" } else { "" };
+        // A symbol side is a pattern.
+        let pattern = |operand: &Operand| -> Option<String> {
+            (!operand.maybe).then(|| operand.code.clone())
+        };
+        match (pattern(l), pattern(r)) {
+            (Some(p), None) | (None, Some(p)) => {
+                let source = if l.maybe { &l.code } else { &r.code };
+                format!("{source}.is_some_and(|result| {negate}::core::matches!(result, {p}))")
+            }
+            (None, None) => format!(
+                "{}.zip({}).is_some_and(|(left, right)| ::core::mem::discriminant(left) {} ::core::mem::discriminant(right))",
+                l.code,
+                r.code,
+                op.as_str()
+            ),
+            (Some(a), Some(b)) => (if (a == b) == (op != BinaryOp::Ne) {
+                "true"
+            } else {
+                "false"
+            })
+            .to_owned(),
+        }
+    }
+}
+
+/// A symbol resolved against the type of the other side.
+fn symbol(name: &str, other: &RTy) -> Operand {
+    let plain = |code: String, ty: RTy| Operand {
+        code,
+        ty,
+        maybe: false,
+    };
+    let other = match other {
+        RTy::Optional(inner) => inner.as_ref(),
+        other => other,
+    };
+    match other {
+        // The checker's names; `coolbot::State` variants are their camel case.
+        RTy::State if DEFAULT_STATES.contains(&name) => plain(
+            format!("::coolbot::State::{}", ident::camel(name)),
+            RTy::State,
+        ),
+        RTy::UserState(states) if states.iter().any(|s| s == name) => {
+            plain(ident::string_literal(name), other.clone())
+        }
+        RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
+            Some(pattern) => plain(pattern.to_owned(), RTy::Result),
+            None => plain(String::new(), RTy::Unreadable),
+        },
+        RTy::Quality(levels) => match levels.iter().position(|l| l == name) {
+            Some(index) => plain(format!("{index}_usize"), other.clone()),
+            None => plain(String::new(), RTy::Unreadable),
+        },
+        _ => plain(String::new(), RTy::Unreadable),
+    }
+}
+
+/// An own variable's field read as a rule operand (`maybe` when it is held as an
+/// `Option` reference until set).
+fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
+    let unreadable = Operand {
+        code: String::new(),
+        ty: RTy::Unreadable,
+        maybe: false,
+    };
+    if maybe {
+        // `Option<&T>`: only the types whose value can be copied out of a reference.
+        let code = match ty {
+            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => format!("{field}.copied()"),
+            _ => return unreadable,
+        };
+        return Operand {
+            code,
+            ty: ty.clone(),
+            maybe: true,
+        };
+    }
+    let code = match ty {
+        RTy::Int => format!("i128::from({field})"),
+        RTy::Float if f64_field => field.to_owned(),
+        RTy::Float => format!("f64::from({field})"),
+        RTy::Str => format!("{field}.as_str()"),
+        RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
+        RTy::Optional(inner) => match inner.as_ref() {
+            RTy::Int => format!("{field}.map(i128::from)"),
+            RTy::Float if f64_field => field.to_owned(),
+            RTy::Float => format!("{field}.map(f64::from)"),
+            RTy::Str => format!("{field}.as_deref()"),
+            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
+            _ => return unreadable,
+        },
+        _ => return unreadable,
+    };
+    Operand {
+        code,
+        ty: ty.clone(),
+        maybe: false,
+    }
+}
+
+/// Reads an instance variable's `Option<&coolbot::Value>` (`raw`) as an `Option` of
+/// the operand's Rust value.
+fn view_value(raw: &str, ty: &RTy) -> Option<String> {
+    let decode = |rust: &str| format!("{raw}.and_then(|value| <{rust}>::try_from(value).ok())");
+    let serde = |rust: &str| {
+        format!("{raw}.and_then(|value| super::__cool_from_value::<{rust}>(value).ok())")
+    };
+    Some(match ty {
+        RTy::Bool => decode("bool"),
+        RTy::Int => format!(
+            "{raw}.and_then(|value| <i64>::try_from(value).map(i128::from).or_else(|_| <u64>::try_from(value).map(i128::from)).ok())"
+        ),
+        RTy::Float => decode("f64"),
+        RTy::Str => format!(
+            "{raw}.and_then(|value| match value {{ ::coolbot::Value::Str(text) => ::core::option::Option::Some(text.as_str()), _ => ::core::option::Option::None }})"
+        ),
+        RTy::Duration => decode("::std::time::Duration"),
+        RTy::Time => decode("::coolbot::Time"),
+        RTy::Enum(path) => serde(path),
+        RTy::Optional(inner) => match inner.as_ref() {
+            RTy::Bool => serde("::core::option::Option<bool>"),
+            RTy::Int => format!(
+                "{}.map(|value| value.map(i128::from))",
+                serde("::core::option::Option<i64>")
+            ),
+            RTy::Float => serde("::core::option::Option<f64>"),
+            RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
+            RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
+            RTy::Enum(path) => serde(&format!("::core::option::Option<{path}>")),
+            // Owned: compared through `as_deref` (see `Scope::comparison`).
+            RTy::Str => serde("::core::option::Option<::std::string::String>"),
+            _ => return None,
+        },
+        _ => return None,
+    })
+}
+
+/// Whether `ty` is `f64` or `f64?` (read as is; `f32` widens).
+fn is_f64(ty: &ast::Type) -> bool {
+    match &ty.kind {
+        TypeKind::Prim(p) => *p == Prim::F64,
+        TypeKind::Optional(inner) => is_f64(inner),
+        _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::ir;
+    use crate::lower::{Options, lower};
+
+    const TEXT: &str = "
+        enum Mode { Normal, Backup }
+        atomic Leaf {
+            observable level: u32 = 0;
+            controllable gain: f64 = 1.0;
+            output out: data<u32>;
+            input input: fifo<u32>(4);
+            timing { period 10ms; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Box {
+            instance a: Leaf { timing { priority 3; } }
+            instance b: Leaf substitutes a;
+            input input = a.input;
+            output out = a.out;
+            observable level = a.level;
+            controllable gain = a.gain;
+            observable mode: Mode = Mode::Normal;
+            local faults: u32 = 0;
+            on error a: substitute;
+            supervisor {
+                initial on;
+                state on {
+                    entry;
+                    when (a.state == running_error || faults > 2) && mode == Mode::Normal -> off;
+                    when level > 3 && !(a.user_state == on) -> off;
+                }
+                state off { exit; }
+            }
+        }
+        compound Outer { instance inner: Box { gain = 2.0; } }
+    ";
+
+    fn compounds() -> Vec<ir::Compound> {
+        let analysis = crate::analyze_text("t.cool", TEXT);
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(crate::RenderOptions::plain())
+        );
+        lower(&analysis.files, &Options::default()).compounds
+    }
+
+    #[test]
+    fn rules_compile_with_their_reads() {
+        let c = &compounds()[0];
+        let reads: Vec<&str> = c.rules.iter().map(|r| r.reads.as_str()).collect();
+        // A local variable is not in the supervisor's spec: not a read.
+        assert_eq!(
+            reads,
+            [r#"&["a.state", "mode"]"#, r#"&["a.level", "a.user_state"]"#]
+        );
+        assert!(c.rules[0].expr.starts_with("(view"), "{}", c.rules[0].expr);
+        assert!(
+            c.rules[0].expr.contains("|| i128::from(vars.faults) > 2)"),
+            "{}",
+            c.rules[0].expr
+        );
+        assert_eq!(c.rules[0].vars_param.as_deref(), Some("vars"));
+        // A mapped variable reads the instance's.
+        assert!(c.rules[1].expr.contains(r#"view.var("a", "level")"#));
+        assert!(c.rules[1].expr.contains("!(view"));
+        assert_eq!(c.rules[1].vars_param, None);
+        assert_eq!(c.rules[1].call, "__cool_rule_1");
+    }
+
+    #[test]
+    fn builder_steps_follow_the_description() {
+        let c = &compounds()[0];
+        assert_eq!(
+            c.steps,
+            [
+                r#".export_input::<u32>("input", "a.input")"#,
+                r#".export_output::<u32>("out", "a.out")"#,
+                r#".map_observable("level", "a.level")"#,
+                r#".map_controllable("gain", "a.gain")"#,
+                r#".on_error("a", ::coolbot::Policy::Substitute)"#,
+                r#".substitute("b", "a")"#,
+            ]
+        );
+        assert_eq!(
+            c.input_specs,
+            [
+                "::coolbot::InputSpec { name: \"input\", kind: ::coolbot::InputKind::Fifo { capacity: 4, policy: ::coolbot::OverflowPolicy::Reject }, packet: \"u32\", pull: false }"
+            ]
+        );
+        assert_eq!(c.output_specs.len(), 1);
+        let a = &c.instances[0];
+        let build = a.build.as_deref().unwrap();
+        assert!(
+            build.ends_with(
+                ".with_timing(::coolbot::TimingSpec { priority: 3, ..super::leaf::SPEC.timing })"
+            ),
+            "{build}"
+        );
+        // Only `mode` is in the supervisor's spec; `faults` is local.
+        let exposed: Vec<&str> = c
+            .vars
+            .iter()
+            .filter(|v| v.spec_index.is_some())
+            .map(|v| v.field.name.as_str())
+            .collect();
+        assert_eq!(exposed, ["mode"]);
+        let parts: Vec<&str> = c.parts.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(parts, ["supervisor", "a", "b"]);
+        let sections: Vec<&str> = c.methods.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(sections, ["on_entry", "off_exit"]);
+    }
+
+    #[test]
+    fn an_instance_named_supervisor_gets_another_method() {
+        let analysis = crate::analyze_text(
+            "t.cool",
+            "atomic Leaf { automaton { initial on; state on { entry; } } }\ncompound Top { instance supervisor: Leaf; }",
+        );
+        assert!(!analysis.has_errors());
+        let krate = lower(&analysis.files, &Options::default());
+        let parts: Vec<&str> = krate.compounds[0]
+            .parts
+            .iter()
+            .map(|m| m.name.as_str())
+            .collect();
+        assert_eq!(parts, ["supervisor", "supervisor_2"]);
+    }
+
+    #[test]
+    fn nested_compounds_and_implicit_supervisors() {
+        let outer = &compounds()[1];
+        // An override of the nested compound's mapped controllable `gain`.
+        assert_eq!(
+            outer.instances[0].build.as_deref(),
+            Some(
+                r#"super::r#box::component_with("inner", parts.inner(), super::r#box::Vars::default(), super::r#box::Mapped { gain: ::core::option::Option::Some(2.0) })?"#
+            )
+        );
+        assert!(outer.instances[0].unapplied.is_empty());
+        // Box's own `Mapped` feeds its instance `a`.
+        let inner = &compounds()[0];
+        assert_eq!(inner.mapped.len(), 1);
+        assert_eq!(inner.mapped[0].ty, "f64");
+        assert!(
+            inner.instances[0]
+                .build
+                .as_deref()
+                .unwrap()
+                .contains("gain: mapped.gain.unwrap_or_else(|| super::leaf::Vars::default().gain)"),
+            "{:?}",
+            inner.instances[0].build
+        );
+        assert!(outer.instances[0].compound);
+        assert!(
+            outer.parts[1]
+                .user_signature
+                .ends_with("impl crate::generated::r#box::Parts")
+        );
+        // No supervisor block: one state without sections.
+        assert_eq!(outer.states.len(), 1);
+        assert_eq!(outer.states[0].cool_name, "supervising");
+        assert!(outer.methods.is_empty());
+    }
+}

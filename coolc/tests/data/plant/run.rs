@@ -1,0 +1,203 @@
+//! Runs the generated `Plant` hierarchy (source, the `Cell` compound, sink) on the
+//! runtime: packets cross the cell's exported ports, a fault injected into the
+//! cell's primary worker is handled inside the cell (its backup substitutes it and
+//! the cell's supervisor rule moves its state), and the plant's rule sees the nested
+//! supervisor's state. Every check is on monitor snapshots.
+
+use std::time::Duration;
+
+use coolbot::{Command, Monitor, State, System, Value};
+use plant::generated::types::Mode;
+use plant::generated::{cell, plant as plant_module};
+use plant::plant::PlantParts;
+
+const WAIT: Duration = Duration::from_secs(20);
+
+fn variable(monitor: &Monitor, name: &str) -> Option<Value> {
+    monitor
+        .variables
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| v.clone())
+}
+
+fn count(monitor: &Monitor, name: &str) -> u64 {
+    variable(monitor, name)
+        .and_then(|v| u64::try_from(&v).ok())
+        .unwrap_or(0)
+}
+
+#[test]
+fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
+    assert_eq!(cell::SUBSTITUTES, &[("backup", "primary")]);
+    let component = plant_module::component("plant", PlantParts::default()).unwrap();
+    // The compound's interface: its mapped variables, then its own.
+    let names: Vec<&str> = component.spec().variables.iter().map(|v| v.name).collect();
+    assert_eq!(
+        names,
+        [
+            "received",
+            "last",
+            "switches",
+            "cell_mode",
+            "fail",
+            "cell_limit",
+            "alarms"
+        ]
+    );
+    let mut system = System::new();
+    let plant = system.add(component).unwrap();
+    system.run_all().unwrap();
+
+    // Packets flow source -> cell (exported input) -> primary -> cell (exported
+    // output) -> sink.
+    let monitor = plant.wait_for(|m| count(m, "received") >= 5, WAIT).unwrap();
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(monitor.user_state.as_deref(), Some("watching"));
+    assert_eq!(count(&monitor, "alarms"), 0);
+    // `instance cell: Cell { limit = 5; scale = 3; }`: the cell's own `limit`, seen
+    // through the mapped `cell_limit`, and its mapped `scale`, which reaches the
+    // primary worker (`gain = 2`): every count arrives multiplied by 6.
+    assert_eq!(count(&monitor, "cell_limit"), 5);
+    let last = count(&monitor, "last");
+    assert!(last > 0 && last.is_multiple_of(6), "last = {last}");
+
+    // The fault, set through the plant's control port down to the primary worker.
+    plant
+        .command(Command::Set("fail".to_owned(), Value::Bool(true)))
+        .unwrap();
+
+    // The cell's backup takes over and its rule moves it to `backup`; the plant's
+    // rule sees that and moves it to `alarmed`, whose entry section counts it.
+    let monitor = plant
+        .wait_for(
+            |m| m.user_state.as_deref() == Some("alarmed") && count(m, "alarms") == 1,
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.state, State::Running, "the fault did not propagate");
+    assert_eq!(count(&monitor, "switches"), 1);
+    let received = count(&monitor, "received");
+
+    // Packets keep arriving (through the backup, then the recovered primary).
+    plant
+        .wait_for(|m| count(m, "received") >= received + 10, WAIT)
+        .unwrap();
+
+    // The primary recovers from the queue: the cell's rule takes it back to
+    // `normal`, whose entry section sets its mode back.
+    let monitor = plant
+        .wait_for(
+            |m| {
+                variable(m, "cell_mode").and_then(|v| v.to_serde::<Mode>().ok())
+                    == Some(Mode::Normal)
+                    && count(m, "switches") == 1
+            },
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("alarmed"));
+    assert_eq!(monitor.state, State::Running);
+
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn rules_read_every_kind_of_value() {
+    let component =
+        plant::generated::probe::component("probe", plant::probe::ProbeParts::default()).unwrap();
+    let mut system = System::new();
+    let probe = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `waiting` -> `seen` (the one rule that holds once the gauge is ready) ->
+    // `done` (the gauge's result); none of the rules to `failed` ever holds.
+    let monitor = probe
+        .wait_for(
+            |m| matches!(m.user_state.as_deref(), Some("done" | "failed")),
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("done"));
+    assert_eq!(count(&monitor, "count"), 1);
+    assert!(count(&monitor, "seen_level") >= 3);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it() {
+    let component =
+        plant::generated::ticker::component("ticker", plant::ticker::TickerParts::default())
+            .unwrap();
+    let mut system = System::new();
+    let ticker = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `ticks` is local: no monitoring event announces it; the rule is evaluated after
+    // each periodic section that counts it up.
+    let monitor = ticker
+        .wait_for(|m| m.user_state.as_deref() == Some("counted"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
+    let gate =
+        plant::generated::gate::component("gate", plant::gate::GateParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(gate).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    system.run_all().unwrap();
+    let monitor = handle
+        .wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("closed"));
+    system.connect("source.out", "gate.input").unwrap();
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some("open"), WAIT)
+        .unwrap();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_redundant_group_keeps_the_stream_when_a_member_fails() {
+    let pair =
+        plant::generated::pair::component("pair", plant::pair::PairParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(pair).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    let sink = system
+        .add(plant::generated::sink::component(
+            "sink",
+            plant::sink::Sink::default(),
+        ))
+        .unwrap();
+    system.connect("source.out", "pair.input").unwrap();
+    system.connect("pair.out", "sink.input").unwrap();
+    system.run_all().unwrap();
+    let monitor = sink.wait_for(|m| count(m, "received") >= 5, WAIT).unwrap();
+    let received = count(&monitor, "received");
+    handle
+        .command(Command::Set("fail_a".to_owned(), Value::Bool(true)))
+        .unwrap();
+    // The other member takes the group's connections: packets keep coming.
+    sink.wait_for(|m| count(m, "received") >= received + 10, WAIT)
+        .unwrap();
+    assert_eq!(handle.snapshot().state, State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
