@@ -1220,6 +1220,9 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
         // runs on, w takes the stream back. (The restart can be quick: w's failure is
         // seen through its script, not through a state that may last a millisecond.)
         let starts_before = starts(&w_script);
+        // In the first cycle w cannot restart until b has had some of the stream
+        // (otherwise, on a loaded machine, w may be back before any packet goes out).
+        w_script.start_fails.store(cycle == 0, Ordering::SeqCst);
         if cycle % 2 == 0 {
             w_script.panic_in(Some("busy.periodic"));
         } else {
@@ -1241,6 +1244,13 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
         for _ in 0..5 {
             feed.data.send(sent);
             sent += 1;
+        }
+        if cycle == 0 {
+            eventually(
+                || b_script.received.load(Ordering::SeqCst) > 0,
+                "b has some of the stream",
+            );
+            w_script.start_fails.store(false, Ordering::SeqCst);
         }
         // Recovered: b back on standby, w running with the stream.
         b.wait_state(State::Ready, WAIT)
@@ -1970,6 +1980,8 @@ fn soak_substitution_cycles_lose_no_packet_on_a_converted_connection() {
     };
     for cycle in 0..CYCLES {
         let starts_before = starts(&w_script);
+        // In the first cycle w cannot restart until b has had some of the stream.
+        w_script.start_fails.store(cycle == 0, Ordering::SeqCst);
         w_script.inject(Some(Injected {
             hook: "busy.periodic",
             exception: Some(Exception::Fatal),
@@ -1979,6 +1991,13 @@ fn soak_substitution_cycles_lose_no_packet_on_a_converted_connection() {
             || starts(&w_script) > starts_before,
             &format!("cycle {cycle}: w failed and was restarted"),
         );
+        if cycle == 0 {
+            eventually(
+                || b_script.received.load(Ordering::SeqCst) > 0,
+                "b has some of the stream",
+            );
+            w_script.start_fails.store(false, Ordering::SeqCst);
+        }
         b.wait_state(State::Ready, WAIT)
             .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
         w.wait_state(State::Running, WAIT)
