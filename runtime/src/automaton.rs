@@ -200,6 +200,8 @@ pub struct Context {
     pub(crate) period_changed: bool,
     pub(crate) quality: usize,
     pub(crate) waker: Option<Waker>,
+    /// Compound components: supervision steps to publish when the call returns.
+    pub(crate) supervision: Vec<crate::monitor::Supervision>,
 }
 
 impl Context {
@@ -216,6 +218,7 @@ impl Context {
             period_changed: false,
             quality: 0,
             waker: None,
+            supervision: Vec::new(),
         }
     }
 

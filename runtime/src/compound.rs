@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::Receiver;
 
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
-use crate::monitor::{Command, Handle, Monitor, MonitorEvent};
+use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
     TickOut, UfifoIn,
@@ -858,6 +858,7 @@ impl CompoundBuilder {
             deadline: self.deadline,
             started: false,
             exports: self.exports,
+            steps: Vec::new(),
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports))
     }
@@ -912,6 +913,8 @@ struct Compound {
     deadline: Duration,
     started: bool,
     exports: Vec<Box<dyn Export>>,
+    /// Supervision steps taken since the last call returned (published by the runner).
+    steps: Vec<Supervision>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -921,6 +924,18 @@ fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
 }
 
 impl Compound {
+    /// Record a supervision step about instance `index` for the monitoring port.
+    fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
+        let detail = detail.into();
+        let instance = self.instances[index].name.clone();
+        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
+        self.steps.push(Supervision {
+            instance,
+            step,
+            detail,
+        });
+    }
+
     fn fault(&self, message: String) -> Fault {
         tracing::warn!(compound = %self.name, "{message}");
         Fault::message(message)
@@ -1145,13 +1160,27 @@ impl Compound {
         let monitor = self.view.instances[index].clone();
         let name = self.instances[index].name.clone();
         let error = monitor.error.clone().unwrap_or_default();
-        if self.instances[index].group.is_some() {
+        self.step(index, Step::Failed, error.clone());
+        if let Some(group) = self.instances[index].group {
             // A redundant member: the next live member takes the group's connections.
             self.enqueue(index);
             if !self.covered(index) {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "no member of its redundant group is left",
+                );
                 return Err(self.fault(format!(
                     "every member of the redundant group of `{name}` failed; last: {error}"
                 )));
+            }
+            let standing = self.groups[group]
+                .iter()
+                .copied()
+                .find(|m| self.instances[*m].status == Status::Active);
+            if let Some(member) = standing {
+                let by = self.instances[member].name.clone();
+                self.step(index, Step::Substituted { by }, "");
             }
             return self.rewire();
         }
@@ -1163,24 +1192,36 @@ impl Compound {
         };
         match policy {
             Policy::Ignore => {
-                tracing::warn!(compound = %self.name, "instance `{name}` failed (ignored): {error}");
+                self.step(index, Step::Ignored, "");
                 Ok(())
             }
-            Policy::Propagate => Err(self.fault(format!("instance `{name}` failed: {error}"))),
+            Policy::Propagate => {
+                self.step(index, Step::Propagated, "");
+                Err(self.fault(format!("instance `{name}` failed: {error}")))
+            }
             Policy::Restart if monitor.state == State::RunningError => {
+                self.step(index, Step::Restarted, "");
                 command(&self.instances[index].handle, Controllable::Running)
             }
             Policy::Restart => {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "it cannot restart from starting_error",
+                );
                 Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
             }
             Policy::Substitute => {
                 self.enqueue(index);
+                self.step(index, Step::Enqueued, "");
                 if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Standby
                 {
                     self.instances[substitute].status = Status::Active;
                     self.rewire()?;
                     command(&self.instances[substitute].handle, Controllable::Running)?;
+                    let by = self.instances[substitute].name.clone();
+                    self.step(index, Step::Substituted { by }, "");
                 }
                 Ok(())
             }
@@ -1212,7 +1253,7 @@ impl Compound {
                 } else {
                     self.rewire()?;
                 }
-                tracing::info!(compound = %self.name, "instance `{}` recovered", self.instances[index].name);
+                self.step(index, Step::Recovered, "");
                 continue;
             }
             if now >= crate::thread::later(entry.since, self.deadline) {
@@ -1223,7 +1264,13 @@ impl Compound {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
                 self.refresh(index);
+                self.step(
+                    index,
+                    Step::Retired,
+                    format!("not recovered within {:?}", self.deadline),
+                );
                 if !self.covered(index) {
+                    self.step(index, Step::Propagated, "nothing stands for it");
                     return Err(self.fault(format!(
                         "instance `{name}` did not recover within {:?} and nothing stands for it",
                         self.deadline
@@ -1234,6 +1281,9 @@ impl Compound {
             // Due for a retry: restart it, on probation until the next retry.
             let restarted = command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
+            if restarted {
+                self.step(index, Step::Retried, "");
+            }
             let entry = &mut self.queue[position];
             entry.probation = restarted;
             entry.next = crate::thread::later(now, self.retry_every);
@@ -1372,7 +1422,28 @@ impl Automaton for Compound {
         true
     }
 
-    fn supervise(&mut self, state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        let outcome = self.supervise_turn(state);
+        cx.supervision.append(&mut self.steps);
+        outcome
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        self.queue
+            .iter()
+            .map(|entry| {
+                entry
+                    .next
+                    .min(crate::thread::later(entry.since, self.deadline))
+            })
+            .min()
+    }
+}
+
+impl Compound {
+    /// One supervision turn: exports, instance events and policies, the recovery
+    /// queue, then the rules of supervisor state `state`.
+    fn supervise_turn(&mut self, state: usize) -> Result<Option<usize>, Fault> {
         for export in &mut self.exports {
             export.forward();
         }
@@ -1395,16 +1466,5 @@ impl Automaton for Compound {
             .find(|rule| (rule.test)(view))
             .map(|rule| rule.target);
         Ok(fired)
-    }
-
-    fn wake_at(&self) -> Option<Instant> {
-        self.queue
-            .iter()
-            .map(|entry| {
-                entry
-                    .next
-                    .min(crate::thread::later(entry.since, self.deadline))
-            })
-            .min()
     }
 }

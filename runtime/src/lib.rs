@@ -134,7 +134,7 @@ pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, Ta
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, Rejected,
-    Timeout,
+    SUPERVISION_HISTORY, Step, Supervision, Timeout,
 };
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,

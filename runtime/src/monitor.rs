@@ -107,6 +107,75 @@ pub struct Monitor {
     pub priority: i32,
     /// Monitoring events dropped because an observer's channel was full.
     pub dropped_events: u64,
+    /// Compound components only: the last [`SUPERVISION_HISTORY`] steps the supervisor
+    /// took about its instances (failures, substitutions, restarts, recoveries), oldest
+    /// first. Empty for atomic components.
+    pub supervision: Vec<Supervision>,
+    /// Compound components only: how many supervision steps were taken in all.
+    pub supervision_steps: u64,
+}
+
+/// How many supervision steps [`Monitor::supervision`] keeps.
+pub const SUPERVISION_HISTORY: usize = 32;
+
+/// One step a compound's supervisor took about one of its instances, published on the
+/// compound's monitoring port ([`MonitorEvent::Supervision`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Supervision {
+    /// The instance concerned (a local instance name of the compound).
+    pub instance: String,
+    /// What happened.
+    pub step: Step,
+    /// The instance's error or the reason, when there is one.
+    pub detail: String,
+}
+
+impl std::fmt::Display for Supervision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let instance = &self.instance;
+        match &self.step {
+            Step::Failed => write!(f, "{instance} failed")?,
+            Step::Ignored => write!(f, "{instance} failed; ignored")?,
+            Step::Propagated => write!(f, "{instance} failed; propagated")?,
+            Step::Restarted => write!(f, "{instance} restarted")?,
+            Step::Substituted { by } => write!(f, "{instance} substituted by {by}")?,
+            Step::Enqueued => write!(f, "{instance} entered the recovery queue")?,
+            Step::Retried => write!(f, "{instance} retried")?,
+            Step::Recovered => write!(f, "{instance} recovered")?,
+            Step::Retired => write!(f, "{instance} retired (recovery deadline)")?,
+        }
+        if !self.detail.is_empty() {
+            write!(f, ": {}", self.detail)?;
+        }
+        Ok(())
+    }
+}
+
+/// What a supervisor did (see [`Supervision`] and `docs/runtime.md`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Step {
+    /// The instance went to `running_error` or `starting_error`.
+    Failed,
+    /// Its policy is `ignore`: it stays failed.
+    Ignored,
+    /// Its policy is `propagate` (or nothing could stand for it): the compound fails.
+    Propagated,
+    /// Its policy is `restart`: it was commanded back to `running`.
+    Restarted,
+    /// Its substitute took its place (connections moved to `by`).
+    Substituted {
+        /// The substitute (or, in a redundant group, the member now standing).
+        by: String,
+    },
+    /// It went into the recovery queue.
+    Enqueued,
+    /// The recovery queue restarted it (it is on probation until the next retry).
+    Retried,
+    /// It recovered and took its place back (the arrangement before the fault).
+    Recovered,
+    /// Its recovery deadline expired: it was destroyed (`dead`).
+    Retired,
 }
 
 /// One change on the monitoring port.
@@ -161,6 +230,8 @@ pub enum MonitorEvent {
     Quality(usize),
     /// The configuration changed (through the control port).
     Configured,
+    /// Compound components: the supervisor took a step about an instance.
+    Supervision(Supervision),
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {

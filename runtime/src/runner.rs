@@ -28,7 +28,7 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
-use crate::spec::{AfterSpec, PlanStep, Spec, VarKind};
+use crate::spec::{AfterSpec, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{later, panic_message};
 
@@ -53,6 +53,8 @@ enum Recovery {
 pub(crate) struct Runner {
     automaton: Box<dyn Automaton>,
     spec: &'static Spec,
+    /// The effective timing block: the instance's override, else the spec's.
+    timing: TimingSpec,
     cx: Context,
     shared: Arc<Shared>,
     control: Receiver<ControlMessage>,
@@ -103,6 +105,7 @@ impl Runner {
     pub(crate) fn new(
         name: &str,
         automaton: Box<dyn Automaton>,
+        timing: TimingSpec,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
         bell: Arc<Doorbell>,
@@ -115,9 +118,10 @@ impl Runner {
         let count = inputs.len();
         let supervised = automaton.supervises();
         let mut runner = Runner {
-            cx: Context::new(name, spec.timing.period),
+            cx: Context::new(name, timing.period),
             automaton,
             spec,
+            timing,
             shared,
             control,
             bell,
@@ -135,7 +139,7 @@ impl Runner {
             reanchored: false,
             pending_choice: None,
             deferred: VecDeque::new(),
-            max_response: spec.timing.max_response,
+            max_response: timing.max_response,
             cpu_updated: now,
             clock: now,
             has_pull: spec.outputs.iter().any(|output| output.pull),
@@ -574,7 +578,7 @@ impl Runner {
                 reply(Reply::Done);
             }
             Command::SetQuality(quality) => {
-                let levels = self.spec.timing.qualities.len().max(1);
+                let levels = self.timing.qualities.len().max(1);
                 if *quality >= levels {
                     reply(Reply::Rejected(format!(
                         "quality {quality} out of range: {levels} level(s)"
@@ -627,6 +631,19 @@ impl Runner {
 
     /// Publish what the last call changed in the context and the variables.
     fn after_call(&mut self) {
+        if !self.cx.supervision.is_empty() {
+            let steps = std::mem::take(&mut self.cx.supervision);
+            self.shared.update(|monitor| {
+                monitor.supervision_steps += steps.len() as u64;
+                monitor.supervision.extend(steps.iter().cloned());
+                let excess = monitor
+                    .supervision
+                    .len()
+                    .saturating_sub(crate::monitor::SUPERVISION_HISTORY);
+                monitor.supervision.drain(..excess);
+                steps.into_iter().map(MonitorEvent::Supervision).collect()
+            });
+        }
         if self.cx.result_changed {
             self.cx.result_changed = false;
             let result = self.cx.result.clone();
@@ -773,7 +790,7 @@ impl Runner {
                 }
                 PlanStep::Goto(_) => {}
                 PlanStep::Degrade => {
-                    if self.cx.quality + 1 < self.spec.timing.qualities.len() {
+                    if self.cx.quality + 1 < self.timing.qualities.len() {
                         self.set_quality(self.cx.quality + 1);
                         return Recovery::Recovered;
                     }

@@ -56,6 +56,12 @@ impl Spec {
     /// Check that every index in the spec points at something that exists and that
     /// every periodic section has a period. `System::add` refuses a spec that fails.
     pub fn validate(&self) -> Result<(), String> {
+        self.validate_with(&self.timing)
+    }
+
+    /// [`Spec::validate`] with an instance's own timing block in place of the spec's
+    /// (see `Component::with_timing`): a periodic section may take its period from it.
+    pub fn validate_with(&self, timing: &TimingSpec) -> Result<(), String> {
         let states = self.states.len();
         if states == 0 {
             return Err("the user automaton has no state".to_owned());
@@ -101,7 +107,7 @@ impl Spec {
                 ));
             }
             if let Some(periodic) = state.periodic {
-                match periodic.period.or(self.timing.period) {
+                match periodic.period.or(timing.period) {
                     None => {
                         return Err(format!(
                             "state `{name}` has a periodic section but neither it nor the component has a period"

@@ -13,7 +13,7 @@ use crate::port::{
     ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
 };
 use crate::runner::Runner;
-use crate::spec::{InputKind, OutputKind, Spec};
+use crate::spec::{InputKind, OutputKind, Spec, TimingSpec};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
@@ -61,6 +61,8 @@ pub struct Component {
     name: String,
     automaton: Box<dyn Automaton>,
     ports: PortSet,
+    /// The instance's own `timing` block, replacing the spec's.
+    timing: Option<TimingSpec>,
 }
 
 impl std::fmt::Debug for Component {
@@ -86,7 +88,25 @@ impl Component {
             name: name.into(),
             automaton,
             ports,
+            timing: None,
         }
+    }
+
+    /// This instance with its own `timing` block (a `.cool` instance's `timing { ... }`
+    /// override): `timing` replaces the spec's block as a whole for this instance —
+    /// period, max_period, max_response, priority and quality levels. The runner, the
+    /// monitor and the watchdog use it wherever they would use `spec().timing`. To
+    /// change only some fields, start from the spec's block:
+    /// `TimingSpec { period: Some(ms(50)), ..SPEC.timing }`.
+    pub fn with_timing(mut self, timing: TimingSpec) -> Component {
+        self.timing = Some(timing);
+        self
+    }
+
+    /// The effective `timing` block: the instance's override if it has one
+    /// ([`Component::with_timing`]), else the spec's.
+    pub fn timing(&self) -> TimingSpec {
+        self.timing.unwrap_or(self.automaton.spec().timing)
     }
 
     /// The instance name.
@@ -380,10 +400,12 @@ impl System {
     /// Add a component; it starts with the system (or at once if the system has
     /// started). Duplicate names and ports that do not match the spec are rejected.
     pub fn add(&mut self, component: Component) -> Result<Handle, Error> {
+        let timing = component.timing();
         let Component {
             name,
             automaton,
             ports,
+            timing: _,
         } = component;
         if name.is_empty() || name.contains('.') {
             return Err(Error::InvalidName(name));
@@ -392,7 +414,7 @@ impl System {
             return Err(Error::DuplicateName(name));
         }
         let spec = automaton.spec();
-        if let Err(detail) = spec.validate() {
+        if let Err(detail) = spec.validate_with(&timing) {
             return Err(Error::InvalidSpec {
                 component: name,
                 detail,
@@ -471,10 +493,12 @@ impl System {
             overflows: 0,
             port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
             quality: 0,
-            period: spec.timing.period,
-            max_response: spec.timing.max_response,
-            priority: spec.timing.priority,
+            period: timing.period,
+            max_response: timing.max_response,
+            priority: timing.priority,
             dropped_events: 0,
+            supervision: Vec::new(),
+            supervision_steps: 0,
         };
         let named_inputs = spec
             .inputs
@@ -529,6 +553,7 @@ impl System {
         let runner = Runner::new(
             &name,
             automaton,
+            timing,
             shared,
             control,
             bell,

@@ -11,9 +11,9 @@ use std::time::Duration;
 
 use coolbot::port::{DataOut, TickOut};
 use coolbot::{
-    Command, Component, CompoundBuilder, CompoundError, Controllable, Handle, OutputKind, Policy,
-    Section, SectionResult, Spec, State, StateSpec, Supervisor, SupervisorCx, System, TimingSpec,
-    Value, VarKind, VarSpec,
+    Command, Component, CompoundBuilder, CompoundError, Controllable, Handle, MonitorEvent,
+    OutputKind, Policy, Section, SectionResult, Spec, State, StateSpec, Step, Supervisor,
+    SupervisorCx, System, TimingSpec, Value, VarKind, VarSpec,
 };
 use support::shell::{self, ShellBuilder};
 use support::worker::{self, Exception};
@@ -337,7 +337,7 @@ fn restart_policy_brings_the_instance_back_and_the_compound_runs_on() {
     assert!(
         events
             .try_iter()
-            .all(|e| !matches!(e, coolbot::MonitorEvent::State { .. })),
+            .all(|e| !matches!(e, MonitorEvent::State { .. })),
         "the compound never left running"
     );
     assert!(system.shutdown().clean());
@@ -431,15 +431,48 @@ fn a_substitute_takes_over_and_the_recovered_original_takes_its_place_back() {
     );
     assert_eq!(rig.b_script.received.load(Ordering::SeqCst), 2);
     assert_eq!(rig.base.state(), State::Running);
+    // Each step was reported on the compound's monitoring port, in order.
+    let monitor = rig
+        .base
+        .wait_for(
+            |m| m.supervision.iter().any(|s| s.step == Step::Recovered),
+            WAIT,
+        )
+        .expect("the recovery is reported");
+    let mut steps: Vec<Step> = monitor.supervision.iter().map(|s| s.step.clone()).collect();
+    steps.dedup();
+    assert_eq!(
+        steps,
+        [
+            Step::Failed,
+            Step::Enqueued,
+            Step::Substituted { by: "b".to_owned() },
+            Step::Retried,
+            Step::Recovered
+        ]
+    );
+    assert!(monitor.supervision.iter().all(|s| s.instance == "w"));
+    assert!(monitor.supervision_steps >= 5);
     assert!(rig.system.shutdown().clean());
 }
 
 #[test]
 fn at_the_deadline_the_original_is_destroyed_and_the_substitute_stays() {
     let rig = substitution(Duration::from_millis(200));
+    let events = rig.base.subscribe();
     rig.fail_primary();
     wait(&rig.w, State::Dead);
     assert_eq!(rig.b.state(), State::Running);
+    // The retirement is announced to observers as it happens.
+    let until = std::time::Instant::now() + WAIT;
+    let mut events = std::iter::from_fn(|| events.recv_deadline(until).ok());
+    let retired = events.find_map(|event| match event {
+        MonitorEvent::Supervision(step) if step.step == Step::Retired => Some(step),
+        _ => None,
+    });
+    let retired = retired.expect("a retirement event");
+    assert_eq!(retired.instance, "w");
+    assert!(retired.to_string().starts_with("w retired"), "{retired}");
     assert_eq!(rig.base.state(), State::Running);
     rig.feed.data.send(9);
     eventually(
