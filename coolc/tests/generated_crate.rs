@@ -75,3 +75,31 @@ fn every_construct_generates_a_clippy_clean_crate() {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     );
 }
+
+#[test]
+fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
+    // `Plant` nests the `Cell` compound (a substitute, exported ports, mapped
+    // variables, supervisor rules over own and instance variables); the filled user
+    // files and the run test are in `tests/data/plant`.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("plant.cool");
+    std::fs::copy(data("plant/plant.cool"), &description).unwrap();
+    let krate = dir.path().join("plant");
+    compile(&description, &krate, "plant");
+    for name in ["source.rs", "worker.rs", "sink.rs", "cell.rs", "plant.rs"] {
+        std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("plant/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    assert!(
+        output.contains("test a_failed_leaf_is_substituted_and_the_supervisors_follow ... ok"),
+        "{output}"
+    );
+}

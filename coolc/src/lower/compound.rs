@@ -489,21 +489,28 @@ impl<'a> Lowerer<'a> {
                 format!("super::{module}::component({name}, parts.{method}())"),
             ),
             Some(module) => {
-                let fields = |kind: &str, overrides: &[(String, String)]| {
+                let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
+                let fields = |kind: &str, overrides: &[(String, String)], all: usize| {
                     if overrides.is_empty() {
                         return format!("super::{module}::{kind}::default()");
                     }
                     let mut text = format!("super::{module}::{kind} {{ ");
+                    let mut named = BTreeSet::new();
                     for (field, value) in overrides {
+                        named.insert(field);
                         text.push_str(&format!("{field}: {value}, "));
                     }
-                    text.push_str(&format!("..super::{module}::{kind}::default() }}"));
+                    // Every field named: no struct update (clippy's `needless_update`).
+                    if named.len() < all {
+                        text.push_str(&format!("..super::{module}::{kind}::default()"));
+                    }
+                    text.push_str(" }");
                     text
                 };
                 Some(format!(
                     "super::{module}::component_with({name}, parts.{method}(), {}, {})",
-                    fields("Config", &config_overrides),
-                    fields("Vars", &var_overrides)
+                    fields("Config", &config_overrides, config_fields),
+                    fields("Vars", &var_overrides, var_fields)
                 ))
             }
         };
@@ -718,6 +725,20 @@ impl Lowerer<'_> {
             when,
         }
     }
+}
+
+/// How many fields an atomic component's `Config` and `Vars` have.
+fn field_counts(component: &ast::Component) -> (usize, usize) {
+    let mut config = 0;
+    let mut vars = 0;
+    for member in &component.members {
+        match member {
+            ast::Member::Configuration(c) => config += c.fields.len(),
+            ast::Member::Variable(v) if v.ty.is_some() => vars += 1,
+            _ => {}
+        }
+    }
+    (config, vars)
 }
 
 fn port_address(target: &ast::PortRef) -> String {

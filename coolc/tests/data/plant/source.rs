@@ -1,0 +1,16 @@
+//! Filled-in `Source`: sends an increasing count every period.
+
+use crate::generated::source::*;
+use crate::generated::types::Count;
+
+/// No state of its own.
+#[derive(Debug, Default)]
+pub struct Source {}
+
+impl Behavior for Source {
+    fn sending_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.sent += 1;
+        cx.outputs.out.send(Count { n: cx.vars.sent });
+        Ok(())
+    }
+}
