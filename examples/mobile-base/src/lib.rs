@@ -427,14 +427,14 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     MonitorEvent::Error(Some(error)) => {
                         fresh.push(format!("{:6.2}s {name}: error: {error}", at.as_secs_f64()));
                     }
-                    MonitorEvent::UserState(Some(state)) if name == BASE => {
-                        if user_states.last() != Some(&state) {
-                            fresh.push(format!(
-                                "{:6.2}s {name}: supervisor -> {state}",
-                                at.as_secs_f64()
-                            ));
-                            user_states.push(state);
-                        }
+                    MonitorEvent::UserState(Some(state))
+                        if name == BASE && user_states.last() != Some(&state) =>
+                    {
+                        fresh.push(format!(
+                            "{:6.2}s {name}: supervisor -> {state}",
+                            at.as_secs_f64()
+                        ));
+                        user_states.push(state);
                     }
                     MonitorEvent::Supervision(step) => {
                         let step = SupervisionStep {
