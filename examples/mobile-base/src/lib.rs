@@ -212,7 +212,7 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  distance travelled   {:.2} m (odometry {:.2} m)",
+            "  distance travelled   {:.2} m (odometry {:.2} m, as base last saw it)",
             self.distance, self.odometry_distance
         )?;
         writeln!(
