@@ -64,6 +64,16 @@ impl ::core::default::Default for Vars {
 }
 {% endif %}
 
+/// Initial values of the mapped controllable variables, for an enclosing compound's
+/// instance overrides (`None`: the instance's own value).
+#[derive(Clone, Debug, Default)]
+pub struct Mapped {
+{%- for m in c.mapped %}
+    /// `controllable {{ m.cool_name }} = {{ m.target }};`
+    pub {{ m.name }}: ::core::option::Option<{{ m.ty }}>,
+{%- endfor %}
+}
+
 /// The supervisor's states (its user automaton).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum UserState {
@@ -97,8 +107,9 @@ impl UserState {
 }
 
 /// The supervisor's shape: its states, its own observable and controllable
-/// variables and its timing. The compound's exported ports and mapped variables are
-/// added by `coolbot::CompoundBuilder::build`.
+/// variables, its timing, and the exported ports as the compound will have them
+/// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
+/// adds the mapped variables).
 pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     type_name: "{{ c.type_name }}",
     doc: {{ c.doc_literal() }},
@@ -108,8 +119,16 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     {%- endfor %}
     ],
     initial: {{ c.initial }},
-    inputs: &[],
-    outputs: &[],
+    inputs: &[
+    {%- for spec in c.input_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
+    outputs: &[
+    {%- for spec in c.output_specs %}
+        {{ spec }},
+    {%- endfor %}
+    ],
     variables: &[
     {%- for v in c.vars %}
     {%- if v.spec_index.is_some() %}
@@ -168,14 +187,29 @@ pub fn component{{ c.generics() }}(name: impl ::core::convert::Into<::std::strin
     builder{{ c.turbofish() }}(name, parts)?.build()
 }
 
+/// Like [`component`], starting from the given own variables and initial values of
+/// the mapped controllable ones (an enclosing compound's instance overrides use it).
+pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, vars, mapped)?.build()
+}
+
 /// The runtime's builder for compound `{{ c.type_name }}` named `name`, with
 /// everything the description says: the instances (behaviours from `parts`, with
 /// their overrides), the connections, the exported ports, the mapped variables, the
 /// `on error` policies, the substitutes, the redundant groups, the recovery queue and
 /// the supervisor's rules. Fails when a nested compound cannot be built.
-pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    builder_with{{ c.turbofish() }}(name, parts, Vars::default(), Mapped::default())
+}
+
+/// Like [`builder`], starting from the given own variables and initial values of the
+/// mapped controllable ones.
+pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+    {%- if c.mapped.is_empty() %}
+    let _ = mapped;
+    {%- endif %}
     let name = name.into();
-    let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(Vars::default()));
+    let vars = ::std::sync::Arc::new(::std::sync::Mutex::new(vars));
     let supervisor = __CoolSupervisor {
         supervisor: parts.supervisor(),
         vars{% if c.rules_use_vars() %}: ::std::sync::Arc::clone(&vars){% endif %},
@@ -185,6 +219,9 @@ pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string:
 {%- if let Some(build) = i.build %}
     {%- if let Some(node) = i.node %}
         // Instance `{{ i.name }}` is declared `on "{{ node }}"`: it runs here (remote nodes are not supported yet).
+    {%- endif %}
+    {%- if !i.unapplied.is_empty() %}
+        // Not applied: overrides of `{{ i.name }}`'s mapped variables {{ i.unapplied_text() }} (set them through its control port once it runs).
     {%- endif %}
         .instance({{ build }})
 {%- endif %}

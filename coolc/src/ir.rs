@@ -466,6 +466,14 @@ pub struct Compound {
     /// mapped variables, policies, redundant groups, substitutes, recovery), each a
     /// Rust method call starting with `.`.
     pub steps: Vec<String>,
+    /// The `Mapped` fields: one per mapped controllable variable.
+    pub mapped: Vec<MappedField>,
+    /// `coolbot::InputSpec` expressions of the exported inputs, in order (what the
+    /// builder gives the compound; listed in `SPEC` so that a supervisor's `on` and
+    /// `without` validate).
+    pub input_specs: Vec<String>,
+    /// `coolbot::OutputSpec` expressions of the exported outputs, in order.
+    pub output_specs: Vec<String>,
     /// The compound's own variables (`Vars`), read through the guard `vars`.
     pub vars: Vec<Var>,
     /// Supervisor states (index = state id).
@@ -480,6 +488,14 @@ pub struct Compound {
     pub timing: String,
     /// The `when` rules, in declaration order.
     pub rules: Vec<Rule>,
+}
+
+impl Instance {
+    /// The unapplied overrides as one line of text (`a`, `b`).
+    pub fn unapplied_text(&self) -> String {
+        let names: Vec<String> = self.unapplied.iter().map(|n| format!("`{n}`")).collect();
+        names.join(", ")
+    }
 }
 
 impl Compound {
@@ -533,6 +549,19 @@ impl Compound {
     }
 }
 
+/// A mapped controllable variable's initial value, a field of `Mapped`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MappedField {
+    /// Rust field name.
+    pub name: String,
+    /// The variable's name as written.
+    pub cool_name: String,
+    /// The instance variable it maps (`instance.variable`).
+    pub target: String,
+    /// The instance variable's Rust type (the field is an `Option` of it).
+    pub ty: String,
+}
+
 /// One instance of a compound.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Instance {
@@ -555,6 +584,9 @@ pub struct Instance {
     pub build: Option<String>,
     /// Rust expression of its `timing { ... }` override, if any.
     pub timing: Option<String>,
+    /// Overrides the generated code cannot apply (a nested compound's mapped
+    /// controllable variables), by name.
+    pub unapplied: Vec<String>,
     /// Configuration overrides: `(field, Rust value)`.
     pub config_overrides: Vec<(String, String)>,
     /// Controllable variable overrides: `(field, Rust value)`.

@@ -1000,7 +1000,12 @@ impl<'a> Lowerer<'a> {
 /// `name`, or `name_2`, `name_3`... when a method of that name exists (a state `on`
 /// with an exit section and an exception `exit` would both want `on_exit`).
 fn unique(name: String, methods: &[ir::Method]) -> String {
-    let taken = |candidate: &str| methods.iter().any(|m| m.name == candidate);
+    unique_among(name, methods.iter().map(|m| m.name.as_str()))
+}
+
+/// `name`, or `name_2`, `name_3`... when `taken` holds it.
+fn unique_among<'t>(name: String, taken: impl Iterator<Item = &'t str> + Clone) -> String {
+    let taken = |candidate: &str| taken.clone().any(|t| t == candidate);
     if !taken(&name) {
         return name;
     }
@@ -1013,12 +1018,10 @@ fn unique(name: String, methods: &[ir::Method]) -> String {
 impl Lowerer<'_> {
     /// An instance's overrides of configuration fields (`config`) or controllable
     /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    /// A compound's own controllable variables count; its mapped ones do not (they
+    /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self
-            .components
-            .get(instance.component.name.as_str())
-            .filter(|c| c.kind == ast::ComponentKind::Atomic)
-        else {
+        let Some(component) = self.components.get(instance.component.name.as_str()) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();

@@ -79,14 +79,26 @@ fn every_construct_generates_a_clippy_clean_crate() {
 #[test]
 fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     // `Plant` nests the `Cell` compound (a substitute, exported ports, mapped
-    // variables, supervisor rules over own and instance variables); the filled user
-    // files and the run test are in `tests/data/plant`.
+    // variables, supervisor rules over own and instance variables); `Probe` has rules
+    // of every form over every readable type; `Gate` moves on a packet at an exported
+    // input; `Pair` is a redundant group. The filled user files and the run tests are
+    // in `tests/data/plant`.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("plant.cool");
     std::fs::copy(data("plant/plant.cool"), &description).unwrap();
     let krate = dir.path().join("plant");
     compile(&description, &krate, "plant");
-    for name in ["source.rs", "worker.rs", "sink.rs", "cell.rs", "plant.rs"] {
+    for name in [
+        "source.rs",
+        "worker.rs",
+        "sink.rs",
+        "cell.rs",
+        "plant.rs",
+        "gauge.rs",
+        "probe.rs",
+        "gate.rs",
+        "pair.rs",
+    ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
     std::fs::create_dir_all(krate.join("tests")).unwrap();
@@ -98,8 +110,12 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     );
     let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(
-        output.contains("test a_failed_leaf_is_substituted_and_the_supervisors_follow ... ok"),
-        "{output}"
-    );
+    for test in [
+        "a_failed_leaf_is_substituted_and_the_supervisors_follow",
+        "rules_read_every_kind_of_value",
+        "a_supervisor_moves_on_a_packet_at_an_exported_input",
+        "a_redundant_group_keeps_the_stream_when_a_member_fails",
+    ] {
+        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
+    }
 }

@@ -174,3 +174,84 @@ fn regeneration_keeps_user_code_and_adds_new_stubs() {
     let report = compile(&description, &krate, "lamp");
     assert!(report.written.is_empty(), "{:?}", report.written);
 }
+
+const COMPOUND_V1: &str = "\
+/// A lamp.
+atomic Lamp {
+    observable level: u32 = 0;
+    timing { period 20ms; }
+    automaton { initial off; state off { entry; } }
+}
+
+/// Lamps under a supervisor.
+compound Room {
+    instance main: Lamp;
+    supervisor {
+        initial dark;
+        state dark { entry; when main.level > 3 -> lit; }
+        state lit { }
+    }
+}
+";
+
+/// A supervisor section filled in by hand.
+const MINE: &str = "        let _ = cx.view.state(\"main\"); // mine\n        Ok(())\n";
+
+/// V1 with a new supervisor section, a new state and a new instance.
+fn compound_v2() -> String {
+    COMPOUND_V1
+        .replace("state lit { }", "state lit { exit; periodic 50ms; }")
+        .replace(
+            "    instance main: Lamp;\n",
+            "    instance main: Lamp;\n    instance spare: Lamp substitutes main;\n",
+        )
+}
+
+#[test]
+fn regeneration_adds_supervisor_sections_and_parts_to_compounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("room.cool");
+    let krate = dir.path().join("room");
+
+    write(&description, COMPOUND_V1);
+    compile(&description, &krate, "room");
+    let user_file = krate.join("src/room.rs");
+    let generated = std::fs::read_to_string(&user_file).unwrap();
+    assert!(generated.contains("impl Supervisor for RoomSupervisor"));
+    assert!(generated.contains("fn dark_entry"));
+    assert!(!generated.contains("fn lit_exit"));
+
+    // The user fills in the supervisor's entry section.
+    let start = generated.find("fn dark_entry").unwrap();
+    let open = start + generated[start..].find("{\n").unwrap() + 2;
+    let close = open + generated[open..].find("    }\n").unwrap();
+    let filled = format!("{}{MINE}{}", &generated[..open], &generated[close..]);
+    write(&user_file, &filled);
+
+    write(&description, &compound_v2());
+    let report = compile(&description, &krate, "room");
+    let regenerated = std::fs::read_to_string(&user_file).unwrap();
+    assert!(regenerated.contains(MINE));
+    // Two insertion points (the two impl blocks); everything else is kept.
+    let supervisor_end = regenerated.find("impl Parts for").unwrap();
+    let (supervisor_part, parts_part) = regenerated.split_at(supervisor_end);
+    let (old_supervisor, old_parts) = filled.split_at(filled.find("impl Parts for").unwrap());
+    let inserted = assert_only_inserted(old_supervisor, supervisor_part);
+    assert!(inserted.contains("fn lit_periodic"), "{inserted}");
+    assert!(inserted.contains("fn lit_exit"), "{inserted}");
+    let inserted = assert_only_inserted(old_parts, parts_part);
+    assert!(inserted.contains("fn spare"), "{inserted}");
+    assert_eq!(
+        report.added,
+        [(
+            "src/room.rs".into(),
+            vec![
+                "lit_periodic".to_owned(),
+                "lit_exit".to_owned(),
+                "spare".to_owned()
+            ]
+        )]
+    );
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    cargo(&krate, &["build", "--quiet"]);
+}

@@ -9,32 +9,25 @@
 
 use std::collections::BTreeSet;
 
-use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique};
+use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique_among};
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
+use crate::check::model::{DEFAULT_STATES, RESULTS};
 use crate::ident;
 use crate::ir;
-
-/// The default automaton's states, as written and as `coolbot::State` variants.
-const DEFAULT_STATES: &[(&str, &str)] = &[
-    ("starting", "Starting"),
-    ("ready", "Ready"),
-    ("running", "Running"),
-    ("suspended", "Suspended"),
-    ("dead", "Dead"),
-    ("starting_error", "StartingError"),
-    ("running_error", "RunningError"),
-    ("end", "End"),
-];
 
 /// The supervisor state of a compound that declares none.
 const IMPLICIT_STATE: &str = "supervising";
 
-/// The `result` symbols and the `coolbot::TaskResult` patterns they stand for.
-const RESULTS: &[(&str, &str)] = &[
-    ("none", "::coolbot::TaskResult::None"),
-    ("success", "::coolbot::TaskResult::Success(_)"),
-    ("fail", "::coolbot::TaskResult::Fail(_)"),
-];
+/// The `coolbot::TaskResult` pattern a `result` symbol (`check::model::RESULTS`)
+/// stands for.
+fn result_pattern(symbol: &str) -> Option<&'static str> {
+    match symbol {
+        "none" => Some("::coolbot::TaskResult::None"),
+        "success" => Some("::coolbot::TaskResult::Success(_)"),
+        "fail" => Some("::coolbot::TaskResult::Fail(_)"),
+        _ => None,
+    }
+}
 
 /// The type of a rule operand, as the generated Rust holds it.
 #[derive(Clone, Debug, PartialEq)]
@@ -105,16 +98,15 @@ impl<'a> Lowerer<'a> {
             .copied()
     }
 
-    /// The packet type of input (`input`) or output port `port` of `component`,
-    /// through exports of nested compounds: `Some(None)` for a tick port, `None` when
-    /// it does not resolve.
-    fn port_type(
+    /// The input or output (`input`) port `port` of `component`, followed through
+    /// the exports of nested compounds to the atomic port that implements it.
+    fn leaf_port(
         &self,
         component: &'a ast::Component,
         port: &str,
         input: bool,
         depth: usize,
-    ) -> Option<Option<&'a ast::Type>> {
+    ) -> Option<LeafPort<'a>> {
         if depth > 64 {
             return None;
         }
@@ -122,23 +114,18 @@ impl<'a> Lowerer<'a> {
             match member {
                 ast::Member::Input(i) if input && i.name.name == port => {
                     return match &i.def {
-                        ast::InputDef::Tick => Some(None),
-                        ast::InputDef::Fifo { ty, .. }
-                        | ast::InputDef::Ufifo { ty, .. }
-                        | ast::InputDef::Last(ty)
-                        | ast::InputDef::Poster(ty) => Some(Some(ty)),
                         ast::InputDef::Export(target) => {
-                            self.export_type(component, target, true, depth)
+                            self.exported_port(component, target, true, depth)
                         }
+                        _ => Some(LeafPort::Input(i)),
                     };
                 }
                 ast::Member::Output(o) if !input && o.name.name == port => {
                     return match &o.def {
-                        ast::OutputDef::Tick => Some(None),
-                        ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(Some(ty)),
                         ast::OutputDef::Export(target) => {
-                            self.export_type(component, target, false, depth)
+                            self.exported_port(component, target, false, depth)
                         }
+                        _ => Some(LeafPort::Output(o)),
                     };
                 }
                 _ => {}
@@ -147,16 +134,63 @@ impl<'a> Lowerer<'a> {
         None
     }
 
-    fn export_type(
+    /// The atomic port an export of `component` names.
+    fn exported_port(
         &self,
         component: &'a ast::Component,
         target: &ast::PortRef,
         input: bool,
         depth: usize,
-    ) -> Option<Option<&'a ast::Type>> {
+    ) -> Option<LeafPort<'a>> {
         let instance = Self::instance_of(component, &target.instance.as_ref()?.name)?;
         let inner = self.component_of(instance)?;
-        self.port_type(inner, &target.port.name, input, depth + 1)
+        self.leaf_port(inner, &target.port.name, input, depth + 1)
+    }
+
+    /// The packet type of the port an export names: `Some(None)` for a tick port,
+    /// `None` when it does not resolve.
+    fn export_type(
+        &self,
+        component: &'a ast::Component,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<Option<&'a ast::Type>> {
+        Some(match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => match &i.def {
+                ast::InputDef::Fifo { ty, .. }
+                | ast::InputDef::Ufifo { ty, .. }
+                | ast::InputDef::Last(ty)
+                | ast::InputDef::Poster(ty) => Some(ty),
+                ast::InputDef::Tick | ast::InputDef::Export(_) => None,
+            },
+            LeafPort::Output(o) => match &o.def {
+                ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(ty),
+                ast::OutputDef::Tick | ast::OutputDef::Export(_) => None,
+            },
+        })
+    }
+
+    /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
+    /// atomic port's, under the compound's name for it.
+    fn export_spec(
+        &self,
+        component: &'a ast::Component,
+        name: &str,
+        target: &ast::PortRef,
+        input: bool,
+    ) -> Option<String> {
+        let port = match self.exported_port(component, target, input, 0)? {
+            LeafPort::Input(i) => self.input(i),
+            LeafPort::Output(o) => self.output(o),
+        }?;
+        let kind = if input { "InputSpec" } else { "OutputSpec" };
+        Some(format!(
+            "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
+            ident::string_literal(name),
+            port.kind,
+            ident::string_literal(&port.packet),
+            port.pull
+        ))
     }
 
     /// The declared type of variable `name` of `component` (through mapped variables
@@ -251,26 +285,21 @@ impl<'a> Lowerer<'a> {
         let mut timing = None;
         let mut recovery = None;
         let mut uses_converters = false;
-        let mut part_names: Vec<ir::Method> = vec![ir::Method {
-            name: "supervisor".to_owned(),
-            doc: Vec::new(),
-            signature: String::new(),
-            user_signature: String::new(),
-            stub_body: Vec::new(),
-        }];
+        let mut input_specs = Vec::new();
+        let mut output_specs = Vec::new();
+        // `Parts` method names: `supervisor`, then one per instance.
+        let mut part_names: Vec<String> = vec!["supervisor".to_owned()];
         let mut spec_index = 0;
+        let mapped_controllables = Self::mapped_controllables(c);
         for member in &c.members {
             match member {
                 ast::Member::Instance(i) => {
-                    let method = unique(ident::snake(&i.name.name), &part_names);
-                    part_names.push(ir::Method {
-                        name: method.clone(),
-                        doc: Vec::new(),
-                        signature: String::new(),
-                        user_signature: String::new(),
-                        stub_body: Vec::new(),
-                    });
-                    instances.push(self.instance(i, method));
+                    let method = unique_among(
+                        ident::snake(&i.name.name),
+                        part_names.iter().map(String::as_str),
+                    );
+                    part_names.push(method.clone());
+                    instances.push(self.instance(i, method, &mapped_controllables));
                 }
                 ast::Member::Connect(connect) => {
                     let end = |p: &ast::PortRef| match &p.instance {
@@ -291,7 +320,7 @@ impl<'a> Lowerer<'a> {
                         let address = port_address(target);
                         let name = ident::string_literal(&input.name.name);
                         let target_lit = ident::string_literal(&address);
-                        let step = match self.export_type(c, target, true, 0) {
+                        let step = match self.export_type(c, target, true) {
                             Some(None) => format!(".export_tick_input({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_input::<{}>({name}, {target_lit})",
@@ -300,11 +329,13 @@ impl<'a> Lowerer<'a> {
                             None => format!(".export_input::<()>({name}, {target_lit})"),
                         };
                         steps.push(step);
+                        input_specs.extend(self.export_spec(c, &input.name.name, target, true));
                     }
                 }
                 ast::Member::Output(output) => {
                     if let ast::OutputDef::Export(target) = &output.def {
-                        let ty = match self.export_type(c, target, false, 0) {
+                        output_specs.extend(self.export_spec(c, &output.name.name, target, false));
+                        let ty = match self.export_type(c, target, false) {
                             Some(Some(ty)) => self.rust_type(ty, GEN_TYPES),
                             _ => "()".to_owned(),
                         };
@@ -462,6 +493,9 @@ impl<'a> Lowerer<'a> {
             instances,
             connections,
             steps,
+            mapped: self.mapped_fields(c),
+            input_specs,
+            output_specs,
             vars,
             states: supervisor.states,
             initial: supervisor.initial,
@@ -472,49 +506,186 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    /// One instance: how the builder makes its component.
-    fn instance(&self, i: &'a ast::Instance, method: String) -> ir::Instance {
+    /// The mapped controllable variables of compound `c`: `(name, instance,
+    /// variable)`, in declaration order.
+    fn mapped_controllables(c: &'a ast::Component) -> Vec<(&'a str, &'a str, &'a str)> {
+        c.members
+            .iter()
+            .filter_map(|m| match m {
+                ast::Member::Variable(v)
+                    if v.ty.is_none() && v.kind == ast::VarKind::Controllable =>
+                {
+                    match &v.value.as_ref()?.kind {
+                        ExprKind::Path(segments) => match segments.as_slice() {
+                            [instance, variable] => Some((
+                                v.name.name.as_str(),
+                                instance.name.as_str(),
+                                variable.name.as_str(),
+                            )),
+                            _ => None,
+                        },
+                        _ => None,
+                    }
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The `Mapped` fields of compound `c`: one per mapped controllable variable,
+    /// typed like the instance variable it names.
+    fn mapped_fields(&self, c: &'a ast::Component) -> Vec<ir::MappedField> {
+        Self::mapped_controllables(c)
+            .into_iter()
+            .map(|(name, instance, variable)| {
+                let ty = Self::instance_of(c, instance)
+                    .and_then(|i| self.component_of(i))
+                    .and_then(|t| self.variable_type(t, variable, 0))
+                    .map(|(ty, _)| {
+                        let rust = self.rust_type(ty, GEN_TYPES);
+                        if self.defaultable(ty, &mut BTreeSet::new()) {
+                            rust
+                        } else {
+                            // Its `Vars` field has no default: an `Option` itself.
+                            format!("::core::option::Option<{rust}>")
+                        }
+                    })
+                    .unwrap_or_else(|| "()".to_owned());
+                ir::MappedField {
+                    name: ident::snake(name),
+                    cool_name: name.to_owned(),
+                    target: format!("{instance}.{variable}"),
+                    ty,
+                }
+            })
+            .collect()
+    }
+
+    /// One instance: how the builder makes its component. `mapped` are the mapped
+    /// controllable variables of the enclosing compound (their initial values,
+    /// given to `builder_with`, go to the instance).
+    fn instance(
+        &self,
+        i: &'a ast::Instance,
+        method: String,
+        mapped: &[(&str, &str, &str)],
+    ) -> ir::Instance {
         let target = self.component_of(i);
         let module = target.and_then(|t| self.modules.get(t.name.name.as_str()).cloned());
         let compound = target.is_some_and(|t| t.kind == ast::ComponentKind::Compound);
         let name = ident::string_literal(&i.name.name);
         let config_overrides = self.overrides(i, true);
         let var_overrides = self.overrides(i, false);
-        let component = match &module {
-            None => None,
-            Some(module) if compound => Some(format!(
-                "super::{module}::component({name}, parts.{method}())?"
-            )),
-            Some(module) if config_overrides.is_empty() && var_overrides.is_empty() => Some(
-                format!("super::{module}::component({name}, parts.{method}())"),
-            ),
-            Some(module) => {
-                let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
-                let fields = |kind: &str, overrides: &[(String, String)], all: usize| {
-                    if overrides.is_empty() {
-                        return format!("super::{module}::{kind}::default()");
-                    }
-                    let mut text = format!("super::{module}::{kind} {{ ");
-                    let mut named = BTreeSet::new();
-                    for (field, value) in overrides {
-                        named.insert(field);
-                        text.push_str(&format!("{field}: {value}, "));
-                    }
-                    // Every field named: no struct update (clippy's `needless_update`).
-                    if named.len() < all {
-                        text.push_str(&format!("..super::{module}::{kind}::default()"));
-                    }
-                    text.push_str(" }");
-                    text
-                };
-                Some(format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {}, {})",
-                    fields("Config", &config_overrides, config_fields),
-                    fields("Vars", &var_overrides, var_fields)
-                ))
-            }
+        // The enclosing compound's mapped controllables that name this instance:
+        // `(instance variable, field of the enclosing `Mapped`)`.
+        let from_mapped: Vec<(String, String)> = mapped
+            .iter()
+            .filter(|(_, instance, _)| *instance == i.name.name)
+            .map(|(name, _, variable)| (ident::snake(variable), ident::snake(name)))
+            .collect();
+        // A nested compound's own mapped controllables, overridden here or fed from
+        // the enclosing `Mapped`.
+        let inner_mapped: Vec<(&str, &str, &str)> = match target {
+            Some(t) if compound => Self::mapped_controllables(t),
+            _ => Vec::new(),
         };
-        let timing = i.timing.as_ref().map(|t| self.timing(Some(t)));
+        let is_inner_mapped = |field: &str| {
+            inner_mapped
+                .iter()
+                .any(|(n, _, _)| ident::snake(n) == field)
+        };
+        let mut mapped_overrides: Vec<(String, String)> = Vec::new();
+        if let Some(t) = target.filter(|_| compound) {
+            for o in &i.overrides {
+                let field = ident::snake(&o.name.name);
+                if !is_inner_mapped(&field) {
+                    continue;
+                }
+                if let Some((ty, _)) = self.variable_type(t, &o.name.name, 0) {
+                    let value = self.value(&o.value, Some(ty), GEN_TYPES);
+                    let value = if self.defaultable(ty, &mut BTreeSet::new()) {
+                        value
+                    } else {
+                        format!("::core::option::Option::Some({value})")
+                    };
+                    mapped_overrides.push((field, value));
+                }
+            }
+        }
+        let component = module.as_ref().map(|module| {
+            let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
+            let vars_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| !is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let mapped_from_mapped: Vec<(String, String)> = from_mapped
+                .iter()
+                .filter(|(field, _)| is_inner_mapped(field))
+                .cloned()
+                .collect();
+            let config = fields(
+                module,
+                "Config",
+                &config_overrides,
+                &[],
+                config_fields,
+                false,
+            );
+            let vars = fields(
+                module,
+                "Vars",
+                &var_overrides,
+                &vars_from_mapped,
+                var_fields,
+                false,
+            );
+            let nested = fields(
+                module,
+                "Mapped",
+                &mapped_overrides,
+                &mapped_from_mapped,
+                inner_mapped.len(),
+                true,
+            );
+            let plain = config_overrides.is_empty()
+                && var_overrides.is_empty()
+                && from_mapped.is_empty()
+                && mapped_overrides.is_empty();
+            match (compound, plain) {
+                (true, true) => format!("super::{module}::component({name}, parts.{method}())?"),
+                (true, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {vars}, {nested})?"
+                ),
+                (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
+                (false, false) => format!(
+                    "super::{module}::component_with({name}, parts.{method}(), {config}, {vars})"
+                ),
+            }
+        });
+        let var_overrides: Vec<(String, String)> =
+            var_overrides.into_iter().chain(mapped_overrides).collect();
+        let applied: BTreeSet<&str> = config_overrides
+            .iter()
+            .chain(&var_overrides)
+            .map(|(field, _)| field.as_str())
+            .collect();
+        let unapplied: Vec<String> = i
+            .overrides
+            .iter()
+            .filter(|o| !applied.contains(ident::snake(&o.name.name).as_str()))
+            .map(|o| o.name.name.clone())
+            .collect();
+        let timing = match (&module, &i.timing) {
+            (Some(module), Some(t)) => {
+                Some(self.timing_override(t, &format!("super::{module}::SPEC.timing")))
+            }
+            _ => None,
+        };
+        let component = match (component, &timing) {
+            (Some(build), Some(timing)) => Some(format!("{build}.with_timing({timing})")),
+            (build, _) => build,
+        };
         ir::Instance {
             name: i.name.name.clone(),
             method,
@@ -525,9 +696,62 @@ impl<'a> Lowerer<'a> {
             node: i.node.as_ref().map(|n| n.value.clone()),
             build: component,
             timing,
+            unapplied,
             config_overrides,
             var_overrides,
         }
+    }
+
+    /// An instance's `timing { ... }`: the entries it names replace those of the
+    /// component's block (`base`), the others are kept.
+    fn timing_override(&self, timing: &ast::Timing, base: &str) -> String {
+        let mut fields = Vec::new();
+        let option = |ns: Option<u64>| match ns {
+            Some(ns) => format!("::core::option::Option::Some({})", duration_rust(ns)),
+            None => "::core::option::Option::None".to_owned(),
+        };
+        for entry in &timing.entries {
+            match entry {
+                ast::TimingEntry::Period(interval) => {
+                    fields.push(("period", option(duration_ns(&interval.lo))));
+                    fields.push((
+                        "max_period",
+                        option(interval.hi.as_ref().and_then(duration_ns)),
+                    ));
+                }
+                ast::TimingEntry::MaxResponse(e) => {
+                    fields.push(("max_response", option(duration_ns(e))));
+                }
+                ast::TimingEntry::Priority(e) => {
+                    let priority = super::int_value(e)
+                        .unwrap_or(0)
+                        .clamp(i32::MIN.into(), i32::MAX.into());
+                    fields.push(("priority", priority.to_string()));
+                }
+                ast::TimingEntry::Quality(names, _) => {
+                    let names: Vec<String> = names
+                        .iter()
+                        .map(|n| ident::string_literal(&n.name))
+                        .collect();
+                    fields.push(("qualities", format!("&[{}]", names.join(", "))));
+                }
+            }
+        }
+        // A later entry of the same kind wins, as in a component's block.
+        let mut text = String::from("::coolbot::TimingSpec { ");
+        let mut named = Vec::new();
+        for (index, (field, value)) in fields.iter().enumerate() {
+            if fields[index + 1..].iter().any(|(f, _)| f == field) {
+                continue;
+            }
+            named.push(*field);
+            text.push_str(&format!("{field}: {value}, "));
+        }
+        if named.len() < 5 {
+            text.push_str(&format!("..{base}"));
+        }
+        text.push_str(" }");
+        text
     }
 
     /// The `Parts` method of an instance, with its user stub.
@@ -562,6 +786,12 @@ impl<'a> Lowerer<'a> {
             ],
         }
     }
+}
+
+/// An atomic port an export leads to.
+enum LeafPort<'a> {
+    Input(&'a ast::Input),
+    Output(&'a ast::Output),
 }
 
 /// The lowered supervisor automaton.
@@ -727,6 +957,70 @@ impl Lowerer<'_> {
     }
 }
 
+/// A struct expression `super::<module>::<kind> { ... }` setting `overrides`
+/// (`(field, value)`) and fields fed from the enclosing compound's `Mapped`
+/// (`(field, Mapped field)`), the others from `Default` (no struct update when every
+/// one of the `all` fields is named: clippy's `needless_update`). `optional`: the
+/// fields are `Option`s (a `Mapped`), so a given value wins over the written one
+/// with `or`, not `unwrap_or`.
+fn fields(
+    module: &str,
+    kind: &str,
+    overrides: &[(String, String)],
+    from_mapped: &[(String, String)],
+    all: usize,
+    optional: bool,
+) -> String {
+    let path = format!("super::{module}::{kind}");
+    let mut named: Vec<&str> = Vec::new();
+    for (field, _) in overrides.iter().chain(from_mapped) {
+        if !named.contains(&field.as_str()) {
+            named.push(field);
+        }
+    }
+    if named.is_empty() {
+        return format!("{path}::default()");
+    }
+    let mut entries = Vec::new();
+    for field in &named {
+        let written = overrides.iter().find(|(f, _)| f == field).map(|(_, v)| {
+            if optional {
+                format!("::core::option::Option::Some({v})")
+            } else {
+                v.clone()
+            }
+        });
+        let given: Vec<String> = from_mapped
+            .iter()
+            .filter(|(f, _)| f == field)
+            .map(|(_, m)| format!("mapped.{m}"))
+            .collect();
+        let value = match (given.split_first(), written.as_ref()) {
+            (None, Some(written)) => written.clone(),
+            (None, None) => format!("{path}::default().{field}"),
+            (Some((first, rest)), written) => {
+                let mut chain = first.clone();
+                for other in rest {
+                    chain.push_str(&format!(".or({other})"));
+                }
+                match (optional, written) {
+                    (true, Some(written)) => format!("{chain}.or({written})"),
+                    (true, None) => chain,
+                    (false, Some(written)) => format!("{chain}.unwrap_or({written})"),
+                    (false, None) => {
+                        format!("{chain}.unwrap_or_else(|| {path}::default().{field})")
+                    }
+                }
+            }
+        };
+        entries.push(format!("{field}: {value}"));
+    }
+    if named.len() < all {
+        entries.push(format!("..{path}::default()"));
+    }
+    format!("{path} {{ {} }}", entries.join(", "))
+}
+
 /// How many fields an atomic component's `Config` and `Vars` have.
 fn field_counts(component: &ast::Component) -> (usize, usize) {
     let mut config = 0;
@@ -755,7 +1049,13 @@ fn show(expr: &ast::Expr) -> String {
         ExprKind::Float(x) => format!("{x:?}"),
         ExprKind::Str(s) => format!("{s:?}"),
         ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Duration(ns) => format!("{ns}ns"),
+        ExprKind::Duration(ns) => match *ns {
+            ns if ns > 0 && ns % 60_000_000_000 == 0 => format!("{}min", ns / 60_000_000_000),
+            ns if ns > 0 && ns % 1_000_000_000 == 0 => format!("{}s", ns / 1_000_000_000),
+            ns if ns > 0 && ns % 1_000_000 == 0 => format!("{}ms", ns / 1_000_000),
+            ns if ns > 0 && ns % 1_000 == 0 => format!("{}us", ns / 1_000),
+            ns => format!("{ns}ns"),
+        },
         ExprKind::Frequency(hz) => format!("{hz}Hz"),
         ExprKind::Path(parts) => parts
             .iter()
@@ -773,6 +1073,16 @@ fn show(expr: &ast::Expr) -> String {
         ExprKind::None => "none".to_owned(),
         ExprKind::Unary(UnaryOp::Not, inner) => format!("!{}", show_operand(inner)),
         ExprKind::Unary(UnaryOp::Neg, inner) => format!("-{}", show_operand(inner)),
+        ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
+            let side = |e: &ast::Expr| {
+                if needs_parens(*op, e) {
+                    format!("({})", show(e))
+                } else {
+                    show(e)
+                }
+            };
+            format!("{} {} {}", side(l), op.as_str(), side(r))
+        }
         ExprKind::Binary(op, l, r) => {
             format!("{} {} {}", show_operand(l), op.as_str(), show_operand(r))
         }
@@ -784,6 +1094,13 @@ fn show_operand(expr: &ast::Expr) -> String {
         ExprKind::Binary(..) => format!("({})", show(expr)),
         _ => show(expr),
     }
+}
+
+/// Whether `operand` of logical operator `op` needs parentheses: an `||` inside an
+/// `&&` (comparisons and `&&` bind tighter than `||`, comparisons tighter than
+/// `&&`).
+fn needs_parens(op: BinaryOp, operand: &ast::Expr) -> bool {
+    op == BinaryOp::And && matches!(operand.kind, ExprKind::Binary(BinaryOp::Or, ..))
 }
 
 impl Scope<'_, '_> {
@@ -798,12 +1115,16 @@ impl Scope<'_, '_> {
     fn boolean(&mut self, expr: &ast::Expr) -> String {
         match &expr.kind {
             ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-                let (l, r) = (self.boolean_operand(l), self.boolean_operand(r));
+                let (l, r) = (self.logic_operand(*op, l), self.logic_operand(*op, r));
                 format!("{l} {} {r}", op.as_str())
             }
             ExprKind::Binary(op, l, r) => self.comparison(*op, l, r),
             ExprKind::Unary(UnaryOp::Not, inner) => {
-                format!("!{}", self.boolean_operand(inner))
+                let text = self.boolean(inner);
+                match &inner.kind {
+                    ExprKind::Binary(..) => format!("!({text})"),
+                    _ => format!("!{text}"),
+                }
             }
             _ => {
                 let operand = self.operand(expr);
@@ -816,12 +1137,14 @@ impl Scope<'_, '_> {
         }
     }
 
-    /// [`Scope::boolean`], parenthesized when it is not atomic.
-    fn boolean_operand(&mut self, expr: &ast::Expr) -> String {
+    /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
+    /// would read it otherwise (an `||` inside an `&&`).
+    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr) -> String {
         let text = self.boolean(expr);
-        match &expr.kind {
-            ExprKind::Binary(..) => format!("({text})"),
-            _ => text,
+        if needs_parens(op, expr) {
+            format!("({text})")
+        } else {
+            text
         }
     }
 
@@ -1063,7 +1386,10 @@ impl Scope<'_, '_> {
         let l_opt = matches!(l.ty, RTy::Optional(_));
         let r_opt = matches!(r.ty, RTy::Optional(_));
         let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
-            let value = if operand.maybe {
+            let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
+            let value = if operand.maybe && owned_text {
+                format!("{name}.as_deref()")
+            } else if operand.maybe {
                 name.to_owned()
             } else {
                 operand.code.clone()
@@ -1128,15 +1454,16 @@ fn symbol(name: &str, other: &RTy) -> Operand {
         other => other,
     };
     match other {
-        RTy::State => match DEFAULT_STATES.iter().find(|(n, _)| *n == name) {
-            Some((_, variant)) => plain(format!("::coolbot::State::{variant}"), RTy::State),
-            None => plain(String::new(), RTy::Unreadable),
-        },
+        // The checker's names; `coolbot::State` variants are their camel case.
+        RTy::State if DEFAULT_STATES.contains(&name) => plain(
+            format!("::coolbot::State::{}", ident::camel(name)),
+            RTy::State,
+        ),
         RTy::UserState(states) if states.iter().any(|s| s == name) => {
             plain(ident::string_literal(name), other.clone())
         }
-        RTy::Result => match RESULTS.iter().find(|(n, _)| *n == name) {
-            Some((_, pattern)) => plain((*pattern).to_owned(), RTy::Result),
+        RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
+            Some(pattern) => plain(pattern.to_owned(), RTy::Result),
             None => plain(String::new(), RTy::Unreadable),
         },
         RTy::Quality(levels) => match levels.iter().position(|l| l == name) {
@@ -1219,6 +1546,8 @@ fn view_value(raw: &str, ty: &RTy) -> Option<String> {
             RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
             RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
             RTy::Enum(path) => serde(&format!("::core::option::Option<{path}>")),
+            // Owned: compared through `as_deref` (see `Scope::comparison`).
+            RTy::Str => serde("::core::option::Option<::std::string::String>"),
             _ => return None,
         },
         _ => return None,
@@ -1231,5 +1560,172 @@ fn is_f64(ty: &ast::Type) -> bool {
         TypeKind::Prim(p) => *p == Prim::F64,
         TypeKind::Optional(inner) => is_f64(inner),
         _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::ir;
+    use crate::lower::{Options, lower};
+
+    const TEXT: &str = "
+        enum Mode { Normal, Backup }
+        atomic Leaf {
+            observable level: u32 = 0;
+            controllable gain: f64 = 1.0;
+            output out: data<u32>;
+            input input: fifo<u32>(4);
+            timing { period 10ms; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Box {
+            instance a: Leaf { timing { priority 3; } }
+            instance b: Leaf substitutes a;
+            input input = a.input;
+            output out = a.out;
+            observable level = a.level;
+            controllable gain = a.gain;
+            observable mode: Mode = Mode::Normal;
+            local faults: u32 = 0;
+            on error a: substitute;
+            supervisor {
+                initial on;
+                state on {
+                    entry;
+                    when (a.state == running_error || faults > 2) && mode == Mode::Normal -> off;
+                    when level > 3 && !(a.user_state == on) -> off;
+                }
+                state off { exit; }
+            }
+        }
+        compound Outer { instance inner: Box { gain = 2.0; } }
+    ";
+
+    fn compounds() -> Vec<ir::Compound> {
+        let analysis = crate::analyze_text("t.cool", TEXT);
+        assert!(
+            !analysis.has_errors(),
+            "{}",
+            analysis.render(crate::RenderOptions::plain())
+        );
+        lower(&analysis.files, &Options::default()).compounds
+    }
+
+    #[test]
+    fn rules_compile_with_their_reads() {
+        let c = &compounds()[0];
+        let reads: Vec<&str> = c.rules.iter().map(|r| r.reads.as_str()).collect();
+        // A local variable is not in the supervisor's spec: not a read.
+        assert_eq!(
+            reads,
+            [r#"&["a.state", "mode"]"#, r#"&["a.level", "a.user_state"]"#]
+        );
+        assert!(c.rules[0].expr.starts_with("(view"), "{}", c.rules[0].expr);
+        assert!(
+            c.rules[0].expr.contains("|| i128::from(vars.faults) > 2)"),
+            "{}",
+            c.rules[0].expr
+        );
+        assert_eq!(c.rules[0].vars_param.as_deref(), Some("vars"));
+        // A mapped variable reads the instance's.
+        assert!(c.rules[1].expr.contains(r#"view.var("a", "level")"#));
+        assert!(c.rules[1].expr.contains("!(view"));
+        assert_eq!(c.rules[1].vars_param, None);
+        assert_eq!(c.rules[1].call, "__cool_rule_1");
+    }
+
+    #[test]
+    fn builder_steps_follow_the_description() {
+        let c = &compounds()[0];
+        assert_eq!(
+            c.steps,
+            [
+                r#".export_input::<u32>("input", "a.input")"#,
+                r#".export_output::<u32>("out", "a.out")"#,
+                r#".map_observable("level", "a.level")"#,
+                r#".map_controllable("gain", "a.gain")"#,
+                r#".on_error("a", ::coolbot::Policy::Substitute)"#,
+                r#".substitute("b", "a")"#,
+            ]
+        );
+        assert_eq!(
+            c.input_specs,
+            [
+                "::coolbot::InputSpec { name: \"input\", kind: ::coolbot::InputKind::Fifo { capacity: 4, policy: ::coolbot::OverflowPolicy::Reject }, packet: \"u32\", pull: false }"
+            ]
+        );
+        assert_eq!(c.output_specs.len(), 1);
+        let a = &c.instances[0];
+        let build = a.build.as_deref().unwrap();
+        assert!(
+            build.ends_with(
+                ".with_timing(::coolbot::TimingSpec { priority: 3, ..super::leaf::SPEC.timing })"
+            ),
+            "{build}"
+        );
+        // Only `mode` is in the supervisor's spec; `faults` is local.
+        let exposed: Vec<&str> = c
+            .vars
+            .iter()
+            .filter(|v| v.spec_index.is_some())
+            .map(|v| v.field.name.as_str())
+            .collect();
+        assert_eq!(exposed, ["mode"]);
+        let parts: Vec<&str> = c.parts.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(parts, ["supervisor", "a", "b"]);
+        let sections: Vec<&str> = c.methods.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(sections, ["on_entry", "off_exit"]);
+    }
+
+    #[test]
+    fn an_instance_named_supervisor_gets_another_method() {
+        let analysis = crate::analyze_text(
+            "t.cool",
+            "atomic Leaf { automaton { initial on; state on { entry; } } }\ncompound Top { instance supervisor: Leaf; }",
+        );
+        assert!(!analysis.has_errors());
+        let krate = lower(&analysis.files, &Options::default());
+        let parts: Vec<&str> = krate.compounds[0]
+            .parts
+            .iter()
+            .map(|m| m.name.as_str())
+            .collect();
+        assert_eq!(parts, ["supervisor", "supervisor_2"]);
+    }
+
+    #[test]
+    fn nested_compounds_and_implicit_supervisors() {
+        let outer = &compounds()[1];
+        // An override of the nested compound's mapped controllable `gain`.
+        assert_eq!(
+            outer.instances[0].build.as_deref(),
+            Some(
+                r#"super::r#box::component_with("inner", parts.inner(), super::r#box::Vars::default(), super::r#box::Mapped { gain: ::core::option::Option::Some(2.0) })?"#
+            )
+        );
+        assert!(outer.instances[0].unapplied.is_empty());
+        // Box's own `Mapped` feeds its instance `a`.
+        let inner = &compounds()[0];
+        assert_eq!(inner.mapped.len(), 1);
+        assert_eq!(inner.mapped[0].ty, "f64");
+        assert!(
+            inner.instances[0]
+                .build
+                .as_deref()
+                .unwrap()
+                .contains("gain: mapped.gain.unwrap_or_else(|| super::leaf::Vars::default().gain)"),
+            "{:?}",
+            inner.instances[0].build
+        );
+        assert!(outer.instances[0].compound);
+        assert!(
+            outer.parts[1]
+                .user_signature
+                .ends_with("impl crate::generated::r#box::Parts")
+        );
+        // No supervisor block: one state without sections.
+        assert_eq!(outer.states.len(), 1);
+        assert_eq!(outer.states[0].cool_name, "supervising");
+        assert!(outer.methods.is_empty());
     }
 }

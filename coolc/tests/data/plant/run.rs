@@ -35,7 +35,15 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     let names: Vec<&str> = component.spec().variables.iter().map(|v| v.name).collect();
     assert_eq!(
         names,
-        ["received", "switches", "cell_mode", "fail", "alarms"]
+        [
+            "received",
+            "last",
+            "switches",
+            "cell_mode",
+            "fail",
+            "cell_limit",
+            "alarms"
+        ]
     );
     let mut system = System::new();
     let plant = system.add(component).unwrap();
@@ -47,6 +55,12 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     assert_eq!(monitor.state, State::Running);
     assert_eq!(monitor.user_state.as_deref(), Some("watching"));
     assert_eq!(count(&monitor, "alarms"), 0);
+    // `instance cell: Cell { limit = 5; scale = 3; }`: the cell's own `limit`, seen
+    // through the mapped `cell_limit`, and its mapped `scale`, which reaches the
+    // primary worker (`gain = 2`): every count arrives multiplied by 6.
+    assert_eq!(count(&monitor, "cell_limit"), 5);
+    let last = count(&monitor, "last");
+    assert!(last > 0 && last.is_multiple_of(6), "last = {last}");
 
     // The fault, set through the plant's control port down to the primary worker.
     plant
@@ -85,6 +99,87 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
     assert_eq!(monitor.user_state.as_deref(), Some("alarmed"));
     assert_eq!(monitor.state, State::Running);
 
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn rules_read_every_kind_of_value() {
+    let component =
+        plant::generated::probe::component("probe", plant::probe::ProbeParts::default()).unwrap();
+    let mut system = System::new();
+    let probe = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `waiting` -> `seen` (the one rule that holds once the gauge is ready) ->
+    // `done` (the gauge's result); none of the rules to `failed` ever holds.
+    let monitor = probe
+        .wait_for(
+            |m| matches!(m.user_state.as_deref(), Some("done" | "failed")),
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("done"));
+    assert_eq!(count(&monitor, "count"), 1);
+    assert!(count(&monitor, "seen_level") >= 3);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
+    let gate =
+        plant::generated::gate::component("gate", plant::gate::GateParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(gate).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    system.run_all().unwrap();
+    let monitor = handle
+        .wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("closed"));
+    system.connect("source.out", "gate.input").unwrap();
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some("open"), WAIT)
+        .unwrap();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_redundant_group_keeps_the_stream_when_a_member_fails() {
+    let pair =
+        plant::generated::pair::component("pair", plant::pair::PairParts::default()).unwrap();
+    let mut system = System::new();
+    let handle = system.add(pair).unwrap();
+    system
+        .add(plant::generated::source::component(
+            "source",
+            plant::source::Source::default(),
+        ))
+        .unwrap();
+    let sink = system
+        .add(plant::generated::sink::component(
+            "sink",
+            plant::sink::Sink::default(),
+        ))
+        .unwrap();
+    system.connect("source.out", "pair.input").unwrap();
+    system.connect("pair.out", "sink.input").unwrap();
+    system.run_all().unwrap();
+    let monitor = sink.wait_for(|m| count(m, "received") >= 5, WAIT).unwrap();
+    let received = count(&monitor, "received");
+    handle
+        .command(Command::Set("fail_a".to_owned(), Value::Bool(true)))
+        .unwrap();
+    // The other member takes the group's connections: packets keep coming.
+    sink.wait_for(|m| count(m, "received") >= received + 10, WAIT)
+        .unwrap();
+    assert_eq!(handle.snapshot().state, State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }

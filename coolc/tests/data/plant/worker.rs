@@ -15,7 +15,7 @@ impl Behavior for Worker {
         }
         for packet in cx.inputs.input.drain() {
             cx.outputs.out.send(Count {
-                n: packet.n * cx.config.gain,
+                n: packet.n * cx.config.gain * cx.vars.scale,
             });
             cx.vars.passed += 1;
         }
