@@ -328,6 +328,71 @@ struct Line {
     cpu: Duration,
 }
 
+/// What the monitoring ports of the robot, the base and the wanderer publish, as it
+/// happens: the log lines, every supervision step, the base supervisor's states.
+struct Events {
+    receivers: Vec<(String, coolbot::crossbeam_channel::Receiver<MonitorEvent>)>,
+    supervision: Vec<SupervisionStep>,
+    user_states: Vec<String>,
+}
+
+impl Events {
+    fn new(handles: &[&Handle]) -> Events {
+        let receivers = handles
+            .iter()
+            .map(|h| (h.name().to_owned(), h.subscribe()))
+            .collect();
+        // The state the base's supervisor is in now; changes follow as events.
+        let user_states = handles
+            .iter()
+            .find(|h| h.name() == BASE)
+            .and_then(|h| h.snapshot().user_state)
+            .into_iter()
+            .collect();
+        Events {
+            receivers,
+            supervision: Vec::new(),
+            user_states,
+        }
+    }
+
+    /// Takes what was published since the last call (`at`: the run's clock) and
+    /// returns it as log lines.
+    fn take(&mut self, at: Duration) -> Vec<String> {
+        let time = at.as_secs_f64();
+        let mut lines = Vec::new();
+        for (name, receiver) in &self.receivers {
+            for event in receiver.try_iter() {
+                match event {
+                    MonitorEvent::State { from, to } => {
+                        lines.push(format!("{time:6.2}s {name}: {from} -> {to}"));
+                    }
+                    MonitorEvent::Error(Some(error)) => {
+                        lines.push(format!("{time:6.2}s {name}: error: {error}"));
+                    }
+                    MonitorEvent::UserState(Some(state))
+                        if name == BASE && self.user_states.last() != Some(&state) =>
+                    {
+                        lines.push(format!("{time:6.2}s {name}: supervisor -> {state}"));
+                        self.user_states.push(state);
+                    }
+                    MonitorEvent::Supervision(step) => {
+                        let step = SupervisionStep {
+                            at,
+                            compound: name.clone(),
+                            step,
+                        };
+                        lines.push(step.to_string());
+                        self.supervision.push(step);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        lines
+    }
+}
+
 /// Builds the robot, runs it for `options.duration` (or until `options.stop`), shuts
 /// it down and reports.
 pub fn run(options: &Options) -> Result<Summary, String> {
@@ -350,9 +415,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     };
     let robot = Robot::start(&platform, &setup)?;
     // Every change on the monitoring ports of the robot, the base and the wanderer.
-    let watched = [&robot.robot, &robot.base, &robot.wanderer];
-    let events: Vec<_> = watched.iter().map(|h| h.subscribe()).collect();
-    let mut user_states: Vec<String> = robot.base.snapshot().user_state.into_iter().collect();
+    let mut events = Events::new(&[&robot.robot, &robot.base, &robot.wanderer]);
 
     let member_type = |name: &str| {
         generated::mobile_base::INSTANCES
@@ -394,7 +457,6 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         Display::Auto => Display::Lines,
         other => other,
     };
-    let mut supervision: Vec<SupervisionStep> = Vec::new();
     let mut log: Vec<String> = Vec::new();
     let mut last_frame = Instant::now();
     let mut last_line = Duration::ZERO;
@@ -416,39 +478,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             break false;
         }
         // What the monitoring ports reported since the last turn.
-        let mut fresh = Vec::new();
-        for (handle, receiver) in watched.iter().zip(&events) {
-            let name = handle.name();
-            for event in receiver.try_iter() {
-                match event {
-                    MonitorEvent::State { from, to } => {
-                        fresh.push(format!("{:6.2}s {name}: {from} -> {to}", at.as_secs_f64()));
-                    }
-                    MonitorEvent::Error(Some(error)) => {
-                        fresh.push(format!("{:6.2}s {name}: error: {error}", at.as_secs_f64()));
-                    }
-                    MonitorEvent::UserState(Some(state))
-                        if name == BASE && user_states.last() != Some(&state) =>
-                    {
-                        fresh.push(format!(
-                            "{:6.2}s {name}: supervisor -> {state}",
-                            at.as_secs_f64()
-                        ));
-                        user_states.push(state);
-                    }
-                    MonitorEvent::Supervision(step) => {
-                        let step = SupervisionStep {
-                            at,
-                            compound: name.to_owned(),
-                            step,
-                        };
-                        fresh.push(step.to_string());
-                        supervision.push(step);
-                    }
-                    _ => {}
-                }
-            }
-        }
+        let fresh = events.take(at);
         if display == Display::Lines {
             let mut out = stdout.lock();
             for line in &fresh {
@@ -528,23 +558,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     states_before_shutdown.extend(members.iter().map(|m| (m.name.clone(), m.state)));
     states_before_shutdown.push((wanderer.name.clone(), wanderer.state));
     // The supervision steps and states published up to the end.
-    for (handle, receiver) in watched.iter().zip(&events) {
-        for event in receiver.try_iter() {
-            match event {
-                MonitorEvent::Supervision(step) => supervision.push(SupervisionStep {
-                    at: elapsed,
-                    compound: handle.name().to_owned(),
-                    step,
-                }),
-                MonitorEvent::UserState(Some(state))
-                    if handle.name() == BASE && user_states.last() != Some(&state) =>
-                {
-                    user_states.push(state);
-                }
-                _ => {}
-            }
-        }
-    }
+    events.take(elapsed);
 
     let handles = [
         robot.robot.clone(),
@@ -585,8 +599,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             variable(member(RANGES), "scans") as u64,
             variable(member(SIM_RANGES), "scans") as u64,
         ),
-        supervision,
-        user_states,
+        supervision: events.supervision,
+        user_states: events.user_states,
         supervisor: base.user_state.clone().unwrap_or_else(|| "-".to_owned()),
         mode: word(&base, "mode"),
         base_faults: variable(Some(&base), "faults") as u64,
