@@ -12,7 +12,9 @@
 //! compound's state and let the supervisor react to their monitoring events.
 //! `docs/runtime.md` ("Compound components and supervisors") tells the semantics.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::Receiver;
@@ -32,6 +34,18 @@ use crate::value::Value;
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// The default restart budget ([`CompoundBuilder::restart_budget`]): at most this many
+/// restarts of one instance ...
+pub const DEFAULT_RESTARTS: u32 = 5;
+/// ... within this window; one more failure in the window propagates.
+pub const DEFAULT_RESTART_WINDOW: Duration = Duration::from_secs(10);
+/// The default restart backoff ([`CompoundBuilder::restart_backoff`]): the first
+/// restart in a window is immediate, the second waits this long, each further one
+/// twice as long as the one before ...
+pub const DEFAULT_BACKOFF: Duration = Duration::from_millis(10);
+/// ... up to this.
+pub const DEFAULT_BACKOFF_MAX: Duration = Duration::from_secs(1);
+
 /// What a compound does when one of its instances goes to `running_error`
 /// (`on error inst: <policy>;`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -40,7 +54,11 @@ pub enum Policy {
     /// it on the compound's monitoring port. The default.
     #[default]
     Propagate,
-    /// The instance is commanded back to `running` (a restart through `start`).
+    /// The instance is commanded back to `running` (a restart through `start`), within
+    /// the compound's restart budget ([`CompoundBuilder::restart_budget`], with a
+    /// backoff: [`CompoundBuilder::restart_backoff`]); a failure beyond the budget
+    /// propagates. An instance stuck in a section that overran `max_response` is
+    /// restarted when the section returns.
     Restart,
     /// The declared substitute takes the instance's place and the instance goes into
     /// the recovery queue (without a substitute: the recovery queue only).
@@ -223,6 +241,41 @@ struct Instance {
     /// Its redundant group.
     group: Option<usize>,
     status: Status,
+    /// When the `restart` policy last restarted it (within the budget's window).
+    restarts: std::collections::VecDeque<Instant>,
+    /// A restart decided but not done yet (backoff, or the instance is stuck).
+    pending: Option<PendingRestart>,
+}
+
+/// A restart the `restart` policy has decided.
+#[derive(Debug, Clone, Copy)]
+struct PendingRestart {
+    /// When the fault was seen.
+    since: Instant,
+    /// Not before then (the backoff).
+    due: Instant,
+}
+
+/// The `restart` policy's limits.
+#[derive(Debug, Clone, Copy)]
+struct Budget {
+    restarts: u32,
+    window: Duration,
+    backoff: Duration,
+    backoff_max: Duration,
+}
+
+impl Budget {
+    /// The backoff before restart number `done + 1` within the window.
+    fn delay(&self, done: usize) -> Duration {
+        if done == 0 {
+            return Duration::ZERO;
+        }
+        let doublings = u32::try_from(done - 1).unwrap_or(u32::MAX).min(30);
+        self.backoff
+            .saturating_mul(1 << doublings)
+            .min(self.backoff_max)
+    }
 }
 
 /// An entry of the recovery queue.
@@ -378,6 +431,7 @@ pub struct CompoundBuilder {
     rules: Vec<(String, String, Vec<String>, Test)>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     errors: Vec<CompoundError>,
     exports: Vec<Box<dyn Export>>,
     inputs: Vec<InputSpec>,
@@ -407,6 +461,12 @@ impl CompoundBuilder {
             rules: Vec::new(),
             retry_every: Duration::from_millis(500),
             deadline: Duration::from_secs(5),
+            budget: Budget {
+                restarts: DEFAULT_RESTARTS,
+                window: DEFAULT_RESTART_WINDOW,
+                backoff: DEFAULT_BACKOFF,
+                backoff_max: DEFAULT_BACKOFF_MAX,
+            },
             errors: Vec::new(),
             exports: Vec::new(),
             inputs: Vec::new(),
@@ -559,6 +619,8 @@ impl CompoundBuilder {
                 substitute: None,
                 group: None,
                 status: Status::Active,
+                restarts: std::collections::VecDeque::new(),
+                pending: None,
             }),
             Err(error) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
@@ -622,6 +684,28 @@ impl CompoundBuilder {
     pub fn recovery(mut self, retry_every: Duration, deadline: Duration) -> CompoundBuilder {
         self.retry_every = retry_every.max(Duration::from_millis(1));
         self.deadline = deadline;
+        self
+    }
+
+    /// The `restart` policy's budget: at most `restarts` restarts of one instance
+    /// within any `window` (defaults [`DEFAULT_RESTARTS`] in
+    /// [`DEFAULT_RESTART_WINDOW`]); a failure beyond that propagates (the compound goes
+    /// to `running_error`, its error saying the budget is spent). `u32::MAX` restarts:
+    /// no limit.
+    pub fn restart_budget(mut self, restarts: u32, window: Duration) -> CompoundBuilder {
+        self.budget.restarts = restarts;
+        self.budget.window = window;
+        self
+    }
+
+    /// The `restart` policy's backoff: within the budget's window the first restart of
+    /// an instance is immediate, the second waits `initial`, each further one twice as
+    /// long as the one before, at most `max` (defaults [`DEFAULT_BACKOFF`],
+    /// [`DEFAULT_BACKOFF_MAX`]; zero: no backoff). The compound's thread does not
+    /// sleep meanwhile: the restart is a timer.
+    pub fn restart_backoff(mut self, initial: Duration, max: Duration) -> CompoundBuilder {
+        self.budget.backoff = initial;
+        self.budget.backoff_max = max.max(initial);
         self
     }
 
@@ -823,6 +907,15 @@ impl CompoundBuilder {
                 test,
             });
         }
+        let mut by_read: HashMap<String, Vec<usize>> = HashMap::new();
+        for (index, rule) in rules.iter().enumerate() {
+            for read in &rule.reads {
+                let readers = by_read.entry(read.clone()).or_default();
+                if readers.last() != Some(&index) {
+                    readers.push(index);
+                }
+            }
+        }
         let mut spec = *own;
         spec.variables = Box::leak(variables.into_boxed_slice());
         spec.inputs = Box::leak(std::mem::take(&mut self.inputs).into_boxed_slice());
@@ -849,13 +942,16 @@ impl CompoundBuilder {
             wired: Vec::new(),
             mapped,
             supervisor: self.supervisor,
+            by_read,
             rules,
             events: Vec::new(),
             view,
             evaluated_in: None,
+            fresh: false,
             queue: Vec::new(),
             retry_every: self.retry_every,
             deadline: self.deadline,
+            budget: self.budget,
             started: false,
             exports: self.exports,
             steps: Vec::new(),
@@ -903,14 +999,22 @@ struct Compound {
     mapped: Vec<Mapped>,
     supervisor: Box<dyn Supervisor>,
     rules: Vec<Rule>,
-    /// Monitoring events of each instance (subscribed at the first start).
-    events: Vec<Receiver<MonitorEvent>>,
+    /// Monitoring events of each instance (subscribed at the first start), with a
+    /// flag its publisher sets before ringing the compound: a turn looks only at the
+    /// instances that have news.
+    events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
+    /// The rules reading each variable (`inst.field` or an own variable), by index.
+    by_read: HashMap<String, Vec<usize>>,
     view: View,
     /// The supervisor state whose rules were last evaluated.
     evaluated_in: Option<usize>,
+    /// A rule moved the supervisor to another state: the thread takes one more turn at
+    /// once to evaluate the new state's rules (nothing else may wake it).
+    fresh: bool,
     queue: Vec<Recovering>,
     retry_every: Duration,
     deadline: Duration,
+    budget: Budget,
     started: bool,
     exports: Vec<Box<dyn Export>>,
     /// Supervision steps taken since the last call returned (published by the runner).
@@ -1056,7 +1160,15 @@ impl Compound {
                 self.events = self
                     .instances
                     .iter()
-                    .map(|i| i.handle.subscribe_waking(waker.clone()))
+                    .map(|i| {
+                        // Set: look at whatever came before the subscription too.
+                        let flag = Arc::new(AtomicBool::new(true));
+                        let events = i
+                            .handle
+                            .shared
+                            .subscribe_flagged(waker.clone(), Arc::clone(&flag));
+                        (events, flag)
+                    })
                     .collect();
             }
             if let Some(system) = self.system.as_mut() {
@@ -1069,8 +1181,16 @@ impl Compound {
         self.queue.clear();
         for index in 0..self.instances.len() {
             let instance = &mut self.instances[index];
+            instance.pending = None;
+            instance.restarts.clear();
             if instance.status == Status::Destroyed {
                 continue;
+            }
+            if instance.handle.is_stuck() {
+                return Err(Fault::message(format!(
+                    "instance `{}` cannot restart: it is stuck in a section that overran its max_response",
+                    instance.name
+                )));
             }
             instance.status = if instance.substitutes.is_some() {
                 Status::Standby
@@ -1200,8 +1320,7 @@ impl Compound {
                 Err(self.fault(format!("instance `{name}` failed: {error}")))
             }
             Policy::Restart if monitor.state == State::RunningError => {
-                self.step(index, Step::Restarted, "");
-                command(&self.instances[index].handle, Controllable::Running)
+                self.schedule_restart(index, &error)
             }
             Policy::Restart => {
                 self.step(
@@ -1226,6 +1345,91 @@ impl Compound {
                 Ok(())
             }
         }
+    }
+
+    /// The `restart` policy for instance `index`, which failed with `error`: a restart
+    /// now or after the backoff, or the fault propagates once the budget is spent.
+    fn schedule_restart(&mut self, index: usize, error: &str) -> Result<(), Fault> {
+        let now = Instant::now();
+        let budget = self.budget;
+        let instance = &mut self.instances[index];
+        if instance.pending.is_some() {
+            return Ok(()); // Already decided (another event of the same fault).
+        }
+        while instance
+            .restarts
+            .front()
+            .is_some_and(|t| now.saturating_duration_since(*t) >= budget.window)
+        {
+            instance.restarts.pop_front();
+        }
+        let done = instance.restarts.len();
+        if u32::try_from(done).unwrap_or(u32::MAX) >= budget.restarts {
+            let name = instance.name.clone();
+            self.step(
+                index,
+                Step::Propagated,
+                format!(
+                    "restart budget spent: {done} restart(s) within {:?}",
+                    budget.window
+                ),
+            );
+            return Err(self.fault(format!(
+                "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
+                budget.window
+            )));
+        }
+        instance.pending = Some(PendingRestart {
+            since: now,
+            due: crate::thread::later(now, budget.delay(done)),
+        });
+        self.restarts_due(now)
+    }
+
+    /// Do the decided restarts that are due; propagate a stuck instance's fault once
+    /// it has been stuck for the recovery deadline.
+    fn restarts_due(&mut self, now: Instant) -> Result<(), Fault> {
+        for index in 0..self.instances.len() {
+            let Some(pending) = self.instances[index].pending else {
+                continue;
+            };
+            let instance = &self.instances[index];
+            if instance.handle.is_stuck() {
+                if now >= crate::thread::later(pending.since, self.deadline) {
+                    let name = instance.name.clone();
+                    self.instances[index].pending = None;
+                    self.step(
+                        index,
+                        Step::Propagated,
+                        "stuck in a section that overran its max_response",
+                    );
+                    return Err(self.fault(format!(
+                        "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            if now < pending.due {
+                continue;
+            }
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            if instance.handle.state() != State::RunningError {
+                continue; // Someone else brought it back meanwhile.
+            }
+            instance.restarts.push_back(now);
+            let handle = instance.handle.clone();
+            let waited = now.saturating_duration_since(pending.since);
+            let detail = if waited.is_zero() {
+                String::new()
+            } else {
+                format!("after {waited:?}")
+            };
+            self.step(index, Step::Restarted, detail);
+            command(&handle, Controllable::Running)?;
+        }
+        Ok(())
     }
 
     /// The recovery queue's due work: restart, recognize recoveries, destroy at the
@@ -1260,7 +1464,13 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                if let Err(fault) = command(&self.instances[index].handle, Controllable::Dead) {
+                let handle = &self.instances[index].handle;
+                if handle.is_stuck() {
+                    // Its thread takes the command when (if) the section returns.
+                    if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
+                        tracing::warn!(compound = %self.name, "{rejected}");
+                    }
+                } else if let Err(fault) = command(handle, Controllable::Dead) {
                     tracing::warn!(compound = %self.name, "{fault}");
                 }
                 self.refresh(index);
@@ -1278,8 +1488,10 @@ impl Compound {
                 }
                 continue;
             }
-            // Due for a retry: restart it, on probation until the next retry.
-            let restarted = command(&self.instances[index].handle, Controllable::Running).is_ok()
+            // Due for a retry: restart it, on probation until the next retry (not while
+            // it is stuck in an overrun section: a command would wait for it).
+            let restarted = !self.instances[index].handle.is_stuck()
+                && command(&self.instances[index].handle, Controllable::Running).is_ok()
                 && self.instances[index].handle.state() == State::Running;
             if restarted {
                 self.step(index, Step::Retried, "");
@@ -1296,8 +1508,14 @@ impl Compound {
     fn take_events(&mut self) -> Result<HashSet<String>, Fault> {
         let mut changed = HashSet::new();
         for index in 0..self.events.len() {
+            // Cleared before the channel is read: an event sent after the read sets it
+            // again (it is set before the ring).
+            let flag = &self.events[index].1;
+            if !flag.load(Ordering::Acquire) || !flag.swap(false, Ordering::AcqRel) {
+                continue;
+            }
             let mut seen = false;
-            while let Ok(event) = self.events[index].try_recv() {
+            while let Ok(event) = self.events[index].0.try_recv() {
                 seen = true;
                 let name = &self.instances[index].name;
                 let key = match event {
@@ -1429,14 +1647,22 @@ impl Automaton for Compound {
     }
 
     fn wake_at(&self) -> Option<Instant> {
-        self.queue
-            .iter()
-            .map(|entry| {
-                entry
-                    .next
-                    .min(crate::thread::later(entry.since, self.deadline))
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
             })
-            .min()
+        });
+        let fresh = self.fresh.then(Instant::now);
+        queue.chain(restarts).chain(fresh).min()
     }
 }
 
@@ -1447,9 +1673,13 @@ impl Compound {
         for export in &mut self.exports {
             export.forward();
         }
+        self.fresh = false;
         let mut changed = self.take_events()?;
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;
+        }
+        if self.instances.iter().any(|i| i.pending.is_some()) {
+            self.restarts_due(Instant::now())?;
         }
         self.refresh_own(&mut changed);
         let entered = self.evaluated_in != Some(state);
@@ -1458,13 +1688,48 @@ impl Compound {
         }
         self.evaluated_in = Some(state);
         let view = &self.view;
-        let fired = self
-            .rules
-            .iter()
-            .filter(|rule| rule.state == state)
-            .filter(|rule| entered || rule.reads.iter().any(|read| changed.contains(read)))
-            .find(|rule| (rule.test)(view))
-            .map(|rule| rule.target);
+        let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
+        let fired = if entered {
+            self.rules.iter().find(holds).map(|rule| rule.target)
+        } else {
+            // Only the rules reading a changed variable, in declaration order.
+            let mut candidates: Vec<usize> = changed
+                .iter()
+                .filter_map(|read| self.by_read.get(read))
+                .flatten()
+                .copied()
+                .collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            candidates
+                .into_iter()
+                .map(|index| &self.rules[index])
+                .find(holds)
+                .map(|rule| rule.target)
+        };
+        self.fresh = fired.is_some_and(|target| target != state);
         Ok(fired)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backoff_doubles_from_the_second_restart_up_to_its_maximum() {
+        let budget = Budget {
+            restarts: 10,
+            window: Duration::from_secs(10),
+            backoff: Duration::from_millis(10),
+            backoff_max: Duration::from_millis(50),
+        };
+        let delays: Vec<_> = (0..6).map(|done| budget.delay(done)).collect();
+        assert_eq!(
+            delays,
+            [0, 10, 20, 40, 50, 50].map(Duration::from_millis).to_vec()
+        );
+        // No overflow however many restarts were done.
+        assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
     }
 }

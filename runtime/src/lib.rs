@@ -129,6 +129,7 @@ mod system;
 pub mod table;
 mod thread;
 mod value;
+mod watchdog;
 
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};

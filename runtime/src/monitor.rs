@@ -243,10 +243,14 @@ pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
     observers: Mutex<Vec<Sender<MonitorEvent>>>,
     /// Doorbells rung after every event (compound supervisors watching this component).
-    wakers: Mutex<Vec<crate::automaton::Waker>>,
+    /// With, for each, a flag set before it is rung (which subscription has news).
+    wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
     inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
+    /// Whether the component's thread is inside a section the max_response watchdog
+    /// tripped (it has not returned yet).
+    pub(crate) stuck: AtomicBool,
     /// The component's thread, once spawned.
     pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
 }
@@ -260,6 +264,7 @@ impl Shared {
             inputs,
             dropped: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
+            stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
         }
     }
@@ -306,7 +311,10 @@ impl Shared {
         });
         drop(observers);
         if ring {
-            for waker in lock(&self.wakers).iter() {
+            for (waker, flag) in lock(&self.wakers).iter() {
+                if let Some(flag) = flag {
+                    flag.store(true, Ordering::Release);
+                }
                 waker.wake();
             }
         }
@@ -331,7 +339,18 @@ impl Shared {
         waker: crate::automaton::Waker,
     ) -> Receiver<MonitorEvent> {
         let receiver = self.subscribe();
-        lock(&self.wakers).push(waker);
+        lock(&self.wakers).push((waker, None));
+        receiver
+    }
+
+    /// [`Shared::subscribe_waking`], also setting `flag` before each ring.
+    pub(crate) fn subscribe_flagged(
+        &self,
+        waker: crate::automaton::Waker,
+        flag: Arc<AtomicBool>,
+    ) -> Receiver<MonitorEvent> {
+        let receiver = self.subscribe();
+        lock(&self.wakers).push((waker, Some(flag)));
         receiver
     }
 
@@ -550,6 +569,13 @@ impl Handle {
     /// The default automaton state now.
     pub fn state(&self) -> State {
         self.shared.state()
+    }
+
+    /// Whether the component's thread is inside a section that overran its
+    /// `max_response` and has not returned yet (the watchdog moved the component to
+    /// `running_error`; commands wait until the section returns).
+    pub fn is_stuck(&self) -> bool {
+        self.shared.stuck.load(Ordering::Acquire)
     }
 
     /// A new observer: every change from now on, as it happens.

@@ -31,6 +31,7 @@ use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{later, panic_message};
+use crate::watchdog::Watch;
 
 /// How often, at most, a busy thread reads its CPU time (a system call) for the
 /// monitor; state changes always read it.
@@ -40,6 +41,8 @@ const CPU_TIME_REFRESH: Duration = Duration::from_millis(10);
 enum Failure {
     Fault(Fault),
     Panic(String),
+    /// The section overran `max_response` (its outcome is discarded): the message.
+    Overrun(String),
 }
 
 /// What a continuity plan achieved.
@@ -80,6 +83,9 @@ pub(crate) struct Runner {
     pending_choice: Option<usize>,
     deferred: VecDeque<ControlMessage>,
     max_response: Option<Duration>,
+    /// The max_response watchdog's view of this component's sections (while it has a
+    /// `max_response`).
+    watch: Option<Arc<Watch>>,
     cpu_updated: Instant,
     /// The latest clock reading: taken once per turn and at the end of each user call,
     /// and passed down instead of reading the clock again.
@@ -117,6 +123,9 @@ impl Runner {
         let now = Instant::now();
         let count = inputs.len();
         let supervised = automaton.supervises();
+        let watch = timing
+            .max_response
+            .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit)));
         let mut runner = Runner {
             cx: Context::new(name, timing.period),
             automaton,
@@ -140,6 +149,7 @@ impl Runner {
             pending_choice: None,
             deferred: VecDeque::new(),
             max_response: timing.max_response,
+            watch,
             cpu_updated: now,
             clock: now,
             has_pull: spec.outputs.iter().any(|output| output.pull),
@@ -460,13 +470,18 @@ impl Runner {
     }
 
     fn set_state(&mut self, to: State) {
-        let from = self.state;
-        if from == to {
+        if self.state == to {
             return;
         }
         self.state = to;
         self.update_cpu(true);
+        // The monitor may be there already: the watchdog moved it to `running_error`
+        // while a section overran.
         self.shared.update(|monitor| {
+            let from = monitor.state;
+            if from == to {
+                return Vec::new();
+            }
             monitor.state = to;
             vec![MonitorEvent::State { from, to }]
         });
@@ -567,6 +582,16 @@ impl Runner {
             }
             Command::SetMaxResponse(bound) => {
                 self.max_response = Some(*bound);
+                match &self.watch {
+                    Some(watch) => watch.set_limit(Some(*bound)),
+                    None => {
+                        self.watch = Some(Watch::new(
+                            self.spec,
+                            Arc::clone(&self.shared),
+                            Some(*bound),
+                        ));
+                    }
+                }
                 let bound = *bound;
                 self.shared
                     .quietly(|monitor| monitor.max_response = Some(bound));
@@ -607,16 +632,37 @@ impl Runner {
         &mut self,
         body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
     ) -> Result<R, String> {
+        self.call_watched(None, body)
+            .map_err(|failure| match failure {
+                Failure::Panic(message) | Failure::Overrun(message) => message,
+                Failure::Fault(fault) => fault.text().to_owned(),
+            })
+    }
+
+    /// [`Runner::call`] for the section `watched` (state, section): the max_response
+    /// watchdog watches it, and a section that overran (tripped by the watchdog, or
+    /// returning late) fails with [`Failure::Overrun`], its outcome discarded.
+    fn call_watched<R>(
+        &mut self,
+        watched: Option<(usize, Section)>,
+        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+    ) -> Result<R, Failure> {
         let started = Instant::now();
+        if let (Some((state, section)), Some(watch)) = (watched, &self.watch) {
+            watch.begin(started, state, section);
+        }
         let automaton = &mut *self.automaton;
         let cx = &mut self.cx;
         let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
+        let tripped = watched.is_some() && self.watch.as_ref().is_some_and(|watch| watch.end());
         self.clock = Instant::now();
         let took = self.clock.saturating_duration_since(started);
         // Elapsed time is accumulated here and published with the CPU time (see
         // `update_timing`), keeping the monitor lock off the per-call path.
         self.elapsed += took;
-        if self.max_response.is_some_and(|bound| took > bound) {
+        let bound = self.max_response.filter(|bound| tripped || took > *bound);
+        if bound.is_some() && !tripped {
+            // (A tripped call was counted by the watchdog.)
             self.shared.update(|monitor| {
                 monitor.overruns += 1;
                 vec![MonitorEvent::Overrun {
@@ -625,8 +671,34 @@ impl Runner {
                 }]
             });
         }
+        if let (Some((state, section)), Some(bound)) = (watched, bound) {
+            self.discard_requests();
+            self.after_call();
+            return Err(Failure::Overrun(format!(
+                "overrun in state `{}` ({section:?} section): {} {took:?}, max_response {bound:?}; its outcome was discarded",
+                self.spec.states[state].name,
+                if tripped { "returned after" } else { "ran" },
+            )));
+        }
         self.after_call();
-        result.map_err(|payload| panic_message(payload.as_ref()))
+        result.map_err(|payload| Failure::Panic(panic_message(payload.as_ref())))
+    }
+
+    /// Forget what an overrun section asked of the runtime (`end`, a result, a period):
+    /// the published values stay.
+    fn discard_requests(&mut self) {
+        self.cx.end_requested = false;
+        if self.cx.result_changed || self.cx.period_changed {
+            let monitor = self.shared.snapshot();
+            if self.cx.result_changed {
+                self.cx.result_changed = false;
+                self.cx.result = monitor.result;
+            }
+            if self.cx.period_changed {
+                self.cx.period_changed = false;
+                self.cx.period = monitor.period;
+            }
+        }
     }
 
     /// Publish what the last call changed in the context and the variables.
@@ -735,10 +807,12 @@ impl Runner {
     }
 
     fn run_section(&mut self, state: usize, section: Section) -> Result<(), Failure> {
-        match self.call(|automaton, cx| automaton.section(state, section, cx)) {
+        match self.call_watched(Some((state, section)), |automaton, cx| {
+            automaton.section(state, section, cx)
+        }) {
             Ok(Ok(())) => Ok(()),
             Ok(Err(fault)) => Err(Failure::Fault(fault)),
-            Err(panic) => Err(Failure::Panic(panic)),
+            Err(failure) => Err(failure),
         }
     }
 
@@ -763,6 +837,8 @@ impl Runner {
             Failure::Panic(message) => {
                 return Recovery::Failed(format!("panic in {place}: {message}"));
             }
+            // No continuity plan for an overrun: its outcome is discarded.
+            Failure::Overrun(message) => return Recovery::Failed(message),
             Failure::Fault(fault) => fault,
         };
         let Some(index) = fault

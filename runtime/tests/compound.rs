@@ -142,6 +142,15 @@ fn wait_user(handle: &Handle, user: &str) -> coolbot::Monitor {
         .unwrap_or_else(|t| panic!("{t}"))
 }
 
+/// Wait until the supervisor's log is `expected` (`user_state` changes before the
+/// entry section runs: a state wait alone does not see the section).
+fn wait_log(log: &Mutex<Vec<String>>, expected: &[&str]) {
+    eventually(
+        || *log.lock().unwrap() == expected,
+        &format!("the supervisor's log becomes {expected:?}"),
+    );
+}
+
 fn periodic_fault(script: &Script) {
     script.inject(Some(Injected {
         hook: "busy.periodic",
@@ -274,9 +283,9 @@ fn rules_fire_when_an_instance_changes_state() {
     // Restarting w by hand fires the second rule.
     run(&w, Controllable::Running);
     wait_user(&base, "operating");
-    assert_eq!(
-        *log.lock().unwrap(),
-        ["operating.Entry", "degraded.Entry", "operating.Entry"]
+    wait_log(
+        &log,
+        &["operating.Entry", "degraded.Entry", "operating.Entry"],
     );
     assert!(system.shutdown().clean());
 }
@@ -298,7 +307,7 @@ fn rules_are_evaluated_in_declaration_order_and_on_entry() {
     let base = system.add(builder.build().expect("build")).expect("add");
     system.run_all().expect("run");
     wait_user(&base, "first");
-    assert_eq!(*log.lock().unwrap(), ["operating.Entry", "first.Entry"]);
+    wait_log(&log, &["operating.Entry", "first.Entry"]);
     assert!(system.shutdown().clean());
 }
 
@@ -394,7 +403,14 @@ impl Substitution {
         self.w_script.start_fails.store(true, Ordering::SeqCst);
         self.w_script.panic_in(Some("busy.periodic"));
         self.feed.kick.emit();
-        wait(&self.b, State::Running);
+        // Running and in its initial state: packets from now on fire its `on`
+        // transitions (arrivals before the state is entered do not).
+        self.b
+            .wait_for(
+                |m| m.state == State::Running && m.user_state.is_some(),
+                WAIT,
+            )
+            .unwrap_or_else(|t| panic!("{t}"));
         assert_eq!(self.base.state(), State::Running);
         assert_ne!(self.w.state(), State::Running);
     }
@@ -828,7 +844,10 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
         .instance(steady)
         .instance(f)
         .connect("f.data", "steady.data")
-        .on_error("flaky", Policy::Restart);
+        .on_error("flaky", Policy::Restart)
+        // Every fault is restarted: no budget, no backoff.
+        .restart_budget(u32::MAX, Duration::from_secs(1))
+        .restart_backoff(Duration::ZERO, Duration::ZERO);
     let (flaky, steady) = (
         builder.instance_handle("flaky").expect("flaky"),
         builder.instance_handle("steady").expect("steady"),
@@ -883,4 +902,453 @@ fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
     assert_eq!(steady.state(), State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
+}
+
+/// The worker's timing with a short `max_response` (20 ms), for an instance.
+fn fast_response() -> TimingSpec {
+    TimingSpec {
+        max_response: Some(Duration::from_millis(20)),
+        ..worker::SPEC.timing
+    }
+}
+
+fn starts(script: &Script) -> usize {
+    script.log().iter().filter(|e| *e == "start").count()
+}
+
+#[test]
+fn an_instance_hanging_past_max_response_is_substituted_and_recovers_once_it_returns() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect("f.data", "w.data")
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let release = w_script.hang_in("busy.periodic");
+    feed.kick.emit();
+    // The watchdog moves w to running_error while its section still hangs; the
+    // compound substitutes it at once.
+    wait_user(&b, "idle");
+    assert!(w.is_stuck());
+    assert!(w_script.hanging.load(Ordering::SeqCst));
+    let monitor = w.snapshot();
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("still running after") && e.contains("max_response 20ms")),
+        "{monitor:?}"
+    );
+    assert_eq!(base.state(), State::Running);
+    feed.data.send(1);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 1,
+        "the substitute gets the stream",
+    );
+    // The section returns: the recovery queue restarts w, which takes its place back.
+    assert_eq!(starts(&w_script), 1, "no restart while the section hangs");
+    drop(release);
+    wait(&b, State::Ready);
+    assert_eq!(w.state(), State::Running);
+    assert_eq!(w_script.returned.load(Ordering::SeqCst), 1);
+    assert_eq!(starts(&w_script), 2);
+    let before = w_script.received.load(Ordering::SeqCst);
+    feed.data.send(2);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w has its connections back",
+    );
+    assert_eq!(b_script.received.load(Ordering::SeqCst), 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+/// A compound `base` whose instance `w` (with a 20 ms max_response) is restarted on
+/// error, within `budget` restarts in a minute (backoff 1 ms..4 ms), with a recovery
+/// deadline of `deadline`.
+fn restarting(budget: u32, deadline: Duration) -> (System, Handle, Handle, Arc<Script>, Feeder) {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w.with_timing(fast_response()))
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Restart)
+        .restart_budget(budget, Duration::from_secs(60))
+        .restart_backoff(Duration::from_millis(1), Duration::from_millis(4))
+        .recovery(Duration::from_millis(20), deadline);
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    (system, base, w, script, feed)
+}
+
+#[test]
+fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
+    let (system, base, w, script, feed) = restarting(5, Duration::from_secs(30));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    assert!(w.is_stuck());
+    assert_eq!(base.state(), State::Running, "the compound runs on");
+    assert_eq!(starts(&script), 1);
+    drop(release);
+    eventually(|| starts(&script) == 2, "w restarted once it returned");
+    let monitor = wait_user(&w, "idle");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(monitor.overruns, 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn an_instance_stuck_longer_than_the_recovery_deadline_is_propagated() {
+    let (system, base, w, script, feed) = restarting(5, Duration::from_millis(150));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `w` cannot be restarted: it is stuck"),
+        "{error}"
+    );
+    assert!(w.is_stuck());
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn restart_stops_at_the_budget_and_the_fault_propagates() {
+    let (system, base, w, script, _feed) = {
+        // w fails in its first entry at every run.
+        let (sup, _) = Sup::new(&["operating"]);
+        let (w, script) = worker("w");
+        script.inject(Some(Injected {
+            hook: "idle.entry",
+            exception: Some(Exception::Fatal),
+            times: 1000,
+        }));
+        let (f, feed) = feeder("f");
+        let builder = CompoundBuilder::new("base", sup)
+            .instance(w)
+            .instance(f)
+            .on_error("w", Policy::Restart)
+            .restart_budget(3, Duration::from_secs(60))
+            .restart_backoff(Duration::from_millis(1), Duration::from_millis(4));
+        let w = builder.instance_handle("w").expect("w");
+        let mut system = System::new();
+        let base = system.add(builder.build().expect("build")).expect("add");
+        system.start().expect("start");
+        wait(&base, State::Ready);
+        (system, base, w, script, feed)
+    };
+    base.command(Command::SetState(Controllable::Running))
+        .expect("running");
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains(
+            "instance `w` failed again after 3 restart(s) within 60s (restart budget spent)"
+        ) && error.contains("exception `fatal`"),
+        "{error}"
+    );
+    assert_eq!(starts(&script), 4, "the first run and three restarts");
+    let steps: Vec<_> = monitor
+        .supervision
+        .iter()
+        .map(|s| (s.step.clone(), s.detail.starts_with("restart budget spent")))
+        .filter(|(step, _)| *step != Step::Failed)
+        .collect();
+    assert_eq!(
+        steps,
+        [
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Propagated, true)
+        ],
+        "{:?}",
+        monitor.supervision
+    );
+    assert_eq!(script.injected.load(Ordering::SeqCst), 4);
+    assert_eq!(w.state(), State::RunningError);
+    // The budget starts afresh when the compound is restarted.
+    script.inject(None);
+    base.command(Command::SetState(Controllable::Running))
+        .expect("restart the compound");
+    wait_user(&w, "idle");
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn ignore_leaves_the_instance_in_running_error_where_rules_see_it() {
+    let (sup, log) = Sup::new(&["operating", "degraded"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Ignore)
+        .rule("operating", "degraded", &["w.state"], |v| {
+            v.state("w") == Some(State::RunningError)
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    periodic_fault(&script);
+    feed.kick.emit();
+    wait_user(&base, "degraded");
+    assert_eq!(base.state(), State::Running);
+    assert_eq!(w.state(), State::RunningError, "nobody restarted it");
+    assert_eq!(starts(&script), 1);
+    wait_log(&log, &["operating.Entry", "degraded.Entry"]);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn without_a_substitute_the_recovery_queue_restarts_the_instance_until_it_recovers() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .connect("f.data", "w.data")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    // w fails and cannot start again for a while: the queue keeps retrying it.
+    script.start_fails.store(true, Ordering::SeqCst);
+    periodic_fault(&script);
+    feed.kick.emit();
+    w.wait_state(State::StartingError, WAIT).expect("retried");
+    assert_eq!(base.state(), State::Running, "the compound waits for it");
+    // Packets sent meanwhile wait at w's input.
+    feed.data.send(7);
+    script.start_fails.store(false, Ordering::SeqCst);
+    wait_user(&w, "idle");
+    // (Packets queued before a state is entered do not fire its `on` transitions: a
+    // kick takes w to `busy`, whose entry drains the queue.)
+    feed.kick.emit();
+    eventually(
+        || script.received.load(Ordering::SeqCst) == 1,
+        "the queued packet reaches the recovered instance",
+    );
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
+    const CYCLES: usize = 200;
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = deep_worker("w");
+    let (b, b_script) = deep_worker("b");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .substitute("b", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(1), Duration::from_secs(60))
+        .export_input::<u64>("data", "w.data");
+    let (w, b) = (
+        builder.instance_handle("w").expect("w"),
+        builder.instance_handle("b").expect("b"),
+    );
+    let (f, feed) = feeder("f");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.add(f).expect("feeder");
+    system.connect("f.data", "base.data").expect("data");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let mut sent = 0u64;
+    for cycle in 0..CYCLES {
+        // w fails in its next periodic section (half panics, half declared exceptions)
+        // while the stream goes on; b takes over; the queue restarts w, and once it
+        // runs on, w takes the stream back. (The restart can be quick: w's failure is
+        // seen through its script, not through a state that may last a millisecond.)
+        let starts_before = starts(&w_script);
+        if cycle % 2 == 0 {
+            w_script.panic_in(Some("busy.periodic"));
+        } else {
+            w_script.inject(Some(Injected {
+                hook: "busy.periodic",
+                exception: Some(Exception::Fatal),
+                times: 1,
+            }));
+        }
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        eventually(
+            || starts(&w_script) > starts_before,
+            &format!("cycle {cycle}: w failed and was restarted"),
+        );
+        w_script.panic_in(None);
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        // Recovered: b back on standby, w running with the stream, in its initial
+        // state (packets from then on fire its `on` transitions).
+        b.wait_state(State::Ready, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_for(
+            |m| m.state == State::Running && m.user_state.is_some(),
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        assert_eq!(base.state(), State::Running, "cycle {cycle}");
+    }
+    // Every packet reached w or b, or is counted as lost at an input.
+    let lost = || base.snapshot().overflows + w.snapshot().overflows + b.snapshot().overflows;
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst)
+                + b_script.received.load(Ordering::SeqCst)
+                + lost()
+                == sent
+        },
+        "every packet delivered or counted",
+    );
+    assert_eq!(lost(), 0, "deep queues: nothing overflowed");
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    assert!(w_script.log().iter().filter(|e| *e == "start").count() > CYCLES);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn overruns_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
+    // mid: leaf1 (substitute: spare), leaf2 (propagate), both with a 20 ms
+    // max_response, fed by f.
+    let (mid_sup, _) = Sup::new(&["operating"]);
+    let (leaf1, script1) = worker("leaf1");
+    let (spare, _) = worker("spare");
+    let (leaf2, script2) = worker("leaf2");
+    let (f, feed) = feeder("f");
+    let mid = CompoundBuilder::new("mid", mid_sup)
+        .instance(leaf1.with_timing(fast_response()))
+        .instance(spare)
+        .instance(leaf2.with_timing(fast_response()))
+        .instance(f)
+        .substitute("spare", "leaf1")
+        .connect("f.kick", "leaf1.kick")
+        .connect("f.data", "leaf2.data")
+        .on_error("leaf1", Policy::Substitute)
+        .on_error("leaf2", Policy::Propagate)
+        .recovery(Duration::from_millis(20), Duration::from_secs(30));
+    let leaf1 = mid.instance_handle("leaf1").expect("leaf1");
+    let spare = mid.instance_handle("spare").expect("spare");
+    let leaf2 = mid.instance_handle("leaf2").expect("leaf2");
+    let (top_sup, _) = Sup::new(&["operating"]);
+    let top = CompoundBuilder::new("top", top_sup)
+        .instance(mid.build().expect("mid"))
+        .on_error("mid", Policy::Propagate);
+    let mid = top.instance_handle("mid").expect("mid");
+    let mut system = System::new();
+    let top = system.add(top.build().expect("top")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&leaf1, "idle");
+    wait_user(&leaf2, "idle");
+
+    // leaf1 hangs: the middle substitutes it; the top does not notice.
+    let release1 = script1.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&spare, State::Running);
+    assert!(leaf1.is_stuck());
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(top.state(), State::Running);
+
+    // leaf2 hangs: the middle propagates, the top fails with the whole chain named.
+    let release2 = script2.hang_in("busy.periodic");
+    feed.data.send(1);
+    let monitor = wait(&top, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `mid` failed")
+            && error.contains("instance `leaf2` failed")
+            && error.contains("still running after"),
+        "{error}"
+    );
+    assert!(leaf2.is_stuck());
+    drop(release1);
+    drop(release2);
+    for (handle, script) in [(&leaf1, &script1), (&leaf2, &script2)] {
+        eventually(
+            || !handle.is_stuck() && script.returned.load(Ordering::SeqCst) == 1,
+            "the sections returned",
+        );
+    }
+    // Restarted from the top once the sections returned, the whole hierarchy runs.
+    run(&top, Controllable::Running);
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(leaf1.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_rule_that_already_holds_when_its_state_is_entered_fires_without_another_event() {
+    let (sup, log) = Sup::new(&["first", "second", "third"]);
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .rule("first", "second", &["w.state"], |v| {
+            v.state("w") == Some(State::Suspended)
+        })
+        // Already true when `second` is entered; w (suspended: no section runs)
+        // publishes nothing afterwards.
+        .rule("second", "third", &["w.user_state"], |v| {
+            v.user_state("w") == Some("idle")
+        });
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    let events = w.subscribe();
+    run(&w, Controllable::Suspended);
+    wait_user(&base, "third");
+    wait_log(&log, &["first.Entry", "second.Entry", "third.Entry"]);
+    assert_eq!(
+        events.try_iter().collect::<Vec<_>>(),
+        [MonitorEvent::State {
+            from: State::Running,
+            to: State::Suspended
+        }],
+        "the only event w published"
+    );
+    assert!(system.shutdown().clean());
 }

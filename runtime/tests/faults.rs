@@ -348,25 +348,60 @@ fn a_command_is_withdrawn_if_a_long_section_outlasts_the_command_timeout() {
 }
 
 #[test]
-fn a_section_longer_than_max_response_is_an_overrun() {
+fn a_section_that_returns_after_max_response_is_a_fault() {
     let rig = Rig::started(Script::new());
     rig.handle
         .command(Command::SetMaxResponse(Duration::from_millis(1)))
         .expect("max_response");
     rig.run_busy();
     let events = rig.handle.subscribe();
+    // The section also asks to end the task: an overrun section's requests are
+    // discarded, so the component goes to running_error, not to end.
+    rig.script.end_in_periodic.store(true, Ordering::SeqCst);
     *rig.script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(3));
+    // The watchdog may trip the section before it returns (`still running after`);
+    // once it has returned, the error says so and the outcome is gone.
     let monitor = rig
         .handle
-        .wait_for(|m| m.overruns > 0, WAIT)
-        .expect("overrun");
-    assert_eq!(monitor.state, State::Running, "an overrun is not a fault");
+        .wait_for(
+            |m| {
+                m.state == State::RunningError
+                    && m.error.as_deref().is_some_and(|e| e.ends_with("discarded"))
+            },
+            WAIT,
+        )
+        .expect("running_error once the section returned");
+    assert!(monitor.overruns >= 1);
+    assert!(!rig.handle.is_stuck());
     assert_eq!(monitor.max_response, Some(Duration::from_millis(1)));
+    let error = monitor.error.expect("error");
+    assert!(
+        error.starts_with("overrun in state `busy` (Periodic section): ")
+            && error.ends_with("max_response 1ms; its outcome was discarded")
+            && (error.contains(": ran ") || error.contains(": returned after ")),
+        "{error}"
+    );
+    eventually(
+        || rig.script.log().ends_with(&["stop".to_owned()]),
+        "the fault runs stop",
+    );
+    let events: Vec<_> = events.try_iter().collect();
     assert!(
         events
             .iter()
-            .any(|event| matches!(event, coolbot::MonitorEvent::Overrun { .. }))
+            .any(|event| matches!(event, coolbot::MonitorEvent::Overrun { .. })),
+        "{events:?}"
     );
+    assert!(!events.contains(&coolbot::MonitorEvent::State {
+        from: State::Running,
+        to: State::End
+    }));
+    // A restart works.
+    *rig.script.sleep_in_periodic.lock().unwrap() = None;
+    rig.script.end_in_periodic.store(false, Ordering::SeqCst);
+    rig.command(Controllable::Running).expect("restart");
+    let monitor = rig.wait_user("idle");
+    assert_eq!(monitor.error, None);
 }
 
 #[test]
@@ -410,4 +445,113 @@ fn components_with_the_same_name_or_bad_ports_are_refused() {
         err.to_string(),
         "component `empty`: 0 input ports registered, the spec declares 3"
     );
+}
+
+#[test]
+fn a_hanging_section_is_tripped_by_the_watchdog_before_it_returns() {
+    let rig = Rig::started(Script::new());
+    rig.handle
+        .command(Command::SetMaxResponse(Duration::from_millis(20)))
+        .expect("max_response");
+    rig.run_busy();
+    let release = rig.script.hang_in("busy.periodic");
+    let monitor = rig.wait_state(State::RunningError);
+    // The section has not returned: the watchdog published the fault.
+    assert!(rig.handle.is_stuck());
+    assert!(rig.script.hanging.load(Ordering::SeqCst));
+    assert_eq!(rig.script.returned.load(Ordering::SeqCst), 0);
+    assert_eq!(monitor.overruns, 1);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.starts_with("overrun in state `busy` (Periodic section): still running after ")
+            && error.ends_with(", max_response 20ms"),
+        "{error}"
+    );
+    // Commands wait for the section: an impatient one is withdrawn.
+    let impatient = rig
+        .handle
+        .clone()
+        .with_command_timeout(Duration::from_millis(20));
+    let busy = impatient
+        .command(Command::SetState(Controllable::Running))
+        .unwrap_err();
+    assert!(busy.reason.starts_with("busy"), "{busy}");
+    // The section returns: its outcome is discarded, the fault completes (stop), and
+    // the component stays in running_error, counted once.
+    drop(release);
+    let monitor = rig
+        .handle
+        .wait_for(
+            |m| m.error.as_deref().is_some_and(|e| e.ends_with("discarded")),
+            WAIT,
+        )
+        .expect("the section returned");
+    assert!(!rig.handle.is_stuck());
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains(": returned after ")),
+        "{monitor:?}"
+    );
+    eventually(
+        || rig.script.log().ends_with(&["stop".to_owned()]),
+        "stop ran after the section returned",
+    );
+    assert_eq!(rig.handle.snapshot().overruns, 1);
+    assert_eq!(rig.handle.state(), State::RunningError);
+    // A restart works once the section has returned.
+    rig.command(Controllable::Running).expect("restart");
+    let monitor = rig.wait_user("idle");
+    assert_eq!(monitor.error, None);
+}
+
+#[test]
+fn shutdown_finishes_while_a_section_never_returns() {
+    let rig = Rig::started(Script::new());
+    rig.handle
+        .command(Command::SetMaxResponse(Duration::from_millis(10)))
+        .expect("max_response");
+    rig.run_busy();
+    let release = rig.script.hang_in("busy.periodic");
+    rig.wait_state(State::RunningError);
+    let Rig {
+        system,
+        handle,
+        script,
+        ..
+    } = rig;
+    // The thread cannot be joined: shutdown gives up on it after its timeout and says
+    // so in the report.
+    let report = system.shutdown();
+    let stuck = report
+        .components
+        .iter()
+        .find(|c| c.name == "w")
+        .expect("w in the report");
+    assert!(!stuck.joined, "{report:?}");
+    assert_eq!(stuck.state, State::RunningError);
+    assert!(
+        stuck
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("still running after")),
+        "{report:?}"
+    );
+    assert!(!report.clean());
+    assert!(
+        report
+            .components
+            .iter()
+            .filter(|c| c.name != "w")
+            .all(|c| c.joined),
+        "the others were joined: {report:?}"
+    );
+    // When the section finally returns, the thread takes the `dead` shutdown sent.
+    drop(release);
+    handle
+        .wait_state(State::Dead, WAIT)
+        .expect("dead once the section returned");
+    assert_eq!(script.returned.load(Ordering::SeqCst), 1);
 }

@@ -77,7 +77,7 @@ fn the_runner_uses_the_instance_timing() {
     assert!(handle.command(Command::SetQuality(3)).is_err());
 
     // A periodic section sleeping 5 ms overruns the override's 1 ms max_response (the
-    // spec's 500 ms would not be overrun).
+    // spec's 500 ms would not be overrun): a fault.
     *script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(5));
     handle
         .wait_for(|m| m.user_state.as_deref() == Some("idle"), WAIT)
@@ -88,8 +88,15 @@ fn the_runner_uses_the_instance_timing() {
         "a periodic section",
     );
     let monitor = handle
-        .wait_for(|m| m.overruns >= 1, WAIT)
-        .expect("the overrun is counted");
+        .wait_for(|m| m.overruns >= 1 && m.state == State::RunningError, WAIT)
+        .expect("the overrun is counted, and is a fault");
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("max_response 1ms")),
+        "{monitor:?}"
+    );
     assert_eq!(monitor.period, Some(Duration::from_millis(20)));
     handle
         .command(Command::SetState(Controllable::Dead))

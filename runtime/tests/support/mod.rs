@@ -59,6 +59,11 @@ pub struct Script {
     pub periodics: AtomicU64,
     pub handled: Mutex<Vec<String>>,
     pub injected: AtomicU32,
+    /// A hook that blocks (once) until the sender is dropped or sends: a section that
+    /// hangs past `max_response`. `returned` counts the hung calls that came back.
+    pub hang: Mutex<Option<(&'static str, Receiver<()>)>>,
+    pub hanging: AtomicBool,
+    pub returned: AtomicU32,
 }
 
 impl Script {
@@ -89,9 +94,29 @@ impl Script {
         *self.fault.lock().unwrap() = fault;
     }
 
+    /// Make `hook` hang (once) until the returned sender sends or is dropped.
+    pub fn hang_in(&self, hook: &'static str) -> crossbeam_channel::Sender<()> {
+        let (release, gate) = crossbeam_channel::bounded(1);
+        *self.hang.lock().unwrap() = Some((hook, gate));
+        release
+    }
+
     /// Record a hook call; panic or fail if the script says so.
     fn hit(&self, hook: &'static str) -> SectionResult {
         self.log.lock().unwrap().push(hook.to_owned());
+        let gate = {
+            let mut hang = self.hang.lock().unwrap();
+            match hang.as_ref() {
+                Some((hung, _)) if *hung == hook => hang.take().map(|(_, gate)| gate),
+                _ => None,
+            }
+        };
+        if let Some(gate) = gate {
+            self.hanging.store(true, Ordering::SeqCst);
+            let _ = gate.recv_timeout(Duration::from_secs(60));
+            self.hanging.store(false, Ordering::SeqCst);
+            self.returned.fetch_add(1, Ordering::SeqCst);
+        }
         if *self.panic_in.lock().unwrap() == Some(hook) {
             panic!("boom in {hook}");
         }

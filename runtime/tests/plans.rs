@@ -1,0 +1,233 @@
+//! Exceptions raised from every section kind (entry, periodic, exit) with each
+//! continuity plan of paper 3.5 (`retry` that recovers, `retry` that keeps failing,
+//! `goto`, `ignore`, `degrade`, no plan), and where each leaves the component.
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use coolbot::port::FifoIn;
+use coolbot::{ExceptionSpec, OverflowPolicy, PlanStep, Spec, State};
+use support::worker::{self, Exception};
+use support::{Injected, Rig, Script, WAIT, eventually};
+
+/// Where a section runs in the test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    Entry,
+    Periodic,
+    Exit,
+}
+
+impl Kind {
+    fn hook(self) -> &'static str {
+        match self {
+            Kind::Entry => "busy.entry",
+            Kind::Periodic => "busy.periodic",
+            Kind::Exit => "busy.exit",
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Entry => "Entry",
+            Kind::Periodic => "Periodic",
+            Kind::Exit => "Exit",
+        }
+    }
+}
+
+/// What the component should do after the exception.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Expect {
+    /// Goes on running in user state `user` (None: wherever), at quality `quality`.
+    Runs {
+        user: Option<&'static str>,
+        quality: usize,
+    },
+    /// Goes to running_error with an error naming the exception and the section.
+    Fails,
+}
+
+/// The worker with exception `flaky` (index 0) given `plan`.
+fn spec_with(plan: &'static [PlanStep]) -> &'static Spec {
+    let mut exceptions = worker::SPEC.exceptions.to_vec();
+    exceptions[0] = ExceptionSpec {
+        name: "flaky",
+        description: "",
+        plan,
+    };
+    Box::leak(Box::new(Spec {
+        exceptions: Box::leak(exceptions.into_boxed_slice()),
+        ..worker::SPEC
+    }))
+}
+
+const RETRY: &[PlanStep] = &[PlanStep::Retry {
+    count: 2,
+    every: Duration::from_millis(1),
+}];
+const GOTO_IDLE: &[PlanStep] = &[PlanStep::Goto(worker::IDLE)];
+const IGNORE: &[PlanStep] = &[PlanStep::Ignore];
+const DEGRADE: &[PlanStep] = &[PlanStep::Degrade];
+const NONE: &[PlanStep] = &[];
+
+/// Raise `flaky` `times` times in a row from section `kind` under `plan`, and check
+/// the outcome.
+fn case(kind: Kind, plan: &'static [PlanStep], times: u32, expect: Expect) {
+    let label = format!("{kind:?} section, plan {plan:?}, {times} exception(s)");
+    let data = FifoIn::new(4, OverflowPolicy::Reject);
+    let rig = Rig::start(Rig::unstarted_with(
+        Script::new(),
+        spec_with(plan),
+        data,
+        None,
+    ));
+    let injected = Injected {
+        hook: kind.hook(),
+        exception: Some(Exception::Flaky),
+        times,
+    };
+    match kind {
+        Kind::Entry => {
+            rig.script.inject(Some(injected));
+            rig.command(coolbot::Controllable::Running)
+                .expect("running");
+            rig.wait_user("idle");
+            rig.feeder.kick.emit();
+        }
+        Kind::Periodic => {
+            rig.run_busy();
+            rig.script.inject(Some(injected));
+        }
+        Kind::Exit => {
+            rig.run_busy();
+            rig.script.inject(Some(injected));
+            // `busy` chooses `idle` after its next periodic section: its exit runs.
+            rig.script.choose_idle.store(true, Ordering::SeqCst);
+        }
+    }
+    let injected_all = || rig.script.injected.load(Ordering::SeqCst) == times;
+    match expect {
+        Expect::Fails => {
+            let monitor = rig
+                .handle
+                .wait_state(State::RunningError, WAIT)
+                .unwrap_or_else(|t| panic!("{label}: {t}"));
+            assert_eq!(
+                monitor.error.as_deref(),
+                Some(
+                    format!(
+                        "exception `flaky` in state `busy` ({} section): injected in {}",
+                        kind.name(),
+                        kind.hook()
+                    )
+                    .as_str()
+                ),
+                "{label}"
+            );
+            assert!(injected_all(), "{label}");
+        }
+        Expect::Runs { user, quality } => {
+            eventually(injected_all, &label);
+            if let Some(user) = user {
+                rig.handle
+                    .wait_for(|m| m.user_state.as_deref() == Some(user), WAIT)
+                    .unwrap_or_else(|t| panic!("{label}: {t}"));
+            }
+            rig.sync();
+            let monitor = rig.handle.snapshot();
+            assert_eq!(monitor.state, State::Running, "{label}: {monitor:?}");
+            assert_eq!(monitor.error, None, "{label}");
+            assert_eq!(monitor.quality, quality, "{label}");
+        }
+    }
+    // The handler ran once per exception that reached the plan (retries re-run the
+    // section, not the handler).
+    assert_eq!(
+        *rig.script.handled.lock().unwrap(),
+        [format!("flaky: injected in {}", kind.hook())],
+        "{label}"
+    );
+    assert!(rig.system.shutdown().clean(), "{label}");
+}
+
+const KINDS: [Kind; 3] = [Kind::Entry, Kind::Periodic, Kind::Exit];
+
+#[test]
+fn retry_recovers_from_every_section_kind() {
+    for kind in KINDS {
+        case(
+            kind,
+            RETRY,
+            2,
+            Expect::Runs {
+                user: None,
+                quality: 0,
+            },
+        );
+    }
+}
+
+#[test]
+fn retry_that_keeps_failing_is_running_error_from_every_section_kind() {
+    for kind in KINDS {
+        case(kind, RETRY, 3, Expect::Fails);
+    }
+}
+
+#[test]
+fn goto_moves_the_user_automaton_from_every_section_kind() {
+    // From entry and periodic: to `idle`. From exit: the transition under way goes on
+    // (it was already leaving for `idle`).
+    for kind in KINDS {
+        case(
+            kind,
+            GOTO_IDLE,
+            1,
+            Expect::Runs {
+                user: Some("idle"),
+                quality: 0,
+            },
+        );
+    }
+}
+
+#[test]
+fn ignore_goes_on_from_every_section_kind() {
+    for kind in KINDS {
+        let user = if kind == Kind::Exit { "idle" } else { "busy" };
+        case(
+            kind,
+            IGNORE,
+            1,
+            Expect::Runs {
+                user: Some(user),
+                quality: 0,
+            },
+        );
+    }
+}
+
+#[test]
+fn degrade_lowers_the_quality_from_every_section_kind() {
+    for kind in KINDS {
+        case(
+            kind,
+            DEGRADE,
+            1,
+            Expect::Runs {
+                user: None,
+                quality: 1,
+            },
+        );
+    }
+}
+
+#[test]
+fn no_plan_is_running_error_from_every_section_kind() {
+    for kind in KINDS {
+        case(kind, NONE, 1, Expect::Fails);
+    }
+}
