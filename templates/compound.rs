@@ -227,10 +227,11 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
 {%- endif %}
 {%- endfor %}
 {%- for k in c.connections %}
-    {%- if let Some(converter) = k.converter %}
-        // Through converter `{{ converter }}`: the runtime does not convert inside compounds yet.
-    {%- endif %}
+    {%- if let Some(method) = k.via %}
+        .connect_via("{{ k.from }}", "{{ k.to }}", <C as super::types::Converters>::{{ method }})
+    {%- else %}
         .connect("{{ k.from }}", "{{ k.to }}")
+    {%- endif %}
 {%- endfor %}
 {%- for step in c.steps %}
         {{ step }}

@@ -136,6 +136,54 @@ pub fn merge_stubs(text: &str, set: &StubSet) -> Result<Merged, MergeError> {
     })
 }
 
+/// The `impl <trait_name> for X` block of the freshly generated user file `fresh`,
+/// preceded by the definition of `X` (with its doc and attributes) unless `user`
+/// already has an item named `X`: what a user file written before that block existed
+/// gets appended. `None` when `fresh` has no such block.
+fn missing_block(fresh: &str, trait_name: &str, user: &str) -> Option<String> {
+    use syn::spanned::Spanned;
+    let file = syn::parse_file(fresh).ok()?;
+    let block = file.items.iter().find_map(|item| match item {
+        syn::Item::Impl(block) => {
+            let (_, path, _) = block.trait_.as_ref()?;
+            (path.segments.last()?.ident == trait_name).then_some(block)
+        }
+        _ => None,
+    })?;
+    let syn::Type::Path(self_ty) = block.self_ty.as_ref() else {
+        return None;
+    };
+    let name = self_ty.path.segments.last()?.ident.to_string();
+    let user_has = syn::parse_file(user).is_ok_and(|file| {
+        file.items.iter().any(|item| match item {
+            syn::Item::Struct(s) => s.ident == name,
+            syn::Item::Enum(e) => e.ident == name,
+            syn::Item::Type(t) => t.ident == name,
+            _ => false,
+        })
+    });
+    let definition = file.items.iter().find_map(|item| match item {
+        syn::Item::Struct(s) if s.ident == name && !user_has => Some(s),
+        _ => None,
+    });
+    let start = match definition {
+        Some(s) => s
+            .attrs
+            .first()
+            .map_or_else(|| s.span().start(), |a| a.pound_token.span.start()),
+        None => block
+            .attrs
+            .first()
+            .map_or(block.impl_token.span.start(), |a| {
+                a.pound_token.span.start()
+            }),
+    };
+    let end = block.brace_token.span.close().span().end();
+    let from = byte_offset(fresh, start.line, start.column);
+    let to = byte_offset(fresh, end.line, end.column);
+    (from < to).then(|| fresh[from..to].to_owned())
+}
+
 /// The byte offset of a 1-based line and 0-based character column.
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
     let mut offset = 0;
@@ -258,6 +306,20 @@ pub fn write_files(
                                     merged.stale.join(", ")
                                 ));
                             }
+                        }
+                        Err(MergeError::NoImpl(_))
+                            if let Some(block) =
+                                missing_block(&file.contents, &set.trait_name, &merged_text) =>
+                        {
+                            // A block the file predates (a compound's `impl
+                            // Supervisor` from an older coolc): appended whole.
+                            if !merged_text.ends_with('\n') {
+                                merged_text.push('\n');
+                            }
+                            merged_text.push('\n');
+                            merged_text.push_str(&block);
+                            merged_text.push('\n');
+                            added.extend(set.stubs.iter().map(|(name, _)| name.clone()));
                         }
                         Err(error) => report.warnings.push(format!(
                             "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",

@@ -81,7 +81,8 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     // `Plant` nests the `Cell` compound (a substitute, exported ports, mapped
     // variables, supervisor rules over own and instance variables); `Probe` has rules
     // of every form over every readable type; `Gate` moves on a packet at an exported
-    // input; `Pair` is a redundant group. The filled user files and the run tests are
+    // input; `Pair` is a redundant group; `Ticker`'s rule reads a `local` variable
+    // its periodic section changes. The filled user files and the run tests are
     // in `tests/data/plant`.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("plant.cool");
@@ -98,6 +99,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "probe.rs",
         "gate.rs",
         "pair.rs",
+        "ticker.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -115,6 +117,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "rules_read_every_kind_of_value",
         "a_supervisor_moves_on_a_packet_at_an_exported_input",
         "a_redundant_group_keeps_the_stream_when_a_member_fails",
+        "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

@@ -255,3 +255,52 @@ fn regeneration_adds_supervisor_sections_and_parts_to_compounds() {
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
     cargo(&krate, &["build", "--quiet"]);
 }
+
+#[test]
+fn a_compound_user_file_without_a_supervisor_block_gets_one_appended() {
+    // A user file as the previous coolc wrote it: `impl Parts` only, no supervisor.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("room.cool");
+    let krate = dir.path().join("room");
+    write(&description, COMPOUND_V1);
+    compile(&description, &krate, "room");
+    let user_file = krate.join("src/room.rs");
+    let generated = std::fs::read_to_string(&user_file).unwrap();
+    let struct_start = generated
+        .find("/// What `Room`'s supervisor keeps")
+        .expect("the supervisor struct");
+    let parts_start = generated.find("/// The behaviours").expect("the parts");
+    let supervisor_stub = generated.find("    fn supervisor(&mut self)").unwrap();
+    let stub_end = supervisor_stub + generated[supervisor_stub..].find("    }\n").unwrap() + 6;
+    let old = format!(
+        "{}{}{}\n// A helper of mine.\npub fn mine() -> u32 {{\n    7\n}}\n",
+        &generated[..struct_start],
+        &generated[parts_start..supervisor_stub],
+        &generated[stub_end..].trim_start_matches('\n'),
+    );
+    assert!(!old.contains("Supervisor for"), "{old}");
+    write(&user_file, &old);
+
+    let report = compile(&description, &krate, "room");
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    let regenerated = std::fs::read_to_string(&user_file).unwrap();
+    // The supervisor's struct and block appended at the end; the `supervisor()` stub
+    // inserted into `impl Parts`; nothing else changed.
+    let appended_at = regenerated
+        .rfind("/// What `Room`'s supervisor keeps")
+        .expect("appended");
+    let (head, appended) = regenerated.split_at(appended_at);
+    assert!(appended.contains("pub struct RoomSupervisor"), "{appended}");
+    assert!(
+        appended.contains("impl Supervisor for RoomSupervisor"),
+        "{appended}"
+    );
+    assert!(appended.contains("fn dark_entry"), "{appended}");
+    let head = head
+        .strip_suffix('\n')
+        .expect("a blank line before the block");
+    let inserted = assert_only_inserted(&old, head);
+    assert!(inserted.contains("fn supervisor(&mut self)"), "{inserted}");
+    assert!(!inserted.contains("Supervisor for"), "{inserted}");
+    cargo(&krate, &["build", "--quiet"]);
+}

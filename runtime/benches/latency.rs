@@ -22,8 +22,9 @@ use common::{Figure, Glue, Goal, Mode, Samples, Table};
 
 /// Round trips discarded at the start of every round (thread wake-up, caches).
 const WARMUP: usize = 200;
-/// Rounds of project and baseline, alternated.
-const ROUNDS: usize = 10;
+/// Rounds of project and baseline, alternated (many short rounds, so that a change in
+/// the machine's load, which moves both sides between regimes, hits both alike).
+const ROUNDS: usize = 40;
 
 one_state_spec! {
     static FIFO_SPEC = "FifoEcho",

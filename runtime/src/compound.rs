@@ -27,9 +27,13 @@ use crate::port::{
 };
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
 use crate::spec::{Spec, VarKind, VarSpec};
-use crate::system::{Component, PortSet, System};
+use crate::system::{Component, ConnectError, PortSet, System};
 use crate::table::{Controllable, State};
 use crate::value::Value;
+
+/// The period of a supervisor's `periodic;` sections when neither the state nor the
+/// supervisor's `timing` gives one (`docs/language.md`, "The supervisor").
+pub const DEFAULT_SUPERVISION_PERIOD: Duration = Duration::from_millis(100);
 
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
@@ -111,13 +115,18 @@ pub struct SupervisorCx<'a> {
 #[derive(Debug, Clone, Default)]
 pub struct View {
     instances: Vec<Monitor>,
+    /// Each instance's position in `instances`, by name: a rule's lookup costs one
+    /// hash, not a scan of every instance.
+    positions: HashMap<String, usize>,
     own: Vec<(String, Value)>,
 }
 
 impl View {
     /// The monitor of instance `instance`, as last seen.
     pub fn monitor(&self, instance: &str) -> Option<&Monitor> {
-        self.instances.iter().find(|m| m.name == instance)
+        self.positions
+            .get(instance)
+            .and_then(|index| self.instances.get(*index))
     }
 
     /// `instance.state`.
@@ -159,6 +168,24 @@ impl View {
 }
 
 type Test = Box<dyn Fn(&View) -> bool + Send>;
+
+/// How a converted connection is made: `System::connect_via` with the converter's
+/// packet types and function captured.
+type Via = Arc<dyn Fn(&mut System, &str, &str) -> Result<(), ConnectError> + Send + Sync>;
+
+/// A declared connection (`instance.port` ends), through a converter or not.
+#[derive(Clone)]
+struct Link {
+    from: String,
+    to: String,
+    via: Option<Via>,
+}
+
+impl Link {
+    fn ends(&self) -> (&str, &str) {
+        (&self.from, &self.to)
+    }
+}
 
 /// One rule: in supervisor state `state`, when `test` holds, go to `target`.
 struct Rule {
@@ -423,7 +450,7 @@ pub struct CompoundBuilder {
     supervisor: Box<dyn Supervisor>,
     system: System,
     instances: Vec<Instance>,
-    links: Vec<(String, String)>,
+    links: Vec<Link>,
     mapped: Vec<(String, String, VarKind)>,
     policies: Vec<(String, Policy)>,
     substitutes: Vec<(String, String)>,
@@ -641,7 +668,38 @@ impl CompoundBuilder {
 
     /// `connect from -> to;` between two instances (`instance.port` addresses).
     pub fn connect(mut self, from: &str, to: &str) -> CompoundBuilder {
-        self.links.push((from.to_owned(), to.to_owned()));
+        self.links.push(Link {
+            from: from.to_owned(),
+            to: to.to_owned(),
+            via: None,
+        });
+        self
+    }
+
+    /// `connect from -> to via converter;` between two instances: output `from`
+    /// (packets of `A`) feeds input `to` (packets of `B`) through `convert`, as
+    /// [`System::connect_via`] does (applied on the producer's thread at each send, or
+    /// on the consumer's thread at each read of a poster). The converter stays on the
+    /// connection when substitution or recovery moves one of its ends to another
+    /// instance; such an input end is reconnected rather than moved, so packets queued
+    /// at the replaced instance's input stay there. The packet types are checked when
+    /// the compound starts (a mismatch takes it to `running_error` with the reason).
+    pub fn connect_via<A: Packet, B: Packet>(
+        mut self,
+        from: &str,
+        to: &str,
+        convert: impl Fn(&A) -> B + Send + Sync + 'static,
+    ) -> CompoundBuilder {
+        let convert = Arc::new(convert);
+        let via: Via = Arc::new(move |system: &mut System, from: &str, to: &str| {
+            let convert = Arc::clone(&convert);
+            system.connect_via::<A, B>(from, to, move |packet: &A| convert(packet))
+        });
+        self.links.push(Link {
+            from: from.to_owned(),
+            to: to.to_owned(),
+            via: Some(via),
+        });
         self
     }
 
@@ -752,21 +810,36 @@ impl CompoundBuilder {
         }
     }
 
+    /// Whether instances `a` and `b` can stand for each other: the same ports (by name,
+    /// with their kind, packet type and pull model; queue sizes may differ) and the
+    /// same observable and controllable variables (by name, with their kind and
+    /// type), in any order. `coolc` checks the same (`coolc::check::interface_mismatch`).
     fn same_interface(&self, a: usize, b: usize) -> Result<(), CompoundError> {
         let (x, y) = (self.instances[a].spec, self.instances[b].spec);
         let inputs = |s: &Spec| {
-            s.inputs
+            let mut ports: Vec<_> = s
+                .inputs
                 .iter()
-                .map(|i| (i.name, format!("{:?}", i.kind), i.packet))
-                .collect::<Vec<_>>()
+                .map(|i| (i.name, std::mem::discriminant(&i.kind), i.packet, i.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
         let outputs = |s: &Spec| {
-            s.outputs
+            let mut ports: Vec<_> = s
+                .outputs
                 .iter()
-                .map(|o| (o.name, format!("{:?}", o.kind), o.packet))
-                .collect::<Vec<_>>()
+                .map(|o| (o.name, o.kind, o.packet, o.pull))
+                .collect();
+            ports.sort_by_key(|p| p.0);
+            ports
         };
-        let variables = |s: &Spec| s.variables.iter().map(|v| v.name).collect::<Vec<_>>();
+        let variables = |s: &Spec| {
+            let mut variables: Vec<_> =
+                s.variables.iter().map(|v| (v.name, v.kind, v.ty)).collect();
+            variables.sort_by_key(|v| v.0);
+            variables
+        };
         if inputs(x) != inputs(y) || outputs(x) != outputs(y) || variables(x) != variables(y) {
             return Err(self.arrangement(format!(
                 "`{}` ({}) and `{}` ({}) do not have the same interface (ports, their kinds and packets, variables)",
@@ -782,7 +855,15 @@ impl CompoundBuilder {
         if let Some(error) = self.errors.first() {
             return Err(error.clone());
         }
-        let own = self.supervisor.spec();
+        let mut own = *self.supervisor.spec();
+        let unperiodic = own
+            .states
+            .iter()
+            .any(|state| state.periodic.is_some_and(|p| p.period.is_none()));
+        if unperiodic && own.timing.period.is_none() {
+            own.timing.period = Some(DEFAULT_SUPERVISION_PERIOD);
+        }
+        let own = &own;
         if let Err(detail) = own.validate() {
             return Err(CompoundError::Supervisor {
                 compound: self.name.clone(),
@@ -800,11 +881,12 @@ impl CompoundBuilder {
             let p = self.instance_index(&primary)?;
             if s == p
                 || self.instances[p].substitute.is_some()
+                || self.instances[p].substitutes.is_some()
                 || self.instances[s].substitutes.is_some()
                 || self.instances[s].substitute.is_some()
             {
                 return Err(self.arrangement(format!(
-                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, and a substitute has none of its own"
+                    "`{substitute}` cannot substitute `{primary}`: one substitute per instance, a substitute substitutes one instance, and neither end of a substitution is in another"
                 )));
             }
             self.same_interface(p, s)?;
@@ -844,7 +926,8 @@ impl CompoundBuilder {
             group_members.push(indices);
         }
         // Connections: resolve the instances; the system checks the rest when wiring.
-        for (from, to) in &self.links {
+        for link in &self.links {
+            let (from, to) = link.ends();
             for address in [from, to] {
                 let Some((instance, _)) = address.split_once('.') else {
                     return Err(CompoundError::Connect {
@@ -924,6 +1007,12 @@ impl CompoundBuilder {
         let spec: &'static Spec = Box::leak(Box::new(spec));
         let view = View {
             instances: self.instances.iter().map(|i| i.handle.snapshot()).collect(),
+            positions: self
+                .instances
+                .iter()
+                .enumerate()
+                .map(|(index, i)| (i.name.clone(), index))
+                .collect(),
             own: own
                 .variables
                 .iter()
@@ -948,6 +1037,7 @@ impl CompoundBuilder {
             view,
             evaluated_in: None,
             fresh: false,
+            sectioned: false,
             queue: Vec::new(),
             retry_every: self.retry_every,
             deadline: self.deadline,
@@ -992,10 +1082,10 @@ struct Compound {
     instances: Vec<Instance>,
     groups: Vec<Vec<usize>>,
     /// Declared connections.
-    links: Vec<(String, String)>,
+    links: Vec<Link>,
     /// The connections made now (declared ones with each instance routed to whoever
-    /// stands for it).
-    wired: Vec<(String, String)>,
+    /// stands for it, with their converters).
+    wired: Vec<Link>,
     mapped: Vec<Mapped>,
     supervisor: Box<dyn Supervisor>,
     rules: Vec<Rule>,
@@ -1011,6 +1101,10 @@ struct Compound {
     /// A rule moved the supervisor to another state: the thread takes one more turn at
     /// once to evaluate the new state's rules (nothing else may wake it).
     fresh: bool,
+    /// A supervisor section ran since the last turn: it may have changed variables the
+    /// runtime cannot see (`local` ones, or any state of a hand-written supervisor), so
+    /// the next turn, taken at once, evaluates every rule of the current state.
+    sectioned: bool,
     queue: Vec<Recovering>,
     retry_every: Duration,
     deadline: Duration,
@@ -1078,53 +1172,63 @@ impl Compound {
     /// Make the connections match the arrangement: each declared connection between
     /// the instances standing for its ends now. Removed first, then added.
     fn rewire(&mut self) -> Result<(), Fault> {
-        let mut wanted: Vec<(String, String)> = Vec::new();
-        for (from, to) in &self.links {
-            let link = (self.routed(from), self.routed(to));
-            if !wanted.contains(&link) {
-                wanted.push(link);
+        let mut wanted: Vec<Link> = Vec::new();
+        for link in &self.links {
+            let routed = Link {
+                from: self.routed(&link.from),
+                to: self.routed(&link.to),
+                via: link.via.clone(),
+            };
+            if !wanted.iter().any(|w| w.ends() == routed.ends()) {
+                wanted.push(routed);
             }
         }
         let Some(system) = self.system.as_mut() else {
             return Ok(());
         };
-        let error = |e: crate::system::ConnectError| {
-            Fault::message(format!("compound `{}`: {e}", self.name))
-        };
-        let mut removed: Vec<_> = self
+        let error = |e: ConnectError| Fault::message(format!("compound `{}`: {e}", self.name));
+        let mut removed: Vec<Link> = self
             .wired
             .iter()
-            .filter(|link| !wanted.contains(link))
+            .filter(|link| !wanted.iter().any(|w| w.ends() == link.ends()))
             .cloned()
             .collect();
-        let mut added: Vec<_> = wanted
+        let mut added: Vec<Link> = wanted
             .iter()
-            .filter(|link| !self.wired.contains(link))
+            .filter(|link| !self.wired.iter().any(|w| w.ends() == link.ends()))
             .cloned()
             .collect();
         // An input end moving from one instance to its stand-in (same producer, same
-        // port): moved in one step with the packets queued there.
+        // port, no converter): moved in one step with the packets queued there. A
+        // converted connection is disconnected and connected again, converter and all.
         let port = |address: &str| address.split_once('.').map(|(_, p)| p.to_owned());
         let mut index = 0;
         while index < removed.len() {
-            let (from, old_to) = removed[index].clone();
-            match added
-                .iter()
-                .position(|(f, new_to)| *f == from && port(new_to) == port(&old_to))
-            {
+            let old = removed[index].clone();
+            let moved = old.via.is_none().then(|| {
+                added.iter().position(|new| {
+                    new.via.is_none() && new.from == old.from && port(&new.to) == port(&old.to)
+                })
+            });
+            match moved.flatten() {
                 Some(position) => {
-                    let (_, new_to) = added.remove(position);
-                    system.move_input(&from, &old_to, &new_to).map_err(error)?;
+                    let new = added.remove(position);
+                    system
+                        .move_input(&old.from, &old.to, &new.to)
+                        .map_err(error)?;
                     removed.remove(index);
                 }
                 None => index += 1,
             }
         }
-        for (from, to) in &removed {
-            system.disconnect(from, to).map_err(error)?;
+        for link in &removed {
+            system.disconnect(&link.from, &link.to).map_err(error)?;
         }
-        for (from, to) in &added {
-            system.connect(from, to).map_err(error)?;
+        for link in &added {
+            match &link.via {
+                Some(via) => via(system, &link.from, &link.to).map_err(error)?,
+                None => system.connect(&link.from, &link.to).map_err(error)?,
+            }
         }
         self.wired = wanted;
         for index in 0..self.exports.len() {
@@ -1563,6 +1667,7 @@ impl Automaton for Compound {
     }
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        self.sectioned = true;
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,
@@ -1661,7 +1766,7 @@ impl Automaton for Compound {
                 pending.due
             })
         });
-        let fresh = self.fresh.then(Instant::now);
+        let fresh = (self.fresh || self.sectioned).then(Instant::now);
         queue.chain(restarts).chain(fresh).min()
     }
 }
@@ -1683,13 +1788,16 @@ impl Compound {
         }
         self.refresh_own(&mut changed);
         let entered = self.evaluated_in != Some(state);
-        if !entered && changed.is_empty() {
+        // After a supervisor section every rule of the state is evaluated: the section
+        // may have changed what no `reads` names (its `local` variables).
+        let sectioned = std::mem::take(&mut self.sectioned);
+        if !entered && !sectioned && changed.is_empty() {
             return Ok(None);
         }
         self.evaluated_in = Some(state);
         let view = &self.view;
         let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
-        let fired = if entered {
+        let fired = if entered || sectioned {
             self.rules.iter().find(holds).map(|rule| rule.target)
         } else {
             // Only the rules reading a changed variable, in declaration order.

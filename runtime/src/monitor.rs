@@ -39,7 +39,8 @@ pub enum Command {
     SetPeriod(Duration),
     /// The longest a section may run (`max_response`).
     SetMaxResponse(Duration),
-    /// The priority (`priority`; recorded and published, not applied to the OS thread).
+    /// The priority (`priority`): applied to the component's OS thread at once (see
+    /// [`OsPriority`]; a refusal by the OS does not reject the command).
     SetPriority(i32),
     /// The quality level: an index into the timing block's qualities (0 = best).
     SetQuality(usize),
@@ -105,6 +106,8 @@ pub struct Monitor {
     pub max_response: Option<Duration>,
     /// The priority.
     pub priority: i32,
+    /// How `priority` is applied to the component's OS thread.
+    pub os_priority: OsPriority,
     /// Monitoring events dropped because an observer's channel was full.
     pub dropped_events: u64,
     /// Compound components only: the last [`SUPERVISION_HISTORY`] steps the supervisor
@@ -232,6 +235,28 @@ pub enum MonitorEvent {
     Configured,
     /// Compound components: the supervisor took a step about an instance.
     Supervision(Supervision),
+    /// `priority` was applied to the component's thread, or could not be.
+    OsPriority(OsPriority),
+}
+
+/// How a component's `priority` is applied to its OS thread (`docs/runtime.md`,
+/// "Priority"). Applying can fail (no `CAP_SYS_NICE` in a container): the component
+/// runs on regardless, and this says what holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OsPriority {
+    /// Nothing applied: the thread has not started, or the priority is 0 and the thread
+    /// keeps the scheduling it was created with.
+    Inherited,
+    /// Real-time round-robin scheduling (Linux `SCHED_RR`) at this static priority
+    /// (1 to 99).
+    RoundRobin(i32),
+    /// Normal time-sharing scheduling at this nice value (-20, highest, to 19): a
+    /// negative priority, a priority of 0 restored, or a positive priority when
+    /// real-time scheduling was refused.
+    Nice(i32),
+    /// The OS refused, or the platform is not supported: why. The thread keeps its
+    /// previous scheduling.
+    NotApplied(String),
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {

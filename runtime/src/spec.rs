@@ -338,7 +338,9 @@ pub struct TimingSpec {
     pub max_period: Option<Duration>,
     /// The longest a section may run (the maximum delay to handle an input event).
     pub max_response: Option<Duration>,
-    /// The priority (recorded and published; not applied to the OS thread yet).
+    /// The priority: 0 leaves the thread as the OS created it; above 0, real-time
+    /// scheduling where permitted; below 0, a higher nice value (`docs/runtime.md`,
+    /// "Priority"; what holds is published as [`crate::OsPriority`]).
     pub priority: i32,
     /// Quality levels, best first.
     pub qualities: &'static [&'static str],

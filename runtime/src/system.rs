@@ -496,6 +496,7 @@ impl System {
             period: timing.period,
             max_response: timing.max_response,
             priority: timing.priority,
+            os_priority: crate::monitor::OsPriority::Inherited,
             dropped_events: 0,
             supervision: Vec::new(),
             supervision_steps: 0,

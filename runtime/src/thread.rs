@@ -38,3 +38,181 @@ pub(crate) fn later(start: Instant, delay: Duration) -> Instant {
     const CENTURY: Duration = Duration::from_secs(100 * 365 * 24 * 3600);
     start.checked_add(delay.min(CENTURY)).unwrap_or(start)
 }
+
+/// The timer slack given to component threads (Linux `PR_SET_TIMERSLACK`): how late the
+/// kernel may fire the thread's timers to batch wake-ups. The default, 50 us, is most
+/// of a 1 kHz component's activation lateness; a component's timers are its deadlines.
+pub(crate) const TIMER_SLACK: Duration = Duration::from_micros(1);
+
+/// Set the calling thread's timer slack to [`TIMER_SLACK`] (Linux; elsewhere nothing).
+/// False if the OS refused (the thread keeps its slack).
+pub(crate) fn set_timer_slack() -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        let nanos = u64::try_from(TIMER_SLACK.as_nanos()).unwrap_or(u64::MAX);
+        rustix::thread::set_current_timer_slack(std::num::NonZeroU64::new(nanos)).is_ok()
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        false
+    }
+}
+
+pub(crate) use os::Scheduling;
+
+/// How `priority` maps onto the OS (`docs/runtime.md`, "Priority").
+#[cfg(target_os = "linux")]
+mod os {
+    use rustix::process::{getpriority_process, setpriority_process};
+    use rustix::thread::gettid;
+    use thread_priority::{
+        NormalThreadSchedulePolicy, RealtimeThreadSchedulePolicy, ThreadPriority,
+        ThreadPriorityValue, ThreadSchedulePolicy, set_thread_priority_and_policy,
+        thread_native_id,
+    };
+
+    use crate::monitor::OsPriority;
+
+    /// The highest `SCHED_RR` static priority on Linux.
+    const RR_MAX: i32 = 99;
+    /// The nice range on Linux.
+    const NICE_HIGHEST: i32 = -20;
+    const NICE_LOWEST: i32 = 19;
+
+    /// A component thread's scheduling: what it was created with and what the runtime
+    /// applied. Lives on, and is used only by, the component's own thread.
+    pub(crate) struct Scheduling {
+        /// The nice value the thread was created with (inherited from its creator).
+        base_nice: i32,
+        /// Whether the runtime put the thread under `SCHED_RR`.
+        realtime: bool,
+        /// What holds now.
+        current: OsPriority,
+    }
+
+    impl Scheduling {
+        /// The calling thread's scheduling, as created.
+        pub(crate) fn of_current_thread() -> Scheduling {
+            Scheduling {
+                base_nice: getpriority_process(Some(gettid())).unwrap_or(0),
+                realtime: false,
+                current: OsPriority::Inherited,
+            }
+        }
+
+        /// Apply `priority` to the calling thread (which must be the one this was made
+        /// on); returns what holds now. Never fails: a refusal is `NotApplied`.
+        pub(crate) fn apply(&mut self, priority: i32) -> OsPriority {
+            self.current = match priority {
+                0 if self.current == OsPriority::Inherited => OsPriority::Inherited,
+                0 => self.normal(self.base_nice, ""),
+                p if p > 0 => match self.round_robin(p.min(RR_MAX)) {
+                    Ok(applied) => applied,
+                    Err(refused) => {
+                        // Fall back to a nice value below the thread's own.
+                        let nice = self
+                            .base_nice
+                            .saturating_sub(p.min(NICE_LOWEST - NICE_HIGHEST))
+                            .max(NICE_HIGHEST);
+                        self.normal(nice, &format!("SCHED_RR {}: {refused}; ", p.min(RR_MAX)))
+                    }
+                },
+                p => {
+                    let nice = self
+                        .base_nice
+                        .saturating_add(p.saturating_neg())
+                        .min(NICE_LOWEST);
+                    self.normal(nice, "")
+                }
+            };
+            self.current.clone()
+        }
+
+        fn round_robin(&mut self, level: i32) -> Result<OsPriority, String> {
+            let value = u8::try_from(level)
+                .ok()
+                .and_then(|v| ThreadPriorityValue::try_from(v).ok())
+                .ok_or_else(|| format!("priority {level} out of range"))?;
+            set_thread_priority_and_policy(
+                thread_native_id(),
+                ThreadPriority::Crossplatform(value),
+                ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::RoundRobin),
+            )
+            .map_err(describe)?;
+            self.realtime = true;
+            Ok(OsPriority::RoundRobin(level))
+        }
+
+        /// Normal scheduling at `nice`; `before` says what was refused first, if
+        /// anything (for the `NotApplied` text).
+        fn normal(&mut self, nice: i32, before: &str) -> OsPriority {
+            if self.realtime {
+                // Leave SCHED_RR: `thread-priority` sets a nice value with the policy;
+                // ask it for the one wanted, then set it exactly below.
+                let nearest = (0..=99u8)
+                    .filter_map(|v| ThreadPriorityValue::try_from(v).ok())
+                    .map(ThreadPriority::Crossplatform)
+                    .min_by_key(|p| {
+                        p.to_posix(normal_policy())
+                            .map_or(i32::MAX, |n| (n - nice).abs())
+                    });
+                let left = nearest
+                    .ok_or_else(|| "no priority value".to_owned())
+                    .and_then(|p| {
+                        set_thread_priority_and_policy(thread_native_id(), p, normal_policy())
+                            .map_err(describe)
+                    });
+                if let Err(refused) = left {
+                    return OsPriority::NotApplied(format!(
+                        "{before}leaving SCHED_RR: {refused}; the thread stays real-time"
+                    ));
+                }
+                self.realtime = false;
+            }
+            match setpriority_process(Some(gettid()), nice) {
+                Ok(()) => OsPriority::Nice(nice),
+                Err(errno) => {
+                    let now = getpriority_process(Some(gettid())).unwrap_or(self.base_nice);
+                    OsPriority::NotApplied(format!(
+                        "{before}nice {nice}: {}; the thread keeps nice {now}",
+                        std::io::Error::from(errno)
+                    ))
+                }
+            }
+        }
+    }
+
+    fn normal_policy() -> ThreadSchedulePolicy {
+        ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other)
+    }
+
+    fn describe(error: thread_priority::Error) -> String {
+        match error {
+            thread_priority::Error::OS(code) => std::io::Error::from_raw_os_error(code).to_string(),
+            other => other.to_string(),
+        }
+    }
+}
+
+/// Other platforms: `priority` is recorded and published, not applied.
+#[cfg(not(target_os = "linux"))]
+mod os {
+    use crate::monitor::OsPriority;
+
+    /// A component thread's scheduling (not changed on this platform).
+    pub(crate) struct Scheduling;
+
+    impl Scheduling {
+        pub(crate) fn of_current_thread() -> Scheduling {
+            Scheduling
+        }
+
+        pub(crate) fn apply(&mut self, priority: i32) -> OsPriority {
+            if priority == 0 {
+                OsPriority::Inherited
+            } else {
+                OsPriority::NotApplied("not supported on this platform".to_owned())
+            }
+        }
+    }
+}

@@ -1352,3 +1352,279 @@ fn a_rule_that_already_holds_when_its_state_is_entered_fires_without_another_eve
     );
     assert!(system.shutdown().clean());
 }
+
+/// A sink instance with a fifo input `text` of `String`s, read by the test.
+fn text_sink(name: &str) -> (Component, coolbot::port::FifoIn<String>) {
+    let text = coolbot::port::FifoIn::<String>::new(64, coolbot::OverflowPolicy::Reject);
+    let kind = coolbot::InputKind::Fifo {
+        capacity: 64,
+        policy: coolbot::OverflowPolicy::Reject,
+    };
+    let component = ShellBuilder::new(name)
+        .input(shell::input("text", kind, false), &text)
+        .build();
+    (component, text)
+}
+
+#[test]
+fn a_connection_through_a_converter_converts_inside_a_compound() {
+    let (sup, _) = Sup::new(&["operating"]);
+    let (f, feed) = feeder("f");
+    let (sink, text) = text_sink("sink");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(f)
+        .instance(sink)
+        .connect_via::<u64, String>("f.data", "sink.text", |n| format!("#{n}"));
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait(&base, State::Running);
+    feed.data.send(7);
+    feed.data.send(8);
+    assert_eq!(text.recv_timeout(WAIT).as_deref(), Some("#7"));
+    assert_eq!(text.recv_timeout(WAIT).as_deref(), Some("#8"));
+    assert!(system.shutdown().clean());
+
+    // A converter whose types do not fit the ports: the compound fails to start, and
+    // says why.
+    let (sup, _) = Sup::new(&["operating"]);
+    let (f, _feed) = feeder("f");
+    let (sink, _text) = text_sink("sink");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(f)
+        .instance(sink)
+        .connect_via::<u32, String>("f.data", "sink.text", |n| n.to_string());
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.start().expect("start");
+    let monitor = wait(&base, State::StartingError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .unwrap_or_default()
+            .contains("converter"),
+        "{monitor:?}"
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_converter_between_equal_types_is_applied_and_follows_the_substitute() {
+    let calls = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let counted = Arc::clone(&calls);
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, w_script) = worker("w");
+    let (b, b_script) = worker("b");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(b)
+        .instance(f)
+        .substitute("b", "w")
+        .connect_via::<u64, u64>("f.data", "w.data", move |n| {
+            counted.fetch_add(1, Ordering::SeqCst);
+            *n
+        })
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Substitute)
+        .recovery(Duration::from_millis(40), Duration::from_secs(10));
+    let w = builder.instance_handle("w").expect("w");
+    let b = builder.instance_handle("b").expect("b");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&w, "idle");
+    feed.data.send(1);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == 1,
+        "w receives through the converter",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 1, "the converter ran");
+
+    // w fails: the converted connection moves to b, converter included.
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    b.wait_for(
+        |m| m.state == State::Running && m.user_state.is_some(),
+        WAIT,
+    )
+    .unwrap_or_else(|t| panic!("{t}"));
+    feed.data.send(2);
+    feed.data.send(3);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 2,
+        "b receives through the converter",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 3);
+
+    // w recovers: back to w, still converted.
+    w_script.panic_in(None);
+    w_script.start_fails.store(false, Ordering::SeqCst);
+    wait(&b, State::Ready);
+    let before = w_script.received.load(Ordering::SeqCst);
+    feed.data.send(4);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w receives again",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 4);
+    assert_eq!(b_script.received.load(Ordering::SeqCst), 2);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+/// A supervisor whose `counting` state has a periodic section bumping a counter the
+/// runtime cannot see (like a `local` variable), shared with a rule.
+struct Counting {
+    count: Arc<std::sync::atomic::AtomicU64>,
+}
+
+static COUNTING: Spec = Spec {
+    type_name: "Counting",
+    doc: "",
+    states: &[
+        StateSpec {
+            name: "counting",
+            entry: false,
+            exit: false,
+            periodic: Some(coolbot::PeriodicSpec {
+                period: Some(Duration::from_millis(2)),
+            }),
+            on: &[],
+            after: &[],
+            may: &[],
+        },
+        StateSpec {
+            name: "stopped",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        },
+    ],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl Supervisor for Counting {
+    fn spec(&self) -> &'static Spec {
+        &COUNTING
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        section: Section,
+        _cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        if section == Section::Periodic {
+            self.count.fetch_add(1, Ordering::SeqCst);
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_rule_reading_what_a_section_changed_is_evaluated_after_the_section() {
+    let count = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let seen = Arc::clone(&count);
+    let (w, _) = worker("w");
+    let builder = CompoundBuilder::new("base", Counting { count })
+        .instance(w)
+        // No reads: nothing but the section changes what the rule looks at.
+        .rule("counting", "stopped", &[], move |_| {
+            seen.load(Ordering::SeqCst) > 3
+        });
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait_user(&base, "stopped");
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_supervisor_periodic_section_without_a_period_runs_at_the_default_supervision_period() {
+    static UNTIMED: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
+    let spec = *UNTIMED.get_or_init(|| {
+        let mut states = COUNTING.states.to_vec();
+        states[0].periodic = Some(coolbot::PeriodicSpec { period: None });
+        let mut spec = COUNTING;
+        spec.states = Box::leak(states.into_boxed_slice());
+        Box::leak(Box::new(spec))
+    });
+    struct Untimed(Counting, &'static Spec);
+    impl Supervisor for Untimed {
+        fn spec(&self) -> &'static Spec {
+            self.1
+        }
+        fn section(
+            &mut self,
+            state: usize,
+            section: Section,
+            cx: &mut SupervisorCx<'_>,
+        ) -> SectionResult {
+            self.0.section(state, section, cx)
+        }
+    }
+    let count = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let seen = Arc::clone(&count);
+    let (w, _) = worker("w");
+    let component = CompoundBuilder::new("base", Untimed(Counting { count }, spec))
+        .instance(w)
+        .rule("counting", "stopped", &[], move |_| {
+            seen.load(Ordering::SeqCst) >= 2
+        })
+        .build()
+        .expect("a supervisor's periodic section needs no period");
+    assert_eq!(
+        component.spec().timing.period,
+        Some(coolbot::compound::DEFAULT_SUPERVISION_PERIOD)
+    );
+    let mut system = System::new();
+    let base = system.add(component).expect("add");
+    system.run_all().expect("run");
+    wait_user(&base, "stopped");
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn substitution_chains_are_refused_in_either_order_and_interfaces_compare_by_name() {
+    let build = |f: fn(CompoundBuilder) -> CompoundBuilder| {
+        let (sup, _) = Sup::new(&["operating"]);
+        let (a, _) = worker("a");
+        let (b, _) = worker("b");
+        let (c, _) = worker("c");
+        f(CompoundBuilder::new("base", sup)
+            .instance(a)
+            .instance(b)
+            .instance(c))
+        .build()
+    };
+    for chain in [
+        build(|b| b.substitute("b", "a").substitute("c", "b")),
+        build(|b| b.substitute("c", "b").substitute("b", "a")),
+        build(|b| b.substitute("b", "a").substitute("c", "a")),
+    ] {
+        let error = chain.expect_err("a chain or two substitutes");
+        assert!(error.to_string().contains("one substitute"), "{error}");
+    }
+    // A substitute whose data fifo is deeper: the same interface.
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, _) = worker("w");
+    let (deep, _) = deep_worker("deep");
+    CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(deep)
+        .substitute("deep", "w")
+        .build()
+        .expect("queue sizes may differ");
+}

@@ -25,25 +25,27 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
                 def: ast::InputDef::Export(target),
                 ..
             }) => {
-                endpoint(
+                let port = endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Input,
                     "exported input",
                 );
+                exportable(checker, target, port.as_ref(), Direction::Input);
             }
             ast::Member::Output(ast::Output {
                 def: ast::OutputDef::Export(target),
                 ..
             }) => {
-                endpoint(
+                let port = endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Output,
                     "exported output",
                 );
+                exportable(checker, target, port.as_ref(), Direction::Output);
             }
             ast::Member::OnError(on_error) => {
                 self::on_error(checker, component, &instances, on_error)
@@ -51,6 +53,7 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
             _ => {}
         }
     }
+    arrangement(checker, component, &instances);
     cardinality(checker, component, &instances);
     queue_fan_out(checker, component, &instances);
     duplicate_policies(checker, component);
@@ -234,22 +237,26 @@ fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
             }
         }
     }
-    let observable = |i: &Interface| -> BTreeMap<String, Ty> {
+    // Observable and controllable variables (mapped ones and `Set` commands follow
+    // whoever stands for the instance).
+    let exposed = |i: &Interface| -> BTreeMap<String, (ast::VarKind, Ty)> {
         i.variables
             .iter()
-            .filter(|(_, v)| v.kind == ast::VarKind::Observable)
-            .map(|(n, v)| (n.clone(), v.ty.clone()))
+            .filter(|(_, v)| v.kind != ast::VarKind::Local)
+            .map(|(n, v)| (n.clone(), (v.kind, v.ty.clone())))
             .collect()
     };
-    let (ours, theirs) = (observable(a), observable(b));
+    let (ours, theirs) = (exposed(a), exposed(b));
     let names: BTreeSet<&String> = ours.keys().chain(theirs.keys()).collect();
     for name in names {
         match (ours.get(name), theirs.get(name)) {
-            (Some(p), Some(q)) if !p.same(q) => {
-                out.push(format!("observable `{name}` is `{p}` here but `{q}` there"))
-            }
-            (Some(_), None) => out.push(format!("extra observable `{name}`")),
-            (None, Some(_)) => out.push(format!("missing observable `{name}`")),
+            (Some((k, p)), Some((l, q))) if k != l || !p.same(q) => out.push(format!(
+                "variable `{name}` is {} `{p}` here but {} `{q}` there",
+                kind_word(*k),
+                kind_word(*l)
+            )),
+            (Some((k, _)), None) => out.push(format!("extra {} `{name}`", kind_word(*k))),
+            (None, Some((l, _))) => out.push(format!("missing {} `{name}`", kind_word(*l))),
             _ => {}
         }
     }
@@ -312,6 +319,109 @@ fn redundant(checker: &mut Checker<'_, '_>, instances: &Instances<'_>, redundant
             }
         }
     }
+}
+
+/// Substitutions and redundant groups the runtime can arrange: each instance takes
+/// part in at most one of them, once (one substitute per instance, a substitute
+/// substitutes one instance and has none of its own, no instance both in a
+/// substitution and in a redundant group or in two groups).
+fn arrangement(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+) {
+    // Where each instance was first placed, and as what.
+    let mut placed: BTreeMap<String, (Span, String)> = BTreeMap::new();
+    let mut place = |checker: &mut Checker<'_, '_>, ident: &ast::Ident, role: String| {
+        if !instances.contains_key(ident.name.as_str()) {
+            return;
+        }
+        let Some((earlier, was)) = placed.get(ident.name.as_str()) else {
+            placed.insert(ident.name.clone(), (ident.span, role));
+            return;
+        };
+        let diagnostic = checker
+            .error(
+                Code::Arrangement,
+                ident.span,
+                format!("`{}` cannot be {role}: it is already {was}", ident.name),
+            )
+            .with_label(role.clone())
+            .with_secondary(*earlier, format!("{was} here"))
+            .with_help(
+                "an instance takes part in one substitution (as the substitute or the substituted \
+                 instance) or one redundant group: the runtime could not tell who stands for it",
+            );
+        checker.push(diagnostic);
+    };
+    for member in &component.members {
+        if let ast::Member::Instance(instance) = member
+            && let Some(original) = &instance.substitutes
+            && original.name != instance.name.name
+        {
+            place(
+                checker,
+                &instance.name,
+                format!("the substitute of `{}`", original.name),
+            );
+            place(
+                checker,
+                original,
+                format!("substituted by `{}`", instance.name.name),
+            );
+        }
+    }
+    for member in &component.members {
+        if let ast::Member::Redundant(redundant) = member {
+            let mut seen = BTreeSet::new();
+            for ident in &redundant.members {
+                // A name twice in one group is `duplicate`.
+                if seen.insert(ident.name.as_str()) {
+                    place(checker, ident, "in a redundant group".to_owned());
+                }
+            }
+        }
+    }
+}
+
+/// What a compound can export (the runtime relays pushed packets): `tick`, `fifo`,
+/// `ufifo` and `last` inputs and `data` outputs, none of them `pull`.
+fn exportable(
+    checker: &mut Checker<'_, '_>,
+    target: &ast::PortRef,
+    port: Option<&Port>,
+    direction: Direction,
+) {
+    let Some(port) = port else { return };
+    let (what, problem) = match direction {
+        Direction::Input if port.kind == PortKind::Poster => ("input", "a poster input"),
+        Direction::Output if port.kind != PortKind::Data => (
+            "output",
+            if port.kind == PortKind::Tick {
+                "a tick output"
+            } else {
+                "a poster output"
+            },
+        ),
+        Direction::Input if port.pull => ("input", "a pull input"),
+        Direction::Output if port.pull => ("output", "a pull output"),
+        _ => return,
+    };
+    let diagnostic = checker
+        .error(
+            Code::ExportKind,
+            target.port.span,
+            format!(
+                "`{}` is {problem}: a compound cannot export it",
+                path(target)
+            ),
+        )
+        .with_label(format!("{} {what}", describe_port(port)))
+        .with_help(
+            "a compound exports tick, fifo, ufifo and last inputs and data outputs, in the push \
+             model; connect this port inside the compound instead",
+        );
+    checker.push(diagnostic);
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -876,6 +986,22 @@ fn unconnected_transition_inputs(
         };
         if let Some(instance) = &target.instance {
             fed.insert((instance.name.clone(), target.port.name.clone()));
+        }
+    }
+    // What feeds one member of a redundant group feeds whichever member stands for
+    // the group.
+    for member in &component.members {
+        if let ast::Member::Redundant(redundant) = member {
+            let ports: Vec<String> = fed
+                .iter()
+                .filter(|(i, _)| redundant.members.iter().any(|m| m.name == *i))
+                .map(|(_, port)| port.clone())
+                .collect();
+            for m in &redundant.members {
+                for port in &ports {
+                    fed.insert((m.name.clone(), port.clone()));
+                }
+            }
         }
     }
     for (name, (instance, _)) in instances {

@@ -144,7 +144,10 @@ impl Figure {
             Figure::Time(d) if d >= Duration::from_millis(10) => {
                 format!("{:.1} ms", d.as_secs_f64() * 1e3)
             }
-            Figure::Time(d) => format!("{:.1} us", d.as_secs_f64() * 1e6),
+            Figure::Time(d) if d >= Duration::from_micros(10) => {
+                format!("{:.1} us", d.as_secs_f64() * 1e6)
+            }
+            Figure::Time(d) => format!("{:.2} us", d.as_secs_f64() * 1e6),
             Figure::Rate(r) => format!("{:.2} M/s", r / 1e6),
             Figure::Bytes(b) => format!("{:.1} KiB", b / 1024.0),
         }

@@ -1,14 +1,13 @@
-//! Runs the generated atomic components on the runtime, wired as `MobileBase`
-//! declares (by hand on a `coolbot::System`: the runtime's compound builder does not
-//! convert packets yet, and one connection goes through a converter), with the
-//! behaviours the user file's `MobileBaseParts` gives.
+//! Runs the generated `MobileBase` compound on the runtime, built by its generated
+//! `component` (instances with their overrides, the connections, one of them
+//! through the `PathToTwist` converter, the mapped variables) with the behaviours the
+//! user file's `MobileBaseParts` gives.
 
 use std::time::Duration;
 
 use coolbot::{System, Value};
 use fleet::converters::Convert;
 use fleet::generated::mobile_base::{self, Parts};
-use fleet::generated::types::Converters;
 use fleet::mobile_base::MobileBaseParts;
 
 const WAIT: Duration = Duration::from_secs(20);
@@ -24,47 +23,20 @@ fn variable(monitor: &coolbot::Monitor, name: &str) -> Option<Value> {
 #[test]
 fn mobile_base_instances_run_and_talk() {
     let mut system = System::new();
-    let mut parts = MobileBaseParts::default();
-    // `instance motion: MotionController { max_speed = 0.5; }` sets the configuration
-    // field and the controllable variable of that name.
-    let config = fleet::generated::motion_controller::Config {
-        max_speed: 0.5,
-        ..Default::default()
-    };
-    let vars = fleet::generated::motion_controller::Vars {
-        max_speed: 0.5,
-        ..Default::default()
-    };
-    system
-        .add(fleet::generated::motion_controller::component_with(
-            "motion",
-            parts.motion(),
-            config,
-            vars,
-        ))
-        .unwrap();
-    system
-        .add(fleet::generated::range_server::component(
-            "ranges",
-            parts.ranges(),
-        ))
-        .unwrap();
+    // The compound as the description builds it; `instance motion: MotionController
+    // { max_speed = 0.5; }` sets the configuration field and the controllable
+    // variable of that name.
+    let builder = mobile_base::builder::<Convert>("base", MobileBaseParts::default()).unwrap();
+    let motion = builder.instance_handle("motion").unwrap();
+    let ranges = builder.instance_handle("ranges").unwrap();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    // Outside the compound: a planner of its own and a follower pulling from it.
     system
         .add(fleet::generated::planner::component(
             "planner",
-            parts.planner(),
+            MobileBaseParts::default().planner(),
         ))
         .unwrap();
-    for (from, to) in mobile_base::CONNECTIONS {
-        if *from == "planner.path" {
-            system
-                .connect_via(from, to, <Convert as Converters>::path_to_twist)
-                .unwrap();
-        } else {
-            system.connect(from, to).unwrap();
-        }
-    }
-    // An instance outside the compound, pulling from the planner.
     let follower = system
         .add(fleet::generated::follower::component(
             "follower",
@@ -72,9 +44,8 @@ fn mobile_base_instances_run_and_talk() {
         ))
         .unwrap();
     system.connect("planner.path", "follower.path").unwrap();
-    let motion = system.handle("motion").unwrap();
-    let ranges = system.handle("ranges").unwrap();
     system.run_all().unwrap();
+    base.wait_state(coolbot::State::Running, WAIT).unwrap();
 
     // The range server leaves `calibrating` through its `may` choice and streams.
     let monitor = ranges
@@ -122,7 +93,7 @@ fn mobile_base_instances_run_and_talk() {
         )
         .unwrap();
 
-    // The planner's path reaches the motion controller through the converter: it
+    // Inside the compound the planner's path reaches the motion controller through the converter: it
     // moves (`on command -> moving`) and integrates the command into its odometry.
     let monitor = motion
         .wait_for(
@@ -147,19 +118,24 @@ fn mobile_base_instances_run_and_talk() {
         .wait_for(|m| m.user_state.as_deref() == Some("idle"), WAIT)
         .unwrap();
 
-    // The controllable variable is set through the control port.
-    motion
-        .command(coolbot::Command::Set(
-            "max_speed".to_owned(),
-            Value::Float(0.3),
-        ))
-        .unwrap();
+    // The compound's mapped controllable variable is set through its control port
+    // and lands on the instance's.
+    base.command(coolbot::Command::Set(
+        "max_speed".to_owned(),
+        Value::Float(0.3),
+    ))
+    .unwrap();
     motion
         .wait_for(
             |m| matches!(variable(m, "max_speed"), Some(Value::Float(s)) if s == 0.3),
             WAIT,
         )
         .unwrap();
+    base.wait_for(
+        |m| matches!(variable(m, "max_speed"), Some(Value::Float(s)) if s == 0.3),
+        WAIT,
+    )
+    .unwrap();
 
     let report = system.shutdown();
     assert!(

@@ -126,6 +126,24 @@ fn rules_read_every_kind_of_value() {
 }
 
 #[test]
+fn a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it() {
+    let component =
+        plant::generated::ticker::component("ticker", plant::ticker::TickerParts::default())
+            .unwrap();
+    let mut system = System::new();
+    let ticker = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `ticks` is local: no monitoring event announces it; the rule is evaluated after
+    // each periodic section that counts it up.
+    let monitor = ticker
+        .wait_for(|m| m.user_state.as_deref() == Some("counted"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
 fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
     let gate =
         plant::generated::gate::component("gate", plant::gate::GateParts::default()).unwrap();
