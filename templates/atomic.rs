@@ -1,3 +1,5 @@
+{#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`), which lays out the
+    parts that depend on the description and says when the result needs a formatter. -#}
 {%- import "macros.rs" as m -%}
 {% call m::header(krate.sources_text()) %}{% endcall %}
 //! Generated code of atomic component `{{ c.type_name }}`.
@@ -6,114 +8,133 @@
 //! call [`component`] to get a `coolbot::Component` to add to a `coolbot::System`.
 {%- if !c.doc.is_empty() %}
 //!
-{%- for line in c.doc %}
-//! {{ line }}
-{%- endfor %}
+{{- l.doc(&c.doc, 0, "//!") }}
 {%- endif %}
 
 /// The `configuration` block: the default controllable variable `configuration`.
 #[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if c.config_derives_default() %}, Default{% endif %})]
 #[serde(default)]
+{%- if c.config.is_empty() %}
+pub struct Config {}
+{%- else %}
 pub struct Config {
 {%- for f in c.config %}
-{%- call m::doc(&f.doc) %}{% endcall %}
-    {%- if f.renamed() %}
+{{- l.doc(&f.doc, 4, "///") }}
+{%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
-    {%- endif %}
-    pub {{ f.name }}: {{ f.ty }},
+{%- endif %}
+{{ l.decl(&f.name, &f.ty) }}
 {%- endfor %}
 }
+{%- endif %}
+{%- if !c.config_derives_default() %}
 
-{% if !c.config_derives_default() %}
 impl ::core::default::Default for Config {
     fn default() -> Self {
-        Self {
-        {%- for f in c.config %}
-            {{ f.name }}: {{ f.default }},
-        {%- endfor %}
-        }
+        {{ l.defaults(&c.config) }}
     }
 }
-{% endif %}
+{%- endif %}
 
 /// The component's own variables: observable, controllable and local.
 #[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
+{%- if c.vars.is_empty() %}
+pub struct Vars {}
+{%- else %}
 pub struct Vars {
 {%- for v in c.vars %}
-{%- call m::doc(&v.field.doc) %}{% endcall %}
+{{- l.doc(&v.field.doc, 4, "///") }}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
-    pub {{ v.field.name }}: {{ v.field.ty }},
+{{ l.decl(&v.field.name, &v.field.ty) }}
 {%- endfor %}
 }
+{%- endif %}
+{%- if !c.vars_derive_default() %}
 
-{% if !c.vars_derive_default() %}
 impl ::core::default::Default for Vars {
     fn default() -> Self {
-        Self {
-        {%- for v in c.vars %}
-            {{ v.field.name }}: {{ v.field.default }},
-        {%- endfor %}
-        }
+        {{ l.var_defaults(&c.vars) }}
     }
 }
-{% endif %}
+{%- endif %}
 
 /// The input ports, in declaration order.
+{%- if c.inputs.is_empty() %}
+pub struct Inputs {}
+{%- else %}
 pub struct Inputs {
 {%- for p in c.inputs %}
-{%- call m::doc(&p.doc) %}{% endcall %}
-    pub {{ p.field }}: {{ p.handle }},
+{{- l.doc(&p.doc, 4, "///") }}
+{{ l.decl(&p.field, &p.handle) }}
 {%- endfor %}
 }
+{%- endif %}
 
 /// The output ports, in declaration order.
+{%- if c.outputs.is_empty() %}
+pub struct Outputs {}
+{%- else %}
 pub struct Outputs {
 {%- for p in c.outputs %}
-{%- call m::doc(&p.doc) %}{% endcall %}
-    pub {{ p.field }}: {{ p.handle }},
+{{- l.doc(&p.doc, 4, "///") }}
+{{ l.decl(&p.field, &p.handle) }}
 {%- endfor %}
 }
+{%- endif %}
 
 /// The states of the user automaton (inside the default automaton's `running`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+{%- if c.states.is_empty() %}
+pub enum UserState {}
+{%- else %}
 pub enum UserState {
 {%- for s in c.states %}
-{%- call m::doc(&s.doc) %}{% endcall %}
-    {{ s.variant }},
+{{- l.doc(&s.doc, 4, "///") }}
+{{ l.line(4, &format!("{},", s.variant)) }}
 {%- endfor %}
 }
+{%- endif %}
 
 impl UserState {
     /// Every state, in declaration order.
-    pub const ALL: [UserState; {{ c.states.len() }}] = [{% for s in c.states %}UserState::{{ s.variant }},{% endfor %}];
+    {{ l.all_states(c) }}
 
     /// The state's index in [`SPEC`]`.states`.
     pub fn index(self) -> usize {
+{%- if c.states.is_empty() %}
+        match self {}
+{%- else %}
         match self {
-        {%- for s in c.states %}
-            UserState::{{ s.variant }} => {{ loop.index0 }},
-        {%- endfor %}
+{%- for s in c.states %}
+{{ l.arm(12, &format!("UserState::{}", s.variant), &loop.index0.to_string()) }}
+{%- endfor %}
         }
+{%- endif %}
     }
 
     /// The state's name as written in the description.
     pub fn name(self) -> &'static str {
+{%- if c.states.is_empty() %}
+        match self {}
+{%- else %}
         match self {
-        {%- for s in c.states %}
-            UserState::{{ s.variant }} => "{{ s.cool_name }}",
-        {%- endfor %}
+{%- for s in c.states %}
+{{ l.arm(12, &format!("UserState::{}", s.variant), &format!("{:?}", s.cool_name)) }}
+{%- endfor %}
         }
+{%- endif %}
     }
 }
-{% for s in c.states %}
+{%- for s in c.states %}
 {%- if let Some(may_enum) = s.may_enum %}
+
 /// The targets state `{{ s.cool_name }}` may choose (its `may` list): any other
 /// transition is unrepresentable.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum {{ may_enum }} {
 {%- for (variant, _, name) in s.may %}
     /// Go to state `{{ name }}`.
-    {{ variant }},
+{{ l.line(4, &format!("{},", variant)) }}
 {%- endfor %}
 }
 
@@ -121,37 +142,48 @@ impl {{ may_enum }} {
     /// The target state.
     pub fn state(self) -> UserState {
         match self {
-        {%- for (variant, index, _) in s.may %}
-            {{ may_enum }}::{{ variant }} => UserState::ALL[{{ index }}],
-        {%- endfor %}
+{%- for (variant, index, _) in s.may %}
+{{ l.arm(12, &format!("{}::{}", may_enum, variant), &format!("UserState::ALL[{}]", index)) }}
+{%- endfor %}
         }
     }
 }
-{% endif %}
+{%- endif %}
 {%- endfor %}
 
 /// The declared exceptions; `Exception::X.raise("why")` is a `coolbot::Fault` to
 /// return from a section.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+{%- if c.exceptions.is_empty() %}
+pub enum Exception {}
+{%- else %}
 pub enum Exception {
 {%- for e in c.exceptions %}
-{%- call m::doc(&e.doc) %}{% endcall %}
-    {{ e.variant }},
+{{- l.doc(&e.doc, 4, "///") }}
+{{ l.line(4, &format!("{},", e.variant)) }}
 {%- endfor %}
 }
+{%- endif %}
 
 impl Exception {
     /// The exception's index in [`SPEC`]`.exceptions`.
     pub fn index(self) -> usize {
+{%- if c.exceptions.is_empty() %}
+        match self {}
+{%- else %}
         match self {
-        {%- for e in c.exceptions %}
-            Exception::{{ e.variant }} => {{ loop.index0 }},
-        {%- endfor %}
+{%- for e in c.exceptions %}
+{{ l.arm(12, &format!("Exception::{}", e.variant), &loop.index0.to_string()) }}
+{%- endfor %}
         }
+{%- endif %}
     }
 
     /// A fault raising this exception with `message`: its continuity plan runs.
-    pub fn raise(self, message: impl ::core::convert::Into<::std::string::String>) -> ::coolbot::Fault {
+    pub fn raise(
+        self,
+        message: impl ::core::convert::Into<::std::string::String>,
+    ) -> ::coolbot::Fault {
         ::coolbot::Fault::exception(self.index(), message)
     }
 }
@@ -188,51 +220,21 @@ pub trait Behavior: ::core::marker::Send + 'static {
     fn stop(&mut self, cx: &mut Cx<'_>) {
         let _ = cx;
     }
-{% for method in c.methods %}
-
-
-{% call m::doc(&method.doc) %}{% endcall %}
-    {{ method.signature }};
+{%- for method in c.methods %}
+{{ "" }}
+{{- l.doc(&method.doc, 4, "///") }}
+{{ l.signature(4, &method.signature, ";") }}
 {%- endfor %}
 }
 
 /// The static shape of the component, read by the runtime.
-pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
-    type_name: "{{ c.type_name }}",
-    doc: {{ c.doc_literal() }},
-    states: &[
-    {%- for s in c.states %}
-        {{ s.spec }},
-    {%- endfor %}
-    ],
-    initial: {{ c.initial }},
-    inputs: &[
-    {%- for p in c.inputs %}
-        ::coolbot::InputSpec { name: "{{ p.cool_name }}", kind: {{ p.kind }}, packet: "{{ p.packet }}", pull: {{ p.pull }} },
-    {%- endfor %}
-    ],
-    outputs: &[
-    {%- for p in c.outputs %}
-        ::coolbot::OutputSpec { name: "{{ p.cool_name }}", kind: {{ p.kind }}, packet: "{{ p.packet }}", pull: {{ p.pull }} },
-    {%- endfor %}
-    ],
-    variables: &[
-    {%- for v in c.vars %}
-    {%- if v.spec_index.is_some() %}
-        ::coolbot::VarSpec { name: "{{ v.field.cool_name }}", kind: ::coolbot::VarKind::{{ v.kind }}, ty: "{{ v.cool_ty }}", doc: {{ v.doc_literal() }} },
-    {%- endif %}
-    {%- endfor %}
-    ],
-    exceptions: &[
-    {%- for e in c.exceptions %}
-        {{ e.spec }},
-    {%- endfor %}
-    ],
-    timing: {{ c.timing }},
-};
+{{ l.spec(c) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.
-pub fn component(name: impl ::core::convert::Into<::std::string::String>, behavior: impl Behavior) -> ::coolbot::Component {
+pub fn component(
+    name: impl ::core::convert::Into<::std::string::String>,
+    behavior: impl Behavior,
+) -> ::coolbot::Component {
     component_with(name, behavior, Config::default(), Vars::default())
 }
 
@@ -244,23 +246,9 @@ pub fn component_with(
     config: Config,
     vars: Vars,
 ) -> ::coolbot::Component {
-    let inputs = Inputs {
-    {%- for p in c.inputs %}
-        {{ p.field }}: {{ p.ctor }},
-    {%- endfor %}
-    };
-    let outputs = Outputs {
-    {%- for p in c.outputs %}
-        {{ p.field }}: {{ p.ctor }},
-    {%- endfor %}
-    };
-    let ports = ::coolbot::PortSet::new()
-    {%- for p in c.inputs %}
-        .input(&inputs.{{ p.field }})
-    {%- endfor %}
-    {%- for p in c.outputs %}
-        .output(&outputs.{{ p.field }})
-    {%- endfor %};
+    {{ l.ports_struct("inputs", "Inputs", &c.inputs) }}
+    {{ l.ports_struct("outputs", "Outputs", &c.outputs) }}
+{{ l.port_set(c) }}
     let glue = __CoolGlue {
         behavior,
         config,
@@ -280,129 +268,165 @@ struct __CoolGlue<B> {
     outputs: Outputs,
 }
 
+impl<B: Behavior> __CoolGlue<B> {
+    /// The behavior, and what its sections see.
+    fn parts<'a>(&'a mut self, rt: &'a mut ::coolbot::Context) -> (&'a mut B, Cx<'a>) {
+        let Self {
+            behavior,
+            config,
+            vars,
+            inputs,
+            outputs,
+        } = self;
+        let cx = Cx {
+            config,
+            vars,
+            inputs,
+            outputs,
+            rt,
+        };
+        (behavior, cx)
+    }
+}
+
 impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     fn spec(&self) -> &'static ::coolbot::Spec {
         &SPEC
     }
 
     fn start(&mut self, rt: &mut ::coolbot::Context) -> ::coolbot::SectionResult {
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs, rt };
+        let (behavior, mut cx) = self.parts(rt);
         behavior.start(&mut cx)
     }
 
     fn stop(&mut self, rt: &mut ::coolbot::Context) {
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs, rt };
+        let (behavior, mut cx) = self.parts(rt);
         behavior.stop(&mut cx);
     }
 
-    fn section(&mut self, state: usize, section: ::coolbot::Section, rt: &mut ::coolbot::Context) -> ::coolbot::SectionResult {
-    {%- if c.section_arms.is_empty() %}
+    fn section(
+        &mut self,
+        state: usize,
+        section: ::coolbot::Section,
+        rt: &mut ::coolbot::Context,
+    ) -> ::coolbot::SectionResult {
+{%- if c.section_arms.is_empty() %}
         let _ = (state, section, rt);
         Ok(())
-    {%- else %}
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs, rt };
+{%- else %}
+        let (behavior, mut cx) = self.parts(rt);
         match (state, section) {
-        {%- for (pattern, call) in c.section_arms %}
-            {{ pattern }} => {{ call }},
-        {%- endfor %}
+{%- for (pattern, call) in c.section_arms %}
+{{ l.arm(12, &pattern, &call) }}
+{%- endfor %}
             _ => Ok(()),
         }
-    {%- endif %}
+{%- endif %}
     }
 
-    fn choose(&mut self, state: usize, rt: &mut ::coolbot::Context) -> ::core::option::Option<usize> {
-    {%- if c.choose_arms.is_empty() %}
+    fn choose(
+        &mut self,
+        state: usize,
+        rt: &mut ::coolbot::Context,
+    ) -> ::core::option::Option<usize> {
+{%- if c.choose_arms.is_empty() %}
         let _ = (state, rt);
         None
-    {%- else %}
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs, rt };
+{%- else %}
+        let (behavior, mut cx) = self.parts(rt);
         match state {
-        {%- for arm in c.choose_arms %}
-            {{ arm.state }} => behavior.{{ arm.method }}(&mut cx).map(|target| target.state().index()),
-        {%- endfor %}
+{%- for arm in c.choose_arms %}
+{{ l.choose_arm(arm.state, &arm.method) }}
+{%- endfor %}
             _ => None,
         }
-    {%- endif %}
+{%- endif %}
     }
 
     fn exception(&mut self, exception: usize, message: &str, rt: &mut ::coolbot::Context) {
-    {%- if c.exceptions.is_empty() %}
+{%- if c.exceptions.is_empty() %}
         let _ = (exception, message, rt);
-    {%- else %}
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs, rt };
-        let handlers: [fn(&mut B, &mut Cx<'_>, &str); {{ c.exceptions.len() }}] = [
-        {%- for e in c.exceptions %}
-            B::{{ e.handler }},
-        {%- endfor %}
-        ];
-        if let Some(handler) = handlers.get(exception) {
-            handler(behavior, &mut cx, message);
+{%- else if c.exceptions.len() == 1 %}
+        let (behavior, mut cx) = self.parts(rt);
+        if exception == 0 {
+{%- for e in c.exceptions %}
+{{ l.short(12, &format!("behavior.{}(&mut cx, message);", e.handler)) }}
+{%- endfor %}
         }
-    {%- endif %}
+{%- else %}
+        let (behavior, mut cx) = self.parts(rt);
+        match exception {
+{%- for e in c.exceptions %}
+{{ l.arm(12, &loop.index0.to_string(), &format!("behavior.{}(&mut cx, message)", e.handler)) }}
+{%- endfor %}
+            _ => {}
+        }
+{%- endif %}
     }
 
     fn answer(&mut self, output: usize, rt: &mut ::coolbot::Context) -> ::coolbot::SectionResult {
-    {%- if c.answer_arms.is_empty() %}
+{%- if c.answer_arms.is_empty() %}
         let _ = (output, rt);
         Ok(())
-    {%- else %}
-        let Self { behavior, config, vars, inputs, outputs } = self;
-        let mut cx = Cx { config, vars, inputs, outputs: &*outputs, rt };
+{%- else %}
+        let (behavior, mut cx) = self.parts(rt);
         match output {
-        {%- for arm in c.answer_arms %}
+{%- for arm in c.answer_arms %}
             {{ arm.output }} => {
-                let packet = behavior.{{ arm.method }}(&mut cx)?;
-                outputs.{{ arm.field }}.{{ arm.send }}(packet);
+{{ l.short(16, &format!("let packet = behavior.{}(&mut cx)?;", arm.method)) }}
+{{ l.short(16, &format!("cx.outputs.{}.{}(packet);", arm.field, arm.send)) }}
                 Ok(())
             }
-        {%- endfor %}
+{%- endfor %}
             _ => Ok(()),
         }
-    {%- endif %}
+{%- endif %}
     }
 
-    fn configure(&mut self, configuration: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
+    fn configure(
+        &mut self,
+        configuration: &::coolbot::Value,
+    ) -> ::core::result::Result<(), ::std::string::String> {
         self.config = super::__cool_configure(&self.config, configuration)?;
         Ok(())
     }
 
-    fn set(&mut self, variable: usize, value: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
-    {%- if c.has_controllable() %}
+    fn set(
+        &mut self,
+        variable: usize,
+        value: &::coolbot::Value,
+    ) -> ::core::result::Result<(), ::std::string::String> {
+{%- if c.has_controllable() %}
         match variable {
-        {%- for v in c.vars %}
-        {%- if v.controllable() %}
+{%- for v in c.vars %}
+{%- if v.controllable() %}
             {{ v.spec_index.unwrap_or_default() }} => {
-                self.vars.{{ v.field.name }} = {{ v.from_value }}?;
+{{ l.assign(16, &format!("self.vars.{}", v.field.name), &format!("{}?", v.from_value)) }}
                 Ok(())
             }
-        {%- endif %}
-        {%- endfor %}
-            _ => Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable")),
+{%- endif %}
+{%- endfor %}
+            _ => Err(super::__cool_not_controllable(&SPEC, variable)),
         }
-    {%- else %}
+{%- else %}
         let _ = value;
-        Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable"))
-    {%- endif %}
+        Err(super::__cool_not_controllable(&SPEC, variable))
+{%- endif %}
     }
 
     fn get(&self, variable: usize) -> ::coolbot::Value {
-    {%- if c.has_exposed() %}
+{%- if c.has_exposed() %}
         match variable {
-        {%- for v in c.vars %}
-        {%- if let Some(index) = v.spec_index %}
-            {{ index }} => {{ v.to_value }},
-        {%- endif %}
-        {%- endfor %}
+{%- for v in c.vars %}
+{%- if let Some(index) = v.spec_index %}
+{{ l.short(12, &format!("{} => {},", index, v.to_value)) }}
+{%- endif %}
+{%- endfor %}
             _ => ::coolbot::Value::Unit,
         }
-    {%- else %}
+{%- else %}
         let _ = variable;
         ::coolbot::Value::Unit
-    {%- endif %}
+{%- endif %}
     }
 }

@@ -5,7 +5,7 @@
 //! Each component module holds its configuration, variables, ports, user automaton
 //! states, the `Behavior` trait the user implements and `component()`, which builds a
 //! `coolbot::Component` from an implementation.
-{% for module in krate.module_names() %}
+{% for module in modules %}
 pub mod {{ module }};
 {%- endfor %}
 

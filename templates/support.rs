@@ -12,6 +12,15 @@ pub fn __cool_from_value<T: ::serde::de::DeserializeOwned>(
     value.to_serde()
 }
 
+/// The error of setting `variable` of a component that is not controllable.
+#[doc(hidden)]
+pub fn __cool_not_controllable(spec: &::coolbot::Spec, variable: usize) -> ::std::string::String {
+    ::std::format!(
+        "variable {variable} of {} is not controllable",
+        spec.type_name
+    )
+}
+
 /// The configuration after applying `value`: the fields it names replace the current
 /// ones, the others keep their values.
 #[doc(hidden)]

@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout, like atomic.rs. -#}
 //! The code of component `{{ c.type_name }}`: fill in the stubs.
 //!
 //! `coolc` wrote this file once and never overwrites it: when the description gains a
@@ -11,11 +12,14 @@ use crate::generated::{{ c.module }}::*;
 /// What a `{{ c.type_name }}` keeps between sections.
 #[derive(Debug, Default)]
 pub struct {{ c.user_struct }} {}
-
+{% if c.methods.is_empty() %}
+impl Behavior for {{ c.user_struct }} {}
+{%- else %}
 impl Behavior for {{ c.user_struct }} {
 {%- for method in c.methods %}
 {%- if !loop.first %}
 {% endif %}
-{% include "user_stub.rs" %}
+{{ l.stub(method) }}
 {%- endfor %}
 }
+{%- endif %}

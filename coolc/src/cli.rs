@@ -245,7 +245,9 @@ fn compile(
     package: &str,
     runtime: RuntimeDep,
 ) -> Result<crate::ir::Crate, Failure> {
+    let mut timings = crate::Timings::from_env();
     let analysis = check(cli, files)?;
+    timings.span("check");
     let options = lower::Options {
         package: package.to_owned(),
         runtime,
@@ -260,6 +262,7 @@ fn compile(
             .collect(),
     };
     let krate = lower::lower(&analysis.files, &options);
+    timings.span("lower");
     let report = merge::write_crate(out, &krate)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
     for (file, methods) in &report.added {

@@ -1,13 +1,15 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
-//! **Invariant:** emission cannot fail on user input. Generated Rust is formatted with
-//! `rustfmt` when it is installed (one run over the whole crate, so the files are
-//! `cargo fmt` clean), else printed with `prettyplease`; user files keep the
-//! templates' layout without `rustfmt`. Each file is parsed at most once: by
-//! `rustfmt` or by `syn` for `prettyplease`, and by `syn` in debug builds where no
-//! formatter parses it. A file that does not parse is a template bug and panics with
-//! the offending text (the test suite also compiles every generated crate). Output
-//! depends only on the IR.
+//! **Invariant:** emission cannot fail on user input. Most files come out of their
+//! templates already in `rustfmt`'s layout (the atomic modules, the generated
+//! `mod.rs`, the user files of atomic components and `src/lib.rs`: see `layout`), so
+//! no formatter runs for them. The others, and any file whose layout `layout` is not
+//! certain of, are formatted with `rustfmt` when it is installed (one run over all of
+//! them), else generated ones are printed with `prettyplease` and user ones keep the
+//! templates' layout. Each file is parsed at most once: by `rustfmt` or by `syn` for
+//! `prettyplease`, and by `syn` in debug builds where no formatter parses it. A file
+//! that does not parse is a template bug and panics with the offending text (the test
+//! suite also compiles every generated crate). Output depends only on the IR.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -15,6 +17,7 @@ use std::process::{Command, Stdio};
 use askama::Template;
 
 use crate::ir;
+use crate::layout::Layout;
 
 /// Who owns an emitted file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +81,23 @@ struct BuildRs<'a> {
 #[template(path = "generated_mod.rs", escape = "none")]
 struct GeneratedMod<'a> {
     krate: &'a ir::Crate,
+    /// The module names, in rustfmt's order (`reorder_modules`).
+    modules: Vec<String>,
+}
+
+/// `modules` sorted as rustfmt orders `mod` declarations, and whether that order is
+/// certain (raw identifiers are left to rustfmt).
+fn rustfmt_module_order(mut modules: Vec<String>) -> (Vec<String>, bool) {
+    modules.sort();
+    let certain = !modules.iter().any(|m| m.starts_with("r#"));
+    (modules, certain)
+}
+
+impl<'a> GeneratedMod<'a> {
+    fn new(krate: &'a ir::Crate) -> (GeneratedMod<'a>, bool) {
+        let (modules, certain) = rustfmt_module_order(krate.module_names());
+        (GeneratedMod { krate, modules }, certain)
+    }
 }
 
 #[derive(Template)]
@@ -92,6 +112,7 @@ struct TypesRs<'a> {
 struct AtomicRs<'a> {
     krate: &'a ir::Crate,
     c: &'a ir::Atomic,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -111,6 +132,7 @@ struct UserLib<'a> {
 #[template(path = "user_component.rs", escape = "none")]
 struct UserComponent<'a> {
     c: &'a ir::Atomic,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -131,9 +153,16 @@ struct UserStub<'a> {
     method: &'a ir::Method,
 }
 
+/// A template's text, ending with one newline (askama drops the template file's
+/// last one).
 fn render(template: &impl Template) -> String {
     match template.render() {
-        Ok(text) => text,
+        Ok(mut text) => {
+            if !text.ends_with('\n') {
+                text.push('\n');
+            }
+            text
+        }
         Err(error) => panic!("coolc bug: a template failed to render: {error}"),
     }
 }
@@ -184,20 +213,30 @@ fn rustfmt_program() -> std::ffi::OsString {
     std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
 
-/// Whether `rustfmt` (or the program `RUSTFMT` names) runs: probed once per process
-/// with `--version`, so that without it no scratch tree is written and no process is
-/// spawned per file.
+/// The version line of `rustfmt` (or of the program `RUSTFMT` names), `None` when it
+/// does not run: probed once per process with `--version`, so that without it no
+/// scratch tree is written and no process is spawned per file.
+fn rustfmt_version() -> Option<&'static str> {
+    static VERSION: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    VERSION
+        .get_or_init(|| {
+            let output = Command::new(rustfmt_program())
+                .arg("--version")
+                .stdin(Stdio::null())
+                .stderr(Stdio::null())
+                .output()
+                .ok()?;
+            output
+                .status
+                .success()
+                .then(|| String::from_utf8_lossy(&output.stdout).trim().to_owned())
+        })
+        .as_deref()
+}
+
+/// Whether `rustfmt` runs (see [`rustfmt_version`]).
 fn rustfmt_installed() -> bool {
-    static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *INSTALLED.get_or_init(|| {
-        Command::new(rustfmt_program())
-            .arg("--version")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|status| status.success())
-    })
+    rustfmt_version().is_some()
 }
 
 /// Runs `rustfmt --edition 2024` over `code`; `None` when it is not installed (see
@@ -226,14 +265,26 @@ fn rustfmt_stdin(code: &str) -> Option<String> {
     }
 }
 
-/// Formats a whole crate's Rust files with ONE `rustfmt` run: they are written to a
-/// scratch directory with the crate's layout, `rustfmt` formats the roots and every
-/// module they declare, and the results are read back. `None`, without writing
+/// Whether `text` declares out-of-line modules (`mod x;`), which `rustfmt` would go
+/// and format too when given the file by path.
+fn declares_modules(text: &str) -> bool {
+    text.lines().any(|line| {
+        let line = line.trim_start();
+        (line.starts_with("mod ") || line.starts_with("pub mod ")) && line.ends_with(';')
+    })
+}
+
+/// From how many files [`rustfmt_files`] splits the work over several processes.
+const PATHS_PER_RUSTFMT: usize = 32;
+
+/// Formats Rust files with `rustfmt`: the files that declare no modules with one run
+/// (one per core for many files) over a scratch copy (given by path: no module of theirs is followed), the others
+/// (`src/lib.rs`, a `mod.rs`) one by one from stdin. `None`, without writing
 /// anything, when `rustfmt` is not installed; `None` when it fails (the caller falls
 /// back to per-file formatting).
-fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> {
+fn rustfmt_files(files: &[(&Path, &str)]) -> Option<Vec<String>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
-    if !rustfmt_installed() {
+    if !rustfmt_installed() || files.is_empty() {
         return None;
     }
     static SCRATCH: AtomicUsize = AtomicUsize::new(0);
@@ -243,49 +294,145 @@ fn rustfmt_tree(files: &[(&Path, &str)], roots: &[&str]) -> Option<Vec<String>> 
         SCRATCH.fetch_add(1, Ordering::Relaxed)
     ));
     let result = (|| {
-        for (path, text) in files {
-            let path = dir.join(path);
-            std::fs::create_dir_all(path.parent()?).ok()?;
-            std::fs::write(&path, text).ok()?;
+        let mut paths = Vec::new();
+        for (index, (path, text)) in files.iter().enumerate() {
+            if declares_modules(text) {
+                continue;
+            }
+            // Flat names: the scratch copy needs no directories.
+            let name = format!("{index}-{}", path.file_name()?.to_string_lossy());
+            let path = dir.join(name);
+            paths.push((index, path));
         }
-        let roots: Vec<PathBuf> = roots
-            .iter()
-            .map(|r| dir.join(r))
-            .filter(|r| r.exists())
-            .collect();
-        let status = Command::new(rustfmt_program())
-            .args(["--edition", "2024", "--quiet"])
-            .args(&roots)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .ok()?;
-        if !status.success() {
-            return None;
+        if !paths.is_empty() {
+            std::fs::create_dir_all(&dir).ok()?;
+            for (index, path) in &paths {
+                std::fs::write(path, files[*index].1).ok()?;
+            }
+            // Many files: one rustfmt per core, started together (each start costs
+            // tens of milliseconds, so a few files go to one process).
+            let processes = if paths.len() >= PATHS_PER_RUSTFMT {
+                std::thread::available_parallelism()
+                    .map_or(1, std::num::NonZero::get)
+                    .min(paths.len() / (PATHS_PER_RUSTFMT / 2))
+                    .max(1)
+            } else {
+                1
+            };
+            let chunk = paths.len().div_ceil(processes);
+            let children: Vec<std::process::Child> = paths
+                .chunks(chunk)
+                .map(|part| {
+                    Command::new(rustfmt_program())
+                        .args(["--edition", "2024", "--quiet"])
+                        .args(part.iter().map(|(_, path)| path))
+                        .current_dir(&dir)
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .spawn()
+                })
+                .collect::<Result<_, _>>()
+                .ok()?;
+            let mut ok = true;
+            for mut child in children {
+                ok &= child.wait().is_ok_and(|status| status.success());
+            }
+            if !ok {
+                return None;
+            }
         }
-        files
-            .iter()
-            .map(|(path, _)| std::fs::read_to_string(dir.join(path)).ok())
-            .collect::<Option<Vec<String>>>()
+        let mut by_path = paths.into_iter().peekable();
+        let mut out = Vec::with_capacity(files.len());
+        for (index, (_, text)) in files.iter().enumerate() {
+            match by_path.peek() {
+                Some((at, path)) if *at == index => {
+                    out.push(std::fs::read_to_string(path).ok()?);
+                    by_path.next();
+                }
+                _ => out.push(rustfmt_stdin(text)?),
+            }
+        }
+        Some(out)
     })();
     let _ = std::fs::remove_dir_all(&dir);
     result
 }
 
-/// The generated module texts, unformatted: `(module name, text)`, `types` first.
-fn render_modules(krate: &ir::Crate) -> Vec<(String, String)> {
-    let mut modules = vec![(
-        krate.types.module.clone(),
-        render(&TypesRs {
-            krate,
-            types: &krate.types,
-        }),
-    )];
-    for c in &krate.atomics {
-        modules.push((c.module.clone(), render(&AtomicRs { krate, c })));
+/// Who formats generated code in this process, for caches of formatted files:
+/// `rustfmt` and its version, or the built-in printer.
+pub fn formatter_id() -> String {
+    match rustfmt_version() {
+        Some(version) => version.to_owned(),
+        None => format!("prettyplease (coolc {})", env!("CARGO_PKG_VERSION")),
     }
-    for c in &krate.compounds {
-        modules.push((c.module.clone(), render(&CompoundRs { krate, c })));
+}
+
+/// A rendered template and whether it is already in `rustfmt`'s layout.
+fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool) {
+    let text = render(template);
+    (text, layout.ok())
+}
+
+/// Which files of a crate to render: all, those whose templates need a formatter,
+/// or those whose templates are written in rustfmt's layout (see `layout`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// Every file.
+    All,
+    /// The files a formatter lays out: `types.rs`, compound modules and their user
+    /// files, `build.rs`, `src/converters.rs`.
+    NeedsFormatter,
+    /// The others (some of which may still turn out to need the formatter).
+    LaidOut,
+}
+
+impl Part {
+    /// Whether a file whose template is (`laid_out`) or is not in rustfmt's layout
+    /// belongs to this part.
+    fn wants(self, laid_out: bool) -> bool {
+        match self {
+            Part::All => true,
+            Part::NeedsFormatter => !laid_out,
+            Part::LaidOut => laid_out,
+        }
+    }
+}
+
+/// The generated module texts as rendered: `(module name, text, already in rustfmt's
+/// layout)`, `types` first.
+fn render_modules(krate: &ir::Crate) -> Vec<(String, String, bool)> {
+    render_modules_part(krate, Part::All)
+}
+
+/// [`render_modules`] of one [`Part`].
+fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bool)> {
+    let mut modules = Vec::new();
+    if part.wants(false) {
+        modules.push((
+            krate.types.module.clone(),
+            render(&TypesRs {
+                krate,
+                types: &krate.types,
+            }),
+            false,
+        ));
+    }
+    if part.wants(true) {
+        let atomics = par_map(&krate.atomics, |c| {
+            let template = AtomicRs {
+                krate,
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            (c.module.clone(), text, laid_out)
+        });
+        modules.extend(atomics);
+    }
+    if part.wants(false) {
+        for c in &krate.compounds {
+            modules.push((c.module.clone(), render(&CompoundRs { krate, c }), false));
+        }
     }
     modules
 }
@@ -302,7 +449,7 @@ pub fn single_file(krate: &ir::Crate) -> String {
 pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
     let mut parts: Vec<String> = render_modules(krate)
         .into_iter()
-        .map(|(module, text)| {
+        .map(|(module, text, _)| {
             let mut part = String::with_capacity(text.len() + module.len() + 16);
             part.push_str("pub mod ");
             part.push_str(&module);
@@ -316,7 +463,7 @@ pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
         })
         .collect();
     // The support functions, taken from the generated `mod.rs`.
-    let mod_rs = render(&GeneratedMod { krate });
+    let mod_rs = render(&GeneratedMod::new(krate).0);
     if let Some(start) = mod_rs.find("/// Converts a variable") {
         parts.push(mod_rs[start..].to_owned());
     }
@@ -377,11 +524,12 @@ fn extract_stub(text: &str, name: &str) -> Option<String> {
 /// The stubs of every user file, for merging, taken from the emitted user files
 /// `files` (so they are formatted like a fresh file).
 pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
+    let by_path: std::collections::HashMap<&Path, &str> = files
+        .iter()
+        .map(|f| (f.path.as_path(), f.contents.as_str()))
+        .collect();
     let set = |path: PathBuf, trait_name: &str, methods: &[ir::Method]| {
-        let text = files
-            .iter()
-            .find(|f| f.path == path)
-            .map(|f| f.contents.as_str());
+        let text = by_path.get(path.as_path()).copied();
         StubSet {
             trait_name: trait_name.to_owned(),
             stubs: methods
@@ -428,113 +576,160 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
 
 /// [`emit_crate`], formatted or not (see [`Formatting`]).
 pub fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<EmittedFile> {
-    let mut files: Vec<(PathBuf, String, FileKind)> = Vec::new();
-    let mut push = |path: PathBuf, text: String, kind: FileKind| files.push((path, text, kind));
-    push(
-        PathBuf::from("Cargo.toml"),
-        render(&CargoToml { krate }) + "\n",
-        FileKind::Generated,
-    );
-    if !krate.system_libs.is_empty() {
+    let (mut files, laid_out) = render_crate(krate);
+    match formatting {
+        Formatting::Formatted => {
+            let needs: Vec<bool> = laid_out.iter().map(|l| !l).collect();
+            format_files(&mut files, &needs);
+        }
+        Formatting::Unformatted => {
+            if cfg!(debug_assertions) {
+                par_map(&files, |f| {
+                    if is_rust(&f.path) {
+                        debug_check_parses(&f.contents);
+                    }
+                });
+            }
+        }
+    }
+    files
+}
+
+fn is_rust(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e == "rs")
+}
+
+/// Every file of the crate for `krate` as its template renders it, and for each
+/// whether it is already in `rustfmt`'s layout (so needs no formatter; non-Rust files
+/// count as laid out).
+pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
+    render_crate_part(krate, Part::All)
+}
+
+/// [`render_crate`] of one [`Part`] (the files in the same order).
+pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
+    let mut files: Vec<(EmittedFile, bool)> = Vec::new();
+    let mut push = |path: PathBuf, contents: String, kind: FileKind, laid_out: bool| {
+        files.push((
+            EmittedFile {
+                path,
+                contents,
+                kind,
+            },
+            laid_out,
+        ));
+    };
+    if part.wants(true) {
+        push(
+            PathBuf::from("Cargo.toml"),
+            render(&CargoToml { krate }),
+            FileKind::Generated,
+            true,
+        );
+    }
+    if !krate.system_libs.is_empty() && part.wants(false) {
         push(
             PathBuf::from("build.rs"),
             render(&BuildRs { krate }),
             FileKind::Generated,
+            false,
         );
     }
-    push(
-        PathBuf::from("src/generated/mod.rs"),
-        render(&GeneratedMod { krate }),
-        FileKind::Generated,
-    );
-    for (module, text) in render_modules(krate) {
+    if part.wants(true) {
+        let (generated_mod, certain) = GeneratedMod::new(krate);
+        push(
+            PathBuf::from("src/generated/mod.rs"),
+            render(&generated_mod),
+            FileKind::Generated,
+            certain,
+        );
+    }
+    for (module, text, laid_out) in render_modules_part(krate, part) {
         let path = format!("src/generated/{}.rs", module.trim_start_matches("r#"));
-        push(PathBuf::from(path), text, FileKind::Generated);
+        push(PathBuf::from(path), text, FileKind::Generated, laid_out);
     }
-    let modules = user_modules(krate);
-    push(
-        PathBuf::from("src/lib.rs"),
-        render(&UserLib { modules: &modules }),
-        FileKind::User,
-    );
-    for c in &krate.atomics {
+    if part.wants(true) {
+        let (modules, certain) = rustfmt_module_order(user_modules(krate));
         push(
-            user_path(&c.module),
-            render(&UserComponent { c }),
+            PathBuf::from("src/lib.rs"),
+            render(&UserLib { modules: &modules }),
             FileKind::User,
+            certain,
         );
+        let users = par_map(&krate.atomics, |c| {
+            let template = UserComponent {
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            (user_path(&c.module), text, laid_out)
+        });
+        for (path, text, laid_out) in users {
+            push(path, text, FileKind::User, laid_out);
+        }
     }
-    for c in &krate.compounds {
-        push(
-            user_path(&c.module),
-            render(&UserCompound { c }),
-            FileKind::User,
-        );
+    if part.wants(false) {
+        for c in &krate.compounds {
+            push(
+                user_path(&c.module),
+                render(&UserCompound { c }),
+                FileKind::User,
+                false,
+            );
+        }
     }
-    if !krate.types.converters.is_empty() {
+    if !krate.types.converters.is_empty() && part.wants(false) {
         let methods = converter_methods(krate);
         push(
             PathBuf::from("src/converters.rs"),
             render(&UserConverters { methods: &methods }),
             FileKind::User,
+            false,
         );
     }
+    files.into_iter().unzip()
+}
 
-    let is_rust = |path: &Path| path.extension().is_some_and(|e| e == "rs");
-    let rust: Vec<(&Path, &str)> = files
+/// Formats the Rust files of `files` marked in `needs` (see the module doc); the
+/// others are checked to parse in debug builds.
+pub fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
+    let selected: Vec<usize> = (0..files.len())
+        .filter(|&i| needs[i] && is_rust(&files[i].path))
+        .collect();
+    if cfg!(debug_assertions) {
+        par_map(files, |f| {
+            if is_rust(&f.path) {
+                debug_check_parses(&f.contents);
+            }
+        });
+    }
+    let rust: Vec<(&Path, &str)> = selected
         .iter()
-        .filter(|(path, _, _)| is_rust(path))
-        .map(|(path, text, _)| (path.as_path(), text.as_str()))
+        .map(|&i| (files[i].path.as_path(), files[i].contents.as_str()))
         .collect();
     // rustfmt fails on Rust that does not parse, and then the fallback below parses
     // every file: a template bug is caught on both paths.
-    let formatted = match formatting {
-        Formatting::Formatted => rustfmt_tree(&rust, &["src/lib.rs", "build.rs"]),
-        Formatting::Unformatted => None,
-    };
-    let new_contents: Vec<Option<String>> = match formatted {
-        Some(formatted) => {
-            let mut formatted = formatted.into_iter();
-            files
-                .iter()
-                .map(|(path, _, _)| {
-                    if is_rust(path) {
-                        formatted.next()
-                    } else {
-                        None
-                    }
-                })
-                .collect()
-        }
+    let formatted: Vec<Option<String>> = match rustfmt_files(&rust) {
+        Some(formatted) => formatted.into_iter().map(Some).collect(),
         // The files are independent: print them on every core.
-        None => par_map(&files, |(path, text, kind)| {
-            if !is_rust(path) {
-                None
-            } else if *kind == FileKind::Generated && formatting == Formatting::Formatted {
-                Some(pretty(text))
-            } else {
-                // Without rustfmt, user files keep the templates' own layout
-                // (`prettyplease` would drop their comments); unformatted, all do.
-                debug_check_parses(text);
-                None
-            }
+        None => par_map(&selected, |&i| {
+            let file = &files[i];
+            // Without rustfmt, user files keep the templates' own layout
+            // (`prettyplease` would drop their comments).
+            (file.kind == FileKind::Generated).then(|| pretty(&file.contents))
         }),
     };
-    files
-        .into_iter()
-        .zip(new_contents)
-        .map(|((path, text, kind), new)| EmittedFile {
-            path,
-            contents: new.unwrap_or(text),
-            kind,
-        })
-        .collect()
+    for (i, new) in selected.into_iter().zip(formatted) {
+        if let Some(new) = new {
+            files[i].contents = new;
+        }
+    }
 }
 
 /// `f` applied to every item on `std::thread::available_parallelism` threads (which
 /// take the next item as they finish one), results in the items' order. A panic in
 /// `f` is propagated.
-fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+pub(crate) fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
     use std::sync::atomic::{AtomicUsize, Ordering};
     let threads = std::thread::available_parallelism()
         .map_or(1, std::num::NonZero::get)

@@ -65,14 +65,24 @@ pub struct Crate {
 }
 
 impl Crate {
-    /// The source file names for the generated-file header.
+    /// The source file names for the generated-file header: all of them up to
+    /// [`Crate::HEADER_SOURCES`], else the first ones and how many more (every
+    /// generated file carries the header: naming 1,000 files in each of 2,000 files
+    /// would be most of the output).
     pub fn sources_text(&self) -> String {
-        if self.sources.is_empty() {
-            "the .cool descriptions".to_owned()
-        } else {
-            self.sources.join(", ")
+        match self.sources.len() {
+            0 => "the .cool descriptions".to_owned(),
+            n if n <= Self::HEADER_SOURCES => self.sources.join(", "),
+            n => format!(
+                "{} and {} more",
+                self.sources[..Self::HEADER_SOURCES - 1].join(", "),
+                n - (Self::HEADER_SOURCES - 1)
+            ),
         }
     }
+
+    /// How many source names the generated-file header lists at most.
+    pub const HEADER_SOURCES: usize = 4;
 
     /// Whether a `link crate` names `name`.
     pub fn links_crate(&self, name: &str) -> bool {

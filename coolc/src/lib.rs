@@ -33,6 +33,7 @@ pub mod diagnostics;
 pub mod emit;
 pub mod ident;
 pub mod ir;
+mod layout;
 pub mod lower;
 pub mod merge;
 pub mod resolve;
@@ -116,4 +117,32 @@ pub fn analyze_text(path: &str, text: &str) -> Analysis {
             Err(std::io::Error::from(std::io::ErrorKind::NotFound))
         }
     })
+}
+
+/// Phase timings on stderr when `COOLC_TIMINGS` is set (to see where a compile's time
+/// goes); nothing otherwise.
+#[derive(Debug)]
+pub struct Timings {
+    last: Option<std::time::Instant>,
+}
+
+impl Timings {
+    /// Timings that print only when `COOLC_TIMINGS` is set.
+    pub fn from_env() -> Timings {
+        Timings {
+            last: std::env::var_os("COOLC_TIMINGS").map(|_| std::time::Instant::now()),
+        }
+    }
+
+    /// Prints the time since the last span (or the start) under `name`.
+    pub fn span(&mut self, name: &str) {
+        if let Some(last) = self.last {
+            let now = std::time::Instant::now();
+            eprintln!(
+                "coolc: {:7.1} ms  {name}",
+                now.duration_since(last).as_secs_f64() * 1e3
+            );
+            self.last = Some(now);
+        }
+    }
 }

@@ -10,7 +10,17 @@
 //!
 //! The last generated stubs are kept in `.coolc/stubs/` inside the crate, so the
 //! user can diff what coolc would write today against their code.
+//!
+//! Files that need a formatter (those not emitted in rustfmt's layout: see `emit`)
+//! are formatted once per change: `.coolc/format-cache` records, per file, a
+//! fingerprint of the text as rendered and of the text as formatted and written (for
+//! user files, the copy in `.coolc/stubs/`). When both still match, the file on disk
+//! is the formatted text and the formatter does not run. The cache names the
+//! formatter (`rustfmt` and its version, or the built-in printer); another one
+//! starts it afresh. A file whose bytes would not change is not written, so cargo
+//! rebuilds nothing after a compile that changed nothing.
 
+use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -236,10 +246,260 @@ fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
     Ok(true)
 }
 
-/// Writes the crate for `krate` into `dir`, merging into existing user files: emits
-/// it ([`emit::emit_crate`]) and writes the files ([`write_emitted`]).
+/// What merging into one user file did.
+#[derive(Default)]
+struct UserMerge {
+    /// The file was missing and has been written.
+    created: bool,
+    /// Stubs or module declarations added.
+    added: Vec<String>,
+    /// Warnings: stale methods, a file that could not be merged.
+    warnings: Vec<String>,
+}
+
+/// Writes the user file `file` when it is missing, else merges new stubs (or module
+/// declarations, for `src/lib.rs`) into it.
+fn merge_user_file(
+    dir: &Path,
+    file: &EmittedFile,
+    sets: &HashMap<&Path, Vec<&StubSet>>,
+    user_modules: &[String],
+) -> io::Result<UserMerge> {
+    let path = dir.join(&file.path);
+    let mut result = UserMerge::default();
+    let text = match fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(error) if error.kind() == io::ErrorKind::NotFound => {
+            write_if_changed(&path, &file.contents)?;
+            result.created = true;
+            return Ok(result);
+        }
+        Err(error) => return Err(error),
+    };
+    // Still exactly as coolc would write it today: every stub (or module) is there
+    // and none is stale, without parsing it.
+    if text == file.contents {
+        return Ok(result);
+    }
+    if file.path == Path::new("src/lib.rs") {
+        match merge_modules(&text, user_modules) {
+            Ok((merged, added)) if !added.is_empty() => {
+                fs::write(&path, merged)?;
+                result.added = added;
+            }
+            Ok(_) => {}
+            Err(error) => result.warnings.push(format!(
+                "{} was not updated: {error}; declare these modules yourself: {}",
+                file.path.display(),
+                user_modules.join(", ")
+            )),
+        }
+        return Ok(result);
+    }
+    // A compound's file has two blocks (`impl Supervisor`, `impl Parts`): every set
+    // of the file is merged in turn.
+    let mut merged_text = text;
+    for set in sets.get(file.path.as_path()).into_iter().flatten() {
+        match merge_stubs(&merged_text, set) {
+            Ok(merged) => {
+                result.added.extend(merged.added);
+                merged_text = merged.text;
+                if !merged.stale.is_empty() {
+                    result.warnings.push(format!(
+                        "{} has methods the description no longer asks for (kept, remove them when done): {}",
+                        file.path.display(),
+                        merged.stale.join(", ")
+                    ));
+                }
+            }
+            Err(MergeError::NoImpl(_))
+                if let Some(block) =
+                    missing_block(&file.contents, &set.trait_name, &merged_text) =>
+            {
+                // A block the file predates (a compound's `impl Supervisor` from an
+                // older coolc): appended whole.
+                if !merged_text.ends_with('\n') {
+                    merged_text.push('\n');
+                }
+                merged_text.push('\n');
+                merged_text.push_str(&block);
+                merged_text.push('\n');
+                result
+                    .added
+                    .extend(set.stubs.iter().map(|(name, _)| name.clone()));
+            }
+            Err(error) => result.warnings.push(format!(
+                "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
+                file.path.display(),
+                file.path.display()
+            )),
+        }
+    }
+    if !result.added.is_empty() {
+        fs::write(&path, &merged_text)?;
+    }
+    Ok(result)
+}
+
+/// Where the format cache lives inside the crate.
+const FORMAT_CACHE: &str = ".coolc/format-cache";
+/// Its first line, before the formatter's name.
+const FORMAT_CACHE_HEADER: &str = "coolc format cache 1";
+
+/// A stable fingerprint of `text`: 64-bit FNV-1a and the length, in hex.
+fn fingerprint(text: &str) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for byte in text.bytes() {
+        hash ^= u64::from(byte);
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{hash:016x}-{:x}", text.len())
+}
+
+/// The format cache of the crate in `dir` for `formatter`: path -> (fingerprint as
+/// rendered, fingerprint as written). Empty when missing, unreadable or written for
+/// another formatter.
+fn load_format_cache(dir: &Path, formatter: &str) -> HashMap<PathBuf, (String, String)> {
+    let Ok(text) = fs::read_to_string(dir.join(FORMAT_CACHE)) else {
+        return HashMap::new();
+    };
+    let mut lines = text.lines();
+    if lines.next() != Some(&format!("{FORMAT_CACHE_HEADER}\t{formatter}")) {
+        return HashMap::new();
+    }
+    lines
+        .filter_map(|line| {
+            let mut parts = line.split('\t');
+            let path = parts.next()?;
+            let rendered = parts.next()?;
+            let written = parts.next()?;
+            Some((
+                PathBuf::from(path),
+                (rendered.to_owned(), written.to_owned()),
+            ))
+        })
+        .collect()
+}
+
+/// Where the formatted text of an emitted file is kept: the generated file itself, or
+/// a user file's copy in `.coolc/stubs/`.
+fn formatted_home(dir: &Path, file: &EmittedFile) -> PathBuf {
+    match file.kind {
+        FileKind::Generated => dir.join(&file.path),
+        FileKind::User => dir.join(".coolc/stubs").join(&file.path),
+    }
+}
+
+/// For a file that needs formatting: its fingerprint as rendered, and its formatted
+/// text when the format cache still holds it (see the module doc). `None` for a file
+/// that needs no formatter.
+fn look_up(
+    dir: &Path,
+    cache: &HashMap<PathBuf, (String, String)>,
+    file: &EmittedFile,
+    laid_out: bool,
+) -> Option<(String, Option<String>)> {
+    if laid_out || file.path.extension().is_none_or(|e| e != "rs") {
+        return None;
+    }
+    let rendered = fingerprint(&file.contents);
+    let cached = cache
+        .get(&file.path)
+        .filter(|(was_rendered, _)| *was_rendered == rendered)
+        .and_then(|(_, written)| {
+            let text = fs::read_to_string(formatted_home(dir, file)).ok()?;
+            (fingerprint(&text) == *written).then_some(text)
+        });
+    Some((rendered, cached))
+}
+
+/// `files` with the formatted text of each one that needs it (from the cache, else
+/// from the formatter), and the fingerprints as rendered of those.
+fn format_with_cache(
+    dir: &Path,
+    cache: &HashMap<PathBuf, (String, String)>,
+    mut files: Vec<EmittedFile>,
+    laid_out: &[bool],
+) -> (Vec<EmittedFile>, Vec<Option<String>>) {
+    let indices: Vec<usize> = (0..files.len()).collect();
+    let looked_up = emit::par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
+    let mut needs = vec![false; files.len()];
+    let mut rendered_prints = vec![None; files.len()];
+    for (i, entry) in looked_up.into_iter().enumerate() {
+        if let Some((rendered, cached)) = entry {
+            match cached {
+                Some(text) => files[i].contents = text,
+                None => needs[i] = true,
+            }
+            rendered_prints[i] = Some(rendered);
+        }
+    }
+    emit::format_files(&mut files, &needs);
+    (files, rendered_prints)
+}
+
+/// Writes the crate for `krate` into `dir`, merging into existing user files: renders
+/// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
+/// last compile (see the module doc), and writes the files ([`write_emitted`]). The
+/// files whose templates need a formatter are rendered and formatted on a thread of
+/// their own (the formatter is a `rustfmt` process) while the others are rendered and
+/// written.
 pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
-    write_emitted(dir, krate, &emit::emit_crate(krate))
+    let mut timings = crate::Timings::from_env();
+    let formatter = emit::formatter_id();
+    let cache = load_format_cache(dir, &formatter);
+    let ((formatted, formatted_prints), (laid, laid_prints), written) =
+        std::thread::scope(|scope| {
+            let formatting = scope.spawn(|| {
+                let (files, laid_out) = emit::render_crate_part(krate, emit::Part::NeedsFormatter);
+                format_with_cache(dir, &cache, files, &laid_out)
+            });
+            let (files, laid_out) = emit::render_crate_part(krate, emit::Part::LaidOut);
+            // Generated files already in rustfmt's layout are written at once.
+            let indices: Vec<usize> = (0..files.len()).collect();
+            let written = emit::par_map(&indices, |&i| {
+                let file = &files[i];
+                (laid_out[i] && file.kind == FileKind::Generated)
+                    .then(|| write_if_changed(&dir.join(&file.path), &file.contents))
+            });
+            // Any that turned out to need the formatter (unusual descriptions).
+            let laid = format_with_cache(dir, &cache, files, &laid_out);
+            let formatted = match formatting.join() {
+                Ok(formatted) => formatted,
+                Err(panic) => std::panic::resume_unwind(panic),
+            };
+            (formatted, laid, written)
+        });
+    let mut done: HashMap<PathBuf, bool> = HashMap::new();
+    for (file, written) in laid.iter().zip(written) {
+        if let Some(written) = written {
+            done.insert(file.path.clone(), written?);
+        }
+    }
+    timings.span("render, format, write generated files");
+    let files: Vec<EmittedFile> = laid.into_iter().chain(formatted).collect();
+    let prints: Vec<Option<String>> = laid_prints.into_iter().chain(formatted_prints).collect();
+    let report = write_files_except(
+        dir,
+        &files,
+        &emit::stub_sets(krate, &files),
+        &emit::user_modules(krate),
+        &done,
+    )?;
+    timings.span("merge user files, write stubs");
+    let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
+    for (file, rendered) in files.iter().zip(prints) {
+        if let Some(rendered) = rendered {
+            text.push_str(&format!(
+                "{}\t{rendered}\t{}\n",
+                file.path.display(),
+                fingerprint(&file.contents)
+            ));
+        }
+    }
+    write_if_changed(&dir.join(FORMAT_CACHE), &text)?;
+    timings.span("format cache written");
+    Ok(report)
 }
 
 /// Writes `files`, already emitted for `krate` by [`emit::emit_crate`], into `dir`,
@@ -260,80 +520,51 @@ pub fn write_files(
     stub_sets: &[StubSet],
     user_modules: &[String],
 ) -> io::Result<Report> {
+    write_files_except(dir, files, stub_sets, user_modules, &HashMap::new())
+}
+
+/// [`write_files`], except the generated files in `done`, already written (or found
+/// unchanged: the flag says which).
+fn write_files_except(
+    dir: &Path,
+    files: &[EmittedFile],
+    stub_sets: &[StubSet],
+    user_modules: &[String],
+    done: &HashMap<PathBuf, bool>,
+) -> io::Result<Report> {
     let mut report = Report::default();
-    for file in files {
-        let path = dir.join(&file.path);
-        match file.kind {
-            FileKind::Generated => {
-                if write_if_changed(&path, &file.contents)? {
-                    report.written.push(file.path.clone());
-                }
-            }
-            FileKind::User if !path.exists() => {
-                write_if_changed(&path, &file.contents)?;
-                report.written.push(file.path.clone());
-            }
-            FileKind::User => {
-                let text = fs::read_to_string(&path)?;
-                if file.path == Path::new("src/lib.rs") {
-                    match merge_modules(&text, user_modules) {
-                        Ok((merged, added)) if !added.is_empty() => {
-                            fs::write(&path, merged)?;
-                            report.added.push((file.path.clone(), added));
-                        }
-                        Ok(_) => {}
-                        Err(error) => report.warnings.push(format!(
-                            "{} was not updated: {error}; declare these modules yourself: {}",
-                            file.path.display(),
-                            user_modules.join(", ")
-                        )),
-                    }
-                    continue;
-                }
-                // A compound's file has two blocks (`impl Supervisor`, `impl Parts`):
-                // every set of the file is merged in turn.
-                let mut merged_text = text.clone();
-                let mut added = Vec::new();
-                for set in stub_sets.iter().filter(|s| s.path == file.path) {
-                    match merge_stubs(&merged_text, set) {
-                        Ok(merged) => {
-                            added.extend(merged.added);
-                            merged_text = merged.text;
-                            if !merged.stale.is_empty() {
-                                report.warnings.push(format!(
-                                    "{} has methods the description no longer asks for (kept, remove them when done): {}",
-                                    file.path.display(),
-                                    merged.stale.join(", ")
-                                ));
-                            }
-                        }
-                        Err(MergeError::NoImpl(_))
-                            if let Some(block) =
-                                missing_block(&file.contents, &set.trait_name, &merged_text) =>
-                        {
-                            // A block the file predates (a compound's `impl
-                            // Supervisor` from an older coolc): appended whole.
-                            if !merged_text.ends_with('\n') {
-                                merged_text.push('\n');
-                            }
-                            merged_text.push('\n');
-                            merged_text.push_str(&block);
-                            merged_text.push('\n');
-                            added.extend(set.stubs.iter().map(|(name, _)| name.clone()));
-                        }
-                        Err(error) => report.warnings.push(format!(
-                            "{} was not updated: {error}; its stubs are in .coolc/stubs/{}",
-                            file.path.display(),
-                            file.path.display()
-                        )),
-                    }
-                }
-                if !added.is_empty() {
-                    fs::write(&path, &merged_text)?;
-                    report.added.push((file.path.clone(), added));
-                }
-            }
+    let mut sets: HashMap<&Path, Vec<&StubSet>> = HashMap::new();
+    for set in stub_sets {
+        sets.entry(set.path.as_path()).or_default().push(set);
+    }
+    // Generated files are independent: written (when changed) on every core.
+    let generated: Vec<&EmittedFile> = files
+        .iter()
+        .filter(|f| f.kind == FileKind::Generated)
+        .collect();
+    let written = emit::par_map(&generated, |file| match done.get(&file.path) {
+        Some(written) => Ok(*written),
+        None => write_if_changed(&dir.join(&file.path), &file.contents),
+    });
+    for (file, written) in generated.iter().zip(written) {
+        if written? {
+            report.written.push(file.path.clone());
         }
+    }
+    // User files: each read and merged on every core, the results applied in order.
+    let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
+    let merged = emit::par_map(&users, |file| {
+        merge_user_file(dir, file, &sets, user_modules)
+    });
+    for (file, merged) in users.iter().zip(merged) {
+        let merged = merged?;
+        if merged.created {
+            report.written.push(file.path.clone());
+        }
+        if !merged.added.is_empty() {
+            report.added.push((file.path.clone(), merged.added));
+        }
+        report.warnings.extend(merged.warnings);
     }
     // Generated files no description asks for any more (a removed component, the
     // build script of a removed `link system`) would linger: remove them, but only
@@ -345,8 +576,9 @@ pub fn write_files(
         }
     }
     candidates.sort();
+    let emitted: HashSet<&Path> = files.iter().map(|f| f.path.as_path()).collect();
     for candidate in candidates {
-        if files.iter().any(|f| f.path == candidate) {
+        if emitted.contains(candidate.as_path()) {
             continue;
         }
         let path = dir.join(&candidate);
@@ -370,8 +602,11 @@ pub fn write_files(
         }
     }
     // Keep the latest stubs for reference (what coolc would write today).
-    for file in files.iter().filter(|f| f.kind == FileKind::User) {
-        write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)?;
+    let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
+    for written in emit::par_map(&users, |file| {
+        write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
+    }) {
+        written?;
     }
     Ok(report)
 }

@@ -1,0 +1,80 @@
+//! Recompiling touches nothing that would not change: a second `coolc compile` of the
+//! same descriptions writes no file (so cargo rebuilds nothing), formatted files are
+//! taken from the format cache, a generated file edited by hand is restored, and a
+//! changed description rewrites only its own files.
+
+mod common;
+
+use std::path::Path;
+use std::time::SystemTime;
+
+use common::{compile, copy_descriptions};
+
+fn modified(path: &Path) -> SystemTime {
+    std::fs::metadata(path).unwrap().modified().unwrap()
+}
+
+#[test]
+fn recompile_writes_only_what_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("descriptions");
+    std::fs::create_dir_all(&src).unwrap();
+    copy_descriptions(&src);
+    let out = dir.path().join("fleet");
+    let root = src.join("mobile_base.cool");
+
+    let first = compile(&root, &out, "fleet");
+    assert!(first.written.iter().any(|p| p == Path::new("Cargo.toml")));
+    let cache = std::fs::read_to_string(out.join(".coolc/format-cache")).unwrap();
+    assert!(cache.starts_with("coolc format cache 1\t"), "{cache}");
+    // The compound module and types are formatted (their templates are not in
+    // rustfmt's layout), so the cache lists them.
+    assert!(cache.contains("src/generated/mobile_base.rs\t"), "{cache}");
+    assert!(cache.contains("src/generated/types.rs\t"), "{cache}");
+
+    let watched = [
+        "Cargo.toml",
+        "src/generated/mod.rs",
+        "src/generated/types.rs",
+        "src/generated/mobile_base.rs",
+        "src/generated/motion_controller.rs",
+        ".coolc/format-cache",
+        ".coolc/stubs/src/mobile_base.rs",
+    ];
+    let before: Vec<SystemTime> = watched.iter().map(|p| modified(&out.join(p))).collect();
+    let snapshot = |out: &Path| -> Vec<String> {
+        watched
+            .iter()
+            .map(|p| std::fs::read_to_string(out.join(p)).unwrap())
+            .collect()
+    };
+    let contents = snapshot(&out);
+    std::thread::sleep(std::time::Duration::from_millis(20));
+
+    let second = compile(&root, &out, "fleet");
+    assert!(second.written.is_empty(), "{:?}", second.written);
+    let after: Vec<SystemTime> = watched.iter().map(|p| modified(&out.join(p))).collect();
+    assert_eq!(before, after, "a recompile touched a file");
+    assert_eq!(contents, snapshot(&out));
+
+    // A generated file edited by hand: the cache no longer matches it, so it is
+    // formatted again and rewritten, byte for byte as before.
+    let compound = out.join("src/generated/mobile_base.rs");
+    std::fs::write(&compound, "// edited\n").unwrap();
+    let third = compile(&root, &out, "fleet");
+    assert_eq!(third.written, [Path::new("src/generated/mobile_base.rs")]);
+    assert_eq!(contents, snapshot(&out));
+
+    // A changed description: only its module (and the files naming it) change.
+    let motion = src.join("motion_controller.cool");
+    let text = std::fs::read_to_string(&motion).unwrap();
+    let changed = text.replacen("automaton {", "exception extra;\n    automaton {", 1);
+    assert_ne!(changed, text);
+    std::fs::write(&motion, changed).unwrap();
+    let fourth = compile(&root, &out, "fleet");
+    assert_eq!(
+        fourth.written,
+        [Path::new("src/generated/motion_controller.rs")],
+        "{fourth:?}"
+    );
+}
