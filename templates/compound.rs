@@ -242,7 +242,7 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
 }
 {% for r in c.rules %}
 /// Rule {{ r.doc }}.
-#[allow(clippy::eq_op, clippy::nonminimal_bool, clippy::bool_comparison, clippy::overly_complex_bool_expr, clippy::neg_cmp_op_on_partial_ord)]
+#[allow(clippy::eq_op, clippy::nonminimal_bool, clippy::bool_comparison, clippy::overly_complex_bool_expr, clippy::neg_cmp_op_on_partial_ord, clippy::comparison_to_empty)]
 fn {{ r.function }}({{ r.view_param }}: &::coolbot::View{% if let Some(vars) = r.vars_param %}, {{ vars }}: &Vars{% endif %}) -> bool {
     {{ r.expr }}
 }

@@ -4,7 +4,10 @@
 //! with the instance's user states, `result` with `none`/`success`/`fail`, `quality`
 //! with the instance's quality levels; `error` is a `String`, `cpu_time` and
 //! `elapsed_time` are durations. A bare name that is not a variable is a symbol,
-//! resolved against the other side of the comparison.
+//! resolved against the other side of the comparison. The compound's own `result`,
+//! `error`, `cpu_time`, `elapsed_time` and `quality` are not readable in a rule
+//! (`coolc::check::unreadable_in_rule`); an instance's `quality` levels are those of
+//! its `timing` override when it declares some.
 
 use std::fmt;
 
@@ -12,6 +15,10 @@ use super::Checker;
 use super::model::{DEFAULT_OBSERVABLES, DEFAULT_STATES, Interface, Model, RESULTS, Ty};
 use crate::ast::{self, BinaryOp};
 use crate::diagnostics::Code;
+
+/// The compound's own default variables a rule cannot read: the supervisor's result,
+/// error, times and quality are not published where rules are evaluated.
+const UNREADABLE_OWN: [&str; 5] = ["result", "error", "cpu_time", "elapsed_time", "quality"];
 
 /// The type of a rule expression.
 #[derive(Clone, Debug, PartialEq)]
@@ -216,6 +223,23 @@ impl Typer<'_, '_, '_> {
                 if let Some(var) = self.own.variables.get(&name.name) {
                     return from_ty(&var.ty);
                 }
+                if UNREADABLE_OWN.contains(&name.name.as_str()) {
+                    let diagnostic = self
+                        .checker
+                        .error(
+                            Code::UnreadableInRule,
+                            name.span,
+                            format!("a rule cannot read the compound's own `{}` yet", name.name),
+                        )
+                        .with_label("not readable in a rule")
+                        .with_help(
+                            "rules read the compound's own `state`, `user_state` and \
+                             declared variables, and its instances' variables \
+                             (`instance.variable`)",
+                        );
+                    self.checker.push(diagnostic);
+                    return RTy::Unknown;
+                }
                 default_variable(&name.name, &self.component.name.name, self.own)
                     .unwrap_or_else(|| RTy::Symbol(name.clone()))
             }
@@ -277,7 +301,11 @@ impl Typer<'_, '_, '_> {
             None => {}
         }
         if let Some(ty) = default_variable(&variable.name, &instance.component.name, &interface) {
-            return ty;
+            // An instance's `timing` override may declare its own quality levels.
+            return match (ty, override_levels(instance)) {
+                (RTy::Quality(component, _), Some(levels)) => RTy::Quality(component, levels),
+                (ty, _) => ty,
+            };
         }
         let candidates: Vec<&str> = interface
             .variables
@@ -476,4 +504,19 @@ fn default_variable(name: &str, component: &str, interface: &Interface) -> Optio
         "quality" => RTy::Quality(component.to_owned(), interface.quality.clone()),
         _ => return None,
     })
+}
+
+/// The quality levels an instance's `timing { quality ... }` override declares.
+fn override_levels(instance: &ast::Instance) -> Option<Vec<String>> {
+    instance
+        .timing
+        .as_ref()?
+        .entries
+        .iter()
+        .find_map(|entry| match entry {
+            ast::TimingEntry::Quality(levels, _) => {
+                Some(levels.iter().map(|level| level.name.clone()).collect())
+            }
+            _ => None,
+        })
 }

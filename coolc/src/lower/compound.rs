@@ -70,6 +70,9 @@ struct Operand {
     /// `code` is an `Option` of the value (a read from the view that may be
     /// missing); `false` when `code` is the value itself.
     maybe: bool,
+    /// An `f32` (or `f32?`) widened to `f64`: a float literal it is compared with is
+    /// rounded to `f32` first.
+    narrow: bool,
 }
 
 /// A compound's scope for rules and exports.
@@ -1154,6 +1157,7 @@ impl Scope<'_, '_> {
             code,
             ty,
             maybe: false,
+            narrow: false,
         };
         match &expr.kind {
             ExprKind::Int(n) => known(n.to_string(), RTy::Int),
@@ -1177,15 +1181,21 @@ impl Scope<'_, '_> {
                     code,
                     ty: ty @ (RTy::Int | RTy::Float),
                     maybe: false,
-                } => known(format!("-{code}"), ty),
+                    narrow,
+                } => Operand {
+                    narrow,
+                    ..known(format!("-{code}"), ty)
+                },
                 Operand {
                     code,
                     ty: ty @ (RTy::Int | RTy::Float),
                     maybe: true,
+                    narrow,
                 } => Operand {
                     code: format!("{code}.map(|value| -value)"),
                     ty,
                     maybe: true,
+                    narrow,
                 },
                 _ => known(String::new(), RTy::Unreadable),
             },
@@ -1238,18 +1248,21 @@ impl Scope<'_, '_> {
                             code: String::new(),
                             ty: RTy::Unreadable,
                             maybe: false,
+                            narrow: false,
                         },
                     },
                     _ => Operand {
                         code: String::new(),
                         ty: RTy::Unreadable,
                         maybe: false,
+                        narrow: false,
                     },
                 },
                 (None, None) => Operand {
                     code: String::new(),
                     ty: RTy::Unreadable,
                     maybe: false,
+                    narrow: false,
                 },
             };
         }
@@ -1259,6 +1272,7 @@ impl Scope<'_, '_> {
                 code: "::coolbot::State::Running".to_owned(),
                 ty: RTy::State,
                 maybe: false,
+                narrow: false,
             },
             // A rule is evaluated in its own supervisor state.
             "user_state" => {
@@ -1267,17 +1281,20 @@ impl Scope<'_, '_> {
                     code: ident::string_literal(&self.state),
                     ty: RTy::UserState(states),
                     maybe: false,
+                    narrow: false,
                 }
             }
             "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => Operand {
                 code: String::new(),
                 ty: RTy::Unreadable,
                 maybe: false,
+                narrow: false,
             },
             _ => Operand {
                 code: String::new(),
                 ty: RTy::Symbol(name.to_owned()),
                 maybe: false,
+                narrow: false,
             },
         }
     }
@@ -1288,6 +1305,7 @@ impl Scope<'_, '_> {
             code: String::new(),
             ty: RTy::Unreadable,
             maybe: false,
+            narrow: false,
         };
         let Some(target) = Lowerer::instance_of(self.component, instance)
             .and_then(|i| self.lowerer.component_of(i))
@@ -1299,23 +1317,50 @@ impl Scope<'_, '_> {
             code,
             ty,
             maybe: true,
+            narrow: false,
         };
         if let Some((ty, _)) = self.lowerer.variable_type(target, variable, 0) {
             self.read(format!("{instance}.{variable}"));
             self.uses_view = true;
             let raw = format!("view.var({lit}, {})", ident::string_literal(variable));
+            let f64_field = is_f64(ty);
             let ty = self.lowerer.rule_type(ty);
             return match view_value(&raw, &ty) {
-                Some(code) => maybe(code, ty),
+                Some(code) => Operand {
+                    narrow: !f64_field && is_float(&ty),
+                    ..maybe(code, ty)
+                },
                 None => unreadable,
             };
         }
-        let (states, qualities) = Lowerer::states_and_qualities(target);
+        let (states, mut qualities) = Lowerer::states_and_qualities(target);
+        // An instance's `timing` override may declare its own quality levels.
+        if let Some(levels) = Lowerer::instance_of(self.component, instance)
+            .and_then(|i| i.timing.as_ref())
+            .and_then(|timing| {
+                timing.entries.iter().find_map(|entry| match entry {
+                    ast::TimingEntry::Quality(levels, _) => Some(levels),
+                    _ => None,
+                })
+            })
+        {
+            qualities = levels.iter().map(|level| level.name.clone()).collect();
+        }
         let (code, ty) = match variable {
             "state" => (format!("view.state({lit})"), RTy::State),
             "user_state" => (format!("view.user_state({lit})"), RTy::UserState(states)),
             "result" => (format!("view.result({lit})"), RTy::Result),
-            "error" => (format!("view.error({lit})"), RTy::Str),
+            // No error reads as the empty one: `error != "x"` holds then.
+            "error" => {
+                self.read(format!("{instance}.error"));
+                self.uses_view = true;
+                return Operand {
+                    code: format!("view.error({lit}).unwrap_or(\"\")"),
+                    ty: RTy::Str,
+                    maybe: false,
+                    narrow: false,
+                };
+            }
             "cpu_time" | "elapsed_time" => (
                 format!("view.monitor({lit}).map(|monitor| monitor.{variable})"),
                 RTy::Duration,
@@ -1326,10 +1371,11 @@ impl Scope<'_, '_> {
             ),
             _ => return unreadable,
         };
-        // The runtime names monitor fields other than these four by their variable.
+        // `cpu_time` and `elapsed_time` have no change event of their own: they are
+        // sampled when the rule is evaluated, announced with the state.
         let read = match variable {
-            "state" | "user_state" | "result" | "error" => format!("{instance}.{variable}"),
-            _ => format!("{instance}.state"),
+            "cpu_time" | "elapsed_time" => format!("{instance}.state"),
+            _ => format!("{instance}.{variable}"),
         };
         self.read(read);
         self.uses_view = true;
@@ -1352,6 +1398,39 @@ impl Scope<'_, '_> {
         {
             return "false".to_owned();
         }
+        // An `f32` compared with a float literal: the literal rounded to `f32`, as the
+        // variable holds it.
+        if l.narrow
+            && let Some(literal) = f32_literal(right)
+        {
+            r.code = literal;
+        }
+        if r.narrow
+            && let Some(literal) = f32_literal(left)
+        {
+            l.code = literal;
+        }
+        // `user_state == on`: a missing user state (the automaton has not started)
+        // differs from every state, for `!=` too.
+        if matches!(l.ty, RTy::UserState(_)) && l.maybe != r.maybe {
+            let (maybe, plain) = if l.maybe { (&l, &r) } else { (&r, &l) };
+            return format!(
+                "{} {} ::core::option::Option::Some({})",
+                maybe.code,
+                op.as_str(),
+                plain.code
+            );
+        }
+        // `x != v` is `!(x == v)`, also when a side is missing.
+        if op == BinaryOp::Ne && (l.maybe || r.maybe) {
+            return format!("!({})", self.compare(BinaryOp::Eq, l, r));
+        }
+        self.compare(op, l, r)
+    }
+
+    /// `l op r`, both operands resolved (`!=` over a missing value is handled by
+    /// the caller).
+    fn compare(&mut self, op: BinaryOp, mut l: Operand, mut r: Operand) -> String {
         let rust_op = op.as_str();
         // `x == none`, `x != none`.
         if r.ty == RTy::NoneLit {
@@ -1382,9 +1461,13 @@ impl Scope<'_, '_> {
         if l.ty == RTy::Result && r.ty == RTy::Result {
             return self.result_comparison(op, &l, &r);
         }
-        // One optional side and one plain side: the plain side is wrapped in `Some`.
         let l_opt = matches!(l.ty, RTy::Optional(_));
         let r_opt = matches!(r.ty, RTy::Optional(_));
+        // An ordering with an optional side: `none` satisfies none of them.
+        if (l_opt || r_opt) && op != BinaryOp::Eq && op != BinaryOp::Ne {
+            return ordering(rust_op, &l, &r);
+        }
+        // One optional side and one plain side: the plain side is wrapped in `Some`.
         let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
             let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
             let value = if operand.maybe && owned_text {
@@ -1442,12 +1525,61 @@ impl Scope<'_, '_> {
     }
 }
 
+/// `l op r` for an ordering `op` with an optional side: every `Option` layer (a
+/// missing read, an optional value) is opened with `is_some_and`, so a missing value
+/// or `none` makes it `false`.
+fn ordering(rust_op: &str, l: &Operand, r: &Operand) -> String {
+    let layers = |operand: &Operand| {
+        usize::from(matches!(operand.ty, RTy::Optional(_))) + usize::from(operand.maybe)
+    };
+    let value = |operand: &Operand, name: &str| {
+        if layers(operand) == 0 {
+            operand.code.clone()
+        } else {
+            name.to_owned()
+        }
+    };
+    let open = |operand: &Operand, name: &str, inner: String| -> String {
+        match layers(operand) {
+            0 => inner,
+            1 => format!("{}.is_some_and(|{name}| {inner})", operand.code),
+            _ => format!(
+                "{}.is_some_and(|{name}| {name}.is_some_and(|{name}| {inner}))",
+                operand.code
+            ),
+        }
+    };
+    let test = format!("{} {rust_op} {}", value(l, "left"), value(r, "right"));
+    open(l, "left", open(r, "right", test))
+}
+
+/// A float literal (`0.1`, `-0.1`) as an `f64` holding its `f32` rounding, or `None`
+/// for anything else (and for a literal beyond `f32`'s range, which no `f32` equals).
+fn f32_literal(expr: &ast::Expr) -> Option<String> {
+    let (negative, value) = match &expr.kind {
+        ExprKind::Float(x) => (false, *x),
+        ExprKind::Unary(UnaryOp::Neg, inner) => match &inner.kind {
+            ExprKind::Float(x) => (true, *x),
+            _ => return None,
+        },
+        _ => return None,
+    };
+    // Rounding to `f32` is the point: the variable holds that rounding.
+    let narrow = value as f32;
+    if !narrow.is_finite() {
+        return None;
+    }
+    let sign = if negative { "-" } else { "" };
+    Some(format!("f64::from({sign}{narrow:?}_f32)"))
+}
+
 /// A symbol resolved against the type of the other side.
 fn symbol(name: &str, other: &RTy) -> Operand {
     let plain = |code: String, ty: RTy| Operand {
         code,
         ty,
         maybe: false,
+        narrow: false,
     };
     let other = match other {
         RTy::Optional(inner) => inner.as_ref(),
@@ -1481,6 +1613,7 @@ fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
         code: String::new(),
         ty: RTy::Unreadable,
         maybe: false,
+        narrow: false,
     };
     if maybe {
         // `Option<&T>`: only the types whose value can be copied out of a reference.
@@ -1492,6 +1625,7 @@ fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
             code,
             ty: ty.clone(),
             maybe: true,
+            narrow: false,
         };
     }
     let code = match ty {
@@ -1510,10 +1644,21 @@ fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
         },
         _ => return unreadable,
     };
+    let narrow = !f64_field && is_float(ty);
     Operand {
         code,
         ty: ty.clone(),
         maybe: false,
+        narrow,
+    }
+}
+
+/// Whether `ty` is a float or an optional float.
+fn is_float(ty: &RTy) -> bool {
+    match ty {
+        RTy::Float => true,
+        RTy::Optional(inner) => **inner == RTy::Float,
+        _ => false,
     }
 }
 
@@ -1602,13 +1747,111 @@ mod tests {
     ";
 
     fn compounds() -> Vec<ir::Compound> {
-        let analysis = crate::analyze_text("t.cool", TEXT);
+        compounds_of(TEXT)
+    }
+
+    fn compounds_of(text: &str) -> Vec<ir::Compound> {
+        let analysis = crate::analyze_text("t.cool", text);
         assert!(
             !analysis.has_errors(),
             "{}",
             analysis.render(crate::RenderOptions::plain())
         );
         lower(&analysis.files, &Options::default()).compounds
+    }
+
+    /// The condition and reads of each rule of the first compound of `text`.
+    fn rules_of(text: &str) -> Vec<(String, String)> {
+        compounds_of(text)[0]
+            .rules
+            .iter()
+            .map(|r| (r.expr.clone(), r.reads.clone()))
+            .collect()
+    }
+
+    const MONITORED: &str = "
+        atomic Meter {
+            observable ratio: f32 = 0.0;
+            observable maybe: u8? = none;
+            timing { period 10ms; quality fine, coarse; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Watch {
+            instance m: Meter { timing { quality best, good, poor; } }
+            instance n: Meter;
+            local opt: u8? = none;
+            local x: f32 = 0.1;
+            supervisor {
+                initial on;
+                state on {
+                    when m.quality == poor -> off;
+                    when n.quality == coarse && m.cpu_time > 1s -> off;
+                    when opt < 4 || 4 > opt || m.maybe >= 2 -> off;
+                    when x == 0.1 || m.ratio <= -0.5 -> off;
+                    when m.error != \"boom\" && m.user_state != on -> off;
+                    when m.state != running -> off;
+                }
+                state off { entry; }
+            }
+        }";
+
+    #[test]
+    fn quality_reads_its_own_key_and_the_instance_levels() {
+        let rules = rules_of(MONITORED);
+        // The runtime announces a quality change under `m.quality`; the levels are
+        // the instance's override (`poor` is its third), else the component's.
+        assert_eq!(rules[0].1, r#"&["m.quality"]"#);
+        assert!(rules[0].0.contains("== 2_usize"), "{}", rules[0].0);
+        assert!(rules[1].0.contains("== 1_usize"), "{}", rules[1].0);
+        // `cpu_time` has no change event: sampled when the state's events come.
+        assert_eq!(rules[1].1, r#"&["n.quality", "m.state"]"#);
+    }
+
+    #[test]
+    fn orderings_over_optionals_never_hold_for_none() {
+        let expr = &rules_of(MONITORED)[2].0;
+        assert!(
+            expr.contains("vars.opt.map(i128::from).is_some_and(|left| left < 4)"),
+            "{expr}"
+        );
+        assert!(
+            expr.contains("vars.opt.map(i128::from).is_some_and(|right| 4 > right)"),
+            "{expr}"
+        );
+        assert!(
+            expr.contains(".is_some_and(|left| left.is_some_and(|left| left >= 2))"),
+            "{expr}"
+        );
+        assert!(!expr.contains("Some(4)"), "{expr}");
+    }
+
+    #[test]
+    fn f32_sides_compare_with_the_literal_rounded_to_f32() {
+        let expr = &rules_of(MONITORED)[3].0;
+        assert!(
+            expr.contains("f64::from(vars.x) == f64::from(0.1_f32)"),
+            "{expr}"
+        );
+        assert!(expr.contains("left <= f64::from(-0.5_f32)"), "{expr}");
+    }
+
+    #[test]
+    fn not_equal_is_the_negation_of_equal_when_a_value_is_missing() {
+        let rules = rules_of(MONITORED);
+        let expr = &rules[4].0;
+        assert!(
+            expr.contains(r#"view.error("m").unwrap_or("") != "boom""#),
+            "{expr}"
+        );
+        assert!(
+            expr.contains(r#"view.user_state("m") != ::core::option::Option::Some("on")"#),
+            "{expr}"
+        );
+        assert!(
+            rules[5].0.starts_with("!(view.state(\"m\")"),
+            "{}",
+            rules[5].0
+        );
     }
 
     #[test]

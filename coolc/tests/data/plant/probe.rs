@@ -9,6 +9,7 @@ pub struct ProbeSupervisor {}
 impl Supervisor for ProbeSupervisor {
     fn seen_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         cx.vars.count += 1;
+        cx.vars.opt = Some(3);
         Ok(())
     }
 
@@ -33,6 +34,10 @@ impl Parts for ProbeParts {
     }
 
     fn g(&mut self) -> impl crate::generated::gauge::Behavior {
+        crate::gauge::Gauge::default()
+    }
+
+    fn spare(&mut self) -> impl crate::generated::gauge::Behavior {
         crate::gauge::Gauge::default()
     }
 }
