@@ -29,9 +29,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use coolbot::{MonitorEvent, State};
+use coolbot::{Handle, Monitor, MonitorEvent, State, Step, Supervision};
 
-use crate::robot::{MOTION, MobileBaseSupervisor, RANGES, SIM_RANGES, Setup, WANDERER};
+use crate::robot::{BASE, MOTION, RANGES, Robot, SIM_RANGES, Setup};
 use crate::world::{FaultKind, Platform, SensorFault, World};
 
 /// How the run shows itself.
@@ -58,13 +58,13 @@ pub struct Options {
     pub outage: Duration,
     /// How the range server fails.
     pub fault_kind: FaultKind,
-    /// Range noise of the real sensors (m).
-    pub noise: f64,
+    /// Range noise of the real sensors (m), if not the description's.
+    pub noise: Option<f64>,
     /// Seed of the noise and the wandering.
     pub seed: u64,
     /// A goal for the wanderer to seek.
     pub goal: Option<(f64, f64)>,
-    /// The motion controller's speed limit (m/s), if not the description's.
+    /// The base's speed limit (m/s), if not the description's.
     pub max_speed: Option<f64>,
     /// The range servers' scan frequency (Hz), if not the description's.
     pub scan_rate: Option<f64>,
@@ -81,7 +81,7 @@ impl Default for Options {
             fault_after: None,
             outage: Duration::from_millis(1500),
             fault_kind: FaultKind::Raise,
-            noise: 0.005,
+            noise: None,
             seed: 1,
             goal: None,
             max_speed: None,
@@ -92,16 +92,41 @@ impl Default for Options {
     }
 }
 
-/// What happened in a run.
+/// One supervision step, as a compound's monitoring port published it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SupervisionStep {
+    /// When the run saw it (since the start).
+    pub at: Duration,
+    /// The compound whose supervisor took it (`robot` or `base`).
+    pub compound: String,
+    /// The step.
+    pub step: Supervision,
+}
+
+impl fmt::Display for SupervisionStep {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{:6.2}s {}: {}",
+            self.at.as_secs_f64(),
+            self.compound,
+            self.step
+        )
+    }
+}
+
+/// What happened in a run, as the monitoring ports told it (and the simulated
+/// platform's ground truth).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {
     /// How long it ran.
     pub elapsed: Duration,
     /// Whether it was stopped early (Ctrl-C).
     pub interrupted: bool,
-    /// Distance the robot really travelled (m).
+    /// Distance the robot really travelled (m, the platform's ground truth).
     pub distance: f64,
-    /// Distance by the motion controller's odometry (m).
+    /// Distance by the motion controller's odometry (m, its last published
+    /// `distance`).
     pub odometry_distance: f64,
     /// The smallest distance between the robot's rim and an obstacle (m).
     pub min_clearance: f64,
@@ -119,26 +144,58 @@ pub struct Summary {
     pub goals_reached: u64,
     /// Scans published by `ranges` and by `sim_ranges`.
     pub scans: (u64, u64),
-    /// Faults: components entering `running_error`, all together.
-    pub faults: u64,
-    /// Restarts that failed: components entering `starting_error`.
-    pub failed_restarts: u64,
-    /// Substitutions by the supervisor.
-    pub substitutions: u32,
-    /// Recoveries from the recovery queue.
-    pub recoveries: u32,
-    /// Instances retired at their recovery deadline.
-    pub retired: u32,
-    /// The supervisor's last state.
+    /// Every supervision step the compounds published, in order.
+    pub supervision: Vec<SupervisionStep>,
+    /// The base supervisor's states, in the order its monitoring port reported them.
+    pub user_states: Vec<String>,
+    /// The base supervisor's last state.
     pub supervisor: String,
+    /// The base's own `mode` at the end.
+    pub mode: String,
+    /// The base's own `faults` at the end (faults its supervisor handled).
+    pub base_faults: u64,
     /// The range emergency distance the run used (m).
     pub emergency_distance: f64,
-    /// Each component's state before shutdown: `(name, state)`.
+    /// Each component's state before shutdown: `(name, state)`; the base's instances
+    /// as its supervisor last saw them.
     pub states_before_shutdown: Vec<(String, State)>,
-    /// Each component's state after shutdown, and whether its thread was joined.
-    pub final_states: Vec<(String, State, bool)>,
+    /// `robot`, `base` and `wanderer` after shutdown.
+    pub final_states: Vec<(String, State)>,
+    /// Whether every component, at every level, released the simulated platform
+    /// after shutdown (its code was dropped: its thread ended).
+    pub released: bool,
     /// Every thread joined, every component dead, no runtime panic.
     pub clean_shutdown: bool,
+}
+
+impl Summary {
+    /// How many of the supervision steps are of the kind `step` accepts.
+    pub fn count(&self, step: fn(&Step) -> bool) -> usize {
+        self.supervision
+            .iter()
+            .filter(|s| step(&s.step.step))
+            .count()
+    }
+
+    /// Member faults the supervisors saw.
+    pub fn faults(&self) -> usize {
+        self.count(|s| matches!(s, Step::Failed))
+    }
+
+    /// Substitutions made.
+    pub fn substitutions(&self) -> usize {
+        self.count(|s| matches!(s, Step::Substituted { .. }))
+    }
+
+    /// Instances recovered from the recovery queue.
+    pub fn recoveries(&self) -> usize {
+        self.count(|s| matches!(s, Step::Recovered))
+    }
+
+    /// Instances retired at their recovery deadline.
+    pub fn retired(&self) -> usize {
+        self.count(|s| matches!(s, Step::Retired))
+    }
 }
 
 impl fmt::Display for Summary {
@@ -155,7 +212,7 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  distance travelled   {:.2} m (odometry {:.2} m)",
+            "  distance travelled   {:.2} m (odometry {:.2} m, as base last saw it)",
             self.distance, self.odometry_distance
         )?;
         writeln!(
@@ -178,10 +235,28 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  faults               {} (failed restarts {}, substitutions {}, recoveries {}, retired {})",
-            self.faults, self.failed_restarts, self.substitutions, self.recoveries, self.retired
+            "  faults               {} (substitutions {}, recoveries {}, retired {})",
+            self.faults(),
+            self.substitutions(),
+            self.recoveries(),
+            self.retired()
         )?;
-        writeln!(f, "  supervisor           {}", self.supervisor)?;
+        if self.supervision.is_empty() {
+            writeln!(f, "  supervision steps    none")?;
+        } else {
+            writeln!(f, "  supervision steps")?;
+            for step in &self.supervision {
+                writeln!(f, "    {step}")?;
+            }
+        }
+        writeln!(
+            f,
+            "  base supervisor      {} (mode {}, faults {}); states {}",
+            self.supervisor,
+            self.mode,
+            self.base_faults,
+            self.user_states.join(" -> ")
+        )?;
         let before: Vec<String> = self
             .states_before_shutdown
             .iter()
@@ -191,9 +266,14 @@ impl fmt::Display for Summary {
         let after: Vec<String> = self
             .final_states
             .iter()
-            .map(|(n, s, joined)| format!("{n}={s}{}", if *joined { "" } else { " (NOT joined)" }))
+            .map(|(n, s)| format!("{n}={s}"))
             .collect();
-        writeln!(f, "  after shutdown       {}", after.join(" "))?;
+        writeln!(
+            f,
+            "  after shutdown       {}; every component released the platform: {}",
+            after.join(" "),
+            if self.released { "yes" } else { "NO" }
+        )?;
         write!(
             f,
             "  shutdown             {}",
@@ -216,14 +296,101 @@ fn number(value: Option<&coolbot::Value>) -> f64 {
     }
 }
 
-fn variable(monitor: &coolbot::Monitor, name: &str) -> f64 {
-    number(
-        monitor
-            .variables
+fn lookup<'a>(monitor: &'a Monitor, name: &str) -> Option<&'a coolbot::Value> {
+    monitor
+        .variables
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| v)
+}
+
+fn variable(monitor: Option<&Monitor>, name: &str) -> f64 {
+    number(monitor.and_then(|m| lookup(m, name)))
+}
+
+/// A variable shown as text (an enum's variant name).
+fn word(monitor: &Monitor, name: &str) -> String {
+    lookup(monitor, name).map_or_else(|| "-".to_owned(), status::value)
+}
+
+/// Where the table's rows come from: a handle (`robot`, `base`, `wanderer`) or the
+/// base supervisor's view (its instances).
+enum Source {
+    Handle(Handle),
+    Member(&'static str),
+}
+
+/// One row of the table: what it shows and where from.
+struct Line {
+    depth: usize,
+    type_name: &'static str,
+    source: Source,
+    cpu: Duration,
+}
+
+/// What the monitoring ports of the robot, the base and the wanderer publish, as it
+/// happens: the log lines, every supervision step, the base supervisor's states.
+struct Events {
+    receivers: Vec<(String, coolbot::crossbeam_channel::Receiver<MonitorEvent>)>,
+    supervision: Vec<SupervisionStep>,
+    user_states: Vec<String>,
+}
+
+impl Events {
+    fn new(handles: &[&Handle]) -> Events {
+        let receivers = handles
             .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v),
-    )
+            .map(|h| (h.name().to_owned(), h.subscribe()))
+            .collect();
+        // The state the base's supervisor is in now; changes follow as events.
+        let user_states = handles
+            .iter()
+            .find(|h| h.name() == BASE)
+            .and_then(|h| h.snapshot().user_state)
+            .into_iter()
+            .collect();
+        Events {
+            receivers,
+            supervision: Vec::new(),
+            user_states,
+        }
+    }
+
+    /// Takes what was published since the last call (`at`: the run's clock) and
+    /// returns it as log lines.
+    fn take(&mut self, at: Duration) -> Vec<String> {
+        let time = at.as_secs_f64();
+        let mut lines = Vec::new();
+        for (name, receiver) in &self.receivers {
+            for event in receiver.try_iter() {
+                match event {
+                    MonitorEvent::State { from, to } => {
+                        lines.push(format!("{time:6.2}s {name}: {from} -> {to}"));
+                    }
+                    MonitorEvent::Error(Some(error)) => {
+                        lines.push(format!("{time:6.2}s {name}: error: {error}"));
+                    }
+                    MonitorEvent::UserState(Some(state))
+                        if name == BASE && self.user_states.last() != Some(&state) =>
+                    {
+                        lines.push(format!("{time:6.2}s {name}: supervisor -> {state}"));
+                        self.user_states.push(state);
+                    }
+                    MonitorEvent::Supervision(step) => {
+                        let step = SupervisionStep {
+                            at,
+                            compound: name.clone(),
+                            step,
+                        };
+                        lines.push(step.to_string());
+                        self.supervision.push(step);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        lines
+    }
 }
 
 /// Builds the robot, runs it for `options.duration` (or until `options.stop`), shuts
@@ -246,34 +413,51 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         max_speed: options.max_speed,
         scan_rate: options.scan_rate,
     };
-    let mut system = robot::wire_robot(&platform, &setup)?;
-    let names = [MOTION, RANGES, SIM_RANGES, WANDERER];
-    let handles: Vec<coolbot::Handle> = names
-        .iter()
-        .map(|name| {
-            system
-                .handle(name)
-                .ok_or_else(|| format!("no component {name}"))
-        })
-        .collect::<Result<_, _>>()?;
-    let types = [
-        generated::motion_controller::SPEC.type_name,
-        generated::range_server::SPEC.type_name,
-        generated::sim_range_server::SPEC.type_name,
-        generated::wanderer::SPEC.type_name,
+    let robot = Robot::start(&platform, &setup)?;
+    // Every change on the monitoring ports of the robot, the base and the wanderer.
+    let mut events = Events::new(&[&robot.robot, &robot.base, &robot.wanderer]);
+
+    let member_type = |name: &str| {
+        generated::mobile_base::INSTANCES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map_or("?", |(_, t)| *t)
+    };
+    let mut lines = vec![
+        Line {
+            depth: 0,
+            type_name: generated::robot::TYPE_NAME,
+            source: Source::Handle(robot.robot.clone()),
+            cpu: Duration::ZERO,
+        },
+        Line {
+            depth: 1,
+            type_name: generated::mobile_base::TYPE_NAME,
+            source: Source::Handle(robot.base.clone()),
+            cpu: Duration::ZERO,
+        },
     ];
-    let events: Vec<_> = handles.iter().map(coolbot::Handle::subscribe).collect();
+    for name in [MOTION, RANGES, SIM_RANGES] {
+        lines.push(Line {
+            depth: 2,
+            type_name: member_type(name),
+            source: Source::Member(name),
+            cpu: Duration::ZERO,
+        });
+    }
+    lines.push(Line {
+        depth: 1,
+        type_name: generated::wanderer::SPEC.type_name,
+        source: Source::Handle(robot.wanderer.clone()),
+        cpu: Duration::ZERO,
+    });
 
     let display = match options.display {
         Display::Auto if std::io::stdout().is_terminal() => Display::Table,
         Display::Auto => Display::Lines,
         other => other,
     };
-    let mut supervisor = MobileBaseSupervisor::default();
-    let mut faults = 0u64;
-    let mut failed_restarts = 0u64;
     let mut log: Vec<String> = Vec::new();
-    let mut previous_cpu: Vec<Duration> = vec![Duration::ZERO; handles.len()];
     let mut last_frame = Instant::now();
     let mut last_line = Duration::ZERO;
     // The run's clock is the platform's: injected faults and events agree.
@@ -285,35 +469,16 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     }
 
     let interrupted = loop {
-        let at = platform.uptime();
+        let now = platform.uptime();
+        let at = now.saturating_sub(started);
         if options.stop.load(Ordering::Relaxed) {
             break true;
         }
-        if at.saturating_sub(started) >= options.duration {
+        if at >= options.duration {
             break false;
         }
-        // What the components reported, then what the supervisor made of it.
-        let mut fresh = Vec::new();
-        for (name, receiver) in names.iter().zip(&events) {
-            for event in receiver.try_iter() {
-                match event {
-                    MonitorEvent::State { from, to } => {
-                        match to {
-                            State::RunningError => faults += 1,
-                            State::StartingError => failed_restarts += 1,
-                            _ => {}
-                        }
-                        fresh.push(format!("{:6.2}s {name}: {from} -> {to}", at.as_secs_f64()));
-                    }
-                    MonitorEvent::Error(Some(error)) => {
-                        fresh.push(format!("{:6.2}s {name}: error: {error}", at.as_secs_f64()));
-                    }
-                    _ => {}
-                }
-            }
-        }
-        supervisor.tick(&mut system, at);
-        fresh.extend(supervisor.take_log());
+        // What the monitoring ports reported since the last turn.
+        let fresh = events.take(at);
         if display == Display::Lines {
             let mut out = stdout.lock();
             for line in &fresh {
@@ -321,7 +486,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             }
         }
         log.extend(fresh);
-        let keep = log.len().saturating_sub(10);
+        let keep = log.len().saturating_sub(12);
         log.drain(..keep);
 
         let frame_due = last_frame.elapsed() >= Duration::from_millis(250);
@@ -329,39 +494,35 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         if (display == Display::Table && frame_due) || (display == Display::Lines && line_due) {
             let wall = last_frame.elapsed().as_secs_f64().max(1e-3);
             last_frame = Instant::now();
-            let mut rows: Vec<status::Row> = handles
-                .iter()
-                .zip(types)
-                .zip(previous_cpu.iter_mut())
-                .map(|((handle, type_name), cpu)| {
-                    let monitor = handle.snapshot();
-                    let load = monitor.cpu_time.saturating_sub(*cpu).as_secs_f64() / wall;
-                    *cpu = monitor.cpu_time;
-                    status::Row {
-                        type_name,
+            let members = robot.members.all();
+            let rows: Vec<status::Row> = lines
+                .iter_mut()
+                .filter_map(|line| {
+                    let monitor = match &line.source {
+                        Source::Handle(handle) => handle.snapshot(),
+                        Source::Member(name) => members.iter().find(|m| m.name == *name)?.clone(),
+                    };
+                    let load = monitor.cpu_time.saturating_sub(line.cpu).as_secs_f64() / wall;
+                    line.cpu = monitor.cpu_time;
+                    Some(status::Row {
+                        depth: line.depth,
+                        type_name: line.type_name,
                         monitor,
                         load,
-                    }
+                    })
                 })
                 .collect();
-            // The compound first, as the supervisor publishes it.
-            rows.insert(
-                0,
-                status::Row {
-                    type_name: generated::mobile_base::TYPE_NAME,
-                    monitor: supervisor.monitor(&rows[0].monitor),
-                    load: 0.0,
-                },
-            );
+            let base = robot.base.snapshot();
+            let supervisor = base.user_state.as_deref().unwrap_or("-");
             let truth = platform.truth();
             let mut out = stdout.lock();
             if display == Display::Table {
                 let header = format!(
-                    "CoolBOT mobile base   t={:5.1}s/{:.0}s   supervisor: {} (mode {:?})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}",
+                    "CoolBOT mobile base   t={:5.1}s/{:.0}s   base supervisor: {} (mode {})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}",
                     at.as_secs_f64(),
                     options.duration.as_secs_f64(),
-                    supervisor.state().name(),
-                    supervisor.mode,
+                    supervisor,
+                    word(&base, "mode"),
                     truth.pose.x,
                     truth.pose.y,
                     truth.pose.theta.to_degrees(),
@@ -372,8 +533,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             } else {
                 last_line = at;
                 let extra = format!(
-                    "supervisor={} distance={:.2}m",
-                    supervisor.state().name(),
+                    "mode={} distance={:.2}m",
+                    word(&base, "mode"),
                     truth.distance
                 );
                 let _ = writeln!(out, "{}", status::line(at, &rows, &extra));
@@ -383,52 +544,70 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         std::thread::sleep(Duration::from_millis(20));
     };
 
-    let states_before_shutdown = handles
+    // Before shutdown: every level's monitoring port.
+    let elapsed = platform.uptime().saturating_sub(started);
+    let base = robot.base.snapshot();
+    let wanderer = robot.wanderer.snapshot();
+    let members = robot.members.all();
+    let member = |name: &str| members.iter().find(|m| m.name == name);
+    // In the table's order: robot, base, base's instances, wanderer.
+    let mut states_before_shutdown: Vec<(String, State)> = [&robot.robot, &robot.base]
         .iter()
         .map(|h| (h.name().to_owned(), h.state()))
         .collect();
-    let elapsed = platform.uptime().saturating_sub(started);
-    let report = system.shutdown();
-    // The variables as the components left them: read after the last section ran, so
-    // that they agree with the platform's ground truth.
-    let monitors: Vec<coolbot::Monitor> = handles.iter().map(coolbot::Handle::snapshot).collect();
-    let final_states: Vec<(String, State, bool)> = report
-        .components
+    states_before_shutdown.extend(members.iter().map(|m| (m.name.clone(), m.state)));
+    states_before_shutdown.push((wanderer.name.clone(), wanderer.state));
+    // The supervision steps and states published up to the end.
+    events.take(elapsed);
+
+    let handles = [
+        robot.robot.clone(),
+        robot.base.clone(),
+        robot.wanderer.clone(),
+    ];
+    let report = robot.shutdown();
+    let final_states: Vec<(String, State)> = handles
         .iter()
-        .map(|c| (c.name.clone(), c.state, c.joined))
+        .map(|h| (h.name().to_owned(), h.state()))
         .collect();
+    // Our `platform` is the last reference when every behaviour, at every level, was
+    // dropped: their threads ended.
+    let released = Arc::strong_count(&platform) == 1;
     let clean_shutdown = report.clean()
         && report
             .components
             .iter()
-            .all(|c| c.joined && c.state == State::Dead);
+            .all(|c| c.joined && c.state == State::Dead)
+        && final_states.iter().all(|(_, s)| *s == State::Dead)
+        && released;
     let truth = platform.truth();
-    let [motion, ranges, sim, wanderer] = [&monitors[0], &monitors[1], &monitors[2], &monitors[3]];
+    let emergencies =
+        variable(member(RANGES), "emergencies") + variable(member(SIM_RANGES), "emergencies");
     Ok(Summary {
         elapsed,
         interrupted,
         distance: truth.distance,
-        odometry_distance: variable(motion, "distance"),
+        odometry_distance: variable(member(MOTION), "distance"),
         min_clearance: truth.min_clearance,
         min_front_clearance: truth.min_front_clearance,
         contacts: truth.contacts,
-        emergencies: (variable(ranges, "emergencies") + variable(sim, "emergencies")) as u64,
-        halts: variable(motion, "halts") as u64,
-        avoidances: variable(wanderer, "avoidances") as u64,
-        goals_reached: variable(wanderer, "goals_reached") as u64,
+        emergencies: emergencies as u64,
+        halts: variable(member(MOTION), "halts") as u64,
+        avoidances: variable(Some(&wanderer), "avoidances") as u64,
+        goals_reached: variable(Some(&wanderer), "goals_reached") as u64,
         scans: (
-            variable(ranges, "scans") as u64,
-            variable(sim, "scans") as u64,
+            variable(member(RANGES), "scans") as u64,
+            variable(member(SIM_RANGES), "scans") as u64,
         ),
-        faults,
-        failed_restarts,
-        substitutions: supervisor.substitutions,
-        recoveries: supervisor.recoveries,
-        retired: supervisor.retired,
-        supervisor: supervisor.state().name().to_owned(),
-        emergency_distance: variable(ranges, "emergency_distance"),
+        supervision: events.supervision,
+        user_states: events.user_states,
+        supervisor: base.user_state.clone().unwrap_or_else(|| "-".to_owned()),
+        mode: word(&base, "mode"),
+        base_faults: variable(Some(&base), "faults") as u64,
+        emergency_distance: variable(member(RANGES), "emergency_distance"),
         states_before_shutdown,
         final_states,
+        released,
         clean_shutdown,
     })
 }

@@ -27,16 +27,18 @@ struct Args {
     /// How the range server fails: it raises its `sensor_timeout` exception, or panics.
     #[arg(long, value_enum, default_value_t = Fault::Raise)]
     fault: Fault,
-    /// Range noise of the real sensors: standard deviation in metres (0: noise-free).
-    #[arg(long, default_value_t = 0.005)]
-    noise: f64,
+    /// Range noise of the real sensors: standard deviation in metres (0: noise-free;
+    /// default: the description's `noise = 0.005`).
+    #[arg(long, value_parser = parse_noise)]
+    noise: Option<f64>,
     /// Seed of the range noise and the wandering.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Seek this goal (`x,y` in metres; the room is 6 by 4) instead of wandering.
     #[arg(long, value_parser = parse_goal)]
     goal: Option<(f64, f64)>,
-    /// The motion controller's speed limit in m/s (its controllable `max_speed`).
+    /// The base's speed limit in m/s (its controllable `max_speed`, mapped onto the
+    /// motion controller's).
     #[arg(long, value_parser = parse_speed)]
     max_speed: Option<f64>,
     /// The range servers' scan frequency in Hz, 0.5 to 200 (their controllable
@@ -79,6 +81,14 @@ fn parse_duration(text: &str) -> Result<Duration, String> {
         _ => return Err(format!("unknown unit `{unit}` (use us, ms, s or min)")),
     };
     Duration::try_from_secs_f64(seconds).map_err(|e| format!("`{text}`: {e}"))
+}
+
+/// Parses a noise level: 0 to 0.5 m.
+fn parse_noise(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(noise) if (0.0..=0.5).contains(&noise) => Ok(noise),
+        _ => Err(format!("`{text}` is not a noise level from 0 to 0.5 (m)")),
+    }
 }
 
 /// Parses a speed limit: 0 to 2 m/s.
@@ -178,6 +188,8 @@ mod tests {
     #[test]
     fn limits_are_checked() {
         assert_eq!(parse_speed("0.3"), Ok(0.3));
+        assert_eq!(parse_noise("0"), Ok(0.0));
+        assert!(parse_noise("-0.1").is_err());
         assert!(parse_speed("-1").is_err());
         assert!(parse_speed("fast").is_err());
         assert_eq!(parse_rate("10"), Ok(10.0));

@@ -6,22 +6,24 @@ use std::sync::Arc;
 
 use crate::generated::range_server::*;
 use crate::generated::types::RangeScan;
-use crate::sensing;
+use crate::sensing::{self, Overrides};
 use crate::world::{FaultKind, Platform, Rng};
 
 /// The range server's code: the driver of the platform's sensor suite.
 #[derive(Debug)]
 pub struct RangeServer {
     platform: Arc<Platform>,
+    overrides: Overrides,
     rng: Option<Rng>,
     last: Option<RangeScan>,
 }
 
 impl RangeServer {
-    /// A server reading `platform`'s sensors.
-    pub fn new(platform: Arc<Platform>) -> RangeServer {
+    /// A server reading `platform`'s sensors, with the run's `overrides`.
+    pub fn new(platform: Arc<Platform>, overrides: Overrides) -> RangeServer {
         RangeServer {
             platform,
+            overrides,
             rng: None,
             last: None,
         }
@@ -35,11 +37,12 @@ impl RangeServer {
             cx.rt.set_period(period);
         }
         let config = cx.config;
-        let rng = self.rng.get_or_insert_with(|| Rng::new(config.seed));
+        let seed = self.overrides.seed.unwrap_or(config.seed);
+        let rng = self.rng.get_or_insert_with(|| Rng::new(seed));
         let readings = self.platform.read_sensors(
             f64::from(config.ir_max_range),
             f64::from(config.us_max_range),
-            config.noise,
+            self.overrides.noise.unwrap_or(config.noise),
             rng,
         );
         let Some(readings) = readings else {
@@ -63,8 +66,10 @@ impl RangeServer {
 
 impl Behavior for RangeServer {
     fn start(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        if let Some(frequency) = self.overrides.frequency {
+            cx.vars.frequency = frequency;
+        }
         // Opening the sensor board fails while it does not answer.
-        let _ = cx;
         if self.platform.sensors_answering() {
             Ok(())
         } else {

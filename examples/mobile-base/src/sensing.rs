@@ -6,6 +6,18 @@ use coolbot::Time;
 use crate::generated::types::RangeScan;
 use crate::world::{IR_BEAMS, Readings};
 
+/// Settings of a run that replace the descriptions' for both range servers (the
+/// command line's `--noise`, `--seed` and `--scan-rate`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Overrides {
+    /// Range noise (m, standard deviation) instead of the configuration's `noise`.
+    pub noise: Option<f64>,
+    /// Noise seed instead of the configuration's `seed`.
+    pub seed: Option<u64>,
+    /// Scan frequency (Hz): the controllable `frequency` each start begins with.
+    pub frequency: Option<f64>,
+}
+
 /// Infrared beams that watch the way ahead (within about 65 degrees of straight on).
 const FRONT_IR: std::ops::RangeInclusive<usize> = 1..=IR_BEAMS - 2;
 

@@ -7,21 +7,24 @@ use std::sync::Arc;
 
 use crate::generated::sim_range_server::*;
 use crate::generated::types::RangeScan;
-use crate::sensing;
+use crate::sensing::{self, Overrides};
 use crate::world::Platform;
 
 /// The simulated range server's code.
 #[derive(Debug)]
 pub struct SimRangeServer {
     platform: Arc<Platform>,
+    overrides: Overrides,
     last: Option<RangeScan>,
 }
 
 impl SimRangeServer {
-    /// A server computing ranges in `platform`'s map.
-    pub fn new(platform: Arc<Platform>) -> SimRangeServer {
+    /// A server computing ranges in `platform`'s map, with the run's `overrides` (only
+    /// `frequency` applies: it reads no sensors).
+    pub fn new(platform: Arc<Platform>, overrides: Overrides) -> SimRangeServer {
         SimRangeServer {
             platform,
+            overrides,
             last: None,
         }
     }
@@ -50,6 +53,13 @@ impl SimRangeServer {
 }
 
 impl Behavior for SimRangeServer {
+    fn start(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        if let Some(frequency) = self.overrides.frequency {
+            cx.vars.frequency = frequency;
+        }
+        Ok(())
+    }
+
     fn streaming_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let _ = cx;
         Ok(())

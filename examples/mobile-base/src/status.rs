@@ -10,6 +10,8 @@ use coolbot::{Monitor, Value};
 /// previous frame.
 #[derive(Clone, Debug)]
 pub struct Row {
+    /// How deep in the hierarchy the component is (0: the top compound).
+    pub depth: usize,
     /// The component type (from its spec).
     pub type_name: &'static str,
     /// A snapshot of its monitoring port.
@@ -91,15 +93,15 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     let _ = writeln!(out, "{header}");
     let _ = writeln!(
         out,
-        "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
+        "{:<13} {:<16} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
         "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL",
     );
     for row in rows {
         let m = &row.monitor;
         let _ = writeln!(
             out,
-            "{:<11} {:<16} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
-            clip(&m.name, 11),
+            "{:<13} {:<16} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
+            clip(&format!("{}{}", " ".repeat(row.depth), m.name), 13),
             clip(row.type_name, 16),
             m.state.to_string(),
             // The user automaton's state matters only while it can run.
@@ -124,8 +126,9 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
             .iter()
             .map(|(name, v)| format!("{name}={}", value(v)))
             .collect();
+        let indent = " ".repeat(row.depth + 2);
         for line in wrap(&vars, 110) {
-            let _ = writeln!(out, "  {line}");
+            let _ = writeln!(out, "{indent}{line}");
         }
     }
     if !log.is_empty() {

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use coolbot::State;
+use coolbot::{State, Step};
 use mobile_base::{Display, Options, Summary};
 
 fn run(options: Options) -> Summary {
@@ -18,18 +18,36 @@ fn run(options: Options) -> Summary {
 
 fn assert_clean_shutdown(summary: &Summary) {
     assert!(summary.clean_shutdown, "{summary}");
-    assert_eq!(summary.final_states.len(), 4);
-    for (name, state, joined) in &summary.final_states {
+    let names: Vec<&str> = summary
+        .final_states
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect();
+    assert_eq!(names, ["robot", "base", "wanderer"]);
+    for (name, state) in &summary.final_states {
         assert_eq!(*state, State::Dead, "{name}");
-        assert!(joined, "{name}'s thread was not joined");
     }
+    // Every behaviour, at every level, was dropped: every component thread ended.
+    assert!(summary.released, "{summary}");
+}
+
+/// The steps the base's supervisor published about `instance`, in order.
+fn steps_of<'a>(summary: &'a Summary, instance: &str) -> Vec<&'a Step> {
+    summary
+        .supervision
+        .iter()
+        .filter(|s| s.compound == "base" && s.step.instance == instance)
+        .map(|s| &s.step.step)
+        .collect()
 }
 
 fn assert_safe(summary: &Summary) {
     assert!(summary.distance > 0.2, "the robot hardly moved: {summary}");
-    // Odometry is integrated by the motion controller from the same steps.
+    // Odometry is integrated by the motion controller from the same steps; the value
+    // the base's supervisor last saw is at most a few periods old (0.5 m/s at most).
     assert!(
-        (summary.distance - summary.odometry_distance).abs() < 1e-6,
+        summary.odometry_distance <= summary.distance + 1e-6
+            && summary.odometry_distance > summary.distance - 0.1,
         "{summary}"
     );
     // Never inside an obstacle, and never even touching one.
@@ -60,12 +78,10 @@ fn the_robot_wanders_without_touching_anything_and_stops_cleanly() {
         summary.scans.1, 0,
         "the standby substitute ran without a fault"
     );
-    assert_eq!(
-        (summary.faults, summary.failed_restarts),
-        (0, 0),
-        "{summary}"
-    );
+    assert!(summary.supervision.is_empty(), "{summary}");
     assert_eq!(summary.supervisor, "operating");
+    assert_eq!(summary.user_states, ["operating"]);
+    assert_eq!(summary.base_faults, 0);
     assert!(!summary.interrupted);
     assert_clean_shutdown(&summary);
 }
@@ -79,17 +95,27 @@ fn a_failed_range_server_is_substituted_then_recovered() {
         ..Options::default()
     });
     assert_safe(&summary);
-    assert_eq!(summary.substitutions, 1, "{summary}");
+    // Each step, in order, on the base's monitoring port.
+    assert_eq!(
+        steps_of(&summary, "ranges"),
+        [
+            &Step::Failed,
+            &Step::Enqueued,
+            &Step::Substituted {
+                by: "sim_ranges".to_owned()
+            },
+            &Step::Retried,
+            &Step::Recovered,
+        ],
+        "{summary}"
+    );
+    assert_eq!(
+        (summary.faults(), summary.recoveries(), summary.retired()),
+        (1, 1, 0)
+    );
     assert!(
         summary.scans.1 > 0,
         "the substitute published nothing: {summary}"
-    );
-    assert_eq!(summary.recoveries, 1, "{summary}");
-    assert_eq!(summary.retired, 0);
-    assert_eq!(summary.faults, 1, "{summary}");
-    assert!(
-        summary.failed_restarts >= 1,
-        "the board was still down: {summary}"
     );
     // Back to normal: the real server runs again, the substitute is on standby.
     let before: std::collections::HashMap<_, _> =
@@ -97,6 +123,7 @@ fn a_failed_range_server_is_substituted_then_recovered() {
     assert_eq!(before["ranges"], State::Running, "{summary}");
     assert_eq!(before["sim_ranges"], State::Ready, "{summary}");
     assert_eq!(summary.supervisor, "operating");
+    assert_eq!(summary.base_faults, 1, "{summary}");
     assert_clean_shutdown(&summary);
 }
 
@@ -117,17 +144,28 @@ fn a_range_server_that_does_not_recover_is_retired_and_the_substitute_stays() {
         ..Options::default()
     });
     assert_safe(&summary);
-    assert_eq!(summary.substitutions, 1, "{summary}");
-    assert_eq!(summary.recoveries, 0, "{summary}");
-    assert_eq!(summary.retired, 1, "{summary}");
-    assert_eq!(summary.faults, 1, "{summary}");
-    // Restarted every 500 ms for 5 s, and the board never came back.
-    assert!(summary.failed_restarts >= 5, "{summary}");
+    let steps = steps_of(&summary, "ranges");
+    assert_eq!(
+        steps.first(),
+        Some(&&Step::Failed),
+        "the panic is the first fault: {summary}"
+    );
+    assert!(
+        steps.contains(&&Step::Substituted {
+            by: "sim_ranges".to_owned()
+        }),
+        "{summary}"
+    );
+    // Restarted every 500 ms for 5 s, the board never came back: retired, never
+    // recovered, and the substitute stays.
+    assert_eq!(steps.last(), Some(&&Step::Retired), "{summary}");
+    assert_eq!((summary.recoveries(), summary.retired()), (0, 1));
     let before: std::collections::HashMap<_, _> =
         summary.states_before_shutdown.iter().cloned().collect();
     assert_eq!(before["ranges"], State::Dead, "{summary}");
     assert_eq!(before["sim_ranges"], State::Running, "{summary}");
     assert_eq!(summary.supervisor, "degraded");
+    assert_eq!(summary.user_states, ["operating", "degraded"]);
     assert_clean_shutdown(&summary);
 }
 
@@ -153,10 +191,30 @@ fn a_stop_request_ends_the_run_early_and_cleanly() {
     assert_clean_shutdown(&summary);
 }
 
+/// Waits (at most `timeout`) until the base's supervisor has seen `pred` hold for
+/// instance `name`, and returns that monitor.
+fn wait_member(
+    robot: &mobile_base::robot::Robot,
+    name: &str,
+    pred: impl Fn(&coolbot::Monitor) -> bool,
+    timeout: Duration,
+) -> Option<coolbot::Monitor> {
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        if let Some(monitor) = robot.members.get(name).filter(|m| pred(m)) {
+            return Some(monitor);
+        }
+        if std::time::Instant::now() >= deadline {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 #[test]
 fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     use coolbot::{Command, Controllable};
-    use mobile_base::robot::{self, MOTION, Setup};
+    use mobile_base::robot::{MOTION, Robot, Setup};
     use mobile_base::world::{Platform, World};
     use std::sync::Arc;
 
@@ -166,28 +224,27 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
         None,
     ));
     let setup = Setup {
-        noise: 0.0,
+        noise: Some(0.0),
         seed: 1,
-        goal: None,
-        max_speed: None,
-        scan_rate: None,
+        ..Setup::default()
     };
-    let system = robot::wire_robot(&platform, &setup).expect("the robot starts");
-    let motion = system.handle(MOTION).unwrap();
+    let robot = Robot::start(&platform, &setup).expect("the robot starts");
     let moving = |m: &coolbot::Monitor| {
-        m.variables.iter().any(|(name, value)| {
-            name == "speed" && value.to_json()["linear"].as_f64().is_some_and(|v| v > 0.05)
-        })
+        m.state == State::Running
+            && m.variables.iter().any(|(name, value)| {
+                name == "speed" && value.to_json()["linear"].as_f64().is_some_and(|v| v > 0.05)
+            })
     };
-    motion
-        .wait_for(moving, Duration::from_secs(3))
-        .expect("the base gets going");
-    // Freeze the controller mid-motion for longer than the platform's watchdog.
-    motion
+    wait_member(&robot, MOTION, moving, Duration::from_secs(3)).expect("the base gets going");
+    // Freeze the whole robot mid-motion (the compounds pass `suspended` down to every
+    // instance) for longer than the platform's set-point watchdog.
+    robot
+        .robot
         .command(Command::SetState(Controllable::Suspended))
         .unwrap();
     std::thread::sleep(Duration::from_millis(400));
-    motion
+    robot
+        .robot
         .command(Command::SetState(Controllable::Running))
         .unwrap();
     let trips = |m: &coolbot::Monitor| {
@@ -197,17 +254,87 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
             .and_then(|(_, value)| value.to_json().as_u64())
             .unwrap_or(0)
     };
-    let after = motion
-        .wait_for(|m| trips(m) >= 1, Duration::from_secs(2))
+    let after = wait_member(&robot, MOTION, |m| trips(m) >= 1, Duration::from_secs(2))
         .expect("the watchdog exception was raised");
     // The plan (`retry 3 every 20ms`) recovered: still running, no error, moving on.
     assert_eq!(after.state, State::Running);
     assert_eq!(after.error, None);
+    // Moving on: the odometry gets past where the platform was just now.
     let distance = platform.truth().distance;
-    motion
-        .wait_for(moving, Duration::from_secs(3))
-        .expect("moving again");
-    assert!(platform.truth().distance > distance);
-    let report = system.shutdown();
+    let odometry = |m: &coolbot::Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "distance")
+            .and_then(|(_, value)| value.to_json().as_f64())
+            .unwrap_or(0.0)
+    };
+    wait_member(
+        &robot,
+        MOTION,
+        |m| odometry(m) > distance + 0.05,
+        Duration::from_secs(3),
+    )
+    .expect("moving again");
+    // Nothing failed: the base's supervisor took no step.
+    assert!(robot.base.snapshot().supervision.is_empty());
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_port() {
+    use coolbot::MonitorEvent;
+    use mobile_base::robot::{Robot, Setup};
+    use mobile_base::world::{FaultKind, Platform, SensorFault, World};
+    use std::sync::Arc;
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        Some(SensorFault {
+            after: Duration::from_millis(600),
+            outage: Duration::from_millis(600),
+            kind: FaultKind::Raise,
+        }),
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    let events = robot.base.subscribe();
+    // The state it is in now, then every change the base's monitoring port publishes.
+    let mut states: Vec<String> = robot.base.snapshot().user_state.into_iter().collect();
+    let mut modes: Vec<String> = Vec::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(8);
+    while states.len() < 3 {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match events.recv_timeout(left) {
+            Ok(MonitorEvent::UserState(Some(state))) if states.last() != Some(&state) => {
+                states.push(state);
+            }
+            Ok(MonitorEvent::Variable { name, value }) if name == "mode" => {
+                modes.push(mobile_base::status::value(&value));
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    assert_eq!(states, ["operating", "degraded", "operating"]);
+    // The supervisor's entry sections set `mode` and counted the fault.
+    assert!(modes.starts_with(&["Degraded".to_owned()]), "{modes:?}");
+    let var = |monitor: &coolbot::Monitor, name: &str| {
+        monitor
+            .variables
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| mobile_base::status::value(v))
+    };
+    // `operating`'s entry section runs just after the state change is published.
+    let monitor = robot
+        .base
+        .wait_for(
+            |m| var(m, "mode").as_deref() == Some("Normal"),
+            Duration::from_secs(1),
+        )
+        .expect("`operating`'s entry section sets `mode` back to Normal");
+    assert_eq!(var(&monitor, "faults").as_deref(), Some("1"));
+    let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
 }
