@@ -378,12 +378,13 @@ impl Typer<'_, '_, '_> {
                 .checker
                 .error(
                     Code::RuleType,
-                    expr.span,
+                    right.span,
                     format!("cannot compare {left_ty} with {right_ty}"),
                 )
-                .with_label("different types")
-                .with_secondary(left.span, format!("{left_ty}"))
-                .with_secondary(right.span, format!("{right_ty}"));
+                // Two labels that do not overlap (one over the whole comparison
+                // would make the renderer draw the operands' arrows past its end).
+                .with_label(format!("{right_ty}"))
+                .with_secondary(left.span, format!("{left_ty}"));
             if let Some(help) = help {
                 diagnostic = diagnostic.with_help(help);
             }
