@@ -1118,6 +1118,7 @@ impl CompoundBuilder {
                 .collect(),
             standing: (0..self.instances.len()).collect(),
         };
+        let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
         let compound = Compound {
             name: self.name.clone(),
             spec,
@@ -1145,7 +1146,7 @@ impl CompoundBuilder {
             steps: Vec::new(),
             restood: false,
         };
-        Ok(Component::new(self.name, Box::new(compound), self.ports))
+        Ok(Component::new(self.name, Box::new(compound), self.ports).with_instances(handles))
     }
 
     fn check_read(&self, read: &str, own: &Spec) -> Result<(), CompoundError> {

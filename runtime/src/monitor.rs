@@ -448,6 +448,10 @@ pub struct Handle {
     pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
+    /// A compound's instances' handles, in declaration order (empty for an atomic
+    /// component). They hold the instances' ports only, never the compound's inner
+    /// system: the instances' threads end with the compound whatever handles remain.
+    pub(crate) instances: Arc<[Handle]>,
 }
 
 impl std::fmt::Debug for Handle {
@@ -460,6 +464,30 @@ impl Handle {
     /// The component instance's name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The names of a compound's instances (its direct ones, in declaration order);
+    /// empty for an atomic component.
+    pub fn instances(&self) -> Vec<String> {
+        self.instances.iter().map(|h| h.name.to_string()).collect()
+    }
+
+    /// The control and monitoring ports of the instance at `path` inside this
+    /// compound: instance names separated by `.`, through nested compounds (`"base"`,
+    /// `"base.motion"`). `None` for an atomic component, an unknown name or a malformed
+    /// path (empty, or with an empty segment).
+    ///
+    /// The handle returned is the instance's own (commands reach it, snapshots are
+    /// live), as [`CompoundBuilder::instance_handle`](crate::CompoundBuilder::instance_handle)
+    /// gives on the builder. Commanding an instance goes around its compound's
+    /// supervisor, which sees the change as it sees any of the instance's changes
+    /// (a fault forced this way is handled by the instance's policy).
+    pub fn instance(&self, path: &str) -> Option<Handle> {
+        let mut handle = self;
+        for name in path.split('.') {
+            handle = handle.instances.iter().find(|h| &*h.name == name)?;
+        }
+        Some(handle.clone())
     }
 
     /// A handle whose commands wait at most `timeout` for the component.

@@ -63,6 +63,8 @@ pub struct Component {
     ports: PortSet,
     /// The instance's own `timing` block, replacing the spec's.
     timing: Option<TimingSpec>,
+    /// A compound's instances' handles (see [`Handle::instances`]).
+    instances: Vec<Handle>,
 }
 
 impl std::fmt::Debug for Component {
@@ -89,7 +91,15 @@ impl Component {
             automaton,
             ports,
             timing: None,
+            instances: Vec::new(),
         }
+    }
+
+    /// This component with its instances' handles (a compound's, declaration order),
+    /// published through its [`Handle::instance`].
+    pub(crate) fn with_instances(mut self, instances: Vec<Handle>) -> Component {
+        self.instances = instances;
+        self
     }
 
     /// This instance with its own `timing` block (a `.cool` instance's `timing { ... }`
@@ -406,6 +416,7 @@ impl System {
             automaton,
             ports,
             timing: _,
+            instances,
         } = component;
         if name.is_empty() || name.contains('.') {
             return Err(Error::InvalidName(name));
@@ -550,6 +561,7 @@ impl System {
             exited,
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
+            instances: instances.into(),
         };
         let runner = Runner::new(
             &name,

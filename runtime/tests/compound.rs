@@ -2176,3 +2176,106 @@ fn a_rule_reads_a_mapped_variable_at_the_instance_standing_in() {
     assert_eq!(monitor.variables[0], ("count".to_owned(), Value::UInt(2)));
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn a_built_compound_reaches_its_nested_instances_by_path() {
+    // top { mid { leaf (restart), f -> leaf }, sibling }, built whole: only the top
+    // handle is kept.
+    let (mid_sup, mid_log) = Sup::new(&["operating", "degraded"]);
+    let (leaf, script) = worker("leaf");
+    let (f, feed) = feeder("f");
+    let mid = CompoundBuilder::new("mid", mid_sup)
+        .instance(leaf)
+        .instance(f)
+        .connect("f.kick", "leaf.kick")
+        .on_error("leaf", Policy::Restart)
+        .rule("operating", "degraded", &["leaf.gain"], |v| {
+            v.var("leaf", "gain") == Some(&Value::from(9_i64))
+        })
+        .build()
+        .expect("mid");
+    let (top_sup, _) = Sup::new(&["operating"]);
+    let (sibling, _) = worker("sibling");
+    let top = CompoundBuilder::new("top", top_sup)
+        .instance(mid)
+        .instance(sibling)
+        .build()
+        .expect("top");
+    let mut system = System::new();
+    let top = system.add(top).expect("add");
+    system.run_all().expect("run");
+
+    assert_eq!(top.instances(), ["mid", "sibling"]);
+    let mid = top.instance("mid").expect("mid");
+    assert_eq!(mid.name(), "mid");
+    assert_eq!(mid.instances(), ["leaf", "f"]);
+    let leaf = top.instance("mid.leaf").expect("mid.leaf");
+    assert_eq!(leaf.name(), "leaf");
+    assert!(leaf.instances().is_empty(), "an atomic component has none");
+    assert_eq!(
+        mid.instance("leaf").expect("leaf").name(),
+        "leaf",
+        "a path is relative to the handle it starts from"
+    );
+    for unknown in [
+        "",
+        "nope",
+        "mid.nope",
+        "mid..leaf",
+        "mid.leaf.x",
+        "sibling.x",
+        ".",
+    ] {
+        assert!(top.instance(unknown).is_none(), "`{unknown}` resolves");
+    }
+    assert!(leaf.instance("leaf").is_none(), "atomic: nothing inside");
+
+    // The snapshot is the leaf's own, live.
+    let monitor = wait_user(&leaf, "idle");
+    assert_eq!(monitor.name, "leaf");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(
+        monitor.variables,
+        [
+            ("count".to_owned(), Value::from(0_u64)),
+            ("gain".to_owned(), Value::from(1_i64))
+        ]
+    );
+
+    // A command through the path reaches the leaf, and mid's supervisor sees it.
+    leaf.command(Command::Set("gain".to_owned(), Value::from(9_i64)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        leaf.snapshot().variables[1],
+        ("gain".to_owned(), Value::from(9_i64))
+    );
+    wait_user(&mid, "degraded");
+    wait_log(&mid_log, &["operating.Entry", "degraded.Entry"]);
+    mid.wait_for(|m| m.variables[0].1 == Value::UInt(1), WAIT)
+        .expect("mid's own variable, read through the path");
+
+    // A fault in the leaf: mid's policy restarts it, and the step is on mid's port.
+    periodic_fault(&script);
+    feed.kick.emit();
+    mid.wait_for(
+        |m| {
+            m.supervision
+                .iter()
+                .any(|s| s.instance == "leaf" && s.step == Step::Restarted)
+        },
+        WAIT,
+    )
+    .unwrap_or_else(|t| panic!("{t}"));
+    wait_user(&leaf, "idle");
+    assert_eq!(top.state(), State::Running);
+
+    // The handles outlive the compound without keeping its instances alive.
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    assert_eq!(leaf.state(), State::Dead);
+    assert_eq!(mid.state(), State::Dead);
+    assert!(
+        leaf.command(Command::SetState(Controllable::Running))
+            .is_err()
+    );
+}
