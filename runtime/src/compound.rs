@@ -734,6 +734,8 @@ impl CompoundBuilder {
 
     /// The control and monitoring ports of instance `name` (added with
     /// [`CompoundBuilder::instance`]): for tools and tests that watch a level below.
+    /// Once built, the compound's own handle gives the same through
+    /// [`Handle::instance`] (by dotted path, through nested compounds).
     pub fn instance_handle(&self, name: &str) -> Option<Handle> {
         self.instances
             .iter()
