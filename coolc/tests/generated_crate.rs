@@ -82,7 +82,8 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     // variables, supervisor rules over own and instance variables); `Probe` has rules
     // of every form over every readable type; `Gate` moves on a packet at an exported
     // input; `Pair` is a redundant group; `Ticker`'s rule reads a `local` variable
-    // its periodic section changes. The filled user files and the run tests are
+    // its periodic section changes; `Swap`'s rule over a mapped variable reads the
+    // substitute standing in. The filled user files and the run tests are
     // in `tests/data/plant`.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("plant.cool");
@@ -100,6 +101,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "gate.rs",
         "pair.rs",
         "ticker.rs",
+        "swap.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -118,6 +120,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "a_supervisor_moves_on_a_packet_at_an_exported_input",
         "a_redundant_group_keeps_the_stream_when_a_member_fails",
         "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
+        "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

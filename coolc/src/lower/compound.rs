@@ -1242,7 +1242,7 @@ impl Scope<'_, '_> {
                 (None, Some(value)) => match &value.kind {
                     ExprKind::Path(segments) => match segments.as_slice() {
                         [instance, variable] => {
-                            self.instance_variable(&instance.name, &variable.name)
+                            self.mapped_variable(name, &instance.name, &variable.name)
                         }
                         _ => Operand {
                             code: String::new(),
@@ -1299,8 +1299,27 @@ impl Scope<'_, '_> {
         }
     }
 
+    /// Mapped variable `name` (`observable name = instance.variable;`): an instance
+    /// variable is read with `view.mapped(name)`, from the instance standing for
+    /// `instance` now, under read key `name`; a default variable (`state`, ...) is read
+    /// on `instance` itself.
+    fn mapped_variable(&mut self, name: &str, instance: &str, variable: &str) -> Operand {
+        self.variable_operand(instance, variable, Some(name))
+    }
+
     /// `instance.variable`, read from the view.
     fn instance_variable(&mut self, instance: &str, variable: &str) -> Operand {
+        self.variable_operand(instance, variable, None)
+    }
+
+    /// `instance.variable`, read from the view; through mapped variable `mapped` when
+    /// given and `variable` is one of the instance's own.
+    fn variable_operand(
+        &mut self,
+        instance: &str,
+        variable: &str,
+        mapped: Option<&str>,
+    ) -> Operand {
         let unreadable = Operand {
             code: String::new(),
             ty: RTy::Unreadable,
@@ -1320,9 +1339,17 @@ impl Scope<'_, '_> {
             narrow: false,
         };
         if let Some((ty, _)) = self.lowerer.variable_type(target, variable, 0) {
-            self.read(format!("{instance}.{variable}"));
+            let raw = match mapped {
+                Some(name) => {
+                    self.read(name.to_owned());
+                    format!("view.mapped({})", ident::string_literal(name))
+                }
+                None => {
+                    self.read(format!("{instance}.{variable}"));
+                    format!("view.var({lit}, {})", ident::string_literal(variable))
+                }
+            };
             self.uses_view = true;
-            let raw = format!("view.var({lit}, {})", ident::string_literal(variable));
             let f64_field = is_f64(ty);
             let ty = self.lowerer.rule_type(ty);
             return match view_value(&raw, &ty) {
@@ -1861,7 +1888,7 @@ mod tests {
         // A local variable is not in the supervisor's spec: not a read.
         assert_eq!(
             reads,
-            [r#"&["a.state", "mode"]"#, r#"&["a.level", "a.user_state"]"#]
+            [r#"&["a.state", "mode"]"#, r#"&["level", "a.user_state"]"#]
         );
         assert!(c.rules[0].expr.starts_with("(view"), "{}", c.rules[0].expr);
         assert!(
@@ -1870,8 +1897,9 @@ mod tests {
             c.rules[0].expr
         );
         assert_eq!(c.rules[0].vars_param.as_deref(), Some("vars"));
-        // A mapped variable reads the instance's.
-        assert!(c.rules[1].expr.contains(r#"view.var("a", "level")"#));
+        // A mapped variable reads the instance standing in for `a` now.
+        assert!(c.rules[1].expr.contains(r#"view.mapped("level")"#));
+        assert!(!c.rules[1].expr.contains(r#"view.var("a", "level")"#));
         assert!(c.rules[1].expr.contains("!(view"));
         assert_eq!(c.rules[1].vars_param, None);
         assert_eq!(c.rules[1].call, "__cool_rule_1");

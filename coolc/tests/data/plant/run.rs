@@ -105,10 +105,11 @@ fn a_failed_leaf_is_substituted_and_the_supervisors_follow() {
 
 #[test]
 fn rules_read_every_kind_of_value() {
-    let component =
-        plant::generated::probe::component("probe", plant::probe::ProbeParts::default()).unwrap();
+    let builder =
+        plant::generated::probe::builder("probe", plant::probe::ProbeParts::default()).unwrap();
+    let gauge = builder.instance_handle("g").unwrap();
     let mut system = System::new();
-    let probe = system.add(component).unwrap();
+    let probe = system.add(builder.build().unwrap()).unwrap();
     system.run_all().unwrap();
     // `waiting` -> `seen` (the one rule that holds once the gauge is ready) ->
     // `done` (the gauge's result); none of the rules to `failed` ever holds.
@@ -121,6 +122,41 @@ fn rules_read_every_kind_of_value() {
     assert_eq!(monitor.user_state.as_deref(), Some("done"));
     assert_eq!(count(&monitor, "count"), 1);
     assert!(count(&monitor, "seen_level") >= 3);
+    // `g`'s own levels are `best, fine, coarse`: set to the third, the rule in `done`
+    // over `g.quality` fires.
+    assert_eq!(gauge.snapshot().quality, 0);
+    gauge.command(Command::SetQuality(2)).unwrap();
+    let monitor = probe
+        .wait_for(|m| m.user_state.as_deref() == Some("lowered"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(gauge.snapshot().quality, 2);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_rule_over_a_mapped_variable_reads_the_substitute_standing_in() {
+    let component =
+        plant::generated::swap::component("swap", plant::swap::SwapParts::default()).unwrap();
+    let mut system = System::new();
+    let swap = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `main` runs at scale 1: the rule `scale == 7` does not hold.
+    let monitor = swap
+        .wait_for(
+            |m| m.state == State::Running && count(m, "scale") == 1,
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.user_state.as_deref(), Some("watching"));
+    // `main` fails; `stand` (`scale = 7`) substitutes it and the rule reads its scale.
+    swap.command(Command::Set("fail".to_owned(), Value::Bool(true)))
+        .unwrap();
+    let monitor = swap
+        .wait_for(|m| m.user_state.as_deref() == Some("swapped"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
