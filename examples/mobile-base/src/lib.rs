@@ -156,8 +156,7 @@ pub struct Summary {
     pub base_faults: u64,
     /// The range emergency distance the run used (m).
     pub emergency_distance: f64,
-    /// Each component's state before shutdown: `(name, state)`; the base's instances
-    /// as its supervisor last saw them.
+    /// Each component's state before shutdown, at every level: `(name, state)`.
     pub states_before_shutdown: Vec<(String, State)>,
     /// `robot`, `base` and `wanderer` after shutdown.
     pub final_states: Vec<(String, State)>,
@@ -212,7 +211,7 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "  distance travelled   {:.2} m (odometry {:.2} m, as base last saw it)",
+            "  distance travelled   {:.2} m (odometry {:.2} m)",
             self.distance, self.odometry_distance
         )?;
         writeln!(
@@ -313,19 +312,48 @@ fn word(monitor: &Monitor, name: &str) -> String {
     lookup(monitor, name).map_or_else(|| "-".to_owned(), status::value)
 }
 
-/// Where the table's rows come from: a handle (`robot`, `base`, `wanderer`) or the
-/// base supervisor's view (its instances).
-enum Source {
-    Handle(Handle),
-    Member(&'static str),
-}
-
-/// One row of the table: what it shows and where from.
+/// One row of the table: a component at some depth of the robot, read from its own
+/// monitoring port.
 struct Line {
     depth: usize,
     type_name: &'static str,
-    source: Source,
+    handle: Handle,
     cpu: Duration,
+}
+
+/// The instances a compound type declares, `(name, type)`, from the generated code
+/// (empty for an atomic type).
+fn declared(type_name: &str) -> &'static [(&'static str, &'static str)] {
+    if type_name == generated::robot::TYPE_NAME {
+        generated::robot::INSTANCES
+    } else if type_name == generated::mobile_base::TYPE_NAME {
+        generated::mobile_base::INSTANCES
+    } else {
+        &[]
+    }
+}
+
+/// The table's rows below `handle` (a component of type `type_name` at `depth`):
+/// itself, then its instances in declaration order, each with its own instances.
+fn walk(handle: Handle, type_name: &'static str, depth: usize, lines: &mut Vec<Line>) {
+    let instances = handle.instances();
+    let children: Vec<Handle> = instances
+        .iter()
+        .filter_map(|name| handle.instance(name))
+        .collect();
+    lines.push(Line {
+        depth,
+        type_name,
+        handle,
+        cpu: Duration::ZERO,
+    });
+    for child in children {
+        let child_type = declared(type_name)
+            .iter()
+            .find(|(name, _)| *name == child.name())
+            .map_or("?", |(_, t)| *t);
+        walk(child, child_type, depth + 1, lines);
+    }
 }
 
 /// What the monitoring ports of the robot, the base and the wanderer publish, as it
@@ -417,40 +445,14 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     // Every change on the monitoring ports of the robot, the base and the wanderer.
     let mut events = Events::new(&[&robot.robot, &robot.base, &robot.wanderer]);
 
-    let member_type = |name: &str| {
-        generated::mobile_base::INSTANCES
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map_or("?", |(_, t)| *t)
-    };
-    let mut lines = vec![
-        Line {
-            depth: 0,
-            type_name: generated::robot::TYPE_NAME,
-            source: Source::Handle(robot.robot.clone()),
-            cpu: Duration::ZERO,
-        },
-        Line {
-            depth: 1,
-            type_name: generated::mobile_base::TYPE_NAME,
-            source: Source::Handle(robot.base.clone()),
-            cpu: Duration::ZERO,
-        },
-    ];
-    for name in [MOTION, RANGES, SIM_RANGES] {
-        lines.push(Line {
-            depth: 2,
-            type_name: member_type(name),
-            source: Source::Member(name),
-            cpu: Duration::ZERO,
-        });
-    }
-    lines.push(Line {
-        depth: 1,
-        type_name: generated::wanderer::SPEC.type_name,
-        source: Source::Handle(robot.wanderer.clone()),
-        cpu: Duration::ZERO,
-    });
+    // Every component at every level, each read from its own monitoring port.
+    let mut lines = Vec::new();
+    walk(
+        robot.robot.clone(),
+        generated::robot::TYPE_NAME,
+        0,
+        &mut lines,
+    );
 
     let display = match options.display {
         Display::Auto if std::io::stdout().is_terminal() => Display::Table,
@@ -494,22 +496,18 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         if (display == Display::Table && frame_due) || (display == Display::Lines && line_due) {
             let wall = last_frame.elapsed().as_secs_f64().max(1e-3);
             last_frame = Instant::now();
-            let members = robot.members.all();
             let rows: Vec<status::Row> = lines
                 .iter_mut()
-                .filter_map(|line| {
-                    let monitor = match &line.source {
-                        Source::Handle(handle) => handle.snapshot(),
-                        Source::Member(name) => members.iter().find(|m| m.name == *name)?.clone(),
-                    };
+                .map(|line| {
+                    let monitor = line.handle.snapshot();
                     let load = monitor.cpu_time.saturating_sub(line.cpu).as_secs_f64() / wall;
                     line.cpu = monitor.cpu_time;
-                    Some(status::Row {
+                    status::Row {
                         depth: line.depth,
                         type_name: line.type_name,
                         monitor,
                         load,
-                    })
+                    }
                 })
                 .collect();
             let base = robot.base.snapshot();
@@ -544,19 +542,14 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         std::thread::sleep(Duration::from_millis(20));
     };
 
-    // Before shutdown: every level's monitoring port.
+    // Before shutdown: every level's monitoring port, in the table's order.
     let elapsed = platform.uptime().saturating_sub(started);
     let base = robot.base.snapshot();
     let wanderer = robot.wanderer.snapshot();
-    let members = robot.members.all();
-    let member = |name: &str| members.iter().find(|m| m.name == name);
-    // In the table's order: robot, base, base's instances, wanderer.
-    let mut states_before_shutdown: Vec<(String, State)> = [&robot.robot, &robot.base]
+    let states_before_shutdown: Vec<(String, State)> = lines
         .iter()
-        .map(|h| (h.name().to_owned(), h.state()))
+        .map(|line| (line.handle.name().to_owned(), line.handle.state()))
         .collect();
-    states_before_shutdown.extend(members.iter().map(|m| (m.name.clone(), m.state)));
-    states_before_shutdown.push((wanderer.name.clone(), wanderer.state));
     // The supervision steps and states published up to the end.
     events.take(elapsed);
 
@@ -566,6 +559,13 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         robot.wanderer.clone(),
     ];
     let report = robot.shutdown();
+    // The variables as the components left them, each from its own monitoring port:
+    // read after the last section ran, so that they agree with the platform's ground
+    // truth.
+    let monitor = |path: &str| handles[0].instance(path).as_ref().map(Handle::snapshot);
+    let motion = monitor(&format!("{BASE}.{MOTION}"));
+    let ranges = monitor(&format!("{BASE}.{RANGES}"));
+    let sim_ranges = monitor(&format!("{BASE}.{SIM_RANGES}"));
     let final_states: Vec<(String, State)> = handles
         .iter()
         .map(|h| (h.name().to_owned(), h.state()))
@@ -582,29 +582,29 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         && released;
     let truth = platform.truth();
     let emergencies =
-        variable(member(RANGES), "emergencies") + variable(member(SIM_RANGES), "emergencies");
+        variable(ranges.as_ref(), "emergencies") + variable(sim_ranges.as_ref(), "emergencies");
     Ok(Summary {
         elapsed,
         interrupted,
         distance: truth.distance,
-        odometry_distance: variable(member(MOTION), "distance"),
+        odometry_distance: variable(motion.as_ref(), "distance"),
         min_clearance: truth.min_clearance,
         min_front_clearance: truth.min_front_clearance,
         contacts: truth.contacts,
         emergencies: emergencies as u64,
-        halts: variable(member(MOTION), "halts") as u64,
+        halts: variable(motion.as_ref(), "halts") as u64,
         avoidances: variable(Some(&wanderer), "avoidances") as u64,
         goals_reached: variable(Some(&wanderer), "goals_reached") as u64,
         scans: (
-            variable(member(RANGES), "scans") as u64,
-            variable(member(SIM_RANGES), "scans") as u64,
+            variable(ranges.as_ref(), "scans") as u64,
+            variable(sim_ranges.as_ref(), "scans") as u64,
         ),
         supervision: events.supervision,
         user_states: events.user_states,
         supervisor: base.user_state.clone().unwrap_or_else(|| "-".to_owned()),
         mode: word(&base, "mode"),
         base_faults: variable(Some(&base), "faults") as u64,
-        emergency_distance: variable(member(RANGES), "emergency_distance"),
+        emergency_distance: variable(ranges.as_ref(), "emergency_distance"),
         states_before_shutdown,
         final_states,
         released,

@@ -11,10 +11,10 @@
 //! do ([`BaseSupervisor`]), then starts the whole robot as one component
 //! ([`Robot::start`]).
 
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::Arc;
 use std::time::Duration;
 
-use coolbot::{Command, Controllable, Handle, Monitor, Report, State, System, Value, View};
+use coolbot::{Command, Controllable, Handle, Report, State, System, Value};
 
 use crate::generated::types::BaseMode;
 use crate::generated::{
@@ -56,80 +56,39 @@ pub struct Setup {
     pub scan_rate: Option<f64>,
 }
 
-/// What `MobileBase`'s supervisor last saw of its instances' monitoring ports (the
-/// `View` its rules and sections read), shared with whoever shows them.
-///
-/// The generated `robot::builder` builds `base` whole (`mobile_base::component`), so
-/// the handles of `motion`, `ranges` and `sim_ranges` stay inside it; the
-/// supervisor's sections copy their monitors here instead ([`BaseSupervisor`]).
-#[derive(Clone, Debug, Default)]
-pub struct Members(Arc<Mutex<Vec<Monitor>>>);
-
-impl Members {
-    fn publish(&self, view: &View) {
-        let monitors = mobile_base::INSTANCES
-            .iter()
-            .filter_map(|(name, _)| view.monitor(name).cloned())
-            .collect();
-        *self.0.lock().unwrap_or_else(PoisonError::into_inner) = monitors;
-    }
-
-    /// The instances' monitors, in declaration order (empty before the supervisor's
-    /// first section ran).
-    pub fn all(&self) -> Vec<Monitor> {
-        self.0
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()
-    }
-
-    /// Instance `name`'s monitor, as the supervisor last saw it.
-    pub fn get(&self, name: &str) -> Option<Monitor> {
-        self.all().into_iter().find(|m| m.name == name)
-    }
-}
-
-/// `MobileBase`'s supervisor sections: `mode` follows the supervisor's state, each
+/// `MobileBase`'s supervisor sections: `mode` follows the supervisor's state and each
 /// entry into `degraded` counts a fault (`faults > 3` stops the base, by the
-/// description's rule), and every section shares the supervisor's view of its
-/// instances ([`Members`]).
+/// description's rule). The periodic sections have nothing to do: whoever watches
+/// the base's instances reads their own monitoring ports ([`Robot::instance`]).
 #[derive(Debug)]
-pub struct BaseSupervisor {
-    members: Members,
-}
+pub struct BaseSupervisor;
 
 impl mobile_base::Supervisor for BaseSupervisor {
     fn operating_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Normal;
-        self.members.publish(cx.view);
         Ok(())
     }
 
-    fn operating_periodic(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        self.members.publish(cx.view);
+    fn operating_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         Ok(())
     }
 
     fn degraded_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Degraded;
         cx.vars.faults = cx.vars.faults.saturating_add(1);
-        self.members.publish(cx.view);
         Ok(())
     }
 
-    fn degraded_periodic(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        self.members.publish(cx.view);
+    fn degraded_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         Ok(())
     }
 
     fn stopped_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Stopped;
-        self.members.publish(cx.view);
         Ok(())
     }
 
-    fn stopped_periodic(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        self.members.publish(cx.view);
+    fn stopped_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         Ok(())
     }
 }
@@ -147,14 +106,11 @@ impl robot::Supervisor for RobotSupervisor {}
 pub struct BaseParts {
     platform: Arc<Platform>,
     overrides: Overrides,
-    members: Members,
 }
 
 impl mobile_base::Parts for BaseParts {
     fn supervisor(&mut self) -> impl mobile_base::Supervisor {
-        BaseSupervisor {
-            members: self.members.clone(),
-        }
+        BaseSupervisor
     }
 
     fn motion(&mut self) -> impl motion_controller::Behavior {
@@ -201,8 +157,6 @@ pub struct Robot {
     pub base: Handle,
     /// Instance `wanderer` of `Robot`.
     pub wanderer: Handle,
-    /// `base`'s instances, as its supervisor sees them.
-    pub members: Members,
 }
 
 fn text(error: impl std::fmt::Display) -> String {
@@ -214,7 +168,6 @@ impl Robot {
     /// every level starts; the substitute stays `ready`), applies `setup` through the
     /// control ports, and sets it running.
     pub fn start(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
-        let members = Members::default();
         let parts = RobotParts {
             base: BaseParts {
                 platform: Arc::clone(platform),
@@ -223,18 +176,17 @@ impl Robot {
                     seed: Some(setup.seed),
                     frequency: setup.scan_rate,
                 },
-                members: members.clone(),
             },
         };
-        let builder = robot::builder(ROBOT, parts).map_err(text)?;
-        let instance = |name: &str| {
-            builder
-                .instance_handle(name)
-                .ok_or_else(|| format!("`Robot` has no instance `{name}`"))
+        let built = robot::component(ROBOT, parts).map_err(text)?;
+        let mut system = System::new();
+        let robot = system.add(built).map_err(text)?;
+        let instance = |path: &str| {
+            robot
+                .instance(path)
+                .ok_or_else(|| format!("`Robot` has no instance `{path}`"))
         };
         let (base, wanderer) = (instance(BASE)?, instance(WANDERER)?);
-        let mut system = System::new();
-        let robot = system.add(builder.build().map_err(text)?).map_err(text)?;
         system.start().map_err(text)?;
         let started = robot
             .wait_for(|m| m.state != State::Starting, Duration::from_secs(10))
@@ -279,8 +231,14 @@ impl Robot {
             robot,
             base,
             wanderer,
-            members,
         })
+    }
+
+    /// The control and monitoring ports of the instance at `path` inside `Robot`
+    /// (dotted through nested compounds: `"base"`, `"base.motion"`): the instance's
+    /// own handle, read live.
+    pub fn instance(&self, path: &str) -> Option<Handle> {
+        self.robot.instance(path)
     }
 
     /// Shuts the robot down: `Robot` goes `dead`, taking its instances (and theirs)
