@@ -556,51 +556,18 @@ impl<'a> Lowerer<'a> {
             }
             let variant = ident::camel(name);
             let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
-            let section_kinds = [
-                (
+            section_stubs(
+                &StateSections {
+                    index,
+                    name,
                     entry,
-                    "entry",
-                    "Entry",
-                    "runs once each time the automaton enters the state",
-                ),
-                (
-                    periodic.is_some(),
-                    "periodic",
-                    "Periodic",
-                    "runs once per period while in the state",
-                ),
-                (
+                    periodic: periodic.is_some(),
                     exit,
-                    "exit",
-                    "Exit",
-                    "runs once each time the automaton leaves the state",
-                ),
-            ];
-            for (present, suffix, section, when) in section_kinds {
-                if !present {
-                    continue;
-                }
-                let method = ident::method("", name, &format!("_{suffix}"));
-                methods.push(ir::Method {
-                    name: method.clone(),
-                    doc: vec![format!("The {suffix} section of state `{name}`: {when}.")],
-                    signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
-                    ),
-                    user_signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
-                    ),
-                    stub_body: vec![
-                        format!("// State `{name}`, {suffix} section: {when}."),
-                        "let _ = cx;".to_owned(),
-                        "Ok(())".to_owned(),
-                    ],
-                });
-                section_arms.push((
-                    format!("({index}, ::coolbot::Section::{section})"),
-                    format!("behavior.{method}(&mut cx)"),
-                ));
-            }
+                },
+                SectionOwner::Atomic,
+                &mut methods,
+                &mut section_arms,
+            );
             if let Some(may_enum) = &may_enum {
                 let method = ident::method("", name, "_choose");
                 let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
@@ -1118,6 +1085,94 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
                 .collect();
             format!("{{ {} }}", entries.join(", "))
         }
+    }
+}
+
+/// Whose user automaton a state belongs to: the wording of its stubs and the receiver
+/// the glue calls them on.
+#[derive(Clone, Copy)]
+pub(crate) enum SectionOwner {
+    /// An atomic component's `Behavior` (`behavior.<state>_<section>`).
+    Atomic,
+    /// A compound's `Supervisor` (`supervisor.<state>_<section>`).
+    Supervisor,
+}
+
+/// The sections one state declares.
+pub(crate) struct StateSections<'a> {
+    /// The state's index in `SPEC.states`.
+    pub(crate) index: usize,
+    /// The state's name.
+    pub(crate) name: &'a str,
+    pub(crate) entry: bool,
+    pub(crate) periodic: bool,
+    pub(crate) exit: bool,
+}
+
+/// One required stub and one glue arm per declared section of a state, in the order
+/// entry, periodic, exit.
+pub(crate) fn section_stubs(
+    state: &StateSections<'_>,
+    owner: SectionOwner,
+    methods: &mut Vec<ir::Method>,
+    section_arms: &mut Vec<(String, String)>,
+) {
+    let (subject, of_state, comment_state, receiver) = match owner {
+        SectionOwner::Atomic => ("automaton", "state", "State", "behavior"),
+        SectionOwner::Supervisor => (
+            "supervisor",
+            "supervisor state",
+            "Supervisor state",
+            "supervisor",
+        ),
+    };
+    let name = state.name;
+    let kinds = [
+        (
+            state.entry,
+            "entry",
+            "Entry",
+            format!("runs once each time the {subject} enters the state"),
+        ),
+        (
+            state.periodic,
+            "periodic",
+            "Periodic",
+            "runs once per period while in the state".to_owned(),
+        ),
+        (
+            state.exit,
+            "exit",
+            "Exit",
+            format!("runs once each time the {subject} leaves the state"),
+        ),
+    ];
+    for (present, suffix, section, when) in kinds {
+        if !present {
+            continue;
+        }
+        let method = ident::method("", name, &format!("_{suffix}"));
+        methods.push(ir::Method {
+            name: method.clone(),
+            doc: vec![format!(
+                "The {suffix} section of {of_state} `{name}`: {when}."
+            )],
+            signature: format!(
+                "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
+            ),
+            user_signature: format!(
+                "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
+            ),
+            stub_body: vec![
+                format!("// {comment_state} `{name}`, {suffix} section: {when}."),
+                "let _ = cx;".to_owned(),
+                "Ok(())".to_owned(),
+            ],
+        });
+        section_arms.push((
+            format!("({}, ::coolbot::Section::{section})", state.index),
+            format!("{receiver}.{method}(&mut cx)"),
+        ));
     }
 }
 

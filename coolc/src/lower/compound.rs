@@ -9,7 +9,10 @@
 
 use std::collections::BTreeSet;
 
-use super::{GEN_TYPES, Lowerer, doc, duration_ns, duration_rust, unique_among};
+use super::{
+    GEN_TYPES, Lowerer, SectionOwner, StateSections, doc, duration_ns, duration_rust,
+    section_stubs, unique_among,
+};
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS};
 use crate::ident;
@@ -872,53 +875,18 @@ impl Lowerer<'_> {
                     ast::StateMember::May { .. } => {}
                 }
             }
-            let sections = [
-                (
+            section_stubs(
+                &StateSections {
+                    index,
+                    name,
                     entry,
-                    "entry",
-                    "Entry",
-                    "runs once each time the supervisor enters the state",
-                ),
-                (
-                    periodic.is_some(),
-                    "periodic",
-                    "Periodic",
-                    "runs once per period while in the state",
-                ),
-                (
+                    periodic: periodic.is_some(),
                     exit,
-                    "exit",
-                    "Exit",
-                    "runs once each time the supervisor leaves the state",
-                ),
-            ];
-            for (present, suffix, section, when_text) in sections {
-                if !present {
-                    continue;
-                }
-                let method = ident::method("", name, &format!("_{suffix}"));
-                methods.push(ir::Method {
-                    name: method.clone(),
-                    doc: vec![format!(
-                        "The {suffix} section of supervisor state `{name}`: {when_text}."
-                    )],
-                    signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
-                    ),
-                    user_signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
-                    ),
-                    stub_body: vec![
-                        format!("// Supervisor state `{name}`, {suffix} section: {when_text}."),
-                        "let _ = cx;".to_owned(),
-                        "Ok(())".to_owned(),
-                    ],
-                });
-                section_arms.push((
-                    format!("({index}, ::coolbot::Section::{section})"),
-                    format!("supervisor.{method}(&mut cx)"),
-                ));
-            }
+                },
+                SectionOwner::Supervisor,
+                &mut methods,
+                &mut section_arms,
+            );
             let spec = format!(
                 "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[] }}",
                 ident::string_literal(name),
