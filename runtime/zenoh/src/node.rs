@@ -176,12 +176,15 @@ impl Node {
                 .map_err(Error::zenoh)?;
             streams.push((handle.subscribe(), publisher));
             let snapshots = handle.clone();
+            let own_key = monitor_key.clone();
             queryables.push(
                 self.session
                     .declare_queryable(monitor_key)
                     .callback(move |query| {
+                        // Answered under the component's own key, not the query's
+                        // (`coolbot/robot/*/m`): the key tells which component it is.
                         let reply = match serde_json::to_vec(&snapshots.snapshot()) {
-                            Ok(json) => query.reply(query.key_expr().clone(), json).wait(),
+                            Ok(json) => query.reply(own_key.clone(), json).wait(),
                             Err(error) => query.reply_err(error.to_string()).wait(),
                         };
                         if let Err(error) = reply {

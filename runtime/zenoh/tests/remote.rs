@@ -1,0 +1,242 @@
+//! Remote monitoring and control, and `coolctl`'s text output, against a node started
+//! here: a system with a compound `robot` (holding a compound `base` with `motion` and
+//! `ranges`, and a `planner`) and an atomic `logger`.
+
+mod support;
+
+use std::time::Duration;
+
+use coolbot::{
+    Command, CompoundBuilder, Controllable, PortSet, Spec, State, StateSpec, Supervisor, System,
+    TimingSpec, VarKind,
+};
+use coolbot_zenoh::ctl::{Ctl, CtlError};
+use coolbot_zenoh::{ControlReply, Node};
+use zenoh::Wait;
+
+use support::{PATIENCE, Shell, pair, spec, var, wait_until};
+
+struct Sup(&'static Spec);
+
+impl Supervisor for Sup {
+    fn spec(&self) -> &'static Spec {
+        self.0
+    }
+}
+
+fn supervisor(state: &'static str) -> Sup {
+    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
+        name: state,
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }]));
+    Sup(Box::leak(Box::new(Spec {
+        type_name: "Compound",
+        doc: "",
+        states,
+        initial: 0,
+        inputs: &[],
+        outputs: &[],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    })))
+}
+
+/// The robot's system, running, exposed on `node`.
+fn robot(node: &Node) -> System {
+    let motion = spec(
+        "Motion",
+        vec![],
+        vec![],
+        vec![
+            var("odometry", VarKind::Observable),
+            var("max_speed", VarKind::Controllable),
+        ],
+    );
+    let plain = spec("Plain", vec![], vec![], vec![]);
+    let base = CompoundBuilder::new("base", supervisor("operating"))
+        .instance(Shell::component("motion", motion, PortSet::new()))
+        .instance(Shell::component("ranges", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let robot = CompoundBuilder::new("robot", supervisor("exploring"))
+        .instance(base)
+        .instance(Shell::component("planner", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let mut system = System::new();
+    system.add(robot).unwrap();
+    system
+        .add(Shell::component("logger", plain, PortSet::new()))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    system
+}
+
+const COMPONENTS: usize = 6;
+
+/// A `coolctl` on `station`'s session, once it sees all of the robot's components.
+fn ctl(station: &Node) -> Ctl {
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    assert!(
+        wait_until(PATIENCE, || ctl
+            .components(Some("robot"))
+            .is_ok_and(|listed| listed.len() == COMPONENTS)),
+        "the station does not see the robot's components"
+    );
+    ctl
+}
+
+fn text(f: impl FnOnce(&mut Vec<u8>) -> Result<(), CtlError>) -> String {
+    let mut out = Vec::new();
+    f(&mut out).unwrap();
+    String::from_utf8(out).unwrap()
+}
+
+#[test]
+fn coolctl_lists_nodes_and_every_component_with_its_state() {
+    let (node, station) = pair("robot", "station");
+    let system = robot(&node);
+    let ctl = ctl(&station);
+    insta::assert_snapshot!("nodes", text(|out| ctl.nodes(out)));
+    insta::assert_snapshot!("list", text(|out| ctl.list(Some("robot"), out)));
+    // A suspended instance deep inside shows as such.
+    let motion = system
+        .handle("robot")
+        .unwrap()
+        .instance("base.motion")
+        .unwrap();
+    motion
+        .command(Command::SetState(Controllable::Suspended))
+        .unwrap();
+    let listed = ctl.components(None).unwrap();
+    let row = listed
+        .iter()
+        .find(|listed| listed.path == "robot.base.motion")
+        .expect("motion listed");
+    assert_eq!(row.monitor.state, State::Suspended);
+    assert_eq!(row.node, "robot");
+}
+
+#[test]
+fn coolctl_set_answers_as_the_control_port_does() {
+    let (node, station) = pair("robot", "station");
+    let system = robot(&node);
+    let ctl = ctl(&station);
+    let mut transcript = String::new();
+    for args in [
+        &["state", "suspended"][..],
+        &["state", "running"],
+        &["max_speed=0.5"],
+        &["odometry=1"],
+        &["no_such_variable=1"],
+        &["period=0ms"],
+        &["quality=3"],
+        &["priority=0"],
+    ] {
+        let args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+        let answer = text(|out| {
+            ctl.set("robot/robot.base.motion", &args, out)
+                .map(|_accepted| ())
+        });
+        transcript.push_str(&format!(
+            "$ coolctl set robot/robot.base.motion {}\n{answer}",
+            args.join(" ")
+        ));
+    }
+    insta::assert_snapshot!("set", transcript);
+    let motion = system
+        .handle("robot")
+        .unwrap()
+        .instance("base.motion")
+        .unwrap();
+    let monitor = motion.snapshot();
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(
+        monitor.variables[1],
+        ("max_speed".to_owned(), coolbot::Value::Float(0.5))
+    );
+    // A component nobody exposes does not answer.
+    let quick = Ctl::new(station.session().clone(), Duration::from_millis(300));
+    match quick.command("robot/robot.nothing", &Command::SetPriority(0)) {
+        Err(CtlError::NoAnswer { target, .. }) => assert_eq!(target, "robot/robot.nothing"),
+        other => panic!("expected no answer, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_malformed_command_is_rejected_with_the_reason() {
+    let (node, station) = pair("robot", "station");
+    let _system = robot(&node);
+    let _ctl = ctl(&station);
+    let replies = station
+        .session()
+        .get("coolbot/robot/logger/c")
+        .payload("{\"SetState\": \"Sleeping\"}")
+        .timeout(PATIENCE)
+        .wait()
+        .unwrap();
+    let reply = replies.recv().expect("an answer");
+    let answer: ControlReply =
+        serde_json::from_slice(&reply.result().unwrap().payload().to_bytes()).unwrap();
+    match answer {
+        ControlReply::Rejected { reason } => {
+            assert!(reason.starts_with("malformed command"), "{reason}")
+        }
+        ControlReply::Accepted => panic!("a malformed command was accepted"),
+    }
+}
+
+#[test]
+fn coolctl_watch_prints_monitoring_events_as_they_happen() {
+    let (node, station) = pair("robot", "station");
+    let _system = robot(&node);
+    let ctl = ctl(&station);
+    let target = "robot/robot.base.motion";
+    let watcher = ctl.watcher(target).unwrap();
+    // The subscription reaches the robot's node after a while: change a variable until
+    // the watcher sees an event.
+    let mut probe = 0u32;
+    assert!(wait_until(PATIENCE, || {
+        probe += 1;
+        let reply = ctl
+            .command(
+                target,
+                &Command::Set("max_speed".into(), coolbot::Value::Float(f64::from(probe))),
+            )
+            .unwrap();
+        assert_eq!(reply, ControlReply::Accepted);
+        watcher.next(Duration::from_millis(200)).unwrap().is_some()
+    }));
+    for command in [
+        Command::Set("max_speed".into(), coolbot::Value::Float(0.25)),
+        Command::SetState(Controllable::Suspended),
+        Command::SetState(Controllable::Running),
+    ] {
+        assert_eq!(
+            ctl.command(target, &command).unwrap(),
+            ControlReply::Accepted
+        );
+    }
+    // Events of one component arrive in order: keep what follows the first 0.25.
+    let mut lines = Vec::new();
+    while !lines
+        .last()
+        .is_some_and(|l: &String| l.ends_with("suspended -> running"))
+    {
+        let line = watcher
+            .next(PATIENCE)
+            .unwrap()
+            .expect("the events of the commands");
+        if !lines.is_empty() || line.ends_with("max_speed = 0.25") {
+            lines.push(line);
+        }
+    }
+    insta::assert_snapshot!("watch", lines.join("\n"));
+}
