@@ -240,3 +240,34 @@ fn coolctl_watch_prints_monitoring_events_as_they_happen() {
     }
     insta::assert_snapshot!("watch", lines.join("\n"));
 }
+
+#[test]
+fn the_coolctl_binary_prints_what_the_library_prints() {
+    let (node, endpoint) = support::node("robot", &[]);
+    let _system = robot(&node);
+    let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
+    let expected = text(|out| ctl(&station).list(Some("robot"), out));
+    let run = |args: &[&str]| {
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_coolctl"))
+            .args(["--connect", &endpoint, "--no-multicast", "--timeout", "5s"])
+            .args(args)
+            .output()
+            .expect("coolctl runs");
+        (
+            output.status.code(),
+            String::from_utf8_lossy(&output.stdout).into_owned(),
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+        )
+    };
+    let (code, stdout, stderr) = run(&["list", "robot"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(stdout, expected);
+    let (code, stdout, _) = run(&["set", "robot/robot.planner", "nothing=1"]);
+    assert_eq!(
+        (code, stdout.as_str()),
+        (Some(1), "rejected: no variable `nothing`\n")
+    );
+    let (code, _, stderr) = run(&["set", "robot", "state", "running"]);
+    assert_eq!(code, Some(2));
+    assert!(stderr.contains("not a component address"), "{stderr}");
+}
