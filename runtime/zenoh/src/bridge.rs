@@ -40,6 +40,10 @@ use crate::{Error, Node, keys};
 /// otherwise ([`OutletBuilder::pull`], [`InletBuilder::pull`]).
 pub const DEFAULT_PULL_TIMEOUT: Duration = Duration::from_secs(1);
 
+/// The most events one tick message carries: an outlet splits a larger count, an
+/// inlet counts a message claiming more as lost (it did not come from an outlet).
+const MAX_EVENTS_PER_MESSAGE: u64 = 1 << 16;
+
 /// How long a bridge asks the network for the other ends of its connection when it
 /// is built (the liveliness look-up that checks the cardinality rules).
 const LOOKUP_TIMEOUT: Duration = Duration::from_millis(500);
@@ -539,9 +543,11 @@ impl<T: Packet + Serialize> Outlet<T> {
         let wire = &self.wire;
         match &self.input {
             OutletInput::Tick(port) => {
-                let events = port.take();
-                if events > 0 {
-                    wire.send(encode(&events), true);
+                let mut events = port.take();
+                while events > 0 {
+                    let batch = events.min(MAX_EVENTS_PER_MESSAGE);
+                    wire.send(encode(&batch), true);
+                    events -= batch;
                 }
             }
             OutletInput::Fifo(port) => {
@@ -687,6 +693,9 @@ fn deliverer<T: Packet + DeserializeOwned>(
     match output {
         InletOutput::Tick(port) => {
             Arc::new(move |bytes| match postcard::from_bytes::<u64>(bytes) {
+                Ok(events) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
+                    "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
+                )),
                 Ok(events) => {
                     for _ in 0..events {
                         port.emit();

@@ -381,6 +381,17 @@ fn tick_events_are_counted_never_lost() {
         total == 25
     }));
     assert_eq!(producer.handle("outlet").unwrap().snapshot().overflows, 0);
+    // A message claiming more events than an outlet ever sends is counted as lost,
+    // not emitted.
+    a.session()
+        .put(key, postcard::to_allocvec(&u64::MAX).unwrap())
+        .wait()
+        .unwrap();
+    let inlet = consumer.handle("inlet").unwrap();
+    inlet
+        .wait_for(|m| m.overflows == 1, PATIENCE)
+        .expect("the implausible count is counted");
+    assert_eq!(ticks.take(), 0);
 }
 
 #[test]
