@@ -563,3 +563,45 @@ fn a_node_name_is_unique_on_the_network() {
     assert_eq!(outcome.as_deref(), Some("unique"));
     assert_eq!(a.name(), "unique");
 }
+
+#[test]
+fn when_the_consumer_node_goes_away_the_outlet_counts_every_packet() {
+    let (a, b) = pair("gone-a", "gone-b");
+    let key = "test/gone";
+    let sink = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let consumer = consumer(&b, key, OutputKind::Data, queue, &sink);
+    let (producer, out) = data_producer(&a, key, queue);
+    wait_subscribed(&a, key);
+    for seq in 0..5 {
+        out.send(pose(seq));
+    }
+    for seq in 0..5 {
+        assert_eq!(sink.recv_timeout(PATIENCE), Some(pose(seq)));
+    }
+    // The consumer's process goes away.
+    assert!(consumer.shutdown().clean());
+    drop(b);
+    let outlet = producer.handle("outlet").unwrap();
+    assert_eq!(outlet.snapshot().overflows, 0);
+    // Once the outlet knows (Zenoh tells it the subscriber is gone), every packet is
+    // counted: send until the first one is, then three more.
+    let mut sent = 5;
+    assert!(wait_until(PATIENCE, || {
+        out.send(pose(sent));
+        sent += 1;
+        outlet
+            .wait_for(|m| m.overflows > 0, Duration::from_millis(200))
+            .is_ok()
+    }));
+    let before = outlet.snapshot().overflows;
+    for seq in 0..3 {
+        out.send(pose(100 + seq));
+    }
+    outlet
+        .wait_for(|m| m.overflows == before + 3, PATIENCE)
+        .expect("every packet after the link is gone is counted");
+}
