@@ -232,6 +232,48 @@ impl Ctl {
         Ok(())
     }
 
+    /// Subscribe to nodes coming and going (their liveliness tokens).
+    pub fn node_watcher(&self) -> Result<NodeWatcher, CtlError> {
+        let subscriber = self
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{}/*", keys::ROOT))
+            .wait()
+            .map_err(zenoh_error)?;
+        Ok(NodeWatcher { subscriber })
+    }
+
+    /// `coolctl nodes --watch`: the nodes alive now, then `+ <node>` when one comes
+    /// and `- <node>` when one goes, until `count` changes were printed or `duration`
+    /// passed (each when given).
+    pub fn watch_nodes(
+        &self,
+        count: Option<usize>,
+        duration: Option<Duration>,
+        out: &mut dyn Write,
+    ) -> Result<(), CtlError> {
+        let watcher = self.node_watcher()?;
+        self.nodes(out)?;
+        out.flush()?;
+        let deadline = duration.map(|d| Instant::now() + d);
+        let mut printed = 0;
+        while count.is_none_or(|count| printed < count) {
+            let wait = match deadline {
+                Some(deadline) => match deadline.checked_duration_since(Instant::now()) {
+                    Some(left) => left,
+                    None => break,
+                },
+                None => Duration::from_secs(3600),
+            };
+            if let Some(line) = watcher.next(wait)? {
+                writeln!(out, "{line}")?;
+                out.flush()?;
+                printed += 1;
+            }
+        }
+        Ok(())
+    }
+
     /// The components of `node` (or of every node), with their snapshots, sorted by
     /// node and path.
     pub fn components(&self, node: Option<&str>) -> Result<Vec<Listed>, CtlError> {
@@ -422,6 +464,43 @@ impl Ctl {
                 writeln!(out, "rejected: {reason}")?;
                 Ok(false)
             }
+        }
+    }
+}
+
+/// Nodes coming and going, as lines (`coolctl nodes --watch`).
+pub struct NodeWatcher {
+    subscriber:
+        zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+}
+
+impl std::fmt::Debug for NodeWatcher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("NodeWatcher")
+    }
+}
+
+impl NodeWatcher {
+    /// The next change, `+ <node>` (it came) or `- <node>` (it went), waiting at
+    /// most `timeout`.
+    pub fn next(&self, timeout: Duration) -> Result<Option<String>, CtlError> {
+        loop {
+            let Some(sample) = self.subscriber.recv_timeout(timeout).map_err(zenoh_error)? else {
+                return Ok(None);
+            };
+            let Some(node) = sample
+                .key_expr()
+                .as_str()
+                .strip_prefix(keys::ROOT)
+                .and_then(|rest| rest.strip_prefix('/'))
+            else {
+                continue;
+            };
+            let sign = match sample.kind() {
+                zenoh::sample::SampleKind::Put => '+',
+                zenoh::sample::SampleKind::Delete => '-',
+            };
+            return Ok(Some(format!("{sign} {node}")));
         }
     }
 }

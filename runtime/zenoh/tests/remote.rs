@@ -271,3 +271,34 @@ fn the_coolctl_binary_prints_what_the_library_prints() {
     assert_eq!(code, Some(2));
     assert!(stderr.contains("not a component address"), "{stderr}");
 }
+
+#[test]
+fn coolctl_sees_nodes_come_and_go() {
+    let (robot, endpoint) = support::node("robot", &[]);
+    let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    assert!(wait_until(PATIENCE, || ctl
+        .node_names()
+        .is_ok_and(|names| names == ["robot", "station"])));
+    let watcher = ctl.node_watcher().unwrap();
+    let next = |expected: &str| loop {
+        let line = watcher
+            .next(PATIENCE)
+            .unwrap()
+            .unwrap_or_else(|| panic!("no `{expected}` within {PATIENCE:?}"));
+        // Tokens already alive may be announced when the subscription starts.
+        if line == expected {
+            break;
+        }
+        assert!(
+            line.starts_with('+'),
+            "unexpected `{line}` before `{expected}`"
+        );
+    };
+    let (arm, _) = support::node("arm", std::slice::from_ref(&endpoint));
+    next("+ arm");
+    drop(arm);
+    next("- arm");
+    assert_eq!(ctl.node_names().unwrap(), ["robot", "station"]);
+    drop(robot);
+}

@@ -1,7 +1,7 @@
 //! `coolctl`: look at and command CoolBOT nodes over Zenoh.
 //!
 //! ```text
-//! coolctl nodes
+//! coolctl nodes [--watch]
 //! coolctl list [node]
 //! coolctl watch <node>/<path> [--count N] [--for 10s]
 //! coolctl set <node>/<path> state suspended
@@ -41,7 +41,17 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Action {
     /// The nodes alive on the network.
-    Nodes,
+    Nodes {
+        /// Then print `+ <node>` and `- <node>` as nodes come and go.
+        #[arg(long)]
+        watch: bool,
+        /// With --watch: stop after this many changes.
+        #[arg(long, requires = "watch")]
+        count: Option<usize>,
+        /// With --watch: stop after this long (e.g. 10s).
+        #[arg(long = "for", requires = "watch", value_parser = duration)]
+        duration: Option<Duration>,
+    },
     /// Every component of a node (or of every node): state, user state, quality,
     /// missed deadlines, overruns, overflows.
     List {
@@ -86,7 +96,12 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     };
     let ctl = Ctl::new(session, cli.timeout);
     match cli.command {
-        Action::Nodes => ctl.nodes(out).map(|()| true),
+        Action::Nodes { watch: false, .. } => ctl.nodes(out).map(|()| true),
+        Action::Nodes {
+            watch: true,
+            count,
+            duration,
+        } => ctl.watch_nodes(count, duration, out).map(|()| true),
         Action::List { node } => ctl.list(node.as_deref(), out).map(|()| true),
         Action::Watch {
             target,
