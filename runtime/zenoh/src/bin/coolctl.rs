@@ -60,7 +60,7 @@ enum Action {
     },
     /// Print a component's monitoring events as they happen.
     Watch {
-        /// The component: <node>/<path>, e.g. robot/base.motion.
+        /// The component, as NODE/PATH (e.g. robot/base.motion).
         target: String,
         /// Stop after this many events.
         #[arg(long)]
@@ -73,7 +73,7 @@ enum Action {
     /// `<variable>=<value>` (period, max_response, priority, quality, or a
     /// controllable variable).
     Set {
-        /// The component: <node>/<path>.
+        /// The component, as NODE/PATH.
         target: String,
         /// `state <state>` or `<variable>=<value>`.
         #[arg(required = true, num_args = 1..=2)]
