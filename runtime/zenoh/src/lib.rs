@@ -19,11 +19,15 @@
 //!   (a queryable taking a [`coolbot::Command`] and answering [`ControlReply`]), and a
 //!   liveliness token `coolbot/<node>` per node.
 //! - **`coolctl`**, the command-line tool over those keys ([`ctl`]).
+//! - **Remote instantiation**, a first step ([`agent`]): an agent builds registered
+//!   component types on request from another node, bridges their ports, runs and
+//!   exposes them.
 //!
 //! `docs/distribution.md` describes the model, the keys, the encoding and what
 //! happens when the network fails.
 #![deny(missing_docs)]
 
+pub mod agent;
 mod bridge;
 mod config;
 pub mod ctl;
@@ -62,11 +66,11 @@ pub enum Error {
         /// The rule and how it is broken.
         rule: String,
     },
-    /// A bridge was asked for a kind it cannot carry.
-    #[error("cannot bridge `{key}`: {reason}")]
-    Unsupported {
-        /// The bridge's key expression.
-        key: String,
+    /// Another node refused a request (an instantiation), or nothing answered.
+    #[error("node `{node}`: {reason}")]
+    Remote {
+        /// The node asked.
+        node: String,
         /// Why.
         reason: String,
     },

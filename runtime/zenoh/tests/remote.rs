@@ -302,3 +302,243 @@ fn coolctl_sees_nodes_come_and_go() {
     assert_eq!(ctl.node_names().unwrap(), ["robot", "station"]);
     drop(robot);
 }
+
+/// A reactive component: doubles each number arriving at `input` onto `output`.
+struct Doubler {
+    input: coolbot::port::FifoIn<u64>,
+    output: coolbot::port::DataOut<u64>,
+}
+
+static DOUBLER: Spec = Spec {
+    type_name: "Doubler",
+    doc: "",
+    states: &[StateSpec {
+        name: "doubling",
+        entry: true,
+        exit: false,
+        periodic: None,
+        on: &[coolbot::OnSpec { port: 0, target: 0 }],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[coolbot::InputSpec {
+        name: "input",
+        kind: coolbot::InputKind::Fifo {
+            capacity: 16,
+            policy: coolbot::OverflowPolicy::Reject,
+        },
+        packet: "u64",
+        pull: false,
+    }],
+    outputs: &[coolbot::OutputSpec {
+        name: "output",
+        kind: coolbot::OutputKind::Data,
+        packet: "u64",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Automaton for Doubler {
+    fn spec(&self) -> &'static Spec {
+        &DOUBLER
+    }
+    fn start(&mut self, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _: &mut coolbot::Context) {}
+    fn section(
+        &mut self,
+        _: usize,
+        _: coolbot::Section,
+        _: &mut coolbot::Context,
+    ) -> Result<(), coolbot::Fault> {
+        for number in self.input.drain() {
+            self.output.send(number * 2);
+        }
+        Ok(())
+    }
+    fn choose(&mut self, _: usize, _: &mut coolbot::Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _: usize, _: &str, _: &mut coolbot::Context) {}
+    fn answer(&mut self, _: usize, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _: &coolbot::Value) -> Result<(), String> {
+        Err("no configuration".to_owned())
+    }
+    fn set(&mut self, _: usize, _: &coolbot::Value) -> Result<(), String> {
+        Err("no variable".to_owned())
+    }
+    fn get(&self, _: usize) -> coolbot::Value {
+        coolbot::Value::Unit
+    }
+}
+
+fn doubler(name: &str) -> coolbot::Component {
+    let input = coolbot::port::FifoIn::new(16, coolbot::OverflowPolicy::Reject);
+    let output = coolbot::port::DataOut::new();
+    let ports = PortSet::new().input(&input).output(&output);
+    coolbot::Component::new(name, Box::new(Doubler { input, output }), ports)
+}
+
+#[test]
+fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
+    use coolbot::port::{DataOut, FifoIn};
+    use coolbot::{InputKind, OutputKind, OverflowPolicy};
+    use coolbot_zenoh::Error;
+    use coolbot_zenoh::agent::{Agent, Instantiate, Registry, RemoteInput, Wire, instantiate};
+
+    let (robot, workstation) = pair("robot", "workstation");
+    let workstation = std::sync::Arc::new(workstation);
+    let mut registry = Registry::new();
+    registry
+        .register("Doubler", doubler)
+        .port::<u64>("input")
+        .port::<u64>("output");
+    let _agent = Agent::start(std::sync::Arc::clone(&workstation), registry).unwrap();
+
+    // The robot: numbers out to the remote doubler, doubled numbers back into a fifo.
+    let numbers = DataOut::<u64>::new();
+    let doubled = FifoIn::<u64>::new(64, OverflowPolicy::Reject);
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let mut system = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![coolbot::OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+    );
+    let sink = spec(
+        "Sink",
+        vec![coolbot::InputSpec {
+            name: "input",
+            kind: queue,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+        vec![],
+    );
+    system
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&numbers),
+        ))
+        .unwrap();
+    system
+        .add(Shell::component(
+            "sink",
+            sink,
+            PortSet::new().input(&doubled),
+        ))
+        .unwrap();
+    system
+        .add(
+            robot
+                .outlet::<u64>("to_doubler", "test/agent/in", queue)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    system
+        .add(
+            robot
+                .inlet::<u64>("from_doubler", "test/agent/out", OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    system.connect("source.out", "to_doubler.input").unwrap();
+    system.connect("from_doubler.output", "sink.input").unwrap();
+    system.run_all().unwrap();
+
+    let request = Instantiate {
+        type_name: "Doubler".to_owned(),
+        name: "doubler".to_owned(),
+        wires: vec![
+            Wire::Input {
+                port: "input".to_owned(),
+                key: "test/agent/in".to_owned(),
+            },
+            Wire::Output {
+                port: "output".to_owned(),
+                key: "test/agent/out".to_owned(),
+                to: RemoteInput::Fifo { capacity: 64 },
+            },
+        ],
+    };
+    // The agent's queryable reaches the robot's session after a while.
+    assert!(wait_until(PATIENCE, || {
+        match instantiate(&robot, "workstation", &request, Duration::from_secs(5)) {
+            Ok(()) => true,
+            Err(Error::Remote { reason, .. }) if reason.starts_with("no agent answered") => false,
+            Err(error) => panic!("instantiation refused: {error}"),
+        }
+    }));
+    support::wait_subscribed(&robot, "test/agent/in");
+    support::wait_subscribed(&workstation, "test/agent/out");
+    for number in 1..=3 {
+        numbers.send(number);
+    }
+    let received: Vec<u64> = (0..3)
+        .map(|_| doubled.recv_timeout(PATIENCE).expect("a doubled number"))
+        .collect();
+    assert_eq!(received, [2, 4, 6]);
+
+    // The remote instance and its bridges are exposed on the workstation's node.
+    let ctl = Ctl::new(robot.session().clone(), Duration::from_secs(5));
+    let mut rows = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        rows = ctl
+            .components(Some("workstation"))
+            .unwrap()
+            .into_iter()
+            .map(|listed| (listed.path, listed.monitor.state))
+            .collect();
+        rows.len() == 3
+    }));
+    assert_eq!(
+        rows,
+        [
+            ("doubler".to_owned(), State::Running),
+            ("doubler-input".to_owned(), State::Running),
+            ("doubler-output".to_owned(), State::Running),
+        ]
+    );
+
+    // Refusals say why.
+    let refused =
+        |request: &Instantiate| match instantiate(&robot, "workstation", request, PATIENCE) {
+            Err(Error::Remote { reason, .. }) => reason,
+            other => panic!("expected a refusal, got {other:?}"),
+        };
+    assert!(refused(&request).contains("not a free instance name"));
+    let unknown = Instantiate {
+        type_name: "Tripler".to_owned(),
+        ..request.clone()
+    };
+    assert!(refused(&unknown).contains("no component type `Tripler`"));
+    let bad_port = Instantiate {
+        name: "other".to_owned(),
+        wires: vec![Wire::Input {
+            port: "nothing".to_owned(),
+            key: "test/agent/x".to_owned(),
+        }],
+        ..request.clone()
+    };
+    assert!(refused(&bad_port).contains("has no input port `nothing`"));
+}
