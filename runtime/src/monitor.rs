@@ -270,7 +270,7 @@ pub(crate) struct Shared {
     /// Doorbells rung after every event (compound supervisors watching this component).
     /// With, for each, a flag set before it is rung (which subscription has news).
     wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
-    inputs: Vec<(&'static str, ErasedInput)>,
+    pub(crate) inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
     /// Whether the component's thread is inside a section the max_response watchdog
@@ -452,6 +452,8 @@ pub struct Handle {
     /// component). They hold the instances' ports only, never the compound's inner
     /// system: the instances' threads end with the compound whatever handles remain.
     pub(crate) instances: Arc<[Handle]>,
+    /// The component's output ports by name, in declaration order (recorder taps).
+    pub(crate) outputs: Arc<[(&'static str, crate::port::ErasedOutput)]>,
 }
 
 impl std::fmt::Debug for Handle {

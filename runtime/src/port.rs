@@ -1778,3 +1778,19 @@ pub(crate) fn unforward_data<T: Packet>(from: &ErasedOutput, id: usize) {
         update_list(&out.sinks, |sinks| sinks.retain(|sink| sink.input_id != id));
     }
 }
+
+/// Deliver every packet `from` sends to `tap` as well (a recorder's tap), on the
+/// sender's thread: the tap is one more sink, so each send costs one more clone.
+/// Returns the tap's id for [`unforward_data`], or `None` if `from` is not a data
+/// output of `T`. A tap is no connection: `System::connections` does not list it.
+pub(crate) fn tap_data<T: Packet>(from: &ErasedOutput, tap: Arc<dyn Deliver<T>>) -> Option<usize> {
+    let out = downcast::<DataOutInner<T>>(&from.any)?;
+    let id = next_port_id();
+    update_list(&out.sinks, |sinks| {
+        sinks.push(Sink {
+            input_id: id,
+            target: tap,
+        })
+    });
+    Some(id)
+}
