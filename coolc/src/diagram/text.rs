@@ -96,7 +96,7 @@ pub fn duration(nanos: u128) -> String {
         (1, "ns"),
     ];
     for (size, unit) in UNITS {
-        if nanos != 0 && nanos % size == 0 {
+        if nanos != 0 && nanos.is_multiple_of(size) {
             return format!("{}{unit}", nanos / size);
         }
     }
