@@ -55,8 +55,11 @@ fn all_diagrams(path: &Path) -> Vec<diagram::Diagram> {
     diagrams
 }
 
+/// Every description that checks without errors: the ok and warn fixtures and the
+/// examples.
 fn each_description(mut check: impl FnMut(&Path)) {
     insta::glob!("../../tests/data", "ok/*.cool", |path| check(path));
+    insta::glob!("../../tests/data", "warn/*.cool", |path| check(path));
     insta::glob!("../../examples/components", "*.cool", |path| check(path));
 }
 

@@ -394,6 +394,12 @@ impl Shared {
     pub(crate) fn state(&self) -> State {
         lock(&self.monitor).state
     }
+
+    /// Stop ringing `bell` after events (a recorder that stopped following this
+    /// component: its subscription's receiver is dropped separately).
+    pub(crate) fn forget_waker(&self, bell: &Arc<crate::port::Doorbell>) {
+        lock(&self.wakers).retain(|(waker, _)| !Arc::ptr_eq(&waker.bell, bell));
+    }
 }
 
 /// A command on its way to the component, with the channel for its answer.

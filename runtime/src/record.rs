@@ -497,6 +497,7 @@ impl Recorder {
             .into_iter()
             .map(|(path, handle)| Followed {
                 events: handle.subscribe_waking(waker.clone()),
+                handle,
                 path,
                 recorded: 0,
             })
@@ -817,6 +818,7 @@ impl<T: Packet> Drop for Attached<T> {
 /// A followed monitoring port.
 struct Followed {
     path: String,
+    handle: Handle,
     events: Receiver<MonitorEvent>,
     recorded: u64,
 }
@@ -863,6 +865,9 @@ impl Writer {
         };
         for tap in &mut self.taps {
             tap.detach();
+        }
+        for followed in &self.monitors {
+            followed.handle.shared.forget_waker(&self.bell);
         }
         result.map_err(|source| RecordError::Io {
             path: self.path.clone(),

@@ -107,6 +107,54 @@ impl<'a> Lookup<'a> {
         format!("{}: {kind}", output.name.name)
     }
 
+    /// The variables of one kind, as label lines (`odometry: Pose2D`, and a mapped
+    /// one with the type of what it maps: `pose: Pose2D = motion.odometry`).
+    fn variables(&self, component: &ast::Component, kind: ast::VarKind) -> Vec<String> {
+        component
+            .members
+            .iter()
+            .filter_map(|m| match m {
+                Member::Variable(variable) if variable.kind == kind => Some(variable),
+                _ => None,
+            })
+            .map(|variable| match (&variable.ty, &variable.value) {
+                (Some(ty), _) => format!("{}: {}", variable.name.name, text::ty(ty)),
+                (None, Some(value)) => match self.mapped_type(component, value, 0) {
+                    Some(ty) => format!("{}: {ty} = {}", variable.name.name, text::expr(value)),
+                    None => format!("{} = {}", variable.name.name, text::expr(value)),
+                },
+                (None, None) => variable.name.name.clone(),
+            })
+            .collect()
+    }
+
+    /// The type of the instance variable a mapping names (`motion.odometry`),
+    /// through mappings of nested compounds; `None` for default variables.
+    fn mapped_type(
+        &self,
+        component: &ast::Component,
+        value: &ast::Expr,
+        depth: usize,
+    ) -> Option<String> {
+        let ast::ExprKind::Path(parts) = &value.kind else {
+            return None;
+        };
+        let [instance, name] = parts.as_slice() else {
+            return None;
+        };
+        let declared = instances(component).find(|i| i.name.name == instance.name)?;
+        let inner = self.component(&declared.component.name)?;
+        let variable = inner.members.iter().find_map(|m| match m {
+            Member::Variable(v) if v.name.name == name.name => Some(v),
+            _ => None,
+        })?;
+        match (&variable.ty, &variable.value) {
+            (Some(ty), _) => Some(text::ty(ty)),
+            (None, Some(value)) if depth < 64 => self.mapped_type(inner, value, depth + 1),
+            _ => None,
+        }
+    }
+
     // -----------------------------------------------------------------------------
     // Interface.
 
@@ -144,9 +192,9 @@ impl<'a> Lookup<'a> {
                 control.push(format!("configuration {{ {} }}", fields.join(", ")));
             }
         }
-        control.extend(variables(component, ast::VarKind::Controllable));
+        control.extend(self.variables(component, ast::VarKind::Controllable));
         let mut monitoring = vec!["m (monitoring)".to_owned(), DEFAULT_OBSERVABLES.join(", ")];
-        monitoring.extend(variables(component, ast::VarKind::Observable));
+        monitoring.extend(self.variables(component, ast::VarKind::Observable));
 
         items.push(port_node("in.c", control, true));
         edges.push(edge(End::node("in.c"), End::node("component"), vec![]));
@@ -765,25 +813,6 @@ fn instances(component: &ast::Component) -> impl Iterator<Item = &ast::Instance>
         Member::Instance(instance) => Some(instance),
         _ => None,
     })
-}
-
-/// The variables of one kind, as label lines (`odometry: Pose2D`, `pose = motion.odometry`).
-fn variables(component: &ast::Component, kind: ast::VarKind) -> Vec<String> {
-    component
-        .members
-        .iter()
-        .filter_map(|m| match m {
-            Member::Variable(variable) if variable.kind == kind => Some(match &variable.ty {
-                Some(ty) => format!("{}: {}", variable.name.name, text::ty(ty)),
-                None => format!(
-                    "{} = {}",
-                    variable.name.name,
-                    variable.value.as_ref().map_or_else(String::new, text::expr)
-                ),
-            }),
-            _ => None,
-        })
-        .collect()
 }
 
 /// `observable mode: BaseMode = BaseMode::Normal`, `observable pose = motion.odometry`.
