@@ -869,6 +869,15 @@ pub(crate) trait PosterSource<T>: Send + Sync {
     /// The posted value and its sequence number, read together.
     fn read(&self) -> (Option<T>, u64);
     fn seq(&self) -> u64;
+    /// The posted value and its sequence number if that is above `seen`: one load of
+    /// the sequence number when nothing new was posted, one read lock otherwise.
+    fn read_newer(&self, seen: u64) -> Option<(Option<T>, u64)> {
+        if self.seq() > seen {
+            Some(self.read())
+        } else {
+            None
+        }
+    }
 }
 
 /// A poster input: reads the value its producer posted.
@@ -910,6 +919,17 @@ impl<T: Packet> PosterIn<T> {
         value
     }
 
+    /// The producer's posted value, only if it posted since the last `read` or
+    /// `take_new` (one look at the producer instead of `is_new` then `read`).
+    pub fn take_new(&self) -> Option<T> {
+        let source = read(&self.inner.source);
+        let (value, seq) = source
+            .as_ref()?
+            .read_newer(self.inner.seen.load(Ordering::Acquire))?;
+        self.inner.seen.store(seq, Ordering::Release);
+        value
+    }
+
     /// Whether the producer posted since the last `read`.
     pub fn is_new(&self) -> bool {
         read(&self.inner.source)
@@ -924,9 +944,7 @@ impl<T: Packet> PosterIn<T> {
 
     /// Request a post and wait for it.
     pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
-        self.inner
-            .core
-            .pull_with(timeout, || if self.is_new() { self.read() } else { None })
+        self.inner.core.pull_with(timeout, || self.take_new())
     }
 }
 
