@@ -12,7 +12,7 @@
 //!
 //! - first a `header`: `version` ([`FORMAT_VERSION`]), `start_unix_ns` (wall-clock
 //!   start), `capacity` (each tap's queue), `ports` (each tapped output's `path`, Rust
-//!   `type` and `kind`) and `monitors` (the paths of the components whose monitoring
+//!   `type` and `kind`: `data` or `tick`) and `monitors` (the paths of the components whose monitoring
 //!   events are recorded);
 //! - then, in the order the recorder's thread wrote them, `packet` records (`t`: time
 //!   since the start in ns, taken on the producer's thread when it sent; `port`; `seq`:
@@ -31,9 +31,12 @@
 //! gives the typed packet back), and a [`Player`] replays recorded ports into inputs of
 //! a running system, at the original pace or as fast as possible.
 //!
-//! Only `data` outputs can be tapped and only `last`, `fifo` and `ufifo` inputs fed:
-//! poster and tick ports are not supported yet. Packets a producer sends while it
-//! answers a pull request go to the requester only, so no tap sees them.
+//! `data` outputs are tapped with [`Recorder::tap`] and tick outputs with
+//! [`Recorder::tap_ticks`] (one packet record per event, value `null`, stamped when
+//! the recorder's thread sees it); `last`, `fifo` and `ufifo` inputs are fed with
+//! [`Player::route`] and tick inputs with [`Player::route_ticks`]. Poster ports are not
+//! supported yet. Packets a producer sends while it answers a pull request go to the
+//! requester only, so no tap sees them.
 
 use std::any::TypeId;
 use std::collections::BTreeMap;
@@ -49,7 +52,9 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::monitor::{Handle, MonitorEvent};
-use crate::port::{DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet};
+use crate::port::{
+    DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, TickIn, TickOut,
+};
 use crate::system::System;
 
 /// The version of the recording format written in every header.
@@ -215,7 +220,7 @@ pub struct PortInfo {
     /// The Rust packet type (`std::any::type_name`).
     #[serde(rename = "type")]
     pub type_name: String,
-    /// The output kind (`data`).
+    /// The output kind (`data` or `tick`).
     pub kind: String,
 }
 
@@ -422,6 +427,29 @@ impl Recorder {
         Ok(self)
     }
 
+    /// Record the events of the tick output at `path`: one packet record per event,
+    /// with a `null` value (ticks carry no data). An event's `t` is when the
+    /// recorder's thread saw it (woken by the event), not when it was emitted; ticks
+    /// are counted, never lost.
+    pub fn tap_ticks(&mut self, system: &System, path: &str) -> Result<&mut Recorder, RecordError> {
+        if self.taps.iter().any(|t| t.path() == path) {
+            return Err(RecordError::Duplicate(path.to_owned()));
+        }
+        let output = find_output(system, path)?;
+        if output.kind != OutKind::Tick {
+            return Err(RecordError::UnsupportedKind {
+                path: path.to_owned(),
+                kind: output.kind.name(),
+                supported: "tap_ticks takes tick outputs (data outputs: tap)",
+            });
+        }
+        self.taps.push(Box::new(PendingTicks {
+            path: path.to_owned(),
+            output,
+        }));
+        Ok(self)
+    }
+
     /// Record the monitoring events of the component at `path` (`"base"`,
     /// `"base.motion"`).
     pub fn monitor(&mut self, system: &System, path: &str) -> Result<&mut Recorder, RecordError> {
@@ -472,7 +500,7 @@ impl Recorder {
                 .map(|tap| PortInfo {
                     path: tap.path().to_owned(),
                     type_name: tap.type_name().to_owned(),
-                    kind: "data".to_owned(),
+                    kind: tap.kind().to_owned(),
                 })
                 .collect(),
             monitors: self.monitors.iter().map(|(p, _)| p.clone()).collect(),
@@ -609,6 +637,8 @@ impl Drop for Recording {
 trait PendingTap: Send {
     fn path(&self) -> &str;
     fn type_name(&self) -> &'static str;
+    /// `data` or `tick`.
+    fn kind(&self) -> &'static str;
     fn attach(
         self: Box<Self>,
         capacity: usize,
@@ -630,6 +660,10 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
 
     fn type_name(&self) -> &'static str {
         self.output.type_name
+    }
+
+    fn kind(&self) -> &'static str {
+        "data"
     }
 
     fn attach(
@@ -659,6 +693,115 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
             counters,
             reported: (0, 0),
         })
+    }
+}
+
+/// A tick tap waiting for [`Recorder::start`].
+struct PendingTicks {
+    path: String,
+    output: ErasedOutput,
+}
+
+impl PendingTap for PendingTicks {
+    fn path(&self) -> &str {
+        &self.path
+    }
+
+    fn type_name(&self) -> &'static str {
+        "event"
+    }
+
+    fn kind(&self) -> &'static str {
+        "tick"
+    }
+
+    fn attach(
+        self: Box<Self>,
+        _capacity: usize,
+        start: Instant,
+        bell: Arc<Doorbell>,
+    ) -> Box<dyn Tap> {
+        // A tick input of the tap's own, owned by no component: each event counts at
+        // it and rings the recorder's thread.
+        let events = TickIn::new();
+        let input = crate::port::InputPort::erased(&events);
+        let _ = input.core.owner.set(crate::port::Owner {
+            bell,
+            shared: std::sync::Weak::new(),
+            port_name: "recorder",
+        });
+        let linked = self.output.link(&input);
+        let counters = Arc::new(Counters {
+            port: self.path.clone(),
+            ..Counters::default()
+        });
+        Box::new(TickTap {
+            path: self.path,
+            output: self.output,
+            input,
+            events,
+            linked,
+            counters,
+            start,
+        })
+    }
+}
+
+/// The recorder thread's side of a tick tap.
+struct TickTap {
+    path: String,
+    output: ErasedOutput,
+    input: ErasedInput,
+    events: TickIn,
+    linked: bool,
+    counters: Arc<Counters>,
+    start: Instant,
+}
+
+impl Tap for TickTap {
+    fn counters(&self) -> Arc<Counters> {
+        Arc::clone(&self.counters)
+    }
+
+    fn drain(&mut self, lines: &mut Vec<Line>) {
+        let count = self.events.take();
+        let t = nanos(self.start.elapsed());
+        for _ in 0..count {
+            let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
+            let line = PacketLine {
+                t,
+                port: &self.path,
+                seq,
+                value: &(),
+            };
+            // A unit value always serializes.
+            if let Ok(text) = serde_json::to_vec(&line) {
+                lines.push(Line { t, text });
+                self.counters.recorded.fetch_add(1, Ordering::AcqRel);
+            } else {
+                self.counters.unserializable.fetch_add(1, Ordering::AcqRel);
+            }
+        }
+    }
+
+    fn detach(&mut self) {
+        if std::mem::take(&mut self.linked) {
+            self.output.unlink(&self.input);
+        }
+    }
+
+    fn unreported(&mut self) -> Vec<(u64, u64, &'static str)> {
+        Vec::new()
+    }
+
+    fn path(&self) -> &str {
+        &self.path
+    }
+}
+
+impl Drop for TickTap {
+    fn drop(&mut self) {
+        self.detach();
     }
 }
 
@@ -1196,15 +1339,7 @@ impl Player {
         system: &System,
         input: &str,
     ) -> Result<&mut Player, RecordError> {
-        if !self.reader.header.ports.iter().any(|p| p.path == recorded) {
-            return Err(RecordError::NotRecorded {
-                port: recorded.to_owned(),
-                known: known(self.reader.header.ports.iter().map(|p| p.path.as_str())),
-            });
-        }
-        if self.routes.contains_key(recorded) {
-            return Err(RecordError::Duplicate(recorded.to_owned()));
-        }
+        self.check_route(recorded)?;
         let target = find_input(system, input)?;
         if !matches!(target.kind, InKind::Last | InKind::Fifo | InKind::Ufifo) {
             return Err(RecordError::UnsupportedKind {
@@ -1238,6 +1373,51 @@ impl Player {
             }),
         );
         Ok(self)
+    }
+
+    /// Replay the recorded tick port `recorded` into the tick input at `input`: one
+    /// event per recorded event.
+    pub fn route_ticks(
+        &mut self,
+        recorded: &str,
+        system: &System,
+        input: &str,
+    ) -> Result<&mut Player, RecordError> {
+        self.check_route(recorded)?;
+        let target = find_input(system, input)?;
+        if target.kind != InKind::Tick {
+            return Err(RecordError::UnsupportedKind {
+                path: input.to_owned(),
+                kind: target.kind.name(),
+                supported: "route_ticks feeds tick inputs (data inputs: route)",
+            });
+        }
+        let out = TickOut::new();
+        let erased = crate::port::OutputPort::erased(&out);
+        // Kinds checked: a tick output links to any tick input.
+        let _ = erased.link(&target);
+        self.routes.insert(
+            recorded.to_owned(),
+            Box::new(RoutedTicks {
+                out,
+                erased,
+                target,
+            }),
+        );
+        Ok(self)
+    }
+
+    fn check_route(&self, recorded: &str) -> Result<(), RecordError> {
+        if !self.reader.header.ports.iter().any(|p| p.path == recorded) {
+            return Err(RecordError::NotRecorded {
+                port: recorded.to_owned(),
+                known: known(self.reader.header.ports.iter().map(|p| p.path.as_str())),
+            });
+        }
+        if self.routes.contains_key(recorded) {
+            return Err(RecordError::Duplicate(recorded.to_owned()));
+        }
+        Ok(())
     }
 
     /// Replay the whole recording on the calling thread at `pace`, then detach the
@@ -1293,6 +1473,25 @@ impl<T: Packet + DeserializeOwned> Route for Routed<T> {
 }
 
 impl<T: Packet> Drop for Routed<T> {
+    fn drop(&mut self) {
+        self.erased.unlink(&self.target);
+    }
+}
+
+struct RoutedTicks {
+    out: TickOut,
+    erased: ErasedOutput,
+    target: ErasedInput,
+}
+
+impl Route for RoutedTicks {
+    fn send(&self, _packet: &PacketRecord) -> Result<(), ReadError> {
+        self.out.emit();
+        Ok(())
+    }
+}
+
+impl Drop for RoutedTicks {
     fn drop(&mut self) {
         self.erased.unlink(&self.target);
     }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Receiver, Sender};
-use coolbot::port::{DataOut, FifoIn};
+use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
 use coolbot::record::{
     self, NOT_SERIALIZABLE, Pace, Player, QUEUE_FULL, ReadError, Reader, Record, RecordError,
     Recorder,
@@ -90,12 +90,20 @@ static SOURCE: Spec = Spec {
     states: IDLE,
     initial: 0,
     inputs: &[],
-    outputs: &[OutputSpec {
-        name: "out",
-        kind: OutputKind::Data,
-        packet: "Sample",
-        pull: false,
-    }],
+    outputs: &[
+        OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "Sample",
+            pull: false,
+        },
+        OutputSpec {
+            name: "beat",
+            kind: OutputKind::Tick,
+            packet: "",
+            pull: false,
+        },
+    ],
     variables: &[],
     exceptions: &[],
     timing: TimingSpec::NONE,
@@ -106,15 +114,23 @@ static SINK: Spec = Spec {
     doc: "Queues what arrives; the test reads it.",
     states: IDLE,
     initial: 0,
-    inputs: &[InputSpec {
-        name: "data",
-        kind: InputKind::Fifo {
-            capacity: 100_000,
-            policy: OverflowPolicy::Reject,
+    inputs: &[
+        InputSpec {
+            name: "data",
+            kind: InputKind::Fifo {
+                capacity: 100_000,
+                policy: OverflowPolicy::Reject,
+            },
+            packet: "Sample",
+            pull: false,
         },
-        packet: "Sample",
-        pull: false,
-    }],
+        InputSpec {
+            name: "beat",
+            kind: InputKind::Tick,
+            packet: "",
+            pull: false,
+        },
+    ],
     outputs: &[],
     variables: &[],
     exceptions: &[],
@@ -181,27 +197,54 @@ impl Supervisor for Idle {
     }
 }
 
-fn source(name: &str) -> (Component, DataOut<Sample>) {
-    let out = DataOut::new();
-    let ports = PortSet::new().output(&out);
-    (Component::new(name, Box::new(Inert(&SOURCE)), ports), out)
+/// The test's ends of a source's outputs (`out`, `beat`).
+struct Outputs {
+    out: DataOut<Sample>,
+    beat: TickOut,
 }
 
-fn sink(name: &str) -> (Component, FifoIn<Sample>) {
-    let data = FifoIn::new(100_000, OverflowPolicy::Reject);
-    let ports = PortSet::new().input(&data);
-    (Component::new(name, Box::new(Inert(&SINK)), ports), data)
+/// The test's ends of a sink's inputs (`data`, `beat`).
+struct Inputs {
+    data: FifoIn<Sample>,
+    beat: TickIn,
+}
+
+fn source(name: &str) -> (Component, Outputs) {
+    let outputs = Outputs {
+        out: DataOut::new(),
+        beat: TickOut::new(),
+    };
+    let ports = PortSet::new().output(&outputs.out).output(&outputs.beat);
+    (
+        Component::new(name, Box::new(Inert(&SOURCE)), ports),
+        outputs,
+    )
+}
+
+fn sink(name: &str) -> (Component, Inputs) {
+    let inputs = Inputs {
+        data: FifoIn::new(100_000, OverflowPolicy::Reject),
+        beat: TickIn::new(),
+    };
+    let ports = PortSet::new().input(&inputs.data).input(&inputs.beat);
+    (Component::new(name, Box::new(Inert(&SINK)), ports), inputs)
 }
 
 /// A running system with a source `src` and a sink `sink` (not connected).
-fn bench() -> (System, DataOut<Sample>, FifoIn<Sample>) {
+fn bench_with_ticks() -> (System, Outputs, Inputs) {
     let mut system = System::new();
-    let (src, out) = source("src");
-    let (consumer, data) = sink("sink");
+    let (src, outputs) = source("src");
+    let (consumer, inputs) = sink("sink");
     system.add(src).expect("add src");
     system.add(consumer).expect("add sink");
     system.run_all().expect("run");
-    (system, out, data)
+    (system, outputs, inputs)
+}
+
+/// [`bench_with_ticks`], data ports only.
+fn bench() -> (System, DataOut<Sample>, FifoIn<Sample>) {
+    let (system, outputs, inputs) = bench_with_ticks();
+    (system, outputs.out, inputs.data)
 }
 
 fn temp_file(name: &str) -> std::path::PathBuf {
@@ -420,7 +463,7 @@ fn mistakes_are_clear_errors() {
         .expect_err("unknown port");
     assert_eq!(
         error.to_string(),
-        "`src.nothing`: component `src` has no output port `nothing` (it has: out)"
+        "`src.nothing`: component `src` has no output port `nothing` (it has: out, beat)"
     );
     let error = recorder
         .tap::<Sample>(&system, "ghost.out")
@@ -430,6 +473,24 @@ fn mistakes_are_clear_errors() {
         "{error}"
     );
     let error = recorder.tap::<Sample>(&system, "src").expect_err("no port");
+    assert!(matches!(error, RecordError::BadPath { .. }), "{error}");
+    let error = recorder
+        .tap::<Sample>(&system, "src.beat")
+        .expect_err("a tick output");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let error = recorder
+        .tap_ticks(&system, "src.out")
+        .expect_err("a data output");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let error = recorder
+        .tap::<Sample>(&system, ".out")
+        .expect_err("no component");
     assert!(matches!(error, RecordError::BadPath { .. }), "{error}");
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
     let error = recorder
@@ -487,7 +548,7 @@ fn mistakes_are_clear_errors() {
 
 #[test]
 fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
-    let (inner, out) = source("src");
+    let (inner, Outputs { out, .. }) = source("src");
     let compound = CompoundBuilder::new("base", Idle)
         .instance(inner)
         .export_output::<Sample>("out", "src.out")
@@ -547,4 +608,56 @@ fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
             .count() as u64
     });
     drop(system);
+}
+
+#[test]
+fn tick_events_are_recorded_and_replayed() {
+    let path = temp_file("ticks.jsonl");
+    {
+        let (system, outputs, _inputs) = bench_with_ticks();
+        let mut recorder = Recorder::new();
+        recorder.tap_ticks(&system, "src.beat").expect("tap ticks");
+        recorder
+            .tap::<Sample>(&system, "src.out")
+            .expect("tap data");
+        let recording = recorder.start(&path).expect("start");
+        for n in 0..5 {
+            outputs.beat.emit();
+            outputs.out.send(sample(n));
+        }
+        let summary = recording.finish().expect("finish");
+        let counts: Vec<(u64, u64)> = summary.ports.iter().map(|p| (p.sent, p.recorded)).collect();
+        assert_eq!(counts, [(5, 5), (5, 5)]);
+    }
+    let reader = Reader::open(&path).expect("open");
+    let kinds: Vec<&str> = reader
+        .header()
+        .ports
+        .iter()
+        .map(|p| p.kind.as_str())
+        .collect();
+    assert_eq!(kinds, ["tick", "data"]);
+    let events: Vec<u64> = reader
+        .packets::<()>("src.beat")
+        .map(|item| item.expect("an event").0.seq)
+        .collect();
+    assert_eq!(events, [0, 1, 2, 3, 4]);
+
+    let (system, _outputs, inputs) = bench_with_ticks();
+    let mut player = Player::open(&path).expect("open");
+    player
+        .route_ticks("src.beat", &system, "sink.beat")
+        .expect("route ticks");
+    let error = player
+        .route_ticks("src.out", &system, "sink.data")
+        .expect_err("a data input");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let played = player.play(Pace::AsFastAsPossible).expect("play");
+    assert_eq!(played.sent["src.beat"], 5);
+    assert_eq!(played.skipped, 5, "the data port has no route");
+    assert_eq!(inputs.beat.take(), 5);
+    assert!(inputs.data.is_empty());
 }
