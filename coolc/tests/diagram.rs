@@ -265,6 +265,34 @@ fn the_command_draws_to_stdout_or_a_file() {
 }
 
 #[test]
+fn the_command_has_help() {
+    let dir = tempfile::tempdir().expect("temp");
+    let out = coolc(&["--help"], dir.path());
+    assert!(
+        text(&out.stdout).contains("diagram"),
+        "{}",
+        text(&out.stdout)
+    );
+    let out = coolc(&["diagram", "--help"], dir.path());
+    assert_eq!(out.status.code(), Some(0));
+    let help = text(&out.stdout);
+    for option in [
+        "--component",
+        "--view",
+        "interface",
+        "structure",
+        "automaton",
+        "--format",
+        "mermaid",
+        "markdown",
+        "--default-automaton",
+        "--output",
+    ] {
+        assert!(help.contains(option), "{option} missing from:\n{help}");
+    }
+}
+
+#[test]
 fn the_command_reports_what_it_cannot_draw() {
     let examples = repository().join("examples/components");
     let out = coolc(
