@@ -661,3 +661,32 @@ fn tick_events_are_recorded_and_replayed() {
     assert_eq!(inputs.beat.take(), 5);
     assert!(inputs.data.is_empty());
 }
+
+#[test]
+fn a_recording_dropped_after_its_system_still_ends_its_file() {
+    let path = temp_file("dropped.jsonl");
+    let (system, out, _data) = bench();
+    let mut recorder = Recorder::new();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    recorder.monitor(&system, "src").expect("monitor");
+    let recording = recorder.start(&path).expect("start");
+    for n in 0..10 {
+        out.send(sample(n));
+    }
+    assert!(system.shutdown().clean());
+    // The producer's handle outlives its system: what it sends now is still seen.
+    out.send(sample(10));
+    drop(recording);
+    let records = records(&path);
+    let Some(Record::End(summary)) = records.last() else {
+        panic!("no end record: {:?}", records.last());
+    };
+    assert_eq!((summary.ports[0].sent, summary.ports[0].recorded), (11, 11));
+    assert!(
+        records.iter().any(|r| matches!(
+            r,
+            Record::Event(event) if matches!(event.event, MonitorEvent::State { to: State::Dead, .. })
+        )),
+        "the shutdown is in the recording"
+    );
+}
