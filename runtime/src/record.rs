@@ -1009,9 +1009,6 @@ impl Writer {
         for tap in &mut self.taps {
             tap.detach();
         }
-        for followed in &self.monitors {
-            followed.handle.shared.forget_waker(&self.bell);
-        }
         result.map_err(|source| RecordError::Io {
             path: self.path.clone(),
             source,
@@ -1079,6 +1076,15 @@ impl Writer {
         self.writer.write_all(b"\n")?;
         self.writer.flush()?;
         Ok(summary)
+    }
+}
+
+impl Drop for Writer {
+    fn drop(&mut self) {
+        // Also when the thread could not be spawned: the taps detach as they drop.
+        for followed in &self.monitors {
+            followed.handle.shared.forget_waker(&self.bell);
+        }
     }
 }
 
