@@ -119,11 +119,17 @@ fn every_dot_text_parses_with_its_ends_declared() {
             }
             if dot_installed {
                 let out = run_with_input("dot", &["-Tsvg"], &text);
+                let stderr = String::from_utf8_lossy(&out.stderr);
+                // Any complaint but a missing font is a diagram bug (a syntax error,
+                // an edge dot cannot lay out).
+                let complaints: Vec<&str> = stderr
+                    .lines()
+                    .filter(|line| !line.to_lowercase().contains("font"))
+                    .collect();
                 assert!(
-                    out.status.success() && out.stderr.is_empty(),
-                    "{}: dot says: {}",
-                    one.title(),
-                    String::from_utf8_lossy(&out.stderr)
+                    out.status.success() && complaints.is_empty(),
+                    "{}: dot says: {stderr}",
+                    one.title()
                 );
             }
         }
