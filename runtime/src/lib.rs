@@ -123,6 +123,7 @@ mod automaton;
 pub mod compound;
 mod monitor;
 pub mod port;
+pub mod record;
 mod runner;
 mod spec;
 mod system;
