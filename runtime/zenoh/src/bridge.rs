@@ -566,9 +566,12 @@ impl<T: Packet + Serialize> Outlet<T> {
                 }
             }
             OutletInput::Poster(port) => {
-                if (port.is_new() || !self.published_once)
-                    && let Some(value) = port.read()
-                {
+                let value = if self.published_once {
+                    port.take_new()
+                } else {
+                    port.read()
+                };
+                if let Some(value) = value {
                     self.published_once = true;
                     let seq = self.seq.fetch_add(1, Ordering::AcqRel) + 1;
                     let bytes = encode(&(self.epoch, seq, value));
