@@ -24,11 +24,6 @@ use crate::{ControlReply, Error, Node, keys};
 /// How long the agent waits for a new component to leave `starting`.
 const START_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// The key of node `node`'s agent.
-pub fn agent_key(node: &str) -> String {
-    format!("{}/{node}/@agent", keys::ROOT)
-}
-
 /// The remote input an instance's output is bridged to (an outlet of this kind).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -219,7 +214,7 @@ impl Agent {
         let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(16);
         let queryable = node
             .session()
-            .declare_queryable(agent_key(node.name()))
+            .declare_queryable(keys::agent(node.name()))
             .callback(move |query| {
                 if let Err(error) = requests.try_send(query) {
                     let query = error.into_inner();
@@ -422,7 +417,7 @@ pub fn instantiate(
     let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
     let replies = node
         .session()
-        .get(agent_key(on))
+        .get(keys::agent(on))
         .payload(json)
         .timeout(timeout)
         .wait()

@@ -6,6 +6,9 @@
 //!   `coolbot::Monitor`). `<path>` is the component's dotted path (`robot.base.motion`).
 //! - `coolbot/<node>/<path>/c`: a component's control port: a query whose payload is a
 //!   JSON `coolbot::Command`, answered with a JSON [`crate::ControlReply`].
+//! - `coolbot/<node>/@agent`: the agent of a node (remote instantiation): a query
+//!   whose payload is a JSON [`crate::agent::Instantiate`], answered with a JSON
+//!   [`crate::ControlReply`].
 //! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
 //!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
 //!   liveliness tokens that check the connection rules under `K/@producer`,
@@ -29,6 +32,11 @@ pub fn monitor(node: &str, path: &str) -> String {
 /// The control key of the component at `path` on `node`.
 pub fn control(node: &str, path: &str) -> String {
     format!("{ROOT}/{node}/{path}/c")
+}
+
+/// The key of node `node`'s agent.
+pub fn agent(node: &str) -> String {
+    format!("{ROOT}/{node}/@agent")
 }
 
 /// Split a monitoring or control key back into `(node, path)`.
