@@ -605,3 +605,31 @@ fn when_the_consumer_node_goes_away_the_outlet_counts_every_packet() {
         .wait_for(|m| m.overflows == before + 3, PATIENCE)
         .expect("every packet after the link is gone is counted");
 }
+
+#[test]
+fn a_remote_ufifo_grows_and_takes_every_packet_of_a_burst() {
+    let (a, b) = pair("ufifo-a", "ufifo-b");
+    let key = "test/ufifo";
+    // Nothing reads the sink during the burst: it grows from 16.
+    let sink = coolbot::port::UfifoIn::<Pose>::new(16, None);
+    let kind = InputKind::Ufifo {
+        initial: 16,
+        max: None,
+    };
+    let consumer = consumer(&b, key, OutputKind::Data, kind, &sink);
+    let (producer, out) = data_producer(&a, key, kind);
+    wait_subscribed(&a, key);
+    const BURST: u64 = 5_000;
+    for seq in 0..BURST {
+        out.send(pose(seq));
+    }
+    assert!(
+        wait_until(PATIENCE, || sink.len() as u64 == BURST),
+        "{} of {BURST} arrived",
+        sink.len()
+    );
+    assert!(sink.growths() > 0);
+    assert!(sink.drain().map(|p| p.seq).eq(0..BURST), "order kept");
+    assert_eq!(producer.handle("outlet").unwrap().snapshot().overflows, 0);
+    assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
+}
