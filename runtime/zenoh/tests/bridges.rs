@@ -633,3 +633,38 @@ fn a_remote_ufifo_grows_and_takes_every_packet_of_a_burst() {
     assert_eq!(producer.handle("outlet").unwrap().snapshot().overflows, 0);
     assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
 }
+
+#[test]
+fn when_the_consumer_node_comes_back_packets_flow_again() {
+    // The consumer listens, the producer connects to it (and retries when it goes).
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let listening = |name: &str| {
+        let config =
+            coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), &[], false).unwrap();
+        Node::open(name, config).expect("consumer node")
+    };
+    let b = listening("back-b");
+    let (a, _) = support::node("back-a", std::slice::from_ref(&endpoint));
+    let key = "test/back";
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let (producer, out) = data_producer(&a, key, queue);
+    let first = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let first_consumer = consumer(&b, key, OutputKind::Data, queue, &first);
+    wait_subscribed(&a, key);
+    out.send(pose(1));
+    assert_eq!(first.recv_timeout(PATIENCE), Some(pose(1)));
+
+    // The consumer's process goes away, then comes back on the same endpoint.
+    assert!(first_consumer.shutdown().clean());
+    drop(b);
+    let b = listening("back-b");
+    let again = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let _consumer = consumer(&b, key, OutputKind::Data, queue, &again);
+    wait_subscribed(&a, key);
+    out.send(pose(2));
+    assert_eq!(again.recv_timeout(PATIENCE), Some(pose(2)));
+    assert!(producer.shutdown().clean());
+}
