@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use coolbot::{
     Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet, State,
-    System,
+    System, Value,
 };
 use crossbeam_channel::RecvTimeoutError;
 use serde::de::DeserializeOwned;
@@ -87,7 +87,7 @@ pub enum Wire {
 }
 
 /// What [`instantiate`] asks an agent for.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Instantiate {
     /// The component type, as registered.
     pub type_name: String,
@@ -95,6 +95,13 @@ pub struct Instantiate {
     pub name: String,
     /// The ports to bridge.
     pub wires: Vec<Wire>,
+    /// A configuration to apply before the instance runs (`Command::Configure`).
+    #[serde(default)]
+    pub configuration: Option<Value>,
+    /// Controllable variables to set before the instance runs (`Command::Set`), in
+    /// order: an instance's overrides.
+    #[serde(default)]
+    pub variables: Vec<(String, Value)>,
 }
 
 /// Makes the bridges of one port type.
@@ -282,8 +289,8 @@ fn reply(query: &zenoh::query::Query, answer: &ControlReply) -> zenoh::Result<()
     query.reply(query.key_expr().clone(), json).wait()
 }
 
-/// Bring `handle` from `starting` to `running`.
-fn run(handle: &Handle) -> Result<(), String> {
+/// Wait until `handle` has left `starting` for `ready`.
+fn started(handle: &Handle) -> Result<(), String> {
     let monitor = handle
         .wait_for(|m| m.state != State::Starting, START_TIMEOUT)
         .map_err(|error| error.to_string())?;
@@ -294,6 +301,12 @@ fn run(handle: &Handle) -> Result<(), String> {
             monitor.error.unwrap_or_else(|| monitor.state.to_string())
         ));
     }
+    Ok(())
+}
+
+/// Bring `handle` from `starting` to `running`.
+fn run(handle: &Handle) -> Result<(), String> {
+    started(handle)?;
     handle
         .command(Command::SetState(Controllable::Running))
         .map_err(|rejected| rejected.to_string())
@@ -387,6 +400,23 @@ fn serve(
                         .map_err(|e| e.to_string())?;
                 }
             }
+        }
+        // The overrides, through the instance's control port, before it runs.
+        started(&handles[0])?;
+        let overrides = request
+            .configuration
+            .iter()
+            .map(|configuration| Command::Configure(configuration.clone()))
+            .chain(
+                request
+                    .variables
+                    .iter()
+                    .map(|(variable, value)| Command::Set(variable.clone(), value.clone())),
+            );
+        for command in overrides {
+            handles[0]
+                .command(command)
+                .map_err(|rejected| rejected.to_string())?;
         }
         // Bridges first, so that the instance's first packets find them running.
         for handle in handles.iter().rev() {

@@ -303,10 +303,12 @@ fn coolctl_sees_nodes_come_and_go() {
     drop(robot);
 }
 
-/// A reactive component: doubles each number arriving at `input` onto `output`.
+/// A reactive component: multiplies each number arriving at `input` by its
+/// controllable `factor` (2 unless set) onto `output`.
 struct Doubler {
     input: coolbot::port::FifoIn<u64>,
     output: coolbot::port::DataOut<u64>,
+    factor: u64,
 }
 
 static DOUBLER: Spec = Spec {
@@ -337,7 +339,12 @@ static DOUBLER: Spec = Spec {
         packet: "u64",
         pull: false,
     }],
-    variables: &[],
+    variables: &[coolbot::VarSpec {
+        name: "factor",
+        kind: VarKind::Controllable,
+        ty: "u64",
+        doc: "",
+    }],
     exceptions: &[],
     timing: TimingSpec::NONE,
 };
@@ -357,7 +364,7 @@ impl coolbot::Automaton for Doubler {
         _: &mut coolbot::Context,
     ) -> Result<(), coolbot::Fault> {
         for number in self.input.drain() {
-            self.output.send(number * 2);
+            self.output.send(number * self.factor);
         }
         Ok(())
     }
@@ -371,11 +378,12 @@ impl coolbot::Automaton for Doubler {
     fn configure(&mut self, _: &coolbot::Value) -> Result<(), String> {
         Err("no configuration".to_owned())
     }
-    fn set(&mut self, _: usize, _: &coolbot::Value) -> Result<(), String> {
-        Err("no variable".to_owned())
+    fn set(&mut self, _: usize, value: &coolbot::Value) -> Result<(), String> {
+        self.factor = u64::try_from(value).map_err(|error| error.to_string())?;
+        Ok(())
     }
     fn get(&self, _: usize) -> coolbot::Value {
-        coolbot::Value::Unit
+        coolbot::Value::from(self.factor)
     }
 }
 
@@ -383,7 +391,12 @@ fn doubler(name: &str) -> coolbot::Component {
     let input = coolbot::port::FifoIn::new(16, coolbot::OverflowPolicy::Reject);
     let output = coolbot::port::DataOut::new();
     let ports = PortSet::new().input(&input).output(&output);
-    coolbot::Component::new(name, Box::new(Doubler { input, output }), ports)
+    let doubler = Doubler {
+        input,
+        output,
+        factor: 2,
+    };
+    coolbot::Component::new(name, Box::new(doubler), ports)
 }
 
 #[test]
@@ -480,6 +493,8 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
                 to: RemoteInput::Fifo { capacity: 64 },
             },
         ],
+        configuration: None,
+        variables: Vec::new(),
     };
     // The agent's queryable reaches the robot's session after a while.
     assert!(wait_until(PATIENCE, || {
@@ -541,4 +556,73 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
         ..request.clone()
     };
     assert!(refused(&bad_port).contains("has no input port `nothing`"));
+
+    // An instance's overrides are applied before it runs; a refused one fails the
+    // request with the control port's reason.
+    let (tripled, doubled_back) = (
+        DataOut::<u64>::new(),
+        FifoIn::<u64>::new(64, OverflowPolicy::Reject),
+    );
+    let mut second = System::new();
+    second
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&tripled),
+        ))
+        .unwrap();
+    second
+        .add(Shell::component(
+            "sink",
+            sink,
+            PortSet::new().input(&doubled_back),
+        ))
+        .unwrap();
+    second
+        .add(
+            robot
+                .outlet::<u64>("to", "test/agent/in3", queue)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    second
+        .add(
+            robot
+                .inlet::<u64>("from", "test/agent/out3", OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    second.connect("source.out", "to.input").unwrap();
+    second.connect("from.output", "sink.input").unwrap();
+    second.run_all().unwrap();
+    let tripler = Instantiate {
+        name: "tripler".to_owned(),
+        wires: vec![
+            Wire::Input {
+                port: "input".to_owned(),
+                key: "test/agent/in3".to_owned(),
+            },
+            Wire::Output {
+                port: "output".to_owned(),
+                key: "test/agent/out3".to_owned(),
+                to: RemoteInput::Fifo { capacity: 64 },
+            },
+        ],
+        variables: vec![("factor".to_owned(), coolbot::Value::UInt(3))],
+        ..request.clone()
+    };
+    instantiate(&robot, "workstation", &tripler, PATIENCE).expect("a tripler");
+    support::wait_subscribed(&robot, "test/agent/in3");
+    support::wait_subscribed(&workstation, "test/agent/out3");
+    tripled.send(5);
+    assert_eq!(doubled_back.recv_timeout(PATIENCE), Some(15));
+    let bad_override = Instantiate {
+        name: "broken".to_owned(),
+        wires: Vec::new(),
+        variables: vec![("speed".to_owned(), coolbot::Value::UInt(3))],
+        ..request.clone()
+    };
+    assert!(refused(&bad_override).contains("no variable `speed`"));
 }
