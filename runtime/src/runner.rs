@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 
+use crate::adapt::{AdaptAction, AdaptConfig, Adaptation, Detector, Ladder, Observation, Pressure};
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
@@ -135,6 +136,12 @@ pub(crate) struct Runner {
     polled: bool,
     /// The thread's OS scheduling (`priority`), once the thread runs.
     scheduling: Option<Scheduling>,
+    /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
+    /// component with no ladder and no detection, and for compounds (whose
+    /// supervisor adapts, `compound.rs`).
+    adapt: Option<Local>,
+    /// How long the last user call ran.
+    last_took: Duration,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -148,6 +155,7 @@ impl Runner {
         name: &str,
         automaton: Box<dyn Automaton>,
         timing: TimingSpec,
+        adaptation: AdaptConfig,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
         bell: Arc<Doorbell>,
@@ -162,6 +170,9 @@ impl Runner {
         let watch = timing
             .max_response
             .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit)));
+        let adapt = (!supervised)
+            .then(|| Local::new(adaptation, &timing))
+            .flatten();
         let mut runner = Runner {
             cx: Context::new(name, timing.period),
             automaton,
@@ -197,8 +208,11 @@ impl Runner {
             found_by_polling: false,
             polled: false,
             scheduling: None,
+            adapt,
+            last_took: Duration::ZERO,
             _exit_guard: exit_guard,
         };
+        runner.cx.shared = Some(Arc::clone(&runner.shared));
         runner.cx.waker = Some(crate::automaton::Waker {
             bell: Arc::clone(&runner.bell),
         });
@@ -213,6 +227,13 @@ impl Runner {
         let mut priority = 0;
         self.shared.quietly(|monitor| priority = monitor.priority);
         self.apply_priority(priority);
+        if let Some(adapt) = &self.adapt {
+            let (enabled, max_level) = (adapt.enabled, adapt.ladder.max_level());
+            self.shared.quietly(|monitor| {
+                monitor.adaptation.enabled = enabled;
+                monitor.adaptation.max_level = max_level;
+            });
+        }
         self.clock = Instant::now();
         self.publish_variables();
         match self.run_start() {
@@ -756,7 +777,33 @@ impl Runner {
                     )));
                 } else {
                     self.set_quality(*quality);
+                    self.resync_level();
                     reply(Reply::Done);
+                }
+            }
+            Command::SetDegradation(level) => {
+                let level = *level;
+                if self.supervised {
+                    match self.call(|automaton, cx| automaton.set_degradation(level, cx)) {
+                        Ok(Ok(())) => reply(Reply::Done),
+                        Ok(Err(reason)) => reply(Reply::Rejected(reason)),
+                        Err(panic) => reply(Reply::Rejected(format!(
+                            "panic in set_degradation: {panic}"
+                        ))),
+                    }
+                } else {
+                    match self.adapt.as_ref().map(|adapt| adapt.ladder.max_level()) {
+                        None | Some(0) => reply(Reply::Rejected(
+                            "no adaptation levels: the timing block has no period interval and fewer than two quality levels".to_owned(),
+                        )),
+                        Some(max) if level > max => reply(Reply::Rejected(format!(
+                            "degradation level {level} out of range: the highest is {max}"
+                        ))),
+                        Some(_) => {
+                            self.set_level(level, "commanded through the control port");
+                            reply(Reply::Done);
+                        }
+                    }
                 }
             }
         }
@@ -837,6 +884,7 @@ impl Runner {
         let tripped = watched.is_some() && self.watch.as_ref().is_some_and(|watch| watch.end());
         self.clock = Instant::now();
         let took = self.clock.saturating_duration_since(started);
+        self.last_took = took;
         // Elapsed time is accumulated here and published with the CPU time (see
         // `update_timing`), keeping the monitor lock off the per-call path.
         self.elapsed += took;
@@ -912,6 +960,7 @@ impl Runner {
                 monitor.period = period;
                 vec![MonitorEvent::Period(period)]
             });
+            self.resync_level();
         }
         self.publish_variables();
     }
@@ -1048,6 +1097,7 @@ impl Runner {
                 PlanStep::Degrade => {
                     if self.cx.quality + 1 < self.timing.qualities.len() {
                         self.set_quality(self.cx.quality + 1);
+                        self.resync_level();
                         return Recovery::Recovered;
                     }
                 }
@@ -1167,6 +1217,7 @@ impl Runner {
             return;
         };
         self.reanchored = false;
+        let mut missed_any = false;
         match self.section_with_plan(state, Section::Periodic) {
             Recovery::Recovered => {}
             Recovery::Goto(target) => self.pending_choice = Some(target),
@@ -1188,6 +1239,7 @@ impl Runner {
                 let missed = u64::try_from(late / period.as_nanos().max(1))
                     .unwrap_or(u64::MAX)
                     .saturating_add(1);
+                missed_any = true;
                 self.shared.update(|monitor| {
                     monitor.missed_deadlines += missed;
                     vec![MonitorEvent::MissedDeadline {
@@ -1198,6 +1250,9 @@ impl Runner {
                 next = later(now, period);
             }
             self.next_periodic = Some(next);
+        }
+        if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
+            self.observe(self.last_took, period, missed_any);
         }
         if self.pending_choice.is_none() {
             self.choose(state);
@@ -1270,5 +1325,152 @@ impl Runner {
             }
         }
         served
+    }
+}
+
+/// A component's own adaptation: its ladder, its detector and where it stands.
+struct Local {
+    /// Whether detection runs (`AdaptConfig::enabled_for`).
+    enabled: bool,
+    ladder: Ladder,
+    detector: Detector,
+    level: u32,
+    /// `Exhausted` was published for the current violation.
+    exhausted: bool,
+}
+
+impl Local {
+    /// `None` when there is nothing to adapt and nothing to detect.
+    fn new(config: AdaptConfig, timing: &TimingSpec) -> Option<Local> {
+        let enabled = config.enabled_for(timing);
+        let ladder = Ladder::new(timing, config.period_steps);
+        (enabled || ladder.max_level() > 0).then(|| Local {
+            enabled,
+            ladder,
+            detector: Detector::new(config),
+            level: 0,
+            exhausted: false,
+        })
+    }
+}
+
+impl Runner {
+    /// Feed the detector one periodic section; act on a new verdict (a component no
+    /// compound supervises degrades or promotes itself, one level per verdict).
+    fn observe(&mut self, took: Duration, period: Duration, missed: bool) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let reference = adapt
+            .ladder
+            .setting(adapt.level.saturating_sub(1))
+            .0
+            .unwrap_or(period)
+            .min(period);
+        let verdict = adapt.detector.observe(Observation {
+            elapsed: took,
+            period,
+            missed,
+            reference,
+        });
+        let load = adapt.detector.load();
+        let Some(verdict) = verdict else {
+            self.shared.quietly(|monitor| monitor.adaptation.load = load);
+            return;
+        };
+        self.shared.set_pressure(verdict, load);
+        if verdict != Pressure::Violation {
+            adapt.exhausted = false;
+        }
+        if self.shared.adapt_managed.load(std::sync::atomic::Ordering::Acquire) {
+            return; // The compound's supervisor decides.
+        }
+        let (level, max) = (adapt.level, adapt.ladder.max_level());
+        match verdict {
+            Pressure::Violation if level < max => {
+                self.set_level(level + 1, "time violation");
+            }
+            Pressure::Violation if !adapt.exhausted => {
+                adapt.exhausted = true;
+                let step = Adaptation {
+                    component: self.cx.name.clone(),
+                    action: AdaptAction::Exhausted,
+                    from: level,
+                    to: level,
+                    period: self.cx.period,
+                    quality: Some(self.cx.quality),
+                    detail: "time violation at the highest level".to_owned(),
+                };
+                self.shared.adaptation_step(step, |_| {});
+            }
+            Pressure::Spare if level > 0 => {
+                self.set_level(level - 1, "spare time");
+            }
+            _ => {}
+        }
+    }
+
+    /// Go to adaptation level `level`: its period and quality, applied as the control
+    /// port's `SetPeriod` and `SetQuality` are (events `Period`, `Quality`), then an
+    /// `Adaptation` step; the detector starts afresh after its hold-down.
+    fn set_level(&mut self, level: u32, why: &str) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let from = adapt.level;
+        let (period, quality) = adapt.ladder.setting(level);
+        adapt.level = level;
+        adapt.exhausted = false;
+        let promoted = level < from;
+        adapt.detector.reset(promoted);
+        let load = adapt.detector.load();
+        // The quality first: the period's publication resyncs the level from both.
+        if quality != self.cx.quality {
+            self.set_quality(quality);
+        }
+        if let Some(period) = period
+            && self.cx.period != Some(period)
+        {
+            self.cx.set_period(period);
+            // Publishes the period and re-anchors the schedule (the resync it asks
+            // for finds the level already there).
+            self.after_call();
+        }
+        self.shared.set_pressure(Pressure::Nominal, load);
+        if level == from {
+            return;
+        }
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: if promoted {
+                AdaptAction::Promoted
+            } else {
+                AdaptAction::Degraded
+            },
+            from,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: why.to_owned(),
+        };
+        self.shared
+            .adaptation_step(step, |status| status.level = level);
+    }
+
+    /// The period or quality was set by other means (a command, a `degrade` plan, the
+    /// component's own `set_period`): the level is where they stand on the ladder.
+    fn resync_level(&mut self) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let level = adapt.ladder.level_of(self.cx.period, self.cx.quality);
+        if level == adapt.level {
+            return;
+        }
+        let promoted = level < adapt.level;
+        adapt.level = level;
+        adapt.detector.reset(promoted);
+        self.shared
+            .quietly(|monitor| monitor.adaptation.level = level);
     }
 }
