@@ -450,6 +450,11 @@ pub struct Levels {
     pub top: bool,
     /// What to do when degradation is exhausted at the top.
     pub reconfiguration: Reconfiguration,
+    /// No time violation for a while (the supervisor's settling time, see
+    /// `docs/runtime.md`): promotion is allowed. A member that was just degraded
+    /// shows no verdict during its hold-down; without this, another member could be
+    /// promoted meanwhile and degraded again right after.
+    pub settled: bool,
 }
 
 /// What [`decide`] asks the supervisor to do (indices into the members).
@@ -578,7 +583,7 @@ fn pick(
 ///    (chosen by `selector`); when all are at the cap (or their own top), a nested
 ///    supervisor notifies higher, the top one raises the cap up to the highest
 ///    member top, and beyond that reconfigures ([`Levels::reconfiguration`]);
-/// 3. without violations: resume a member suspended by adaptation once every running
+/// 3. without violations, once settled ([`Levels::settled`]): resume a member suspended by adaptation once every running
 ///    member has spare time; promote a member above the floor that has spare time
 ///    (`selector`); when none is above the floor and one with spare time is degraded
 ///    (or all are nominal under a granted cap), the top supervisor lowers the floor, a
@@ -634,6 +639,9 @@ pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> De
             }
         }
         return Decision::Exhausted;
+    }
+    if !levels.settled {
+        return Decision::Hold;
     }
     let spare = |i: &usize| members[*i].pressure == Pressure::Spare;
     if active.iter().all(spare)

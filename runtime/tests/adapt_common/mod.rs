@@ -181,3 +181,84 @@ pub fn eventually(what: &str, f: impl Fn() -> bool) {
         std::thread::sleep(ms(5));
     }
 }
+
+/// A supervisor with one state and no sections: the compound only coordinates.
+pub struct Plain;
+
+static PLAIN: Spec = Spec {
+    type_name: "Group",
+    doc: "",
+    states: &[StateSpec {
+        name: "supervising",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Supervisor for Plain {
+    fn spec(&self) -> &'static Spec {
+        &PLAIN
+    }
+}
+
+/// A sleeper on [`SLEEPER`] with priority `priority` (negative: a nice value, which
+/// any process may set) and the quick detection settings.
+pub fn member(name: &str, priority: i32, load: &Arc<Load>) -> Component {
+    sleeper(name, &SLEEPER, load)
+        .with_timing(TimingSpec {
+            priority,
+            ..SLEEPER.timing
+        })
+        .with_adaptation(quick())
+}
+
+/// Replays a compound's adaptation steps (top level, width 1) and checks the
+/// homogeneity interval: an instance is degraded only up to the current maximum
+/// level, and the maximum is raised only when every instance is at it (or at its own
+/// top, `max`). Returns the instances' levels at the end.
+pub fn check_homogeneity(
+    compound: &str,
+    members: &[&str],
+    max: u32,
+    steps: &[Adaptation],
+) -> Vec<u32> {
+    let mut levels = vec![0u32; members.len()];
+    let mut cap = 1;
+    for step in steps {
+        let position = members.iter().position(|m| *m == step.component);
+        match (step.action, position) {
+            (AdaptAction::CapRaised, None) if step.component == compound => {
+                assert_eq!(step.from, cap, "{step}");
+                assert!(
+                    levels.iter().all(|l| *l >= cap || *l == max),
+                    "cap raised with an instance below it: {levels:?}, {step}"
+                );
+                cap = step.to;
+            }
+            (AdaptAction::FloorLowered, None) if step.component == compound => {
+                cap = step.to + 1;
+            }
+            (AdaptAction::Degraded, Some(index)) => {
+                assert_eq!(step.from, levels[index], "{step}");
+                assert!(step.to <= cap, "degraded above the cap {cap}: {step}");
+                levels[index] = step.to;
+            }
+            (AdaptAction::Promoted, Some(index)) => {
+                assert_eq!(step.from, levels[index], "{step}");
+                levels[index] = step.to;
+            }
+            _ => {}
+        }
+    }
+    levels
+}
