@@ -106,9 +106,9 @@ impl AdaptConfig {
 
     /// Whether detection runs for a component with timing block `timing`.
     pub(crate) fn enabled_for(&self, timing: &TimingSpec) -> bool {
-        self.enabled.unwrap_or_else(|| {
-            matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p)
-        })
+        self.enabled.unwrap_or_else(
+            || matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p),
+        )
     }
 }
 
@@ -370,7 +370,9 @@ impl Detector {
         while self.recent.len() > self.config.window.max(1) as usize {
             self.recent.pop_front();
         }
-        let spare_limit = observation.reference.mul_f64(self.config.spare_ratio.max(0.0));
+        let spare_limit = observation
+            .reference
+            .mul_f64(self.config.spare_ratio.max(0.0));
         if !bad && observation.elapsed <= spare_limit {
             self.spare_run = self.spare_run.saturating_add(1);
         } else {
@@ -660,9 +662,7 @@ pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> De
         return Decision::Promote(selector.promote(members, &promotable));
     }
     let none_above = active.iter().all(|i| members[*i].level <= levels.floor);
-    let degraded_spare = active
-        .iter()
-        .any(|i| members[*i].level > 0 && spare(i));
+    let degraded_spare = active.iter().any(|i| members[*i].level > 0 && spare(i));
     let all_nominal = active.iter().all(|i| members[*i].level == 0);
     if levels.top {
         if none_above && levels.floor > 0 && degraded_spare {

@@ -597,7 +597,7 @@ impl CompoundBuilder {
     }
 
     /// How the supervisor chooses the instance to degrade and the one to promote
-    /// (default [`ProtectPriority`](crate::adapt::ProtectPriority); the paper's
+    /// (default [`ProtectPriority`]; the paper's
     /// [`FastestCorrection`](crate::adapt::FastestCorrection), or your own).
     pub fn adaptation_selector(mut self, selector: impl Selector) -> CompoundBuilder {
         self.selector = Box::new(selector);
@@ -2203,28 +2203,6 @@ impl Compound {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_backoff_doubles_from_the_second_restart_up_to_its_maximum() {
-        let budget = Budget {
-            restarts: 10,
-            window: Duration::from_secs(10),
-            backoff: Duration::from_millis(10),
-            backoff_max: Duration::from_millis(50),
-        };
-        let delays: Vec<_> = (0..6).map(|done| budget.delay(done)).collect();
-        assert_eq!(
-            delays,
-            [0, 10, 20, 40, 50, 50].map(Duration::from_millis).to_vec()
-        );
-        // No overflow however many restarts were done.
-        assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
-    }
-}
-
 impl Compound {
     /// Set up adaptation at the first start: the cap (top level: the interval's
     /// width; nested: 0, until the supervisor above grants a level) and the published
@@ -2365,7 +2343,8 @@ impl Compound {
             if decision != Decision::Exhausted {
                 coordinator.exhausted = false;
             }
-            let (cap, floor, width) = (coordinator.cap, coordinator.floor, coordinator.config.width);
+            let (cap, floor, width) =
+                (coordinator.cap, coordinator.floor, coordinator.config.width);
             let own = |action, from, to, detail: String| Adaptation {
                 component: self.name.clone(),
                 action,
@@ -2387,15 +2366,26 @@ impl Compound {
                 Decision::RaiseCap => {
                     coordinator.cap = cap + 1;
                     coordinator.floor = (cap + 1).saturating_sub(width);
-                    let detail = format!("every instance at the current maximum; time violation at {}", violators());
-                    publish(own(AdaptAction::CapRaised, cap, cap + 1, detail), cap + 1, coordinator.floor);
+                    let detail = format!(
+                        "every instance at the current maximum; time violation at {}",
+                        violators()
+                    );
+                    publish(
+                        own(AdaptAction::CapRaised, cap, cap + 1, detail),
+                        cap + 1,
+                        coordinator.floor,
+                    );
                     continue;
                 }
                 Decision::LowerFloor => {
                     coordinator.floor = floor - 1;
                     coordinator.cap = (floor - 1 + width).min(max_level.max(width));
                     let detail = "every instance at the current minimum, spare time".to_owned();
-                    publish(own(AdaptAction::FloorLowered, floor, floor - 1, detail), coordinator.cap, floor - 1);
+                    publish(
+                        own(AdaptAction::FloorLowered, floor, floor - 1, detail),
+                        coordinator.cap,
+                        floor - 1,
+                    );
                     continue;
                 }
                 Decision::Degrade(m) | Decision::Promote(m) | Decision::Clamp(m) => {
@@ -2411,7 +2401,11 @@ impl Compound {
                             AdaptAction::Promoted,
                             "spare time".to_owned(),
                         ),
-                        _ => (cap, AdaptAction::Promoted, format!("above the current maximum level {cap}")),
+                        _ => (
+                            cap,
+                            AdaptAction::Promoted,
+                            format!("above the current maximum level {cap}"),
+                        ),
                     };
                     let index = indices[m];
                     coordinator.pending[index] = Some((to, Instant::now()));
@@ -2432,9 +2426,17 @@ impl Compound {
                     let suspend = matches!(decision, Decision::Suspend(_));
                     coordinator.suspended[index] = suspend;
                     let (action, target, detail) = if suspend {
-                        (AdaptAction::Suspended, Controllable::Suspended, format!("degradation exhausted; time violation at {}", violators()))
+                        (
+                            AdaptAction::Suspended,
+                            Controllable::Suspended,
+                            format!("degradation exhausted; time violation at {}", violators()),
+                        )
                     } else {
-                        (AdaptAction::Resumed, Controllable::Running, "spare time".to_owned())
+                        (
+                            AdaptAction::Resumed,
+                            Controllable::Running,
+                            "spare time".to_owned(),
+                        )
                     };
                     let level = members[m].level;
                     let step = Adaptation {
@@ -2451,7 +2453,10 @@ impl Compound {
                 }
                 Decision::Exhausted if !coordinator.exhausted => {
                     coordinator.exhausted = true;
-                    let detail = format!("every instance at the highest level; time violation at {}", violators());
+                    let detail = format!(
+                        "every instance at the highest level; time violation at {}",
+                        violators()
+                    );
                     publish(own(AdaptAction::Exhausted, cap, cap, detail), cap, floor);
                 }
                 Decision::NotifyHigher | Decision::ReportSpare => {
@@ -2461,9 +2466,18 @@ impl Compound {
                         .is_some_and(|s| s.snapshot().adaptation.pressure == pressure);
                     if !already {
                         let (action, detail) = if pressure == Pressure::Violation {
-                            (AdaptAction::NotifiedHigher, format!("every instance at the current maximum level {cap}; time violation at {}", violators()))
+                            (
+                                AdaptAction::NotifiedHigher,
+                                format!(
+                                    "every instance at the current maximum level {cap}; time violation at {}",
+                                    violators()
+                                ),
+                            )
                         } else {
-                            (AdaptAction::ReportedSpare, "spare time; no instance above the current minimum".to_owned())
+                            (
+                                AdaptAction::ReportedSpare,
+                                "spare time; no instance above the current minimum".to_owned(),
+                            )
                         };
                         publish(own(action, cap, cap, detail), cap, floor);
                     }
@@ -2512,5 +2526,27 @@ const DEFAULT_PENDING: Duration = Duration::from_secs(2);
 fn post(handle: &Handle, command: Command) {
     if let Err(rejected) = handle.post(command) {
         tracing::warn!("adaptation: {rejected}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backoff_doubles_from_the_second_restart_up_to_its_maximum() {
+        let budget = Budget {
+            restarts: 10,
+            window: Duration::from_secs(10),
+            backoff: Duration::from_millis(10),
+            backoff_max: Duration::from_millis(50),
+        };
+        let delays: Vec<_> = (0..6).map(|done| budget.delay(done)).collect();
+        assert_eq!(
+            delays,
+            [0, 10, 20, 40, 50, 50].map(Duration::from_millis).to_vec()
+        );
+        // No overflow however many restarts were done.
+        assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
     }
 }

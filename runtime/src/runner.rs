@@ -1375,14 +1375,19 @@ impl Runner {
         });
         let load = adapt.detector.load();
         let Some(verdict) = verdict else {
-            self.shared.quietly(|monitor| monitor.adaptation.load = load);
+            self.shared
+                .quietly(|monitor| monitor.adaptation.load = load);
             return;
         };
         self.shared.set_pressure(verdict, load);
         if verdict != Pressure::Violation {
             adapt.exhausted = false;
         }
-        if self.shared.adapt_managed.load(std::sync::atomic::Ordering::Acquire) {
+        if self
+            .shared
+            .adapt_managed
+            .load(std::sync::atomic::Ordering::Acquire)
+        {
             return; // The compound's supervisor decides.
         }
         let (level, max) = (adapt.level, adapt.ladder.max_level());

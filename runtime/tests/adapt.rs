@@ -157,7 +157,11 @@ fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_qualit
     system.run_all().expect("run");
     let monitor = wait(&asked, "quality lowered", |m| m.adaptation.level == 1);
     assert_eq!(monitor.quality, 1);
-    assert_eq!(monitor.period, Some(ms(10)), "no period interval: no period step");
+    assert_eq!(
+        monitor.period,
+        Some(ms(10)),
+        "no period interval: no period step"
+    );
     assert!(monitor.adaptation.enabled);
     // The other one, same work, same spec, default settings: off.
     let monitor = wait(&default, "missed deadlines", |m| m.missed_deadlines >= 5);
@@ -176,10 +180,12 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
         .add(sleeper("s", &SLEEPER, &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
     let fixed = system
-        .add(sleeper("f", &FIXED, &load).with_timing(coolbot::TimingSpec {
-            qualities: &[],
-            ..FIXED.timing
-        }))
+        .add(
+            sleeper("f", &FIXED, &load).with_timing(coolbot::TimingSpec {
+                qualities: &[],
+                ..FIXED.timing
+            }),
+        )
         .expect("add");
     system.run_all().expect("run");
     handle.command(Command::SetDegradation(4)).expect("level 4");
@@ -201,7 +207,10 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
         "degradation level 5 out of range: the highest is 4"
     );
     let rejected = fixed.command(Command::SetDegradation(1)).unwrap_err();
-    assert!(rejected.reason.starts_with("no adaptation levels"), "{rejected}");
+    assert!(
+        rejected.reason.starts_with("no adaptation levels"),
+        "{rejected}"
+    );
     // A period set by other means moves the level with it.
     handle.command(Command::SetPeriod(ms(35))).expect("period");
     assert_eq!(handle.snapshot().adaptation.level, 3);

@@ -13,7 +13,9 @@ use coolbot::{CompoundBuilder, MonitorEvent, Pressure, System};
 const HEAVY: [u64; 3] = [45, 25, 25];
 const LIGHT: [u64; 3] = [1, 1, 1];
 
-fn adaptation_steps(events: &coolbot::crossbeam_channel::Receiver<MonitorEvent>) -> Vec<coolbot::Adaptation> {
+fn adaptation_steps(
+    events: &crossbeam_channel::Receiver<MonitorEvent>,
+) -> Vec<coolbot::Adaptation> {
     events
         .try_iter()
         .filter_map(|event| match event {
@@ -87,12 +89,19 @@ fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
     for name in ["a", "b", "c"] {
         let handle = group.instance(name).expect("instance");
         let monitor = wait(&handle, "nominal", |m| m.adaptation.level == 0);
-        assert_eq!((monitor.period, monitor.quality), (Some(ms(10)), 0), "{name}");
+        assert_eq!(
+            (monitor.period, monitor.quality),
+            (Some(ms(10)), 0),
+            "{name}"
+        );
     }
     let monitor = wait(&group, "floor 0", |m| m.adaptation.floor == 0);
     assert!(monitor.adaptation.level <= 1);
     steps.extend(adaptation_steps(&events));
-    assert_eq!(check_homogeneity("group", &["a", "b", "c"], 4, &steps), [0, 0, 0]);
+    assert_eq!(
+        check_homogeneity("group", &["a", "b", "c"], 4, &steps),
+        [0, 0, 0]
+    );
     assert!(
         steps.iter().any(|s| s.action == AdaptAction::FloorLowered),
         "promotion lowers the floor from the top"
@@ -139,7 +148,9 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
     let x = outer.instance("inner.x").expect("x");
     assert_eq!(inner.snapshot().adaptation.max_level, 4);
 
-    wait(&x, "x at the bottom of its ladder", |m| m.adaptation.level == 4);
+    wait(&x, "x at the bottom of its ladder", |m| {
+        m.adaptation.level == 4
+    });
     let inner_monitor = inner.snapshot();
     assert_eq!(inner_monitor.adaptation.level, 4, "granted by outer");
     let inner_history = &inner_monitor.adaptation.history;

@@ -6,8 +6,7 @@ use std::time::Duration;
 
 use coolbot::Pressure;
 use coolbot::adapt::{
-    Decision, FastestCorrection, Levels, Member, ProtectPriority, Reconfiguration, Selector,
-    decide,
+    Decision, FastestCorrection, Levels, Member, ProtectPriority, Reconfiguration, Selector, decide,
 };
 use proptest::prelude::*;
 
@@ -114,9 +113,8 @@ fn the_fastest_correction_selector_degrades_the_urgent_and_loaded_first() {
         .iter()
         .map(|m| member(m))
         .collect();
-    let pick = |selector: &dyn Selector| {
-        render(decide(&members, levels(1, 0, true), selector), &members)
-    };
+    let pick =
+        |selector: &dyn Selector| render(decide(&members, levels(1, 0, true), selector), &members);
     assert_eq!(pick(&FastestCorrection), "degrade b");
     assert_eq!(pick(&ProtectPriority), "degrade a");
 }
@@ -166,19 +164,30 @@ impl Model {
             settled: true,
         };
         let decision = decide(&self.members, levels, &ProtectPriority);
-        let violating = self.members.iter().any(|m| m.pressure == Pressure::Violation);
+        let violating = self
+            .members
+            .iter()
+            .any(|m| m.pressure == Pressure::Violation);
         match decision {
             Decision::Degrade(i) => {
                 let m = &mut self.members[i];
                 assert!(violating, "degradation without a violation");
-                assert!(m.level < self.cap.min(m.max_level), "{m:?} not below the cap {}", self.cap);
+                assert!(
+                    m.level < self.cap.min(m.max_level),
+                    "{m:?} not below the cap {}",
+                    self.cap
+                );
                 m.level += 1;
             }
             Decision::RaiseCap => {
                 assert!(violating);
                 assert!(
-                    self.members.iter().all(|m| m.level >= self.cap || m.level == m.max_level),
-                    "cap {} raised with a member below it: {:?}", self.cap, self.members
+                    self.members
+                        .iter()
+                        .all(|m| m.level >= self.cap || m.level == m.max_level),
+                    "cap {} raised with a member below it: {:?}",
+                    self.cap,
+                    self.members
                 );
                 self.cap += 1;
                 self.floor = self.cap - 1;

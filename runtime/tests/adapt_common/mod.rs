@@ -109,7 +109,9 @@ impl Automaton for Sleeper {
         let micros = u64::try_from(period.as_micros()).unwrap_or(u64::MAX);
         self.load.longest_period.fetch_max(micros, Ordering::SeqCst);
         self.load.last_period.store(micros, Ordering::SeqCst);
-        self.load.lowest_quality.fetch_max(quality, Ordering::SeqCst);
+        self.load
+            .lowest_quality
+            .fetch_max(quality, Ordering::SeqCst);
         let work = self.load.work[quality].load(Ordering::SeqCst);
         std::thread::sleep(Duration::from_micros(work));
         self.load.runs.fetch_add(1, Ordering::SeqCst);
