@@ -190,3 +190,75 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
     assert_ne!(inner_monitor.adaptation.pressure, Pressure::Violation);
     assert!(system.shutdown().clean());
 }
+
+/// When even the highest level is not enough, the top-level supervisor reconfigures:
+/// with `SuspendLowestPriority` it suspends the least urgent instance (never one as
+/// urgent as the violator), then reports exhaustion; when time is spare again, the
+/// suspended instance is resumed first, then everyone is promoted.
+#[test]
+fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spare() {
+    let hopeless = Load::new();
+    hopeless.set([45, 45, 45]);
+    let light = Load::new();
+    light.set(LIGHT);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("hi", -1, &hopeless))
+        .instance(member("lo", -4, &light))
+        .adaptation(coolbot::AdaptConfig {
+            reconfiguration: coolbot::Reconfiguration::SuspendLowestPriority,
+            ..coolbot::AdaptConfig::default()
+        })
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    let events = group.subscribe();
+    system.run_all().expect("run");
+    let lo = group.instance("lo").expect("lo");
+
+    let monitor = wait(&group, "exhausted", |m| {
+        m.adaptation
+            .history
+            .iter()
+            .any(|s| s.action == AdaptAction::Exhausted)
+    });
+    assert_eq!(monitor.adaptation.pressure, Pressure::Violation);
+    assert_eq!(lo.state(), coolbot::State::Suspended);
+    let steps = adaptation_steps(&events);
+    let reconfiguration: Vec<_> = steps
+        .iter()
+        .filter(|s| matches!(s.action, AdaptAction::Suspended | AdaptAction::Exhausted))
+        .map(|s| (s.component.as_str(), s.action))
+        .collect();
+    assert_eq!(
+        reconfiguration,
+        [
+            ("lo", AdaptAction::Suspended),
+            ("group", AdaptAction::Exhausted)
+        ]
+    );
+    // Suspended only at the end: both were at the top of their ladders first.
+    let levels = check_homogeneity("group", &["hi", "lo"], 4, &steps);
+    assert_eq!(levels, [4, 4]);
+
+    hopeless.set(LIGHT);
+    wait(&lo, "lo resumed and promoted", |m| {
+        m.state == coolbot::State::Running && m.adaptation.level == 0
+    });
+    let hi = group.instance("hi").expect("hi");
+    wait(&hi, "hi promoted", |m| m.adaptation.level == 0);
+    let steps = adaptation_steps(&events);
+    let resumed = steps
+        .iter()
+        .position(|s| s.action == AdaptAction::Resumed && s.component == "lo")
+        .expect("lo resumed");
+    let promoted = steps
+        .iter()
+        .position(|s| s.action == AdaptAction::Promoted)
+        .expect("promotions");
+    assert!(
+        resumed < promoted,
+        "resumed before any promotion: {steps:#?}"
+    );
+    assert!(system.shutdown().clean());
+}
