@@ -1150,27 +1150,27 @@ impl CompoundBuilder {
             standing: (0..self.instances.len()).collect(),
         };
         let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
-        let coordinator = (self.adaptation.enabled != Some(false)).then(|| {
-            for instance in &self.instances {
-                instance
-                    .handle
-                    .shared
-                    .adapt_managed
-                    .store(true, Ordering::Release);
-            }
-            Coordinator {
-                config: self.adaptation,
-                selector: self.selector,
-                cap: 0,
-                floor: 0,
-                initialized: false,
-                dirty: false,
-                exhausted: false,
-                suspended: vec![false; self.instances.len()],
-                pending: vec![None; self.instances.len()],
-                max_level: 0,
-                settle_until: None,
-            }
+        // The instances' runners only detect and publish: the compound decides (and,
+        // with its adaptation off, nothing does).
+        for instance in &self.instances {
+            instance
+                .handle
+                .shared
+                .adapt_managed
+                .store(true, Ordering::Release);
+        }
+        let coordinator = (self.adaptation.enabled != Some(false)).then(|| Coordinator {
+            config: self.adaptation,
+            selector: self.selector,
+            cap: 0,
+            floor: 0,
+            initialized: false,
+            dirty: false,
+            exhausted: false,
+            suspended: vec![false; self.instances.len()],
+            pending: vec![None; self.instances.len()],
+            max_level: 0,
+            settle_until: None,
         });
         let compound = Compound {
             name: self.name.clone(),

@@ -262,3 +262,37 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
     );
     assert!(system.shutdown().clean());
 }
+
+/// A compound with adaptation off: its instances detect and publish their verdicts,
+/// nothing acts on them (neither the compound nor the instances themselves).
+#[test]
+fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
+    let heavy = Load::new();
+    heavy.set(HEAVY);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("b", -1, &heavy))
+        .adaptation(coolbot::AdaptConfig::off())
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    system.run_all().expect("run");
+    let b = group.instance("b").expect("b");
+    let monitor = wait(&b, "a violation, published", |m| {
+        m.adaptation.pressure == Pressure::Violation
+    });
+    let runs = heavy.runs();
+    adapt_common::eventually("five more sections", || heavy.runs() >= runs + 5);
+    let monitor_now = b.snapshot();
+    assert_eq!(monitor_now.adaptation.level, 0);
+    assert_eq!(monitor_now.period, monitor.period);
+    assert!(monitor_now.adaptation.history.is_empty());
+    let compound = group.snapshot();
+    assert!(!compound.adaptation.enabled);
+    assert!(compound.adaptation.history.is_empty());
+    let rejected = group
+        .command(coolbot::Command::SetDegradation(1))
+        .unwrap_err();
+    assert_eq!(rejected.reason, "adaptation is off in this compound");
+    assert!(system.shutdown().clean());
+}
