@@ -74,57 +74,52 @@ impl Automaton for Ticker {
     }
 }
 
-/// CPU time per period (ns) of each side over `rounds` rounds of `each` long.
-fn periods(rounds: usize, each: Duration) -> (Vec<f64>, Vec<f64>) {
+/// CPU time per period (ns) of each component over `rounds` rounds of `each` long:
+/// adaptation on, off, and off again (the noise floor of the comparison).
+fn periods(rounds: usize, each: Duration) -> [Vec<f64>; 3] {
     let mut system = System::new();
-    let on_count = Arc::new(AtomicU64::new(0));
-    let off_count = Arc::new(AtomicU64::new(0));
-    // Never spare, never violating on an idle machine: the detector runs and stays
-    // at level 0, which is the steady-state cost.
-    let on = system
-        .add(
-            Component::new(
-                "on",
-                Box::new(Ticker(Arc::clone(&on_count))),
+    let configs = [
+        // Never spare, never violating on an idle machine: the detector runs and
+        // stays at level 0, which is the steady-state cost.
+        AdaptConfig {
+            spare_ratio: 0.0,
+            ..AdaptConfig::on()
+        },
+        AdaptConfig::off(),
+        AdaptConfig::off(),
+    ];
+    let sides: Vec<_> = configs
+        .iter()
+        .enumerate()
+        .map(|(index, config)| {
+            let count = Arc::new(AtomicU64::new(0));
+            let component = Component::new(
+                format!("c{index}"),
+                Box::new(Ticker(Arc::clone(&count))),
                 PortSet::new(),
             )
-            .with_adaptation(AdaptConfig {
-                spare_ratio: 0.0,
-                ..AdaptConfig::on()
-            }),
-        )
-        .expect("add");
-    let off = system
-        .add(
-            Component::new(
-                "off",
-                Box::new(Ticker(Arc::clone(&off_count))),
-                PortSet::new(),
-            )
-            .with_adaptation(AdaptConfig::off()),
-        )
-        .expect("add");
+            .with_adaptation(*config);
+            (system.add(component).expect("add"), count)
+        })
+        .collect();
     system.start().expect("start");
-    let mut on_samples = Vec::new();
-    let mut off_samples = Vec::new();
+    let mut samples = [Vec::new(), Vec::new(), Vec::new()];
     for round in 0..rounds {
-        // Alternate which one starts first.
-        let pair = if round % 2 == 0 {
-            [(&on, &on_count), (&off, &off_count)]
-        } else {
-            [(&off, &off_count), (&on, &on_count)]
-        };
-        let before: Vec<_> = pair
+        // Rotate which one starts first.
+        let order: Vec<usize> = (0..3).map(|k| (k + round) % 3).collect();
+        let before: Vec<_> = sides
             .iter()
             .map(|(h, c)| (h.snapshot().cpu_time, c.load(Ordering::Relaxed)))
             .collect();
-        for (handle, _) in &pair {
-            handle
+        for &index in &order {
+            sides[index]
+                .0
                 .command(Command::SetState(Controllable::Running))
                 .expect("running");
         }
         std::thread::sleep(each);
-        for (handle, _) in &pair {
+        for &index in &order {
+            let handle = &sides[index].0;
             handle
                 .command(Command::SetState(Controllable::Ready))
                 .expect("ready");
@@ -132,20 +127,15 @@ fn periods(rounds: usize, each: Duration) -> (Vec<f64>, Vec<f64>) {
                 .wait_state(State::Ready, Duration::from_secs(5))
                 .expect("ready");
         }
-        for ((handle, count), (cpu, runs)) in pair.iter().zip(before) {
+        for (index, ((handle, count), (cpu, runs))) in sides.iter().zip(before).enumerate() {
             let cpu = handle.snapshot().cpu_time.saturating_sub(cpu);
             let runs = count.load(Ordering::Relaxed) - runs;
-            let per = cpu.as_nanos() as f64 / runs.max(1) as f64;
-            if handle.name() == "on" {
-                on_samples.push(per);
-            } else {
-                off_samples.push(per);
-            }
+            samples[index].push(cpu.as_nanos() as f64 / runs.max(1) as f64);
         }
     }
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
-    (on_samples, off_samples)
+    samples
 }
 
 fn median(mut values: Vec<f64>) -> f64 {
@@ -179,17 +169,12 @@ fn main() {
     } else {
         (20, Duration::from_millis(500))
     };
-    let (on, off) = periods(rounds, each);
-    let (on, off) = (median(on), median(off));
+    let [on, off, control] = periods(rounds, each).map(median);
+    println!("adaptation cost ({} mode)", if quick { "quick" } else { "full" });
     println!(
-        "adaptation cost ({} mode)",
-        if quick { "quick" } else { "full" }
-    );
-    println!(
-        "  CPU time per 1 kHz period, median of {rounds} rounds: adaptation on {:.0} ns, off {:.0} ns, ratio {:.2}",
-        on,
-        off,
-        on / off
+        "  CPU time per 1 kHz period, median of {rounds} rounds: adaptation on {on:.0} ns, off {off:.0} ns, ratio {:.2} (off against off: {:.2})",
+        on / off,
+        control / off
     );
     for count in [10usize, 100] {
         let members = members(count);

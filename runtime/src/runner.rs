@@ -1010,8 +1010,12 @@ impl Runner {
         }
         self.elapsed_published = self.elapsed;
         let elapsed = self.elapsed;
+        let load = self.adapt.as_ref().map(|adapt| adapt.detector.load());
         self.shared.quietly(|monitor| {
             monitor.elapsed_time = elapsed;
+            if let Some(load) = load {
+                monitor.adaptation.load = load;
+            }
             if let Some(cpu) = cpu {
                 monitor.cpu_time = cpu;
             }
@@ -1374,9 +1378,8 @@ impl Runner {
             reference,
         });
         let load = adapt.detector.load();
+        // (Without a new verdict, the load is published with the timing counters.)
         let Some(verdict) = verdict else {
-            self.shared
-                .quietly(|monitor| monitor.adaptation.load = load);
             return;
         };
         self.shared.set_pressure(verdict, load);
