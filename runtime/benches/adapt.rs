@@ -170,7 +170,10 @@ fn main() {
         (20, Duration::from_millis(500))
     };
     let [on, off, control] = periods(rounds, each).map(median);
-    println!("adaptation cost ({} mode)", if quick { "quick" } else { "full" });
+    println!(
+        "adaptation cost ({} mode)",
+        if quick { "quick" } else { "full" }
+    );
     println!(
         "  CPU time per 1 kHz period, median of {rounds} rounds: adaptation on {on:.0} ns, off {off:.0} ns, ratio {:.2} (off against off: {:.2})",
         on / off,
