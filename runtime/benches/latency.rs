@@ -96,7 +96,7 @@ fn end(kind: Kind) -> End {
             let output = PosterOut::<Instant>::new();
             let ports = ports(&input, &output);
             End {
-                recv: Box::new(move || if input.is_new() { input.read() } else { None }),
+                recv: Box::new(move || input.take_new()),
                 send: Box::new(move |t| output.post(t)),
                 ports,
                 spec: &POSTER_SPEC,
@@ -205,14 +205,19 @@ fn main() {
     let mode = Mode::from_env();
     let per_round = mode.scale(10_000, 500) / ROUNDS;
     let mut table = Table::new("One-way latency, ping-pong (half round trip)", mode);
+    // `cargo bench --bench latency -- last poster` measures only the kinds named.
+    let named: Vec<String> = std::env::args().skip(1).collect();
     for kind in [Kind::Fifo, Kind::Last, Kind::Poster] {
+        let name = format!("{kind:?}").to_lowercase();
+        if named.iter().any(|arg| !arg.starts_with('-')) && !named.contains(&name) {
+            continue;
+        }
         let (project, baseline) = common::alternate(
             ROUNDS,
             || project_round(kind, per_round),
             || baseline_round(per_round),
         );
         let (project, baseline) = (Samples::new(project), Samples::new(baseline));
-        let name = format!("{kind:?}").to_lowercase();
         table.row(
             &format!("{name} p50"),
             Figure::Time(project.p50()),

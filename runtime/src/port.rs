@@ -867,8 +867,15 @@ impl<T: Packet> Default for LastIn<T> {
 /// Where a poster input reads from: a producer's post, maybe through a converter.
 pub(crate) trait PosterSource<T>: Send + Sync {
     /// The posted value and its sequence number, read together.
-    fn read(&self) -> (Option<T>, u64);
+    fn read(&self) -> (Option<T>, u64) {
+        // (Without a `seen` bound, `read_newer` always answers.)
+        self.read_newer(None).unwrap_or((None, 0))
+    }
+    /// The sequence number of the latest post (0 before any).
     fn seq(&self) -> u64;
+    /// The posted value and its sequence number, if that is above `seen` (always when
+    /// `seen` is `None`), under one lock of the producer's slot.
+    fn read_newer(&self, seen: Option<u64>) -> Option<(Option<T>, u64)>;
 }
 
 /// A poster input: reads the value its producer posted.
@@ -910,6 +917,17 @@ impl<T: Packet> PosterIn<T> {
         value
     }
 
+    /// The producer's posted value, only if it posted since the last `read` or
+    /// `take_new` (one look at the producer instead of `is_new` then `read`).
+    pub fn take_new(&self) -> Option<T> {
+        let source = read(&self.inner.source);
+        let (value, seq) = source
+            .as_ref()?
+            .read_newer(Some(self.inner.seen.load(Ordering::Acquire)))?;
+        self.inner.seen.store(seq, Ordering::Release);
+        value
+    }
+
     /// Whether the producer posted since the last `read`.
     pub fn is_new(&self) -> bool {
         read(&self.inner.source)
@@ -924,9 +942,7 @@ impl<T: Packet> PosterIn<T> {
 
     /// Request a post and wait for it.
     pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
-        self.inner
-            .core
-            .pull_with(timeout, || if self.is_new() { self.read() } else { None })
+        self.inner.core.pull_with(timeout, || self.take_new())
     }
 }
 
@@ -1056,20 +1072,35 @@ impl<T> Clone for PosterOut<T> {
 
 pub(crate) struct PosterOutInner<T> {
     core: Arc<OutputCore>,
-    slot: RwLock<Option<T>>,
-    seq: AtomicU64,
+    /// The posted value and its sequence number (1 for the first post), together
+    /// under one short lock: a post takes it once, a reader once.
+    slot: Mutex<(Option<T>, u64)>,
     readers: RwLock<Arc<[Arc<InputCore>]>>,
 }
 
+impl<T> PosterOutInner<T> {
+    /// `f` applied to the posted value and its sequence number, if that is above
+    /// `seen` (always when `seen` is `None`).
+    fn with_newer<R>(
+        &self,
+        seen: Option<u64>,
+        f: impl FnOnce(&Option<T>) -> R,
+    ) -> Option<(R, u64)> {
+        let slot = lock(&self.slot);
+        if seen.is_some_and(|seen| slot.1 <= seen) {
+            return None;
+        }
+        Some((f(&slot.0), slot.1))
+    }
+}
+
 impl<T: Packet> PosterSource<T> for PosterOutInner<T> {
-    fn read(&self) -> (Option<T>, u64) {
-        // `post` bumps the sequence number under the write lock: consistent here.
-        let slot = read(&self.slot);
-        (slot.clone(), self.seq.load(Ordering::Acquire))
+    fn seq(&self) -> u64 {
+        lock(&self.slot).1
     }
 
-    fn seq(&self) -> u64 {
-        self.seq.load(Ordering::Acquire)
+    fn read_newer(&self, seen: Option<u64>) -> Option<(Option<T>, u64)> {
+        self.with_newer(seen, Option::clone)
     }
 }
 
@@ -1079,14 +1110,14 @@ struct ConvertedPoster<A, B> {
 }
 
 impl<A: Packet, B: Packet> PosterSource<B> for ConvertedPoster<A, B> {
-    fn read(&self) -> (Option<B>, u64) {
-        let slot = read(&self.source.slot);
-        let seq = self.source.seq.load(Ordering::Acquire);
-        (slot.as_ref().map(|value| (self.convert)(value)), seq)
-    }
-
     fn seq(&self) -> u64 {
         self.source.seq()
+    }
+
+    fn read_newer(&self, seen: Option<u64>) -> Option<(Option<B>, u64)> {
+        self.source.with_newer(seen, |value| {
+            value.as_ref().map(|value| (self.convert)(value))
+        })
     }
 }
 
@@ -1096,8 +1127,7 @@ impl<T: Packet> PosterOut<T> {
         PosterOut {
             inner: Arc::new(PosterOutInner {
                 core: OutputCore::new(),
-                slot: RwLock::new(None),
-                seq: AtomicU64::new(0),
+                slot: Mutex::new((None, 0)),
                 readers: RwLock::new(Arc::from([])),
             }),
         }
@@ -1106,9 +1136,9 @@ impl<T: Packet> PosterOut<T> {
     /// Post a value: connected poster inputs read it from now on and are woken.
     pub fn post(&self, packet: T) {
         {
-            let mut slot = write(&self.inner.slot);
-            *slot = Some(packet);
-            self.inner.seq.fetch_add(1, Ordering::AcqRel);
+            let mut slot = lock(&self.inner.slot);
+            slot.0 = Some(packet);
+            slot.1 += 1;
         }
         for reader in read(&self.inner.readers).iter() {
             reader.arrived();
@@ -1117,7 +1147,7 @@ impl<T: Packet> PosterOut<T> {
 
     /// The value posted now.
     pub fn posted(&self) -> Option<T> {
-        read(&self.inner.slot).clone()
+        lock(&self.inner.slot).0.clone()
     }
 }
 

@@ -57,8 +57,12 @@ const SPIN: Duration = Duration::from_micros(2);
 /// answers a request (a ping-pong), never pauses.
 const BATCH_PAUSE: u32 = 32;
 
-/// Spin hints between two clock reads while spinning.
-const SPIN_BATCH: u32 = 32;
+/// Spin hints between two clock reads while spinning (a hint takes about 25 ns on the
+/// development machine, a clock read about 30 ns). A thread that finds work while
+/// spinning starts its turn from the spin's last clock reading instead of reading the
+/// clock again: the reading is at most this many hints old (about 0.1 us), and a
+/// packet handed over between spinning threads saves a clock read on its path.
+const SPIN_BATCH: u32 = 4;
 
 /// `yield_now` rounds after the spin, before parking (as crossbeam's `Backoff`): on a
 /// busy machine, they let the peer this thread waits for run on its core.
@@ -132,6 +136,9 @@ pub(crate) struct Runner {
     /// The last wait found work by looking at the sources (`wait_for_input`), not at
     /// the bell: the next turn does not clear the bell.
     found_by_polling: bool,
+    /// When the last wait found its work while spinning: the spin's last clock
+    /// reading, which the next turn starts from (see `SPIN_BATCH`).
+    found_at: Option<Instant>,
     /// This turn did not clear the bell (the bell may be rung for work already seen).
     polled: bool,
     /// The thread's OS scheduling (`priority`), once the thread runs.
@@ -206,6 +213,7 @@ impl Runner {
             supervised,
             arrivals_count_on_entry: false,
             found_by_polling: false,
+            found_at: None,
             polled: false,
             scheduling: None,
             adapt,
@@ -260,8 +268,9 @@ impl Runner {
             if rung && !self.polled {
                 self.bell.clear();
             }
-            // One clock reading per turn (user calls start from it, and end with another).
-            self.clock = Instant::now();
+            // One clock reading per turn (user calls start from it, and end with another),
+            // or the reading the spin that found this turn's work just took.
+            self.clock = self.found_at.take().unwrap_or_else(Instant::now);
             // 1. Control first.
             if (rung || !self.deferred.is_empty()) && !self.drain_control() {
                 break;
@@ -410,15 +419,18 @@ impl Runner {
             return;
         }
         let idle_since = Instant::now();
+        let mut read_at = idle_since;
         'spin: loop {
             for _ in 0..SPIN_BATCH {
                 if found(self) {
                     self.found_by_polling = polling;
+                    self.found_at = Some(read_at);
                     return;
                 }
                 std::hint::spin_loop();
             }
-            if idle_since.elapsed() >= SPIN {
+            read_at = Instant::now();
+            if read_at.saturating_duration_since(idle_since) >= SPIN {
                 break 'spin;
             }
         }

@@ -379,11 +379,17 @@ fn poster_inputs_read_the_producers_latest_post() {
     assert_eq!(r1.read().as_deref(), Some("v2"));
     assert!(!r1.is_new());
     assert_eq!(r1.read().as_deref(), Some("v2"), "reading does not consume");
-    assert_eq!(r2.read().as_deref(), Some("v2"));
-    assert_eq!(post.posted().as_deref(), Some("v2"));
+    assert_eq!(r2.take_new().as_deref(), Some("v2"), "r2 had not read v2");
+    assert_eq!(r2.take_new(), None, "take_new returns each post once");
+    assert_eq!(r2.read().as_deref(), Some("v2"), "read still sees it");
+    post.post("v3".to_owned());
+    assert_eq!(r1.take_new().as_deref(), Some("v3"));
+    assert!(!r1.is_new(), "take_new marks the post as read");
+    assert_eq!(post.posted().as_deref(), Some("v3"));
     pair.system.disconnect("p.map", "c.r1").expect("disconnect");
     assert_eq!(r1.read(), None, "a disconnected poster input reads nothing");
-    assert_eq!(r2.read().as_deref(), Some("v2"));
+    assert_eq!(r2.read().as_deref(), Some("v3"));
+    assert_eq!(r1.take_new(), None, "nor does take_new");
 }
 
 #[test]

@@ -49,25 +49,46 @@ enum RTy {
     Unknown,
 }
 
+impl RTy {
+    /// The type as a noun without its article ("float", "optional float"); `None` for
+    /// the kinds that are not named with an article (`none`, a symbol, a description).
+    fn noun(&self) -> Option<String> {
+        Some(match self {
+            RTy::Bool => "bool".to_owned(),
+            RTy::Int => "integer".to_owned(),
+            RTy::Float => "float".to_owned(),
+            RTy::Str => "string".to_owned(),
+            RTy::Duration => "duration".to_owned(),
+            RTy::Time => "time".to_owned(),
+            RTy::Enum(name) => format!("`{name}` value"),
+            RTy::Optional(inner) => match inner.noun() {
+                Some(noun) => format!("optional {noun}"),
+                None => format!("optional {inner}"),
+            },
+            RTy::State => "default automaton state".to_owned(),
+            RTy::UserState(component, _) => format!("user state of `{component}`"),
+            RTy::Result => "result".to_owned(),
+            RTy::Quality(component, _) => format!("quality level of `{component}`"),
+            RTy::Unknown => "unknown type".to_owned(),
+            RTy::NoneLit | RTy::Symbol(_) | RTy::Other(_) => return None,
+        })
+    }
+}
+
+/// Every type reads the same way in messages: "a float", "a string", "an optional
+/// integer", "a `Mode` value".
 impl fmt::Display for RTy {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(noun) = self.noun() {
+            // ("a user state": the vowel of "user" is not sounded as one.)
+            let vowel = noun.starts_with(['a', 'e', 'i', 'o', 'u']) && !noun.starts_with("user");
+            return write!(f, "{} {noun}", if vowel { "an" } else { "a" });
+        }
         match self {
-            RTy::Bool => f.write_str("bool"),
-            RTy::Int => f.write_str("an integer"),
-            RTy::Float => f.write_str("a float"),
-            RTy::Str => f.write_str("String"),
-            RTy::Duration => f.write_str("Duration"),
-            RTy::Time => f.write_str("Time"),
-            RTy::Enum(name) => f.write_str(name),
-            RTy::Optional(inner) => write!(f, "{inner}?"),
-            RTy::State => f.write_str("a default automaton state"),
-            RTy::UserState(component, _) => write!(f, "a user state of `{component}`"),
-            RTy::Result => f.write_str("a result"),
-            RTy::Quality(component, _) => write!(f, "a quality level of `{component}`"),
             RTy::NoneLit => f.write_str("`none`"),
             RTy::Symbol(name) => write!(f, "`{}`", name.name),
             RTy::Other(description) => f.write_str(description),
-            RTy::Unknown => f.write_str("an unknown type"),
+            _ => Ok(()),
         }
     }
 }
@@ -520,4 +541,32 @@ fn override_levels(instance: &ast::Instance) -> Option<Vec<String>> {
             }
             _ => None,
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RTy;
+
+    #[test]
+    fn types_read_with_their_article() {
+        let cases = [
+            (RTy::Bool, "a bool"),
+            (RTy::Int, "an integer"),
+            (RTy::Str, "a string"),
+            (RTy::Optional(Box::new(RTy::Float)), "an optional float"),
+            (
+                RTy::Optional(Box::new(RTy::Enum("Mode".into()))),
+                "an optional `Mode` value",
+            ),
+            (
+                RTy::UserState("Gate".into(), Vec::new()),
+                "a user state of `Gate`",
+            ),
+            (RTy::Unknown, "an unknown type"),
+            (RTy::NoneLit, "`none`"),
+        ];
+        for (ty, text) in cases {
+            assert_eq!(ty.to_string(), text);
+        }
+    }
 }
