@@ -789,7 +789,7 @@ impl Runner {
                     )));
                 } else {
                     self.set_quality(*quality);
-                    self.resync_level();
+                    self.resync_level("quality set through the control port");
                     reply(Reply::Done);
                 }
             }
@@ -972,7 +972,7 @@ impl Runner {
                 monitor.period = period;
                 vec![MonitorEvent::Period(period)]
             });
-            self.resync_level();
+            self.resync_level("period set through the control port or by the component");
         }
         self.publish_variables();
     }
@@ -1113,7 +1113,7 @@ impl Runner {
                 PlanStep::Degrade => {
                     if self.cx.quality + 1 < self.timing.qualities.len() {
                         self.set_quality(self.cx.quality + 1);
-                        self.resync_level();
+                        self.resync_level("a `degrade` continuity plan step");
                         return Recovery::Recovered;
                     }
                 }
@@ -1478,8 +1478,9 @@ impl Runner {
     }
 
     /// The period or quality was set by other means (a command, a `degrade` plan, the
-    /// component's own `set_period`): the level is where they stand on the ladder.
-    fn resync_level(&mut self) {
+    /// component's own `set_period`): the level is where they stand on the ladder, an
+    /// `Adaptation` step says so (`why`), and the detector starts afresh.
+    fn resync_level(&mut self, why: &str) {
         let Some(adapt) = self.adapt.as_mut() else {
             return;
         };
@@ -1487,10 +1488,26 @@ impl Runner {
         if level == adapt.level {
             return;
         }
-        let promoted = level < adapt.level;
+        let from = adapt.level;
+        let promoted = level < from;
         adapt.level = level;
         adapt.detector.reset(promoted);
+        let load = adapt.detector.load();
+        self.shared.set_pressure(Pressure::Nominal, load);
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: if promoted {
+                AdaptAction::Promoted
+            } else {
+                AdaptAction::Degraded
+            },
+            from,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: why.to_owned(),
+        };
         self.shared
-            .quietly(|monitor| monitor.adaptation.level = level);
+            .adaptation_step(step, |status| status.level = level);
     }
 }

@@ -215,6 +215,28 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
     handle.command(Command::SetPeriod(ms(35))).expect("period");
     assert_eq!(handle.snapshot().adaptation.level, 3);
     handle.command(Command::SetQuality(1)).expect("quality");
-    assert_eq!(handle.snapshot().adaptation.level, 4);
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.adaptation.level, 4);
+    let last: Vec<_> = monitor.adaptation.history[2..]
+        .iter()
+        .map(|step| (step.action, step.from, step.to, step.detail.as_str()))
+        .collect();
+    assert_eq!(
+        last,
+        [
+            (
+                AdaptAction::Degraded,
+                1,
+                3,
+                "period set through the control port or by the component"
+            ),
+            (
+                AdaptAction::Degraded,
+                3,
+                4,
+                "quality set through the control port"
+            ),
+        ]
+    );
     assert!(system.shutdown().clean());
 }
