@@ -156,6 +156,7 @@ fn members(count: usize) -> Vec<Member> {
                 Pressure::Nominal
             },
             load: (i % 10) as f64 / 10.0,
+            cpu_share: 0.0,
             period: Some(Duration::from_millis(10 + i as u64)),
             suspended: false,
         })

@@ -226,6 +226,11 @@ pub struct AdaptStatus {
     /// Section time over period, smoothed (an atomic component's demand; 0 for a
     /// compound).
     pub load: f64,
+    /// The share of a core the component's thread used (its CPU time over wall-clock
+    /// time between the monitor's CPU time readings), smoothed: the paper's "CPU time
+    /// versus elapsed time" load profile (0 for a compound).
+    #[serde(default)]
+    pub cpu_share: f64,
     /// The last [`ADAPTATION_HISTORY`] steps, oldest first.
     pub history: Vec<Adaptation>,
     /// How many steps in all.
@@ -433,6 +438,8 @@ pub struct Member {
     pub pressure: Pressure,
     /// Its demand: section time over period.
     pub load: f64,
+    /// Its computational demand: the share of a core its thread uses.
+    pub cpu_share: f64,
     /// Its period now.
     pub period: Option<Duration>,
     /// Suspended by adaptation (reconfiguration).
@@ -540,7 +547,8 @@ impl Selector for ProtectPriority {
 }
 
 /// The paper's "fastest correction" [`Selector`]: instances with a time violation
-/// first, then the highest priority, the highest load, the shortest period.
+/// first, then the highest priority, the highest computational demand (share of a
+/// core, then section time over period), the shortest period.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct FastestCorrection;
 
@@ -551,6 +559,7 @@ impl Selector for FastestCorrection {
             violating(a)
                 .cmp(&violating(b))
                 .then(a.priority.cmp(&b.priority))
+                .then(a.cpu_share.total_cmp(&b.cpu_share))
                 .then(a.load.total_cmp(&b.load))
                 .then(period_key(b).cmp(&period_key(a)))
         })

@@ -2284,6 +2284,7 @@ impl Compound {
                 max_level: monitor.adaptation.max_level,
                 pressure,
                 load: monitor.adaptation.load,
+                cpu_share: monitor.adaptation.cpu_share,
                 period: monitor.period,
                 suspended,
             });

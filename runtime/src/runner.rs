@@ -1022,11 +1022,18 @@ impl Runner {
         }
         self.elapsed_published = self.elapsed;
         let elapsed = self.elapsed;
-        let load = self.adapt.as_ref().map(|adapt| adapt.detector.load());
+        let clock = self.clock;
+        let load = self.adapt.as_mut().map(|adapt| {
+            if let Some(cpu) = cpu {
+                adapt.profile(cpu, clock);
+            }
+            (adapt.detector.load(), adapt.cpu_share)
+        });
         self.shared.quietly(|monitor| {
             monitor.elapsed_time = elapsed;
-            if let Some(load) = load {
+            if let Some((load, cpu_share)) = load {
                 monitor.adaptation.load = load;
+                monitor.adaptation.cpu_share = cpu_share;
             }
             if let Some(cpu) = cpu {
                 monitor.cpu_time = cpu;
@@ -1353,6 +1360,10 @@ struct Local {
     level: u32,
     /// `Exhausted` was published for the current violation.
     exhausted: bool,
+    /// The last CPU time reading and when (wall clock), for `cpu_share`.
+    cpu_mark: Option<(Instant, Duration)>,
+    /// The thread's CPU time over wall-clock time between readings, smoothed.
+    cpu_share: f64,
 }
 
 impl Local {
@@ -1366,7 +1377,25 @@ impl Local {
             detector: Detector::new(config),
             level: 0,
             exhausted: false,
+            cpu_mark: None,
+            cpu_share: 0.0,
         })
+    }
+
+    /// Load profiling (paper 3.6.1, "CPU time versus elapsed time"): the share of a
+    /// core the thread used since the last CPU time reading (taken anyway for the
+    /// monitor, at most every 10 ms while busy).
+    fn profile(&mut self, cpu: Duration, now: Instant) {
+        if let Some((then, before)) = self.cpu_mark {
+            let wall = now.saturating_duration_since(then).as_secs_f64();
+            if wall >= 0.001 {
+                let share = cpu.saturating_sub(before).as_secs_f64() / wall;
+                self.cpu_share = 0.5 * self.cpu_share + 0.5 * share.min(1.0);
+                self.cpu_mark = Some((now, cpu));
+            }
+        } else {
+            self.cpu_mark = Some((now, cpu));
+        }
     }
 }
 

@@ -240,3 +240,36 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
     );
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn the_load_profile_tells_computing_from_waiting() {
+    let sleeping = Load::new();
+    sleeping.set([4, 4, 4]);
+    let spinning = Load::new();
+    spinning.set([4, 4, 4]);
+    spinning.spin.store(true, Ordering::SeqCst);
+    let mut system = System::new();
+    let waiter = system
+        .add(sleeper("sleeps", &SLEEPER, &sleeping).with_adaptation(quick()))
+        .expect("add");
+    let computer = system
+        .add(sleeper("spins", &SLEEPER, &spinning).with_adaptation(quick()))
+        .expect("add");
+    system.run_all().expect("run");
+    eventually("fifty sections each", || {
+        sleeping.runs() >= 50 && spinning.runs() >= 50
+    });
+    let (sleeps, spins) = (waiter.snapshot(), computer.snapshot());
+    // Both spend about 40 % of their period in their section ...
+    assert!(sleeps.adaptation.load > 0.2, "{:?}", sleeps.adaptation);
+    assert!(spins.adaptation.load > 0.2, "{:?}", spins.adaptation);
+    // ... but only one computes.
+    assert!(spins.adaptation.cpu_share > 0.05, "{:?}", spins.adaptation);
+    assert!(
+        sleeps.adaptation.cpu_share < spins.adaptation.cpu_share / 2.0,
+        "{:?} {:?}",
+        sleeps.adaptation,
+        spins.adaptation
+    );
+    assert!(system.shutdown().clean());
+}

@@ -26,6 +26,7 @@ fn member(text: &str) -> Member {
             _ => Pressure::Nominal,
         },
         load: parts.get(5).map_or(0.5, |load| load.parse().expect("load")),
+        cpu_share: 0.0,
         period: Some(Duration::from_millis(10)),
         suspended: parts.get(4) == Some(&"z"),
     }
@@ -142,6 +143,7 @@ impl Model {
                     max_level: *max,
                     pressure: Pressure::Nominal,
                     load: 0.5,
+                    cpu_share: 0.0,
                     period: Some(Duration::from_millis(10)),
                     suspended: false,
                 })

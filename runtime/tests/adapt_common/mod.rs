@@ -33,6 +33,8 @@ pub struct Load {
     pub lowest_quality: AtomicUsize,
     /// The period the last section saw, in microseconds.
     pub last_period: AtomicU64,
+    /// Busy-wait instead of sleeping (CPU work rather than waiting).
+    pub spin: std::sync::atomic::AtomicBool,
 }
 
 impl Load {
@@ -113,7 +115,14 @@ impl Automaton for Sleeper {
             .lowest_quality
             .fetch_max(quality, Ordering::SeqCst);
         let work = self.load.work[quality].load(Ordering::SeqCst);
-        std::thread::sleep(Duration::from_micros(work));
+        if self.load.spin.load(Ordering::SeqCst) {
+            let until = std::time::Instant::now() + Duration::from_micros(work);
+            while std::time::Instant::now() < until {
+                std::hint::spin_loop();
+            }
+        } else {
+            std::thread::sleep(Duration::from_micros(work));
+        }
         self.load.runs.fetch_add(1, Ordering::SeqCst);
         Ok(())
     }
