@@ -269,3 +269,36 @@ proptest! {
         prop_assert_eq!(model.floor, 0);
     }
 }
+
+/// A designer's own criterion (paper 3.6.2): here, the instance declared last is
+/// degraded first, and promoted first.
+struct LastDeclared;
+
+impl Selector for LastDeclared {
+    fn degrade(&self, _members: &[Member], candidates: &[usize]) -> usize {
+        *candidates.last().expect("never empty")
+    }
+
+    fn promote(&self, _members: &[Member], candidates: &[usize]) -> usize {
+        *candidates.last().expect("never empty")
+    }
+}
+
+#[test]
+fn the_selection_is_pluggable() {
+    let degrade: Vec<Member> = ["a:9:0/4:v", "b:1:0/4:v", "c:5:0/4:-"]
+        .iter()
+        .map(|m| member(m))
+        .collect();
+    let decision = decide(&degrade, levels(1, 0, true), &LastDeclared);
+    assert_eq!(render(decision, &degrade), "degrade c");
+    let promote: Vec<Member> = ["a:9:2/4:s", "b:1:2/4:s", "c:5:1/4:s"]
+        .iter()
+        .map(|m| member(m))
+        .collect();
+    let decision = decide(&promote, levels(2, 1, true), &LastDeclared);
+    assert_eq!(render(decision, &promote), "promote b");
+    // The default promotion order, for comparison: the highest priority first.
+    let decision = decide(&promote, levels(2, 1, true), &ProtectPriority);
+    assert_eq!(render(decision, &promote), "promote a");
+}
