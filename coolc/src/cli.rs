@@ -1,4 +1,4 @@
-//! The `coolc` command line: `check`, `compile` and `new`.
+//! The `coolc` command line: `check`, `compile`, `new` and `diagram`.
 //!
 //! Exit codes: 0 when there is no error, 1 when the descriptions have errors
 //! (diagnostics), 2 for usage and I/O errors. Diagnostics go to stderr rendered for a
@@ -12,7 +12,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::ir::RuntimeDep;
-use crate::{Analysis, RenderFormat, RenderOptions, emit, ident, lower, merge};
+use crate::{Analysis, RenderFormat, RenderOptions, diagram, emit, ident, lower, merge};
 
 /// Exit code: no error.
 pub const EXIT_OK: u8 = 0;
@@ -68,6 +68,29 @@ pub enum Commands {
         #[command(flatten)]
         runtime: RuntimeArgs,
     },
+    /// Draw components as diagrams (Graphviz DOT or mermaid): interfaces, the
+    /// structure of compounds, automata and supervisors.
+    Diagram {
+        /// The `.cool` files (their imports are followed).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// The component to draw (any loaded file; default: every component of the
+        /// files given).
+        #[arg(long)]
+        component: Option<String>,
+        /// Which view.
+        #[arg(long, value_enum, default_value_t = ViewArg::All)]
+        view: ViewArg,
+        /// The output format (`markdown`: a heading and a mermaid block per diagram).
+        #[arg(long, value_enum, default_value_t = DiagramFormat::Dot)]
+        format: DiagramFormat,
+        /// Draw automata inside the default automaton's `running` state.
+        #[arg(long)]
+        default_automaton: bool,
+        /// Write to this file instead of stdout.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Create a new component crate with a starter description that builds and runs.
     New {
         /// The crate directory and package name (e.g. `blinker`).
@@ -76,6 +99,30 @@ pub enum Commands {
         #[command(flatten)]
         runtime: RuntimeArgs,
     },
+}
+
+/// The views of `coolc diagram`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ViewArg {
+    /// Ports by kind and direction, the default ports `c` and `m`, variables.
+    Interface,
+    /// A compound's instances, connections, exports, policies and groups.
+    Structure,
+    /// The user automaton or the supervisor.
+    Automaton,
+    /// Every view that applies.
+    All,
+}
+
+/// The formats of `coolc diagram`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DiagramFormat {
+    /// Graphviz DOT (`dot -Tsvg`).
+    Dot,
+    /// One mermaid flowchart.
+    Mermaid,
+    /// Markdown with one mermaid block per diagram.
+    Markdown,
 }
 
 /// How the generated `Cargo.toml` names the runtime crate `coolbot`.
@@ -175,6 +222,31 @@ pub fn run(cli: Cli) -> ExitCode {
             compile(&cli, files, out, &package, runtime.dep(out)).map(|_| ())
         }
         Commands::New { name, runtime } => new(&cli, name, runtime.dep(name)),
+        Commands::Diagram {
+            files,
+            component,
+            view,
+            format,
+            default_automaton,
+            output,
+        } => {
+            let options = diagram::Options {
+                component: component.clone(),
+                views: match view {
+                    ViewArg::Interface => vec![diagram::View::Interface],
+                    ViewArg::Structure => vec![diagram::View::Structure],
+                    ViewArg::Automaton => vec![diagram::View::Automaton],
+                    ViewArg::All => Vec::new(),
+                },
+                default_automaton: *default_automaton,
+            };
+            let format = match format {
+                DiagramFormat::Dot => diagram::Format::Dot,
+                DiagramFormat::Mermaid => diagram::Format::Mermaid,
+                DiagramFormat::Markdown => diagram::Format::Markdown,
+            };
+            draw(&cli, files, &options, format, output.as_deref())
+        }
     };
     match result {
         Ok(()) => ExitCode::from(EXIT_OK),
@@ -280,6 +352,28 @@ fn compile(
         report.written.len()
     );
     Ok(krate)
+}
+
+/// `coolc diagram`: checks, then draws.
+fn draw(
+    cli: &Cli,
+    files: &[PathBuf],
+    options: &diagram::Options,
+    format: diagram::Format,
+    output: Option<&Path>,
+) -> Result<(), Failure> {
+    let analysis = check(cli, files)?;
+    let diagrams = diagram::diagrams(&analysis.files, files.len(), options)
+        .map_err(|e| Failure::Usage(e.to_string()))?;
+    let text = diagram::render(&diagrams, format).map_err(|e| Failure::Usage(e.to_string()))?;
+    match output {
+        Some(path) => std::fs::write(path, text)
+            .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", path.display()))),
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
 }
 
 fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {

@@ -30,6 +30,7 @@ pub mod builder;
 pub mod check;
 pub mod cli;
 pub mod diagnostics;
+pub mod diagram;
 pub mod emit;
 pub mod ident;
 pub mod ir;

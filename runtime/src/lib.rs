@@ -124,6 +124,7 @@ mod automaton;
 pub mod compound;
 mod monitor;
 pub mod port;
+pub mod record;
 mod runner;
 mod spec;
 mod system;

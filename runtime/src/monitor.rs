@@ -285,7 +285,7 @@ pub(crate) struct Shared {
     /// Doorbells rung after every event (compound supervisors watching this component).
     /// With, for each, a flag set before it is rung (which subscription has news).
     wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
-    inputs: Vec<(&'static str, ErasedInput)>,
+    pub(crate) inputs: Vec<(&'static str, ErasedInput)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
     /// Whether the component's thread is inside a section the max_response watchdog
@@ -448,6 +448,12 @@ impl Shared {
             vec![MonitorEvent::Pressure(pressure)]
         });
     }
+
+    /// Stop ringing `bell` after events (a recorder that stopped following this
+    /// component: its subscription's receiver is dropped separately).
+    pub(crate) fn forget_waker(&self, bell: &Arc<crate::port::Doorbell>) {
+        lock(&self.wakers).retain(|(waker, _)| !Arc::ptr_eq(&waker.bell, bell));
+    }
 }
 
 /// A command on its way to the component, with the channel for its answer.
@@ -506,6 +512,8 @@ pub struct Handle {
     /// component). They hold the instances' ports only, never the compound's inner
     /// system: the instances' threads end with the compound whatever handles remain.
     pub(crate) instances: Arc<[Handle]>,
+    /// The component's output ports by name, in declaration order (recorder taps).
+    pub(crate) outputs: Arc<[(&'static str, crate::port::ErasedOutput)]>,
 }
 
 impl std::fmt::Debug for Handle {

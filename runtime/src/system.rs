@@ -577,6 +577,12 @@ impl System {
             join: Arc::new(Mutex::new(None)),
             command_timeout: DEFAULT_COMMAND_TIMEOUT,
             instances: instances.into(),
+            outputs: spec
+                .outputs
+                .iter()
+                .map(|o| o.name)
+                .zip(ports.outputs.iter().cloned())
+                .collect(),
         };
         let runner = Runner::new(
             &name,
@@ -667,6 +673,20 @@ impl System {
             handle.finish(posted)?;
         }
         Ok(())
+    }
+
+    /// The component at `path`: a component of this system (`"base"`) or an instance
+    /// inside it, through nested compounds (`"base.motion"`, see [`Handle::instance`]).
+    pub(crate) fn handle_at(&self, path: &str) -> Option<Handle> {
+        let (first, rest) = match path.split_once('.') {
+            Some((first, rest)) => (first, Some(rest)),
+            None => (path, None),
+        };
+        let handle = self.handle(first)?;
+        match rest {
+            Some(rest) => handle.instance(rest),
+            None => Some(handle),
+        }
     }
 
     /// The control and monitoring ports of component `name`.

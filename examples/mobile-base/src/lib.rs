@@ -72,6 +72,10 @@ pub struct Options {
     pub display: Display,
     /// Set to stop the run early (Ctrl-C).
     pub stop: Arc<AtomicBool>,
+    /// Record the odometry (`base.motion.pose`), the scans (`base.scan`, from
+    /// whichever range server stands in) and the base's monitoring events into this
+    /// file (`coolbot::record`, JSON lines).
+    pub record: Option<std::path::PathBuf>,
 }
 
 impl Default for Options {
@@ -88,6 +92,7 @@ impl Default for Options {
             scan_rate: None,
             display: Display::Auto,
             stop: Arc::new(AtomicBool::new(false)),
+            record: None,
         }
     }
 }
@@ -165,6 +170,9 @@ pub struct Summary {
     pub released: bool,
     /// Every thread joined, every component dead, no runtime panic.
     pub clean_shutdown: bool,
+    /// With `record`: what the recording holds (per port, packets sent, recorded and
+    /// lost).
+    pub recorded: Option<coolbot::record::Summary>,
 }
 
 impl Summary {
@@ -273,6 +281,14 @@ impl fmt::Display for Summary {
             after.join(" "),
             if self.released { "yes" } else { "NO" }
         )?;
+        if let Some(recorded) = &self.recorded {
+            let ports: Vec<String> = recorded
+                .ports
+                .iter()
+                .map(|p| format!("{} {} recorded, {} lost", p.port, p.recorded, p.lost))
+                .collect();
+            writeln!(f, "  recorded             {}", ports.join("; "))?;
+        }
         write!(
             f,
             "  shutdown             {}",
@@ -283,6 +299,33 @@ impl fmt::Display for Summary {
             }
         )
     }
+}
+
+/// The ports `--record` taps: the motion controller's odometry and the base's
+/// exported scans (from whichever range server stands in).
+pub const RECORDED_PORTS: [&str; 2] = ["robot.base.motion.pose", "robot.base.scan"];
+
+/// Starts recording the odometry, the scans and the base's monitoring events.
+fn start_recording(
+    robot: &Robot,
+    path: &std::path::Path,
+) -> Result<coolbot::record::Recording, String> {
+    use coolbot::record::Recorder;
+    use generated::types::{Pose2D, RangeScan};
+    let system = robot.system();
+    let mut recorder = Recorder::new();
+    recorder
+        .tap::<Pose2D>(system, RECORDED_PORTS[0])
+        .map_err(text)?;
+    recorder
+        .tap::<RangeScan>(system, RECORDED_PORTS[1])
+        .map_err(text)?;
+    recorder.monitor(system, "robot.base").map_err(text)?;
+    recorder.start(path).map_err(text)
+}
+
+fn text(error: impl fmt::Display) -> String {
+    error.to_string()
 }
 
 fn number(value: Option<&coolbot::Value>) -> f64 {
@@ -442,6 +485,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         scan_rate: options.scan_rate,
     };
     let robot = Robot::start(&platform, &setup)?;
+    let recording = match &options.record {
+        Some(path) => Some(start_recording(&robot, path)?),
+        None => None,
+    };
     // Every change on the monitoring ports of the robot, the base and the wanderer.
     let mut events = Events::new(&[&robot.robot, &robot.base, &robot.wanderer]);
 
@@ -553,6 +600,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     // The supervision steps and states published up to the end.
     events.take(elapsed);
 
+    let recorded = match recording {
+        Some(recording) => Some(recording.finish().map_err(text)?),
+        None => None,
+    };
     let handles = [
         robot.robot.clone(),
         robot.base.clone(),
@@ -609,5 +660,6 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         final_states,
         released,
         clean_shutdown,
+        recorded,
     })
 }

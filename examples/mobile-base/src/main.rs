@@ -48,6 +48,10 @@ struct Args {
     /// Output: the live table, status lines, or auto (the table on a terminal).
     #[arg(long, value_enum, default_value_t = Output::Auto)]
     output: Output,
+    /// Record the odometry, the scans and the base's monitoring events into this file
+    /// (JSON lines, see docs/tools.md).
+    #[arg(long, value_name = "FILE")]
+    record: Option<std::path::PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -138,6 +142,7 @@ fn main() -> ExitCode {
             Output::Table => Display::Table,
             Output::Lines => Display::Lines,
         },
+        record: args.record,
         ..Options::default()
     };
     let stop = options.stop.clone();

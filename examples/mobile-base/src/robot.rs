@@ -241,6 +241,11 @@ impl Robot {
         self.robot.instance(path)
     }
 
+    /// The system the robot runs on (to tap its ports: `coolbot::record`).
+    pub fn system(&self) -> &System {
+        &self.system
+    }
+
     /// Shuts the robot down: `Robot` goes `dead`, taking its instances (and theirs)
     /// with it.
     pub fn shutdown(self) -> Report {

@@ -339,3 +339,53 @@ fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_por
     let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn a_recorded_run_holds_every_odometry_and_scan_packet_or_counts_it_lost() {
+    use coolbot::record::{Reader, Record};
+    use mobile_base::generated::types::{Pose2D, RangeScan};
+
+    let dir = std::env::temp_dir().join(format!("mobile-base-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("run.jsonl");
+    let summary = run(Options {
+        duration: Duration::from_secs(2),
+        record: Some(path.clone()),
+        ..Options::default()
+    });
+    assert_clean_shutdown(&summary);
+    let recorded = summary.recorded.as_ref().expect("a recording summary");
+    let ports: Vec<&str> = recorded.ports.iter().map(|p| p.port.as_str()).collect();
+    assert_eq!(ports, mobile_base::RECORDED_PORTS);
+    for port in &recorded.ports {
+        assert!(port.sent > 0, "nothing sent on {}", port.port);
+        assert_eq!(port.sent, port.recorded + port.lost, "{}", port.port);
+    }
+
+    let reader = Reader::open(&path).expect("the recording opens");
+    let poses: Vec<Pose2D> = reader
+        .packets::<Pose2D>(mobile_base::RECORDED_PORTS[0])
+        .map(|item| item.expect("a pose").1)
+        .collect();
+    assert_eq!(poses.len() as u64, recorded.ports[0].recorded);
+    let moved = poses
+        .windows(2)
+        .any(|pair| pair[0].x != pair[1].x || pair[0].y != pair[1].y);
+    assert!(moved, "the recorded odometry shows the robot moving");
+    let scans: Vec<RangeScan> = Reader::open(&path)
+        .expect("opens")
+        .packets::<RangeScan>(mobile_base::RECORDED_PORTS[1])
+        .map(|item| item.expect("a scan").1)
+        .collect();
+    assert_eq!(scans.len() as u64, recorded.ports[1].recorded);
+    let last = Reader::open(&path)
+        .expect("opens")
+        .last()
+        .expect("a record")
+        .expect("readable");
+    assert!(
+        matches!(last, Record::End(_)),
+        "the file ends with its summary"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

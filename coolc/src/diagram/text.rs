@@ -1,0 +1,262 @@
+//! Types, port kinds and expressions printed back as `.cool` text, for diagram labels.
+
+use crate::ast::{self, BinaryOp, ExprKind, TypeKind, UnaryOp};
+use crate::check::model::prim_name;
+
+/// A type as written (`[f32; 16]`, `Pose2D?`).
+pub fn ty(ty: &ast::Type) -> String {
+    match &ty.kind {
+        TypeKind::Prim(prim) => prim_name(*prim).to_owned(),
+        TypeKind::Named(name) => name.name.clone(),
+        TypeKind::List(inner) => format!("[{}]", self::ty(inner)),
+        TypeKind::Array(inner, size) => format!("[{}; {}]", self::ty(inner), size.value),
+        TypeKind::Optional(inner) => format!("{}?", self::ty(inner)),
+    }
+}
+
+/// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`;
+/// `None` for an exported input.
+pub fn input_kind(input: &ast::Input) -> Option<String> {
+    let kind = match &input.def {
+        ast::InputDef::Tick => "tick".to_owned(),
+        ast::InputDef::Fifo {
+            ty: packet,
+            size,
+            policy,
+        } => match policy {
+            Some(policy) => format!("fifo<{}>({}, {})", ty(packet), size.value, policy.name),
+            None => format!("fifo<{}>({})", ty(packet), size.value),
+        },
+        ast::InputDef::Ufifo {
+            size,
+            ty: packet,
+            max,
+        } => match max {
+            Some(max) => format!("ufifo<{}>({}, max {})", ty(packet), size.value, max.value),
+            None => format!("ufifo<{}>({})", ty(packet), size.value),
+        },
+        ast::InputDef::Last(packet) => format!("last<{}>", ty(packet)),
+        ast::InputDef::Poster(packet) => format!("poster<{}>", ty(packet)),
+        ast::InputDef::Export(_) => return None,
+    };
+    Some(with_pull(kind, input.pull.is_some()))
+}
+
+/// An output's kind as written (`data<Pose2D>`, `tick`), with ` pull`; `None` for an
+/// exported output.
+pub fn output_kind(output: &ast::Output) -> Option<String> {
+    let kind = match &output.def {
+        ast::OutputDef::Tick => "tick".to_owned(),
+        ast::OutputDef::Data(packet) => format!("data<{}>", ty(packet)),
+        ast::OutputDef::Poster(packet) => format!("poster<{}>", ty(packet)),
+        ast::OutputDef::Export(_) => return None,
+    };
+    Some(with_pull(kind, output.pull.is_some()))
+}
+
+fn with_pull(kind: String, pull: bool) -> String {
+    if pull { format!("{kind} pull") } else { kind }
+}
+
+/// The connection kind an input forms (paper Figure 3): the input's kind name.
+pub fn connection_kind(input: &ast::Input) -> Option<&'static str> {
+    Some(match &input.def {
+        ast::InputDef::Tick => "tick",
+        ast::InputDef::Fifo { .. } => "fifo",
+        ast::InputDef::Ufifo { .. } => "ufifo",
+        ast::InputDef::Last(_) => "last",
+        ast::InputDef::Poster(_) => "poster",
+        ast::InputDef::Export(_) => return None,
+    })
+}
+
+/// `instance.port`, or `port`.
+pub fn port_ref(port: &ast::PortRef) -> String {
+    match &port.instance {
+        Some(instance) => format!("{}.{}", instance.name, port.port.name),
+        None => port.port.name.clone(),
+    }
+}
+
+/// `lo` or `lo..hi`.
+pub fn interval(interval: &ast::Interval) -> String {
+    match &interval.hi {
+        Some(hi) => format!("{}..{}", expr(&interval.lo), expr(hi)),
+        None => expr(&interval.lo),
+    }
+}
+
+/// A duration in the largest unit that divides it (`2s`, `500ms`, `1min`).
+pub fn duration(nanos: u128) -> String {
+    const UNITS: [(u128, &str); 5] = [
+        (60_000_000_000, "min"),
+        (1_000_000_000, "s"),
+        (1_000_000, "ms"),
+        (1_000, "us"),
+        (1, "ns"),
+    ];
+    for (size, unit) in UNITS {
+        if nanos != 0 && nanos.is_multiple_of(size) {
+            return format!("{}{unit}", nanos / size);
+        }
+    }
+    "0s".to_owned()
+}
+
+fn float(value: f64) -> String {
+    let text = format!("{value}");
+    if text.contains(['.', 'e', 'E', 'i', 'N']) {
+        text
+    } else {
+        format!("{text}.0")
+    }
+}
+
+fn frequency(hertz: f64) -> String {
+    if hertz >= 1000.0 && (hertz / 1000.0).fract() == 0.0 {
+        format!("{}kHz", hertz / 1000.0)
+    } else {
+        format!("{hertz}Hz")
+    }
+}
+
+fn string(text: &str) -> String {
+    let mut out = String::from("\"");
+    for c in text.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\t' => out.push_str("\\t"),
+            '\r' => out.push_str("\\r"),
+            c if c.is_control() => out.push_str(&format!("\\u{{{:X}}}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// How tightly an expression binds (higher binds tighter).
+fn precedence(expr: &ast::Expr) -> u8 {
+    match &expr.kind {
+        ExprKind::Binary(BinaryOp::Or, ..) => 1,
+        ExprKind::Binary(BinaryOp::And, ..) => 2,
+        ExprKind::Binary(..) => 3,
+        ExprKind::Unary(..) => 4,
+        _ => 5,
+    }
+}
+
+/// An expression as written, with the parentheses its shape needs.
+pub fn expr(expr: &ast::Expr) -> String {
+    match &expr.kind {
+        ExprKind::Int(value) => value.to_string(),
+        ExprKind::Float(value) => float(*value),
+        ExprKind::Str(text) => string(text),
+        ExprKind::Bool(value) => value.to_string(),
+        ExprKind::Duration(nanos) => duration(*nanos),
+        ExprKind::Frequency(hertz) => frequency(*hertz),
+        ExprKind::Path(parts) => parts
+            .iter()
+            .map(|part| part.name.as_str())
+            .collect::<Vec<_>>()
+            .join("."),
+        ExprKind::EnumValue { enum_name, variant } => {
+            format!("{}::{}", enum_name.name, variant.name)
+        }
+        ExprKind::List(items) => {
+            let items: Vec<String> = items.iter().map(self::expr).collect();
+            format!("[{}]", items.join(", "))
+        }
+        ExprKind::Repeat(item, count) => format!("[{}; {}]", self::expr(item), count.value),
+        ExprKind::None => "none".to_owned(),
+        ExprKind::Unary(op, operand) => {
+            let op = match op {
+                UnaryOp::Not => "!",
+                UnaryOp::Neg => "-",
+            };
+            format!("{op}{}", operand_text(operand, 4, false))
+        }
+        ExprKind::Binary(op, left, right) => {
+            let own = precedence(expr);
+            // Comparisons do not chain: a comparison operand of a comparison keeps its
+            // parentheses on both sides.
+            let strict = own == 3;
+            format!(
+                "{} {} {}",
+                operand_text(left, own, strict),
+                op.as_str(),
+                operand_text(right, own, true)
+            )
+        }
+    }
+}
+
+fn operand_text(operand: &ast::Expr, parent: u8, strict: bool) -> String {
+    let own = precedence(operand);
+    if own < parent || (strict && own == parent) {
+        format!("({})", expr(operand))
+    } else {
+        expr(operand)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn condition(text: &str) -> String {
+        let source = format!(
+            "atomic A {{ observable x: u32 = 0; observable y: bool = true; automaton {{ initial s; state s {{ }} }} }}\ncompound C {{ instance a: A; observable f: u32 = 0; supervisor {{ initial s; state s {{ when {text} -> s; }} }} }}"
+        );
+        let analysis = crate::analyze_text("c.cool", &source);
+        let component = analysis.files[0]
+            .items
+            .iter()
+            .find_map(|item| match item {
+                ast::Item::Component(c) if c.name.name == "C" => Some(c),
+                _ => None,
+            })
+            .expect("C");
+        let automaton = component
+            .members
+            .iter()
+            .find_map(|m| match m {
+                ast::Member::Automaton(a) => Some(a),
+                _ => None,
+            })
+            .expect("supervisor");
+        match &automaton.states[0].members[0] {
+            ast::StateMember::When { condition, .. } => expr(condition),
+            other => panic!("not a rule: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn expressions_print_back_with_the_parentheses_they_need() {
+        for text in [
+            "a.x > 3 || f == 2 && a.y",
+            "(a.x > 3 || f == 2) && a.y",
+            "!(a.y && f != 0)",
+            "a.state == running_error",
+            "a.elapsed_time > 2s",
+            "a.error == \"say \\\"hi\\\"\"",
+        ] {
+            assert_eq!(condition(text), text);
+        }
+    }
+
+    #[test]
+    fn durations_take_the_largest_unit_that_divides_them() {
+        assert_eq!(duration(60_000_000_000), "1min");
+        assert_eq!(duration(1_500_000_000), "1500ms");
+        assert_eq!(duration(250), "250ns");
+        assert_eq!(duration(500_000), "500us");
+        assert_eq!(duration(0), "0s");
+        assert_eq!(frequency(1000.0), "1kHz");
+        assert_eq!(frequency(10.0), "10Hz");
+        assert_eq!(float(1.0), "1.0");
+        assert_eq!(float(0.0015), "0.0015");
+    }
+}

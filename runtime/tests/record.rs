@@ -1,0 +1,756 @@
+//! Recording and replay of port traffic (`coolbot::record`): every packet a tapped
+//! producer sends is in the file or counted as lost, a recording replays into a
+//! consumer as the same sequence, mistakes are clear errors, and ports inside
+//! compounds are reached by path.
+
+use std::io::Write;
+use std::sync::Arc;
+use std::time::Duration;
+
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::{DataOut, FifoIn, PosterOut, TickIn, TickOut};
+use coolbot::record::{
+    self, NOT_SERIALIZABLE, Pace, Player, QUEUE_FULL, ReadError, Reader, Record, RecordError,
+    Recorder,
+};
+use coolbot::{
+    Automaton, Component, CompoundBuilder, Context, Fault, InputKind, InputSpec, MonitorEvent,
+    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, SectionResult, Spec, State,
+    StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value,
+};
+use serde::ser::{Error as _, SerializeStruct};
+use serde::{Deserialize, Serialize, Serializer};
+
+/// How long tests wait for anything (generous: the machine is shared).
+const WAIT: Duration = Duration::from_secs(20);
+
+/// What the recorder's thread does when it serializes a sample that carries one.
+#[derive(Debug)]
+struct Hook {
+    /// Fail to serialize.
+    fail: bool,
+    /// Told when serialization starts.
+    entered: Sender<()>,
+    /// Serialization waits for this (or its sender's drop).
+    release: Receiver<()>,
+}
+
+/// The packet type of the tests.
+#[derive(Clone, Debug, Deserialize)]
+struct Sample {
+    n: u64,
+    label: String,
+    #[serde(skip)]
+    hook: Option<Arc<Hook>>,
+}
+
+impl PartialEq for Sample {
+    fn eq(&self, other: &Sample) -> bool {
+        self.n == other.n && self.label == other.label
+    }
+}
+
+impl Serialize for Sample {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        if let Some(hook) = &self.hook {
+            if hook.fail {
+                return Err(S::Error::custom("a sample that refuses to serialize"));
+            }
+            let _ = hook.entered.send(());
+            let _ = hook.release.recv_timeout(WAIT);
+        }
+        let mut fields = serializer.serialize_struct("Sample", 2)?;
+        fields.serialize_field("n", &self.n)?;
+        fields.serialize_field("label", &self.label)?;
+        fields.end()
+    }
+}
+
+fn sample(n: u64) -> Sample {
+    Sample {
+        n,
+        label: format!("sample {n}"),
+        hook: None,
+    }
+}
+
+const IDLE: &[StateSpec] = &[StateSpec {
+    name: "idle",
+    entry: false,
+    exit: false,
+    periodic: None,
+    on: &[],
+    after: &[],
+    may: &[],
+}];
+
+static SOURCE: Spec = Spec {
+    type_name: "Source",
+    doc: "Sends what the test sends.",
+    states: IDLE,
+    initial: 0,
+    inputs: &[],
+    outputs: &[
+        OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "Sample",
+            pull: false,
+        },
+        OutputSpec {
+            name: "beat",
+            kind: OutputKind::Tick,
+            packet: "",
+            pull: false,
+        },
+    ],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+static SINK: Spec = Spec {
+    type_name: "Sink",
+    doc: "Queues what arrives; the test reads it.",
+    states: IDLE,
+    initial: 0,
+    inputs: &[
+        InputSpec {
+            name: "data",
+            kind: InputKind::Fifo {
+                capacity: 100_000,
+                policy: OverflowPolicy::Reject,
+            },
+            packet: "Sample",
+            pull: false,
+        },
+        InputSpec {
+            name: "beat",
+            kind: InputKind::Tick,
+            packet: "",
+            pull: false,
+        },
+    ],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+static SUPERVISOR: Spec = Spec {
+    type_name: "Holder",
+    doc: "A compound holding a source.",
+    states: IDLE,
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+/// A component with no behaviour of its own: its ports are driven by the test.
+struct Inert(&'static Spec);
+
+impl Automaton for Inert {
+    fn spec(&self) -> &'static Spec {
+        self.0
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
+        Ok(())
+    }
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("nothing to set".to_owned())
+    }
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+struct Idle;
+
+impl Supervisor for Idle {
+    fn spec(&self) -> &'static Spec {
+        &SUPERVISOR
+    }
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        Ok(())
+    }
+}
+
+/// The test's ends of a source's outputs (`out`, `beat`).
+struct Outputs {
+    out: DataOut<Sample>,
+    beat: TickOut,
+}
+
+/// The test's ends of a sink's inputs (`data`, `beat`).
+struct Inputs {
+    data: FifoIn<Sample>,
+    beat: TickIn,
+}
+
+fn source(name: &str) -> (Component, Outputs) {
+    let outputs = Outputs {
+        out: DataOut::new(),
+        beat: TickOut::new(),
+    };
+    let ports = PortSet::new().output(&outputs.out).output(&outputs.beat);
+    (
+        Component::new(name, Box::new(Inert(&SOURCE)), ports),
+        outputs,
+    )
+}
+
+fn sink(name: &str) -> (Component, Inputs) {
+    let inputs = Inputs {
+        data: FifoIn::new(100_000, OverflowPolicy::Reject),
+        beat: TickIn::new(),
+    };
+    let ports = PortSet::new().input(&inputs.data).input(&inputs.beat);
+    (Component::new(name, Box::new(Inert(&SINK)), ports), inputs)
+}
+
+/// A running system with a source `src` and a sink `sink` (not connected).
+fn bench_with_ticks() -> (System, Outputs, Inputs) {
+    let mut system = System::new();
+    let (src, outputs) = source("src");
+    let (consumer, inputs) = sink("sink");
+    system.add(src).expect("add src");
+    system.add(consumer).expect("add sink");
+    system.run_all().expect("run");
+    (system, outputs, inputs)
+}
+
+/// [`bench_with_ticks`], data ports only.
+fn bench() -> (System, DataOut<Sample>, FifoIn<Sample>) {
+    let (system, outputs, inputs) = bench_with_ticks();
+    (system, outputs.out, inputs.data)
+}
+
+fn temp_file(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("coolbot-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir.join(name)
+}
+
+fn records(path: &std::path::Path) -> Vec<Record> {
+    Reader::open(path)
+        .expect("open")
+        .collect::<Result<Vec<_>, _>>()
+        .expect("every line is a record")
+}
+
+fn packets(records: &[Record], port: &str) -> Vec<(u64, Sample)> {
+    records
+        .iter()
+        .filter_map(|record| match record {
+            Record::Packet(packet) if packet.port == port => {
+                Some((packet.seq, packet.decode::<Sample>().expect("decodes")))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_full_tap_loses_packets_counted_and_reported_never_silently() {
+    let (system, out, _data) = bench();
+    let path = temp_file("full.jsonl");
+    let mut recorder = Recorder::new().capacity(4);
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+
+    // The first packet holds the recorder's thread inside serde until released, so
+    // the queue fills deterministically: 4 packets wait, the next 6 are lost.
+    let (entered_sender, entered) = crossbeam_channel::bounded(1);
+    let (release, gate) = crossbeam_channel::bounded(1);
+    let mut first = sample(0);
+    first.hook = Some(Arc::new(Hook {
+        fail: false,
+        entered: entered_sender,
+        release: gate,
+    }));
+    out.send(first);
+    entered.recv_timeout(WAIT).expect("the recorder serializes");
+    for n in 1..=10 {
+        out.send(sample(n));
+    }
+    assert_eq!(
+        recording.stats()[0].lost,
+        6,
+        "the producer counted the losses"
+    );
+    release.send(()).expect("release");
+    let loss = recording
+        .losses()
+        .recv_timeout(WAIT)
+        .expect("a loss notice");
+    assert_eq!(
+        (loss.port.as_str(), loss.reason.as_str()),
+        ("src.out", QUEUE_FULL)
+    );
+    let summary = recording.finish().expect("finish");
+
+    let port = &summary.ports[0];
+    assert_eq!((port.sent, port.recorded, port.lost), (11, 5, 6));
+    let records = records(&path);
+    let recorded = packets(&records, "src.out");
+    let seqs: Vec<u64> = recorded.iter().map(|(seq, _)| *seq).collect();
+    assert_eq!(seqs, [0, 1, 2, 3, 4], "the queued packets, in order");
+    assert!(recorded.iter().all(|(seq, s)| *s == sample(*seq)));
+    let lost: u64 = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Lost(loss) if loss.port == "src.out" => Some(loss.lost),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(lost, 6, "the file says how many were lost");
+    assert_eq!(records.last(), Some(&Record::End(summary)));
+    drop(system);
+}
+
+#[test]
+fn under_load_every_packet_is_recorded_or_counted_lost() {
+    let (system, out, _data) = bench();
+    let path = temp_file("load.jsonl");
+    let mut recorder = Recorder::new().capacity(64);
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+    const SENT: u64 = 20_000;
+    let senders: Vec<_> = (0..2)
+        .map(|half| {
+            let out = out.clone();
+            std::thread::spawn(move || {
+                for n in (half * SENT / 2)..((half + 1) * SENT / 2) {
+                    out.send(sample(n));
+                }
+            })
+        })
+        .collect();
+    for sender in senders {
+        sender.join().expect("sender");
+    }
+    let summary = recording.finish().expect("finish");
+    let port = &summary.ports[0];
+    assert_eq!(port.sent, SENT);
+    assert_eq!(port.recorded + port.lost, SENT);
+
+    let records = records(&path);
+    let recorded = packets(&records, "src.out");
+    assert_eq!(recorded.len() as u64, port.recorded);
+    let mut seqs: Vec<u64> = recorded.iter().map(|(seq, _)| *seq).collect();
+    seqs.sort_unstable();
+    seqs.dedup();
+    assert_eq!(seqs.len() as u64, port.recorded, "no packet twice");
+    assert!(seqs.iter().all(|seq| *seq < SENT));
+    let lost: u64 = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Lost(loss) => Some(loss.lost),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(lost, port.lost, "every loss is in the file");
+    drop(system);
+}
+
+#[test]
+fn a_packet_that_does_not_serialize_is_counted_lost() {
+    let (system, out, _data) = bench();
+    let path = temp_file("unserializable.jsonl");
+    let mut recorder = Recorder::new();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+    let (entered, _) = crossbeam_channel::bounded(1);
+    let (_, release) = crossbeam_channel::bounded(1);
+    out.send(sample(0));
+    out.send(Sample {
+        hook: Some(Arc::new(Hook {
+            fail: true,
+            entered,
+            release,
+        })),
+        ..sample(1)
+    });
+    out.send(sample(2));
+    let summary = recording.finish().expect("finish");
+    let port = &summary.ports[0];
+    assert_eq!((port.sent, port.recorded, port.lost), (3, 2, 1));
+    let records = records(&path);
+    let seqs: Vec<u64> = packets(&records, "src.out").iter().map(|p| p.0).collect();
+    assert_eq!(seqs, [0, 2]);
+    assert!(records.iter().any(|r| matches!(
+        r,
+        Record::Lost(loss) if loss.reason == NOT_SERIALIZABLE && loss.lost == 1
+    )));
+    drop(system);
+}
+
+#[test]
+fn a_recording_replays_into_a_consumer_as_the_same_sequence() {
+    let path = temp_file("replay.jsonl");
+    let sent: Vec<Sample> = (0..200).map(sample).collect();
+    {
+        let (system, out, _data) = bench();
+        let mut recorder = Recorder::new();
+        recorder.tap::<Sample>(&system, "src.out").expect("tap");
+        let recording = recorder.start(&path).expect("start");
+        for packet in &sent {
+            out.send(packet.clone());
+        }
+        let summary = recording.finish().expect("finish");
+        assert_eq!(summary.ports[0].recorded, 200);
+    }
+
+    for pace in [Pace::AsFastAsPossible, Pace::Original] {
+        let (system, _out, data) = bench();
+        let mut player = Player::open(&path).expect("open");
+        assert_eq!(player.header().ports[0].path, "src.out");
+        player
+            .route::<Sample>("src.out", &system, "sink.data")
+            .expect("route");
+        let played = player.play(pace).expect("play");
+        assert_eq!(played.sent["src.out"], 200, "{pace:?}");
+        let received: Vec<Sample> = data.drain().collect();
+        assert_eq!(received, sent, "{pace:?}: the same sequence");
+    }
+
+    // Offline: the typed packets of one port.
+    let offline: Vec<Sample> = Reader::open(&path)
+        .expect("open")
+        .packets::<Sample>("src.out")
+        .map(|item| item.expect("decodes").1)
+        .collect();
+    assert_eq!(offline, sent);
+}
+
+#[test]
+fn mistakes_are_clear_errors() {
+    let (system, _out, _data) = bench();
+    let mut recorder = Recorder::new();
+    let error = recorder
+        .tap::<String>(&system, "src.out")
+        .expect_err("wrong type");
+    assert!(matches!(error, RecordError::TypeMismatch { .. }), "{error}");
+    let message = error.to_string();
+    assert!(
+        message.contains("Sample") && message.contains("String") && message.contains("src.out"),
+        "{message}"
+    );
+    let error = recorder
+        .tap::<Sample>(&system, "src.nothing")
+        .expect_err("unknown port");
+    assert_eq!(
+        error.to_string(),
+        "`src.nothing`: component `src` has no output port `nothing` (it has: out, beat)"
+    );
+    let error = recorder
+        .tap::<Sample>(&system, "ghost.out")
+        .expect_err("unknown component");
+    assert!(
+        matches!(error, RecordError::UnknownComponent { .. }),
+        "{error}"
+    );
+    let error = recorder.tap::<Sample>(&system, "src").expect_err("no port");
+    assert!(matches!(error, RecordError::BadPath { .. }), "{error}");
+    let error = recorder
+        .tap::<Sample>(&system, "src.beat")
+        .expect_err("a tick output");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let error = recorder
+        .tap_ticks(&system, "src.out")
+        .expect_err("a data output");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let error = recorder
+        .tap::<Sample>(&system, ".out")
+        .expect_err("no component");
+    assert!(matches!(error, RecordError::BadPath { .. }), "{error}");
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let error = recorder
+        .tap::<Sample>(&system, "src.out")
+        .expect_err("twice");
+    assert!(matches!(error, RecordError::Duplicate(_)), "{error}");
+    let error = recorder
+        .monitor(&system, "nobody")
+        .expect_err("unknown component");
+    assert!(
+        matches!(error, RecordError::UnknownComponent { .. }),
+        "{error}"
+    );
+
+    let path = temp_file("mistakes.jsonl");
+    drop(recorder.start(&path).expect("start"));
+    let mut player = Player::open(&path).expect("open");
+    let error = player
+        .route::<Sample>("elsewhere.out", &system, "sink.data")
+        .expect_err("not recorded");
+    assert_eq!(
+        error.to_string(),
+        "the recording has no port `elsewhere.out` (it has: src.out)"
+    );
+    let error = player
+        .route::<String>("src.out", &system, "sink.data")
+        .expect_err("wrong type");
+    assert!(matches!(error, RecordError::TypeMismatch { .. }), "{error}");
+
+    let not_a_recording = temp_file("not-a-recording.jsonl");
+    std::fs::write(
+        &not_a_recording,
+        "{\"kind\":\"end\",\"t\":0,\"ports\":[],\"monitors\":[]}\n",
+    )
+    .expect("write");
+    assert!(matches!(
+        Reader::open(&not_a_recording),
+        Err(ReadError::NoHeader { .. })
+    ));
+    let future = temp_file("future.jsonl");
+    let mut file = std::fs::File::create(&future).expect("create");
+    writeln!(
+        file,
+        "{{\"kind\":\"header\",\"version\":99,\"shape\":\"new\"}}"
+    )
+    .expect("write");
+    drop(file);
+    let error = Reader::open(&future).expect_err("a future version");
+    assert!(
+        matches!(error, ReadError::Version { found: 99, .. }),
+        "{error}"
+    );
+    assert_eq!(record::FORMAT_VERSION, 1);
+}
+
+#[test]
+fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
+    let (inner, Outputs { out, .. }) = source("src");
+    let compound = CompoundBuilder::new("base", Idle)
+        .instance(inner)
+        .export_output::<Sample>("out", "src.out")
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    system.add(compound).expect("add");
+    system.start().expect("start");
+
+    let path = temp_file("compound.jsonl");
+    let mut recorder = Recorder::new();
+    recorder
+        .tap::<Sample>(&system, "base.src.out")
+        .expect("inner tap");
+    recorder
+        .tap::<Sample>(&system, "base.out")
+        .expect("exported tap");
+    recorder
+        .monitor(&system, "base.src")
+        .expect("inner monitor");
+    let recording = recorder.start(&path).expect("start");
+    system.run_all().expect("run");
+    let inner = system
+        .handle("base")
+        .and_then(|h| h.instance("src"))
+        .expect("src");
+    inner.wait_state(State::Running, WAIT).expect("running");
+    for n in 0..50 {
+        out.send(sample(n));
+    }
+    let summary = recording.finish().expect("finish");
+    for port in &summary.ports {
+        assert_eq!((port.sent, port.recorded), (50, 50), "{}", port.port);
+    }
+    let records = records(&path);
+    let expected: Vec<(u64, Sample)> = (0..50).map(|n| (n, sample(n))).collect();
+    assert_eq!(packets(&records, "base.src.out"), expected);
+    assert_eq!(packets(&records, "base.out"), expected);
+    let states: Vec<State> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Event(event) if event.component == "base.src" => match event.event {
+                MonitorEvent::State { to, .. } => Some(to),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect();
+    assert!(
+        states.contains(&State::Running),
+        "the instance's way to running is recorded: {states:?}"
+    );
+    assert_eq!(summary.monitors[0].events, {
+        records
+            .iter()
+            .filter(|r| matches!(r, Record::Event(_)))
+            .count() as u64
+    });
+    drop(system);
+}
+
+#[test]
+fn tick_events_are_recorded_and_replayed() {
+    let path = temp_file("ticks.jsonl");
+    {
+        let (system, outputs, _inputs) = bench_with_ticks();
+        let mut recorder = Recorder::new();
+        recorder.tap_ticks(&system, "src.beat").expect("tap ticks");
+        recorder
+            .tap::<Sample>(&system, "src.out")
+            .expect("tap data");
+        let recording = recorder.start(&path).expect("start");
+        for n in 0..5 {
+            outputs.beat.emit();
+            outputs.out.send(sample(n));
+        }
+        let summary = recording.finish().expect("finish");
+        let counts: Vec<(u64, u64)> = summary.ports.iter().map(|p| (p.sent, p.recorded)).collect();
+        assert_eq!(counts, [(5, 5), (5, 5)]);
+    }
+    let reader = Reader::open(&path).expect("open");
+    let kinds: Vec<&str> = reader
+        .header()
+        .ports
+        .iter()
+        .map(|p| p.kind.as_str())
+        .collect();
+    assert_eq!(kinds, ["tick", "data"]);
+    let events: Vec<u64> = reader
+        .packets::<()>("src.beat")
+        .map(|item| item.expect("an event").0.seq)
+        .collect();
+    assert_eq!(events, [0, 1, 2, 3, 4]);
+
+    let (system, _outputs, inputs) = bench_with_ticks();
+    let mut player = Player::open(&path).expect("open");
+    player
+        .route_ticks("src.beat", &system, "sink.beat")
+        .expect("route ticks");
+    let error = player
+        .route_ticks("src.out", &system, "sink.data")
+        .expect_err("a data input");
+    assert!(
+        matches!(error, RecordError::UnsupportedKind { .. }),
+        "{error}"
+    );
+    let played = player.play(Pace::AsFastAsPossible).expect("play");
+    assert_eq!(played.sent["src.beat"], 5);
+    assert_eq!(played.skipped, 5, "the data port has no route");
+    assert_eq!(inputs.beat.take(), 5);
+    assert!(inputs.data.is_empty());
+}
+
+#[test]
+fn a_recording_dropped_after_its_system_still_ends_its_file() {
+    let path = temp_file("dropped.jsonl");
+    let (system, out, _data) = bench();
+    let mut recorder = Recorder::new();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    recorder.monitor(&system, "src").expect("monitor");
+    let recording = recorder.start(&path).expect("start");
+    for n in 0..10 {
+        out.send(sample(n));
+    }
+    assert!(system.shutdown().clean());
+    // The producer's handle outlives its system: what it sends now is still seen.
+    out.send(sample(10));
+    drop(recording);
+    let records = records(&path);
+    let Some(Record::End(summary)) = records.last() else {
+        panic!("no end record: {:?}", records.last());
+    };
+    assert_eq!((summary.ports[0].sent, summary.ports[0].recorded), (11, 11));
+    assert!(
+        records.iter().any(|r| matches!(
+            r,
+            Record::Event(event) if matches!(event.event, MonitorEvent::State { to: State::Dead, .. })
+        )),
+        "the shutdown is in the recording"
+    );
+}
+
+static POSTER_SOURCE: Spec = Spec {
+    type_name: "PosterSource",
+    doc: "Posts what the test posts.",
+    states: IDLE,
+    initial: 0,
+    inputs: &[],
+    outputs: &[OutputSpec {
+        name: "map",
+        kind: OutputKind::Poster,
+        packet: "Sample",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+#[test]
+fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
+    let map = PosterOut::<Sample>::new();
+    let mut system = System::new();
+    system
+        .add(Component::new(
+            "src",
+            Box::new(Inert(&POSTER_SOURCE)),
+            PortSet::new().output(&map),
+        ))
+        .expect("add src");
+    system.run_all().expect("run");
+    let path = temp_file("poster.jsonl");
+    let mut recorder = Recorder::new().capacity(4);
+    recorder
+        .tap::<Sample>(&system, "src.map")
+        .expect("tap a poster");
+    let recording = recorder.start(&path).expect("start");
+    const POSTS: u64 = 2_000;
+    for n in 0..POSTS {
+        map.post(sample(n));
+    }
+    let summary = recording.finish().expect("finish");
+    let port = &summary.ports[0];
+    assert_eq!(port.port, "src.map");
+    assert_eq!(port.sent, POSTS);
+    assert_eq!(port.recorded + port.lost, POSTS, "{port:?}");
+    let values: Vec<u64> = Reader::open(&path)
+        .expect("open")
+        .packets::<Sample>("src.map")
+        .map(|item| item.expect("a post").1.n)
+        .collect();
+    assert_eq!(values.len() as u64, port.recorded);
+    assert!(
+        values.windows(2).all(|pair| pair[0] < pair[1]),
+        "posts are recorded in order"
+    );
+    let reader = Reader::open(&path).expect("open");
+    assert_eq!(reader.header().ports[0].kind, "poster");
+    assert_eq!(
+        map.posted(),
+        Some(sample(POSTS - 1)),
+        "the post itself is kept"
+    );
+    assert!(system.shutdown().clean());
+}
