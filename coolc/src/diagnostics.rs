@@ -142,6 +142,9 @@ codes! {
     UnconnectedPort => "coolc::check::unconnected_port",
     /// A name does not follow the naming convention (warning).
     Naming => "coolc::check::naming",
+    /// A `degrade` plan step in a component with fewer than two quality levels: it
+    /// can never lower the quality, so the plan always fails (warning).
+    DegradeWithoutQuality => "coolc::check::degrade_without_quality",
 }
 
 impl fmt::Display for Code {

@@ -169,6 +169,14 @@ pub trait Automaton: Send + 'static {
     /// state), before its entry section runs. The supervisor evaluates the rules of
     /// `state` on its next turn, which the runner takes at once.
     fn entered(&mut self, _state: usize) {}
+
+    /// Compound components only: `Command::SetDegradation(level)` arrived through the
+    /// control port: `level` is the current maximum degradation level of the
+    /// compound's instances (paper 3.6, the homogeneity interval's upper end). `Err`
+    /// rejects the command with the reason.
+    fn set_degradation(&mut self, _level: u32, _cx: &mut Context) -> Result<(), String> {
+        Err("this component has no adaptation levels".to_owned())
+    }
 }
 
 /// Rings a component's doorbell: the thread wakes and looks for work (see
@@ -208,6 +216,9 @@ pub struct Context {
     pub(crate) waker: Option<Waker>,
     /// Compound components: supervision steps to publish when the call returns.
     pub(crate) supervision: Vec<crate::monitor::Supervision>,
+    /// The component's monitoring state (none in a context made outside a system):
+    /// compounds publish their adaptation steps through it.
+    pub(crate) shared: Option<std::sync::Arc<crate::monitor::Shared>>,
 }
 
 impl Context {
@@ -225,6 +236,7 @@ impl Context {
             quality: 0,
             waker: None,
             supervision: Vec::new(),
+            shared: None,
         }
     }
 

@@ -19,6 +19,10 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::Receiver;
 
+use crate::adapt::{
+    AdaptAction, AdaptConfig, Adaptation, Decision, Levels, Member, Pressure, ProtectPriority,
+    Selector,
+};
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
 use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
@@ -537,6 +541,8 @@ pub struct CompoundBuilder {
     inputs: Vec<InputSpec>,
     outputs: Vec<OutputSpec>,
     ports: PortSet,
+    adaptation: AdaptConfig,
+    selector: Box<dyn Selector>,
 }
 
 impl std::fmt::Debug for CompoundBuilder {
@@ -572,7 +578,30 @@ impl CompoundBuilder {
             inputs: Vec::new(),
             outputs: Vec::new(),
             ports: PortSet::new(),
+            adaptation: AdaptConfig::default(),
+            selector: Box::new(ProtectPriority),
         }
+    }
+
+    /// The supervisor's adaptation (paper 3.6; `docs/runtime.md`, "Adaptation"): on
+    /// by default, coordinating the instances that adapt (those with a period
+    /// interval, or turned on with [`Component::with_adaptation`]);
+    /// [`AdaptConfig::off`] turns it off (the instances then detect and publish their
+    /// verdicts, and nothing acts on them). [`AdaptConfig::width`] is the homogeneity
+    /// interval's width and [`AdaptConfig::reconfiguration`] what the top-level
+    /// supervisor does when degradation is exhausted; the detection fields are the
+    /// instances' own ([`Component::with_adaptation`]).
+    pub fn adaptation(mut self, adaptation: AdaptConfig) -> CompoundBuilder {
+        self.adaptation = adaptation;
+        self
+    }
+
+    /// How the supervisor chooses the instance to degrade and the one to promote
+    /// (default [`ProtectPriority`]; the paper's
+    /// [`FastestCorrection`](crate::adapt::FastestCorrection), or your own).
+    pub fn adaptation_selector(mut self, selector: impl Selector) -> CompoundBuilder {
+        self.selector = Box::new(selector);
+        self
     }
 
     /// The declared input at `target` and its erased port, if `T` is its packet type.
@@ -1121,6 +1150,28 @@ impl CompoundBuilder {
             standing: (0..self.instances.len()).collect(),
         };
         let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
+        // The instances' runners only detect and publish: the compound decides (and,
+        // with its adaptation off, nothing does).
+        for instance in &self.instances {
+            instance
+                .handle
+                .shared
+                .adapt_managed
+                .store(true, Ordering::Release);
+        }
+        let coordinator = (self.adaptation.enabled != Some(false)).then(|| Coordinator {
+            config: self.adaptation,
+            selector: self.selector,
+            cap: 0,
+            floor: 0,
+            initialized: false,
+            dirty: false,
+            exhausted: false,
+            suspended: vec![false; self.instances.len()],
+            pending: vec![None; self.instances.len()],
+            max_level: 0,
+            settle_until: None,
+        });
         let compound = Compound {
             name: self.name.clone(),
             spec,
@@ -1147,6 +1198,7 @@ impl CompoundBuilder {
             exports: self.exports,
             steps: Vec::new(),
             restood: false,
+            coordinator,
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports).with_instances(handles))
     }
@@ -1231,6 +1283,35 @@ struct Compound {
     /// Another instance started standing for one with mapped variables: rules reading
     /// them are evaluated on the next turn.
     restood: bool,
+    /// Adaptation (paper 3.6): `None` when turned off.
+    coordinator: Option<Coordinator>,
+}
+
+/// A compound supervisor's adaptation state: its homogeneity interval and what it has
+/// asked of its instances.
+struct Coordinator {
+    config: AdaptConfig,
+    selector: Box<dyn Selector>,
+    /// The current maximum degradation level (the compound's own level).
+    cap: u32,
+    /// The current minimum degradation level.
+    floor: u32,
+    /// The cap and floor were set up at the first start (top level: `width`; nested:
+    /// 0 until its supervisor grants more).
+    initialized: bool,
+    /// Something adaptation reads changed: decide on the next turn.
+    dirty: bool,
+    /// `Exhausted` was published for the current violation.
+    exhausted: bool,
+    /// Instances suspended by adaptation (reconfiguration).
+    suspended: Vec<bool>,
+    /// Levels commanded and not yet seen on the instance's monitor, with when.
+    pending: Vec<Option<(u32, Instant)>>,
+    /// The highest ladder top among the instances (published).
+    max_level: u32,
+    /// Until when promotion waits: the settling time after the last time violation
+    /// seen or degradation decided.
+    settle_until: Option<Instant>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -1804,6 +1885,9 @@ impl Compound {
                 let name = &instance.name;
                 let key = match event {
                     MonitorEvent::State { from, to } => {
+                        if let Some(coordinator) = self.coordinator.as_mut() {
+                            coordinator.dirty = true;
+                        }
                         if failure(from) && !failure(to) {
                             // It left its fault: the next one is a new fault.
                             instance.handled = false;
@@ -1811,6 +1895,12 @@ impl Compound {
                         format!("{name}.state")
                     }
                     MonitorEvent::Quality(_) => format!("{name}.quality"),
+                    MonitorEvent::Pressure(_) | MonitorEvent::Adaptation(_) => {
+                        if let Some(coordinator) = self.coordinator.as_mut() {
+                            coordinator.dirty = true;
+                        }
+                        continue;
+                    }
                     MonitorEvent::UserState(_) => format!("{name}.user_state"),
                     MonitorEvent::Result(_) => format!("{name}.result"),
                     MonitorEvent::Error(_) => format!("{name}.error"),
@@ -1864,7 +1954,9 @@ impl Automaton for Compound {
 
     fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
         self.evaluated_in = None;
-        self.start_instances(cx)
+        self.start_instances(cx)?;
+        self.adapt_start(cx);
+        Ok(())
     }
 
     fn stop(&mut self, _cx: &mut Context) {
@@ -1920,8 +2012,13 @@ impl Automaton for Compound {
     fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
         // The supervisor enters (or resumes) a state: its rules are evaluated afresh.
         self.evaluated_in = None;
-        for instance in &self.instances {
+        for (index, instance) in self.instances.iter().enumerate() {
+            let held = self
+                .coordinator
+                .as_ref()
+                .is_some_and(|c| c.suspended[index]);
             if instance.status == Status::Active
+                && !held
                 && matches!(instance.handle.state(), State::Ready | State::Suspended)
             {
                 command(&instance.handle, Controllable::Running)?;
@@ -1952,8 +2049,62 @@ impl Automaton for Compound {
 
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
         let outcome = self.supervise_turn(state);
+        if let Some(coordinator) = self.coordinator.as_mut()
+            && coordinator
+                .settle_until
+                .is_some_and(|until| Instant::now() >= until)
+        {
+            // Settled: promotion may be due.
+            coordinator.settle_until = None;
+            coordinator.dirty = true;
+        }
+        if outcome.is_ok() && self.coordinator.as_ref().is_some_and(|c| c.dirty) {
+            self.adapt_turn(cx);
+        }
         cx.supervision.append(&mut self.steps);
         outcome
+    }
+
+    fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), String> {
+        let name = self.name.clone();
+        let Some(coordinator) = self.coordinator.as_mut() else {
+            return Err("adaptation is off in this compound".to_owned());
+        };
+        if level > coordinator.max_level {
+            return Err(format!(
+                "degradation level {level} out of range: the highest is {}",
+                coordinator.max_level
+            ));
+        }
+        let from = coordinator.cap;
+        coordinator.cap = level;
+        coordinator.floor = level.saturating_sub(coordinator.config.width);
+        coordinator.initialized = true;
+        coordinator.dirty = true;
+        if from != level {
+            let step = Adaptation {
+                component: name,
+                action: if level > from {
+                    AdaptAction::Degraded
+                } else {
+                    AdaptAction::Promoted
+                },
+                from,
+                to: level,
+                period: None,
+                quality: None,
+                detail: "current maximum level of the instances, set through the control port"
+                    .to_owned(),
+            };
+            let floor = coordinator.floor;
+            if let Some(shared) = &cx.shared {
+                shared.adaptation_step(step, |status| {
+                    status.level = level;
+                    status.floor = floor;
+                });
+            }
+        }
+        Ok(())
     }
 
     fn entered(&mut self, state: usize) {
@@ -1982,7 +2133,9 @@ impl Automaton for Compound {
                 pending.due
             })
         });
-        let fresh = (self.fresh || self.sectioned).then(Instant::now);
+        let dirty = self.coordinator.as_ref().is_some_and(|c| c.dirty);
+        let settle = self.coordinator.as_ref().and_then(|c| c.settle_until);
+        let fresh = (self.fresh || self.sectioned || dirty).then(Instant::now);
         // Packets held at an exported input (the instance's `Block` fifo was full):
         // retried soon.
         let held = self
@@ -1990,7 +2143,12 @@ impl Automaton for Compound {
             .iter()
             .any(|export| export.held())
             .then(|| crate::thread::later(Instant::now(), EXPORT_RETRY));
-        queue.chain(restarts).chain(fresh).chain(held).min()
+        queue
+            .chain(restarts)
+            .chain(fresh)
+            .chain(held)
+            .chain(settle)
+            .min()
     }
 }
 
@@ -2042,6 +2200,333 @@ impl Compound {
                 .map(|rule| rule.target)
         };
         Ok(fired)
+    }
+}
+
+impl Compound {
+    /// Set up adaptation at the first start: the cap (top level: the interval's
+    /// width; nested: 0, until the supervisor above grants a level) and the published
+    /// status.
+    fn adapt_start(&mut self, cx: &mut Context) {
+        let max_level = self.adaptive_max_level();
+        let Some(coordinator) = self.coordinator.as_mut() else {
+            return;
+        };
+        coordinator.max_level = max_level;
+        let managed = cx
+            .shared
+            .as_ref()
+            .is_some_and(|shared| shared.adapt_managed.load(Ordering::Acquire));
+        if !coordinator.initialized {
+            coordinator.initialized = true;
+            coordinator.cap = if managed {
+                0
+            } else {
+                coordinator.config.width.min(max_level)
+            };
+            coordinator.floor = 0;
+        }
+        coordinator.dirty = true;
+        let (cap, floor) = (coordinator.cap, coordinator.floor);
+        if let Some(shared) = &cx.shared {
+            shared.quietly(|monitor| {
+                let status = &mut monitor.adaptation;
+                status.enabled = true;
+                status.level = cap;
+                status.floor = floor;
+                status.max_level = max_level;
+            });
+        }
+    }
+
+    /// The highest ladder top among the instances that adapt.
+    fn adaptive_max_level(&self) -> u32 {
+        self.view
+            .instances
+            .iter()
+            .filter(|m| m.adaptation.enabled)
+            .map(|m| m.adaptation.max_level)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The instances taking part in adaptation, as the policy sees them: those
+    /// active and running with adaptation on, and those suspended by adaptation.
+    fn members(&mut self) -> (Vec<Member>, Vec<usize>) {
+        let now = Instant::now();
+        let Some(coordinator) = self.coordinator.as_mut() else {
+            return (Vec::new(), Vec::new());
+        };
+        let mut members = Vec::new();
+        let mut indices = Vec::new();
+        for (index, instance) in self.instances.iter().enumerate() {
+            let monitor = &self.view.instances[index];
+            let suspended = coordinator.suspended[index];
+            let running = instance.status == Status::Active && monitor.state == State::Running;
+            if !monitor.adaptation.enabled || !(running || suspended) {
+                continue;
+            }
+            let mut level = monitor.adaptation.level;
+            let mut pressure = monitor.adaptation.pressure;
+            if let Some((commanded, since)) = coordinator.pending[index] {
+                if commanded == level || now.saturating_duration_since(since) > DEFAULT_PENDING {
+                    coordinator.pending[index] = None;
+                } else {
+                    // Not applied yet: its verdict is about the level before.
+                    level = commanded;
+                    pressure = Pressure::Nominal;
+                }
+            }
+            members.push(Member {
+                name: instance.name.clone(),
+                priority: monitor.priority,
+                level,
+                max_level: monitor.adaptation.max_level,
+                pressure,
+                load: monitor.adaptation.load,
+                cpu_share: monitor.adaptation.cpu_share,
+                period: monitor.period,
+                suspended,
+            });
+            indices.push(index);
+        }
+        (members, indices)
+    }
+
+    /// One adaptation turn: decide (Figures 6 and 7) and act, until an instance was
+    /// commanded or nothing is left to do. Commands are posted without waiting (an
+    /// instance in a long section takes them when it returns).
+    fn adapt_turn(&mut self, cx: &mut Context) {
+        let max_level = self.adaptive_max_level();
+        let managed = cx
+            .shared
+            .as_ref()
+            .is_some_and(|shared| shared.adapt_managed.load(Ordering::Acquire));
+        let shared = cx.shared.clone();
+        let publish = |step: Adaptation, cap: u32, floor: u32| {
+            if let Some(shared) = &shared {
+                shared.adaptation_step(step, |status| {
+                    status.level = cap;
+                    status.floor = floor;
+                });
+            }
+        };
+        if let Some(coordinator) = self.coordinator.as_mut() {
+            coordinator.dirty = false;
+            coordinator.max_level = max_level;
+        }
+        let mut decision = Decision::Hold;
+        for _ in 0..8 {
+            let (members, indices) = self.members();
+            let Some(coordinator) = self.coordinator.as_mut() else {
+                return;
+            };
+            let now = Instant::now();
+            if members.iter().any(|m| m.pressure == Pressure::Violation) {
+                coordinator.settle(&members, now);
+            }
+            let settled = match coordinator.settle_until {
+                Some(until) if now < until => false,
+                Some(_) => {
+                    coordinator.settle_until = None;
+                    true
+                }
+                None => true,
+            };
+            let levels = Levels {
+                cap: coordinator.cap,
+                floor: coordinator.floor,
+                top: !managed,
+                reconfiguration: coordinator.config.reconfiguration,
+                settled,
+            };
+            decision = crate::adapt::decide(&members, levels, &*coordinator.selector);
+            if decision != Decision::Exhausted {
+                coordinator.exhausted = false;
+            }
+            let (cap, floor, width) =
+                (coordinator.cap, coordinator.floor, coordinator.config.width);
+            let own = |action, from, to, detail: String| Adaptation {
+                component: self.name.clone(),
+                action,
+                from,
+                to,
+                period: None,
+                quality: None,
+                detail,
+            };
+            let violators = || {
+                members
+                    .iter()
+                    .filter(|m| m.pressure == Pressure::Violation)
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            match decision {
+                Decision::RaiseCap => {
+                    coordinator.cap = cap + 1;
+                    coordinator.floor = (cap + 1).saturating_sub(width);
+                    let detail = format!(
+                        "every instance at the current maximum; time violation at {}",
+                        violators()
+                    );
+                    publish(
+                        own(AdaptAction::CapRaised, cap, cap + 1, detail),
+                        cap + 1,
+                        coordinator.floor,
+                    );
+                    continue;
+                }
+                Decision::LowerFloor => {
+                    coordinator.floor = floor - 1;
+                    coordinator.cap = (floor - 1 + width).min(max_level.max(width));
+                    let detail = "every instance at the current minimum, spare time".to_owned();
+                    publish(
+                        own(AdaptAction::FloorLowered, floor, floor - 1, detail),
+                        coordinator.cap,
+                        floor - 1,
+                    );
+                    continue;
+                }
+                Decision::Degrade(m) | Decision::Promote(m) | Decision::Clamp(m) => {
+                    let member = &members[m];
+                    let (to, action, detail) = match decision {
+                        Decision::Degrade(_) => (
+                            member.level + 1,
+                            AdaptAction::Degraded,
+                            format!("time violation at {}", violators()),
+                        ),
+                        Decision::Promote(_) => (
+                            member.level - 1,
+                            AdaptAction::Promoted,
+                            "spare time".to_owned(),
+                        ),
+                        _ => (
+                            cap,
+                            AdaptAction::Promoted,
+                            format!("above the current maximum level {cap}"),
+                        ),
+                    };
+                    let index = indices[m];
+                    coordinator.pending[index] = Some((to, Instant::now()));
+                    let step = Adaptation {
+                        component: member.name.clone(),
+                        action,
+                        from: member.level,
+                        to,
+                        period: None,
+                        quality: None,
+                        detail,
+                    };
+                    publish(step, cap, floor);
+                    post(&self.instances[index].handle, Command::SetDegradation(to));
+                }
+                Decision::Suspend(m) | Decision::Resume(m) => {
+                    let index = indices[m];
+                    let suspend = matches!(decision, Decision::Suspend(_));
+                    coordinator.suspended[index] = suspend;
+                    let (action, target, detail) = if suspend {
+                        (
+                            AdaptAction::Suspended,
+                            Controllable::Suspended,
+                            format!("degradation exhausted; time violation at {}", violators()),
+                        )
+                    } else {
+                        (
+                            AdaptAction::Resumed,
+                            Controllable::Running,
+                            "spare time".to_owned(),
+                        )
+                    };
+                    let level = members[m].level;
+                    let step = Adaptation {
+                        component: members[m].name.clone(),
+                        action,
+                        from: level,
+                        to: level,
+                        period: None,
+                        quality: None,
+                        detail,
+                    };
+                    publish(step, cap, floor);
+                    post(&self.instances[index].handle, Command::SetState(target));
+                }
+                Decision::Exhausted if !coordinator.exhausted => {
+                    coordinator.exhausted = true;
+                    let detail = format!(
+                        "every instance at the highest level; time violation at {}",
+                        violators()
+                    );
+                    publish(own(AdaptAction::Exhausted, cap, cap, detail), cap, floor);
+                }
+                Decision::NotifyHigher | Decision::ReportSpare => {
+                    let pressure = decision.pressure();
+                    let already = shared
+                        .as_ref()
+                        .is_some_and(|s| s.snapshot().adaptation.pressure == pressure);
+                    if !already {
+                        let (action, detail) = if pressure == Pressure::Violation {
+                            (
+                                AdaptAction::NotifiedHigher,
+                                format!(
+                                    "every instance at the current maximum level {cap}; time violation at {}",
+                                    violators()
+                                ),
+                            )
+                        } else {
+                            (
+                                AdaptAction::ReportedSpare,
+                                "spare time; no instance above the current minimum".to_owned(),
+                            )
+                        };
+                        publish(own(action, cap, cap, detail), cap, floor);
+                    }
+                }
+                Decision::Exhausted | Decision::Hold => {}
+            }
+            break;
+        }
+        if let Some(shared) = &shared {
+            shared.set_pressure(decision.pressure(), 0.0);
+            let (cap, floor) = self
+                .coordinator
+                .as_ref()
+                .map_or((0, 0), |c| (c.cap, c.floor));
+            shared.quietly(|monitor| {
+                monitor.adaptation.level = cap;
+                monitor.adaptation.floor = floor;
+                monitor.adaptation.max_level = max_level;
+            });
+        }
+    }
+}
+
+impl Coordinator {
+    /// A time violation now: promotion waits for the settling time, long enough for
+    /// a member degraded now to pass its hold-down and fill its detection window:
+    /// `hold_periods + window + 1` of the slowest member's cycles (its period, plus
+    /// its section's overrun while it is late).
+    fn settle(&mut self, members: &[Member], now: Instant) {
+        let cycle = members
+            .iter()
+            .filter_map(|m| Some(m.period?.mul_f64(1.0 + m.load.clamp(0.0, 10.0))))
+            .max()
+            .unwrap_or(DEFAULT_SUPERVISION_PERIOD);
+        let periods = self.config.hold_periods + self.config.window + 1;
+        self.settle_until = Some(crate::thread::later(now, cycle.saturating_mul(periods)));
+    }
+}
+
+/// How long a level commanded to an instance is taken as applied before its monitor
+/// shows it (a command the instance rejected is forgotten after this).
+const DEFAULT_PENDING: Duration = Duration::from_secs(2);
+
+/// Queue `command` at `handle` without waiting for the answer (the supervisor never
+/// waits for an instance in a long section).
+fn post(handle: &Handle, command: Command) {
+    if let Err(rejected) = handle.post(command) {
+        tracing::warn!("adaptation: {rejected}");
     }
 }
 

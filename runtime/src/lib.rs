@@ -119,6 +119,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod adapt;
 mod automaton;
 pub mod compound;
 mod monitor;
@@ -132,6 +133,7 @@ mod thread;
 mod value;
 mod watchdog;
 
+pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{

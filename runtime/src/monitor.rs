@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use serde::{Deserialize, Serialize};
 
+use crate::adapt::{AdaptStatus, Adaptation, Pressure};
 use crate::automaton::TaskResult;
 use crate::port::ErasedInput;
 use crate::table::{Controllable, State};
@@ -44,6 +45,12 @@ pub enum Command {
     SetPriority(i32),
     /// The quality level: an index into the timing block's qualities (0 = best).
     SetQuality(usize),
+    /// The adaptation level (`docs/runtime.md`, "Adaptation"): for an atomic
+    /// component, its place on its degradation ladder (period steps, then quality
+    /// steps), applied as `SetPeriod` and `SetQuality` would be; for a compound, the
+    /// current maximum degradation level its instances may reach. A compound's
+    /// supervisor degrades and promotes its instances with it.
+    SetDegradation(u32),
 }
 
 /// Why a command was rejected.
@@ -116,6 +123,9 @@ pub struct Monitor {
     pub supervision: Vec<Supervision>,
     /// Compound components only: how many supervision steps were taken in all.
     pub supervision_steps: u64,
+    /// Adaptation (paper 3.6): level, verdict and the last steps.
+    #[serde(default)]
+    pub adaptation: AdaptStatus,
 }
 
 /// How many supervision steps [`Monitor::supervision`] keeps.
@@ -237,6 +247,11 @@ pub enum MonitorEvent {
     Supervision(Supervision),
     /// `priority` was applied to the component's thread, or could not be.
     OsPriority(OsPriority),
+    /// The component's adaptation verdict changed (time violation, spare time, or
+    /// neither).
+    Pressure(Pressure),
+    /// An adaptation step: a level changed, or a compound's supervisor acted.
+    Adaptation(Adaptation),
 }
 
 /// How a component's `priority` is applied to its OS thread (`docs/runtime.md`,
@@ -278,6 +293,15 @@ pub(crate) struct Shared {
     pub(crate) stuck: AtomicBool,
     /// The component's thread, once spawned.
     pub(crate) thread: std::sync::OnceLock<std::thread::ThreadId>,
+    /// A compound's supervisor decides this component's adaptation level: its runner
+    /// only detects and publishes its verdicts (set when the compound is built).
+    pub(crate) adapt_managed: AtomicBool,
+}
+
+impl std::fmt::Debug for Shared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Shared").finish_non_exhaustive()
+    }
 }
 
 impl Shared {
@@ -291,6 +315,7 @@ impl Shared {
             spawned: AtomicBool::new(false),
             stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
+            adapt_managed: AtomicBool::new(false),
         }
     }
 
@@ -393,6 +418,35 @@ impl Shared {
 
     pub(crate) fn state(&self) -> State {
         lock(&self.monitor).state
+    }
+
+    /// Record adaptation step `step`: the history, the counter, and the event.
+    pub(crate) fn adaptation_step(&self, step: Adaptation, f: impl FnOnce(&mut AdaptStatus)) {
+        tracing::info!(component = %step.component, "adaptation: {step}");
+        self.update(|monitor| {
+            let status = &mut monitor.adaptation;
+            f(status);
+            status.steps += 1;
+            status.history.push(step.clone());
+            let excess = status
+                .history
+                .len()
+                .saturating_sub(crate::adapt::ADAPTATION_HISTORY);
+            status.history.drain(..excess);
+            vec![MonitorEvent::Adaptation(step)]
+        });
+    }
+
+    /// Publish a new verdict (an event only if it changed).
+    pub(crate) fn set_pressure(&self, pressure: Pressure, load: f64) {
+        self.update(|monitor| {
+            monitor.adaptation.load = load;
+            if monitor.adaptation.pressure == pressure {
+                return Vec::new();
+            }
+            monitor.adaptation.pressure = pressure;
+            vec![MonitorEvent::Pressure(pressure)]
+        });
     }
 
     /// Stop ringing `bell` after events (a recorder that stopped following this

@@ -1076,6 +1076,10 @@ pub(crate) struct PosterOutInner<T> {
     /// under one short lock: a post takes it once, a reader once.
     slot: Mutex<(Option<T>, u64)>,
     readers: RwLock<Arc<[Arc<InputCore>]>>,
+    /// Recorders' taps: each post is delivered to them too (see `tap_data`).
+    taps: RwLock<Arc<[Sink<T>]>>,
+    /// Whether `taps` is not empty: a post without taps reads one flag, not the list.
+    tapped: AtomicBool,
 }
 
 impl<T> PosterOutInner<T> {
@@ -1129,12 +1133,19 @@ impl<T: Packet> PosterOut<T> {
                 core: OutputCore::new(),
                 slot: Mutex::new((None, 0)),
                 readers: RwLock::new(Arc::from([])),
+                taps: RwLock::new(Arc::from([])),
+                tapped: AtomicBool::new(false),
             }),
         }
     }
 
     /// Post a value: connected poster inputs read it from now on and are woken.
     pub fn post(&self, packet: T) {
+        if self.inner.tapped.load(Ordering::Acquire) {
+            for tap in read(&self.inner.taps).iter() {
+                tap.target.deliver(packet.clone());
+            }
+        }
         {
             let mut slot = lock(&self.inner.slot);
             slot.0 = Some(packet);
@@ -1813,25 +1824,42 @@ pub(crate) fn forward_data<T: Packet>(from: &ErasedOutput, to: &DataOut<T>) -> O
     Some(id)
 }
 
-/// Stop a forwarding made by [`forward_data`].
+/// Stop a forwarding made by [`forward_data`], or remove a tap [`tap_data`] added.
 pub(crate) fn unforward_data<T: Packet>(from: &ErasedOutput, id: usize) {
     if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
         update_list(&out.sinks, |sinks| sinks.retain(|sink| sink.input_id != id));
+    } else if let Some(out) = downcast::<PosterOutInner<T>>(&from.any) {
+        let mut taps = write(&out.taps);
+        let kept: Vec<Sink<T>> = taps
+            .iter()
+            .filter(|tap| tap.input_id != id)
+            .cloned()
+            .collect();
+        out.tapped.store(!kept.is_empty(), Ordering::Release);
+        *taps = Arc::from(kept);
     }
 }
 
-/// Deliver every packet `from` sends to `tap` as well (a recorder's tap), on the
-/// sender's thread: the tap is one more sink, so each send costs one more clone.
-/// Returns the tap's id for [`unforward_data`], or `None` if `from` is not a data
-/// output of `T`. A tap is no connection: `System::connections` does not list it.
+/// Deliver every packet `from` sends (a data output) or posts (a poster output) to
+/// `tap` as well (a recorder's tap), on the producer's thread: the tap is one more
+/// sink, so each packet costs one more clone. Returns the tap's id for
+/// [`unforward_data`], or `None` if `from` is neither a data nor a poster output of
+/// `T`. A tap is no connection: `System::connections` does not list it.
 pub(crate) fn tap_data<T: Packet>(from: &ErasedOutput, tap: Arc<dyn Deliver<T>>) -> Option<usize> {
-    let out = downcast::<DataOutInner<T>>(&from.any)?;
     let id = next_port_id();
-    update_list(&out.sinks, |sinks| {
-        sinks.push(Sink {
-            input_id: id,
-            target: tap,
-        })
-    });
+    let sink = Sink {
+        input_id: id,
+        target: tap,
+    };
+    if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
+        update_list(&out.sinks, |sinks| sinks.push(sink));
+    } else {
+        let out = downcast::<PosterOutInner<T>>(&from.any)?;
+        let mut taps = write(&out.taps);
+        let mut list: Vec<Sink<T>> = taps.iter().cloned().collect();
+        list.push(sink);
+        *taps = Arc::from(list);
+        out.tapped.store(true, Ordering::Release);
+    }
     Some(id)
 }

@@ -31,11 +31,11 @@
 //! gives the typed packet back), and a [`Player`] replays recorded ports into inputs of
 //! a running system, at the original pace or as fast as possible.
 //!
-//! `data` outputs are tapped with [`Recorder::tap`] and tick outputs with
-//! [`Recorder::tap_ticks`] (one packet record per event, value `null`, stamped when
-//! the recorder's thread sees it); `last`, `fifo` and `ufifo` inputs are fed with
-//! [`Player::route`] and tick inputs with [`Player::route_ticks`]. Poster ports are not
-//! supported yet. Packets a producer sends while it answers a pull request go to the
+//! `data` and `poster` outputs are tapped with [`Recorder::tap`] (every post is a
+//! packet record) and tick outputs with [`Recorder::tap_ticks`] (one packet record per
+//! event, value `null`, stamped when the recorder's thread sees it); `last`, `fifo`
+//! and `ufifo` inputs are fed with [`Player::route`] and tick inputs with
+//! [`Player::route_ticks`]. Poster inputs are not fed (they read a producer's post). Packets a producer sends while it answers a pull request go to the
 //! requester only, so no tap sees them.
 
 use std::any::TypeId;
@@ -405,11 +405,11 @@ impl Recorder {
             return Err(RecordError::Duplicate(path.to_owned()));
         }
         let output = find_output(system, path)?;
-        if output.kind != OutKind::Data {
+        if !matches!(output.kind, OutKind::Data | OutKind::Poster) {
             return Err(RecordError::UnsupportedKind {
                 path: path.to_owned(),
                 kind: output.kind.name(),
-                supported: "only data outputs can be tapped",
+                supported: "tap takes data and poster outputs (tick outputs: tap_ticks)",
             });
         }
         if output.type_id != TypeId::of::<T>() {
@@ -421,6 +421,7 @@ impl Recorder {
         }
         self.taps.push(Box::new(Pending::<T> {
             path: path.to_owned(),
+            kind: output.kind.name(),
             output,
             marker: std::marker::PhantomData,
         }));
@@ -649,6 +650,8 @@ trait PendingTap: Send {
 
 struct Pending<T> {
     path: String,
+    /// `data` or `poster`.
+    kind: &'static str,
     output: ErasedOutput,
     marker: std::marker::PhantomData<fn() -> T>,
 }
@@ -663,7 +666,7 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
     }
 
     fn kind(&self) -> &'static str {
-        "data"
+        self.kind
     }
 
     fn attach(

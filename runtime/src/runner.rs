@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 
+use crate::adapt::{AdaptAction, AdaptConfig, Adaptation, Detector, Ladder, Observation, Pressure};
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
@@ -57,10 +58,11 @@ const SPIN: Duration = Duration::from_micros(2);
 const BATCH_PAUSE: u32 = 32;
 
 /// Spin hints between two clock reads while spinning (a hint takes about 25 ns on the
-/// development machine, a clock read about 30 ns). A thread that finds work while
-/// spinning starts its turn from the spin's last clock reading instead of reading the
-/// clock again: the reading is at most this many hints old (about 0.1 us), and a
-/// packet handed over between spinning threads saves a clock read on its path.
+/// development machine, a clock read about 30 ns). A component without timers that
+/// finds work while spinning starts its turn from the spin's last clock reading
+/// instead of reading the clock again: the reading is normally at most this many hints
+/// old (about 0.1 us; more if the thread was preempted in between), and a packet
+/// handed over between spinning threads saves a clock read on its path.
 const SPIN_BATCH: u32 = 4;
 
 /// `yield_now` rounds after the spin, before parking (as crossbeam's `Backoff`): on a
@@ -136,12 +138,25 @@ pub(crate) struct Runner {
     /// the bell: the next turn does not clear the bell.
     found_by_polling: bool,
     /// When the last wait found its work while spinning: the spin's last clock
-    /// reading, which the next turn starts from (see `SPIN_BATCH`).
+    /// reading, which the next turn starts from (see `SPIN_BATCH`). Only for a
+    /// component without timers (`untimed`).
     found_at: Option<Instant>,
+    /// No state has a periodic section or an `after` transition, and the component is
+    /// not a compound: nothing times a delay from the turn's clock, so a spin's last
+    /// reading may stand in for it. (A thread preempted between that reading and
+    /// finding its work would start the turn from an older reading; a timer measured
+    /// from it would fire early, so timed components always read the clock.)
+    untimed: bool,
     /// This turn did not clear the bell (the bell may be rung for work already seen).
     polled: bool,
     /// The thread's OS scheduling (`priority`), once the thread runs.
     scheduling: Option<Scheduling>,
+    /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
+    /// component with no ladder and no detection, and for compounds (whose
+    /// supervisor adapts, `compound.rs`).
+    adapt: Option<Local>,
+    /// How long the last user call ran.
+    last_took: Duration,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -155,6 +170,7 @@ impl Runner {
         name: &str,
         automaton: Box<dyn Automaton>,
         timing: TimingSpec,
+        adaptation: AdaptConfig,
         shared: Arc<Shared>,
         control: Receiver<ControlMessage>,
         bell: Arc<Doorbell>,
@@ -169,6 +185,9 @@ impl Runner {
         let watch = timing
             .max_response
             .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit)));
+        let adapt = (!supervised)
+            .then(|| Local::new(adaptation, &timing))
+            .flatten();
         let mut runner = Runner {
             cx: Context::new(name, timing.period),
             automaton,
@@ -203,10 +222,18 @@ impl Runner {
             arrivals_count_on_entry: false,
             found_by_polling: false,
             found_at: None,
+            untimed: !supervised
+                && spec
+                    .states
+                    .iter()
+                    .all(|state| state.periodic.is_none() && state.after.is_empty()),
             polled: false,
             scheduling: None,
+            adapt,
+            last_took: Duration::ZERO,
             _exit_guard: exit_guard,
         };
+        runner.cx.shared = Some(Arc::clone(&runner.shared));
         runner.cx.waker = Some(crate::automaton::Waker {
             bell: Arc::clone(&runner.bell),
         });
@@ -221,6 +248,13 @@ impl Runner {
         let mut priority = 0;
         self.shared.quietly(|monitor| priority = monitor.priority);
         self.apply_priority(priority);
+        if let Some(adapt) = &self.adapt {
+            let (enabled, max_level) = (adapt.enabled, adapt.ladder.max_level());
+            self.shared.quietly(|monitor| {
+                monitor.adaptation.enabled = enabled;
+                monitor.adaptation.max_level = max_level;
+            });
+        }
         self.clock = Instant::now();
         self.publish_variables();
         match self.run_start() {
@@ -403,7 +437,7 @@ impl Runner {
             for _ in 0..SPIN_BATCH {
                 if found(self) {
                     self.found_by_polling = polling;
-                    self.found_at = Some(read_at);
+                    self.found_at = self.untimed.then_some(read_at);
                     return;
                 }
                 std::hint::spin_loop();
@@ -768,7 +802,33 @@ impl Runner {
                     )));
                 } else {
                     self.set_quality(*quality);
+                    self.resync_level("quality set through the control port");
                     reply(Reply::Done);
+                }
+            }
+            Command::SetDegradation(level) => {
+                let level = *level;
+                if self.supervised {
+                    match self.call(|automaton, cx| automaton.set_degradation(level, cx)) {
+                        Ok(Ok(())) => reply(Reply::Done),
+                        Ok(Err(reason)) => reply(Reply::Rejected(reason)),
+                        Err(panic) => reply(Reply::Rejected(format!(
+                            "panic in set_degradation: {panic}"
+                        ))),
+                    }
+                } else {
+                    match self.adapt.as_ref().map(|adapt| adapt.ladder.max_level()) {
+                        None | Some(0) => reply(Reply::Rejected(
+                            "no adaptation levels: the timing block has no period interval and fewer than two quality levels".to_owned(),
+                        )),
+                        Some(max) if level > max => reply(Reply::Rejected(format!(
+                            "degradation level {level} out of range: the highest is {max}"
+                        ))),
+                        Some(_) => {
+                            self.set_level(level, "commanded through the control port");
+                            reply(Reply::Done);
+                        }
+                    }
                 }
             }
         }
@@ -849,6 +909,7 @@ impl Runner {
         let tripped = watched.is_some() && self.watch.as_ref().is_some_and(|watch| watch.end());
         self.clock = Instant::now();
         let took = self.clock.saturating_duration_since(started);
+        self.last_took = took;
         // Elapsed time is accumulated here and published with the CPU time (see
         // `update_timing`), keeping the monitor lock off the per-call path.
         self.elapsed += took;
@@ -924,6 +985,7 @@ impl Runner {
                 monitor.period = period;
                 vec![MonitorEvent::Period(period)]
             });
+            self.resync_level("period set through the control port or by the component");
         }
         self.publish_variables();
     }
@@ -973,8 +1035,19 @@ impl Runner {
         }
         self.elapsed_published = self.elapsed;
         let elapsed = self.elapsed;
+        let clock = self.clock;
+        let load = self.adapt.as_mut().map(|adapt| {
+            if let Some(cpu) = cpu {
+                adapt.profile(cpu, clock);
+            }
+            (adapt.detector.load(), adapt.cpu_share)
+        });
         self.shared.quietly(|monitor| {
             monitor.elapsed_time = elapsed;
+            if let Some((load, cpu_share)) = load {
+                monitor.adaptation.load = load;
+                monitor.adaptation.cpu_share = cpu_share;
+            }
             if let Some(cpu) = cpu {
                 monitor.cpu_time = cpu;
             }
@@ -1060,6 +1133,7 @@ impl Runner {
                 PlanStep::Degrade => {
                     if self.cx.quality + 1 < self.timing.qualities.len() {
                         self.set_quality(self.cx.quality + 1);
+                        self.resync_level("a `degrade` continuity plan step");
                         return Recovery::Recovered;
                     }
                 }
@@ -1179,6 +1253,7 @@ impl Runner {
             return;
         };
         self.reanchored = false;
+        let mut missed_any = false;
         match self.section_with_plan(state, Section::Periodic) {
             Recovery::Recovered => {}
             Recovery::Goto(target) => self.pending_choice = Some(target),
@@ -1200,6 +1275,7 @@ impl Runner {
                 let missed = u64::try_from(late / period.as_nanos().max(1))
                     .unwrap_or(u64::MAX)
                     .saturating_add(1);
+                missed_any = true;
                 self.shared.update(|monitor| {
                     monitor.missed_deadlines += missed;
                     vec![MonitorEvent::MissedDeadline {
@@ -1210,6 +1286,9 @@ impl Runner {
                 next = later(now, period);
             }
             self.next_periodic = Some(next);
+        }
+        if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
+            self.observe(self.last_took, period, missed_any);
         }
         if self.pending_choice.is_none() {
             self.choose(state);
@@ -1282,5 +1361,195 @@ impl Runner {
             }
         }
         served
+    }
+}
+
+/// A component's own adaptation: its ladder, its detector and where it stands.
+struct Local {
+    /// Whether detection runs (`AdaptConfig::enabled_for`).
+    enabled: bool,
+    ladder: Ladder,
+    detector: Detector,
+    level: u32,
+    /// `Exhausted` was published for the current violation.
+    exhausted: bool,
+    /// The last CPU time reading and when (wall clock), for `cpu_share`.
+    cpu_mark: Option<(Instant, Duration)>,
+    /// The thread's CPU time over wall-clock time between readings, smoothed.
+    cpu_share: f64,
+}
+
+impl Local {
+    /// `None` when there is nothing to adapt and nothing to detect.
+    fn new(config: AdaptConfig, timing: &TimingSpec) -> Option<Local> {
+        let enabled = config.enabled_for(timing);
+        let ladder = Ladder::new(timing, config.period_steps);
+        (enabled || ladder.max_level() > 0).then(|| Local {
+            enabled,
+            ladder,
+            detector: Detector::new(config),
+            level: 0,
+            exhausted: false,
+            cpu_mark: None,
+            cpu_share: 0.0,
+        })
+    }
+
+    /// Load profiling (paper 3.6.1, "CPU time versus elapsed time"): the share of a
+    /// core the thread used since the last CPU time reading (taken anyway for the
+    /// monitor, at most every 10 ms while busy).
+    fn profile(&mut self, cpu: Duration, now: Instant) {
+        if let Some((then, before)) = self.cpu_mark {
+            let wall = now.saturating_duration_since(then).as_secs_f64();
+            if wall >= 0.001 {
+                let share = cpu.saturating_sub(before).as_secs_f64() / wall;
+                self.cpu_share = 0.5 * self.cpu_share + 0.5 * share.min(1.0);
+                self.cpu_mark = Some((now, cpu));
+            }
+        } else {
+            self.cpu_mark = Some((now, cpu));
+        }
+    }
+}
+
+impl Runner {
+    /// Feed the detector one periodic section; act on a new verdict (a component no
+    /// compound supervises degrades or promotes itself, one level per verdict).
+    fn observe(&mut self, took: Duration, period: Duration, missed: bool) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let reference = adapt
+            .ladder
+            .setting(adapt.level.saturating_sub(1))
+            .0
+            .unwrap_or(period)
+            .min(period);
+        let verdict = adapt.detector.observe(Observation {
+            elapsed: took,
+            period,
+            missed,
+            reference,
+        });
+        let load = adapt.detector.load();
+        // (Without a new verdict, the load is published with the timing counters.)
+        let Some(verdict) = verdict else {
+            return;
+        };
+        self.shared.set_pressure(verdict, load);
+        if verdict != Pressure::Violation {
+            adapt.exhausted = false;
+        }
+        if self
+            .shared
+            .adapt_managed
+            .load(std::sync::atomic::Ordering::Acquire)
+        {
+            return; // The compound's supervisor decides.
+        }
+        let (level, max) = (adapt.level, adapt.ladder.max_level());
+        match verdict {
+            Pressure::Violation if level < max => {
+                self.set_level(level + 1, "time violation");
+            }
+            Pressure::Violation if !adapt.exhausted => {
+                adapt.exhausted = true;
+                let step = Adaptation {
+                    component: self.cx.name.clone(),
+                    action: AdaptAction::Exhausted,
+                    from: level,
+                    to: level,
+                    period: self.cx.period,
+                    quality: Some(self.cx.quality),
+                    detail: "time violation at the highest level".to_owned(),
+                };
+                self.shared.adaptation_step(step, |_| {});
+            }
+            Pressure::Spare if level > 0 => {
+                self.set_level(level - 1, "spare time");
+            }
+            _ => {}
+        }
+    }
+
+    /// Go to adaptation level `level`: its period and quality, applied as the control
+    /// port's `SetPeriod` and `SetQuality` are (events `Period`, `Quality`), then an
+    /// `Adaptation` step; the detector starts afresh after its hold-down.
+    fn set_level(&mut self, level: u32, why: &str) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let from = adapt.level;
+        let (period, quality) = adapt.ladder.setting(level);
+        adapt.level = level;
+        adapt.exhausted = false;
+        let promoted = level < from;
+        adapt.detector.reset(promoted);
+        let load = adapt.detector.load();
+        // The quality first: the period's publication resyncs the level from both.
+        if quality != self.cx.quality {
+            self.set_quality(quality);
+        }
+        if let Some(period) = period
+            && self.cx.period != Some(period)
+        {
+            self.cx.set_period(period);
+            // Publishes the period and re-anchors the schedule (the resync it asks
+            // for finds the level already there).
+            self.after_call();
+        }
+        self.shared.set_pressure(Pressure::Nominal, load);
+        if level == from {
+            return;
+        }
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: if promoted {
+                AdaptAction::Promoted
+            } else {
+                AdaptAction::Degraded
+            },
+            from,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: why.to_owned(),
+        };
+        self.shared
+            .adaptation_step(step, |status| status.level = level);
+    }
+
+    /// The period or quality was set by other means (a command, a `degrade` plan, the
+    /// component's own `set_period`): the level is where they stand on the ladder, an
+    /// `Adaptation` step says so (`why`), and the detector starts afresh.
+    fn resync_level(&mut self, why: &str) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        let level = adapt.ladder.level_of(self.cx.period, self.cx.quality);
+        if level == adapt.level {
+            return;
+        }
+        let from = adapt.level;
+        let promoted = level < from;
+        adapt.level = level;
+        adapt.detector.reset(promoted);
+        let load = adapt.detector.load();
+        self.shared.set_pressure(Pressure::Nominal, load);
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: if promoted {
+                AdaptAction::Promoted
+            } else {
+                AdaptAction::Degraded
+            },
+            from,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: why.to_owned(),
+        };
+        self.shared
+            .adaptation_step(step, |status| status.level = level);
     }
 }

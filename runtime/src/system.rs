@@ -65,6 +65,8 @@ pub struct Component {
     timing: Option<TimingSpec>,
     /// A compound's instances' handles (see [`Handle::instances`]).
     instances: Vec<Handle>,
+    /// The instance's adaptation settings (`docs/runtime.md`, "Adaptation").
+    adaptation: crate::adapt::AdaptConfig,
 }
 
 impl std::fmt::Debug for Component {
@@ -92,6 +94,7 @@ impl Component {
             ports,
             timing: None,
             instances: Vec::new(),
+            adaptation: crate::adapt::AdaptConfig::default(),
         }
     }
 
@@ -110,6 +113,16 @@ impl Component {
     /// `TimingSpec { period: Some(ms(50)), ..SPEC.timing }`.
     pub fn with_timing(mut self, timing: TimingSpec) -> Component {
         self.timing = Some(timing);
+        self
+    }
+
+    /// This instance with its own adaptation settings (paper 3.6; `docs/runtime.md`,
+    /// "Adaptation"): [`AdaptConfig::off`](crate::AdaptConfig::off) turns it off,
+    /// [`AdaptConfig::on`](crate::AdaptConfig::on) turns it on without a period
+    /// interval (quality steps only), and the other fields tune its detection. By
+    /// default adaptation is on where the timing block has a period interval.
+    pub fn with_adaptation(mut self, adaptation: crate::adapt::AdaptConfig) -> Component {
+        self.adaptation = adaptation;
         self
     }
 
@@ -417,6 +430,7 @@ impl System {
             ports,
             timing: _,
             instances,
+            adaptation,
         } = component;
         if name.is_empty() || name.contains('.') {
             return Err(Error::InvalidName(name));
@@ -511,6 +525,7 @@ impl System {
             dropped_events: 0,
             supervision: Vec::new(),
             supervision_steps: 0,
+            adaptation: crate::adapt::AdaptStatus::default(),
         };
         let named_inputs = spec
             .inputs
@@ -573,6 +588,7 @@ impl System {
             &name,
             automaton,
             timing,
+            adaptation,
             shared,
             control,
             bell,

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Receiver, Sender};
-use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
+use coolbot::port::{DataOut, FifoIn, PosterOut, TickIn, TickOut};
 use coolbot::record::{
     self, NOT_SERIALIZABLE, Pace, Player, QUEUE_FULL, ReadError, Reader, Record, RecordError,
     Recorder,
@@ -689,4 +689,68 @@ fn a_recording_dropped_after_its_system_still_ends_its_file() {
         )),
         "the shutdown is in the recording"
     );
+}
+
+static POSTER_SOURCE: Spec = Spec {
+    type_name: "PosterSource",
+    doc: "Posts what the test posts.",
+    states: IDLE,
+    initial: 0,
+    inputs: &[],
+    outputs: &[OutputSpec {
+        name: "map",
+        kind: OutputKind::Poster,
+        packet: "Sample",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+#[test]
+fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
+    let map = PosterOut::<Sample>::new();
+    let mut system = System::new();
+    system
+        .add(Component::new(
+            "src",
+            Box::new(Inert(&POSTER_SOURCE)),
+            PortSet::new().output(&map),
+        ))
+        .expect("add src");
+    system.run_all().expect("run");
+    let path = temp_file("poster.jsonl");
+    let mut recorder = Recorder::new().capacity(4);
+    recorder
+        .tap::<Sample>(&system, "src.map")
+        .expect("tap a poster");
+    let recording = recorder.start(&path).expect("start");
+    const POSTS: u64 = 2_000;
+    for n in 0..POSTS {
+        map.post(sample(n));
+    }
+    let summary = recording.finish().expect("finish");
+    let port = &summary.ports[0];
+    assert_eq!(port.port, "src.map");
+    assert_eq!(port.sent, POSTS);
+    assert_eq!(port.recorded + port.lost, POSTS, "{port:?}");
+    let values: Vec<u64> = Reader::open(&path)
+        .expect("open")
+        .packets::<Sample>("src.map")
+        .map(|item| item.expect("a post").1.n)
+        .collect();
+    assert_eq!(values.len() as u64, port.recorded);
+    assert!(
+        values.windows(2).all(|pair| pair[0] < pair[1]),
+        "posts are recorded in order"
+    );
+    let reader = Reader::open(&path).expect("open");
+    assert_eq!(reader.header().ports[0].kind, "poster");
+    assert_eq!(
+        map.posted(),
+        Some(sample(POSTS - 1)),
+        "the post itself is kept"
+    );
+    assert!(system.shutdown().clean());
 }

@@ -5,7 +5,7 @@ use super::model::DEFAULT_CONTROLLABLES;
 use super::model::DEFAULT_OBSERVABLES;
 use super::{Checker, automaton, compound, names, values};
 use crate::ast::{self, ComponentKind, Span};
-use crate::diagnostics::Code;
+use crate::diagnostics::{Code, Diagnostic};
 
 /// Every check of one component.
 pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
@@ -25,7 +25,10 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             ast::Member::Input(input) => self::input(checker, input),
             ast::Member::Output(output) => self::output(checker, output),
             ast::Member::Timing(timing) => values::timing(checker, timing),
-            ast::Member::Exception(exception) => self::exception(checker, exception),
+            ast::Member::Exception(exception) => {
+                self::exception(checker, exception);
+                degrade_without_quality(checker, component, exception);
+            }
             ast::Member::Recovery(recovery) => {
                 if let Some(every) = &recovery.retry_every {
                     values::duration(checker, every, "`retry every`");
@@ -432,4 +435,62 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
             values::duration(checker, every, "`retry ... every`");
         }
     }
+}
+
+/// A `degrade` step lowers the quality level by one; with fewer than two levels it
+/// never applies and is skipped (the plan goes on to its next step, or, after the
+/// last, the component goes to running error). An instance's `timing` override may
+/// declare levels of its own: the help says so.
+fn degrade_without_quality(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    exception: &ast::Exception,
+) {
+    let Some(position) = exception
+        .plan
+        .iter()
+        .position(|step| matches!(step.kind, ast::PlanKind::Degrade))
+    else {
+        return;
+    };
+    let step = &exception.plan[position];
+    let levels = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Timing(timing) => Some(timing),
+            _ => None,
+        })
+        .flat_map(|timing| &timing.entries)
+        .filter_map(|entry| match entry {
+            ast::TimingEntry::Quality(levels, _) => Some(levels.len()),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0);
+    if levels >= 2 {
+        return;
+    }
+    let then = if position + 1 < exception.plan.len() {
+        "skipped: the plan goes on to its next step"
+    } else {
+        "skipped: the plan ends and the component goes to running error"
+    };
+    let diagnostic = Diagnostic::warning(
+        Code::DegradeWithoutQuality,
+        checker.file,
+        step.span,
+        format!(
+            "`degrade` has no lower quality to go to: `{}` declares {} quality level{}",
+            component.name.name,
+            if levels == 0 { "no".to_owned() } else { levels.to_string() },
+            if levels == 1 { "" } else { "s" }
+        ),
+    )
+    .with_label(then)
+    .with_help(format!(
+        "declare two or more levels, best first, in the timing block (`timing {{ quality full, reduced; }}`); an instance's `timing` override that declares them also makes the step apply for that instance of `{}`",
+        component.name.name
+    ));
+    checker.push(diagnostic);
 }

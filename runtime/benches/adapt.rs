@@ -1,0 +1,206 @@
+//! The cost of adaptation: the CPU time per period of a 1 kHz component whose
+//! adaptation is on (its detector fed every period, a period interval of 1 to 4 ms)
+//! against the same component with adaptation off, both running at the same time in
+//! alternating rounds; and the cost of one supervisor decision (`adapt::decide`) over
+//! 10 and 100 instances.
+//!
+//! `cargo bench -p coolbot --bench adapt` (add `-- --quick` for a smoke run).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use coolbot::adapt::{Decision, Levels, Member, ProtectPriority, Reconfiguration, decide};
+use coolbot::{
+    AdaptConfig, Automaton, Command, Component, Context, Controllable, Fault, PeriodicSpec,
+    PortSet, Pressure, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec, Value,
+};
+
+static TICKER: Spec = Spec {
+    type_name: "Ticker",
+    doc: "",
+    states: &[StateSpec {
+        name: "ticking",
+        entry: false,
+        exit: false,
+        periodic: Some(PeriodicSpec { period: None }),
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec {
+        period: Some(Duration::from_millis(1)),
+        max_period: Some(Duration::from_millis(4)),
+        max_response: None,
+        priority: 0,
+        qualities: &["full", "reduced"],
+    },
+};
+
+struct Ticker(Arc<AtomicU64>);
+
+impl Automaton for Ticker {
+    fn spec(&self) -> &'static Spec {
+        &TICKER
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
+        self.0.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+/// CPU time per period (ns) of each component over `rounds` rounds of `each` long:
+/// adaptation on, off, and off again (the noise floor of the comparison).
+fn periods(rounds: usize, each: Duration) -> [Vec<f64>; 3] {
+    let mut system = System::new();
+    let configs = [
+        // Never spare, never violating on an idle machine: the detector runs and
+        // stays at level 0, which is the steady-state cost.
+        AdaptConfig {
+            spare_ratio: 0.0,
+            ..AdaptConfig::on()
+        },
+        AdaptConfig::off(),
+        AdaptConfig::off(),
+    ];
+    let sides: Vec<_> = configs
+        .iter()
+        .enumerate()
+        .map(|(index, config)| {
+            let count = Arc::new(AtomicU64::new(0));
+            let component = Component::new(
+                format!("c{index}"),
+                Box::new(Ticker(Arc::clone(&count))),
+                PortSet::new(),
+            )
+            .with_adaptation(*config);
+            (system.add(component).expect("add"), count)
+        })
+        .collect();
+    system.start().expect("start");
+    let mut samples = [Vec::new(), Vec::new(), Vec::new()];
+    for round in 0..rounds {
+        // Rotate which one starts first.
+        let order: Vec<usize> = (0..3).map(|k| (k + round) % 3).collect();
+        let before: Vec<_> = sides
+            .iter()
+            .map(|(h, c)| (h.snapshot().cpu_time, c.load(Ordering::Relaxed)))
+            .collect();
+        for &index in &order {
+            sides[index]
+                .0
+                .command(Command::SetState(Controllable::Running))
+                .expect("running");
+        }
+        std::thread::sleep(each);
+        for &index in &order {
+            let handle = &sides[index].0;
+            handle
+                .command(Command::SetState(Controllable::Ready))
+                .expect("ready");
+            handle
+                .wait_state(State::Ready, Duration::from_secs(5))
+                .expect("ready");
+        }
+        for (index, ((handle, count), (cpu, runs))) in sides.iter().zip(before).enumerate() {
+            let cpu = handle.snapshot().cpu_time.saturating_sub(cpu);
+            let runs = count.load(Ordering::Relaxed) - runs;
+            samples[index].push(cpu.as_nanos() as f64 / runs.max(1) as f64);
+        }
+    }
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    samples
+}
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+fn members(count: usize) -> Vec<Member> {
+    (0..count)
+        .map(|i| Member {
+            name: format!("m{i}"),
+            priority: (i % 7) as i32,
+            level: (i % 3) as u32,
+            max_level: 4,
+            pressure: if i == count / 2 {
+                Pressure::Violation
+            } else {
+                Pressure::Nominal
+            },
+            load: (i % 10) as f64 / 10.0,
+            cpu_share: 0.0,
+            period: Some(Duration::from_millis(10 + i as u64)),
+            suspended: false,
+        })
+        .collect()
+}
+
+fn main() {
+    let quick = std::env::args().any(|arg| arg == "--quick");
+    let (rounds, each) = if quick {
+        (4, Duration::from_millis(250))
+    } else {
+        (20, Duration::from_millis(500))
+    };
+    let [on, off, control] = periods(rounds, each).map(median);
+    println!(
+        "adaptation cost ({} mode)",
+        if quick { "quick" } else { "full" }
+    );
+    println!(
+        "  CPU time per 1 kHz period, median of {rounds} rounds: adaptation on {on:.0} ns, off {off:.0} ns, ratio {:.2} (off against off: {:.2})",
+        on / off,
+        control / off
+    );
+    for count in [10usize, 100] {
+        let members = members(count);
+        let levels = Levels {
+            cap: 2,
+            floor: 1,
+            top: true,
+            reconfiguration: Reconfiguration::Report,
+            settled: true,
+        };
+        let iterations = if quick { 10_000 } else { 100_000 };
+        let started = Instant::now();
+        let mut degrades = 0usize;
+        for _ in 0..iterations {
+            if let Decision::Degrade(_) =
+                decide(std::hint::black_box(&members), levels, &ProtectPriority)
+            {
+                degrades += 1;
+            }
+        }
+        let per = started.elapsed() / iterations;
+        assert_eq!(degrades, iterations as usize);
+        println!("  decide over {count} instances: {per:?} per decision");
+    }
+}

@@ -1,0 +1,802 @@
+//! Adaptation (paper 3.6): graceful degradation when a component runs out of time, and
+//! promotion back to nominal when time is spare.
+//!
+//! Three parts live here, all free of threads and clocks so that they can be tested as
+//! pure functions:
+//!
+//! - [`Ladder`]: a component's degradation levels. Level 0 is nominal (the timing
+//!   block's `period`, quality 0); the first levels stretch the period in equal steps
+//!   up to `max_period` (frequency degradation), the next ones lower the quality one
+//!   level at a time at `max_period` (quality degradation).
+//! - `Detector`: per component, fed one observation per periodic section (how long
+//!   the section ran, whether it missed its deadline). It turns them into a
+//!   [`Pressure`] verdict with hysteresis: a time violation needs
+//!   [`AdaptConfig::violations`] bad periods among the last [`AdaptConfig::window`],
+//!   spare time needs [`AdaptConfig::spare_periods`] consecutive periods that finished
+//!   within [`AdaptConfig::spare_ratio`] of the period one promotion would give; after
+//!   every change of level the detector ignores [`AdaptConfig::hold_periods`] periods,
+//!   and a promotion that is followed by a violation doubles the spare run needed next
+//!   time (up to [`AdaptConfig::max_backoff`]).
+//! - [`decide`]: the supervisor's policy (Figures 6 and 7) over a snapshot of its
+//!   instances ([`Member`]) and its homogeneity interval ([`Levels`]), returning one
+//!   [`Decision`]. The choice of the instance to degrade or promote is a [`Selector`].
+//!
+//! The runner (`runner.rs`) runs the detector and, for a component that no compound
+//! supervises, applies the ladder locally; a compound (`compound.rs`) runs [`decide`]
+//! on its instances' verdicts and commands their levels through their control ports
+//! ([`crate::Command::SetDegradation`]). `docs/runtime.md`, "Adaptation", tells the
+//! whole story.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use crate::spec::TimingSpec;
+
+/// How many adaptation steps [`AdaptStatus::history`] keeps.
+pub const ADAPTATION_HISTORY: usize = 32;
+
+/// The adaptation settings of a component ([`crate::Component::with_adaptation`]) or
+/// of a compound's supervisor ([`crate::CompoundBuilder::adaptation`]). Counts are in
+/// periods of the component concerned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdaptConfig {
+    /// `Some(false)` turns adaptation off; `Some(true)` turns it on; `None` (the
+    /// default) leaves it on where the timing block has a period interval
+    /// (`period 10ms..40ms`) and off elsewhere. A compound's supervisor is on unless
+    /// `Some(false)`.
+    pub enabled: Option<bool>,
+    /// Bad periods (a missed deadline, or a section longer than the period) among the
+    /// last [`AdaptConfig::window`] that make a time violation. Default 2.
+    pub violations: u32,
+    /// The sliding window of periods for [`AdaptConfig::violations`]. Default 4.
+    pub window: u32,
+    /// A period is spare when its section ran at most this fraction of the period the
+    /// next promotion would give. Default 0.75.
+    pub spare_ratio: f64,
+    /// Consecutive spare periods that make spare time. Default 20.
+    pub spare_periods: u32,
+    /// Periods ignored after every change of level (the hold-down). Default 5.
+    pub hold_periods: u32,
+    /// Equal steps from `period` to `max_period`. Default 3.
+    pub period_steps: u32,
+    /// The largest multiplier of [`AdaptConfig::spare_periods`] after promotions that
+    /// failed (a violation came within the spare window after them). Default 8.
+    pub max_backoff: u32,
+    /// Compounds: the width of the homogeneity interval `[floor, cap]`. Default 1.
+    pub width: u32,
+    /// Compounds: what the top-level supervisor does when degradation is exhausted.
+    pub reconfiguration: Reconfiguration,
+}
+
+impl Default for AdaptConfig {
+    fn default() -> AdaptConfig {
+        AdaptConfig {
+            enabled: None,
+            violations: 2,
+            window: 4,
+            spare_ratio: 0.75,
+            spare_periods: 20,
+            hold_periods: 5,
+            period_steps: 3,
+            max_backoff: 8,
+            width: 1,
+            reconfiguration: Reconfiguration::Report,
+        }
+    }
+}
+
+impl AdaptConfig {
+    /// Adaptation turned off.
+    pub fn off() -> AdaptConfig {
+        AdaptConfig {
+            enabled: Some(false),
+            ..AdaptConfig::default()
+        }
+    }
+
+    /// Adaptation turned on, whatever the timing block.
+    pub fn on() -> AdaptConfig {
+        AdaptConfig {
+            enabled: Some(true),
+            ..AdaptConfig::default()
+        }
+    }
+
+    /// Whether detection runs for a component with timing block `timing`.
+    pub(crate) fn enabled_for(&self, timing: &TimingSpec) -> bool {
+        self.enabled.unwrap_or_else(
+            || matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p),
+        )
+    }
+}
+
+/// What the top-level supervisor does when every instance is at the highest level and
+/// time violations persist (paper: "component suspension or system reconfiguration").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum Reconfiguration {
+    /// Publish [`AdaptAction::Exhausted`] (once, until something changes); nothing
+    /// else. The default: suspending a part of a robot is the application's call.
+    #[default]
+    Report,
+    /// Suspend the lowest-priority running instance whose priority is below that of
+    /// every violating instance (published as [`AdaptAction::Suspended`]); it is
+    /// resumed first when time is spare again. With no such instance: `Exhausted`.
+    SuspendLowestPriority,
+}
+
+/// A component's verdict on its own timing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum Pressure {
+    /// Neither: the component keeps its level.
+    #[default]
+    Nominal,
+    /// Time violations: the component asks to be degraded (a compound: "notify
+    /// higher level", every instance is at its current maximum level).
+    Violation,
+    /// Spare time: the component could be promoted (a compound: all its instances are
+    /// at or below its floor, its level can be lowered at no cost).
+    Spare,
+}
+
+/// What an adaptation step did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum AdaptAction {
+    /// A level went up (a longer period or a lower quality).
+    Degraded,
+    /// A level went down (back towards nominal).
+    Promoted,
+    /// A compound raised its current maximum degradation level (top level only).
+    CapRaised,
+    /// A compound lowered its current minimum degradation level (top level only).
+    FloorLowered,
+    /// A compound told its own supervisor that its instances are all at its maximum
+    /// level and violations persist.
+    NotifiedHigher,
+    /// A compound told its own supervisor that it has spare time.
+    ReportedSpare,
+    /// Every instance is at the highest level and violations persist.
+    Exhausted,
+    /// Reconfiguration: an instance was suspended.
+    Suspended,
+    /// An instance suspended by adaptation was resumed.
+    Resumed,
+}
+
+/// One adaptation step, published as [`crate::MonitorEvent::Adaptation`] and kept in
+/// [`AdaptStatus::history`] of the component that took it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Adaptation {
+    /// The component whose level changed (the component itself, or a compound's
+    /// instance); the compound itself for its own steps.
+    pub component: String,
+    /// What happened.
+    pub action: AdaptAction,
+    /// The level before (for a compound's own steps: the cap or floor before).
+    pub from: u32,
+    /// The level after.
+    pub to: u32,
+    /// The period the step gave, when the component applied it itself.
+    pub period: Option<Duration>,
+    /// The quality the step gave, when the component applied it itself.
+    pub quality: Option<usize>,
+    /// Why, in words.
+    pub detail: String,
+}
+
+impl std::fmt::Display for Adaptation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {:?} {} -> {}",
+            self.component, self.action, self.from, self.to
+        )?;
+        if let Some(period) = self.period {
+            write!(f, " (period {period:?}")?;
+            if let Some(quality) = self.quality {
+                write!(f, ", quality {quality}")?;
+            }
+            f.write_str(")")?;
+        }
+        if !self.detail.is_empty() {
+            write!(f, ": {}", self.detail)?;
+        }
+        Ok(())
+    }
+}
+
+/// The adaptation part of the monitoring port ([`crate::Monitor::adaptation`]).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct AdaptStatus {
+    /// Whether detection runs (a compound: whether its supervisor adapts).
+    pub enabled: bool,
+    /// The current level: an atomic component's place on its [`Ladder`]; a compound's
+    /// current maximum degradation level (the cap its instances may reach).
+    pub level: u32,
+    /// The highest level: an atomic component's ladder top; a compound's highest
+    /// instance ladder top.
+    pub max_level: u32,
+    /// Compounds: the homogeneity interval's lower end (no instance is promoted below
+    /// it until every instance reached it).
+    pub floor: u32,
+    /// The current verdict.
+    pub pressure: Pressure,
+    /// Section time over period, smoothed (an atomic component's demand; 0 for a
+    /// compound).
+    pub load: f64,
+    /// The share of a core the component's thread used (its CPU time over wall-clock
+    /// time between the monitor's CPU time readings), smoothed: the paper's "CPU time
+    /// versus elapsed time" load profile (0 for a compound).
+    #[serde(default)]
+    pub cpu_share: f64,
+    /// The last [`ADAPTATION_HISTORY`] steps, oldest first.
+    pub history: Vec<Adaptation>,
+    /// How many steps in all.
+    pub steps: u64,
+}
+
+/// A component's degradation levels: period steps first, then quality steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ladder {
+    /// The nominal period (`None`: no period, no frequency steps).
+    pub period: Option<Duration>,
+    /// The longest period.
+    pub max_period: Option<Duration>,
+    /// Frequency steps (0 without a period interval).
+    pub period_steps: u32,
+    /// Quality levels (at least 1).
+    pub qualities: u32,
+}
+
+impl Ladder {
+    /// The ladder of a timing block, with `steps` period steps when it has a period
+    /// interval.
+    pub fn new(timing: &TimingSpec, steps: u32) -> Ladder {
+        let interval = matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p);
+        Ladder {
+            period: timing.period,
+            max_period: if interval { timing.max_period } else { None },
+            period_steps: if interval { steps.max(1) } else { 0 },
+            qualities: u32::try_from(timing.qualities.len().max(1)).unwrap_or(u32::MAX),
+        }
+    }
+
+    /// The highest level.
+    pub fn max_level(&self) -> u32 {
+        self.period_steps + self.qualities - 1
+    }
+
+    /// The period and quality of `level` (clamped to the ladder).
+    pub fn setting(&self, level: u32) -> (Option<Duration>, usize) {
+        let level = level.min(self.max_level());
+        if level <= self.period_steps {
+            (self.period_at(level), 0)
+        } else {
+            (
+                self.max_period.or(self.period),
+                (level - self.period_steps) as usize,
+            )
+        }
+    }
+
+    fn period_at(&self, step: u32) -> Option<Duration> {
+        let (Some(period), Some(max)) = (self.period, self.max_period) else {
+            return self.period;
+        };
+        if self.period_steps == 0 {
+            return Some(period);
+        }
+        let span = max.saturating_sub(period);
+        Some(period + span.mul_f64(f64::from(step) / f64::from(self.period_steps)))
+    }
+
+    /// The level a period and quality set by other means (a command, a `degrade` plan,
+    /// the component's own `set_period`) stand at: the quality's level at the longest
+    /// period, else the first period step at least as long as `period`.
+    pub fn level_of(&self, period: Option<Duration>, quality: usize) -> u32 {
+        let quality = u32::try_from(quality).unwrap_or(u32::MAX);
+        if quality > 0 {
+            return (self.period_steps + quality).min(self.max_level());
+        }
+        let Some(period) = period else { return 0 };
+        (0..=self.period_steps)
+            .find(|step| self.period_at(*step).is_none_or(|p| p >= period))
+            .unwrap_or(self.period_steps)
+    }
+}
+
+/// One periodic section, as the detector sees it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Observation {
+    /// How long the section ran.
+    pub(crate) elapsed: Duration,
+    /// The period it ran at.
+    pub(crate) period: Duration,
+    /// Whether it ended past its next deadline.
+    pub(crate) missed: bool,
+    /// The period one promotion would give (the spare test's reference).
+    pub(crate) reference: Duration,
+}
+
+/// The per-component detector: observations in, a [`Pressure`] verdict out.
+#[derive(Debug, Clone)]
+pub(crate) struct Detector {
+    config: AdaptConfig,
+    /// Bad-period flags of the last `window` periods.
+    recent: VecDeque<bool>,
+    spare_run: u32,
+    hold: u32,
+    backoff: u32,
+    /// Periods left in which a violation counts as a failed promotion.
+    probation: u32,
+    verdict: Pressure,
+    load: f64,
+}
+
+impl Detector {
+    pub(crate) fn new(config: AdaptConfig) -> Detector {
+        Detector {
+            config,
+            recent: VecDeque::new(),
+            spare_run: 0,
+            hold: 0,
+            backoff: 1,
+            probation: 0,
+            verdict: Pressure::Nominal,
+            load: 0.0,
+        }
+    }
+
+    pub(crate) fn load(&self) -> f64 {
+        self.load
+    }
+
+    /// One periodic section; the new verdict if it changed.
+    pub(crate) fn observe(&mut self, observation: Observation) -> Option<Pressure> {
+        let ratio = observation.elapsed.as_secs_f64() / observation.period.as_secs_f64().max(1e-9);
+        self.load = if self.load == 0.0 {
+            ratio
+        } else {
+            0.75 * self.load + 0.25 * ratio
+        };
+        if self.hold > 0 {
+            self.hold -= 1;
+            return None;
+        }
+        if self.probation == 1 {
+            // The last promotion held through its probation: forget earlier failures.
+            self.backoff = 1;
+        }
+        self.probation = self.probation.saturating_sub(1);
+        let bad = observation.missed || observation.elapsed > observation.period;
+        self.recent.push_back(bad);
+        while self.recent.len() > self.config.window.max(1) as usize {
+            self.recent.pop_front();
+        }
+        let spare_limit = observation
+            .reference
+            .mul_f64(self.config.spare_ratio.max(0.0));
+        if !bad && observation.elapsed <= spare_limit {
+            self.spare_run = self.spare_run.saturating_add(1);
+        } else {
+            self.spare_run = 0;
+        }
+        let violations = self.recent.iter().filter(|bad| **bad).count();
+        let needed = self
+            .config
+            .spare_periods
+            .max(1)
+            .saturating_mul(self.backoff);
+        let verdict = if violations >= self.config.violations.max(1) as usize {
+            if self.probation > 0 {
+                // A promotion that did not hold: wait longer before the next one.
+                self.backoff = (self.backoff * 2).min(self.config.max_backoff.max(1));
+                self.probation = 0;
+            }
+            Pressure::Violation
+        } else if self.spare_run >= needed {
+            Pressure::Spare
+        } else {
+            Pressure::Nominal
+        };
+        (verdict != self.verdict).then(|| {
+            self.verdict = verdict;
+            verdict
+        })
+    }
+
+    /// The level changed (`promoted`: towards nominal): start afresh after a hold-down.
+    /// Returns the verdict before (now `Nominal`).
+    pub(crate) fn reset(&mut self, promoted: bool) -> Pressure {
+        self.recent.clear();
+        self.spare_run = 0;
+        self.hold = self.config.hold_periods;
+        if promoted {
+            self.probation = self
+                .config
+                .hold_periods
+                .saturating_add(self.config.spare_periods);
+        }
+        std::mem::replace(&mut self.verdict, Pressure::Nominal)
+    }
+}
+
+/// One instance of a compound, as the policy sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Member {
+    /// The instance name.
+    pub name: String,
+    /// Its `priority` (higher is more urgent).
+    pub priority: i32,
+    /// Its level (a compound instance: the cap granted to it).
+    pub level: u32,
+    /// Its highest level (0: it cannot be degraded).
+    pub max_level: u32,
+    /// Its verdict.
+    pub pressure: Pressure,
+    /// Its demand: section time over period.
+    pub load: f64,
+    /// Its computational demand: the share of a core its thread uses.
+    pub cpu_share: f64,
+    /// Its period now.
+    pub period: Option<Duration>,
+    /// Suspended by adaptation (reconfiguration).
+    pub suspended: bool,
+}
+
+/// A supervisor's homogeneity interval and role.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Levels {
+    /// The current maximum degradation level: no instance is degraded above it.
+    pub cap: u32,
+    /// The current minimum degradation level: no instance is promoted below it while
+    /// another is above it.
+    pub floor: u32,
+    /// Whether this is the top-level supervisor (it raises its cap itself; a nested
+    /// one notifies its own supervisor instead).
+    pub top: bool,
+    /// What to do when degradation is exhausted at the top.
+    pub reconfiguration: Reconfiguration,
+    /// No time violation for a while (the supervisor's settling time, see
+    /// `docs/runtime.md`): promotion is allowed. A member that was just degraded
+    /// shows no verdict during its hold-down; without this, another member could be
+    /// promoted meanwhile and degraded again right after.
+    pub settled: bool,
+}
+
+/// What [`decide`] asks the supervisor to do (indices into the members).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Decision {
+    /// Nothing to do.
+    Hold,
+    /// Degrade this member one level.
+    Degrade(usize),
+    /// Raise the cap by one (top level; the floor follows at `cap - width`).
+    RaiseCap,
+    /// Report the violation to the supervisor above (nested supervisors).
+    NotifyHigher,
+    /// Suspend this member (top level, reconfiguration).
+    Suspend(usize),
+    /// Degradation is exhausted; nothing left to do.
+    Exhausted,
+    /// Resume this member, suspended by adaptation.
+    Resume(usize),
+    /// Promote this member one level.
+    Promote(usize),
+    /// This member is above the cap (the cap was lowered from above): bring it to the
+    /// cap.
+    Clamp(usize),
+    /// Lower the floor by one (top level; the cap follows at `floor + width`).
+    LowerFloor,
+    /// Report spare time to the supervisor above (nested supervisors).
+    ReportSpare,
+}
+
+impl Decision {
+    /// The pressure a supervisor publishes about itself after this decision.
+    pub fn pressure(self) -> Pressure {
+        match self {
+            Decision::NotifyHigher | Decision::Exhausted => Pressure::Violation,
+            Decision::ReportSpare => Pressure::Spare,
+            _ => Pressure::Nominal,
+        }
+    }
+}
+
+/// Chooses the instance to degrade or promote (paper 3.6.2: "actual selection criteria
+/// is defined by the component's designer"). `candidates` are indices into `members`,
+/// never empty; the answer must be one of them.
+pub trait Selector: Send + 'static {
+    /// The member to degrade among `candidates` (all below the cap).
+    fn degrade(&self, members: &[Member], candidates: &[usize]) -> usize;
+
+    /// The member to promote among `candidates` (all above the floor, with spare
+    /// time). The default follows the paper: highest priority first, then the most
+    /// degraded, then declaration order.
+    fn promote(&self, members: &[Member], candidates: &[usize]) -> usize {
+        let mut best = candidates[0];
+        for &index in &candidates[1..] {
+            let (a, b) = (&members[index], &members[best]);
+            if (a.priority, a.level) > (b.priority, b.level) {
+                best = index;
+            }
+        }
+        best
+    }
+}
+
+/// The default [`Selector`]: instances with a time violation first (degrading them
+/// helps them directly), then the lowest priority (the urgent ones are spared), then
+/// the highest load, then the shortest period, then declaration order.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ProtectPriority;
+
+impl Selector for ProtectPriority {
+    fn degrade(&self, members: &[Member], candidates: &[usize]) -> usize {
+        pick(members, candidates, |a, b| {
+            let violating = |m: &Member| m.pressure == Pressure::Violation;
+            violating(a)
+                .cmp(&violating(b))
+                .then(b.priority.cmp(&a.priority))
+                .then(a.load.total_cmp(&b.load))
+                .then(period_key(b).cmp(&period_key(a)))
+        })
+    }
+}
+
+/// The paper's "fastest correction" [`Selector`]: instances with a time violation
+/// first, then the highest priority, the highest computational demand (share of a
+/// core, then section time over period), the shortest period.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FastestCorrection;
+
+impl Selector for FastestCorrection {
+    fn degrade(&self, members: &[Member], candidates: &[usize]) -> usize {
+        pick(members, candidates, |a, b| {
+            let violating = |m: &Member| m.pressure == Pressure::Violation;
+            violating(a)
+                .cmp(&violating(b))
+                .then(a.priority.cmp(&b.priority))
+                .then(a.cpu_share.total_cmp(&b.cpu_share))
+                .then(a.load.total_cmp(&b.load))
+                .then(period_key(b).cmp(&period_key(a)))
+        })
+    }
+}
+
+fn period_key(member: &Member) -> Duration {
+    member.period.unwrap_or(Duration::MAX)
+}
+
+/// The first candidate that no later one beats (`better(a, b)` is `Greater` when `a`
+/// is the better choice).
+fn pick(
+    members: &[Member],
+    candidates: &[usize],
+    better: impl Fn(&Member, &Member) -> std::cmp::Ordering,
+) -> usize {
+    let mut best = candidates[0];
+    for &index in &candidates[1..] {
+        if better(&members[index], &members[best]) == std::cmp::Ordering::Greater {
+            best = index;
+        }
+    }
+    best
+}
+
+/// The supervisor's policy (Figures 6 and 7), one decision at a time:
+///
+/// 1. a member above the cap (lowered from above) is brought to it (highest priority
+///    first);
+/// 2. on a time violation (any member's verdict): degrade a member below the cap
+///    (chosen by `selector`); when all are at the cap (or their own top), a nested
+///    supervisor notifies higher, the top one raises the cap up to the highest
+///    member top, and beyond that reconfigures ([`Levels::reconfiguration`]);
+/// 3. without violations, once settled ([`Levels::settled`]): resume a member suspended by adaptation once every running
+///    member has spare time; promote a member above the floor that has spare time
+///    (`selector`); when none is above the floor and one with spare time is degraded
+///    (or all are nominal under a granted cap), the top supervisor lowers the floor, a
+///    nested one reports spare time.
+pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> Decision {
+    let active: Vec<usize> = (0..members.len())
+        .filter(|i| !members[*i].suspended)
+        .collect();
+    let above_cap: Vec<usize> = active
+        .iter()
+        .copied()
+        .filter(|i| members[*i].level > levels.cap)
+        .collect();
+    if let Some(&first) = above_cap.first() {
+        let mut best = first;
+        for &index in &above_cap {
+            if members[index].priority > members[best].priority {
+                best = index;
+            }
+        }
+        return Decision::Clamp(best);
+    }
+    let violating: Vec<usize> = active
+        .iter()
+        .copied()
+        .filter(|i| members[*i].pressure == Pressure::Violation)
+        .collect();
+    if !violating.is_empty() {
+        let eligible: Vec<usize> = active
+            .iter()
+            .copied()
+            .filter(|i| members[*i].level < levels.cap.min(members[*i].max_level))
+            .collect();
+        if !eligible.is_empty() {
+            return Decision::Degrade(selector.degrade(members, &eligible));
+        }
+        if !levels.top {
+            return Decision::NotifyHigher;
+        }
+        let highest = active.iter().map(|i| members[*i].max_level).max();
+        if highest.is_some_and(|highest| levels.cap < highest) {
+            return Decision::RaiseCap;
+        }
+        if levels.reconfiguration == Reconfiguration::SuspendLowestPriority {
+            let urgent = violating.iter().map(|i| members[*i].priority).min();
+            let victim = active
+                .iter()
+                .copied()
+                .filter(|i| urgent.is_some_and(|urgent| members[*i].priority < urgent))
+                .min_by_key(|i| (members[*i].priority, std::cmp::Reverse(*i)));
+            if let Some(victim) = victim {
+                return Decision::Suspend(victim);
+            }
+        }
+        return Decision::Exhausted;
+    }
+    if !levels.settled {
+        return Decision::Hold;
+    }
+    let spare = |i: &usize| members[*i].pressure == Pressure::Spare;
+    if active.iter().all(spare)
+        && let Some(resume) = (0..members.len())
+            .filter(|i| members[*i].suspended)
+            .max_by_key(|i| (members[*i].priority, std::cmp::Reverse(*i)))
+    {
+        return Decision::Resume(resume);
+    }
+    let promotable: Vec<usize> = active
+        .iter()
+        .copied()
+        .filter(|i| members[*i].level > levels.floor && spare(i))
+        .collect();
+    if !promotable.is_empty() {
+        return Decision::Promote(selector.promote(members, &promotable));
+    }
+    let none_above = active.iter().all(|i| members[*i].level <= levels.floor);
+    let degraded_spare = active.iter().any(|i| members[*i].level > 0 && spare(i));
+    let all_nominal = active.iter().all(|i| members[*i].level == 0);
+    if levels.top {
+        if none_above && levels.floor > 0 && degraded_spare {
+            return Decision::LowerFloor;
+        }
+    } else if none_above && levels.cap > 0 && (degraded_spare || all_nominal) {
+        return Decision::ReportSpare;
+    }
+    Decision::Hold
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: fn(u64) -> Duration = Duration::from_millis;
+
+    fn timing(period: u64, max: u64, qualities: &'static [&'static str]) -> TimingSpec {
+        TimingSpec {
+            period: Some(MS(period)),
+            max_period: Some(MS(max)),
+            qualities,
+            ..TimingSpec::NONE
+        }
+    }
+
+    #[test]
+    fn the_ladder_stretches_the_period_then_lowers_the_quality() {
+        let ladder = Ladder::new(&timing(10, 40, &["full", "reduced", "minimal"]), 3);
+        assert_eq!(ladder.max_level(), 5);
+        let settings: Vec<_> = (0..=6).map(|level| ladder.setting(level)).collect();
+        assert_eq!(
+            settings,
+            [
+                (Some(MS(10)), 0),
+                (Some(MS(20)), 0),
+                (Some(MS(30)), 0),
+                (Some(MS(40)), 0),
+                (Some(MS(40)), 1),
+                (Some(MS(40)), 2),
+                (Some(MS(40)), 2),
+            ]
+        );
+        // Back from what other means set.
+        assert_eq!(ladder.level_of(Some(MS(10)), 0), 0);
+        assert_eq!(ladder.level_of(Some(MS(15)), 0), 1);
+        assert_eq!(ladder.level_of(Some(MS(100)), 0), 3);
+        assert_eq!(ladder.level_of(Some(MS(10)), 1), 4);
+        // No interval: quality steps only; nothing at all: level 0 only.
+        let quality_only = Ladder::new(
+            &TimingSpec {
+                qualities: &["a", "b"],
+                ..timing(10, 10, &[])
+            },
+            3,
+        );
+        assert_eq!(quality_only.max_level(), 1);
+        assert_eq!(quality_only.setting(1), (Some(MS(10)), 1));
+        assert_eq!(Ladder::new(&TimingSpec::NONE, 3).max_level(), 0);
+    }
+
+    fn run(detector: &mut Detector, elapsed: u64, period: u64, times: usize) -> Vec<Pressure> {
+        (0..times)
+            .filter_map(|_| {
+                detector.observe(Observation {
+                    elapsed: MS(elapsed),
+                    period: MS(period),
+                    missed: elapsed > period,
+                    reference: MS(period),
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_detector_needs_repeated_violations_and_a_sustained_spare_run() {
+        let config = AdaptConfig {
+            violations: 2,
+            window: 4,
+            spare_periods: 5,
+            hold_periods: 2,
+            ..AdaptConfig::default()
+        };
+        let mut detector = Detector::new(config);
+        // One bad period is noise.
+        assert_eq!(run(&mut detector, 15, 10, 1), []);
+        assert_eq!(run(&mut detector, 5, 10, 1), []);
+        assert_eq!(run(&mut detector, 15, 10, 1), [Pressure::Violation]);
+        // A change of level: two periods ignored, then a fresh window.
+        assert_eq!(detector.reset(false), Pressure::Violation);
+        assert_eq!(run(&mut detector, 15, 10, 2), []);
+        assert_eq!(run(&mut detector, 1, 10, 4), []);
+        assert_eq!(run(&mut detector, 1, 10, 1), [Pressure::Spare]);
+        // 8 ms of 10 is not spare at ratio 0.75: back to nominal.
+        assert_eq!(run(&mut detector, 8, 10, 1), [Pressure::Nominal]);
+    }
+
+    #[test]
+    fn a_promotion_that_fails_doubles_the_spare_run_needed_next() {
+        let config = AdaptConfig {
+            violations: 1,
+            window: 1,
+            spare_periods: 3,
+            hold_periods: 0,
+            max_backoff: 4,
+            ..AdaptConfig::default()
+        };
+        let mut detector = Detector::new(config);
+        assert_eq!(run(&mut detector, 1, 10, 3), [Pressure::Spare]);
+        detector.reset(true);
+        assert_eq!(run(&mut detector, 15, 10, 1), [Pressure::Violation]);
+        detector.reset(false);
+        // Now 6 spare periods are needed, not 3.
+        assert_eq!(run(&mut detector, 1, 10, 5), []);
+        assert_eq!(run(&mut detector, 1, 10, 1), [Pressure::Spare]);
+        detector.reset(true);
+        assert_eq!(run(&mut detector, 15, 10, 1), [Pressure::Violation]);
+        detector.reset(false);
+        // Capped at 4 times.
+        assert_eq!(run(&mut detector, 1, 10, 11), []);
+        assert_eq!(run(&mut detector, 1, 10, 1), [Pressure::Spare]);
+        // A promotion that holds through its probation clears the backoff.
+        detector.reset(true);
+        assert_eq!(run(&mut detector, 1, 10, 3), [Pressure::Spare]);
+        detector.reset(true);
+        assert_eq!(run(&mut detector, 1, 10, 3), [Pressure::Spare]);
+    }
+}

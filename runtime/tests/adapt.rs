@@ -1,0 +1,279 @@
+//! Adaptation of a component no compound supervises (paper 3.6, local level): under
+//! time violations it stretches its period step by step within its interval, then
+//! lowers its quality; when time is spare again it is promoted back, quality first.
+//! The work is simulated with sleeps proportional to the quality level, so violations
+//! do not depend on the machine's load; the tests assert outcomes, never timings.
+
+mod adapt_common;
+
+use std::sync::atomic::Ordering;
+
+use adapt_common::{FIXED, Load, SLEEPER, eventually, moves, ms, quick, sleeper, wait};
+use coolbot::adapt::AdaptAction;
+use coolbot::{AdaptConfig, Command, MonitorEvent, Pressure, System};
+
+/// At quality 0 the section sleeps 45 ms (longer than the longest period, 40 ms), at
+/// quality 1 25 ms (within 40 ms, and not spare at ratio 0.5).
+const HEAVY: [u64; 3] = [45, 25, 25];
+const LIGHT: [u64; 3] = [1, 1, 1];
+
+#[test]
+fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back() {
+    let load = Load::new();
+    load.set(HEAVY);
+    let mut system = System::new();
+    let handle = system
+        .add(sleeper("s", &SLEEPER, &load).with_adaptation(quick()))
+        .expect("add");
+    let events = handle.subscribe();
+    system.run_all().expect("run");
+
+    // Degraded to the bottom of the ladder: 40 ms and quality 1.
+    let monitor = wait(&handle, "fully degraded", |m| m.adaptation.level == 4);
+    assert_eq!(monitor.period, Some(ms(40)));
+    assert_eq!(monitor.quality, 1);
+    assert_eq!(monitor.adaptation.max_level, 4);
+    assert!(monitor.adaptation.enabled);
+    let degraded: Vec<_> = monitor
+        .adaptation
+        .history
+        .iter()
+        .filter(|step| step.action == AdaptAction::Degraded)
+        .map(|step| (step.to, step.period, step.quality))
+        .collect();
+    // Frequency first, in equal steps within [10 ms, 40 ms], then quality.
+    assert_eq!(
+        degraded,
+        [
+            (1, Some(ms(20)), Some(0)),
+            (2, Some(ms(30)), Some(0)),
+            (3, Some(ms(40)), Some(0)),
+            (4, Some(ms(40)), Some(1)),
+        ]
+    );
+    // The section itself saw the changes through its context.
+    eventually("a section at quality 1", || {
+        load.lowest_quality.load(Ordering::SeqCst) == 1
+    });
+    assert_eq!(load.longest_period.load(Ordering::SeqCst), 40_000);
+
+    // Stable at the bottom: ten more sections, and no promotion probe (25 ms of 40
+    // is not spare at ratio 0.5). (A late wake-up on a loaded machine could still
+    // make a violation there, reported as `Exhausted`: allowed.)
+    let runs = load.runs();
+    eventually("ten more sections", || load.runs() >= runs + 10);
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.adaptation.level, 4);
+    assert!(
+        monitor
+            .adaptation
+            .history
+            .iter()
+            .all(|step| matches!(step.action, AdaptAction::Degraded | AdaptAction::Exhausted)),
+        "{:#?}",
+        monitor.adaptation.history
+    );
+
+    // The load drops: promoted back to nominal, quality first.
+    load.set(LIGHT);
+    let monitor = wait(&handle, "back to nominal", |m| m.adaptation.level == 0);
+    assert_eq!(monitor.period, Some(ms(10)));
+    assert_eq!(monitor.quality, 0);
+    let promoted: Vec<_> = monitor
+        .adaptation
+        .history
+        .iter()
+        .filter(|step| step.action == AdaptAction::Promoted)
+        .map(|step| (step.to, step.period, step.quality))
+        .collect();
+    assert_eq!(
+        promoted,
+        [
+            (3, Some(ms(40)), Some(0)),
+            (2, Some(ms(30)), Some(0)),
+            (1, Some(ms(20)), Some(0)),
+            (0, Some(ms(10)), Some(0)),
+        ]
+    );
+    eventually("a section at 10 ms again", || {
+        load.last_period.load(Ordering::SeqCst) == 10_000
+    });
+
+    // Every step was announced on the monitoring port, with the period and quality
+    // changes it made, and the verdicts that led to it.
+    let events: Vec<_> = events.try_iter().collect();
+    let steps = events
+        .iter()
+        .filter(|e| {
+            matches!(e, MonitorEvent::Adaptation(step)
+                if matches!(step.action, AdaptAction::Degraded | AdaptAction::Promoted))
+        })
+        .count();
+    assert_eq!(steps, 8);
+    assert!(events.contains(&MonitorEvent::Period(Some(ms(40)))));
+    assert!(events.contains(&MonitorEvent::Quality(1)));
+    assert!(events.contains(&MonitorEvent::Pressure(Pressure::Violation)));
+    assert!(events.contains(&MonitorEvent::Pressure(Pressure::Spare)));
+    assert_eq!(moves(&monitor.adaptation.history).len(), 8);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn adaptation_turned_off_leaves_period_and_quality_alone() {
+    let load = Load::new();
+    load.set(HEAVY);
+    let mut system = System::new();
+    let handle = system
+        .add(sleeper("s", &SLEEPER, &load).with_adaptation(AdaptConfig::off()))
+        .expect("add");
+    system.run_all().expect("run");
+    eventually("ten sections", || load.runs() >= 10);
+    let monitor = wait(&handle, "missed deadlines", |m| m.missed_deadlines >= 5);
+    assert_eq!(monitor.period, Some(ms(10)));
+    assert_eq!(monitor.quality, 0);
+    assert!(!monitor.adaptation.enabled);
+    assert_eq!(monitor.adaptation.pressure, Pressure::Nominal);
+    assert!(monitor.adaptation.history.is_empty());
+    // The ladder is still there for the control port.
+    handle
+        .command(Command::SetDegradation(2))
+        .expect("level 2 of 4");
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.period, Some(ms(30)));
+    assert_eq!(monitor.adaptation.level, 2);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_quality_only() {
+    let load = Load::new();
+    load.set([15, 1, 1]);
+    let mut system = System::new();
+    let default = system.add(sleeper("d", &FIXED, &load)).expect("add");
+    let asked = system
+        .add(sleeper("a", &FIXED, &load).with_adaptation(AdaptConfig {
+            enabled: Some(true),
+            // Never spare: no promotion probe back to quality 0.
+            spare_ratio: 0.0,
+            ..quick()
+        }))
+        .expect("add");
+    system.run_all().expect("run");
+    let monitor = wait(&asked, "quality lowered", |m| m.adaptation.level == 1);
+    assert_eq!(monitor.quality, 1);
+    assert_eq!(
+        monitor.period,
+        Some(ms(10)),
+        "no period interval: no period step"
+    );
+    assert!(monitor.adaptation.enabled);
+    // The other one, same work, same spec, default settings: off.
+    let monitor = wait(&default, "missed deadlines", |m| m.missed_deadlines >= 5);
+    assert!(!monitor.adaptation.enabled);
+    assert_eq!(monitor.adaptation.max_level, 1);
+    assert_eq!((monitor.quality, monitor.adaptation.level), (0, 0));
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
+    let load = Load::new();
+    load.set(LIGHT);
+    let mut system = System::new();
+    let handle = system
+        .add(sleeper("s", &SLEEPER, &load).with_adaptation(AdaptConfig::off()))
+        .expect("add");
+    let fixed = system
+        .add(
+            sleeper("f", &FIXED, &load).with_timing(coolbot::TimingSpec {
+                qualities: &[],
+                ..FIXED.timing
+            }),
+        )
+        .expect("add");
+    system.run_all().expect("run");
+    handle.command(Command::SetDegradation(4)).expect("level 4");
+    let monitor = handle.snapshot();
+    assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
+    handle.command(Command::SetDegradation(1)).expect("level 1");
+    let monitor = handle.snapshot();
+    assert_eq!((monitor.period, monitor.quality), (Some(ms(20)), 0));
+    assert_eq!(
+        moves(&monitor.adaptation.history),
+        [
+            ("s".to_owned(), AdaptAction::Degraded, 0, 4),
+            ("s".to_owned(), AdaptAction::Promoted, 4, 1),
+        ]
+    );
+    let rejected = handle.command(Command::SetDegradation(5)).unwrap_err();
+    assert_eq!(
+        rejected.reason,
+        "degradation level 5 out of range: the highest is 4"
+    );
+    let rejected = fixed.command(Command::SetDegradation(1)).unwrap_err();
+    assert!(
+        rejected.reason.starts_with("no adaptation levels"),
+        "{rejected}"
+    );
+    // A period set by other means moves the level with it.
+    handle.command(Command::SetPeriod(ms(35))).expect("period");
+    assert_eq!(handle.snapshot().adaptation.level, 3);
+    handle.command(Command::SetQuality(1)).expect("quality");
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.adaptation.level, 4);
+    let last: Vec<_> = monitor.adaptation.history[2..]
+        .iter()
+        .map(|step| (step.action, step.from, step.to, step.detail.as_str()))
+        .collect();
+    assert_eq!(
+        last,
+        [
+            (
+                AdaptAction::Degraded,
+                1,
+                3,
+                "period set through the control port or by the component"
+            ),
+            (
+                AdaptAction::Degraded,
+                3,
+                4,
+                "quality set through the control port"
+            ),
+        ]
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn the_load_profile_tells_computing_from_waiting() {
+    let sleeping = Load::new();
+    sleeping.set([4, 4, 4]);
+    let spinning = Load::new();
+    spinning.set([4, 4, 4]);
+    spinning.spin.store(true, Ordering::SeqCst);
+    let mut system = System::new();
+    let waiter = system
+        .add(sleeper("sleeps", &SLEEPER, &sleeping).with_adaptation(quick()))
+        .expect("add");
+    let computer = system
+        .add(sleeper("spins", &SLEEPER, &spinning).with_adaptation(quick()))
+        .expect("add");
+    system.run_all().expect("run");
+    eventually("fifty sections each", || {
+        sleeping.runs() >= 50 && spinning.runs() >= 50
+    });
+    let (sleeps, spins) = (waiter.snapshot(), computer.snapshot());
+    // Both spend about 40 % of their period in their section ...
+    assert!(sleeps.adaptation.load > 0.2, "{:?}", sleeps.adaptation);
+    assert!(spins.adaptation.load > 0.2, "{:?}", spins.adaptation);
+    // ... but only one computes.
+    assert!(spins.adaptation.cpu_share > 0.05, "{:?}", spins.adaptation);
+    assert!(
+        sleeps.adaptation.cpu_share < spins.adaptation.cpu_share / 2.0,
+        "{:?} {:?}",
+        sleeps.adaptation,
+        spins.adaptation
+    );
+    assert!(system.shutdown().clean());
+}

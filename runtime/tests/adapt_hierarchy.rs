@@ -1,0 +1,301 @@
+//! Adaptation inside compounds (paper 3.6, Figures 6 and 7): the supervisor degrades
+//! its instances within a homogeneity interval, selects whom to degrade, raises its
+//! current maximum level at the top, notifies its own supervisor when nested, and
+//! promotes back from the top when time is spare. Work is simulated with sleeps (see
+//! `adapt_common`); the tests assert outcomes and orders, never timings.
+
+mod adapt_common;
+
+use adapt_common::{Load, Plain, check_homogeneity, member, moves, ms, wait};
+use coolbot::adapt::AdaptAction;
+use coolbot::{CompoundBuilder, MonitorEvent, Pressure, System};
+
+const HEAVY: [u64; 3] = [45, 25, 25];
+const LIGHT: [u64; 3] = [1, 1, 1];
+
+fn adaptation_steps(
+    events: &crossbeam_channel::Receiver<MonitorEvent>,
+) -> Vec<coolbot::Adaptation> {
+    events
+        .try_iter()
+        .filter_map(|event| match event {
+            MonitorEvent::Adaptation(step) => Some(step),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `b` (priority -1, the most urgent) runs out of time; `a` (-5) and `c` (-3) do not.
+/// The supervisor degrades `b` first (it violates), then, as `b` is at the current
+/// maximum level, the others by priority (`a` before `c`), then raises the level; so
+/// on until `b` fits. When the load drops, all come back to nominal.
+#[test]
+fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
+    let heavy = Load::new();
+    heavy.set(HEAVY);
+    let light = Load::new();
+    light.set(LIGHT);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("a", -5, &light))
+        .instance(member("b", -1, &heavy))
+        .instance(member("c", -3, &light))
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    let events = group.subscribe();
+    system.run_all().expect("run");
+    let b = group.instance("b").expect("b");
+
+    let monitor = wait(&b, "b fits at the bottom of its ladder", |m| {
+        m.adaptation.level == 4
+    });
+    assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
+    let mut steps = adaptation_steps(&events);
+    // The first rounds, in order: b (violating), then a (lowest priority), then c;
+    // the cap raised; again.
+    let first: Vec<_> = steps
+        .iter()
+        .filter(|s| matches!(s.action, AdaptAction::Degraded | AdaptAction::CapRaised))
+        .take(8)
+        .map(|s| (s.component.as_str(), s.action, s.to))
+        .collect();
+    assert_eq!(
+        first,
+        [
+            ("b", AdaptAction::Degraded, 1),
+            ("a", AdaptAction::Degraded, 1),
+            ("c", AdaptAction::Degraded, 1),
+            ("group", AdaptAction::CapRaised, 2),
+            ("b", AdaptAction::Degraded, 2),
+            ("a", AdaptAction::Degraded, 2),
+            ("c", AdaptAction::Degraded, 2),
+            ("group", AdaptAction::CapRaised, 3),
+        ]
+    );
+    let levels = check_homogeneity("group", &["a", "b", "c"], 4, &steps);
+    assert_eq!(levels[1], 4);
+    // The instances applied what their supervisor asked (through their control
+    // ports): their own histories say so.
+    let a = group.instance("a").expect("a").snapshot();
+    assert_eq!(a.adaptation.level, levels[0]);
+    assert_eq!(
+        a.adaptation.history.last().map(|s| s.detail.as_str()),
+        Some("commanded through the control port")
+    );
+
+    // The load drops: everyone back to nominal, through the interval.
+    heavy.set(LIGHT);
+    for name in ["a", "b", "c"] {
+        let handle = group.instance(name).expect("instance");
+        let monitor = wait(&handle, "nominal", |m| m.adaptation.level == 0);
+        assert_eq!(
+            (monitor.period, monitor.quality),
+            (Some(ms(10)), 0),
+            "{name}"
+        );
+    }
+    let monitor = wait(&group, "floor 0", |m| m.adaptation.floor == 0);
+    assert!(monitor.adaptation.level <= 1);
+    steps.extend(adaptation_steps(&events));
+    assert_eq!(
+        check_homogeneity("group", &["a", "b", "c"], 4, &steps),
+        [0, 0, 0]
+    );
+    assert!(
+        steps.iter().any(|s| s.action == AdaptAction::FloorLowered),
+        "promotion lowers the floor from the top"
+    );
+    // No promotion before b's last degradation: promotions wait for the violations
+    // to settle.
+    let last_degraded = steps
+        .iter()
+        .rposition(|s| s.action == AdaptAction::Degraded)
+        .expect("degradations");
+    let first_promoted = steps
+        .iter()
+        .position(|s| s.action == AdaptAction::Promoted)
+        .expect("promotions");
+    assert!(last_degraded < first_promoted, "{steps:#?}");
+    assert!(system.shutdown().clean());
+}
+
+/// A compound inside a compound: the inner one may not degrade its instances beyond
+/// the level its supervisor granted (0 at first): it notifies higher, the outer one
+/// (the top) grants it a level (degrading it like any instance), raising its own cap
+/// when every instance is at it. Promotion comes back down the same way.
+#[test]
+fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
+    let heavy = Load::new();
+    heavy.set(HEAVY);
+    let light = Load::new();
+    light.set(LIGHT);
+    let inner = CompoundBuilder::new("inner", Plain)
+        .instance(member("x", -1, &heavy))
+        .instance(member("y", -2, &light))
+        .build()
+        .expect("inner");
+    let outer = CompoundBuilder::new("outer", Plain)
+        .instance(inner)
+        .instance(member("z", -3, &light))
+        .build()
+        .expect("outer");
+    let mut system = System::new();
+    let outer = system.add(outer).expect("add");
+    let outer_events = outer.subscribe();
+    system.run_all().expect("run");
+    let inner = outer.instance("inner").expect("inner");
+    let x = outer.instance("inner.x").expect("x");
+    assert_eq!(inner.snapshot().adaptation.max_level, 4);
+
+    wait(&x, "x at the bottom of its ladder", |m| {
+        m.adaptation.level == 4
+    });
+    let inner_monitor = inner.snapshot();
+    assert_eq!(inner_monitor.adaptation.level, 4, "granted by outer");
+    let inner_history = &inner_monitor.adaptation.history;
+    assert!(
+        inner_history
+            .iter()
+            .any(|s| s.action == AdaptAction::NotifiedHigher && s.component == "inner"),
+        "{inner_history:#?}"
+    );
+    let steps = adaptation_steps(&outer_events);
+    // The outer supervisor's first move: grant the violating inner compound level 1
+    // (the inner one had notified higher).
+    assert_eq!(
+        moves(&steps).first(),
+        Some(&("inner".to_owned(), AdaptAction::Degraded, 0, 1))
+    );
+    // z never violated, yet was degraded to keep the interval homogeneous before the
+    // cap was raised.
+    assert!(moves(&steps).contains(&("z".to_owned(), AdaptAction::Degraded, 0, 1)));
+    check_homogeneity("outer", &["inner", "z"], 4, &steps);
+
+    heavy.set(LIGHT);
+    for path in ["inner.x", "inner.y", "z"] {
+        let handle = outer.instance(path).expect(path);
+        wait(&handle, path, |m| m.adaptation.level == 0);
+    }
+    let inner_monitor = wait(&inner, "inner granted nothing", |m| m.adaptation.level == 0);
+    assert!(
+        inner_monitor
+            .adaptation
+            .history
+            .iter()
+            .any(|s| s.action == AdaptAction::ReportedSpare),
+        "{:#?}",
+        inner_monitor.adaptation.history
+    );
+    assert_ne!(inner_monitor.adaptation.pressure, Pressure::Violation);
+    assert!(system.shutdown().clean());
+}
+
+/// When even the highest level is not enough, the top-level supervisor reconfigures:
+/// with `SuspendLowestPriority` it suspends the least urgent instance (never one as
+/// urgent as the violator), then reports exhaustion; when time is spare again, the
+/// suspended instance is resumed first, then everyone is promoted.
+#[test]
+fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spare() {
+    let hopeless = Load::new();
+    hopeless.set([45, 45, 45]);
+    let light = Load::new();
+    light.set(LIGHT);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("hi", -1, &hopeless))
+        .instance(member("lo", -4, &light))
+        .adaptation(coolbot::AdaptConfig {
+            reconfiguration: coolbot::Reconfiguration::SuspendLowestPriority,
+            ..coolbot::AdaptConfig::default()
+        })
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    let events = group.subscribe();
+    system.run_all().expect("run");
+    let lo = group.instance("lo").expect("lo");
+
+    let monitor = wait(&group, "exhausted", |m| {
+        m.adaptation
+            .history
+            .iter()
+            .any(|s| s.action == AdaptAction::Exhausted)
+    });
+    assert_eq!(monitor.adaptation.pressure, Pressure::Violation);
+    // (The suspension is queued at lo's control port; it takes it between sections.)
+    wait(&lo, "lo suspended", |m| {
+        m.state == coolbot::State::Suspended
+    });
+    let steps = adaptation_steps(&events);
+    let reconfiguration: Vec<_> = steps
+        .iter()
+        .filter(|s| matches!(s.action, AdaptAction::Suspended | AdaptAction::Exhausted))
+        .map(|s| (s.component.as_str(), s.action))
+        .collect();
+    assert_eq!(
+        reconfiguration,
+        [
+            ("lo", AdaptAction::Suspended),
+            ("group", AdaptAction::Exhausted)
+        ]
+    );
+    // Suspended only at the end: both were at the top of their ladders first.
+    let levels = check_homogeneity("group", &["hi", "lo"], 4, &steps);
+    assert_eq!(levels, [4, 4]);
+
+    hopeless.set(LIGHT);
+    wait(&lo, "lo resumed and promoted", |m| {
+        m.state == coolbot::State::Running && m.adaptation.level == 0
+    });
+    let hi = group.instance("hi").expect("hi");
+    wait(&hi, "hi promoted", |m| m.adaptation.level == 0);
+    let steps = adaptation_steps(&events);
+    let resumed = steps
+        .iter()
+        .position(|s| s.action == AdaptAction::Resumed && s.component == "lo")
+        .expect("lo resumed");
+    let promoted = steps
+        .iter()
+        .position(|s| s.action == AdaptAction::Promoted)
+        .expect("promotions");
+    assert!(
+        resumed < promoted,
+        "resumed before any promotion: {steps:#?}"
+    );
+    assert!(system.shutdown().clean());
+}
+
+/// A compound with adaptation off: its instances detect and publish their verdicts,
+/// nothing acts on them (neither the compound nor the instances themselves).
+#[test]
+fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
+    let heavy = Load::new();
+    heavy.set(HEAVY);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("b", -1, &heavy))
+        .adaptation(coolbot::AdaptConfig::off())
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    system.run_all().expect("run");
+    let b = group.instance("b").expect("b");
+    let monitor = wait(&b, "a violation, published", |m| {
+        m.adaptation.pressure == Pressure::Violation
+    });
+    let runs = heavy.runs();
+    adapt_common::eventually("five more sections", || heavy.runs() >= runs + 5);
+    let monitor_now = b.snapshot();
+    assert_eq!(monitor_now.adaptation.level, 0);
+    assert_eq!(monitor_now.period, monitor.period);
+    assert!(monitor_now.adaptation.history.is_empty());
+    let compound = group.snapshot();
+    assert!(!compound.adaptation.enabled);
+    assert!(compound.adaptation.history.is_empty());
+    let rejected = group
+        .command(coolbot::Command::SetDegradation(1))
+        .unwrap_err();
+    assert_eq!(rejected.reason, "adaptation is off in this compound");
+    assert!(system.shutdown().clean());
+}
