@@ -185,6 +185,8 @@ pub fn describe(event: &MonitorEvent) -> String {
         MonitorEvent::Configured => "configured".to_owned(),
         MonitorEvent::Supervision(step) => format!("supervision: {step}"),
         MonitorEvent::OsPriority(priority) => format!("os priority {priority:?}"),
+        MonitorEvent::Pressure(pressure) => format!("pressure {pressure:?}"),
+        MonitorEvent::Adaptation(step) => format!("adaptation: {step}"),
     }
 }
 
