@@ -2541,16 +2541,13 @@ impl Coordinator {
             .filter_map(|m| Some(m.period?.mul_f64(1.0 + m.load.clamp(0.0, 10.0))))
             .max()
             .unwrap_or(DEFAULT_SUPERVISION_PERIOD);
-        let own = self
-            .config
-            .hold_periods
-            .saturating_add(self.config.window)
-            .saturating_add(1);
-        let periods = indices
-            .iter()
-            .filter_map(|i| monitors.get(*i))
-            .map(|m| m.adaptation.settle_periods)
-            .fold(own, u32::max);
+        let periods = settle_periods(
+            &self.config,
+            indices
+                .iter()
+                .filter_map(|i| monitors.get(*i))
+                .map(|m| m.adaptation.settle_periods),
+        );
         cycle
             .saturating_mul(periods)
             .saturating_mul(self.backoff.max(1))
@@ -2588,6 +2585,16 @@ impl Coordinator {
         self.backoff = next_backoff(self.backoff, premature, self.config.max_backoff);
         self.settle(members, monitors, indices, now);
     }
+}
+
+/// The periods a supervisor settles for: the longest of its own configuration's
+/// `hold_periods + window + 1` and its members' (`published`).
+fn settle_periods(own: &AdaptConfig, published: impl IntoIterator<Item = u32>) -> u32 {
+    let own = own
+        .hold_periods
+        .saturating_add(own.window)
+        .saturating_add(1);
+    published.into_iter().fold(own, u32::max)
 }
 
 /// The reconfiguration backoff after a suspension: doubled when the suspension
@@ -2631,6 +2638,19 @@ mod tests {
         );
         // No overflow however many restarts were done.
         assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
+    }
+
+    #[test]
+    fn a_compound_settles_for_its_slowest_settling_member() {
+        let own = AdaptConfig::default(); // 5 + 4 + 1
+        assert_eq!(settle_periods(&own, []), 10);
+        assert_eq!(settle_periods(&own, [6, 44, 0]), 44);
+        assert_eq!(settle_periods(&own, [6]), 10);
+        let huge = AdaptConfig {
+            hold_periods: u32::MAX,
+            ..own
+        };
+        assert_eq!(settle_periods(&huge, [1]), u32::MAX);
     }
 
     #[test]
