@@ -424,3 +424,58 @@ fn instances_publish_their_settling_periods() {
     assert_eq!(b.snapshot().adaptation.settle_periods, 2 + 3 + 1);
     assert!(system.shutdown().clean());
 }
+
+/// A `degrade` continuity plan step (paper 3.5) in an instance of a compound: the
+/// lower quality is the instance's own, and its compound does not revert it when time
+/// is spare.
+#[test]
+fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
+    let light = Load::new();
+    light.set(LIGHT);
+    let planned = adapt_common::sleeper("p", &adapt_common::PLANNED, &light)
+        .with_adaptation(adapt_common::quick());
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(planned)
+        .instance(member("q", -1, &light))
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    system.run_all().expect("run");
+    let p = group.instance("p").expect("p");
+    p.wait_state(coolbot::State::Running, adapt_common::WAIT)
+        .expect("running");
+    light.fault.store(true, std::sync::atomic::Ordering::SeqCst);
+    let monitor = wait(&p, "the plan's degradation", |m| m.quality == 1);
+    assert_eq!(monitor.state, coolbot::State::Running);
+    assert_eq!(
+        (
+            monitor.period,
+            monitor.adaptation.level,
+            monitor.adaptation.min_level
+        ),
+        (Some(ms(10)), 1, 1)
+    );
+    wait(&p, "spare time", |m| {
+        m.adaptation.pressure == Pressure::Spare
+    });
+    let runs = light.runs();
+    adapt_common::eventually("twenty more sections", || light.runs() >= runs + 20);
+    let monitor = p.snapshot();
+    assert_eq!(
+        (monitor.quality, monitor.adaptation.level),
+        (1, 1),
+        "{:#?}",
+        monitor.adaptation.history
+    );
+    assert!(
+        monitor
+            .adaptation
+            .history
+            .iter()
+            .all(|s| s.detail == "a `degrade` continuity plan step"),
+        "{:#?}",
+        monitor.adaptation.history
+    );
+    assert!(system.shutdown().clean());
+}
