@@ -382,7 +382,9 @@ impl Ladder {
         }
         let span = (max - period).as_nanos();
         let offset = span * u128::from(step.min(self.period_steps)) / u128::from(self.period_steps);
-        Some(period + Duration::from_nanos(u64::try_from(offset).unwrap_or(u64::MAX)))
+        Some(period.saturating_add(Duration::from_nanos(
+            u64::try_from(offset).unwrap_or(u64::MAX),
+        )))
     }
 
     /// The period index of `period`: the first step at least as long (0 for a period

@@ -2333,6 +2333,14 @@ impl Compound {
                 return;
             };
             let now = Instant::now();
+            if let Some(resumed) = coordinator.resumed_at
+                && now.saturating_duration_since(resumed)
+                    > coordinator.settling(&members, &self.view.instances, &indices)
+            {
+                // The last resume held through a settling time: no backoff any more.
+                coordinator.resumed_at = None;
+                coordinator.backoff = 1;
+            }
             if members.iter().any(|m| m.pressure == Pressure::Violation) {
                 coordinator.settle(&members, &self.view.instances, &indices, now);
             }
