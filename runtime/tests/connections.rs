@@ -663,3 +663,38 @@ fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
     assert_eq!(second.try_iter().count(), coolbot::OBSERVER_CAPACITY);
     assert_eq!(handle.snapshot().dropped_events, 100);
 }
+
+#[test]
+fn a_poster_input_sees_the_first_post_of_a_new_producer_at_once() {
+    let (pa, pb) = (PosterOut::<u64>::new(), PosterOut::<u64>::new());
+    let r = PosterIn::<u64>::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("pa", OutputKind::Poster, false), &pa)
+            .output(output("pb", OutputKind::Poster, false), &pb),
+        ShellBuilder::new("c").input(input("r", InputKind::Poster, false), &r),
+    );
+    pair.system.connect("p.pa", "c.r").expect("pa");
+    for n in 0..5 {
+        pa.post(n);
+    }
+    assert_eq!(r.take_new(), Some(4));
+    assert!(!r.is_new());
+    // The producer is replaced (as a substitute takes over): a new source, whose
+    // posts are numbered from 1 again.
+    pair.system.disconnect("p.pa", "c.r").expect("disconnect");
+    assert_eq!(r.read(), None, "a disconnected poster input reads nothing");
+    pair.system.connect("p.pb", "c.r").expect("pb");
+    assert!(!r.is_new(), "pb has posted nothing yet");
+    pb.post(100);
+    assert!(r.is_new(), "the new producer's first post is new");
+    assert_eq!(r.take_new(), Some(100), "the new producer's first post is new");
+    assert_eq!(r.take_new(), None);
+    // Back to pa, whose latest post (4, sequence 5) was read from the old source:
+    // it is new for the new source.
+    pair.system.disconnect("p.pb", "c.r").expect("disconnect pb");
+    pair.system.connect("p.pa", "c.r").expect("pa again");
+    assert!(r.is_new());
+    assert_eq!(r.take_new(), Some(4));
+    assert!(!r.is_new());
+}
