@@ -6,22 +6,28 @@
 //! from its own thread. A tap is one more consumer of the output, never a connection:
 //! the producer hands it a clone of each packet and goes on (the tap's queue is bounded
 //! and a full queue never blocks the producer: the packet is counted as lost, and the
-//! loss is written into the recording, sent on [`Recording::losses`] and logged).
+//! loss is written into the recording, sent on [`Recording::losses`] and logged). A
+//! monitoring port is followed through the recorder's own counted
+//! [`Subscription`](crate::Subscription), bounded by
+//! [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY): events dropped for it when the
+//! recorder falls behind are lost the same way, counted, written and reported.
 //!
 //! The file is JSON lines (one JSON object per line, each with a `kind`):
 //!
 //! - first a `header`: `version` ([`FORMAT_VERSION`]), `start_unix_ns` (wall-clock
 //!   start), `capacity` (each tap's queue), `ports` (each tapped output's `path`, Rust
-//!   `type` and `kind`: `data` or `tick`) and `monitors` (the paths of the components whose monitoring
-//!   events are recorded);
+//!   `type` and `kind`: `data`, `poster` or `tick`) and `monitors` (the paths of the
+//!   components whose monitoring events are recorded);
 //! - then, in the order the recorder's thread wrote them, `packet` records (`t`: time
 //!   since the start in ns, taken on the producer's thread when it sent; `port`; `seq`:
 //!   the packet's number on that port, from 0; `value`: the packet, serialized with
-//!   serde), `lost` records (`t`, `port`, `lost` now, `total` so far, `reason`), and
+//!   serde), `lost` records (`t`, `port`, `lost` now, `total` so far, `reason`; for
+//!   monitoring events dropped for the recorder, `port` is the component's path), and
 //!   `event` records (`t`, `component`, `event`: a [`MonitorEvent`]);
 //! - last an `end` record: for each port how many packets were `sent`, `recorded` and
-//!   `lost` (always `sent == recorded + lost`), and how many events were recorded per
-//!   component.
+//!   `lost` (always `sent == recorded + lost`), and for each monitored component how
+//!   many events it published to the recorder (`sent`), were recorded (`events`) and
+//!   were dropped (`lost`), with `sent == events + lost`.
 //!
 //! Packet records of one port are in `seq` order, and a gap in `seq` is a loss (a `lost`
 //! record says so). Records of different ports are sorted by `t` within each batch the
@@ -220,7 +226,7 @@ pub struct PortInfo {
     /// The Rust packet type (`std::any::type_name`).
     #[serde(rename = "type")]
     pub type_name: String,
-    /// The output kind (`data` or `tick`).
+    /// The output kind (`data`, `poster` or `tick`).
     pub kind: String,
 }
 
@@ -616,7 +622,7 @@ impl Recording {
 
     /// Stop recording: detach every tap and monitor, write what they still hold and the
     /// `end` record, flush, and return the counts (in which `sent == recorded + lost`
-    /// for every port).
+    /// for every port, and `sent == events + lost` for every monitored component).
     pub fn finish(mut self) -> Result<Summary, RecordError> {
         self.stop_and_join()
     }

@@ -286,6 +286,12 @@ impl fmt::Display for Summary {
                 .ports
                 .iter()
                 .map(|p| format!("{} {} recorded, {} lost", p.port, p.recorded, p.lost))
+                .chain(recorded.monitors.iter().map(|m| {
+                    format!(
+                        "{} monitoring events {} recorded, {} lost",
+                        m.component, m.events, m.lost
+                    )
+                }))
                 .collect();
             writeln!(f, "  recorded             {}", ports.join("; "))?;
         }
