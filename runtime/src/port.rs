@@ -891,12 +891,15 @@ impl<T> Clone for PosterIn<T> {
     }
 }
 
+/// A poster input's source: the id of the output it reads, and that output's post.
+type Linked<T> = (usize, Arc<dyn PosterSource<T>>);
+
 pub(crate) struct PosterInInner<T> {
     core: Arc<InputCore>,
     /// What the input reads: the id of the output it is connected to (its
     /// `OutputCore` id, for `unlink` to clear only its own connection) and that
     /// output's post, maybe through a converter.
-    source: RwLock<Option<(usize, Arc<dyn PosterSource<T>>)>>,
+    source: RwLock<Option<Linked<T>>>,
     /// The sequence number of the post read last, in the current source's numbering:
     /// set back to 0 (nothing read) whenever the source is set or cleared, under the
     /// source's write lock, so the first post of a new producer is new.

@@ -8,7 +8,7 @@
 //! and a full queue never blocks the producer: the packet is counted as lost, and the
 //! loss is written into the recording, sent on [`Recording::losses`] and logged). A
 //! monitoring port is followed through the recorder's own counted
-//! [`Subscription`](crate::Subscription), bounded by
+//! [`Subscription`], bounded by
 //! [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY): events dropped for it when the
 //! recorder falls behind are lost the same way, counted, written and reported.
 //!
