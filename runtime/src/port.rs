@@ -1279,6 +1279,17 @@ impl ErasedInput {
         }
         lost
     }
+
+    /// Count `lost` packets as lost at this input, from outside its component: packets
+    /// meant for it that never reached it (a network bridge's packet that did not
+    /// decode, or that it could not send). They are added to the input's `overflows`
+    /// and announced as a `MonitorEvent::Overflow` on its component's monitoring
+    /// port, like a packet its own overflow policy dropped. Zero does nothing.
+    pub fn count_loss(&self, lost: u64) {
+        if lost > 0 {
+            self.core.overflowed(lost);
+        }
+    }
 }
 
 fn discard_nothing(_: &ErasedInput) -> u64 {

@@ -58,10 +58,11 @@ const SPIN: Duration = Duration::from_micros(2);
 const BATCH_PAUSE: u32 = 32;
 
 /// Spin hints between two clock reads while spinning (a hint takes about 25 ns on the
-/// development machine, a clock read about 30 ns). A thread that finds work while
-/// spinning starts its turn from the spin's last clock reading instead of reading the
-/// clock again: the reading is at most this many hints old (about 0.1 us), and a
-/// packet handed over between spinning threads saves a clock read on its path.
+/// development machine, a clock read about 30 ns). A component without timers that
+/// finds work while spinning starts its turn from the spin's last clock reading
+/// instead of reading the clock again: the reading is normally at most this many hints
+/// old (about 0.1 us; more if the thread was preempted in between), and a packet
+/// handed over between spinning threads saves a clock read on its path.
 const SPIN_BATCH: u32 = 4;
 
 /// `yield_now` rounds after the spin, before parking (as crossbeam's `Backoff`): on a
@@ -137,8 +138,15 @@ pub(crate) struct Runner {
     /// the bell: the next turn does not clear the bell.
     found_by_polling: bool,
     /// When the last wait found its work while spinning: the spin's last clock
-    /// reading, which the next turn starts from (see `SPIN_BATCH`).
+    /// reading, which the next turn starts from (see `SPIN_BATCH`). Only for a
+    /// component without timers (`untimed`).
     found_at: Option<Instant>,
+    /// No state has a periodic section or an `after` transition, and the component is
+    /// not a compound: nothing times a delay from the turn's clock, so a spin's last
+    /// reading may stand in for it. (A thread preempted between that reading and
+    /// finding its work would start the turn from an older reading; a timer measured
+    /// from it would fire early, so timed components always read the clock.)
+    untimed: bool,
     /// This turn did not clear the bell (the bell may be rung for work already seen).
     polled: bool,
     /// The thread's OS scheduling (`priority`), once the thread runs.
@@ -214,6 +222,11 @@ impl Runner {
             arrivals_count_on_entry: false,
             found_by_polling: false,
             found_at: None,
+            untimed: !supervised
+                && spec
+                    .states
+                    .iter()
+                    .all(|state| state.periodic.is_none() && state.after.is_empty()),
             polled: false,
             scheduling: None,
             adapt,
@@ -424,7 +437,7 @@ impl Runner {
             for _ in 0..SPIN_BATCH {
                 if found(self) {
                     self.found_by_polling = polling;
-                    self.found_at = Some(read_at);
+                    self.found_at = self.untimed.then_some(read_at);
                     return;
                 }
                 std::hint::spin_loop();

@@ -437,20 +437,23 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
     }
 }
 
-/// A `degrade` step lowers the quality level by one: with fewer than two levels it
-/// always fails, and the exception ends in running error as if it had no plan.
+/// A `degrade` step lowers the quality level by one; with fewer than two levels it
+/// never applies and is skipped (the plan goes on to its next step, or, after the
+/// last, the component goes to running error). An instance's `timing` override may
+/// declare levels of its own: the help says so.
 fn degrade_without_quality(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
     exception: &ast::Exception,
 ) {
-    let Some(step) = exception
+    let Some(position) = exception
         .plan
         .iter()
-        .find(|step| matches!(step.kind, ast::PlanKind::Degrade))
+        .position(|step| matches!(step.kind, ast::PlanKind::Degrade))
     else {
         return;
     };
+    let step = &exception.plan[position];
     let levels = component
         .members
         .iter()
@@ -468,20 +471,26 @@ fn degrade_without_quality(
     if levels >= 2 {
         return;
     }
+    let then = if position + 1 < exception.plan.len() {
+        "skipped: the plan goes on to its next step"
+    } else {
+        "skipped: the plan ends and the component goes to running error"
+    };
     let diagnostic = Diagnostic::warning(
         Code::DegradeWithoutQuality,
         checker.file,
         step.span,
         format!(
-            "`degrade` can never succeed: `{}` declares {} quality level{}",
+            "`degrade` has no lower quality to go to: `{}` declares {} quality level{}",
             component.name.name,
             if levels == 0 { "no".to_owned() } else { levels.to_string() },
             if levels == 1 { "" } else { "s" }
         ),
     )
-    .with_label("the plan fails here and the component goes to running error")
-    .with_help(
-        "declare the levels, best first, in the timing block (`timing { quality full, reduced; }`), or choose another plan",
-    );
+    .with_label(then)
+    .with_help(format!(
+        "declare two or more levels, best first, in the timing block (`timing {{ quality full, reduced; }}`); an instance's `timing` override that declares them also makes the step apply for that instance of `{}`",
+        component.name.name
+    ));
     checker.push(diagnostic);
 }

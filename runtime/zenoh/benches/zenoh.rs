@@ -1,0 +1,353 @@
+//! One-way latency over the network: ping-pong between two components on two nodes
+//! through Zenoh bridges (an outlet and an inlet each way, fifo connections), against
+//! raw Zenoh pub/sub ping-pong between two bare threads on the same two sessions. One
+//! process, two sessions connected over loopback TCP (explicit endpoints, multicast
+//! scouting off). One-way latency is half a round trip; every round trip is a sample.
+//!
+//! `cargo bench -p coolbot-zenoh --bench zenoh` (add `-- --quick` for a smoke run).
+
+#[path = "../../benches/common/mod.rs"]
+#[macro_use]
+mod common;
+
+use std::net::TcpListener;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
+use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, PortSet, Section, System};
+use coolbot_zenoh::Node;
+use crossbeam_channel::{Receiver, Sender, bounded};
+use zenoh::Wait;
+
+use common::{Figure, Glue, Goal, Mode, Samples, Table};
+
+/// Round trips discarded at the start of every round.
+const WARMUP: usize = 100;
+/// Rounds of project and baseline, alternated.
+const ROUNDS: usize = 10;
+
+const QUEUE: InputKind = InputKind::Fifo {
+    capacity: 4,
+    policy: OverflowPolicy::Reject,
+};
+
+one_state_spec! {
+    static PING_SPEC = "Ping",
+    inputs: [("input", QUEUE), ("kick", InputKind::Tick)],
+    outputs: [("output", OutputKind::Data)],
+    on: [0, 1],
+    periodic: None,
+}
+
+one_state_spec! {
+    static PONG_SPEC = "Pong",
+    inputs: [("input", QUEUE)],
+    outputs: [("output", OutputKind::Data)],
+    on: [0],
+    periodic: None,
+}
+
+one_state_spec! {
+    static KICK_SPEC = "Kick",
+    inputs: [],
+    outputs: [("kick", OutputKind::Tick)],
+    on: [],
+    periodic: None,
+}
+
+/// Stamps are nanoseconds since one instant of this process (both ends are in it).
+fn stamp() -> u64 {
+    static BASE: OnceLock<Instant> = OnceLock::new();
+    BASE.get_or_init(Instant::now).elapsed().as_nanos() as u64
+}
+
+fn since(stamp_ns: u64) -> Duration {
+    Duration::from_nanos(stamp().saturating_sub(stamp_ns))
+}
+
+fn endpoint() -> String {
+    let port = TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .expect("a free loopback port")
+        .port();
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// Two nodes, `b` connected to `a`, on loopback.
+fn nodes() -> (Node, Node) {
+    let a_endpoint = endpoint();
+    let config = |listen: &str, connect: &[String]| {
+        coolbot_zenoh::peer_config(&[listen.to_owned()], connect, false).expect("config")
+    };
+    let a = Node::open("bench-a", config(&a_endpoint, &[])).expect("node a");
+    let b = Node::open("bench-b", config(&endpoint(), &[a_endpoint])).expect("node b");
+    (a, b)
+}
+
+/// Wait until `node`'s session knows a subscriber on `key`.
+fn wait_subscribed(node: &Node, key: &str) {
+    let publisher = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("probe publisher");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !publisher
+        .matching_status()
+        .wait()
+        .is_ok_and(|status| status.matching())
+    {
+        assert!(Instant::now() < deadline, "no subscriber on `{key}`");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// The pinging side: on a kick, runs `per_round + WARMUP` round trips and sends the
+/// samples (warm-up dropped) on `done`.
+fn ping(per_round: usize, done: Sender<Vec<Duration>>) -> Component {
+    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
+    let kick = TickIn::new();
+    let output = DataOut::<u64>::new();
+    let ports = PortSet::new().input(&input).input(&kick).output(&output);
+    let mut samples = Vec::with_capacity(per_round + WARMUP);
+    let mut remaining = 0usize;
+    let mut in_flight = false;
+    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
+        if section != Section::Entry {
+            return Ok(());
+        }
+        if kick.take() > 0 {
+            remaining = per_round + WARMUP;
+            samples.clear();
+        }
+        if let Some(sent) = input.recv() {
+            samples.push(since(sent) / 2);
+            in_flight = false;
+        }
+        if !in_flight {
+            if remaining > 0 {
+                remaining -= 1;
+                in_flight = true;
+                output.send(stamp());
+            } else if samples.len() == per_round + WARMUP {
+                let _ = done.send(samples.split_off(WARMUP));
+                samples.clear();
+            }
+        }
+        Ok(())
+    });
+    Component::new("ping", Glue::boxed(&PING_SPEC, body), ports)
+}
+
+/// The echo side: sends back every stamp it takes.
+fn pong() -> Component {
+    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
+    let output = DataOut::<u64>::new();
+    let ports = PortSet::new().input(&input).output(&output);
+    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
+        if section == Section::Entry {
+            while let Some(stamp) = input.recv() {
+                output.send(stamp);
+            }
+        }
+        Ok(())
+    });
+    Component::new("pong", Glue::boxed(&PONG_SPEC, body), ports)
+}
+
+/// The project: ping on node a, pong on node b, bridged both ways.
+struct Project {
+    kick: TickOut,
+    samples: Receiver<Vec<Duration>>,
+    systems: (System, System),
+}
+
+fn project(a: &Node, b: &Node, per_round: usize) -> Project {
+    let bridge = InputKind::Fifo {
+        capacity: 16,
+        policy: OverflowPolicy::Block,
+    };
+    let (done, samples) = bounded(1);
+    let kick = TickOut::new();
+    let mut near = System::new();
+    near.add(ping(per_round, done)).expect("ping");
+    near.add(Component::new(
+        "kicker",
+        Glue::boxed(&KICK_SPEC, Box::new(|_, _| Ok(()))),
+        PortSet::new().output(&kick),
+    ))
+    .expect("kicker");
+    near.add(
+        a.outlet::<u64>("to_pong", "bench/ping", bridge)
+            .build()
+            .expect("outlet"),
+    )
+    .expect("outlet");
+    near.add(
+        a.inlet::<u64>("from_pong", "bench/pong", OutputKind::Data)
+            .build()
+            .expect("inlet"),
+    )
+    .expect("inlet");
+    near.connect("ping.output", "to_pong.input")
+        .expect("connect");
+    near.connect("from_pong.output", "ping.input")
+        .expect("connect");
+    near.connect("kicker.kick", "ping.kick").expect("connect");
+
+    let mut far = System::new();
+    far.add(pong()).expect("pong");
+    far.add(
+        b.inlet::<u64>("from_ping", "bench/ping", OutputKind::Data)
+            .build()
+            .expect("inlet"),
+    )
+    .expect("inlet");
+    far.add(
+        b.outlet::<u64>("to_ping", "bench/pong", bridge)
+            .build()
+            .expect("outlet"),
+    )
+    .expect("outlet");
+    far.connect("from_ping.output", "pong.input")
+        .expect("connect");
+    far.connect("pong.output", "to_ping.input")
+        .expect("connect");
+    far.run_all().expect("run far");
+    near.run_all().expect("run near");
+    wait_subscribed(a, "bench/ping");
+    wait_subscribed(b, "bench/pong");
+    Project {
+        kick,
+        samples,
+        systems: (near, far),
+    }
+}
+
+fn project_round(project: &Project) -> Vec<Duration> {
+    project.kick.emit();
+    common::expect(
+        &project.samples,
+        Duration::from_secs(120),
+        "bridge ping-pong",
+    )
+}
+
+/// The baseline: raw Zenoh on the same two sessions, an echo thread on b.
+struct Baseline {
+    to_echo: zenoh::pubsub::Publisher<'static>,
+    back: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    stop: Arc<AtomicBool>,
+    echo: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for Baseline {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(echo) = self.echo.take() {
+            let _ = echo.join();
+        }
+    }
+}
+
+fn baseline(a: &Node, b: &Node) -> Baseline {
+    let echo_in = b
+        .session()
+        .declare_subscriber("bench/raw/ping")
+        .wait()
+        .expect("subscriber");
+    let echo_out = b
+        .session()
+        .declare_publisher("bench/raw/pong")
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .wait()
+        .expect("publisher");
+    let back = a
+        .session()
+        .declare_subscriber("bench/raw/pong")
+        .wait()
+        .expect("subscriber");
+    let to_echo = a
+        .session()
+        .declare_publisher("bench/raw/ping")
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .wait()
+        .expect("publisher");
+    let stop = Arc::new(AtomicBool::new(false));
+    let stopped = Arc::clone(&stop);
+    let echo = std::thread::spawn(move || {
+        while !stopped.load(Ordering::Acquire) {
+            if let Ok(Some(sample)) = echo_in.recv_timeout(Duration::from_millis(100)) {
+                echo_out.put(sample.payload().clone()).wait().expect("echo");
+            }
+        }
+    });
+    wait_subscribed(a, "bench/raw/ping");
+    wait_subscribed(b, "bench/raw/pong");
+    Baseline {
+        to_echo,
+        back,
+        stop,
+        echo: Some(echo),
+    }
+}
+
+fn baseline_round(baseline: &Baseline, per_round: usize) -> Vec<Duration> {
+    let mut samples = Vec::with_capacity(per_round + WARMUP);
+    for _ in 0..per_round + WARMUP {
+        let bytes = postcard::to_allocvec(&stamp()).expect("encode");
+        baseline.to_echo.put(bytes).wait().expect("put");
+        let sample = baseline.back.recv().expect("echo alive");
+        let sent: u64 = postcard::from_bytes(&sample.payload().to_bytes()).expect("decode");
+        samples.push(since(sent) / 2);
+    }
+    samples.split_off(WARMUP)
+}
+
+fn main() {
+    let mode = Mode::from_env();
+    let per_round = mode.scale(10_000, 1_000) / ROUNDS;
+    let mut table = Table::new(
+        "One-way latency over Zenoh, ping-pong (half round trip): components through bridges vs raw pub/sub",
+        mode,
+    );
+    let (a, b) = nodes();
+    let project = project(&a, &b, per_round);
+    let baseline = baseline(&a, &b);
+    let (project_samples, baseline_samples) = common::alternate(
+        ROUNDS,
+        || project_round(&project),
+        || baseline_round(&baseline, per_round),
+    );
+    let (near, far) = project.systems;
+    let outlet_losses = near.handle("to_pong").map_or(0, |h| h.snapshot().overflows)
+        + far.handle("to_ping").map_or(0, |h| h.snapshot().overflows);
+    let (project_samples, baseline_samples) = (
+        Samples::new(project_samples),
+        Samples::new(baseline_samples),
+    );
+    table.row(
+        "bridge p50",
+        Figure::Time(project_samples.p50()),
+        Figure::Time(baseline_samples.p50()),
+        Goal::None,
+    );
+    table.row(
+        "bridge p99",
+        Figure::Time(project_samples.p99()),
+        Figure::Time(baseline_samples.p99()),
+        Goal::None,
+    );
+    table.note(&format!(
+        "{} samples per side; max project {:?}, baseline {:?}; packets lost at the outlets: {outlet_losses}",
+        project_samples.len(),
+        project_samples.max(),
+        baseline_samples.max()
+    ));
+    table.print();
+    assert!(near.shutdown().clean(), "unclean shutdown");
+    assert!(far.shutdown().clean(), "unclean shutdown");
+    drop(baseline);
+}

@@ -1,0 +1,483 @@
+//! Remote instantiation, the first step (`docs/distribution.md`, "Remote instances"):
+//! an [`Agent`] on a node builds components from a [`Registry`] of factories when
+//! another node asks ([`instantiate`]), bridges the ports the request names, runs them
+//! and exposes them like any other component of the node.
+
+use std::collections::BTreeMap;
+use std::marker::PhantomData;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use coolbot::{
+    Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet, State,
+    System, Value,
+};
+use crossbeam_channel::RecvTimeoutError;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+
+use crate::{ControlReply, Error, Node, keys};
+
+/// How long the agent waits for a new component to leave `starting`.
+const START_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The remote input an instance's output is bridged to (an outlet of this kind).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemoteInput {
+    /// A tick input.
+    Tick,
+    /// A poster input.
+    Poster,
+    /// A last input.
+    Last,
+    /// A fifo input of `capacity` packets, rejecting packets when full.
+    Fifo {
+        /// Its capacity.
+        capacity: usize,
+    },
+    /// A ufifo input starting at `initial` packets.
+    Ufifo {
+        /// Its initial size (and growth step).
+        initial: usize,
+        /// Its cap, if any.
+        max: Option<usize>,
+    },
+}
+
+impl RemoteInput {
+    fn kind(self) -> InputKind {
+        match self {
+            RemoteInput::Tick => InputKind::Tick,
+            RemoteInput::Poster => InputKind::Poster,
+            RemoteInput::Last => InputKind::Last,
+            RemoteInput::Fifo { capacity } => InputKind::Fifo {
+                capacity,
+                policy: OverflowPolicy::Reject,
+            },
+            RemoteInput::Ufifo { initial, max } => InputKind::Ufifo { initial, max },
+        }
+    }
+}
+
+/// One port of the new instance to bridge.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Wire {
+    /// Feed the instance's input `port` from bridge key `key` (an inlet).
+    Input {
+        /// The instance's input port.
+        port: String,
+        /// The bridge key.
+        key: String,
+    },
+    /// Publish the instance's output `port` on bridge key `key`, for a remote input
+    /// of kind `to` (an outlet).
+    Output {
+        /// The instance's output port.
+        port: String,
+        /// The bridge key.
+        key: String,
+        /// The remote input's kind.
+        to: RemoteInput,
+    },
+}
+
+/// What [`instantiate`] asks an agent for.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Instantiate {
+    /// The component type, as registered.
+    pub type_name: String,
+    /// The instance's name on the agent's node (no `.`).
+    pub name: String,
+    /// The ports to bridge.
+    pub wires: Vec<Wire>,
+    /// A configuration to apply before the instance runs (`Command::Configure`).
+    #[serde(default)]
+    pub configuration: Option<Value>,
+    /// Controllable variables to set before the instance runs (`Command::Set`), in
+    /// order: an instance's overrides.
+    #[serde(default)]
+    pub variables: Vec<(String, Value)>,
+}
+
+/// Makes the bridges of one port type.
+trait PortBridge: Send + Sync {
+    fn inlet(
+        &self,
+        node: &Node,
+        name: &str,
+        key: &str,
+        kind: OutputKind,
+    ) -> Result<Component, Error>;
+    fn outlet(
+        &self,
+        node: &Node,
+        name: &str,
+        key: &str,
+        kind: InputKind,
+    ) -> Result<Component, Error>;
+}
+
+struct Typed<T>(PhantomData<fn() -> T>);
+
+impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
+    fn inlet(
+        &self,
+        node: &Node,
+        name: &str,
+        key: &str,
+        kind: OutputKind,
+    ) -> Result<Component, Error> {
+        node.inlet::<T>(name, key, kind).build()
+    }
+
+    fn outlet(
+        &self,
+        node: &Node,
+        name: &str,
+        key: &str,
+        kind: InputKind,
+    ) -> Result<Component, Error> {
+        node.outlet::<T>(name, key, kind).build()
+    }
+}
+
+type Make = Box<dyn Fn(&str) -> Component + Send>;
+
+/// How to build one component type, and the packet type of each port that may be
+/// bridged.
+pub struct Factory {
+    make: Make,
+    ports: BTreeMap<String, Box<dyn PortBridge>>,
+}
+
+impl Factory {
+    /// Port `port` (input or output) carries `T` (`()` for a tick port).
+    pub fn port<T: Packet + Serialize + DeserializeOwned>(&mut self, port: &str) -> &mut Factory {
+        self.ports
+            .insert(port.to_owned(), Box::new(Typed::<T>(PhantomData)));
+        self
+    }
+}
+
+/// The component types an agent can build, by type name.
+#[derive(Default)]
+pub struct Registry {
+    types: BTreeMap<String, Factory>,
+}
+
+impl std::fmt::Debug for Registry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.types.keys()).finish()
+    }
+}
+
+impl Registry {
+    /// An empty registry.
+    pub fn new() -> Registry {
+        Registry::default()
+    }
+
+    /// Register type `type_name`, built by `make(instance_name)`; declare its
+    /// bridgeable ports on the returned factory.
+    pub fn register(
+        &mut self,
+        type_name: &str,
+        make: impl Fn(&str) -> Component + Send + 'static,
+    ) -> &mut Factory {
+        self.types.insert(
+            type_name.to_owned(),
+            Factory {
+                make: Box::new(make),
+                ports: BTreeMap::new(),
+            },
+        );
+        self.types.get_mut(type_name).expect("just inserted")
+    }
+}
+
+/// Builds components on request, on its own thread, in its own [`System`]. Dropping
+/// it stops answering and shuts that system down (every component it built is joined).
+pub struct Agent {
+    stop: Arc<AtomicBool>,
+    queryable: Option<zenoh::query::Queryable<()>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for Agent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Agent")
+    }
+}
+
+impl Agent {
+    /// Answer instantiation requests on `coolbot/<node>/@agent` with the types of
+    /// `registry`.
+    pub fn start(node: Arc<Node>, registry: Registry) -> Result<Agent, Error> {
+        let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(16);
+        let queryable = node
+            .session()
+            .declare_queryable(keys::agent(node.name()))
+            .callback(move |query| {
+                if let Err(error) = requests.try_send(query) {
+                    let query = error.into_inner();
+                    let _ = reply(
+                        &query,
+                        &ControlReply::Rejected {
+                            reason: "the agent has too many requests waiting".to_owned(),
+                        },
+                    );
+                }
+            })
+            .wait()
+            .map_err(Error::zenoh)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name(format!("cool-net:{}:agent", node.name()))
+            .spawn(move || {
+                let mut system = System::new();
+                if let Err(error) = system.start() {
+                    tracing::error!("the agent's system does not start: {error}");
+                    return;
+                }
+                loop {
+                    match received.recv_timeout(Duration::from_millis(100)) {
+                        Ok(query) => {
+                            let answer = match serve(&node, &registry, &mut system, &query) {
+                                Ok(()) => ControlReply::Accepted,
+                                Err(reason) => ControlReply::Rejected { reason },
+                            };
+                            if let Err(error) = reply(&query, &answer) {
+                                tracing::warn!("instantiation answer not sent: {error}");
+                            }
+                        }
+                        Err(RecvTimeoutError::Timeout) if !stopped.load(Ordering::Acquire) => {}
+                        Err(_) => break,
+                    }
+                }
+                let report = system.shutdown();
+                if !report.clean() {
+                    tracing::warn!("the agent's system did not shut down cleanly: {report:?}");
+                }
+            })
+            .map_err(|error| Error::Zenoh(format!("cannot spawn the agent thread: {error}")))?;
+        Ok(Agent {
+            stop,
+            queryable: Some(queryable),
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for Agent {
+    fn drop(&mut self) {
+        drop(self.queryable.take());
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn reply(query: &zenoh::query::Query, answer: &ControlReply) -> zenoh::Result<()> {
+    let json = serde_json::to_vec(answer).expect("a ControlReply serializes");
+    query.reply(query.key_expr().clone(), json).wait()
+}
+
+/// Wait until `handle` has left `starting` for `ready`.
+fn started(handle: &Handle) -> Result<(), String> {
+    let monitor = handle
+        .wait_for(|m| m.state != State::Starting, START_TIMEOUT)
+        .map_err(|error| error.to_string())?;
+    if monitor.state != State::Ready {
+        return Err(format!(
+            "`{}` did not start: {}",
+            monitor.name,
+            monitor.error.unwrap_or_else(|| monitor.state.to_string())
+        ));
+    }
+    Ok(())
+}
+
+/// Bring `handle` from `starting` to `running`.
+fn run(handle: &Handle) -> Result<(), String> {
+    started(handle)?;
+    handle
+        .command(Command::SetState(Controllable::Running))
+        .map_err(|rejected| rejected.to_string())
+}
+
+/// One instantiation request: build, bridge, run, expose.
+fn serve(
+    node: &Node,
+    registry: &Registry,
+    system: &mut System,
+    query: &zenoh::query::Query,
+) -> Result<(), String> {
+    let request: Instantiate = query
+        .payload()
+        .ok_or("no request: the query carries no payload")
+        .and_then(|payload| {
+            serde_json::from_slice(&payload.to_bytes()).map_err(|_| "malformed request")
+        })
+        .map_err(str::to_owned)?;
+    let factory = registry.types.get(&request.type_name).ok_or_else(|| {
+        format!(
+            "no component type `{}` here (registered: {:?})",
+            request.type_name, registry
+        )
+    })?;
+    keys::check_name(&request.name).map_err(|error| error.to_string())?;
+    if request.name.contains('.') || system.handle(&request.name).is_some() {
+        return Err(format!(
+            "`{}` is not a free instance name here",
+            request.name
+        ));
+    }
+    let component = (factory.make)(&request.name);
+    let spec = component.spec();
+    // Check every wire before building anything.
+    for wire in &request.wires {
+        let (port, output) = match wire {
+            Wire::Input { port, .. } => (port, false),
+            Wire::Output { port, .. } => (port, true),
+        };
+        let declared = if output {
+            spec.output_index(port).is_some()
+        } else {
+            spec.input_index(port).is_some()
+        };
+        if !declared {
+            return Err(format!(
+                "`{}` has no {} port `{port}`",
+                spec.type_name,
+                if output { "output" } else { "input" }
+            ));
+        }
+        if !factory.ports.contains_key(port) {
+            return Err(format!(
+                "port `{port}` of `{}` was not registered as bridgeable",
+                spec.type_name
+            ));
+        }
+    }
+    let name = request.name.clone();
+    let mut handles = vec![system.add(component).map_err(|e| e.to_string())?];
+    let mut made = || -> Result<(), String> {
+        for wire in &request.wires {
+            match wire {
+                Wire::Input { port, key } => {
+                    let index = spec.input_index(port).expect("checked");
+                    let kind = match spec.inputs[index].kind {
+                        InputKind::Tick => OutputKind::Tick,
+                        InputKind::Poster => OutputKind::Poster,
+                        InputKind::Last | InputKind::Fifo { .. } | InputKind::Ufifo { .. } => {
+                            OutputKind::Data
+                        }
+                    };
+                    let bridge = format!("{name}-{port}");
+                    let inlet = factory.ports[port]
+                        .inlet(node, &bridge, key, kind)
+                        .map_err(|e| e.to_string())?;
+                    handles.push(system.add(inlet).map_err(|e| e.to_string())?);
+                    system
+                        .connect(&format!("{bridge}.output"), &format!("{name}.{port}"))
+                        .map_err(|e| e.to_string())?;
+                }
+                Wire::Output { port, key, to } => {
+                    let bridge = format!("{name}-{port}");
+                    let outlet = factory.ports[port]
+                        .outlet(node, &bridge, key, to.kind())
+                        .map_err(|e| e.to_string())?;
+                    handles.push(system.add(outlet).map_err(|e| e.to_string())?);
+                    system
+                        .connect(&format!("{name}.{port}"), &format!("{bridge}.input"))
+                        .map_err(|e| e.to_string())?;
+                }
+            }
+        }
+        // The overrides, through the instance's control port, before it runs.
+        started(&handles[0])?;
+        let overrides = request
+            .configuration
+            .iter()
+            .map(|configuration| Command::Configure(configuration.clone()))
+            .chain(
+                request
+                    .variables
+                    .iter()
+                    .map(|(variable, value)| Command::Set(variable.clone(), value.clone())),
+            );
+        for command in overrides {
+            handles[0]
+                .command(command)
+                .map_err(|rejected| rejected.to_string())?;
+        }
+        // Bridges first, so that the instance's first packets find them running.
+        for handle in handles.iter().rev() {
+            run(handle)?;
+        }
+        for handle in &handles {
+            node.expose(handle).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    };
+    let outcome = made();
+    if outcome.is_err() {
+        // What was built goes away (its names stay taken in this system).
+        for handle in &handles {
+            let _ = handle.command(Command::SetState(Controllable::Dead));
+        }
+    }
+    outcome
+}
+
+/// Ask the agent of node `on` to build `request`, waiting at most `timeout`.
+pub fn instantiate(
+    node: &Node,
+    on: &str,
+    request: &Instantiate,
+    timeout: Duration,
+) -> Result<(), Error> {
+    let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
+    let replies = node
+        .session()
+        .get(keys::agent(on))
+        .payload(json)
+        .timeout(timeout)
+        .wait()
+        .map_err(Error::zenoh)?;
+    let Ok(reply) = replies.recv() else {
+        return Err(Error::Remote {
+            node: on.to_owned(),
+            reason: format!("no agent answered within {timeout:?}"),
+        });
+    };
+    let answer = reply
+        .result()
+        .map_err(|error| {
+            Error::Zenoh(
+                error
+                    .payload()
+                    .try_to_string()
+                    .unwrap_or_default()
+                    .into_owned(),
+            )
+        })
+        .and_then(|sample| {
+            serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes())
+                .map_err(Error::zenoh)
+        })?;
+    match answer {
+        ControlReply::Accepted => Ok(()),
+        ControlReply::Rejected { reason } => Err(Error::Remote {
+            node: on.to_owned(),
+            reason,
+        }),
+    }
+}

@@ -1,0 +1,939 @@
+//! Port bridges: outlets and inlets (`docs/distribution.md`, "Port bridges").
+//!
+//! An **outlet** stands, in the producer's system, for a remote input: its one input
+//! (`input`) has that input's kind, so [`coolbot::System::connect`] applies the
+//! connection's local rules, and its thread publishes what arrives on the bridge's
+//! key. An **inlet** stands, in the consumer's system, for the remote output: its one
+//! output (`output`) has that output's kind, and a Zenoh callback sends on it what
+//! arrives on the key (no extra thread hop on the receiving side). Packets are encoded
+//! with postcard.
+//!
+//! No packet is lost without a counter and an event: a packet an outlet cannot
+//! publish (it does not encode, Zenoh refuses it, or nothing on the network
+//! subscribes to the key) is counted as lost at the outlet's input; a packet an inlet
+//! cannot decode is counted as lost at the inlet's `network` input; a packet that
+//! reaches a full input is handled by that input's own overflow policy. Each of these
+//! is an `overflows` count and a `MonitorEvent::Overflow` on the monitoring port of
+//! the bridge or of the consumer, and a `tracing` warning with the reason.
+
+use std::marker::PhantomData;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use coolbot::port::{
+    DataOut, ErasedInput, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn,
+};
+use coolbot::{
+    Automaton, Component, Context, Fault, InputKind, InputPort, InputSpec, OnSpec, OutputKind,
+    OutputSpec, Packet, PortSet, Section, Spec, StateSpec, TimingSpec, Value,
+};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use zenoh::Wait;
+use zenoh::query::{ConsolidationMode, QueryTarget};
+
+use crate::{Error, Node, keys};
+
+/// How long a pull over the network waits for its answer unless the bridge says
+/// otherwise ([`OutletBuilder::pull`], [`InletBuilder::pull`]).
+pub const DEFAULT_PULL_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// The most events one tick message carries: an outlet splits a larger count, an
+/// inlet counts a message claiming more as lost (it did not come from an outlet).
+const MAX_EVENTS_PER_MESSAGE: u64 = 1 << 16;
+
+/// How long a bridge asks the network for the other ends of its connection when it
+/// is built (the liveliness look-up that checks the cardinality rules).
+const LOOKUP_TIMEOUT: Duration = Duration::from_millis(500);
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The wire name of an input kind (liveliness tokens, messages).
+fn input_kind_name(kind: InputKind) -> &'static str {
+    match kind {
+        InputKind::Tick => "tick",
+        InputKind::Fifo { .. } => "fifo",
+        InputKind::Ufifo { .. } => "ufifo",
+        InputKind::Last => "last",
+        InputKind::Poster => "poster",
+    }
+}
+
+/// Which remote input kinds an output kind connects to.
+fn feeds(output: OutputKind, input: &str) -> bool {
+    match output {
+        OutputKind::Tick => input == "tick",
+        OutputKind::Poster => input == "poster",
+        OutputKind::Data => matches!(input, "last" | "fifo" | "ufifo"),
+    }
+}
+
+fn output_kind_name(kind: OutputKind) -> &'static str {
+    match kind {
+        OutputKind::Tick => "tick",
+        OutputKind::Data => "data",
+        OutputKind::Poster => "poster",
+    }
+}
+
+/// The liveliness tokens under `pattern`, as their keys.
+fn tokens(session: &zenoh::Session, pattern: &str) -> Result<Vec<String>, Error> {
+    crate::node::liveliness_keys(session, pattern, LOOKUP_TIMEOUT)
+}
+
+/// The kinds of the outlets already on `key` (from their tokens `K/@out/<kind>/..`).
+fn outlet_kinds(session: &zenoh::Session, key: &str) -> Result<Vec<String>, Error> {
+    let prefix = format!("{key}/@out/");
+    Ok(tokens(session, &format!("{key}/@out/**"))?
+        .into_iter()
+        .filter_map(|token| {
+            let rest = token.strip_prefix(&prefix)?;
+            Some(rest.split('/').next()?.to_owned())
+        })
+        .collect())
+}
+
+fn encode<P: Serialize + ?Sized>(packet: &P) -> Result<Vec<u8>, String> {
+    postcard::to_allocvec(packet).map_err(|error| format!("does not encode: {error}"))
+}
+
+fn leak_spec(
+    type_name: &'static str,
+    doc: &'static str,
+    input: InputSpec,
+    output: Option<OutputSpec>,
+    reacts: bool,
+) -> &'static Spec {
+    let inputs: &'static [InputSpec] = Box::leak(Box::new([input]));
+    let outputs: &'static [OutputSpec] = match output {
+        Some(output) => Box::leak(Box::new([output])),
+        None => &[],
+    };
+    let on: &'static [OnSpec] = if reacts {
+        &[OnSpec { port: 0, target: 0 }]
+    } else {
+        &[]
+    };
+    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
+        name: "forwarding",
+        entry: reacts,
+        exit: false,
+        periodic: None,
+        on,
+        after: &[],
+        may: &[],
+    }]));
+    Box::leak(Box::new(Spec {
+        type_name,
+        doc,
+        states,
+        initial: 0,
+        inputs,
+        outputs,
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    }))
+}
+
+// ---------------------------------------------------------------------------------
+// Outlets.
+
+/// Builds an outlet: a component that stands for a remote input of a given kind and
+/// publishes what arrives at its input `input` on a key expression. Made by
+/// [`Node::outlet`].
+#[must_use = "call build() to get the component"]
+pub struct OutletBuilder<'n, T> {
+    node: &'n Node,
+    name: String,
+    key: String,
+    kind: InputKind,
+    pull: Option<Duration>,
+    packet: PhantomData<fn() -> T>,
+}
+
+impl<'n, T> OutletBuilder<'n, T> {
+    pub(crate) fn new(node: &'n Node, name: &str, key: &str, kind: InputKind) -> Self {
+        OutletBuilder {
+            node,
+            name: name.to_owned(),
+            key: key.to_owned(),
+            kind,
+            pull: None,
+            packet: PhantomData,
+        }
+    }
+
+    /// The remote input is a `pull` input: the outlet's input is declared `pull` (the
+    /// local producer's output must be too), nothing is published, and each query on
+    /// `K/@pull` pulls one packet from the producer, waiting at most `timeout`.
+    pub fn pull(mut self, timeout: Duration) -> Self {
+        self.pull = Some(timeout);
+        self
+    }
+}
+
+/// The outlet's input, by kind.
+enum OutletInput<T> {
+    Tick(TickIn),
+    Fifo(FifoIn<T>),
+    Ufifo(UfifoIn<T>),
+    Last(LastIn<T>),
+    Poster(PosterIn<T>),
+}
+
+/// The sending side of an outlet.
+struct Wire {
+    key: String,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    /// Whether a subscriber matches the key (kept by a matching listener).
+    matching: Arc<AtomicBool>,
+    /// Where a packet that could not be published is counted.
+    losses: ErasedInput,
+}
+
+impl Wire {
+    fn lost(&self, reason: &str) {
+        self.losses.count_loss(1);
+        tracing::warn!(key = %self.key, "outlet lost a packet: {reason}");
+    }
+
+    /// Publish one packet; `counted`: a packet nobody subscribes to is a loss (data
+    /// and ticks; a poster's value stays available on query).
+    fn send(&self, bytes: Result<Vec<u8>, String>, counted: bool) {
+        let bytes = match bytes {
+            Ok(bytes) => bytes,
+            Err(reason) => return self.lost(&reason),
+        };
+        if counted && !self.matching.load(Ordering::Acquire) {
+            return self.lost("nothing on the network subscribes to the key");
+        }
+        if let Err(error) = self.publisher.put(bytes).wait() {
+            self.lost(&format!("zenoh refused it: {error}"));
+        }
+    }
+}
+
+/// Serves pull queries on its own thread (a pull waits for the producer).
+struct PullServer {
+    stop: Arc<AtomicBool>,
+    queryable: Option<zenoh::query::Queryable<()>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Drop for PullServer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        drop(self.queryable.take());
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+type PullFn = Box<dyn Fn(Duration) -> Result<Vec<u8>, String> + Send>;
+
+fn pull_server(
+    session: &zenoh::Session,
+    key: &str,
+    timeout: Duration,
+    pull: PullFn,
+) -> Result<PullServer, Error> {
+    let (queries, received) = crossbeam_channel::bounded::<zenoh::query::Query>(64);
+    let queryable = session
+        .declare_queryable(format!("{key}/@pull"))
+        .callback(move |query| {
+            if let Err(crossbeam_channel::TrySendError::Full(query)) = queries.try_send(query) {
+                let _ = query
+                    .reply_err("the producer has too many pull requests waiting")
+                    .wait();
+            }
+        })
+        .wait()
+        .map_err(Error::zenoh)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let stopped = Arc::clone(&stop);
+    let thread = std::thread::Builder::new()
+        .name(format!("cool-net:pull:{key}"))
+        .spawn(move || {
+            loop {
+                match received.recv_timeout(Duration::from_millis(100)) {
+                    Ok(query) => {
+                        let result = match pull(timeout) {
+                            Ok(bytes) => query.reply(query.key_expr().clone(), bytes).wait(),
+                            Err(reason) => query.reply_err(reason).wait(),
+                        };
+                        if let Err(error) = result {
+                            tracing::warn!("pull answer not sent: {error}");
+                        }
+                    }
+                    Err(crossbeam_channel::RecvTimeoutError::Timeout) => {
+                        if stopped.load(Ordering::Acquire) {
+                            break;
+                        }
+                    }
+                    Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+                }
+            }
+        })
+        .map_err(|error| Error::Zenoh(format!("cannot spawn the pull thread: {error}")))?;
+    Ok(PullServer {
+        stop,
+        queryable: Some(queryable),
+        thread: Some(thread),
+    })
+}
+
+/// A poster value on the wire: the outlet's epoch (its creation time), a sequence
+/// number, the value. Readers keep the newest (a late reply never replaces a newer
+/// post).
+type Posted<T> = (u64, u64, T);
+
+struct Outlet<T> {
+    spec: &'static Spec,
+    input: OutletInput<T>,
+    wire: Wire,
+    pull: bool,
+    epoch: u64,
+    seq: Arc<AtomicU64>,
+    /// A poster outlet's last published value, served to late-joining readers.
+    posted: Arc<Mutex<Option<Vec<u8>>>>,
+    published_once: bool,
+    _poster_queryable: Option<zenoh::query::Queryable<()>>,
+    _pull_server: Option<PullServer>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
+    /// Check the connection rules across the network, declare the outlet's keys and
+    /// return the component (add it to the producer's system and connect the
+    /// producer's output to `<name>.input`).
+    pub fn build(self) -> Result<Component, Error> {
+        let OutletBuilder {
+            node,
+            name,
+            key,
+            kind,
+            pull,
+            packet: _,
+        } = self;
+        keys::check_name(&name)?;
+        keys::check_bridge_key(&key)?;
+        if name.contains('.') {
+            return Err(Error::InvalidName {
+                name,
+                reason: "a component name has no `.`".to_owned(),
+            });
+        }
+        let session = node.session();
+        let kind_name = input_kind_name(kind);
+        // One connection, one kind; a last or poster connection has one producer; a
+        // fifo or ufifo connection has one input end.
+        let existing = outlet_kinds(session, &key)?;
+        if let Some(other) = existing.iter().find(|k| k.as_str() != kind_name) {
+            return Err(Error::Cardinality {
+                key,
+                rule: format!(
+                    "it carries a {other} connection, and this outlet stands for a {kind_name} input"
+                ),
+            });
+        }
+        if matches!(kind, InputKind::Last | InputKind::Poster) && !existing.is_empty() {
+            return Err(Error::Cardinality {
+                key,
+                rule: format!(
+                    "a {kind_name} connection is 1 output to N inputs, and the key already has a producer"
+                ),
+            });
+        }
+        if matches!(kind, InputKind::Fifo { .. } | InputKind::Ufifo { .. }) {
+            let inlets = tokens(session, &format!("{key}/@in/**"))?;
+            if inlets.len() > 1 {
+                return Err(Error::Cardinality {
+                    key,
+                    rule: format!(
+                        "a {kind_name} connection is N outputs to 1 input, and {} inlets read the key",
+                        inlets.len()
+                    ),
+                });
+            }
+        }
+        let token = session
+            .liveliness()
+            .declare_token(format!("{key}/@out/{kind_name}/{}/{name}", node.name()))
+            .wait()
+            .map_err(Error::zenoh)?;
+
+        let packet = if kind == InputKind::Tick {
+            "event"
+        } else {
+            std::any::type_name::<T>()
+        };
+        let spec = leak_spec(
+            "Outlet",
+            "Stands for a remote input: publishes what arrives at `input` on its key.",
+            InputSpec {
+                name: "input",
+                kind,
+                packet,
+                pull: pull.is_some(),
+            },
+            None,
+            pull.is_none(),
+        );
+        let (input, erased): (OutletInput<T>, ErasedInput) = match kind {
+            InputKind::Tick => {
+                let port = TickIn::new();
+                let erased = port.erased();
+                (OutletInput::Tick(port), erased)
+            }
+            InputKind::Fifo { capacity, policy } => {
+                let port = FifoIn::new(capacity, policy);
+                let erased = port.erased();
+                (OutletInput::Fifo(port), erased)
+            }
+            InputKind::Ufifo { initial, max } => {
+                let port = UfifoIn::new(initial, max);
+                let erased = port.erased();
+                (OutletInput::Ufifo(port), erased)
+            }
+            InputKind::Last => {
+                let port = LastIn::new();
+                let erased = port.erased();
+                (OutletInput::Last(port), erased)
+            }
+            InputKind::Poster => {
+                let port = PosterIn::new();
+                let erased = port.erased();
+                (OutletInput::Poster(port), erased)
+            }
+        };
+        let publisher = session
+            .declare_publisher(key.clone())
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .wait()
+            .map_err(Error::zenoh)?;
+        let matching = Arc::new(AtomicBool::new(
+            publisher
+                .matching_status()
+                .wait()
+                .map(|status| status.matching())
+                .unwrap_or(false),
+        ));
+        let flag = Arc::clone(&matching);
+        publisher
+            .matching_listener()
+            .callback(move |status| flag.store(status.matching(), Ordering::Release))
+            .background()
+            .wait()
+            .map_err(Error::zenoh)?;
+        let epoch = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        let seq = Arc::new(AtomicU64::new(0));
+        let posted = Arc::new(Mutex::new(None::<Vec<u8>>));
+        let poster_queryable = if kind == InputKind::Poster && pull.is_none() {
+            let posted = Arc::clone(&posted);
+            Some(
+                session
+                    .declare_queryable(key.clone())
+                    .callback(move |query| {
+                        let current = lock(&posted).clone();
+                        if let Some(bytes) = current
+                            && let Err(error) = query.reply(query.key_expr().clone(), bytes).wait()
+                        {
+                            tracing::warn!("poster value not sent: {error}");
+                        }
+                    })
+                    .wait()
+                    .map_err(Error::zenoh)?,
+            )
+        } else {
+            None
+        };
+        let pull_server = match pull {
+            Some(timeout) => {
+                let pull: PullFn = match &input {
+                    OutletInput::Tick(port) => {
+                        let port = port.clone();
+                        Box::new(move |t| {
+                            port.pull(t)
+                                .map_err(|e| e.to_string())
+                                .and_then(|n| encode(&n))
+                        })
+                    }
+                    OutletInput::Fifo(port) => {
+                        let port = port.clone();
+                        Box::new(move |t| {
+                            port.pull(t)
+                                .map_err(|e| e.to_string())
+                                .and_then(|p| encode(&p))
+                        })
+                    }
+                    OutletInput::Ufifo(port) => {
+                        let port = port.clone();
+                        Box::new(move |t| {
+                            port.pull(t)
+                                .map_err(|e| e.to_string())
+                                .and_then(|p| encode(&p))
+                        })
+                    }
+                    OutletInput::Last(port) => {
+                        let port = port.clone();
+                        Box::new(move |t| {
+                            port.pull(t)
+                                .map_err(|e| e.to_string())
+                                .and_then(|p| encode(&p))
+                        })
+                    }
+                    OutletInput::Poster(port) => {
+                        let port = port.clone();
+                        let seq = Arc::clone(&seq);
+                        Box::new(move |t| {
+                            port.pull(t).map_err(|e| e.to_string()).and_then(|p| {
+                                let n = seq.fetch_add(1, Ordering::AcqRel) + 1;
+                                encode(&(epoch, n, p))
+                            })
+                        })
+                    }
+                };
+                Some(pull_server(session, &key, timeout, pull)?)
+            }
+            None => None,
+        };
+        let ports = match &input {
+            OutletInput::Tick(port) => PortSet::new().input(port),
+            OutletInput::Fifo(port) => PortSet::new().input(port),
+            OutletInput::Ufifo(port) => PortSet::new().input(port),
+            OutletInput::Last(port) => PortSet::new().input(port),
+            OutletInput::Poster(port) => PortSet::new().input(port),
+        };
+        let outlet = Outlet {
+            spec,
+            input,
+            wire: Wire {
+                key,
+                publisher,
+                matching,
+                losses: erased,
+            },
+            pull: pull.is_some(),
+            epoch,
+            seq,
+            posted,
+            published_once: false,
+            _poster_queryable: poster_queryable,
+            _pull_server: pull_server,
+            _token: token,
+        };
+        Ok(Component::new(name, Box::new(outlet), ports))
+    }
+}
+
+impl<T: Packet + Serialize> Outlet<T> {
+    fn forward(&mut self) {
+        if self.pull {
+            // Pull answers go to the querier only, from the pull thread.
+            return;
+        }
+        let wire = &self.wire;
+        match &self.input {
+            OutletInput::Tick(port) => {
+                let mut events = port.take();
+                while events > 0 {
+                    let batch = events.min(MAX_EVENTS_PER_MESSAGE);
+                    wire.send(encode(&batch), true);
+                    events -= batch;
+                }
+            }
+            OutletInput::Fifo(port) => {
+                for packet in port.drain() {
+                    wire.send(encode(&packet), true);
+                }
+            }
+            OutletInput::Ufifo(port) => {
+                for packet in port.drain() {
+                    wire.send(encode(&packet), true);
+                }
+            }
+            OutletInput::Last(port) => {
+                if let Some(packet) = port.take_new() {
+                    wire.send(encode(&packet), true);
+                }
+            }
+            OutletInput::Poster(port) => {
+                let value = if self.published_once {
+                    port.take_new()
+                } else {
+                    port.read()
+                };
+                if let Some(value) = value {
+                    self.published_once = true;
+                    let seq = self.seq.fetch_add(1, Ordering::AcqRel) + 1;
+                    let bytes = encode(&(self.epoch, seq, value));
+                    if let Ok(bytes) = &bytes {
+                        *lock(&self.posted) = Some(bytes.clone());
+                    }
+                    wire.send(bytes, false);
+                }
+            }
+        }
+    }
+}
+
+impl<T: Packet + Serialize> Automaton for Outlet<T> {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {}
+
+    fn section(&mut self, _state: usize, section: Section, _cx: &mut Context) -> Result<(), Fault> {
+        if section == Section::Entry {
+            self.forward();
+        }
+        Ok(())
+    }
+
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("a bridge has no configuration".to_owned())
+    }
+
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("a bridge has no controllable variable".to_owned())
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Inlets.
+
+/// Builds an inlet: a component that stands for a remote output of a given kind and
+/// sends on its output `output` what arrives on a key expression. Made by
+/// [`Node::inlet`].
+#[must_use = "call build() to get the component"]
+pub struct InletBuilder<'n, T> {
+    node: &'n Node,
+    name: String,
+    key: String,
+    kind: OutputKind,
+    pull: Option<Duration>,
+    packet: PhantomData<fn() -> T>,
+}
+
+impl<'n, T> InletBuilder<'n, T> {
+    pub(crate) fn new(node: &'n Node, name: &str, key: &str, kind: OutputKind) -> Self {
+        InletBuilder {
+            node,
+            name: name.to_owned(),
+            key: key.to_owned(),
+            kind,
+            pull: None,
+            packet: PhantomData,
+        }
+    }
+
+    /// The remote output is a `pull` output: the inlet's output is declared `pull`
+    /// (a local `pull` input may connect to it), the inlet subscribes to nothing, and
+    /// each pull request from its consumer becomes a query on `K/@pull`, waiting at
+    /// most `timeout` for the answers.
+    pub fn pull(mut self, timeout: Duration) -> Self {
+        self.pull = Some(timeout);
+        self
+    }
+}
+
+/// The inlet's output, by kind.
+enum InletOutput<T> {
+    Tick(TickOut),
+    Data(DataOut<T>),
+    Poster(PosterOut<T>),
+}
+
+type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
+
+struct Inlet {
+    spec: &'static Spec,
+    session: zenoh::Session,
+    key: String,
+    deliver: DeliverFn,
+    poster: bool,
+    pull: Option<Duration>,
+    subscriber: Option<zenoh::pubsub::Subscriber<()>>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+fn deliverer<T: Packet + DeserializeOwned>(
+    output: InletOutput<T>,
+    network: ErasedInput,
+    key: String,
+) -> DeliverFn {
+    let lost = move |reason: String| {
+        network.count_loss(1);
+        tracing::warn!(key = %key, "inlet lost a packet: {reason}");
+    };
+    match output {
+        InletOutput::Tick(port) => {
+            Arc::new(move |bytes| match postcard::from_bytes::<u64>(bytes) {
+                Ok(events) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
+                    "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
+                )),
+                Ok(events) => {
+                    for _ in 0..events {
+                        port.emit();
+                    }
+                }
+                Err(error) => lost(format!("does not decode as events: {error}")),
+            })
+        }
+        InletOutput::Data(port) => Arc::new(move |bytes| match postcard::from_bytes::<T>(bytes) {
+            Ok(packet) => port.send(packet),
+            Err(error) => lost(format!(
+                "does not decode as {}: {error}",
+                std::any::type_name::<T>()
+            )),
+        }),
+        InletOutput::Poster(port) => {
+            let newest = Mutex::new(None::<(u64, u64)>);
+            Arc::new(
+                move |bytes| match postcard::from_bytes::<Posted<T>>(bytes) {
+                    Ok((epoch, seq, value)) => {
+                        let mut newest = lock(&newest);
+                        let newer = match *newest {
+                            Some((e, s)) => e != epoch || seq > s,
+                            None => true,
+                        };
+                        if newer {
+                            *newest = Some((epoch, seq));
+                            port.post(value);
+                        }
+                    }
+                    Err(error) => lost(format!(
+                        "does not decode as a posted {}: {error}",
+                        std::any::type_name::<T>()
+                    )),
+                },
+            )
+        }
+    }
+}
+
+impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
+    /// Check the connection rules across the network, declare the inlet's token and
+    /// return the component (add it to the consumer's system and connect
+    /// `<name>.output` to the consumer's input). It subscribes when it starts.
+    pub fn build(self) -> Result<Component, Error> {
+        let InletBuilder {
+            node,
+            name,
+            key,
+            kind,
+            pull,
+            packet: _,
+        } = self;
+        keys::check_name(&name)?;
+        keys::check_bridge_key(&key)?;
+        if name.contains('.') {
+            return Err(Error::InvalidName {
+                name,
+                reason: "a component name has no `.`".to_owned(),
+            });
+        }
+        let session = node.session();
+        let kind_name = output_kind_name(kind);
+        let existing = outlet_kinds(session, &key)?;
+        if let Some(other) = existing.iter().find(|k| !feeds(kind, k)) {
+            return Err(Error::Cardinality {
+                key,
+                rule: format!(
+                    "it carries a {other} connection, and this inlet stands for a {kind_name} output"
+                ),
+            });
+        }
+        if existing.iter().any(|k| k == "fifo" || k == "ufifo") {
+            let inlets = tokens(session, &format!("{key}/@in/**"))?;
+            if !inlets.is_empty() {
+                return Err(Error::Cardinality {
+                    key,
+                    rule: "a queue connection is N outputs to 1 input, and an inlet already reads the key".to_owned(),
+                });
+            }
+        }
+        let token = session
+            .liveliness()
+            .declare_token(format!("{key}/@in/{}/{name}", node.name()))
+            .wait()
+            .map_err(Error::zenoh)?;
+        let packet = if kind == OutputKind::Tick {
+            "event"
+        } else {
+            std::any::type_name::<T>()
+        };
+        let spec = leak_spec(
+            "Inlet",
+            "Stands for a remote output: sends on `output` what arrives on its key; packets that do not decode are counted at `network`.",
+            InputSpec {
+                name: "network",
+                kind: InputKind::Tick,
+                packet: "event",
+                pull: false,
+            },
+            Some(OutputSpec {
+                name: "output",
+                kind,
+                packet,
+                pull: pull.is_some(),
+            }),
+            false,
+        );
+        let network = TickIn::new();
+        let ports = PortSet::new().input(&network);
+        let (output, ports) = match kind {
+            OutputKind::Tick => {
+                let port = TickOut::new();
+                let ports = ports.output(&port);
+                (InletOutput::Tick(port), ports)
+            }
+            OutputKind::Data => {
+                let port = DataOut::<T>::new();
+                let ports = ports.output(&port);
+                (InletOutput::Data(port), ports)
+            }
+            OutputKind::Poster => {
+                let port = PosterOut::<T>::new();
+                let ports = ports.output(&port);
+                (InletOutput::Poster(port), ports)
+            }
+        };
+        let inlet = Inlet {
+            spec,
+            session: session.clone(),
+            deliver: deliverer(output, network.erased(), key.clone()),
+            key,
+            poster: kind == OutputKind::Poster,
+            pull,
+            subscriber: None,
+            _token: token,
+        };
+        Ok(Component::new(name, Box::new(inlet), ports))
+    }
+}
+
+impl Automaton for Inlet {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    /// Subscribe to the key (not for a pull inlet); a poster inlet also asks for the
+    /// value posted now (a late-joining reader).
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        if self.pull.is_some() || self.subscriber.is_some() {
+            return Ok(());
+        }
+        let deliver = Arc::clone(&self.deliver);
+        let subscriber = self
+            .session
+            .declare_subscriber(self.key.clone())
+            .callback(move |sample| deliver(&sample.payload().to_bytes()))
+            .wait()
+            .map_err(|error| Fault::message(format!("cannot subscribe: {error}")))?;
+        self.subscriber = Some(subscriber);
+        if self.poster {
+            let deliver = Arc::clone(&self.deliver);
+            self.session
+                .get(self.key.clone())
+                .callback(move |reply| {
+                    if let Ok(sample) = reply.result() {
+                        deliver(&sample.payload().to_bytes());
+                    }
+                })
+                .wait()
+                .map_err(|error| Fault::message(format!("cannot ask for the poster: {error}")))?;
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {
+        self.subscriber = None;
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    /// A pull request from the consumer: one query on `K/@pull`; every answer that
+    /// arrives within the timeout is sent (to the requesting input only). No answer
+    /// is not a fault: the consumer's pull times out.
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        let timeout = self.pull.unwrap_or(DEFAULT_PULL_TIMEOUT);
+        let replies = match self
+            .session
+            .get(format!("{}/@pull", self.key))
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(timeout)
+            .wait()
+        {
+            Ok(replies) => replies,
+            Err(error) => {
+                tracing::warn!(key = %self.key, "pull query not sent: {error}");
+                return Ok(());
+            }
+        };
+        while let Ok(reply) = replies.recv() {
+            match reply.result() {
+                Ok(sample) => (self.deliver)(&sample.payload().to_bytes()),
+                Err(error) => tracing::warn!(
+                    key = %self.key,
+                    "pull answered with an error: {}",
+                    error.payload().try_to_string().unwrap_or_default()
+                ),
+            }
+        }
+        Ok(())
+    }
+
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("a bridge has no configuration".to_owned())
+    }
+
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("a bridge has no controllable variable".to_owned())
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}

@@ -1,0 +1,626 @@
+//! What `coolctl` does, as a library (the binary parses arguments and prints; tests
+//! call these on a session of their own): list nodes and components, watch a
+//! component's monitoring events, send it commands.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use coolbot::{Command, Controllable, Monitor, MonitorEvent, Value};
+use zenoh::Wait;
+use zenoh::query::{ConsolidationMode, QueryTarget};
+
+use crate::{ControlReply, keys};
+
+/// Why a `coolctl` command failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CtlError {
+    /// Zenoh refused an operation.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A target that is not `<node>/<path>`.
+    #[error("`{0}` is not a component address: write <node>/<path>, e.g. robot/base.motion")]
+    BadTarget(String),
+    /// An argument that cannot be understood.
+    #[error("{0}")]
+    BadArgument(String),
+    /// Nothing answered.
+    #[error(
+        "no component answered at `{target}` within {waited:?} (is the node running and reachable?)"
+    )]
+    NoAnswer {
+        /// The target.
+        target: String,
+        /// How long it waited.
+        waited: Duration,
+    },
+    /// An answer that is not what a node sends.
+    #[error("`{key}` answered something that does not decode: {detail}")]
+    Decode {
+        /// The key that answered.
+        key: String,
+        /// What failed.
+        detail: String,
+    },
+    /// Writing the output failed.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+fn zenoh_error(error: impl std::fmt::Display) -> CtlError {
+    CtlError::Zenoh(error.to_string())
+}
+
+/// A parsed `<node>/<path>` address.
+fn target(address: &str) -> Result<(&str, &str), CtlError> {
+    let (node, path) = address
+        .split_once('/')
+        .ok_or_else(|| CtlError::BadTarget(address.to_owned()))?;
+    if keys::check_name(node).is_err() || keys::check_name(path).is_err() {
+        return Err(CtlError::BadTarget(address.to_owned()));
+    }
+    Ok((node, path))
+}
+
+/// Parse a duration written `500us`, `20ms`, `2s` or `1min`.
+pub fn parse_duration(text: &str) -> Result<Duration, CtlError> {
+    let bad = || {
+        CtlError::BadArgument(format!(
+            "`{text}` is not a duration (write e.g. 500us, 20ms, 2s, 1min)"
+        ))
+    };
+    let split = text
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .ok_or_else(bad)?;
+    let (number, unit) = text.split_at(split);
+    let number: f64 = number.parse().map_err(|_| bad())?;
+    let seconds = match unit {
+        "ns" => number / 1e9,
+        "us" => number / 1e6,
+        "ms" => number / 1e3,
+        "s" => number,
+        "min" => number * 60.0,
+        _ => return Err(bad()),
+    };
+    Duration::try_from_secs_f64(seconds).map_err(|_| bad())
+}
+
+/// A variable's value as written on the command line: `true`/`false`, an integer
+/// (signed if it starts with `-`), a float, a JSON string, list or object, else the
+/// text itself as a string.
+pub fn parse_value(text: &str) -> Value {
+    match text {
+        "true" => return Value::Bool(true),
+        "false" => return Value::Bool(false),
+        _ => {}
+    }
+    if let Ok(unsigned) = text.parse::<u64>() {
+        return Value::UInt(unsigned);
+    }
+    if let Ok(signed) = text.parse::<i64>() {
+        return Value::Int(signed);
+    }
+    if let Ok(float) = text.parse::<f64>() {
+        return Value::Float(float);
+    }
+    match serde_json::from_str::<serde_json::Value>(text) {
+        Ok(serde_json::Value::String(string)) => Value::Str(string),
+        Ok(json @ (serde_json::Value::Array(_) | serde_json::Value::Object(_))) => {
+            Value::Json(json)
+        }
+        _ => Value::Str(text.to_owned()),
+    }
+}
+
+/// The command `coolctl set` sends for `args`: `state <ready|running|suspended|dead>`,
+/// or `<name>=<value>` where `period`, `max_response` (durations), `priority` and
+/// `quality` (integers) are the default controllable variables and any other name is
+/// a controllable variable of the component.
+pub fn parse_command(args: &[String]) -> Result<Command, CtlError> {
+    match args {
+        [word, state] if word == "state" => {
+            let state = match state.as_str() {
+                "ready" => Controllable::Ready,
+                "running" => Controllable::Running,
+                "suspended" => Controllable::Suspended,
+                "dead" => Controllable::Dead,
+                other => {
+                    return Err(CtlError::BadArgument(format!(
+                        "`{other}` is not a controllable state (ready, running, suspended, dead)"
+                    )));
+                }
+            };
+            Ok(Command::SetState(state))
+        }
+        [assignment] => {
+            let (name, value) = assignment.split_once('=').ok_or_else(|| {
+                CtlError::BadArgument(format!(
+                    "`{assignment}`: write `state <state>` or `<variable>=<value>`"
+                ))
+            })?;
+            let integer =
+                |what: &str| CtlError::BadArgument(format!("{name} takes {what}, not `{value}`"));
+            match name {
+                "period" => Ok(Command::SetPeriod(parse_duration(value)?)),
+                "max_response" => Ok(Command::SetMaxResponse(parse_duration(value)?)),
+                "priority" => Ok(Command::SetPriority(
+                    value.parse().map_err(|_| integer("an integer"))?,
+                )),
+                "quality" => {
+                    Ok(Command::SetQuality(value.parse().map_err(|_| {
+                        integer("a quality level index (0 = best)")
+                    })?))
+                }
+                "" => Err(CtlError::BadArgument(format!(
+                    "`{assignment}`: the variable has no name"
+                ))),
+                _ => Ok(Command::Set(name.to_owned(), parse_value(value))),
+            }
+        }
+        _ => Err(CtlError::BadArgument(
+            "write `state <state>` or `<variable>=<value>`".to_owned(),
+        )),
+    }
+}
+
+/// One line describing a monitoring event.
+pub fn describe(event: &MonitorEvent) -> String {
+    match event {
+        MonitorEvent::State { from, to } => format!("state {from} -> {to}"),
+        MonitorEvent::UserState(Some(state)) => format!("user state {state}"),
+        MonitorEvent::UserState(None) => "user state -".to_owned(),
+        MonitorEvent::Result(result) => format!("result {result:?}"),
+        MonitorEvent::Error(Some(error)) => format!("error {error}"),
+        MonitorEvent::Error(None) => "error cleared".to_owned(),
+        MonitorEvent::Variable { name, value } => format!("{name} = {value}"),
+        MonitorEvent::Overflow { port, lost, total } => {
+            format!("overflow at {port}: {lost} lost ({total} in all)")
+        }
+        MonitorEvent::MissedDeadline { missed, total } => {
+            format!("missed {missed} deadline(s) ({total} in all)")
+        }
+        MonitorEvent::Overrun { took, total } => format!("overrun: ran {took:?} ({total} in all)"),
+        MonitorEvent::Period(Some(period)) => format!("period {period:?}"),
+        MonitorEvent::Period(None) => "period -".to_owned(),
+        MonitorEvent::Quality(level) => format!("quality {level}"),
+        MonitorEvent::Configured => "configured".to_owned(),
+        MonitorEvent::Supervision(step) => format!("supervision: {step}"),
+        MonitorEvent::OsPriority(priority) => format!("os priority {priority:?}"),
+        MonitorEvent::Pressure(pressure) => format!("pressure {pressure:?}"),
+        MonitorEvent::Adaptation(step) => format!("adaptation: {step}"),
+    }
+}
+
+/// One component in `coolctl list`.
+#[derive(Debug, Clone)]
+pub struct Listed {
+    /// The node.
+    pub node: String,
+    /// The component's path on the node.
+    pub path: String,
+    /// Its snapshot.
+    pub monitor: Monitor,
+}
+
+/// `coolctl` on a session.
+#[derive(Debug, Clone)]
+pub struct Ctl {
+    session: zenoh::Session,
+    timeout: Duration,
+}
+
+impl Ctl {
+    /// On `session`, waiting at most `timeout` for answers.
+    pub fn new(session: zenoh::Session, timeout: Duration) -> Ctl {
+        Ctl { session, timeout }
+    }
+
+    /// The names of the nodes alive, sorted.
+    pub fn node_names(&self) -> Result<Vec<String>, CtlError> {
+        let tokens =
+            crate::node::liveliness_keys(&self.session, &format!("{}/*", keys::ROOT), self.timeout)
+                .map_err(zenoh_error)?;
+        Ok(tokens
+            .iter()
+            .filter_map(|key| key.strip_prefix(keys::ROOT)?.strip_prefix('/'))
+            .map(str::to_owned)
+            .collect())
+    }
+
+    /// `coolctl nodes`: one node name per line.
+    pub fn nodes(&self, out: &mut dyn Write) -> Result<(), CtlError> {
+        for name in self.node_names()? {
+            writeln!(out, "{name}")?;
+        }
+        Ok(())
+    }
+
+    /// Subscribe to nodes coming and going (their liveliness tokens).
+    pub fn node_watcher(&self) -> Result<NodeWatcher, CtlError> {
+        let subscriber = self
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{}/*", keys::ROOT))
+            .wait()
+            .map_err(zenoh_error)?;
+        Ok(NodeWatcher { subscriber })
+    }
+
+    /// `coolctl nodes --watch`: the nodes alive now, then `+ <node>` when one comes
+    /// and `- <node>` when one goes, until `count` changes were printed or `duration`
+    /// passed (each when given).
+    pub fn watch_nodes(
+        &self,
+        count: Option<usize>,
+        duration: Option<Duration>,
+        out: &mut dyn Write,
+    ) -> Result<(), CtlError> {
+        let watcher = self.node_watcher()?;
+        self.nodes(out)?;
+        out.flush()?;
+        let deadline = duration.map(|d| Instant::now() + d);
+        let mut printed = 0;
+        while count.is_none_or(|count| printed < count) {
+            let wait = match deadline {
+                Some(deadline) => match deadline.checked_duration_since(Instant::now()) {
+                    Some(left) => left,
+                    None => break,
+                },
+                None => Duration::from_secs(3600),
+            };
+            if let Some(line) = watcher.next(wait)? {
+                writeln!(out, "{line}")?;
+                out.flush()?;
+                printed += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// The components of `node` (or of every node), with their snapshots, sorted by
+    /// node and path.
+    pub fn components(&self, node: Option<&str>) -> Result<Vec<Listed>, CtlError> {
+        if let Some(node) = node {
+            keys::check_name(node).map_err(|error| CtlError::BadArgument(error.to_string()))?;
+        }
+        let pattern = keys::monitor(node.unwrap_or("*"), "*");
+        let replies = self
+            .session
+            .get(pattern)
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(self.timeout)
+            .wait()
+            .map_err(zenoh_error)?;
+        let mut listed = Vec::new();
+        while let Ok(reply) = replies.recv() {
+            let Ok(sample) = reply.result() else {
+                continue;
+            };
+            let key = sample.key_expr().as_str();
+            let Some((node, path)) = keys::parse_component(key) else {
+                continue;
+            };
+            let monitor: Monitor =
+                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                    CtlError::Decode {
+                        key: key.to_owned(),
+                        detail: error.to_string(),
+                    }
+                })?;
+            listed.push(Listed {
+                node: node.to_owned(),
+                path: path.to_owned(),
+                monitor,
+            });
+        }
+        listed.sort_by(|a, b| (&a.node, &a.path).cmp(&(&b.node, &b.path)));
+        listed.dedup_by(|a, b| a.node == b.node && a.path == b.path);
+        Ok(listed)
+    }
+
+    /// `coolctl list [node]`: a table of every component with its state, user state,
+    /// quality, missed deadlines, overruns and overflows.
+    pub fn list(&self, node: Option<&str>, out: &mut dyn Write) -> Result<(), CtlError> {
+        let mut rows = vec![[
+            "NODE".to_owned(),
+            "COMPONENT".to_owned(),
+            "STATE".to_owned(),
+            "USER STATE".to_owned(),
+            "QUALITY".to_owned(),
+            "MISSED".to_owned(),
+            "OVERRUNS".to_owned(),
+            "OVERFLOWS".to_owned(),
+        ]];
+        for listed in self.components(node)? {
+            let monitor = &listed.monitor;
+            rows.push([
+                listed.node,
+                listed.path,
+                monitor.state.to_string(),
+                monitor.user_state.clone().unwrap_or_else(|| "-".to_owned()),
+                monitor.quality.to_string(),
+                monitor.missed_deadlines.to_string(),
+                monitor.overruns.to_string(),
+                monitor.overflows.to_string(),
+            ]);
+        }
+        let mut widths = [0usize; 8];
+        for row in &rows {
+            for (width, cell) in widths.iter_mut().zip(row) {
+                *width = (*width).max(cell.chars().count());
+            }
+        }
+        for row in &rows {
+            let mut line = String::new();
+            for (column, (cell, width)) in row.iter().zip(widths).enumerate() {
+                if column + 1 == row.len() {
+                    line.push_str(cell);
+                } else {
+                    line.push_str(&format!("{cell:<width$}  "));
+                }
+            }
+            writeln!(out, "{}", line.trim_end())?;
+        }
+        Ok(())
+    }
+
+    /// Subscribe to the monitoring events of `<node>/<path>`.
+    pub fn watcher(&self, address: &str) -> Result<Watcher, CtlError> {
+        let (node, path) = target(address)?;
+        let subscriber = self
+            .session
+            .declare_subscriber(keys::monitor(node, path))
+            .wait()
+            .map_err(zenoh_error)?;
+        Ok(Watcher {
+            address: address.to_owned(),
+            subscriber,
+        })
+    }
+
+    /// `coolctl watch`: print `<node>/<path> <event>` for each event, until `count`
+    /// events were printed or `duration` passed (each when given).
+    pub fn watch(
+        &self,
+        address: &str,
+        count: Option<usize>,
+        duration: Option<Duration>,
+        out: &mut dyn Write,
+    ) -> Result<(), CtlError> {
+        let watcher = self.watcher(address)?;
+        let deadline = duration.map(|d| Instant::now() + d);
+        let mut printed = 0;
+        while count.is_none_or(|count| printed < count) {
+            let wait = match deadline {
+                Some(deadline) => match deadline.checked_duration_since(Instant::now()) {
+                    Some(left) => left,
+                    None => break,
+                },
+                None => Duration::from_secs(3600),
+            };
+            if let Some(line) = watcher.next(wait)? {
+                writeln!(out, "{line}")?;
+                out.flush()?;
+                printed += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Send `command` to `<node>/<path>` and return the component's answer.
+    pub fn command(&self, address: &str, command: &Command) -> Result<ControlReply, CtlError> {
+        let (node, path) = target(address)?;
+        let key = keys::control(node, path);
+        let json = serde_json::to_vec(command).map_err(|error| CtlError::Decode {
+            key: key.clone(),
+            detail: error.to_string(),
+        })?;
+        let replies = self
+            .session
+            .get(key.clone())
+            .payload(json)
+            .timeout(self.timeout)
+            .wait()
+            .map_err(zenoh_error)?;
+        match replies.recv() {
+            Ok(reply) => match reply.result() {
+                Ok(sample) => {
+                    serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                        CtlError::Decode {
+                            key,
+                            detail: error.to_string(),
+                        }
+                    })
+                }
+                Err(error) => Err(CtlError::Decode {
+                    key,
+                    detail: error
+                        .payload()
+                        .try_to_string()
+                        .unwrap_or_default()
+                        .into_owned(),
+                }),
+            },
+            Err(_) => Err(CtlError::NoAnswer {
+                target: address.to_owned(),
+                waited: self.timeout,
+            }),
+        }
+    }
+
+    /// `coolctl set <node>/<path> ...`: print `accepted` or `rejected: <reason>`;
+    /// returns whether it was accepted.
+    pub fn set(
+        &self,
+        address: &str,
+        args: &[String],
+        out: &mut dyn Write,
+    ) -> Result<bool, CtlError> {
+        let command = parse_command(args)?;
+        match self.command(address, &command)? {
+            ControlReply::Accepted => {
+                writeln!(out, "accepted")?;
+                Ok(true)
+            }
+            ControlReply::Rejected { reason } => {
+                writeln!(out, "rejected: {reason}")?;
+                Ok(false)
+            }
+        }
+    }
+}
+
+/// Nodes coming and going, as lines (`coolctl nodes --watch`).
+pub struct NodeWatcher {
+    subscriber:
+        zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+}
+
+impl std::fmt::Debug for NodeWatcher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("NodeWatcher")
+    }
+}
+
+impl NodeWatcher {
+    /// The next change, `+ <node>` (it came) or `- <node>` (it went), waiting at
+    /// most `timeout`.
+    pub fn next(&self, timeout: Duration) -> Result<Option<String>, CtlError> {
+        loop {
+            let Some(sample) = self.subscriber.recv_timeout(timeout).map_err(zenoh_error)? else {
+                return Ok(None);
+            };
+            let Some(node) = sample
+                .key_expr()
+                .as_str()
+                .strip_prefix(keys::ROOT)
+                .and_then(|rest| rest.strip_prefix('/'))
+            else {
+                continue;
+            };
+            let sign = match sample.kind() {
+                zenoh::sample::SampleKind::Put => '+',
+                zenoh::sample::SampleKind::Delete => '-',
+            };
+            return Ok(Some(format!("{sign} {node}")));
+        }
+    }
+}
+
+/// The monitoring events of one component, as lines (`coolctl watch`).
+pub struct Watcher {
+    address: String,
+    subscriber:
+        zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+}
+
+impl std::fmt::Debug for Watcher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Watcher({})", self.address)
+    }
+}
+
+impl Watcher {
+    /// The next event as `<node>/<path> <event>`, waiting at most `timeout`.
+    pub fn next(&self, timeout: Duration) -> Result<Option<String>, CtlError> {
+        let Some(sample) = self.subscriber.recv_timeout(timeout).map_err(zenoh_error)? else {
+            return Ok(None);
+        };
+        let event: MonitorEvent =
+            serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                CtlError::Decode {
+                    key: sample.key_expr().as_str().to_owned(),
+                    detail: error.to_string(),
+                }
+            })?;
+        Ok(Some(format!("{} {}", self.address, describe(&event))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(words: &[&str]) -> Vec<String> {
+        words.iter().map(|w| (*w).to_owned()).collect()
+    }
+
+    #[test]
+    fn commands_parse() {
+        let cases: &[(&[&str], Command)] = &[
+            (
+                &["state", "suspended"],
+                Command::SetState(Controllable::Suspended),
+            ),
+            (&["state", "dead"], Command::SetState(Controllable::Dead)),
+            (
+                &["period=20ms"],
+                Command::SetPeriod(Duration::from_millis(20)),
+            ),
+            (
+                &["max_response=1s"],
+                Command::SetMaxResponse(Duration::from_secs(1)),
+            ),
+            (&["priority=-3"], Command::SetPriority(-3)),
+            (&["quality=2"], Command::SetQuality(2)),
+            (
+                &["max_speed=0.5"],
+                Command::Set("max_speed".into(), Value::Float(0.5)),
+            ),
+            (&["limit=7"], Command::Set("limit".into(), Value::UInt(7))),
+            (
+                &["offset=-7"],
+                Command::Set("offset".into(), Value::Int(-7)),
+            ),
+            (&["on=true"], Command::Set("on".into(), Value::Bool(true))),
+            (
+                &["mode=Degraded"],
+                Command::Set("mode".into(), Value::Str("Degraded".into())),
+            ),
+            (
+                &["name=\"a b\""],
+                Command::Set("name".into(), Value::Str("a b".into())),
+            ),
+        ];
+        for (words, expected) in cases {
+            assert_eq!(&parse_command(&args(words)).unwrap(), expected, "{words:?}");
+        }
+    }
+
+    #[test]
+    fn bad_commands_say_why() {
+        for (words, message) in [
+            (&["state", "starting"][..], "not a controllable state"),
+            (&["period=fast"], "not a duration"),
+            (&["priority=high"], "takes an integer"),
+            (&["quality=-1"], "quality level index"),
+            (&["=3"], "has no name"),
+            (&["speed"], "write `state <state>`"),
+            (&[], "write `state <state>`"),
+        ] {
+            let error = parse_command(&args(words)).unwrap_err().to_string();
+            assert!(error.contains(message), "{words:?}: {error}");
+        }
+    }
+
+    #[test]
+    fn targets_are_node_and_path() {
+        assert_eq!(
+            target("robot/base.motion").unwrap(),
+            ("robot", "base.motion")
+        );
+        for bad in ["robot", "robot/", "/x", "robot/a/b", "robot/*"] {
+            assert!(target(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn durations_parse() {
+        assert_eq!(parse_duration("250us").unwrap(), Duration::from_micros(250));
+        assert_eq!(parse_duration("1.5s").unwrap(), Duration::from_millis(1500));
+        assert_eq!(parse_duration("1min").unwrap(), Duration::from_secs(60));
+        for bad in ["", "ms", "10", "10h", "-1s"] {
+            assert!(parse_duration(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,125 @@
+//! The key expressions this crate uses (`docs/distribution.md`, "Key expressions").
+//!
+//! - `coolbot/<node>`: the liveliness token of a node.
+//! - `coolbot/<node>/<path>/m`: a component's monitoring port: its events as they
+//!   happen (JSON `coolbot::MonitorEvent`), and its snapshot on query (JSON
+//!   `coolbot::Monitor`). `<path>` is the component's dotted path (`robot.base.motion`).
+//! - `coolbot/<node>/<path>/c`: a component's control port: a query whose payload is a
+//!   JSON `coolbot::Command`, answered with a JSON [`crate::ControlReply`].
+//! - `coolbot/<node>/@agent`: the agent of a node (remote instantiation): a query
+//!   whose payload is a JSON [`crate::agent::Instantiate`], answered with a JSON
+//!   [`crate::ControlReply`].
+//! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
+//!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
+//!   liveliness tokens that check the connection rules under `K/@producer`,
+//!   `K/@queue` and `K/@inlet`.
+
+use crate::Error;
+
+/// The root of every key this crate declares for nodes.
+pub const ROOT: &str = "coolbot";
+
+/// The liveliness token of node `node`.
+pub fn node_token(node: &str) -> String {
+    format!("{ROOT}/{node}")
+}
+
+/// The monitoring key of the component at `path` on `node`.
+pub fn monitor(node: &str, path: &str) -> String {
+    format!("{ROOT}/{node}/{path}/m")
+}
+
+/// The control key of the component at `path` on `node`.
+pub fn control(node: &str, path: &str) -> String {
+    format!("{ROOT}/{node}/{path}/c")
+}
+
+/// The key of node `node`'s agent.
+pub fn agent(node: &str) -> String {
+    format!("{ROOT}/{node}/@agent")
+}
+
+/// Split a monitoring or control key back into `(node, path)`.
+pub fn parse_component(key: &str) -> Option<(&str, &str)> {
+    let rest = key.strip_prefix(ROOT)?.strip_prefix('/')?;
+    let (node, rest) = rest.split_once('/')?;
+    let (path, port) = rest.rsplit_once('/')?;
+    (matches!(port, "m" | "c") && !path.contains('/')).then_some((node, path))
+}
+
+/// Check a node or component name: one key chunk, of letters, digits, `_`, `-` and
+/// `.` (dotted paths), not starting with `.`.
+pub fn check_name(name: &str) -> Result<(), Error> {
+    let reason = if name.is_empty() {
+        Some("a name cannot be empty")
+    } else if name.starts_with('.') || name.ends_with('.') || name.contains("..") {
+        Some("a dotted path has no empty segment")
+    } else if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+    {
+        Some("only letters, digits, `_`, `-` and `.` are allowed")
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(Error::InvalidName {
+            name: name.to_owned(),
+            reason: reason.to_owned(),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Check a bridge key: a key expression without wildcards (one connection is one key)
+/// and without `@` chunks of its own (they are the bridge's).
+pub fn check_bridge_key(key: &str) -> Result<(), Error> {
+    let invalid = |reason: &str| Error::InvalidName {
+        name: key.to_owned(),
+        reason: reason.to_owned(),
+    };
+    if let Err(error) = zenoh::key_expr::KeyExpr::try_from(key) {
+        return Err(invalid(&format!("not a key expression: {error}")));
+    }
+    if key.split('/').any(|chunk| chunk.contains(['*', '$'])) {
+        return Err(invalid("a bridge key names one connection: no wildcards"));
+    }
+    if key.split('/').any(|chunk| chunk.starts_with('@')) {
+        return Err(invalid("`@` chunks are reserved for the bridge's own keys"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn component_keys_round_trip() {
+        let key = monitor("robot", "base.motion");
+        assert_eq!(key, "coolbot/robot/base.motion/m");
+        assert_eq!(parse_component(&key), Some(("robot", "base.motion")));
+        assert_eq!(parse_component(&control("n", "x")), Some(("n", "x")));
+        assert_eq!(parse_component("coolbot/robot"), None);
+        assert_eq!(parse_component("coolbot/robot/a/b/m"), None);
+        assert_eq!(parse_component("other/robot/a/m"), None);
+    }
+
+    #[test]
+    fn names_are_checked() {
+        for good in ["robot", "base.motion", "node-1", "a_b"] {
+            assert!(check_name(good).is_ok(), "{good}");
+        }
+        for bad in ["", ".a", "a.", "a..b", "a/b", "a*", "@x", "é"] {
+            assert!(check_name(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn bridge_keys_are_checked() {
+        assert!(check_bridge_key("robot/pose").is_ok());
+        for bad in ["robot/*", "robot/**", "a/@x", "", "a//b", "/a"] {
+            assert!(check_bridge_key(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,83 @@
+//! `coolbot-zenoh`: CoolBOT components distributed over a network, on Zenoh.
+//!
+//! The paper's components "can be distributed along a computer network", and CoolBOT
+//! "hides any aspects related to communications". This crate keeps the core runtime
+//! (`coolbot`) free of network code and adds, on a Zenoh session:
+//!
+//! - **Port bridges** ([`Node::outlet`], [`Node::inlet`]): an *outlet* is a component
+//!   that stands, in the producer's [`coolbot::System`], for a remote input (its one
+//!   input has that remote input's kind), and publishes what arrives at it on a key
+//!   expression; an *inlet* stands, in the consumer's system, for the remote output
+//!   (its one output has that output's kind) and sends what arrives on the key. Both
+//!   are connected with [`coolbot::System::connect`], so every local rule (kinds,
+//!   cardinality, pull, packet types) holds at both ends. Packets are encoded with
+//!   postcard; poster values are served to late-joining readers by a queryable; pull
+//!   requests are queries and answers are replies.
+//! - **Remote monitoring and control** ([`Node::expose`]): every component of a system,
+//!   nested instances included, as `coolbot/<node>/<path>/m` (monitoring events as they
+//!   happen, and the current snapshot on query, in JSON) and `coolbot/<node>/<path>/c`
+//!   (a queryable taking a [`coolbot::Command`] and answering [`ControlReply`]), and a
+//!   liveliness token `coolbot/<node>` per node.
+//! - **`coolctl`**, the command-line tool over those keys ([`ctl`]).
+//! - **Remote instantiation**, a first step ([`agent`]): an agent builds registered
+//!   component types on request from another node, bridges their ports, runs and
+//!   exposes them.
+//!
+//! `docs/distribution.md` describes the model, the keys, the encoding and what
+//! happens when the network fails.
+#![deny(missing_docs)]
+
+pub mod agent;
+mod bridge;
+mod config;
+pub mod ctl;
+pub mod keys;
+mod node;
+
+pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
+pub use crate::config::peer_config;
+pub use crate::node::{ControlReply, Node};
+
+/// Re-exported so users need not depend on it themselves (configurations, sessions).
+pub use zenoh;
+
+/// What can go wrong in this crate.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Zenoh refused an operation (opening a session, declaring, querying).
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A node, component or key name that cannot be used.
+    #[error("invalid name `{name}`: {reason}")]
+    InvalidName {
+        /// The name.
+        name: String,
+        /// Why.
+        reason: String,
+    },
+    /// A node with this name is already alive on the network.
+    #[error("a node named `{0}` is already alive on the network")]
+    NodeNameTaken(String),
+    /// A bridge would break a connection rule across the network.
+    #[error("cannot bridge `{key}`: {rule}")]
+    Cardinality {
+        /// The bridge's key expression.
+        key: String,
+        /// The rule and how it is broken.
+        rule: String,
+    },
+    /// Another node refused a request (an instantiation), or nothing answered.
+    #[error("node `{node}`: {reason}")]
+    Remote {
+        /// The node asked.
+        node: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+impl Error {
+    pub(crate) fn zenoh(error: impl std::fmt::Display) -> Error {
+        Error::Zenoh(error.to_string())
+    }
+}

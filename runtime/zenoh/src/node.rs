@@ -1,0 +1,332 @@
+//! A [`Node`]: one per process, named, holding the Zenoh session; it exposes
+//! components' monitoring and control ports on the network and makes bridges.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use coolbot::{Command, Handle, InputKind, MonitorEvent, OutputKind, System};
+use crossbeam_channel::{RecvTimeoutError, Select, Sender};
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+
+use crate::bridge::{InletBuilder, OutletBuilder};
+use crate::{Error, keys};
+
+/// How often the node's threads look whether they are to stop.
+const STOP_POLL: Duration = Duration::from_millis(100);
+
+/// How long [`Node::open`] asks the network whether its name is taken.
+const NAME_LOOKUP: Duration = Duration::from_millis(500);
+
+/// The answer to a command sent to a component's control key
+/// (`coolbot/<node>/<path>/c`): what the component's control port answered.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ControlReply {
+    /// The command was accepted (a state change has run).
+    Accepted,
+    /// The command was rejected, or was not a command.
+    Rejected {
+        /// Why, as the control port said it.
+        reason: String,
+    },
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The keys of the liveliness tokens under `pattern` (sorted, without duplicates).
+pub(crate) fn liveliness_keys(
+    session: &zenoh::Session,
+    pattern: &str,
+    timeout: Duration,
+) -> Result<Vec<String>, Error> {
+    let replies = session
+        .liveliness()
+        .get(pattern)
+        .timeout(timeout)
+        .wait()
+        .map_err(Error::zenoh)?;
+    let mut found = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result() {
+            found.push(sample.key_expr().as_str().to_owned());
+        }
+    }
+    found.sort();
+    found.dedup();
+    Ok(found)
+}
+
+/// One [`Node::expose`] call: its queryables and its monitoring thread.
+struct Exposure {
+    queryables: Vec<zenoh::query::Queryable<()>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Drop for Exposure {
+    fn drop(&mut self) {
+        self.queryables.clear();
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// A command received on a control key, with the handle it is for.
+type ControlRequest = (zenoh::query::Query, Handle);
+
+/// A process on the network: a name, a Zenoh session, a liveliness token
+/// `coolbot/<name>`, and the components it exposes. Dropping it stops exposing them
+/// (its threads are joined) and withdraws its token.
+pub struct Node {
+    name: String,
+    session: zenoh::Session,
+    exposures: Mutex<Vec<Exposure>>,
+    control: Sender<ControlRequest>,
+    control_stop: Arc<AtomicBool>,
+    control_thread: Option<JoinHandle<()>>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl std::fmt::Debug for Node {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Node({})", self.name)
+    }
+}
+
+impl Node {
+    /// Open a session with `config` (see [`crate::peer_config`]) as node `name` (one
+    /// key chunk: letters, digits, `_`, `-`, `.`). Fails if a node of that name is
+    /// already alive among the peers this session reaches when it opens.
+    pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
+        keys::check_name(name)?;
+        let session = zenoh::open(config).wait().map_err(Error::zenoh)?;
+        let token_key = keys::node_token(name);
+        if !liveliness_keys(&session, &token_key, NAME_LOOKUP)?.is_empty() {
+            return Err(Error::NodeNameTaken(name.to_owned()));
+        }
+        let token = session
+            .liveliness()
+            .declare_token(token_key)
+            .wait()
+            .map_err(Error::zenoh)?;
+        let (control, requests) = crossbeam_channel::bounded::<ControlRequest>(256);
+        let control_stop = Arc::new(AtomicBool::new(false));
+        let stop = Arc::clone(&control_stop);
+        let control_thread = std::thread::Builder::new()
+            .name(format!("cool-net:{name}:c"))
+            .spawn(move || {
+                loop {
+                    match requests.recv_timeout(STOP_POLL) {
+                        Ok((query, handle)) => serve_command(&query, &handle),
+                        Err(RecvTimeoutError::Timeout) if !stop.load(Ordering::Acquire) => {}
+                        Err(_) => break,
+                    }
+                }
+            })
+            .map_err(|error| Error::Zenoh(format!("cannot spawn the control thread: {error}")))?;
+        Ok(Node {
+            name: name.to_owned(),
+            session,
+            exposures: Mutex::new(Vec::new()),
+            control,
+            control_stop,
+            control_thread: Some(control_thread),
+            _token: token,
+        })
+    }
+
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The node's Zenoh session.
+    pub fn session(&self) -> &zenoh::Session {
+        &self.session
+    }
+
+    /// Expose the component behind `handle` and, for a compound, every instance inside
+    /// it at any depth: each as `coolbot/<node>/<path>/m` and `.../c`, `<path>` being
+    /// the handle's name followed by the instance path (`robot`, `robot.base`,
+    /// `robot.base.motion`). Monitoring events are published as they happen (JSON
+    /// `MonitorEvent`), a query on `m` answers the snapshot (JSON `Monitor`), a query
+    /// on `c` with a JSON `Command` answers a JSON [`ControlReply`].
+    pub fn expose(&self, handle: &Handle) -> Result<(), Error> {
+        let mut components = Vec::new();
+        collect(handle, handle.name().to_owned(), &mut components);
+        for (path, _) in &components {
+            keys::check_name(path)?;
+        }
+        let mut queryables = Vec::new();
+        let mut streams = Vec::new();
+        for (path, handle) in components {
+            let monitor_key = keys::monitor(&self.name, &path);
+            let publisher = self
+                .session
+                .declare_publisher(monitor_key.clone())
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .wait()
+                .map_err(Error::zenoh)?;
+            streams.push((handle.subscribe(), publisher));
+            let snapshots = handle.clone();
+            let own_key = monitor_key.clone();
+            queryables.push(
+                self.session
+                    .declare_queryable(monitor_key)
+                    .callback(move |query| {
+                        // Answered under the component's own key, not the query's
+                        // (`coolbot/robot/*/m`): the key tells which component it is.
+                        let reply = match serde_json::to_vec(&snapshots.snapshot()) {
+                            Ok(json) => query.reply(own_key.clone(), json).wait(),
+                            Err(error) => query.reply_err(error.to_string()).wait(),
+                        };
+                        if let Err(error) = reply {
+                            tracing::warn!("snapshot not sent: {error}");
+                        }
+                    })
+                    .wait()
+                    .map_err(Error::zenoh)?,
+            );
+            let control = self.control.clone();
+            queryables.push(
+                self.session
+                    .declare_queryable(keys::control(&self.name, &path))
+                    .callback(move |query| {
+                        if let Err(error) = control.try_send((query, handle.clone())) {
+                            let (query, _) = error.into_inner();
+                            let _ = reply_control(
+                                &query,
+                                &ControlReply::Rejected {
+                                    reason: "the node has too many commands waiting".to_owned(),
+                                },
+                            );
+                        }
+                    })
+                    .wait()
+                    .map_err(Error::zenoh)?,
+            );
+        }
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name(format!("cool-net:{}:m", self.name))
+            .spawn(move || forward_events(&streams, &stopped))
+            .map_err(|error| Error::Zenoh(format!("cannot spawn the monitor thread: {error}")))?;
+        lock(&self.exposures).push(Exposure {
+            queryables,
+            stop,
+            thread: Some(thread),
+        });
+        Ok(())
+    }
+
+    /// [`Node::expose`] every component of `system` (in the order they were added).
+    pub fn expose_system(&self, system: &System) -> Result<(), Error> {
+        for name in system.names() {
+            if let Some(handle) = system.handle(name) {
+                self.expose(&handle)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// An outlet named `name` on bridge key `key`, standing for a remote input of
+    /// `kind` (see the crate documentation and `docs/distribution.md`).
+    pub fn outlet<T>(&self, name: &str, key: &str, kind: InputKind) -> OutletBuilder<'_, T> {
+        OutletBuilder::new(self, name, key, kind)
+    }
+
+    /// An inlet named `name` on bridge key `key`, standing for a remote output of
+    /// `kind`.
+    pub fn inlet<T>(&self, name: &str, key: &str, kind: OutputKind) -> InletBuilder<'_, T> {
+        InletBuilder::new(self, name, key, kind)
+    }
+}
+
+impl Drop for Node {
+    fn drop(&mut self) {
+        lock(&self.exposures).clear();
+        self.control_stop.store(true, Ordering::Release);
+        if let Some(thread) = self.control_thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// `handle` at `path` and every instance below it, depth first, declaration order.
+fn collect(handle: &Handle, path: String, out: &mut Vec<(String, Handle)>) {
+    out.push((path.clone(), handle.clone()));
+    for name in handle.instances() {
+        if let Some(instance) = handle.instance(&name) {
+            collect(&instance, format!("{path}.{name}"), out);
+        }
+    }
+}
+
+/// Publish every monitoring event of every stream, as it comes, until `stop`.
+fn forward_events(
+    streams: &[(
+        crossbeam_channel::Receiver<MonitorEvent>,
+        zenoh::pubsub::Publisher<'static>,
+    )],
+    stop: &AtomicBool,
+) {
+    let mut select = Select::new();
+    for (events, _) in streams {
+        select.recv(events);
+    }
+    while !stop.load(Ordering::Acquire) {
+        let Ok(operation) = select.select_timeout(STOP_POLL) else {
+            continue;
+        };
+        let index = operation.index();
+        let (events, publisher) = &streams[index];
+        match operation.recv(events) {
+            Ok(event) => match serde_json::to_vec(&event) {
+                Ok(json) => {
+                    if let Err(error) = publisher.put(json).wait() {
+                        tracing::warn!("monitoring event not published: {error}");
+                    }
+                }
+                Err(error) => tracing::warn!("monitoring event does not encode: {error}"),
+            },
+            // The component is gone: stop watching it.
+            Err(_) => select.remove(index),
+        }
+    }
+}
+
+fn reply_control(query: &zenoh::query::Query, reply: &ControlReply) -> zenoh::Result<()> {
+    let json = serde_json::to_vec(reply).expect("a ControlReply serializes");
+    query.reply(query.key_expr().clone(), json).wait()
+}
+
+/// Apply one command from the network, through the component's own control port.
+fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
+    let reply = match query.payload() {
+        None => ControlReply::Rejected {
+            reason: "no command: the query carries no payload".to_owned(),
+        },
+        Some(payload) => match serde_json::from_slice::<Command>(&payload.to_bytes()) {
+            Err(error) => ControlReply::Rejected {
+                reason: format!("malformed command: {error}"),
+            },
+            Ok(command) => match handle.command(command) {
+                Ok(()) => ControlReply::Accepted,
+                Err(rejected) => ControlReply::Rejected {
+                    reason: rejected.reason,
+                },
+            },
+        },
+    };
+    if let Err(error) = reply_control(query, &reply) {
+        tracing::warn!("control answer not sent: {error}");
+    }
+}

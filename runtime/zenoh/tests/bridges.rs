@@ -1,0 +1,670 @@
+//! Port bridges between two nodes on loopback: every connection kind keeps its
+//! semantics and cardinality across the network, pull is a query, and no packet is
+//! lost without a counter and an event.
+
+mod support;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut};
+use coolbot::{
+    InputKind, InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy, PortSet, System,
+};
+use coolbot_zenoh::{Error, Node};
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+
+use support::{PATIENCE, Shell, pair, spec, wait_subscribed, wait_until};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Pose {
+    x: f64,
+    seq: u64,
+}
+
+fn output(name: &'static str, kind: OutputKind, pull: bool) -> OutputSpec {
+    OutputSpec {
+        name,
+        kind,
+        packet: "Pose",
+        pull,
+    }
+}
+
+fn input(name: &'static str, kind: InputKind, pull: bool) -> InputSpec {
+    InputSpec {
+        name,
+        kind,
+        packet: "Pose",
+        pull,
+    }
+}
+
+fn pose(seq: u64) -> Pose {
+    Pose {
+        x: seq as f64 / 2.0,
+        seq,
+    }
+}
+
+/// Producer side: `source.out` (data) into an outlet of `kind` on `key`.
+fn data_producer(node: &Node, key: &str, kind: InputKind) -> (System, DataOut<Pose>) {
+    let out = DataOut::<Pose>::new();
+    let mut system = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![output("out", OutputKind::Data, false)],
+        vec![],
+    );
+    system
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&out),
+        ))
+        .unwrap();
+    system
+        .add(node.outlet::<Pose>("outlet", key, kind).build().unwrap())
+        .unwrap();
+    system.connect("source.out", "outlet.input").unwrap();
+    system.run_all().unwrap();
+    (system, out)
+}
+
+/// Consumer side: an inlet of `kind` on `key` into `sink.input` (`sink_port`).
+fn consumer(
+    node: &Node,
+    key: &str,
+    kind: OutputKind,
+    sink_kind: InputKind,
+    sink_port: &dyn coolbot::InputPort,
+) -> System {
+    let mut system = System::new();
+    system
+        .add(node.inlet::<Pose>("inlet", key, kind).build().unwrap())
+        .unwrap();
+    let sink = spec(
+        "Sink",
+        vec![input("input", sink_kind, false)],
+        vec![],
+        vec![],
+    );
+    let mut ports = PortSet::new();
+    ports = add_input(ports, sink_port);
+    system.add(Shell::component("sink", sink, ports)).unwrap();
+    system.connect("inlet.output", "sink.input").unwrap();
+    system.run_all().unwrap();
+    system
+}
+
+fn add_input(ports: PortSet, port: &dyn coolbot::InputPort) -> PortSet {
+    struct Erased(coolbot::port::ErasedInput);
+    impl coolbot::InputPort for Erased {
+        fn erased(&self) -> coolbot::port::ErasedInput {
+            self.0.clone()
+        }
+    }
+    ports.input(&Erased(port.erased()))
+}
+
+#[test]
+fn fifo_packets_cross_in_order_and_none_is_lost() {
+    let (a, b) = pair("fifo-a", "fifo-b");
+    let key = "test/fifo";
+    let sink = FifoIn::<Pose>::new(256, OverflowPolicy::Reject);
+    let consumer = consumer(
+        &b,
+        key,
+        OutputKind::Data,
+        InputKind::Fifo {
+            capacity: 256,
+            policy: OverflowPolicy::Reject,
+        },
+        &sink,
+    );
+    let (producer, out) = data_producer(
+        &a,
+        key,
+        InputKind::Fifo {
+            capacity: 64,
+            policy: OverflowPolicy::Block,
+        },
+    );
+    wait_subscribed(&a, key);
+    for seq in 0..200 {
+        out.send(pose(seq));
+    }
+    let mut received = Vec::new();
+    while received.len() < 200 {
+        match sink.recv_timeout(PATIENCE) {
+            Some(packet) => received.push(packet),
+            None => break,
+        }
+    }
+    assert_eq!(received, (0..200).map(pose).collect::<Vec<_>>());
+    let outlet = producer.handle("outlet").unwrap().snapshot();
+    assert_eq!(outlet.overflows, 0, "{outlet:?}");
+    assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
+    assert!(producer.shutdown().clean());
+    assert!(consumer.shutdown().clean());
+}
+
+#[test]
+fn a_full_remote_fifo_applies_its_own_policy_and_counts() {
+    let (a, b) = pair("full-a", "full-b");
+    let key = "test/full";
+    // Nothing reads the sink: 4 packets fit, the 6 others are rejected and counted.
+    let sink = FifoIn::<Pose>::new(4, OverflowPolicy::Reject);
+    let consumer = consumer(
+        &b,
+        key,
+        OutputKind::Data,
+        InputKind::Fifo {
+            capacity: 4,
+            policy: OverflowPolicy::Reject,
+        },
+        &sink,
+    );
+    let events = consumer.handle("sink").unwrap().subscribe();
+    // The outlet's own queue is only the hop to the network: room for all ten.
+    let (producer, out) = data_producer(
+        &a,
+        key,
+        InputKind::Fifo {
+            capacity: 64,
+            policy: OverflowPolicy::Reject,
+        },
+    );
+    wait_subscribed(&a, key);
+    for seq in 0..10 {
+        out.send(pose(seq));
+    }
+    let sink_handle = consumer.handle("sink").unwrap();
+    let monitor = sink_handle
+        .wait_for(|m| m.overflows == 6, PATIENCE)
+        .expect("six packets counted lost at the full input");
+    assert_eq!(monitor.port_overflows, vec![("input".to_owned(), 6)]);
+    assert_eq!(sink.len(), 4);
+    let overflow_events = events
+        .try_iter()
+        .filter(|event| matches!(event, MonitorEvent::Overflow { port, .. } if port == "input"))
+        .count();
+    assert_eq!(overflow_events, 6);
+    // received + overflows = sent
+    assert_eq!(sink.drain().count() as u64 + monitor.overflows, 10);
+    drop((producer, consumer));
+}
+
+#[test]
+fn a_packet_that_does_not_decode_is_counted_at_the_inlet() {
+    let (a, b) = pair("decode-a", "decode-b");
+    let key = "test/decode";
+    let sink = LastIn::<Pose>::new();
+    let consumer = consumer(&b, key, OutputKind::Data, InputKind::Last, &sink);
+    let inlet = consumer.handle("inlet").unwrap();
+    let events = inlet.subscribe();
+    wait_subscribed(&a, key);
+    // Not a postcard `Pose`: too short.
+    a.session().put(key, vec![1u8]).wait().unwrap();
+    let monitor = inlet
+        .wait_for(|m| m.overflows == 1, PATIENCE)
+        .expect("the undecodable packet counted");
+    assert_eq!(monitor.port_overflows, vec![("network".to_owned(), 1)]);
+    assert!(matches!(
+        events.recv_timeout(PATIENCE),
+        Ok(MonitorEvent::Overflow { ref port, lost: 1, total: 1 }) if port == "network"
+    ));
+    assert_eq!(sink.received(), 0);
+    // A good one still goes through.
+    a.session()
+        .put(key, postcard::to_allocvec(&pose(3)).unwrap())
+        .wait()
+        .unwrap();
+    assert!(wait_until(PATIENCE, || sink.latest() == Some(pose(3))));
+}
+
+#[test]
+fn an_outlet_that_cannot_send_counts_its_packets() {
+    let (a, _b) = pair("lonely-a", "lonely-b");
+    // Nobody subscribes to this key.
+    let (producer, out) = data_producer(&a, "test/nobody", InputKind::Last);
+    let outlet = producer.handle("outlet").unwrap();
+    let events = outlet.subscribe();
+    for seq in 0..3 {
+        out.send(pose(seq));
+        // One at a time, so that the last input does not merge them (by design).
+        outlet
+            .wait_for(|m| m.overflows == seq + 1, PATIENCE)
+            .expect("each unsent packet counted");
+    }
+    let lost: u64 = events
+        .try_iter()
+        .filter_map(|event| match event {
+            MonitorEvent::Overflow { lost, .. } => Some(lost),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(lost, 3);
+}
+
+#[test]
+fn a_last_input_keeps_the_latest_packet() {
+    let (a, b) = pair("last-a", "last-b");
+    let key = "test/last";
+    let sink = LastIn::<Pose>::new();
+    let _consumer = consumer(&b, key, OutputKind::Data, InputKind::Last, &sink);
+    let (_producer, out) = data_producer(&a, key, InputKind::Last);
+    wait_subscribed(&a, key);
+    for seq in 1..=50 {
+        out.send(pose(seq));
+    }
+    assert!(
+        wait_until(PATIENCE, || sink.latest() == Some(pose(50))),
+        "latest: {:?}",
+        sink.latest()
+    );
+}
+
+#[test]
+fn a_late_poster_reader_gets_the_current_value() {
+    let (a, b) = pair("poster-a", "poster-b");
+    let key = "test/poster";
+    let post = PosterOut::<Pose>::new();
+    let mut producer = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![output("out", OutputKind::Poster, false)],
+        vec![],
+    );
+    producer
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&post),
+        ))
+        .unwrap();
+    producer
+        .add(
+            a.outlet::<Pose>("outlet", key, InputKind::Poster)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    producer.connect("source.out", "outlet.input").unwrap();
+    producer.run_all().unwrap();
+    post.post(pose(7));
+    // The outlet publishes (to nobody yet) and keeps the value for late readers.
+    std::thread::sleep(Duration::from_millis(50));
+
+    let reader = PosterIn::<Pose>::new();
+    let consumer = consumer(&b, key, OutputKind::Poster, InputKind::Poster, &reader);
+    assert!(
+        wait_until(PATIENCE, || reader.read() == Some(pose(7))),
+        "the late reader did not get the posted value"
+    );
+    wait_subscribed(&a, key);
+    post.post(pose(8));
+    assert!(wait_until(PATIENCE, || reader.read() == Some(pose(8))));
+    assert_eq!(consumer.handle("inlet").unwrap().snapshot().overflows, 0);
+}
+
+#[test]
+fn tick_events_are_counted_never_lost() {
+    let (a, b) = pair("tick-a", "tick-b");
+    let key = "test/tick";
+    let ticks = TickIn::new();
+    let mut consumer = System::new();
+    consumer
+        .add(
+            b.inlet::<()>("inlet", key, OutputKind::Tick)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    let sink = spec(
+        "Sink",
+        vec![InputSpec {
+            name: "input",
+            kind: InputKind::Tick,
+            packet: "event",
+            pull: false,
+        }],
+        vec![],
+        vec![],
+    );
+    consumer
+        .add(Shell::component("sink", sink, PortSet::new().input(&ticks)))
+        .unwrap();
+    consumer.connect("inlet.output", "sink.input").unwrap();
+    consumer.run_all().unwrap();
+
+    let emit = TickOut::new();
+    let mut producer = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![OutputSpec {
+            name: "out",
+            kind: OutputKind::Tick,
+            packet: "event",
+            pull: false,
+        }],
+        vec![],
+    );
+    producer
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&emit),
+        ))
+        .unwrap();
+    producer
+        .add(
+            a.outlet::<()>("outlet", key, InputKind::Tick)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    producer.connect("source.out", "outlet.input").unwrap();
+    producer.run_all().unwrap();
+    wait_subscribed(&a, key);
+    for _ in 0..25 {
+        emit.emit();
+    }
+    let mut total = 0;
+    assert!(wait_until(PATIENCE, || {
+        total += ticks.take();
+        total == 25
+    }));
+    assert_eq!(producer.handle("outlet").unwrap().snapshot().overflows, 0);
+    // A message claiming more events than an outlet ever sends is counted as lost,
+    // not emitted.
+    a.session()
+        .put(key, postcard::to_allocvec(&u64::MAX).unwrap())
+        .wait()
+        .unwrap();
+    let inlet = consumer.handle("inlet").unwrap();
+    inlet
+        .wait_for(|m| m.overflows == 1, PATIENCE)
+        .expect("the implausible count is counted");
+    assert_eq!(ticks.take(), 0);
+}
+
+#[test]
+fn a_pull_is_a_query_and_the_answer_a_reply() {
+    let (a, b) = pair("pull-a", "pull-b");
+    let key = "test/pull";
+    // Producer: a pull output answering each request with the next pose.
+    let out = DataOut::<Pose>::new();
+    let answered = Arc::new(AtomicU64::new(0));
+    let answer_out = out.clone();
+    let count = Arc::clone(&answered);
+    let mut producer = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![output("out", OutputKind::Data, true)],
+        vec![],
+    );
+    producer
+        .add(Shell::with_answer(
+            "source",
+            source,
+            PortSet::new().output(&out),
+            Some(Box::new(move |_| {
+                let n = count.fetch_add(1, Ordering::SeqCst) + 1;
+                answer_out.send(pose(n));
+            })),
+        ))
+        .unwrap();
+    producer
+        .add(
+            a.outlet::<Pose>("outlet", key, InputKind::Last)
+                .pull(Duration::from_secs(10))
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    producer.connect("source.out", "outlet.input").unwrap();
+    producer.run_all().unwrap();
+
+    // Consumer: a pull last input fed by a pull inlet.
+    let goal = LastIn::<Pose>::new();
+    let mut consumer = System::new();
+    consumer
+        .add(
+            b.inlet::<Pose>("inlet", key, OutputKind::Data)
+                .pull(Duration::from_secs(10))
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    let sink = spec(
+        "Sink",
+        vec![input("goal", InputKind::Last, true)],
+        vec![],
+        vec![],
+    );
+    consumer
+        .add(Shell::component("sink", sink, PortSet::new().input(&goal)))
+        .unwrap();
+    consumer.connect("inlet.output", "sink.goal").unwrap();
+    consumer.run_all().unwrap();
+
+    // The queryable on the producer's node may not be known yet: pull until answered.
+    let mut first = None;
+    assert!(wait_until(PATIENCE, || {
+        first = goal.pull(Duration::from_secs(2)).ok();
+        first.is_some()
+    }));
+    let first = first.unwrap();
+    let second = goal.pull(PATIENCE).expect("a second answer");
+    assert_eq!(second.seq, first.seq + 1, "one answer per request");
+    assert_eq!(answered.load(Ordering::SeqCst), second.seq);
+}
+
+/// The checks see the tokens a session knows of: wait until `node` knows one under
+/// `pattern`.
+fn wait_token(node: &Node, pattern: &str) {
+    assert!(
+        wait_until(PATIENCE, || {
+            node.session()
+                .liveliness()
+                .get(pattern)
+                .timeout(Duration::from_millis(500))
+                .wait()
+                .is_ok_and(|replies| replies.recv().is_ok())
+        }),
+        "no token under `{pattern}`"
+    );
+}
+
+#[test]
+fn connection_rules_hold_across_the_network() {
+    let (a, b) = pair("rules-a", "rules-b");
+    // A last connection has one producer.
+    let _first = a
+        .outlet::<Pose>("first", "test/rules/last", InputKind::Last)
+        .build()
+        .unwrap();
+    wait_token(&b, "test/rules/last/@out/**");
+    let error = b
+        .outlet::<Pose>("second", "test/rules/last", InputKind::Last)
+        .build();
+    let rejected = |result: Result<coolbot::Component, Error>| match result {
+        Err(Error::Cardinality { rule, .. }) => rule,
+        other => panic!("expected a cardinality error, got {other:?}"),
+    };
+    let rule = rejected(error);
+    assert!(rule.contains("already has a producer"), "{rule}");
+    // One key, one kind: a poster inlet cannot read a last connection.
+    let rule = rejected(
+        b.inlet::<Pose>("reader", "test/rules/last", OutputKind::Poster)
+            .build(),
+    );
+    assert!(rule.contains("carries a last connection"), "{rule}");
+    // A fifo connection has one input end.
+    let _producer = a
+        .outlet::<Pose>(
+            "queue",
+            "test/rules/fifo",
+            InputKind::Fifo {
+                capacity: 8,
+                policy: OverflowPolicy::Reject,
+            },
+        )
+        .build()
+        .unwrap();
+    let _reader = b
+        .inlet::<Pose>("reader", "test/rules/fifo", OutputKind::Data)
+        .build()
+        .unwrap();
+    wait_token(&a, "test/rules/fifo/@in/**");
+    let rule = rejected(
+        a.inlet::<Pose>("other", "test/rules/fifo", OutputKind::Data)
+            .build(),
+    );
+    assert!(rule.contains("N outputs to 1 input"), "{rule}");
+    // Bad keys and names are refused with a reason.
+    assert!(matches!(
+        a.outlet::<Pose>("x", "test/*", InputKind::Last).build(),
+        Err(Error::InvalidName { .. })
+    ));
+    assert!(matches!(
+        a.inlet::<Pose>("a.b", "test/ok", OutputKind::Data).build(),
+        Err(Error::InvalidName { .. })
+    ));
+}
+
+#[test]
+fn a_node_name_is_unique_on_the_network() {
+    let (a, endpoint) = support::node("unique", &[]);
+    let config = coolbot_zenoh::peer_config(
+        &[format!("tcp/127.0.0.1:{}", support::free_port())],
+        &[endpoint],
+        false,
+    )
+    .unwrap();
+    // The second session may need a moment to learn the first one's token.
+    let mut outcome = None;
+    assert!(wait_until(PATIENCE, || {
+        match Node::open("unique", config.clone()) {
+            Err(Error::NodeNameTaken(name)) => {
+                outcome = Some(name);
+                true
+            }
+            _ => false,
+        }
+    }));
+    assert_eq!(outcome.as_deref(), Some("unique"));
+    assert_eq!(a.name(), "unique");
+}
+
+#[test]
+fn when_the_consumer_node_goes_away_the_outlet_counts_every_packet() {
+    let (a, b) = pair("gone-a", "gone-b");
+    let key = "test/gone";
+    let sink = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let consumer = consumer(&b, key, OutputKind::Data, queue, &sink);
+    let (producer, out) = data_producer(&a, key, queue);
+    wait_subscribed(&a, key);
+    for seq in 0..5 {
+        out.send(pose(seq));
+    }
+    for seq in 0..5 {
+        assert_eq!(sink.recv_timeout(PATIENCE), Some(pose(seq)));
+    }
+    // The consumer's process goes away.
+    assert!(consumer.shutdown().clean());
+    drop(b);
+    let outlet = producer.handle("outlet").unwrap();
+    assert_eq!(outlet.snapshot().overflows, 0);
+    // Once the outlet knows (Zenoh tells it the subscriber is gone), every packet is
+    // counted: send until the first one is, then three more.
+    let mut sent = 5;
+    assert!(wait_until(PATIENCE, || {
+        out.send(pose(sent));
+        sent += 1;
+        outlet
+            .wait_for(|m| m.overflows > 0, Duration::from_millis(200))
+            .is_ok()
+    }));
+    let before = outlet.snapshot().overflows;
+    for seq in 0..3 {
+        out.send(pose(100 + seq));
+    }
+    outlet
+        .wait_for(|m| m.overflows == before + 3, PATIENCE)
+        .expect("every packet after the link is gone is counted");
+}
+
+#[test]
+fn a_remote_ufifo_grows_and_takes_every_packet_of_a_burst() {
+    let (a, b) = pair("ufifo-a", "ufifo-b");
+    let key = "test/ufifo";
+    // Nothing reads the sink during the burst: it grows from 16.
+    let sink = coolbot::port::UfifoIn::<Pose>::new(16, None);
+    let kind = InputKind::Ufifo {
+        initial: 16,
+        max: None,
+    };
+    let consumer = consumer(&b, key, OutputKind::Data, kind, &sink);
+    let (producer, out) = data_producer(&a, key, kind);
+    wait_subscribed(&a, key);
+    const BURST: u64 = 5_000;
+    for seq in 0..BURST {
+        out.send(pose(seq));
+    }
+    assert!(
+        wait_until(PATIENCE, || sink.len() as u64 == BURST),
+        "{} of {BURST} arrived",
+        sink.len()
+    );
+    assert!(sink.growths() > 0);
+    assert!(sink.drain().map(|p| p.seq).eq(0..BURST), "order kept");
+    assert_eq!(producer.handle("outlet").unwrap().snapshot().overflows, 0);
+    assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
+}
+
+#[test]
+fn when_the_consumer_node_comes_back_packets_flow_again() {
+    // The consumer listens, the producer connects to it (and retries when it goes).
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let listening = |name: &str| {
+        let config =
+            coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), &[], false).unwrap();
+        Node::open(name, config).expect("consumer node")
+    };
+    let b = listening("back-b");
+    let (a, _) = support::node("back-a", std::slice::from_ref(&endpoint));
+    let key = "test/back";
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let (producer, out) = data_producer(&a, key, queue);
+    let first = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let first_consumer = consumer(&b, key, OutputKind::Data, queue, &first);
+    wait_subscribed(&a, key);
+    out.send(pose(1));
+    assert_eq!(first.recv_timeout(PATIENCE), Some(pose(1)));
+
+    // The consumer's process goes away, then comes back on the same endpoint.
+    assert!(first_consumer.shutdown().clean());
+    drop(b);
+    let b = listening("back-b");
+    let again = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
+    let _consumer = consumer(&b, key, OutputKind::Data, queue, &again);
+    wait_subscribed(&a, key);
+    out.send(pose(2));
+    assert_eq!(again.recv_timeout(PATIENCE), Some(pose(2)));
+    assert!(producer.shutdown().clean());
+}

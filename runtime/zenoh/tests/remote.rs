@@ -1,0 +1,628 @@
+//! Remote monitoring and control, and `coolctl`'s text output, against a node started
+//! here: a system with a compound `robot` (holding a compound `base` with `motion` and
+//! `ranges`, and a `planner`) and an atomic `logger`.
+
+mod support;
+
+use std::time::Duration;
+
+use coolbot::{
+    Command, CompoundBuilder, Controllable, PortSet, Spec, State, StateSpec, Supervisor, System,
+    TimingSpec, VarKind,
+};
+use coolbot_zenoh::ctl::{Ctl, CtlError};
+use coolbot_zenoh::{ControlReply, Node};
+use zenoh::Wait;
+
+use support::{PATIENCE, Shell, pair, spec, var, wait_until};
+
+struct Sup(&'static Spec);
+
+impl Supervisor for Sup {
+    fn spec(&self) -> &'static Spec {
+        self.0
+    }
+}
+
+fn supervisor(state: &'static str) -> Sup {
+    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
+        name: state,
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }]));
+    Sup(Box::leak(Box::new(Spec {
+        type_name: "Compound",
+        doc: "",
+        states,
+        initial: 0,
+        inputs: &[],
+        outputs: &[],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    })))
+}
+
+/// The robot's system, running, exposed on `node`.
+fn robot(node: &Node) -> System {
+    let motion = spec(
+        "Motion",
+        vec![],
+        vec![],
+        vec![
+            var("odometry", VarKind::Observable),
+            var("max_speed", VarKind::Controllable),
+        ],
+    );
+    let plain = spec("Plain", vec![], vec![], vec![]);
+    let base = CompoundBuilder::new("base", supervisor("operating"))
+        .instance(Shell::component("motion", motion, PortSet::new()))
+        .instance(Shell::component("ranges", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let robot = CompoundBuilder::new("robot", supervisor("exploring"))
+        .instance(base)
+        .instance(Shell::component("planner", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let mut system = System::new();
+    system.add(robot).unwrap();
+    system
+        .add(Shell::component("logger", plain, PortSet::new()))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    system
+}
+
+const COMPONENTS: usize = 6;
+
+/// A `coolctl` on `station`'s session, once it sees all of the robot's components.
+fn ctl(station: &Node) -> Ctl {
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    assert!(
+        wait_until(PATIENCE, || ctl
+            .components(Some("robot"))
+            .is_ok_and(|listed| listed.len() == COMPONENTS)),
+        "the station does not see the robot's components"
+    );
+    ctl
+}
+
+fn text(f: impl FnOnce(&mut Vec<u8>) -> Result<(), CtlError>) -> String {
+    let mut out = Vec::new();
+    f(&mut out).unwrap();
+    String::from_utf8(out).unwrap()
+}
+
+#[test]
+fn coolctl_lists_nodes_and_every_component_with_its_state() {
+    let (node, station) = pair("robot", "station");
+    let system = robot(&node);
+    let ctl = ctl(&station);
+    insta::assert_snapshot!("nodes", text(|out| ctl.nodes(out)));
+    insta::assert_snapshot!("list", text(|out| ctl.list(Some("robot"), out)));
+    // A suspended instance deep inside shows as such.
+    let motion = system
+        .handle("robot")
+        .unwrap()
+        .instance("base.motion")
+        .unwrap();
+    motion
+        .command(Command::SetState(Controllable::Suspended))
+        .unwrap();
+    let listed = ctl.components(None).unwrap();
+    let row = listed
+        .iter()
+        .find(|listed| listed.path == "robot.base.motion")
+        .expect("motion listed");
+    assert_eq!(row.monitor.state, State::Suspended);
+    assert_eq!(row.node, "robot");
+}
+
+#[test]
+fn coolctl_set_answers_as_the_control_port_does() {
+    let (node, station) = pair("robot", "station");
+    let system = robot(&node);
+    let ctl = ctl(&station);
+    let mut transcript = String::new();
+    for args in [
+        &["state", "suspended"][..],
+        &["state", "running"],
+        &["max_speed=0.5"],
+        &["odometry=1"],
+        &["no_such_variable=1"],
+        &["period=0ms"],
+        &["quality=3"],
+        &["priority=0"],
+    ] {
+        let args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+        let answer = text(|out| {
+            ctl.set("robot/robot.base.motion", &args, out)
+                .map(|_accepted| ())
+        });
+        transcript.push_str(&format!(
+            "$ coolctl set robot/robot.base.motion {}\n{answer}",
+            args.join(" ")
+        ));
+    }
+    insta::assert_snapshot!("set", transcript);
+    let motion = system
+        .handle("robot")
+        .unwrap()
+        .instance("base.motion")
+        .unwrap();
+    let monitor = motion.snapshot();
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(
+        monitor.variables[1],
+        ("max_speed".to_owned(), coolbot::Value::Float(0.5))
+    );
+    // A component nobody exposes does not answer.
+    let quick = Ctl::new(station.session().clone(), Duration::from_millis(300));
+    match quick.command("robot/robot.nothing", &Command::SetPriority(0)) {
+        Err(CtlError::NoAnswer { target, .. }) => assert_eq!(target, "robot/robot.nothing"),
+        other => panic!("expected no answer, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_malformed_command_is_rejected_with_the_reason() {
+    let (node, station) = pair("robot", "station");
+    let _system = robot(&node);
+    let _ctl = ctl(&station);
+    let replies = station
+        .session()
+        .get("coolbot/robot/logger/c")
+        .payload("{\"SetState\": \"Sleeping\"}")
+        .timeout(PATIENCE)
+        .wait()
+        .unwrap();
+    let reply = replies.recv().expect("an answer");
+    let answer: ControlReply =
+        serde_json::from_slice(&reply.result().unwrap().payload().to_bytes()).unwrap();
+    match answer {
+        ControlReply::Rejected { reason } => {
+            assert!(reason.starts_with("malformed command"), "{reason}")
+        }
+        ControlReply::Accepted => panic!("a malformed command was accepted"),
+    }
+}
+
+#[test]
+fn coolctl_watch_prints_monitoring_events_as_they_happen() {
+    let (node, station) = pair("robot", "station");
+    let _system = robot(&node);
+    let ctl = ctl(&station);
+    let target = "robot/robot.base.motion";
+    let watcher = ctl.watcher(target).unwrap();
+    // The subscription reaches the robot's node after a while: change a variable until
+    // the watcher sees an event.
+    let mut probe = 0u32;
+    assert!(wait_until(PATIENCE, || {
+        probe += 1;
+        let reply = ctl
+            .command(
+                target,
+                &Command::Set("max_speed".into(), coolbot::Value::Float(f64::from(probe))),
+            )
+            .unwrap();
+        assert_eq!(reply, ControlReply::Accepted);
+        watcher.next(Duration::from_millis(200)).unwrap().is_some()
+    }));
+    for command in [
+        Command::Set("max_speed".into(), coolbot::Value::Float(0.25)),
+        Command::SetState(Controllable::Suspended),
+        Command::SetState(Controllable::Running),
+    ] {
+        assert_eq!(
+            ctl.command(target, &command).unwrap(),
+            ControlReply::Accepted
+        );
+    }
+    // Events of one component arrive in order: keep what follows the first 0.25.
+    let mut lines = Vec::new();
+    while !lines
+        .last()
+        .is_some_and(|l: &String| l.ends_with("suspended -> running"))
+    {
+        let line = watcher
+            .next(PATIENCE)
+            .unwrap()
+            .expect("the events of the commands");
+        if !lines.is_empty() || line.ends_with("max_speed = 0.25") {
+            lines.push(line);
+        }
+    }
+    insta::assert_snapshot!("watch", lines.join("\n"));
+}
+
+#[test]
+fn the_coolctl_binary_prints_what_the_library_prints() {
+    let (node, endpoint) = support::node("robot", &[]);
+    let _system = robot(&node);
+    let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
+    let expected = text(|out| ctl(&station).list(Some("robot"), out));
+    let run = |args: &[&str]| {
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_coolctl"))
+            .args(["--connect", &endpoint, "--no-multicast", "--timeout", "5s"])
+            .args(args)
+            .output()
+            .expect("coolctl runs");
+        (
+            output.status.code(),
+            String::from_utf8_lossy(&output.stdout).into_owned(),
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+        )
+    };
+    let (code, stdout, stderr) = run(&["list", "robot"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(stdout, expected);
+    let (code, stdout, _) = run(&["set", "robot/robot.planner", "nothing=1"]);
+    assert_eq!(
+        (code, stdout.as_str()),
+        (Some(1), "rejected: no variable `nothing`\n")
+    );
+    let (code, _, stderr) = run(&["set", "robot", "state", "running"]);
+    assert_eq!(code, Some(2));
+    assert!(stderr.contains("not a component address"), "{stderr}");
+}
+
+#[test]
+fn coolctl_sees_nodes_come_and_go() {
+    let (robot, endpoint) = support::node("robot", &[]);
+    let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    assert!(wait_until(PATIENCE, || ctl
+        .node_names()
+        .is_ok_and(|names| names == ["robot", "station"])));
+    let watcher = ctl.node_watcher().unwrap();
+    let next = |expected: &str| loop {
+        let line = watcher
+            .next(PATIENCE)
+            .unwrap()
+            .unwrap_or_else(|| panic!("no `{expected}` within {PATIENCE:?}"));
+        // Tokens already alive may be announced when the subscription starts.
+        if line == expected {
+            break;
+        }
+        assert!(
+            line.starts_with('+'),
+            "unexpected `{line}` before `{expected}`"
+        );
+    };
+    let (arm, _) = support::node("arm", std::slice::from_ref(&endpoint));
+    next("+ arm");
+    drop(arm);
+    next("- arm");
+    assert_eq!(ctl.node_names().unwrap(), ["robot", "station"]);
+    drop(robot);
+}
+
+/// A reactive component: multiplies each number arriving at `input` by its
+/// controllable `factor` (2 unless set) onto `output`.
+struct Doubler {
+    input: coolbot::port::FifoIn<u64>,
+    output: coolbot::port::DataOut<u64>,
+    factor: u64,
+}
+
+static DOUBLER: Spec = Spec {
+    type_name: "Doubler",
+    doc: "",
+    states: &[StateSpec {
+        name: "doubling",
+        entry: true,
+        exit: false,
+        periodic: None,
+        on: &[coolbot::OnSpec { port: 0, target: 0 }],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[coolbot::InputSpec {
+        name: "input",
+        kind: coolbot::InputKind::Fifo {
+            capacity: 16,
+            policy: coolbot::OverflowPolicy::Reject,
+        },
+        packet: "u64",
+        pull: false,
+    }],
+    outputs: &[coolbot::OutputSpec {
+        name: "output",
+        kind: coolbot::OutputKind::Data,
+        packet: "u64",
+        pull: false,
+    }],
+    variables: &[coolbot::VarSpec {
+        name: "factor",
+        kind: VarKind::Controllable,
+        ty: "u64",
+        doc: "",
+    }],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Automaton for Doubler {
+    fn spec(&self) -> &'static Spec {
+        &DOUBLER
+    }
+    fn start(&mut self, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _: &mut coolbot::Context) {}
+    fn section(
+        &mut self,
+        _: usize,
+        _: coolbot::Section,
+        _: &mut coolbot::Context,
+    ) -> Result<(), coolbot::Fault> {
+        for number in self.input.drain() {
+            self.output.send(number * self.factor);
+        }
+        Ok(())
+    }
+    fn choose(&mut self, _: usize, _: &mut coolbot::Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _: usize, _: &str, _: &mut coolbot::Context) {}
+    fn answer(&mut self, _: usize, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _: &coolbot::Value) -> Result<(), String> {
+        Err("no configuration".to_owned())
+    }
+    fn set(&mut self, _: usize, value: &coolbot::Value) -> Result<(), String> {
+        self.factor = u64::try_from(value).map_err(|error| error.to_string())?;
+        Ok(())
+    }
+    fn get(&self, _: usize) -> coolbot::Value {
+        coolbot::Value::from(self.factor)
+    }
+}
+
+fn doubler(name: &str) -> coolbot::Component {
+    let input = coolbot::port::FifoIn::new(16, coolbot::OverflowPolicy::Reject);
+    let output = coolbot::port::DataOut::new();
+    let ports = PortSet::new().input(&input).output(&output);
+    let doubler = Doubler {
+        input,
+        output,
+        factor: 2,
+    };
+    coolbot::Component::new(name, Box::new(doubler), ports)
+}
+
+#[test]
+fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
+    use coolbot::port::{DataOut, FifoIn};
+    use coolbot::{InputKind, OutputKind, OverflowPolicy};
+    use coolbot_zenoh::Error;
+    use coolbot_zenoh::agent::{Agent, Instantiate, Registry, RemoteInput, Wire, instantiate};
+
+    let (robot, workstation) = pair("robot", "workstation");
+    let workstation = std::sync::Arc::new(workstation);
+    let mut registry = Registry::new();
+    registry
+        .register("Doubler", doubler)
+        .port::<u64>("input")
+        .port::<u64>("output");
+    let _agent = Agent::start(std::sync::Arc::clone(&workstation), registry).unwrap();
+
+    // The robot: numbers out to the remote doubler, doubled numbers back into a fifo.
+    let numbers = DataOut::<u64>::new();
+    let doubled = FifoIn::<u64>::new(64, OverflowPolicy::Reject);
+    let queue = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let mut system = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![coolbot::OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+    );
+    let sink = spec(
+        "Sink",
+        vec![coolbot::InputSpec {
+            name: "input",
+            kind: queue,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+        vec![],
+    );
+    system
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&numbers),
+        ))
+        .unwrap();
+    system
+        .add(Shell::component(
+            "sink",
+            sink,
+            PortSet::new().input(&doubled),
+        ))
+        .unwrap();
+    system
+        .add(
+            robot
+                .outlet::<u64>("to_doubler", "test/agent/in", queue)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    system
+        .add(
+            robot
+                .inlet::<u64>("from_doubler", "test/agent/out", OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    system.connect("source.out", "to_doubler.input").unwrap();
+    system.connect("from_doubler.output", "sink.input").unwrap();
+    system.run_all().unwrap();
+
+    let request = Instantiate {
+        type_name: "Doubler".to_owned(),
+        name: "doubler".to_owned(),
+        wires: vec![
+            Wire::Input {
+                port: "input".to_owned(),
+                key: "test/agent/in".to_owned(),
+            },
+            Wire::Output {
+                port: "output".to_owned(),
+                key: "test/agent/out".to_owned(),
+                to: RemoteInput::Fifo { capacity: 64 },
+            },
+        ],
+        configuration: None,
+        variables: Vec::new(),
+    };
+    // The agent's queryable reaches the robot's session after a while.
+    assert!(wait_until(PATIENCE, || {
+        match instantiate(&robot, "workstation", &request, Duration::from_secs(5)) {
+            Ok(()) => true,
+            Err(Error::Remote { reason, .. }) if reason.starts_with("no agent answered") => false,
+            Err(error) => panic!("instantiation refused: {error}"),
+        }
+    }));
+    support::wait_subscribed(&robot, "test/agent/in");
+    support::wait_subscribed(&workstation, "test/agent/out");
+    for number in 1..=3 {
+        numbers.send(number);
+    }
+    let received: Vec<u64> = (0..3)
+        .map(|_| doubled.recv_timeout(PATIENCE).expect("a doubled number"))
+        .collect();
+    assert_eq!(received, [2, 4, 6]);
+
+    // The remote instance and its bridges are exposed on the workstation's node.
+    let ctl = Ctl::new(robot.session().clone(), Duration::from_secs(5));
+    let mut rows = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        rows = ctl
+            .components(Some("workstation"))
+            .unwrap()
+            .into_iter()
+            .map(|listed| (listed.path, listed.monitor.state))
+            .collect();
+        rows.len() == 3
+    }));
+    assert_eq!(
+        rows,
+        [
+            ("doubler".to_owned(), State::Running),
+            ("doubler-input".to_owned(), State::Running),
+            ("doubler-output".to_owned(), State::Running),
+        ]
+    );
+
+    // Refusals say why.
+    let refused =
+        |request: &Instantiate| match instantiate(&robot, "workstation", request, PATIENCE) {
+            Err(Error::Remote { reason, .. }) => reason,
+            other => panic!("expected a refusal, got {other:?}"),
+        };
+    assert!(refused(&request).contains("not a free instance name"));
+    let unknown = Instantiate {
+        type_name: "Tripler".to_owned(),
+        ..request.clone()
+    };
+    assert!(refused(&unknown).contains("no component type `Tripler`"));
+    let bad_port = Instantiate {
+        name: "other".to_owned(),
+        wires: vec![Wire::Input {
+            port: "nothing".to_owned(),
+            key: "test/agent/x".to_owned(),
+        }],
+        ..request.clone()
+    };
+    assert!(refused(&bad_port).contains("has no input port `nothing`"));
+
+    // An instance's overrides are applied before it runs; a refused one fails the
+    // request with the control port's reason.
+    let (tripled, doubled_back) = (
+        DataOut::<u64>::new(),
+        FifoIn::<u64>::new(64, OverflowPolicy::Reject),
+    );
+    let mut second = System::new();
+    second
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&tripled),
+        ))
+        .unwrap();
+    second
+        .add(Shell::component(
+            "sink",
+            sink,
+            PortSet::new().input(&doubled_back),
+        ))
+        .unwrap();
+    second
+        .add(
+            robot
+                .outlet::<u64>("to", "test/agent/in3", queue)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    second
+        .add(
+            robot
+                .inlet::<u64>("from", "test/agent/out3", OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    second.connect("source.out", "to.input").unwrap();
+    second.connect("from.output", "sink.input").unwrap();
+    second.run_all().unwrap();
+    let tripler = Instantiate {
+        name: "tripler".to_owned(),
+        wires: vec![
+            Wire::Input {
+                port: "input".to_owned(),
+                key: "test/agent/in3".to_owned(),
+            },
+            Wire::Output {
+                port: "output".to_owned(),
+                key: "test/agent/out3".to_owned(),
+                to: RemoteInput::Fifo { capacity: 64 },
+            },
+        ],
+        variables: vec![("factor".to_owned(), coolbot::Value::UInt(3))],
+        ..request.clone()
+    };
+    instantiate(&robot, "workstation", &tripler, PATIENCE).expect("a tripler");
+    support::wait_subscribed(&robot, "test/agent/in3");
+    support::wait_subscribed(&workstation, "test/agent/out3");
+    tripled.send(5);
+    assert_eq!(doubled_back.recv_timeout(PATIENCE), Some(15));
+    let bad_override = Instantiate {
+        name: "broken".to_owned(),
+        wires: Vec::new(),
+        variables: vec![("speed".to_owned(), coolbot::Value::UInt(3))],
+        ..request.clone()
+    };
+    assert!(refused(&bad_override).contains("no variable `speed`"));
+}

@@ -1,0 +1,201 @@
+//! What the network tests share: two nodes on loopback with explicit endpoints and
+//! multicast scouting off, hand-written components (ports, variables, pull answers),
+//! and waiting for conditions.
+
+#![allow(
+    dead_code,
+    reason = "each test binary includes this module and uses a different part of it"
+)]
+
+use std::net::TcpListener;
+use std::time::{Duration, Instant};
+
+use coolbot::{
+    Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Section, Spec, StateSpec,
+    TimingSpec, Value, VarKind, VarSpec,
+};
+use coolbot_zenoh::Node;
+use zenoh::Wait;
+
+/// Generous: the machine is shared and may be loaded.
+pub const PATIENCE: Duration = Duration::from_secs(30);
+
+/// A TCP port free on 127.0.0.1 now.
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free loopback port")
+}
+
+/// A node listening on a free loopback port, connecting to `connect`.
+pub fn node(name: &str, connect: &[String]) -> (Node, String) {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let config = coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), connect, false)
+        .expect("config");
+    (Node::open(name, config).expect("open node"), endpoint)
+}
+
+/// Two nodes, the second connected to the first, each seeing the other's token.
+pub fn pair(first: &str, second: &str) -> (Node, Node) {
+    let (a, endpoint) = node(first, &[]);
+    let (b, _) = node(second, &[endpoint]);
+    let sees = |node: &Node, other: &str| {
+        let key = format!("coolbot/{other}");
+        wait_until(PATIENCE, || {
+            let replies = node
+                .session()
+                .liveliness()
+                .get(&key)
+                .timeout(Duration::from_millis(500))
+                .wait()
+                .expect("liveliness query");
+            replies.recv().is_ok()
+        })
+    };
+    assert!(sees(&a, second), "{first} does not see {second}");
+    assert!(sees(&b, first), "{second} does not see {first}");
+    (a, b)
+}
+
+/// Poll `condition` every few milliseconds until it holds or `limit` passes.
+pub fn wait_until(limit: Duration, mut condition: impl FnMut() -> bool) -> bool {
+    let deadline = Instant::now() + limit;
+    loop {
+        if condition() {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Wait until `node`'s session knows a subscriber on `key` (a bridge's inlet).
+pub fn wait_subscribed(node: &Node, key: &str) {
+    let publisher = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("probe publisher");
+    assert!(
+        wait_until(PATIENCE, || publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())),
+        "no subscriber on `{key}`"
+    );
+}
+
+/// A spec with the given ports and variables and one state that does nothing.
+pub fn spec(
+    type_name: &'static str,
+    inputs: Vec<InputSpec>,
+    outputs: Vec<OutputSpec>,
+    variables: Vec<VarSpec>,
+) -> &'static Spec {
+    Box::leak(Box::new(Spec {
+        type_name,
+        doc: "",
+        states: &[StateSpec {
+            name: "idle",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        }],
+        initial: 0,
+        inputs: Box::leak(inputs.into_boxed_slice()),
+        outputs: Box::leak(outputs.into_boxed_slice()),
+        variables: Box::leak(variables.into_boxed_slice()),
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    }))
+}
+
+/// An observable or controllable variable's spec.
+pub fn var(name: &'static str, kind: VarKind) -> VarSpec {
+    VarSpec {
+        name,
+        kind,
+        ty: "f64",
+        doc: "",
+    }
+}
+
+/// What a pull answer does (on the component's thread), by output index.
+pub type Answer = Box<dyn FnMut(usize) + Send>;
+
+/// A component with ports the test drives from outside, variables it keeps, and an
+/// optional pull answer.
+pub struct Shell {
+    spec: &'static Spec,
+    values: Vec<Value>,
+    answer: Option<Answer>,
+}
+
+impl Shell {
+    /// A component named `name` of shape `spec` with `ports`.
+    pub fn component(name: &str, spec: &'static Spec, ports: PortSet) -> Component {
+        Shell::with_answer(name, spec, ports, None)
+    }
+
+    /// The same, answering pull requests with `answer`.
+    pub fn with_answer(
+        name: &str,
+        spec: &'static Spec,
+        ports: PortSet,
+        answer: Option<Answer>,
+    ) -> Component {
+        let values = spec.variables.iter().map(|_| Value::Float(0.0)).collect();
+        Component::new(
+            name,
+            Box::new(Shell {
+                spec,
+                values,
+                answer,
+            }),
+            ports,
+        )
+    }
+}
+
+impl Automaton for Shell {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(&mut self, _: usize, _: Section, _: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
+    fn answer(&mut self, output: usize, _: &mut Context) -> Result<(), Fault> {
+        if let Some(answer) = &mut self.answer {
+            answer(output);
+        }
+        Ok(())
+    }
+    fn configure(&mut self, _: &Value) -> Result<(), String> {
+        Err("no configuration".to_owned())
+    }
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        if self.spec.variables[variable].kind != VarKind::Controllable {
+            return Err("not controllable".to_owned());
+        }
+        let number = f64::try_from(value).map_err(|error| error.to_string())?;
+        self.values[variable] = Value::Float(number);
+        Ok(())
+    }
+    fn get(&self, variable: usize) -> Value {
+        self.values[variable].clone()
+    }
+}
