@@ -43,11 +43,15 @@ const CPU_TIME_REFRESH: Duration = Duration::from_millis(10);
 
 /// How long a thread waiting for input only spins before it yields and parks: a packet
 /// that comes back within this time (a ping-pong, a pipeline on free cores) costs no
-/// futex wake-up. A little less than a crossbeam-channel `recv` spins (127 spin hints,
-/// 3.3 us on the development machine), and the sources are checked after every hint,
-/// not after batches of up to 64: when both threads share one core, the spin only
-/// delays the peer, which runs once this thread yields.
-const SPIN: Duration = Duration::from_micros(2);
+/// futex wake-up. A little more than a crossbeam-channel `recv` spins (127 spin hints,
+/// 3.3 us on the development machine): with 2 us, a peer delayed 2-3.3 us (an
+/// interrupt, a timer tick) made a component park where a bare thread on a channel
+/// rode it out, and the ping-pong p99 fell into the park regime (4 us against 0.15 us)
+/// in 2 of 18 rows; with 4 us in none (`benches/latency.rs`, A/B under the same
+/// conditions). The sources are checked after every hint, not after batches of up to
+/// 64: when both threads share one core, the spin only delays the peer, which runs
+/// once this thread yields.
+const SPIN: Duration = Duration::from_micros(4);
 
 /// Spin hints (about 0.8 us on the development machine) a component waits before its
 /// next turn when work was already waiting as its last turn ended: it is behind a
