@@ -639,15 +639,15 @@ mod tests {
             from: Duration::ZERO,
             until: Duration::ZERO,
         };
-        let platform = Platform::new(World::example(), World::example_start(), None)
-            .with_overload(Some(over));
+        let platform =
+            Platform::new(World::example(), World::example_start(), None).with_overload(Some(over));
         assert!(!platform.overloaded());
         let now = Overload {
             from: Duration::ZERO,
             until: Duration::from_secs(3600),
         };
-        let platform = Platform::new(World::example(), World::example_start(), None)
-            .with_overload(Some(now));
+        let platform =
+            Platform::new(World::example(), World::example_start(), None).with_overload(Some(now));
         assert!(platform.overloaded());
     }
 }

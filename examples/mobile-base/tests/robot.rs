@@ -461,7 +461,11 @@ fn a_processor_shortage_degrades_the_range_server_and_it_is_promoted_back_after(
 
     // The description gives the range server degraded modes: adaptation is on, at
     // nominal (50 ms, full scans) to begin with.
-    let start = wait("nominal at first", &|m| scans(m) > 0, Duration::from_secs(10));
+    let start = wait(
+        "nominal at first",
+        &|m| scans(m) > 0,
+        Duration::from_secs(10),
+    );
     assert!(start.adaptation.enabled, "{:?}", start.adaptation);
     assert_eq!(start.adaptation.max_level, 4, "3 period steps, then `half`");
     assert!(nominal(&start), "{:?}", start.adaptation);
