@@ -150,6 +150,7 @@ fn members(count: usize) -> Vec<Member> {
             priority: (i % 7) as i32,
             level: (i % 3) as u32,
             max_level: 4,
+            min_level: 0,
             pressure: if i == count / 2 {
                 Pressure::Violation
             } else {

@@ -37,6 +37,18 @@ use crate::spec::TimingSpec;
 /// How many adaptation steps [`AdaptStatus::history`] keeps.
 pub const ADAPTATION_HISTORY: usize = 32;
 
+/// The most period steps a ladder has ([`AdaptConfig::period_steps`] is clamped to it).
+pub const MAX_PERIOD_STEPS: u32 = 1000;
+
+/// The widest violation window ([`AdaptConfig::window`] is clamped to it).
+pub const MAX_WINDOW: u32 = 1000;
+
+/// The largest spare-run multiplier ([`AdaptConfig::max_backoff`] is clamped to it).
+pub const MAX_BACKOFF: u32 = 1024;
+
+/// The most periods of [`AdaptConfig::hold_periods`] and [`AdaptConfig::spare_periods`].
+pub const MAX_PERIODS: u32 = 100_000;
+
 /// The adaptation settings of a component ([`crate::Component::with_adaptation`]) or
 /// of a compound's supervisor ([`crate::CompoundBuilder::adaptation`]). Counts are in
 /// periods of the component concerned.
@@ -101,6 +113,33 @@ impl AdaptConfig {
         AdaptConfig {
             enabled: Some(true),
             ..AdaptConfig::default()
+        }
+    }
+
+    /// The settings made safe to use: every count at least 1, `violations` at most
+    /// `window` (more could never be counted: detection would be off without a word),
+    /// `window` at most [`MAX_WINDOW`], `period_steps` at most [`MAX_PERIOD_STEPS`],
+    /// `max_backoff` at most [`MAX_BACKOFF`], `spare_ratio` a finite number in
+    /// `0.0..=1.0` (0 when not a number), `hold_periods` and `spare_periods` at most
+    /// [`MAX_PERIODS`]. The runtime applies this to every configuration it is given
+    /// (a component's and a compound's), so an odd value never panics nor loops long.
+    #[must_use]
+    pub fn sanitized(self) -> AdaptConfig {
+        let window = self.window.clamp(1, MAX_WINDOW);
+        AdaptConfig {
+            violations: self.violations.clamp(1, window),
+            window,
+            spare_ratio: if self.spare_ratio.is_nan() {
+                0.0
+            } else {
+                self.spare_ratio.clamp(0.0, 1.0)
+            },
+            spare_periods: self.spare_periods.clamp(1, MAX_PERIODS),
+            hold_periods: self.hold_periods.min(MAX_PERIODS),
+            period_steps: self.period_steps.clamp(1, MAX_PERIOD_STEPS),
+            max_backoff: self.max_backoff.clamp(1, MAX_BACKOFF),
+            width: self.width.max(1),
+            ..self
         }
     }
 
@@ -221,6 +260,16 @@ pub struct AdaptStatus {
     /// Compounds: the homogeneity interval's lower end (no instance is promoted below
     /// it until every instance reached it).
     pub floor: u32,
+    /// An atomic component: the lowest level adaptation promotes it to, where the
+    /// period and quality set by other means stand ([`Floor`], [`Ladder::toward`]; 0
+    /// when nothing set them). 0 for a compound.
+    #[serde(default)]
+    pub min_level: u32,
+    /// The periods a supervisor waits after a time violation before it promotes (the
+    /// detector's `hold_periods + window + 1`): a compound settles for the longest of
+    /// its instances' (0 for a compound itself).
+    #[serde(default)]
+    pub settle_periods: u32,
     /// The current verdict.
     pub pressure: Pressure,
     /// Section time over period, smoothed (an atomic component's demand; 0 for a
@@ -238,6 +287,17 @@ pub struct AdaptStatus {
 }
 
 /// A component's degradation levels: period steps first, then quality steps.
+///
+/// The ladder has two axes, the period (its steps, index 0 to
+/// [`Ladder::period_steps`]) and the quality (0 to `qualities - 1`), and a component's
+/// level is the sum of its period index and its quality: level 0 is nominal, the top
+/// is the longest period at the lowest quality. Adaptation walks the ladder along
+/// [`Ladder::setting`] (period steps first, then quality), but a period or quality set
+/// by other means (a command, a `degrade` plan step, the component's own `set_period`)
+/// can put a component off that path, say at the nominal period with a lower quality.
+/// [`Ladder::level_of`] gives such a point its level and [`Ladder::toward`] moves from
+/// it one axis at a time: a degradation stretches the period first, a promotion raises
+/// the quality first and never lengthens the period.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ladder {
     /// The nominal period (`None`: no period, no frequency steps).
@@ -250,25 +310,55 @@ pub struct Ladder {
     pub qualities: u32,
 }
 
+/// A point on a ladder's two axes: what adaptation applies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Setting {
+    /// The period (`None` for a component without one).
+    pub period: Option<Duration>,
+    /// The quality level (0 is the best).
+    pub quality: usize,
+}
+
+/// The lowest setting promotions may reach: the period and quality set by other means
+/// (a command, a `degrade` plan step, the component's own `set_period`), which
+/// adaptation does not undo (`docs/runtime.md`, "Adaptation").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Floor {
+    /// Promotions do not shorten the period below this.
+    pub period: Option<Duration>,
+    /// Promotions do not raise the quality above this one (a lower index is better).
+    pub quality: usize,
+}
+
 impl Ladder {
     /// The ladder of a timing block, with `steps` period steps when it has a period
-    /// interval.
+    /// interval (at least 1, at most [`MAX_PERIOD_STEPS`], and at most one per
+    /// nanosecond of the interval, so that every step is a longer period).
     pub fn new(timing: &TimingSpec, steps: u32) -> Ladder {
-        let interval = matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p);
+        let span = match (timing.period, timing.max_period) {
+            (Some(p), Some(m)) if m > p => Some(m - p),
+            _ => None,
+        };
+        let steps = span.map_or(0, |span| {
+            let nanos = u32::try_from(span.as_nanos()).unwrap_or(u32::MAX);
+            steps.clamp(1, MAX_PERIOD_STEPS).min(nanos)
+        });
         Ladder {
             period: timing.period,
-            max_period: if interval { timing.max_period } else { None },
-            period_steps: if interval { steps.max(1) } else { 0 },
+            max_period: span.and(timing.max_period),
+            period_steps: steps,
             qualities: u32::try_from(timing.qualities.len().max(1)).unwrap_or(u32::MAX),
         }
     }
 
     /// The highest level.
     pub fn max_level(&self) -> u32 {
-        self.period_steps + self.qualities - 1
+        self.period_steps
+            .saturating_add(self.qualities.saturating_sub(1))
     }
 
-    /// The period and quality of `level` (clamped to the ladder).
+    /// The period and quality of `level` on the nominal path (clamped to the ladder):
+    /// the period steps first, then the quality steps at the longest period.
     pub fn setting(&self, level: u32) -> (Option<Duration>, usize) {
         let level = level.min(self.max_level());
         if level <= self.period_steps {
@@ -281,6 +371,8 @@ impl Ladder {
         }
     }
 
+    /// The period of step `step` (`nominal + span * step / steps`, in whole
+    /// nanoseconds: every step is strictly longer than the one before).
     fn period_at(&self, step: u32) -> Option<Duration> {
         let (Some(period), Some(max)) = (self.period, self.max_period) else {
             return self.period;
@@ -288,22 +380,109 @@ impl Ladder {
         if self.period_steps == 0 {
             return Some(period);
         }
-        let span = max.saturating_sub(period);
-        Some(period + span.mul_f64(f64::from(step) / f64::from(self.period_steps)))
+        let span = (max - period).as_nanos();
+        let offset = span * u128::from(step.min(self.period_steps)) / u128::from(self.period_steps);
+        Some(period.saturating_add(Duration::from_nanos(
+            u64::try_from(offset).unwrap_or(u64::MAX),
+        )))
     }
 
-    /// The level a period and quality set by other means (a command, a `degrade` plan,
-    /// the component's own `set_period`) stand at: the quality's level at the longest
-    /// period, else the first period step at least as long as `period`.
-    pub fn level_of(&self, period: Option<Duration>, quality: usize) -> u32 {
-        let quality = u32::try_from(quality).unwrap_or(u32::MAX);
-        if quality > 0 {
-            return (self.period_steps + quality).min(self.max_level());
+    /// The period index of `period`: the first step at least as long (0 for a period
+    /// at or below nominal, `period_steps` at or beyond the longest). Computed
+    /// directly, not searched.
+    fn period_index(&self, period: Option<Duration>) -> u32 {
+        let (Some(period), Some(nominal), Some(max)) = (period, self.period, self.max_period)
+        else {
+            return 0;
+        };
+        if self.period_steps == 0 || period <= nominal {
+            return 0;
         }
-        let Some(period) = period else { return 0 };
-        (0..=self.period_steps)
-            .find(|step| self.period_at(*step).is_none_or(|p| p >= period))
-            .unwrap_or(self.period_steps)
+        if period >= max {
+            return self.period_steps;
+        }
+        // The least k with floor(span * k / steps) >= offset, that is span * k >=
+        // offset * steps (offset is whole nanoseconds).
+        let span = (max - nominal).as_nanos();
+        let offset = (period - nominal).as_nanos();
+        let k = (offset * u128::from(self.period_steps)).div_ceil(span);
+        u32::try_from(k).unwrap_or(u32::MAX).min(self.period_steps)
+    }
+
+    /// The level of a period and quality, wherever they came from: the period's index
+    /// (the first step at least as long) plus the quality (clamped to the ladder).
+    pub fn level_of(&self, period: Option<Duration>, quality: usize) -> u32 {
+        let quality = u32::try_from(quality)
+            .unwrap_or(u32::MAX)
+            .min(self.qualities.saturating_sub(1));
+        self.period_index(period).saturating_add(quality)
+    }
+
+    /// The level of the lowest setting `floor` allows.
+    pub fn floor_level(&self, floor: Floor) -> u32 {
+        self.level_of(floor.period, floor.quality)
+    }
+
+    /// Move from `now` towards level `target`, one axis at a time, and never past
+    /// `floor` on the way down:
+    ///
+    /// - a degradation stretches the period first (to the step of the target level,
+    ///   never shorter than it is), then lowers the quality;
+    /// - a promotion raises the quality first (not above `floor.quality`), then
+    ///   shortens the period step by step (never longer than it is, never shorter
+    ///   than `floor.period`).
+    ///
+    /// The result's level ([`Ladder::level_of`]) is `target` clamped to the ladder,
+    /// or the floor's level when the floor stops a promotion. From a point on the
+    /// nominal path the result is [`Ladder::setting`]`(target)`.
+    pub fn toward(&self, now: Setting, target: u32, floor: Floor) -> Setting {
+        let target = target.min(self.max_level());
+        let top_quality = self.qualities.saturating_sub(1) as usize;
+        let quality = now.quality.min(top_quality);
+        let index = self.period_index(now.period);
+        let level = index.saturating_add(quality as u32);
+        if target > level {
+            let index_to = index.saturating_add(target - level).min(self.period_steps);
+            let stretch = self.period_at(index_to);
+            let period = match (now.period, stretch) {
+                (Some(now), Some(step)) if index_to > 0 => Some(now.max(step)),
+                (None, step) if index_to > 0 => step,
+                (now, _) => now,
+            };
+            let left = (target - level) - (index_to - index);
+            Setting {
+                period,
+                quality: quality.saturating_add(left as usize).min(top_quality),
+            }
+        } else if target < level {
+            let down = level - target;
+            let floor_quality = floor.quality.min(top_quality);
+            let raise = (quality.saturating_sub(floor_quality) as u32).min(down);
+            let left = down - raise;
+            let floor_index = self.period_index(floor.period);
+            let index_to = index.saturating_sub(left).max(floor_index.min(index));
+            let period = if index_to < index {
+                let step = self.period_at(index_to);
+                match (now.period, step) {
+                    (Some(now), Some(step)) => {
+                        let step = floor.period.map_or(step, |f| step.max(f));
+                        Some(now.min(step))
+                    }
+                    (now, _) => now,
+                }
+            } else {
+                now.period
+            };
+            Setting {
+                period,
+                quality: quality - raise as usize,
+            }
+        } else {
+            Setting {
+                period: now.period,
+                quality,
+            }
+        }
     }
 }
 
@@ -338,7 +517,7 @@ pub(crate) struct Detector {
 impl Detector {
     pub(crate) fn new(config: AdaptConfig) -> Detector {
         Detector {
-            config,
+            config: config.sanitized(),
             recent: VecDeque::new(),
             spare_run: 0,
             hold: 0,
@@ -392,7 +571,10 @@ impl Detector {
         let verdict = if violations >= self.config.violations.max(1) as usize {
             if self.probation > 0 {
                 // A promotion that did not hold: wait longer before the next one.
-                self.backoff = (self.backoff * 2).min(self.config.max_backoff.max(1));
+                self.backoff = self
+                    .backoff
+                    .saturating_mul(2)
+                    .min(self.config.max_backoff.max(1));
                 self.probation = 0;
             }
             Pressure::Violation
@@ -434,6 +616,10 @@ pub struct Member {
     pub level: u32,
     /// Its highest level (0: it cannot be degraded).
     pub max_level: u32,
+    /// The lowest level it may be promoted to: that of the period and quality set on
+    /// it by other means (a command to the instance, its `degrade` plan step, its own
+    /// `set_period`), which the supervisor does not undo. 0 when nothing set them.
+    pub min_level: u32,
     /// Its verdict.
     pub pressure: Pressure,
     /// Its demand: section time over period.
@@ -486,7 +672,7 @@ pub enum Decision {
     /// Promote this member one level.
     Promote(usize),
     /// This member is above the cap (the cap was lowered from above): bring it to the
-    /// cap.
+    /// cap, or to its [`Member::min_level`] when that is higher.
     Clamp(usize),
     /// Lower the floor by one (top level; the cap follows at `floor + width`).
     LowerFloor,
@@ -599,14 +785,58 @@ fn pick(
 ///    (`selector`); when none is above the floor and one with spare time is degraded
 ///    (or all are nominal under a granted cap), the top supervisor lowers the floor, a
 ///    nested one reports spare time.
+///
+/// A member's [`Member::min_level`] (what was set on it by other means) is kept: it is
+/// neither clamped nor promoted below it, and counts as at the floor when there.
+///
+/// A selector's answer that is not one of the candidates is ignored (the default
+/// choice is taken): [`decide_explained`] says so.
 pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> Decision {
+    decide_explained(members, levels, selector).0
+}
+
+/// [`decide`], with a note when the selector answered outside the candidates (its
+/// answer was ignored and the default choice taken), for the supervisor to publish.
+pub fn decide_explained(
+    members: &[Member],
+    levels: Levels,
+    selector: &dyn Selector,
+) -> (Decision, Option<String>) {
+    let mut note = None;
+    let decision = decide_inner(members, levels, selector, &mut note);
+    (decision, note)
+}
+
+/// `answer` if it is one of `candidates`, else `fallback` with a note.
+fn checked(
+    answer: usize,
+    candidates: &[usize],
+    what: &str,
+    fallback: impl FnOnce() -> usize,
+    note: &mut Option<String>,
+) -> usize {
+    if candidates.contains(&answer) {
+        return answer;
+    }
+    *note = Some(format!(
+        "the selector chose {answer} to {what}, not one of the candidates {candidates:?}: ignored, the default choice taken"
+    ));
+    fallback()
+}
+
+fn decide_inner(
+    members: &[Member],
+    levels: Levels,
+    selector: &dyn Selector,
+    note: &mut Option<String>,
+) -> Decision {
     let active: Vec<usize> = (0..members.len())
         .filter(|i| !members[*i].suspended)
         .collect();
     let above_cap: Vec<usize> = active
         .iter()
         .copied()
-        .filter(|i| members[*i].level > levels.cap)
+        .filter(|i| members[*i].level > levels.cap.max(members[*i].min_level))
         .collect();
     if let Some(&first) = above_cap.first() {
         let mut best = first;
@@ -629,7 +859,15 @@ pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> De
             .filter(|i| members[*i].level < levels.cap.min(members[*i].max_level))
             .collect();
         if !eligible.is_empty() {
-            return Decision::Degrade(selector.degrade(members, &eligible));
+            let answer = selector.degrade(members, &eligible);
+            let chosen = checked(
+                answer,
+                &eligible,
+                "degrade",
+                || ProtectPriority.degrade(members, &eligible),
+                note,
+            );
+            return Decision::Degrade(chosen);
         }
         if !levels.top {
             return Decision::NotifyHigher;
@@ -665,14 +903,28 @@ pub fn decide(members: &[Member], levels: Levels, selector: &dyn Selector) -> De
     let promotable: Vec<usize> = active
         .iter()
         .copied()
-        .filter(|i| members[*i].level > levels.floor && spare(i))
+        .filter(|i| members[*i].level > levels.floor.max(members[*i].min_level) && spare(i))
         .collect();
     if !promotable.is_empty() {
-        return Decision::Promote(selector.promote(members, &promotable));
+        let answer = selector.promote(members, &promotable);
+        let chosen = checked(
+            answer,
+            &promotable,
+            "promote",
+            || ProtectPriority.promote(members, &promotable),
+            note,
+        );
+        return Decision::Promote(chosen);
     }
-    let none_above = active.iter().all(|i| members[*i].level <= levels.floor);
-    let degraded_spare = active.iter().any(|i| members[*i].level > 0 && spare(i));
-    let all_nominal = active.iter().all(|i| members[*i].level == 0);
+    let none_above = active
+        .iter()
+        .all(|i| members[*i].level <= levels.floor.max(members[*i].min_level));
+    let degraded_spare = active
+        .iter()
+        .any(|i| members[*i].level > members[*i].min_level && spare(i));
+    let all_nominal = active
+        .iter()
+        .all(|i| members[*i].level <= members[*i].min_level);
     if levels.top {
         if none_above && levels.floor > 0 && degraded_spare {
             return Decision::LowerFloor;
@@ -719,7 +971,10 @@ mod tests {
         assert_eq!(ladder.level_of(Some(MS(10)), 0), 0);
         assert_eq!(ladder.level_of(Some(MS(15)), 0), 1);
         assert_eq!(ladder.level_of(Some(MS(100)), 0), 3);
-        assert_eq!(ladder.level_of(Some(MS(10)), 1), 4);
+        // Off the nominal path: the period's index plus the quality.
+        assert_eq!(ladder.level_of(Some(MS(10)), 1), 1);
+        assert_eq!(ladder.level_of(Some(MS(20)), 2), 3);
+        assert_eq!(ladder.level_of(Some(MS(40)), 1), 4);
         // No interval: quality steps only; nothing at all: level 0 only.
         let quality_only = Ladder::new(
             &TimingSpec {
@@ -731,6 +986,172 @@ mod tests {
         assert_eq!(quality_only.max_level(), 1);
         assert_eq!(quality_only.setting(1), (Some(MS(10)), 1));
         assert_eq!(Ladder::new(&TimingSpec::NONE, 3).max_level(), 0);
+    }
+
+    fn at(period: u64, quality: usize) -> Setting {
+        Setting {
+            period: Some(MS(period)),
+            quality,
+        }
+    }
+
+    #[test]
+    fn from_off_the_path_a_promotion_raises_the_quality_first_and_never_lengthens_the_period() {
+        let ladder = Ladder::new(&timing(10, 40, &["full", "reduced", "minimal"]), 3);
+        let free = Floor::default();
+        // Nominal period at quality 1 (a `degrade` plan step, `SetQuality(1)`): level 1,
+        // promoted to nominal by the quality alone (the nominal path would say 40 ms).
+        assert_eq!(ladder.toward(at(10, 1), 0, free), at(10, 0));
+        // Every promotion from every point: one level down, the period never longer,
+        // the quality changed only while above 0 and the period only after.
+        for period in [5, 10, 12, 20, 25, 30, 35, 40, 100] {
+            for quality in 0..3 {
+                let now = at(period, quality);
+                let level = ladder.level_of(now.period, now.quality);
+                if level == 0 {
+                    continue;
+                }
+                let to = ladder.toward(now, level - 1, free);
+                assert_eq!(
+                    ladder.level_of(to.period, to.quality),
+                    level - 1,
+                    "{now:?} -> {to:?}"
+                );
+                assert!(
+                    to.period <= now.period,
+                    "a promotion lengthened: {now:?} -> {to:?}"
+                );
+                assert!(to.quality <= now.quality, "{now:?} -> {to:?}");
+                if quality > 0 {
+                    assert_eq!(
+                        to,
+                        Setting {
+                            quality: quality - 1,
+                            ..now
+                        },
+                        "quality first"
+                    );
+                }
+                // And a degradation: the period first while it can stretch.
+                if level < ladder.max_level() {
+                    let to = ladder.toward(now, level + 1, free);
+                    assert_eq!(
+                        ladder.level_of(to.period, to.quality),
+                        level + 1,
+                        "{now:?} -> {to:?}"
+                    );
+                    assert!(to.period >= now.period, "{now:?} -> {to:?}");
+                    if ladder.period_index(now.period) < ladder.period_steps {
+                        assert_eq!(to.quality, now.quality, "period first: {now:?} -> {to:?}");
+                    } else {
+                        // (35 ms is at the last step's index: stretched to 40 ms,
+                        // then the quality.)
+                        assert_eq!(to.period, now.period.max(Some(MS(40))), "{now:?} -> {to:?}");
+                    }
+                }
+            }
+        }
+        // At 10 ms and quality 1, a degradation stretches the period (the nominal path
+        // would say quality 2 at 40 ms, or exhausted).
+        assert_eq!(ladder.toward(at(10, 1), 2, free), at(20, 1));
+        // On the nominal path, `toward` walks it.
+        for level in 0..=ladder.max_level() {
+            let (period, quality) = ladder.setting(level);
+            for target in 0..=ladder.max_level() {
+                let (p, q) = ladder.setting(target);
+                assert_eq!(
+                    ladder.toward(Setting { period, quality }, target, free),
+                    Setting {
+                        period: p,
+                        quality: q
+                    },
+                    "{level} -> {target}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn promotions_stop_at_what_was_set_by_other_means() {
+        let ladder = Ladder::new(&timing(10, 40, &["full", "reduced"]), 3);
+        let pinned = Floor {
+            period: None,
+            quality: 1,
+        };
+        assert_eq!(ladder.floor_level(pinned), 1);
+        // Degraded from there to (40 ms, 1), then promoted: the period comes back,
+        // the quality stays.
+        assert_eq!(ladder.toward(at(40, 1), 0, pinned), at(10, 1));
+        let slow = Floor {
+            period: Some(MS(35)),
+            quality: 0,
+        };
+        assert_eq!(ladder.floor_level(slow), 3);
+        assert_eq!(ladder.toward(at(40, 1), 0, slow), at(40, 0));
+        assert_eq!(ladder.toward(at(35, 1), 0, slow), at(35, 0));
+    }
+
+    #[test]
+    fn huge_period_steps_are_clamped_and_levels_are_computed_not_searched() {
+        let t = timing(10, 40, &["full", "reduced"]);
+        let ladder = Ladder::new(&t, u32::MAX);
+        assert_eq!(ladder.period_steps, MAX_PERIOD_STEPS);
+        assert_eq!(ladder.max_level(), MAX_PERIOD_STEPS + 1);
+        assert_eq!(ladder.level_of(Some(MS(40)), 1), ladder.max_level());
+        assert_eq!(ladder.level_of(Some(MS(25)), 0), MAX_PERIOD_STEPS / 2);
+        // An interval of 3 ns has at most 3 steps, each a longer period.
+        let tiny = TimingSpec {
+            max_period: Some(MS(10) + Duration::from_nanos(3)),
+            ..t
+        };
+        let ladder = Ladder::new(&tiny, 100);
+        assert_eq!(ladder.period_steps, 3);
+        for level in 0..=3 {
+            let (period, quality) = ladder.setting(level);
+            assert_eq!(ladder.level_of(period, quality), level);
+        }
+        // Every quality count and step count: no overflow.
+        let ladder = Ladder {
+            period: Some(MS(10)),
+            max_period: Some(MS(40)),
+            period_steps: u32::MAX,
+            qualities: u32::MAX,
+        };
+        assert_eq!(ladder.max_level(), u32::MAX);
+        let _ = ladder.level_of(Some(Duration::MAX), usize::MAX);
+        let _ = ladder.toward(at(40, usize::MAX), u32::MAX, Floor::default());
+    }
+
+    #[test]
+    fn odd_settings_are_made_safe() {
+        let odd = AdaptConfig {
+            violations: 5,
+            window: 4,
+            spare_ratio: f64::NAN,
+            spare_periods: 0,
+            period_steps: u32::MAX,
+            max_backoff: u32::MAX,
+            width: 0,
+            hold_periods: u32::MAX,
+            ..AdaptConfig::default()
+        }
+        .sanitized();
+        assert_eq!((odd.violations, odd.window), (4, 4));
+        assert_eq!(odd.spare_ratio, 0.0);
+        assert_eq!(odd.spare_periods, 1);
+        assert_eq!(odd.period_steps, MAX_PERIOD_STEPS);
+        assert_eq!(odd.max_backoff, MAX_BACKOFF);
+        assert_eq!(odd.width, 1);
+        assert_eq!(odd.hold_periods, MAX_PERIODS);
+        assert_eq!(AdaptConfig::default().sanitized(), AdaptConfig::default());
+        // More violations than the window holds: detected once the window is full.
+        let mut detector = Detector::new(AdaptConfig {
+            violations: 5,
+            window: 4,
+            hold_periods: 0,
+            ..AdaptConfig::default()
+        });
+        assert_eq!(run(&mut detector, 45, 10, 4), [Pressure::Violation]);
     }
 
     fn run(detector: &mut Detector, elapsed: u64, period: u64, times: usize) -> Vec<Pressure> {

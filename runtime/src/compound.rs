@@ -591,8 +591,10 @@ impl CompoundBuilder {
     /// interval's width and [`AdaptConfig::reconfiguration`] what the top-level
     /// supervisor does when degradation is exhausted; the detection fields are the
     /// instances' own ([`Component::with_adaptation`]).
+    ///
+    /// Odd values are made safe ([`AdaptConfig::sanitized`]).
     pub fn adaptation(mut self, adaptation: AdaptConfig) -> CompoundBuilder {
-        self.adaptation = adaptation;
+        self.adaptation = adaptation.sanitized();
         self
     }
 
@@ -1171,6 +1173,8 @@ impl CompoundBuilder {
             pending: vec![None; self.instances.len()],
             max_level: 0,
             settle_until: None,
+            backoff: 1,
+            resumed_at: None,
         });
         let compound = Compound {
             name: self.name.clone(),
@@ -1312,6 +1316,12 @@ struct Coordinator {
     /// Until when promotion waits: the settling time after the last time violation
     /// seen or degradation decided.
     settle_until: Option<Instant>,
+    /// Reconfiguration: the settling time's multiplier after a suspension (doubled
+    /// when a suspension follows a resume within the settling time, up to
+    /// `max_backoff`; back to 1 after a resume that held).
+    backoff: u32,
+    /// When the last instance suspended by adaptation was resumed.
+    resumed_at: Option<Instant>,
 }
 
 fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -2282,6 +2292,7 @@ impl Compound {
                 priority: monitor.priority,
                 level,
                 max_level: monitor.adaptation.max_level,
+                min_level: monitor.adaptation.min_level,
                 pressure,
                 load: monitor.adaptation.load,
                 cpu_share: monitor.adaptation.cpu_share,
@@ -2322,8 +2333,16 @@ impl Compound {
                 return;
             };
             let now = Instant::now();
+            if let Some(resumed) = coordinator.resumed_at
+                && now.saturating_duration_since(resumed)
+                    > coordinator.settling(&members, &self.view.instances, &indices)
+            {
+                // The last resume held through a settling time: no backoff any more.
+                coordinator.resumed_at = None;
+                coordinator.backoff = 1;
+            }
             if members.iter().any(|m| m.pressure == Pressure::Violation) {
-                coordinator.settle(&members, now);
+                coordinator.settle(&members, &self.view.instances, &indices, now);
             }
             let settled = match coordinator.settle_until {
                 Some(until) if now < until => false,
@@ -2340,7 +2359,16 @@ impl Compound {
                 reconfiguration: coordinator.config.reconfiguration,
                 settled,
             };
-            decision = crate::adapt::decide(&members, levels, &*coordinator.selector);
+            let (decided, note) =
+                crate::adapt::decide_explained(&members, levels, &*coordinator.selector);
+            decision = decided;
+            if let Some(note) = &note {
+                tracing::warn!(compound = %self.name, "adaptation: {note}");
+            }
+            let noted = |detail: String| match &note {
+                Some(note) => format!("{detail} ({note})"),
+                None => detail,
+            };
             if decision != Decision::Exhausted {
                 coordinator.exhausted = false;
             }
@@ -2393,17 +2421,17 @@ impl Compound {
                     let member = &members[m];
                     let (to, action, detail) = match decision {
                         Decision::Degrade(_) => (
-                            member.level + 1,
+                            member.level.saturating_add(1),
                             AdaptAction::Degraded,
-                            format!("time violation at {}", violators()),
+                            noted(format!("time violation at {}", violators())),
                         ),
                         Decision::Promote(_) => (
-                            member.level - 1,
+                            member.level.saturating_sub(1),
                             AdaptAction::Promoted,
-                            "spare time".to_owned(),
+                            noted("spare time".to_owned()),
                         ),
                         _ => (
-                            cap,
+                            cap.max(member.min_level),
                             AdaptAction::Promoted,
                             format!("above the current maximum level {cap}"),
                         ),
@@ -2426,6 +2454,11 @@ impl Compound {
                     let index = indices[m];
                     let suspend = matches!(decision, Decision::Suspend(_));
                     coordinator.suspended[index] = suspend;
+                    if suspend {
+                        coordinator.suspended_now(&members, &self.view.instances, &indices, now);
+                    } else {
+                        coordinator.resumed_at = Some(now);
+                    }
                     let (action, target, detail) = if suspend {
                         (
                             AdaptAction::Suspended,
@@ -2503,18 +2536,82 @@ impl Compound {
 }
 
 impl Coordinator {
-    /// A time violation now: promotion waits for the settling time, long enough for
-    /// a member degraded now to pass its hold-down and fill its detection window:
-    /// `hold_periods + window + 1` of the slowest member's cycles (its period, plus
-    /// its section's overrun while it is late).
-    fn settle(&mut self, members: &[Member], now: Instant) {
+    /// The settling time: `settle_periods` of the slowest member's cycles (its period,
+    /// plus its section's overrun while it is late), where `settle_periods` is the
+    /// longest of the members' own (`hold_periods + window + 1` of their detectors,
+    /// published as [`crate::adapt::AdaptStatus::settle_periods`]) and the
+    /// compound's configuration's, so that a member with a longer hold-down is not
+    /// taken as settled before it can show a verdict; times the reconfiguration
+    /// backoff.
+    fn settling(&self, members: &[Member], monitors: &[Monitor], indices: &[usize]) -> Duration {
         let cycle = members
             .iter()
             .filter_map(|m| Some(m.period?.mul_f64(1.0 + m.load.clamp(0.0, 10.0))))
             .max()
             .unwrap_or(DEFAULT_SUPERVISION_PERIOD);
-        let periods = self.config.hold_periods + self.config.window + 1;
-        self.settle_until = Some(crate::thread::later(now, cycle.saturating_mul(periods)));
+        let periods = settle_periods(
+            &self.config,
+            indices
+                .iter()
+                .filter_map(|i| monitors.get(*i))
+                .map(|m| m.adaptation.settle_periods),
+        );
+        cycle
+            .saturating_mul(periods)
+            .saturating_mul(self.backoff.max(1))
+    }
+
+    /// A time violation now: promotion waits for the settling time, long enough for
+    /// a member degraded now to pass its hold-down and fill its detection window.
+    fn settle(
+        &mut self,
+        members: &[Member],
+        monitors: &[Monitor],
+        indices: &[usize],
+        now: Instant,
+    ) {
+        let until = crate::thread::later(now, self.settling(members, monitors, indices));
+        self.settle_until = Some(self.settle_until.map_or(until, |before| before.max(until)));
+    }
+
+    /// An instance was suspended now (reconfiguration): a suspension that follows a
+    /// resume within the settling time shows the resume was premature, so the next
+    /// resume waits twice as long (up to `max_backoff` times); otherwise the backoff
+    /// starts again. Without this, a load that comes and goes would suspend and resume
+    /// an instance forever at the settling time's pace.
+    fn suspended_now(
+        &mut self,
+        members: &[Member],
+        monitors: &[Monitor],
+        indices: &[usize],
+        now: Instant,
+    ) {
+        let window = self.settling(members, monitors, indices);
+        let premature = self
+            .resumed_at
+            .is_some_and(|resumed| now.saturating_duration_since(resumed) <= window);
+        self.backoff = next_backoff(self.backoff, premature, self.config.max_backoff);
+        self.settle(members, monitors, indices, now);
+    }
+}
+
+/// The periods a supervisor settles for: the longest of its own configuration's
+/// `hold_periods + window + 1` and its members' (`published`).
+fn settle_periods(own: &AdaptConfig, published: impl IntoIterator<Item = u32>) -> u32 {
+    let own = own
+        .hold_periods
+        .saturating_add(own.window)
+        .saturating_add(1);
+    published.into_iter().fold(own, u32::max)
+}
+
+/// The reconfiguration backoff after a suspension: doubled when the suspension
+/// followed a resume too soon (`premature`), up to `max` (at least 1); 1 otherwise.
+fn next_backoff(backoff: u32, premature: bool, max: u32) -> u32 {
+    if premature {
+        backoff.saturating_mul(2).min(max.max(1))
+    } else {
+        1
     }
 }
 
@@ -2549,5 +2646,35 @@ mod tests {
         );
         // No overflow however many restarts were done.
         assert_eq!(budget.delay(usize::MAX), Duration::from_millis(50));
+    }
+
+    #[test]
+    fn a_compound_settles_for_its_slowest_settling_member() {
+        let own = AdaptConfig::default(); // 5 + 4 + 1
+        assert_eq!(settle_periods(&own, []), 10);
+        assert_eq!(settle_periods(&own, [6, 44, 0]), 44);
+        assert_eq!(settle_periods(&own, [6]), 10);
+        let huge = AdaptConfig {
+            hold_periods: u32::MAX,
+            ..own
+        };
+        assert_eq!(settle_periods(&huge, [1]), u32::MAX);
+    }
+
+    #[test]
+    fn a_premature_resume_doubles_the_wait_before_the_next_one() {
+        // Suspended, resumed, suspended again at once: 2, 4, 8, then the maximum.
+        let backoffs: Vec<u32> = (0..5)
+            .scan(1, |backoff, _| {
+                *backoff = next_backoff(*backoff, true, 8);
+                Some(*backoff)
+            })
+            .collect();
+        assert_eq!(backoffs, [2, 4, 8, 8, 8]);
+        // A resume that held: back to 1.
+        assert_eq!(next_backoff(8, false, 8), 1);
+        // No overflow, and a zero maximum still means "no backoff".
+        assert_eq!(next_backoff(u32::MAX, true, u32::MAX), u32::MAX);
+        assert_eq!(next_backoff(4, true, 0), 1);
     }
 }

@@ -138,7 +138,7 @@ pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, Ta
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
-    Rejected, SUPERVISION_HISTORY, Step, Supervision, Timeout,
+    Rejected, SUPERVISION_HISTORY, Step, Subscription, Supervision, Timeout,
 };
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,

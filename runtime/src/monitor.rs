@@ -20,8 +20,9 @@ use crate::table::{Controllable, State};
 use crate::value::Value;
 
 /// How many events an observer's channel holds; events beyond that are dropped for
-/// that observer (and counted in [`Monitor::dropped_events`]). The channel grows as
-/// events wait in it, up to this bound: an observer that keeps up costs little memory.
+/// that observer (counted for all observers in [`Monitor::dropped_events`], and for
+/// each in its own [`Subscription::dropped`]). The channel grows as events wait in it,
+/// up to this bound: an observer that keeps up costs little memory.
 pub const OBSERVER_CAPACITY: usize = 4096;
 
 /// How long [`Handle::command`] waits for the component by default.
@@ -278,10 +279,82 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// The counts of one observer, shared by the publisher and the [`Subscription`].
+#[derive(Debug, Default)]
+struct Counts {
+    /// Events published while it was subscribed (queued or dropped).
+    published: AtomicU64,
+    /// Events dropped because its channel was full.
+    dropped: AtomicU64,
+}
+
+/// One observer: its channel and its counts.
+struct Observer {
+    sender: Sender<MonitorEvent>,
+    counts: Arc<Counts>,
+}
+
+/// A subscription to a component's monitoring port ([`Handle::subscribe_counted`],
+/// [`Handle::subscribe_waking`]): the events as they happen (it dereferences to their
+/// [`Receiver`]), and how many were dropped for it because it fell behind.
+///
+/// An observer that does not take its events falls behind: once
+/// [`OBSERVER_CAPACITY`] events wait in its channel, newer events are dropped for it
+/// (never for the other observers, and the component never waits), and each drop is
+/// counted in [`Subscription::dropped`] (and, for all observers together, in
+/// [`Monitor::dropped_events`]). The events it does get are in order; a snapshot
+/// ([`Handle::snapshot`]) always shows the current state, whatever was dropped.
+pub struct Subscription {
+    events: Receiver<MonitorEvent>,
+    counts: Arc<Counts>,
+}
+
+impl std::fmt::Debug for Subscription {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Subscription")
+            .field("queued", &self.events.len())
+            .field("published", &self.published())
+            .field("dropped", &self.dropped())
+            .finish()
+    }
+}
+
+impl Subscription {
+    /// The events' channel.
+    pub fn events(&self) -> &Receiver<MonitorEvent> {
+        &self.events
+    }
+
+    /// How many events were dropped for this subscription so far (its channel was
+    /// full: it fell behind).
+    pub fn dropped(&self) -> u64 {
+        self.counts.dropped.load(Ordering::Acquire)
+    }
+
+    /// How many events were published to this subscription so far: queued in its
+    /// channel (taken or not) or dropped.
+    pub fn published(&self) -> u64 {
+        self.counts.published.load(Ordering::Acquire)
+    }
+
+    /// The events' channel alone (the counts are no longer reachable).
+    pub fn into_events(self) -> Receiver<MonitorEvent> {
+        self.events
+    }
+}
+
+impl std::ops::Deref for Subscription {
+    type Target = Receiver<MonitorEvent>;
+
+    fn deref(&self) -> &Receiver<MonitorEvent> {
+        &self.events
+    }
+}
+
 /// The monitoring state of one component, shared by its thread and its handles.
 pub(crate) struct Shared {
     monitor: Mutex<Monitor>,
-    observers: Mutex<Vec<Sender<MonitorEvent>>>,
+    observers: Mutex<Vec<Observer>>,
     /// Doorbells rung after every event (compound supervisors watching this component).
     /// With, for each, a flag set before it is rung (which subscription has news).
     wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
@@ -346,16 +419,21 @@ impl Shared {
             // applied here. Every send happens under this lock, so the length cannot
             // grow between the check and the send. A disconnected observer's channel is
             // emptied when its receiver goes, so the send below finds it.
-            if observer.len() >= OBSERVER_CAPACITY {
+            let drop_it = || {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
-                return true;
+                observer.counts.published.fetch_add(1, Ordering::AcqRel);
+                observer.counts.dropped.fetch_add(1, Ordering::AcqRel);
+                true
+            };
+            if observer.sender.len() >= OBSERVER_CAPACITY {
+                return drop_it();
             }
-            match observer.try_send(event.clone()) {
-                Ok(()) => true,
-                Err(TrySendError::Full(_)) => {
-                    self.dropped.fetch_add(1, Ordering::Relaxed);
+            match observer.sender.try_send(event.clone()) {
+                Ok(()) => {
+                    observer.counts.published.fetch_add(1, Ordering::AcqRel);
                     true
                 }
+                Err(TrySendError::Full(_)) => drop_it(),
                 Err(TrySendError::Disconnected(_)) => false,
             }
         });
@@ -378,19 +456,27 @@ impl Shared {
         });
     }
 
-    pub(crate) fn subscribe(&self) -> Receiver<MonitorEvent> {
-        let (sender, receiver) = crossbeam_channel::unbounded();
-        lock(&self.observers).push(sender);
-        receiver
+    pub(crate) fn subscribe(&self) -> Subscription {
+        let (sender, events) = crossbeam_channel::unbounded();
+        let counts = Arc::new(Counts::default());
+        lock(&self.observers).push(Observer {
+            sender,
+            counts: Arc::clone(&counts),
+        });
+        Subscription { events, counts }
     }
 
-    pub(crate) fn subscribe_waking(
-        &self,
-        waker: crate::automaton::Waker,
-    ) -> Receiver<MonitorEvent> {
-        let receiver = self.subscribe();
+    /// End `subscription` now: no event is published to it (queued, dropped or
+    /// counted) after this returns, so its counts are final. What is queued in it
+    /// stays there.
+    pub(crate) fn unsubscribe(&self, subscription: &Subscription) {
+        lock(&self.observers).retain(|o| !Arc::ptr_eq(&o.counts, &subscription.counts));
+    }
+
+    pub(crate) fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Subscription {
+        let subscription = self.subscribe();
         lock(&self.wakers).push((waker, None));
-        receiver
+        subscription
     }
 
     /// [`Shared::subscribe_waking`], also setting `flag` before each ring.
@@ -399,9 +485,9 @@ impl Shared {
         waker: crate::automaton::Waker,
         flag: Arc<AtomicBool>,
     ) -> Receiver<MonitorEvent> {
-        let receiver = self.subscribe();
+        let subscription = self.subscribe();
         lock(&self.wakers).push((waker, Some(flag)));
-        receiver
+        subscription.into_events()
     }
 
     pub(crate) fn snapshot(&self) -> Monitor {
@@ -693,14 +779,23 @@ impl Handle {
         self.shared.stuck.load(Ordering::Acquire)
     }
 
-    /// A new observer: every change from now on, as it happens.
+    /// A new observer: every change from now on, as it happens, up to
+    /// [`OBSERVER_CAPACITY`] events waiting (beyond that, events are dropped for it:
+    /// [`Handle::subscribe_counted`] tells how many).
     pub fn subscribe(&self) -> Receiver<MonitorEvent> {
+        self.shared.subscribe().into_events()
+    }
+
+    /// [`Handle::subscribe`], with the counts of what was published to this observer
+    /// and dropped for it ([`Subscription::dropped`]): an observer that must not lose
+    /// events silently (a recorder, a bridge, a live display) uses this.
+    pub fn subscribe_counted(&self) -> Subscription {
         self.shared.subscribe()
     }
 
-    /// A new observer whose every event also rings `waker` (a compound's supervisor
-    /// watching one of its instances: its thread wakes on each change, no polling).
-    pub fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Receiver<MonitorEvent> {
+    /// A new counted observer whose every event also rings `waker` (a recorder or a
+    /// compound's supervisor: its thread wakes on each change, no polling).
+    pub fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Subscription {
         self.shared.subscribe_waking(waker)
     }
 
@@ -721,7 +816,7 @@ impl Handle {
         }
         // Subscribe, then look again: a change between the two looks is either in the
         // second snapshot or announced on the channel.
-        let events = self.subscribe();
+        let events = self.shared.subscribe();
         loop {
             let monitor = self.snapshot();
             if pred(&monitor) {

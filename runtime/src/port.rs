@@ -891,9 +891,18 @@ impl<T> Clone for PosterIn<T> {
     }
 }
 
+/// A poster input's source: the id of the output it reads, and that output's post.
+type Linked<T> = (usize, Arc<dyn PosterSource<T>>);
+
 pub(crate) struct PosterInInner<T> {
     core: Arc<InputCore>,
-    source: RwLock<Option<Arc<dyn PosterSource<T>>>>,
+    /// What the input reads: the id of the output it is connected to (its
+    /// `OutputCore` id, for `unlink` to clear only its own connection) and that
+    /// output's post, maybe through a converter.
+    source: RwLock<Option<Linked<T>>>,
+    /// The sequence number of the post read last, in the current source's numbering:
+    /// set back to 0 (nothing read) whenever the source is set or cleared, under the
+    /// source's write lock, so the first post of a new producer is new.
     seen: AtomicU64,
 }
 
@@ -912,7 +921,7 @@ impl<T: Packet> PosterIn<T> {
     /// The producer's currently posted value (`None` if unconnected or nothing posted).
     pub fn read(&self) -> Option<T> {
         let source = read(&self.inner.source);
-        let (value, seq) = source.as_ref()?.read();
+        let (value, seq) = source.as_ref()?.1.read();
         self.inner.seen.store(seq, Ordering::Release);
         value
     }
@@ -923,16 +932,18 @@ impl<T: Packet> PosterIn<T> {
         let source = read(&self.inner.source);
         let (value, seq) = source
             .as_ref()?
+            .1
             .read_newer(Some(self.inner.seen.load(Ordering::Acquire)))?;
         self.inner.seen.store(seq, Ordering::Release);
         value
     }
 
-    /// Whether the producer posted since the last `read`.
+    /// Whether the producer posted since the last `read` or `take_new` (a producer
+    /// connected since then counts as new as soon as it has posted).
     pub fn is_new(&self) -> bool {
         read(&self.inner.source)
             .as_ref()
-            .is_some_and(|source| source.seq() > self.inner.seen.load(Ordering::Acquire))
+            .is_some_and(|(_, source)| source.seq() > self.inner.seen.load(Ordering::Acquire))
     }
 
     /// Ask the producer to post (pull model).
@@ -1219,7 +1230,9 @@ pub struct ErasedInput {
     pub(crate) type_name: &'static str,
     pub(crate) core: Arc<InputCore>,
     pub(crate) any: Arc<dyn Any + Send + Sync>,
-    clear_source: fn(&ErasedInput),
+    /// Forget the source of a poster input if it is the output with this id (an
+    /// input's source may already be another output's: see `replace_link`).
+    clear_source: fn(&ErasedInput, usize),
     /// Move what is queued at this input into another input of the same kind and type.
     transfer: fn(&ErasedInput, &ErasedInput) -> u64,
     /// Empty this input's queue (fifo, ufifo): how many packets were in it.
@@ -1293,11 +1306,16 @@ fn discard_ufifo<T: Packet>(input: &ErasedInput) -> u64 {
     })
 }
 
-fn clear_nothing(_: &ErasedInput) {}
+fn clear_nothing(_: &ErasedInput, _: usize) {}
 
-fn clear_poster_source<T: Packet>(input: &ErasedInput) {
+fn clear_poster_source<T: Packet>(input: &ErasedInput, output: usize) {
     if let Some(reader) = input.any.downcast_ref::<PosterInInner<T>>() {
-        *write(&reader.source) = None;
+        let mut source = write(&reader.source);
+        if source.as_ref().is_some_and(|(id, _)| *id == output) {
+            *source = None;
+            // (Under the write lock: no read is between its look and its `seen`.)
+            reader.seen.store(0, Ordering::Release);
+        }
     }
 }
 
@@ -1577,7 +1595,12 @@ fn set_poster_source<T: Packet>(
     let Some(reader) = downcast::<PosterInInner<T>>(&input.any) else {
         return false;
     };
-    *write(&reader.source) = Some(source);
+    {
+        let mut slot = write(&reader.source);
+        *slot = Some((output.core.id, source));
+        // A new source numbers its posts from 1: nothing of it has been read yet.
+        reader.seen.store(0, Ordering::Release);
+    }
     update_list(out_readers, |readers| readers.push(Arc::clone(&input.core)));
     input.core.add_source(Arc::clone(&output.core));
     true
@@ -1598,8 +1621,9 @@ fn unlink_poster<T: Packet>(output: &ErasedOutput, input: &ErasedInput) {
         });
     }
     // The input's packet type may differ from T (a converter): clear its source through
-    // the hook the input registered for its own type.
-    (input.clear_source)(input);
+    // the hook the input registered for its own type, only if it still reads this
+    // output (a replacing connection may have been made first).
+    (input.clear_source)(input, output.core.id);
     input.core.remove_source(output.core.id);
 }
 

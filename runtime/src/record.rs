@@ -6,22 +6,28 @@
 //! from its own thread. A tap is one more consumer of the output, never a connection:
 //! the producer hands it a clone of each packet and goes on (the tap's queue is bounded
 //! and a full queue never blocks the producer: the packet is counted as lost, and the
-//! loss is written into the recording, sent on [`Recording::losses`] and logged).
+//! loss is written into the recording, sent on [`Recording::losses`] and logged). A
+//! monitoring port is followed through the recorder's own counted
+//! [`Subscription`], bounded by
+//! [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY): events dropped for it when the
+//! recorder falls behind are lost the same way, counted, written and reported.
 //!
 //! The file is JSON lines (one JSON object per line, each with a `kind`):
 //!
 //! - first a `header`: `version` ([`FORMAT_VERSION`]), `start_unix_ns` (wall-clock
 //!   start), `capacity` (each tap's queue), `ports` (each tapped output's `path`, Rust
-//!   `type` and `kind`: `data` or `tick`) and `monitors` (the paths of the components whose monitoring
-//!   events are recorded);
+//!   `type` and `kind`: `data`, `poster` or `tick`) and `monitors` (the paths of the
+//!   components whose monitoring events are recorded);
 //! - then, in the order the recorder's thread wrote them, `packet` records (`t`: time
 //!   since the start in ns, taken on the producer's thread when it sent; `port`; `seq`:
 //!   the packet's number on that port, from 0; `value`: the packet, serialized with
-//!   serde), `lost` records (`t`, `port`, `lost` now, `total` so far, `reason`), and
+//!   serde), `lost` records (`t`, `port`, `lost` now, `total` so far, `reason`; for
+//!   monitoring events dropped for the recorder, `port` is the component's path), and
 //!   `event` records (`t`, `component`, `event`: a [`MonitorEvent`]);
 //! - last an `end` record: for each port how many packets were `sent`, `recorded` and
-//!   `lost` (always `sent == recorded + lost`), and how many events were recorded per
-//!   component.
+//!   `lost` (always `sent == recorded + lost`), and for each monitored component how
+//!   many events it published to the recorder (`sent`), were recorded (`events`) and
+//!   were dropped (`lost`), with `sent == events + lost`.
 //!
 //! Packet records of one port are in `seq` order, and a gap in `seq` is a loss (a `lost`
 //! record says so). Records of different ports are sorted by `t` within each batch the
@@ -51,7 +57,7 @@ use crossbeam_channel::{Receiver, Sender};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::monitor::{Handle, MonitorEvent};
+use crate::monitor::{Handle, MonitorEvent, Subscription};
 use crate::port::{
     DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, TickIn, TickOut,
 };
@@ -220,7 +226,7 @@ pub struct PortInfo {
     /// The Rust packet type (`std::any::type_name`).
     #[serde(rename = "type")]
     pub type_name: String,
-    /// The output kind (`data` or `tick`).
+    /// The output kind (`data`, `poster` or `tick`).
     pub kind: String,
 }
 
@@ -299,13 +305,21 @@ pub struct PortSummary {
     pub lost: u64,
 }
 
-/// The count of one recorded monitoring port.
+/// The counts of one recorded monitoring port: `sent == events + lost`.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct MonitorSummary {
     /// The component's path.
     pub component: String,
+    /// Events the component published to the recorder while it was recording.
+    #[serde(default)]
+    pub sent: u64,
     /// Events in the recording.
     pub events: u64,
+    /// Events dropped for the recorder because it fell behind (its subscription held
+    /// [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY) events): `sent - events`, each
+    /// written as a `lost` record with the component's path as `port`.
+    #[serde(default)]
+    pub lost: u64,
 }
 
 /// One line of a recording after the header.
@@ -529,6 +543,8 @@ impl Recorder {
                 handle,
                 path,
                 recorded: 0,
+                reported: 0,
+                detached: false,
             })
             .collect();
         let (loss_sender, losses) = crossbeam_channel::bounded(LOSS_EVENTS);
@@ -606,7 +622,7 @@ impl Recording {
 
     /// Stop recording: detach every tap and monitor, write what they still hold and the
     /// `end` record, flush, and return the counts (in which `sent == recorded + lost`
-    /// for every port).
+    /// for every port, and `sent == events + lost` for every monitored component).
     pub fn finish(mut self) -> Result<Summary, RecordError> {
         self.stop_and_join()
     }
@@ -965,8 +981,25 @@ impl<T: Packet> Drop for Attached<T> {
 struct Followed {
     path: String,
     handle: Handle,
-    events: Receiver<MonitorEvent>,
+    /// The recorder's own subscription: it counts what was published to it and what
+    /// was dropped for it (its channel full: the recorder's thread fell behind).
+    events: Subscription,
     recorded: u64,
+    /// Drops already written as `lost` records.
+    reported: u64,
+    /// Whether the subscription was ended (`detach`): its counts are final.
+    detached: bool,
+}
+
+impl Followed {
+    /// End the subscription: nothing is published to it from now on (what it holds
+    /// stays, for the last drain).
+    fn detach(&mut self, bell: &Arc<Doorbell>) {
+        if !std::mem::replace(&mut self.detached, true) {
+            self.handle.shared.unsubscribe(&self.events);
+            self.handle.shared.forget_waker(bell);
+        }
+    }
 }
 
 /// The recorder's thread.
@@ -991,6 +1024,9 @@ impl Writer {
             if stopping {
                 for tap in &mut self.taps {
                     tap.detach();
+                }
+                for followed in &mut self.monitors {
+                    followed.detach(&self.bell);
                 }
             }
             match self.turn() {
@@ -1044,20 +1080,49 @@ impl Writer {
             self.writer.write_all(&line.text)?;
             self.writer.write_all(b"\n")?;
         }
+        let mut losses = Vec::new();
         for tap in &mut self.taps {
             for (lost, total, reason) in tap.unreported() {
-                let loss = LossRecord {
+                losses.push(LossRecord {
                     t: nanos(self.start.elapsed()),
                     port: tap.path().to_owned(),
                     lost,
                     total,
                     reason: reason.to_owned(),
-                };
-                tracing::warn!(port = %loss.port, lost, total, "recorder: packets lost");
-                serde_json::to_writer(&mut self.writer, &Record::Lost(loss.clone()))?;
-                self.writer.write_all(b"\n")?;
-                let _ = self.losses.try_send(loss);
+                });
             }
+        }
+        // Events dropped for the recorder's subscription since the last turn: a `lost`
+        // record after this turn's events (a drop means the recorder's channel held
+        // `OBSERVER_CAPACITY` older events).
+        for followed in &mut self.monitors {
+            let total = followed.events.dropped();
+            if total > followed.reported {
+                losses.push(LossRecord {
+                    t: nanos(self.start.elapsed()),
+                    port: followed.path.clone(),
+                    lost: total - followed.reported,
+                    total,
+                    reason: QUEUE_FULL.to_owned(),
+                });
+                followed.reported = total;
+            }
+        }
+        for loss in losses {
+            tracing::warn!(
+                port = %loss.port,
+                lost = loss.lost,
+                total = loss.total,
+                "recorder: {} lost",
+                if self.monitors.iter().any(|m| m.path == loss.port) {
+                    "monitoring events"
+                } else {
+                    "packets"
+                }
+            );
+            serde_json::to_writer(&mut self.writer, &Record::Lost(loss.clone()))?;
+            self.writer.write_all(b"\n")?;
+            let _ = self.losses.try_send(loss);
         }
         Ok(())
     }
@@ -1071,7 +1136,11 @@ impl Writer {
                 .iter()
                 .map(|m| MonitorSummary {
                     component: m.path.clone(),
+                    // (The subscription ended before the last drain: these are final,
+                    // and every event published to it was either recorded or dropped.)
+                    sent: m.events.published(),
                     events: m.recorded,
+                    lost: m.events.dropped(),
                 })
                 .collect(),
         };
@@ -1085,8 +1154,8 @@ impl Writer {
 impl Drop for Writer {
     fn drop(&mut self) {
         // Also when the thread could not be spawned: the taps detach as they drop.
-        for followed in &self.monitors {
-            followed.handle.shared.forget_waker(&self.bell);
+        for followed in &mut self.monitors {
+            followed.detach(&self.bell);
         }
     }
 }
@@ -1316,8 +1385,10 @@ pub struct Played {
     pub sent: BTreeMap<String, u64>,
     /// Packet records of ports without a route.
     pub skipped: u64,
-    /// Loss records met (packets the recording does not have).
+    /// Loss records of tapped outputs met (packets the recording does not have).
     pub lost: u64,
+    /// Loss records of monitoring ports met (events the recording does not have).
+    pub lost_events: u64,
 }
 
 impl Player {
@@ -1438,6 +1509,7 @@ impl Player {
         for name in self.routes.keys() {
             played.sent.insert(name.clone(), 0);
         }
+        let monitors = self.reader.header().monitors.clone();
         for record in self.reader.by_ref() {
             match record? {
                 Record::Packet(packet) => {
@@ -1454,6 +1526,9 @@ impl Player {
                     }
                     route.send(&packet)?;
                     *played.sent.entry(packet.port).or_default() += 1;
+                }
+                Record::Lost(loss) if monitors.contains(&loss.port) => {
+                    played.lost_events += loss.lost;
                 }
                 Record::Lost(loss) => played.lost += loss.lost,
                 Record::Header(_) | Record::Event(_) | Record::End(_) => {}

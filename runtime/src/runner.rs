@@ -26,7 +26,9 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 
-use crate::adapt::{AdaptAction, AdaptConfig, Adaptation, Detector, Ladder, Observation, Pressure};
+use crate::adapt::{
+    AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
+};
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
@@ -250,9 +252,11 @@ impl Runner {
         self.apply_priority(priority);
         if let Some(adapt) = &self.adapt {
             let (enabled, max_level) = (adapt.enabled, adapt.ladder.max_level());
+            let settle_periods = adapt.settle_periods;
             self.shared.quietly(|monitor| {
                 monitor.adaptation.enabled = enabled;
                 monitor.adaptation.max_level = max_level;
+                monitor.adaptation.settle_periods = settle_periods;
             });
         }
         self.clock = Instant::now();
@@ -801,8 +805,7 @@ impl Runner {
                         "quality {quality} out of range: {levels} level(s)"
                     )));
                 } else {
-                    self.set_quality(*quality);
-                    self.resync_level("quality set through the control port");
+                    self.quality_by_other_means(*quality, "quality set through the control port");
                     reply(Reply::Done);
                 }
             }
@@ -823,6 +826,10 @@ impl Runner {
                         )),
                         Some(max) if level > max => reply(Reply::Rejected(format!(
                             "degradation level {level} out of range: the highest is {max}"
+                        ))),
+                        Some(_) if level < self.floor_level() => reply(Reply::Rejected(format!(
+                            "degradation level {level} is below {}, where the period and quality set by other means stand (SetPeriod and SetQuality move them)",
+                            self.floor_level()
                         ))),
                         Some(_) => {
                             self.set_level(level, "commanded through the control port");
@@ -858,6 +865,14 @@ impl Runner {
             monitor.os_priority = applied.clone();
             vec![MonitorEvent::OsPriority(applied)]
         });
+    }
+
+    /// A quality set by a command or a `degrade` plan step: the adaptation level and
+    /// floor follow it (before the `Quality` event, which then shows them).
+    fn quality_by_other_means(&mut self, quality: usize, why: &str) {
+        self.cx.quality = quality;
+        self.resync_level(why, Pin::Quality);
+        self.set_quality(quality);
     }
 
     fn set_quality(&mut self, quality: usize) {
@@ -981,11 +996,15 @@ impl Runner {
             self.cx.period_changed = false;
             let period = self.cx.period;
             self.reanchor();
+            // The level first: the `Period` event then shows where it stands.
+            self.resync_level(
+                "period set through the control port or by the component",
+                Pin::Period,
+            );
             self.shared.update(|monitor| {
                 monitor.period = period;
                 vec![MonitorEvent::Period(period)]
             });
-            self.resync_level("period set through the control port or by the component");
         }
         self.publish_variables();
     }
@@ -1132,8 +1151,8 @@ impl Runner {
                 PlanStep::Goto(_) => {}
                 PlanStep::Degrade => {
                     if self.cx.quality + 1 < self.timing.qualities.len() {
-                        self.set_quality(self.cx.quality + 1);
-                        self.resync_level("a `degrade` continuity plan step");
+                        let quality = self.cx.quality + 1;
+                        self.quality_by_other_means(quality, "a `degrade` continuity plan step");
                         return Recovery::Recovered;
                     }
                 }
@@ -1370,7 +1389,16 @@ struct Local {
     enabled: bool,
     ladder: Ladder,
     detector: Detector,
+    /// Where the component stands: [`Ladder::level_of`] its period and quality.
     level: u32,
+    /// What was set by other means (a command, a `degrade` plan step, the component's
+    /// own `set_period`): promotions stop there.
+    floor: Floor,
+    /// `set_level` is applying a level: the period change it makes is adaptation's,
+    /// not another means' (no floor from it).
+    applying: bool,
+    /// `hold_periods + window + 1` (published for a supervisor's settling time).
+    settle_periods: u32,
     /// `Exhausted` was published for the current violation.
     exhausted: bool,
     /// The last CPU time reading and when (wall clock), for `cpu_share`.
@@ -1379,9 +1407,17 @@ struct Local {
     cpu_share: f64,
 }
 
+/// Which axis a change by other means set (it becomes the floor of promotions).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pin {
+    Period,
+    Quality,
+}
+
 impl Local {
     /// `None` when there is nothing to adapt and nothing to detect.
     fn new(config: AdaptConfig, timing: &TimingSpec) -> Option<Local> {
+        let config = config.sanitized();
         let enabled = config.enabled_for(timing);
         let ladder = Ladder::new(timing, config.period_steps);
         (enabled || ladder.max_level() > 0).then(|| Local {
@@ -1389,6 +1425,12 @@ impl Local {
             ladder,
             detector: Detector::new(config),
             level: 0,
+            floor: Floor::default(),
+            applying: false,
+            settle_periods: config
+                .hold_periods
+                .saturating_add(config.window)
+                .saturating_add(1),
             exhausted: false,
             cpu_mark: None,
             cpu_share: 0.0,
@@ -1419,10 +1461,14 @@ impl Runner {
         let Some(adapt) = self.adapt.as_mut() else {
             return;
         };
+        let now = Setting {
+            period: self.cx.period,
+            quality: self.cx.quality,
+        };
         let reference = adapt
             .ladder
-            .setting(adapt.level.saturating_sub(1))
-            .0
+            .toward(now, adapt.level.saturating_sub(1), adapt.floor)
+            .period
             .unwrap_or(period)
             .min(period);
         let verdict = adapt.detector.observe(Observation {
@@ -1448,6 +1494,7 @@ impl Runner {
             return; // The compound's supervisor decides.
         }
         let (level, max) = (adapt.level, adapt.ladder.max_level());
+        let floor = adapt.ladder.floor_level(adapt.floor);
         match verdict {
             Pressure::Violation if level < max => {
                 self.set_level(level + 1, "time violation");
@@ -1465,38 +1512,59 @@ impl Runner {
                 };
                 self.shared.adaptation_step(step, |_| {});
             }
-            Pressure::Spare if level > 0 => {
+            Pressure::Spare if level > floor => {
                 self.set_level(level - 1, "spare time");
             }
             _ => {}
         }
     }
 
-    /// Go to adaptation level `level`: its period and quality, applied as the control
-    /// port's `SetPeriod` and `SetQuality` are (events `Period`, `Quality`), then an
-    /// `Adaptation` step; the detector starts afresh after its hold-down.
-    fn set_level(&mut self, level: u32, why: &str) {
+    /// The level the period and quality set by other means stand at (promotions stop
+    /// there); 0 without adaptation.
+    fn floor_level(&self) -> u32 {
+        self.adapt
+            .as_ref()
+            .map_or(0, |adapt| adapt.ladder.floor_level(adapt.floor))
+    }
+
+    /// Go towards adaptation level `target`, one axis at a time from where the
+    /// component stands ([`Ladder::toward`]: a degradation stretches the period first,
+    /// a promotion raises the quality first and stops at the floor), applied as the
+    /// control port's `SetPeriod` and `SetQuality` are (events `Period`, `Quality`),
+    /// then an `Adaptation` step; the detector starts afresh after its hold-down.
+    fn set_level(&mut self, target: u32, why: &str) {
         let Some(adapt) = self.adapt.as_mut() else {
             return;
         };
         let from = adapt.level;
-        let (period, quality) = adapt.ladder.setting(level);
+        let now = Setting {
+            period: self.cx.period,
+            quality: self.cx.quality,
+        };
+        let to = adapt.ladder.toward(now, target, adapt.floor);
+        let level = adapt.ladder.level_of(to.period, to.quality);
         adapt.level = level;
         adapt.exhausted = false;
         let promoted = level < from;
         adapt.detector.reset(promoted);
         let load = adapt.detector.load();
-        // The quality first: the period's publication resyncs the level from both.
-        if quality != self.cx.quality {
-            self.set_quality(quality);
+        let floor = adapt.ladder.floor_level(adapt.floor);
+        if to.quality != self.cx.quality {
+            self.set_quality(to.quality);
         }
-        if let Some(period) = period
+        if let Some(period) = to.period
             && self.cx.period != Some(period)
         {
+            if let Some(adapt) = self.adapt.as_mut() {
+                adapt.applying = true;
+            }
             self.cx.set_period(period);
             // Publishes the period and re-anchors the schedule (the resync it asks
             // for finds the level already there).
             self.after_call();
+            if let Some(adapt) = self.adapt.as_mut() {
+                adapt.applying = false;
+            }
         }
         self.shared.set_pressure(Pressure::Nominal, load);
         if level == from {
@@ -1515,24 +1583,43 @@ impl Runner {
             quality: Some(self.cx.quality),
             detail: why.to_owned(),
         };
-        self.shared
-            .adaptation_step(step, |status| status.level = level);
+        self.shared.adaptation_step(step, |status| {
+            status.level = level;
+            status.min_level = floor;
+        });
     }
 
     /// The period or quality was set by other means (a command, a `degrade` plan, the
-    /// component's own `set_period`): the level is where they stand on the ladder, an
+    /// component's own `set_period`): it becomes the floor of promotions on its axis
+    /// (`pin`), the level is where period and quality stand ([`Ladder::level_of`]), an
     /// `Adaptation` step says so (`why`), and the detector starts afresh.
-    fn resync_level(&mut self, why: &str) {
+    fn resync_level(&mut self, why: &str, pin: Pin) {
         let Some(adapt) = self.adapt.as_mut() else {
             return;
         };
+        if adapt.applying {
+            return; // Adaptation's own period change: `set_level` publishes it.
+        }
+        match pin {
+            Pin::Quality => adapt.floor.quality = self.cx.quality,
+            Pin::Period => {
+                adapt.floor.period = self
+                    .cx
+                    .period
+                    .filter(|period| adapt.ladder.period.is_some_and(|nominal| *period > nominal));
+            }
+        }
+        let floor = adapt.ladder.floor_level(adapt.floor);
         let level = adapt.ladder.level_of(self.cx.period, self.cx.quality);
         if level == adapt.level {
+            self.shared
+                .quietly(|monitor| monitor.adaptation.min_level = floor);
             return;
         }
         let from = adapt.level;
         let promoted = level < from;
         adapt.level = level;
+        adapt.exhausted = false;
         adapt.detector.reset(promoted);
         let load = adapt.detector.load();
         self.shared.set_pressure(Pressure::Nominal, load);
@@ -1549,7 +1636,9 @@ impl Runner {
             quality: Some(self.cx.quality),
             detail: why.to_owned(),
         };
-        self.shared
-            .adaptation_step(step, |status| status.level = level);
+        self.shared.adaptation_step(step, |status| {
+            status.level = level;
+            status.min_level = floor;
+        });
     }
 }

@@ -6,20 +6,25 @@ use std::time::Duration;
 
 use coolbot::Pressure;
 use coolbot::adapt::{
-    Decision, FastestCorrection, Levels, Member, ProtectPriority, Reconfiguration, Selector, decide,
+    Decision, FastestCorrection, Levels, Member, ProtectPriority, Reconfiguration, Selector,
+    decide, decide_explained,
 };
 use proptest::prelude::*;
 
 /// A member from `"name:priority:level/max:pressure"`, pressure `v` (violation), `s`
-/// (spare) or `-`; a trailing `:z` marks it suspended by adaptation.
+/// (spare) or `-`; a trailing `:z` marks it suspended by adaptation; `level` may be
+/// `level>min` for a member whose own settings hold it at `min` or above
+/// (`Member::min_level`).
 fn member(text: &str) -> Member {
     let parts: Vec<&str> = text.split(':').collect();
     let (level, max) = parts[2].split_once('/').expect("level/max");
+    let (level, min) = level.split_once('>').unwrap_or((level, "0"));
     Member {
         name: parts[0].to_owned(),
         priority: parts[1].parse().expect("priority"),
         level: level.parse().expect("level"),
         max_level: max.parse().expect("max"),
+        min_level: min.parse().expect("min"),
         pressure: match parts[3] {
             "v" => Pressure::Violation,
             "s" => Pressure::Spare,
@@ -96,6 +101,14 @@ fn decisions_table() {
         ("nested, nothing granted: nothing to report", &["a:1:0/4:s"], levels(0, 0, false), "hold"),
         ("a member above a lowered cap is brought to it", &["a:1:3/4:-", "b:2:3/4:v"], levels(2, 1, false), "clamp b"),
         ("suspended members do not count as below the cap", &["a:1:1/4:v", "b:0:0/4:-:z"], levels(1, 0, true), "raise cap"),
+        // Levels set on a member by other means (a command, its `degrade` plan step).
+        ("a member held above the cap by its own settings is not clamped", &["a:1:3>3/4:-", "b:2:1/4:-"], levels(1, 0, true), "hold"),
+        ("nor promoted below them", &["a:1:2>2/4:s", "b:2:0/4:s"], levels(2, 1, true), "hold"),
+        ("above them it is promoted", &["a:1:3>2/4:s", "b:2:0/4:s"], levels(3, 2, true), "promote a"),
+        ("clamped to them, not below", &["a:1:3>2/4:-"], levels(1, 0, false), "clamp a"),
+        ("at its own level it counts as at the floor", &["a:1:2>2/4:s", "b:2:1/4:s"], levels(1, 0, true), "promote b"),
+        ("and lets the floor come down", &["a:1:2>2/4:-", "b:2:1/4:s"], levels(2, 1, true), "lower floor"),
+        ("nested, held by its own settings only: nothing to give back", &["a:1:1>1/4:s"], levels(1, 0, false), "report spare"),
     ];
     let mut failures = Vec::new();
     for (label, members, levels, expected) in cases {
@@ -141,6 +154,7 @@ impl Model {
                     priority: *priority,
                     level: 0,
                     max_level: *max,
+                    min_level: 0,
                     pressure: Pressure::Nominal,
                     load: 0.5,
                     cpu_share: 0.0,
@@ -301,4 +315,47 @@ fn the_selection_is_pluggable() {
     // The default promotion order, for comparison: the highest priority first.
     let decision = decide(&promote, levels(2, 1, true), &ProtectPriority);
     assert_eq!(render(decision, &promote), "promote a");
+}
+
+/// A selector that answers outside the candidates.
+struct Wrong;
+
+impl Selector for Wrong {
+    fn degrade(&self, members: &[Member], _candidates: &[usize]) -> usize {
+        members.len() + 7
+    }
+
+    fn promote(&self, _members: &[Member], candidates: &[usize]) -> usize {
+        // A member, but not a candidate (the one before the first candidate).
+        candidates[0].wrapping_sub(1)
+    }
+}
+
+#[test]
+fn a_selector_answer_outside_the_candidates_is_ignored_with_a_note() {
+    let degrade: Vec<Member> = ["a:9:0/4:v", "b:1:0/4:-"]
+        .iter()
+        .map(|m| member(m))
+        .collect();
+    let (decision, note) = decide_explained(&degrade, levels(1, 0, true), &Wrong);
+    assert_eq!(
+        render(decision, &degrade),
+        "degrade a",
+        "the default choice"
+    );
+    let note = note.expect("a note");
+    assert!(note.contains("chose 9 to degrade"), "{note}");
+    let promote: Vec<Member> = ["a:9:2/4:-", "b:1:2/4:s"]
+        .iter()
+        .map(|m| member(m))
+        .collect();
+    let (decision, note) = decide_explained(&promote, levels(2, 1, true), &Wrong);
+    assert_eq!(render(decision, &promote), "promote b");
+    assert!(note.expect("a note").contains("to promote"));
+    // `decide` gives the same decision; a good answer has no note.
+    assert_eq!(decide(&promote, levels(2, 1, true), &Wrong), decision);
+    assert_eq!(
+        decide_explained(&promote, levels(2, 1, true), &ProtectPriority).1,
+        None
+    );
 }

@@ -2279,3 +2279,171 @@ fn a_built_compound_reaches_its_nested_instances_by_path() {
             .is_err()
     );
 }
+
+/// A component posting on its poster output `map` every 5 ms: `base`, `base + 1`, …;
+/// while `fail` is set it cannot start and its periodic section faults.
+struct Poster {
+    out: coolbot::port::PosterOut<u64>,
+    base: u64,
+    posted: u64,
+    fail: Arc<std::sync::atomic::AtomicBool>,
+}
+
+static POSTER: Spec = Spec {
+    type_name: "Poster",
+    doc: "",
+    states: &[StateSpec {
+        name: "posting",
+        entry: false,
+        exit: false,
+        periodic: Some(coolbot::PeriodicSpec { period: None }),
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[coolbot::OutputSpec {
+        name: "map",
+        kind: OutputKind::Poster,
+        packet: "u64",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec {
+        period: Some(Duration::from_millis(5)),
+        ..TimingSpec::NONE
+    },
+};
+
+impl coolbot::Automaton for Poster {
+    fn spec(&self) -> &'static Spec {
+        &POSTER
+    }
+    fn start(&mut self, _cx: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        if self.fail.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("cannot start"));
+        }
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut coolbot::Context) {}
+    fn section(&mut self, _s: usize, _sec: Section, _cx: &mut coolbot::Context) -> SectionResult {
+        if self.fail.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("broken"));
+        }
+        self.out.post(self.base + self.posted);
+        self.posted += 1;
+        Ok(())
+    }
+    fn choose(&mut self, _s: usize, _cx: &mut coolbot::Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _e: usize, _m: &str, _cx: &mut coolbot::Context) {}
+    fn answer(&mut self, _o: usize, _cx: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _c: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _v: usize, _value: &Value) -> Result<(), String> {
+        Err("no variables".into())
+    }
+    fn get(&self, _v: usize) -> Value {
+        Value::Unit
+    }
+}
+
+fn poster(name: &str, base: u64, fail: &Arc<std::sync::atomic::AtomicBool>) -> Component {
+    let out = coolbot::port::PosterOut::new();
+    Component::new(
+        name,
+        Box::new(Poster {
+            out: out.clone(),
+            base,
+            posted: 0,
+            fail: Arc::clone(fail),
+        }),
+        coolbot::PortSet::new().output(&out),
+    )
+}
+
+/// Wait until the poster input `r` reads a value for which `wanted` holds, through
+/// `read` (`read` or `take_new`).
+fn reads(what: &str, read: impl Fn() -> Option<u64>, wanted: impl Fn(u64) -> bool) {
+    let deadline = std::time::Instant::now() + WAIT;
+    let mut last = None;
+    loop {
+        if let Some(value) = read() {
+            last = Some(value);
+            if wanted(value) {
+                return;
+            }
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for the reader to read {what}; it read {last:?} last"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// A poster reader in a compound whose producer `p1` is substituted by `p2` and then
+/// recovers: the reader reads the stand-in's post (with `read` and with `take_new`),
+/// then `p1`'s again, with or without a converter on the connection.
+fn a_poster_reader_follows_its_producer_through_substitution(converted: bool) {
+    let p1_fails = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let never = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let r = coolbot::port::PosterIn::<u64>::new();
+    let reader = ShellBuilder::new("c")
+        .input(shell::input("r", coolbot::InputKind::Poster, false), &r)
+        .build();
+    let (sup, _) = Sup::new(&["operating"]);
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(poster("p1", 1_000_000, &p1_fails))
+        .instance(poster("p2", 2_000_000, &never))
+        .instance(reader)
+        .substitute("p2", "p1")
+        .on_error("p1", Policy::Substitute)
+        .recovery(Duration::from_millis(40), Duration::from_secs(60));
+    let builder = if converted {
+        builder.connect_via::<u64, u64>("p1.map", "c.r", |n| n + 10)
+    } else {
+        builder.connect("p1.map", "c.r")
+    };
+    let offset = if converted { 10 } else { 0 };
+    let p1 = builder.instance_handle("p1").expect("p1");
+    let p2 = builder.instance_handle("p2").expect("p2");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    let from_p1 = |v: u64| (1_000_000 + offset..2_000_000).contains(&v);
+    let from_p2 = |v: u64| v >= 2_000_000 + offset;
+    reads("a post of p1", || r.read(), from_p1);
+
+    // p1 faults: p2 stands in, and the reader reads p2's posts from its first.
+    p1_fails.store(true, Ordering::SeqCst);
+    p2.wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    reads("a post of the substitute p2", || r.read(), from_p2);
+    reads("a new post of p2 with take_new", || r.take_new(), from_p2);
+
+    // p1 recovers: the reader reads p1 again.
+    p1_fails.store(false, Ordering::SeqCst);
+    wait(&p2, State::Ready);
+    p1.wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    reads("a post of p1 after its recovery", || r.take_new(), from_p1);
+    assert_eq!(base.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_poster_reader_reads_the_substitute_after_a_substitution() {
+    a_poster_reader_follows_its_producer_through_substitution(false);
+}
+
+#[test]
+fn a_converted_poster_reader_reads_the_substitute_after_a_substitution() {
+    a_poster_reader_follows_its_producer_through_substitution(true);
+}

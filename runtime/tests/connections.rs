@@ -663,3 +663,78 @@ fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
     assert_eq!(second.try_iter().count(), coolbot::OBSERVER_CAPACITY);
     assert_eq!(handle.snapshot().dropped_events, 100);
 }
+
+#[test]
+fn a_poster_input_sees_the_first_post_of_a_new_producer_at_once() {
+    let (pa, pb) = (PosterOut::<u64>::new(), PosterOut::<u64>::new());
+    let r = PosterIn::<u64>::new();
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("pa", OutputKind::Poster, false), &pa)
+            .output(output("pb", OutputKind::Poster, false), &pb),
+        ShellBuilder::new("c").input(input("r", InputKind::Poster, false), &r),
+    );
+    pair.system.connect("p.pa", "c.r").expect("pa");
+    for n in 0..5 {
+        pa.post(n);
+    }
+    assert_eq!(r.take_new(), Some(4));
+    assert!(!r.is_new());
+    // The producer is replaced (as a substitute takes over): a new source, whose
+    // posts are numbered from 1 again.
+    pair.system.disconnect("p.pa", "c.r").expect("disconnect");
+    assert_eq!(r.read(), None, "a disconnected poster input reads nothing");
+    pair.system.connect("p.pb", "c.r").expect("pb");
+    assert!(!r.is_new(), "pb has posted nothing yet");
+    pb.post(100);
+    assert!(r.is_new(), "the new producer's first post is new");
+    assert_eq!(
+        r.take_new(),
+        Some(100),
+        "the new producer's first post is new"
+    );
+    assert_eq!(r.take_new(), None);
+    // Back to pa, whose latest post (4, sequence 5) was read from the old source:
+    // it is new for the new source.
+    pair.system
+        .disconnect("p.pb", "c.r")
+        .expect("disconnect pb");
+    pair.system.connect("p.pa", "c.r").expect("pa again");
+    assert!(r.is_new());
+    assert_eq!(r.take_new(), Some(4));
+    assert!(!r.is_new());
+}
+
+#[test]
+fn a_counted_subscription_counts_what_it_was_sent_and_what_it_lost() {
+    let out = DataOut::<u64>::new();
+    let q = FifoIn::<u64>::new(1, OverflowPolicy::Reject);
+    let mut pair = Pair::new(
+        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
+        ShellBuilder::new("c").input(input("q", fifo(1), false), &q),
+    );
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let handle = pair.system.handle("c").unwrap();
+    let (keeps_up, falls_behind) = (handle.subscribe_counted(), handle.subscribe_counted());
+    let before = handle.snapshot().dropped_events;
+    let sent = coolbot::OBSERVER_CAPACITY as u64 + 250;
+    // One packet fills the queue; every other one overflows and is announced: one
+    // event each. `keeps_up` reads as they come; `falls_behind` never reads.
+    let mut got = 0;
+    for packet in 0..=sent {
+        out.send(packet);
+        got += keeps_up.try_iter().count() as u64;
+    }
+    assert_eq!(q.overflows(), sent);
+    assert_eq!(
+        (keeps_up.published(), keeps_up.dropped(), got),
+        (sent, 0, sent)
+    );
+    assert_eq!(falls_behind.published(), sent);
+    assert_eq!(falls_behind.dropped(), 250, "its own losses, counted");
+    assert_eq!(
+        falls_behind.events().try_iter().count() as u64 + falls_behind.dropped(),
+        sent
+    );
+    assert_eq!(handle.snapshot().dropped_events - before, 250);
+}

@@ -754,3 +754,77 @@ fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
     );
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn monitoring_events_the_recorder_cannot_keep_up_with_are_counted_and_reported_lost() {
+    let (system, out, _data) = bench();
+    let handle = system.handle("src").expect("src");
+    let path = temp_file("monitor-lost.jsonl");
+    let mut recorder = Recorder::new();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    recorder.monitor(&system, "src").expect("monitor");
+    let recording = recorder.start(&path).expect("start");
+
+    // A packet holds the recorder's thread inside serde until released (a slow disk):
+    // meanwhile the component publishes more events than the recorder's subscription
+    // holds (one `Period` event per command), and the rest are dropped for it.
+    let (entered_sender, entered) = crossbeam_channel::bounded(1);
+    let (release, gate) = crossbeam_channel::bounded(1);
+    let mut held = sample(0);
+    held.hook = Some(Arc::new(Hook {
+        fail: false,
+        entered: entered_sender,
+        release: gate,
+    }));
+    out.send(held);
+    entered.recv_timeout(WAIT).expect("the recorder serializes");
+    const COMMANDS: u64 = coolbot::OBSERVER_CAPACITY as u64 + 600;
+    for n in 0..COMMANDS {
+        let period = Duration::from_millis(if n % 2 == 0 { 11 } else { 12 });
+        handle
+            .command(coolbot::Command::SetPeriod(period))
+            .expect("period");
+    }
+    release.send(()).expect("release");
+    let summary = recording.finish().expect("finish");
+    let monitor = &summary.monitors[0];
+    assert!(monitor.sent >= COMMANDS, "{monitor:?}");
+    assert_eq!(monitor.sent, monitor.events + monitor.lost, "{monitor:?}");
+    assert!(monitor.lost >= 600, "{monitor:?}");
+
+    let records = records(&path);
+    let events = records
+        .iter()
+        .filter(|r| matches!(r, Record::Event(e) if e.component == "src"))
+        .count() as u64;
+    assert_eq!(
+        events, monitor.events,
+        "the summary counts the event records"
+    );
+    let losses: Vec<_> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Lost(loss) if loss.port == "src" => Some(loss),
+            _ => None,
+        })
+        .collect();
+    assert!(losses.iter().all(|loss| loss.reason == QUEUE_FULL));
+    assert_eq!(
+        losses.iter().map(|loss| loss.lost).sum::<u64>(),
+        monitor.lost,
+        "every lost event is in a `lost` record"
+    );
+    assert_eq!(losses.last().map(|loss| loss.total), Some(monitor.lost));
+    let Some(Record::End(end)) = records.last() else {
+        panic!("no end record");
+    };
+    assert_eq!(end.monitors, summary.monitors);
+
+    // A replay tells event losses from packet losses.
+    let played = Player::open(&path)
+        .expect("open")
+        .play(Pace::AsFastAsPossible)
+        .expect("play");
+    assert_eq!((played.lost, played.lost_events), (0, monitor.lost));
+    drop(system);
+}

@@ -442,6 +442,12 @@ impl fmt::Display for Summary {
                 .ports
                 .iter()
                 .map(|p| format!("{} {} recorded, {} lost", p.port, p.recorded, p.lost))
+                .chain(recorded.monitors.iter().map(|m| {
+                    format!(
+                        "{} monitoring events {} recorded, {} lost",
+                        m.component, m.events, m.lost
+                    )
+                }))
                 .collect();
             writeln!(f, "  recorded             {}", ports.join("; "))?;
         }
@@ -581,7 +587,8 @@ fn walk(handle: Handle, type_name: &'static str, depth: usize, lines: &mut Vec<L
 /// happens: the log lines, every supervision and adaptation step, the base
 /// supervisor's states.
 struct Events {
-    receivers: Vec<(String, coolbot::crossbeam_channel::Receiver<MonitorEvent>)>,
+    /// Each port's subscription, with how many of its dropped events were reported.
+    receivers: Vec<(String, coolbot::Subscription, u64)>,
     supervision: Vec<SupervisionStep>,
     adaptation: Vec<AdaptationStep>,
     user_states: Vec<String>,
@@ -591,7 +598,7 @@ impl Events {
     fn new(handles: &[&Handle]) -> Events {
         let receivers = handles
             .iter()
-            .map(|h| (h.name().to_owned(), h.subscribe()))
+            .map(|h| (h.name().to_owned(), h.subscribe_counted(), 0))
             .collect();
         // The state the base's supervisor is in now; changes follow as events.
         let user_states = handles
@@ -613,7 +620,16 @@ impl Events {
     fn take(&mut self, at: Duration) -> Vec<String> {
         let time = at.as_secs_f64();
         let mut lines = Vec::new();
-        for (name, receiver) in &self.receivers {
+        for (name, receiver, reported) in &mut self.receivers {
+            // Events dropped because this display fell behind: said, never hidden.
+            let dropped = receiver.dropped();
+            if dropped > *reported {
+                let lost = dropped - *reported;
+                lines.push(format!(
+                    "{time:6.2}s {name}: {lost} monitoring events lost (the display fell behind)"
+                ));
+                *reported = dropped;
+            }
             for event in receiver.try_iter() {
                 match event {
                     MonitorEvent::State { from, to } => {
@@ -623,7 +639,7 @@ impl Events {
                         lines.push(format!("{time:6.2}s {name}: error: {error}"));
                     }
                     MonitorEvent::UserState(Some(state))
-                        if name == BASE && self.user_states.last() != Some(&state) =>
+                        if *name == BASE && self.user_states.last() != Some(&state) =>
                     {
                         lines.push(format!("{time:6.2}s {name}: supervisor -> {state}"));
                         self.user_states.push(state);

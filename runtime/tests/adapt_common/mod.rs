@@ -35,6 +35,8 @@ pub struct Load {
     pub last_period: AtomicU64,
     /// Busy-wait instead of sleeping (CPU work rather than waiting).
     pub spin: std::sync::atomic::AtomicBool,
+    /// Raise the spec's first exception once, in the next section.
+    pub fault: std::sync::atomic::AtomicBool,
 }
 
 impl Load {
@@ -92,6 +94,16 @@ pub static FIXED: Spec = Spec {
     ..SLEEPER
 };
 
+/// [`SLEEPER`] with an exception whose continuity plan is `{ degrade; }`.
+pub static PLANNED: Spec = Spec {
+    exceptions: &[coolbot::ExceptionSpec {
+        name: "noisy",
+        description: "the readings are too noisy at this quality",
+        plan: &[coolbot::PlanStep::Degrade],
+    }],
+    ..SLEEPER
+};
+
 struct Sleeper {
     spec: &'static Spec,
     load: Arc<Load>,
@@ -124,6 +136,9 @@ impl Automaton for Sleeper {
             std::thread::sleep(Duration::from_micros(work));
         }
         self.load.runs.fetch_add(1, Ordering::SeqCst);
+        if !self.spec.exceptions.is_empty() && self.load.fault.swap(false, Ordering::SeqCst) {
+            return Err(Fault::exception(0, "too noisy"));
+        }
         Ok(())
     }
     fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {

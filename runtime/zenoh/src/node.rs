@@ -174,7 +174,12 @@ impl Node {
                 .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait()
                 .map_err(Error::zenoh)?;
-            streams.push((handle.subscribe(), publisher));
+            streams.push(Stream {
+                path: path.clone(),
+                events: handle.subscribe_counted(),
+                reported: 0,
+                publisher,
+            });
             let snapshots = handle.clone();
             let own_key = monitor_key.clone();
             queryables.push(
@@ -217,7 +222,7 @@ impl Node {
         let stopped = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:m", self.name))
-            .spawn(move || forward_events(&streams, &stopped))
+            .spawn(move || forward_events(&mut streams, &stopped))
             .map_err(|error| Error::Zenoh(format!("cannot spawn the monitor thread: {error}")))?;
         lock(&self.exposures).push(Exposure {
             queryables,
@@ -270,16 +275,25 @@ fn collect(handle: &Handle, path: String, out: &mut Vec<(String, Handle)>) {
     }
 }
 
-/// Publish every monitoring event of every stream, as it comes, until `stop`.
-fn forward_events(
-    streams: &[(
-        crossbeam_channel::Receiver<MonitorEvent>,
-        zenoh::pubsub::Publisher<'static>,
-    )],
-    stop: &AtomicBool,
-) {
+/// One exposed component's monitoring events on their way to the network.
+struct Stream {
+    path: String,
+    /// The node's own subscription: it counts the events dropped for the node when
+    /// publishing falls behind (`OBSERVER_CAPACITY` waiting).
+    events: coolbot::Subscription,
+    /// Drops already logged.
+    reported: u64,
+    publisher: zenoh::pubsub::Publisher<'static>,
+}
+
+/// Publish every monitoring event of every stream, as it comes, until `stop`. Events
+/// dropped for the node (it fell behind) are logged with their count; remote
+/// observers see them in the snapshot's `dropped_events`.
+fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
+    let receivers: Vec<crossbeam_channel::Receiver<MonitorEvent>> =
+        streams.iter().map(|s| s.events.events().clone()).collect();
     let mut select = Select::new();
-    for (events, _) in streams {
+    for events in &receivers {
         select.recv(events);
     }
     while !stop.load(Ordering::Acquire) {
@@ -287,8 +301,19 @@ fn forward_events(
             continue;
         };
         let index = operation.index();
-        let (events, publisher) = &streams[index];
-        match operation.recv(events) {
+        let stream = &mut streams[index];
+        let dropped = stream.events.dropped();
+        if dropped > stream.reported {
+            tracing::warn!(
+                component = %stream.path,
+                lost = dropped - stream.reported,
+                total = dropped,
+                "monitoring events dropped before publishing (the node fell behind)"
+            );
+            stream.reported = dropped;
+        }
+        let publisher = &stream.publisher;
+        match operation.recv(&receivers[index]) {
             Ok(event) => match serde_json::to_vec(&event) {
                 Ok(json) => {
                     if let Err(error) = publisher.put(json).wait() {
