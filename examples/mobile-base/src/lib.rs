@@ -9,6 +9,7 @@
 #![deny(missing_docs)]
 
 pub mod motion_controller;
+pub mod node;
 pub mod range_server;
 pub mod robot;
 pub mod sensing;
@@ -29,10 +30,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use coolbot::adapt::{AdaptAction, Adaptation};
 use coolbot::{Handle, Monitor, MonitorEvent, State, Step, Supervision};
 
-use crate::robot::{BASE, MOTION, RANGES, Robot, SIM_RANGES, Setup};
-use crate::world::{FaultKind, Platform, SensorFault, World};
+use crate::node::NodeOptions;
+use crate::robot::{BASE, MOTION, RANGES, Robot, SIM_RANGES, Setup, WANDERER};
+use crate::world::{FaultKind, Overload, Platform, SensorFault, World};
 
 /// How the run shows itself.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,6 +79,13 @@ pub struct Options {
     /// whichever range server stands in) and the base's monitoring events into this
     /// file (`coolbot::record`, JSON lines).
     pub record: Option<std::path::PathBuf>,
+    /// A simulated processor shortage (`--load 3s..9s`): meanwhile the range server's
+    /// scans cost time ([`world::OVERLOAD_COST_PER_BEAM`]), so that the runtime
+    /// degrades it, and promotes it back after.
+    pub load: Option<Overload>,
+    /// Expose every component on the network as this Zenoh node (`--node`), for
+    /// `coolctl`.
+    pub node: Option<NodeOptions>,
 }
 
 impl Default for Options {
@@ -93,7 +103,119 @@ impl Default for Options {
             display: Display::Auto,
             stop: Arc::new(AtomicBool::new(false)),
             record: None,
+            load: None,
+            node: None,
         }
+    }
+}
+
+/// One adaptation step (paper 3.6), as a compound's monitoring port published it: a
+/// level its supervisor gave one of its instances, or a step of its own (the cap
+/// raised, the floor lowered, a violation notified to the compound above).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdaptationStep {
+    /// When the run saw it (since the start).
+    pub at: Duration,
+    /// The compound whose supervisor took it (`robot` or `base`).
+    pub compound: String,
+    /// The step.
+    pub step: Adaptation,
+}
+
+impl fmt::Display for AdaptationStep {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let step = &self.step;
+        write!(
+            f,
+            "{:6.2}s {}: {} {} {} -> {}",
+            self.at.as_secs_f64(),
+            self.compound,
+            step.component,
+            action(step.action),
+            step.from,
+            step.to
+        )?;
+        if !step.detail.is_empty() {
+            write!(f, " ({})", step.detail)?;
+        }
+        Ok(())
+    }
+}
+
+/// An adaptation action in words.
+pub fn action(action: AdaptAction) -> &'static str {
+    match action {
+        AdaptAction::Degraded => "degraded",
+        AdaptAction::Promoted => "promoted",
+        AdaptAction::CapRaised => "raised its cap",
+        AdaptAction::FloorLowered => "lowered its floor",
+        AdaptAction::NotifiedHigher => "notified higher",
+        AdaptAction::ReportedSpare => "reported spare time",
+        AdaptAction::Exhausted => "exhausted",
+        AdaptAction::Suspended => "suspended",
+        AdaptAction::Resumed => "resumed",
+        _ => "adapted",
+    }
+}
+
+/// The levels an atomic component went through, from its own monitoring port.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelPath {
+    /// The instance (`motion`, `ranges`).
+    pub name: String,
+    /// Its levels in order, nominal (0) first.
+    pub levels: Vec<u32>,
+    /// Its period at the end.
+    pub period: Option<Duration>,
+    /// Its quality at the end, by name (`None`: it declares no quality levels).
+    pub quality: Option<String>,
+}
+
+impl LevelPath {
+    /// The path of the component whose monitor is `monitor` (its own adaptation
+    /// history: the last [`coolbot::adapt::ADAPTATION_HISTORY`] steps).
+    fn of(monitor: &Monitor, qualities: &[&str]) -> LevelPath {
+        let own: Vec<&Adaptation> = monitor
+            .adaptation
+            .history
+            .iter()
+            .filter(|s| matches!(s.action, AdaptAction::Degraded | AdaptAction::Promoted))
+            .collect();
+        let mut levels = vec![own.first().map_or(monitor.adaptation.level, |s| s.from)];
+        levels.extend(own.iter().map(|s| s.to));
+        LevelPath {
+            name: monitor.name.clone(),
+            levels,
+            period: monitor.period,
+            quality: (!qualities.is_empty()).then(|| status::quality(monitor.quality, qualities)),
+        }
+    }
+
+    /// The highest level reached.
+    pub fn highest(&self) -> u32 {
+        self.levels.iter().copied().max().unwrap_or(0)
+    }
+
+    /// The level at the end.
+    pub fn last(&self) -> u32 {
+        self.levels.last().copied().unwrap_or(0)
+    }
+}
+
+impl fmt::Display for LevelPath {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let levels: Vec<String> = self.levels.iter().map(u32::to_string).collect();
+        write!(
+            f,
+            "{} {} (at the end: period {}",
+            self.name,
+            levels.join(" -> "),
+            status::period(self.period),
+        )?;
+        if let Some(quality) = &self.quality {
+            write!(f, ", quality {quality}")?;
+        }
+        f.write_str(")")
     }
 }
 
@@ -173,6 +295,14 @@ pub struct Summary {
     /// With `record`: what the recording holds (per port, packets sent, recorded and
     /// lost).
     pub recorded: Option<coolbot::record::Summary>,
+    /// The simulated processor shortage of the run, if any.
+    pub load: Option<Overload>,
+    /// Every adaptation step the compounds published, in order.
+    pub adaptation: Vec<AdaptationStep>,
+    /// The adaptation levels `motion` and `ranges` went through.
+    pub levels: Vec<LevelPath>,
+    /// With `node`: the node's name and how many components it exposed.
+    pub node: Option<(String, usize)>,
 }
 
 impl Summary {
@@ -202,6 +332,11 @@ impl Summary {
     /// Instances retired at their recovery deadline.
     pub fn retired(&self) -> usize {
         self.count(|s| matches!(s, Step::Retired))
+    }
+
+    /// The adaptation levels of instance `name` of the base, if it adapts.
+    pub fn levels_of(&self, name: &str) -> Option<&LevelPath> {
+        self.levels.iter().find(|l| l.name == name)
     }
 }
 
@@ -256,6 +391,27 @@ impl fmt::Display for Summary {
                 writeln!(f, "    {step}")?;
             }
         }
+        if let Some(load) = self.load {
+            writeln!(
+                f,
+                "  simulated load       the processor is short from {:.1} s to {:.1} s ({} ms a beam for the range server)",
+                load.from.as_secs_f64(),
+                load.until.as_secs_f64(),
+                world::OVERLOAD_COST_PER_BEAM.as_millis()
+            )?;
+        }
+        if self.adaptation.is_empty() {
+            writeln!(f, "  adaptation steps     none")?;
+        } else {
+            writeln!(f, "  adaptation steps")?;
+            for step in &self.adaptation {
+                writeln!(f, "    {step}")?;
+            }
+        }
+        for (i, path) in self.levels.iter().enumerate() {
+            let label = if i == 0 { "adaptation levels" } else { "" };
+            writeln!(f, "  {label:<20} {path}")?;
+        }
         writeln!(
             f,
             "  base supervisor      {} (mode {}, faults {}); states {}",
@@ -294,6 +450,12 @@ impl fmt::Display for Summary {
                 }))
                 .collect();
             writeln!(f, "  recorded             {}", ports.join("; "))?;
+        }
+        if let Some((name, count)) = &self.node {
+            writeln!(
+                f,
+                "  network node         `{name}` exposed {count} components (`coolctl list {name}` while it ran)"
+            )?;
         }
         write!(
             f,
@@ -370,6 +532,22 @@ struct Line {
     cpu: Duration,
 }
 
+/// The quality levels a component type declares in its timing block, by name (empty
+/// without any), from the generated code.
+fn qualities(type_name: &str) -> &'static [&'static str] {
+    use generated::{motion_controller, range_server, sim_range_server, wanderer};
+    let specs = [
+        &motion_controller::SPEC,
+        &range_server::SPEC,
+        &sim_range_server::SPEC,
+        &wanderer::SPEC,
+    ];
+    specs
+        .iter()
+        .find(|spec| spec.type_name == type_name)
+        .map_or(&[], |spec| spec.timing.qualities)
+}
+
 /// The instances a compound type declares, `(name, type)`, from the generated code
 /// (empty for an atomic type).
 fn declared(type_name: &str) -> &'static [(&'static str, &'static str)] {
@@ -406,11 +584,13 @@ fn walk(handle: Handle, type_name: &'static str, depth: usize, lines: &mut Vec<L
 }
 
 /// What the monitoring ports of the robot, the base and the wanderer publish, as it
-/// happens: the log lines, every supervision step, the base supervisor's states.
+/// happens: the log lines, every supervision and adaptation step, the base
+/// supervisor's states.
 struct Events {
     /// Each port's subscription, with how many of its dropped events were reported.
     receivers: Vec<(String, coolbot::Subscription, u64)>,
     supervision: Vec<SupervisionStep>,
+    adaptation: Vec<AdaptationStep>,
     user_states: Vec<String>,
 }
 
@@ -430,6 +610,7 @@ impl Events {
         Events {
             receivers,
             supervision: Vec::new(),
+            adaptation: Vec::new(),
             user_states,
         }
     }
@@ -472,6 +653,25 @@ impl Events {
                         lines.push(step.to_string());
                         self.supervision.push(step);
                     }
+                    // The compounds' adaptation decisions (the wanderer does not adapt).
+                    // A compound applying the level its own supervisor granted it is
+                    // already listed as that supervisor's step.
+                    MonitorEvent::Adaptation(step)
+                        if name != WANDERER
+                            && !(step.component == *name
+                                && matches!(
+                                    step.action,
+                                    AdaptAction::Degraded | AdaptAction::Promoted
+                                )) =>
+                    {
+                        let step = AdaptationStep {
+                            at,
+                            compound: name.clone(),
+                            step,
+                        };
+                        lines.push(step.to_string());
+                        self.adaptation.push(step);
+                    }
                     _ => {}
                 }
             }
@@ -488,11 +688,9 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         outage: options.outage,
         kind: options.fault_kind,
     });
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        fault,
-    ));
+    let platform = Arc::new(
+        Platform::new(World::example(), World::example_start(), fault).with_overload(options.load),
+    );
     let setup = Setup {
         noise: options.noise,
         seed: options.seed,
@@ -503,6 +701,17 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let robot = Robot::start(&platform, &setup)?;
     let recording = match &options.record {
         Some(path) => Some(start_recording(&robot, path)?),
+        None => None,
+    };
+    // On the network only when asked: nothing of Zenoh runs otherwise.
+    let node = match &options.node {
+        Some(node) => match node::expose(&robot, node) {
+            Ok(opened) => Some(opened),
+            Err(error) => {
+                let _ = robot.shutdown();
+                return Err(error);
+            }
+        },
         None => None,
     };
     // Every change on the monitoring ports of the robot, the base and the wanderer.
@@ -568,6 +777,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     status::Row {
                         depth: line.depth,
                         type_name: line.type_name,
+                        qualities: qualities(line.type_name),
                         monitor,
                         load,
                     }
@@ -579,7 +789,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             let mut out = stdout.lock();
             if display == Display::Table {
                 let header = format!(
-                    "CoolBOT mobile base   t={:5.1}s/{:.0}s   base supervisor: {} (mode {})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}",
+                    "CoolBOT mobile base   t={:5.1}s/{:.0}s   base supervisor: {} (mode {})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}{}",
                     at.as_secs_f64(),
                     options.duration.as_secs_f64(),
                     supervisor,
@@ -589,14 +799,16 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     truth.pose.theta.to_degrees(),
                     truth.distance,
                     truth.contacts,
+                    load_note(&platform),
                 );
                 let _ = write!(out, "\x1b[H{}\x1b[J", status::table(&header, &rows, &log));
             } else {
                 last_line = at;
                 let extra = format!(
-                    "mode={} distance={:.2}m",
+                    "mode={} distance={:.2}m{}",
                     word(&base, "mode"),
-                    truth.distance
+                    truth.distance,
+                    load_note(&platform)
                 );
                 let _ = writeln!(out, "{}", status::line(at, &rows, &extra));
             }
@@ -625,6 +837,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         robot.base.clone(),
         robot.wanderer.clone(),
     ];
+    let exposed = node.map(|node| (node.name().to_owned(), lines.len()));
     let report = robot.shutdown();
     // The variables as the components left them, each from its own monitoring port:
     // read after the last section ran, so that they agree with the platform's ground
@@ -647,6 +860,20 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             .all(|c| c.joined && c.state == State::Dead)
         && final_states.iter().all(|(_, s)| *s == State::Dead)
         && released;
+    let levels: Vec<LevelPath> = [(&motion, MOTION), (&ranges, RANGES)]
+        .into_iter()
+        .filter_map(|(monitor, name)| {
+            let monitor = monitor.as_ref()?;
+            let type_name = generated::mobile_base::INSTANCES
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map_or("?", |(_, t)| *t);
+            monitor
+                .adaptation
+                .enabled
+                .then(|| LevelPath::of(monitor, qualities(type_name)))
+        })
+        .collect();
     let truth = platform.truth();
     let emergencies =
         variable(ranges.as_ref(), "emergencies") + variable(sim_ranges.as_ref(), "emergencies");
@@ -677,5 +904,18 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         released,
         clean_shutdown,
         recorded,
+        load: options.load,
+        adaptation: events.adaptation,
+        levels,
+        node: exposed,
     })
+}
+
+/// `   overloaded` while the simulated processor shortage lasts (the table's header).
+fn load_note(platform: &Platform) -> &'static str {
+    if platform.overloaded() {
+        "   PROCESSOR SHORT (--load)"
+    } else {
+        ""
+    }
 }

@@ -6,7 +6,8 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
-use mobile_base::world::FaultKind;
+use mobile_base::node::NodeOptions;
+use mobile_base::world::{FaultKind, Overload};
 use mobile_base::{Display, Options};
 
 /// Run the CoolBOT paper's mobile robot (MotionController, RangeServer, MobileBase)
@@ -41,10 +42,30 @@ struct Args {
     /// motion controller's).
     #[arg(long, value_parser = parse_speed)]
     max_speed: Option<f64>,
-    /// The range servers' scan frequency in Hz, 0.5 to 200 (their controllable
-    /// `frequency`).
+    /// The range servers' scan frequency in Hz, 0.5 to 20 (their controllable
+    /// `frequency`; the range server publishes at most that often).
     #[arg(long, value_parser = parse_rate)]
     scan_rate: Option<f64>,
+    /// Simulate a processor shortage from one time to another (e.g. `3s..9s`):
+    /// meanwhile the range server's scans cost 7 ms a beam, whatever the machine's
+    /// real load, and the runtime degrades it (a longer period, then half scans) and
+    /// promotes it back once the shortage is over.
+    #[arg(long, value_name = "FROM..UNTIL", value_parser = parse_load)]
+    load: Option<Overload>,
+    /// Expose every component on the network as this Zenoh node, for `coolctl`
+    /// (`cargo run -p coolbot-zenoh --bin coolctl -- list` in another terminal).
+    #[arg(long, value_name = "NAME")]
+    node: Option<String>,
+    /// With --node: listen on this Zenoh endpoint (e.g. `tcp/0.0.0.0:7447`); repeatable.
+    #[arg(long, requires = "node", value_name = "ENDPOINT")]
+    listen: Vec<String>,
+    /// With --node: connect to this Zenoh endpoint; repeatable.
+    #[arg(long, requires = "node", value_name = "ENDPOINT")]
+    connect: Vec<String>,
+    /// With --node: do not look for peers by multicast scouting (name them with
+    /// --listen / --connect).
+    #[arg(long, requires = "node")]
+    no_multicast: bool,
     /// Output: the live table, status lines, or auto (the table on a terminal).
     #[arg(long, value_enum, default_value_t = Output::Auto)]
     output: Output,
@@ -103,12 +124,27 @@ fn parse_speed(text: &str) -> Result<f64, String> {
     }
 }
 
-/// Parses a scan frequency the range servers accept: 0.5 to 200 Hz.
+/// Parses a scan frequency the range servers serve: 0.5 to 20 Hz.
 fn parse_rate(text: &str) -> Result<f64, String> {
+    use mobile_base::sensing::{MAX_SCAN_RATE, period_for};
     match text.parse::<f64>() {
-        Ok(rate) if mobile_base::sensing::period_for(rate).is_some() => Ok(rate),
-        _ => Err(format!("`{text}` is not a frequency from 0.5 to 200 (Hz)")),
+        Ok(rate) if period_for(rate).is_some() && rate <= MAX_SCAN_RATE => Ok(rate),
+        _ => Err(format!(
+            "`{text}` is not a frequency from 0.5 to {MAX_SCAN_RATE} (Hz)"
+        )),
     }
+}
+
+/// Parses `FROM..UNTIL`, two durations (`3s..9s`), FROM before UNTIL.
+fn parse_load(text: &str) -> Result<Overload, String> {
+    let (from, until) = text
+        .split_once("..")
+        .ok_or_else(|| format!("`{text}` is not FROM..UNTIL, e.g. `3s..9s`"))?;
+    let (from, until) = (parse_duration(from)?, parse_duration(until)?);
+    if from >= until {
+        return Err(format!("`{text}`: the shortage must end after it starts"));
+    }
+    Ok(Overload { from, until })
 }
 
 /// Parses `x,y`.
@@ -143,6 +179,13 @@ fn main() -> ExitCode {
             Output::Lines => Display::Lines,
         },
         record: args.record,
+        load: args.load,
+        node: args.node.map(|name| NodeOptions {
+            listen: args.listen,
+            connect: args.connect,
+            multicast: !args.no_multicast,
+            ..NodeOptions::named(name)
+        }),
         ..Options::default()
     };
     let stop = options.stop.clone();
@@ -198,8 +241,32 @@ mod tests {
         assert!(parse_speed("-1").is_err());
         assert!(parse_speed("fast").is_err());
         assert_eq!(parse_rate("10"), Ok(10.0));
+        assert!(parse_rate("40").is_err());
         assert!(parse_rate("1000").is_err());
         assert!(parse_rate("0").is_err());
+    }
+
+    #[test]
+    fn load_windows_parse() {
+        let ms = Duration::from_millis;
+        assert_eq!(
+            parse_load("3s..9s"),
+            Ok(Overload {
+                from: ms(3000),
+                until: ms(9000)
+            })
+        );
+        assert_eq!(
+            parse_load("500ms..1.5s"),
+            Ok(Overload {
+                from: ms(500),
+                until: ms(1500)
+            })
+        );
+        assert!(parse_load("9s..3s").is_err());
+        assert!(parse_load("3s").is_err());
+        assert!(parse_load("3s..").is_err());
+        assert!(parse_load("3..9s").is_err());
     }
 
     #[test]

@@ -1,13 +1,17 @@
 //! `RangeServer` (paper Figure 4, right): reads the platform's ir/us/bumper suite at a
 //! set frequency, publishes time-stamped scans and raises the emergency tick when the
-//! platform gets too close to an obstacle.
+//! platform gets too close to an obstacle. Its description gives it degraded
+//! operating modes (a period interval and the qualities `full` and `half`): the
+//! runtime's adaptation (paper 3.6) picks the period and the quality; the code honours
+//! `Context::quality()`.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use crate::generated::range_server::*;
 use crate::generated::types::RangeScan;
 use crate::sensing::{self, Overrides};
-use crate::world::{FaultKind, Platform, Rng};
+use crate::world::{FaultKind, IR_BEAMS, Platform, Rng, US_BEAMS};
 
 /// The range server's code: the driver of the platform's sensor suite.
 #[derive(Debug)]
@@ -15,7 +19,12 @@ pub struct RangeServer {
     platform: Arc<Platform>,
     overrides: Overrides,
     rng: Option<Rng>,
+    /// The last scan read (published or not).
     last: Option<RangeScan>,
+    /// When the last scan was published.
+    published: Option<Instant>,
+    /// At quality `half`: whether this scan refreshes the odd ultrasonic beams.
+    odd: bool,
 }
 
 impl RangeServer {
@@ -26,16 +35,21 @@ impl RangeServer {
             overrides,
             rng: None,
             last: None,
+            published: None,
+            odd: false,
         }
     }
 
-    /// Reads the sensors once and publishes the scan.
+    /// Reads the sensors once, at the quality the runtime asks for, and publishes the
+    /// scan when one is due at the controllable `frequency`.
+    ///
+    /// Quality `full` (0) refreshes every beam; `half` (1) refreshes every infrared
+    /// beam (they watch the way ahead: the emergency stop uses them) and every other
+    /// ultrasonic beam, alternately the even and the odd ones, the others keeping
+    /// their last reading. The period is the runtime's: the description's 50 ms, or
+    /// longer while the server is degraded (it never sets its own period, so that
+    /// adaptation alone moves it).
     fn read(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        if let Some(period) = sensing::period_for(cx.vars.frequency)
-            && cx.rt.period() != Some(period)
-        {
-            cx.rt.set_period(period);
-        }
         let config = cx.config;
         let seed = self.overrides.seed.unwrap_or(config.seed);
         let rng = self.rng.get_or_insert_with(|| Rng::new(seed));
@@ -45,7 +59,7 @@ impl RangeServer {
             self.overrides.noise.unwrap_or(config.noise),
             rng,
         );
-        let Some(readings) = readings else {
+        let Some(mut readings) = readings else {
             if self
                 .platform
                 .fault()
@@ -55,10 +69,33 @@ impl RangeServer {
             }
             return Err(Exception::SensorTimeout.raise("no answer from the ir/us board"));
         };
-        let scan = sensing::scan(cx.rt.now(), &readings);
-        cx.vars.scans += 1;
+        let stamp = cx.rt.now();
+        let mut beams = IR_BEAMS + US_BEAMS;
+        if cx.rt.quality() > 0 {
+            self.odd = !self.odd;
+            let kept = usize::from(!self.odd);
+            if let Some(last) = &self.last {
+                for i in (kept..US_BEAMS).step_by(2) {
+                    readings.us[i] = f64::from(last.us[i]);
+                }
+            }
+            beams = IR_BEAMS + US_BEAMS / 2;
+        }
+        // The simulated processor shortage (`--load`): processing the beams takes
+        // time, whatever the machine's real load.
+        let cost = self.platform.processing_cost(beams);
+        if !cost.is_zero() {
+            std::thread::sleep(cost);
+        }
+        let scan = sensing::scan(stamp, &readings);
         cx.vars.nearest = sensing::nearest(&scan);
-        cx.outputs.scan.send(scan.clone());
+        let now = Instant::now();
+        let since = self.published.map(|at| now.duration_since(at));
+        if sensing::publish_due(since, cx.vars.frequency, cx.rt.period()) {
+            self.published = Some(now);
+            cx.vars.scans += 1;
+            cx.outputs.scan.send(scan.clone());
+        }
         self.last = Some(scan);
         Ok(())
     }

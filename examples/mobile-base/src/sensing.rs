@@ -1,6 +1,8 @@
 //! What `RangeServer` and `SimRangeServer` share: turning readings into a scan and
 //! deciding when the platform is too close to an obstacle.
 
+use std::time::Duration;
+
 use coolbot::Time;
 
 use crate::generated::types::RangeScan;
@@ -58,10 +60,26 @@ pub fn clear_again(scan: &RangeScan, distance: f32) -> bool {
 }
 
 /// The period for a scan frequency in Hz, when it is a sensible one (0.5 to 200 Hz).
-pub fn period_for(frequency: f64) -> Option<std::time::Duration> {
+pub fn period_for(frequency: f64) -> Option<Duration> {
     (0.5..=200.0)
         .contains(&frequency)
-        .then(|| std::time::Duration::from_secs_f64(1.0 / frequency))
+        .then(|| Duration::from_secs_f64(1.0 / frequency))
+}
+
+/// The highest scan rate the range server serves (Hz): it reads its sensors once a
+/// period, and its description's shortest period is 50 ms.
+pub const MAX_SCAN_RATE: f64 = 20.0;
+
+/// Whether a scan read now is published, `since` the last publication (`None`: none
+/// yet), at most `frequency` times a second, by a server that reads every `period`:
+/// due when the next read would come later than the publication interval (half a
+/// period of tolerance, so 20 Hz at a 50 ms period publishes every scan, and 10 Hz
+/// every other one). An unusable frequency publishes every scan.
+pub fn publish_due(since: Option<Duration>, frequency: f64, period: Option<Duration>) -> bool {
+    let (Some(since), Some(interval)) = (since, period_for(frequency)) else {
+        return true;
+    };
+    since + period.unwrap_or_default() / 2 >= interval
 }
 
 #[cfg(test)]
@@ -96,8 +114,23 @@ mod tests {
     }
 
     #[test]
+    fn scans_are_published_at_most_at_the_frequency() {
+        let ms = Duration::from_millis;
+        // The first scan, and every scan at 20 Hz with a 50 ms period.
+        assert!(publish_due(None, 10.0, Some(ms(50))));
+        assert!(publish_due(Some(ms(50)), 20.0, Some(ms(50))));
+        // 10 Hz at a 50 ms period: every other scan.
+        assert!(!publish_due(Some(ms(50)), 10.0, Some(ms(50))));
+        assert!(publish_due(Some(ms(100)), 10.0, Some(ms(50))));
+        // A degraded period longer than the interval: every scan.
+        assert!(publish_due(Some(ms(100)), 20.0, Some(ms(100))));
+        // A nonsense frequency does not stop the scans.
+        assert!(publish_due(Some(ms(1)), 0.0, Some(ms(50))));
+    }
+
+    #[test]
     fn frequencies_map_to_periods_within_bounds() {
-        assert_eq!(period_for(20.0), Some(std::time::Duration::from_millis(50)));
+        assert_eq!(period_for(20.0), Some(Duration::from_millis(50)));
         assert_eq!(period_for(0.0), None);
         assert_eq!(period_for(1000.0), None);
     }

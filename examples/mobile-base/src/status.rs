@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::time::Duration;
 
+use coolbot::adapt::Pressure;
 use coolbot::{Monitor, Value};
 
 /// What one row shows: the monitor, its component type and the CPU load since the
@@ -14,6 +15,8 @@ pub struct Row {
     pub depth: usize,
     /// The component type (from its spec).
     pub type_name: &'static str,
+    /// Its quality levels by name (its timing block's `quality`; empty without).
+    pub qualities: &'static [&'static str],
     /// A snapshot of its monitoring port.
     pub monitor: Monitor,
     /// CPU time over wall time since the previous frame (0..1).
@@ -49,11 +52,41 @@ pub fn value(value: &Value) -> String {
     }
 }
 
-fn rate(period: Option<Duration>) -> String {
+/// A period in milliseconds (`66.7ms`, `50ms`), `-` without one.
+pub fn period(period: Option<Duration>) -> String {
     match period {
-        Some(p) if !p.is_zero() => format!("{:.0}", 1.0 / p.as_secs_f64()),
+        Some(p) if !p.is_zero() => {
+            let ms = p.as_secs_f64() * 1e3;
+            if (ms - ms.round()).abs() < 0.05 {
+                format!("{ms:.0}ms")
+            } else {
+                format!("{ms:.1}ms")
+            }
+        }
         _ => "-".to_owned(),
     }
+}
+
+/// A quality level by name (`full`, `half`), its index when it has no name.
+pub fn quality(level: usize, names: &[&str]) -> String {
+    names
+        .get(level)
+        .map_or_else(|| level.to_string(), |name| (*name).to_owned())
+}
+
+/// The adaptation columns: the level out of the highest (a compound: the cap its
+/// instances may reach) and the verdict; `-` where adaptation is off.
+fn adaptation(monitor: &Monitor) -> (String, &'static str) {
+    let status = &monitor.adaptation;
+    if !status.enabled {
+        return ("-".to_owned(), "-");
+    }
+    let pressure = match status.pressure {
+        Pressure::Nominal => "nominal",
+        Pressure::Violation => "VIOLATION",
+        Pressure::Spare => "spare",
+    };
+    (format!("{}/{}", status.level, status.max_level), pressure)
 }
 
 fn clip(text: &str, width: usize) -> String {
@@ -93,14 +126,26 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     let _ = writeln!(out, "{header}");
     let _ = writeln!(
         out,
-        "{:<13} {:<16} {:<14} {:<11} {:>4} {:>5} {:>6} {:>6} {:>6}  ERROR",
-        "COMPONENT", "TYPE", "STATE", "USER STATE", "HZ", "CPU%", "MISSED", "OVERRN", "OVERFL",
+        "{:<13} {:<16} {:<14} {:<11} {:>7} {:<4} {:>5} {:<9} {:>5} {:>6} {:>6} {:>6}  ERROR",
+        "COMPONENT",
+        "TYPE",
+        "STATE",
+        "USER STATE",
+        "PERIOD",
+        "QUAL",
+        "LEVEL",
+        "PRESSURE",
+        "CPU%",
+        "MISSED",
+        "OVERRN",
+        "OVERFL",
     );
     for row in rows {
         let m = &row.monitor;
+        let (level, pressure) = adaptation(m);
         let _ = writeln!(
             out,
-            "{:<13} {:<16} {:<14} {:<11} {:>4} {:>5.1} {:>6} {:>6} {:>6}  {}",
+            "{:<13} {:<16} {:<14} {:<11} {:>7} {:<4} {:>5} {:<9} {:>5.1} {:>6} {:>6} {:>6}  {}",
             clip(&format!("{}{}", " ".repeat(row.depth), m.name), 13),
             clip(row.type_name, 16),
             m.state.to_string(),
@@ -114,7 +159,17 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
                 },
                 11
             ),
-            rate(m.period),
+            period(m.period),
+            clip(
+                &if row.qualities.is_empty() {
+                    "-".to_owned()
+                } else {
+                    quality(m.quality, row.qualities)
+                },
+                4
+            ),
+            level,
+            pressure,
             row.load * 100.0,
             m.missed_deadlines,
             m.overruns,
@@ -140,17 +195,23 @@ pub fn table(header: &str, rows: &[Row], log: &[String]) -> String {
     out
 }
 
-/// One line for non-terminal output: each component's state and user state.
+/// One line for non-terminal output: each component's state and user state, and
+/// the adaptation level of those degraded (`@2/4`).
 pub fn line(at: Duration, rows: &[Row], extra: &str) -> String {
     let parts: Vec<String> = rows
         .iter()
         .map(|row| {
             let m = &row.monitor;
+            let level = if m.adaptation.enabled && m.adaptation.level > 0 {
+                format!("@{}/{}", m.adaptation.level, m.adaptation.max_level)
+            } else {
+                String::new()
+            };
             match &m.user_state {
                 Some(user) if m.state == coolbot::State::Running => {
-                    format!("{}={}/{user}", m.name, m.state)
+                    format!("{}={}/{user}{level}", m.name, m.state)
                 }
-                _ => format!("{}={}", m.name, m.state),
+                _ => format!("{}={}{level}", m.name, m.state),
             }
         })
         .collect();
@@ -175,6 +236,15 @@ mod tests {
         assert_eq!(wrap(&items, 10), ["aaaa  bbbb", "cccc"]);
         assert_eq!(wrap(&items, 100), ["aaaa  bbbb  cccc"]);
         assert_eq!(wrap(&[], 10), Vec::<String>::new());
+    }
+
+    #[test]
+    fn periods_and_qualities_print_for_people() {
+        assert_eq!(period(Some(Duration::from_millis(50))), "50ms");
+        assert_eq!(period(Some(Duration::from_micros(66_667))), "66.7ms");
+        assert_eq!(period(None), "-");
+        assert_eq!(quality(1, &["full", "half"]), "half");
+        assert_eq!(quality(3, &["full", "half"]), "3");
     }
 
     #[test]

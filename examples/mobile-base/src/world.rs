@@ -7,6 +7,7 @@
 //! the summary and the tests check (distance, clearance, contacts).
 
 use std::f64::consts::PI;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -326,6 +327,25 @@ pub struct SensorFault {
     pub kind: FaultKind,
 }
 
+/// A simulated shortage of processor time, from `from` to `until` (since the start of
+/// the run): meanwhile the range server's scan processing costs
+/// [`OVERLOAD_COST_PER_BEAM`] for every beam it reads, whatever the machine's real
+/// load, so that a run shows the same degradation on any machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Overload {
+    /// When the shortage starts.
+    pub from: Duration,
+    /// When it ends.
+    pub until: Duration,
+}
+
+/// What processing one beam of a scan costs the range server while the processor is
+/// short: a full scan (8 ir + 8 us beams) takes 112 ms, longer than the longest
+/// period its description allows (100 ms); a `half` scan (8 ir + 4 us) takes 84 ms,
+/// which fits in it but leaves no spare time, so the server stays at `half` until
+/// the shortage ends.
+pub const OVERLOAD_COST_PER_BEAM: Duration = Duration::from_millis(7);
+
 /// Ground truth gathered while the robot moves.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Truth {
@@ -349,6 +369,9 @@ pub struct Platform {
     world: World,
     epoch: Instant,
     fault: Option<SensorFault>,
+    overload: Option<Overload>,
+    /// An overload switched on by hand ([`Platform::set_overloaded`]).
+    overloaded: AtomicBool,
     truth: Mutex<Truth>,
 }
 
@@ -372,6 +395,8 @@ impl Platform {
             world,
             epoch: Instant::now(),
             fault,
+            overload: None,
+            overloaded: AtomicBool::new(false),
             truth: Mutex::new(Truth {
                 pose: start,
                 distance: 0.0,
@@ -379,6 +404,42 @@ impl Platform {
                 min_front_clearance: front,
                 contacts: 0,
             }),
+        }
+    }
+
+    /// The same platform with a simulated processor shortage during `overload`.
+    pub fn with_overload(mut self, overload: Option<Overload>) -> Platform {
+        self.overload = overload;
+        self
+    }
+
+    /// Switches a simulated processor shortage on or off by hand (tests), besides the
+    /// window given to [`Platform::with_overload`].
+    pub fn set_overloaded(&self, on: bool) {
+        self.overloaded.store(on, Ordering::Relaxed);
+    }
+
+    /// The simulated shortage window, if any.
+    pub fn overload(&self) -> Option<Overload> {
+        self.overload
+    }
+
+    /// Whether the processor is short now (within the window, or switched on).
+    pub fn overloaded(&self) -> bool {
+        let now = self.uptime();
+        self.overloaded.load(Ordering::Relaxed)
+            || self
+                .overload
+                .is_some_and(|o| now >= o.from && now < o.until)
+    }
+
+    /// What processing a scan of `beams` beams costs now: nothing normally,
+    /// [`OVERLOAD_COST_PER_BEAM`] a beam while the processor is short.
+    pub fn processing_cost(&self, beams: usize) -> Duration {
+        if self.overloaded() {
+            OVERLOAD_COST_PER_BEAM * u32::try_from(beams).unwrap_or(u32::MAX)
+        } else {
+            Duration::ZERO
         }
     }
 
@@ -555,5 +616,38 @@ mod tests {
         let ys: Vec<f64> = (0..5).map(|_| b.gaussian(0.1)).collect();
         assert_eq!(xs, ys);
         assert!(xs.iter().any(|x| *x != 0.0));
+    }
+
+    #[test]
+    fn scans_cost_time_only_while_the_processor_is_short() {
+        let platform = Platform::new(World::example(), World::example_start(), None);
+        assert!(!platform.overloaded());
+        assert_eq!(platform.processing_cost(16), Duration::ZERO);
+        platform.set_overloaded(true);
+        assert_eq!(platform.processing_cost(16), Duration::from_millis(112));
+        assert_eq!(platform.processing_cost(12), Duration::from_millis(84));
+        platform.set_overloaded(false);
+        // A window that has not started yet, and one that is over.
+        let later = Overload {
+            from: Duration::from_secs(3600),
+            until: Duration::from_secs(7200),
+        };
+        let platform = Platform::new(World::example(), World::example_start(), None)
+            .with_overload(Some(later));
+        assert!(!platform.overloaded());
+        let over = Overload {
+            from: Duration::ZERO,
+            until: Duration::ZERO,
+        };
+        let platform =
+            Platform::new(World::example(), World::example_start(), None).with_overload(Some(over));
+        assert!(!platform.overloaded());
+        let now = Overload {
+            from: Duration::ZERO,
+            until: Duration::from_secs(3600),
+        };
+        let platform =
+            Platform::new(World::example(), World::example_start(), None).with_overload(Some(now));
+        assert!(platform.overloaded());
     }
 }

@@ -44,7 +44,13 @@ fn steps_of<'a>(summary: &'a Summary, instance: &str) -> Vec<&'a Step> {
 fn assert_safe(summary: &Summary) {
     assert!(summary.distance > 0.2, "the robot hardly moved: {summary}");
     // Odometry is integrated by the motion controller from the same steps, and read
-    // from its own monitoring port after its last section ran.
+    // from its own monitoring port after its last section ran. The check is exact
+    // whatever period the motion controller ran at: its description's `period
+    // 20ms..40ms` turns adaptation on, and on a loaded machine its supervisor may
+    // stretch the period (or stretch it to keep the base homogeneous when the range
+    // server is degraded), but each step integrates the time that really elapsed
+    // (capped at 0.1 s) and the platform executes that very step. So the example keeps
+    // adaptation on for the motion controller, as the description says.
     assert!(
         (summary.distance - summary.odometry_distance).abs() < 1e-6,
         "{summary}"
@@ -388,4 +394,234 @@ fn a_recorded_run_holds_every_odometry_and_scan_packet_or_counts_it_lost() {
         "the file ends with its summary"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_processor_shortage_degrades_the_range_server_and_it_is_promoted_back_after() {
+    use coolbot::adapt::{AdaptAction, Adaptation};
+    use coolbot::{Monitor, MonitorEvent};
+    use mobile_base::robot::{RANGES, Robot, Setup};
+    use mobile_base::world::{Platform, World};
+    use std::sync::Arc;
+    use std::time::Instant;
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    let ranges = robot.instance("base.ranges").expect("base.ranges");
+    let events = ranges.subscribe();
+    let base_events = robot.base.subscribe();
+    let mut own: Vec<Adaptation> = Vec::new();
+    let mut decisions: Vec<Adaptation> = Vec::new();
+    // Waits (generously: the machine may be loaded) for `pred` on the range server's
+    // monitoring port, keeping the adaptation steps the range server and the base
+    // published meanwhile.
+    let mut wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, timeout: Duration| {
+        let deadline = Instant::now() + timeout;
+        loop {
+            for event in events.try_iter() {
+                if let MonitorEvent::Adaptation(step) = event {
+                    own.push(step);
+                }
+            }
+            for event in base_events.try_iter() {
+                if let MonitorEvent::Adaptation(step) = event
+                    && step.component == RANGES
+                {
+                    decisions.push(step);
+                }
+            }
+            let monitor = ranges.snapshot();
+            if pred(&monitor) {
+                return monitor;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{what}: not within {timeout:?}; the range server: period {:?}, quality {}, {:?}",
+                monitor.period,
+                monitor.quality,
+                monitor.adaptation
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    let scans = |m: &Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "scans")
+            .and_then(|(_, value)| value.to_json().as_u64())
+            .unwrap_or(0)
+    };
+    let nominal = |m: &Monitor| {
+        m.adaptation.level == 0 && m.quality == 0 && m.period == Some(Duration::from_millis(50))
+    };
+
+    // The description gives the range server degraded modes: adaptation is on, at
+    // nominal (50 ms, full scans) to begin with.
+    let start = wait(
+        "nominal at first",
+        &|m| scans(m) > 0,
+        Duration::from_secs(10),
+    );
+    assert!(start.adaptation.enabled, "{:?}", start.adaptation);
+    assert_eq!(start.adaptation.max_level, 4, "3 period steps, then `half`");
+    assert!(nominal(&start), "{:?}", start.adaptation);
+
+    // The processor gets short: a full scan now takes longer than even the longest
+    // period; the runtime stretches the period, then lowers the quality to `half`,
+    // which fits.
+    platform.set_overloaded(true);
+    let degraded = wait(
+        "degraded to half scans",
+        &|m| m.quality == 1,
+        Duration::from_secs(90),
+    );
+    assert_eq!(degraded.adaptation.level, 4, "{:?}", degraded.adaptation);
+    assert_eq!(degraded.period, Some(Duration::from_millis(100)));
+    let during = scans(&degraded);
+    wait(
+        "scans flow while degraded",
+        &|m| scans(m) >= during + 3,
+        Duration::from_secs(30),
+    );
+
+    // The shortage is over: spare time, promotions back to nominal.
+    platform.set_overloaded(false);
+    let back = wait("back to nominal", &nominal, Duration::from_secs(120));
+    let after = scans(&back);
+    wait(
+        "scans flow after",
+        &|m| scans(m) >= after + 3,
+        Duration::from_secs(30),
+    );
+    assert_eq!(back.state, State::Running);
+    assert_eq!(back.error, None);
+
+    // The range server's own steps: degraded one level at a time up to `half`, then
+    // promoted one level at a time back to nominal (the steps it applied, period and
+    // quality included).
+    let levels: Vec<(AdaptAction, u32)> = own.iter().map(|s| (s.action, s.to)).collect();
+    let top = own
+        .iter()
+        .position(|s| s.to == 4)
+        .unwrap_or_else(|| panic!("never at level 4: {levels:?}"));
+    for pair in own[..=top].windows(2) {
+        assert!(pair[1].to >= pair[0].to, "{levels:?}");
+    }
+    assert_eq!(
+        own[top].quality,
+        Some(1),
+        "level 4 is the half scan: {levels:?}"
+    );
+    assert!(
+        own[top..]
+            .iter()
+            .any(|s| s.action == AdaptAction::Promoted && s.to == 0),
+        "{levels:?}"
+    );
+    // The base's supervisor decided them (the range server is its instance).
+    assert!(
+        decisions.iter().any(|s| s.action == AdaptAction::Degraded),
+        "{decisions:?}"
+    );
+    assert!(
+        decisions.iter().any(|s| s.action == AdaptAction::Promoted),
+        "{decisions:?}"
+    );
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn with_a_node_every_component_answers_coolctl_on_the_network() {
+    use coolbot::{Command, Value};
+    use coolbot_zenoh::ctl::Ctl;
+    use coolbot_zenoh::{ControlReply, Node, peer_config};
+    use mobile_base::node::NodeOptions;
+    use std::time::Instant;
+
+    // The robot's node listens on a free loopback port; multicast scouting is off so
+    // that parallel runs on the machine do not meet.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free loopback port");
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let name = format!("mobile-base-test-{}", std::process::id());
+    let options = Options {
+        duration: Duration::from_secs(120),
+        node: Some(NodeOptions {
+            listen: vec![endpoint.clone()],
+            multicast: false,
+            ..NodeOptions::named(name.clone())
+        }),
+        ..Options::default()
+    };
+    let stop = options.stop.clone();
+    let runner = std::thread::spawn(move || run(options));
+
+    // What `coolctl --connect <endpoint> --no-multicast list <name>` does.
+    let probe = Node::open(
+        &format!("probe-{}", std::process::id()),
+        peer_config(&[], &[endpoint], false).expect("config"),
+    )
+    .expect("the probe opens");
+    let ctl = Ctl::new(probe.session().clone(), Duration::from_secs(2));
+    let expected = [
+        "robot",
+        "robot.base",
+        "robot.base.motion",
+        "robot.base.ranges",
+        "robot.base.sim_ranges",
+        "robot.wanderer",
+    ];
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let listed = loop {
+        let listed = ctl.components(Some(&name)).unwrap_or_default();
+        let paths: Vec<&str> = listed.iter().map(|l| l.path.as_str()).collect();
+        if paths == expected {
+            break listed;
+        }
+        assert!(
+            Instant::now() < deadline && !runner.is_finished(),
+            "the node did not list every component: {paths:?}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    for component in &listed {
+        let state = component.monitor.state;
+        // The substitute waits on standby; every other component runs.
+        let wanted = if component.path.ends_with("sim_ranges") {
+            State::Ready
+        } else {
+            State::Running
+        };
+        assert_eq!(state, wanted, "{}", component.path);
+    }
+    // The control port answers over the network as it does locally.
+    let reply = ctl
+        .command(
+            &format!("{name}/robot.base"),
+            &Command::Set("max_speed".to_owned(), Value::Float(0.3)),
+        )
+        .expect("the base answers");
+    assert_eq!(reply, ControlReply::Accepted);
+    let reply = ctl
+        .command(
+            &format!("{name}/robot.base"),
+            &Command::Set("faults".to_owned(), Value::UInt(0)),
+        )
+        .expect("the base answers");
+    assert!(
+        matches!(reply, ControlReply::Rejected { .. }),
+        "`faults` is observable: {reply:?}"
+    );
+
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let summary = runner.join().expect("the run ends");
+    assert_eq!(summary.node, Some((name, expected.len())));
+    assert_clean_shutdown(&summary);
 }

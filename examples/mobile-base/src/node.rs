@@ -1,0 +1,48 @@
+//! `--node NAME`: the robot on the network. A [`coolbot_zenoh::Node`] exposes every
+//! component of the robot, at every level (`robot`, `robot.base`,
+//! `robot.base.motion`, ...), on its monitoring and control keys, so that `coolctl`
+//! in another terminal (or on another machine) lists, watches and commands them
+//! (`docs/distribution.md`). Nothing of Zenoh runs without the flag: the components
+//! and their ports are the same either way, the node only observes them (one thread
+//! forwarding monitoring events, one applying remote commands).
+
+use coolbot_zenoh::Node;
+
+use crate::robot::Robot;
+
+/// Where the node is on the network.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NodeOptions {
+    /// The node's name (one key chunk: letters, digits, `_`, `-`, `.`).
+    pub name: String,
+    /// Zenoh endpoints to listen on (e.g. `tcp/0.0.0.0:7447`).
+    pub listen: Vec<String>,
+    /// Zenoh endpoints to connect to.
+    pub connect: Vec<String>,
+    /// Find peers by multicast scouting (what `coolctl` does by default).
+    pub multicast: bool,
+}
+
+impl NodeOptions {
+    /// A node called `name` that finds its peers by multicast scouting.
+    pub fn named(name: impl Into<String>) -> NodeOptions {
+        NodeOptions {
+            name: name.into(),
+            listen: Vec::new(),
+            connect: Vec::new(),
+            multicast: true,
+        }
+    }
+}
+
+/// Opens the node and exposes every component of `robot` on it. The robot stays
+/// exposed while the returned node lives.
+pub fn expose(robot: &Robot, options: &NodeOptions) -> Result<Node, String> {
+    let config = coolbot_zenoh::peer_config(&options.listen, &options.connect, options.multicast)
+        .map_err(|e| format!("node `{}`: {e}", options.name))?;
+    let node = Node::open(&options.name, config)
+        .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
+    node.expose_system(robot.system())
+        .map_err(|e| format!("node `{}` cannot expose the robot: {e}", options.name))?;
+    Ok(node)
+}
