@@ -1,12 +1,10 @@
-//! `--node NAME`: the robot on the network. A [`coolbot_zenoh::Node`] exposes every
-//! component of the robot, at every level (`robot`, `robot.base`,
-//! `robot.base.motion`, ...), on its monitoring and control keys, so that `coolctl`
-//! in another terminal (or on another machine) lists, watches and commands them
-//! (`docs/distribution.md`). Nothing of Zenoh runs without the flag: the components
+//! `--node NAME`: the robot on the network (the `network` feature). A Zenoh node
+//! (`coolbot_zenoh::Node`) exposes every component of the robot, at every level
+//! (`robot`, `robot.base`, `robot.base.motion`, ...), on its monitoring and control
+//! keys, so that `coolctl` in another terminal (or on another machine) lists,
+//! watches and commands them (`docs/distribution.md`). Nothing of Zenoh runs without the flag: the components
 //! and their ports are the same either way, the node only observes them (one thread
 //! forwarding monitoring events, one applying remote commands).
-
-use coolbot_zenoh::Node;
 
 use crate::robot::Robot;
 
@@ -35,14 +33,43 @@ impl NodeOptions {
     }
 }
 
+/// The robot on the network: its components stay exposed while this lives.
+pub struct Exposed {
+    name: String,
+    #[cfg(feature = "network")]
+    _node: coolbot_zenoh::Node,
+}
+
+impl Exposed {
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+}
+
 /// Opens the node and exposes every component of `robot` on it. The robot stays
-/// exposed while the returned node lives.
-pub fn expose(robot: &Robot, options: &NodeOptions) -> Result<Node, String> {
+/// exposed while the returned value lives.
+#[cfg(feature = "network")]
+pub fn expose(robot: &Robot, options: &NodeOptions) -> Result<Exposed, String> {
     let config = coolbot_zenoh::peer_config(&options.listen, &options.connect, options.multicast)
         .map_err(|e| format!("node `{}`: {e}", options.name))?;
-    let node = Node::open(&options.name, config)
+    let node = coolbot_zenoh::Node::open(&options.name, config)
         .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
     node.expose_system(robot.system())
         .map_err(|e| format!("node `{}` cannot expose the robot: {e}", options.name))?;
-    Ok(node)
+    Ok(Exposed {
+        name: options.name.clone(),
+        _node: node,
+    })
+}
+
+/// Without the `network` feature there is no Zenoh in the build: `--node` says how
+/// to get it.
+#[cfg(not(feature = "network"))]
+pub fn expose(_robot: &Robot, options: &NodeOptions) -> Result<Exposed, String> {
+    Err(format!(
+        "node `{}`: this build has no network support; build the example with \
+         `--features network` (cargo run --release -p mobile-base --features network -- --node {})",
+        options.name, options.name
+    ))
 }

@@ -535,6 +535,7 @@ fn a_processor_shortage_degrades_the_range_server_and_it_is_promoted_back_after(
     assert!(report.clean(), "{report:?}");
 }
 
+#[cfg(feature = "network")]
 #[test]
 fn with_a_node_every_component_answers_coolctl_on_the_network() {
     use coolbot::{Command, Value};
