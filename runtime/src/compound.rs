@@ -2112,6 +2112,12 @@ impl Automaton for Compound {
                     status.level = level;
                     status.floor = floor;
                 });
+                // The verdict published so far was about the previous level: withdraw
+                // it, as an atomic component does when its level changes, so that the
+                // supervisor above does not act on it again before this compound's
+                // next turn judges the new level.
+                let load = shared.snapshot().adaptation.load;
+                shared.set_pressure(Pressure::Nominal, load);
             }
         }
         Ok(())
