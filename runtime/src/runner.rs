@@ -1574,9 +1574,15 @@ impl Runner {
         if level == from {
             return;
         }
+        self.publish_move(from, level, floor, why);
+    }
+
+    /// Publish a move of the adaptation level from `from` to `level` (the floor of
+    /// promotions now `floor`) as an `Adaptation` step saying `why`.
+    fn publish_move(&self, from: u32, level: u32, floor: u32, why: &str) {
         let step = Adaptation {
             component: self.cx.name.clone(),
-            action: if promoted {
+            action: if level < from {
                 AdaptAction::Promoted
             } else {
                 AdaptAction::Degraded
@@ -1627,22 +1633,6 @@ impl Runner {
         adapt.detector.reset(promoted);
         let load = adapt.detector.load();
         self.shared.set_pressure(Pressure::Nominal, load);
-        let step = Adaptation {
-            component: self.cx.name.clone(),
-            action: if promoted {
-                AdaptAction::Promoted
-            } else {
-                AdaptAction::Degraded
-            },
-            from,
-            to: level,
-            period: self.cx.period,
-            quality: Some(self.cx.quality),
-            detail: why.to_owned(),
-        };
-        self.shared.adaptation_step(step, |status| {
-            status.level = level;
-            status.min_level = floor;
-        });
+        self.publish_move(from, level, floor, why);
     }
 }
