@@ -281,8 +281,9 @@ fn the_load_profile_tells_computing_from_waiting() {
     // Both spend about 40 % of their period in their section ...
     assert!(sleeps.adaptation.load > 0.2, "{:?}", sleeps.adaptation);
     assert!(spins.adaptation.load > 0.2, "{:?}", spins.adaptation);
-    // ... but only one computes.
-    assert!(spins.adaptation.cpu_share > 0.05, "{:?}", spins.adaptation);
+    // ... but only one computes (how much CPU it gets depends on the machine's load:
+    // only the comparison is asserted).
+    assert!(spins.adaptation.cpu_share > 0.0, "{:?}", spins.adaptation);
     assert!(
         sleeps.adaptation.cpu_share < spins.adaptation.cpu_share / 2.0,
         "{:?} {:?}",
