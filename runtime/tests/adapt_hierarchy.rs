@@ -217,13 +217,14 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
     system.run_all().expect("run");
     let lo = group.instance("lo").expect("lo");
 
-    let monitor = wait(&group, "exhausted", |m| {
+    // (The step is published before the turn's verdict: wait for both.)
+    wait(&group, "exhausted, under a time violation", |m| {
         m.adaptation
             .history
             .iter()
             .any(|s| s.action == AdaptAction::Exhausted)
+            && m.adaptation.pressure == Pressure::Violation
     });
-    assert_eq!(monitor.adaptation.pressure, Pressure::Violation);
     // (The suspension is queued at lo's control port; it takes it between sections.)
     wait(&lo, "lo suspended", |m| {
         m.state == coolbot::State::Suspended
