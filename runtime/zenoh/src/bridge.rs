@@ -237,6 +237,17 @@ impl Drop for PullServer {
 
 type PullFn = Box<dyn Fn(Duration) -> Result<Vec<u8>, String> + Send>;
 
+/// A pull answer: what `pull` returns, encoded (its error as text).
+fn encoded_pull<P: Serialize>(
+    pull: impl Fn(Duration) -> Result<P, coolbot::port::PullError> + Send + 'static,
+) -> PullFn {
+    Box::new(move |timeout| {
+        pull(timeout)
+            .map_err(|error| error.to_string())
+            .and_then(|packet| encode(&packet))
+    })
+}
+
 fn pull_server(
     session: &zenoh::Session,
     key: &str,
@@ -460,35 +471,19 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 let pull: PullFn = match &input {
                     OutletInput::Tick(port) => {
                         let port = port.clone();
-                        Box::new(move |t| {
-                            port.pull(t)
-                                .map_err(|e| e.to_string())
-                                .and_then(|n| encode(&n))
-                        })
+                        encoded_pull(move |t| port.pull(t))
                     }
                     OutletInput::Fifo(port) => {
                         let port = port.clone();
-                        Box::new(move |t| {
-                            port.pull(t)
-                                .map_err(|e| e.to_string())
-                                .and_then(|p| encode(&p))
-                        })
+                        encoded_pull(move |t| port.pull(t))
                     }
                     OutletInput::Ufifo(port) => {
                         let port = port.clone();
-                        Box::new(move |t| {
-                            port.pull(t)
-                                .map_err(|e| e.to_string())
-                                .and_then(|p| encode(&p))
-                        })
+                        encoded_pull(move |t| port.pull(t))
                     }
                     OutletInput::Last(port) => {
                         let port = port.clone();
-                        Box::new(move |t| {
-                            port.pull(t)
-                                .map_err(|e| e.to_string())
-                                .and_then(|p| encode(&p))
-                        })
+                        encoded_pull(move |t| port.pull(t))
                     }
                     OutletInput::Poster(port) => {
                         let port = port.clone();
