@@ -86,6 +86,26 @@ fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -
     out
 }
 
+/// `on "node"` is accepted but not carried out yet: the generated compound builds the
+/// instance in its own process. A warning says so, so that no description means more
+/// than what runs.
+fn remote_instance(checker: &mut Checker<'_, '_>, instance: &ast::Instance, node: &ast::StrLit) {
+    let diagnostic = Diagnostic::warning(
+        Code::RemoteInstance,
+        checker.file,
+        node.span,
+        format!(
+            "instance `{}` runs in this process: `on \"{}\"` is not carried out yet",
+            instance.name.name, node.value
+        ),
+    )
+    .with_label("not carried out yet")
+    .with_help(
+        "remove `on \"...\"` to say what runs, or run the component on that node by hand with coolbot-zenoh (docs/distribution.md)",
+    );
+    checker.push(diagnostic);
+}
+
 fn instance(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
@@ -100,6 +120,11 @@ fn instance(
             .error(Code::TypeMismatch, node.span, "a node name cannot be empty")
             .with_label("empty");
         checker.push(diagnostic);
+    }
+    if let Some(node) = &instance.node
+        && !node.value.trim().is_empty()
+    {
+        remote_instance(checker, instance, node);
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);

@@ -238,7 +238,6 @@ impl<'a> Lookup<'a> {
             component,
             "",
             vec![format!("«compound» {}", component.name.name)],
-            false,
             &mut edges,
             0,
         );
@@ -256,7 +255,6 @@ impl<'a> Lookup<'a> {
         component: &ast::Component,
         prefix: &str,
         label: Vec<String>,
-        dashed: bool,
         edges: &mut Vec<Edge>,
         depth: usize,
     ) -> Group {
@@ -429,7 +427,7 @@ impl<'a> Lookup<'a> {
         Group {
             id: group_id,
             label,
-            dashed,
+            dashed: false,
             rounded: false,
             items,
         }
@@ -449,16 +447,20 @@ impl<'a> Lookup<'a> {
             instance.name.name, instance.component.name
         )];
         if let Some(node) = &instance.node {
-            lines.push(format!("on \"{}\" (remote)", node.value));
+            // `on "node"` is not carried out yet (`coolc::check::remote_instance`):
+            // the drawing says where the instance really runs.
+            lines.push(format!(
+                "on \"{}\": runs locally (not yet remote)",
+                node.value
+            ));
         }
         if let Some(policy) = policies.get(instance.name.name.as_str()) {
             lines.push(format!("on error: {policy}"));
         }
-        let remote = instance.node.is_some();
         let inner = self.component(&instance.component.name);
         match inner {
             Some(inner) if inner.kind == ComponentKind::Compound && depth < 16 => {
-                Item::Group(self.compound_group(inner, &path, lines, remote, edges, depth + 1))
+                Item::Group(self.compound_group(inner, &path, lines, edges, depth + 1))
             }
             _ => {
                 let ports = inner.map(|inner| Ports {
@@ -473,7 +475,7 @@ impl<'a> Lookup<'a> {
                     id: path,
                     lines,
                     shape: Shape::Box,
-                    dashed: remote,
+                    dashed: false,
                     ports,
                 })
             }
