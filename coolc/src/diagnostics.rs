@@ -148,6 +148,8 @@ codes! {
     /// An instance declared `on "node"`: remote instantiation is not carried out yet,
     /// the instance runs in the compound's process (warning).
     RemoteInstance => "coolc::check::remote_instance",
+    /// A `restart { }` or `recovery { }` block that applies to no instance (warning).
+    UnusedBlock => "coolc::check::unused_block",
 }
 
 impl fmt::Display for Code {

@@ -397,7 +397,7 @@ impl<'a> Lookup<'a> {
             }
         }
 
-        // Variables and the recovery queue, in a note.
+        // Variables, the recovery queue and the restart budget, in a note.
         let mut note = Vec::new();
         for member in &component.members {
             match member {
@@ -411,6 +411,24 @@ impl<'a> Lookup<'a> {
                         parts.push(format!("deadline {}", text::expr(deadline)));
                     }
                     note.push(format!("recovery {{ {} }}", parts.join("; ")));
+                }
+                Member::Restart(restart) => {
+                    let mut parts = Vec::new();
+                    if let Some((count, window)) = &restart.limit {
+                        parts.push(format!(
+                            "limit {} in {}",
+                            text::expr(count),
+                            text::expr(window)
+                        ));
+                    }
+                    if let Some((first, last)) = &restart.backoff {
+                        parts.push(format!(
+                            "backoff {}..{}",
+                            text::expr(first),
+                            text::expr(last)
+                        ));
+                    }
+                    note.push(format!("restart {{ {} }}", parts.join("; ")));
                 }
                 _ => {}
             }

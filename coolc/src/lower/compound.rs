@@ -398,6 +398,26 @@ impl<'a> Lowerer<'a> {
                 ast::Member::Recovery(r) => {
                     recovery.get_or_insert(r);
                 }
+                ast::Member::Restart(r) => {
+                    if let Some((count, window)) = &r.limit {
+                        // Checked: an integer in `1..=u32::MAX` and non-zero durations.
+                        let count = match count.kind {
+                            ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
+                            _ => u32::MAX,
+                        };
+                        steps.push(format!(
+                            ".restart_budget({count}, {})",
+                            duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
+                        ));
+                    }
+                    if let Some((first, last)) = &r.backoff {
+                        steps.push(format!(
+                            ".restart_backoff({}, {})",
+                            duration_rust(duration_ns(first).unwrap_or(10_000_000)),
+                            duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
+                        ));
+                    }
+                }
                 ast::Member::Automaton(a) => {
                     automaton.get_or_insert(a);
                 }
