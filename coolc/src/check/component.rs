@@ -24,7 +24,12 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             ast::Member::Variable(variable) => self::variable(checker, component, variable),
             ast::Member::Input(input) => self::input(checker, input),
             ast::Member::Output(output) => self::output(checker, output),
-            ast::Member::Timing(timing) => values::timing(checker, timing),
+            ast::Member::Timing(timing) => {
+                values::timing(checker, timing);
+                if component.kind == ComponentKind::Compound {
+                    compound::compound_timing(checker, timing, &component.name.name);
+                }
+            }
             ast::Member::Exception(exception) => {
                 self::exception(checker, exception);
                 degrade_without_quality(checker, component, exception);

@@ -220,8 +220,44 @@ fn instance(
     }
     if let Some(timing) = &instance.timing {
         values::timing(checker, timing);
+        let nested = checker
+            .model
+            .component(&instance.component.name)
+            .is_some_and(|(_, def)| def.kind == ComponentKind::Compound);
+        if nested {
+            compound_timing(checker, timing, &instance.component.name);
+        }
     }
     let _ = component;
+}
+
+/// A compound's own `timing` (or a nested compound instance's `timing` override)
+/// takes a period for its supervisor's periodic sections, `max_response` and
+/// `priority`; a period interval or quality levels would be degraded modes of the
+/// supervisor itself, which the runtime does not have: a compound degrades through
+/// its instances (`docs/runtime.md`, adaptation). Both are errors rather than
+/// accepted and ignored.
+pub(super) fn compound_timing(checker: &mut Checker<'_, '_>, timing: &ast::Timing, compound: &str) {
+    for entry in &timing.entries {
+        let (span, what) = match entry {
+            ast::TimingEntry::Period(ast::Interval {
+                hi: Some(_), span, ..
+            }) => (*span, "a period interval"),
+            ast::TimingEntry::Quality(_, span) => (*span, "quality levels"),
+            _ => continue,
+        };
+        let diagnostic = checker
+            .error(
+                Code::MisplacedMember,
+                span,
+                format!("the timing of compound `{compound}` cannot have {what}"),
+            )
+            .with_label("not allowed in a compound")
+            .with_help(
+                "a compound degrades through its instances: give the period interval or the quality levels to the atomic components inside",
+            );
+        checker.push(diagnostic);
+    }
 }
 
 /// `substitutes other`: another instance of this compound with the same interface.
