@@ -10,8 +10,8 @@
 use std::collections::BTreeSet;
 
 use super::{
-    GEN_TYPES, Lowerer, SectionOwner, StateSections, doc, duration_ns, duration_rust,
-    section_stubs, unique_among,
+    GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
+    may_targets, section_stubs, unique_among,
 };
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS};
@@ -472,6 +472,7 @@ impl<'a> Lowerer<'a> {
             });
         }
 
+        let handles = self.handles(c, &instances);
         let name = ident::camel_raw(&c.name.name);
         let parts = instances
             .iter()
@@ -507,9 +508,99 @@ impl<'a> Lowerer<'a> {
             initial: supervisor.initial,
             methods: supervisor.methods,
             section_arms: supervisor.section_arms,
+            choose_arms: supervisor.choose_arms,
             timing: self.timing(timing),
             rules,
+            handles,
         }
+    }
+
+    /// The typed handles of `c`'s instances for the supervisor's `Cx`: one per
+    /// instance whose component is known, in declaration order.
+    fn handles(&self, c: &'a ast::Component, instances: &[ir::Instance]) -> Vec<ir::Handle> {
+        // Names the handles' methods and types must not take: `Instances` has no
+        // other method; the types live beside the module's own.
+        let mut methods: Vec<String> = Vec::new();
+        let mut types: Vec<String> = Vec::new();
+        let mut handles = Vec::new();
+        for lowered in instances {
+            let Some(instance) = Self::instance_of(c, &lowered.name) else {
+                continue;
+            };
+            let (Some(component), Some(module)) =
+                (self.component_of(instance), lowered.module.as_ref())
+            else {
+                continue;
+            };
+            let method = unique_among(
+                ident::snake(&lowered.name),
+                methods.iter().map(String::as_str),
+            );
+            methods.push(method.clone());
+            let type_name = unique_among(
+                format!("{}Instance", ident::camel_raw(&lowered.name)),
+                types.iter().map(String::as_str),
+            );
+            types.push(type_name.clone());
+            let mut setters = Vec::new();
+            let mut config = None;
+            for member in &component.members {
+                match member {
+                    ast::Member::Variable(v) if v.kind == ast::VarKind::Controllable => {
+                        let Some((ty, _)) = self.variable_type(component, &v.name.name, 0) else {
+                            continue;
+                        };
+                        let to_value = match &ty.kind {
+                            TypeKind::Prim(_) => "::coolbot::Value::from(value)".to_owned(),
+                            _ => "super::__cool_to_value(&value)".to_owned(),
+                        };
+                        setters.push(ir::Setter {
+                            method: ident::method("set_", &v.name.name, ""),
+                            variable: v.name.name.clone(),
+                            ty: self.rust_type(ty, GEN_TYPES),
+                            to_value,
+                        });
+                    }
+                    ast::Member::Configuration(block)
+                        if !lowered.compound && !block.fields.is_empty() =>
+                    {
+                        config = Some(format!("super::{module}::Config"));
+                    }
+                    _ => {}
+                }
+            }
+            let (_, mut levels) = Self::states_and_qualities(component);
+            if let Some(own) = instance.timing.as_ref().and_then(|timing| {
+                timing.entries.iter().find_map(|entry| match entry {
+                    ast::TimingEntry::Quality(levels, _) => Some(levels),
+                    _ => None,
+                })
+            }) {
+                levels = own.iter().map(|level| level.name.clone()).collect();
+            }
+            let quality = (levels.len() >= 2).then(|| {
+                let name = unique_among(
+                    format!("{}Quality", ident::camel_raw(&lowered.name)),
+                    types.iter().map(String::as_str),
+                );
+                types.push(name.clone());
+                let variants = levels
+                    .iter()
+                    .map(|level| (ident::camel(level), level.clone()))
+                    .collect();
+                (name, variants)
+            });
+            handles.push(ir::Handle {
+                instance: lowered.name.clone(),
+                method,
+                type_name,
+                component: lowered.component.clone(),
+                setters,
+                config,
+                quality,
+            });
+        }
+        handles
     }
 
     /// The mapped controllable variables of compound `c`: `(name, instance,
@@ -806,6 +897,7 @@ struct Supervisor {
     initial: usize,
     methods: Vec<ir::Method>,
     section_arms: Vec<(String, String)>,
+    choose_arms: Vec<ir::ChooseArm>,
     /// `(state, condition, target)` of every `when`, in order.
     when: Vec<(String, ast::Expr, String)>,
 }
@@ -835,11 +927,12 @@ impl Lowerer<'_> {
         let mut states = Vec::new();
         let mut methods = Vec::new();
         let mut section_arms = Vec::new();
+        let mut choose_arms = Vec::new();
         let mut when = Vec::new();
         for (index, state) in states_ast.iter().enumerate() {
             let name = &state.name.name;
             let (mut entry, mut exit, mut periodic) = (false, false, None);
-            let (mut on, mut after) = (Vec::new(), Vec::new());
+            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
             for member in &state.members {
                 match member {
                     ast::StateMember::Entry(_) => entry = true,
@@ -872,7 +965,9 @@ impl Lowerer<'_> {
                     ast::StateMember::When {
                         condition, target, ..
                     } => when.push((name.clone(), condition.clone(), target.name.clone())),
-                    ast::StateMember::May { .. } => {}
+                    ast::StateMember::May { targets, .. } => {
+                        may_targets(targets, &state_index, &mut may);
+                    }
                 }
             }
             section_stubs(
@@ -887,19 +982,27 @@ impl Lowerer<'_> {
                 &mut methods,
                 &mut section_arms,
             );
+            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
+            if let Some(may_enum) = &may_enum {
+                choose_stub(index, name, may_enum, &may, &mut methods, &mut choose_arms);
+            }
             let spec = format!(
-                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[] }}",
+                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
                 ident::string_literal(name),
                 periodic.unwrap_or_else(|| "None".to_owned()),
                 on.join(", "),
                 after.join(", "),
+                may.iter()
+                    .map(|(_, i, _)| i.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             states.push(ir::State {
                 doc: doc(&state.doc),
                 cool_name: name.clone(),
                 variant: ident::camel(name),
-                may_enum: None,
-                may: Vec::new(),
+                may_enum,
+                may,
                 spec,
             });
         }
@@ -923,6 +1026,7 @@ impl Lowerer<'_> {
             initial,
             methods,
             section_arms,
+            choose_arms,
             when,
         }
     }
@@ -1252,12 +1356,35 @@ impl Scope<'_, '_> {
                     narrow: false,
                 }
             }
-            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => Operand {
-                code: String::new(),
-                ty: RTy::Unreadable,
-                maybe: false,
-                narrow: false,
-            },
+            // The compound's own default observables, copied into the view at each
+            // supervision turn.
+            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => {
+                self.read(name.to_owned());
+                self.uses_view = true;
+                let (code, ty, maybe) = match name {
+                    "result" => (
+                        "::core::option::Option::Some(view.own_result())".to_owned(),
+                        RTy::Result,
+                        true,
+                    ),
+                    "error" => (
+                        "view.own_error().unwrap_or(\"\")".to_owned(),
+                        RTy::Str,
+                        false,
+                    ),
+                    "quality" => {
+                        let (_, levels) = Lowerer::states_and_qualities(component);
+                        ("view.own_quality()".to_owned(), RTy::Quality(levels), false)
+                    }
+                    _ => (format!("view.own_{name}()"), RTy::Duration, false),
+                };
+                Operand {
+                    code,
+                    ty,
+                    maybe,
+                    narrow: false,
+                }
+            }
             _ => Operand {
                 code: String::new(),
                 ty: RTy::Symbol(name.to_owned()),
@@ -1366,13 +1493,9 @@ impl Scope<'_, '_> {
             ),
             _ => return unreadable,
         };
-        // `cpu_time` and `elapsed_time` have no change event of their own: they are
-        // sampled when the rule is evaluated, announced with the state.
-        let read = match variable {
-            "cpu_time" | "elapsed_time" => format!("{instance}.state"),
-            _ => format!("{instance}.{variable}"),
-        };
-        self.read(read);
+        // (`cpu_time` and `elapsed_time` have no change event of their own: the
+        // runtime counts them as changed every supervisor period.)
+        self.read(format!("{instance}.{variable}"));
         self.uses_view = true;
         maybe(code, ty)
     }
