@@ -1921,8 +1921,110 @@ mod tests {
         assert_eq!(rules[0].1, r#"&["m.quality"]"#);
         assert!(rules[0].0.contains("== 2_usize"), "{}", rules[0].0);
         assert!(rules[1].0.contains("== 1_usize"), "{}", rules[1].0);
-        // `cpu_time` has no change event: sampled when the state's events come.
-        assert_eq!(rules[1].1, r#"&["n.quality", "m.state"]"#);
+        // `cpu_time` has no change event: read under its own key, which the runtime
+        // counts as changed every supervisor period.
+        assert_eq!(rules[1].1, r#"&["n.quality", "m.cpu_time"]"#);
+    }
+
+    const CONTROLLED: &str = "
+        atomic Drive {
+            configuration { accel: f64 = 1.0; }
+            controllable speed: f64 = 1.0;
+            controllable label: String = \"d\";
+            observable travelled: f64 = 0.0;
+            timing { period 5ms; quality full, eco; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Base {
+            instance motion: Drive;
+            instance spare: Drive { timing { quality only; } }
+            timing { quality best, good; }
+            supervisor {
+                initial on;
+                state on {
+                    entry;
+                    may -> off;
+                    when result == fail || error != \"\" -> off;
+                    when quality == good && cpu_time > 1s -> off;
+                    when motion.speed < 0.5 -> off;
+                }
+                state off { entry; }
+            }
+        }";
+
+    #[test]
+    fn rules_read_the_compounds_own_defaults_and_instance_controllables() {
+        let rules = rules_of(CONTROLLED);
+        assert_eq!(rules[0].1, r#"&["result", "error"]"#);
+        assert!(
+            rules[0].0.contains("Some(view.own_result())"),
+            "{}",
+            rules[0].0
+        );
+        assert!(rules[0].0.contains("view.own_error()"), "{}", rules[0].0);
+        assert_eq!(rules[1].1, r#"&["quality", "cpu_time"]"#);
+        assert!(
+            rules[1].0.contains("view.own_quality() == 1_usize"),
+            "{}",
+            rules[1].0
+        );
+        assert!(rules[1].0.contains("view.own_cpu_time()"), "{}", rules[1].0);
+        assert_eq!(rules[2].1, r#"&["motion.speed"]"#);
+        assert!(
+            rules[2].0.contains(r#"view.var("motion", "speed")"#),
+            "{}",
+            rules[2].0
+        );
+    }
+
+    #[test]
+    fn a_supervisor_may_becomes_its_target_enum_and_a_choose_stub() {
+        let compound = &compounds_of(CONTROLLED)[0];
+        let on = &compound.states[0];
+        assert_eq!(on.may_enum.as_deref(), Some("OnMay"));
+        assert!(on.spec.contains("may: &[1]"), "{}", on.spec);
+        assert!(compound.methods.iter().any(|m| m.name == "on_choose"));
+        assert_eq!(compound.choose_arms.len(), 1);
+        assert_eq!(compound.choose_arms[0].targets, [("Off".to_owned(), 1)]);
+    }
+
+    #[test]
+    fn every_instance_gets_a_typed_handle() {
+        let handles = &compounds_of(CONTROLLED)[0].handles;
+        assert_eq!(handles.len(), 2);
+        let motion = &handles[0];
+        assert_eq!(
+            (motion.method.as_str(), motion.type_name.as_str()),
+            ("motion", "MotionInstance")
+        );
+        let setters: Vec<(&str, &str, &str)> = motion
+            .setters
+            .iter()
+            .map(|s| (s.method.as_str(), s.ty.as_str(), s.to_value.as_str()))
+            .collect();
+        assert_eq!(
+            setters,
+            [
+                ("set_speed", "f64", "::coolbot::Value::from(value)"),
+                (
+                    "set_label",
+                    "::std::string::String",
+                    "::coolbot::Value::from(value)"
+                ),
+            ]
+        );
+        assert_eq!(motion.config.as_deref(), Some("super::drive::Config"));
+        let (quality, levels) = motion.quality.clone().unwrap();
+        assert_eq!(quality, "MotionQuality");
+        assert_eq!(
+            levels,
+            [
+                ("Full".to_owned(), "full".to_owned()),
+                ("Eco".to_owned(), "eco".to_owned())
+            ]
+        );
+        // One level (its override): nothing to set.
+        assert_eq!(handles[1].quality, None);
     }
 
     #[test]
