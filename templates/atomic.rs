@@ -23,6 +23,9 @@ pub struct Config {
 {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
 {%- endif %}
+{%- if let Some(adapter) = f.serde_with %}
+{{ l.serde_with(adapter) }}
+{%- endif %}
 {{ l.decl(&f.name, &f.ty) }}
 {%- endfor %}
 }

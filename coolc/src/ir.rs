@@ -152,6 +152,9 @@ pub struct Field {
     pub ty: String,
     /// Rust expression of its default value.
     pub default: String,
+    /// The `#[serde(with = "...")]` adapter of a type holding an array longer than 32
+    /// elements (serde's own impls stop at 32), or `None`.
+    pub serde_with: Option<String>,
 }
 
 /// Whether `#[derive(Default)]` gives the same values as the written defaults (a
@@ -164,7 +167,8 @@ pub fn derive_default(fields: &[Field]) -> bool {
 fn default_equivalent(expr: &str) -> bool {
     if let Some(inner) = expr.strip_prefix('[').and_then(|e| e.strip_suffix(']')) {
         return match inner.rsplit_once("; ") {
-            Some((item, count)) if count.chars().all(|c| c.is_ascii_digit()) => {
+            // `Default` for arrays stops at 32 elements.
+            Some((item, count)) if count.parse::<u64>().is_ok_and(|n| n <= 32) => {
                 default_equivalent(item)
             }
             _ => false,
