@@ -157,3 +157,30 @@ fn arrays_of_any_length_build_default_and_round_trip() {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }
 }
+
+#[test]
+fn compounds_with_converters_nest_three_levels_deep() {
+    // `tests/data/nest`: `Fleet` nests `Robot`, which nests `Base` (with an override
+    // of its mapped `gain`), whose follower reaches its drive through a converter.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("nest.cool");
+    std::fs::copy(data("nest/nest.cool"), &description).unwrap();
+    let krate = dir.path().join("nest");
+    compile(&description, &krate, "nest");
+    for name in ["follower.rs", "drive.rs", "converters.rs"] {
+        std::fs::copy(data("nest").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("nest/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    assert!(
+        output.contains("test converters_reach_compounds_nested_three_deep ... ok"),
+        "{output}"
+    );
+}
