@@ -231,6 +231,7 @@ pub trait Behavior: ::core::marker::Send + 'static {
 }
 
 /// The static shape of the component, read by the runtime.
+{{- l.doc(&c.notes, 0, "///") }}
 {{ l.spec(c) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.

@@ -294,6 +294,26 @@ pub struct Atomic {
     pub choose_arms: Vec<ChooseArm>,
     /// `answer` dispatch arms: `(output index, method, send call)`.
     pub answer_arms: Vec<AnswerArm>,
+    /// Doc lines added to `SPEC`'s rustdoc: the doc comments of constructs without a
+    /// Rust item of their own ([`notes`]).
+    pub notes: Doc,
+}
+
+/// The doc lines that document a component's constructs without a Rust item of their
+/// own, for `SPEC`'s rustdoc: per note an empty line, then its subject followed by
+/// its first doc line, then its other doc lines.
+pub fn notes(notes: &[crate::ast::Note]) -> Doc {
+    let mut lines = Vec::new();
+    for note in notes {
+        lines.push(String::new());
+        let mut doc = note.doc.0.iter();
+        match doc.next().map(|line| line.trim_end()) {
+            Some(first) if !first.is_empty() => lines.push(format!("{}: {first}", note.subject)),
+            _ => lines.push(format!("{}:", note.subject)),
+        }
+        lines.extend(doc.cloned());
+    }
+    lines
 }
 
 /// The doc lines as one Rust string literal.
@@ -458,6 +478,8 @@ pub struct AnswerArm {
 pub struct Compound {
     /// Doc lines.
     pub doc: Doc,
+    /// Doc lines added to `SPEC`'s rustdoc ([`notes`]).
+    pub notes: Doc,
     /// The component type name as written.
     pub type_name: String,
     /// Module name.

@@ -637,6 +637,7 @@ impl<'a> Lowerer<'a> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
+                    docs: SectionDocs::of(state),
                 },
                 SectionOwner::Atomic,
                 &mut methods,
@@ -647,12 +648,13 @@ impl<'a> Lowerer<'a> {
                 let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
                 methods.push(ir::Method {
                     name: method.clone(),
-                    doc: vec![
+                    doc: with_written(
                         format!(
                             "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
                             targets.join(", ")
                         ),
-                    ],
+                        &SectionDocs::of(state).may,
+                    ),
                     signature: format!(
                         "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
                     ),
@@ -796,6 +798,7 @@ impl<'a> Lowerer<'a> {
 
         ir::Atomic {
             doc: doc(&c.doc),
+            notes: ir::notes(&c.notes),
             type_name: c.name.name.clone(),
             user_struct: ident::camel(&c.name.name),
             module,
@@ -1199,6 +1202,46 @@ pub(crate) struct StateSections<'a> {
     pub(crate) entry: bool,
     pub(crate) periodic: bool,
     pub(crate) exit: bool,
+    /// The doc comments written on the state's sections and `may` rules.
+    pub(crate) docs: SectionDocs,
+}
+
+/// The doc comments on a state's sections and `may` rules: they document the trait
+/// methods generated for them.
+#[derive(Default)]
+pub(crate) struct SectionDocs {
+    pub(crate) entry: Vec<String>,
+    pub(crate) periodic: Vec<String>,
+    pub(crate) exit: Vec<String>,
+    pub(crate) may: Vec<String>,
+}
+
+impl SectionDocs {
+    /// The doc comments of `state`'s sections and `may` rules.
+    pub(crate) fn of(state: &ast::State) -> SectionDocs {
+        let mut docs = SectionDocs::default();
+        for (member, doc) in state.members.iter().zip(&state.member_docs) {
+            let lines = match member {
+                ast::StateMember::Entry(_) => &mut docs.entry,
+                ast::StateMember::Periodic { .. } => &mut docs.periodic,
+                ast::StateMember::Exit(_) => &mut docs.exit,
+                ast::StateMember::May { .. } => &mut docs.may,
+                _ => continue,
+            };
+            lines.extend(doc.0.iter().cloned());
+        }
+        docs
+    }
+}
+
+/// `first`, then (after an empty line) the written doc comment `written`, if any.
+fn with_written(first: String, written: &[String]) -> Vec<String> {
+    let mut lines = vec![first];
+    if !written.is_empty() {
+        lines.push(String::new());
+        lines.extend(written.iter().cloned());
+    }
+    lines
 }
 
 /// One required stub and one glue arm per declared section of a state, in the order
@@ -1225,30 +1268,34 @@ pub(crate) fn section_stubs(
             "entry",
             "Entry",
             format!("runs once each time the {subject} enters the state"),
+            &state.docs.entry,
         ),
         (
             state.periodic,
             "periodic",
             "Periodic",
             "runs once per period while in the state".to_owned(),
+            &state.docs.periodic,
         ),
         (
             state.exit,
             "exit",
             "Exit",
             format!("runs once each time the {subject} leaves the state"),
+            &state.docs.exit,
         ),
     ];
-    for (present, suffix, section, when) in kinds {
+    for (present, suffix, section, when, written) in kinds {
         if !present {
             continue;
         }
         let method = ident::method("", name, &format!("_{suffix}"));
         methods.push(ir::Method {
             name: method.clone(),
-            doc: vec![format!(
-                "The {suffix} section of {of_state} `{name}`: {when}."
-            )],
+            doc: with_written(
+                format!("The {suffix} section of {of_state} `{name}`: {when}."),
+                written,
+            ),
             signature: format!(
                 "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
             ),

@@ -517,6 +517,7 @@ impl<'a> Lowerer<'a> {
         all_parts.extend(parts);
         ir::Compound {
             doc: doc(&c.doc),
+            notes: ir::notes(&c.notes),
             type_name: c.name.name.clone(),
             module,
             user_struct: format!("{name}Parts"),
@@ -916,6 +917,7 @@ impl Lowerer<'_> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
+                    docs: super::SectionDocs::of(state),
                 },
                 SectionOwner::Supervisor,
                 &mut methods,
