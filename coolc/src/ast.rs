@@ -283,8 +283,23 @@ pub struct Component {
     pub name: Ident,
     /// Members in source order.
     pub members: Vec<Member>,
+    /// Doc comments on constructs inside the component that have no generated Rust
+    /// item of their own (timing entries, transitions, connections, ...), in source
+    /// order.
+    pub notes: Vec<Note>,
     /// The whole item.
     pub span: Span,
+}
+
+/// A doc comment on a construct without a generated Rust item of its own: lowering
+/// prints it in the rustdoc of the component's `SPEC`, after the construct's text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    /// The construct as written, up to its first `{` or `;`, in backticks, with its
+    /// context: `` `period 100ms` ``, ``state `moving`: `on halt -> stopped` ``.
+    pub subject: String,
+    /// The doc comment.
+    pub doc: Doc,
 }
 
 /// The two kinds of component.
@@ -614,6 +629,9 @@ pub struct State {
     pub name: Ident,
     /// Sections and transitions in source order.
     pub members: Vec<StateMember>,
+    /// The doc comment of each member (`members[i]`'s is `member_docs[i]`), empty
+    /// when none was written.
+    pub member_docs: Vec<Doc>,
     /// The whole state.
     pub span: Span,
 }

@@ -232,29 +232,29 @@ fn instance(
 }
 
 /// A compound's own `timing` (or a nested compound instance's `timing` override)
-/// takes a period for its supervisor's periodic sections, `max_response` and
-/// `priority`; a period interval or quality levels would be degraded modes of the
-/// supervisor itself, which the runtime does not have: a compound degrades through
-/// its instances (`docs/runtime.md`, adaptation). Both are errors rather than
-/// accepted and ignored.
+/// takes one period for its supervisor's periodic sections, `max_response`,
+/// `priority`, and quality levels (its own `quality`, set through its control port,
+/// which its rules read and its sections act on by commanding instances); a period
+/// interval would be a degraded period of the supervisor itself, which no adaptation
+/// uses: a compound's period degrades through its instances. It is an error rather
+/// than accepted and ignored.
 pub(super) fn compound_timing(checker: &mut Checker<'_, '_>, timing: &ast::Timing, compound: &str) {
     for entry in &timing.entries {
-        let (span, what) = match entry {
-            ast::TimingEntry::Period(ast::Interval {
-                hi: Some(_), span, ..
-            }) => (*span, "a period interval"),
-            ast::TimingEntry::Quality(_, span) => (*span, "quality levels"),
-            _ => continue,
+        let ast::TimingEntry::Period(ast::Interval {
+            hi: Some(_), span, ..
+        }) = entry
+        else {
+            continue;
         };
         let diagnostic = checker
             .error(
                 Code::MisplacedMember,
-                span,
-                format!("the timing of compound `{compound}` cannot have {what}"),
+                *span,
+                format!("the timing of compound `{compound}` cannot have a period interval"),
             )
             .with_label("not allowed in a compound")
             .with_help(
-                "a compound degrades through its instances: give the period interval or the quality levels to the atomic components inside",
+                "a compound's period degrades through its instances: give the interval to the atomic components inside, and one period to the supervisor",
             );
         checker.push(diagnostic);
     }
