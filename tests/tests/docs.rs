@@ -198,6 +198,21 @@ fn lower(name: &str, text: &str, package: &str) -> coolc::ir::Crate {
 }
 
 #[test]
+fn the_documented_header_is_the_starters() {
+    let text = doc("generated-code.md");
+    let starter = lower(
+        "blinker.cool",
+        &coolc::cli::starter_description("Blinker"),
+        "blinker",
+    );
+    let header = starter.header();
+    assert!(
+        text.lines().any(|line| line == header),
+        "docs/generated-code.md should show the header {header}"
+    );
+}
+
+#[test]
 fn the_tutorials_description_is_the_starter() {
     let tutorial = doc("tutorial.md");
     let described = &blocks(section(&tutorial, "## 2. "), "cool")[0];
