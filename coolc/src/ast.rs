@@ -325,6 +325,8 @@ pub enum Member {
     OnError(OnError),
     /// `recovery { retry every D; deadline D; }`
     Recovery(Recovery),
+    /// `restart { limit N in D; backoff D..D; }`
+    Restart(Restart),
 }
 
 /// A `link` member: a dependency of the generated crate.
@@ -740,6 +742,18 @@ pub struct Recovery {
     pub retry_every: Option<Expr>,
     /// How long an instance may stay in the queue.
     pub deadline: Option<Expr>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `restart { limit N in D; backoff D..D; }`: the budget and backoff of the compound's
+/// `restart` policy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Restart {
+    /// `limit N in D`: at most `N` restarts of one instance within any `D`.
+    pub limit: Option<(Expr, Expr)>,
+    /// `backoff D..D`: the first wait before a repeated restart, and the longest.
+    pub backoff: Option<(Expr, Expr)>,
     /// The whole member.
     pub span: Span,
 }

@@ -512,6 +512,46 @@ pub struct Compound {
     pub timing: String,
     /// The `when` rules, in declaration order.
     pub rules: Vec<Rule>,
+    /// `choose` dispatch arms: one per supervisor state with `may`.
+    pub choose_arms: Vec<ChooseArm>,
+    /// The typed handles a supervisor section commands the instances with, one per
+    /// instance whose component is known, in declaration order.
+    pub handles: Vec<Handle>,
+}
+
+/// The typed handle of one instance in a compound's `Cx`: its methods command the
+/// instance through `coolbot::Commander`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Handle {
+    /// The instance's name as written (what the commander is given).
+    pub instance: String,
+    /// The method of `Instances` returning it.
+    pub method: String,
+    /// The handle struct's name (`MotionInstance`).
+    pub type_name: String,
+    /// The component type name as written.
+    pub component: String,
+    /// One setter per controllable variable (own or mapped), in declaration order.
+    pub setters: Vec<Setter>,
+    /// The configuration type (`super::<module>::Config`) when the instance is an
+    /// atomic component with a `configuration` block.
+    pub config: Option<String>,
+    /// The quality enum's name and its variants `(variant, level name)`, best first,
+    /// when the instance has two or more quality levels.
+    pub quality: Option<(String, Vec<(String, String)>)>,
+}
+
+/// `set_<variable>` on an instance handle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Setter {
+    /// Method name.
+    pub method: String,
+    /// The variable's name as written.
+    pub variable: String,
+    /// The value's Rust type.
+    pub ty: String,
+    /// The `coolbot::Value` expression of `value`.
+    pub to_value: String,
 }
 
 impl Instance {
@@ -553,6 +593,7 @@ impl Compound {
     /// emitted only then).
     pub fn locks(&self) -> bool {
         !self.section_arms.is_empty()
+            || !self.choose_arms.is_empty()
             || self.has_exposed()
             || self.has_controllable()
             || self.rules_use_vars()

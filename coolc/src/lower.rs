@@ -543,18 +543,7 @@ impl<'a> Lowerer<'a> {
                         state_index(&target.name)
                     )),
                     ast::StateMember::May { targets, .. } => {
-                        for target in targets {
-                            if !may
-                                .iter()
-                                .any(|(_, _, n): &(String, usize, String)| *n == target.name)
-                            {
-                                may.push((
-                                    ident::camel(&target.name),
-                                    state_index(&target.name),
-                                    target.name.clone(),
-                                ));
-                            }
-                        }
+                        may_targets(targets, &state_index, &mut may);
                     }
                     ast::StateMember::When { .. } => {}
                 }
@@ -574,32 +563,7 @@ impl<'a> Lowerer<'a> {
                 &mut section_arms,
             );
             if let Some(may_enum) = &may_enum {
-                let method = ident::method("", name, "_choose");
-                let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
-                methods.push(ir::Method {
-                    name: method.clone(),
-                    doc: vec![
-                        format!(
-                            "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
-                            targets.join(", ")
-                        ),
-                    ],
-                    signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
-                    ),
-                    user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
-                    stub_body: vec![
-                        format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
-                        "let _ = cx;".to_owned(),
-                        "None".to_owned(),
-                    ],
-                });
-                choose_arms.push(ir::ChooseArm {
-                    state: index,
-                    method,
-                    may_enum: may_enum.clone(),
-                    targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
-                });
+                choose_stub(index, name, may_enum, &may, &mut methods, &mut choose_arms);
             }
             let spec = format!(
                 "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
@@ -1091,6 +1055,60 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
             format!("{{ {} }}", entries.join(", "))
         }
     }
+}
+
+/// Adds `may` targets `targets` (by name; `state_index` gives their index) to `may`
+/// as `(variant, index, name)`, each once.
+pub(crate) fn may_targets(
+    targets: &[ast::Ident],
+    state_index: &dyn Fn(&str) -> usize,
+    may: &mut Vec<(String, usize, String)>,
+) {
+    for target in targets {
+        if !may.iter().any(|(_, _, n)| *n == target.name) {
+            may.push((
+                ident::camel(&target.name),
+                state_index(&target.name),
+                target.name.clone(),
+            ));
+        }
+    }
+}
+
+/// The `<state>_choose` stub of state `name` (index `index`) whose `may` targets are
+/// `may`, returning `Option<may_enum>`, and its glue arm.
+pub(crate) fn choose_stub(
+    index: usize,
+    name: &str,
+    may_enum: &str,
+    may: &[(String, usize, String)],
+    methods: &mut Vec<ir::Method>,
+    choose_arms: &mut Vec<ir::ChooseArm>,
+) {
+    let method = ident::method("", name, "_choose");
+    let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
+    methods.push(ir::Method {
+        name: method.clone(),
+        doc: vec![format!(
+            "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
+            targets.join(", ")
+        )],
+        signature: format!(
+            "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
+        ),
+        user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
+        stub_body: vec![
+            format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
+            "let _ = cx;".to_owned(),
+            "None".to_owned(),
+        ],
+    });
+    choose_arms.push(ir::ChooseArm {
+        state: index,
+        method,
+        may_enum: may_enum.to_owned(),
+        targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
+    });
 }
 
 /// Whose user automaton a state belongs to: the wording of its stubs and the receiver

@@ -56,6 +56,7 @@ const MEMBER_KEYWORDS: &[&str] = &[
     "connect",
     "on",
     "recovery",
+    "restart",
 ];
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
@@ -791,6 +792,10 @@ fn rule_name(rule: Rule) -> Option<&'static str> {
         kw_error => "`error`",
         kw_recovery => "`recovery`",
         kw_deadline => "`deadline`",
+        kw_restart => "`restart`",
+        kw_limit => "`limit`",
+        kw_in => "`in`",
+        kw_backoff => "`backoff`",
         _ => return None,
     })
 }
@@ -977,6 +982,10 @@ fn is_keyword(rule: Rule) -> bool {
             | Rule::kw_error
             | Rule::kw_recovery
             | Rule::kw_deadline
+            | Rule::kw_restart
+            | Rule::kw_limit
+            | Rule::kw_in
+            | Rule::kw_backoff
     )
 }
 
@@ -1520,6 +1529,27 @@ impl Builder<'_> {
                     }
                 }
                 ast::Member::Recovery(recovery)
+            }
+            Rule::restart => {
+                let mut restart = ast::Restart {
+                    limit: None,
+                    backoff: None,
+                    span,
+                };
+                for part in children(inner) {
+                    let rule = part.as_rule();
+                    let values = children(part);
+                    let pair = (
+                        self.expr(values.first()?.clone())?,
+                        self.expr(values.get(1)?.clone())?,
+                    );
+                    if rule == Rule::restart_limit {
+                        restart.limit = Some(pair);
+                    } else {
+                        restart.backoff = Some(pair);
+                    }
+                }
+                ast::Member::Restart(restart)
             }
             _ => return None,
         };

@@ -102,6 +102,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "pair.rs",
         "ticker.rs",
         "swap.rs",
+        "restarter.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -121,6 +122,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "a_redundant_group_keeps_the_stream_when_a_member_fails",
         "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
         "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
+        "the_restart_budget_of_the_description_bounds_the_restarts",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

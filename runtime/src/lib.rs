@@ -121,6 +121,7 @@
 
 pub mod adapt;
 mod automaton;
+mod commander;
 pub mod compound;
 mod monitor;
 pub mod port;
@@ -135,6 +136,7 @@ mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, Refused};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
