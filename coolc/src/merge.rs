@@ -248,8 +248,8 @@ pub fn merge_modules(
 /// How [`write_crate_with`] writes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct WriteOptions {
-    /// Write nothing: only report what a compile would write, add and remove
-    /// (`coolc compile --check`). `.coolc/` is neither read for stubs nor written.
+    /// Write nothing (`.coolc/` included): only report what a compile would write,
+    /// add and remove (`coolc compile --check`).
     pub check: bool,
     /// Keep the `coolbot` dependency of an existing `Cargo.toml` as it is (no runtime
     /// option was given); a new manifest gets the crate's runtime either way.
@@ -657,7 +657,7 @@ fn write_manifest(
                 source = cause.source();
             }
             warnings.push(format!(
-                "{message}; coolc's entries for these descriptions are:\n{}",
+                "{message}; the manifest coolc would write for these descriptions, with its entries, is:\n{}",
                 file.contents
             ));
             Ok(false)

@@ -476,3 +476,27 @@ fn a_link_crate_naming_a_user_dependency_takes_it_over_with_a_warning() {
     assert!(!removed.contains("ryu ="), "{removed}");
     assert!(removed.contains("# My own ryu.\n"), "{removed}");
 }
+
+#[test]
+fn a_manifest_that_does_not_parse_is_left_alone_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let krate = dir.path().join("lamp");
+    write(&description, V1);
+    compile(&description, &krate, "lamp");
+    let broken = "[package\nname = \"lamp\"\n";
+    write(&krate.join("Cargo.toml"), broken);
+    let report = compile(&description, &krate, "lamp");
+    assert_eq!(
+        std::fs::read_to_string(krate.join("Cargo.toml")).unwrap(),
+        broken
+    );
+    assert!(!report.written.iter().any(|p| p == Path::new("Cargo.toml")));
+    assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+    assert!(
+        report.warnings[0].starts_with("Cargo.toml was not updated: it does not parse as TOML")
+            && report.warnings[0].contains("[package.metadata.coolc]"),
+        "{}",
+        report.warnings[0]
+    );
+}
