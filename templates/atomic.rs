@@ -1,7 +1,7 @@
 {#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`), which lays out the
     parts that depend on the description and says when the result needs a formatter. -#}
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Generated code of atomic component `{{ c.type_name }}`.
 //!
 //! Implement [`Behavior`] (the user file `src/{{ c.module }}.rs` holds the stubs) and

@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Generated code of compound component `{{ c.type_name }}`.
 //!
 //! Implement [`Supervisor`] (the supervisor's sections) and [`Parts`] (which

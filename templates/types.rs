@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Packets, enums, extern packets and converters of the descriptions.
 {% for e in types.externs %}
 

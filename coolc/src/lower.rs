@@ -22,6 +22,9 @@ pub struct Options {
     pub runtime: RuntimeDep,
     /// Source file names shown in the generated-file header.
     pub sources: Vec<String>,
+    /// The fingerprint of the inputs shown in the generated-file header:
+    /// [`crate::fingerprint::inputs`] of the analysis's sources.
+    pub inputs: String,
 }
 
 impl Default for Options {
@@ -30,6 +33,7 @@ impl Default for Options {
             package: "cool-components".to_owned(),
             runtime: RuntimeDep::Version("0.1".to_owned()),
             sources: Vec::new(),
+            inputs: crate::fingerprint::inputs(&[]),
         }
     }
 }
@@ -509,6 +513,7 @@ impl<'a> Lowerer<'a> {
             dependencies,
             system_libs,
             sources: options.sources.clone(),
+            inputs: options.inputs.clone(),
             types,
             atomics,
             compounds,

@@ -30,6 +30,7 @@ fn lower_file(root: &Path, package: &str) -> coolc::ir::Crate {
         package: package.to_owned(),
         runtime: RuntimeDep::Version("0.1".to_owned()),
         sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
+        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
     };
     lower::lower(&analysis.files, &options)
 }
@@ -46,6 +47,8 @@ fn snapshot_crate(prefix: &str, krate: &coolc::ir::Crate) {
             let kind = match f.kind {
                 FileKind::Generated => "generated",
                 FileKind::User => "user",
+                FileKind::Manifest => "manifest",
+                FileKind::Starter => "starter",
             };
             format!("{kind:9} {}", f.path.display())
         })
@@ -83,12 +86,13 @@ fn starter_component() {
             package: "starter".to_owned(),
             runtime: RuntimeDep::Version("0.1".to_owned()),
             sources: vec!["starter.cool".to_owned()],
+            inputs: coolc::fingerprint::inputs(analysis.sources.files()),
         },
     );
     snapshot_crate("starter", &krate);
     let atomic = &krate.atomics[0];
     insta::assert_snapshot!("starter__filled_component", emit::starter_component(atomic));
-    insta::assert_snapshot!("starter__main", emit::starter_main(&krate, atomic));
+    insta::assert_snapshot!("starter__main", emit::starter_main(&krate));
 }
 
 #[test]
