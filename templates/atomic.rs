@@ -23,6 +23,9 @@ pub struct Config {
 {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
 {%- endif %}
+{%- if let Some(adapter) = f.serde_with %}
+{{ l.serde_with(adapter) }}
+{%- endif %}
 {{ l.decl(&f.name, &f.ty) }}
 {%- endfor %}
 }
@@ -228,6 +231,7 @@ pub trait Behavior: ::core::marker::Send + 'static {
 }
 
 /// The static shape of the component, read by the runtime.
+{{- l.doc(&c.notes, 0, "///") }}
 {{ l.spec(c) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.

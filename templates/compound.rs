@@ -136,6 +136,9 @@ impl {{ may_enum }} {
 /// variables, its timing, and the exported ports as the compound will have them
 /// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
 /// adds the mapped variables).
+{%- for line in c.notes %}
+///{% if !line.is_empty() %} {{ line }}{% endif %}
+{%- endfor %}
 pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     type_name: "{{ c.type_name }}",
     doc: {{ c.doc_literal() }},

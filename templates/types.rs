@@ -18,6 +18,9 @@ pub struct {{ p.name }} {
     {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
     {%- endif %}
+    {%- if let Some(adapter) = f.serde_with %}
+    #[serde(with = "{{ adapter }}")]
+    {%- endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}
 }

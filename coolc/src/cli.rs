@@ -93,8 +93,9 @@ pub enum Commands {
     },
     /// Create a new component crate with a starter description that builds and runs.
     New {
-        /// The crate directory and package name (e.g. `blinker`).
-        name: PathBuf,
+        /// The crate directory and package name (e.g. `blinker`): the last path
+        /// component must be a valid package name, as for `cargo new`.
+        name: String,
         /// Where the runtime is found.
         #[command(flatten)]
         runtime: RuntimeArgs,
@@ -221,7 +222,7 @@ pub fn run(cli: Cli) -> ExitCode {
             let package = name.clone().unwrap_or_else(|| dir_name(out));
             compile(&cli, files, out, &package, runtime.dep(out)).map(|_| ())
         }
-        Commands::New { name, runtime } => new(&cli, name, runtime.dep(name)),
+        Commands::New { name, runtime } => new(&cli, Path::new(name), runtime.dep(Path::new(name))),
         Commands::Diagram {
             files,
             component,
@@ -283,6 +284,23 @@ fn render_options(cli: &Cli) -> RenderOptions {
     }
 }
 
+/// The files of directory `dir` (`""` is the current directory), for the help on an
+/// unknown name that a file next to the one using it defines.
+fn cool_files_in(dir: &Path) -> Vec<PathBuf> {
+    let read = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(entries) = std::fs::read_dir(read) else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(Result::ok)
+        .map(|entry| dir.join(entry.file_name()))
+        .collect()
+}
+
 /// Analyzes `files`, prints the diagnostics, fails when there are errors.
 fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     for file in files {
@@ -293,7 +311,11 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
             )));
         }
     }
-    let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
+    let analysis = crate::analyze_with_siblings(
+        files,
+        &|path: &Path| std::fs::read_to_string(path),
+        &cool_files_in,
+    );
     if !analysis.diagnostics.is_empty() {
         let rendered = analysis.render(render_options(cli));
         match cli.message_format {
@@ -377,10 +399,19 @@ fn draw(
 }
 
 fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
+    let name = if dir.as_os_str().is_empty() {
+        String::new()
+    } else {
+        dir_name(dir)
+    };
+    if let Some(why) = package_name_error(&name) {
+        return Err(Failure::Usage(format!(
+            "invalid package name `{name}`: {why}; pass a name such as `blinker` or `my-robot`"
+        )));
+    }
     if dir.exists() {
         return Err(Failure::Usage(format!("{} already exists", dir.display())));
     }
-    let name = dir_name(dir);
     let type_name = ident::camel_raw(&name.replace('-', "_"));
     let description = starter_description(&type_name);
     let components = dir.join("components");
@@ -413,6 +444,30 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
             .display(),
     );
     Ok(())
+}
+
+/// Why `name` cannot be the package name `coolc new` gives the crate (the rules of
+/// `cargo new`), or `None` when it can.
+pub fn package_name_error(name: &str) -> Option<&'static str> {
+    let Some(first) = name.chars().next() else {
+        return Some("the name cannot be empty");
+    };
+    Some(if first.is_ascii_digit() {
+        "the name cannot start with a digit"
+    } else if !(first.is_ascii_alphabetic() || first == '_') {
+        "the name must start with a letter or `_`"
+    } else if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        "only ASCII letters, digits, `-` and `_` may be used"
+    } else if ident::is_keyword(name) {
+        "it is a Rust keyword"
+    } else if ["test", "std", "core", "alloc", "proc_macro"].contains(&name) {
+        "it is the name of a crate of Rust's standard library"
+    } else {
+        return None;
+    })
 }
 
 fn cool_file_name(type_name: &str) -> String {

@@ -152,6 +152,9 @@ pub struct Field {
     pub ty: String,
     /// Rust expression of its default value.
     pub default: String,
+    /// The `#[serde(with = "...")]` adapter of a type holding an array longer than 32
+    /// elements (serde's own impls stop at 32), or `None`.
+    pub serde_with: Option<String>,
 }
 
 /// Whether `#[derive(Default)]` gives the same values as the written defaults (a
@@ -164,7 +167,8 @@ pub fn derive_default(fields: &[Field]) -> bool {
 fn default_equivalent(expr: &str) -> bool {
     if let Some(inner) = expr.strip_prefix('[').and_then(|e| e.strip_suffix(']')) {
         return match inner.rsplit_once("; ") {
-            Some((item, count)) if count.chars().all(|c| c.is_ascii_digit()) => {
+            // `Default` for arrays stops at 32 elements.
+            Some((item, count)) if count.parse::<u64>().is_ok_and(|n| n <= 32) => {
                 default_equivalent(item)
             }
             _ => false,
@@ -290,6 +294,26 @@ pub struct Atomic {
     pub choose_arms: Vec<ChooseArm>,
     /// `answer` dispatch arms: `(output index, method, send call)`.
     pub answer_arms: Vec<AnswerArm>,
+    /// Doc lines added to `SPEC`'s rustdoc: the doc comments of constructs without a
+    /// Rust item of their own ([`notes`]).
+    pub notes: Doc,
+}
+
+/// The doc lines that document a component's constructs without a Rust item of their
+/// own, for `SPEC`'s rustdoc: per note an empty line, then its subject followed by
+/// its first doc line, then its other doc lines.
+pub fn notes(notes: &[crate::ast::Note]) -> Doc {
+    let mut lines = Vec::new();
+    for note in notes {
+        lines.push(String::new());
+        let mut doc = note.doc.0.iter();
+        match doc.next().map(|line| line.trim_end()) {
+            Some(first) if !first.is_empty() => lines.push(format!("{}: {first}", note.subject)),
+            _ => lines.push(format!("{}:", note.subject)),
+        }
+        lines.extend(doc.cloned());
+    }
+    lines
 }
 
 /// The doc lines as one Rust string literal.
@@ -454,6 +478,8 @@ pub struct AnswerArm {
 pub struct Compound {
     /// Doc lines.
     pub doc: Doc,
+    /// Doc lines added to `SPEC`'s rustdoc ([`notes`]).
+    pub notes: Doc,
     /// The component type name as written.
     pub type_name: String,
     /// Module name.

@@ -2012,13 +2012,27 @@ impl Compound {
                 continue;
             }
             // Due for a retry: restart it, on probation until the next retry (not while
-            // it is stuck in an overrun section: a command would wait for it).
-            let restarted = !self.instances[index].handle.is_stuck()
-                && command(&self.instances[index].handle, Controllable::Running).is_ok()
-                && self.instances[index].handle.state() == State::Running;
-            if restarted {
-                self.instances[index].handled = false;
-                self.step(index, Step::Retried, "");
+            // it is stuck in an overrun section: a command would wait for it). Every
+            // attempt is a step, so an operator sees recovery being tried.
+            let handle = &self.instances[index].handle;
+            let attempt = if handle.is_stuck() {
+                Err("still stuck in a section past its max_response".to_owned())
+            } else {
+                match command(handle, Controllable::Running) {
+                    Err(fault) => Err(fault.text().to_owned()),
+                    Ok(()) => match handle.state() {
+                        State::Running => Ok(()),
+                        state => Err(format!("{state} after the restart")),
+                    },
+                }
+            };
+            let restarted = attempt.is_ok();
+            match attempt {
+                Ok(()) => {
+                    self.instances[index].handled = false;
+                    self.step(index, Step::Retried, "");
+                }
+                Err(why) => self.step(index, Step::RetryFailed, why),
             }
             let entry = &mut self.queue[position];
             entry.probation = restarted;

@@ -158,3 +158,7 @@ pub use crate::value::{Time, Value, ValueError};
 
 /// Re-exported so generated code and users need not depend on it themselves.
 pub use crossbeam_channel;
+/// Re-exported for generated code: the serde adapters of packet fields, configuration
+/// fields and variables holding arrays longer than 32 elements (serde's own impls stop
+/// at 32), so a generated crate needs no dependency of its own for them.
+pub use serde_with;

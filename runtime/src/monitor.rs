@@ -155,6 +155,7 @@ impl std::fmt::Display for Supervision {
             Step::Substituted { by } => write!(f, "{instance} substituted by {by}")?,
             Step::Enqueued => write!(f, "{instance} entered the recovery queue")?,
             Step::Retried => write!(f, "{instance} retried")?,
+            Step::RetryFailed => write!(f, "{instance} retry failed")?,
             Step::Recovered => write!(f, "{instance} recovered")?,
             Step::Retired => write!(f, "{instance} retired (recovery deadline)")?,
             Step::Commanded { command } => write!(f, "{instance} commanded: {command}")?,
@@ -188,6 +189,9 @@ pub enum Step {
     Enqueued,
     /// The recovery queue restarted it (it is on probation until the next retry).
     Retried,
+    /// The recovery queue tried to restart it and it did not come back to `running`
+    /// (the detail says why); it stays queued until the next retry or its deadline.
+    RetryFailed,
     /// It recovered and took its place back (the arrangement before the fault).
     Recovered,
     /// Its recovery deadline expired: it was destroyed (`dead`).

@@ -126,6 +126,9 @@ pub(super) fn rule(
         RTy::Bool | RTy::Unknown => {}
         RTy::Symbol(name) => typer.unknown_variable(&name),
         other => {
+            let help = typer
+                .enum_variants(&other)
+                .unwrap_or_else(|| "compare it: `x == value`, `x > 3`".to_owned());
             let diagnostic = typer
                 .checker
                 .error(
@@ -134,7 +137,7 @@ pub(super) fn rule(
                     format!("a rule must be a boolean expression, but this is {other}"),
                 )
                 .with_label("not a bool")
-                .with_help("compare it: `x == value`, `x > 3`");
+                .with_help(help);
             typer.checker.push(diagnostic);
         }
     }
@@ -400,9 +403,11 @@ impl Typer<'_, '_, '_> {
         if !compatible(&left_ty, &right_ty) {
             let help = match (&left_ty, &right_ty) {
                 (RTy::Float, RTy::Int) | (RTy::Int, RTy::Float) => {
-                    Some("write float literals with a point, e.g. `3.0`")
+                    Some("write float literals with a point, e.g. `3.0`".to_owned())
                 }
-                _ => None,
+                _ => self
+                    .enum_variants(&left_ty)
+                    .or_else(|| self.enum_variants(&right_ty)),
             };
             let mut diagnostic = self
                 .checker
@@ -431,15 +436,43 @@ impl Typer<'_, '_, '_> {
                 RTy::Int | RTy::Float | RTy::Duration | RTy::Time
             )
         {
-            self.mismatch(
-                expr,
-                format!(
-                    "`{}` orders numbers, durations and times, not {left_ty}",
-                    op.as_str()
-                ),
-            );
+            let mut diagnostic = self
+                .checker
+                .error(
+                    Code::RuleType,
+                    expr.span,
+                    format!(
+                        "`{}` orders numbers, durations and times, not {left_ty}",
+                        op.as_str()
+                    ),
+                )
+                .with_label("ill-typed");
+            if let Some(help) = self.enum_variants(&left_ty) {
+                diagnostic = diagnostic.with_help(help);
+            }
+            self.checker.push(diagnostic);
         }
         RTy::Bool
+    }
+
+    /// For an enum (or optional enum) type, help that lists its variants and how a
+    /// rule compares with one.
+    fn enum_variants(&self, ty: &RTy) -> Option<String> {
+        let RTy::Enum(name) = strip(ty) else {
+            return None;
+        };
+        let def = self.checker.model.enum_def(name)?;
+        let variants: Vec<String> = def
+            .variants
+            .iter()
+            .map(|v| format!("`{name}::{}`", v.name.name))
+            .collect();
+        let first = variants.first()?;
+        Some(format!(
+            "compare it with `==` or `!=` to a variant of `{name}`: {} (e.g. `== {}`)",
+            variants.join(", "),
+            first.trim_matches('`')
+        ))
     }
 
     /// Resolves a bare name against the type it is compared with.

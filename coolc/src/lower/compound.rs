@@ -281,6 +281,33 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// Whether compound `c` connects through a converter, itself or in a compound it
+    /// nests at any depth: its builder then takes the converters as a type argument
+    /// and passes them on to the nested builders.
+    fn uses_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        let own = c
+            .members
+            .iter()
+            .any(|m| matches!(m, ast::Member::Connect(k) if k.via.is_some()));
+        own || self.nests_converters(c, visiting)
+    }
+
+    /// Whether an instance of compound `c` is a compound that uses converters.
+    fn nests_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        if !visiting.insert(&c.name.name) {
+            // A compound nesting itself was rejected by the checker.
+            return false;
+        }
+        let nested = c.members.iter().any(|m| match m {
+            ast::Member::Instance(i) => self.component_of(i).is_some_and(|t| {
+                t.kind == ast::ComponentKind::Compound && self.uses_converters(t, visiting)
+            }),
+            _ => false,
+        });
+        visiting.remove(c.name.name.as_str());
+        nested
+    }
+
     /// Lowers compound `c` into the IR of its generated module.
     pub(super) fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
         let mut instances = Vec::new();
@@ -398,6 +425,26 @@ impl<'a> Lowerer<'a> {
                 ast::Member::Recovery(r) => {
                     recovery.get_or_insert(r);
                 }
+                ast::Member::Restart(r) => {
+                    if let Some((count, window)) = &r.limit {
+                        // Checked: an integer in `1..=u32::MAX` and non-zero durations.
+                        let count = match count.kind {
+                            ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
+                            _ => u32::MAX,
+                        };
+                        steps.push(format!(
+                            ".restart_budget({count}, {})",
+                            duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
+                        ));
+                    }
+                    if let Some((first, last)) = &r.backoff {
+                        steps.push(format!(
+                            ".restart_backoff({}, {})",
+                            duration_rust(duration_ns(first).unwrap_or(10_000_000)),
+                            duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
+                        ));
+                    }
+                }
                 ast::Member::Automaton(a) => {
                     automaton.get_or_insert(a);
                 }
@@ -491,12 +538,13 @@ impl<'a> Lowerer<'a> {
         all_parts.extend(parts);
         ir::Compound {
             doc: doc(&c.doc),
+            notes: ir::notes(&c.notes),
             type_name: c.name.name.clone(),
             module,
             user_struct: format!("{name}Parts"),
             supervisor_struct: format!("{name}Supervisor"),
             parts: all_parts,
-            uses_converters,
+            uses_converters: uses_converters || self.nests_converters(c, &mut BTreeSet::new()),
             instances,
             connections,
             steps,
@@ -749,10 +797,17 @@ impl<'a> Lowerer<'a> {
                 && var_overrides.is_empty()
                 && from_mapped.is_empty()
                 && mapped_overrides.is_empty();
+            // A nested compound that uses converters gets the enclosing compound's.
+            let converters = match target {
+                Some(t) if compound && self.uses_converters(t, &mut BTreeSet::new()) => "::<C>",
+                _ => "",
+            };
             match (compound, plain) {
-                (true, true) => format!("super::{module}::component({name}, parts.{method}())?"),
+                (true, true) => format!(
+                    "super::{module}::component{converters}({name}, parts.{method}())?"
+                ),
                 (true, false) => format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {vars}, {nested})?"
+                    "super::{module}::component_with{converters}({name}, parts.{method}(), {vars}, {nested})?"
                 ),
                 (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
                 (false, false) => format!(
@@ -977,6 +1032,7 @@ impl Lowerer<'_> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
+                    docs: super::SectionDocs::of(state),
                 },
                 SectionOwner::Supervisor,
                 &mut methods,
@@ -984,7 +1040,15 @@ impl Lowerer<'_> {
             );
             let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
             if let Some(may_enum) = &may_enum {
-                choose_stub(index, name, may_enum, &may, &mut methods, &mut choose_arms);
+                choose_stub(
+                    index,
+                    name,
+                    may_enum,
+                    &may,
+                    &super::SectionDocs::of(state).may,
+                    &mut methods,
+                    &mut choose_arms,
+                );
             }
             let spec = format!(
                 "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
