@@ -34,11 +34,12 @@ struct Commanding {
     answers: Answers,
 }
 
-static STATES: [StateSpec; 4] = [
+static STATES: [StateSpec; 5] = [
     state("operating", &[]),
     state("stopped", &[]),
     state("degraded", &[]),
     state("probing", &[]),
+    state("strict", &[]),
 ];
 
 const fn state(name: &'static str, may: &'static [usize]) -> StateSpec {
@@ -112,6 +113,8 @@ impl Supervisor for Commanding {
                 answer("quality 2", cx.instances.set_quality("w", 2));
             }
             "probing" => answer("run", cx.instances.state("w", Controllable::Running)),
+            // A refusal given to `?` is the section's fault.
+            "strict" => cx.instances.set("w", "count", 1_u64)?,
             _ => {}
         }
         Ok(())
@@ -133,6 +136,7 @@ fn go_rules(builder: CompoundBuilder) -> CompoundBuilder {
         ("operating", "stopped", 1),
         ("operating", "degraded", 2),
         ("operating", "probing", 3),
+        ("operating", "strict", 4),
         ("stopped", "operating", 0),
         ("degraded", "operating", 0),
         ("probing", "operating", 0),
@@ -309,6 +313,40 @@ fn a_supervisor_suspends_resumes_and_sets_its_instance_and_each_command_is_a_ste
         },
         String::new()
     )));
+    drop(system);
+}
+
+#[test]
+fn a_refusal_passed_to_question_mark_takes_the_compound_to_running_error() {
+    let (w, _script) = worker("w");
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::default(),
+        },
+    ))
+    .instance(w);
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+    set_go(&base, 4);
+    let monitor = base
+        .wait_state(State::RunningError, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    let error = monitor.error.unwrap_or_default();
+    assert!(
+        error.contains(
+            "instance `w` did not take `set count = 1`: `count` is observable, not controllable"
+        ),
+        "{error}"
+    );
+    // The refusal is a step too.
+    assert!(monitor.supervision.iter().any(|s| s.step
+        == Step::CommandRefused {
+            command: "set count = 1".to_owned()
+        }));
     drop(system);
 }
 
