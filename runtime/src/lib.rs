@@ -126,6 +126,7 @@ mod monitor;
 pub mod port;
 pub mod record;
 mod runner;
+pub mod schema;
 mod spec;
 mod system;
 pub mod table;
