@@ -121,6 +121,7 @@
 
 pub mod adapt;
 mod automaton;
+pub mod clock;
 pub mod compound;
 mod monitor;
 pub mod port;
@@ -136,6 +137,7 @@ mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::clock::{Clock, NotSettled, VirtualClock};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,

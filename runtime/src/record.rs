@@ -73,6 +73,7 @@ use crossbeam_channel::{Receiver, Sender};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+use crate::clock::Clock;
 use crate::monitor::{Handle, MonitorEvent, Subscription};
 use crate::port::{
     DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, TickIn, TickOut,
@@ -433,6 +434,7 @@ fn message_bytes<T: Serialize>(value: &T, wrapped: bool) -> serde_json::Result<V
 /// ```
 pub struct Recorder {
     capacity: usize,
+    clock: Clock,
     taps: Vec<Box<dyn PendingTap>>,
     monitors: Vec<(String, Handle)>,
 }
@@ -460,6 +462,7 @@ impl Recorder {
     pub fn new() -> Recorder {
         Recorder {
             capacity: DEFAULT_TAP_CAPACITY,
+            clock: Clock::real(),
             taps: Vec::new(),
             monitors: Vec::new(),
         }
@@ -469,6 +472,14 @@ impl Recorder {
     /// catches up; a packet sent to a full queue is lost, counted and reported.
     pub fn capacity(mut self, packets: usize) -> Recorder {
         self.capacity = packets.max(1);
+        self
+    }
+
+    /// Stamp the messages with `clock` (`crate::clock`; the real clock by default):
+    /// the same virtual clock as the system's makes a recording's times those its
+    /// components saw.
+    pub fn clock(mut self, clock: Clock) -> Recorder {
+        self.clock = clock;
         self
     }
 
@@ -585,7 +596,7 @@ impl Recorder {
             .library(concat!("coolbot-", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(mcap_error)?;
-        let start = Instant::now();
+        let start = Start::on(self.clock.clone());
         let start_unix_ns = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, nanos);
@@ -651,7 +662,7 @@ impl Recorder {
         let mut taps = Vec::new();
         let mut counters = Vec::new();
         for (pending, channel) in pending.into_iter().zip(channels) {
-            let tap = pending.attach(self.capacity, start, Arc::clone(&bell), channel);
+            let tap = pending.attach(self.capacity, start.clone(), Arc::clone(&bell), channel);
             counters.push(tap.counters());
             taps.push(tap);
         }
@@ -701,6 +712,27 @@ impl Recorder {
             counters,
             losses,
         })
+    }
+}
+
+/// The start of a recording on its clock.
+#[derive(Clone)]
+struct Start {
+    clock: Clock,
+    at: Instant,
+}
+
+impl Start {
+    fn on(clock: Clock) -> Start {
+        Start {
+            at: clock.now(),
+            clock,
+        }
+    }
+
+    /// Nanoseconds since the start.
+    fn since(&self) -> u64 {
+        nanos(self.clock.now().saturating_duration_since(self.at))
     }
 }
 
@@ -826,7 +858,7 @@ trait PendingTap: Send {
     fn attach(
         self: Box<Self>,
         capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
         channel: Channel,
     ) -> Box<dyn Tap>;
@@ -861,7 +893,7 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
     fn attach(
         self: Box<Self>,
         capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
         channel: Channel,
     ) -> Box<dyn Tap> {
@@ -920,7 +952,7 @@ impl PendingTap for PendingTicks {
     fn attach(
         self: Box<Self>,
         _capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
         channel: Channel,
     ) -> Box<dyn Tap> {
@@ -960,7 +992,7 @@ struct TickTap {
     events: TickIn,
     linked: bool,
     counters: Arc<Counters>,
-    start: Instant,
+    start: Start,
 }
 
 impl Tap for TickTap {
@@ -970,7 +1002,7 @@ impl Tap for TickTap {
 
     fn drain(&mut self, lines: &mut Vec<Line>) {
         let count = self.events.take();
-        let t = nanos(self.start.elapsed());
+        let t = self.start.since();
         for _ in 0..count {
             let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
             // A unit value always serializes.
@@ -1045,7 +1077,7 @@ impl Counters {
 /// The producer's side of a tap: one more sink of the output.
 struct TapSink<T> {
     sender: Sender<(u64, u64, T)>,
-    start: Instant,
+    start: Start,
     counters: Arc<Counters>,
     bell: Arc<Doorbell>,
 }
@@ -1053,7 +1085,7 @@ struct TapSink<T> {
 impl<T: Packet> Deliver<T> for TapSink<T> {
     fn deliver(&self, packet: T) {
         let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
-        let t = nanos(self.start.elapsed());
+        let t = self.start.since();
         if self.sender.try_send((t, seq, packet)).is_err() {
             self.counters.full.fetch_add(1, Ordering::AcqRel);
         }
@@ -1197,7 +1229,7 @@ impl Followed {
 struct Writer {
     path: PathBuf,
     mcap: McapWriter,
-    start: Instant,
+    start: Start,
     /// `log_time` of the start.
     start_unix_ns: u64,
     taps: Vec<Box<dyn Tap>>,
@@ -1274,7 +1306,7 @@ impl Writer {
         }
         for followed in &mut self.monitors {
             for event in followed.events.try_iter() {
-                let t = nanos(self.start.elapsed());
+                let t = self.start.since();
                 let data = message_bytes(&event, followed.channel.wrapped)
                     .map_err(|error| mcap::McapError::Io(error.into()))?;
                 lines.push(Line {
@@ -1294,7 +1326,7 @@ impl Writer {
         for tap in &mut self.taps {
             for (lost, total, reason) in tap.unreported() {
                 losses.push(LossRecord {
-                    t: nanos(self.start.elapsed()),
+                    t: self.start.since(),
                     port: tap.path().to_owned(),
                     lost,
                     total,
@@ -1309,7 +1341,7 @@ impl Writer {
             let total = followed.events.dropped();
             if total > followed.reported {
                 losses.push(LossRecord {
-                    t: nanos(self.start.elapsed()),
+                    t: self.start.since(),
                     port: followed.path.clone(),
                     lost: total - followed.reported,
                     total,
@@ -1341,7 +1373,7 @@ impl Writer {
 
     fn end(&mut self) -> mcap::McapResult<Summary> {
         let summary = Summary {
-            t: nanos(self.start.elapsed()),
+            t: self.start.since(),
             ports: self.taps.iter().map(|t| t.counters().summary()).collect(),
             monitors: self
                 .monitors

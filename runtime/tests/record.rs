@@ -1019,3 +1019,30 @@ fn an_mcap_reader_of_its_own_finds_the_schemas_channels_and_counts() {
     assert_eq!(end["ports"][0]["lost"], 1);
     drop(system);
 }
+
+#[test]
+fn a_recording_on_a_virtual_clock_is_stamped_with_its_times() {
+    let path = temp_file("virtual.mcap");
+    let (system, out, _data) = bench();
+    let clock = coolbot::VirtualClock::new();
+    let mut recorder = Recorder::new().clock(coolbot::Clock::virtual_clock(&clock));
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+    out.send(sample(0));
+    clock
+        .advance(Duration::from_millis(10))
+        .expect("no component on it");
+    out.send(sample(1));
+    clock
+        .advance(Duration::from_micros(1))
+        .expect("no component on it");
+    out.send(sample(2));
+    recording.finish().expect("finish");
+    let times: Vec<u64> = Reader::open(&path)
+        .expect("open")
+        .packets::<Sample>("src.out")
+        .map(|item| item.expect("a packet").0.t)
+        .collect();
+    assert_eq!(times, [0, 10_000_000, 10_001_000]);
+    drop(system);
+}
