@@ -11,8 +11,9 @@
 //! on a field the thread owns, then the same system call as before.
 //!
 //! [`Clock::virtual_clock`] gives a clock that stands still until a test calls
-//! [`VirtualClock::advance`]. Components of a [`crate::System`] built
-//! [`with_clock`](crate::System::with_clock) then never wait on the OS for a timer:
+//! [`VirtualClock::advance`]. Atomic components of a [`crate::System`] built
+//! [`with_clock`](crate::System::with_clock) then never wait on the OS for a timer
+//! (compounds keep the real clock: their supervision timing is not on the seam yet):
 //! a component with a timer due later parks until it is rung, and `advance` moves the
 //! time, trips the sections that overran their `max_response` by then, rings every
 //! component on the clock, and returns once each of them has looked at the new time
