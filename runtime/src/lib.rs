@@ -121,12 +121,14 @@
 
 pub mod adapt;
 mod automaton;
+pub mod clock;
 mod commander;
 pub mod compound;
 mod monitor;
 pub mod port;
 pub mod record;
 mod runner;
+pub mod schema;
 mod spec;
 mod system;
 pub mod table;
@@ -136,6 +138,7 @@ mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::clock::{Clock, NotSettled, VirtualClock};
 pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, Refused};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{

@@ -12,42 +12,58 @@
 //! [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY): events dropped for it when the
 //! recorder falls behind are lost the same way, counted, written and reported.
 //!
-//! The file is JSON lines (one JSON object per line, each with a `kind`):
+//! The file is [MCAP](https://mcap.dev) (profile empty, library `coolbot`, chunked, no
+//! compression), so Foxglove and the MCAP tools open it. Every message is JSON
+//! (`message_encoding` `json`) with a JSON Schema (`jsonschema`):
 //!
-//! - first a `header`: `version` ([`FORMAT_VERSION`]), `start_unix_ns` (wall-clock
-//!   start), `capacity` (each tap's queue), `ports` (each tapped output's `path`, Rust
-//!   `type` and `kind`: `data`, `poster` or `tick`) and `monitors` (the paths of the
-//!   components whose monitoring events are recorded);
-//! - then, in the order the recorder's thread wrote them, `packet` records (`t`: time
-//!   since the start in ns, taken on the producer's thread when it sent; `port`; `seq`:
-//!   the packet's number on that port, from 0; `value`: the packet, serialized with
-//!   serde), `lost` records (`t`, `port`, `lost` now, `total` so far, `reason`; for
-//!   monitoring events dropped for the recorder, `port` is the component's path), and
-//!   `event` records (`t`, `component`, `event`: a [`MonitorEvent`]);
-//! - last an `end` record: for each port how many packets were `sent`, `recorded` and
-//!   `lost` (always `sent == recorded + lost`), and for each monitored component how
-//!   many events it published to the recorder (`sent`), were recorded (`events`) and
-//!   were dropped (`lost`), with `sent == events + lost`.
+//! - a metadata record `coolbot.header` first, before any channel: key `header`, a
+//!   JSON [`Header`] (`version` [`FORMAT_VERSION`], `start_unix_ns`, `capacity`, the
+//!   tapped `ports` with their Rust `type` and `kind`, the monitored components);
+//! - one channel per tapped output, its topic the output's path, its schema the packet
+//!   type's ([`crate::schema`]: traced from the type's serde `Deserialize`, or given to
+//!   [`Recorder::tap_with_schema`]), its metadata `coolbot.kind` (`data`, `poster`,
+//!   `tick`), `coolbot.type` (the Rust type), `coolbot.schema` (how the schema was
+//!   obtained) and `coolbot.wrapped` (`value` when a packet that is not a JSON object is
+//!   written as `{"value": packet}`, since plotting tools address fields of objects;
+//!   empty otherwise). A message is one packet; its `sequence` is the packet's number
+//!   on that output since the recording started (from 0, modulo 2^32); its `log_time`
+//!   and `publish_time` are when the producer sent it, in nanoseconds since the Unix
+//!   epoch (`start_unix_ns` plus the recording clock's time since the start); a tick is
+//!   `{"value": null}`, stamped when the recorder's thread saw it;
+//! - one channel per monitored component, topic `<path>/events` (metadata
+//!   `coolbot.monitor`: the path), one [`MonitorEvent`] per message, stamped when the
+//!   recorder's thread received it;
+//! - one channel `coolbot/losses` with one [`LossRecord`] per loss noticed (`port`: the
+//!   output's path, or the component's path for monitoring events; `lost` now,
+//!   `total` so far, `reason`);
+//! - a metadata record `coolbot.end` last, key `summary`: a JSON [`Summary`] giving for
+//!   each port how many packets were `sent`, `recorded` and `lost` (always `sent ==
+//!   recorded + lost`), and for each monitored component how many events it published
+//!   to the recorder (`sent`), were recorded (`events`) and were dropped (`lost`), with
+//!   `sent == events + lost`. The MCAP statistics record counts the messages per
+//!   channel as well.
 //!
-//! Packet records of one port are in `seq` order, and a gap in `seq` is a loss (a `lost`
-//! record says so). Records of different ports are sorted by `t` within each batch the
-//! thread writes, not across batches: a reader that needs one global order sorts.
+//! Messages of one port are in `sequence` order, and a gap in the sequence is a loss (a
+//! loss message says so). Messages of different channels are in `log_time` order within
+//! each batch the thread writes, not across batches: a reader that needs one global
+//! order sorts.
 //!
-//! A [`Reader`] iterates a recording (for offline analysis: [`PacketRecord::decode`]
-//! gives the typed packet back), and a [`Player`] replays recorded ports into inputs of
-//! a running system, at the original pace or as fast as possible.
+//! A [`Reader`] iterates a recording as [`Record`]s (for offline analysis:
+//! [`PacketRecord::decode`] gives the typed packet back), and a [`Player`] replays
+//! recorded ports into inputs of a running system, at the original pace or as fast as
+//! possible.
 //!
 //! `data` and `poster` outputs are tapped with [`Recorder::tap`] (every post is a
-//! packet record) and tick outputs with [`Recorder::tap_ticks`] (one packet record per
-//! event, value `null`, stamped when the recorder's thread sees it); `last`, `fifo`
-//! and `ufifo` inputs are fed with [`Player::route`] and tick inputs with
-//! [`Player::route_ticks`]. Poster inputs are not fed (they read a producer's post). Packets a producer sends while it answers a pull request go to the
-//! requester only, so no tap sees them.
+//! packet) and tick outputs with [`Recorder::tap_ticks`] (one message per event);
+//! `last`, `fifo` and `ufifo` inputs are fed with [`Player::route`] and tick inputs
+//! with [`Player::route_ticks`]. Poster inputs are not fed (they read a producer's
+//! post). Packets a producer sends while it answers a pull request go to the requester
+//! only, so no tap sees them.
 
 use std::any::TypeId;
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{BufReader, BufWriter, Read};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -57,14 +73,28 @@ use crossbeam_channel::{Receiver, Sender};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
+use crate::clock::Clock;
 use crate::monitor::{Handle, MonitorEvent, Subscription};
 use crate::port::{
     DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, TickIn, TickOut,
 };
+use crate::schema::Schema;
 use crate::system::System;
 
 /// The version of the recording format written in every header.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The topic of the channel that holds the losses.
+pub const LOSSES_TOPIC: &str = "coolbot/losses";
+
+/// The suffix of a monitored component's channel topic (`base.motion/events`).
+pub const EVENTS_SUFFIX: &str = "/events";
+
+/// The name of the metadata record that opens a recording.
+const HEADER_METADATA: &str = "coolbot.header";
+
+/// The name of the metadata record that closes a recording that ended cleanly.
+const END_METADATA: &str = "coolbot.end";
 
 /// How many packets each tap's queue holds by default, waiting for the recorder's
 /// thread (see [`Recorder::capacity`]).
@@ -143,6 +173,14 @@ pub enum RecordError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// The MCAP writer failed.
+    #[error("cannot write the recording {path}: {source}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        source: mcap::McapError,
+    },
     /// The recorder's thread could not be spawned.
     #[error("cannot spawn the recorder's thread: {0}")]
     Spawn(std::io::Error),
@@ -162,18 +200,40 @@ pub enum ReadError {
         /// The OS error.
         source: std::io::Error,
     },
-    /// A line is not a record.
-    #[error("{path}:{line}: not a recording record: {source}")]
+    /// The file is not MCAP, or is damaged.
+    #[error("{path}: not a readable MCAP file: {source}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        source: mcap::McapError,
+    },
+    /// A message or metadata record of the recording is not what this runtime writes.
+    #[error("{path}: record {record}: {what}: {source}")]
     Json {
         /// The file.
         path: PathBuf,
-        /// The line number (from 1).
-        line: usize,
+        /// The record's number in the file (from 1).
+        record: usize,
+        /// What it was meant to be.
+        what: &'static str,
         /// What is wrong.
         source: serde_json::Error,
     },
+    /// A message on a channel the file never declared.
+    #[error("{path}: record {record}: a message on channel {channel}, which is not declared")]
+    UnknownChannel {
+        /// The file.
+        path: PathBuf,
+        /// The record's number in the file (from 1).
+        record: usize,
+        /// The channel id.
+        channel: u16,
+    },
     /// The file does not start with a header.
-    #[error("{path}: not a recording (the first line is not a `header` record)")]
+    #[error(
+        "{path}: not a CoolBOT recording (no `coolbot.header` metadata before the first channel)"
+    )]
     NoHeader {
         /// The file.
         path: PathBuf,
@@ -203,7 +263,7 @@ pub enum ReadError {
 // ---------------------------------------------------------------------------------
 // The records.
 
-/// The first line of a recording.
+/// What a recording holds, written first (the `coolbot.header` metadata record).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Header {
     /// [`FORMAT_VERSION`] when written.
@@ -280,8 +340,8 @@ pub struct EventRecord {
     pub event: MonitorEvent,
 }
 
-/// The last line of a recording that ended cleanly (also what
-/// [`Recording::finish`] returns).
+/// The counts of a recording that ended cleanly (the `coolbot.end` metadata record,
+/// last in the file; also what [`Recording::finish`] returns).
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct Summary {
     /// When the recording ended: nanoseconds since it started.
@@ -322,11 +382,11 @@ pub struct MonitorSummary {
     pub lost: u64,
 }
 
-/// One line of a recording after the header.
+/// One record of a recording, as a [`Reader`] yields it after the header.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Record {
-    /// The header (only as the first line).
+    /// The header (a [`Reader`] gives it as [`Reader::header`], never as a record).
     Header(Header),
     /// A packet.
     Packet(PacketRecord),
@@ -338,14 +398,19 @@ pub enum Record {
     End(Summary),
 }
 
-/// A packet record as the recorder writes it, without building a JSON value first.
+/// A packet that is not a JSON object, as a recording holds it (`coolbot.wrapped`).
 #[derive(Serialize)]
-#[serde(tag = "kind", rename = "packet")]
-struct PacketLine<'a, T> {
-    t: u64,
-    port: &'a str,
-    seq: u64,
+struct Wrapped<'a, T> {
     value: &'a T,
+}
+
+/// `value` as the JSON bytes of a message (wrapped in `{"value": ...}` if `wrapped`).
+fn message_bytes<T: Serialize>(value: &T, wrapped: bool) -> serde_json::Result<Vec<u8>> {
+    if wrapped {
+        serde_json::to_vec(&Wrapped { value })
+    } else {
+        serde_json::to_vec(value)
+    }
 }
 
 // ---------------------------------------------------------------------------------
@@ -360,7 +425,7 @@ struct PacketLine<'a, T> {
 /// let mut recorder = Recorder::new();
 /// recorder.tap::<f64>(system, "base.motion.speed")?;
 /// recorder.monitor(system, "base.motion")?;
-/// let recording = recorder.start("run.jsonl")?;
+/// let recording = recorder.start("run.mcap")?;
 /// // ... the system runs ...
 /// let summary = recording.finish()?;
 /// assert!(summary.ports.iter().all(|p| p.sent == p.recorded + p.lost));
@@ -369,6 +434,7 @@ struct PacketLine<'a, T> {
 /// ```
 pub struct Recorder {
     capacity: usize,
+    clock: Clock,
     taps: Vec<Box<dyn PendingTap>>,
     monitors: Vec<(String, Handle)>,
 }
@@ -396,6 +462,7 @@ impl Recorder {
     pub fn new() -> Recorder {
         Recorder {
             capacity: DEFAULT_TAP_CAPACITY,
+            clock: Clock::real(),
             taps: Vec::new(),
             monitors: Vec::new(),
         }
@@ -408,12 +475,41 @@ impl Recorder {
         self
     }
 
+    /// Stamp the messages with `clock` (`crate::clock`; the real clock by default):
+    /// the same virtual clock as the system's makes a recording's times those its
+    /// components saw.
+    pub fn clock(mut self, clock: Clock) -> Recorder {
+        self.clock = clock;
+        self
+    }
+
     /// Record the data output at `path` (`component.port`, the component through
-    /// nested compounds: `"base.motion.pose"`), whose packets are `T`.
-    pub fn tap<T: Packet + Serialize>(
+    /// nested compounds: `"base.motion.pose"`), whose packets are `T`. The channel's
+    /// JSON Schema is traced from `T`'s `Deserialize` ([`crate::schema::of`]).
+    pub fn tap<T: Packet + Serialize + DeserializeOwned>(
         &mut self,
         system: &System,
         path: &str,
+    ) -> Result<&mut Recorder, RecordError> {
+        self.tap_as::<T>(system, path, crate::schema::of::<T>)
+    }
+
+    /// [`Recorder::tap`] with the channel's JSON Schema given (for a type whose
+    /// `Deserialize` cannot be traced, see [`crate::schema`]).
+    pub fn tap_with_schema<T: Packet + Serialize>(
+        &mut self,
+        system: &System,
+        path: &str,
+        schema: serde_json::Value,
+    ) -> Result<&mut Recorder, RecordError> {
+        self.tap_as::<T>(system, path, move || Schema::given(schema))
+    }
+
+    fn tap_as<T: Packet + Serialize>(
+        &mut self,
+        system: &System,
+        path: &str,
+        schema: impl FnOnce() -> Schema,
     ) -> Result<&mut Recorder, RecordError> {
         if self.taps.iter().any(|t| t.path() == path) {
             return Err(RecordError::Duplicate(path.to_owned()));
@@ -437,6 +533,7 @@ impl Recorder {
             path: path.to_owned(),
             kind: output.kind.name(),
             output,
+            schema: schema(),
             marker: std::marker::PhantomData,
         }));
         Ok(self)
@@ -481,7 +578,7 @@ impl Recorder {
         Ok(self)
     }
 
-    /// Attach the taps and start recording into the file at `path` (created or
+    /// Attach the taps and start recording into the MCAP file at `path` (created or
     /// truncated).
     pub fn start(self, path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let path = path.as_ref().to_path_buf();
@@ -489,28 +586,26 @@ impl Recorder {
             path: path.clone(),
             source,
         })?;
-        self.start_writer(path, Box::new(BufWriter::new(file)))
-    }
-
-    fn start_writer(
-        self,
-        path: PathBuf,
-        mut writer: Box<dyn Write + Send>,
-    ) -> Result<Recording, RecordError> {
-        let io = |source| RecordError::Io {
+        let mcap_error = |source| RecordError::Mcap {
             path: path.clone(),
             source,
         };
-        let start = Instant::now();
+        let mut mcap = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .library(concat!("coolbot-", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::new(file))
+            .map_err(mcap_error)?;
+        let start = Start::on(self.clock.clone());
         let start_unix_ns = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, nanos);
-        let header = Record::Header(Header {
+        let mut pending = self.taps;
+        let header = Header {
             version: FORMAT_VERSION,
             start_unix_ns,
             capacity: self.capacity,
-            ports: self
-                .taps
+            ports: pending
                 .iter()
                 .map(|tap| PortInfo {
                     path: tap.path().to_owned(),
@@ -519,16 +614,55 @@ impl Recorder {
                 })
                 .collect(),
             monitors: self.monitors.iter().map(|(p, _)| p.clone()).collect(),
-        });
-        serde_json::to_writer(&mut writer, &header).map_err(|e| io(e.into()))?;
-        writer.write_all(b"\n").map_err(io)?;
-        writer.flush().map_err(io)?;
+        };
+        // (A header of strings and numbers always serializes.)
+        let header_text = serde_json::to_string(&header).unwrap_or_default();
+        mcap.write_metadata(&mcap::records::Metadata {
+            name: HEADER_METADATA.to_owned(),
+            metadata: BTreeMap::from([("header".to_owned(), header_text)]),
+        })
+        .map_err(mcap_error)?;
+
+        // One channel per tapped output, per monitored component, and for the losses.
+        let mut channels = Vec::new();
+        for tap in &mut pending {
+            let schema = tap.schema();
+            let mut metadata = BTreeMap::new();
+            metadata.insert("coolbot.kind".to_owned(), tap.kind().to_owned());
+            metadata.insert("coolbot.type".to_owned(), tap.type_name().to_owned());
+            let out = add_channel(&mut mcap, tap.type_name(), tap.path(), &schema, metadata)
+                .map_err(mcap_error)?;
+            channels.push(out);
+        }
+        let mut monitor_channels = Vec::new();
+        let event_schema = crate::schema::of::<MonitorEvent>();
+        for (path, _) in &self.monitors {
+            let metadata = BTreeMap::from([("coolbot.monitor".to_owned(), path.clone())]);
+            let out = add_channel(
+                &mut mcap,
+                "coolbot::MonitorEvent",
+                &format!("{path}{EVENTS_SUFFIX}"),
+                &event_schema,
+                metadata,
+            )
+            .map_err(mcap_error)?;
+            monitor_channels.push(out);
+        }
+        let losses_channel = add_channel(
+            &mut mcap,
+            "coolbot::record::LossRecord",
+            LOSSES_TOPIC,
+            &crate::schema::of::<LossRecord>(),
+            BTreeMap::new(),
+        )
+        .map_err(mcap_error)?;
+        mcap.flush().map_err(mcap_error)?;
 
         let bell = Doorbell::new();
         let mut taps = Vec::new();
         let mut counters = Vec::new();
-        for pending in self.taps {
-            let tap = pending.attach(self.capacity, start, Arc::clone(&bell));
+        for (pending, channel) in pending.into_iter().zip(channels) {
+            let tap = pending.attach(self.capacity, start.clone(), Arc::clone(&bell), channel);
             counters.push(tap.counters());
             taps.push(tap);
         }
@@ -538,10 +672,12 @@ impl Recorder {
         let monitors = self
             .monitors
             .into_iter()
-            .map(|(path, handle)| Followed {
+            .zip(monitor_channels)
+            .map(|((path, handle), channel)| Followed {
                 events: handle.subscribe_waking(waker.clone()),
                 handle,
                 path,
+                channel,
                 recorded: 0,
                 reported: 0,
                 detached: false,
@@ -551,10 +687,13 @@ impl Recorder {
         let stop = Arc::new(AtomicBool::new(false));
         let thread = Writer {
             path: path.clone(),
-            writer,
+            mcap,
             start,
+            start_unix_ns,
             taps,
             monitors,
+            losses_channel,
+            losses_written: 0,
             bell: Arc::clone(&bell),
             stop: Arc::clone(&stop),
             losses: loss_sender,
@@ -575,6 +714,64 @@ impl Recorder {
         })
     }
 }
+
+/// The start of a recording on its clock.
+#[derive(Clone)]
+struct Start {
+    clock: Clock,
+    at: Instant,
+}
+
+impl Start {
+    fn on(clock: Clock) -> Start {
+        Start {
+            at: clock.now(),
+            clock,
+        }
+    }
+
+    /// Nanoseconds since the start.
+    fn since(&self) -> u64 {
+        nanos(self.clock.now().saturating_duration_since(self.at))
+    }
+}
+
+/// A channel of the recording: its id, and whether its messages are wrapped.
+#[derive(Debug, Clone, Copy)]
+struct Channel {
+    id: u16,
+    wrapped: bool,
+}
+
+/// Add a JSON channel on `topic` with `schema` (wrapped when its values are not
+/// objects), named after the Rust type `type_name`.
+fn add_channel(
+    mcap: &mut McapWriter,
+    type_name: &str,
+    topic: &str,
+    schema: &Schema,
+    mut metadata: BTreeMap<String, String>,
+) -> Result<Channel, mcap::McapError> {
+    let wrapped = !schema.is_object();
+    let data = if wrapped {
+        schema.wrapped()
+    } else {
+        schema.schema.clone()
+    };
+    // (A JSON value always serializes.)
+    let bytes = serde_json::to_vec(&data).unwrap_or_default();
+    let schema_id = mcap.add_schema(type_name, "jsonschema", &bytes)?;
+    metadata.insert("coolbot.schema".to_owned(), schema.derived.clone());
+    metadata.insert(
+        "coolbot.wrapped".to_owned(),
+        if wrapped { "value" } else { "" }.to_owned(),
+    );
+    let id = mcap.add_channel(schema_id, topic, "json", &metadata)?;
+    Ok(Channel { id, wrapped })
+}
+
+/// The MCAP writer of a recording.
+type McapWriter = mcap::Writer<BufWriter<File>>;
 
 /// How many loss notices [`Recording::losses`] holds; beyond that they are dropped
 /// (the losses themselves stay in the recording and in [`Recording::stats`]).
@@ -654,13 +851,16 @@ impl Drop for Recording {
 trait PendingTap: Send {
     fn path(&self) -> &str;
     fn type_name(&self) -> &'static str;
-    /// `data` or `tick`.
+    /// `data`, `poster` or `tick`.
     fn kind(&self) -> &'static str;
+    /// The JSON Schema of its messages.
+    fn schema(&self) -> Schema;
     fn attach(
         self: Box<Self>,
         capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
+        channel: Channel,
     ) -> Box<dyn Tap>;
 }
 
@@ -669,6 +869,7 @@ struct Pending<T> {
     /// `data` or `poster`.
     kind: &'static str,
     output: ErasedOutput,
+    schema: Schema,
     marker: std::marker::PhantomData<fn() -> T>,
 }
 
@@ -685,11 +886,16 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
         self.kind
     }
 
+    fn schema(&self) -> Schema {
+        self.schema.clone()
+    }
+
     fn attach(
         self: Box<Self>,
         capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
+        channel: Channel,
     ) -> Box<dyn Tap> {
         let (sender, receiver) = crossbeam_channel::bounded(capacity);
         let counters = Arc::new(Counters {
@@ -707,6 +913,7 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
         Box::new(Attached {
             path: self.path,
             output: self.output,
+            channel,
             id,
             receiver,
             counters,
@@ -734,11 +941,20 @@ impl PendingTap for PendingTicks {
         "tick"
     }
 
+    fn schema(&self) -> Schema {
+        Schema::given(serde_json::json!({
+            "$schema": crate::schema::DIALECT,
+            "title": "tick",
+            "type": "null",
+        }))
+    }
+
     fn attach(
         self: Box<Self>,
         _capacity: usize,
-        start: Instant,
+        start: Start,
         bell: Arc<Doorbell>,
+        channel: Channel,
     ) -> Box<dyn Tap> {
         // A tick input of the tap's own, owned by no component: each event counts at
         // it and rings the recorder's thread.
@@ -756,6 +972,7 @@ impl PendingTap for PendingTicks {
         });
         Box::new(TickTap {
             path: self.path,
+            channel,
             output: self.output,
             input,
             events,
@@ -769,12 +986,13 @@ impl PendingTap for PendingTicks {
 /// The recorder thread's side of a tick tap.
 struct TickTap {
     path: String,
+    channel: Channel,
     output: ErasedOutput,
     input: ErasedInput,
     events: TickIn,
     linked: bool,
     counters: Arc<Counters>,
-    start: Instant,
+    start: Start,
 }
 
 impl Tap for TickTap {
@@ -784,21 +1002,23 @@ impl Tap for TickTap {
 
     fn drain(&mut self, lines: &mut Vec<Line>) {
         let count = self.events.take();
-        let t = nanos(self.start.elapsed());
+        let t = self.start.since();
         for _ in 0..count {
             let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
-            let line = PacketLine {
-                t,
-                port: &self.path,
-                seq,
-                value: &(),
-            };
             // A unit value always serializes.
-            if let Ok(text) = serde_json::to_vec(&line) {
-                lines.push(Line { t, text });
-                self.counters.recorded.fetch_add(1, Ordering::AcqRel);
-            } else {
-                self.counters.unserializable.fetch_add(1, Ordering::AcqRel);
+            match message_bytes(&(), self.channel.wrapped) {
+                Ok(data) => {
+                    lines.push(Line {
+                        t,
+                        channel: self.channel.id,
+                        seq,
+                        data,
+                    });
+                    self.counters.recorded.fetch_add(1, Ordering::AcqRel);
+                }
+                Err(_) => {
+                    self.counters.unserializable.fetch_add(1, Ordering::AcqRel);
+                }
             }
         }
     }
@@ -857,7 +1077,7 @@ impl Counters {
 /// The producer's side of a tap: one more sink of the output.
 struct TapSink<T> {
     sender: Sender<(u64, u64, T)>,
-    start: Instant,
+    start: Start,
     counters: Arc<Counters>,
     bell: Arc<Doorbell>,
 }
@@ -865,7 +1085,7 @@ struct TapSink<T> {
 impl<T: Packet> Deliver<T> for TapSink<T> {
     fn deliver(&self, packet: T) {
         let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
-        let t = nanos(self.start.elapsed());
+        let t = self.start.since();
         if self.sender.try_send((t, seq, packet)).is_err() {
             self.counters.full.fetch_add(1, Ordering::AcqRel);
         }
@@ -898,6 +1118,7 @@ trait Tap: Send {
 struct Attached<T: Packet> {
     path: String,
     output: ErasedOutput,
+    channel: Channel,
     id: Option<usize>,
     receiver: Receiver<(u64, u64, T)>,
     counters: Arc<Counters>,
@@ -905,10 +1126,12 @@ struct Attached<T: Packet> {
     reported: (u64, u64),
 }
 
-/// One serialized line with its time, for sorting a batch.
+/// One serialized message with its time, for sorting a batch.
 struct Line {
     t: u64,
-    text: Vec<u8>,
+    channel: u16,
+    seq: u64,
+    data: Vec<u8>,
 }
 
 impl<T: Packet + Serialize> Tap for Attached<T> {
@@ -918,15 +1141,14 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
 
     fn drain(&mut self, lines: &mut Vec<Line>) {
         for (t, seq, value) in self.receiver.try_iter() {
-            let line = PacketLine {
-                t,
-                port: &self.path,
-                seq,
-                value: &value,
-            };
-            match serde_json::to_vec(&line) {
-                Ok(text) => {
-                    lines.push(Line { t, text });
+            match message_bytes(&value, self.channel.wrapped) {
+                Ok(data) => {
+                    lines.push(Line {
+                        t,
+                        channel: self.channel.id,
+                        seq,
+                        data,
+                    });
                     self.counters.recorded.fetch_add(1, Ordering::AcqRel);
                 }
                 Err(error) => {
@@ -981,6 +1203,7 @@ impl<T: Packet> Drop for Attached<T> {
 struct Followed {
     path: String,
     handle: Handle,
+    channel: Channel,
     /// The recorder's own subscription: it counts what was published to it and what
     /// was dropped for it (its channel full: the recorder's thread fell behind).
     events: Subscription,
@@ -1005,10 +1228,15 @@ impl Followed {
 /// The recorder's thread.
 struct Writer {
     path: PathBuf,
-    writer: Box<dyn Write + Send>,
-    start: Instant,
+    mcap: McapWriter,
+    start: Start,
+    /// `log_time` of the start.
+    start_unix_ns: u64,
     taps: Vec<Box<dyn Tap>>,
     monitors: Vec<Followed>,
+    losses_channel: Channel,
+    /// Loss messages written so far (their sequence numbers).
+    losses_written: u64,
     bell: Arc<Doorbell>,
     stop: Arc<AtomicBool>,
     losses: Sender<Loss>,
@@ -1037,7 +1265,8 @@ impl Writer {
                 break self.end();
             }
             if last_flush.elapsed() >= FLUSH_INTERVAL {
-                if let Err(source) = self.writer.flush() {
+                // Ends the chunk under way: a reader of the file sees it whole.
+                if let Err(source) = self.mcap.flush() {
                     break Err(source);
                 }
                 last_flush = Instant::now();
@@ -1048,43 +1277,56 @@ impl Writer {
         for tap in &mut self.taps {
             tap.detach();
         }
-        result.map_err(|source| RecordError::Io {
+        result.map_err(|source| RecordError::Mcap {
             path: self.path.clone(),
             source,
         })
     }
 
+    /// Write one message.
+    fn write(&mut self, channel: u16, seq: u64, t: u64, data: &[u8]) -> mcap::McapResult<()> {
+        let time = self.start_unix_ns.saturating_add(t);
+        self.mcap.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                // The sequence modulo 2^32 (a reader unwraps it, see `Reader`).
+                sequence: seq as u32,
+                log_time: time,
+                publish_time: time,
+            },
+            data,
+        )
+    }
+
     /// Write what the taps and monitors hold now, then the losses noticed.
-    fn turn(&mut self) -> std::io::Result<()> {
+    fn turn(&mut self) -> mcap::McapResult<()> {
         let mut lines = Vec::new();
         for tap in &mut self.taps {
             tap.drain(&mut lines);
         }
         for followed in &mut self.monitors {
             for event in followed.events.try_iter() {
-                let record = Record::Event(EventRecord {
-                    t: nanos(self.start.elapsed()),
-                    component: followed.path.clone(),
-                    event,
-                });
-                let text = serde_json::to_vec(&record)?;
+                let t = self.start.since();
+                let data = message_bytes(&event, followed.channel.wrapped)
+                    .map_err(|error| mcap::McapError::Io(error.into()))?;
                 lines.push(Line {
-                    t: nanos(self.start.elapsed()),
-                    text,
+                    t,
+                    channel: followed.channel.id,
+                    seq: followed.recorded,
+                    data,
                 });
                 followed.recorded += 1;
             }
         }
         lines.sort_by_key(|line| line.t);
         for line in &lines {
-            self.writer.write_all(&line.text)?;
-            self.writer.write_all(b"\n")?;
+            self.write(line.channel, line.seq, line.t, &line.data)?;
         }
         let mut losses = Vec::new();
         for tap in &mut self.taps {
             for (lost, total, reason) in tap.unreported() {
                 losses.push(LossRecord {
-                    t: nanos(self.start.elapsed()),
+                    t: self.start.since(),
                     port: tap.path().to_owned(),
                     lost,
                     total,
@@ -1092,14 +1334,14 @@ impl Writer {
                 });
             }
         }
-        // Events dropped for the recorder's subscription since the last turn: a `lost`
-        // record after this turn's events (a drop means the recorder's channel held
+        // Events dropped for the recorder's subscription since the last turn: a loss
+        // after this turn's events (a drop means the recorder's channel held
         // `OBSERVER_CAPACITY` older events).
         for followed in &mut self.monitors {
             let total = followed.events.dropped();
             if total > followed.reported {
                 losses.push(LossRecord {
-                    t: nanos(self.start.elapsed()),
+                    t: self.start.since(),
                     port: followed.path.clone(),
                     lost: total - followed.reported,
                     total,
@@ -1120,16 +1362,18 @@ impl Writer {
                     "packets"
                 }
             );
-            serde_json::to_writer(&mut self.writer, &Record::Lost(loss.clone()))?;
-            self.writer.write_all(b"\n")?;
+            let data = message_bytes(&loss, self.losses_channel.wrapped)
+                .map_err(|error| mcap::McapError::Io(error.into()))?;
+            self.write(self.losses_channel.id, self.losses_written, loss.t, &data)?;
+            self.losses_written += 1;
             let _ = self.losses.try_send(loss);
         }
         Ok(())
     }
 
-    fn end(&mut self) -> std::io::Result<Summary> {
+    fn end(&mut self) -> mcap::McapResult<Summary> {
         let summary = Summary {
-            t: nanos(self.start.elapsed()),
+            t: self.start.since(),
             ports: self.taps.iter().map(|t| t.counters().summary()).collect(),
             monitors: self
                 .monitors
@@ -1144,9 +1388,13 @@ impl Writer {
                 })
                 .collect(),
         };
-        serde_json::to_writer(&mut self.writer, &Record::End(summary.clone()))?;
-        self.writer.write_all(b"\n")?;
-        self.writer.flush()?;
+        // (Strings and numbers always serialize.)
+        let text = serde_json::to_string(&summary).unwrap_or_default();
+        self.mcap.write_metadata(&mcap::records::Metadata {
+            name: END_METADATA.to_owned(),
+            metadata: BTreeMap::from([("summary".to_owned(), text)]),
+        })?;
+        self.mcap.finish()?;
         Ok(summary)
     }
 }
@@ -1229,12 +1477,50 @@ fn known<'a>(names: impl Iterator<Item = &'a str>) -> String {
 // ---------------------------------------------------------------------------------
 // Reading.
 
-/// Reads a recording: the [`Header`] at once, then the records as an iterator.
+/// Reads a recording: the [`Header`] at once, then the records as an iterator (packets,
+/// losses and events in file order, then the [`Summary`] as [`Record::End`] if the
+/// recording ended cleanly).
+///
+/// It streams the file (one record in memory at a time). A recording whose process
+/// died before [`Recording::finish`] holds every chunk flushed until then; the
+/// reader yields them, then an error for the cut-off end.
 pub struct Reader {
     path: PathBuf,
     header: Header,
-    lines: std::io::Lines<Box<dyn BufRead + Send>>,
-    line: usize,
+    input: Box<dyn Read + Send>,
+    mcap: mcap::sans_io::LinearReader,
+    channels: BTreeMap<u16, Topic>,
+    /// Records read so far (for error messages).
+    record: usize,
+    /// The data section ended (or an error was yielded).
+    done: bool,
+}
+
+/// What a channel of a recording carries.
+#[derive(Debug)]
+enum Topic {
+    /// A tapped output, and the last sequence number read on it (to unwrap the
+    /// 32-bit MCAP sequence).
+    Port {
+        path: String,
+        wrapped: bool,
+        last: Option<u64>,
+    },
+    /// A monitored component's events.
+    Events { component: String, wrapped: bool },
+    /// The losses.
+    Losses { wrapped: bool },
+    /// A channel this runtime does not write (ignored).
+    Other,
+}
+
+/// An MCAP record, owned, as far as a [`Reader`] cares.
+enum Raw {
+    Metadata(mcap::records::Metadata),
+    Channel(mcap::records::Channel),
+    Message(mcap::records::MessageHeader, Vec<u8>),
+    DataEnd,
+    Other,
 }
 
 impl std::fmt::Debug for Reader {
@@ -1255,47 +1541,66 @@ impl Reader {
     }
 
     /// Read a recording from `input` (`path` names it in errors).
-    pub fn new(path: PathBuf, input: Box<dyn BufRead + Send>) -> Result<Reader, ReadError> {
-        let mut lines = input.lines();
-        let first = match lines.next() {
-            Some(Ok(line)) => line,
-            Some(Err(source)) => return Err(ReadError::Io { path, source }),
-            None => return Err(ReadError::NoHeader { path }),
-        };
-        let header = match serde_json::from_str::<Record>(&first) {
-            Ok(Record::Header(header)) => header,
-            Ok(_) => return Err(ReadError::NoHeader { path }),
-            Err(source) => {
-                // A header of another version may not parse as this version's header.
-                let version = serde_json::from_str::<serde_json::Value>(&first)
-                    .ok()
-                    .filter(|v| v.get("kind").and_then(|k| k.as_str()) == Some("header"))
-                    .and_then(|v| v.get("version").and_then(serde_json::Value::as_u64));
-                return Err(match version {
-                    Some(found) if found != u64::from(FORMAT_VERSION) => ReadError::Version {
-                        path,
-                        found: u32::try_from(found).unwrap_or(u32::MAX),
-                    },
-                    _ => ReadError::Json {
-                        path,
-                        line: 1,
-                        source,
-                    },
-                });
-            }
-        };
-        if header.version != FORMAT_VERSION {
-            return Err(ReadError::Version {
-                path,
-                found: header.version,
-            });
-        }
-        Ok(Reader {
+    pub fn new(path: PathBuf, input: Box<dyn Read + Send>) -> Result<Reader, ReadError> {
+        let mut reader = Reader {
             path,
-            header,
-            lines,
-            line: 1,
-        })
+            header: Header {
+                version: FORMAT_VERSION,
+                start_unix_ns: 0,
+                capacity: 0,
+                ports: Vec::new(),
+                monitors: Vec::new(),
+            },
+            input,
+            mcap: mcap::sans_io::LinearReader::new(),
+            channels: BTreeMap::new(),
+            record: 0,
+            done: false,
+        };
+        // The header metadata comes before any channel.
+        loop {
+            let raw = match reader.next_raw() {
+                Some(Ok(raw)) => raw,
+                Some(Err(error)) => return Err(error),
+                None => return Err(reader.no_header()),
+            };
+            match raw {
+                Raw::Metadata(metadata) if metadata.name == HEADER_METADATA => {
+                    let text = metadata.metadata.get("header").cloned().unwrap_or_default();
+                    let value: serde_json::Value = serde_json::from_str(&text)
+                        .map_err(|source| reader.json("header", source))?;
+                    let version = value.get("version").and_then(serde_json::Value::as_u64);
+                    if let Some(found) = version.filter(|v| *v != u64::from(FORMAT_VERSION)) {
+                        return Err(ReadError::Version {
+                            path: reader.path,
+                            found: u32::try_from(found).unwrap_or(u32::MAX),
+                        });
+                    }
+                    reader.header = serde_json::from_value(value)
+                        .map_err(|source| reader.json("header", source))?;
+                    return Ok(reader);
+                }
+                Raw::Channel(_) | Raw::Message(..) | Raw::DataEnd => {
+                    return Err(reader.no_header());
+                }
+                Raw::Metadata(_) | Raw::Other => {}
+            }
+        }
+    }
+
+    fn no_header(&self) -> ReadError {
+        ReadError::NoHeader {
+            path: self.path.clone(),
+        }
+    }
+
+    fn json(&self, what: &'static str, source: serde_json::Error) -> ReadError {
+        ReadError::Json {
+            path: self.path.clone(),
+            record: self.record,
+            what,
+            source,
+        }
     }
 
     /// The header.
@@ -1317,35 +1622,200 @@ impl Reader {
             Err(error) => Some(Err(error)),
         })
     }
+
+    /// The next MCAP record of the data section, chunks unpacked.
+    fn next_raw(&mut self) -> Option<Result<Raw, ReadError>> {
+        loop {
+            let event = match self.mcap.next_event()? {
+                Ok(event) => event,
+                Err(source) => {
+                    return Some(Err(ReadError::Mcap {
+                        path: self.path.clone(),
+                        source,
+                    }));
+                }
+            };
+            match event {
+                mcap::sans_io::LinearReadEvent::ReadRequest(wanted) => {
+                    let buffer = self.mcap.insert(wanted);
+                    let read = match self.input.read(buffer) {
+                        Ok(read) => read,
+                        Err(error) if error.kind() == std::io::ErrorKind::Interrupted => 0,
+                        Err(source) => {
+                            return Some(Err(ReadError::Io {
+                                path: self.path.clone(),
+                                source,
+                            }));
+                        }
+                    };
+                    self.mcap.notify_read(read);
+                }
+                mcap::sans_io::LinearReadEvent::Record { data, opcode } => {
+                    self.record += 1;
+                    let raw = match mcap::parse_record(opcode, data) {
+                        Ok(mcap::records::Record::Metadata(metadata)) => Raw::Metadata(metadata),
+                        Ok(mcap::records::Record::Channel(channel)) => Raw::Channel(channel),
+                        Ok(mcap::records::Record::Message { header, data }) => {
+                            Raw::Message(header, data.into_owned())
+                        }
+                        Ok(mcap::records::Record::DataEnd(_)) => Raw::DataEnd,
+                        Ok(_) => Raw::Other,
+                        Err(source) => {
+                            return Some(Err(ReadError::Mcap {
+                                path: self.path.clone(),
+                                source,
+                            }));
+                        }
+                    };
+                    return Some(Ok(raw));
+                }
+            }
+        }
+    }
+
+    /// Learn what a channel carries.
+    fn declare(&mut self, channel: mcap::records::Channel) {
+        let wrapped = channel
+            .metadata
+            .get("coolbot.wrapped")
+            .is_some_and(|w| w == "value");
+        let topic = if channel.topic == LOSSES_TOPIC {
+            Topic::Losses { wrapped }
+        } else if let Some(component) = channel.metadata.get("coolbot.monitor") {
+            Topic::Events {
+                component: component.clone(),
+                wrapped,
+            }
+        } else if channel.metadata.contains_key("coolbot.kind") {
+            Topic::Port {
+                path: channel.topic,
+                wrapped,
+                last: None,
+            }
+        } else {
+            Topic::Other
+        };
+        self.channels.insert(channel.id, topic);
+    }
+
+    /// A message as a record; `None` for a channel this runtime does not write.
+    fn message(
+        &mut self,
+        header: mcap::records::MessageHeader,
+        data: &[u8],
+    ) -> Result<Option<Record>, ReadError> {
+        let t = header.log_time.saturating_sub(self.header.start_unix_ns);
+        let record = self.record;
+        let Some(topic) = self.channels.get_mut(&header.channel_id) else {
+            return Err(ReadError::UnknownChannel {
+                path: self.path.clone(),
+                record,
+                channel: header.channel_id,
+            });
+        };
+        let parse = |wrapped: bool| -> Result<serde_json::Value, serde_json::Error> {
+            let value: serde_json::Value = serde_json::from_slice(data)?;
+            Ok(if wrapped {
+                value
+                    .get("value")
+                    .cloned()
+                    .unwrap_or(serde_json::Value::Null)
+            } else {
+                value
+            })
+        };
+        match topic {
+            Topic::Port {
+                path,
+                wrapped,
+                last,
+            } => {
+                // The MCAP sequence is the packet's number modulo 2^32.
+                let low = u64::from(header.sequence);
+                let seq = match *last {
+                    None => low,
+                    Some(previous) => {
+                        let candidate = (previous & !0xffff_ffff) | low;
+                        if candidate < previous {
+                            candidate + (1 << 32)
+                        } else {
+                            candidate
+                        }
+                    }
+                };
+                *last = Some(seq);
+                let port = path.clone();
+                let value = parse(*wrapped).map_err(|source| self.json("a packet", source))?;
+                Ok(Some(Record::Packet(PacketRecord {
+                    t,
+                    port,
+                    seq,
+                    value,
+                })))
+            }
+            Topic::Events { component, wrapped } => {
+                let component = component.clone();
+                let value = parse(*wrapped).map_err(|source| self.json("an event", source))?;
+                let event = serde_json::from_value(value)
+                    .map_err(|source| self.json("a monitoring event", source))?;
+                Ok(Some(Record::Event(EventRecord {
+                    t,
+                    component,
+                    event,
+                })))
+            }
+            Topic::Losses { wrapped } => {
+                let value = parse(*wrapped).map_err(|source| self.json("a loss", source))?;
+                let loss =
+                    serde_json::from_value(value).map_err(|source| self.json("a loss", source))?;
+                Ok(Some(Record::Lost(loss)))
+            }
+            Topic::Other => Ok(None),
+        }
+    }
 }
 
 impl Iterator for Reader {
     type Item = Result<Record, ReadError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        loop {
-            let line = self.lines.next()?;
-            self.line += 1;
-            let line = match line {
-                Ok(line) => line,
-                Err(source) => {
-                    return Some(Err(ReadError::Io {
-                        path: self.path.clone(),
-                        source,
-                    }));
+        while !self.done {
+            let raw = match self.next_raw() {
+                None => {
+                    self.done = true;
+                    return None;
                 }
+                Some(Err(error)) => {
+                    self.done = true;
+                    return Some(Err(error));
+                }
+                Some(Ok(raw)) => raw,
             };
-            if line.trim().is_empty() {
-                continue;
+            match raw {
+                Raw::Channel(channel) => self.declare(channel),
+                Raw::Message(header, data) => match self.message(header, &data) {
+                    Ok(Some(record)) => return Some(Ok(record)),
+                    Ok(None) => {}
+                    Err(error) => return Some(Err(error)),
+                },
+                Raw::Metadata(metadata) if metadata.name == END_METADATA => {
+                    let text = metadata
+                        .metadata
+                        .get("summary")
+                        .cloned()
+                        .unwrap_or_default();
+                    return Some(
+                        serde_json::from_str(&text)
+                            .map(Record::End)
+                            .map_err(|source| self.json("the summary", source)),
+                    );
+                }
+                // The summary section repeats the channels: nothing more to read.
+                Raw::DataEnd => self.done = true,
+                Raw::Metadata(_) | Raw::Other => {}
             }
-            return Some(
-                serde_json::from_str::<Record>(&line).map_err(|source| ReadError::Json {
-                    path: self.path.clone(),
-                    line: self.line,
-                    source,
-                }),
-            );
         }
+        None
     }
 }
 

@@ -30,6 +30,7 @@ use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
 use crate::automaton::{Automaton, Context, Fault, Section};
+use crate::clock::Clock;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
@@ -128,6 +129,11 @@ pub(crate) struct Runner {
     /// The latest clock reading: taken once per turn and at the end of each user call,
     /// and passed down instead of reading the clock again.
     clock: Instant,
+    /// The clock every reading comes from (`crate::clock`): the real one unless the
+    /// system was given a virtual clock.
+    time: Clock,
+    /// This component's id on a virtual clock, once its thread runs.
+    on_clock: Option<u64>,
     /// Whether the spec declares a `pull` output (otherwise no pull queue is looked at).
     has_pull: bool,
     /// Wall-clock time spent in user calls, and the value last published.
@@ -190,7 +196,7 @@ impl Runner {
         let supervised = automaton.supervises();
         let watch = timing
             .max_response
-            .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit)));
+            .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit), &Clock::real()));
         let adapt = (!supervised)
             .then(|| Local::new(adaptation, &timing))
             .flatten();
@@ -220,6 +226,8 @@ impl Runner {
             watch,
             cpu_updated: now,
             clock: now,
+            time: Clock::real(),
+            on_clock: None,
             has_pull: spec.outputs.iter().any(|output| output.pull),
             elapsed: Duration::ZERO,
             elapsed_published: Duration::ZERO,
@@ -246,9 +254,47 @@ impl Runner {
         runner
     }
 
+    /// Whether this is a compound's runner.
+    pub(crate) fn supervises(&self) -> bool {
+        self.supervised
+    }
+
+    /// Run on `clock` (before the thread starts): every timer reads it.
+    pub(crate) fn set_clock(&mut self, clock: Clock) {
+        let now = clock.now();
+        self.entered_at = now;
+        self.cpu_updated = now;
+        self.clock = now;
+        for arrival in &mut self.last_arrival {
+            *arrival = now;
+        }
+        self.time = clock;
+        if let Some(watch) = &self.watch {
+            watch.set_clock(&self.time);
+        }
+    }
+
+    /// On a virtual clock: this component has nothing due at the clock's time and is
+    /// about to wait (see `crate::clock`).
+    fn settle(&self) {
+        if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
+            clock.settled(id, clock.now());
+        }
+    }
+
     /// The thread's body.
     pub(crate) fn run(mut self) {
         self.bell.attach();
+        if let Some(clock) = self.time.as_virtual() {
+            self.on_clock = Some(clock.join(&self.cx.name, Arc::clone(&self.bell)));
+        }
+        self.run_loop();
+        if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
+            clock.leave(id);
+        }
+    }
+
+    fn run_loop(&mut self) {
         crate::thread::set_timer_slack();
         self.scheduling = Some(Scheduling::of_current_thread());
         let mut priority = 0;
@@ -263,7 +309,7 @@ impl Runner {
                 monitor.adaptation.settle_periods = settle_periods;
             });
         }
-        self.clock = Instant::now();
+        self.clock = self.time.now();
         self.publish_variables();
         match self.run_start() {
             Ok(()) => self.apply(Event::StartOk),
@@ -291,7 +337,10 @@ impl Runner {
             }
             // One clock reading per turn (user calls start from it, and end with another),
             // or the reading the spin that found this turn's work just took.
-            self.clock = self.found_at.take().unwrap_or_else(Instant::now);
+            self.clock = match self.found_at.take() {
+                Some(reading) => reading,
+                None => self.time.now(),
+            };
             // 1. Control first.
             if (rung || !self.deferred.is_empty()) && !self.drain_control() {
                 break;
@@ -301,8 +350,9 @@ impl Runner {
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
                 if !self.bell.spin() {
-                    self.clock = Instant::now();
+                    self.clock = self.time.now();
                     self.update_cpu(false);
+                    self.settle();
                     self.bell.park_until(None);
                 }
                 continue;
@@ -399,10 +449,25 @@ impl Runner {
         // for input only, spin first (`wait_for_input`). The timing counters are
         // published (a lock of the monitor) only when the thread is about to sleep.
         if deadline.is_none() {
+            self.settle();
             self.wait_for_input();
             return;
         }
         self.update_cpu(false);
+        if let Some(clock) = self.time.as_virtual() {
+            // A virtual timer: never a real timeout. With the timer due later, settle
+            // and wait for a ring (the clock rings when it advances).
+            // One reading for the check and the report: settled at `now` means
+            // nothing was due at `now`.
+            let now = clock.now();
+            if deadline.is_some_and(|due| due > now) {
+                if let Some(id) = self.on_clock {
+                    clock.settled(id, now);
+                }
+                self.bell.park_until(None);
+            }
+            return;
+        }
         self.bell.park_until(deadline);
     }
 
@@ -445,7 +510,7 @@ impl Runner {
             for _ in 0..SPIN_BATCH {
                 if found(self) {
                     self.found_by_polling = polling;
-                    self.found_at = self.untimed.then_some(read_at);
+                    self.found_at = (self.untimed && self.time.is_real()).then_some(read_at);
                     return;
                 }
                 std::hint::spin_loop();
@@ -479,7 +544,7 @@ impl Runner {
             match self.call(|automaton, cx| automaton.supervise(state, cx)) {
                 Ok(Ok(None)) => {}
                 Ok(Ok(Some(target))) => {
-                    self.goto(target, Instant::now());
+                    self.goto(target, self.time.now());
                     return true;
                 }
                 Ok(Err(fault)) => {
@@ -631,7 +696,7 @@ impl Runner {
                     // or moved to it as a substitute) are arrivals in its initial
                     // state.
                     self.arrivals_count_on_entry = true;
-                    self.enter(self.spec.initial, Instant::now());
+                    self.enter(self.spec.initial, self.time.now());
                     return;
                 }
                 Action::ResumeUser => {
@@ -645,18 +710,18 @@ impl Runner {
             }
         }
         if to == State::Suspended && self.state == State::Running {
-            self.suspended_at = Some(Instant::now());
+            self.suspended_at = Some(self.time.now());
         }
         self.set_state(to);
     }
 
     fn resume(&mut self) {
         if !self.user_entered {
-            self.enter(self.user, Instant::now());
+            self.enter(self.user, self.time.now());
             return;
         }
         // Time in a state stops while suspended: shift the timers by the pause.
-        let now = Instant::now();
+        let now = self.time.now();
         if let Some(since) = self.suspended_at.take() {
             let pause = now.saturating_duration_since(since);
             self.entered_at += pause;
@@ -788,6 +853,7 @@ impl Runner {
                             self.spec,
                             Arc::clone(&self.shared),
                             Some(*bound),
+                            &self.time,
                         ));
                     }
                 }
@@ -915,7 +981,7 @@ impl Runner {
         // the end of the previous call): one clock read per call saved on the
         // per-packet path. The watchdog gets a reading of its own.
         let started = if self.watch.is_some() {
-            Instant::now()
+            self.time.now()
         } else {
             self.clock
         };
@@ -926,7 +992,7 @@ impl Runner {
         let cx = &mut self.cx;
         let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
         let tripped = watched.is_some() && self.watch.as_ref().is_some_and(|watch| watch.end());
-        self.clock = Instant::now();
+        self.clock = self.time.now();
         let took = self.clock.saturating_duration_since(started);
         self.last_took = took;
         // Elapsed time is accumulated here and published with the CPU time (see
@@ -1046,7 +1112,7 @@ impl Runner {
         let refresh_cpu =
             force || self.clock.saturating_duration_since(self.cpu_updated) >= CPU_TIME_REFRESH;
         let cpu = if refresh_cpu {
-            self.cpu_updated = Instant::now();
+            self.cpu_updated = self.time.now();
             cpu_time::ThreadTime::try_now()
                 .ok()
                 .map(|time| time.as_duration())
@@ -1164,7 +1230,7 @@ impl Runner {
                     let Some(section) = section else { continue };
                     for _ in 0..count {
                         std::thread::sleep(every);
-                        self.clock = Instant::now();
+                        self.clock = self.time.now();
                         if self.run_section(state, section).is_ok() {
                             return Recovery::Recovered;
                         }
@@ -1323,7 +1389,7 @@ impl Runner {
         if self.user_entered && self.state == State::Running {
             self.next_periodic = self
                 .period_of(self.user)
-                .map(|period| later(Instant::now(), period));
+                .map(|period| later(self.time.now(), period));
             self.reanchored = true;
         }
     }

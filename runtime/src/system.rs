@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use crate::automaton::{Automaton, TaskResult};
+use crate::clock::Clock;
 use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
 use crate::port::{
     ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
@@ -373,6 +374,8 @@ pub struct System {
     names: HashMap<String, usize>,
     links: Vec<Link>,
     started: bool,
+    /// The clock the components' timers read (`crate::clock`).
+    clock: Clock,
 }
 
 impl Default for System {
@@ -417,7 +420,21 @@ impl System {
             names: HashMap::new(),
             links: Vec::new(),
             started: false,
+            clock: Clock::real(),
         }
+    }
+
+    /// A system whose components' timers read `clock` (`crate::clock`: a
+    /// [`VirtualClock`](crate::VirtualClock) for tests that step time by hand).
+    pub fn with_clock(clock: Clock) -> System {
+        let mut system = System::new();
+        system.clock = clock;
+        system
+    }
+
+    /// The clock the components' timers read.
+    pub fn clock(&self) -> &Clock {
+        &self.clock
     }
 
     /// Add a component; it starts with the system (or at once if the system has
@@ -614,9 +631,14 @@ impl System {
 
     fn spawn(&mut self, index: usize) -> Result<(), Error> {
         let slot = &mut self.slots[index];
-        let Some(runner) = slot.runner.take() else {
+        let Some(mut runner) = slot.runner.take() else {
             return Ok(());
         };
+        // Compounds are not on the clock seam yet (their supervision timing reads the
+        // real clock): they and their instances keep the real clock.
+        if !self.clock.is_real() && !runner.supervises() {
+            runner.set_clock(self.clock.clone());
+        }
         let join = crate::thread::spawn(&slot.name, move || runner.run()).map_err(|source| {
             Error::Spawn {
                 component: slot.name.clone(),

@@ -16,6 +16,11 @@
 //! (`SCHED_RR` 99, or the `RLIMIT_RTPRIO` limit), and stays at normal priority if
 //! refused.
 //!
+//! A component on a [`VirtualClock`](crate::clock::VirtualClock) is not watched by
+//! that thread: its sections start at virtual times, and the virtual clock trips the
+//! ones past their limit each time it advances (`Watch::trip_if_due`), with the same
+//! publication.
+//!
 //! While no section is under way, the watchdog sleeps for the smallest registered
 //! `max_response` (at least [`IDLE_POLL_FLOOR`]): a section that starts while it
 //! sleeps cannot reach its deadline before the watchdog wakes, so no section needs to
@@ -26,6 +31,7 @@ use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
 use crate::automaton::Section;
+use crate::clock::Clock;
 use crate::monitor::{MonitorEvent, Shared};
 use crate::spec::Spec;
 use crate::table::State;
@@ -40,8 +46,9 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// The instant all watch times count from.
-fn epoch() -> Instant {
+/// The instant all watch times count from (a virtual clock takes it before its own
+/// start, so that its instants are never before it).
+pub(crate) fn epoch() -> Instant {
     static EPOCH: OnceLock<Instant> = OnceLock::new();
     *EPOCH.get_or_init(Instant::now)
 }
@@ -65,6 +72,9 @@ pub(crate) struct Watch {
     /// runner, finding the trip, sees it published.
     trip: Mutex<()>,
     registered: AtomicBool,
+    /// The sections' starts are read from a virtual clock, which trips them itself:
+    /// the watchdog thread skips this watch.
+    on_virtual_clock: AtomicBool,
 }
 
 fn section_code(section: Section) -> u64 {
@@ -89,6 +99,7 @@ impl Watch {
         spec: &'static Spec,
         shared: Arc<Shared>,
         limit: Option<Duration>,
+        clock: &Clock,
     ) -> Arc<Watch> {
         let _ = epoch();
         let watch = Arc::new(Watch {
@@ -99,9 +110,34 @@ impl Watch {
             limit: AtomicU64::new(0),
             trip: Mutex::new(()),
             registered: AtomicBool::new(false),
+            on_virtual_clock: AtomicBool::new(false),
         });
+        watch.set_clock(clock);
         watch.set_limit(limit);
         watch
+    }
+
+    /// Watch on `clock` from now on (before the component's thread runs): a virtual
+    /// clock trips the overruns itself, the watchdog thread skips this watch.
+    pub(crate) fn set_clock(self: &Arc<Self>, clock: &Clock) {
+        if let Some(virtual_clock) = clock.as_virtual() {
+            self.on_virtual_clock.store(true, Ordering::Release);
+            virtual_clock.watch(self);
+        }
+    }
+
+    /// The virtual clock moved to `now`: trip the section under way if it started
+    /// `max_response` or more before.
+    pub(crate) fn trip_if_due(&self, now: Instant) {
+        let limit = self.limit.load(Ordering::Acquire);
+        let token = self.slot.load(Ordering::Acquire);
+        if limit == 0 || token == 0 || token == TRIPPED {
+            return;
+        }
+        let now_n = nanos(now.saturating_duration_since(epoch()));
+        if (token - 1).saturating_add(limit) <= now_n {
+            self.trip(token, now);
+        }
     }
 
     /// A new `max_response` (from now on, including the section under way).
@@ -243,7 +279,7 @@ impl Registry {
                     continue;
                 };
                 let limit = watch.limit.load(Ordering::Acquire);
-                if limit == 0 {
+                if limit == 0 || watch.on_virtual_clock.load(Ordering::Acquire) {
                     continue;
                 }
                 let poll = now_n.saturating_add(limit.max(nanos(IDLE_POLL_FLOOR)));

@@ -3,7 +3,7 @@
 //! consumer as the same sequence, mistakes are clear errors, and ports inside
 //! compounds are reached by path.
 
-use std::io::Write;
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,9 +14,9 @@ use coolbot::record::{
     Recorder,
 };
 use coolbot::{
-    Automaton, Component, CompoundBuilder, Context, Fault, InputKind, InputSpec, MonitorEvent,
-    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, SectionResult, Spec, State,
-    StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value,
+    Automaton, Command, Component, CompoundBuilder, Context, Controllable, Fault, InputKind,
+    InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy, PortSet, Section,
+    SectionResult, Spec, State, StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value,
 };
 use serde::ser::{Error as _, SerializeStruct};
 use serde::{Deserialize, Serialize, Serializer};
@@ -275,7 +275,7 @@ fn packets(records: &[Record], port: &str) -> Vec<(u64, Sample)> {
 #[test]
 fn a_full_tap_loses_packets_counted_and_reported_never_silently() {
     let (system, out, _data) = bench();
-    let path = temp_file("full.jsonl");
+    let path = temp_file("full.mcap");
     let mut recorder = Recorder::new().capacity(4);
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
     let recording = recorder.start(&path).expect("start");
@@ -333,7 +333,7 @@ fn a_full_tap_loses_packets_counted_and_reported_never_silently() {
 #[test]
 fn under_load_every_packet_is_recorded_or_counted_lost() {
     let (system, out, _data) = bench();
-    let path = temp_file("load.jsonl");
+    let path = temp_file("load.mcap");
     let mut recorder = Recorder::new().capacity(64);
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
     let recording = recorder.start(&path).expect("start");
@@ -378,7 +378,7 @@ fn under_load_every_packet_is_recorded_or_counted_lost() {
 #[test]
 fn a_packet_that_does_not_serialize_is_counted_lost() {
     let (system, out, _data) = bench();
-    let path = temp_file("unserializable.jsonl");
+    let path = temp_file("unserializable.mcap");
     let mut recorder = Recorder::new();
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
     let recording = recorder.start(&path).expect("start");
@@ -409,7 +409,7 @@ fn a_packet_that_does_not_serialize_is_counted_lost() {
 
 #[test]
 fn a_recording_replays_into_a_consumer_as_the_same_sequence() {
-    let path = temp_file("replay.jsonl");
+    let path = temp_file("replay.mcap");
     let sent: Vec<Sample> = (0..200).map(sample).collect();
     {
         let (system, out, _data) = bench();
@@ -505,7 +505,7 @@ fn mistakes_are_clear_errors() {
         "{error}"
     );
 
-    let path = temp_file("mistakes.jsonl");
+    let path = temp_file("mistakes.mcap");
     drop(recorder.start(&path).expect("start"));
     let mut player = Player::open(&path).expect("open");
     let error = player
@@ -520,30 +520,48 @@ fn mistakes_are_clear_errors() {
         .expect_err("wrong type");
     assert!(matches!(error, RecordError::TypeMismatch { .. }), "{error}");
 
-    let not_a_recording = temp_file("not-a-recording.jsonl");
-    std::fs::write(
-        &not_a_recording,
-        "{\"kind\":\"end\",\"t\":0,\"ports\":[],\"monitors\":[]}\n",
-    )
-    .expect("write");
+    // A file that is not MCAP at all.
+    let not_mcap = temp_file("not-mcap.mcap");
+    std::fs::write(&not_mcap, "{\"kind\":\"end\"}\n").expect("write");
+    let error = Reader::open(&not_mcap).expect_err("not MCAP");
+    assert!(matches!(error, ReadError::Mcap { .. }), "{error}");
+    // An MCAP file that is not a recording: a channel before any header.
+    let not_a_recording = temp_file("not-a-recording.mcap");
+    {
+        let file = std::fs::File::create(&not_a_recording).expect("create");
+        let mut writer = mcap::Writer::new(std::io::BufWriter::new(file)).expect("writer");
+        writer
+            .add_channel(0, "elsewhere", "json", &Default::default())
+            .expect("channel");
+        writer.finish().expect("finish");
+    }
     assert!(matches!(
         Reader::open(&not_a_recording),
         Err(ReadError::NoHeader { .. })
     ));
-    let future = temp_file("future.jsonl");
-    let mut file = std::fs::File::create(&future).expect("create");
-    writeln!(
-        file,
-        "{{\"kind\":\"header\",\"version\":99,\"shape\":\"new\"}}"
-    )
-    .expect("write");
-    drop(file);
+    // A recording of a later format version.
+    let future = temp_file("future.mcap");
+    {
+        let file = std::fs::File::create(&future).expect("create");
+        let mut writer = mcap::Writer::new(std::io::BufWriter::new(file)).expect("writer");
+        writer
+            .write_metadata(&mcap::records::Metadata {
+                name: "coolbot.header".to_owned(),
+                metadata: [(
+                    "header".to_owned(),
+                    "{\"version\":99,\"shape\":\"new\"}".to_owned(),
+                )]
+                .into(),
+            })
+            .expect("metadata");
+        writer.finish().expect("finish");
+    }
     let error = Reader::open(&future).expect_err("a future version");
     assert!(
         matches!(error, ReadError::Version { found: 99, .. }),
         "{error}"
     );
-    assert_eq!(record::FORMAT_VERSION, 1);
+    assert_eq!(record::FORMAT_VERSION, 2);
 }
 
 #[test]
@@ -558,7 +576,7 @@ fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
     system.add(compound).expect("add");
     system.start().expect("start");
 
-    let path = temp_file("compound.jsonl");
+    let path = temp_file("compound.mcap");
     let mut recorder = Recorder::new();
     recorder
         .tap::<Sample>(&system, "base.src.out")
@@ -612,7 +630,7 @@ fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
 
 #[test]
 fn tick_events_are_recorded_and_replayed() {
-    let path = temp_file("ticks.jsonl");
+    let path = temp_file("ticks.mcap");
     {
         let (system, outputs, _inputs) = bench_with_ticks();
         let mut recorder = Recorder::new();
@@ -664,7 +682,7 @@ fn tick_events_are_recorded_and_replayed() {
 
 #[test]
 fn a_recording_dropped_after_its_system_still_ends_its_file() {
-    let path = temp_file("dropped.jsonl");
+    let path = temp_file("dropped.mcap");
     let (system, out, _data) = bench();
     let mut recorder = Recorder::new();
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
@@ -720,7 +738,7 @@ fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
         ))
         .expect("add src");
     system.run_all().expect("run");
-    let path = temp_file("poster.jsonl");
+    let path = temp_file("poster.mcap");
     let mut recorder = Recorder::new().capacity(4);
     recorder
         .tap::<Sample>(&system, "src.map")
@@ -759,7 +777,7 @@ fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
 fn monitoring_events_the_recorder_cannot_keep_up_with_are_counted_and_reported_lost() {
     let (system, out, _data) = bench();
     let handle = system.handle("src").expect("src");
-    let path = temp_file("monitor-lost.jsonl");
+    let path = temp_file("monitor-lost.mcap");
     let mut recorder = Recorder::new();
     recorder.tap::<Sample>(&system, "src.out").expect("tap");
     recorder.monitor(&system, "src").expect("monitor");
@@ -781,9 +799,7 @@ fn monitoring_events_the_recorder_cannot_keep_up_with_are_counted_and_reported_l
     const COMMANDS: u64 = coolbot::OBSERVER_CAPACITY as u64 + 600;
     for n in 0..COMMANDS {
         let period = Duration::from_millis(if n % 2 == 0 { 11 } else { 12 });
-        handle
-            .command(coolbot::Command::SetPeriod(period))
-            .expect("period");
+        handle.command(Command::SetPeriod(period)).expect("period");
     }
     release.send(()).expect("release");
     let summary = recording.finish().expect("finish");
@@ -826,5 +842,207 @@ fn monitoring_events_the_recorder_cannot_keep_up_with_are_counted_and_reported_l
         .play(Pace::AsFastAsPossible)
         .expect("play");
     assert_eq!((played.lost, played.lost_events), (0, monitor.lost));
+    drop(system);
+}
+
+/// The JSON of an MCAP message.
+fn json_of(data: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(data).expect("a JSON message")
+}
+
+#[test]
+fn an_mcap_reader_of_its_own_finds_the_schemas_channels_and_counts() {
+    // Read back with the `mcap` crate's own readers (its summary section and its
+    // message stream), not with `coolbot::record::Reader`.
+    let path = temp_file("independent.mcap");
+    let (system, outputs, _inputs) = bench_with_ticks();
+    let mut recorder = Recorder::new();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    recorder.tap_ticks(&system, "src.beat").expect("tap ticks");
+    recorder.monitor(&system, "src").expect("monitor");
+    let recording = recorder.start(&path).expect("start");
+    for n in 0..20 {
+        if n == 7 {
+            // One packet that does not serialize: a loss, written on the losses channel.
+            let (entered, _) = crossbeam_channel::bounded(1);
+            let (_, release) = crossbeam_channel::bounded(1);
+            outputs.out.send(Sample {
+                hook: Some(Arc::new(Hook {
+                    fail: true,
+                    entered,
+                    release,
+                })),
+                ..sample(n)
+            });
+        } else {
+            outputs.out.send(sample(n));
+        }
+    }
+    for _ in 0..3 {
+        outputs.beat.emit();
+    }
+    // Monitoring events: the source is stopped and started again.
+    let src = system.handle("src").expect("src");
+    src.command(Command::SetState(Controllable::Ready))
+        .expect("ready");
+    src.command(Command::SetState(Controllable::Running))
+        .expect("running");
+    // The ticks are seen by the recorder's thread when it wakes: wait for them.
+    let deadline = std::time::Instant::now() + WAIT;
+    while recording.stats()[1].recorded < 3 && std::time::Instant::now() < deadline {
+        std::thread::yield_now();
+    }
+    let summary = recording.finish().expect("finish");
+    assert_eq!(
+        summary
+            .ports
+            .iter()
+            .map(|p| (p.sent, p.recorded, p.lost))
+            .collect::<Vec<_>>(),
+        [(20, 19, 1), (3, 3, 0)]
+    );
+    let events = summary.monitors[0].events;
+    assert!(events >= 4, "two state changes, each from and to: {events}");
+
+    let bytes = std::fs::read(&path).expect("read");
+    let found = mcap::Summary::read(&bytes)
+        .expect("an MCAP summary")
+        .expect("a summary section");
+    let mut topics: Vec<(&str, &str, &str, &str)> = found
+        .channels
+        .values()
+        .map(|channel| {
+            let schema = channel.schema.as_ref().expect("every channel has a schema");
+            (
+                channel.topic.as_str(),
+                channel.message_encoding.as_str(),
+                schema.encoding.as_str(),
+                schema.name.as_str(),
+            )
+        })
+        .collect();
+    topics.sort();
+    assert_eq!(
+        topics,
+        [
+            (
+                "coolbot/losses",
+                "json",
+                "jsonschema",
+                "coolbot::record::LossRecord"
+            ),
+            ("src.beat", "json", "jsonschema", "event"),
+            (
+                "src.out",
+                "json",
+                "jsonschema",
+                std::any::type_name::<Sample>()
+            ),
+            ("src/events", "json", "jsonschema", "coolbot::MonitorEvent"),
+        ]
+    );
+    let channel = |topic: &str| {
+        found
+            .channels
+            .values()
+            .find(|c| c.topic == topic)
+            .expect("the channel")
+            .clone()
+    };
+    // The packet type's schema, traced from its `Deserialize`.
+    let out = channel("src.out");
+    let schema = json_of(&out.schema.as_ref().expect("schema").data);
+    assert_eq!(schema["type"], "object");
+    assert_eq!(schema["title"], "Sample");
+    assert_eq!(schema["properties"]["n"]["type"], "integer");
+    assert_eq!(schema["properties"]["n"]["minimum"], 0);
+    assert_eq!(schema["properties"]["label"]["type"], "string");
+    assert_eq!(schema["required"], serde_json::json!(["n", "label"]));
+    assert_eq!(out.metadata["coolbot.kind"], "data");
+    assert_eq!(out.metadata["coolbot.schema"], "traced");
+    assert_eq!(out.metadata["coolbot.wrapped"], "");
+    // A tick is not an object: wrapped as `{"value": null}`.
+    let beat = channel("src.beat");
+    let schema = json_of(&beat.schema.as_ref().expect("schema").data);
+    assert_eq!(schema["properties"]["value"]["type"], "null");
+    assert_eq!(beat.metadata["coolbot.wrapped"], "value");
+    let losses = channel("coolbot/losses");
+    let schema = json_of(&losses.schema.as_ref().expect("schema").data);
+    assert_eq!(schema["properties"]["lost"]["type"], "integer");
+
+    // The counts: the statistics and the messages themselves.
+    let stats = found.stats.as_ref().expect("statistics");
+    let count = |topic: &str| stats.channel_message_counts[&channel(topic).id];
+    assert_eq!(count("src.out"), 19);
+    assert_eq!(count("src.beat"), 3);
+    assert_eq!(count("coolbot/losses"), 1);
+    assert_eq!(count("src/events"), events);
+    let mut sequences = Vec::new();
+    let mut lost = Vec::new();
+    let mut times = Vec::new();
+    for message in mcap::MessageStream::new(&bytes).expect("a message stream") {
+        let message = message.expect("a message");
+        times.push(message.log_time);
+        let value = json_of(&message.data);
+        match message.channel.topic.as_str() {
+            "src.out" => {
+                let n = value["n"].as_u64().expect("n");
+                assert_eq!(u64::from(message.sequence), n);
+                assert_eq!(value["label"], format!("sample {n}"));
+                sequences.push(message.sequence);
+            }
+            "src.beat" => assert_eq!(value, serde_json::json!({ "value": null })),
+            "coolbot/losses" => lost.push((value["port"].clone(), value["lost"].clone())),
+            "src/events" => assert!(value.is_object() || value.is_string(), "{value}"),
+            other => panic!("a message on {other}"),
+        }
+    }
+    let expected: Vec<u32> = (0..20).filter(|n| *n != 7).collect();
+    assert_eq!(sequences, expected, "the gap is the lost packet");
+    assert_eq!(lost, [(serde_json::json!("src.out"), serde_json::json!(1))]);
+
+    // The header and the end, as metadata; times are Unix nanoseconds from the start.
+    let mut metadata = BTreeMap::new();
+    for index in &found.metadata_indexes {
+        let record = mcap::read::metadata(&bytes, index).expect("a metadata record");
+        metadata.insert(record.name.clone(), record.metadata);
+    }
+    let header = json_of(metadata["coolbot.header"]["header"].as_bytes());
+    let start = header["start_unix_ns"].as_u64().expect("start");
+    assert!(
+        times.iter().all(|t| *t >= start),
+        "log times count from the start"
+    );
+    assert_eq!(header["ports"][0]["path"], "src.out");
+    let end = json_of(metadata["coolbot.end"]["summary"].as_bytes());
+    assert_eq!(end["ports"][0]["recorded"], 19);
+    assert_eq!(end["ports"][0]["lost"], 1);
+    drop(system);
+}
+
+#[test]
+fn a_recording_on_a_virtual_clock_is_stamped_with_its_times() {
+    let path = temp_file("virtual.mcap");
+    let (system, out, _data) = bench();
+    let clock = coolbot::VirtualClock::new();
+    let mut recorder = Recorder::new().clock(coolbot::Clock::virtual_clock(&clock));
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+    out.send(sample(0));
+    clock
+        .advance(Duration::from_millis(10))
+        .expect("no component on it");
+    out.send(sample(1));
+    clock
+        .advance(Duration::from_micros(1))
+        .expect("no component on it");
+    out.send(sample(2));
+    recording.finish().expect("finish");
+    let times: Vec<u64> = Reader::open(&path)
+        .expect("open")
+        .packets::<Sample>("src.out")
+        .map(|item| item.expect("a packet").0.t)
+        .collect();
+    assert_eq!(times, [0, 10_000_000, 10_001_000]);
     drop(system);
 }

@@ -1,15 +1,18 @@
 //! The user automaton inside `running`: `after` timers and watchdogs, `may` choices,
 //! periodic sections (missed deadlines, period changes), `end` and `result`, and the
-//! control port's variables, configuration and quality.
+//! control port's variables, configuration and quality. The timers' exact sequences
+//! are tested on a virtual clock (`coolbot::clock`), stepped by hand.
 
 mod support;
 
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use coolbot::port::FifoIn;
 use coolbot::{
-    AfterSpec, Command, Controllable, MonitorEvent, OverflowPolicy, State, TaskResult, Value,
+    AfterSpec, Clock, Command, Controllable, MonitorEvent, OverflowPolicy, State, TaskResult,
+    Value, VirtualClock,
 };
 use support::worker::{self, FEED, IDLE};
 use support::{Rig, Script, WAIT, eventually};
@@ -22,62 +25,6 @@ fn rig_with_after(after: Vec<AfterSpec>) -> Rig {
         FifoIn::new(4, OverflowPolicy::Reject),
         None,
     ))
-}
-
-#[test]
-fn after_fires_on_time_in_state() {
-    let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::from_millis(30),
-        without: None,
-        target: IDLE,
-    }]);
-    rig.run_busy();
-    rig.script.clear_log();
-    rig.wait_user("idle");
-    // `user_state` changes before the entry section runs: wait for the section too.
-    eventually(
-        || rig.script.log() == ["busy.exit", "idle.entry"],
-        "busy.exit then idle.entry",
-    );
-}
-
-#[test]
-fn a_watchdog_fires_only_when_its_port_is_quiet() {
-    let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::from_secs(2),
-        without: Some(FEED),
-        target: IDLE,
-    }]);
-    rig.run_busy();
-    // Feeding every 10 ms for 200 ms keeps the watchdog quiet (its 2 s leave room for
-    // the test thread being preempted on a loaded machine).
-    for packet in 0..20 {
-        rig.feeder.feed.send(packet);
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("busy"));
-    assert_eq!(rig.inputs.feed.latest(), Some(19));
-    rig.wait_user("idle");
-}
-
-#[test]
-fn after_timers_pause_while_suspended() {
-    let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::from_secs(1),
-        without: None,
-        target: IDLE,
-    }]);
-    rig.run_busy();
-    rig.command(Controllable::Suspended).expect("suspend");
-    // Longer than the delay: had the pause counted, `busy` would be over on resume.
-    std::thread::sleep(Duration::from_millis(1200));
-    rig.command(Controllable::Running).expect("resume");
-    assert_eq!(
-        rig.handle.snapshot().user_state.as_deref(),
-        Some("busy"),
-        "the pause does not count"
-    );
-    rig.wait_user("idle");
 }
 
 #[test]
@@ -286,4 +233,128 @@ fn absurd_durations_mean_never_and_do_not_panic() {
     patient
         .command(Command::SetState(Controllable::Suspended))
         .expect("suspend");
+}
+
+// ---------------------------------------------------------------------------------
+// On a virtual clock (`coolbot::clock`): the test steps time by hand, and each
+// `advance` returns once every timer due by then has fired, so the sequences are
+// exact and nothing sleeps.
+
+fn virtual_rig_with_after(after: Vec<AfterSpec>) -> (Rig, Arc<VirtualClock>) {
+    let clock = VirtualClock::new();
+    let spec = worker::spec_with_busy_after(after);
+    let rig = Rig::start(Rig::unstarted_on(
+        Clock::virtual_clock(&clock),
+        Script::new(),
+        spec,
+        FifoIn::new(4, OverflowPolicy::Reject),
+    ));
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.clear_log();
+    (rig, clock)
+}
+
+fn ms(n: u64) -> Duration {
+    Duration::from_millis(n)
+}
+
+#[test]
+fn on_a_virtual_clock_after_fires_at_its_delay_exactly_after_every_period_before() {
+    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
+        delay: ms(30),
+        without: None,
+        target: IDLE,
+    }]);
+    // `busy` is periodic (5 ms): one millisecond at a time, the periodic section runs
+    // at 5, 10, ... 25 ms, and nothing else happens before 30 ms.
+    for _ in 0..29 {
+        clock.advance(ms(1)).expect("settled");
+    }
+    assert_eq!(rig.script.full_log(), ["busy.periodic"; 5]);
+    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("busy"));
+    // At 30 ms the timer and the periodic section are both due: timers come first.
+    clock.advance(ms(1)).expect("settled");
+    let mut expected = vec!["busy.periodic"; 5];
+    expected.extend(["busy.exit", "idle.entry"]);
+    assert_eq!(rig.script.full_log(), expected);
+    assert_eq!(rig.handle.snapshot().missed_deadlines, 0);
+}
+
+#[test]
+fn on_a_virtual_clock_a_watchdog_counts_from_the_last_arrival() {
+    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
+        delay: Duration::from_secs(2),
+        without: Some(FEED),
+        target: IDLE,
+    }]);
+    clock.advance(ms(1500)).expect("settled");
+    rig.feeder.feed.send(1);
+    // The worker sees the arrival at 1.5 s (before the command's answer).
+    rig.sync();
+    clock.advance(ms(1999)).expect("settled");
+    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("busy"));
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("idle"));
+}
+
+#[test]
+fn on_a_virtual_clock_after_timers_pause_while_suspended() {
+    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
+        delay: Duration::from_secs(1),
+        without: None,
+        target: IDLE,
+    }]);
+    rig.command(Controllable::Suspended).expect("suspend");
+    clock.advance(ms(1200)).expect("settled");
+    rig.command(Controllable::Running).expect("resume");
+    clock.settle().expect("settled");
+    clock.advance(ms(999)).expect("settled");
+    assert_eq!(
+        rig.handle.snapshot().user_state.as_deref(),
+        Some("busy"),
+        "the pause does not count"
+    );
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(rig.handle.snapshot().user_state.as_deref(), Some("idle"));
+}
+
+#[test]
+fn on_a_virtual_clock_a_jump_over_periods_is_counted_as_missed_deadlines() {
+    let (rig, clock) = virtual_rig_with_after(Vec::new());
+    clock.advance(ms(5)).expect("settled");
+    assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 1);
+    assert_eq!(rig.handle.snapshot().missed_deadlines, 0);
+    // 20 ms at once: the section due at 10 ms runs late, once; 15, 20 and 25 ms are
+    // missed (the next deadline is a period after the late run).
+    clock.advance(ms(20)).expect("settled");
+    assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 2);
+    assert_eq!(rig.handle.snapshot().missed_deadlines, 3);
+    clock.advance(ms(5)).expect("settled");
+    assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 3);
+}
+
+#[test]
+fn on_a_virtual_clock_a_section_past_max_response_is_tripped_when_the_clock_passes_it() {
+    let (rig, clock) = virtual_rig_with_after(Vec::new());
+    let release = rig.script.hang_in("busy.periodic");
+    // The periodic section starts at 5 ms and hangs: the worker cannot settle.
+    let busy = clock
+        .advance_with_timeout(ms(5), ms(50))
+        .expect_err("a hung section");
+    assert_eq!(busy.busy, ["w"]);
+    eventually(
+        || rig.script.hanging.load(Ordering::SeqCst),
+        "the section started at 5 ms",
+    );
+    // 499 ms into the section: under its max_response (500 ms).
+    let _ = clock.advance_with_timeout(ms(499), ms(1));
+    assert_eq!(rig.handle.snapshot().overruns, 0);
+    // 500 ms: tripped at once, as the watchdog does in real time.
+    let _ = clock.advance_with_timeout(ms(1), ms(1));
+    let monitor = rig.handle.snapshot();
+    assert_eq!(monitor.overruns, 1);
+    assert_eq!(monitor.state, State::RunningError);
+    drop(release);
+    clock.settle().expect("settled once the section returned");
 }

@@ -77,7 +77,7 @@ pub struct Options {
     pub stop: Arc<AtomicBool>,
     /// Record the odometry (`base.motion.pose`), the scans (`base.scan`, from
     /// whichever range server stands in) and the base's monitoring events into this
-    /// file (`coolbot::record`, JSON lines).
+    /// file (`coolbot::record`, MCAP).
     pub record: Option<std::path::PathBuf>,
     /// A simulated processor shortage (`--load 3s..9s`): meanwhile the range server's
     /// scans cost time ([`world::OVERLOAD_COST_PER_BEAM`]), so that the runtime

@@ -70,7 +70,7 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Output::Auto)]
     output: Output,
     /// Record the odometry, the scans and the base's monitoring events into this file
-    /// (JSON lines, see docs/tools.md).
+    /// (MCAP: Foxglove and the MCAP tools open it; see docs/tools.md).
     #[arg(long, value_name = "FILE")]
     record: Option<std::path::PathBuf>,
 }

@@ -484,7 +484,7 @@ fn a_recorded_run_holds_every_odometry_and_scan_packet_or_counts_it_lost() {
 
     let dir = std::env::temp_dir().join(format!("mobile-base-record-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join("run.jsonl");
+    let path = dir.join("run.mcap");
     let summary = run(Options {
         duration: Duration::from_secs(2),
         record: Some(path.clone()),

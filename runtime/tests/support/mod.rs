@@ -82,6 +82,12 @@ impl Script {
             .collect()
     }
 
+    /// The whole log, periodic sections included (exact on a virtual clock).
+    #[allow(dead_code, reason = "used by the tests on a virtual clock only")]
+    pub fn full_log(&self) -> Vec<String> {
+        self.log.lock().unwrap().clone()
+    }
+
     pub fn clear_log(&self) {
         self.log.lock().unwrap().clear();
     }
@@ -269,7 +275,27 @@ impl Rig {
         data: coolbot::port::FifoIn<u64>,
         token: Option<Arc<()>>,
     ) -> Rig {
-        let mut system = System::new();
+        Rig::build(System::new(), script, spec, data, token)
+    }
+
+    /// Like `unstarted_with`, on `clock` (`coolbot::clock`).
+    #[allow(dead_code, reason = "used by the tests on a virtual clock only")]
+    pub fn unstarted_on(
+        clock: coolbot::Clock,
+        script: Arc<Script>,
+        spec: &'static coolbot::Spec,
+        data: coolbot::port::FifoIn<u64>,
+    ) -> Rig {
+        Rig::build(System::with_clock(clock), script, spec, data, None)
+    }
+
+    fn build(
+        mut system: System,
+        script: Arc<Script>,
+        spec: &'static coolbot::Spec,
+        data: coolbot::port::FifoIn<u64>,
+        token: Option<Arc<()>>,
+    ) -> Rig {
         let behavior = Scripted {
             script: Arc::clone(&script),
             token,

@@ -1,0 +1,258 @@
+//! The one clock the runtime's timers read: the real clock, or a [`VirtualClock`] a test
+//! advances by hand.
+//!
+//! Every time the runtime measures for the user automaton goes through a [`Clock`]: the
+//! runner's turn readings (so `after`, `after ... without` and periodic deadlines),
+//! the duration of each section (so `max_response`, missed deadlines and the
+//! adaptation detector's view of a section), and, for a [`crate::record::Recorder`]
+//! given one, the recording's timestamps.
+//!
+//! [`Clock::real`] (the default) reads [`Instant::now`] and nothing else: one branch
+//! on a field the thread owns, then the same system call as before.
+//!
+//! [`Clock::virtual_clock`] gives a clock that stands still until a test calls
+//! [`VirtualClock::advance`]. Atomic components of a [`crate::System`] built
+//! [`with_clock`](crate::System::with_clock) then never wait on the OS for a timer
+//! (compounds keep the real clock: their supervision timing is not on the seam yet):
+//! a component with a timer due later parks until it is rung, and `advance` moves the
+//! time, trips the sections that overran their `max_response` by then, rings every
+//! component on the clock, and returns once each of them has looked at the new time
+//! and has nothing more due (it is *settled*). So after `advance` returns, every
+//! timer due up to the new time has fired, in due order, and no real time was
+//! waited for: a test asserts exact sequences with no sleep.
+//!
+//! Settling covers timers, not data: a packet sent during the step is handled as
+//! usual, and a test waits for its effect as it would with the real clock.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
+use std::time::{Duration, Instant};
+
+use crate::port::Doorbell;
+use crate::watchdog::Watch;
+
+/// How long [`VirtualClock::advance`] waits (real time) for the components to settle.
+pub const SETTLE_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// The clock a component's timers read. Cheap to clone.
+#[derive(Clone, Default)]
+pub struct Clock {
+    virtual_clock: Option<Arc<VirtualClock>>,
+}
+
+impl std::fmt::Debug for Clock {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.virtual_clock {
+            None => write!(f, "Clock::real"),
+            Some(clock) => write!(f, "Clock::virtual({:?})", clock.elapsed()),
+        }
+    }
+}
+
+impl Clock {
+    /// The real clock ([`Instant::now`]).
+    pub fn real() -> Clock {
+        Clock::default()
+    }
+
+    /// A clock that stands still until `clock` is advanced.
+    pub fn virtual_clock(clock: &Arc<VirtualClock>) -> Clock {
+        Clock {
+            virtual_clock: Some(Arc::clone(clock)),
+        }
+    }
+
+    /// The time now.
+    #[inline]
+    pub fn now(&self) -> Instant {
+        match &self.virtual_clock {
+            None => Instant::now(),
+            Some(clock) => clock.now(),
+        }
+    }
+
+    /// The virtual clock, if this is one.
+    pub fn as_virtual(&self) -> Option<&Arc<VirtualClock>> {
+        self.virtual_clock.as_ref()
+    }
+
+    /// Whether this is the real clock.
+    pub fn is_real(&self) -> bool {
+        self.virtual_clock.is_none()
+    }
+}
+
+/// A clock that moves only when told ([`VirtualClock::advance`]).
+pub struct VirtualClock {
+    /// The instant the clock started at (a real reading when it was made).
+    base: Instant,
+    /// Nanoseconds since `base`.
+    offset: AtomicU64,
+    state: Mutex<Members>,
+    settled: Condvar,
+}
+
+impl std::fmt::Debug for VirtualClock {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "VirtualClock({:?})", self.elapsed())
+    }
+}
+
+/// The components on a virtual clock.
+#[derive(Default)]
+struct Members {
+    next: u64,
+    /// Each component's doorbell and the time it last settled at (`None`: busy).
+    components: BTreeMap<u64, Member>,
+    /// The `max_response` watches of the components on the clock.
+    watches: Vec<Weak<Watch>>,
+}
+
+struct Member {
+    name: String,
+    bell: Arc<Doorbell>,
+    settled: Option<Instant>,
+}
+
+/// Why [`VirtualClock::advance`] returned before every component settled.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("components still busy {timeout:?} after the clock advanced: {busy:?}")]
+pub struct NotSettled {
+    /// How long it waited.
+    pub timeout: Duration,
+    /// The components that had not settled.
+    pub busy: Vec<String>,
+}
+
+fn nanos(duration: Duration) -> u64 {
+    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
+}
+
+impl VirtualClock {
+    /// A virtual clock at time zero (an instant taken from the real clock now).
+    pub fn new() -> Arc<VirtualClock> {
+        // `max_response` watches count from the watchdog's epoch: take it first.
+        let _ = crate::watchdog::epoch();
+        Arc::new(VirtualClock {
+            base: Instant::now(),
+            offset: AtomicU64::new(0),
+            state: Mutex::new(Members::default()),
+            settled: Condvar::new(),
+        })
+    }
+
+    /// The time now.
+    pub fn now(&self) -> Instant {
+        self.base + Duration::from_nanos(self.offset.load(Ordering::Acquire))
+    }
+
+    /// How far the clock has been advanced since it was made.
+    pub fn elapsed(&self) -> Duration {
+        Duration::from_nanos(self.offset.load(Ordering::Acquire))
+    }
+
+    /// Move the clock forward by `by`, then wait until every component on it has seen
+    /// the new time and has nothing due (see the module's documentation).
+    pub fn advance(&self, by: Duration) -> Result<(), NotSettled> {
+        self.advance_with_timeout(by, SETTLE_TIMEOUT)
+    }
+
+    /// [`VirtualClock::advance`], waiting at most `timeout` (real time) for the
+    /// components to settle.
+    pub fn advance_with_timeout(&self, by: Duration, timeout: Duration) -> Result<(), NotSettled> {
+        let mut members = self.lock();
+        let offset = self
+            .offset
+            .load(Ordering::Acquire)
+            .saturating_add(nanos(by));
+        self.offset.store(offset, Ordering::Release);
+        let now = self.now();
+        // Sections past their `max_response` by now are tripped, as the watchdog does
+        // in real time.
+        members.watches.retain(|watch| watch.strong_count() > 0);
+        let watches: Vec<Arc<Watch>> = members.watches.iter().filter_map(Weak::upgrade).collect();
+        for member in members.components.values_mut() {
+            member.settled = None;
+            member.bell.ring_strong();
+        }
+        drop(members);
+        for watch in watches {
+            watch.trip_if_due(now);
+        }
+        self.wait_settled(now, timeout)
+    }
+
+    /// Wait until every component has settled at `now` or later.
+    fn wait_settled(&self, now: Instant, timeout: Duration) -> Result<(), NotSettled> {
+        let deadline = Instant::now() + timeout;
+        let mut members = self.lock();
+        loop {
+            let busy: Vec<String> = members
+                .components
+                .values()
+                .filter(|member| member.settled.is_none_or(|at| at < now))
+                .map(|member| member.name.clone())
+                .collect();
+            if busy.is_empty() {
+                return Ok(());
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(NotSettled { timeout, busy });
+            }
+            members = self
+                .settled
+                .wait_timeout(members, left)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// Wait until every component on the clock has settled at the current time (for
+    /// a test that just started or commanded its components).
+    pub fn settle(&self) -> Result<(), NotSettled> {
+        self.wait_settled(self.now(), SETTLE_TIMEOUT)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Members> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// A component joins the clock: its id, to report with.
+    pub(crate) fn join(&self, name: &str, bell: Arc<Doorbell>) -> u64 {
+        let mut members = self.lock();
+        let id = members.next;
+        members.next += 1;
+        members.components.insert(
+            id,
+            Member {
+                name: name.to_owned(),
+                bell,
+                settled: None,
+            },
+        );
+        id
+    }
+
+    /// A component's thread ended.
+    pub(crate) fn leave(&self, id: u64) {
+        self.lock().components.remove(&id);
+        self.settled.notify_all();
+    }
+
+    /// A component has nothing due at `at` (its turn's reading) and is about to wait.
+    pub(crate) fn settled(&self, id: u64, at: Instant) {
+        let mut members = self.lock();
+        if let Some(member) = members.components.get_mut(&id) {
+            member.settled = Some(at);
+        }
+        drop(members);
+        self.settled.notify_all();
+    }
+
+    /// Watch a component's sections against its `max_response` on this clock.
+    pub(crate) fn watch(&self, watch: &Arc<Watch>) {
+        self.lock().watches.push(Arc::downgrade(watch));
+    }
+}

@@ -1,0 +1,400 @@
+//! JSON Schemas of packet types, for recordings that other tools read
+//! ([`crate::record`] writes one per recorded port into its MCAP file).
+//!
+//! A schema is derived from the type's `serde::Deserialize` alone, with no value of it:
+//! the type is deserialized from a tracing deserializer (`serde-reflection`), which
+//! records every struct, field, enum variant and primitive the type asks for, and the
+//! trace is written out as the JSON Schema of the type's `serde_json` form (structs as
+//! objects, externally tagged enums, `Option` as "or null", maps as objects, integers
+//! and numbers, tuples as fixed arrays). Named types are written inline (a type that
+//! contains itself is cut at the second occurrence with an empty schema), so readers
+//! that do not resolve `$ref` see every field.
+//!
+//! What cannot be traced this way (a type whose `Deserialize` is hand-written to accept
+//! anything, `#[serde(untagged)]` or internally tagged enums, `#[serde(flatten)]`) gets
+//! the permissive schema `{}` and the reason in [`Schema::derived`]; a caller that
+//! knows better gives the schema itself (`Recorder::tap_with_schema`). An enum's
+//! variants are traced one pass each; one still untraced after [`MAX_PASSES`] passes
+//! gets `{}` for its own schema, the rest of the type keeps its exact schema.
+
+use std::collections::BTreeMap;
+
+use serde::de::DeserializeOwned;
+use serde_json::{Map, Value, json};
+use serde_reflection::{
+    ContainerFormat, Format, Named, Registry, Samples, Tracer, TracerConfig, VariantFormat,
+};
+
+/// How many tracing passes at most one type gets (each pass explores one more variant
+/// of every enum not yet complete).
+pub const MAX_PASSES: usize = 64;
+
+/// The JSON Schema dialect the schemas are written in.
+pub const DIALECT: &str = "https://json-schema.org/draft/2020-12/schema";
+
+/// A JSON Schema and how it was obtained.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Schema {
+    /// The schema (a JSON object).
+    pub schema: Value,
+    /// `traced` (derived from the type), `given` (by the caller), or `unknown: <why>`
+    /// (the permissive schema `{}`).
+    pub derived: String,
+}
+
+impl Schema {
+    /// A schema given by the caller.
+    pub fn given(schema: Value) -> Schema {
+        Schema {
+            schema,
+            derived: "given".to_owned(),
+        }
+    }
+
+    /// Whether values of the schema are JSON objects (otherwise a recording wraps
+    /// them as `{"value": ...}`, which plotting tools expect).
+    pub fn is_object(&self) -> bool {
+        self.schema.get("type").and_then(Value::as_str) == Some("object")
+    }
+
+    /// The schema of `{"value": <a value of this schema>}`.
+    pub fn wrapped(&self) -> Value {
+        let mut inner = self.schema.clone();
+        if let Some(object) = inner.as_object_mut() {
+            object.remove("$schema");
+        }
+        json!({
+            "$schema": DIALECT,
+            "type": "object",
+            "properties": { "value": inner },
+            "required": ["value"],
+        })
+    }
+}
+
+/// The JSON Schema of `T`'s `serde_json` form, traced from its `Deserialize`.
+pub fn of<T: DeserializeOwned>() -> Schema {
+    match trace::<T>() {
+        Ok((format, registry, incomplete)) => {
+            let mut writer = SchemaWriter {
+                registry: &registry,
+                incomplete: &incomplete,
+                open: Vec::new(),
+            };
+            let mut schema = writer.format(&format);
+            if let Some(object) = schema.as_object_mut() {
+                object.insert("$schema".to_owned(), Value::from(DIALECT));
+                object
+                    .entry("title")
+                    .or_insert_with(|| Value::from(short_name(std::any::type_name::<T>())));
+            }
+            Schema {
+                schema,
+                derived: "traced".to_owned(),
+            }
+        }
+        Err(why) => Schema {
+            schema: json!({
+                "$schema": DIALECT,
+                "title": short_name(std::any::type_name::<T>()),
+                "description": format!("no schema: {why}"),
+            }),
+            derived: format!("unknown: {why}"),
+        },
+    }
+}
+
+/// The type's last path segment (`RangeScan` for `robot::types::RangeScan`), generics
+/// kept.
+fn short_name(type_name: &str) -> &str {
+    let head = type_name.split('<').next().unwrap_or(type_name);
+    let start = head.rfind("::").map_or(0, |at| at + 2);
+    &type_name[start..]
+}
+
+/// Trace `T`: its top-level format, the named types it uses, and the enums whose
+/// variants are not all traced.
+///
+/// Each pass explores one more variant of the enums it is told to watch; the enums
+/// nested in `T` are learnt from the tracer's `MissingVariants` answer, and the
+/// tracing starts over with them watched, until no enum is missing variants.
+fn trace<T: DeserializeOwned>() -> Result<(Format, Registry, Vec<String>), String> {
+    let mut watched: Vec<String> = Vec::new();
+    loop {
+        let (format, tracer) = passes::<T>(&watched)?;
+        match tracer.registry() {
+            Ok(registry) => return Ok((format, registry, Vec::new())),
+            Err(serde_reflection::Error::MissingVariants(missing)) => {
+                let new: Vec<String> = missing
+                    .into_iter()
+                    .filter(|name| !watched.contains(name))
+                    .collect();
+                if new.is_empty() {
+                    // No progress: keep what was traced, with the incomplete enums
+                    // left open.
+                    let (format, tracer) = passes::<T>(&watched)?;
+                    let mut registry = tracer.registry_unchecked();
+                    registry.retain(|name, _| !watched.contains(name));
+                    return Ok((format, registry, watched));
+                }
+                watched.extend(new);
+            }
+            Err(error) => return Err(error.to_string()),
+        }
+    }
+}
+
+/// Trace `T` until none of the `watched` enums is missing a variant (at most
+/// [`MAX_PASSES`] passes).
+fn passes<T: DeserializeOwned>(watched: &[String]) -> Result<(Format, Tracer), String> {
+    let samples = Samples::new();
+    let mut tracer = Tracer::new(TracerConfig::default().is_human_readable(true));
+    let mut format = Format::Unit;
+    for _ in 0..MAX_PASSES {
+        format = tracer
+            .trace_type_once::<T>(&samples)
+            .map_err(|error| error.to_string())?
+            .0;
+        let mut more = false;
+        for name in watched {
+            more |= tracer.check_incomplete_enum(name).is_some();
+        }
+        if !more {
+            break;
+        }
+    }
+    Ok((format, tracer))
+}
+
+/// Writes traced formats as JSON Schema, inlining named types.
+struct SchemaWriter<'a> {
+    registry: &'a BTreeMap<String, ContainerFormat>,
+    incomplete: &'a [String],
+    /// The named types being written (a type met again inside itself is cut).
+    open: Vec<String>,
+}
+
+impl SchemaWriter<'_> {
+    fn format(&mut self, format: &Format) -> Value {
+        match format {
+            Format::Variable(_) => json!({}),
+            Format::TypeName(name) => self.named(name),
+            Format::Unit => json!({ "type": "null" }),
+            Format::Bool => json!({ "type": "boolean" }),
+            Format::I8 => integer(i64::from(i8::MIN), i8::MAX.into()),
+            Format::I16 => integer(i64::from(i16::MIN), i16::MAX.into()),
+            Format::I32 => integer(i64::from(i32::MIN), i32::MAX.into()),
+            Format::U8 => integer(0, u8::MAX.into()),
+            Format::U16 => integer(0, u16::MAX.into()),
+            Format::U32 => integer(0, u32::MAX.into()),
+            Format::I64 | Format::I128 => json!({ "type": "integer" }),
+            Format::U64 | Format::U128 => json!({ "type": "integer", "minimum": 0 }),
+            // serde_json writes a non-finite float as `null`.
+            Format::F32 | Format::F64 => json!({ "type": ["number", "null"] }),
+            Format::Char => json!({ "type": "string", "minLength": 1, "maxLength": 1 }),
+            Format::Str => json!({ "type": "string" }),
+            Format::Bytes => json!({
+                "type": "array",
+                "items": { "type": "integer", "minimum": 0, "maximum": 255 },
+            }),
+            Format::Option(inner) => {
+                json!({ "anyOf": [self.format(inner), { "type": "null" }] })
+            }
+            Format::Seq(inner) => json!({ "type": "array", "items": self.format(inner) }),
+            Format::Map { value, .. } => {
+                // JSON object keys are strings, whatever the map's key type.
+                json!({ "type": "object", "additionalProperties": self.format(value) })
+            }
+            Format::Tuple(items) => self.tuple(items),
+            Format::TupleArray { content, size } => json!({
+                "type": "array",
+                "items": self.format(content),
+                "minItems": size,
+                "maxItems": size,
+            }),
+        }
+    }
+
+    fn tuple(&mut self, items: &[Format]) -> Value {
+        let prefix: Vec<Value> = items.iter().map(|item| self.format(item)).collect();
+        json!({
+            "type": "array",
+            "prefixItems": prefix,
+            "items": false,
+            "minItems": items.len(),
+            "maxItems": items.len(),
+        })
+    }
+
+    fn fields(&mut self, fields: &[Named<Format>]) -> Value {
+        let mut properties = Map::new();
+        for field in fields {
+            properties.insert(field.name.clone(), self.format(&field.value));
+        }
+        let required: Vec<&str> = fields.iter().map(|field| field.name.as_str()).collect();
+        json!({ "type": "object", "properties": properties, "required": required })
+    }
+
+    fn named(&mut self, name: &str) -> Value {
+        if self.incomplete.iter().any(|n| n == name) {
+            return json!({ "title": name, "description": "variants not all traced" });
+        }
+        let Some(container) = self.registry.get(name) else {
+            return json!({ "title": name });
+        };
+        if self.open.iter().any(|open| open == name) {
+            // Recursive: cut here.
+            return json!({ "title": name });
+        }
+        self.open.push(name.to_owned());
+        let mut schema = match container {
+            ContainerFormat::UnitStruct => json!({ "type": "null" }),
+            ContainerFormat::NewTypeStruct(inner) => self.format(inner),
+            ContainerFormat::TupleStruct(items) => self.tuple(items),
+            ContainerFormat::Struct(fields) => self.fields(fields),
+            ContainerFormat::Enum(variants) => {
+                let cases: Vec<Value> = variants
+                    .values()
+                    .map(|variant| self.variant(variant))
+                    .collect();
+                json!({ "oneOf": cases })
+            }
+        };
+        self.open.pop();
+        if let Some(object) = schema.as_object_mut() {
+            object
+                .entry("title")
+                .or_insert_with(|| Value::from(name.to_owned()));
+        }
+        schema
+    }
+
+    /// A variant as `serde_json` writes it: a unit variant as its name, the others as
+    /// `{ "Name": content }`.
+    fn variant(&mut self, variant: &Named<VariantFormat>) -> Value {
+        let content = match &variant.value {
+            VariantFormat::Unit => return json!({ "const": variant.name }),
+            VariantFormat::Variable(_) => json!({}),
+            VariantFormat::NewType(inner) => self.format(inner),
+            VariantFormat::Tuple(items) => self.tuple(items),
+            VariantFormat::Struct(fields) => self.fields(fields),
+        };
+        let mut properties = Map::new();
+        properties.insert(variant.name.clone(), content);
+        json!({
+            "type": "object",
+            "properties": properties,
+            "required": [variant.name],
+            "additionalProperties": false,
+        })
+    }
+}
+
+fn integer(minimum: i64, maximum: i64) -> Value {
+    json!({ "type": "integer", "minimum": minimum, "maximum": maximum })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use serde::Deserialize;
+    use serde_json::json;
+
+    use super::of;
+
+    #[derive(Deserialize)]
+    #[allow(dead_code, reason = "only traced")]
+    enum Mode {
+        Idle,
+        Moving { speed: f64 },
+        Turning(i8),
+    }
+
+    #[derive(Deserialize)]
+    #[allow(dead_code, reason = "only traced")]
+    struct Pose {
+        x: f32,
+        label: Option<String>,
+        mode: Mode,
+        path: Vec<(u8, bool)>,
+        tags: BTreeMap<String, u16>,
+        corners: [u32; 2],
+    }
+
+    #[test]
+    fn a_struct_with_a_nested_enum_is_traced_whole() {
+        let schema = of::<Pose>();
+        assert_eq!(schema.derived, "traced");
+        assert!(schema.is_object());
+        let p = &schema.schema["properties"];
+        assert_eq!(schema.schema["title"], "Pose");
+        assert_eq!(p["x"]["type"], json!(["number", "null"]));
+        assert_eq!(p["label"]["anyOf"][1], json!({ "type": "null" }));
+        assert_eq!(p["label"]["anyOf"][0], json!({ "type": "string" }));
+        let modes = p["mode"]["oneOf"].as_array().expect("variants");
+        assert_eq!(
+            modes.len(),
+            3,
+            "every variant of the nested enum: {modes:?}"
+        );
+        assert_eq!(modes[0], json!({ "const": "Idle" }));
+        assert_eq!(
+            modes[1]["properties"]["Moving"]["properties"]["speed"]["type"],
+            json!(["number", "null"])
+        );
+        assert_eq!(modes[2]["properties"]["Turning"]["minimum"], -128);
+        assert_eq!(p["path"]["items"]["prefixItems"][1]["type"], "boolean");
+        assert_eq!(p["tags"]["additionalProperties"]["maximum"], 65535);
+        assert_eq!(p["corners"]["maxItems"], 2);
+    }
+
+    #[test]
+    fn a_number_is_not_an_object_and_is_wrapped() {
+        let schema = of::<f64>();
+        assert!(!schema.is_object());
+        assert_eq!(
+            schema.wrapped()["properties"]["value"]["type"],
+            json!(["number", "null"])
+        );
+    }
+
+    #[test]
+    fn a_type_that_cannot_be_traced_gets_the_permissive_schema_and_why() {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        #[allow(dead_code, reason = "only traced")]
+        enum Loose {
+            A(u8),
+            B(String),
+        }
+        let schema = of::<Loose>();
+        assert!(
+            schema.derived.starts_with("unknown: "),
+            "{}",
+            schema.derived
+        );
+        assert!(schema.schema.get("type").is_none());
+        assert!(
+            schema.schema["description"]
+                .as_str()
+                .is_some_and(|d| d.starts_with("no schema: ")),
+        );
+    }
+
+    #[test]
+    fn a_type_that_contains_itself_is_cut_at_the_repetition() {
+        #[derive(Deserialize)]
+        #[allow(dead_code, reason = "only traced")]
+        struct Tree {
+            value: u8,
+            children: Vec<Tree>,
+        }
+        let schema = of::<Tree>();
+        assert_eq!(schema.derived, "traced");
+        assert_eq!(
+            schema.schema["properties"]["children"]["items"],
+            json!({ "title": "Tree" })
+        );
+    }
+}
