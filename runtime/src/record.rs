@@ -43,8 +43,9 @@
 //!   `sent == events + lost`. The MCAP statistics record counts the messages per
 //!   channel as well.
 //!
-//! Messages of one port are in `sequence` order, and a gap in the sequence is a loss (a
-//! loss message says so). Messages of different channels are in `log_time` order within
+//! Messages of one port are in `sequence` order when one thread sends on it (an
+//! output sent on from several threads at once may have neighbours swapped), and a
+//! number missing from the sequence is a loss (a loss message says so). Messages of different channels are in `log_time` order within
 //! each batch the thread writes, not across batches: a reader that needs one global
 //! order sorts.
 //!
@@ -1730,17 +1731,24 @@ impl Reader {
                 wrapped,
                 last,
             } => {
-                // The MCAP sequence is the packet's number modulo 2^32.
+                // The MCAP sequence is the packet's number modulo 2^32: the number is
+                // the one nearest the last one read (packets sent from several threads
+                // at once may be written slightly out of order, so a smaller number is
+                // not always a wrap).
                 let low = u64::from(header.sequence);
                 let seq = match *last {
                     None => low,
                     Some(previous) => {
                         let candidate = (previous & !0xffff_ffff) | low;
-                        if candidate < previous {
-                            candidate + (1 << 32)
-                        } else {
-                            candidate
-                        }
+                        [
+                            candidate.checked_sub(1 << 32),
+                            Some(candidate),
+                            candidate.checked_add(1 << 32),
+                        ]
+                        .into_iter()
+                        .flatten()
+                        .min_by_key(|seq| seq.abs_diff(previous))
+                        .unwrap_or(candidate)
                     }
                 };
                 *last = Some(seq);
