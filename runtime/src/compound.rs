@@ -26,8 +26,8 @@ use crate::adapt::{
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
 use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
-    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
-    TickOut, UfifoIn,
+    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, Parcel,
+    PosterIn, PosterOut, PullRoute, TickIn, TickOut, UfifoIn,
 };
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
 use crate::spec::{Spec, VarKind, VarSpec};
@@ -376,22 +376,52 @@ trait Export: Send {
     fn follow(&mut self, system: &System, address: &str) -> Result<(), String>;
 }
 
-/// The compound's own end of an exported data input.
+/// The compound's own end of an exported input of packets `T`, with the relay output
+/// that feeds the instance's input.
 enum Twin<T> {
-    Fifo(FifoIn<T>),
-    Ufifo(UfifoIn<T>),
-    Last(LastIn<T>),
+    Fifo(FifoIn<T>, DataOut<T>),
+    Ufifo(UfifoIn<T>, DataOut<T>),
+    Last(LastIn<T>, DataOut<T>),
+    Poster(PosterIn<T>, PosterOut<T>),
 }
 
-/// An exported data input: packets arriving at the compound's port are sent on
-/// through a relay output connected to the instance's input.
+impl<T: Packet> Twin<T> {
+    /// The compound's input, erased.
+    fn input(&self) -> ErasedInput {
+        match self {
+            Twin::Fifo(input, _) => input.erased(),
+            Twin::Ufifo(input, _) => input.erased(),
+            Twin::Last(input, _) => input.erased(),
+            Twin::Poster(input, _) => input.erased(),
+        }
+    }
+
+    /// The relay, erased.
+    fn relay(&self) -> ErasedOutput {
+        match self {
+            Twin::Fifo(_, relay) | Twin::Ufifo(_, relay) | Twin::Last(_, relay) => relay.erased(),
+            Twin::Poster(_, relay) => relay.erased(),
+        }
+    }
+}
+
+/// An exported input of packets `T`: what arrives at the compound's port is passed on
+/// through a relay output connected to the instance's input (a poster input's post is
+/// posted again on a relay poster output).
 struct InputExport<T> {
     target: String,
     twin: Twin<T>,
-    relay: DataOut<T>,
     linked: Option<ErasedInput>,
     /// Packets stayed at the compound's port at the last `forward`.
     held: bool,
+}
+
+/// A relay whose pull requests (from the instance's `pull` input) become requests of
+/// the compound's input `twin` to its own producers.
+fn route_pulls(relay: &ErasedOutput, twin: &ErasedInput) {
+    relay
+        .core
+        .set_route(PullRoute::Input(Arc::clone(&twin.core)));
 }
 
 /// Connect `relay` to `new`, or move it there from `linked` with what is queued.
@@ -425,31 +455,39 @@ impl<T: Packet> Export for InputExport<T> {
             .as_ref()
             .and_then(ErasedInput::room)
             .unwrap_or(usize::MAX);
+        // Packets pass on as they were queued: a packet its producer shares with
+        // other inputs stays shared (no copy for the hop).
         self.held = match &self.twin {
-            Twin::Fifo(input) => {
+            Twin::Fifo(input, relay) => {
                 while room > 0
-                    && let Some(packet) = input.recv()
+                    && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
-                    self.relay.send(packet);
+                    relay.send_parcel(packet);
                 }
                 !input.is_empty()
             }
-            Twin::Ufifo(input) => {
+            Twin::Ufifo(input, relay) => {
                 while room > 0
-                    && let Some(packet) = input.recv()
+                    && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
-                    self.relay.send(packet);
+                    relay.send_parcel(packet);
                 }
                 !input.is_empty()
             }
             // (Whether a new packet waits is not known without taking it: held while
             // the instance's input is full.)
-            Twin::Last(_) if room == 0 => true,
-            Twin::Last(input) => {
+            Twin::Last(..) if room == 0 => true,
+            Twin::Last(input, relay) => {
+                if let Some(packet) = input.take_new_shared() {
+                    relay.send_parcel(Parcel::Shared(packet));
+                }
+                false
+            }
+            Twin::Poster(input, relay) => {
                 if let Some(packet) = input.take_new() {
-                    self.relay.send(packet);
+                    relay.post(packet);
                 }
                 false
             }
@@ -462,7 +500,7 @@ impl<T: Packet> Export for InputExport<T> {
 
     fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
         let new = system.input_port(address).map_err(|e| e.to_string())?;
-        follow_input(&self.relay.erased(), &mut self.linked, new)
+        follow_input(&self.twin.relay(), &mut self.linked, new)
     }
 }
 
@@ -491,15 +529,17 @@ impl Export for TickExport {
     }
 }
 
-/// An exported data output: what the instance sends is sent on the compound's port
-/// too, synchronously on the instance's thread.
-struct OutputExport<T> {
+/// An exported output (tick, data or poster): what the instance emits, sends or posts
+/// goes out of the compound's port too, synchronously on the instance's thread (no
+/// extra hop), and the pull requests the compound's port receives go to the
+/// instance's output on behalf of the requesting input (`port::forward`).
+struct OutputExport {
     target: String,
-    twin: DataOut<T>,
+    twin: ErasedOutput,
     source: Option<(ErasedOutput, usize)>,
 }
 
-impl<T: Packet> Export for OutputExport<T> {
+impl Export for OutputExport {
     fn target(&self) -> &str {
         &self.target
     }
@@ -510,10 +550,10 @@ impl<T: Packet> Export for OutputExport<T> {
             if old.core.id == new.core.id {
                 return Ok(());
             }
-            crate::port::unforward_data::<T>(old, *id);
+            crate::port::unforward(old, *id);
         }
         self.source = None;
-        let id = crate::port::forward_data::<T>(&new, &self.twin)
+        let id = crate::port::forward(&new, &self.twin)
             .ok_or_else(|| "the exported output does not match the instance's".to_owned())?;
         self.source = Some((new, id));
         Ok(())
@@ -606,66 +646,82 @@ impl CompoundBuilder {
         self
     }
 
-    /// The declared input at `target` and its erased port, if `T` is its packet type.
-    fn exported_input<T: 'static>(
+    /// The declared port at `target` (an input if `input`, else an output), if its
+    /// kind is one of `kinds` and, for a port that carries packets, they are `T`.
+    fn exported_port<T: 'static>(
         &mut self,
         target: &str,
-        tick: bool,
-    ) -> Option<(InputSpec, ErasedInput)> {
-        let found = self.system.input_port(target).ok().and_then(|port| {
-            let (instance, name) = target.split_once('.')?;
+        input: bool,
+        kinds: &str,
+    ) -> Option<(Option<InputSpec>, Option<OutputSpec>)> {
+        let declared = target.split_once('.').and_then(|(instance, port)| {
             let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
-            let declared = *spec.inputs.iter().find(|i| i.name == name)?;
-            Some((declared, port))
+            Some(if input {
+                (spec.inputs.iter().find(|i| i.name == port).copied(), None)
+            } else {
+                (None, spec.outputs.iter().find(|o| o.name == port).copied())
+            })
         });
-        let fits = found.as_ref().is_some_and(|(declared, port)| {
-            (declared.kind == InputKind::Tick) == tick
-                && (tick || port.type_id == std::any::TypeId::of::<T>())
-                && !matches!(declared.kind, InputKind::Poster)
-                && !declared.pull
-        });
+        let type_id = if input {
+            self.system
+                .input_port(target)
+                .ok()
+                .map(|p| (p.type_id, p.kind.name()))
+        } else {
+            self.system
+                .output_port(target)
+                .ok()
+                .map(|p| (p.type_id, p.kind.name()))
+        };
+        let fits = match (&declared, type_id) {
+            (Some(_), Some((type_id, kind))) => {
+                kinds.split(", ").any(|k| k == kind)
+                    && (kind == "tick" || type_id == std::any::TypeId::of::<T>())
+            }
+            _ => false,
+        };
         if !fits {
+            let direction = if input { "input" } else { "output" };
+            let packets = if kinds == "tick" {
+                String::new()
+            } else {
+                format!(" of `{}`", std::any::type_name::<T>())
+            };
             self.errors.push(CompoundError::Connect {
                 compound: self.name.clone(),
                 detail: format!(
-                    "cannot export `{target}`: no such input, or not a {} input{}",
-                    if tick { "tick" } else { "fifo, ufifo or last" },
-                    if tick {
-                        String::new()
-                    } else {
-                        format!(" of `{}` (push model)", std::any::type_name::<T>())
-                    }
+                    "cannot export `{target}`: no such {direction}, or not a {kinds} {direction}{packets}"
                 ),
             });
             return None;
         }
-        found
+        declared
     }
 
-    /// `input name = instance.port;` for a fifo, ufifo or last input of packets `T`:
-    /// the compound gets an input of the same kind; what arrives there is passed on
-    /// to the instance (or its stand-in) while the compound runs.
+    /// `input name = instance.port;` for a fifo, ufifo, last or poster input of
+    /// packets `T`, `pull` or not: the compound gets an input of the same kind, size
+    /// and pull model; what arrives there is passed on to the instance (or its
+    /// stand-in) by the compound's thread while the compound runs, and a pull request
+    /// of the instance's input becomes a request of the compound's input to its
+    /// producers.
     pub fn export_input<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let Some((declared, _)) = self.exported_input::<T>(target, false) else {
+        let Some((Some(declared), _)) =
+            self.exported_port::<T>(target, true, "fifo, ufifo, last, poster")
+        else {
             return self;
         };
-        let (twin, port): (Twin<T>, ErasedInput) = match declared.kind {
+        let twin: Twin<T> = match declared.kind {
             InputKind::Fifo { capacity, policy } => {
-                let input = FifoIn::new(capacity, policy);
-                let erased = input.erased();
-                (Twin::Fifo(input), erased)
+                Twin::Fifo(FifoIn::new(capacity, policy), DataOut::new())
             }
             InputKind::Ufifo { initial, max } => {
-                let input = UfifoIn::new(initial, max);
-                let erased = input.erased();
-                (Twin::Ufifo(input), erased)
+                Twin::Ufifo(UfifoIn::new(initial, max), DataOut::new())
             }
-            _ => {
-                let input = LastIn::new();
-                let erased = input.erased();
-                (Twin::Last(input), erased)
-            }
+            InputKind::Poster => Twin::Poster(PosterIn::new(), PosterOut::new()),
+            InputKind::Last | InputKind::Tick => Twin::Last(LastIn::new(), DataOut::new()),
         };
+        let port = twin.input();
+        route_pulls(&twin.relay(), &port);
         self.ports = std::mem::take(&mut self.ports).erased_input(port);
         self.inputs.push(InputSpec {
             name: leak_str(name),
@@ -674,19 +730,20 @@ impl CompoundBuilder {
         self.exports.push(Box::new(InputExport {
             target: target.to_owned(),
             twin,
-            relay: DataOut::new(),
             linked: None,
             held: false,
         }));
         self
     }
 
-    /// `input name = instance.port;` for a tick input.
+    /// `input name = instance.port;` for a tick input, `pull` or not.
     pub fn export_tick_input(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let Some((declared, _)) = self.exported_input::<()>(target, true) else {
+        let Some((Some(declared), _)) = self.exported_port::<()>(target, true, "tick") else {
             return self;
         };
         let twin = TickIn::new();
+        let relay = TickOut::new();
+        route_pulls(&relay.erased(), &twin.erased());
         self.ports = std::mem::take(&mut self.ports).input(&twin);
         self.inputs.push(InputSpec {
             name: leak_str(name),
@@ -695,36 +752,40 @@ impl CompoundBuilder {
         self.exports.push(Box::new(TickExport {
             target: target.to_owned(),
             twin,
-            relay: TickOut::new(),
+            relay,
             linked: None,
         }));
         self
     }
 
-    /// `output name = instance.port;` for a data output of packets `T`: what the
-    /// instance (or its stand-in) sends goes out of the compound's port.
-    pub fn export_output<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let declared = target.split_once('.').and_then(|(instance, port)| {
-            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
-            spec.outputs.iter().find(|o| o.name == port).copied()
-        });
-        let fits = declared.is_some_and(|d| d.kind == OutputKind::Data && !d.pull)
-            && self
-                .system
-                .output_port(target)
-                .is_ok_and(|port| port.type_id == std::any::TypeId::of::<T>());
-        let Some(declared) = declared.filter(|_| fits) else {
-            self.errors.push(CompoundError::Connect {
-                compound: self.name.clone(),
-                detail: format!(
-                    "cannot export `{target}`: no such output, or not a data output of `{}` (push model)",
-                    std::any::type_name::<T>()
-                ),
-            });
+    /// `output name = instance.port;` for a data or poster output of packets `T`,
+    /// `pull` or not: what the instance (or its stand-in, or its redundant group's
+    /// leader) sends or posts goes out of the compound's port too, and pull requests
+    /// to the compound's port go to the instance's output for the requesting input.
+    pub fn export_output<T: Packet>(self, name: &str, target: &str) -> CompoundBuilder {
+        self.export_output_of::<T>(name, target, "data, poster")
+    }
+
+    /// `output name = instance.port;` for a tick output, `pull` or not.
+    pub fn export_tick_output(self, name: &str, target: &str) -> CompoundBuilder {
+        self.export_output_of::<()>(name, target, "tick")
+    }
+
+    fn export_output_of<T: Packet>(
+        mut self,
+        name: &str,
+        target: &str,
+        kinds: &str,
+    ) -> CompoundBuilder {
+        let Some((_, Some(declared))) = self.exported_port::<T>(target, false, kinds) else {
             return self;
         };
-        let twin = DataOut::<T>::new();
-        self.ports = std::mem::take(&mut self.ports).output(&twin);
+        let twin = match declared.kind {
+            OutputKind::Tick => TickOut::new().erased(),
+            OutputKind::Data => DataOut::<T>::new().erased(),
+            OutputKind::Poster => PosterOut::<T>::new().erased(),
+        };
+        self.ports = std::mem::take(&mut self.ports).erased_output(twin.clone());
         self.outputs.push(OutputSpec {
             name: leak_str(name),
             ..declared

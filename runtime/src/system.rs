@@ -54,6 +54,12 @@ impl PortSet {
         self.outputs.push(port.erased());
         self
     }
+
+    /// Register the next output port, already erased.
+    pub(crate) fn erased_output(mut self, port: ErasedOutput) -> PortSet {
+        self.outputs.push(port);
+        self
+    }
 }
 
 /// An unstarted component: a name, its code and its ports.

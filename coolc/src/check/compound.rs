@@ -25,27 +25,25 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
                 def: ast::InputDef::Export(target),
                 ..
             }) => {
-                let port = endpoint(
+                endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Input,
                     "exported input",
                 );
-                exportable(checker, target, port.as_ref(), Direction::Input);
             }
             ast::Member::Output(ast::Output {
                 def: ast::OutputDef::Export(target),
                 ..
             }) => {
-                let port = endpoint(
+                endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Output,
                     "exported output",
                 );
-                exportable(checker, target, port.as_ref(), Direction::Output);
             }
             ast::Member::OnError(on_error) => {
                 self::on_error(checker, component, &instances, on_error)
@@ -382,46 +380,6 @@ fn arrangement(
             }
         }
     }
-}
-
-/// What a compound can export (the runtime relays pushed packets): `tick`, `fifo`,
-/// `ufifo` and `last` inputs and `data` outputs, none of them `pull`.
-fn exportable(
-    checker: &mut Checker<'_, '_>,
-    target: &ast::PortRef,
-    port: Option<&Port>,
-    direction: Direction,
-) {
-    let Some(port) = port else { return };
-    let (what, problem) = match direction {
-        Direction::Input if port.kind == PortKind::Poster => ("input", "a poster input"),
-        Direction::Output if port.kind != PortKind::Data => (
-            "output",
-            if port.kind == PortKind::Tick {
-                "a tick output"
-            } else {
-                "a poster output"
-            },
-        ),
-        Direction::Input if port.pull => ("input", "a pull input"),
-        Direction::Output if port.pull => ("output", "a pull output"),
-        _ => return,
-    };
-    let diagnostic = checker
-        .error(
-            Code::ExportKind,
-            target.port.span,
-            format!(
-                "`{}` is {problem}: a compound cannot export it",
-                path(target)
-            ),
-        )
-        .with_label(format!("{} {what}", describe_port(port)))
-        .with_help(
-            "a compound exports tick, fifo, ufifo and last inputs and data outputs, in the push \
-             model; connect this port inside the compound instead",
-        );
-    checker.push(diagnostic);
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
