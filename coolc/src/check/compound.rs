@@ -53,7 +53,6 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
     }
     arrangement(checker, component, &instances);
     cardinality(checker, component, &instances);
-    queue_fan_out(checker, component, &instances);
     duplicate_policies(checker, component);
     unconnected_transition_inputs(checker, component, &instances);
 }
@@ -630,7 +629,9 @@ fn path(port: &ast::PortRef) -> String {
 }
 
 /// `last` and `poster` inputs take one producer (a connection or an export from the
-/// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number.
+/// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number, and an
+/// output feeds any number of inputs (a `data` output any number of queues, each
+/// with its own).
 fn cardinality(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
@@ -695,50 +696,6 @@ fn cardinality(
                     .with_help("use a `fifo` or `ufifo` input to merge several producers");
                 checker.push(diagnostic);
             }
-        }
-    }
-}
-
-/// A `data` output feeds at most one queue (`fifo` or `ufifo` input): a queue
-/// connection is N outputs to one input, and the runtime refuses a second queue on the
-/// same output. Any number of `last` inputs may read the same output beside it.
-fn queue_fan_out(
-    checker: &mut Checker<'_, '_>,
-    component: &ast::Component,
-    instances: &Instances<'_>,
-) {
-    let input_kind = |port: &ast::PortRef| -> Option<PortKind> {
-        let instance = port.instance.as_ref()?;
-        let (_, interface) = instances.get(instance.name.as_str())?;
-        Some(interface.as_ref()?.inputs.get(&port.port.name)?.kind)
-    };
-    let mut queues: BTreeMap<String, Vec<Span>> = BTreeMap::new();
-    for member in &component.members {
-        let ast::Member::Connect(connect) = member else {
-            continue;
-        };
-        if matches!(
-            input_kind(&connect.to),
-            Some(PortKind::Fifo | PortKind::Ufifo)
-        ) {
-            queues
-                .entry(path(&connect.from))
-                .or_default()
-                .push(connect.span);
-        }
-    }
-    for (output, spans) in queues {
-        for extra in &spans[1..] {
-            let diagnostic = checker
-                .error(
-                    Code::ConnectCardinality,
-                    *extra,
-                    format!("`{output}` already feeds a queue; a `data` output feeds at most one `fifo` or `ufifo` input"),
-                )
-                .with_label("second queue")
-                .with_secondary(spans[0], "first queue")
-                .with_help("connect the second consumer through a `last` input, or give the producer a second output");
-            checker.push(diagnostic);
         }
     }
 }
