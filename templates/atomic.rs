@@ -1,7 +1,7 @@
 {#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`), which lays out the
     parts that depend on the description and says when the result needs a formatter. -#}
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Generated code of atomic component `{{ c.type_name }}`.
 //!
 //! Implement [`Behavior`] (the user file `src/{{ c.module }}.rs` holds the stubs) and
@@ -22,6 +22,9 @@ pub struct Config {
 {{- l.doc(&f.doc, 4, "///") }}
 {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
+{%- endif %}
+{%- if let Some(adapter) = f.serde_with %}
+{{ l.serde_with(adapter) }}
 {%- endif %}
 {{ l.decl(&f.name, &f.ty) }}
 {%- endfor %}
@@ -228,6 +231,7 @@ pub trait Behavior: ::core::marker::Send + 'static {
 }
 
 /// The static shape of the component, read by the runtime.
+{{- l.doc(&c.notes, 0, "///") }}
 {{ l.spec(c) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.

@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Links the native libraries the descriptions name with `link system`.
 
 fn main() {

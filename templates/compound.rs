@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Generated code of compound component `{{ c.type_name }}`.
 //!
 //! Implement [`Supervisor`] (the supervisor's sections) and [`Parts`] (which
@@ -106,10 +106,39 @@ impl UserState {
     }
 }
 
+{%- for s in c.states %}
+{%- if let Some(may_enum) = s.may_enum %}
+
+/// The targets supervisor state `{{ s.cool_name }}` may choose (its `may` list): any
+/// other transition is unrepresentable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum {{ may_enum }} {
+{%- for (variant, _, name) in s.may %}
+    /// Go to state `{{ name }}`.
+    {{ variant }},
+{%- endfor %}
+}
+
+impl {{ may_enum }} {
+    /// The target state.
+    pub fn state(self) -> UserState {
+        match self {
+        {%- for (variant, index, _) in s.may %}
+            {{ may_enum }}::{{ variant }} => UserState::ALL[{{ index }}],
+        {%- endfor %}
+        }
+    }
+}
+{%- endif %}
+{%- endfor %}
+
 /// The supervisor's shape: its states, its own observable and controllable
 /// variables, its timing, and the exported ports as the compound will have them
 /// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
 /// adds the mapped variables).
+{%- for line in c.notes %}
+///{% if !line.is_empty() %} {{ line }}{% endif %}
+{%- endfor %}
 pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     type_name: "{{ c.type_name }}",
     doc: {{ c.doc_literal() }},
@@ -149,7 +178,121 @@ pub struct Cx<'a> {
     /// The instances' monitors (their `state`, `user_state`, `result`, `error` and
     /// variables) as last seen.
     pub view: &'a ::coolbot::View,
+    /// The instances, to command: `cx.instances.motion().suspend()?`.
+    pub instances: Instances<'a>,
 }
+
+impl<'a> Cx<'a> {
+    /// The context of a section, from the runtime's.
+    #[doc(hidden)]
+    pub fn __cool_new(vars: &'a mut Vars, cx: &'a mut ::coolbot::SupervisorCx<'_>) -> Cx<'a> {
+        Cx {
+            vars,
+            rt: &mut *cx.rt,
+            view: cx.view,
+            instances: Instances { commander: &mut *cx.instances },
+        }
+    }
+}
+
+/// The compound's instances, one typed handle each. Every command waits (boundedly)
+/// for the instance's answer, and is a supervision step on the compound's monitoring
+/// port; a refusal is a `coolbot::CommandError` whose `reason` says why.
+{%- if c.handles.is_empty() %}
+#[allow(dead_code, reason = "no instance to command")]
+{%- endif %}
+pub struct Instances<'a> {
+    commander: &'a mut ::coolbot::Commander,
+}
+
+impl Instances<'_> {
+{%- for h in c.handles %}
+{%- if !loop.first %}
+{% endif %}
+    /// Instance `{{ h.instance }}`, a `{{ h.component }}`.
+    pub fn {{ h.method }}(&mut self) -> {{ h.type_name }}<'_> {
+        {{ h.type_name }} { commander: &mut *self.commander }
+    }
+{%- endfor %}
+}
+{%- for h in c.handles %}
+
+/// Commands to instance `{{ h.instance }}` (a `{{ h.component }}`), through its control
+/// port.
+pub struct {{ h.type_name }}<'a> {
+    commander: &'a mut ::coolbot::Commander,
+}
+
+impl {{ h.type_name }}<'_> {
+    /// Bring it to `suspended` (its user automaton frozen in its state).
+    pub fn suspend(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Suspended)
+    }
+
+    /// Bring it to `running` (resumed, or started again after an error).
+    pub fn run(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Running)
+    }
+
+    /// Bring it to `ready` (its user automaton left).
+    pub fn ready(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Ready)
+    }
+
+    /// Bring it to `dead` (its thread ends; it takes no command after this).
+    pub fn dead(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Dead)
+    }
+{%- for setter in h.setters %}
+
+    /// Set its controllable variable `{{ setter.variable }}`.
+    pub fn {{ setter.method }}(&mut self, value: {{ setter.ty }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.set("{{ h.instance }}", "{{ setter.variable }}", {{ setter.to_value }})
+    }
+{%- endfor %}
+{%- if let Some(config) = h.config %}
+
+    /// Give it a new configuration (its `configuration` block).
+    pub fn configure(&mut self, configuration: {{ config }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.configure("{{ h.instance }}", super::__cool_to_value(&configuration))
+    }
+{%- endif %}
+
+    /// Set its period.
+    pub fn set_period(&mut self, period: ::core::time::Duration) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.set_period("{{ h.instance }}", period)
+    }
+{%- if let Some((quality, _)) = h.quality %}
+
+    /// Set its quality level.
+    pub fn set_quality(&mut self, level: {{ quality }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        self.commander.set_quality("{{ h.instance }}", level.index())
+    }
+{%- endif %}
+}
+{%- if let Some((quality, levels)) = h.quality %}
+
+/// The quality levels of instance `{{ h.instance }}`, best first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum {{ quality }} {
+{%- for (variant, level) in levels %}
+    /// Level `{{ level }}`.
+    {{ variant }},
+{%- endfor %}
+}
+
+impl {{ quality }} {
+    /// The level's index (0 = best).
+    pub fn index(self) -> usize {
+        match self {
+        {%- for (variant, _) in levels %}
+            {{ quality }}::{{ variant }} => {{ loop.index0 }},
+        {%- endfor %}
+        }
+    }
+}
+{%- endif %}
+{%- endfor %}
 
 /// The supervisor's code: one required method per section of its states. Its
 /// transitions are the description's `when` rules; a section that fails takes the
@@ -272,12 +415,29 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
     {%- else %}
         let Self { supervisor, vars } = self;
         let mut vars = __cool_lock(vars);
-        let mut cx = Cx { vars: &mut vars, rt: &mut *cx.rt, view: cx.view };
+        let mut cx = Cx::__cool_new(&mut vars, cx);
         match (state, section) {
         {%- for (pattern, call) in c.section_arms %}
             {{ pattern }} => {{ call }},
         {%- endfor %}
             _ => Ok(()),
+        }
+    {%- endif %}
+    }
+
+    fn choose(&mut self, state: usize, cx: &mut ::coolbot::SupervisorCx<'_>) -> ::core::option::Option<usize> {
+    {%- if c.choose_arms.is_empty() %}
+        let _ = (state, cx, &self.supervisor);
+        None
+    {%- else %}
+        let Self { supervisor, vars } = self;
+        let mut vars = __cool_lock(vars);
+        let mut cx = Cx::__cool_new(&mut vars, cx);
+        match state {
+        {%- for arm in c.choose_arms %}
+            {{ arm.state }} => supervisor.{{ arm.method }}(&mut cx).map(|target| target.state().index()),
+        {%- endfor %}
+            _ => None,
         }
     {%- endif %}
     }

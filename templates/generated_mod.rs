@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Generated from the `.cool` descriptions by `coolc`; regenerated on every compile.
 //!
 //! Each component module holds its configuration, variables, ports, user automaton

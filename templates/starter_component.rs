@@ -1,9 +1,8 @@
 //! The code of component `{{ c.type_name }}`, filled in by `coolc new` as an example.
 //!
-//! `coolc` wrote this file once and never overwrites it: when
-//! `components/{{ c.module }}.cool` gains a state, section, exception or pull output,
-//! `coolc compile components/{{ c.module }}.cool -o .` adds the new stubs at the end
-//! of the `impl Behavior` block and leaves everything else as you wrote it.
+//! `coolc` wrote this file once and never overwrites it: when the description gains
+//! a state, section, exception or pull output, `coolc compile` adds the new stubs at
+//! the end of the `impl Behavior` block and leaves everything else as you wrote it.
 
 use crate::generated::{{ c.module }}::*;
 

@@ -1,5 +1,5 @@
 {%- import "macros.rs" as m -%}
-{% call m::header(krate.sources_text()) %}{% endcall %}
+{% call m::header(krate.header()) %}{% endcall %}
 //! Packets, enums, extern packets and converters of the descriptions.
 {% for e in types.externs %}
 
@@ -17,6 +17,9 @@ pub struct {{ p.name }} {
 {%- call m::doc(&f.doc) %}{% endcall %}
     {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
+    {%- endif %}
+    {%- if let Some(adapter) = f.serde_with %}
+    #[serde(with = "{{ adapter }}")]
     {%- endif %}
     pub {{ f.name }}: {{ f.ty }},
 {%- endfor %}

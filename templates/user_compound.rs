@@ -3,9 +3,9 @@
 //!
 //! `coolc` wrote this file once and never overwrites it: new supervisor sections get
 //! stubs at the end of the `impl Supervisor` block, new instances new methods at the
-//! end of the `impl Parts` block. Build the compound with
-//! `crate::generated::{{ c.module }}::component{% if c.uses_converters %}::<crate::converters::Convert>{% endif %}("name", {{ c.user_struct }}::default())`
-//! and add it to a `coolbot::System` (or to another compound).
+//! end of the `impl Parts` block. Build the compound with the generated module's
+//! `component` function from a `{{ c.user_struct }}` and add it to a
+//! `coolbot::System` (or to another compound).
 
 use crate::generated::{{ c.module }}::*;
 

@@ -283,8 +283,23 @@ pub struct Component {
     pub name: Ident,
     /// Members in source order.
     pub members: Vec<Member>,
+    /// Doc comments on constructs inside the component that have no generated Rust
+    /// item of their own (timing entries, transitions, connections, ...), in source
+    /// order.
+    pub notes: Vec<Note>,
     /// The whole item.
     pub span: Span,
+}
+
+/// A doc comment on a construct without a generated Rust item of its own: lowering
+/// prints it in the rustdoc of the component's `SPEC`, after the construct's text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    /// The construct as written, up to its first `{` or `;`, in backticks, with its
+    /// context: `` `period 100ms` ``, ``state `moving`: `on halt -> stopped` ``.
+    pub subject: String,
+    /// The doc comment.
+    pub doc: Doc,
 }
 
 /// The two kinds of component.
@@ -325,6 +340,8 @@ pub enum Member {
     OnError(OnError),
     /// `recovery { retry every D; deadline D; }`
     Recovery(Recovery),
+    /// `restart { limit N in D; backoff D..D; }`
+    Restart(Restart),
 }
 
 /// A `link` member: a dependency of the generated crate.
@@ -612,6 +629,9 @@ pub struct State {
     pub name: Ident,
     /// Sections and transitions in source order.
     pub members: Vec<StateMember>,
+    /// The doc comment of each member (`members[i]`'s is `member_docs[i]`), empty
+    /// when none was written.
+    pub member_docs: Vec<Doc>,
     /// The whole state.
     pub span: Span,
 }
@@ -740,6 +760,18 @@ pub struct Recovery {
     pub retry_every: Option<Expr>,
     /// How long an instance may stay in the queue.
     pub deadline: Option<Expr>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `restart { limit N in D; backoff D..D; }`: the budget and backoff of the compound's
+/// `restart` policy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Restart {
+    /// `limit N in D`: at most `N` restarts of one instance within any `D`.
+    pub limit: Option<(Expr, Expr)>,
+    /// `backoff D..D`: the first wait before a repeated restart, and the longest.
+    pub backoff: Option<(Expr, Expr)>,
     /// The whole member.
     pub span: Span,
 }

@@ -131,6 +131,7 @@ impl Builder {
                 .iter()
                 .map(|f| f.as_ref().display().to_string())
                 .collect(),
+            inputs: crate::fingerprint::inputs(analysis.sources.files()),
             ..lower::Options::default()
         };
         let krate = lower::lower(&analysis.files, &options);

@@ -1,7 +1,8 @@
 //! The `coolc` command line: `check`, `compile`, `new` and `diagram`.
 //!
 //! Exit codes: 0 when there is no error, 1 when the descriptions have errors
-//! (diagnostics), 2 for usage and I/O errors. Diagnostics go to stderr rendered for a
+//! (diagnostics) or, for `compile --check`, when files would change, 2 for usage and
+//! I/O errors. Diagnostics go to stderr rendered for a
 //! person (colour only when stderr is a terminal and `NO_COLOR` is unset), or to
 //! stdout as JSON lines with `--message-format json`.
 
@@ -12,7 +13,10 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::ir::RuntimeDep;
-use crate::{Analysis, RenderFormat, RenderOptions, diagram, emit, ident, lower, merge};
+use crate::{
+    Analysis, RenderFormat, RenderOptions, diagram, emit, fingerprint, ident, lower, manifest,
+    merge,
+};
 
 /// Exit code: no error.
 pub const EXIT_OK: u8 = 0;
@@ -61,12 +65,18 @@ pub enum Commands {
         /// The crate directory to write (created when missing; user code in it is kept).
         #[arg(short, long)]
         out: PathBuf,
-        /// The Cargo package name (default: the output directory's name).
+        /// The Cargo package name (default: the name in the crate's `Cargo.toml`, else
+        /// the output directory's name).
         #[arg(long)]
         name: Option<String>,
-        /// Where the runtime is found.
+        /// Where the runtime is found (default for an existing crate: its `Cargo.toml`'s
+        /// `coolbot` entry, kept as it is).
         #[command(flatten)]
         runtime: RuntimeArgs,
+        /// Write nothing: list the files a compile would change and exit with 1 when
+        /// there are any, 0 when the crate is up to date (for CI).
+        #[arg(long)]
+        check: bool,
     },
     /// Draw components as diagrams (Graphviz DOT or mermaid): interfaces, the
     /// structure of compounds, automata and supervisors.
@@ -93,8 +103,9 @@ pub enum Commands {
     },
     /// Create a new component crate with a starter description that builds and runs.
     New {
-        /// The crate directory and package name (e.g. `blinker`).
-        name: PathBuf,
+        /// The crate directory and package name (e.g. `blinker`): the last path
+        /// component must be a valid package name, as for `cargo new`.
+        name: String,
         /// Where the runtime is found.
         #[command(flatten)]
         runtime: RuntimeArgs,
@@ -139,6 +150,11 @@ pub struct RuntimeArgs {
 }
 
 impl RuntimeArgs {
+    /// Whether an option was given.
+    fn given(&self) -> bool {
+        self.runtime_path.is_some() || self.runtime_version.is_some()
+    }
+
     /// The runtime dependency of a crate written to `out`.
     fn dep(&self, out: &Path) -> RuntimeDep {
         if let Some(version) = &self.runtime_version {
@@ -217,11 +233,25 @@ pub fn run(cli: Cli) -> ExitCode {
             out,
             name,
             runtime,
+            check,
         } => {
-            let package = name.clone().unwrap_or_else(|| dir_name(out));
-            compile(&cli, files, out, &package, runtime.dep(out)).map(|_| ())
+            // The name given once is kept: an existing manifest's, unless another is
+            // given.
+            let package = name
+                .clone()
+                .or_else(|| {
+                    std::fs::read_to_string(out.join("Cargo.toml"))
+                        .ok()
+                        .and_then(|text| manifest::package_name(&text))
+                })
+                .unwrap_or_else(|| dir_name(out));
+            let options = merge::WriteOptions {
+                check: *check,
+                keep_runtime: !runtime.given(),
+            };
+            compile(&cli, files, out, &package, runtime.dep(out), options).map(|_| ())
         }
-        Commands::New { name, runtime } => new(&cli, name, runtime.dep(name)),
+        Commands::New { name, runtime } => new(&cli, Path::new(name), runtime.dep(Path::new(name))),
         Commands::Diagram {
             files,
             component,
@@ -250,7 +280,7 @@ pub fn run(cli: Cli) -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::from(EXIT_OK),
-        Err(Failure::Diagnostics) => ExitCode::from(EXIT_DIAGNOSTICS),
+        Err(Failure::Diagnostics | Failure::Stale) => ExitCode::from(EXIT_DIAGNOSTICS),
         Err(Failure::Usage(message)) => {
             eprintln!("error: {message}");
             ExitCode::from(EXIT_USAGE)
@@ -261,6 +291,8 @@ pub fn run(cli: Cli) -> ExitCode {
 enum Failure {
     /// Already rendered.
     Diagnostics,
+    /// `compile --check`: files would change (already listed).
+    Stale,
     /// A usage or I/O error message.
     Usage(String),
 }
@@ -283,6 +315,23 @@ fn render_options(cli: &Cli) -> RenderOptions {
     }
 }
 
+/// The files of directory `dir` (`""` is the current directory), for the help on an
+/// unknown name that a file next to the one using it defines.
+fn cool_files_in(dir: &Path) -> Vec<PathBuf> {
+    let read = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(entries) = std::fs::read_dir(read) else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(Result::ok)
+        .map(|entry| dir.join(entry.file_name()))
+        .collect()
+}
+
 /// Analyzes `files`, prints the diagnostics, fails when there are errors.
 fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     for file in files {
@@ -293,7 +342,11 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
             )));
         }
     }
-    let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
+    let analysis = crate::analyze_with_siblings(
+        files,
+        &|path: &Path| std::fs::read_to_string(path),
+        &cool_files_in,
+    );
     if !analysis.diagnostics.is_empty() {
         let rendered = analysis.render(render_options(cli));
         match cli.message_format {
@@ -316,6 +369,7 @@ fn compile(
     out: &Path,
     package: &str,
     runtime: RuntimeDep,
+    write: merge::WriteOptions,
 ) -> Result<crate::ir::Crate, Failure> {
     let mut timings = crate::Timings::from_env();
     let analysis = check(cli, files)?;
@@ -332,11 +386,15 @@ fn compile(
                 )
             })
             .collect(),
+        inputs: fingerprint::inputs(analysis.sources.files()),
     };
     let krate = lower::lower(&analysis.files, &options);
     timings.span("lower");
-    let report = merge::write_crate(out, &krate)
+    let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
+    if write.check {
+        return check_report(out, &report).map(|()| krate);
+    }
     for (file, methods) in &report.added {
         eprintln!("coolc: added to {}: {}", file.display(), methods.join(", "));
     }
@@ -352,6 +410,34 @@ fn compile(
         report.written.len()
     );
     Ok(krate)
+}
+
+/// `compile --check`: lists on stdout every file the compile would write, add stubs
+/// to or remove; fails when there is one.
+fn check_report(out: &Path, report: &merge::Report) -> Result<(), Failure> {
+    for warning in &report.warnings {
+        eprintln!("warning: {warning}");
+    }
+    let changed: std::collections::BTreeSet<&Path> = report
+        .written
+        .iter()
+        .chain(report.added.iter().map(|(file, _)| file))
+        .chain(&report.removed)
+        .map(PathBuf::as_path)
+        .collect();
+    if changed.is_empty() {
+        eprintln!("coolc: {} is up to date", out.display());
+        return Ok(());
+    }
+    for file in &changed {
+        println!("{}", out.join(file).display());
+    }
+    eprintln!(
+        "coolc: {} file(s) in {} would change: run `coolc compile` without --check",
+        changed.len(),
+        out.display()
+    );
+    Err(Failure::Stale)
 }
 
 /// `coolc diagram`: checks, then draws.
@@ -377,10 +463,19 @@ fn draw(
 }
 
 fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
+    let name = if dir.as_os_str().is_empty() {
+        String::new()
+    } else {
+        dir_name(dir)
+    };
+    if let Some(why) = package_name_error(&name) {
+        return Err(Failure::Usage(format!(
+            "invalid package name `{name}`: {why}; pass a name such as `blinker` or `my-robot`"
+        )));
+    }
     if dir.exists() {
         return Err(Failure::Usage(format!("{} already exists", dir.display())));
     }
-    let name = dir_name(dir);
     let type_name = ident::camel_raw(&name.replace('-', "_"));
     let description = starter_description(&type_name);
     let components = dir.join("components");
@@ -388,7 +483,14 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     std::fs::create_dir_all(&components).map_err(io)?;
     let cool = components.join(format!("{}.cool", ident::snake_raw(&type_name)));
     std::fs::write(&cool, description).map_err(io)?;
-    let krate = compile(cli, &[cool], dir, &name, runtime)?;
+    let krate = compile(
+        cli,
+        &[cool],
+        dir,
+        &name,
+        runtime,
+        merge::WriteOptions::default(),
+    )?;
     let Some(atomic) = krate.atomics.first() else {
         return Err(Failure::Usage(
             "the starter description has no component".to_owned(),
@@ -400,7 +502,6 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
         emit::starter_component(atomic),
     )
     .map_err(io)?;
-    std::fs::write(dir.join("src/main.rs"), emit::starter_main(&krate, atomic)).map_err(io)?;
     std::fs::write(dir.join(".gitignore"), "/target\n/.coolc\n").map_err(io)?;
     eprintln!(
         "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",
@@ -413,6 +514,30 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
             .display(),
     );
     Ok(())
+}
+
+/// Why `name` cannot be the package name `coolc new` gives the crate (the rules of
+/// `cargo new`), or `None` when it can.
+pub fn package_name_error(name: &str) -> Option<&'static str> {
+    let Some(first) = name.chars().next() else {
+        return Some("the name cannot be empty");
+    };
+    Some(if first.is_ascii_digit() {
+        "the name cannot start with a digit"
+    } else if !(first.is_ascii_alphabetic() || first == '_') {
+        "the name must start with a letter or `_`"
+    } else if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        "only ASCII letters, digits, `-` and `_` may be used"
+    } else if ident::is_keyword(name) {
+        "it is a Rust keyword"
+    } else if ["test", "std", "core", "alloc", "proc_macro"].contains(&name) {
+        "it is the name of a crate of Rust's standard library"
+    } else {
+        return None;
+    })
 }
 
 fn cool_file_name(type_name: &str) -> String {

@@ -23,6 +23,11 @@ const KEYWORDS: &[&str] = &[
 /// Keywords that cannot be written as raw identifiers.
 const NOT_RAW: &[&str] = &["self", "Self", "super", "crate", "_"];
 
+/// Whether `name` is a Rust 2024 keyword (strict or reserved).
+pub fn is_keyword(name: &str) -> bool {
+    KEYWORDS.contains(&name)
+}
+
 /// Escapes `name` if it is a Rust keyword; returns it unchanged otherwise.
 pub fn escape(name: &str) -> String {
     if NOT_RAW.contains(&name) {

@@ -101,6 +101,12 @@ impl Layout {
         self.line(4, &format!("pub {name}: {ty},"))
     }
 
+    /// `#[serde(with = "adapter")]`, a field attribute at indent 4 (left to the
+    /// formatter when it does not fit on one line).
+    pub fn serde_with(&self, adapter: &str) -> String {
+        self.line(4, &format!("#[serde(with = \"{adapter}\")]"))
+    }
+
     /// A match arm `pattern => body,` at `indent`, `body` a short expression.
     pub fn arm(&self, indent: usize, pattern: &str, body: &str) -> String {
         if body.len() > CHAIN_WIDTH {

@@ -32,10 +32,12 @@ pub mod cli;
 pub mod diagnostics;
 pub mod diagram;
 pub mod emit;
+pub mod fingerprint;
 pub mod ident;
 pub mod ir;
 mod layout;
 pub mod lower;
+pub mod manifest;
 pub mod merge;
 pub mod resolve;
 pub mod source;
@@ -91,13 +93,26 @@ pub fn analyze<P: AsRef<Path>>(
     roots: &[P],
     loader: &dyn Fn(&Path) -> std::io::Result<String>,
 ) -> Analysis {
+    analyze_with_siblings(roots, loader, &|_| Vec::new())
+}
+
+/// Like [`analyze`]; `list(dir)` gives the files of a directory, so that an unknown
+/// name defined in a `.cool` file next to the file using it, which that file does not
+/// import, gets help naming the `import` to add. Those files are only scanned for
+/// their item names, not analyzed.
+pub fn analyze_with_siblings<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    list: &dyn Fn(&Path) -> Vec<std::path::PathBuf>,
+) -> Analysis {
     let mut loaded = resolve::load(roots, loader);
-    let symbols = resolve::Symbols::build(
+    let mut symbols = resolve::Symbols::build(
         &loaded.sources,
         &loaded.files,
         &loaded.imports,
         &mut loaded.diagnostics,
     );
+    symbols.add_siblings(&loaded.sources, list, loader);
     check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
     Analysis {
         sources: loaded.sources,

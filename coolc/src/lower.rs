@@ -22,6 +22,9 @@ pub struct Options {
     pub runtime: RuntimeDep,
     /// Source file names shown in the generated-file header.
     pub sources: Vec<String>,
+    /// The fingerprint of the inputs shown in the generated-file header:
+    /// [`crate::fingerprint::inputs`] of the analysis's sources.
+    pub inputs: String,
 }
 
 impl Default for Options {
@@ -30,6 +33,7 @@ impl Default for Options {
             package: "cool-components".to_owned(),
             runtime: RuntimeDep::Version("0.1".to_owned()),
             sources: Vec::new(),
+            inputs: crate::fingerprint::inputs(&[]),
         }
     }
 }
@@ -38,6 +42,8 @@ impl Default for Options {
 const GEN_TYPES: &str = "super::types::";
 /// Path of the types module as seen from user files.
 const USER_TYPES: &str = "crate::generated::types::";
+/// The default value of a type that implements `Default`.
+const DEFAULT: &str = "::core::default::Default::default()";
 
 #[derive(Clone, Copy)]
 enum TypeDef<'a> {
@@ -142,6 +148,32 @@ fn option_duration(expr: Option<&ast::Expr>) -> String {
     }
 }
 
+/// The path of the serde_with crate as generated code sees it (re-exported by the
+/// runtime).
+const SERDE_WITH: &str = "::coolbot::serde_with::";
+
+/// The serde_with adapter type of `ty` when it holds an array longer than 32
+/// elements, directly or in lists, optionals and arrays (a packet field of such a
+/// type is the packet's business): `[Same; 72]`, `Option<[[Same; 40]; 2]>`.
+fn serde_adapter(ty: &ast::Type) -> Option<String> {
+    fn adapter(ty: &ast::Type) -> String {
+        match &ty.kind {
+            TypeKind::Prim(_) | TypeKind::Named(_) => format!("{SERDE_WITH}Same"),
+            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", adapter(inner)),
+            TypeKind::Array(inner, n) => format!("[{}; {}]", adapter(inner), n.value),
+            TypeKind::Optional(inner) => format!("::core::option::Option<{}>", adapter(inner)),
+        }
+    }
+    fn needs(ty: &ast::Type) -> bool {
+        match &ty.kind {
+            TypeKind::Prim(_) | TypeKind::Named(_) => false,
+            TypeKind::List(inner) | TypeKind::Optional(inner) => needs(inner),
+            TypeKind::Array(inner, n) => n.value > 32 || needs(inner),
+        }
+    }
+    needs(ty).then(|| adapter(ty))
+}
+
 fn cool_type(ty: &ast::Type) -> String {
     match &ty.kind {
         TypeKind::Prim(p) => prim_cool(*p).to_owned(),
@@ -198,16 +230,55 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    /// Whether `T::default()` exists for the emitted type.
+    /// Whether the emitted type has a default value ([`Self::default_of`]).
     fn defaultable(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> bool {
+        self.default_of(ty, visiting).is_some()
+    }
+
+    /// The Rust expression of the default value of the emitted type, or `None` when
+    /// it has none (an extern packet, an empty enum, a packet holding one of those).
+    /// Arrays longer than 32 elements, or of elements without `Default`, are built
+    /// with `core::array::from_fn`: the standard library implements `Default` for
+    /// arrays only up to 32 elements.
+    fn default_of(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> Option<String> {
         match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::List(_) | TypeKind::Optional(_) => true,
-            TypeKind::Array(inner, n) => n.value <= 32 && self.defaultable(inner, visiting),
+            TypeKind::Prim(_) | TypeKind::List(_) | TypeKind::Optional(_) => {
+                Some(DEFAULT.to_owned())
+            }
+            TypeKind::Array(inner, n) => {
+                let item = self.default_of(inner, visiting)?;
+                Some(if n.value <= 32 && item == DEFAULT {
+                    DEFAULT.to_owned()
+                } else {
+                    format!("::core::array::from_fn(|_| {item})")
+                })
+            }
             TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
-                Some(TypeDef::Enum(e)) => !e.variants.is_empty(),
-                Some(TypeDef::Packet(p)) => self.packet_defaultable(p, visiting),
-                Some(TypeDef::Extern) | None => false,
+                Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(DEFAULT.to_owned()),
+                Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
+                    Some(DEFAULT.to_owned())
+                }
+                _ => None,
             },
+        }
+    }
+
+    /// The default value of `ty` as a user stub writes it (`Default::default()` when
+    /// the type implements `Default`).
+    fn stub_default(&self, ty: &ast::Type) -> Option<String> {
+        let default = self.default_of(ty, &mut BTreeSet::new())?;
+        Some(default.replace(DEFAULT, "Default::default()"))
+    }
+
+    /// Whether values of the emitted type are `Copy` (so `[value; n]` compiles).
+    fn is_copy(&self, ty: &ast::Type) -> bool {
+        match &ty.kind {
+            TypeKind::Prim(p) => *p != Prim::String,
+            TypeKind::Named(name) => {
+                matches!(self.types.get(name.name.as_str()), Some(TypeDef::Enum(_)))
+            }
+            TypeKind::Optional(inner) | TypeKind::Array(inner, _) => self.is_copy(inner),
+            TypeKind::List(_) => false,
         }
     }
 
@@ -223,7 +294,8 @@ impl<'a> Lowerer<'a> {
         result
     }
 
-    /// The Rust expression of a field default: the written value, or `Default`.
+    /// The Rust expression of a field default: the written value, or the type's
+    /// default.
     fn field_default(
         &self,
         field_ty: &ast::Type,
@@ -232,7 +304,9 @@ impl<'a> Lowerer<'a> {
     ) -> String {
         match value {
             Some(expr) => self.value(expr, Some(field_ty), prefix),
-            None => "::core::default::Default::default()".to_owned(),
+            None => self
+                .default_of(field_ty, &mut BTreeSet::new())
+                .unwrap_or_else(|| DEFAULT.to_owned()),
         }
     }
 
@@ -286,10 +360,13 @@ impl<'a> Lowerer<'a> {
                     Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
+                let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
                 match kind {
                     Some(TypeKind::List(_)) => format!("::std::vec![{item}; {}]", n.value),
-                    _ => format!("[{item}; {}]", n.value),
+                    // `[value; n]` needs a `Copy` value.
+                    _ if copy => format!("[{item}; {}]", n.value),
+                    _ => format!("::core::array::from_fn(|_| {item})"),
                 }
             }
             ExprKind::None => "::core::option::Option::None".to_owned(),
@@ -314,6 +391,8 @@ impl<'a> Lowerer<'a> {
             cool_name: field.name.name.clone(),
             ty: self.rust_type(&field.ty, prefix),
             default: self.field_default(&field.ty, field.default.as_ref(), prefix),
+            serde_with: serde_adapter(&field.ty)
+                .map(|adapter| format!("{SERDE_WITH}As::<{adapter}>")),
         }
     }
 
@@ -364,13 +443,12 @@ impl<'a> Lowerer<'a> {
                     if types.converters.iter().any(|x| x.cool_name == c.name.name) {
                         continue;
                     }
-                    let to_default = self.defaultable(&c.to, &mut BTreeSet::new());
                     let method = ident::snake(&c.name.name);
-                    let stub_body = if to_default {
+                    let stub_body = if let Some(default) = self.stub_default(&c.to) {
                         format!(
                             "// Converter `{}`: build the output packet from `from`.\n\
                              let _ = from;\n\
-                             Default::default()",
+                             {default}",
                             c.name.name
                         )
                     } else {
@@ -435,6 +513,7 @@ impl<'a> Lowerer<'a> {
             dependencies,
             system_libs,
             sources: options.sources.clone(),
+            inputs: options.inputs.clone(),
             types,
             atomics,
             compounds,
@@ -538,18 +617,7 @@ impl<'a> Lowerer<'a> {
                         state_index(&target.name)
                     )),
                     ast::StateMember::May { targets, .. } => {
-                        for target in targets {
-                            if !may
-                                .iter()
-                                .any(|(_, _, n): &(String, usize, String)| *n == target.name)
-                            {
-                                may.push((
-                                    ident::camel(&target.name),
-                                    state_index(&target.name),
-                                    target.name.clone(),
-                                ));
-                            }
-                        }
+                        may_targets(targets, &state_index, &mut may);
                     }
                     ast::StateMember::When { .. } => {}
                 }
@@ -563,38 +631,22 @@ impl<'a> Lowerer<'a> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
+                    docs: SectionDocs::of(state),
                 },
                 SectionOwner::Atomic,
                 &mut methods,
                 &mut section_arms,
             );
             if let Some(may_enum) = &may_enum {
-                let method = ident::method("", name, "_choose");
-                let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
-                methods.push(ir::Method {
-                    name: method.clone(),
-                    doc: vec![
-                        format!(
-                            "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
-                            targets.join(", ")
-                        ),
-                    ],
-                    signature: format!(
-                        "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
-                    ),
-                    user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
-                    stub_body: vec![
-                        format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
-                        "let _ = cx;".to_owned(),
-                        "None".to_owned(),
-                    ],
-                });
-                choose_arms.push(ir::ChooseArm {
-                    state: index,
-                    method,
-                    may_enum: may_enum.clone(),
-                    targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
-                });
+                choose_stub(
+                    index,
+                    name,
+                    may_enum,
+                    &may,
+                    &SectionDocs::of(state).may,
+                    &mut methods,
+                    &mut choose_arms,
+                );
             }
             let spec = format!(
                 "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
@@ -680,13 +732,13 @@ impl<'a> Lowerer<'a> {
             };
             let method = unique(ident::method("answer_", &output.name.name, ""), &methods);
             let name = &output.name.name;
-            let stub_body = if self.defaultable(ty, &mut BTreeSet::new()) {
+            let stub_body = if let Some(default) = self.stub_default(ty) {
                 vec![
                     format!(
                         "// A consumer pulled from output `{name}`: compute the packet to answer with."
                     ),
                     "let _ = cx;".to_owned(),
-                    "Ok(Default::default())".to_owned(),
+                    format!("Ok({default})"),
                 ]
             } else {
                 vec![
@@ -722,6 +774,7 @@ impl<'a> Lowerer<'a> {
 
         ir::Atomic {
             doc: doc(&c.doc),
+            notes: ir::notes(&c.notes),
             type_name: c.name.name.clone(),
             user_struct: ident::camel(&c.name.name),
             module,
@@ -775,8 +828,25 @@ impl<'a> Lowerer<'a> {
             *spec_index - 1
         });
         let field = ident::snake(&v.name.name);
-        let (to_value, from_value) = match &ty.kind {
-            TypeKind::Prim(p) if has_default => (
+        // A type holding an array longer than 32 elements goes through its serde_with
+        // adapter (wrapped in `Option` like the field when it has no default).
+        let adapter = serde_adapter(ty).map(|adapter| {
+            if has_default {
+                adapter
+            } else {
+                format!("::core::option::Option<{adapter}>")
+            }
+        });
+        let (to_value, from_value) = match (&adapter, &ty.kind) {
+            (Some(adapter), _) => (
+                format!(
+                    "super::__cool_to_value(&{SERDE_WITH}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&{receiver}.{field}))"
+                ),
+                format!(
+                    "super::__cool_from_value::<{SERDE_WITH}de::DeserializeAsWrap<{rust_ty}, {adapter}>>(value).map({SERDE_WITH}de::DeserializeAsWrap::into_inner)"
+                ),
+            ),
+            (None, TypeKind::Prim(p)) if has_default => (
                 if *p == Prim::String {
                     format!("::coolbot::Value::from({receiver}.{field}.clone())")
                 } else {
@@ -801,6 +871,7 @@ impl<'a> Lowerer<'a> {
                 cool_name: v.name.name.clone(),
                 ty: rust_ty,
                 default: default_expr,
+                serde_with: None,
             },
             kind: kind.to_owned(),
             spec_index: index,
@@ -1088,6 +1159,64 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
     }
 }
 
+/// Adds `may` targets `targets` (by name; `state_index` gives their index) to `may`
+/// as `(variant, index, name)`, each once.
+pub(crate) fn may_targets(
+    targets: &[ast::Ident],
+    state_index: &dyn Fn(&str) -> usize,
+    may: &mut Vec<(String, usize, String)>,
+) {
+    for target in targets {
+        if !may.iter().any(|(_, _, n)| *n == target.name) {
+            may.push((
+                ident::camel(&target.name),
+                state_index(&target.name),
+                target.name.clone(),
+            ));
+        }
+    }
+}
+
+/// The `<state>_choose` stub of state `name` (index `index`) whose `may` targets are
+/// `may`, returning `Option<may_enum>`, and its glue arm.
+pub(crate) fn choose_stub(
+    index: usize,
+    name: &str,
+    may_enum: &str,
+    may: &[(String, usize, String)],
+    written: &[String],
+    methods: &mut Vec<ir::Method>,
+    choose_arms: &mut Vec<ir::ChooseArm>,
+) {
+    let method = ident::method("", name, "_choose");
+    let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
+    methods.push(ir::Method {
+        name: method.clone(),
+        doc: with_written(
+            format!(
+                "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
+                targets.join(", ")
+            ),
+            written,
+        ),
+        signature: format!(
+            "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
+        ),
+        user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
+        stub_body: vec![
+            format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
+            "let _ = cx;".to_owned(),
+            "None".to_owned(),
+        ],
+    });
+    choose_arms.push(ir::ChooseArm {
+        state: index,
+        method,
+        may_enum: may_enum.to_owned(),
+        targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
+    });
+}
+
 /// Whose user automaton a state belongs to: the wording of its stubs and the receiver
 /// the glue calls them on.
 #[derive(Clone, Copy)]
@@ -1107,6 +1236,46 @@ pub(crate) struct StateSections<'a> {
     pub(crate) entry: bool,
     pub(crate) periodic: bool,
     pub(crate) exit: bool,
+    /// The doc comments written on the state's sections and `may` rules.
+    pub(crate) docs: SectionDocs,
+}
+
+/// The doc comments on a state's sections and `may` rules: they document the trait
+/// methods generated for them.
+#[derive(Default)]
+pub(crate) struct SectionDocs {
+    pub(crate) entry: Vec<String>,
+    pub(crate) periodic: Vec<String>,
+    pub(crate) exit: Vec<String>,
+    pub(crate) may: Vec<String>,
+}
+
+impl SectionDocs {
+    /// The doc comments of `state`'s sections and `may` rules.
+    pub(crate) fn of(state: &ast::State) -> SectionDocs {
+        let mut docs = SectionDocs::default();
+        for (member, doc) in state.members.iter().zip(&state.member_docs) {
+            let lines = match member {
+                ast::StateMember::Entry(_) => &mut docs.entry,
+                ast::StateMember::Periodic { .. } => &mut docs.periodic,
+                ast::StateMember::Exit(_) => &mut docs.exit,
+                ast::StateMember::May { .. } => &mut docs.may,
+                _ => continue,
+            };
+            lines.extend(doc.0.iter().cloned());
+        }
+        docs
+    }
+}
+
+/// `first`, then (after an empty line) the written doc comment `written`, if any.
+fn with_written(first: String, written: &[String]) -> Vec<String> {
+    let mut lines = vec![first];
+    if !written.is_empty() {
+        lines.push(String::new());
+        lines.extend(written.iter().cloned());
+    }
+    lines
 }
 
 /// One required stub and one glue arm per declared section of a state, in the order
@@ -1133,30 +1302,34 @@ pub(crate) fn section_stubs(
             "entry",
             "Entry",
             format!("runs once each time the {subject} enters the state"),
+            &state.docs.entry,
         ),
         (
             state.periodic,
             "periodic",
             "Periodic",
             "runs once per period while in the state".to_owned(),
+            &state.docs.periodic,
         ),
         (
             state.exit,
             "exit",
             "Exit",
             format!("runs once each time the {subject} leaves the state"),
+            &state.docs.exit,
         ),
     ];
-    for (present, suffix, section, when) in kinds {
+    for (present, suffix, section, when, written) in kinds {
         if !present {
             continue;
         }
         let method = ident::method("", name, &format!("_{suffix}"));
         methods.push(ir::Method {
             name: method.clone(),
-            doc: vec![format!(
-                "The {suffix} section of {of_state} `{name}`: {when}."
-            )],
+            doc: with_written(
+                format!("The {suffix} section of {of_state} `{name}`: {when}."),
+                written,
+            ),
             signature: format!(
                 "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
             ),

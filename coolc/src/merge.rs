@@ -1,7 +1,10 @@
 //! Writing an emitted crate to disk without destroying user code.
 //!
 //! Generated files are rewritten (only when their contents changed, so cargo does not
-//! rebuild needlessly). User files are written when missing; an existing one is only
+//! rebuild needlessly). `Cargo.toml` is written whole when missing, else only coolc's
+//! entries in it are updated (`manifest`). `src/main.rs` is written only by the
+//! compile that creates the crate (no `Cargo.toml` before it), and never over an
+//! existing file. User files are written when missing; an existing one is only
 //! ever added to: stubs for methods that are new in the description are inserted just
 //! before the closing brace of the file's `impl ... Behavior for ...` (or
 //! `Converters`) block, and `src/lib.rs` gets `pub mod` lines for new user modules.
@@ -17,8 +20,15 @@
 //! user files, the copy in `.coolc/stubs/`). When both still match, the file on disk
 //! is the formatted text and the formatter does not run. The cache names the
 //! formatter (`rustfmt` and its version, or the built-in printer); another one
-//! starts it afresh. A file whose bytes would not change is not written, so cargo
-//! rebuilds nothing after a compile that changed nothing.
+//! starts it afresh. Fingerprints leave out the generated-file header line, which
+//! changes with every description (it names the inputs' hash): a file whose body did
+//! not change gets the new header on its cached formatted body. A file whose bytes
+//! would not change is not written, so cargo rebuilds nothing after a compile that
+//! changed nothing.
+//!
+//! A check ([`WriteOptions::check`], `coolc compile --check`) runs all of this but
+//! writes nothing, `.coolc/` included: its report lists what would be written, added
+//! and removed.
 
 use std::collections::{HashMap, HashSet};
 use std::fs;
@@ -28,12 +38,12 @@ use std::path::{Path, PathBuf};
 use syn::spanned::Spanned;
 
 use crate::emit::{self, EmittedFile, FileKind, StubSet};
-use crate::ir;
+use crate::{ir, manifest};
 
-/// What writing a crate did, for the CLI to report.
+/// What writing a crate did (in a check: would do), for the CLI to report.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Report {
-    /// Files written or rewritten (generated, and user files created).
+    /// Files written or rewritten (generated, the manifest, and user files created).
     pub written: Vec<PathBuf>,
     /// Generated files of an earlier compile that are no longer generated, removed.
     pub removed: Vec<PathBuf>,
@@ -235,15 +245,55 @@ pub fn merge_modules(
     Ok((text, missing))
 }
 
-fn write_if_changed(path: &Path, contents: &str) -> io::Result<bool> {
-    if fs::read_to_string(path).is_ok_and(|old| old == contents) {
-        return Ok(false);
+/// How [`write_crate_with`] writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// Write nothing (`.coolc/` included): only report what a compile would write,
+    /// add and remove (`coolc compile --check`).
+    pub check: bool,
+    /// Keep the `coolbot` dependency of an existing `Cargo.toml` as it is (no runtime
+    /// option was given); a new manifest gets the crate's runtime either way.
+    pub keep_runtime: bool,
+}
+
+/// Writes files, or in a check only tells which would change.
+#[derive(Clone, Copy, Debug)]
+struct Writer {
+    check: bool,
+}
+
+impl Writer {
+    /// Writes `contents` to `path` unless it holds them already; whether it did (in a
+    /// check: whether it would).
+    fn write_if_changed(self, path: &Path, contents: &str) -> io::Result<bool> {
+        if fs::read_to_string(path).is_ok_and(|old| old == contents) {
+            return Ok(false);
+        }
+        if self.check {
+            return Ok(true);
+        }
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent)?;
+        }
+        fs::write(path, contents)?;
+        Ok(true)
     }
-    if let Some(parent) = path.parent() {
-        fs::create_dir_all(parent)?;
+
+    /// Writes `contents` to the existing file `path` (not in a check).
+    fn write(self, path: &Path, contents: &str) -> io::Result<()> {
+        if self.check {
+            return Ok(());
+        }
+        fs::write(path, contents)
     }
-    fs::write(path, contents)?;
-    Ok(true)
+
+    /// Removes `path` (not in a check).
+    fn remove(self, path: &Path) -> io::Result<()> {
+        if self.check {
+            return Ok(());
+        }
+        fs::remove_file(path)
+    }
 }
 
 /// What merging into one user file did.
@@ -260,6 +310,7 @@ struct UserMerge {
 /// Writes the user file `file` when it is missing, else merges new stubs (or module
 /// declarations, for `src/lib.rs`) into it.
 fn merge_user_file(
+    writer: Writer,
     dir: &Path,
     file: &EmittedFile,
     sets: &HashMap<&Path, Vec<&StubSet>>,
@@ -270,7 +321,7 @@ fn merge_user_file(
     let text = match fs::read_to_string(&path) {
         Ok(text) => text,
         Err(error) if error.kind() == io::ErrorKind::NotFound => {
-            write_if_changed(&path, &file.contents)?;
+            writer.write_if_changed(&path, &file.contents)?;
             result.created = true;
             return Ok(result);
         }
@@ -284,7 +335,7 @@ fn merge_user_file(
     if file.path == Path::new("src/lib.rs") {
         match merge_modules(&text, user_modules) {
             Ok((merged, added)) if !added.is_empty() => {
-                fs::write(&path, merged)?;
+                writer.write(&path, &merged)?;
                 result.added = added;
             }
             Ok(_) => {}
@@ -336,7 +387,7 @@ fn merge_user_file(
         }
     }
     if !result.added.is_empty() {
-        fs::write(&path, &merged_text)?;
+        writer.write(&path, &merged_text)?;
     }
     Ok(result)
 }
@@ -344,16 +395,29 @@ fn merge_user_file(
 /// Where the format cache lives inside the crate.
 const FORMAT_CACHE: &str = ".coolc/format-cache";
 /// Its first line, before the formatter's name.
-const FORMAT_CACHE_HEADER: &str = "coolc format cache 1";
+const FORMAT_CACHE_HEADER: &str = "coolc format cache 2";
 
-/// A stable fingerprint of `text`: 64-bit FNV-1a and the length, in hex.
-fn fingerprint(text: &str) -> String {
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
-    for byte in text.bytes() {
-        hash ^= u64::from(byte);
-        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+/// `text` split after its generated-file header line (empty when it has none): the
+/// header names the compile's inputs, so it changes with any description while
+/// the rest of the file may not; the formatter leaves that line as it is.
+fn split_header(text: &str) -> (&str, &str) {
+    if text.starts_with(GENERATED_HEADER) {
+        let end = text.find('\n').map_or(text.len(), |i| i + 1);
+        text.split_at(end)
+    } else {
+        ("", text)
     }
-    format!("{hash:016x}-{:x}", text.len())
+}
+
+/// A stable fingerprint of `text` without its generated-file header line (see
+/// [`split_header`]): 64-bit FNV-1a and the length, in hex.
+fn fingerprint(text: &str) -> String {
+    let (_, body) = split_header(text);
+    format!(
+        "{:016x}-{:x}",
+        crate::fingerprint::fnv1a(body.as_bytes()),
+        body.len()
+    )
 }
 
 /// The format cache of the crate in `dir` for `formatter`: path -> (fingerprint as
@@ -386,7 +450,8 @@ fn load_format_cache(dir: &Path, formatter: &str) -> HashMap<PathBuf, (String, S
 fn formatted_home(dir: &Path, file: &EmittedFile) -> PathBuf {
     match file.kind {
         FileKind::Generated => dir.join(&file.path),
-        FileKind::User => dir.join(".coolc/stubs").join(&file.path),
+        FileKind::User | FileKind::Starter => dir.join(".coolc/stubs").join(&file.path),
+        FileKind::Manifest => dir.join(&file.path),
     }
 }
 
@@ -408,7 +473,14 @@ fn look_up(
         .filter(|(was_rendered, _)| *was_rendered == rendered)
         .and_then(|(_, written)| {
             let text = fs::read_to_string(formatted_home(dir, file)).ok()?;
-            (fingerprint(&text) == *written).then_some(text)
+            // The formatted body, under the header as rendered today.
+            (fingerprint(&text) == *written).then(|| {
+                format!(
+                    "{}{}",
+                    split_header(&file.contents).0,
+                    split_header(&text).1
+                )
+            })
         });
     Some((rendered, cached))
 }
@@ -437,15 +509,29 @@ fn format_with_cache(
     emit::format_files(&mut files, &needs);
     (files, rendered_prints)
 }
+/// Writes the crate for `krate` into `dir`, merging into existing user files (see
+/// [`write_crate_with`]; the runtime of an existing manifest is set to the crate's).
+pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
+    write_crate_with(dir, krate, WriteOptions::default())
+}
 
 /// Writes the crate for `krate` into `dir`, merging into existing user files: renders
 /// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
 /// last compile (see the module doc), and writes the files ([`write_emitted`]). The
 /// files whose templates need a formatter are rendered and formatted on a thread of
 /// their own (the formatter is a `rustfmt` process) while the others are rendered and
-/// written.
-pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
+/// written. With [`WriteOptions::check`] nothing is written and the report says what
+/// would be.
+pub fn write_crate_with(
+    dir: &Path,
+    krate: &ir::Crate,
+    options: WriteOptions,
+) -> io::Result<Report> {
     let mut timings = crate::Timings::from_env();
+    let writer = Writer {
+        check: options.check,
+    };
+    let creating = !dir.join("Cargo.toml").exists();
     let formatter = emit::formatter_id();
     let cache = load_format_cache(dir, &formatter);
     let ((formatted, formatted_prints), (laid, laid_prints), written) =
@@ -460,7 +546,7 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
             let written = emit::par_map(&indices, |&i| {
                 let file = &files[i];
                 (laid_out[i] && file.kind == FileKind::Generated)
-                    .then(|| write_if_changed(&dir.join(&file.path), &file.contents))
+                    .then(|| writer.write_if_changed(&dir.join(&file.path), &file.contents))
             });
             // Any that turned out to need the formatter (unusual descriptions).
             let laid = format_with_cache(dir, &cache, files, &laid_out);
@@ -480,61 +566,119 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
     let files: Vec<EmittedFile> = laid.into_iter().chain(formatted).collect();
     let prints: Vec<Option<String>> = laid_prints.into_iter().chain(formatted_prints).collect();
     let report = write_files_except(
+        writer,
         dir,
+        krate,
         &files,
-        &emit::stub_sets(krate, &files),
-        &emit::user_modules(krate),
-        &done,
+        &Context {
+            creating,
+            keep_runtime: options.keep_runtime,
+            done: &done,
+        },
     )?;
     timings.span("merge user files, write stubs");
-    let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
-    for (file, rendered) in files.iter().zip(prints) {
-        if let Some(rendered) = rendered {
-            text.push_str(&format!(
-                "{}\t{rendered}\t{}\n",
-                file.path.display(),
-                fingerprint(&file.contents)
-            ));
+    if !options.check {
+        let mut text = format!("{FORMAT_CACHE_HEADER}\t{formatter}\n");
+        for (file, rendered) in files.iter().zip(prints) {
+            if let Some(rendered) = rendered {
+                text.push_str(&format!(
+                    "{}\t{rendered}\t{}\n",
+                    file.path.display(),
+                    fingerprint(&file.contents)
+                ));
+            }
         }
+        writer.write_if_changed(&dir.join(FORMAT_CACHE), &text)?;
+        timings.span("format cache written");
     }
-    write_if_changed(&dir.join(FORMAT_CACHE), &text)?;
-    timings.span("format cache written");
     Ok(report)
 }
 
 /// Writes `files`, already emitted for `krate` by [`emit::emit_crate`], into `dir`,
 /// merging into existing user files (no second emission).
-pub fn write_emitted(dir: &Path, krate: &ir::Crate, files: &[EmittedFile]) -> io::Result<Report> {
-    write_files(
+pub fn write_emitted(
+    dir: &Path,
+    krate: &ir::Crate,
+    files: &[EmittedFile],
+    options: WriteOptions,
+) -> io::Result<Report> {
+    write_files_except(
+        Writer {
+            check: options.check,
+        },
         dir,
+        krate,
         files,
-        &emit::stub_sets(krate, files),
-        &emit::user_modules(krate),
+        &Context {
+            creating: !dir.join("Cargo.toml").exists(),
+            keep_runtime: options.keep_runtime,
+            done: &HashMap::new(),
+        },
     )
 }
 
-/// Writes emitted `files` into `dir` (see the module doc).
-pub fn write_files(
-    dir: &Path,
-    files: &[EmittedFile],
-    stub_sets: &[StubSet],
-    user_modules: &[String],
-) -> io::Result<Report> {
-    write_files_except(dir, files, stub_sets, user_modules, &HashMap::new())
+/// What [`write_files_except`] needs to know besides the files.
+struct Context<'a> {
+    /// The crate is being created (no `Cargo.toml` yet): `src/main.rs` is written.
+    creating: bool,
+    /// See [`WriteOptions::keep_runtime`].
+    keep_runtime: bool,
+    /// Generated files already written (or found unchanged: the flag says which).
+    done: &'a HashMap<PathBuf, bool>,
 }
 
-/// [`write_files`], except the generated files in `done`, already written (or found
-/// unchanged: the flag says which).
+/// Updates the existing manifest at `path` (see `manifest`), or writes `file` when
+/// there is none. Whether it was (or would be) written.
+fn write_manifest(
+    writer: Writer,
+    path: &Path,
+    file: &EmittedFile,
+    krate: &ir::Crate,
+    keep_runtime: bool,
+    warnings: &mut Vec<String>,
+) -> io::Result<bool> {
+    let text = match fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(error) if error.kind() == io::ErrorKind::NotFound => {
+            return writer.write_if_changed(path, &file.contents);
+        }
+        Err(error) => return Err(error),
+    };
+    match manifest::update(&text, krate, !keep_runtime) {
+        Ok(updated) => {
+            warnings.extend(updated.warnings);
+            writer.write_if_changed(path, &updated.text)
+        }
+        Err(error) => {
+            let mut message = format!("{} was not updated: {error}", file.path.display());
+            let mut source = std::error::Error::source(&error);
+            while let Some(cause) = source {
+                message.push_str(&format!(": {cause}"));
+                source = cause.source();
+            }
+            warnings.push(format!(
+                "{message}; the manifest coolc would write for these descriptions, with its entries, is:\n{}",
+                file.contents
+            ));
+            Ok(false)
+        }
+    }
+}
+
+/// Writes emitted `files` into `dir` (see the module doc), except the generated files
+/// in `context.done`.
 fn write_files_except(
+    writer: Writer,
     dir: &Path,
+    krate: &ir::Crate,
     files: &[EmittedFile],
-    stub_sets: &[StubSet],
-    user_modules: &[String],
-    done: &HashMap<PathBuf, bool>,
+    context: &Context<'_>,
 ) -> io::Result<Report> {
+    let stub_sets = emit::stub_sets(krate, files);
+    let user_modules = emit::user_modules(krate);
     let mut report = Report::default();
     let mut sets: HashMap<&Path, Vec<&StubSet>> = HashMap::new();
-    for set in stub_sets {
+    for set in &stub_sets {
         sets.entry(set.path.as_path()).or_default().push(set);
     }
     // Generated files are independent: written (when changed) on every core.
@@ -542,19 +686,39 @@ fn write_files_except(
         .iter()
         .filter(|f| f.kind == FileKind::Generated)
         .collect();
-    let written = emit::par_map(&generated, |file| match done.get(&file.path) {
+    let written = emit::par_map(&generated, |file| match context.done.get(&file.path) {
         Some(written) => Ok(*written),
-        None => write_if_changed(&dir.join(&file.path), &file.contents),
+        None => writer.write_if_changed(&dir.join(&file.path), &file.contents),
     });
     for (file, written) in generated.iter().zip(written) {
         if written? {
             report.written.push(file.path.clone());
         }
     }
+    for file in files.iter().filter(|f| f.kind == FileKind::Manifest) {
+        let path = dir.join(&file.path);
+        if write_manifest(
+            writer,
+            &path,
+            file,
+            krate,
+            context.keep_runtime,
+            &mut report.warnings,
+        )? {
+            report.written.push(file.path.clone());
+        }
+    }
+    // The starter `main.rs`: only into a crate being created, never over a file.
+    for file in files.iter().filter(|f| f.kind == FileKind::Starter) {
+        let path = dir.join(&file.path);
+        if context.creating && !path.exists() && writer.write_if_changed(&path, &file.contents)? {
+            report.written.push(file.path.clone());
+        }
+    }
     // User files: each read and merged on every core, the results applied in order.
     let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
     let merged = emit::par_map(&users, |file| {
-        merge_user_file(dir, file, &sets, user_modules)
+        merge_user_file(writer, dir, file, &sets, &user_modules)
     });
     for (file, merged) in users.iter().zip(merged) {
         let merged = merged?;
@@ -585,7 +749,7 @@ fn write_files_except(
         let generated =
             fs::read_to_string(&path).is_ok_and(|text| text.starts_with(GENERATED_HEADER));
         if generated {
-            fs::remove_file(&path)?;
+            writer.remove(&path)?;
             if let Some(name) = candidate
                 .file_name()
                 .filter(|_| candidate.starts_with("src/generated"))
@@ -602,11 +766,16 @@ fn write_files_except(
         }
     }
     // Keep the latest stubs for reference (what coolc would write today).
-    let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
-    for written in emit::par_map(&users, |file| {
-        write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
-    }) {
-        written?;
+    if !writer.check {
+        let users: Vec<&EmittedFile> = files
+            .iter()
+            .filter(|f| matches!(f.kind, FileKind::User | FileKind::Starter))
+            .collect();
+        for written in emit::par_map(&users, |file| {
+            writer.write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
+        }) {
+            written?;
+        }
     }
     Ok(report)
 }

@@ -224,6 +224,12 @@ pub struct Symbols {
     pub visible: Vec<BTreeSet<FileId>>,
     /// Display paths by file id, for messages.
     pub paths: Vec<String>,
+    /// Names defined in `.cool` files that were not loaded but lie in the directory of
+    /// a loaded file ([`Symbols::add_siblings`]), with those files and what each
+    /// defines: an unknown name found there gets help naming the import to add.
+    pub siblings: BTreeMap<String, Vec<(PathBuf, DefKind)>>,
+    /// The directory of each loaded file, by file id.
+    pub dirs: Vec<PathBuf>,
 }
 
 /// The outcome of looking a name up from one file.
@@ -251,6 +257,11 @@ impl Symbols {
                 .iter()
                 .map(|file| sources.display_path(file.id))
                 .collect(),
+            dirs: sources
+                .files()
+                .iter()
+                .map(|file| file.path.parent().unwrap_or(Path::new("")).to_owned())
+                .collect(),
             ..Symbols::default()
         };
         // Imported files first, so a clash is reported in the file that imports (and
@@ -260,13 +271,8 @@ impl Symbols {
             .filter_map(|index| files.get(index))
         {
             for (index, item) in file.items.iter().enumerate() {
-                let (kind, name) = match item {
-                    ast::Item::Import(_) => continue,
-                    ast::Item::Packet(packet) => (DefKind::Packet, &packet.name),
-                    ast::Item::Enum(def) => (DefKind::Enum, &def.name),
-                    ast::Item::ExternPacket(def) => (DefKind::ExternPacket, &def.name),
-                    ast::Item::Converter(def) => (DefKind::Converter, &def.name),
-                    ast::Item::Component(def) => (DefKind::Component, &def.name),
+                let Some((kind, name)) = def_of(item) else {
+                    continue;
                 };
                 let def = Def {
                     kind,
@@ -303,6 +309,54 @@ impl Symbols {
             symbols.visible.push(seen);
         }
         symbols
+    }
+
+    /// Records the top-level names of the `.cool` files next to the loaded ones that
+    /// were not loaded: `list(dir)` gives the files of a directory, `loader` reads
+    /// one. Only their names are kept (syntax errors in them are not reported: they
+    /// are not part of the analysis).
+    pub fn add_siblings(
+        &mut self,
+        sources: &SourceMap,
+        list: &dyn Fn(&Path) -> Vec<PathBuf>,
+        loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    ) {
+        let dirs: BTreeSet<&PathBuf> = self.dirs.iter().collect();
+        let mut found: BTreeMap<String, Vec<(PathBuf, DefKind)>> = BTreeMap::new();
+        for dir in dirs {
+            let mut paths: Vec<PathBuf> = list(dir)
+                .into_iter()
+                .filter(|path| path.extension().is_some_and(|e| e == "cool"))
+                .map(|path| normalize(&path))
+                .filter(|path| sources.find(path).is_none())
+                .collect();
+            paths.sort();
+            for path in paths {
+                let Ok(text) = loader(&path) else { continue };
+                let (file, _) = syntax::parse(FileId(u32::MAX), &text);
+                for item in &file.items {
+                    if let Some((kind, name)) = def_of(item) {
+                        found
+                            .entry(name.name.clone())
+                            .or_default()
+                            .push((path.clone(), kind));
+                    }
+                }
+            }
+        }
+        self.siblings = found;
+    }
+
+    /// The file next to `from`, not imported, that defines `name` as one of `accept`.
+    fn sibling(&self, from: FileId, name: &str, accept: &[DefKind]) -> Option<String> {
+        let dir = self.dirs.get(from.0 as usize)?;
+        self.siblings
+            .get(name)?
+            .iter()
+            .find(|(path, kind)| {
+                accept.contains(kind) && path.parent().unwrap_or(Path::new("")) == dir
+            })
+            .and_then(|(path, _)| Some(path.file_name()?.to_string_lossy().into_owned()))
     }
 
     /// Looks `name` up as seen from `from`.
@@ -381,7 +435,12 @@ impl Symbols {
                     format!("unknown {what} `{}`", name.name),
                 )
                 .with_label("not found");
-                if let Some(near) = closest(&name.name, candidates) {
+                if let Some(file) = self.sibling(from, &name.name, accept) {
+                    diagnostic = diagnostic.with_help(format!(
+                        "`{}` is defined in `{file}` next to this file: add `import \"{file}\";`",
+                        name.name
+                    ));
+                } else if let Some(near) = closest(&name.name, candidates) {
                     diagnostic = diagnostic.with_help(format!("did you mean `{near}`?"));
                 }
                 diagnostics.push(diagnostic);
@@ -389,6 +448,18 @@ impl Symbols {
             }
         }
     }
+}
+
+/// What a top-level item defines, and its name (`None` for an import).
+fn def_of(item: &ast::Item) -> Option<(DefKind, &ast::Ident)> {
+    Some(match item {
+        ast::Item::Import(_) => return None,
+        ast::Item::Packet(packet) => (DefKind::Packet, &packet.name),
+        ast::Item::Enum(def) => (DefKind::Enum, &def.name),
+        ast::Item::ExternPacket(def) => (DefKind::ExternPacket, &def.name),
+        ast::Item::Converter(def) => (DefKind::Converter, &def.name),
+        ast::Item::Component(def) => (DefKind::Component, &def.name),
+    })
 }
 
 /// File indices with every file after the files it imports (cycles cut).

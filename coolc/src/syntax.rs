@@ -56,7 +56,11 @@ const MEMBER_KEYWORDS: &[&str] = &[
     "connect",
     "on",
     "recovery",
+    "restart",
 ];
+
+/// Keywords that start a state member, for recovery.
+const STATE_MEMBER_KEYWORDS: &[&str] = &["entry", "exit", "periodic", "on", "after", "may", "when"];
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
 pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
@@ -99,14 +103,38 @@ const PARSER_STACK: usize = 64 << 20;
 /// KiB of stack even in debug builds); deeper files get the parsing thread.
 const SHALLOW: usize = 12;
 
+/// Parses the items of a file. A `///` doc comment with nothing to document after
+/// it is reported once; the file is then parsed again with that comment blanked out
+/// (same length, so spans hold), so that it costs nothing else: no member lost, no
+/// error caused by the loss.
 fn parse_items(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
-    let mut parser = FileParser {
-        file,
-        text,
-        diagnostics: Vec::new(),
-    };
-    let items = parser.items();
-    (ast::File { id: file, items }, parser.diagnostics)
+    let mut text = std::borrow::Cow::Borrowed(text);
+    let mut doc_errors: Vec<Diagnostic> = Vec::new();
+    loop {
+        let mut parser = FileParser {
+            file,
+            text: &text,
+            diagnostics: Vec::new(),
+            notes: Vec::new(),
+            dangling: Vec::new(),
+        };
+        let items = parser.items();
+        if parser.dangling.is_empty() {
+            let mut diagnostics = parser.diagnostics;
+            if !doc_errors.is_empty() {
+                diagnostics.extend(doc_errors);
+                diagnostics.sort_by_key(|d| d.primary_span().start);
+            }
+            return (ast::File { id: file, items }, diagnostics);
+        }
+        let mut blanked = text.clone().into_owned().into_bytes();
+        for (index, span) in parser.dangling.iter().rev() {
+            blanked[span.start..span.end].fill(b' ');
+            doc_errors.push(parser.diagnostics.swap_remove(*index));
+        }
+        // Only whole lines of UTF-8 text were replaced by spaces.
+        text = std::borrow::Cow::Owned(String::from_utf8(blanked).unwrap_or_default());
+    }
 }
 
 /// Parses with `rule`; on failure, parses again with pest's error detail (expected
@@ -224,6 +252,11 @@ struct FileParser<'t> {
     file: FileId,
     text: &'t str,
     diagnostics: Vec<Diagnostic>,
+    /// Notes of the component being parsed member by member.
+    notes: Vec<ast::Note>,
+    /// The diagnostics (by index) about `///` doc comments with nothing to document,
+    /// and the spans of those comments.
+    dangling: Vec<(usize, Span)>,
 }
 
 impl<'t> FileParser<'t> {
@@ -243,6 +276,7 @@ impl<'t> FileParser<'t> {
                         base: offset,
                         file: self.file,
                         diagnostics: &mut self.diagnostics,
+                        notes: &mut self.notes,
                     };
                     if let Some(item) = builder.item(pair) {
                         items.push(item);
@@ -282,6 +316,7 @@ impl<'t> FileParser<'t> {
             base: start,
             file: self.file,
             diagnostics: &mut self.diagnostics,
+            notes: &mut self.notes,
         };
         let mut doc = Vec::new();
         let mut kind = None;
@@ -311,6 +346,7 @@ impl<'t> FileParser<'t> {
                                 base: offset,
                                 file: self.file,
                                 diagnostics: &mut self.diagnostics,
+                                notes: &mut self.notes,
                             };
                             if let Some(member) = builder.member(pair) {
                                 members.push(member);
@@ -372,6 +408,7 @@ impl<'t> FileParser<'t> {
             kind_span,
             name,
             members,
+            notes: std::mem::take(&mut self.notes),
             span: Span::new(start + head.as_span().start(), end),
         };
         Some((component, end))
@@ -383,11 +420,13 @@ impl<'t> FileParser<'t> {
         let head = CoolParser::parse(Rule::automaton_head, &self.text[start..])
             .ok()?
             .next()?;
-        let builder = Builder {
+        let mut builder = Builder {
             base: start,
             file: self.file,
             diagnostics: &mut self.diagnostics,
+            notes: &mut self.notes,
         };
+        builder.note(&head);
         let keyword_pair = head
             .clone()
             .into_inner()
@@ -415,9 +454,11 @@ impl<'t> FileParser<'t> {
                         base: offset,
                         file: self.file,
                         diagnostics: &mut self.diagnostics,
+                        notes: &mut self.notes,
                     };
                     match pair.as_rule() {
                         Rule::initial => {
+                            builder.note(&pair);
                             if let Some(name) = children(pair).first() {
                                 automaton.initial.push(builder.ident(name));
                             }
@@ -466,12 +507,15 @@ impl<'t> FileParser<'t> {
             base: start,
             file: self.file,
             diagnostics: &mut self.diagnostics,
+            notes: &mut self.notes,
         };
         let doc = docs(&head);
         let name = builder.ident(children(head.clone()).first()?);
+        let notes_before = self.notes.len();
         let head_start = start + head.as_span().start();
         let mut offset = start + head.as_span().end();
         let mut members = Vec::new();
+        let mut member_docs = Vec::new();
         let end = loop {
             match parse_detailed(Rule::state_step, &self.text[offset..]) {
                 Ok(mut pairs) => {
@@ -485,8 +529,12 @@ impl<'t> FileParser<'t> {
                                 base: offset,
                                 file: self.file,
                                 diagnostics: &mut self.diagnostics,
+                                notes: &mut self.notes,
                             };
-                            members.extend(builder.state_member(pair));
+                            if let Some((member, doc)) = builder.state_member(pair) {
+                                members.push(member);
+                                member_docs.push(doc);
+                            }
                         }
                     }
                     offset = if pair_end > offset {
@@ -497,7 +545,7 @@ impl<'t> FileParser<'t> {
                 }
                 Err(error) => {
                     let at = self.report(&error, offset);
-                    let next = next_start(self.text, offset, at, &[], true);
+                    let next = next_start(self.text, offset, at, STATE_MEMBER_KEYWORDS, true);
                     if next >= self.text.len() {
                         break self.text.len();
                     }
@@ -509,10 +557,15 @@ impl<'t> FileParser<'t> {
                 }
             }
         };
+        in_context(
+            &mut self.notes[notes_before..],
+            &format!("state `{}`", name.name),
+        );
         let state = ast::State {
             doc,
             name,
             members,
+            member_docs,
             span: Span::new(head_start, end),
         };
         Some((state, end))
@@ -520,20 +573,25 @@ impl<'t> FileParser<'t> {
 
     /// Records a pest error as a diagnostic; returns the absolute error offset.
     fn report(&mut self, error: &pest::error::Error<Rule>, base: usize) -> usize {
-        let diagnostic = syntax_error(self.file, self.text, error, base);
+        let (diagnostic, dangling) = syntax_error(self.file, self.text, error, base);
         let at = diagnostic.primary_span().start;
+        if dangling {
+            self.dangling
+                .push((self.diagnostics.len(), diagnostic.primary_span()));
+        }
         self.diagnostics.push(diagnostic);
         at
     }
 }
 
-/// Turns a pest error into a readable diagnostic.
+/// Turns a pest error into a readable diagnostic; `true` when it is about a `///`
+/// doc comment with nothing to document (the diagnostic's span is that comment).
 fn syntax_error(
     file: FileId,
     text: &str,
     error: &pest::error::Error<Rule>,
     base: usize,
-) -> Diagnostic {
+) -> (Diagnostic, bool) {
     let mut position = match error.location {
         InputLocation::Pos(pos) => pos,
         InputLocation::Span((start, _)) => start,
@@ -581,19 +639,61 @@ fn syntax_error(
     expected.dedup();
     let expected = summarize(expected);
     let at = (base + position).min(text.len());
+    if let Some(doc) = dangling_doc(text, at) {
+        let diagnostic = Diagnostic::error(
+            Code::UnexpectedToken,
+            file,
+            doc,
+            "a `///` doc comment must come right before the item, member, field, variant, state, section, transition or entry it documents",
+        )
+        .with_label("documents nothing here")
+        .with_help("write `//` for a plain comment");
+        return (diagnostic, true);
+    }
     let (found, len) = describe_found(&text[at..]);
     let message = if expected.is_empty() {
         format!("unexpected {found}")
     } else {
         format!("expected {}, found {found}", join_or(&expected))
     };
-    Diagnostic::error(
+    let diagnostic = Diagnostic::error(
         Code::UnexpectedToken,
         file,
         Span::new(at, at + len),
         message,
     )
-    .with_label("unexpected here")
+    .with_label("unexpected here");
+    (diagnostic, false)
+}
+
+/// The span of the `///` doc comment that a syntax error at `at` is about: the doc
+/// line at `at`, or the one right before it (only blank space between) when a
+/// closing brace or the end of the file follows it.
+fn dangling_doc(text: &str, at: usize) -> Option<Span> {
+    // The error may point into the `///` (after the `//` a plain comment would take).
+    for start in (at.saturating_sub(3)..=at).rev() {
+        if !text.is_char_boundary(start) {
+            continue;
+        }
+        let rest = text.get(start..).unwrap_or_default();
+        let line_start = text[..start].rfind('\n').map_or(0, |n| n + 1);
+        let line_end = rest.find('\n').map_or(text.len(), |n| start + n);
+        let in_comment = text[line_start..start].contains("//");
+        if rest.starts_with("///") && !rest.starts_with("////") && !in_comment {
+            return Some(Span::new(start, line_end));
+        }
+    }
+    let rest = &text[at..];
+    if !(rest.is_empty() || rest.starts_with('}')) {
+        return None;
+    }
+    let before = text[..at].trim_end();
+    let line_start = before.rfind('\n').map_or(0, |n| n + 1);
+    let line = &before[line_start..];
+    let indent = line.len() - line.trim_start().len();
+    let doc = line.trim_start();
+    (doc.starts_with("///") && !doc.starts_with("////"))
+        .then(|| Span::new(line_start + indent, before.len()))
 }
 
 /// True for a punctuation token worth naming (not a comment opener).
@@ -791,6 +891,10 @@ fn rule_name(rule: Rule) -> Option<&'static str> {
         kw_error => "`error`",
         kw_recovery => "`recovery`",
         kw_deadline => "`deadline`",
+        kw_restart => "`restart`",
+        kw_limit => "`limit`",
+        kw_in => "`in`",
+        kw_backoff => "`backoff`",
         _ => return None,
     })
 }
@@ -808,7 +912,10 @@ fn next_start(
     member_mode: bool,
 ) -> usize {
     let bytes = text.as_bytes();
+    // Depth in any bracket, and in braces only: a `(` or `[` left open inside the bad
+    // member must not hide the members and the closing brace after it.
     let mut depth: i64 = 0;
+    let mut braces: i64 = 0;
     let mut index = start;
     let mut line_start = true;
     let mut fallback = None;
@@ -854,7 +961,7 @@ fn next_start(
             let word = &text[index..word_end];
             let is_doc = text[index..].starts_with("///");
             if keywords.contains(&word) || is_doc {
-                if depth == 0 {
+                if depth == 0 || (member_mode && braces == 0) {
                     return index;
                 }
                 if fallback.is_none() && (index == 0 || bytes[index - 1] == b'\n') && !member_mode {
@@ -871,15 +978,19 @@ fn next_start(
                 index += 1;
                 continue;
             }
-            b'{' | b'[' | b'(' => depth += 1,
+            b'{' | b'[' | b'(' => {
+                depth += 1;
+                braces += i64::from(byte == b'{');
+            }
             b'}' | b']' | b')' => {
                 depth -= 1;
                 if member_mode && byte == b'}' {
-                    if depth < 0 {
+                    braces -= 1;
+                    if braces < 0 {
                         // The component's closing brace: resume there.
                         return index;
                     }
-                    if depth == 0 && index >= error_at {
+                    if braces == 0 && index >= error_at {
                         return index + 1;
                     }
                 }
@@ -898,6 +1009,27 @@ fn next_char(text: &str, offset: usize) -> usize {
         .chars()
         .next()
         .map_or(text.len() + 1, |c| offset + c.len_utf8())
+}
+
+/// The construct `pair` as a note's subject: its text after its doc comment, up to
+/// its first `{` or `;`, on one line, in backticks.
+fn subject(pair: &P<'_>) -> String {
+    let start = pair
+        .clone()
+        .into_inner()
+        .find(|p| p.as_rule() != Rule::doc_line)
+        .map_or(0, |p| p.as_span().start() - pair.as_span().start());
+    let text = &pair.as_str()[start..];
+    let head = text.find(['{', ';']).map_or(text, |end| &text[..end]);
+    let words: Vec<&str> = head.split_whitespace().collect();
+    format!("`{}`", words.join(" "))
+}
+
+/// Prefixes the subjects of `notes` with `context` (the state or instance they are in).
+fn in_context(notes: &mut [ast::Note], context: &str) {
+    for note in notes {
+        note.subject = format!("{context}: {}", note.subject);
+    }
 }
 
 fn doc_text(line: &str) -> String {
@@ -921,6 +1053,9 @@ struct Builder<'d> {
     base: usize,
     file: FileId,
     diagnostics: &'d mut Vec<Diagnostic>,
+    /// Where doc comments on constructs without a Rust item of their own go, until
+    /// the component that holds them takes them.
+    notes: &'d mut Vec<ast::Note>,
 }
 
 type P<'i> = Pair<'i, Rule>;
@@ -977,6 +1112,10 @@ fn is_keyword(rule: Rule) -> bool {
             | Rule::kw_error
             | Rule::kw_recovery
             | Rule::kw_deadline
+            | Rule::kw_restart
+            | Rule::kw_limit
+            | Rule::kw_in
+            | Rule::kw_backoff
     )
 }
 
@@ -998,6 +1137,18 @@ fn docs(pair: &P<'_>) -> ast::Doc {
 }
 
 impl Builder<'_> {
+    /// Keeps the doc comment of `pair`, a construct without a Rust item of its own, as
+    /// a note of the enclosing component.
+    fn note(&mut self, pair: &P<'_>) {
+        let doc = docs(pair);
+        if !doc.0.is_empty() {
+            self.notes.push(ast::Note {
+                subject: subject(pair),
+                doc,
+            });
+        }
+    }
+
     fn span(&self, pair: &P<'_>) -> Span {
         let span = pair.as_span();
         Span::new(self.base + span.start(), self.base + span.end())
@@ -1098,6 +1249,7 @@ impl Builder<'_> {
                     kind_span,
                     name: name?,
                     members,
+                    notes: std::mem::take(self.notes),
                     span,
                 })
             }
@@ -1239,6 +1391,27 @@ impl Builder<'_> {
 
     fn member(&mut self, pair: P<'_>) -> Option<ast::Member> {
         let doc = docs(&pair);
+        let notes_before = self.notes.len();
+        let has_item = |rule| {
+            matches!(
+                rule,
+                Rule::configuration
+                    | Rule::variable
+                    | Rule::input
+                    | Rule::output
+                    | Rule::exception
+                    | Rule::instance
+            )
+        };
+        if pair
+            .clone()
+            .into_inner()
+            .find(|p| p.as_rule() != Rule::doc_line)
+            .is_some_and(|inner| !has_item(inner.as_rule()))
+        {
+            // Its doc comment has no Rust item to go to: a note.
+            self.note(&pair);
+        }
         let inner = children(pair).into_iter().next()?;
         let span = self.span(&inner);
         let member = match inner.as_rule() {
@@ -1395,9 +1568,14 @@ impl Builder<'_> {
                         _ => plan.extend(self.plan_step(part)),
                     }
                 }
+                let name = name?;
+                in_context(
+                    &mut self.notes[notes_before..],
+                    &format!("exception `{}`", name.name),
+                );
                 ast::Member::Exception(ast::Exception {
                     doc,
-                    name: name?,
+                    name,
                     description,
                     plan,
                     span,
@@ -1416,7 +1594,10 @@ impl Builder<'_> {
                             }
                             keyword_span = self.span(&part);
                         }
-                        Rule::initial => initial.push(self.ident(children(part).first()?)),
+                        Rule::initial => {
+                            self.note(&part);
+                            initial.push(self.ident(children(part).first()?));
+                        }
                         Rule::state => states.extend(self.state(part)),
                         _ => {}
                     }
@@ -1452,6 +1633,7 @@ impl Builder<'_> {
                             instance.node = Some(self.string(children(part).first()?))
                         }
                         Rule::override_entry => {
+                            self.note(&part);
                             let override_span = self.span(&part);
                             let parts = children(part);
                             let name = self.ident(parts.first()?);
@@ -1476,6 +1658,10 @@ impl Builder<'_> {
                         _ => {}
                     }
                 }
+                in_context(
+                    &mut self.notes[notes_before..],
+                    &format!("instance `{}`", instance.name.name),
+                );
                 ast::Member::Instance(instance)
             }
             Rule::redundant => {
@@ -1511,6 +1697,7 @@ impl Builder<'_> {
                     span,
                 };
                 for part in children(inner) {
+                    self.note(&part);
                     let rule = part.as_rule();
                     let value = self.expr(children(part).first()?.clone())?;
                     if rule == Rule::recovery_retry {
@@ -1520,6 +1707,27 @@ impl Builder<'_> {
                     }
                 }
                 ast::Member::Recovery(recovery)
+            }
+            Rule::restart => {
+                let mut restart = ast::Restart {
+                    limit: None,
+                    backoff: None,
+                    span,
+                };
+                for part in children(inner) {
+                    let rule = part.as_rule();
+                    let values = children(part);
+                    let pair = (
+                        self.expr(values.first()?.clone())?,
+                        self.expr(values.get(1)?.clone())?,
+                    );
+                    if rule == Rule::restart_limit {
+                        restart.limit = Some(pair);
+                    } else {
+                        restart.backoff = Some(pair);
+                    }
+                }
+                ast::Member::Restart(restart)
             }
             _ => return None,
         };
@@ -1548,6 +1756,7 @@ impl Builder<'_> {
         let span = self.span(&pair);
         let mut entries = Vec::new();
         for entry in children(pair) {
+            self.note(&entry);
             let entry_span = self.span(&entry);
             let rule = entry.as_rule();
             let parts = children(entry);
@@ -1585,6 +1794,7 @@ impl Builder<'_> {
     }
 
     fn plan_step(&mut self, pair: P<'_>) -> Option<ast::PlanStep> {
+        self.note(&pair);
         let span = self.span(&pair);
         let rule = pair.as_rule();
         let parts = children(pair);
@@ -1606,16 +1816,32 @@ impl Builder<'_> {
         let doc = docs(&pair);
         let mut parts = children(pair).into_iter();
         let name = self.ident(&parts.next()?);
-        let members = parts.filter_map(|part| self.state_member(part)).collect();
+        let notes_before = self.notes.len();
+        let (members, member_docs) = parts.filter_map(|part| self.state_member(part)).unzip();
+        in_context(
+            &mut self.notes[notes_before..],
+            &format!("state `{}`", name.name),
+        );
         Some(ast::State {
             doc,
             name,
             members,
+            member_docs,
             span,
         })
     }
 
-    fn state_member(&mut self, part: P<'_>) -> Option<ast::StateMember> {
+    /// One section or transition, with its doc comment. Sections and `may` document
+    /// their trait methods; a transition's doc comment becomes a note.
+    fn state_member(&mut self, part: P<'_>) -> Option<(ast::StateMember, ast::Doc)> {
+        let doc = docs(&part);
+        let has_method = matches!(
+            part.as_rule(),
+            Rule::entry_section | Rule::exit_section | Rule::periodic_section | Rule::may_rule
+        );
+        if !has_method {
+            self.note(&part);
+        }
         let member_span = self.span(&part);
         let rule = part.as_rule();
         let has_without = part
@@ -1663,7 +1889,7 @@ impl Builder<'_> {
             },
             _ => return None,
         };
-        Some(member)
+        Some((member, doc))
     }
 
     fn expr(&mut self, pair: P<'_>) -> Option<ast::Expr> {

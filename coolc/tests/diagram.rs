@@ -841,3 +841,22 @@ mod mermaid {
         Ok(())
     }
 }
+
+/// `on "node"` is not carried out yet (`coolc::check::remote_instance`), so the
+/// structure view draws the instance where it runs: no remote style, and a label
+/// that says it runs locally.
+#[test]
+fn an_instance_on_a_node_is_drawn_where_it_runs() {
+    let path = repository().join("tests/data/warn/remote_instance.cool");
+    let dot = rendered(&path, Format::Dot).expect("a compound to draw");
+    assert!(
+        dot.contains("on &quot;workstation&quot;: runs locally (not yet remote)"),
+        "{dot}"
+    );
+    assert!(!dot.contains("(remote)"), "{dot}");
+    let planner = dot
+        .lines()
+        .find(|line| line.trim_start().starts_with("\"planner\""))
+        .expect("the planner node");
+    assert!(!planner.contains("dashed"), "{planner}");
+}

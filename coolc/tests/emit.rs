@@ -30,6 +30,7 @@ fn lower_file(root: &Path, package: &str) -> coolc::ir::Crate {
         package: package.to_owned(),
         runtime: RuntimeDep::Version("0.1".to_owned()),
         sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
+        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
     };
     lower::lower(&analysis.files, &options)
 }
@@ -46,6 +47,8 @@ fn snapshot_crate(prefix: &str, krate: &coolc::ir::Crate) {
             let kind = match f.kind {
                 FileKind::Generated => "generated",
                 FileKind::User => "user",
+                FileKind::Manifest => "manifest",
+                FileKind::Starter => "starter",
             };
             format!("{kind:9} {}", f.path.display())
         })
@@ -83,12 +86,13 @@ fn starter_component() {
             package: "starter".to_owned(),
             runtime: RuntimeDep::Version("0.1".to_owned()),
             sources: vec!["starter.cool".to_owned()],
+            inputs: coolc::fingerprint::inputs(analysis.sources.files()),
         },
     );
     snapshot_crate("starter", &krate);
     let atomic = &krate.atomics[0];
     insta::assert_snapshot!("starter__filled_component", emit::starter_component(atomic));
-    insta::assert_snapshot!("starter__main", emit::starter_main(&krate, atomic));
+    insta::assert_snapshot!("starter__main", emit::starter_main(&krate));
 }
 
 #[test]
@@ -209,4 +213,89 @@ fn every_ok_fixture_emits() {
             );
         }
     });
+}
+
+#[test]
+fn doc_comments_without_an_item_go_to_the_spec_rustdoc() {
+    // `tests/data/ok/doc_comments.cool` documents every construct: those without a
+    // Rust item of their own (timing entries, plan steps, transitions, connections,
+    // overrides, ...) are listed after their text in the rustdoc of `SPEC`.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/ok/doc_comments.cool");
+    let files = emit::emit_crate(&lower_file(&root, "docs"));
+    let text = |name: &str| {
+        files
+            .iter()
+            .find(|f| f.path == Path::new("src/generated").join(name))
+            .map(|f| f.contents.clone())
+            .unwrap()
+    };
+    let probe = text("probe.rs");
+    let spec_doc = |text: &str| -> Vec<String> {
+        let end = text.find("pub static SPEC").unwrap();
+        let start = text[..end].rfind("\n\n").unwrap();
+        text[start..end]
+            .lines()
+            .filter(|l| {
+                l.starts_with("/// `")
+                    || l.starts_with("/// state")
+                    || l.starts_with("/// instance")
+                    || l.starts_with("/// exception")
+            })
+            .map(str::to_owned)
+            .collect()
+    };
+    assert_eq!(
+        spec_doc(&probe),
+        [
+            "/// `timing`: How the probe keeps time.",
+            "/// `period 10ms..20ms`: Fast enough for the controller.",
+            "/// `max_response 5ms`: A section may take this long.",
+            "/// `priority 2`: Above the default.",
+            "/// `quality full, reduced`: Best first.",
+            "/// exception `lost`: `retry 3 every 10ms`: Try again soon.",
+            "/// exception `lost`: `goto waiting`: Then wait it out.",
+            "/// `automaton`: Probing, or waiting for the sensor.",
+            "/// `initial probing`: Start by probing.",
+            "/// state `waiting`: `after 1s -> probing`: Give it a second.",
+        ]
+    );
+    // Constructs with an item of their own keep their doc there: ports, sections and
+    // `may` rules (after the generated line).
+    for item in [
+        "    /// Readings, one per period.\n    pub out:",
+        "enters the state.\n    ///\n    /// Reset the sensor.\n    fn waiting_entry(",
+        "period while in the state.\n    ///\n    /// Read the sensor.\n    fn probing_periodic(",
+        "leaves the state.\n    ///\n    /// Clean up.\n    fn waiting_exit(",
+        "to stay.\n    ///\n    /// Leave when the sensor is lost.\n    fn probing_choose(",
+    ] {
+        assert!(probe.contains(item), "{item} not in:\n{probe}");
+    }
+    let station = text("station.rs");
+    assert_eq!(
+        spec_doc(&station),
+        [
+            "/// instance `probe`: `period 20ms`: Slower than its default.",
+            "/// instance `a`: `scale = 2.0`: Twice as sensitive.",
+            "/// `connect probe.out -> a.readings`: Readings to both meters.",
+            "/// `redundant a, b`: Either meter will do.",
+            "/// `on error probe: restart`: Restart a failed probe.",
+            "/// `recovery`: Keep trying for a minute.",
+            "/// `retry every 1s`: Every second.",
+            "/// `deadline 60s`: For a minute.",
+            "/// `supervisor`: Watching the probe.",
+            "/// state `watching`: `when probe.state == running_error -> alarmed`: Leave when the probe fails.",
+        ]
+    );
+    assert!(
+        station.contains("    ///\n    /// Count the alarm.\n    fn alarmed_entry("),
+        "{station}"
+    );
+    let meter = text("meter.rs");
+    assert_eq!(
+        spec_doc(&meter),
+        [
+            "/// state `idle`: `on readings -> idle`: A reading wakes it up.",
+            "/// state `idle`: `after 1s -> idle`: So does a second without one.",
+        ]
+    );
 }

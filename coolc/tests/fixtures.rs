@@ -178,3 +178,52 @@ fn shared_imports_load_once_and_ids_follow_load_order() {
         assert_eq!(file.id.0 as usize, index);
     }
 }
+
+#[test]
+fn an_unknown_name_in_a_sibling_file_gets_the_import_to_add() {
+    // `list` offers the files of a directory; `scan.cool` is next to `robot.cool`
+    // but not imported, `other/far.cool` is elsewhere: only the sibling is named.
+    let files = [
+        (
+            "robot.cool",
+            "atomic Mapper { input scan: last<LaserScan>; input far: last<Far>; }\n",
+        ),
+        ("scan.cool", "packet LaserScan { ranges: [f32; 72] }\n"),
+        ("other/far.cool", "packet Far { x: f64 }\n"),
+    ];
+    let loader = |path: &Path| -> std::io::Result<String> {
+        files
+            .iter()
+            .find(|(name, _)| Path::new(name) == path)
+            .map(|(_, text)| text.to_string())
+            .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+    };
+    let list = |dir: &Path| -> Vec<PathBuf> {
+        files
+            .iter()
+            .map(|(name, _)| PathBuf::from(name))
+            .filter(|path| path.parent() == Some(dir))
+            .collect()
+    };
+    let analysis = coolc::analyze_with_siblings(&["robot.cool"], &loader, &list);
+    let helps: Vec<(String, Option<String>)> = analysis
+        .diagnostics
+        .iter()
+        .map(|d| (d.message.clone(), d.help.clone()))
+        .collect();
+    assert_eq!(
+        helps,
+        [
+            (
+                "unknown type `LaserScan`".to_owned(),
+                Some(
+                    "`LaserScan` is defined in `scan.cool` next to this file: add `import \"scan.cool\";`"
+                        .to_owned()
+                )
+            ),
+            ("unknown type `Far`".to_owned(), None),
+        ]
+    );
+    // The sibling was only scanned: it is not part of the analysis.
+    assert_eq!(analysis.files.len(), 1);
+}

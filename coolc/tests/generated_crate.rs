@@ -103,6 +103,7 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "pair.rs",
         "ticker.rs",
         "swap.rs",
+        "restarter.rs",
     ] {
         std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
     }
@@ -122,9 +123,69 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
         "a_redundant_group_keeps_the_stream_when_a_member_fails",
         "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
         "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
+        "the_restart_budget_of_the_description_bounds_the_restarts",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }
+}
+
+#[test]
+fn arrays_of_any_length_build_default_and_round_trip() {
+    // `tests/data/arrays`: arrays longer than serde's and `Default`'s 32 elements in
+    // packets (plain, nested, optional, in lists, of strings), in a configuration and
+    // in variables, with and without written defaults; the run tests check defaults,
+    // serde round trips and a running system that carries them.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("arrays.cool");
+    std::fs::copy(data("arrays/arrays.cool"), &description).unwrap();
+    let krate = dir.path().join("arrays");
+    compile(&description, &krate, "arrays");
+    for name in ["scanner.rs", "recorder.rs"] {
+        std::fs::copy(data("arrays").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("arrays/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    for test in [
+        "long_arrays_get_their_defaults",
+        "long_arrays_round_trip_through_serde",
+        "long_arrays_flow_through_a_running_system",
+    ] {
+        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
+    }
+}
+
+#[test]
+fn compounds_with_converters_nest_three_levels_deep() {
+    // `tests/data/nest`: `Fleet` nests `Robot`, which nests `Base` (with an override
+    // of its mapped `gain`), whose follower reaches its drive through a converter.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("nest.cool");
+    std::fs::copy(data("nest/nest.cool"), &description).unwrap();
+    let krate = dir.path().join("nest");
+    compile(&description, &krate, "nest");
+    for name in ["follower.rs", "drive.rs", "converters.rs"] {
+        std::fs::copy(data("nest").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("nest/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    assert!(
+        output.contains("test converters_reach_compounds_nested_three_deep ... ok"),
+        "{output}"
+    );
 }
 
 #[test]

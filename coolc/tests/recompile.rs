@@ -1,11 +1,12 @@
 //! Recompiling touches nothing that would not change: a second `coolc compile` of the
 //! same descriptions writes no file (so cargo rebuilds nothing), formatted files are
 //! taken from the format cache, a generated file edited by hand is restored, and a
-//! changed description rewrites only its own files.
+//! changed description changes only its own files below the generated header (which
+//! names the inputs' hash).
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 use common::{compile, copy_descriptions};
@@ -26,7 +27,7 @@ fn recompile_writes_only_what_changed() {
     let first = compile(&root, &out, "fleet");
     assert!(first.written.iter().any(|p| p == Path::new("Cargo.toml")));
     let cache = std::fs::read_to_string(out.join(".coolc/format-cache")).unwrap();
-    assert!(cache.starts_with("coolc format cache 1\t"), "{cache}");
+    assert!(cache.starts_with("coolc format cache 2\t"), "{cache}");
     // The compound module and types are formatted (their templates are not in
     // rustfmt's layout), so the cache lists them.
     assert!(cache.contains("src/generated/mobile_base.rs\t"), "{cache}");
@@ -65,16 +66,32 @@ fn recompile_writes_only_what_changed() {
     assert_eq!(third.written, [Path::new("src/generated/mobile_base.rs")]);
     assert_eq!(contents, snapshot(&out));
 
-    // A changed description: only its module (and the files naming it) change.
+    // A changed description: every generated file gets the new inputs' hash in its
+    // header, and only its own module changes below the header. The others' formatted
+    // bodies come from the cache under the new header.
     let motion = src.join("motion_controller.cool");
     let text = std::fs::read_to_string(&motion).unwrap();
     let changed = text.replacen("automaton {", "exception extra;\n    automaton {", 1);
     assert_ne!(changed, text);
     std::fs::write(&motion, changed).unwrap();
     let fourth = compile(&root, &out, "fleet");
-    assert_eq!(
-        fourth.written,
-        [Path::new("src/generated/motion_controller.rs")],
-        "{fourth:?}"
-    );
+    let mut generated: Vec<&Path> = first
+        .written
+        .iter()
+        .map(PathBuf::as_path)
+        .filter(|p| p.starts_with("src/generated") || *p == Path::new("build.rs"))
+        .collect();
+    assert!(generated.len() >= 5, "{generated:?}");
+    let mut written: Vec<&Path> = fourth.written.iter().map(PathBuf::as_path).collect();
+    generated.sort();
+    written.sort();
+    assert_eq!(written, generated, "{fourth:?}");
+    let body = |text: &str| text.split_once('\n').unwrap().1.to_owned();
+    for (path, old) in watched.iter().zip(&contents) {
+        let new = std::fs::read_to_string(out.join(path)).unwrap();
+        if path.starts_with("src/generated/") && *path != "src/generated/motion_controller.rs" {
+            assert_eq!(body(&new), body(old), "{path} changed below its header");
+            assert_ne!(new.lines().next(), old.lines().next(), "{path}");
+        }
+    }
 }

@@ -304,3 +304,199 @@ fn a_compound_user_file_without_a_supervisor_block_gets_one_appended() {
     assert!(!inserted.contains("Supervisor for"), "{inserted}");
     cargo(&krate, &["build", "--quiet"]);
 }
+
+/// What a user adds to the generated `Cargo.toml`: a dependency of theirs (with a
+/// comment) inside `[dependencies]`, and after it dev-dependencies, a binary, a
+/// feature and a profile.
+const USER_DEPENDENCY: &str =
+    "# Mine: the tool in src/bin uses it.\nitoa = { version = \"1\" } # keep this comment\n";
+const USER_TABLES: &str = "\
+# Mine, all of it.
+[dev-dependencies]
+tempfile = \"3\"
+
+[[bin]]
+name = \"lamp-tool\"
+path = \"src/bin/tool.rs\"
+
+[features]
+extra = []
+
+[profile.release]
+debug = true # for perf
+";
+
+/// `Cargo.toml` parsed.
+fn manifest(krate: &Path) -> toml_edit::DocumentMut {
+    std::fs::read_to_string(krate.join("Cargo.toml"))
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn the_manifest_keeps_what_the_user_wrote_and_follows_link_crate() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let krate = dir.path().join("lamp");
+    write(&description, V1);
+    compile(&description, &krate, "lamp");
+
+    // The user edits the manifest: a dependency inside [dependencies] (right after
+    // its header) and tables of their own at the end.
+    let generated = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    let at = generated.find("[dependencies]\n").unwrap() + "[dependencies]\n".len();
+    let edited = format!(
+        "{}{USER_DEPENDENCY}{}\n{USER_TABLES}",
+        &generated[..at],
+        &generated[at..]
+    );
+    write(&krate.join("Cargo.toml"), &edited);
+    std::fs::create_dir_all(krate.join("src/bin")).unwrap();
+    write(&krate.join("src/bin/tool.rs"), "fn main() {}\n");
+
+    // Nothing in the descriptions changed: the manifest is not touched.
+    let report = compile(&description, &krate, "lamp");
+    assert!(report.written.is_empty(), "{:?}", report.written);
+    assert_eq!(
+        std::fs::read_to_string(krate.join("Cargo.toml")).unwrap(),
+        edited
+    );
+
+    // A `link crate` added: coolc's entries change, the user's bytes do not.
+    let linked = V1.replace(
+        "    observable level",
+        "    link crate \"ryu\" = { version = \"1\", default_features = false };\n    observable level",
+    );
+    write(&description, &linked);
+    let report = compile(&description, &krate, "lamp");
+    assert!(
+        report.written.iter().any(|p| p == Path::new("Cargo.toml")),
+        "{:?}",
+        report.written
+    );
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    let updated = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    assert!(updated.contains(USER_DEPENDENCY), "{updated}");
+    assert!(updated.ends_with(&format!("\n{USER_TABLES}")), "{updated}");
+    let doc = manifest(&krate);
+    assert_eq!(
+        doc["dependencies"]["ryu"].to_string().trim(),
+        "{ version = \"1\", default-features = false }"
+    );
+    assert_eq!(
+        doc["package"]["metadata"]["coolc"]["dependencies"]
+            .to_string()
+            .trim(),
+        "[\"serde\", \"ryu\"]"
+    );
+    assert_eq!(doc["package"]["name"].as_str(), Some("lamp"));
+    // The only differences from the edited file: the new entry and the list.
+    let without_coolc = updated
+        .replace("ryu = { version = \"1\", default-features = false }\n", "")
+        .replace("[\"serde\", \"ryu\"]", "[\"serde\"]");
+    assert_eq!(without_coolc, edited);
+    // Cargo reads it: the package, its binaries and features.
+    let metadata = cargo(&krate, &["metadata", "--no-deps", "--format-version", "1"]);
+    for needle in [
+        "\"lamp-tool\"",
+        "\"extra\"",
+        "\"itoa\"",
+        "\"ryu\"",
+        "\"tempfile\"",
+    ] {
+        assert!(
+            metadata.contains(needle),
+            "{needle} missing from {metadata}"
+        );
+    }
+
+    // The version changes: coolc's entry follows, in place.
+    write(
+        &description,
+        &linked.replace(
+            "{ version = \"1\", default_features = false }",
+            "{ version = \"1.0\", default_features = false }",
+        ),
+    );
+    compile(&description, &krate, "lamp");
+    let bumped = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    assert_eq!(
+        bumped,
+        updated.replace(
+            "version = \"1\", default-features",
+            "version = \"1.0\", default-features"
+        )
+    );
+
+    // The `link crate` removed: its entry goes, and the file is what the user wrote.
+    write(&description, V1);
+    let report = compile(&description, &krate, "lamp");
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    assert_eq!(
+        std::fs::read_to_string(krate.join("Cargo.toml")).unwrap(),
+        edited
+    );
+}
+
+#[test]
+fn a_link_crate_naming_a_user_dependency_takes_it_over_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let krate = dir.path().join("lamp");
+    write(&description, V1);
+    compile(&description, &krate, "lamp");
+    let generated = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    let edited = format!("{generated}# My own ryu.\nryu = \"1.0.5\"\n");
+    write(&krate.join("Cargo.toml"), &edited);
+
+    write(
+        &description,
+        &V1.replace(
+            "    observable level",
+            "    link crate \"ryu\" = \"1\";\n    observable level",
+        ),
+    );
+    let report = compile(&description, &krate, "lamp");
+    assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+    assert!(
+        report.warnings[0].contains("`ryu`") && report.warnings[0].contains("\"1.0.5\""),
+        "{:?}",
+        report.warnings
+    );
+    let updated = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    assert!(
+        updated.contains("# My own ryu.\nryu = \"1\"\n"),
+        "{updated}"
+    );
+    // Now coolc's: removing the `link crate` removes it, the comment above it stays.
+    write(&description, V1);
+    compile(&description, &krate, "lamp");
+    let removed = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
+    assert!(!removed.contains("ryu ="), "{removed}");
+    assert!(removed.contains("# My own ryu.\n"), "{removed}");
+}
+
+#[test]
+fn a_manifest_that_does_not_parse_is_left_alone_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let krate = dir.path().join("lamp");
+    write(&description, V1);
+    compile(&description, &krate, "lamp");
+    let broken = "[package\nname = \"lamp\"\n";
+    write(&krate.join("Cargo.toml"), broken);
+    let report = compile(&description, &krate, "lamp");
+    assert_eq!(
+        std::fs::read_to_string(krate.join("Cargo.toml")).unwrap(),
+        broken
+    );
+    assert!(!report.written.iter().any(|p| p == Path::new("Cargo.toml")));
+    assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+    assert!(
+        report.warnings[0].starts_with("Cargo.toml was not updated: it does not parse as TOML")
+            && report.warnings[0].contains("[package.metadata.coolc]"),
+        "{}",
+        report.warnings[0]
+    );
+}

@@ -60,6 +60,7 @@ fn lower_files(files: &[(PathBuf, String)], package: &str) -> coolc::ir::Crate {
             .iter()
             .map(|r| r.file_name().unwrap().to_string_lossy().into_owned())
             .collect(),
+        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
     };
     lower::lower(&analysis.files, &options)
 }

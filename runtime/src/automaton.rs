@@ -73,9 +73,22 @@ impl fmt::Display for Fault {
     }
 }
 
+/// The message is the error's, followed by each of its sources whose text it does not
+/// already hold (`instance `w` did not take `set count = 1`: `count` is observable,
+/// not controllable`): a fault keeps the whole chain as text.
 impl<E: std::error::Error + Send + Sync + 'static> From<E> for Fault {
     fn from(error: E) -> Fault {
-        Fault::message(error.to_string())
+        let mut message = error.to_string();
+        let mut source = error.source();
+        while let Some(cause) = source {
+            let text = cause.to_string();
+            if !message.contains(&text) {
+                message.push_str(": ");
+                message.push_str(&text);
+            }
+            source = cause.source();
+        }
+        Fault::message(message)
     }
 }
 

@@ -24,6 +24,7 @@ use crate::adapt::{
     Selector,
 };
 use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult};
+use crate::commander::{Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT};
 use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, MergeEnd, OutputPort, Packet,
@@ -83,8 +84,9 @@ pub enum Policy {
 /// atomic component's) and its own variables. Transitions are fired by rules
 /// ([`CompoundBuilder::rule`]), not by ports.
 pub trait Supervisor: Send + 'static {
-    /// The supervisor's shape: `states`, `initial`, its own `variables` and `timing`
-    /// (a period for periodic sections). Ports, `on`, `may` and exceptions are not
+    /// The supervisor's shape: `states` (with their `on`, `after` and `may`),
+    /// `initial`, its own `variables` and `timing` (a period for periodic sections).
+    /// Its ports are replaced by the ones the builder exports; exceptions are not
     /// used.
     fn spec(&self) -> &'static Spec;
 
@@ -107,15 +109,25 @@ pub trait Supervisor: Send + 'static {
     fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
         Err(format!("variable #{variable} cannot be set"))
     }
+
+    /// For states with `may` (`spec().states[state].may`): called after each entry or
+    /// periodic section of `state`, the target to go to (one of the state's `may`
+    /// targets, an index into `spec().states`), if any. The default stays.
+    fn choose(&mut self, _state: usize, _cx: &mut SupervisorCx<'_>) -> Option<usize> {
+        None
+    }
 }
 
-/// What a supervisor section sees: the runtime context and the view of the
-/// instances' monitors.
+/// What a supervisor section sees: the runtime context, the view of the instances'
+/// monitors, and the commander of its instances.
 pub struct SupervisorCx<'a> {
     /// Time, result, end, period of the compound.
     pub rt: &'a mut Context,
     /// The instances' monitors and the supervisor's own variables, as last seen.
     pub view: &'a View,
+    /// Commands to the instances (state, variables, configuration, period,
+    /// quality), each answered, each a supervision step (`crate::commander`).
+    pub instances: &'a mut Commander,
 }
 
 /// The variables rules read: every instance's monitor (its `state`, `user_state`,
@@ -132,6 +144,31 @@ pub struct View {
     /// The instance standing for each instance now (itself, its substitute, or its
     /// redundant group's live member).
     standing: Vec<usize>,
+    /// The compound's own default observable variables, as last seen.
+    compound: Own,
+}
+
+/// The compound's own default observable variables that rules read (`result`,
+/// `error`, `quality`, `cpu_time`, `elapsed_time`), copied from its monitoring port
+/// at each supervision turn of a compound whose rules read them.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Own {
+    result: TaskResult,
+    error: Option<String>,
+    quality: usize,
+    cpu_time: Duration,
+    elapsed_time: Duration,
+}
+
+/// The read keys of the compound's own default variables (`CompoundBuilder::rule`).
+const OWN_DEFAULTS: [&str; 5] = ["result", "error", "quality", "cpu_time", "elapsed_time"];
+
+/// Whether read key `read` names a time (`cpu_time`, `elapsed_time`, own or an
+/// instance's), which changes without an event: such rules are evaluated every
+/// supervisor period.
+fn is_timed(read: &str) -> bool {
+    let field = read.rsplit_once('.').map_or(read, |(_, field)| field);
+    matches!(field, "cpu_time" | "elapsed_time")
 }
 
 impl View {
@@ -186,6 +223,32 @@ impl View {
             .iter()
             .find(|(name, _)| name == variable)
             .map(|(_, value)| value)
+    }
+
+    /// The compound's own `result` (what its supervisor's sections set with
+    /// [`Context::set_result`]), as of the current supervision turn.
+    pub fn own_result(&self) -> &TaskResult {
+        &self.compound.result
+    }
+
+    /// The compound's own `error`: its last error, kept until a restart succeeds.
+    pub fn own_error(&self) -> Option<&str> {
+        self.compound.error.as_deref()
+    }
+
+    /// The compound's own `quality` level (0 = best).
+    pub fn own_quality(&self) -> usize {
+        self.compound.quality
+    }
+
+    /// The compound's own `cpu_time` (its thread's CPU time).
+    pub fn own_cpu_time(&self) -> Duration {
+        self.compound.cpu_time
+    }
+
+    /// The compound's own `elapsed_time` (wall-clock time in its supervisor's code).
+    pub fn own_elapsed_time(&self) -> Duration {
+        self.compound.elapsed_time
     }
 
     /// One of the supervisor's own variables.
@@ -627,6 +690,7 @@ pub struct CompoundBuilder {
     ports: PortSet,
     adaptation: AdaptConfig,
     selector: Box<dyn Selector>,
+    command_timeout: Duration,
 }
 
 impl std::fmt::Debug for CompoundBuilder {
@@ -664,7 +728,17 @@ impl CompoundBuilder {
             ports: PortSet::new(),
             adaptation: AdaptConfig::default(),
             selector: Box::new(ProtectPriority),
+            command_timeout: DEFAULT_SUPERVISOR_COMMAND_TIMEOUT,
         }
+    }
+
+    /// How long a supervisor's command ([`SupervisorCx::instances`]) waits for an
+    /// instance to take it (default [`DEFAULT_SUPERVISOR_COMMAND_TIMEOUT`]; at least
+    /// 1 ms): an instance busy in a section longer than that has the command withdrawn
+    /// and the section gets [`Refused::Busy`](crate::Refused::Busy).
+    pub fn command_timeout(mut self, timeout: Duration) -> CompoundBuilder {
+        self.command_timeout = timeout.max(Duration::from_millis(1));
+        self
     }
 
     /// The supervisor's adaptation (paper 3.6; `docs/runtime.md`, "Adaptation"): on
@@ -1263,8 +1337,25 @@ impl CompoundBuilder {
                 .map(|((name, _, _), m)| (name.clone(), (m.instance, m.variable.clone())))
                 .collect(),
             standing: (0..self.instances.len()).collect(),
+            compound: Own::default(),
         };
+        let reads_own = rules
+            .iter()
+            .flat_map(|rule| &rule.reads)
+            .any(|read| OWN_DEFAULTS.contains(&read.as_str()));
+        let timed: Vec<String> = by_read
+            .keys()
+            .filter(|read| is_timed(read))
+            .cloned()
+            .collect();
         let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
+        let commander = Commander::new(
+            self.name.clone(),
+            self.instances
+                .iter()
+                .map(|i| (i.name.clone(), i.handle.clone(), i.spec)),
+            self.command_timeout,
+        );
         // The instances' runners only detect and publish: the compound decides (and,
         // with its adaptation off, nothing does).
         for instance in &self.instances {
@@ -1320,12 +1411,17 @@ impl CompoundBuilder {
             steps: Vec::new(),
             restood: false,
             coordinator,
+            commander,
+            reads_own,
+            timed,
+            next_timed: None,
         };
         Ok(Component::new(self.name, Box::new(compound), self.ports).with_instances(handles))
     }
 
     fn check_read(&self, read: &str, own: &Spec) -> Result<(), CompoundError> {
         match read.split_once('.') {
+            None if OWN_DEFAULTS.contains(&read) => Ok(()),
             None => own
                 .variable_index(read)
                 .map(|_| ())
@@ -1340,7 +1436,13 @@ impl CompoundBuilder {
                 let index = self.instance_index(instance)?;
                 let default = matches!(
                     field,
-                    "state" | "user_state" | "result" | "error" | "quality"
+                    "state"
+                        | "user_state"
+                        | "result"
+                        | "error"
+                        | "quality"
+                        | "cpu_time"
+                        | "elapsed_time"
                 );
                 if default || self.instances[index].spec.variable_index(field).is_some() {
                     Ok(())
@@ -1415,6 +1517,17 @@ struct Compound {
     restood: bool,
     /// Adaptation (paper 3.6): `None` when turned off.
     coordinator: Option<Coordinator>,
+    /// What the supervisor's sections command the instances with.
+    commander: Commander,
+    /// Some rule reads the compound's own `result`, `error`, `quality`, `cpu_time`
+    /// or `elapsed_time`: each turn copies them into the view.
+    reads_own: bool,
+    /// The time reads (`cpu_time`, `elapsed_time`, own or an instance's) some rule
+    /// names: they change without events, so they count as changed every supervisor
+    /// period.
+    timed: Vec<String>,
+    /// When the time reads are next due.
+    next_timed: Option<Instant>,
 }
 
 /// A compound supervisor's adaptation state: its homogeneity interval and what it has
@@ -1839,6 +1952,45 @@ impl Compound {
         self.view.instances[index] = self.instances[index].handle.snapshot();
     }
 
+    /// Copy the compound's own default variables into the view (when a rule reads
+    /// them) and, every supervisor period, count the time reads as changed.
+    fn refresh_compound(&mut self, cx: &Context, changed: &mut HashSet<String>) {
+        if self.reads_own
+            && let Some(shared) = &cx.shared
+        {
+            let mut now = Own::default();
+            shared.quietly(|monitor| {
+                now = Own {
+                    result: monitor.result.clone(),
+                    error: monitor.error.clone(),
+                    quality: monitor.quality,
+                    cpu_time: monitor.cpu_time,
+                    elapsed_time: monitor.elapsed_time,
+                };
+            });
+            let before = std::mem::replace(&mut self.view.compound, now);
+            let after = &self.view.compound;
+            for (key, differs) in [
+                ("result", before.result != after.result),
+                ("error", before.error != after.error),
+                ("quality", before.quality != after.quality),
+            ] {
+                if differs {
+                    changed.insert(key.to_owned());
+                }
+            }
+        }
+        if self.timed.is_empty() {
+            return;
+        }
+        let now = Instant::now();
+        if self.next_timed.is_none_or(|due| now >= due) {
+            let period = cx.period().unwrap_or(DEFAULT_SUPERVISION_PERIOD);
+            self.next_timed = Some(crate::thread::later(now, period));
+            changed.extend(self.timed.iter().cloned());
+        }
+    }
+
     fn refresh_own(&mut self, changed: &mut HashSet<String>) {
         for (index, (name, value)) in self.view.own.iter_mut().enumerate() {
             let now = self.supervisor.get(index);
@@ -2237,13 +2389,27 @@ impl Compound {
                 continue;
             }
             // Due for a retry: restart it, on probation until the next retry (not while
-            // it is stuck in an overrun section: a command would wait for it).
-            let restarted = !self.instances[index].handle.is_stuck()
-                && command(&self.instances[index].handle, Controllable::Running).is_ok()
-                && self.instances[index].handle.state() == State::Running;
-            if restarted {
-                self.instances[index].handled = false;
-                self.step(index, Step::Retried, "");
+            // it is stuck in an overrun section: a command would wait for it). Every
+            // attempt is a step, so an operator sees recovery being tried.
+            let handle = &self.instances[index].handle;
+            let attempt = if handle.is_stuck() {
+                Err("still stuck in a section past its max_response".to_owned())
+            } else {
+                match command(handle, Controllable::Running) {
+                    Err(fault) => Err(fault.text().to_owned()),
+                    Ok(()) => match handle.state() {
+                        State::Running => Ok(()),
+                        state => Err(format!("{state} after the restart")),
+                    },
+                }
+            };
+            let restarted = attempt.is_ok();
+            match attempt {
+                Ok(()) => {
+                    self.instances[index].handled = false;
+                    self.step(index, Step::Retried, "");
+                }
+                Err(why) => self.step(index, Step::RetryFailed, why),
             }
             let entry = &mut self.queue[position];
             entry.probation = restarted;
@@ -2355,12 +2521,23 @@ impl Automaton for Compound {
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,
+            instances: &mut self.commander,
         };
-        self.supervisor.section(state, section, &mut scx)
+        let outcome = self.supervisor.section(state, section, &mut scx);
+        // The commands it gave are steps, published when the call returns.
+        cx.supervision.append(&mut self.commander.take_steps());
+        outcome
     }
 
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
+    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+            instances: &mut self.commander,
+        };
+        let target = self.supervisor.choose(state, &mut scx);
+        cx.supervision.append(&mut self.commander.take_steps());
+        target
     }
 
     fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
@@ -2435,7 +2612,7 @@ impl Automaton for Compound {
     }
 
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
-        let outcome = self.supervise_turn(state);
+        let outcome = self.supervise_turn(state, cx);
         if let Some(coordinator) = self.coordinator.as_mut()
             && coordinator
                 .settle_until
@@ -2541,6 +2718,7 @@ impl Automaton for Compound {
             .chain(fresh)
             .chain(held)
             .chain(settle)
+            .chain(self.next_timed)
             .min()
     }
 }
@@ -2548,7 +2726,7 @@ impl Automaton for Compound {
 impl Compound {
     /// One supervision turn: exports, instance events and policies, the recovery
     /// queue, then the rules of supervisor state `state`.
-    fn supervise_turn(&mut self, state: usize) -> Result<Option<usize>, Fault> {
+    fn supervise_turn(&mut self, state: usize, cx: &Context) -> Result<Option<usize>, Fault> {
         for export in &mut self.exports {
             export.forward();
         }
@@ -2561,6 +2739,7 @@ impl Compound {
             self.restarts_due(Instant::now())?;
         }
         self.refresh_own(&mut changed);
+        self.refresh_compound(cx, &mut changed);
         if std::mem::take(&mut self.restood) {
             changed.extend(self.view.mapped.keys().cloned());
         }

@@ -121,6 +121,7 @@
 
 pub mod adapt;
 mod automaton;
+mod commander;
 pub mod compound;
 mod monitor;
 pub mod port;
@@ -135,6 +136,7 @@ mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, Refused};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
@@ -156,3 +158,7 @@ pub use crate::value::{Time, Value, ValueError};
 
 /// Re-exported so generated code and users need not depend on it themselves.
 pub use crossbeam_channel;
+/// Re-exported for generated code: the serde adapters of packet fields, configuration
+/// fields and variables holding arrays longer than 32 elements (serde's own impls stop
+/// at 32), so a generated crate needs no dependency of its own for them.
+pub use serde_with;

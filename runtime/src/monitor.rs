@@ -155,8 +155,11 @@ impl std::fmt::Display for Supervision {
             Step::Substituted { by } => write!(f, "{instance} substituted by {by}")?,
             Step::Enqueued => write!(f, "{instance} entered the recovery queue")?,
             Step::Retried => write!(f, "{instance} retried")?,
+            Step::RetryFailed => write!(f, "{instance} retry failed")?,
             Step::Recovered => write!(f, "{instance} recovered")?,
             Step::Retired => write!(f, "{instance} retired (recovery deadline)")?,
+            Step::Commanded { command } => write!(f, "{instance} commanded: {command}")?,
+            Step::CommandRefused { command } => write!(f, "{instance} refused: {command}")?,
         }
         if !self.detail.is_empty() {
             write!(f, ": {}", self.detail)?;
@@ -186,10 +189,25 @@ pub enum Step {
     Enqueued,
     /// The recovery queue restarted it (it is on probation until the next retry).
     Retried,
+    /// The recovery queue tried to restart it and it did not come back to `running`
+    /// (the detail says why); it stays queued until the next retry or its deadline.
+    RetryFailed,
     /// It recovered and took its place back (the arrangement before the fault).
     Recovered,
     /// Its recovery deadline expired: it was destroyed (`dead`).
     Retired,
+    /// A supervisor section commanded it through the compound's
+    /// [`Commander`](crate::Commander), and it took the command.
+    Commanded {
+        /// The command, as the supervisor gave it (`suspend`, `set max_speed = 0.2`).
+        command: String,
+    },
+    /// A supervisor section commanded it and the command was refused (the reason is
+    /// the step's detail).
+    CommandRefused {
+        /// The command, as the supervisor gave it.
+        command: String,
+    },
 }
 
 /// One change on the monitoring port.
@@ -582,6 +600,44 @@ pub(crate) enum Reply {
     Rejected(String),
 }
 
+/// Why a command did not go through, before it is rendered into [`Rejected::reason`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Refusal {
+    /// The component's thread has not been spawned.
+    NotStarted,
+    /// The command was given on the component's own thread.
+    OwnThread,
+    /// The component's control queue is full.
+    QueueFull,
+    /// The component's thread has ended.
+    Ended,
+    /// The component did not take the command within the handle's command timeout
+    /// (a section still running); the command was withdrawn.
+    Busy,
+    /// The component rejected it, for this reason.
+    Rejected(String),
+}
+
+impl Refusal {
+    /// The reason as [`Rejected::reason`] words it.
+    fn describe(self, timeout: Duration) -> String {
+        match self {
+            Refusal::NotStarted => "the component has not been started (System::start)".to_owned(),
+            Refusal::OwnThread => {
+                "a component cannot command itself from its own thread (use Context::end to finish)"
+                    .to_owned()
+            }
+            Refusal::QueueFull | Refusal::Ended => {
+                "the component's thread has ended or its control queue is full".to_owned()
+            }
+            Refusal::Busy => format!(
+                "busy: the component did not take the command within {timeout:?}; withdrawn"
+            ),
+            Refusal::Rejected(reason) => reason,
+        }
+    }
+}
+
 /// The control port `c` and monitoring port `m` of one component. Cheap to clone,
 /// `Send`; any number of handles may exist.
 #[derive(Clone)]
@@ -671,18 +727,19 @@ impl Handle {
     /// component, without waiting ([`System::run_all`](crate::System::run_all) posts to
     /// every component before it waits for any).
     pub(crate) fn post(&self, command: Command) -> Result<Posted, Rejected> {
+        let rendered = command.clone();
+        self.post_command(command)
+            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
+    }
+
+    /// [`Handle::post`], with why it failed as a [`Refusal`].
+    pub(crate) fn post_command(&self, command: Command) -> Result<Posted, Refusal> {
         if !self.shared.spawned.load(Ordering::Acquire) {
-            return Err(self.rejected(
-                &command,
-                "the component has not been started (System::start)",
-            ));
+            return Err(Refusal::NotStarted);
         }
         if self.shared.thread.get() == Some(&std::thread::current().id()) {
             // The thread would wait for itself until the timeout.
-            return Err(self.rejected(
-                &command,
-                "a component cannot command itself from its own thread (use Context::end to finish)",
-            ));
+            return Err(Refusal::OwnThread);
         }
         let deadline = crate::thread::later(Instant::now(), self.command_timeout);
         let (reply, answers) = crossbeam_channel::bounded(2);
@@ -692,11 +749,10 @@ impl Handle {
             reply,
             claim: Arc::clone(&claim),
         };
-        if self.control.try_send(message).is_err() {
-            return Err(self.rejected(
-                &command,
-                "the component's thread has ended or its control queue is full",
-            ));
+        match self.control.try_send(message) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => return Err(Refusal::QueueFull),
+            Err(TrySendError::Disconnected(_)) => return Err(Refusal::Ended),
         }
         self.bell.ring_strong();
         Ok(Posted {
@@ -709,6 +765,13 @@ impl Handle {
 
     /// The second half of [`Handle::command`]: wait for the answers to `posted`.
     pub(crate) fn finish(&self, posted: Posted) -> Result<(), Rejected> {
+        let rendered = posted.command.clone();
+        self.finish_command(posted)
+            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
+    }
+
+    /// [`Handle::finish`], with why it failed as a [`Refusal`].
+    pub(crate) fn finish_command(&self, posted: Posted) -> Result<(), Refusal> {
         let Posted {
             command,
             answers,
@@ -719,19 +782,13 @@ impl Handle {
         match answers.recv_deadline(deadline) {
             Ok(Reply::Accepted) => {}
             Ok(Reply::Done) => return Ok(()),
-            Ok(Reply::Rejected(reason)) => return Err(self.rejected(&command, reason)),
+            Ok(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
             Err(_) => {
                 if claim
                     .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
                     .is_ok()
                 {
-                    return Err(self.rejected(
-                        &command,
-                        format!(
-                            "busy: the component did not take the command within {:?}; withdrawn",
-                            self.command_timeout
-                        ),
-                    ));
+                    return Err(Refusal::Busy);
                 }
                 // Taken just now: the transition is under way.
                 if answers
@@ -749,6 +806,13 @@ impl Handle {
             self.join_if_exited(deadline);
         }
         Ok(())
+    }
+
+    /// [`Handle::command`] with why it failed as a [`Refusal`] (a compound's
+    /// supervisor commanding its instances: `crate::commander`).
+    pub(crate) fn command_refusable(&self, command: Command) -> Result<(), Refusal> {
+        let posted = self.post_command(command)?;
+        self.finish_command(posted)
     }
 
     /// Wait (until `deadline`) for the thread to end, then join it.

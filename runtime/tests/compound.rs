@@ -457,9 +457,25 @@ fn a_substitute_takes_over_and_the_recovered_original_takes_its_place_back() {
             Step::Failed,
             Step::Enqueued,
             Step::Substituted { by: "b".to_owned() },
+            Step::RetryFailed,
             Step::Retried,
             Step::Recovered
         ]
+    );
+    // The failed retries say why: a first retry may find w still in its panicking
+    // section; the one the test waited for left it in starting_error (its `start`
+    // fails).
+    let failed: Vec<String> = monitor
+        .supervision
+        .iter()
+        .filter(|s| s.step == Step::RetryFailed)
+        .map(|s| s.to_string())
+        .collect();
+    assert!(
+        failed
+            .iter()
+            .any(|s| s == "w retry failed: starting_error after the restart"),
+        "{failed:?}"
     );
     assert!(monitor.supervision.iter().all(|s| s.instance == "w"));
     assert!(monitor.supervision_steps >= 5);

@@ -2,7 +2,7 @@
 //! may appear once, per-scope duplicates, variables, ports and exceptions.
 
 use super::model::DEFAULT_CONTROLLABLES;
-use super::model::DEFAULT_OBSERVABLES;
+use super::model::{DEFAULT_OBSERVABLES, Ty};
 use super::{Checker, automaton, compound, names, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
@@ -24,7 +24,12 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             ast::Member::Variable(variable) => self::variable(checker, component, variable),
             ast::Member::Input(input) => self::input(checker, input),
             ast::Member::Output(output) => self::output(checker, output),
-            ast::Member::Timing(timing) => values::timing(checker, timing),
+            ast::Member::Timing(timing) => {
+                values::timing(checker, timing);
+                if component.kind == ComponentKind::Compound {
+                    compound::compound_timing(checker, timing, &component.name.name);
+                }
+            }
             ast::Member::Exception(exception) => {
                 self::exception(checker, exception);
                 degrade_without_quality(checker, component, exception);
@@ -37,6 +42,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
                     values::duration(checker, deadline, "`deadline`");
                 }
             }
+            ast::Member::Restart(restart) => self::restart(checker, restart),
             ast::Member::Automaton(_)
             | ast::Member::Instance(_)
             | ast::Member::Redundant(_)
@@ -79,6 +85,11 @@ fn placement(checker: &mut Checker<'_, '_>, component: &ast::Component) {
                 m.span,
                 "`recovery`",
                 "the recovery queue belongs to a compound",
+            )),
+            ast::Member::Restart(m) if atomic => Some((
+                m.span,
+                "`restart { }`",
+                "the restart budget belongs to a compound's `restart` policy",
             )),
             ast::Member::Input(ast::Input {
                 def: ast::InputDef::Export(_),
@@ -165,8 +176,47 @@ fn placement(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     }
 }
 
-/// `configuration`, `timing`, `automaton`/`supervisor` and `recovery` appear at most
-/// once.
+/// `restart { limit N in D; backoff D..D; }`: a positive count that fits the runtime's
+/// `u32`, non-zero durations, a backoff whose first wait is not longer than its last.
+fn restart(checker: &mut Checker<'_, '_>, restart: &ast::Restart) {
+    if let Some((count, window)) = &restart.limit {
+        if let ast::ExprKind::Int(0) = count.kind {
+            let diagnostic = checker
+                .error(
+                    Code::ZeroSize,
+                    count.span,
+                    "a restart limit must not be zero",
+                )
+                .with_label("zero here")
+                .with_help("to never restart, use `on error x: propagate;`");
+            checker.push(diagnostic);
+        } else {
+            values::value(checker, count, &Ty::Int(ast::Prim::U32));
+        }
+        values::duration(checker, window, "the restart window");
+    }
+    if let Some((first, last)) = &restart.backoff {
+        values::duration(checker, first, "`backoff`");
+        values::duration(checker, last, "`backoff`");
+        if let (ast::ExprKind::Duration(lo), ast::ExprKind::Duration(hi)) =
+            (&first.kind, &last.kind)
+            && lo > hi
+        {
+            let diagnostic = checker
+                .error(
+                    Code::ReversedInterval,
+                    first.span.join(last.span),
+                    "the backoff's first wait is longer than its last",
+                )
+                .with_label("reversed interval")
+                .with_help("write the first wait first: `backoff 10ms..1s;`");
+            checker.push(diagnostic);
+        }
+    }
+}
+
+/// `configuration`, `timing`, `automaton`/`supervisor`, `recovery` and `restart`
+/// appear at most once.
 fn repeated_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     let mut seen: Vec<(&str, Span)> = Vec::new();
     for member in &component.members {
@@ -175,6 +225,7 @@ fn repeated_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
             ast::Member::Timing(m) => ("timing", m.span),
             ast::Member::Automaton(m) => ("automaton", m.keyword_span),
             ast::Member::Recovery(m) => ("recovery", m.span),
+            ast::Member::Restart(m) => ("restart", m.span),
             _ => continue,
         };
         if let Some((_, first)) = seen.iter().find(|(seen_name, _)| *seen_name == name) {

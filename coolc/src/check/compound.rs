@@ -55,6 +55,50 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
     cardinality(checker, component, &instances);
     duplicate_policies(checker, component);
     unconnected_transition_inputs(checker, component, &instances);
+    unused_blocks(checker, component);
+}
+
+/// A `restart { }` block with no `restart` policy, or a `recovery { }` block with
+/// nothing that uses the recovery queue (no `substitute` policy, no redundant group),
+/// changes nothing at run time: a warning says so.
+fn unused_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let policy = |name: &str| {
+        component
+            .members
+            .iter()
+            .any(|member| matches!(member, ast::Member::OnError(on) if on.policy.name == name))
+    };
+    let grouped = component
+        .members
+        .iter()
+        .any(|member| matches!(member, ast::Member::Redundant(_)));
+    for member in &component.members {
+        let (block, span, help) = match member {
+            ast::Member::Restart(restart) if !policy("restart") => (
+                "restart",
+                restart.span,
+                "it sets the budget of the `restart` policy: add `on error x: restart;` or remove the block",
+            ),
+            ast::Member::Recovery(recovery) if !policy("substitute") && !grouped => (
+                "recovery",
+                recovery.span,
+                "the recovery queue holds instances whose policy is `substitute` and failed redundant members: add one or remove the block",
+            ),
+            _ => continue,
+        };
+        let diagnostic = Diagnostic::warning(
+            Code::UnusedBlock,
+            checker.file,
+            span,
+            format!(
+                "`{block} {{ }}` applies to no instance of `{}`",
+                component.name.name
+            ),
+        )
+        .with_label("changes nothing at run time")
+        .with_help(help);
+        checker.push(diagnostic);
+    }
 }
 
 /// The instances of a compound by name, with the interface of their component
@@ -83,6 +127,26 @@ fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -
     out
 }
 
+/// `on "node"` is accepted but not carried out yet: the generated compound builds the
+/// instance in its own process. A warning says so, so that no description means more
+/// than what runs.
+fn remote_instance(checker: &mut Checker<'_, '_>, instance: &ast::Instance, node: &ast::StrLit) {
+    let diagnostic = Diagnostic::warning(
+        Code::RemoteInstance,
+        checker.file,
+        node.span,
+        format!(
+            "instance `{}` runs in this process: `on \"{}\"` is not carried out yet",
+            instance.name.name, node.value
+        ),
+    )
+    .with_label("not carried out yet")
+    .with_help(
+        "remove `on \"...\"` to say what runs, or run the component on that node by hand with coolbot-zenoh (docs/distribution.md)",
+    );
+    checker.push(diagnostic);
+}
+
 fn instance(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
@@ -97,6 +161,11 @@ fn instance(
             .error(Code::TypeMismatch, node.span, "a node name cannot be empty")
             .with_label("empty");
         checker.push(diagnostic);
+    }
+    if let Some(node) = &instance.node
+        && !node.value.trim().is_empty()
+    {
+        remote_instance(checker, instance, node);
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
@@ -148,8 +217,44 @@ fn instance(
     }
     if let Some(timing) = &instance.timing {
         values::timing(checker, timing);
+        let nested = checker
+            .model
+            .component(&instance.component.name)
+            .is_some_and(|(_, def)| def.kind == ComponentKind::Compound);
+        if nested {
+            compound_timing(checker, timing, &instance.component.name);
+        }
     }
     let _ = component;
+}
+
+/// A compound's own `timing` (or a nested compound instance's `timing` override)
+/// takes one period for its supervisor's periodic sections, `max_response`,
+/// `priority`, and quality levels (its own `quality`, set through its control port,
+/// which its rules read and its sections act on by commanding instances); a period
+/// interval would be a degraded period of the supervisor itself, which no adaptation
+/// uses: a compound's period degrades through its instances. It is an error rather
+/// than accepted and ignored.
+pub(super) fn compound_timing(checker: &mut Checker<'_, '_>, timing: &ast::Timing, compound: &str) {
+    for entry in &timing.entries {
+        let ast::TimingEntry::Period(ast::Interval {
+            hi: Some(_), span, ..
+        }) = entry
+        else {
+            continue;
+        };
+        let diagnostic = checker
+            .error(
+                Code::MisplacedMember,
+                *span,
+                format!("the timing of compound `{compound}` cannot have a period interval"),
+            )
+            .with_label("not allowed in a compound")
+            .with_help(
+                "a compound's period degrades through its instances: give the interval to the atomic components inside, and one period to the supervisor",
+            );
+        checker.push(diagnostic);
+    }
 }
 
 /// `substitutes other`: another instance of this compound with the same interface.
@@ -769,7 +874,52 @@ fn on_error(
             checker.push(diagnostic);
         }
     }
-    let _ = component;
+    unconsulted_policy(checker, component, instances, on_error);
+}
+
+/// The runtime consults no policy for a substitute (one that fails while standing in
+/// leaves nothing to stand for the original: the compound fails) nor for a member of
+/// a redundant group (it goes to the recovery queue while the others keep the group
+/// running). A policy written for one would be accepted and ignored: it is an error.
+fn unconsulted_policy(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+    on_error: &ast::OnError,
+) {
+    let name = on_error.instance.name.as_str();
+    let substitutes = instances
+        .get(name)
+        .and_then(|(instance, _)| instance.substitutes.as_ref());
+    let grouped = component.members.iter().any(|member| {
+        matches!(member, ast::Member::Redundant(group)
+            if group.members.iter().any(|m| m.name == name))
+    });
+    let (why, help) = if let Some(original) = substitutes {
+        (
+            format!("`{name}` substitutes `{}`", original.name),
+            format!(
+                "a substitute that fails while it stands in leaves nothing to stand for `{}`: the compound goes to running_error; remove this line",
+                original.name
+            ),
+        )
+    } else if grouped {
+        (
+            format!("`{name}` is a member of a redundant group"),
+            "a failed member goes to the recovery queue while the other members keep the group running (`recovery { }` sets its retries); remove this line".to_owned(),
+        )
+    } else {
+        return;
+    };
+    let diagnostic = checker
+        .error(
+            Code::BadPolicy,
+            on_error.span,
+            format!("no policy applies to `{name}`: {why}"),
+        )
+        .with_label("never consulted")
+        .with_help(help);
+    checker.push(diagnostic);
 }
 
 /// A mapped variable `observable x = instance.variable;`: the instance exists and has

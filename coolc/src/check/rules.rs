@@ -3,22 +3,23 @@
 //! default ones. `state` compares with the default automaton's states, `user_state`
 //! with the instance's user states, `result` with `none`/`success`/`fail`, `quality`
 //! with the instance's quality levels; `error` is a `String`, `cpu_time` and
-//! `elapsed_time` are durations. A bare name that is not a variable is a symbol,
-//! resolved against the other side of the comparison. The compound's own `result`,
-//! `error`, `cpu_time`, `elapsed_time` and `quality` are not readable in a rule
-//! (`coolc::check::unreadable_in_rule`); an instance's `quality` levels are those of
-//! its `timing` override when it declares some.
+//! `elapsed_time` are durations. The compound's own default observables read the same
+//! way (its `quality` with its own levels). An instance's observable and controllable
+//! variables are readable; its `local` variables and the default controllable
+//! variables (`new_state`, `configuration`, `period`, `max_response`, `priority`)
+//! are not published where rules are evaluated (`coolc::check::unreadable_in_rule`).
+//! A bare name that is not a variable is a symbol, resolved against the other side of
+//! the comparison. An instance's `quality` levels are those of its `timing` override
+//! when it declares some.
 
 use std::fmt;
 
 use super::Checker;
-use super::model::{DEFAULT_OBSERVABLES, DEFAULT_STATES, Interface, Model, RESULTS, Ty};
+use super::model::{
+    DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Interface, Model, RESULTS, Ty,
+};
 use crate::ast::{self, BinaryOp};
 use crate::diagnostics::Code;
-
-/// The compound's own default variables a rule cannot read: the supervisor's result,
-/// error, times and quality are not published where rules are evaluated.
-const UNREADABLE_OWN: [&str; 5] = ["result", "error", "cpu_time", "elapsed_time", "quality"];
 
 /// The type of a rule expression.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,6 +126,9 @@ pub(super) fn rule(
         RTy::Bool | RTy::Unknown => {}
         RTy::Symbol(name) => typer.unknown_variable(&name),
         other => {
+            let help = typer
+                .enum_variants(&other)
+                .unwrap_or_else(|| "compare it: `x == value`, `x > 3`".to_owned());
             let diagnostic = typer
                 .checker
                 .error(
@@ -133,7 +137,7 @@ pub(super) fn rule(
                     format!("a rule must be a boolean expression, but this is {other}"),
                 )
                 .with_label("not a bool")
-                .with_help("compare it: `x == value`, `x > 3`");
+                .with_help(help);
             typer.checker.push(diagnostic);
         }
     }
@@ -244,23 +248,6 @@ impl Typer<'_, '_, '_> {
                 if let Some(var) = self.own.variables.get(&name.name) {
                     return from_ty(&var.ty);
                 }
-                if UNREADABLE_OWN.contains(&name.name.as_str()) {
-                    let diagnostic = self
-                        .checker
-                        .error(
-                            Code::UnreadableInRule,
-                            name.span,
-                            format!("a rule cannot read the compound's own `{}` yet", name.name),
-                        )
-                        .with_label("not readable in a rule")
-                        .with_help(
-                            "rules read the compound's own `state`, `user_state` and \
-                             declared variables, and its instances' variables \
-                             (`instance.variable`)",
-                        );
-                    self.checker.push(diagnostic);
-                    return RTy::Unknown;
-                }
                 default_variable(&name.name, &self.component.name.name, self.own)
                     .unwrap_or_else(|| RTy::Symbol(name.clone()))
             }
@@ -302,24 +289,49 @@ impl Typer<'_, '_, '_> {
         }
         let interface = self.checker.model.interface(&instance.component.name);
         match interface.variables.get(&variable.name) {
-            Some(var) if var.kind == ast::VarKind::Observable => return from_ty(&var.ty),
+            Some(var) if var.kind != ast::VarKind::Local => return from_ty(&var.ty),
             Some(_) => {
                 let diagnostic = self
                     .checker
                     .error(
-                        Code::UnknownVariable,
+                        Code::UnreadableInRule,
                         variable.span,
                         format!(
-                            "`{}` is not observable in `{}`",
+                            "`{}` is a local variable of `{}`: it is not published, so a rule cannot read it",
                             variable.name, instance.component.name
                         ),
                     )
-                    .with_label("not observable")
-                    .with_help("rules read observable variables only: declare it `observable`");
+                    .with_label("local")
+                    .with_help(
+                        "rules read observable and controllable variables: declare it `observable`",
+                    );
                 self.checker.push(diagnostic);
                 return RTy::Unknown;
             }
             None => {}
+        }
+        if DEFAULT_CONTROLLABLES.contains(&variable.name.as_str()) {
+            let diagnostic = self
+                .checker
+                .error(
+                    Code::UnreadableInRule,
+                    variable.span,
+                    format!(
+                        "`{}` is a default controllable variable: a rule cannot read it",
+                        variable.name
+                    ),
+                )
+                .with_label("not readable in a rule")
+                .with_help(format!(
+                    "rules read the default observable variables ({}) and declared variables",
+                    DEFAULT_OBSERVABLES
+                        .iter()
+                        .map(|name| format!("`{name}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            self.checker.push(diagnostic);
+            return RTy::Unknown;
         }
         if let Some(ty) = default_variable(&variable.name, &instance.component.name, &interface) {
             // An instance's `timing` override may declare its own quality levels.
@@ -331,14 +343,14 @@ impl Typer<'_, '_, '_> {
         let candidates: Vec<&str> = interface
             .variables
             .iter()
-            .filter(|(_, v)| v.kind == ast::VarKind::Observable)
+            .filter(|(_, v)| v.kind != ast::VarKind::Local)
             .map(|(n, _)| n.as_str())
             .chain(DEFAULT_OBSERVABLES.iter().copied())
             .collect();
         self.checker.unknown(
             Code::UnknownVariable,
             variable,
-            "observable variable",
+            "variable",
             &format!(
                 " in `{}` (component `{}`)",
                 instance_name.name, instance.component.name
@@ -391,9 +403,11 @@ impl Typer<'_, '_, '_> {
         if !compatible(&left_ty, &right_ty) {
             let help = match (&left_ty, &right_ty) {
                 (RTy::Float, RTy::Int) | (RTy::Int, RTy::Float) => {
-                    Some("write float literals with a point, e.g. `3.0`")
+                    Some("write float literals with a point, e.g. `3.0`".to_owned())
                 }
-                _ => None,
+                _ => self
+                    .enum_variants(&left_ty)
+                    .or_else(|| self.enum_variants(&right_ty)),
             };
             let mut diagnostic = self
                 .checker
@@ -422,15 +436,43 @@ impl Typer<'_, '_, '_> {
                 RTy::Int | RTy::Float | RTy::Duration | RTy::Time
             )
         {
-            self.mismatch(
-                expr,
-                format!(
-                    "`{}` orders numbers, durations and times, not {left_ty}",
-                    op.as_str()
-                ),
-            );
+            let mut diagnostic = self
+                .checker
+                .error(
+                    Code::RuleType,
+                    expr.span,
+                    format!(
+                        "`{}` orders numbers, durations and times, not {left_ty}",
+                        op.as_str()
+                    ),
+                )
+                .with_label("ill-typed");
+            if let Some(help) = self.enum_variants(&left_ty) {
+                diagnostic = diagnostic.with_help(help);
+            }
+            self.checker.push(diagnostic);
         }
         RTy::Bool
+    }
+
+    /// For an enum (or optional enum) type, help that lists its variants and how a
+    /// rule compares with one.
+    fn enum_variants(&self, ty: &RTy) -> Option<String> {
+        let RTy::Enum(name) = strip(ty) else {
+            return None;
+        };
+        let def = self.checker.model.enum_def(name)?;
+        let variants: Vec<String> = def
+            .variants
+            .iter()
+            .map(|v| format!("`{name}::{}`", v.name.name))
+            .collect();
+        let first = variants.first()?;
+        Some(format!(
+            "compare it with `==` or `!=` to a variant of `{name}`: {} (e.g. `== {}`)",
+            variants.join(", "),
+            first.trim_matches('`')
+        ))
     }
 
     /// Resolves a bare name against the type it is compared with.

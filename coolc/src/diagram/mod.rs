@@ -115,7 +115,7 @@ pub struct Group {
     pub id: String,
     /// Label lines.
     pub label: Vec<String>,
-    /// Dashed frame (redundant groups, remote compounds).
+    /// Dashed frame (redundant groups).
     pub dashed: bool,
     /// Rounded frame (states).
     pub rounded: bool,
@@ -147,7 +147,7 @@ pub struct Node {
     pub lines: Vec<String>,
     /// Its shape.
     pub shape: Shape,
-    /// Dashed outline (default ports, remote instances).
+    /// Dashed outline (default ports).
     pub dashed: bool,
     /// Ports drawn on the node (DOT records); edges may end at them.
     pub ports: Option<Ports>,

@@ -238,7 +238,6 @@ impl<'a> Lookup<'a> {
             component,
             "",
             vec![format!("«compound» {}", component.name.name)],
-            false,
             &mut edges,
             0,
         );
@@ -256,7 +255,6 @@ impl<'a> Lookup<'a> {
         component: &ast::Component,
         prefix: &str,
         label: Vec<String>,
-        dashed: bool,
         edges: &mut Vec<Edge>,
         depth: usize,
     ) -> Group {
@@ -399,7 +397,7 @@ impl<'a> Lookup<'a> {
             }
         }
 
-        // Variables and the recovery queue, in a note.
+        // Variables, the recovery queue and the restart budget, in a note.
         let mut note = Vec::new();
         for member in &component.members {
             match member {
@@ -413,6 +411,24 @@ impl<'a> Lookup<'a> {
                         parts.push(format!("deadline {}", text::expr(deadline)));
                     }
                     note.push(format!("recovery {{ {} }}", parts.join("; ")));
+                }
+                Member::Restart(restart) => {
+                    let mut parts = Vec::new();
+                    if let Some((count, window)) = &restart.limit {
+                        parts.push(format!(
+                            "limit {} in {}",
+                            text::expr(count),
+                            text::expr(window)
+                        ));
+                    }
+                    if let Some((first, last)) = &restart.backoff {
+                        parts.push(format!(
+                            "backoff {}..{}",
+                            text::expr(first),
+                            text::expr(last)
+                        ));
+                    }
+                    note.push(format!("restart {{ {} }}", parts.join("; ")));
                 }
                 _ => {}
             }
@@ -429,7 +445,7 @@ impl<'a> Lookup<'a> {
         Group {
             id: group_id,
             label,
-            dashed,
+            dashed: false,
             rounded: false,
             items,
         }
@@ -449,16 +465,20 @@ impl<'a> Lookup<'a> {
             instance.name.name, instance.component.name
         )];
         if let Some(node) = &instance.node {
-            lines.push(format!("on \"{}\" (remote)", node.value));
+            // `on "node"` is not carried out yet (`coolc::check::remote_instance`):
+            // the drawing says where the instance really runs.
+            lines.push(format!(
+                "on \"{}\": runs locally (not yet remote)",
+                node.value
+            ));
         }
         if let Some(policy) = policies.get(instance.name.name.as_str()) {
             lines.push(format!("on error: {policy}"));
         }
-        let remote = instance.node.is_some();
         let inner = self.component(&instance.component.name);
         match inner {
             Some(inner) if inner.kind == ComponentKind::Compound && depth < 16 => {
-                Item::Group(self.compound_group(inner, &path, lines, remote, edges, depth + 1))
+                Item::Group(self.compound_group(inner, &path, lines, edges, depth + 1))
             }
             _ => {
                 let ports = inner.map(|inner| Ports {
@@ -473,7 +493,7 @@ impl<'a> Lookup<'a> {
                     id: path,
                     lines,
                     shape: Shape::Box,
-                    dashed: remote,
+                    dashed: false,
                     ports,
                 })
             }

@@ -10,8 +10,8 @@
 use std::collections::BTreeSet;
 
 use super::{
-    GEN_TYPES, Lowerer, SectionOwner, StateSections, doc, duration_ns, duration_rust,
-    section_stubs, unique_among,
+    GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
+    may_targets, section_stubs, unique_among,
 };
 use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS};
@@ -281,6 +281,33 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// Whether compound `c` connects through a converter, itself or in a compound it
+    /// nests at any depth: its builder then takes the converters as a type argument
+    /// and passes them on to the nested builders.
+    fn uses_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        let own = c
+            .members
+            .iter()
+            .any(|m| matches!(m, ast::Member::Connect(k) if k.via.is_some()));
+        own || self.nests_converters(c, visiting)
+    }
+
+    /// Whether an instance of compound `c` is a compound that uses converters.
+    fn nests_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        if !visiting.insert(&c.name.name) {
+            // A compound nesting itself was rejected by the checker.
+            return false;
+        }
+        let nested = c.members.iter().any(|m| match m {
+            ast::Member::Instance(i) => self.component_of(i).is_some_and(|t| {
+                t.kind == ast::ComponentKind::Compound && self.uses_converters(t, visiting)
+            }),
+            _ => false,
+        });
+        visiting.remove(c.name.name.as_str());
+        nested
+    }
+
     /// Lowers compound `c` into the IR of its generated module.
     pub(super) fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
         let mut instances = Vec::new();
@@ -399,6 +426,26 @@ impl<'a> Lowerer<'a> {
                 ast::Member::Recovery(r) => {
                     recovery.get_or_insert(r);
                 }
+                ast::Member::Restart(r) => {
+                    if let Some((count, window)) = &r.limit {
+                        // Checked: an integer in `1..=u32::MAX` and non-zero durations.
+                        let count = match count.kind {
+                            ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
+                            _ => u32::MAX,
+                        };
+                        steps.push(format!(
+                            ".restart_budget({count}, {})",
+                            duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
+                        ));
+                    }
+                    if let Some((first, last)) = &r.backoff {
+                        steps.push(format!(
+                            ".restart_backoff({}, {})",
+                            duration_rust(duration_ns(first).unwrap_or(10_000_000)),
+                            duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
+                        ));
+                    }
+                }
                 ast::Member::Automaton(a) => {
                     automaton.get_or_insert(a);
                 }
@@ -473,6 +520,7 @@ impl<'a> Lowerer<'a> {
             });
         }
 
+        let handles = self.handles(c, &instances);
         let name = ident::camel_raw(&c.name.name);
         let parts = instances
             .iter()
@@ -491,12 +539,13 @@ impl<'a> Lowerer<'a> {
         all_parts.extend(parts);
         ir::Compound {
             doc: doc(&c.doc),
+            notes: ir::notes(&c.notes),
             type_name: c.name.name.clone(),
             module,
             user_struct: format!("{name}Parts"),
             supervisor_struct: format!("{name}Supervisor"),
             parts: all_parts,
-            uses_converters,
+            uses_converters: uses_converters || self.nests_converters(c, &mut BTreeSet::new()),
             instances,
             connections,
             steps,
@@ -508,9 +557,99 @@ impl<'a> Lowerer<'a> {
             initial: supervisor.initial,
             methods: supervisor.methods,
             section_arms: supervisor.section_arms,
+            choose_arms: supervisor.choose_arms,
             timing: self.timing(timing),
             rules,
+            handles,
         }
+    }
+
+    /// The typed handles of `c`'s instances for the supervisor's `Cx`: one per
+    /// instance whose component is known, in declaration order.
+    fn handles(&self, c: &'a ast::Component, instances: &[ir::Instance]) -> Vec<ir::Handle> {
+        // Names the handles' methods and types must not take: `Instances` has no
+        // other method; the types live beside the module's own.
+        let mut methods: Vec<String> = Vec::new();
+        let mut types: Vec<String> = Vec::new();
+        let mut handles = Vec::new();
+        for lowered in instances {
+            let Some(instance) = Self::instance_of(c, &lowered.name) else {
+                continue;
+            };
+            let (Some(component), Some(module)) =
+                (self.component_of(instance), lowered.module.as_ref())
+            else {
+                continue;
+            };
+            let method = unique_among(
+                ident::snake(&lowered.name),
+                methods.iter().map(String::as_str),
+            );
+            methods.push(method.clone());
+            let type_name = unique_among(
+                format!("{}Instance", ident::camel_raw(&lowered.name)),
+                types.iter().map(String::as_str),
+            );
+            types.push(type_name.clone());
+            let mut setters = Vec::new();
+            let mut config = None;
+            for member in &component.members {
+                match member {
+                    ast::Member::Variable(v) if v.kind == ast::VarKind::Controllable => {
+                        let Some((ty, _)) = self.variable_type(component, &v.name.name, 0) else {
+                            continue;
+                        };
+                        let to_value = match &ty.kind {
+                            TypeKind::Prim(_) => "::coolbot::Value::from(value)".to_owned(),
+                            _ => "super::__cool_to_value(&value)".to_owned(),
+                        };
+                        setters.push(ir::Setter {
+                            method: ident::method("set_", &v.name.name, ""),
+                            variable: v.name.name.clone(),
+                            ty: self.rust_type(ty, GEN_TYPES),
+                            to_value,
+                        });
+                    }
+                    ast::Member::Configuration(block)
+                        if !lowered.compound && !block.fields.is_empty() =>
+                    {
+                        config = Some(format!("super::{module}::Config"));
+                    }
+                    _ => {}
+                }
+            }
+            let (_, mut levels) = Self::states_and_qualities(component);
+            if let Some(own) = instance.timing.as_ref().and_then(|timing| {
+                timing.entries.iter().find_map(|entry| match entry {
+                    ast::TimingEntry::Quality(levels, _) => Some(levels),
+                    _ => None,
+                })
+            }) {
+                levels = own.iter().map(|level| level.name.clone()).collect();
+            }
+            let quality = (levels.len() >= 2).then(|| {
+                let name = unique_among(
+                    format!("{}Quality", ident::camel_raw(&lowered.name)),
+                    types.iter().map(String::as_str),
+                );
+                types.push(name.clone());
+                let variants = levels
+                    .iter()
+                    .map(|level| (ident::camel(level), level.clone()))
+                    .collect();
+                (name, variants)
+            });
+            handles.push(ir::Handle {
+                instance: lowered.name.clone(),
+                method,
+                type_name,
+                component: lowered.component.clone(),
+                setters,
+                config,
+                quality,
+            });
+        }
+        handles
     }
 
     /// The mapped controllable variables of compound `c`: `(name, instance,
@@ -659,10 +798,17 @@ impl<'a> Lowerer<'a> {
                 && var_overrides.is_empty()
                 && from_mapped.is_empty()
                 && mapped_overrides.is_empty();
+            // A nested compound that uses converters gets the enclosing compound's.
+            let converters = match target {
+                Some(t) if compound && self.uses_converters(t, &mut BTreeSet::new()) => "::<C>",
+                _ => "",
+            };
             match (compound, plain) {
-                (true, true) => format!("super::{module}::component({name}, parts.{method}())?"),
+                (true, true) => format!(
+                    "super::{module}::component{converters}({name}, parts.{method}())?"
+                ),
                 (true, false) => format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {vars}, {nested})?"
+                    "super::{module}::component_with{converters}({name}, parts.{method}(), {vars}, {nested})?"
                 ),
                 (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
                 (false, false) => format!(
@@ -807,6 +953,7 @@ struct Supervisor {
     initial: usize,
     methods: Vec<ir::Method>,
     section_arms: Vec<(String, String)>,
+    choose_arms: Vec<ir::ChooseArm>,
     /// `(state, condition, target)` of every `when`, in order.
     when: Vec<(String, ast::Expr, String)>,
 }
@@ -836,11 +983,12 @@ impl Lowerer<'_> {
         let mut states = Vec::new();
         let mut methods = Vec::new();
         let mut section_arms = Vec::new();
+        let mut choose_arms = Vec::new();
         let mut when = Vec::new();
         for (index, state) in states_ast.iter().enumerate() {
             let name = &state.name.name;
             let (mut entry, mut exit, mut periodic) = (false, false, None);
-            let (mut on, mut after) = (Vec::new(), Vec::new());
+            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
             for member in &state.members {
                 match member {
                     ast::StateMember::Entry(_) => entry = true,
@@ -873,7 +1021,9 @@ impl Lowerer<'_> {
                     ast::StateMember::When {
                         condition, target, ..
                     } => when.push((name.clone(), condition.clone(), target.name.clone())),
-                    ast::StateMember::May { .. } => {}
+                    ast::StateMember::May { targets, .. } => {
+                        may_targets(targets, &state_index, &mut may);
+                    }
                 }
             }
             section_stubs(
@@ -883,24 +1033,41 @@ impl Lowerer<'_> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
+                    docs: super::SectionDocs::of(state),
                 },
                 SectionOwner::Supervisor,
                 &mut methods,
                 &mut section_arms,
             );
+            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
+            if let Some(may_enum) = &may_enum {
+                choose_stub(
+                    index,
+                    name,
+                    may_enum,
+                    &may,
+                    &super::SectionDocs::of(state).may,
+                    &mut methods,
+                    &mut choose_arms,
+                );
+            }
             let spec = format!(
-                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[] }}",
+                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
                 ident::string_literal(name),
                 periodic.unwrap_or_else(|| "None".to_owned()),
                 on.join(", "),
                 after.join(", "),
+                may.iter()
+                    .map(|(_, i, _)| i.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             states.push(ir::State {
                 doc: doc(&state.doc),
                 cool_name: name.clone(),
                 variant: ident::camel(name),
-                may_enum: None,
-                may: Vec::new(),
+                may_enum,
+                may,
                 spec,
             });
         }
@@ -924,6 +1091,7 @@ impl Lowerer<'_> {
             initial,
             methods,
             section_arms,
+            choose_arms,
             when,
         }
     }
@@ -1253,12 +1421,35 @@ impl Scope<'_, '_> {
                     narrow: false,
                 }
             }
-            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => Operand {
-                code: String::new(),
-                ty: RTy::Unreadable,
-                maybe: false,
-                narrow: false,
-            },
+            // The compound's own default observables, copied into the view at each
+            // supervision turn.
+            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => {
+                self.read(name.to_owned());
+                self.uses_view = true;
+                let (code, ty, maybe) = match name {
+                    "result" => (
+                        "::core::option::Option::Some(view.own_result())".to_owned(),
+                        RTy::Result,
+                        true,
+                    ),
+                    "error" => (
+                        "view.own_error().unwrap_or(\"\")".to_owned(),
+                        RTy::Str,
+                        false,
+                    ),
+                    "quality" => {
+                        let (_, levels) = Lowerer::states_and_qualities(component);
+                        ("view.own_quality()".to_owned(), RTy::Quality(levels), false)
+                    }
+                    _ => (format!("view.own_{name}()"), RTy::Duration, false),
+                };
+                Operand {
+                    code,
+                    ty,
+                    maybe,
+                    narrow: false,
+                }
+            }
             _ => Operand {
                 code: String::new(),
                 ty: RTy::Symbol(name.to_owned()),
@@ -1367,13 +1558,9 @@ impl Scope<'_, '_> {
             ),
             _ => return unreadable,
         };
-        // `cpu_time` and `elapsed_time` have no change event of their own: they are
-        // sampled when the rule is evaluated, announced with the state.
-        let read = match variable {
-            "cpu_time" | "elapsed_time" => format!("{instance}.state"),
-            _ => format!("{instance}.{variable}"),
-        };
-        self.read(read);
+        // (`cpu_time` and `elapsed_time` have no change event of their own: the
+        // runtime counts them as changed every supervisor period.)
+        self.read(format!("{instance}.{variable}"));
         self.uses_view = true;
         maybe(code, ty)
     }
@@ -1799,8 +1986,110 @@ mod tests {
         assert_eq!(rules[0].1, r#"&["m.quality"]"#);
         assert!(rules[0].0.contains("== 2_usize"), "{}", rules[0].0);
         assert!(rules[1].0.contains("== 1_usize"), "{}", rules[1].0);
-        // `cpu_time` has no change event: sampled when the state's events come.
-        assert_eq!(rules[1].1, r#"&["n.quality", "m.state"]"#);
+        // `cpu_time` has no change event: read under its own key, which the runtime
+        // counts as changed every supervisor period.
+        assert_eq!(rules[1].1, r#"&["n.quality", "m.cpu_time"]"#);
+    }
+
+    const CONTROLLED: &str = "
+        atomic Drive {
+            configuration { accel: f64 = 1.0; }
+            controllable speed: f64 = 1.0;
+            controllable label: String = \"d\";
+            observable travelled: f64 = 0.0;
+            timing { period 5ms; quality full, eco; }
+            automaton { initial on; state on { periodic; } }
+        }
+        compound Base {
+            instance motion: Drive;
+            instance spare: Drive { timing { quality only; } }
+            timing { quality best, good; }
+            supervisor {
+                initial on;
+                state on {
+                    entry;
+                    may -> off;
+                    when result == fail || error != \"\" -> off;
+                    when quality == good && cpu_time > 1s -> off;
+                    when motion.speed < 0.5 -> off;
+                }
+                state off { entry; }
+            }
+        }";
+
+    #[test]
+    fn rules_read_the_compounds_own_defaults_and_instance_controllables() {
+        let rules = rules_of(CONTROLLED);
+        assert_eq!(rules[0].1, r#"&["result", "error"]"#);
+        assert!(
+            rules[0].0.contains("Some(view.own_result())"),
+            "{}",
+            rules[0].0
+        );
+        assert!(rules[0].0.contains("view.own_error()"), "{}", rules[0].0);
+        assert_eq!(rules[1].1, r#"&["quality", "cpu_time"]"#);
+        assert!(
+            rules[1].0.contains("view.own_quality() == 1_usize"),
+            "{}",
+            rules[1].0
+        );
+        assert!(rules[1].0.contains("view.own_cpu_time()"), "{}", rules[1].0);
+        assert_eq!(rules[2].1, r#"&["motion.speed"]"#);
+        assert!(
+            rules[2].0.contains(r#"view.var("motion", "speed")"#),
+            "{}",
+            rules[2].0
+        );
+    }
+
+    #[test]
+    fn a_supervisor_may_becomes_its_target_enum_and_a_choose_stub() {
+        let compound = &compounds_of(CONTROLLED)[0];
+        let on = &compound.states[0];
+        assert_eq!(on.may_enum.as_deref(), Some("OnMay"));
+        assert!(on.spec.contains("may: &[1]"), "{}", on.spec);
+        assert!(compound.methods.iter().any(|m| m.name == "on_choose"));
+        assert_eq!(compound.choose_arms.len(), 1);
+        assert_eq!(compound.choose_arms[0].targets, [("Off".to_owned(), 1)]);
+    }
+
+    #[test]
+    fn every_instance_gets_a_typed_handle() {
+        let handles = &compounds_of(CONTROLLED)[0].handles;
+        assert_eq!(handles.len(), 2);
+        let motion = &handles[0];
+        assert_eq!(
+            (motion.method.as_str(), motion.type_name.as_str()),
+            ("motion", "MotionInstance")
+        );
+        let setters: Vec<(&str, &str, &str)> = motion
+            .setters
+            .iter()
+            .map(|s| (s.method.as_str(), s.ty.as_str(), s.to_value.as_str()))
+            .collect();
+        assert_eq!(
+            setters,
+            [
+                ("set_speed", "f64", "::coolbot::Value::from(value)"),
+                (
+                    "set_label",
+                    "::std::string::String",
+                    "::coolbot::Value::from(value)"
+                ),
+            ]
+        );
+        assert_eq!(motion.config.as_deref(), Some("super::drive::Config"));
+        let (quality, levels) = motion.quality.clone().unwrap();
+        assert_eq!(quality, "MotionQuality");
+        assert_eq!(
+            levels,
+            [
+                ("Full".to_owned(), "full".to_owned()),
+                ("Eco".to_owned(), "eco".to_owned())
+            ]
+        );
+        // One level (its override): nothing to set.
+        assert_eq!(handles[1].quality, None);
     }
 
     #[test]

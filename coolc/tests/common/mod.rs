@@ -52,6 +52,7 @@ pub fn compile(root: &Path, out: &Path, package: &str) -> merge::Report {
         package: package.to_owned(),
         runtime: runtime(),
         sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
+        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
     };
     merge::write_crate(out, &lower::lower(&analysis.files, &options)).unwrap()
 }

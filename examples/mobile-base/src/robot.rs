@@ -56,16 +56,31 @@ pub struct Setup {
     pub scan_rate: Option<f64>,
 }
 
+/// The forward speed limit (m/s) of the motion controller while the simulated range
+/// server stands in for the real one (`degraded`).
+pub const DEGRADED_MAX_SPEED: f64 = 0.25;
+
 /// `MobileBase`'s supervisor sections: `mode` follows the supervisor's state and each
 /// entry into `degraded` counts a fault (`faults > 3` stops the base, by the
-/// description's rule). The periodic sections have nothing to do: whoever watches
-/// the base's instances reads their own monitoring ports ([`Robot::instance`]).
-#[derive(Debug)]
-pub struct BaseSupervisor;
+/// description's rule). The sections also control the motion controller through the
+/// generated typed handle (`cx.instances.motion()`): `stopped` suspends it, so the
+/// platform stands still; `operating` resumes it if it was suspended; `degraded`
+/// lowers its controllable `max_speed` to [`DEGRADED_MAX_SPEED`] and its exit puts
+/// back the limit it found. The periodic sections have nothing to do: whoever
+/// watches the base's instances reads their own monitoring ports
+/// ([`Robot::instance`]).
+#[derive(Debug, Default)]
+pub struct BaseSupervisor {
+    /// The motion controller's `max_speed` before `degraded` lowered it.
+    max_speed: Option<f64>,
+}
 
 impl mobile_base::Supervisor for BaseSupervisor {
     fn operating_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Normal;
+        if cx.view.state(MOTION) == Some(State::Suspended) {
+            cx.instances.motion().run()?;
+        }
         Ok(())
     }
 
@@ -76,6 +91,21 @@ impl mobile_base::Supervisor for BaseSupervisor {
     fn degraded_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Degraded;
         cx.vars.faults = cx.vars.faults.saturating_add(1);
+        let limit = cx
+            .view
+            .var(MOTION, "max_speed")
+            .and_then(|value| f64::try_from(value).ok());
+        if let Some(limit) = limit.filter(|limit| *limit > DEGRADED_MAX_SPEED) {
+            cx.instances.motion().set_max_speed(DEGRADED_MAX_SPEED)?;
+            self.max_speed = Some(limit);
+        }
+        Ok(())
+    }
+
+    fn degraded_exit(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
+        if let Some(limit) = self.max_speed.take() {
+            cx.instances.motion().set_max_speed(limit)?;
+        }
         Ok(())
     }
 
@@ -85,6 +115,9 @@ impl mobile_base::Supervisor for BaseSupervisor {
 
     fn stopped_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
         cx.vars.mode = BaseMode::Stopped;
+        // The platform moves only when the motion controller's periodic section
+        // drives it: suspended, it stands still.
+        cx.instances.motion().suspend()?;
         Ok(())
     }
 
@@ -110,7 +143,7 @@ pub struct BaseParts {
 
 impl mobile_base::Parts for BaseParts {
     fn supervisor(&mut self) -> impl mobile_base::Supervisor {
-        BaseSupervisor
+        BaseSupervisor::default()
     }
 
     fn motion(&mut self) -> impl motion_controller::Behavior {

@@ -100,9 +100,32 @@ fn a_failed_range_server_is_substituted_then_recovered() {
         ..Options::default()
     });
     assert_safe(&summary);
-    // Each step, in order, on the base's monitoring port.
+    // Each step, in order, on the base's monitoring port. Retries made while the
+    // sensor is still out are steps too (`RetryFailed`), between the substitution and
+    // the retry that succeeds; how many depends on where the retry period falls.
+    let steps = steps_of(&summary, "ranges");
+    let substituted = steps
+        .iter()
+        .position(|s| matches!(s, Step::Substituted { .. }))
+        .unwrap_or_default();
+    let retried = steps
+        .iter()
+        .position(|s| **s == Step::Retried)
+        .unwrap_or_default();
+    assert!(
+        steps
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| ***s == Step::RetryFailed)
+            .all(|(i, _)| substituted < i && i < retried),
+        "{summary}"
+    );
+    let steps: Vec<_> = steps
+        .into_iter()
+        .filter(|s| **s != Step::RetryFailed)
+        .collect();
     assert_eq!(
-        steps_of(&summary, "ranges"),
+        steps,
         [
             &Step::Failed,
             &Step::Enqueued,
@@ -289,6 +312,103 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
 }
 
 #[test]
+fn a_hold_stops_the_platform_and_its_release_drives_on() {
+    use coolbot::{Command, MonitorEvent, Value};
+    use mobile_base::robot::{MOTION, Robot, Setup};
+    use mobile_base::world::{Platform, World};
+    use std::sync::Arc;
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    let motion = robot.instance("base.motion").expect("base.motion");
+    let odometry = |m: &coolbot::Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "distance")
+            .and_then(|(_, value)| value.to_json().as_f64())
+            .unwrap_or(0.0)
+    };
+    wait_member(
+        &robot,
+        MOTION,
+        |m| odometry(m) > 0.05,
+        Duration::from_secs(5),
+    )
+    .expect("the base gets going");
+    let motion_events = motion.subscribe();
+
+    // The operator holds the base: its supervisor goes to `stopped`, whose entry
+    // section suspends the motion controller, so the platform stands still.
+    robot
+        .base
+        .command(Command::Set("hold".to_owned(), Value::Bool(true)))
+        .unwrap();
+    robot
+        .base
+        .wait_for(
+            |m| m.user_state.as_deref() == Some("stopped"),
+            Duration::from_secs(5),
+        )
+        .expect("the base stops");
+    motion
+        .wait_state(State::Suspended, Duration::from_secs(5))
+        .expect("the motion controller is suspended");
+    let commanded = |command: &str| {
+        let command = command.to_owned();
+        move |m: &coolbot::Monitor| {
+            m.supervision.iter().any(|s| {
+                s.instance == MOTION
+                    && s.step
+                        == Step::Commanded {
+                            command: command.clone(),
+                        }
+            })
+        }
+    };
+    robot
+        .base
+        .wait_for(commanded("suspend"), Duration::from_secs(5))
+        .expect("the command is a step on the base's monitoring port");
+    // Suspended, the motion controller runs no section: the platform does not move
+    // (the ground truth is what it drove; a suspended controller drives nothing).
+    let held_at = platform.truth().distance;
+    assert_eq!(motion.state(), State::Suspended);
+
+    // Released: `operating` resumes it and the platform drives on.
+    robot
+        .base
+        .command(Command::Set("hold".to_owned(), Value::Bool(false)))
+        .unwrap();
+    robot
+        .base
+        .wait_for(commanded("run"), Duration::from_secs(5))
+        .expect("`operating` resumes the motion controller");
+    wait_member(
+        &robot,
+        MOTION,
+        |m| odometry(m) > held_at + 0.05,
+        Duration::from_secs(5),
+    )
+    .expect("moving again");
+    // While held, the motion controller's state went to `suspended` and came back
+    // only through the supervisor's command.
+    let states: Vec<State> = motion_events
+        .try_iter()
+        .filter_map(|event| match event {
+            MonitorEvent::State { to, .. } => Some(to),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(states, [State::Suspended, State::Running]);
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
 fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_port() {
     use coolbot::MonitorEvent;
     use mobile_base::robot::{Robot, Setup};
@@ -342,6 +462,17 @@ fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_por
         )
         .expect("`operating`'s entry section sets `mode` back to Normal");
     assert_eq!(var(&monitor, "faults").as_deref(), Some("1"));
+    // While the substitute stood in, `degraded` drove the motion controller at the
+    // cautious speed, and its exit put the limit back.
+    let commands: Vec<String> = monitor
+        .supervision
+        .iter()
+        .filter_map(|s| match &s.step {
+            Step::Commanded { command } if s.instance == "motion" => Some(command.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(commands, ["set max_speed = 0.25", "set max_speed = 0.5"]);
     let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
 }

@@ -237,3 +237,49 @@ fn a_redundant_group_keeps_the_stream_when_a_member_fails() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn the_restart_budget_of_the_description_bounds_the_restarts() {
+    use coolbot::Step;
+    // `restart { limit 1 in 1min; ... }`: the first failure is restarted in place,
+    // the second spends the budget and the compound fails.
+    let restarter = plant::generated::restarter::component(
+        "restarter",
+        plant::restarter::RestarterParts::default(),
+    )
+    .unwrap();
+    let mut system = System::new();
+    let handle = system.add(restarter).unwrap();
+    system.run_all().unwrap();
+    let fail = || {
+        handle
+            .command(Command::Set("fail".to_owned(), Value::Bool(true)))
+            .unwrap()
+    };
+    fail();
+    let monitor = handle
+        .wait_for(
+            |m| m.supervision.iter().any(|s| s.step == Step::Restarted),
+            WAIT,
+        )
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
+    let worker = handle.instance("w").unwrap();
+    worker.wait_state(State::Running, WAIT).unwrap();
+    fail();
+    let monitor = handle.wait_state(State::RunningError, WAIT).unwrap();
+    let steps: Vec<&Step> = monitor.supervision.iter().map(|s| &s.step).collect();
+    assert_eq!(
+        steps,
+        [
+            &Step::Failed,
+            &Step::Restarted,
+            &Step::Failed,
+            &Step::Propagated
+        ],
+        "{:?}",
+        monitor.supervision
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}

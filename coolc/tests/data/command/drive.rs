@@ -1,0 +1,20 @@
+//! Filled-in `Drive`: integrates its speed every period.
+
+use crate::generated::drive::*;
+
+/// Nothing of its own: the distance is an observable variable.
+#[derive(Debug, Default)]
+pub struct Drive {}
+
+impl Behavior for Drive {
+    fn start(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.accel_used = cx.config.accel;
+        Ok(())
+    }
+
+    fn driving_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.accel_used = cx.config.accel;
+        cx.vars.travelled += cx.vars.speed * 0.005;
+        Ok(())
+    }
+}

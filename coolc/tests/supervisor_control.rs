@@ -1,0 +1,37 @@
+//! A generated compound whose supervisor controls its instance (`tests/data/command`):
+//! the crate builds clippy-clean and rustfmt-clean, and its run tests show the
+//! supervisor suspending, resuming and slowing its drive through the typed handles
+//! of the generated `Cx`, choosing a `may` target, and rules reading the compound's
+//! own result, error and CPU time and the drive's controllable speed and elapsed
+//! time.
+
+mod common;
+
+use common::{cargo, compile, data};
+
+#[test]
+fn a_generated_supervisor_commands_its_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("command.cool");
+    std::fs::copy(data("command/command.cool"), &description).unwrap();
+    let krate = dir.path().join("command");
+    compile(&description, &krate, "command");
+    for name in ["drive.rs", "base.rs"] {
+        std::fs::copy(data("command").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("command/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    for test in [
+        "the_supervisor_suspends_slows_and_resumes_its_drive",
+        "a_may_choice_and_rules_over_the_compounds_own_result_and_times_move_the_supervisor",
+    ] {
+        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
+    }
+}

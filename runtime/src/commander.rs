@@ -1,0 +1,329 @@
+//! A compound's supervisor controls its instances (paper 3.4: a compound "provides a
+//! supervisor for their monitoring and control"): the [`Commander`] a supervisor
+//! section receives in [`SupervisorCx::instances`](crate::SupervisorCx) brings an
+//! instance to a controllable state, sets its controllable variables, gives it a new
+//! configuration, period or quality, through the instance's control port.
+//!
+//! Every command is answered: `Ok`, or a [`CommandError`] whose [`Refused`] says why
+//! (a `?` in a section turns it into the section's fault). Every command, taken or
+//! refused, is a supervision step ([`Step::Commanded`], [`Step::CommandRefused`]) on
+//! the compound's monitoring port, published when the section returns.
+//!
+//! A command never holds the compound's thread for long: an instance stuck in a
+//! section that overran its `max_response` refuses at once ([`Refused::Stuck`]), and
+//! an instance that does not take the command within the commander's timeout
+//! ([`CompoundBuilder::command_timeout`](crate::CompoundBuilder::command_timeout),
+//! default [`DEFAULT_SUPERVISOR_COMMAND_TIMEOUT`]) has it withdrawn
+//! ([`Refused::Busy`]); the whole call waits at most twice that timeout (a command
+//! taken just before the timeout is given as long again to finish its transition,
+//! which then completes in the background).
+
+use std::time::Duration;
+
+use crate::monitor::{Command, Handle, Refusal, Step, Supervision};
+use crate::spec::{Spec, VarKind};
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+/// How long a supervisor's command waits for an instance to take it, by default.
+pub const DEFAULT_SUPERVISOR_COMMAND_TIMEOUT: Duration = Duration::from_millis(250);
+
+/// Why an instance did not take a supervisor's command.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("instance `{instance}` did not take `{command}`")]
+pub struct CommandError {
+    /// The instance commanded (a local instance name of the compound).
+    pub instance: String,
+    /// The command, as the supervisor gave it (`suspend`, `set max_speed = 0.2`).
+    pub command: String,
+    /// Why it was refused.
+    #[source]
+    pub reason: Refused,
+}
+
+/// The reason of a [`CommandError`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Refused {
+    /// The compound has no instance of that name.
+    #[error("the compound has no such instance")]
+    UnknownInstance,
+    /// The compound has not started its instances yet.
+    #[error("the instances have not been started")]
+    NotStarted,
+    /// The instance is dead: its thread has ended (a `dead` command, or retired by the
+    /// recovery queue).
+    #[error("the instance is dead: its thread has ended")]
+    Dead,
+    /// The instance is inside a section that overran its `max_response`: it takes no
+    /// command until the section returns.
+    #[error("the instance is stuck in a section that overran its max_response")]
+    Stuck,
+    /// The instance did not take the command within the commander's timeout (a section
+    /// still running); the command was withdrawn and has no effect.
+    #[error(
+        "the instance did not take the command within {waited:?} (busy in a section); withdrawn"
+    )]
+    Busy {
+        /// How long the command waited.
+        waited: Duration,
+    },
+    /// The instance's control queue is full.
+    #[error("the instance's control queue is full")]
+    QueueFull,
+    /// The instance has no variable of that name.
+    #[error("the instance has no variable `{0}`")]
+    UnknownVariable(String),
+    /// The variable is observable, not controllable.
+    #[error("`{0}` is observable, not controllable")]
+    NotControllable(String),
+    /// The instance refused the value (its reason).
+    #[error("the value was refused: {0}")]
+    InvalidValue(String),
+    /// The instance refused the configuration (its reason).
+    #[error("the configuration was refused: {0}")]
+    InvalidConfiguration(String),
+    /// A zero period.
+    #[error("a period must be positive")]
+    ZeroPeriod,
+    /// A quality level the instance does not have.
+    #[error("quality level {level} out of range: the instance has {levels} level(s)")]
+    QualityOutOfRange {
+        /// The level asked for.
+        level: usize,
+        /// How many levels the instance has.
+        levels: usize,
+    },
+    /// The instance rejected the command for another reason (its words).
+    #[error("{0}")]
+    Rejected(String),
+}
+
+/// One instance a [`Commander`] can command.
+struct Target {
+    name: String,
+    handle: Handle,
+    spec: &'static Spec,
+}
+
+/// What a supervisor section commands its instances with (its
+/// [`SupervisorCx::instances`](crate::SupervisorCx)); `coolc`'s generated `Cx` wraps
+/// it in typed handles, one per instance. The compound owns it; every call runs on the
+/// compound's thread and waits (boundedly: see the module documentation) for the
+/// instance's answer.
+pub struct Commander {
+    compound: String,
+    targets: Vec<Target>,
+    timeout: Duration,
+    /// Steps taken since the compound last published them.
+    steps: Vec<Supervision>,
+}
+
+impl std::fmt::Debug for Commander {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Commander")
+            .field("compound", &self.compound)
+            .field("instances", &self.instances().collect::<Vec<_>>())
+            .field("timeout", &self.timeout)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Commander {
+    /// A commander for compound `compound`'s instances `(name, handle, spec)`, each
+    /// command waiting at most `timeout` for the instance to take it.
+    pub(crate) fn new(
+        compound: String,
+        instances: impl IntoIterator<Item = (String, Handle, &'static Spec)>,
+        timeout: Duration,
+    ) -> Commander {
+        Commander {
+            compound,
+            targets: instances
+                .into_iter()
+                .map(|(name, handle, spec)| Target {
+                    name,
+                    handle: handle.with_command_timeout(timeout),
+                    spec,
+                })
+                .collect(),
+            timeout,
+            steps: Vec::new(),
+        }
+    }
+
+    /// The names of the instances it commands, in declaration order.
+    pub fn instances(&self) -> impl Iterator<Item = &str> {
+        self.targets.iter().map(|t| t.name.as_str())
+    }
+
+    /// How long a command waits for an instance to take it.
+    pub fn timeout(&self) -> Duration {
+        self.timeout
+    }
+
+    /// Bring `instance` to the controllable state `target` (`ready`, `running`,
+    /// `suspended`, `dead`), as its control port's `new_state` does. Returns when the
+    /// transition has run (its sections and hooks).
+    pub fn state(&mut self, instance: &str, target: Controllable) -> Result<(), CommandError> {
+        let verb = match target {
+            Controllable::Ready => "ready",
+            Controllable::Running => "run",
+            Controllable::Suspended => "suspend",
+            Controllable::Dead => "dead",
+        };
+        self.give(instance, verb.to_owned(), Command::SetState(target), |_| {
+            None
+        })
+    }
+
+    /// Set controllable variable `variable` of `instance` to `value`.
+    pub fn set(
+        &mut self,
+        instance: &str,
+        variable: &str,
+        value: impl Into<Value>,
+    ) -> Result<(), CommandError> {
+        let value = value.into();
+        let described = format!("set {variable} = {value}");
+        let check = |spec: &Spec| match spec.variables.iter().find(|v| v.name == variable) {
+            None => Some(Refused::UnknownVariable(variable.to_owned())),
+            Some(v) if v.kind != VarKind::Controllable => {
+                Some(Refused::NotControllable(variable.to_owned()))
+            }
+            Some(_) => None,
+        };
+        self.give(
+            instance,
+            described,
+            Command::Set(variable.to_owned(), value),
+            check,
+        )
+    }
+
+    /// Give `instance` a new configuration (its `configuration` block's record; the
+    /// fields it names replace the instance's, the others are kept).
+    pub fn configure(&mut self, instance: &str, configuration: Value) -> Result<(), CommandError> {
+        self.give(
+            instance,
+            "configure".to_owned(),
+            Command::Configure(configuration),
+            |_| None,
+        )
+    }
+
+    /// Set the period of `instance`.
+    pub fn set_period(&mut self, instance: &str, period: Duration) -> Result<(), CommandError> {
+        let check = |_: &Spec| period.is_zero().then_some(Refused::ZeroPeriod);
+        self.give(
+            instance,
+            format!("period {period:?}"),
+            Command::SetPeriod(period),
+            check,
+        )
+    }
+
+    /// Set the quality level of `instance` (an index into its `quality` levels, 0 the
+    /// best).
+    pub fn set_quality(&mut self, instance: &str, level: usize) -> Result<(), CommandError> {
+        let check = |spec: &Spec| {
+            let levels = spec.timing.qualities.len().max(1);
+            (level >= levels).then_some(Refused::QualityOutOfRange { level, levels })
+        };
+        self.give(
+            instance,
+            format!("quality {level}"),
+            Command::SetQuality(level),
+            check,
+        )
+    }
+
+    /// The steps taken since the last call (the compound publishes them).
+    pub(crate) fn take_steps(&mut self) -> Vec<Supervision> {
+        std::mem::take(&mut self.steps)
+    }
+
+    /// Give `command` (`described` for the step) to `instance`, unless `check` finds
+    /// it refused from the instance's spec; record the step.
+    fn give(
+        &mut self,
+        instance: &str,
+        described: String,
+        command: Command,
+        check: impl FnOnce(&Spec) -> Option<Refused>,
+    ) -> Result<(), CommandError> {
+        let outcome = self.answer(instance, &command, check);
+        let (step, detail) = match &outcome {
+            Ok(()) => (
+                Step::Commanded {
+                    command: described.clone(),
+                },
+                String::new(),
+            ),
+            Err(reason) => (
+                Step::CommandRefused {
+                    command: described.clone(),
+                },
+                reason.to_string(),
+            ),
+        };
+        if let Err(reason) = &outcome {
+            tracing::warn!(compound = %self.compound, %instance, "refused {described}: {reason}");
+        } else {
+            tracing::info!(compound = %self.compound, %instance, "commanded: {described}");
+        }
+        self.steps.push(Supervision {
+            instance: instance.to_owned(),
+            step,
+            detail,
+        });
+        outcome.map_err(|reason| CommandError {
+            instance: instance.to_owned(),
+            command: described,
+            reason,
+        })
+    }
+
+    fn answer(
+        &self,
+        instance: &str,
+        command: &Command,
+        check: impl FnOnce(&Spec) -> Option<Refused>,
+    ) -> Result<(), Refused> {
+        let target = self
+            .targets
+            .iter()
+            .find(|t| t.name == instance)
+            .ok_or(Refused::UnknownInstance)?;
+        if let Some(refused) = check(target.spec) {
+            return Err(refused);
+        }
+        if target.handle.is_stuck() {
+            return Err(Refused::Stuck);
+        }
+        if target.handle.state() == State::Dead {
+            return Err(Refused::Dead);
+        }
+        target
+            .handle
+            .command_refusable(command.clone())
+            .map_err(|refusal| match refusal {
+                Refusal::NotStarted => Refused::NotStarted,
+                Refusal::Ended => Refused::Dead,
+                Refusal::QueueFull => Refused::QueueFull,
+                Refusal::Busy => Refused::Busy {
+                    waited: self.timeout,
+                },
+                Refusal::Rejected(reason) => match command {
+                    Command::Set(..) => Refused::InvalidValue(reason),
+                    Command::Configure(_) => Refused::InvalidConfiguration(reason),
+                    _ if target.handle.state() == State::Dead => Refused::Dead,
+                    _ => Refused::Rejected(reason),
+                },
+                // The compound's thread is never an instance's thread.
+                Refusal::OwnThread => Refused::Rejected(
+                    "a component cannot command itself from its own thread".to_owned(),
+                ),
+            })
+    }
+}

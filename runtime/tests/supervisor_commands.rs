@@ -1,0 +1,537 @@
+//! Supervisors control their instances (paper 3.4): a supervisor section commands an
+//! instance through `SupervisorCx::instances` (state, variables, configuration,
+//! period, quality), every command is answered (taken, or refused with a typed
+//! reason), every command is a supervision step on the compound's monitoring port,
+//! and a hung instance refuses within the commander's bound instead of holding the
+//! compound. Rules read the compound's own `result` and times (the latter every
+//! supervisor period), and a supervisor state's `may` lets its sections choose.
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use coolbot::port::TickOut;
+use coolbot::{
+    Command, CommandError, Component, CompoundBuilder, Controllable, Handle, OutputKind, Refused,
+    Section, SectionResult, Spec, State, StateSpec, Step, Supervisor, SupervisorCx, System,
+    TaskResult, TimingSpec, Value, VarKind, VarSpec,
+};
+use support::shell::{self, ShellBuilder};
+use support::worker;
+use support::{Script, Scripted, WAIT, eventually};
+
+/// The answers the supervisor's sections got, in order.
+type Answers = Arc<Mutex<Vec<(String, Result<(), CommandError>)>>>;
+
+/// A supervisor with states `operating`, `stopped`, `degraded`, `probing` (entry
+/// sections), one own controllable variable `go` (an `i64`) that the test sets to
+/// move it: rules `go == 1 -> stopped`, `go == 2 -> degraded`, `go == 3 -> probing`,
+/// `go == 0 -> operating`.
+struct Commanding {
+    go: i64,
+    answers: Answers,
+}
+
+static STATES: [StateSpec; 5] = [
+    state("operating", &[]),
+    state("stopped", &[]),
+    state("degraded", &[]),
+    state("probing", &[]),
+    state("strict", &[]),
+];
+
+const fn state(name: &'static str, may: &'static [usize]) -> StateSpec {
+    StateSpec {
+        name,
+        entry: true,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may,
+    }
+}
+
+static COMMANDING: Spec = Spec {
+    type_name: "Commanding",
+    doc: "",
+    states: &STATES,
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[VarSpec {
+        name: "go",
+        kind: VarKind::Controllable,
+        ty: "i64",
+        doc: "",
+    }],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl Supervisor for Commanding {
+    fn spec(&self) -> &'static Spec {
+        &COMMANDING
+    }
+
+    fn section(
+        &mut self,
+        state: usize,
+        section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        assert_eq!(section, Section::Entry);
+        let answer = |what: &str, outcome: Result<(), CommandError>| {
+            self.answers
+                .lock()
+                .unwrap()
+                .push((what.to_owned(), outcome));
+        };
+        match COMMANDING.states[state].name {
+            "stopped" => answer("suspend", cx.instances.state("w", Controllable::Suspended)),
+            "degraded" => {
+                answer("gain", cx.instances.set("w", "gain", 5_i64));
+                answer("count", cx.instances.set("w", "count", 1_u64));
+                answer("speed", cx.instances.set("w", "speed", 1_i64));
+                answer("bad gain", cx.instances.set("w", "gain", "fast"));
+                answer("nobody", cx.instances.state("nobody", Controllable::Ready));
+                answer(
+                    "configure",
+                    cx.instances.configure(
+                        "w",
+                        Value::from_serde(&worker::Config { scale: 7 }).unwrap(),
+                    ),
+                );
+                answer(
+                    "period",
+                    cx.instances.set_period("w", Duration::from_millis(20)),
+                );
+                answer("zero period", cx.instances.set_period("w", Duration::ZERO));
+                answer("quality", cx.instances.set_quality("w", 1));
+                answer("quality 2", cx.instances.set_quality("w", 2));
+            }
+            "probing" => answer("run", cx.instances.state("w", Controllable::Running)),
+            // A refusal given to `?` is the section's fault.
+            "strict" => cx.instances.set("w", "count", 1_u64)?,
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::from(self.go)
+    }
+
+    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), String> {
+        self.go = i64::try_from(value).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}
+
+fn go_rules(builder: CompoundBuilder) -> CompoundBuilder {
+    let go = |n: i64| move |view: &coolbot::View| view.own("go") == Some(&Value::from(n));
+    [
+        ("operating", "stopped", 1),
+        ("operating", "degraded", 2),
+        ("operating", "probing", 3),
+        ("operating", "strict", 4),
+        ("stopped", "operating", 0),
+        ("degraded", "operating", 0),
+        ("probing", "operating", 0),
+    ]
+    .into_iter()
+    .fold(builder, |builder, (from, to, n)| {
+        builder.rule(from, to, &["go"], go(n))
+    })
+}
+
+fn worker(name: &str) -> (Component, Arc<Script>) {
+    let script = Script::new();
+    let (component, _, _) = worker::component(
+        name,
+        Scripted {
+            script: Arc::clone(&script),
+            token: None,
+        },
+    );
+    (component, script)
+}
+
+fn set_go(handle: &Handle, n: i64) {
+    handle
+        .command(Command::Set("go".to_owned(), Value::from(n)))
+        .unwrap_or_else(|e| panic!("{e}"));
+}
+
+fn wait_user(handle: &Handle, user: &str) {
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some(user), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+}
+
+/// Wait until the supervisor has `n` answers; return them.
+fn answers(answers: &Answers, n: usize) -> Vec<(String, Result<(), CommandError>)> {
+    eventually(
+        || answers.lock().unwrap().len() >= n,
+        &format!("the supervisor got {n} answers"),
+    );
+    answers.lock().unwrap().clone()
+}
+
+fn steps(monitor: &coolbot::Monitor) -> Vec<(Step, String)> {
+    monitor
+        .supervision
+        .iter()
+        .filter(|s| matches!(s.step, Step::Commanded { .. } | Step::CommandRefused { .. }))
+        .map(|s| (s.step.clone(), s.detail.clone()))
+        .collect()
+}
+
+fn reason(outcome: &Result<(), CommandError>) -> Option<&Refused> {
+    outcome.as_ref().err().map(|e| &e.reason)
+}
+
+#[test]
+fn a_supervisor_suspends_resumes_and_sets_its_instance_and_each_command_is_a_step() {
+    let log: Answers = Arc::default();
+    let (w, _script) = worker("w");
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::clone(&log),
+        },
+    ))
+    .instance(w);
+    let w = builder.instance_handle("w").unwrap();
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+    assert_eq!(w.state(), State::Running);
+
+    // `stopped` suspends it, and the command is a step.
+    set_go(&base, 1);
+    let got = answers(&log, 1);
+    assert_eq!(got[0], ("suspend".to_owned(), Ok(())));
+    assert_eq!(
+        w.state(),
+        State::Suspended,
+        "the transition has run when the command returns"
+    );
+    let monitor = base
+        .wait_for(|m| !steps(m).is_empty(), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert_eq!(
+        steps(&monitor),
+        [(
+            Step::Commanded {
+                command: "suspend".to_owned()
+            },
+            String::new()
+        )]
+    );
+    assert_eq!(monitor.supervision.last().unwrap().instance, "w");
+
+    // Back to `operating`, then `probing` runs it again.
+    set_go(&base, 0);
+    wait_user(&base, "operating");
+    set_go(&base, 3);
+    let got = answers(&log, 2);
+    assert_eq!(got[1], ("run".to_owned(), Ok(())));
+    assert_eq!(w.state(), State::Running);
+
+    // `degraded`: variables, configuration, period, quality; taken or refused with
+    // the reason.
+    set_go(&base, 0);
+    wait_user(&base, "operating");
+    set_go(&base, 2);
+    let got = answers(&log, 12);
+    let by_name = |name: &str| &got.iter().find(|(n, _)| n == name).unwrap().1;
+    assert_eq!(by_name("gain"), &Ok(()));
+    assert_eq!(
+        reason(by_name("count")),
+        Some(&Refused::NotControllable("count".to_owned()))
+    );
+    assert_eq!(
+        reason(by_name("speed")),
+        Some(&Refused::UnknownVariable("speed".to_owned()))
+    );
+    assert!(
+        matches!(reason(by_name("bad gain")), Some(Refused::InvalidValue(_))),
+        "{:?}",
+        by_name("bad gain")
+    );
+    assert_eq!(reason(by_name("nobody")), Some(&Refused::UnknownInstance));
+    assert_eq!(by_name("configure"), &Ok(()));
+    assert_eq!(by_name("period"), &Ok(()));
+    assert_eq!(reason(by_name("zero period")), Some(&Refused::ZeroPeriod));
+    assert_eq!(by_name("quality"), &Ok(()));
+    assert_eq!(
+        reason(by_name("quality 2")),
+        Some(&Refused::QualityOutOfRange {
+            level: 2,
+            levels: 2
+        })
+    );
+    // An error names the instance and the command, its source is the reason.
+    let error = by_name("count").clone().unwrap_err();
+    assert_eq!(error.instance, "w");
+    assert_eq!(error.command, "set count = 1");
+    assert!(std::error::Error::source(&error).is_some());
+
+    let monitor = w.snapshot();
+    assert_eq!(
+        monitor
+            .variables
+            .iter()
+            .find(|(n, _)| n == "gain")
+            .unwrap()
+            .1,
+        Value::from(5_i64)
+    );
+    assert_eq!(monitor.period, Some(Duration::from_millis(20)));
+    assert_eq!(monitor.quality, 1);
+
+    // Every command is a step, taken or refused (with the reason as detail).
+    let monitor = base
+        .wait_for(|m| steps(m).len() >= 12, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    let steps = steps(&monitor);
+    assert_eq!(steps.len(), 12);
+    assert!(steps.contains(&(
+        Step::CommandRefused {
+            command: "set count = 1".to_owned()
+        },
+        Refused::NotControllable("count".to_owned()).to_string()
+    )));
+    assert!(steps.contains(&(
+        Step::Commanded {
+            command: "set gain = 5".to_owned()
+        },
+        String::new()
+    )));
+    drop(system);
+}
+
+#[test]
+fn a_refusal_passed_to_question_mark_takes_the_compound_to_running_error() {
+    let (w, _script) = worker("w");
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::default(),
+        },
+    ))
+    .instance(w);
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+    set_go(&base, 4);
+    let monitor = base
+        .wait_state(State::RunningError, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    let error = monitor.error.unwrap_or_default();
+    assert!(
+        error.contains(
+            "instance `w` did not take `set count = 1`: `count` is observable, not controllable"
+        ),
+        "{error}"
+    );
+    // The refusal is a step too.
+    assert!(monitor.supervision.iter().any(|s| s.step
+        == Step::CommandRefused {
+            command: "set count = 1".to_owned()
+        }));
+    drop(system);
+}
+
+#[test]
+fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
+    let log: Answers = Arc::default();
+    let (w, script) = worker("w");
+    let kick = TickOut::new();
+    let feeder = ShellBuilder::new("f")
+        .output(shell::output("kick", OutputKind::Tick, false), &kick)
+        .build();
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::clone(&log),
+        },
+    ))
+    .instance(feeder)
+    .instance(w)
+    .connect("f.kick", "w.kick")
+    .on_error("w", coolbot::Policy::Ignore)
+    .command_timeout(Duration::from_millis(20));
+    let w = builder.instance_handle("w").unwrap();
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+
+    // `w` hangs in its busy entry section.
+    let release = script.hang_in("busy.entry");
+    kick.emit();
+    eventually(
+        || script.hanging.load(Ordering::SeqCst),
+        "the worker hangs in busy.entry",
+    );
+    set_go(&base, 1);
+    let got = answers(&log, 1);
+    assert!(
+        matches!(
+            reason(&got[0].1),
+            Some(Refused::Busy { .. } | Refused::Stuck)
+        ),
+        "{got:?}"
+    );
+    // The compound's thread is free: it answers its own control port and moves on.
+    set_go(&base, 0);
+    wait_user(&base, "operating");
+    let monitor = base
+        .wait_for(|m| !steps(m).is_empty(), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert!(matches!(steps(&monitor)[0].0, Step::CommandRefused { .. }));
+    // The withdrawn (or never given) command had no effect once the section returns.
+    drop(release);
+    eventually(
+        || script.returned.load(Ordering::SeqCst) == 1,
+        "the hung section returns",
+    );
+    assert_ne!(w.state(), State::Suspended);
+    drop(system);
+}
+
+/// States `deciding` (entry, `may -> done`) and `done`; the entry section sets the
+/// compound's result, `choose` moves on once asked to.
+struct Choosing {
+    choose: Arc<std::sync::atomic::AtomicBool>,
+}
+
+static CHOOSING_STATES: [StateSpec; 3] = [
+    state("deciding", &[1]),
+    state("done", &[]),
+    state("failed", &[]),
+];
+
+static CHOOSING: Spec = Spec {
+    type_name: "Choosing",
+    doc: "",
+    states: &CHOOSING_STATES,
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl Supervisor for Choosing {
+    fn spec(&self) -> &'static Spec {
+        &CHOOSING
+    }
+
+    fn section(
+        &mut self,
+        state: usize,
+        _section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        if state == 1 {
+            cx.rt.set_result(TaskResult::Fail("given up".to_owned()));
+        }
+        Ok(())
+    }
+
+    fn choose(&mut self, state: usize, _cx: &mut SupervisorCx<'_>) -> Option<usize> {
+        (state == 0 && self.choose.load(Ordering::SeqCst)).then_some(1)
+    }
+}
+
+#[test]
+fn a_supervisor_section_chooses_a_may_target_and_a_rule_reads_the_compounds_own_result() {
+    let choose = Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let (w, _) = worker("w");
+    let compound = CompoundBuilder::new(
+        "base",
+        Choosing {
+            choose: Arc::clone(&choose),
+        },
+    )
+    .instance(w)
+    .rule("done", "failed", &["result"], |view| {
+        matches!(view.own_result(), TaskResult::Fail(_))
+    })
+    .build()
+    .unwrap();
+    let mut system = System::new();
+    let base = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    // `deciding` -> `done` by `may`; `done`'s entry sets the result; the rule over
+    // the own result moves on to `failed`.
+    wait_user(&base, "failed");
+    assert!(matches!(base.snapshot().result, TaskResult::Fail(_)));
+    drop(system);
+}
+
+/// One state `watching` with a rule over `w.elapsed_time` only: no event announces
+/// a time, so only the periodic evaluation can fire it.
+struct Watching;
+
+static WATCHING_STATES: [StateSpec; 2] = [state("watching", &[]), state("late", &[])];
+
+static WATCHING: Spec = Spec {
+    type_name: "Watching",
+    doc: "",
+    states: &WATCHING_STATES,
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec {
+        period: Some(Duration::from_millis(10)),
+        ..TimingSpec::NONE
+    },
+};
+
+impl Supervisor for Watching {
+    fn spec(&self) -> &'static Spec {
+        &WATCHING
+    }
+}
+
+#[test]
+fn a_rule_over_an_instance_time_is_evaluated_every_supervisor_period() {
+    let (w, script) = worker("w");
+    *script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(1));
+    let kick = TickOut::new();
+    let feeder = ShellBuilder::new("f")
+        .output(shell::output("kick", OutputKind::Tick, false), &kick)
+        .build();
+    let compound = CompoundBuilder::new("base", Watching)
+        .instance(feeder)
+        .instance(w)
+        .connect("f.kick", "w.kick")
+        .rule("watching", "late", &["w.elapsed_time"], |view| {
+            view.monitor("w")
+                .is_some_and(|m| m.elapsed_time >= Duration::from_millis(30))
+        })
+        .build()
+        .unwrap();
+    let mut system = System::new();
+    let base = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "watching");
+    // Busy: its periodic section adds to its elapsed time every 5 ms.
+    kick.emit();
+    wait_user(&base, "late");
+    drop(system);
+}
