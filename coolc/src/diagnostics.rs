@@ -130,8 +130,6 @@ codes! {
     InterfaceMismatch => "coolc::check::interface_mismatch",
     /// An instance takes part in more than one substitution or redundant group.
     Arrangement => "coolc::check::arrangement",
-    /// An exported port is of a kind a compound cannot export.
-    ExportKind => "coolc::check::export_kind",
     /// A compound contains itself.
     SelfContaining => "coolc::check::self_containing",
     /// A packet contains itself by value (an infinitely large type).

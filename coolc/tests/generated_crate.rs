@@ -2,7 +2,8 @@
 //! with filled-in stubs builds clippy-clean under `-D warnings`, is rustfmt-clean,
 //! and runs on the runtime: components start, move through their user automata,
 //! exchange packets over the connections `MobileBase` declares (one through a
-//! converter), and publish variables on their monitoring ports.
+//! converter), and publish variables on their monitoring ports; a compound exporting
+//! poster, tick and pull outputs is read as its atomic instance would be.
 
 mod common;
 
@@ -183,6 +184,34 @@ fn compounds_with_converters_nest_three_levels_deep() {
     let output = cargo(&krate, &["test", "--test", "run"]);
     assert!(
         output.contains("test converters_reach_compounds_nested_three_deep ... ok"),
+        "{output}"
+    );
+}
+
+#[test]
+fn a_compound_exports_poster_tick_and_pull_outputs() {
+    // `Unit` exports its sensor's poster output, tick output and `pull` data output;
+    // `Station` connects a watcher to them as it would to the sensor. The filled user
+    // files and the run test are in `tests/data/exports`.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("exports.cool");
+    std::fs::copy(data("exports/exports.cool"), &description).unwrap();
+    let krate = dir.path().join("exports");
+    compile(&description, &krate, "exports");
+    for name in ["sensor.rs", "watcher.rs", "unit.rs", "station.rs"] {
+        std::fs::copy(data("exports").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("exports/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    assert!(
+        output.contains("test a_watcher_reads_a_compound_as_it_reads_an_atomic_sensor ... ok"),
         "{output}"
     );
 }

@@ -27,8 +27,8 @@ use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskRe
 use crate::commander::{Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT};
 use crate::monitor::{Command, Handle, Monitor, MonitorEvent, Step, Supervision};
 use crate::port::{
-    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, TickIn,
-    TickOut, UfifoIn,
+    DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, MergeEnd, OutputPort, Packet,
+    Parcel, PosterIn, PosterOut, PullRoute, TickIn, TickOut, UfifoIn,
 };
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec};
 use crate::spec::{Spec, VarKind, VarSpec};
@@ -269,12 +269,17 @@ type Via = Arc<
     dyn Fn(&mut System, Option<(&str, &str)>, &str, &str) -> Result<(), ConnectError> + Send + Sync,
 >;
 
+/// A converter's connection made between two erased ports directly (a redundant
+/// group's merged output, which is no port of the inner system, to a consumer).
+type LinkVia = Arc<dyn Fn(&ErasedOutput, &ErasedInput) -> bool + Send + Sync>;
+
 /// A declared connection (`instance.port` ends), through a converter or not.
 #[derive(Clone)]
 struct Link {
     from: String,
     to: String,
     via: Option<Via>,
+    link_via: Option<LinkVia>,
 }
 
 impl Link {
@@ -435,43 +440,102 @@ trait Export: Send {
     fn held(&self) -> bool {
         false
     }
-    /// Follow the instance port now at `address`.
-    fn follow(&mut self, system: &System, address: &str) -> Result<(), String>;
+    /// Whether this is an exported input.
+    fn is_input(&self) -> bool;
+    /// Inputs: feed the instance inputs `inputs` (one, or every live member of a
+    /// redundant group).
+    fn follow_inputs(&mut self, _inputs: Vec<ErasedInput>) -> Result<(), String> {
+        Err("not an exported input".to_owned())
+    }
+    /// Outputs: follow `output` (the instance's output, or a redundant group's merged
+    /// stream).
+    fn follow_output(&mut self, _output: ErasedOutput) -> Result<(), String> {
+        Err("not an exported output".to_owned())
+    }
 }
 
-/// The compound's own end of an exported data input.
+/// A redundant group's data output merged into one stream (`port::MergeEnd`).
+struct MergedPort {
+    group: usize,
+    port: String,
+    merge: Arc<dyn MergeEnd>,
+}
+
+/// The compound's own end of an exported input of packets `T`, with the relay output
+/// that feeds the instance's input.
 enum Twin<T> {
-    Fifo(FifoIn<T>),
-    Ufifo(UfifoIn<T>),
-    Last(LastIn<T>),
+    Fifo(FifoIn<T>, DataOut<T>),
+    Ufifo(UfifoIn<T>, DataOut<T>),
+    Last(LastIn<T>, DataOut<T>),
+    Poster(PosterIn<T>, PosterOut<T>),
 }
 
-/// An exported data input: packets arriving at the compound's port are sent on
-/// through a relay output connected to the instance's input.
+impl<T: Packet> Twin<T> {
+    /// The compound's input, erased.
+    fn input(&self) -> ErasedInput {
+        match self {
+            Twin::Fifo(input, _) => input.erased(),
+            Twin::Ufifo(input, _) => input.erased(),
+            Twin::Last(input, _) => input.erased(),
+            Twin::Poster(input, _) => input.erased(),
+        }
+    }
+
+    /// The relay, erased.
+    fn relay(&self) -> ErasedOutput {
+        match self {
+            Twin::Fifo(_, relay) | Twin::Ufifo(_, relay) | Twin::Last(_, relay) => relay.erased(),
+            Twin::Poster(_, relay) => relay.erased(),
+        }
+    }
+}
+
+/// An exported input of packets `T`: what arrives at the compound's port is passed on
+/// through a relay output connected to the instance's input (a poster input's post is
+/// posted again on a relay poster output).
 struct InputExport<T> {
     target: String,
     twin: Twin<T>,
-    relay: DataOut<T>,
-    linked: Option<ErasedInput>,
+    linked: Vec<ErasedInput>,
     /// Packets stayed at the compound's port at the last `forward`.
     held: bool,
 }
 
-/// Connect `relay` to `new`, or move it there from `linked` with what is queued.
+/// A relay whose pull requests (from the instance's `pull` input) become requests of
+/// the compound's input `twin` to its own producers.
+fn route_pulls(relay: &ErasedOutput, twin: &ErasedInput) {
+    relay
+        .core
+        .set_route(PullRoute::Input(Arc::clone(&twin.core)));
+}
+
+/// Connect `relay` to the inputs `new`: one input replacing another moves there with
+/// what is queued (a stand-in takes over); otherwise inputs no longer fed are
+/// unlinked and new ones linked (a redundant group's live members).
 fn follow_input(
     relay: &ErasedOutput,
-    linked: &mut Option<ErasedInput>,
-    new: ErasedInput,
+    linked: &mut Vec<ErasedInput>,
+    new: Vec<ErasedInput>,
 ) -> Result<(), String> {
-    let done = match linked.as_ref() {
-        Some(old) if old.core.id == new.core.id => true,
-        Some(old) => relay.relink(old, &new),
-        None => relay.link(&new),
-    };
-    if !done {
-        return Err("the exported input does not match the instance's".to_owned());
+    let mismatch = || "the exported input does not match the instance's".to_owned();
+    if let ([old], [input]) = (linked.as_slice(), new.as_slice()) {
+        if old.core.id != input.core.id && !relay.relink(old, input) {
+            return Err(mismatch());
+        }
+        *linked = new;
+        return Ok(());
     }
-    *linked = Some(new);
+    for input in &new {
+        if !linked.iter().any(|l| l.core.id == input.core.id) && !relay.link(input) {
+            return Err(mismatch());
+        }
+    }
+    for old in linked.iter() {
+        if !new.iter().any(|n| n.core.id == old.core.id) {
+            relay.unlink(old);
+        }
+    }
+    *linked = new;
     Ok(())
 }
 
@@ -485,34 +549,43 @@ impl<T: Packet> Export for InputExport<T> {
         // it is full (its instance may hang): only what it has room for goes now.
         let mut room = self
             .linked
-            .as_ref()
-            .and_then(ErasedInput::room)
+            .iter()
+            .filter_map(ErasedInput::room)
+            .min()
             .unwrap_or(usize::MAX);
+        // Packets pass on as they were queued: a packet its producer shares with
+        // other inputs stays shared (no copy for the hop).
         self.held = match &self.twin {
-            Twin::Fifo(input) => {
+            Twin::Fifo(input, relay) => {
                 while room > 0
-                    && let Some(packet) = input.recv()
+                    && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
-                    self.relay.send(packet);
+                    relay.send_parcel(packet);
                 }
                 !input.is_empty()
             }
-            Twin::Ufifo(input) => {
+            Twin::Ufifo(input, relay) => {
                 while room > 0
-                    && let Some(packet) = input.recv()
+                    && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
-                    self.relay.send(packet);
+                    relay.send_parcel(packet);
                 }
                 !input.is_empty()
             }
             // (Whether a new packet waits is not known without taking it: held while
             // the instance's input is full.)
-            Twin::Last(_) if room == 0 => true,
-            Twin::Last(input) => {
+            Twin::Last(..) if room == 0 => true,
+            Twin::Last(input, relay) => {
+                if let Some(packet) = input.take_new_shared() {
+                    relay.send_parcel(Parcel::Shared(packet));
+                }
+                false
+            }
+            Twin::Poster(input, relay) => {
                 if let Some(packet) = input.take_new() {
-                    self.relay.send(packet);
+                    relay.post(packet);
                 }
                 false
             }
@@ -523,9 +596,12 @@ impl<T: Packet> Export for InputExport<T> {
         self.held
     }
 
-    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
-        let new = system.input_port(address).map_err(|e| e.to_string())?;
-        follow_input(&self.relay.erased(), &mut self.linked, new)
+    fn is_input(&self) -> bool {
+        true
+    }
+
+    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), String> {
+        follow_input(&self.twin.relay(), &mut self.linked, inputs)
     }
 }
 
@@ -534,7 +610,7 @@ struct TickExport {
     target: String,
     twin: TickIn,
     relay: TickOut,
-    linked: Option<ErasedInput>,
+    linked: Vec<ErasedInput>,
 }
 
 impl Export for TickExport {
@@ -548,35 +624,43 @@ impl Export for TickExport {
         }
     }
 
-    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
-        let new = system.input_port(address).map_err(|e| e.to_string())?;
-        follow_input(&self.relay.erased(), &mut self.linked, new)
+    fn is_input(&self) -> bool {
+        true
+    }
+
+    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), String> {
+        follow_input(&self.relay.erased(), &mut self.linked, inputs)
     }
 }
 
-/// An exported data output: what the instance sends is sent on the compound's port
-/// too, synchronously on the instance's thread.
-struct OutputExport<T> {
+/// An exported output (tick, data or poster): what the instance emits, sends or posts
+/// goes out of the compound's port too, synchronously on the instance's thread (no
+/// extra hop), and the pull requests the compound's port receives go to the
+/// instance's output on behalf of the requesting input (`port::forward`).
+struct OutputExport {
     target: String,
-    twin: DataOut<T>,
+    twin: ErasedOutput,
     source: Option<(ErasedOutput, usize)>,
 }
 
-impl<T: Packet> Export for OutputExport<T> {
+impl Export for OutputExport {
     fn target(&self) -> &str {
         &self.target
     }
 
-    fn follow(&mut self, system: &System, address: &str) -> Result<(), String> {
-        let new = system.output_port(address).map_err(|e| e.to_string())?;
+    fn is_input(&self) -> bool {
+        false
+    }
+
+    fn follow_output(&mut self, new: ErasedOutput) -> Result<(), String> {
         if let Some((old, id)) = &self.source {
             if old.core.id == new.core.id {
                 return Ok(());
             }
-            crate::port::unforward_data::<T>(old, *id);
+            crate::port::unforward(old, *id);
         }
         self.source = None;
-        let id = crate::port::forward_data::<T>(&new, &self.twin)
+        let id = crate::port::forward(&new, &self.twin)
             .ok_or_else(|| "the exported output does not match the instance's".to_owned())?;
         self.source = Some((new, id));
         Ok(())
@@ -680,66 +764,82 @@ impl CompoundBuilder {
         self
     }
 
-    /// The declared input at `target` and its erased port, if `T` is its packet type.
-    fn exported_input<T: 'static>(
+    /// The declared port at `target` (an input if `input`, else an output), if its
+    /// kind is one of `kinds` and, for a port that carries packets, they are `T`.
+    fn exported_port<T: 'static>(
         &mut self,
         target: &str,
-        tick: bool,
-    ) -> Option<(InputSpec, ErasedInput)> {
-        let found = self.system.input_port(target).ok().and_then(|port| {
-            let (instance, name) = target.split_once('.')?;
+        input: bool,
+        kinds: &str,
+    ) -> Option<(Option<InputSpec>, Option<OutputSpec>)> {
+        let declared = target.split_once('.').and_then(|(instance, port)| {
             let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
-            let declared = *spec.inputs.iter().find(|i| i.name == name)?;
-            Some((declared, port))
+            Some(if input {
+                (spec.inputs.iter().find(|i| i.name == port).copied(), None)
+            } else {
+                (None, spec.outputs.iter().find(|o| o.name == port).copied())
+            })
         });
-        let fits = found.as_ref().is_some_and(|(declared, port)| {
-            (declared.kind == InputKind::Tick) == tick
-                && (tick || port.type_id == std::any::TypeId::of::<T>())
-                && !matches!(declared.kind, InputKind::Poster)
-                && !declared.pull
-        });
+        let type_id = if input {
+            self.system
+                .input_port(target)
+                .ok()
+                .map(|p| (p.type_id, p.kind.name()))
+        } else {
+            self.system
+                .output_port(target)
+                .ok()
+                .map(|p| (p.type_id, p.kind.name()))
+        };
+        let fits = match (&declared, type_id) {
+            (Some(_), Some((type_id, kind))) => {
+                kinds.split(", ").any(|k| k == kind)
+                    && (kind == "tick" || type_id == std::any::TypeId::of::<T>())
+            }
+            _ => false,
+        };
         if !fits {
+            let direction = if input { "input" } else { "output" };
+            let packets = if kinds == "tick" {
+                String::new()
+            } else {
+                format!(" of `{}`", std::any::type_name::<T>())
+            };
             self.errors.push(CompoundError::Connect {
                 compound: self.name.clone(),
                 detail: format!(
-                    "cannot export `{target}`: no such input, or not a {} input{}",
-                    if tick { "tick" } else { "fifo, ufifo or last" },
-                    if tick {
-                        String::new()
-                    } else {
-                        format!(" of `{}` (push model)", std::any::type_name::<T>())
-                    }
+                    "cannot export `{target}`: no such {direction}, or not a {kinds} {direction}{packets}"
                 ),
             });
             return None;
         }
-        found
+        declared
     }
 
-    /// `input name = instance.port;` for a fifo, ufifo or last input of packets `T`:
-    /// the compound gets an input of the same kind; what arrives there is passed on
-    /// to the instance (or its stand-in) while the compound runs.
+    /// `input name = instance.port;` for a fifo, ufifo, last or poster input of
+    /// packets `T`, `pull` or not: the compound gets an input of the same kind, size
+    /// and pull model; what arrives there is passed on to the instance (or its
+    /// stand-in) by the compound's thread while the compound runs, and a pull request
+    /// of the instance's input becomes a request of the compound's input to its
+    /// producers.
     pub fn export_input<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let Some((declared, _)) = self.exported_input::<T>(target, false) else {
+        let Some((Some(declared), _)) =
+            self.exported_port::<T>(target, true, "fifo, ufifo, last, poster")
+        else {
             return self;
         };
-        let (twin, port): (Twin<T>, ErasedInput) = match declared.kind {
+        let twin: Twin<T> = match declared.kind {
             InputKind::Fifo { capacity, policy } => {
-                let input = FifoIn::new(capacity, policy);
-                let erased = input.erased();
-                (Twin::Fifo(input), erased)
+                Twin::Fifo(FifoIn::new(capacity, policy), DataOut::new())
             }
             InputKind::Ufifo { initial, max } => {
-                let input = UfifoIn::new(initial, max);
-                let erased = input.erased();
-                (Twin::Ufifo(input), erased)
+                Twin::Ufifo(UfifoIn::new(initial, max), DataOut::new())
             }
-            _ => {
-                let input = LastIn::new();
-                let erased = input.erased();
-                (Twin::Last(input), erased)
-            }
+            InputKind::Poster => Twin::Poster(PosterIn::new(), PosterOut::new()),
+            InputKind::Last | InputKind::Tick => Twin::Last(LastIn::new(), DataOut::new()),
         };
+        let port = twin.input();
+        route_pulls(&twin.relay(), &port);
         self.ports = std::mem::take(&mut self.ports).erased_input(port);
         self.inputs.push(InputSpec {
             name: leak_str(name),
@@ -748,19 +848,20 @@ impl CompoundBuilder {
         self.exports.push(Box::new(InputExport {
             target: target.to_owned(),
             twin,
-            relay: DataOut::new(),
-            linked: None,
+            linked: Vec::new(),
             held: false,
         }));
         self
     }
 
-    /// `input name = instance.port;` for a tick input.
+    /// `input name = instance.port;` for a tick input, `pull` or not.
     pub fn export_tick_input(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let Some((declared, _)) = self.exported_input::<()>(target, true) else {
+        let Some((Some(declared), _)) = self.exported_port::<()>(target, true, "tick") else {
             return self;
         };
         let twin = TickIn::new();
+        let relay = TickOut::new();
+        route_pulls(&relay.erased(), &twin.erased());
         self.ports = std::mem::take(&mut self.ports).input(&twin);
         self.inputs.push(InputSpec {
             name: leak_str(name),
@@ -769,36 +870,40 @@ impl CompoundBuilder {
         self.exports.push(Box::new(TickExport {
             target: target.to_owned(),
             twin,
-            relay: TickOut::new(),
-            linked: None,
+            relay,
+            linked: Vec::new(),
         }));
         self
     }
 
-    /// `output name = instance.port;` for a data output of packets `T`: what the
-    /// instance (or its stand-in) sends goes out of the compound's port.
-    pub fn export_output<T: Packet>(mut self, name: &str, target: &str) -> CompoundBuilder {
-        let declared = target.split_once('.').and_then(|(instance, port)| {
-            let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
-            spec.outputs.iter().find(|o| o.name == port).copied()
-        });
-        let fits = declared.is_some_and(|d| d.kind == OutputKind::Data && !d.pull)
-            && self
-                .system
-                .output_port(target)
-                .is_ok_and(|port| port.type_id == std::any::TypeId::of::<T>());
-        let Some(declared) = declared.filter(|_| fits) else {
-            self.errors.push(CompoundError::Connect {
-                compound: self.name.clone(),
-                detail: format!(
-                    "cannot export `{target}`: no such output, or not a data output of `{}` (push model)",
-                    std::any::type_name::<T>()
-                ),
-            });
+    /// `output name = instance.port;` for a data or poster output of packets `T`,
+    /// `pull` or not: what the instance (or its stand-in, or its redundant group's
+    /// leader) sends or posts goes out of the compound's port too, and pull requests
+    /// to the compound's port go to the instance's output for the requesting input.
+    pub fn export_output<T: Packet>(self, name: &str, target: &str) -> CompoundBuilder {
+        self.export_output_of::<T>(name, target, "data, poster")
+    }
+
+    /// `output name = instance.port;` for a tick output, `pull` or not.
+    pub fn export_tick_output(self, name: &str, target: &str) -> CompoundBuilder {
+        self.export_output_of::<()>(name, target, "tick")
+    }
+
+    fn export_output_of<T: Packet>(
+        mut self,
+        name: &str,
+        target: &str,
+        kinds: &str,
+    ) -> CompoundBuilder {
+        let Some((_, Some(declared))) = self.exported_port::<T>(target, false, kinds) else {
             return self;
         };
-        let twin = DataOut::<T>::new();
-        self.ports = std::mem::take(&mut self.ports).output(&twin);
+        let twin = match declared.kind {
+            OutputKind::Tick => TickOut::new().erased(),
+            OutputKind::Data => DataOut::<T>::new().erased(),
+            OutputKind::Poster => PosterOut::<T>::new().erased(),
+        };
+        self.ports = std::mem::take(&mut self.ports).erased_output(twin.clone());
         self.outputs.push(OutputSpec {
             name: leak_str(name),
             ..declared
@@ -854,6 +959,7 @@ impl CompoundBuilder {
             from: from.to_owned(),
             to: to.to_owned(),
             via: None,
+            link_via: None,
         });
         self
     }
@@ -873,6 +979,12 @@ impl CompoundBuilder {
         convert: impl Fn(&A) -> B + Send + Sync + 'static,
     ) -> CompoundBuilder {
         let convert: Arc<dyn Fn(&A) -> B + Send + Sync> = Arc::new(convert);
+        let direct = Arc::clone(&convert);
+        let link_via: LinkVia = Arc::new(move |output: &ErasedOutput, input: &ErasedInput| {
+            output.type_id == std::any::TypeId::of::<A>()
+                && input.type_id == std::any::TypeId::of::<B>()
+                && crate::port::link_converted::<A, B>(output, input, Arc::clone(&direct))
+        });
         let via: Via = Arc::new(
             move |system: &mut System, old: Option<(&str, &str)>, from: &str, to: &str| {
                 let Some(old) = old else {
@@ -895,6 +1007,7 @@ impl CompoundBuilder {
             from: from.to_owned(),
             to: to.to_owned(),
             via: Some(via),
+            link_via: Some(link_via),
         });
         self
     }
@@ -1273,7 +1386,11 @@ impl CompoundBuilder {
             own_offset: mapped.len(),
             system: Some(self.system),
             instances: self.instances,
+            leaders: group_members.iter().map(|members| members[0]).collect(),
             groups: group_members,
+            merges: Vec::new(),
+            merged: Vec::new(),
+            fanned: Vec::new(),
             links: self.links,
             wired: Vec::new(),
             mapped,
@@ -1350,6 +1467,15 @@ struct Compound {
     system: Option<System>,
     instances: Vec<Instance>,
     groups: Vec<Vec<usize>>,
+    /// Each redundant group's leader (its merged streams carry its packets): changes
+    /// only when the leader fails.
+    leaders: Vec<usize>,
+    /// The merged data outputs of redundant groups, made at the first wiring.
+    merges: Vec<MergedPort>,
+    /// The consumers linked to a merged output: `(merge, input address, input)`.
+    merged: Vec<(usize, String, ErasedInput)>,
+    /// The connections made to redundant members' inputs (every live member).
+    fanned: Vec<(String, String)>,
     /// Declared connections.
     links: Vec<Link>,
     /// The connections made now (declared ones with each instance routed to whoever
@@ -1479,12 +1605,7 @@ impl Compound {
     fn route(&self, index: usize) -> usize {
         let instance = &self.instances[index];
         if let Some(group) = instance.group {
-            let members = &self.groups[group];
-            return members
-                .iter()
-                .copied()
-                .find(|m| self.instances[*m].status == Status::Active)
-                .unwrap_or(members[0]);
+            return self.leaders[group];
         }
         if let Some(substitute) = instance.substitute
             && instance.status != Status::Active
@@ -1511,12 +1632,38 @@ impl Compound {
     /// replaced input (`System::replace_link`): no packet is lost meanwhile.
     fn rewire(&mut self) -> Result<(), Fault> {
         self.update_standing();
+        self.make_merges()?;
         let mut wanted: Vec<Option<Link>> = Vec::with_capacity(self.links.len());
+        // Connections to a redundant group's inputs go to every live member; from a
+        // group's data output, the merged stream feeds the consumers.
+        let mut fanned: Vec<Link> = Vec::new();
+        let mut merged: Vec<(usize, String, Option<LinkVia>)> = Vec::new();
         for link in &self.links {
+            if let Some(merge) = self.merge_of(&link.from) {
+                for to in self.fed(&link.to) {
+                    merged.push((merge, to, link.link_via.clone()));
+                }
+                wanted.push(None);
+                continue;
+            }
+            if self.in_group(&link.to) {
+                let from = self.routed(&link.from);
+                for to in self.fed(&link.to) {
+                    fanned.push(Link {
+                        from: from.clone(),
+                        to,
+                        via: link.via.clone(),
+                        link_via: None,
+                    });
+                }
+                wanted.push(None);
+                continue;
+            }
             let routed = Link {
                 from: self.routed(&link.from),
                 to: self.routed(&link.to),
                 via: link.via.clone(),
+                link_via: None,
             };
             let duplicate = wanted.iter().flatten().any(|w| w.ends() == routed.ends());
             wanted.push((!duplicate).then_some(routed));
@@ -1580,15 +1727,215 @@ impl Compound {
             }
             self.wired[index] = Some(new.clone());
         }
-        for index in 0..self.exports.len() {
-            let address = self.routed(self.exports[index].target());
-            if let Some(system) = self.system.as_ref() {
-                self.exports[index].follow(system, &address).map_err(|e| {
-                    Fault::message(format!("compound `{}`: `{address}`: {e}", self.name))
-                })?;
+        // Fanned connections: those no longer wanted go first (a poster or last input
+        // takes one producer), then the new ones are made.
+        let stale: Vec<(String, String)> = self
+            .fanned
+            .iter()
+            .filter(|old| {
+                !fanned
+                    .iter()
+                    .any(|new| new.ends() == (old.0.as_str(), old.1.as_str()))
+            })
+            .cloned()
+            .collect();
+        for (from, to) in stale {
+            system.disconnect(&from, &to).map_err(error)?;
+            self.fanned.retain(|old| *old != (from.clone(), to.clone()));
+        }
+        for new in &fanned {
+            let ends = (new.from.clone(), new.to.clone());
+            if self.fanned.contains(&ends) {
+                continue;
             }
+            match &new.via {
+                Some(via) => via(system, None, &new.from, &new.to),
+                None => system.connect(&new.from, &new.to),
+            }
+            .map_err(error)?;
+            self.fanned.push(ends);
+        }
+        // The merged streams' consumers: new ones linked before stale ones unlinked.
+        for (merge, to, via) in &merged {
+            if self.merged.iter().any(|(m, t, _)| m == merge && t == to) {
+                continue;
+            }
+            let input = system.input_port(to).map_err(error)?;
+            let output = self.merges[*merge].merge.output();
+            let linked = match via {
+                Some(via) => via(&output, &input),
+                None => output.type_id == input.type_id && output.link(&input),
+            };
+            if !linked {
+                return Err(Fault::message(format!(
+                    "compound `{name}`: the merged output of `{}` does not match `{to}`",
+                    self.merges[*merge].port
+                )));
+            }
+            self.merged.push((*merge, to.clone(), input));
+        }
+        let merges = &self.merges;
+        self.merged.retain(|(merge, to, input)| {
+            let keep = merged.iter().any(|(m, t, _)| m == merge && t == to);
+            if !keep {
+                merges[*merge].merge.output().unlink(input);
+            }
+            keep
+        });
+        for index in 0..self.exports.len() {
+            let target = self.exports[index].target().to_owned();
+            let Some(system) = self.system.as_ref() else {
+                break;
+            };
+            let followed = if self.exports[index].is_input() {
+                let inputs: Result<Vec<ErasedInput>, ConnectError> = self
+                    .fed(&target)
+                    .iter()
+                    .map(|address| system.input_port(address))
+                    .collect();
+                inputs
+                    .map_err(|e| e.to_string())
+                    .and_then(|inputs| self.exports[index].follow_inputs(inputs))
+            } else {
+                let output = match self.merge_of(&target) {
+                    Some(merge) => Ok(self.merges[merge].merge.output()),
+                    None => system
+                        .output_port(&self.routed(&target))
+                        .map_err(|e| e.to_string()),
+                };
+                output.and_then(|output| self.exports[index].follow_output(output))
+            };
+            followed.map_err(|e| {
+                Fault::message(format!("compound `{}`: `{target}`: {e}", self.name))
+            })?;
         }
         Ok(())
+    }
+
+    /// Whether `address` (`instance.port`) is a port of a redundant group's member.
+    fn in_group(&self, address: &str) -> bool {
+        self.index_of(address)
+            .is_some_and(|index| self.instances[index].group.is_some())
+    }
+
+    fn index_of(&self, address: &str) -> Option<usize> {
+        let (instance, _) = address.split_once('.')?;
+        self.instances.iter().position(|i| i.name == instance)
+    }
+
+    /// The inputs a connection or export to input `address` feeds now: for a member
+    /// of a redundant group, the same input of every live member (of the leader if
+    /// none is live); else the input of whoever stands for the instance.
+    fn fed(&self, address: &str) -> Vec<String> {
+        let (Some(index), Some((_, port))) = (self.index_of(address), address.split_once('.'))
+        else {
+            return vec![address.to_owned()];
+        };
+        match self.instances[index].group {
+            Some(group) => {
+                let live: Vec<String> = self.groups[group]
+                    .iter()
+                    .filter(|m| self.instances[**m].status == Status::Active)
+                    .map(|m| format!("{}.{port}", self.instances[*m].name))
+                    .collect();
+                if live.is_empty() {
+                    vec![format!(
+                        "{}.{port}",
+                        self.instances[self.leaders[group]].name
+                    )]
+                } else {
+                    live
+                }
+            }
+            None => vec![self.routed(address)],
+        }
+    }
+
+    /// The merge of the data output at `address`, if it is a redundant member's.
+    fn merge_of(&self, address: &str) -> Option<usize> {
+        let index = self.index_of(address)?;
+        let group = self.instances[index].group?;
+        let (_, port) = address.split_once('.')?;
+        self.merges
+            .iter()
+            .position(|m| m.group == group && m.port == port)
+    }
+
+    /// Make the merge of every redundant member's data output that a connection or an
+    /// export reads (once: the lanes stay attached to the members' outputs).
+    fn make_merges(&mut self) -> Result<(), Fault> {
+        let Some(system) = self.system.as_ref() else {
+            return Ok(());
+        };
+        let sources = self.links.iter().map(|link| link.from.clone()).chain(
+            self.exports
+                .iter()
+                .filter(|e| !e.is_input())
+                .map(|e| e.target().to_owned()),
+        );
+        let mut made = Vec::new();
+        for address in sources {
+            let (Some(index), Some((_, port))) = (self.index_of(&address), address.split_once('.'))
+            else {
+                continue;
+            };
+            let Some(group) = self.instances[index].group else {
+                continue;
+            };
+            if self
+                .merges
+                .iter()
+                .chain(&made)
+                .any(|m: &MergedPort| m.group == group && m.port == port)
+            {
+                continue;
+            }
+            let members = &self.groups[group];
+            let first = system
+                .output_port(&format!("{}.{port}", self.instances[members[0]].name))
+                .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+            let Some(merge) = first.merge(members.len()) else {
+                continue; // A tick or poster output: its consumers follow the leader.
+            };
+            for (lane, member) in members.iter().enumerate() {
+                let output = system
+                    .output_port(&format!("{}.{port}", self.instances[*member].name))
+                    .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+                if !merge.attach(lane, &output) {
+                    return Err(Fault::message(format!(
+                        "compound `{}`: `{}.{port}` does not match its group's",
+                        self.name, self.instances[*member].name
+                    )));
+                }
+            }
+            let leader = members
+                .iter()
+                .position(|m| *m == self.leaders[group])
+                .unwrap_or(0);
+            merge.reset(leader);
+            made.push(MergedPort {
+                group,
+                port: port.to_owned(),
+                merge,
+            });
+        }
+        self.merges.extend(made);
+        Ok(())
+    }
+
+    /// Member `member` of redundant group `group` leads it from now on: the merged
+    /// streams go on from its backlog. Returns the packets replayed and missing.
+    fn lead(&mut self, group: usize, member: usize) -> (u64, u64) {
+        self.leaders[group] = member;
+        let lane = self.groups[group]
+            .iter()
+            .position(|m| *m == member)
+            .unwrap_or(0);
+        self.merges
+            .iter()
+            .filter(|m| m.group == group)
+            .map(|m| m.merge.lead(lane))
+            .fold((0, 0), |(r, g), (r2, g2)| (r + r2, g + g2))
     }
 
     /// Record who stands for each instance now in the view (for mapped variables);
@@ -1722,6 +2069,14 @@ impl Compound {
                 }
             }
         }
+        // Every redundant group is led by its first member again; its merged streams
+        // count on from where they are.
+        for group in 0..self.groups.len() {
+            self.leaders[group] = self.groups[group][0];
+        }
+        for merged in &self.merges {
+            merged.merge.reset(0);
+        }
         // A destroyed instance's substitute keeps standing for it.
         for index in 0..self.instances.len() {
             if self.instances[index].status == Status::Destroyed
@@ -1785,9 +2140,9 @@ impl Compound {
         let error = monitor.error.clone().unwrap_or_default();
         self.step(index, Step::Failed, error.clone());
         if let Some(group) = self.instances[index].group {
-            // A redundant member: the next live member takes the group's connections
-            // (if it was the one standing for the group: the leader).
-            let leader = self.route(index) == index;
+            // A redundant member: its inputs are disconnected; if it led the group,
+            // the next live member leads (the merged streams go on from its backlog).
+            let leader = self.leaders[group] == index;
             self.enqueue(index);
             self.step(index, Step::Enqueued, "");
             if !self.covered(index) {
@@ -1806,9 +2161,23 @@ impl Compound {
                 .find(|m| self.instances[*m].status == Status::Active);
             if leader && let Some(member) = standing {
                 let by = self.instances[member].name.clone();
+                let (replayed, missing) = self.lead(group, member);
                 self.rewire()
                     .map_err(|fault| self.propagated(index, fault))?;
-                self.step(index, Step::Substituted { by }, "");
+                let mut detail = String::new();
+                if replayed > 0 {
+                    detail = format!("{replayed} packet(s) of its backlog continued the stream");
+                }
+                if missing > 0 {
+                    tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group");
+                    detail.push_str(&format!(
+                        "; {missing} packet(s) missing from the stream (beyond its backlog)"
+                    ));
+                }
+                self.step(index, Step::Substituted { by }, detail);
+            } else {
+                self.rewire()
+                    .map_err(|fault| self.propagated(index, fault))?;
             }
             return Ok(());
         }
@@ -1959,9 +2328,17 @@ impl Compound {
             let index = entry.instance;
             let state = self.instances[index].handle.state();
             if entry.probation && state == State::Running {
-                // Recovered: the arrangement before the fault comes back.
+                // Recovered: the arrangement before the fault comes back (a redundant
+                // member joins its group again, not leading it: its merged lanes count
+                // on from the streams' numbers).
                 self.queue.remove(position);
                 self.instances[index].status = Status::Active;
+                if let Some(group) = self.instances[index].group {
+                    let lane = self.groups[group].iter().position(|m| *m == index);
+                    for merged in self.merges.iter().filter(|m| m.group == group) {
+                        merged.merge.rejoin(lane.unwrap_or(0));
+                    }
+                }
                 let rewired = if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Active
                 {

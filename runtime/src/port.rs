@@ -359,6 +359,21 @@ pub(crate) struct OutputCore {
     requests: OnceLock<(Sender<usize>, Receiver<usize>)>,
     /// While the producer answers a pull request: the requesting input's id (0: none).
     answering_to: AtomicUsize,
+    /// Where pull requests go instead of this output's own queue: a compound's
+    /// exported port passes them on to the port it stands for (see [`PullRoute`]).
+    route: Mutex<Option<PullRoute>>,
+}
+
+/// Where a compound's exported port passes the pull requests it receives.
+#[derive(Clone)]
+pub(crate) enum PullRoute {
+    /// The relay of an exported input, feeding the instance's input: a request from
+    /// the instance becomes a request of the compound's input to its producers.
+    Input(Arc<InputCore>),
+    /// The compound's exported output: a request from one of its consumers goes to
+    /// the instance output it follows, on behalf of the same consumer (the answer
+    /// reaches that consumer only, through the forwarding).
+    Output(Arc<OutputCore>),
 }
 
 impl OutputCore {
@@ -368,7 +383,18 @@ impl OutputCore {
             owner: OnceLock::new(),
             requests: OnceLock::new(),
             answering_to: AtomicUsize::new(0),
+            route: Mutex::new(None),
         })
+    }
+
+    /// Pass the pull requests this output receives on along `route` from now on,
+    /// with those already waiting in its own queue (an exported port following the
+    /// instance port it stands for).
+    pub(crate) fn set_route(&self, route: PullRoute) {
+        *lock(&self.route) = Some(route.clone());
+        while let Some(input_id) = self.next_request() {
+            let _ = route.request(input_id);
+        }
     }
 
     /// Give this output its pull-request queue (it is declared `pull`).
@@ -378,6 +404,10 @@ impl OutputCore {
     }
 
     fn request(&self, input_id: usize) -> Result<(), PullError> {
+        let route = lock(&self.route).clone();
+        if let Some(route) = route {
+            return route.request(input_id);
+        }
         let Some(requests) = self.requests.get() else {
             // Not a pull output: nobody answers, as if the producer dropped it.
             return Ok(());
@@ -415,10 +445,91 @@ impl OutputCore {
     }
 }
 
-/// Something that accepts packets of type `T`: an input end, or a converter in front of
-/// one.
+/// A packet on its way to an input end: owned when one input gets it, shared (one
+/// allocation, no copy) when several do and copying it would cost more than sharing
+/// ([`shares`]). A consumer that takes a shared packet by value copies it only if
+/// another consumer still holds it (the last one takes the original).
+pub(crate) enum Parcel<T> {
+    /// The only input that gets this packet.
+    Owned(T),
+    /// One of several inputs that get this packet.
+    Shared(Arc<T>),
+}
+
+impl<T: Packet> Parcel<T> {
+    /// The packet, read in place.
+    #[inline]
+    pub(crate) fn get(&self) -> &T {
+        match self {
+            Parcel::Owned(packet) => packet,
+            Parcel::Shared(packet) => packet,
+        }
+    }
+
+    /// The packet by value: copied only if another input still holds it.
+    #[inline]
+    pub(crate) fn into_owned(self) -> T {
+        match self {
+            Parcel::Owned(packet) => packet,
+            Parcel::Shared(packet) => Arc::try_unwrap(packet).unwrap_or_else(|p| (*p).clone()),
+        }
+    }
+
+    /// The packet behind a shared pointer (no copy).
+    #[inline]
+    pub(crate) fn into_shared(self) -> Arc<T> {
+        match self {
+            Parcel::Owned(packet) => Arc::new(packet),
+            Parcel::Shared(packet) => packet,
+        }
+    }
+}
+
+impl<T> Clone for Parcel<T>
+where
+    T: Packet,
+{
+    fn clone(&self) -> Self {
+        match self {
+            Parcel::Owned(packet) => Parcel::Owned(packet.clone()),
+            Parcel::Shared(packet) => Parcel::Shared(Arc::clone(packet)),
+        }
+    }
+}
+
+/// Whether a packet sent to several inputs is shared rather than copied for each: when
+/// its type owns memory elsewhere (it has drop glue: a `Vec`, a `String`, a `Box`), or
+/// is larger than 256 bytes. A small plain-data packet is cheaper to copy than to
+/// allocate once and count references to.
+#[inline]
+pub(crate) const fn shares<T>() -> bool {
+    std::mem::needs_drop::<T>() || size_of::<T>() > 256
+}
+
+impl PullRoute {
+    fn request(&self, input_id: usize) -> Result<(), PullError> {
+        match self {
+            PullRoute::Input(input) => input.request(),
+            PullRoute::Output(output) => output.request(input_id),
+        }
+    }
+}
+
+/// Something that accepts packets of type `T`: an input end, a converter in front of
+/// one, a compound's exported output, or a recorder's tap.
 pub(crate) trait Deliver<T>: Send + Sync {
-    fn deliver(&self, packet: T);
+    fn deliver(&self, packet: Parcel<T>);
+
+    /// Whether the pull request of input `id` is answered through this sink (a
+    /// compound's exported output whose consumers include that input).
+    fn answers(&self, _id: usize) -> bool {
+        false
+    }
+
+    /// Deliver an answer to the pull request of input `id`, which this sink answers.
+    fn deliver_answer(&self, packet: Parcel<T>, _id: usize) {
+        self.deliver(packet);
+    }
 }
 
 /// A converter on a connection, in front of the input end.
@@ -428,8 +539,9 @@ struct Converted<A, B> {
 }
 
 impl<A: Packet, B: Packet> Deliver<A> for Converted<A, B> {
-    fn deliver(&self, packet: A) {
-        self.target.deliver((self.convert)(&packet));
+    fn deliver(&self, packet: Parcel<A>) {
+        self.target
+            .deliver(Parcel::Owned((self.convert)(packet.get())));
     }
 }
 
@@ -445,6 +557,43 @@ impl<T> Clone for Sink<T> {
             input_id: self.input_id,
             target: Arc::clone(&self.target),
         }
+    }
+}
+
+/// Deliver `packet` to every sink: owned to a single one, shared among several when
+/// [`shares`] says so, else copied for each but the last.
+#[inline]
+fn dispatch<T: Packet>(sinks: &[Sink<T>], packet: Parcel<T>) {
+    let Some((last, rest)) = sinks.split_last() else {
+        return;
+    };
+    if rest.is_empty() {
+        last.target.deliver(packet);
+    } else if shares::<T>() {
+        let shared = packet.into_shared();
+        for sink in rest {
+            sink.target.deliver(Parcel::Shared(Arc::clone(&shared)));
+        }
+        last.target.deliver(Parcel::Shared(shared));
+    } else {
+        for sink in rest {
+            sink.target.deliver(packet.clone());
+        }
+        last.target.deliver(packet);
+    }
+}
+
+/// Deliver an answer to input `id`'s pull request to the one sink that leads there
+/// (the input itself, or an exported output in front of it). False if none does.
+fn dispatch_answer<T: Packet>(sinks: &[Sink<T>], packet: Parcel<T>, id: usize) -> bool {
+    if let Some(sink) = sinks.iter().find(|sink| sink.input_id == id) {
+        sink.target.deliver(packet);
+        true
+    } else if let Some(sink) = sinks.iter().find(|sink| sink.target.answers(id)) {
+        sink.target.deliver_answer(packet, id);
+        true
+    } else {
+        false
     }
 }
 
@@ -530,8 +679,8 @@ impl<T> Clone for FifoIn<T> {
 
 pub(crate) struct FifoInner<T> {
     core: Arc<InputCore>,
-    sender: Sender<T>,
-    receiver: Receiver<T>,
+    sender: Sender<Parcel<T>>,
+    receiver: Receiver<Parcel<T>>,
     policy: OverflowPolicy,
     capacity: usize,
     block_timeout: Duration,
@@ -539,7 +688,7 @@ pub(crate) struct FifoInner<T> {
 
 impl<T: Packet> Deliver<T> for FifoInner<T> {
     #[inline]
-    fn deliver(&self, packet: T) {
+    fn deliver(&self, packet: Parcel<T>) {
         match self.sender.try_send(packet) {
             Ok(()) => {}
             Err(TrySendError::Full(packet)) => self.deliver_full(packet),
@@ -552,7 +701,7 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
 
 impl<T: Packet> FifoInner<T> {
     #[cold]
-    fn deliver_full(&self, packet: T) {
+    fn deliver_full(&self, packet: Parcel<T>) {
         match self.policy {
             OverflowPolicy::Reject => self.core.overflowed(1),
             OverflowPolicy::DropOldest => {
@@ -607,21 +756,38 @@ impl<T: Packet> FifoIn<T> {
         }
     }
 
-    /// The oldest queued packet.
+    /// The oldest queued packet. A packet its producer sent to several inputs is
+    /// shared among them: taking it by value copies it if another input still holds
+    /// it ([`FifoIn::recv_shared`] never copies).
     pub fn recv(&self) -> Option<T> {
-        self.inner.receiver.try_recv().ok()
+        self.inner.receiver.try_recv().ok().map(Parcel::into_owned)
+    }
+
+    /// The oldest queued packet, behind a shared pointer: a packet sent to several
+    /// inputs is not copied for this one.
+    pub fn recv_shared(&self) -> Option<Arc<T>> {
+        self.inner.receiver.try_recv().ok().map(Parcel::into_shared)
     }
 
     /// Every packet queued now, oldest first.
     pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
-        self.inner.receiver.try_iter()
+        self.inner.receiver.try_iter().map(Parcel::into_owned)
+    }
+
+    /// The oldest queued packet as it was delivered (owned or shared).
+    pub(crate) fn recv_parcel(&self) -> Option<Parcel<T>> {
+        self.inner.receiver.try_recv().ok()
     }
 
     /// Wait up to `timeout` for a packet. This blocks the calling thread: meant for
     /// threads outside the system (tests, tools), not for sections, which should
     /// react to arrivals with `on` transitions instead.
     pub fn recv_timeout(&self, timeout: Duration) -> Option<T> {
-        self.inner.receiver.recv_timeout(timeout).ok()
+        self.inner
+            .receiver
+            .recv_timeout(timeout)
+            .ok()
+            .map(Parcel::into_owned)
     }
 
     /// The number of queued packets.
@@ -682,13 +848,13 @@ pub(crate) struct UfifoInner<T> {
 }
 
 struct UfifoQueue<T> {
-    packets: VecDeque<T>,
+    packets: VecDeque<Parcel<T>>,
     capacity: usize,
     growths: u64,
 }
 
 impl<T: Packet> Deliver<T> for UfifoInner<T> {
-    fn deliver(&self, packet: T) {
+    fn deliver(&self, packet: Parcel<T>) {
         let stored = {
             let mut queue = lock(&self.queue);
             if queue.packets.len() >= queue.capacity {
@@ -734,15 +900,28 @@ impl<T: Packet> UfifoIn<T> {
         }
     }
 
-    /// The oldest queued packet.
+    /// The oldest queued packet (copied if another input still holds it, as for
+    /// [`FifoIn::recv`]).
     pub fn recv(&self) -> Option<T> {
-        lock(&self.inner.queue).packets.pop_front()
+        let packet = lock(&self.inner.queue).packets.pop_front();
+        packet.map(Parcel::into_owned)
+    }
+
+    /// The oldest queued packet, behind a shared pointer (never copied).
+    pub fn recv_shared(&self) -> Option<Arc<T>> {
+        let packet = lock(&self.inner.queue).packets.pop_front();
+        packet.map(Parcel::into_shared)
     }
 
     /// Every packet queued now, oldest first.
     pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
         let packets = std::mem::take(&mut lock(&self.inner.queue).packets);
-        packets.into_iter()
+        packets.into_iter().map(Parcel::into_owned)
+    }
+
+    /// The oldest queued packet as it was delivered (owned or shared).
+    pub(crate) fn recv_parcel(&self) -> Option<Parcel<T>> {
+        lock(&self.inner.queue).packets.pop_front()
     }
 
     /// The number of queued packets.
@@ -797,19 +976,21 @@ impl<T> Clone for LastIn<T> {
 pub(crate) struct LastInner<T> {
     core: Arc<InputCore>,
     /// The latest packet and its sequence number (1 for the first packet).
-    slot: Mutex<(Option<T>, u64)>,
+    slot: Mutex<(Option<Parcel<T>>, u64)>,
     /// The sequence number the consumer last read with `take_new`.
     read_seq: AtomicU64,
 }
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
     #[inline]
-    fn deliver(&self, packet: T) {
-        {
+    fn deliver(&self, packet: Parcel<T>) {
+        let replaced = {
             let mut slot = lock(&self.slot);
-            slot.0 = Some(packet);
             slot.1 += 1;
-        }
+            slot.0.replace(packet)
+        };
+        // (The replaced packet is dropped outside the lock.)
+        drop(replaced);
         self.core.arrived();
     }
 }
@@ -828,7 +1009,15 @@ impl<T: Packet> LastIn<T> {
 
     /// The latest packet received, if any (a clone of the local copy).
     pub fn latest(&self) -> Option<T> {
-        lock(&self.inner.slot).0.clone()
+        lock(&self.inner.slot).0.as_ref().map(|p| p.get().clone())
+    }
+
+    /// The latest packet received, behind a shared pointer: not copied when its
+    /// producer shares it among several inputs ([`FifoIn::recv_shared`]); else moved
+    /// once into a shared allocation that later reads reuse.
+    pub fn latest_shared(&self) -> Option<Arc<T>> {
+        let mut slot = lock(&self.inner.slot);
+        Self::share(&mut slot.0)
     }
 
     /// The latest packet, only if it is newer than the last one `take_new` returned.
@@ -836,10 +1025,28 @@ impl<T: Packet> LastIn<T> {
         let slot = lock(&self.inner.slot);
         if slot.1 > self.inner.read_seq.load(Ordering::Acquire) {
             self.inner.read_seq.store(slot.1, Ordering::Release);
-            slot.0.clone()
+            slot.0.as_ref().map(|p| p.get().clone())
         } else {
             None
         }
+    }
+
+    /// [`LastIn::take_new`] behind a shared pointer (see [`LastIn::latest_shared`]).
+    pub fn take_new_shared(&self) -> Option<Arc<T>> {
+        let mut slot = lock(&self.inner.slot);
+        if slot.1 > self.inner.read_seq.load(Ordering::Acquire) {
+            self.inner.read_seq.store(slot.1, Ordering::Release);
+            Self::share(&mut slot.0)
+        } else {
+            None
+        }
+    }
+
+    /// The packet in `slot`, made shared in place if it was owned.
+    fn share(slot: &mut Option<Parcel<T>>) -> Option<Arc<T>> {
+        let shared = slot.take()?.into_shared();
+        *slot = Some(Parcel::Shared(Arc::clone(&shared)));
+        Some(shared)
     }
 
     /// How many packets have been received in all.
@@ -974,7 +1181,48 @@ pub struct TickOut {
 
 pub(crate) struct TickOutInner {
     core: Arc<OutputCore>,
-    targets: RwLock<Arc<[Arc<TickInner>]>>,
+    targets: RwLock<Arc<[TickTarget]>>,
+}
+
+/// Where a tick output's events go: a tick input, or a compound's exported tick
+/// output that passes them on to its own inputs.
+#[derive(Clone)]
+enum TickTarget {
+    Input(Arc<TickInner>),
+    Forward { id: usize, to: Arc<TickOutInner> },
+}
+
+impl TickTarget {
+    /// The input's id, or the forwarding's.
+    fn id(&self) -> usize {
+        match self {
+            TickTarget::Input(input) => input.core.id,
+            TickTarget::Forward { id, .. } => *id,
+        }
+    }
+
+    /// Whether input `id`'s pull request is answered through this target.
+    fn answers(&self, id: usize) -> bool {
+        match self {
+            TickTarget::Input(input) => input.core.id == id,
+            TickTarget::Forward { to, .. } => read(&to.targets).iter().any(|t| t.answers(id)),
+        }
+    }
+}
+
+impl TickOutInner {
+    /// One event to every target, or only along the way to input `answering` (not 0).
+    fn emit(&self, answering: usize) {
+        for target in read(&self.targets).iter() {
+            if answering != 0 && !target.answers(answering) {
+                continue;
+            }
+            match target {
+                TickTarget::Input(input) => input.tick(),
+                TickTarget::Forward { to, .. } => to.emit(answering),
+            }
+        }
+    }
 }
 
 impl TickOut {
@@ -992,11 +1240,7 @@ impl TickOut {
     /// pull request).
     pub fn emit(&self) {
         let answering = self.inner.core.answering_to.load(Ordering::Relaxed);
-        for target in read(&self.inner.targets).iter() {
-            if answering == 0 || target.core.id == answering {
-                target.tick();
-            }
-        }
+        self.inner.emit(answering);
     }
 }
 
@@ -1035,25 +1279,24 @@ impl<T: Packet> DataOut<T> {
         }
     }
 
-    /// Send a packet to every connected input: each gets a clone, the last one the
-    /// packet itself. While the component answers a pull request, only the requesting
-    /// input gets it.
+    /// Send a packet to every connected input. One input gets the packet itself;
+    /// several share it (one allocation, no copy) when it owns memory or is large
+    /// (see `docs/runtime.md`, "Fan-out"), else each gets a copy. While the
+    /// component answers a pull request, only the requesting input gets it.
     #[inline]
     pub fn send(&self, packet: T) {
-        let sinks = read(&self.inner.sinks);
         let answering = self.inner.core.answering_to.load(Ordering::Relaxed);
         if answering != 0 {
-            if let Some(sink) = sinks.iter().find(|sink| sink.input_id == answering) {
-                sink.target.deliver(packet);
-            }
+            dispatch_answer(&read(&self.inner.sinks), Parcel::Owned(packet), answering);
             return;
         }
-        if let Some((last, rest)) = sinks.split_last() {
-            for sink in rest {
-                sink.target.deliver(packet.clone());
-            }
-            last.target.deliver(packet);
-        }
+        dispatch(&read(&self.inner.sinks), Parcel::Owned(packet));
+    }
+
+    /// Send a packet that may already be shared (a compound's relay passing on what
+    /// arrived at its exported input), as [`DataOut::send`] does.
+    pub(crate) fn send_parcel(&self, packet: Parcel<T>) {
+        dispatch(&read(&self.inner.sinks), packet);
     }
 
     /// How many inputs are connected.
@@ -1154,7 +1397,7 @@ impl<T: Packet> PosterOut<T> {
     pub fn post(&self, packet: T) {
         if self.inner.tapped.load(Ordering::Acquire) {
             for tap in read(&self.inner.taps).iter() {
-                tap.target.deliver(packet.clone());
+                tap.target.deliver(Parcel::Owned(packet.clone()));
             }
         }
         {
@@ -1222,6 +1465,60 @@ impl OutKind {
     }
 }
 
+/// What the type-erased code (connecting, moving a connection's input end, retiring a
+/// component) asks of an input end, implemented by each typed input end. The defaults
+/// are those of an input that holds no queue.
+pub(crate) trait InputEnd: Any + Send + Sync {
+    /// Forget the source of a poster input if it is the output with this id (an
+    /// input's source may already be another output's: see `replace_link`).
+    fn clear_source(&self, _output: usize) {}
+
+    /// Move what is queued here into `to`, an input of the same kind and packet type:
+    /// how many packets (or events) moved.
+    fn transfer(&self, _to: &ErasedInput) -> u64 {
+        0
+    }
+
+    /// Empty the queue (fifo, ufifo): how many packets were in it.
+    fn discard(&self) -> u64 {
+        0
+    }
+
+    /// Room left in a fifo whose policy is `Block` (`None` for every other input: a
+    /// delivery to it never waits).
+    fn room(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// What the type-erased code asks of an output end, implemented by each typed output
+/// end. `output` is the erased handle of `self`; `input` has been checked for kind.
+pub(crate) trait OutputEnd: Any + Send + Sync {
+    /// Connect to `input`: false if it is not of this output's packet type after all.
+    fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool;
+
+    /// Disconnect from `input`.
+    fn unlink(&self, output: &ErasedOutput, input: &ErasedInput);
+
+    /// Move the connection from `old` to `new` in one step, with what is queued.
+    fn relink(&self, output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool;
+
+    /// Make this output (`this`, a compound's exported data or poster output) follow
+    /// `from`: one more sink or tap of `from`, with id `id`, passing on to this one.
+    /// False if `from` is not of this output's kind and packet type.
+    fn forward_from(&self, _this: &ErasedOutput, _from: &ErasedOutput, _id: usize) -> bool {
+        false
+    }
+
+    /// Remove the forwarding or tap with id `id` (nothing if there is none).
+    fn remove_sink(&self, id: usize);
+
+    /// A merge of `lanes` outputs like this one (data outputs only).
+    fn merge(&self, _lanes: usize) -> Option<Arc<dyn MergeEnd>> {
+        None
+    }
+}
+
 /// An input port with its packet type erased (see [`InputPort`]).
 #[derive(Clone)]
 pub struct ErasedInput {
@@ -1229,41 +1526,33 @@ pub struct ErasedInput {
     pub(crate) type_id: TypeId,
     pub(crate) type_name: &'static str,
     pub(crate) core: Arc<InputCore>,
-    pub(crate) any: Arc<dyn Any + Send + Sync>,
-    /// Forget the source of a poster input if it is the output with this id (an
-    /// input's source may already be another output's: see `replace_link`).
-    clear_source: fn(&ErasedInput, usize),
-    /// Move what is queued at this input into another input of the same kind and type.
-    transfer: fn(&ErasedInput, &ErasedInput) -> u64,
-    /// Empty this input's queue (fifo, ufifo): how many packets were in it.
-    discard: fn(&ErasedInput) -> u64,
-    /// Room left in a fifo whose policy is `Block` (`None` for every other input: a
-    /// delivery to it never waits).
-    room: fn(&ErasedInput) -> Option<usize>,
+    end: Arc<dyn InputEnd>,
 }
 
-fn room_unbounded(_: &ErasedInput) -> Option<usize> {
-    None
+/// The typed input end behind `input`, if it is an `X`.
+fn input_as<X: InputEnd>(input: &ErasedInput) -> Option<Arc<X>> {
+    let any: Arc<dyn Any + Send + Sync> = input.end.clone();
+    any.downcast::<X>().ok()
 }
 
-fn room_fifo<T: Packet>(input: &ErasedInput) -> Option<usize> {
-    let inner = downcast::<FifoInner<T>>(&input.any)?;
-    (inner.policy == OverflowPolicy::Block)
-        .then(|| inner.capacity.saturating_sub(inner.receiver.len()))
+/// The typed output end behind `output`, if it is an `X`.
+fn output_as<X: OutputEnd>(output: &ErasedOutput) -> Option<Arc<X>> {
+    let any: Arc<dyn Any + Send + Sync> = output.end.clone();
+    any.downcast::<X>().ok()
 }
 
 impl ErasedInput {
     /// How many packets a delivery can add without waiting, if a delivery to this
     /// input can wait at all (a fifo with the `Block` policy); `None` otherwise.
     pub(crate) fn room(&self) -> Option<usize> {
-        (self.room)(self)
+        self.end.room()
     }
 
     /// Move what is queued at this input to `to`, if it is of the same kind and packet
     /// type (otherwise nothing moves). Returns how many packets (or events) moved.
     pub(crate) fn transfer_to(&self, to: &ErasedInput) -> u64 {
         if self.type_id == to.type_id && self.kind == to.kind {
-            (self.transfer)(self, to)
+            self.end.transfer(to)
         } else {
             0
         }
@@ -1273,7 +1562,7 @@ impl ErasedInput {
     /// `MonitorEvent::Overflow`): its component is retired and will never read them.
     /// Returns how many there were.
     pub(crate) fn discard_queued(&self) -> u64 {
-        let lost = (self.discard)(self);
+        let lost = self.end.discard();
         if lost > 0 {
             self.core.overflowed(lost);
         }
@@ -1292,29 +1581,80 @@ impl ErasedInput {
     }
 }
 
-fn discard_nothing(_: &ErasedInput) -> u64 {
-    0
+impl InputEnd for TickInner {
+    fn transfer(&self, to: &ErasedInput) -> u64 {
+        let Some(to) = input_as::<TickInner>(to) else {
+            return 0;
+        };
+        let count = self.count.swap(0, Ordering::AcqRel);
+        if count > 0 {
+            to.count.fetch_add(count, Ordering::AcqRel);
+            to.core.arrived();
+        }
+        count
+    }
 }
 
-fn discard_fifo<T: Packet>(input: &ErasedInput) -> u64 {
-    downcast::<FifoInner<T>>(&input.any).map_or(0, |inner| inner.receiver.try_iter().count() as u64)
+/// Deliver `packets` to `to` (an input of `T`): how many.
+fn transfer_queue<T: Packet>(packets: Vec<Parcel<T>>, to: &ErasedInput) -> u64 {
+    let count = packets.len() as u64;
+    if let Some(target) = data_target::<T>(to) {
+        for packet in packets {
+            target.deliver(packet);
+        }
+    }
+    count
 }
 
-fn discard_ufifo<T: Packet>(input: &ErasedInput) -> u64 {
-    downcast::<UfifoInner<T>>(&input.any).map_or(0, |inner| {
-        std::mem::take(&mut lock(&inner.queue).packets).len() as u64
-    })
+impl<T: Packet> InputEnd for FifoInner<T> {
+    fn transfer(&self, to: &ErasedInput) -> u64 {
+        transfer_queue(self.receiver.try_iter().collect(), to)
+    }
+
+    fn discard(&self) -> u64 {
+        self.receiver.try_iter().count() as u64
+    }
+
+    fn room(&self) -> Option<usize> {
+        (self.policy == OverflowPolicy::Block)
+            .then(|| self.capacity.saturating_sub(self.receiver.len()))
+    }
 }
 
-fn clear_nothing(_: &ErasedInput, _: usize) {}
+impl<T: Packet> InputEnd for UfifoInner<T> {
+    fn transfer(&self, to: &ErasedInput) -> u64 {
+        let packets: Vec<Parcel<T>> = std::mem::take(&mut lock(&self.queue).packets).into();
+        transfer_queue(packets, to)
+    }
 
-fn clear_poster_source<T: Packet>(input: &ErasedInput, output: usize) {
-    if let Some(reader) = input.any.downcast_ref::<PosterInInner<T>>() {
-        let mut source = write(&reader.source);
+    fn discard(&self) -> u64 {
+        std::mem::take(&mut lock(&self.queue).packets).len() as u64
+    }
+}
+
+impl<T: Packet> InputEnd for LastInner<T> {
+    fn transfer(&self, to: &ErasedInput) -> u64 {
+        // Only a packet the old consumer has not taken yet is handed on.
+        let unread = {
+            let slot = lock(&self.slot);
+            (slot.1 > self.read_seq.load(Ordering::Acquire))
+                .then(|| slot.0.clone())
+                .flatten()
+        };
+        match unread {
+            Some(packet) => transfer_queue(vec![packet], to),
+            None => 0,
+        }
+    }
+}
+
+impl<T: Packet> InputEnd for PosterInInner<T> {
+    fn clear_source(&self, output: usize) {
+        let mut source = write(&self.source);
         if source.as_ref().is_some_and(|(id, _)| *id == output) {
             *source = None;
             // (Under the write lock: no read is between its look and its `seen`.)
-            reader.seen.store(0, Ordering::Release);
+            self.seen.store(0, Ordering::Release);
         }
     }
 }
@@ -1325,10 +1665,6 @@ impl fmt::Debug for ErasedInput {
     }
 }
 
-type LinkFn = fn(&ErasedOutput, &ErasedInput) -> bool;
-type UnlinkFn = fn(&ErasedOutput, &ErasedInput);
-type RelinkFn = fn(&ErasedOutput, &ErasedInput, &ErasedInput) -> bool;
-
 /// An output port with its packet type erased (see [`OutputPort`]).
 #[derive(Clone)]
 pub struct ErasedOutput {
@@ -1336,10 +1672,7 @@ pub struct ErasedOutput {
     pub(crate) type_id: TypeId,
     pub(crate) type_name: &'static str,
     pub(crate) core: Arc<OutputCore>,
-    pub(crate) any: Arc<dyn Any + Send + Sync>,
-    link: LinkFn,
-    unlink: UnlinkFn,
-    relink: RelinkFn,
+    end: Arc<dyn OutputEnd>,
 }
 
 impl fmt::Debug for ErasedOutput {
@@ -1352,19 +1685,19 @@ impl ErasedOutput {
     /// Connect to `input`, whose kind and packet type were already checked. Returns
     /// false if the input is not of this output's packet type after all.
     pub(crate) fn link(&self, input: &ErasedInput) -> bool {
-        (self.link)(self, input)
+        self.end.link(self, input)
     }
 
     /// Disconnect from `input`. Packets already queued at the input stay there.
     pub(crate) fn unlink(&self, input: &ErasedInput) {
-        (self.unlink)(self, input)
+        self.end.unlink(self, input)
     }
 
     /// Move this output's connection from input `old` to input `new` (of the same kind
     /// and type, checked by the caller) in one step, with what is queued at `old`:
     /// while it runs no packet is sent, so none is lost, duplicated or reordered.
     pub(crate) fn relink(&self, old: &ErasedInput, new: &ErasedInput) -> bool {
-        (self.relink)(self, old, new)
+        self.end.relink(self, old, new)
     }
 }
 
@@ -1390,11 +1723,7 @@ impl InputPort for TickIn {
             type_id: TypeId::of::<Event>(),
             type_name: "event",
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            clear_source: clear_nothing,
-            transfer: transfer_ticks,
-            discard: discard_nothing,
-            room: room_unbounded,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1406,11 +1735,7 @@ impl<T: Packet> InputPort for FifoIn<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            clear_source: clear_nothing,
-            transfer: transfer_fifo::<T>,
-            discard: discard_fifo::<T>,
-            room: room_fifo::<T>,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1422,11 +1747,7 @@ impl<T: Packet> InputPort for UfifoIn<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            clear_source: clear_nothing,
-            transfer: transfer_ufifo::<T>,
-            discard: discard_ufifo::<T>,
-            room: room_unbounded,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1438,11 +1759,7 @@ impl<T: Packet> InputPort for LastIn<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            clear_source: clear_nothing,
-            transfer: transfer_last::<T>,
-            discard: discard_nothing,
-            room: room_unbounded,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1454,11 +1771,7 @@ impl<T: Packet> InputPort for PosterIn<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            clear_source: clear_poster_source::<T>,
-            transfer: transfer_nothing,
-            discard: discard_nothing,
-            room: room_unbounded,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1470,10 +1783,7 @@ impl OutputPort for TickOut {
             type_id: TypeId::of::<Event>(),
             type_name: "event",
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            link: link_tick,
-            unlink: unlink_tick,
-            relink: relink_tick,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1485,10 +1795,7 @@ impl<T: Packet> OutputPort for DataOut<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            link: link_data::<T>,
-            unlink: unlink_data::<T>,
-            relink: relink_data::<T>,
+            end: self.inner.clone(),
         }
     }
 }
@@ -1500,16 +1807,9 @@ impl<T: Packet> OutputPort for PosterOut<T> {
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
             core: Arc::clone(&self.inner.core),
-            any: self.inner.clone(),
-            link: link_poster::<T>,
-            unlink: unlink_poster::<T>,
-            relink: relink_poster,
+            end: self.inner.clone(),
         }
     }
-}
-
-fn downcast<X: Any + Send + Sync>(any: &Arc<dyn Any + Send + Sync>) -> Option<Arc<X>> {
-    Arc::clone(any).downcast::<X>().ok()
 }
 
 /// Replace a snapshot list with `f` applied to a copy of it.
@@ -1520,70 +1820,156 @@ fn update_list<X: Clone>(list: &RwLock<Arc<[X]>>, f: impl FnOnce(&mut Vec<X>)) {
     *guard = Arc::from(items);
 }
 
-fn link_tick(output: &ErasedOutput, input: &ErasedInput) -> bool {
-    let (Some(out), Some(target)) = (
-        downcast::<TickOutInner>(&output.any),
-        downcast::<TickInner>(&input.any),
-    ) else {
-        return false;
-    };
-    update_list(&out.targets, |targets| targets.push(target));
-    input.core.add_source(Arc::clone(&output.core));
-    true
-}
-
-fn unlink_tick(output: &ErasedOutput, input: &ErasedInput) {
-    if let Some(out) = downcast::<TickOutInner>(&output.any) {
-        update_list(&out.targets, |targets| {
-            targets.retain(|t| t.core.id != input.core.id)
+impl OutputEnd for TickOutInner {
+    fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
+        let Some(target) = input_as::<TickInner>(input) else {
+            return false;
+        };
+        update_list(&self.targets, |targets| {
+            targets.push(TickTarget::Input(target))
         });
+        input.core.add_source(Arc::clone(&output.core));
+        true
     }
-    input.core.remove_source(output.core.id);
+
+    fn unlink(&self, output: &ErasedOutput, input: &ErasedInput) {
+        update_list(&self.targets, |targets| {
+            targets.retain(|t| t.id() != input.core.id)
+        });
+        input.core.remove_source(output.core.id);
+    }
+
+    fn relink(&self, output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+        let Some(target) = input_as::<TickInner>(new) else {
+            return false;
+        };
+        let mut targets = write(&self.targets);
+        let mut items: Vec<_> = targets
+            .iter()
+            .filter(|t| t.id() != old.core.id)
+            .cloned()
+            .collect();
+        items.push(TickTarget::Input(target));
+        *targets = Arc::from(items);
+        old.end.transfer(new);
+        drop(targets);
+        old.core.remove_source(output.core.id);
+        new.core.add_source(Arc::clone(&output.core));
+        true
+    }
+
+    fn remove_sink(&self, id: usize) {
+        update_list(&self.targets, |targets| targets.retain(|t| t.id() != id));
+    }
 }
 
 /// The data-receiving end of `input` as a `Deliver<T>`, if it is a last, fifo or ufifo
 /// input of `T`.
 fn data_target<T: Packet>(input: &ErasedInput) -> Option<Arc<dyn Deliver<T>>> {
     match input.kind {
-        InKind::Fifo => downcast::<FifoInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
-        InKind::Ufifo => downcast::<UfifoInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
-        InKind::Last => downcast::<LastInner<T>>(&input.any).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Fifo => input_as::<FifoInner<T>>(input).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Ufifo => input_as::<UfifoInner<T>>(input).map(|x| x as Arc<dyn Deliver<T>>),
+        InKind::Last => input_as::<LastInner<T>>(input).map(|x| x as Arc<dyn Deliver<T>>),
         InKind::Tick | InKind::Poster => None,
     }
 }
 
-fn add_sink<T: Packet>(
-    output: &ErasedOutput,
-    input: &ErasedInput,
-    target: Arc<dyn Deliver<T>>,
-) -> bool {
-    let Some(out) = downcast::<DataOutInner<T>>(&output.any) else {
-        return false;
-    };
-    update_list(&out.sinks, |sinks| {
-        sinks.push(Sink {
-            input_id: input.core.id,
-            target,
-        })
-    });
-    input.core.add_source(Arc::clone(&output.core));
-    true
-}
+impl<T: Packet> DataOutInner<T> {
+    fn add_sink(&self, output: &ErasedOutput, input: &ErasedInput, target: Arc<dyn Deliver<T>>) {
+        update_list(&self.sinks, |sinks| {
+            sinks.push(Sink {
+                input_id: input.core.id,
+                target,
+            })
+        });
+        input.core.add_source(Arc::clone(&output.core));
+    }
 
-fn link_data<T: Packet>(output: &ErasedOutput, input: &ErasedInput) -> bool {
-    match data_target::<T>(input) {
-        Some(target) => add_sink(output, input, target),
-        None => false,
+    /// Replace, in one write of the sinks, the sink at input `old` by `target`
+    /// (delivering to input `new`, directly or through a converter), and move what
+    /// is queued at `old` to `new` (if both take the same packet type).
+    fn swap_sink(
+        &self,
+        output: &ErasedOutput,
+        old: &ErasedInput,
+        new: &ErasedInput,
+        target: Arc<dyn Deliver<T>>,
+    ) {
+        // Senders hold the read lock while delivering: under the write lock nothing is
+        // in flight, so the queued packets move before any newer one arrives at `new`.
+        let mut sinks = write(&self.sinks);
+        let mut items: Vec<_> = sinks
+            .iter()
+            .filter(|sink| sink.input_id != old.core.id)
+            .cloned()
+            .collect();
+        items.push(Sink {
+            input_id: new.core.id,
+            target,
+        });
+        *sinks = Arc::from(items);
+        if old.type_id == new.type_id && old.kind == new.kind {
+            old.end.transfer(new);
+        }
+        drop(sinks);
+        old.core.remove_source(output.core.id);
+        new.core.add_source(Arc::clone(&output.core));
     }
 }
 
-fn unlink_data<T: Packet>(output: &ErasedOutput, input: &ErasedInput) {
-    if let Some(out) = downcast::<DataOutInner<T>>(&output.any) {
-        update_list(&out.sinks, |sinks| {
+impl<T: Packet> OutputEnd for DataOutInner<T> {
+    fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
+        match data_target::<T>(input) {
+            Some(target) => {
+                self.add_sink(output, input, target);
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn unlink(&self, output: &ErasedOutput, input: &ErasedInput) {
+        update_list(&self.sinks, |sinks| {
             sinks.retain(|sink| sink.input_id != input.core.id)
         });
+        input.core.remove_source(output.core.id);
     }
-    input.core.remove_source(output.core.id);
+
+    fn relink(&self, output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+        match data_target::<T>(new) {
+            Some(target) => {
+                self.swap_sink(output, old, new, target);
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn forward_from(&self, this: &ErasedOutput, from: &ErasedOutput, id: usize) -> bool {
+        let (Some(out), Some(to)) = (
+            output_as::<DataOutInner<T>>(from),
+            output_as::<DataOutInner<T>>(this),
+        ) else {
+            return false;
+        };
+        update_list(&out.sinks, |sinks| {
+            sinks.push(Sink {
+                input_id: id,
+                target: Arc::new(DataForward { to }),
+            })
+        });
+        true
+    }
+
+    fn remove_sink(&self, id: usize) {
+        update_list(&self.sinks, |sinks| {
+            sinks.retain(|sink| sink.input_id != id)
+        });
+    }
+
+    fn merge(&self, lanes: usize) -> Option<Arc<dyn MergeEnd>> {
+        Some(DataOutInner::<T>::new_merge(lanes))
+    }
 }
 
 fn set_poster_source<T: Packet>(
@@ -1592,7 +1978,7 @@ fn set_poster_source<T: Packet>(
     source: Arc<dyn PosterSource<T>>,
     out_readers: &RwLock<Arc<[Arc<InputCore>]>>,
 ) -> bool {
-    let Some(reader) = downcast::<PosterInInner<T>>(&input.any) else {
+    let Some(reader) = input_as::<PosterInInner<T>>(input) else {
         return false;
     };
     {
@@ -1606,25 +1992,72 @@ fn set_poster_source<T: Packet>(
     true
 }
 
-fn link_poster<T: Packet>(output: &ErasedOutput, input: &ErasedInput) -> bool {
-    let Some(out) = downcast::<PosterOutInner<T>>(&output.any) else {
-        return false;
-    };
-    let source: Arc<dyn PosterSource<T>> = out.clone();
-    set_poster_source(output, input, source, &out.readers)
-}
+impl<T: Packet> OutputEnd for PosterOutInner<T> {
+    fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
+        let Some(this) = output_as::<PosterOutInner<T>>(output) else {
+            return false;
+        };
+        let source: Arc<dyn PosterSource<T>> = this;
+        set_poster_source(output, input, source, &self.readers)
+    }
 
-fn unlink_poster<T: Packet>(output: &ErasedOutput, input: &ErasedInput) {
-    if let Some(out) = downcast::<PosterOutInner<T>>(&output.any) {
-        update_list(&out.readers, |readers| {
+    fn unlink(&self, output: &ErasedOutput, input: &ErasedInput) {
+        update_list(&self.readers, |readers| {
             readers.retain(|r| r.id != input.core.id)
         });
+        // The input's packet type may differ from T (a converter): clear its source
+        // through the input's own end, only if it still reads this output (a replacing
+        // connection may have been made first).
+        input.end.clear_source(output.core.id);
+        input.core.remove_source(output.core.id);
     }
-    // The input's packet type may differ from T (a converter): clear its source through
-    // the hook the input registered for its own type, only if it still reads this
-    // output (a replacing connection may have been made first).
-    (input.clear_source)(input, output.core.id);
-    input.core.remove_source(output.core.id);
+
+    fn relink(&self, output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
+        // A poster input holds no queue: it reads the producer's post.
+        if !self.link(output, new) {
+            return false;
+        }
+        self.unlink(output, old);
+        true
+    }
+
+    fn forward_from(&self, this: &ErasedOutput, from: &ErasedOutput, id: usize) -> bool {
+        let (Some(out), Some(to)) = (
+            output_as::<PosterOutInner<T>>(from),
+            output_as::<PosterOutInner<T>>(this),
+        ) else {
+            return false;
+        };
+        out.add_tap(Sink {
+            input_id: id,
+            target: Arc::new(PosterForward {
+                to: PosterOut { inner: to },
+            }),
+        });
+        true
+    }
+
+    fn remove_sink(&self, id: usize) {
+        let mut taps = write(&self.taps);
+        let kept: Vec<Sink<T>> = taps
+            .iter()
+            .filter(|tap| tap.input_id != id)
+            .cloned()
+            .collect();
+        self.tapped.store(!kept.is_empty(), Ordering::Release);
+        *taps = Arc::from(kept);
+    }
+}
+
+impl<T: Packet> PosterOutInner<T> {
+    /// Deliver every post to `tap` too (a recorder's tap, an exported output).
+    fn add_tap(&self, tap: Sink<T>) {
+        let mut taps = write(&self.taps);
+        let mut list: Vec<Sink<T>> = taps.iter().cloned().collect();
+        list.push(tap);
+        *taps = Arc::from(list);
+        self.tapped.store(true, Ordering::Release);
+    }
 }
 
 /// Connect a data or poster output of `A` to an input of `B` through `convert`.
@@ -1635,15 +2068,18 @@ pub(crate) fn link_converted<A: Packet, B: Packet>(
     convert: Arc<dyn Fn(&A) -> B + Send + Sync>,
 ) -> bool {
     match output.kind {
-        OutKind::Data => match data_target::<B>(input) {
-            Some(target) => {
-                let converted: Arc<dyn Deliver<A>> = Arc::new(Converted { convert, target });
-                add_sink(output, input, converted)
+        OutKind::Data => match (
+            output_as::<DataOutInner<A>>(output),
+            data_target::<B>(input),
+        ) {
+            (Some(out), Some(target)) => {
+                out.add_sink(output, input, Arc::new(Converted { convert, target }));
+                true
             }
-            None => false,
+            _ => false,
         },
         OutKind::Poster => {
-            let Some(out) = downcast::<PosterOutInner<A>>(&output.any) else {
+            let Some(out) = output_as::<PosterOutInner<A>>(output) else {
                 return false;
             };
             let source: Arc<dyn PosterSource<B>> = Arc::new(ConvertedPoster {
@@ -1654,133 +2090,6 @@ pub(crate) fn link_converted<A: Packet, B: Packet>(
         }
         OutKind::Tick => false,
     }
-}
-
-// ---------------------------------------------------------------------------------
-// Moving a connection's input end (compound substitution and recovery).
-
-fn transfer_nothing(_: &ErasedInput, _: &ErasedInput) -> u64 {
-    0
-}
-
-fn transfer_ticks(from: &ErasedInput, to: &ErasedInput) -> u64 {
-    let (Some(from), Some(to)) = (
-        downcast::<TickInner>(&from.any),
-        downcast::<TickInner>(&to.any),
-    ) else {
-        return 0;
-    };
-    let count = from.count.swap(0, Ordering::AcqRel);
-    if count > 0 {
-        to.count.fetch_add(count, Ordering::AcqRel);
-        to.core.arrived();
-    }
-    count
-}
-
-fn transfer_queue<T: Packet>(packets: Vec<T>, to: &ErasedInput) -> u64 {
-    let count = packets.len() as u64;
-    if let Some(target) = data_target::<T>(to) {
-        for packet in packets {
-            target.deliver(packet);
-        }
-    }
-    count
-}
-
-fn transfer_fifo<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
-    let Some(from) = downcast::<FifoInner<T>>(&from.any) else {
-        return 0;
-    };
-    transfer_queue(from.receiver.try_iter().collect::<Vec<T>>(), to)
-}
-
-fn transfer_ufifo<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
-    let Some(from) = downcast::<UfifoInner<T>>(&from.any) else {
-        return 0;
-    };
-    let packets: Vec<T> = std::mem::take(&mut lock(&from.queue).packets).into();
-    transfer_queue(packets, to)
-}
-
-fn transfer_last<T: Packet>(from: &ErasedInput, to: &ErasedInput) -> u64 {
-    let Some(from) = downcast::<LastInner<T>>(&from.any) else {
-        return 0;
-    };
-    // Only a packet the old consumer has not taken yet is handed on.
-    let unread = {
-        let slot = lock(&from.slot);
-        (slot.1 > from.read_seq.load(Ordering::Acquire))
-            .then(|| slot.0.clone())
-            .flatten()
-    };
-    match unread {
-        Some(packet) => transfer_queue(vec![packet], to),
-        None => 0,
-    }
-}
-
-fn relink_tick(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
-    let (Some(out), Some(target)) = (
-        downcast::<TickOutInner>(&output.any),
-        downcast::<TickInner>(&new.any),
-    ) else {
-        return false;
-    };
-    let mut targets = write(&out.targets);
-    let mut items: Vec<_> = targets
-        .iter()
-        .filter(|t| t.core.id != old.core.id)
-        .cloned()
-        .collect();
-    items.push(target);
-    *targets = Arc::from(items);
-    (old.transfer)(old, new);
-    drop(targets);
-    old.core.remove_source(output.core.id);
-    new.core.add_source(Arc::clone(&output.core));
-    true
-}
-
-fn relink_data<T: Packet>(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
-    match data_target::<T>(new) {
-        Some(target) => swap_sink(output, old, new, target),
-        None => false,
-    }
-}
-
-/// Replace, in one write of `output`'s sinks, its sink at input `old` by `target`
-/// (delivering to input `new`, directly or through a converter), and move what is
-/// queued at `old` to `new` (if both take the same packet type).
-fn swap_sink<T: Packet>(
-    output: &ErasedOutput,
-    old: &ErasedInput,
-    new: &ErasedInput,
-    target: Arc<dyn Deliver<T>>,
-) -> bool {
-    let Some(out) = downcast::<DataOutInner<T>>(&output.any) else {
-        return false;
-    };
-    // Senders hold the read lock while delivering: under the write lock nothing is in
-    // flight, so the queued packets move before any newer one arrives at `new`.
-    let mut sinks = write(&out.sinks);
-    let mut items: Vec<_> = sinks
-        .iter()
-        .filter(|sink| sink.input_id != old.core.id)
-        .cloned()
-        .collect();
-    items.push(Sink {
-        input_id: new.core.id,
-        target,
-    });
-    *sinks = Arc::from(items);
-    if old.type_id == new.type_id && old.kind == new.kind {
-        (old.transfer)(old, new);
-    }
-    drop(sinks);
-    old.core.remove_source(output.core.id);
-    new.core.add_source(Arc::clone(&output.core));
-    true
 }
 
 /// [`link_converted`], replacing `output`'s connection to input `old` (if given) in
@@ -1797,12 +2106,15 @@ pub(crate) fn relink_converted<A: Packet, B: Packet>(
         return link_converted(output, input, convert);
     };
     match output.kind {
-        OutKind::Data => match data_target::<B>(input) {
-            Some(target) => {
-                let converted: Arc<dyn Deliver<A>> = Arc::new(Converted { convert, target });
-                swap_sink(output, old, input, converted)
+        OutKind::Data => match (
+            output_as::<DataOutInner<A>>(output),
+            data_target::<B>(input),
+        ) {
+            (Some(out), Some(target)) => {
+                out.swap_sink(output, old, input, Arc::new(Converted { convert, target }));
+                true
             }
-            None => false,
+            _ => false,
         },
         OutKind::Poster => {
             if !link_converted(output, input, convert) {
@@ -1815,75 +2127,298 @@ pub(crate) fn relink_converted<A: Packet, B: Packet>(
     }
 }
 
-fn relink_poster(output: &ErasedOutput, old: &ErasedInput, new: &ErasedInput) -> bool {
-    // A poster input holds no queue: it reads the producer's post.
-    if !output.link(new) {
-        return false;
-    }
-    output.unlink(old);
-    true
+// ---------------------------------------------------------------------------------
+// Forwarding: a compound's exported output following the instance output behind it,
+// and recorders' taps.
+
+/// A compound's exported data output as a sink of the instance output it follows.
+struct DataForward<T> {
+    to: Arc<DataOutInner<T>>,
 }
 
-/// Forward every packet `from` sends to `to` as well (a compound's exported output
-/// following the instance behind it), synchronously on the sender's thread. Returns
-/// the forwarding's id for [`unforward_data`], or `None` if `from` is not a data
-/// output of `T`.
-pub(crate) fn forward_data<T: Packet>(from: &ErasedOutput, to: &DataOut<T>) -> Option<usize> {
-    struct Forward<T> {
-        to: DataOut<T>,
+impl<T: Packet> Deliver<T> for DataForward<T> {
+    fn deliver(&self, packet: Parcel<T>) {
+        dispatch(&read(&self.to.sinks), packet);
     }
-    impl<T: Packet> Deliver<T> for Forward<T> {
-        fn deliver(&self, packet: T) {
-            self.to.send(packet);
+
+    fn answers(&self, id: usize) -> bool {
+        read(&self.to.sinks)
+            .iter()
+            .any(|sink| sink.input_id == id || sink.target.answers(id))
+    }
+
+    fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
+        dispatch_answer(&read(&self.to.sinks), packet, id);
+    }
+}
+
+/// A compound's exported poster output as a tap of the instance output it follows.
+struct PosterForward<T> {
+    to: PosterOut<T>,
+}
+
+impl<T: Packet> Deliver<T> for PosterForward<T> {
+    fn deliver(&self, packet: Parcel<T>) {
+        self.to.post(packet.into_owned());
+    }
+}
+
+/// Pass every packet, post or event `from` produces on to `to` (a compound's exported
+/// output following the instance behind it), synchronously on the producer's thread,
+/// and the pull requests `to` receives back to `from`. Data packets are not copied
+/// for this (the exported output is one more sink of `from`, sharing packets as any
+/// sink does); a post is copied once into `to`'s slot. Returns the forwarding's id
+/// for [`unforward`], or `None` if the two are not of the same kind and packet type.
+pub(crate) fn forward(from: &ErasedOutput, to: &ErasedOutput) -> Option<usize> {
+    if from.kind != to.kind || from.type_id != to.type_id {
+        return None;
+    }
+    let id = next_port_id();
+    match to.kind {
+        OutKind::Tick => {
+            let out = output_as::<TickOutInner>(from)?;
+            let target = output_as::<TickOutInner>(to)?;
+            update_list(&out.targets, |targets| {
+                targets.push(TickTarget::Forward { id, to: target })
+            });
+        }
+        OutKind::Data | OutKind::Poster => {
+            // The typed half: `to` knows its packet type.
+            if !to.end.forward_from(to, from, id) {
+                return None;
+            }
         }
     }
-    let out = downcast::<DataOutInner<T>>(&from.any)?;
-    let id = next_port_id();
-    update_list(&out.sinks, |sinks| {
-        sinks.push(Sink {
-            input_id: id,
-            target: Arc::new(Forward { to: to.clone() }),
-        })
-    });
+    to.core.set_route(PullRoute::Output(Arc::clone(&from.core)));
     Some(id)
 }
 
-/// Stop a forwarding made by [`forward_data`], or remove a tap [`tap_data`] added.
-pub(crate) fn unforward_data<T: Packet>(from: &ErasedOutput, id: usize) {
-    if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
-        update_list(&out.sinks, |sinks| sinks.retain(|sink| sink.input_id != id));
-    } else if let Some(out) = downcast::<PosterOutInner<T>>(&from.any) {
-        let mut taps = write(&out.taps);
-        let kept: Vec<Sink<T>> = taps
-            .iter()
-            .filter(|tap| tap.input_id != id)
-            .cloned()
-            .collect();
-        out.tapped.store(!kept.is_empty(), Ordering::Release);
-        *taps = Arc::from(kept);
-    }
+/// Stop a forwarding made by [`forward`], or remove a tap [`tap_data`] added.
+pub(crate) fn unforward(from: &ErasedOutput, id: usize) {
+    from.end.remove_sink(id);
 }
 
 /// Deliver every packet `from` sends (a data output) or posts (a poster output) to
 /// `tap` as well (a recorder's tap), on the producer's thread: the tap is one more
-/// sink, so each packet costs one more clone. Returns the tap's id for
-/// [`unforward_data`], or `None` if `from` is neither a data nor a poster output of
-/// `T`. A tap is no connection: `System::connections` does not list it.
+/// sink (sharing a packet it gets with the other sinks, see [`shares`]). Returns the
+/// tap's id for [`unforward`], or `None` if `from` is neither a data nor a poster
+/// output of `T`. A tap is no connection: `System::connections` does not list it.
 pub(crate) fn tap_data<T: Packet>(from: &ErasedOutput, tap: Arc<dyn Deliver<T>>) -> Option<usize> {
     let id = next_port_id();
     let sink = Sink {
         input_id: id,
         target: tap,
     };
-    if let Some(out) = downcast::<DataOutInner<T>>(&from.any) {
+    if let Some(out) = output_as::<DataOutInner<T>>(from) {
         update_list(&out.sinks, |sinks| sinks.push(sink));
     } else {
-        let out = downcast::<PosterOutInner<T>>(&from.any)?;
-        let mut taps = write(&out.taps);
-        let mut list: Vec<Sink<T>> = taps.iter().cloned().collect();
-        list.push(sink);
-        *taps = Arc::from(list);
-        out.tapped.store(true, Ordering::Release);
+        output_as::<PosterOutInner<T>>(from)?.add_tap(sink);
     }
     Some(id)
+}
+
+// ---------------------------------------------------------------------------------
+// Merging a redundant group's outputs into one stream.
+
+/// How many packets a member that does not lead its group keeps, ahead of the stream,
+/// for the moment it leads.
+pub(crate) const MERGE_BACKLOG: usize = 1024;
+
+/// A redundant group's data output as one stream (see `docs/runtime.md`,
+/// "Redundancy"): every member's output is a lane, numbered by the packets it sent;
+/// the stream carries the leader's packets, each sequence number once; the other
+/// lanes keep their packets ahead of the stream (up to [`MERGE_BACKLOG`]) so that,
+/// when another member leads, the stream goes on from its backlog with no number
+/// missing and none doubled.
+pub(crate) trait MergeEnd: Send + Sync {
+    /// The merged stream's output (consumers connect to it, not to the members).
+    fn output(&self) -> ErasedOutput;
+    /// Make member output `from` lane `lane` (kind and type checked): false if it is
+    /// not a data output of the stream's packet type.
+    fn attach(&self, lane: usize, from: &ErasedOutput) -> bool;
+    /// Lane `lane` leads from now on: its packets ahead of the stream go out now.
+    /// Returns how many went out, and how many numbers were missing before them
+    /// (packets its backlog could not keep).
+    fn lead(&self, lane: usize) -> (u64, u64);
+    /// Lane `lane` (a member back from recovery) counts on from the stream's number.
+    fn rejoin(&self, lane: usize);
+    /// Every lane counts on from the stream's number, and `lane` leads (a restart of
+    /// the compound: every member starts again).
+    fn reset(&self, lane: usize);
+}
+
+struct Lane<T> {
+    sent: u64,
+    backlog: VecDeque<(u64, Parcel<T>)>,
+    core: Option<Arc<OutputCore>>,
+}
+
+struct MergeState<T> {
+    leader: usize,
+    /// The number of the last packet of the stream.
+    delivered: u64,
+    lanes: Vec<Lane<T>>,
+}
+
+struct Merge<T> {
+    out: DataOut<T>,
+    state: Mutex<MergeState<T>>,
+}
+
+impl<T: Packet> Merge<T> {
+    fn arrive(&self, lane: usize, packet: Parcel<T>) {
+        let mut state = lock(&self.state);
+        let state = &mut *state;
+        let leader = state.leader;
+        let seq = {
+            let lane = &mut state.lanes[lane];
+            lane.sent += 1;
+            lane.sent
+        };
+        if seq <= state.delivered {
+            return; // Already in the stream (sent by the member that led then).
+        }
+        if lane == leader {
+            state.delivered = seq;
+            for other in &mut state.lanes {
+                while other.backlog.front().is_some_and(|(s, _)| *s <= seq) {
+                    other.backlog.pop_front();
+                }
+            }
+            // Under the lock: the stream keeps its order.
+            self.out.send_parcel(packet);
+        } else {
+            let backlog = &mut state.lanes[lane].backlog;
+            backlog.push_back((seq, packet));
+            if backlog.len() > MERGE_BACKLOG {
+                backlog.pop_front();
+            }
+        }
+    }
+
+    fn route_pulls(&self, state: &MergeState<T>) {
+        if let Some(core) = &state.lanes[state.leader].core {
+            self.out
+                .inner
+                .core
+                .set_route(PullRoute::Output(Arc::clone(core)));
+        }
+    }
+}
+
+/// One member's output as a lane of a merge.
+struct LaneSink<T> {
+    merge: Arc<Merge<T>>,
+    lane: usize,
+}
+
+impl<T: Packet> Deliver<T> for LaneSink<T> {
+    fn deliver(&self, packet: Parcel<T>) {
+        self.merge.arrive(self.lane, packet);
+    }
+
+    fn answers(&self, id: usize) -> bool {
+        read(&self.merge.out.inner.sinks)
+            .iter()
+            .any(|sink| sink.input_id == id || sink.target.answers(id))
+    }
+
+    fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
+        // A pull answer is for its requester, not part of the stream.
+        dispatch_answer(&read(&self.merge.out.inner.sinks), packet, id);
+    }
+}
+
+impl<T: Packet> MergeEnd for Arc<Merge<T>> {
+    fn output(&self) -> ErasedOutput {
+        self.out.erased()
+    }
+
+    fn attach(&self, lane: usize, from: &ErasedOutput) -> bool {
+        let Some(out) = output_as::<DataOutInner<T>>(from) else {
+            return false;
+        };
+        let sink = LaneSink {
+            merge: Arc::clone(self),
+            lane,
+        };
+        update_list(&out.sinks, |sinks| {
+            sinks.push(Sink {
+                input_id: next_port_id(),
+                target: Arc::new(sink),
+            })
+        });
+        let mut state = lock(&self.state);
+        state.lanes[lane].core = Some(Arc::clone(&from.core));
+        if lane == state.leader {
+            self.route_pulls(&state);
+        }
+        true
+    }
+
+    fn lead(&self, lane: usize) -> (u64, u64) {
+        let mut state = lock(&self.state);
+        state.leader = lane;
+        self.route_pulls(&state);
+        let backlog = std::mem::take(&mut state.lanes[lane].backlog);
+        let (mut replayed, mut missing) = (0, 0);
+        for (seq, packet) in backlog {
+            if seq > state.delivered {
+                missing += seq - state.delivered - 1;
+                state.delivered = seq;
+                replayed += 1;
+                self.out.send_parcel(packet);
+            }
+        }
+        (replayed, missing)
+    }
+
+    fn rejoin(&self, lane: usize) {
+        let mut state = lock(&self.state);
+        let delivered = state.delivered;
+        let lane = &mut state.lanes[lane];
+        lane.sent = delivered;
+        lane.backlog.clear();
+    }
+
+    fn reset(&self, lane: usize) {
+        let mut state = lock(&self.state);
+        let delivered = state.delivered;
+        for each in &mut state.lanes {
+            each.sent = delivered;
+            each.backlog.clear();
+        }
+        state.leader = lane;
+        self.route_pulls(&state);
+    }
+}
+
+impl ErasedOutput {
+    /// A merge of `lanes` outputs of this output's kind and packet type (a redundant
+    /// group's data output), or `None` for a tick or poster output.
+    pub(crate) fn merge(&self, lanes: usize) -> Option<Arc<dyn MergeEnd>> {
+        self.end.merge(lanes)
+    }
+}
+
+impl<T: Packet> DataOutInner<T> {
+    fn new_merge(lanes: usize) -> Arc<dyn MergeEnd> {
+        let out = DataOut::<T>::new();
+        // The merged output answers pull requests (routed to the leader).
+        out.inner.core.accept_pulls();
+        Arc::new(Arc::new(Merge {
+            out,
+            state: Mutex::new(MergeState {
+                leader: 0,
+                delivered: 0,
+                lanes: (0..lanes)
+                    .map(|_| Lane {
+                        sent: 0,
+                        backlog: VecDeque::new(),
+                        core: None,
+                    })
+                    .collect(),
+            }),
+        }))
+    }
 }

@@ -77,7 +77,8 @@ use serde::{Deserialize, Serialize};
 use crate::clock::Clock;
 use crate::monitor::{Handle, MonitorEvent, Subscription};
 use crate::port::{
-    DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, TickIn, TickOut,
+    DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, Parcel, TickIn,
+    TickOut,
 };
 use crate::schema::Schema;
 use crate::system::System;
@@ -1084,7 +1085,10 @@ struct TapSink<T> {
 }
 
 impl<T: Packet> Deliver<T> for TapSink<T> {
-    fn deliver(&self, packet: T) {
+    fn deliver(&self, packet: Parcel<T>) {
+        // (A packet shared with the output's other sinks is copied here, on the
+        // producer's thread, as it was before packets were shared.)
+        let packet = packet.into_owned();
         let seq = self.counters.sent.fetch_add(1, Ordering::AcqRel);
         let t = self.start.since();
         if self.sender.try_send((t, seq, packet)).is_err() {
@@ -1164,7 +1168,7 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
         if let Some(id) = self.id.take() {
             // Senders deliver under the sinks' read lock: once the write that removes
             // the tap returns, no delivery to it is in flight.
-            crate::port::unforward_data::<T>(&self.output, id);
+            crate::port::unforward(&self.output, id);
         }
     }
 
@@ -1195,7 +1199,7 @@ impl<T: Packet> Drop for Attached<T> {
     fn drop(&mut self) {
         // A tap is never left on an output, even if the recorder's thread panicked.
         if let Some(id) = self.id.take() {
-            crate::port::unforward_data::<T>(&self.output, id);
+            crate::port::unforward(&self.output, id);
         }
     }
 }

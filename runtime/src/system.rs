@@ -55,6 +55,12 @@ impl PortSet {
         self.outputs.push(port.erased());
         self
     }
+
+    /// Register the next output port, already erased.
+    pub(crate) fn erased_output(mut self, port: ErasedOutput) -> PortSet {
+        self.outputs.push(port);
+        self
+    }
 }
 
 /// An unstarted component: a name, its code and its ports.
@@ -811,31 +817,9 @@ impl System {
                     });
                 }
             }
-            InKind::Fifo | InKind::Ufifo => {
-                let queue_input = |l: &Link| {
-                    matches!(
-                        self.slots[l.to.0].inputs[l.to.1].kind,
-                        InKind::Fifo | InKind::Ufifo
-                    )
-                };
-                if let Some(existing) = self
-                    .links
-                    .iter()
-                    .find(|l| l.from == link.from && queue_input(l))
-                {
-                    return Err(ConnectError::Cardinality {
-                        from,
-                        to,
-                        rule: format!(
-                            "a {} connection is N outputs to 1 input, and `{}` already feeds `{}`",
-                            input.kind.name(),
-                            address(existing.from, true),
-                            address(existing.to, false)
-                        ),
-                    });
-                }
-            }
-            InKind::Tick => {}
+            // A data output feeds any number of fifo and ufifo inputs (each with its
+            // own queue), and a queue input takes any number of producers.
+            InKind::Fifo | InKind::Ufifo | InKind::Tick => {}
         }
         let input_pull = self.slots[in_slot].spec.inputs[in_port].pull;
         let output_pull = self.slots[out_slot].spec.outputs[out_port].pull;

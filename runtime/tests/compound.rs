@@ -569,19 +569,19 @@ fn a_redundant_group_runs_while_one_member_survives() {
     system.run_all().expect("run");
     wait_user(&a, "idle");
     wait_user(&b, "idle");
-    // One stream: only the first live member is connected.
+    // Every live member receives every packet.
     feed.data.send(1);
     eventually(|| a_script.received.load(Ordering::SeqCst) == 1, "a got it");
-    // a fails (a panic; its restarts fail): b takes the stream, the compound goes on.
+    eventually(|| b_script.received.load(Ordering::SeqCst) == 1, "b got it");
+    // a fails (a panic; its restarts fail): b goes on alone, the compound goes on.
     a_script.start_fails.store(true, Ordering::SeqCst);
     a_script.panic_in(Some("busy.periodic"));
     wait(&a, State::RunningError);
-    // Sent while the compound moves the connection: queued at a, or delivered to b.
     feed.data.send(2);
     feed.data.send(3);
     eventually(
-        || b_script.received.load(Ordering::SeqCst) == 2,
-        "b gets the stream, with what was queued at a",
+        || b_script.received.load(Ordering::SeqCst) == 3,
+        "b gets every packet",
     );
     assert_eq!(base.state(), State::Running);
     // b fails too: nobody is left.

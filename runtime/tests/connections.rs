@@ -237,9 +237,8 @@ fn ufifo_grows_by_steps_up_to_its_cap_then_counts() {
     );
     let events = pair.system.handle("c").unwrap().subscribe();
     pair.system.connect("p.out", "c.capped").expect("capped");
-    // One data output feeds at most one queue input: a second producer for `open`.
-    let err = pair.system.connect("p.out", "c.open").unwrap_err();
-    assert!(matches!(err, ConnectError::Cardinality { .. }), "{err}");
+    // The same output feeds `open` too: each queue grows (or not) by its own rule.
+    pair.system.connect("p.out", "c.open").expect("open");
     assert_eq!(capped.capacity(), 2);
     for packet in 0..10 {
         out.send(packet);
@@ -254,6 +253,11 @@ fn ufifo_grows_by_steps_up_to_its_cap_then_counts() {
         (0..6).collect::<Vec<_>>()
     );
     assert!(capped.is_empty());
+    assert_eq!(
+        open.drain().collect::<Vec<_>>(),
+        (0..10).collect::<Vec<_>>()
+    );
+    assert_eq!(open.overflows(), 0);
 }
 
 #[test]
@@ -339,24 +343,111 @@ fn last_and_poster_inputs_have_one_producer() {
 }
 
 #[test]
-fn a_data_output_feeds_one_queue_input() {
-    let out = DataOut::<u64>::new();
-    let (q1, q2) = (
-        FifoIn::<u64>::new(4, OverflowPolicy::Reject),
-        FifoIn::<u64>::new(4, OverflowPolicy::Reject),
+fn a_data_output_feeds_every_queue_with_its_own_policy() {
+    // One output, four queues of different policies and a last input; a second
+    // producer merges into the first queue.
+    let (out, other) = (DataOut::<u64>::new(), DataOut::<u64>::new());
+    let reject = FifoIn::<u64>::new(2, OverflowPolicy::Reject);
+    let oldest = FifoIn::<u64>::new(2, OverflowPolicy::DropOldest);
+    let wide = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
+    let grows = UfifoIn::<u64>::new(2, Some(3));
+    let latest = LastIn::<u64>::new();
+    let policy = |capacity, policy| InputKind::Fifo { capacity, policy };
+    let mut pair = Pair::new(
+        ShellBuilder::new("p")
+            .output(output("out", OutputKind::Data, false), &out)
+            .output(output("other", OutputKind::Data, false), &other),
+        ShellBuilder::new("c")
+            .input(input("reject", fifo(2), false), &reject)
+            .input(
+                input("oldest", policy(2, OverflowPolicy::DropOldest), false),
+                &oldest,
+            )
+            .input(input("wide", fifo(8), false), &wide)
+            .input(
+                input(
+                    "grows",
+                    InputKind::Ufifo {
+                        initial: 2,
+                        max: Some(3),
+                    },
+                    false,
+                ),
+                &grows,
+            )
+            .input(input("latest", InputKind::Last, false), &latest),
     );
+    for to in ["reject", "oldest", "wide", "grows", "latest"] {
+        pair.system
+            .connect("p.out", &format!("c.{to}"))
+            .unwrap_or_else(|e| panic!("{to}: {e}"));
+    }
+    pair.system
+        .connect("p.other", "c.wide")
+        .expect("a second producer");
+    for packet in 1..=5 {
+        out.send(packet);
+    }
+    other.send(100);
+    assert_eq!(reject.drain().collect::<Vec<_>>(), [1, 2]);
+    assert_eq!(reject.overflows(), 3);
+    assert_eq!(oldest.drain().collect::<Vec<_>>(), [4, 5]);
+    assert_eq!(oldest.overflows(), 3);
+    assert_eq!(wide.drain().collect::<Vec<_>>(), [1, 2, 3, 4, 5, 100]);
+    assert_eq!(wide.overflows(), 0);
+    assert_eq!(grows.drain().collect::<Vec<_>>(), [1, 2, 3]);
+    assert_eq!(grows.overflows(), 2);
+    assert_eq!(latest.take_new(), Some(5));
+}
+
+#[test]
+fn a_packet_sent_to_several_queues_is_shared_not_copied() {
+    // A packet that owns memory goes to every input behind one pointer.
+    let out = DataOut::<Vec<u8>>::new();
+    let (a, b) = (
+        FifoIn::<Vec<u8>>::new(4, OverflowPolicy::Reject),
+        UfifoIn::<Vec<u8>>::new(4, None),
+    );
+    let latest = LastIn::<Vec<u8>>::new();
     let mut pair = Pair::new(
         ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
         ShellBuilder::new("c")
-            .input(input("q1", fifo(4), false), &q1)
-            .input(input("q2", fifo(4), false), &q2),
+            .input(input("a", fifo(4), false), &a)
+            .input(
+                input(
+                    "b",
+                    InputKind::Ufifo {
+                        initial: 4,
+                        max: None,
+                    },
+                    false,
+                ),
+                &b,
+            )
+            .input(input("latest", InputKind::Last, false), &latest),
     );
-    pair.system.connect("p.out", "c.q1").expect("q1");
-    let err = pair.system.connect("p.out", "c.q2").unwrap_err();
+    for to in ["a", "b", "latest"] {
+        pair.system.connect("p.out", &format!("c.{to}")).expect(to);
+    }
+    out.send(vec![7; 1 << 16]);
+    let (x, y) = (a.recv_shared().unwrap(), b.recv_shared().unwrap());
+    let z = latest.take_new_shared().unwrap();
+    assert!(std::sync::Arc::ptr_eq(&x, &y) && std::sync::Arc::ptr_eq(&x, &z));
+    assert_eq!(x.len(), 1 << 16);
+    // Taken by value, the packet is copied only while another input holds it: the
+    // last holder takes the original allocation.
+    pair.system.disconnect("p.out", "c.latest").expect("latest");
+    let packet = vec![9; 16];
+    let original = packet.as_ptr();
+    out.send(packet);
+    let first = a.recv().unwrap();
+    let last = b.recv().unwrap();
     assert_eq!(
-        err.to_string(),
-        "cannot connect `p.out` to `c.q2`: a fifo connection is N outputs to 1 input, and `p.out` already feeds `c.q1`"
+        (first.as_slice(), last.as_slice()),
+        ([9; 16].as_slice(), [9; 16].as_slice())
     );
+    assert_ne!(first.as_ptr(), original, "a copy while `b` still held it");
+    assert_eq!(last.as_ptr(), original, "the last holder took the original");
 }
 
 #[test]

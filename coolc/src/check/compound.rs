@@ -25,27 +25,25 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
                 def: ast::InputDef::Export(target),
                 ..
             }) => {
-                let port = endpoint(
+                endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Input,
                     "exported input",
                 );
-                exportable(checker, target, port.as_ref(), Direction::Input);
             }
             ast::Member::Output(ast::Output {
                 def: ast::OutputDef::Export(target),
                 ..
             }) => {
-                let port = endpoint(
+                endpoint(
                     checker,
                     &instances,
                     target,
                     Direction::Output,
                     "exported output",
                 );
-                exportable(checker, target, port.as_ref(), Direction::Output);
             }
             ast::Member::OnError(on_error) => {
                 self::on_error(checker, component, &instances, on_error)
@@ -55,7 +53,6 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
     }
     arrangement(checker, component, &instances);
     cardinality(checker, component, &instances);
-    queue_fan_out(checker, component, &instances);
     duplicate_policies(checker, component);
     unconnected_transition_inputs(checker, component, &instances);
     unused_blocks(checker, component);
@@ -489,46 +486,6 @@ fn arrangement(
     }
 }
 
-/// What a compound can export (the runtime relays pushed packets): `tick`, `fifo`,
-/// `ufifo` and `last` inputs and `data` outputs, none of them `pull`.
-fn exportable(
-    checker: &mut Checker<'_, '_>,
-    target: &ast::PortRef,
-    port: Option<&Port>,
-    direction: Direction,
-) {
-    let Some(port) = port else { return };
-    let (what, problem) = match direction {
-        Direction::Input if port.kind == PortKind::Poster => ("input", "a poster input"),
-        Direction::Output if port.kind != PortKind::Data => (
-            "output",
-            if port.kind == PortKind::Tick {
-                "a tick output"
-            } else {
-                "a poster output"
-            },
-        ),
-        Direction::Input if port.pull => ("input", "a pull input"),
-        Direction::Output if port.pull => ("output", "a pull output"),
-        _ => return,
-    };
-    let diagnostic = checker
-        .error(
-            Code::ExportKind,
-            target.port.span,
-            format!(
-                "`{}` is {problem}: a compound cannot export it",
-                path(target)
-            ),
-        )
-        .with_label(format!("{} {what}", describe_port(port)))
-        .with_help(
-            "a compound exports tick, fifo, ufifo and last inputs and data outputs, in the push \
-             model; connect this port inside the compound instead",
-        );
-    checker.push(diagnostic);
-}
-
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Direction {
     Input,
@@ -777,7 +734,9 @@ fn path(port: &ast::PortRef) -> String {
 }
 
 /// `last` and `poster` inputs take one producer (a connection or an export from the
-/// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number.
+/// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number, and an
+/// output feeds any number of inputs (a `data` output any number of queues, each
+/// with its own).
 fn cardinality(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
@@ -842,50 +801,6 @@ fn cardinality(
                     .with_help("use a `fifo` or `ufifo` input to merge several producers");
                 checker.push(diagnostic);
             }
-        }
-    }
-}
-
-/// A `data` output feeds at most one queue (`fifo` or `ufifo` input): a queue
-/// connection is N outputs to one input, and the runtime refuses a second queue on the
-/// same output. Any number of `last` inputs may read the same output beside it.
-fn queue_fan_out(
-    checker: &mut Checker<'_, '_>,
-    component: &ast::Component,
-    instances: &Instances<'_>,
-) {
-    let input_kind = |port: &ast::PortRef| -> Option<PortKind> {
-        let instance = port.instance.as_ref()?;
-        let (_, interface) = instances.get(instance.name.as_str())?;
-        Some(interface.as_ref()?.inputs.get(&port.port.name)?.kind)
-    };
-    let mut queues: BTreeMap<String, Vec<Span>> = BTreeMap::new();
-    for member in &component.members {
-        let ast::Member::Connect(connect) = member else {
-            continue;
-        };
-        if matches!(
-            input_kind(&connect.to),
-            Some(PortKind::Fifo | PortKind::Ufifo)
-        ) {
-            queues
-                .entry(path(&connect.from))
-                .or_default()
-                .push(connect.span);
-        }
-    }
-    for (output, spans) in queues {
-        for extra in &spans[1..] {
-            let diagnostic = checker
-                .error(
-                    Code::ConnectCardinality,
-                    *extra,
-                    format!("`{output}` already feeds a queue; a `data` output feeds at most one `fifo` or `ufifo` input"),
-                )
-                .with_label("second queue")
-                .with_secondary(spans[0], "first queue")
-                .with_help("connect the second consumer through a `last` input, or give the producer a second output");
-            checker.push(diagnostic);
         }
     }
 }

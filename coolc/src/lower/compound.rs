@@ -368,15 +368,16 @@ impl<'a> Lowerer<'a> {
                 ast::Member::Output(output) => {
                     if let ast::OutputDef::Export(target) = &output.def {
                         output_specs.extend(self.export_spec(c, &output.name.name, target, false));
-                        let ty = match self.export_type(c, target, false) {
-                            Some(Some(ty)) => self.rust_type(ty, GEN_TYPES),
-                            _ => "()".to_owned(),
-                        };
-                        steps.push(format!(
-                            ".export_output::<{ty}>({}, {})",
-                            ident::string_literal(&output.name.name),
-                            ident::string_literal(&port_address(target))
-                        ));
+                        let name = ident::string_literal(&output.name.name);
+                        let target_lit = ident::string_literal(&port_address(target));
+                        steps.push(match self.export_type(c, target, false) {
+                            Some(None) => format!(".export_tick_output({name}, {target_lit})"),
+                            Some(Some(ty)) => format!(
+                                ".export_output::<{}>({name}, {target_lit})",
+                                self.rust_type(ty, GEN_TYPES)
+                            ),
+                            None => format!(".export_output::<()>({name}, {target_lit})"),
+                        });
                     }
                 }
                 ast::Member::Variable(v) => match (&v.ty, &v.value) {

@@ -1,0 +1,351 @@
+//! Redundancy as the paper has it: the members of a redundant group run together on
+//! the same inputs (every member receives every packet), consumers see one stream, the
+//! leader's, and when the leader fails another member's output takes over with no
+//! packet of the stream missing and none doubled.
+
+mod support;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{
+    Automaton, Component, CompoundBuilder, Context, Fault, InputKind, InputSpec, OnSpec,
+    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, Spec, StateSpec, Step, Supervisor,
+    System, TimingSpec, Value,
+};
+use support::WAIT;
+use support::shell::{ShellBuilder, input, output};
+
+/// A supervisor with one state and nothing to do.
+struct Idle;
+
+static IDLE: Spec = Spec {
+    type_name: "Idle",
+    doc: "",
+    states: &[StateSpec {
+        name: "supervising",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl Supervisor for Idle {
+    fn spec(&self) -> &'static Spec {
+        &IDLE
+    }
+}
+
+const QUEUE: usize = 4096;
+
+/// A reactive relay: each packet that arrives at `input` is sent on `output`; while
+/// `fail` is set, its next section fails instead.
+static RELAY: Spec = Spec {
+    type_name: "Relay",
+    doc: "",
+    states: &[StateSpec {
+        name: "relaying",
+        entry: true,
+        exit: false,
+        periodic: None,
+        on: &[OnSpec { port: 0, target: 0 }],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[InputSpec {
+        name: "input",
+        kind: InputKind::Fifo {
+            capacity: QUEUE,
+            policy: OverflowPolicy::Reject,
+        },
+        packet: "u64",
+        pull: false,
+    }],
+    outputs: &[OutputSpec {
+        name: "output",
+        kind: OutputKind::Data,
+        packet: "u64",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+struct Relay {
+    input: FifoIn<u64>,
+    output: DataOut<u64>,
+    fail: Arc<AtomicBool>,
+    relayed: Arc<AtomicU64>,
+}
+
+impl Automaton for Relay {
+    fn spec(&self) -> &'static Spec {
+        &RELAY
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        if self.fail.swap(false, Ordering::SeqCst) {
+            return Err(Fault::message("injected"));
+        }
+        for packet in self.input.drain() {
+            self.relayed.fetch_add(1, Ordering::SeqCst);
+            self.output.send(packet);
+        }
+        Ok(())
+    }
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("no variables".to_owned())
+    }
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+struct Member {
+    fail: Arc<AtomicBool>,
+    relayed: Arc<AtomicU64>,
+}
+
+fn relay(name: &str) -> (Component, Member) {
+    let input = FifoIn::new(QUEUE, OverflowPolicy::Reject);
+    let output = DataOut::new();
+    let ports = PortSet::new().input(&input).output(&output);
+    let member = Member {
+        fail: Arc::new(AtomicBool::new(false)),
+        relayed: Arc::new(AtomicU64::new(0)),
+    };
+    let automaton = Relay {
+        input,
+        output,
+        fail: Arc::clone(&member.fail),
+        relayed: Arc::clone(&member.relayed),
+    };
+    (Component::new(name, Box::new(automaton), ports), member)
+}
+
+/// `p` feeds compound `k` (members `a` and `b`, redundant, behind exported `in` and
+/// `out`), which feeds `c`; the test sends through `p` and reads `c`'s queue.
+struct Rig {
+    system: System,
+    send: DataOut<u64>,
+    received: FifoIn<u64>,
+    a: Member,
+    b: Member,
+}
+
+fn rig() -> Rig {
+    let (a_component, a) = relay("a");
+    let (b_component, b) = relay("b");
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(a_component)
+        .instance(b_component)
+        .redundant(&["a", "b"])
+        .export_input::<u64>("in", "a.input")
+        .export_output::<u64>("out", "a.output")
+        .recovery(Duration::from_secs(60), Duration::from_secs(120))
+        .build()
+        .expect("build k");
+    let send = DataOut::<u64>::new();
+    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
+    let mut system = System::new();
+    system
+        .add(
+            ShellBuilder::new("p")
+                .output(output("out", OutputKind::Data, false), &send)
+                .build(),
+        )
+        .expect("add p");
+    system.add(k).expect("add k");
+    system
+        .add(
+            ShellBuilder::new("c")
+                .input(
+                    input(
+                        "in",
+                        InputKind::Fifo {
+                            capacity: QUEUE,
+                            policy: OverflowPolicy::Reject,
+                        },
+                        false,
+                    ),
+                    &received,
+                )
+                .build(),
+        )
+        .expect("add c");
+    system.connect("p.out", "k.in").expect("p -> k");
+    system.connect("k.out", "c.in").expect("k -> c");
+    system.run_all().expect("run");
+    Rig {
+        system,
+        send,
+        received,
+        a,
+        b,
+    }
+}
+
+/// Every packet `c` receives until it has `count`, or the deadline.
+fn collect(received: &FifoIn<u64>, count: usize) -> Vec<u64> {
+    let deadline = Instant::now() + WAIT;
+    let mut seen = Vec::new();
+    while seen.len() < count && Instant::now() < deadline {
+        if let Some(packet) = received.recv_timeout(Duration::from_millis(10)) {
+            seen.push(packet);
+        }
+    }
+    seen
+}
+
+#[test]
+fn every_member_receives_every_packet_and_consumers_see_one_stream() {
+    let rig = rig();
+    for n in 1..=200 {
+        rig.send.send(n);
+    }
+    assert_eq!(collect(&rig.received, 200), (1..=200).collect::<Vec<_>>());
+    // Both members relayed everything (the standby's state is warm); the consumer
+    // got each packet once.
+    support::eventually(
+        || rig.b.relayed.load(Ordering::SeqCst) == 200,
+        "b relayed every packet",
+    );
+    assert_eq!(rig.a.relayed.load(Ordering::SeqCst), 200);
+    assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
+    assert!(rig.system.shutdown().clean());
+}
+
+#[test]
+fn the_stream_loses_no_packet_and_doubles_none_across_a_failover() {
+    for round in 0..5 {
+        let rig = rig();
+        let k = rig.system.handle("k").expect("k");
+        // The leader fails somewhere in the middle of a stream of numbered packets.
+        for n in 1..=1000u64 {
+            rig.send.send(n);
+            if n == 300 + round * 100 {
+                rig.a.fail.store(true, Ordering::SeqCst);
+            }
+        }
+        let seen = collect(&rig.received, 1000);
+        assert_eq!(
+            seen,
+            (1..=1000).collect::<Vec<_>>(),
+            "round {round}: every packet once, in order"
+        );
+        let monitor = k.snapshot();
+        assert!(
+            monitor
+                .supervision
+                .iter()
+                .any(|s| s.instance == "a" && s.step == Step::Substituted { by: "b".to_owned() }),
+            "round {round}: b took over: {:?}",
+            monitor.supervision
+        );
+        assert_eq!(monitor.state, coolbot::State::Running);
+        assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
+        assert_eq!(rig.received.overflows(), 0);
+        assert!(rig.system.shutdown().clean());
+    }
+}
+
+#[test]
+fn a_converted_connection_inside_the_compound_reads_the_merged_stream() {
+    // `a` and `b` feed `t` inside the compound through a converter; `t`'s output is
+    // exported. `t` sees one stream, converted, across the failover.
+    let (a_component, a) = relay("a");
+    let (b_component, b) = relay("b");
+    let (t_component, _t) = relay("t");
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(a_component)
+        .instance(b_component)
+        .instance(t_component)
+        .redundant(&["a", "b"])
+        .connect_via::<u64, u64>("a.output", "t.input", |n| n * 10)
+        .export_input::<u64>("in", "a.input")
+        .export_output::<u64>("out", "t.output")
+        .build()
+        .expect("build k");
+    let send = DataOut::<u64>::new();
+    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
+    let mut system = System::new();
+    system
+        .add(
+            ShellBuilder::new("p")
+                .output(output("out", OutputKind::Data, false), &send)
+                .build(),
+        )
+        .expect("add p");
+    system.add(k).expect("add k");
+    system
+        .add(
+            ShellBuilder::new("c")
+                .input(
+                    input(
+                        "in",
+                        InputKind::Fifo {
+                            capacity: QUEUE,
+                            policy: OverflowPolicy::Reject,
+                        },
+                        false,
+                    ),
+                    &received,
+                )
+                .build(),
+        )
+        .expect("add c");
+    system.connect("p.out", "k.in").expect("p -> k");
+    system.connect("k.out", "c.in").expect("k -> c");
+    system.run_all().expect("run");
+    for n in 1..=600u64 {
+        send.send(n);
+        if n == 250 {
+            a.fail.store(true, Ordering::SeqCst);
+        }
+    }
+    assert_eq!(
+        collect(&received, 600),
+        (1..=600).map(|n| n * 10).collect::<Vec<_>>()
+    );
+    assert_eq!(b.relayed.load(Ordering::SeqCst), 600);
+    let k = system.handle("k").expect("k");
+    assert!(
+        k.snapshot()
+            .supervision
+            .iter()
+            .any(|s| s.instance == "a" && s.step == Step::Substituted { by: "b".to_owned() }),
+        "b took over"
+    );
+    assert!(system.shutdown().clean());
+}
