@@ -215,3 +215,50 @@ fn a_compound_exports_poster_tick_and_pull_outputs() {
         "{output}"
     );
 }
+
+#[test]
+fn a_warehouse_robot_written_from_the_reference_builds_and_runs() {
+    // Four description files (types, sensors, drive, warehouse) importing each other:
+    // a 72-beam scan packet, doc comments in timing blocks, a converter inside the
+    // nested `Base` of a three-level hierarchy, a camera fanning out to two redundant
+    // detectors' queues, an exported poster read by a console outside the robot, a
+    // lidar with a spare, and a supervisor that stops the base by suspending it. The
+    // filled user files and the run test are in `tests/data/warehouse`.
+    let dir = tempfile::tempdir().unwrap();
+    let descriptions = dir.path().join("cool");
+    std::fs::create_dir_all(&descriptions).unwrap();
+    for name in ["types.cool", "sensors.cool", "drive.cool", "warehouse.cool"] {
+        std::fs::copy(data("warehouse").join(name), descriptions.join(name)).unwrap();
+    }
+    let krate = dir.path().join("warehouse");
+    compile(&descriptions.join("warehouse.cool"), &krate, "warehouse");
+    for name in [
+        "lidar.rs",
+        "camera.rs",
+        "detector.rs",
+        "pan_tilt.rs",
+        "follower.rs",
+        "drive.rs",
+        "converters.rs",
+        "base.rs",
+        "perception.rs",
+        "navigation.rs",
+        "warehouse.rs",
+        "console.rs",
+    ] {
+        std::fs::copy(data("warehouse").join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data("warehouse/run.rs"), krate.join("tests/run.rs")).unwrap();
+
+    cargo(&krate, &["fmt", "--check"]);
+    cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(&krate, &["test", "--test", "run"]);
+    assert!(
+        output.contains("test the_warehouse_robot_runs_as_described ... ok"),
+        "{output}"
+    );
+}
