@@ -859,7 +859,7 @@ fn render_starter_main(krate: &ir::Crate) -> String {
     render(&StarterMain::new(krate))
 }
 
-/// [`render_starter_main`], formatted like a user file.
+/// `render_starter_main`, formatted like a user file.
 pub fn starter_main(krate: &ir::Crate) -> String {
     format_user(&render_starter_main(krate))
 }

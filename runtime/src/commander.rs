@@ -104,6 +104,8 @@ struct Target {
     name: String,
     handle: Handle,
     spec: &'static Spec,
+    /// Its quality levels: its component's, or its `timing` override's.
+    levels: usize,
 }
 
 /// What a supervisor section commands its instances with (its
@@ -130,21 +132,22 @@ impl std::fmt::Debug for Commander {
 }
 
 impl Commander {
-    /// A commander for compound `compound`'s instances `(name, handle, spec)`, each
-    /// command waiting at most `timeout` for the instance to take it.
+    /// A commander for compound `compound`'s instances `(name, handle, spec, quality
+    /// levels)`, each command waiting at most `timeout` for the instance to take it.
     pub(crate) fn new(
         compound: String,
-        instances: impl IntoIterator<Item = (String, Handle, &'static Spec)>,
+        instances: impl IntoIterator<Item = (String, Handle, &'static Spec, usize)>,
         timeout: Duration,
     ) -> Commander {
         Commander {
             compound,
             targets: instances
                 .into_iter()
-                .map(|(name, handle, spec)| Target {
+                .map(|(name, handle, spec, levels)| Target {
                     name,
                     handle: handle.with_command_timeout(timeout),
                     spec,
+                    levels,
                 })
                 .collect(),
             timeout,
@@ -186,13 +189,14 @@ impl Commander {
     ) -> Result<(), CommandError> {
         let value = value.into();
         let described = format!("set {variable} = {value}");
-        let check = |spec: &Spec| match spec.variables.iter().find(|v| v.name == variable) {
-            None => Some(Refused::UnknownVariable(variable.to_owned())),
-            Some(v) if v.kind != VarKind::Controllable => {
-                Some(Refused::NotControllable(variable.to_owned()))
-            }
-            Some(_) => None,
-        };
+        let check =
+            |target: &Target| match target.spec.variables.iter().find(|v| v.name == variable) {
+                None => Some(Refused::UnknownVariable(variable.to_owned())),
+                Some(v) if v.kind != VarKind::Controllable => {
+                    Some(Refused::NotControllable(variable.to_owned()))
+                }
+                Some(_) => None,
+            };
         self.give(
             instance,
             described,
@@ -214,7 +218,7 @@ impl Commander {
 
     /// Set the period of `instance`.
     pub fn set_period(&mut self, instance: &str, period: Duration) -> Result<(), CommandError> {
-        let check = |_: &Spec| period.is_zero().then_some(Refused::ZeroPeriod);
+        let check = |_: &Target| period.is_zero().then_some(Refused::ZeroPeriod);
         self.give(
             instance,
             format!("period {period:?}"),
@@ -226,8 +230,8 @@ impl Commander {
     /// Set the quality level of `instance` (an index into its `quality` levels, 0 the
     /// best).
     pub fn set_quality(&mut self, instance: &str, level: usize) -> Result<(), CommandError> {
-        let check = |spec: &Spec| {
-            let levels = spec.timing.qualities.len().max(1);
+        let check = |target: &Target| {
+            let levels = target.levels.max(1);
             (level >= levels).then_some(Refused::QualityOutOfRange { level, levels })
         };
         self.give(
@@ -250,7 +254,7 @@ impl Commander {
         instance: &str,
         described: String,
         command: Command,
-        check: impl FnOnce(&Spec) -> Option<Refused>,
+        check: impl FnOnce(&Target) -> Option<Refused>,
     ) -> Result<(), CommandError> {
         let outcome = self.answer(instance, &command, check);
         let (step, detail) = match &outcome {
@@ -288,14 +292,14 @@ impl Commander {
         &self,
         instance: &str,
         command: &Command,
-        check: impl FnOnce(&Spec) -> Option<Refused>,
+        check: impl FnOnce(&Target) -> Option<Refused>,
     ) -> Result<(), Refused> {
         let target = self
             .targets
             .iter()
             .find(|t| t.name == instance)
             .ok_or(Refused::UnknownInstance)?;
-        if let Some(refused) = check(target.spec) {
+        if let Some(refused) = check(target) {
             return Err(refused);
         }
         if target.handle.is_stuck() {

@@ -12,7 +12,7 @@
 //! compound's state and let the supervisor react to their monitoring events.
 //! `docs/runtime.md` ("Compound components and supervisors") tells the semantics.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -360,6 +360,8 @@ enum Status {
 struct Instance {
     name: String,
     spec: &'static Spec,
+    /// Its quality levels: its component's, or its `timing` override's.
+    levels: usize,
     handle: Handle,
     policy: Policy,
     /// The instance this one substitutes.
@@ -920,10 +922,12 @@ impl CompoundBuilder {
     pub fn instance(mut self, component: Component) -> CompoundBuilder {
         let name = component.name().to_owned();
         let spec = component.spec();
+        let levels = component.timing().qualities.len();
         match self.system.add(component) {
             Ok(handle) => self.instances.push(Instance {
                 name,
                 spec,
+                levels,
                 handle,
                 policy: Policy::Propagate,
                 substitutes: None,
@@ -1080,9 +1084,11 @@ impl CompoundBuilder {
     /// variable the test reads (`instance.state`, `instance.user_state`,
     /// `instance.result`, `instance.error`, `instance.quality`, `instance.<variable>`,
     /// an own variable `name`, or a mapped variable `name` read with [`View::mapped`]): the rule is evaluated when one of them changes, and
-    /// when the supervisor enters `state` (however it got there). An instance's
-    /// `cpu_time` and `elapsed_time` announce no change: a test reading them sees
-    /// their values when it is evaluated for another reason.
+    /// when the supervisor enters `state` (however it got there). The compound's own
+    /// defaults are read as `result`, `error`, `quality`, `cpu_time` and
+    /// `elapsed_time`. Times (`instance.cpu_time`, `instance.elapsed_time` and the
+    /// compound's own) announce no change: a rule reading them is also evaluated once
+    /// every supervisor period, on a fresh snapshot of the instances it names.
     pub fn rule(
         mut self,
         state: &str,
@@ -1353,7 +1359,7 @@ impl CompoundBuilder {
             self.name.clone(),
             self.instances
                 .iter()
-                .map(|i| (i.name.clone(), i.handle.clone(), i.spec)),
+                .map(|i| (i.name.clone(), i.handle.clone(), i.spec, i.levels)),
             self.command_timeout,
         );
         // The instances' runners only detect and publish: the compound decides (and,
@@ -1987,6 +1993,17 @@ impl Compound {
         if self.next_timed.is_none_or(|due| now >= due) {
             let period = cx.period().unwrap_or(DEFAULT_SUPERVISION_PERIOD);
             self.next_timed = Some(crate::thread::later(now, period));
+            // An instance publishes its times without an event: read the snapshot of
+            // every instance a time read names, so the rules see their times now.
+            let named: BTreeSet<usize> = self
+                .timed
+                .iter()
+                .filter_map(|key| key.split_once('.'))
+                .filter_map(|(instance, _)| self.view.positions.get(instance).copied())
+                .collect();
+            for index in named {
+                self.refresh(index);
+            }
             changed.extend(self.timed.iter().cloned());
         }
     }

@@ -535,3 +535,36 @@ fn a_rule_over_an_instance_time_is_evaluated_every_supervisor_period() {
     wait_user(&base, "late");
     drop(system);
 }
+
+#[test]
+fn a_quality_is_checked_against_the_instance_timing_override() {
+    // The worker's component declares two quality levels; this instance's timing
+    // override declares three, so level 2 is valid for it.
+    let log: Answers = Arc::default();
+    let (w, _script) = worker("w");
+    let timing = w.timing();
+    let w = w.with_timing(TimingSpec {
+        qualities: &["full", "reduced", "minimal"],
+        ..timing
+    });
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::clone(&log),
+        },
+    ))
+    .instance(w);
+    let w = builder.instance_handle("w").unwrap();
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+    set_go(&base, 2);
+    let got = answers(&log, 10);
+    let by_name = |name: &str| &got.iter().find(|(n, _)| n == name).unwrap().1;
+    assert_eq!(by_name("quality 2"), &Ok(()));
+    w.wait_for(|m| m.quality == 2, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert!(system.shutdown().clean());
+}
