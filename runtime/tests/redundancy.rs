@@ -216,6 +216,11 @@ fn rig() -> Rig {
     }
 }
 
+/// Whether `step` says `b` took over from `a`.
+fn took_over(step: &coolbot::Supervision) -> bool {
+    step.instance == "a" && step.step == Step::Substituted { by: "b".to_owned() }
+}
+
 /// Every packet `c` receives until it has `count`, or the deadline.
 fn collect(received: &FifoIn<u64>, count: usize) -> Vec<u64> {
     let deadline = Instant::now() + WAIT;
@@ -251,11 +256,19 @@ fn the_stream_loses_no_packet_and_doubles_none_across_a_failover() {
     for round in 0..5 {
         let rig = rig();
         let k = rig.system.handle("k").expect("k");
-        // The leader fails somewhere in the middle of a stream of numbered packets.
+        // The leader fails in the middle of a stream of numbered packets: at its
+        // first section after `fail_at` was sent (the next packet's arrival runs
+        // one), before the rest is sent.
+        let a = k.instance("a").expect("a");
+        let fail_at = 300 + round * 100;
         for n in 1..=1000u64 {
             rig.send.send(n);
-            if n == 300 + round * 100 {
+            if n == fail_at {
                 rig.a.fail.store(true, Ordering::SeqCst);
+            }
+            if n == fail_at + 1 {
+                a.wait_for(|m| m.state == coolbot::State::RunningError, WAIT)
+                    .expect("a fails");
             }
         }
         let seen = collect(&rig.received, 1000);
@@ -264,15 +277,11 @@ fn the_stream_loses_no_packet_and_doubles_none_across_a_failover() {
             (1..=1000).collect::<Vec<_>>(),
             "round {round}: every packet once, in order"
         );
-        let monitor = k.snapshot();
-        assert!(
-            monitor
-                .supervision
-                .iter()
-                .any(|s| s.instance == "a" && s.step == Step::Substituted { by: "b".to_owned() }),
-            "round {round}: b took over: {:?}",
-            monitor.supervision
-        );
+        // (The step is published when the compound's turn ends, just after the
+        // stream went on.)
+        let monitor = k
+            .wait_for(|m| m.supervision.iter().any(took_over), WAIT)
+            .unwrap_or_else(|_| panic!("round {round}: b took over: {:?}", k.snapshot()));
         assert_eq!(monitor.state, coolbot::State::Running);
         assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
         assert_eq!(rig.received.overflows(), 0);
@@ -328,10 +337,16 @@ fn a_converted_connection_inside_the_compound_reads_the_merged_stream() {
     system.connect("p.out", "k.in").expect("p -> k");
     system.connect("k.out", "c.in").expect("k -> c");
     system.run_all().expect("run");
+    let a_handle = system.handle("k").and_then(|k| k.instance("a")).expect("a");
     for n in 1..=600u64 {
         send.send(n);
         if n == 250 {
             a.fail.store(true, Ordering::SeqCst);
+        }
+        if n == 251 {
+            a_handle
+                .wait_for(|m| m.state == coolbot::State::RunningError, WAIT)
+                .expect("a fails");
         }
     }
     assert_eq!(
@@ -340,12 +355,7 @@ fn a_converted_connection_inside_the_compound_reads_the_merged_stream() {
     );
     assert_eq!(b.relayed.load(Ordering::SeqCst), 600);
     let k = system.handle("k").expect("k");
-    assert!(
-        k.snapshot()
-            .supervision
-            .iter()
-            .any(|s| s.instance == "a" && s.step == Step::Substituted { by: "b".to_owned() }),
-        "b took over"
-    );
+    k.wait_for(|m| m.supervision.iter().any(took_over), WAIT)
+        .expect("b took over");
     assert!(system.shutdown().clean());
 }
