@@ -140,7 +140,7 @@ fn arrays_of_any_length_build_default_and_round_trip() {
     std::fs::copy(data("arrays/arrays.cool"), &description).unwrap();
     let krate = dir.path().join("arrays");
     compile(&description, &krate, "arrays");
-    for name in ["scanner.rs", "recorder.rs"] {
+    for name in ["scanner.rs", "recorder.rs", "rig.rs"] {
         std::fs::copy(data("arrays").join(name), krate.join("src").join(name)).unwrap();
     }
     std::fs::create_dir_all(krate.join("tests")).unwrap();
@@ -156,6 +156,7 @@ fn arrays_of_any_length_build_default_and_round_trip() {
         "long_arrays_get_their_defaults",
         "long_arrays_round_trip_through_serde",
         "long_arrays_flow_through_a_running_system",
+        "a_supervisor_sets_a_long_array_through_its_typed_handle",
     ] {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }

@@ -599,14 +599,21 @@ impl<'a> Lowerer<'a> {
                         let Some((ty, _)) = self.variable_type(component, &v.name.name, 0) else {
                             continue;
                         };
-                        let to_value = match &ty.kind {
-                            TypeKind::Prim(_) => "::coolbot::Value::from(value)".to_owned(),
-                            _ => "super::__cool_to_value(&value)".to_owned(),
+                        let rust_ty = self.rust_type(ty, GEN_TYPES);
+                        // A type holding an array longer than 32 elements goes through
+                        // its serde_with adapter, as the instance's own variable does.
+                        let to_value = match (super::serde_adapter(ty), &ty.kind) {
+                            (Some(adapter), _) => format!(
+                                "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
+                                super::SERDE_WITH
+                            ),
+                            (None, TypeKind::Prim(_)) => "::coolbot::Value::from(value)".to_owned(),
+                            (None, _) => "super::__cool_to_value(&value)".to_owned(),
                         };
                         setters.push(ir::Setter {
                             method: ident::method("set_", &v.name.name, ""),
                             variable: v.name.name.clone(),
-                            ty: self.rust_type(ty, GEN_TYPES),
+                            ty: rust_ty,
                             to_value,
                         });
                     }

@@ -168,3 +168,24 @@ fn long_arrays_flow_through_a_running_system() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn a_supervisor_sets_a_long_array_through_its_typed_handle() {
+    let rig = arrays::generated::rig::component("rig", arrays::rig::RigParts::default()).unwrap();
+    let mut system = System::new();
+    let rig = system.add(rig).unwrap();
+    system.run_all().unwrap();
+    let scanner = rig.instance("scanner").unwrap();
+    scanner
+        .wait_for(
+            |m| {
+                variable(m, "limits")
+                    .and_then(|v| v.to_serde::<Vec<u16>>().ok())
+                    .is_some_and(|l| l == vec![5; 64])
+            },
+            WAIT,
+        )
+        .unwrap();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
