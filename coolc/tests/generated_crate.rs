@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{cargo, compile, copy_descriptions, data};
+use common::{cargo, compile, copy_descriptions, data, fill_check_and_run};
 
 #[test]
 fn generated_crate_builds_and_runs() {
@@ -19,27 +19,17 @@ fn generated_crate_builds_and_runs() {
     compile(&descriptions.join("mobile_base.cool"), &krate, "fleet");
 
     // The untouched stubs (SimRangeServer, Gyro) must build as generated.
-    for name in [
-        "range_server.rs",
-        "planner.rs",
-        "converters.rs",
-        "motion_controller.rs",
-        "follower.rs",
-    ] {
-        std::fs::copy(data("filled").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("filled/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(
-        output.contains("test mobile_base_instances_run_and_talk ... ok"),
-        "{output}"
+        "filled",
+        &[
+            "range_server.rs",
+            "planner.rs",
+            "converters.rs",
+            "motion_controller.rs",
+            "follower.rs",
+        ],
+        &["mobile_base_instances_run_and_talk"],
     );
 }
 
@@ -91,42 +81,33 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     std::fs::copy(data("plant/plant.cool"), &description).unwrap();
     let krate = dir.path().join("plant");
     compile(&description, &krate, "plant");
-    for name in [
-        "source.rs",
-        "worker.rs",
-        "sink.rs",
-        "cell.rs",
-        "plant.rs",
-        "gauge.rs",
-        "probe.rs",
-        "gate.rs",
-        "pair.rs",
-        "ticker.rs",
-        "swap.rs",
-        "restarter.rs",
-    ] {
-        std::fs::copy(data("plant").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("plant/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+        "plant",
+        &[
+            "source.rs",
+            "worker.rs",
+            "sink.rs",
+            "cell.rs",
+            "plant.rs",
+            "gauge.rs",
+            "probe.rs",
+            "gate.rs",
+            "pair.rs",
+            "ticker.rs",
+            "swap.rs",
+            "restarter.rs",
+        ],
+        &[
+            "a_failed_leaf_is_substituted_and_the_supervisors_follow",
+            "rules_read_every_kind_of_value",
+            "a_supervisor_moves_on_a_packet_at_an_exported_input",
+            "a_redundant_group_keeps_the_stream_when_a_member_fails",
+            "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
+            "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
+            "the_restart_budget_of_the_description_bounds_the_restarts",
+        ],
     );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    for test in [
-        "a_failed_leaf_is_substituted_and_the_supervisors_follow",
-        "rules_read_every_kind_of_value",
-        "a_supervisor_moves_on_a_packet_at_an_exported_input",
-        "a_redundant_group_keeps_the_stream_when_a_member_fails",
-        "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
-        "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
-        "the_restart_budget_of_the_description_bounds_the_restarts",
-    ] {
-        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
-    }
 }
 
 #[test]
@@ -140,26 +121,17 @@ fn arrays_of_any_length_build_default_and_round_trip() {
     std::fs::copy(data("arrays/arrays.cool"), &description).unwrap();
     let krate = dir.path().join("arrays");
     compile(&description, &krate, "arrays");
-    for name in ["scanner.rs", "recorder.rs", "rig.rs"] {
-        std::fs::copy(data("arrays").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("arrays/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+        "arrays",
+        &["scanner.rs", "recorder.rs", "rig.rs"],
+        &[
+            "long_arrays_get_their_defaults",
+            "long_arrays_round_trip_through_serde",
+            "long_arrays_flow_through_a_running_system",
+            "a_supervisor_sets_a_long_array_through_its_typed_handle",
+        ],
     );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    for test in [
-        "long_arrays_get_their_defaults",
-        "long_arrays_round_trip_through_serde",
-        "long_arrays_flow_through_a_running_system",
-        "a_supervisor_sets_a_long_array_through_its_typed_handle",
-    ] {
-        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
-    }
 }
 
 #[test]
@@ -171,21 +143,11 @@ fn compounds_with_converters_nest_three_levels_deep() {
     std::fs::copy(data("nest/nest.cool"), &description).unwrap();
     let krate = dir.path().join("nest");
     compile(&description, &krate, "nest");
-    for name in ["follower.rs", "drive.rs", "converters.rs"] {
-        std::fs::copy(data("nest").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("nest/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(
-        output.contains("test converters_reach_compounds_nested_three_deep ... ok"),
-        "{output}"
+        "nest",
+        &["follower.rs", "drive.rs", "converters.rs"],
+        &["converters_reach_compounds_nested_three_deep"],
     );
 }
 
@@ -199,21 +161,11 @@ fn a_compound_exports_poster_tick_and_pull_outputs() {
     std::fs::copy(data("exports/exports.cool"), &description).unwrap();
     let krate = dir.path().join("exports");
     compile(&description, &krate, "exports");
-    for name in ["sensor.rs", "watcher.rs", "unit.rs", "station.rs"] {
-        std::fs::copy(data("exports").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("exports/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(
-        output.contains("test a_watcher_reads_a_compound_as_it_reads_an_atomic_sensor ... ok"),
-        "{output}"
+        "exports",
+        &["sensor.rs", "watcher.rs", "unit.rs", "station.rs"],
+        &["a_watcher_reads_a_compound_as_it_reads_an_atomic_sensor"],
     );
 }
 
@@ -233,33 +185,23 @@ fn a_warehouse_robot_written_from_the_reference_builds_and_runs() {
     }
     let krate = dir.path().join("warehouse");
     compile(&descriptions.join("warehouse.cool"), &krate, "warehouse");
-    for name in [
-        "lidar.rs",
-        "camera.rs",
-        "detector.rs",
-        "pan_tilt.rs",
-        "follower.rs",
-        "drive.rs",
-        "converters.rs",
-        "base.rs",
-        "perception.rs",
-        "navigation.rs",
-        "warehouse.rs",
-        "console.rs",
-    ] {
-        std::fs::copy(data("warehouse").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("warehouse/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    assert!(
-        output.contains("test the_warehouse_robot_runs_as_described ... ok"),
-        "{output}"
+        "warehouse",
+        &[
+            "lidar.rs",
+            "camera.rs",
+            "detector.rs",
+            "pan_tilt.rs",
+            "follower.rs",
+            "drive.rs",
+            "converters.rs",
+            "base.rs",
+            "perception.rs",
+            "navigation.rs",
+            "warehouse.rs",
+            "console.rs",
+        ],
+        &["the_warehouse_robot_runs_as_described"],
     );
 }

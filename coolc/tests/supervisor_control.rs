@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{cargo, compile, data};
+use common::{compile, data, fill_check_and_run};
 
 #[test]
 fn a_generated_supervisor_commands_its_instances() {
@@ -16,22 +16,13 @@ fn a_generated_supervisor_commands_its_instances() {
     std::fs::copy(data("command/command.cool"), &description).unwrap();
     let krate = dir.path().join("command");
     compile(&description, &krate, "command");
-    for name in ["drive.rs", "base.rs"] {
-        std::fs::copy(data("command").join(name), krate.join("src").join(name)).unwrap();
-    }
-    std::fs::create_dir_all(krate.join("tests")).unwrap();
-    std::fs::copy(data("command/run.rs"), krate.join("tests/run.rs")).unwrap();
-
-    cargo(&krate, &["fmt", "--check"]);
-    cargo(
+    fill_check_and_run(
         &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+        "command",
+        &["drive.rs", "base.rs"],
+        &[
+            "the_supervisor_suspends_slows_and_resumes_its_drive",
+            "a_may_choice_and_rules_over_the_compounds_own_result_and_times_move_the_supervisor",
+        ],
     );
-    let output = cargo(&krate, &["test", "--test", "run"]);
-    for test in [
-        "the_supervisor_suspends_slows_and_resumes_its_drive",
-        "a_may_choice_and_rules_over_the_compounds_own_result_and_times_move_the_supervisor",
-    ] {
-        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
-    }
 }

@@ -78,3 +78,24 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
     );
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
+
+/// Copies the filled-in user files `user_files` of `coolc/tests/data/<data_dir>` into
+/// the crate `krate`'s `src/` and its `run.rs` into `tests/`; checks that the crate is
+/// rustfmt-clean and clippy-clean under `-D warnings`; runs `tests/run.rs` and asserts
+/// that each of `tests` passed.
+pub fn fill_check_and_run(krate: &Path, data_dir: &str, user_files: &[&str], tests: &[&str]) {
+    for name in user_files {
+        std::fs::copy(data(data_dir).join(name), krate.join("src").join(name)).unwrap();
+    }
+    std::fs::create_dir_all(krate.join("tests")).unwrap();
+    std::fs::copy(data(data_dir).join("run.rs"), krate.join("tests/run.rs")).unwrap();
+    cargo(krate, &["fmt", "--check"]);
+    cargo(
+        krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = cargo(krate, &["test", "--test", "run"]);
+    for test in tests {
+        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
+    }
+}
