@@ -497,6 +497,9 @@ pub(crate) struct Observation {
     pub(crate) missed: bool,
     /// The period one promotion would give (the spare test's reference).
     pub(crate) reference: Duration,
+    /// Whether the idle probe saw spare time on the processor ([`crate::idle`]): a
+    /// period is spare only then.
+    pub(crate) idle: bool,
 }
 
 /// The per-component detector: observations in, a [`Pressure`] verdict out.
@@ -557,7 +560,7 @@ impl Detector {
         let spare_limit = observation
             .reference
             .mul_f64(self.config.spare_ratio.max(0.0));
-        if !bad && observation.elapsed <= spare_limit {
+        if !bad && observation.idle && observation.elapsed <= spare_limit {
             self.spare_run = self.spare_run.saturating_add(1);
         } else {
             self.spare_run = 0;
@@ -1155,6 +1158,16 @@ mod tests {
     }
 
     fn run(detector: &mut Detector, elapsed: u64, period: u64, times: usize) -> Vec<Pressure> {
+        run_idle(detector, elapsed, period, times, true)
+    }
+
+    fn run_idle(
+        detector: &mut Detector,
+        elapsed: u64,
+        period: u64,
+        times: usize,
+        idle: bool,
+    ) -> Vec<Pressure> {
         (0..times)
             .filter_map(|_| {
                 detector.observe(Observation {
@@ -1162,9 +1175,35 @@ mod tests {
                     period: MS(period),
                     missed: elapsed > period,
                     reference: MS(period),
+                    idle,
                 })
             })
             .collect()
+    }
+
+    #[test]
+    fn short_sections_are_spare_time_only_while_the_idle_probe_sees_an_idle_cpu() {
+        let mut detector = Detector::new(AdaptConfig {
+            spare_periods: 3,
+            hold_periods: 0,
+            ..AdaptConfig::default()
+        });
+        // Short sections on a busy processor: no spare time, however many.
+        assert_eq!(run_idle(&mut detector, 1, 10, 10, false), []);
+        // Two idle periods, then a busy one: the run starts again.
+        assert_eq!(run_idle(&mut detector, 1, 10, 2, true), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 1, false), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 2, true), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 1, true), [Pressure::Spare]);
+        // A busy processor ends spare time; violations do not need the probe.
+        assert_eq!(
+            run_idle(&mut detector, 1, 10, 1, false),
+            [Pressure::Nominal]
+        );
+        assert_eq!(
+            run_idle(&mut detector, 15, 10, 2, true),
+            [Pressure::Violation]
+        );
     }
 
     #[test]

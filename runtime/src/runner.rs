@@ -31,6 +31,7 @@ use crate::adapt::{
 };
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::clock::Clock;
+use crate::idle::IdleProbe;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
@@ -1475,6 +1476,11 @@ struct Local {
     cpu_mark: Option<(Instant, Duration)>,
     /// The thread's CPU time over wall-clock time between readings, smoothed.
     cpu_share: f64,
+    /// The process's idle probe (`crate::idle`), taken at the first observation on the
+    /// real clock; `None` before, on a virtual clock, or if it could not start.
+    probe: Option<IdleProbe>,
+    /// Whether the probe was asked for.
+    probe_asked: bool,
 }
 
 /// Which axis a change by other means set (it becomes the floor of promotions).
@@ -1504,6 +1510,8 @@ impl Local {
             exhausted: false,
             cpu_mark: None,
             cpu_share: 0.0,
+            probe: None,
+            probe_asked: false,
         })
     }
 
@@ -1541,11 +1549,22 @@ impl Runner {
             .period
             .unwrap_or(period)
             .min(period);
+        let idle = match self.time.as_virtual() {
+            Some(clock) => clock.idle(),
+            None => {
+                if !adapt.probe_asked {
+                    adapt.probe_asked = true;
+                    adapt.probe = IdleProbe::shared();
+                }
+                adapt.probe.as_ref().is_none_or(IdleProbe::idle)
+            }
+        };
         let verdict = adapt.detector.observe(Observation {
             elapsed: took,
             period,
             missed,
             reference,
+            idle,
         });
         let load = adapt.detector.load();
         // (Without a new verdict, the load is published with the timing counters.)
