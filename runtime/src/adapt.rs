@@ -80,6 +80,10 @@ pub struct AdaptConfig {
     pub width: u32,
     /// Compounds: what the top-level supervisor does when degradation is exhausted.
     pub reconfiguration: Reconfiguration,
+    /// Equalization (`crate::equalize`): whether a periodic component whose adaptation
+    /// is on may have its phase moved when its sections coincide with others' on a
+    /// busy processor. Default true.
+    pub equalize: bool,
 }
 
 impl Default for AdaptConfig {
@@ -95,6 +99,7 @@ impl Default for AdaptConfig {
             max_backoff: 8,
             width: 1,
             reconfiguration: Reconfiguration::Report,
+            equalize: true,
         }
     }
 }
@@ -202,6 +207,9 @@ pub enum AdaptAction {
     Suspended,
     /// An instance suspended by adaptation was resumed.
     Resumed,
+    /// Equalization moved the component's phase: its periodic sections coincided with
+    /// other components' on a busy processor (`crate::equalize`). The level stays.
+    Equalized,
 }
 
 /// One adaptation step, published as [`crate::MonitorEvent::Adaptation`] and kept in

@@ -226,6 +226,8 @@ pub struct Context {
     pub(crate) period: Option<Duration>,
     pub(crate) period_changed: bool,
     pub(crate) quality: usize,
+    /// The deadline of the periodic section running now.
+    pub(crate) deadline: Option<Instant>,
     pub(crate) waker: Option<Waker>,
     /// Compound components: supervision steps to publish when the call returns.
     pub(crate) supervision: Vec<crate::monitor::Supervision>,
@@ -247,6 +249,7 @@ impl Context {
             period,
             period_changed: false,
             quality: 0,
+            deadline: None,
             waker: None,
             supervision: Vec::new(),
             shared: None,
@@ -307,6 +310,13 @@ impl Context {
     /// (0 = best).
     pub fn quality(&self) -> usize {
         self.quality
+    }
+
+    /// The deadline of the periodic section running now (`None` in other sections):
+    /// it started `Instant::now() - deadline` late. The runtime's clock: on a virtual
+    /// clock, an instant of that clock.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.deadline
     }
 
     /// The component instance's name.

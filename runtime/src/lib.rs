@@ -124,6 +124,7 @@ mod automaton;
 pub mod clock;
 mod commander;
 pub mod compound;
+pub mod equalize;
 pub mod idle;
 mod monitor;
 pub mod port;

@@ -31,6 +31,7 @@ use crate::adapt::{
 };
 use crate::automaton::{Automaton, Context, Fault, Section};
 use crate::clock::Clock;
+use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::idle::IdleProbe;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
@@ -1344,7 +1345,10 @@ impl Runner {
         };
         self.reanchored = false;
         let mut missed_any = false;
-        match self.section_with_plan(state, Section::Periodic) {
+        self.cx.deadline = Some(deadline);
+        let outcome = self.section_with_plan(state, Section::Periodic);
+        self.cx.deadline = None;
+        match outcome {
             Recovery::Recovered => {}
             Recovery::Goto(target) => self.pending_choice = Some(target),
             Recovery::Failed(message) => {
@@ -1379,10 +1383,67 @@ impl Runner {
         }
         if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
             self.observe(self.last_took, period, missed_any);
+            self.equalize(deadline, period, !self.reanchored && !missed_any);
         }
         if self.pending_choice.is_none() {
             self.choose(state);
         }
+    }
+
+    /// Equalization (`crate::equalize`): feed the seat this periodic section (when
+    /// `on_time`: a period that missed its deadline or was re-anchored says nothing of
+    /// its phase); when it says so, delay the next deadline once and publish an
+    /// `Equalized` step.
+    fn equalize(&mut self, deadline: Instant, period: Duration, on_time: bool) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        if !adapt.equalize || !self.time.is_real() {
+            return; // (Phases on a virtual clock say nothing about the processor.)
+        }
+        // CPU time and waits since the previous periodic section ended.
+        let stats = adapt
+            .stats
+            .get_or_insert_with(ThreadStats::of_current_thread);
+        let Some((cpu, waited)) = stats.since_last() else {
+            return;
+        };
+        if !on_time {
+            return;
+        }
+        // Without the OS's figure: the elapsed time the thread did not spend on a CPU
+        // while its section ran.
+        let waited = waited.unwrap_or_else(|| self.last_took.saturating_sub(cpu));
+        let name = &self.cx.name;
+        let seat = adapt
+            .seat
+            .get_or_insert_with(|| Board::process().seat(name, EqualizeConfig::default()));
+        let Some(shift) = seat.observe(Activation {
+            deadline,
+            cpu,
+            waited,
+            period,
+        }) else {
+            return;
+        };
+        let level = adapt.level;
+        if let Some(next) = self.next_periodic.as_mut() {
+            *next = later(*next, shift.delay);
+        }
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: AdaptAction::Equalized,
+            from: level,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: format!(
+                "phase moved {:?} later: its sections coincided with {}'s",
+                shift.delay,
+                shift.away_from.join("'s, ")
+            ),
+        };
+        self.shared.adaptation_step(step, |_| {});
     }
 
     /// Re-anchor the periodic deadline on the current period, from now.
@@ -1481,6 +1542,14 @@ struct Local {
     probe: Option<IdleProbe>,
     /// Whether the probe was asked for.
     probe_asked: bool,
+    /// Whether equalization may move its phase (`AdaptConfig::equalize`).
+    equalize: bool,
+    /// Its place on the process's equalization board (`crate::equalize`), taken at its
+    /// first periodic section on the real clock.
+    seat: Option<Seat>,
+    /// The thread's CPU time and run-queue wait (equalization), opened on the
+    /// component's thread at its first periodic section.
+    stats: Option<ThreadStats>,
 }
 
 /// Which axis a change by other means set (it becomes the floor of promotions).
@@ -1512,6 +1581,9 @@ impl Local {
             cpu_share: 0.0,
             probe: None,
             probe_asked: false,
+            equalize: config.equalize,
+            seat: None,
+            stats: None,
         })
     }
 
