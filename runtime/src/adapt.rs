@@ -56,7 +56,8 @@ pub const MAX_PERIODS: u32 = 100_000;
 pub struct AdaptConfig {
     /// `Some(false)` turns adaptation off; `Some(true)` turns it on; `None` (the
     /// default) leaves it on where the timing block has a period interval
-    /// (`period 10ms..40ms`) and off elsewhere. A compound's supervisor is on unless
+    /// (`period 10ms..40ms`), or no period, a `max_response` and quality levels (an
+    /// aperiodic component degrades its quality on late responses), and off elsewhere. A compound's supervisor is on unless
     /// `Some(false)`.
     pub enabled: Option<bool>,
     /// Bad periods (a missed deadline, or a section longer than the period) among the
@@ -148,11 +149,19 @@ impl AdaptConfig {
         }
     }
 
-    /// Whether detection runs for a component with timing block `timing`.
+    /// Whether detection runs for a component with timing block `timing`: by default
+    /// where there is something to adapt to a violation, a period interval, or, for an
+    /// aperiodic component with a `max_response` (whose late responses are its
+    /// violations), quality levels.
     pub(crate) fn enabled_for(&self, timing: &TimingSpec) -> bool {
-        self.enabled.unwrap_or_else(
-            || matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p),
-        )
+        self.enabled.unwrap_or_else(|| {
+            let interval =
+                matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p);
+            let responsive = timing.period.is_none()
+                && timing.max_response.is_some()
+                && timing.qualities.len() > 1;
+            interval || responsive
+        })
     }
 }
 

@@ -242,6 +242,59 @@ pub(crate) struct Owner {
     pub(crate) bell: Arc<Doorbell>,
     pub(crate) shared: Weak<Shared>,
     pub(crate) port_name: &'static str,
+    /// Temporal labeling of arrivals at this input, when its component measures its
+    /// response time (`None`: no clock is read on delivery).
+    pub(crate) label: Option<Arc<ArrivalLabel>>,
+}
+
+/// Temporal labeling (paper 3.6, "temporal labeling of input data"): when the oldest
+/// packet at an input that no `on` transition has handled yet arrived. Stamped on
+/// delivery (one clock read for the first packet after each handling, none for the
+/// others), taken by the component's thread when an `on` transition of the input
+/// fires: its response time runs from this instant to the end of that transition's
+/// sections.
+#[derive(Debug, Default)]
+pub(crate) struct ArrivalLabel {
+    /// Nanoseconds since `crate::watchdog::epoch()`, plus one; 0: none.
+    first: AtomicU64,
+    /// The component's clock when it is virtual (else the real one is read).
+    clock: OnceLock<Arc<crate::clock::VirtualClock>>,
+}
+
+impl ArrivalLabel {
+    /// Read arrivals on `clock` (a component on a virtual clock).
+    pub(crate) fn set_clock(&self, clock: &crate::clock::Clock) {
+        if let Some(clock) = clock.as_virtual() {
+            let _ = self.clock.set(Arc::clone(clock));
+        }
+    }
+
+    /// A packet arrived: stamp it if it is the oldest not handled.
+    #[inline]
+    fn stamp(&self) {
+        if self.first.load(Ordering::Relaxed) != 0 {
+            return;
+        }
+        let now = match self.clock.get() {
+            Some(clock) => clock.now(),
+            None => Instant::now(),
+        };
+        let since = now.saturating_duration_since(crate::watchdog::epoch());
+        let nanos = u64::try_from(since.as_nanos())
+            .unwrap_or(u64::MAX - 1)
+            .saturating_add(1);
+        let _ = self
+            .first
+            .compare_exchange(0, nanos, Ordering::Relaxed, Ordering::Relaxed);
+    }
+
+    /// The oldest arrival not handled, if any; the label is cleared.
+    pub(crate) fn take(&self) -> Option<Instant> {
+        match self.first.swap(0, Ordering::AcqRel) {
+            0 => None,
+            nanos => Some(crate::watchdog::epoch() + Duration::from_nanos(nanos - 1)),
+        }
+    }
 }
 
 /// The kind-independent part of every input end.
@@ -276,6 +329,9 @@ impl InputCore {
         // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
         self.arrivals.fetch_add(1, Ordering::SeqCst);
         if let Some(owner) = self.owner.get() {
+            if let Some(label) = &owner.label {
+                label.stamp();
+            }
             owner.bell.ring();
         }
         if self.pull_waiting.load(Ordering::Acquire)

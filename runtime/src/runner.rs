@@ -34,7 +34,7 @@ use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::idle::IdleProbe;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
-use crate::port::{Doorbell, InputCore, OutputCore};
+use crate::port::{ArrivalLabel, Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{Scheduling, later, panic_message};
@@ -171,6 +171,11 @@ pub(crate) struct Runner {
     adapt: Option<Local>,
     /// How long the last user call ran.
     last_took: Duration,
+    /// Temporal labels of the inputs whose response time is measured (aperiodic
+    /// components with a `max_response`; `crate::port::ArrivalLabel`).
+    labels: Vec<Option<Arc<ArrivalLabel>>>,
+    /// The last `RESPONSE_WINDOW` response times.
+    responses: VecDeque<Duration>,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -247,6 +252,8 @@ impl Runner {
             scheduling: None,
             adapt,
             last_took: Duration::ZERO,
+            labels: Vec::new(),
+            responses: VecDeque::new(),
             _exit_guard: exit_guard,
         };
         runner.cx.shared = Some(Arc::clone(&runner.shared));
@@ -261,8 +268,16 @@ impl Runner {
         self.supervised
     }
 
+    /// Measure response times at these inputs (`None`: not measured).
+    pub(crate) fn set_labels(&mut self, labels: Vec<Option<Arc<ArrivalLabel>>>) {
+        self.labels = labels;
+    }
+
     /// Run on `clock` (before the thread starts): every timer reads it.
     pub(crate) fn set_clock(&mut self, clock: Clock) {
+        for label in self.labels.iter().flatten() {
+            label.set_clock(&clock);
+        }
         let now = clock.now();
         self.entered_at = now;
         self.cpu_updated = now;
@@ -585,7 +600,15 @@ impl Runner {
             .min_by_key(|on| on.port);
         if let Some(on) = fired {
             self.pending[on.port] = false;
+            let arrived = self
+                .labels
+                .get(on.port)
+                .and_then(Option::as_ref)
+                .and_then(|label| label.take());
             self.goto(on.target, now);
+            if let Some(arrived) = arrived {
+                self.responded(arrived);
+            }
             return true;
         }
         // 5. Pull requests.
@@ -696,8 +719,11 @@ impl Runner {
                     self.set_state(to);
                     // Packets that came while it did not run (queued while `ready`,
                     // or moved to it as a substitute) are arrivals in its initial
-                    // state.
+                    // state; their wait is not a response time.
                     self.arrivals_count_on_entry = true;
+                    for label in self.labels.iter().flatten() {
+                        let _ = label.take();
+                    }
                     self.enter(self.spec.initial, self.time.now());
                     return;
                 }
@@ -1605,6 +1631,44 @@ impl Local {
 }
 
 impl Runner {
+    /// An `on` transition handled packets that arrived from `arrived` on: publish the
+    /// response time; past `max_response` it is a late response, and a timing
+    /// violation for the adaptation detector (paper 3.6).
+    fn responded(&mut self, arrived: Instant) {
+        let took = self.clock.saturating_duration_since(arrived);
+        let Some(bound) = self.max_response else {
+            return;
+        };
+        if self.responses.len() == crate::monitor::RESPONSE_WINDOW {
+            self.responses.pop_front();
+        }
+        self.responses.push_back(took);
+        let mut sorted: Vec<Duration> = self.responses.iter().copied().collect();
+        sorted.sort_unstable();
+        let at = |share: f64| sorted[((sorted.len() - 1) as f64 * share).round() as usize];
+        let (p50, p99) = (at(0.5), at(0.99));
+        let late = took > bound;
+        self.shared.update(|monitor| {
+            let response = &mut monitor.response;
+            response.p50 = p50;
+            response.p99 = p99;
+            response.worst = response.worst.max(took);
+            response.count += 1;
+            if !late {
+                return Vec::new();
+            }
+            response.late += 1;
+            vec![MonitorEvent::LateResponse {
+                took,
+                bound,
+                total: response.late,
+            }]
+        });
+        if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
+            self.observe(took, bound, late);
+        }
+    }
+
     /// Feed the detector one periodic section; act on a new verdict (a component no
     /// compound supervises degrades or promotes itself, one level per verdict).
     fn observe(&mut self, took: Duration, period: Duration, missed: bool) {

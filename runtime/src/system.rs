@@ -11,7 +11,7 @@ use crate::automaton::{Automaton, TaskResult};
 use crate::clock::Clock;
 use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
 use crate::port::{
-    ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
+    ArrivalLabel, ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
 };
 use crate::runner::Runner;
 use crate::spec::{InputKind, OutputKind, Spec, TimingSpec};
@@ -549,6 +549,7 @@ impl System {
             supervision: Vec::new(),
             supervision_steps: 0,
             adaptation: crate::adapt::AdaptStatus::default(),
+            response: crate::monitor::ResponseTimes::default(),
         };
         let named_inputs = spec
             .inputs
@@ -558,11 +559,24 @@ impl System {
             .collect();
         let shared = Arc::new(Shared::new(monitor, named_inputs));
         let bell = crate::port::Doorbell::new();
-        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+        // Response times (paper 3.6) are measured for an aperiodic component with a
+        // `max_response`, at the inputs an `on` transition handles.
+        let labeled = timing.period.is_none() && timing.max_response.is_some();
+        let labels: Vec<Option<Arc<ArrivalLabel>>> = (0..spec.inputs.len())
+            .map(|index| {
+                let handled = spec
+                    .states
+                    .iter()
+                    .any(|state| state.on.iter().any(|on| on.port == index));
+                (labeled && handled).then(|| Arc::new(ArrivalLabel::default()))
+            })
+            .collect();
+        for ((port, declared), label) in ports.inputs.iter().zip(spec.inputs).zip(&labels) {
             let owner = Owner {
                 bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
+                label: label.clone(),
             };
             if port.core.owner.set(owner).is_err() {
                 return Err(Error::PortInUse {
@@ -576,6 +590,7 @@ impl System {
                 bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
+                label: None,
             };
             if port.core.owner.set(owner).is_err() {
                 return Err(Error::PortInUse {
@@ -607,7 +622,7 @@ impl System {
                 .zip(ports.outputs.iter().cloned())
                 .collect(),
         };
-        let runner = Runner::new(
+        let mut runner = Runner::new(
             &name,
             automaton,
             timing,
@@ -619,6 +634,7 @@ impl System {
             ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             exit_guard,
         );
+        runner.set_labels(labels);
         let index = self.slots.len();
         self.names.insert(name.clone(), index);
         self.slots.push(Slot {
