@@ -29,7 +29,7 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Automaton, Context, Fault, Section};
+use crate::automaton::{Context, Driven, Fault, Section};
 use crate::clock::Clock;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
 use crate::port::{Doorbell, InputCore, OutputCore};
@@ -93,7 +93,7 @@ enum Recovery {
 
 /// Everything one component thread owns.
 pub(crate) struct Runner {
-    automaton: Box<dyn Automaton>,
+    automaton: Box<dyn Driven>,
     spec: &'static Spec,
     /// The effective timing block: the instance's override, else the spec's.
     timing: TimingSpec,
@@ -180,7 +180,7 @@ impl Runner {
     )]
     pub(crate) fn new(
         name: &str,
-        automaton: Box<dyn Automaton>,
+        automaton: Box<dyn Driven>,
         timing: TimingSpec,
         adaptation: AdaptConfig,
         shared: Arc<Shared>,
@@ -959,7 +959,7 @@ impl Runner {
     /// Run one user call under `catch_unwind`, account its time, publish its changes.
     fn call<R>(
         &mut self,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, String> {
         self.call_watched(None, body)
             .map_err(|failure| match failure {
@@ -974,7 +974,7 @@ impl Runner {
     fn call_watched<R>(
         &mut self,
         watched: Option<(usize, Section)>,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, Failure> {
         // Without a watchdog (no max_response), the call starts from the turn's clock
         // reading (taken at most a few hundred nanoseconds of runner work ago, or at

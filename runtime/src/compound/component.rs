@@ -1,0 +1,522 @@
+//! The compound automaton: the inner [`System`] of instances, the compound's record of
+//! each instance (its policy, its place in the arrangement), and how the instances
+//! follow the compound's own state (the runner's compound hooks, `automaton::Driven`).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::Receiver;
+
+use crate::adapt::{AdaptAction, Adaptation, Pressure};
+use crate::automaton::{Automaton, Context, Driven, Fault, Section};
+use crate::commander::Commander;
+use crate::monitor::{Command, Handle, MonitorEvent, Step, Supervision};
+use crate::port::ErasedInput;
+use crate::spec::Spec;
+use crate::system::System;
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+use super::INSTANCE_START_TIMEOUT;
+use super::adaptation::Coordinator;
+use super::exports::{EXPORT_RETRY, Export};
+use super::faults::{Budget, PendingRestart, Policy, Recovering};
+use super::supervisor::{Supervisor, SupervisorCx};
+use super::view::{Rule, View};
+use super::wiring::{Link, MergedPort};
+
+/// Where an instance stands in the compound's arrangement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Status {
+    /// Part of the arrangement: runs when the compound runs.
+    Active,
+    /// A declared substitute not in use: started (`ready`), not running.
+    Standby,
+    /// In the recovery queue.
+    Recovering,
+    /// Its recovery deadline expired: commanded to `dead`.
+    Destroyed,
+}
+
+pub(super) struct Instance {
+    pub(super) name: String,
+    pub(super) spec: &'static Spec,
+    /// Its quality levels: its component's, or its `timing` override's.
+    pub(super) levels: usize,
+    pub(super) handle: Handle,
+    pub(super) policy: Policy,
+    /// The instance this one substitutes.
+    pub(super) substitutes: Option<usize>,
+    /// This instance's substitute.
+    pub(super) substitute: Option<usize>,
+    /// Its redundant group.
+    pub(super) group: Option<usize>,
+    pub(super) status: Status,
+    /// When the `restart` policy last restarted it (within the budget's window).
+    pub(super) restarts: std::collections::VecDeque<Instant>,
+    /// A restart decided but not done yet (backoff, or the instance is stuck).
+    pub(super) pending: Option<PendingRestart>,
+    /// Its current fault was handled (its policy ran): cleared when it leaves
+    /// `running_error`/`starting_error`, or is commanded back to `running`. Later
+    /// events of the same fault (a watchdog trip, then the section's return) are not
+    /// a new fault.
+    pub(super) handled: bool,
+}
+
+/// A variable of the compound mapped onto an instance's.
+pub(super) struct Mapped {
+    pub(super) instance: usize,
+    pub(super) variable: String,
+}
+
+/// The code of a compound component, driven by the runner like any automaton.
+pub(super) struct Compound {
+    pub(super) name: String,
+    pub(super) spec: &'static Spec,
+    /// Index of the first own variable in `spec.variables` (mapped ones come first).
+    pub(super) own_offset: usize,
+    pub(super) system: Option<System>,
+    pub(super) instances: Vec<Instance>,
+    pub(super) groups: Vec<Vec<usize>>,
+    /// Each redundant group's leader (its merged streams carry its packets): changes
+    /// only when the leader fails.
+    pub(super) leaders: Vec<usize>,
+    /// The merged data outputs of redundant groups, made at the first wiring.
+    pub(super) merges: Vec<MergedPort>,
+    /// The consumers linked to a merged output: `(merge, input address, input)`.
+    pub(super) merged: Vec<(usize, String, ErasedInput)>,
+    /// The connections made to redundant members' inputs (every live member).
+    pub(super) fanned: Vec<(String, String)>,
+    /// Declared connections.
+    pub(super) links: Vec<Link>,
+    /// The connections made now (declared ones with each instance routed to whoever
+    /// stands for it, with their converters).
+    /// The connection made for each declared link (`links`, same order), between the
+    /// instances standing for its ends; `None` where none is (not made yet, or the
+    /// same ends as an earlier link's).
+    pub(super) wired: Vec<Option<Link>>,
+    pub(super) mapped: Vec<Mapped>,
+    pub(super) supervisor: Box<dyn Supervisor>,
+    pub(super) rules: Vec<Rule>,
+    /// Monitoring events of each instance (subscribed at the first start), with a
+    /// flag its publisher sets before ringing the compound: a turn looks only at the
+    /// instances that have news.
+    pub(super) events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
+    /// The rules reading each variable (`inst.field` or an own variable), by index.
+    pub(super) by_read: HashMap<String, Vec<usize>>,
+    pub(super) view: View,
+    /// The supervisor state whose rules were last evaluated.
+    pub(super) evaluated_in: Option<usize>,
+    /// The supervisor entered a state (by a rule, `after`, `on`, ...): the thread takes
+    /// one more turn at once to evaluate the new state's rules (nothing else may wake
+    /// it).
+    pub(super) fresh: bool,
+    /// A supervisor section ran since the last turn: it may have changed variables the
+    /// runtime cannot see (`local` ones, or any state of a hand-written supervisor), so
+    /// the next turn, taken at once, evaluates every rule of the current state.
+    pub(super) sectioned: bool,
+    pub(super) queue: Vec<Recovering>,
+    pub(super) retry_every: Duration,
+    pub(super) deadline: Duration,
+    pub(super) budget: Budget,
+    pub(super) started: bool,
+    pub(super) exports: Vec<Box<dyn Export>>,
+    /// Supervision steps taken since the last call returned (published by the runner).
+    pub(super) steps: Vec<Supervision>,
+    /// Another instance started standing for one with mapped variables: rules reading
+    /// them are evaluated on the next turn.
+    pub(super) restood: bool,
+    /// Adaptation (paper 3.6): `None` when turned off.
+    pub(super) coordinator: Option<Coordinator>,
+    /// What the supervisor's sections command the instances with.
+    pub(super) commander: Commander,
+    /// Some rule reads the compound's own `result`, `error`, `quality`, `cpu_time`
+    /// or `elapsed_time`: each turn copies them into the view.
+    pub(super) reads_own: bool,
+    /// The time reads (`cpu_time`, `elapsed_time`, own or an instance's) some rule
+    /// names: they change without events, so they count as changed every supervisor
+    /// period.
+    pub(super) timed: Vec<String>,
+    /// When the time reads are next due.
+    pub(super) next_timed: Option<Instant>,
+}
+
+pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
+    handle
+        .command(Command::SetState(target))
+        .map_err(|rejected| Fault::message(rejected.to_string()))
+}
+
+impl Compound {
+    /// Record a supervision step about instance `index` for the monitoring port.
+    pub(super) fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
+        let detail = detail.into();
+        let instance = self.instances[index].name.clone();
+        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
+        self.steps.push(Supervision {
+            instance,
+            step,
+            detail,
+        });
+    }
+
+    /// A fault raised while handling instance `index` (a rewiring or a command that
+    /// failed after a step was recorded): recorded as `Propagated` with the reason,
+    /// unless the last step recorded is that fault's `Propagated` already.
+    pub(super) fn propagated(&mut self, index: usize, fault: Fault) -> Fault {
+        let recorded = self
+            .steps
+            .last()
+            .is_some_and(|last| last.step == Step::Propagated);
+        if !recorded {
+            self.step(index, Step::Propagated, fault.text().to_owned());
+        }
+        fault
+    }
+
+    pub(super) fn fault(&self, message: String) -> Fault {
+        tracing::warn!(compound = %self.name, "{message}");
+        Fault::message(message)
+    }
+
+    pub(super) fn refresh(&mut self, index: usize) {
+        self.view.instances[index] = self.instances[index].handle.snapshot();
+    }
+
+    /// Start the instances (first start) or bring them back to `ready` (a restart),
+    /// and restore the declared arrangement.
+    pub(super) fn start_instances(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        if !self.started {
+            if let Some(waker) = cx.waker() {
+                self.events = self
+                    .instances
+                    .iter()
+                    .map(|i| {
+                        // Set: look at whatever came before the subscription too.
+                        let flag = Arc::new(AtomicBool::new(true));
+                        let events = i
+                            .handle
+                            .shared
+                            .subscribe_flagged(waker.clone(), Arc::clone(&flag));
+                        (events, flag)
+                    })
+                    .collect();
+            }
+            if let Some(system) = self.system.as_mut() {
+                system
+                    .start()
+                    .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+            }
+            self.started = true;
+        }
+        self.queue.clear();
+        for index in 0..self.instances.len() {
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            instance.restarts.clear();
+            instance.handled = false;
+            if instance.status == Status::Destroyed {
+                continue;
+            }
+            if instance.handle.is_stuck() {
+                return Err(Fault::message(format!(
+                    "instance `{}` cannot restart: it is stuck in a section that overran its max_response",
+                    instance.name
+                )));
+            }
+            instance.status = if instance.substitutes.is_some() {
+                Status::Standby
+            } else {
+                Status::Active
+            };
+            let monitor = instance
+                .handle
+                .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
+                .map_err(|t| Fault::message(t.to_string()))?;
+            if monitor.state == State::StartingError {
+                return Err(Fault::message(format!(
+                    "instance `{}` could not start: {}",
+                    instance.name,
+                    monitor.error.unwrap_or_default()
+                )));
+            }
+            if monitor.state != State::Ready {
+                command(&instance.handle, Controllable::Ready)?;
+                let state = instance.handle.state();
+                if state != State::Ready {
+                    return Err(Fault::message(format!(
+                        "instance `{}` could not restart: it is {state}",
+                        instance.name
+                    )));
+                }
+            }
+        }
+        // Every redundant group is led by its first member again; its merged streams
+        // count on from where they are.
+        for group in 0..self.groups.len() {
+            self.leaders[group] = self.groups[group][0];
+        }
+        for merged in &self.merges {
+            merged.merge.reset(0);
+        }
+        // A destroyed instance's substitute keeps standing for it.
+        for index in 0..self.instances.len() {
+            if self.instances[index].status == Status::Destroyed
+                && let Some(substitute) = self.instances[index].substitute
+                && self.instances[substitute].status == Status::Standby
+            {
+                self.instances[substitute].status = Status::Active;
+            }
+            self.refresh(index);
+        }
+        self.rewire()
+    }
+
+    /// Bring every instance that runs (or is suspended) to `target`, last declared
+    /// first.
+    pub(super) fn instances_to(&mut self, target: Controllable) {
+        for instance in self.instances.iter().rev() {
+            let state = instance.handle.state();
+            let follows = match target {
+                Controllable::Ready => matches!(state, State::Running | State::Suspended),
+                Controllable::Suspended => {
+                    state == State::Running
+                        || (state == State::Ready && instance.status == Status::Active)
+                }
+                Controllable::Running | Controllable::Dead => false,
+            };
+            if follows && let Err(fault) = command(&instance.handle, target) {
+                tracing::warn!(compound = %self.name, "{fault}");
+            }
+        }
+    }
+}
+
+impl Automaton for Compound {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        self.evaluated_in = None;
+        self.start_instances(cx)?;
+        self.adapt_start(cx);
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {
+        self.instances_to(Controllable::Ready);
+    }
+
+    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        self.sectioned = true;
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+            instances: &mut self.commander,
+        };
+        let outcome = self.supervisor.section(state, section, &mut scx);
+        // The commands it gave are steps, published when the call returns.
+        cx.supervision.append(&mut self.commander.take_steps());
+        outcome
+    }
+
+    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+            instances: &mut self.commander,
+        };
+        let target = self.supervisor.choose(state, &mut scx);
+        cx.supervision.append(&mut self.commander.take_steps());
+        target
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("a compound has no configuration of its own; configure its instances".to_owned())
+    }
+
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.instances[target]
+                .handle
+                .command(Command::Set(mapped.variable.clone(), value.clone()))
+                .map_err(|rejected| rejected.reason);
+        }
+        self.supervisor.set(variable - self.own_offset, value)
+    }
+
+    fn get(&self, variable: usize) -> Value {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.view.instances[target]
+                .variables
+                .iter()
+                .find(|(name, _)| *name == mapped.variable)
+                .map_or(Value::Unit, |(_, value)| value.clone());
+        }
+        self.supervisor.get(variable - self.own_offset)
+    }
+}
+
+/// The runner's compound hooks: the instances follow the compound's state, the
+/// supervisor takes its turns.
+impl Driven for Compound {
+    fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        // The supervisor enters (or resumes) a state: its rules are evaluated afresh.
+        self.evaluated_in = None;
+        for (index, instance) in self.instances.iter().enumerate() {
+            let held = self
+                .coordinator
+                .as_ref()
+                .is_some_and(|c| c.suspended[index]);
+            if instance.status == Status::Active
+                && !held
+                && matches!(instance.handle.state(), State::Ready | State::Suspended)
+            {
+                command(&instance.handle, Controllable::Running)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn after_transition(&mut self, _from: State, to: State, _cx: &mut Context) {
+        match to {
+            State::Ready => self.instances_to(Controllable::Ready),
+            State::Suspended => self.instances_to(Controllable::Suspended),
+            State::Dead => {
+                if let Some(system) = self.system.take() {
+                    let report = system.shutdown();
+                    if !report.clean() {
+                        tracing::warn!(compound = %self.name, "instances not joined: {report:?}");
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn supervises(&self) -> bool {
+        true
+    }
+
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        let outcome = self.supervise_turn(state, cx);
+        if let Some(coordinator) = self.coordinator.as_mut()
+            && coordinator
+                .settle_until
+                .is_some_and(|until| Instant::now() >= until)
+        {
+            // Settled: promotion may be due.
+            coordinator.settle_until = None;
+            coordinator.dirty = true;
+        }
+        if outcome.is_ok() && self.coordinator.as_ref().is_some_and(|c| c.dirty) {
+            self.adapt_turn(cx);
+        }
+        cx.supervision.append(&mut self.steps);
+        outcome
+    }
+
+    fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), String> {
+        let name = self.name.clone();
+        let Some(coordinator) = self.coordinator.as_mut() else {
+            return Err("adaptation is off in this compound".to_owned());
+        };
+        if level > coordinator.max_level {
+            return Err(format!(
+                "degradation level {level} out of range: the highest is {}",
+                coordinator.max_level
+            ));
+        }
+        let from = coordinator.cap;
+        coordinator.cap = level;
+        coordinator.floor = level.saturating_sub(coordinator.config.width);
+        coordinator.initialized = true;
+        coordinator.dirty = true;
+        if from != level {
+            let step = Adaptation {
+                component: name,
+                action: if level > from {
+                    AdaptAction::Degraded
+                } else {
+                    AdaptAction::Promoted
+                },
+                from,
+                to: level,
+                period: None,
+                quality: None,
+                detail: "current maximum level of the instances, set through the control port"
+                    .to_owned(),
+            };
+            let floor = coordinator.floor;
+            if let Some(shared) = &cx.shared {
+                shared.adaptation_step(step, |status| {
+                    status.level = level;
+                    status.floor = floor;
+                });
+                // The verdict published so far was about the previous level: withdraw
+                // it, as an atomic component does when its level changes, so that the
+                // supervisor above does not act on it again before this compound's
+                // next turn judges the new level.
+                let load = shared.snapshot().adaptation.load;
+                shared.set_pressure(Pressure::Nominal, load);
+            }
+        }
+        Ok(())
+    }
+
+    fn entered(&mut self, state: usize) {
+        // Whatever led there (a rule, `after`, `on`, `may`), the next turn, taken at
+        // once, evaluates every rule of the entered state. (Re-entering the state
+        // whose rules were evaluated last changes nothing they read: as before, only
+        // changes make them evaluated again, so a rule leading back to its own state
+        // does not fire in a loop.)
+        if self.evaluated_in != Some(state) {
+            self.fresh = true;
+        }
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
+            })
+        });
+        let dirty = self.coordinator.as_ref().is_some_and(|c| c.dirty);
+        let settle = self.coordinator.as_ref().and_then(|c| c.settle_until);
+        let fresh = (self.fresh || self.sectioned || dirty).then(Instant::now);
+        // Packets held at an exported input (the instance's `Block` fifo was full):
+        // retried soon.
+        let held = self
+            .exports
+            .iter()
+            .any(|export| export.held())
+            .then(|| crate::thread::later(Instant::now(), EXPORT_RETRY));
+        queue
+            .chain(restarts)
+            .chain(fresh)
+            .chain(held)
+            .chain(settle)
+            .chain(self.next_timed)
+            .min()
+    }
+}
