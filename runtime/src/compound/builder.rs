@@ -17,18 +17,21 @@ use crate::port::{
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec, Spec, VarKind, VarSpec};
 use crate::system::{Component, PortSet, System};
 
-use super::adaptation::Coordinator;
-use super::component::{Compound, Instance, Mapped, Status};
+use super::coordinator::Coordinator;
 use super::error::CompoundError;
 use super::exports::{Export, InputExport, OutputExport, TickExport, Twin, route_pulls};
-use super::faults::{Budget, Policy};
-use super::supervisor::Supervisor;
-use super::view::{OWN_DEFAULTS, Own, Rule, Test, View, is_timed};
-use super::wiring::{Link, LinkVia, Via};
-use super::{
-    DEFAULT_BACKOFF, DEFAULT_BACKOFF_MAX, DEFAULT_RESTART_WINDOW, DEFAULT_RESTARTS,
-    DEFAULT_SUPERVISION_PERIOD, leak_str,
+use super::links::{Link, LinkVia, Via};
+use super::policy::{
+    Budget, DEFAULT_BACKOFF, DEFAULT_BACKOFF_MAX, DEFAULT_RESTART_WINDOW, DEFAULT_RESTARTS, Policy,
 };
+use super::state::{Compound, Instance, Mapped, Status};
+use super::supervisor::{DEFAULT_SUPERVISION_PERIOD, Supervisor};
+use super::view::{OWN_DEFAULTS, Own, Rule, Test, View, is_timed};
+
+/// A name made `'static` for the compound's assembled `Spec` (leaked once per build).
+fn leak_str(text: &str) -> &'static str {
+    Box::leak(text.to_owned().into_boxed_str())
+}
 
 /// Builds a compound component: instances, connections, mappings, policies,
 /// supervisor rules. See the module documentation and `docs/runtime.md`.
@@ -95,7 +98,7 @@ impl CompoundBuilder {
         }
     }
 
-    /// How long a supervisor's command ([`SupervisorCx::instances`]) waits for an
+    /// How long a supervisor's command ([`SupervisorCx::instances`](crate::SupervisorCx::instances)) waits for an
     /// instance to take it (default [`DEFAULT_SUPERVISOR_COMMAND_TIMEOUT`]; at least
     /// 1 ms): an instance busy in a section longer than that has the command withdrawn
     /// and the section gets [`Refused::Busy`](crate::Refused::Busy).

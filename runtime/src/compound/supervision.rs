@@ -10,8 +10,8 @@ use crate::automaton::{Context, Fault};
 use crate::monitor::MonitorEvent;
 use crate::table::State;
 
-use super::DEFAULT_SUPERVISION_PERIOD;
-use super::component::{Compound, Status};
+use super::state::{Compound, Status};
+use super::supervisor::DEFAULT_SUPERVISION_PERIOD;
 use super::view::{Own, Rule};
 
 impl Compound {

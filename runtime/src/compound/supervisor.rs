@@ -5,13 +5,19 @@
 use crate::automaton::{Context, Section, SectionResult};
 use crate::commander::Commander;
 use crate::spec::Spec;
+use std::time::Duration;
+
 use crate::value::Value;
 
 use super::view::View;
 
+/// The period of a supervisor's `periodic;` sections when neither the state nor the
+/// supervisor's `timing` gives one (`docs/language.md`, "The supervisor").
+pub const DEFAULT_SUPERVISION_PERIOD: Duration = Duration::from_millis(100);
+
 /// The supervisor of a compound: its user automaton (states and sections, like an
 /// atomic component's) and its own variables. Transitions are fired by rules
-/// ([`CompoundBuilder::rule`]), not by ports.
+/// ([`CompoundBuilder::rule`](crate::CompoundBuilder::rule)), not by ports.
 pub trait Supervisor: Send + 'static {
     /// The supervisor's shape: `states` (with their `on`, `after` and `may`),
     /// `initial`, its own `variables` and `timing` (a period for periodic sections).

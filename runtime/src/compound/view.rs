@@ -107,7 +107,7 @@ impl View {
     }
 
     /// The compound's own `result` (what its supervisor's sections set with
-    /// [`Context::set_result`]), as of the current supervision turn.
+    /// [`Context::set_result`](crate::Context::set_result)), as of the current supervision turn.
     pub fn own_result(&self) -> &TaskResult {
         &self.compound.result
     }
