@@ -128,12 +128,30 @@ impl<T: Packet> Export for InputExport<T> {
     fn forward(&mut self) {
         // A fifo with the `Block` policy would make the compound's thread wait while
         // it is full (its instance may hang): only what it has room for goes now.
-        let mut room = self
-            .linked
+        // Of a redundant group's members (several inputs fed), one whose fifo is full
+        // while another has room does not hold the others back: it is left out of
+        // this round, and what it misses is counted as lost at its input (an
+        // overflow, with its `MonitorEvent::Overflow`). When every input is full,
+        // the packets wait at the compound's port, as at any full `Block` fifo.
+        let rooms: Vec<Option<usize>> = self.linked.iter().map(ErasedInput::room).collect();
+        let open = rooms.iter().filter(|room| **room != Some(0)).count();
+        let skipped: Vec<usize> = if open > 0 && open < rooms.len() {
+            (0..rooms.len()).filter(|i| rooms[*i] == Some(0)).collect()
+        } else {
+            Vec::new()
+        };
+        let mut room = rooms
             .iter()
-            .filter_map(ErasedInput::room)
+            .enumerate()
+            .filter(|(i, _)| !skipped.contains(i))
+            .filter_map(|(_, room)| *room)
             .min()
             .unwrap_or(usize::MAX);
+        let relay = self.twin.relay();
+        for index in &skipped {
+            relay.unlink(&self.linked[*index]);
+        }
+        let mut moved: u64 = 0;
         // Packets pass on as they were queued: a packet its producer shares with
         // other inputs stays shared (no copy for the hop).
         self.held = match &self.twin {
@@ -142,6 +160,7 @@ impl<T: Packet> Export for InputExport<T> {
                     && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
+                    moved += 1;
                     relay.send_parcel(packet);
                 }
                 !input.is_empty()
@@ -151,6 +170,7 @@ impl<T: Packet> Export for InputExport<T> {
                     && let Some(packet) = input.recv_parcel()
                 {
                     room -= 1;
+                    moved += 1;
                     relay.send_parcel(packet);
                 }
                 !input.is_empty()
@@ -160,6 +180,7 @@ impl<T: Packet> Export for InputExport<T> {
             Twin::Last(..) if room == 0 => true,
             Twin::Last(input, relay) => {
                 if let Some(packet) = input.take_new_shared() {
+                    moved += 1;
                     relay.send_parcel(Parcel::Shared(packet));
                 }
                 false
@@ -171,6 +192,14 @@ impl<T: Packet> Export for InputExport<T> {
                 false
             }
         };
+        for index in skipped {
+            let member = &self.linked[index];
+            member.count_loss(moved);
+            if !relay.link(member) {
+                // (It was linked a moment ago, with the same kind and packet type.)
+                tracing::error!(target = %self.target, "an exported input could not link a member's input again");
+            }
+        }
     }
 
     fn held(&self) -> bool {
