@@ -530,6 +530,12 @@ pub(crate) trait Deliver<T>: Send + Sync {
     fn deliver_answer(&self, packet: Parcel<T>, _id: usize) {
         self.deliver(packet);
     }
+
+    /// `count` packets meant for this sink will never come (a redundant group's
+    /// merged stream could not carry them across a failover): an input counts them
+    /// as lost (an overflow, with its `MonitorEvent::Overflow`); a sink passing
+    /// packets on passes the count on.
+    fn lost(&self, _count: u64) {}
 }
 
 /// A converter on a connection, in front of the input end.
@@ -542,6 +548,10 @@ impl<A: Packet, B: Packet> Deliver<A> for Converted<A, B> {
     fn deliver(&self, packet: Parcel<A>) {
         self.target
             .deliver(Parcel::Owned((self.convert)(packet.get())));
+    }
+
+    fn lost(&self, count: u64) {
+        self.target.lost(count);
     }
 }
 
@@ -687,6 +697,12 @@ pub(crate) struct FifoInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for FifoInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
         match self.sender.try_send(packet) {
@@ -854,6 +870,12 @@ struct UfifoQueue<T> {
 }
 
 impl<T: Packet> Deliver<T> for UfifoInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     fn deliver(&self, packet: Parcel<T>) {
         let stored = {
             let mut queue = lock(&self.queue);
@@ -982,6 +1004,12 @@ pub(crate) struct LastInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
         let replaced = {
@@ -2150,6 +2178,12 @@ impl<T: Packet> Deliver<T> for DataForward<T> {
     fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
         dispatch_answer(&read(&self.to.sinks), packet, id);
     }
+
+    fn lost(&self, count: u64) {
+        for sink in read(&self.to.sinks).iter() {
+            sink.target.lost(count);
+        }
+    }
 }
 
 /// A compound's exported poster output as a tap of the instance output it follows.
@@ -2238,7 +2272,9 @@ pub(crate) trait MergeEnd: Send + Sync {
     fn attach(&self, lane: usize, from: &ErasedOutput) -> bool;
     /// Lane `lane` leads from now on: its packets ahead of the stream go out now.
     /// Returns how many went out, and how many numbers were missing before them
-    /// (packets its backlog could not keep).
+    /// (packets its backlog could not keep), which are counted as lost at every
+    /// input the stream feeds (directly, through a converter, or through a
+    /// compound's exported output).
     fn lead(&self, lane: usize) -> (u64, u64);
     /// Lane `lane` (a member back from recovery) counts on from the stream's number.
     fn rejoin(&self, lane: usize);
@@ -2368,6 +2404,13 @@ impl<T: Packet> MergeEnd for Arc<Merge<T>> {
                 state.delivered = seq;
                 replayed += 1;
                 self.out.send_parcel(packet);
+            }
+        }
+        if missing > 0 {
+            // The stream's consumers never get them: lost there, counted and
+            // announced, so that sent = received + lost holds at each of them.
+            for sink in read(&self.out.inner.sinks).iter() {
+                sink.target.lost(missing);
             }
         }
         (replayed, missing)

@@ -89,7 +89,7 @@ struct Relay {
     input: FifoIn<u64>,
     output: DataOut<u64>,
     fail: Arc<AtomicBool>,
-    /// While set, its next section hangs (until it is cleared).
+    /// While set, its next section hangs (until it is cleared, or `fail` is set).
     hold: Arc<AtomicBool>,
     relayed: Arc<AtomicU64>,
 }
@@ -112,6 +112,9 @@ impl Automaton for Relay {
             return Err(Fault::message("injected"));
         }
         while self.hold.load(Ordering::SeqCst) {
+            if self.fail.swap(false, Ordering::SeqCst) {
+                return Err(Fault::message("injected while hung"));
+            }
             std::thread::sleep(Duration::from_millis(1));
         }
         for packet in self.input.drain() {
@@ -451,4 +454,45 @@ fn a_hung_member_does_not_stall_the_others_and_what_it_misses_is_counted_lost() 
         "every packet b missed is counted",
     );
     assert!(system.shutdown().clean());
+}
+
+#[test]
+fn packets_missing_at_a_failover_are_counted_lost_at_the_consumers() {
+    // The leader `a` hangs while `b` runs on: `b` gets further ahead of the stream
+    // than its backlog keeps. When `a` fails, `b` leads from its backlog; the packets
+    // neither could give are counted lost at the consumer: sent = received + lost.
+    let rig = rig();
+    rig.a.hold.store(true, Ordering::SeqCst);
+    let backlog = 1024; // `port::MERGE_BACKLOG`
+    let sent = backlog as u64 + 300;
+    for n in 1..=sent {
+        rig.send.send(n);
+    }
+    support::eventually(
+        || rig.b.relayed.load(Ordering::SeqCst) == sent,
+        "b relayed every packet",
+    );
+    rig.a.fail.store(true, Ordering::SeqCst);
+    let k = rig.system.handle("k").expect("k");
+    k.wait_for(|m| m.supervision.iter().any(took_over), WAIT)
+        .expect("b took over");
+    let seen = collect(&rig.received, backlog);
+    let first = sent - backlog as u64 + 1;
+    assert_eq!(
+        seen,
+        (first..=sent).collect::<Vec<_>>(),
+        "b's backlog, in order"
+    );
+    assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
+    assert_eq!(
+        rig.received.overflows(),
+        first - 1,
+        "the packets missing from the stream are counted lost at the consumer"
+    );
+    assert_eq!(seen.len() as u64 + rig.received.overflows(), sent);
+    let c = rig.system.handle("c").expect("c");
+    c.wait_for(|m| m.overflows == first - 1, WAIT)
+        .expect("the loss is announced on the consumer's monitoring port");
+    rig.a.hold.store(false, Ordering::SeqCst);
+    assert!(rig.system.shutdown().clean());
 }

@@ -74,7 +74,7 @@ impl Compound {
                 if missing > 0 {
                     tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group");
                     detail.push_str(&format!(
-                        "; {missing} packet(s) missing from the stream (beyond its backlog)"
+                        "; {missing} packet(s) missing from the stream (beyond its backlog), counted lost at its consumers"
                     ));
                 }
                 self.step(index, Step::Substituted { by }, detail);
