@@ -166,14 +166,17 @@ pub(crate) trait Driven: Automaton {
     /// Called after a default-automaton transition from `from` ended in `to`.
     fn after_transition(&mut self, _from: State, _to: State, _cx: &mut Context) {}
 
-    /// Called on every turn of the thread loop while the component is `running` or
-    /// `suspended` and `state` is the current user state, before timers and inputs
-    /// (`suspended`: `docs/runtime.md`, "While a compound is suspended").
-    /// `Ok(Some(target))` asks for a user transition to `target` (taken only while
-    /// `running`); `Err` is a fault (`running_error`).
+    /// Called on every turn of the thread loop while the component is `running` and
+    /// `state` is the current user state, before timers and inputs. `Ok(Some(target))`
+    /// asks for a user transition to `target`; `Err` is a fault (`running_error`).
     fn supervise(&mut self, _state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
         Ok(None)
     }
+
+    /// Called on every turn of the thread loop while the component is `suspended`:
+    /// observation only (a compound's instances' events keep its view and its mapped
+    /// variables current; `docs/runtime.md`, "While a compound is suspended").
+    fn observe(&mut self, _cx: &mut Context) {}
 
     /// The next instant the thread must wake for [`Driven::supervise`] (a timer of
     /// its own), if any.

@@ -346,6 +346,9 @@ impl Runner {
                 break;
             }
             if self.state != State::Running {
+                if self.supervised && self.state == State::Suspended {
+                    self.observe_instances();
+                }
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
@@ -634,6 +637,14 @@ impl Runner {
             {
                 self.set_error(Some(format!("panic after a transition: {panic}")));
             }
+        }
+    }
+
+    /// Compound components, while suspended: observe the instances (their events keep
+    /// the compound's view and mapped variables current); nothing acts.
+    fn observe_instances(&mut self) {
+        if let Err(panic) = self.call(|automaton, cx| automaton.observe(cx)) {
+            self.set_error(Some(format!("panic in the supervisor: {panic}")));
         }
     }
 

@@ -2463,3 +2463,47 @@ fn a_poster_reader_reads_the_substitute_after_a_substitution() {
 fn a_converted_poster_reader_reads_the_substitute_after_a_substitution() {
     a_poster_reader_follows_its_producer_through_substitution(true);
 }
+
+#[test]
+fn a_suspended_compound_keeps_its_mapped_variables_current_up_the_hierarchy() {
+    // `top` runs and maps `gain` onto `base`'s, which maps it onto its worker `a`'s.
+    // `base` is suspended (and `a` with it); `a`'s gain changes meanwhile: monitoring
+    // is observation, so `base` and `top` publish the new value while `base` stays
+    // suspended.
+    let (sup, _) = Sup::new(&["operating"]);
+    let (a, _) = worker("a");
+    let base = CompoundBuilder::new("base", sup)
+        .instance(a)
+        .map_controllable("gain", "a.gain")
+        .build()
+        .expect("build base");
+    let (top_sup, _) = Sup::new(&["operating"]);
+    let top = CompoundBuilder::new("top", top_sup)
+        .instance(base)
+        .map_observable("gain", "base.gain")
+        .build()
+        .expect("build top");
+    let mut system = System::new();
+    let top = system.add(top).expect("add top");
+    system.run_all().expect("run");
+    let base = top.instance("base").expect("base");
+    let a = top.instance("base.a").expect("a");
+    wait(&a, State::Running);
+    run(&base, Controllable::Suspended);
+    wait(&a, State::Suspended);
+    assert_eq!(top.state(), State::Running);
+    let gain = |m: &coolbot::Monitor| m.variables[0].1.clone();
+    a.command(Command::Set("gain".to_owned(), Value::Int(9)))
+        .expect("a suspended instance takes a Set");
+    base.wait_for(|m| gain(m) == Value::Int(9), WAIT)
+        .expect("the suspended compound publishes its instance's change");
+    top.wait_for(|m| gain(m) == Value::Int(9), WAIT)
+        .expect("and so does the compound above it");
+    assert_eq!(
+        base.state(),
+        State::Suspended,
+        "it observed, it did not run"
+    );
+    assert_eq!(a.state(), State::Suspended);
+    assert!(system.shutdown().clean());
+}

@@ -785,6 +785,7 @@ impl CompoundBuilder {
             reads_own,
             timed,
             next_timed: None,
+            deferred_faults: false,
         };
         Ok(Component::driven(self.name, Box::new(compound), self.ports).with_instances(handles))
     }

@@ -263,6 +263,11 @@ impl Driven for Compound {
         outcome
     }
 
+    fn observe(&mut self, cx: &mut Context) {
+        self.observe_turn();
+        cx.supervision.append(&mut self.steps);
+    }
+
     fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), String> {
         let name = self.name.clone();
         let Some(coordinator) = self.coordinator.as_mut() else {

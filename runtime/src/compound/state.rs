@@ -137,6 +137,9 @@ pub(super) struct Compound {
     /// names: they change without events, so they count as changed every supervisor
     /// period.
     pub(super) timed: Vec<String>,
+    /// An active instance failed while the compound was suspended: its policy runs
+    /// on the compound's next running turn.
+    pub(super) deferred_faults: bool,
     /// When the time reads are next due.
     pub(super) next_timed: Option<Instant>,
 }

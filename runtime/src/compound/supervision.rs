@@ -75,8 +75,10 @@ impl Compound {
         }
     }
 
-    /// Take the instances' events; run policies; return the variables that changed.
-    pub(super) fn take_events(&mut self) -> Result<HashSet<String>, Fault> {
+    /// Take the instances' events and refresh the view; run the policies of the
+    /// instances that failed if `act` (otherwise, while the compound is suspended,
+    /// they wait for it to run: `deferred_faults`); return the variables that changed.
+    pub(super) fn take_events(&mut self, act: bool) -> Result<HashSet<String>, Fault> {
         let mut changed = HashSet::new();
         for index in 0..self.events.len() {
             // Cleared before the channel is read: an event sent after the read sets it
@@ -139,6 +141,9 @@ impl Compound {
                 self.instances[index].handled = false;
             }
             match self.instances[index].status {
+                Status::Active if failed && !self.instances[index].handled && !act => {
+                    self.deferred_faults = true;
+                }
                 Status::Active if failed && !self.instances[index].handled => {
                     self.instances[index].handled = true;
                     let outcome = self.failed(index);
@@ -168,7 +173,10 @@ impl Compound {
             export.forward();
         }
         self.fresh = false;
-        let mut changed = self.take_events()?;
+        let mut changed = self.take_events(true)?;
+        if std::mem::take(&mut self.deferred_faults) {
+            self.deferred_policies()?;
+        }
         if !self.queue.is_empty() {
             self.recover(Instant::now())?;
         }
@@ -209,5 +217,38 @@ impl Compound {
                 .map(|rule| rule.target)
         };
         Ok(fired)
+    }
+}
+
+impl Compound {
+    /// A turn while the compound is suspended: monitoring is observation, so it goes
+    /// on (the instances' events are taken, the view and the compound's mapped
+    /// variables follow them, and its own monitoring port publishes them); nothing
+    /// acts: no packet is passed on at exported inputs, no policy runs (an instance
+    /// that fails meanwhile is handled when the compound runs again), no recovery
+    /// retry, restart, rule or adaptation decision.
+    pub(super) fn observe_turn(&mut self) {
+        if let Err(fault) = self.take_events(false) {
+            // (Without policies nothing in it fails.)
+            tracing::warn!(compound = %self.name, "{fault}");
+        }
+    }
+
+    /// The policies of the active instances that failed while the compound was
+    /// suspended, now that it runs.
+    fn deferred_policies(&mut self) -> Result<(), Fault> {
+        for index in 0..self.instances.len() {
+            let state = self.view.instances[index].state;
+            let failed = matches!(state, State::RunningError | State::StartingError);
+            if self.instances[index].status == Status::Active
+                && failed
+                && !self.instances[index].handled
+            {
+                self.instances[index].handled = true;
+                let outcome = self.failed(index);
+                outcome.map_err(|fault| self.propagated(index, fault))?;
+            }
+        }
+        Ok(())
     }
 }
