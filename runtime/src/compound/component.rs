@@ -2,6 +2,7 @@
 //! each instance (its policy, its place in the arrangement), and how the instances
 //! follow the compound's own state (the runner's compound hooks, `automaton::Driven`).
 
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -153,10 +154,14 @@ impl Automaton for Compound {
             view: &self.view,
             instances: &mut self.commander,
         };
-        let outcome = self.supervisor.section(state, section, &mut scx);
-        // The commands it gave are steps, published when the call returns.
+        let supervisor = &mut self.supervisor;
+        let outcome = catch_unwind(AssertUnwindSafe(|| {
+            supervisor.section(state, section, &mut scx)
+        }));
+        // The commands it gave are steps of this section, published when the call
+        // returns, whether it returned or panicked (the runner handles the panic).
         cx.supervision.append(&mut self.commander.take_steps());
-        outcome
+        outcome.unwrap_or_else(|panic| resume_unwind(panic))
     }
 
     fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
@@ -165,9 +170,10 @@ impl Automaton for Compound {
             view: &self.view,
             instances: &mut self.commander,
         };
-        let target = self.supervisor.choose(state, &mut scx);
+        let supervisor = &mut self.supervisor;
+        let target = catch_unwind(AssertUnwindSafe(|| supervisor.choose(state, &mut scx)));
         cx.supervision.append(&mut self.commander.take_steps());
-        target
+        target.unwrap_or_else(|panic| resume_unwind(panic))
     }
 
     fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
