@@ -496,3 +496,94 @@ fn packets_missing_at_a_failover_are_counted_lost_at_the_consumers() {
     rig.a.hold.store(false, Ordering::SeqCst);
     assert!(rig.system.shutdown().clean());
 }
+
+#[test]
+fn a_substituted_consumer_of_a_merged_stream_hands_its_queue_to_its_substitute() {
+    // `a` and `b` (redundant) feed `t` inside the compound; `t2` substitutes `t`,
+    // whose output is exported. `t` hangs with packets queued, then fails: its queue
+    // moves to `t2` with the connection, as for any consumer, and nothing is lost.
+    let (a_component, a) = relay("a");
+    let (b_component, _) = relay("b");
+    let (t_component, t) = relay("t");
+    let (t2_component, t2) = relay("t2");
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(a_component)
+        .instance(b_component)
+        .instance(t_component)
+        .instance(t2_component)
+        .redundant(&["a", "b"])
+        .substitute("t2", "t")
+        .on_error("t", coolbot::Policy::Substitute)
+        .connect("a.output", "t.input")
+        .export_input::<u64>("in", "a.input")
+        .export_output::<u64>("out", "t.output")
+        .recovery(Duration::from_secs(60), Duration::from_secs(120))
+        .build()
+        .expect("build k");
+    let send = DataOut::<u64>::new();
+    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
+    let mut system = System::new();
+    system
+        .add(
+            ShellBuilder::new("p")
+                .output(output("out", OutputKind::Data, false), &send)
+                .build(),
+        )
+        .expect("add p");
+    system.add(k).expect("add k");
+    system
+        .add(
+            ShellBuilder::new("c")
+                .input(
+                    input(
+                        "in",
+                        InputKind::Fifo {
+                            capacity: QUEUE,
+                            policy: OverflowPolicy::Reject,
+                        },
+                        false,
+                    ),
+                    &received,
+                )
+                .build(),
+        )
+        .expect("add c");
+    system.connect("p.out", "k.in").expect("p -> k");
+    system.connect("k.out", "c.in").expect("k -> c");
+    system.run_all().expect("run");
+    t.hold.store(true, Ordering::SeqCst);
+    let k = system.handle("k").expect("k");
+    for n in 1..=50u64 {
+        send.send(n);
+    }
+    // The leader relayed every packet: each is in the stream, so queued at `t` (the
+    // stream is delivered on the leader's thread as it sends).
+    support::eventually(
+        || a.relayed.load(Ordering::SeqCst) == 50,
+        "the stream carried every packet",
+    );
+    assert_eq!(t.relayed.load(Ordering::SeqCst), 0, "t holds them");
+    t.fail.store(true, Ordering::SeqCst);
+    k.wait_for(
+        |m| {
+            m.supervision.iter().any(|s| {
+                s.instance == "t"
+                    && s.step
+                        == Step::Substituted {
+                            by: "t2".to_owned(),
+                        }
+            })
+        },
+        WAIT,
+    )
+    .expect("t2 substitutes t");
+    assert_eq!(
+        collect(&received, 50),
+        (1..=50).collect::<Vec<_>>(),
+        "t2 relays what was queued at t, then the rest"
+    );
+    assert_eq!(t2.relayed.load(Ordering::SeqCst), 50);
+    assert_eq!(t.relayed.load(Ordering::SeqCst), 0);
+    t.hold.store(false, Ordering::SeqCst);
+    assert!(system.shutdown().clean());
+}

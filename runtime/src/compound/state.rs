@@ -83,8 +83,9 @@ pub(super) struct Compound {
     pub(super) leaders: Vec<usize>,
     /// The merged data outputs of redundant groups, made at the first wiring.
     pub(super) merges: Vec<MergedPort>,
-    /// The consumers linked to a merged output: `(merge, input address, input)`.
-    pub(super) merged: Vec<(usize, String, ErasedInput)>,
+    /// The consumers linked to a merged output: `(merge, declared link, input
+    /// address, input)`.
+    pub(super) merged: Vec<(usize, usize, String, ErasedInput)>,
     /// The connections made to redundant members' inputs (every live member).
     pub(super) fanned: Vec<(String, String)>,
     /// Declared connections.

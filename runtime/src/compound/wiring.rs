@@ -47,11 +47,11 @@ impl Compound {
         // Connections to a redundant group's inputs go to every live member; from a
         // group's data output, the merged stream feeds the consumers.
         let mut fanned: Vec<Link> = Vec::new();
-        let mut merged: Vec<(usize, String, Option<LinkVia>)> = Vec::new();
-        for link in &self.links {
+        let mut merged: Vec<(usize, usize, String, Option<LinkVia>)> = Vec::new();
+        for (index, link) in self.links.iter().enumerate() {
             if let Some(merge) = self.merge_of(&link.from) {
                 for to in self.fed(&link.to) {
-                    merged.push((merge, to, link.link_via.clone()));
+                    merged.push((merge, index, to, link.link_via.clone()));
                 }
                 wanted.push(None);
                 continue;
@@ -165,13 +165,29 @@ impl Compound {
             .map_err(error)?;
             self.fanned.push(ends);
         }
-        // The merged streams' consumers: new ones linked before stale ones unlinked.
-        for (merge, to, via) in &merged {
-            if self.merged.iter().any(|(m, t, _)| m == merge && t == to) {
+        // The merged streams' consumers: new ones linked before stale ones unlinked. A
+        // declared connection's one consumer replaced by another (a stand-in, or the
+        // original back) moves in one step with its queue, as any connection's does.
+        for (merge, link, to, via) in &merged {
+            if self.merged.iter().any(|(m, _, t, _)| m == merge && t == to) {
                 continue;
             }
             let input = system.input_port(to).map_err(error)?;
             let output = self.merges[*merge].merge.output();
+            let single = merged.iter().filter(|(_, l, _, _)| l == link).count() == 1;
+            let replaced = self.merged.iter().position(|(m, l, t, _)| {
+                m == merge && l == link && !merged.iter().any(|(m2, _, t2, _)| m2 == m && t2 == t)
+            });
+            if via.is_none()
+                && single
+                && let Some(position) = replaced
+                && self.merged[position].3.kind == input.kind
+                && output.type_id == input.type_id
+                && output.relink(&self.merged[position].3, &input)
+            {
+                self.merged[position] = (*merge, *link, to.clone(), input);
+                continue;
+            }
             let linked = match via {
                 Some(via) => via(&output, &input),
                 None => output.type_id == input.type_id && output.link(&input),
@@ -182,11 +198,11 @@ impl Compound {
                     self.merges[*merge].port
                 )));
             }
-            self.merged.push((*merge, to.clone(), input));
+            self.merged.push((*merge, *link, to.clone(), input));
         }
         let merges = &self.merges;
-        self.merged.retain(|(merge, to, input)| {
-            let keep = merged.iter().any(|(m, t, _)| m == merge && t == to);
+        self.merged.retain(|(merge, _, to, input)| {
+            let keep = merged.iter().any(|(m, _, t, _)| m == merge && t == to);
             if !keep {
                 merges[*merge].merge.output().unlink(input);
             }
