@@ -506,6 +506,20 @@ pub(crate) const fn shares<T>() -> bool {
     std::mem::needs_drop::<T>() || size_of::<T>() > 256
 }
 
+/// Move the pull requests waiting at `from` to `to` (an instance's stand-in now
+/// answers its consumers): returns how many moved, and how many `to` refused (its
+/// request queue full; their pullers time out).
+pub(crate) fn move_requests(from: &ErasedOutput, to: &ErasedOutput) -> (u64, u64) {
+    let (mut moved, mut refused) = (0, 0);
+    while let Some(input_id) = from.core.next_request() {
+        match to.core.request(input_id) {
+            Ok(()) => moved += 1,
+            Err(_) => refused += 1,
+        }
+    }
+    (moved, refused)
+}
+
 impl PullRoute {
     fn request(&self, input_id: usize) -> Result<(), PullError> {
         match self {

@@ -260,7 +260,7 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                self.update_standing();
+                let _ = self.update_standing();
                 let handle = &self.instances[index].handle;
                 if handle.is_stuck() {
                     // Its thread takes the command when (if) the section returns.

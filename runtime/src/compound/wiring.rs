@@ -41,7 +41,7 @@ impl Compound {
     /// stand-in, or back) is replaced in one step, with the packets queued at a
     /// replaced input (`System::replace_link`): no packet is lost meanwhile.
     pub(super) fn rewire(&mut self) -> Result<(), Fault> {
-        self.update_standing();
+        let moves = self.update_standing();
         self.make_merges()?;
         let mut wanted: Vec<Option<Link>> = Vec::with_capacity(self.links.len());
         // Connections to a redundant group's inputs go to every live member; from a
@@ -235,6 +235,11 @@ impl Compound {
                 Fault::message(format!("compound `{}`: `{target}`: {e}", self.name))
             })?;
         }
+        // Last, once every consumer reads the stand-in: the pulls waiting at the
+        // instance it replaces.
+        for (from, to) in moves {
+            self.move_pulls(from, to);
+        }
         Ok(())
     }
 
@@ -366,11 +371,47 @@ impl Compound {
 
     /// Record who stands for each instance now in the view (for mapped variables);
     /// if that changed, rules reading mapped variables are evaluated on this turn.
-    pub(super) fn update_standing(&mut self) {
+    /// Returns the moves `(from, to)` of the instances that stopped and started
+    /// standing for one (their waiting pull requests follow: [`Compound::move_pulls`]).
+    pub(super) fn update_standing(&mut self) -> Vec<(usize, usize)> {
         let standing: Vec<usize> = (0..self.instances.len()).map(|i| self.route(i)).collect();
+        let mut moves = Vec::new();
         if standing != self.view.standing {
+            for (before, now) in self.view.standing.iter().zip(&standing) {
+                if before != now && !moves.contains(&(*before, *now)) {
+                    moves.push((*before, *now));
+                }
+            }
             self.view.standing = standing;
             self.restood = true;
+        }
+        moves
+    }
+
+    /// Instance `to` stands where `from` stood: the pull requests waiting at `from`'s
+    /// pull outputs (their consumers now read `to`) go to `to`'s same outputs, so a
+    /// pull in flight is answered by the stand-in instead of waiting at an instance
+    /// that no longer feeds its puller. A request `to` cannot queue (its queue is
+    /// full) is dropped with a warning: its puller gets `PullError::Timeout`.
+    fn move_pulls(&self, from: usize, to: usize) {
+        let Some(system) = self.system.as_ref() else {
+            return;
+        };
+        let (old, new) = (&self.instances[from].name, &self.instances[to].name);
+        for output in self.instances[from].spec.outputs.iter().filter(|o| o.pull) {
+            let ports = (
+                system.output_port(&format!("{old}.{}", output.name)),
+                system.output_port(&format!("{new}.{}", output.name)),
+            );
+            if let (Ok(from_port), Ok(to_port)) = ports {
+                let (moved, refused) = crate::port::move_requests(&from_port, &to_port);
+                if moved > 0 {
+                    tracing::info!(compound = %self.name, "{moved} pull request(s) waiting at `{old}.{}` moved to `{new}`", output.name);
+                }
+                if refused > 0 {
+                    tracing::warn!(compound = %self.name, "{refused} pull request(s) waiting at `{old}.{}` dropped: `{new}`'s request queue is full", output.name);
+                }
+            }
         }
     }
 }
