@@ -15,7 +15,7 @@ use crate::port::{
     PosterOut, TickIn, TickOut, UfifoIn,
 };
 use crate::spec::{InputKind, InputSpec, OutputKind, OutputSpec, Spec, VarKind, VarSpec};
-use crate::system::{Component, PortSet, System};
+use crate::system::{Component, ConnectError, PortSet, System};
 
 use super::coordinator::Coordinator;
 use super::error::CompoundError;
@@ -136,7 +136,7 @@ impl CompoundBuilder {
         &mut self,
         target: &str,
         input: bool,
-        kinds: &str,
+        kinds: &'static str,
     ) -> Option<(Option<InputSpec>, Option<OutputSpec>)> {
         let declared = target.split_once('.').and_then(|(instance, port)| {
             let spec = self.instances.iter().find(|i| i.name == instance)?.spec;
@@ -171,11 +171,12 @@ impl CompoundBuilder {
             } else {
                 format!(" of `{}`", std::any::type_name::<T>())
             };
-            self.errors.push(CompoundError::Connect {
+            self.errors.push(CompoundError::Export {
                 compound: self.name.clone(),
-                detail: format!(
-                    "cannot export `{target}`: no such {direction}, or not a {kinds} {direction}{packets}"
-                ),
+                target: target.to_owned(),
+                direction,
+                kinds,
+                packets,
             });
             return None;
         }
@@ -259,7 +260,7 @@ impl CompoundBuilder {
         mut self,
         name: &str,
         target: &str,
-        kinds: &str,
+        kinds: &'static str,
     ) -> CompoundBuilder {
         let Some((_, Some(declared))) = self.exported_port::<T>(target, false, kinds) else {
             return self;
@@ -302,9 +303,9 @@ impl CompoundBuilder {
                 pending: None,
                 handled: false,
             }),
-            Err(error) => self.errors.push(CompoundError::Instance {
+            Err(source) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
-                detail: error.to_string(),
+                source: Box::new(source),
             }),
         }
         self
@@ -533,8 +534,8 @@ impl CompoundBuilder {
     /// The compound as a component, ready for [`System::add`] (or for another
     /// compound's [`CompoundBuilder::instance`]).
     pub fn build(mut self) -> Result<Component, CompoundError> {
-        if let Some(error) = self.errors.first() {
-            return Err(error.clone());
+        if !self.errors.is_empty() {
+            return Err(self.errors.swap_remove(0));
         }
         let mut own = *self.supervisor.spec();
         let unperiodic = own
@@ -613,7 +614,9 @@ impl CompoundBuilder {
                 let Some((instance, _)) = address.split_once('.') else {
                     return Err(CompoundError::Connect {
                         compound: self.name.clone(),
-                        detail: format!("`{address}` is not an `instance.port` address"),
+                        source: Box::new(ConnectError::BadAddress {
+                            address: address.to_owned(),
+                        }),
                     });
                 };
                 self.instance_index(instance)?;

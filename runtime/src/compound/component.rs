@@ -14,6 +14,7 @@ use crate::spec::Spec;
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
+use super::error::RunError;
 use super::exports::EXPORT_RETRY;
 use super::state::{Compound, Status, command};
 use super::supervisor::SupervisorCx;
@@ -42,9 +43,10 @@ impl Compound {
                     .collect();
             }
             if let Some(system) = self.system.as_mut() {
-                system
-                    .start()
-                    .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+                system.start().map_err(|source| RunError::Start {
+                    compound: self.name.clone(),
+                    source,
+                })?;
             }
             self.started = true;
         }
@@ -58,10 +60,10 @@ impl Compound {
                 continue;
             }
             if instance.handle.is_stuck() {
-                return Err(Fault::message(format!(
-                    "instance `{}` cannot restart: it is stuck in a section that overran its max_response",
-                    instance.name
-                )));
+                return Err(RunError::Stuck {
+                    instance: instance.name.clone(),
+                }
+                .into());
             }
             instance.status = if instance.substitutes.is_some() {
                 Status::Standby
@@ -71,22 +73,23 @@ impl Compound {
             let monitor = instance
                 .handle
                 .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
-                .map_err(|t| Fault::message(t.to_string()))?;
+                .map_err(RunError::from)?;
             if monitor.state == State::StartingError {
-                return Err(Fault::message(format!(
-                    "instance `{}` could not start: {}",
-                    instance.name,
-                    monitor.error.unwrap_or_default()
-                )));
+                return Err(RunError::CouldNotStart {
+                    instance: instance.name.clone(),
+                    error: monitor.error.unwrap_or_default(),
+                }
+                .into());
             }
             if monitor.state != State::Ready {
                 command(&instance.handle, Controllable::Ready)?;
                 let state = instance.handle.state();
                 if state != State::Ready {
-                    return Err(Fault::message(format!(
-                        "instance `{}` could not restart: it is {state}",
-                        instance.name
-                    )));
+                    return Err(RunError::CouldNotRestart {
+                        instance: instance.name.clone(),
+                        state,
+                    }
+                    .into());
                 }
             }
         }

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use super::error::ExportError;
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, Parcel,
     PosterIn, PosterOut, PullRoute, TickIn, TickOut, UfifoIn,
@@ -32,13 +33,13 @@ pub(super) trait Export: Send {
     fn is_input(&self) -> bool;
     /// Inputs: feed the instance inputs `inputs` (one, or every live member of a
     /// redundant group).
-    fn follow_inputs(&mut self, _inputs: Vec<ErasedInput>) -> Result<(), String> {
-        Err("not an exported input".to_owned())
+    fn follow_inputs(&mut self, _inputs: Vec<ErasedInput>) -> Result<(), ExportError> {
+        Err(ExportError::NotAnInput)
     }
     /// Outputs: follow `output` (the instance's output, or a redundant group's merged
     /// stream).
-    fn follow_output(&mut self, _output: ErasedOutput) -> Result<(), String> {
-        Err("not an exported output".to_owned())
+    fn follow_output(&mut self, _output: ErasedOutput) -> Result<(), ExportError> {
+        Err(ExportError::NotAnOutput)
     }
 }
 
@@ -97,8 +98,8 @@ pub(super) fn follow_input(
     relay: &ErasedOutput,
     linked: &mut Vec<ErasedInput>,
     new: Vec<ErasedInput>,
-) -> Result<(), String> {
-    let mismatch = || "the exported input does not match the instance's".to_owned();
+) -> Result<(), ExportError> {
+    let mismatch = || ExportError::Mismatch("input");
     if let ([old], [input]) = (linked.as_slice(), new.as_slice()) {
         if old.core.id != input.core.id && !relay.relink(old, input) {
             return Err(mismatch());
@@ -210,7 +211,7 @@ impl<T: Packet> Export for InputExport<T> {
         true
     }
 
-    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), String> {
+    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), ExportError> {
         follow_input(&self.twin.relay(), &mut self.linked, inputs)
     }
 }
@@ -238,7 +239,7 @@ impl Export for TickExport {
         true
     }
 
-    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), String> {
+    fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), ExportError> {
         follow_input(&self.relay.erased(), &mut self.linked, inputs)
     }
 }
@@ -262,7 +263,7 @@ impl Export for OutputExport {
         false
     }
 
-    fn follow_output(&mut self, new: ErasedOutput) -> Result<(), String> {
+    fn follow_output(&mut self, new: ErasedOutput) -> Result<(), ExportError> {
         if let Some((old, id)) = &self.source {
             if old.core.id == new.core.id {
                 return Ok(());
@@ -270,8 +271,7 @@ impl Export for OutputExport {
             crate::port::unforward(old, *id);
         }
         self.source = None;
-        let id = crate::port::forward(&new, &self.twin)
-            .ok_or_else(|| "the exported output does not match the instance's".to_owned())?;
+        let id = crate::port::forward(&new, &self.twin).ok_or(ExportError::Mismatch("output"))?;
         self.source = Some((new, id));
         Ok(())
     }

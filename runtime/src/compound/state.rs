@@ -19,6 +19,7 @@ use crate::system::System;
 use crate::table::Controllable;
 
 use super::coordinator::Coordinator;
+use super::error::RunError;
 use super::exports::Export;
 use super::links::{Link, MergedPort};
 use super::policy::{Budget, PendingRestart, Policy, Recovering};
@@ -148,7 +149,7 @@ pub(super) struct Compound {
 pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
     handle
         .command(Command::SetState(target))
-        .map_err(|rejected| Fault::message(rejected.to_string()))
+        .map_err(|rejected| RunError::from(rejected).into())
 }
 
 impl Compound {

@@ -7,6 +7,7 @@ use crate::automaton::Fault;
 use crate::port::{ErasedInput, ErasedOutput};
 use crate::system::ConnectError;
 
+use super::error::{ExportError, RunError};
 use super::links::{Link, LinkVia, MergedPort};
 use super::state::{Compound, Status};
 
@@ -83,7 +84,12 @@ impl Compound {
             return Ok(());
         };
         let name = &self.name;
-        let error = |e: ConnectError| Fault::message(format!("compound `{name}`: {e}"));
+        let error = |source: ConnectError| {
+            Fault::from(RunError::Wiring {
+                compound: name.clone(),
+                source,
+            })
+        };
         let plain = |output: &ErasedOutput, input: &ErasedInput, old: Option<&ErasedInput>| {
             output.type_id == input.type_id
                 && match old {
@@ -193,10 +199,12 @@ impl Compound {
                 None => output.type_id == input.type_id && output.link(&input),
             };
             if !linked {
-                return Err(Fault::message(format!(
-                    "compound `{name}`: the merged output of `{}` does not match `{to}`",
-                    self.merges[*merge].port
-                )));
+                return Err(RunError::MergedConsumer {
+                    compound: name.clone(),
+                    port: self.merges[*merge].port.clone(),
+                    to: to.clone(),
+                }
+                .into());
             }
             self.merged.push((*merge, *link, to.clone(), input));
         }
@@ -220,19 +228,21 @@ impl Compound {
                     .map(|address| system.input_port(address))
                     .collect();
                 inputs
-                    .map_err(|e| e.to_string())
+                    .map_err(ExportError::from)
                     .and_then(|inputs| self.exports[index].follow_inputs(inputs))
             } else {
                 let output = match self.merge_of(&target) {
                     Some(merge) => Ok(self.merges[merge].merge.output()),
                     None => system
                         .output_port(&self.routed(&target))
-                        .map_err(|e| e.to_string()),
+                        .map_err(ExportError::from),
                 };
                 output.and_then(|output| self.exports[index].follow_output(output))
             };
-            followed.map_err(|e| {
-                Fault::message(format!("compound `{}`: `{target}`: {e}", self.name))
+            followed.map_err(|source| RunError::Export {
+                compound: self.name.clone(),
+                target,
+                source,
             })?;
         }
         // Last, once every consumer reads the stand-in: the pulls waiting at the
@@ -322,21 +332,26 @@ impl Compound {
                 continue;
             }
             let members = &self.groups[group];
+            let wiring = |source| RunError::Wiring {
+                compound: self.name.clone(),
+                source,
+            };
             let first = system
                 .output_port(&format!("{}.{port}", self.instances[members[0]].name))
-                .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+                .map_err(wiring)?;
             let Some(merge) = first.merge(members.len()) else {
                 continue; // A tick or poster output: its consumers follow the leader.
             };
             for (lane, member) in members.iter().enumerate() {
                 let output = system
                     .output_port(&format!("{}.{port}", self.instances[*member].name))
-                    .map_err(|e| Fault::message(format!("compound `{}`: {e}", self.name)))?;
+                    .map_err(wiring)?;
                 if !merge.attach(lane, &output) {
-                    return Err(Fault::message(format!(
-                        "compound `{}`: `{}.{port}` does not match its group's",
-                        self.name, self.instances[*member].name
-                    )));
+                    return Err(RunError::MergedMember {
+                        compound: self.name.clone(),
+                        output: format!("{}.{port}", self.instances[*member].name),
+                    }
+                    .into());
                 }
             }
             let leader = members
