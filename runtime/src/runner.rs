@@ -165,7 +165,7 @@ pub(crate) struct Runner {
     scheduling: Option<Scheduling>,
     /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
     /// component with no ladder and no detection, and for compounds (whose
-    /// supervisor adapts, `compound.rs`).
+    /// supervisor adapts, `compound/adaptation.rs`).
     adapt: Option<Local>,
     /// How long the last user call ran.
     last_took: Duration,
