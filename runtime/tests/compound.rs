@@ -2507,3 +2507,71 @@ fn a_suspended_compound_keeps_its_mapped_variables_current_up_the_hierarchy() {
     assert_eq!(a.state(), State::Suspended);
     assert!(system.shutdown().clean());
 }
+
+#[test]
+fn a_fault_while_the_compound_is_suspended_is_handled_when_it_runs_again() {
+    // `w` (restart policy) fails while `base` is suspended (commanded to run on its
+    // own, then kicked into a panicking section): `base` observes it, and its policy
+    // waits until `base` runs again, then restarts it.
+    let (sup, _) = Sup::new(&["operating"]);
+    let (w, script) = worker("w");
+    let (f, feed) = feeder("f");
+    let builder = CompoundBuilder::new("base", sup)
+        .instance(w)
+        .instance(f)
+        .connect("f.kick", "w.kick")
+        .on_error("w", Policy::Restart)
+        .map_controllable("gain", "w.gain");
+    let w = builder.instance_handle("w").expect("w");
+    let mut system = System::new();
+    let base = system.add(builder.build().expect("build")).expect("add");
+    system.run_all().expect("run");
+    wait(&w, State::Running);
+    run(&base, Controllable::Suspended);
+    wait(&w, State::Suspended);
+    script.panic_in(Some("busy.periodic"));
+    run(&w, Controllable::Running);
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    // A change after the fault, published by `base` once it has taken `w`'s events
+    // up to there (the fault included).
+    w.command(Command::Set("gain".to_owned(), Value::Int(4)))
+        .expect("set gain");
+    let observed = base
+        .wait_for(|m| m.variables[0].1 == Value::Int(4), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert_eq!(observed.state, State::Suspended);
+    assert!(
+        observed.supervision.iter().all(|s| s.instance != "w"),
+        "no policy acted while suspended: {:?}",
+        observed.supervision
+    );
+    assert_eq!(
+        w.state(),
+        State::RunningError,
+        "not restarted while suspended"
+    );
+    // Running again: the deferred policy restarts it.
+    script.panic_in(None);
+    run(&base, Controllable::Running);
+    let restarted = base
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == "w" && s.step == Step::Restarted)
+            },
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert!(
+        restarted
+            .supervision
+            .iter()
+            .any(|s| s.instance == "w" && s.step == Step::Failed),
+        "{:?}",
+        restarted.supervision
+    );
+    wait(&w, State::Running);
+    assert!(system.shutdown().clean());
+}
