@@ -22,7 +22,7 @@
 //!   [`Decision`]. The choice of the instance to degrade or promote is a [`Selector`].
 //!
 //! The runner (`runner.rs`) runs the detector and, for a component that no compound
-//! supervises, applies the ladder locally; a compound (`compound.rs`) runs [`decide`]
+//! supervises, applies the ladder locally; a compound (`compound/adaptation.rs`) runs [`decide`]
 //! on its instances' verdicts and commands their levels through their control ports
 //! ([`crate::Command::SetDegradation`]). `docs/runtime.md`, "Adaptation", tells the
 //! whole story.

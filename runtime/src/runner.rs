@@ -29,7 +29,7 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Automaton, Context, Fault, Section};
+use crate::automaton::{Context, Driven, Fault, Section};
 use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::idle::IdleProbe;
@@ -95,7 +95,7 @@ enum Recovery {
 
 /// Everything one component thread owns.
 pub(crate) struct Runner {
-    automaton: Box<dyn Automaton>,
+    automaton: Box<dyn Driven>,
     spec: &'static Spec,
     /// The effective timing block: the instance's override, else the spec's.
     timing: TimingSpec,
@@ -167,7 +167,7 @@ pub(crate) struct Runner {
     scheduling: Option<Scheduling>,
     /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
     /// component with no ladder and no detection, and for compounds (whose
-    /// supervisor adapts, `compound.rs`).
+    /// supervisor adapts, `compound/adaptation.rs`).
     adapt: Option<Local>,
     /// How long the last user call ran.
     last_took: Duration,
@@ -187,7 +187,7 @@ impl Runner {
     )]
     pub(crate) fn new(
         name: &str,
-        automaton: Box<dyn Automaton>,
+        automaton: Box<dyn Driven>,
         timing: TimingSpec,
         adaptation: AdaptConfig,
         shared: Arc<Shared>,
@@ -363,6 +363,9 @@ impl Runner {
                 break;
             }
             if self.state != State::Running {
+                if self.supervised && self.state == State::Suspended {
+                    self.observe_instances();
+                }
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
@@ -659,6 +662,14 @@ impl Runner {
             {
                 self.set_error(Some(format!("panic after a transition: {panic}")));
             }
+        }
+    }
+
+    /// Compound components, while suspended: observe the instances (their events keep
+    /// the compound's view and mapped variables current); nothing acts.
+    fn observe_instances(&mut self) {
+        if let Err(panic) = self.call(|automaton, cx| automaton.observe(cx)) {
+            self.set_error(Some(format!("panic in the supervisor: {panic}")));
         }
     }
 
@@ -987,7 +998,7 @@ impl Runner {
     /// Run one user call under `catch_unwind`, account its time, publish its changes.
     fn call<R>(
         &mut self,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, String> {
         self.call_watched(None, body)
             .map_err(|failure| match failure {
@@ -1002,7 +1013,7 @@ impl Runner {
     fn call_watched<R>(
         &mut self,
         watched: Option<(usize, Section)>,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, Failure> {
         // Without a watchdog (no max_response), the call starts from the turn's clock
         // reading (taken at most a few hundred nanoseconds of runner work ago, or at

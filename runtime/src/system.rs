@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::automaton::{Automaton, TaskResult};
+use crate::automaton::{Atomic, Automaton, Driven, TaskResult};
 use crate::clock::Clock;
 use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
 use crate::port::{
@@ -66,7 +66,7 @@ impl PortSet {
 /// An unstarted component: a name, its code and its ports.
 pub struct Component {
     name: String,
-    automaton: Box<dyn Automaton>,
+    automaton: Box<dyn Driven>,
     ports: PortSet,
     /// The instance's own `timing` block, replacing the spec's.
     timing: Option<TimingSpec>,
@@ -93,6 +93,15 @@ impl Component {
     pub fn new(
         name: impl Into<String>,
         automaton: Box<dyn Automaton>,
+        ports: PortSet,
+    ) -> Component {
+        Component::driven(name, Box::new(Atomic(automaton)), ports)
+    }
+
+    /// A component whose automaton has the compound hooks ([`Driven`]): a compound's.
+    pub(crate) fn driven(
+        name: impl Into<String>,
+        automaton: Box<dyn Driven>,
         ports: PortSet,
     ) -> Component {
         Component {
