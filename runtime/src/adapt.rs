@@ -85,6 +85,11 @@ pub struct AdaptConfig {
     /// is on may have its phase moved when its sections coincide with others' on a
     /// busy processor. Default true.
     pub equalize: bool,
+    /// Whether promotion also needs the idle probe's spare time on the processor
+    /// (`crate::idle`), besides short sections. Default true; false judges spare time
+    /// from the component's own sections only (a machine whose idle time other
+    /// processes legitimately take, or tests that must not depend on the machine).
+    pub idle_probe: bool,
 }
 
 impl Default for AdaptConfig {
@@ -101,6 +106,7 @@ impl Default for AdaptConfig {
             width: 1,
             reconfiguration: Reconfiguration::Report,
             equalize: true,
+            idle_probe: true,
         }
     }
 }

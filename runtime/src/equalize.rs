@@ -162,10 +162,12 @@ impl Seat {
     /// One periodic section; a [`Shift`] when the component should move its phase.
     pub fn observe(&mut self, activation: Activation) -> Option<Shift> {
         let window = self.config.window.max(1) as usize;
-        let peak = activation.waited
-            > activation
-                .period
-                .mul_f64(self.config.late_share.clamp(0.0, 1.0));
+        let share = if self.config.late_share.is_finite() {
+            self.config.late_share.clamp(0.0, 1.0)
+        } else {
+            EqualizeConfig::default().late_share
+        };
+        let peak = activation.waited > activation.period.mul_f64(share);
         push_window(&mut self.recent, peak, window);
         push_window(
             &mut self.busy,
@@ -202,9 +204,15 @@ impl Seat {
         }
         // A peak: find who coincides and the widest valley they leave.
         let period = activation.period;
+        // Rivals: the same period, and a deadline within the last two periods (a
+        // component that stopped its periodic sections, suspended or in another
+        // state, keeps its place but is no rival).
+        let active = |place: &Place| {
+            crate::thread::later(place.deadline, period.saturating_mul(2)) >= activation.deadline
+        };
         let others: Vec<(Duration, Duration, &str)> = places
             .iter()
-            .filter(|place| place.id != self.id && place.period == period)
+            .filter(|place| place.id != self.id && place.period == period && active(place))
             .map(|place| {
                 (
                     phase(place.deadline, activation.deadline, period),
@@ -226,7 +234,7 @@ impl Seat {
         let spans: Vec<(Duration, Duration)> = others.iter().map(|(s, l, _)| (*s, *l)).collect();
         let delay = place(period, busy, &spans)?;
         if let Some(place) = places.iter_mut().find(|place| place.id == self.id) {
-            place.deadline = activation.deadline + delay;
+            place.deadline = crate::thread::later(activation.deadline, delay);
         }
         Some(Shift { delay, away_from })
     }
@@ -515,6 +523,50 @@ mod tests {
         let shift = me.observe(waited).expect("a shift");
         assert_eq!(shift.away_from, ["rival"]);
         assert_eq!(shift.delay, ms(10));
+    }
+
+    #[test]
+    fn a_rival_that_stopped_its_periodic_sections_is_no_rival() {
+        let board = Board::new();
+        let config = EqualizeConfig {
+            window: 2,
+            peaks: 2,
+            hold_periods: 0,
+            ..EqualizeConfig::default()
+        };
+        let mut gone = board.seat("gone", config);
+        let mut me = board.seat("me", config);
+        let t0 = Instant::now();
+        assert_eq!(gone.observe(activation(t0, 0, 0, 6)), None);
+        // Three periods later `gone` has not run again: waits find nobody to flee.
+        assert_eq!(me.observe(activation(t0, 60, 5, 6)), None);
+        assert_eq!(me.observe(activation(t0, 80, 5, 6)), None);
+        // It runs again, in phase: now it is a rival.
+        assert_eq!(gone.observe(activation(t0, 100, 0, 6)), None);
+        assert_eq!(me.observe(activation(t0, 100, 5, 6)), None);
+        let shift = me.observe(activation(t0, 120, 5, 6)).expect("a shift");
+        assert_eq!(shift.away_from, ["gone"]);
+    }
+
+    #[test]
+    fn odd_settings_do_not_panic() {
+        let board = Board::new();
+        let mut seat = board.seat(
+            "odd",
+            EqualizeConfig {
+                late_share: f64::NAN,
+                window: 0,
+                peaks: 0,
+                ..EqualizeConfig::default()
+            },
+        );
+        let t0 = Instant::now();
+        assert_eq!(seat.observe(activation(t0, 0, 5, 6)), None, "alone");
+        assert_eq!(
+            place(Duration::ZERO, ms(1), &[(ms(0), ms(1))]),
+            None,
+            "a zero period"
+        );
     }
 
     #[test]

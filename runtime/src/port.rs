@@ -326,12 +326,15 @@ impl InputCore {
     /// A packet or event was stored: count it, wake the component and any puller.
     #[inline]
     fn arrived(&self) {
+        let owner = self.owner.get();
+        // Stamp before counting: the count publishes the stamp, so a component that
+        // sees the arrival also sees its time (at worst a response goes unmeasured).
+        if let Some(label) = owner.and_then(|owner| owner.label.as_ref()) {
+            label.stamp();
+        }
         // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
         self.arrivals.fetch_add(1, Ordering::SeqCst);
-        if let Some(owner) = self.owner.get() {
-            if let Some(label) = &owner.label {
-                label.stamp();
-            }
+        if let Some(owner) = owner {
             owner.bell.ring();
         }
         if self.pull_waiting.load(Ordering::Acquire)

@@ -742,6 +742,11 @@ impl Runner {
                     if !self.before_running() {
                         return;
                     }
+                    // Packets that waited while it was suspended: their wait is not a
+                    // response time.
+                    for label in self.labels.iter().flatten() {
+                        let _ = label.take();
+                    }
                     self.set_state(to);
                     self.resume();
                     return;
@@ -1349,6 +1354,13 @@ impl Runner {
             self.pending[index] = unseen_count && data && arrivals != self.seen[index];
             self.seen[index] = arrivals;
             self.last_arrival[index] = now;
+            // Arrivals before the state was entered are no events in it: their stamp
+            // would time a later packet's response from them.
+            if !self.pending[index]
+                && let Some(Some(label)) = self.labels.get(index)
+            {
+                let _ = label.take();
+            }
         }
         self.next_periodic = self.period_of(target).map(|period| later(now, period));
         if self.supervised {
@@ -1577,7 +1589,7 @@ struct Local {
     /// The process's idle probe (`crate::idle`), taken at the first observation on the
     /// real clock; `None` before, on a virtual clock, or if it could not start.
     probe: Option<IdleProbe>,
-    /// Whether the probe was asked for.
+    /// Whether the probe was asked for (never, with `AdaptConfig::idle_probe` off).
     probe_asked: bool,
     /// Whether equalization may move its phase (`AdaptConfig::equalize`).
     equalize: bool,
@@ -1617,7 +1629,7 @@ impl Local {
             cpu_mark: None,
             cpu_share: 0.0,
             probe: None,
-            probe_asked: false,
+            probe_asked: !config.idle_probe,
             equalize: config.equalize,
             seat: None,
             stats: None,

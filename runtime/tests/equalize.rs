@@ -67,10 +67,19 @@ fn two_components_in_phase_on_one_core_are_moved_apart_once_unless_turned_off() 
     let steps = run_pair(false, |_, sections| sections.iter().all(|n| *n >= 50));
     assert_eq!(steps, []);
 
-    // On: one of them moves, naming the other; 50 sections after the move, it was the
-    // only move.
+    // On: one of them moves, naming the other; 50 more sections each after the move
+    // (beyond the 16-period hold), it was the only move.
+    let at_move = std::sync::Mutex::new(None::<[usize; 2]>);
     let steps = run_pair(true, |steps, sections| {
-        !steps.is_empty() && sections.iter().all(|n| *n >= 50)
+        if steps.is_empty() {
+            return false;
+        }
+        let mut at_move = at_move.lock().expect("at move");
+        let first = *at_move.get_or_insert(sections);
+        sections
+            .iter()
+            .zip(first)
+            .all(|(now, then)| *now >= then + 50)
     });
     let (moved, step) = &steps[0];
     let other = ["a", "b"][1 - moved];

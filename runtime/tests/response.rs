@@ -13,8 +13,9 @@ use std::time::Duration;
 use coolbot::adapt::AdaptAction;
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{
-    Automaton, Component, Context, Fault, InputKind, InputSpec, MonitorEvent, OnSpec, OutputKind,
-    OverflowPolicy, PortSet, Section, SectionResult, Spec, StateSpec, System, TimingSpec, Value,
+    AdaptConfig, Automaton, Component, Context, Fault, InputKind, InputSpec, MonitorEvent, OnSpec,
+    OutputKind, OverflowPolicy, PortSet, Section, SectionResult, Spec, StateSpec, System,
+    TimingSpec, Value,
 };
 use support::shell::{self, ShellBuilder};
 use support::{WAIT, eventually};
@@ -142,7 +143,13 @@ fn setup() -> (System, coolbot::Handle, DataOut<u32>, Done) {
             done: Arc::clone(&done),
         }),
         PortSet::new().input(&jobs),
-    );
+    )
+    // Spare time judged from the responses alone, so that promotion does not depend
+    // on what else the machine runs (the idle probe has tests of its own).
+    .with_adaptation(AdaptConfig {
+        idle_probe: false,
+        ..AdaptConfig::default()
+    });
     let feed = DataOut::new();
     let feeder = ShellBuilder::new("f")
         .output(shell::output("jobs", OutputKind::Data, false), &feed)
@@ -171,7 +178,7 @@ fn a_packet_that_waits_in_the_queue_makes_a_late_response_though_no_section_is_l
         [(1, 0), (0, 0)],
         "both jobs, in order"
     );
-    assert_eq!(monitor.response.late, 1, "{:?}", monitor.response);
+    assert!(monitor.response.late >= 1, "{:?}", monitor.response);
     assert!(
         monitor.response.worst >= Duration::from_millis(50),
         "the wait in the queue counts: {:?}",
@@ -184,9 +191,13 @@ fn a_packet_that_waits_in_the_queue_makes_a_late_response_though_no_section_is_l
             _ => None,
         })
         .collect();
-    assert_eq!(late.len(), 1, "{late:?}");
-    assert_eq!((late[0].1, late[0].2), (MAX_RESPONSE, 1));
-    assert!(late[0].0 >= Duration::from_millis(50), "{late:?}");
+    // Job 0's response, at least 50 ms, is late (job 1's 25 ms section could be too on
+    // a very loaded machine: the assertion is on the queued one).
+    assert!(
+        late.iter()
+            .any(|(took, bound, _)| *took >= Duration::from_millis(50) && *bound == MAX_RESPONSE),
+        "{late:?}"
+    );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
@@ -197,7 +208,7 @@ fn late_responses_degrade_the_quality_and_short_ones_promote_it_back() {
     let monitor = handle.snapshot();
     assert!(
         monitor.adaptation.enabled,
-        "on by default: no period, a max_response and quality levels"
+        "on (`enabled: None`, the default): no period, a max_response and quality levels"
     );
     // Chains of two: the second job of each chain is late (see above). Two late
     // responses in a window of four are a violation: quality 1.
