@@ -124,6 +124,7 @@ mod automaton;
 pub mod clock;
 mod commander;
 pub mod compound;
+pub mod harness;
 mod monitor;
 pub mod port;
 pub mod record;
