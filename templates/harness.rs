@@ -119,21 +119,27 @@ impl<B: Behavior> Harness<B> {
 {{ "" }}
 {{- l.doc(&m.doc, 4, "///") }}
 {{ l.signature(4, &m.signature, " {") }}
-{{ l.short(8, &m.body) }}
+{%- for line in m.body %}
+{{ l.short(8, line) }}
+{%- endfor %}
     }
 {%- endfor %}
 {%- for m in h.outputs %}
 {{ "" }}
 {{- l.doc(&m.doc, 4, "///") }}
 {{ l.signature(4, &m.signature, " {") }}
-{{ l.short(8, &m.body) }}
+{%- for line in m.body %}
+{{ l.short(8, line) }}
+{%- endfor %}
     }
 {%- endfor %}
 {%- for m in h.setters %}
 {{ "" }}
 {{- l.doc(&m.doc, 4, "///") }}
 {{ l.signature(4, &m.signature, " {") }}
-{{ l.short(8, &m.body) }}
+{%- for line in m.body %}
+{{ l.short(8, line) }}
+{%- endfor %}
     }
 {%- endfor %}
 }

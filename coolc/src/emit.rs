@@ -456,6 +456,7 @@ fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bo
                 l: Layout::default(),
             };
             let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
+            text.push('\n');
             text.push_str(&harness_text);
             (c.module.clone(), text, laid_out && harness_laid_out)
         });

@@ -44,7 +44,9 @@ use std::time::{Duration, Instant};
 use crate::automaton::TaskResult;
 use crate::clock::{Clock, VirtualClock};
 use crate::monitor::{Command, ControlMessage, Handle, Monitor, PENDING, Reply};
-use crate::port::{Collected, ErasedInput, ErasedOutput, InKind, OutKind, Packet, PullError, TickIn};
+use crate::port::{
+    Collected, ErasedInput, ErasedOutput, InKind, OutKind, Packet, PullError, TickIn,
+};
 use crate::runner::{Runner, Turn};
 use crate::spec::Spec;
 use crate::system::{Component, Prepared, prepare};

@@ -583,7 +583,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
         exit_guard,
     );
-Ok(Prepared {
+    Ok(Prepared {
         name,
         spec,
         handle,

@@ -40,7 +40,10 @@ fn start_run_arrivals_and_periodic_sections_in_exact_order() {
     assert_eq!(h.variable("count"), Some(Value::UInt(3)));
     // period 5ms: two periodic sections by 12ms, none before.
     h.advance(ms(4)).unwrap();
-    assert_eq!(script.periodics.load(std::sync::atomic::Ordering::SeqCst), 0);
+    assert_eq!(
+        script.periodics.load(std::sync::atomic::Ordering::SeqCst),
+        0
+    );
     h.advance(ms(8)).unwrap();
     assert_eq!(
         script.full_log(),
@@ -77,7 +80,13 @@ fn an_after_transition_fires_at_its_time_before_the_periodic_section_due_then() 
     let log = script.log();
     assert_eq!(
         log,
-        ["start", "idle.entry", "busy.entry", "busy.exit", "idle.entry"]
+        [
+            "start",
+            "idle.entry",
+            "busy.entry",
+            "busy.exit",
+            "idle.entry"
+        ]
     );
 }
 
@@ -146,7 +155,10 @@ fn commands_and_variables_through_the_control_port() {
     h.command(Command::SetQuality(1)).unwrap();
     assert_eq!(h.quality(), 1);
     let refused = h.command(Command::SetQuality(2)).unwrap_err();
-    assert!(matches!(refused, HarnessError::Rejected { .. }), "{refused}");
+    assert!(
+        matches!(refused, HarnessError::Rejected { .. }),
+        "{refused}"
+    );
 }
 
 #[test]

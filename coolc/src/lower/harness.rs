@@ -24,8 +24,8 @@ pub struct Method {
     pub doc: ir::Doc,
     /// `pub fn name(&mut self, ...) -> ...`, without the body.
     pub signature: String,
-    /// The body: one expression.
-    pub body: String,
+    /// The body's lines: statements, then the returned expression.
+    pub body: Vec<String>,
 }
 
 /// The port's kind as its handle type says (`::coolbot::port::FifoIn<T>` is a fifo).
@@ -68,9 +68,15 @@ pub fn harness(c: &ir::Atomic) -> Harness {
         match packet_of(&port.handle) {
             None => {
                 inputs.push(Method {
-                    doc: vec![format!("An event arrives at tick input `{}`.", port.cool_name)],
-                    signature: format!("pub fn {}(&mut self) -> HarnessResult<()>", method("tick", &port.field)),
-                    body: format!("self.inner.tick({name})"),
+                    doc: vec![format!(
+                        "An event arrives at tick input `{}`.",
+                        port.cool_name
+                    )],
+                    signature: format!(
+                        "pub fn {}(&mut self) -> HarnessResult<()>",
+                        method("tick", &port.field)
+                    ),
+                    body: vec![format!("self.inner.tick({name})")],
                 });
                 if port.pull {
                     inputs.push(Method {
@@ -82,7 +88,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                             "pub fn {}(&mut self) -> HarnessResult<()>",
                             method("answer", &port.field)
                         ),
-                        body: format!("self.inner.answer_tick({name})"),
+                        body: vec![format!("self.inner.answer_tick({name})")],
                     });
                 }
             }
@@ -93,12 +99,15 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     ("push", "arrives at")
                 };
                 inputs.push(Method {
-                    doc: vec![format!("`packet` {what} {kind} input `{}`.", port.cool_name)],
+                    doc: vec![format!(
+                        "`packet` {what} {kind} input `{}`.",
+                        port.cool_name
+                    )],
                     signature: format!(
                         "pub fn {}(&mut self, packet: {packet}) -> HarnessResult<()>",
                         method(verb, &port.field)
                     ),
-                    body: format!("self.inner.push({name}, packet)"),
+                    body: vec![format!("self.inner.push({name}, packet)")],
                 });
                 if port.pull {
                     inputs.push(Method {
@@ -110,7 +119,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                             "pub fn {}(&mut self, packet: {packet}) -> HarnessResult<()>",
                             method("answer", &port.field)
                         ),
-                        body: format!("self.inner.answer({name}, packet)"),
+                        body: vec![format!("self.inner.answer({name}, packet)")],
                     });
                 }
             }
@@ -129,7 +138,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     "pub fn {}(&mut self) -> HarnessResult<u64>",
                     method("ticks", &port.field)
                 ),
-                body: format!("self.inner.take_ticks({name})"),
+                body: vec![format!("self.inner.take_ticks({name})")],
             }),
             Some(packet) => {
                 outputs.push(Method {
@@ -141,16 +150,19 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                         "pub fn {}(&mut self) -> HarnessResult<::std::vec::Vec<{packet}>>",
                         method("sent", &port.field)
                     ),
-                    body: format!("self.inner.take_sent({name})"),
+                    body: vec![format!("self.inner.take_sent({name})")],
                 });
                 if handle_kind(&port.handle) == "poster" {
                     outputs.push(Method {
-                        doc: vec![format!("The value poster output `{}` holds now.", port.cool_name)],
+                        doc: vec![format!(
+                            "The value poster output `{}` holds now.",
+                            port.cool_name
+                        )],
                         signature: format!(
                             "pub fn {}(&self) -> HarnessResult<::core::option::Option<{packet}>>",
                             method("posted", &port.field)
                         ),
-                        body: format!("self.inner.posted({name})"),
+                        body: vec![format!("self.inner.posted({name})")],
                     });
                 }
             }
@@ -165,7 +177,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     "pub fn {}(&mut self) -> HarnessResult<()>",
                     method("pull", &port.field)
                 ),
-                body: format!("self.inner.pull({name})"),
+                body: vec![format!("self.inner.pull({name})")],
             });
         }
     }
@@ -186,11 +198,10 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     method("set", &var.field.name),
                     var.field.ty
                 ),
-                body: format!(
-                    "self.inner.set({}, {})",
-                    string(&var.field.cool_name),
-                    var.to_value.replace(&field, "value")
-                ),
+                body: vec![
+                    format!("let value = {};", var.to_value.replace(&field, "value")),
+                    format!("self.inner.set({}, value)", string(&var.field.cool_name)),
+                ],
             })
         })
         .collect();
@@ -209,10 +220,19 @@ mod tests {
     fn kinds_and_packets_come_from_the_handle_types() {
         let fifo = "::coolbot::port::FifoIn<::std::vec::Vec<super::types::Range>>";
         assert_eq!(handle_kind(fifo), "fifo");
-        assert_eq!(packet_of(fifo), Some("::std::vec::Vec<super::types::Range>"));
+        assert_eq!(
+            packet_of(fifo),
+            Some("::std::vec::Vec<super::types::Range>")
+        );
         assert_eq!(handle_kind("::coolbot::port::TickIn"), "tick");
         assert_eq!(packet_of("::coolbot::port::TickIn"), None);
-        assert_eq!(handle_kind("::coolbot::port::PosterOut<[f32; 72]>"), "poster");
-        assert_eq!(packet_of("::coolbot::port::PosterOut<[f32; 72]>"), Some("[f32; 72]"));
+        assert_eq!(
+            handle_kind("::coolbot::port::PosterOut<[f32; 72]>"),
+            "poster"
+        );
+        assert_eq!(
+            packet_of("::coolbot::port::PosterOut<[f32; 72]>"),
+            Some("[f32; 72]")
+        );
     }
 }

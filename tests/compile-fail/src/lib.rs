@@ -11,7 +11,10 @@ use generated::gate::{Behavior, Cx, OpenMay};
 
 /// A gate that closes again after one period open.
 #[derive(Debug, Default)]
-pub struct Gate;
+pub struct Gate {
+    /// Periods spent open since it opened.
+    periods: u32,
+}
 
 impl Behavior for Gate {
     fn closed_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
@@ -21,17 +24,19 @@ impl Behavior for Gate {
 
     fn open_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         cx.vars.openings += 1;
+        self.periods = 0;
         Ok(())
     }
 
     fn open_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let _ = cx;
+        self.periods += 1;
         Ok(())
     }
 
     fn open_choose(&mut self, cx: &mut Cx<'_>) -> Option<OpenMay> {
         let _ = cx;
-        Some(OpenMay::Closed)
+        (self.periods > 0).then_some(OpenMay::Closed)
     }
 
     fn jammed_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {

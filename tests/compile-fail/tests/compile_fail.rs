@@ -13,12 +13,15 @@ fn misuse_of_generated_code_does_not_compile() {
 #[test]
 fn the_correct_implementation_builds_and_runs() {
     use coolbot_compile_fail::generated::gate::{Harness, UserState};
-    let mut gate = Harness::running(coolbot_compile_fail::Gate).unwrap();
+    let mut gate = Harness::running(coolbot_compile_fail::Gate::default()).unwrap();
     assert_eq!(gate.user_state(), Some(UserState::Closed));
     gate.tick_push().unwrap();
     gate.settle().unwrap();
     assert_eq!(gate.user_state(), Some(UserState::Open));
-    gate.advance(std::time::Duration::from_millis(100)).unwrap();
+    gate.advance(std::time::Duration::from_millis(99)).unwrap();
+    assert_eq!(gate.user_state(), Some(UserState::Open));
+    // The first periodic section, then `open`'s choice: back to `closed`.
+    gate.advance(std::time::Duration::from_millis(1)).unwrap();
     assert_eq!(gate.user_state(), Some(UserState::Closed));
     assert_eq!(gate.vars().openings, 1);
 }
