@@ -652,6 +652,19 @@ impl Harness {
     }
 }
 
+/// Answers still queued hold their feeder, whose pull route holds the queue: dropped
+/// here, so no cycle outlives the harness.
+impl Drop for Harness {
+    fn drop(&mut self) {
+        for feed in &self.inputs {
+            feed.answers
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clear();
+        }
+    }
+}
+
 /// Send (data) or post (poster) `packet` through `feeder`, an output of `T` the
 /// harness made for an input of `T`.
 fn send_through<T: Packet>(feeder: &ErasedOutput, packet: T) {
