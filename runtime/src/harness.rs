@@ -625,14 +625,12 @@ impl Harness {
     /// The component's code (generated glue) as `A`, if it is one: the typed
     /// wrappers read variables, configuration and behaviour through it.
     pub fn automaton<A: Any>(&self) -> Option<&A> {
-        let any: &dyn Any = self.runner.automaton();
-        any.downcast_ref::<A>()
+        self.runner.automaton().downcast_ref::<A>()
     }
 
     /// [`Harness::automaton`], mutable.
     pub fn automaton_mut<A: Any>(&mut self) -> Option<&mut A> {
-        let any: &mut dyn Any = self.runner.automaton_mut();
-        any.downcast_mut::<A>()
+        self.runner.automaton_mut().downcast_mut::<A>()
     }
 
     /// The component's name.
