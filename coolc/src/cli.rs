@@ -502,6 +502,12 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
         emit::starter_component(atomic),
     )
     .map_err(io)?;
+    std::fs::create_dir_all(dir.join("tests")).map_err(io)?;
+    std::fs::write(
+        dir.join(format!("tests/{module}.rs")),
+        emit::starter_test(&krate, atomic),
+    )
+    .map_err(io)?;
     std::fs::write(dir.join(".gitignore"), "/target\n/.coolc\n").map_err(io)?;
     eprintln!(
         "coolc: created {}: `cargo run` inside it starts the component; edit {} and run `coolc compile {} -o .` there",

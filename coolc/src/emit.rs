@@ -131,6 +131,15 @@ struct AtomicRs<'a> {
     l: Layout,
 }
 
+/// The typed test harness, appended to the atomic component's module.
+#[derive(Template)]
+#[template(path = "harness.rs", escape = "none")]
+struct HarnessRs<'a> {
+    c: &'a ir::Atomic,
+    h: crate::lower::harness::Harness,
+    l: Layout,
+}
+
 #[derive(Template)]
 #[template(path = "compound.rs", escape = "none")]
 struct CompoundRs<'a> {
@@ -440,8 +449,16 @@ fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bo
                 c,
                 l: Layout::default(),
             };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            (c.module.clone(), text, laid_out)
+            let (mut text, laid_out) = render_laid_out(&template, &template.l);
+            let harness = HarnessRs {
+                c,
+                h: crate::lower::harness::harness(c),
+                l: Layout::default(),
+            };
+            let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
+            text.push('\n');
+            text.push_str(&harness_text);
+            (c.module.clone(), text, laid_out && harness_laid_out)
         });
         modules.extend(atomics);
     }
@@ -851,6 +868,22 @@ impl StarterMain {
 /// The filled-in user file of the `coolc new` starter component.
 pub fn starter_component(c: &ir::Atomic) -> String {
     format_user(&render(&StarterComponent { c }))
+}
+
+#[derive(Template)]
+#[template(path = "starter_test.rs", escape = "none")]
+struct StarterTest<'a> {
+    c: &'a ir::Atomic,
+    lib: &'a str,
+}
+
+/// The test `coolc new` writes for its starter component (in the crate's `tests/`):
+/// it drives the component in its generated harness.
+pub fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
+    format_user(&render(&StarterTest {
+        c,
+        lib: &krate.lib_name,
+    }))
 }
 
 /// The `src/main.rs` of a new crate as its template renders it: runs every component

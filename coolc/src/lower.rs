@@ -12,6 +12,7 @@ use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
 mod compound;
+pub mod harness;
 
 /// What the caller decides about the emitted crate.
 #[derive(Clone, Debug)]

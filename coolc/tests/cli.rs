@@ -161,6 +161,14 @@ fn new_crate_builds_and_runs() {
     assert!(stdout.contains("\"done\""), "{stdout}");
     assert!(stdout.contains("counted 10 periods"), "{stdout}");
 
+    // The test `coolc new` wrote drives the component in its generated harness.
+    assert!(krate.join("tests/blinker.rs").exists());
+    let stdout = cargo(&krate, &["test", "--test", "blinker"]);
+    assert!(
+        stdout.contains("test counts_its_periods_then_finishes ... ok"),
+        "{stdout}"
+    );
+
     // A second `new` on the same directory is a usage error.
     let out = coolc(&["new", "blinker"], dir.path());
     assert_eq!(out.status.code(), Some(2));

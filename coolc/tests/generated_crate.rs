@@ -29,7 +29,11 @@ fn generated_crate_builds_and_runs() {
             "motion_controller.rs",
             "follower.rs",
         ],
-        &["mobile_base_instances_run_and_talk"],
+        &[
+            "mobile_base_instances_run_and_talk",
+            "a_range_server_alone_in_its_harness_streams_and_retries_on_the_virtual_clock",
+            "a_planner_answers_a_pull_and_a_follower_gets_its_answer_in_their_harnesses",
+        ],
     );
 }
 

@@ -106,8 +106,9 @@ pub enum TaskResult {
 
 /// The code of one component, as the runtime drives it. `coolc` generates a glue type
 /// implementing this over the user's `Behavior`; the runtime calls it only on the
-/// component's own thread, each call under `catch_unwind`.
-pub trait Automaton: Send + 'static {
+/// component's own thread, each call under `catch_unwind`. (`Any`: a harness,
+/// `crate::harness`, reads the generated glue back through it.)
+pub trait Automaton: std::any::Any + Send + 'static {
     /// The component's static shape.
     fn spec(&self) -> &'static Spec;
 

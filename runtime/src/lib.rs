@@ -125,6 +125,7 @@ pub mod clock;
 mod commander;
 pub mod compound;
 pub mod equalize;
+pub mod harness;
 pub mod idle;
 mod monitor;
 pub mod port;

@@ -433,6 +433,9 @@ pub(crate) enum PullRoute {
     /// the instance output it follows, on behalf of the same consumer (the answer
     /// reaches that consumer only, through the forwarding).
     Output(Arc<OutputCore>),
+    /// A harness's feeder (`crate::harness`): the request is answered at once, on
+    /// the requester's thread, by sending the next canned answer (if any).
+    Answer(Arc<dyn Fn() + Send + Sync>),
 }
 
 impl OutputCore {
@@ -584,8 +587,77 @@ impl PullRoute {
         match self {
             PullRoute::Input(input) => input.request(),
             PullRoute::Output(output) => output.request(input_id),
+            PullRoute::Answer(answer) => {
+                answer();
+                Ok(())
+            }
         }
     }
+}
+
+// ---------------------------------------------------------------------------------
+// What a harness (`crate::harness`) needs of the ports.
+
+/// The packets an output sent to a harness's collector, in order.
+pub(crate) struct Collected<T> {
+    packets: Mutex<Vec<T>>,
+}
+
+impl<T> Default for Collected<T> {
+    fn default() -> Self {
+        Collected {
+            packets: Mutex::new(Vec::new()),
+        }
+    }
+}
+
+impl<T: Packet> Collected<T> {
+    /// The packets collected since the last call.
+    pub(crate) fn take(&self) -> Vec<T> {
+        std::mem::take(&mut *lock(&self.packets))
+    }
+}
+
+impl<T: Packet> Deliver<T> for Collected<T> {
+    fn deliver(&self, packet: Parcel<T>) {
+        lock(&self.packets).push(packet.into_owned());
+    }
+}
+
+/// The input end of `input` that feeds it (see `InputEnd::feeder`), not connected.
+pub(crate) fn feeder_of(input: &ErasedInput) -> ErasedOutput {
+    input.end.feeder()
+}
+
+/// The collector of `output` (see `OutputEnd::collector`).
+pub(crate) fn collector_of(output: &ErasedOutput) -> Option<(usize, Arc<dyn Any + Send + Sync>)> {
+    output.end.collector(output)
+}
+
+/// The typed data output behind `output`, if it is a `DataOut<T>`.
+pub(crate) fn data_out<T: Packet>(output: &ErasedOutput) -> Option<DataOut<T>> {
+    output_as::<DataOutInner<T>>(output).map(|inner| DataOut { inner })
+}
+
+/// The typed poster output behind `output`, if it is a `PosterOut<T>`.
+pub(crate) fn poster_out<T: Packet>(output: &ErasedOutput) -> Option<PosterOut<T>> {
+    output_as::<PosterOutInner<T>>(output).map(|inner| PosterOut { inner })
+}
+
+/// The tick output behind `output`, if it is one.
+pub(crate) fn tick_out(output: &ErasedOutput) -> Option<TickOut> {
+    output_as::<TickOutInner>(output).map(|inner| TickOut { inner })
+}
+
+/// Pull requests to `output` are answered by `answer`, called at once on the
+/// requester's thread (a harness's canned answers).
+pub(crate) fn answer_pulls_with(output: &ErasedOutput, answer: Arc<dyn Fn() + Send + Sync>) {
+    output.core.set_route(PullRoute::Answer(answer));
+}
+
+/// A pull request to `output` on behalf of the input (or tap) with id `input_id`.
+pub(crate) fn request_on_behalf(output: &ErasedOutput, input_id: usize) -> Result<(), PullError> {
+    output.core.request(input_id)
 }
 
 /// Something that accepts packets of type `T`: an input end, a converter in front of
@@ -1590,6 +1662,11 @@ pub(crate) trait InputEnd: Any + Send + Sync {
     fn room(&self) -> Option<usize> {
         None
     }
+
+    /// A new, unconnected output that can feed this input (same packet type): a tick
+    /// output for a tick input, a poster output for a poster input, a data output
+    /// for the others. A harness (`crate::harness`) feeds inputs through these.
+    fn feeder(&self) -> ErasedOutput;
 }
 
 /// What the type-erased code asks of an output end, implemented by each typed output
@@ -1618,6 +1695,12 @@ pub(crate) trait OutputEnd: Any + Send + Sync {
     fn merge(&self, _lanes: usize) -> Option<Arc<dyn MergeEnd>> {
         None
     }
+
+    /// Keep everything `output` (this end) sends from now on, for a harness
+    /// (`crate::harness`): a data or poster output gets a [`Collected`] tap (see
+    /// [`tap_data`]), a tick output a tick input of its own. The tap's or input's
+    /// id (a pull request on its behalf is answered to it) and the collector.
+    fn collector(&self, output: &ErasedOutput) -> Option<(usize, Arc<dyn Any + Send + Sync>)>;
 }
 
 /// An input port with its packet type erased (see [`InputPort`]).
@@ -1683,6 +1766,10 @@ impl ErasedInput {
 }
 
 impl InputEnd for TickInner {
+    fn feeder(&self) -> ErasedOutput {
+        TickOut::new().erased()
+    }
+
     fn transfer(&self, to: &ErasedInput) -> u64 {
         let Some(to) = input_as::<TickInner>(to) else {
             return 0;
@@ -1708,6 +1795,10 @@ fn transfer_queue<T: Packet>(packets: Vec<Parcel<T>>, to: &ErasedInput) -> u64 {
 }
 
 impl<T: Packet> InputEnd for FifoInner<T> {
+    fn feeder(&self) -> ErasedOutput {
+        DataOut::<T>::new().erased()
+    }
+
     fn transfer(&self, to: &ErasedInput) -> u64 {
         transfer_queue(self.receiver.try_iter().collect(), to)
     }
@@ -1723,6 +1814,10 @@ impl<T: Packet> InputEnd for FifoInner<T> {
 }
 
 impl<T: Packet> InputEnd for UfifoInner<T> {
+    fn feeder(&self) -> ErasedOutput {
+        DataOut::<T>::new().erased()
+    }
+
     fn transfer(&self, to: &ErasedInput) -> u64 {
         let packets: Vec<Parcel<T>> = std::mem::take(&mut lock(&self.queue).packets).into();
         transfer_queue(packets, to)
@@ -1734,6 +1829,10 @@ impl<T: Packet> InputEnd for UfifoInner<T> {
 }
 
 impl<T: Packet> InputEnd for LastInner<T> {
+    fn feeder(&self) -> ErasedOutput {
+        DataOut::<T>::new().erased()
+    }
+
     fn transfer(&self, to: &ErasedInput) -> u64 {
         // Only a packet the old consumer has not taken yet is handed on.
         let unread = {
@@ -1750,6 +1849,10 @@ impl<T: Packet> InputEnd for LastInner<T> {
 }
 
 impl<T: Packet> InputEnd for PosterInInner<T> {
+    fn feeder(&self) -> ErasedOutput {
+        PosterOut::<T>::new().erased()
+    }
+
     fn clear_source(&self, output: usize) {
         let mut source = write(&self.source);
         if source.as_ref().is_some_and(|(id, _)| *id == output) {
@@ -1922,6 +2025,15 @@ fn update_list<X: Clone>(list: &RwLock<Arc<[X]>>, f: impl FnOnce(&mut Vec<X>)) {
 }
 
 impl OutputEnd for TickOutInner {
+    fn collector(&self, output: &ErasedOutput) -> Option<(usize, Arc<dyn Any + Send + Sync>)> {
+        let input = TickIn::new();
+        let erased = input.erased();
+        self.link(output, &erased).then(|| {
+            let any: Arc<dyn Any + Send + Sync> = Arc::new(input);
+            (erased.core.id, any)
+        })
+    }
+
     fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
         let Some(target) = input_as::<TickInner>(input) else {
             return false;
@@ -2019,6 +2131,13 @@ impl<T: Packet> DataOutInner<T> {
 }
 
 impl<T: Packet> OutputEnd for DataOutInner<T> {
+    fn collector(&self, output: &ErasedOutput) -> Option<(usize, Arc<dyn Any + Send + Sync>)> {
+        let collected = Arc::new(Collected::<T>::default());
+        let id = tap_data::<T>(output, collected.clone())?;
+        let any: Arc<dyn Any + Send + Sync> = collected;
+        Some((id, any))
+    }
+
     fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
         match data_target::<T>(input) {
             Some(target) => {
@@ -2094,6 +2213,13 @@ fn set_poster_source<T: Packet>(
 }
 
 impl<T: Packet> OutputEnd for PosterOutInner<T> {
+    fn collector(&self, output: &ErasedOutput) -> Option<(usize, Arc<dyn Any + Send + Sync>)> {
+        let collected = Arc::new(Collected::<T>::default());
+        let id = tap_data::<T>(output, collected.clone())?;
+        let any: Arc<dyn Any + Send + Sync> = collected;
+        Some((id, any))
+    }
+
     fn link(&self, output: &ErasedOutput, input: &ErasedInput) -> bool {
         let Some(this) = output_as::<PosterOutInner<T>>(output) else {
             return false;

@@ -29,7 +29,7 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Context, Driven, Fault, Section};
+use crate::automaton::{Atomic, Context, Driven, Fault, Section};
 use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::idle::IdleProbe;
@@ -91,6 +91,20 @@ enum Recovery {
     Recovered,
     Goto(usize),
     Failed(String),
+}
+
+/// What one turn of the loop ([`Runner::turn`]) found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Turn {
+    /// The component is dead: the loop ends.
+    Dead,
+    /// The user automaton does not run (`ready`, `suspended`, an error, `end`):
+    /// nothing happens until a command arrives.
+    Stopped,
+    /// A piece of user-automaton work was done; more may be waiting.
+    Worked,
+    /// Nothing was due: wait for a ring or the nearest timer.
+    Idle,
 }
 
 /// Everything one component thread owns.
@@ -171,6 +185,9 @@ pub(crate) struct Runner {
     adapt: Option<Local>,
     /// How long the last user call ran.
     last_took: Duration,
+    /// Driven by a harness (`crate::harness`) on the caller's thread, on a virtual
+    /// clock of its own: a retry plan's wait advances that clock.
+    harnessed: bool,
     /// Temporal labels of the inputs whose response time is measured (aperiodic
     /// components with a `max_response`; `crate::port::ArrivalLabel`).
     labels: Vec<Option<Arc<ArrivalLabel>>>,
@@ -252,6 +269,7 @@ impl Runner {
             scheduling: None,
             adapt,
             last_took: Duration::ZERO,
+            harnessed: false,
             labels: Vec::new(),
             responses: VecDeque::new(),
             _exit_guard: exit_guard,
@@ -261,6 +279,32 @@ impl Runner {
             bell: Arc::clone(&runner.bell),
         });
         runner
+    }
+
+    /// The component's code (the harness reads the generated glue through it): an
+    /// atomic component's own automaton, not the `Atomic` wrapper around it.
+    pub(crate) fn automaton(&self) -> &dyn std::any::Any {
+        let driven: &dyn std::any::Any = &*self.automaton;
+        match driven.downcast_ref::<Atomic>() {
+            Some(atomic) => {
+                let inner: &dyn std::any::Any = &*atomic.0;
+                inner
+            }
+            None => driven,
+        }
+    }
+
+    /// [`Runner::automaton`], mutable.
+    pub(crate) fn automaton_mut(&mut self) -> &mut dyn std::any::Any {
+        let driven: &mut dyn std::any::Any = &mut *self.automaton;
+        if driven.is::<Atomic>() {
+            if let Some(atomic) = driven.downcast_mut::<Atomic>() {
+                let inner: &mut dyn std::any::Any = &mut *atomic.0;
+                return inner;
+            }
+            unreachable!("checked just above");
+        }
+        driven
     }
 
     /// Whether this is a compound's runner.
@@ -291,6 +335,12 @@ impl Runner {
         }
     }
 
+    /// Driven by a harness on `clock` (its own virtual clock), with no thread.
+    pub(crate) fn harness_on(&mut self, clock: Clock) {
+        self.set_clock(clock);
+        self.harnessed = true;
+    }
+
     /// On a virtual clock: this component has nothing due at the clock's time and is
     /// about to wait (see `crate::clock`).
     fn settle(&self) {
@@ -317,6 +367,36 @@ impl Runner {
         let mut priority = 0;
         self.shared.quietly(|monitor| priority = monitor.priority);
         self.apply_priority(priority);
+        self.begin();
+        loop {
+            match self.turn() {
+                Turn::Dead => break,
+                Turn::Stopped => {
+                    // Nothing runs: wait for the next ring (a command, or an arrival
+                    // that only needs to stay where it is).
+                    if !self.bell.spin() {
+                        self.clock = self.time.now();
+                        self.update_cpu(false);
+                        self.settle();
+                        self.bell.park_until(None);
+                    }
+                }
+                // After a piece of work, wait at once when nothing else is known to be
+                // waiting, instead of going round for a second full look: anything
+                // that arrived since the turn's `clear` rang the bell, so the wait
+                // returns at once for it, and a timer already due makes the wait's
+                // deadline past.
+                Turn::Worked if !self.idle() => {}
+                Turn::Worked | Turn::Idle => self.block(),
+            }
+        }
+        self.end();
+    }
+
+    /// What the thread does before its first turn (after its OS scheduling is set):
+    /// publish the adaptation settings and the variables, run `start` and go to
+    /// `ready` (or `starting_error`). The harness (`crate::harness`) calls it too.
+    pub(crate) fn begin(&mut self) {
         if let Some(adapt) = &self.adapt {
             let (enabled, max_level) = (adapt.enabled, adapt.ladder.max_level());
             let settle_periods = adapt.settle_periods;
@@ -335,66 +415,65 @@ impl Runner {
                 self.apply(Event::StartFailed);
             }
         }
-        loop {
-            // Before looking at anything: a ring from now on wakes the next wait. Not
-            // after a wait that found its work by looking at the sources themselves
-            // (`wait_for_input`): the bell then stays rung, so that producers only read
-            // it, until the thread is about to park.
-            self.polled = std::mem::take(&mut self.found_by_polling);
-            // Whether anything rang since the last clear. If not, the bell is already
-            // quiet and needs no clearing (the clear would write the value it reads:
-            // a ring after this load still leaves the bell rung for the next wait),
-            // and the control queue needs no reading: a command rings after it is
-            // queued, so one queued but not rung yet rings before the next wait, which
-            // then returns at once. Saves an atomic swap and the read of a cold
-            // channel on every timer wake-up.
-            let rung = self.polled || self.bell.is_rung();
-            if rung && !self.polled {
-                self.bell.clear();
-            }
-            // One clock reading per turn (user calls start from it, and end with another),
-            // or the reading the spin that found this turn's work just took.
-            self.clock = match self.found_at.take() {
-                Some(reading) => reading,
-                None => self.time.now(),
-            };
-            // 1. Control first.
-            if (rung || !self.deferred.is_empty()) && !self.drain_control() {
-                break;
-            }
-            if self.state != State::Running {
-                if self.supervised && self.state == State::Suspended {
-                    self.observe_instances();
-                }
-                // Nothing runs: wait for the next ring (a command, or an arrival that
-                // only needs to stay where it is).
-                self.cx.end_requested = false;
-                if !self.bell.spin() {
-                    self.clock = self.time.now();
-                    self.update_cpu(false);
-                    self.settle();
-                    self.bell.park_until(None);
-                }
-                continue;
-            }
-            // 2. The task finished.
-            if self.cx.end_requested {
-                self.cx.end_requested = false;
-                self.apply(Event::Finished);
-                continue;
-            }
-            let now = self.clock;
-            self.notice_arrivals(now);
-            // After a piece of work, wait at once when nothing else is known to be
-            // waiting, instead of going round for a second full look: anything that
-            // arrived since the `clear` above rang the bell, so the wait returns at once
-            // for it, and a timer already due makes the wait's deadline past.
-            if !self.step(now) || self.idle() {
-                self.block();
-            }
+    }
+
+    /// One turn of the loop, everything but the wait: the runtime's semantics per
+    /// event, in one place, shared by the component thread and by the harness
+    /// (`crate::harness`), which calls it until it returns something other than
+    /// [`Turn::Worked`].
+    pub(crate) fn turn(&mut self) -> Turn {
+        // Before looking at anything: a ring from now on wakes the next wait. Not
+        // after a wait that found its work by looking at the sources themselves
+        // (`wait_for_input`): the bell then stays rung, so that producers only read
+        // it, until the thread is about to park.
+        self.polled = std::mem::take(&mut self.found_by_polling);
+        // Whether anything rang since the last clear. If not, the bell is already
+        // quiet and needs no clearing (the clear would write the value it reads:
+        // a ring after this load still leaves the bell rung for the next wait),
+        // and the control queue needs no reading: a command rings after it is
+        // queued, so one queued but not rung yet rings before the next wait, which
+        // then returns at once. Saves an atomic swap and the read of a cold
+        // channel on every timer wake-up.
+        let rung = self.polled || self.bell.is_rung();
+        if rung && !self.polled {
+            self.bell.clear();
         }
+        // One clock reading per turn (user calls start from it, and end with another),
+        // or the reading the spin that found this turn's work just took.
+        self.clock = match self.found_at.take() {
+            Some(reading) => reading,
+            None => self.time.now(),
+        };
+        // 1. Control first.
+        if (rung || !self.deferred.is_empty()) && !self.drain_control() {
+            return Turn::Dead;
+        }
+        if self.state != State::Running {
+            if self.supervised && self.state == State::Suspended {
+                self.observe_instances();
+            }
+            self.cx.end_requested = false;
+            return Turn::Stopped;
+        }
+        // 2. The task finished.
+        if self.cx.end_requested {
+            self.cx.end_requested = false;
+            self.apply(Event::Finished);
+            return Turn::Worked;
+        }
+        let now = self.clock;
+        self.notice_arrivals(now);
+        if self.step(now) {
+            Turn::Worked
+        } else {
+            Turn::Idle
+        }
+    }
+
+    /// What the thread does after its last turn: publish its CPU time, and answer the
+    /// commands that arrived while the component went dead.
+    pub(crate) fn end(&mut self) {
         self.update_cpu(true);
-        // Commands that arrived while the component went dead get their answer.
         while let Ok(message) = self.control.try_recv() {
             if message.take() {
                 let _ = message.reply.try_send(Reply::Rejected(
@@ -450,8 +529,12 @@ impl Runner {
         self.has_pull && self.outputs.iter().any(|output| output.has_requests())
     }
 
-    /// Wait for a command, an arrival or the nearest timer.
-    fn block(&mut self) {
+    /// The nearest timer of the current user state (`after` transitions, the periodic
+    /// deadline, a compound's own wake-up), while the user automaton runs.
+    pub(crate) fn next_due(&self) -> Option<Instant> {
+        if self.state != State::Running {
+            return None;
+        }
         let state_spec = &self.spec.states[self.user];
         let mut deadline = self.next_periodic;
         for after in state_spec.after {
@@ -463,6 +546,12 @@ impl Runner {
         {
             deadline = Some(deadline.map_or(due, |d| d.min(due)));
         }
+        deadline
+    }
+
+    /// Wait for a command, an arrival or the nearest timer.
+    fn block(&mut self) {
+        let deadline = self.next_due();
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
         // loop then looks at the control port first (the priority rule above). With a
         // timer due, park at once (a periodic thread sleeps like a bare one); waiting
@@ -1273,7 +1362,14 @@ impl Runner {
                 PlanStep::Retry { count, every } => {
                     let Some(section) = section else { continue };
                     for _ in 0..count {
-                        std::thread::sleep(every);
+                        match self.time.as_virtual().filter(|_| self.harnessed) {
+                            // A harness's clock is the component's own: the retry
+                            // waits on it, not in real time.
+                            Some(clock) => {
+                                let _ = clock.advance_with_timeout(every, Duration::ZERO);
+                            }
+                            None => std::thread::sleep(every),
+                        }
                         self.clock = self.time.now();
                         if self.run_section(state, section).is_ok() {
                             return Recovery::Recovered;

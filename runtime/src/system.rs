@@ -407,6 +407,217 @@ impl std::fmt::Debug for System {
     }
 }
 
+/// A component checked against its spec and wired to its monitor, control port and
+/// doorbell, with its runner not started: what [`System::add`] keeps in a slot, and
+/// what a harness (`crate::harness`) drives on the caller's thread.
+pub(crate) struct Prepared {
+    pub(crate) name: String,
+    pub(crate) spec: &'static Spec,
+    pub(crate) handle: Handle,
+    pub(crate) inputs: Vec<ErasedInput>,
+    pub(crate) outputs: Vec<ErasedOutput>,
+    pub(crate) runner: Runner,
+}
+
+/// Check `component` (name, spec, ports) and build its monitor, control port, handle
+/// and runner.
+pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
+    let timing = component.timing();
+    let Component {
+        name,
+        automaton,
+        ports,
+        timing: _,
+        instances,
+        adaptation,
+    } = component;
+    if name.is_empty() || name.contains('.') {
+        return Err(Error::InvalidName(name));
+    }
+    let spec = automaton.spec();
+    if let Err(detail) = spec.validate_with(&timing) {
+        return Err(Error::InvalidSpec {
+            component: name,
+            detail,
+        });
+    }
+    let mismatch = |detail: String| Error::PortMismatch {
+        component: name.clone(),
+        detail,
+    };
+    if ports.inputs.len() != spec.inputs.len() {
+        return Err(mismatch(format!(
+            "{} input ports registered, the spec declares {}",
+            ports.inputs.len(),
+            spec.inputs.len()
+        )));
+    }
+    if ports.outputs.len() != spec.outputs.len() {
+        return Err(mismatch(format!(
+            "{} output ports registered, the spec declares {}",
+            ports.outputs.len(),
+            spec.outputs.len()
+        )));
+    }
+    for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+        if !kind_matches_input(declared.kind, port.kind) {
+            return Err(mismatch(format!(
+                "input `{}` is declared {:?} but registered as {}",
+                declared.name,
+                declared.kind,
+                port.kind.name()
+            )));
+        }
+    }
+    for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+        if !kind_matches_output(declared.kind, port.kind) {
+            return Err(mismatch(format!(
+                "output `{}` is declared {:?} but registered as {}",
+                declared.name,
+                declared.kind,
+                port.kind.name()
+            )));
+        }
+    }
+    for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+        if port.core.owner.get().is_some() {
+            return Err(Error::PortInUse {
+                component: name.clone(),
+                port: declared.name.to_owned(),
+            });
+        }
+    }
+    for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+        if port.core.owner.get().is_some() {
+            return Err(Error::PortInUse {
+                component: name.clone(),
+                port: declared.name.to_owned(),
+            });
+        }
+    }
+
+    let monitor = Monitor {
+        name: name.clone(),
+        state: State::Starting,
+        user_state: None,
+        result: TaskResult::None,
+        error: None,
+        variables: spec
+            .variables
+            .iter()
+            .map(|v| (v.name.to_owned(), Value::Unit))
+            .collect(),
+        cpu_time: Duration::ZERO,
+        elapsed_time: Duration::ZERO,
+        missed_deadlines: 0,
+        overruns: 0,
+        overflows: 0,
+        port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
+        quality: 0,
+        period: timing.period,
+        max_response: timing.max_response,
+        priority: timing.priority,
+        os_priority: crate::monitor::OsPriority::Inherited,
+        dropped_events: 0,
+        supervision: Vec::new(),
+        supervision_steps: 0,
+        adaptation: crate::adapt::AdaptStatus::default(),
+        response: crate::monitor::ResponseTimes::default(),
+    };
+    let named_inputs = spec
+        .inputs
+        .iter()
+        .map(|i| i.name)
+        .zip(ports.inputs.iter().cloned())
+        .collect();
+    let shared = Arc::new(Shared::new(monitor, named_inputs));
+    let bell = crate::port::Doorbell::new();
+    // Response times (paper 3.6) are measured for an aperiodic component with a
+    // `max_response`, at the inputs an `on` transition handles.
+    let labeled = timing.period.is_none() && timing.max_response.is_some();
+    let labels: Vec<Option<Arc<ArrivalLabel>>> = (0..spec.inputs.len())
+        .map(|index| {
+            let handled = spec
+                .states
+                .iter()
+                .any(|state| state.on.iter().any(|on| on.port == index));
+            (labeled && handled).then(|| Arc::new(ArrivalLabel::default()))
+        })
+        .collect();
+    for ((port, declared), label) in ports.inputs.iter().zip(spec.inputs).zip(&labels) {
+        let owner = Owner {
+            bell: Arc::clone(&bell),
+            shared: Arc::downgrade(&shared),
+            port_name: declared.name,
+            label: label.clone(),
+        };
+        if port.core.owner.set(owner).is_err() {
+            return Err(Error::PortInUse {
+                component: name.clone(),
+                port: declared.name.to_owned(),
+            });
+        }
+    }
+    for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+        let owner = Owner {
+            bell: Arc::clone(&bell),
+            shared: Arc::downgrade(&shared),
+            port_name: declared.name,
+            label: None,
+        };
+        if port.core.owner.set(owner).is_err() {
+            return Err(Error::PortInUse {
+                component: name.clone(),
+                port: declared.name.to_owned(),
+            });
+        }
+    }
+    for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
+        if declared.pull {
+            port.core.accept_pulls();
+        }
+    }
+    let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
+    let (exit_guard, exited) = crossbeam_channel::bounded(1);
+    let handle = Handle {
+        name: Arc::from(name.as_str()),
+        shared: Arc::clone(&shared),
+        control: control_sender,
+        bell: Arc::clone(&bell),
+        exited,
+        join: Arc::new(Mutex::new(None)),
+        command_timeout: DEFAULT_COMMAND_TIMEOUT,
+        instances: instances.into(),
+        outputs: spec
+            .outputs
+            .iter()
+            .map(|o| o.name)
+            .zip(ports.outputs.iter().cloned())
+            .collect(),
+    };
+    let mut runner = Runner::new(
+        &name,
+        automaton,
+        timing,
+        adaptation,
+        shared,
+        control,
+        bell,
+        ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
+        ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
+        exit_guard,
+    );
+    runner.set_labels(labels);
+    Ok(Prepared {
+        name,
+        spec,
+        handle,
+        inputs: ports.inputs,
+        outputs: ports.outputs,
+        runner,
+    })
+}
+
 fn kind_matches_input(spec: InputKind, erased: InKind) -> bool {
     matches!(
         (spec, erased),
@@ -455,203 +666,25 @@ impl System {
     /// Add a component; it starts with the system (or at once if the system has
     /// started). Duplicate names and ports that do not match the spec are rejected.
     pub fn add(&mut self, component: Component) -> Result<Handle, Error> {
-        let timing = component.timing();
-        let Component {
+        if self.names.contains_key(&component.name) {
+            return Err(Error::DuplicateName(component.name));
+        }
+        let Prepared {
             name,
-            automaton,
-            ports,
-            timing: _,
-            instances,
-            adaptation,
-        } = component;
-        if name.is_empty() || name.contains('.') {
-            return Err(Error::InvalidName(name));
-        }
-        if self.names.contains_key(&name) {
-            return Err(Error::DuplicateName(name));
-        }
-        let spec = automaton.spec();
-        if let Err(detail) = spec.validate_with(&timing) {
-            return Err(Error::InvalidSpec {
-                component: name,
-                detail,
-            });
-        }
-        let mismatch = |detail: String| Error::PortMismatch {
-            component: name.clone(),
-            detail,
-        };
-        if ports.inputs.len() != spec.inputs.len() {
-            return Err(mismatch(format!(
-                "{} input ports registered, the spec declares {}",
-                ports.inputs.len(),
-                spec.inputs.len()
-            )));
-        }
-        if ports.outputs.len() != spec.outputs.len() {
-            return Err(mismatch(format!(
-                "{} output ports registered, the spec declares {}",
-                ports.outputs.len(),
-                spec.outputs.len()
-            )));
-        }
-        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
-            if !kind_matches_input(declared.kind, port.kind) {
-                return Err(mismatch(format!(
-                    "input `{}` is declared {:?} but registered as {}",
-                    declared.name,
-                    declared.kind,
-                    port.kind.name()
-                )));
-            }
-        }
-        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
-            if !kind_matches_output(declared.kind, port.kind) {
-                return Err(mismatch(format!(
-                    "output `{}` is declared {:?} but registered as {}",
-                    declared.name,
-                    declared.kind,
-                    port.kind.name()
-                )));
-            }
-        }
-        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
-            if port.core.owner.get().is_some() {
-                return Err(Error::PortInUse {
-                    component: name.clone(),
-                    port: declared.name.to_owned(),
-                });
-            }
-        }
-        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
-            if port.core.owner.get().is_some() {
-                return Err(Error::PortInUse {
-                    component: name.clone(),
-                    port: declared.name.to_owned(),
-                });
-            }
-        }
-
-        let monitor = Monitor {
-            name: name.clone(),
-            state: State::Starting,
-            user_state: None,
-            result: TaskResult::None,
-            error: None,
-            variables: spec
-                .variables
-                .iter()
-                .map(|v| (v.name.to_owned(), Value::Unit))
-                .collect(),
-            cpu_time: Duration::ZERO,
-            elapsed_time: Duration::ZERO,
-            missed_deadlines: 0,
-            overruns: 0,
-            overflows: 0,
-            port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
-            quality: 0,
-            period: timing.period,
-            max_response: timing.max_response,
-            priority: timing.priority,
-            os_priority: crate::monitor::OsPriority::Inherited,
-            dropped_events: 0,
-            supervision: Vec::new(),
-            supervision_steps: 0,
-            adaptation: crate::adapt::AdaptStatus::default(),
-            response: crate::monitor::ResponseTimes::default(),
-        };
-        let named_inputs = spec
-            .inputs
-            .iter()
-            .map(|i| i.name)
-            .zip(ports.inputs.iter().cloned())
-            .collect();
-        let shared = Arc::new(Shared::new(monitor, named_inputs));
-        let bell = crate::port::Doorbell::new();
-        // Response times (paper 3.6) are measured for an aperiodic component with a
-        // `max_response`, at the inputs an `on` transition handles.
-        let labeled = timing.period.is_none() && timing.max_response.is_some();
-        let labels: Vec<Option<Arc<ArrivalLabel>>> = (0..spec.inputs.len())
-            .map(|index| {
-                let handled = spec
-                    .states
-                    .iter()
-                    .any(|state| state.on.iter().any(|on| on.port == index));
-                (labeled && handled).then(|| Arc::new(ArrivalLabel::default()))
-            })
-            .collect();
-        for ((port, declared), label) in ports.inputs.iter().zip(spec.inputs).zip(&labels) {
-            let owner = Owner {
-                bell: Arc::clone(&bell),
-                shared: Arc::downgrade(&shared),
-                port_name: declared.name,
-                label: label.clone(),
-            };
-            if port.core.owner.set(owner).is_err() {
-                return Err(Error::PortInUse {
-                    component: name.clone(),
-                    port: declared.name.to_owned(),
-                });
-            }
-        }
-        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
-            let owner = Owner {
-                bell: Arc::clone(&bell),
-                shared: Arc::downgrade(&shared),
-                port_name: declared.name,
-                label: None,
-            };
-            if port.core.owner.set(owner).is_err() {
-                return Err(Error::PortInUse {
-                    component: name.clone(),
-                    port: declared.name.to_owned(),
-                });
-            }
-        }
-        for (port, declared) in ports.outputs.iter().zip(spec.outputs) {
-            if declared.pull {
-                port.core.accept_pulls();
-            }
-        }
-        let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
-        let (exit_guard, exited) = crossbeam_channel::bounded(1);
-        let handle = Handle {
-            name: Arc::from(name.as_str()),
-            shared: Arc::clone(&shared),
-            control: control_sender,
-            bell: Arc::clone(&bell),
-            exited,
-            join: Arc::new(Mutex::new(None)),
-            command_timeout: DEFAULT_COMMAND_TIMEOUT,
-            instances: instances.into(),
-            outputs: spec
-                .outputs
-                .iter()
-                .map(|o| o.name)
-                .zip(ports.outputs.iter().cloned())
-                .collect(),
-        };
-        let mut runner = Runner::new(
-            &name,
-            automaton,
-            timing,
-            adaptation,
-            shared,
-            control,
-            bell,
-            ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
-            ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
-            exit_guard,
-        );
-        runner.set_labels(labels);
+            spec,
+            handle,
+            inputs,
+            outputs,
+            runner,
+        } = prepare(component)?;
         let index = self.slots.len();
         self.names.insert(name.clone(), index);
         self.slots.push(Slot {
             name,
             spec,
             handle: handle.clone(),
-            inputs: ports.inputs,
-            outputs: ports.outputs,
+            inputs,
+            outputs,
             runner: Some(runner),
         });
         if self.started {

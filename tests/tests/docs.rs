@@ -285,3 +285,27 @@ fn the_section_api_example_compiles_warning_free() {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     );
 }
+
+#[test]
+fn the_harness_example_runs() {
+    // docs/generated-code.md, "Testing a component alone": the description, its code
+    // and its test, in the crate `coolc compile` writes; the test passes.
+    let text = doc("generated-code.md");
+    let text = section(&text, "## Testing a component alone");
+    let description = &blocks(text, "cool")[0];
+    let code = blocks(text, "rust");
+    let (user, test) = (&code[0], &code[1]);
+    assert!(test.matches("#[test]").count() >= 2, "{test}");
+    let krate = lower("tally.cool", description, "tally");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tally");
+    coolc::merge::write_crate(&out, &krate).unwrap();
+    std::fs::write(out.join("src/tally.rs"), user).unwrap();
+    std::fs::create_dir_all(out.join("tests")).unwrap();
+    std::fs::write(out.join("tests/tally.rs"), test).unwrap();
+    cargo(
+        &out,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    cargo(&out, &["test", "--quiet", "--test", "tally"]);
+}

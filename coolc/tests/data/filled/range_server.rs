@@ -10,6 +10,13 @@ pub struct RangeServer {
     calibrated: bool,
 }
 
+impl RangeServer {
+    /// Whether `calibrating`'s entry has run.
+    pub fn calibrated_once(&self) -> bool {
+        self.calibrated
+    }
+}
+
 impl Behavior for RangeServer {
     fn calibrating_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let _ = cx;

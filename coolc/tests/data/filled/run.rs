@@ -143,3 +143,62 @@ fn mobile_base_instances_run_and_talk() {
         "{report:?}"
     );
 }
+
+// ---------------------------------------------------------------------------------
+// The generated harnesses (`<module>::Harness`): one component alone, on a virtual
+// clock, with no thread.
+
+#[test]
+fn a_range_server_alone_in_its_harness_streams_and_retries_on_the_virtual_clock() {
+    use fleet::generated::range_server::{Harness, UserState};
+    let mut h = Harness::running(fleet::range_server::RangeServer::default()).unwrap();
+    // `calibrating`'s entry, then its `may` choice.
+    assert_eq!(h.user_state(), Some(UserState::Streaming));
+    assert!(h.behavior().calibrated_once());
+    h.advance(Duration::from_millis(199)).unwrap();
+    assert_eq!(h.sent_scan().unwrap().len(), 3);
+    // The fourth periodic section (at 200ms) raises `sensor_timeout` once; its plan
+    // (`retry 2 every 50ms`) runs the section again 50ms later on the harness clock.
+    h.advance(Duration::from_millis(1)).unwrap();
+    let scans = h.sent_scan().unwrap();
+    assert_eq!(scans.len(), 1);
+    assert_eq!(scans[0].ranges, [h.config().emergency_distance * 10.0; 16]);
+    assert_eq!((h.vars().scans, h.vars().timeouts), (4, 1));
+    assert_eq!(h.inner().elapsed(), Duration::from_millis(250));
+    assert_eq!(h.state(), coolbot::State::Running);
+    assert_eq!(h.ticks_emergency().unwrap(), 0);
+}
+
+#[test]
+fn a_planner_answers_a_pull_and_a_follower_gets_its_answer_in_their_harnesses() {
+    use fleet::generated::types::{Path, Pose2D};
+    use fleet::generated::{follower, planner};
+    let mut planner = planner::Harness::running(MobileBaseParts::default().planner()).unwrap();
+    // The entry section sends one path; a pull asks for another.
+    assert_eq!(planner.sent_path().unwrap().len(), 1);
+    planner.push_goal(Pose2D::default()).unwrap();
+    planner.pull_path().unwrap();
+    let answered = planner.sent_path().unwrap();
+    assert_eq!(answered.len(), 1);
+    assert_eq!(answered[0].poses.len(), 2);
+
+    let config = follower::Config {
+        scale: 2,
+        ..follower::Config::default()
+    };
+    let mut follower = follower::Harness::with(
+        fleet::follower::Follower::default(),
+        config,
+        follower::Vars::default(),
+    )
+    .unwrap();
+    follower.run().unwrap();
+    follower
+        .answer_path(Path {
+            poses: vec![Pose2D::default(); 3],
+        })
+        .unwrap();
+    follower.advance(Duration::from_millis(50)).unwrap();
+    assert_eq!(follower.vars().waypoints, 6);
+    assert_eq!(follower.error(), None);
+}

@@ -1,0 +1,243 @@
+//! `coolbot::harness`: one component on the test's thread, on a virtual clock. The
+//! sequences are exact (no thread, no real time), and they are the runtime's: the
+//! harness drives the runner's own per-event step.
+
+mod support;
+
+use std::time::Duration;
+
+use coolbot::harness::{Harness, HarnessError};
+use coolbot::{Command, Controllable, State, TaskResult, Value};
+use support::worker::{self, Exception};
+use support::{Injected, Script, Scripted};
+
+fn ms(n: u64) -> Duration {
+    Duration::from_millis(n)
+}
+
+fn worker(script: &std::sync::Arc<Script>) -> Harness {
+    let behavior = Scripted {
+        script: script.clone(),
+        token: None,
+    };
+    Harness::new(worker::component("w", behavior).0).unwrap()
+}
+
+#[test]
+fn start_run_arrivals_and_periodic_sections_in_exact_order() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    assert_eq!(h.state(), State::Ready);
+    assert_eq!(script.full_log(), ["start"]);
+    h.run().unwrap();
+    assert_eq!(h.state(), State::Running);
+    assert_eq!(h.user_state().as_deref(), Some("idle"));
+    for n in 0..3u64 {
+        h.push("data", n).unwrap();
+    }
+    h.settle().unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("busy"));
+    assert_eq!(h.variable("count"), Some(Value::UInt(3)));
+    // period 5ms: two periodic sections by 12ms, none before.
+    h.advance(ms(4)).unwrap();
+    assert_eq!(
+        script.periodics.load(std::sync::atomic::Ordering::SeqCst),
+        0
+    );
+    h.advance(ms(8)).unwrap();
+    assert_eq!(
+        script.full_log(),
+        [
+            "start",
+            "idle.entry",
+            "busy.entry",
+            "busy.periodic",
+            "busy.periodic"
+        ]
+    );
+    assert_eq!(h.elapsed(), ms(12));
+    assert_eq!(h.next_due(), Some(ms(3)));
+}
+
+#[test]
+fn an_after_transition_fires_at_its_time_before_the_periodic_section_due_then() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.run().unwrap();
+    h.tick("kick").unwrap();
+    h.settle().unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("busy"));
+    // `after 10s -> idle` and the 2000th periodic deadline fall at 10s: timers in
+    // declaration order after a `may` choice, `after` before the periodic section.
+    h.advance(Duration::from_secs(10) - ms(1)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("busy"));
+    h.advance(ms(1)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("idle"));
+    assert_eq!(
+        script.periodics.load(std::sync::atomic::Ordering::SeqCst),
+        1999
+    );
+    let log = script.log();
+    assert_eq!(
+        log,
+        [
+            "start",
+            "idle.entry",
+            "busy.entry",
+            "busy.exit",
+            "idle.entry"
+        ]
+    );
+}
+
+#[test]
+fn a_may_choice_and_a_retry_plan_on_the_harness_clock() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.run().unwrap();
+    h.push("data", 7u64).unwrap();
+    h.settle().unwrap();
+    // `exception flaky { retry 2 every 1ms; }`: two failures, then the third call
+    // succeeds; the retries wait on the harness's clock.
+    script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(Exception::Flaky),
+        times: 2,
+    }));
+    h.advance(ms(5)).unwrap();
+    assert_eq!(h.state(), State::Running);
+    assert_eq!(
+        *script.handled.lock().unwrap(),
+        ["flaky: injected in busy.periodic"]
+    );
+    assert_eq!(h.elapsed(), ms(7));
+    // The next periodic section chooses `idle`.
+    script
+        .choose_idle
+        .store(true, std::sync::atomic::Ordering::SeqCst);
+    h.advance(ms(5)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("idle"));
+}
+
+#[test]
+fn an_undeclared_fault_ends_in_running_error_and_a_restart_runs_start_again() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.run().unwrap();
+    script.inject(Some(Injected {
+        hook: "busy.entry",
+        exception: None,
+        times: 1,
+    }));
+    h.tick("kick").unwrap();
+    h.settle().unwrap();
+    assert_eq!(h.state(), State::RunningError);
+    let error = h.error().unwrap();
+    assert!(error.contains("injected in busy.entry"), "{error}");
+    assert_eq!(h.result(), TaskResult::None);
+    h.set_state(Controllable::Ready).unwrap();
+    assert_eq!(h.state(), State::Ready);
+    assert_eq!(script.log().iter().filter(|e| *e == "start").count(), 2);
+}
+
+#[test]
+fn commands_and_variables_through_the_control_port() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.set("gain", Value::Int(3)).unwrap();
+    assert_eq!(h.variable("gain"), Some(Value::Int(3)));
+    let refused = h.set("count", Value::UInt(1)).unwrap_err();
+    assert!(
+        matches!(&refused, HarnessError::Rejected { reason, .. } if reason.contains("observable")),
+        "{refused}"
+    );
+    // Two quality levels: 0 and 1.
+    h.command(Command::SetQuality(1)).unwrap();
+    assert_eq!(h.quality(), 1);
+    let refused = h.command(Command::SetQuality(2)).unwrap_err();
+    assert!(
+        matches!(refused, HarnessError::Rejected { .. }),
+        "{refused}"
+    );
+}
+
+#[test]
+fn wrong_ports_are_errors_that_name_them() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    let error = h.push("nope", 1u64).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "`w` has no input `nope` (inputs: data, kick, feed)"
+    );
+    let error = h.push("data", 1u32).unwrap_err();
+    assert!(matches!(error, HarnessError::WrongType { .. }), "{error}");
+    let error = h.tick("data").unwrap_err();
+    assert!(matches!(error, HarnessError::WrongKind { .. }), "{error}");
+    let error = h.push("kick", 1u64).unwrap_err();
+    assert!(matches!(error, HarnessError::WrongKind { .. }), "{error}");
+    let error = h.take_sent::<u32>("out").unwrap_err();
+    assert!(matches!(error, HarnessError::WrongType { .. }), "{error}");
+    assert_eq!(h.take_sent::<u64>("out").unwrap(), Vec::<u64>::new());
+}
+
+#[test]
+fn a_recording_replays_into_the_harness_at_its_recorded_times() {
+    use coolbot::clock::{Clock, VirtualClock};
+    use coolbot::harness::replay::{Replay, ReplayError};
+    use coolbot::port::DataOut;
+    use coolbot::record::Recorder;
+    use coolbot::{OutputKind, System};
+
+    // A recording of a producer's `out` (u64), stamped by a virtual clock: packets 1
+    // and 2 at 0ms, 3 at 12ms.
+    let dir = std::env::temp_dir().join(format!("coolbot-harness-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("replay.mcap");
+    {
+        let clock = VirtualClock::new();
+        let mut system = System::new();
+        let out = DataOut::<u64>::new();
+        let source = support::shell::ShellBuilder::new("src")
+            .output(support::shell::output("out", OutputKind::Data, false), &out)
+            .build();
+        system.add(source).unwrap();
+        system.run_all().unwrap();
+        let mut recorder = Recorder::new().clock(Clock::virtual_clock(&clock));
+        recorder.tap::<u64>(&system, "src.out").unwrap();
+        let recording = recorder.start(&path).unwrap();
+        out.send(1);
+        out.send(2);
+        clock.advance(ms(12)).unwrap();
+        out.send(3);
+        assert_eq!(recording.finish().unwrap().ports[0].recorded, 3);
+    }
+
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.run().unwrap();
+    let mut replay = Replay::open(&path).unwrap();
+    let error = replay.route::<u64>("src.nope", &h, "data").unwrap_err();
+    assert!(matches!(error, ReplayError::NotRecorded { .. }), "{error}");
+    let error = replay.route::<u32>("src.out", &h, "data").unwrap_err();
+    assert!(
+        matches!(error, ReplayError::Harness(HarnessError::WrongType { .. })),
+        "{error}"
+    );
+    replay.route::<u64>("src.out", &h, "data").unwrap();
+    let replayed = replay.play(&mut h).unwrap();
+    assert_eq!(replayed.sent["src.out"], 3);
+    let (first, last) = replayed.span.unwrap();
+    assert_eq!(last - first, ms(12));
+    // Packets 1 and 2 woke `busy` at 0ms (its entry counted them); the periodic
+    // sections at 5ms and 10ms found nothing; packet 3 came at 12ms, after them.
+    assert_eq!(h.elapsed(), ms(12));
+    assert_eq!(h.variable("count"), Some(Value::UInt(2)));
+    assert_eq!(
+        script.periodics.load(std::sync::atomic::Ordering::SeqCst),
+        2
+    );
+    h.advance(ms(3)).unwrap();
+    assert_eq!(h.variable("count"), Some(Value::UInt(3)));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,50 @@
+//! The generated code the compile-fail cases (`tests/ui/*.rs`) implement, and a
+//! correct implementation of it that builds (so a case fails for its own reason only).
+
+/// The code `coolc` generated from `gate.cool` (in `OUT_DIR`).
+#[allow(missing_docs, unused_qualifications)]
+pub mod generated {
+    include!(concat!(env!("OUT_DIR"), "/cool.rs"));
+}
+
+use generated::gate::{Behavior, Cx, OpenMay};
+
+/// A gate that closes again after one period open.
+#[derive(Debug, Default)]
+pub struct Gate {
+    /// Periods spent open since it opened.
+    periods: u32,
+}
+
+impl Behavior for Gate {
+    fn closed_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let _ = cx;
+        Ok(())
+    }
+
+    fn open_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.openings += 1;
+        self.periods = 0;
+        Ok(())
+    }
+
+    fn open_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let _ = cx;
+        self.periods += 1;
+        Ok(())
+    }
+
+    fn open_choose(&mut self, cx: &mut Cx<'_>) -> Option<OpenMay> {
+        let _ = cx;
+        (self.periods > 0).then_some(OpenMay::Closed)
+    }
+
+    fn jammed_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let _ = cx;
+        Ok(())
+    }
+
+    fn on_stuck(&mut self, cx: &mut Cx<'_>, message: &str) {
+        let _ = (cx, message);
+    }
+}
