@@ -14,8 +14,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::ir::RuntimeDep;
 use crate::{
-    Analysis, RenderFormat, RenderOptions, diagram, emit, fingerprint, ident, lower, manifest,
-    merge,
+    Checked, RenderFormat, RenderOptions, diagram, emit, fingerprint, ident, lower, manifest, merge,
 };
 
 /// Exit code: no error.
@@ -315,25 +314,8 @@ fn render_options(cli: &Cli) -> RenderOptions {
     }
 }
 
-/// The files of directory `dir` (`""` is the current directory), for the help on an
-/// unknown name that a file next to the one using it defines.
-fn cool_files_in(dir: &Path) -> Vec<PathBuf> {
-    let read = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let Ok(entries) = std::fs::read_dir(read) else {
-        return Vec::new();
-    };
-    entries
-        .filter_map(Result::ok)
-        .map(|entry| dir.join(entry.file_name()))
-        .collect()
-}
-
 /// Analyzes `files`, prints the diagnostics, fails when there are errors.
-fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
+fn check(cli: &Cli, files: &[PathBuf]) -> Result<Checked, Failure> {
     for file in files {
         if let Err(error) = std::fs::metadata(file) {
             return Err(Failure::Usage(format!(
@@ -345,7 +327,7 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     let analysis = crate::analyze_with_siblings(
         files,
         &|path: &Path| std::fs::read_to_string(path),
-        &cool_files_in,
+        &crate::builder::files_in,
     );
     if !analysis.diagnostics.is_empty() {
         let rendered = analysis.render(render_options(cli));
@@ -354,13 +336,12 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
             MessageFormat::Human => eprint!("{rendered}"),
         }
     }
-    if analysis.has_errors() {
+    analysis.checked().map_err(|analysis| {
         if cli.message_format == MessageFormat::Human {
             eprintln!("coolc: {} error(s)", analysis.error_count());
         }
-        return Err(Failure::Diagnostics);
-    }
-    Ok(analysis)
+        Failure::Diagnostics
+    })
 }
 
 fn compile(
@@ -372,7 +353,7 @@ fn compile(
     write: merge::WriteOptions,
 ) -> Result<crate::ir::Crate, Failure> {
     let mut timings = crate::Timings::from_env();
-    let analysis = check(cli, files)?;
+    let checked = check(cli, files)?;
     timings.span("check");
     let options = lower::Options {
         package: package.to_owned(),
@@ -386,9 +367,9 @@ fn compile(
                 )
             })
             .collect(),
-        inputs: fingerprint::inputs(analysis.sources.files()),
+        inputs: fingerprint::inputs(checked.sources().files()),
     };
-    let krate = lower::lower(&analysis.files, &options);
+    let krate = lower::lower(&checked, &options);
     timings.span("lower");
     let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
@@ -448,8 +429,8 @@ fn draw(
     format: diagram::Format,
     output: Option<&Path>,
 ) -> Result<(), Failure> {
-    let analysis = check(cli, files)?;
-    let diagrams = diagram::diagrams(&analysis.files, files.len(), options)
+    let checked = check(cli, files)?;
+    let diagrams = diagram::diagrams(&checked, files.len(), options)
         .map_err(|e| Failure::Usage(e.to_string()))?;
     let text = diagram::render(&diagrams, format).map_err(|e| Failure::Usage(e.to_string()))?;
     match output {

@@ -1,13 +1,14 @@
 //! Lowering: checked ASTs to the IR the templates print.
 //!
-//! **Precondition:** the files passed the checker without errors. Lowering looks
-//! names up across all files by name; anything the checker would have rejected is
-//! lowered to something harmless rather than panicking (a dangling name becomes index
-//! 0, an unknown type becomes `()`), so lowering never fails.
+//! Lowering takes a [`Checked`] model, which exists only when the checker found no
+//! error, and looks every name up in it (types, components, interfaces, typed rules).
+//! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
+//! to something harmless (index 0, the type `()`), never a panic.
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::ast::{self, ExprKind, Prim, TypeKind};
+use crate::checked::{Checked, TypeDef};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -45,68 +46,32 @@ const USER_TYPES: &str = "crate::generated::types::";
 /// The default value of a type that implements `Default`.
 const DEFAULT: &str = "::core::default::Default::default()";
 
-#[derive(Clone, Copy)]
-enum TypeDef<'a> {
-    Packet(&'a ast::Packet),
-    Enum(&'a ast::EnumDef),
-    Extern,
-}
-
 struct Lowerer<'a> {
-    types: BTreeMap<&'a str, TypeDef<'a>>,
-    components: BTreeMap<&'a str, &'a ast::Component>,
+    /// The checked model: every name lowering meets is looked up in it.
+    checked: &'a Checked,
     /// Generated module name of every component.
     modules: BTreeMap<&'a str, String>,
 }
 
-/// Lowers a set of checked files (imports included) to the IR of one crate.
-pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
+/// Lowers checked descriptions (imports included) to the IR of one crate.
+pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
     let mut lowerer = Lowerer {
-        types: BTreeMap::new(),
-        components: BTreeMap::new(),
+        checked,
         modules: BTreeMap::new(),
     };
-    for item in files.iter().flat_map(|f| &f.items) {
-        match item {
-            ast::Item::Packet(p) => {
-                lowerer
-                    .types
-                    .entry(&p.name.name)
-                    .or_insert(TypeDef::Packet(p));
-            }
-            ast::Item::Enum(e) => {
-                lowerer
-                    .types
-                    .entry(&e.name.name)
-                    .or_insert(TypeDef::Enum(e));
-            }
-            ast::Item::ExternPacket(e) => {
-                lowerer.types.entry(&e.name.name).or_insert(TypeDef::Extern);
-            }
-            ast::Item::Component(c) => {
-                lowerer.components.entry(&c.name.name).or_insert(c);
-            }
-            ast::Item::Import(_) | ast::Item::Converter(_) => {}
-        }
-    }
     // Module names in source order; names coolc uses itself are taken.
     let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
         .map(str::to_owned)
         .into_iter()
         .collect();
-    for item in files.iter().flat_map(|f| &f.items) {
-        if let ast::Item::Component(c) = item {
-            if lowerer.modules.contains_key(c.name.name.as_str()) {
-                continue;
-            }
-            let mut module = ident::snake_raw(&c.name.name);
-            while !taken.insert(module.clone()) {
-                module.push_str("_component");
-            }
-            lowerer.modules.insert(&c.name.name, ident::escape(&module));
+    for (_, c) in checked.components() {
+        let mut module = ident::snake_raw(&c.name.name);
+        while !taken.insert(module.clone()) {
+            module.push_str("_component");
         }
+        lowerer.modules.insert(&c.name.name, ident::escape(&module));
     }
-    lowerer.lower_crate(files, options)
+    lowerer.lower_crate(checked.files(), options)
 }
 
 /// A Cargo package name made from `name` (lowercase, `-` separated).
@@ -216,7 +181,7 @@ impl<'a> Lowerer<'a> {
     fn rust_type(&self, ty: &ast::Type, prefix: &str) -> String {
         match &ty.kind {
             TypeKind::Prim(p) => prim_rust(*p).to_owned(),
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+            TypeKind::Named(name) => match self.checked.type_def(&name.name) {
                 Some(_) => format!("{prefix}{}", ident::camel(&name.name)),
                 None => "()".to_owned(),
             },
@@ -253,7 +218,7 @@ impl<'a> Lowerer<'a> {
                     format!("::core::array::from_fn(|_| {item})")
                 })
             }
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+            TypeKind::Named(name) => match self.checked.type_def(&name.name) {
                 Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(DEFAULT.to_owned()),
                 Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
                     Some(DEFAULT.to_owned())
@@ -275,7 +240,7 @@ impl<'a> Lowerer<'a> {
         match &ty.kind {
             TypeKind::Prim(p) => *p != Prim::String,
             TypeKind::Named(name) => {
-                matches!(self.types.get(name.name.as_str()), Some(TypeDef::Enum(_)))
+                matches!(self.checked.type_def(&name.name), Some(TypeDef::Enum(_)))
             }
             TypeKind::Optional(inner) | TypeKind::Array(inner, _) => self.is_copy(inner),
             TypeKind::List(_) => false,
@@ -1059,7 +1024,7 @@ impl Lowerer<'_> {
     /// A compound's own controllable variables count; its mapped ones do not (they
     /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self.components.get(instance.component.name.as_str()) else {
+        let Some((_, component)) = self.checked.component(&instance.component.name) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();
@@ -1354,13 +1319,12 @@ mod tests {
     use super::*;
 
     fn lower_text(text: &str) -> ir::Crate {
-        let analysis = crate::analyze_text("t.cool", text);
-        assert!(
-            !analysis.has_errors(),
-            "{}",
-            analysis.render(crate::RenderOptions::plain())
-        );
-        lower(&analysis.files, &Options::default())
+        let checked = crate::analyze_text("t.cool", text)
+            .checked()
+            .unwrap_or_else(|analysis| {
+                panic!("{}", analysis.render(crate::RenderOptions::plain()))
+            });
+        lower(&checked, &Options::default())
     }
 
     #[test]
@@ -1406,7 +1370,7 @@ mod tests {
             codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
             "{codes:?}"
         );
-        lower(&analysis.files, &Options::default())
+        lower(&analysis.assume_checked(), &Options::default())
     }
 
     #[test]
@@ -1443,5 +1407,50 @@ mod tests {
                 "::std::vec![1, 2]"
             ]
         );
+    }
+
+    #[test]
+    fn rust_keywords_as_names_emit_valid_rust() {
+        // The checker rejects Rust keywords as names (`coolc::check::rust_keyword`);
+        // lowering escapes them anyway, as defence in depth. Every emitted Rust file is
+        // parsed by `syn` while emitting: a keyword that is not escaped would panic here.
+        let analysis = crate::analyze_text(
+            "k.cool",
+            "packet Self { type: u8, loop: bool = true }\n\
+             enum Kind { Self, Fn }\n\
+             atomic Loop {\n\
+                 configuration { use: u8 = 1; }\n\
+                 observable match: Self;\n\
+                 controllable move: u8 = 2;\n\
+                 input in: fifo<Self>(2);\n\
+                 output ref: data<Kind> pull;\n\
+                 exception break;\n\
+                 automaton { initial self; state self { entry; may -> super; } state super { periodic 10ms; } }\n\
+             }\n",
+        );
+        let codes: Vec<&str> = analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect();
+        assert!(
+            codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+            "{codes:?}"
+        );
+        let krate = lower(&analysis.assume_checked(), &Options::default());
+        let files = crate::emit::emit_crate(&krate);
+        let module = files
+            .iter()
+            .find(|f| f.path == std::path::Path::new("src/generated/loop.rs"))
+            .expect("module file named after the component");
+        assert!(
+            module
+                .contents
+                .contains("pub r#match: super::types::Self_,"),
+            "{}",
+            module.contents
+        );
+        assert!(module.contents.contains("fn self_entry"));
+        assert!(module.contents.contains("fn on_break"));
     }
 }

@@ -13,8 +13,9 @@ use super::{
     GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
     may_targets, section_stubs, unique_among,
 };
-use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
-use crate::check::model::{DEFAULT_STATES, RESULTS};
+use crate::ast::{self, BinaryOp, ExprKind, FileId, Prim, TypeKind, UnaryOp};
+use crate::check::model::{DEFAULT_STATES, RESULTS, Ty};
+use crate::check::{RTy, Typed};
 use crate::ident;
 use crate::ir;
 
@@ -32,37 +33,41 @@ fn result_pattern(symbol: &str) -> Option<&'static str> {
     }
 }
 
-/// The type of a rule operand, as the generated Rust holds it.
-#[derive(Clone, Debug, PartialEq)]
-enum RTy {
-    Bool,
-    /// Held as `i128` (every `.cool` integer widens to it).
-    Int,
-    /// Held as `f64`.
-    Float,
-    /// Held as `&str`.
-    Str,
-    Duration,
-    Time,
-    /// An enum, by its Rust path.
-    Enum(String),
-    /// `T?`: held as `Option<T>` (a string as `Option<&str>`).
-    Optional(Box<RTy>),
-    /// A default automaton state (`coolbot::State`).
-    State,
-    /// A user state of an instance (`&str`), with the states it has.
-    UserState(Vec<String>),
-    /// `&coolbot::TaskResult`.
-    Result,
-    /// A quality level (`usize`), with the levels.
-    Quality(Vec<String>),
-    /// `none`.
-    NoneLit,
-    /// A bare name to resolve against the other side of a comparison.
-    Symbol(String),
-    /// Nothing the generated code can read (a packet, a list, an error the checker
-    /// reported): comparisons with it are `false`.
-    Unreadable,
+/// Where a typed node is missing (never in a checked model): an unknown type, which
+/// reads as a missing value.
+static UNKNOWN: Typed = Typed {
+    ty: RTy::Unknown,
+    operands: Vec::new(),
+};
+
+/// Operand `index` of a typed node.
+fn part(typed: &Typed, index: usize) -> &Typed {
+    typed.operands.get(index).unwrap_or(&UNKNOWN)
+}
+
+/// The Rust path of enum `name` as a compound module sees it.
+fn enum_path(name: &str) -> String {
+    format!("{GEN_TYPES}{}", ident::camel(name))
+}
+
+/// The checker's type of an operand as the generated Rust can read it: a packet, a
+/// list or anything else that is not a rule value becomes [`RTy::Unknown`] (so
+/// comparisons with it are `false`), also under `?`; `T??` reads as `T?`.
+fn readable(ty: &RTy) -> RTy {
+    match ty {
+        RTy::Optional(inner) => match readable(inner) {
+            RTy::Unknown => RTy::Unknown,
+            RTy::Optional(inner) => RTy::Optional(inner),
+            inner => RTy::Optional(Box::new(inner)),
+        },
+        RTy::Other(_) | RTy::Symbol(_) | RTy::Unknown => RTy::Unknown,
+        other => other.clone(),
+    }
+}
+
+/// Whether a type is unreadable: comparisons with it are `false`.
+fn unreadable(ty: &RTy) -> bool {
+    matches!(ty, RTy::Unknown | RTy::Other(_) | RTy::Symbol(_))
 }
 
 /// A rule operand: Rust text and its type.
@@ -99,9 +104,9 @@ impl<'a> Lowerer<'a> {
     }
 
     fn component_of(&self, instance: &ast::Instance) -> Option<&'a ast::Component> {
-        self.components
-            .get(instance.component.name.as_str())
-            .copied()
+        self.checked
+            .component(&instance.component.name)
+            .map(|(_, component)| component)
     }
 
     /// The input or output (`input`) port `port` of `component`, followed through
@@ -253,32 +258,6 @@ impl<'a> Lowerer<'a> {
             }
         }
         (states, qualities)
-    }
-
-    /// The rule type of a declared `.cool` type.
-    fn rule_type(&self, ty: &ast::Type) -> RTy {
-        match &ty.kind {
-            TypeKind::Prim(p) => match p {
-                Prim::Bool => RTy::Bool,
-                Prim::F32 | Prim::F64 => RTy::Float,
-                Prim::String => RTy::Str,
-                Prim::Time => RTy::Time,
-                Prim::Duration => RTy::Duration,
-                _ => RTy::Int,
-            },
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
-                Some(super::TypeDef::Enum(_)) => {
-                    RTy::Enum(format!("{GEN_TYPES}{}", ident::camel(&name.name)))
-                }
-                _ => RTy::Unreadable,
-            },
-            TypeKind::Optional(inner) => match self.rule_type(inner) {
-                RTy::Unreadable => RTy::Unreadable,
-                RTy::Optional(inner) => RTy::Optional(inner),
-                inner => RTy::Optional(Box::new(inner)),
-            },
-            TypeKind::List(_) | TypeKind::Array(..) => RTy::Unreadable,
-        }
     }
 
     /// Whether compound `c` connects through a converter, itself or in a compound it
@@ -479,6 +458,11 @@ impl<'a> Lowerer<'a> {
         let supervisor = self.supervisor(c, automaton);
         let mut rules = Vec::new();
         for (state, condition, target) in &supervisor.when {
+            let file = self
+                .checked
+                .component(&c.name.name)
+                .map_or(FileId(0), |(file, _)| file);
+            let typed = self.checked.rule(file, condition).unwrap_or(&UNKNOWN);
             let mut scope = Scope {
                 lowerer: self,
                 component: c,
@@ -487,7 +471,7 @@ impl<'a> Lowerer<'a> {
                 uses_view: false,
                 uses_vars: false,
             };
-            let expr = scope.boolean(condition);
+            let expr = scope.boolean(condition, typed);
             let function = format!("__cool_rule_{}", rules.len());
             let reads: Vec<String> = scope
                 .reads
@@ -1257,24 +1241,27 @@ impl Scope<'_, '_> {
         }
     }
 
-    /// A boolean Rust expression for `expr` (a missing or unreadable value makes the
-    /// comparison that reads it `false`).
-    fn boolean(&mut self, expr: &ast::Expr) -> String {
+    /// A boolean Rust expression for `expr`, typed `typed` by the checker (a missing
+    /// or unreadable value makes the comparison that reads it `false`).
+    fn boolean(&mut self, expr: &ast::Expr, typed: &Typed) -> String {
         match &expr.kind {
             ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-                let (l, r) = (self.logic_operand(*op, l), self.logic_operand(*op, r));
+                let l = self.logic_operand(*op, l, part(typed, 0));
+                let r = self.logic_operand(*op, r, part(typed, 1));
                 format!("{l} {} {r}", op.as_str())
             }
-            ExprKind::Binary(op, l, r) => self.comparison(*op, l, r),
+            ExprKind::Binary(op, l, r) => {
+                self.comparison(*op, (l, part(typed, 0)), (r, part(typed, 1)))
+            }
             ExprKind::Unary(UnaryOp::Not, inner) => {
-                let text = self.boolean(inner);
+                let text = self.boolean(inner, part(typed, 0));
                 match &inner.kind {
                     ExprKind::Binary(..) => format!("!({text})"),
                     _ => format!("!{text}"),
                 }
             }
             _ => {
-                let operand = self.operand(expr);
+                let operand = self.operand(expr, typed);
                 match (operand.ty, operand.maybe) {
                     (RTy::Bool, false) => operand.code,
                     (RTy::Bool, true) => format!("{}.unwrap_or(false)", operand.code),
@@ -1286,8 +1273,8 @@ impl Scope<'_, '_> {
 
     /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
     /// would read it otherwise (an `||` inside an `&&`).
-    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr) -> String {
-        let text = self.boolean(expr);
+    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr, typed: &Typed) -> String {
+        let text = self.boolean(expr, typed);
         if needs_parens(op, expr) {
             format!("({text})")
         } else {
@@ -1296,7 +1283,7 @@ impl Scope<'_, '_> {
     }
 
     /// An operand of a comparison (or a bare boolean).
-    fn operand(&mut self, expr: &ast::Expr) -> Operand {
+    fn operand(&mut self, expr: &ast::Expr, typed: &Typed) -> Operand {
         let known = |code: String, ty: RTy| Operand {
             code,
             ty,
@@ -1313,14 +1300,15 @@ impl Scope<'_, '_> {
                 RTy::Duration,
             ),
             ExprKind::None => known(String::new(), RTy::NoneLit),
-            ExprKind::EnumValue { enum_name, variant } => {
-                let path = format!("{GEN_TYPES}{}", ident::camel(&enum_name.name));
-                known(
-                    format!("{path}::{}", ident::camel(&variant.name)),
-                    RTy::Enum(path),
-                )
-            }
-            ExprKind::Unary(UnaryOp::Neg, inner) => match self.operand(inner) {
+            ExprKind::EnumValue { enum_name, variant } => known(
+                format!(
+                    "{}::{}",
+                    enum_path(&enum_name.name),
+                    ident::camel(&variant.name)
+                ),
+                RTy::Enum(enum_name.name.clone()),
+            ),
+            ExprKind::Unary(UnaryOp::Neg, inner) => match self.operand(inner, part(typed, 0)) {
                 Operand {
                     code,
                     ty: ty @ (RTy::Int | RTy::Float),
@@ -1341,25 +1329,33 @@ impl Scope<'_, '_> {
                     maybe: true,
                     narrow,
                 },
-                _ => known(String::new(), RTy::Unreadable),
+                _ => known(String::new(), RTy::Unknown),
             },
             ExprKind::Unary(UnaryOp::Not, _) | ExprKind::Binary(..) => {
-                known(format!("({})", self.boolean(expr)), RTy::Bool)
+                known(format!("({})", self.boolean(expr, typed)), RTy::Bool)
             }
             ExprKind::Path(segments) => match segments.as_slice() {
-                [name] => self.own(&name.name),
-                [instance, variable] => self.instance_variable(&instance.name, &variable.name),
-                _ => known(String::new(), RTy::Unreadable),
+                [name] => self.own(&name.name, &typed.ty),
+                [instance, variable] => {
+                    self.variable_operand(&instance.name, &variable.name, None, &typed.ty)
+                }
+                _ => known(String::new(), RTy::Unknown),
             },
             ExprKind::Frequency(_) | ExprKind::List(_) | ExprKind::Repeat(..) => {
-                known(String::new(), RTy::Unreadable)
+                known(String::new(), RTy::Unknown)
             }
         }
     }
 
-    /// A bare name: an own variable, a mapped one, an own default variable, or a
-    /// symbol.
-    fn own(&mut self, name: &str) -> Operand {
+    /// A bare name of type `ty`: an own variable, a mapped one, an own default
+    /// variable, or a symbol (`ty` is then what the checker resolved it to).
+    fn own(&mut self, name: &str, ty: &RTy) -> Operand {
+        let unreadable = Operand {
+            code: String::new(),
+            ty: RTy::Unknown,
+            maybe: false,
+            narrow: false,
+        };
         let component = self.component;
         let variable = component.members.iter().find_map(|m| match m {
             ast::Member::Variable(v) if v.name.name == name => Some(v),
@@ -1367,16 +1363,16 @@ impl Scope<'_, '_> {
         });
         if let Some(v) = variable {
             return match (&v.ty, &v.value) {
-                (Some(ty), _) => {
+                (Some(declared), _) => {
                     if v.kind != ast::VarKind::Local {
                         self.read(name.to_owned());
                     }
                     self.uses_vars = true;
                     let field = format!("vars.{}", ident::snake(name));
-                    let has_default =
-                        v.value.is_some() || self.lowerer.defaultable(ty, &mut BTreeSet::new());
-                    let f64_field = is_f64(ty);
-                    let ty = self.lowerer.rule_type(ty);
+                    let has_default = v.value.is_some()
+                        || self.lowerer.defaultable(declared, &mut BTreeSet::new());
+                    let f64_field = is_f64(declared);
+                    let ty = readable(ty);
                     if !has_default {
                         // Held as `Option<T>` until set: read it as a missing value.
                         return own_value(&format!("{field}.as_ref()"), &ty, true, f64_field);
@@ -1385,29 +1381,16 @@ impl Scope<'_, '_> {
                 }
                 (None, Some(value)) => match &value.kind {
                     ExprKind::Path(segments) => match segments.as_slice() {
+                        // Read with `view.mapped(name)`, from the instance standing
+                        // for `instance` now.
                         [instance, variable] => {
-                            self.mapped_variable(name, &instance.name, &variable.name)
+                            self.variable_operand(&instance.name, &variable.name, Some(name), ty)
                         }
-                        _ => Operand {
-                            code: String::new(),
-                            ty: RTy::Unreadable,
-                            maybe: false,
-                            narrow: false,
-                        },
+                        _ => unreadable,
                     },
-                    _ => Operand {
-                        code: String::new(),
-                        ty: RTy::Unreadable,
-                        maybe: false,
-                        narrow: false,
-                    },
+                    _ => unreadable,
                 },
-                (None, None) => Operand {
-                    code: String::new(),
-                    ty: RTy::Unreadable,
-                    maybe: false,
-                    narrow: false,
-                },
+                (None, None) => unreadable,
             };
         }
         match name {
@@ -1419,15 +1402,12 @@ impl Scope<'_, '_> {
                 narrow: false,
             },
             // A rule is evaluated in its own supervisor state.
-            "user_state" => {
-                let (states, _) = Lowerer::states_and_qualities(component);
-                Operand {
-                    code: ident::string_literal(&self.state),
-                    ty: RTy::UserState(states),
-                    maybe: false,
-                    narrow: false,
-                }
-            }
+            "user_state" => Operand {
+                code: ident::string_literal(&self.state),
+                ty: readable(ty),
+                maybe: false,
+                narrow: false,
+            },
             // The compound's own default observables, copied into the view at each
             // supervision turn.
             "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => {
@@ -1444,10 +1424,7 @@ impl Scope<'_, '_> {
                         RTy::Str,
                         false,
                     ),
-                    "quality" => {
-                        let (_, levels) = Lowerer::states_and_qualities(component);
-                        ("view.own_quality()".to_owned(), RTy::Quality(levels), false)
-                    }
+                    "quality" => ("view.own_quality()".to_owned(), readable(ty), false),
                     _ => (format!("view.own_{name}()"), RTy::Duration, false),
                 };
                 Operand {
@@ -1457,44 +1434,28 @@ impl Scope<'_, '_> {
                     narrow: false,
                 }
             }
-            _ => Operand {
-                code: String::new(),
-                ty: RTy::Symbol(name.to_owned()),
-                maybe: false,
-                narrow: false,
-            },
+            _ => symbol(name, ty),
         }
     }
 
-    /// Mapped variable `name` (`observable name = instance.variable;`): an instance
-    /// variable is read with `view.mapped(name)`, from the instance standing for
-    /// `instance` now, under read key `name`; a default variable (`state`, ...) is read
-    /// on `instance` itself.
-    fn mapped_variable(&mut self, name: &str, instance: &str, variable: &str) -> Operand {
-        self.variable_operand(instance, variable, Some(name))
-    }
-
-    /// `instance.variable`, read from the view.
-    fn instance_variable(&mut self, instance: &str, variable: &str) -> Operand {
-        self.variable_operand(instance, variable, None)
-    }
-
-    /// `instance.variable`, read from the view; through mapped variable `mapped` when
-    /// given and `variable` is one of the instance's own.
+    /// `instance.variable` of type `ty`, read from the view; through mapped variable
+    /// `mapped` when given and `variable` is one of the instance's own (a default
+    /// variable, `state`..., is read on `instance` itself).
     fn variable_operand(
         &mut self,
         instance: &str,
         variable: &str,
         mapped: Option<&str>,
+        ty: &RTy,
     ) -> Operand {
         let unreadable = Operand {
             code: String::new(),
-            ty: RTy::Unreadable,
+            ty: RTy::Unknown,
             maybe: false,
             narrow: false,
         };
-        let Some(target) = Lowerer::instance_of(self.component, instance)
-            .and_then(|i| self.lowerer.component_of(i))
+        let Some(interface) = Lowerer::instance_of(self.component, instance)
+            .and_then(|i| self.lowerer.checked.interface(&i.component.name))
         else {
             return unreadable;
         };
@@ -1505,7 +1466,8 @@ impl Scope<'_, '_> {
             maybe: true,
             narrow: false,
         };
-        if let Some((ty, _)) = self.lowerer.variable_type(target, variable, 0) {
+        let ty = readable(ty);
+        if let Some(declared) = interface.variables.get(variable) {
             let raw = match mapped {
                 Some(name) => {
                     self.read(name.to_owned());
@@ -1517,8 +1479,7 @@ impl Scope<'_, '_> {
                 }
             };
             self.uses_view = true;
-            let f64_field = is_f64(ty);
-            let ty = self.lowerer.rule_type(ty);
+            let f64_field = holds_f64(&declared.ty);
             return match view_value(&raw, &ty) {
                 Some(code) => Operand {
                     narrow: !f64_field && is_float(&ty),
@@ -1527,23 +1488,10 @@ impl Scope<'_, '_> {
                 None => unreadable,
             };
         }
-        let (states, mut qualities) = Lowerer::states_and_qualities(target);
-        // An instance's `timing` override may declare its own quality levels.
-        if let Some(levels) = Lowerer::instance_of(self.component, instance)
-            .and_then(|i| i.timing.as_ref())
-            .and_then(|timing| {
-                timing.entries.iter().find_map(|entry| match entry {
-                    ast::TimingEntry::Quality(levels, _) => Some(levels),
-                    _ => None,
-                })
-            })
-        {
-            qualities = levels.iter().map(|level| level.name.clone()).collect();
-        }
-        let (code, ty) = match variable {
-            "state" => (format!("view.state({lit})"), RTy::State),
-            "user_state" => (format!("view.user_state({lit})"), RTy::UserState(states)),
-            "result" => (format!("view.result({lit})"), RTy::Result),
+        let code = match variable {
+            "state" => format!("view.state({lit})"),
+            "user_state" => format!("view.user_state({lit})"),
+            "result" => format!("view.result({lit})"),
             // No error reads as the empty one: `error != "x"` holds then.
             "error" => {
                 self.read(format!("{instance}.error"));
@@ -1555,14 +1503,9 @@ impl Scope<'_, '_> {
                     narrow: false,
                 };
             }
-            "cpu_time" | "elapsed_time" => (
-                format!("view.monitor({lit}).map(|monitor| monitor.{variable})"),
-                RTy::Duration,
-            ),
-            "quality" => (
-                format!("view.monitor({lit}).map(|monitor| monitor.quality)"),
-                RTy::Quality(qualities),
-            ),
+            "cpu_time" | "elapsed_time" | "quality" => {
+                format!("view.monitor({lit}).map(|monitor| monitor.{variable})")
+            }
             _ => return unreadable,
         };
         // (`cpu_time` and `elapsed_time` have no change event of their own: the
@@ -1572,20 +1515,16 @@ impl Scope<'_, '_> {
         maybe(code, ty)
     }
 
-    /// `left op right`.
-    fn comparison(&mut self, op: BinaryOp, left: &ast::Expr, right: &ast::Expr) -> String {
-        let mut l = self.operand(left);
-        let mut r = self.operand(right);
-        // Symbols take the type of the other side.
-        if let RTy::Symbol(name) = &l.ty {
-            l = symbol(name, &r.ty);
-        }
-        if let RTy::Symbol(name) = &r.ty {
-            r = symbol(name, &l.ty);
-        }
-        if matches!(l.ty, RTy::Unreadable | RTy::Symbol(_))
-            || matches!(r.ty, RTy::Unreadable | RTy::Symbol(_))
-        {
+    /// `left op right`, each with its typed node.
+    fn comparison(
+        &mut self,
+        op: BinaryOp,
+        (left, left_typed): (&ast::Expr, &Typed),
+        (right, right_typed): (&ast::Expr, &Typed),
+    ) -> String {
+        let mut l = self.operand(left, left_typed);
+        let mut r = self.operand(right, right_typed);
+        if unreadable(&l.ty) || unreadable(&r.ty) {
             return "false".to_owned();
         }
         // An `f32` compared with a float literal: the literal rounded to `f32`, as the
@@ -1602,7 +1541,7 @@ impl Scope<'_, '_> {
         }
         // `user_state == on`: a missing user state (the automaton has not started)
         // differs from every state, for `!=` too.
-        if matches!(l.ty, RTy::UserState(_)) && l.maybe != r.maybe {
+        if matches!(l.ty, RTy::UserState(..)) && l.maybe != r.maybe {
             let (maybe, plain) = if l.maybe { (&l, &r) } else { (&r, &l) };
             return format!(
                 "{} {} ::core::option::Option::Some({})",
@@ -1763,36 +1702,32 @@ fn f32_literal(expr: &ast::Expr) -> Option<String> {
     Some(format!("f64::from({sign}{narrow:?}_f32)"))
 }
 
-/// A symbol resolved against the type of the other side.
-fn symbol(name: &str, other: &RTy) -> Operand {
+/// A symbol of the type the checker resolved it to (the other side's, without `?`).
+fn symbol(name: &str, resolved: &RTy) -> Operand {
     let plain = |code: String, ty: RTy| Operand {
         code,
         ty,
         maybe: false,
         narrow: false,
     };
-    let other = match other {
-        RTy::Optional(inner) => inner.as_ref(),
-        other => other,
-    };
-    match other {
+    match crate::check::strip(resolved) {
         // The checker's names; `coolbot::State` variants are their camel case.
         RTy::State if DEFAULT_STATES.contains(&name) => plain(
             format!("::coolbot::State::{}", ident::camel(name)),
             RTy::State,
         ),
-        RTy::UserState(states) if states.iter().any(|s| s == name) => {
-            plain(ident::string_literal(name), other.clone())
+        ty @ RTy::UserState(_, states) if states.iter().any(|s| s == name) => {
+            plain(ident::string_literal(name), ty.clone())
         }
         RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
             Some(pattern) => plain(pattern.to_owned(), RTy::Result),
-            None => plain(String::new(), RTy::Unreadable),
+            None => plain(String::new(), RTy::Unknown),
         },
-        RTy::Quality(levels) => match levels.iter().position(|l| l == name) {
-            Some(index) => plain(format!("{index}_usize"), other.clone()),
-            None => plain(String::new(), RTy::Unreadable),
+        ty @ RTy::Quality(_, levels) => match levels.iter().position(|l| l == name) {
+            Some(index) => plain(format!("{index}_usize"), ty.clone()),
+            None => plain(String::new(), RTy::Unknown),
         },
-        _ => plain(String::new(), RTy::Unreadable),
+        _ => plain(String::new(), RTy::Unknown),
     }
 }
 
@@ -1801,7 +1736,7 @@ fn symbol(name: &str, other: &RTy) -> Operand {
 fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
     let unreadable = Operand {
         code: String::new(),
-        ty: RTy::Unreadable,
+        ty: RTy::Unknown,
         maybe: false,
         narrow: false,
     };
@@ -1870,7 +1805,7 @@ fn view_value(raw: &str, ty: &RTy) -> Option<String> {
         ),
         RTy::Duration => decode("::std::time::Duration"),
         RTy::Time => decode("::coolbot::Time"),
-        RTy::Enum(path) => serde(path),
+        RTy::Enum(name) => serde(&enum_path(name)),
         RTy::Optional(inner) => match inner.as_ref() {
             RTy::Bool => serde("::core::option::Option<bool>"),
             RTy::Int => format!(
@@ -1880,13 +1815,23 @@ fn view_value(raw: &str, ty: &RTy) -> Option<String> {
             RTy::Float => serde("::core::option::Option<f64>"),
             RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
             RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
-            RTy::Enum(path) => serde(&format!("::core::option::Option<{path}>")),
+            RTy::Enum(name) => serde(&format!("::core::option::Option<{}>", enum_path(name))),
             // Owned: compared through `as_deref` (see `Scope::comparison`).
             RTy::Str => serde("::core::option::Option<::std::string::String>"),
             _ => return None,
         },
         _ => return None,
     })
+}
+
+/// Whether a variable of type `ty` holds an `f64` or `f64?` (read as is; `f32`
+/// widens).
+fn holds_f64(ty: &Ty) -> bool {
+    match ty {
+        Ty::Float(prim) => *prim == Prim::F64,
+        Ty::Optional(inner) => holds_f64(inner),
+        _ => false,
+    }
 }
 
 /// Whether `ty` is `f64` or `f64?` (read as is; `f32` widens).
@@ -1941,13 +1886,12 @@ mod tests {
     }
 
     fn compounds_of(text: &str) -> Vec<ir::Compound> {
-        let analysis = crate::analyze_text("t.cool", text);
-        assert!(
-            !analysis.has_errors(),
-            "{}",
-            analysis.render(crate::RenderOptions::plain())
-        );
-        lower(&analysis.files, &Options::default()).compounds
+        let checked = crate::analyze_text("t.cool", text)
+            .checked()
+            .unwrap_or_else(|analysis| {
+                panic!("{}", analysis.render(crate::RenderOptions::plain()))
+            });
+        lower(&checked, &Options::default()).compounds
     }
 
     /// The condition and reads of each rule of the first compound of `text`.
@@ -2219,8 +2163,8 @@ mod tests {
             "t.cool",
             "atomic Leaf { automaton { initial on; state on { entry; } } }\ncompound Top { instance supervisor: Leaf; }",
         );
-        assert!(!analysis.has_errors());
-        let krate = lower(&analysis.files, &Options::default());
+        let checked = analysis.checked().expect("no error");
+        let krate = lower(&checked, &Options::default());
         let parts: Vec<&str> = krate.compounds[0]
             .parts
             .iter()
