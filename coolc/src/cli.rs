@@ -29,7 +29,7 @@ pub const EXIT_USAGE: u8 = 2;
 #[command(name = "coolc", version, about, propagate_version = true)]
 pub struct Cli {
     /// How diagnostics are printed: `human` (stderr) or `json` (one object per line
-    /// on stdout).
+    /// on stdout; `compile --check` lists the files that would change the same way).
     #[arg(long, value_enum, default_value_t = MessageFormat::Human, global = true)]
     pub message_format: MessageFormat,
 
@@ -374,7 +374,7 @@ fn compile(
     let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
     if write.check {
-        return check_report(out, &report).map(|()| krate);
+        return check_report(out, &report, cli.message_format).map(|()| krate);
     }
     for (file, methods) in &report.added {
         eprintln!("coolc: added to {}: {}", file.display(), methods.join(", "));
@@ -393,25 +393,59 @@ fn compile(
     Ok(krate)
 }
 
+/// A file `compile --check` found out of date, as one JSON line
+/// (`--message-format json`).
+#[derive(Debug, serde::Serialize)]
+struct StaleFile<'a> {
+    /// Always `"stale_file"`: what the line is.
+    reason: &'static str,
+    /// The file, under the output directory.
+    path: String,
+    /// `"write"` (created or rewritten), `"add_stubs"` (stubs added to a user
+    /// file) or `"remove"` (generated before, no longer).
+    change: &'static str,
+    /// The methods whose stubs would be added (`add_stubs` only).
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    methods: &'a [String],
+}
+
 /// `compile --check`: lists on stdout every file the compile would write, add stubs
-/// to or remove; fails when there is one.
-fn check_report(out: &Path, report: &merge::Report) -> Result<(), Failure> {
+/// to or remove (one path per line, or one JSON object per line in `json` format);
+/// fails when there is one.
+fn check_report(out: &Path, report: &merge::Report, format: MessageFormat) -> Result<(), Failure> {
     for warning in &report.warnings {
         eprintln!("warning: {warning}");
     }
-    let changed: std::collections::BTreeSet<&Path> = report
-        .written
-        .iter()
-        .chain(report.added.iter().map(|(file, _)| file))
-        .chain(&report.removed)
-        .map(PathBuf::as_path)
-        .collect();
+    // Per file, one change: a removal or stub insertion says more than a write.
+    let mut changed: std::collections::BTreeMap<&Path, (&'static str, &[String])> =
+        std::collections::BTreeMap::new();
+    for file in &report.written {
+        changed.insert(file, ("write", &[]));
+    }
+    for (file, methods) in &report.added {
+        changed.insert(file, ("add_stubs", methods));
+    }
+    for file in &report.removed {
+        changed.insert(file, ("remove", &[]));
+    }
     if changed.is_empty() {
         eprintln!("coolc: {} is up to date", out.display());
         return Ok(());
     }
-    for file in &changed {
-        println!("{}", out.join(file).display());
+    for (file, (change, methods)) in &changed {
+        let path = out.join(file).display().to_string();
+        match format {
+            MessageFormat::Human => println!("{path}"),
+            MessageFormat::Json => {
+                let line = StaleFile {
+                    reason: "stale_file",
+                    path,
+                    change,
+                    methods,
+                };
+                println!("{}", serde_json::to_string(&line).unwrap_or_default());
+            }
+        }
     }
     eprintln!(
         "coolc: {} file(s) in {} would change: run `coolc compile` without --check",
