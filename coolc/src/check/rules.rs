@@ -290,10 +290,7 @@ impl Typer<'_, '_, '_> {
         match segments {
             [name] => {
                 if let Some(var) = self.own.variables.get(&name.name) {
-                    return match var.ty {
-                        Ty::Unknown => self.mapped_default(&name.name).unwrap_or(RTy::Unknown),
-                        ref ty => from_ty(ty),
-                    };
+                    return from_ty(&var.ty);
                 }
                 default_variable(&name.name, &self.component.name.name, self.own)
                     .unwrap_or_else(|| RTy::Symbol(name.clone()))
@@ -304,32 +301,6 @@ impl Typer<'_, '_, '_> {
                 "a rule names `variable` or `instance.variable`".into(),
             ),
         }
-    }
-
-    /// The type of own variable `name` when it maps an instance's default observable
-    /// (`observable s = nav.state;`), which has no [`Ty`] in the interface.
-    fn mapped_default(&self, name: &str) -> Option<RTy> {
-        let value = self.component.members.iter().find_map(|m| match m {
-            ast::Member::Variable(v) if v.name.name == name && v.ty.is_none() => v.value.as_ref(),
-            _ => None,
-        })?;
-        let ast::ExprKind::Path(segments) = &value.kind else {
-            return None;
-        };
-        let [instance, variable] = segments.as_slice() else {
-            return None;
-        };
-        let instance = Model::instance(self.component, &instance.name)?;
-        self.checker.model.component(&instance.component.name)?;
-        let interface = self.checker.model.interface(&instance.component.name);
-        if interface.variables.contains_key(&variable.name) {
-            return None;
-        }
-        let ty = default_variable(&variable.name, &instance.component.name, &interface)?;
-        Some(match (ty, override_levels(instance)) {
-            (RTy::Quality(component, _), Some(levels)) => RTy::Quality(component, levels),
-            (ty, _) => ty,
-        })
     }
 
     fn instance_variable(&mut self, instance_name: &ast::Ident, variable: &ast::Ident) -> RTy {
