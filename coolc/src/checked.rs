@@ -143,3 +143,52 @@ impl Checked {
         self.resolved.rules.get(&(file, condition.span))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::ast;
+    use crate::check::RTy;
+
+    #[test]
+    fn rules_are_typed_with_their_symbols_resolved() {
+        let checked = crate::analyze_text(
+            "t.cool",
+            "atomic A { observable level: f32? = none; automaton { initial on; state on { entry; } } }\n\
+             compound C { instance a: A; supervisor { initial s; state s {\n\
+                 when a.state == running_error && a.level > 0.5 -> s;\n\
+             } } }",
+        )
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(crate::RenderOptions::plain())));
+        let (file, compound) = checked.component("C").expect("C");
+        let condition = compound
+            .members
+            .iter()
+            .find_map(|member| match member {
+                ast::Member::Automaton(automaton) => {
+                    automaton.states[0].members.iter().find_map(|m| match m {
+                        ast::StateMember::When { condition, .. } => Some(condition),
+                        _ => None,
+                    })
+                }
+                _ => None,
+            })
+            .expect("a when rule");
+        let typed = checked.rule(file, condition).expect("typed by the checker");
+        assert_eq!(typed.ty, RTy::Bool);
+        let [state, level] = typed.operands.as_slice() else {
+            panic!("`&&` has two operands: {typed:?}");
+        };
+        // `running_error` is a bare name: the checker resolved it to a state.
+        let types: Vec<&RTy> = state.operands.iter().map(|t| &t.ty).collect();
+        assert_eq!(types, [&RTy::State, &RTy::State]);
+        let types: Vec<&RTy> = level.operands.iter().map(|t| &t.ty).collect();
+        assert_eq!(types, [&RTy::Optional(Box::new(RTy::Float)), &RTy::Float]);
+        assert!(
+            checked
+                .interface("A")
+                .is_some_and(|a| a.variables.contains_key("level"))
+        );
+        assert!(checked.component("A").is_some() && checked.converter("A").is_none());
+    }
+}
