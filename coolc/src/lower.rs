@@ -8,6 +8,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::ast::{self, ExprKind, Prim, TypeKind};
+use crate::check::model::Ty;
 use crate::checked::{Checked, TypeDef};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
@@ -120,23 +121,42 @@ const SERDE_WITH: &str = "::coolbot::serde_with::";
 /// The serde_with adapter type of `ty` when it holds an array longer than 32
 /// elements, directly or in lists, optionals and arrays (a packet field of such a
 /// type is the packet's business): `[Same; 72]`, `Option<[[Same; 40]; 2]>`.
-fn serde_adapter(ty: &ast::Type) -> Option<String> {
-    fn adapter(ty: &ast::Type) -> String {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::Named(_) => format!("{SERDE_WITH}Same"),
-            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", adapter(inner)),
-            TypeKind::Array(inner, n) => format!("[{}; {}]", adapter(inner), n.value),
-            TypeKind::Optional(inner) => format!("::core::option::Option<{}>", adapter(inner)),
+fn serde_adapter(ty: &Ty) -> Option<String> {
+    fn adapter(ty: &Ty) -> String {
+        match ty {
+            Ty::List(inner) => format!("::std::vec::Vec<{}>", adapter(inner)),
+            Ty::Array(inner, n) => format!("[{}; {n}]", adapter(inner)),
+            Ty::Optional(inner) => format!("::core::option::Option<{}>", adapter(inner)),
+            _ => format!("{SERDE_WITH}Same"),
         }
     }
-    fn needs(ty: &ast::Type) -> bool {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::Named(_) => false,
-            TypeKind::List(inner) | TypeKind::Optional(inner) => needs(inner),
-            TypeKind::Array(inner, n) => n.value > 32 || needs(inner),
+    fn needs(ty: &Ty) -> bool {
+        match ty {
+            Ty::List(inner) | Ty::Optional(inner) => needs(inner),
+            Ty::Array(inner, n) => *n > 32 || needs(inner),
+            _ => false,
         }
     }
     needs(ty).then(|| adapter(ty))
+}
+
+/// The Rust type of a resolved type; named types under `prefix` (an unresolved one,
+/// impossible in a checked model, is `()`).
+fn rust_ty(ty: &Ty, prefix: &str) -> String {
+    match ty {
+        Ty::Bool => "bool".to_owned(),
+        Ty::Int(p) | Ty::Float(p) => prim_rust(*p).to_owned(),
+        Ty::Str => prim_rust(Prim::String).to_owned(),
+        Ty::Time => prim_rust(Prim::Time).to_owned(),
+        Ty::Duration => prim_rust(Prim::Duration).to_owned(),
+        Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) => {
+            format!("{prefix}{}", ident::camel(name))
+        }
+        Ty::List(inner) => format!("::std::vec::Vec<{}>", rust_ty(inner, prefix)),
+        Ty::Array(inner, n) => format!("[{}; {n}]", rust_ty(inner, prefix)),
+        Ty::Optional(inner) => format!("::core::option::Option<{}>", rust_ty(inner, prefix)),
+        Ty::Unknown => "()".to_owned(),
+    }
 }
 
 fn cool_type(ty: &ast::Type) -> String {
@@ -178,26 +198,23 @@ fn prim_rust(p: Prim) -> &'static str {
 }
 
 impl<'a> Lowerer<'a> {
+    /// The resolved type of a written type, from the checked model.
+    fn ty(&self, ty: &ast::Type) -> Ty {
+        self.checked.ty(ty)
+    }
+
     fn rust_type(&self, ty: &ast::Type, prefix: &str) -> String {
-        match &ty.kind {
-            TypeKind::Prim(p) => prim_rust(*p).to_owned(),
-            TypeKind::Named(name) => match self.checked.type_def(&name.name) {
-                Some(_) => format!("{prefix}{}", ident::camel(&name.name)),
-                None => "()".to_owned(),
-            },
-            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", self.rust_type(inner, prefix)),
-            TypeKind::Array(inner, n) => {
-                format!("[{}; {}]", self.rust_type(inner, prefix), n.value)
-            }
-            TypeKind::Optional(inner) => {
-                format!("::core::option::Option<{}>", self.rust_type(inner, prefix))
-            }
-        }
+        rust_ty(&self.ty(ty), prefix)
     }
 
     /// Whether the emitted type has a default value ([`Self::default_of`]).
     fn defaultable(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> bool {
-        self.default_of(ty, visiting).is_some()
+        self.default_of(&self.ty(ty), visiting).is_some()
+    }
+
+    /// Whether the emitted resolved type has a default value.
+    fn ty_defaultable(&self, ty: &Ty) -> bool {
+        self.default_of(ty, &mut BTreeSet::new()).is_some()
     }
 
     /// The Rust expression of the default value of the emitted type, or `None` when
@@ -205,46 +222,40 @@ impl<'a> Lowerer<'a> {
     /// Arrays longer than 32 elements, or of elements without `Default`, are built
     /// with `core::array::from_fn`: the standard library implements `Default` for
     /// arrays only up to 32 elements.
-    fn default_of(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> Option<String> {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::List(_) | TypeKind::Optional(_) => {
-                Some(DEFAULT.to_owned())
-            }
-            TypeKind::Array(inner, n) => {
+    fn default_of(&self, ty: &Ty, visiting: &mut BTreeSet<String>) -> Option<String> {
+        match ty {
+            Ty::Bool
+            | Ty::Int(_)
+            | Ty::Float(_)
+            | Ty::Str
+            | Ty::Time
+            | Ty::Duration
+            | Ty::List(_)
+            | Ty::Optional(_) => Some(DEFAULT.to_owned()),
+            Ty::Array(inner, n) => {
                 let item = self.default_of(inner, visiting)?;
-                Some(if n.value <= 32 && item == DEFAULT {
+                Some(if *n <= 32 && item == DEFAULT {
                     DEFAULT.to_owned()
                 } else {
                     format!("::core::array::from_fn(|_| {item})")
                 })
             }
-            TypeKind::Named(name) => match self.checked.type_def(&name.name) {
+            Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
                 Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(DEFAULT.to_owned()),
                 Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
                     Some(DEFAULT.to_owned())
                 }
                 _ => None,
             },
+            Ty::Extern(_) | Ty::Unknown => None,
         }
     }
 
     /// The default value of `ty` as a user stub writes it (`Default::default()` when
     /// the type implements `Default`).
     fn stub_default(&self, ty: &ast::Type) -> Option<String> {
-        let default = self.default_of(ty, &mut BTreeSet::new())?;
+        let default = self.default_of(&self.ty(ty), &mut BTreeSet::new())?;
         Some(default.replace(DEFAULT, "Default::default()"))
-    }
-
-    /// Whether values of the emitted type are `Copy` (so `[value; n]` compiles).
-    fn is_copy(&self, ty: &ast::Type) -> bool {
-        match &ty.kind {
-            TypeKind::Prim(p) => *p != Prim::String,
-            TypeKind::Named(name) => {
-                matches!(self.checked.type_def(&name.name), Some(TypeDef::Enum(_)))
-            }
-            TypeKind::Optional(inner) | TypeKind::Array(inner, _) => self.is_copy(inner),
-            TypeKind::List(_) => false,
-        }
     }
 
     fn packet_defaultable(&self, packet: &ast::Packet, visiting: &mut BTreeSet<String>) -> bool {
@@ -267,18 +278,18 @@ impl<'a> Lowerer<'a> {
         value: Option<&ast::Expr>,
         prefix: &str,
     ) -> String {
+        let field_ty = self.ty(field_ty);
         match value {
-            Some(expr) => self.value(expr, Some(field_ty), prefix),
+            Some(expr) => self.value(expr, Some(&field_ty), prefix),
             None => self
-                .default_of(field_ty, &mut BTreeSet::new())
+                .default_of(&field_ty, &mut BTreeSet::new())
                 .unwrap_or_else(|| DEFAULT.to_owned()),
         }
     }
 
     /// A Rust expression for a constant `.cool` value of type `ty`.
-    fn value(&self, expr: &ast::Expr, ty: Option<&ast::Type>, prefix: &str) -> String {
-        let kind = ty.map(|t| &t.kind);
-        if let Some(TypeKind::Optional(inner)) = kind {
+    fn value(&self, expr: &ast::Expr, ty: Option<&Ty>, prefix: &str) -> String {
+        if let Some(Ty::Optional(inner)) = ty {
             return match &expr.kind {
                 ExprKind::None => "::core::option::Option::None".to_owned(),
                 _ => format!(
@@ -288,9 +299,9 @@ impl<'a> Lowerer<'a> {
             };
         }
         match &expr.kind {
-            ExprKind::Int(n) => match kind {
-                Some(TypeKind::Prim(Prim::F32 | Prim::F64)) => format!("{n}.0"),
-                Some(TypeKind::Prim(Prim::Duration)) => duration_rust(*n),
+            ExprKind::Int(n) => match ty {
+                Some(Ty::Float(_)) => format!("{n}.0"),
+                Some(Ty::Duration) => duration_rust(*n),
                 _ => n.to_string(),
             },
             ExprKind::Float(x) => format!("{x:?}"),
@@ -309,26 +320,26 @@ impl<'a> Lowerer<'a> {
                 )
             }
             ExprKind::List(items) => {
-                let inner = match kind {
-                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                let inner = match ty {
+                    Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let items: Vec<String> =
                     items.iter().map(|e| self.value(e, inner, prefix)).collect();
-                match kind {
-                    Some(TypeKind::Array(..)) => format!("[{}]", items.join(", ")),
+                match ty {
+                    Some(Ty::Array(..)) => format!("[{}]", items.join(", ")),
                     _ => format!("::std::vec![{}]", items.join(", ")),
                 }
             }
             ExprKind::Repeat(item, n) => {
-                let inner = match kind {
-                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                let inner = match ty {
+                    Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
-                match kind {
-                    Some(TypeKind::List(_)) => format!("::std::vec![{item}; {}]", n.value),
+                match ty {
+                    Some(Ty::List(_)) => format!("::std::vec![{item}; {}]", n.value),
                     // `[value; n]` needs a `Copy` value.
                     _ if copy => format!("[{item}; {}]", n.value),
                     _ => format!("::core::array::from_fn(|_| {item})"),
@@ -349,6 +360,15 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// Whether values of the emitted type are `Copy` (so `[value; n]` compiles).
+    fn is_copy(&self, ty: &Ty) -> bool {
+        match ty {
+            Ty::Bool | Ty::Int(_) | Ty::Float(_) | Ty::Time | Ty::Duration | Ty::Enum(_) => true,
+            Ty::Optional(inner) | Ty::Array(inner, _) => self.is_copy(inner),
+            Ty::Str | Ty::List(_) | Ty::Packet(_) | Ty::Extern(_) | Ty::Unknown => false,
+        }
+    }
+
     fn field(&self, field: &ast::Field, prefix: &str) -> ir::Field {
         ir::Field {
             doc: doc(&field.doc),
@@ -356,7 +376,7 @@ impl<'a> Lowerer<'a> {
             cool_name: field.name.name.clone(),
             ty: self.rust_type(&field.ty, prefix),
             default: self.field_default(&field.ty, field.default.as_ref(), prefix),
-            serde_with: serde_adapter(&field.ty)
+            serde_with: serde_adapter(&self.ty(&field.ty))
                 .map(|adapter| format!("{SERDE_WITH}As::<{adapter}>")),
         }
     }
@@ -795,7 +815,7 @@ impl<'a> Lowerer<'a> {
         let field = ident::snake(&v.name.name);
         // A type holding an array longer than 32 elements goes through its serde_with
         // adapter (wrapped in `Option` like the field when it has no default).
-        let adapter = serde_adapter(ty).map(|adapter| {
+        let adapter = serde_adapter(&self.ty(ty)).map(|adapter| {
             if has_default {
                 adapter
             } else {
@@ -1035,7 +1055,7 @@ impl Lowerer<'_> {
                         for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
                             overrides.push((
                                 ident::snake(&f.name.name),
-                                self.value(&o.value, Some(&f.ty), GEN_TYPES),
+                                self.value(&o.value, Some(&self.ty(&f.ty)), GEN_TYPES),
                             ));
                         }
                     }
@@ -1047,7 +1067,7 @@ impl Lowerer<'_> {
                         if let Some(ty) = &v.ty {
                             overrides.push((
                                 ident::snake(&v.name.name),
-                                self.value(&o.value, Some(ty), GEN_TYPES),
+                                self.value(&o.value, Some(&self.ty(ty)), GEN_TYPES),
                             ));
                         }
                     }

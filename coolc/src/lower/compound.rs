@@ -14,9 +14,10 @@ use std::collections::BTreeSet;
 
 use super::{
     GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
-    may_targets, section_stubs, unique_among,
+    may_targets, rust_ty, section_stubs, unique_among,
 };
-use crate::ast::{self, ExprKind, TypeKind};
+use crate::ast::{self, ExprKind};
+use crate::check::model::Ty;
 use crate::ident;
 use crate::ir;
 
@@ -87,27 +88,22 @@ impl<'a> Lowerer<'a> {
         self.leaf_port(inner, &target.port.name, input, depth + 1)
     }
 
-    /// The packet type of the port an export names: `Some(None)` for a tick port,
-    /// `None` when it does not resolve.
+    /// The packet type of exported input (`input`) or output `name` of `component`
+    /// (the port it exports, through nested compounds), from the component's
+    /// interface: `Some(None)` for a tick port, `None` when it does not resolve.
     fn export_type(
         &self,
-        component: &'a ast::Component,
-        target: &ast::PortRef,
+        component: &ast::Component,
+        name: &str,
         input: bool,
-    ) -> Option<Option<&'a ast::Type>> {
-        Some(match self.exported_port(component, target, input, 0)? {
-            LeafPort::Input(i) => match &i.def {
-                ast::InputDef::Fifo { ty, .. }
-                | ast::InputDef::Ufifo { ty, .. }
-                | ast::InputDef::Last(ty)
-                | ast::InputDef::Poster(ty) => Some(ty),
-                ast::InputDef::Tick | ast::InputDef::Export(_) => None,
-            },
-            LeafPort::Output(o) => match &o.def {
-                ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(ty),
-                ast::OutputDef::Tick | ast::OutputDef::Export(_) => None,
-            },
-        })
+    ) -> Option<Option<Ty>> {
+        let interface = self.checked.interface(&component.name.name)?;
+        let ports = if input {
+            &interface.inputs
+        } else {
+            &interface.outputs
+        };
+        ports.get(name).map(|port| port.ty.clone())
     }
 
     /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
@@ -133,37 +129,15 @@ impl<'a> Lowerer<'a> {
         ))
     }
 
-    /// The declared type of variable `name` of `component` (through mapped variables
-    /// of nested compounds), and whether it is observable (or controllable).
-    fn variable_type(
-        &self,
-        component: &'a ast::Component,
-        name: &str,
-        depth: usize,
-    ) -> Option<(&'a ast::Type, ast::VarKind)> {
-        if depth > 64 {
-            return None;
-        }
-        let variable = component.members.iter().find_map(|m| match m {
-            ast::Member::Variable(v) if v.name.name == name => Some(v),
-            _ => None,
-        })?;
-        match (&variable.ty, &variable.value) {
-            (Some(ty), _) => Some((ty, variable.kind)),
-            (None, Some(value)) => {
-                let ExprKind::Path(segments) = &value.kind else {
-                    return None;
-                };
-                let [instance, inner_var] = segments.as_slice() else {
-                    return None;
-                };
-                let instance = Self::instance_of(component, &instance.name)?;
-                let inner = self.component_of(instance)?;
-                self.variable_type(inner, &inner_var.name, depth + 1)
-                    .map(|(ty, _)| (ty, variable.kind))
-            }
-            (None, None) => None,
-        }
+    /// The type of variable `name` of `component` (through mapped variables of
+    /// nested compounds), from the component's interface.
+    fn variable_type(&self, component: &ast::Component, name: &str) -> Option<Ty> {
+        let variable = self
+            .checked
+            .interface(&component.name.name)?
+            .variables
+            .get(name)?;
+        (variable.ty != Ty::Unknown).then(|| variable.ty.clone())
     }
 
     /// The user states and quality levels of `component` (a compound's supervisor
@@ -261,11 +235,11 @@ impl<'a> Lowerer<'a> {
                         let address = port_address(target);
                         let name = ident::string_literal(&input.name.name);
                         let target_lit = ident::string_literal(&address);
-                        let step = match self.export_type(c, target, true) {
+                        let step = match self.export_type(c, &input.name.name, true) {
                             Some(None) => format!(".export_tick_input({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_input::<{}>({name}, {target_lit})",
-                                self.rust_type(ty, GEN_TYPES)
+                                rust_ty(&ty, GEN_TYPES)
                             ),
                             None => format!(".export_input::<()>({name}, {target_lit})"),
                         };
@@ -278,11 +252,11 @@ impl<'a> Lowerer<'a> {
                         output_specs.extend(self.export_spec(c, &output.name.name, target, false));
                         let name = ident::string_literal(&output.name.name);
                         let target_lit = ident::string_literal(&port_address(target));
-                        steps.push(match self.export_type(c, target, false) {
+                        steps.push(match self.export_type(c, &output.name.name, false) {
                             Some(None) => format!(".export_tick_output({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_output::<{}>({name}, {target_lit})",
-                                self.rust_type(ty, GEN_TYPES)
+                                rust_ty(&ty, GEN_TYPES)
                             ),
                             None => format!(".export_output::<()>({name}, {target_lit})"),
                         });
@@ -463,18 +437,26 @@ impl<'a> Lowerer<'a> {
             for member in &component.members {
                 match member {
                     ast::Member::Variable(v) if v.kind == ast::VarKind::Controllable => {
-                        let Some((ty, _)) = self.variable_type(component, &v.name.name, 0) else {
+                        let Some(ty) = self.variable_type(component, &v.name.name) else {
                             continue;
                         };
-                        let rust_ty = self.rust_type(ty, GEN_TYPES);
+                        let rust_ty = rust_ty(&ty, GEN_TYPES);
                         // A type holding an array longer than 32 elements goes through
                         // its serde_with adapter, as the instance's own variable does.
-                        let to_value = match (super::serde_adapter(ty), &ty.kind) {
+                        let to_value = match (super::serde_adapter(&ty), &ty) {
                             (Some(adapter), _) => format!(
                                 "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
                                 super::SERDE_WITH
                             ),
-                            (None, TypeKind::Prim(_)) => "::coolbot::Value::from(value)".to_owned(),
+                            (
+                                None,
+                                Ty::Bool
+                                | Ty::Int(_)
+                                | Ty::Float(_)
+                                | Ty::Str
+                                | Ty::Time
+                                | Ty::Duration,
+                            ) => "::coolbot::Value::from(value)".to_owned(),
                             (None, _) => "super::__cool_to_value(&value)".to_owned(),
                         };
                         setters.push(ir::Setter {
@@ -560,10 +542,10 @@ impl<'a> Lowerer<'a> {
             .map(|(name, instance, variable)| {
                 let ty = Self::instance_of(c, instance)
                     .and_then(|i| self.component_of(i))
-                    .and_then(|t| self.variable_type(t, variable, 0))
-                    .map(|(ty, _)| {
-                        let rust = self.rust_type(ty, GEN_TYPES);
-                        if self.defaultable(ty, &mut BTreeSet::new()) {
+                    .and_then(|t| self.variable_type(t, variable))
+                    .map(|ty| {
+                        let rust = rust_ty(&ty, GEN_TYPES);
+                        if self.ty_defaultable(&ty) {
                             rust
                         } else {
                             // Its `Vars` field has no default: an `Option` itself.
@@ -621,9 +603,9 @@ impl<'a> Lowerer<'a> {
                 if !is_inner_mapped(&field) {
                     continue;
                 }
-                if let Some((ty, _)) = self.variable_type(t, &o.name.name, 0) {
-                    let value = self.value(&o.value, Some(ty), GEN_TYPES);
-                    let value = if self.defaultable(ty, &mut BTreeSet::new()) {
+                if let Some(ty) = self.variable_type(t, &o.name.name) {
+                    let value = self.value(&o.value, Some(&ty), GEN_TYPES);
+                    let value = if self.ty_defaultable(&ty) {
                         value
                     } else {
                         format!("::core::option::Option::Some({value})")
