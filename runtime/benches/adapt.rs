@@ -2,7 +2,8 @@
 //! adaptation is on (its detector fed every period, a period interval of 1 to 4 ms)
 //! against the same component with adaptation off, both running at the same time in
 //! alternating rounds; and the cost of one supervisor decision (`adapt::decide`) over
-//! 10 and 100 instances.
+//! 10 and 100 instances; and the idle probe's own CPU share over the rounds
+//! (`coolbot::idle`).
 //!
 //! `cargo bench -p coolbot --bench adapt` (add `-- --quick` for a smoke run).
 
@@ -171,7 +172,12 @@ fn main() {
     } else {
         (20, Duration::from_millis(500))
     };
+    // The idle probe runs while some component adapts: hold a handle on it over the
+    // rounds to read its own CPU time against the wall-clock time.
+    let probe = coolbot::idle::IdleProbe::shared();
+    let probe_started = (Instant::now(), probe.as_ref().map(|p| p.cpu_time()));
     let [on, off, control] = periods(rounds, each).map(median);
+    let probe_wall = probe_started.0.elapsed();
     println!(
         "adaptation cost ({} mode)",
         if quick { "quick" } else { "full" }
@@ -181,6 +187,18 @@ fn main() {
         on / off,
         control / off
     );
+    match (probe, probe_started.1) {
+        (Some(probe), Some(cpu_before)) => {
+            let cpu = probe.cpu_time().saturating_sub(cpu_before);
+            let (wakes, late) = probe.wakes();
+            println!(
+                "  idle probe: {:.4}% of a core over {probe_wall:.1?} ({cpu:?} CPU, {wakes} wake-ups, {late} late; idle share {:.2})",
+                100.0 * cpu.as_secs_f64() / probe_wall.as_secs_f64(),
+                probe.share().unwrap_or(f64::NAN),
+            );
+        }
+        _ => println!("  idle probe: could not start"),
+    }
     for count in [10usize, 100] {
         let members = members(count);
         let levels = Levels {

@@ -22,7 +22,7 @@
 //!   [`Decision`]. The choice of the instance to degrade or promote is a [`Selector`].
 //!
 //! The runner (`runner.rs`) runs the detector and, for a component that no compound
-//! supervises, applies the ladder locally; a compound (`compound.rs`) runs [`decide`]
+//! supervises, applies the ladder locally; a compound (`compound/adaptation.rs`) runs [`decide`]
 //! on its instances' verdicts and commands their levels through their control ports
 //! ([`crate::Command::SetDegradation`]). `docs/runtime.md`, "Adaptation", tells the
 //! whole story.
@@ -56,7 +56,8 @@ pub const MAX_PERIODS: u32 = 100_000;
 pub struct AdaptConfig {
     /// `Some(false)` turns adaptation off; `Some(true)` turns it on; `None` (the
     /// default) leaves it on where the timing block has a period interval
-    /// (`period 10ms..40ms`) and off elsewhere. A compound's supervisor is on unless
+    /// (`period 10ms..40ms`), or no period, a `max_response` and quality levels (an
+    /// aperiodic component degrades its quality on late responses), and off elsewhere. A compound's supervisor is on unless
     /// `Some(false)`.
     pub enabled: Option<bool>,
     /// Bad periods (a missed deadline, or a section longer than the period) among the
@@ -80,6 +81,10 @@ pub struct AdaptConfig {
     pub width: u32,
     /// Compounds: what the top-level supervisor does when degradation is exhausted.
     pub reconfiguration: Reconfiguration,
+    /// Equalization (`crate::equalize`): whether a periodic component whose adaptation
+    /// is on may have its phase moved when its sections coincide with others' on a
+    /// busy processor. Default true.
+    pub equalize: bool,
 }
 
 impl Default for AdaptConfig {
@@ -95,6 +100,7 @@ impl Default for AdaptConfig {
             max_backoff: 8,
             width: 1,
             reconfiguration: Reconfiguration::Report,
+            equalize: true,
         }
     }
 }
@@ -143,11 +149,19 @@ impl AdaptConfig {
         }
     }
 
-    /// Whether detection runs for a component with timing block `timing`.
+    /// Whether detection runs for a component with timing block `timing`: by default
+    /// where there is something to adapt to a violation, a period interval, or, for an
+    /// aperiodic component with a `max_response` (whose late responses are its
+    /// violations), quality levels.
     pub(crate) fn enabled_for(&self, timing: &TimingSpec) -> bool {
-        self.enabled.unwrap_or_else(
-            || matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p),
-        )
+        self.enabled.unwrap_or_else(|| {
+            let interval =
+                matches!((timing.period, timing.max_period), (Some(p), Some(m)) if m > p);
+            let responsive = timing.period.is_none()
+                && timing.max_response.is_some()
+                && timing.qualities.len() > 1;
+            interval || responsive
+        })
     }
 }
 
@@ -202,6 +216,9 @@ pub enum AdaptAction {
     Suspended,
     /// An instance suspended by adaptation was resumed.
     Resumed,
+    /// Equalization moved the component's phase: its periodic sections coincided with
+    /// other components' on a busy processor (`crate::equalize`). The level stays.
+    Equalized,
 }
 
 /// One adaptation step, published as [`crate::MonitorEvent::Adaptation`] and kept in
@@ -497,6 +514,9 @@ pub(crate) struct Observation {
     pub(crate) missed: bool,
     /// The period one promotion would give (the spare test's reference).
     pub(crate) reference: Duration,
+    /// Whether the idle probe saw spare time on the processor ([`crate::idle`]): a
+    /// period is spare only then.
+    pub(crate) idle: bool,
 }
 
 /// The per-component detector: observations in, a [`Pressure`] verdict out.
@@ -557,7 +577,7 @@ impl Detector {
         let spare_limit = observation
             .reference
             .mul_f64(self.config.spare_ratio.max(0.0));
-        if !bad && observation.elapsed <= spare_limit {
+        if !bad && observation.idle && observation.elapsed <= spare_limit {
             self.spare_run = self.spare_run.saturating_add(1);
         } else {
             self.spare_run = 0;
@@ -1155,6 +1175,16 @@ mod tests {
     }
 
     fn run(detector: &mut Detector, elapsed: u64, period: u64, times: usize) -> Vec<Pressure> {
+        run_idle(detector, elapsed, period, times, true)
+    }
+
+    fn run_idle(
+        detector: &mut Detector,
+        elapsed: u64,
+        period: u64,
+        times: usize,
+        idle: bool,
+    ) -> Vec<Pressure> {
         (0..times)
             .filter_map(|_| {
                 detector.observe(Observation {
@@ -1162,9 +1192,35 @@ mod tests {
                     period: MS(period),
                     missed: elapsed > period,
                     reference: MS(period),
+                    idle,
                 })
             })
             .collect()
+    }
+
+    #[test]
+    fn short_sections_are_spare_time_only_while_the_idle_probe_sees_an_idle_cpu() {
+        let mut detector = Detector::new(AdaptConfig {
+            spare_periods: 3,
+            hold_periods: 0,
+            ..AdaptConfig::default()
+        });
+        // Short sections on a busy processor: no spare time, however many.
+        assert_eq!(run_idle(&mut detector, 1, 10, 10, false), []);
+        // Two idle periods, then a busy one: the run starts again.
+        assert_eq!(run_idle(&mut detector, 1, 10, 2, true), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 1, false), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 2, true), []);
+        assert_eq!(run_idle(&mut detector, 1, 10, 1, true), [Pressure::Spare]);
+        // A busy processor ends spare time; violations do not need the probe.
+        assert_eq!(
+            run_idle(&mut detector, 1, 10, 1, false),
+            [Pressure::Nominal]
+        );
+        assert_eq!(
+            run_idle(&mut detector, 15, 10, 2, true),
+            [Pressure::Violation]
+        );
     }
 
     #[test]

@@ -143,9 +143,19 @@ pub trait Automaton: Send + 'static {
 
     /// The current value of variable `variable`, for the monitoring port.
     fn get(&self, variable: usize) -> Value;
+}
 
-    /// Compound components only (atomic code keeps the default, which does nothing):
-    /// called on the component's thread right before the user automaton is entered or
+/// What the runner drives: an [`Automaton`], plus the hooks only a compound component
+/// has (crate-private, so a hand-written or generated automaton implements only what it
+/// uses). An atomic component's automaton is driven through [`Atomic`], which keeps
+/// every hook's default; a compound's automaton (`crate::compound`) implements them.
+pub(crate) trait Driven: Automaton {
+    /// Whether [`Driven::supervise`] and [`Driven::wake_at`] are to be called at all.
+    fn supervises(&self) -> bool {
+        false
+    }
+
+    /// Called on the component's thread right before the user automaton is entered or
     /// resumed (the compound's instances go to `running` first). An `Err` ends the
     /// transition in `running_error` (after `stop`), with the fault's message in
     /// `error`.
@@ -153,44 +163,80 @@ pub trait Automaton: Send + 'static {
         Ok(())
     }
 
-    /// Compound components only: called after a default-automaton transition from
-    /// `from` ended in `to`.
+    /// Called after a default-automaton transition from `from` ended in `to`.
     fn after_transition(&mut self, _from: State, _to: State, _cx: &mut Context) {}
 
-    /// Compound components only: whether [`Automaton::supervise`] and
-    /// [`Automaton::wake_at`] are to be called at all.
-    fn supervises(&self) -> bool {
-        false
-    }
-
-    /// Compound components only: called on every turn of the thread loop while the
-    /// component is `running` and `state` is the current user state, before timers and
-    /// inputs. `Ok(Some(target))` asks for a user transition to `target`; `Err` is a
-    /// fault (`running_error`).
+    /// Called on every turn of the thread loop while the component is `running` and
+    /// `state` is the current user state, before timers and inputs. `Ok(Some(target))`
+    /// asks for a user transition to `target`; `Err` is a fault (`running_error`).
     fn supervise(&mut self, _state: usize, _cx: &mut Context) -> Result<Option<usize>, Fault> {
         Ok(None)
     }
 
-    /// Compound components only: the next instant the thread must wake for
-    /// [`Automaton::supervise`] (a timer of its own), if any.
+    /// Called on every turn of the thread loop while the component is `suspended`:
+    /// observation only (a compound's instances' events keep its view and its mapped
+    /// variables current; `docs/runtime.md`, "While a compound is suspended").
+    fn observe(&mut self, _cx: &mut Context) {}
+
+    /// The next instant the thread must wake for [`Driven::supervise`] (a timer of
+    /// its own), if any.
     fn wake_at(&self) -> Option<Instant> {
         None
     }
 
-    /// Compound components only: the runner entered user state `state` (by any user
-    /// transition: a rule, `after`, `on`, `may`, a plan's `goto`, or the initial
-    /// state), before its entry section runs. The supervisor evaluates the rules of
-    /// `state` on its next turn, which the runner takes at once.
+    /// The runner entered user state `state` (by any user transition: a rule,
+    /// `after`, `on`, `may`, a plan's `goto`, or the initial state), before its entry
+    /// section runs. The supervisor evaluates the rules of `state` on its next turn,
+    /// which the runner takes at once.
     fn entered(&mut self, _state: usize) {}
 
-    /// Compound components only: `Command::SetDegradation(level)` arrived through the
-    /// control port: `level` is the current maximum degradation level of the
-    /// compound's instances (paper 3.6, the homogeneity interval's upper end). `Err`
-    /// rejects the command with the reason.
+    /// `Command::SetDegradation(level)` arrived through the control port: `level` is
+    /// the current maximum degradation level of the compound's instances (paper 3.6,
+    /// the homogeneity interval's upper end). `Err` rejects the command with the
+    /// reason.
     fn set_degradation(&mut self, _level: u32, _cx: &mut Context) -> Result<(), String> {
         Err("this component has no adaptation levels".to_owned())
     }
 }
+
+/// An atomic component's automaton as the runner drives it: every compound hook keeps
+/// its default.
+pub(crate) struct Atomic(pub(crate) Box<dyn Automaton>);
+
+impl Automaton for Atomic {
+    fn spec(&self) -> &'static Spec {
+        self.0.spec()
+    }
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        self.0.start(cx)
+    }
+    fn stop(&mut self, cx: &mut Context) {
+        self.0.stop(cx)
+    }
+    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        self.0.section(state, section, cx)
+    }
+    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
+        self.0.choose(state, cx)
+    }
+    fn exception(&mut self, exception: usize, message: &str, cx: &mut Context) {
+        self.0.exception(exception, message, cx)
+    }
+    fn answer(&mut self, output: usize, cx: &mut Context) -> Result<(), Fault> {
+        self.0.answer(output, cx)
+    }
+    fn configure(&mut self, configuration: &Value) -> Result<(), String> {
+        self.0.configure(configuration)
+    }
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        self.0.set(variable, value)
+    }
+    fn get(&self, variable: usize) -> Value {
+        self.0.get(variable)
+    }
+}
+
+impl Driven for Atomic {}
 
 /// Rings a component's doorbell: the thread wakes and looks for work (see
 /// [`Context::waker`]).
@@ -226,6 +272,8 @@ pub struct Context {
     pub(crate) period: Option<Duration>,
     pub(crate) period_changed: bool,
     pub(crate) quality: usize,
+    /// The deadline of the periodic section running now.
+    pub(crate) deadline: Option<Instant>,
     pub(crate) waker: Option<Waker>,
     /// Compound components: supervision steps to publish when the call returns.
     pub(crate) supervision: Vec<crate::monitor::Supervision>,
@@ -247,6 +295,7 @@ impl Context {
             period,
             period_changed: false,
             quality: 0,
+            deadline: None,
             waker: None,
             supervision: Vec::new(),
             shared: None,
@@ -307,6 +356,13 @@ impl Context {
     /// (0 = best).
     pub fn quality(&self) -> usize {
         self.quality
+    }
+
+    /// The deadline of the periodic section running now (`None` in other sections):
+    /// it started `Instant::now() - deadline` late. The runtime's clock: on a virtual
+    /// clock, an instant of that clock.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.deadline
     }
 
     /// The component instance's name.

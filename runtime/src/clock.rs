@@ -25,7 +25,7 @@
 //! usual, and a test waits for its effect as it would with the real clock.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
@@ -91,6 +91,8 @@ pub struct VirtualClock {
     offset: AtomicU64,
     state: Mutex<Members>,
     settled: Condvar,
+    /// What the idle probe would say ([`VirtualClock::set_idle`]).
+    idle: AtomicBool,
 }
 
 impl std::fmt::Debug for VirtualClock {
@@ -139,12 +141,25 @@ impl VirtualClock {
             offset: AtomicU64::new(0),
             state: Mutex::new(Members::default()),
             settled: Condvar::new(),
+            idle: AtomicBool::new(true),
         })
     }
 
     /// The time now.
     pub fn now(&self) -> Instant {
         self.base + Duration::from_nanos(self.offset.load(Ordering::Acquire))
+    }
+
+    /// Say whether the processor has spare time, as the idle probe would
+    /// ([`crate::idle`]; there is no probe on a virtual clock). Initially true: promotion
+    /// then goes by the components' own section times.
+    pub fn set_idle(&self, idle: bool) {
+        self.idle.store(idle, Ordering::Release);
+    }
+
+    /// What [`VirtualClock::set_idle`] last said.
+    pub fn idle(&self) -> bool {
+        self.idle.load(Ordering::Acquire)
     }
 
     /// How far the clock has been advanced since it was made.

@@ -124,6 +124,8 @@ mod automaton;
 pub mod clock;
 mod commander;
 pub mod compound;
+pub mod equalize;
+pub mod idle;
 mod monitor;
 pub mod port;
 pub mod record;
@@ -143,7 +145,8 @@ pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_T
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
-    Rejected, SUPERVISION_HISTORY, Step, Subscription, Supervision, Timeout,
+    RESPONSE_WINDOW, Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision,
+    Timeout,
 };
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,

@@ -127,6 +127,32 @@ pub struct Monitor {
     /// Adaptation (paper 3.6): level, verdict and the last steps.
     #[serde(default)]
     pub adaptation: AdaptStatus,
+    /// Aperiodic components with a `max_response`: their response times, from a
+    /// packet's arrival to the end of the `on` transition that handled it.
+    #[serde(default)]
+    pub response: ResponseTimes,
+}
+
+/// How many responses [`ResponseTimes::p50`] and [`ResponseTimes::p99`] are taken
+/// over.
+pub const RESPONSE_WINDOW: usize = 64;
+
+/// An aperiodic component's response times (paper 3.6: "the maximum delay for input
+/// event processing", verified by "temporal labeling of input data"): from the arrival
+/// of the oldest packet an `on` transition handles to the end of that transition's
+/// sections, queueing included.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct ResponseTimes {
+    /// The median of the last [`RESPONSE_WINDOW`] responses.
+    pub p50: Duration,
+    /// The 99th percentile of the last [`RESPONSE_WINDOW`] responses.
+    pub p99: Duration,
+    /// The longest response so far.
+    pub worst: Duration,
+    /// Responses measured.
+    pub count: u64,
+    /// Responses longer than `max_response`.
+    pub late: u64,
 }
 
 /// How many supervision steps [`Monitor::supervision`] keeps.
@@ -254,6 +280,17 @@ pub enum MonitorEvent {
         /// How long it ran.
         took: Duration,
         /// How many overruns in all.
+        total: u64,
+    },
+    /// An aperiodic component responded later than its `max_response` (from a
+    /// packet's arrival to the end of the transition that handled it): a timing
+    /// violation.
+    LateResponse {
+        /// The response time.
+        took: Duration,
+        /// The bound, `max_response`.
+        bound: Duration,
+        /// How many late responses in all.
         total: u64,
     },
     /// The period changed.

@@ -242,6 +242,59 @@ pub(crate) struct Owner {
     pub(crate) bell: Arc<Doorbell>,
     pub(crate) shared: Weak<Shared>,
     pub(crate) port_name: &'static str,
+    /// Temporal labeling of arrivals at this input, when its component measures its
+    /// response time (`None`: no clock is read on delivery).
+    pub(crate) label: Option<Arc<ArrivalLabel>>,
+}
+
+/// Temporal labeling (paper 3.6, "temporal labeling of input data"): when the oldest
+/// packet at an input that no `on` transition has handled yet arrived. Stamped on
+/// delivery (one clock read for the first packet after each handling, none for the
+/// others), taken by the component's thread when an `on` transition of the input
+/// fires: its response time runs from this instant to the end of that transition's
+/// sections.
+#[derive(Debug, Default)]
+pub(crate) struct ArrivalLabel {
+    /// Nanoseconds since `crate::watchdog::epoch()`, plus one; 0: none.
+    first: AtomicU64,
+    /// The component's clock when it is virtual (else the real one is read).
+    clock: OnceLock<Arc<crate::clock::VirtualClock>>,
+}
+
+impl ArrivalLabel {
+    /// Read arrivals on `clock` (a component on a virtual clock).
+    pub(crate) fn set_clock(&self, clock: &crate::clock::Clock) {
+        if let Some(clock) = clock.as_virtual() {
+            let _ = self.clock.set(Arc::clone(clock));
+        }
+    }
+
+    /// A packet arrived: stamp it if it is the oldest not handled.
+    #[inline]
+    fn stamp(&self) {
+        if self.first.load(Ordering::Relaxed) != 0 {
+            return;
+        }
+        let now = match self.clock.get() {
+            Some(clock) => clock.now(),
+            None => Instant::now(),
+        };
+        let since = now.saturating_duration_since(crate::watchdog::epoch());
+        let nanos = u64::try_from(since.as_nanos())
+            .unwrap_or(u64::MAX - 1)
+            .saturating_add(1);
+        let _ = self
+            .first
+            .compare_exchange(0, nanos, Ordering::Relaxed, Ordering::Relaxed);
+    }
+
+    /// The oldest arrival not handled, if any; the label is cleared.
+    pub(crate) fn take(&self) -> Option<Instant> {
+        match self.first.swap(0, Ordering::AcqRel) {
+            0 => None,
+            nanos => Some(crate::watchdog::epoch() + Duration::from_nanos(nanos - 1)),
+        }
+    }
 }
 
 /// The kind-independent part of every input end.
@@ -276,6 +329,9 @@ impl InputCore {
         // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
         self.arrivals.fetch_add(1, Ordering::SeqCst);
         if let Some(owner) = self.owner.get() {
+            if let Some(label) = &owner.label {
+                label.stamp();
+            }
             owner.bell.ring();
         }
         if self.pull_waiting.load(Ordering::Acquire)
@@ -506,6 +562,20 @@ pub(crate) const fn shares<T>() -> bool {
     std::mem::needs_drop::<T>() || size_of::<T>() > 256
 }
 
+/// Move the pull requests waiting at `from` to `to` (an instance's stand-in now
+/// answers its consumers): returns how many moved, and how many `to` refused (its
+/// request queue full; their pullers time out).
+pub(crate) fn move_requests(from: &ErasedOutput, to: &ErasedOutput) -> (u64, u64) {
+    let (mut moved, mut refused) = (0, 0);
+    while let Some(input_id) = from.core.next_request() {
+        match to.core.request(input_id) {
+            Ok(()) => moved += 1,
+            Err(_) => refused += 1,
+        }
+    }
+    (moved, refused)
+}
+
 impl PullRoute {
     fn request(&self, input_id: usize) -> Result<(), PullError> {
         match self {
@@ -530,6 +600,12 @@ pub(crate) trait Deliver<T>: Send + Sync {
     fn deliver_answer(&self, packet: Parcel<T>, _id: usize) {
         self.deliver(packet);
     }
+
+    /// `count` packets meant for this sink will never come (a redundant group's
+    /// merged stream could not carry them across a failover): an input counts them
+    /// as lost (an overflow, with its `MonitorEvent::Overflow`); a sink passing
+    /// packets on passes the count on.
+    fn lost(&self, _count: u64) {}
 }
 
 /// A converter on a connection, in front of the input end.
@@ -542,6 +618,10 @@ impl<A: Packet, B: Packet> Deliver<A> for Converted<A, B> {
     fn deliver(&self, packet: Parcel<A>) {
         self.target
             .deliver(Parcel::Owned((self.convert)(packet.get())));
+    }
+
+    fn lost(&self, count: u64) {
+        self.target.lost(count);
     }
 }
 
@@ -687,6 +767,12 @@ pub(crate) struct FifoInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for FifoInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
         match self.sender.try_send(packet) {
@@ -854,6 +940,12 @@ struct UfifoQueue<T> {
 }
 
 impl<T: Packet> Deliver<T> for UfifoInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     fn deliver(&self, packet: Parcel<T>) {
         let stored = {
             let mut queue = lock(&self.queue);
@@ -982,6 +1074,12 @@ pub(crate) struct LastInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
+    fn lost(&self, count: u64) {
+        if count > 0 {
+            self.core.overflowed(count);
+        }
+    }
+
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
         let replaced = {
@@ -2150,6 +2248,12 @@ impl<T: Packet> Deliver<T> for DataForward<T> {
     fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
         dispatch_answer(&read(&self.to.sinks), packet, id);
     }
+
+    fn lost(&self, count: u64) {
+        for sink in read(&self.to.sinks).iter() {
+            sink.target.lost(count);
+        }
+    }
 }
 
 /// A compound's exported poster output as a tap of the instance output it follows.
@@ -2238,7 +2342,9 @@ pub(crate) trait MergeEnd: Send + Sync {
     fn attach(&self, lane: usize, from: &ErasedOutput) -> bool;
     /// Lane `lane` leads from now on: its packets ahead of the stream go out now.
     /// Returns how many went out, and how many numbers were missing before them
-    /// (packets its backlog could not keep).
+    /// (packets its backlog could not keep), which are counted as lost at every
+    /// input the stream feeds (directly, through a converter, or through a
+    /// compound's exported output).
     fn lead(&self, lane: usize) -> (u64, u64);
     /// Lane `lane` (a member back from recovery) counts on from the stream's number.
     fn rejoin(&self, lane: usize);
@@ -2368,6 +2474,13 @@ impl<T: Packet> MergeEnd for Arc<Merge<T>> {
                 state.delivered = seq;
                 replayed += 1;
                 self.out.send_parcel(packet);
+            }
+        }
+        if missing > 0 {
+            // The stream's consumers never get them: lost there, counted and
+            // announced, so that sent = received + lost holds at each of them.
+            for sink in read(&self.out.inner.sinks).iter() {
+                sink.target.lost(missing);
             }
         }
         (replayed, missing)

@@ -966,6 +966,7 @@ impl PendingTap for PendingTicks {
             bell,
             shared: std::sync::Weak::new(),
             port_name: "recorder",
+            label: None,
         });
         let linked = self.output.link(&input);
         let counters = Arc::new(Counters {

@@ -29,10 +29,12 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Automaton, Context, Fault, Section};
+use crate::automaton::{Context, Driven, Fault, Section};
 use crate::clock::Clock;
+use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
+use crate::idle::IdleProbe;
 use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
-use crate::port::{Doorbell, InputCore, OutputCore};
+use crate::port::{ArrivalLabel, Doorbell, InputCore, OutputCore};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::{Scheduling, later, panic_message};
@@ -93,7 +95,7 @@ enum Recovery {
 
 /// Everything one component thread owns.
 pub(crate) struct Runner {
-    automaton: Box<dyn Automaton>,
+    automaton: Box<dyn Driven>,
     spec: &'static Spec,
     /// The effective timing block: the instance's override, else the spec's.
     timing: TimingSpec,
@@ -165,10 +167,15 @@ pub(crate) struct Runner {
     scheduling: Option<Scheduling>,
     /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
     /// component with no ladder and no detection, and for compounds (whose
-    /// supervisor adapts, `compound.rs`).
+    /// supervisor adapts, `compound/adaptation.rs`).
     adapt: Option<Local>,
     /// How long the last user call ran.
     last_took: Duration,
+    /// Temporal labels of the inputs whose response time is measured (aperiodic
+    /// components with a `max_response`; `crate::port::ArrivalLabel`).
+    labels: Vec<Option<Arc<ArrivalLabel>>>,
+    /// The last `RESPONSE_WINDOW` response times.
+    responses: VecDeque<Duration>,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -180,7 +187,7 @@ impl Runner {
     )]
     pub(crate) fn new(
         name: &str,
-        automaton: Box<dyn Automaton>,
+        automaton: Box<dyn Driven>,
         timing: TimingSpec,
         adaptation: AdaptConfig,
         shared: Arc<Shared>,
@@ -245,6 +252,8 @@ impl Runner {
             scheduling: None,
             adapt,
             last_took: Duration::ZERO,
+            labels: Vec::new(),
+            responses: VecDeque::new(),
             _exit_guard: exit_guard,
         };
         runner.cx.shared = Some(Arc::clone(&runner.shared));
@@ -259,8 +268,16 @@ impl Runner {
         self.supervised
     }
 
+    /// Measure response times at these inputs (`None`: not measured).
+    pub(crate) fn set_labels(&mut self, labels: Vec<Option<Arc<ArrivalLabel>>>) {
+        self.labels = labels;
+    }
+
     /// Run on `clock` (before the thread starts): every timer reads it.
     pub(crate) fn set_clock(&mut self, clock: Clock) {
+        for label in self.labels.iter().flatten() {
+            label.set_clock(&clock);
+        }
         let now = clock.now();
         self.entered_at = now;
         self.cpu_updated = now;
@@ -346,6 +363,9 @@ impl Runner {
                 break;
             }
             if self.state != State::Running {
+                if self.supervised && self.state == State::Suspended {
+                    self.observe_instances();
+                }
                 // Nothing runs: wait for the next ring (a command, or an arrival that
                 // only needs to stay where it is).
                 self.cx.end_requested = false;
@@ -583,7 +603,15 @@ impl Runner {
             .min_by_key(|on| on.port);
         if let Some(on) = fired {
             self.pending[on.port] = false;
+            let arrived = self
+                .labels
+                .get(on.port)
+                .and_then(Option::as_ref)
+                .and_then(|label| label.take());
             self.goto(on.target, now);
+            if let Some(arrived) = arrived {
+                self.responded(arrived);
+            }
             return true;
         }
         // 5. Pull requests.
@@ -634,6 +662,14 @@ impl Runner {
             {
                 self.set_error(Some(format!("panic after a transition: {panic}")));
             }
+        }
+    }
+
+    /// Compound components, while suspended: observe the instances (their events keep
+    /// the compound's view and mapped variables current); nothing acts.
+    fn observe_instances(&mut self) {
+        if let Err(panic) = self.call(|automaton, cx| automaton.observe(cx)) {
+            self.set_error(Some(format!("panic in the supervisor: {panic}")));
         }
     }
 
@@ -694,8 +730,11 @@ impl Runner {
                     self.set_state(to);
                     // Packets that came while it did not run (queued while `ready`,
                     // or moved to it as a substitute) are arrivals in its initial
-                    // state.
+                    // state; their wait is not a response time.
                     self.arrivals_count_on_entry = true;
+                    for label in self.labels.iter().flatten() {
+                        let _ = label.take();
+                    }
                     self.enter(self.spec.initial, self.time.now());
                     return;
                 }
@@ -959,7 +998,7 @@ impl Runner {
     /// Run one user call under `catch_unwind`, account its time, publish its changes.
     fn call<R>(
         &mut self,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, String> {
         self.call_watched(None, body)
             .map_err(|failure| match failure {
@@ -974,7 +1013,7 @@ impl Runner {
     fn call_watched<R>(
         &mut self,
         watched: Option<(usize, Section)>,
-        body: impl FnOnce(&mut dyn Automaton, &mut Context) -> R,
+        body: impl FnOnce(&mut dyn Driven, &mut Context) -> R,
     ) -> Result<R, Failure> {
         // Without a watchdog (no max_response), the call starts from the turn's clock
         // reading (taken at most a few hundred nanoseconds of runner work ago, or at
@@ -1343,7 +1382,10 @@ impl Runner {
         };
         self.reanchored = false;
         let mut missed_any = false;
-        match self.section_with_plan(state, Section::Periodic) {
+        self.cx.deadline = Some(deadline);
+        let outcome = self.section_with_plan(state, Section::Periodic);
+        self.cx.deadline = None;
+        match outcome {
             Recovery::Recovered => {}
             Recovery::Goto(target) => self.pending_choice = Some(target),
             Recovery::Failed(message) => {
@@ -1378,10 +1420,67 @@ impl Runner {
         }
         if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
             self.observe(self.last_took, period, missed_any);
+            self.equalize(deadline, period, !self.reanchored && !missed_any);
         }
         if self.pending_choice.is_none() {
             self.choose(state);
         }
+    }
+
+    /// Equalization (`crate::equalize`): feed the seat this periodic section (when
+    /// `on_time`: a period that missed its deadline or was re-anchored says nothing of
+    /// its phase); when it says so, delay the next deadline once and publish an
+    /// `Equalized` step.
+    fn equalize(&mut self, deadline: Instant, period: Duration, on_time: bool) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        if !adapt.equalize || !self.time.is_real() {
+            return; // (Phases on a virtual clock say nothing about the processor.)
+        }
+        // CPU time and waits since the previous periodic section ended.
+        let stats = adapt
+            .stats
+            .get_or_insert_with(ThreadStats::of_current_thread);
+        let Some((cpu, waited)) = stats.since_last() else {
+            return;
+        };
+        if !on_time {
+            return;
+        }
+        // Without the OS's figure: the elapsed time the thread did not spend on a CPU
+        // while its section ran.
+        let waited = waited.unwrap_or_else(|| self.last_took.saturating_sub(cpu));
+        let name = &self.cx.name;
+        let seat = adapt
+            .seat
+            .get_or_insert_with(|| Board::process().seat(name, EqualizeConfig::default()));
+        let Some(shift) = seat.observe(Activation {
+            deadline,
+            cpu,
+            waited,
+            period,
+        }) else {
+            return;
+        };
+        let level = adapt.level;
+        if let Some(next) = self.next_periodic.as_mut() {
+            *next = later(*next, shift.delay);
+        }
+        let step = Adaptation {
+            component: self.cx.name.clone(),
+            action: AdaptAction::Equalized,
+            from: level,
+            to: level,
+            period: self.cx.period,
+            quality: Some(self.cx.quality),
+            detail: format!(
+                "phase moved {:?} later: its sections coincided with {}'s",
+                shift.delay,
+                shift.away_from.join("'s, ")
+            ),
+        };
+        self.shared.adaptation_step(step, |_| {});
     }
 
     /// Re-anchor the periodic deadline on the current period, from now.
@@ -1475,6 +1574,19 @@ struct Local {
     cpu_mark: Option<(Instant, Duration)>,
     /// The thread's CPU time over wall-clock time between readings, smoothed.
     cpu_share: f64,
+    /// The process's idle probe (`crate::idle`), taken at the first observation on the
+    /// real clock; `None` before, on a virtual clock, or if it could not start.
+    probe: Option<IdleProbe>,
+    /// Whether the probe was asked for.
+    probe_asked: bool,
+    /// Whether equalization may move its phase (`AdaptConfig::equalize`).
+    equalize: bool,
+    /// Its place on the process's equalization board (`crate::equalize`), taken at its
+    /// first periodic section on the real clock.
+    seat: Option<Seat>,
+    /// The thread's CPU time and run-queue wait (equalization), opened on the
+    /// component's thread at its first periodic section.
+    stats: Option<ThreadStats>,
 }
 
 /// Which axis a change by other means set (it becomes the floor of promotions).
@@ -1504,6 +1616,11 @@ impl Local {
             exhausted: false,
             cpu_mark: None,
             cpu_share: 0.0,
+            probe: None,
+            probe_asked: false,
+            equalize: config.equalize,
+            seat: None,
+            stats: None,
         })
     }
 
@@ -1525,6 +1642,44 @@ impl Local {
 }
 
 impl Runner {
+    /// An `on` transition handled packets that arrived from `arrived` on: publish the
+    /// response time; past `max_response` it is a late response, and a timing
+    /// violation for the adaptation detector (paper 3.6).
+    fn responded(&mut self, arrived: Instant) {
+        let took = self.clock.saturating_duration_since(arrived);
+        let Some(bound) = self.max_response else {
+            return;
+        };
+        if self.responses.len() == crate::monitor::RESPONSE_WINDOW {
+            self.responses.pop_front();
+        }
+        self.responses.push_back(took);
+        let mut sorted: Vec<Duration> = self.responses.iter().copied().collect();
+        sorted.sort_unstable();
+        let at = |share: f64| sorted[((sorted.len() - 1) as f64 * share).round() as usize];
+        let (p50, p99) = (at(0.5), at(0.99));
+        let late = took > bound;
+        self.shared.update(|monitor| {
+            let response = &mut monitor.response;
+            response.p50 = p50;
+            response.p99 = p99;
+            response.worst = response.worst.max(took);
+            response.count += 1;
+            if !late {
+                return Vec::new();
+            }
+            response.late += 1;
+            vec![MonitorEvent::LateResponse {
+                took,
+                bound,
+                total: response.late,
+            }]
+        });
+        if self.adapt.as_ref().is_some_and(|adapt| adapt.enabled) {
+            self.observe(took, bound, late);
+        }
+    }
+
     /// Feed the detector one periodic section; act on a new verdict (a component no
     /// compound supervises degrades or promotes itself, one level per verdict).
     fn observe(&mut self, took: Duration, period: Duration, missed: bool) {
@@ -1541,11 +1696,22 @@ impl Runner {
             .period
             .unwrap_or(period)
             .min(period);
+        let idle = match self.time.as_virtual() {
+            Some(clock) => clock.idle(),
+            None => {
+                if !adapt.probe_asked {
+                    adapt.probe_asked = true;
+                    adapt.probe = IdleProbe::shared();
+                }
+                adapt.probe.as_ref().is_none_or(IdleProbe::idle)
+            }
+        };
         let verdict = adapt.detector.observe(Observation {
             elapsed: took,
             period,
             missed,
             reference,
+            idle,
         });
         let load = adapt.detector.load();
         // (Without a new verdict, the load is published with the timing counters.)

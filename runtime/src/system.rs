@@ -7,11 +7,11 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::automaton::{Automaton, TaskResult};
+use crate::automaton::{Atomic, Automaton, Driven, TaskResult};
 use crate::clock::Clock;
 use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
 use crate::port::{
-    ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
+    ArrivalLabel, ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
 };
 use crate::runner::Runner;
 use crate::spec::{InputKind, OutputKind, Spec, TimingSpec};
@@ -66,7 +66,7 @@ impl PortSet {
 /// An unstarted component: a name, its code and its ports.
 pub struct Component {
     name: String,
-    automaton: Box<dyn Automaton>,
+    automaton: Box<dyn Driven>,
     ports: PortSet,
     /// The instance's own `timing` block, replacing the spec's.
     timing: Option<TimingSpec>,
@@ -93,6 +93,15 @@ impl Component {
     pub fn new(
         name: impl Into<String>,
         automaton: Box<dyn Automaton>,
+        ports: PortSet,
+    ) -> Component {
+        Component::driven(name, Box::new(Atomic(automaton)), ports)
+    }
+
+    /// A component whose automaton has the compound hooks ([`Driven`]): a compound's.
+    pub(crate) fn driven(
+        name: impl Into<String>,
+        automaton: Box<dyn Driven>,
         ports: PortSet,
     ) -> Component {
         Component {
@@ -549,6 +558,7 @@ impl System {
             supervision: Vec::new(),
             supervision_steps: 0,
             adaptation: crate::adapt::AdaptStatus::default(),
+            response: crate::monitor::ResponseTimes::default(),
         };
         let named_inputs = spec
             .inputs
@@ -558,11 +568,24 @@ impl System {
             .collect();
         let shared = Arc::new(Shared::new(monitor, named_inputs));
         let bell = crate::port::Doorbell::new();
-        for (port, declared) in ports.inputs.iter().zip(spec.inputs) {
+        // Response times (paper 3.6) are measured for an aperiodic component with a
+        // `max_response`, at the inputs an `on` transition handles.
+        let labeled = timing.period.is_none() && timing.max_response.is_some();
+        let labels: Vec<Option<Arc<ArrivalLabel>>> = (0..spec.inputs.len())
+            .map(|index| {
+                let handled = spec
+                    .states
+                    .iter()
+                    .any(|state| state.on.iter().any(|on| on.port == index));
+                (labeled && handled).then(|| Arc::new(ArrivalLabel::default()))
+            })
+            .collect();
+        for ((port, declared), label) in ports.inputs.iter().zip(spec.inputs).zip(&labels) {
             let owner = Owner {
                 bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
+                label: label.clone(),
             };
             if port.core.owner.set(owner).is_err() {
                 return Err(Error::PortInUse {
@@ -576,6 +599,7 @@ impl System {
                 bell: Arc::clone(&bell),
                 shared: Arc::downgrade(&shared),
                 port_name: declared.name,
+                label: None,
             };
             if port.core.owner.set(owner).is_err() {
                 return Err(Error::PortInUse {
@@ -607,7 +631,7 @@ impl System {
                 .zip(ports.outputs.iter().cloned())
                 .collect(),
         };
-        let runner = Runner::new(
+        let mut runner = Runner::new(
             &name,
             automaton,
             timing,
@@ -619,6 +643,7 @@ impl System {
             ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
             exit_guard,
         );
+        runner.set_labels(labels);
         let index = self.slots.len();
         self.names.insert(name.clone(), index);
         self.slots.push(Slot {

@@ -560,3 +560,92 @@ fn exporting_a_port_of_the_wrong_kind_or_type_is_refused() {
         "{error}"
     );
 }
+
+#[test]
+fn a_pull_waiting_at_a_failed_instance_is_answered_by_its_substitute() {
+    // `w` is busy answering a pull of `trip` (which fails it) when `o` pulls the
+    // exported `x`: that request waits at `w.port`. `w` fails, `s` takes its place,
+    // and the waiting request goes with the connection: `s` answers it.
+    let gate = Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let busy = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let answered_by = Arc::new(std::sync::Mutex::new(Vec::<&'static str>::new()));
+    let member = |name: &'static str| {
+        let port = DataOut::<u64>::new();
+        let trip = DataOut::<u64>::new();
+        let (gate, busy, answered_by) = (
+            Arc::clone(&gate),
+            Arc::clone(&busy),
+            Arc::clone(&answered_by),
+        );
+        let answer_with = port.clone();
+        ShellBuilder::new(name)
+            .output(output("port", OutputKind::Data, true), &port)
+            .output(output("trip", OutputKind::Data, true), &trip)
+            .answer(move |index| {
+                if index == 1 {
+                    busy.store(true, Ordering::SeqCst);
+                    while gate.load(Ordering::SeqCst) {
+                        std::thread::sleep(std::time::Duration::from_millis(1));
+                    }
+                    return Err(Fault::message("tripped"));
+                }
+                answered_by.lock().unwrap().push(name);
+                answer_with.send(7);
+                Ok(())
+            })
+            .build()
+    };
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(member("w"))
+        .instance(member("s"))
+        .substitute("s", "w")
+        .on_error("w", Policy::Substitute)
+        .recovery(WAIT, WAIT * 6)
+        .export_output::<u64>("x", "w.port")
+        .export_output::<u64>("trip", "w.trip")
+        .build()
+        .expect("build k");
+    let end = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
+    let trip = LastIn::<u64>::new();
+    let o = ShellBuilder::new("o")
+        .input(
+            input(
+                "end",
+                InputKind::Fifo {
+                    capacity: 8,
+                    policy: OverflowPolicy::Reject,
+                },
+                true,
+            ),
+            &end,
+        )
+        .input(input("trip", InputKind::Last, true), &trip)
+        .build();
+    let mut system = System::new();
+    system.add(o).expect("add o");
+    system.add(k).expect("add k");
+    system.connect("k.x", "o.end").expect("x");
+    system.connect("k.trip", "o.trip").expect("trip");
+    system.run_all().expect("run");
+    trip.request().expect("request trip");
+    eventually(|| busy.load(Ordering::SeqCst), "w is busy answering trip");
+    end.request().expect("request x: it waits at w.port");
+    gate.store(false, Ordering::SeqCst);
+    assert_eq!(
+        end.recv_timeout(WAIT),
+        Some(7),
+        "the request waiting at w is answered by its substitute"
+    );
+    assert_eq!(*answered_by.lock().unwrap(), ["s"]);
+    let k = system.handle("k").expect("k");
+    k.wait_for(
+        |m| {
+            m.supervision
+                .iter()
+                .any(|s| s.instance == "w" && s.step == Step::Substituted { by: "s".to_owned() })
+        },
+        WAIT,
+    )
+    .expect("w was substituted");
+    assert!(system.shutdown().clean());
+}

@@ -85,15 +85,18 @@ static RELAY: Spec = Spec {
 };
 
 struct Relay {
+    spec: &'static Spec,
     input: FifoIn<u64>,
     output: DataOut<u64>,
     fail: Arc<AtomicBool>,
+    /// While set, its next section hangs (until it is cleared, or `fail` is set).
+    hold: Arc<AtomicBool>,
     relayed: Arc<AtomicU64>,
 }
 
 impl Automaton for Relay {
     fn spec(&self) -> &'static Spec {
-        &RELAY
+        self.spec
     }
     fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
         Ok(())
@@ -107,6 +110,12 @@ impl Automaton for Relay {
     ) -> Result<(), Fault> {
         if self.fail.swap(false, Ordering::SeqCst) {
             return Err(Fault::message("injected"));
+        }
+        while self.hold.load(Ordering::SeqCst) {
+            if self.fail.swap(false, Ordering::SeqCst) {
+                return Err(Fault::message("injected while hung"));
+            }
+            std::thread::sleep(Duration::from_millis(1));
         }
         for packet in self.input.drain() {
             self.relayed.fetch_add(1, Ordering::SeqCst);
@@ -132,23 +141,51 @@ impl Automaton for Relay {
     }
 }
 
+/// The relay with a small `Block` fifo: a producer waits while it is full.
+const BLOCK_QUEUE: usize = 4;
+
+static BLOCK_RELAY: Spec = Spec {
+    type_name: "BlockRelay",
+    inputs: &[InputSpec {
+        name: "input",
+        kind: InputKind::Fifo {
+            capacity: BLOCK_QUEUE,
+            policy: OverflowPolicy::Block,
+        },
+        packet: "u64",
+        pull: false,
+    }],
+    ..RELAY
+};
+
 struct Member {
     fail: Arc<AtomicBool>,
+    hold: Arc<AtomicBool>,
     relayed: Arc<AtomicU64>,
 }
 
 fn relay(name: &str) -> (Component, Member) {
-    let input = FifoIn::new(QUEUE, OverflowPolicy::Reject);
+    relay_as(name, &RELAY)
+}
+
+fn relay_as(name: &str, spec: &'static Spec) -> (Component, Member) {
+    let input = match spec.inputs[0].kind {
+        InputKind::Fifo { capacity, policy } => FifoIn::new(capacity, policy),
+        _ => unreachable!("the relays' input is a fifo"),
+    };
     let output = DataOut::new();
     let ports = PortSet::new().input(&input).output(&output);
     let member = Member {
         fail: Arc::new(AtomicBool::new(false)),
+        hold: Arc::new(AtomicBool::new(false)),
         relayed: Arc::new(AtomicU64::new(0)),
     };
     let automaton = Relay {
+        spec,
         input,
         output,
         fail: Arc::clone(&member.fail),
+        hold: Arc::clone(&member.hold),
         relayed: Arc::clone(&member.relayed),
     };
     (Component::new(name, Box::new(automaton), ports), member)
@@ -357,5 +394,196 @@ fn a_converted_connection_inside_the_compound_reads_the_merged_stream() {
     let k = system.handle("k").expect("k");
     k.wait_for(|m| m.supervision.iter().any(took_over), WAIT)
         .expect("b took over");
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_hung_member_does_not_stall_the_others_and_what_it_misses_is_counted_lost() {
+    // `a` and `b` read the compound's exported input through `Block` fifos of 4; `b`
+    // hangs in a section. `a` still gets every packet (the compound does not wait for
+    // `b`'s room), and every packet `b` does not get is counted lost at its input.
+    let (a_component, a) = relay_as("a", &BLOCK_RELAY);
+    let (b_component, b) = relay_as("b", &BLOCK_RELAY);
+    b.hold.store(true, Ordering::SeqCst);
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(a_component)
+        .instance(b_component)
+        .redundant(&["a", "b"])
+        .export_input::<u64>("in", "a.input")
+        .build()
+        .expect("build k");
+    let send = DataOut::<u64>::new();
+    let mut system = System::new();
+    system
+        .add(
+            ShellBuilder::new("p")
+                .output(output("out", OutputKind::Data, false), &send)
+                .build(),
+        )
+        .expect("add p");
+    system.add(k).expect("add k");
+    system.connect("p.out", "k.in").expect("p -> k");
+    system.run_all().expect("run");
+    const SENT: u64 = 100;
+    for n in 1..=SENT {
+        send.send(n);
+        // One at a time: the compound's own fifo never fills, whatever `b` does.
+        support::eventually(
+            || a.relayed.load(Ordering::SeqCst) == n,
+            "a relays the packet while b hangs",
+        );
+    }
+    let b_handle = system.handle("k").and_then(|k| k.instance("b")).expect("b");
+    let lost = |m: &coolbot::Monitor| m.port_overflows.iter().map(|(_, n)| n).sum::<u64>();
+    // `b` took its queue's worth (and the packet its hung section is about); the
+    // rest is lost at its input, counted and announced.
+    let overflowing = b_handle
+        .wait_for(|m| lost(m) >= SENT - BLOCK_QUEUE as u64 - 1, WAIT)
+        .expect("b's losses are counted");
+    assert!(
+        lost(&overflowing) < SENT,
+        "b lost only what did not fit: {overflowing:?}"
+    );
+    b.hold.store(false, Ordering::SeqCst);
+    // Released, `b` relays what it holds: sent = relayed + lost.
+    support::eventually(
+        || {
+            b.relayed.load(Ordering::SeqCst) + lost(&b_handle.snapshot()) == SENT
+                && b_handle.snapshot().state == coolbot::State::Running
+        },
+        "every packet b missed is counted",
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn packets_missing_at_a_failover_are_counted_lost_at_the_consumers() {
+    // The leader `a` hangs while `b` runs on: `b` gets further ahead of the stream
+    // than its backlog keeps. When `a` fails, `b` leads from its backlog; the packets
+    // neither could give are counted lost at the consumer: sent = received + lost.
+    let rig = rig();
+    rig.a.hold.store(true, Ordering::SeqCst);
+    let backlog = 1024; // `port::MERGE_BACKLOG`
+    let sent = backlog as u64 + 300;
+    for n in 1..=sent {
+        rig.send.send(n);
+    }
+    support::eventually(
+        || rig.b.relayed.load(Ordering::SeqCst) == sent,
+        "b relayed every packet",
+    );
+    rig.a.fail.store(true, Ordering::SeqCst);
+    let k = rig.system.handle("k").expect("k");
+    k.wait_for(|m| m.supervision.iter().any(took_over), WAIT)
+        .expect("b took over");
+    let seen = collect(&rig.received, backlog);
+    let first = sent - backlog as u64 + 1;
+    assert_eq!(
+        seen,
+        (first..=sent).collect::<Vec<_>>(),
+        "b's backlog, in order"
+    );
+    assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
+    assert_eq!(
+        rig.received.overflows(),
+        first - 1,
+        "the packets missing from the stream are counted lost at the consumer"
+    );
+    assert_eq!(seen.len() as u64 + rig.received.overflows(), sent);
+    let c = rig.system.handle("c").expect("c");
+    c.wait_for(|m| m.overflows == first - 1, WAIT)
+        .expect("the loss is announced on the consumer's monitoring port");
+    rig.a.hold.store(false, Ordering::SeqCst);
+    assert!(rig.system.shutdown().clean());
+}
+
+#[test]
+fn a_substituted_consumer_of_a_merged_stream_hands_its_queue_to_its_substitute() {
+    // `a` and `b` (redundant) feed `t` inside the compound; `t2` substitutes `t`,
+    // whose output is exported. `t` hangs with packets queued, then fails: its queue
+    // moves to `t2` with the connection, as for any consumer, and nothing is lost.
+    let (a_component, a) = relay("a");
+    let (b_component, _) = relay("b");
+    let (t_component, t) = relay("t");
+    let (t2_component, t2) = relay("t2");
+    let k = CompoundBuilder::new("k", Idle)
+        .instance(a_component)
+        .instance(b_component)
+        .instance(t_component)
+        .instance(t2_component)
+        .redundant(&["a", "b"])
+        .substitute("t2", "t")
+        .on_error("t", coolbot::Policy::Substitute)
+        .connect("a.output", "t.input")
+        .export_input::<u64>("in", "a.input")
+        .export_output::<u64>("out", "t.output")
+        .recovery(Duration::from_secs(60), Duration::from_secs(120))
+        .build()
+        .expect("build k");
+    let send = DataOut::<u64>::new();
+    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
+    let mut system = System::new();
+    system
+        .add(
+            ShellBuilder::new("p")
+                .output(output("out", OutputKind::Data, false), &send)
+                .build(),
+        )
+        .expect("add p");
+    system.add(k).expect("add k");
+    system
+        .add(
+            ShellBuilder::new("c")
+                .input(
+                    input(
+                        "in",
+                        InputKind::Fifo {
+                            capacity: QUEUE,
+                            policy: OverflowPolicy::Reject,
+                        },
+                        false,
+                    ),
+                    &received,
+                )
+                .build(),
+        )
+        .expect("add c");
+    system.connect("p.out", "k.in").expect("p -> k");
+    system.connect("k.out", "c.in").expect("k -> c");
+    system.run_all().expect("run");
+    t.hold.store(true, Ordering::SeqCst);
+    let k = system.handle("k").expect("k");
+    for n in 1..=50u64 {
+        send.send(n);
+    }
+    // The leader relayed every packet: each is in the stream, so queued at `t` (the
+    // stream is delivered on the leader's thread as it sends).
+    support::eventually(
+        || a.relayed.load(Ordering::SeqCst) == 50,
+        "the stream carried every packet",
+    );
+    assert_eq!(t.relayed.load(Ordering::SeqCst), 0, "t holds them");
+    t.fail.store(true, Ordering::SeqCst);
+    k.wait_for(
+        |m| {
+            m.supervision.iter().any(|s| {
+                s.instance == "t"
+                    && s.step
+                        == Step::Substituted {
+                            by: "t2".to_owned(),
+                        }
+            })
+        },
+        WAIT,
+    )
+    .expect("t2 substitutes t");
+    assert_eq!(
+        collect(&received, 50),
+        (1..=50).collect::<Vec<_>>(),
+        "t2 relays what was queued at t, then the rest"
+    );
+    assert_eq!(t2.relayed.load(Ordering::SeqCst), 50);
+    assert_eq!(t.relayed.load(Ordering::SeqCst), 0);
+    t.hold.store(false, Ordering::SeqCst);
     assert!(system.shutdown().clean());
 }

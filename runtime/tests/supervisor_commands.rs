@@ -568,3 +568,69 @@ fn a_quality_is_checked_against_the_instance_timing_override() {
         .unwrap_or_else(|t| panic!("{t}"));
     assert!(system.shutdown().clean());
 }
+
+/// A supervisor whose one state's entry section suspends `w`, then panics.
+struct Panicky;
+
+static PANICKY_STATES: [StateSpec; 1] = [state("operating", &[])];
+
+static PANICKY: Spec = Spec {
+    type_name: "Panicky",
+    states: &PANICKY_STATES,
+    variables: &[],
+    ..COMMANDING
+};
+
+impl Supervisor for Panicky {
+    fn spec(&self) -> &'static Spec {
+        &PANICKY
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        cx.instances
+            .state("w", Controllable::Suspended)
+            .expect("w takes it");
+        panic!("the section fails after its command");
+    }
+}
+
+#[test]
+fn the_commands_of_a_section_that_panics_are_published_with_it() {
+    let (w, _script) = worker("w");
+    let builder = CompoundBuilder::new("base", Panicky).instance(w);
+    let w = builder.instance_handle("w").unwrap();
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    let failed = base
+        .wait_state(State::RunningError, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert!(
+        failed
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("the section fails after its command")),
+        "{failed:?}"
+    );
+    // The command it gave before the panic is a step of that section, published with
+    // it (not held back for a later section).
+    let monitor = base
+        .wait_for(|m| !steps(m).is_empty(), WAIT)
+        .unwrap_or_else(|t| panic!("the command is a step: {t}"));
+    assert_eq!(
+        steps(&monitor),
+        [(
+            Step::Commanded {
+                command: "suspend".to_owned()
+            },
+            String::new()
+        )]
+    );
+    assert_ne!(w.state(), State::Running);
+    assert!(system.shutdown().clean());
+}

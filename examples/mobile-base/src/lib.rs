@@ -154,6 +154,7 @@ pub fn action(action: AdaptAction) -> &'static str {
         AdaptAction::Exhausted => "exhausted",
         AdaptAction::Suspended => "suspended",
         AdaptAction::Resumed => "resumed",
+        AdaptAction::Equalized => "equalized",
         _ => "adapted",
     }
 }

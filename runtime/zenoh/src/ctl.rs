@@ -179,6 +179,9 @@ pub fn describe(event: &MonitorEvent) -> String {
             format!("missed {missed} deadline(s) ({total} in all)")
         }
         MonitorEvent::Overrun { took, total } => format!("overrun: ran {took:?} ({total} in all)"),
+        MonitorEvent::LateResponse { took, bound, total } => {
+            format!("late response: {took:?}, max_response {bound:?} ({total} in all)")
+        }
         MonitorEvent::Period(Some(period)) => format!("period {period:?}"),
         MonitorEvent::Period(None) => "period -".to_owned(),
         MonitorEvent::Quality(level) => format!("quality {level}"),

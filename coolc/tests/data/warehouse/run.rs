@@ -80,6 +80,11 @@ fn the_warehouse_robot_runs_as_described() {
         .wait_for(|m| number(m, "sweeps") >= sweeps + 10.0, WAIT)
         .unwrap();
     assert_eq!(number(&drive.snapshot(), "travelled"), stopped_at);
+    // The robot's mapped `travelled` reads the same value: the suspended base keeps
+    // observing its drive, so the value goes up three compounds.
+    robot
+        .wait_for(|m| number(m, "travelled") == stopped_at, WAIT)
+        .unwrap();
     let navigation = robot.instance("navigation").unwrap();
     assert!(
         navigation

@@ -1,0 +1,372 @@
+//! The compound automaton: the inner [`System`] of instances, the compound's record of
+//! each instance (its policy, its place in the arrangement), and how the instances
+//! follow the compound's own state (the runner's compound hooks, `automaton::Driven`).
+
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use crate::adapt::{AdaptAction, Adaptation, Pressure};
+use crate::automaton::{Automaton, Context, Driven, Fault, Section};
+use crate::monitor::Command;
+use crate::spec::Spec;
+use crate::table::{Controllable, State};
+use crate::value::Value;
+
+use super::error::RunError;
+use super::exports::EXPORT_RETRY;
+use super::state::{Compound, Status, command};
+use super::supervisor::SupervisorCx;
+
+/// How long a compound waits for one of its instances to leave `starting`.
+pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
+
+impl Compound {
+    /// Start the instances (first start) or bring them back to `ready` (a restart),
+    /// and restore the declared arrangement.
+    pub(super) fn start_instances(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        if !self.started {
+            if let Some(waker) = cx.waker() {
+                self.events = self
+                    .instances
+                    .iter()
+                    .map(|i| {
+                        // Set: look at whatever came before the subscription too.
+                        let flag = Arc::new(AtomicBool::new(true));
+                        let events = i
+                            .handle
+                            .shared
+                            .subscribe_flagged(waker.clone(), Arc::clone(&flag));
+                        (events, flag)
+                    })
+                    .collect();
+            }
+            if let Some(system) = self.system.as_mut() {
+                system.start().map_err(|source| RunError::Start {
+                    compound: self.name.clone(),
+                    source,
+                })?;
+            }
+            self.started = true;
+        }
+        self.queue.clear();
+        for index in 0..self.instances.len() {
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            instance.restarts.clear();
+            instance.handled = false;
+            if instance.status == Status::Destroyed {
+                continue;
+            }
+            if instance.handle.is_stuck() {
+                return Err(RunError::Stuck {
+                    instance: instance.name.clone(),
+                }
+                .into());
+            }
+            instance.status = if instance.substitutes.is_some() {
+                Status::Standby
+            } else {
+                Status::Active
+            };
+            let monitor = instance
+                .handle
+                .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
+                .map_err(RunError::from)?;
+            if monitor.state == State::StartingError {
+                return Err(RunError::CouldNotStart {
+                    instance: instance.name.clone(),
+                    error: monitor.error.unwrap_or_default(),
+                }
+                .into());
+            }
+            if monitor.state != State::Ready {
+                command(&instance.handle, Controllable::Ready)?;
+                let state = instance.handle.state();
+                if state != State::Ready {
+                    return Err(RunError::CouldNotRestart {
+                        instance: instance.name.clone(),
+                        state,
+                    }
+                    .into());
+                }
+            }
+        }
+        // Every redundant group is led by its first member again; its merged streams
+        // count on from where they are.
+        for group in 0..self.groups.len() {
+            self.leaders[group] = self.groups[group][0];
+        }
+        for merged in &self.merges {
+            merged.merge.reset(0);
+        }
+        // A destroyed instance's substitute keeps standing for it.
+        for index in 0..self.instances.len() {
+            if self.instances[index].status == Status::Destroyed
+                && let Some(substitute) = self.instances[index].substitute
+                && self.instances[substitute].status == Status::Standby
+            {
+                self.instances[substitute].status = Status::Active;
+            }
+            self.refresh(index);
+        }
+        self.rewire()
+    }
+
+    /// Bring every instance that runs (or is suspended) to `target`, last declared
+    /// first.
+    pub(super) fn instances_to(&mut self, target: Controllable) {
+        for instance in self.instances.iter().rev() {
+            let state = instance.handle.state();
+            let follows = match target {
+                Controllable::Ready => matches!(state, State::Running | State::Suspended),
+                Controllable::Suspended => {
+                    state == State::Running
+                        || (state == State::Ready && instance.status == Status::Active)
+                }
+                Controllable::Running | Controllable::Dead => false,
+            };
+            if follows && let Err(fault) = command(&instance.handle, target) {
+                tracing::warn!(compound = %self.name, "{fault}");
+            }
+        }
+    }
+}
+
+impl Automaton for Compound {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        self.evaluated_in = None;
+        self.start_instances(cx)?;
+        self.adapt_start(cx);
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {
+        self.instances_to(Controllable::Ready);
+    }
+
+    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
+        self.sectioned = true;
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+            instances: &mut self.commander,
+        };
+        let supervisor = &mut self.supervisor;
+        let outcome = catch_unwind(AssertUnwindSafe(|| {
+            supervisor.section(state, section, &mut scx)
+        }));
+        // The commands it gave are steps of this section, published when the call
+        // returns, whether it returned or panicked (the runner handles the panic).
+        cx.supervision.append(&mut self.commander.take_steps());
+        outcome.unwrap_or_else(|panic| resume_unwind(panic))
+    }
+
+    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
+        let mut scx = SupervisorCx {
+            rt: cx,
+            view: &self.view,
+            instances: &mut self.commander,
+        };
+        let supervisor = &mut self.supervisor;
+        let target = catch_unwind(AssertUnwindSafe(|| supervisor.choose(state, &mut scx)));
+        cx.supervision.append(&mut self.commander.take_steps());
+        target.unwrap_or_else(|panic| resume_unwind(panic))
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("a compound has no configuration of its own; configure its instances".to_owned())
+    }
+
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.instances[target]
+                .handle
+                .command(Command::Set(mapped.variable.clone(), value.clone()))
+                .map_err(|rejected| rejected.reason);
+        }
+        self.supervisor.set(variable - self.own_offset, value)
+    }
+
+    fn get(&self, variable: usize) -> Value {
+        if let Some(mapped) = self.mapped.get(variable) {
+            let target = self.route(mapped.instance);
+            return self.view.instances[target]
+                .variables
+                .iter()
+                .find(|(name, _)| *name == mapped.variable)
+                .map_or(Value::Unit, |(_, value)| value.clone());
+        }
+        self.supervisor.get(variable - self.own_offset)
+    }
+}
+
+/// The runner's compound hooks: the instances follow the compound's state, the
+/// supervisor takes its turns.
+impl Driven for Compound {
+    fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        // The supervisor enters (or resumes) a state: its rules are evaluated afresh.
+        self.evaluated_in = None;
+        for (index, instance) in self.instances.iter().enumerate() {
+            let held = self
+                .coordinator
+                .as_ref()
+                .is_some_and(|c| c.suspended[index]);
+            if instance.status == Status::Active
+                && !held
+                && matches!(instance.handle.state(), State::Ready | State::Suspended)
+            {
+                command(&instance.handle, Controllable::Running)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn after_transition(&mut self, _from: State, to: State, _cx: &mut Context) {
+        match to {
+            State::Ready => self.instances_to(Controllable::Ready),
+            State::Suspended => self.instances_to(Controllable::Suspended),
+            State::Dead => {
+                if let Some(system) = self.system.take() {
+                    let report = system.shutdown();
+                    if !report.clean() {
+                        tracing::warn!(compound = %self.name, "instances not joined: {report:?}");
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn supervises(&self) -> bool {
+        true
+    }
+
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        let outcome = self.supervise_turn(state, cx);
+        if let Some(coordinator) = self.coordinator.as_mut()
+            && coordinator
+                .settle_until
+                .is_some_and(|until| Instant::now() >= until)
+        {
+            // Settled: promotion may be due.
+            coordinator.settle_until = None;
+            coordinator.dirty = true;
+        }
+        if outcome.is_ok() && self.coordinator.as_ref().is_some_and(|c| c.dirty) {
+            self.adapt_turn(cx);
+        }
+        cx.supervision.append(&mut self.steps);
+        outcome
+    }
+
+    fn observe(&mut self, cx: &mut Context) {
+        self.observe_turn();
+        cx.supervision.append(&mut self.steps);
+    }
+
+    fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), String> {
+        let name = self.name.clone();
+        let Some(coordinator) = self.coordinator.as_mut() else {
+            return Err("adaptation is off in this compound".to_owned());
+        };
+        if level > coordinator.max_level {
+            return Err(format!(
+                "degradation level {level} out of range: the highest is {}",
+                coordinator.max_level
+            ));
+        }
+        let from = coordinator.cap;
+        coordinator.cap = level;
+        coordinator.floor = level.saturating_sub(coordinator.config.width);
+        coordinator.initialized = true;
+        coordinator.dirty = true;
+        if from != level {
+            let step = Adaptation {
+                component: name,
+                action: if level > from {
+                    AdaptAction::Degraded
+                } else {
+                    AdaptAction::Promoted
+                },
+                from,
+                to: level,
+                period: None,
+                quality: None,
+                detail: "current maximum level of the instances, set through the control port"
+                    .to_owned(),
+            };
+            let floor = coordinator.floor;
+            if let Some(shared) = &cx.shared {
+                shared.adaptation_step(step, |status| {
+                    status.level = level;
+                    status.floor = floor;
+                });
+                // The verdict published so far was about the previous level: withdraw
+                // it, as an atomic component does when its level changes, so that the
+                // supervisor above does not act on it again before this compound's
+                // next turn judges the new level.
+                let load = shared.snapshot().adaptation.load;
+                shared.set_pressure(Pressure::Nominal, load);
+            }
+        }
+        Ok(())
+    }
+
+    fn entered(&mut self, state: usize) {
+        // Whatever led there (a rule, `after`, `on`, `may`), the next turn, taken at
+        // once, evaluates every rule of the entered state. (Re-entering the state
+        // whose rules were evaluated last changes nothing they read: as before, only
+        // changes make them evaluated again, so a rule leading back to its own state
+        // does not fire in a loop.)
+        if self.evaluated_in != Some(state) {
+            self.fresh = true;
+        }
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        let queue = self.queue.iter().map(|entry| {
+            entry
+                .next
+                .min(crate::thread::later(entry.since, self.deadline))
+        });
+        // A stuck instance's return is an event; its deadline is a timer.
+        let restarts = self.instances.iter().filter_map(|i| {
+            let pending = i.pending?;
+            Some(if i.handle.is_stuck() {
+                crate::thread::later(pending.since, self.deadline)
+            } else {
+                pending.due
+            })
+        });
+        let dirty = self.coordinator.as_ref().is_some_and(|c| c.dirty);
+        let settle = self.coordinator.as_ref().and_then(|c| c.settle_until);
+        let fresh = (self.fresh || self.sectioned || dirty).then(Instant::now);
+        // Packets held at an exported input (the instance's `Block` fifo was full):
+        // retried soon.
+        let held = self
+            .exports
+            .iter()
+            .any(|export| export.held())
+            .then(|| crate::thread::later(Instant::now(), EXPORT_RETRY));
+        queue
+            .chain(restarts)
+            .chain(fresh)
+            .chain(held)
+            .chain(settle)
+            .chain(self.next_timed)
+            .min()
+    }
+}

@@ -1,0 +1,324 @@
+//! What a compound does when an instance fails: the policies (propagate, restart,
+//! substitute, ignore), the `restart` policy's budget and backoff, and the recovery
+//! queue (retries, recoveries, retirement at the deadline).
+
+use std::time::Instant;
+
+use crate::automaton::Fault;
+use crate::monitor::{Command, Step};
+use crate::table::{Controllable, State};
+
+use super::policy::{PendingRestart, Policy, Recovering};
+use super::state::{Compound, Status, command};
+
+impl Compound {
+    pub(super) fn enqueue(&mut self, index: usize) {
+        let now = Instant::now();
+        self.instances[index].status = Status::Recovering;
+        self.queue.push(Recovering {
+            instance: index,
+            since: now,
+            next: crate::thread::later(now, self.retry_every),
+            probation: false,
+        });
+    }
+
+    /// Whether the arrangement can go on without instance `index`.
+    pub(super) fn covered(&self, index: usize) -> bool {
+        let instance = &self.instances[index];
+        if let Some(group) = instance.group {
+            return self.groups[group]
+                .iter()
+                .any(|m| self.instances[*m].status == Status::Active);
+        }
+        instance
+            .substitute
+            .is_some_and(|s| self.instances[s].status == Status::Active)
+    }
+
+    /// Instance `index` went to `running_error` (or `starting_error`): its policy.
+    pub(super) fn failed(&mut self, index: usize) -> Result<(), Fault> {
+        let monitor = self.view.instances[index].clone();
+        let name = self.instances[index].name.clone();
+        let error = monitor.error.clone().unwrap_or_default();
+        self.step(index, Step::Failed, error.clone());
+        if let Some(group) = self.instances[index].group {
+            // A redundant member: its inputs are disconnected; if it led the group,
+            // the next live member leads (the merged streams go on from its backlog).
+            let leader = self.leaders[group] == index;
+            self.enqueue(index);
+            self.step(index, Step::Enqueued, "");
+            if !self.covered(index) {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "no member of its redundant group is left",
+                );
+                return Err(self.fault(format!(
+                    "every member of the redundant group of `{name}` failed; last: {error}"
+                )));
+            }
+            let standing = self.groups[group]
+                .iter()
+                .copied()
+                .find(|m| self.instances[*m].status == Status::Active);
+            if leader && let Some(member) = standing {
+                let by = self.instances[member].name.clone();
+                let (replayed, missing) = self.lead(group, member);
+                self.rewire()
+                    .map_err(|fault| self.propagated(index, fault))?;
+                let mut detail = String::new();
+                if replayed > 0 {
+                    detail = format!("{replayed} packet(s) of its backlog continued the stream");
+                }
+                if missing > 0 {
+                    tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group");
+                    detail.push_str(&format!(
+                        "; {missing} packet(s) missing from the stream (beyond its backlog), counted lost at its consumers"
+                    ));
+                }
+                self.step(index, Step::Substituted { by }, detail);
+            } else {
+                self.rewire()
+                    .map_err(|fault| self.propagated(index, fault))?;
+            }
+            return Ok(());
+        }
+        let policy = if self.instances[index].substitutes.is_some() {
+            // A substitute in use fails: nothing stands for it.
+            Policy::Propagate
+        } else {
+            self.instances[index].policy
+        };
+        match policy {
+            Policy::Ignore => {
+                self.step(index, Step::Ignored, "");
+                Ok(())
+            }
+            Policy::Propagate => {
+                self.step(index, Step::Propagated, "");
+                Err(self.fault(format!("instance `{name}` failed: {error}")))
+            }
+            Policy::Restart if monitor.state == State::RunningError => {
+                self.schedule_restart(index, &error)
+            }
+            Policy::Restart => {
+                self.step(
+                    index,
+                    Step::Propagated,
+                    "it cannot restart from starting_error",
+                );
+                Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
+            }
+            Policy::Substitute => {
+                self.enqueue(index);
+                self.step(index, Step::Enqueued, "");
+                if let Some(substitute) = self.instances[index].substitute
+                    && self.instances[substitute].status == Status::Standby
+                {
+                    self.instances[substitute].status = Status::Active;
+                    self.instances[substitute].handled = false;
+                    self.rewire()
+                        .and_then(|()| {
+                            command(&self.instances[substitute].handle, Controllable::Running)
+                        })
+                        .map_err(|fault| self.propagated(index, fault))?;
+                    let by = self.instances[substitute].name.clone();
+                    self.step(index, Step::Substituted { by }, "");
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The `restart` policy for instance `index`, which failed with `error`: a restart
+    /// now or after the backoff, or the fault propagates once the budget is spent.
+    pub(super) fn schedule_restart(&mut self, index: usize, error: &str) -> Result<(), Fault> {
+        let now = Instant::now();
+        let budget = self.budget;
+        let instance = &mut self.instances[index];
+        if instance.pending.is_some() {
+            return Ok(()); // Already decided (another event of the same fault).
+        }
+        while instance
+            .restarts
+            .front()
+            .is_some_and(|t| now.saturating_duration_since(*t) >= budget.window)
+        {
+            instance.restarts.pop_front();
+        }
+        let done = instance.restarts.len();
+        if u32::try_from(done).unwrap_or(u32::MAX) >= budget.restarts {
+            let name = instance.name.clone();
+            self.step(
+                index,
+                Step::Propagated,
+                format!(
+                    "restart budget spent: {done} restart(s) within {:?}",
+                    budget.window
+                ),
+            );
+            return Err(self.fault(format!(
+                "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
+                budget.window
+            )));
+        }
+        instance.pending = Some(PendingRestart {
+            since: now,
+            due: crate::thread::later(now, budget.delay(done)),
+        });
+        self.restarts_due(now)
+    }
+
+    /// Do the decided restarts that are due; propagate a stuck instance's fault once
+    /// it has been stuck for the recovery deadline.
+    pub(super) fn restarts_due(&mut self, now: Instant) -> Result<(), Fault> {
+        for index in 0..self.instances.len() {
+            let Some(pending) = self.instances[index].pending else {
+                continue;
+            };
+            let instance = &self.instances[index];
+            if instance.handle.is_stuck() {
+                if now >= crate::thread::later(pending.since, self.deadline) {
+                    let name = instance.name.clone();
+                    self.instances[index].pending = None;
+                    self.step(
+                        index,
+                        Step::Propagated,
+                        "stuck in a section that overran its max_response",
+                    );
+                    return Err(self.fault(format!(
+                        "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            if now < pending.due {
+                continue;
+            }
+            let instance = &mut self.instances[index];
+            instance.pending = None;
+            if instance.handle.state() != State::RunningError {
+                continue; // Someone else brought it back meanwhile.
+            }
+            instance.restarts.push_back(now);
+            let handle = instance.handle.clone();
+            let waited = now.saturating_duration_since(pending.since);
+            let detail = if waited.is_zero() {
+                String::new()
+            } else {
+                format!("after {waited:?}")
+            };
+            self.step(index, Step::Restarted, detail);
+            command(&handle, Controllable::Running)
+                .map_err(|fault| self.propagated(index, fault))?;
+            self.instances[index].handled = false;
+        }
+        Ok(())
+    }
+
+    /// The recovery queue's due work: restart, recognize recoveries, destroy at the
+    /// deadline.
+    pub(super) fn recover(&mut self, now: Instant) -> Result<(), Fault> {
+        let mut position = 0;
+        while position < self.queue.len() {
+            let entry = self.queue[position];
+            if now < entry.next && now < crate::thread::later(entry.since, self.deadline) {
+                position += 1;
+                continue;
+            }
+            let index = entry.instance;
+            let state = self.instances[index].handle.state();
+            if entry.probation && state == State::Running {
+                // Recovered: the arrangement before the fault comes back (a redundant
+                // member joins its group again, not leading it: its merged lanes count
+                // on from the streams' numbers).
+                self.queue.remove(position);
+                self.instances[index].status = Status::Active;
+                if let Some(group) = self.instances[index].group {
+                    let lane = self.groups[group].iter().position(|m| *m == index);
+                    for merged in self.merges.iter().filter(|m| m.group == group) {
+                        merged.merge.rejoin(lane.unwrap_or(0));
+                    }
+                }
+                let rewired = if let Some(substitute) = self.instances[index].substitute
+                    && self.instances[substitute].status == Status::Active
+                {
+                    self.instances[substitute].status = Status::Standby;
+                    self.rewire().and_then(|()| {
+                        command(&self.instances[substitute].handle, Controllable::Ready)
+                    })
+                } else {
+                    self.rewire()
+                };
+                rewired.map_err(|fault| self.propagated(index, fault))?;
+                self.step(index, Step::Recovered, "");
+                continue;
+            }
+            if now >= crate::thread::later(entry.since, self.deadline) {
+                self.queue.remove(position);
+                let name = self.instances[index].name.clone();
+                self.instances[index].status = Status::Destroyed;
+                let _ = self.update_standing();
+                let handle = &self.instances[index].handle;
+                if handle.is_stuck() {
+                    // Its thread takes the command when (if) the section returns.
+                    if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
+                        tracing::warn!(compound = %self.name, "{rejected}");
+                    }
+                } else if let Err(fault) = command(handle, Controllable::Dead) {
+                    tracing::warn!(compound = %self.name, "{fault}");
+                }
+                // What is still queued at its inputs will never be read: lost there,
+                // counted and announced (on its monitoring port).
+                let lost = self
+                    .system
+                    .as_ref()
+                    .map_or(0, |system| system.discard_queued(&name));
+                self.refresh(index);
+                let mut detail = format!("not recovered within {:?}", self.deadline);
+                if lost > 0 {
+                    detail.push_str(&format!("; {lost} packet(s) left at its inputs lost"));
+                }
+                self.step(index, Step::Retired, detail);
+                if !self.covered(index) {
+                    self.step(index, Step::Propagated, "nothing stands for it");
+                    return Err(self.fault(format!(
+                        "instance `{name}` did not recover within {:?} and nothing stands for it",
+                        self.deadline
+                    )));
+                }
+                continue;
+            }
+            // Due for a retry: restart it, on probation until the next retry (not while
+            // it is stuck in an overrun section: a command would wait for it). Every
+            // attempt is a step, so an operator sees recovery being tried.
+            let handle = &self.instances[index].handle;
+            let attempt = if handle.is_stuck() {
+                Err("still stuck in a section past its max_response".to_owned())
+            } else {
+                match command(handle, Controllable::Running) {
+                    Err(fault) => Err(fault.text().to_owned()),
+                    Ok(()) => match handle.state() {
+                        State::Running => Ok(()),
+                        state => Err(format!("{state} after the restart")),
+                    },
+                }
+            };
+            let restarted = attempt.is_ok();
+            match attempt {
+                Ok(()) => {
+                    self.instances[index].handled = false;
+                    self.step(index, Step::Retried, "");
+                }
+                Err(why) => self.step(index, Step::RetryFailed, why),
+            }
+            let entry = &mut self.queue[position];
+            entry.probation = restarted;
+            entry.next = crate::thread::later(now, self.retry_every);
+            position += 1;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,190 @@
+//! The compound automaton's state: the inner [`System`] of instances, the compound's
+//! record of each instance (its policy, its place in the arrangement), the supervisor,
+//! its rules and view, and the supervision steps taken; with the few helpers every
+//! part of the compound uses (a step, a fault, a refreshed monitor).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::Receiver;
+
+use crate::automaton::Fault;
+use crate::commander::Commander;
+use crate::monitor::{Command, Handle, MonitorEvent, Step, Supervision};
+use crate::port::ErasedInput;
+use crate::spec::Spec;
+use crate::system::System;
+use crate::table::Controllable;
+
+use super::coordinator::Coordinator;
+use super::error::RunError;
+use super::exports::Export;
+use super::links::{Link, MergedPort};
+use super::policy::{Budget, PendingRestart, Policy, Recovering};
+use super::supervisor::Supervisor;
+use super::view::{Rule, View};
+
+/// Where an instance stands in the compound's arrangement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Status {
+    /// Part of the arrangement: runs when the compound runs.
+    Active,
+    /// A declared substitute not in use: started (`ready`), not running.
+    Standby,
+    /// In the recovery queue.
+    Recovering,
+    /// Its recovery deadline expired: commanded to `dead`.
+    Destroyed,
+}
+
+pub(super) struct Instance {
+    pub(super) name: String,
+    pub(super) spec: &'static Spec,
+    /// Its quality levels: its component's, or its `timing` override's.
+    pub(super) levels: usize,
+    pub(super) handle: Handle,
+    pub(super) policy: Policy,
+    /// The instance this one substitutes.
+    pub(super) substitutes: Option<usize>,
+    /// This instance's substitute.
+    pub(super) substitute: Option<usize>,
+    /// Its redundant group.
+    pub(super) group: Option<usize>,
+    pub(super) status: Status,
+    /// When the `restart` policy last restarted it (within the budget's window).
+    pub(super) restarts: std::collections::VecDeque<Instant>,
+    /// A restart decided but not done yet (backoff, or the instance is stuck).
+    pub(super) pending: Option<PendingRestart>,
+    /// Its current fault was handled (its policy ran): cleared when it leaves
+    /// `running_error`/`starting_error`, or is commanded back to `running`. Later
+    /// events of the same fault (a watchdog trip, then the section's return) are not
+    /// a new fault.
+    pub(super) handled: bool,
+}
+
+/// A variable of the compound mapped onto an instance's.
+pub(super) struct Mapped {
+    pub(super) instance: usize,
+    pub(super) variable: String,
+}
+
+/// The code of a compound component, driven by the runner like any automaton.
+pub(super) struct Compound {
+    pub(super) name: String,
+    pub(super) spec: &'static Spec,
+    /// Index of the first own variable in `spec.variables` (mapped ones come first).
+    pub(super) own_offset: usize,
+    pub(super) system: Option<System>,
+    pub(super) instances: Vec<Instance>,
+    pub(super) groups: Vec<Vec<usize>>,
+    /// Each redundant group's leader (its merged streams carry its packets): changes
+    /// only when the leader fails.
+    pub(super) leaders: Vec<usize>,
+    /// The merged data outputs of redundant groups, made at the first wiring.
+    pub(super) merges: Vec<MergedPort>,
+    /// The consumers linked to a merged output: `(merge, declared link, input
+    /// address, input)`.
+    pub(super) merged: Vec<(usize, usize, String, ErasedInput)>,
+    /// The connections made to redundant members' inputs (every live member).
+    pub(super) fanned: Vec<(String, String)>,
+    /// Declared connections.
+    pub(super) links: Vec<Link>,
+    /// The connections made now (declared ones with each instance routed to whoever
+    /// stands for it, with their converters).
+    /// The connection made for each declared link (`links`, same order), between the
+    /// instances standing for its ends; `None` where none is (not made yet, or the
+    /// same ends as an earlier link's).
+    pub(super) wired: Vec<Option<Link>>,
+    pub(super) mapped: Vec<Mapped>,
+    pub(super) supervisor: Box<dyn Supervisor>,
+    pub(super) rules: Vec<Rule>,
+    /// Monitoring events of each instance (subscribed at the first start), with a
+    /// flag its publisher sets before ringing the compound: a turn looks only at the
+    /// instances that have news.
+    pub(super) events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
+    /// The rules reading each variable (`inst.field` or an own variable), by index.
+    pub(super) by_read: HashMap<String, Vec<usize>>,
+    pub(super) view: View,
+    /// The supervisor state whose rules were last evaluated.
+    pub(super) evaluated_in: Option<usize>,
+    /// The supervisor entered a state (by a rule, `after`, `on`, ...): the thread takes
+    /// one more turn at once to evaluate the new state's rules (nothing else may wake
+    /// it).
+    pub(super) fresh: bool,
+    /// A supervisor section ran since the last turn: it may have changed variables the
+    /// runtime cannot see (`local` ones, or any state of a hand-written supervisor), so
+    /// the next turn, taken at once, evaluates every rule of the current state.
+    pub(super) sectioned: bool,
+    pub(super) queue: Vec<Recovering>,
+    pub(super) retry_every: Duration,
+    pub(super) deadline: Duration,
+    pub(super) budget: Budget,
+    pub(super) started: bool,
+    pub(super) exports: Vec<Box<dyn Export>>,
+    /// Supervision steps taken since the last call returned (published by the runner).
+    pub(super) steps: Vec<Supervision>,
+    /// Another instance started standing for one with mapped variables: rules reading
+    /// them are evaluated on the next turn.
+    pub(super) restood: bool,
+    /// Adaptation (paper 3.6): `None` when turned off.
+    pub(super) coordinator: Option<Coordinator>,
+    /// What the supervisor's sections command the instances with.
+    pub(super) commander: Commander,
+    /// Some rule reads the compound's own `result`, `error`, `quality`, `cpu_time`
+    /// or `elapsed_time`: each turn copies them into the view.
+    pub(super) reads_own: bool,
+    /// The time reads (`cpu_time`, `elapsed_time`, own or an instance's) some rule
+    /// names: they change without events, so they count as changed every supervisor
+    /// period.
+    pub(super) timed: Vec<String>,
+    /// An active instance failed while the compound was suspended: its policy runs
+    /// on the compound's next running turn.
+    pub(super) deferred_faults: bool,
+    /// When the time reads are next due.
+    pub(super) next_timed: Option<Instant>,
+}
+
+pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
+    handle
+        .command(Command::SetState(target))
+        .map_err(|rejected| RunError::from(rejected).into())
+}
+
+impl Compound {
+    /// Record a supervision step about instance `index` for the monitoring port.
+    pub(super) fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
+        let detail = detail.into();
+        let instance = self.instances[index].name.clone();
+        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
+        self.steps.push(Supervision {
+            instance,
+            step,
+            detail,
+        });
+    }
+
+    /// A fault raised while handling instance `index` (a rewiring or a command that
+    /// failed after a step was recorded): recorded as `Propagated` with the reason,
+    /// unless the last step recorded is that fault's `Propagated` already.
+    pub(super) fn propagated(&mut self, index: usize, fault: Fault) -> Fault {
+        let recorded = self
+            .steps
+            .last()
+            .is_some_and(|last| last.step == Step::Propagated);
+        if !recorded {
+            self.step(index, Step::Propagated, fault.text().to_owned());
+        }
+        fault
+    }
+
+    pub(super) fn fault(&self, message: String) -> Fault {
+        tracing::warn!(compound = %self.name, "{message}");
+        Fault::message(message)
+    }
+
+    pub(super) fn refresh(&mut self, index: usize) {
+        self.view.instances[index] = self.instances[index].handle.snapshot();
+    }
+}
