@@ -317,13 +317,14 @@ fn run(files: &Files, roots: &[PathBuf], formatter: Formatter) -> Times {
     let dir = tempfile::tempdir().expect("temporary directory").keep();
     let once = || {
         let (check, analysis) = measure(|| coolc::analyze(roots, &load));
-        assert!(
-            !analysis.has_errors(),
-            "the benchmark's descriptions must be valid:\n{}",
-            analysis.render(coolc::RenderOptions::plain())
-        );
+        let checked = analysis.checked().unwrap_or_else(|analysis| {
+            panic!(
+                "the benchmark's descriptions must be valid:\n{}",
+                analysis.render(coolc::RenderOptions::plain())
+            )
+        });
         let options = coolc::lower::Options::default();
-        let (lower, krate) = measure(|| coolc::lower::lower(&analysis.files, &options));
+        let (lower, krate) = measure(|| coolc::lower::lower(&checked, &options));
         let (emit, (files, bytes)) = measure(|| {
             if formatter == Formatter::Unformatted {
                 let text =

@@ -110,19 +110,23 @@ impl Builder {
     /// errors returns them rendered, and a build script that unwraps fails the build
     /// showing them.
     pub fn compile<P: AsRef<Path>>(&self, files: &[P]) -> Result<PathBuf, BuildError> {
-        let analysis = crate::analyze(files, &|path: &Path| std::fs::read_to_string(path));
+        // With the sibling scan the CLI does: an unknown name that a `.cool` file next
+        // to the one using it defines gets help naming the `import` to add.
+        let analysis = crate::analyze_with_siblings(
+            files,
+            &|path: &Path| std::fs::read_to_string(path),
+            &files_in,
+        );
         if self.cargo_output {
             for file in analysis.sources.files() {
                 println!("cargo:rerun-if-changed={}", file.path.display());
             }
         }
-        if analysis.has_errors() {
-            return Err(BuildError::Diagnostics(
-                analysis.render(RenderOptions::plain()),
-            ));
-        }
-        if self.cargo_output && !analysis.diagnostics.is_empty() {
-            for line in analysis.render(RenderOptions::plain()).lines() {
+        let checked = analysis
+            .checked()
+            .map_err(|analysis| BuildError::Diagnostics(analysis.render(RenderOptions::plain())))?;
+        if self.cargo_output && !checked.warnings().is_empty() {
+            for line in checked.render(RenderOptions::plain()).lines() {
                 println!("cargo:warning={line}");
             }
         }
@@ -131,10 +135,10 @@ impl Builder {
                 .iter()
                 .map(|f| f.as_ref().display().to_string())
                 .collect(),
-            inputs: crate::fingerprint::inputs(analysis.sources.files()),
+            inputs: crate::fingerprint::inputs(checked.sources().files()),
             ..lower::Options::default()
         };
-        let krate = lower::lower(&analysis.files, &options);
+        let krate = lower::lower(&checked, &options);
         if self.cargo_output {
             for lib in &krate.system_libs {
                 println!("cargo:rustc-link-lib={lib}");
@@ -160,4 +164,22 @@ impl Builder {
             })?;
         Ok(path)
     }
+}
+
+/// The files of directory `dir` (`""` is the current directory), for the help on an
+/// unknown name that a file next to the one using it defines (the CLI lists
+/// directories the same way).
+pub(crate) fn files_in(dir: &Path) -> Vec<PathBuf> {
+    let read = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(entries) = std::fs::read_dir(read) else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(Result::ok)
+        .map(|entry| dir.join(entry.file_name()))
+        .collect()
 }

@@ -14,8 +14,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::ir::RuntimeDep;
 use crate::{
-    Analysis, RenderFormat, RenderOptions, diagram, emit, fingerprint, ident, lower, manifest,
-    merge,
+    Checked, RenderFormat, RenderOptions, diagram, emit, fingerprint, ident, lower, manifest, merge,
 };
 
 /// Exit code: no error.
@@ -30,7 +29,7 @@ pub const EXIT_USAGE: u8 = 2;
 #[command(name = "coolc", version, about, propagate_version = true)]
 pub struct Cli {
     /// How diagnostics are printed: `human` (stderr) or `json` (one object per line
-    /// on stdout).
+    /// on stdout; `compile --check` lists the files that would change the same way).
     #[arg(long, value_enum, default_value_t = MessageFormat::Human, global = true)]
     pub message_format: MessageFormat,
 
@@ -315,25 +314,8 @@ fn render_options(cli: &Cli) -> RenderOptions {
     }
 }
 
-/// The files of directory `dir` (`""` is the current directory), for the help on an
-/// unknown name that a file next to the one using it defines.
-fn cool_files_in(dir: &Path) -> Vec<PathBuf> {
-    let read = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let Ok(entries) = std::fs::read_dir(read) else {
-        return Vec::new();
-    };
-    entries
-        .filter_map(Result::ok)
-        .map(|entry| dir.join(entry.file_name()))
-        .collect()
-}
-
 /// Analyzes `files`, prints the diagnostics, fails when there are errors.
-fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
+fn check(cli: &Cli, files: &[PathBuf]) -> Result<Checked, Failure> {
     for file in files {
         if let Err(error) = std::fs::metadata(file) {
             return Err(Failure::Usage(format!(
@@ -345,7 +327,7 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
     let analysis = crate::analyze_with_siblings(
         files,
         &|path: &Path| std::fs::read_to_string(path),
-        &cool_files_in,
+        &crate::builder::files_in,
     );
     if !analysis.diagnostics.is_empty() {
         let rendered = analysis.render(render_options(cli));
@@ -354,13 +336,12 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Analysis, Failure> {
             MessageFormat::Human => eprint!("{rendered}"),
         }
     }
-    if analysis.has_errors() {
+    analysis.checked().map_err(|analysis| {
         if cli.message_format == MessageFormat::Human {
             eprintln!("coolc: {} error(s)", analysis.error_count());
         }
-        return Err(Failure::Diagnostics);
-    }
-    Ok(analysis)
+        Failure::Diagnostics
+    })
 }
 
 fn compile(
@@ -372,7 +353,7 @@ fn compile(
     write: merge::WriteOptions,
 ) -> Result<crate::ir::Crate, Failure> {
     let mut timings = crate::Timings::from_env();
-    let analysis = check(cli, files)?;
+    let checked = check(cli, files)?;
     timings.span("check");
     let options = lower::Options {
         package: package.to_owned(),
@@ -386,14 +367,14 @@ fn compile(
                 )
             })
             .collect(),
-        inputs: fingerprint::inputs(analysis.sources.files()),
+        inputs: fingerprint::inputs(checked.sources().files()),
     };
-    let krate = lower::lower(&analysis.files, &options);
+    let krate = lower::lower(&checked, &options);
     timings.span("lower");
     let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
     if write.check {
-        return check_report(out, &report).map(|()| krate);
+        return check_report(out, &report, cli.message_format).map(|()| krate);
     }
     for (file, methods) in &report.added {
         eprintln!("coolc: added to {}: {}", file.display(), methods.join(", "));
@@ -412,25 +393,59 @@ fn compile(
     Ok(krate)
 }
 
+/// A file `compile --check` found out of date, as one JSON line
+/// (`--message-format json`).
+#[derive(Debug, serde::Serialize)]
+struct StaleFile<'a> {
+    /// Always `"stale_file"`: what the line is.
+    reason: &'static str,
+    /// The file, under the output directory.
+    path: String,
+    /// `"write"` (created or rewritten), `"add_stubs"` (stubs added to a user
+    /// file) or `"remove"` (generated before, no longer).
+    change: &'static str,
+    /// The methods whose stubs would be added (`add_stubs` only).
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    methods: &'a [String],
+}
+
 /// `compile --check`: lists on stdout every file the compile would write, add stubs
-/// to or remove; fails when there is one.
-fn check_report(out: &Path, report: &merge::Report) -> Result<(), Failure> {
+/// to or remove (one path per line, or one JSON object per line in `json` format);
+/// fails when there is one.
+fn check_report(out: &Path, report: &merge::Report, format: MessageFormat) -> Result<(), Failure> {
     for warning in &report.warnings {
         eprintln!("warning: {warning}");
     }
-    let changed: std::collections::BTreeSet<&Path> = report
-        .written
-        .iter()
-        .chain(report.added.iter().map(|(file, _)| file))
-        .chain(&report.removed)
-        .map(PathBuf::as_path)
-        .collect();
+    // Per file, one change: a removal or stub insertion says more than a write.
+    let mut changed: std::collections::BTreeMap<&Path, (&'static str, &[String])> =
+        std::collections::BTreeMap::new();
+    for file in &report.written {
+        changed.insert(file, ("write", &[]));
+    }
+    for (file, methods) in &report.added {
+        changed.insert(file, ("add_stubs", methods));
+    }
+    for file in &report.removed {
+        changed.insert(file, ("remove", &[]));
+    }
     if changed.is_empty() {
         eprintln!("coolc: {} is up to date", out.display());
         return Ok(());
     }
-    for file in &changed {
-        println!("{}", out.join(file).display());
+    for (file, (change, methods)) in &changed {
+        let path = out.join(file).display().to_string();
+        match format {
+            MessageFormat::Human => println!("{path}"),
+            MessageFormat::Json => {
+                let line = StaleFile {
+                    reason: "stale_file",
+                    path,
+                    change,
+                    methods,
+                };
+                println!("{}", serde_json::to_string(&line).unwrap_or_default());
+            }
+        }
     }
     eprintln!(
         "coolc: {} file(s) in {} would change: run `coolc compile` without --check",
@@ -448,8 +463,8 @@ fn draw(
     format: diagram::Format,
     output: Option<&Path>,
 ) -> Result<(), Failure> {
-    let analysis = check(cli, files)?;
-    let diagrams = diagram::diagrams(&analysis.files, files.len(), options)
+    let checked = check(cli, files)?;
+    let diagrams = diagram::diagrams(&checked, files.len(), options)
         .map_err(|e| Failure::Usage(e.to_string()))?;
     let text = diagram::render(&diagrams, format).map_err(|e| Failure::Usage(e.to_string()))?;
     match output {

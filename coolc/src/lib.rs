@@ -21,13 +21,18 @@
 //!         .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
 //! };
 //! let analysis = coolc::analyze(&["main.cool"], &loader);
-//! assert!(!analysis.has_errors(), "{}", analysis.render(coolc::RenderOptions::plain()));
+//! let checked = analysis
+//!     .checked()
+//!     .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
+//! let krate = coolc::lower::lower(&checked, &coolc::lower::Options::default());
+//! assert_eq!(krate.types.packets[0].name, "Pose");
 //! ```
 #![deny(missing_docs)]
 
 pub mod ast;
 pub mod builder;
 pub mod check;
+pub mod checked;
 pub mod cli;
 pub mod diagnostics;
 pub mod diagram;
@@ -46,6 +51,7 @@ pub mod syntax;
 use std::path::Path;
 
 pub use builder::Builder;
+pub use checked::Checked;
 pub use diagnostics::{Diagnostic, RenderFormat, RenderOptions, Severity};
 pub use source::SourceMap;
 
@@ -60,6 +66,8 @@ pub struct Analysis {
     /// Every diagnostic: syntax errors per file in file order, then resolution and
     /// check diagnostics.
     pub diagnostics: Vec<Diagnostic>,
+    /// What the checker resolved (handed on by [`Analysis::checked`]).
+    resolved: check::Resolved,
 }
 
 impl Analysis {
@@ -81,6 +89,27 @@ impl Analysis {
     /// Renders every diagnostic (graphical or JSON, see [`RenderOptions`]).
     pub fn render(&self, options: RenderOptions) -> String {
         diagnostics::render(&self.sources, &self.diagnostics, options)
+    }
+
+    /// The checked model when there is no error (what `lower` and `diagram` take);
+    /// the analysis itself otherwise (boxed: it is large), to report its diagnostics.
+    pub fn checked(self) -> Result<Checked, Box<Analysis>> {
+        if self.has_errors() {
+            return Err(Box::new(self));
+        }
+        Ok(Checked::new(
+            self.sources,
+            self.files,
+            self.diagnostics,
+            self.resolved,
+        ))
+    }
+
+    /// The model of an analysis with errors, for tests that lower what the checker
+    /// rejects (defence in depth: lowering escapes what it must even then).
+    #[cfg(test)]
+    pub(crate) fn assume_checked(self) -> Checked {
+        Checked::new(self.sources, self.files, self.diagnostics, self.resolved)
     }
 }
 
@@ -113,11 +142,12 @@ pub fn analyze_with_siblings<P: AsRef<Path>>(
         &mut loaded.diagnostics,
     );
     symbols.add_siblings(&loaded.sources, list, loader);
-    check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
+    let resolved = check::check(&loaded.files, symbols, &mut loaded.diagnostics);
     Analysis {
         sources: loaded.sources,
         files: loaded.files,
         diagnostics: loaded.diagnostics,
+        resolved,
     }
 }
 

@@ -1,13 +1,15 @@
 //! Lowering: checked ASTs to the IR the templates print.
 //!
-//! **Precondition:** the files passed the checker without errors. Lowering looks
-//! names up across all files by name; anything the checker would have rejected is
-//! lowered to something harmless rather than panicking (a dangling name becomes index
-//! 0, an unknown type becomes `()`), so lowering never fails.
+//! Lowering takes a [`Checked`] model, which exists only when the checker found no
+//! error, and looks every name up in it (types, components, interfaces, typed rules).
+//! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
+//! to something harmless (index 0, the type `()`), never a panic.
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::ast::{self, ExprKind, Prim, TypeKind};
+use crate::check::model::Ty;
+use crate::checked::{Checked, TypeDef};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -46,68 +48,32 @@ const USER_TYPES: &str = "crate::generated::types::";
 /// The default value of a type that implements `Default`.
 const DEFAULT: &str = "::core::default::Default::default()";
 
-#[derive(Clone, Copy)]
-enum TypeDef<'a> {
-    Packet(&'a ast::Packet),
-    Enum(&'a ast::EnumDef),
-    Extern,
-}
-
 struct Lowerer<'a> {
-    types: BTreeMap<&'a str, TypeDef<'a>>,
-    components: BTreeMap<&'a str, &'a ast::Component>,
+    /// The checked model: every name lowering meets is looked up in it.
+    checked: &'a Checked,
     /// Generated module name of every component.
     modules: BTreeMap<&'a str, String>,
 }
 
-/// Lowers a set of checked files (imports included) to the IR of one crate.
-pub fn lower(files: &[ast::File], options: &Options) -> ir::Crate {
+/// Lowers checked descriptions (imports included) to the IR of one crate.
+pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
     let mut lowerer = Lowerer {
-        types: BTreeMap::new(),
-        components: BTreeMap::new(),
+        checked,
         modules: BTreeMap::new(),
     };
-    for item in files.iter().flat_map(|f| &f.items) {
-        match item {
-            ast::Item::Packet(p) => {
-                lowerer
-                    .types
-                    .entry(&p.name.name)
-                    .or_insert(TypeDef::Packet(p));
-            }
-            ast::Item::Enum(e) => {
-                lowerer
-                    .types
-                    .entry(&e.name.name)
-                    .or_insert(TypeDef::Enum(e));
-            }
-            ast::Item::ExternPacket(e) => {
-                lowerer.types.entry(&e.name.name).or_insert(TypeDef::Extern);
-            }
-            ast::Item::Component(c) => {
-                lowerer.components.entry(&c.name.name).or_insert(c);
-            }
-            ast::Item::Import(_) | ast::Item::Converter(_) => {}
-        }
-    }
     // Module names in source order; names coolc uses itself are taken.
     let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
         .map(str::to_owned)
         .into_iter()
         .collect();
-    for item in files.iter().flat_map(|f| &f.items) {
-        if let ast::Item::Component(c) = item {
-            if lowerer.modules.contains_key(c.name.name.as_str()) {
-                continue;
-            }
-            let mut module = ident::snake_raw(&c.name.name);
-            while !taken.insert(module.clone()) {
-                module.push_str("_component");
-            }
-            lowerer.modules.insert(&c.name.name, ident::escape(&module));
+    for (_, c) in checked.components() {
+        let mut module = ident::snake_raw(&c.name.name);
+        while !taken.insert(module.clone()) {
+            module.push_str("_component");
         }
+        lowerer.modules.insert(&c.name.name, ident::escape(&module));
     }
-    lowerer.lower_crate(files, options)
+    lowerer.lower_crate(checked.files(), options)
 }
 
 /// A Cargo package name made from `name` (lowercase, `-` separated).
@@ -156,23 +122,42 @@ const SERDE_WITH: &str = "::coolbot::serde_with::";
 /// The serde_with adapter type of `ty` when it holds an array longer than 32
 /// elements, directly or in lists, optionals and arrays (a packet field of such a
 /// type is the packet's business): `[Same; 72]`, `Option<[[Same; 40]; 2]>`.
-fn serde_adapter(ty: &ast::Type) -> Option<String> {
-    fn adapter(ty: &ast::Type) -> String {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::Named(_) => format!("{SERDE_WITH}Same"),
-            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", adapter(inner)),
-            TypeKind::Array(inner, n) => format!("[{}; {}]", adapter(inner), n.value),
-            TypeKind::Optional(inner) => format!("::core::option::Option<{}>", adapter(inner)),
+fn serde_adapter(ty: &Ty) -> Option<String> {
+    fn adapter(ty: &Ty) -> String {
+        match ty {
+            Ty::List(inner) => format!("::std::vec::Vec<{}>", adapter(inner)),
+            Ty::Array(inner, n) => format!("[{}; {n}]", adapter(inner)),
+            Ty::Optional(inner) => format!("::core::option::Option<{}>", adapter(inner)),
+            _ => format!("{SERDE_WITH}Same"),
         }
     }
-    fn needs(ty: &ast::Type) -> bool {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::Named(_) => false,
-            TypeKind::List(inner) | TypeKind::Optional(inner) => needs(inner),
-            TypeKind::Array(inner, n) => n.value > 32 || needs(inner),
+    fn needs(ty: &Ty) -> bool {
+        match ty {
+            Ty::List(inner) | Ty::Optional(inner) => needs(inner),
+            Ty::Array(inner, n) => *n > 32 || needs(inner),
+            _ => false,
         }
     }
     needs(ty).then(|| adapter(ty))
+}
+
+/// The Rust type of a resolved type; named types under `prefix` (an unresolved one,
+/// impossible in a checked model, is `()`).
+fn rust_ty(ty: &Ty, prefix: &str) -> String {
+    match ty {
+        Ty::Bool => "bool".to_owned(),
+        Ty::Int(p) | Ty::Float(p) => prim_rust(*p).to_owned(),
+        Ty::Str => prim_rust(Prim::String).to_owned(),
+        Ty::Time => prim_rust(Prim::Time).to_owned(),
+        Ty::Duration => prim_rust(Prim::Duration).to_owned(),
+        Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) => {
+            format!("{prefix}{}", ident::camel(name))
+        }
+        Ty::List(inner) => format!("::std::vec::Vec<{}>", rust_ty(inner, prefix)),
+        Ty::Array(inner, n) => format!("[{}; {n}]", rust_ty(inner, prefix)),
+        Ty::Optional(inner) => format!("::core::option::Option<{}>", rust_ty(inner, prefix)),
+        Ty::Unknown => "()".to_owned(),
+    }
 }
 
 fn cool_type(ty: &ast::Type) -> String {
@@ -214,26 +199,23 @@ fn prim_rust(p: Prim) -> &'static str {
 }
 
 impl<'a> Lowerer<'a> {
+    /// The resolved type of a written type, from the checked model.
+    fn ty(&self, ty: &ast::Type) -> Ty {
+        self.checked.ty(ty)
+    }
+
     fn rust_type(&self, ty: &ast::Type, prefix: &str) -> String {
-        match &ty.kind {
-            TypeKind::Prim(p) => prim_rust(*p).to_owned(),
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
-                Some(_) => format!("{prefix}{}", ident::camel(&name.name)),
-                None => "()".to_owned(),
-            },
-            TypeKind::List(inner) => format!("::std::vec::Vec<{}>", self.rust_type(inner, prefix)),
-            TypeKind::Array(inner, n) => {
-                format!("[{}; {}]", self.rust_type(inner, prefix), n.value)
-            }
-            TypeKind::Optional(inner) => {
-                format!("::core::option::Option<{}>", self.rust_type(inner, prefix))
-            }
-        }
+        rust_ty(&self.ty(ty), prefix)
     }
 
     /// Whether the emitted type has a default value ([`Self::default_of`]).
     fn defaultable(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> bool {
-        self.default_of(ty, visiting).is_some()
+        self.default_of(&self.ty(ty), visiting).is_some()
+    }
+
+    /// Whether the emitted resolved type has a default value.
+    fn ty_defaultable(&self, ty: &Ty) -> bool {
+        self.default_of(ty, &mut BTreeSet::new()).is_some()
     }
 
     /// The Rust expression of the default value of the emitted type, or `None` when
@@ -241,46 +223,40 @@ impl<'a> Lowerer<'a> {
     /// Arrays longer than 32 elements, or of elements without `Default`, are built
     /// with `core::array::from_fn`: the standard library implements `Default` for
     /// arrays only up to 32 elements.
-    fn default_of(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> Option<String> {
-        match &ty.kind {
-            TypeKind::Prim(_) | TypeKind::List(_) | TypeKind::Optional(_) => {
-                Some(DEFAULT.to_owned())
-            }
-            TypeKind::Array(inner, n) => {
+    fn default_of(&self, ty: &Ty, visiting: &mut BTreeSet<String>) -> Option<String> {
+        match ty {
+            Ty::Bool
+            | Ty::Int(_)
+            | Ty::Float(_)
+            | Ty::Str
+            | Ty::Time
+            | Ty::Duration
+            | Ty::List(_)
+            | Ty::Optional(_) => Some(DEFAULT.to_owned()),
+            Ty::Array(inner, n) => {
                 let item = self.default_of(inner, visiting)?;
-                Some(if n.value <= 32 && item == DEFAULT {
+                Some(if *n <= 32 && item == DEFAULT {
                     DEFAULT.to_owned()
                 } else {
                     format!("::core::array::from_fn(|_| {item})")
                 })
             }
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
+            Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
                 Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(DEFAULT.to_owned()),
                 Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
                     Some(DEFAULT.to_owned())
                 }
                 _ => None,
             },
+            Ty::Extern(_) | Ty::Unknown => None,
         }
     }
 
     /// The default value of `ty` as a user stub writes it (`Default::default()` when
     /// the type implements `Default`).
     fn stub_default(&self, ty: &ast::Type) -> Option<String> {
-        let default = self.default_of(ty, &mut BTreeSet::new())?;
+        let default = self.default_of(&self.ty(ty), &mut BTreeSet::new())?;
         Some(default.replace(DEFAULT, "Default::default()"))
-    }
-
-    /// Whether values of the emitted type are `Copy` (so `[value; n]` compiles).
-    fn is_copy(&self, ty: &ast::Type) -> bool {
-        match &ty.kind {
-            TypeKind::Prim(p) => *p != Prim::String,
-            TypeKind::Named(name) => {
-                matches!(self.types.get(name.name.as_str()), Some(TypeDef::Enum(_)))
-            }
-            TypeKind::Optional(inner) | TypeKind::Array(inner, _) => self.is_copy(inner),
-            TypeKind::List(_) => false,
-        }
     }
 
     fn packet_defaultable(&self, packet: &ast::Packet, visiting: &mut BTreeSet<String>) -> bool {
@@ -303,18 +279,18 @@ impl<'a> Lowerer<'a> {
         value: Option<&ast::Expr>,
         prefix: &str,
     ) -> String {
+        let field_ty = self.ty(field_ty);
         match value {
-            Some(expr) => self.value(expr, Some(field_ty), prefix),
+            Some(expr) => self.value(expr, Some(&field_ty), prefix),
             None => self
-                .default_of(field_ty, &mut BTreeSet::new())
+                .default_of(&field_ty, &mut BTreeSet::new())
                 .unwrap_or_else(|| DEFAULT.to_owned()),
         }
     }
 
     /// A Rust expression for a constant `.cool` value of type `ty`.
-    fn value(&self, expr: &ast::Expr, ty: Option<&ast::Type>, prefix: &str) -> String {
-        let kind = ty.map(|t| &t.kind);
-        if let Some(TypeKind::Optional(inner)) = kind {
+    fn value(&self, expr: &ast::Expr, ty: Option<&Ty>, prefix: &str) -> String {
+        if let Some(Ty::Optional(inner)) = ty {
             return match &expr.kind {
                 ExprKind::None => "::core::option::Option::None".to_owned(),
                 _ => format!(
@@ -324,9 +300,9 @@ impl<'a> Lowerer<'a> {
             };
         }
         match &expr.kind {
-            ExprKind::Int(n) => match kind {
-                Some(TypeKind::Prim(Prim::F32 | Prim::F64)) => format!("{n}.0"),
-                Some(TypeKind::Prim(Prim::Duration)) => duration_rust(*n),
+            ExprKind::Int(n) => match ty {
+                Some(Ty::Float(_)) => format!("{n}.0"),
+                Some(Ty::Duration) => duration_rust(*n),
                 _ => n.to_string(),
             },
             ExprKind::Float(x) => format!("{x:?}"),
@@ -345,26 +321,26 @@ impl<'a> Lowerer<'a> {
                 )
             }
             ExprKind::List(items) => {
-                let inner = match kind {
-                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                let inner = match ty {
+                    Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let items: Vec<String> =
                     items.iter().map(|e| self.value(e, inner, prefix)).collect();
-                match kind {
-                    Some(TypeKind::Array(..)) => format!("[{}]", items.join(", ")),
+                match ty {
+                    Some(Ty::Array(..)) => format!("[{}]", items.join(", ")),
                     _ => format!("::std::vec![{}]", items.join(", ")),
                 }
             }
             ExprKind::Repeat(item, n) => {
-                let inner = match kind {
-                    Some(TypeKind::List(inner) | TypeKind::Array(inner, _)) => Some(&**inner),
+                let inner = match ty {
+                    Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
-                match kind {
-                    Some(TypeKind::List(_)) => format!("::std::vec![{item}; {}]", n.value),
+                match ty {
+                    Some(Ty::List(_)) => format!("::std::vec![{item}; {}]", n.value),
                     // `[value; n]` needs a `Copy` value.
                     _ if copy => format!("[{item}; {}]", n.value),
                     _ => format!("::core::array::from_fn(|_| {item})"),
@@ -385,6 +361,15 @@ impl<'a> Lowerer<'a> {
         }
     }
 
+    /// Whether values of the emitted type are `Copy` (so `[value; n]` compiles).
+    fn is_copy(&self, ty: &Ty) -> bool {
+        match ty {
+            Ty::Bool | Ty::Int(_) | Ty::Float(_) | Ty::Time | Ty::Duration | Ty::Enum(_) => true,
+            Ty::Optional(inner) | Ty::Array(inner, _) => self.is_copy(inner),
+            Ty::Str | Ty::List(_) | Ty::Packet(_) | Ty::Extern(_) | Ty::Unknown => false,
+        }
+    }
+
     fn field(&self, field: &ast::Field, prefix: &str) -> ir::Field {
         ir::Field {
             doc: doc(&field.doc),
@@ -392,7 +377,7 @@ impl<'a> Lowerer<'a> {
             cool_name: field.name.name.clone(),
             ty: self.rust_type(&field.ty, prefix),
             default: self.field_default(&field.ty, field.default.as_ref(), prefix),
-            serde_with: serde_adapter(&field.ty)
+            serde_with: serde_adapter(&self.ty(&field.ty))
                 .map(|adapter| format!("{SERDE_WITH}As::<{adapter}>")),
         }
     }
@@ -831,7 +816,7 @@ impl<'a> Lowerer<'a> {
         let field = ident::snake(&v.name.name);
         // A type holding an array longer than 32 elements goes through its serde_with
         // adapter (wrapped in `Option` like the field when it has no default).
-        let adapter = serde_adapter(ty).map(|adapter| {
+        let adapter = serde_adapter(&self.ty(ty)).map(|adapter| {
             if has_default {
                 adapter
             } else {
@@ -1060,7 +1045,7 @@ impl Lowerer<'_> {
     /// A compound's own controllable variables count; its mapped ones do not (they
     /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self.components.get(instance.component.name.as_str()) else {
+        let Some((_, component)) = self.checked.component(&instance.component.name) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();
@@ -1071,7 +1056,7 @@ impl Lowerer<'_> {
                         for f in cfg.fields.iter().filter(|f| f.name.name == o.name.name) {
                             overrides.push((
                                 ident::snake(&f.name.name),
-                                self.value(&o.value, Some(&f.ty), GEN_TYPES),
+                                self.value(&o.value, Some(&self.ty(&f.ty)), GEN_TYPES),
                             ));
                         }
                     }
@@ -1083,7 +1068,7 @@ impl Lowerer<'_> {
                         if let Some(ty) = &v.ty {
                             overrides.push((
                                 ident::snake(&v.name.name),
-                                self.value(&o.value, Some(ty), GEN_TYPES),
+                                self.value(&o.value, Some(&self.ty(ty)), GEN_TYPES),
                             ));
                         }
                     }
@@ -1355,13 +1340,12 @@ mod tests {
     use super::*;
 
     fn lower_text(text: &str) -> ir::Crate {
-        let analysis = crate::analyze_text("t.cool", text);
-        assert!(
-            !analysis.has_errors(),
-            "{}",
-            analysis.render(crate::RenderOptions::plain())
-        );
-        lower(&analysis.files, &Options::default())
+        let checked = crate::analyze_text("t.cool", text)
+            .checked()
+            .unwrap_or_else(|analysis| {
+                panic!("{}", analysis.render(crate::RenderOptions::plain()))
+            });
+        lower(&checked, &Options::default())
     }
 
     #[test]
@@ -1407,7 +1391,7 @@ mod tests {
             codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
             "{codes:?}"
         );
-        lower(&analysis.files, &Options::default())
+        lower(&analysis.assume_checked(), &Options::default())
     }
 
     #[test]
@@ -1444,5 +1428,50 @@ mod tests {
                 "::std::vec![1, 2]"
             ]
         );
+    }
+
+    #[test]
+    fn rust_keywords_as_names_emit_valid_rust() {
+        // The checker rejects Rust keywords as names (`coolc::check::rust_keyword`);
+        // lowering escapes them anyway, as defence in depth. Every emitted Rust file is
+        // parsed by `syn` while emitting: a keyword that is not escaped would panic here.
+        let analysis = crate::analyze_text(
+            "k.cool",
+            "packet Self { type: u8, loop: bool = true }\n\
+             enum Kind { Self, Fn }\n\
+             atomic Loop {\n\
+                 configuration { use: u8 = 1; }\n\
+                 observable match: Self;\n\
+                 controllable move: u8 = 2;\n\
+                 input in: fifo<Self>(2);\n\
+                 output ref: data<Kind> pull;\n\
+                 exception break;\n\
+                 automaton { initial self; state self { entry; may -> super; } state super { periodic 10ms; } }\n\
+             }\n",
+        );
+        let codes: Vec<&str> = analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect();
+        assert!(
+            codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
+            "{codes:?}"
+        );
+        let krate = lower(&analysis.assume_checked(), &Options::default());
+        let files = crate::emit::emit_crate(&krate);
+        let module = files
+            .iter()
+            .find(|f| f.path == std::path::Path::new("src/generated/loop.rs"))
+            .expect("module file named after the component");
+        assert!(
+            module
+                .contents
+                .contains("pub r#match: super::types::Self_,"),
+            "{}",
+            module.contents
+        );
+        assert!(module.contents.contains("fn self_entry"));
+        assert!(module.contents.contains("fn on_break"));
     }
 }

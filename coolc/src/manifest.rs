@@ -370,10 +370,11 @@ mod tests {
     use super::*;
 
     fn krate(text: &str) -> ir::Crate {
-        let analysis = crate::analyze_text("x.cool", text);
-        assert!(!analysis.has_errors());
+        let checked = crate::analyze_text("x.cool", text)
+            .checked()
+            .expect("no error");
         crate::lower::lower(
-            &analysis.files,
+            &checked,
             &crate::lower::Options {
                 package: "lamp".to_owned(),
                 ..crate::lower::Options::default()

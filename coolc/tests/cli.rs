@@ -440,6 +440,66 @@ fn compile_check_lists_what_would_change_and_writes_nothing() {
 }
 
 #[test]
+fn compile_check_in_json_lists_stale_files_as_json_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("lamp.cool");
+    let lamp = "atomic Lamp {\n    automaton { initial off; state off { entry; } }\n}\n";
+    std::fs::write(&description, lamp).unwrap();
+    let check = &[
+        "compile",
+        "--check",
+        "--message-format",
+        "json",
+        "lamp.cool",
+        "-o",
+        "lamp",
+    ];
+    // One object per line: the reason, the path, the change (and the stubs added).
+    let lines = |out: &Output| -> Vec<serde_json::Value> {
+        text(&out.stdout)
+            .lines()
+            .map(|line| serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}")))
+            .collect()
+    };
+
+    let out = coolc(check, dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let listed = lines(&out);
+    assert!(
+        listed
+            .iter()
+            .all(|l| l["reason"] == "stale_file" && l["change"] == "write")
+    );
+    let manifest = Path::new("lamp").join("Cargo.toml").display().to_string();
+    assert!(
+        listed.iter().any(|l| l["path"] == manifest.as_str()),
+        "{listed:?}"
+    );
+
+    let out = coolc(&["compile", "lamp.cool", "-o", "lamp"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = coolc(check, dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "");
+
+    // A new state with an entry section: the user file would get its stub.
+    let changed = lamp.replace(
+        "state off { entry; }",
+        "state off { entry; after 1s -> on; }\n        state on { entry; }",
+    );
+    std::fs::write(&description, changed).unwrap();
+    let out = coolc(check, dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let user = Path::new("lamp").join("src/lamp.rs").display().to_string();
+    let stubs = lines(&out)
+        .into_iter()
+        .find(|l| l["path"] == user.as_str())
+        .expect("the user file is listed");
+    assert_eq!(stubs["change"], "add_stubs");
+    assert_eq!(stubs["methods"], serde_json::json!(["on_entry"]));
+}
+
+#[test]
 fn compile_into_a_new_directory_writes_a_main_that_runs() {
     // The example descriptions (a compound over two atomics, a converter): the
     // generated `main.rs` starts the compound, the one component nothing

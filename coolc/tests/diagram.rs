@@ -17,7 +17,7 @@ fn repository() -> PathBuf {
 }
 
 /// Analyzes `path` with paths shown relative to the repository; panics on errors.
-fn analyze(path: &Path) -> coolc::Analysis {
+fn analyze(path: &Path) -> coolc::Checked {
     let base = repository();
     let relative = path
         .canonicalize()
@@ -25,22 +25,18 @@ fn analyze(path: &Path) -> coolc::Analysis {
         .strip_prefix(&base)
         .expect("inside the repository")
         .to_owned();
-    let analysis = coolc::analyze(&[relative], &|p: &Path| {
+    coolc::analyze(&[relative], &|p: &Path| {
         std::fs::read_to_string(base.join(p))
-    });
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
-    analysis
+    })
+    .checked()
+    .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())))
 }
 
 /// Every view of every component of the file, with and without the default
 /// automaton around automata.
 fn all_diagrams(path: &Path) -> Vec<diagram::Diagram> {
-    let analysis = analyze(path);
-    let mut diagrams = match diagram::diagrams(&analysis.files, 1, &Options::default()) {
+    let checked = analyze(path);
+    let mut diagrams = match diagram::diagrams(&checked, 1, &Options::default()) {
         Ok(diagrams) => diagrams,
         // A file of packets only (`types.cool`): nothing to draw.
         Err(diagram::SelectError::Nothing) => return Vec::new(),
@@ -51,7 +47,7 @@ fn all_diagrams(path: &Path) -> Vec<diagram::Diagram> {
         default_automaton: true,
         ..Options::default()
     };
-    diagrams.extend(diagram::diagrams(&analysis.files, 1, &nested).expect("draw nested"));
+    diagrams.extend(diagram::diagrams(&checked, 1, &nested).expect("draw nested"));
     diagrams
 }
 

@@ -20,19 +20,16 @@ fn lower_fixture(root: &str, package: &str) -> coolc::ir::Crate {
 }
 
 fn lower_file(root: &Path, package: &str) -> coolc::ir::Crate {
-    let analysis = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p));
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
+    let checked = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p))
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = lower::Options {
         package: package.to_owned(),
         runtime: RuntimeDep::Version("0.1".to_owned()),
         sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
-        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
+        inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
-    lower::lower(&analysis.files, &options)
+    lower::lower(&checked, &options)
 }
 
 fn snapshot_crate(prefix: &str, krate: &coolc::ir::Crate) {
@@ -74,19 +71,16 @@ fn example_robot() {
 
 #[test]
 fn starter_component() {
-    let analysis = coolc::analyze_text("starter.cool", &coolc::cli::starter_description("Starter"));
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
+    let checked = coolc::analyze_text("starter.cool", &coolc::cli::starter_description("Starter"))
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let krate = lower::lower(
-        &analysis.files,
+        &checked,
         &lower::Options {
             package: "starter".to_owned(),
             runtime: RuntimeDep::Version("0.1".to_owned()),
             sources: vec!["starter.cool".to_owned()],
-            inputs: coolc::fingerprint::inputs(analysis.sources.files()),
+            inputs: coolc::fingerprint::inputs(checked.sources().files()),
         },
     );
     snapshot_crate("starter", &krate);
@@ -141,48 +135,32 @@ fn builder_reports_diagnostics() {
 }
 
 #[test]
-fn rust_keywords_as_names_emit_valid_rust() {
-    // The checker rejects Rust keywords as names (`coolc::check::rust_keyword`);
-    // lowering escapes them anyway, as defence in depth. Every emitted Rust file is
-    // parsed by `syn` while emitting: a keyword that is not escaped would panic here.
-    let analysis = coolc::analyze_text(
-        "k.cool",
-        "packet Self { type: u8, loop: bool = true }\n\
-         enum Kind { Self, Fn }\n\
-         atomic Loop {\n\
-             configuration { use: u8 = 1; }\n\
-             observable match: Self;\n\
-             controllable move: u8 = 2;\n\
-             input in: fifo<Self>(2);\n\
-             output ref: data<Kind> pull;\n\
-             exception break;\n\
-             automaton { initial self; state self { entry; may -> super; } state super { periodic 10ms; } }\n\
-         }\n",
-    );
-    let codes: Vec<&str> = analysis
-        .diagnostics
-        .iter()
-        .map(|d| d.code.as_str())
-        .collect();
+fn builder_names_the_import_a_sibling_file_offers() {
+    // As `coolc check` does: an unknown type defined in a `.cool` file next to the
+    // one using it gets help naming the import to add.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("scan.cool"),
+        "packet LaserScan { ranges: [f32; 72] }\n",
+    )
+    .unwrap();
+    let robot = dir.path().join("robot.cool");
+    std::fs::write(&robot, "atomic Mapper { input scan: last<LaserScan>; }\n").unwrap();
+    let error = coolc::Builder::new()
+        .out_dir(dir.path().join("out"))
+        .cargo_output(false)
+        .compile(&[&robot])
+        .unwrap_err();
+    let coolc::builder::BuildError::Diagnostics(text) = error else {
+        panic!("expected diagnostics, got {error:?}");
+    };
+    let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
     assert!(
-        codes.iter().all(|c| *c == "coolc::check::rust_keyword"),
-        "{codes:?}"
+        words.contains(
+            "`LaserScan` is defined in `scan.cool` next to this file: add `import \"scan.cool\";`"
+        ),
+        "{text}"
     );
-    let krate = lower::lower(&analysis.files, &lower::Options::default());
-    let files = emit::emit_crate(&krate);
-    let module = files
-        .iter()
-        .find(|f| f.path == Path::new("src/generated/loop.rs"))
-        .expect("module file named after the component");
-    assert!(
-        module
-            .contents
-            .contains("pub r#match: super::types::Self_,"),
-        "{}",
-        module.contents
-    );
-    assert!(module.contents.contains("fn self_entry"));
-    assert!(module.contents.contains("fn on_break"));
 }
 
 #[test]
@@ -190,13 +168,12 @@ fn every_ok_fixture_emits() {
     // The front end's fixture suite: every description that checks must emit (emission
     // parses every Rust file it writes, so a template bug panics here).
     insta::glob!("../../tests/data/ok", "*.cool", |path| {
-        let analysis = coolc::analyze(&[path], &|p: &Path| std::fs::read_to_string(p));
-        assert!(
-            !analysis.has_errors(),
-            "{}",
-            analysis.render(coolc::RenderOptions::plain())
-        );
-        let krate = lower::lower(&analysis.files, &lower::Options::default());
+        let checked = coolc::analyze(&[path], &|p: &Path| std::fs::read_to_string(p))
+            .checked()
+            .unwrap_or_else(|analysis| {
+                panic!("{}", analysis.render(coolc::RenderOptions::plain()))
+            });
+        let krate = lower::lower(&checked, &lower::Options::default());
         let files = emit::emit_crate(&krate);
         let manifest = &files[0];
         assert_eq!(manifest.path, Path::new("Cargo.toml"));

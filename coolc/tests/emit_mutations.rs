@@ -53,8 +53,8 @@ proptest! {
             lines.remove(index);
         }
         let analysis = analyze_mutated(root, &lines.join("\n"));
-        if !analysis.has_errors() {
-            let krate = coolc::lower::lower(&analysis.files, &coolc::lower::Options::default());
+        if let Ok(checked) = analysis.checked() {
+            let krate = coolc::lower::lower(&checked, &coolc::lower::Options::default());
             let files = coolc::emit::emit_crate(&krate);
             prop_assert!(files.iter().any(|f| f.path == Path::new("src/generated/mod.rs")));
         }

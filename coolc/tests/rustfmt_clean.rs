@@ -47,12 +47,9 @@ fn lower_files(files: &[(PathBuf, String)], package: &str) -> coolc::ir::Crate {
             .map(|(_, text)| text.clone())
             .map_or_else(|| std::fs::read_to_string(path), Ok)
     };
-    let analysis = coolc::analyze(&roots, &load);
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
+    let checked = coolc::analyze(&roots, &load)
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = lower::Options {
         package: package.to_owned(),
         runtime: RuntimeDep::Version("0.1".to_owned()),
@@ -60,9 +57,9 @@ fn lower_files(files: &[(PathBuf, String)], package: &str) -> coolc::ir::Crate {
             .iter()
             .map(|r| r.file_name().unwrap().to_string_lossy().into_owned())
             .collect(),
-        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
+        inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
-    lower::lower(&analysis.files, &options)
+    lower::lower(&checked, &options)
 }
 
 fn on_disk(path: PathBuf) -> (PathBuf, String) {

@@ -182,19 +182,16 @@ fn cargo(dir: &Path, args: &[&str]) {
 
 /// Lowers one description for a crate named `package` on the repository's runtime.
 fn lower(name: &str, text: &str, package: &str) -> coolc::ir::Crate {
-    let analysis = coolc::analyze_text(name, text);
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
+    let checked = coolc::analyze_text(name, text)
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = coolc::lower::Options {
         package: package.to_owned(),
         runtime: coolc::ir::RuntimeDep::Path(repository().join("runtime").display().to_string()),
         sources: vec![name.to_owned()],
-        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
+        inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
-    coolc::lower::lower(&analysis.files, &options)
+    coolc::lower::lower(&checked, &options)
 }
 
 #[test]

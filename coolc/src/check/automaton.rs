@@ -176,7 +176,8 @@ fn state_member(
             span,
         } => {
             if automaton.keyword == ast::AutomatonKeyword::Supervisor || supervisor {
-                rules::rule(checker, component, condition);
+                let typed = rules::rule(checker, component, condition);
+                checker.rules.insert((checker.file, condition.span), typed);
             } else {
                 let diagnostic = checker
                     .error(Code::MisplacedMember, *span, "`when` rules are only allowed in a compound's `supervisor`")

@@ -11,6 +11,10 @@
 //! (instances, connections, interfaces, containment) and `rules` (typed supervisor
 //! rule expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
+//!
+//! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol
+//! table, every component's interface, every `when` rule typed), which
+//! `crate::Checked` hands to `lower` and `diagram` once there are no errors.
 
 mod automaton;
 mod component;
@@ -20,14 +24,42 @@ mod names;
 mod rules;
 mod values;
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
+
+pub use rules::{RTy, Typed, strip};
 
 use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
-use crate::resolve::Symbols;
+use crate::resolve::{DefKind, Symbols};
 
-/// Runs every check over every file.
-pub fn check(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagnostic>) {
+/// What the checks resolved: the model `lower` and `diagram` read (through
+/// `crate::Checked`, which exists only when there are no errors).
+#[derive(Clone, Debug, Default)]
+pub struct Resolved {
+    /// The top-level symbol table.
+    pub(crate) symbols: Symbols,
+    /// The interface of every component, by name.
+    pub(crate) interfaces: BTreeMap<String, model::Interface>,
+    /// Every `when` condition, typed, by its file and span.
+    pub(crate) rules: BTreeMap<(FileId, Span), Typed>,
+}
+
+/// Runs every check over every file and returns what they resolved.
+pub fn check(files: &[ast::File], symbols: Symbols, diagnostics: &mut Vec<Diagnostic>) -> Resolved {
+    let (interfaces, rules) = run(files, &symbols, diagnostics);
+    Resolved {
+        symbols,
+        interfaces,
+        rules,
+    }
+}
+
+type Outcome = (
+    BTreeMap<String, model::Interface>,
+    BTreeMap<(FileId, Span), Typed>,
+);
+
+fn run(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagnostic>) -> Outcome {
     let model = model::Model::new(files, symbols);
     // A file with syntax errors lost what failed to parse: checks that need the whole
     // picture (reachability) would only report the loss again.
@@ -41,6 +73,7 @@ pub fn check(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagn
         diagnostics,
         file: FileId(0),
         incomplete: false,
+        rules: BTreeMap::new(),
     };
     for file in files {
         checker.file = file.id;
@@ -50,6 +83,14 @@ pub fn check(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagn
         }
     }
     compound::self_containing(&mut checker, files);
+    let rules = std::mem::take(&mut checker.rules);
+    let interfaces = symbols
+        .defs
+        .iter()
+        .filter(|(_, def)| def.kind == DefKind::Component)
+        .map(|(name, _)| (name.clone(), (*model.interface(name)).clone()))
+        .collect();
+    (interfaces, rules)
 }
 
 /// The state shared by the checks: the model and where diagnostics go.
@@ -60,6 +101,8 @@ pub(crate) struct Checker<'a, 'd> {
     pub(crate) file: FileId,
     /// The file being checked has syntax errors (parts of it are missing).
     pub(crate) incomplete: bool,
+    /// The `when` conditions typed so far.
+    pub(crate) rules: BTreeMap<(FileId, Span), Typed>,
 }
 
 impl Checker<'_, '_> {

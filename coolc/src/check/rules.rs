@@ -21,16 +21,25 @@ use super::model::{
 use crate::ast::{self, BinaryOp};
 use crate::diagnostics::Code;
 
-/// The type of a rule expression.
+/// The type of a rule expression: the one rule typer's output, read by `lower`
+/// (which compiles each node to Rust by its type) as well as by the checks here.
 #[derive(Clone, Debug, PartialEq)]
-enum RTy {
+pub enum RTy {
+    /// `bool`
     Bool,
+    /// Any integer (rules widen every integer to one type).
     Int,
+    /// `f32` or `f64`.
     Float,
+    /// `String`
     Str,
+    /// `Duration`
     Duration,
+    /// `Time`
     Time,
+    /// An enum, by its `.cool` name.
     Enum(String),
+    /// `T?`
     Optional(Box<RTy>),
     /// A default automaton state.
     State,
@@ -44,7 +53,8 @@ enum RTy {
     NoneLit,
     /// A bare name that is not a variable.
     Symbol(ast::Ident),
-    /// Anything else, described.
+    /// Anything else (a packet, a list, a frequency), described: a rule cannot read
+    /// it, it only compares with `none` when optional.
     Other(String),
     /// Already reported.
     Unknown,
@@ -109,25 +119,46 @@ fn from_ty(ty: &Ty) -> RTy {
     }
 }
 
-/// Checks one `when` condition of `component`'s supervisor.
+/// A rule expression as the checker typed it: the same shape as its `ast::Expr`,
+/// one operand per operand of a unary or binary operator (none otherwise). A bare
+/// name compared with a state, result or quality level carries the type it resolved
+/// to (`State`, `UserState`, `Result`, `Quality`), never `Symbol`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Typed {
+    /// The node's type.
+    pub ty: RTy,
+    /// The typed operands of a unary or binary operator, in order.
+    pub operands: Vec<Typed>,
+}
+
+impl Typed {
+    fn leaf(ty: RTy) -> Typed {
+        Typed {
+            ty,
+            operands: Vec::new(),
+        }
+    }
+}
+
+/// Checks one `when` condition of `component`'s supervisor and returns it typed.
 pub(super) fn rule(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
     condition: &ast::Expr,
-) {
+) -> Typed {
     let own = checker.model.interface(&component.name.name);
     let mut typer = Typer {
         checker,
         component,
         own: &own,
     };
-    let ty = typer.infer(condition);
-    match ty {
+    let typed = typer.infer(condition);
+    match &typed.ty {
         RTy::Bool | RTy::Unknown => {}
-        RTy::Symbol(name) => typer.unknown_variable(&name),
+        RTy::Symbol(name) => typer.unknown_variable(name),
         other => {
             let help = typer
-                .enum_variants(&other)
+                .enum_variants(other)
                 .unwrap_or_else(|| "compare it: `x == value`, `x > 3`".to_owned());
             let diagnostic = typer
                 .checker
@@ -141,6 +172,7 @@ pub(super) fn rule(
             typer.checker.push(diagnostic);
         }
     }
+    typed
 }
 
 struct Typer<'c, 'a, 'd> {
@@ -150,9 +182,9 @@ struct Typer<'c, 'a, 'd> {
 }
 
 impl Typer<'_, '_, '_> {
-    fn infer(&mut self, expr: &ast::Expr) -> RTy {
+    fn infer(&mut self, expr: &ast::Expr) -> Typed {
         use ast::ExprKind as E;
-        match &expr.kind {
+        let ty = match &expr.kind {
             E::Int(_) => RTy::Int,
             E::Float(_) => RTy::Float,
             E::Str(_) => RTy::Str,
@@ -164,44 +196,56 @@ impl Typer<'_, '_, '_> {
             E::EnumValue { enum_name, variant } => self.enum_value(enum_name, variant),
             E::Path(segments) => self.path(expr, segments),
             E::Unary(op, operand) => {
-                let ty = self.operand(operand);
-                match (op, &ty) {
+                let operand = self.operand(operand);
+                let ty = match (op, &operand.ty) {
                     (_, RTy::Unknown) => RTy::Unknown,
                     (ast::UnaryOp::Not, RTy::Bool) => RTy::Bool,
-                    (ast::UnaryOp::Neg, RTy::Int | RTy::Float | RTy::Duration) => ty,
-                    (ast::UnaryOp::Not, _) => {
+                    (ast::UnaryOp::Neg, RTy::Int | RTy::Float | RTy::Duration) => {
+                        operand.ty.clone()
+                    }
+                    (ast::UnaryOp::Not, ty) => {
                         self.mismatch(expr, format!("`!` needs a bool, found {ty}"))
                     }
-                    (ast::UnaryOp::Neg, _) => {
+                    (ast::UnaryOp::Neg, ty) => {
                         self.mismatch(expr, format!("`-` needs a number, found {ty}"))
                     }
-                }
+                };
+                return Typed {
+                    ty,
+                    operands: vec![operand],
+                };
             }
             E::Binary(op @ (BinaryOp::And | BinaryOp::Or), left, right) => {
+                let mut operands = Vec::with_capacity(2);
                 for side in [left, right] {
-                    let ty = self.operand(side);
-                    if !matches!(ty, RTy::Bool | RTy::Unknown) {
+                    let typed = self.operand(side);
+                    if !matches!(typed.ty, RTy::Bool | RTy::Unknown) {
                         self.mismatch(
                             side,
-                            format!("`{}` needs bool operands, found {ty}", op.as_str()),
+                            format!("`{}` needs bool operands, found {}", op.as_str(), typed.ty),
                         );
                     }
+                    operands.push(typed);
                 }
-                RTy::Bool
+                return Typed {
+                    ty: RTy::Bool,
+                    operands,
+                };
             }
-            E::Binary(op, left, right) => self.comparison(expr, *op, left, right),
-        }
+            E::Binary(op, left, right) => return self.comparison(expr, *op, left, right),
+        };
+        Typed::leaf(ty)
     }
 
     /// Infers an operand; a bare symbol on its own is an unknown variable.
-    fn operand(&mut self, expr: &ast::Expr) -> RTy {
-        match self.infer(expr) {
-            RTy::Symbol(name) => {
-                self.unknown_variable(&name);
-                RTy::Unknown
-            }
-            other => other,
+    fn operand(&mut self, expr: &ast::Expr) -> Typed {
+        let mut typed = self.infer(expr);
+        if let RTy::Symbol(name) = &typed.ty {
+            let name = name.clone();
+            self.unknown_variable(&name);
+            typed.ty = RTy::Unknown;
         }
+        typed
     }
 
     fn mismatch(&mut self, expr: &ast::Expr, message: String) -> RTy {
@@ -379,35 +423,44 @@ impl Typer<'_, '_, '_> {
         op: BinaryOp,
         left: &ast::Expr,
         right: &ast::Expr,
-    ) -> RTy {
-        let left_ty = self.infer(left);
-        let right_ty = self.infer(right);
-        let (left_ty, right_ty) = match (left_ty, right_ty) {
+    ) -> Typed {
+        let mut left_typed = self.infer(left);
+        let mut right_typed = self.infer(right);
+        // A bare name takes its meaning from the other side; the node records what
+        // it resolved to, without the other side's `?`.
+        match (&left_typed.ty, &right_typed.ty) {
             (RTy::Symbol(a), RTy::Symbol(_)) => {
+                let a = a.clone();
                 self.unknown_variable(&a);
-                return RTy::Bool;
+                left_typed.ty = RTy::Unknown;
+                right_typed.ty = RTy::Unknown;
             }
             (RTy::Symbol(symbol), other) => {
-                let resolved = self.symbol(&symbol, &other);
-                (resolved, other)
+                let (symbol, other) = (symbol.clone(), other.clone());
+                left_typed.ty = self.symbol(&symbol, &other);
             }
             (other, RTy::Symbol(symbol)) => {
-                let resolved = self.symbol(&symbol, &other);
-                (other, resolved)
+                let (symbol, other) = (symbol.clone(), other.clone());
+                right_typed.ty = self.symbol(&symbol, &other);
             }
-            pair => pair,
-        };
-        if matches!(left_ty, RTy::Unknown) || matches!(right_ty, RTy::Unknown) {
-            return RTy::Bool;
+            _ => {}
         }
-        if !compatible(&left_ty, &right_ty) {
-            let help = match (&left_ty, &right_ty) {
+        let typed = |left_typed, right_typed| Typed {
+            ty: RTy::Bool,
+            operands: vec![left_typed, right_typed],
+        };
+        let (left_ty, right_ty) = (&left_typed.ty, &right_typed.ty);
+        if matches!(left_ty, RTy::Unknown) || matches!(right_ty, RTy::Unknown) {
+            return typed(left_typed, right_typed);
+        }
+        if !compatible(left_ty, right_ty) {
+            let help = match (left_ty, right_ty) {
                 (RTy::Float, RTy::Int) | (RTy::Int, RTy::Float) => {
                     Some("write float literals with a point, e.g. `3.0`".to_owned())
                 }
                 _ => self
-                    .enum_variants(&left_ty)
-                    .or_else(|| self.enum_variants(&right_ty)),
+                    .enum_variants(left_ty)
+                    .or_else(|| self.enum_variants(right_ty)),
             };
             let mut diagnostic = self
                 .checker
@@ -424,7 +477,7 @@ impl Typer<'_, '_, '_> {
                 diagnostic = diagnostic.with_help(help);
             }
             self.checker.push(diagnostic);
-            return RTy::Bool;
+            return typed(left_typed, right_typed);
         }
         let ordered = matches!(
             op,
@@ -432,7 +485,7 @@ impl Typer<'_, '_, '_> {
         );
         if ordered
             && !matches!(
-                strip(&left_ty),
+                strip(left_ty),
                 RTy::Int | RTy::Float | RTy::Duration | RTy::Time
             )
         {
@@ -447,12 +500,12 @@ impl Typer<'_, '_, '_> {
                     ),
                 )
                 .with_label("ill-typed");
-            if let Some(help) = self.enum_variants(&left_ty) {
+            if let Some(help) = self.enum_variants(left_ty) {
                 diagnostic = diagnostic.with_help(help);
             }
             self.checker.push(diagnostic);
         }
-        RTy::Bool
+        typed(left_typed, right_typed)
     }
 
     /// For an enum (or optional enum) type, help that lists its variants and how a
@@ -519,7 +572,7 @@ impl Typer<'_, '_, '_> {
             }
         };
         if domain.contains(&symbol.name) {
-            return other.clone();
+            return strip(other).clone();
         }
         let code = if matches!(strip(other), RTy::State | RTy::UserState(..)) {
             Code::UnknownState
@@ -537,7 +590,8 @@ impl Typer<'_, '_, '_> {
     }
 }
 
-fn strip(ty: &RTy) -> &RTy {
+/// The type inside every `?` layer.
+pub fn strip(ty: &RTy) -> &RTy {
     match ty {
         RTy::Optional(inner) => strip(inner),
         other => other,

@@ -5,13 +5,13 @@
 //! and 4).
 //!
 //! Each view builds a [`Diagram`] (nodes, nested groups, edges: no format in it), which
-//! [`dot`] and [`mermaid`] print. **Invariant:** runs only on an analysis without
-//! errors (names resolve); output depends only on the descriptions (source order,
-//! identifiers from names), never on hashing or addresses.
-
-use std::collections::BTreeMap;
+//! [`dot`] and [`mermaid`] print. It takes a [`Checked`] model (there are no errors,
+//! names resolve) and finds components through it; output depends only on the
+//! descriptions (source order, identifiers from names), never on hashing or
+//! addresses.
 
 use crate::ast::{self, FileId};
+use crate::checked::Checked;
 
 pub mod dot;
 pub mod mermaid;
@@ -258,14 +258,14 @@ pub fn render(diagrams: &[Diagram], format: Format) -> Result<String, FormatErro
     }
 }
 
-/// The diagrams `options` ask for, from checked `files` of which the first `roots`
+/// The diagrams `options` ask for, from checked descriptions whose first `roots` files
 /// are the root files.
 pub fn diagrams(
-    files: &[ast::File],
+    checked: &Checked,
     roots: usize,
     options: &Options,
 ) -> Result<Vec<Diagram>, SelectError> {
-    let model = views::Lookup::new(files);
+    let model = views::Lookup::new(checked);
     let chosen: Vec<&ast::Component> = match &options.component {
         Some(name) => match model.component(name) {
             Some(component) => vec![component],
@@ -276,14 +276,10 @@ pub fn diagrams(
                 });
             }
         },
-        None => files
-            .iter()
-            .filter(|file| (file.id.0 as usize) < roots || file.id == FileId(0))
-            .flat_map(|file| &file.items)
-            .filter_map(|item| match item {
-                ast::Item::Component(component) => Some(component),
-                _ => None,
-            })
+        None => checked
+            .components()
+            .filter(|(file, _)| (file.0 as usize) < roots || *file == FileId(0))
+            .map(|(_, component)| component)
             .collect(),
     };
     if chosen.is_empty() {
@@ -332,15 +328,4 @@ fn join(prefix: &str, name: &str) -> String {
     } else {
         format!("{prefix}.{name}")
     }
-}
-
-/// Every component by name, first definition wins (the analysis has no duplicates).
-fn components(files: &[ast::File]) -> BTreeMap<&str, &ast::Component> {
-    let mut map = BTreeMap::new();
-    for item in files.iter().flat_map(|file| &file.items) {
-        if let ast::Item::Component(component) = item {
-            map.entry(component.name.name.as_str()).or_insert(component);
-        }
-    }
-    map
 }

@@ -6,28 +6,34 @@ use super::text;
 use super::{Diagram, Edge, EdgeStyle, End, Group, Item, Node, Ports, Shape, View, join};
 use crate::ast::{self, ComponentKind, Member, StateMember};
 use crate::check::model::{DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES};
+use crate::checked::Checked;
 
-/// Components by name.
+/// The checked model the views are drawn from.
 pub(super) struct Lookup<'a> {
-    components: BTreeMap<&'a str, &'a ast::Component>,
+    checked: &'a Checked,
 }
 
 /// The state a compound without a `supervisor` is in (as the generated code has it).
 const IMPLICIT_STATE: &str = "supervising";
 
 impl<'a> Lookup<'a> {
-    pub(super) fn new(files: &'a [ast::File]) -> Lookup<'a> {
-        Lookup {
-            components: super::components(files),
-        }
+    pub(super) fn new(checked: &'a Checked) -> Lookup<'a> {
+        Lookup { checked }
     }
 
     pub(super) fn component(&self, name: &str) -> Option<&'a ast::Component> {
-        self.components.get(name).copied()
+        self.checked.component(name).map(|(_, component)| component)
     }
 
+    /// Every component's name, sorted.
     pub(super) fn names(&self) -> Vec<&'a str> {
-        self.components.keys().copied().collect()
+        let mut names: Vec<&str> = self
+            .checked
+            .components()
+            .map(|(_, component)| component.name.name.as_str())
+            .collect();
+        names.sort_unstable();
+        names
     }
 
     // -----------------------------------------------------------------------------

@@ -1,93 +1,28 @@
 //! Lowering of compound components: the supervisor (states, sections, own variables),
 //! the instances and everything the runtime's `coolbot::CompoundBuilder` is told
 //! (connections, exports, mapped variables, policies, substitutes, redundant groups,
-//! recovery) and the `when` rules, compiled to typed Rust over `coolbot::View`.
+//! recovery). The `when` rules are compiled to typed Rust over `coolbot::View` by the
+//! submodule `rules`.
 //!
 //! Like the rest of lowering, this never fails: the checker has accepted the
 //! description, and anything it would have rejected lowers to something harmless
 //! (an unknown type reads as a missing value, which makes a comparison `false`).
 
+mod rules;
+
 use std::collections::BTreeSet;
 
 use super::{
     GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
-    may_targets, section_stubs, unique_among,
+    may_targets, rust_ty, section_stubs, unique_among,
 };
-use crate::ast::{self, BinaryOp, ExprKind, Prim, TypeKind, UnaryOp};
-use crate::check::model::{DEFAULT_STATES, RESULTS};
+use crate::ast::{self, ExprKind};
+use crate::check::model::Ty;
 use crate::ident;
 use crate::ir;
 
 /// The supervisor state of a compound that declares none.
 const IMPLICIT_STATE: &str = "supervising";
-
-/// The `coolbot::TaskResult` pattern a `result` symbol (`check::model::RESULTS`)
-/// stands for.
-fn result_pattern(symbol: &str) -> Option<&'static str> {
-    match symbol {
-        "none" => Some("::coolbot::TaskResult::None"),
-        "success" => Some("::coolbot::TaskResult::Success(_)"),
-        "fail" => Some("::coolbot::TaskResult::Fail(_)"),
-        _ => None,
-    }
-}
-
-/// The type of a rule operand, as the generated Rust holds it.
-#[derive(Clone, Debug, PartialEq)]
-enum RTy {
-    Bool,
-    /// Held as `i128` (every `.cool` integer widens to it).
-    Int,
-    /// Held as `f64`.
-    Float,
-    /// Held as `&str`.
-    Str,
-    Duration,
-    Time,
-    /// An enum, by its Rust path.
-    Enum(String),
-    /// `T?`: held as `Option<T>` (a string as `Option<&str>`).
-    Optional(Box<RTy>),
-    /// A default automaton state (`coolbot::State`).
-    State,
-    /// A user state of an instance (`&str`), with the states it has.
-    UserState(Vec<String>),
-    /// `&coolbot::TaskResult`.
-    Result,
-    /// A quality level (`usize`), with the levels.
-    Quality(Vec<String>),
-    /// `none`.
-    NoneLit,
-    /// A bare name to resolve against the other side of a comparison.
-    Symbol(String),
-    /// Nothing the generated code can read (a packet, a list, an error the checker
-    /// reported): comparisons with it are `false`.
-    Unreadable,
-}
-
-/// A rule operand: Rust text and its type.
-#[derive(Clone, Debug)]
-struct Operand {
-    code: String,
-    ty: RTy,
-    /// `code` is an `Option` of the value (a read from the view that may be
-    /// missing); `false` when `code` is the value itself.
-    maybe: bool,
-    /// An `f32` (or `f32?`) widened to `f64`: a float literal it is compared with is
-    /// rounded to `f32` first.
-    narrow: bool,
-}
-
-/// A compound's scope for rules and exports.
-struct Scope<'a, 'b> {
-    lowerer: &'b Lowerer<'a>,
-    component: &'a ast::Component,
-    /// The rule's supervisor state (own `user_state` is known statically).
-    state: String,
-    reads: Vec<String>,
-    uses_view: bool,
-    uses_vars: bool,
-}
 
 impl<'a> Lowerer<'a> {
     /// The instance `name` of `component`.
@@ -99,9 +34,9 @@ impl<'a> Lowerer<'a> {
     }
 
     fn component_of(&self, instance: &ast::Instance) -> Option<&'a ast::Component> {
-        self.components
-            .get(instance.component.name.as_str())
-            .copied()
+        self.checked
+            .component(&instance.component.name)
+            .map(|(_, component)| component)
     }
 
     /// The input or output (`input`) port `port` of `component`, followed through
@@ -153,27 +88,22 @@ impl<'a> Lowerer<'a> {
         self.leaf_port(inner, &target.port.name, input, depth + 1)
     }
 
-    /// The packet type of the port an export names: `Some(None)` for a tick port,
-    /// `None` when it does not resolve.
+    /// The packet type of exported input (`input`) or output `name` of `component`
+    /// (the port it exports, through nested compounds), from the component's
+    /// interface: `Some(None)` for a tick port, `None` when it does not resolve.
     fn export_type(
         &self,
-        component: &'a ast::Component,
-        target: &ast::PortRef,
+        component: &ast::Component,
+        name: &str,
         input: bool,
-    ) -> Option<Option<&'a ast::Type>> {
-        Some(match self.exported_port(component, target, input, 0)? {
-            LeafPort::Input(i) => match &i.def {
-                ast::InputDef::Fifo { ty, .. }
-                | ast::InputDef::Ufifo { ty, .. }
-                | ast::InputDef::Last(ty)
-                | ast::InputDef::Poster(ty) => Some(ty),
-                ast::InputDef::Tick | ast::InputDef::Export(_) => None,
-            },
-            LeafPort::Output(o) => match &o.def {
-                ast::OutputDef::Data(ty) | ast::OutputDef::Poster(ty) => Some(ty),
-                ast::OutputDef::Tick | ast::OutputDef::Export(_) => None,
-            },
-        })
+    ) -> Option<Option<Ty>> {
+        let interface = self.checked.interface(&component.name.name)?;
+        let ports = if input {
+            &interface.inputs
+        } else {
+            &interface.outputs
+        };
+        ports.get(name).map(|port| port.ty.clone())
     }
 
     /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
@@ -199,37 +129,15 @@ impl<'a> Lowerer<'a> {
         ))
     }
 
-    /// The declared type of variable `name` of `component` (through mapped variables
-    /// of nested compounds), and whether it is observable (or controllable).
-    fn variable_type(
-        &self,
-        component: &'a ast::Component,
-        name: &str,
-        depth: usize,
-    ) -> Option<(&'a ast::Type, ast::VarKind)> {
-        if depth > 64 {
-            return None;
-        }
-        let variable = component.members.iter().find_map(|m| match m {
-            ast::Member::Variable(v) if v.name.name == name => Some(v),
-            _ => None,
-        })?;
-        match (&variable.ty, &variable.value) {
-            (Some(ty), _) => Some((ty, variable.kind)),
-            (None, Some(value)) => {
-                let ExprKind::Path(segments) = &value.kind else {
-                    return None;
-                };
-                let [instance, inner_var] = segments.as_slice() else {
-                    return None;
-                };
-                let instance = Self::instance_of(component, &instance.name)?;
-                let inner = self.component_of(instance)?;
-                self.variable_type(inner, &inner_var.name, depth + 1)
-                    .map(|(ty, _)| (ty, variable.kind))
-            }
-            (None, None) => None,
-        }
+    /// The type of variable `name` of `component` (through mapped variables of
+    /// nested compounds), from the component's interface.
+    fn variable_type(&self, component: &ast::Component, name: &str) -> Option<Ty> {
+        let variable = self
+            .checked
+            .interface(&component.name.name)?
+            .variables
+            .get(name)?;
+        (variable.ty != Ty::Unknown).then(|| variable.ty.clone())
     }
 
     /// The user states and quality levels of `component` (a compound's supervisor
@@ -253,32 +161,6 @@ impl<'a> Lowerer<'a> {
             }
         }
         (states, qualities)
-    }
-
-    /// The rule type of a declared `.cool` type.
-    fn rule_type(&self, ty: &ast::Type) -> RTy {
-        match &ty.kind {
-            TypeKind::Prim(p) => match p {
-                Prim::Bool => RTy::Bool,
-                Prim::F32 | Prim::F64 => RTy::Float,
-                Prim::String => RTy::Str,
-                Prim::Time => RTy::Time,
-                Prim::Duration => RTy::Duration,
-                _ => RTy::Int,
-            },
-            TypeKind::Named(name) => match self.types.get(name.name.as_str()) {
-                Some(super::TypeDef::Enum(_)) => {
-                    RTy::Enum(format!("{GEN_TYPES}{}", ident::camel(&name.name)))
-                }
-                _ => RTy::Unreadable,
-            },
-            TypeKind::Optional(inner) => match self.rule_type(inner) {
-                RTy::Unreadable => RTy::Unreadable,
-                RTy::Optional(inner) => RTy::Optional(inner),
-                inner => RTy::Optional(Box::new(inner)),
-            },
-            TypeKind::List(_) | TypeKind::Array(..) => RTy::Unreadable,
-        }
     }
 
     /// Whether compound `c` connects through a converter, itself or in a compound it
@@ -353,11 +235,11 @@ impl<'a> Lowerer<'a> {
                         let address = port_address(target);
                         let name = ident::string_literal(&input.name.name);
                         let target_lit = ident::string_literal(&address);
-                        let step = match self.export_type(c, target, true) {
+                        let step = match self.export_type(c, &input.name.name, true) {
                             Some(None) => format!(".export_tick_input({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_input::<{}>({name}, {target_lit})",
-                                self.rust_type(ty, GEN_TYPES)
+                                rust_ty(&ty, GEN_TYPES)
                             ),
                             None => format!(".export_input::<()>({name}, {target_lit})"),
                         };
@@ -370,11 +252,11 @@ impl<'a> Lowerer<'a> {
                         output_specs.extend(self.export_spec(c, &output.name.name, target, false));
                         let name = ident::string_literal(&output.name.name);
                         let target_lit = ident::string_literal(&port_address(target));
-                        steps.push(match self.export_type(c, target, false) {
+                        steps.push(match self.export_type(c, &output.name.name, false) {
                             Some(None) => format!(".export_tick_output({name}, {target_lit})"),
                             Some(Some(ty)) => format!(
                                 ".export_output::<{}>({name}, {target_lit})",
-                                self.rust_type(ty, GEN_TYPES)
+                                rust_ty(&ty, GEN_TYPES)
                             ),
                             None => format!(".export_output::<()>({name}, {target_lit})"),
                         });
@@ -477,48 +359,7 @@ impl<'a> Lowerer<'a> {
         }
 
         let supervisor = self.supervisor(c, automaton);
-        let mut rules = Vec::new();
-        for (state, condition, target) in &supervisor.when {
-            let mut scope = Scope {
-                lowerer: self,
-                component: c,
-                state: state.clone(),
-                reads: Vec::new(),
-                uses_view: false,
-                uses_vars: false,
-            };
-            let expr = scope.boolean(condition);
-            let function = format!("__cool_rule_{}", rules.len());
-            let reads: Vec<String> = scope
-                .reads
-                .iter()
-                .map(|r| ident::string_literal(r))
-                .collect();
-            let call = match (scope.uses_view, scope.uses_vars) {
-                (_, true) => format!(
-                    "{{ let vars = ::std::sync::Arc::clone(&vars); move |view: &::coolbot::View| {function}(view, &__cool_lock(&vars)) }}"
-                ),
-                (_, false) => function.clone(),
-            };
-            rules.push(ir::Rule {
-                state: ident::string_literal(state),
-                target: ident::string_literal(target),
-                reads: format!("&[{}]", reads.join(", ")),
-                view_param: if scope.uses_view { "view" } else { "_" }.to_owned(),
-                vars_param: if scope.uses_vars {
-                    Some("vars".to_owned())
-                } else {
-                    None
-                },
-                function,
-                expr,
-                call,
-                doc: format!(
-                    "`when {}` in state `{state}` -> `{target}`",
-                    show(condition)
-                ),
-            });
-        }
+        let rules = rules::compile(self, c, &supervisor.when);
 
         let handles = self.handles(c, &instances);
         let name = ident::camel_raw(&c.name.name);
@@ -596,18 +437,26 @@ impl<'a> Lowerer<'a> {
             for member in &component.members {
                 match member {
                     ast::Member::Variable(v) if v.kind == ast::VarKind::Controllable => {
-                        let Some((ty, _)) = self.variable_type(component, &v.name.name, 0) else {
+                        let Some(ty) = self.variable_type(component, &v.name.name) else {
                             continue;
                         };
-                        let rust_ty = self.rust_type(ty, GEN_TYPES);
+                        let rust_ty = rust_ty(&ty, GEN_TYPES);
                         // A type holding an array longer than 32 elements goes through
                         // its serde_with adapter, as the instance's own variable does.
-                        let to_value = match (super::serde_adapter(ty), &ty.kind) {
+                        let to_value = match (super::serde_adapter(&ty), &ty) {
                             (Some(adapter), _) => format!(
                                 "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
                                 super::SERDE_WITH
                             ),
-                            (None, TypeKind::Prim(_)) => "::coolbot::Value::from(value)".to_owned(),
+                            (
+                                None,
+                                Ty::Bool
+                                | Ty::Int(_)
+                                | Ty::Float(_)
+                                | Ty::Str
+                                | Ty::Time
+                                | Ty::Duration,
+                            ) => "::coolbot::Value::from(value)".to_owned(),
                             (None, _) => "super::__cool_to_value(&value)".to_owned(),
                         };
                         setters.push(ir::Setter {
@@ -693,10 +542,10 @@ impl<'a> Lowerer<'a> {
             .map(|(name, instance, variable)| {
                 let ty = Self::instance_of(c, instance)
                     .and_then(|i| self.component_of(i))
-                    .and_then(|t| self.variable_type(t, variable, 0))
-                    .map(|(ty, _)| {
-                        let rust = self.rust_type(ty, GEN_TYPES);
-                        if self.defaultable(ty, &mut BTreeSet::new()) {
+                    .and_then(|t| self.variable_type(t, variable))
+                    .map(|ty| {
+                        let rust = rust_ty(&ty, GEN_TYPES);
+                        if self.ty_defaultable(&ty) {
                             rust
                         } else {
                             // Its `Vars` field has no default: an `Option` itself.
@@ -754,9 +603,9 @@ impl<'a> Lowerer<'a> {
                 if !is_inner_mapped(&field) {
                     continue;
                 }
-                if let Some((ty, _)) = self.variable_type(t, &o.name.name, 0) {
-                    let value = self.value(&o.value, Some(ty), GEN_TYPES);
-                    let value = if self.defaultable(ty, &mut BTreeSet::new()) {
+                if let Some(ty) = self.variable_type(t, &o.name.name) {
+                    let value = self.value(&o.value, Some(&ty), GEN_TYPES);
+                    let value = if self.ty_defaultable(&ty) {
                         value
                     } else {
                         format!("::core::option::Option::Some({value})")
@@ -1189,715 +1038,6 @@ fn port_address(target: &ast::PortRef) -> String {
     }
 }
 
-/// A rule condition as written (for the generated documentation).
-fn show(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Int(n) => n.to_string(),
-        ExprKind::Float(x) => format!("{x:?}"),
-        ExprKind::Str(s) => format!("{s:?}"),
-        ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Duration(ns) => match *ns {
-            ns if ns > 0 && ns % 60_000_000_000 == 0 => format!("{}min", ns / 60_000_000_000),
-            ns if ns > 0 && ns % 1_000_000_000 == 0 => format!("{}s", ns / 1_000_000_000),
-            ns if ns > 0 && ns % 1_000_000 == 0 => format!("{}ms", ns / 1_000_000),
-            ns if ns > 0 && ns % 1_000 == 0 => format!("{}us", ns / 1_000),
-            ns => format!("{ns}ns"),
-        },
-        ExprKind::Frequency(hz) => format!("{hz}Hz"),
-        ExprKind::Path(parts) => parts
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect::<Vec<_>>()
-            .join("."),
-        ExprKind::EnumValue { enum_name, variant } => {
-            format!("{}::{}", enum_name.name, variant.name)
-        }
-        ExprKind::List(items) => format!(
-            "[{}]",
-            items.iter().map(show).collect::<Vec<_>>().join(", ")
-        ),
-        ExprKind::Repeat(item, n) => format!("[{}; {}]", show(item), n.value),
-        ExprKind::None => "none".to_owned(),
-        ExprKind::Unary(UnaryOp::Not, inner) => format!("!{}", show_operand(inner)),
-        ExprKind::Unary(UnaryOp::Neg, inner) => format!("-{}", show_operand(inner)),
-        ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-            let side = |e: &ast::Expr| {
-                if needs_parens(*op, e) {
-                    format!("({})", show(e))
-                } else {
-                    show(e)
-                }
-            };
-            format!("{} {} {}", side(l), op.as_str(), side(r))
-        }
-        ExprKind::Binary(op, l, r) => {
-            format!("{} {} {}", show_operand(l), op.as_str(), show_operand(r))
-        }
-    }
-}
-
-fn show_operand(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Binary(..) => format!("({})", show(expr)),
-        _ => show(expr),
-    }
-}
-
-/// Whether `operand` of logical operator `op` needs parentheses: an `||` inside an
-/// `&&` (comparisons and `&&` bind tighter than `||`, comparisons tighter than
-/// `&&`).
-fn needs_parens(op: BinaryOp, operand: &ast::Expr) -> bool {
-    op == BinaryOp::And && matches!(operand.kind, ExprKind::Binary(BinaryOp::Or, ..))
-}
-
-impl Scope<'_, '_> {
-    fn read(&mut self, name: String) {
-        if !self.reads.contains(&name) {
-            self.reads.push(name);
-        }
-    }
-
-    /// A boolean Rust expression for `expr` (a missing or unreadable value makes the
-    /// comparison that reads it `false`).
-    fn boolean(&mut self, expr: &ast::Expr) -> String {
-        match &expr.kind {
-            ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-                let (l, r) = (self.logic_operand(*op, l), self.logic_operand(*op, r));
-                format!("{l} {} {r}", op.as_str())
-            }
-            ExprKind::Binary(op, l, r) => self.comparison(*op, l, r),
-            ExprKind::Unary(UnaryOp::Not, inner) => {
-                let text = self.boolean(inner);
-                match &inner.kind {
-                    ExprKind::Binary(..) => format!("!({text})"),
-                    _ => format!("!{text}"),
-                }
-            }
-            _ => {
-                let operand = self.operand(expr);
-                match (operand.ty, operand.maybe) {
-                    (RTy::Bool, false) => operand.code,
-                    (RTy::Bool, true) => format!("{}.unwrap_or(false)", operand.code),
-                    _ => "false".to_owned(),
-                }
-            }
-        }
-    }
-
-    /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
-    /// would read it otherwise (an `||` inside an `&&`).
-    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr) -> String {
-        let text = self.boolean(expr);
-        if needs_parens(op, expr) {
-            format!("({text})")
-        } else {
-            text
-        }
-    }
-
-    /// An operand of a comparison (or a bare boolean).
-    fn operand(&mut self, expr: &ast::Expr) -> Operand {
-        let known = |code: String, ty: RTy| Operand {
-            code,
-            ty,
-            maybe: false,
-            narrow: false,
-        };
-        match &expr.kind {
-            ExprKind::Int(n) => known(n.to_string(), RTy::Int),
-            ExprKind::Float(x) => known(format!("{x:?}"), RTy::Float),
-            ExprKind::Str(s) => known(ident::string_literal(s), RTy::Str),
-            ExprKind::Bool(b) => known(b.to_string(), RTy::Bool),
-            ExprKind::Duration(_) => known(
-                duration_rust(duration_ns(expr).unwrap_or_default()),
-                RTy::Duration,
-            ),
-            ExprKind::None => known(String::new(), RTy::NoneLit),
-            ExprKind::EnumValue { enum_name, variant } => {
-                let path = format!("{GEN_TYPES}{}", ident::camel(&enum_name.name));
-                known(
-                    format!("{path}::{}", ident::camel(&variant.name)),
-                    RTy::Enum(path),
-                )
-            }
-            ExprKind::Unary(UnaryOp::Neg, inner) => match self.operand(inner) {
-                Operand {
-                    code,
-                    ty: ty @ (RTy::Int | RTy::Float),
-                    maybe: false,
-                    narrow,
-                } => Operand {
-                    narrow,
-                    ..known(format!("-{code}"), ty)
-                },
-                Operand {
-                    code,
-                    ty: ty @ (RTy::Int | RTy::Float),
-                    maybe: true,
-                    narrow,
-                } => Operand {
-                    code: format!("{code}.map(|value| -value)"),
-                    ty,
-                    maybe: true,
-                    narrow,
-                },
-                _ => known(String::new(), RTy::Unreadable),
-            },
-            ExprKind::Unary(UnaryOp::Not, _) | ExprKind::Binary(..) => {
-                known(format!("({})", self.boolean(expr)), RTy::Bool)
-            }
-            ExprKind::Path(segments) => match segments.as_slice() {
-                [name] => self.own(&name.name),
-                [instance, variable] => self.instance_variable(&instance.name, &variable.name),
-                _ => known(String::new(), RTy::Unreadable),
-            },
-            ExprKind::Frequency(_) | ExprKind::List(_) | ExprKind::Repeat(..) => {
-                known(String::new(), RTy::Unreadable)
-            }
-        }
-    }
-
-    /// A bare name: an own variable, a mapped one, an own default variable, or a
-    /// symbol.
-    fn own(&mut self, name: &str) -> Operand {
-        let component = self.component;
-        let variable = component.members.iter().find_map(|m| match m {
-            ast::Member::Variable(v) if v.name.name == name => Some(v),
-            _ => None,
-        });
-        if let Some(v) = variable {
-            return match (&v.ty, &v.value) {
-                (Some(ty), _) => {
-                    if v.kind != ast::VarKind::Local {
-                        self.read(name.to_owned());
-                    }
-                    self.uses_vars = true;
-                    let field = format!("vars.{}", ident::snake(name));
-                    let has_default =
-                        v.value.is_some() || self.lowerer.defaultable(ty, &mut BTreeSet::new());
-                    let f64_field = is_f64(ty);
-                    let ty = self.lowerer.rule_type(ty);
-                    if !has_default {
-                        // Held as `Option<T>` until set: read it as a missing value.
-                        return own_value(&format!("{field}.as_ref()"), &ty, true, f64_field);
-                    }
-                    own_value(&field, &ty, false, f64_field)
-                }
-                (None, Some(value)) => match &value.kind {
-                    ExprKind::Path(segments) => match segments.as_slice() {
-                        [instance, variable] => {
-                            self.mapped_variable(name, &instance.name, &variable.name)
-                        }
-                        _ => Operand {
-                            code: String::new(),
-                            ty: RTy::Unreadable,
-                            maybe: false,
-                            narrow: false,
-                        },
-                    },
-                    _ => Operand {
-                        code: String::new(),
-                        ty: RTy::Unreadable,
-                        maybe: false,
-                        narrow: false,
-                    },
-                },
-                (None, None) => Operand {
-                    code: String::new(),
-                    ty: RTy::Unreadable,
-                    maybe: false,
-                    narrow: false,
-                },
-            };
-        }
-        match name {
-            // Rules are evaluated while the compound runs.
-            "state" => Operand {
-                code: "::coolbot::State::Running".to_owned(),
-                ty: RTy::State,
-                maybe: false,
-                narrow: false,
-            },
-            // A rule is evaluated in its own supervisor state.
-            "user_state" => {
-                let (states, _) = Lowerer::states_and_qualities(component);
-                Operand {
-                    code: ident::string_literal(&self.state),
-                    ty: RTy::UserState(states),
-                    maybe: false,
-                    narrow: false,
-                }
-            }
-            // The compound's own default observables, copied into the view at each
-            // supervision turn.
-            "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => {
-                self.read(name.to_owned());
-                self.uses_view = true;
-                let (code, ty, maybe) = match name {
-                    "result" => (
-                        "::core::option::Option::Some(view.own_result())".to_owned(),
-                        RTy::Result,
-                        true,
-                    ),
-                    "error" => (
-                        "view.own_error().unwrap_or(\"\")".to_owned(),
-                        RTy::Str,
-                        false,
-                    ),
-                    "quality" => {
-                        let (_, levels) = Lowerer::states_and_qualities(component);
-                        ("view.own_quality()".to_owned(), RTy::Quality(levels), false)
-                    }
-                    _ => (format!("view.own_{name}()"), RTy::Duration, false),
-                };
-                Operand {
-                    code,
-                    ty,
-                    maybe,
-                    narrow: false,
-                }
-            }
-            _ => Operand {
-                code: String::new(),
-                ty: RTy::Symbol(name.to_owned()),
-                maybe: false,
-                narrow: false,
-            },
-        }
-    }
-
-    /// Mapped variable `name` (`observable name = instance.variable;`): an instance
-    /// variable is read with `view.mapped(name)`, from the instance standing for
-    /// `instance` now, under read key `name`; a default variable (`state`, ...) is read
-    /// on `instance` itself.
-    fn mapped_variable(&mut self, name: &str, instance: &str, variable: &str) -> Operand {
-        self.variable_operand(instance, variable, Some(name))
-    }
-
-    /// `instance.variable`, read from the view.
-    fn instance_variable(&mut self, instance: &str, variable: &str) -> Operand {
-        self.variable_operand(instance, variable, None)
-    }
-
-    /// `instance.variable`, read from the view; through mapped variable `mapped` when
-    /// given and `variable` is one of the instance's own.
-    fn variable_operand(
-        &mut self,
-        instance: &str,
-        variable: &str,
-        mapped: Option<&str>,
-    ) -> Operand {
-        let unreadable = Operand {
-            code: String::new(),
-            ty: RTy::Unreadable,
-            maybe: false,
-            narrow: false,
-        };
-        let Some(target) = Lowerer::instance_of(self.component, instance)
-            .and_then(|i| self.lowerer.component_of(i))
-        else {
-            return unreadable;
-        };
-        let lit = ident::string_literal(instance);
-        let maybe = |code: String, ty: RTy| Operand {
-            code,
-            ty,
-            maybe: true,
-            narrow: false,
-        };
-        if let Some((ty, _)) = self.lowerer.variable_type(target, variable, 0) {
-            let raw = match mapped {
-                Some(name) => {
-                    self.read(name.to_owned());
-                    format!("view.mapped({})", ident::string_literal(name))
-                }
-                None => {
-                    self.read(format!("{instance}.{variable}"));
-                    format!("view.var({lit}, {})", ident::string_literal(variable))
-                }
-            };
-            self.uses_view = true;
-            let f64_field = is_f64(ty);
-            let ty = self.lowerer.rule_type(ty);
-            return match view_value(&raw, &ty) {
-                Some(code) => Operand {
-                    narrow: !f64_field && is_float(&ty),
-                    ..maybe(code, ty)
-                },
-                None => unreadable,
-            };
-        }
-        let (states, mut qualities) = Lowerer::states_and_qualities(target);
-        // An instance's `timing` override may declare its own quality levels.
-        if let Some(levels) = Lowerer::instance_of(self.component, instance)
-            .and_then(|i| i.timing.as_ref())
-            .and_then(|timing| {
-                timing.entries.iter().find_map(|entry| match entry {
-                    ast::TimingEntry::Quality(levels, _) => Some(levels),
-                    _ => None,
-                })
-            })
-        {
-            qualities = levels.iter().map(|level| level.name.clone()).collect();
-        }
-        let (code, ty) = match variable {
-            "state" => (format!("view.state({lit})"), RTy::State),
-            "user_state" => (format!("view.user_state({lit})"), RTy::UserState(states)),
-            "result" => (format!("view.result({lit})"), RTy::Result),
-            // No error reads as the empty one: `error != "x"` holds then.
-            "error" => {
-                self.read(format!("{instance}.error"));
-                self.uses_view = true;
-                return Operand {
-                    code: format!("view.error({lit}).unwrap_or(\"\")"),
-                    ty: RTy::Str,
-                    maybe: false,
-                    narrow: false,
-                };
-            }
-            "cpu_time" | "elapsed_time" => (
-                format!("view.monitor({lit}).map(|monitor| monitor.{variable})"),
-                RTy::Duration,
-            ),
-            "quality" => (
-                format!("view.monitor({lit}).map(|monitor| monitor.quality)"),
-                RTy::Quality(qualities),
-            ),
-            _ => return unreadable,
-        };
-        // (`cpu_time` and `elapsed_time` have no change event of their own: the
-        // runtime counts them as changed every supervisor period.)
-        self.read(format!("{instance}.{variable}"));
-        self.uses_view = true;
-        maybe(code, ty)
-    }
-
-    /// `left op right`.
-    fn comparison(&mut self, op: BinaryOp, left: &ast::Expr, right: &ast::Expr) -> String {
-        let mut l = self.operand(left);
-        let mut r = self.operand(right);
-        // Symbols take the type of the other side.
-        if let RTy::Symbol(name) = &l.ty {
-            l = symbol(name, &r.ty);
-        }
-        if let RTy::Symbol(name) = &r.ty {
-            r = symbol(name, &l.ty);
-        }
-        if matches!(l.ty, RTy::Unreadable | RTy::Symbol(_))
-            || matches!(r.ty, RTy::Unreadable | RTy::Symbol(_))
-        {
-            return "false".to_owned();
-        }
-        // An `f32` compared with a float literal: the literal rounded to `f32`, as the
-        // variable holds it.
-        if l.narrow
-            && let Some(literal) = f32_literal(right)
-        {
-            r.code = literal;
-        }
-        if r.narrow
-            && let Some(literal) = f32_literal(left)
-        {
-            l.code = literal;
-        }
-        // `user_state == on`: a missing user state (the automaton has not started)
-        // differs from every state, for `!=` too.
-        if matches!(l.ty, RTy::UserState(_)) && l.maybe != r.maybe {
-            let (maybe, plain) = if l.maybe { (&l, &r) } else { (&r, &l) };
-            return format!(
-                "{} {} ::core::option::Option::Some({})",
-                maybe.code,
-                op.as_str(),
-                plain.code
-            );
-        }
-        // `x != v` is `!(x == v)`, also when a side is missing.
-        if op == BinaryOp::Ne && (l.maybe || r.maybe) {
-            return format!("!({})", self.compare(BinaryOp::Eq, l, r));
-        }
-        self.compare(op, l, r)
-    }
-
-    /// `l op r`, both operands resolved (`!=` over a missing value is handled by
-    /// the caller).
-    fn compare(&mut self, op: BinaryOp, mut l: Operand, mut r: Operand) -> String {
-        let rust_op = op.as_str();
-        // `x == none`, `x != none`.
-        if r.ty == RTy::NoneLit {
-            std::mem::swap(&mut l, &mut r);
-        }
-        if l.ty == RTy::NoneLit {
-            let test = match op {
-                BinaryOp::Ne => "is_some",
-                _ => "is_none",
-            };
-            return match (&r.ty, r.maybe) {
-                (RTy::Optional(_), false) => format!("{}.{test}()", r.code),
-                (RTy::Optional(_), true) => {
-                    format!("{}.is_some_and(|value| value.{test}())", r.code)
-                }
-                (RTy::Result, _) => {
-                    let pattern = "::coolbot::TaskResult::None";
-                    let negate = if op == BinaryOp::Ne { "!" } else { "" };
-                    format!(
-                        "{}.is_some_and(|result| {negate}::core::matches!(result, {pattern}))",
-                        r.code
-                    )
-                }
-                _ => "false".to_owned(),
-            };
-        }
-        // `result == fail`: a pattern match.
-        if l.ty == RTy::Result && r.ty == RTy::Result {
-            return self.result_comparison(op, &l, &r);
-        }
-        let l_opt = matches!(l.ty, RTy::Optional(_));
-        let r_opt = matches!(r.ty, RTy::Optional(_));
-        // An ordering with an optional side: `none` satisfies none of them.
-        if (l_opt || r_opt) && op != BinaryOp::Eq && op != BinaryOp::Ne {
-            return ordering(rust_op, &l, &r);
-        }
-        // One optional side and one plain side: the plain side is wrapped in `Some`.
-        let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
-            let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
-            let value = if operand.maybe && owned_text {
-                format!("{name}.as_deref()")
-            } else if operand.maybe {
-                name.to_owned()
-            } else {
-                operand.code.clone()
-            };
-            let value = if wrap {
-                format!("::core::option::Option::Some({value})")
-            } else {
-                value
-            };
-            (operand.code.clone(), value)
-        };
-        let (l_source, l_value) = bind(&l, "left", r_opt && !l_opt);
-        let (r_source, r_value) = bind(&r, "right", l_opt && !r_opt);
-        let test = format!("{l_value} {rust_op} {r_value}");
-        match (l.maybe, r.maybe) {
-            (false, false) => test,
-            (true, false) => format!("{l_source}.is_some_and(|left| {test})"),
-            (false, true) => format!("{r_source}.is_some_and(|right| {test})"),
-            (true, true) => {
-                format!("{l_source}.zip({r_source}).is_some_and(|(left, right)| {test})")
-            }
-        }
-    }
-
-    /// A comparison of two results: by kind (`none`, `success`, `fail`).
-    fn result_comparison(&mut self, op: BinaryOp, l: &Operand, r: &Operand) -> String {
-        let negate = if op == BinaryOp::Ne { "!" } else { "" };
-        // A symbol side is a pattern.
-        let pattern = |operand: &Operand| -> Option<String> {
-            (!operand.maybe).then(|| operand.code.clone())
-        };
-        match (pattern(l), pattern(r)) {
-            (Some(p), None) | (None, Some(p)) => {
-                let source = if l.maybe { &l.code } else { &r.code };
-                format!("{source}.is_some_and(|result| {negate}::core::matches!(result, {p}))")
-            }
-            (None, None) => format!(
-                "{}.zip({}).is_some_and(|(left, right)| ::core::mem::discriminant(left) {} ::core::mem::discriminant(right))",
-                l.code,
-                r.code,
-                op.as_str()
-            ),
-            (Some(a), Some(b)) => (if (a == b) == (op != BinaryOp::Ne) {
-                "true"
-            } else {
-                "false"
-            })
-            .to_owned(),
-        }
-    }
-}
-
-/// `l op r` for an ordering `op` with an optional side: every `Option` layer (a
-/// missing read, an optional value) is opened with `is_some_and`, so a missing value
-/// or `none` makes it `false`.
-fn ordering(rust_op: &str, l: &Operand, r: &Operand) -> String {
-    let layers = |operand: &Operand| {
-        usize::from(matches!(operand.ty, RTy::Optional(_))) + usize::from(operand.maybe)
-    };
-    let value = |operand: &Operand, name: &str| {
-        if layers(operand) == 0 {
-            operand.code.clone()
-        } else {
-            name.to_owned()
-        }
-    };
-    let open = |operand: &Operand, name: &str, inner: String| -> String {
-        match layers(operand) {
-            0 => inner,
-            1 => format!("{}.is_some_and(|{name}| {inner})", operand.code),
-            _ => format!(
-                "{}.is_some_and(|{name}| {name}.is_some_and(|{name}| {inner}))",
-                operand.code
-            ),
-        }
-    };
-    let test = format!("{} {rust_op} {}", value(l, "left"), value(r, "right"));
-    open(l, "left", open(r, "right", test))
-}
-
-/// A float literal (`0.1`, `-0.1`) as an `f64` holding its `f32` rounding, or `None`
-/// for anything else (and for a literal beyond `f32`'s range, which no `f32` equals).
-fn f32_literal(expr: &ast::Expr) -> Option<String> {
-    let (negative, value) = match &expr.kind {
-        ExprKind::Float(x) => (false, *x),
-        ExprKind::Unary(UnaryOp::Neg, inner) => match &inner.kind {
-            ExprKind::Float(x) => (true, *x),
-            _ => return None,
-        },
-        _ => return None,
-    };
-    // Rounding to `f32` is the point: the variable holds that rounding.
-    let narrow = value as f32;
-    if !narrow.is_finite() {
-        return None;
-    }
-    let sign = if negative { "-" } else { "" };
-    Some(format!("f64::from({sign}{narrow:?}_f32)"))
-}
-
-/// A symbol resolved against the type of the other side.
-fn symbol(name: &str, other: &RTy) -> Operand {
-    let plain = |code: String, ty: RTy| Operand {
-        code,
-        ty,
-        maybe: false,
-        narrow: false,
-    };
-    let other = match other {
-        RTy::Optional(inner) => inner.as_ref(),
-        other => other,
-    };
-    match other {
-        // The checker's names; `coolbot::State` variants are their camel case.
-        RTy::State if DEFAULT_STATES.contains(&name) => plain(
-            format!("::coolbot::State::{}", ident::camel(name)),
-            RTy::State,
-        ),
-        RTy::UserState(states) if states.iter().any(|s| s == name) => {
-            plain(ident::string_literal(name), other.clone())
-        }
-        RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
-            Some(pattern) => plain(pattern.to_owned(), RTy::Result),
-            None => plain(String::new(), RTy::Unreadable),
-        },
-        RTy::Quality(levels) => match levels.iter().position(|l| l == name) {
-            Some(index) => plain(format!("{index}_usize"), other.clone()),
-            None => plain(String::new(), RTy::Unreadable),
-        },
-        _ => plain(String::new(), RTy::Unreadable),
-    }
-}
-
-/// An own variable's field read as a rule operand (`maybe` when it is held as an
-/// `Option` reference until set).
-fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
-    let unreadable = Operand {
-        code: String::new(),
-        ty: RTy::Unreadable,
-        maybe: false,
-        narrow: false,
-    };
-    if maybe {
-        // `Option<&T>`: only the types whose value can be copied out of a reference.
-        let code = match ty {
-            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => format!("{field}.copied()"),
-            _ => return unreadable,
-        };
-        return Operand {
-            code,
-            ty: ty.clone(),
-            maybe: true,
-            narrow: false,
-        };
-    }
-    let code = match ty {
-        RTy::Int => format!("i128::from({field})"),
-        RTy::Float if f64_field => field.to_owned(),
-        RTy::Float => format!("f64::from({field})"),
-        RTy::Str => format!("{field}.as_str()"),
-        RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
-        RTy::Optional(inner) => match inner.as_ref() {
-            RTy::Int => format!("{field}.map(i128::from)"),
-            RTy::Float if f64_field => field.to_owned(),
-            RTy::Float => format!("{field}.map(f64::from)"),
-            RTy::Str => format!("{field}.as_deref()"),
-            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
-            _ => return unreadable,
-        },
-        _ => return unreadable,
-    };
-    let narrow = !f64_field && is_float(ty);
-    Operand {
-        code,
-        ty: ty.clone(),
-        maybe: false,
-        narrow,
-    }
-}
-
-/// Whether `ty` is a float or an optional float.
-fn is_float(ty: &RTy) -> bool {
-    match ty {
-        RTy::Float => true,
-        RTy::Optional(inner) => **inner == RTy::Float,
-        _ => false,
-    }
-}
-
-/// Reads an instance variable's `Option<&coolbot::Value>` (`raw`) as an `Option` of
-/// the operand's Rust value.
-fn view_value(raw: &str, ty: &RTy) -> Option<String> {
-    let decode = |rust: &str| format!("{raw}.and_then(|value| <{rust}>::try_from(value).ok())");
-    let serde = |rust: &str| {
-        format!("{raw}.and_then(|value| super::__cool_from_value::<{rust}>(value).ok())")
-    };
-    Some(match ty {
-        RTy::Bool => decode("bool"),
-        RTy::Int => format!(
-            "{raw}.and_then(|value| <i64>::try_from(value).map(i128::from).or_else(|_| <u64>::try_from(value).map(i128::from)).ok())"
-        ),
-        RTy::Float => decode("f64"),
-        RTy::Str => format!(
-            "{raw}.and_then(|value| match value {{ ::coolbot::Value::Str(text) => ::core::option::Option::Some(text.as_str()), _ => ::core::option::Option::None }})"
-        ),
-        RTy::Duration => decode("::std::time::Duration"),
-        RTy::Time => decode("::coolbot::Time"),
-        RTy::Enum(path) => serde(path),
-        RTy::Optional(inner) => match inner.as_ref() {
-            RTy::Bool => serde("::core::option::Option<bool>"),
-            RTy::Int => format!(
-                "{}.map(|value| value.map(i128::from))",
-                serde("::core::option::Option<i64>")
-            ),
-            RTy::Float => serde("::core::option::Option<f64>"),
-            RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
-            RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
-            RTy::Enum(path) => serde(&format!("::core::option::Option<{path}>")),
-            // Owned: compared through `as_deref` (see `Scope::comparison`).
-            RTy::Str => serde("::core::option::Option<::std::string::String>"),
-            _ => return None,
-        },
-        _ => return None,
-    })
-}
-
-/// Whether `ty` is `f64` or `f64?` (read as is; `f32` widens).
-fn is_f64(ty: &ast::Type) -> bool {
-    match &ty.kind {
-        TypeKind::Prim(p) => *p == Prim::F64,
-        TypeKind::Optional(inner) => is_f64(inner),
-        _ => false,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use crate::ir;
@@ -1941,13 +1081,12 @@ mod tests {
     }
 
     fn compounds_of(text: &str) -> Vec<ir::Compound> {
-        let analysis = crate::analyze_text("t.cool", text);
-        assert!(
-            !analysis.has_errors(),
-            "{}",
-            analysis.render(crate::RenderOptions::plain())
-        );
-        lower(&analysis.files, &Options::default()).compounds
+        let checked = crate::analyze_text("t.cool", text)
+            .checked()
+            .unwrap_or_else(|analysis| {
+                panic!("{}", analysis.render(crate::RenderOptions::plain()))
+            });
+        lower(&checked, &Options::default()).compounds
     }
 
     /// The condition and reads of each rule of the first compound of `text`.
@@ -2219,8 +1358,8 @@ mod tests {
             "t.cool",
             "atomic Leaf { automaton { initial on; state on { entry; } } }\ncompound Top { instance supervisor: Leaf; }",
         );
-        assert!(!analysis.has_errors());
-        let krate = lower(&analysis.files, &Options::default());
+        let checked = analysis.checked().expect("no error");
+        let krate = lower(&checked, &Options::default());
         let parts: Vec<&str> = krate.compounds[0]
             .parts
             .iter()

@@ -42,19 +42,16 @@ pub fn copy_descriptions(dir: &Path) {
 
 /// Analyzes `root`, lowers it and writes (or merges into) the crate `out`.
 pub fn compile(root: &Path, out: &Path, package: &str) -> merge::Report {
-    let analysis = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p));
-    assert!(
-        !analysis.has_errors(),
-        "{}",
-        analysis.render(coolc::RenderOptions::plain())
-    );
+    let checked = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p))
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = lower::Options {
         package: package.to_owned(),
         runtime: runtime(),
         sources: vec![root.file_name().unwrap().to_string_lossy().into_owned()],
-        inputs: coolc::fingerprint::inputs(analysis.sources.files()),
+        inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
-    merge::write_crate(out, &lower::lower(&analysis.files, &options)).unwrap()
+    merge::write_crate(out, &lower::lower(&checked, &options)).unwrap()
 }
 
 /// Runs `cargo <args>` in `dir` with the shared generated-crate target directory;
