@@ -126,12 +126,15 @@ mod commander;
 pub mod compound;
 mod monitor;
 pub mod port;
+#[cfg(feature = "process")]
+pub mod process;
 pub mod record;
 mod runner;
 pub mod schema;
 mod spec;
 mod system;
 pub mod table;
+pub mod tap;
 mod thread;
 mod value;
 mod watchdog;

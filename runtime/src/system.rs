@@ -606,6 +606,7 @@ impl System {
                 .map(|o| o.name)
                 .zip(ports.outputs.iter().cloned())
                 .collect(),
+            spec,
         };
         let runner = Runner::new(
             &name,
@@ -705,7 +706,7 @@ impl System {
 
     /// The component at `path`: a component of this system (`"base"`) or an instance
     /// inside it, through nested compounds (`"base.motion"`, see [`Handle::instance`]).
-    pub(crate) fn handle_at(&self, path: &str) -> Option<Handle> {
+    pub fn handle_at(&self, path: &str) -> Option<Handle> {
         let (first, rest) = match path.split_once('.') {
             Some((first, rest)) => (first, Some(rest)),
             None => (path, None),

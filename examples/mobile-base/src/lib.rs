@@ -73,7 +73,7 @@ pub struct Options {
     pub scan_rate: Option<f64>,
     /// How the run shows itself.
     pub display: Display,
-    /// Set to stop the run early (Ctrl-C).
+    /// Set to stop the run early (SIGINT or SIGTERM: `coolbot::process`).
     pub stop: Arc<AtomicBool>,
     /// Record the odometry (`base.motion.pose`), the scans (`base.scan`, from
     /// whichever range server stands in) and the base's monitoring events into this
@@ -248,7 +248,7 @@ impl fmt::Display for SupervisionStep {
 pub struct Summary {
     /// How long it ran.
     pub elapsed: Duration,
-    /// Whether it was stopped early (Ctrl-C).
+    /// Whether it was stopped early (SIGINT or SIGTERM).
     pub interrupted: bool,
     /// Distance the robot really travelled (m, the platform's ground truth).
     pub distance: f64,
@@ -699,6 +699,9 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         scan_rate: options.scan_rate,
     };
     let robot = Robot::start(&platform, &setup)?;
+    // A panic the runtime catches in one of the robot's components prints one line
+    // (under `coolbot::process`'s panic hook, when the program installed it).
+    coolbot::process::watch_system(robot.system());
     let recording = match &options.record {
         Some(path) => Some(start_recording(&robot, path)?),
         None => None,
@@ -740,6 +743,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     if display == Display::Table {
         // Clear the screen once; frames then redraw from the top.
         print!("\x1b[2J");
+        // Log lines and caught panics go into the table's event pane, not over it.
+        coolbot::process::capture_output(true);
     }
 
     let interrupted = loop {
@@ -752,7 +757,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             break false;
         }
         // What the monitoring ports reported since the last turn.
-        let fresh = events.take(at);
+        let mut fresh = events.take(at);
+        fresh.extend(coolbot::process::take_output());
         if display == Display::Lines {
             let mut out = stdout.lock();
             for line in &fresh {
@@ -817,6 +823,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         std::thread::sleep(Duration::from_millis(20));
     };
 
+    if display == Display::Table {
+        // What is left, and what the shutdown logs, on stderr again.
+        coolbot::process::capture_output(false);
+    }
     // Before shutdown: every level's monitoring port, in the table's order.
     let elapsed = platform.uptime().saturating_sub(started);
     let base = robot.base.snapshot();
@@ -838,6 +848,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         robot.wanderer.clone(),
     ];
     let exposed = node.map(|node| (node.name().to_owned(), lines.len()));
+    coolbot::process::forget_system(robot.system());
     let report = robot.shutdown();
     // The variables as the components left them, each from its own monitoring port:
     // read after the last section ran, so that they agree with the platform's ground
