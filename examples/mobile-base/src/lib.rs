@@ -740,9 +740,9 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     // The run's clock is the platform's: injected faults and events agree.
     let started = platform.uptime();
     let stdout = std::io::stdout();
+    let mut screen = None;
     if display == Display::Table {
-        // Clear the screen once; frames then redraw from the top.
-        print!("\x1b[2J");
+        screen = Some(status::Screen::open().map_err(|e| format!("the terminal: {e}"))?);
         // Log lines and caught panics go into the table's event pane, not over it.
         coolbot::process::capture_output(true);
     }
@@ -766,7 +766,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             }
         }
         log.extend(fresh);
-        let keep = log.len().saturating_sub(12);
+        let keep = log.len().saturating_sub(200);
         log.drain(..keep);
 
         let frame_due = last_frame.elapsed() >= Duration::from_millis(250);
@@ -792,8 +792,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             let base = robot.base.snapshot();
             let supervisor = base.user_state.as_deref().unwrap_or("-");
             let truth = platform.truth();
-            let mut out = stdout.lock();
-            if display == Display::Table {
+            if let Some(screen) = &mut screen {
                 let header = format!(
                     "CoolBOT mobile base   t={:5.1}s/{:.0}s   base supervisor: {} (mode {})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}{}",
                     at.as_secs_f64(),
@@ -807,8 +806,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     truth.contacts,
                     load_note(&platform),
                 );
-                let _ = write!(out, "\x1b[H{}\x1b[J", status::table(&header, &rows, &log));
+                if let Err(error) = screen.draw(&header, &rows, &log) {
+                    log.push(format!("the table cannot be drawn: {error}"));
+                }
             } else {
+                let mut out = stdout.lock();
                 last_line = at;
                 let extra = format!(
                     "mode={} distance={:.2}m{}",
@@ -817,14 +819,16 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     load_note(&platform)
                 );
                 let _ = writeln!(out, "{}", status::line(at, &rows, &extra));
+                let _ = out.flush();
             }
-            let _ = out.flush();
         }
         std::thread::sleep(Duration::from_millis(20));
     };
 
     if display == Display::Table {
-        // What is left, and what the shutdown logs, on stderr again.
+        // The shell's screen back, then what is left and what the shutdown logs on
+        // stderr again.
+        drop(screen);
         coolbot::process::capture_output(false);
     }
     // Before shutdown: every level's monitoring port, in the table's order.
