@@ -1,6 +1,6 @@
 //! The live status table: every component's monitoring port, one row each, plus the
 //! variables it publishes, drawn with ratatui ([`render`]); and the one-line form for
-//! logs and pipes ([`line`]).
+//! logs and pipes ([`line()`]).
 
 use std::time::Duration;
 
