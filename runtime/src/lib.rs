@@ -129,12 +129,15 @@ pub mod harness;
 pub mod idle;
 mod monitor;
 pub mod port;
+#[cfg(feature = "process")]
+pub mod process;
 pub mod record;
 mod runner;
 pub mod schema;
 mod spec;
 mod system;
 pub mod table;
+pub mod tap;
 mod thread;
 mod value;
 mod watchdog;

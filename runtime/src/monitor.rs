@@ -561,6 +561,18 @@ impl Shared {
         lock(&self.monitor).state
     }
 
+    /// The default and user states now, without waiting: `None` while the monitor
+    /// is locked (a panic hook on the component's own thread must never block).
+    #[cfg(feature = "process")]
+    pub(crate) fn peek_states(&self) -> Option<(State, Option<String>)> {
+        let monitor = match self.monitor.try_lock() {
+            Ok(monitor) => monitor,
+            Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => return None,
+        };
+        Some((monitor.state, monitor.user_state.clone()))
+    }
+
     /// Record adaptation step `step`: the history, the counter, and the event.
     pub(crate) fn adaptation_step(&self, step: Adaptation, f: impl FnOnce(&mut AdaptStatus)) {
         tracing::info!(component = %step.component, "adaptation: {step}");
@@ -693,6 +705,9 @@ pub struct Handle {
     pub(crate) instances: Arc<[Handle]>,
     /// The component's output ports by name, in declaration order (recorder taps).
     pub(crate) outputs: Arc<[(&'static str, crate::port::ErasedOutput)]>,
+    /// The component's static shape (a compound's as built: exported ports, mapped
+    /// variables).
+    pub(crate) spec: &'static crate::Spec,
 }
 
 impl std::fmt::Debug for Handle {
@@ -705,6 +720,13 @@ impl Handle {
     /// The component instance's name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The component's static shape: its type, states, ports, variables (with their
+    /// kinds and types) and timing; a compound's as built, with its exported ports
+    /// and mapped variables.
+    pub fn spec(&self) -> &'static crate::Spec {
+        self.spec
     }
 
     /// The names of a compound's instances (its direct ones, in declaration order);

@@ -594,6 +594,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
             .map(|o| o.name)
             .zip(ports.outputs.iter().cloned())
             .collect(),
+        spec,
     };
     let mut runner = Runner::new(
         &name,
@@ -763,7 +764,7 @@ impl System {
 
     /// The component at `path`: a component of this system (`"base"`) or an instance
     /// inside it, through nested compounds (`"base.motion"`, see [`Handle::instance`]).
-    pub(crate) fn handle_at(&self, path: &str) -> Option<Handle> {
+    pub fn handle_at(&self, path: &str) -> Option<Handle> {
         let (first, rest) = match path.split_once('.') {
             Some((first, rest)) => (first, Some(rest)),
             None => (path, None),

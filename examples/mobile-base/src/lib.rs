@@ -73,7 +73,7 @@ pub struct Options {
     pub scan_rate: Option<f64>,
     /// How the run shows itself.
     pub display: Display,
-    /// Set to stop the run early (Ctrl-C).
+    /// Set to stop the run early (SIGINT or SIGTERM: `coolbot::process`).
     pub stop: Arc<AtomicBool>,
     /// Record the odometry (`base.motion.pose`), the scans (`base.scan`, from
     /// whichever range server stands in) and the base's monitoring events into this
@@ -249,7 +249,7 @@ impl fmt::Display for SupervisionStep {
 pub struct Summary {
     /// How long it ran.
     pub elapsed: Duration,
-    /// Whether it was stopped early (Ctrl-C).
+    /// Whether it was stopped early (SIGINT or SIGTERM).
     pub interrupted: bool,
     /// Distance the robot really travelled (m, the platform's ground truth).
     pub distance: f64,
@@ -700,6 +700,9 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         scan_rate: options.scan_rate,
     };
     let robot = Robot::start(&platform, &setup)?;
+    // A panic the runtime catches in one of the robot's components prints one line
+    // (under `coolbot::process`'s panic hook, when the program installed it).
+    coolbot::process::watch_system(robot.system());
     let recording = match &options.record {
         Some(path) => Some(start_recording(&robot, path)?),
         None => None,
@@ -738,9 +741,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     // The run's clock is the platform's: injected faults and events agree.
     let started = platform.uptime();
     let stdout = std::io::stdout();
+    let mut screen = None;
     if display == Display::Table {
-        // Clear the screen once; frames then redraw from the top.
-        print!("\x1b[2J");
+        screen = Some(status::Screen::open().map_err(|e| format!("the terminal: {e}"))?);
+        // Log lines and caught panics go into the table's event pane, not over it.
+        coolbot::process::capture_output(true);
     }
 
     let interrupted = loop {
@@ -753,7 +758,8 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             break false;
         }
         // What the monitoring ports reported since the last turn.
-        let fresh = events.take(at);
+        let mut fresh = events.take(at);
+        fresh.extend(coolbot::process::take_output());
         if display == Display::Lines {
             let mut out = stdout.lock();
             for line in &fresh {
@@ -761,7 +767,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             }
         }
         log.extend(fresh);
-        let keep = log.len().saturating_sub(12);
+        let keep = log.len().saturating_sub(200);
         log.drain(..keep);
 
         let frame_due = last_frame.elapsed() >= Duration::from_millis(250);
@@ -787,8 +793,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             let base = robot.base.snapshot();
             let supervisor = base.user_state.as_deref().unwrap_or("-");
             let truth = platform.truth();
-            let mut out = stdout.lock();
-            if display == Display::Table {
+            if let Some(screen) = &mut screen {
                 let header = format!(
                     "CoolBOT mobile base   t={:5.1}s/{:.0}s   base supervisor: {} (mode {})   pose ({:.2}, {:.2}, {:.0} deg)   distance {:.2} m   contacts {}{}",
                     at.as_secs_f64(),
@@ -802,8 +807,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     truth.contacts,
                     load_note(&platform),
                 );
-                let _ = write!(out, "\x1b[H{}\x1b[J", status::table(&header, &rows, &log));
+                if let Err(error) = screen.draw(&header, &rows, &log) {
+                    log.push(format!("the table cannot be drawn: {error}"));
+                }
             } else {
+                let mut out = stdout.lock();
                 last_line = at;
                 let extra = format!(
                     "mode={} distance={:.2}m{}",
@@ -812,12 +820,18 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                     load_note(&platform)
                 );
                 let _ = writeln!(out, "{}", status::line(at, &rows, &extra));
+                let _ = out.flush();
             }
-            let _ = out.flush();
         }
         std::thread::sleep(Duration::from_millis(20));
     };
 
+    if display == Display::Table {
+        // The shell's screen back, then what is left and what the shutdown logs on
+        // stderr again.
+        drop(screen);
+        coolbot::process::capture_output(false);
+    }
     // Before shutdown: every level's monitoring port, in the table's order.
     let elapsed = platform.uptime().saturating_sub(started);
     let base = robot.base.snapshot();
@@ -839,6 +853,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         robot.wanderer.clone(),
     ];
     let exposed = node.map(|node| (node.name().to_owned(), lines.len()));
+    coolbot::process::forget_system(robot.system());
     let report = robot.shutdown();
     // The variables as the components left them, each from its own monitoring port:
     // read after the last section ran, so that they agree with the platform's ground

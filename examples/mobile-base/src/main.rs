@@ -2,7 +2,6 @@
 //! components live. See `examples/README.md`.
 
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
@@ -160,6 +159,20 @@ fn parse_goal(text: &str) -> Result<(f64, f64), String> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // Logs (RUST_LOG), SIGINT and SIGTERM (a clean shutdown), and the panic hook: a
+    // panic the runtime catches in a component prints one line.
+    // The logs default to warnings: the run's own output shows the supervision and
+    // adaptation steps (RUST_LOG=info shows the runtime's too).
+    let process = match coolbot::process::Process::builder()
+        .default_log("warn")
+        .init()
+    {
+        Ok(process) => process,
+        Err(error) => {
+            eprintln!("error: {error}");
+            return ExitCode::from(2);
+        }
+    };
     let options = Options {
         duration: args.duration,
         fault_after: args.fault_after,
@@ -186,25 +199,14 @@ fn main() -> ExitCode {
             multicast: !args.no_multicast,
             ..NodeOptions::named(name)
         }),
-        ..Options::default()
+        stop: process.stop_flag(),
     };
-    let stop = options.stop.clone();
-    if let Err(error) = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed)) {
-        eprintln!("warning: Ctrl-C will not stop the robot cleanly: {error}");
-    }
-    if matches!(args.fault, Fault::Panic) {
-        // The runtime catches the range server's panic and shows it in the table;
-        // keep the default hook from printing it over the table (other panics print).
-        let default_hook = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if std::thread::current().name() != Some("cool:ranges") {
-                default_hook(info);
-            }
-        }));
-    }
     match mobile_base::run(&options) {
         Ok(summary) => {
             println!("\n{summary}");
+            if let Some(signal) = process.signal() {
+                println!("stopped by {signal}");
+            }
             if summary.clean_shutdown {
                 ExitCode::SUCCESS
             } else {

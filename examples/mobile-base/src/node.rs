@@ -2,7 +2,8 @@
 //! (`coolbot_zenoh::Node`) exposes every component of the robot, at every level
 //! (`robot`, `robot.base`, `robot.base.motion`, ...), on its monitoring and control
 //! keys, so that `coolctl` in another terminal (or on another machine) lists,
-//! watches and commands them (`docs/distribution.md`). Nothing of Zenoh runs without the flag: the components
+//! watches and commands them (`docs/distribution.md`), and echoes the odometry and
+//! the scans (`coolctl echo robot/robot.base.scan`, `docs/tools.md`). Nothing of Zenoh runs without the flag: the components
 //! and their ports are the same either way, the node only observes them (one thread
 //! forwarding monitoring events, one applying remote commands).
 
@@ -57,6 +58,14 @@ pub fn expose(robot: &Robot, options: &NodeOptions) -> Result<Exposed, String> {
         .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
     node.expose_system(robot.system())
         .map_err(|e| format!("node `{}` cannot expose the robot: {e}", options.name))?;
+    // `coolctl echo` on the odometry and the scans (the ports `--record` records).
+    use crate::generated::types::{Pose2D, RangeScan};
+    let echo = |result: Result<(), coolbot_zenoh::Error>, port: &str| {
+        result.map_err(|e| format!("node `{}` cannot echo `{port}`: {e}", options.name))
+    };
+    let [pose, scan] = crate::RECORDED_PORTS;
+    echo(node.echo::<Pose2D>(robot.system(), pose), pose)?;
+    echo(node.echo::<RangeScan>(robot.system(), scan), scan)?;
     Ok(Exposed {
         name: options.name.clone(),
         _node: node,

@@ -9,6 +9,8 @@ use coolbot::{Command, Controllable, Monitor, MonitorEvent, Value};
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
+use crate::echo::Echoed;
+use crate::info::ComponentInfo;
 use crate::{ControlReply, keys};
 
 /// Why a `coolctl` command failed.
@@ -33,6 +35,27 @@ pub enum CtlError {
         /// How long it waited.
         waited: Duration,
     },
+    /// No node of that name is alive.
+    #[error("no node `{node}` is alive (nodes alive: {alive})")]
+    UnknownNode {
+        /// The node asked for.
+        node: String,
+        /// The nodes alive, comma-separated (`none`).
+        alive: String,
+    },
+    /// The node is alive but has no such component.
+    #[error("node `{node}` has no component `{path}` (its components: {known})")]
+    UnknownComponent {
+        /// The node.
+        node: String,
+        /// The path asked for.
+        path: String,
+        /// Its components, comma-separated (`none`).
+        known: String,
+    },
+    /// The component has no such output, or its node does not echo it.
+    #[error("{0}")]
+    UnknownPort(String),
     /// An answer that is not what a node sends.
     #[error("`{key}` answered something that does not decode: {detail}")]
     Decode {
@@ -162,6 +185,55 @@ pub fn parse_command(args: &[String]) -> Result<Command, CtlError> {
     }
 }
 
+/// The command `coolctl configure` sends for `fields` (`FIELD=VALUE` each, values
+/// typed as [`parse_value`] reads them): `Configure` with a JSON object of those
+/// fields.
+pub fn parse_configuration(fields: &[String]) -> Result<Command, CtlError> {
+    if fields.is_empty() {
+        return Err(CtlError::BadArgument(
+            "give at least one FIELD=VALUE".to_owned(),
+        ));
+    }
+    let mut object = serde_json::Map::new();
+    for field in fields {
+        let (name, value) = field
+            .split_once('=')
+            .filter(|(name, _)| !name.is_empty())
+            .ok_or_else(|| CtlError::BadArgument(format!("`{field}` is not FIELD=VALUE")))?;
+        if object
+            .insert(name.to_owned(), parse_value(value).to_json())
+            .is_some()
+        {
+            return Err(CtlError::BadArgument(format!("field `{name}` given twice")));
+        }
+    }
+    Ok(Command::Configure(Value::Json(serde_json::Value::Object(
+        object,
+    ))))
+}
+
+/// Rows as columns two spaces apart, each as wide as its widest cell.
+fn write_table<const N: usize>(rows: &[[String; N]], out: &mut dyn Write) -> Result<(), CtlError> {
+    let mut widths = [0usize; N];
+    for row in rows {
+        for (width, cell) in widths.iter_mut().zip(row) {
+            *width = (*width).max(cell.chars().count());
+        }
+    }
+    for row in rows {
+        let mut line = String::new();
+        for (column, (cell, width)) in row.iter().zip(widths).enumerate() {
+            if column + 1 == row.len() {
+                line.push_str(cell);
+            } else {
+                line.push_str(&format!("{cell:<width$}  "));
+            }
+        }
+        writeln!(out, "{}", line.trim_end())?;
+    }
+    Ok(())
+}
+
 /// One line describing a monitoring event.
 pub fn describe(event: &MonitorEvent) -> String {
     match event {
@@ -190,6 +262,42 @@ pub fn describe(event: &MonitorEvent) -> String {
         MonitorEvent::OsPriority(priority) => format!("os priority {priority:?}"),
         MonitorEvent::Pressure(pressure) => format!("pressure {pressure:?}"),
         MonitorEvent::Adaptation(step) => format!("adaptation: {step}"),
+    }
+}
+
+/// `none`, or the names joined with `, `.
+fn listing(names: &[String]) -> String {
+    if names.is_empty() {
+        "none".to_owned()
+    } else {
+        names.join(", ")
+    }
+}
+
+/// What `coolctl echo` saw.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct EchoSummary {
+    /// Packets received.
+    pub received: u64,
+    /// Packets printed.
+    pub printed: u64,
+    /// Packets received but not printed because of `--hz`.
+    pub skipped: u64,
+    /// Packets the port sent after the first one received that never arrived
+    /// (dropped by the node's echo queue or by the network).
+    pub lost: u64,
+    /// What the node said it dropped in all (its echo queue was full), at the last
+    /// packet received.
+    pub node_dropped: u64,
+}
+
+impl std::fmt::Display for EchoSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} received, {} printed, {} skipped (--hz), {} lost (the node's echo queue dropped {} in all)",
+            self.received, self.printed, self.skipped, self.lost, self.node_dropped
+        )
     }
 }
 
@@ -347,24 +455,7 @@ impl Ctl {
                 monitor.overflows.to_string(),
             ]);
         }
-        let mut widths = [0usize; 8];
-        for row in &rows {
-            for (width, cell) in widths.iter_mut().zip(row) {
-                *width = (*width).max(cell.chars().count());
-            }
-        }
-        for row in &rows {
-            let mut line = String::new();
-            for (column, (cell, width)) in row.iter().zip(widths).enumerate() {
-                if column + 1 == row.len() {
-                    line.push_str(cell);
-                } else {
-                    line.push_str(&format!("{cell:<width$}  "));
-                }
-            }
-            writeln!(out, "{}", line.trim_end())?;
-        }
-        Ok(())
+        write_table(&rows, out)
     }
 
     /// Subscribe to the monitoring events of `<node>/<path>`.
@@ -391,6 +482,8 @@ impl Ctl {
         out: &mut dyn Write,
     ) -> Result<(), CtlError> {
         let watcher = self.watcher(address)?;
+        // A wrong node or path fails now, not after waiting forever in silence.
+        self.snapshot(address)?;
         let deadline = duration.map(|d| Instant::now() + d);
         let mut printed = 0;
         while count.is_none_or(|count| printed < count) {
@@ -444,11 +537,260 @@ impl Ctl {
                         .into_owned(),
                 }),
             },
-            Err(_) => Err(CtlError::NoAnswer {
-                target: address.to_owned(),
-                waited: self.timeout,
-            }),
+            Err(_) => Err(self.missing(node, path, address)),
         }
+    }
+
+    /// Why nothing answered at `<node>/<path>`: the node is not alive, it has no such
+    /// component, or (both there) it did not answer in time.
+    fn missing(&self, node: &str, path: &str, address: &str) -> CtlError {
+        let no_answer = || CtlError::NoAnswer {
+            target: address.to_owned(),
+            waited: self.timeout,
+        };
+        let Ok(alive) = self.node_names() else {
+            return no_answer();
+        };
+        if !alive.iter().any(|name| name == node) {
+            return CtlError::UnknownNode {
+                node: node.to_owned(),
+                alive: listing(&alive),
+            };
+        }
+        match self.components(Some(node)) {
+            Ok(listed) if !listed.iter().any(|listed| listed.path == path) => {
+                let known: Vec<String> = listed.into_iter().map(|listed| listed.path).collect();
+                CtlError::UnknownComponent {
+                    node: node.to_owned(),
+                    path: path.to_owned(),
+                    known: listing(&known),
+                }
+            }
+            _ => no_answer(),
+        }
+    }
+
+    /// The one JSON answer to a query on `key` (for `<node>/<path>`), decoded.
+    fn query<T: serde::de::DeserializeOwned>(
+        &self,
+        key: String,
+        node: &str,
+        path: &str,
+        address: &str,
+    ) -> Result<T, CtlError> {
+        let replies = self
+            .session
+            .get(key.clone())
+            .timeout(self.timeout)
+            .wait()
+            .map_err(zenoh_error)?;
+        while let Ok(reply) = replies.recv() {
+            let Ok(sample) = reply.result() else {
+                continue;
+            };
+            return serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                CtlError::Decode {
+                    key,
+                    detail: error.to_string(),
+                }
+            });
+        }
+        Err(self.missing(node, path, address))
+    }
+
+    /// The snapshot of `<node>/<path>`'s monitoring port; a clear error, within the
+    /// timeout, when the node or the component does not exist.
+    pub fn snapshot(&self, address: &str) -> Result<Monitor, CtlError> {
+        let (node, path) = target(address)?;
+        self.query(keys::monitor(node, path), node, path, address)
+    }
+
+    /// The static shape of `<node>/<path>` (types of its variables, its ports, the
+    /// outputs its node echoes).
+    pub fn info(&self, address: &str) -> Result<ComponentInfo, CtlError> {
+        let (node, path) = target(address)?;
+        self.query(keys::info(node, path), node, path, address)
+    }
+
+    /// `coolctl get <node>/<path>`: the component's type and states, its default
+    /// variables, then every user variable with its kind, type and value.
+    pub fn get(&self, address: &str, out: &mut dyn Write) -> Result<(), CtlError> {
+        let info = self.info(address)?;
+        let monitor = self.snapshot(address)?;
+        let user = monitor
+            .user_state
+            .as_deref()
+            .map(|user| format!(" ({user})"))
+            .unwrap_or_default();
+        writeln!(out, "{address}: {} {}{user}", info.type_name, monitor.state)?;
+        let quality = match info.qualities.get(monitor.quality) {
+            Some(name) => format!("{} ({name})", monitor.quality),
+            None => monitor.quality.to_string(),
+        };
+        let duration = |d: Option<Duration>| d.map_or_else(|| "-".to_owned(), |d| format!("{d:?}"));
+        writeln!(
+            out,
+            "period {}, quality {quality}, level {}/{}, max_response {}, priority {}",
+            duration(monitor.period),
+            monitor.adaptation.level,
+            monitor.adaptation.max_level,
+            duration(monitor.max_response),
+            monitor.priority,
+        )?;
+        if let Some(error) = &monitor.error {
+            writeln!(out, "error {error}")?;
+        }
+        let mut rows = vec![[
+            "VARIABLE".to_owned(),
+            "KIND".to_owned(),
+            "TYPE".to_owned(),
+            "VALUE".to_owned(),
+        ]];
+        for (name, value) in &monitor.variables {
+            let declared = info.variables.iter().find(|v| &v.name == name);
+            rows.push([
+                name.clone(),
+                declared.map_or_else(|| "-".to_owned(), |v| v.kind.clone()),
+                declared.map_or_else(|| "-".to_owned(), |v| v.ty.clone()),
+                serde_json::to_string(&value.to_json()).unwrap_or_else(|_| value.to_string()),
+            ]);
+        }
+        write_table(&rows, out)
+    }
+
+    /// Send `command` and print `accepted` or `rejected: <reason>`; whether it was
+    /// accepted.
+    fn answer(
+        &self,
+        address: &str,
+        command: &Command,
+        out: &mut dyn Write,
+    ) -> Result<bool, CtlError> {
+        match self.command(address, command)? {
+            ControlReply::Accepted => {
+                writeln!(out, "accepted")?;
+                Ok(true)
+            }
+            ControlReply::Rejected { reason } => {
+                writeln!(out, "rejected: {reason}")?;
+                Ok(false)
+            }
+        }
+    }
+
+    /// `coolctl configure <node>/<path> FIELD=VALUE...`: one `Configure` command with
+    /// the fields given (the others keep their values), each value typed as
+    /// [`parse_value`] reads it; prints the component's answer.
+    pub fn configure(
+        &self,
+        address: &str,
+        fields: &[String],
+        out: &mut dyn Write,
+    ) -> Result<bool, CtlError> {
+        let command = parse_configuration(fields)?;
+        self.answer(address, &command, out)
+    }
+
+    /// `coolctl degrade <node>/<path> LEVEL`: set the adaptation level (an atomic
+    /// component's place on its ladder; a compound's cap); prints the answer.
+    pub fn degrade(
+        &self,
+        address: &str,
+        level: u32,
+        out: &mut dyn Write,
+    ) -> Result<bool, CtlError> {
+        self.answer(address, &Command::SetDegradation(level), out)
+    }
+
+    /// `coolctl echo <node>/<path>.<port>`: every packet the port sends, one JSON line
+    /// each; with `hz`, at most that many lines a second (the others are counted as
+    /// skipped, the producer is never slowed); until `count` lines were printed or
+    /// `duration` passed (each when given).
+    pub fn echo(
+        &self,
+        address: &str,
+        hz: Option<f64>,
+        count: Option<u64>,
+        duration: Option<Duration>,
+        out: &mut dyn Write,
+    ) -> Result<EchoSummary, CtlError> {
+        let (node, full) = target(address)?;
+        let (path, port) = full.rsplit_once('.').ok_or_else(|| {
+            CtlError::BadArgument(format!(
+                "`{address}` names no port: write <node>/<path>.<port>, e.g. robot/robot.base.scan"
+            ))
+        })?;
+        let interval = match hz {
+            Some(hz) if hz.is_finite() && hz > 0.0 => Some(Duration::from_secs_f64(1.0 / hz)),
+            Some(hz) => {
+                return Err(CtlError::BadArgument(format!(
+                    "--hz {hz}: the rate is a positive number of lines a second"
+                )));
+            }
+            None => None,
+        };
+        let subscriber = self
+            .session
+            .declare_subscriber(keys::echo(node, path, port))
+            .wait()
+            .map_err(zenoh_error)?;
+        let component = format!("{node}/{path}");
+        let info = self.info(&component)?;
+        if !info.outputs.iter().any(|output| output.name == port) {
+            let outputs: Vec<String> = info.outputs.iter().map(|o| o.name.clone()).collect();
+            return Err(CtlError::UnknownPort(format!(
+                "`{component}` has no output `{port}` (its outputs: {})",
+                listing(&outputs)
+            )));
+        }
+        if !info.echoed.iter().any(|echoed| echoed == port) {
+            return Err(CtlError::UnknownPort(format!(
+                "node `{node}` does not echo `{full}` (it echoes {} of `{path}`; a program \
+                 chooses the outputs it echoes with Node::echo)",
+                listing(&info.echoed)
+            )));
+        }
+        let deadline = duration.map(|d| Instant::now() + d);
+        let mut summary = EchoSummary::default();
+        let mut next_seq = None;
+        let mut next_print = Instant::now();
+        while count.is_none_or(|count| summary.printed < count) {
+            let wait = match deadline {
+                Some(deadline) => match deadline.checked_duration_since(Instant::now()) {
+                    Some(left) => left,
+                    None => break,
+                },
+                None => Duration::from_secs(3600),
+            };
+            let Some(sample) = subscriber.recv_timeout(wait).map_err(zenoh_error)? else {
+                continue;
+            };
+            let echoed: Echoed =
+                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                    CtlError::Decode {
+                        key: sample.key_expr().as_str().to_owned(),
+                        detail: error.to_string(),
+                    }
+                })?;
+            summary.received += 1;
+            summary.node_dropped = echoed.dropped;
+            if let Some(expected) = next_seq {
+                summary.lost += echoed.seq.saturating_sub(expected);
+            }
+            next_seq = Some(echoed.seq + 1);
+            let now = Instant::now();
+            if now < next_print {
+                summary.skipped += 1;
+                continue;
+            }
+            if let Some(interval) = interval {
+                next_print = now + interval;
+            }
+            writeln!(out, "{}", echoed.packet)?;
+            out.flush()?;
+            summary.printed += 1;
+        }
+        Ok(summary)
     }
 
     /// `coolctl set <node>/<path> ...`: print `accepted` or `rejected: <reason>`;
@@ -460,16 +802,7 @@ impl Ctl {
         out: &mut dyn Write,
     ) -> Result<bool, CtlError> {
         let command = parse_command(args)?;
-        match self.command(address, &command)? {
-            ControlReply::Accepted => {
-                writeln!(out, "accepted")?;
-                Ok(true)
-            }
-            ControlReply::Rejected { reason } => {
-                writeln!(out, "rejected: {reason}")?;
-                Ok(false)
-            }
-        }
+        self.answer(address, &command, out)
     }
 }
 

@@ -6,6 +6,11 @@
 //!   `coolbot::Monitor`). `<path>` is the component's dotted path (`robot.base.motion`).
 //! - `coolbot/<node>/<path>/c`: a component's control port: a query whose payload is a
 //!   JSON `coolbot::Command`, answered with a JSON [`crate::ControlReply`].
+//! - `coolbot/<node>/<path>/s`: a component's static shape on query (JSON
+//!   [`crate::info::ComponentInfo`]: variables with kinds and types, ports, the
+//!   outputs echoed).
+//! - `coolbot/<node>/<path>/o/<port>`: the packets of an echoed output (JSON
+//!   [`crate::echo::Echoed`], `coolctl echo`).
 //! - `coolbot/<node>/@agent`: the agent of a node (remote instantiation): a query
 //!   whose payload is a JSON [`crate::agent::Instantiate`], answered with a JSON
 //!   [`crate::ControlReply`].
@@ -32,6 +37,16 @@ pub fn monitor(node: &str, path: &str) -> String {
 /// The control key of the component at `path` on `node`.
 pub fn control(node: &str, path: &str) -> String {
     format!("{ROOT}/{node}/{path}/c")
+}
+
+/// The info key of the component at `path` on `node`.
+pub fn info(node: &str, path: &str) -> String {
+    format!("{ROOT}/{node}/{path}/s")
+}
+
+/// The key on which `node` echoes output `port` of the component at `path`.
+pub fn echo(node: &str, path: &str, port: &str) -> String {
+    format!("{ROOT}/{node}/{path}/o/{port}")
 }
 
 /// The key of node `node`'s agent.

@@ -18,6 +18,8 @@
 //!   happen, and the current snapshot on query, in JSON) and `coolbot/<node>/<path>/c`
 //!   (a queryable taking a [`coolbot::Command`] and answering [`ControlReply`]), and a
 //!   liveliness token `coolbot/<node>` per node.
+//! - **Echoed outputs** ([`Node::echo`]): the packets of chosen outputs as JSON, for
+//!   `coolctl echo`; and each component's static shape on query ([`info`]).
 //! - **`coolctl`**, the command-line tool over those keys ([`ctl`]).
 //! - **Remote instantiation**, a first step ([`agent`]): an agent builds registered
 //!   component types on request from another node, bridges their ports, runs and
@@ -31,6 +33,8 @@ pub mod agent;
 mod bridge;
 mod config;
 pub mod ctl;
+pub mod echo;
+pub mod info;
 pub mod keys;
 mod node;
 

@@ -1,6 +1,7 @@
 //! A [`Node`]: one per process, named, holding the Zenoh session; it exposes
 //! components' monitoring and control ports on the network and makes bridges.
 
+use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -12,6 +13,8 @@ use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
 use crate::bridge::{InletBuilder, OutletBuilder};
+use crate::echo::{ECHO_CAPACITY, Echo};
+use crate::info::ComponentInfo;
 use crate::{Error, keys};
 
 /// How often the node's threads look whether they are to stop.
@@ -91,6 +94,9 @@ pub struct Node {
     control: Sender<ControlRequest>,
     control_stop: Arc<AtomicBool>,
     control_thread: Option<JoinHandle<()>>,
+    /// The outputs echoed, as `(component path, port)`.
+    echoed: Arc<Mutex<BTreeSet<(String, String)>>>,
+    echoes: Mutex<Vec<Echo>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -138,6 +144,8 @@ impl Node {
             control,
             control_stop,
             control_thread: Some(control_thread),
+            echoed: Arc::default(),
+            echoes: Mutex::new(Vec::new()),
             _token: token,
         })
     }
@@ -199,6 +207,31 @@ impl Node {
                     .wait()
                     .map_err(Error::zenoh)?,
             );
+            let info_handle = handle.clone();
+            let echoed = Arc::clone(&self.echoed);
+            let info_path = path.clone();
+            let info_key = keys::info(&self.name, &path);
+            queryables.push(
+                self.session
+                    .declare_queryable(info_key.clone())
+                    .callback(move |query| {
+                        let ports = lock(&echoed)
+                            .iter()
+                            .filter(|(path, _)| *path == info_path)
+                            .map(|(_, port)| port.clone())
+                            .collect();
+                        let info = ComponentInfo::of(info_handle.spec(), ports);
+                        let reply = match serde_json::to_vec(&info) {
+                            Ok(json) => query.reply(info_key.clone(), json).wait(),
+                            Err(error) => query.reply_err(error.to_string()).wait(),
+                        };
+                        if let Err(error) = reply {
+                            tracing::warn!("component info not sent: {error}");
+                        }
+                    })
+                    .wait()
+                    .map_err(Error::zenoh)?,
+            );
             let control = self.control.clone();
             queryables.push(
                 self.session
@@ -242,6 +275,38 @@ impl Node {
         Ok(())
     }
 
+    /// Echo output `path` of `system` (`component.port`, the component through
+    /// nested compounds: `"robot.base.scan"`), whose packets are `T`, on the network
+    /// for `coolctl echo`: each packet as JSON ([`crate::echo::Echoed`]) on
+    /// `coolbot/<node>/<component>/o/<port>`, from a thread of the node's. The
+    /// producer is never slowed (`docs/tools.md`, "coolctl echo"): packets beyond
+    /// [`ECHO_CAPACITY`] waiting are dropped for the echo and counted. The echo lasts
+    /// as long as the node.
+    pub fn echo<T: coolbot::port::Packet + Serialize>(
+        &self,
+        system: &System,
+        path: &str,
+    ) -> Result<(), Error> {
+        let invalid = |reason: String| Error::InvalidName {
+            name: path.to_owned(),
+            reason,
+        };
+        let (component, port) = path
+            .rsplit_once('.')
+            .ok_or_else(|| invalid("write `component.port`".to_owned()))?;
+        keys::check_name(component)?;
+        keys::check_name(port)?;
+        let handle = system
+            .handle_at(component)
+            .ok_or_else(|| invalid(format!("no component `{component}` in the system")))?;
+        let tap = coolbot::tap::Tap::<T>::attach(&handle, port, ECHO_CAPACITY)
+            .map_err(|error| invalid(error.to_string()))?;
+        let echo = Echo::start(&self.session, keys::echo(&self.name, component, port), tap)?;
+        lock(&self.echoes).push(echo);
+        lock(&self.echoed).insert((component.to_owned(), port.to_owned()));
+        Ok(())
+    }
+
     /// An outlet named `name` on bridge key `key`, standing for a remote input of
     /// `kind` (see the crate documentation and `docs/distribution.md`).
     pub fn outlet<T>(&self, name: &str, key: &str, kind: InputKind) -> OutletBuilder<'_, T> {
@@ -257,6 +322,7 @@ impl Node {
 
 impl Drop for Node {
     fn drop(&mut self) {
+        lock(&self.echoes).clear();
         lock(&self.exposures).clear();
         self.control_stop.store(true, Ordering::Release);
         if let Some(thread) = self.control_thread.take() {

@@ -162,11 +162,15 @@ fn coolctl_set_answers_as_the_control_port_does() {
         monitor.variables[1],
         ("max_speed".to_owned(), coolbot::Value::Float(0.5))
     );
-    // A component nobody exposes does not answer.
+    // A component nobody exposes does not answer, and the error says the node has
+    // no such component, naming those it has.
     let quick = Ctl::new(station.session().clone(), Duration::from_millis(300));
     match quick.command("robot/robot.nothing", &Command::SetPriority(0)) {
-        Err(CtlError::NoAnswer { target, .. }) => assert_eq!(target, "robot/robot.nothing"),
-        other => panic!("expected no answer, got {other:?}"),
+        Err(CtlError::UnknownComponent { node, path, known }) => {
+            assert_eq!((node.as_str(), path.as_str()), ("robot", "robot.nothing"));
+            assert!(known.contains("robot.base.motion"), "{known}");
+        }
+        other => panic!("expected no such component, got {other:?}"),
     }
 }
 

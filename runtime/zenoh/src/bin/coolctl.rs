@@ -6,10 +6,14 @@
 //! coolctl watch <node>/<path> [--count N] [--for 10s]
 //! coolctl set <node>/<path> state suspended
 //! coolctl set <node>/<path> max_speed=0.5
+//! coolctl get <node>/<path>
+//! coolctl configure <node>/<path> FIELD=VALUE...
+//! coolctl degrade <node>/<path> LEVEL
+//! coolctl echo <node>/<path>.<port> [--hz 10] [--count N] [--for 10s]
 //! ```
 //!
-//! Exit codes: 0 done, 1 a command rejected or nothing answered, 2 usage or network
-//! errors.
+//! Exit codes: 0 done, 1 a command rejected, nothing answered, or no such node,
+//! component or port (each within `--timeout`), 2 usage or network errors.
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -79,6 +83,45 @@ enum Action {
         #[arg(required = true, num_args = 1..=2)]
         args: Vec<String>,
     },
+    /// A component's type, states, timing, and every variable with its kind, type
+    /// and value.
+    Get {
+        /// The component, as NODE/PATH.
+        target: String,
+    },
+    /// Send a component a configuration: the fields given (the others keep their
+    /// values), each value typed (true/false, integers, floats, JSON, else text).
+    Configure {
+        /// The component, as NODE/PATH.
+        target: String,
+        /// FIELD=VALUE, one or more.
+        #[arg(required = true)]
+        fields: Vec<String>,
+    },
+    /// Set a component's adaptation level (0 = nominal; a compound: the cap of its
+    /// instances).
+    Degrade {
+        /// The component, as NODE/PATH.
+        target: String,
+        /// The level.
+        level: u32,
+    },
+    /// Print the packets an echoed output sends, one JSON line each (a summary with
+    /// the packets skipped and lost goes to stderr at the end).
+    Echo {
+        /// The output, as NODE/PATH.PORT (e.g. robot/robot.base.scan).
+        target: String,
+        /// At most this many lines a second (the others are skipped and counted; the
+        /// producer is never slowed).
+        #[arg(long)]
+        hz: Option<f64>,
+        /// Stop after this many lines.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Stop after this long (e.g. 10s).
+        #[arg(long = "for", value_parser = duration)]
+        duration: Option<Duration>,
+    },
 }
 
 fn duration(text: &str) -> Result<Duration, String> {
@@ -109,6 +152,19 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             duration,
         } => ctl.watch(&target, count, duration, out).map(|()| true),
         Action::Set { target, args } => ctl.set(&target, &args, out),
+        Action::Get { target } => ctl.get(&target, out).map(|()| true),
+        Action::Configure { target, fields } => ctl.configure(&target, &fields, out),
+        Action::Degrade { target, level } => ctl.degrade(&target, level, out),
+        Action::Echo {
+            target,
+            hz,
+            count,
+            duration,
+        } => {
+            let summary = ctl.echo(&target, hz, count, duration, out)?;
+            eprintln!("coolctl echo {target}: {summary}");
+            Ok(true)
+        }
     }
 }
 
@@ -118,7 +174,12 @@ fn main() -> ExitCode {
     match run(cli, &mut stdout.lock()) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),
-        Err(error @ CtlError::NoAnswer { .. }) => {
+        Err(
+            error @ (CtlError::NoAnswer { .. }
+            | CtlError::UnknownNode { .. }
+            | CtlError::UnknownComponent { .. }
+            | CtlError::UnknownPort(_)),
+        ) => {
             eprintln!("coolctl: {error}");
             ExitCode::from(1)
         }

@@ -1,0 +1,409 @@
+//! The `coolctl` binary as an operator runs it, against a node started here: `get`,
+//! `configure`, `degrade` and `echo`, and every command failing within its timeout,
+//! with a clear message and a non-zero exit, on a node, component or port that does
+//! not exist.
+
+mod support;
+
+use std::process::{Command, Output};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use coolbot::port::DataOut;
+use coolbot::{
+    Automaton, Component, Context, Fault, OutputKind, OutputSpec, PortSet, Section, Spec,
+    StateSpec, System, TimingSpec, Value, VarKind, VarSpec,
+};
+use coolbot_zenoh::Node;
+use serde::{Deserialize, Serialize};
+
+use support::{PATIENCE, Shell, node, spec, wait_until};
+
+/// The packets `source.out` sends.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Reading {
+    n: u64,
+    label: String,
+}
+
+/// The configuration of `tuner`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Tuning {
+    gain: f64,
+    label: String,
+}
+
+static TUNER: Spec = Spec {
+    type_name: "Tuner",
+    doc: "",
+    states: &[StateSpec {
+        name: "tuning",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[
+        VarSpec {
+            name: "gain",
+            kind: VarKind::Observable,
+            ty: "f64",
+            doc: "",
+        },
+        VarSpec {
+            name: "label",
+            kind: VarKind::Observable,
+            ty: "String",
+            doc: "",
+        },
+        VarSpec {
+            name: "limit",
+            kind: VarKind::Controllable,
+            ty: "u32",
+            doc: "",
+        },
+    ],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+/// A component whose configuration (`gain`, `label`) shows in its variables.
+struct Tuner {
+    tuning: Tuning,
+    limit: u64,
+}
+
+impl Automaton for Tuner {
+    fn spec(&self) -> &'static Spec {
+        &TUNER
+    }
+    fn start(&mut self, _: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _: &mut Context) {}
+    fn section(&mut self, _: usize, _: Section, _: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
+    fn answer(&mut self, _: usize, _: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn configure(&mut self, value: &Value) -> Result<(), String> {
+        // The fields given over the current ones, as generated code does.
+        let mut merged = serde_json::to_value(&self.tuning).map_err(|e| e.to_string())?;
+        if let (Some(fields), serde_json::Value::Object(given)) =
+            (merged.as_object_mut(), value.to_json())
+        {
+            fields.extend(given);
+        }
+        self.tuning = serde_json::from_value(merged).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+    fn set(&mut self, _: usize, value: &Value) -> Result<(), String> {
+        self.limit = u64::try_from(value).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+    fn get(&self, variable: usize) -> Value {
+        match variable {
+            0 => Value::Float(self.tuning.gain),
+            1 => Value::Str(self.tuning.label.clone()),
+            _ => Value::UInt(self.limit),
+        }
+    }
+}
+
+/// Node `robot` with `tuner` and `source` (its output `out` echoed, `idle` not),
+/// running; and the endpoint to reach it.
+struct Robot {
+    node: Node,
+    endpoint: String,
+    system: System,
+    out: DataOut<Reading>,
+}
+
+fn robot() -> Robot {
+    let (node, endpoint) = node("robot", &[]);
+    let out = DataOut::<Reading>::new();
+    let idle = DataOut::<Reading>::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![
+            OutputSpec {
+                name: "out",
+                kind: OutputKind::Data,
+                packet: "Reading",
+                pull: false,
+            },
+            OutputSpec {
+                name: "idle",
+                kind: OutputKind::Data,
+                packet: "Reading",
+                pull: false,
+            },
+        ],
+        vec![],
+    );
+    let mut system = System::new();
+    system
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&out).output(&idle),
+        ))
+        .unwrap();
+    system
+        .add(Component::new(
+            "tuner",
+            Box::new(Tuner {
+                tuning: Tuning {
+                    gain: 1.5,
+                    label: "first".to_owned(),
+                },
+                limit: 3,
+            }),
+            PortSet::new(),
+        ))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    node.echo::<Reading>(&system, "source.out").unwrap();
+    Robot {
+        node,
+        endpoint,
+        system,
+        out,
+    }
+}
+
+/// `coolctl ARGS` reaching `endpoint` only.
+fn coolctl(endpoint: &str, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args(["--connect", endpoint, "--no-multicast", "--timeout", "2s"])
+        .args(args)
+        .output()
+        .expect("coolctl runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// `coolctl get robot/tuner` once it sees the node (its session needs a moment to
+/// connect the first time).
+fn get_tuner(endpoint: &str) -> String {
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            let out = coolctl(endpoint, &["get", "robot/tuner"]);
+            let ok = out.status.success();
+            last = Some(out);
+            ok
+        }),
+        "coolctl get never succeeded: {last:?}"
+    );
+    text(&last.unwrap().stdout)
+}
+
+#[test]
+fn get_shows_every_variable_with_kind_type_and_value_and_configure_changes_them() {
+    let robot = robot();
+    let before = get_tuner(&robot.endpoint);
+    insta::assert_snapshot!("get_tuner", before);
+
+    // A configuration, typed: a float and a string; the others keep their values.
+    let out = coolctl(
+        &robot.endpoint,
+        &[
+            "configure",
+            "robot/tuner",
+            "gain=2.25",
+            "label=\"tuned up\"",
+        ],
+    );
+    assert_eq!(text(&out.stdout), "accepted\n", "{}", text(&out.stderr));
+    assert!(out.status.success());
+    let after = get_tuner(&robot.endpoint);
+    assert!(
+        after.contains("gain      observable    f64     2.25"),
+        "{after}"
+    );
+    assert!(
+        after.contains("label     observable    String  \"tuned up\""),
+        "{after}"
+    );
+
+    // Refused by the component: the answer is printed, the exit status is 1.
+    for (fields, reason) in [
+        (&["gain=fast"][..], "invalid type"),
+        (&["gian=2"], "unknown field `gian`"),
+    ] {
+        let mut args = vec!["configure", "robot/tuner"];
+        args.extend_from_slice(fields);
+        let out = coolctl(&robot.endpoint, &args);
+        let stdout = text(&out.stdout);
+        assert!(stdout.starts_with("rejected: "), "{stdout}");
+        assert!(stdout.contains(reason), "{stdout}");
+        assert_eq!(out.status.code(), Some(1), "{stdout}");
+    }
+    // Malformed on the command line: usage, exit 2, nothing sent.
+    let out = coolctl(&robot.endpoint, &["configure", "robot/tuner", "gain"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("`gain` is not FIELD=VALUE"));
+
+    // `degrade`: a component without adaptation refuses, with the reason.
+    let out = coolctl(&robot.endpoint, &["degrade", "robot/tuner", "1"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stdout).starts_with("rejected: "),
+        "{}",
+        text(&out.stdout)
+    );
+    drop(robot.node);
+    robot.system.shutdown();
+}
+
+#[test]
+fn echo_prints_packets_as_json_lines_and_counts_what_it_skips() {
+    let robot = robot();
+    get_tuner(&robot.endpoint);
+    // The producer sends as fast as it can meanwhile: never slowed by the echo.
+    let stop = Arc::new(AtomicBool::new(false));
+    let producer = {
+        let stop = Arc::clone(&stop);
+        let out = robot.out.clone();
+        std::thread::spawn(move || {
+            let mut n = 0;
+            while !stop.load(Ordering::Relaxed) {
+                out.send(Reading {
+                    n,
+                    label: "r".to_owned(),
+                });
+                n += 1;
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            n
+        })
+    };
+    let out = coolctl(
+        &robot.endpoint,
+        &["echo", "robot/source.out", "--count", "5"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<Reading> = text(&out.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("a JSON packet per line"))
+        .collect();
+    assert_eq!(lines.len(), 5, "{}", text(&out.stdout));
+    assert!(lines.windows(2).all(|w| w[0].n < w[1].n), "{lines:?}");
+    assert!(
+        text(&out.stderr).contains("coolctl echo robot/source.out: "),
+        "{}",
+        text(&out.stderr)
+    );
+
+    // At 5 lines a second for a second and a half: a handful printed, the rest
+    // received and counted as skipped.
+    let out = coolctl(
+        &robot.endpoint,
+        &["echo", "robot/source.out", "--hz", "5", "--for", "1500ms"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let printed = text(&out.stdout).lines().count();
+    assert!((1..=8).contains(&printed), "{printed} lines");
+    let summary = text(&out.stderr);
+    let skipped: u64 = summary
+        .split(", ")
+        .find_map(|part| part.strip_suffix(" skipped (--hz)"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no skipped count in {summary}"));
+    assert!(skipped > 0, "{summary}");
+    stop.store(true, Ordering::Relaxed);
+    let sent = producer.join().unwrap();
+    assert!(sent > 0);
+    drop(robot.node);
+    robot.system.shutdown();
+}
+
+#[test]
+fn every_command_fails_fast_and_clearly_on_what_does_not_exist() {
+    let robot = robot();
+    get_tuner(&robot.endpoint);
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["get", "nobody/tuner"],
+            "no node `nobody` is alive (nodes alive: robot)",
+        ),
+        (
+            &["get", "robot/tunr"],
+            "node `robot` has no component `tunr` (its components: source, tuner)",
+        ),
+        (
+            &["watch", "robot/tunr", "--count", "1"],
+            "node `robot` has no component `tunr`",
+        ),
+        (
+            &["set", "robot/tunr", "state", "suspended"],
+            "node `robot` has no component `tunr`",
+        ),
+        (
+            &["configure", "robot/tunr", "gain=1"],
+            "node `robot` has no component `tunr`",
+        ),
+        (
+            &["degrade", "nobody/tuner", "1"],
+            "no node `nobody` is alive",
+        ),
+        (
+            &["echo", "robot/tunr.out", "--count", "1"],
+            "node `robot` has no component `tunr`",
+        ),
+        (
+            &["echo", "robot/source.nope", "--count", "1"],
+            "`robot/source` has no output `nope` (its outputs: out, idle)",
+        ),
+        (
+            &["echo", "robot/source.idle", "--count", "1"],
+            "node `robot` does not echo `source.idle` (it echoes out of `source`",
+        ),
+    ];
+    for (args, message) in cases {
+        let started = Instant::now();
+        let out = coolctl(&robot.endpoint, args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(message), "{args:?}: {stderr}");
+        assert!(out.stdout.is_empty(), "{args:?}: {}", text(&out.stdout));
+        // Bounded: the session, the timeout of a query or two, never a wait forever.
+        assert!(
+            started.elapsed() < PATIENCE,
+            "{args:?} took {:?}",
+            started.elapsed()
+        );
+    }
+    // Usage errors: exit 2.
+    for args in [
+        &["echo", "robot/source", "--count", "1"][..],
+        &["get", "robot"],
+    ] {
+        let out = coolctl(&robot.endpoint, args);
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            text(&out.stderr)
+        );
+    }
+    drop(robot.node);
+    robot.system.shutdown();
+}
