@@ -13,7 +13,7 @@
 
 /// The `configuration` block: the default controllable variable `configuration`.
 #[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if c.config_derives_default() %}, Default{% endif %})]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 {%- if c.config.is_empty() %}
 pub struct Config {}
 {%- else %}

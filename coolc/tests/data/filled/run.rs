@@ -92,6 +92,17 @@ fn mobile_base_instances_run_and_talk() {
             WAIT,
         )
         .unwrap();
+    // A field the configuration does not have is rejected, not ignored.
+    let refused = follower.command(coolbot::Command::Configure(Value::Record(vec![(
+        "scal".to_owned(),
+        Value::UInt(3),
+    )])));
+    assert!(
+        refused
+            .as_ref()
+            .is_err_and(|rejected| rejected.to_string().contains("unknown field `scal`")),
+        "{refused:?}"
+    );
 
     // Inside the compound the planner's path reaches the motion controller through the converter: it
     // moves (`on command -> moving`) and integrates the command into its odometry.
