@@ -179,6 +179,7 @@ impl std::fmt::Display for Supervision {
             Step::Propagated => write!(f, "{instance} failed; propagated")?,
             Step::Restarted => write!(f, "{instance} restarted")?,
             Step::Substituted { by } => write!(f, "{instance} substituted by {by}")?,
+            Step::OutOfStep => write!(f, "{instance} out of step with its redundant group")?,
             Step::Enqueued => write!(f, "{instance} entered the recovery queue")?,
             Step::Retried => write!(f, "{instance} retried")?,
             Step::RetryFailed => write!(f, "{instance} retry failed")?,
@@ -211,6 +212,11 @@ pub enum Step {
         /// The substitute (or, in a redundant group, the member now standing).
         by: String,
     },
+    /// A redundant member lost input packets (overflows at its inputs, or packets it
+    /// was left out of at an exported input while it stalled): it no longer agrees
+    /// with its group, so it stops leading or standing by and is resynchronized
+    /// through the recovery queue (the detail says how many it lost).
+    OutOfStep,
     /// It went into the recovery queue.
     Enqueued,
     /// The recovery queue restarted it (it is on probation until the next retry).

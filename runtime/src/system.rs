@@ -1045,6 +1045,17 @@ impl System {
             .sum()
     }
 
+    /// The packets lost so far at the inputs of component `name` (overflows, counted
+    /// and announced at each input).
+    pub(crate) fn input_losses(&self, name: &str) -> u64 {
+        self.slots
+            .iter()
+            .filter(|slot| slot.name == name)
+            .flat_map(|slot| &slot.inputs)
+            .map(|input| input.core.overflows())
+            .sum()
+    }
+
     /// The connections, as `(output address, input address)` pairs.
     pub fn connections(&self) -> Vec<(String, String)> {
         self.links

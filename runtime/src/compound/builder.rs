@@ -216,6 +216,7 @@ impl CompoundBuilder {
             target: target.to_owned(),
             twin,
             linked: Vec::new(),
+            full_since: Vec::new(),
             held: false,
         }));
         self
@@ -302,6 +303,7 @@ impl CompoundBuilder {
                 restarts: std::collections::VecDeque::new(),
                 pending: None,
                 handled: false,
+                lost_at_join: 0,
             }),
             Err(source) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),

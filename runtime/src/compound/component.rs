@@ -101,6 +101,11 @@ impl Compound {
         for merged in &self.merges {
             merged.merge.reset(0);
         }
+        for group in 0..self.groups.len() {
+            for member in self.groups[group].clone() {
+                self.joined(member);
+            }
+        }
         // A destroyed instance's substitute keeps standing for it.
         for index in 0..self.instances.len() {
             if self.instances[index].status == Status::Destroyed

@@ -4,7 +4,7 @@
 //! merged stream).
 
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::error::ExportError;
 use crate::port::{
@@ -15,6 +15,13 @@ use crate::port::{
 /// How soon the compound's thread retries passing on packets that an instance's full
 /// `Block` fifo could not take (they wait at the compound's exported input).
 pub(super) const EXPORT_RETRY: Duration = Duration::from_millis(1);
+
+/// How long a redundant member's `Block` fifo at an exported input may stay full
+/// while another member has room before the member is left behind (it stalls the
+/// group no longer; what it misses is counted lost at its input, which puts it out of
+/// step: `in_step`). Until then the members are fed in step and packets wait at the
+/// compound's port.
+pub const MEMBER_STALL: Duration = Duration::from_millis(100);
 
 /// An exported port: the compound's own port, following the instance port it stands
 /// for (or whoever stands for that instance now).
@@ -79,6 +86,8 @@ pub(super) struct InputExport<T> {
     pub(super) target: String,
     pub(super) twin: Twin<T>,
     pub(super) linked: Vec<ErasedInput>,
+    /// Since when each input of `linked` has been full while another had room.
+    pub(super) full_since: Vec<Option<Instant>>,
     /// Packets stayed at the compound's port at the last `forward`.
     pub(super) held: bool,
 }
@@ -129,18 +138,30 @@ impl<T: Packet> Export for InputExport<T> {
     fn forward(&mut self) {
         // A fifo with the `Block` policy would make the compound's thread wait while
         // it is full (its instance may hang): only what it has room for goes now.
-        // Of a redundant group's members (several inputs fed), one whose fifo is full
-        // while another has room does not hold the others back: it is left out of
-        // this round, and what it misses is counted as lost at its input (an
-        // overflow, with its `MonitorEvent::Overflow`). When every input is full,
-        // the packets wait at the compound's port, as at any full `Block` fifo.
+        // A redundant group's members (several inputs fed) are fed in step: while
+        // one's fifo is full, packets wait at the compound's port. One whose fifo has
+        // stayed full for `MEMBER_STALL` while another has room (hung, or not yet
+        // seen to fail) holds the others back no longer: it is left out, and what it
+        // misses is counted as lost at its input (an overflow, with its
+        // `MonitorEvent::Overflow`), which puts it out of step with its group.
         let rooms: Vec<Option<usize>> = self.linked.iter().map(ErasedInput::room).collect();
-        let open = rooms.iter().filter(|room| **room != Some(0)).count();
-        let skipped: Vec<usize> = if open > 0 && open < rooms.len() {
-            (0..rooms.len()).filter(|i| rooms[*i] == Some(0)).collect()
-        } else {
-            Vec::new()
-        };
+        let open = rooms.iter().any(|room| *room != Some(0));
+        let now = Instant::now();
+        self.full_since.resize(rooms.len(), None);
+        for (since, room) in self.full_since.iter_mut().zip(&rooms) {
+            *since = match (room, *since) {
+                (Some(0), _) if !open => None,
+                (Some(0), Some(since)) => Some(since),
+                (Some(0), None) => Some(now),
+                _ => None,
+            };
+        }
+        let skipped: Vec<usize> = (0..rooms.len())
+            .filter(|i| {
+                self.full_since[*i]
+                    .is_some_and(|since| now.saturating_duration_since(since) >= MEMBER_STALL)
+            })
+            .collect();
         let mut room = rooms
             .iter()
             .enumerate()
@@ -212,6 +233,7 @@ impl<T: Packet> Export for InputExport<T> {
     }
 
     fn follow_inputs(&mut self, inputs: Vec<ErasedInput>) -> Result<(), ExportError> {
+        self.full_since.clear();
         follow_input(&self.twin.relay(), &mut self.linked, inputs)
     }
 }

@@ -9,6 +9,7 @@ use crate::monitor::{Command, Step};
 use crate::table::{Controllable, State};
 
 use super::policy::{PendingRestart, Policy, Recovering};
+use super::in_step::takeover;
 use super::state::{Compound, Status, command};
 
 impl Compound {
@@ -48,36 +49,31 @@ impl Compound {
             let leader = self.leaders[group] == index;
             self.enqueue(index);
             self.step(index, Step::Enqueued, "");
+            // Members that lost input packets are out of step: they cannot lead.
+            self.keep_in_step();
             if !self.covered(index) {
                 self.step(
                     index,
                     Step::Propagated,
-                    "no member of its redundant group is left",
+                    "no member of its redundant group is left in step",
                 );
                 return Err(self.fault(format!(
-                    "every member of the redundant group of `{name}` failed; last: {error}"
+                    "every member of the redundant group of `{name}` failed or is out of step; last: {error}"
                 )));
             }
             let standing = self.groups[group]
                 .iter()
                 .copied()
-                .find(|m| self.instances[*m].status == Status::Active);
+                .find(|m| self.can_lead(*m));
             if leader && let Some(member) = standing {
                 let by = self.instances[member].name.clone();
                 let (replayed, missing) = self.lead(group, member);
                 self.rewire()
                     .map_err(|fault| self.propagated(index, fault))?;
-                let mut detail = String::new();
-                if replayed > 0 {
-                    detail = format!("{replayed} packet(s) of its backlog continued the stream");
-                }
                 if missing > 0 {
                     tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group");
-                    detail.push_str(&format!(
-                        "; {missing} packet(s) missing from the stream (beyond its backlog), counted lost at its consumers"
-                    ));
                 }
-                self.step(index, Step::Substituted { by }, detail);
+                self.step(index, Step::Substituted { by }, takeover(replayed, missing));
             } else {
                 self.rewire()
                     .map_err(|fault| self.propagated(index, fault))?;
@@ -241,6 +237,7 @@ impl Compound {
                     for merged in self.merges.iter().filter(|m| m.group == group) {
                         merged.merge.rejoin(lane.unwrap_or(0));
                     }
+                    self.joined(index);
                 }
                 let rewired = if let Some(substitute) = self.instances[index].substitute
                     && self.instances[substitute].status == Status::Active

@@ -24,7 +24,8 @@
 //! - `state`: the compound automaton's state (instances, arrangement, supervisor, view);
 //! - what a running compound does, each an `impl` of that state: `wiring` (who stands
 //!   for each instance, and the connections that follow), `faults` (policies, restarts,
-//!   the recovery queue), `supervision` (one turn: exports, events, rules),
+//!   the recovery queue), `in_step` (redundant members that lost input packets
+//!   leave their group until resynchronized), `supervision` (one turn: exports, events, rules),
 //!   `adaptation` (coordinating its instances' degradation);
 //! - `component`: the compound as the runner drives it (`Automaton` and the crate's
 //!   compound hooks; the instances follow the compound's state);
@@ -37,6 +38,7 @@ mod coordinator;
 mod error;
 mod exports;
 mod faults;
+mod in_step;
 mod links;
 mod policy;
 mod state;
@@ -47,6 +49,7 @@ mod wiring;
 
 pub use builder::CompoundBuilder;
 pub use component::INSTANCE_START_TIMEOUT;
+pub use exports::MEMBER_STALL;
 pub use error::CompoundError;
 pub use policy::{
     DEFAULT_BACKOFF, DEFAULT_BACKOFF_MAX, DEFAULT_RESTART_WINDOW, DEFAULT_RESTARTS, Policy,

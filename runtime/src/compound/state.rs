@@ -62,6 +62,9 @@ pub(super) struct Instance {
     /// events of the same fault (a watchdog trip, then the section's return) are not
     /// a new fault.
     pub(super) handled: bool,
+    /// The packets lost at its inputs when it last joined its redundant group (its
+    /// start, or its recovery): more since then puts it out of step (`in_step`).
+    pub(super) lost_at_join: u64,
 }
 
 /// A variable of the compound mapped onto an instance's.

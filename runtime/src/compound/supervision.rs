@@ -174,6 +174,9 @@ impl Compound {
         }
         self.fresh = false;
         let mut changed = self.take_events(true)?;
+        if self.keep_in_step() {
+            self.rewire()?;
+        }
         if std::mem::take(&mut self.deferred_faults) {
             self.deferred_policies()?;
         }

@@ -1,0 +1,135 @@
+//! Redundant members in step. A merged stream numbers each member's packets in the
+//! order it sends them, which matches the other members' numbers only while every
+//! member has received every packet. A member that lost input packets since it joined
+//! its group (overflows at its inputs, or packets it was left out of at an exported
+//! input while it stalled) is out of step: it may no longer lead or stand by, since a
+//! failover to it would skip or double packets of the stream without a count. It is
+//! taken out of the group and resynchronized through the recovery queue; when it
+//! recovers it joins again at the stream's number.
+
+use crate::monitor::{Command, Step};
+use crate::table::Controllable;
+
+use super::state::{Compound, Status};
+
+impl Compound {
+    /// The packets member `index` lost at its inputs since it joined its group.
+    pub(super) fn lost_since_join(&self, index: usize) -> u64 {
+        let instance = &self.instances[index];
+        self.system.as_ref().map_or(0, |system| {
+            system
+                .input_losses(&instance.name)
+                .saturating_sub(instance.lost_at_join)
+        })
+    }
+
+    /// Whether member `index` may take its group's lead: active, and in step.
+    pub(super) fn can_lead(&self, index: usize) -> bool {
+        self.instances[index].status == Status::Active && self.lost_since_join(index) == 0
+    }
+
+    /// Member `index` joins its group (at the compound's start, or recovered): its
+    /// losses count from now.
+    pub(super) fn joined(&mut self, index: usize) {
+        let name = &self.instances[index].name;
+        let lost = self
+            .system
+            .as_ref()
+            .map_or(0, |system| system.input_losses(name));
+        self.instances[index].lost_at_join = lost;
+    }
+
+    /// Take the active members of redundant groups that lost input packets out of
+    /// their groups. A member that leads hands the lead to a member still in step, if
+    /// one is; if none is, it keeps leading (the stream is what it sends: its losses
+    /// are counted at its inputs) and every other member, out of step with it now, is
+    /// resynchronized. Returns whether the arrangement changed (the caller rewires).
+    pub(super) fn keep_in_step(&mut self) -> bool {
+        let mut changed = false;
+        for group in 0..self.groups.len() {
+            let active: Vec<usize> = self.groups[group]
+                .iter()
+                .copied()
+                .filter(|m| self.instances[*m].status == Status::Active)
+                .collect();
+            let lossy: Vec<(usize, u64)> = active
+                .iter()
+                .map(|m| (*m, self.lost_since_join(*m)))
+                .filter(|(_, lost)| *lost > 0)
+                .collect();
+            if lossy.is_empty() {
+                continue;
+            }
+            changed = true;
+            let leader = self.leaders[group];
+            let in_step = active
+                .iter()
+                .copied()
+                .find(|m| !lossy.iter().any(|(l, _)| l == m));
+            for (member, lost) in &lossy {
+                if *member != leader {
+                    self.resync(*member, format!("{lost} input packet(s) lost"));
+                }
+            }
+            let Some(&(_, lost)) = lossy.iter().find(|(m, _)| *m == leader) else {
+                continue;
+            };
+            match in_step {
+                Some(next) => {
+                    let by = self.instances[next].name.clone();
+                    self.resync(leader, format!("{lost} input packet(s) lost"));
+                    let (replayed, missing) = self.lead(group, next);
+                    self.step(leader, Step::Substituted { by }, takeover(replayed, missing));
+                }
+                None => {
+                    // Nobody has what it lost: it leads on from here.
+                    self.joined(leader);
+                    let name = self.instances[leader].name.clone();
+                    let others: Vec<usize> = active
+                        .iter()
+                        .copied()
+                        .filter(|m| *m != leader && self.instances[*m].status == Status::Active)
+                        .collect();
+                    for member in others {
+                        self.resync(
+                            member,
+                            format!("out of step with the leader `{name}`, which lost {lost} input packet(s)"),
+                        );
+                    }
+                }
+            }
+        }
+        changed
+    }
+
+    /// Member `index` is out of step: published (`OutOfStep`), commanded to `ready`
+    /// without waiting (it may be hung), its queued inputs discarded (counted lost at
+    /// them), and queued for recovery (its inputs are disconnected at the rewiring).
+    fn resync(&mut self, index: usize, detail: String) {
+        self.step(index, Step::OutOfStep, detail);
+        let handle = &self.instances[index].handle;
+        if let Err(rejected) = handle.post(Command::SetState(Controllable::Ready)) {
+            tracing::warn!(compound = %self.name, "{rejected}");
+        }
+        if let Some(system) = self.system.as_ref() {
+            system.discard_queued(&self.instances[index].name);
+        }
+        self.enqueue(index);
+        self.step(index, Step::Enqueued, "");
+    }
+}
+
+/// The detail of a `Substituted` step in a redundant group: what the new leader's
+/// backlog gave the stream, and what the stream misses.
+pub(super) fn takeover(replayed: u64, missing: u64) -> String {
+    let mut detail = String::new();
+    if replayed > 0 {
+        detail = format!("{replayed} packet(s) of its backlog continued the stream");
+    }
+    if missing > 0 {
+        detail.push_str(&format!(
+            "; {missing} packet(s) missing from the stream (beyond its backlog), counted lost at its consumers"
+        ));
+    }
+    detail
+}
