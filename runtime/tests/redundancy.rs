@@ -421,7 +421,11 @@ fn hang_b_through(rig: &Rig, sent: u64) -> coolbot::Monitor {
     }
     let k = rig.system.handle("k").expect("k");
     k.wait_for(
-        |m| m.supervision.iter().any(|s| step_of(s, "b", &Step::OutOfStep)),
+        |m| {
+            m.supervision
+                .iter()
+                .any(|s| step_of(s, "b", &Step::OutOfStep))
+        },
         WAIT,
     )
     .unwrap_or_else(|_| panic!("b is out of step: {:?}", k.snapshot()))
@@ -446,7 +450,11 @@ fn a_hung_member_does_not_stall_the_others_and_what_it_misses_is_counted_lost() 
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("the detail says what b lost: {out_of_step:?}"));
     assert!(lost >= 1, "{out_of_step:?}");
-    let b = rig.system.handle("k").and_then(|k| k.instance("b")).expect("b");
+    let b = rig
+        .system
+        .handle("k")
+        .and_then(|k| k.instance("b"))
+        .expect("b");
     // What b missed, and what was queued at it when it left the group, is counted
     // and announced at its input.
     b.wait_for(|m| m.overflows >= lost + BLOCK_QUEUE as u64, WAIT)
@@ -470,7 +478,11 @@ fn a_member_that_fell_out_of_step_leads_only_after_it_is_resynchronized() {
     rig.b.hold.store(false, Ordering::SeqCst);
     let k = rig.system.handle("k").expect("k");
     k.wait_for(
-        |m| m.supervision.iter().any(|s| step_of(s, "b", &Step::Recovered)),
+        |m| {
+            m.supervision
+                .iter()
+                .any(|s| step_of(s, "b", &Step::Recovered))
+        },
         WAIT,
     )
     .unwrap_or_else(|_| panic!("b recovered: {:?}", k.snapshot()));
@@ -540,14 +552,29 @@ fn packets_missing_at_a_failover_are_counted_lost_at_the_consumers() {
 
 #[test]
 fn a_substituted_consumer_of_a_merged_stream_hands_its_queue_to_its_substitute() {
-    // `a` and `b` (redundant) feed `t` inside the compound; `t2` substitutes `t`,
-    // whose output is exported. `t` hangs with packets queued, then fails: its queue
-    // moves to `t2` with the connection, as for any consumer, and nothing is lost.
+    substituted_consumer_keeps_the_queue(None);
+}
+
+#[test]
+fn a_substituted_consumer_behind_a_converter_hands_its_queue_to_its_substitute() {
+    substituted_consumer_keeps_the_queue(Some(|n| n * 10));
+}
+
+/// `a` and `b` (redundant) feed `t` inside the compound (through `convert`, if
+/// given); `t2` substitutes `t`, whose output is exported. `t` hangs with packets
+/// queued, then fails: its queue moves to `t2` with the connection (and its
+/// converter), as for any consumer, and nothing is lost.
+fn substituted_consumer_keeps_the_queue(convert: Option<fn(&u64) -> u64>) {
     let (a_component, a) = relay("a");
     let (b_component, _) = relay("b");
     let (t_component, t) = relay("t");
     let (t2_component, t2) = relay("t2");
-    let k = CompoundBuilder::new("k", Idle)
+    let k = CompoundBuilder::new("k", Idle);
+    let k = match convert {
+        Some(convert) => k.connect_via::<u64, u64>("a.output", "t.input", convert),
+        None => k.connect("a.output", "t.input"),
+    };
+    let k = k
         .instance(a_component)
         .instance(b_component)
         .instance(t_component)
@@ -555,7 +582,6 @@ fn a_substituted_consumer_of_a_merged_stream_hands_its_queue_to_its_substitute()
         .redundant(&["a", "b"])
         .substitute("t2", "t")
         .on_error("t", coolbot::Policy::Substitute)
-        .connect("a.output", "t.input")
         .export_input::<u64>("in", "a.input")
         .export_output::<u64>("out", "t.output")
         .recovery(Duration::from_secs(60), Duration::from_secs(120))
@@ -618,9 +644,10 @@ fn a_substituted_consumer_of_a_merged_stream_hands_its_queue_to_its_substitute()
         WAIT,
     )
     .expect("t2 substitutes t");
+    let expected = |n: u64| convert.map_or(n, |convert| convert(&n));
     assert_eq!(
         collect(&received, 50),
-        (1..=50).collect::<Vec<_>>(),
+        (1..=50).map(expected).collect::<Vec<_>>(),
         "t2 relays what was queued at t, then the rest"
     );
     assert_eq!(t2.relayed.load(Ordering::SeqCst), 50);

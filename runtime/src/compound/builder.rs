@@ -351,11 +351,18 @@ impl CompoundBuilder {
     ) -> CompoundBuilder {
         let convert: Arc<dyn Fn(&A) -> B + Send + Sync> = Arc::new(convert);
         let direct = Arc::clone(&convert);
-        let link_via: LinkVia = Arc::new(move |output: &ErasedOutput, input: &ErasedInput| {
-            output.type_id == std::any::TypeId::of::<A>()
-                && input.type_id == std::any::TypeId::of::<B>()
-                && crate::port::link_converted::<A, B>(output, input, Arc::clone(&direct))
-        });
+        let link_via: LinkVia = Arc::new(
+            move |output: &ErasedOutput, old: Option<&ErasedInput>, input: &ErasedInput| {
+                output.type_id == std::any::TypeId::of::<A>()
+                    && input.type_id == std::any::TypeId::of::<B>()
+                    && crate::port::relink_converted::<A, B>(
+                        output,
+                        old,
+                        input,
+                        Arc::clone(&direct),
+                    )
+            },
+        );
         let via: Via = Arc::new(
             move |system: &mut System, old: Option<(&str, &str)>, from: &str, to: &str| {
                 let Some(old) = old else {

@@ -8,8 +8,8 @@ use crate::automaton::Fault;
 use crate::monitor::{Command, Step};
 use crate::table::{Controllable, State};
 
-use super::policy::{PendingRestart, Policy, Recovering};
 use super::in_step::takeover;
+use super::policy::{PendingRestart, Policy, Recovering};
 use super::state::{Compound, Status, command};
 
 impl Compound {

@@ -79,7 +79,11 @@ impl Compound {
                     let by = self.instances[next].name.clone();
                     self.resync(leader, format!("{lost} input packet(s) lost"));
                     let (replayed, missing) = self.lead(group, next);
-                    self.step(leader, Step::Substituted { by }, takeover(replayed, missing));
+                    self.step(
+                        leader,
+                        Step::Substituted { by },
+                        takeover(replayed, missing),
+                    );
                 }
                 None => {
                     // Nobody has what it lost: it leads on from here.

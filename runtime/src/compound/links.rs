@@ -14,8 +14,11 @@ pub(super) type Via = Arc<
 >;
 
 /// A converter's connection made between two erased ports directly (a redundant
-/// group's merged output, which is no port of the inner system, to a consumer).
-pub(super) type LinkVia = Arc<dyn Fn(&ErasedOutput, &ErasedInput) -> bool + Send + Sync>;
+/// group's merged output, which is no port of the inner system, to a consumer): in
+/// place of its connection to the old input, if given, in one step with the packets
+/// queued there (`port::relink_converted`).
+pub(super) type LinkVia =
+    Arc<dyn Fn(&ErasedOutput, Option<&ErasedInput>, &ErasedInput) -> bool + Send + Sync>;
 
 /// A declared connection (`instance.port` ends), through a converter or not.
 #[derive(Clone)]

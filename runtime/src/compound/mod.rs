@@ -49,8 +49,8 @@ mod wiring;
 
 pub use builder::CompoundBuilder;
 pub use component::INSTANCE_START_TIMEOUT;
-pub use exports::MEMBER_STALL;
 pub use error::CompoundError;
+pub use exports::MEMBER_STALL;
 pub use policy::{
     DEFAULT_BACKOFF, DEFAULT_BACKOFF_MAX, DEFAULT_RESTART_WINDOW, DEFAULT_RESTARTS, Policy,
 };

@@ -184,18 +184,23 @@ impl Compound {
             let replaced = self.merged.iter().position(|(m, l, t, _)| {
                 m == merge && l == link && !merged.iter().any(|(m2, _, t2, _)| m2 == m && t2 == t)
             });
-            if via.is_none()
-                && single
+            // (Through a converter too: it stays on the connection.)
+            if single
                 && let Some(position) = replaced
                 && self.merged[position].3.kind == input.kind
-                && output.type_id == input.type_id
-                && output.relink(&self.merged[position].3, &input)
             {
-                self.merged[position] = (*merge, *link, to.clone(), input);
-                continue;
+                let old = &self.merged[position].3;
+                let moved = match via {
+                    Some(via) => via(&output, Some(old), &input),
+                    None => output.type_id == input.type_id && output.relink(old, &input),
+                };
+                if moved {
+                    self.merged[position] = (*merge, *link, to.clone(), input);
+                    continue;
+                }
             }
             let linked = match via {
-                Some(via) => via(&output, &input),
+                Some(via) => via(&output, None, &input),
                 None => output.type_id == input.type_id && output.link(&input),
             };
             if !linked {
