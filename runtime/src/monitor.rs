@@ -212,10 +212,10 @@ pub enum Step {
         /// The substitute (or, in a redundant group, the member now standing).
         by: String,
     },
-    /// A redundant member lost input packets (overflows at its inputs, or packets it
-    /// was left out of at an exported input while it stalled): it no longer agrees
-    /// with its group, so it stops leading or standing by and is resynchronized
-    /// through the recovery queue (the detail says how many it lost).
+    /// A redundant member stalled and was left out of packets at the compound's
+    /// exported input: it no longer agrees with its group, so it stops leading or
+    /// standing by and is resynchronized through the recovery queue (the detail says
+    /// how many packets it missed).
     OutOfStep,
     /// It went into the recovery queue.
     Enqueued,

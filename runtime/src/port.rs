@@ -303,6 +303,9 @@ pub(crate) struct InputCore {
     pub(crate) owner: OnceLock<Owner>,
     arrivals: AtomicU64,
     overflows: AtomicU64,
+    /// Of `overflows`, the packets a compound's exported input left this input out
+    /// of (its redundant member stalled): they put the member out of step.
+    left_behind: AtomicU64,
     pull_waiting: AtomicBool,
     /// Wakes a thread waiting in `pull`: created by the first `pull` on this input.
     pull_signal: OnceLock<(Sender<()>, Receiver<()>)>,
@@ -317,6 +320,7 @@ impl InputCore {
             owner: OnceLock::new(),
             arrivals: AtomicU64::new(0),
             overflows: AtomicU64::new(0),
+            left_behind: AtomicU64::new(0),
             pull_waiting: AtomicBool::new(false),
             pull_signal: OnceLock::new(),
             sources: Mutex::new(Vec::new()),
@@ -361,6 +365,10 @@ impl InputCore {
 
     pub(crate) fn overflows(&self) -> u64 {
         self.overflows.load(Ordering::Acquire)
+    }
+
+    pub(crate) fn left_behind(&self) -> u64 {
+        self.left_behind.load(Ordering::Acquire)
     }
 
     pub(crate) fn add_source(&self, source: Arc<OutputCore>) {
@@ -1760,6 +1768,15 @@ impl ErasedInput {
     /// port, like a packet its own overflow policy dropped. Zero does nothing.
     pub fn count_loss(&self, lost: u64) {
         if lost > 0 {
+            self.core.overflowed(lost);
+        }
+    }
+
+    /// [`ErasedInput::count_loss`] for packets a compound's exported input left this
+    /// input out of (a redundant member that stalled), counted apart too.
+    pub(crate) fn count_left_behind(&self, lost: u64) {
+        if lost > 0 {
+            self.core.left_behind.fetch_add(lost, Ordering::AcqRel);
             self.core.overflowed(lost);
         }
     }

@@ -1045,14 +1045,14 @@ impl System {
             .sum()
     }
 
-    /// The packets lost so far at the inputs of component `name` (overflows, counted
-    /// and announced at each input).
-    pub(crate) fn input_losses(&self, name: &str) -> u64 {
+    /// The packets the inputs of component `name` were left out of so far by a
+    /// compound's exported input (it stalled in a redundant group).
+    pub(crate) fn left_behind(&self, name: &str) -> u64 {
         self.slots
             .iter()
             .filter(|slot| slot.name == name)
             .flat_map(|slot| &slot.inputs)
-            .map(|input| input.core.overflows())
+            .map(|input| input.core.left_behind())
             .sum()
     }
 

@@ -446,7 +446,8 @@ fn a_hung_member_does_not_stall_the_others_and_what_it_misses_is_counted_lost() 
         .expect("the step");
     let lost: u64 = out_of_step
         .detail
-        .strip_suffix(" input packet(s) lost")
+        .strip_prefix("left out of ")
+        .and_then(|rest| rest.strip_suffix(" input packet(s)"))
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("the detail says what b lost: {out_of_step:?}"));
     assert!(lost >= 1, "{out_of_step:?}");

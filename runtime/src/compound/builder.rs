@@ -303,7 +303,7 @@ impl CompoundBuilder {
                 restarts: std::collections::VecDeque::new(),
                 pending: None,
                 handled: false,
-                lost_at_join: 0,
+                left_at_join: 0,
             }),
             Err(source) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),
@@ -797,6 +797,7 @@ impl CompoundBuilder {
             reads_own,
             timed,
             next_timed: None,
+            moves: Vec::new(),
             deferred_faults: false,
         };
         Ok(Component::driven(self.name, Box::new(compound), self.ports).with_instances(handles))

@@ -3,6 +3,8 @@
 //! error becomes its fault ([`Fault`](crate::Fault)'s `From` keeps the whole chain as
 //! the compound's `error` text).
 
+use std::time::Duration;
+
 use crate::monitor::{Rejected, Timeout};
 use crate::system::{ConnectError, Error as SystemError};
 use crate::table::State;
@@ -128,6 +130,50 @@ pub(super) enum RunError {
     /// state following the compound's).
     #[error(transparent)]
     Command(#[from] Rejected),
+    /// A fault policy gave up on an instance.
+    #[error(transparent)]
+    Policy(#[from] PolicyFault),
+}
+
+/// Why a compound's fault policy gives up on an instance, so that the compound fails
+/// (the instance's own error is its text, as its monitoring port published it).
+#[derive(Debug, thiserror::Error)]
+pub(super) enum PolicyFault {
+    /// No member of a redundant group is left live and in step.
+    #[error(
+        "every member of the redundant group of `{instance}` failed or is out of step; last: {error}"
+    )]
+    GroupLost { instance: String, error: String },
+    /// Its policy is `propagate` (or it is a substitute in use).
+    #[error("instance `{instance}` failed: {error}")]
+    Failed { instance: String, error: String },
+    /// `restart` cannot restart from `starting_error`.
+    #[error("instance `{instance}` failed to restart: {error}")]
+    CannotRestart { instance: String, error: String },
+    /// The `restart` policy's budget is spent.
+    #[error(
+        "instance `{instance}` failed again after {restarts} restart(s) within {window:?} (restart budget spent): {error}"
+    )]
+    BudgetSpent {
+        instance: String,
+        restarts: usize,
+        window: Duration,
+        error: String,
+    },
+    /// A restart is due but the instance is stuck in an overrun section.
+    #[error(
+        "instance `{instance}` cannot be restarted: it is stuck in a section that overran its max_response, for over {deadline:?}"
+    )]
+    Stuck {
+        instance: String,
+        deadline: Duration,
+    },
+    /// The recovery deadline expired and nothing stands for the instance.
+    #[error("instance `{instance}` did not recover within {deadline:?} and nothing stands for it")]
+    NotRecovered {
+        instance: String,
+        deadline: Duration,
+    },
 }
 
 /// Why an exported port could not follow an instance port.

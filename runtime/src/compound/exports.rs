@@ -216,7 +216,7 @@ impl<T: Packet> Export for InputExport<T> {
         };
         for index in skipped {
             let member = &self.linked[index];
-            member.count_loss(moved);
+            member.count_left_behind(moved);
             if !relay.link(member) {
                 // (It was linked a moment ago, with the same kind and packet type.)
                 tracing::error!(target = %self.target, "an exported input could not link a member's input again");

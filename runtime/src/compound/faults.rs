@@ -8,6 +8,7 @@ use crate::automaton::Fault;
 use crate::monitor::{Command, Step};
 use crate::table::{Controllable, State};
 
+use super::error::PolicyFault;
 use super::in_step::takeover;
 use super::policy::{PendingRestart, Policy, Recovering};
 use super::state::{Compound, Status, command};
@@ -49,7 +50,7 @@ impl Compound {
             let leader = self.leaders[group] == index;
             self.enqueue(index);
             self.step(index, Step::Enqueued, "");
-            // Members that lost input packets are out of step: they cannot lead.
+            // Members left out of packets are out of step: they cannot lead.
             self.keep_in_step();
             if !self.covered(index) {
                 self.step(
@@ -57,9 +58,10 @@ impl Compound {
                     Step::Propagated,
                     "no member of its redundant group is left in step",
                 );
-                return Err(self.fault(format!(
-                    "every member of the redundant group of `{name}` failed or is out of step; last: {error}"
-                )));
+                return Err(self.fault(PolicyFault::GroupLost {
+                    instance: name,
+                    error,
+                }));
             }
             let standing = self.groups[group]
                 .iter()
@@ -93,7 +95,10 @@ impl Compound {
             }
             Policy::Propagate => {
                 self.step(index, Step::Propagated, "");
-                Err(self.fault(format!("instance `{name}` failed: {error}")))
+                Err(self.fault(PolicyFault::Failed {
+                    instance: name,
+                    error,
+                }))
             }
             Policy::Restart if monitor.state == State::RunningError => {
                 self.schedule_restart(index, &error)
@@ -104,7 +109,10 @@ impl Compound {
                     Step::Propagated,
                     "it cannot restart from starting_error",
                 );
-                Err(self.fault(format!("instance `{name}` failed to restart: {error}")))
+                Err(self.fault(PolicyFault::CannotRestart {
+                    instance: name,
+                    error,
+                }))
             }
             Policy::Substitute => {
                 self.enqueue(index);
@@ -154,10 +162,12 @@ impl Compound {
                     budget.window
                 ),
             );
-            return Err(self.fault(format!(
-                "instance `{name}` failed again after {done} restart(s) within {:?} (restart budget spent): {error}",
-                budget.window
-            )));
+            return Err(self.fault(PolicyFault::BudgetSpent {
+                instance: name,
+                restarts: done,
+                window: budget.window,
+                error: error.to_owned(),
+            }));
         }
         instance.pending = Some(PendingRestart {
             since: now,
@@ -183,10 +193,10 @@ impl Compound {
                         Step::Propagated,
                         "stuck in a section that overran its max_response",
                     );
-                    return Err(self.fault(format!(
-                        "instance `{name}` cannot be restarted: it is stuck in a section that overran its max_response, for over {:?}",
-                        self.deadline
-                    )));
+                    return Err(self.fault(PolicyFault::Stuck {
+                        instance: name,
+                        deadline: self.deadline,
+                    }));
                 }
                 continue;
             }
@@ -257,7 +267,8 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                let _ = self.update_standing();
+                let moves = self.update_standing();
+                self.moves.extend(moves);
                 let handle = &self.instances[index].handle;
                 if handle.is_stuck() {
                     // Its thread takes the command when (if) the section returns.
@@ -281,10 +292,10 @@ impl Compound {
                 self.step(index, Step::Retired, detail);
                 if !self.covered(index) {
                     self.step(index, Step::Propagated, "nothing stands for it");
-                    return Err(self.fault(format!(
-                        "instance `{name}` did not recover within {:?} and nothing stands for it",
-                        self.deadline
-                    )));
+                    return Err(self.fault(PolicyFault::NotRecovered {
+                        instance: name,
+                        deadline: self.deadline,
+                    }));
                 }
                 continue;
             }

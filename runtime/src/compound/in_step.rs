@@ -1,11 +1,12 @@
 //! Redundant members in step. A merged stream numbers each member's packets in the
 //! order it sends them, which matches the other members' numbers only while every
-//! member has received every packet. A member that lost input packets since it joined
-//! its group (overflows at its inputs, or packets it was left out of at an exported
-//! input while it stalled) is out of step: it may no longer lead or stand by, since a
-//! failover to it would skip or double packets of the stream without a count. It is
-//! taken out of the group and resynchronized through the recovery queue; when it
-//! recovers it joins again at the stream's number.
+//! member has received every packet. A member that stalled and was left out of
+//! packets at a compound's exported input since it joined its group is out of step:
+//! it may no longer lead or stand by, since a failover to it would skip or double
+//! packets of the stream without a count. It is taken out of the group and
+//! resynchronized through the recovery queue; when it recovers it joins again at the
+//! stream's number. (Losses by a member's own overflow policy are the description's
+//! choice and leave it in the group: see `docs/runtime.md`, "Redundancy".)
 
 use crate::monitor::{Command, Step};
 use crate::table::Controllable;
@@ -13,13 +14,13 @@ use crate::table::Controllable;
 use super::state::{Compound, Status};
 
 impl Compound {
-    /// The packets member `index` lost at its inputs since it joined its group.
+    /// The packets member `index` was left out of since it joined its group.
     pub(super) fn lost_since_join(&self, index: usize) -> u64 {
         let instance = &self.instances[index];
         self.system.as_ref().map_or(0, |system| {
             system
-                .input_losses(&instance.name)
-                .saturating_sub(instance.lost_at_join)
+                .left_behind(&instance.name)
+                .saturating_sub(instance.left_at_join)
         })
     }
 
@@ -35,12 +36,12 @@ impl Compound {
         let lost = self
             .system
             .as_ref()
-            .map_or(0, |system| system.input_losses(name));
-        self.instances[index].lost_at_join = lost;
+            .map_or(0, |system| system.left_behind(name));
+        self.instances[index].left_at_join = lost;
     }
 
-    /// Take the active members of redundant groups that lost input packets out of
-    /// their groups. A member that leads hands the lead to a member still in step, if
+    /// Take the active members of redundant groups that were left out of packets out
+    /// of their groups. A member that leads hands the lead to a member still in step, if
     /// one is; if none is, it keeps leading (the stream is what it sends: its losses
     /// are counted at its inputs) and every other member, out of step with it now, is
     /// resynchronized. Returns whether the arrangement changed (the caller rewires).
@@ -68,7 +69,7 @@ impl Compound {
                 .find(|m| !lossy.iter().any(|(l, _)| l == m));
             for (member, lost) in &lossy {
                 if *member != leader {
-                    self.resync(*member, format!("{lost} input packet(s) lost"));
+                    self.resync(*member, format!("left out of {lost} input packet(s)"));
                 }
             }
             let Some(&(_, lost)) = lossy.iter().find(|(m, _)| *m == leader) else {
@@ -77,7 +78,7 @@ impl Compound {
             match in_step {
                 Some(next) => {
                     let by = self.instances[next].name.clone();
-                    self.resync(leader, format!("{lost} input packet(s) lost"));
+                    self.resync(leader, format!("left out of {lost} input packet(s)"));
                     let (replayed, missing) = self.lead(group, next);
                     self.step(
                         leader,
@@ -97,7 +98,7 @@ impl Compound {
                     for member in others {
                         self.resync(
                             member,
-                            format!("out of step with the leader `{name}`, which lost {lost} input packet(s)"),
+                            format!("out of step with the leader `{name}`, which was left out of {lost} input packet(s)"),
                         );
                     }
                 }

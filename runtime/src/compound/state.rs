@@ -19,7 +19,7 @@ use crate::system::System;
 use crate::table::Controllable;
 
 use super::coordinator::Coordinator;
-use super::error::RunError;
+use super::error::{PolicyFault, RunError};
 use super::exports::Export;
 use super::links::{Link, MergedPort};
 use super::policy::{Budget, PendingRestart, Policy, Recovering};
@@ -62,9 +62,10 @@ pub(super) struct Instance {
     /// events of the same fault (a watchdog trip, then the section's return) are not
     /// a new fault.
     pub(super) handled: bool,
-    /// The packets lost at its inputs when it last joined its redundant group (its
-    /// start, or its recovery): more since then puts it out of step (`in_step`).
-    pub(super) lost_at_join: u64,
+    /// The packets a compound's exported input had left it out of when it last
+    /// joined its redundant group (its start, or its recovery): more since then puts
+    /// it out of step (`in_step`).
+    pub(super) left_at_join: u64,
 }
 
 /// A variable of the compound mapped onto an instance's.
@@ -147,6 +148,9 @@ pub(super) struct Compound {
     pub(super) deferred_faults: bool,
     /// When the time reads are next due.
     pub(super) next_timed: Option<Instant>,
+    /// Stand-in moves `(from, to)` whose waiting pull requests have not followed yet
+    /// (they follow once a rewiring completes).
+    pub(super) moves: Vec<(usize, usize)>,
 }
 
 pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {
@@ -182,9 +186,9 @@ impl Compound {
         fault
     }
 
-    pub(super) fn fault(&self, message: String) -> Fault {
-        tracing::warn!(compound = %self.name, "{message}");
-        Fault::message(message)
+    pub(super) fn fault(&self, why: PolicyFault) -> Fault {
+        tracing::warn!(compound = %self.name, "{why}");
+        RunError::from(why).into()
     }
 
     pub(super) fn refresh(&mut self, index: usize) {

@@ -42,7 +42,10 @@ impl Compound {
     /// stand-in, or back) is replaced in one step, with the packets queued at a
     /// replaced input (`System::replace_link`): no packet is lost meanwhile.
     pub(super) fn rewire(&mut self) -> Result<(), Fault> {
+        // Moves wait in `self.moves` until a rewiring completes: one that fails half
+        // way leaves them for the next (at the compound's restart).
         let moves = self.update_standing();
+        self.moves.extend(moves);
         self.make_merges()?;
         let mut wanted: Vec<Option<Link>> = Vec::with_capacity(self.links.len());
         // Connections to a redundant group's inputs go to every live member; from a
@@ -252,7 +255,7 @@ impl Compound {
         }
         // Last, once every consumer reads the stand-in: the pulls waiting at the
         // instance it replaces.
-        for (from, to) in moves {
+        for (from, to) in std::mem::take(&mut self.moves) {
             self.move_pulls(from, to);
         }
         Ok(())
