@@ -2,8 +2,8 @@
 //! (tick, fifo, ufifo, last and poster inputs; tick, data and poster outputs), pushed
 //! and pulled, the same scenario runs once against an atomic component's port and
 //! once against a compound exporting that port of the same component, and must see
-//! the same packets. Then the same through a substitution: the exported ports follow
-//! the substitute, pulls included.
+//! the same packets. Then the same through a substitution and through a redundant
+//! group's failover: the exported ports follow the stand-in, pulls included.
 
 mod support;
 
@@ -123,6 +123,17 @@ impl Input {
             Input::Tick(port) => port.pull(WAIT),
         }
         .expect("the pull is answered")
+    }
+
+    /// Forget what arrived so far.
+    fn clear(&self) {
+        match self {
+            Input::Fifo(port) => port.drain().for_each(drop),
+            Input::Ufifo(port) => port.drain().for_each(drop),
+            Input::Last(port) => _ = port.take_new(),
+            Input::Poster(port) => _ = port.take_new(),
+            Input::Tick(port) => _ = port.take(),
+        }
     }
 
     /// Wait until `last` (the last of `count` packets or events sent) is seen; return
@@ -304,7 +315,17 @@ struct Rig {
     trip: LastIn<u64>,
 }
 
-fn rig(port: Port, pull: bool, topology: Topology, substitute: bool) -> Rig {
+/// Who stands by for `w` inside the compound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Standby {
+    None,
+    /// `s` substitutes `w`.
+    Substitute,
+    /// `w` and `s` are a redundant group (`w` leads).
+    Redundant,
+}
+
+fn rig(port: Port, pull: bool, topology: Topology, standby_by: Standby) -> Rig {
     let answers = Arc::new(AtomicU64::new(0));
     let w = member("w", port, pull, Arc::clone(&answers));
     let inner = w.port.clone();
@@ -338,14 +359,16 @@ fn rig(port: Port, pull: bool, topology: Topology, substitute: bool) -> Rig {
         }
         Topology::Exported => {
             let mut builder = CompoundBuilder::new("k", Idle).instance(w.component);
-            if substitute {
+            if standby_by != Standby::None {
                 let s = member("s", port, pull, Arc::clone(&answers));
                 standby = Some(s.port.clone());
-                builder = builder
-                    .instance(s.component)
-                    .substitute("s", "w")
-                    .on_error("w", Policy::Substitute)
-                    .recovery(WAIT, WAIT * 6);
+                builder = builder.instance(s.component).recovery(WAIT, WAIT * 6);
+                builder = match standby_by {
+                    Standby::Substitute => builder
+                        .substitute("s", "w")
+                        .on_error("w", Policy::Substitute),
+                    _ => builder.redundant(&["w", "s"]),
+                };
             }
             builder = match port {
                 Port::In(In::Tick) => builder.export_tick_input("x", "w.port"),
@@ -383,6 +406,18 @@ fn rig(port: Port, pull: bool, topology: Topology, substitute: bool) -> Rig {
 /// three packets and see them arrive; with `pull`, also pull three. Returns what was
 /// seen, in order.
 fn scenario(rig: &Rig, at: &PortHandle, pull: bool, base: u64) -> Vec<u64> {
+    scenario_with(rig, at, None, pull, base)
+}
+
+/// [`scenario`], where `twin` (a redundant member beside `at`, if given) sends what
+/// `at` sends, as members on the same inputs do.
+fn scenario_with(
+    rig: &Rig,
+    at: &PortHandle,
+    twin: Option<&PortHandle>,
+    pull: bool,
+    base: u64,
+) -> Vec<u64> {
     let mut seen = Vec::new();
     let (producer, consumer, answers) = match (at, &rig.outer) {
         (PortHandle::In(input), PortHandle::Out(output)) => (output, input, &rig.outer_answers),
@@ -390,6 +425,9 @@ fn scenario(rig: &Rig, at: &PortHandle, pull: bool, base: u64) -> Vec<u64> {
         _ => unreachable!("an input faces an output"),
     };
     for n in base + 1..=base + 3 {
+        if let Some(PortHandle::Out(twin)) = twin {
+            twin.produce(n);
+        }
         producer.produce(n);
     }
     seen.extend(consumer.observe(3, base + 3));
@@ -451,7 +489,7 @@ fn every_port_kind_exported_behaves_as_the_atomic_port() {
     for &(port, pull) in CASES {
         let mut results = Vec::new();
         for topology in [Topology::Atomic, Topology::Exported] {
-            let rig = rig(port, pull, topology, false);
+            let rig = rig(port, pull, topology, Standby::None);
             results.push(scenario(&rig, &rig.inner, pull, 0));
             let report = rig.system.shutdown();
             assert!(
@@ -473,12 +511,27 @@ fn every_port_kind_exported_behaves_as_the_atomic_port() {
 
 #[test]
 fn every_exported_port_kind_follows_the_substitute() {
+    every_kind_follows_the_stand_in(Standby::Substitute);
+}
+
+#[test]
+fn every_exported_port_kind_follows_the_redundant_group() {
+    every_kind_follows_the_stand_in(Standby::Redundant);
+}
+
+/// Each port kind, exported from `w`, pushed and pulled before and after `w` fails
+/// and `s` (its substitute, or the other member of its redundant group) stands for
+/// it.
+fn every_kind_follows_the_stand_in(standby_by: Standby) {
     for &(port, pull) in CASES {
-        let rig = rig(port, pull, Topology::Exported, true);
+        let rig = rig(port, pull, Topology::Exported, standby_by);
+        let standby = rig.standby.clone().expect("a stand-in");
+        // Redundant members send the same packets.
+        let twin = (standby_by == Standby::Redundant).then_some(&standby);
         assert_eq!(
-            scenario(&rig, &rig.inner, pull, 0),
+            scenario_with(&rig, &rig.inner, twin, pull, 0),
             expected(port, pull),
-            "{port:?} pull {pull}: before the fault"
+            "{port:?} pull {pull} {standby_by:?}: before the fault"
         );
         // `w` fails answering `trip`; `s` takes its connections and exported ports.
         let _ = rig.trip.request();
@@ -491,8 +544,11 @@ fn every_exported_port_kind_follows_the_substitute() {
             },
             WAIT,
         )
-        .unwrap_or_else(|_| panic!("{port:?} pull {pull}: w is substituted"));
-        let standby = rig.standby.clone().expect("a substitute");
+        .unwrap_or_else(|_| panic!("{port:?} pull {pull} {standby_by:?}: w is substituted"));
+        if let PortHandle::In(input) = &standby {
+            // A redundant member got what `w` got: the scenario starts afresh.
+            input.clear();
+        }
         // Packets 4, 5 and 6 are pushed; pull answers go on counting where they
         // stopped (`w` and `s` share their counter).
         let base = 3;
@@ -511,10 +567,13 @@ fn every_exported_port_kind_follows_the_substitute() {
         assert_eq!(
             scenario(&rig, &standby, pull, base),
             want,
-            "{port:?} pull {pull}: after the substitution, at the substitute"
+            "{port:?} pull {pull} {standby_by:?}: after the fault, at the stand-in"
         );
         let report = rig.system.shutdown();
-        assert!(report.clean(), "{port:?} pull {pull}: {report:?}");
+        assert!(
+            report.clean(),
+            "{port:?} pull {pull} {standby_by:?}: {report:?}"
+        );
     }
 }
 
