@@ -321,6 +321,8 @@ enum Standby {
     None,
     /// `s` substitutes `w`.
     Substitute,
+    /// `s` substitutes `w`, and `w` recovers soon after (it takes its place back).
+    SubstituteThenRecover,
     /// `w` and `s` are a redundant group (`w` leads).
     Redundant,
 }
@@ -362,12 +364,16 @@ fn rig(port: Port, pull: bool, topology: Topology, standby_by: Standby) -> Rig {
             if standby_by != Standby::None {
                 let s = member("s", port, pull, Arc::clone(&answers));
                 standby = Some(s.port.clone());
-                builder = builder.instance(s.component).recovery(WAIT, WAIT * 6);
+                let retry = match standby_by {
+                    Standby::SubstituteThenRecover => std::time::Duration::from_millis(20),
+                    _ => WAIT,
+                };
+                builder = builder.instance(s.component).recovery(retry, WAIT * 6);
                 builder = match standby_by {
-                    Standby::Substitute => builder
+                    Standby::Redundant => builder.redundant(&["w", "s"]),
+                    _ => builder
                         .substitute("s", "w")
                         .on_error("w", Policy::Substitute),
-                    _ => builder.redundant(&["w", "s"]),
                 };
             }
             builder = match port {
@@ -515,13 +521,18 @@ fn every_exported_port_kind_follows_the_substitute() {
 }
 
 #[test]
+fn every_exported_port_kind_follows_the_original_back_after_its_recovery() {
+    every_kind_follows_the_stand_in(Standby::SubstituteThenRecover);
+}
+
+#[test]
 fn every_exported_port_kind_follows_the_redundant_group() {
     every_kind_follows_the_stand_in(Standby::Redundant);
 }
 
 /// Each port kind, exported from `w`, pushed and pulled before and after `w` fails
 /// and `s` (its substitute, or the other member of its redundant group) stands for
-/// it.
+/// it (or, once `w` recovered, at `w` again).
 fn every_kind_follows_the_stand_in(standby_by: Standby) {
     for &(port, pull) in CASES {
         let rig = rig(port, pull, Topology::Exported, standby_by);
@@ -545,6 +556,20 @@ fn every_kind_follows_the_stand_in(standby_by: Standby) {
             WAIT,
         )
         .unwrap_or_else(|_| panic!("{port:?} pull {pull} {standby_by:?}: w is substituted"));
+        let at = if standby_by == Standby::SubstituteThenRecover {
+            k.wait_for(
+                |m| {
+                    m.supervision
+                        .iter()
+                        .any(|s| s.instance == "w" && s.step == Step::Recovered)
+                },
+                WAIT,
+            )
+            .unwrap_or_else(|_| panic!("{port:?} pull {pull}: w recovers"));
+            &rig.inner
+        } else {
+            &standby
+        };
         if let PortHandle::In(input) = &standby {
             // A redundant member got what `w` got: the scenario starts afresh.
             input.clear();
@@ -565,7 +590,7 @@ fn every_kind_follows_the_stand_in(standby_by: Standby) {
             want.extend((answered + 1..=answered + 3).map(|n| if ticks { 1 } else { n }));
         }
         assert_eq!(
-            scenario(&rig, &standby, pull, base),
+            scenario(&rig, at, pull, base),
             want,
             "{port:?} pull {pull} {standby_by:?}: after the fault, at the stand-in"
         );
