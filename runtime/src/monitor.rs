@@ -636,12 +636,15 @@ impl ControlMessage {
     }
 }
 
-/// A command queued by [`Handle::post`], whose answers [`Handle::finish`] waits for.
+/// A command queued by [`Handle::post`], whose answers [`Handle::finish`] waits for
+/// (or [`Handle::poll`] looks at).
 pub(crate) struct Posted {
     command: Command,
     answers: Receiver<Reply>,
     claim: Arc<AtomicU8>,
     deadline: Instant,
+    /// [`Handle::poll`] saw the component take it (the transition is under way).
+    accepted: bool,
 }
 
 /// The component's answers to one command.
@@ -825,7 +828,49 @@ impl Handle {
             answers,
             claim,
             deadline,
+            accepted: false,
         })
+    }
+
+    /// Look at the answers to `posted`, waiting at most `wait`: `None` while the
+    /// component has not finished with it (not taken yet, or its transition still
+    /// running) and its deadline has not passed; otherwise its outcome, as
+    /// [`Handle::command`] gives it (a command not taken by its deadline is withdrawn
+    /// and rejected as busy; one taken whose transition outlasts it counts as done).
+    /// For a caller that must not wait for a component that may be busy (a compound's
+    /// recovery queue: its thread passes packets on meanwhile).
+    pub(crate) fn poll(&self, posted: &mut Posted, wait: Duration) -> Option<Result<(), Rejected>> {
+        let until = crate::thread::later(Instant::now(), wait);
+        loop {
+            match posted.answers.recv_deadline(until) {
+                Ok(Reply::Accepted) => posted.accepted = true,
+                Ok(Reply::Done) => return Some(Ok(())),
+                Ok(Reply::Rejected(reason)) => {
+                    return Some(Err(self.rejected(&posted.command, reason)));
+                }
+                Err(_) => break,
+            }
+        }
+        if Instant::now() < posted.deadline {
+            return None;
+        }
+        if posted.accepted {
+            return Some(Ok(()));
+        }
+        match posted
+            .claim
+            .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+        {
+            Ok(_) => Some(Err(self.rejected(
+                &posted.command,
+                Refusal::Busy.describe(self.command_timeout),
+            ))),
+            // Taken just now: its answers come.
+            Err(_) => {
+                posted.accepted = true;
+                None
+            }
+        }
     }
 
     /// The second half of [`Handle::command`]: wait for the answers to `posted`.
@@ -842,6 +887,7 @@ impl Handle {
             answers,
             claim,
             deadline,
+            accepted: _,
         } = posted;
         let is_dead = command == Command::SetState(Controllable::Dead);
         match answers.recv_deadline(deadline) {

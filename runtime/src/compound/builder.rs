@@ -304,6 +304,7 @@ impl CompoundBuilder {
                 pending: None,
                 handled: false,
                 left_at_join: 0,
+                retry: None,
             }),
             Err(source) => self.errors.push(CompoundError::Instance {
                 compound: self.name.clone(),

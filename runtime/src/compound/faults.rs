@@ -2,13 +2,17 @@
 //! substitute, ignore), the `restart` policy's budget and backoff, and the recovery
 //! queue (retries, recoveries, retirement at the deadline).
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::automaton::Fault;
 use crate::monitor::{Command, Step};
+
+/// How long a recovery retry waits for the instance's answer before the compound's
+/// thread goes on (the answer is looked at again at the next retry).
+const RETRY_LOOK: Duration = Duration::from_millis(10);
 use crate::table::{Controllable, State};
 
-use super::error::PolicyFault;
+use super::error::{PolicyFault, RunError};
 use super::in_step::takeover;
 use super::policy::{PendingRestart, Policy, Recovering};
 use super::state::{Compound, Status, command};
@@ -267,6 +271,7 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
+                self.instances[index].retry = None;
                 let moves = self.update_standing();
                 self.moves.extend(moves);
                 let handle = &self.instances[index].handle;
@@ -300,19 +305,24 @@ impl Compound {
                 continue;
             }
             // Due for a retry: restart it, on probation until the next retry (not while
-            // it is stuck in an overrun section: a command would wait for it). Every
-            // attempt is a step, so an operator sees recovery being tried.
-            let handle = &self.instances[index].handle;
-            let attempt = if handle.is_stuck() {
-                Err("still stuck in a section past its max_response".to_owned())
+            // it is stuck in an overrun section: a command would wait for it). The
+            // command is posted, and its answer looked at for a moment only: an
+            // instance busy in a section answers at a later retry, while the
+            // compound's thread goes on passing packets. Every attempt is a step, so
+            // an operator sees recovery being tried.
+            let attempt = if self.instances[index].handle.is_stuck() {
+                Some(Err(
+                    "still stuck in a section past its max_response".to_owned()
+                ))
             } else {
-                match command(handle, Controllable::Running) {
-                    Err(fault) => Err(fault.text().to_owned()),
-                    Ok(()) => match handle.state() {
-                        State::Running => Ok(()),
-                        state => Err(format!("{state} after the restart")),
-                    },
-                }
+                self.retry_command(index)
+            };
+            let Some(attempt) = attempt else {
+                // Not answered yet: looked at again at the next retry.
+                let entry = &mut self.queue[position];
+                entry.next = crate::thread::later(now, self.retry_every);
+                position += 1;
+                continue;
             };
             let restarted = attempt.is_ok();
             match attempt {
@@ -328,5 +338,35 @@ impl Compound {
             position += 1;
         }
         Ok(())
+    }
+
+    /// The recovery queue's command to instance `index` to run again: posted if none
+    /// is on its way, then its answer looked at for `RETRY_LOOK` at most. `None`
+    /// while unanswered; else whether the instance is `running` now, or why not.
+    fn retry_command(&mut self, index: usize) -> Option<Result<(), String>> {
+        let instance = &mut self.instances[index];
+        let mut posted = match instance.retry.take() {
+            Some(posted) => posted,
+            None => match instance
+                .handle
+                .post(Command::SetState(Controllable::Running))
+            {
+                Ok(posted) => posted,
+                Err(rejected) => {
+                    return Some(Err(Fault::from(RunError::from(rejected)).text().to_owned()));
+                }
+            },
+        };
+        let Some(answer) = instance.handle.poll(&mut posted, RETRY_LOOK) else {
+            instance.retry = Some(posted);
+            return None;
+        };
+        Some(match answer {
+            Err(rejected) => Err(Fault::from(RunError::from(rejected)).text().to_owned()),
+            Ok(()) => match instance.handle.state() {
+                State::Running => Ok(()),
+                state => Err(format!("{state} after the restart")),
+            },
+        })
     }
 }

@@ -12,7 +12,7 @@ use crossbeam_channel::Receiver;
 
 use crate::automaton::Fault;
 use crate::commander::Commander;
-use crate::monitor::{Command, Handle, MonitorEvent, Step, Supervision};
+use crate::monitor::{Command, Handle, MonitorEvent, Posted, Step, Supervision};
 use crate::port::ErasedInput;
 use crate::spec::Spec;
 use crate::system::System;
@@ -66,6 +66,8 @@ pub(super) struct Instance {
     /// joined its redundant group (its start, or its recovery): more since then puts
     /// it out of step (`in_step`).
     pub(super) left_at_join: u64,
+    /// The recovery queue's command to run again, posted and not answered yet.
+    pub(super) retry: Option<Posted>,
 }
 
 /// A variable of the compound mapped onto an instance's.
