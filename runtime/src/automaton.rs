@@ -185,6 +185,10 @@ pub(crate) trait Driven: Automaton {
         None
     }
 
+    /// The component runs on `clock` (set before its thread starts): a compound puts
+    /// its own timers and its instances on it.
+    fn set_clock(&mut self, _clock: &crate::clock::Clock) {}
+
     /// The runner entered user state `state` (by any user transition: a rule,
     /// `after`, `on`, `may`, a plan's `goto`, or the initial state), before its entry
     /// section runs. The supervisor evaluates the rules of `state` on its next turn,
@@ -281,6 +285,8 @@ pub struct Context {
     /// The component's monitoring state (none in a context made outside a system):
     /// compounds publish their adaptation steps through it.
     pub(crate) shared: Option<std::sync::Arc<crate::monitor::Shared>>,
+    /// The clock the component's timers read (`crate::clock`).
+    pub(crate) clock: crate::clock::Clock,
 }
 
 impl Context {
@@ -300,6 +306,7 @@ impl Context {
             waker: None,
             supervision: Vec::new(),
             shared: None,
+            clock: crate::clock::Clock::real(),
         }
     }
 
@@ -310,14 +317,16 @@ impl Context {
         self.waker.clone()
     }
 
-    /// The wall-clock time now.
+    /// The wall-clock time now (on a virtual clock: the wall time the clock was made
+    /// at, plus the time it advanced).
     pub fn now(&self) -> Time {
-        Time::now()
+        self.clock.wall_now()
     }
 
-    /// The time since the user automaton entered its current state.
+    /// The time since the user automaton entered its current state (on the
+    /// component's clock: a virtual clock's time in a test).
     pub fn in_state_for(&self) -> Duration {
-        self.entered_at.elapsed()
+        self.clock.now().saturating_duration_since(self.entered_at)
     }
 
     /// Set the observable `result`.
@@ -369,5 +378,27 @@ impl Context {
     /// The component instance's name.
     pub fn component_name(&self) -> &str {
         &self.name
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::Context;
+    use crate::clock::{Clock, VirtualClock};
+
+    #[test]
+    fn the_context_reads_the_component_clock() {
+        let clock = VirtualClock::new();
+        let mut cx = Context::new("c", None);
+        cx.clock = Clock::virtual_clock(&clock);
+        cx.entered_at = clock.now();
+        let wall = cx.now();
+        clock
+            .advance(Duration::from_millis(7))
+            .expect("no component");
+        assert_eq!(cx.in_state_for(), Duration::from_millis(7));
+        assert_eq!(cx.now().0 - wall.0, 7_000_000);
     }
 }

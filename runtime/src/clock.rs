@@ -11,9 +11,9 @@
 //! on a field the thread owns, then the same system call as before.
 //!
 //! [`Clock::virtual_clock`] gives a clock that stands still until a test calls
-//! [`VirtualClock::advance`]. Atomic components of a [`crate::System`] built
+//! [`VirtualClock::advance`]. Components of a [`crate::System`] built
 //! [`with_clock`](crate::System::with_clock) then never wait on the OS for a timer
-//! (compounds keep the real clock: their supervision timing is not on the seam yet):
+//! (a compound's supervision timing and its instances included):
 //! a component with a timer due later parks until it is rung, and `advance` moves the
 //! time, trips the sections that overran their `max_response` by then, rings every
 //! component on the clock, and returns once each of them has looked at the new time
@@ -30,6 +30,7 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
 use crate::port::Doorbell;
+use crate::value::Time;
 use crate::watchdog::Watch;
 
 /// How long [`VirtualClock::advance`] waits (real time) for the components to settle.
@@ -72,6 +73,20 @@ impl Clock {
         }
     }
 
+    /// The wall-clock time now ([`Time::now`], or on a virtual clock the wall time it
+    /// was made at plus the time it advanced).
+    pub fn wall_now(&self) -> Time {
+        match &self.virtual_clock {
+            None => Time::now(),
+            Some(clock) => Time::from_nanos(
+                clock
+                    .wall
+                    .0
+                    .saturating_add(clock.offset.load(Ordering::Acquire)),
+            ),
+        }
+    }
+
     /// The virtual clock, if this is one.
     pub fn as_virtual(&self) -> Option<&Arc<VirtualClock>> {
         self.virtual_clock.as_ref()
@@ -87,6 +102,8 @@ impl Clock {
 pub struct VirtualClock {
     /// The instant the clock started at (a real reading when it was made).
     base: Instant,
+    /// The wall-clock time it was made at (what `Context::now` counts from).
+    wall: Time,
     /// Nanoseconds since `base`.
     offset: AtomicU64,
     state: Mutex<Members>,
@@ -138,6 +155,7 @@ impl VirtualClock {
         let _ = crate::watchdog::epoch();
         Arc::new(VirtualClock {
             base: Instant::now(),
+            wall: Time::now(),
             offset: AtomicU64::new(0),
             state: Mutex::new(Members::default()),
             settled: Condvar::new(),

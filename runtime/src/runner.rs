@@ -307,11 +307,6 @@ impl Runner {
         driven
     }
 
-    /// Whether this is a compound's runner.
-    pub(crate) fn supervises(&self) -> bool {
-        self.supervised
-    }
-
     /// Measure response times at these inputs (`None`: not measured).
     pub(crate) fn set_labels(&mut self, labels: Vec<Option<Arc<ArrivalLabel>>>) {
         self.labels = labels;
@@ -329,6 +324,9 @@ impl Runner {
         for arrival in &mut self.last_arrival {
             *arrival = now;
         }
+        self.cx.entered_at = now;
+        self.cx.clock = clock.clone();
+        self.automaton.set_clock(&clock);
         self.time = clock;
         if let Some(watch) = &self.watch {
             watch.set_clock(&self.time);
@@ -592,10 +590,14 @@ impl Runner {
     /// thread's clear, two cache-line transfers per packet, are saved. Nothing is lost:
     /// before it parks, the thread clears the bell and looks at every source once more,
     /// so the doorbell's protocol (`port.rs`, `Doorbell`) holds from there on. A
-    /// compound's bell is also rung by events that leave no source to look at, so it
-    /// spins on the bell.
+    /// compound's bell is also rung by events that leave no source to look at, and so
+    /// is any component's on a virtual clock when the clock advances: those spin on
+    /// the bell.
     fn wait_for_input(&mut self) {
-        let polling = !self.supervised;
+        // On a virtual clock the bell also says the clock advanced (no source shows
+        // that): spin on the bell, or an advance rung while polling would be cleared
+        // unseen and the component never settle at the new time.
+        let polling = !self.supervised && self.time.is_real();
         let found = |runner: &Runner| {
             if polling {
                 runner.work_waiting()

@@ -659,6 +659,12 @@ impl System {
         system
     }
 
+    /// Put the components on `clock` (before they start: a compound's inner system,
+    /// when the compound is put on a clock).
+    pub(crate) fn set_clock(&mut self, clock: Clock) {
+        self.clock = clock;
+    }
+
     /// The clock the components' timers read.
     pub fn clock(&self) -> &Clock {
         &self.clock
@@ -699,9 +705,8 @@ impl System {
         let Some(mut runner) = slot.runner.take() else {
             return Ok(());
         };
-        // Compounds are not on the clock seam yet (their supervision timing reads the
-        // real clock): they and their instances keep the real clock.
-        if !self.clock.is_real() && !runner.supervises() {
+        // (A compound puts its instances on the same clock.)
+        if !self.clock.is_real() {
             runner.set_clock(self.clock.clone());
         }
         let join = crate::thread::spawn(&slot.name, move || runner.run()).map_err(|source| {

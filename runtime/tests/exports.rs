@@ -12,40 +12,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
 use coolbot::{
-    Component, CompoundBuilder, Fault, InputKind, OutputKind, OverflowPolicy, Policy, Spec,
-    StateSpec, Step, Supervisor, System, TimingSpec,
+    Component, CompoundBuilder, Fault, InputKind, OutputKind, OverflowPolicy, Policy, Step, System,
 };
-use support::shell::{ShellBuilder, input, output};
+use support::shell::{Idle, ShellBuilder, input, output};
 use support::{WAIT, eventually};
-
-/// A supervisor with one state and nothing to do.
-struct Idle;
-
-static IDLE: Spec = Spec {
-    type_name: "Idle",
-    doc: "",
-    states: &[StateSpec {
-        name: "supervising",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-impl Supervisor for Idle {
-    fn spec(&self) -> &'static Spec {
-        &IDLE
-    }
-}
 
 /// The input kinds, as the port under test or as the outside consumer of an output.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

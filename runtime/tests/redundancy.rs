@@ -12,40 +12,11 @@ use std::time::{Duration, Instant};
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{
     Automaton, Component, CompoundBuilder, Context, Fault, InputKind, InputSpec, OnSpec,
-    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, Spec, StateSpec, Step, Supervisor,
-    System, TimingSpec, Value,
+    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, Spec, StateSpec, Step, System,
+    TimingSpec, Value,
 };
 use support::WAIT;
-use support::shell::{ShellBuilder, input, output};
-
-/// A supervisor with one state and nothing to do.
-struct Idle;
-
-static IDLE: Spec = Spec {
-    type_name: "Idle",
-    doc: "",
-    states: &[StateSpec {
-        name: "supervising",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-impl Supervisor for Idle {
-    fn spec(&self) -> &'static Spec {
-        &IDLE
-    }
-}
+use support::shell::{Idle, ShellBuilder, input, output};
 
 const QUEUE: usize = 4096;
 

@@ -3,7 +3,7 @@
 //! settling time and reconfiguration backoff between decisions.
 
 use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crate::adapt::{AdaptAction, Adaptation, Decision, Levels, Member, Pressure};
 use crate::automaton::Context;
@@ -62,7 +62,7 @@ impl Compound {
     /// The instances taking part in adaptation, as the policy sees them: those
     /// active and running with adaptation on, and those suspended by adaptation.
     pub(super) fn members(&mut self) -> (Vec<Member>, Vec<usize>) {
-        let now = Instant::now();
+        let now = self.clock.now();
         let Some(coordinator) = self.coordinator.as_mut() else {
             return (Vec::new(), Vec::new());
         };
@@ -131,7 +131,7 @@ impl Compound {
             let Some(coordinator) = self.coordinator.as_mut() else {
                 return;
             };
-            let now = Instant::now();
+            let now = self.clock.now();
             if let Some(resumed) = coordinator.resumed_at
                 && now.saturating_duration_since(resumed)
                     > coordinator.settling(&members, &self.view.instances, &indices)
@@ -236,7 +236,7 @@ impl Compound {
                         ),
                     };
                     let index = indices[m];
-                    coordinator.pending[index] = Some((to, Instant::now()));
+                    coordinator.pending[index] = Some((to, self.clock.now()));
                     let step = Adaptation {
                         component: member.name.clone(),
                         action,

@@ -799,6 +799,7 @@ impl CompoundBuilder {
             timed,
             next_timed: None,
             moves: Vec::new(),
+            clock: crate::clock::Clock::real(),
             deferred_faults: false,
         };
         Ok(Component::driven(self.name, Box::new(compound), self.ports).with_instances(handles))

@@ -259,12 +259,20 @@ impl Driven for Compound {
         true
     }
 
+    fn set_clock(&mut self, clock: &crate::clock::Clock) {
+        // Before the compound's thread starts, so before its instances start.
+        self.clock = clock.clone();
+        if let Some(system) = self.system.as_mut() {
+            system.set_clock(clock.clone());
+        }
+    }
+
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
         let outcome = self.supervise_turn(state, cx);
         if let Some(coordinator) = self.coordinator.as_mut()
             && coordinator
                 .settle_until
-                .is_some_and(|until| Instant::now() >= until)
+                .is_some_and(|until| self.clock.now() >= until)
         {
             // Settled: promotion may be due.
             coordinator.settle_until = None;
@@ -365,7 +373,7 @@ impl Driven for Compound {
             .exports
             .iter()
             .any(|export| export.held())
-            .then(|| crate::thread::later(Instant::now(), EXPORT_RETRY));
+            .then(|| crate::thread::later(self.clock.now(), EXPORT_RETRY));
         queue
             .chain(restarts)
             .chain(fresh)

@@ -29,8 +29,9 @@ pub(super) trait Export: Send {
     /// The instance port, as declared (`instance.port`).
     fn target(&self) -> &str;
     /// Inputs: move what arrived at the compound's port on to the instance's, without
-    /// waiting: what a full `Block` fifo cannot take now stays at the compound's port.
-    fn forward(&mut self) {}
+    /// waiting: what a full `Block` fifo cannot take now stays at the compound's port
+    /// (`now`: the compound's clock).
+    fn forward(&mut self, _now: Instant) {}
     /// Inputs: packets stayed at the compound's port at the last `forward` (the
     /// compound's thread retries soon).
     fn held(&self) -> bool {
@@ -135,7 +136,7 @@ impl<T: Packet> Export for InputExport<T> {
         &self.target
     }
 
-    fn forward(&mut self) {
+    fn forward(&mut self, now: Instant) {
         // A fifo with the `Block` policy would make the compound's thread wait while
         // it is full (its instance may hang): only what it has room for goes now.
         // A redundant group's members (several inputs fed) are fed in step: while
@@ -146,7 +147,6 @@ impl<T: Packet> Export for InputExport<T> {
         // `MonitorEvent::Overflow`), which puts it out of step with its group.
         let rooms: Vec<Option<usize>> = self.linked.iter().map(ErasedInput::room).collect();
         let open = rooms.iter().any(|room| *room != Some(0));
-        let now = Instant::now();
         self.full_since.resize(rooms.len(), None);
         for (since, room) in self.full_since.iter_mut().zip(&rooms) {
             *since = match (room, *since) {
@@ -251,7 +251,7 @@ impl Export for TickExport {
         &self.target
     }
 
-    fn forward(&mut self) {
+    fn forward(&mut self, _now: Instant) {
         for _ in 0..self.twin.take() {
             self.relay.emit();
         }

@@ -19,7 +19,7 @@ use super::state::{Compound, Status, command};
 
 impl Compound {
     pub(super) fn enqueue(&mut self, index: usize) {
-        let now = Instant::now();
+        let now = self.clock.now();
         self.instances[index].status = Status::Recovering;
         self.queue.push(Recovering {
             instance: index,
@@ -142,7 +142,7 @@ impl Compound {
     /// The `restart` policy for instance `index`, which failed with `error`: a restart
     /// now or after the backoff, or the fault propagates once the budget is spent.
     pub(super) fn schedule_restart(&mut self, index: usize, error: &str) -> Result<(), Fault> {
-        let now = Instant::now();
+        let now = self.clock.now();
         let budget = self.budget;
         let instance = &mut self.instances[index];
         if instance.pending.is_some() {

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::Receiver;
 
 use crate::automaton::Fault;
+use crate::clock::Clock;
 use crate::commander::Commander;
 use crate::monitor::{Command, Handle, MonitorEvent, Posted, Step, Supervision};
 use crate::port::ErasedInput;
@@ -153,6 +154,9 @@ pub(super) struct Compound {
     /// Stand-in moves `(from, to)` whose waiting pull requests have not followed yet
     /// (they follow once a rewiring completes).
     pub(super) moves: Vec<(usize, usize)>,
+    /// The clock its timers read (the runner's: a virtual one in tests), which its
+    /// instances run on too.
+    pub(super) clock: Clock,
 }
 
 pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {

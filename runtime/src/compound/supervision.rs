@@ -4,7 +4,6 @@
 
 use std::collections::{BTreeSet, HashSet};
 use std::sync::atomic::Ordering;
-use std::time::Instant;
 
 use crate::automaton::{Context, Fault};
 use crate::monitor::MonitorEvent;
@@ -46,7 +45,7 @@ impl Compound {
         if self.timed.is_empty() {
             return;
         }
-        let now = Instant::now();
+        let now = self.clock.now();
         if self.next_timed.is_none_or(|due| now >= due) {
             let period = cx.period().unwrap_or(DEFAULT_SUPERVISION_PERIOD);
             self.next_timed = Some(crate::thread::later(now, period));
@@ -169,8 +168,9 @@ impl Compound {
         state: usize,
         cx: &Context,
     ) -> Result<Option<usize>, Fault> {
+        let now = self.clock.now();
         for export in &mut self.exports {
-            export.forward();
+            export.forward(now);
         }
         self.fresh = false;
         let mut changed = self.take_events(true)?;
@@ -181,10 +181,10 @@ impl Compound {
             self.deferred_policies()?;
         }
         if !self.queue.is_empty() {
-            self.recover(Instant::now())?;
+            self.recover(self.clock.now())?;
         }
         if self.instances.iter().any(|i| i.pending.is_some()) {
-            self.restarts_due(Instant::now())?;
+            self.restarts_due(self.clock.now())?;
         }
         self.refresh_own(&mut changed);
         self.refresh_compound(cx, &mut changed);

@@ -154,3 +154,33 @@ pub fn output(name: &'static str, kind: coolbot::OutputKind, pull: bool) -> Outp
         pull,
     }
 }
+
+/// A supervisor with one state and nothing to do (a compound whose instances the
+/// test drives).
+pub struct Idle;
+
+static IDLE: Spec = Spec {
+    type_name: "Idle",
+    doc: "",
+    states: &[StateSpec {
+        name: "supervising",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Supervisor for Idle {
+    fn spec(&self) -> &'static Spec {
+        &IDLE
+    }
+}
