@@ -15,6 +15,7 @@ use support::{Injected, Rig, Script, Scripted, WAIT, eventually};
 
 #[test]
 fn a_panic_goes_to_running_error_and_the_others_go_on() {
+    support::quiet_component_panics();
     let rig = Rig::started(Script::new());
     // A second, independent worker in the same system.
     let mut rig = rig;
@@ -64,6 +65,7 @@ fn a_panic_goes_to_running_error_and_the_others_go_on() {
 
 #[test]
 fn a_panicking_start_goes_to_starting_error() {
+    support::quiet_component_panics();
     let script = Script::new();
     script.panic_in(Some("start"));
     let rig = Rig::started(script);
@@ -208,6 +210,7 @@ fn a_degrade_plan_lowers_the_quality_until_there_is_no_lower_level() {
 
 #[test]
 fn a_failing_exit_section_leads_to_a_defined_state() {
+    support::quiet_component_panics();
     // Leaving for `ready`: running_error.
     let rig = Rig::started(Script::new());
     rig.run_busy();
@@ -231,6 +234,7 @@ fn a_failing_exit_section_leads_to_a_defined_state() {
 
 #[test]
 fn a_panicking_stop_is_recorded_and_the_transition_completes() {
+    support::quiet_component_panics();
     let rig = Rig::started(Script::new());
     rig.script.panic_in(Some("stop"));
     rig.command(Controllable::Dead).expect("dead");

@@ -306,3 +306,56 @@ fn the_harness_example_runs() {
     );
     cargo(&out, &["test", "--quiet", "--test", "tally"]);
 }
+
+/// The tests the "Constructs at run time" table of `docs/language.md` cites, as
+/// `(file, test)`: each cell names `path/file.rs::test`, and `::test` goes on with the
+/// file named before it.
+fn cited_tests(text: &str) -> Vec<(String, String)> {
+    let table = text
+        .split("## Constructs at run time")
+        .nth(1)
+        .expect("the table's section");
+    let mut cited = Vec::new();
+    for row in table
+        .lines()
+        .skip_while(|line| !line.starts_with('|'))
+        .take_while(|line| line.starts_with('|'))
+        .skip(2)
+    {
+        let cell = row.trim_end_matches('|').rsplit('|').next().unwrap_or("");
+        let mut file = String::new();
+        for (index, piece) in cell.split('`').enumerate() {
+            if index % 2 == 0 {
+                continue;
+            }
+            let Some((path, test)) = piece.rsplit_once("::") else {
+                continue;
+            };
+            if !path.is_empty() {
+                file = path.to_owned();
+            }
+            if !file.is_empty() && !test.is_empty() {
+                cited.push((file.clone(), test.to_owned()));
+            }
+        }
+    }
+    cited
+}
+
+#[test]
+fn every_test_the_constructs_table_cites_exists() {
+    let cited = cited_tests(&language_md());
+    assert!(cited.len() > 50, "the table cites tests: {cited:?}");
+    let missing: Vec<String> = cited
+        .iter()
+        .filter(|(file, test)| {
+            let source = std::fs::read_to_string(repository().join(file)).unwrap_or_default();
+            !source.contains(&format!("fn {test}("))
+        })
+        .map(|(file, test)| format!("{file}::{test}"))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "docs/language.md cites tests that do not exist: {missing:#?}"
+    );
+}

@@ -43,8 +43,8 @@ impl Compound {
     /// Take the active members of redundant groups that were left out of packets out
     /// of their groups. A member that leads hands the lead to a member still in step, if
     /// one is; if none is, it keeps leading (the stream is what it sends: its losses
-    /// are counted at its inputs) and every other member, out of step with it now, is
-    /// resynchronized. Returns whether the arrangement changed (the caller rewires).
+    /// are counted at its inputs). Returns whether the arrangement changed (the caller
+    /// rewires).
     pub(super) fn keep_in_step(&mut self) -> bool {
         let mut changed = false;
         for group in 0..self.groups.len() {
@@ -86,22 +86,9 @@ impl Compound {
                         takeover(replayed, missing),
                     );
                 }
-                None => {
-                    // Nobody has what it lost: it leads on from here.
-                    self.joined(leader);
-                    let name = self.instances[leader].name.clone();
-                    let others: Vec<usize> = active
-                        .iter()
-                        .copied()
-                        .filter(|m| *m != leader && self.instances[*m].status == Status::Active)
-                        .collect();
-                    for member in others {
-                        self.resync(
-                            member,
-                            format!("out of step with the leader `{name}`, which was left out of {lost} input packet(s)"),
-                        );
-                    }
-                }
+                // Every active member lost packets (the others were taken out
+                // above): nobody has what it lost, and it leads on from here.
+                None => self.joined(leader),
             }
         }
         changed
