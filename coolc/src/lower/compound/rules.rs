@@ -101,9 +101,14 @@ fn enum_path(name: &str) -> String {
 
 /// The checker's type of an operand as the generated Rust can read it: a packet, a
 /// list or anything else that is not a rule value becomes [`RTy::Unknown`] (so
-/// comparisons with it are `false`), also under `?`; `T??` reads as `T?`.
+/// comparisons with it are `false`); under `?` it stays `Optional(Other)`, read for
+/// its presence only (the checker lets it compare with `none` only); `T??` reads as
+/// `T?`.
 fn readable(ty: &RTy) -> RTy {
     match ty {
+        RTy::Optional(inner) if presence_only(inner) => {
+            RTy::Optional(Box::new(RTy::Other(String::new())))
+        }
         RTy::Optional(inner) => match readable(inner) {
             RTy::Unknown => RTy::Unknown,
             RTy::Optional(inner) => RTy::Optional(inner),
@@ -111,6 +116,16 @@ fn readable(ty: &RTy) -> RTy {
         },
         RTy::Other(_) | RTy::Symbol(_) | RTy::Unknown => RTy::Unknown,
         other => other.clone(),
+    }
+}
+
+/// Whether an optional value of type `inner` is read for its presence only (a packet,
+/// a list: nothing a rule compares but with `none`).
+fn presence_only(inner: &RTy) -> bool {
+    match inner {
+        RTy::Other(_) => true,
+        RTy::Optional(inner) => presence_only(inner),
+        _ => false,
     }
 }
 
@@ -711,9 +726,13 @@ fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
         narrow: false,
     };
     if maybe {
-        // `Option<&T>`: only the types whose value can be copied out of a reference.
+        // `Option<&T>`: only the types whose value can be copied out of a reference,
+        // and an optional packet's presence.
         let code = match ty {
             RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => format!("{field}.copied()"),
+            RTy::Optional(inner) if matches!(inner.as_ref(), RTy::Other(_)) => {
+                format!("{field}.map(|value| value.as_ref().map(|_| ()))")
+            }
             _ => return unreadable,
         };
         return Operand {
@@ -735,6 +754,8 @@ fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
             RTy::Float => format!("{field}.map(f64::from)"),
             RTy::Str => format!("{field}.as_deref()"),
             RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
+            // Present or not (compared with `none` only).
+            RTy::Other(_) => format!("{field}.as_ref().map(|_| ())"),
             _ => return unreadable,
         },
         _ => return unreadable,
@@ -788,6 +809,8 @@ fn view_value(raw: &str, ty: &RTy) -> Option<String> {
             RTy::Enum(name) => serde(&format!("::core::option::Option<{}>", enum_path(name))),
             // Owned: compared through `as_deref` (see `Scope::comparison`).
             RTy::Str => serde("::core::option::Option<::std::string::String>"),
+            // Present or not (compared with `none` only): any value decodes.
+            RTy::Other(_) => serde("::core::option::Option<::serde::de::IgnoredAny>"),
             _ => return None,
         },
         _ => return None,

@@ -1,7 +1,7 @@
 //! Filled-in `Gauge`: counts, and changes its variables as it counts.
 
 use crate::generated::gauge::*;
-use crate::generated::types::Mode;
+use crate::generated::types::{Count, Mode};
 
 /// No state of its own.
 #[derive(Debug, Default)]
@@ -17,6 +17,9 @@ impl Gauge {
         if cx.vars.level == 5 {
             cx.vars.mode = Mode::Backup;
             cx.vars.maybe = Some(5);
+        }
+        if cx.vars.level == 60 {
+            cx.vars.last = Some(Count { n: 60 });
         }
         if cx.vars.level == 30 {
             cx.rt

@@ -10,6 +10,7 @@ impl Supervisor for ProbeSupervisor {
     fn seen_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         cx.vars.count += 1;
         cx.vars.opt = Some(3);
+        cx.vars.pkt = Some(crate::generated::types::Count { n: 3 });
         Ok(())
     }
 
