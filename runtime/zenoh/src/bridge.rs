@@ -203,17 +203,35 @@ impl Wire {
     }
 
     /// Publish one packet; `counted`: a packet nobody subscribes to is a loss (data
-    /// and ticks; a poster's value stays available on query).
-    fn send(&self, bytes: Result<Vec<u8>, String>, counted: bool) {
+    /// and ticks; a poster's value stays available on query). Whether Zenoh took it
+    /// (if not, it was counted here).
+    fn send(&self, bytes: Result<Vec<u8>, String>, counted: bool) -> bool {
         let bytes = match bytes {
             Ok(bytes) => bytes,
-            Err(reason) => return self.lost(&reason),
+            Err(reason) => {
+                self.lost(&reason);
+                return false;
+            }
         };
         if counted && !self.matching.load(Ordering::Acquire) {
-            return self.lost("nothing on the network subscribes to the key");
+            self.lost("nothing on the network subscribes to the key");
+            return false;
         }
         if let Err(error) = self.publisher.put(bytes).wait() {
             self.lost(&format!("zenoh refused it: {error}"));
+            return false;
+        }
+        true
+    }
+
+    /// Publish `packet` as the next numbered message of this outlet (`epoch`, the
+    /// number after `sent`): a number is used only by a message Zenoh took, so an
+    /// inlet that sees one missing knows it was lost on the way, not here (where it
+    /// would be counted already).
+    fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &mut u64, packet: &P) {
+        let next = *sent + 1;
+        if self.send(encode(&(epoch, next, packet)), true) {
+            *sent = next;
         }
     }
 }
@@ -237,14 +255,16 @@ impl Drop for PullServer {
 
 type PullFn = Box<dyn Fn(Duration) -> Result<Vec<u8>, String> + Send>;
 
-/// A pull answer: what `pull` returns, encoded (its error as text).
+/// A pull answer: what `pull` returns, encoded as a message of the outlet's `epoch`
+/// numbered 0 (an answer is not part of the numbered stream), its error as text.
 fn encoded_pull<P: Serialize>(
+    epoch: u64,
     pull: impl Fn(Duration) -> Result<P, coolbot::port::PullError> + Send + 'static,
 ) -> PullFn {
     Box::new(move |timeout| {
         pull(timeout)
             .map_err(|error| error.to_string())
-            .and_then(|packet| encode(&packet))
+            .and_then(|packet| encode(&(epoch, 0u64, packet)))
     })
 }
 
@@ -304,6 +324,12 @@ fn pull_server(
 /// post).
 type Posted<T> = (u64, u64, T);
 
+/// A data packet or a count of tick events on the wire: the outlet's epoch, the
+/// message's number (1, 2, ... for each message the outlet handed to Zenoh; 0 for a
+/// pull answer, which is not part of the stream), the packet. An inlet counts the
+/// numbers missing between two it received as lost.
+type Numbered<T> = (u64, u64, T);
+
 struct Outlet<T> {
     spec: &'static Spec,
     input: OutletInput<T>,
@@ -311,6 +337,8 @@ struct Outlet<T> {
     pull: bool,
     epoch: u64,
     seq: Arc<AtomicU64>,
+    /// The number of the last data or tick message Zenoh took.
+    sent: u64,
     /// A poster outlet's last published value, served to late-joining readers.
     posted: Arc<Mutex<Option<Vec<u8>>>>,
     published_once: bool,
@@ -471,19 +499,19 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 let pull: PullFn = match &input {
                     OutletInput::Tick(port) => {
                         let port = port.clone();
-                        encoded_pull(move |t| port.pull(t))
+                        encoded_pull(epoch, move |t| port.pull(t))
                     }
                     OutletInput::Fifo(port) => {
                         let port = port.clone();
-                        encoded_pull(move |t| port.pull(t))
+                        encoded_pull(epoch, move |t| port.pull(t))
                     }
                     OutletInput::Ufifo(port) => {
                         let port = port.clone();
-                        encoded_pull(move |t| port.pull(t))
+                        encoded_pull(epoch, move |t| port.pull(t))
                     }
                     OutletInput::Last(port) => {
                         let port = port.clone();
-                        encoded_pull(move |t| port.pull(t))
+                        encoded_pull(epoch, move |t| port.pull(t))
                     }
                     OutletInput::Poster(port) => {
                         let port = port.clone();
@@ -519,6 +547,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             pull: pull.is_some(),
             epoch,
             seq,
+            sent: 0,
             posted,
             published_once: false,
             _poster_queryable: poster_queryable,
@@ -536,28 +565,29 @@ impl<T: Packet + Serialize> Outlet<T> {
             return;
         }
         let wire = &self.wire;
+        let (epoch, sent) = (self.epoch, &mut self.sent);
         match &self.input {
             OutletInput::Tick(port) => {
                 let mut events = port.take();
                 while events > 0 {
                     let batch = events.min(MAX_EVENTS_PER_MESSAGE);
-                    wire.send(encode(&batch), true);
+                    wire.send_numbered(epoch, sent, &batch);
                     events -= batch;
                 }
             }
             OutletInput::Fifo(port) => {
                 for packet in port.drain() {
-                    wire.send(encode(&packet), true);
+                    wire.send_numbered(epoch, sent, &packet);
                 }
             }
             OutletInput::Ufifo(port) => {
                 for packet in port.drain() {
-                    wire.send(encode(&packet), true);
+                    wire.send_numbered(epoch, sent, &packet);
                 }
             }
             OutletInput::Last(port) => {
                 if let Some(packet) = port.take_new() {
-                    wire.send(encode(&packet), true);
+                    wire.send_numbered(epoch, sent, &packet);
                 }
             }
             OutletInput::Poster(port) => {
@@ -668,6 +698,58 @@ enum InletOutput<T> {
 
 type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
 
+/// The most outlets (epochs) an inlet remembers the last number of: a key has few
+/// producers, and each restart of one is a new epoch.
+const MAX_EPOCHS: usize = 64;
+
+/// An inlet's count of the numbered messages missing on the way: per outlet (its
+/// epoch), the numbers skipped between two received are lost, counted at the inlet's
+/// `network` input with the reason. The first message of an epoch counts nothing
+/// before it (what an outlet sent before the inlet subscribed was counted at the
+/// outlet, as sent to nobody).
+struct Gaps {
+    last: Mutex<Vec<(u64, u64)>>,
+    network: Arc<ErasedInput>,
+    key: String,
+}
+
+impl Gaps {
+    fn new(network: Arc<ErasedInput>, key: String) -> Gaps {
+        Gaps {
+            last: Mutex::new(Vec::new()),
+            network,
+            key,
+        }
+    }
+
+    fn received(&self, epoch: u64, seq: u64) {
+        if seq == 0 {
+            return; // A pull answer.
+        }
+        let missing = {
+            let mut last = lock(&self.last);
+            match last.iter_mut().find(|(e, _)| *e == epoch) {
+                Some((_, newest)) => {
+                    let missing = seq.saturating_sub(*newest + 1);
+                    *newest = (*newest).max(seq);
+                    missing
+                }
+                None => {
+                    if last.len() >= MAX_EPOCHS {
+                        last.remove(0);
+                    }
+                    last.push((epoch, seq));
+                    0
+                }
+            }
+        };
+        if missing > 0 {
+            self.network.count_loss(missing);
+            tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing)");
+        }
+    }
+}
+
 struct Inlet {
     spec: &'static Spec,
     session: zenoh::Session,
@@ -684,31 +766,45 @@ fn deliverer<T: Packet + DeserializeOwned>(
     network: ErasedInput,
     key: String,
 ) -> DeliverFn {
+    let network = Arc::new(network);
+    let counted = Arc::clone(&network);
+    let lost_key = key.clone();
     let lost = move |reason: String| {
-        network.count_loss(1);
-        tracing::warn!(key = %key, "inlet lost a packet: {reason}");
+        counted.count_loss(1);
+        tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}");
     };
+    let gaps = Gaps::new(network, key);
     match output {
         InletOutput::Tick(port) => {
-            Arc::new(move |bytes| match postcard::from_bytes::<u64>(bytes) {
-                Ok(events) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
-                    "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
-                )),
-                Ok(events) => {
-                    for _ in 0..events {
-                        port.emit();
+            Arc::new(
+                move |bytes| match postcard::from_bytes::<Numbered<u64>>(bytes) {
+                    Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
+                        "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
+                    )),
+                    Ok((epoch, seq, events)) => {
+                        gaps.received(epoch, seq);
+                        for _ in 0..events {
+                            port.emit();
+                        }
                     }
-                }
-                Err(error) => lost(format!("does not decode as events: {error}")),
-            })
+                    Err(error) => lost(format!("does not decode as events: {error}")),
+                },
+            )
         }
-        InletOutput::Data(port) => Arc::new(move |bytes| match postcard::from_bytes::<T>(bytes) {
-            Ok(packet) => port.send(packet),
-            Err(error) => lost(format!(
-                "does not decode as {}: {error}",
-                std::any::type_name::<T>()
-            )),
-        }),
+        InletOutput::Data(port) => {
+            Arc::new(
+                move |bytes| match postcard::from_bytes::<Numbered<T>>(bytes) {
+                    Ok((epoch, seq, packet)) => {
+                        gaps.received(epoch, seq);
+                        port.send(packet);
+                    }
+                    Err(error) => lost(format!(
+                        "does not decode as {}: {error}",
+                        std::any::type_name::<T>()
+                    )),
+                },
+            )
+        }
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
             Arc::new(

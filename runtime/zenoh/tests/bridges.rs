@@ -218,12 +218,52 @@ fn a_packet_that_does_not_decode_is_counted_at_the_inlet() {
         Ok(MonitorEvent::Overflow { ref port, lost: 1, total: 1 }) if port == "network"
     ));
     assert_eq!(sink.received(), 0);
-    // A good one still goes through.
+    // A good one (numbered, as an outlet sends it) still goes through.
     a.session()
-        .put(key, postcard::to_allocvec(&pose(3)).unwrap())
+        .put(key, postcard::to_allocvec(&(7u64, 1u64, pose(3))).unwrap())
         .wait()
         .unwrap();
     assert!(wait_until(PATIENCE, || sink.latest() == Some(pose(3))));
+}
+
+#[test]
+fn numbers_missing_on_the_way_are_counted_lost_at_the_inlet() {
+    // Messages are numbered per outlet (its epoch): the inlet counts the numbers
+    // missing between two it received, so a packet lost on the way is counted.
+    let (a, b) = pair("gap-a", "gap-b");
+    let key = "test/gap";
+    let sink = FifoIn::<Pose>::new(16, OverflowPolicy::Reject);
+    let queue = InputKind::Fifo {
+        capacity: 16,
+        policy: OverflowPolicy::Reject,
+    };
+    let consumer = consumer(&b, key, OutputKind::Data, queue, &sink);
+    let inlet = consumer.handle("inlet").unwrap();
+    wait_subscribed(&a, key);
+    let put = |epoch: u64, seq: u64| {
+        a.session()
+            .put(
+                key,
+                postcard::to_allocvec(&(epoch, seq, pose(seq))).unwrap(),
+            )
+            .wait()
+            .unwrap();
+    };
+    // Outlet 7 sends 1, 2, then 5 (3 and 4 lost); outlet 9 starts at 4 (what it
+    // sent before the inlet was there is not the inlet's to count), then 5.
+    for (epoch, seq) in [(7, 1), (7, 2), (7, 5), (9, 4), (9, 5)] {
+        put(epoch, seq);
+    }
+    let mut received = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        received.extend(sink.drain().map(|p| p.seq));
+        received.len() == 5
+    }));
+    assert_eq!(received, [1, 2, 5, 4, 5]);
+    let monitor = inlet
+        .wait_for(|m| m.overflows == 2, PATIENCE)
+        .expect("the two missing numbers are counted");
+    assert_eq!(monitor.port_overflows, vec![("network".to_owned(), 2)]);
 }
 
 #[test]
@@ -384,7 +424,7 @@ fn tick_events_are_counted_never_lost() {
     // A message claiming more events than an outlet ever sends is counted as lost,
     // not emitted.
     a.session()
-        .put(key, postcard::to_allocvec(&u64::MAX).unwrap())
+        .put(key, postcard::to_allocvec(&(7u64, 1u64, u64::MAX)).unwrap())
         .wait()
         .unwrap();
     let inlet = consumer.handle("inlet").unwrap();
