@@ -260,7 +260,7 @@ pub fn component_with(
         inputs,
         outputs,
     };
-    ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports)
+    ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports){% if let Some(adaptation) = c.adaptation %}.with_adaptation({{ adaptation }}){% endif %}
 }
 
 /// Adapts a [`Behavior`] to the runtime's index-based `coolbot::Automaton`.

@@ -300,6 +300,8 @@ pub struct Atomic {
     pub exceptions: Vec<ExceptionIr>,
     /// Rust expression of the `coolbot::TimingSpec`.
     pub timing: String,
+    /// Rust expression of its `adaptation { ... }` (a `coolbot::AdaptConfig`), if any.
+    pub adaptation: Option<String>,
     /// Behavior trait methods (the stubs), in a stable order.
     pub methods: Vec<Method>,
     /// `section` dispatch arms: `(pattern, call)`.

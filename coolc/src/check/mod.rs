@@ -16,6 +16,7 @@
 //! table, every component's interface, every `when` rule typed), which
 //! `crate::Checked` hands to `lower` and `diagram` once there are no errors.
 
+mod adaptation;
 mod automaton;
 mod component;
 mod compound;
