@@ -776,7 +776,7 @@ impl<'a> Lowerer<'a> {
             adaptation: self
                 .checked
                 .interface(&c.name.name)
-                .and_then(|interface| adaptation::config(&interface.adaptation)),
+                .and_then(|interface| adaptation::written_fields(&interface.adaptation)),
             methods,
             section_arms,
             choose_arms,

@@ -14,6 +14,19 @@ pub(super) fn config(tuning: &Tuning) -> Option<String> {
 /// The `coolbot::AdaptConfig` a tuning says, even when it is the default (an
 /// instance's block replaces its component's `off`).
 pub(super) fn config_always(tuning: &Tuning) -> String {
+    let mut fields = fields(tuning);
+    fields.push("..::coolbot::AdaptConfig::default()".to_owned());
+    format!("::coolbot::AdaptConfig {{ {} }}", fields.join(", "))
+}
+
+/// The fields of the `coolbot::AdaptConfig` a tuning says, or `None` when it says
+/// nothing (for the atomic template, which lays the struct out itself).
+pub(super) fn written_fields(tuning: &Tuning) -> Option<Vec<String>> {
+    (*tuning != Tuning::default()).then(|| fields(tuning))
+}
+
+/// `field: value` for every key the tuning writes.
+fn fields(tuning: &Tuning) -> Vec<String> {
     let mut fields = Vec::new();
     if tuning.off {
         fields.push("enabled: ::core::option::Option::Some(false)".to_owned());
@@ -30,8 +43,7 @@ pub(super) fn config_always(tuning: &Tuning) -> String {
             fields.push(format!("{field}: {value}"));
         }
     }
-    fields.push("..::coolbot::AdaptConfig::default()".to_owned());
-    format!("::coolbot::AdaptConfig {{ {} }}", fields.join(", "))
+    fields
 }
 
 /// The `coolbot::adapt::Selector` a tuning names, if it names one.
