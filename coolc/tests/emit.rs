@@ -171,7 +171,7 @@ fn builder_names_the_import_a_sibling_file_offers() {
 fn adaptation_blocks() {
     let krate = lower_fixture("tune/tune.cool", "tune");
     let files = emit::emit_crate(&krate);
-    for module in ["slow", "frozen", "cell"] {
+    for module in ["slow", "frozen", "cell", "still"] {
         let path = format!("src/generated/{module}.rs");
         let file = files
             .iter()

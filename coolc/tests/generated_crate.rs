@@ -158,8 +158,9 @@ fn compounds_with_converters_nest_three_levels_deep() {
 #[test]
 fn adaptation_blocks_take_effect_at_run_time() {
     // `tests/data/tune`: a tuned component degrades, one with `adaptation { off; }`
-    // keeps its period under the same violations, and a compound's instance blocks
-    // replace their components' tuning (seen in the detectors' settling periods).
+    // keeps its period under the same violations, a compound's instance blocks
+    // replace their components' tuning (seen in the detectors' settling periods), and
+    // a compound turned off degrades none of its late instances.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("tune.cool");
     std::fs::copy(data("tune/tune.cool"), &description).unwrap();
@@ -168,10 +169,11 @@ fn adaptation_blocks_take_effect_at_run_time() {
     fill_check_and_run(
         &krate,
         "tune",
-        &["slow.rs", "frozen.rs", "cell.rs"],
+        &["slow.rs", "frozen.rs", "cell.rs", "still.rs"],
         &[
             "off_means_no_degradation_and_tuning_sets_the_detector",
             "instance_blocks_replace_their_components_tuning",
+            "a_compound_turned_off_degrades_none_of_its_instances",
         ],
     );
 }
