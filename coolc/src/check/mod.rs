@@ -8,7 +8,8 @@
 //! The submodules group the rules: `names` (keywords, naming, duplicates), `values`
 //! (types, defaults, sizes, timing), `component` (members and their placement),
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
-//! (instances, connections, interfaces, containment) and `rules` (typed supervisor
+//! (instances, connections, interfaces, containment), `adaptation` (`adaptation`
+//! blocks) and `rules` (typed supervisor
 //! rule expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
 //!
