@@ -9,8 +9,7 @@
 //! (types, defaults, sizes, timing), `component` (members and their placement),
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
 //! (instances, connections, interfaces, containment), `adaptation` (`adaptation`
-//! blocks) and `rules` (typed supervisor
-//! rule expressions). `model` computes what a component offers to others (ports,
+//! blocks) and `rules` (typed supervisor rule expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
 //!
 //! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol

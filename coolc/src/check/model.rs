@@ -494,11 +494,9 @@ impl<'a> Model<'a> {
                         }
                     }
                 }
-                ast::Member::Adaptation(block) => {
-                    // The first block (a second one is an error).
-                    if interface.adaptation == Tuning::default() {
-                        interface.adaptation = Tuning::of(block);
-                    }
+                // The first block (a second one is an error).
+                ast::Member::Adaptation(block) if interface.adaptation == Tuning::default() => {
+                    interface.adaptation = Tuning::of(block);
                 }
                 ast::Member::Timing(timing) => {
                     for entry in &timing.entries {
