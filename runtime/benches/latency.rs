@@ -3,7 +3,8 @@
 //! threads. One-way latency is half a round trip; every round trip is one sample.
 //! `fifo_labeled` is the fifo ping-pong between two aperiodic components with a
 //! `max_response`: every packet is stamped on arrival (temporal labeling) and every
-//! response timed, the cost of issue 15's response times next to the plain fifo's.
+//! response timed, the cost of issue 15's response times next to the plain fifo's
+//! (reported, without a goal of its own).
 //!
 //! Goals (issue 3, item 8): p50 <= 1.5x and p99 <= 2x the baseline.
 //!
@@ -240,17 +241,22 @@ fn main() {
             || baseline_round(per_round),
         );
         let (project, baseline) = (Samples::new(project), Samples::new(baseline));
+        // Labeling is reported next to the plain fifo: the goals are the plain paths'.
+        let goal = |ratio| match kind {
+            Kind::FifoLabeled => Goal::None,
+            _ => Goal::AtMost(ratio),
+        };
         table.row(
             &format!("{name} p50"),
             Figure::Time(project.p50()),
             Figure::Time(baseline.p50()),
-            Goal::AtMost(1.5),
+            goal(1.5),
         );
         table.row(
             &format!("{name} p99"),
             Figure::Time(project.p99()),
             Figure::Time(baseline.p99()),
-            Goal::AtMost(2.0),
+            goal(2.0),
         );
         table.note(&format!(
             "{name}: {} samples per side; max project {:?}, baseline {:?}",
