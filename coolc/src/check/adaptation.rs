@@ -86,6 +86,20 @@ pub(super) fn block(checker: &mut Checker<'_, '_>, block: &ast::Adaptation, targ
             checker.push(diagnostic);
             continue;
         }
+        if matches!(key, "violations" | "settle") && target.compound {
+            let diagnostic = checker
+                .error(
+                    Code::MisplacedMember,
+                    entry.span,
+                    format!("`{key}` tunes an atomic component's detector, not a compound's supervisor"),
+                )
+                .with_label("in the adaptation of a compound")
+                .with_help(
+                    "a compound's supervisor settles for `hold + window + 1` periods; tune its instances' detectors in their own blocks",
+                );
+            checker.push(diagnostic);
+            continue;
+        }
         match key {
             "off" => {
                 if let Some(value) = &entry.value {

@@ -708,6 +708,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         "robot.base.motion",
         "robot.base.ranges",
         "robot.base.sim_ranges",
+        "robot.mapper",
         "robot.wanderer",
     ];
     let deadline = Instant::now() + Duration::from_secs(60);
