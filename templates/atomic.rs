@@ -261,6 +261,15 @@ pub fn component_with(
         outputs,
     };
     ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports)
+    {%- if let Some(fields) = c.adaptation %}.with_adaptation(
+        ::coolbot::AdaptConfig {
+        {%- for field in fields %}
+            {{ field }},
+        {%- endfor %}
+            ..::coolbot::AdaptConfig::default()
+        },
+    )
+    {%- endif %}
 }
 
 /// Adapts a [`Behavior`] to the runtime's index-based `coolbot::Automaton`.

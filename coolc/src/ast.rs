@@ -342,6 +342,8 @@ pub enum Member {
     Recovery(Recovery),
     /// `restart { limit N in D; backoff D..D; }`
     Restart(Restart),
+    /// `adaptation { off; }` or `adaptation { key value; ... }`
+    Adaptation(Adaptation),
 }
 
 /// A `link` member: a dependency of the generated crate.
@@ -705,6 +707,8 @@ pub struct Instance {
     pub overrides: Vec<Override>,
     /// A `timing { ... }` override.
     pub timing: Option<Timing>,
+    /// `adaptation { ... }` overrides, in source order (more than one is an error).
+    pub adaptation: Vec<Adaptation>,
     /// The whole member.
     pub span: Span,
 }
@@ -773,6 +777,26 @@ pub struct Restart {
     /// `backoff D..D`: the first wait before a repeated restart, and the longest.
     pub backoff: Option<(Expr, Expr)>,
     /// The whole member.
+    pub span: Span,
+}
+
+/// `adaptation { off; }` or `adaptation { window 4; hold 5; ... }`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adaptation {
+    /// Entries in source order.
+    pub entries: Vec<AdaptEntry>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// One `key [value];` entry of an `adaptation` block (the checker knows the keys).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdaptEntry {
+    /// `off`, `window`, `violations`, `hold`, `settle`, `homogeneity`, `selector`, ...
+    pub key: Ident,
+    /// The value, absent for `off`.
+    pub value: Option<Expr>,
+    /// The whole entry.
     pub span: Span,
 }
 

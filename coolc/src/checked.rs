@@ -11,7 +11,7 @@
 //! one rule typer (`check::rules`).
 
 use crate::ast::{self, FileId};
-use crate::check::model::{Interface, Ty};
+use crate::check::model::{Interface, Tuning, Ty};
 use crate::check::{Resolved, Typed};
 use crate::diagnostics::{self, Diagnostic, RenderOptions};
 use crate::resolve::DefKind;
@@ -131,6 +131,19 @@ impl Checked {
     /// nest it.
     pub fn interface(&self, name: &str) -> Option<&Interface> {
         self.resolved.interfaces.get(name)
+    }
+
+    /// The adaptation tuning of instance `instance`: its component's own
+    /// `adaptation` block with the instance's block (if any) laid on it.
+    pub fn instance_tuning(&self, instance: &ast::Instance) -> Tuning {
+        let own = self
+            .interface(&instance.component.name)
+            .map(|interface| interface.adaptation.clone())
+            .unwrap_or_default();
+        match instance.adaptation.first() {
+            Some(block) => own.overlaid(&Tuning::of(block)),
+            None => own,
+        }
     }
 
     /// The resolved type of a written type.

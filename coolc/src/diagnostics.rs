@@ -93,6 +93,20 @@ codes! {
     BadLink => "coolc::check::bad_link",
     /// A block that may appear once appears twice.
     RepeatedBlock => "coolc::check::repeated_block",
+    /// An `adaptation` block names a key the language does not know.
+    UnknownAdaptationKey => "coolc::check::unknown_adaptation_key",
+    /// An `adaptation` block writes the same key twice.
+    RepeatedAdaptationKey => "coolc::check::repeated_adaptation_key",
+    /// An `adaptation` block says `off` and tunes adaptation too.
+    AdaptationOffTuned => "coolc::check::adaptation_off_tuned",
+    /// An `adaptation` count is beyond what the runtime accepts (`violations` above
+    /// `window`, or above the runtime's maximum).
+    AdaptationRange => "coolc::check::adaptation_range",
+    /// An `adaptation` block's `selector` is not one the language knows.
+    UnknownSelector => "coolc::check::unknown_selector",
+    /// An atomic component's `adaptation` block tunes a component whose timing never
+    /// adapts (no period interval, nor `max_response` with quality levels).
+    TuningWithoutAdaptation => "coolc::check::tuning_without_adaptation",
     /// An automaton has no `initial`, or several.
     InitialState => "coolc::check::initial_state",
     /// A state cannot be reached from the initial state.

@@ -300,6 +300,9 @@ pub struct Atomic {
     pub exceptions: Vec<ExceptionIr>,
     /// Rust expression of the `coolbot::TimingSpec`.
     pub timing: String,
+    /// The fields of its `adaptation { ... }` (`coolbot::AdaptConfig` fields, as
+    /// `name: value`), if it has a block that says anything.
+    pub adaptation: Option<Vec<String>>,
     /// Behavior trait methods (the stubs), in a stable order.
     pub methods: Vec<Method>,
     /// `section` dispatch arms: `(pattern, call)`.

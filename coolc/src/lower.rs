@@ -13,6 +13,7 @@ use crate::checked::{Checked, TypeDef};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
+mod adaptation;
 mod compound;
 pub mod harness;
 
@@ -772,6 +773,10 @@ impl<'a> Lowerer<'a> {
             initial,
             exceptions,
             timing: self.timing(timing),
+            adaptation: self
+                .checked
+                .interface(&c.name.name)
+                .and_then(|interface| adaptation::written_fields(&interface.adaptation)),
             methods,
             section_arms,
             choose_arms,

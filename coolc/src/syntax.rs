@@ -64,6 +64,7 @@ const MEMBER_KEYWORDS: &[&str] = &[
     "on",
     "recovery",
     "restart",
+    "adaptation",
 ];
 
 /// Keywords that start a state member, for recovery.

@@ -163,6 +163,24 @@ fn builder_names_the_import_a_sibling_file_offers() {
     );
 }
 
+/// `adaptation { ... }` blocks (`tests/data/tune`, also compiled and run by
+/// `generated_crate.rs`): an atomic component's block in its `component_with`, an
+/// instance's block merged with its component's, a compound's block and selector in
+/// its builder.
+#[test]
+fn adaptation_blocks() {
+    let krate = lower_fixture("tune/tune.cool", "tune");
+    let files = emit::emit_crate(&krate);
+    for module in ["slow", "frozen", "cell", "still"] {
+        let path = format!("src/generated/{module}.rs");
+        let file = files
+            .iter()
+            .find(|f| f.path == Path::new(&path))
+            .unwrap_or_else(|| panic!("{path}"));
+        insta::assert_snapshot!(format!("tune__{module}"), file.contents);
+    }
+}
+
 #[test]
 fn every_ok_fixture_emits() {
     // The front end's fixture suite: every description that checks must emit (emission

@@ -156,6 +156,29 @@ fn compounds_with_converters_nest_three_levels_deep() {
 }
 
 #[test]
+fn adaptation_blocks_take_effect_at_run_time() {
+    // `tests/data/tune`: a tuned component degrades, one with `adaptation { off; }`
+    // keeps its period under the same violations, a compound's instance blocks
+    // replace their components' tuning (seen in the detectors' settling periods), and
+    // a compound turned off degrades none of its late instances.
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("tune.cool");
+    std::fs::copy(data("tune/tune.cool"), &description).unwrap();
+    let krate = dir.path().join("tune");
+    compile(&description, &krate, "tune");
+    fill_check_and_run(
+        &krate,
+        "tune",
+        &["slow.rs", "frozen.rs", "cell.rs", "still.rs"],
+        &[
+            "off_means_no_degradation_and_tuning_sets_the_detector",
+            "instance_blocks_replace_their_components_tuning",
+            "a_compound_turned_off_degrades_none_of_its_instances",
+        ],
+    );
+}
+
+#[test]
 fn a_compound_exports_poster_tick_and_pull_outputs() {
     // `Unit` exports its sensor's poster output, tick output and `pull` data output;
     // `Station` connects a watcher to them as it would to the sensor. The filled user

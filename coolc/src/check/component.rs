@@ -3,7 +3,7 @@
 
 use super::model::DEFAULT_CONTROLLABLES;
 use super::model::{DEFAULT_OBSERVABLES, Ty};
-use super::{Checker, automaton, compound, names, values};
+use super::{Checker, adaptation, automaton, compound, names, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
@@ -43,6 +43,19 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
                 }
             }
             ast::Member::Restart(restart) => self::restart(checker, restart),
+            ast::Member::Adaptation(block) => {
+                let compound = component.kind == ComponentKind::Compound;
+                let own_timing = component.members.iter().flat_map(|member| match member {
+                    ast::Member::Timing(timing) => timing.entries.as_slice(),
+                    _ => &[],
+                });
+                let target = adaptation::Target {
+                    compound,
+                    adapts: compound || adaptation::adapts(own_timing),
+                    window: None,
+                };
+                adaptation::block(checker, block, target);
+            }
             ast::Member::Automaton(_)
             | ast::Member::Instance(_)
             | ast::Member::Redundant(_)
@@ -226,6 +239,7 @@ fn repeated_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
             ast::Member::Automaton(m) => ("automaton", m.keyword_span),
             ast::Member::Recovery(m) => ("recovery", m.span),
             ast::Member::Restart(m) => ("restart", m.span),
+            ast::Member::Adaptation(m) => ("adaptation", m.span),
             _ => continue,
         };
         if let Some((_, first)) = seen.iter().find(|(seen_name, _)| *seen_name == name) {

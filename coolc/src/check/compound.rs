@@ -6,7 +6,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::model::{Interface, Model, Port, PortKind, Ty};
-use super::{Checker, names, values};
+use super::{Checker, adaptation, names, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 use crate::resolve::DefKind;
@@ -225,7 +225,70 @@ fn instance(
             compound_timing(checker, timing, &instance.component.name);
         }
     }
+    instance_adaptation(checker, instance);
     let _ = component;
+}
+
+/// An instance's `adaptation { ... }`: once, on an instance of an atomic component,
+/// checked against the timing that applies to the instance.
+fn instance_adaptation(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
+    let [block, rest @ ..] = instance.adaptation.as_slice() else {
+        return;
+    };
+    for repeated in rest {
+        let diagnostic = checker
+            .error(
+                Code::RepeatedBlock,
+                repeated.span,
+                "an instance has at most one `adaptation` block",
+            )
+            .with_label("second block")
+            .with_secondary(block.span, "first block")
+            .with_help("merge the two blocks");
+        checker.push(diagnostic);
+    }
+    let Some((_, def)) = checker.model.component(&instance.component.name) else {
+        return;
+    };
+    if def.kind == ComponentKind::Compound {
+        let diagnostic = checker
+            .error(
+                Code::MisplacedMember,
+                block.span,
+                format!(
+                    "an instance of compound `{}` cannot tune its adaptation",
+                    instance.component.name
+                ),
+            )
+            .with_label("on an instance of a compound")
+            .with_help(format!(
+                "write the `adaptation` block in compound `{}` itself",
+                instance.component.name
+            ));
+        checker.push(diagnostic);
+        return;
+    }
+    let own_timing = def.members.iter().flat_map(|member| match member {
+        ast::Member::Timing(timing) => timing.entries.as_slice(),
+        _ => &[],
+    });
+    let adapts =
+        adaptation::adapts(own_timing.chain(instance.timing.iter().flat_map(|t| t.entries.iter())));
+    let window = checker
+        .model
+        .interface(&instance.component.name)
+        .adaptation
+        .window
+        .map(u64::from);
+    adaptation::block(
+        checker,
+        block,
+        adaptation::Target {
+            compound: false,
+            adapts,
+            window,
+        },
+    );
 }
 
 /// A compound's own `timing` (or a nested compound instance's `timing` override)

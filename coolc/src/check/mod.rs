@@ -8,14 +8,15 @@
 //! The submodules group the rules: `names` (keywords, naming, duplicates), `values`
 //! (types, defaults, sizes, timing), `component` (members and their placement),
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
-//! (instances, connections, interfaces, containment) and `rules` (typed supervisor
-//! rule expressions). `model` computes what a component offers to others (ports,
+//! (instances, connections, interfaces, containment), `adaptation` (`adaptation`
+//! blocks) and `rules` (typed supervisor rule expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
 //!
 //! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol
 //! table, every component's interface, every `when` rule typed), which
 //! `crate::Checked` hands to `lower` and `diagram` once there are no errors.
 
+mod adaptation;
 mod automaton;
 mod component;
 mod compound;

@@ -167,6 +167,94 @@ pub struct Interface {
     pub states: Vec<String>,
     /// Quality levels, best first.
     pub quality: Vec<String>,
+    /// The component's own `adaptation { ... }` tuning (default when it has none).
+    pub adaptation: Tuning,
+}
+
+/// What an `adaptation { ... }` block says (`check::adaptation` checks it; a key not
+/// written is `None`, and the runtime's default applies).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Tuning {
+    /// `off;`: adaptation turned off.
+    pub off: bool,
+    /// `window N;`: the sliding window of periods the detector counts violations in.
+    pub window: Option<u32>,
+    /// `violations N;`: bad periods within the window that make a time violation.
+    pub violations: Option<u32>,
+    /// `hold N;`: periods ignored after every change of level (the hold-down).
+    pub hold: Option<u32>,
+    /// `settle N;`: consecutive spare periods before a promotion.
+    pub settle: Option<u32>,
+    /// `homogeneity N;` (compounds): the width of the homogeneity interval.
+    pub homogeneity: Option<u32>,
+    /// `selector name;` (compounds): which instance degrades or is promoted first.
+    pub selector: Option<SelectorKind>,
+}
+
+/// The selectors the language names (`coolbot::adapt::Selector` implementations).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SelectorKind {
+    /// `protect_priority`: `coolbot::adapt::ProtectPriority` (the default).
+    ProtectPriority,
+    /// `fastest_correction`: `coolbot::adapt::FastestCorrection`.
+    FastestCorrection,
+}
+
+impl SelectorKind {
+    /// Every selector with its name in the language.
+    pub const ALL: [(&'static str, SelectorKind); 2] = [
+        ("protect_priority", SelectorKind::ProtectPriority),
+        ("fastest_correction", SelectorKind::FastestCorrection),
+    ];
+}
+
+impl Tuning {
+    /// The tuning one block says, reading only well-formed entries (the checker
+    /// reports the others, and a checked model has none).
+    pub fn of(block: &ast::Adaptation) -> Tuning {
+        let mut tuning = Tuning::default();
+        for entry in &block.entries {
+            let count = match entry.value.as_ref().map(|value| &value.kind) {
+                Some(ast::ExprKind::Int(n)) => u32::try_from(*n).ok(),
+                _ => None,
+            };
+            match entry.key.name.as_str() {
+                "off" => tuning.off = true,
+                "window" => tuning.window = tuning.window.or(count),
+                "violations" => tuning.violations = tuning.violations.or(count),
+                "hold" => tuning.hold = tuning.hold.or(count),
+                "settle" => tuning.settle = tuning.settle.or(count),
+                "homogeneity" => tuning.homogeneity = tuning.homogeneity.or(count),
+                "selector" => {
+                    if let Some(ast::ExprKind::Path(path)) =
+                        entry.value.as_ref().map(|value| &value.kind)
+                        && let [name] = path.as_slice()
+                    {
+                        tuning.selector = SelectorKind::ALL
+                            .iter()
+                            .find(|(known, _)| *known == name.name)
+                            .map(|(_, kind)| *kind);
+                    }
+                }
+                _ => {}
+            }
+        }
+        tuning
+    }
+
+    /// This tuning with an instance's block `over` laid on it: the keys `over` writes
+    /// replace these, and `over` alone says whether adaptation is off.
+    pub fn overlaid(&self, over: &Tuning) -> Tuning {
+        Tuning {
+            off: over.off,
+            window: over.window.or(self.window),
+            violations: over.violations.or(self.violations),
+            hold: over.hold.or(self.hold),
+            settle: over.settle.or(self.settle),
+            homogeneity: over.homogeneity.or(self.homogeneity),
+            selector: over.selector.or(self.selector),
+        }
+    }
 }
 
 /// The names of the default automaton's states (paper Figure 2).
@@ -405,6 +493,10 @@ impl<'a> Model<'a> {
                             interface.states.push(state.name.name.clone());
                         }
                     }
+                }
+                // The first block (a second one is an error).
+                ast::Member::Adaptation(block) if interface.adaptation == Tuning::default() => {
+                    interface.adaptation = Tuning::of(block);
                 }
                 ast::Member::Timing(timing) => {
                     for entry in &timing.entries {

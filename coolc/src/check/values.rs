@@ -103,7 +103,7 @@ pub(super) fn value(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &
 
 type ValueError = (Span, String, Option<String>);
 
-fn describe(expr: &ast::Expr) -> &'static str {
+pub(super) fn describe(expr: &ast::Expr) -> &'static str {
     match &expr.kind {
         ast::ExprKind::Int(_) => "an integer",
         ast::ExprKind::Float(_) => "a float",

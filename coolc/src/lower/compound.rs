@@ -13,11 +13,11 @@ mod rules;
 use std::collections::BTreeSet;
 
 use super::{
-    GEN_TYPES, Lowerer, SectionOwner, StateSections, choose_stub, doc, duration_ns, duration_rust,
-    may_targets, rust_ty, section_stubs, unique_among,
+    GEN_TYPES, Lowerer, SectionOwner, StateSections, adaptation, choose_stub, doc, duration_ns,
+    duration_rust, may_targets, rust_ty, section_stubs, unique_among,
 };
 use crate::ast::{self, ExprKind};
-use crate::check::model::Ty;
+use crate::check::model::{Tuning, Ty};
 use crate::ident;
 use crate::ir;
 
@@ -337,6 +337,7 @@ impl<'a> Lowerer<'a> {
                 _ => {}
             }
         }
+        steps.extend(self.compound_adaptation(c));
         // Substitutes after every instance (a substitute may be declared before the
         // instance it stands for).
         for i in &instances {
@@ -695,6 +696,14 @@ impl<'a> Lowerer<'a> {
             (Some(build), Some(timing)) => Some(format!("{build}.with_timing({timing})")),
             (build, _) => build,
         };
+        // Checked: only an instance of an atomic component has an `adaptation` block.
+        let component = match component {
+            Some(build) if !i.adaptation.is_empty() => Some(format!(
+                "{build}.with_adaptation({})",
+                adaptation::config_always(&self.checked.instance_tuning(i))
+            )),
+            build => build,
+        };
         ir::Instance {
             name: i.name.name.clone(),
             method,
@@ -709,6 +718,26 @@ impl<'a> Lowerer<'a> {
             config_overrides,
             var_overrides,
         }
+    }
+
+    /// The builder steps of a compound's own `adaptation { ... }`.
+    fn compound_adaptation(&self, c: &ast::Component) -> Vec<String> {
+        let Some(interface) = self.checked.interface(&c.name.name) else {
+            return Vec::new();
+        };
+        let tuning = &interface.adaptation;
+        let config = adaptation::config(&Tuning {
+            selector: None,
+            ..tuning.clone()
+        });
+        config
+            .map(|config| format!(".adaptation({config})"))
+            .into_iter()
+            .chain(
+                adaptation::selector(tuning)
+                    .map(|selector| format!(".adaptation_selector({selector})")),
+            )
+            .collect()
     }
 
     /// An instance's `timing { ... }`: the entries it names replace those of the

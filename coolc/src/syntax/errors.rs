@@ -319,6 +319,7 @@ pub(super) fn rule_name(rule: Rule) -> Option<&'static str> {
         kw_limit => "`limit`",
         kw_in => "`in`",
         kw_backoff => "`backoff`",
+        kw_adaptation => "`adaptation`",
         _ => return None,
     })
 }

@@ -113,6 +113,7 @@ pub(super) fn is_keyword(rule: Rule) -> bool {
             | Rule::kw_limit
             | Rule::kw_in
             | Rule::kw_backoff
+            | Rule::kw_adaptation
     )
 }
 
@@ -554,6 +555,7 @@ impl Builder<'_> {
                 })
             }
             Rule::timing => ast::Member::Timing(self.timing(inner)?),
+            Rule::adaptation => ast::Member::Adaptation(self.adaptation(inner)?),
             Rule::exception => {
                 let mut name = None;
                 let mut description = None;
@@ -619,6 +621,7 @@ impl Builder<'_> {
                     node: None,
                     overrides: Vec::new(),
                     timing: None,
+                    adaptation: Vec::new(),
                     span,
                 };
                 for part in parts.into_iter().skip(2) {
@@ -651,6 +654,10 @@ impl Builder<'_> {
                                 }
                                 None => instance.timing = Some(timing),
                             }
+                        }
+                        Rule::adaptation => {
+                            // Every block is kept: the checker reports a second one.
+                            instance.adaptation.push(self.adaptation(part)?);
                         }
                         _ => {}
                     }
@@ -788,6 +795,30 @@ impl Builder<'_> {
             entries.push(timing_entry);
         }
         Some(ast::Timing { entries, span })
+    }
+
+    pub(super) fn adaptation(&mut self, pair: P<'_>) -> Option<ast::Adaptation> {
+        let span = self.span(&pair);
+        let mut entries = Vec::new();
+        for entry in children(pair) {
+            if entry.as_rule() != Rule::adaptation_entry {
+                continue;
+            }
+            self.note(&entry);
+            let entry_span = self.span(&entry);
+            let parts = children(entry);
+            let key = self.ident(parts.first()?);
+            let value = match parts.get(1) {
+                Some(value) => Some(self.expr(value.clone())?),
+                None => None,
+            };
+            entries.push(ast::AdaptEntry {
+                key,
+                value,
+                span: entry_span,
+            });
+        }
+        Some(ast::Adaptation { entries, span })
     }
 
     pub(super) fn plan_step(&mut self, pair: P<'_>) -> Option<ast::PlanStep> {

@@ -8,6 +8,7 @@
 //! integration test both call it.
 #![deny(missing_docs)]
 
+pub mod mapper;
 pub mod motion_controller;
 pub mod node;
 pub mod range_server;
@@ -34,7 +35,7 @@ use coolbot::adapt::{AdaptAction, Adaptation};
 use coolbot::{Handle, Monitor, MonitorEvent, State, Step, Supervision};
 
 use crate::node::NodeOptions;
-use crate::robot::{BASE, MOTION, RANGES, Robot, SIM_RANGES, Setup, WANDERER};
+use crate::robot::{BASE, MAPPER, MOTION, RANGES, Robot, SIM_RANGES, Setup, WANDERER};
 use crate::world::{FaultKind, Overload, Platform, SensorFault, World};
 
 /// How the run shows itself.
@@ -300,8 +301,11 @@ pub struct Summary {
     pub load: Option<Overload>,
     /// Every adaptation step the compounds published, in order.
     pub adaptation: Vec<AdaptationStep>,
-    /// The adaptation levels `motion` and `ranges` went through.
+    /// The adaptation levels `motion`, `ranges` and `mapper` went through.
     pub levels: Vec<LevelPath>,
+    /// The mapper's response times (an aperiodic component: a scan's arrival to the
+    /// end of its handling) and its `max_response`, from its monitoring port.
+    pub responses: Option<(coolbot::ResponseTimes, Option<Duration>)>,
     /// With `node`: the node's name and how many components it exposed.
     pub node: Option<(String, usize)>,
 }
@@ -412,6 +416,22 @@ impl fmt::Display for Summary {
         for (i, path) in self.levels.iter().enumerate() {
             let label = if i == 0 { "adaptation levels" } else { "" };
             writeln!(f, "  {label:<20} {path}")?;
+        }
+        if let Some((times, bound)) = &self.responses {
+            let ms = |d: Duration| d.as_secs_f64() * 1e3;
+            writeln!(
+                f,
+                "  response times       mapper p50 {:.1} ms, p99 {:.1} ms, worst {:.1} ms; {} late of {}{}",
+                ms(times.p50),
+                ms(times.p99),
+                ms(times.worst),
+                times.late,
+                times.count,
+                bound.map_or(String::new(), |b| format!(
+                    " (max_response {:.0} ms)",
+                    ms(b)
+                ))
+            )?;
         }
         writeln!(
             f,
@@ -536,8 +556,9 @@ struct Line {
 /// The quality levels a component type declares in its timing block, by name (empty
 /// without any), from the generated code.
 fn qualities(type_name: &str) -> &'static [&'static str] {
-    use generated::{motion_controller, range_server, sim_range_server, wanderer};
+    use generated::{mapper, motion_controller, range_server, sim_range_server, wanderer};
     let specs = [
+        &mapper::SPEC,
         &motion_controller::SPEC,
         &range_server::SPEC,
         &sim_range_server::SPEC,
@@ -862,6 +883,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let motion = monitor(&format!("{BASE}.{MOTION}"));
     let ranges = monitor(&format!("{BASE}.{RANGES}"));
     let sim_ranges = monitor(&format!("{BASE}.{SIM_RANGES}"));
+    let mapper = monitor(MAPPER);
     let final_states: Vec<(String, State)> = handles
         .iter()
         .map(|h| (h.name().to_owned(), h.state()))
@@ -876,12 +898,13 @@ pub fn run(options: &Options) -> Result<Summary, String> {
             .all(|c| c.joined && c.state == State::Dead)
         && final_states.iter().all(|(_, s)| *s == State::Dead)
         && released;
-    let levels: Vec<LevelPath> = [(&motion, MOTION), (&ranges, RANGES)]
+    let levels: Vec<LevelPath> = [(&motion, MOTION), (&ranges, RANGES), (&mapper, MAPPER)]
         .into_iter()
         .filter_map(|(monitor, name)| {
             let monitor = monitor.as_ref()?;
             let type_name = generated::mobile_base::INSTANCES
                 .iter()
+                .chain(generated::robot::INSTANCES)
                 .find(|(n, _)| *n == name)
                 .map_or("?", |(_, t)| *t);
             monitor
@@ -923,6 +946,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         load: options.load,
         adaptation: events.adaptation,
         levels,
+        responses: mapper.as_ref().map(|m| (m.response, m.max_response)),
         node: exposed,
     })
 }

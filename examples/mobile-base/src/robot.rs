@@ -18,8 +18,9 @@ use coolbot::{Command, Controllable, Handle, Report, State, System, Value};
 
 use crate::generated::types::BaseMode;
 use crate::generated::{
-    mobile_base, motion_controller, range_server, robot, sim_range_server, wanderer,
+    mapper, mobile_base, motion_controller, range_server, robot, sim_range_server, wanderer,
 };
+use crate::mapper::Mapper;
 use crate::motion_controller::MotionController;
 use crate::range_server::RangeServer;
 use crate::sensing::Overrides;
@@ -33,6 +34,8 @@ pub const ROBOT: &str = "robot";
 pub const BASE: &str = "base";
 /// Instance `wanderer` of `Robot`.
 pub const WANDERER: &str = "wanderer";
+/// Instance `mapper` of `Robot`.
+pub const MAPPER: &str = "mapper";
 /// Instance `motion` of `MobileBase`.
 pub const MOTION: &str = "motion";
 /// Instance `ranges` of `MobileBase`.
@@ -177,6 +180,10 @@ impl robot::Parts for RobotParts {
     fn wanderer(&mut self) -> impl wanderer::Behavior {
         Wanderer::default()
     }
+
+    fn mapper(&mut self) -> impl mapper::Behavior {
+        Mapper::new(Arc::clone(&self.base.platform))
+    }
 }
 
 /// The running robot: one `Robot` component on a system, and the monitoring ports at
@@ -190,6 +197,8 @@ pub struct Robot {
     pub base: Handle,
     /// Instance `wanderer` of `Robot`.
     pub wanderer: Handle,
+    /// Instance `mapper` of `Robot`.
+    pub mapper: Handle,
 }
 
 fn text(error: impl std::fmt::Display) -> String {
@@ -219,7 +228,7 @@ impl Robot {
                 .instance(path)
                 .ok_or_else(|| format!("`Robot` has no instance `{path}`"))
         };
-        let (base, wanderer) = (instance(BASE)?, instance(WANDERER)?);
+        let (base, wanderer, mapper) = (instance(BASE)?, instance(WANDERER)?, instance(MAPPER)?);
         system.start().map_err(text)?;
         let started = robot
             .wait_for(|m| m.state != State::Starting, Duration::from_secs(10))
@@ -264,6 +273,7 @@ impl Robot {
             robot,
             base,
             wanderer,
+            mapper,
         })
     }
 
@@ -296,6 +306,6 @@ mod tests {
         assert_eq!(names, [MOTION, RANGES, SIM_RANGES]);
         assert_eq!(mobile_base::SUBSTITUTES, &[(SIM_RANGES, RANGES)]);
         let names: Vec<&str> = robot::INSTANCES.iter().map(|(n, _)| *n).collect();
-        assert_eq!(names, [BASE, WANDERER]);
+        assert_eq!(names, [BASE, WANDERER, MAPPER]);
     }
 }

@@ -708,6 +708,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         "robot.base.motion",
         "robot.base.ranges",
         "robot.base.sim_ranges",
+        "robot.mapper",
         "robot.wanderer",
     ];
     let deadline = Instant::now() + Duration::from_secs(60);
@@ -756,4 +757,85 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
     let summary = runner.join().expect("the run ends");
     assert_eq!(summary.node, Some((name, expected.len())));
     assert_clean_shutdown(&summary);
+}
+
+#[test]
+fn the_mappers_responses_grow_late_under_a_processor_shortage_its_quality_drops_and_comes_back() {
+    use coolbot::Monitor;
+    use mobile_base::robot::{Robot, Setup};
+    use mobile_base::world::{Platform, World};
+    use std::sync::Arc;
+    use std::time::Instant;
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    // Waits (generously: the machine may be loaded) for `pred` on the mapper's
+    // monitoring port.
+    let wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, timeout: Duration| {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let monitor = robot.mapper.snapshot();
+            if pred(&monitor) {
+                return monitor;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{what}: not within {timeout:?}; the mapper: quality {}, {:?}, {:?}",
+                monitor.quality,
+                monitor.response,
+                monitor.adaptation
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+
+    // The description bounds the mapper's responses (aperiodic: no period) and gives
+    // it two quality levels: adaptation is on, at `full`, and responses are timed.
+    let start = wait(
+        "poses mapped at first",
+        &|m| m.response.count >= 10,
+        Duration::from_secs(10),
+    );
+    assert!(start.adaptation.enabled, "{:?}", start.adaptation);
+    assert_eq!(start.max_response, Some(Duration::from_millis(150)));
+    assert_eq!(start.period, None);
+
+    // The processor gets short: a pose at `full` takes longer than poses take to
+    // arrive, they queue, responses pass `max_response`, and the quality drops.
+    platform.set_overloaded(true);
+    let degraded = wait(
+        "late responses and the coarse quality",
+        &|m| m.response.late >= 1 && m.quality == 1,
+        Duration::from_secs(90),
+    );
+    assert!(
+        degraded.response.worst > Duration::from_millis(150),
+        "{:?}",
+        degraded.response
+    );
+
+    // The shortage is over: responses are short again and the quality comes back.
+    platform.set_overloaded(false);
+    let back = wait(
+        "back to the full quality",
+        &|m| m.quality == 0 && m.adaptation.level == 0,
+        Duration::from_secs(120),
+    );
+    let count = back.response.count;
+    let after = wait(
+        "poses mapped after",
+        &|m| m.response.count >= count + 10,
+        Duration::from_secs(30),
+    );
+    assert_eq!(after.state, State::Running);
+    assert!(
+        after.response.p50 < Duration::from_millis(150),
+        "{:?}",
+        after.response
+    );
+    assert!(robot.shutdown().clean());
 }
