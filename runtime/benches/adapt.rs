@@ -76,8 +76,10 @@ impl Automaton for Ticker {
 }
 
 /// CPU time per period (ns) of each component over `rounds` rounds of `each` long:
-/// adaptation on, off, and off again (the noise floor of the comparison).
-fn periods(rounds: usize, each: Duration) -> [Vec<f64>; 3] {
+/// adaptation on, off, and off again (the noise floor of the comparison); and the
+/// adapted component's level at the end and adaptation steps taken (on a loaded
+/// machine it may be degraded to a longer period, which changes its cost per period).
+fn periods(rounds: usize, each: Duration) -> ([Vec<f64>; 3], (u32, u64)) {
     let mut system = System::new();
     let configs = [
         // Never spare, never violating on an idle machine: the detector runs and
@@ -134,9 +136,10 @@ fn periods(rounds: usize, each: Duration) -> [Vec<f64>; 3] {
             samples[index].push(cpu.as_nanos() as f64 / runs.max(1) as f64);
         }
     }
+    let adapted = sides[0].0.snapshot().adaptation;
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
-    samples
+    (samples, (adapted.level, adapted.steps))
 }
 
 fn median(mut values: Vec<f64>) -> f64 {
@@ -176,7 +179,8 @@ fn main() {
     // rounds to read its own CPU time against the wall-clock time.
     let probe = coolbot::idle::IdleProbe::shared();
     let probe_started = (Instant::now(), probe.as_ref().map(|p| p.cpu_time()));
-    let [on, off, control] = periods(rounds, each).map(median);
+    let (samples, (level, steps)) = periods(rounds, each);
+    let [on, off, control] = samples.map(median);
     let probe_wall = probe_started.0.elapsed();
     println!(
         "adaptation cost ({} mode)",
@@ -187,6 +191,7 @@ fn main() {
         on / off,
         control / off
     );
+    println!("  the adapted component ended at level {level} after {steps} adaptation steps");
     match (probe, probe_started.1) {
         (Some(probe), Some(cpu_before)) => {
             let cpu = probe.cpu_time().saturating_sub(cpu_before);
