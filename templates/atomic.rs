@@ -272,6 +272,22 @@ pub fn component_with(
     {%- endif %}
 }
 
+/// Tells a network layer how to build `{{ c.type_name }}` on another node and bridge
+/// its ports (an instance declared `on "node"`, `docs/distribution.md`): `make`
+/// builds one named as asked, with this crate's behaviour.
+pub fn register<R: ::coolbot::remote::Registrar>(
+    registrar: &mut R,
+    make: impl Fn(&str) -> ::coolbot::Component + ::core::marker::Send + ::core::marker::Sync + 'static,
+) {
+    registrar.component(SPEC.type_name, ::std::boxed::Box::new(make));
+{%- for p in c.inputs %}
+    registrar.port::<{{ p.rust_packet() }}>(SPEC.type_name, "{{ p.cool_name }}");
+{%- endfor %}
+{%- for p in c.outputs %}
+    registrar.port::<{{ p.rust_packet() }}>(SPEC.type_name, "{{ p.cool_name }}");
+{%- endfor %}
+}
+
 /// Adapts a [`Behavior`] to the runtime's index-based `coolbot::Automaton`.
 struct __CoolGlue<B> {
     behavior: B,
@@ -441,5 +457,9 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         let _ = variable;
         ::coolbot::Value::Unit
 {%- endif %}
+    }
+
+    fn configuration(&self) -> ::core::option::Option<::coolbot::Value> {
+        ::core::option::Option::Some(super::__cool_to_value(&self.config))
     }
 }

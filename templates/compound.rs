@@ -360,13 +360,14 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
     Ok(::coolbot::CompoundBuilder::new(name, supervisor)
 {%- for i in c.instances %}
 {%- if let Some(build) = i.build %}
-    {%- if let Some(node) = i.node %}
-        // Instance `{{ i.name }}` is declared `on "{{ node }}"`: it runs here (remote nodes are not supported yet).
-    {%- endif %}
     {%- if !i.unapplied.is_empty() %}
         // Not applied: overrides of `{{ i.name }}`'s mapped variables {{ i.unapplied_text() }} (set them through its control port once it runs).
     {%- endif %}
+    {%- if let Some(node) = i.node %}
+        .instance_on("{{ node }}", {{ build }})
+    {%- else %}
         .instance({{ build }})
+    {%- endif %}
 {%- endif %}
 {%- endfor %}
 {%- for k in c.connections %}

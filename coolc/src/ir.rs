@@ -417,6 +417,17 @@ pub struct Port {
     pub pull: bool,
 }
 
+impl Port {
+    /// The Rust type of its packets: the handle's type argument (`()` for a tick
+    /// port, whose handle has none).
+    pub fn rust_packet(&self) -> &str {
+        match (self.handle.find('<'), self.handle.rfind('>')) {
+            (Some(open), Some(close)) if open < close => &self.handle[open + 1..close],
+            _ => "()",
+        }
+    }
+}
+
 /// A state of the user automaton.
 #[derive(Clone, Debug, PartialEq)]
 pub struct State {

@@ -144,6 +144,13 @@ pub trait Automaton: std::any::Any + Send + 'static {
 
     /// The current value of variable `variable`, for the monitoring port.
     fn get(&self, variable: usize) -> Value;
+
+    /// The current configuration, if the component has one to report (generated
+    /// components do): what an instance declared `on "node"` is configured with on
+    /// its node (`crate::remote`).
+    fn configuration(&self) -> Option<Value> {
+        None
+    }
 }
 
 /// What the runner drives: an [`Automaton`], plus the hooks only a compound component
@@ -202,6 +209,13 @@ pub(crate) trait Driven: Automaton {
     fn set_degradation(&mut self, _level: u32, _cx: &mut Context) -> Result<(), String> {
         Err("this component has no adaptation levels".to_owned())
     }
+
+    /// A command that arrived through the control port, before the runner applies
+    /// it: `Some(answer)` answers it here and the runner does nothing more (a remote
+    /// instance's proxy, `crate::remote`, forwards it to the instance).
+    fn forward(&mut self, _command: &crate::monitor::Command) -> Option<Result<(), String>> {
+        None
+    }
 }
 
 /// An atomic component's automaton as the runner drives it: every compound hook keeps
@@ -238,6 +252,9 @@ impl Automaton for Atomic {
     }
     fn get(&self, variable: usize) -> Value {
         self.0.get(variable)
+    }
+    fn configuration(&self) -> Option<Value> {
+        self.0.configuration()
     }
 }
 

@@ -132,6 +132,7 @@ pub mod port;
 #[cfg(feature = "process")]
 pub mod process;
 pub mod record;
+pub mod remote;
 mod runner;
 pub mod schema;
 mod spec;

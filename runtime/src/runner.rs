@@ -925,6 +925,15 @@ impl Runner {
         let reply = |answer: Reply| {
             let _ = message.reply.try_send(answer);
         };
+        // A remote instance's proxy answers some commands itself (`crate::remote`);
+        // only supervised automata (compounds, proxies) have anything to say.
+        if self.supervised {
+            match self.automaton.forward(&message.command) {
+                None => {}
+                Some(Ok(())) => return reply(Reply::Done),
+                Some(Err(reason)) => return reply(Reply::Rejected(reason)),
+            }
+        }
         match &message.command {
             Command::SetState(target) => match next(self.state, Event::Command(*target)) {
                 Outcome::Go { .. } => {

@@ -157,6 +157,17 @@ impl Component {
     pub fn spec(&self) -> &'static Spec {
         self.automaton.spec()
     }
+
+    /// The current value of variable `index` (before the component runs: its initial
+    /// value, with an instance's overrides).
+    pub(crate) fn automaton_get(&self, index: usize) -> Value {
+        self.automaton.get(index)
+    }
+
+    /// The current configuration, if the automaton reports one.
+    pub(crate) fn configuration(&self) -> Option<Value> {
+        self.automaton.configuration()
+    }
 }
 
 /// Errors of [`System`] operations other than connecting.

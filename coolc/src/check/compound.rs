@@ -127,24 +127,49 @@ fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -
     out
 }
 
-/// `on "node"` is accepted but not carried out yet: the generated compound builds the
-/// instance in its own process. A warning says so, so that no description means more
-/// than what runs.
+/// `on "node"` runs the instance on that node behind a proxy when the process has a
+/// network placer (`docs/distribution.md`, "Remote instances from the description").
+/// What a proxy cannot carry is refused here, so that no description means more than
+/// what runs: an instance of a compound (only atomic types are registered with a
+/// node), and a component with `pull` ports (pull through a proxy is not carried out).
 fn remote_instance(checker: &mut Checker<'_, '_>, instance: &ast::Instance, node: &ast::StrLit) {
-    let diagnostic = Diagnostic::warning(
-        Code::RemoteInstance,
-        checker.file,
-        node.span,
-        format!(
-            "instance `{}` runs in this process: `on \"{}\"` is not carried out yet",
-            instance.name.name, node.value
-        ),
-    )
-    .with_label("not carried out yet")
-    .with_help(
-        "remove `on \"...\"` to say what runs, or run the component on that node by hand with coolbot-zenoh (docs/distribution.md)",
-    );
-    checker.push(diagnostic);
+    let Some((_, def)) = checker.model.component(&instance.component.name) else {
+        return;
+    };
+    let reason = if def.kind == ComponentKind::Compound {
+        Some(format!(
+            "`{}` is a compound: only atomic components run on another node",
+            instance.component.name
+        ))
+    } else {
+        def.members
+            .iter()
+            .find_map(|member| match member {
+                ast::Member::Input(input) if input.pull.is_some() => Some(&input.name.name),
+                ast::Member::Output(output) if output.pull.is_some() => Some(&output.name.name),
+                _ => None,
+            })
+            .map(|port| {
+                format!(
+                    "`{}` has the pull port `{port}`: pull through a remote instance is not carried out",
+                    instance.component.name
+                )
+            })
+    };
+    if let Some(reason) = reason {
+        let diagnostic = checker
+            .error(
+                Code::RemoteInstance,
+                node.span,
+                format!(
+                    "instance `{}` cannot run on node `{}`: {reason}",
+                    instance.name.name, node.value
+                ),
+            )
+            .with_label("not carried out")
+            .with_help("remove `on \"...\"` to run it in the compound's process");
+        checker.push(diagnostic);
+    }
 }
 
 fn instance(

@@ -702,6 +702,17 @@ impl Events {
     }
 }
 
+/// `--serve`: this process is a node of the robot's network that runs what other
+/// nodes place on it (the wanderer, for a robot started with `--node`), until `stop`
+/// is set. Returns the node's name.
+pub fn serve(node: &NodeOptions, stop: &AtomicBool) -> Result<String, String> {
+    let network = node::open(node)?;
+    while !stop.load(Ordering::Acquire) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(network.name().to_owned())
+}
+
 /// Builds the robot, runs it for `options.duration` (or until `options.stop`), shuts
 /// it down and reports.
 pub fn run(options: &Options) -> Result<Summary, String> {
@@ -720,6 +731,12 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         max_speed: options.max_speed,
         scan_rate: options.scan_rate,
     };
+    // On the network only when asked: nothing of Zenoh runs otherwise. The node is
+    // opened first: its placer puts the wanderer (`on "station"`) on its node.
+    let network = match &options.node {
+        Some(node) => Some(node::open(node)?),
+        None => None,
+    };
     let robot = Robot::start(&platform, &setup)?;
     // A panic the runtime catches in one of the robot's components prints one line
     // (under `coolbot::process`'s panic hook, when the program installed it).
@@ -728,10 +745,9 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         Some(path) => Some(start_recording(&robot, path)?),
         None => None,
     };
-    // On the network only when asked: nothing of Zenoh runs otherwise.
-    let node = match &options.node {
-        Some(node) => match node::expose(&robot, node) {
-            Ok(opened) => Some(opened),
+    let node = match network {
+        Some(network) => match network.expose(&robot) {
+            Ok(()) => Some(network),
             Err(error) => {
                 let _ = robot.shutdown();
                 return Err(error);

@@ -55,6 +55,14 @@ struct Args {
     /// (`cargo run -p coolbot-zenoh --bin coolctl -- list` in another terminal).
     #[arg(long, value_name = "NAME")]
     node: Option<String>,
+    /// With --node: do not run the robot; run what other nodes place on this one (the
+    /// wanderer, declared `on "station"`: `--node station --serve`) until stopped.
+    #[arg(long, requires = "node")]
+    serve: bool,
+    /// With --node: the Zenoh session lease, after which a silent peer is lost (e.g.
+    /// `2s`, the default); an instance on a lost node is a fault of its proxy.
+    #[arg(long, requires = "node", value_parser = parse_duration)]
+    lease: Option<Duration>,
     /// With --node: listen on this Zenoh endpoint (e.g. `tcp/0.0.0.0:7447`); repeatable.
     #[arg(long, requires = "node", value_name = "ENDPOINT")]
     listen: Vec<String>,
@@ -193,14 +201,34 @@ fn main() -> ExitCode {
         },
         record: args.record,
         load: args.load,
-        node: args.node.map(|name| NodeOptions {
-            listen: args.listen,
-            connect: args.connect,
-            multicast: !args.no_multicast,
-            ..NodeOptions::named(name)
+        node: args.node.map(|name| {
+            let named = NodeOptions::named(name);
+            NodeOptions {
+                listen: args.listen,
+                connect: args.connect,
+                multicast: !args.no_multicast,
+                lease: args.lease.unwrap_or(named.lease),
+                ..named
+            }
         }),
         stop: process.stop_flag(),
     };
+    if args.serve {
+        let node = options
+            .node
+            .as_ref()
+            .expect("clap: --serve requires --node");
+        return match mobile_base::serve(node, &options.stop) {
+            Ok(name) => {
+                println!("node `{name}` stopped");
+                ExitCode::SUCCESS
+            }
+            Err(error) => {
+                eprintln!("error: {error}");
+                ExitCode::from(2)
+            }
+        };
+    }
     match mobile_base::run(&options) {
         Ok(summary) => {
             println!("\n{summary}");

@@ -20,6 +20,9 @@ pub struct NodeOptions {
     pub connect: Vec<String>,
     /// Find peers by multicast scouting (what `coolctl` does by default).
     pub multicast: bool,
+    /// The Zenoh session lease: a peer that stops answering is lost after it (and an
+    /// instance on it is a fault of its proxy).
+    pub lease: std::time::Duration,
 }
 
 impl NodeOptions {
@@ -30,55 +33,110 @@ impl NodeOptions {
             listen: Vec::new(),
             connect: Vec::new(),
             multicast: true,
+            lease: std::time::Duration::from_secs(2),
         }
     }
 }
 
-/// The robot on the network: its components stay exposed while this lives.
-pub struct Exposed {
+/// The process on the network: its node, the placer that puts the robot's
+/// `on "node"` instances on their nodes (the wanderer `on "station"`), and the agent
+/// that builds such instances here when another node asks. Open it before the robot
+/// is built (the placer must be installed then); the robot's components are exposed
+/// by [`Network::expose`].
+pub struct Network {
     name: String,
     #[cfg(feature = "network")]
-    _node: coolbot_zenoh::Node,
+    node: std::sync::Arc<coolbot_zenoh::Node>,
+    #[cfg(feature = "network")]
+    _agent: coolbot_zenoh::agent::Agent,
+    #[cfg(feature = "network")]
+    _placer: coolbot::remote::Installed,
 }
 
-impl Exposed {
+impl Network {
     /// The node's name.
     pub fn name(&self) -> &str {
         &self.name
     }
 }
 
-/// Opens the node and exposes every component of `robot` on it. The robot stays
-/// exposed while the returned value lives.
+/// The component types this process can run for another node, and whose ports it
+/// can bridge: the wanderer (the one instance the robot's description places).
 #[cfg(feature = "network")]
-pub fn expose(robot: &Robot, options: &NodeOptions) -> Result<Exposed, String> {
-    let config = coolbot_zenoh::peer_config(&options.listen, &options.connect, options.multicast)
-        .map_err(|e| format!("node `{}`: {e}", options.name))?;
-    let node = coolbot_zenoh::Node::open(&options.name, config)
-        .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
-    node.expose_system(robot.system())
-        .map_err(|e| format!("node `{}` cannot expose the robot: {e}", options.name))?;
-    // `coolctl echo` on the odometry and the scans (the ports `--record` records).
-    use crate::generated::types::{Pose2D, RangeScan};
-    let echo = |result: Result<(), coolbot_zenoh::Error>, port: &str| {
-        result.map_err(|e| format!("node `{}` cannot echo `{port}`: {e}", options.name))
-    };
-    let [pose, scan] = crate::RECORDED_PORTS;
-    echo(node.echo::<Pose2D>(robot.system(), pose), pose)?;
-    echo(node.echo::<RangeScan>(robot.system(), scan), scan)?;
-    Ok(Exposed {
+fn registry() -> coolbot_zenoh::agent::Registry {
+    use crate::generated::wanderer;
+    let mut registry = coolbot_zenoh::agent::Registry::new();
+    wanderer::register(&mut registry, |name| {
+        wanderer::component(name, crate::wanderer::Wanderer::default())
+    });
+    registry
+}
+
+/// Opens the node, installs its placer and starts its agent.
+#[cfg(feature = "network")]
+pub fn open(options: &NodeOptions) -> Result<Network, String> {
+    use std::sync::Arc;
+    let mut config =
+        coolbot_zenoh::peer_config(&options.listen, &options.connect, options.multicast)
+            .map_err(|e| format!("node `{}`: {e}", options.name))?;
+    // A lost node is noticed within the session lease (`docs/distribution.md`).
+    config
+        .insert_json5(
+            "transport/link/tx/lease",
+            &options.lease.as_millis().to_string(),
+        )
+        .map_err(|e| format!("node `{}`: lease: {e}", options.name))?;
+    let node = Arc::new(
+        coolbot_zenoh::Node::open(&options.name, config)
+            .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?,
+    );
+    let registry = Arc::new(registry());
+    let agent = coolbot_zenoh::agent::Agent::start(Arc::clone(&node), Arc::clone(&registry))
+        .map_err(|e| format!("node `{}`: the agent does not start: {e}", options.name))?;
+    let placer = coolbot_zenoh::Placer::new(Arc::clone(&node), registry).install();
+    Ok(Network {
         name: options.name.clone(),
-        _node: node,
+        node,
+        _agent: agent,
+        _placer: placer,
     })
+}
+
+#[cfg(feature = "network")]
+impl Network {
+    /// Exposes every component of `robot` on the node, and echoes the odometry and
+    /// the scans.
+    pub fn expose(&self, robot: &Robot) -> Result<(), String> {
+        let node = &self.node;
+        node.expose_system(robot.system())
+            .map_err(|e| format!("node `{}` cannot expose the robot: {e}", self.name))?;
+        // `coolctl echo` on the odometry and the scans (the ports `--record` records).
+        use crate::generated::types::{Pose2D, RangeScan};
+        let echo = |result: Result<(), coolbot_zenoh::Error>, port: &str| {
+            result.map_err(|e| format!("node `{}` cannot echo `{port}`: {e}", self.name))
+        };
+        let [pose, scan] = crate::RECORDED_PORTS;
+        echo(node.echo::<Pose2D>(robot.system(), pose), pose)?;
+        echo(node.echo::<RangeScan>(robot.system(), scan), scan)?;
+        Ok(())
+    }
 }
 
 /// Without the `network` feature there is no Zenoh in the build: `--node` says how
 /// to get it.
 #[cfg(not(feature = "network"))]
-pub fn expose(_robot: &Robot, options: &NodeOptions) -> Result<Exposed, String> {
+pub fn open(options: &NodeOptions) -> Result<Network, String> {
     Err(format!(
         "node `{}`: this build has no network support; build the example with \
          `--features network` (cargo run --release -p mobile-base --features network -- --node {})",
         options.name, options.name
     ))
+}
+
+#[cfg(not(feature = "network"))]
+impl Network {
+    /// Never reached: [`open`] fails without the feature.
+    pub fn expose(&self, _robot: &Robot) -> Result<(), String> {
+        Ok(())
+    }
 }

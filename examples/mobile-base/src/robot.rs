@@ -181,6 +181,10 @@ impl robot::Parts for RobotParts {
         Wanderer::default()
     }
 
+    fn fallback(&mut self) -> impl wanderer::Behavior {
+        Wanderer::default()
+    }
+
     fn mapper(&mut self) -> impl mapper::Behavior {
         Mapper::new(Arc::clone(&self.base.platform))
     }

@@ -314,6 +314,27 @@ impl CompoundBuilder {
         self
     }
 
+    /// An instance declared `on "node"` (`docs/distribution.md`, "Remote instances
+    /// from the description"): with a network placer installed
+    /// ([`crate::remote::install`]), a proxy stands here for `component` built on
+    /// `node`; without one, or when `node` is this process's own, `component` runs
+    /// here as with [`CompoundBuilder::instance`].
+    pub fn instance_on(mut self, node: &str, component: Component) -> CompoundBuilder {
+        let name = component.name().to_owned();
+        match crate::remote::place(&self.name, node, component) {
+            Ok(component) => self.instance(component),
+            Err(reason) => {
+                self.errors.push(CompoundError::Placement {
+                    compound: self.name.clone(),
+                    instance: name,
+                    node: node.to_owned(),
+                    reason,
+                });
+                self
+            }
+        }
+    }
+
     /// The control and monitoring ports of instance `name` (added with
     /// [`CompoundBuilder::instance`]): for tools and tests that watch a level below.
     /// Once built, the compound's own handle gives the same through

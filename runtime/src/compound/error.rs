@@ -30,6 +30,20 @@ pub enum CompoundError {
         #[source]
         source: Box<SystemError>,
     },
+    /// An instance declared `on "node"` could not be placed there.
+    #[error(
+        "compound `{compound}`: instance `{instance}` cannot be placed on node `{node}`: {reason}"
+    )]
+    Placement {
+        /// The compound.
+        compound: String,
+        /// The instance.
+        instance: String,
+        /// The node.
+        node: String,
+        /// Why.
+        reason: String,
+    },
     /// A name that does not resolve.
     #[error("compound `{compound}`: {what} `{name}` does not exist")]
     Unknown {

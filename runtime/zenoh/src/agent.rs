@@ -10,9 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use coolbot::port::ErasedInput;
 use coolbot::{
-    Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet, State,
-    System, Value,
+    Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet,
+    PortSet, State, System, TimingSpec, Value,
 };
 use crossbeam_channel::RecvTimeoutError;
 use serde::de::DeserializeOwned;
@@ -102,10 +103,66 @@ pub struct Instantiate {
     /// order: an instance's overrides.
     #[serde(default)]
     pub variables: Vec<(String, Value)>,
+    /// The instance's timing (an instance's `timing` override), if not the type's.
+    #[serde(default)]
+    pub timing: Option<RemoteTiming>,
+    /// Bring the instance to `running` (the default); `false` leaves it `ready`, for
+    /// the node that asked to run it (a proxy, [`crate::place`]).
+    #[serde(default = "yes")]
+    pub run: bool,
 }
 
+fn yes() -> bool {
+    true
+}
+
+/// The fields of a timing block that travel with an instantiation (its quality
+/// levels are the type's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RemoteTiming {
+    /// The nominal period.
+    pub period: Option<Duration>,
+    /// The longest period degradation may stretch to.
+    pub max_period: Option<Duration>,
+    /// The longest a response may take.
+    pub max_response: Option<Duration>,
+    /// The priority.
+    pub priority: i32,
+}
+
+impl From<TimingSpec> for RemoteTiming {
+    fn from(timing: TimingSpec) -> RemoteTiming {
+        RemoteTiming {
+            period: timing.period,
+            max_period: timing.max_period,
+            max_response: timing.max_response,
+            priority: timing.priority,
+        }
+    }
+}
+
+/// What pumps a proxy's input to the network.
+pub(crate) type Pump = Box<dyn FnMut() + Send>;
+
 /// Makes the bridges of one port type.
-trait PortBridge: Send + Sync {
+pub(crate) trait PortBridge: Send + Sync {
+    /// A proxy's input of `kind` (added to `ports`), published on `key`.
+    fn proxy_input(
+        &self,
+        node: &Node,
+        key: &str,
+        kind: InputKind,
+        ports: PortSet,
+    ) -> Result<(PortSet, Pump), Error>;
+    /// A proxy's output of `kind` (added to `ports`), and what delivers a message of
+    /// `key` on it.
+    fn proxy_output(
+        &self,
+        ports: PortSet,
+        kind: OutputKind,
+        losses: ErasedInput,
+        key: &str,
+    ) -> (PortSet, crate::bridge::DeliverFn);
     fn inlet(
         &self,
         node: &Node,
@@ -125,6 +182,28 @@ trait PortBridge: Send + Sync {
 struct Typed<T>(PhantomData<fn() -> T>);
 
 impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
+    fn proxy_input(
+        &self,
+        node: &Node,
+        key: &str,
+        kind: InputKind,
+        ports: PortSet,
+    ) -> Result<(PortSet, Pump), Error> {
+        let (_, mut outlet, _) = node.outlet::<T>("proxy", key, kind).parts()?;
+        let ports = outlet.add_input(ports);
+        Ok((ports, Box::new(move || outlet.pump())))
+    }
+
+    fn proxy_output(
+        &self,
+        ports: PortSet,
+        kind: OutputKind,
+        losses: ErasedInput,
+        key: &str,
+    ) -> (PortSet, crate::bridge::DeliverFn) {
+        crate::bridge::proxy_output::<T>(ports, kind, losses, key)
+    }
+
     fn inlet(
         &self,
         node: &Node,
@@ -146,13 +225,13 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
     }
 }
 
-type Make = Box<dyn Fn(&str) -> Component + Send>;
+type Make = Box<dyn Fn(&str) -> Component + Send + Sync>;
 
 /// How to build one component type, and the packet type of each port that may be
 /// bridged.
 pub struct Factory {
     make: Make,
-    ports: BTreeMap<String, Box<dyn PortBridge>>,
+    pub(crate) ports: BTreeMap<String, Box<dyn PortBridge>>,
 }
 
 impl Factory {
@@ -167,7 +246,7 @@ impl Factory {
 /// The component types an agent can build, by type name.
 #[derive(Default)]
 pub struct Registry {
-    types: BTreeMap<String, Factory>,
+    pub(crate) types: BTreeMap<String, Factory>,
 }
 
 impl std::fmt::Debug for Registry {
@@ -187,7 +266,7 @@ impl Registry {
     pub fn register(
         &mut self,
         type_name: &str,
-        make: impl Fn(&str) -> Component + Send + 'static,
+        make: impl Fn(&str) -> Component + Send + Sync + 'static,
     ) -> &mut Factory {
         self.types.insert(
             type_name.to_owned(),
@@ -197,6 +276,34 @@ impl Registry {
             },
         );
         self.types.get_mut(type_name).expect("just inserted")
+    }
+}
+
+/// What generated crates register (`<component>::register`, one call per type):
+/// the factory and the packet type of every port.
+impl coolbot::remote::Registrar for Registry {
+    fn component(
+        &mut self,
+        type_name: &'static str,
+        make: Box<dyn Fn(&str) -> Component + Send + Sync>,
+    ) {
+        let ports = self
+            .types
+            .remove(type_name)
+            .map(|factory| factory.ports)
+            .unwrap_or_default();
+        self.types
+            .insert(type_name.to_owned(), Factory { make, ports });
+    }
+
+    fn port<T: Packet + Serialize + DeserializeOwned>(
+        &mut self,
+        type_name: &'static str,
+        port: &'static str,
+    ) {
+        if let Some(factory) = self.types.get_mut(type_name) {
+            factory.port::<T>(port);
+        }
     }
 }
 
@@ -217,7 +324,8 @@ impl std::fmt::Debug for Agent {
 impl Agent {
     /// Answer instantiation requests on `coolbot/<node>/@agent` with the types of
     /// `registry`.
-    pub fn start(node: Arc<Node>, registry: Registry) -> Result<Agent, Error> {
+    pub fn start(node: Arc<Node>, registry: impl Into<Arc<Registry>>) -> Result<Agent, Error> {
+        let registry: Arc<Registry> = registry.into();
         let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(16);
         let queryable = node
             .session()
@@ -339,8 +447,18 @@ fn serve(
             request.name
         ));
     }
-    let component = (factory.make)(&request.name);
+    let mut component = (factory.make)(&request.name);
     let spec = component.spec();
+    if let Some(timing) = request.timing {
+        let own = component.timing();
+        component = component.with_timing(TimingSpec {
+            period: timing.period,
+            max_period: timing.max_period,
+            max_response: timing.max_response,
+            priority: timing.priority,
+            ..own
+        });
+    }
     // Check every wire before building anything.
     for wire in &request.wires {
         let (port, output) = match wire {
@@ -419,8 +537,11 @@ fn serve(
                 .map_err(|rejected| rejected.to_string())?;
         }
         // Bridges first, so that the instance's first packets find them running.
-        for handle in handles.iter().rev() {
+        for handle in handles.iter().skip(1).rev() {
             run(handle)?;
+        }
+        if request.run {
+            run(&handles[0])?;
         }
         for handle in &handles {
             node.expose(handle).map_err(|e| e.to_string())?;
@@ -455,7 +576,7 @@ pub fn instantiate(
     let Ok(reply) = replies.recv() else {
         return Err(Error::Remote {
             node: on.to_owned(),
-            reason: format!("no agent answered within {timeout:?}"),
+            reason: format!("no agent answered (waited at most {timeout:?})"),
         });
     };
     let answer = reply

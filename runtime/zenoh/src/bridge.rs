@@ -330,7 +330,7 @@ type Posted<T> = (u64, u64, T);
 /// numbers missing between two it received as lost.
 type Numbered<T> = (u64, u64, T);
 
-struct Outlet<T> {
+pub(crate) struct Outlet<T> {
     spec: &'static Spec,
     input: OutletInput<T>,
     wire: Wire,
@@ -352,6 +352,13 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
     /// return the component (add it to the producer's system and connect the
     /// producer's output to `<name>.input`).
     pub fn build(self) -> Result<Component, Error> {
+        let (name, outlet, ports) = self.parts()?;
+        Ok(Component::new(name, Box::new(outlet), ports))
+    }
+
+    /// What [`OutletBuilder::build`] makes, unassembled: the name, the outlet, its
+    /// port set (a proxy, `crate::place`, takes the outlet's input as its own).
+    pub(crate) fn parts(self) -> Result<(String, Outlet<T>, PortSet), Error> {
         let OutletBuilder {
             node,
             name,
@@ -554,11 +561,27 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             _pull_server: pull_server,
             _token: token,
         };
-        Ok(Component::new(name, Box::new(outlet), ports))
+        Ok((name, outlet, ports))
     }
 }
 
 impl<T: Packet + Serialize> Outlet<T> {
+    /// `ports` with this outlet's input added (a proxy's input, `crate::place`).
+    pub(crate) fn add_input(&self, ports: PortSet) -> PortSet {
+        match &self.input {
+            OutletInput::Tick(port) => ports.input(port),
+            OutletInput::Fifo(port) => ports.input(port),
+            OutletInput::Ufifo(port) => ports.input(port),
+            OutletInput::Last(port) => ports.input(port),
+            OutletInput::Poster(port) => ports.input(port),
+        }
+    }
+
+    /// Publish what waits at the input (a proxy's pump, `crate::place`).
+    pub(crate) fn pump(&mut self) {
+        self.forward();
+    }
+
     fn forward(&mut self) {
         if self.pull {
             // Pull answers go to the querier only, from the pull thread.
@@ -696,7 +719,7 @@ enum InletOutput<T> {
     Poster(PosterOut<T>),
 }
 
-type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
+pub(crate) type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
 
 /// The most outlets (epochs) an inlet remembers the last number of: a key has few
 /// producers, and each restart of one is a new epoch.
@@ -828,6 +851,35 @@ fn deliverer<T: Packet + DeserializeOwned>(
             )
         }
     }
+}
+
+/// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
+/// and what delivers the messages of a bridge key on it (decode, gaps, losses counted
+/// at `losses`).
+pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
+    ports: PortSet,
+    kind: OutputKind,
+    losses: ErasedInput,
+    key: &str,
+) -> (PortSet, DeliverFn) {
+    let (output, ports) = match kind {
+        OutputKind::Tick => {
+            let port = TickOut::new();
+            let ports = ports.output(&port);
+            (InletOutput::Tick(port), ports)
+        }
+        OutputKind::Data => {
+            let port = DataOut::<T>::new();
+            let ports = ports.output(&port);
+            (InletOutput::Data(port), ports)
+        }
+        OutputKind::Poster => {
+            let port = PosterOut::<T>::new();
+            let ports = ports.output(&port);
+            (InletOutput::Poster(port), ports)
+        }
+    };
+    (ports, deliverer(output, losses, key.to_owned()))
 }
 
 impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {

@@ -21,9 +21,11 @@
 //! - **Echoed outputs** ([`Node::echo`]): the packets of chosen outputs as JSON, for
 //!   `coolctl echo`; and each component's static shape on query ([`info`]).
 //! - **`coolctl`**, the command-line tool over those keys ([`ctl`]).
-//! - **Remote instantiation**, a first step ([`agent`]): an agent builds registered
-//!   component types on request from another node, bridges their ports, runs and
-//!   exposes them.
+//! - **Remote instantiation** ([`agent`]): an agent builds registered component
+//!   types on request from another node, bridges their ports, runs and exposes them.
+//! - **Remote instances from the description** ([`place`]): a [`Placer`] installed
+//!   in a process puts its compounds' `instance x: T on "node";` on that node, each
+//!   behind a proxy (`coolbot::remote`).
 //!
 //! `docs/distribution.md` describes the model, the keys, the encoding and what
 //! happens when the network fails.
@@ -37,10 +39,12 @@ pub mod echo;
 pub mod info;
 pub mod keys;
 mod node;
+pub mod place;
 
 pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
 pub use crate::config::peer_config;
 pub use crate::node::{ControlReply, Node};
+pub use crate::place::Placer;
 
 /// Re-exported so users need not depend on it themselves (configurations, sessions).
 pub use zenoh;

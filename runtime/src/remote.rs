@@ -1,0 +1,398 @@
+//! Remote instances (`instance x: T on "node";`): the seam between a compound and a
+//! network layer (`docs/distribution.md`, "Remote instances from the description").
+//!
+//! The core runtime has no network code. A network layer (`coolbot-zenoh`) installs a
+//! [`Placer`] for the process ([`install`]); a compound built while one is installed
+//! asks it, for each instance declared `on "node"`, for the far end of a *proxy*
+//! ([`Remote`]): the ports the proxy has in the instance's place (same names, kinds
+//! and packet types, bridged to the instance on its node) and a [`RemoteEnd`] that
+//! builds the instance there, forwards commands and reports what the instance's
+//! monitoring port says. The proxy is a component with the instance's spec, so the
+//! compound's connections, rules, mapped variables, policies, substitution,
+//! redundancy and supervisor commands work on it unchanged:
+//!
+//! - its user state, result, error and variables mirror the remote instance's;
+//! - the remote instance failing (`running_error`), or its node being lost, is a fault
+//!   of the proxy (`running_error` with the reason), handled by the compound's policy;
+//! - commands given to the proxy go to the remote instance (state changes, variables,
+//!   configuration, period, quality, priority, degradation), each answered by it;
+//! - a restart of the proxy (a policy's or the recovery queue's) builds the instance
+//!   again if its node lost it.
+//!
+//! With no placer installed (a process that is not on a network) an `on "node"`
+//! instance runs in the compound's own process, and a `tracing` line says so.
+
+use std::sync::{Arc, PoisonError, RwLock};
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::automaton::{Automaton, Driven, Waker};
+use crate::monitor::{Command, Monitor};
+use crate::port::Packet;
+use crate::spec::{Spec, StateSpec, TimingSpec};
+use crate::table::{Controllable, State};
+use crate::{Component, Context, Fault, PortSet, Section, Value};
+
+/// What a network layer is told about a component type so that its instances can be
+/// built on another node and bridged: generated crates call it from each atomic
+/// component's `register` function (one call per component type, one per port).
+pub trait Registrar {
+    /// Component type `type_name` is built by `make(instance_name)` (with its default
+    /// configuration and variables; overrides come as commands).
+    fn component(
+        &mut self,
+        type_name: &'static str,
+        make: Box<dyn Fn(&str) -> Component + Send + Sync>,
+    );
+
+    /// Port `port` of component type `type_name` carries `T` (`()` for a tick port).
+    fn port<T: Packet + Serialize + DeserializeOwned>(
+        &mut self,
+        type_name: &'static str,
+        port: &'static str,
+    );
+}
+
+/// One instance declared `on "node"`, as a compound asks a [`Placer`] for it.
+#[derive(Debug, Clone)]
+pub struct Placement {
+    /// The node it is to run on.
+    pub node: String,
+    /// The compound that declares it.
+    pub compound: String,
+    /// The instance's name in the compound.
+    pub name: String,
+    /// Its component type.
+    pub spec: &'static Spec,
+    /// Its effective timing block (the instance's `timing` override, or the spec's).
+    pub timing: TimingSpec,
+    /// Its configuration with the instance's overrides, when the component reports
+    /// one ([`Automaton::configuration`]).
+    pub configuration: Option<Value>,
+    /// Its controllable variables with the instance's overrides, in declaration order.
+    pub variables: Vec<(String, Value)>,
+}
+
+/// The far end of a proxy: what a [`Placer`] returns for a [`Placement`].
+pub struct Remote {
+    /// The proxy's ports, in the spec's declaration order: what arrives at its inputs
+    /// is to reach the remote instance's inputs (the network layer forwards it when
+    /// [`RemoteEnd::pump`] is called, or on its own), and what the remote instance
+    /// sends is sent on its outputs.
+    pub ports: PortSet,
+    /// The instance on its node.
+    pub end: Box<dyn RemoteEnd>,
+}
+
+impl std::fmt::Debug for Remote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Remote")
+    }
+}
+
+/// The remote instance as the proxy's thread sees it. Every method runs on the
+/// proxy's thread; none may wait longer than a network round trip.
+pub trait RemoteEnd: Send + 'static {
+    /// Build the instance on its node and leave it `ready` (the proxy's `start`, and a
+    /// restart after the node lost it); `waker` is rung whenever something changes
+    /// (the instance's monitoring events, the node's liveliness). `Err`: why not.
+    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String>;
+
+    /// Whether the instance must be built again before it can run: never built, or
+    /// its node was lost since.
+    fn needs_instance(&self) -> bool;
+
+    /// Give `command` to the remote instance; its answer.
+    fn command(&mut self, command: &Command) -> Result<(), String>;
+
+    /// Forward what waits at the proxy's inputs (called on every turn of the proxy).
+    fn pump(&mut self);
+
+    /// The remote instance's monitoring port as last heard (`Ok(None)`: nothing yet),
+    /// or why it cannot be heard: its node is lost.
+    fn view(&mut self) -> Result<Option<Monitor>, String>;
+
+    /// The proxy is dead: kill the remote instance if its node is there, and stop
+    /// listening.
+    fn release(&mut self);
+}
+
+/// Builds the far ends of proxies: a network layer's, installed for the process with
+/// [`install`].
+pub trait Placer: Send + Sync {
+    /// The far end for `placement`, or `Ok(None)` if `placement.node` is this
+    /// process's own node (the instance then runs here).
+    fn place(&self, placement: &Placement) -> Result<Option<Remote>, String>;
+}
+
+static PLACER: RwLock<Option<Arc<dyn Placer>>> = RwLock::new(None);
+
+/// The process's placer is `placer` while the returned guard lives (replacing any
+/// other). Compounds built meanwhile put their `on "node"` instances where it says.
+#[must_use = "the placer is uninstalled when the guard is dropped"]
+pub fn install(placer: Arc<dyn Placer>) -> Installed {
+    *PLACER.write().unwrap_or_else(PoisonError::into_inner) = Some(placer);
+    Installed(())
+}
+
+/// Keeps a placer installed ([`install`]).
+#[derive(Debug)]
+pub struct Installed(());
+
+impl Drop for Installed {
+    fn drop(&mut self) {
+        *PLACER.write().unwrap_or_else(PoisonError::into_inner) = None;
+    }
+}
+
+/// The installed placer, if any.
+pub(crate) fn placer() -> Option<Arc<dyn Placer>> {
+    PLACER
+        .read()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone()
+}
+
+/// What a compound does with an instance declared `on node`: the proxy that stands
+/// for it, or the local component itself when there is no placer or the node is this
+/// process's own.
+pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Component, String> {
+    let Some(placer) = placer() else {
+        tracing::info!(
+            compound,
+            instance = local.name(),
+            node,
+            "runs in this process: no network placer is installed"
+        );
+        return Ok(local);
+    };
+    let spec = local.spec();
+    let variables = spec
+        .variables
+        .iter()
+        .enumerate()
+        .filter(|(_, var)| var.kind == crate::spec::VarKind::Controllable)
+        .map(|(index, var)| (var.name.to_owned(), local.automaton_get(index)))
+        .collect();
+    let placement = Placement {
+        node: node.to_owned(),
+        compound: compound.to_owned(),
+        name: local.name().to_owned(),
+        spec,
+        timing: local.timing(),
+        configuration: local.configuration(),
+        variables,
+    };
+    let Some(remote) = placer.place(&placement)? else {
+        return Ok(local);
+    };
+    Ok(proxy(&placement, remote))
+}
+
+/// The proxy's own spec: the instance's ports, variables, exceptions and timing, and
+/// its user states by name, with no sections and no transitions of their own (the
+/// proxy's user state follows the remote instance's).
+fn proxy_spec(spec: &'static Spec) -> &'static Spec {
+    let states: Vec<StateSpec> = spec
+        .states
+        .iter()
+        .map(|state| StateSpec {
+            name: state.name,
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        })
+        .collect();
+    Box::leak(Box::new(Spec {
+        type_name: spec.type_name,
+        doc: spec.doc,
+        states: Box::leak(states.into_boxed_slice()),
+        initial: spec.initial,
+        inputs: spec.inputs,
+        outputs: spec.outputs,
+        variables: spec.variables,
+        exceptions: spec.exceptions,
+        timing: TimingSpec {
+            max_response: None,
+            ..spec.timing
+        },
+    }))
+}
+
+fn proxy(placement: &Placement, remote: Remote) -> Component {
+    let spec = proxy_spec(placement.spec);
+    let proxy = Proxy {
+        spec,
+        node: placement.node.clone(),
+        end: remote.end,
+        view: None,
+    };
+    Component::driven(placement.name.clone(), Box::new(proxy), remote.ports)
+        .with_timing(TimingSpec {
+            period: None,
+            max_period: None,
+            max_response: None,
+            ..placement.timing
+        })
+        .with_adaptation(crate::adapt::AdaptConfig::off())
+}
+
+/// Stands for an instance on another node (see the module documentation).
+struct Proxy {
+    spec: &'static Spec,
+    node: String,
+    end: Box<dyn RemoteEnd>,
+    /// The remote monitoring port as last heard.
+    view: Option<Monitor>,
+}
+
+impl Proxy {
+    fn forward(&mut self, command: Command) -> Result<(), Fault> {
+        self.end
+            .command(&command)
+            .map_err(|reason| Fault::message(format!("on node `{}`: {reason}", self.node)))
+    }
+
+    /// Read the remote view; a fault when the node is lost or the instance failed.
+    fn refresh(&mut self) -> Result<(), Fault> {
+        match self.end.view() {
+            Err(reason) => Err(Fault::message(reason)),
+            Ok(None) => Ok(()),
+            Ok(Some(view)) => {
+                let failed = matches!(view.state, State::RunningError | State::StartingError);
+                let error = view.error.clone();
+                self.view = Some(view);
+                if failed {
+                    return Err(Fault::message(format!(
+                        "on node `{}`: {}",
+                        self.node,
+                        error.unwrap_or_else(|| "the remote instance failed".to_owned())
+                    )));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+impl Automaton for Proxy {
+    fn spec(&self) -> &'static Spec {
+        self.spec
+    }
+
+    fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        if self.end.needs_instance() {
+            self.end
+                .instantiate(cx.waker())
+                .map_err(|reason| Fault::message(format!("on node `{}`: {reason}", self.node)))?;
+        } else {
+            // A restart: the remote instance restarts too.
+            self.forward(Command::SetState(Controllable::Ready))?;
+        }
+        self.refresh()
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {}
+
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        Ok(())
+    }
+
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+
+    fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        Err(Fault::message(format!(
+            "output `{}` is pulled from a remote instance: pull through a remote instance is not carried out",
+            self.spec.outputs.get(output).map_or("?", |o| o.name)
+        )))
+    }
+
+    fn configure(&mut self, configuration: &Value) -> Result<(), String> {
+        self.end.command(&Command::Configure(configuration.clone()))
+    }
+
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+        let name = self.spec.variables[variable].name.to_owned();
+        self.end.command(&Command::Set(name, value.clone()))
+    }
+
+    fn get(&self, variable: usize) -> Value {
+        let name = self.spec.variables[variable].name;
+        self.view
+            .as_ref()
+            .and_then(|view| view.variables.iter().find(|(n, _)| n == name))
+            .map_or(Value::Unit, |(_, value)| value.clone())
+    }
+}
+
+impl Driven for Proxy {
+    fn supervises(&self) -> bool {
+        true
+    }
+
+    fn before_running(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        self.forward(Command::SetState(Controllable::Running))
+    }
+
+    fn after_transition(&mut self, from: State, to: State, _cx: &mut Context) {
+        let command = match to {
+            State::Suspended => Controllable::Suspended,
+            State::Ready if from != State::Starting => Controllable::Ready,
+            State::Dead => {
+                self.end.release();
+                return;
+            }
+            _ => return,
+        };
+        if let Err(fault) = self.forward(Command::SetState(command)) {
+            tracing::warn!("{}", fault.text());
+        }
+    }
+
+    fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        self.end.pump();
+        self.refresh()?;
+        let Some(view) = &self.view else {
+            return Ok(None);
+        };
+        cx.set_result(view.result.clone());
+        let target = view
+            .user_state
+            .as_deref()
+            .and_then(|name| self.spec.state_index(name));
+        Ok(target.filter(|&target| target != state))
+    }
+
+    fn observe(&mut self, _cx: &mut Context) {
+        self.end.pump();
+        let _ = self.end.view().map(|view| {
+            if let Some(view) = view {
+                self.view = Some(view);
+            }
+        });
+    }
+
+    fn forward(&mut self, command: &Command) -> Option<Result<(), String>> {
+        match command {
+            Command::SetPeriod(_)
+            | Command::SetMaxResponse(_)
+            | Command::SetPriority(_)
+            | Command::SetQuality(_)
+            | Command::SetDegradation(_) => Some(self.end.command(command)),
+            Command::SetState(_) | Command::Configure(_) | Command::Set(..) => None,
+        }
+    }
+}

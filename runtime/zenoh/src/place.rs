@@ -1,0 +1,405 @@
+//! Remote instances from the description (`docs/distribution.md`, "Remote instances
+//! from the description"): the [`Placer`] a process installs so that its compounds'
+//! `instance x: T on "node";` run on that node, each behind a proxy
+//! (`coolbot::remote`).
+//!
+//! For each such instance the placer makes the proxy's ports from the [`Registry`]
+//! (the packet type of each port, as the generated `register` functions declare it):
+//! each input publishes what arrives on a bridge key of its own, each output sends
+//! what arrives on one. The [`End`] asks the agent of the named node to build the
+//! instance with the same keys ([`crate::agent`]), mirrors its monitoring port,
+//! forwards commands to its control port, and watches the node's liveliness token:
+//! the node lost is a fault of the proxy within the Zenoh session's lease
+//! ([`crate::peer_config`]'s `lease`).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use coolbot::port::{InputPort, TickIn};
+use coolbot::remote::{Placement, Remote, RemoteEnd};
+use coolbot::{Command, Monitor, MonitorEvent, OutputKind, PortSet, Waker};
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+use crate::agent::{Instantiate, Pump, RemoteInput, Wire, instantiate};
+use crate::bridge::DeliverFn;
+use crate::{ControlReply, Error, Node, keys};
+
+/// How long an instantiation, a command or a snapshot query waits for the other node
+/// unless the placer says otherwise.
+pub const DEFAULT_REMOTE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The queue a remote instance's data output feeds on its node before the network
+/// (the agent's outlet: a ufifo input of this initial size, growing to the cap).
+const REMOTE_QUEUE: (usize, usize) = (64, 65_536);
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Places the `on "node"` instances of this process's compounds on their nodes
+/// (install it with [`Placer::install`] before building them).
+pub struct Placer {
+    node: Arc<Node>,
+    registry: Arc<crate::agent::Registry>,
+    timeout: Duration,
+}
+
+impl std::fmt::Debug for Placer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Placer({})", self.node.name())
+    }
+}
+
+impl Placer {
+    /// A placer on `node` knowing the component types of `registry`.
+    pub fn new(node: Arc<Node>, registry: impl Into<Arc<crate::agent::Registry>>) -> Placer {
+        Placer {
+            node,
+            registry: registry.into(),
+            timeout: DEFAULT_REMOTE_TIMEOUT,
+        }
+    }
+
+    /// How long an instantiation, a command or a query waits for the other node.
+    pub fn timeout(mut self, timeout: Duration) -> Placer {
+        self.timeout = timeout;
+        self
+    }
+
+    /// Install this placer for the process while the guard lives
+    /// ([`coolbot::remote::install`]).
+    pub fn install(self) -> coolbot::remote::Installed {
+        coolbot::remote::install(Arc::new(self))
+    }
+}
+
+/// The name of the remote instance on its node, and the root of its bridge keys.
+fn remote_name(from: &str, placement: &Placement) -> String {
+    format!("{from}-{}-{}", placement.compound, placement.name)
+}
+
+impl coolbot::remote::Placer for Placer {
+    fn place(&self, placement: &Placement) -> Result<Option<Remote>, String> {
+        if placement.node == self.node.name() {
+            return Ok(None);
+        }
+        let spec = placement.spec;
+        let factory = self.registry.types.get(spec.type_name).ok_or_else(|| {
+            format!(
+                "component type `{}` is not registered with this node's placer \
+                     (call its generated `register` function)",
+                spec.type_name
+            )
+        })?;
+        let name = remote_name(self.node.name(), placement);
+        keys::check_name(&name).map_err(|e| e.to_string())?;
+        let base = format!("coolbot-link/{}/{name}", placement.node);
+        let bridge = |port: &str| {
+            factory.ports.get(port).ok_or_else(|| {
+                format!(
+                    "port `{port}` of `{}` was not registered (call its generated `register` function)",
+                    spec.type_name
+                )
+            })
+        };
+        let mut ports = PortSet::new();
+        let mut pumps = Vec::new();
+        let mut wires = Vec::new();
+        for input in spec.inputs {
+            if input.pull {
+                return Err(format!(
+                    "input `{}` is a pull input: pull through a remote instance is not carried out",
+                    input.name
+                ));
+            }
+            let key = format!("{base}/in/{}", input.name);
+            let (with, pump) = bridge(input.name)?
+                .proxy_input(&self.node, &key, input.kind, ports)
+                .map_err(|e| e.to_string())?;
+            ports = with;
+            pumps.push(pump);
+            wires.push(Wire::Input {
+                port: input.name.to_owned(),
+                key,
+            });
+        }
+        // Losses on the way in are counted at an input of the proxy's own (not one of
+        // its ports: the count shows in the log and in `End::lost_on_the_way`).
+        let losses = TickIn::new();
+        let mut outputs = Vec::new();
+        for output in spec.outputs {
+            if output.pull {
+                return Err(format!(
+                    "output `{}` is a pull output: pull through a remote instance is not carried out",
+                    output.name
+                ));
+            }
+            let key = format!("{base}/out/{}", output.name);
+            let (with, deliver) =
+                bridge(output.name)?.proxy_output(ports, output.kind, losses.erased(), &key);
+            ports = with;
+            let to = match output.kind {
+                OutputKind::Tick => RemoteInput::Tick,
+                OutputKind::Poster => RemoteInput::Poster,
+                OutputKind::Data => RemoteInput::Ufifo {
+                    initial: REMOTE_QUEUE.0,
+                    max: Some(REMOTE_QUEUE.1),
+                },
+            };
+            wires.push(Wire::Output {
+                port: output.name.to_owned(),
+                key: key.clone(),
+                to,
+            });
+            outputs.push((key, deliver, output.kind == OutputKind::Poster));
+        }
+        let request = Instantiate {
+            type_name: spec.type_name.to_owned(),
+            name: name.clone(),
+            wires,
+            configuration: placement.configuration.clone(),
+            variables: placement.variables.clone(),
+            timing: Some(placement.timing.into()),
+            run: false,
+        };
+        let mut end = End {
+            node: Arc::clone(&self.node),
+            on: placement.node.clone(),
+            name,
+            request,
+            timeout: self.timeout,
+            pumps,
+            outputs,
+            subscribers: Vec::new(),
+            shared: Arc::new(Shared::default()),
+            instantiated: false,
+            _losses: losses,
+        };
+        end.listen().map_err(|e| e.to_string())?;
+        Ok(Some(Remote {
+            ports,
+            end: Box::new(end),
+        }))
+    }
+}
+
+/// What the Zenoh callbacks of one proxy tell its thread.
+#[derive(Default)]
+struct Shared {
+    /// The remote monitoring port as last heard.
+    view: Mutex<Option<Monitor>>,
+    /// Whether `view` changed since the proxy last read it.
+    changed: AtomicBool,
+    /// Why the node is lost, while it is.
+    lost: Mutex<Option<String>>,
+    waker: Mutex<Option<Waker>>,
+}
+
+impl Shared {
+    fn ring(&self) {
+        if let Some(waker) = lock(&self.waker).as_ref() {
+            waker.wake();
+        }
+    }
+}
+
+/// The far end of one proxy: the remote instance, seen from here.
+struct End {
+    node: Arc<Node>,
+    /// The node the instance runs on.
+    on: String,
+    /// Its name there.
+    name: String,
+    request: Instantiate,
+    timeout: Duration,
+    pumps: Vec<Pump>,
+    /// The proxy's outputs: key, delivery, whether a poster (asked again after each
+    /// instantiation: a late joiner's value).
+    outputs: Vec<(String, DeliverFn, bool)>,
+    subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    shared: Arc<Shared>,
+    instantiated: bool,
+    _losses: TickIn,
+}
+
+impl End {
+    /// Subscribe to the outputs' keys, the instance's monitoring events and the
+    /// node's liveliness.
+    fn listen(&mut self) -> Result<(), Error> {
+        let session = self.node.session();
+        for (key, deliver, _) in &self.outputs {
+            let deliver = Arc::clone(deliver);
+            self.subscribers.push(
+                session
+                    .declare_subscriber(key.clone())
+                    .callback(move |sample| deliver(&sample.payload().to_bytes()))
+                    .wait()
+                    .map_err(Error::zenoh)?,
+            );
+        }
+        let shared = Arc::clone(&self.shared);
+        self.subscribers.push(
+            session
+                .declare_subscriber(keys::monitor(&self.on, &self.name))
+                .callback(move |sample| {
+                    let Ok(event) =
+                        serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes())
+                    else {
+                        tracing::warn!("a monitoring event that does not decode was dropped");
+                        return;
+                    };
+                    if let Some(view) = lock(&shared.view).as_mut() {
+                        mirror(view, event);
+                        shared.changed.store(true, Ordering::Release);
+                    }
+                    shared.ring();
+                })
+                .wait()
+                .map_err(Error::zenoh)?,
+        );
+        let shared = Arc::clone(&self.shared);
+        let on = self.on.clone();
+        self.subscribers.push(
+            session
+                .liveliness()
+                .declare_subscriber(keys::node_token(&self.on))
+                .callback(move |sample| {
+                    if sample.kind() == SampleKind::Delete {
+                        *lock(&shared.lost) = Some(format!(
+                            "node `{on}` is lost: its liveliness token was withdrawn"
+                        ));
+                        shared.ring();
+                    }
+                })
+                .wait()
+                .map_err(Error::zenoh)?,
+        );
+        Ok(())
+    }
+
+    /// The remote instance's snapshot, asked for now.
+    fn snapshot(&self) -> Result<Monitor, String> {
+        let replies = self
+            .node
+            .session()
+            .get(keys::monitor(&self.on, &self.name))
+            .timeout(self.timeout)
+            .wait()
+            .map_err(|e| e.to_string())?;
+        let reply = replies
+            .recv()
+            .map_err(|_| format!("node `{}` did not answer for `{}`", self.on, self.name))?;
+        let sample = reply
+            .result()
+            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
+        serde_json::from_slice(&sample.payload().to_bytes()).map_err(|e| e.to_string())
+    }
+}
+
+/// Apply one monitoring event to the mirrored view (what a proxy mirrors).
+fn mirror(view: &mut Monitor, event: MonitorEvent) {
+    match event {
+        MonitorEvent::State { to, .. } => view.state = to,
+        MonitorEvent::UserState(state) => view.user_state = state,
+        MonitorEvent::Result(result) => view.result = result,
+        MonitorEvent::Error(error) => view.error = error,
+        MonitorEvent::Variable { name, value } => {
+            if let Some(slot) = view.variables.iter_mut().find(|(n, _)| *n == name) {
+                slot.1 = value;
+            }
+        }
+        _ => {}
+    }
+}
+
+impl RemoteEnd for End {
+    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
+        *lock(&self.shared.waker) = waker;
+        *lock(&self.shared.view) = None;
+        instantiate(&self.node, &self.on, &self.request, self.timeout)
+            .map_err(|e| e.to_string())?;
+        self.instantiated = true;
+        *lock(&self.shared.lost) = None;
+        let snapshot = self.snapshot()?;
+        *lock(&self.shared.view) = Some(snapshot);
+        self.shared.changed.store(true, Ordering::Release);
+        // A poster's current value, for the proxy's readers.
+        for (key, deliver, poster) in &self.outputs {
+            if *poster {
+                let deliver = Arc::clone(deliver);
+                let _ = self
+                    .node
+                    .session()
+                    .get(key.clone())
+                    .callback(move |reply| {
+                        if let Ok(sample) = reply.result() {
+                            deliver(&sample.payload().to_bytes());
+                        }
+                    })
+                    .wait();
+            }
+        }
+        Ok(())
+    }
+
+    fn needs_instance(&self) -> bool {
+        !self.instantiated || lock(&self.shared.lost).is_some()
+    }
+
+    fn command(&mut self, command: &Command) -> Result<(), String> {
+        if let Some(lost) = lock(&self.shared.lost).clone() {
+            return Err(lost);
+        }
+        let json = serde_json::to_vec(command).map_err(|e| e.to_string())?;
+        let replies = self
+            .node
+            .session()
+            .get(keys::control(&self.on, &self.name))
+            .payload(json)
+            .timeout(self.timeout)
+            .wait()
+            .map_err(|e| e.to_string())?;
+        let reply = replies.recv().map_err(|_| {
+            format!(
+                "node `{}` did not answer for `{}` within {:?}",
+                self.on, self.name, self.timeout
+            )
+        })?;
+        let sample = reply
+            .result()
+            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
+        match serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes()) {
+            Ok(ControlReply::Accepted) => Ok(()),
+            Ok(ControlReply::Rejected { reason }) => Err(reason),
+            Err(error) => Err(format!("an answer that does not decode: {error}")),
+        }
+    }
+
+    fn pump(&mut self) {
+        for pump in &mut self.pumps {
+            pump();
+        }
+    }
+
+    fn view(&mut self) -> Result<Option<Monitor>, String> {
+        if let Some(lost) = lock(&self.shared.lost).clone() {
+            return Err(lost);
+        }
+        if !self.shared.changed.swap(false, Ordering::AcqRel) {
+            return Ok(None);
+        }
+        Ok(lock(&self.shared.view).clone())
+    }
+
+    fn release(&mut self) {
+        if self.instantiated && lock(&self.shared.lost).is_none() {
+            let dead = Command::SetState(coolbot::Controllable::Dead);
+            if let Err(reason) = self.command(&dead) {
+                tracing::warn!(instance = %self.name, node = %self.on, "not released: {reason}");
+            }
+        }
+        self.subscribers.clear();
+    }
+}
