@@ -277,7 +277,7 @@ pub fn component_with(
 /// builds one named as asked, with this crate's behaviour.
 pub fn register<R: ::coolbot::remote::Registrar>(
     registrar: &mut R,
-    make: impl Fn(&str) -> ::coolbot::Component + ::core::marker::Send + ::core::marker::Sync + 'static,
+    make: impl Fn(&str) -> ::coolbot::Component + Send + Sync + 'static,
 ) {
     registrar.component(SPEC.type_name, ::std::boxed::Box::new(make));
 {%- for p in c.inputs %}

@@ -838,21 +838,20 @@ mod mermaid {
     }
 }
 
-/// `on "node"` is not carried out yet (`coolc::check::remote_instance`), so the
-/// structure view draws the instance where it runs: no remote style, and a label
-/// that says it runs locally.
+/// `on "node"` runs the instance on that node when the process is on a network
+/// (`docs/distribution.md`), so the structure view labels it with its node and says
+/// when; it is not drawn dashed (dashed is for substitutes and redundant groups).
 #[test]
-fn an_instance_on_a_node_is_drawn_where_it_runs() {
-    let path = repository().join("tests/data/warn/remote_instance.cool");
+fn an_instance_on_a_node_is_labelled_with_its_node() {
+    let path = repository().join("examples/components/mobile_base.cool");
     let dot = rendered(&path, Format::Dot).expect("a compound to draw");
     assert!(
-        dot.contains("on &quot;workstation&quot;: runs locally (not yet remote)"),
+        dot.contains("on &quot;station&quot; (remote when on a network)"),
         "{dot}"
     );
-    assert!(!dot.contains("(remote)"), "{dot}");
-    let planner = dot
+    let wanderer = dot
         .lines()
-        .find(|line| line.trim_start().starts_with("\"planner\""))
-        .expect("the planner node");
-    assert!(!planner.contains("dashed"), "{planner}");
+        .find(|line| line.trim_start().starts_with("\"wanderer\""))
+        .expect("the wanderer node");
+    assert!(!wanderer.contains("dashed"), "{wanderer}");
 }

@@ -471,12 +471,9 @@ impl<'a> Lookup<'a> {
             instance.name.name, instance.component.name
         )];
         if let Some(node) = &instance.node {
-            // `on "node"` is not carried out yet (`coolc::check::remote_instance`):
-            // the drawing says where the instance really runs.
-            lines.push(format!(
-                "on \"{}\": runs locally (not yet remote)",
-                node.value
-            ));
+            // `on "node"`: on that node behind a proxy when the process is on a
+            // network, else in the compound's process (`docs/distribution.md`).
+            lines.push(format!("on \"{}\" (remote when on a network)", node.value));
         }
         if let Some(policy) = policies.get(instance.name.name.as_str()) {
             lines.push(format!("on error: {policy}"));
