@@ -549,6 +549,14 @@ fn serve(
         Ok(())
     };
     let outcome = made();
+    if outcome.is_ok() {
+        tracing::info!(
+            instance = %name,
+            type_name = %request.type_name,
+            "built for another node{}",
+            if request.run { "" } else { " (left ready)" }
+        );
+    }
     if outcome.is_err() {
         // What was built goes away (its names stay taken in this system).
         for handle in &handles {
