@@ -181,3 +181,130 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
     station.kill().expect("SIGKILL");
     let _ = station.wait();
 }
+
+/// In one process, two Zenoh sessions: the station's agent, and the robot with the
+/// placer installed (`mobile_base::node::open`). Commands given to the wanderer's
+/// proxy reach the instance on the station (read back on the station's own keys), and
+/// the proxy mirrors what the instance publishes.
+#[test]
+fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back() {
+    use std::sync::Arc;
+
+    use coolbot::{Command, Controllable, State, Value};
+    use coolbot_zenoh::agent::{Agent, Registry};
+    use coolbot_zenoh::ctl::Ctl;
+    use coolbot_zenoh::zenoh::{self, Wait};
+    use mobile_base::generated::wanderer;
+    use mobile_base::node::NodeOptions;
+    use mobile_base::robot::{Robot, Setup};
+    use mobile_base::world::{Platform, World};
+
+    let port = free_port();
+    let listen = format!("tcp/127.0.0.1:{port}");
+    let config = coolbot_zenoh::peer_config(std::slice::from_ref(&listen), &[], false)
+        .expect("a configuration");
+    let station = Arc::new(coolbot_zenoh::Node::open("station", config).expect("the station"));
+    let mut registry = Registry::new();
+    wanderer::register(&mut registry, |name| {
+        wanderer::component(name, mobile_base::wanderer::Wanderer::default())
+    });
+    let _agent = Agent::start(Arc::clone(&station), registry).expect("the agent");
+    let network = mobile_base::node::open(&NodeOptions {
+        connect: vec![listen.clone()],
+        multicast: false,
+        ..NodeOptions::named("robot")
+    })
+    .expect("the robot's node");
+
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    let proxy = &robot.wanderer;
+    let remote = "station/robot-robot-wanderer";
+    let session = zenoh::open(
+        coolbot_zenoh::peer_config(&[], std::slice::from_ref(&listen), false).expect("config"),
+    )
+    .wait()
+    .expect("a session");
+    let ctl = Ctl::new(session, Duration::from_secs(2));
+    let deadline = Duration::from_secs(20);
+    let remote_is = |what: &str, holds: &dyn Fn(&coolbot::Monitor) -> bool| {
+        let until = Instant::now() + deadline;
+        loop {
+            match ctl.snapshot(remote) {
+                Ok(monitor) if holds(&monitor) => return monitor,
+                Ok(monitor) if Instant::now() > until => {
+                    panic!("the remote wanderer is not {what}: {monitor:?}")
+                }
+                Err(error) if Instant::now() > until => panic!("{remote}: {error}"),
+                _ => std::thread::sleep(Duration::from_millis(20)),
+            }
+        }
+    };
+    let variable = |monitor: &coolbot::Monitor, name: &str| {
+        monitor
+            .variables
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, value)| value.clone())
+    };
+
+    // The instance runs on the station, and the proxy mirrors its user state.
+    remote_is("running", &|m| m.state == State::Running);
+    let mirrored = proxy
+        .wait_for(
+            |m| m.user_state.is_some() && m.state == State::Running,
+            deadline,
+        )
+        .expect("the proxy runs");
+    assert!(
+        ["wandering", "avoiding", "seeking"]
+            .contains(&mirrored.user_state.as_deref().unwrap_or("")),
+        "{mirrored:?}"
+    );
+
+    // A controllable variable: set through the proxy, set on the station, and the
+    // value the station publishes comes back to the proxy's monitoring port.
+    proxy
+        .command(Command::Set("seek".to_owned(), Value::Bool(true)))
+        .expect("seek is set");
+    remote_is("seeking", &|m| {
+        variable(m, "seek") == Some(Value::Bool(true))
+    });
+    proxy
+        .wait_for(|m| variable(m, "seek") == Some(Value::Bool(true)), deadline)
+        .expect("the proxy mirrors seek");
+    // A bad value is refused by the remote instance, with its reason.
+    let refused = proxy
+        .command(Command::Set(
+            "seek".to_owned(),
+            Value::Str("yes".to_owned()),
+        ))
+        .expect_err("a text is no bool");
+    assert!(refused.reason.contains("seek"), "{refused}");
+
+    // The period, and the default automaton: suspend and run.
+    proxy
+        .command(Command::SetPeriod(Duration::from_millis(120)))
+        .expect("the period is set");
+    remote_is("at 120 ms", &|m| {
+        m.period == Some(Duration::from_millis(120))
+    });
+    proxy
+        .command(Command::SetState(Controllable::Suspended))
+        .expect("suspended");
+    remote_is("suspended", &|m| m.state == State::Suspended);
+    proxy
+        .command(Command::SetState(Controllable::Running))
+        .expect("running again");
+    remote_is("running again", &|m| m.state == State::Running);
+
+    // Shutting the robot down releases the remote instance.
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+    remote_is("dead", &|m| m.state == State::Dead);
+    drop(network);
+}

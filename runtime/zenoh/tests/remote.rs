@@ -497,6 +497,8 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
                 to: RemoteInput::Fifo { capacity: 64 },
             },
         ],
+        timing: None,
+        run: true,
         configuration: None,
         variables: Vec::new(),
     };
