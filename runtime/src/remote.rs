@@ -2,7 +2,8 @@
 //! network layer (`docs/distribution.md`, "Remote instances from the description").
 //!
 //! The core runtime has no network code. A network layer (`coolbot-zenoh`) installs a
-//! [`Placer`] for the process ([`install`]); a compound built while one is installed
+//! [`Placer`] on the thread that builds the compounds ([`install`]); a compound built
+//! there while one is installed
 //! asks it, for each instance declared `on "node"`, for the far end of a *proxy*
 //! ([`Remote`]): the ports the proxy has in the instance's place (same names, kinds
 //! and packet types, bridged to the instance on its node) and a [`RemoteEnd`] that
@@ -22,7 +23,9 @@
 //! With no placer installed (a process that is not on a network) an `on "node"`
 //! instance runs in the compound's own process, and a `tracing` line says so.
 
-use std::sync::{Arc, PoisonError, RwLock};
+use std::cell::RefCell;
+use std::marker::PhantomData;
+use std::sync::Arc;
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -126,32 +129,47 @@ pub trait Placer: Send + Sync {
     fn place(&self, placement: &Placement) -> Result<Option<Remote>, String>;
 }
 
-static PLACER: RwLock<Option<Arc<dyn Placer>>> = RwLock::new(None);
-
-/// The process's placer is `placer` while the returned guard lives (replacing any
-/// other). Compounds built meanwhile put their `on "node"` instances where it says.
-#[must_use = "the placer is uninstalled when the guard is dropped"]
-pub fn install(placer: Arc<dyn Placer>) -> Installed {
-    *PLACER.write().unwrap_or_else(PoisonError::into_inner) = Some(placer);
-    Installed(())
+thread_local! {
+    static PLACER: RefCell<Option<Arc<dyn Placer>>> = const { RefCell::new(None) };
 }
 
-/// Keeps a placer installed ([`install`]).
-#[derive(Debug)]
-pub struct Installed(());
-
-impl Drop for Installed {
-    fn drop(&mut self) {
-        *PLACER.write().unwrap_or_else(PoisonError::into_inner) = None;
+/// `placer` places the `on "node"` instances of the compounds built on this thread
+/// while the returned guard lives (a process builds its compounds on the thread that
+/// opened its node; two systems built on two threads of one process, as tests do,
+/// do not see each other's placer). Dropping the guard restores what was installed
+/// before.
+#[must_use = "the placer is uninstalled when the guard is dropped"]
+pub fn install(placer: Arc<dyn Placer>) -> Installed {
+    let previous = PLACER.with(|slot| slot.replace(Some(placer)));
+    Installed {
+        previous,
+        _thread: PhantomData,
     }
 }
 
-/// The installed placer, if any.
+/// Keeps a placer installed on this thread ([`install`]); not `Send`: it is dropped
+/// on the thread that installed it.
+pub struct Installed {
+    previous: Option<Arc<dyn Placer>>,
+    _thread: PhantomData<*const ()>,
+}
+
+impl std::fmt::Debug for Installed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Installed")
+    }
+}
+
+impl Drop for Installed {
+    fn drop(&mut self) {
+        let previous = self.previous.take();
+        PLACER.with(|slot| *slot.borrow_mut() = previous);
+    }
+}
+
+/// The placer installed on this thread, if any.
 pub(crate) fn placer() -> Option<Arc<dyn Placer>> {
-    PLACER
-        .read()
-        .unwrap_or_else(PoisonError::into_inner)
-        .clone()
+    PLACER.with(|slot| slot.borrow().clone())
 }
 
 /// What a compound does with an instance declared `on node`: the proxy that stands

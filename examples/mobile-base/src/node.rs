@@ -41,7 +41,7 @@ impl NodeOptions {
 /// The process on the network: its node, the placer that puts the robot's
 /// `on "node"` instances on their nodes (the wanderer `on "station"`), and the agent
 /// that builds such instances here when another node asks. Open it before the robot
-/// is built (the placer must be installed then); the robot's components are exposed
+/// is built, on the thread that builds it (the placer is installed on that thread); the robot's components are exposed
 /// by [`Network::expose`].
 pub struct Network {
     name: String,

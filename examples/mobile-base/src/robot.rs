@@ -34,6 +34,8 @@ pub const ROBOT: &str = "robot";
 pub const BASE: &str = "base";
 /// Instance `wanderer` of `Robot`.
 pub const WANDERER: &str = "wanderer";
+/// Instance `fallback` of `Robot` (`substitutes wanderer`).
+pub const FALLBACK: &str = "fallback";
 /// Instance `mapper` of `Robot`.
 pub const MAPPER: &str = "mapper";
 /// Instance `motion` of `MobileBase`.
@@ -310,6 +312,7 @@ mod tests {
         assert_eq!(names, [MOTION, RANGES, SIM_RANGES]);
         assert_eq!(mobile_base::SUBSTITUTES, &[(SIM_RANGES, RANGES)]);
         let names: Vec<&str> = robot::INSTANCES.iter().map(|(n, _)| *n).collect();
-        assert_eq!(names, [BASE, WANDERER, MAPPER]);
+        assert_eq!(names, [BASE, WANDERER, FALLBACK, MAPPER]);
+        assert_eq!(robot::SUBSTITUTES, &[(FALLBACK, WANDERER)]);
     }
 }

@@ -683,10 +683,33 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         .expect("a free loopback port");
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let name = format!("mobile-base-test-{}", std::process::id());
+    // The station the robot's description places the wanderer on (`on "station"`),
+    // here in the test's process: a node with an agent that can build a wanderer.
+    let station_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free loopback port");
+    let station_endpoint = format!("tcp/127.0.0.1:{station_port}");
+    let station = std::sync::Arc::new(
+        Node::open(
+            "station",
+            peer_config(std::slice::from_ref(&station_endpoint), &[], false).expect("config"),
+        )
+        .expect("the station opens"),
+    );
+    let mut registry = coolbot_zenoh::agent::Registry::new();
+    mobile_base::generated::wanderer::register(&mut registry, |name| {
+        mobile_base::generated::wanderer::component(
+            name,
+            mobile_base::wanderer::Wanderer::default(),
+        )
+    });
+    let _agent = coolbot_zenoh::agent::Agent::start(station, registry).expect("the agent");
     let options = Options {
         duration: Duration::from_secs(120),
         node: Some(NodeOptions {
             listen: vec![endpoint.clone()],
+            connect: vec![station_endpoint],
             multicast: false,
             ..NodeOptions::named(name.clone())
         }),
@@ -708,6 +731,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         "robot.base.motion",
         "robot.base.ranges",
         "robot.base.sim_ranges",
+        "robot.fallback",
         "robot.mapper",
         "robot.wanderer",
     ];
@@ -726,12 +750,14 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
     };
     for component in &listed {
         let state = component.monitor.state;
-        // The substitute waits on standby; every other component runs.
-        let wanted = if component.path.ends_with("sim_ranges") {
-            State::Ready
-        } else {
-            State::Running
-        };
+        // The substitutes wait on standby; every other component runs (the wanderer's
+        // proxy mirrors the wanderer on the station).
+        let wanted =
+            if component.path.ends_with("sim_ranges") || component.path.ends_with("fallback") {
+                State::Ready
+            } else {
+                State::Running
+            };
         assert_eq!(state, wanted, "{}", component.path);
     }
     // The control port answers over the network as it does locally.

@@ -315,7 +315,7 @@ impl CompoundBuilder {
     }
 
     /// An instance declared `on "node"` (`docs/distribution.md`, "Remote instances
-    /// from the description"): with a network placer installed
+    /// from the description"): with a network placer installed on this thread
     /// ([`crate::remote::install`]), a proxy stands here for `component` built on
     /// `node`; without one, or when `node` is this process's own, `component` runs
     /// here as with [`CompoundBuilder::instance`].

@@ -38,8 +38,8 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// Places the `on "node"` instances of this process's compounds on their nodes
-/// (install it with [`Placer::install`] before building them).
+/// Places the `on "node"` instances of compounds on their nodes (install it with
+/// [`Placer::install`] on the thread that builds them, before building them).
 pub struct Placer {
     node: Arc<Node>,
     registry: Arc<crate::agent::Registry>,
@@ -68,7 +68,7 @@ impl Placer {
         self
     }
 
-    /// Install this placer for the process while the guard lives
+    /// Install this placer on this thread while the guard lives
     /// ([`coolbot::remote::install`]).
     pub fn install(self) -> coolbot::remote::Installed {
         coolbot::remote::install(Arc::new(self))
