@@ -707,6 +707,10 @@ impl Events {
 /// is set. Returns the node's name.
 pub fn serve(node: &NodeOptions, stop: &AtomicBool) -> Result<String, String> {
     let network = node::open(node)?;
+    println!(
+        "node `{}` on the network: serving what other nodes place on it",
+        network.name()
+    );
     while !stop.load(Ordering::Acquire) {
         std::thread::sleep(Duration::from_millis(50));
     }

@@ -23,16 +23,14 @@ fn free_port() -> u16 {
         .expect("a free port")
 }
 
-/// Starts the binary with `args`; every line of its stdout and stderr is sent on
-/// the returned channel (tagged with `who`), and kept in the joined string.
+/// Starts the binary with `args`; every line of its stdout and stderr goes to `lines`
+/// tagged with `who` (`robot: ...`, `station stderr: ...`), and its stdout is kept
+/// in the joined string.
 fn spawn(
     who: &'static str,
     args: &[&str],
-) -> (
-    Child,
-    mpsc::Receiver<String>,
-    std::thread::JoinHandle<String>,
-) {
+    lines: &mpsc::Sender<String>,
+) -> (Child, std::thread::JoinHandle<String>) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mobile-base"))
         .args(args)
         .env("RUST_LOG", "warn,coolbot_zenoh=info")
@@ -40,7 +38,6 @@ fn spawn(
         .stderr(Stdio::piped())
         .spawn()
         .expect("the example starts");
-    let (lines, receiver) = mpsc::channel();
     let stderr = child.stderr.take().expect("piped");
     let errors = lines.clone();
     std::thread::spawn(move || {
@@ -50,21 +47,22 @@ fn spawn(
         }
     });
     let stdout = child.stdout.take().expect("piped");
+    let lines = lines.clone();
     let reader = std::thread::spawn(move || {
         let mut all = String::new();
         for line in BufReader::new(stdout).lines() {
             let Ok(line) = line else { break };
             all.push_str(&line);
             all.push('\n');
-            let _ = lines.send(line);
+            let _ = lines.send(format!("{who}: {line}"));
         }
         all
     });
-    (child, receiver, reader)
+    (child, reader)
 }
 
-/// Waits for a line for which `wanted` holds; the lines seen meanwhile are kept in
-/// `seen` (for the failure message).
+/// Waits for a line (of either process) for which `wanted` holds; the lines seen
+/// meanwhile are kept in `seen`, and printed if none comes.
 fn wait_line(
     lines: &mpsc::Receiver<String>,
     seen: &mut Vec<String>,
@@ -99,8 +97,12 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
         "--lease",
         "1s",
     ];
-    let (mut station, station_lines, _) = spawn("station", &station_args);
-    let (robot, robot_lines, robot_out) = spawn(
+    let (sender, lines) = mpsc::channel();
+    let (mut station, _) = spawn("station", &station_args, &sender);
+    let mut seen = Vec::new();
+    let serving = |l: &str| l.starts_with("station: node `station` on the network");
+    wait_line(&lines, &mut seen, "of the station serving", serving);
+    let (robot, robot_out) = spawn(
         "robot",
         &[
             "--node",
@@ -115,56 +117,75 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
             "--output",
             "lines",
         ],
+        &sender,
     );
-    let mut seen = Vec::new();
+    let built = |l: &str| {
+        l.starts_with("station")
+            && l.contains("built for another node")
+            && l.contains("robot-robot-wanderer")
+    };
+    let robot_says =
+        |text: &'static str| move |l: &str| l.starts_with("robot: ") && l.contains(text);
+    let status = |a: &'static str, b: &'static str| {
+        move |l: &str| l.starts_with("robot: [") && l.contains(a) && l.contains(b)
+    };
 
     // The station built the wanderer for the robot; the robot's status lines show it
     // running (its proxy mirrors the remote user state) with the fallback standing by.
     wait_line(
-        &station_lines,
+        &lines,
         &mut seen,
         "of the station building the wanderer",
-        |l| l.contains("built for another node") && l.contains("robot-robot-wanderer"),
+        built,
     );
     wait_line(
-        &robot_lines,
+        &lines,
         &mut seen,
         "with the remote wanderer running",
-        |l| l.contains(" wanderer=running/") && l.contains(" fallback=ready"),
+        status(" wanderer=running/", " fallback=ready"),
     );
 
     // kill -9 the station: the proxy's node is lost, the fallback takes over.
     station.kill().expect("SIGKILL");
     let _ = station.wait();
-    wait_line(&robot_lines, &mut seen, "saying the station is lost", |l| {
-        l.contains("robot: wanderer failed: node `station` is lost")
-    });
-    wait_line(&robot_lines, &mut seen, "substituting the fallback", |l| {
-        l.contains("robot: wanderer substituted by fallback")
-    });
-    wait_line(&robot_lines, &mut seen, "with the fallback driving", |l| {
-        l.contains(" fallback=running/")
-    });
+    wait_line(
+        &lines,
+        &mut seen,
+        "saying the station is lost",
+        robot_says("robot: wanderer failed: node `station` is lost"),
+    );
+    wait_line(
+        &lines,
+        &mut seen,
+        "substituting the fallback",
+        robot_says("robot: wanderer substituted by fallback"),
+    );
+    wait_line(
+        &lines,
+        &mut seen,
+        "with the fallback driving",
+        status(" fallback=running/", " wanderer="),
+    );
 
     // The station is back: the wanderer is built there again and takes over.
-    let (mut station, station_lines, _) = spawn("station", &station_args);
+    let (mut station, _) = spawn("station", &station_args, &sender);
     wait_line(
-        &station_lines,
+        &lines,
         &mut seen,
         "of the new station building the wanderer",
-        |l| l.contains("built for another node") && l.contains("robot-robot-wanderer"),
+        built,
     );
     wait_line(
-        &robot_lines,
+        &lines,
         &mut seen,
         "saying the wanderer recovered",
-        |l| l.contains("robot: wanderer recovered"),
+        robot_says("robot: wanderer recovered"),
     );
     wait_line(
-        &robot_lines,
+        &lines,
         &mut seen,
         "with the wanderer back and the fallback ready",
-        |l| l.contains(" wanderer=running/") && l.contains(" fallback=ready"),
+        status(" wanderer=running/", " fallback=ready"),
     );
 
     // SIGTERM: a clean shutdown, which releases the remote wanderer too.

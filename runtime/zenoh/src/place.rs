@@ -14,7 +14,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use coolbot::port::{InputPort, TickIn};
 use coolbot::remote::{Placement, Remote, RemoteEnd};
@@ -318,8 +318,20 @@ impl RemoteEnd for End {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
-        instantiate(&self.node, &self.on, &self.request, self.timeout)
-            .map_err(|e| e.to_string())?;
+        // The node may not be reachable yet (a robot and its station started together):
+        // ask again until the timeout, every 100 ms, while nothing answers.
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            match instantiate(&self.node, &self.on, &self.request, self.timeout) {
+                Ok(()) => break,
+                Err(Error::Remote { reason, .. })
+                    if reason.starts_with("no agent answered") && Instant::now() < deadline =>
+                {
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+                Err(error) => return Err(error.to_string()),
+            }
+        }
         self.instantiated = true;
         *lock(&self.shared.lost) = None;
         let snapshot = self.snapshot()?;
