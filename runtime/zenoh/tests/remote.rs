@@ -7,45 +7,14 @@ mod support;
 use std::time::Duration;
 
 use coolbot::{
-    Command, CompoundBuilder, Controllable, PortSet, Spec, State, StateSpec, Supervisor, System,
-    TimingSpec, VarKind,
+    Command, CompoundBuilder, Controllable, PortSet, Spec, State, StateSpec, System, TimingSpec,
+    VarKind,
 };
 use coolbot_zenoh::ctl::{Ctl, CtlError};
 use coolbot_zenoh::{ControlReply, Node};
 use zenoh::Wait;
 
-use support::{PATIENCE, Shell, pair, spec, var, wait_until};
-
-struct Sup(&'static Spec);
-
-impl Supervisor for Sup {
-    fn spec(&self) -> &'static Spec {
-        self.0
-    }
-}
-
-fn supervisor(state: &'static str) -> Sup {
-    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
-        name: state,
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }]));
-    Sup(Box::leak(Box::new(Spec {
-        type_name: "Compound",
-        doc: "",
-        states,
-        initial: 0,
-        inputs: &[],
-        outputs: &[],
-        variables: &[],
-        exceptions: &[],
-        timing: TimingSpec::NONE,
-    })))
-}
+use support::{PATIENCE, Shell, pair, spec, supervisor, var, wait_until};
 
 /// The robot's system, running, exposed on `node`.
 fn robot(node: &Node) -> System {

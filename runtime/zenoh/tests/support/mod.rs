@@ -199,3 +199,36 @@ impl Automaton for Shell {
         self.values[variable].clone()
     }
 }
+
+/// A compound's supervisor with one state that does nothing.
+pub struct Idle(&'static Spec);
+
+impl coolbot::Supervisor for Idle {
+    fn spec(&self) -> &'static Spec {
+        self.0
+    }
+}
+
+/// [`Idle`] in state `state`.
+pub fn supervisor(state: &'static str) -> Idle {
+    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
+        name: state,
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }]));
+    Idle(Box::leak(Box::new(Spec {
+        type_name: "Compound",
+        doc: "",
+        states,
+        initial: 0,
+        inputs: &[],
+        outputs: &[],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    })))
+}

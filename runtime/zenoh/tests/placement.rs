@@ -1,0 +1,247 @@
+//! Remote instances from the description (`coolbot_zenoh::place`): a compound's
+//! instance declared on another node runs there behind a proxy, and every connection
+//! kind crosses the network through the proxy's ports, both ways: tick, last, fifo,
+//! ufifo and poster inputs; tick, data and poster outputs (a poster's value reaches a
+//! reader that joins late).
+
+mod support;
+
+use std::sync::{Arc, Mutex};
+
+use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
+use coolbot::{
+    CompoundBuilder, InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy, PortSet, State,
+    System,
+};
+use coolbot_zenoh::Placer;
+use coolbot_zenoh::agent::{Agent, Registry};
+
+use support::{PATIENCE, Shell, pair, spec, supervisor, wait_until};
+
+fn input(name: &'static str, kind: InputKind) -> InputSpec {
+    InputSpec {
+        name,
+        kind,
+        packet: "u64",
+        pull: false,
+    }
+}
+
+fn output(name: &'static str, kind: OutputKind) -> OutputSpec {
+    OutputSpec {
+        name,
+        kind,
+        packet: "u64",
+        pull: false,
+    }
+}
+
+const FIFO: InputKind = InputKind::Fifo {
+    capacity: 16,
+    policy: OverflowPolicy::Reject,
+};
+const UFIFO: InputKind = InputKind::Ufifo {
+    initial: 4,
+    max: None,
+};
+
+/// The ports of the instance built on the station, for the test to drive.
+#[derive(Clone)]
+struct RelayPorts {
+    ti: TickIn,
+    li: LastIn<u64>,
+    fi: FifoIn<u64>,
+    ui: UfifoIn<u64>,
+    pi: PosterIn<u64>,
+    to: TickOut,
+    out: DataOut<u64>,
+    po: PosterOut<u64>,
+}
+
+/// `Relay`: one input of each kind and one output of each kind.
+fn relay(name: &str, built: &Mutex<Option<RelayPorts>>) -> coolbot::Component {
+    let shape = spec(
+        "Relay",
+        vec![
+            input("ti", InputKind::Tick),
+            input("li", InputKind::Last),
+            input("fi", FIFO),
+            input("ui", UFIFO),
+            input("pi", InputKind::Poster),
+        ],
+        vec![
+            output("to", OutputKind::Tick),
+            output("out", OutputKind::Data),
+            output("po", OutputKind::Poster),
+        ],
+        vec![],
+    );
+    let ports = RelayPorts {
+        ti: TickIn::new(),
+        li: LastIn::new(),
+        fi: FifoIn::new(16, OverflowPolicy::Reject),
+        ui: UfifoIn::new(4, None),
+        pi: PosterIn::new(),
+        to: TickOut::new(),
+        out: DataOut::new(),
+        po: PosterOut::new(),
+    };
+    let set = PortSet::new()
+        .input(&ports.ti)
+        .input(&ports.li)
+        .input(&ports.fi)
+        .input(&ports.ui)
+        .input(&ports.pi)
+        .output(&ports.to)
+        .output(&ports.out)
+        .output(&ports.po);
+    *built.lock().unwrap() = Some(ports);
+    Shell::component(name, shape, set)
+}
+
+fn registry(built: &Arc<Mutex<Option<RelayPorts>>>) -> Registry {
+    let mut registry = Registry::new();
+    let built = Arc::clone(built);
+    registry
+        .register("Relay", move |name| relay(name, &built))
+        .port::<()>("ti")
+        .port::<u64>("li")
+        .port::<u64>("fi")
+        .port::<u64>("ui")
+        .port::<u64>("pi")
+        .port::<()>("to")
+        .port::<u64>("out")
+        .port::<u64>("po");
+    registry
+}
+
+#[test]
+fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
+    let (station, robot) = pair("station", "robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let remote_ports = Arc::new(Mutex::new(None));
+    let _agent = Agent::start(Arc::clone(&station), registry(&remote_ports)).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry(&Arc::new(Mutex::new(None)))).install();
+
+    // Local producers and consumers around the remote relay.
+    let src_t = TickOut::new();
+    let src_d = DataOut::<u64>::new();
+    let src_p = PosterOut::<u64>::new();
+    let source = Shell::component(
+        "source",
+        spec(
+            "Source",
+            vec![],
+            vec![
+                output("t", OutputKind::Tick),
+                output("d", OutputKind::Data),
+                output("p", OutputKind::Poster),
+            ],
+            vec![],
+        ),
+        PortSet::new().output(&src_t).output(&src_d).output(&src_p),
+    );
+    let dst_ti = TickIn::new();
+    let dst_fi = FifoIn::<u64>::new(16, OverflowPolicy::Reject);
+    let dst_li = LastIn::<u64>::new();
+    let dst_pi = PosterIn::<u64>::new();
+    let sink = Shell::component(
+        "sink",
+        spec(
+            "Sink",
+            vec![
+                input("ti", InputKind::Tick),
+                input("fi", FIFO),
+                input("li", InputKind::Last),
+                input("pi", InputKind::Poster),
+            ],
+            vec![],
+            vec![],
+        ),
+        PortSet::new()
+            .input(&dst_ti)
+            .input(&dst_fi)
+            .input(&dst_li)
+            .input(&dst_pi),
+    );
+    let local_relay = relay("relay", &Mutex::new(None));
+    let compound = CompoundBuilder::new("cell", supervisor("working"))
+        .instance(source)
+        .instance_on("station", local_relay)
+        .instance(sink)
+        .connect("source.t", "relay.ti")
+        .connect("source.d", "relay.li")
+        .connect("source.d", "relay.fi")
+        .connect("source.d", "relay.ui")
+        .connect("source.p", "relay.pi")
+        .connect("relay.to", "sink.ti")
+        .connect("relay.out", "sink.fi")
+        .connect("relay.out", "sink.li")
+        .connect("relay.po", "sink.pi")
+        .build()
+        .expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).expect("added");
+    system.run_all().expect("runs");
+    let proxy = cell.instance("relay").expect("the relay's proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .expect("the proxy runs");
+    let remote = remote_ports
+        .lock()
+        .unwrap()
+        .clone()
+        .expect("the agent built the relay on the station");
+
+    // Out: local producers to the remote relay's inputs, every kind. The poster is
+    // posted first, before anything else: its value reaches the relay however late.
+    src_p.post(42);
+    for _ in 0..3 {
+        src_t.emit();
+    }
+    for n in 1..=5 {
+        src_d.send(n);
+    }
+    let (mut ticks, mut fifo, mut ufifo) = (0, Vec::new(), Vec::new());
+    let arrived = wait_until(PATIENCE, || {
+        ticks += remote.ti.take();
+        fifo.extend(remote.fi.drain());
+        ufifo.extend(remote.ui.drain());
+        ticks == 3
+            && fifo == [1, 2, 3, 4, 5]
+            && ufifo == [1, 2, 3, 4, 5]
+            && remote.li.latest() == Some(5)
+            && remote.pi.read() == Some(42)
+    });
+    assert!(
+        arrived,
+        "on the station: ticks {ticks}, fifo {fifo:?}, ufifo {ufifo:?}, last {:?}, poster {:?}",
+        remote.li.latest(),
+        remote.pi.read()
+    );
+
+    // Back: the remote relay's outputs to the local consumers, every kind.
+    remote.po.post(99);
+    remote.to.emit();
+    remote.to.emit();
+    for n in [7, 8, 9] {
+        remote.out.send(n);
+    }
+    let (mut ticks, mut fifo) = (0, Vec::new());
+    let arrived = wait_until(PATIENCE, || {
+        ticks += dst_ti.take();
+        fifo.extend(dst_fi.drain());
+        ticks == 2 && fifo == [7, 8, 9] && dst_li.latest() == Some(9) && dst_pi.read() == Some(99)
+    });
+    assert!(
+        arrived,
+        "here: ticks {ticks}, fifo {fifo:?}, last {:?}, poster {:?}",
+        dst_li.latest(),
+        dst_pi.read()
+    );
+    // Nothing was lost on the way: no overflow at the proxy's inputs.
+    assert_eq!(proxy.snapshot().overflows, 0);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
