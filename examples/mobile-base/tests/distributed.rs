@@ -199,6 +199,39 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
         out.contains("clean: every component dead, every thread joined"),
         "{out}"
     );
+    // A robot that dies without releasing its wanderer: the station sees it lost and
+    // sends what it built for it to `dead`.
+    let (mut robot, _) = spawn(
+        "robot",
+        &[
+            "--node",
+            "robot",
+            "--connect",
+            &listen,
+            "--no-multicast",
+            "--lease",
+            "1s",
+            "--duration",
+            "120s",
+            "--output",
+            "lines",
+        ],
+        &sender,
+    );
+    wait_line(
+        &lines,
+        &mut seen,
+        "of the station building a wanderer again",
+        built,
+    );
+    robot.kill().expect("SIGKILL");
+    let _ = robot.wait();
+    wait_line(
+        &lines,
+        &mut seen,
+        "of the station stopping the dead robot's instances",
+        |l| l.starts_with("station") && l.contains("is lost: they go to dead"),
+    );
     station.kill().expect("SIGKILL");
     let _ = station.wait();
 }
@@ -244,7 +277,6 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
     ));
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let proxy = &robot.wanderer;
-    let remote = "station/robot-robot-wanderer";
     let session = zenoh::open(
         coolbot_zenoh::peer_config(&[], std::slice::from_ref(&listen), false).expect("config"),
     )
@@ -252,6 +284,23 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
     .expect("a session");
     let ctl = Ctl::new(session, Duration::from_secs(2));
     let deadline = Duration::from_secs(20);
+    // The instance's name on the station: `robot-robot-wanderer-<epoch>-<generation>`.
+    let until = Instant::now() + deadline;
+    let remote = loop {
+        let listed = ctl.components(Some("station")).unwrap_or_default();
+        if let Some(found) = listed
+            .iter()
+            .find(|c| c.path.starts_with("robot-robot-wanderer-") && c.path.ends_with("-1"))
+        {
+            break format!("station/{}", found.path);
+        }
+        assert!(
+            Instant::now() < until,
+            "no wanderer on the station: {listed:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let remote = remote.as_str();
     let remote_is = |what: &str, holds: &dyn Fn(&coolbot::Monitor) -> bool| {
         let until = Instant::now() + deadline;
         loop {

@@ -15,7 +15,6 @@ use coolbot::{
     Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet,
     PortSet, State, System, TimingSpec, Value,
 };
-use crossbeam_channel::RecvTimeoutError;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
@@ -110,6 +109,12 @@ pub struct Instantiate {
     /// the node that asked to run it (a proxy, [`crate::place`]).
     #[serde(default = "yes")]
     pub run: bool,
+    /// The node that asks, if the instance is to live only as long as that node: when
+    /// its liveliness token goes (the node stopped, died or cannot be reached), the
+    /// agent sends the instance and its bridges to `dead` (a proxy's instance: its
+    /// node builds it again, under a new name, when it needs it).
+    #[serde(default)]
+    pub owner: Option<String>,
 }
 
 fn yes() -> bool {
@@ -312,6 +317,7 @@ impl coolbot::remote::Registrar for Registry {
 pub struct Agent {
     stop: Arc<AtomicBool>,
     queryable: Option<zenoh::query::Queryable<()>>,
+    _watcher: zenoh::pubsub::Subscriber<()>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -343,6 +349,22 @@ impl Agent {
             })
             .wait()
             .map_err(Error::zenoh)?;
+        // The nodes that go away (their tokens `coolbot/<node>`): their instances here
+        // go with them.
+        let (gone, lost) = crossbeam_channel::unbounded::<String>();
+        let watcher = node
+            .session()
+            .liveliness()
+            .declare_subscriber(format!("{}/*", keys::ROOT))
+            .callback(move |sample| {
+                if sample.kind() == zenoh::sample::SampleKind::Delete
+                    && let Some(name) = sample.key_expr().as_str().rsplit('/').next()
+                {
+                    let _ = gone.send(name.to_owned());
+                }
+            })
+            .wait()
+            .map_err(Error::zenoh)?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
@@ -353,19 +375,43 @@ impl Agent {
                     tracing::error!("the agent's system does not start: {error}");
                     return;
                 }
+                // What each owner node had built here.
+                let mut owned: BTreeMap<String, Vec<Handle>> = BTreeMap::new();
                 loop {
-                    match received.recv_timeout(Duration::from_millis(100)) {
-                        Ok(query) => {
+                    crossbeam_channel::select! {
+                        recv(received) -> query => {
+                            let Ok(query) = query else { break };
                             let answer = match serve(&node, &registry, &mut system, &query) {
-                                Ok(()) => ControlReply::Accepted,
+                                Ok((owner, handles)) => {
+                                    if let Some(owner) = owner {
+                                        owned.entry(owner).or_default().extend(handles);
+                                    }
+                                    ControlReply::Accepted
+                                }
                                 Err(reason) => ControlReply::Rejected { reason },
                             };
                             if let Err(error) = reply(&query, &answer) {
                                 tracing::warn!("instantiation answer not sent: {error}");
                             }
                         }
-                        Err(RecvTimeoutError::Timeout) if !stopped.load(Ordering::Acquire) => {}
-                        Err(_) => break,
+                        recv(lost) -> name => {
+                            let Ok(name) = name else { break };
+                            if let Some(handles) = owned.remove(&name) {
+                                tracing::info!(
+                                    owner = %name,
+                                    "the node that asked for {} instance(s) here is lost: they go to dead",
+                                    handles.len()
+                                );
+                                for handle in handles.iter().rev() {
+                                    let _ = handle.command(Command::SetState(Controllable::Dead));
+                                }
+                            }
+                        }
+                        default(Duration::from_millis(100)) => {
+                            if stopped.load(Ordering::Acquire) {
+                                break;
+                            }
+                        }
                     }
                 }
                 let report = system.shutdown();
@@ -377,6 +423,7 @@ impl Agent {
         Ok(Agent {
             stop,
             queryable: Some(queryable),
+            _watcher: watcher,
             thread: Some(thread),
         })
     }
@@ -420,13 +467,14 @@ fn run(handle: &Handle) -> Result<(), String> {
         .map_err(|rejected| rejected.to_string())
 }
 
-/// One instantiation request: build, bridge, run, expose.
+/// One instantiation request: build, bridge, run, expose. Its owner, and what was
+/// built (the instance first, then its bridges).
 fn serve(
     node: &Node,
     registry: &Registry,
     system: &mut System,
     query: &zenoh::query::Query,
-) -> Result<(), String> {
+) -> Result<(Option<String>, Vec<Handle>), String> {
     let request: Instantiate = query
         .payload()
         .ok_or("no request: the query carries no payload")
@@ -548,7 +596,7 @@ fn serve(
         }
         Ok(())
     };
-    let outcome = made();
+    let outcome = made().map(|()| (request.owner.clone(), handles.clone()));
     if outcome.is_ok() {
         tracing::info!(
             instance = %name,

@@ -14,7 +14,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use coolbot::port::{InputPort, TickIn};
 use coolbot::remote::{Placement, Remote, RemoteEnd};
@@ -75,9 +75,20 @@ impl Placer {
     }
 }
 
-/// The name of the remote instance on its node, and the root of its bridge keys.
-fn remote_name(from: &str, placement: &Placement) -> String {
-    format!("{from}-{}-{}", placement.compound, placement.name)
+/// The root of a proxy's names on the instance's node: the placing node, the
+/// compound, the instance, and this proxy's epoch (its creation time), so that a
+/// process started again never meets the names of its previous run. Its bridge keys
+/// live under it; each instantiation adds a generation (`<root>-1`, `<root>-2`, ...),
+/// so that the instance can be built again while its node still holds the name of a
+/// dead one.
+fn remote_root(from: &str, placement: &Placement) -> String {
+    let epoch = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |elapsed| elapsed.as_nanos() as u32);
+    format!(
+        "{from}-{}-{}-{epoch:08x}",
+        placement.compound, placement.name
+    )
 }
 
 impl coolbot::remote::Placer for Placer {
@@ -93,9 +104,9 @@ impl coolbot::remote::Placer for Placer {
                 spec.type_name
             )
         })?;
-        let name = remote_name(self.node.name(), placement);
-        keys::check_name(&name).map_err(|e| e.to_string())?;
-        let base = format!("coolbot-link/{}/{name}", placement.node);
+        let root = remote_root(self.node.name(), placement);
+        keys::check_name(&root).map_err(|e| e.to_string())?;
+        let base = format!("coolbot-link/{}/{root}", placement.node);
         let bridge = |port: &str| {
             factory.ports.get(port).ok_or_else(|| {
                 format!(
@@ -157,17 +168,20 @@ impl coolbot::remote::Placer for Placer {
         }
         let request = Instantiate {
             type_name: spec.type_name.to_owned(),
-            name: name.clone(),
+            name: root.clone(),
             wires,
             configuration: placement.configuration.clone(),
             variables: placement.variables.clone(),
             timing: Some(placement.timing.into()),
             run: false,
+            owner: Some(self.node.name().to_owned()),
         };
         let mut end = End {
             node: Arc::clone(&self.node),
             on: placement.node.clone(),
-            name,
+            root,
+            generation: 0,
+            name: String::new(),
             request,
             timeout: self.timeout,
             pumps,
@@ -194,6 +208,8 @@ struct Shared {
     changed: AtomicBool,
     /// Why the node is lost, while it is.
     lost: Mutex<Option<String>>,
+    /// The monitoring key of the instance's current generation.
+    monitor_key: Mutex<String>,
     waker: Mutex<Option<Waker>>,
 }
 
@@ -210,7 +226,11 @@ struct End {
     node: Arc<Node>,
     /// The node the instance runs on.
     on: String,
-    /// Its name there.
+    /// The root of its names there ([`remote_root`]).
+    root: String,
+    /// How many times it was built.
+    generation: u32,
+    /// Its name there now (`<root>-<generation>`).
     name: String,
     request: Instantiate,
     timeout: Duration,
@@ -242,8 +262,13 @@ impl End {
         let shared = Arc::clone(&self.shared);
         self.subscribers.push(
             session
-                .declare_subscriber(keys::monitor(&self.on, &self.name))
+                .declare_subscriber(keys::monitor(&self.on, &format!("{}-$*", self.root)))
                 .callback(move |sample| {
+                    // The instance of this generation only (not its bridges, not an
+                    // earlier generation).
+                    if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
+                        return;
+                    }
                     let Ok(event) =
                         serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes())
                     else {
@@ -277,6 +302,33 @@ impl End {
                 .map_err(Error::zenoh)?,
         );
         Ok(())
+    }
+
+    /// Give `command` to the instance's current generation; its answer.
+    fn send(&self, command: &Command) -> Result<(), String> {
+        let json = serde_json::to_vec(command).map_err(|e| e.to_string())?;
+        let replies = self
+            .node
+            .session()
+            .get(keys::control(&self.on, &self.name))
+            .payload(json)
+            .timeout(self.timeout)
+            .wait()
+            .map_err(|e| e.to_string())?;
+        let reply = replies.recv().map_err(|_| {
+            format!(
+                "node `{}` did not answer for `{}` within {:?}",
+                self.on, self.name, self.timeout
+            )
+        })?;
+        let sample = reply
+            .result()
+            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
+        match serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes()) {
+            Ok(ControlReply::Accepted) => Ok(()),
+            Ok(ControlReply::Rejected { reason }) => Err(reason),
+            Err(error) => Err(format!("an answer that does not decode: {error}")),
+        }
     }
 
     /// The remote instance's snapshot, asked for now.
@@ -318,6 +370,19 @@ impl RemoteEnd for End {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
+        if self.generation > 0 {
+            // An earlier generation may still run (its node was unreachable, not
+            // gone): it goes first, so that two never serve the same keys. Its node
+            // also sends it to `dead` when it sees this node lost (`Instantiate::owner`).
+            let dead = Command::SetState(coolbot::Controllable::Dead);
+            if let Err(reason) = self.send(&dead) {
+                tracing::debug!(instance = %self.name, "the earlier generation: {reason}");
+            }
+        }
+        self.generation += 1;
+        self.name = format!("{}-{}", self.root, self.generation);
+        self.request.name = self.name.clone();
+        *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
         // The node may not be reachable yet (a robot and its station started together):
         // ask again until the timeout, every 100 ms, while nothing answers.
         let deadline = Instant::now() + self.timeout;
@@ -364,29 +429,7 @@ impl RemoteEnd for End {
         if let Some(lost) = lock(&self.shared.lost).clone() {
             return Err(lost);
         }
-        let json = serde_json::to_vec(command).map_err(|e| e.to_string())?;
-        let replies = self
-            .node
-            .session()
-            .get(keys::control(&self.on, &self.name))
-            .payload(json)
-            .timeout(self.timeout)
-            .wait()
-            .map_err(|e| e.to_string())?;
-        let reply = replies.recv().map_err(|_| {
-            format!(
-                "node `{}` did not answer for `{}` within {:?}",
-                self.on, self.name, self.timeout
-            )
-        })?;
-        let sample = reply
-            .result()
-            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
-        match serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes()) {
-            Ok(ControlReply::Accepted) => Ok(()),
-            Ok(ControlReply::Rejected { reason }) => Err(reason),
-            Err(error) => Err(format!("an answer that does not decode: {error}")),
-        }
+        self.send(command)
     }
 
     fn pump(&mut self) {
@@ -408,7 +451,7 @@ impl RemoteEnd for End {
     fn release(&mut self) {
         if self.instantiated && lock(&self.shared.lost).is_none() {
             let dead = Command::SetState(coolbot::Controllable::Dead);
-            if let Err(reason) = self.command(&dead) {
+            if let Err(reason) = self.send(&dead) {
                 tracing::warn!(instance = %self.name, node = %self.on, "not released: {reason}");
             }
         }

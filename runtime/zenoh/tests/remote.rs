@@ -468,6 +468,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
         ],
         timing: None,
         run: true,
+        owner: None,
         configuration: None,
         variables: Vec::new(),
     };
