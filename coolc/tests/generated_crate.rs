@@ -78,7 +78,8 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
     // of every form over every readable type; `Gate` moves on a packet at an exported
     // input; `Pair` is a redundant group; `Ticker`'s rule reads a `local` variable
     // its periodic section changes; `Swap`'s rule over a mapped variable reads the
-    // substitute standing in. The filled user files and the run tests are
+    // substitute standing in; `Source` keeps a `local`; `Labels` carries an extern
+    // packet; `Slowpoke` has a timing block of its own. The filled user files and the run tests are
     // in `tests/data/plant`.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("plant.cool");
@@ -101,6 +102,10 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
             "ticker.rs",
             "swap.rs",
             "restarter.rs",
+            "labeler.rs",
+            "reader.rs",
+            "labels.rs",
+            "slowpoke.rs",
         ],
         &[
             "a_failed_leaf_is_substituted_and_the_supervisors_follow",
@@ -110,6 +115,9 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
             "a_rule_reading_a_local_variable_fires_after_the_section_that_changed_it",
             "a_rule_over_a_mapped_variable_reads_the_substitute_standing_in",
             "the_restart_budget_of_the_description_bounds_the_restarts",
+            "an_atomic_local_variable_is_kept_between_sections_and_never_published",
+            "an_extern_packet_is_carried_like_a_packet",
+            "a_compounds_own_timing_applies_to_its_thread_sections_and_quality",
         ],
     );
 }

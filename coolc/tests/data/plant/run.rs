@@ -283,3 +283,83 @@ fn the_restart_budget_of_the_description_bounds_the_restarts() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+#[test]
+fn an_atomic_local_variable_is_kept_between_sections_and_never_published() {
+    let component = plant::generated::source::component("source", plant::source::Source::default());
+    let mut system = System::new();
+    let source = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `sent` is copied from the local `ticks` each period: it counts up only if the
+    // local keeps its value from one section to the next.
+    let monitor = source.wait_for(|m| count(m, "sent") >= 3, WAIT).unwrap();
+    let names: Vec<&str> = monitor.variables.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["sent"], "a local is not published");
+    let refused = source
+        .command(Command::Set("ticks".to_owned(), Value::UInt(0)))
+        .expect_err("a local is not settable");
+    assert!(refused.reason.contains("ticks"), "{refused}");
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn an_extern_packet_is_carried_like_a_packet() {
+    let component =
+        plant::generated::labels::component("labels", plant::labels::LabelsParts::default())
+            .unwrap();
+    let mut system = System::new();
+    let labels = system.add(component).unwrap();
+    system.run_all().unwrap();
+    let reader = labels.instance("reader").unwrap();
+    // `label 1` ... `label 9` are 7 characters long.
+    let monitor = reader.wait_for(|m| count(m, "got") >= 3, WAIT).unwrap();
+    assert_eq!(count(&monitor, "last_len"), 7);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_compounds_own_timing_applies_to_its_thread_sections_and_quality() {
+    let component = plant::generated::slowpoke::component(
+        "slowpoke",
+        plant::slowpoke::SlowpokeParts::default(),
+    )
+    .unwrap();
+    let mut system = System::new();
+    let slowpoke = system.add(component).unwrap();
+    system.run_all().unwrap();
+    // `priority 2` is applied to the compound's own thread: real-time round-robin
+    // where the process may, else what the OS allowed, and why (published).
+    let monitor = slowpoke
+        .wait_for(|m| m.os_priority != coolbot::OsPriority::Inherited, WAIT)
+        .unwrap();
+    assert_eq!(monitor.priority, 2);
+    assert!(
+        matches!(
+            monitor.os_priority,
+            coolbot::OsPriority::RoundRobin(2)
+                | coolbot::OsPriority::Nice(_)
+                | coolbot::OsPriority::NotApplied(_)
+        ),
+        "{:?}",
+        monitor.os_priority
+    );
+    // Its own quality levels: set through its control port, read by its rule.
+    slowpoke.command(Command::SetQuality(1)).unwrap();
+    let monitor = slowpoke
+        .wait_for(|m| m.user_state.as_deref() == Some("leaning"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.quality, 1);
+    // `max_response 40ms` watches its supervisor's sections: one that stalls 200 ms
+    // is an overrun, and the compound fails.
+    slowpoke
+        .command(Command::Set("stall_ms".to_owned(), Value::UInt(200)))
+        .unwrap();
+    let monitor = slowpoke
+        .wait_for(|m| m.state == State::RunningError, WAIT)
+        .unwrap();
+    assert!(monitor.overruns >= 1, "{monitor:?}");
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
