@@ -339,7 +339,8 @@ pub(crate) struct Outlet<T> {
     seq: Arc<AtomicU64>,
     /// The number of the last data or tick message Zenoh took.
     sent: u64,
-    /// A poster outlet's last published value, served to late-joining readers.
+    /// A poster outlet's last published value, or a `last` outlet's latest packet
+    /// (numbered 0), served to readers that ask (late joiners, links that came back).
     posted: Arc<Mutex<Option<Vec<u8>>>>,
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
@@ -482,7 +483,9 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .map_or(0, |d| d.as_nanos() as u64);
         let seq = Arc::new(AtomicU64::new(0));
         let posted = Arc::new(Mutex::new(None::<Vec<u8>>));
-        let poster_queryable = if kind == InputKind::Poster && pull.is_none() {
+        let poster_queryable = if matches!(kind, InputKind::Poster | InputKind::Last)
+            && pull.is_none()
+        {
             let posted = Arc::clone(&posted);
             Some(
                 session
@@ -610,6 +613,11 @@ impl<T: Packet + Serialize> Outlet<T> {
             }
             OutletInput::Last(port) => {
                 if let Some(packet) = port.take_new() {
+                    // The latest, for a reader that asks (a late joiner, a link that
+                    // came back): numbered 0, not part of the stream.
+                    if let Ok(bytes) = encode(&(epoch, 0u64, &packet)) {
+                        *lock(&self.posted) = Some(bytes);
+                    }
                     wire.send_numbered(epoch, sent, &packet);
                 }
             }
@@ -778,9 +786,11 @@ struct Inlet {
     session: zenoh::Session,
     key: String,
     deliver: DeliverFn,
-    poster: bool,
     pull: Option<Duration>,
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
+    /// Watches the producers' outlets (their liveliness tokens), to ask for the
+    /// current value again when one appears.
+    watcher: Option<zenoh::pubsub::Subscriber<()>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -882,6 +892,24 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
     (ports, deliverer(output, losses, key.to_owned()))
 }
 
+/// Ask the producers on `key` for their current value (a poster's, or the latest
+/// packet of a remote `last` input's outlet); the answers are delivered as they come.
+pub(crate) fn ask_current(
+    session: &zenoh::Session,
+    key: &str,
+    deliver: &DeliverFn,
+) -> zenoh::Result<()> {
+    let deliver = Arc::clone(deliver);
+    session
+        .get(key.to_owned())
+        .callback(move |reply| {
+            if let Ok(sample) = reply.result() {
+                deliver(&sample.payload().to_bytes());
+            }
+        })
+        .wait()
+}
+
 impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
     /// Check the connection rules across the network, declare the inlet's token and
     /// return the component (add it to the consumer's system and connect
@@ -974,9 +1002,9 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             session: session.clone(),
             deliver: deliverer(output, network.erased(), key.clone()),
             key,
-            poster: kind == OutputKind::Poster,
             pull,
             subscriber: None,
+            watcher: None,
             _token: token,
         };
         Ok(Component::new(name, Box::new(inlet), ports))
@@ -1002,23 +1030,45 @@ impl Automaton for Inlet {
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {error}")))?;
         self.subscriber = Some(subscriber);
-        if self.poster {
-            let deliver = Arc::clone(&self.deliver);
-            self.session
-                .get(self.key.clone())
-                .callback(move |reply| {
-                    if let Ok(sample) = reply.result() {
-                        deliver(&sample.payload().to_bytes());
-                    }
-                })
-                .wait()
-                .map_err(|error| Fault::message(format!("cannot ask for the poster: {error}")))?;
-        }
+        // The current value of a poster, or of a data connection to a remote `last`
+        // input: asked for now (a late joiner), and again whenever a producer's outlet
+        // appears on the network (a producer that starts, or a link that comes back:
+        // what was posted meanwhile is not lost to this reader).
+        ask_current(&self.session, &self.key, &self.deliver).map_err(|error| {
+            Fault::message(format!("cannot ask for the current value: {error}"))
+        })?;
+        let (session, key, deliver) = (
+            self.session.clone(),
+            self.key.clone(),
+            Arc::clone(&self.deliver),
+        );
+        let prefix = format!("{}/@out/", self.key);
+        let watcher = self
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{}/@out/**", self.key))
+            .callback(move |sample| {
+                let kind = sample
+                    .key_expr()
+                    .as_str()
+                    .strip_prefix(&prefix)
+                    .and_then(|rest| rest.split('/').next());
+                if sample.kind() == zenoh::sample::SampleKind::Put
+                    && matches!(kind, Some("poster" | "last"))
+                    && let Err(error) = ask_current(&session, &key, &deliver)
+                {
+                    tracing::warn!(%key, "cannot ask for the current value again: {error}");
+                }
+            })
+            .wait()
+            .map_err(|error| Fault::message(format!("cannot watch the producers: {error}")))?;
+        self.watcher = Some(watcher);
         Ok(())
     }
 
     fn stop(&mut self, _cx: &mut Context) {
         self.subscriber = None;
+        self.watcher = None;
     }
 
     fn section(

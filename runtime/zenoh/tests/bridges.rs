@@ -724,3 +724,106 @@ fn when_the_consumer_node_comes_back_packets_flow_again() {
     assert!(received.seq >= 2, "{received:?}");
     assert!(producer.shutdown().clean());
 }
+
+/// The producer's node connects to the consumer's through a forwarder the test can
+/// cut. While the link is down the producer posts a new value (and sends a new latest
+/// packet to a remote `last` input); when the link comes back the readers ask for
+/// the current values again and get them, without another post or send.
+#[test]
+fn poster_and_last_readers_ask_again_when_the_link_comes_back() {
+    let (b, b_endpoint) = support::node("relink-b", &[]);
+    let target = b_endpoint
+        .trim_start_matches("tcp/")
+        .parse()
+        .expect("an address");
+    let forwarder = support::Forwarder::start(target);
+    let (a, _) = support::node("relink-a", std::slice::from_ref(&forwarder.endpoint));
+    let sees = |node: &Node, other: &str| {
+        let key = format!("coolbot/{other}");
+        node.session()
+            .liveliness()
+            .get(&key)
+            .timeout(Duration::from_millis(300))
+            .wait()
+            .expect("liveliness query")
+            .recv()
+            .is_ok()
+    };
+    assert!(wait_until(PATIENCE, || sees(&a, "relink-b")));
+
+    // A poster connection and a data connection to a remote `last` input.
+    let post = PosterOut::<Pose>::new();
+    let data = DataOut::<Pose>::new();
+    let mut producer = System::new();
+    let source = spec(
+        "Source",
+        vec![],
+        vec![
+            output("post", OutputKind::Poster, false),
+            output("data", OutputKind::Data, false),
+        ],
+        vec![],
+    );
+    producer
+        .add(Shell::component(
+            "source",
+            source,
+            PortSet::new().output(&post).output(&data),
+        ))
+        .unwrap();
+    for (name, key, kind) in [
+        ("poster-outlet", "test/relink/poster", InputKind::Poster),
+        ("last-outlet", "test/relink/last", InputKind::Last),
+    ] {
+        producer
+            .add(a.outlet::<Pose>(name, key, kind).build().unwrap())
+            .unwrap();
+    }
+    producer
+        .connect("source.post", "poster-outlet.input")
+        .unwrap();
+    producer
+        .connect("source.data", "last-outlet.input")
+        .unwrap();
+    producer.run_all().unwrap();
+    let reader = PosterIn::<Pose>::new();
+    let _posters = consumer(
+        &b,
+        "test/relink/poster",
+        OutputKind::Poster,
+        InputKind::Poster,
+        &reader,
+    );
+    let latest = LastIn::<Pose>::new();
+    let _lasts = consumer(
+        &b,
+        "test/relink/last",
+        OutputKind::Data,
+        InputKind::Last,
+        &latest,
+    );
+    wait_subscribed(&a, "test/relink/last");
+    post.post(pose(1));
+    data.send(pose(1));
+    assert!(wait_until(PATIENCE, || reader.read() == Some(pose(1))
+        && latest.latest() == Some(pose(1))));
+
+    // The link goes down; the producer posts and sends meanwhile.
+    forwarder.cut();
+    assert!(
+        wait_until(PATIENCE, || !sees(&a, "relink-b")),
+        "the producer still sees the consumer"
+    );
+    post.post(pose(2));
+    data.send(pose(2));
+    // The link comes back: the readers get the current values.
+    forwarder.restore();
+    assert!(
+        wait_until(PATIENCE, || reader.read() == Some(pose(2))
+            && latest.latest() == Some(pose(2))),
+        "after the link came back: poster {:?}, last {:?}",
+        reader.read(),
+        latest.latest()
+    );
+    assert!(producer.shutdown().clean());
+}

@@ -232,3 +232,64 @@ pub fn supervisor(state: &'static str) -> Idle {
         timing: TimingSpec::NONE,
     })))
 }
+
+/// A TCP forwarder between two nodes on loopback, so that a test can break the link
+/// between them while both stay alive: `cut` closes every connection through it and
+/// refuses new ones until `restore`.
+pub struct Forwarder {
+    /// The endpoint to connect to (`tcp/127.0.0.1:<port>`): it forwards to `target`.
+    pub endpoint: String,
+    open: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    streams: std::sync::Arc<std::sync::Mutex<Vec<std::net::TcpStream>>>,
+}
+
+impl Forwarder {
+    /// Forward connections on a free loopback port to `target` (`127.0.0.1:<port>`).
+    pub fn start(target: std::net::SocketAddr) -> Forwarder {
+        use std::sync::atomic::Ordering;
+        let listener = TcpListener::bind("127.0.0.1:0").expect("a free port");
+        let endpoint = format!("tcp/{}", listener.local_addr().expect("an address"));
+        let open = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let streams = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (accepting, kept) = (open.clone(), streams.clone());
+        std::thread::spawn(move || {
+            for incoming in listener.incoming() {
+                let Ok(client) = incoming else { continue };
+                let Ok(server) = std::net::TcpStream::connect(target) else {
+                    continue;
+                };
+                if !accepting.load(Ordering::Acquire) {
+                    continue; // Dropped: the connection is refused.
+                }
+                let pipe = |from: &std::net::TcpStream, to: &std::net::TcpStream| {
+                    let (mut from, mut to) = (from.try_clone().unwrap(), to.try_clone().unwrap());
+                    std::thread::spawn(move || {
+                        let _ = std::io::copy(&mut from, &mut to);
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                };
+                pipe(&client, &server);
+                pipe(&server, &client);
+                kept.lock().unwrap().extend([client, server]);
+            }
+        });
+        Forwarder {
+            endpoint,
+            open,
+            streams,
+        }
+    }
+
+    /// Close every connection through the forwarder, and refuse new ones.
+    pub fn cut(&self) {
+        self.open.store(false, std::sync::atomic::Ordering::Release);
+        for stream in self.streams.lock().unwrap().drain(..) {
+            let _ = stream.shutdown(std::net::Shutdown::Both);
+        }
+    }
+
+    /// Accept connections again.
+    pub fn restore(&self) {
+        self.open.store(true, std::sync::atomic::Ordering::Release);
+    }
+}
