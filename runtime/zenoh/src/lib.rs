@@ -20,7 +20,8 @@
 //!   liveliness token `coolbot/<node>` per node.
 //! - **Echoed outputs** ([`Node::echo`]): the packets of chosen outputs as JSON, for
 //!   `coolctl echo`; and each component's static shape on query ([`info`]).
-//! - **`coolctl`**, the command-line tool over those keys ([`ctl`]).
+//! - **`coolctl`**, the command-line tool over those keys ([`ctl`]), and its live view
+//!   `coolctl top` ([`top`]).
 //! - **Remote instantiation** ([`agent`]): an agent builds registered component
 //!   types on request from another node, bridges their ports, runs and exposes them.
 //! - **Remote instances from the description** ([`place`]): a [`Placer`] installed
@@ -40,6 +41,7 @@ pub mod info;
 pub mod keys;
 mod node;
 pub mod place;
+pub mod top;
 
 pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
 pub use crate::config::peer_config;

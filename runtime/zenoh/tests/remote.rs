@@ -7,46 +7,15 @@ mod support;
 use std::time::Duration;
 
 use coolbot::{
-    Command, CompoundBuilder, Controllable, PortSet, Spec, State, StateSpec, System, TimingSpec,
-    VarKind,
+    Command, Controllable, PortSet, Spec, State, StateSpec, System, TimingSpec, VarKind,
 };
 use coolbot_zenoh::ctl::{Ctl, CtlError};
 use coolbot_zenoh::{ControlReply, Node};
 use zenoh::Wait;
 
-use support::{PATIENCE, Shell, pair, spec, supervisor, var, wait_until};
+use support::{PATIENCE, Shell, pair, spec, wait_until};
 
-/// The robot's system, running, exposed on `node`.
-fn robot(node: &Node) -> System {
-    let motion = spec(
-        "Motion",
-        vec![],
-        vec![],
-        vec![
-            var("odometry", VarKind::Observable),
-            var("max_speed", VarKind::Controllable),
-        ],
-    );
-    let plain = spec("Plain", vec![], vec![], vec![]);
-    let base = CompoundBuilder::new("base", supervisor("operating"))
-        .instance(Shell::component("motion", motion, PortSet::new()))
-        .instance(Shell::component("ranges", plain, PortSet::new()))
-        .build()
-        .unwrap();
-    let robot = CompoundBuilder::new("robot", supervisor("exploring"))
-        .instance(base)
-        .instance(Shell::component("planner", plain, PortSet::new()))
-        .build()
-        .unwrap();
-    let mut system = System::new();
-    system.add(robot).unwrap();
-    system
-        .add(Shell::component("logger", plain, PortSet::new()))
-        .unwrap();
-    system.run_all().unwrap();
-    node.expose_system(&system).unwrap();
-    system
-}
+use support::robot;
 
 const COMPONENTS: usize = 6;
 

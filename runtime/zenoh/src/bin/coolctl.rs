@@ -10,6 +10,7 @@
 //! coolctl configure <node>/<path> FIELD=VALUE...
 //! coolctl degrade <node>/<path> LEVEL
 //! coolctl echo <node>/<path>.<port> [--hz 10] [--count N] [--for 10s]
+//! coolctl top [--once [--json] [--size 160x40]] [--refresh 1s]
 //! ```
 //!
 //! Exit codes: 0 done, 1 a command rejected, nothing answered, or no such node,
@@ -106,6 +107,23 @@ enum Action {
         /// The level.
         level: u32,
     },
+    /// A live view of every component of every node (keys: up/down select, s
+    /// suspend, r run, R restart, v set a variable, q quit).
+    Top {
+        /// Print one snapshot and exit: the screen as text, or JSON with --json.
+        #[arg(long)]
+        once: bool,
+        /// With --once: JSON, for scripts.
+        #[arg(long, requires = "once")]
+        json: bool,
+        /// With --once: the screen's size, COLUMNSxROWS.
+        #[arg(long, requires = "once", default_value = "160x40", value_parser = size)]
+        size: (u16, u16),
+        /// How often the view asks every node again (with --once: the interval the
+        /// CPU shares are measured over).
+        #[arg(long, default_value = "1s", value_parser = duration)]
+        refresh: Duration,
+    },
     /// Print the packets an echoed output sends, one JSON line each (a summary with
     /// the packets skipped and lost goes to stderr at the end).
     Echo {
@@ -128,6 +146,19 @@ fn duration(text: &str) -> Result<Duration, String> {
     parse_duration(text).map_err(|error| error.to_string())
 }
 
+fn size(text: &str) -> Result<(u16, u16), String> {
+    let (columns, rows) = text
+        .split_once('x')
+        .ok_or_else(|| format!("`{text}` is not COLUMNSxROWS (e.g. 160x40)"))?;
+    let parse = |n: &str| {
+        n.parse::<u16>()
+            .ok()
+            .filter(|n| (10..=1000).contains(n))
+            .ok_or_else(|| format!("`{n}` is not a size from 10 to 1000"))
+    };
+    Ok((parse(columns)?, parse(rows)?))
+}
+
 fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     let config = coolbot_zenoh::peer_config(&cli.listen, &cli.connect, !cli.no_multicast)
         .map_err(|error| CtlError::Zenoh(error.to_string()))?;
@@ -137,8 +168,30 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             .wait()
             .map_err(|error| CtlError::Zenoh(error.to_string()))?
     };
-    let ctl = Ctl::new(session, cli.timeout);
+    let ctl = Ctl::new(session.clone(), cli.timeout);
     match cli.command {
+        Action::Top {
+            once: true,
+            json: true,
+            refresh,
+            ..
+        } => {
+            writeln!(out, "{}", coolbot_zenoh::top::once_json(&ctl, refresh)?)?;
+            Ok(true)
+        }
+        Action::Top {
+            once: true,
+            size: (columns, rows),
+            refresh,
+            ..
+        } => {
+            let (board, _) = coolbot_zenoh::top::board(&ctl, refresh)?;
+            write!(out, "{}", coolbot_zenoh::top::render(&board, columns, rows))?;
+            Ok(true)
+        }
+        Action::Top { refresh, .. } => {
+            coolbot_zenoh::top::run(&ctl, &session, refresh).map(|()| true)
+        }
         Action::Nodes { watch: false, .. } => ctl.nodes(out).map(|()| true),
         Action::Nodes {
             watch: true,

@@ -293,3 +293,37 @@ impl Forwarder {
         self.open.store(true, std::sync::atomic::Ordering::Release);
     }
 }
+
+/// The robot's system of the network tests: a compound `robot` (holding a compound
+/// `base` with `motion` and `ranges`, and a `planner`) and an atomic `logger`,
+/// running, exposed on `node`.
+pub fn robot(node: &Node) -> coolbot::System {
+    let motion = spec(
+        "Motion",
+        vec![],
+        vec![],
+        vec![
+            var("odometry", VarKind::Observable),
+            var("max_speed", VarKind::Controllable),
+        ],
+    );
+    let plain = spec("Plain", vec![], vec![], vec![]);
+    let base = coolbot::CompoundBuilder::new("base", supervisor("operating"))
+        .instance(Shell::component("motion", motion, PortSet::new()))
+        .instance(Shell::component("ranges", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let robot = coolbot::CompoundBuilder::new("robot", supervisor("exploring"))
+        .instance(base)
+        .instance(Shell::component("planner", plain, PortSet::new()))
+        .build()
+        .unwrap();
+    let mut system = coolbot::System::new();
+    system.add(robot).unwrap();
+    system
+        .add(Shell::component("logger", plain, PortSet::new()))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    system
+}

@@ -1,0 +1,196 @@
+//! `coolctl top`: a live view of every component of every node on the network
+//! (`docs/tools.md`, "`coolctl top`"): the component tree with each default and user
+//! state, period, quality, adaptation level, CPU share, missed deadlines, overruns,
+//! overflows, dropped events and last error; the supervision and adaptation steps as
+//! they happen; keys to suspend, run, restart a component or set a controllable
+//! variable, with the reply shown. A node that goes away stays on screen, marked
+//! lost, until it comes back.
+//!
+//! `model` holds what is shown (no terminal), `view` draws it with ratatui, `input`
+//! maps keys to actions; this module gathers from the network and runs the loop.
+
+mod input;
+pub mod model;
+pub mod view;
+
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use coolbot::{Command, Controllable, MonitorEvent};
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::crossterm::event::{self, Event, KeyEventKind};
+use zenoh::Wait;
+
+use crate::ControlReply;
+use crate::ctl::{Ctl, CtlError, Listed, parse_command};
+use crate::keys;
+
+pub use model::{Board, Row};
+
+/// The nodes alive and their components, gathered once.
+fn gather(ctl: &Ctl) -> Result<(Vec<String>, Vec<Listed>), CtlError> {
+    Ok((ctl.node_names()?, ctl.components(None)?))
+}
+
+/// One board, gathered twice `interval` apart (the CPU shares are over it), with
+/// the compounds' recent supervision steps in the steps pane.
+pub fn board(ctl: &Ctl, interval: Duration) -> Result<(Board, Vec<String>), CtlError> {
+    let mut board = Board::new();
+    let (alive, listed) = gather(ctl)?;
+    board.refresh(&alive, listed, Instant::now());
+    std::thread::sleep(interval);
+    let (alive, listed) = gather(ctl)?;
+    board.refresh(&alive, listed, Instant::now());
+    board.seed_history();
+    Ok((board, alive))
+}
+
+/// `coolctl top --once --json`: every node and component now (CPU shares over
+/// `interval`), as JSON.
+pub fn once_json(ctl: &Ctl, interval: Duration) -> Result<String, CtlError> {
+    let (board, alive) = board(ctl, interval)?;
+    Ok(serde_json::to_string_pretty(&board.snapshot(&alive)).expect("a snapshot serializes"))
+}
+
+/// `board` drawn on a `width` x `height` screen, as text (`coolctl top --once`, and
+/// the snapshot tests).
+pub fn render(board: &Board, width: u16, height: u16) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(width, height)).expect("a test backend");
+    terminal
+        .draw(|frame| view::draw(frame, board))
+        .expect("a test backend draws");
+    let buffer = terminal.backend().buffer();
+    let mut text = String::new();
+    for y in 0..buffer.area.height {
+        let line: String = (0..buffer.area.width)
+            .map(|x| buffer[(x, y)].symbol())
+            .collect();
+        text.push_str(line.trim_end());
+        text.push('\n');
+    }
+    text
+}
+
+/// What answered a command, for the status line.
+fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) -> String {
+    match reply {
+        Ok(ControlReply::Accepted) => format!("{address}: {what}: accepted"),
+        Ok(ControlReply::Rejected { reason }) => format!("{address}: {what}: rejected: {reason}"),
+        Err(error) => format!("{address}: {what}: {error}"),
+    }
+}
+
+/// The interactive view, until `q`: gathers every `refresh`, on its own thread, so
+/// that keys are answered while a node is slow to answer.
+pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(), CtlError> {
+    let started = Instant::now();
+    // Every monitoring event of every component: the steps pane.
+    let events = session
+        .declare_subscriber(keys::monitor("*", "*"))
+        .wait()
+        .map_err(|error| CtlError::Zenoh(error.to_string()))?;
+    let (gathered, heard) = mpsc::channel();
+    let gatherer = ctl.clone();
+    std::thread::spawn(move || {
+        loop {
+            if gathered.send(gather(&gatherer)).is_err() {
+                break;
+            }
+            std::thread::sleep(refresh);
+        }
+    });
+    let mut board = Board::new();
+    let mut prompt: Option<String> = None;
+    let mut terminal = ratatui::init();
+    let outcome = (|| -> Result<(), CtlError> {
+        loop {
+            while let Ok(result) = heard.try_recv() {
+                match result {
+                    Ok((alive, listed)) => {
+                        let first = board.rows().is_empty();
+                        board.refresh(&alive, listed, Instant::now());
+                        if first {
+                            board.seed_history();
+                        }
+                    }
+                    Err(error) => board.status = format!("gathering: {error}"),
+                }
+            }
+            while let Ok(Some(sample)) = events.try_recv() {
+                let key = sample.key_expr().as_str();
+                let (Some((node, path)), Ok(event)) = (
+                    keys::parse_component(key),
+                    serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes()),
+                ) else {
+                    continue;
+                };
+                let at = format!("{:.1}s", started.elapsed().as_secs_f64());
+                board.step(&format!("{node}/{path}"), &event, &at);
+            }
+            if let Some(text) = &prompt {
+                board.status = format!("set {text}_  (enter: send, esc: cancel)");
+            }
+            terminal.draw(|frame| view::draw(frame, &board))?;
+            if !event::poll(Duration::from_millis(100))? {
+                continue;
+            }
+            let Event::Key(key) = event::read()? else {
+                continue;
+            };
+            if key.kind != KeyEventKind::Press {
+                continue;
+            }
+            let address = board.selected_row().map(Row::address);
+            if let Some(text) = &mut prompt {
+                match input::edit(text, key) {
+                    None => {}
+                    Some(false) => {
+                        prompt = None;
+                        board.status.clear();
+                    }
+                    Some(true) => {
+                        let text = prompt.take().unwrap_or_default();
+                        board.status = match (&address, parse_command(&[text.clone()])) {
+                            (Some(address), Ok(command)) => {
+                                answered(address, &text, ctl.command(address, &command))
+                            }
+                            (None, _) => "no component selected".to_owned(),
+                            (_, Err(error)) => format!("{text}: {error}"),
+                        };
+                    }
+                }
+                continue;
+            }
+            let state = |target: Controllable| Command::SetState(target);
+            match (input::action(key), &address) {
+                (input::Action::Quit, _) => return Ok(()),
+                (input::Action::Select(delta), _) => {
+                    board.select(delta);
+                    board.status.clear();
+                }
+                (input::Action::Prompt, Some(_)) => prompt = Some(String::new()),
+                (input::Action::Suspend, Some(address)) => {
+                    let reply = ctl.command(address, &state(Controllable::Suspended));
+                    board.status = answered(address, "suspend", reply);
+                }
+                (input::Action::Run, Some(address)) => {
+                    let reply = ctl.command(address, &state(Controllable::Running));
+                    board.status = answered(address, "run", reply);
+                }
+                (input::Action::Restart, Some(address)) => {
+                    let reply = match ctl.command(address, &state(Controllable::Ready)) {
+                        Ok(ControlReply::Accepted) => {
+                            ctl.command(address, &state(Controllable::Running))
+                        }
+                        other => other,
+                    };
+                    board.status = answered(address, "restart", reply);
+                }
+                _ => {}
+            }
+        }
+    })();
+    ratatui::restore();
+    outcome
+}

@@ -1,0 +1,150 @@
+//! How `coolctl top` draws a [`Board`]: the component table (each node's tree,
+//! lost nodes greyed), the steps pane (supervision and adaptation steps, newest at
+//! the bottom), and a status line (the last reply, or the keys). Every frame is drawn
+//! whole by ratatui, so nothing of an earlier frame stays on screen, at any size.
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout};
+use ratatui::style::{Modifier, Style};
+use ratatui::text::Line;
+use ratatui::widgets::{Block, Cell, Paragraph, Row as TableRow, Table, TableState};
+
+use super::model::{Board, Row};
+
+/// The keys, shown when there is no reply to show.
+pub const HELP: &str = "up/down select  s suspend  r run  R restart  v set variable  q quit";
+
+fn duration(value: Option<std::time::Duration>) -> String {
+    match value {
+        Some(d) if d.as_secs() >= 1 => format!("{:.1}s", d.as_secs_f64()),
+        Some(d) => format!("{}ms", d.as_millis()),
+        None => "-".to_owned(),
+    }
+}
+
+fn cells(row: &Row) -> Vec<String> {
+    let m = &row.monitor;
+    let name = row.path.rsplit('.').next().unwrap_or(&row.path);
+    let tree = if row.depth == 0 {
+        format!("{}/{name}", row.node)
+    } else {
+        format!("{}{name}", "  ".repeat(row.depth))
+    };
+    let state = if row.lost {
+        "lost".to_owned()
+    } else {
+        m.state.to_string()
+    };
+    vec![
+        tree,
+        state,
+        m.user_state.clone().unwrap_or_else(|| "-".to_owned()),
+        duration(m.period),
+        m.quality.to_string(),
+        format!("{}/{}", m.adaptation.level, m.adaptation.max_level),
+        row.cpu_share
+            .map_or_else(|| "-".to_owned(), |share| format!("{:.1}", share * 100.0)),
+        m.missed_deadlines.to_string(),
+        m.overruns.to_string(),
+        m.overflows.to_string(),
+        m.dropped_events.to_string(),
+        m.error.clone().unwrap_or_default(),
+    ]
+}
+
+const HEADER: [&str; 12] = [
+    "COMPONENT",
+    "STATE",
+    "USER",
+    "PERIOD",
+    "Q",
+    "LVL",
+    "CPU%",
+    "MISSED",
+    "OVERRUN",
+    "OVERFL",
+    "DROPPED",
+    "LAST ERROR",
+];
+
+/// Draw `board` on the whole frame.
+pub fn draw(frame: &mut Frame<'_>, board: &Board) {
+    let area = frame.area();
+    let steps_height = (area.height / 3).clamp(3, 12);
+    let [table_area, steps_area, status_area] = Layout::vertical([
+        Constraint::Min(3),
+        Constraint::Length(steps_height),
+        Constraint::Length(1),
+    ])
+    .areas(area);
+
+    let rows = board.rows().iter().map(|row| {
+        let style = if row.lost {
+            Style::new().add_modifier(Modifier::DIM)
+        } else {
+            Style::new()
+        };
+        TableRow::new(cells(row).into_iter().map(Cell::from)).style(style)
+    });
+    // The component column fits the longest name, up to half the screen.
+    let longest = board
+        .rows()
+        .iter()
+        .map(|row| cells(row)[0].chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(HEADER[0].len());
+    let first = u16::try_from(longest)
+        .unwrap_or(u16::MAX)
+        .min(area.width / 2);
+    let widths = [
+        Constraint::Length(first),
+        Constraint::Length(13),
+        Constraint::Length(10),
+        Constraint::Length(7),
+        Constraint::Length(2),
+        Constraint::Length(4),
+        Constraint::Length(5),
+        Constraint::Length(6),
+        Constraint::Length(7),
+        Constraint::Length(6),
+        Constraint::Length(7),
+        Constraint::Fill(1),
+    ];
+    let table = Table::new(rows, widths)
+        .header(TableRow::new(HEADER).style(Style::new().add_modifier(Modifier::BOLD)))
+        .row_highlight_style(Style::new().add_modifier(Modifier::REVERSED))
+        .block(Block::bordered().title(" coolctl top: components "));
+    let mut state = TableState::new().with_selected(Some(board.selected()));
+    frame.render_stateful_widget(table, table_area, &mut state);
+    if board.rows().is_empty() {
+        let inner = Block::bordered().inner(table_area);
+        let [_, line] =
+            Layout::vertical([Constraint::Length(1), Constraint::Length(1)]).areas(inner);
+        frame.render_widget(
+            Paragraph::new(
+                "no CoolBOT node answered (yet): start one with --node, or name it with --connect",
+            ),
+            line,
+        );
+    }
+
+    let shown = usize::from(steps_area.height.saturating_sub(2));
+    let steps: Vec<Line<'_>> = board
+        .steps()
+        .rev()
+        .take(shown)
+        .rev()
+        .map(|step| Line::from(step.as_str()))
+        .collect();
+    frame.render_widget(
+        Paragraph::new(steps).block(Block::bordered().title(" supervision and adaptation steps ")),
+        steps_area,
+    );
+    let status = if board.status.is_empty() {
+        HELP
+    } else {
+        board.status.as_str()
+    };
+    frame.render_widget(Paragraph::new(status), status_area);
+}

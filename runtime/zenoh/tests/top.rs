@@ -1,0 +1,116 @@
+//! `coolctl top` against nodes started here: the board a node's components make,
+//! drawn at several terminal sizes (every frame whole, nothing of an earlier one
+//! left), a node that goes away shown lost, and `coolctl top --once --json` from the
+//! real binary.
+
+mod support;
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use coolbot_zenoh::ctl::Ctl;
+use coolbot_zenoh::top::{Board, render};
+
+use support::{PATIENCE, pair, robot, wait_until};
+
+/// The board once `ctl` sees `count` components.
+fn board(ctl: &Ctl, count: usize) -> Board {
+    let mut board = Board::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            let (Ok(alive), Ok(listed)) = (ctl.node_names(), ctl.components(None)) else {
+                return false;
+            };
+            let complete = listed.len() == count;
+            board.refresh(&alive, listed, Instant::now());
+            complete
+        }),
+        "{} components seen, not {count}",
+        board.rows().len()
+    );
+    board
+}
+
+#[test]
+fn a_nodes_components_draw_at_every_terminal_size() {
+    let (robot_node, station) = pair("top-robot", "top-station");
+    let system = robot(&robot_node);
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    let board = board(&ctl, 6);
+    for (width, height) in [(160, 45), (100, 30), (80, 24), (40, 12), (20, 4)] {
+        let screen = render(&board, width, height);
+        assert_eq!(screen.lines().count(), usize::from(height));
+        insta::assert_snapshot!(format!("board_{width}x{height}"), screen);
+    }
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_node_that_goes_away_is_shown_lost_and_the_board_goes_on() {
+    let (robot_node, station) = pair("lost-robot", "lost-station");
+    let system = robot(&robot_node);
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    let mut board = board(&ctl, 6);
+    assert!(system.shutdown().clean());
+    drop(robot_node);
+    assert!(
+        wait_until(PATIENCE, || ctl
+            .node_names()
+            .is_ok_and(|names| !names.iter().any(|n| n == "lost-robot"))),
+        "the robot's node is still alive"
+    );
+    let alive = ctl.node_names().unwrap();
+    board.refresh(&alive, ctl.components(None).unwrap(), Instant::now());
+    assert!(
+        board.rows().iter().all(|row| row.lost),
+        "{:?}",
+        board.rows()
+    );
+    assert_eq!(board.snapshot(&alive).lost, ["lost-robot"]);
+    let screen = render(&board, 100, 20);
+    assert!(screen.contains("lost-robot/robot"), "{screen}");
+    assert_eq!(screen.matches(" lost ").count(), 6, "{screen}");
+}
+
+#[test]
+fn coolctl_top_once_json_prints_every_node_and_component() {
+    let (robot_node, _endpoint) = support::node("json-robot", &[]);
+    let endpoint = _endpoint;
+    let system = robot(&robot_node);
+    let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args([
+            "--connect",
+            &endpoint,
+            "--no-multicast",
+            "top",
+            "--once",
+            "--json",
+            "--refresh",
+            "200ms",
+        ])
+        .output()
+        .expect("coolctl runs");
+    assert!(output.status.success(), "{output:?}");
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).expect("JSON");
+    assert_eq!(json["nodes"], serde_json::json!(["json-robot"]));
+    assert_eq!(json["lost"], serde_json::json!([]));
+    let paths: Vec<&str> = json["components"]
+        .as_array()
+        .expect("components")
+        .iter()
+        .map(|c| c["path"].as_str().expect("a path"))
+        .collect();
+    assert_eq!(
+        paths,
+        [
+            "logger",
+            "robot",
+            "robot.base",
+            "robot.base.motion",
+            "robot.base.ranges",
+            "robot.planner"
+        ]
+    );
+    assert_eq!(json["components"][1]["monitor"]["state"], "Running");
+    assert!(system.shutdown().clean());
+}
