@@ -139,6 +139,17 @@ fn coolctl_top_in_a_terminal_shows_both_nodes_and_the_substitution_as_it_happens
     assert!(screen.contains("coolctl top: components"), "{screen}");
     // The range server fails at 4 s: the base's supervisor substitutes it, live.
     tmux.wait_for(&["robot/robot.base: supervision: ranges substituted by sim_ranges"]);
+    // Keys: the selection starts on the robot; suspend it and run it again, each
+    // answered on the status line.
+    tmux.run(&["send-keys", "-t", "top", "s"]);
+    tmux.wait_for(&["robot/robot: suspend: accepted"]);
+    tmux.run(&["send-keys", "-t", "top", "r"]);
+    tmux.wait_for(&["robot/robot: run: accepted"]);
+    // A controllable variable of the base (one row down), typed at the prompt.
+    tmux.run(&["send-keys", "-t", "top", "Down", "v"]);
+    tmux.run(&["send-keys", "-t", "top", "-l", "max_speed=0.3"]);
+    tmux.run(&["send-keys", "-t", "top", "Enter"]);
+    tmux.wait_for(&["robot/robot.base: max_speed=0.3: accepted"]);
     tmux.run(&["send-keys", "-t", "top", "q"]);
     let deadline = Instant::now() + PATIENCE;
     while tmux.run(&["list-sessions"]).contains("top:") {
