@@ -335,6 +335,7 @@ impl Harness {
         let (reply, answers) = crossbeam_channel::bounded(2);
         let message = ControlMessage {
             command: command.clone(),
+            by_supervisor: false,
             reply,
             claim: Arc::new(std::sync::atomic::AtomicU8::new(PENDING)),
         };

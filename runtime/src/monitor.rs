@@ -618,6 +618,9 @@ impl Shared {
 /// A command on its way to the component, with the channel for its answer.
 pub(crate) struct ControlMessage {
     pub(crate) command: Command,
+    /// Given by the component's compound's adaptation (its supervisor managing the
+    /// instance's level), not by anyone else (an operator, a policy, a test).
+    pub(crate) by_supervisor: bool,
     pub(crate) reply: Sender<Reply>,
     /// `PENDING`, then `TAKEN` by the component or `WITHDRAWN` by the sender.
     pub(crate) claim: Arc<AtomicU8>,
@@ -802,6 +805,18 @@ impl Handle {
 
     /// [`Handle::post`], with why it failed as a [`Refusal`].
     pub(crate) fn post_command(&self, command: Command) -> Result<Posted, Refusal> {
+        self.post_from(command, false)
+    }
+
+    /// [`Handle::post`] for a compound's adaptation managing this instance's level
+    /// (`crate::compound::adaptation`): the instance tells it from an operator's.
+    pub(crate) fn post_by_supervisor(&self, command: Command) -> Result<Posted, Rejected> {
+        let rendered = command.clone();
+        self.post_from(command, true)
+            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
+    }
+
+    fn post_from(&self, command: Command, by_supervisor: bool) -> Result<Posted, Refusal> {
         if !self.shared.spawned.load(Ordering::Acquire) {
             return Err(Refusal::NotStarted);
         }
@@ -814,6 +829,7 @@ impl Handle {
         let claim = Arc::new(AtomicU8::new(PENDING));
         let message = ControlMessage {
             command: command.clone(),
+            by_supervisor,
             reply,
             claim: Arc::clone(&claim),
         };

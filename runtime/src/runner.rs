@@ -1034,6 +1034,15 @@ impl Runner {
                         ))),
                     }
                 } else {
+                    // An instance whose compound manages its level, commanded by
+                    // someone else (an operator): the level is set by other means, as
+                    // a period or quality is, and its supervisor keeps it (neither
+                    // clamps it nor promotes below it) until the same means move it.
+                    let pinned = !message.by_supervisor
+                        && self
+                            .shared
+                            .adapt_managed
+                            .load(std::sync::atomic::Ordering::Acquire);
                     match self.adapt.as_ref().map(|adapt| adapt.ladder.max_level()) {
                         None | Some(0) => reply(Reply::Rejected(
                             "no adaptation levels: the timing block has no period interval and fewer than two quality levels".to_owned(),
@@ -1041,6 +1050,10 @@ impl Runner {
                         Some(max) if level > max => reply(Reply::Rejected(format!(
                             "degradation level {level} out of range: the highest is {max}"
                         ))),
+                        Some(_) if pinned => {
+                            self.pin_level(level);
+                            reply(Reply::Done);
+                        }
                         Some(_) if level < self.floor_level() => reply(Reply::Rejected(format!(
                             "degradation level {level} is below {}, where the period and quality set by other means stand (SetPeriod and SetQuality move them)",
                             self.floor_level()
@@ -1948,6 +1961,33 @@ impl Runner {
             status.level = level;
             status.min_level = floor;
         });
+    }
+
+    /// Level `level`, set by other means on an instance its compound manages (an
+    /// operator's `SetDegradation`): the floor is lifted, the level set, then both
+    /// axes pinned where they stand, so that the supervisor keeps it (`min_level`).
+    fn pin_level(&mut self, level: u32) {
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        adapt.floor = Floor::default();
+        self.set_level(
+            level,
+            "commanded through the control port (kept by its supervisor)",
+        );
+        let Some(adapt) = self.adapt.as_mut() else {
+            return;
+        };
+        adapt.floor = Floor {
+            quality: self.cx.quality,
+            period: self
+                .cx
+                .period
+                .filter(|period| adapt.ladder.period.is_some_and(|nominal| *period > nominal)),
+        };
+        let floor = adapt.ladder.floor_level(adapt.floor);
+        self.shared
+            .quietly(|monitor| monitor.adaptation.min_level = floor);
     }
 
     /// The period or quality was set by other means (a command, a `degrade` plan, the

@@ -1110,6 +1110,7 @@ impl System {
                     .control
                     .try_send(crate::monitor::ControlMessage {
                         command: crate::Command::SetState(Controllable::Dead),
+                        by_supervisor: false,
                         reply,
                         claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
                     });

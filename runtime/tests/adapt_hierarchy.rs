@@ -362,6 +362,51 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
     assert!(system.shutdown().clean());
 }
 
+/// An operator's `SetDegradation` on an instance (`coolctl degrade`) is set by other
+/// means too: the compound neither clamps it to its current maximum level nor
+/// promotes it back, and the same means move it again (down to 0, releasing it).
+#[test]
+fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
+    let light = Load::new();
+    light.set(LIGHT);
+    let group = CompoundBuilder::new("group", Plain)
+        .instance(member("a", -1, &light))
+        .build()
+        .expect("build");
+    let mut system = System::new();
+    let group = system.add(group).expect("add");
+    system.run_all().expect("run");
+    let a = group.instance("a").expect("a");
+    a.wait_state(coolbot::State::Running, adapt_common::WAIT)
+        .expect("running");
+    // Level 3 is above the compound's current maximum (1).
+    a.command(Command::SetDegradation(3)).expect("level 3");
+    let monitor = a.snapshot();
+    assert_eq!(
+        (monitor.adaptation.level, monitor.adaptation.min_level),
+        (3, 3)
+    );
+    wait(&a, "spare time", |m| {
+        m.adaptation.pressure == Pressure::Spare
+    });
+    let runs = light.runs();
+    adapt_common::eventually("twenty more sections", || light.runs() >= runs + 20);
+    let now = a.snapshot();
+    assert_eq!(
+        now.adaptation.level, 3,
+        "the compound undid the operator's degradation: {:#?}",
+        now.adaptation.history
+    );
+    // The operator releases it: level 0, nothing kept.
+    a.command(Command::SetDegradation(0)).expect("level 0");
+    let monitor = a.snapshot();
+    assert_eq!(
+        (monitor.adaptation.level, monitor.adaptation.min_level),
+        (0, 0)
+    );
+    assert!(system.shutdown().clean());
+}
+
 /// A designer's selector that answers outside the candidates: its answer is
 /// ignored, the default choice taken, and the step says why (no panic in the
 /// supervisor).

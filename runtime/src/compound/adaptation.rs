@@ -341,7 +341,7 @@ pub(super) const DEFAULT_PENDING: Duration = Duration::from_secs(2);
 /// Queue `command` at `handle` without waiting for the answer (the supervisor never
 /// waits for an instance in a long section).
 pub(super) fn post(handle: &Handle, command: Command) {
-    if let Err(rejected) = handle.post(command) {
+    if let Err(rejected) = handle.post_by_supervisor(command) {
         tracing::warn!("adaptation: {rejected}");
     }
 }
