@@ -151,7 +151,8 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                     }
                     Some(true) => {
                         let text = prompt.take().unwrap_or_default();
-                        board.status = match (&address, parse_command(std::slice::from_ref(&text))) {
+                        board.status = match (&address, parse_command(std::slice::from_ref(&text)))
+                        {
                             (Some(address), Ok(command)) => {
                                 answered(address, &text, ctl.command(address, &command))
                             }
