@@ -3,10 +3,10 @@
 //! `instance x: T on "node";` run on that node, each behind a proxy
 //! (`coolbot::remote`).
 //!
-//! For each such instance the placer makes the proxy's ports from the [`Registry`]
+//! For each such instance the placer makes the proxy's ports from the [`Registry`](crate::agent::Registry)
 //! (the packet type of each port, as the generated `register` functions declare it):
 //! each input publishes what arrives on a bridge key of its own, each output sends
-//! what arrives on one. The [`End`] asks the agent of the named node to build the
+//! what arrives on one. The proxy's far end asks the agent of the named node to build the
 //! instance with the same keys ([`crate::agent`]), mirrors its monitoring port,
 //! forwards commands to its control port, and watches the node's liveliness token:
 //! the node lost is a fault of the proxy within the Zenoh session's lease
