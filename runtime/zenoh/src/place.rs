@@ -383,14 +383,19 @@ impl RemoteEnd for End {
         self.name = format!("{}-{}", self.root, self.generation);
         self.request.name = self.name.clone();
         *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
-        // The node may not be reachable yet (a robot and its station started together):
-        // ask again until the timeout, every 100 ms, while nothing answers.
+        // The first time, the node may not be reachable yet (a robot and its station
+        // started together): ask again until the timeout, every 100 ms, while nothing
+        // answers. Later (a restart after the node was lost) once: the recovery queue
+        // retries, and the proxy's thread stays free for its commands.
+        let patient = !self.instantiated;
         let deadline = Instant::now() + self.timeout;
         loop {
             match instantiate(&self.node, &self.on, &self.request, self.timeout) {
                 Ok(()) => break,
                 Err(Error::Remote { reason, .. })
-                    if reason.starts_with("no agent answered") && Instant::now() < deadline =>
+                    if patient
+                        && reason.starts_with("no agent answered")
+                        && Instant::now() < deadline =>
                 {
                     std::thread::sleep(Duration::from_millis(100));
                 }
