@@ -6,6 +6,15 @@
 //! follow `RUST_LOG` (e.g. `RUST_LOG=debug`); a panic the runtime catches in a
 //! component prints one line.
 //!
+//! Built with the `network` feature (`cargo run --features network -- forever --node
+//! robot`), `--node NAME` puts the process on the network as a Zenoh node:
+//! `coolctl` lists, watches and commands every component; the `on "node"` instances
+//! of the crate's compounds run on their nodes; and other nodes may place instances
+//! of the crate's components on this one. The same binary started with `--node
+//! station --serve` runs only what other nodes place on it. The options are those of
+//! `coolbot_zenoh::network::USAGE` (`--listen`, `--connect`, `--no-multicast`,
+//! `--lease`).
+//!
 //! `coolc` wrote this file when it created the crate and never changes it: it is
 //! yours. It starts each component that no compound of the crate instantiated at
 //! that time; a component described later is not added here by itself.
@@ -14,7 +23,25 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
-    let run_for = match std::env::args().nth(1).as_deref() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    // `--node NAME` and the other network options, taken out of the arguments.
+    #[cfg(feature = "network")]
+    let (node, args) = {
+        let mut args = args;
+        let node = coolbot_zenoh::network::NodeOptions::take_args(&mut args)
+            .map_err(|e| e.to_string())?;
+        (node, args)
+    };
+    if let Some(flag) = args.iter().find(|arg| arg.starts_with("--")) {
+        return Err(match flag.split('=').next() {
+            Some("--node" | "--serve" | "--listen" | "--connect" | "--no-multicast" | "--lease") => {
+                format!("`{flag}`: this build has no network support; build with `--features network`")
+            }
+            _ => format!("unknown option `{flag}`"),
+        }
+        .into());
+    }
+    let run_for = match args.first().map(String::as_str) {
         None => Some(Duration::from_secs(2)),
         Some("forever") => None,
         Some(seconds) => Some(
@@ -27,6 +54,26 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     };
     // Logs, SIGINT and SIGTERM, and the panic hook.
     let process = coolbot::process::Process::init()?;
+    // On the network with `--node`, before the components are built: the placer it
+    // installs on this thread puts the compounds' `on "node"` instances on their nodes.
+    #[cfg(feature = "network")]
+    let network = match node {
+        Some(options) => {
+            let network = coolbot_zenoh::network::Network::open(&options, registry())
+                .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
+            if options.serve {
+                println!(
+                    "node `{}` on the network: serving what other nodes place on it",
+                    network.name()
+                );
+                while !process.wait(Duration::from_secs(3600)) {}
+                println!("node `{}` stopped", network.name());
+                return Ok(ExitCode::SUCCESS);
+            }
+            Some(network)
+        }
+        None => None,
+    };
     let mut system = coolbot::System::new();
     let handles: [coolbot::Handle; {{ roots.len() }}] = [
 {%- for root in roots %}
@@ -36,6 +83,13 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
 {%- endfor %}
     ];
     coolbot::process::watch_system(&system);
+    #[cfg(feature = "network")]
+    if let Some(network) = &network {
+        network
+            .expose_system(&system)
+            .map_err(|e| format!("node `{}` cannot expose the components: {e}", network.name()))?;
+        println!("node `{}` on the network", network.name());
+    }
     // Start the components' threads and command them to `running`.
     system.run_all().map_err(|e| format!("cannot start: {e}"))?;
     match run_for {
@@ -55,4 +109,16 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// The component types other nodes may place on this one (with the `network`
+/// feature), each built from its default behaviour; the types of the ports bridged
+/// for the `on "node"` instances placed from here.
+#[cfg(feature = "network")]
+fn registry() -> coolbot_zenoh::agent::Registry {
+    let mut registry = coolbot_zenoh::agent::Registry::new();
+{%- for registration in registrations %}
+    {{ registration }};
+{%- endfor %}
+    registry
 }

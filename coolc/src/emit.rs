@@ -823,6 +823,9 @@ struct StarterComponent<'a> {
 struct StarterMain {
     /// One expression per component to run: its `coolbot::Component`.
     roots: Vec<String>,
+    /// One statement per atomic component type: its registration with the network
+    /// layer's `registry`.
+    registrations: Vec<String>,
 }
 
 impl StarterMain {
@@ -836,6 +839,17 @@ impl StarterMain {
             .collect();
         let lib = &krate.lib_name;
         let mut roots = Vec::new();
+        let registrations = krate
+            .atomics
+            .iter()
+            .map(|c| {
+                let module = &c.module;
+                format!(
+                    "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component(name, ::{lib}::{module}::{}::default()) }})",
+                    c.user_struct
+                )
+            })
+            .collect();
         for c in &krate.atomics {
             if !instantiated.contains(c.type_name.as_str()) {
                 let module = &c.module;
@@ -861,7 +875,10 @@ impl StarterMain {
                 ));
             }
         }
-        StarterMain { roots }
+        StarterMain {
+            roots,
+            registrations,
+        }
     }
 }
 

@@ -4,7 +4,9 @@
 //! compile edits it in place with `toml_edit`, which keeps every byte it is not asked
 //! to change (comments, order, spacing): coolc sets `package.name` (the crate's name,
 //! which the CLI takes from `--name`, else from this file), `[dependencies] coolbot`
-//! (only when a runtime option is given, or when it is missing) and the dependencies
+//! (only when a runtime option is given, or when it is missing), `coolbot-zenoh` (the
+//! network layer next to the runtime, optional, under the same rule) with the
+//! `network` feature that turns it on (written when missing), and the dependencies
 //! it manages, listed in `[package.metadata.coolc] dependencies`: `serde` (unless a
 //! `link crate` names it) and every `link crate` of the descriptions. A managed
 //! dependency whose `link crate` is gone is removed, its leading comments kept; a
@@ -84,6 +86,35 @@ fn runtime_value(krate: &ir::Crate) -> Value {
         .parse::<DocumentMut>()
         .unwrap_or_else(|error| panic!("coolc bug: `{line}` is not TOML: {error}"));
     match doc.get("coolbot").and_then(Item::as_value) {
+        Some(value) => value.clone(),
+        None => panic!("coolc bug: `{line}` has no value"),
+    }
+}
+
+/// The network layer, an optional dependency the `network` feature turns on (the
+/// starter `main`'s `--node`).
+const NETWORK_DEPENDENCY: &str = "coolbot-zenoh";
+
+/// The feature that builds the crate with [`NETWORK_DEPENDENCY`].
+const NETWORK_FEATURE: &str = "network";
+
+/// The network layer's value: next to the runtime (`<runtime>/zenoh`), or the same
+/// version; optional.
+fn network_value(krate: &ir::Crate) -> Value {
+    let line = match &krate.runtime {
+        ir::RuntimeDep::Path(path) => format!(
+            "x = {{ path = {}, optional = true }}",
+            ir::toml_string(&format!("{}/zenoh", path.trim_end_matches('/')))
+        ),
+        ir::RuntimeDep::Version(version) => format!(
+            "x = {{ version = {}, optional = true }}",
+            ir::toml_string(version)
+        ),
+    };
+    let doc = line
+        .parse::<DocumentMut>()
+        .unwrap_or_else(|error| panic!("coolc bug: `{line}` is not TOML: {error}"));
+    match doc.get("x").and_then(Item::as_value) {
         Some(value) => value.clone(),
         None => panic!("coolc bug: `{line}` has no value"),
     }
@@ -312,6 +343,9 @@ pub fn update(text: &str, krate: &ir::Crate, set_runtime: bool) -> Result<Update
         if set_runtime || !dependencies.contains_key("coolbot") {
             set_value(dependencies, "coolbot", runtime_value(krate));
         }
+        if set_runtime || !dependencies.contains_key(NETWORK_DEPENDENCY) {
+            set_value(dependencies, NETWORK_DEPENDENCY, network_value(krate));
+        }
         for (name, value) in &wanted {
             if let Some(item) = dependencies.get(name)
                 && !previously.contains(name)
@@ -331,6 +365,14 @@ pub fn update(text: &str, krate: &ir::Crate, set_runtime: bool) -> Result<Update
         if gone != "coolbot" {
             remove_dependency(&mut doc, gone);
         }
+    }
+
+    let features =
+        table_at(doc.as_table_mut(), &["features"]).ok_or(ManifestError::NotATable("features"))?;
+    features.set_implicit(false);
+    if !features.contains_key(NETWORK_FEATURE) {
+        let enables: Array = [format!("dep:{NETWORK_DEPENDENCY}")].into_iter().collect();
+        features.insert(NETWORK_FEATURE, Item::Value(Value::Array(enables)));
     }
 
     let list: Array = wanted.iter().map(|(name, _)| name.as_str()).collect();
@@ -360,9 +402,11 @@ pub fn update(text: &str, krate: &ir::Crate, set_runtime: bool) -> Result<Update
 /// the same lines).
 pub const HEADER: &str = "\
 # coolc wrote this manifest and keeps only its own entries up to date: the package
-# name, `coolbot` and the dependencies listed in [package.metadata.coolc] (`serde`
-# and the crates the descriptions name with `link crate`). Every other line is
-# yours and kept as written: add dependencies, binaries, features, profiles.
+# name, `coolbot`, `coolbot-zenoh` (optional: the `network` feature, which the
+# starter main's `--node` uses) and the dependencies listed in
+# [package.metadata.coolc] (`serde` and the crates the descriptions name with
+# `link crate`). Every other line is yours and kept as written: add dependencies,
+# binaries, features, profiles.
 ";
 
 #[cfg(test)]
@@ -408,24 +452,17 @@ mod tests {
         let edited = first.replace("ryu = ", "# Why ryu.\nryu = ");
         let updated = update(&edited, &krate(PLAIN), true).unwrap();
         assert!(!updated.text.contains("ryu ="), "{}", updated.text);
-        assert!(updated.text.ends_with("# Why ryu.\n"), "{}", updated.text);
+        // The last dependency: the comment goes to the next table's header, `[features]`.
+        assert!(
+            updated.text.contains("# Why ryu.\n\n[features]\n"),
+            "{}",
+            updated.text
+        );
         // Not the last entry: the comment moves to the next one.
         let edited = first.replace("ryu = \"1\"\n", "# Why ryu.\nryu = \"1\"\nmine = \"2\"\n");
         let updated = update(&edited, &krate(PLAIN), true).unwrap();
         assert!(
-            updated.text.ends_with("# Why ryu.\nmine = \"2\"\n"),
-            "{}",
-            updated.text
-        );
-        // The last entry before another table: the comment goes to that table's header.
-        let edited = format!(
-            "{}\n[features]\nx = []\n",
-            first.replace("ryu = ", "# Why ryu.\nryu = ")
-        );
-        let updated = update(&edited, &krate(PLAIN), true).unwrap();
-        assert!(
-            updated.text.contains("# Why ryu.\n\n[features]\n")
-                || updated.text.contains("# Why ryu.\n[features]\n"),
+            updated.text.contains("# Why ryu.\nmine = \"2\"\n"),
             "{}",
             updated.text
         );

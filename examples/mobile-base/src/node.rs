@@ -40,17 +40,14 @@ impl NodeOptions {
 
 /// The process on the network: its node, the placer that puts the robot's
 /// `on "node"` instances on their nodes (the wanderer `on "station"`), and the agent
-/// that builds such instances here when another node asks. Open it before the robot
-/// is built, on the thread that builds it (the placer is installed on that thread); the robot's components are exposed
-/// by [`Network::expose`].
+/// that builds such instances here when another node asks
+/// (`coolbot_zenoh::network::Network`). Open it before the robot is built, on the
+/// thread that builds it (the placer is installed on that thread); the robot's
+/// components are exposed by [`Network::expose`].
 pub struct Network {
     name: String,
     #[cfg(feature = "network")]
-    node: std::sync::Arc<coolbot_zenoh::Node>,
-    #[cfg(feature = "network")]
-    _agent: coolbot_zenoh::agent::Agent,
-    #[cfg(feature = "network")]
-    _placer: coolbot::remote::Installed,
+    network: coolbot_zenoh::network::Network,
 }
 
 impl Network {
@@ -75,30 +72,18 @@ fn registry() -> coolbot_zenoh::agent::Registry {
 /// Opens the node, installs its placer and starts its agent.
 #[cfg(feature = "network")]
 pub fn open(options: &NodeOptions) -> Result<Network, String> {
-    use std::sync::Arc;
-    let mut config =
-        coolbot_zenoh::peer_config(&options.listen, &options.connect, options.multicast)
-            .map_err(|e| format!("node `{}`: {e}", options.name))?;
-    // A lost node is noticed within the session lease (`docs/distribution.md`).
-    config
-        .insert_json5(
-            "transport/link/tx/lease",
-            &options.lease.as_millis().to_string(),
-        )
-        .map_err(|e| format!("node `{}`: lease: {e}", options.name))?;
-    let node = Arc::new(
-        coolbot_zenoh::Node::open(&options.name, config)
-            .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?,
-    );
-    let registry = Arc::new(registry());
-    let agent = coolbot_zenoh::agent::Agent::start(Arc::clone(&node), Arc::clone(&registry))
-        .map_err(|e| format!("node `{}`: the agent does not start: {e}", options.name))?;
-    let placer = coolbot_zenoh::Placer::new(Arc::clone(&node), registry).install();
+    let zenoh_options = coolbot_zenoh::network::NodeOptions {
+        listen: options.listen.clone(),
+        connect: options.connect.clone(),
+        multicast: options.multicast,
+        lease: options.lease,
+        ..coolbot_zenoh::network::NodeOptions::named(options.name.clone())
+    };
+    let network = coolbot_zenoh::network::Network::open(&zenoh_options, registry())
+        .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
     Ok(Network {
         name: options.name.clone(),
-        node,
-        _agent: agent,
-        _placer: placer,
+        network,
     })
 }
 
@@ -107,7 +92,7 @@ impl Network {
     /// Exposes every component of `robot` on the node, and echoes the odometry and
     /// the scans.
     pub fn expose(&self, robot: &Robot) -> Result<(), String> {
-        let node = &self.node;
+        let node = self.network.node();
         node.expose_system(robot.system())
             .map_err(|e| format!("node `{}` cannot expose the robot: {e}", self.name))?;
         // `coolctl echo` on the odometry and the scans (the ports `--record` records).

@@ -27,6 +27,8 @@
 //! - **Remote instances from the description** ([`place`]): a [`Placer`] installed
 //!   in a process puts its compounds' `instance x: T on "node";` on that node, each
 //!   behind a proxy (`coolbot::remote`).
+//! - **A process on the network** ([`network`]): the `--node NAME` options of a
+//!   program, and the node, agent and placer they open.
 //!
 //! `docs/distribution.md` describes the model, the keys, the encoding and what
 //! happens when the network fails.
@@ -39,6 +41,7 @@ pub mod ctl;
 pub mod echo;
 pub mod info;
 pub mod keys;
+pub mod network;
 mod node;
 pub mod place;
 pub mod top;

@@ -1,0 +1,268 @@
+//! The starter `main` coolc writes, built with the `network` feature, as an operator
+//! runs it: one binary as two processes, `--node station --serve` and `--node robot`.
+//! The robot's compound places its `on "station"` instance on the station (through the
+//! registry the starter main builds), `coolctl` sees both nodes' components, and
+//! SIGTERM stops each process cleanly (the station then reaps what it built for the
+//! robot: its instance is dead).
+//!
+//! The crate is built in the workspace's target directory with the workspace's
+//! `Cargo.lock` and profile, so that the network layer `cargo test --workspace` has
+//! built already is reused rather than built again.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use coolbot_zenoh::ctl::{Ctl, Listed};
+use rustix::process::{Pid, Signal, kill_process};
+
+/// Generous: the machine is shared and may be loaded.
+const PATIENCE: Duration = Duration::from_secs(60);
+
+const DESCRIPTION: &str = r#"
+/// Beats once a period.
+atomic Beat {
+    output beat: tick;
+    timing { period 50ms; }
+    automaton {
+        initial beating;
+        state beating { periodic; }
+    }
+}
+
+/// One beat here, one on the station.
+compound Duo {
+    instance here: Beat;
+    instance there: Beat on "station";
+}
+"#;
+
+fn repository() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .canonicalize()
+        .unwrap()
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free port")
+}
+
+/// Writes the crate for [`DESCRIPTION`] into `dir` as `coolc compile` into a new
+/// directory does (with the starter `main`), and builds it with `--features network`.
+/// Returns the binary.
+fn build(dir: &Path) -> std::path::PathBuf {
+    let checked = coolc::analyze_text("duo.cool", DESCRIPTION)
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
+    let options = coolc::lower::Options {
+        package: "duo".to_owned(),
+        runtime: coolc::ir::RuntimeDep::Path(repository().join("runtime").display().to_string()),
+        sources: vec!["duo.cool".to_owned()],
+        inputs: coolc::fingerprint::inputs(checked.sources().files()),
+    };
+    coolc::merge::write_crate(dir, &coolc::lower::lower(&checked, &options)).unwrap();
+    let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+    assert!(
+        manifest.contains("[features]\nnetwork = [\"dep:coolbot-zenoh\"]"),
+        "{manifest}"
+    );
+    // The workspace's profile (a user may add one: the manifest keeps it) and lock.
+    let profile = "\n[profile.dev]\ndebug = \"line-tables-only\"\n\n[profile.dev.package.\"*\"]\ndebug = false\n";
+    std::fs::write(dir.join("Cargo.toml"), manifest + profile).unwrap();
+    std::fs::copy(repository().join("Cargo.lock"), dir.join("Cargo.lock")).unwrap();
+    let target = repository().join("target");
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let output = Command::new(cargo)
+        .args(["build", "--quiet", "--features", "network"])
+        .current_dir(dir)
+        .env("CARGO_TARGET_DIR", &target)
+        .env_remove("RUSTFLAGS")
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "cargo build --features network failed:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    target.join("debug").join("duo")
+}
+
+/// Starts `binary` with `args`; its stdout and stderr lines go to `lines`, tagged.
+fn spawn(binary: &Path, who: &'static str, args: &[&str], lines: &mpsc::Sender<String>) -> Child {
+    let mut child = Command::new(binary)
+        .args(args)
+        .env("RUST_LOG", "warn,coolbot_zenoh=info")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the generated binary starts");
+    for (stream, tag) in [
+        (
+            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            "",
+        ),
+        (Box::new(child.stderr.take().unwrap()), " stderr"),
+    ] {
+        let lines = lines.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stream).lines() {
+                let Ok(line) = line else { break };
+                let _ = lines.send(format!("{who}{tag}: {line}"));
+            }
+        });
+    }
+    child
+}
+
+/// Waits for a line for which `wanted` holds; the others are kept in `seen`.
+fn wait_line(
+    lines: &mpsc::Receiver<String>,
+    seen: &mut Vec<String>,
+    what: &str,
+    wanted: impl Fn(&str) -> bool,
+) -> String {
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) if wanted(&line) => return line,
+            Ok(line) => seen.push(line),
+            Err(error) => panic!(
+                "no line {what} within {PATIENCE:?} ({error}); seen:\n{}",
+                seen.join("\n")
+            ),
+        }
+    }
+}
+
+/// Polls `coolctl list` until `wanted` holds of the components, or panics with the
+/// last list.
+fn wait_list(ctl: &Ctl, what: &str, wanted: impl Fn(&[Listed]) -> bool) -> Vec<Listed> {
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        let listed = ctl.components(None).unwrap_or_default();
+        if wanted(&listed) {
+            return listed;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "not {what} within {PATIENCE:?}; listed: {:?}",
+            listed
+                .iter()
+                .map(|l| format!("{}/{} {:?}", l.node, l.path, l.monitor.state))
+                .collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn stop(child: &mut Child) -> std::process::ExitStatus {
+    let pid = Pid::from_child(child);
+    kill_process(pid, Signal::TERM).unwrap();
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no exit within {PATIENCE:?} of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn the_starter_main_runs_as_the_robot_or_as_the_station() {
+    let dir = tempfile::tempdir().unwrap();
+    let binary = build(dir.path());
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let robot_listen = format!("tcp/127.0.0.1:{}", free_port());
+    let (sender, lines) = mpsc::channel();
+    let mut seen = Vec::new();
+
+    let network = ["--no-multicast", "--lease", "1s"];
+    let mut station = spawn(
+        &binary,
+        "station",
+        &[
+            &["--node", "station", "--serve", "--listen", &listen][..],
+            &network,
+        ]
+        .concat(),
+        &sender,
+    );
+    wait_line(&lines, &mut seen, "of the station serving", |l| {
+        l == "station: node `station` on the network: serving what other nodes place on it"
+    });
+    let mut robot = spawn(
+        &binary,
+        "robot",
+        &[
+            &[
+                "forever",
+                "--node",
+                "robot",
+                "--connect",
+                &listen,
+                "--listen",
+                &robot_listen,
+            ][..],
+            &network,
+        ]
+        .concat(),
+        &sender,
+    );
+    wait_line(&lines, &mut seen, "of the robot on the network", |l| {
+        l == "robot: node `robot` on the network"
+    });
+
+    // coolctl's view: the robot's compound with its local instance and the proxy of
+    // the remote one; the station's instance, built for the robot, running.
+    let config = coolbot_zenoh::peer_config(&[], &[listen, robot_listen], false).unwrap();
+    let session = coolbot_zenoh::zenoh::Wait::wait(coolbot_zenoh::zenoh::open(config)).unwrap();
+    let ctl = Ctl::new(session, Duration::from_secs(2));
+    let running = |listed: &[Listed], node: &str, path: &str| {
+        listed
+            .iter()
+            .any(|l| l.node == node && l.path == path && l.monitor.state == coolbot::State::Running)
+    };
+    let listed = wait_list(&ctl, "both nodes' beats running", |listed| {
+        running(listed, "robot", "duo")
+            && running(listed, "robot", "duo.here")
+            && running(listed, "robot", "duo.there")
+            && listed
+                .iter()
+                .any(|l| l.node == "station" && l.path.starts_with("robot-duo-there-"))
+    });
+    let remote = listed
+        .iter()
+        .find(|l| l.node == "station" && l.path.starts_with("robot-duo-there-"))
+        .unwrap();
+    assert_eq!(remote.monitor.state, coolbot::State::Running);
+    assert_eq!(remote.monitor.user_state.as_deref(), Some("beating"));
+
+    // SIGTERM: the robot shuts down cleanly; the station reaps what it built for it.
+    let status = stop(&mut robot);
+    wait_line(&lines, &mut seen, "of a clean shutdown", |l| {
+        l.starts_with("robot: shutdown clean")
+    });
+    assert!(status.success(), "{status:?}");
+    wait_list(&ctl, "the station's instance reaped", |listed| {
+        listed
+            .iter()
+            .filter(|l| l.node == "station")
+            .all(|l| l.monitor.state == coolbot::State::Dead)
+    });
+    let status = stop(&mut station);
+    wait_line(&lines, &mut seen, "of the station stopping", |l| {
+        l == "station: node `station` stopped"
+    });
+    assert!(status.success(), "{status:?}");
+}
