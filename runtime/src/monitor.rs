@@ -108,8 +108,13 @@ pub struct Monitor {
     pub port_overflows: Vec<(String, u64)>,
     /// The quality level (0 = best).
     pub quality: usize,
-    /// The component period.
+    /// The component period in effect: the nominal one, or what a command or
+    /// adaptation set.
     pub period: Option<Duration>,
+    /// The period the component was built with (its description's `timing`, with the
+    /// instance's overrides), whatever commands and adaptation do to `period`.
+    #[serde(default)]
+    pub nominal_period: Option<Duration>,
     /// The response bound.
     pub max_response: Option<Duration>,
     /// The priority.

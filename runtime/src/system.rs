@@ -526,6 +526,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
         quality: 0,
         period: timing.period,
+        nominal_period: timing.period,
         max_response: timing.max_response,
         priority: timing.priority,
         os_priority: crate::monitor::OsPriority::Inherited,

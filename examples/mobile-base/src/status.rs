@@ -352,6 +352,7 @@ mod tests {
             port_overflows: Vec::new(),
             quality: 0,
             period: None,
+            nominal_period: None,
             max_response: None,
             priority: 0,
             os_priority: coolbot::OsPriority::Inherited,

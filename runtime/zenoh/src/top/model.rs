@@ -185,7 +185,7 @@ impl Board {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A monitor as a node would publish it for a running component.

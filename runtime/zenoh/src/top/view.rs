@@ -22,6 +22,17 @@ fn duration(value: Option<std::time::Duration>) -> String {
     }
 }
 
+/// The period in effect, and `/nominal` after it when a command or adaptation moved
+/// it from the description's.
+fn period(m: &coolbot::Monitor) -> String {
+    match m.nominal_period {
+        Some(nominal) if m.period != Some(nominal) => {
+            format!("{}/{}", duration(m.period), duration(Some(nominal)))
+        }
+        _ => duration(m.period),
+    }
+}
+
 fn cells(row: &Row) -> Vec<String> {
     let m = &row.monitor;
     let name = row.path.rsplit('.').next().unwrap_or(&row.path);
@@ -39,7 +50,7 @@ fn cells(row: &Row) -> Vec<String> {
         tree,
         state,
         m.user_state.clone().unwrap_or_else(|| "-".to_owned()),
-        duration(m.period),
+        period(m),
         m.quality.to_string(),
         format!("{}/{}", m.adaptation.level, m.adaptation.max_level),
         row.cpu_share
@@ -101,7 +112,7 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
         Constraint::Length(first),
         Constraint::Length(13),
         Constraint::Length(10),
-        Constraint::Length(7),
+        Constraint::Length(10),
         Constraint::Length(2),
         Constraint::Length(4),
         Constraint::Length(5),
@@ -147,4 +158,25 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
         board.status.as_str()
     };
     frame.render_widget(Paragraph::new(status), status_area);
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    #[test]
+    fn the_period_shows_its_nominal_only_when_moved_from_it() {
+        let mut m = crate::top::model::tests::monitor("motion", 0);
+        assert_eq!(m.period, Some(Duration::from_millis(20)));
+        // A snapshot from a node that predates `nominal_period`: the period alone.
+        assert_eq!(m.nominal_period, None);
+        assert_eq!(super::period(&m), "20ms");
+        m.nominal_period = Some(Duration::from_millis(20));
+        assert_eq!(super::period(&m), "20ms");
+        // Adapted (or commanded) to 40 ms: in effect, then the description's.
+        m.period = Some(Duration::from_millis(40));
+        assert_eq!(super::period(&m), "40ms/20ms");
+        m.period = None;
+        assert_eq!(super::period(&m), "-/20ms");
+    }
 }
