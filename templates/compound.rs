@@ -480,3 +480,161 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
     {%- endif %}
     }
 }
+
+/// The result of a [`Harness`] operation.
+pub type HarnessResult<T> = ::core::result::Result<T, ::coolbot::harness::HarnessError>;
+
+/// `{{ c.type_name }}`'s supervisor alone for tests (`coolbot::harness::supervisor`):
+/// its states, sections and `when` rules run on the caller's thread on a virtual
+/// clock, exactly as the compound's thread would run them, while its instances are
+/// stand-ins whose state, user state, result, error, quality and variables the test
+/// sets, and whose commands from the supervisor the test reads back. Fault policies,
+/// the recovery queue, substitution, redundancy and adaptation need the instances
+/// themselves: test them with [`component`] on threads.
+pub struct Harness {
+    inner: ::coolbot::harness::SupervisorHarness,
+}
+
+impl Harness {
+    /// The compound with the supervisor of `parts` (its instances' behaviours are
+    /// built but never run), started: `ready`, every instance `ready`.
+    pub fn new{{ c.generics() }}(parts: impl Parts) -> HarnessResult<Self> {
+        let builder = builder{{ c.turbofish() }}("{{ c.module.trim_start_matches("r#") }}", parts)
+            .map_err(|error| ::coolbot::harness::HarnessError::Compound(::std::boxed::Box::new(error)))?;
+        Ok(Harness { inner: ::coolbot::harness::SupervisorHarness::new(builder)? })
+    }
+
+    /// [`Harness::new`], then `running`: the supervisor enters its initial state and
+    /// the instances run.
+    pub fn running{{ c.generics() }}(parts: impl Parts) -> HarnessResult<Self> {
+        let mut harness = Self::new{{ c.turbofish() }}(parts)?;
+        harness.inner.run()?;
+        Ok(harness)
+    }
+
+    /// The untyped harness: commands, the clock, the monitoring snapshot (with the
+    /// supervision steps), the stand-ins by name.
+    pub fn inner(&mut self) -> &mut ::coolbot::harness::SupervisorHarness {
+        &mut self.inner
+    }
+
+    /// Runs the supervisor until nothing more is due at the current time.
+    pub fn settle(&mut self) -> HarnessResult<()> {
+        self.inner.settle()
+    }
+
+    /// Moves the virtual clock forward by `by`, timer by timer (periodic sections,
+    /// `after` transitions), settling at each.
+    pub fn advance(&mut self, by: ::core::time::Duration) -> HarnessResult<()> {
+        self.inner.advance(by)
+    }
+
+    /// Commands `running` through the control port.
+    pub fn run(&mut self) -> HarnessResult<()> {
+        self.inner.run()
+    }
+
+    /// The compound's default state.
+    pub fn state(&self) -> ::coolbot::State {
+        self.inner.state()
+    }
+
+    /// The supervisor's state, while it has one.
+    pub fn user_state(&self) -> ::core::option::Option<UserState> {
+        let name = self.inner.user_state()?;
+        UserState::ALL
+            .into_iter()
+            .find(|state| state.name() == name)
+    }
+
+    /// A variable of the compound (mapped, or the supervisor's own), by name.
+    pub fn variable(&self, name: &str) -> ::core::option::Option<::coolbot::Value> {
+        self.inner.variable(name)
+    }
+
+    /// The commands the supervisor gave its instances since the last call, in order.
+    pub fn take_commands(&mut self) -> ::std::vec::Vec<(::std::string::String, ::coolbot::Command)> {
+        self.inner.take_commands()
+    }
+
+    /// The stand-ins of the instances, to set what the rules read of them:
+    /// `harness.instances().motion().set_state(coolbot::State::RunningError)?`.
+    pub fn instances(&mut self) -> StandIns<'_> {
+        StandIns { inner: &mut self.inner }
+    }
+}
+
+/// The stand-ins of a [`Harness`]'s instances, one method each.
+{%- if c.handles.is_empty() %}
+#[allow(dead_code, reason = "no instance to stand in for")]
+{%- endif %}
+pub struct StandIns<'a> {
+    inner: &'a mut ::coolbot::harness::SupervisorHarness,
+}
+
+impl StandIns<'_> {
+{%- for h in c.handles %}
+{%- if !loop.first %}
+{% endif %}
+    /// The stand-in of instance `{{ h.instance }}` (a `{{ h.component }}`).
+    pub fn {{ h.method }}(&mut self) -> {{ h.type_name }}StandIn<'_> {
+        {{ h.type_name }}StandIn { inner: &mut *self.inner }
+    }
+{%- endfor %}
+}
+{%- for h in c.handles %}
+
+/// What the test sets of instance `{{ h.instance }}` (a `{{ h.component }}`) in a
+/// [`Harness`]: each change is an event of the instance, and the supervisor's rules
+/// that read it are evaluated at once.
+pub struct {{ h.type_name }}StandIn<'a> {
+    inner: &'a mut ::coolbot::harness::SupervisorHarness,
+}
+
+impl {{ h.type_name }}StandIn<'_> {
+    /// Its default state is now `state` (e.g. `running_error`).
+    pub fn set_state(&mut self, state: ::coolbot::State) -> HarnessResult<()> {
+        self.inner.set_instance_state("{{ h.instance }}", state)
+    }
+
+    /// Its user state is now the one named `user_state` (one of its automaton's), or
+    /// none.
+    pub fn set_user_state(&mut self, user_state: ::core::option::Option<&str>) -> HarnessResult<()> {
+        self.inner.set_instance_user_state("{{ h.instance }}", user_state)
+    }
+
+    /// Its task result is now `result`.
+    pub fn set_result(&mut self, result: ::coolbot::TaskResult) -> HarnessResult<()> {
+        self.inner.set_instance_result("{{ h.instance }}", result)
+    }
+
+    /// Its last error is now `error`.
+    pub fn set_error(&mut self, error: ::core::option::Option<&str>) -> HarnessResult<()> {
+        self.inner.set_instance_error("{{ h.instance }}", error)
+    }
+
+    /// Its variable `variable` (observable or controllable, by name) is now `value`.
+    pub fn put(&mut self, variable: &str, value: impl ::core::convert::Into<::coolbot::Value>) -> HarnessResult<()> {
+        self.inner.set_instance_variable("{{ h.instance }}", variable, value)
+    }
+{%- for setter in h.setters %}
+
+    /// Its controllable variable `{{ setter.variable }}` is now `value`.
+    pub fn {{ setter.method }}(&mut self, value: {{ setter.ty }}) -> HarnessResult<()> {
+        self.inner.set_instance_variable("{{ h.instance }}", "{{ setter.variable }}", {{ setter.to_value }})
+    }
+{%- endfor %}
+{%- if let Some((quality, _)) = h.quality %}
+
+    /// Its quality level is now `level`.
+    pub fn set_quality(&mut self, level: {{ quality }}) -> HarnessResult<()> {
+        self.inner.set_instance_quality("{{ h.instance }}", level.index())
+    }
+{%- endif %}
+
+    /// What it shows now.
+    pub fn monitor(&self) -> HarnessResult<::coolbot::Monitor> {
+        self.inner.instance("{{ h.instance }}")
+    }
+}
+{%- endfor %}

@@ -310,6 +310,10 @@ fn a_compound_user_file_without_a_supervisor_block_gets_one_appended() {
 /// feature and a profile.
 const USER_DEPENDENCY: &str =
     "# Mine: the tool in src/bin uses it.\nitoa = { version = \"1\" } # keep this comment\n";
+/// A feature of the user's, in the `[features]` table the first compile wrote (which
+/// holds coolc's `network`).
+const USER_FEATURE: &str = "extra = [] # mine\n";
+const NETWORK_FEATURE: &str = "[features]\nnetwork = [\"dep:coolbot-zenoh\"]\n";
 const USER_TABLES: &str = "\
 # Mine, all of it.
 [dev-dependencies]
@@ -318,9 +322,6 @@ tempfile = \"3\"
 [[bin]]
 name = \"lamp-tool\"
 path = \"src/bin/tool.rs\"
-
-[features]
-extra = []
 
 [profile.release]
 debug = true # for perf
@@ -351,6 +352,8 @@ fn the_manifest_keeps_what_the_user_wrote_and_follows_link_crate() {
         &generated[..at],
         &generated[at..]
     );
+    assert!(edited.contains(NETWORK_FEATURE), "{edited}");
+    let edited = edited.replace(NETWORK_FEATURE, &format!("{NETWORK_FEATURE}{USER_FEATURE}"));
     write(&krate.join("Cargo.toml"), &edited);
     std::fs::create_dir_all(krate.join("src/bin")).unwrap();
     write(&krate.join("src/bin/tool.rs"), "fn main() {}\n");
@@ -447,7 +450,13 @@ fn a_link_crate_naming_a_user_dependency_takes_it_over_with_a_warning() {
     write(&description, V1);
     compile(&description, &krate, "lamp");
     let generated = std::fs::read_to_string(krate.join("Cargo.toml")).unwrap();
-    let edited = format!("{generated}# My own ryu.\nryu = \"1.0.5\"\n");
+    // At the end of [dependencies], before coolc's [features].
+    assert!(generated.contains("\n\n[features]\n"), "{generated}");
+    let edited = generated.replacen(
+        "\n\n[features]\n",
+        "\n# My own ryu.\nryu = \"1.0.5\"\n\n[features]\n",
+        1,
+    );
     write(&krate.join("Cargo.toml"), &edited);
 
     write(

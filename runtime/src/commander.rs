@@ -18,6 +18,7 @@
 //! taken just before the timeout is given as long again to finish its transition,
 //! which then completes in the background).
 
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use crate::monitor::{Command, Handle, Refusal, Step, Supervision};
@@ -99,10 +100,20 @@ pub enum Refused {
     Rejected(String),
 }
 
+/// What answers a [`Commander`]'s commands in place of the instances' control ports:
+/// the stand-ins of a supervisor harness, which record each command and take it as an
+/// instance would (or refuse it as the test asks).
+pub(crate) trait StandIns: Send {
+    /// Take `command` for instance `instance` (checked against its spec already).
+    fn command(&mut self, instance: &str, command: &Command) -> Result<(), Refused>;
+}
+
 /// One instance a [`Commander`] can command.
 struct Target {
     name: String,
-    handle: Handle,
+    /// Its control port; `None` for a stand-in's (the commander's [`StandIns`]
+    /// answer).
+    handle: Option<Handle>,
     spec: &'static Spec,
     /// Its quality levels: its component's, or its `timing` override's.
     levels: usize,
@@ -116,6 +127,9 @@ struct Target {
 pub struct Commander {
     compound: String,
     targets: Vec<Target>,
+    /// Who answers instead of the instances' control ports: a supervisor harness's
+    /// stand-ins (`crate::harness::supervisor`).
+    stand_ins: Option<Arc<Mutex<dyn StandIns>>>,
     timeout: Duration,
     /// Steps taken since the compound last published them.
     steps: Vec<Supervision>,
@@ -145,12 +159,38 @@ impl Commander {
                 .into_iter()
                 .map(|(name, handle, spec, levels)| Target {
                     name,
-                    handle: handle.with_command_timeout(timeout),
+                    handle: Some(handle.with_command_timeout(timeout)),
                     spec,
                     levels,
                 })
                 .collect(),
+            stand_ins: None,
             timeout,
+            steps: Vec::new(),
+        }
+    }
+
+    /// A commander whose commands `stand_ins` answers for compound `compound`'s
+    /// instances `(name, spec, quality levels)`: the same checks against each
+    /// instance's spec, the same steps, no control port.
+    pub(crate) fn standing_in(
+        compound: String,
+        instances: impl IntoIterator<Item = (String, &'static Spec, usize)>,
+        stand_ins: Arc<Mutex<dyn StandIns>>,
+    ) -> Commander {
+        Commander {
+            compound,
+            targets: instances
+                .into_iter()
+                .map(|(name, spec, levels)| Target {
+                    name,
+                    handle: None,
+                    spec,
+                    levels,
+                })
+                .collect(),
+            stand_ins: Some(stand_ins),
+            timeout: Duration::ZERO,
             steps: Vec::new(),
         }
     }
@@ -302,14 +342,22 @@ impl Commander {
         if let Some(refused) = check(target) {
             return Err(refused);
         }
-        if target.handle.is_stuck() {
+        let Some(handle) = &target.handle else {
+            return match &self.stand_ins {
+                Some(stand_ins) => stand_ins
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .command(instance, command),
+                None => Err(Refused::NotStarted),
+            };
+        };
+        if handle.is_stuck() {
             return Err(Refused::Stuck);
         }
-        if target.handle.state() == State::Dead {
+        if handle.state() == State::Dead {
             return Err(Refused::Dead);
         }
-        target
-            .handle
+        handle
             .command_refusable(command.clone())
             .map_err(|refusal| match refusal {
                 Refusal::NotStarted => Refused::NotStarted,
@@ -321,7 +369,7 @@ impl Commander {
                 Refusal::Rejected(reason) => match command {
                     Command::Set(..) => Refused::InvalidValue(reason),
                     Command::Configure(_) => Refused::InvalidConfiguration(reason),
-                    _ if target.handle.state() == State::Dead => Refused::Dead,
+                    _ if handle.state() == State::Dead => Refused::Dead,
                     _ => Refused::Rejected(reason),
                 },
                 // The compound's thread is never an instance's thread.

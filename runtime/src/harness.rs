@@ -29,12 +29,17 @@
 //! [`crate::Context::now`], wall-clock time for packets' stamps.)
 //!
 //! [`replay`] feeds a harness from an MCAP recording ([`crate::record`]).
+//! [`SupervisorHarness`] drives a compound's supervisor the same way, its instances
+//! stood in for by monitors the test sets ([`supervisor`]).
 //!
 //! coolc generates a typed wrapper per atomic component (`<module>::Harness<B>`,
 //! `docs/generated-code.md`) over this one: methods per port with the component's
 //! packet types, and its `Vars`, `Config`, behaviour and `UserState` read back.
 
 pub mod replay;
+pub mod supervisor;
+
+pub use supervisor::SupervisorHarness;
 
 use std::any::Any;
 use std::collections::VecDeque;
@@ -112,6 +117,37 @@ pub enum HarnessError {
         command: String,
         /// Its reason.
         reason: String,
+    },
+    /// The compound does not build (a supervisor harness's builder).
+    #[error("the compound cannot be driven")]
+    Compound(#[source] Box<crate::compound::CompoundError>),
+    /// A supervisor harness's compound has no instance of that name.
+    #[error("`{compound}` has no instance `{instance}` (instances: {known})")]
+    NoInstance {
+        /// The compound's name.
+        compound: String,
+        /// The name asked for.
+        instance: String,
+        /// The instances it has.
+        known: String,
+    },
+    /// An instance's automaton has no state of that name.
+    #[error("instance `{instance}` has no user state `{state}` (states: {known})")]
+    NoUserState {
+        /// The instance.
+        instance: String,
+        /// The name asked for.
+        state: String,
+        /// The states it has.
+        known: String,
+    },
+    /// An instance's component declares no variable of that name.
+    #[error("instance `{instance}` has no variable `{variable}`")]
+    NoInstanceVariable {
+        /// The instance.
+        instance: String,
+        /// The name asked for.
+        variable: String,
     },
     /// The component kept working at one instant for [`MAX_TURNS`] turns.
     #[error("`{component}` is still busy after {turns} turns at one instant (a `may` loop?)")]

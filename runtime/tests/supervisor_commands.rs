@@ -634,3 +634,102 @@ fn the_commands_of_a_section_that_panics_are_published_with_it() {
     assert_ne!(w.state(), State::Running);
     assert!(system.shutdown().clean());
 }
+
+/// The same supervisor and rules in a supervisor harness: no thread, the instance a
+/// stand-in. Rules fire on the own variable and on what the test sets of the
+/// instance; the commands are recorded and taken as the instance would take them
+/// (or refused when asked); they are the compound's supervision steps as on threads.
+#[test]
+fn a_supervisor_harness_runs_the_rules_and_records_the_commands_without_threads() {
+    use coolbot::harness::SupervisorHarness;
+    let log: Answers = Arc::default();
+    let (w, _script) = worker("w");
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::clone(&log),
+        },
+    ))
+    .instance(w)
+    .rule(
+        "operating",
+        "stopped",
+        &["w.state"],
+        |view: &coolbot::View| view.state("w") == Some(State::RunningError),
+    );
+    let mut h = SupervisorHarness::running(builder).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("operating"));
+    assert_eq!(h.instance("w").unwrap().state, State::Running);
+    assert!(h.take_commands().is_empty());
+
+    // The own variable, through the control port: `stopped` suspends the instance.
+    h.set("go", Value::from(1_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("stopped"));
+    assert_eq!(
+        h.take_commands(),
+        [("w".to_owned(), Command::SetState(Controllable::Suspended))]
+    );
+    assert_eq!(h.instance("w").unwrap().state, State::Suspended);
+    assert_eq!(
+        log.lock().unwrap().last().unwrap(),
+        &("suspend".to_owned(), Ok(()))
+    );
+
+    // Back, then a refusal the test asks for.
+    h.set("go", Value::from(0_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("operating"));
+    h.refuse_next(
+        "w",
+        Refused::Busy {
+            waited: Duration::from_millis(250),
+        },
+    )
+    .unwrap();
+    h.set("go", Value::from(3_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("probing"));
+    let (what, outcome) = log.lock().unwrap().last().unwrap().clone();
+    assert_eq!(what, "run");
+    assert!(
+        matches!(reason(&outcome), Some(Refused::Busy { .. })),
+        "{outcome:?}"
+    );
+    assert!(
+        steps(&h.monitor())
+            .iter()
+            .any(|(step, detail)| matches!(step, Step::CommandRefused { .. })
+                && detail.contains("busy")),
+        "{:?}",
+        h.monitor().supervision
+    );
+    h.take_commands();
+
+    // A rule over the instance's state, set by the test.
+    h.set("go", Value::from(0_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("operating"));
+    // (No rule reads `go == 5`: `stopped` is kept once entered.)
+    h.set("go", Value::from(5_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("operating"));
+    h.set_instance_state("w", State::RunningError).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("stopped"));
+    assert_eq!(
+        h.take_commands(),
+        [("w".to_owned(), Command::SetState(Controllable::Suspended))]
+    );
+
+    // Unknown names are errors that say what there is.
+    let error = h.set_instance_state("x", State::Running).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "`base` has no instance `x` (instances: w)"
+    );
+    let error = h.set_instance_user_state("w", Some("nope")).unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .starts_with("instance `w` has no user state `nope` (states: "),
+        "{error}"
+    );
+    let error = h.set_instance_variable("w", "nope", 1_i64).unwrap_err();
+    assert_eq!(error.to_string(), "instance `w` has no variable `nope`");
+}

@@ -59,6 +59,20 @@ pub struct CompoundBuilder {
     pub(super) command_timeout: Duration,
 }
 
+/// A compound's description checked and resolved ([`CompoundBuilder::resolve`]).
+pub(crate) struct Resolved {
+    /// The compound's spec: the supervisor's states, the mapped and own variables,
+    /// the exported ports.
+    pub(crate) spec: &'static Spec,
+    pub(super) mapped: Vec<Mapped>,
+    pub(super) rules: Vec<Rule>,
+    pub(super) by_read: HashMap<String, Vec<usize>>,
+    pub(super) view: View,
+    pub(super) reads_own: bool,
+    pub(super) timed: Vec<String>,
+    pub(super) group_members: Vec<Vec<usize>>,
+}
+
 impl std::fmt::Debug for CompoundBuilder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "CompoundBuilder({})", self.name)
@@ -562,9 +576,11 @@ impl CompoundBuilder {
         Ok(())
     }
 
-    /// The compound as a component, ready for [`System::add`] (or for another
-    /// compound's [`CompoundBuilder::instance`]).
-    pub fn build(mut self) -> Result<Component, CompoundError> {
+    /// Everything of the description checked and resolved (policies, substitutes,
+    /// groups, connections' ends, mapped variables, rules), the compound's spec and
+    /// its supervisor's first view: what [`CompoundBuilder::build`] and the
+    /// supervisor harness (`crate::harness::supervisor`) start from.
+    pub(crate) fn resolve(&mut self) -> Result<Resolved, CompoundError> {
         if !self.errors.is_empty() {
             return Err(self.errors.swap_remove(0));
         }
@@ -752,6 +768,31 @@ impl CompoundBuilder {
             .filter(|read| is_timed(read))
             .cloned()
             .collect();
+        Ok(Resolved {
+            spec,
+            mapped,
+            rules,
+            by_read,
+            view,
+            reads_own,
+            timed,
+            group_members,
+        })
+    }
+
+    /// The compound as a component, ready for [`System::add`] (or for another
+    /// compound's [`CompoundBuilder::instance`]).
+    pub fn build(mut self) -> Result<Component, CompoundError> {
+        let Resolved {
+            spec,
+            mapped,
+            rules,
+            by_read,
+            view,
+            reads_own,
+            timed,
+            group_members,
+        } = self.resolve()?;
         let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
         let commander = Commander::new(
             self.name.clone(),

@@ -29,7 +29,9 @@
 //!   `adaptation` (coordinating its instances' degradation);
 //! - `component`: the compound as the runner drives it (`Automaton` and the crate's
 //!   compound hooks; the instances follow the compound's state);
-//! - `builder`: [`CompoundBuilder`], from a description to a [`Component`].
+//! - `builder`: [`CompoundBuilder`], from a description to a [`Component`];
+//! - `stand_in`: the compound with stand-ins for its instances, which the supervisor
+//!   harness drives (`crate::harness::supervisor`).
 
 mod adaptation;
 mod builder;
@@ -41,6 +43,7 @@ mod faults;
 mod in_step;
 mod links;
 mod policy;
+mod stand_in;
 mod state;
 mod supervision;
 mod supervisor;
@@ -56,6 +59,8 @@ pub use policy::{
 };
 pub use supervisor::{DEFAULT_SUPERVISION_PERIOD, Supervisor, SupervisorCx};
 pub use view::View;
+
+pub(crate) use stand_in::Stage;
 
 #[allow(unused_imports, reason = "named by the documentation of this module")]
 use crate::{

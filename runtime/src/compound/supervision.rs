@@ -2,7 +2,7 @@
 //! inputs, take its instances' monitoring events (applying the fault policies), run
 //! the recovery queue and pending restarts, refresh the view, evaluate the rules.
 
-use std::collections::{BTreeSet, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::atomic::Ordering;
 
 use crate::automaton::{Context, Fault};
@@ -11,36 +11,77 @@ use crate::table::State;
 
 use super::state::{Compound, Status};
 use super::supervisor::DEFAULT_SUPERVISION_PERIOD;
-use super::view::{Own, Rule};
+use super::view::{Own, Rule, View};
+
+/// Copy the compound's own default variables (`result`, `error`, `quality`, its
+/// times) from its monitoring port into `view`; the keys whose value changed go into
+/// `changed`.
+pub(super) fn refresh_own_defaults(view: &mut View, cx: &Context, changed: &mut HashSet<String>) {
+    let Some(shared) = &cx.shared else {
+        return;
+    };
+    let mut now = Own::default();
+    shared.quietly(|monitor| {
+        now = Own {
+            result: monitor.result.clone(),
+            error: monitor.error.clone(),
+            quality: monitor.quality,
+            cpu_time: monitor.cpu_time,
+            elapsed_time: monitor.elapsed_time,
+        };
+    });
+    let before = std::mem::replace(&mut view.compound, now);
+    let after = &view.compound;
+    for (key, differs) in [
+        ("result", before.result != after.result),
+        ("error", before.error != after.error),
+        ("quality", before.quality != after.quality),
+    ] {
+        if differs {
+            changed.insert(key.to_owned());
+        }
+    }
+}
+
+/// The rule of supervisor state `state` that fires, if any: the first that holds in
+/// declaration order, among all the state's rules when `all` (the state was just
+/// entered, or a supervisor section ran: it may have changed what no `reads` names,
+/// its `local` variables), else among the rules reading a variable in `changed`.
+pub(super) fn fire(
+    rules: &[Rule],
+    by_read: &HashMap<String, Vec<usize>>,
+    view: &View,
+    state: usize,
+    all: bool,
+    changed: &HashSet<String>,
+) -> Option<usize> {
+    let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
+    if all {
+        rules.iter().find(holds).map(|rule| rule.target)
+    } else {
+        // Only the rules reading a changed variable, in declaration order.
+        let mut candidates: Vec<usize> = changed
+            .iter()
+            .filter_map(|read| by_read.get(read))
+            .flatten()
+            .copied()
+            .collect();
+        candidates.sort_unstable();
+        candidates.dedup();
+        candidates
+            .into_iter()
+            .map(|index| &rules[index])
+            .find(holds)
+            .map(|rule| rule.target)
+    }
+}
 
 impl Compound {
     /// Copy the compound's own default variables into the view (when a rule reads
     /// them) and, every supervisor period, count the time reads as changed.
     pub(super) fn refresh_compound(&mut self, cx: &Context, changed: &mut HashSet<String>) {
-        if self.reads_own
-            && let Some(shared) = &cx.shared
-        {
-            let mut now = Own::default();
-            shared.quietly(|monitor| {
-                now = Own {
-                    result: monitor.result.clone(),
-                    error: monitor.error.clone(),
-                    quality: monitor.quality,
-                    cpu_time: monitor.cpu_time,
-                    elapsed_time: monitor.elapsed_time,
-                };
-            });
-            let before = std::mem::replace(&mut self.view.compound, now);
-            let after = &self.view.compound;
-            for (key, differs) in [
-                ("result", before.result != after.result),
-                ("error", before.error != after.error),
-                ("quality", before.quality != after.quality),
-            ] {
-                if differs {
-                    changed.insert(key.to_owned());
-                }
-            }
+        if self.reads_own {
+            refresh_own_defaults(&mut self.view, cx, changed);
         }
         if self.timed.is_empty() {
             return;
@@ -199,26 +240,14 @@ impl Compound {
             return Ok(None);
         }
         self.evaluated_in = Some(state);
-        let view = &self.view;
-        let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
-        let fired = if entered || sectioned {
-            self.rules.iter().find(holds).map(|rule| rule.target)
-        } else {
-            // Only the rules reading a changed variable, in declaration order.
-            let mut candidates: Vec<usize> = changed
-                .iter()
-                .filter_map(|read| self.by_read.get(read))
-                .flatten()
-                .copied()
-                .collect();
-            candidates.sort_unstable();
-            candidates.dedup();
-            candidates
-                .into_iter()
-                .map(|index| &self.rules[index])
-                .find(holds)
-                .map(|rule| rule.target)
-        };
+        let fired = fire(
+            &self.rules,
+            &self.by_read,
+            &self.view,
+            state,
+            entered || sectioned,
+            &changed,
+        );
         Ok(fired)
     }
 }
