@@ -53,20 +53,30 @@ fn free_port() -> u16 {
         .expect("a free port")
 }
 
-/// Writes the crate for [`DESCRIPTION`] into `dir` as `coolc compile` into a new
-/// directory does (with the starter `main`), and builds it with `--features network`.
-/// Returns the binary.
-fn build(dir: &Path) -> std::path::PathBuf {
-    let checked = coolc::analyze_text("duo.cool", DESCRIPTION)
+/// Writes the crate `package` for `description` into `dir` as `coolc compile` into a
+/// new directory does (with the starter `main`), replaces the user files `user`
+/// (`(file in src/, text)`), and builds it with `--features network`. Returns the
+/// binary.
+fn build(
+    dir: &Path,
+    package: &str,
+    description: &str,
+    user: &[(&str, &str)],
+) -> std::path::PathBuf {
+    let file = format!("{package}.cool");
+    let checked = coolc::analyze_text(&file, description)
         .checked()
         .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = coolc::lower::Options {
-        package: "duo".to_owned(),
+        package: package.to_owned(),
         runtime: coolc::ir::RuntimeDep::Path(repository().join("runtime").display().to_string()),
-        sources: vec!["duo.cool".to_owned()],
+        sources: vec![file.clone()],
         inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
     coolc::merge::write_crate(dir, &coolc::lower::lower(&checked, &options)).unwrap();
+    for (name, text) in user {
+        std::fs::write(dir.join("src").join(name), text).unwrap();
+    }
     let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
     assert!(
         manifest.contains("[features]\nnetwork = [\"dep:coolbot-zenoh\"]"),
@@ -90,7 +100,7 @@ fn build(dir: &Path) -> std::path::PathBuf {
         "cargo build --features network failed:\n{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    target.join("debug").join("duo")
+    target.join("debug").join(package)
 }
 
 /// Starts `binary` with `args`; its stdout and stderr lines go to `lines`, tagged.
@@ -181,7 +191,7 @@ fn stop(child: &mut Child) -> std::process::ExitStatus {
 #[test]
 fn the_starter_main_runs_as_the_robot_or_as_the_station() {
     let dir = tempfile::tempdir().unwrap();
-    let binary = build(dir.path());
+    let binary = build(dir.path(), "duo", DESCRIPTION, &[]);
     let listen = format!("tcp/127.0.0.1:{}", free_port());
     let robot_listen = format!("tcp/127.0.0.1:{}", free_port());
     let (sender, lines) = mpsc::channel();
@@ -265,4 +275,201 @@ fn the_starter_main_runs_as_the_robot_or_as_the_station() {
         l == "station: node `station` stopped"
     });
     assert!(status.success(), "{status:?}");
+}
+
+const TRIO: &str = r#"
+/// Beats once a period.
+atomic Beat {
+    output beat: tick;
+    timing { period 20ms; }
+    automaton {
+        initial beating;
+        state beating { periodic; }
+    }
+}
+
+/// Counts the beats it hears.
+atomic Count {
+    input beat: tick;
+    observable heard: u64 = 0;
+    automaton {
+        initial counting;
+        state counting { entry; on beat -> counting; }
+    }
+}
+
+/// A beat on one node heard on another, through this one; a local beat stands in.
+compound Trio {
+    instance source: Beat on "left";
+    instance backup: Beat substitutes source;
+    instance sink: Count on "right";
+    connect source.beat -> sink.beat;
+    on error source: substitute;
+    recovery { retry every 300ms; deadline 120s; }
+}
+"#;
+
+const BEAT_RS: &str = "use crate::generated::beat::*;
+
+/// Beats.
+#[derive(Debug, Default)]
+pub struct Beat {}
+
+impl Behavior for Beat {
+    fn beating_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.outputs.beat.emit();
+        Ok(())
+    }
+}
+";
+
+const COUNT_RS: &str = "use crate::generated::count::*;
+
+/// Counts.
+#[derive(Debug, Default)]
+pub struct Count {}
+
+impl Behavior for Count {
+    fn counting_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.heard += 1;
+        Ok(())
+    }
+}
+";
+
+/// What the sink on `right` has heard (its `heard`), if it is listed.
+fn heard(listed: &[Listed]) -> Option<u64> {
+    let sink = listed.iter().find(|l| {
+        l.node == "right" && l.path.starts_with("robot-trio-sink-") && !l.path.ends_with("-beat")
+    })?;
+    let (_, value) = sink
+        .monitor
+        .variables
+        .iter()
+        .find(|(name, _)| name == "heard")?;
+    u64::try_from(value).ok()
+}
+
+/// Waits until the sink has heard more than it had when this was called.
+fn hears_on(ctl: &Ctl, what: &str) {
+    let before = heard(&ctl.components(None).unwrap_or_default()).unwrap_or(0);
+    wait_list(ctl, what, |listed| {
+        heard(listed).is_some_and(|now| now > before + 5)
+    });
+}
+
+/// Three processes of one generated binary: the robot places `source` on `left` and
+/// `sink` on `right`, and the beats go from one to the other through the robot's
+/// proxies. `kill -9` of `left` makes the local `backup` beat for it (the sink goes on
+/// hearing); `left` back, the recovery queue builds `source` there again and the
+/// backup stands by.
+#[test]
+fn three_processes_stream_and_the_loss_of_one_is_substituted_then_recovered() {
+    let dir = tempfile::tempdir().unwrap();
+    let binary = build(
+        dir.path(),
+        "trio",
+        TRIO,
+        &[("beat.rs", BEAT_RS), ("count.rs", COUNT_RS)],
+    );
+    let [left, right, robot] = [0; 3].map(|_| format!("tcp/127.0.0.1:{}", free_port()));
+    let (sender, lines) = mpsc::channel();
+    let mut seen = Vec::new();
+    let network = ["--no-multicast", "--lease", "1s"];
+    let serve = |name: &'static str, listen: &str| {
+        spawn(
+            &binary,
+            name,
+            &[
+                &["--node", name, "--serve", "--listen", listen][..],
+                &network,
+            ]
+            .concat(),
+            &sender,
+        )
+    };
+    let mut left_node = serve("left", &left);
+    let mut right_node = serve("right", &right);
+    let mut serving = std::collections::BTreeSet::new();
+    while serving.len() < 2 {
+        let line = wait_line(&lines, &mut seen, "of a node serving", |l| {
+            l.ends_with("on the network: serving what other nodes place on it")
+        });
+        serving.insert(line);
+    }
+    let mut robot_node = spawn(
+        &binary,
+        "robot",
+        &[
+            &[
+                "forever",
+                "--node",
+                "robot",
+                "--connect",
+                &left,
+                "--connect",
+                &right,
+                "--listen",
+                &robot,
+            ][..],
+            &network,
+        ]
+        .concat(),
+        &sender,
+    );
+    let config = coolbot_zenoh::peer_config(&[], &[left.clone(), right, robot], false).unwrap();
+    let session = coolbot_zenoh::zenoh::Wait::wait(coolbot_zenoh::zenoh::open(config)).unwrap();
+    let ctl = Ctl::new(session, Duration::from_secs(2));
+    let state = |listed: &[Listed], path: &str| {
+        listed
+            .iter()
+            .find(|l| l.node == "robot" && l.path == path)
+            .map(|l| l.monitor.state)
+    };
+    use coolbot::State::{Ready, Running};
+
+    // The beats of `left` reach `right`.
+    wait_list(
+        &ctl,
+        "the source and the sink placed and running",
+        |listed| {
+            state(listed, "trio.source") == Some(Running)
+                && state(listed, "trio.sink") == Some(Running)
+                && state(listed, "trio.backup") == Some(Ready)
+        },
+    );
+    hears_on(&ctl, "the sink hearing the source's beats");
+
+    // `left` killed: the backup beats for it, and the sink goes on hearing.
+    left_node.kill().unwrap();
+    left_node.wait().unwrap();
+    wait_list(&ctl, "the backup standing in", |listed| {
+        state(listed, "trio.backup") == Some(Running)
+    });
+    hears_on(&ctl, "the sink hearing the backup's beats");
+
+    // `left` back: `source` is built there again and the backup stands by.
+    let mut left_node = serve("left", &left);
+    wait_list(&ctl, "the source recovered on left", |listed| {
+        state(listed, "trio.source") == Some(Running)
+            && state(listed, "trio.backup") == Some(Ready)
+            && listed.iter().any(|l| {
+                l.node == "left"
+                    && l.path.starts_with("robot-trio-source-")
+                    && l.monitor.state == Running
+            })
+    });
+    hears_on(&ctl, "the sink hearing the recovered source's beats");
+
+    for (child, who) in [
+        (&mut robot_node, "robot"),
+        (&mut left_node, "left"),
+        (&mut right_node, "right"),
+    ] {
+        let status = stop(child);
+        assert!(status.success(), "{who}: {status:?}");
+    }
+    wait_line(&lines, &mut seen, "of the robot's clean shutdown", |l| {
+        l.starts_with("robot: shutdown clean")
+    });
 }
