@@ -163,6 +163,13 @@ pub(crate) trait Driven: Automaton {
         false
     }
 
+    /// Whether the component's monitor shows another component's times (a remote
+    /// instance's proxy mirrors its `cpu_time` and `elapsed_time`): the runner then
+    /// publishes none of its own thread's.
+    fn mirrors_times(&self) -> bool {
+        false
+    }
+
     /// Called on the component's thread right before the user automaton is entered or
     /// resumed (the compound's instances go to `running` first). An `Err` ends the
     /// transition in `running_error` (after `stop`), with the fault's message in

@@ -12,7 +12,10 @@
 //! compound's connections, rules, mapped variables, policies, substitution,
 //! redundancy and supervisor commands work on it unchanged:
 //!
-//! - its user state, result, error and variables mirror the remote instance's;
+//! - its user state, result, error and variables mirror the remote instance's, and so
+//!   do its quality level, period, missed deadlines, overruns, CPU and elapsed time
+//!   (rules reading `<instance>.quality` or `.cpu_time` read the remote instance's;
+//!   the proxy's own thread's times are not published);
 //! - the remote instance failing (`running_error`), or its node being lost, is a fault
 //!   of the proxy (`running_error` with the reason), handled by the compound's policy;
 //! - commands given to the proxy go to the remote instance (state changes, variables,
@@ -31,7 +34,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::automaton::{Automaton, Driven, Waker};
-use crate::monitor::{Command, Monitor};
+use crate::monitor::{Command, Monitor, MonitorEvent};
 use crate::port::Packet;
 use crate::spec::{Spec, StateSpec, TimingSpec};
 use crate::table::{Controllable, State};
@@ -259,6 +262,32 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
         .with_adaptation(crate::adapt::AdaptConfig::off())
 }
 
+/// Show on the proxy's monitoring port what the remote instance's shows of its
+/// timing: quality level (an event, so that rules reading `<instance>.quality` see
+/// it), period (an event), missed deadlines, overruns, CPU and elapsed time (the
+/// proxy's runner publishes none of its own thread's: `Driven::mirrors_times`).
+fn overlay(view: &Monitor, cx: &Context) {
+    let Some(shared) = &cx.shared else {
+        return;
+    };
+    shared.update(|monitor| {
+        let mut events = Vec::new();
+        if monitor.quality != view.quality {
+            monitor.quality = view.quality;
+            events.push(MonitorEvent::Quality(view.quality));
+        }
+        if monitor.period != view.period {
+            monitor.period = view.period;
+            events.push(MonitorEvent::Period(view.period));
+        }
+        monitor.missed_deadlines = view.missed_deadlines;
+        monitor.overruns = view.overruns;
+        monitor.cpu_time = view.cpu_time;
+        monitor.elapsed_time = view.elapsed_time;
+        events
+    });
+}
+
 /// Stands for an instance on another node (see the module documentation).
 struct Proxy {
     spec: &'static Spec,
@@ -380,12 +409,17 @@ impl Driven for Proxy {
         }
     }
 
+    fn mirrors_times(&self) -> bool {
+        true
+    }
+
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
         self.end.pump();
         self.refresh()?;
         let Some(view) = &self.view else {
             return Ok(None);
         };
+        overlay(view, cx);
         cx.set_result(view.result.clone());
         let target = view
             .user_state
@@ -394,13 +428,12 @@ impl Driven for Proxy {
         Ok(target.filter(|&target| target != state))
     }
 
-    fn observe(&mut self, _cx: &mut Context) {
+    fn observe(&mut self, cx: &mut Context) {
         self.end.pump();
-        let _ = self.end.view().map(|view| {
-            if let Some(view) = view {
-                self.view = Some(view);
-            }
-        });
+        if let Ok(Some(view)) = self.end.view() {
+            overlay(&view, cx);
+            self.view = Some(view);
+        }
     }
 
     fn forward(&mut self, command: &Command) -> Option<Result<(), String>> {

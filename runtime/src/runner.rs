@@ -159,6 +159,8 @@ pub(crate) struct Runner {
     published_user: Option<usize>,
     /// Whether the automaton is a compound's (its supervision hooks are called).
     supervised: bool,
+    /// The monitor shows another component's times (`Driven::mirrors_times`).
+    mirrors_times: bool,
     /// The next [`Runner::enter`] is the initial state's as the component starts
     /// running: arrivals it has not seen at its data inputs count as arrivals there.
     arrivals_count_on_entry: bool,
@@ -218,6 +220,7 @@ impl Runner {
         let now = Instant::now();
         let count = inputs.len();
         let supervised = automaton.supervises();
+        let mirrors_times = automaton.mirrors_times();
         let watch = timing
             .max_response
             .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit), &Clock::real()));
@@ -257,6 +260,7 @@ impl Runner {
             elapsed_published: Duration::ZERO,
             published_user: None,
             supervised,
+            mirrors_times,
             arrivals_count_on_entry: false,
             found_by_polling: false,
             found_at: None,
@@ -1266,6 +1270,9 @@ impl Runner {
     /// Publish the elapsed time (if it changed) and the thread's CPU time (a system
     /// call: at most once per `CPU_TIME_REFRESH` unless `force`).
     fn update_cpu(&mut self, force: bool) {
+        if self.mirrors_times {
+            return;
+        }
         let refresh_cpu =
             force || self.clock.saturating_duration_since(self.cpu_updated) >= CPU_TIME_REFRESH;
         let cpu = if refresh_cpu {

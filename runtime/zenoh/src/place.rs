@@ -34,6 +34,10 @@ pub const DEFAULT_REMOTE_TIMEOUT: Duration = Duration::from_secs(5);
 /// (the agent's outlet: a ufifo input of this initial size, growing to the cap).
 const REMOTE_QUEUE: (usize, usize) = (64, 65_536);
 
+/// How often a proxy asks for its remote instance's snapshot, for what changes without
+/// an event: its CPU and elapsed time.
+pub const TIMES_REFRESH: Duration = Duration::from_secs(1);
+
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
@@ -189,6 +193,7 @@ impl coolbot::remote::Placer for Placer {
             subscribers: Vec::new(),
             shared: Arc::new(Shared::default()),
             instantiated: false,
+            times_asked: None,
             _losses: losses,
         };
         end.listen().map_err(|e| e.to_string())?;
@@ -241,6 +246,8 @@ struct End {
     subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
     shared: Arc<Shared>,
     instantiated: bool,
+    /// When the remote snapshot (for its times) was last asked for.
+    times_asked: Option<Instant>,
     _losses: TickIn,
 }
 
@@ -331,6 +338,46 @@ impl End {
         }
     }
 
+    /// Every [`TIMES_REFRESH`], ask for the remote snapshot without waiting for it: its
+    /// CPU and elapsed time (which change without an event) go into the view when it
+    /// comes, and the proxy is woken.
+    fn ask_times(&mut self) {
+        if !self.instantiated
+            || self
+                .times_asked
+                .is_some_and(|asked| asked.elapsed() < TIMES_REFRESH)
+        {
+            return;
+        }
+        self.times_asked = Some(Instant::now());
+        let shared = Arc::clone(&self.shared);
+        let key = keys::monitor(&self.on, &self.name);
+        let asked = self
+            .node
+            .session()
+            .get(&key)
+            .timeout(self.timeout)
+            .callback(move |reply| {
+                let Ok(sample) = reply.result() else {
+                    return;
+                };
+                let Ok(snapshot) = serde_json::from_slice::<Monitor>(&sample.payload().to_bytes())
+                else {
+                    return;
+                };
+                if let Some(view) = lock(&shared.view).as_mut() {
+                    view.cpu_time = snapshot.cpu_time;
+                    view.elapsed_time = snapshot.elapsed_time;
+                }
+                shared.changed.store(true, Ordering::Release);
+                shared.ring();
+            })
+            .wait();
+        if let Err(error) = asked {
+            tracing::debug!(instance = %self.name, "the snapshot was not asked for: {error}");
+        }
+    }
+
     /// The remote instance's snapshot, asked for now.
     fn snapshot(&self) -> Result<Monitor, String> {
         let replies = self
@@ -353,6 +400,10 @@ impl End {
 /// Apply one monitoring event to the mirrored view (what a proxy mirrors).
 fn mirror(view: &mut Monitor, event: MonitorEvent) {
     match event {
+        MonitorEvent::Period(period) => view.period = period,
+        MonitorEvent::Quality(level) => view.quality = level,
+        MonitorEvent::MissedDeadline { total, .. } => view.missed_deadlines = total,
+        MonitorEvent::Overrun { total, .. } => view.overruns = total,
         MonitorEvent::State { to, .. } => view.state = to,
         MonitorEvent::UserState(state) => view.user_state = state,
         MonitorEvent::Result(result) => view.result = result,
@@ -441,6 +492,7 @@ impl RemoteEnd for End {
         for pump in &mut self.pumps {
             pump();
         }
+        self.ask_times();
     }
 
     fn view(&mut self) -> Result<Option<Monitor>, String> {

@@ -242,6 +242,21 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
     );
     // Nothing was lost on the way: no overflow at the proxy's inputs.
     assert_eq!(proxy.snapshot().overflows, 0);
+    // The remote instance's timing shows on the proxy's monitor: a period given to the
+    // proxy goes to the remote instance (the proxy's runner sets nothing of its own),
+    // and the period its monitor then shows comes back on the proxy's.
+    assert_eq!(proxy.snapshot().period, None);
+    proxy
+        .command(coolbot::Command::SetPeriod(
+            std::time::Duration::from_millis(25),
+        ))
+        .expect("the period is forwarded");
+    assert!(
+        wait_until(PATIENCE, || proxy.snapshot().period
+            == Some(std::time::Duration::from_millis(25))),
+        "{:?}",
+        proxy.snapshot()
+    );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
