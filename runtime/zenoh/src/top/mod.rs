@@ -141,7 +141,7 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
             if key.kind != KeyEventKind::Press {
                 continue;
             }
-            let address = board.selected_row().map(Row::address);
+            let address = board.command_target();
             if let Some(text) = &mut prompt {
                 match input::edit(text, key) {
                     None => {}
@@ -153,10 +153,10 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                         let text = prompt.take().unwrap_or_default();
                         board.status = match (&address, parse_command(std::slice::from_ref(&text)))
                         {
-                            (Some(address), Ok(command)) => {
+                            (Ok(address), Ok(command)) => {
                                 answered(address, &text, ctl.command(address, &command))
                             }
-                            (None, _) => "no component selected".to_owned(),
+                            (Err(why), _) => why.clone(),
                             (_, Err(error)) => format!("{text}: {error}"),
                         };
                     }
@@ -170,16 +170,23 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                     board.select(delta);
                     board.status.clear();
                 }
-                (input::Action::Prompt, Some(_)) => prompt = Some(String::new()),
-                (input::Action::Suspend, Some(address)) => {
+                (
+                    input::Action::Prompt
+                    | input::Action::Suspend
+                    | input::Action::Run
+                    | input::Action::Restart,
+                    Err(why),
+                ) => board.status = why.clone(),
+                (input::Action::Prompt, Ok(_)) => prompt = Some(String::new()),
+                (input::Action::Suspend, Ok(address)) => {
                     let reply = ctl.command(address, &state(Controllable::Suspended));
                     board.status = answered(address, "suspend", reply);
                 }
-                (input::Action::Run, Some(address)) => {
+                (input::Action::Run, Ok(address)) => {
                     let reply = ctl.command(address, &state(Controllable::Running));
                     board.status = answered(address, "run", reply);
                 }
-                (input::Action::Restart, Some(address)) => {
+                (input::Action::Restart, Ok(address)) => {
                     let reply = match ctl.command(address, &state(Controllable::Ready)) {
                         Ok(ControlReply::Accepted) => {
                             ctl.command(address, &state(Controllable::Running))

@@ -162,6 +162,21 @@ impl Board {
         self.rows.get(self.selected)
     }
 
+    /// The address of the selected component, to command; why not when there is none
+    /// or its node is lost (no command is sent to a node that is not there: it could
+    /// only time out).
+    pub fn command_target(&self) -> Result<String, String> {
+        match self.selected_row() {
+            None => Err("no component selected".to_owned()),
+            Some(row) if row.lost => Err(format!(
+                "node `{}` is lost: no command sent to `{}`",
+                row.node,
+                row.address()
+            )),
+            Some(row) => Ok(row.address()),
+        }
+    }
+
     /// Move the selection by `delta` rows, within the table.
     pub fn select(&mut self, delta: isize) {
         let last = self.rows.len().saturating_sub(1);
@@ -229,6 +244,14 @@ pub(crate) mod tests {
             .collect();
         assert_eq!(lost, ["b/y"]);
         assert_eq!(board.snapshot(&alive[..1]).lost, ["b"]);
+        // A lost row is not commanded; a live one is.
+        assert_eq!(board.command_target(), Ok("a/x".to_owned()));
+        board.select(1);
+        assert_eq!(
+            board.command_target(),
+            Err("node `b` is lost: no command sent to `b/y`".to_owned())
+        );
+        board.select(-1);
         // `b` comes back with another component: the old rows go.
         board.refresh(&alive, vec![listed("a", "x", 0), listed("b", "z", 0)], t0);
         let rows: Vec<_> = board.rows().iter().map(|r| (r.address(), r.lost)).collect();
