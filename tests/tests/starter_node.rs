@@ -103,8 +103,31 @@ fn build(
     target.join("debug").join(package)
 }
 
+/// A process of the test: killed when dropped (a failing test leaves none behind).
+struct Process(Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl std::ops::Deref for Process {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Process {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
 /// Starts `binary` with `args`; its stdout and stderr lines go to `lines`, tagged.
-fn spawn(binary: &Path, who: &'static str, args: &[&str], lines: &mpsc::Sender<String>) -> Child {
+fn spawn(binary: &Path, who: &'static str, args: &[&str], lines: &mpsc::Sender<String>) -> Process {
     let mut child = Command::new(binary)
         .args(args)
         .env("RUST_LOG", "warn,coolbot_zenoh=info")
@@ -127,7 +150,7 @@ fn spawn(binary: &Path, who: &'static str, args: &[&str], lines: &mpsc::Sender<S
             }
         });
     }
-    child
+    Process(child)
 }
 
 /// Waits for a line for which `wanted` holds; the others are kept in `seen`.
@@ -172,7 +195,7 @@ fn wait_list(ctl: &Ctl, what: &str, wanted: impl Fn(&[Listed]) -> bool) -> Vec<L
     }
 }
 
-fn stop(child: &mut Child) -> std::process::ExitStatus {
+fn stop(child: &mut Process) -> std::process::ExitStatus {
     let pid = Pid::from_child(child);
     kill_process(pid, Signal::TERM).unwrap();
     let deadline = Instant::now() + PATIENCE;
