@@ -115,6 +115,12 @@ pub trait RemoteEnd: Send + 'static {
     /// Forward what waits at the proxy's inputs (called on every turn of the proxy).
     fn pump(&mut self);
 
+    /// A consumer here pulled the proxy's pull output `output` (an index into the
+    /// spec's outputs): ask the remote instance for its answer and send it on the
+    /// proxy's output (this runs inside the proxy's answer to that request). `Err`:
+    /// why no answer came (the consumer's pull then times out).
+    fn pull(&mut self, output: usize) -> Result<(), String>;
+
     /// The remote instance's monitoring port as last heard (`Ok(None)`: nothing yet),
     /// or why it cannot be heard: its node is lost.
     fn view(&mut self) -> Result<Option<Monitor>, String>;
@@ -361,10 +367,16 @@ impl Automaton for Proxy {
     fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
 
     fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Err(Fault::message(format!(
-            "output `{}` is pulled from a remote instance: pull through a remote instance is not carried out",
-            self.spec.outputs.get(output).map_or("?", |o| o.name)
-        )))
+        // No answer is not a fault of the proxy: the consumer's pull times out, as
+        // when a local producer does not answer.
+        if let Err(reason) = self.end.pull(output) {
+            tracing::warn!(
+                node = %self.node,
+                output = self.spec.outputs.get(output).map_or("?", |o| o.name),
+                "pull through the proxy: {reason}"
+            );
+        }
+        Ok(())
     }
 
     fn configure(&mut self, configuration: &Value) -> Result<(), String> {

@@ -136,26 +136,15 @@ fn remote_instance(checker: &mut Checker<'_, '_>, instance: &ast::Instance, node
     let Some((_, def)) = checker.model.component(&instance.component.name) else {
         return;
     };
-    let reason = if def.kind == ComponentKind::Compound {
-        Some(format!(
+    // Only atomic types are registered with a node's agent (their ports, pull ones
+    // included, are bridged by the proxy); a compound's instances would need a
+    // placement of their own.
+    let reason = (def.kind == ComponentKind::Compound).then(|| {
+        format!(
             "`{}` is a compound: only atomic components run on another node",
             instance.component.name
-        ))
-    } else {
-        def.members
-            .iter()
-            .find_map(|member| match member {
-                ast::Member::Input(input) if input.pull.is_some() => Some(&input.name.name),
-                ast::Member::Output(output) if output.pull.is_some() => Some(&output.name.name),
-                _ => None,
-            })
-            .map(|port| {
-                format!(
-                    "`{}` has the pull port `{port}`: pull through a remote instance is not carried out",
-                    instance.component.name
-                )
-            })
-    };
+        )
+    });
     if let Some(reason) = reason {
         let diagnostic = checker
             .error(

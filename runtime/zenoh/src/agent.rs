@@ -151,12 +151,15 @@ pub(crate) type Pump = Box<dyn FnMut() + Send>;
 
 /// Makes the bridges of one port type.
 pub(crate) trait PortBridge: Send + Sync {
-    /// A proxy's input of `kind` (added to `ports`), published on `key`.
+    /// A proxy's input of `kind` (added to `ports`), published on `key`; a `pull`
+    /// input serves the remote instance's pull requests on `key/@pull` instead,
+    /// waiting at most `pull` for the producer.
     fn proxy_input(
         &self,
         node: &Node,
         key: &str,
         kind: InputKind,
+        pull: Option<Duration>,
         ports: PortSet,
     ) -> Result<(PortSet, Pump), Error>;
     /// A proxy's output of `kind` (added to `ports`), and what delivers a message of
@@ -168,19 +171,24 @@ pub(crate) trait PortBridge: Send + Sync {
         losses: ErasedInput,
         key: &str,
     ) -> (PortSet, crate::bridge::DeliverFn);
+    /// An inlet of `kind` on `key` (a pull inlet when `pull`, its requests waiting
+    /// at most that long).
     fn inlet(
         &self,
         node: &Node,
         name: &str,
         key: &str,
         kind: OutputKind,
+        pull: Option<Duration>,
     ) -> Result<Component, Error>;
+    /// An outlet of `kind` on `key` (serving pull requests when `pull`).
     fn outlet(
         &self,
         node: &Node,
         name: &str,
         key: &str,
         kind: InputKind,
+        pull: Option<Duration>,
     ) -> Result<Component, Error>;
 }
 
@@ -192,9 +200,14 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         node: &Node,
         key: &str,
         kind: InputKind,
+        pull: Option<Duration>,
         ports: PortSet,
     ) -> Result<(PortSet, Pump), Error> {
-        let (_, mut outlet, _) = node.outlet::<T>("proxy", key, kind).parts()?;
+        let mut builder = node.outlet::<T>("proxy", key, kind);
+        if let Some(timeout) = pull {
+            builder = builder.pull(timeout);
+        }
+        let (_, mut outlet, _) = builder.parts()?;
         let ports = outlet.add_input(ports);
         Ok((ports, Box::new(move || outlet.pump())))
     }
@@ -215,8 +228,12 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         name: &str,
         key: &str,
         kind: OutputKind,
+        pull: Option<Duration>,
     ) -> Result<Component, Error> {
-        node.inlet::<T>(name, key, kind).build()
+        match pull {
+            Some(timeout) => node.inlet::<T>(name, key, kind).pull(timeout).build(),
+            None => node.inlet::<T>(name, key, kind).build(),
+        }
     }
 
     fn outlet(
@@ -225,8 +242,12 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         name: &str,
         key: &str,
         kind: InputKind,
+        pull: Option<Duration>,
     ) -> Result<Component, Error> {
-        node.outlet::<T>(name, key, kind).build()
+        match pull {
+            Some(timeout) => node.outlet::<T>(name, key, kind).pull(timeout).build(),
+            None => node.outlet::<T>(name, key, kind).build(),
+        }
     }
 }
 
@@ -547,8 +568,12 @@ fn serve(
                         }
                     };
                     let bridge = format!("{name}-{port}");
+                    // A pull input pulls through the inlet: each request a query.
+                    let pull = spec.inputs[index]
+                        .pull
+                        .then_some(crate::DEFAULT_PULL_TIMEOUT);
                     let inlet = factory.ports[port]
-                        .inlet(node, &bridge, key, kind)
+                        .inlet(node, &bridge, key, kind, pull)
                         .map_err(|e| e.to_string())?;
                     handles.push(system.add(inlet).map_err(|e| e.to_string())?);
                     system
@@ -557,8 +582,13 @@ fn serve(
                 }
                 Wire::Output { port, key, to } => {
                     let bridge = format!("{name}-{port}");
+                    // A pull output is pulled through the outlet: it serves queries.
+                    let index = spec.output_index(port).expect("checked");
+                    let pull = spec.outputs[index]
+                        .pull
+                        .then_some(crate::DEFAULT_PULL_TIMEOUT);
                     let outlet = factory.ports[port]
-                        .outlet(node, &bridge, key, to.kind())
+                        .outlet(node, &bridge, key, to.kind(), pull)
                         .map_err(|e| e.to_string())?;
                     handles.push(system.add(outlet).map_err(|e| e.to_string())?);
                     system

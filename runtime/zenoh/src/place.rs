@@ -123,15 +123,12 @@ impl coolbot::remote::Placer for Placer {
         let mut pumps = Vec::new();
         let mut wires = Vec::new();
         for input in spec.inputs {
-            if input.pull {
-                return Err(format!(
-                    "input `{}` is a pull input: pull through a remote instance is not carried out",
-                    input.name
-                ));
-            }
             let key = format!("{base}/in/{}", input.name);
+            // A pull input: the remote instance's requests come back as queries, which
+            // the proxy's input serves by pulling from its producer here.
+            let pull = input.pull.then_some(crate::DEFAULT_PULL_TIMEOUT);
             let (with, pump) = bridge(input.name)?
-                .proxy_input(&self.node, &key, input.kind, ports)
+                .proxy_input(&self.node, &key, input.kind, pull, ports)
                 .map_err(|e| e.to_string())?;
             ports = with;
             pumps.push(pump);
@@ -145,12 +142,6 @@ impl coolbot::remote::Placer for Placer {
         let losses = TickIn::new();
         let mut outputs = Vec::new();
         for output in spec.outputs {
-            if output.pull {
-                return Err(format!(
-                    "output `{}` is a pull output: pull through a remote instance is not carried out",
-                    output.name
-                ));
-            }
             let key = format!("{base}/out/{}", output.name);
             let (with, deliver) =
                 bridge(output.name)?.proxy_output(ports, output.kind, losses.erased(), &key);
@@ -168,7 +159,12 @@ impl coolbot::remote::Placer for Placer {
                 key: key.clone(),
                 to,
             });
-            outputs.push((key, deliver, output.kind == OutputKind::Poster));
+            outputs.push(ProxyOutput {
+                key,
+                deliver,
+                poster: output.kind == OutputKind::Poster,
+                pull: output.pull,
+            });
         }
         let request = Instantiate {
             type_name: spec.type_name.to_owned(),
@@ -226,6 +222,16 @@ impl Shared {
     }
 }
 
+/// One output of a proxy: what the remote instance sends on it arrives on `key`.
+struct ProxyOutput {
+    key: String,
+    deliver: DeliverFn,
+    /// A poster: asked for its value again after each instantiation (a late joiner's).
+    poster: bool,
+    /// A pull output: each request of a consumer here is a query on `key/@pull`.
+    pull: bool,
+}
+
 /// The far end of one proxy: the remote instance, seen from here.
 struct End {
     node: Arc<Node>,
@@ -240,9 +246,8 @@ struct End {
     request: Instantiate,
     timeout: Duration,
     pumps: Vec<Pump>,
-    /// The proxy's outputs: key, delivery, whether a poster (asked again after each
-    /// instantiation: a late joiner's value).
-    outputs: Vec<(String, DeliverFn, bool)>,
+    /// The proxy's outputs, in declaration order.
+    outputs: Vec<ProxyOutput>,
     subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
     shared: Arc<Shared>,
     instantiated: bool,
@@ -256,11 +261,12 @@ impl End {
     /// node's liveliness.
     fn listen(&mut self) -> Result<(), Error> {
         let session = self.node.session();
-        for (key, deliver, _) in &self.outputs {
-            let deliver = Arc::clone(deliver);
+        // A pull output's answers come as replies to its queries, not on the key.
+        for output in self.outputs.iter().filter(|output| !output.pull) {
+            let deliver = Arc::clone(&output.deliver);
             self.subscribers.push(
                 session
-                    .declare_subscriber(key.clone())
+                    .declare_subscriber(output.key.clone())
                     .callback(move |sample| deliver(&sample.payload().to_bytes()))
                     .wait()
                     .map_err(Error::zenoh)?,
@@ -459,13 +465,13 @@ impl RemoteEnd for End {
         *lock(&self.shared.view) = Some(snapshot);
         self.shared.changed.store(true, Ordering::Release);
         // A poster's current value, for the proxy's readers.
-        for (key, deliver, poster) in &self.outputs {
-            if *poster {
-                let deliver = Arc::clone(deliver);
+        for output in &self.outputs {
+            if output.poster && !output.pull {
+                let deliver = Arc::clone(&output.deliver);
                 let _ = self
                     .node
                     .session()
-                    .get(key.clone())
+                    .get(output.key.clone())
                     .callback(move |reply| {
                         if let Ok(sample) = reply.result() {
                             deliver(&sample.payload().to_bytes());
@@ -493,6 +499,49 @@ impl RemoteEnd for End {
             pump();
         }
         self.ask_times();
+    }
+
+    fn pull(&mut self, output: usize) -> Result<(), String> {
+        let Some(output) = self.outputs.get(output).filter(|output| output.pull) else {
+            return Err(format!("output #{output} is not a pull output"));
+        };
+        if let Some(lost) = lock(&self.shared.lost).clone() {
+            return Err(lost);
+        }
+        let replies = self
+            .node
+            .session()
+            .get(format!("{}/@pull", output.key))
+            .timeout(crate::DEFAULT_PULL_TIMEOUT)
+            .wait()
+            .map_err(|error| format!("the pull query was not sent: {error}"))?;
+        // Each answer is sent on the proxy's output, to the input that asked (this
+        // runs inside the proxy's answer to it).
+        let mut answered = false;
+        while let Ok(reply) = replies.recv() {
+            match reply.result() {
+                Ok(sample) => {
+                    (output.deliver)(&sample.payload().to_bytes());
+                    answered = true;
+                }
+                Err(error) => {
+                    return Err(format!(
+                        "node `{}` answered the pull with an error: {}",
+                        self.on,
+                        error.payload().try_to_string().unwrap_or_default()
+                    ));
+                }
+            }
+        }
+        if answered {
+            Ok(())
+        } else {
+            Err(format!(
+                "node `{}` did not answer the pull within {:?}",
+                self.on,
+                crate::DEFAULT_PULL_TIMEOUT
+            ))
+        }
     }
 
     fn view(&mut self) -> Result<Option<Monitor>, String> {

@@ -2,7 +2,7 @@
 //! instance declared on another node runs there behind a proxy, and every connection
 //! kind crosses the network through the proxy's ports, both ways: tick, last, fifo,
 //! ufifo and poster inputs; tick, data and poster outputs (a poster's value reaches a
-//! reader that joins late).
+//! reader that joins late); and pull, both ways in one request.
 
 mod support;
 
@@ -256,6 +256,120 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
             == Some(std::time::Duration::from_millis(25))),
         "{:?}",
         proxy.snapshot()
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+fn pulled_input(name: &'static str, kind: InputKind) -> InputSpec {
+    InputSpec {
+        pull: true,
+        ..input(name, kind)
+    }
+}
+
+fn pulled_output(name: &'static str) -> OutputSpec {
+    OutputSpec {
+        pull: true,
+        ..output(name, OutputKind::Data)
+    }
+}
+
+/// `Doubler`: a pull output `y` whose answer pulls its pull input `x` and sends twice
+/// the value.
+fn doubler(name: &str) -> coolbot::Component {
+    let shape = spec(
+        "Doubler",
+        vec![pulled_input("x", InputKind::Last)],
+        vec![pulled_output("y")],
+        vec![],
+    );
+    let x = LastIn::<u64>::new();
+    let y = DataOut::<u64>::new();
+    let ports = PortSet::new().input(&x).output(&y);
+    let (x, answer_y) = (x.clone(), y.clone());
+    Shell::with_answer(
+        name,
+        shape,
+        ports,
+        Some(Box::new(move |_| {
+            if let Ok(value) = x.pull(std::time::Duration::from_secs(5)) {
+                answer_y.send(value * 2);
+            }
+        })),
+    )
+}
+
+fn doubler_registry() -> Registry {
+    let mut registry = Registry::new();
+    registry
+        .register("Doubler", doubler)
+        .port::<u64>("x")
+        .port::<u64>("y");
+    registry
+}
+
+/// Pull through a proxy, both ways in one request: a consumer here pulls the remote
+/// `Doubler`'s pull output; to answer, the `Doubler` on the station pulls its pull
+/// input, which the proxy serves by pulling from the producer here.
+#[test]
+fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
+    let (station, robot) = pair("pull-station", "pull-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), doubler_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), doubler_registry()).install();
+
+    // The producer answers each pull with the next number: 21, 22, ...
+    let numbers = DataOut::<u64>::new();
+    let next = Arc::new(std::sync::atomic::AtomicU64::new(21));
+    let (answer, counter) = (numbers.clone(), Arc::clone(&next));
+    let source = Shell::with_answer(
+        "source",
+        spec("Source", vec![], vec![pulled_output("n")], vec![]),
+        PortSet::new().output(&numbers),
+        Some(Box::new(move |_| {
+            answer.send(counter.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
+        })),
+    );
+    let asked = LastIn::<u64>::new();
+    let sink = Shell::component(
+        "sink",
+        spec(
+            "Sink",
+            vec![pulled_input("asked", InputKind::Last)],
+            vec![],
+            vec![],
+        ),
+        PortSet::new().input(&asked),
+    );
+    let compound = CompoundBuilder::new("cell", supervisor("working"))
+        .instance(source)
+        .instance_on("pull-station", doubler("doubler"))
+        .instance(sink)
+        .connect("source.n", "doubler.x")
+        .connect("doubler.y", "sink.asked")
+        .build()
+        .expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    cell.wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("{timeout}"));
+    for expected in [42, 44, 46] {
+        assert_eq!(asked.pull(PATIENCE), Ok(expected));
+    }
+    // It was the station's instance that answered.
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.session().clone(), PATIENCE);
+    let built = ctl
+        .components(Some("pull-station"))
+        .expect("the station lists");
+    assert!(
+        built
+            .iter()
+            .any(|l| l.path.starts_with("pull-robot-cell-doubler-")),
+        "{:?}",
+        built.iter().map(|l| &l.path).collect::<Vec<_>>()
     );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
