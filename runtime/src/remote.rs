@@ -40,9 +40,13 @@ use crate::spec::{Spec, StateSpec, TimingSpec};
 use crate::table::{Controllable, State};
 use crate::{Component, Context, Fault, PortSet, Section, Value};
 
+/// How a [`Registrar`] builds a compound: by instance name, or why not.
+pub type MakeCompound = Box<dyn Fn(&str) -> Result<Component, String> + Send + Sync>;
+
 /// What a network layer is told about a component type so that its instances can be
-/// built on another node and bridged: generated crates call it from each atomic
-/// component's `register` function (one call per component type, one per port).
+/// built on another node and bridged: generated crates call it from each component's
+/// `register` function (one call per component type, one per port; a compound's
+/// ports are its exported ones).
 pub trait Registrar {
     /// Component type `type_name` is built by `make(instance_name)` (with its default
     /// configuration and variables; overrides come as commands).
@@ -51,6 +55,10 @@ pub trait Registrar {
         type_name: &'static str,
         make: Box<dyn Fn(&str) -> Component + Send + Sync>,
     );
+
+    /// Compound type `type_name` is built by `make(instance_name)` (its supervisor
+    /// and instances from the crate's default parts), or fails with why not.
+    fn compound(&mut self, type_name: &'static str, make: MakeCompound);
 
     /// Port `port` of component type `type_name` carries `T` (`()` for a tick port).
     fn port<T: Packet + Serialize + DeserializeOwned>(
@@ -201,6 +209,9 @@ pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Comp
         .enumerate()
         .filter(|(_, var)| var.kind == crate::spec::VarKind::Controllable)
         .map(|(index, var)| (var.name.to_owned(), local.automaton_get(index)))
+        // A compound's mapped variables read its instances, which have published
+        // nothing before they run: no value to send.
+        .filter(|(_, value)| *value != Value::Unit)
         .collect();
     let placement = Placement {
         node: node.to_owned(),

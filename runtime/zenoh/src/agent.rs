@@ -251,7 +251,7 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
     }
 }
 
-type Make = Box<dyn Fn(&str) -> Component + Send + Sync>;
+type Make = coolbot::remote::MakeCompound;
 
 /// How to build one component type, and the packet type of each port that may be
 /// bridged.
@@ -297,7 +297,7 @@ impl Registry {
         self.types.insert(
             type_name.to_owned(),
             Factory {
-                make: Box::new(make),
+                make: Box::new(move |name| Ok(make(name))),
                 ports: BTreeMap::new(),
             },
         );
@@ -313,6 +313,21 @@ impl coolbot::remote::Registrar for Registry {
         type_name: &'static str,
         make: Box<dyn Fn(&str) -> Component + Send + Sync>,
     ) {
+        let ports = self
+            .types
+            .remove(type_name)
+            .map(|factory| factory.ports)
+            .unwrap_or_default();
+        self.types.insert(
+            type_name.to_owned(),
+            Factory {
+                make: Box::new(move |name| Ok(make(name))),
+                ports,
+            },
+        );
+    }
+
+    fn compound(&mut self, type_name: &'static str, make: coolbot::remote::MakeCompound) {
         let ports = self
             .types
             .remove(type_name)
@@ -516,7 +531,7 @@ fn serve(
             request.name
         ));
     }
-    let mut component = (factory.make)(&request.name);
+    let mut component = (factory.make)(&request.name)?;
     let spec = component.spec();
     if let Some(timing) = request.timing {
         let own = component.timing();

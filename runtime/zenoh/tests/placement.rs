@@ -374,3 +374,92 @@ fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+/// `Doubling`: a compound around a `Doubler`, exporting its pull input and output.
+fn doubling(name: &str) -> Result<coolbot::Component, String> {
+    CompoundBuilder::new(name, support::supervisor_of("Doubling", "doubling"))
+        .instance(doubler("doubler"))
+        .export_input::<u64>("x", "doubler.x")
+        .export_output::<u64>("y", "doubler.y")
+        .build()
+        .map_err(|error| error.to_string())
+}
+
+fn doubling_registry() -> Registry {
+    use coolbot::remote::Registrar;
+    let mut registry = doubler_registry();
+    registry.compound("Doubling", Box::new(doubling));
+    registry.port::<u64>("Doubling", "x");
+    registry.port::<u64>("Doubling", "y");
+    registry
+}
+
+/// A compound on another node: the station builds the whole `Doubling` (its
+/// supervisor and its `Doubler`), the proxy here stands for it with its exported
+/// ports, mirrors its supervisor's state, and a pull crosses it both ways.
+#[test]
+fn a_compound_runs_on_another_node_behind_a_proxy() {
+    let (station, robot) = pair("nest-station", "nest-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), doubling_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), doubling_registry()).install();
+
+    let numbers = DataOut::<u64>::new();
+    let next = Arc::new(std::sync::atomic::AtomicU64::new(5));
+    let (answer, counter) = (numbers.clone(), Arc::clone(&next));
+    let source = Shell::with_answer(
+        "source",
+        spec("Source", vec![], vec![pulled_output("n")], vec![]),
+        PortSet::new().output(&numbers),
+        Some(Box::new(move |_| {
+            answer.send(counter.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
+        })),
+    );
+    let asked = LastIn::<u64>::new();
+    let sink = Shell::component(
+        "sink",
+        spec(
+            "Sink",
+            vec![pulled_input("asked", InputKind::Last)],
+            vec![],
+            vec![],
+        ),
+        PortSet::new().input(&asked),
+    );
+    let local = doubling("twice").expect("the compound builds here too");
+    let compound = CompoundBuilder::new("cell", supervisor("working"))
+        .instance(source)
+        .instance_on("nest-station", local)
+        .instance(sink)
+        .connect("source.n", "twice.x")
+        .connect("twice.y", "sink.asked")
+        .build()
+        .expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    let twice = cell.instance("twice").expect("the proxy");
+    twice
+        .wait_for(|m| m.user_state.as_deref() == Some("doubling"), PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the remote supervisor's state: {timeout}"));
+    for expected in [10, 12, 14] {
+        assert_eq!(asked.pull(PATIENCE), Ok(expected));
+    }
+    // The station built the compound, with its own instance.
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.session().clone(), PATIENCE);
+    let built: Vec<String> = ctl
+        .components(Some("nest-station"))
+        .expect("the station lists")
+        .into_iter()
+        .map(|l| l.path)
+        .collect();
+    assert!(
+        built
+            .iter()
+            .any(|path| path.starts_with("nest-robot-cell-twice-") && path.ends_with(".doubler")),
+        "{built:?}"
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}

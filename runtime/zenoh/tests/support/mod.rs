@@ -209,8 +209,13 @@ impl coolbot::Supervisor for Idle {
     }
 }
 
-/// [`Idle`] in state `state`.
+/// [`Idle`] in state `state`, of a compound type named `Compound`.
 pub fn supervisor(state: &'static str) -> Idle {
+    supervisor_of("Compound", state)
+}
+
+/// [`Idle`] in state `state`, of compound type `type_name`.
+pub fn supervisor_of(type_name: &'static str, state: &'static str) -> Idle {
     let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
         name: state,
         entry: false,
@@ -221,7 +226,7 @@ pub fn supervisor(state: &'static str) -> Idle {
         may: &[],
     }]));
     Idle(Box::leak(Box::new(Spec {
-        type_name: "Compound",
+        type_name,
         doc: "",
         states,
         initial: 0,
