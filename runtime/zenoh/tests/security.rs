@@ -8,11 +8,16 @@ mod support;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use coolbot::State;
+use std::time::Duration;
+
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{
+    InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy, PortSet, State, System,
+};
 use coolbot_zenoh::{Node, Security, secure_config};
 use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 
-use support::{PATIENCE, free_port, robot, wait_until};
+use support::{PATIENCE, Shell, free_port, robot, spec, wait_subscribed, wait_until};
 
 /// A certificate authority: its certificate in `dir/<name>-ca.pem`, and what signs.
 struct Authority {
@@ -181,4 +186,128 @@ fn plaintext_off_loopback_is_refused_without_the_flag() {
         .expect("coolctl runs");
     assert_eq!(out.status.code(), Some(2), "{out:?}");
     assert!(text(&out.stderr).contains("multicast scouting"), "{out:?}");
+}
+
+/// Node `name` with the security file `file`, listening on `listen` or connecting to
+/// `connect`.
+fn secure_node(name: &str, file: &Path, listen: &[String], connect: &[String]) -> Node {
+    let security = Security::load(file).expect("a security file");
+    let config = secure_config(listen, connect, false, &security).expect("a TLS configuration");
+    Node::open(name, config).expect("the node opens")
+}
+
+/// `ops` may send packets on `robot/cmd`, not on `robot/free`: the robot's inlet on
+/// the first gets them, the one on the second gets nothing.
+#[test]
+fn publish_rules_gate_bridge_keys() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\npublish = [\"robot/cmd\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let ops = secure_node(
+        "ops",
+        &authority.node(dir, "ops", "ops", rules),
+        &[],
+        std::slice::from_ref(&endpoint),
+    );
+    let fifo = InputKind::Fifo {
+        capacity: 16,
+        policy: OverflowPolicy::Reject,
+    };
+    let sink_spec = spec(
+        "Sink",
+        vec![InputSpec {
+            name: "input",
+            kind: fifo,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+        vec![],
+    );
+    let source_spec = spec(
+        "Source",
+        vec![],
+        vec![OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+    );
+    let mut consumers = System::new();
+    let mut producers = System::new();
+    let mut sinks = Vec::new();
+    let mut outs = Vec::new();
+    for (index, key) in ["robot/cmd", "robot/free"].into_iter().enumerate() {
+        let sink = FifoIn::<u64>::new(16, OverflowPolicy::Reject);
+        consumers
+            .add(
+                robot
+                    .inlet::<u64>(&format!("inlet{index}"), key, OutputKind::Data)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        consumers
+            .add(Shell::component(
+                &format!("sink{index}"),
+                sink_spec,
+                PortSet::new().input(&sink),
+            ))
+            .unwrap();
+        consumers
+            .connect(
+                &format!("inlet{index}.output"),
+                &format!("sink{index}.input"),
+            )
+            .unwrap();
+        let out = DataOut::<u64>::new();
+        producers
+            .add(
+                ops.outlet::<u64>(&format!("outlet{index}"), key, fifo)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        producers
+            .add(Shell::component(
+                &format!("source{index}"),
+                source_spec,
+                PortSet::new().output(&out),
+            ))
+            .unwrap();
+        producers
+            .connect(
+                &format!("source{index}.out"),
+                &format!("outlet{index}.input"),
+            )
+            .unwrap();
+        sinks.push(sink);
+        outs.push(out);
+    }
+    consumers.run_all().unwrap();
+    producers.run_all().unwrap();
+    // The declarations cross (every node of the CA may declare): ops sees both inlets.
+    wait_subscribed(&ops, "robot/cmd");
+    wait_subscribed(&ops, "robot/free");
+    for n in 0..3 {
+        outs[1].send(n);
+        outs[0].send(n);
+    }
+    for n in 0..3 {
+        assert_eq!(sinks[0].recv_timeout(PATIENCE), Some(n));
+    }
+    // Sent before the allowed ones, on the same link: they would be here by now.
+    assert_eq!(sinks[1].recv_timeout(Duration::from_millis(500)), None);
+    assert!(producers.shutdown().clean());
+    assert!(consumers.shutdown().clean());
 }
