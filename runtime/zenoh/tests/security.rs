@@ -176,7 +176,7 @@ fn plaintext_off_loopback_is_refused_without_the_flag() {
     assert_eq!(out.status.code(), Some(2), "{out:?}");
     let error = text(&out.stderr);
     assert!(
-        error.contains("`tcp/192.0.2.1:7447` is not on loopback and not TLS")
+        error.starts_with("coolctl: security: `tcp/192.0.2.1:7447` is not on loopback and not TLS")
             && error.contains("--insecure"),
         "{error}"
     );

@@ -172,11 +172,11 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
         Some(path) => coolbot_zenoh::Security::load(path),
         None => Ok(coolbot_zenoh::Security::none()),
     }
-    .map_err(|error| CtlError::Zenoh(error.to_string()))?
+    .map_err(|error| CtlError::BadArgument(error.to_string()))?
     .allow_plaintext(cli.insecure);
     let config =
         coolbot_zenoh::secure_config(&cli.listen, &cli.connect, !cli.no_multicast, &security)
-            .map_err(|error| CtlError::Zenoh(error.to_string()))?;
+            .map_err(|error| CtlError::BadArgument(error.to_string()))?;
     let session = {
         use zenoh::Wait;
         zenoh::open(config)
