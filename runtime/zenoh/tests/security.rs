@@ -311,3 +311,91 @@ fn publish_rules_gate_bridge_keys() {
     assert!(producers.shutdown().clean());
     assert!(consumers.shutdown().clean());
 }
+
+/// `ops` may instantiate on `robot`, `guest` (signed by the same CA) may only command:
+/// the agent builds what `ops` asks, and `guest`'s request never reaches it.
+#[test]
+fn instantiate_rules_gate_the_agent() {
+    use coolbot_zenoh::agent::{Agent, Instantiate, Registry, instantiate};
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\ninstantiate = [\"robot\"]\n\n\
+                 [[allow]]\nnodes = [\"guest\"]\ncommand = [\"robot/*\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = std::sync::Arc::new(secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    ));
+    let plain = spec("Plain", vec![], vec![], vec![]);
+    let mut registry = Registry::new();
+    registry.register("Plain", move |name| {
+        Shell::component(name, plain, PortSet::new())
+    });
+    let _agent = Agent::start(std::sync::Arc::clone(&robot), registry).expect("the agent");
+    let client = |name: &str| {
+        secure_node(
+            name,
+            &authority.node(dir, name, name, rules),
+            &[],
+            std::slice::from_ref(&endpoint),
+        )
+    };
+    let (ops, guest) = (client("ops"), client("guest"));
+    let request = |name: &str| Instantiate {
+        type_name: "Plain".to_owned(),
+        name: name.to_owned(),
+        wires: Vec::new(),
+        timing: None,
+        run: true,
+        owner: None,
+        configuration: None,
+        variables: Vec::new(),
+    };
+    // The agent's queryable reaches the operator's session after a while.
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            last = Some(instantiate(
+                &ops,
+                "robot",
+                &request("one"),
+                Duration::from_secs(1),
+            ));
+            matches!(last, Some(Ok(())))
+        }),
+        "ops could not instantiate: {last:?}"
+    );
+    // The guest's session knows the agent (declarations cross), but its request is
+    // dropped by the robot's access control: nothing answers, nothing is built.
+    let querier = guest
+        .session()
+        .declare_querier(coolbot_zenoh::keys::agent("robot"))
+        .wait()
+        .expect("a querier");
+    assert!(wait_until(PATIENCE, || querier
+        .matching_status()
+        .wait()
+        .is_ok_and(|status| status.matching())));
+    let refused = instantiate(&guest, "robot", &request("two"), Duration::from_secs(1));
+    let error = refused
+        .expect_err("the guest may not instantiate")
+        .to_string();
+    assert!(error.contains("no agent answered"), "{error}");
+    let built = |path: &str| {
+        robot
+            .session()
+            .get(coolbot_zenoh::keys::monitor("robot", path))
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .expect("a query")
+            .recv()
+            .is_ok()
+    };
+    assert!(built("one"));
+    assert!(!built("two"));
+}
