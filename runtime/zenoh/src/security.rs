@@ -454,6 +454,38 @@ fn publish_pattern(key: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Check that a node called `name` holds, in `config`, a certificate of that common
+/// name, if it holds one: the access rules name nodes by their certificates, the keys
+/// by their node names, and both must be one name.
+pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Result<(), Error> {
+    let Ok(json) = config.get_json("transport/link/tls/listen_certificate") else {
+        return Ok(());
+    };
+    let Ok(Some(path)) = serde_json::from_str::<Option<PathBuf>>(&json) else {
+        return Ok(());
+    };
+    let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
+    let bytes = std::fs::read(&path).map_err(|error| bad(format!("cannot read: {error}")))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
+    let certificate = pem
+        .parse_x509()
+        .map_err(|error| bad(format!("not an X.509 certificate: {error}")))?;
+    let common_name = certificate
+        .subject()
+        .iter_common_name()
+        .next()
+        .and_then(|cn| cn.as_str().ok())
+        .ok_or_else(|| bad("the certificate has no common name".to_owned()))?;
+    if common_name != name {
+        return Err(bad(format!(
+            "the certificate is node `{common_name}`'s: a node opens under its \
+             certificate's common name, not `{name}`"
+        )));
+    }
+    Ok(())
+}
+
 /// An endpoint's protocol, and whether its address is on loopback.
 fn parse_endpoint(endpoint: &str) -> Result<(&str, bool), Error> {
     let bad = || {

@@ -98,6 +98,15 @@ fn tls_and_access_rules() {
     assert!(security.has_tls() && security.has_rules());
     let config = secure_config(std::slice::from_ref(&endpoint), &[], false, &security)
         .expect("a TLS configuration");
+    // A node opens under its certificate's common name, no other.
+    let other = secure_config(&[], &[], false, &security).expect("a TLS configuration");
+    let error = Node::open("station", other).expect_err("not station's certificate");
+    assert!(
+        error
+            .to_string()
+            .contains("the certificate is node `robot`'s"),
+        "{error}"
+    );
     let node = Node::open("robot", config).expect("the robot's node opens");
     let system = robot(&node);
     let state = |path: &str| system.handle_at(path).expect(path).snapshot().state;
