@@ -174,7 +174,8 @@ impl Security {
         })
     }
 
-    /// Let plaintext endpoints leave loopback (`--insecure`), or not.
+    /// Also let plaintext endpoints leave loopback, and multicast scouting run
+    /// without TLS, when `allow` (`--insecure`); `false` keeps what the file says.
     pub fn allow_plaintext(mut self, allow: bool) -> Security {
         self.allow_plaintext |= allow;
         self
