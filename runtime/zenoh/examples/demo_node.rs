@@ -3,7 +3,7 @@
 //! network.
 //!
 //! ```sh
-//! cargo run -p coolbot-zenoh --example demo_node -- --listen tcp/127.0.0.1:7447
+//! cargo run -p coolbot-zenoh --example demo_node -- --listen tcp/127.0.0.1:7447 --no-multicast
 //! cargo run -p coolbot-zenoh --bin coolctl -- --connect tcp/127.0.0.1:7447 --no-multicast list
 //! cargo run -p coolbot-zenoh --bin coolctl -- --connect tcp/127.0.0.1:7447 --no-multicast \
 //!     set demo/robot.counter step=5
@@ -33,6 +33,13 @@ struct Args {
     /// Do not scout for peers by multicast.
     #[arg(long)]
     no_multicast: bool,
+    /// The security file: TLS certificates and access rules (docs/distribution.md,
+    /// "Security").
+    #[arg(long, value_name = "FILE")]
+    config: Option<std::path::PathBuf>,
+    /// Allow plaintext endpoints off loopback, and multicast scouting, without TLS.
+    #[arg(long)]
+    insecure: bool,
     /// Stop after this many seconds (default: run until killed).
     #[arg(long = "for")]
     seconds: Option<u64>,
@@ -179,7 +186,13 @@ fn component(name: &str, spec: &'static Spec) -> coolbot::Component {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
-    let config = coolbot_zenoh::peer_config(&args.listen, &args.connect, !args.no_multicast)?;
+    let security = match &args.config {
+        Some(path) => coolbot_zenoh::Security::load(path)?,
+        None => coolbot_zenoh::Security::none(),
+    }
+    .allow_plaintext(args.insecure);
+    let config =
+        coolbot_zenoh::secure_config(&args.listen, &args.connect, !args.no_multicast, &security)?;
     let node = Node::open(&args.name, config)?;
     let robot = CompoundBuilder::new("robot", Exploring)
         .instance(component("counter", &COUNTER))

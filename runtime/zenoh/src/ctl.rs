@@ -27,7 +27,7 @@ pub enum CtlError {
     BadArgument(String),
     /// Nothing answered.
     #[error(
-        "no component answered at `{target}` within {waited:?} (is the node running and reachable?)"
+        "no component answered at `{target}` within {waited:?} (is the node running and reachable, and do its access rules let this node do that?)"
     )]
     NoAnswer {
         /// The target.

@@ -29,6 +29,9 @@
 //!   behind a proxy (`coolbot::remote`).
 //! - **A process on the network** ([`network`]): the `--node NAME` options of a
 //!   program, and the node, agent and placer they open.
+//! - **Security** ([`security`]): TLS with mutual authentication and access rules
+//!   from a file, mapped onto Zenoh's access control; without one, a node stays on
+//!   loopback.
 //!
 //! `docs/distribution.md` describes the model, the keys, the encoding and what
 //! happens when the network fails.
@@ -44,12 +47,14 @@ pub mod keys;
 pub mod network;
 mod node;
 pub mod place;
+pub mod security;
 pub mod top;
 
 pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
-pub use crate::config::peer_config;
+pub use crate::config::{peer_config, secure_config};
 pub use crate::node::{ControlReply, Node};
 pub use crate::place::Placer;
+pub use crate::security::Security;
 
 /// Re-exported so users need not depend on it themselves (configurations, sessions).
 pub use zenoh;
@@ -79,6 +84,9 @@ pub enum Error {
         /// The rule and how it is broken.
         rule: String,
     },
+    /// A security file that cannot be used, or endpoints it does not allow.
+    #[error("security: {0}")]
+    Security(String),
     /// Another node refused a request (an instantiation), or nothing answered.
     #[error("node `{node}`: {reason}")]
     Remote {

@@ -109,9 +109,12 @@ impl std::fmt::Debug for Node {
 impl Node {
     /// Open a session with `config` (see [`crate::peer_config`]) as node `name` (one
     /// key chunk: letters, digits, `_`, `-`, `.`). Fails if a node of that name is
-    /// already alive among the peers this session reaches when it opens.
+    /// already alive among the peers this session reaches when it opens, or if the
+    /// configuration holds a TLS certificate ([`crate::secure_config`]) whose common
+    /// name is not `name`.
     pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
         keys::check_name(name)?;
+        crate::security::check_certificate_name(&config, name)?;
         let session = zenoh::open(config).wait().map_err(Error::zenoh)?;
         let token_key = keys::node_token(name);
         if !liveliness_keys(&session, &token_key, NAME_LOOKUP)?.is_empty() {

@@ -36,6 +36,14 @@ struct Cli {
     /// Do not look for peers by multicast scouting (name them with --connect).
     #[arg(long, global = true)]
     no_multicast: bool,
+    /// The security file (TLS certificates and access rules) the nodes use; its
+    /// certificate's common name is who coolctl is to their access rules.
+    #[arg(long, global = true, value_name = "FILE")]
+    config: Option<std::path::PathBuf>,
+    /// Allow plaintext (tcp/) endpoints off loopback, and multicast scouting, without
+    /// TLS.
+    #[arg(long, global = true)]
+    insecure: bool,
     /// How long to wait for answers (e.g. 500ms, 2s).
     #[arg(long, global = true, default_value = "2s", value_parser = duration)]
     timeout: Duration,
@@ -160,8 +168,15 @@ fn size(text: &str) -> Result<(u16, u16), String> {
 }
 
 fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
-    let config = coolbot_zenoh::peer_config(&cli.listen, &cli.connect, !cli.no_multicast)
-        .map_err(|error| CtlError::Zenoh(error.to_string()))?;
+    let security = match &cli.config {
+        Some(path) => coolbot_zenoh::Security::load(path),
+        None => Ok(coolbot_zenoh::Security::none()),
+    }
+    .map_err(|error| CtlError::BadArgument(error.to_string()))?
+    .allow_plaintext(cli.insecure);
+    let config =
+        coolbot_zenoh::secure_config(&cli.listen, &cli.connect, !cli.no_multicast, &security)
+            .map_err(|error| CtlError::BadArgument(error.to_string()))?;
     let session = {
         use zenoh::Wait;
         zenoh::open(config)

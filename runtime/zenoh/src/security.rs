@@ -1,0 +1,634 @@
+//! A node's security file (`docs/distribution.md`, "Security"): TLS with mutual
+//! authentication, and access rules mapped onto Zenoh's own access control over this
+//! crate's key layout ([`crate::keys`]).
+//!
+//! ```toml
+//! allow_plaintext = false        # optional: tcp/ endpoints off loopback
+//!
+//! [tls]                          # paths relative to this file
+//! ca = "ca.pem"                  # the authority that signs every node's certificate
+//! certificate = "robot.pem"      # this node's certificate; its common name is its
+//! key = "robot.key"              #   identity in the rules below
+//! verify_name = true             # optional: a listener's certificate names its host
+//!
+//! [[allow]]                      # with no [[allow]], every node of the CA may do all
+//! nodes = ["workstation"]        # certificate common names
+//! command = ["robot/*"]          # NODE/PATH: control ports `c` (coolctl set, ...)
+//! instantiate = ["robot"]        # NODE: the agent's Instantiate requests
+//! publish = ["robot/cmd_vel"]    # bridge keys the nodes may send packets on
+//! ```
+//!
+//! With `[[allow]]` rules, Zenoh's access control is on and denies by default; every
+//! node may still observe (monitoring, info, echo, liveliness, declarations, replies)
+//! and read bridges named in some `publish` rule (poster values and pull requests);
+//! only the rules grant commands, instantiation and packets on a bridge key.
+
+use std::net::IpAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+use crate::{Error, keys};
+
+/// A node's security: TLS identity, access rules, and whether plaintext may leave
+/// loopback. The default (no file) is plaintext on loopback only.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Security {
+    tls: Option<Tls>,
+    allow_plaintext: bool,
+    rules: Vec<Rule>,
+}
+
+/// The TLS part of a security file, paths resolved.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Tls {
+    ca: PathBuf,
+    certificate: PathBuf,
+    key: PathBuf,
+    verify_name: bool,
+}
+
+/// The file as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    #[serde(default)]
+    allow_plaintext: bool,
+    tls: Option<TlsFile>,
+    #[serde(default)]
+    allow: Vec<Rule>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TlsFile {
+    ca: PathBuf,
+    certificate: PathBuf,
+    key: PathBuf,
+    #[serde(default = "yes")]
+    verify_name: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// One `[[allow]]` rule: what the nodes it names may do.
+#[derive(Debug, Clone, Deserialize, PartialEq, Eq)]
+#[serde(deny_unknown_fields)]
+struct Rule {
+    nodes: Vec<String>,
+    #[serde(default)]
+    command: Vec<String>,
+    #[serde(default)]
+    instantiate: Vec<String>,
+    #[serde(default)]
+    publish: Vec<String>,
+}
+
+/// Every message kind Zenoh's access control knows.
+const ALL_MESSAGES: [&str; 9] = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "declare_queryable",
+    "query",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+];
+
+/// Key expressions that cover every key this crate uses: `**` does not match the
+/// verbatim `@` chunks, so those are named.
+const EVERY_KEY: [&str; 5] = [
+    "**",
+    "coolbot/*/@agent",
+    "**/@pull",
+    "**/@out/**",
+    "**/@in/**",
+];
+
+fn invalid(path: &Path, reason: impl std::fmt::Display) -> Error {
+    Error::Security(format!("{}: {reason}", path.display()))
+}
+
+impl Security {
+    /// No TLS and no rules: plaintext, on loopback only unless
+    /// [`Security::allow_plaintext`].
+    pub fn none() -> Security {
+        Security::default()
+    }
+
+    /// Read the security file at `path` (TOML; its format is in the module
+    /// documentation and in `docs/distribution.md`). Paths inside are relative to the
+    /// file's directory; the certificate files must exist.
+    pub fn load(path: &Path) -> Result<Security, Error> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|error| invalid(path, format!("cannot read: {error}")))?;
+        Security::parse(&text, path)
+    }
+
+    /// [`Security::load`] on `text`, as if read from `path`.
+    pub fn parse(text: &str, path: &Path) -> Result<Security, Error> {
+        let file: File = toml::from_str(text).map_err(|error| invalid(path, error))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let tls = match file.tls {
+            None => None,
+            Some(tls) => {
+                let resolve = |file: PathBuf, what: &str| {
+                    let full = base.join(file);
+                    if full.is_file() {
+                        Ok(full)
+                    } else {
+                        Err(invalid(
+                            path,
+                            format!("[tls] {what}: no file {}", full.display()),
+                        ))
+                    }
+                };
+                Some(Tls {
+                    ca: resolve(tls.ca, "ca")?,
+                    certificate: resolve(tls.certificate, "certificate")?,
+                    key: resolve(tls.key, "key")?,
+                    verify_name: tls.verify_name,
+                })
+            }
+        };
+        for (index, rule) in file.allow.iter().enumerate() {
+            rule.check()
+                .map_err(|reason| invalid(path, format!("[[allow]] #{}: {reason}", index + 1)))?;
+        }
+        if !file.allow.is_empty() && tls.is_none() {
+            return Err(invalid(
+                path,
+                "[[allow]] rules name nodes by their certificate: they need [tls]",
+            ));
+        }
+        Ok(Security {
+            tls,
+            allow_plaintext: file.allow_plaintext,
+            rules: file.allow,
+        })
+    }
+
+    /// Also let plaintext endpoints leave loopback, and multicast scouting run
+    /// without TLS, when `allow` (`--insecure`); `false` keeps what the file says.
+    pub fn allow_plaintext(mut self, allow: bool) -> Security {
+        self.allow_plaintext |= allow;
+        self
+    }
+
+    /// Whether the node speaks TLS.
+    pub fn has_tls(&self) -> bool {
+        self.tls.is_some()
+    }
+
+    /// Whether access rules are enforced.
+    pub fn has_rules(&self) -> bool {
+        !self.rules.is_empty()
+    }
+
+    /// Check the endpoints and scouting against this security: `tls/` endpoints need
+    /// TLS; `tcp/` endpoints off loopback and multicast scouting need TLS or plaintext
+    /// allowed.
+    pub(crate) fn check(
+        &self,
+        listen: &[String],
+        connect: &[String],
+        multicast: bool,
+    ) -> Result<(), Error> {
+        let open = self.tls.is_some() || self.allow_plaintext;
+        for endpoint in listen.iter().chain(connect) {
+            let (protocol, loopback) = parse_endpoint(endpoint)?;
+            if protocol == "tls" && self.tls.is_none() {
+                return Err(Error::Security(format!(
+                    "`{endpoint}` is a TLS endpoint but the node has no certificate: \
+                     give it a security file with [tls] (--config FILE)"
+                )));
+            }
+            if protocol != "tls" && !loopback && !self.allow_plaintext {
+                return Err(Error::Security(format!(
+                    "`{endpoint}` is not on loopback and not TLS: a node opens to a \
+                     network with tls/ endpoints and a security file (--config FILE), \
+                     or in plaintext only when told to (--insecure, allow_plaintext = true)"
+                )));
+            }
+        }
+        if multicast && !open {
+            return Err(Error::Security(
+                "multicast scouting finds peers on the whole network: without TLS name \
+                 loopback peers instead (--no-multicast --connect tcp/127.0.0.1:PORT), \
+                 or use a security file with [tls] (--config FILE), or allow plaintext \
+                 (--insecure)"
+                    .to_owned(),
+            ));
+        }
+        if !open {
+            static SAID: Once = Once::new();
+            SAID.call_once(|| {
+                tracing::info!(
+                    "no security file: plaintext on loopback only (docs/distribution.md, \"Security\")"
+                );
+            });
+        } else if self.tls.is_none() {
+            tracing::warn!(
+                "plaintext allowed off loopback: any host that reaches this node may command it"
+            );
+        }
+        Ok(())
+    }
+
+    /// Write the TLS and access-control settings into a Zenoh configuration.
+    pub(crate) fn apply(&self, config: &mut zenoh::Config) -> Result<(), Error> {
+        let set = |config: &mut zenoh::Config, key: &str, value: Value| {
+            config
+                .insert_json5(key, &value.to_string())
+                .map_err(|error| Error::Security(format!("{key}: {error}")))
+        };
+        if let Some(tls) = &self.tls {
+            let text = |path: &Path| json!(path.display().to_string());
+            let prefix = "transport/link/tls";
+            set(
+                config,
+                &format!("{prefix}/root_ca_certificate"),
+                text(&tls.ca),
+            )?;
+            for side in ["listen", "connect"] {
+                set(
+                    config,
+                    &format!("{prefix}/{side}_certificate"),
+                    text(&tls.certificate),
+                )?;
+                set(
+                    config,
+                    &format!("{prefix}/{side}_private_key"),
+                    text(&tls.key),
+                )?;
+            }
+            set(config, &format!("{prefix}/enable_mtls"), json!(true))?;
+            set(
+                config,
+                &format!("{prefix}/verify_name_on_connect"),
+                json!(tls.verify_name),
+            )?;
+        }
+        if !self.rules.is_empty() {
+            set(config, "access_control", self.access_control())?;
+        }
+        Ok(())
+    }
+
+    /// The `access_control` section: deny by default; every peer ("any") may observe
+    /// and declare; each rule's nodes get what the rule grants.
+    fn access_control(&self) -> Value {
+        let rule = |id: String, messages: &[&str], flow: &str, keys: Vec<String>| {
+            json!({
+                "id": id,
+                "messages": messages,
+                "flows": [flow],
+                "permission": "allow",
+                "key_exprs": keys,
+            })
+        };
+        let every = || {
+            EVERY_KEY
+                .iter()
+                .map(|k| (*k).to_owned())
+                .collect::<Vec<_>>()
+        };
+        let mut rules = vec![
+            rule("send".to_owned(), &ALL_MESSAGES, "egress", every()),
+            rule(
+                "declare".to_owned(),
+                &[
+                    "declare_subscriber",
+                    "declare_queryable",
+                    "reply",
+                    "liveliness_token",
+                    "declare_liveliness_subscriber",
+                    "liveliness_query",
+                ],
+                "ingress",
+                every(),
+            ),
+            rule(
+                "observe".to_owned(),
+                &["query"],
+                "ingress",
+                vec![keys::monitor("*", "*"), keys::info("*", "*")],
+            ),
+            rule(
+                "events".to_owned(),
+                &["put"],
+                "ingress",
+                vec![keys::monitor("*", "*"), keys::echo("*", "*", "*")],
+            ),
+        ];
+        let bridges: Vec<String> = self
+            .rules
+            .iter()
+            .flat_map(|rule| &rule.publish)
+            .flat_map(|key| [key.clone(), format!("{key}/@pull")])
+            .collect();
+        let mut any = vec!["send", "declare", "observe", "events"];
+        if !bridges.is_empty() {
+            rules.push(rule(
+                "read-bridges".to_owned(),
+                &["query"],
+                "ingress",
+                bridges,
+            ));
+            any.push("read-bridges");
+        }
+        let mut subjects = vec![json!({ "id": "any" })];
+        let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
+        for (index, allowed) in self.rules.iter().enumerate() {
+            let subject = format!("rule-{index}");
+            let mut granted = Vec::new();
+            let mut grant = |what: &str, message: &str, keys: Vec<String>| {
+                if !keys.is_empty() {
+                    let id = format!("{subject}-{what}");
+                    rules.push(rule(id.clone(), &[message], "ingress", keys));
+                    granted.push(id);
+                }
+            };
+            grant(
+                "command",
+                "query",
+                allowed
+                    .command
+                    .iter()
+                    .map(|pattern| {
+                        let (node, path) = component_pattern(pattern).expect("checked on load");
+                        keys::control(node, &path)
+                    })
+                    .collect(),
+            );
+            grant(
+                "instantiate",
+                "query",
+                allowed
+                    .instantiate
+                    .iter()
+                    .map(|node| keys::agent(node))
+                    .collect(),
+            );
+            grant("publish", "put", allowed.publish.clone());
+            subjects.push(json!({ "id": subject, "cert_common_names": allowed.nodes }));
+            policies.push(json!({ "rules": granted, "subjects": [subject] }));
+        }
+        json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": rules,
+            "subjects": subjects,
+            "policies": policies,
+        })
+    }
+}
+
+impl Rule {
+    fn check(&self) -> Result<(), String> {
+        if self.nodes.is_empty() || self.nodes.iter().any(|n| n.trim().is_empty()) {
+            return Err("`nodes` names one certificate common name or more".to_owned());
+        }
+        if self.command.is_empty() && self.instantiate.is_empty() && self.publish.is_empty() {
+            return Err(
+                "the rule grants nothing: give `command`, `instantiate` or `publish`".to_owned(),
+            );
+        }
+        for pattern in &self.command {
+            component_pattern(pattern)?;
+        }
+        for node in &self.instantiate {
+            node_pattern(node).map_err(|reason| format!("instantiate `{node}`: {reason}"))?;
+        }
+        for key in &self.publish {
+            publish_pattern(key)?;
+        }
+        Ok(())
+    }
+}
+
+/// A node in a rule: a name, or `*` for every node.
+fn node_pattern(node: &str) -> Result<(), String> {
+    if node == "*" {
+        return Ok(());
+    }
+    keys::check_name(node).map_err(|error| error.to_string())
+}
+
+/// `NODE/PATH` in a `command` rule, as the node and the key chunk of the path: NODE
+/// is a name or `*`; PATH is a component path, `*` (every component), or `PREFIX.*`
+/// (every component inside `PREFIX`).
+fn component_pattern(pattern: &str) -> Result<(&str, String), String> {
+    let bad = |reason: &str| format!("command `{pattern}`: {reason}");
+    let (node, path) = pattern
+        .split_once('/')
+        .ok_or_else(|| bad("write NODE/PATH (e.g. robot/base.motion, robot/*)"))?;
+    node_pattern(node).map_err(|reason| bad(&reason))?;
+    let chunk = if path == "*" {
+        "*".to_owned()
+    } else if let Some(prefix) = path.strip_suffix(".*") {
+        keys::check_name(prefix).map_err(|error| bad(&error.to_string()))?;
+        format!("{prefix}.$*")
+    } else {
+        keys::check_name(path).map_err(|error| bad(&error.to_string()))?;
+        path.to_owned()
+    };
+    Ok((node, chunk))
+}
+
+/// A bridge key in a `publish` rule: a key expression (wildcards allowed) without `@`
+/// chunks.
+fn publish_pattern(key: &str) -> Result<(), String> {
+    zenoh::key_expr::KeyExpr::try_from(key)
+        .map_err(|error| format!("publish `{key}`: not a key expression: {error}"))?;
+    if key.split('/').any(|chunk| chunk.starts_with('@')) {
+        return Err(format!(
+            "publish `{key}`: `@` chunks are the bridge's own keys; name the bridge key"
+        ));
+    }
+    Ok(())
+}
+
+/// Check that a node called `name` holds, in `config`, a certificate of that common
+/// name, if it holds one: the access rules name nodes by their certificates, the keys
+/// by their node names, and both must be one name.
+pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Result<(), Error> {
+    let Ok(json) = config.get_json("transport/link/tls/listen_certificate") else {
+        return Ok(());
+    };
+    let Ok(Some(path)) = serde_json::from_str::<Option<PathBuf>>(&json) else {
+        return Ok(());
+    };
+    let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
+    let bytes = std::fs::read(&path).map_err(|error| bad(format!("cannot read: {error}")))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
+    let certificate = pem
+        .parse_x509()
+        .map_err(|error| bad(format!("not an X.509 certificate: {error}")))?;
+    let common_name = certificate
+        .subject()
+        .iter_common_name()
+        .next()
+        .and_then(|cn| cn.as_str().ok())
+        .ok_or_else(|| bad("the certificate has no common name".to_owned()))?;
+    if common_name != name {
+        return Err(bad(format!(
+            "the certificate is node `{common_name}`'s: a node opens under its \
+             certificate's common name, not `{name}`"
+        )));
+    }
+    Ok(())
+}
+
+/// An endpoint's protocol, and whether its address is on loopback.
+fn parse_endpoint(endpoint: &str) -> Result<(&str, bool), Error> {
+    let bad = || {
+        Error::Security(format!(
+            "`{endpoint}` is not an endpoint (write e.g. tcp/127.0.0.1:7447, tls/robot.local:7447)"
+        ))
+    };
+    let address = endpoint.split(['?', '#']).next().unwrap_or_default();
+    let (protocol, address) = address.split_once('/').ok_or_else(bad)?;
+    let host = match address.strip_prefix('[') {
+        Some(rest) => rest.split_once(']').ok_or_else(bad)?.0,
+        None => address.rsplit_once(':').map_or(address, |(host, _)| host),
+    };
+    let loopback = host.eq_ignore_ascii_case("localhost")
+        || host.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback());
+    Ok((protocol, loopback))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn endpoints(security: &Security, listen: &[&str], multicast: bool) -> Result<(), String> {
+        let listen: Vec<String> = listen.iter().map(|e| (*e).to_owned()).collect();
+        security
+            .check(&listen, &[], multicast)
+            .map_err(|error| error.to_string())
+    }
+
+    #[test]
+    fn plaintext_stays_on_loopback_unless_allowed() {
+        let none = Security::none();
+        for good in ["tcp/127.0.0.1:7447", "tcp/[::1]:7447", "tcp/localhost:7447"] {
+            assert_eq!(endpoints(&none, &[good], false), Ok(()), "{good}");
+        }
+        for open in ["tcp/0.0.0.0:7447", "tcp/192.168.1.10:7447", "tcp/[::]:7447"] {
+            let error = endpoints(&none, &[open], false).unwrap_err();
+            assert!(error.contains("not on loopback"), "{error}");
+            let insecure = Security::none().allow_plaintext(true);
+            assert_eq!(endpoints(&insecure, &[open], false), Ok(()), "{open}");
+        }
+        let error = endpoints(&none, &[], true).unwrap_err();
+        assert!(error.contains("multicast"), "{error}");
+        let error = endpoints(&none, &["tls/127.0.0.1:7447"], false).unwrap_err();
+        assert!(error.contains("no certificate"), "{error}");
+        assert!(endpoints(&none, &["127.0.0.1"], false).is_err());
+    }
+
+    fn parse(text: &str) -> Result<Security, String> {
+        Security::parse(text, Path::new("/nowhere/security.toml")).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn bad_files_are_clear_errors() {
+        let cases = [
+            ("colour = 1", "unknown field"),
+            (
+                "[tls]\nca = \"ca.pem\"\ncertificate = \"a\"\nkey = \"b\"",
+                "no file /nowhere/ca.pem",
+            ),
+            (
+                "[[allow]]\nnodes = [\"a\"]\ncommand = [\"robot/*\"]",
+                "need [tls]",
+            ),
+        ];
+        for (text, expected) in cases {
+            let error = parse(text).unwrap_err();
+            assert!(error.contains(expected), "{text}: {error}");
+        }
+        let rule = |body: &str| Rule::check(&toml::from_str::<Rule>(body).unwrap());
+        assert!(rule("nodes = []\ncommand = [\"a/b\"]").is_err());
+        assert!(
+            rule("nodes = [\"a\"]")
+                .unwrap_err()
+                .contains("grants nothing")
+        );
+        assert!(rule("nodes = [\"a\"]\ncommand = [\"robot\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ncommand = [\"robot/a/b\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/b\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\npublish = [\"k/@pull\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\npublish = [\"k//x\"]").is_err());
+        assert_eq!(
+            rule("nodes = [\"a\"]\ncommand = [\"*/base.*\", \"r/*\"]\npublish = [\"k/**\"]"),
+            Ok(())
+        );
+    }
+
+    #[test]
+    fn rules_become_zenoh_key_expressions() {
+        let security = Security {
+            tls: None,
+            allow_plaintext: false,
+            rules: vec![Rule {
+                nodes: vec!["ops".to_owned()],
+                command: vec!["robot/base.*".to_owned(), "*/arm".to_owned()],
+                instantiate: vec!["station".to_owned()],
+                publish: vec!["robot/cmd".to_owned()],
+            }],
+        };
+        let acl = security.access_control();
+        let keys_of = |id: &str| {
+            acl["rules"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|rule| rule["id"] == id)
+                .map(|rule| rule["key_exprs"].clone())
+        };
+        assert_eq!(
+            keys_of("rule-0-command"),
+            Some(json!(["coolbot/robot/base.$*/c", "coolbot/*/arm/c"]))
+        );
+        assert_eq!(
+            keys_of("rule-0-instantiate"),
+            Some(json!(["coolbot/station/@agent"]))
+        );
+        assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
+        assert_eq!(
+            keys_of("read-bridges"),
+            Some(json!(["robot/cmd", "robot/cmd/@pull"]))
+        );
+        // `**` does not reach the guarded keys: commands and instantiation are granted
+        // only by the rules, and the verbatim chunks the crate uses are named.
+        let includes = |pattern: &str, key: &str| {
+            let pattern = zenoh::key_expr::KeyExpr::try_from(pattern).unwrap();
+            pattern.includes(&zenoh::key_expr::KeyExpr::try_from(key).unwrap())
+        };
+        assert!(!includes("**", "coolbot/station/@agent"));
+        assert!(includes("coolbot/*/@agent", "coolbot/station/@agent"));
+        assert!(includes("**/@pull", "a/b/@pull"));
+        assert!(includes("**/@out/**", "a/b/@out/poster/n/x"));
+        assert!(includes(
+            "coolbot/robot/base.$*/c",
+            "coolbot/robot/base.motion/c"
+        ));
+        assert!(!includes("coolbot/robot/base.$*/c", "coolbot/robot/arm/c"));
+        // The observe rules do not reach control keys.
+        assert!(!includes(
+            &keys::monitor("*", "*"),
+            &keys::control("robot", "arm")
+        ));
+        let mut config = zenoh::Config::default();
+        Security::apply(&security, &mut config).expect("zenoh takes the section");
+    }
+}

@@ -1,0 +1,410 @@
+//! A node with a security file (`docs/distribution.md`, "Security"): TLS with mutual
+//! authentication and access rules, against `coolctl --config` as an operator runs
+//! it. Certificates are made here with rcgen: a CA, the robot's and the operator's
+//! certificates signed by it, and an intruder's from another CA.
+
+mod support;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use std::time::Duration;
+
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{
+    InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy, PortSet, State, System,
+};
+use coolbot_zenoh::{Node, Security, secure_config};
+use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
+
+use support::{PATIENCE, Shell, free_port, robot, spec, wait_subscribed, wait_until};
+
+/// A certificate authority: its certificate in `dir/<name>-ca.pem`, and what signs.
+struct Authority {
+    ca: PathBuf,
+    issuer: Issuer<'static, KeyPair>,
+}
+
+impl Authority {
+    fn new(dir: &Path, name: &str) -> Authority {
+        let key = KeyPair::generate().expect("a CA key");
+        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.self_signed(&key).expect("a self-signed CA");
+        let ca = dir.join(format!("{name}-ca.pem"));
+        std::fs::write(&ca, certificate.pem()).expect("write the CA");
+        Authority {
+            ca,
+            issuer: Issuer::new(params, key),
+        }
+    }
+
+    /// A security file for the node whose certificate's common name is `name`, with
+    /// `rules` (TOML `[[allow]]` tables) after its `[tls]` table.
+    fn node(&self, dir: &Path, file: &str, name: &str, rules: &str) -> PathBuf {
+        let key = KeyPair::generate().expect("a node key");
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                .expect("node params");
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
+        std::fs::write(dir.join(format!("{file}.pem")), certificate.pem()).expect("write");
+        std::fs::write(dir.join(format!("{file}.key")), key.serialize_pem()).expect("write");
+        let path = dir.join(format!("{file}.toml"));
+        let ca = self.ca.file_name().expect("a file").to_string_lossy();
+        std::fs::write(
+            &path,
+            format!(
+                "[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
+            ),
+        )
+        .expect("write the security file");
+        path
+    }
+}
+
+/// The rules every node of the test reads: the operator `ops` may command the robot's
+/// base and what is inside it, nothing else.
+const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base.*\"]\n";
+
+/// `coolctl --config FILE ARGS` reaching `endpoint` only.
+fn coolctl(config: &Path, endpoint: &str, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .arg("--config")
+        .arg(config)
+        .args(["--connect", endpoint, "--no-multicast", "--timeout", "1s"])
+        .args(args)
+        .output()
+        .expect("coolctl runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn tls_and_access_rules() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let robot_file = authority.node(dir, "robot", "robot", RULES);
+    let ops_file = authority.node(dir, "ops", "ops", RULES);
+    // Another CA's certificate, with the operator's name.
+    let intruder_file = Authority::new(dir, "other").node(dir, "intruder", "ops", RULES);
+
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let security = Security::load(&robot_file).expect("the robot's security file");
+    assert!(security.has_tls() && security.has_rules());
+    let config = secure_config(std::slice::from_ref(&endpoint), &[], false, &security)
+        .expect("a TLS configuration");
+    // A node opens under its certificate's common name, no other.
+    let other = secure_config(&[], &[], false, &security).expect("a TLS configuration");
+    let error = Node::open("station", other).expect_err("not station's certificate");
+    assert!(
+        error
+            .to_string()
+            .contains("the certificate is node `robot`'s"),
+        "{error}"
+    );
+    let node = Node::open("robot", config).expect("the robot's node opens");
+    let system = robot(&node);
+    let state = |path: &str| system.handle_at(path).expect(path).snapshot().state;
+
+    // Allowed: the operator suspends the base's motion (the first run may come before
+    // the TLS session is up: poll).
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            let out = coolctl(
+                &ops_file,
+                &endpoint,
+                &["set", "robot/robot.base.motion", "state", "suspended"],
+            );
+            let ok = out.status.success();
+            last = Some(out);
+            ok
+        }),
+        "the allowed command never succeeded: {last:?}"
+    );
+    assert!(
+        wait_until(PATIENCE, || state("robot.base.motion") == State::Suspended),
+        "motion is {:?}",
+        state("robot.base.motion")
+    );
+
+    // Outside the rules: the robot's access control drops the command; coolctl
+    // fails with a clear error and the logger is untouched. The operator still sees
+    // the logger (observing is open to every node of the CA).
+    let out = coolctl(
+        &ops_file,
+        &endpoint,
+        &["set", "robot/logger", "state", "suspended"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let error = text(&out.stderr);
+    assert!(
+        error.contains("no component answered at `robot/logger`") && error.contains("access rules"),
+        "{error}"
+    );
+    assert_eq!(state("logger"), State::Running);
+    let listed = coolctl(&ops_file, &endpoint, &["list", "robot"]);
+    assert!(listed.status.success(), "{listed:?}");
+    assert!(
+        text(&listed.stdout).contains("logger"),
+        "{}",
+        text(&listed.stdout)
+    );
+
+    // A certificate from another CA: the TLS handshake fails, the intruder sees no
+    // node and its command does nothing.
+    let out = coolctl(&intruder_file, &endpoint, &["nodes"]);
+    assert!(!text(&out.stdout).contains("robot"), "{out:?}");
+    let out = coolctl(
+        &intruder_file,
+        &endpoint,
+        &["set", "robot/robot.base.ranges", "state", "suspended"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    assert!(
+        text(&out.stderr).contains("no node `robot`"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(state("robot.base.ranges"), State::Running);
+    drop(system);
+    drop(node);
+}
+
+#[test]
+fn plaintext_off_loopback_is_refused_without_the_flag() {
+    let out = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args(["--connect", "tcp/192.0.2.1:7447", "--no-multicast", "nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let error = text(&out.stderr);
+    assert!(
+        error.starts_with("coolctl: security: `tcp/192.0.2.1:7447` is not on loopback and not TLS")
+            && error.contains("--insecure"),
+        "{error}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args(["nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(text(&out.stderr).contains("multicast scouting"), "{out:?}");
+}
+
+/// Node `name` with the security file `file`, listening on `listen` or connecting to
+/// `connect`.
+fn secure_node(name: &str, file: &Path, listen: &[String], connect: &[String]) -> Node {
+    let security = Security::load(file).expect("a security file");
+    let config = secure_config(listen, connect, false, &security).expect("a TLS configuration");
+    Node::open(name, config).expect("the node opens")
+}
+
+/// `ops` may send packets on `robot/cmd`, not on `robot/free`: the robot's inlet on
+/// the first gets them, the one on the second gets nothing.
+#[test]
+fn publish_rules_gate_bridge_keys() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\npublish = [\"robot/cmd\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let ops = secure_node(
+        "ops",
+        &authority.node(dir, "ops", "ops", rules),
+        &[],
+        std::slice::from_ref(&endpoint),
+    );
+    let fifo = InputKind::Fifo {
+        capacity: 16,
+        policy: OverflowPolicy::Reject,
+    };
+    let sink_spec = spec(
+        "Sink",
+        vec![InputSpec {
+            name: "input",
+            kind: fifo,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+        vec![],
+    );
+    let source_spec = spec(
+        "Source",
+        vec![],
+        vec![OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "u64",
+            pull: false,
+        }],
+        vec![],
+    );
+    let mut consumers = System::new();
+    let mut producers = System::new();
+    let mut sinks = Vec::new();
+    let mut outs = Vec::new();
+    for (index, key) in ["robot/cmd", "robot/free"].into_iter().enumerate() {
+        let sink = FifoIn::<u64>::new(16, OverflowPolicy::Reject);
+        consumers
+            .add(
+                robot
+                    .inlet::<u64>(&format!("inlet{index}"), key, OutputKind::Data)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        consumers
+            .add(Shell::component(
+                &format!("sink{index}"),
+                sink_spec,
+                PortSet::new().input(&sink),
+            ))
+            .unwrap();
+        consumers
+            .connect(
+                &format!("inlet{index}.output"),
+                &format!("sink{index}.input"),
+            )
+            .unwrap();
+        let out = DataOut::<u64>::new();
+        producers
+            .add(
+                ops.outlet::<u64>(&format!("outlet{index}"), key, fifo)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        producers
+            .add(Shell::component(
+                &format!("source{index}"),
+                source_spec,
+                PortSet::new().output(&out),
+            ))
+            .unwrap();
+        producers
+            .connect(
+                &format!("source{index}.out"),
+                &format!("outlet{index}.input"),
+            )
+            .unwrap();
+        sinks.push(sink);
+        outs.push(out);
+    }
+    consumers.run_all().unwrap();
+    producers.run_all().unwrap();
+    // The declarations cross (every node of the CA may declare): ops sees both inlets.
+    wait_subscribed(&ops, "robot/cmd");
+    wait_subscribed(&ops, "robot/free");
+    for n in 0..3 {
+        outs[1].send(n);
+        outs[0].send(n);
+    }
+    for n in 0..3 {
+        assert_eq!(sinks[0].recv_timeout(PATIENCE), Some(n));
+    }
+    // Sent before the allowed ones, on the same link: they would be here by now.
+    assert_eq!(sinks[1].recv_timeout(Duration::from_millis(500)), None);
+    assert!(producers.shutdown().clean());
+    assert!(consumers.shutdown().clean());
+}
+
+/// `ops` may instantiate on `robot`, `guest` (signed by the same CA) may only command:
+/// the agent builds what `ops` asks, and `guest`'s request never reaches it.
+#[test]
+fn instantiate_rules_gate_the_agent() {
+    use coolbot_zenoh::agent::{Agent, Instantiate, Registry, instantiate};
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\ninstantiate = [\"robot\"]\n\n\
+                 [[allow]]\nnodes = [\"guest\"]\ncommand = [\"robot/*\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = std::sync::Arc::new(secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    ));
+    let plain = spec("Plain", vec![], vec![], vec![]);
+    let mut registry = Registry::new();
+    registry.register("Plain", move |name| {
+        Shell::component(name, plain, PortSet::new())
+    });
+    let _agent = Agent::start(std::sync::Arc::clone(&robot), registry).expect("the agent");
+    let client = |name: &str| {
+        secure_node(
+            name,
+            &authority.node(dir, name, name, rules),
+            &[],
+            std::slice::from_ref(&endpoint),
+        )
+    };
+    let (ops, guest) = (client("ops"), client("guest"));
+    let request = |name: &str| Instantiate {
+        type_name: "Plain".to_owned(),
+        name: name.to_owned(),
+        wires: Vec::new(),
+        timing: None,
+        run: true,
+        owner: None,
+        configuration: None,
+        variables: Vec::new(),
+    };
+    // The agent's queryable reaches the operator's session after a while.
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            last = Some(instantiate(
+                &ops,
+                "robot",
+                &request("one"),
+                Duration::from_secs(1),
+            ));
+            matches!(last, Some(Ok(())))
+        }),
+        "ops could not instantiate: {last:?}"
+    );
+    // The guest's session knows the agent (declarations cross), but its request is
+    // dropped by the robot's access control: nothing answers, nothing is built.
+    let querier = guest
+        .session()
+        .declare_querier(coolbot_zenoh::keys::agent("robot"))
+        .wait()
+        .expect("a querier");
+    assert!(wait_until(PATIENCE, || querier
+        .matching_status()
+        .wait()
+        .is_ok_and(|status| status.matching())));
+    let refused = instantiate(&guest, "robot", &request("two"), Duration::from_secs(1));
+    let error = refused
+        .expect_err("the guest may not instantiate")
+        .to_string();
+    assert!(error.contains("no agent answered"), "{error}");
+    let built = |path: &str| {
+        robot
+            .session()
+            .get(coolbot_zenoh::keys::monitor("robot", path))
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .expect("a query")
+            .recv()
+            .is_ok()
+    };
+    assert!(built("one"));
+    assert!(!built("two"));
+}
