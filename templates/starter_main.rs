@@ -12,8 +12,9 @@
 //! of the crate's compounds run on their nodes; and other nodes may place instances
 //! of the crate's components on this one. The same binary started with `--node
 //! station --serve` runs only what other nodes place on it. The options are those of
-//! `coolbot_zenoh::network::USAGE` (`--listen`, `--connect`, `--no-multicast`,
-//! `--lease`).
+//! `coolbot_zenoh::network::USAGE` (`--listen`, `--connect`, `--config FILE` for TLS
+//! and access rules, `--insecure`, `--multicast`, `--lease`); without a security file
+//! the node stays on loopback.
 //!
 //! `coolc` wrote this file when it created the crate and never changes it: it is
 //! yours. It starts each component that no compound of the crate instantiated at
@@ -34,7 +35,10 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     };
     if let Some(flag) = args.iter().find(|arg| arg.starts_with("--")) {
         return Err(match flag.split('=').next() {
-            Some("--node" | "--serve" | "--listen" | "--connect" | "--no-multicast" | "--lease") => {
+            Some(
+                "--node" | "--serve" | "--listen" | "--connect" | "--multicast" | "--no-multicast"
+                | "--lease" | "--config" | "--insecure",
+            ) => {
                 format!("`{flag}`: this build has no network support; build with `--features network`")
             }
             _ => format!("unknown option `{flag}`"),

@@ -63,16 +63,29 @@ struct Args {
     /// `2s`, the default); an instance on a lost node is a fault of its proxy.
     #[arg(long, requires = "node", value_parser = parse_duration)]
     lease: Option<Duration>,
-    /// With --node: listen on this Zenoh endpoint (e.g. `tcp/0.0.0.0:7447`); repeatable.
+    /// With --node: listen on this Zenoh endpoint (e.g. `tcp/127.0.0.1:7447`; off
+    /// loopback, `tls/0.0.0.0:7447` with --config, or tcp with --insecure); repeatable.
     #[arg(long, requires = "node", value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// With --node: connect to this Zenoh endpoint; repeatable.
     #[arg(long, requires = "node", value_name = "ENDPOINT")]
     connect: Vec<String>,
     /// With --node: do not look for peers by multicast scouting (name them with
-    /// --listen / --connect).
+    /// --listen / --connect): the default without TLS.
     #[arg(long, requires = "node")]
     no_multicast: bool,
+    /// With --node: look for peers by multicast scouting (the default with TLS;
+    /// without TLS it needs --insecure).
+    #[arg(long, requires = "node", conflicts_with = "no_multicast")]
+    multicast: bool,
+    /// With --node: the security file, TLS certificates and access rules
+    /// (docs/distribution.md, "Security"); without one the node stays on loopback.
+    #[arg(long, requires = "node", value_name = "FILE")]
+    config: Option<std::path::PathBuf>,
+    /// With --node: allow plaintext endpoints off loopback, and multicast scouting,
+    /// without TLS.
+    #[arg(long, requires = "node")]
+    insecure: bool,
     /// Output: the live table, status lines, or auto (the table on a terminal).
     #[arg(long, value_enum, default_value_t = Output::Auto)]
     output: Output,
@@ -206,7 +219,13 @@ fn main() -> ExitCode {
             NodeOptions {
                 listen: args.listen,
                 connect: args.connect,
-                multicast: !args.no_multicast,
+                multicast: match (args.multicast, args.no_multicast) {
+                    (true, _) => Some(true),
+                    (_, true) => Some(false),
+                    _ => None,
+                },
+                security: args.config,
+                insecure: args.insecure,
                 lease: args.lease.unwrap_or(named.lease),
                 ..named
             }

@@ -18,21 +18,28 @@ pub struct NodeOptions {
     pub listen: Vec<String>,
     /// Zenoh endpoints to connect to.
     pub connect: Vec<String>,
-    /// Find peers by multicast scouting (what `coolctl` does by default).
-    pub multicast: bool,
+    /// Find peers by multicast scouting: `None` for the default (on with TLS, off
+    /// without).
+    pub multicast: Option<bool>,
+    /// The security file: TLS certificates and access rules.
+    pub security: Option<std::path::PathBuf>,
+    /// Allow plaintext off loopback and multicast scouting without TLS.
+    pub insecure: bool,
     /// The Zenoh session lease: a peer that stops answering is lost after it (and an
     /// instance on it is a fault of its proxy).
     pub lease: std::time::Duration,
 }
 
 impl NodeOptions {
-    /// A node called `name` that finds its peers by multicast scouting.
+    /// A node called `name`, without a security file: on loopback only.
     pub fn named(name: impl Into<String>) -> NodeOptions {
         NodeOptions {
             name: name.into(),
             listen: Vec::new(),
             connect: Vec::new(),
-            multicast: true,
+            multicast: None,
+            security: None,
+            insecure: false,
             lease: std::time::Duration::from_secs(2),
         }
     }
@@ -76,6 +83,8 @@ pub fn open(options: &NodeOptions) -> Result<Network, String> {
         listen: options.listen.clone(),
         connect: options.connect.clone(),
         multicast: options.multicast,
+        security: options.security.clone(),
+        insecure: options.insecure,
         lease: options.lease,
         ..coolbot_zenoh::network::NodeOptions::named(options.name.clone())
     };

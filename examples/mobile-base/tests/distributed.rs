@@ -265,7 +265,7 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
     let _agent = Agent::start(Arc::clone(&station), registry).expect("the agent");
     let network = mobile_base::node::open(&NodeOptions {
         connect: vec![listen.clone()],
-        multicast: false,
+        multicast: Some(false),
         ..NodeOptions::named("robot")
     })
     .expect("the robot's node");

@@ -710,7 +710,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         node: Some(NodeOptions {
             listen: vec![endpoint.clone()],
             connect: vec![station_endpoint],
-            multicast: false,
+            multicast: Some(false),
             ..NodeOptions::named(name.clone())
         }),
         ..Options::default()

@@ -2,8 +2,9 @@
 //! starter `main` that `coolc` writes, the example robot), and what they open.
 //!
 //! [`NodeOptions::take_args`] takes `--node NAME`, `--listen ENDPOINT`,
-//! `--connect ENDPOINT`, `--no-multicast`, `--lease DURATION` and `--serve` out of a
-//! program's arguments and leaves the rest to the program. [`Network::open`] then opens
+//! `--connect ENDPOINT`, `--multicast` / `--no-multicast`, `--lease DURATION`,
+//! `--config FILE` (the security file, [`crate::Security`]), `--insecure` and
+//! `--serve` out of a program's arguments and leaves the rest to the program. [`Network::open`] then opens
 //! the node (`coolctl` sees it), starts its agent (other nodes may build the
 //! registered component types here: an `on "node"` instance of one of their
 //! compounds) and installs its placer on the calling thread (the compounds this
@@ -29,9 +30,15 @@ network options (a build with the `network` feature):
                        every component; `on \"NAME\"` instances of other nodes run here
   --serve              with --node: run no components of this program, only what other
                        nodes place on this one, until stopped
-  --listen ENDPOINT    with --node: listen on ENDPOINT (e.g. tcp/0.0.0.0:7447); repeatable
+  --listen ENDPOINT    with --node: listen on ENDPOINT (e.g. tcp/127.0.0.1:7447, or
+                       tls/0.0.0.0:7447 with --config); repeatable
   --connect ENDPOINT   with --node: connect to ENDPOINT; repeatable
-  --no-multicast       with --node: do not find peers by multicast scouting
+  --config FILE        with --node: the security file (TLS certificates, access rules);
+                       without one the node stays on loopback
+  --insecure           with --node: allow plaintext off loopback and multicast scouting
+  --multicast          with --node: find peers by multicast scouting (the default with
+                       TLS; needs TLS or --insecure)
+  --no-multicast       with --node: do not (the default without TLS)
   --lease DURATION     with --node: the session lease, after which a silent peer is
                        lost (default 2s)";
 
@@ -44,8 +51,13 @@ pub struct NodeOptions {
     pub listen: Vec<String>,
     /// Zenoh endpoints to connect to.
     pub connect: Vec<String>,
-    /// Find peers by multicast scouting (what `coolctl` does by default).
-    pub multicast: bool,
+    /// Find peers by multicast scouting: `None` for the default, on with TLS and off
+    /// without (multicast reaches the whole network).
+    pub multicast: Option<bool>,
+    /// The security file (`--config`): TLS and access rules ([`crate::Security`]).
+    pub security: Option<std::path::PathBuf>,
+    /// Allow plaintext off loopback and multicast scouting without TLS (`--insecure`).
+    pub insecure: bool,
     /// The Zenoh session lease: a peer that stops answering is lost after it.
     pub lease: Duration,
     /// Run only what other nodes place on this one (`--serve`).
@@ -70,14 +82,16 @@ pub enum OptionsError {
 }
 
 impl NodeOptions {
-    /// A node called `name` that finds its peers by multicast scouting, with the
-    /// default lease, running the program's components.
+    /// A node called `name` with no security file (on loopback only), the default
+    /// lease, running the program's components.
     pub fn named(name: impl Into<String>) -> NodeOptions {
         NodeOptions {
             name: name.into(),
             listen: Vec::new(),
             connect: Vec::new(),
-            multicast: true,
+            multicast: None,
+            security: None,
+            insecure: false,
             lease: DEFAULT_LEASE,
             serve: false,
         }
@@ -103,6 +117,9 @@ impl NodeOptions {
                 "--listen" => "--listen",
                 "--connect" => "--connect",
                 "--lease" => "--lease",
+                "--config" => "--config",
+                "--insecure" if inline.is_none() => "--insecure",
+                "--multicast" if inline.is_none() => "--multicast",
                 "--no-multicast" if inline.is_none() => "--no-multicast",
                 "--serve" if inline.is_none() => "--serve",
                 _ => {
@@ -128,7 +145,10 @@ impl NodeOptions {
                     options.lease = crate::ctl::parse_duration(&text)
                         .map_err(|_| OptionsError::Lease(text.clone()))?;
                 }
-                "--no-multicast" => options.multicast = false,
+                "--config" => options.security = Some(value()?.into()),
+                "--insecure" => options.insecure = true,
+                "--multicast" => options.multicast = Some(true),
+                "--no-multicast" => options.multicast = Some(false),
                 _ => options.serve = true,
             }
             without_node.get_or_insert(flag);
@@ -141,9 +161,17 @@ impl NodeOptions {
         }
     }
 
-    /// The node's Zenoh configuration: peer mode, the endpoints, scouting and lease.
+    /// The node's Zenoh configuration: peer mode, the endpoints, scouting, lease, and
+    /// the security file's TLS and access rules (endpoints off loopback, and
+    /// multicast scouting, need TLS or `--insecure`: an error says so).
     pub fn config(&self) -> Result<zenoh::Config, Error> {
-        let mut config = crate::peer_config(&self.listen, &self.connect, self.multicast)?;
+        let security = match &self.security {
+            Some(path) => crate::Security::load(path)?,
+            None => crate::Security::none(),
+        }
+        .allow_plaintext(self.insecure);
+        let multicast = self.multicast.unwrap_or(security.has_tls());
+        let mut config = crate::secure_config(&self.listen, &self.connect, multicast, &security)?;
         config
             .insert_json5(
                 "transport/link/tx/lease",
@@ -210,7 +238,7 @@ mod tests {
     #[test]
     fn network_options_are_taken_and_the_rest_is_left() {
         let mut given = args(
-            "30 --node robot --listen tcp/127.0.0.1:7447 -v --lease=500ms --no-multicast --connect tcp/10.0.0.2:7447",
+            "30 --node robot --listen tcp/127.0.0.1:7447 -v --lease=500ms --no-multicast --connect tcp/10.0.0.2:7447 --config=sec.toml --insecure",
         );
         let options = NodeOptions::take_args(&mut given).unwrap().unwrap();
         assert_eq!(given, args("30 -v"));
@@ -220,7 +248,9 @@ mod tests {
                 name: "robot".into(),
                 listen: args("tcp/127.0.0.1:7447"),
                 connect: args("tcp/10.0.0.2:7447"),
-                multicast: false,
+                multicast: Some(false),
+                security: Some("sec.toml".into()),
+                insecure: true,
                 lease: Duration::from_millis(500),
                 serve: false,
             }
@@ -235,6 +265,23 @@ mod tests {
                 ..NodeOptions::named("station")
             }
         );
+    }
+
+    #[test]
+    fn without_a_security_file_multicast_and_plaintext_off_loopback_are_refused() {
+        let mut options = NodeOptions::named("robot");
+        // The default: no multicast without TLS, loopback endpoints.
+        options.listen = args("tcp/127.0.0.1:0");
+        assert!(options.config().is_ok());
+        options.multicast = Some(true);
+        let error = options.config().unwrap_err().to_string();
+        assert!(error.contains("multicast scouting"), "{error}");
+        options.multicast = None;
+        options.listen = args("tcp/0.0.0.0:7447");
+        let error = options.config().unwrap_err().to_string();
+        assert!(error.contains("not on loopback"), "{error}");
+        options.insecure = true;
+        assert!(options.config().is_ok());
     }
 
     #[test]

@@ -189,12 +189,19 @@ fn plaintext_off_loopback_is_refused_without_the_flag() {
             && error.contains("--insecure"),
         "{error}"
     );
+    // Without TLS, multicast scouting is off unless asked for; asked for, it needs
+    // --insecure.
     let out = Command::new(env!("CARGO_BIN_EXE_coolctl"))
-        .args(["nodes"])
+        .args(["--multicast", "nodes"])
         .output()
         .expect("coolctl runs");
     assert_eq!(out.status.code(), Some(2), "{out:?}");
     assert!(text(&out.stderr).contains("multicast scouting"), "{out:?}");
+    let out = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args(["--timeout", "200ms", "nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
 }
 
 /// Node `name` with the security file `file`, listening on `listen` or connecting to

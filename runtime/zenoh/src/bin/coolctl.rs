@@ -33,9 +33,14 @@ struct Cli {
     /// Listen on this Zenoh endpoint; repeatable.
     #[arg(long, global = true)]
     listen: Vec<String>,
-    /// Do not look for peers by multicast scouting (name them with --connect).
+    /// Do not look for peers by multicast scouting (name them with --connect): the
+    /// default without a security file's TLS.
     #[arg(long, global = true)]
     no_multicast: bool,
+    /// Look for peers by multicast scouting on the whole network (the default with a
+    /// security file's TLS; without TLS it needs --insecure).
+    #[arg(long, global = true, conflicts_with = "no_multicast")]
+    multicast: bool,
     /// The security file (TLS certificates and access rules) the nodes use; its
     /// certificate's common name is who coolctl is to their access rules.
     #[arg(long, global = true, value_name = "FILE")]
@@ -174,9 +179,10 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     }
     .map_err(|error| CtlError::BadArgument(error.to_string()))?
     .allow_plaintext(cli.insecure);
-    let config =
-        coolbot_zenoh::secure_config(&cli.listen, &cli.connect, !cli.no_multicast, &security)
-            .map_err(|error| CtlError::BadArgument(error.to_string()))?;
+    // Multicast scouting reaches the whole network: on by default only under TLS.
+    let multicast = cli.multicast || (!cli.no_multicast && security.has_tls());
+    let config = coolbot_zenoh::secure_config(&cli.listen, &cli.connect, multicast, &security)
+        .map_err(|error| CtlError::BadArgument(error.to_string()))?;
     let session = {
         use zenoh::Wait;
         zenoh::open(config)
