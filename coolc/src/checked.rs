@@ -10,6 +10,11 @@
 //! mappings, configuration, states, quality levels) and every `when` rule typed by the
 //! one rule typer (`check::rules`).
 
+mod build;
+pub mod model;
+
+use std::collections::BTreeMap;
+
 use crate::ast::{self, FileId};
 use crate::check::model::{Interface, Tuning, Ty};
 use crate::check::{Resolved, Typed};
@@ -25,6 +30,10 @@ pub struct Checked {
     files: Vec<ast::File>,
     warnings: Vec<Diagnostic>,
     resolved: Resolved,
+    /// Every component, resolved, in source order.
+    components: Vec<model::Component>,
+    /// Index into `components` by name.
+    by_name: BTreeMap<String, usize>,
 }
 
 /// A type definition, as the symbol table finds it.
@@ -46,12 +55,31 @@ impl Checked {
         warnings: Vec<Diagnostic>,
         resolved: Resolved,
     ) -> Checked {
+        let components = build::components(&files, &resolved);
+        let by_name = components
+            .iter()
+            .enumerate()
+            .map(|(index, component)| (component.name.clone(), index))
+            .collect();
         Checked {
             sources,
             files,
             warnings,
             resolved,
+            components,
+            by_name,
         }
+    }
+
+    /// The resolved component named `name`.
+    pub fn component(&self, name: &str) -> Option<&model::Component> {
+        self.components.get(*self.by_name.get(name)?)
+    }
+
+    /// Every resolved component, in source order (files in `FileId` order), each
+    /// once.
+    pub fn components(&self) -> impl Iterator<Item = &model::Component> {
+        self.components.iter()
     }
 
     /// Every loaded file; `FileId(i)` is `sources().files()[i]`.
@@ -83,21 +111,23 @@ impl Checked {
         Some((def.file, item))
     }
 
-    /// The component named `name`, with its file.
-    pub fn component(&self, name: &str) -> Option<(FileId, &ast::Component)> {
+    /// The syntax tree of the component named `name`, with its file (what `lower`
+    /// still reads; `diagram` reads only [`Checked::component`]).
+    pub fn ast_component(&self, name: &str) -> Option<(FileId, &ast::Component)> {
         match self.item(name, DefKind::Component)? {
             (file, ast::Item::Component(component)) => Some((file, component)),
             _ => None,
         }
     }
 
-    /// Every component, in source order (files in `FileId` order), each once.
-    pub fn components(&self) -> impl Iterator<Item = (FileId, &ast::Component)> {
+    /// The syntax tree of every component, in source order (files in `FileId`
+    /// order), each once.
+    pub fn ast_components(&self) -> impl Iterator<Item = (FileId, &ast::Component)> {
         self.files.iter().flat_map(move |file| {
             file.items.iter().filter_map(move |item| match item {
                 ast::Item::Component(component)
                     if self
-                        .component(&component.name.name)
+                        .ast_component(&component.name.name)
                         .is_some_and(|(at, _)| at == file.id) =>
                 {
                     Some((file.id, component))
@@ -173,7 +203,7 @@ mod tests {
         )
         .checked()
         .unwrap_or_else(|analysis| panic!("{}", analysis.render(crate::RenderOptions::plain())));
-        let (file, compound) = checked.component("C").expect("C");
+        let (file, compound) = checked.ast_component("C").expect("C");
         let condition = compound
             .members
             .iter()

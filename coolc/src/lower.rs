@@ -67,7 +67,7 @@ pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
         .map(str::to_owned)
         .into_iter()
         .collect();
-    for (_, c) in checked.components() {
+    for (_, c) in checked.ast_components() {
         let mut module = ident::snake_raw(&c.name.name);
         while !taken.insert(module.clone()) {
             module.push_str("_component");
@@ -1050,7 +1050,7 @@ impl Lowerer<'_> {
     /// A compound's own controllable variables count; its mapped ones do not (they
     /// have no `Vars` field).
     fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some((_, component)) = self.checked.component(&instance.component.name) else {
+        let Some((_, component)) = self.checked.ast_component(&instance.component.name) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();

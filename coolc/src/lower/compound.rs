@@ -35,7 +35,7 @@ impl<'a> Lowerer<'a> {
 
     fn component_of(&self, instance: &ast::Instance) -> Option<&'a ast::Component> {
         self.checked
-            .component(&instance.component.name)
+            .ast_component(&instance.component.name)
             .map(|(_, component)| component)
     }
 

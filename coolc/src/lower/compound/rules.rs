@@ -24,7 +24,7 @@ pub(super) fn compile(
     for (state, condition, target) in when {
         let file = lowerer
             .checked
-            .component(&c.name.name)
+            .ast_component(&c.name.name)
             .map_or(FileId(0), |(file, _)| file);
         let typed = lowerer.checked.rule(file, condition).unwrap_or(&UNKNOWN);
         let mut scope = Scope {

@@ -1,0 +1,407 @@
+//! Builds the resolved [`model`](super::model) of every component from the syntax
+//! trees and what the checker resolved: the only place after `check` where names are
+//! looked up. It never fails: on input with errors (which only tests build a model
+//! from) what cannot be resolved is left `None`.
+
+use std::collections::BTreeMap;
+
+use super::model::{
+    Automaton, Component, Connection, Declared, Exception, Field, Input, InputKind, Instance,
+    InstanceRef, Link, Note, Output, OutputKind, PlanStep, PortRef, Recovery, Restart, State,
+    StateMember, TimingEntry, Variable,
+};
+use crate::ast::{self, FileId, Span};
+use crate::check::model::{Interface, Model, Ty};
+use crate::check::{Resolved, Typed};
+
+/// Exports nested deeper than this are not followed (a checked model has no
+/// containment cycle; this only bounds a model built from input with errors).
+const MAX_DEPTH: usize = 64;
+
+/// Every component of `files`, in source order (files in `FileId` order), each once
+/// (the one the symbol table names).
+pub(super) fn components(files: &[ast::File], resolved: &Resolved) -> Vec<Component> {
+    let builder = Builder {
+        model: Model::new(files, &resolved.symbols),
+        interfaces: &resolved.interfaces,
+        rules: &resolved.rules,
+    };
+    let mut out = Vec::new();
+    for file in files {
+        for item in &file.items {
+            if let ast::Item::Component(component) = item
+                && builder
+                    .model
+                    .component(&component.name.name)
+                    .is_some_and(|(at, _)| at == file.id)
+            {
+                out.push(builder.component(file.id, component));
+            }
+        }
+    }
+    out
+}
+
+struct Builder<'a> {
+    model: Model<'a>,
+    interfaces: &'a BTreeMap<String, Interface>,
+    rules: &'a BTreeMap<(FileId, Span), Typed>,
+}
+
+impl<'a> Builder<'a> {
+    fn component(&self, file: FileId, component: &ast::Component) -> Component {
+        let mut out = Component {
+            name: component.name.name.clone(),
+            file,
+            kind: component.kind,
+            doc: component.doc.0.clone(),
+            notes: component
+                .notes
+                .iter()
+                .map(|note| Note {
+                    subject: note.subject.clone(),
+                    doc: note.doc.0.clone(),
+                })
+                .collect(),
+            links: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            variables: Vec::new(),
+            configuration: None,
+            timing: None,
+            automaton: None,
+            exceptions: Vec::new(),
+            instances: Vec::new(),
+            redundant: Vec::new(),
+            connections: Vec::new(),
+            recovery: None,
+            restart: None,
+        };
+        let policies: BTreeMap<&str, &str> = component
+            .members
+            .iter()
+            .filter_map(|member| match member {
+                ast::Member::OnError(on) => {
+                    Some((on.instance.name.as_str(), on.policy.name.as_str()))
+                }
+                _ => None,
+            })
+            .collect();
+        for member in &component.members {
+            match member {
+                ast::Member::Input(input) => out.inputs.push(Input {
+                    doc: input.doc.0.clone(),
+                    name: input.name.name.clone(),
+                    export: match &input.def {
+                        ast::InputDef::Export(target) => Some(self.port_ref(component, target)),
+                        _ => None,
+                    },
+                    port: self.declared_input(component, input, 0),
+                }),
+                ast::Member::Output(output) => out.outputs.push(Output {
+                    doc: output.doc.0.clone(),
+                    name: output.name.name.clone(),
+                    export: match &output.def {
+                        ast::OutputDef::Export(target) => Some(self.port_ref(component, target)),
+                        _ => None,
+                    },
+                    port: self.declared_output(component, output, 0),
+                }),
+                ast::Member::Variable(variable) => out.variables.push(Variable {
+                    doc: variable.doc.0.clone(),
+                    name: variable.name.name.clone(),
+                    kind: variable.kind,
+                    written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
+                    value: variable.value.clone(),
+                    ty: self
+                        .interfaces
+                        .get(&component.name.name)
+                        .and_then(|interface| interface.variables.get(&variable.name.name))
+                        .map(|var| var.ty.clone())
+                        .filter(|ty| *ty != Ty::Unknown),
+                    span: variable.span,
+                }),
+                ast::Member::Configuration(configuration) if out.configuration.is_none() => {
+                    out.configuration = Some(
+                        configuration
+                            .fields
+                            .iter()
+                            .map(|field| Field {
+                                doc: field.doc.0.clone(),
+                                name: field.name.name.clone(),
+                                ty: self.model.ty(&field.ty),
+                                default: field.default.clone(),
+                            })
+                            .collect(),
+                    );
+                }
+                ast::Member::Timing(timing) if out.timing.is_none() => {
+                    out.timing = Some(timing.entries.iter().map(timing_entry).collect());
+                }
+                ast::Member::Automaton(automaton) if out.automaton.is_none() => {
+                    out.automaton = Some(self.automaton(file, automaton));
+                }
+                ast::Member::Link(link) => out.links.push(match &link.kind {
+                    ast::LinkKind::Crate { name, spec } => Link::Crate {
+                        name: name.value.clone(),
+                        spec: spec.clone(),
+                    },
+                    ast::LinkKind::System { name } => Link::System(name.value.clone()),
+                }),
+                ast::Member::Exception(exception) => out.exceptions.push(Exception {
+                    doc: exception.doc.0.clone(),
+                    name: exception.name.name.clone(),
+                    description: exception.description.as_ref().map(|d| d.value.clone()),
+                    plan: exception
+                        .plan
+                        .iter()
+                        .map(|step| match &step.kind {
+                            ast::PlanKind::Retry { count, every } => PlanStep::Retry {
+                                count: count.value,
+                                every: every.clone(),
+                            },
+                            ast::PlanKind::Goto(target) => PlanStep::Goto(target.name.clone()),
+                            ast::PlanKind::Ignore => PlanStep::Ignore,
+                            ast::PlanKind::Degrade => PlanStep::Degrade,
+                        })
+                        .collect(),
+                }),
+                ast::Member::Instance(instance) => out.instances.push(Instance {
+                    name: instance.name.name.clone(),
+                    component: instance.component.name.clone(),
+                    compound: self.is_compound(&instance.component.name),
+                    node: instance.node.as_ref().map(|node| node.value.clone()),
+                    substitutes: instance
+                        .substitutes
+                        .as_ref()
+                        .map(|primary| self.instance_ref(component, &primary.name)),
+                    on_error: policies
+                        .get(instance.name.name.as_str())
+                        .map(|policy| (*policy).to_owned()),
+                }),
+                ast::Member::Redundant(redundant) => out.redundant.push(
+                    redundant
+                        .members
+                        .iter()
+                        .map(|member| member.name.clone())
+                        .collect(),
+                ),
+                ast::Member::Connect(connect) => out.connections.push(Connection {
+                    from: self.port_ref(component, &connect.from),
+                    to: self.port_ref(component, &connect.to),
+                    via: connect.via.as_ref().map(|via| via.name.clone()),
+                    kind: self
+                        .target_input(component, &connect.to)
+                        .map(|declared| declared.kind.port_kind()),
+                }),
+                ast::Member::Recovery(recovery) if out.recovery.is_none() => {
+                    out.recovery = Some(Recovery {
+                        retry_every: recovery.retry_every.clone(),
+                        deadline: recovery.deadline.clone(),
+                        span: recovery.span,
+                    });
+                }
+                ast::Member::Restart(restart) if out.restart.is_none() => {
+                    out.restart = Some(Restart {
+                        limit: restart.limit.clone(),
+                        backoff: restart.backoff.clone(),
+                        span: restart.span,
+                    });
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+
+    fn is_compound(&self, name: &str) -> bool {
+        self.model
+            .component(name)
+            .is_some_and(|(_, c)| c.kind == ast::ComponentKind::Compound)
+    }
+
+    /// The component of the instance `name` declared in `component`.
+    fn instance_component(
+        &self,
+        component: &ast::Component,
+        name: &str,
+    ) -> Option<&'a ast::Component> {
+        let instance = Model::instance(component, name)?;
+        self.model
+            .component(&instance.component.name)
+            .map(|(_, c)| c)
+    }
+
+    fn instance_ref(&self, component: &ast::Component, name: &str) -> InstanceRef {
+        InstanceRef {
+            name: name.to_owned(),
+            compound: self
+                .instance_component(component, name)
+                .is_some_and(|c| c.kind == ast::ComponentKind::Compound),
+        }
+    }
+
+    fn port_ref(&self, component: &ast::Component, port: &ast::PortRef) -> PortRef {
+        PortRef {
+            instance: port
+                .instance
+                .as_ref()
+                .map(|instance| self.instance_ref(component, &instance.name)),
+            port: port.port.name.clone(),
+        }
+    }
+
+    /// The input a connection's `to` end reaches: an instance's input, or for a bare
+    /// port the compound's own.
+    fn target_input(
+        &self,
+        component: &ast::Component,
+        port: &ast::PortRef,
+    ) -> Option<Declared<InputKind>> {
+        let owner = match &port.instance {
+            Some(instance) => self.instance_component(component, &instance.name)?,
+            None => component,
+        };
+        let input = inputs(owner).find(|input| input.name.name == port.port.name)?;
+        self.declared_input(owner, input, 0)
+    }
+
+    fn declared_input(
+        &self,
+        component: &ast::Component,
+        input: &ast::Input,
+        depth: usize,
+    ) -> Option<Declared<InputKind>> {
+        let kind = match &input.def {
+            ast::InputDef::Tick => InputKind::Tick,
+            ast::InputDef::Fifo { ty, size, policy } => InputKind::Fifo {
+                ty: self.model.ty(ty),
+                size: size.value,
+                policy: policy.as_ref().map(|p| p.name.clone()),
+            },
+            ast::InputDef::Ufifo { size, ty, max } => InputKind::Ufifo {
+                ty: self.model.ty(ty),
+                size: size.value,
+                max: max.as_ref().map(|m| m.value),
+            },
+            ast::InputDef::Last(ty) => InputKind::Last(self.model.ty(ty)),
+            ast::InputDef::Poster(ty) => InputKind::Poster(self.model.ty(ty)),
+            ast::InputDef::Export(target) => {
+                if depth > MAX_DEPTH {
+                    return None;
+                }
+                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
+                let input = inputs(inner).find(|i| i.name.name == target.port.name)?;
+                return self.declared_input(inner, input, depth + 1);
+            }
+        };
+        Some(Declared {
+            kind,
+            pull: input.pull.is_some(),
+        })
+    }
+
+    fn declared_output(
+        &self,
+        component: &ast::Component,
+        output: &ast::Output,
+        depth: usize,
+    ) -> Option<Declared<OutputKind>> {
+        let kind = match &output.def {
+            ast::OutputDef::Tick => OutputKind::Tick,
+            ast::OutputDef::Data(ty) => OutputKind::Data(self.model.ty(ty)),
+            ast::OutputDef::Poster(ty) => OutputKind::Poster(self.model.ty(ty)),
+            ast::OutputDef::Export(target) => {
+                if depth > MAX_DEPTH {
+                    return None;
+                }
+                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
+                let output = outputs(inner).find(|o| o.name.name == target.port.name)?;
+                return self.declared_output(inner, output, depth + 1);
+            }
+        };
+        Some(Declared {
+            kind,
+            pull: output.pull.is_some(),
+        })
+    }
+
+    fn automaton(&self, file: FileId, automaton: &ast::Automaton) -> Automaton {
+        Automaton {
+            initial: automaton.initial.first().map(|i| i.name.clone()),
+            states: automaton
+                .states
+                .iter()
+                .map(|state| State {
+                    doc: state.doc.0.clone(),
+                    name: state.name.name.clone(),
+                    member_docs: state.member_docs.iter().map(|d| d.0.clone()).collect(),
+                    members: state
+                        .members
+                        .iter()
+                        .map(|member| self.state_member(file, member))
+                        .collect(),
+                })
+                .collect(),
+        }
+    }
+
+    fn state_member(&self, file: FileId, member: &ast::StateMember) -> StateMember {
+        match member {
+            ast::StateMember::Entry(_) => StateMember::Entry,
+            ast::StateMember::Exit(_) => StateMember::Exit,
+            ast::StateMember::Periodic { period, .. } => StateMember::Periodic(period.clone()),
+            ast::StateMember::On { port, target, .. } => StateMember::On {
+                port: port.name.clone(),
+                target: target.name.clone(),
+            },
+            ast::StateMember::After {
+                delay,
+                without,
+                target,
+                ..
+            } => StateMember::After {
+                delay: delay.clone(),
+                without: without.as_ref().map(|w| w.name.clone()),
+                target: target.name.clone(),
+            },
+            ast::StateMember::May { targets, .. } => {
+                StateMember::May(targets.iter().map(|t| t.name.clone()).collect())
+            }
+            ast::StateMember::When {
+                condition, target, ..
+            } => StateMember::When {
+                condition: condition.clone(),
+                typed: self.rules.get(&(file, condition.span)).cloned(),
+                target: target.name.clone(),
+            },
+        }
+    }
+}
+
+fn timing_entry(entry: &ast::TimingEntry) -> TimingEntry {
+    match entry {
+        ast::TimingEntry::Period(interval) => {
+            TimingEntry::Period(interval.lo.clone(), interval.hi.clone())
+        }
+        ast::TimingEntry::MaxResponse(value) => TimingEntry::MaxResponse(value.clone()),
+        ast::TimingEntry::Priority(value) => TimingEntry::Priority(value.clone()),
+        ast::TimingEntry::Quality(levels, _) => {
+            TimingEntry::Quality(levels.iter().map(|l| l.name.clone()).collect())
+        }
+    }
+}
+
+fn inputs(component: &ast::Component) -> impl Iterator<Item = &ast::Input> {
+    component.members.iter().filter_map(|m| match m {
+        ast::Member::Input(input) => Some(input),
+        _ => None,
+    })
+}
+
+fn outputs(component: &ast::Component) -> impl Iterator<Item = &ast::Output> {
+    component.members.iter().filter_map(|m| match m {
+        ast::Member::Output(output) => Some(output),
+        _ => None,
+    })
+}
