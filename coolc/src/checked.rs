@@ -9,6 +9,11 @@
 //! their kinds and packet types through exports, variables with their types through
 //! mappings, configuration, states, quality levels) and every `when` rule typed by the
 //! one rule typer (`check::rules`).
+//!
+//! On top of them, [`model`] holds every component resolved ([`Checked::component`],
+//! [`Checked::components`]), built once by `build`. `diagram` and the lowering of
+//! atomic components read only that; the lowering of compounds and of types still
+//! reads the syntax trees ([`Checked::ast_component`], [`Checked::files`]).
 
 mod build;
 pub mod model;

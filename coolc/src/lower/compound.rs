@@ -39,55 +39,6 @@ impl<'a> Lowerer<'a> {
             .map(|(_, component)| component)
     }
 
-    /// The input or output (`input`) port `port` of `component`, followed through
-    /// the exports of nested compounds to the atomic port that implements it.
-    fn leaf_port(
-        &self,
-        component: &'a ast::Component,
-        port: &str,
-        input: bool,
-        depth: usize,
-    ) -> Option<LeafPort<'a>> {
-        if depth > 64 {
-            return None;
-        }
-        for member in &component.members {
-            match member {
-                ast::Member::Input(i) if input && i.name.name == port => {
-                    return match &i.def {
-                        ast::InputDef::Export(target) => {
-                            self.exported_port(component, target, true, depth)
-                        }
-                        _ => Some(LeafPort::Input(i)),
-                    };
-                }
-                ast::Member::Output(o) if !input && o.name.name == port => {
-                    return match &o.def {
-                        ast::OutputDef::Export(target) => {
-                            self.exported_port(component, target, false, depth)
-                        }
-                        _ => Some(LeafPort::Output(o)),
-                    };
-                }
-                _ => {}
-            }
-        }
-        None
-    }
-
-    /// The atomic port an export of `component` names.
-    fn exported_port(
-        &self,
-        component: &'a ast::Component,
-        target: &ast::PortRef,
-        input: bool,
-        depth: usize,
-    ) -> Option<LeafPort<'a>> {
-        let instance = Self::instance_of(component, &target.instance.as_ref()?.name)?;
-        let inner = self.component_of(instance)?;
-        self.leaf_port(inner, &target.port.name, input, depth + 1)
-    }
-
     /// The packet type of exported input (`input`) or output `name` of `component`
     /// (the port it exports, through nested compounds), from the component's
     /// interface: `Some(None)` for a tick port, `None` when it does not resolve.
@@ -112,12 +63,14 @@ impl<'a> Lowerer<'a> {
         &self,
         component: &'a ast::Component,
         name: &str,
-        target: &ast::PortRef,
         input: bool,
     ) -> Option<String> {
-        let port = match self.exported_port(component, target, input, 0)? {
-            LeafPort::Input(i) => self.input(i),
-            LeafPort::Output(o) => self.output(o),
+        // The model carries the declared port an export reaches.
+        let model = self.checked.component(&component.name.name)?;
+        let port = if input {
+            self.input(model.inputs.iter().find(|i| i.name == name)?)
+        } else {
+            self.output(model.outputs.iter().find(|o| o.name == name)?)
         }?;
         let kind = if input { "InputSpec" } else { "OutputSpec" };
         Some(format!(
@@ -197,7 +150,6 @@ impl<'a> Lowerer<'a> {
         let mut steps = Vec::new();
         let mut vars = Vec::new();
         let mut automaton = None;
-        let mut timing = None;
         let mut recovery = None;
         let mut uses_converters = false;
         let mut input_specs = Vec::new();
@@ -206,6 +158,7 @@ impl<'a> Lowerer<'a> {
         let mut part_names: Vec<String> = vec!["supervisor".to_owned()];
         let mut spec_index = 0;
         let mapped_controllables = Self::mapped_controllables(c);
+        let model = self.checked.component(&c.name.name);
         for member in &c.members {
             match member {
                 ast::Member::Instance(i) => {
@@ -244,12 +197,12 @@ impl<'a> Lowerer<'a> {
                             None => format!(".export_input::<()>({name}, {target_lit})"),
                         };
                         steps.push(step);
-                        input_specs.extend(self.export_spec(c, &input.name.name, target, true));
+                        input_specs.extend(self.export_spec(c, &input.name.name, true));
                     }
                 }
                 ast::Member::Output(output) => {
                     if let ast::OutputDef::Export(target) = &output.def {
-                        output_specs.extend(self.export_spec(c, &output.name.name, target, false));
+                        output_specs.extend(self.export_spec(c, &output.name.name, false));
                         let name = ident::string_literal(&output.name.name);
                         let target_lit = ident::string_literal(&port_address(target));
                         steps.push(match self.export_type(c, &output.name.name, false) {
@@ -279,7 +232,12 @@ impl<'a> Lowerer<'a> {
                         }
                     }
                     (Some(_), _) => {
-                        if let Some(var) = self.variable(v, &mut spec_index, "vars") {
+                        let own = model.and_then(|model| {
+                            model.variables.iter().find(|m| m.name == v.name.name)
+                        });
+                        if let Some(var) =
+                            own.and_then(|own| self.variable(own, &mut spec_index, "vars"))
+                        {
                             vars.push(var);
                         }
                     }
@@ -331,9 +289,6 @@ impl<'a> Lowerer<'a> {
                 ast::Member::Automaton(a) => {
                     automaton.get_or_insert(a);
                 }
-                ast::Member::Timing(t) => {
-                    timing.get_or_insert(t);
-                }
                 _ => {}
             }
         }
@@ -381,7 +336,11 @@ impl<'a> Lowerer<'a> {
         all_parts.extend(parts);
         ir::Compound {
             doc: doc(&c.doc),
-            notes: ir::notes(&c.notes),
+            notes: ir::notes(
+                c.notes
+                    .iter()
+                    .map(|n| (n.subject.as_str(), n.doc.0.as_slice())),
+            ),
             type_name: c.name.name.clone(),
             module,
             user_struct: format!("{name}Parts"),
@@ -400,7 +359,7 @@ impl<'a> Lowerer<'a> {
             methods: supervisor.methods,
             section_arms: supervisor.section_arms,
             choose_arms: supervisor.choose_arms,
-            timing: self.timing(timing),
+            timing: self.timing(model.and_then(|model| model.timing.as_deref())),
             rules,
             handles,
         }
@@ -826,12 +785,6 @@ impl<'a> Lowerer<'a> {
     }
 }
 
-/// An atomic port an export leads to.
-enum LeafPort<'a> {
-    Input(&'a ast::Input),
-    Output(&'a ast::Output),
-}
-
 /// The lowered supervisor automaton.
 struct Supervisor {
     states: Vec<ir::State>,
@@ -907,7 +860,11 @@ impl Lowerer<'_> {
                         condition, target, ..
                     } => when.push((name.clone(), condition.clone(), target.name.clone())),
                     ast::StateMember::May { targets, .. } => {
-                        may_targets(targets, &state_index, &mut may);
+                        may_targets(
+                            targets.iter().map(|t| t.name.as_str()),
+                            &state_index,
+                            &mut may,
+                        );
                     }
                 }
             }

@@ -24,8 +24,8 @@ pub(super) fn compile(
     for (state, condition, target) in when {
         let file = lowerer
             .checked
-            .ast_component(&c.name.name)
-            .map_or(FileId(0), |(file, _)| file);
+            .component(&c.name.name)
+            .map_or(FileId(0), |model| model.file);
         let typed = lowerer.checked.rule(file, condition).unwrap_or(&UNKNOWN);
         let mut scope = Scope {
             lowerer,
