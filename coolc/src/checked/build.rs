@@ -405,3 +405,103 @@ fn outputs(component: &ast::Component) -> impl Iterator<Item = &ast::Output> {
         _ => None,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::check::model::{PortKind, Ty};
+    use crate::checked::model::{InputKind, OutputKind, StateMember};
+
+    const TEXT: &str = "packet Twist { v: f32 }\n\
+        packet Wheels { left: f32 }\n\
+        converter TwistToWheels: Twist -> Wheels;\n\
+        atomic Drive {\n\
+            input wheels: fifo<Wheels>(4, drop_oldest) pull;\n\
+            output odometry: data<Twist> pull;\n\
+            observable speed: f32 = 0.0;\n\
+            automaton { initial run; state run { entry; } }\n\
+        }\n\
+        compound Inner { instance d: Drive; input wheels = d.wheels; output odometry = d.odometry; observable speed = d.speed; }\n\
+        compound Outer {\n\
+            instance inner: Inner;\n\
+            instance spare: Drive substitutes other;\n\
+            instance other: Drive;\n\
+            input wheels = inner.wheels;\n\
+            observable speed = inner.speed;\n\
+            connect inner.odometry -> other.wheels via TwistToWheels;\n\
+            supervisor { initial s; state s { when other.speed > 1.0 -> s; } }\n\
+        }";
+
+    #[test]
+    fn names_are_resolved_once_in_the_model() {
+        let checked = crate::analyze_text("t.cool", TEXT)
+            .checked()
+            .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let outer = checked.component("Outer").expect("Outer");
+        // An export two levels deep carries the atomic port it reaches.
+        let wheels = &outer.inputs[0];
+        assert_eq!(
+            wheels.export.as_ref().map(|p| p.port.as_str()),
+            Some("wheels")
+        );
+        assert!(
+            wheels
+                .export
+                .as_ref()
+                .and_then(|p| p.instance.as_ref())
+                .is_some_and(|i| i.compound)
+        );
+        let declared = wheels
+            .port
+            .as_ref()
+            .expect("resolved through Inner to Drive");
+        assert!(declared.pull);
+        assert_eq!(
+            declared.kind,
+            InputKind::Fifo {
+                ty: Ty::Packet("Wheels".to_owned()),
+                size: 4,
+                policy: Some("drop_oldest".to_owned())
+            }
+        );
+        // A mapping through a mapping has the type of the variable at the end.
+        assert_eq!(outer.variables[0].written, None);
+        assert_eq!(
+            outer.variables[0].ty,
+            Some(Ty::Float(crate::ast::Prim::F32))
+        );
+        // A connection knows the kind of the input it feeds and its converter.
+        let connection = &outer.connections[0];
+        assert_eq!(connection.kind, Some(PortKind::Fifo));
+        assert_eq!(connection.via.as_deref(), Some("TwistToWheels"));
+        assert!(
+            connection
+                .from
+                .instance
+                .as_ref()
+                .is_some_and(|i| i.compound)
+        );
+        assert!(connection.to.instance.as_ref().is_some_and(|i| !i.compound));
+        // Instances know their component's kind, substitutes their primary.
+        let spare = &outer.instances[1];
+        assert!(outer.instances[0].compound && !spare.compound);
+        assert_eq!(
+            spare.substitutes.as_ref().map(|p| p.name.as_str()),
+            Some("other")
+        );
+        // `when` rules carry their typed tree.
+        let state = &outer.automaton.as_ref().expect("supervisor").states[0];
+        assert!(matches!(
+            &state.members[0],
+            StateMember::When { typed: Some(typed), target, .. }
+                if typed.ty == crate::check::RTy::Bool && target == "s"
+        ));
+        let inner = checked.component("Inner").expect("Inner");
+        assert_eq!(
+            inner.outputs[0].port.as_ref().map(|p| &p.kind),
+            Some(&OutputKind::Data(Ty::Packet("Twist".to_owned())))
+        );
+        // Components come in source order, each once.
+        let names: Vec<&str> = checked.components().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["Drive", "Inner", "Outer"]);
+    }
+}
