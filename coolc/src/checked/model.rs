@@ -1,7 +1,7 @@
 //! The resolved components of a checked model: what `lower` and `diagram` read
 //! instead of the syntax tree.
 //!
-//! Every name a component refers to is resolved here, once, by [`super::build`]:
+//! Every name a component refers to is resolved here, once, by `checked::build`:
 //! an instance knows whether its component is a compound, an exported port carries
 //! the port it reaches (through any depth of exports), a connection carries the kind
 //! of the input it feeds, a mapped variable carries the type of what it maps, and a
