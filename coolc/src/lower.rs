@@ -2,9 +2,9 @@
 //!
 //! Lowering takes a [`Checked`] model, which exists only when the checker found no
 //! error, and looks every name up in it (types, components, interfaces, typed rules).
-//! Atomic components are lowered from their resolved model alone (`atomic`); compounds
-//! (`compound`) and types (packets, enums, converters) still read the syntax tree
-//! through the model's lookups.
+//! Everything is lowered from the resolved model alone (`crate::checked::model`):
+//! types and converters here, atomic components in `atomic`, compounds in `compound`;
+//! values are kept as written (`ast::Expr`) and compiled here, never looked up.
 //! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
 //! to something harmless (index 0, the type `()`), never a panic.
 
@@ -12,8 +12,10 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use crate::ast::{self, ExprKind, Prim};
 use crate::check::model::Ty;
-use crate::checked::model::{ComponentKind, Link, State, StateMember, VarKind};
-use crate::checked::{Checked, TypeDef};
+use crate::checked::Checked;
+use crate::checked::model::{
+    ComponentKind, Instance, Link, Packet, State, StateMember, TypeDef, VarKind,
+};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -79,7 +81,7 @@ pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
         }
         lowerer.modules.insert(&c.name, ident::escape(&module));
     }
-    lowerer.lower_crate(checked.files(), options)
+    lowerer.lower_crate(options)
 }
 
 /// A Cargo package name made from `name` (lowercase, `-` separated).
@@ -95,10 +97,6 @@ pub fn package_name(name: &str) -> String {
     } else {
         trimmed.to_owned()
     }
-}
-
-fn doc(doc: &ast::Doc) -> ir::Doc {
-    doc.0.clone()
 }
 
 /// Nanoseconds of a duration or frequency expression.
@@ -207,20 +205,6 @@ fn prim_rust(p: Prim) -> &'static str {
 }
 
 impl<'a> Lowerer<'a> {
-    /// The resolved type of a written type, from the checked model.
-    fn ty(&self, ty: &ast::Type) -> Ty {
-        self.checked.ty(ty)
-    }
-
-    fn rust_type(&self, ty: &ast::Type, prefix: &str) -> String {
-        rust_ty(&self.ty(ty), prefix)
-    }
-
-    /// Whether the emitted type has a default value ([`Self::default_of`]).
-    fn defaultable(&self, ty: &ast::Type, visiting: &mut BTreeSet<String>) -> bool {
-        self.default_of(&self.ty(ty), visiting).is_some()
-    }
-
     /// Whether the emitted resolved type has a default value.
     fn ty_defaultable(&self, ty: &Ty) -> bool {
         self.default_of(ty, &mut BTreeSet::new()).is_some()
@@ -262,31 +246,26 @@ impl<'a> Lowerer<'a> {
 
     /// The default value of `ty` as a user stub writes it (`Default::default()` when
     /// the type implements `Default`).
-    fn stub_default(&self, ty: &ast::Type) -> Option<String> {
-        self.stub_default_of(&self.ty(ty))
-    }
-
-    /// [`Self::stub_default`] of a resolved type.
-    fn stub_default_of(&self, ty: &Ty) -> Option<String> {
+    fn stub_default(&self, ty: &Ty) -> Option<String> {
         let default = self.default_of(ty, &mut BTreeSet::new())?;
         Some(default.replace(DEFAULT, "Default::default()"))
     }
 
-    fn packet_defaultable(&self, packet: &ast::Packet, visiting: &mut BTreeSet<String>) -> bool {
-        if !visiting.insert(packet.name.name.clone()) {
+    fn packet_defaultable(&self, packet: &Packet, visiting: &mut BTreeSet<String>) -> bool {
+        if !visiting.insert(packet.name.clone()) {
             return false;
         }
         let result = packet
             .fields
             .iter()
-            .all(|f| f.default.is_some() || self.defaultable(&f.ty, visiting));
-        visiting.remove(&packet.name.name);
+            .all(|f| f.default.is_some() || self.default_of(&f.ty, visiting).is_some());
+        visiting.remove(&packet.name);
         result
     }
 
     /// The Rust expression of a field default: the written value, or the type's
     /// default.
-    fn field_default_of(&self, field_ty: &Ty, value: Option<&ast::Expr>, prefix: &str) -> String {
+    fn field_default(&self, field_ty: &Ty, value: Option<&ast::Expr>, prefix: &str) -> String {
         match value {
             Some(expr) => self.value(expr, Some(field_ty), prefix),
             None => self
@@ -377,18 +356,8 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    fn field(&self, field: &ast::Field, prefix: &str) -> ir::Field {
-        self.field_of(
-            &field.doc.0,
-            &field.name.name,
-            &self.ty(&field.ty),
-            field.default.as_ref(),
-            prefix,
-        )
-    }
-
     /// A packet or configuration field of resolved type `ty`.
-    fn field_of(
+    fn field(
         &self,
         doc: &[String],
         name: &str,
@@ -401,12 +370,12 @@ impl<'a> Lowerer<'a> {
             name: ident::snake(name),
             cool_name: name.to_owned(),
             ty: rust_ty(ty, prefix),
-            default: self.field_default_of(ty, default, prefix),
+            default: self.field_default(ty, default, prefix),
             serde_with: serde_adapter(ty).map(|adapter| format!("{SERDE_WITH}As::<{adapter}>")),
         }
     }
 
-    fn lower_crate(&self, files: &[ast::File], options: &Options) -> ir::Crate {
+    fn lower_crate(&self, options: &Options) -> ir::Crate {
         let mut types = ir::Types {
             module: "types".to_owned(),
             ..Default::default()
@@ -415,74 +384,67 @@ impl<'a> Lowerer<'a> {
         let mut compounds = Vec::new();
         let mut dependencies: Vec<ir::Dependency> = Vec::new();
         let mut system_libs: Vec<String> = Vec::new();
-        let mut seen_types = BTreeSet::new();
-        for item in files.iter().flat_map(|f| &f.items) {
-            match item {
-                ast::Item::Packet(p) if seen_types.insert(p.name.name.clone()) => {
-                    types.packets.push(ir::Packet {
-                        doc: doc(&p.doc),
-                        name: ident::camel(&p.name.name),
-                        fields: p.fields.iter().map(|f| self.field(f, "")).collect(),
-                        has_default: self.packet_defaultable(p, &mut BTreeSet::new()),
-                    });
-                }
-                ast::Item::Enum(e) if seen_types.insert(e.name.name.clone()) => {
-                    types.enums.push(ir::Enum {
-                        doc: doc(&e.doc),
-                        name: ident::camel(&e.name.name),
-                        variants: e
-                            .variants
-                            .iter()
-                            .map(|v| ir::EnumVariant {
-                                doc: doc(&v.doc),
-                                name: ident::camel(&v.name.name),
-                                cool_name: v.name.name.clone(),
-                            })
-                            .collect(),
-                    });
-                }
-                ast::Item::ExternPacket(e) if seen_types.insert(e.name.name.clone()) => {
-                    types.externs.push(ir::Extern {
-                        doc: doc(&e.doc),
-                        name: ident::camel(&e.name.name),
-                        path: e.rust_path.value.clone(),
-                    });
-                }
-                ast::Item::Converter(c) => {
-                    if types.converters.iter().any(|x| x.cool_name == c.name.name) {
-                        continue;
-                    }
-                    let method = ident::snake(&c.name.name);
-                    let stub_body = if let Some(default) = self.stub_default(&c.to) {
-                        format!(
-                            "// Converter `{}`: build the output packet from `from`.\n\
-                             let _ = from;\n\
-                             {default}",
-                            c.name.name
-                        )
-                    } else {
-                        format!(
-                            "let _ = from;\n\
-                             panic!({})",
-                            ident::string_literal(&format!(
-                                "converter `{}` is not written yet: fill in `{}` in src/converters.rs",
-                                c.name.name, method
-                            ))
-                        )
-                    };
-                    types.converters.push(ir::Converter {
-                        doc: doc(&c.doc),
-                        cool_name: c.name.name.clone(),
-                        method,
-                        from: self.rust_type(&c.from, ""),
-                        to: self.rust_type(&c.to, ""),
-                        user_from: self.rust_type(&c.from, USER_TYPES),
-                        user_to: self.rust_type(&c.to, USER_TYPES),
-                        stub_body,
-                    });
-                }
-                _ => {}
+        for def in self.checked.types() {
+            match def {
+                TypeDef::Packet(p) => types.packets.push(ir::Packet {
+                    doc: p.doc.clone(),
+                    name: ident::camel(&p.name),
+                    fields: p
+                        .fields
+                        .iter()
+                        .map(|f| self.field(&f.doc, &f.name, &f.ty, f.default.as_ref(), ""))
+                        .collect(),
+                    has_default: self.packet_defaultable(p, &mut BTreeSet::new()),
+                }),
+                TypeDef::Enum(e) => types.enums.push(ir::Enum {
+                    doc: e.doc.clone(),
+                    name: ident::camel(&e.name),
+                    variants: e
+                        .variants
+                        .iter()
+                        .map(|(doc, name)| ir::EnumVariant {
+                            doc: doc.clone(),
+                            name: ident::camel(name),
+                            cool_name: name.clone(),
+                        })
+                        .collect(),
+                }),
+                TypeDef::Extern(e) => types.externs.push(ir::Extern {
+                    doc: e.doc.clone(),
+                    name: ident::camel(&e.name),
+                    path: e.rust_path.clone(),
+                }),
             }
+        }
+        for c in self.checked.converters() {
+            let method = ident::snake(&c.name);
+            let stub_body = if let Some(default) = self.stub_default(&c.to) {
+                format!(
+                    "// Converter `{}`: build the output packet from `from`.\n\
+                     let _ = from;\n\
+                     {default}",
+                    c.name
+                )
+            } else {
+                format!(
+                    "let _ = from;\n\
+                     panic!({})",
+                    ident::string_literal(&format!(
+                        "converter `{}` is not written yet: fill in `{}` in src/converters.rs",
+                        c.name, method
+                    ))
+                )
+            };
+            types.converters.push(ir::Converter {
+                doc: c.doc.clone(),
+                cool_name: c.name.clone(),
+                method,
+                from: rust_ty(&c.from, ""),
+                to: rust_ty(&c.to, ""),
+                user_from: rust_ty(&c.from, USER_TYPES),
+                user_to: rust_ty(&c.to, USER_TYPES),
+                stub_body,
+            });
         }
         for c in self.checked.components() {
             for link in &c.links {
@@ -507,11 +469,7 @@ impl<'a> Lowerer<'a> {
             let module = self.modules[c.name.as_str()].clone();
             match c.kind {
                 ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
-                ComponentKind::Compound => {
-                    if let Some((_, ast)) = self.checked.ast_component(&c.name) {
-                        compounds.push(self.compound(ast, module));
-                    }
-                }
+                ComponentKind::Compound => compounds.push(self.compound(c, module)),
             }
         }
         let package = package_name(&options.package);
@@ -553,8 +511,8 @@ impl Lowerer<'_> {
     /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
     /// A compound's own controllable variables count; its mapped ones do not (they
     /// have no `Vars` field).
-    fn overrides(&self, instance: &ast::Instance, config: bool) -> Vec<(String, String)> {
-        let Some(component) = self.checked.component(&instance.component.name) else {
+    fn overrides(&self, instance: &Instance, config: bool) -> Vec<(String, String)> {
+        let Some(component) = self.checked.component(&instance.component) else {
             return Vec::new();
         };
         let mut overrides = Vec::new();
@@ -564,7 +522,7 @@ impl Lowerer<'_> {
                     .configuration
                     .iter()
                     .flatten()
-                    .filter(|f| f.name == o.name.name)
+                    .filter(|f| f.name == o.name)
                 {
                     overrides.push((
                         ident::snake(&f.name),
@@ -575,7 +533,7 @@ impl Lowerer<'_> {
                 for v in component
                     .variables
                     .iter()
-                    .filter(|v| v.kind == VarKind::Controllable && v.name == o.name.name)
+                    .filter(|v| v.kind == VarKind::Controllable && v.name == o.name)
                 {
                     if let Some(ty) = &v.written {
                         overrides.push((
@@ -743,9 +701,8 @@ pub(crate) struct SectionDocs {
 }
 
 impl SectionDocs {
-    /// The doc comments of `state`'s sections and `may` rules.
     /// The doc comments of a resolved state's sections and `may` rules.
-    pub(crate) fn of_model(state: &State) -> SectionDocs {
+    pub(crate) fn of(state: &State) -> SectionDocs {
         let mut docs = SectionDocs::default();
         for (member, doc) in state.members.iter().zip(&state.member_docs) {
             let lines = match member {
@@ -756,21 +713,6 @@ impl SectionDocs {
                 _ => continue,
             };
             lines.extend(doc.iter().cloned());
-        }
-        docs
-    }
-
-    pub(crate) fn of(state: &ast::State) -> SectionDocs {
-        let mut docs = SectionDocs::default();
-        for (member, doc) in state.members.iter().zip(&state.member_docs) {
-            let lines = match member {
-                ast::StateMember::Entry(_) => &mut docs.entry,
-                ast::StateMember::Periodic { .. } => &mut docs.periodic,
-                ast::StateMember::Exit(_) => &mut docs.exit,
-                ast::StateMember::May { .. } => &mut docs.may,
-                _ => continue,
-            };
-            lines.extend(doc.0.iter().cloned());
         }
         docs
     }

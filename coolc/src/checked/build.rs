@@ -6,12 +6,13 @@
 use std::collections::BTreeMap;
 
 use super::model::{
-    Automaton, Component, Connection, Declared, Exception, Field, Input, InputKind, Instance,
-    InstanceRef, Link, Note, Output, OutputKind, PlanStep, PortRef, Recovery, Restart, State,
-    StateMember, TimingEntry, Variable,
+    Automaton, Component, Connection, Converter, Declared, Enum, Exception, Extern, Field, Input,
+    InputKind, Instance, InstanceRef, Link, Note, Output, OutputKind, Override, Packet, PlanStep,
+    Policy, PortRef, Recovery, Redundant, Restart, State, StateMember, TimingEntry, TypeDef,
+    Variable,
 };
 use crate::ast::{self, FileId, Span};
-use crate::check::model::{Interface, Model, Ty};
+use crate::check::model::{Interface, Model, Tuning, Ty};
 use crate::check::{Resolved, Typed};
 
 /// Exports nested deeper than this are not followed (a checked model has no
@@ -40,6 +41,71 @@ pub(super) fn components(files: &[ast::File], resolved: &Resolved) -> Vec<Compon
         }
     }
     out
+}
+
+/// Every packet, enum and extern packet, then every converter, in source order
+/// (files in `FileId` order), each once (the one the symbol table names).
+pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, Vec<Converter>) {
+    let model = Model::new(files, &resolved.symbols);
+    let named_here = |file: FileId, name: &str| {
+        resolved
+            .symbols
+            .defs
+            .get(name)
+            .is_some_and(|def| def.file == file)
+    };
+    let mut types = Vec::new();
+    let mut converters = Vec::new();
+    for file in files {
+        for item in &file.items {
+            match item {
+                ast::Item::Packet(packet) if named_here(file.id, &packet.name.name) => {
+                    types.push(TypeDef::Packet(Packet {
+                        doc: packet.doc.0.clone(),
+                        name: packet.name.name.clone(),
+                        fields: packet
+                            .fields
+                            .iter()
+                            .map(|field| Field {
+                                doc: field.doc.0.clone(),
+                                name: field.name.name.clone(),
+                                ty: model.ty(&field.ty),
+                                default: field.default.clone(),
+                            })
+                            .collect(),
+                    }));
+                }
+                ast::Item::Enum(def) if named_here(file.id, &def.name.name) => {
+                    types.push(TypeDef::Enum(Enum {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        variants: def
+                            .variants
+                            .iter()
+                            .map(|v| (v.doc.0.clone(), v.name.name.clone()))
+                            .collect(),
+                    }));
+                }
+                ast::Item::ExternPacket(def) if named_here(file.id, &def.name.name) => {
+                    types.push(TypeDef::Extern(Extern {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        rust_path: def.rust_path.value.clone(),
+                    }));
+                }
+                ast::Item::Converter(def) if named_here(file.id, &def.name.name) => {
+                    converters.push(Converter {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        from: model.ty(&def.from),
+                        to: model.ty(&def.to),
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
+    (types, converters)
 }
 
 struct Builder<'a> {
@@ -73,6 +139,7 @@ impl<'a> Builder<'a> {
             exceptions: Vec::new(),
             instances: Vec::new(),
             redundant: Vec::new(),
+            policies: Vec::new(),
             connections: Vec::new(),
             recovery: None,
             restart: None,
@@ -97,6 +164,7 @@ impl<'a> Builder<'a> {
                         _ => None,
                     },
                     port: self.declared_input(component, input, 0),
+                    span: input.span,
                 }),
                 ast::Member::Output(output) => out.outputs.push(Output {
                     doc: output.doc.0.clone(),
@@ -106,6 +174,7 @@ impl<'a> Builder<'a> {
                         _ => None,
                     },
                     port: self.declared_output(component, output, 0),
+                    span: output.span,
                 }),
                 ast::Member::Variable(variable) => out.variables.push(Variable {
                     doc: variable.doc.0.clone(),
@@ -113,6 +182,12 @@ impl<'a> Builder<'a> {
                     kind: variable.kind,
                     written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
                     value: variable.value.clone(),
+                    mapping: match (&variable.ty, variable.value.as_ref().map(|v| &v.kind)) {
+                        (None, Some(ast::ExprKind::Path(segments))) => {
+                            Some(segments.iter().map(|s| s.name.clone()).collect())
+                        }
+                        _ => None,
+                    },
                     ty: self
                         .interfaces
                         .get(&component.name.name)
@@ -178,14 +253,40 @@ impl<'a> Builder<'a> {
                     on_error: policies
                         .get(instance.name.name.as_str())
                         .map(|policy| (*policy).to_owned()),
+                    overrides: instance
+                        .overrides
+                        .iter()
+                        .map(|o| Override {
+                            name: o.name.name.clone(),
+                            value: o.value.clone(),
+                        })
+                        .collect(),
+                    timing: instance
+                        .timing
+                        .as_ref()
+                        .map(|timing| timing.entries.iter().map(timing_entry).collect()),
+                    tuning: instance.adaptation.first().map(|block| {
+                        self.interfaces
+                            .get(&instance.component.name)
+                            .map(|interface| interface.adaptation.clone())
+                            .unwrap_or_default()
+                            .overlaid(&Tuning::of(block))
+                    }),
+                    span: instance.span,
                 }),
-                ast::Member::Redundant(redundant) => out.redundant.push(
-                    redundant
+                ast::Member::OnError(on) => out.policies.push(Policy {
+                    instance: on.instance.name.clone(),
+                    policy: on.policy.name.clone(),
+                    span: on.span,
+                }),
+                ast::Member::Redundant(redundant) => out.redundant.push(Redundant {
+                    members: redundant
                         .members
                         .iter()
                         .map(|member| member.name.clone())
                         .collect(),
-                ),
+                    span: redundant.span,
+                }),
                 ast::Member::Connect(connect) => out.connections.push(Connection {
                     from: self.port_ref(component, &connect.from),
                     to: self.port_ref(component, &connect.to),

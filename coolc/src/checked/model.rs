@@ -15,7 +15,7 @@
 
 use crate::ast::{self, FileId, Span};
 use crate::check::Typed;
-use crate::check::model::{PortKind, Ty};
+use crate::check::model::{PortKind, Tuning, Ty};
 
 pub use crate::ast::{ComponentKind, VarKind};
 
@@ -51,8 +51,10 @@ pub struct Component {
     pub exceptions: Vec<Exception>,
     /// Instances (compounds), in source order.
     pub instances: Vec<Instance>,
-    /// `redundant a, b;` groups, each by its members' names.
-    pub redundant: Vec<Vec<String>>,
+    /// `redundant a, b;` groups.
+    pub redundant: Vec<Redundant>,
+    /// `on error instance: policy;` members, in source order.
+    pub policies: Vec<Policy>,
     /// `connect` members, in source order.
     pub connections: Vec<Connection>,
     /// The `recovery { ... }` block.
@@ -101,6 +103,14 @@ impl InputKind {
             InputKind::Poster(_) => PortKind::Poster,
         }
     }
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            InputKind::Tick => None,
+            InputKind::Fifo { ty, .. } | InputKind::Ufifo { ty, .. } => Some(ty),
+            InputKind::Last(ty) | InputKind::Poster(ty) => Some(ty),
+        }
+    }
 }
 
 /// What an output port is, once exports are followed to a declared port.
@@ -112,6 +122,16 @@ pub enum OutputKind {
     Data(Ty),
     /// `poster<T>`
     Poster(Ty),
+}
+
+impl OutputKind {
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            OutputKind::Tick => None,
+            OutputKind::Data(ty) | OutputKind::Poster(ty) => Some(ty),
+        }
+    }
 }
 
 /// A declared port: its kind and whether it is `pull`.
@@ -136,6 +156,8 @@ pub struct Input {
     /// reaches through every level of exports (`None` only if that cannot be
     /// followed, which a checked model does not have).
     pub port: Option<Declared<InputKind>>,
+    /// Where it is written (a compound's builder steps follow source order).
+    pub span: Span,
 }
 
 /// An output port.
@@ -149,6 +171,8 @@ pub struct Output {
     pub export: Option<PortRef>,
     /// The declared port (through exports, as for [`Input::port`]).
     pub port: Option<Declared<OutputKind>>,
+    /// Where it is written.
+    pub span: Span,
 }
 
 /// `instance.port` or a compound's own `port`, resolved.
@@ -182,6 +206,8 @@ pub struct Variable {
     pub written: Option<Ty>,
     /// The initial value, or for a mapped variable the mapping (`motion.odometry`).
     pub value: Option<ast::Expr>,
+    /// A mapped variable's path (`["motion", "odometry"]`).
+    pub mapping: Option<Vec<String>>,
     /// The type: as written, or that of the instance variable a mapping names
     /// (through mappings of nested compounds); `None` for a mapping of a default
     /// variable (`motion.state`).
@@ -347,6 +373,44 @@ pub struct Instance {
     pub substitutes: Option<InstanceRef>,
     /// The policy of `on error instance: policy;`.
     pub on_error: Option<String>,
+    /// `{ name = value; ... }` overrides, in order.
+    pub overrides: Vec<Override>,
+    /// Its own `timing { ... }` entries, when written.
+    pub timing: Option<Vec<TimingEntry>>,
+    /// Its adaptation tuning when it has an `adaptation` block: its component's with
+    /// the instance's laid on it.
+    pub tuning: Option<Tuning>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `name = value;` in an instance's block.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Override {
+    /// The configuration field or controllable variable.
+    pub name: String,
+    /// The value as written.
+    pub value: ast::Expr,
+}
+
+/// `redundant a, b;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Redundant {
+    /// The instances, by name.
+    pub members: Vec<String>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `on error instance: policy;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Policy {
+    /// The instance.
+    pub instance: String,
+    /// The policy's name.
+    pub policy: String,
+    /// Where it is written.
+    pub span: Span,
 }
 
 /// `connect from -> to [via Converter];`
@@ -382,4 +446,72 @@ pub struct Restart {
     pub backoff: Option<(ast::Expr, ast::Expr)>,
     /// Where it is written.
     pub span: Span,
+}
+
+/// A type definition, resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TypeDef {
+    /// `packet Name { fields }`
+    Packet(Packet),
+    /// `enum Name { variants }`
+    Enum(Enum),
+    /// `extern packet Name = "path";`
+    Extern(Extern),
+}
+
+impl TypeDef {
+    /// Its name.
+    pub fn name(&self) -> &str {
+        match self {
+            TypeDef::Packet(packet) => &packet.name,
+            TypeDef::Enum(def) => &def.name,
+            TypeDef::Extern(def) => &def.name,
+        }
+    }
+}
+
+/// `packet Name { fields }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Packet {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its fields, in order.
+    pub fields: Vec<Field>,
+}
+
+/// `enum Name { variants }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Enum {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its variants, in order: `(doc comment, name)`.
+    pub variants: Vec<(Vec<String>, String)>,
+}
+
+/// `extern packet Name = "path";`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extern {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// The Rust path of the type.
+    pub rust_path: String,
+}
+
+/// `converter Name: From -> To;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Converter {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// The packet type it takes.
+    pub from: Ty,
+    /// The packet type it makes.
+    pub to: Ty,
 }

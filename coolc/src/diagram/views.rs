@@ -213,8 +213,8 @@ impl<'a> Lookup<'a> {
             let item = self.instance_item(instance, prefix, edges, depth);
             instance_items.push((instance.name.clone(), item));
         }
-        for (index, members) in component.redundant.iter().enumerate() {
-            let names: Vec<&str> = members.iter().map(String::as_str).collect();
+        for (index, redundant) in component.redundant.iter().enumerate() {
+            let names: Vec<&str> = redundant.members.iter().map(String::as_str).collect();
             let Some(first) = instance_items
                 .iter()
                 .position(|(name, _)| names.contains(&name.as_str()))

@@ -30,7 +30,7 @@ impl<'a> Lowerer<'a> {
             .configuration
             .iter()
             .flatten()
-            .map(|f| self.field_of(&f.doc, &f.name, &f.ty, f.default.as_ref(), GEN_TYPES))
+            .map(|f| self.field(&f.doc, &f.name, &f.ty, f.default.as_ref(), GEN_TYPES))
             .collect();
         let mut spec_index = 0;
         let vars: Vec<ir::Var> = c
@@ -114,7 +114,7 @@ impl<'a> Lowerer<'a> {
                     entry,
                     periodic: periodic.is_some(),
                     exit,
-                    docs: SectionDocs::of_model(state),
+                    docs: SectionDocs::of(state),
                 },
                 SectionOwner::Atomic,
                 &mut methods,
@@ -126,7 +126,7 @@ impl<'a> Lowerer<'a> {
                     name,
                     may_enum,
                     &may,
-                    &SectionDocs::of_model(state).may,
+                    &SectionDocs::of(state).may,
                     &mut methods,
                     &mut choose_arms,
                 );
@@ -211,7 +211,7 @@ impl<'a> Lowerer<'a> {
             };
             let method = unique(ident::method("answer_", &output.name, ""), &methods);
             let name = &output.name;
-            let stub_body = if let Some(default) = self.stub_default_of(ty) {
+            let stub_body = if let Some(default) = self.stub_default(ty) {
                 vec![
                     format!(
                         "// A consumer pulled from output `{name}`: compute the packet to answer with."
@@ -295,7 +295,7 @@ impl<'a> Lowerer<'a> {
             // until set.
             None
         } else {
-            Some(self.field_default_of(ty, v.value.as_ref(), GEN_TYPES))
+            Some(self.field_default(ty, v.value.as_ref(), GEN_TYPES))
         };
         let (rust_ty, default_expr) = match default.clone() {
             Some(d) => (rust_ty(ty, GEN_TYPES), d),
