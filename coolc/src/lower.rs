@@ -13,14 +13,13 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::ast::{self, ExprKind, Prim};
 use crate::check::model::Ty;
 use crate::checked::Checked;
-use crate::checked::model::{
-    ComponentKind, Instance, Link, Packet, State, StateMember, TypeDef, VarKind,
-};
+use crate::checked::model::{ComponentKind, Instance, Link, Packet, TypeDef, VarKind};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
 mod adaptation;
 mod atomic;
+mod automaton;
 mod compound;
 pub mod harness;
 
@@ -610,192 +609,6 @@ fn crate_spec(spec: &ast::CrateSpec) -> String {
                 .collect();
             format!("{{ {} }}", entries.join(", "))
         }
-    }
-}
-
-/// Adds `may` targets `targets` (by name; `state_index` gives their index) to `may`
-/// as `(variant, index, name)`, each once.
-pub(crate) fn may_targets<'t>(
-    targets: impl IntoIterator<Item = &'t str>,
-    state_index: &dyn Fn(&str) -> usize,
-    may: &mut Vec<(String, usize, String)>,
-) {
-    for target in targets {
-        if !may.iter().any(|(_, _, n)| n == target) {
-            may.push((ident::camel(target), state_index(target), target.to_owned()));
-        }
-    }
-}
-
-/// The `<state>_choose` stub of state `name` (index `index`) whose `may` targets are
-/// `may`, returning `Option<may_enum>`, and its glue arm.
-pub(crate) fn choose_stub(
-    index: usize,
-    name: &str,
-    may_enum: &str,
-    may: &[(String, usize, String)],
-    written: &[String],
-    methods: &mut Vec<ir::Method>,
-    choose_arms: &mut Vec<ir::ChooseArm>,
-) {
-    let method = ident::method("", name, "_choose");
-    let targets: Vec<String> = may.iter().map(|(_, _, n)| format!("`{n}`")).collect();
-    methods.push(ir::Method {
-        name: method.clone(),
-        doc: with_written(
-            format!(
-                "Called after each section of state `{name}`: return a target ({}) to move there, or `None` to stay.",
-                targets.join(", ")
-            ),
-            written,
-        ),
-        signature: format!(
-            "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::core::option::Option<{may_enum}>"
-        ),
-        user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
-        stub_body: vec![
-            format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
-            "let _ = cx;".to_owned(),
-            "None".to_owned(),
-        ],
-    });
-    choose_arms.push(ir::ChooseArm {
-        state: index,
-        method,
-        may_enum: may_enum.to_owned(),
-        targets: may.iter().map(|(v, i, _)| (v.clone(), *i)).collect(),
-    });
-}
-
-/// Whose user automaton a state belongs to: the wording of its stubs and the receiver
-/// the glue calls them on.
-#[derive(Clone, Copy)]
-pub(crate) enum SectionOwner {
-    /// An atomic component's `Behavior` (`behavior.<state>_<section>`).
-    Atomic,
-    /// A compound's `Supervisor` (`supervisor.<state>_<section>`).
-    Supervisor,
-}
-
-/// The sections one state declares.
-pub(crate) struct StateSections<'a> {
-    /// The state's index in `SPEC.states`.
-    pub(crate) index: usize,
-    /// The state's name.
-    pub(crate) name: &'a str,
-    pub(crate) entry: bool,
-    pub(crate) periodic: bool,
-    pub(crate) exit: bool,
-    /// The doc comments written on the state's sections and `may` rules.
-    pub(crate) docs: SectionDocs,
-}
-
-/// The doc comments on a state's sections and `may` rules: they document the trait
-/// methods generated for them.
-#[derive(Default)]
-pub(crate) struct SectionDocs {
-    pub(crate) entry: Vec<String>,
-    pub(crate) periodic: Vec<String>,
-    pub(crate) exit: Vec<String>,
-    pub(crate) may: Vec<String>,
-}
-
-impl SectionDocs {
-    /// The doc comments of a resolved state's sections and `may` rules.
-    pub(crate) fn of(state: &State) -> SectionDocs {
-        let mut docs = SectionDocs::default();
-        for (member, doc) in state.members.iter().zip(&state.member_docs) {
-            let lines = match member {
-                StateMember::Entry => &mut docs.entry,
-                StateMember::Periodic(_) => &mut docs.periodic,
-                StateMember::Exit => &mut docs.exit,
-                StateMember::May(_) => &mut docs.may,
-                _ => continue,
-            };
-            lines.extend(doc.iter().cloned());
-        }
-        docs
-    }
-}
-
-/// `first`, then (after an empty line) the written doc comment `written`, if any.
-fn with_written(first: String, written: &[String]) -> Vec<String> {
-    let mut lines = vec![first];
-    if !written.is_empty() {
-        lines.push(String::new());
-        lines.extend(written.iter().cloned());
-    }
-    lines
-}
-
-/// One required stub and one glue arm per declared section of a state, in the order
-/// entry, periodic, exit.
-pub(crate) fn section_stubs(
-    state: &StateSections<'_>,
-    owner: SectionOwner,
-    methods: &mut Vec<ir::Method>,
-    section_arms: &mut Vec<(String, String)>,
-) {
-    let (subject, of_state, comment_state, receiver) = match owner {
-        SectionOwner::Atomic => ("automaton", "state", "State", "behavior"),
-        SectionOwner::Supervisor => (
-            "supervisor",
-            "supervisor state",
-            "Supervisor state",
-            "supervisor",
-        ),
-    };
-    let name = state.name;
-    let kinds = [
-        (
-            state.entry,
-            "entry",
-            "Entry",
-            format!("runs once each time the {subject} enters the state"),
-            &state.docs.entry,
-        ),
-        (
-            state.periodic,
-            "periodic",
-            "Periodic",
-            "runs once per period while in the state".to_owned(),
-            &state.docs.periodic,
-        ),
-        (
-            state.exit,
-            "exit",
-            "Exit",
-            format!("runs once each time the {subject} leaves the state"),
-            &state.docs.exit,
-        ),
-    ];
-    for (present, suffix, section, when, written) in kinds {
-        if !present {
-            continue;
-        }
-        let method = ident::method("", name, &format!("_{suffix}"));
-        methods.push(ir::Method {
-            name: method.clone(),
-            doc: with_written(
-                format!("The {suffix} section of {of_state} `{name}`: {when}."),
-                written,
-            ),
-            signature: format!(
-                "fn {method}(&mut self, cx: &mut Cx<'_>) -> ::coolbot::SectionResult"
-            ),
-            user_signature: format!(
-                "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
-            ),
-            stub_body: vec![
-                format!("// {comment_state} `{name}`, {suffix} section: {when}."),
-                "let _ = cx;".to_owned(),
-                "Ok(())".to_owned(),
-            ],
-        });
-        section_arms.push((
-            format!("({}, ::coolbot::Section::{section})", state.index),
-            format!("{receiver}.{method}(&mut cx)"),
-        ));
     }
 }
 

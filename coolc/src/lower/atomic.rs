@@ -1,18 +1,17 @@
 //! Lowering an atomic component, from its resolved model alone
-//! ([`crate::checked::model`]): ports, variables, configuration, timing, exceptions
-//! and the user automaton. Compounds share the port, variable and timing lowering
-//! here (`compound.rs`).
+//! ([`crate::checked::model`]): ports, variables, configuration, timing, exceptions,
+//! pull answers and the user automaton (its states by `automaton`). Compounds share
+//! the port, variable and timing lowering here (`compound.rs`).
 
+use super::automaton::{self, Lowered, SectionOwner};
 use super::{
-    GEN_TYPES, Lowerer, SERDE_WITH, SectionDocs, SectionOwner, StateSections, USER_TYPES,
-    adaptation, choose_stub, duration_ns, duration_rust, int_value, may_targets, option_duration,
-    prim_of, prim_rust, rust_ty, section_stubs, serde_adapter, unique,
+    GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_ns, duration_rust, int_value,
+    prim_of, prim_rust, rust_ty, serde_adapter, unique,
 };
 use crate::ast::Prim;
 use crate::check::model::Ty;
 use crate::checked::model::{
-    Component, Input, InputKind, Output, OutputKind, PlanStep, State, StateMember, TimingEntry,
-    VarKind, Variable,
+    Component, Input, InputKind, Output, OutputKind, PlanStep, TimingEntry, VarKind, Variable,
 };
 use crate::ident;
 use crate::ir;
@@ -49,108 +48,16 @@ impl<'a> Lowerer<'a> {
             .iter()
             .filter_map(|output| Some((output, self.output(output)?)))
             .collect();
-        let automaton = c.automaton.as_ref();
-        let states_model: &[State] = automaton.map_or(&[], |a| a.states.as_slice());
-        let state_index = |name: &str| {
-            states_model
-                .iter()
-                .position(|s| s.name == name)
-                .unwrap_or(0)
-        };
         let input_index = |name: &str| inputs.iter().position(|(i, _)| i.name == name).unwrap_or(0);
-        let initial = automaton
-            .and_then(|a| a.initial.as_deref())
-            .map(state_index)
-            .unwrap_or(0);
-
-        let mut states = Vec::new();
-        let mut methods = Vec::new();
-        let mut section_arms = Vec::new();
-        let mut choose_arms = Vec::new();
-        for (index, state) in states_model.iter().enumerate() {
-            let name = &state.name;
-            let (mut entry, mut exit, mut periodic) = (false, false, None);
-            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
-            for member in &state.members {
-                match member {
-                    StateMember::Entry => entry = true,
-                    StateMember::Exit => exit = true,
-                    StateMember::Periodic(period) => {
-                        periodic = Some(format!(
-                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
-                            option_duration(period.as_ref())
-                        ));
-                    }
-                    StateMember::On { port, target } => on.push(format!(
-                        "::coolbot::OnSpec {{ port: {}, target: {} }}",
-                        input_index(port),
-                        state_index(target)
-                    )),
-                    StateMember::After {
-                        delay,
-                        without,
-                        target,
-                    } => after.push(format!(
-                        "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
-                        duration_rust(duration_ns(delay).unwrap_or_default()),
-                        match without {
-                            Some(port) => format!("Some({})", input_index(port)),
-                            None => "None".to_owned(),
-                        },
-                        state_index(target)
-                    )),
-                    StateMember::May(targets) => {
-                        may_targets(targets.iter().map(String::as_str), &state_index, &mut may);
-                    }
-                    StateMember::When { .. } => {}
-                }
-            }
-            let variant = ident::camel(name);
-            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
-            section_stubs(
-                &StateSections {
-                    index,
-                    name,
-                    entry,
-                    periodic: periodic.is_some(),
-                    exit,
-                    docs: SectionDocs::of(state),
-                },
-                SectionOwner::Atomic,
-                &mut methods,
-                &mut section_arms,
-            );
-            if let Some(may_enum) = &may_enum {
-                choose_stub(
-                    index,
-                    name,
-                    may_enum,
-                    &may,
-                    &SectionDocs::of(state).may,
-                    &mut methods,
-                    &mut choose_arms,
-                );
-            }
-            let spec = format!(
-                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
-                ident::string_literal(name),
-                periodic.unwrap_or_else(|| "None".to_owned()),
-                on.join(", "),
-                after.join(", "),
-                may.iter()
-                    .map(|(_, i, _)| i.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            states.push(ir::State {
-                doc: state.doc.clone(),
-                cool_name: name.clone(),
-                variant,
-                may_enum,
-                may,
-                spec,
-            });
-        }
+        let Lowered {
+            states,
+            initial,
+            mut methods,
+            section_arms,
+            choose_arms,
+            when: _,
+        } = automaton::states(c.automaton.as_ref(), &input_index, SectionOwner::Atomic);
+        let state_index = |name: &str| states.iter().position(|s| s.cool_name == name).unwrap_or(0);
 
         let mut exceptions = Vec::new();
         for e in &c.exceptions {

@@ -1,6 +1,7 @@
 //! Lowering of compound components, from their resolved model alone
-//! ([`crate::checked::model`]): the supervisor (states, sections, own variables),
-//! the instances and everything the runtime's `coolbot::CompoundBuilder` is told
+//! ([`crate::checked::model`]): its own variables, the supervisor (its states are
+//! lowered by `automaton`, as an atomic's are), the instances and everything the
+//! runtime's `coolbot::CompoundBuilder` is told
 //! (connections, exports, mapped variables, policies, substitutes, redundant groups,
 //! recovery). The `when` rules are compiled to typed Rust over `coolbot::View` by the
 //! submodule `rules`.
@@ -13,15 +14,11 @@ mod rules;
 
 use std::collections::BTreeSet;
 
-use super::{
-    GEN_TYPES, Lowerer, SectionDocs, SectionOwner, StateSections, adaptation, choose_stub,
-    duration_ns, duration_rust, may_targets, rust_ty, section_stubs, unique_among,
-};
+use super::automaton::{self, Lowered, SectionOwner};
+use super::{GEN_TYPES, Lowerer, adaptation, duration_ns, duration_rust, rust_ty, unique_among};
 use crate::ast;
 use crate::check::model::{Tuning, Ty};
-use crate::checked::model::{
-    Automaton, Component, ComponentKind, Instance, PortRef, StateMember, TimingEntry, VarKind,
-};
+use crate::checked::model::{Component, ComponentKind, Instance, PortRef, TimingEntry, VarKind};
 use crate::ident;
 use crate::ir;
 
@@ -242,7 +239,7 @@ impl<'a> Lowerer<'a> {
             ));
         }
 
-        let supervisor = self.supervisor(c, c.automaton.as_ref());
+        let supervisor = self.supervisor(c);
         let rules = rules::compile(self, c, &supervisor.when);
 
         let handles = self.handles(c, &instances);
@@ -685,137 +682,14 @@ impl<'a> Lowerer<'a> {
     }
 }
 
-/// The lowered supervisor automaton.
-struct Supervisor<'a> {
-    states: Vec<ir::State>,
-    initial: usize,
-    methods: Vec<ir::Method>,
-    section_arms: Vec<(String, String)>,
-    choose_arms: Vec<ir::ChooseArm>,
-    /// Every `when` rule, in order.
-    when: Vec<When<'a>>,
-}
-
-/// A supervisor's `when` rule: its state, its condition as written and typed, and
-/// its target.
-struct When<'a> {
-    state: String,
-    condition: &'a ast::Expr,
-    typed: Option<&'a crate::check::Typed>,
-    target: String,
-}
-
 impl<'a> Lowerer<'a> {
-    fn supervisor(&self, c: &Component, automaton: Option<&'a Automaton>) -> Supervisor<'a> {
-        let states_model = automaton.map_or(&[][..], |a| a.states.as_slice());
-        let state_index = |name: &str| {
-            states_model
-                .iter()
-                .position(|s| s.name == name)
-                .unwrap_or(0)
-        };
+    /// The supervisor of compound `c`: its states, or one implicit state without
+    /// sections when it declares none.
+    fn supervisor(&self, c: &'a Component) -> Lowered<'a> {
         let input_index = |name: &str| c.inputs.iter().position(|i| i.name == name).unwrap_or(0);
-        let initial = automaton
-            .and_then(|a| a.initial.as_deref())
-            .map(state_index)
-            .unwrap_or(0);
-        let mut states = Vec::new();
-        let mut methods = Vec::new();
-        let mut section_arms = Vec::new();
-        let mut choose_arms = Vec::new();
-        let mut when = Vec::new();
-        for (index, state) in states_model.iter().enumerate() {
-            let name = &state.name;
-            let (mut entry, mut exit, mut periodic) = (false, false, None);
-            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
-            for member in &state.members {
-                match member {
-                    StateMember::Entry => entry = true,
-                    StateMember::Exit => exit = true,
-                    StateMember::Periodic(period) => {
-                        periodic = Some(format!(
-                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
-                            super::option_duration(period.as_ref())
-                        ));
-                    }
-                    StateMember::On { port, target } => on.push(format!(
-                        "::coolbot::OnSpec {{ port: {}, target: {} }}",
-                        input_index(port),
-                        state_index(target)
-                    )),
-                    StateMember::After {
-                        delay,
-                        without,
-                        target,
-                    } => after.push(format!(
-                        "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
-                        duration_rust(duration_ns(delay).unwrap_or_default()),
-                        match without {
-                            Some(port) => format!("Some({})", input_index(port)),
-                            None => "None".to_owned(),
-                        },
-                        state_index(target)
-                    )),
-                    StateMember::When {
-                        condition,
-                        typed,
-                        target,
-                    } => when.push(When {
-                        state: name.clone(),
-                        condition,
-                        typed: typed.as_ref(),
-                        target: target.clone(),
-                    }),
-                    StateMember::May(targets) => {
-                        may_targets(targets.iter().map(String::as_str), &state_index, &mut may);
-                    }
-                }
-            }
-            section_stubs(
-                &StateSections {
-                    index,
-                    name,
-                    entry,
-                    periodic: periodic.is_some(),
-                    exit,
-                    docs: SectionDocs::of(state),
-                },
-                SectionOwner::Supervisor,
-                &mut methods,
-                &mut section_arms,
-            );
-            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
-            if let Some(may_enum) = &may_enum {
-                choose_stub(
-                    index,
-                    name,
-                    may_enum,
-                    &may,
-                    &SectionDocs::of(state).may,
-                    &mut methods,
-                    &mut choose_arms,
-                );
-            }
-            let spec = format!(
-                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
-                ident::string_literal(name),
-                periodic.unwrap_or_else(|| "None".to_owned()),
-                on.join(", "),
-                after.join(", "),
-                may.iter()
-                    .map(|(_, i, _)| i.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            states.push(ir::State {
-                doc: state.doc.clone(),
-                cool_name: name.clone(),
-                variant: ident::camel(name),
-                may_enum,
-                may,
-                spec,
-            });
-        }
+        let mut lowered =
+            automaton::states(c.automaton.as_ref(), &input_index, SectionOwner::Supervisor);
+        let states = &mut lowered.states;
         if states.is_empty() {
             // No `supervisor { ... }`: one state without sections, so the compound
             // has a user automaton like every component.
@@ -831,14 +705,7 @@ impl<'a> Lowerer<'a> {
                 ),
             });
         }
-        Supervisor {
-            states,
-            initial,
-            methods,
-            section_arms,
-            choose_arms,
-            when,
-        }
+        lowered
     }
 }
 

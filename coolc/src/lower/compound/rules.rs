@@ -5,13 +5,13 @@
 //! keys that make the runtime evaluate it.
 
 use super::super::{GEN_TYPES, Lowerer, duration_ns, duration_rust};
-use super::When;
 use crate::ast::{self, BinaryOp, ExprKind, Prim, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS, Ty};
 use crate::check::{RTy, Typed};
 use crate::checked::model::{Component, VarKind};
 use crate::ident;
 use crate::ir;
+use crate::lower::automaton::When;
 
 /// The rules of compound `c`, from each `when` of its supervisor in order (its
 /// condition typed by the checker).
