@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use super::model::{
     Automaton, Component, Connection, Converter, Declared, Enum, Exception, Extern, Field, Input,
     InputKind, Instance, InstanceRef, Link, Note, Output, OutputKind, Override, Packet, PlanStep,
-    Policy, PortRef, Recovery, Redundant, Restart, State, StateMember, TimingEntry, TypeDef,
+    Policy, PortRef, Recovery, Redundant, Ref, Restart, State, StateMember, TimingEntry, TypeDef,
     Variable,
 };
 use crate::ast::{self, FileId, Span};
@@ -154,6 +154,25 @@ impl<'a> Builder<'a> {
                 _ => None,
             })
             .collect();
+        // Names transitions and plans resolve to indices against: the states of the
+        // (first) automaton and every input, in order.
+        let states: Vec<&str> = component
+            .members
+            .iter()
+            .find_map(|member| match member {
+                ast::Member::Automaton(automaton) => Some(
+                    automaton
+                        .states
+                        .iter()
+                        .map(|state| state.name.name.as_str())
+                        .collect(),
+                ),
+                _ => None,
+            })
+            .unwrap_or_default();
+        let ports: Vec<&str> = inputs(component)
+            .map(|input| input.name.name.as_str())
+            .collect();
         for member in &component.members {
             match member {
                 ast::Member::Input(input) => out.inputs.push(Input {
@@ -214,7 +233,7 @@ impl<'a> Builder<'a> {
                     out.timing = Some(timing.entries.iter().map(timing_entry).collect());
                 }
                 ast::Member::Automaton(automaton) if out.automaton.is_none() => {
-                    out.automaton = Some(self.automaton(file, automaton));
+                    out.automaton = Some(self.automaton(file, automaton, &states, &ports));
                 }
                 ast::Member::Link(link) => out.links.push(match &link.kind {
                     ast::LinkKind::Crate { name, spec } => Link::Crate {
@@ -235,7 +254,9 @@ impl<'a> Builder<'a> {
                                 count: count.value,
                                 every: every.clone(),
                             },
-                            ast::PlanKind::Goto(target) => PlanStep::Goto(target.name.clone()),
+                            ast::PlanKind::Goto(target) => {
+                                PlanStep::Goto(state_ref(&states, &target.name))
+                            }
                             ast::PlanKind::Ignore => PlanStep::Ignore,
                             ast::PlanKind::Degrade => PlanStep::Degrade,
                         })
@@ -427,9 +448,18 @@ impl<'a> Builder<'a> {
         })
     }
 
-    fn automaton(&self, file: FileId, automaton: &ast::Automaton) -> Automaton {
+    fn automaton(
+        &self,
+        file: FileId,
+        automaton: &ast::Automaton,
+        states: &[&str],
+        ports: &[&str],
+    ) -> Automaton {
         Automaton {
-            initial: automaton.initial.first().map(|i| i.name.clone()),
+            initial: automaton
+                .initial
+                .first()
+                .map(|i| state_ref(states, &i.name)),
             states: automaton
                 .states
                 .iter()
@@ -440,21 +470,31 @@ impl<'a> Builder<'a> {
                     members: state
                         .members
                         .iter()
-                        .map(|member| self.state_member(file, member))
+                        .map(|member| self.state_member(file, member, states, ports))
                         .collect(),
                 })
                 .collect(),
         }
     }
 
-    fn state_member(&self, file: FileId, member: &ast::StateMember) -> StateMember {
+    fn state_member(
+        &self,
+        file: FileId,
+        member: &ast::StateMember,
+        states: &[&str],
+        ports: &[&str],
+    ) -> StateMember {
+        let state = |name: &ast::Ident| state_ref(states, &name.name);
+        let port = |name: &ast::Ident| state_ref(ports, &name.name);
         match member {
             ast::StateMember::Entry(_) => StateMember::Entry,
             ast::StateMember::Exit(_) => StateMember::Exit,
             ast::StateMember::Periodic { period, .. } => StateMember::Periodic(period.clone()),
-            ast::StateMember::On { port, target, .. } => StateMember::On {
-                port: port.name.clone(),
-                target: target.name.clone(),
+            ast::StateMember::On {
+                port: on, target, ..
+            } => StateMember::On {
+                port: port(on),
+                target: state(target),
             },
             ast::StateMember::After {
                 delay,
@@ -463,20 +503,28 @@ impl<'a> Builder<'a> {
                 ..
             } => StateMember::After {
                 delay: delay.clone(),
-                without: without.as_ref().map(|w| w.name.clone()),
-                target: target.name.clone(),
+                without: without.as_ref().map(port),
+                target: state(target),
             },
             ast::StateMember::May { targets, .. } => {
-                StateMember::May(targets.iter().map(|t| t.name.clone()).collect())
+                StateMember::May(targets.iter().map(state).collect())
             }
             ast::StateMember::When {
                 condition, target, ..
             } => StateMember::When {
                 condition: condition.clone(),
                 typed: self.rules.get(&(file, condition.span)).cloned(),
-                target: target.name.clone(),
+                target: state(target),
             },
         }
+    }
+}
+
+/// `name` resolved to its index in `names` (0 when absent: input with errors).
+fn state_ref(names: &[&str], name: &str) -> Ref {
+    Ref {
+        name: name.to_owned(),
+        index: names.iter().position(|n| *n == name).unwrap_or(0),
     }
 }
 
@@ -519,7 +567,7 @@ mod tests {
             input wheels: fifo<Wheels>(4, drop_oldest) pull;\n\
             output odometry: data<Twist> pull;\n\
             observable speed: f32 = 0.0;\n\
-            automaton { initial run; state run { entry; } }\n\
+            automaton { initial idle; state idle { entry; on wheels -> run; } state run { entry; } }\n\
         }\n\
         compound Inner { instance d: Drive; input wheels = d.wheels; output odometry = d.odometry; observable speed = d.speed; }\n\
         compound Outer {\n\
@@ -594,13 +642,21 @@ mod tests {
         assert!(matches!(
             &state.members[0],
             StateMember::When { typed: Some(typed), target, .. }
-                if typed.ty == crate::check::RTy::Bool && target == "s"
+                if typed.ty == crate::check::RTy::Bool && target.name == "s"
         ));
         let inner = checked.component("Inner").expect("Inner");
         assert_eq!(
             inner.outputs[0].port.as_ref().map(|p| &p.kind),
             Some(&OutputKind::Data(Ty::Packet("Twist".to_owned())))
         );
+        // Transitions refer to states and ports by the indices the model resolved.
+        let drive = checked.component("Drive").expect("Drive");
+        let automaton = drive.automaton.as_ref().expect("automaton");
+        assert_eq!(automaton.initial.as_ref().map(|r| r.index), Some(0));
+        assert!(matches!(
+            &automaton.states[0].members[1],
+            StateMember::On { port, target } if port.index == 0 && target.index == 1
+        ));
         // Components come in source order, each once.
         let names: Vec<&str> = checked.components().map(|c| c.name.as_str()).collect();
         assert_eq!(names, ["Drive", "Inner", "Outer"]);

@@ -242,11 +242,28 @@ pub enum TimingEntry {
     Quality(Vec<String>),
 }
 
+/// A state or an input port of the same component, by name and resolved to its
+/// index (in the automaton's states, or in [`Component::inputs`]); prints as its
+/// name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Ref {
+    /// The name as written.
+    pub name: String,
+    /// Its index (0 if it did not resolve, which a checked model does not have).
+    pub index: usize,
+}
+
+impl std::fmt::Display for Ref {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
 /// A user automaton or supervisor.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Automaton {
     /// The initial state.
-    pub initial: Option<String>,
+    pub initial: Option<Ref>,
     /// The states, in source order.
     pub states: Vec<State>,
 }
@@ -312,7 +329,7 @@ pub enum PlanStep {
         every: ast::Expr,
     },
     /// `goto state;`
-    Goto(String),
+    Goto(Ref),
     /// `ignore;`
     Ignore,
     /// `degrade;`
@@ -331,21 +348,21 @@ pub enum StateMember {
     /// `on port -> target;`
     On {
         /// The input port.
-        port: String,
+        port: Ref,
         /// The target state.
-        target: String,
+        target: Ref,
     },
     /// `after D [without port] -> target;`
     After {
         /// The delay.
         delay: ast::Expr,
         /// The watched port.
-        without: Option<String>,
+        without: Option<Ref>,
         /// The target state.
-        target: String,
+        target: Ref,
     },
     /// `may -> a, b;`
-    May(Vec<String>),
+    May(Vec<Ref>),
     /// `when condition -> target;`
     When {
         /// The condition as written.
@@ -354,7 +371,7 @@ pub enum StateMember {
         /// which a checked model does not have).
         typed: Option<Typed>,
         /// The target state.
-        target: String,
+        target: Ref,
     },
 }
 

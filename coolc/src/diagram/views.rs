@@ -421,7 +421,11 @@ impl<'a> Lookup<'a> {
                         dashed: false,
                         ports: None,
                     }));
-                    edges.push(edge(End::node(id), End::node(state_id(initial)), vec![]));
+                    edges.push(edge(
+                        End::node(id),
+                        End::node(state_id(&initial.name)),
+                        vec![],
+                    ));
                 }
                 for state in &automaton.states {
                     items.push(Item::Node(Node {
@@ -436,7 +440,7 @@ impl<'a> Lookup<'a> {
                         match member {
                             StateMember::On { port, target } => edges.push(edge(
                                 from,
-                                End::node(state_id(target)),
+                                End::node(state_id(&target.name)),
                                 vec![format!("on {port}")],
                             )),
                             StateMember::After {
@@ -450,7 +454,11 @@ impl<'a> Lookup<'a> {
                                     }
                                     None => format!("after {}", text::expr(delay)),
                                 };
-                                edges.push(edge(from, End::node(state_id(target)), vec![label]));
+                                edges.push(edge(
+                                    from,
+                                    End::node(state_id(&target.name)),
+                                    vec![label],
+                                ));
                             }
                             StateMember::May(targets) => {
                                 for target in targets {
@@ -458,7 +466,7 @@ impl<'a> Lookup<'a> {
                                         style: EdgeStyle::Dashed,
                                         ..edge(
                                             from.clone(),
-                                            End::node(state_id(target)),
+                                            End::node(state_id(&target.name)),
                                             vec!["may".to_owned()],
                                         )
                                     });
@@ -468,7 +476,7 @@ impl<'a> Lookup<'a> {
                                 condition, target, ..
                             } => edges.push(edge(
                                 from,
-                                End::node(state_id(target)),
+                                End::node(state_id(&target.name)),
                                 vec![format!("when {}", text::expr(condition))],
                             )),
                             StateMember::Entry | StateMember::Exit | StateMember::Periodic(_) => {}

@@ -48,7 +48,6 @@ impl<'a> Lowerer<'a> {
             .iter()
             .filter_map(|output| Some((output, self.output(output)?)))
             .collect();
-        let input_index = |name: &str| inputs.iter().position(|(i, _)| i.name == name).unwrap_or(0);
         let Lowered {
             states,
             initial,
@@ -56,8 +55,7 @@ impl<'a> Lowerer<'a> {
             section_arms,
             choose_arms,
             when: _,
-        } = automaton::states(c.automaton.as_ref(), &input_index, SectionOwner::Atomic);
-        let state_index = |name: &str| states.iter().position(|s| s.cool_name == name).unwrap_or(0);
+        } = automaton::states(c.automaton.as_ref(), SectionOwner::Atomic);
 
         let mut exceptions = Vec::new();
         for e in &c.exceptions {
@@ -73,7 +71,7 @@ impl<'a> Lowerer<'a> {
                         duration_rust(duration_ns(every).unwrap_or_default())
                     ),
                     PlanStep::Goto(target) => {
-                        format!("::coolbot::PlanStep::Goto({})", state_index(target))
+                        format!("::coolbot::PlanStep::Goto({})", target.index)
                     }
                     PlanStep::Ignore => "::coolbot::PlanStep::Ignore".to_owned(),
                     PlanStep::Degrade => "::coolbot::PlanStep::Degrade".to_owned(),

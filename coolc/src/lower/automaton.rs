@@ -6,7 +6,7 @@
 use super::{duration_ns, duration_rust, option_duration};
 use crate::ast;
 use crate::check::Typed;
-use crate::checked::model::{Automaton, State, StateMember};
+use crate::checked::model::{Automaton, Ref, State, StateMember};
 use crate::ident;
 use crate::ir;
 
@@ -31,24 +31,13 @@ pub(super) struct When<'m> {
     pub(super) target: String,
 }
 
-/// The states of `automaton` (none when it is not written), `input_index` giving the
-/// index of an input port by name, with stubs worded for `owner`.
-pub(super) fn states<'m>(
-    automaton: Option<&'m Automaton>,
-    input_index: &dyn Fn(&str) -> usize,
-    owner: SectionOwner,
-) -> Lowered<'m> {
+/// The states of `automaton` (none when it is not written), with stubs worded for
+/// `owner`. States and ports are referred to by the indices the model resolved.
+pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowered<'_> {
     let states_model: &[State] = automaton.map_or(&[], |a| a.states.as_slice());
-    let state_index = |name: &str| {
-        states_model
-            .iter()
-            .position(|s| s.name == name)
-            .unwrap_or(0)
-    };
     let initial = automaton
-        .and_then(|a| a.initial.as_deref())
-        .map(state_index)
-        .unwrap_or(0);
+        .and_then(|a| a.initial.as_ref())
+        .map_or(0, |initial| initial.index);
     let mut states = Vec::new();
     let mut methods = Vec::new();
     let mut section_arms = Vec::new();
@@ -70,8 +59,7 @@ pub(super) fn states<'m>(
                 }
                 StateMember::On { port, target } => on.push(format!(
                     "::coolbot::OnSpec {{ port: {}, target: {} }}",
-                    input_index(port),
-                    state_index(target)
+                    port.index, target.index
                 )),
                 StateMember::After {
                     delay,
@@ -81,14 +69,12 @@ pub(super) fn states<'m>(
                     "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
                     duration_rust(duration_ns(delay).unwrap_or_default()),
                     match without {
-                        Some(port) => format!("Some({})", input_index(port)),
+                        Some(port) => format!("Some({})", port.index),
                         None => "None".to_owned(),
                     },
-                    state_index(target)
+                    target.index
                 )),
-                StateMember::May(targets) => {
-                    may_targets(targets.iter().map(String::as_str), &state_index, &mut may);
-                }
+                StateMember::May(targets) => may_targets(targets, &mut may),
                 StateMember::When {
                     condition,
                     typed,
@@ -97,7 +83,7 @@ pub(super) fn states<'m>(
                     state: name.clone(),
                     condition,
                     typed: typed.as_ref(),
-                    target: target.clone(),
+                    target: target.name.clone(),
                 }),
             }
         }
@@ -157,16 +143,15 @@ pub(super) fn states<'m>(
     }
 }
 
-/// Adds `may` targets `targets` (by name; `state_index` gives their index) to `may`
-/// as `(variant, index, name)`, each once.
-pub(super) fn may_targets<'t>(
-    targets: impl IntoIterator<Item = &'t str>,
-    state_index: &dyn Fn(&str) -> usize,
-    may: &mut Vec<(String, usize, String)>,
-) {
+/// Adds `may` targets `targets` to `may` as `(variant, index, name)`, each once.
+fn may_targets(targets: &[Ref], may: &mut Vec<(String, usize, String)>) {
     for target in targets {
-        if !may.iter().any(|(_, _, n)| n == target) {
-            may.push((ident::camel(target), state_index(target), target.to_owned()));
+        if !may.iter().any(|(_, _, n)| *n == target.name) {
+            may.push((
+                ident::camel(&target.name),
+                target.index,
+                target.name.clone(),
+            ));
         }
     }
 }

@@ -29,25 +29,6 @@ const IMPLICIT_STATE: &str = "supervising";
 type MappedControllable<'m> = (&'m str, &'m str, &'m str);
 
 impl<'a> Lowerer<'a> {
-    /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of exported input or
-    /// output `name` of `c`: the declared port the export reaches, under the
-    /// compound's name for it.
-    fn export_spec(&self, c: &Component, name: &str, input: bool) -> Option<String> {
-        let port = if input {
-            self.input(c.inputs.iter().find(|i| i.name == name)?)
-        } else {
-            self.output(c.outputs.iter().find(|o| o.name == name)?)
-        }?;
-        let kind = if input { "InputSpec" } else { "OutputSpec" };
-        Some(format!(
-            "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
-            ident::string_literal(name),
-            port.kind,
-            ident::string_literal(&port.packet),
-            port.pull
-        ))
-    }
-
     /// The type of variable `name` of component `component` (through mapped
     /// variables of nested compounds), from the component's interface.
     fn variable_type(&self, component: &str, name: &str) -> Option<Ty> {
@@ -121,13 +102,13 @@ impl<'a> Lowerer<'a> {
                 None => format!(".export_input::<()>({name}, {target_lit})"),
             };
             ordered.push((input.span.start, step));
-            input_specs.extend(self.export_spec(c, &input.name, true));
+            input_specs.extend(export_spec(&input.name, self.input(input), true));
         }
         for output in &c.outputs {
             let Some(target) = &output.export else {
                 continue;
             };
-            output_specs.extend(self.export_spec(c, &output.name, false));
+            output_specs.extend(export_spec(&output.name, self.output(output), false));
             let name = ident::string_literal(&output.name);
             let target_lit = ident::string_literal(&port_address(target));
             let step = match output.port.as_ref().map(|p| p.kind.packet()) {
@@ -686,9 +667,7 @@ impl<'a> Lowerer<'a> {
     /// The supervisor of compound `c`: its states, or one implicit state without
     /// sections when it declares none.
     fn supervisor(&self, c: &'a Component) -> Lowered<'a> {
-        let input_index = |name: &str| c.inputs.iter().position(|i| i.name == name).unwrap_or(0);
-        let mut lowered =
-            automaton::states(c.automaton.as_ref(), &input_index, SectionOwner::Supervisor);
+        let mut lowered = automaton::states(c.automaton.as_ref(), SectionOwner::Supervisor);
         let states = &mut lowered.states;
         if states.is_empty() {
             // No `supervisor { ... }`: one state without sections, so the compound
@@ -771,6 +750,20 @@ fn fields(
         entries.push(format!("..{path}::default()"));
     }
     format!("{path} {{ {} }}", entries.join(", "))
+}
+
+/// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of exported input or output
+/// `name` whose declared port (the one the export reaches) lowers to `port`.
+fn export_spec(name: &str, port: Option<ir::Port>, input: bool) -> Option<String> {
+    let port = port?;
+    let kind = if input { "InputSpec" } else { "OutputSpec" };
+    Some(format!(
+        "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
+        ident::string_literal(name),
+        port.kind,
+        ident::string_literal(&port.packet),
+        port.pull
+    ))
 }
 
 /// How many fields an atomic component's `Config` and `Vars` have.
