@@ -4,17 +4,25 @@
 //! A [`Checked`] can only be obtained from [`crate::Analysis::checked`], which refuses
 //! an analysis with errors: `lower` and `diagram` take one, so "generate only from
 //! descriptions that passed the checker" is a type, not a convention each caller must
-//! remember. Its lookups are the checker's: the symbol table (components, types and
-//! converters by name, each with its file), every component's interface (ports with
-//! their kinds and packet types through exports, variables with their types through
-//! mappings, configuration, states, quality levels) and every `when` rule typed by the
-//! one rule typer (`check::rules`).
+//! remember. It holds no syntax tree: [`model`] is every component, packet, enum,
+//! extern packet and converter resolved ([`Checked::components`],
+//! [`Checked::types`], [`Checked::converters`]), built once by `build` from the trees
+//! and what the checker resolved: every component's interface ([`Checked::interface`]:
+//! ports with their kinds and packet types through exports, variables with their
+//! types through mappings, configuration, states, quality levels) and every `when`
+//! rule typed by the one rule typer (`check::rules`). `lower` and `diagram` read only
+//! this model; what they keep as written is values ([`crate::ast::Expr`]), never a
+//! name to look up.
 
-use crate::ast::{self, FileId};
-use crate::check::model::{Interface, Tuning, Ty};
-use crate::check::{Resolved, Typed};
+mod build;
+pub mod model;
+
+use std::collections::BTreeMap;
+
+use crate::ast;
+use crate::check::Resolved;
+use crate::check::model::Interface;
 use crate::diagnostics::{self, Diagnostic, RenderOptions};
-use crate::resolve::DefKind;
 use crate::source::SourceMap;
 
 /// Descriptions that passed every check (warnings aside), with what the checker
@@ -22,20 +30,16 @@ use crate::source::SourceMap;
 #[derive(Clone, Debug)]
 pub struct Checked {
     sources: SourceMap,
-    files: Vec<ast::File>,
     warnings: Vec<Diagnostic>,
     resolved: Resolved,
-}
-
-/// A type definition, as the symbol table finds it.
-#[derive(Clone, Copy, Debug)]
-pub enum TypeDef<'a> {
-    /// `packet`
-    Packet(&'a ast::Packet),
-    /// `enum`
-    Enum(&'a ast::EnumDef),
-    /// `extern packet`
-    Extern(&'a ast::ExternPacket),
+    /// Every component, resolved, in source order.
+    components: Vec<model::Component>,
+    /// Index into `components` by name.
+    by_name: BTreeMap<String, usize>,
+    /// Every packet, enum and extern packet, resolved, in source order.
+    types: Vec<model::TypeDef>,
+    /// Every converter, resolved, in source order.
+    converters: Vec<model::Converter>,
 }
 
 impl Checked {
@@ -46,22 +50,54 @@ impl Checked {
         warnings: Vec<Diagnostic>,
         resolved: Resolved,
     ) -> Checked {
+        let components = build::components(&files, &resolved);
+        let (types, converters) = build::types(&files, &resolved);
+        let by_name = components
+            .iter()
+            .enumerate()
+            .map(|(index, component)| (component.name.clone(), index))
+            .collect();
         Checked {
             sources,
-            files,
             warnings,
             resolved,
+            components,
+            by_name,
+            types,
+            converters,
         }
+    }
+
+    /// Every packet, enum and extern packet, in source order (files in `FileId`
+    /// order), each once.
+    pub fn types(&self) -> &[model::TypeDef] {
+        &self.types
+    }
+
+    /// Every converter, in source order, each once.
+    pub fn converters(&self) -> &[model::Converter] {
+        &self.converters
+    }
+
+    /// The packet, enum or extern packet named `name`.
+    pub fn type_def(&self, name: &str) -> Option<&model::TypeDef> {
+        self.types.iter().find(|def| def.name() == name)
+    }
+
+    /// The resolved component named `name`.
+    pub fn component(&self, name: &str) -> Option<&model::Component> {
+        self.components.get(*self.by_name.get(name)?)
+    }
+
+    /// Every resolved component, in source order (files in `FileId` order), each
+    /// once.
+    pub fn components(&self) -> impl Iterator<Item = &model::Component> {
+        self.components.iter()
     }
 
     /// Every loaded file; `FileId(i)` is `sources().files()[i]`.
     pub fn sources(&self) -> &SourceMap {
         &self.sources
-    }
-
-    /// One syntax tree per loaded file, in `FileId` order (roots first).
-    pub fn files(&self) -> &[ast::File] {
-        &self.files
     }
 
     /// The warnings (a checked analysis has no error).
@@ -74,93 +110,17 @@ impl Checked {
         diagnostics::render(&self.sources, &self.warnings, options)
     }
 
-    fn item(&self, name: &str, kind: DefKind) -> Option<(FileId, &ast::Item)> {
-        let def = self.resolved.symbols.defs.get(name)?;
-        if def.kind != kind {
-            return None;
-        }
-        let item = self.files.get(def.file.0 as usize)?.items.get(def.item)?;
-        Some((def.file, item))
-    }
-
-    /// The component named `name`, with its file.
-    pub fn component(&self, name: &str) -> Option<(FileId, &ast::Component)> {
-        match self.item(name, DefKind::Component)? {
-            (file, ast::Item::Component(component)) => Some((file, component)),
-            _ => None,
-        }
-    }
-
-    /// Every component, in source order (files in `FileId` order), each once.
-    pub fn components(&self) -> impl Iterator<Item = (FileId, &ast::Component)> {
-        self.files.iter().flat_map(move |file| {
-            file.items.iter().filter_map(move |item| match item {
-                ast::Item::Component(component)
-                    if self
-                        .component(&component.name.name)
-                        .is_some_and(|(at, _)| at == file.id) =>
-                {
-                    Some((file.id, component))
-                }
-                _ => None,
-            })
-        })
-    }
-
-    /// The packet, enum or extern packet named `name`.
-    pub fn type_def(&self, name: &str) -> Option<TypeDef<'_>> {
-        let def = self.resolved.symbols.defs.get(name)?;
-        let item = self.files.get(def.file.0 as usize)?.items.get(def.item)?;
-        match item {
-            ast::Item::Packet(packet) => Some(TypeDef::Packet(packet)),
-            ast::Item::Enum(def) => Some(TypeDef::Enum(def)),
-            ast::Item::ExternPacket(def) => Some(TypeDef::Extern(def)),
-            _ => None,
-        }
-    }
-
-    /// The converter named `name`.
-    pub fn converter(&self, name: &str) -> Option<&ast::Converter> {
-        match self.item(name, DefKind::Converter)? {
-            (_, ast::Item::Converter(converter)) => Some(converter),
-            _ => None,
-        }
-    }
-
     /// The interface of component `name`: what it offers to the compounds that
     /// nest it.
     pub fn interface(&self, name: &str) -> Option<&Interface> {
         self.resolved.interfaces.get(name)
     }
-
-    /// The adaptation tuning of instance `instance`: its component's own
-    /// `adaptation` block with the instance's block (if any) laid on it.
-    pub fn instance_tuning(&self, instance: &ast::Instance) -> Tuning {
-        let own = self
-            .interface(&instance.component.name)
-            .map(|interface| interface.adaptation.clone())
-            .unwrap_or_default();
-        match instance.adaptation.first() {
-            Some(block) => own.overlaid(&Tuning::of(block)),
-            None => own,
-        }
-    }
-
-    /// The resolved type of a written type.
-    pub fn ty(&self, ty: &ast::Type) -> Ty {
-        crate::check::model::Model::new(&self.files, &self.resolved.symbols).ty(ty)
-    }
-
-    /// The `when` condition `condition` of a supervisor in `file`, typed.
-    pub fn rule(&self, file: FileId, condition: &ast::Expr) -> Option<&Typed> {
-        self.resolved.rules.get(&(file, condition.span))
-    }
 }
 
 #[cfg(test)]
 mod tests {
-    use crate::ast;
     use crate::check::RTy;
+    use crate::checked::model::StateMember;
 
     #[test]
     fn rules_are_typed_with_their_symbols_resolved() {
@@ -173,21 +133,14 @@ mod tests {
         )
         .checked()
         .unwrap_or_else(|analysis| panic!("{}", analysis.render(crate::RenderOptions::plain())));
-        let (file, compound) = checked.component("C").expect("C");
-        let condition = compound
-            .members
-            .iter()
-            .find_map(|member| match member {
-                ast::Member::Automaton(automaton) => {
-                    automaton.states[0].members.iter().find_map(|m| match m {
-                        ast::StateMember::When { condition, .. } => Some(condition),
-                        _ => None,
-                    })
-                }
-                _ => None,
-            })
-            .expect("a when rule");
-        let typed = checked.rule(file, condition).expect("typed by the checker");
+        let compound = checked.component("C").expect("C");
+        let automaton = compound.automaton.as_ref().expect("a supervisor");
+        let Some(StateMember::When {
+            typed: Some(typed), ..
+        }) = automaton.states[0].members.first()
+        else {
+            panic!("a typed when rule: {automaton:?}");
+        };
         assert_eq!(typed.ty, RTy::Bool);
         let [state, level] = typed.operands.as_slice() else {
             panic!("`&&` has two operands: {typed:?}");
@@ -202,6 +155,6 @@ mod tests {
                 .interface("A")
                 .is_some_and(|a| a.variables.contains_key("level"))
         );
-        assert!(checked.component("A").is_some() && checked.converter("A").is_none());
+        assert!(checked.component("A").is_some() && checked.type_def("A").is_none());
     }
 }

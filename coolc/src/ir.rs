@@ -319,14 +319,14 @@ pub struct Atomic {
 /// The doc lines that document a component's constructs without a Rust item of their
 /// own, for `SPEC`'s rustdoc: per note an empty line, then its subject followed by
 /// its first doc line, then its other doc lines.
-pub fn notes(notes: &[crate::ast::Note]) -> Doc {
+pub fn notes<'n>(notes: impl IntoIterator<Item = (&'n str, &'n [String])>) -> Doc {
     let mut lines = Vec::new();
-    for note in notes {
+    for (subject, doc) in notes {
         lines.push(String::new());
-        let mut doc = note.doc.0.iter();
+        let mut doc = doc.iter();
         match doc.next().map(|line| line.trim_end()) {
-            Some(first) if !first.is_empty() => lines.push(format!("{}: {first}", note.subject)),
-            _ => lines.push(format!("{}:", note.subject)),
+            Some(first) if !first.is_empty() => lines.push(format!("{subject}: {first}")),
+            _ => lines.push(format!("{subject}:")),
         }
         lines.extend(doc.cloned());
     }

@@ -10,8 +10,9 @@
 //! descriptions (source order, identifiers from names), never on hashing or
 //! addresses.
 
-use crate::ast::{self, FileId};
+use crate::ast::FileId;
 use crate::checked::Checked;
+use crate::checked::model::{Component, ComponentKind};
 
 pub mod dot;
 pub mod mermaid;
@@ -266,7 +267,7 @@ pub fn diagrams(
     options: &Options,
 ) -> Result<Vec<Diagram>, SelectError> {
     let model = views::Lookup::new(checked);
-    let chosen: Vec<&ast::Component> = match &options.component {
+    let chosen: Vec<&Component> = match &options.component {
         Some(name) => match model.component(name) {
             Some(component) => vec![component],
             None => {
@@ -278,8 +279,7 @@ pub fn diagrams(
         },
         None => checked
             .components()
-            .filter(|(file, _)| (file.0 as usize) < roots || *file == FileId(0))
-            .map(|(_, component)| component)
+            .filter(|component| (component.file.0 as usize) < roots || component.file == FileId(0))
             .collect(),
     };
     if chosen.is_empty() {
@@ -287,7 +287,7 @@ pub fn diagrams(
     }
     let mut out = Vec::new();
     for component in chosen {
-        let compound = component.kind == ast::ComponentKind::Compound;
+        let compound = component.kind == ComponentKind::Compound;
         let views: Vec<View> = if options.views.is_empty() {
             if compound {
                 vec![View::Interface, View::Structure, View::Automaton]
@@ -306,7 +306,7 @@ pub fn diagrams(
                     // every component, the atomic ones simply have no structure.
                     if options.component.is_some() {
                         return Err(SelectError::NotApplicable {
-                            component: component.name.name.clone(),
+                            component: component.name.clone(),
                             view: view.name(),
                         });
                     }

@@ -1,88 +1,54 @@
-//! Types, port kinds and expressions printed back as `.cool` text, for diagram labels.
+//! Port kinds and values printed back as `.cool` text, for diagram labels (types
+//! print as written through their `Display`).
 
-use crate::ast::{self, BinaryOp, ExprKind, TypeKind, UnaryOp};
-use crate::check::model::prim_name;
+use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
+use crate::checked::model::{Declared, InputKind, OutputKind, PortRef};
 
-/// A type as written (`[f32; 16]`, `Pose2D?`).
-pub fn ty(ty: &ast::Type) -> String {
-    match &ty.kind {
-        TypeKind::Prim(prim) => prim_name(*prim).to_owned(),
-        TypeKind::Named(name) => name.name.clone(),
-        TypeKind::List(inner) => format!("[{}]", self::ty(inner)),
-        TypeKind::Array(inner, size) => format!("[{}; {}]", self::ty(inner), size.value),
-        TypeKind::Optional(inner) => format!("{}?", self::ty(inner)),
-    }
+/// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
+pub fn input_kind(input: &Declared<InputKind>) -> String {
+    let kind = match &input.kind {
+        InputKind::Tick => "tick".to_owned(),
+        InputKind::Fifo { ty, size, policy } => match policy {
+            Some(policy) => format!("fifo<{ty}>({size}, {policy})"),
+            None => format!("fifo<{ty}>({size})"),
+        },
+        InputKind::Ufifo { ty, size, max } => match max {
+            Some(max) => format!("ufifo<{ty}>({size}, max {max})"),
+            None => format!("ufifo<{ty}>({size})"),
+        },
+        InputKind::Last(ty) => format!("last<{ty}>"),
+        InputKind::Poster(ty) => format!("poster<{ty}>"),
+    };
+    with_pull(kind, input.pull)
 }
 
-/// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`;
-/// `None` for an exported input.
-pub fn input_kind(input: &ast::Input) -> Option<String> {
-    let kind = match &input.def {
-        ast::InputDef::Tick => "tick".to_owned(),
-        ast::InputDef::Fifo {
-            ty: packet,
-            size,
-            policy,
-        } => match policy {
-            Some(policy) => format!("fifo<{}>({}, {})", ty(packet), size.value, policy.name),
-            None => format!("fifo<{}>({})", ty(packet), size.value),
-        },
-        ast::InputDef::Ufifo {
-            size,
-            ty: packet,
-            max,
-        } => match max {
-            Some(max) => format!("ufifo<{}>({}, max {})", ty(packet), size.value, max.value),
-            None => format!("ufifo<{}>({})", ty(packet), size.value),
-        },
-        ast::InputDef::Last(packet) => format!("last<{}>", ty(packet)),
-        ast::InputDef::Poster(packet) => format!("poster<{}>", ty(packet)),
-        ast::InputDef::Export(_) => return None,
+/// An output's kind as written (`data<Pose2D>`, `tick`), with ` pull`.
+pub fn output_kind(output: &Declared<OutputKind>) -> String {
+    let kind = match &output.kind {
+        OutputKind::Tick => "tick".to_owned(),
+        OutputKind::Data(ty) => format!("data<{ty}>"),
+        OutputKind::Poster(ty) => format!("poster<{ty}>"),
     };
-    Some(with_pull(kind, input.pull.is_some()))
-}
-
-/// An output's kind as written (`data<Pose2D>`, `tick`), with ` pull`; `None` for an
-/// exported output.
-pub fn output_kind(output: &ast::Output) -> Option<String> {
-    let kind = match &output.def {
-        ast::OutputDef::Tick => "tick".to_owned(),
-        ast::OutputDef::Data(packet) => format!("data<{}>", ty(packet)),
-        ast::OutputDef::Poster(packet) => format!("poster<{}>", ty(packet)),
-        ast::OutputDef::Export(_) => return None,
-    };
-    Some(with_pull(kind, output.pull.is_some()))
+    with_pull(kind, output.pull)
 }
 
 fn with_pull(kind: String, pull: bool) -> String {
     if pull { format!("{kind} pull") } else { kind }
 }
 
-/// The connection kind an input forms (paper Figure 3): the input's kind name.
-pub fn connection_kind(input: &ast::Input) -> Option<&'static str> {
-    Some(match &input.def {
-        ast::InputDef::Tick => "tick",
-        ast::InputDef::Fifo { .. } => "fifo",
-        ast::InputDef::Ufifo { .. } => "ufifo",
-        ast::InputDef::Last(_) => "last",
-        ast::InputDef::Poster(_) => "poster",
-        ast::InputDef::Export(_) => return None,
-    })
-}
-
 /// `instance.port`, or `port`.
-pub fn port_ref(port: &ast::PortRef) -> String {
+pub fn port_ref(port: &PortRef) -> String {
     match &port.instance {
-        Some(instance) => format!("{}.{}", instance.name, port.port.name),
-        None => port.port.name.clone(),
+        Some(instance) => format!("{}.{}", instance.name, port.port),
+        None => port.port.clone(),
     }
 }
 
 /// `lo` or `lo..hi`.
-pub fn interval(interval: &ast::Interval) -> String {
-    match &interval.hi {
-        Some(hi) => format!("{}..{}", expr(&interval.lo), expr(hi)),
-        None => expr(&interval.lo),
+pub fn interval(lo: &ast::Expr, hi: Option<&ast::Expr>) -> String {
+    match hi {
+        Some(hi) => format!("{}..{}", expr(lo), expr(hi)),
+        None => expr(lo),
     }
 }
 

@@ -1,5 +1,7 @@
-//! Lowering of compound components: the supervisor (states, sections, own variables),
-//! the instances and everything the runtime's `coolbot::CompoundBuilder` is told
+//! Lowering of compound components, from their resolved model alone
+//! ([`crate::checked::model`]): its own variables, the supervisor (its states are
+//! lowered by `automaton`, as an atomic's are), the instances and everything the
+//! runtime's `coolbot::CompoundBuilder` is told
 //! (connections, exports, mapped variables, policies, substitutes, redundant groups,
 //! recovery). The `when` rules are compiled to typed Rust over `coolbot::View` by the
 //! submodule `rules`.
@@ -12,331 +14,190 @@ mod rules;
 
 use std::collections::BTreeSet;
 
-use super::{
-    GEN_TYPES, Lowerer, SectionOwner, StateSections, adaptation, choose_stub, doc, duration_ns,
-    duration_rust, may_targets, rust_ty, section_stubs, unique_among,
-};
-use crate::ast::{self, ExprKind};
+use super::automaton::{self, Lowered, SectionOwner};
+use super::{GEN_TYPES, Lowerer, adaptation, duration_ns, duration_rust, rust_ty, unique_among};
+use crate::ast;
 use crate::check::model::{Tuning, Ty};
+use crate::checked::model::{Component, ComponentKind, Instance, PortRef, TimingEntry, VarKind};
 use crate::ident;
 use crate::ir;
 
 /// The supervisor state of a compound that declares none.
 const IMPLICIT_STATE: &str = "supervising";
 
+/// A compound's mapped controllable variable: `(name, instance, variable)`.
+type MappedControllable<'m> = (&'m str, &'m str, &'m str);
+
 impl<'a> Lowerer<'a> {
-    /// The instance `name` of `component`.
-    fn instance_of(component: &'a ast::Component, name: &str) -> Option<&'a ast::Instance> {
-        component.members.iter().find_map(|m| match m {
-            ast::Member::Instance(i) if i.name.name == name => Some(i),
-            _ => None,
-        })
-    }
-
-    fn component_of(&self, instance: &ast::Instance) -> Option<&'a ast::Component> {
-        self.checked
-            .component(&instance.component.name)
-            .map(|(_, component)| component)
-    }
-
-    /// The input or output (`input`) port `port` of `component`, followed through
-    /// the exports of nested compounds to the atomic port that implements it.
-    fn leaf_port(
-        &self,
-        component: &'a ast::Component,
-        port: &str,
-        input: bool,
-        depth: usize,
-    ) -> Option<LeafPort<'a>> {
-        if depth > 64 {
-            return None;
-        }
-        for member in &component.members {
-            match member {
-                ast::Member::Input(i) if input && i.name.name == port => {
-                    return match &i.def {
-                        ast::InputDef::Export(target) => {
-                            self.exported_port(component, target, true, depth)
-                        }
-                        _ => Some(LeafPort::Input(i)),
-                    };
-                }
-                ast::Member::Output(o) if !input && o.name.name == port => {
-                    return match &o.def {
-                        ast::OutputDef::Export(target) => {
-                            self.exported_port(component, target, false, depth)
-                        }
-                        _ => Some(LeafPort::Output(o)),
-                    };
-                }
-                _ => {}
-            }
-        }
-        None
-    }
-
-    /// The atomic port an export of `component` names.
-    fn exported_port(
-        &self,
-        component: &'a ast::Component,
-        target: &ast::PortRef,
-        input: bool,
-        depth: usize,
-    ) -> Option<LeafPort<'a>> {
-        let instance = Self::instance_of(component, &target.instance.as_ref()?.name)?;
-        let inner = self.component_of(instance)?;
-        self.leaf_port(inner, &target.port.name, input, depth + 1)
-    }
-
-    /// The packet type of exported input (`input`) or output `name` of `component`
-    /// (the port it exports, through nested compounds), from the component's
-    /// interface: `Some(None)` for a tick port, `None` when it does not resolve.
-    fn export_type(
-        &self,
-        component: &ast::Component,
-        name: &str,
-        input: bool,
-    ) -> Option<Option<Ty>> {
-        let interface = self.checked.interface(&component.name.name)?;
-        let ports = if input {
-            &interface.inputs
-        } else {
-            &interface.outputs
-        };
-        ports.get(name).map(|port| port.ty.clone())
-    }
-
-    /// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of an exported port: the
-    /// atomic port's, under the compound's name for it.
-    fn export_spec(
-        &self,
-        component: &'a ast::Component,
-        name: &str,
-        target: &ast::PortRef,
-        input: bool,
-    ) -> Option<String> {
-        let port = match self.exported_port(component, target, input, 0)? {
-            LeafPort::Input(i) => self.input(i),
-            LeafPort::Output(o) => self.output(o),
-        }?;
-        let kind = if input { "InputSpec" } else { "OutputSpec" };
-        Some(format!(
-            "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
-            ident::string_literal(name),
-            port.kind,
-            ident::string_literal(&port.packet),
-            port.pull
-        ))
-    }
-
-    /// The type of variable `name` of `component` (through mapped variables of
-    /// nested compounds), from the component's interface.
-    fn variable_type(&self, component: &ast::Component, name: &str) -> Option<Ty> {
-        let variable = self
-            .checked
-            .interface(&component.name.name)?
-            .variables
-            .get(name)?;
+    /// The type of variable `name` of component `component` (through mapped
+    /// variables of nested compounds), from the component's interface.
+    fn variable_type(&self, component: &str, name: &str) -> Option<Ty> {
+        let variable = self.checked.interface(component)?.variables.get(name)?;
         (variable.ty != Ty::Unknown).then(|| variable.ty.clone())
-    }
-
-    /// The user states and quality levels of `component` (a compound's supervisor
-    /// states are its user states).
-    fn states_and_qualities(component: &ast::Component) -> (Vec<String>, Vec<String>) {
-        let mut states = Vec::new();
-        let mut qualities = Vec::new();
-        for member in &component.members {
-            match member {
-                ast::Member::Automaton(a) if states.is_empty() => {
-                    states = a.states.iter().map(|s| s.name.name.clone()).collect();
-                }
-                ast::Member::Timing(t) => {
-                    for entry in &t.entries {
-                        if let ast::TimingEntry::Quality(names, _) = entry {
-                            qualities = names.iter().map(|n| n.name.clone()).collect();
-                        }
-                    }
-                }
-                _ => {}
-            }
-        }
-        (states, qualities)
     }
 
     /// Whether compound `c` connects through a converter, itself or in a compound it
     /// nests at any depth: its builder then takes the converters as a type argument
     /// and passes them on to the nested builders.
-    fn uses_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
-        let own = c
-            .members
-            .iter()
-            .any(|m| matches!(m, ast::Member::Connect(k) if k.via.is_some()));
+    fn uses_converters(&self, c: &'a Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        let own = c.connections.iter().any(|k| k.via.is_some());
         own || self.nests_converters(c, visiting)
     }
 
     /// Whether an instance of compound `c` is a compound that uses converters.
-    fn nests_converters(&self, c: &'a ast::Component, visiting: &mut BTreeSet<&'a str>) -> bool {
-        if !visiting.insert(&c.name.name) {
+    fn nests_converters(&self, c: &'a Component, visiting: &mut BTreeSet<&'a str>) -> bool {
+        if !visiting.insert(&c.name) {
             // A compound nesting itself was rejected by the checker.
             return false;
         }
-        let nested = c.members.iter().any(|m| match m {
-            ast::Member::Instance(i) => self.component_of(i).is_some_and(|t| {
-                t.kind == ast::ComponentKind::Compound && self.uses_converters(t, visiting)
-            }),
-            _ => false,
+        let nested = c.instances.iter().any(|i| {
+            self.checked.component(&i.component).is_some_and(|t| {
+                t.kind == ComponentKind::Compound && self.uses_converters(t, visiting)
+            })
         });
-        visiting.remove(c.name.name.as_str());
+        visiting.remove(c.name.as_str());
         nested
     }
 
     /// Lowers compound `c` into the IR of its generated module.
-    pub(super) fn compound(&self, c: &'a ast::Component, module: String) -> ir::Compound {
-        let mut instances = Vec::new();
-        let mut connections = Vec::new();
-        let mut steps = Vec::new();
-        let mut vars = Vec::new();
-        let mut automaton = None;
-        let mut timing = None;
-        let mut recovery = None;
-        let mut uses_converters = false;
+    pub(super) fn compound(&self, c: &'a Component, module: String) -> ir::Compound {
+        // Builder steps with where their member is written: they follow source
+        // order across member kinds.
+        let mut ordered: Vec<(usize, String)> = Vec::new();
         let mut input_specs = Vec::new();
         let mut output_specs = Vec::new();
+        let mapped_controllables = Self::mapped_controllables(c);
+
         // `Parts` method names: `supervisor`, then one per instance.
         let mut part_names: Vec<String> = vec!["supervisor".to_owned()];
+        let mut instances = Vec::new();
+        for i in &c.instances {
+            let method = unique_among(ident::snake(&i.name), part_names.iter().map(String::as_str));
+            part_names.push(method.clone());
+            instances.push(self.instance(i, method, &mapped_controllables));
+        }
+        let connections: Vec<ir::Connection> = c
+            .connections
+            .iter()
+            .map(|connect| ir::Connection {
+                from: port_address(&connect.from),
+                to: port_address(&connect.to),
+                via: connect.via.as_ref().map(|v| ident::snake(v)),
+                converter: connect.via.clone(),
+            })
+            .collect();
+        let uses_converters = c.connections.iter().any(|k| k.via.is_some());
+        for input in &c.inputs {
+            let Some(target) = &input.export else {
+                continue;
+            };
+            let name = ident::string_literal(&input.name);
+            let target_lit = ident::string_literal(&port_address(target));
+            let step = match input.port.as_ref().map(|p| p.kind.packet()) {
+                Some(None) => format!(".export_tick_input({name}, {target_lit})"),
+                Some(Some(ty)) => format!(
+                    ".export_input::<{}>({name}, {target_lit})",
+                    rust_ty(ty, GEN_TYPES)
+                ),
+                None => format!(".export_input::<()>({name}, {target_lit})"),
+            };
+            ordered.push((input.span.start, step));
+            input_specs.extend(export_spec(&input.name, self.input(input), true));
+        }
+        for output in &c.outputs {
+            let Some(target) = &output.export else {
+                continue;
+            };
+            output_specs.extend(export_spec(&output.name, self.output(output), false));
+            let name = ident::string_literal(&output.name);
+            let target_lit = ident::string_literal(&port_address(target));
+            let step = match output.port.as_ref().map(|p| p.kind.packet()) {
+                Some(None) => format!(".export_tick_output({name}, {target_lit})"),
+                Some(Some(ty)) => format!(
+                    ".export_output::<{}>({name}, {target_lit})",
+                    rust_ty(ty, GEN_TYPES)
+                ),
+                None => format!(".export_output::<()>({name}, {target_lit})"),
+            };
+            ordered.push((output.span.start, step));
+        }
+        let mut vars = Vec::new();
         let mut spec_index = 0;
-        let mapped_controllables = Self::mapped_controllables(c);
-        for member in &c.members {
-            match member {
-                ast::Member::Instance(i) => {
-                    let method = unique_among(
-                        ident::snake(&i.name.name),
-                        part_names.iter().map(String::as_str),
-                    );
-                    part_names.push(method.clone());
-                    instances.push(self.instance(i, method, &mapped_controllables));
+        for v in &c.variables {
+            match (&v.written, &v.mapping) {
+                (Some(_), _) => {
+                    if let Some(var) = self.variable(v, &mut spec_index, "vars") {
+                        vars.push(var);
+                    }
                 }
-                ast::Member::Connect(connect) => {
-                    let end = |p: &ast::PortRef| match &p.instance {
-                        Some(i) => format!("{}.{}", i.name, p.port.name),
-                        None => p.port.name.clone(),
+                (None, Some(path)) => {
+                    let call = match v.kind {
+                        VarKind::Controllable => "map_controllable",
+                        _ => "map_observable",
                     };
-                    let via = connect.via.as_ref().map(|v| ident::snake(&v.name));
-                    uses_converters |= via.is_some();
-                    connections.push(ir::Connection {
-                        from: end(&connect.from),
-                        to: end(&connect.to),
-                        via,
-                        converter: connect.via.as_ref().map(|v| v.name.clone()),
-                    });
-                }
-                ast::Member::Input(input) => {
-                    if let ast::InputDef::Export(target) = &input.def {
-                        let address = port_address(target);
-                        let name = ident::string_literal(&input.name.name);
-                        let target_lit = ident::string_literal(&address);
-                        let step = match self.export_type(c, &input.name.name, true) {
-                            Some(None) => format!(".export_tick_input({name}, {target_lit})"),
-                            Some(Some(ty)) => format!(
-                                ".export_input::<{}>({name}, {target_lit})",
-                                rust_ty(&ty, GEN_TYPES)
-                            ),
-                            None => format!(".export_input::<()>({name}, {target_lit})"),
-                        };
-                        steps.push(step);
-                        input_specs.extend(self.export_spec(c, &input.name.name, target, true));
-                    }
-                }
-                ast::Member::Output(output) => {
-                    if let ast::OutputDef::Export(target) = &output.def {
-                        output_specs.extend(self.export_spec(c, &output.name.name, target, false));
-                        let name = ident::string_literal(&output.name.name);
-                        let target_lit = ident::string_literal(&port_address(target));
-                        steps.push(match self.export_type(c, &output.name.name, false) {
-                            Some(None) => format!(".export_tick_output({name}, {target_lit})"),
-                            Some(Some(ty)) => format!(
-                                ".export_output::<{}>({name}, {target_lit})",
-                                rust_ty(&ty, GEN_TYPES)
-                            ),
-                            None => format!(".export_output::<()>({name}, {target_lit})"),
-                        });
-                    }
-                }
-                ast::Member::Variable(v) => match (&v.ty, &v.value) {
-                    (None, Some(value)) => {
-                        if let ExprKind::Path(segments) = &value.kind {
-                            let target: Vec<&str> =
-                                segments.iter().map(|s| s.name.as_str()).collect();
-                            let call = match v.kind {
-                                ast::VarKind::Controllable => "map_controllable",
-                                _ => "map_observable",
-                            };
-                            steps.push(format!(
-                                ".{call}({}, {})",
-                                ident::string_literal(&v.name.name),
-                                ident::string_literal(&target.join("."))
-                            ));
-                        }
-                    }
-                    (Some(_), _) => {
-                        if let Some(var) = self.variable(v, &mut spec_index, "vars") {
-                            vars.push(var);
-                        }
-                    }
-                    (None, None) => {}
-                },
-                ast::Member::OnError(on) => {
-                    let policy = match on.policy.name.as_str() {
-                        "restart" => "Restart",
-                        "substitute" => "Substitute",
-                        "ignore" => "Ignore",
-                        _ => "Propagate",
-                    };
-                    steps.push(format!(
-                        ".on_error({}, ::coolbot::Policy::{policy})",
-                        ident::string_literal(&on.instance.name)
+                    ordered.push((
+                        v.span.start,
+                        format!(
+                            ".{call}({}, {})",
+                            ident::string_literal(&v.name),
+                            ident::string_literal(&path.join("."))
+                        ),
                     ));
                 }
-                ast::Member::Redundant(r) => {
-                    let members: Vec<String> = r
-                        .members
-                        .iter()
-                        .map(|m| ident::string_literal(&m.name))
-                        .collect();
-                    steps.push(format!(".redundant(&[{}])", members.join(", ")));
-                }
-                ast::Member::Recovery(r) => {
-                    recovery.get_or_insert(r);
-                }
-                ast::Member::Restart(r) => {
-                    if let Some((count, window)) = &r.limit {
-                        // Checked: an integer in `1..=u32::MAX` and non-zero durations.
-                        let count = match count.kind {
-                            ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
-                            _ => u32::MAX,
-                        };
-                        steps.push(format!(
-                            ".restart_budget({count}, {})",
-                            duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
-                        ));
-                    }
-                    if let Some((first, last)) = &r.backoff {
-                        steps.push(format!(
-                            ".restart_backoff({}, {})",
-                            duration_rust(duration_ns(first).unwrap_or(10_000_000)),
-                            duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
-                        ));
-                    }
-                }
-                ast::Member::Automaton(a) => {
-                    automaton.get_or_insert(a);
-                }
-                ast::Member::Timing(t) => {
-                    timing.get_or_insert(t);
-                }
-                _ => {}
+                (None, None) => {}
             }
         }
+        for on in &c.policies {
+            let policy = match on.policy.as_str() {
+                "restart" => "Restart",
+                "substitute" => "Substitute",
+                "ignore" => "Ignore",
+                _ => "Propagate",
+            };
+            ordered.push((
+                on.span.start,
+                format!(
+                    ".on_error({}, ::coolbot::Policy::{policy})",
+                    ident::string_literal(&on.instance)
+                ),
+            ));
+        }
+        for r in &c.redundant {
+            let members: Vec<String> = r.members.iter().map(|m| ident::string_literal(m)).collect();
+            ordered.push((
+                r.span.start,
+                format!(".redundant(&[{}])", members.join(", ")),
+            ));
+        }
+        if let Some(r) = &c.restart {
+            if let Some((count, window)) = &r.limit {
+                // Checked: an integer in `1..=u32::MAX` and non-zero durations.
+                let count = match count.kind {
+                    ast::ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
+                    _ => u32::MAX,
+                };
+                ordered.push((
+                    r.span.start,
+                    format!(
+                        ".restart_budget({count}, {})",
+                        duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
+                    ),
+                ));
+            }
+            if let Some((first, last)) = &r.backoff {
+                ordered.push((
+                    r.span.start,
+                    format!(
+                        ".restart_backoff({}, {})",
+                        duration_rust(duration_ns(first).unwrap_or(10_000_000)),
+                        duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
+                    ),
+                ));
+            }
+        }
+        // Stable: the two steps of one `restart` block keep their order.
+        ordered.sort_by_key(|(start, _)| *start);
+        let mut steps: Vec<String> = ordered.into_iter().map(|(_, step)| step).collect();
         steps.extend(self.compound_adaptation(c));
         // Substitutes after every instance (a substitute may be declared before the
         // instance it stands for).
@@ -349,7 +210,7 @@ impl<'a> Lowerer<'a> {
                 ));
             }
         }
-        if let Some(r) = recovery {
+        if let Some(r) = &c.recovery {
             let ns =
                 |e: Option<&ast::Expr>, default: u64| e.and_then(duration_ns).unwrap_or(default);
             steps.push(format!(
@@ -359,11 +220,11 @@ impl<'a> Lowerer<'a> {
             ));
         }
 
-        let supervisor = self.supervisor(c, automaton);
+        let supervisor = self.supervisor(c);
         let rules = rules::compile(self, c, &supervisor.when);
 
         let handles = self.handles(c, &instances);
-        let name = ident::camel_raw(&c.name.name);
+        let name = ident::camel_raw(&c.name);
         let parts = instances
             .iter()
             .map(|i| self.part_stub(i))
@@ -380,9 +241,13 @@ impl<'a> Lowerer<'a> {
         }];
         all_parts.extend(parts);
         ir::Compound {
-            doc: doc(&c.doc),
-            notes: ir::notes(&c.notes),
-            type_name: c.name.name.clone(),
+            doc: c.doc.clone(),
+            notes: ir::notes(
+                c.notes
+                    .iter()
+                    .map(|n| (n.subject.as_str(), n.doc.as_slice())),
+            ),
+            type_name: c.name.clone(),
             module,
             user_struct: format!("{name}Parts"),
             supervisor_struct: format!("{name}Supervisor"),
@@ -400,7 +265,7 @@ impl<'a> Lowerer<'a> {
             methods: supervisor.methods,
             section_arms: supervisor.section_arms,
             choose_arms: supervisor.choose_arms,
-            timing: self.timing(timing),
+            timing: self.timing(c.timing.as_deref()),
             rules,
             handles,
         }
@@ -408,19 +273,17 @@ impl<'a> Lowerer<'a> {
 
     /// The typed handles of `c`'s instances for the supervisor's `Cx`: one per
     /// instance whose component is known, in declaration order.
-    fn handles(&self, c: &'a ast::Component, instances: &[ir::Instance]) -> Vec<ir::Handle> {
+    fn handles(&self, c: &'a Component, instances: &[ir::Instance]) -> Vec<ir::Handle> {
         // Names the handles' methods and types must not take: `Instances` has no
         // other method; the types live beside the module's own.
         let mut methods: Vec<String> = Vec::new();
         let mut types: Vec<String> = Vec::new();
         let mut handles = Vec::new();
-        for lowered in instances {
-            let Some(instance) = Self::instance_of(c, &lowered.name) else {
-                continue;
-            };
-            let (Some(component), Some(module)) =
-                (self.component_of(instance), lowered.module.as_ref())
-            else {
+        for (instance, lowered) in c.instances.iter().zip(instances) {
+            let (Some(component), Some(module)) = (
+                self.checked.component(&instance.component),
+                lowered.module.as_ref(),
+            ) else {
                 continue;
             };
             let method = unique_among(
@@ -434,55 +297,44 @@ impl<'a> Lowerer<'a> {
             );
             types.push(type_name.clone());
             let mut setters = Vec::new();
-            let mut config = None;
-            for member in &component.members {
-                match member {
-                    ast::Member::Variable(v) if v.kind == ast::VarKind::Controllable => {
-                        let Some(ty) = self.variable_type(component, &v.name.name) else {
-                            continue;
-                        };
-                        let rust_ty = rust_ty(&ty, GEN_TYPES);
-                        // A type holding an array longer than 32 elements goes through
-                        // its serde_with adapter, as the instance's own variable does.
-                        let to_value = match (super::serde_adapter(&ty), &ty) {
-                            (Some(adapter), _) => format!(
-                                "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
-                                super::SERDE_WITH
-                            ),
-                            (
-                                None,
-                                Ty::Bool
-                                | Ty::Int(_)
-                                | Ty::Float(_)
-                                | Ty::Str
-                                | Ty::Time
-                                | Ty::Duration,
-                            ) => "::coolbot::Value::from(value)".to_owned(),
-                            (None, _) => "super::__cool_to_value(&value)".to_owned(),
-                        };
-                        setters.push(ir::Setter {
-                            method: ident::method("set_", &v.name.name, ""),
-                            variable: v.name.name.clone(),
-                            ty: rust_ty,
-                            to_value,
-                        });
-                    }
-                    ast::Member::Configuration(block)
-                        if !lowered.compound && !block.fields.is_empty() =>
-                    {
-                        config = Some(format!("super::{module}::Config"));
-                    }
-                    _ => {}
-                }
+            for v in component
+                .variables
+                .iter()
+                .filter(|v| v.kind == VarKind::Controllable)
+            {
+                let Some(ty) = self.variable_type(&component.name, &v.name) else {
+                    continue;
+                };
+                let rust_ty = rust_ty(&ty, GEN_TYPES);
+                // A type holding an array longer than 32 elements goes through its
+                // serde_with adapter, as the instance's own variable does.
+                let to_value = match (super::serde_adapter(&ty), &ty) {
+                    (Some(adapter), _) => format!(
+                        "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
+                        super::SERDE_WITH
+                    ),
+                    (
+                        None,
+                        Ty::Bool | Ty::Int(_) | Ty::Float(_) | Ty::Str | Ty::Time | Ty::Duration,
+                    ) => "::coolbot::Value::from(value)".to_owned(),
+                    (None, _) => "super::__cool_to_value(&value)".to_owned(),
+                };
+                setters.push(ir::Setter {
+                    method: ident::method("set_", &v.name, ""),
+                    variable: v.name.clone(),
+                    ty: rust_ty,
+                    to_value,
+                });
             }
-            let (_, mut levels) = Self::states_and_qualities(component);
-            if let Some(own) = instance.timing.as_ref().and_then(|timing| {
-                timing.entries.iter().find_map(|entry| match entry {
-                    ast::TimingEntry::Quality(levels, _) => Some(levels),
-                    _ => None,
-                })
-            }) {
-                levels = own.iter().map(|level| level.name.clone()).collect();
+            let config = (!lowered.compound
+                && component
+                    .configuration
+                    .as_ref()
+                    .is_some_and(|fields| !fields.is_empty()))
+            .then(|| format!("super::{module}::Config"));
+            let mut levels = quality_levels(component.timing.as_deref()).unwrap_or_default();
+            if let Some(own) = instance.timing.as_deref().and_then(first_quality_levels) {
+                levels = own;
             }
             let quality = (levels.len() >= 2).then(|| {
                 let name = unique_among(
@@ -509,26 +361,14 @@ impl<'a> Lowerer<'a> {
         handles
     }
 
-    /// The mapped controllable variables of compound `c`: `(name, instance,
-    /// variable)`, in declaration order.
-    fn mapped_controllables(c: &'a ast::Component) -> Vec<(&'a str, &'a str, &'a str)> {
-        c.members
+    /// The mapped controllable variables of compound `c`, in declaration order.
+    fn mapped_controllables(c: &'a Component) -> Vec<MappedControllable<'a>> {
+        c.variables
             .iter()
-            .filter_map(|m| match m {
-                ast::Member::Variable(v)
-                    if v.ty.is_none() && v.kind == ast::VarKind::Controllable =>
-                {
-                    match &v.value.as_ref()?.kind {
-                        ExprKind::Path(segments) => match segments.as_slice() {
-                            [instance, variable] => Some((
-                                v.name.name.as_str(),
-                                instance.name.as_str(),
-                                variable.name.as_str(),
-                            )),
-                            _ => None,
-                        },
-                        _ => None,
-                    }
+            .filter(|v| v.written.is_none() && v.kind == VarKind::Controllable)
+            .filter_map(|v| match v.mapping.as_deref()? {
+                [instance, variable] => {
+                    Some((v.name.as_str(), instance.as_str(), variable.as_str()))
                 }
                 _ => None,
             })
@@ -537,13 +377,15 @@ impl<'a> Lowerer<'a> {
 
     /// The `Mapped` fields of compound `c`: one per mapped controllable variable,
     /// typed like the instance variable it names.
-    fn mapped_fields(&self, c: &'a ast::Component) -> Vec<ir::MappedField> {
+    fn mapped_fields(&self, c: &'a Component) -> Vec<ir::MappedField> {
         Self::mapped_controllables(c)
             .into_iter()
             .map(|(name, instance, variable)| {
-                let ty = Self::instance_of(c, instance)
-                    .and_then(|i| self.component_of(i))
-                    .and_then(|t| self.variable_type(t, variable))
+                let ty = c
+                    .instances
+                    .iter()
+                    .find(|i| i.name == instance)
+                    .and_then(|i| self.variable_type(&i.component, variable))
                     .map(|ty| {
                         let rust = rust_ty(&ty, GEN_TYPES);
                         if self.ty_defaultable(&ty) {
@@ -569,26 +411,26 @@ impl<'a> Lowerer<'a> {
     /// given to `builder_with`, go to the instance).
     fn instance(
         &self,
-        i: &'a ast::Instance,
+        i: &'a Instance,
         method: String,
-        mapped: &[(&str, &str, &str)],
+        mapped: &[MappedControllable<'_>],
     ) -> ir::Instance {
-        let target = self.component_of(i);
-        let module = target.and_then(|t| self.modules.get(t.name.name.as_str()).cloned());
-        let compound = target.is_some_and(|t| t.kind == ast::ComponentKind::Compound);
-        let name = ident::string_literal(&i.name.name);
+        let target = self.checked.component(&i.component);
+        let module = target.and_then(|t| self.modules.get(t.name.as_str()).cloned());
+        let compound = target.is_some_and(|t| t.kind == ComponentKind::Compound);
+        let name = ident::string_literal(&i.name);
         let config_overrides = self.overrides(i, true);
         let var_overrides = self.overrides(i, false);
         // The enclosing compound's mapped controllables that name this instance:
         // `(instance variable, field of the enclosing `Mapped`)`.
         let from_mapped: Vec<(String, String)> = mapped
             .iter()
-            .filter(|(_, instance, _)| *instance == i.name.name)
+            .filter(|(_, instance, _)| *instance == i.name)
             .map(|(name, _, variable)| (ident::snake(variable), ident::snake(name)))
             .collect();
         // A nested compound's own mapped controllables, overridden here or fed from
         // the enclosing `Mapped`.
-        let inner_mapped: Vec<(&str, &str, &str)> = match target {
+        let inner_mapped: Vec<MappedControllable<'_>> = match target {
             Some(t) if compound => Self::mapped_controllables(t),
             _ => Vec::new(),
         };
@@ -600,11 +442,11 @@ impl<'a> Lowerer<'a> {
         let mut mapped_overrides: Vec<(String, String)> = Vec::new();
         if let Some(t) = target.filter(|_| compound) {
             for o in &i.overrides {
-                let field = ident::snake(&o.name.name);
+                let field = ident::snake(&o.name);
                 if !is_inner_mapped(&field) {
                     continue;
                 }
-                if let Some(ty) = self.variable_type(t, &o.name.name) {
+                if let Some(ty) = self.variable_type(&t.name, &o.name) {
                     let value = self.value(&o.value, Some(&ty), GEN_TYPES);
                     let value = if self.ty_defaultable(&ty) {
                         value
@@ -683,8 +525,8 @@ impl<'a> Lowerer<'a> {
         let unapplied: Vec<String> = i
             .overrides
             .iter()
-            .filter(|o| !applied.contains(ident::snake(&o.name.name).as_str()))
-            .map(|o| o.name.name.clone())
+            .filter(|o| !applied.contains(ident::snake(&o.name).as_str()))
+            .map(|o| o.name.clone())
             .collect();
         let timing = match (&module, &i.timing) {
             (Some(module), Some(t)) => {
@@ -697,21 +539,21 @@ impl<'a> Lowerer<'a> {
             (build, _) => build,
         };
         // Checked: only an instance of an atomic component has an `adaptation` block.
-        let component = match component {
-            Some(build) if !i.adaptation.is_empty() => Some(format!(
+        let component = match (component, &i.tuning) {
+            (Some(build), Some(tuning)) => Some(format!(
                 "{build}.with_adaptation({})",
-                adaptation::config_always(&self.checked.instance_tuning(i))
+                adaptation::config_always(tuning)
             )),
-            build => build,
+            (build, _) => build,
         };
         ir::Instance {
-            name: i.name.name.clone(),
+            name: i.name.clone(),
             method,
-            component: i.component.name.clone(),
+            component: i.component.clone(),
             module,
             compound,
             substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
-            node: i.node.as_ref().map(|n| n.value.clone()),
+            node: i.node.clone(),
             build: component,
             timing,
             unapplied,
@@ -721,8 +563,8 @@ impl<'a> Lowerer<'a> {
     }
 
     /// The builder steps of a compound's own `adaptation { ... }`.
-    fn compound_adaptation(&self, c: &ast::Component) -> Vec<String> {
-        let Some(interface) = self.checked.interface(&c.name.name) else {
+    fn compound_adaptation(&self, c: &Component) -> Vec<String> {
+        let Some(interface) = self.checked.interface(&c.name) else {
             return Vec::new();
         };
         let tuning = &interface.adaptation;
@@ -742,35 +584,30 @@ impl<'a> Lowerer<'a> {
 
     /// An instance's `timing { ... }`: the entries it names replace those of the
     /// component's block (`base`), the others are kept.
-    fn timing_override(&self, timing: &ast::Timing, base: &str) -> String {
+    fn timing_override(&self, timing: &[TimingEntry], base: &str) -> String {
         let mut fields = Vec::new();
         let option = |ns: Option<u64>| match ns {
             Some(ns) => format!("::core::option::Option::Some({})", duration_rust(ns)),
             None => "::core::option::Option::None".to_owned(),
         };
-        for entry in &timing.entries {
+        for entry in timing {
             match entry {
-                ast::TimingEntry::Period(interval) => {
-                    fields.push(("period", option(duration_ns(&interval.lo))));
-                    fields.push((
-                        "max_period",
-                        option(interval.hi.as_ref().and_then(duration_ns)),
-                    ));
+                TimingEntry::Period(lo, hi) => {
+                    fields.push(("period", option(duration_ns(lo))));
+                    fields.push(("max_period", option(hi.as_ref().and_then(duration_ns))));
                 }
-                ast::TimingEntry::MaxResponse(e) => {
+                TimingEntry::MaxResponse(e) => {
                     fields.push(("max_response", option(duration_ns(e))));
                 }
-                ast::TimingEntry::Priority(e) => {
+                TimingEntry::Priority(e) => {
                     let priority = super::int_value(e)
                         .unwrap_or(0)
                         .clamp(i32::MIN.into(), i32::MAX.into());
                     fields.push(("priority", priority.to_string()));
                 }
-                ast::TimingEntry::Quality(names, _) => {
-                    let names: Vec<String> = names
-                        .iter()
-                        .map(|n| ident::string_literal(&n.name))
-                        .collect();
+                TimingEntry::Quality(names) => {
+                    let names: Vec<String> =
+                        names.iter().map(|n| ident::string_literal(n)).collect();
                     fields.push(("qualities", format!("&[{}]", names.join(", "))));
                 }
             }
@@ -826,136 +663,12 @@ impl<'a> Lowerer<'a> {
     }
 }
 
-/// An atomic port an export leads to.
-enum LeafPort<'a> {
-    Input(&'a ast::Input),
-    Output(&'a ast::Output),
-}
-
-/// The lowered supervisor automaton.
-struct Supervisor {
-    states: Vec<ir::State>,
-    initial: usize,
-    methods: Vec<ir::Method>,
-    section_arms: Vec<(String, String)>,
-    choose_arms: Vec<ir::ChooseArm>,
-    /// `(state, condition, target)` of every `when`, in order.
-    when: Vec<(String, ast::Expr, String)>,
-}
-
-impl Lowerer<'_> {
-    fn supervisor(&self, c: &ast::Component, automaton: Option<&ast::Automaton>) -> Supervisor {
-        let states_ast: Vec<&ast::State> = automaton
-            .map(|a| a.states.iter().collect())
-            .unwrap_or_default();
-        let state_index = |name: &str| {
-            states_ast
-                .iter()
-                .position(|s| s.name.name == name)
-                .unwrap_or(0)
-        };
-        let input_index = |name: &str| {
-            c.members
-                .iter()
-                .filter(|m| matches!(m, ast::Member::Input(_)))
-                .position(|m| matches!(m, ast::Member::Input(i) if i.name.name == name))
-                .unwrap_or(0)
-        };
-        let initial = automaton
-            .and_then(|a| a.initial.first())
-            .map(|i| state_index(&i.name))
-            .unwrap_or(0);
-        let mut states = Vec::new();
-        let mut methods = Vec::new();
-        let mut section_arms = Vec::new();
-        let mut choose_arms = Vec::new();
-        let mut when = Vec::new();
-        for (index, state) in states_ast.iter().enumerate() {
-            let name = &state.name.name;
-            let (mut entry, mut exit, mut periodic) = (false, false, None);
-            let (mut on, mut after, mut may) = (Vec::new(), Vec::new(), Vec::new());
-            for member in &state.members {
-                match member {
-                    ast::StateMember::Entry(_) => entry = true,
-                    ast::StateMember::Exit(_) => exit = true,
-                    ast::StateMember::Periodic { period, .. } => {
-                        periodic = Some(format!(
-                            "Some(::coolbot::PeriodicSpec {{ period: {} }})",
-                            super::option_duration(period.as_ref())
-                        ));
-                    }
-                    ast::StateMember::On { port, target, .. } => on.push(format!(
-                        "::coolbot::OnSpec {{ port: {}, target: {} }}",
-                        input_index(&port.name),
-                        state_index(&target.name)
-                    )),
-                    ast::StateMember::After {
-                        delay,
-                        without,
-                        target,
-                        ..
-                    } => after.push(format!(
-                        "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
-                        duration_rust(duration_ns(delay).unwrap_or_default()),
-                        match without {
-                            Some(port) => format!("Some({})", input_index(&port.name)),
-                            None => "None".to_owned(),
-                        },
-                        state_index(&target.name)
-                    )),
-                    ast::StateMember::When {
-                        condition, target, ..
-                    } => when.push((name.clone(), condition.clone(), target.name.clone())),
-                    ast::StateMember::May { targets, .. } => {
-                        may_targets(targets, &state_index, &mut may);
-                    }
-                }
-            }
-            section_stubs(
-                &StateSections {
-                    index,
-                    name,
-                    entry,
-                    periodic: periodic.is_some(),
-                    exit,
-                    docs: super::SectionDocs::of(state),
-                },
-                SectionOwner::Supervisor,
-                &mut methods,
-                &mut section_arms,
-            );
-            let may_enum = (!may.is_empty()).then(|| format!("{}May", ident::camel_raw(name)));
-            if let Some(may_enum) = &may_enum {
-                choose_stub(
-                    index,
-                    name,
-                    may_enum,
-                    &may,
-                    &super::SectionDocs::of(state).may,
-                    &mut methods,
-                    &mut choose_arms,
-                );
-            }
-            let spec = format!(
-                "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
-                ident::string_literal(name),
-                periodic.unwrap_or_else(|| "None".to_owned()),
-                on.join(", "),
-                after.join(", "),
-                may.iter()
-                    .map(|(_, i, _)| i.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            states.push(ir::State {
-                doc: doc(&state.doc),
-                cool_name: name.clone(),
-                variant: ident::camel(name),
-                may_enum,
-                may,
-                spec,
-            });
-        }
+impl<'a> Lowerer<'a> {
+    /// The supervisor of compound `c`: its states, or one implicit state without
+    /// sections when it declares none.
+    fn supervisor(&self, c: &'a Component) -> Lowered<'a> {
+        let mut lowered = automaton::states(c.automaton.as_ref(), SectionOwner::Supervisor);
+        let states = &mut lowered.states;
         if states.is_empty() {
             // No `supervisor { ... }`: one state without sections, so the compound
             // has a user automaton like every component.
@@ -971,14 +684,7 @@ impl Lowerer<'_> {
                 ),
             });
         }
-        Supervisor {
-            states,
-            initial,
-            methods,
-            section_arms,
-            choose_arms,
-            when,
-        }
+        lowered
     }
 }
 
@@ -1046,24 +752,52 @@ fn fields(
     format!("{path} {{ {} }}", entries.join(", "))
 }
 
+/// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of exported input or output
+/// `name` whose declared port (the one the export reaches) lowers to `port`.
+fn export_spec(name: &str, port: Option<ir::Port>, input: bool) -> Option<String> {
+    let port = port?;
+    let kind = if input { "InputSpec" } else { "OutputSpec" };
+    Some(format!(
+        "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
+        ident::string_literal(name),
+        port.kind,
+        ident::string_literal(&port.packet),
+        port.pull
+    ))
+}
+
 /// How many fields an atomic component's `Config` and `Vars` have.
-fn field_counts(component: &ast::Component) -> (usize, usize) {
-    let mut config = 0;
-    let mut vars = 0;
-    for member in &component.members {
-        match member {
-            ast::Member::Configuration(c) => config += c.fields.len(),
-            ast::Member::Variable(v) if v.ty.is_some() => vars += 1,
-            _ => {}
-        }
-    }
+fn field_counts(component: &Component) -> (usize, usize) {
+    let config = component.configuration.as_ref().map_or(0, Vec::len);
+    let vars = component
+        .variables
+        .iter()
+        .filter(|v| v.written.is_some())
+        .count();
     (config, vars)
 }
 
-fn port_address(target: &ast::PortRef) -> String {
-    match &target.instance {
-        Some(i) => format!("{}.{}", i.name, target.port.name),
-        None => target.port.name.clone(),
+/// The quality levels of the last `quality` entry of a `timing` block.
+fn quality_levels(timing: Option<&[TimingEntry]>) -> Option<Vec<String>> {
+    timing?.iter().rev().find_map(|entry| match entry {
+        TimingEntry::Quality(levels) => Some(levels.clone()),
+        _ => None,
+    })
+}
+
+/// The quality levels of the first `quality` entry of an instance's `timing` block.
+fn first_quality_levels(timing: &[TimingEntry]) -> Option<Vec<String>> {
+    timing.iter().find_map(|entry| match entry {
+        TimingEntry::Quality(levels) => Some(levels.clone()),
+        _ => None,
+    })
+}
+
+/// `instance.port`, or `port`.
+fn port_address(port: &PortRef) -> String {
+    match &port.instance {
+        Some(instance) => format!("{}.{}", instance.name, port.port),
+        None => port.port.clone(),
     }
 }
 

@@ -4,29 +4,26 @@
 //! boolean expression that is `false` when a value it reads is missing, with the read
 //! keys that make the runtime evaluate it.
 
-use std::collections::BTreeSet;
-
 use super::super::{GEN_TYPES, Lowerer, duration_ns, duration_rust};
-use crate::ast::{self, BinaryOp, ExprKind, FileId, Prim, TypeKind, UnaryOp};
+use crate::ast::{self, BinaryOp, ExprKind, Prim, UnaryOp};
 use crate::check::model::{DEFAULT_STATES, RESULTS, Ty};
 use crate::check::{RTy, Typed};
+use crate::checked::model::{Component, VarKind};
 use crate::ident;
 use crate::ir;
+use crate::lower::automaton::When;
 
-/// The rules of compound `c`: `(supervisor state, condition, target)` of each `when`
-/// in order.
-pub(super) fn compile(
-    lowerer: &Lowerer<'_>,
-    c: &ast::Component,
-    when: &[(String, ast::Expr, String)],
+/// The rules of compound `c`, from each `when` of its supervisor in order (its
+/// condition typed by the checker).
+pub(super) fn compile<'a>(
+    lowerer: &Lowerer<'a>,
+    c: &'a Component,
+    when: &[When<'_>],
 ) -> Vec<ir::Rule> {
     let mut rules = Vec::new();
-    for (state, condition, target) in when {
-        let file = lowerer
-            .checked
-            .component(&c.name.name)
-            .map_or(FileId(0), |(file, _)| file);
-        let typed = lowerer.checked.rule(file, condition).unwrap_or(&UNKNOWN);
+    for rule in when {
+        let (state, condition, target) = (&rule.state, rule.condition, &rule.target);
+        let typed = rule.typed.unwrap_or(&UNKNOWN);
         let mut scope = Scope {
             lowerer,
             component: c,
@@ -150,7 +147,7 @@ struct Operand {
 /// A compound's scope for rules and exports.
 struct Scope<'a, 'b> {
     lowerer: &'b Lowerer<'a>,
-    component: &'a ast::Component,
+    component: &'a Component,
     /// The rule's supervisor state (own `user_state` is known statically).
     state: String,
     reads: Vec<String>,
@@ -342,21 +339,17 @@ impl Scope<'_, '_> {
             narrow: false,
         };
         let component = self.component;
-        let variable = component.members.iter().find_map(|m| match m {
-            ast::Member::Variable(v) if v.name.name == name => Some(v),
-            _ => None,
-        });
+        let variable = component.variables.iter().find(|v| v.name == name);
         if let Some(v) = variable {
-            return match (&v.ty, &v.value) {
+            return match (&v.written, &v.mapping) {
                 (Some(declared), _) => {
-                    if v.kind != ast::VarKind::Local {
+                    if v.kind != VarKind::Local {
                         self.read(name.to_owned());
                     }
                     self.uses_vars = true;
                     let field = format!("vars.{}", ident::snake(name));
-                    let has_default = v.value.is_some()
-                        || self.lowerer.defaultable(declared, &mut BTreeSet::new());
-                    let f64_field = is_f64(declared);
+                    let has_default = v.value.is_some() || self.lowerer.ty_defaultable(declared);
+                    let f64_field = holds_f64(declared);
                     let ty = readable(ty);
                     if !has_default {
                         // Held as `Option<T>` until set: read it as a missing value.
@@ -364,15 +357,12 @@ impl Scope<'_, '_> {
                     }
                     own_value(&field, &ty, false, f64_field)
                 }
-                (None, Some(value)) => match &value.kind {
-                    ExprKind::Path(segments) => match segments.as_slice() {
-                        // Read with `view.mapped(name)`, from the instance standing
-                        // for `instance` now.
-                        [instance, variable] => {
-                            self.variable_operand(&instance.name, &variable.name, Some(name), ty)
-                        }
-                        _ => unreadable,
-                    },
+                (None, Some(path)) => match path.as_slice() {
+                    // Read with `view.mapped(name)`, from the instance standing for
+                    // `instance` now.
+                    [instance, variable] => {
+                        self.variable_operand(instance, variable, Some(name), ty)
+                    }
                     _ => unreadable,
                 },
                 (None, None) => unreadable,
@@ -439,8 +429,12 @@ impl Scope<'_, '_> {
             maybe: false,
             narrow: false,
         };
-        let Some(interface) = Lowerer::instance_of(self.component, instance)
-            .and_then(|i| self.lowerer.checked.interface(&i.component.name))
+        let Some(interface) = self
+            .component
+            .instances
+            .iter()
+            .find(|i| i.name == instance)
+            .and_then(|i| self.lowerer.checked.interface(&i.component))
         else {
             return unreadable;
         };
@@ -823,15 +817,6 @@ fn holds_f64(ty: &Ty) -> bool {
     match ty {
         Ty::Float(prim) => *prim == Prim::F64,
         Ty::Optional(inner) => holds_f64(inner),
-        _ => false,
-    }
-}
-
-/// Whether `ty` is `f64` or `f64?` (read as is; `f32` widens).
-fn is_f64(ty: &ast::Type) -> bool {
-    match &ty.kind {
-        TypeKind::Prim(p) => *p == Prim::F64,
-        TypeKind::Optional(inner) => is_f64(inner),
         _ => false,
     }
 }

@@ -1,0 +1,664 @@
+//! Builds the resolved [`model`](super::model) of every component from the syntax
+//! trees and what the checker resolved: the only place after `check` where names are
+//! looked up. It never fails: on input with errors (which only tests build a model
+//! from) what cannot be resolved is left `None`.
+
+use std::collections::BTreeMap;
+
+use super::model::{
+    Automaton, Component, Connection, Converter, Declared, Enum, Exception, Extern, Field, Input,
+    InputKind, Instance, InstanceRef, Link, Note, Output, OutputKind, Override, Packet, PlanStep,
+    Policy, PortRef, Recovery, Redundant, Ref, Restart, State, StateMember, TimingEntry, TypeDef,
+    Variable,
+};
+use crate::ast::{self, FileId, Span};
+use crate::check::model::{Interface, Model, Tuning, Ty};
+use crate::check::{Resolved, Typed};
+
+/// Exports nested deeper than this are not followed (a checked model has no
+/// containment cycle; this only bounds a model built from input with errors).
+const MAX_DEPTH: usize = 64;
+
+/// Every component of `files`, in source order (files in `FileId` order), each once
+/// (the one the symbol table names).
+pub(super) fn components(files: &[ast::File], resolved: &Resolved) -> Vec<Component> {
+    let builder = Builder {
+        model: Model::new(files, &resolved.symbols),
+        interfaces: &resolved.interfaces,
+        rules: &resolved.rules,
+    };
+    let mut out = Vec::new();
+    for file in files {
+        for item in &file.items {
+            if let ast::Item::Component(component) = item
+                && builder
+                    .model
+                    .component(&component.name.name)
+                    .is_some_and(|(at, _)| at == file.id)
+            {
+                out.push(builder.component(file.id, component));
+            }
+        }
+    }
+    out
+}
+
+/// Every packet, enum and extern packet, then every converter, in source order
+/// (files in `FileId` order), each once (the one the symbol table names).
+pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, Vec<Converter>) {
+    let model = Model::new(files, &resolved.symbols);
+    let named_here = |file: FileId, name: &str| {
+        resolved
+            .symbols
+            .defs
+            .get(name)
+            .is_some_and(|def| def.file == file)
+    };
+    let mut types = Vec::new();
+    let mut converters = Vec::new();
+    for file in files {
+        for item in &file.items {
+            match item {
+                ast::Item::Packet(packet) if named_here(file.id, &packet.name.name) => {
+                    types.push(TypeDef::Packet(Packet {
+                        doc: packet.doc.0.clone(),
+                        name: packet.name.name.clone(),
+                        fields: packet
+                            .fields
+                            .iter()
+                            .map(|field| Field {
+                                doc: field.doc.0.clone(),
+                                name: field.name.name.clone(),
+                                ty: model.ty(&field.ty),
+                                default: field.default.clone(),
+                            })
+                            .collect(),
+                    }));
+                }
+                ast::Item::Enum(def) if named_here(file.id, &def.name.name) => {
+                    types.push(TypeDef::Enum(Enum {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        variants: def
+                            .variants
+                            .iter()
+                            .map(|v| (v.doc.0.clone(), v.name.name.clone()))
+                            .collect(),
+                    }));
+                }
+                ast::Item::ExternPacket(def) if named_here(file.id, &def.name.name) => {
+                    types.push(TypeDef::Extern(Extern {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        rust_path: def.rust_path.value.clone(),
+                    }));
+                }
+                ast::Item::Converter(def) if named_here(file.id, &def.name.name) => {
+                    converters.push(Converter {
+                        doc: def.doc.0.clone(),
+                        name: def.name.name.clone(),
+                        from: model.ty(&def.from),
+                        to: model.ty(&def.to),
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
+    (types, converters)
+}
+
+struct Builder<'a> {
+    model: Model<'a>,
+    interfaces: &'a BTreeMap<String, Interface>,
+    rules: &'a BTreeMap<(FileId, Span), Typed>,
+}
+
+impl<'a> Builder<'a> {
+    fn component(&self, file: FileId, component: &ast::Component) -> Component {
+        let mut out = Component {
+            name: component.name.name.clone(),
+            file,
+            kind: component.kind,
+            doc: component.doc.0.clone(),
+            notes: component
+                .notes
+                .iter()
+                .map(|note| Note {
+                    subject: note.subject.clone(),
+                    doc: note.doc.0.clone(),
+                })
+                .collect(),
+            links: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            variables: Vec::new(),
+            configuration: None,
+            timing: None,
+            automaton: None,
+            exceptions: Vec::new(),
+            instances: Vec::new(),
+            redundant: Vec::new(),
+            policies: Vec::new(),
+            connections: Vec::new(),
+            recovery: None,
+            restart: None,
+        };
+        let policies: BTreeMap<&str, &str> = component
+            .members
+            .iter()
+            .filter_map(|member| match member {
+                ast::Member::OnError(on) => {
+                    Some((on.instance.name.as_str(), on.policy.name.as_str()))
+                }
+                _ => None,
+            })
+            .collect();
+        // Names transitions and plans resolve to indices against: the states of the
+        // (first) automaton and every input, in order.
+        let states: Vec<&str> = component
+            .members
+            .iter()
+            .find_map(|member| match member {
+                ast::Member::Automaton(automaton) => Some(
+                    automaton
+                        .states
+                        .iter()
+                        .map(|state| state.name.name.as_str())
+                        .collect(),
+                ),
+                _ => None,
+            })
+            .unwrap_or_default();
+        let ports: Vec<&str> = inputs(component)
+            .map(|input| input.name.name.as_str())
+            .collect();
+        for member in &component.members {
+            match member {
+                ast::Member::Input(input) => out.inputs.push(Input {
+                    doc: input.doc.0.clone(),
+                    name: input.name.name.clone(),
+                    export: match &input.def {
+                        ast::InputDef::Export(target) => Some(self.port_ref(component, target)),
+                        _ => None,
+                    },
+                    port: self.declared_input(component, input, 0),
+                    span: input.span,
+                }),
+                ast::Member::Output(output) => out.outputs.push(Output {
+                    doc: output.doc.0.clone(),
+                    name: output.name.name.clone(),
+                    export: match &output.def {
+                        ast::OutputDef::Export(target) => Some(self.port_ref(component, target)),
+                        _ => None,
+                    },
+                    port: self.declared_output(component, output, 0),
+                    span: output.span,
+                }),
+                ast::Member::Variable(variable) => out.variables.push(Variable {
+                    doc: variable.doc.0.clone(),
+                    name: variable.name.name.clone(),
+                    kind: variable.kind,
+                    written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
+                    value: variable.value.clone(),
+                    mapping: match (&variable.ty, variable.value.as_ref().map(|v| &v.kind)) {
+                        (None, Some(ast::ExprKind::Path(segments))) => {
+                            Some(segments.iter().map(|s| s.name.clone()).collect())
+                        }
+                        _ => None,
+                    },
+                    ty: self
+                        .interfaces
+                        .get(&component.name.name)
+                        .and_then(|interface| interface.variables.get(&variable.name.name))
+                        .map(|var| var.ty.clone())
+                        .filter(|ty| *ty != Ty::Unknown),
+                    span: variable.span,
+                }),
+                ast::Member::Configuration(configuration) if out.configuration.is_none() => {
+                    out.configuration = Some(
+                        configuration
+                            .fields
+                            .iter()
+                            .map(|field| Field {
+                                doc: field.doc.0.clone(),
+                                name: field.name.name.clone(),
+                                ty: self.model.ty(&field.ty),
+                                default: field.default.clone(),
+                            })
+                            .collect(),
+                    );
+                }
+                ast::Member::Timing(timing) if out.timing.is_none() => {
+                    out.timing = Some(timing.entries.iter().map(timing_entry).collect());
+                }
+                ast::Member::Automaton(automaton) if out.automaton.is_none() => {
+                    out.automaton = Some(self.automaton(file, automaton, &states, &ports));
+                }
+                ast::Member::Link(link) => out.links.push(match &link.kind {
+                    ast::LinkKind::Crate { name, spec } => Link::Crate {
+                        name: name.value.clone(),
+                        spec: spec.clone(),
+                    },
+                    ast::LinkKind::System { name } => Link::System(name.value.clone()),
+                }),
+                ast::Member::Exception(exception) => out.exceptions.push(Exception {
+                    doc: exception.doc.0.clone(),
+                    name: exception.name.name.clone(),
+                    description: exception.description.as_ref().map(|d| d.value.clone()),
+                    plan: exception
+                        .plan
+                        .iter()
+                        .map(|step| match &step.kind {
+                            ast::PlanKind::Retry { count, every } => PlanStep::Retry {
+                                count: count.value,
+                                every: every.clone(),
+                            },
+                            ast::PlanKind::Goto(target) => {
+                                PlanStep::Goto(state_ref(&states, &target.name))
+                            }
+                            ast::PlanKind::Ignore => PlanStep::Ignore,
+                            ast::PlanKind::Degrade => PlanStep::Degrade,
+                        })
+                        .collect(),
+                }),
+                ast::Member::Instance(instance) => out.instances.push(Instance {
+                    name: instance.name.name.clone(),
+                    component: instance.component.name.clone(),
+                    compound: self.is_compound(&instance.component.name),
+                    node: instance.node.as_ref().map(|node| node.value.clone()),
+                    substitutes: instance
+                        .substitutes
+                        .as_ref()
+                        .map(|primary| self.instance_ref(component, &primary.name)),
+                    on_error: policies
+                        .get(instance.name.name.as_str())
+                        .map(|policy| (*policy).to_owned()),
+                    overrides: instance
+                        .overrides
+                        .iter()
+                        .map(|o| Override {
+                            name: o.name.name.clone(),
+                            value: o.value.clone(),
+                        })
+                        .collect(),
+                    timing: instance
+                        .timing
+                        .as_ref()
+                        .map(|timing| timing.entries.iter().map(timing_entry).collect()),
+                    tuning: instance.adaptation.first().map(|block| {
+                        self.interfaces
+                            .get(&instance.component.name)
+                            .map(|interface| interface.adaptation.clone())
+                            .unwrap_or_default()
+                            .overlaid(&Tuning::of(block))
+                    }),
+                    span: instance.span,
+                }),
+                ast::Member::OnError(on) => out.policies.push(Policy {
+                    instance: on.instance.name.clone(),
+                    policy: on.policy.name.clone(),
+                    span: on.span,
+                }),
+                ast::Member::Redundant(redundant) => out.redundant.push(Redundant {
+                    members: redundant
+                        .members
+                        .iter()
+                        .map(|member| member.name.clone())
+                        .collect(),
+                    span: redundant.span,
+                }),
+                ast::Member::Connect(connect) => out.connections.push(Connection {
+                    from: self.port_ref(component, &connect.from),
+                    to: self.port_ref(component, &connect.to),
+                    via: connect.via.as_ref().map(|via| via.name.clone()),
+                    kind: self
+                        .target_input(component, &connect.to)
+                        .map(|declared| declared.kind.port_kind()),
+                }),
+                ast::Member::Recovery(recovery) if out.recovery.is_none() => {
+                    out.recovery = Some(Recovery {
+                        retry_every: recovery.retry_every.clone(),
+                        deadline: recovery.deadline.clone(),
+                        span: recovery.span,
+                    });
+                }
+                ast::Member::Restart(restart) if out.restart.is_none() => {
+                    out.restart = Some(Restart {
+                        limit: restart.limit.clone(),
+                        backoff: restart.backoff.clone(),
+                        span: restart.span,
+                    });
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+
+    fn is_compound(&self, name: &str) -> bool {
+        self.model
+            .component(name)
+            .is_some_and(|(_, c)| c.kind == ast::ComponentKind::Compound)
+    }
+
+    /// The component of the instance `name` declared in `component`.
+    fn instance_component(
+        &self,
+        component: &ast::Component,
+        name: &str,
+    ) -> Option<&'a ast::Component> {
+        let instance = Model::instance(component, name)?;
+        self.model
+            .component(&instance.component.name)
+            .map(|(_, c)| c)
+    }
+
+    fn instance_ref(&self, component: &ast::Component, name: &str) -> InstanceRef {
+        InstanceRef {
+            name: name.to_owned(),
+            compound: self
+                .instance_component(component, name)
+                .is_some_and(|c| c.kind == ast::ComponentKind::Compound),
+        }
+    }
+
+    fn port_ref(&self, component: &ast::Component, port: &ast::PortRef) -> PortRef {
+        PortRef {
+            instance: port
+                .instance
+                .as_ref()
+                .map(|instance| self.instance_ref(component, &instance.name)),
+            port: port.port.name.clone(),
+        }
+    }
+
+    /// The input a connection's `to` end reaches: an instance's input, or for a bare
+    /// port the compound's own.
+    fn target_input(
+        &self,
+        component: &ast::Component,
+        port: &ast::PortRef,
+    ) -> Option<Declared<InputKind>> {
+        let owner = match &port.instance {
+            Some(instance) => self.instance_component(component, &instance.name)?,
+            None => component,
+        };
+        let input = inputs(owner).find(|input| input.name.name == port.port.name)?;
+        self.declared_input(owner, input, 0)
+    }
+
+    fn declared_input(
+        &self,
+        component: &ast::Component,
+        input: &ast::Input,
+        depth: usize,
+    ) -> Option<Declared<InputKind>> {
+        let kind = match &input.def {
+            ast::InputDef::Tick => InputKind::Tick,
+            ast::InputDef::Fifo { ty, size, policy } => InputKind::Fifo {
+                ty: self.model.ty(ty),
+                size: size.value,
+                policy: policy.as_ref().map(|p| p.name.clone()),
+            },
+            ast::InputDef::Ufifo { size, ty, max } => InputKind::Ufifo {
+                ty: self.model.ty(ty),
+                size: size.value,
+                max: max.as_ref().map(|m| m.value),
+            },
+            ast::InputDef::Last(ty) => InputKind::Last(self.model.ty(ty)),
+            ast::InputDef::Poster(ty) => InputKind::Poster(self.model.ty(ty)),
+            ast::InputDef::Export(target) => {
+                if depth > MAX_DEPTH {
+                    return None;
+                }
+                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
+                let input = inputs(inner).find(|i| i.name.name == target.port.name)?;
+                return self.declared_input(inner, input, depth + 1);
+            }
+        };
+        Some(Declared {
+            kind,
+            pull: input.pull.is_some(),
+        })
+    }
+
+    fn declared_output(
+        &self,
+        component: &ast::Component,
+        output: &ast::Output,
+        depth: usize,
+    ) -> Option<Declared<OutputKind>> {
+        let kind = match &output.def {
+            ast::OutputDef::Tick => OutputKind::Tick,
+            ast::OutputDef::Data(ty) => OutputKind::Data(self.model.ty(ty)),
+            ast::OutputDef::Poster(ty) => OutputKind::Poster(self.model.ty(ty)),
+            ast::OutputDef::Export(target) => {
+                if depth > MAX_DEPTH {
+                    return None;
+                }
+                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
+                let output = outputs(inner).find(|o| o.name.name == target.port.name)?;
+                return self.declared_output(inner, output, depth + 1);
+            }
+        };
+        Some(Declared {
+            kind,
+            pull: output.pull.is_some(),
+        })
+    }
+
+    fn automaton(
+        &self,
+        file: FileId,
+        automaton: &ast::Automaton,
+        states: &[&str],
+        ports: &[&str],
+    ) -> Automaton {
+        Automaton {
+            initial: automaton
+                .initial
+                .first()
+                .map(|i| state_ref(states, &i.name)),
+            states: automaton
+                .states
+                .iter()
+                .map(|state| State {
+                    doc: state.doc.0.clone(),
+                    name: state.name.name.clone(),
+                    member_docs: state.member_docs.iter().map(|d| d.0.clone()).collect(),
+                    members: state
+                        .members
+                        .iter()
+                        .map(|member| self.state_member(file, member, states, ports))
+                        .collect(),
+                })
+                .collect(),
+        }
+    }
+
+    fn state_member(
+        &self,
+        file: FileId,
+        member: &ast::StateMember,
+        states: &[&str],
+        ports: &[&str],
+    ) -> StateMember {
+        let state = |name: &ast::Ident| state_ref(states, &name.name);
+        let port = |name: &ast::Ident| state_ref(ports, &name.name);
+        match member {
+            ast::StateMember::Entry(_) => StateMember::Entry,
+            ast::StateMember::Exit(_) => StateMember::Exit,
+            ast::StateMember::Periodic { period, .. } => StateMember::Periodic(period.clone()),
+            ast::StateMember::On {
+                port: on, target, ..
+            } => StateMember::On {
+                port: port(on),
+                target: state(target),
+            },
+            ast::StateMember::After {
+                delay,
+                without,
+                target,
+                ..
+            } => StateMember::After {
+                delay: delay.clone(),
+                without: without.as_ref().map(port),
+                target: state(target),
+            },
+            ast::StateMember::May { targets, .. } => {
+                StateMember::May(targets.iter().map(state).collect())
+            }
+            ast::StateMember::When {
+                condition, target, ..
+            } => StateMember::When {
+                condition: condition.clone(),
+                typed: self.rules.get(&(file, condition.span)).cloned(),
+                target: state(target),
+            },
+        }
+    }
+}
+
+/// `name` resolved to its index in `names` (0 when absent: input with errors).
+fn state_ref(names: &[&str], name: &str) -> Ref {
+    Ref {
+        name: name.to_owned(),
+        index: names.iter().position(|n| *n == name).unwrap_or(0),
+    }
+}
+
+fn timing_entry(entry: &ast::TimingEntry) -> TimingEntry {
+    match entry {
+        ast::TimingEntry::Period(interval) => {
+            TimingEntry::Period(interval.lo.clone(), interval.hi.clone())
+        }
+        ast::TimingEntry::MaxResponse(value) => TimingEntry::MaxResponse(value.clone()),
+        ast::TimingEntry::Priority(value) => TimingEntry::Priority(value.clone()),
+        ast::TimingEntry::Quality(levels, _) => {
+            TimingEntry::Quality(levels.iter().map(|l| l.name.clone()).collect())
+        }
+    }
+}
+
+fn inputs(component: &ast::Component) -> impl Iterator<Item = &ast::Input> {
+    component.members.iter().filter_map(|m| match m {
+        ast::Member::Input(input) => Some(input),
+        _ => None,
+    })
+}
+
+fn outputs(component: &ast::Component) -> impl Iterator<Item = &ast::Output> {
+    component.members.iter().filter_map(|m| match m {
+        ast::Member::Output(output) => Some(output),
+        _ => None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::check::model::{PortKind, Ty};
+    use crate::checked::model::{InputKind, OutputKind, StateMember};
+
+    const TEXT: &str = "packet Twist { v: f32 }\n\
+        packet Wheels { left: f32 }\n\
+        converter TwistToWheels: Twist -> Wheels;\n\
+        atomic Drive {\n\
+            input wheels: fifo<Wheels>(4, drop_oldest) pull;\n\
+            output odometry: data<Twist> pull;\n\
+            observable speed: f32 = 0.0;\n\
+            automaton { initial idle; state idle { entry; on wheels -> run; } state run { entry; } }\n\
+        }\n\
+        compound Inner { instance d: Drive; input wheels = d.wheels; output odometry = d.odometry; observable speed = d.speed; }\n\
+        compound Outer {\n\
+            instance inner: Inner;\n\
+            instance spare: Drive substitutes other;\n\
+            instance other: Drive;\n\
+            input wheels = inner.wheels;\n\
+            observable speed = inner.speed;\n\
+            connect inner.odometry -> other.wheels via TwistToWheels;\n\
+            supervisor { initial s; state s { when other.speed > 1.0 -> s; } }\n\
+        }";
+
+    #[test]
+    fn names_are_resolved_once_in_the_model() {
+        let checked = crate::analyze_text("t.cool", TEXT)
+            .checked()
+            .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let outer = checked.component("Outer").expect("Outer");
+        // An export two levels deep carries the atomic port it reaches.
+        let wheels = &outer.inputs[0];
+        assert_eq!(
+            wheels.export.as_ref().map(|p| p.port.as_str()),
+            Some("wheels")
+        );
+        assert!(
+            wheels
+                .export
+                .as_ref()
+                .and_then(|p| p.instance.as_ref())
+                .is_some_and(|i| i.compound)
+        );
+        let declared = wheels
+            .port
+            .as_ref()
+            .expect("resolved through Inner to Drive");
+        assert!(declared.pull);
+        assert_eq!(
+            declared.kind,
+            InputKind::Fifo {
+                ty: Ty::Packet("Wheels".to_owned()),
+                size: 4,
+                policy: Some("drop_oldest".to_owned())
+            }
+        );
+        // A mapping through a mapping has the type of the variable at the end.
+        assert_eq!(outer.variables[0].written, None);
+        assert_eq!(
+            outer.variables[0].ty,
+            Some(Ty::Float(crate::ast::Prim::F32))
+        );
+        // A connection knows the kind of the input it feeds and its converter.
+        let connection = &outer.connections[0];
+        assert_eq!(connection.kind, Some(PortKind::Fifo));
+        assert_eq!(connection.via.as_deref(), Some("TwistToWheels"));
+        assert!(
+            connection
+                .from
+                .instance
+                .as_ref()
+                .is_some_and(|i| i.compound)
+        );
+        assert!(connection.to.instance.as_ref().is_some_and(|i| !i.compound));
+        // Instances know their component's kind, substitutes their primary.
+        let spare = &outer.instances[1];
+        assert!(outer.instances[0].compound && !spare.compound);
+        assert_eq!(
+            spare.substitutes.as_ref().map(|p| p.name.as_str()),
+            Some("other")
+        );
+        // `when` rules carry their typed tree.
+        let state = &outer.automaton.as_ref().expect("supervisor").states[0];
+        assert!(matches!(
+            &state.members[0],
+            StateMember::When { typed: Some(typed), target, .. }
+                if typed.ty == crate::check::RTy::Bool && target.name == "s"
+        ));
+        let inner = checked.component("Inner").expect("Inner");
+        assert_eq!(
+            inner.outputs[0].port.as_ref().map(|p| &p.kind),
+            Some(&OutputKind::Data(Ty::Packet("Twist".to_owned())))
+        );
+        // Transitions refer to states and ports by the indices the model resolved.
+        let drive = checked.component("Drive").expect("Drive");
+        let automaton = drive.automaton.as_ref().expect("automaton");
+        assert_eq!(automaton.initial.as_ref().map(|r| r.index), Some(0));
+        assert!(matches!(
+            &automaton.states[0].members[1],
+            StateMember::On { port, target } if port.index == 0 && target.index == 1
+        ));
+        // Components come in source order, each once.
+        let names: Vec<&str> = checked.components().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["Drive", "Inner", "Outer"]);
+    }
+}

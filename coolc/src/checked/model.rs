@@ -1,0 +1,534 @@
+//! The resolved components of a checked model: what `lower` and `diagram` read
+//! instead of the syntax tree.
+//!
+//! Every name a component refers to is resolved here, once, by `checked::build`:
+//! an instance knows whether its component is a compound, an exported port carries
+//! the port it reaches (through any depth of exports), a connection carries the kind
+//! of the input it feeds, a mapped variable carries the type of what it maps, and a
+//! `when` condition carries its type from the one rule typer. What stays as written
+//! is values ([`ast::Expr`]: literals, durations, frequencies, enum values and
+//! mapping paths, which name nothing left to look up) and names, as strings.
+//!
+//! Members of one kind keep their source order; members of different kinds are
+//! held apart (a checked component has at most one `timing`, `configuration`,
+//! automaton, `recovery` and `restart` block).
+
+use crate::ast::{self, FileId, Span};
+use crate::check::Typed;
+use crate::check::model::{PortKind, Tuning, Ty};
+
+pub use crate::ast::{ComponentKind, VarKind};
+
+/// A component, resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Component {
+    /// Its name.
+    pub name: String,
+    /// The file that defines it.
+    pub file: FileId,
+    /// Atomic or compound.
+    pub kind: ComponentKind,
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// The doc comments written after it on its members' subjects
+    /// (`docs/language.md`, "Lexical rules").
+    pub notes: Vec<Note>,
+    /// `link` members, in source order.
+    pub links: Vec<Link>,
+    /// Input ports, in source order.
+    pub inputs: Vec<Input>,
+    /// Output ports, in source order.
+    pub outputs: Vec<Output>,
+    /// Own and mapped variables, in source order.
+    pub variables: Vec<Variable>,
+    /// The `configuration { ... }` block's fields, when there is one.
+    pub configuration: Option<Vec<Field>>,
+    /// The `timing { ... }` block's entries, when there is one.
+    pub timing: Option<Vec<TimingEntry>>,
+    /// The user automaton (atomic) or supervisor (compound), when written.
+    pub automaton: Option<Automaton>,
+    /// Exceptions, in source order.
+    pub exceptions: Vec<Exception>,
+    /// Instances (compounds), in source order.
+    pub instances: Vec<Instance>,
+    /// `redundant a, b;` groups.
+    pub redundant: Vec<Redundant>,
+    /// `on error instance: policy;` members, in source order.
+    pub policies: Vec<Policy>,
+    /// `connect` members, in source order.
+    pub connections: Vec<Connection>,
+    /// The `recovery { ... }` block.
+    pub recovery: Option<Recovery>,
+    /// The `restart { ... }` block.
+    pub restart: Option<Restart>,
+}
+
+/// What an input port is, once exports are followed to a declared port.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InputKind {
+    /// `tick`
+    Tick,
+    /// `fifo<T>(size[, policy])`
+    Fifo {
+        /// Packet type.
+        ty: Ty,
+        /// Queue length.
+        size: u64,
+        /// Overflow policy, when written.
+        policy: Option<String>,
+    },
+    /// `ufifo<T>(size[, max m])`
+    Ufifo {
+        /// Packet type.
+        ty: Ty,
+        /// Initial length and growth step.
+        size: u64,
+        /// Growth cap, when written.
+        max: Option<u64>,
+    },
+    /// `last<T>`
+    Last(Ty),
+    /// `poster<T>`
+    Poster(Ty),
+}
+
+impl InputKind {
+    /// The port kind (and so the connection kind an input forms, paper Figure 3).
+    pub fn port_kind(&self) -> PortKind {
+        match self {
+            InputKind::Tick => PortKind::Tick,
+            InputKind::Fifo { .. } => PortKind::Fifo,
+            InputKind::Ufifo { .. } => PortKind::Ufifo,
+            InputKind::Last(_) => PortKind::Last,
+            InputKind::Poster(_) => PortKind::Poster,
+        }
+    }
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            InputKind::Tick => None,
+            InputKind::Fifo { ty, .. } | InputKind::Ufifo { ty, .. } => Some(ty),
+            InputKind::Last(ty) | InputKind::Poster(ty) => Some(ty),
+        }
+    }
+}
+
+/// What an output port is, once exports are followed to a declared port.
+#[derive(Clone, Debug, PartialEq)]
+pub enum OutputKind {
+    /// `tick`
+    Tick,
+    /// `data<T>`
+    Data(Ty),
+    /// `poster<T>`
+    Poster(Ty),
+}
+
+impl OutputKind {
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            OutputKind::Tick => None,
+            OutputKind::Data(ty) | OutputKind::Poster(ty) => Some(ty),
+        }
+    }
+}
+
+/// A declared port: its kind and whether it is `pull`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Declared<K> {
+    /// The kind, with its packet type.
+    pub kind: K,
+    /// `pull` was written.
+    pub pull: bool,
+}
+
+/// An input port.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Input {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// `= instance.port`: the instance port it exports (compounds).
+    pub export: Option<PortRef>,
+    /// The declared port: its own declaration, or for an export the declaration it
+    /// reaches through every level of exports (`None` only if that cannot be
+    /// followed, which a checked model does not have).
+    pub port: Option<Declared<InputKind>>,
+    /// Where it is written (a compound's builder steps follow source order).
+    pub span: Span,
+}
+
+/// An output port.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// `= instance.port`: the instance port it exports (compounds).
+    pub export: Option<PortRef>,
+    /// The declared port (through exports, as for [`Input::port`]).
+    pub port: Option<Declared<OutputKind>>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `instance.port` or a compound's own `port`, resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PortRef {
+    /// The instance, `None` for the compound's own port.
+    pub instance: Option<InstanceRef>,
+    /// The port name.
+    pub port: String,
+}
+
+/// A reference to an instance of the same compound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceRef {
+    /// The instance's name.
+    pub name: String,
+    /// Its component is a compound.
+    pub compound: bool,
+}
+
+/// A variable.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variable {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Observable, controllable or local.
+    pub kind: VarKind,
+    /// The type as written (`None` for a mapped variable).
+    pub written: Option<Ty>,
+    /// The initial value, or for a mapped variable the mapping (`motion.odometry`).
+    pub value: Option<ast::Expr>,
+    /// A mapped variable's path (`["motion", "odometry"]`).
+    pub mapping: Option<Vec<String>>,
+    /// The type: as written, or that of the instance variable a mapping names
+    /// (through mappings of nested compounds); `None` for a mapping of a default
+    /// variable (`motion.state`).
+    pub ty: Option<Ty>,
+    /// Where it is written (members of different kinds interleave by it).
+    pub span: Span,
+}
+
+/// A configuration field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its type.
+    pub ty: Ty,
+    /// Its default, when written.
+    pub default: Option<ast::Expr>,
+}
+
+/// One entry of a `timing` block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TimingEntry {
+    /// `period lo;` or `period lo..hi;`
+    Period(ast::Expr, Option<ast::Expr>),
+    /// `max_response D;`
+    MaxResponse(ast::Expr),
+    /// `priority N;`
+    Priority(ast::Expr),
+    /// `quality a, b, c;` best first.
+    Quality(Vec<String>),
+}
+
+/// A state or an input port of the same component, by name and resolved to its
+/// index (in the automaton's states, or in [`Component::inputs`]); prints as its
+/// name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Ref {
+    /// The name as written.
+    pub name: String,
+    /// Its index (0 if it did not resolve, which a checked model does not have).
+    pub index: usize,
+}
+
+impl std::fmt::Display for Ref {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+/// A user automaton or supervisor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Automaton {
+    /// The initial state.
+    pub initial: Option<Ref>,
+    /// The states, in source order.
+    pub states: Vec<State>,
+}
+
+/// A state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Sections and transitions, in source order.
+    pub members: Vec<StateMember>,
+    /// The doc comment of each member (`members[i]`'s is `member_docs[i]`; empty
+    /// when none was written).
+    pub member_docs: Vec<Vec<String>>,
+}
+
+/// A doc comment written after a component on one of its members' subjects.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    /// What it is about.
+    pub subject: String,
+    /// The doc comment.
+    pub doc: Vec<String>,
+}
+
+/// A `link` member: a dependency of the generated crate.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Link {
+    /// `link crate "name" = spec;`
+    Crate {
+        /// The crate's name.
+        name: String,
+        /// Its version or table, as written.
+        spec: ast::CrateSpec,
+    },
+    /// `link system "name";`
+    System(String),
+}
+
+/// `exception name ["description"] [{ plan }];`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Exception {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its description, when written.
+    pub description: Option<String>,
+    /// Its continuity plan, in order.
+    pub plan: Vec<PlanStep>,
+}
+
+/// One step of a continuity plan.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PlanStep {
+    /// `retry N every D;`
+    Retry {
+        /// How many times.
+        count: u64,
+        /// The delay between attempts.
+        every: ast::Expr,
+    },
+    /// `goto state;`
+    Goto(Ref),
+    /// `ignore;`
+    Ignore,
+    /// `degrade;`
+    Degrade,
+}
+
+/// A section or transition of a state.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StateMember {
+    /// `entry;`
+    Entry,
+    /// `exit;`
+    Exit,
+    /// `periodic;` or `periodic D;`
+    Periodic(Option<ast::Expr>),
+    /// `on port -> target;`
+    On {
+        /// The input port.
+        port: Ref,
+        /// The target state.
+        target: Ref,
+    },
+    /// `after D [without port] -> target;`
+    After {
+        /// The delay.
+        delay: ast::Expr,
+        /// The watched port.
+        without: Option<Ref>,
+        /// The target state.
+        target: Ref,
+    },
+    /// `may -> a, b;`
+    May(Vec<Ref>),
+    /// `when condition -> target;`
+    When {
+        /// The condition as written.
+        condition: ast::Expr,
+        /// The condition typed by the rule typer (`None` only if it was not typed,
+        /// which a checked model does not have).
+        typed: Option<Typed>,
+        /// The target state.
+        target: Ref,
+    },
+}
+
+/// An instance of a component inside a compound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// Its name.
+    pub name: String,
+    /// Its component's name ([`crate::Checked::component`] finds it).
+    pub component: String,
+    /// Its component is a compound.
+    pub compound: bool,
+    /// `on "node"`.
+    pub node: Option<String>,
+    /// `substitutes primary`.
+    pub substitutes: Option<InstanceRef>,
+    /// The policy of `on error instance: policy;`.
+    pub on_error: Option<String>,
+    /// `{ name = value; ... }` overrides, in order.
+    pub overrides: Vec<Override>,
+    /// Its own `timing { ... }` entries, when written.
+    pub timing: Option<Vec<TimingEntry>>,
+    /// Its adaptation tuning when it has an `adaptation` block: its component's with
+    /// the instance's laid on it.
+    pub tuning: Option<Tuning>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `name = value;` in an instance's block.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Override {
+    /// The configuration field or controllable variable.
+    pub name: String,
+    /// The value as written.
+    pub value: ast::Expr,
+}
+
+/// `redundant a, b;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Redundant {
+    /// The instances, by name.
+    pub members: Vec<String>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `on error instance: policy;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Policy {
+    /// The instance.
+    pub instance: String,
+    /// The policy's name.
+    pub policy: String,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `connect from -> to [via Converter];`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Connection {
+    /// The output end.
+    pub from: PortRef,
+    /// The input end.
+    pub to: PortRef,
+    /// The converter, by name.
+    pub via: Option<String>,
+    /// The kind of the input `to` reaches (the connection's kind).
+    pub kind: Option<PortKind>,
+}
+
+/// `recovery { retry every D; deadline D; }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recovery {
+    /// `retry every D`
+    pub retry_every: Option<ast::Expr>,
+    /// `deadline D`
+    pub deadline: Option<ast::Expr>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `restart { limit N in D; backoff D..D; }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Restart {
+    /// `limit N in D`
+    pub limit: Option<(ast::Expr, ast::Expr)>,
+    /// `backoff D..D`
+    pub backoff: Option<(ast::Expr, ast::Expr)>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// A type definition, resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TypeDef {
+    /// `packet Name { fields }`
+    Packet(Packet),
+    /// `enum Name { variants }`
+    Enum(Enum),
+    /// `extern packet Name = "path";`
+    Extern(Extern),
+}
+
+impl TypeDef {
+    /// Its name.
+    pub fn name(&self) -> &str {
+        match self {
+            TypeDef::Packet(packet) => &packet.name,
+            TypeDef::Enum(def) => &def.name,
+            TypeDef::Extern(def) => &def.name,
+        }
+    }
+}
+
+/// `packet Name { fields }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Packet {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its fields, in order.
+    pub fields: Vec<Field>,
+}
+
+/// `enum Name { variants }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Enum {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// Its variants, in order: `(doc comment, name)`.
+    pub variants: Vec<(Vec<String>, String)>,
+}
+
+/// `extern packet Name = "path";`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extern {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// The Rust path of the type.
+    pub rust_path: String,
+}
+
+/// `converter Name: From -> To;`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Converter {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// Its name.
+    pub name: String,
+    /// The packet type it takes.
+    pub from: Ty,
+    /// The packet type it makes.
+    pub to: Ty,
+}
