@@ -384,6 +384,20 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
         .rule({{ r.state }}, {{ r.target }}, {{ r.reads }}, {{ r.call }})
 {%- endfor %})
 }
+
+/// Tells a network layer how to build `{{ c.type_name }}` on another node (its
+/// supervisor and every instance, there) and bridge its exported ports (an instance
+/// declared `on "node"`, `docs/distribution.md`): `make` builds one named as asked,
+/// with this crate's parts.
+pub fn register<R: ::coolbot::remote::Registrar>(
+    registrar: &mut R,
+    make: impl Fn(&str) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> + Send + Sync + 'static,
+) {
+    registrar.compound(TYPE_NAME, ::std::boxed::Box::new(move |name: &str| make(name).map_err(|error| error.to_string())));
+{%- for (port, packet) in c.exported_ports %}
+    registrar.port::<{{ packet }}>(TYPE_NAME, "{{ port }}");
+{%- endfor %}
+}
 {% for r in c.rules %}
 /// Rule {{ r.doc }}.
 #[allow(clippy::eq_op, clippy::nonminimal_bool, clippy::bool_comparison, clippy::overly_complex_bool_expr, clippy::neg_cmp_op_on_partial_ord, clippy::comparison_to_empty)]

@@ -116,8 +116,8 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
 }
 
 /// The component types other nodes may place on this one (with the `network`
-/// feature), each built from its default behaviour; the types of the ports bridged
-/// for the `on "node"` instances placed from here.
+/// feature), atomic and compound, each built from its default behaviour or parts;
+/// the types of the ports bridged for the `on "node"` instances placed from here.
 #[cfg(feature = "network")]
 fn registry() -> coolbot_zenoh::agent::Registry {
     let mut registry = coolbot_zenoh::agent::Registry::new();

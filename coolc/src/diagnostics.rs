@@ -157,9 +157,6 @@ codes! {
     /// A `degrade` plan step in a component with fewer than two quality levels: it
     /// can never lower the quality, so the plan always fails (warning).
     DegradeWithoutQuality => "coolc::check::degrade_without_quality",
-    /// An instance declared `on "node"`: remote instantiation is not carried out yet,
-    /// the instance runs in the compound's process (warning).
-    RemoteInstance => "coolc::check::remote_instance",
     /// A `restart { }` or `recovery { }` block that applies to no instance (warning).
     UnusedBlock => "coolc::check::unused_block",
 }

@@ -839,17 +839,26 @@ impl StarterMain {
             .collect();
         let lib = &krate.lib_name;
         let mut roots = Vec::new();
-        let registrations = krate
-            .atomics
-            .iter()
-            .map(|c| {
-                let module = &c.module;
-                format!(
-                    "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component(name, ::{lib}::{module}::{}::default()) }})",
-                    c.user_struct
-                )
-            })
-            .collect();
+        let atomics = krate.atomics.iter().map(|c| {
+            let module = &c.module;
+            format!(
+                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component(name, ::{lib}::{module}::{}::default()) }})",
+                c.user_struct
+            )
+        });
+        let compounds = krate.compounds.iter().map(|c| {
+            let module = &c.module;
+            let generics = if c.uses_converters {
+                format!("::<::{lib}::converters::Convert>")
+            } else {
+                String::new()
+            };
+            format!(
+                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component{generics}(name, ::{lib}::{module}::{}::default()) }})",
+                c.user_struct
+            )
+        });
+        let registrations = atomics.chain(compounds).collect();
         for c in &krate.atomics {
             if !instantiated.contains(c.type_name.as_str()) {
                 let module = &c.module;

@@ -538,6 +538,9 @@ pub struct Compound {
     pub input_specs: Vec<String>,
     /// `coolbot::OutputSpec` expressions of the exported outputs, in order.
     pub output_specs: Vec<String>,
+    /// Every exported port, inputs then outputs: its name and the Rust type of its
+    /// packets (`()` for a tick port), for the network layer's registration.
+    pub exported_ports: Vec<(String, String)>,
     /// The compound's own variables (`Vars`), read through the guard `vars`.
     pub vars: Vec<Var>,
     /// Supervisor states (index = state id).

@@ -321,11 +321,18 @@ atomic Count {
     }
 }
 
+/// A counter behind a compound's exported input and mapped variable.
+compound Ear {
+    instance count: Count;
+    input beat = count.beat;
+    observable heard = count.heard;
+}
+
 /// A beat on one node heard on another, through this one; a local beat stands in.
 compound Trio {
     instance source: Beat on "left";
     instance backup: Beat substitutes source;
-    instance sink: Count on "right";
+    instance sink: Ear on "right";
     connect source.beat -> sink.beat;
     on error source: substitute;
     recovery { retry every 300ms; deadline 120s; }
@@ -363,7 +370,10 @@ impl Behavior for Count {
 /// What the sink on `right` has heard (its `heard`), if it is listed.
 fn heard(listed: &[Listed]) -> Option<u64> {
     let sink = listed.iter().find(|l| {
-        l.node == "right" && l.path.starts_with("robot-trio-sink-") && !l.path.ends_with("-beat")
+        l.node == "right"
+            && l.path.starts_with("robot-trio-sink-")
+            && !l.path.contains('.')
+            && !l.path.ends_with("-beat")
     })?;
     let (_, value) = sink
         .monitor
@@ -382,8 +392,8 @@ fn hears_on(ctl: &Ctl, what: &str) {
 }
 
 /// Three processes of one generated binary: the robot places `source` on `left` and
-/// `sink` on `right`, and the beats go from one to the other through the robot's
-/// proxies. `kill -9` of `left` makes the local `backup` beat for it (the sink goes on
+/// `sink`, a compound, on `right` (built there whole: its supervisor and its
+/// counter), and the beats go from one to the other through the robot's proxies. `kill -9` of `left` makes the local `backup` beat for it (the sink goes on
 /// hearing); `left` back, the recovery queue builds `source` there again and the
 /// backup stands by.
 #[test]
@@ -462,6 +472,18 @@ fn three_processes_stream_and_the_loss_of_one_is_substituted_then_recovered() {
         },
     );
     hears_on(&ctl, "the sink hearing the source's beats");
+    // The compound runs on `right` with its own instance; the robot has its proxy.
+    let listed = ctl.components(None).unwrap();
+    assert!(
+        listed.iter().any(|l| l.node == "right"
+            && l.path.starts_with("robot-trio-sink-")
+            && l.path.ends_with(".count")),
+        "{:?}",
+        listed
+            .iter()
+            .map(|l| format!("{}/{}", l.node, l.path))
+            .collect::<Vec<_>>()
+    );
 
     // `left` killed: the backup beats for it, and the sink goes on hearing.
     left_node.kill().unwrap();

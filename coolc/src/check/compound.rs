@@ -127,40 +127,6 @@ fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -
     out
 }
 
-/// `on "node"` runs the instance on that node behind a proxy when the process has a
-/// network placer (`docs/distribution.md`, "Remote instances from the description").
-/// What a proxy cannot carry is refused here, so that no description means more than
-/// what runs: an instance of a compound (only atomic types are registered with a
-/// node), and a component with `pull` ports (pull through a proxy is not carried out).
-fn remote_instance(checker: &mut Checker<'_, '_>, instance: &ast::Instance, node: &ast::StrLit) {
-    let Some((_, def)) = checker.model.component(&instance.component.name) else {
-        return;
-    };
-    // Only atomic types are registered with a node's agent (their ports, pull ones
-    // included, are bridged by the proxy); a compound's instances would need a
-    // placement of their own.
-    let reason = (def.kind == ComponentKind::Compound).then(|| {
-        format!(
-            "`{}` is a compound: only atomic components run on another node",
-            instance.component.name
-        )
-    });
-    if let Some(reason) = reason {
-        let diagnostic = checker
-            .error(
-                Code::RemoteInstance,
-                node.span,
-                format!(
-                    "instance `{}` cannot run on node `{}`: {reason}",
-                    instance.name.name, node.value
-                ),
-            )
-            .with_label("not carried out")
-            .with_help("remove `on \"...\"` to run it in the compound's process");
-        checker.push(diagnostic);
-    }
-}
-
 fn instance(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
@@ -175,11 +141,6 @@ fn instance(
             .error(Code::TypeMismatch, node.span, "a node name cannot be empty")
             .with_label("empty");
         checker.push(diagnostic);
-    }
-    if let Some(node) = &instance.node
-        && !node.value.trim().is_empty()
-    {
-        remote_instance(checker, instance, node);
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);

@@ -66,6 +66,7 @@ impl<'a> Lowerer<'a> {
         let mut ordered: Vec<(usize, String)> = Vec::new();
         let mut input_specs = Vec::new();
         let mut output_specs = Vec::new();
+        let mut exported_ports = Vec::new();
         let mapped_controllables = Self::mapped_controllables(c);
 
         // `Parts` method names: `supervisor`, then one per instance.
@@ -93,6 +94,11 @@ impl<'a> Lowerer<'a> {
             };
             let name = ident::string_literal(&input.name);
             let target_lit = ident::string_literal(&port_address(target));
+            let packet = match input.port.as_ref().map(|p| p.kind.packet()) {
+                Some(Some(ty)) => rust_ty(ty, GEN_TYPES),
+                _ => "()".to_owned(),
+            };
+            exported_ports.push((input.name.clone(), packet));
             let step = match input.port.as_ref().map(|p| p.kind.packet()) {
                 Some(None) => format!(".export_tick_input({name}, {target_lit})"),
                 Some(Some(ty)) => format!(
@@ -109,6 +115,11 @@ impl<'a> Lowerer<'a> {
                 continue;
             };
             output_specs.extend(export_spec(&output.name, self.output(output), false));
+            let packet = match output.port.as_ref().map(|p| p.kind.packet()) {
+                Some(Some(ty)) => rust_ty(ty, GEN_TYPES),
+                _ => "()".to_owned(),
+            };
+            exported_ports.push((output.name.clone(), packet));
             let name = ident::string_literal(&output.name);
             let target_lit = ident::string_literal(&port_address(target));
             let step = match output.port.as_ref().map(|p| p.kind.packet()) {
@@ -259,6 +270,7 @@ impl<'a> Lowerer<'a> {
             mapped: self.mapped_fields(c),
             input_specs,
             output_specs,
+            exported_ports,
             vars,
             states: supervisor.states,
             initial: supervisor.initial,
