@@ -203,6 +203,7 @@ pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Comp
         return Ok(local);
     };
     let spec = local.spec();
+    let of_compound = local.is_compound();
     let variables = spec
         .variables
         .iter()
@@ -210,8 +211,9 @@ pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Comp
         .filter(|(_, var)| var.kind == crate::spec::VarKind::Controllable)
         .map(|(index, var)| (var.name.to_owned(), local.automaton_get(index)))
         // A compound's mapped variables read its instances, which have published
-        // nothing before they run: no value to send.
-        .filter(|(_, value)| *value != Value::Unit)
+        // nothing before they run: no value to send (an atomic component's values
+        // are all sent).
+        .filter(|(_, value)| !of_compound || *value != Value::Unit)
         .collect();
     let placement = Placement {
         node: node.to_owned(),

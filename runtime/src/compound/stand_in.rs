@@ -5,6 +5,10 @@
 //! instances are monitors a test sets ([`Stage`]), and the commands the supervisor
 //! gives them are recorded and taken as an instance would take them.
 //!
+//! As in a built compound, the view the supervisor's sections and choices read is the
+//! one taken at the last supervision turn: a state an instance reached by a command
+//! given in the same section shows at the next turn.
+//!
 //! What a stand-in compound does not do: fault policies, the recovery queue,
 //! substitution and redundancy (no instance fails on its own), adaptation, and
 //! forwarding on exported ports. Those need the instances themselves: a built
@@ -301,9 +305,16 @@ impl Automaton for StandIn {
 
     fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
         if let Some(mapped) = self.mapped.get(variable) {
-            self.stage()
-                .set_variable(mapped.instance, &mapped.variable, value.clone());
-            return Ok(());
+            // As a built compound does: a `set` command to the instance, recorded and
+            // refused as any other.
+            let mut stage = self.stage();
+            let instance = stage.names[mapped.instance].clone();
+            return stage
+                .command(
+                    &instance,
+                    &Command::Set(mapped.variable.clone(), value.clone()),
+                )
+                .map_err(|refused| refused.to_string());
         }
         self.supervisor.set(variable - self.own_offset, value)
     }

@@ -79,6 +79,9 @@ pub enum OptionsError {
     /// `--node` twice.
     #[error("`--node` is given twice")]
     TwoNodes,
+    /// A flag that takes no value was given one (`--serve=yes`).
+    #[error("`{0}` takes no value")]
+    UnexpectedValue(&'static str),
 }
 
 impl NodeOptions {
@@ -106,7 +109,7 @@ impl NodeOptions {
         let mut options = NodeOptions::named("");
         let mut without_node = None;
         let mut rest = Vec::new();
-        let mut iter = std::mem::take(args).into_iter();
+        let mut iter = std::mem::take(args).into_iter().peekable();
         while let Some(arg) = iter.next() {
             let (flag, inline) = match arg.split_once('=') {
                 Some((flag, value)) if flag.starts_with("--") => (flag, Some(value.to_owned())),
@@ -118,19 +121,37 @@ impl NodeOptions {
                 "--connect" => "--connect",
                 "--lease" => "--lease",
                 "--config" => "--config",
-                "--insecure" if inline.is_none() => "--insecure",
-                "--multicast" if inline.is_none() => "--multicast",
-                "--no-multicast" if inline.is_none() => "--no-multicast",
-                "--serve" if inline.is_none() => "--serve",
+                "--insecure" => "--insecure",
+                "--multicast" => "--multicast",
+                "--no-multicast" => "--no-multicast",
+                "--serve" => "--serve",
                 _ => {
                     rest.push(arg);
                     continue;
                 }
             };
-            let mut value = || match inline.clone() {
-                Some(value) => Ok(value),
-                None => iter.next().ok_or(OptionsError::MissingValue(flag)),
+            // A value is the flag's own (`--flag=value`) or the next argument, never
+            // another flag, and never empty.
+            let mut value = || {
+                let value = match inline.clone() {
+                    Some(value) => value,
+                    None => iter
+                        .next_if(|next| !next.starts_with("--"))
+                        .ok_or(OptionsError::MissingValue(flag))?,
+                };
+                if value.is_empty() {
+                    return Err(OptionsError::MissingValue(flag));
+                }
+                Ok(value)
             };
+            if inline.is_some()
+                && matches!(
+                    flag,
+                    "--insecure" | "--multicast" | "--no-multicast" | "--serve"
+                )
+            {
+                return Err(OptionsError::UnexpectedValue(flag));
+            }
             match flag {
                 "--node" => {
                     if name.replace(value()?).is_some() {
@@ -304,6 +325,19 @@ mod tests {
         assert_eq!(
             NodeOptions::take_args(&mut args("--node a --node b")),
             Err(OptionsError::TwoNodes)
+        );
+        // A flag is not another flag's value; a value is not empty; a switch has none.
+        assert_eq!(
+            NodeOptions::take_args(&mut args("--listen --node left")),
+            Err(OptionsError::MissingValue("--listen"))
+        );
+        assert_eq!(
+            NodeOptions::take_args(&mut args("--node=")),
+            Err(OptionsError::MissingValue("--node"))
+        );
+        assert_eq!(
+            NodeOptions::take_args(&mut args("--node a --insecure=yes")),
+            Err(OptionsError::UnexpectedValue("--insecure"))
         );
     }
 }

@@ -515,32 +515,24 @@ impl RemoteEnd for End {
             .timeout(crate::DEFAULT_PULL_TIMEOUT)
             .wait()
             .map_err(|error| format!("the pull query was not sent: {error}"))?;
-        // Each answer is sent on the proxy's output, to the input that asked (this
-        // runs inside the proxy's answer to it).
-        let mut answered = false;
-        while let Ok(reply) = replies.recv() {
-            match reply.result() {
-                Ok(sample) => {
-                    (output.deliver)(&sample.payload().to_bytes());
-                    answered = true;
-                }
-                Err(error) => {
-                    return Err(format!(
-                        "node `{}` answered the pull with an error: {}",
-                        self.on,
-                        error.payload().try_to_string().unwrap_or_default()
-                    ));
-                }
+        // The first answer is sent on the proxy's output, to the input that asked
+        // (this runs inside the proxy's answer to it); any other reply is dropped,
+        // so that one request gets one answer, and the proxy's thread goes on at once.
+        match replies.recv().map(|reply| reply.into_result()) {
+            Ok(Ok(sample)) => {
+                (output.deliver)(&sample.payload().to_bytes());
+                Ok(())
             }
-        }
-        if answered {
-            Ok(())
-        } else {
-            Err(format!(
+            Ok(Err(error)) => Err(format!(
+                "node `{}` answered the pull with an error: {}",
+                self.on,
+                error.payload().try_to_string().unwrap_or_default()
+            )),
+            Err(_) => Err(format!(
                 "node `{}` did not answer the pull within {:?}",
                 self.on,
                 crate::DEFAULT_PULL_TIMEOUT
-            ))
+            )),
         }
     }
 
