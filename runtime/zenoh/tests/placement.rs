@@ -309,27 +309,18 @@ fn doubler_registry() -> Registry {
     registry
 }
 
-/// Pull through a proxy, both ways in one request: a consumer here pulls the remote
-/// `Doubler`'s pull output; to answer, the `Doubler` on the station pulls its pull
-/// input, which the proxy serves by pulling from the producer here.
-#[test]
-fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
-    let (station, robot) = pair("pull-station", "pull-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), doubler_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), doubler_registry()).install();
-
-    // The producer answers each pull with the next number: 21, 22, ...
+/// A producer `source` whose pull output `n` answers each pull with the next number
+/// from `first`, and a consumer `sink` with a pull input `asked` (returned, to pull).
+fn pull_ends(first: u64) -> (coolbot::Component, coolbot::Component, LastIn<u64>) {
     let numbers = DataOut::<u64>::new();
-    let next = Arc::new(std::sync::atomic::AtomicU64::new(21));
-    let (answer, counter) = (numbers.clone(), Arc::clone(&next));
+    let next = std::sync::atomic::AtomicU64::new(first);
+    let answer = numbers.clone();
     let source = Shell::with_answer(
         "source",
         spec("Source", vec![], vec![pulled_output("n")], vec![]),
         PortSet::new().output(&numbers),
         Some(Box::new(move |_| {
-            answer.send(counter.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
+            answer.send(next.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
         })),
     );
     let asked = LastIn::<u64>::new();
@@ -343,6 +334,22 @@ fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
         ),
         PortSet::new().input(&asked),
     );
+    (source, sink, asked)
+}
+
+/// Pull through a proxy, both ways in one request: a consumer here pulls the remote
+/// `Doubler`'s pull output; to answer, the `Doubler` on the station pulls its pull
+/// input, which the proxy serves by pulling from the producer here.
+#[test]
+fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
+    let (station, robot) = pair("pull-station", "pull-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), doubler_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), doubler_registry()).install();
+
+    // The producer answers each pull with the next number: 21, 22, ...
+    let (source, sink, asked) = pull_ends(21);
     let compound = CompoundBuilder::new("cell", supervisor("working"))
         .instance(source)
         .instance_on("pull-station", doubler("doubler"))
@@ -405,28 +412,7 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     let _agent = Agent::start(Arc::clone(&station), doubling_registry()).expect("agent");
     let _placer = Placer::new(Arc::clone(&robot), doubling_registry()).install();
 
-    let numbers = DataOut::<u64>::new();
-    let next = Arc::new(std::sync::atomic::AtomicU64::new(5));
-    let (answer, counter) = (numbers.clone(), Arc::clone(&next));
-    let source = Shell::with_answer(
-        "source",
-        spec("Source", vec![], vec![pulled_output("n")], vec![]),
-        PortSet::new().output(&numbers),
-        Some(Box::new(move |_| {
-            answer.send(counter.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
-        })),
-    );
-    let asked = LastIn::<u64>::new();
-    let sink = Shell::component(
-        "sink",
-        spec(
-            "Sink",
-            vec![pulled_input("asked", InputKind::Last)],
-            vec![],
-            vec![],
-        ),
-        PortSet::new().input(&asked),
-    );
+    let (source, sink, asked) = pull_ends(5);
     let local = doubling("twice").expect("the compound builds here too");
     let compound = CompoundBuilder::new("cell", supervisor("working"))
         .instance(source)
