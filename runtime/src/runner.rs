@@ -537,7 +537,7 @@ impl Runner {
         if self.state != State::Running {
             return None;
         }
-        let state_spec = &self.spec.states[self.user];
+        let state_spec = self.spec.states.get(self.user)?;
         let mut deadline = self.next_periodic;
         for after in state_spec.after {
             let due = self.after_due(after);
@@ -672,7 +672,10 @@ impl Runner {
                 }
             }
         }
-        let state_spec = &self.spec.states[self.user];
+        let Some(state_spec) = self.spec.states.get(self.user) else {
+            // No user automaton: only pull requests.
+            return self.has_pull && self.serve_pulls();
+        };
         // 3. Timers.
         if let Some(target) = self.pending_choice.take() {
             self.goto(target, now);
@@ -815,7 +818,8 @@ impl Runner {
                     self.user = self.spec.initial;
                     self.user_entered = false;
                     self.pending_choice = None;
-                    self.publish_user(Some(self.spec.initial));
+                    let initial = (!self.spec.states.is_empty()).then_some(self.spec.initial);
+                    self.publish_user(initial);
                 }
                 // The user automaton runs inside `running`: set the state first.
                 Action::EnterUser => {
@@ -1463,6 +1467,10 @@ impl Runner {
 
     /// Enter user state `target` and run its entry section.
     fn enter(&mut self, target: usize, now: Instant) {
+        if self.spec.states.is_empty() {
+            // No user automaton: `running` only serves pull requests.
+            return;
+        }
         self.user = target;
         self.user_entered = true;
         self.entered_at = now;

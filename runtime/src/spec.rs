@@ -63,10 +63,9 @@ impl Spec {
     /// (see `Component::with_timing`): a periodic section may take its period from it.
     pub fn validate_with(&self, timing: &TimingSpec) -> Result<(), String> {
         let states = self.states.len();
-        if states == 0 {
-            return Err("the user automaton has no state".to_owned());
-        }
-        if self.initial >= states {
+        // No state: a component without a user automaton (it serves pulls in
+        // `running`); its `initial` is then 0.
+        if self.initial >= states.max(1) {
             return Err(format!(
                 "initial state #{} does not exist ({states} states)",
                 self.initial

@@ -2,15 +2,15 @@
 //! continuity plan of paper 3.5 (`retry` that recovers, `retry` that keeps failing,
 //! `goto`, `ignore`, `degrade`, no plan), and where each leaves the component.
 
-mod support;
-
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
 
-use coolbot::port::FifoIn;
-use coolbot::{ExceptionSpec, OverflowPolicy, PlanStep, Spec, State};
-use support::worker::{self, Exception};
-use support::{Injected, Rig, Script, WAIT, eventually};
+use coolbot::{Component, State, System};
+use coolbot_runtime_tests::generated::{
+    degrade_worker, goto_worker, ignore_worker, plain_worker, worker,
+};
+use coolbot_runtime_tests::support::{Injected, Rig, Script, Scripted, WAIT, WORKER, eventually};
+use worker::Exception;
 
 /// Where a section runs in the test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,40 +50,48 @@ enum Expect {
     Fails,
 }
 
-/// The worker with exception `flaky` (index 0) given `plan`.
-fn spec_with(plan: &'static [PlanStep]) -> &'static Spec {
-    let mut exceptions = worker::SPEC.exceptions.to_vec();
-    exceptions[0] = ExceptionSpec {
-        name: "flaky",
-        description: "",
-        plan,
-    };
-    Box::leak(Box::new(Spec {
-        exceptions: Box::leak(exceptions.into_boxed_slice()),
-        ..worker::SPEC
-    }))
+/// The continuity plan of exception `flaky`: one component per plan (`cool/plans.cool`).
+#[derive(Debug, Clone, Copy)]
+enum Plan {
+    /// `retry 2 every 1ms` (`Worker`).
+    Retry,
+    /// `goto idle` (`GotoWorker`).
+    GotoIdle,
+    /// `ignore` (`IgnoreWorker`).
+    Ignore,
+    /// `degrade` (`DegradeWorker`).
+    Degrade,
+    /// None (`PlainWorker`).
+    None,
 }
 
-const RETRY: &[PlanStep] = &[PlanStep::Retry {
-    count: 2,
-    every: Duration::from_millis(1),
-}];
-const GOTO_IDLE: &[PlanStep] = &[PlanStep::Goto(worker::IDLE)];
-const IGNORE: &[PlanStep] = &[PlanStep::Ignore];
-const DEGRADE: &[PlanStep] = &[PlanStep::Degrade];
-const NONE: &[PlanStep] = &[];
+impl Plan {
+    /// The rig's worker, of the component whose `flaky` has this plan.
+    fn worker(self, script: &Arc<Script>) -> Component {
+        let behavior = Scripted::new(script);
+        match self {
+            Plan::Retry => worker::component(WORKER, behavior),
+            Plan::GotoIdle => goto_worker::component(WORKER, behavior),
+            Plan::Ignore => ignore_worker::component(WORKER, behavior),
+            Plan::Degrade => degrade_worker::component(WORKER, behavior),
+            Plan::None => plain_worker::component(WORKER, behavior),
+        }
+    }
+}
+
+const RETRY: Plan = Plan::Retry;
+const GOTO_IDLE: Plan = Plan::GotoIdle;
+const IGNORE: Plan = Plan::Ignore;
+const DEGRADE: Plan = Plan::Degrade;
+const NONE: Plan = Plan::None;
 
 /// Raise `flaky` `times` times in a row from section `kind` under `plan`, and check
 /// the outcome.
-fn case(kind: Kind, plan: &'static [PlanStep], times: u32, expect: Expect) {
+fn case(kind: Kind, plan: Plan, times: u32, expect: Expect) {
     let label = format!("{kind:?} section, plan {plan:?}, {times} exception(s)");
-    let data = FifoIn::new(4, OverflowPolicy::Reject);
-    let rig = Rig::start(Rig::unstarted_with(
-        Script::new(),
-        spec_with(plan),
-        data,
-        None,
-    ));
+    let script = Script::new();
+    let component = plan.worker(&script);
+    let rig = Rig::start(Rig::with(System::new(), script, component));
     let injected = Injected {
         hook: kind.hook(),
         exception: Some(Exception::Flaky),
@@ -95,7 +103,7 @@ fn case(kind: Kind, plan: &'static [PlanStep], times: u32, expect: Expect) {
             rig.command(coolbot::Controllable::Running)
                 .expect("running");
             rig.wait_user("idle");
-            rig.feeder.kick.emit();
+            rig.feeder().kick.emit();
         }
         Kind::Periodic => {
             rig.run_busy();
