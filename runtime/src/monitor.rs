@@ -556,13 +556,61 @@ impl Shared {
         subscription.into_events()
     }
 
+    /// Packets lost at `port` that no input of this component counted (a proxy's:
+    /// lost at the remote instance's input, or on the network, port `network`): added
+    /// to the port's count and announced.
+    pub(crate) fn add_overflows(&self, port: &str, lost: u64) {
+        if lost == 0 {
+            return;
+        }
+        let counted_elsewhere = {
+            let mut monitor = lock(&self.monitor);
+            let slot = match monitor
+                .port_overflows
+                .iter()
+                .position(|(name, _)| name == port)
+            {
+                Some(at) => &mut monitor.port_overflows[at].1,
+                None => {
+                    monitor.port_overflows.push((port.to_owned(), 0));
+                    &mut monitor.port_overflows.last_mut().expect("just pushed").1
+                }
+            };
+            *slot += lost;
+            *slot
+        };
+        let here = self
+            .inputs
+            .iter()
+            .find(|(name, _)| *name == port)
+            .map_or(0, |(_, input)| input.core.overflows());
+        self.publish(MonitorEvent::Overflow {
+            port: port.to_owned(),
+            lost,
+            total: here + counted_elsewhere,
+        });
+    }
+
     pub(crate) fn snapshot(&self) -> Monitor {
         let mut monitor = lock(&self.monitor).clone();
+        // The stored counts are those added by `add_overflows` (0 for most
+        // components); the inputs' own counts come on top.
+        let elsewhere = std::mem::take(&mut monitor.port_overflows);
         monitor.port_overflows = self
             .inputs
             .iter()
             .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
             .collect();
+        for (port, lost) in elsewhere {
+            match monitor
+                .port_overflows
+                .iter_mut()
+                .find(|(name, _)| *name == port)
+            {
+                Some(slot) => slot.1 += lost,
+                None => monitor.port_overflows.push((port, lost)),
+            }
+        }
         monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
         monitor.dropped_events = self.dropped.load(Ordering::Relaxed);
         monitor

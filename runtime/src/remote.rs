@@ -270,6 +270,7 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
         node: placement.node.clone(),
         end: remote.end,
         view: None,
+        applied: Vec::new(),
     };
     Component::driven(placement.name.clone(), Box::new(proxy), remote.ports)
         .with_timing(TimingSpec {
@@ -284,13 +285,36 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
 /// Show on the proxy's monitoring port what the remote instance's shows of its
 /// timing: quality level (an event, so that rules reading `<instance>.quality` see
 /// it), period (an event), missed deadlines, overruns, CPU and elapsed time (the
-/// proxy's runner publishes none of its own thread's: `Driven::mirrors_times`).
-fn overlay(view: &Monitor, cx: &Context) {
+/// proxy's runner publishes none of its own thread's: `Driven::mirrors_times`),
+/// response times and adaptation status; and its losses: what the remote inputs lost,
+/// and what was lost on the way here (port `network`), each added to the proxy's own
+/// count at that port with an `Overflow` event. `applied` holds the remote totals
+/// already added (a new remote instance starts again from 0).
+fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
     let Some(shared) = &cx.shared else {
         return;
     };
+    for (port, total) in &view.port_overflows {
+        let slot = match applied.iter().position(|(name, _)| name == port) {
+            Some(at) => &mut applied[at].1,
+            None => {
+                applied.push((port.clone(), 0));
+                &mut applied.last_mut().expect("just pushed").1
+            }
+        };
+        // Lower than what was added: the instance was built again and counts anew.
+        let lost = if *total >= *slot {
+            *total - *slot
+        } else {
+            *total
+        };
+        *slot = *total;
+        shared.add_overflows(port, lost);
+    }
     shared.update(|monitor| {
         let mut events = Vec::new();
+        monitor.response = view.response;
+        monitor.adaptation = view.adaptation.clone();
         if monitor.quality != view.quality {
             monitor.quality = view.quality;
             events.push(MonitorEvent::Quality(view.quality));
@@ -314,6 +338,8 @@ struct Proxy {
     end: Box<dyn RemoteEnd>,
     /// The remote monitoring port as last heard.
     view: Option<Monitor>,
+    /// The remote loss totals already added to the proxy's monitor ([`overlay`]).
+    applied: Vec<(String, u64)>,
 }
 
 impl Proxy {
@@ -444,7 +470,7 @@ impl Driven for Proxy {
         let Some(view) = &self.view else {
             return Ok(None);
         };
-        overlay(view, cx);
+        overlay(view, &mut self.applied, cx);
         cx.set_result(view.result.clone());
         let target = view
             .user_state
@@ -456,7 +482,7 @@ impl Driven for Proxy {
     fn observe(&mut self, cx: &mut Context) {
         self.end.pump();
         if let Ok(Some(view)) = self.end.view() {
-            overlay(&view, cx);
+            overlay(&view, &mut self.applied, cx);
             self.view = Some(view);
         }
     }

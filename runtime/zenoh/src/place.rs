@@ -12,7 +12,7 @@
 //! the node lost is a fault of the proxy within the Zenoh session's lease
 //! ([`crate::peer_config`]'s `lease`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -137,14 +137,16 @@ impl coolbot::remote::Placer for Placer {
                 key,
             });
         }
-        // Losses on the way in are counted at an input of the proxy's own (not one of
-        // its ports: the count shows in the log and in `End::lost_on_the_way`).
+        // Losses on the way in are counted at an input of the proxy's own, not one of
+        // its ports: the proxy's monitor shows them at port `network` (`End::view`).
         let losses = TickIn::new();
+        let shared = Arc::new(Shared::default());
         let mut outputs = Vec::new();
         for output in spec.outputs {
             let key = format!("{base}/out/{}", output.name);
             let (with, deliver) =
                 bridge(output.name)?.proxy_output(ports, output.kind, losses.erased(), &key);
+            let deliver = waking_on_loss(deliver, losses.clone(), Arc::clone(&shared));
             ports = with;
             let to = match output.kind {
                 OutputKind::Tick => RemoteInput::Tick,
@@ -187,10 +189,11 @@ impl coolbot::remote::Placer for Placer {
             pumps,
             outputs,
             subscribers: Vec::new(),
-            shared: Arc::new(Shared::default()),
+            shared,
             instantiated: false,
             times_asked: None,
-            _losses: losses,
+            losses,
+            reported_losses: 0,
         };
         end.listen().map_err(|e| e.to_string())?;
         Ok(Some(Remote {
@@ -209,6 +212,8 @@ struct Shared {
     changed: AtomicBool,
     /// Why the node is lost, while it is.
     lost: Mutex<Option<String>>,
+    /// Monitoring events of the instance that did not decode (dropped).
+    bad_events: AtomicU64,
     /// The monitoring key of the instance's current generation.
     monitor_key: Mutex<String>,
     waker: Mutex<Option<Waker>>,
@@ -253,7 +258,11 @@ struct End {
     instantiated: bool,
     /// When the remote snapshot (for its times) was last asked for.
     times_asked: Option<Instant>,
-    _losses: TickIn,
+    /// Messages lost on the way here: packets on the outputs' keys that do not decode
+    /// or are missing from the numbering (counted by their deliverers).
+    losses: TickIn,
+    /// The network losses the view last reported.
+    reported_losses: u64,
 }
 
 impl End {
@@ -286,6 +295,8 @@ impl End {
                         serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes())
                     else {
                         tracing::warn!("a monitoring event that does not decode was dropped");
+                        shared.bad_events.fetch_add(1, Ordering::AcqRel);
+                        shared.ring();
                         return;
                     };
                     if let Some(view) = lock(&shared.view).as_mut() {
@@ -374,6 +385,8 @@ impl End {
                 if let Some(view) = lock(&shared.view).as_mut() {
                     view.cpu_time = snapshot.cpu_time;
                     view.elapsed_time = snapshot.elapsed_time;
+                    view.response = snapshot.response;
+                    view.adaptation = snapshot.adaptation;
                 }
                 shared.changed.store(true, Ordering::Release);
                 shared.ring();
@@ -403,9 +416,37 @@ impl End {
     }
 }
 
+/// `deliver`, which also wakes the proxy when a message was lost (it then shows the
+/// loss on its monitor at once).
+fn waking_on_loss(deliver: DeliverFn, losses: TickIn, shared: Arc<Shared>) -> DeliverFn {
+    Arc::new(move |bytes: &[u8]| {
+        let before = losses.overflows();
+        deliver(bytes);
+        if losses.overflows() != before {
+            shared.changed.store(true, Ordering::Release);
+            shared.ring();
+        }
+    })
+}
+
+/// The pseudo-port at which a proxy's monitor counts messages lost on the network.
+const NETWORK: &str = "network";
+
 /// Apply one monitoring event to the mirrored view (what a proxy mirrors).
 fn mirror(view: &mut Monitor, event: MonitorEvent) {
     match event {
+        MonitorEvent::Overflow { port, total, .. } => {
+            match view
+                .port_overflows
+                .iter_mut()
+                .find(|(name, _)| *name == port)
+            {
+                Some(slot) => slot.1 = total,
+                None => view.port_overflows.push((port, total)),
+            }
+            view.overflows = view.port_overflows.iter().map(|(_, n)| n).sum();
+        }
+        MonitorEvent::LateResponse { total, .. } => view.response.late = total,
         MonitorEvent::Period(period) => view.period = period,
         MonitorEvent::Quality(level) => view.quality = level,
         MonitorEvent::MissedDeadline { total, .. } => view.missed_deadlines = total,
@@ -540,10 +581,20 @@ impl RemoteEnd for End {
         if let Some(lost) = lock(&self.shared.lost).clone() {
             return Err(lost);
         }
-        if !self.shared.changed.swap(false, Ordering::AcqRel) {
+        let losses = self.losses.overflows() + self.shared.bad_events.load(Ordering::Acquire);
+        let more_lost = losses != self.reported_losses;
+        if !self.shared.changed.swap(false, Ordering::AcqRel) && !more_lost {
             return Ok(None);
         }
-        Ok(lock(&self.shared.view).clone())
+        let Some(mut view) = lock(&self.shared.view).clone() else {
+            return Ok(None);
+        };
+        self.reported_losses = losses;
+        // Counted here, over every generation of the instance: `overlay` adds what
+        // grew since it last looked.
+        view.port_overflows.retain(|(port, _)| port != NETWORK);
+        view.port_overflows.push((NETWORK.to_owned(), losses));
+        Ok(Some(view))
     }
 
     fn release(&mut self) {

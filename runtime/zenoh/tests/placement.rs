@@ -10,11 +10,12 @@ use std::sync::{Arc, Mutex};
 
 use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
 use coolbot::{
-    CompoundBuilder, InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy, PortSet, State,
-    System,
+    CompoundBuilder, InputKind, InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy,
+    PortSet, State, System,
 };
 use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
+use zenoh::Wait;
 
 use support::{PATIENCE, Shell, pair, spec, supervisor, wait_until};
 
@@ -257,6 +258,67 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
         "{:?}",
         proxy.snapshot()
     );
+
+    // Losses show on the proxy's monitor, with their events. What the remote fifo
+    // (16, reject) drops: 20 packets while the station reads none.
+    let events = proxy.subscribe();
+    for n in 100..120 {
+        src_d.send(n);
+    }
+    assert!(
+        wait_until(PATIENCE, || proxy
+            .snapshot()
+            .port_overflows
+            .contains(&("fi".to_owned(), 4))),
+        "{:?}",
+        proxy.snapshot()
+    );
+    // Bytes that are no packet, put on the key of the proxy's output `out` (from the
+    // station, as a faulty producer would): dropped, and counted at `network`.
+    let heard = robot
+        .session()
+        .declare_subscriber("coolbot-link/station/*/out/out")
+        .wait()
+        .expect("subscribe");
+    remote.out.send(10);
+    let key = heard
+        .recv_timeout(PATIENCE)
+        .expect("a packet on the output's key")
+        .expect("in time")
+        .key_expr()
+        .to_string();
+    station
+        .session()
+        .put(key, vec![0xff_u8; 3])
+        .wait()
+        .expect("put");
+    assert!(
+        wait_until(PATIENCE, || proxy
+            .snapshot()
+            .port_overflows
+            .contains(&("network".to_owned(), 1))),
+        "{:?}",
+        proxy.snapshot()
+    );
+    let snapshot = proxy.snapshot();
+    assert_eq!(snapshot.overflows, 5, "{snapshot:?}");
+    let mut announced = Vec::new();
+    while let Ok(event) = events.try_recv() {
+        if let MonitorEvent::Overflow { port, lost, total } = event {
+            announced.push((port, lost, total));
+        }
+    }
+    // Every loss was announced: at `fi` (the proxy's own queue or the remote one,
+    // whichever filled first), then on the network.
+    let at = |port: &str| -> (u64, Option<u64>) {
+        let mut events = announced.iter().filter(|(p, _, _)| p == port);
+        (
+            events.clone().map(|(_, lost, _)| lost).sum(),
+            events.next_back().map(|(_, _, total)| *total),
+        )
+    };
+    assert_eq!(at("fi"), (4, Some(4)), "{announced:?}");
+    assert_eq!(at("network"), (1, Some(1)), "{announced:?}");
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
