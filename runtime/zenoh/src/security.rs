@@ -4,6 +4,7 @@
 //!
 //! ```toml
 //! allow_plaintext = false        # optional: tcp/ endpoints off loopback
+//! nodes = ["robot", "station"]   # optional: more nodes heard under their own names
 //!
 //! [tls]                          # paths relative to this file
 //! ca = "ca.pem"                  # the authority that signs every node's certificate
@@ -18,11 +19,18 @@
 //! publish = ["robot/cmd_vel"]    # bridge keys the nodes may send packets on
 //! ```
 //!
-//! With `[[allow]]` rules, Zenoh's access control is on and denies by default; every
-//! node may still observe (monitoring, info, echo, liveliness, declarations, replies)
-//! and read bridges named in some `publish` rule (poster values and pull requests);
-//! only the rules grant commands, instantiation and packets on a bridge key.
+//! With `[[allow]]` rules, Zenoh's access control is on and denies by default, on
+//! what a node receives from each peer, by the common name of the peer's certificate.
+//! Every peer may still subscribe, watch liveliness, and query monitoring, info and
+//! the bridges named in some `publish` rule (poster values and pull requests). A node
+//! is heard (puts, queryables and their replies, liveliness tokens) only under its own
+//! name: `coolbot/<name>/**` and its agent, the inlet tokens that carry its name, and
+//! on the bridge keys a `publish` rule grants it (packets, a poster's value, pull
+//! answers, outlet tokens). The names are those the file gives as nodes ([`Security`]'s
+//! `nodes`, a rule's `nodes`, the NODE of `command` and `instantiate`). Only the rules
+//! grant commands and instantiation.
 
+use std::collections::BTreeSet;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -38,6 +46,8 @@ use crate::{Error, keys};
 pub struct Security {
     tls: Option<Tls>,
     allow_plaintext: bool,
+    /// The top-level `nodes`: heard under their own names though no rule names them.
+    nodes: Vec<String>,
     rules: Vec<Rule>,
 }
 
@@ -56,6 +66,8 @@ struct Tls {
 struct File {
     #[serde(default)]
     allow_plaintext: bool,
+    #[serde(default)]
+    nodes: Vec<String>,
     tls: Option<TlsFile>,
     #[serde(default)]
     allow: Vec<Rule>,
@@ -161,6 +173,17 @@ impl Security {
             rule.check()
                 .map_err(|reason| invalid(path, format!("[[allow]] #{}: {reason}", index + 1)))?;
         }
+        for node in &file.nodes {
+            keys::check_name(node)
+                .map_err(|error| invalid(path, format!("nodes: `{node}`: {error}")))?;
+        }
+        if !file.nodes.is_empty() && file.allow.is_empty() {
+            return Err(invalid(
+                path,
+                "`nodes` says who is heard under their own names when access rules are \
+                 on: without [[allow]] rules every node of the CA may do all",
+            ));
+        }
         if !file.allow.is_empty() && tls.is_none() {
             return Err(invalid(
                 path,
@@ -170,6 +193,7 @@ impl Security {
         Ok(Security {
             tls,
             allow_plaintext: file.allow_plaintext,
+            nodes: file.nodes,
             rules: file.allow,
         })
     }
@@ -281,8 +305,29 @@ impl Security {
         Ok(())
     }
 
-    /// The `access_control` section: deny by default; every peer ("any") may observe
-    /// and declare; each rule's nodes get what the rule grants.
+    /// The names heard under their own keys: the top-level `nodes`, every rule's
+    /// `nodes`, and the NODE of every `command` and `instantiate` but `*`.
+    fn node_names(&self) -> BTreeSet<&str> {
+        let targets = self.rules.iter().flat_map(|rule| {
+            rule.command
+                .iter()
+                .filter_map(|pattern| pattern.split_once('/').map(|(node, _)| node))
+                .chain(rule.instantiate.iter().map(String::as_str))
+        });
+        self.nodes
+            .iter()
+            .chain(self.rules.iter().flat_map(|rule| &rule.nodes))
+            .map(String::as_str)
+            .chain(targets)
+            .filter(|node| *node != "*")
+            .collect()
+    }
+
+    /// The `access_control` section: deny by default, on what the node receives.
+    /// Every peer ("any") may subscribe, watch liveliness and observe; each node named
+    /// in the file may speak under its own name (subject `node-<n>`, by certificate);
+    /// each rule's nodes get what the rule grants (subject `rule-<n>`). Zenoh allows
+    /// a message when one of the subjects the peer matches allows it.
     fn access_control(&self) -> Value {
         let rule = |id: String, messages: &[&str], flow: &str, keys: Vec<String>| {
             json!({
@@ -302,12 +347,9 @@ impl Security {
         let mut rules = vec![
             rule("send".to_owned(), &ALL_MESSAGES, "egress", every()),
             rule(
-                "declare".to_owned(),
+                "watch".to_owned(),
                 &[
                     "declare_subscriber",
-                    "declare_queryable",
-                    "reply",
-                    "liveliness_token",
                     "declare_liveliness_subscriber",
                     "liveliness_query",
                 ],
@@ -320,12 +362,6 @@ impl Security {
                 "ingress",
                 vec![keys::monitor("*", "*"), keys::info("*", "*")],
             ),
-            rule(
-                "events".to_owned(),
-                &["put"],
-                "ingress",
-                vec![keys::monitor("*", "*"), keys::echo("*", "*", "*")],
-            ),
         ];
         let bridges: Vec<String> = self
             .rules
@@ -333,7 +369,7 @@ impl Security {
             .flat_map(|rule| &rule.publish)
             .flat_map(|key| [key.clone(), format!("{key}/@pull")])
             .collect();
-        let mut any = vec!["send", "declare", "observe", "events"];
+        let mut any = vec!["send", "watch", "observe"];
         if !bridges.is_empty() {
             rules.push(rule(
                 "read-bridges".to_owned(),
@@ -345,19 +381,63 @@ impl Security {
         }
         let mut subjects = vec![json!({ "id": "any" })];
         let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
+        for (index, node) in self.node_names().into_iter().enumerate() {
+            let subject = format!("node-{index}");
+            let own = vec![format!("{}/{node}/**", keys::ROOT), keys::agent(node)];
+            // Its inlets' tokens carry its name; its outlets' tokens too, on the
+            // bridge keys a rule lets it publish on.
+            let mut tokens = vec![
+                format!("{}/{node}/**", keys::ROOT),
+                format!("**/@in/{node}/*"),
+            ];
+            tokens.extend(
+                self.rules
+                    .iter()
+                    .filter(|rule| rule.nodes.iter().any(|n| n == node))
+                    .flat_map(|rule| &rule.publish)
+                    .map(|key| format!("{key}/@out/*/{node}/*")),
+            );
+            rules.push(rule(
+                format!("{subject}-put"),
+                &["put"],
+                "ingress",
+                vec![format!("{}/{node}/**", keys::ROOT)],
+            ));
+            rules.push(rule(
+                format!("{subject}-answer"),
+                &["declare_queryable", "reply"],
+                "ingress",
+                own,
+            ));
+            rules.push(rule(
+                format!("{subject}-tokens"),
+                &["liveliness_token"],
+                "ingress",
+                tokens,
+            ));
+            subjects.push(json!({ "id": subject, "cert_common_names": [node] }));
+            policies.push(json!({
+                "rules": [
+                    format!("{subject}-put"),
+                    format!("{subject}-answer"),
+                    format!("{subject}-tokens"),
+                ],
+                "subjects": [subject],
+            }));
+        }
         for (index, allowed) in self.rules.iter().enumerate() {
             let subject = format!("rule-{index}");
             let mut granted = Vec::new();
-            let mut grant = |what: &str, message: &str, keys: Vec<String>| {
+            let mut grant = |what: &str, messages: &[&str], keys: Vec<String>| {
                 if !keys.is_empty() {
                     let id = format!("{subject}-{what}");
-                    rules.push(rule(id.clone(), &[message], "ingress", keys));
+                    rules.push(rule(id.clone(), messages, "ingress", keys));
                     granted.push(id);
                 }
             };
             grant(
                 "command",
-                "query",
+                &["query"],
                 allowed
                     .command
                     .iter()
@@ -369,14 +449,24 @@ impl Security {
             );
             grant(
                 "instantiate",
-                "query",
+                &["query"],
                 allowed
                     .instantiate
                     .iter()
                     .map(|node| keys::agent(node))
                     .collect(),
             );
-            grant("publish", "put", allowed.publish.clone());
+            grant("publish", &["put"], allowed.publish.clone());
+            // The producer on a bridge key answers its poster and pull queries.
+            grant(
+                "serve",
+                &["declare_queryable", "reply"],
+                allowed
+                    .publish
+                    .iter()
+                    .flat_map(|key| [key.clone(), format!("{key}/@pull")])
+                    .collect(),
+            );
             subjects.push(json!({ "id": subject, "cert_common_names": allowed.nodes }));
             policies.push(json!({ "rules": granted, "subjects": [subject] }));
         }
@@ -579,6 +669,7 @@ mod tests {
         let security = Security {
             tls: None,
             allow_plaintext: false,
+            nodes: vec!["camera".to_owned()],
             rules: vec![Rule {
                 nodes: vec!["ops".to_owned()],
                 command: vec!["robot/base.*".to_owned(), "*/arm".to_owned()],
@@ -630,5 +721,193 @@ mod tests {
         ));
         let mut config = zenoh::Config::default();
         Security::apply(&security, &mut config).expect("zenoh takes the section");
+    }
+
+    /// Zenoh's decision on an ingress message from a peer whose certificate names
+    /// `peer` (`None`: no certificate), over the section's JSON: allowed when a subject
+    /// the peer matches has an allow rule for the message on a key expression that
+    /// includes `key` (the section has no deny rules).
+    fn allowed(acl: &Value, peer: Option<&str>, message: &str, key: &str) -> bool {
+        let key = zenoh::key_expr::KeyExpr::try_from(key).unwrap();
+        let matches = |subject: &Value| match subject["cert_common_names"].as_array() {
+            None => true,
+            Some(names) => peer.is_some_and(|peer| names.iter().any(|n| n == peer)),
+        };
+        let subjects: Vec<&Value> = acl["subjects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|subject| matches(subject))
+            .map(|subject| &subject["id"])
+            .collect();
+        let rule_ids: Vec<&Value> = acl["policies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|policy| {
+                policy["subjects"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|s| subjects.contains(&s))
+            })
+            .flat_map(|policy| policy["rules"].as_array().unwrap())
+            .collect();
+        acl["rules"].as_array().unwrap().iter().any(|rule| {
+            rule_ids.contains(&&rule["id"])
+                && rule["flows"] == json!(["ingress"])
+                && rule["messages"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|m| m == message)
+                && rule["key_exprs"].as_array().unwrap().iter().any(|pattern| {
+                    zenoh::key_expr::KeyExpr::try_from(pattern.as_str().unwrap())
+                        .unwrap()
+                        .includes(&key)
+                })
+        })
+    }
+
+    #[test]
+    fn a_node_is_heard_only_under_its_own_name() {
+        let security = parse_rules(
+            "nodes = [\"camera\"]\n\
+             [[allow]]\nnodes = [\"station\"]\npublish = [\"link/**\"]\n\
+             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\"]\n",
+        );
+        let acl = security.access_control();
+        let cases: &[(Option<&str>, &str, &str, bool)] = &[
+            // Its own monitoring events, echoes, queryables, replies, tokens.
+            (Some("station"), "put", "coolbot/station/wanderer/m", true),
+            (
+                Some("station"),
+                "put",
+                "coolbot/station/wanderer/o/pose",
+                true,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/station/wanderer/c",
+                true,
+            ),
+            (Some("station"), "reply", "coolbot/station/wanderer/s", true),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/station/@agent",
+                true,
+            ),
+            (Some("station"), "reply", "coolbot/station/@agent", true),
+            (Some("station"), "liveliness_token", "coolbot/station", true),
+            (Some("camera"), "put", "coolbot/camera/lens/m", true),
+            (Some("robot"), "reply", "coolbot/robot/logger/m", true),
+            (Some("ops"), "liveliness_token", "coolbot/ops", true),
+            // Not under another node's name.
+            (Some("station"), "put", "coolbot/robot/logger/m", false),
+            (Some("station"), "put", "coolbot/robot/logger/o/out", false),
+            (Some("station"), "reply", "coolbot/robot/logger/m", false),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/robot/logger/c",
+                false,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/robot/@agent",
+                false,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/*/logger/m",
+                false,
+            ),
+            (Some("station"), "liveliness_token", "coolbot/robot", false),
+            (Some("ops"), "put", "coolbot/station/wanderer/m", false),
+            // A name no part of the file gives, or no certificate: not heard.
+            (Some("mallory"), "put", "coolbot/mallory/x/m", false),
+            (None, "put", "coolbot/robot/logger/m", false),
+            (None, "liveliness_token", "coolbot/robot", false),
+            // Bridges: packets, answers and outlet tokens where `publish` allows;
+            // inlet tokens under one's own name.
+            (Some("station"), "put", "link/robot/out/pose", true),
+            (Some("station"), "reply", "link/robot/out/pose", true),
+            (Some("station"), "reply", "link/robot/out/pose/@pull", true),
+            (
+                Some("station"),
+                "declare_queryable",
+                "link/robot/out/pose/@pull",
+                true,
+            ),
+            (
+                Some("station"),
+                "liveliness_token",
+                "link/robot/out/pose/@out/poster/station/w",
+                true,
+            ),
+            (
+                Some("station"),
+                "liveliness_token",
+                "link/robot/out/pose/@out/poster/robot/w",
+                false,
+            ),
+            (Some("station"), "put", "other/pose", false),
+            (Some("station"), "reply", "other/pose/@pull", false),
+            (Some("ops"), "put", "link/robot/out/pose", false),
+            (Some("ops"), "reply", "link/robot/out/pose", false),
+            (
+                Some("ops"),
+                "liveliness_token",
+                "link/a/@in/ops/inlet",
+                true,
+            ),
+            (
+                Some("ops"),
+                "liveliness_token",
+                "link/a/@in/station/inlet",
+                false,
+            ),
+            // Everyone watches and observes; only the rules command and instantiate.
+            (None, "declare_subscriber", "coolbot/robot/logger/m", true),
+            (None, "liveliness_query", "coolbot/*", true),
+            (Some("mallory"), "query", "coolbot/robot/logger/m", true),
+            (Some("mallory"), "query", "link/robot/out/pose/@pull", true),
+            (Some("station"), "query", "coolbot/robot/logger/c", false),
+            (Some("ops"), "query", "coolbot/robot/logger/c", true),
+            (Some("station"), "query", "coolbot/station/@agent", false),
+            (Some("ops"), "query", "coolbot/station/@agent", true),
+        ];
+        for &(peer, message, key, expected) in cases {
+            assert_eq!(
+                allowed(&acl, peer, message, key),
+                expected,
+                "{peer:?} {message} {key}"
+            );
+        }
+    }
+
+    fn parse_rules(rules: &str) -> Security {
+        let file: File = toml::from_str(rules).expect("a security file");
+        for rule in &file.allow {
+            rule.check().expect("a good rule");
+        }
+        Security {
+            tls: None,
+            allow_plaintext: false,
+            nodes: file.nodes,
+            rules: file.allow,
+        }
+    }
+
+    #[test]
+    fn top_level_nodes_are_node_names_and_need_rules() {
+        let error = parse("nodes = [\"robot\"]").unwrap_err();
+        assert!(error.contains("without [[allow]] rules"), "{error}");
+        let error = parse("nodes = [\"*\"]").unwrap_err();
+        assert!(error.contains("nodes: `*`"), "{error}");
     }
 }

@@ -43,6 +43,11 @@ impl Authority {
     /// A security file for the node whose certificate's common name is `name`, with
     /// `rules` (TOML `[[allow]]` tables) after its `[tls]` table.
     fn node(&self, dir: &Path, file: &str, name: &str, rules: &str) -> PathBuf {
+        self.node_with(dir, file, name, "", rules)
+    }
+
+    /// [`Authority::node`] with `top` (top-level keys) before the `[tls]` table.
+    fn node_with(&self, dir: &Path, file: &str, name: &str, top: &str, rules: &str) -> PathBuf {
         let key = KeyPair::generate().expect("a node key");
         let mut params =
             CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
@@ -56,7 +61,7 @@ impl Authority {
         std::fs::write(
             &path,
             format!(
-                "[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
+                "{top}\n[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
             ),
         )
         .expect("write the security file");
@@ -414,4 +419,300 @@ fn instantiate_rules_gate_the_agent() {
     };
     assert!(built("one"));
     assert!(!built("two"));
+}
+
+/// Three nodes of one CA, each with the same rules (the `nodes` line names all three,
+/// so each is heard under its own name): `robot` listens and watches; `station` and
+/// `mallory` connect to it. `mallory` stands for a program holding a good certificate
+/// that tries to speak as `station`.
+fn three_nodes(dir: &Path) -> (Node, Node, Node) {
+    let authority = Authority::new(dir, "fleet");
+    let top = "nodes = [\"robot\", \"station\", \"mallory\"]";
+    let rules = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\n";
+    let file = |name: &str| authority.node_with(dir, name, name, top, rules);
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &file("robot"),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let connect = std::slice::from_ref(&endpoint);
+    let station = secure_node("station", &file("station"), &[], connect);
+    let mallory = secure_node("mallory", &file("mallory"), &[], connect);
+    (robot, station, mallory)
+}
+
+/// Wait until `node`'s session knows a subscriber on `key`, so that a put on it is
+/// sent.
+fn wait_heard(node: &Node, key: &str) -> zenoh::pubsub::Publisher<'static> {
+    use zenoh::Wait;
+    let publisher = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("a publisher");
+    assert!(
+        wait_until(PATIENCE, || publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())),
+        "nobody subscribes to `{key}`"
+    );
+    publisher
+}
+
+/// A monitoring event put under another node's name is refused by the receiver's
+/// access control (a forged `error` here; on a proxy's key it would fail the proxy),
+/// while the real node's events, and the forger's own, are heard.
+#[test]
+fn monitoring_events_are_heard_only_from_their_own_node() {
+    use coolbot::{Command, Controllable, MonitorEvent};
+    use coolbot_zenoh::keys;
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let (robot, station, mallory) = three_nodes(dir.path());
+    let (heard_tx, heard) = std::sync::mpsc::channel::<(String, String)>();
+    let _watch = robot
+        .session()
+        .declare_subscriber(keys::monitor("*", "*"))
+        .callback(move |sample| {
+            let payload = sample.payload().try_to_string().unwrap_or_default();
+            let _ = heard_tx.send((sample.key_expr().to_string(), payload.into_owned()));
+        })
+        .wait()
+        .expect("a subscriber");
+    let system = support::robot(&station);
+    let real_key = keys::monitor("station", "logger");
+    drop(wait_heard(&station, &real_key));
+    let forged = wait_heard(&mallory, &real_key);
+    let own = wait_heard(&mallory, &keys::monitor("mallory", "logger"));
+
+    let json = |event: &MonitorEvent| serde_json::to_string(event).expect("JSON");
+    let forged_event = MonitorEvent::Error(Some("forged by mallory".to_owned()));
+    let own_event = MonitorEvent::Error(Some("mallory's own".to_owned()));
+    // The forgery first, then mallory's own event on the same link: once the second
+    // is heard, the first would have been.
+    forged.put(json(&forged_event)).wait().expect("put");
+    own.put(json(&own_event)).wait().expect("put");
+    system
+        .handle_at("logger")
+        .expect("the logger")
+        .command(Command::SetState(Controllable::Suspended))
+        .expect("the logger suspends");
+    let real_event = MonitorEvent::State {
+        from: State::Running,
+        to: State::Suspended,
+    };
+
+    let mut all = Vec::new();
+    let wanted = [
+        (real_key.clone(), json(&real_event)),
+        (keys::monitor("mallory", "logger"), json(&own_event)),
+    ];
+    let complete = wait_until(PATIENCE, || {
+        all.extend(heard.try_iter());
+        wanted.iter().all(|event| all.contains(event))
+    });
+    assert!(complete, "heard {all:?}");
+    assert!(
+        !all.iter().any(|(_, payload)| payload.contains("forged")),
+        "a forged event was heard: {all:?}"
+    );
+    drop(system);
+}
+
+/// A queryable under another node's name is not declared to the receiver, and its
+/// answers (and a liveliness token under another name) are dropped; the forger's own
+/// queryable and token, and the real node's answers, come through.
+#[test]
+fn queryables_answer_only_under_their_own_name() {
+    use coolbot_zenoh::keys;
+    use zenoh::Wait;
+    use zenoh::query::{ConsolidationMode, QueryTarget};
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let (robot, station, mallory) = three_nodes(dir.path());
+    let system = support::robot(&station);
+    let session = mallory.session();
+    // The forgeries first, then mallory's own, of each kind, on the same link.
+    let ghost = keys::info("station", "ghost");
+    let _forged = session
+        .declare_queryable(ghost.clone())
+        .callback(|query| {
+            let _ = query.reply(query.key_expr().clone(), "forged").wait();
+        })
+        .wait()
+        .expect("a queryable");
+    let _forged_token = session
+        .liveliness()
+        .declare_token("coolbot/ghost")
+        .wait()
+        .expect("a token");
+    let real_info = keys::info("station", "logger");
+    let mallory_info = keys::info("mallory", "ghost");
+    let (on_station, own_key) = (real_info.clone(), mallory_info.clone());
+    let _own = session
+        .declare_queryable(mallory_info.clone())
+        .callback(move |query| {
+            // An answer under station's name first (it fits a query on
+            // `coolbot/*/*/s`), then mallory's own.
+            let _ = query.reply(on_station.as_str(), "forged").wait();
+            let _ = query.reply(own_key.as_str(), "own").wait();
+        })
+        .wait()
+        .expect("a queryable");
+    let _own_token = session
+        .liveliness()
+        .declare_token("coolbot/mallory/ghost")
+        .wait()
+        .expect("a token");
+
+    // Declarations: mallory's own queryable reaches the robot, the forged one never.
+    let querier = |key: &str| {
+        robot
+            .session()
+            .declare_querier(key.to_owned())
+            .wait()
+            .expect("a querier")
+    };
+    let matching = |querier: &zenoh::query::Querier<'_>| {
+        querier
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())
+    };
+    let own_querier = querier(&mallory_info);
+    assert!(wait_until(PATIENCE, || matching(&own_querier)));
+    assert!(
+        !matching(&querier(&ghost)),
+        "the forged queryable reached the robot"
+    );
+    let replies = robot
+        .session()
+        .get(ghost.clone())
+        .timeout(Duration::from_secs(1))
+        .wait()
+        .expect("a query");
+    assert!(replies.recv().is_err(), "the forged queryable answered");
+
+    // Answers: a query on every component's info reaches mallory through its own
+    // queryable, which answers under station's name too; only its own answer and the
+    // real station's come through.
+    let mut last = Vec::new();
+    let complete = wait_until(PATIENCE, || {
+        let replies = robot
+            .session()
+            .get(keys::info("*", "*"))
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .expect("a query");
+        last.clear();
+        while let Ok(reply) = replies.recv() {
+            if let Ok(sample) = reply.result() {
+                let payload = sample.payload().try_to_string().unwrap_or_default();
+                last.push((sample.key_expr().to_string(), payload.into_owned()));
+            }
+        }
+        let own = last
+            .iter()
+            .any(|(key, payload)| *key == mallory_info && payload == "own");
+        let real = last
+            .iter()
+            .any(|(key, payload)| *key == real_info && payload.contains("Plain"));
+        own && real
+    });
+    assert!(complete, "answers: {last:?}");
+    assert!(
+        !last.iter().any(|(_, payload)| payload == "forged"),
+        "a forged answer came through: {last:?}"
+    );
+
+    // Liveliness: mallory's own token is seen, the one under another name never.
+    let mut tokens = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        let replies = robot
+            .session()
+            .liveliness()
+            .get("coolbot/**")
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .expect("a liveliness query");
+        tokens.clear();
+        while let Ok(reply) = replies.recv() {
+            if let Ok(sample) = reply.result() {
+                tokens.push(sample.key_expr().to_string());
+            }
+        }
+        tokens.iter().any(|key| key == "coolbot/mallory/ghost")
+    }));
+    assert!(
+        !tokens.iter().any(|key| key == "coolbot/ghost"),
+        "{tokens:?}"
+    );
+    assert!(
+        tokens.iter().any(|key| key == "coolbot/station"),
+        "{tokens:?}"
+    );
+    drop(system);
+}
+
+/// `coolctl`'s library under access rules: the operator, whom the rules let command
+/// only the robot's base, lists the robot's components and reads a monitor (the
+/// robot's answers are heard under its own name).
+#[test]
+fn coolctl_lists_and_reads_under_access_rules() {
+    use coolbot_zenoh::ctl::Ctl;
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", RULES),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let system = support::robot(&robot);
+    let security = Security::load(&authority.node(dir, "ops", "ops", RULES)).expect("ops's file");
+    let config = secure_config(&[], std::slice::from_ref(&endpoint), false, &security)
+        .expect("a TLS configuration");
+    let ctl = Ctl::new(
+        zenoh::open(config).wait().expect("a session"),
+        Duration::from_secs(1),
+    );
+    let mut listed = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            listed = ctl
+                .components(Some("robot"))
+                .expect("a listing")
+                .into_iter()
+                .map(|listed| format!("{}/{}", listed.node, listed.path))
+                .collect();
+            listed.len() == 6
+        }),
+        "listed {listed:?}"
+    );
+    assert_eq!(
+        listed,
+        [
+            "robot/logger",
+            "robot/robot",
+            "robot/robot.base",
+            "robot/robot.base.motion",
+            "robot/robot.base.ranges",
+            "robot/robot.planner",
+        ]
+    );
+    let monitor = ctl.snapshot("robot/robot.base.motion").expect("a snapshot");
+    assert_eq!(monitor.state, State::Running);
+    let info = ctl.info("robot/logger").expect("the logger's shape");
+    assert_eq!(info.type_name, "Plain");
+    drop(system);
 }
