@@ -15,7 +15,7 @@
 //! [[allow]]                      # with no [[allow]], every node of the CA may do all
 //! nodes = ["workstation"]        # certificate common names
 //! command = ["robot/*"]          # NODE/PATH: control ports `c` (coolctl set, ...)
-//! instantiate = ["robot"]        # NODE: the agent's Instantiate requests
+//! instantiate = ["robot/Planner"] # NODE or NODE/TYPE: the agent's Instantiate requests
 //! publish = ["robot/cmd_vel"]    # bridge keys the nodes may send packets on
 //! ```
 //!
@@ -117,7 +117,7 @@ const ALL_MESSAGES: [&str; 9] = [
 /// verbatim `@` chunks, so those are named.
 const EVERY_KEY: [&str; 5] = [
     "**",
-    "coolbot/*/@agent",
+    "coolbot/*/@agent/*",
     "**/@pull",
     "**/@out/**",
     "**/@in/**",
@@ -312,7 +312,11 @@ impl Security {
             rule.command
                 .iter()
                 .filter_map(|pattern| pattern.split_once('/').map(|(node, _)| node))
-                .chain(rule.instantiate.iter().map(String::as_str))
+                .chain(rule.instantiate.iter().map(|pattern| {
+                    pattern
+                        .split_once('/')
+                        .map_or(pattern.as_str(), |(node, _)| node)
+                }))
         });
         self.nodes
             .iter()
@@ -383,7 +387,7 @@ impl Security {
         let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
         for (index, node) in self.node_names().into_iter().enumerate() {
             let subject = format!("node-{index}");
-            let own = vec![format!("{}/{node}/**", keys::ROOT), keys::agent(node)];
+            let own = vec![format!("{}/{node}/**", keys::ROOT), keys::agent(node, "*")];
             // Its inlets' tokens carry its name; its outlets' tokens too, on the
             // bridge keys a rule lets it publish on.
             let mut tokens = vec![
@@ -453,7 +457,10 @@ impl Security {
                 allowed
                     .instantiate
                     .iter()
-                    .map(|node| keys::agent(node))
+                    .map(|pattern| {
+                        let (node, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
+                        keys::agent(node, type_name)
+                    })
                     .collect(),
             );
             grant("publish", &["put"], allowed.publish.clone());
@@ -493,8 +500,9 @@ impl Rule {
         for pattern in &self.command {
             component_pattern(pattern)?;
         }
-        for node in &self.instantiate {
-            node_pattern(node).map_err(|reason| format!("instantiate `{node}`: {reason}"))?;
+        for pattern in &self.instantiate {
+            instantiate_pattern(pattern)
+                .map_err(|reason| format!("instantiate `{pattern}`: {reason}"))?;
         }
         for key in &self.publish {
             publish_pattern(key)?;
@@ -509,6 +517,17 @@ fn node_pattern(node: &str) -> Result<(), String> {
         return Ok(());
     }
     keys::check_name(node).map_err(|error| error.to_string())
+}
+
+/// `NODE` or `NODE/TYPE` in an `instantiate` rule: NODE is a name or `*`, TYPE a
+/// component type name or `*` (NODE alone: every type).
+fn instantiate_pattern(pattern: &str) -> Result<(), String> {
+    let (node, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
+    node_pattern(node)?;
+    if type_name != "*" {
+        keys::check_name(type_name).map_err(|error| error.to_string())?;
+    }
+    Ok(())
 }
 
 /// `NODE/PATH` in a `command` rule, as the node and the key chunk of the path: NODE
@@ -655,7 +674,12 @@ mod tests {
         );
         assert!(rule("nodes = [\"a\"]\ncommand = [\"robot\"]").is_err());
         assert!(rule("nodes = [\"a\"]\ncommand = [\"robot/a/b\"]").is_err());
-        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/b\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/b/c\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/B*\"]").is_err());
+        assert_eq!(
+            rule("nodes = [\"a\"]\ninstantiate = [\"a/B\", \"*/*\", \"c\"]"),
+            Ok(())
+        );
         assert!(rule("nodes = [\"a\"]\npublish = [\"k/@pull\"]").is_err());
         assert!(rule("nodes = [\"a\"]\npublish = [\"k//x\"]").is_err());
         assert_eq!(
@@ -673,7 +697,7 @@ mod tests {
             rules: vec![Rule {
                 nodes: vec!["ops".to_owned()],
                 command: vec!["robot/base.*".to_owned(), "*/arm".to_owned()],
-                instantiate: vec!["station".to_owned()],
+                instantiate: vec!["station".to_owned(), "robot/Planner".to_owned()],
                 publish: vec!["robot/cmd".to_owned()],
             }],
         };
@@ -692,7 +716,10 @@ mod tests {
         );
         assert_eq!(
             keys_of("rule-0-instantiate"),
-            Some(json!(["coolbot/station/@agent"]))
+            Some(json!([
+                "coolbot/station/@agent/*",
+                "coolbot/robot/@agent/Planner"
+            ]))
         );
         assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
         assert_eq!(
@@ -705,8 +732,15 @@ mod tests {
             let pattern = zenoh::key_expr::KeyExpr::try_from(pattern).unwrap();
             pattern.includes(&zenoh::key_expr::KeyExpr::try_from(key).unwrap())
         };
-        assert!(!includes("**", "coolbot/station/@agent"));
-        assert!(includes("coolbot/*/@agent", "coolbot/station/@agent"));
+        assert!(!includes("**", "coolbot/station/@agent/Planner"));
+        assert!(includes(
+            "coolbot/*/@agent/*",
+            "coolbot/station/@agent/Planner"
+        ));
+        assert!(!includes(
+            "coolbot/station/@agent/*",
+            "coolbot/station/@agent"
+        ));
         assert!(includes("**/@pull", "a/b/@pull"));
         assert!(includes("**/@out/**", "a/b/@out/poster/n/x"));
         assert!(includes(
@@ -774,7 +808,7 @@ mod tests {
         let security = parse_rules(
             "nodes = [\"camera\"]\n\
              [[allow]]\nnodes = [\"station\"]\npublish = [\"link/**\"]\n\
-             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\"]\n",
+             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\", \"robot/Planner\"]\n",
         );
         let acl = security.access_control();
         let cases: &[(Option<&str>, &str, &str, bool)] = &[
@@ -796,10 +830,15 @@ mod tests {
             (
                 Some("station"),
                 "declare_queryable",
-                "coolbot/station/@agent",
+                "coolbot/station/@agent/Wanderer",
                 true,
             ),
-            (Some("station"), "reply", "coolbot/station/@agent", true),
+            (
+                Some("station"),
+                "reply",
+                "coolbot/station/@agent/Wanderer",
+                true,
+            ),
             (Some("station"), "liveliness_token", "coolbot/station", true),
             (Some("camera"), "put", "coolbot/camera/lens/m", true),
             (Some("robot"), "reply", "coolbot/robot/logger/m", true),
@@ -817,7 +856,7 @@ mod tests {
             (
                 Some("station"),
                 "declare_queryable",
-                "coolbot/robot/@agent",
+                "coolbot/robot/@agent/*",
                 false,
             ),
             (
@@ -878,8 +917,20 @@ mod tests {
             (Some("mallory"), "query", "link/robot/out/pose/@pull", true),
             (Some("station"), "query", "coolbot/robot/logger/c", false),
             (Some("ops"), "query", "coolbot/robot/logger/c", true),
-            (Some("station"), "query", "coolbot/station/@agent", false),
-            (Some("ops"), "query", "coolbot/station/@agent", true),
+            (
+                Some("station"),
+                "query",
+                "coolbot/station/@agent/Wanderer",
+                false,
+            ),
+            (
+                Some("ops"),
+                "query",
+                "coolbot/station/@agent/Wanderer",
+                true,
+            ),
+            (Some("ops"), "query", "coolbot/robot/@agent/Planner", true),
+            (Some("ops"), "query", "coolbot/robot/@agent/Mapper", false),
         ];
         for &(peer, message, key, expected) in cases {
             assert_eq!(

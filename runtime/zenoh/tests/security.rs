@@ -333,10 +333,13 @@ fn publish_rules_gate_bridge_keys() {
     assert!(consumers.shutdown().clean());
 }
 
-/// `ops` may instantiate on `robot`, `guest` (signed by the same CA) may only command:
-/// the agent builds what `ops` asks, and `guest`'s request never reaches it.
+/// `ops` may instantiate every type on `robot`, `typed` only `Plain`, and `guest`
+/// (signed by the same CA) may only command: the agent builds what the rules allow,
+/// and the other requests never reach it; a request for another type than its key's
+/// is refused by the agent.
 #[test]
-fn instantiate_rules_gate_the_agent() {
+fn instantiate_rules_gate_the_agent_by_node_and_type() {
+    use coolbot_zenoh::ControlReply;
     use coolbot_zenoh::agent::{Agent, Instantiate, Registry, instantiate};
     use zenoh::Wait;
 
@@ -344,6 +347,7 @@ fn instantiate_rules_gate_the_agent() {
     let dir = dir.path();
     let authority = Authority::new(dir, "fleet");
     let rules = "[[allow]]\nnodes = [\"ops\"]\ninstantiate = [\"robot\"]\n\n\
+                 [[allow]]\nnodes = [\"typed\"]\ninstantiate = [\"robot/Plain\"]\n\n\
                  [[allow]]\nnodes = [\"guest\"]\ncommand = [\"robot/*\"]\n";
     let endpoint = format!("tls/127.0.0.1:{}", free_port());
     let robot = std::sync::Arc::new(secure_node(
@@ -352,11 +356,13 @@ fn instantiate_rules_gate_the_agent() {
         std::slice::from_ref(&endpoint),
         &[],
     ));
-    let plain = spec("Plain", vec![], vec![], vec![]);
     let mut registry = Registry::new();
-    registry.register("Plain", move |name| {
-        Shell::component(name, plain, PortSet::new())
-    });
+    for type_name in ["Plain", "Other"] {
+        let shape = spec(type_name, vec![], vec![], vec![]);
+        registry.register(type_name, move |name| {
+            Shell::component(name, shape, PortSet::new())
+        });
+    }
     let _agent = Agent::start(std::sync::Arc::clone(&robot), registry).expect("the agent");
     let client = |name: &str| {
         secure_node(
@@ -366,9 +372,9 @@ fn instantiate_rules_gate_the_agent() {
             std::slice::from_ref(&endpoint),
         )
     };
-    let (ops, guest) = (client("ops"), client("guest"));
-    let request = |name: &str| Instantiate {
-        type_name: "Plain".to_owned(),
+    let (ops, typed, guest) = (client("ops"), client("typed"), client("guest"));
+    let request = |type_name: &str, name: &str| Instantiate {
+        type_name: type_name.to_owned(),
         name: name.to_owned(),
         wires: Vec::new(),
         timing: None,
@@ -377,48 +383,86 @@ fn instantiate_rules_gate_the_agent() {
         configuration: None,
         variables: Vec::new(),
     };
+    let second = Duration::from_secs(1);
     // The agent's queryable reaches the operator's session after a while.
     let mut last = None;
     assert!(
         wait_until(PATIENCE, || {
-            last = Some(instantiate(
-                &ops,
-                "robot",
-                &request("one"),
-                Duration::from_secs(1),
-            ));
+            last = Some(instantiate(&ops, "robot", &request("Plain", "one"), second));
             matches!(last, Some(Ok(())))
         }),
         "ops could not instantiate: {last:?}"
     );
-    // The guest's session knows the agent (declarations cross), but its request is
-    // dropped by the robot's access control: nothing answers, nothing is built.
-    let querier = guest
-        .session()
-        .declare_querier(coolbot_zenoh::keys::agent("robot"))
-        .wait()
-        .expect("a querier");
-    assert!(wait_until(PATIENCE, || querier
-        .matching_status()
-        .wait()
-        .is_ok_and(|status| status.matching())));
-    let refused = instantiate(&guest, "robot", &request("two"), Duration::from_secs(1));
+    instantiate(&ops, "robot", &request("Other", "three"), second).expect("ops builds Other");
+    // The other sessions know the agent (declarations cross), but the requests the
+    // rules do not grant are dropped by the robot's access control: nothing answers,
+    // nothing is built.
+    for client in [&typed, &guest] {
+        let querier = client
+            .session()
+            .declare_querier(coolbot_zenoh::keys::agent("robot", "Plain"))
+            .wait()
+            .expect("a querier");
+        assert!(wait_until(PATIENCE, || querier
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())));
+    }
+    let refused = instantiate(&guest, "robot", &request("Plain", "two"), second);
     let error = refused
         .expect_err("the guest may not instantiate")
         .to_string();
-    assert!(error.contains("no agent answered"), "{error}");
+    assert!(
+        error.contains("no agent answered") && error.contains("access rules"),
+        "{error}"
+    );
+    instantiate(&typed, "robot", &request("Plain", "four"), second).expect("typed builds Plain");
+    let refused = instantiate(&typed, "robot", &request("Other", "five"), second);
+    assert!(
+        refused
+            .expect_err("typed may not build Other")
+            .to_string()
+            .contains("no agent answered")
+    );
+    // A request for Other on Plain's key: the access control lets it through, the
+    // agent refuses it.
+    let replies = typed
+        .session()
+        .get(coolbot_zenoh::keys::agent("robot", "Plain"))
+        .payload(serde_json::to_vec(&request("Other", "six")).expect("JSON"))
+        .timeout(second)
+        .wait()
+        .expect("a query");
+    let reply = replies.recv().expect("the agent answers");
+    let answer: ControlReply =
+        serde_json::from_slice(&reply.result().expect("an answer").payload().to_bytes())
+            .expect("a ControlReply");
+    assert_eq!(
+        answer,
+        ControlReply::Rejected {
+            reason: "the request builds a `Other` but came on the key of type `Plain`".to_owned()
+        }
+    );
     let built = |path: &str| {
         robot
             .session()
             .get(coolbot_zenoh::keys::monitor("robot", path))
-            .timeout(Duration::from_secs(1))
+            .timeout(second)
             .wait()
             .expect("a query")
             .recv()
             .is_ok()
     };
-    assert!(built("one"));
-    assert!(!built("two"));
+    for (path, expected) in [
+        ("one", true),
+        ("two", false),
+        ("three", true),
+        ("four", true),
+        ("five", false),
+        ("six", false),
+    ] {
+        assert_eq!(built(path), expected, "{path}");
+    }
 }
 
 /// Three nodes of one CA, each with the same rules (the `nodes` line names all three,
