@@ -215,6 +215,36 @@ impl Security {
         !self.rules.is_empty()
     }
 
+    /// The common name of this node's certificate, its name in every node's rules
+    /// (`None` without `[tls]`).
+    pub fn identity(&self) -> Result<Option<String>, Error> {
+        self.tls
+            .as_ref()
+            .map(|tls| common_name(&tls.certificate))
+            .transpose()
+    }
+
+    /// Whether these rules let the node whose certificate names `who` command the
+    /// component at `path` on `node`, as the same rules enforced by that node would
+    /// decide (the same key expressions); `None` without rules (no access control).
+    pub fn grants_command(&self, who: &str, node: &str, path: &str) -> Option<bool> {
+        if self.rules.is_empty() {
+            return None;
+        }
+        let key = zenoh::key_expr::KeyExpr::try_from(keys::control(node, path)).ok()?;
+        Some(
+            self.rules
+                .iter()
+                .filter(|rule| rule.nodes.iter().any(|n| n == who))
+                .flat_map(|rule| &rule.command)
+                .filter_map(|pattern| component_pattern(pattern).ok())
+                .filter_map(|(node, chunk)| {
+                    zenoh::key_expr::KeyExpr::try_from(keys::control(node, &chunk)).ok()
+                })
+                .any(|pattern| pattern.includes(&key)),
+        )
+    }
+
     /// Check the endpoints and scouting against this security: `tls/` endpoints need
     /// TLS; `tcp/` endpoints off loopback and multicast scouting need TLS or plaintext
     /// allowed.
@@ -574,26 +604,33 @@ pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Resu
     let Ok(Some(path)) = serde_json::from_str::<Option<PathBuf>>(&json) else {
         return Ok(());
     };
+    let common_name = common_name(&path)?;
+    if common_name != name {
+        return Err(Error::Security(format!(
+            "{}: the certificate is node `{common_name}`'s: a node opens under its \
+             certificate's common name, not `{name}`",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// The common name of the PEM certificate at `path`.
+fn common_name(path: &Path) -> Result<String, Error> {
     let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
-    let bytes = std::fs::read(&path).map_err(|error| bad(format!("cannot read: {error}")))?;
+    let bytes = std::fs::read(path).map_err(|error| bad(format!("cannot read: {error}")))?;
     let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
         .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
     let certificate = pem
         .parse_x509()
         .map_err(|error| bad(format!("not an X.509 certificate: {error}")))?;
-    let common_name = certificate
+    certificate
         .subject()
         .iter_common_name()
         .next()
         .and_then(|cn| cn.as_str().ok())
-        .ok_or_else(|| bad("the certificate has no common name".to_owned()))?;
-    if common_name != name {
-        return Err(bad(format!(
-            "the certificate is node `{common_name}`'s: a node opens under its \
-             certificate's common name, not `{name}`"
-        )));
-    }
-    Ok(())
+        .map(str::to_owned)
+        .ok_or_else(|| bad("the certificate has no common name".to_owned()))
 }
 
 /// An endpoint's protocol, and whether its address is on loopback.
@@ -952,6 +989,31 @@ mod tests {
             nodes: file.nodes,
             rules: file.allow,
         }
+    }
+
+    #[test]
+    fn commands_granted_are_those_the_keys_allow() {
+        let security = parse_rules(
+            "[[allow]]\nnodes = [\"ops\", \"dev\"]\ncommand = [\"robot/base.*\", \"*/arm\"]\n\
+             [[allow]]\nnodes = [\"dev\"]\ncommand = [\"station/*\"]\n",
+        );
+        let cases = [
+            ("ops", "robot", "base.motion", true),
+            ("ops", "robot", "base", false),
+            ("ops", "robot", "logger", false),
+            ("ops", "station", "arm", true),
+            ("ops", "station", "wanderer", false),
+            ("dev", "station", "wanderer", true),
+            ("guest", "robot", "base.motion", false),
+        ];
+        for (who, node, path, expected) in cases {
+            assert_eq!(
+                security.grants_command(who, node, path),
+                Some(expected),
+                "{who} {node}/{path}"
+            );
+        }
+        assert_eq!(Security::none().grants_command("ops", "robot", "x"), None);
     }
 
     #[test]

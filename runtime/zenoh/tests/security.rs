@@ -149,7 +149,8 @@ fn tls_and_access_rules() {
     assert_eq!(out.status.code(), Some(1), "{out:?}");
     let error = text(&out.stderr);
     assert!(
-        error.contains("no component answered at `robot/logger`") && error.contains("access rules"),
+        error.contains("no component answered at `robot/logger`")
+            && error.contains("do not let `ops` command `robot/logger`"),
         "{error}"
     );
     assert_eq!(state("logger"), State::Running);
@@ -706,10 +707,13 @@ fn queryables_answer_only_under_their_own_name() {
 
 /// `coolctl`'s library under access rules: the operator, whom the rules let command
 /// only the robot's base, lists the robot's components and reads a monitor (the
-/// robot's answers are heard under its own name).
+/// robot's answers are heard under its own name); a command the rules refuse is
+/// reported as refused by them.
 #[test]
 fn coolctl_lists_and_reads_under_access_rules() {
-    use coolbot_zenoh::ctl::Ctl;
+    use coolbot::{Command, Controllable};
+    use coolbot_zenoh::ControlReply;
+    use coolbot_zenoh::ctl::{Ctl, CtlError};
     use zenoh::Wait;
 
     let dir = tempfile::tempdir().expect("a temporary directory");
@@ -729,7 +733,9 @@ fn coolctl_lists_and_reads_under_access_rules() {
     let ctl = Ctl::new(
         zenoh::open(config).wait().expect("a session"),
         Duration::from_secs(1),
-    );
+    )
+    .with_security(&security)
+    .expect("ops's certificate names it");
     let mut listed = Vec::new();
     assert!(
         wait_until(PATIENCE, || {
@@ -758,5 +764,20 @@ fn coolctl_lists_and_reads_under_access_rules() {
     assert_eq!(monitor.state, State::Running);
     let info = ctl.info("robot/logger").expect("the logger's shape");
     assert_eq!(info.type_name, "Plain");
+    let suspend = Command::SetState(Controllable::Suspended);
+    assert_eq!(
+        ctl.command("robot/robot.base.ranges", &suspend)
+            .expect("allowed"),
+        ControlReply::Accepted
+    );
+    match ctl.command("robot/logger", &suspend) {
+        Err(CtlError::Refused { target, who, .. }) => {
+            assert_eq!((target.as_str(), who.as_str()), ("robot/logger", "ops"));
+        }
+        other => panic!("not refused by the rules: {other:?}"),
+    }
+    let state = |path: &str| system.handle_at(path).expect(path).snapshot().state;
+    assert_eq!(state("robot.base.ranges"), State::Suspended);
+    assert_eq!(state("logger"), State::Running);
     drop(system);
 }
