@@ -336,7 +336,8 @@ impl Security {
     }
 
     /// The names heard under their own keys: the top-level `nodes`, every rule's
-    /// `nodes`, and the NODE of every `command` and `instantiate` but `*`.
+    /// `nodes`, and the NODE of every `command` and `instantiate` but `*`; a common
+    /// name that cannot be a node's (`keys::check_name`: a space, a `*`) names no keys.
     fn node_names(&self) -> BTreeSet<&str> {
         let targets = self.rules.iter().flat_map(|rule| {
             rule.command
@@ -353,7 +354,7 @@ impl Security {
             .chain(self.rules.iter().flat_map(|rule| &rule.nodes))
             .map(String::as_str)
             .chain(targets)
-            .filter(|node| *node != "*")
+            .filter(|node| keys::check_name(node).is_ok())
             .collect()
     }
 
@@ -845,7 +846,8 @@ mod tests {
         let security = parse_rules(
             "nodes = [\"camera\"]\n\
              [[allow]]\nnodes = [\"station\"]\npublish = [\"link/**\"]\n\
-             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\", \"robot/Planner\"]\n",
+             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\", \"robot/Planner\"]\n\
+             [[allow]]\nnodes = [\"*\", \"the ops\"]\ncommand = [\"robot/logger\"]\n",
         );
         let acl = security.access_control();
         let cases: &[(Option<&str>, &str, &str, bool)] = &[
@@ -904,6 +906,8 @@ mod tests {
             ),
             (Some("station"), "liveliness_token", "coolbot/robot", false),
             (Some("ops"), "put", "coolbot/station/wanderer/m", false),
+            // A common name that cannot be a node's names no keys.
+            (Some("*"), "put", "coolbot/robot/logger/m", false),
             // A name no part of the file gives, or no certificate: not heard.
             (Some("mallory"), "put", "coolbot/mallory/x/m", false),
             (None, "put", "coolbot/robot/logger/m", false),
