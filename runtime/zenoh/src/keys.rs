@@ -17,8 +17,8 @@
 //!   key so that access rules can grant instantiation per type.
 //! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
 //!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
-//!   liveliness tokens that check the connection rules under `K/@producer`,
-//!   `K/@queue` and `K/@inlet`.
+//!   liveliness tokens that check the connection rules, `K/@out/<kind>/<node>/<name>`
+//!   (outlets) and `K/@in/<node>/<name>` (inlets).
 
 use crate::Error;
 
