@@ -15,7 +15,7 @@
 //! [[allow]]                      # with no [[allow]], every node of the CA may do all
 //! nodes = ["workstation"]        # certificate common names
 //! command = ["robot/*"]          # NODE/PATH: control ports `c` (coolctl set, ...)
-//! instantiate = ["robot/Planner"] # NODE or NODE/TYPE: the agent's Instantiate requests
+//! instantiate = ["robot/Arm"]    # NODE or NODE/TYPE: the agent's Instantiate requests
 //! publish = ["robot/cmd_vel"]    # bridge keys the nodes may send packets on
 //! ```
 //!
