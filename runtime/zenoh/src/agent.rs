@@ -364,14 +364,14 @@ impl std::fmt::Debug for Agent {
 }
 
 impl Agent {
-    /// Answer instantiation requests on `coolbot/<node>/@agent` with the types of
-    /// `registry`.
+    /// Answer instantiation requests on `coolbot/<node>/@agent/<type>` with the types
+    /// of `registry`.
     pub fn start(node: Arc<Node>, registry: impl Into<Arc<Registry>>) -> Result<Agent, Error> {
         let registry: Arc<Registry> = registry.into();
         let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(16);
         let queryable = node
             .session()
-            .declare_queryable(keys::agent(node.name()))
+            .declare_queryable(keys::agent(node.name(), "*"))
             .callback(move |query| {
                 if let Err(error) = requests.try_send(query) {
                     let query = error.into_inner();
@@ -518,6 +518,19 @@ fn serve(
             serde_json::from_slice(&payload.to_bytes()).map_err(|_| "malformed request")
         })
         .map_err(str::to_owned)?;
+    // Access rules grant instantiation by the key's type: the request must be for it.
+    let asked = query
+        .key_expr()
+        .as_str()
+        .rsplit('/')
+        .next()
+        .unwrap_or_default();
+    if asked != request.type_name {
+        return Err(format!(
+            "the request builds a `{}` but came on the key of type `{asked}`",
+            request.type_name
+        ));
+    }
     let factory = registry.types.get(&request.type_name).ok_or_else(|| {
         format!(
             "no component type `{}` here (registered: {:?})",
@@ -666,10 +679,14 @@ pub fn instantiate(
     request: &Instantiate,
     timeout: Duration,
 ) -> Result<(), Error> {
+    keys::check_name(&request.type_name).map_err(|error| Error::Remote {
+        node: on.to_owned(),
+        reason: format!("the type name is not a key chunk: {error}"),
+    })?;
     let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
     let replies = node
         .session()
-        .get(keys::agent(on))
+        .get(keys::agent(on, &request.type_name))
         .payload(json)
         .timeout(timeout)
         .wait()
@@ -677,7 +694,11 @@ pub fn instantiate(
     let Ok(reply) = replies.recv() else {
         return Err(Error::Remote {
             node: on.to_owned(),
-            reason: format!("no agent answered (waited at most {timeout:?})"),
+            reason: format!(
+                "no agent answered (waited at most {timeout:?}; does the node run an agent, \
+                 and do its access rules let this node instantiate `{}` there?)",
+                request.type_name
+            ),
         });
     };
     let answer = reply

@@ -35,6 +35,19 @@ pub enum CtlError {
         /// How long it waited.
         waited: Duration,
     },
+    /// Nothing answered a command, and the access rules of the security file this
+    /// `coolctl` was given do not grant it.
+    #[error(
+        "no component answered at `{target}` within {waited:?}: the access rules of this security file do not let `{who}` command `{target}` (a node that enforces them drops the command unanswered)"
+    )]
+    Refused {
+        /// The target.
+        target: String,
+        /// How long it waited.
+        waited: Duration,
+        /// This `coolctl`'s name in the rules (its certificate's common name).
+        who: String,
+    },
     /// No node of that name is alive.
     #[error("no node `{node}` is alive (nodes alive: {alive})")]
     UnknownNode {
@@ -317,12 +330,33 @@ pub struct Listed {
 pub struct Ctl {
     session: zenoh::Session,
     timeout: Duration,
+    /// The security file's rules and this session's name in them.
+    rules: Option<(crate::Security, String)>,
 }
 
 impl Ctl {
     /// On `session`, waiting at most `timeout` for answers.
     pub fn new(session: zenoh::Session, timeout: Duration) -> Ctl {
-        Ctl { session, timeout }
+        Ctl {
+            session,
+            timeout,
+            rules: None,
+        }
+    }
+
+    /// Explain, with the access rules of `security` (the file the session was opened
+    /// with), a command nothing answered: when they do not let this session's
+    /// certificate command the target, the error says so ([`CtlError::Refused`])
+    /// rather than only that nothing answered. The target node enforces its own file;
+    /// this reads the same rules, as nodes that share one file do.
+    pub fn with_security(mut self, security: &crate::Security) -> Result<Ctl, CtlError> {
+        let who = security
+            .identity()
+            .map_err(|error| CtlError::BadArgument(error.to_string()))?;
+        self.rules = who
+            .filter(|_| security.has_rules())
+            .map(|who| (security.clone(), who));
+        Ok(self)
     }
 
     /// The names of the nodes alive, sorted.
@@ -537,7 +571,19 @@ impl Ctl {
                         .into_owned(),
                 }),
             },
-            Err(_) => Err(self.missing(node, path, address)),
+            Err(_) => Err(match self.missing(node, path, address) {
+                CtlError::NoAnswer { target, waited } => match &self.rules {
+                    Some((rules, who)) if rules.grants_command(who, node, path) == Some(false) => {
+                        CtlError::Refused {
+                            target,
+                            waited,
+                            who: who.clone(),
+                        }
+                    }
+                    _ => CtlError::NoAnswer { target, waited },
+                },
+                other => other,
+            }),
         }
     }
 

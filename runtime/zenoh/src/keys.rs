@@ -11,13 +11,14 @@
 //!   outputs echoed).
 //! - `coolbot/<node>/<path>/o/<port>`: the packets of an echoed output (JSON
 //!   [`crate::echo::Echoed`], `coolctl echo`).
-//! - `coolbot/<node>/@agent`: the agent of a node (remote instantiation): a query
-//!   whose payload is a JSON [`crate::agent::Instantiate`], answered with a JSON
-//!   [`crate::ControlReply`].
+//! - `coolbot/<node>/@agent/<type>`: the agent of a node (remote instantiation): a
+//!   query whose payload is a JSON [`crate::agent::Instantiate`] for a component of
+//!   type `<type>`, answered with a JSON [`crate::ControlReply`]. The type is in the
+//!   key so that access rules can grant instantiation per type.
 //! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
 //!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
-//!   liveliness tokens that check the connection rules under `K/@producer`,
-//!   `K/@queue` and `K/@inlet`.
+//!   liveliness tokens that check the connection rules, `K/@out/<kind>/<node>/<name>`
+//!   (outlets) and `K/@in/<node>/<name>` (inlets).
 
 use crate::Error;
 
@@ -49,9 +50,10 @@ pub fn echo(node: &str, path: &str, port: &str) -> String {
     format!("{ROOT}/{node}/{path}/o/{port}")
 }
 
-/// The key of node `node`'s agent.
-pub fn agent(node: &str) -> String {
-    format!("{ROOT}/{node}/@agent")
+/// The key on which node `node`'s agent takes requests to build a `type_name`
+/// (`*`: every type, the key the agent answers on).
+pub fn agent(node: &str, type_name: &str) -> String {
+    format!("{ROOT}/{node}/@agent/{type_name}")
 }
 
 /// Split a monitoring or control key back into `(node, path)`.

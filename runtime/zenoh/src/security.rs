@@ -4,6 +4,7 @@
 //!
 //! ```toml
 //! allow_plaintext = false        # optional: tcp/ endpoints off loopback
+//! nodes = ["robot", "station"]   # optional: more nodes heard under their own names
 //!
 //! [tls]                          # paths relative to this file
 //! ca = "ca.pem"                  # the authority that signs every node's certificate
@@ -14,15 +15,22 @@
 //! [[allow]]                      # with no [[allow]], every node of the CA may do all
 //! nodes = ["workstation"]        # certificate common names
 //! command = ["robot/*"]          # NODE/PATH: control ports `c` (coolctl set, ...)
-//! instantiate = ["robot"]        # NODE: the agent's Instantiate requests
+//! instantiate = ["robot/Arm"]    # NODE or NODE/TYPE: the agent's Instantiate requests
 //! publish = ["robot/cmd_vel"]    # bridge keys the nodes may send packets on
 //! ```
 //!
-//! With `[[allow]]` rules, Zenoh's access control is on and denies by default; every
-//! node may still observe (monitoring, info, echo, liveliness, declarations, replies)
-//! and read bridges named in some `publish` rule (poster values and pull requests);
-//! only the rules grant commands, instantiation and packets on a bridge key.
+//! With `[[allow]]` rules, Zenoh's access control is on and denies by default, on
+//! what a node receives from each peer, by the common name of the peer's certificate.
+//! Every peer may still subscribe, watch liveliness, and query monitoring, info and
+//! the bridges named in some `publish` rule (poster values and pull requests). A node
+//! is heard (puts, queryables and their replies, liveliness tokens) only under its own
+//! name: `coolbot/<name>/**` and its agent, the inlet tokens that carry its name, and
+//! on the bridge keys a `publish` rule grants it (packets, a poster's value, pull
+//! answers, outlet tokens). The names are those the file gives as nodes ([`Security`]'s
+//! `nodes`, a rule's `nodes`, the NODE of `command` and `instantiate`). Only the rules
+//! grant commands and instantiation.
 
+use std::collections::BTreeSet;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -38,6 +46,8 @@ use crate::{Error, keys};
 pub struct Security {
     tls: Option<Tls>,
     allow_plaintext: bool,
+    /// The top-level `nodes`: heard under their own names though no rule names them.
+    nodes: Vec<String>,
     rules: Vec<Rule>,
 }
 
@@ -56,6 +66,8 @@ struct Tls {
 struct File {
     #[serde(default)]
     allow_plaintext: bool,
+    #[serde(default)]
+    nodes: Vec<String>,
     tls: Option<TlsFile>,
     #[serde(default)]
     allow: Vec<Rule>,
@@ -105,7 +117,7 @@ const ALL_MESSAGES: [&str; 9] = [
 /// verbatim `@` chunks, so those are named.
 const EVERY_KEY: [&str; 5] = [
     "**",
-    "coolbot/*/@agent",
+    "coolbot/*/@agent/*",
     "**/@pull",
     "**/@out/**",
     "**/@in/**",
@@ -161,6 +173,17 @@ impl Security {
             rule.check()
                 .map_err(|reason| invalid(path, format!("[[allow]] #{}: {reason}", index + 1)))?;
         }
+        for node in &file.nodes {
+            keys::check_name(node)
+                .map_err(|error| invalid(path, format!("nodes: `{node}`: {error}")))?;
+        }
+        if !file.nodes.is_empty() && file.allow.is_empty() {
+            return Err(invalid(
+                path,
+                "`nodes` says who is heard under their own names when access rules are \
+                 on: without [[allow]] rules every node of the CA may do all",
+            ));
+        }
         if !file.allow.is_empty() && tls.is_none() {
             return Err(invalid(
                 path,
@@ -170,6 +193,7 @@ impl Security {
         Ok(Security {
             tls,
             allow_plaintext: file.allow_plaintext,
+            nodes: file.nodes,
             rules: file.allow,
         })
     }
@@ -189,6 +213,36 @@ impl Security {
     /// Whether access rules are enforced.
     pub fn has_rules(&self) -> bool {
         !self.rules.is_empty()
+    }
+
+    /// The common name of this node's certificate, its name in every node's rules
+    /// (`None` without `[tls]`).
+    pub fn identity(&self) -> Result<Option<String>, Error> {
+        self.tls
+            .as_ref()
+            .map(|tls| common_name(&tls.certificate))
+            .transpose()
+    }
+
+    /// Whether these rules let the node whose certificate names `who` command the
+    /// component at `path` on `node`, as the same rules enforced by that node would
+    /// decide (the same key expressions); `None` without rules (no access control).
+    pub fn grants_command(&self, who: &str, node: &str, path: &str) -> Option<bool> {
+        if self.rules.is_empty() {
+            return None;
+        }
+        let key = zenoh::key_expr::KeyExpr::try_from(keys::control(node, path)).ok()?;
+        Some(
+            self.rules
+                .iter()
+                .filter(|rule| rule.nodes.iter().any(|n| n == who))
+                .flat_map(|rule| &rule.command)
+                .filter_map(|pattern| component_pattern(pattern).ok())
+                .filter_map(|(node, chunk)| {
+                    zenoh::key_expr::KeyExpr::try_from(keys::control(node, &chunk)).ok()
+                })
+                .any(|pattern| pattern.includes(&key)),
+        )
     }
 
     /// Check the endpoints and scouting against this security: `tls/` endpoints need
@@ -281,8 +335,34 @@ impl Security {
         Ok(())
     }
 
-    /// The `access_control` section: deny by default; every peer ("any") may observe
-    /// and declare; each rule's nodes get what the rule grants.
+    /// The names heard under their own keys: the top-level `nodes`, every rule's
+    /// `nodes`, and the NODE of every `command` and `instantiate` but `*`; a common
+    /// name that cannot be a node's (`keys::check_name`: a space, a `*`) names no keys.
+    fn node_names(&self) -> BTreeSet<&str> {
+        let targets = self.rules.iter().flat_map(|rule| {
+            rule.command
+                .iter()
+                .filter_map(|pattern| pattern.split_once('/').map(|(node, _)| node))
+                .chain(rule.instantiate.iter().map(|pattern| {
+                    pattern
+                        .split_once('/')
+                        .map_or(pattern.as_str(), |(node, _)| node)
+                }))
+        });
+        self.nodes
+            .iter()
+            .chain(self.rules.iter().flat_map(|rule| &rule.nodes))
+            .map(String::as_str)
+            .chain(targets)
+            .filter(|node| keys::check_name(node).is_ok())
+            .collect()
+    }
+
+    /// The `access_control` section: deny by default, on what the node receives.
+    /// Every peer ("any") may subscribe, watch liveliness and observe; each node named
+    /// in the file may speak under its own name (subject `node-<n>`, by certificate);
+    /// each rule's nodes get what the rule grants (subject `rule-<n>`). Zenoh allows
+    /// a message when one of the subjects the peer matches allows it.
     fn access_control(&self) -> Value {
         let rule = |id: String, messages: &[&str], flow: &str, keys: Vec<String>| {
             json!({
@@ -302,12 +382,9 @@ impl Security {
         let mut rules = vec![
             rule("send".to_owned(), &ALL_MESSAGES, "egress", every()),
             rule(
-                "declare".to_owned(),
+                "watch".to_owned(),
                 &[
                     "declare_subscriber",
-                    "declare_queryable",
-                    "reply",
-                    "liveliness_token",
                     "declare_liveliness_subscriber",
                     "liveliness_query",
                 ],
@@ -320,12 +397,6 @@ impl Security {
                 "ingress",
                 vec![keys::monitor("*", "*"), keys::info("*", "*")],
             ),
-            rule(
-                "events".to_owned(),
-                &["put"],
-                "ingress",
-                vec![keys::monitor("*", "*"), keys::echo("*", "*", "*")],
-            ),
         ];
         let bridges: Vec<String> = self
             .rules
@@ -333,7 +404,7 @@ impl Security {
             .flat_map(|rule| &rule.publish)
             .flat_map(|key| [key.clone(), format!("{key}/@pull")])
             .collect();
-        let mut any = vec!["send", "declare", "observe", "events"];
+        let mut any = vec!["send", "watch", "observe"];
         if !bridges.is_empty() {
             rules.push(rule(
                 "read-bridges".to_owned(),
@@ -345,19 +416,63 @@ impl Security {
         }
         let mut subjects = vec![json!({ "id": "any" })];
         let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
+        for (index, node) in self.node_names().into_iter().enumerate() {
+            let subject = format!("node-{index}");
+            let own = vec![format!("{}/{node}/**", keys::ROOT), keys::agent(node, "*")];
+            // Its inlets' tokens carry its name; its outlets' tokens too, on the
+            // bridge keys a rule lets it publish on.
+            let mut tokens = vec![
+                format!("{}/{node}/**", keys::ROOT),
+                format!("**/@in/{node}/*"),
+            ];
+            tokens.extend(
+                self.rules
+                    .iter()
+                    .filter(|rule| rule.nodes.iter().any(|n| n == node))
+                    .flat_map(|rule| &rule.publish)
+                    .map(|key| format!("{key}/@out/*/{node}/*")),
+            );
+            rules.push(rule(
+                format!("{subject}-put"),
+                &["put"],
+                "ingress",
+                vec![format!("{}/{node}/**", keys::ROOT)],
+            ));
+            rules.push(rule(
+                format!("{subject}-answer"),
+                &["declare_queryable", "reply"],
+                "ingress",
+                own,
+            ));
+            rules.push(rule(
+                format!("{subject}-tokens"),
+                &["liveliness_token"],
+                "ingress",
+                tokens,
+            ));
+            subjects.push(json!({ "id": subject, "cert_common_names": [node] }));
+            policies.push(json!({
+                "rules": [
+                    format!("{subject}-put"),
+                    format!("{subject}-answer"),
+                    format!("{subject}-tokens"),
+                ],
+                "subjects": [subject],
+            }));
+        }
         for (index, allowed) in self.rules.iter().enumerate() {
             let subject = format!("rule-{index}");
             let mut granted = Vec::new();
-            let mut grant = |what: &str, message: &str, keys: Vec<String>| {
+            let mut grant = |what: &str, messages: &[&str], keys: Vec<String>| {
                 if !keys.is_empty() {
                     let id = format!("{subject}-{what}");
-                    rules.push(rule(id.clone(), &[message], "ingress", keys));
+                    rules.push(rule(id.clone(), messages, "ingress", keys));
                     granted.push(id);
                 }
             };
             grant(
                 "command",
-                "query",
+                &["query"],
                 allowed
                     .command
                     .iter()
@@ -369,14 +484,27 @@ impl Security {
             );
             grant(
                 "instantiate",
-                "query",
+                &["query"],
                 allowed
                     .instantiate
                     .iter()
-                    .map(|node| keys::agent(node))
+                    .map(|pattern| {
+                        let (node, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
+                        keys::agent(node, type_name)
+                    })
                     .collect(),
             );
-            grant("publish", "put", allowed.publish.clone());
+            grant("publish", &["put"], allowed.publish.clone());
+            // The producer on a bridge key answers its poster and pull queries.
+            grant(
+                "serve",
+                &["declare_queryable", "reply"],
+                allowed
+                    .publish
+                    .iter()
+                    .flat_map(|key| [key.clone(), format!("{key}/@pull")])
+                    .collect(),
+            );
             subjects.push(json!({ "id": subject, "cert_common_names": allowed.nodes }));
             policies.push(json!({ "rules": granted, "subjects": [subject] }));
         }
@@ -403,8 +531,9 @@ impl Rule {
         for pattern in &self.command {
             component_pattern(pattern)?;
         }
-        for node in &self.instantiate {
-            node_pattern(node).map_err(|reason| format!("instantiate `{node}`: {reason}"))?;
+        for pattern in &self.instantiate {
+            instantiate_pattern(pattern)
+                .map_err(|reason| format!("instantiate `{pattern}`: {reason}"))?;
         }
         for key in &self.publish {
             publish_pattern(key)?;
@@ -419,6 +548,17 @@ fn node_pattern(node: &str) -> Result<(), String> {
         return Ok(());
     }
     keys::check_name(node).map_err(|error| error.to_string())
+}
+
+/// `NODE` or `NODE/TYPE` in an `instantiate` rule: NODE is a name or `*`, TYPE a
+/// component type name or `*` (NODE alone: every type).
+fn instantiate_pattern(pattern: &str) -> Result<(), String> {
+    let (node, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
+    node_pattern(node)?;
+    if type_name != "*" {
+        keys::check_name(type_name).map_err(|error| error.to_string())?;
+    }
+    Ok(())
 }
 
 /// `NODE/PATH` in a `command` rule, as the node and the key chunk of the path: NODE
@@ -465,26 +605,33 @@ pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Resu
     let Ok(Some(path)) = serde_json::from_str::<Option<PathBuf>>(&json) else {
         return Ok(());
     };
+    let common_name = common_name(&path)?;
+    if common_name != name {
+        return Err(Error::Security(format!(
+            "{}: the certificate is node `{common_name}`'s: a node opens under its \
+             certificate's common name, not `{name}`",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// The common name of the PEM certificate at `path`.
+fn common_name(path: &Path) -> Result<String, Error> {
     let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
-    let bytes = std::fs::read(&path).map_err(|error| bad(format!("cannot read: {error}")))?;
+    let bytes = std::fs::read(path).map_err(|error| bad(format!("cannot read: {error}")))?;
     let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
         .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
     let certificate = pem
         .parse_x509()
         .map_err(|error| bad(format!("not an X.509 certificate: {error}")))?;
-    let common_name = certificate
+    certificate
         .subject()
         .iter_common_name()
         .next()
         .and_then(|cn| cn.as_str().ok())
-        .ok_or_else(|| bad("the certificate has no common name".to_owned()))?;
-    if common_name != name {
-        return Err(bad(format!(
-            "the certificate is node `{common_name}`'s: a node opens under its \
-             certificate's common name, not `{name}`"
-        )));
-    }
-    Ok(())
+        .map(str::to_owned)
+        .ok_or_else(|| bad("the certificate has no common name".to_owned()))
 }
 
 /// An endpoint's protocol, and whether its address is on loopback.
@@ -565,7 +712,12 @@ mod tests {
         );
         assert!(rule("nodes = [\"a\"]\ncommand = [\"robot\"]").is_err());
         assert!(rule("nodes = [\"a\"]\ncommand = [\"robot/a/b\"]").is_err());
-        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/b\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/b/c\"]").is_err());
+        assert!(rule("nodes = [\"a\"]\ninstantiate = [\"a/B*\"]").is_err());
+        assert_eq!(
+            rule("nodes = [\"a\"]\ninstantiate = [\"a/B\", \"*/*\", \"c\"]"),
+            Ok(())
+        );
         assert!(rule("nodes = [\"a\"]\npublish = [\"k/@pull\"]").is_err());
         assert!(rule("nodes = [\"a\"]\npublish = [\"k//x\"]").is_err());
         assert_eq!(
@@ -579,10 +731,11 @@ mod tests {
         let security = Security {
             tls: None,
             allow_plaintext: false,
+            nodes: vec!["camera".to_owned()],
             rules: vec![Rule {
                 nodes: vec!["ops".to_owned()],
                 command: vec!["robot/base.*".to_owned(), "*/arm".to_owned()],
-                instantiate: vec!["station".to_owned()],
+                instantiate: vec!["station".to_owned(), "robot/Planner".to_owned()],
                 publish: vec!["robot/cmd".to_owned()],
             }],
         };
@@ -601,7 +754,10 @@ mod tests {
         );
         assert_eq!(
             keys_of("rule-0-instantiate"),
-            Some(json!(["coolbot/station/@agent"]))
+            Some(json!([
+                "coolbot/station/@agent/*",
+                "coolbot/robot/@agent/Planner"
+            ]))
         );
         assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
         assert_eq!(
@@ -614,8 +770,15 @@ mod tests {
             let pattern = zenoh::key_expr::KeyExpr::try_from(pattern).unwrap();
             pattern.includes(&zenoh::key_expr::KeyExpr::try_from(key).unwrap())
         };
-        assert!(!includes("**", "coolbot/station/@agent"));
-        assert!(includes("coolbot/*/@agent", "coolbot/station/@agent"));
+        assert!(!includes("**", "coolbot/station/@agent/Planner"));
+        assert!(includes(
+            "coolbot/*/@agent/*",
+            "coolbot/station/@agent/Planner"
+        ));
+        assert!(!includes(
+            "coolbot/station/@agent/*",
+            "coolbot/station/@agent"
+        ));
         assert!(includes("**/@pull", "a/b/@pull"));
         assert!(includes("**/@out/**", "a/b/@out/poster/n/x"));
         assert!(includes(
@@ -630,5 +793,238 @@ mod tests {
         ));
         let mut config = zenoh::Config::default();
         Security::apply(&security, &mut config).expect("zenoh takes the section");
+    }
+
+    /// Zenoh's decision on an ingress message from a peer whose certificate names
+    /// `peer` (`None`: no certificate), over the section's JSON: allowed when a subject
+    /// the peer matches has an allow rule for the message on a key expression that
+    /// includes `key` (the section has no deny rules).
+    fn allowed(acl: &Value, peer: Option<&str>, message: &str, key: &str) -> bool {
+        let key = zenoh::key_expr::KeyExpr::try_from(key).unwrap();
+        let matches = |subject: &Value| match subject["cert_common_names"].as_array() {
+            None => true,
+            Some(names) => peer.is_some_and(|peer| names.iter().any(|n| n == peer)),
+        };
+        let subjects: Vec<&Value> = acl["subjects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|subject| matches(subject))
+            .map(|subject| &subject["id"])
+            .collect();
+        let rule_ids: Vec<&Value> = acl["policies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|policy| {
+                policy["subjects"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|s| subjects.contains(&s))
+            })
+            .flat_map(|policy| policy["rules"].as_array().unwrap())
+            .collect();
+        acl["rules"].as_array().unwrap().iter().any(|rule| {
+            rule_ids.contains(&&rule["id"])
+                && rule["flows"] == json!(["ingress"])
+                && rule["messages"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|m| m == message)
+                && rule["key_exprs"].as_array().unwrap().iter().any(|pattern| {
+                    zenoh::key_expr::KeyExpr::try_from(pattern.as_str().unwrap())
+                        .unwrap()
+                        .includes(&key)
+                })
+        })
+    }
+
+    #[test]
+    fn a_node_is_heard_only_under_its_own_name() {
+        let security = parse_rules(
+            "nodes = [\"camera\"]\n\
+             [[allow]]\nnodes = [\"station\"]\npublish = [\"link/**\"]\n\
+             [[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\ninstantiate = [\"station\", \"robot/Planner\"]\n\
+             [[allow]]\nnodes = [\"*\", \"the ops\"]\ncommand = [\"robot/logger\"]\n",
+        );
+        let acl = security.access_control();
+        let cases: &[(Option<&str>, &str, &str, bool)] = &[
+            // Its own monitoring events, echoes, queryables, replies, tokens.
+            (Some("station"), "put", "coolbot/station/wanderer/m", true),
+            (
+                Some("station"),
+                "put",
+                "coolbot/station/wanderer/o/pose",
+                true,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/station/wanderer/c",
+                true,
+            ),
+            (Some("station"), "reply", "coolbot/station/wanderer/s", true),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/station/@agent/Wanderer",
+                true,
+            ),
+            (
+                Some("station"),
+                "reply",
+                "coolbot/station/@agent/Wanderer",
+                true,
+            ),
+            (Some("station"), "liveliness_token", "coolbot/station", true),
+            (Some("camera"), "put", "coolbot/camera/lens/m", true),
+            (Some("robot"), "reply", "coolbot/robot/logger/m", true),
+            (Some("ops"), "liveliness_token", "coolbot/ops", true),
+            // Not under another node's name.
+            (Some("station"), "put", "coolbot/robot/logger/m", false),
+            (Some("station"), "put", "coolbot/robot/logger/o/out", false),
+            (Some("station"), "reply", "coolbot/robot/logger/m", false),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/robot/logger/c",
+                false,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/robot/@agent/*",
+                false,
+            ),
+            (
+                Some("station"),
+                "declare_queryable",
+                "coolbot/*/logger/m",
+                false,
+            ),
+            (Some("station"), "liveliness_token", "coolbot/robot", false),
+            (Some("ops"), "put", "coolbot/station/wanderer/m", false),
+            // A common name that cannot be a node's names no keys.
+            (Some("*"), "put", "coolbot/robot/logger/m", false),
+            // A name no part of the file gives, or no certificate: not heard.
+            (Some("mallory"), "put", "coolbot/mallory/x/m", false),
+            (None, "put", "coolbot/robot/logger/m", false),
+            (None, "liveliness_token", "coolbot/robot", false),
+            // Bridges: packets, answers and outlet tokens where `publish` allows;
+            // inlet tokens under one's own name.
+            (Some("station"), "put", "link/robot/out/pose", true),
+            (Some("station"), "reply", "link/robot/out/pose", true),
+            (Some("station"), "reply", "link/robot/out/pose/@pull", true),
+            (
+                Some("station"),
+                "declare_queryable",
+                "link/robot/out/pose/@pull",
+                true,
+            ),
+            (
+                Some("station"),
+                "liveliness_token",
+                "link/robot/out/pose/@out/poster/station/w",
+                true,
+            ),
+            (
+                Some("station"),
+                "liveliness_token",
+                "link/robot/out/pose/@out/poster/robot/w",
+                false,
+            ),
+            (Some("station"), "put", "other/pose", false),
+            (Some("station"), "reply", "other/pose/@pull", false),
+            (Some("ops"), "put", "link/robot/out/pose", false),
+            (Some("ops"), "reply", "link/robot/out/pose", false),
+            (
+                Some("ops"),
+                "liveliness_token",
+                "link/a/@in/ops/inlet",
+                true,
+            ),
+            (
+                Some("ops"),
+                "liveliness_token",
+                "link/a/@in/station/inlet",
+                false,
+            ),
+            // Everyone watches and observes; only the rules command and instantiate.
+            (None, "declare_subscriber", "coolbot/robot/logger/m", true),
+            (None, "liveliness_query", "coolbot/*", true),
+            (Some("mallory"), "query", "coolbot/robot/logger/m", true),
+            (Some("mallory"), "query", "link/robot/out/pose/@pull", true),
+            (Some("station"), "query", "coolbot/robot/logger/c", false),
+            (Some("ops"), "query", "coolbot/robot/logger/c", true),
+            (
+                Some("station"),
+                "query",
+                "coolbot/station/@agent/Wanderer",
+                false,
+            ),
+            (
+                Some("ops"),
+                "query",
+                "coolbot/station/@agent/Wanderer",
+                true,
+            ),
+            (Some("ops"), "query", "coolbot/robot/@agent/Planner", true),
+            (Some("ops"), "query", "coolbot/robot/@agent/Mapper", false),
+        ];
+        for &(peer, message, key, expected) in cases {
+            assert_eq!(
+                allowed(&acl, peer, message, key),
+                expected,
+                "{peer:?} {message} {key}"
+            );
+        }
+    }
+
+    fn parse_rules(rules: &str) -> Security {
+        let file: File = toml::from_str(rules).expect("a security file");
+        for rule in &file.allow {
+            rule.check().expect("a good rule");
+        }
+        Security {
+            tls: None,
+            allow_plaintext: false,
+            nodes: file.nodes,
+            rules: file.allow,
+        }
+    }
+
+    #[test]
+    fn commands_granted_are_those_the_keys_allow() {
+        let security = parse_rules(
+            "[[allow]]\nnodes = [\"ops\", \"dev\"]\ncommand = [\"robot/base.*\", \"*/arm\"]\n\
+             [[allow]]\nnodes = [\"dev\"]\ncommand = [\"station/*\"]\n",
+        );
+        let cases = [
+            ("ops", "robot", "base.motion", true),
+            ("ops", "robot", "base", false),
+            ("ops", "robot", "logger", false),
+            ("ops", "station", "arm", true),
+            ("ops", "station", "wanderer", false),
+            ("dev", "station", "wanderer", true),
+            ("guest", "robot", "base.motion", false),
+        ];
+        for (who, node, path, expected) in cases {
+            assert_eq!(
+                security.grants_command(who, node, path),
+                Some(expected),
+                "{who} {node}/{path}"
+            );
+        }
+        assert_eq!(Security::none().grants_command("ops", "robot", "x"), None);
+    }
+
+    #[test]
+    fn top_level_nodes_are_node_names_and_need_rules() {
+        let error = parse("nodes = [\"robot\"]").unwrap_err();
+        assert!(error.contains("without [[allow]] rules"), "{error}");
+        let error = parse("nodes = [\"*\"]").unwrap_err();
+        assert!(error.contains("nodes: `*`"), "{error}");
     }
 }

@@ -189,7 +189,7 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             .wait()
             .map_err(|error| CtlError::Zenoh(error.to_string()))?
     };
-    let ctl = Ctl::new(session.clone(), cli.timeout);
+    let ctl = Ctl::new(session.clone(), cli.timeout).with_security(&security)?;
     match cli.command {
         Action::Top {
             once: true,
@@ -250,6 +250,7 @@ fn main() -> ExitCode {
         Ok(false) => ExitCode::from(1),
         Err(
             error @ (CtlError::NoAnswer { .. }
+            | CtlError::Refused { .. }
             | CtlError::UnknownNode { .. }
             | CtlError::UnknownComponent { .. }
             | CtlError::UnknownPort(_)),
