@@ -250,14 +250,23 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
             members.push(format!("    output o{o}: {text};"));
         }
         members.push("    timing { period 10ms; max_response 50ms; }".to_owned());
-        members.push(
-            "    /// A fault.\n    exception x0 \"the sensor failed\" { retry 2 every 5ms; goto s1; }"
-                .to_owned(),
-        );
-        let on = rng.pick(&input_names).clone();
+        // Every third atomic has no automaton (the language allows none): decided by
+        // its index, not drawn, so that the other draws stay as they were.
+        let automaton = a % 3 != 2;
+        let plan = if automaton {
+            "retry 2 every 5ms; goto s1;"
+        } else {
+            "retry 2 every 5ms;"
+        };
         members.push(format!(
-            "    automaton {{\n        initial s0;\n        state s0 {{ entry; periodic; on {on} -> s1; may -> s1; }}\n        state s1 {{ exit; after 100ms -> s0; }}\n    }}"
+            "    /// A fault.\n    exception x0 \"the sensor failed\" {{ {plan} }}"
         ));
+        let on = rng.pick(&input_names).clone();
+        if automaton {
+            members.push(format!(
+                "    automaton {{\n        initial s0;\n        state s0 {{ entry; periodic; on {on} -> s1; may -> s1; }}\n        state s1 {{ exit; after 100ms -> s0; }}\n    }}"
+            ));
+        }
         writeln!(
             main,
             "/// Atomic {a}.\natomic A{a} {{\n{}\n}}\n",
