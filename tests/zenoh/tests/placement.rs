@@ -4,49 +4,21 @@
 //! ufifo and poster inputs; tick, data and poster outputs (a poster's value reaches a
 //! reader that joins late); and pull, both ways in one request.
 
-mod support;
+use std::sync::Arc;
 
-use std::sync::{Arc, Mutex};
-
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
-use coolbot::{
-    CompoundBuilder, InputKind, InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy,
-    PortSet, State, System,
-};
+use coolbot::{MonitorEvent, SectionResult, State, System};
 use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
+use coolbot_zenoh_tests::generated::{
+    asker, cell, cell_sink, cell_source, counter, doubling, nest_cell, pull_cell, pull_doubler,
+    relay,
+};
+use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
 
-use support::{PATIENCE, Shell, pair, spec, supervisor, wait_until};
-
-fn input(name: &'static str, kind: InputKind) -> InputSpec {
-    InputSpec {
-        name,
-        kind,
-        packet: "u64",
-        pull: false,
-    }
-}
-
-fn output(name: &'static str, kind: OutputKind) -> OutputSpec {
-    OutputSpec {
-        name,
-        kind,
-        packet: "u64",
-        pull: false,
-    }
-}
-
-const FIFO: InputKind = InputKind::Fifo {
-    capacity: 16,
-    policy: OverflowPolicy::Reject,
-};
-const UFIFO: InputKind = InputKind::Ufifo {
-    initial: 4,
-    max: None,
-};
-
-/// The ports of the instance built on the station, for the test to drive.
+/// The ports of a relay, as its behaviour hands them over when it starts.
 #[derive(Clone)]
 struct RelayPorts {
     ti: TickIn,
@@ -59,61 +31,114 @@ struct RelayPorts {
     po: PosterOut<u64>,
 }
 
-/// `Relay`: one input of each kind and one output of each kind.
-fn relay(name: &str, built: &Mutex<Option<RelayPorts>>) -> coolbot::Component {
-    let shape = spec(
-        "Relay",
-        vec![
-            input("ti", InputKind::Tick),
-            input("li", InputKind::Last),
-            input("fi", FIFO),
-            input("ui", UFIFO),
-            input("pi", InputKind::Poster),
-        ],
-        vec![
-            output("to", OutputKind::Tick),
-            output("out", OutputKind::Data),
-            output("po", OutputKind::Poster),
-        ],
-        vec![],
-    );
-    let ports = RelayPorts {
-        ti: TickIn::new(),
-        li: LastIn::new(),
-        fi: FifoIn::new(16, OverflowPolicy::Reject),
-        ui: UfifoIn::new(4, None),
-        pi: PosterIn::new(),
-        to: TickOut::new(),
-        out: DataOut::new(),
-        po: PosterOut::new(),
-    };
-    let set = PortSet::new()
-        .input(&ports.ti)
-        .input(&ports.li)
-        .input(&ports.fi)
-        .input(&ports.ui)
-        .input(&ports.pi)
-        .output(&ports.to)
-        .output(&ports.out)
-        .output(&ports.po);
-    *built.lock().unwrap() = Some(ports);
-    Shell::component(name, shape, set)
+/// A relay's behaviour: hands its ports to the test when it starts.
+struct HandRelay(Sender<RelayPorts>);
+
+impl relay::Behavior for HandRelay {
+    fn start(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+        let (i, o) = (&cx.inputs, &cx.outputs);
+        let _ = self.0.send(RelayPorts {
+            ti: i.ti.clone(),
+            li: i.li.clone(),
+            fi: i.fi.clone(),
+            ui: i.ui.clone(),
+            pi: i.pi.clone(),
+            to: o.to.clone(),
+            out: o.out.clone(),
+            po: o.po.clone(),
+        });
+        Ok(())
+    }
 }
 
-fn registry(built: &Arc<Mutex<Option<RelayPorts>>>) -> Registry {
+/// The local source's outputs, handed over when it starts.
+struct SourcePorts {
+    t: TickOut,
+    d: DataOut<u64>,
+    p: PosterOut<u64>,
+}
+
+struct HandSource(Sender<SourcePorts>);
+
+impl cell_source::Behavior for HandSource {
+    fn start(&mut self, cx: &mut cell_source::Cx<'_>) -> SectionResult {
+        let o = &cx.outputs;
+        let _ = self.0.send(SourcePorts {
+            t: o.t.clone(),
+            d: o.d.clone(),
+            p: o.p.clone(),
+        });
+        Ok(())
+    }
+}
+
+/// The local sink's inputs, handed over when it starts.
+struct SinkPorts {
+    ti: TickIn,
+    fi: FifoIn<u64>,
+    li: LastIn<u64>,
+    pi: PosterIn<u64>,
+}
+
+struct HandSink(Sender<SinkPorts>);
+
+impl cell_sink::Behavior for HandSink {
+    fn start(&mut self, cx: &mut cell_sink::Cx<'_>) -> SectionResult {
+        let i = &cx.inputs;
+        let _ = self.0.send(SinkPorts {
+            ti: i.ti.clone(),
+            fi: i.fi.clone(),
+            li: i.li.clone(),
+            pi: i.pi.clone(),
+        });
+        Ok(())
+    }
+}
+
+/// The behaviour of every supervisor here: nothing.
+struct Quiet;
+
+impl cell::Supervisor for Quiet {}
+impl pull_cell::Supervisor for Quiet {}
+impl nest_cell::Supervisor for Quiet {}
+impl doubling::Supervisor for Quiet {}
+
+/// `Cell`'s parts: the source and sink hand their ports to the test; the local
+/// relay (which the placer leaves unused: the station's runs) hands them to nobody.
+struct CellParts {
+    source: Sender<SourcePorts>,
+    sink: Sender<SinkPorts>,
+}
+
+impl cell::Parts for CellParts {
+    fn supervisor(&mut self) -> impl cell::Supervisor {
+        Quiet
+    }
+    fn source(&mut self) -> impl cell_source::Behavior {
+        HandSource(self.source.clone())
+    }
+    fn relay(&mut self) -> impl relay::Behavior {
+        HandRelay(crossbeam_channel::bounded(1).0)
+    }
+    fn sink(&mut self) -> impl cell_sink::Behavior {
+        HandSink(self.sink.clone())
+    }
+}
+
+/// A registry of `Relay`, whose instances hand their ports to `built`.
+fn registry(built: Sender<RelayPorts>) -> Registry {
     let mut registry = Registry::new();
-    let built = Arc::clone(built);
+    relay::register(&mut registry, move |name| {
+        relay::component(name, HandRelay(built.clone()))
+    });
     registry
-        .register("Relay", move |name| relay(name, &built))
-        .port::<()>("ti")
-        .port::<u64>("li")
-        .port::<u64>("fi")
-        .port::<u64>("ui")
-        .port::<u64>("pi")
-        .port::<()>("to")
-        .port::<u64>("out")
-        .port::<u64>("po");
-    registry
+}
+
+/// What a channel's sender handed over, once it has.
+fn handed<T>(ports: &Receiver<T>, what: &str) -> T {
+    ports
+        .recv_timeout(PATIENCE)
+        .unwrap_or_else(|_| panic!("{what} did not start"))
 }
 
 #[test]
@@ -121,67 +146,19 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
     let (station, robot) = pair("station", "robot");
     let station = Arc::new(station);
     let robot = Arc::new(robot);
-    let remote_ports = Arc::new(Mutex::new(None));
-    let _agent = Agent::start(Arc::clone(&station), registry(&remote_ports)).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), registry(&Arc::new(Mutex::new(None)))).install();
+    let (built, remote_ports) = crossbeam_channel::bounded(1);
+    let _agent = Agent::start(Arc::clone(&station), registry(built)).expect("agent");
+    let _placer = Placer::new(
+        Arc::clone(&robot),
+        registry(crossbeam_channel::bounded(1).0),
+    )
+    .install();
 
-    // Local producers and consumers around the remote relay.
-    let src_t = TickOut::new();
-    let src_d = DataOut::<u64>::new();
-    let src_p = PosterOut::<u64>::new();
-    let source = Shell::component(
-        "source",
-        spec(
-            "Source",
-            vec![],
-            vec![
-                output("t", OutputKind::Tick),
-                output("d", OutputKind::Data),
-                output("p", OutputKind::Poster),
-            ],
-            vec![],
-        ),
-        PortSet::new().output(&src_t).output(&src_d).output(&src_p),
-    );
-    let dst_ti = TickIn::new();
-    let dst_fi = FifoIn::<u64>::new(16, OverflowPolicy::Reject);
-    let dst_li = LastIn::<u64>::new();
-    let dst_pi = PosterIn::<u64>::new();
-    let sink = Shell::component(
-        "sink",
-        spec(
-            "Sink",
-            vec![
-                input("ti", InputKind::Tick),
-                input("fi", FIFO),
-                input("li", InputKind::Last),
-                input("pi", InputKind::Poster),
-            ],
-            vec![],
-            vec![],
-        ),
-        PortSet::new()
-            .input(&dst_ti)
-            .input(&dst_fi)
-            .input(&dst_li)
-            .input(&dst_pi),
-    );
-    let local_relay = relay("relay", &Mutex::new(None));
-    let compound = CompoundBuilder::new("cell", supervisor("working"))
-        .instance(source)
-        .instance_on("station", local_relay)
-        .instance(sink)
-        .connect("source.t", "relay.ti")
-        .connect("source.d", "relay.li")
-        .connect("source.d", "relay.fi")
-        .connect("source.d", "relay.ui")
-        .connect("source.p", "relay.pi")
-        .connect("relay.to", "sink.ti")
-        .connect("relay.out", "sink.fi")
-        .connect("relay.out", "sink.li")
-        .connect("relay.po", "sink.pi")
-        .build()
-        .expect("the compound builds");
+    // Local producers and consumers around the remote relay (`cool/placement.cool`).
+    let (source, sources) = crossbeam_channel::bounded(1);
+    let (sink, sinks) = crossbeam_channel::bounded(1);
+    let compound =
+        cell::component("cell", CellParts { source, sink }).expect("the compound builds");
     let mut system = System::new();
     let cell = system.add(compound).expect("added");
     system.run_all().expect("runs");
@@ -189,11 +166,18 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
     proxy
         .wait_for(|m| m.state == State::Running, PATIENCE)
         .expect("the proxy runs");
-    let remote = remote_ports
-        .lock()
-        .unwrap()
-        .clone()
-        .expect("the agent built the relay on the station");
+    let remote = handed(&remote_ports, "the relay the agent built on the station");
+    let SourcePorts {
+        t: src_t,
+        d: src_d,
+        p: src_p,
+    } = handed(&sources, "the source");
+    let SinkPorts {
+        ti: dst_ti,
+        fi: dst_fi,
+        li: dst_li,
+        pi: dst_pi,
+    } = handed(&sinks, "the sink");
 
     // Out: local producers to the remote relay's inputs, every kind. The poster is
     // posted first, before anything else: its value reaches the relay however late.
@@ -323,80 +307,89 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
     assert!(report.clean(), "{report:?}");
 }
 
-fn pulled_input(name: &'static str, kind: InputKind) -> InputSpec {
-    InputSpec {
-        pull: true,
-        ..input(name, kind)
-    }
-}
-
-fn pulled_output(name: &'static str) -> OutputSpec {
-    OutputSpec {
-        pull: true,
-        ..output(name, OutputKind::Data)
-    }
-}
-
-/// `Doubler`: a pull output `y` whose answer pulls its pull input `x` and sends twice
+/// `PullDoubler`'s behaviour: answers a pull of `y` by pulling `x` and sending twice
 /// the value.
-fn doubler(name: &str) -> coolbot::Component {
-    let shape = spec(
-        "Doubler",
-        vec![pulled_input("x", InputKind::Last)],
-        vec![pulled_output("y")],
-        vec![],
-    );
-    let x = LastIn::<u64>::new();
-    let y = DataOut::<u64>::new();
-    let ports = PortSet::new().input(&x).output(&y);
-    let (x, answer_y) = (x.clone(), y.clone());
-    Shell::with_answer(
-        name,
-        shape,
-        ports,
-        Some(Box::new(move |_| {
-            if let Ok(value) = x.pull(std::time::Duration::from_secs(5)) {
-                answer_y.send(value * 2);
-            }
-        })),
-    )
+struct Twice;
+
+impl pull_doubler::Behavior for Twice {
+    fn answer_y(&mut self, cx: &mut pull_doubler::Cx<'_>) -> Result<u64, coolbot::Fault> {
+        let value = cx
+            .inputs
+            .x
+            .pull(std::time::Duration::from_secs(5))
+            .map_err(|error| coolbot::Fault::message(format!("no answer at `x`: {error}")))?;
+        Ok(value * 2)
+    }
 }
 
 fn doubler_registry() -> Registry {
     let mut registry = Registry::new();
-    registry
-        .register("Doubler", doubler)
-        .port::<u64>("x")
-        .port::<u64>("y");
+    pull_doubler::register(&mut registry, |name| pull_doubler::component(name, Twice));
     registry
 }
 
-/// A producer `source` whose pull output `n` answers each pull with the next number
-/// from `first`, and a consumer `sink` with a pull input `asked` (returned, to pull).
-fn pull_ends(first: u64) -> (coolbot::Component, coolbot::Component, LastIn<u64>) {
-    let numbers = DataOut::<u64>::new();
-    let next = std::sync::atomic::AtomicU64::new(first);
-    let answer = numbers.clone();
-    let source = Shell::with_answer(
-        "source",
-        spec("Source", vec![], vec![pulled_output("n")], vec![]),
-        PortSet::new().output(&numbers),
-        Some(Box::new(move |_| {
-            answer.send(next.fetch_add(1, std::sync::atomic::Ordering::SeqCst));
-        })),
-    );
-    let asked = LastIn::<u64>::new();
-    let sink = Shell::component(
-        "sink",
-        spec(
-            "Sink",
-            vec![pulled_input("asked", InputKind::Last)],
-            vec![],
-            vec![],
-        ),
-        PortSet::new().input(&asked),
-    );
-    (source, sink, asked)
+/// `Counter`'s behaviour: answers each pull with the next number.
+struct Counting(u64);
+
+impl counter::Behavior for Counting {
+    fn answer_n(&mut self, _cx: &mut counter::Cx<'_>) -> Result<u64, coolbot::Fault> {
+        self.0 += 1;
+        Ok(self.0 - 1)
+    }
+}
+
+/// `Asker`'s behaviour: hands its pull input to the test when it starts.
+struct HandAsker(Sender<LastIn<u64>>);
+
+impl asker::Behavior for HandAsker {
+    fn start(&mut self, cx: &mut asker::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.inputs.asked.clone());
+        Ok(())
+    }
+}
+
+/// The parts of `PullCell` and `NestCell`: a producer `source` whose pull output `n`
+/// answers each pull with the next number from `first`, and a consumer `sink` whose
+/// pull input `asked` it hands to the test.
+struct PullParts {
+    first: u64,
+    asked: Sender<LastIn<u64>>,
+}
+
+/// `PullParts` from `first`, and where the sink's input arrives.
+fn pull_ends(first: u64) -> (PullParts, Receiver<LastIn<u64>>) {
+    let (asked, input) = crossbeam_channel::bounded(1);
+    (PullParts { first, asked }, input)
+}
+
+impl pull_cell::Parts for PullParts {
+    fn supervisor(&mut self) -> impl pull_cell::Supervisor {
+        Quiet
+    }
+    fn source(&mut self) -> impl counter::Behavior {
+        Counting(self.first)
+    }
+    fn doubler(&mut self) -> impl pull_doubler::Behavior {
+        Twice
+    }
+    fn sink(&mut self) -> impl asker::Behavior {
+        HandAsker(self.asked.clone())
+    }
+}
+
+impl nest_cell::Parts for PullParts {
+    fn supervisor(&mut self) -> impl nest_cell::Supervisor {
+        Quiet
+    }
+    fn source(&mut self) -> impl counter::Behavior {
+        Counting(self.first)
+    }
+    fn twice(&mut self) -> impl doubling::Parts {
+        DoublingParts
+    }
+    fn sink(&mut self) -> impl asker::Behavior {
+        HandAsker(self.asked.clone())
+    }
 }
 
 /// Pull through a proxy, both ways in one request: a consumer here pulls the remote
@@ -411,20 +404,14 @@ fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
     let _placer = Placer::new(Arc::clone(&robot), doubler_registry()).install();
 
     // The producer answers each pull with the next number: 21, 22, ...
-    let (source, sink, asked) = pull_ends(21);
-    let compound = CompoundBuilder::new("cell", supervisor("working"))
-        .instance(source)
-        .instance_on("pull-station", doubler("doubler"))
-        .instance(sink)
-        .connect("source.n", "doubler.x")
-        .connect("doubler.y", "sink.asked")
-        .build()
-        .expect("the compound builds");
+    let (parts, asked) = pull_ends(21);
+    let compound = pull_cell::component("cell", parts).expect("the compound builds");
     let mut system = System::new();
     let cell = system.add(compound).unwrap();
     system.run_all().unwrap();
     cell.wait_for(|m| m.state == State::Running, PATIENCE)
         .unwrap_or_else(|timeout| panic!("{timeout}"));
+    let asked = handed(&asked, "the sink");
     for expected in [42, 44, 46] {
         assert_eq!(asked.pull(PATIENCE), Ok(expected));
     }
@@ -444,22 +431,23 @@ fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
     assert!(report.clean(), "{report:?}");
 }
 
-/// `Doubling`: a compound around a `Doubler`, exporting its pull input and output.
-fn doubling(name: &str) -> Result<coolbot::Component, String> {
-    CompoundBuilder::new(name, support::supervisor_of("Doubling", "doubling"))
-        .instance(doubler("doubler"))
-        .export_input::<u64>("x", "doubler.x")
-        .export_output::<u64>("y", "doubler.y")
-        .build()
-        .map_err(|error| error.to_string())
+/// `Doubling`'s parts: a `PullDoubler` that doubles.
+struct DoublingParts;
+
+impl doubling::Parts for DoublingParts {
+    fn supervisor(&mut self) -> impl doubling::Supervisor {
+        Quiet
+    }
+    fn doubler(&mut self) -> impl pull_doubler::Behavior {
+        Twice
+    }
 }
 
 fn doubling_registry() -> Registry {
-    use coolbot::remote::Registrar;
     let mut registry = doubler_registry();
-    registry.compound("Doubling", Box::new(doubling));
-    registry.port::<u64>("Doubling", "x");
-    registry.port::<u64>("Doubling", "y");
+    doubling::register(&mut registry, |name| {
+        doubling::component(name, DoublingParts)
+    });
     registry
 }
 
@@ -474,16 +462,8 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     let _agent = Agent::start(Arc::clone(&station), doubling_registry()).expect("agent");
     let _placer = Placer::new(Arc::clone(&robot), doubling_registry()).install();
 
-    let (source, sink, asked) = pull_ends(5);
-    let local = doubling("twice").expect("the compound builds here too");
-    let compound = CompoundBuilder::new("cell", supervisor("working"))
-        .instance(source)
-        .instance_on("nest-station", local)
-        .instance(sink)
-        .connect("source.n", "twice.x")
-        .connect("twice.y", "sink.asked")
-        .build()
-        .expect("the compound builds");
+    let (parts, asked) = pull_ends(5);
+    let compound = nest_cell::component("cell", parts).expect("the compound builds");
     let mut system = System::new();
     let cell = system.add(compound).unwrap();
     system.run_all().unwrap();
@@ -491,6 +471,7 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     twice
         .wait_for(|m| m.user_state.as_deref() == Some("doubling"), PATIENCE)
         .unwrap_or_else(|timeout| panic!("the remote supervisor's state: {timeout}"));
+    let asked = handed(&asked, "the sink");
     for expected in [10, 12, 14] {
         assert_eq!(asked.pull(PATIENCE), Ok(expected));
     }

@@ -1,0 +1,188 @@
+//! What the network tests share: two nodes on loopback with explicit endpoints and
+//! multicast scouting off, waiting for conditions, a TCP forwarder whose link a test
+//! can cut, and the robot's system (generated components, `cool/robot.cool`).
+
+use std::net::TcpListener;
+use std::time::{Duration, Instant};
+
+use crate::generated::{base, motion, plain, robot as robot_compound};
+use coolbot_zenoh::Node;
+use zenoh::Wait;
+
+/// Generous: the machine is shared and may be loaded.
+pub const PATIENCE: Duration = Duration::from_secs(30);
+
+/// A TCP port free on 127.0.0.1 now.
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free loopback port")
+}
+
+/// A node listening on a free loopback port, connecting to `connect`.
+pub fn node(name: &str, connect: &[String]) -> (Node, String) {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let config = coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), connect, false)
+        .expect("config");
+    (Node::open(name, config).expect("open node"), endpoint)
+}
+
+/// Two nodes, the second connected to the first, each seeing the other's token.
+pub fn pair(first: &str, second: &str) -> (Node, Node) {
+    let (a, endpoint) = node(first, &[]);
+    let (b, _) = node(second, &[endpoint]);
+    let sees = |node: &Node, other: &str| {
+        let key = format!("coolbot/{other}");
+        wait_until(PATIENCE, || {
+            let replies = node
+                .session()
+                .liveliness()
+                .get(&key)
+                .timeout(Duration::from_millis(500))
+                .wait()
+                .expect("liveliness query");
+            replies.recv().is_ok()
+        })
+    };
+    assert!(sees(&a, second), "{first} does not see {second}");
+    assert!(sees(&b, first), "{second} does not see {first}");
+    (a, b)
+}
+
+/// Poll `condition` every few milliseconds until it holds or `limit` passes.
+pub fn wait_until(limit: Duration, mut condition: impl FnMut() -> bool) -> bool {
+    let deadline = Instant::now() + limit;
+    loop {
+        if condition() {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Wait until `node`'s session knows a subscriber on `key` (a bridge's inlet).
+pub fn wait_subscribed(node: &Node, key: &str) {
+    let publisher = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("probe publisher");
+    assert!(
+        wait_until(PATIENCE, || publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())),
+        "no subscriber on `{key}`"
+    );
+}
+
+/// A TCP forwarder between two nodes on loopback, so that a test can break the link
+/// between them while both stay alive: `cut` closes every connection through it and
+/// refuses new ones until `restore`.
+pub struct Forwarder {
+    /// The endpoint to connect to (`tcp/127.0.0.1:<port>`): it forwards to `target`.
+    pub endpoint: String,
+    open: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    streams: std::sync::Arc<std::sync::Mutex<Vec<std::net::TcpStream>>>,
+}
+
+impl Forwarder {
+    /// Forward connections on a free loopback port to `target` (`127.0.0.1:<port>`).
+    pub fn start(target: std::net::SocketAddr) -> Forwarder {
+        use std::sync::atomic::Ordering;
+        let listener = TcpListener::bind("127.0.0.1:0").expect("a free port");
+        let endpoint = format!("tcp/{}", listener.local_addr().expect("an address"));
+        let open = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let streams = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (accepting, kept) = (open.clone(), streams.clone());
+        std::thread::spawn(move || {
+            for incoming in listener.incoming() {
+                let Ok(client) = incoming else { continue };
+                let Ok(server) = std::net::TcpStream::connect(target) else {
+                    continue;
+                };
+                if !accepting.load(Ordering::Acquire) {
+                    continue; // Dropped: the connection is refused.
+                }
+                let pipe = |from: &std::net::TcpStream, to: &std::net::TcpStream| {
+                    let (mut from, mut to) = (from.try_clone().unwrap(), to.try_clone().unwrap());
+                    std::thread::spawn(move || {
+                        let _ = std::io::copy(&mut from, &mut to);
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                };
+                pipe(&client, &server);
+                pipe(&server, &client);
+                kept.lock().unwrap().extend([client, server]);
+            }
+        });
+        Forwarder {
+            endpoint,
+            open,
+            streams,
+        }
+    }
+
+    /// Close every connection through the forwarder, and refuse new ones.
+    pub fn cut(&self) {
+        self.open.store(false, std::sync::atomic::Ordering::Release);
+        for stream in self.streams.lock().unwrap().drain(..) {
+            let _ = stream.shutdown(std::net::Shutdown::Both);
+        }
+    }
+
+    /// Accept connections again.
+    pub fn restore(&self) {
+        self.open.store(true, std::sync::atomic::Ordering::Release);
+    }
+}
+
+/// The behaviour of every component of the robot: nothing.
+pub struct Quiet;
+
+impl motion::Behavior for Quiet {}
+impl plain::Behavior for Quiet {}
+impl base::Supervisor for Quiet {}
+impl robot_compound::Supervisor for Quiet {}
+
+impl base::Parts for Quiet {
+    fn supervisor(&mut self) -> impl base::Supervisor {
+        Quiet
+    }
+    fn motion(&mut self) -> impl motion::Behavior {
+        Quiet
+    }
+    fn ranges(&mut self) -> impl plain::Behavior {
+        Quiet
+    }
+}
+
+impl robot_compound::Parts for Quiet {
+    fn supervisor(&mut self) -> impl robot_compound::Supervisor {
+        Quiet
+    }
+    fn base(&mut self) -> impl base::Parts {
+        Quiet
+    }
+    fn planner(&mut self) -> impl plain::Behavior {
+        Quiet
+    }
+}
+
+/// The robot's system of the network tests: a compound `robot` (holding a compound
+/// `base` with `motion` and `ranges`, and a `planner`) and an atomic `logger`
+/// (`cool/robot.cool`), running, exposed on `node`.
+pub fn robot(node: &Node) -> coolbot::System {
+    let mut system = coolbot::System::new();
+    system
+        .add(robot_compound::component("robot", Quiet).expect("the robot builds"))
+        .unwrap();
+    system.add(plain::component("logger", Quiet)).unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    system
+}
