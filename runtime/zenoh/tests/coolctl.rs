@@ -1,7 +1,7 @@
-//! The `coolctl` binary as an operator runs it, against a node started here: `get`,
-//! `configure`, `degrade` and `echo`, and every command failing within its timeout,
-//! with a clear message and a non-zero exit, on a node, component or port that does
-//! not exist.
+//! The `coolctl` binary as an operator runs it, against a node started here: `list`,
+//! `set`, `get`, `configure`, `degrade` and `echo`, and every command failing within
+//! its timeout, with a clear message and a non-zero exit, on a node, component or port
+//! that does not exist.
 
 mod support;
 
@@ -406,4 +406,54 @@ fn every_command_fails_fast_and_clearly_on_what_does_not_exist() {
     }
     drop(robot.node);
     robot.system.shutdown();
+}
+
+/// What `coolctl list robot` prints through the library on `station`'s session, once
+/// it sees the six components of `support::robot`.
+fn library_list(station: &Node) -> String {
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.session().clone(), Duration::from_secs(5));
+    assert!(
+        wait_until(PATIENCE, || ctl
+            .components(Some("robot"))
+            .is_ok_and(|listed| listed.len() == 6)),
+        "the station does not see the robot's components"
+    );
+    let mut out = Vec::new();
+    ctl.list(Some("robot"), &mut out).unwrap();
+    String::from_utf8(out).unwrap()
+}
+
+/// The robot of `support::robot` (nested compounds), listed by the binary as by the
+/// library; its answers and exit codes (from `tests/zenoh/tests/remote.rs`, whose
+/// other tests run on generated components: this one needs the binary, which only
+/// this package's tests can run).
+#[test]
+fn the_coolctl_binary_prints_what_the_library_prints() {
+    let (robot_node, endpoint) = node("robot", &[]);
+    let _system = support::robot(&robot_node);
+    let (station, _) = node("station", std::slice::from_ref(&endpoint));
+    let expected = library_list(&station);
+    let run = |args: &[&str]| {
+        let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+            .args(["--connect", &endpoint, "--no-multicast", "--timeout", "5s"])
+            .args(args)
+            .output()
+            .expect("coolctl runs");
+        (
+            output.status.code(),
+            String::from_utf8_lossy(&output.stdout).into_owned(),
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+        )
+    };
+    let (code, stdout, stderr) = run(&["list", "robot"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(stdout, expected);
+    let (code, stdout, _) = run(&["set", "robot/robot.planner", "nothing=1"]);
+    assert_eq!(
+        (code, stdout.as_str()),
+        (Some(1), "rejected: no variable `nothing`\n")
+    );
+    let (code, _, stderr) = run(&["set", "robot", "state", "running"]);
+    assert_eq!(code, Some(2));
+    assert!(stderr.contains("not a component address"), "{stderr}");
 }

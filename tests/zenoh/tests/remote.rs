@@ -2,20 +2,16 @@
 //! here: a system with a compound `robot` (holding a compound `base` with `motion` and
 //! `ranges`, and a `planner`) and an atomic `logger`.
 
-mod support;
-
 use std::time::Duration;
 
-use coolbot::{
-    Command, Controllable, PortSet, Spec, State, StateSpec, System, TimingSpec, VarKind,
-};
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{Command, Controllable, SectionResult, State, System};
 use coolbot_zenoh::ctl::{Ctl, CtlError};
 use coolbot_zenoh::{ControlReply, Node};
+use coolbot_zenoh_tests::generated::{doubler, numbers, results};
+use coolbot_zenoh_tests::support::{self, PATIENCE, pair, robot, wait_until};
 use zenoh::Wait;
-
-use support::{PATIENCE, Shell, pair, spec, wait_until};
-
-use support::robot;
 
 const COMPONENTS: usize = 6;
 
@@ -184,37 +180,6 @@ fn coolctl_watch_prints_monitoring_events_as_they_happen() {
 }
 
 #[test]
-fn the_coolctl_binary_prints_what_the_library_prints() {
-    let (node, endpoint) = support::node("robot", &[]);
-    let _system = robot(&node);
-    let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
-    let expected = text(|out| ctl(&station).list(Some("robot"), out));
-    let run = |args: &[&str]| {
-        let output = std::process::Command::new(env!("CARGO_BIN_EXE_coolctl"))
-            .args(["--connect", &endpoint, "--no-multicast", "--timeout", "5s"])
-            .args(args)
-            .output()
-            .expect("coolctl runs");
-        (
-            output.status.code(),
-            String::from_utf8_lossy(&output.stdout).into_owned(),
-            String::from_utf8_lossy(&output.stderr).into_owned(),
-        )
-    };
-    let (code, stdout, stderr) = run(&["list", "robot"]);
-    assert_eq!(code, Some(0), "{stderr}");
-    assert_eq!(stdout, expected);
-    let (code, stdout, _) = run(&["set", "robot/robot.planner", "nothing=1"]);
-    assert_eq!(
-        (code, stdout.as_str()),
-        (Some(1), "rejected: no variable `nothing`\n")
-    );
-    let (code, _, stderr) = run(&["set", "robot", "state", "running"]);
-    assert_eq!(code, Some(2));
-    assert!(stderr.contains("not a component address"), "{stderr}");
-}
-
-#[test]
 fn coolctl_sees_nodes_come_and_go() {
     let (robot, endpoint) = support::node("robot", &[]);
     let (station, _) = support::node("station", std::slice::from_ref(&endpoint));
@@ -245,105 +210,60 @@ fn coolctl_sees_nodes_come_and_go() {
     drop(robot);
 }
 
-/// A reactive component: multiplies each number arriving at `input` by its
-/// controllable `factor` (2 unless set) onto `output`.
-struct Doubler {
-    input: coolbot::port::FifoIn<u64>,
-    output: coolbot::port::DataOut<u64>,
-    factor: u64,
-}
+/// `Doubler`'s behaviour (`cool/remote.cool`): multiplies each number arriving at
+/// `input` by its controllable `factor` (2 unless set) onto `output`.
+struct Doubling;
 
-static DOUBLER: Spec = Spec {
-    type_name: "Doubler",
-    doc: "",
-    states: &[StateSpec {
-        name: "doubling",
-        entry: true,
-        exit: false,
-        periodic: None,
-        on: &[coolbot::OnSpec { port: 0, target: 0 }],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[coolbot::InputSpec {
-        name: "input",
-        kind: coolbot::InputKind::Fifo {
-            capacity: 16,
-            policy: coolbot::OverflowPolicy::Reject,
-        },
-        packet: "u64",
-        pull: false,
-    }],
-    outputs: &[coolbot::OutputSpec {
-        name: "output",
-        kind: coolbot::OutputKind::Data,
-        packet: "u64",
-        pull: false,
-    }],
-    variables: &[coolbot::VarSpec {
-        name: "factor",
-        kind: VarKind::Controllable,
-        ty: "u64",
-        doc: "",
-    }],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-impl coolbot::Automaton for Doubler {
-    fn spec(&self) -> &'static Spec {
-        &DOUBLER
-    }
-    fn start(&mut self, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _: &mut coolbot::Context) {}
-    fn section(
-        &mut self,
-        _: usize,
-        _: coolbot::Section,
-        _: &mut coolbot::Context,
-    ) -> Result<(), coolbot::Fault> {
-        for number in self.input.drain() {
-            self.output.send(number * self.factor);
+impl doubler::Behavior for Doubling {
+    fn doubling_entry(&mut self, cx: &mut doubler::Cx<'_>) -> SectionResult {
+        for number in cx.inputs.input.drain() {
+            cx.outputs.output.send(number * cx.vars.factor);
         }
         Ok(())
     }
-    fn choose(&mut self, _: usize, _: &mut coolbot::Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _: usize, _: &str, _: &mut coolbot::Context) {}
-    fn answer(&mut self, _: usize, _: &mut coolbot::Context) -> Result<(), coolbot::Fault> {
+}
+
+/// `Numbers`' behaviour: hands its output to the test when it starts.
+struct HandNumbers(Sender<DataOut<u64>>);
+
+impl numbers::Behavior for HandNumbers {
+    fn start(&mut self, cx: &mut numbers::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
         Ok(())
-    }
-    fn configure(&mut self, _: &coolbot::Value) -> Result<(), String> {
-        Err("no configuration".to_owned())
-    }
-    fn set(&mut self, _: usize, value: &coolbot::Value) -> Result<(), String> {
-        self.factor = u64::try_from(value).map_err(|error| error.to_string())?;
-        Ok(())
-    }
-    fn get(&self, _: usize) -> coolbot::Value {
-        coolbot::Value::from(self.factor)
     }
 }
 
-fn doubler(name: &str) -> coolbot::Component {
-    let input = coolbot::port::FifoIn::new(16, coolbot::OverflowPolicy::Reject);
-    let output = coolbot::port::DataOut::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let doubler = Doubler {
-        input,
-        output,
-        factor: 2,
-    };
-    coolbot::Component::new(name, Box::new(doubler), ports)
+/// `Results`' behaviour: hands its input to the test when it starts.
+struct HandResults(Sender<FifoIn<u64>>);
+
+impl results::Behavior for HandResults {
+    fn start(&mut self, cx: &mut results::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.inputs.input.clone());
+        Ok(())
+    }
+}
+
+/// A `Numbers` named `source` and a `Results` named `sink` in `system`, and (once
+/// the system has started) their ports.
+fn ends(
+    system: &mut System,
+) -> (
+    crossbeam_channel::Receiver<DataOut<u64>>,
+    crossbeam_channel::Receiver<FifoIn<u64>>,
+) {
+    let (out, source) = crossbeam_channel::bounded(1);
+    let (input, sink) = crossbeam_channel::bounded(1);
+    system
+        .add(numbers::component("source", HandNumbers(out)))
+        .unwrap();
+    system
+        .add(results::component("sink", HandResults(input)))
+        .unwrap();
+    (source, sink)
 }
 
 #[test]
 fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
-    use coolbot::port::{DataOut, FifoIn};
     use coolbot::{InputKind, OutputKind, OverflowPolicy};
     use coolbot_zenoh::Error;
     use coolbot_zenoh::agent::{Agent, Instantiate, Registry, RemoteInput, Wire, instantiate};
@@ -351,56 +271,16 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     let (robot, workstation) = pair("robot", "workstation");
     let workstation = std::sync::Arc::new(workstation);
     let mut registry = Registry::new();
-    registry
-        .register("Doubler", doubler)
-        .port::<u64>("input")
-        .port::<u64>("output");
+    doubler::register(&mut registry, |name| doubler::component(name, Doubling));
     let _agent = Agent::start(std::sync::Arc::clone(&workstation), registry).unwrap();
 
     // The robot: numbers out to the remote doubler, doubled numbers back into a fifo.
-    let numbers = DataOut::<u64>::new();
-    let doubled = FifoIn::<u64>::new(64, OverflowPolicy::Reject);
     let queue = InputKind::Fifo {
         capacity: 64,
         policy: OverflowPolicy::Reject,
     };
     let mut system = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![coolbot::OutputSpec {
-            name: "out",
-            kind: OutputKind::Data,
-            packet: "u64",
-            pull: false,
-        }],
-        vec![],
-    );
-    let sink = spec(
-        "Sink",
-        vec![coolbot::InputSpec {
-            name: "input",
-            kind: queue,
-            packet: "u64",
-            pull: false,
-        }],
-        vec![],
-        vec![],
-    );
-    system
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&numbers),
-        ))
-        .unwrap();
-    system
-        .add(Shell::component(
-            "sink",
-            sink,
-            PortSet::new().input(&doubled),
-        ))
-        .unwrap();
+    let (numbers, doubled) = ends(&mut system);
     system
         .add(
             robot
@@ -420,6 +300,8 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     system.connect("source.out", "to_doubler.input").unwrap();
     system.connect("from_doubler.output", "sink.input").unwrap();
     system.run_all().unwrap();
+    let numbers = numbers.recv_timeout(PATIENCE).expect("the source started");
+    let doubled = doubled.recv_timeout(PATIENCE).expect("the sink started");
 
     let request = Instantiate {
         type_name: "Doubler".to_owned(),
@@ -504,25 +386,8 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
 
     // An instance's overrides are applied before it runs; a refused one fails the
     // request with the control port's reason.
-    let (tripled, doubled_back) = (
-        DataOut::<u64>::new(),
-        FifoIn::<u64>::new(64, OverflowPolicy::Reject),
-    );
     let mut second = System::new();
-    second
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&tripled),
-        ))
-        .unwrap();
-    second
-        .add(Shell::component(
-            "sink",
-            sink,
-            PortSet::new().input(&doubled_back),
-        ))
-        .unwrap();
+    let (tripled, doubled_back) = ends(&mut second);
     second
         .add(
             robot
@@ -542,6 +407,10 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     second.connect("source.out", "to.input").unwrap();
     second.connect("from.output", "sink.input").unwrap();
     second.run_all().unwrap();
+    let tripled = tripled.recv_timeout(PATIENCE).expect("the source started");
+    let doubled_back = doubled_back
+        .recv_timeout(PATIENCE)
+        .expect("the sink started");
     let tripler = Instantiate {
         name: "tripler".to_owned(),
         wires: vec![
