@@ -2,45 +2,21 @@
 //! semantics and cardinality across the network, pull is a query, and no packet is
 //! lost without a counter and an event.
 
-mod support;
-
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut};
-use coolbot::{
-    InputKind, InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy, PortSet, System,
-};
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
+use coolbot::{Component, InputKind, MonitorEvent, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::{Error, Node};
-use serde::{Deserialize, Serialize};
+use coolbot_zenoh_tests::generated::types::Pose;
+use coolbot_zenoh_tests::generated::{
+    goal, growing_queue, latest, pose_source, poster_source, pull_source, queue, reader,
+    small_queue, tick_source, ticks, tiny_queue, two_source, wide_queue,
+};
+use coolbot_zenoh_tests::support::{self, PATIENCE, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
-
-use support::{PATIENCE, Shell, pair, spec, wait_subscribed, wait_until};
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct Pose {
-    x: f64,
-    seq: u64,
-}
-
-fn output(name: &'static str, kind: OutputKind, pull: bool) -> OutputSpec {
-    OutputSpec {
-        name,
-        kind,
-        packet: "Pose",
-        pull,
-    }
-}
-
-fn input(name: &'static str, kind: InputKind, pull: bool) -> InputSpec {
-    InputSpec {
-        name,
-        kind,
-        packet: "Pose",
-        pull,
-    }
-}
 
 fn pose(seq: u64) -> Pose {
     Pose {
@@ -49,82 +25,96 @@ fn pose(seq: u64) -> Pose {
     }
 }
 
+/// A behaviour that hands a port (or ports) to the test when its component starts.
+struct Hand<T>(Sender<T>);
+
+/// Implements the `Behavior` of generated module `$module` for [`Hand`] of `$port`:
+/// `start` hands over `cx.$side.$field`.
+macro_rules! hand {
+    ($module:ident, $port:ty, $side:ident . $field:ident) => {
+        impl $module::Behavior for Hand<$port> {
+            fn start(&mut self, cx: &mut $module::Cx<'_>) -> coolbot::SectionResult {
+                let _ = self.0.send(cx.$side.$field.clone());
+                Ok(())
+            }
+        }
+    };
+}
+
+hand!(pose_source, DataOut<Pose>, outputs.out);
+hand!(poster_source, PosterOut<Pose>, outputs.out);
+hand!(tick_source, TickOut, outputs.out);
+hand!(wide_queue, FifoIn<Pose>, inputs.input);
+hand!(queue, FifoIn<Pose>, inputs.input);
+hand!(small_queue, FifoIn<Pose>, inputs.input);
+hand!(tiny_queue, FifoIn<Pose>, inputs.input);
+hand!(growing_queue, UfifoIn<Pose>, inputs.input);
+hand!(latest, LastIn<Pose>, inputs.input);
+hand!(reader, PosterIn<Pose>, inputs.input);
+hand!(ticks, TickIn, inputs.input);
+hand!(goal, LastIn<Pose>, inputs.goal);
+
+impl two_source::Behavior for Hand<(PosterOut<Pose>, DataOut<Pose>)> {
+    fn start(&mut self, cx: &mut two_source::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self
+            .0
+            .send((cx.outputs.post.clone(), cx.outputs.data.clone()));
+        Ok(())
+    }
+}
+
+/// `system` with `component` added (its behaviour a [`Hand`] of `hand`), run; and
+/// what the component handed over when it started.
+fn started<T>(
+    mut system: System,
+    component: impl FnOnce(Sender<T>) -> Component,
+    connect: (&str, &str),
+) -> (System, T) {
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system.add(component(hand)).unwrap();
+    system.connect(connect.0, connect.1).unwrap();
+    system.run_all().unwrap();
+    let port = handed
+        .recv_timeout(PATIENCE)
+        .expect("the component hands its port over when it starts");
+    (system, port)
+}
+
 /// Producer side: `source.out` (data) into an outlet of `kind` on `key`.
 fn data_producer(node: &Node, key: &str, kind: InputKind) -> (System, DataOut<Pose>) {
-    let out = DataOut::<Pose>::new();
     let mut system = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![output("out", OutputKind::Data, false)],
-        vec![],
-    );
-    system
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&out),
-        ))
-        .unwrap();
     system
         .add(node.outlet::<Pose>("outlet", key, kind).build().unwrap())
         .unwrap();
-    system.connect("source.out", "outlet.input").unwrap();
-    system.run_all().unwrap();
-    (system, out)
+    started(
+        system,
+        |hand| pose_source::component("source", Hand(hand)),
+        ("source.out", "outlet.input"),
+    )
 }
 
-/// Consumer side: an inlet of `kind` on `key` into `sink.input` (`sink_port`).
-fn consumer(
+/// Consumer side: an inlet of `kind` on `key` into `sink.input`, the sink built by
+/// `sink` (from `cool/bridges.cool`); and the sink's input port.
+fn consumer<P>(
     node: &Node,
     key: &str,
     kind: OutputKind,
-    sink_kind: InputKind,
-    sink_port: &dyn coolbot::InputPort,
-) -> System {
+    sink: impl FnOnce(Sender<P>) -> Component,
+) -> (System, P) {
     let mut system = System::new();
     system
         .add(node.inlet::<Pose>("inlet", key, kind).build().unwrap())
         .unwrap();
-    let sink = spec(
-        "Sink",
-        vec![input("input", sink_kind, false)],
-        vec![],
-        vec![],
-    );
-    let mut ports = PortSet::new();
-    ports = add_input(ports, sink_port);
-    system.add(Shell::component("sink", sink, ports)).unwrap();
-    system.connect("inlet.output", "sink.input").unwrap();
-    system.run_all().unwrap();
-    system
-}
-
-fn add_input(ports: PortSet, port: &dyn coolbot::InputPort) -> PortSet {
-    struct Erased(coolbot::port::ErasedInput);
-    impl coolbot::InputPort for Erased {
-        fn erased(&self) -> coolbot::port::ErasedInput {
-            self.0.clone()
-        }
-    }
-    ports.input(&Erased(port.erased()))
+    started(system, sink, ("inlet.output", "sink.input"))
 }
 
 #[test]
 fn fifo_packets_cross_in_order_and_none_is_lost() {
     let (a, b) = pair("fifo-a", "fifo-b");
     let key = "test/fifo";
-    let sink = FifoIn::<Pose>::new(256, OverflowPolicy::Reject);
-    let consumer = consumer(
-        &b,
-        key,
-        OutputKind::Data,
-        InputKind::Fifo {
-            capacity: 256,
-            policy: OverflowPolicy::Reject,
-        },
-        &sink,
-    );
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        wide_queue::component("sink", Hand(hand))
+    });
     let (producer, out) = data_producer(
         &a,
         key,
@@ -157,17 +147,9 @@ fn a_full_remote_fifo_applies_its_own_policy_and_counts() {
     let (a, b) = pair("full-a", "full-b");
     let key = "test/full";
     // Nothing reads the sink: 4 packets fit, the 6 others are rejected and counted.
-    let sink = FifoIn::<Pose>::new(4, OverflowPolicy::Reject);
-    let consumer = consumer(
-        &b,
-        key,
-        OutputKind::Data,
-        InputKind::Fifo {
-            capacity: 4,
-            policy: OverflowPolicy::Reject,
-        },
-        &sink,
-    );
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        tiny_queue::component("sink", Hand(hand))
+    });
     let events = consumer.handle("sink").unwrap().subscribe();
     // The outlet's own queue is only the hop to the network: room for all ten.
     let (producer, out) = data_producer(
@@ -202,8 +184,9 @@ fn a_full_remote_fifo_applies_its_own_policy_and_counts() {
 fn a_packet_that_does_not_decode_is_counted_at_the_inlet() {
     let (a, b) = pair("decode-a", "decode-b");
     let key = "test/decode";
-    let sink = LastIn::<Pose>::new();
-    let consumer = consumer(&b, key, OutputKind::Data, InputKind::Last, &sink);
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        latest::component("sink", Hand(hand))
+    });
     let inlet = consumer.handle("inlet").unwrap();
     let events = inlet.subscribe();
     wait_subscribed(&a, key);
@@ -232,12 +215,9 @@ fn numbers_missing_on_the_way_are_counted_lost_at_the_inlet() {
     // missing between two it received, so a packet lost on the way is counted.
     let (a, b) = pair("gap-a", "gap-b");
     let key = "test/gap";
-    let sink = FifoIn::<Pose>::new(16, OverflowPolicy::Reject);
-    let queue = InputKind::Fifo {
-        capacity: 16,
-        policy: OverflowPolicy::Reject,
-    };
-    let consumer = consumer(&b, key, OutputKind::Data, queue, &sink);
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        small_queue::component("sink", Hand(hand))
+    });
     let inlet = consumer.handle("inlet").unwrap();
     wait_subscribed(&a, key);
     let put = |epoch: u64, seq: u64| {
@@ -294,8 +274,9 @@ fn an_outlet_that_cannot_send_counts_its_packets() {
 fn a_last_input_keeps_the_latest_packet() {
     let (a, b) = pair("last-a", "last-b");
     let key = "test/last";
-    let sink = LastIn::<Pose>::new();
-    let _consumer = consumer(&b, key, OutputKind::Data, InputKind::Last, &sink);
+    let (_consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        latest::component("sink", Hand(hand))
+    });
     let (_producer, out) = data_producer(&a, key, InputKind::Last);
     wait_subscribed(&a, key);
     for seq in 1..=50 {
@@ -312,21 +293,7 @@ fn a_last_input_keeps_the_latest_packet() {
 fn a_late_poster_reader_gets_the_current_value() {
     let (a, b) = pair("poster-a", "poster-b");
     let key = "test/poster";
-    let post = PosterOut::<Pose>::new();
     let mut producer = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![output("out", OutputKind::Poster, false)],
-        vec![],
-    );
-    producer
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&post),
-        ))
-        .unwrap();
     producer
         .add(
             a.outlet::<Pose>("outlet", key, InputKind::Poster)
@@ -334,14 +301,18 @@ fn a_late_poster_reader_gets_the_current_value() {
                 .unwrap(),
         )
         .unwrap();
-    producer.connect("source.out", "outlet.input").unwrap();
-    producer.run_all().unwrap();
+    let (_producer, post) = started(
+        producer,
+        |hand| poster_source::component("source", Hand(hand)),
+        ("source.out", "outlet.input"),
+    );
     post.post(pose(7));
     // The outlet publishes (to nobody yet) and keeps the value for late readers.
     std::thread::sleep(Duration::from_millis(50));
 
-    let reader = PosterIn::<Pose>::new();
-    let consumer = consumer(&b, key, OutputKind::Poster, InputKind::Poster, &reader);
+    let (consumer, reader) = consumer(&b, key, OutputKind::Poster, |hand| {
+        reader::component("sink", Hand(hand))
+    });
     assert!(
         wait_until(PATIENCE, || reader.read() == Some(pose(7))),
         "the late reader did not get the posted value"
@@ -356,7 +327,6 @@ fn a_late_poster_reader_gets_the_current_value() {
 fn tick_events_are_counted_never_lost() {
     let (a, b) = pair("tick-a", "tick-b");
     let key = "test/tick";
-    let ticks = TickIn::new();
     let mut consumer = System::new();
     consumer
         .add(
@@ -365,43 +335,13 @@ fn tick_events_are_counted_never_lost() {
                 .unwrap(),
         )
         .unwrap();
-    let sink = spec(
-        "Sink",
-        vec![InputSpec {
-            name: "input",
-            kind: InputKind::Tick,
-            packet: "event",
-            pull: false,
-        }],
-        vec![],
-        vec![],
+    let (consumer, ticks) = started(
+        consumer,
+        |hand| ticks::component("sink", Hand(hand)),
+        ("inlet.output", "sink.input"),
     );
-    consumer
-        .add(Shell::component("sink", sink, PortSet::new().input(&ticks)))
-        .unwrap();
-    consumer.connect("inlet.output", "sink.input").unwrap();
-    consumer.run_all().unwrap();
 
-    let emit = TickOut::new();
     let mut producer = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![OutputSpec {
-            name: "out",
-            kind: OutputKind::Tick,
-            packet: "event",
-            pull: false,
-        }],
-        vec![],
-    );
-    producer
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&emit),
-        ))
-        .unwrap();
     producer
         .add(
             a.outlet::<()>("outlet", key, InputKind::Tick)
@@ -409,8 +349,11 @@ fn tick_events_are_counted_never_lost() {
                 .unwrap(),
         )
         .unwrap();
-    producer.connect("source.out", "outlet.input").unwrap();
-    producer.run_all().unwrap();
+    let (producer, emit) = started(
+        producer,
+        |hand| tick_source::component("source", Hand(hand)),
+        ("source.out", "outlet.input"),
+    );
     wait_subscribed(&a, key);
     for _ in 0..25 {
         emit.emit();
@@ -439,26 +382,12 @@ fn a_pull_is_a_query_and_the_answer_a_reply() {
     let (a, b) = pair("pull-a", "pull-b");
     let key = "test/pull";
     // Producer: a pull output answering each request with the next pose.
-    let out = DataOut::<Pose>::new();
     let answered = Arc::new(AtomicU64::new(0));
-    let answer_out = out.clone();
-    let count = Arc::clone(&answered);
     let mut producer = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![output("out", OutputKind::Data, true)],
-        vec![],
-    );
     producer
-        .add(Shell::with_answer(
+        .add(pull_source::component(
             "source",
-            source,
-            PortSet::new().output(&out),
-            Some(Box::new(move |_| {
-                let n = count.fetch_add(1, Ordering::SeqCst) + 1;
-                answer_out.send(pose(n));
-            })),
+            Answering(Arc::clone(&answered)),
         ))
         .unwrap();
     producer
@@ -473,7 +402,6 @@ fn a_pull_is_a_query_and_the_answer_a_reply() {
     producer.run_all().unwrap();
 
     // Consumer: a pull last input fed by a pull inlet.
-    let goal = LastIn::<Pose>::new();
     let mut consumer = System::new();
     consumer
         .add(
@@ -483,17 +411,11 @@ fn a_pull_is_a_query_and_the_answer_a_reply() {
                 .unwrap(),
         )
         .unwrap();
-    let sink = spec(
-        "Sink",
-        vec![input("goal", InputKind::Last, true)],
-        vec![],
-        vec![],
+    let (_consumer, goal) = started(
+        consumer,
+        |hand| goal::component("sink", Hand(hand)),
+        ("inlet.output", "sink.goal"),
     );
-    consumer
-        .add(Shell::component("sink", sink, PortSet::new().input(&goal)))
-        .unwrap();
-    consumer.connect("inlet.output", "sink.goal").unwrap();
-    consumer.run_all().unwrap();
 
     // The queryable on the producer's node may not be known yet: pull until answered.
     let mut first = None;
@@ -505,6 +427,16 @@ fn a_pull_is_a_query_and_the_answer_a_reply() {
     let second = goal.pull(PATIENCE).expect("a second answer");
     assert_eq!(second.seq, first.seq + 1, "one answer per request");
     assert_eq!(answered.load(Ordering::SeqCst), second.seq);
+}
+
+/// `PullSource`'s behaviour: answers each request with the next pose, counting them.
+struct Answering(Arc<AtomicU64>);
+
+impl pull_source::Behavior for Answering {
+    fn answer_out(&mut self, _cx: &mut pull_source::Cx<'_>) -> Result<Pose, coolbot::Fault> {
+        let n = self.0.fetch_add(1, Ordering::SeqCst) + 1;
+        Ok(pose(n))
+    }
 }
 
 /// The checks see the tokens a session knows of: wait until `node` knows one under
@@ -535,7 +467,7 @@ fn connection_rules_hold_across_the_network() {
     let error = b
         .outlet::<Pose>("second", "test/rules/last", InputKind::Last)
         .build();
-    let rejected = |result: Result<coolbot::Component, Error>| match result {
+    let rejected = |result: Result<Component, Error>| match result {
         Err(Error::Cardinality { rule, .. }) => rule,
         other => panic!("expected a cardinality error, got {other:?}"),
     };
@@ -608,12 +540,13 @@ fn a_node_name_is_unique_on_the_network() {
 fn when_the_consumer_node_goes_away_the_outlet_counts_every_packet() {
     let (a, b) = pair("gone-a", "gone-b");
     let key = "test/gone";
-    let sink = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
     let queue = InputKind::Fifo {
         capacity: 64,
         policy: OverflowPolicy::Reject,
     };
-    let consumer = consumer(&b, key, OutputKind::Data, queue, &sink);
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        queue::component("sink", Hand(hand))
+    });
     let (producer, out) = data_producer(&a, key, queue);
     wait_subscribed(&a, key);
     for seq in 0..5 {
@@ -651,12 +584,13 @@ fn a_remote_ufifo_grows_and_takes_every_packet_of_a_burst() {
     let (a, b) = pair("ufifo-a", "ufifo-b");
     let key = "test/ufifo";
     // Nothing reads the sink during the burst: it grows from 16.
-    let sink = coolbot::port::UfifoIn::<Pose>::new(16, None);
     let kind = InputKind::Ufifo {
         initial: 16,
         max: None,
     };
-    let consumer = consumer(&b, key, OutputKind::Data, kind, &sink);
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        growing_queue::component("sink", Hand(hand))
+    });
     let (producer, out) = data_producer(&a, key, kind);
     wait_subscribed(&a, key);
     const BURST: u64 = 5_000;
@@ -691,8 +625,9 @@ fn when_the_consumer_node_comes_back_packets_flow_again() {
         policy: OverflowPolicy::Reject,
     };
     let (producer, out) = data_producer(&a, key, queue);
-    let first = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
-    let first_consumer = consumer(&b, key, OutputKind::Data, queue, &first);
+    let (first_consumer, first) = consumer(&b, key, OutputKind::Data, |hand| {
+        queue::component("sink", Hand(hand))
+    });
     wait_subscribed(&a, key);
     out.send(pose(1));
     assert_eq!(first.recv_timeout(PATIENCE), Some(pose(1)));
@@ -701,8 +636,9 @@ fn when_the_consumer_node_comes_back_packets_flow_again() {
     assert!(first_consumer.shutdown().clean());
     drop(b);
     let b = listening("back-b");
-    let again = FifoIn::<Pose>::new(64, OverflowPolicy::Reject);
-    let _consumer = consumer(&b, key, OutputKind::Data, queue, &again);
+    let (_consumer, again) = consumer(&b, key, OutputKind::Data, |hand| {
+        queue::component("sink", Hand(hand))
+    });
     wait_subscribed(&a, key);
     // The producer's node may still see the old subscriber for a moment (its
     // matching status lags the broken session), and a packet sent then goes nowhere
@@ -752,24 +688,10 @@ fn poster_and_last_readers_ask_again_when_the_link_comes_back() {
     assert!(wait_until(PATIENCE, || sees(&a, "relink-b")));
 
     // A poster connection and a data connection to a remote `last` input.
-    let post = PosterOut::<Pose>::new();
-    let data = DataOut::<Pose>::new();
     let mut producer = System::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![
-            output("post", OutputKind::Poster, false),
-            output("data", OutputKind::Data, false),
-        ],
-        vec![],
-    );
+    let (post, data) = crossbeam_channel::bounded(1);
     producer
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&post).output(&data),
-        ))
+        .add(two_source::component("source", Hand(post)))
         .unwrap();
     for (name, key, kind) in [
         ("poster-outlet", "test/relink/poster", InputKind::Poster),
@@ -786,22 +708,15 @@ fn poster_and_last_readers_ask_again_when_the_link_comes_back() {
         .connect("source.data", "last-outlet.input")
         .unwrap();
     producer.run_all().unwrap();
-    let reader = PosterIn::<Pose>::new();
-    let _posters = consumer(
-        &b,
-        "test/relink/poster",
-        OutputKind::Poster,
-        InputKind::Poster,
-        &reader,
-    );
-    let latest = LastIn::<Pose>::new();
-    let _lasts = consumer(
-        &b,
-        "test/relink/last",
-        OutputKind::Data,
-        InputKind::Last,
-        &latest,
-    );
+    let (post, data) = data
+        .recv_timeout(PATIENCE)
+        .expect("the source hands its ports over when it starts");
+    let (_posters, reader) = consumer(&b, "test/relink/poster", OutputKind::Poster, |hand| {
+        reader::component("sink", Hand(hand))
+    });
+    let (_lasts, latest) = consumer(&b, "test/relink/last", OutputKind::Data, |hand| {
+        latest::component("sink", Hand(hand))
+    });
     wait_subscribed(&a, "test/relink/last");
     post.post(pose(1));
     data.send(pose(1));
