@@ -1,7 +1,7 @@
 //! The `coolctl` binary as an operator runs it, against a node started here: `list`,
 //! `set`, `get`, `configure`, `degrade` and `echo`, and every command failing within
 //! its timeout, with a clear message and a non-zero exit, on a node, component or port
-//! that does not exist.
+//! that does not exist; and `top --once --json`.
 
 mod support;
 
@@ -456,4 +456,49 @@ fn the_coolctl_binary_prints_what_the_library_prints() {
     let (code, _, stderr) = run(&["set", "robot", "state", "running"]);
     assert_eq!(code, Some(2));
     assert!(stderr.contains("not a component address"), "{stderr}");
+}
+
+/// `coolctl top --once --json` from the real binary, against `support::robot` (from
+/// `tests/zenoh/tests/top.rs`, whose other tests run on generated components: this one
+/// needs the binary, which only this package's tests can run).
+#[test]
+fn coolctl_top_once_json_prints_every_node_and_component() {
+    let (robot_node, endpoint) = node("json-robot", &[]);
+    let system = support::robot(&robot_node);
+    let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        .args([
+            "--connect",
+            &endpoint,
+            "--no-multicast",
+            "top",
+            "--once",
+            "--json",
+            "--refresh",
+            "200ms",
+        ])
+        .output()
+        .expect("coolctl runs");
+    assert!(output.status.success(), "{output:?}");
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).expect("JSON");
+    assert_eq!(json["nodes"], serde_json::json!(["json-robot"]));
+    assert_eq!(json["lost"], serde_json::json!([]));
+    let paths: Vec<&str> = json["components"]
+        .as_array()
+        .expect("components")
+        .iter()
+        .map(|c| c["path"].as_str().expect("a path"))
+        .collect();
+    assert_eq!(
+        paths,
+        [
+            "logger",
+            "robot",
+            "robot.base",
+            "robot.base.motion",
+            "robot.base.ranges",
+            "robot.planner"
+        ]
+    );
+    assert_eq!(json["components"][1]["monitor"]["state"], "Running");
+    assert!(system.shutdown().clean());
 }

@@ -1,17 +1,13 @@
 //! `coolctl top` against nodes started here: the board a node's components make,
 //! drawn at several terminal sizes (every frame whole, nothing of an earlier one
-//! left), a node that goes away shown lost, and `coolctl top --once --json` from the
-//! real binary.
+//! left), and a node that goes away shown lost. (`coolctl top --once --json` from the
+//! real binary: `runtime/zenoh/tests/coolctl.rs`.)
 
-mod support;
-
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::top::{Board, render};
-
-use support::{PATIENCE, pair, robot, wait_until};
+use coolbot_zenoh_tests::support::{PATIENCE, pair, robot, wait_until};
 
 /// The board once `ctl` sees `count` components.
 fn board(ctl: &Ctl, count: usize) -> Board {
@@ -85,47 +81,4 @@ fn a_node_that_goes_away_is_shown_lost_and_the_board_goes_on() {
     let screen = render(&board, 100, 20);
     assert!(screen.contains("lost-robot/robot"), "{screen}");
     assert_eq!(screen.matches(" lost ").count(), 6, "{screen}");
-}
-
-#[test]
-fn coolctl_top_once_json_prints_every_node_and_component() {
-    let (robot_node, _endpoint) = support::node("json-robot", &[]);
-    let endpoint = _endpoint;
-    let system = robot(&robot_node);
-    let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
-        .args([
-            "--connect",
-            &endpoint,
-            "--no-multicast",
-            "top",
-            "--once",
-            "--json",
-            "--refresh",
-            "200ms",
-        ])
-        .output()
-        .expect("coolctl runs");
-    assert!(output.status.success(), "{output:?}");
-    let json: serde_json::Value = serde_json::from_slice(&output.stdout).expect("JSON");
-    assert_eq!(json["nodes"], serde_json::json!(["json-robot"]));
-    assert_eq!(json["lost"], serde_json::json!([]));
-    let paths: Vec<&str> = json["components"]
-        .as_array()
-        .expect("components")
-        .iter()
-        .map(|c| c["path"].as_str().expect("a path"))
-        .collect();
-    assert_eq!(
-        paths,
-        [
-            "logger",
-            "robot",
-            "robot.base",
-            "robot.base.motion",
-            "robot.base.ranges",
-            "robot.planner"
-        ]
-    );
-    assert_eq!(json["components"][1]["monitor"]["state"], "Running");
-    assert!(system.shutdown().clean());
 }
