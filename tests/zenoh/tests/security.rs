@@ -1,0 +1,651 @@
+//! Nodes with a security file (`docs/distribution.md`, "Security"): access rules on
+//! bridge keys, on the agent, on monitoring events, queryables and tokens, and
+//! `coolctl`'s library under them. Certificates are made here with rcgen: a CA and the
+//! nodes' certificates signed by it. (The `coolctl` binary under TLS and rules:
+//! `runtime/zenoh/tests/security.rs`.)
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{InputKind, OutputKind, OverflowPolicy, SectionResult, State, System};
+use coolbot_zenoh::{Node, Security, secure_config};
+use coolbot_zenoh_tests::generated::{inbox, numbers, other, plain};
+use coolbot_zenoh_tests::support::{self, PATIENCE, free_port, wait_subscribed, wait_until};
+use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
+
+/// A certificate authority: its certificate in `dir/<name>-ca.pem`, and what signs.
+struct Authority {
+    ca: PathBuf,
+    issuer: Issuer<'static, KeyPair>,
+}
+
+impl Authority {
+    fn new(dir: &Path, name: &str) -> Authority {
+        let key = KeyPair::generate().expect("a CA key");
+        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.self_signed(&key).expect("a self-signed CA");
+        let ca = dir.join(format!("{name}-ca.pem"));
+        std::fs::write(&ca, certificate.pem()).expect("write the CA");
+        Authority {
+            ca,
+            issuer: Issuer::new(params, key),
+        }
+    }
+
+    /// A security file for the node whose certificate's common name is `name`, with
+    /// `rules` (TOML `[[allow]]` tables) after its `[tls]` table.
+    fn node(&self, dir: &Path, file: &str, name: &str, rules: &str) -> PathBuf {
+        self.node_with(dir, file, name, "", rules)
+    }
+
+    /// [`Authority::node`] with `top` (top-level keys) before the `[tls]` table.
+    fn node_with(&self, dir: &Path, file: &str, name: &str, top: &str, rules: &str) -> PathBuf {
+        let key = KeyPair::generate().expect("a node key");
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                .expect("node params");
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
+        std::fs::write(dir.join(format!("{file}.pem")), certificate.pem()).expect("write");
+        std::fs::write(dir.join(format!("{file}.key")), key.serialize_pem()).expect("write");
+        let path = dir.join(format!("{file}.toml"));
+        let ca = self.ca.file_name().expect("a file").to_string_lossy();
+        std::fs::write(
+            &path,
+            format!(
+                "{top}\n[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
+            ),
+        )
+        .expect("write the security file");
+        path
+    }
+}
+
+/// The rules every node of the test reads: the operator `ops` may command the robot's
+/// base and what is inside it, nothing else.
+const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base.*\"]\n";
+
+/// Node `name` with the security file `file`, listening on `listen` or connecting to
+/// `connect`.
+fn secure_node(name: &str, file: &Path, listen: &[String], connect: &[String]) -> Node {
+    let security = Security::load(file).expect("a security file");
+    let config = secure_config(listen, connect, false, &security).expect("a TLS configuration");
+    Node::open(name, config).expect("the node opens")
+}
+
+/// `Inbox`'s behaviour: hands its input (with its index) to the test when it starts.
+struct HandInbox(usize, Sender<(usize, FifoIn<u64>)>);
+
+impl inbox::Behavior for HandInbox {
+    fn start(&mut self, cx: &mut inbox::Cx<'_>) -> SectionResult {
+        let _ = self.1.send((self.0, cx.inputs.input.clone()));
+        Ok(())
+    }
+}
+
+/// `Numbers`' behaviour: hands its output (with its index) to the test when it starts.
+struct HandNumbers(usize, Sender<(usize, DataOut<u64>)>);
+
+impl numbers::Behavior for HandNumbers {
+    fn start(&mut self, cx: &mut numbers::Cx<'_>) -> SectionResult {
+        let _ = self.1.send((self.0, cx.outputs.out.clone()));
+        Ok(())
+    }
+}
+
+/// The two ports handed over on `handed`, by their index.
+fn in_order<T>(handed: &crossbeam_channel::Receiver<(usize, T)>) -> Vec<T> {
+    let mut ports: Vec<(usize, T)> = (0..2)
+        .map(|_| {
+            handed
+                .recv_timeout(PATIENCE)
+                .expect("the component hands its port over when it starts")
+        })
+        .collect();
+    ports.sort_by_key(|(index, _)| *index);
+    ports.into_iter().map(|(_, port)| port).collect()
+}
+
+/// `ops` may send packets on `robot/cmd`, not on `robot/free`: the robot's inlet on
+/// the first gets them, the one on the second gets nothing.
+#[test]
+fn publish_rules_gate_bridge_keys() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\npublish = [\"robot/cmd\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let ops = secure_node(
+        "ops",
+        &authority.node(dir, "ops", "ops", rules),
+        &[],
+        std::slice::from_ref(&endpoint),
+    );
+    let fifo = InputKind::Fifo {
+        capacity: 16,
+        policy: OverflowPolicy::Reject,
+    };
+    let mut consumers = System::new();
+    let mut producers = System::new();
+    let (hand_sink, sinks) = crossbeam_channel::unbounded();
+    let (hand_out, outs) = crossbeam_channel::unbounded();
+    for (index, key) in ["robot/cmd", "robot/free"].into_iter().enumerate() {
+        consumers
+            .add(
+                robot
+                    .inlet::<u64>(&format!("inlet{index}"), key, OutputKind::Data)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        consumers
+            .add(inbox::component(
+                &format!("sink{index}"),
+                HandInbox(index, hand_sink.clone()),
+            ))
+            .unwrap();
+        consumers
+            .connect(
+                &format!("inlet{index}.output"),
+                &format!("sink{index}.input"),
+            )
+            .unwrap();
+        producers
+            .add(
+                ops.outlet::<u64>(&format!("outlet{index}"), key, fifo)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        producers
+            .add(numbers::component(
+                &format!("source{index}"),
+                HandNumbers(index, hand_out.clone()),
+            ))
+            .unwrap();
+        producers
+            .connect(
+                &format!("source{index}.out"),
+                &format!("outlet{index}.input"),
+            )
+            .unwrap();
+    }
+    consumers.run_all().unwrap();
+    producers.run_all().unwrap();
+    let sinks = in_order(&sinks);
+    let outs = in_order(&outs);
+    // The declarations cross (every node of the CA may declare): ops sees both inlets.
+    wait_subscribed(&ops, "robot/cmd");
+    wait_subscribed(&ops, "robot/free");
+    for n in 0..3 {
+        outs[1].send(n);
+        outs[0].send(n);
+    }
+    for n in 0..3 {
+        assert_eq!(sinks[0].recv_timeout(PATIENCE), Some(n));
+    }
+    // Sent before the allowed ones, on the same link: they would be here by now.
+    assert_eq!(sinks[1].recv_timeout(Duration::from_millis(500)), None);
+    assert!(producers.shutdown().clean());
+    assert!(consumers.shutdown().clean());
+}
+
+/// `ops` may instantiate every type on `robot`, `typed` only `Plain`, and `guest`
+/// (signed by the same CA) may only command: the agent builds what the rules allow,
+/// and the other requests never reach it; a request for another type than its key's
+/// is refused by the agent.
+#[test]
+fn instantiate_rules_gate_the_agent_by_node_and_type() {
+    use coolbot_zenoh::ControlReply;
+    use coolbot_zenoh::agent::{Agent, Instantiate, Registry, instantiate};
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"ops\"]\ninstantiate = [\"robot\"]\n\n\
+                 [[allow]]\nnodes = [\"typed\"]\ninstantiate = [\"robot/Plain\"]\n\n\
+                 [[allow]]\nnodes = [\"guest\"]\ncommand = [\"robot/*\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = std::sync::Arc::new(secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    ));
+    let mut registry = Registry::new();
+    plain::register(&mut registry, |name| plain::component(name, Idle));
+    other::register(&mut registry, |name| other::component(name, Idle));
+    let _agent = Agent::start(std::sync::Arc::clone(&robot), registry).expect("the agent");
+    let client = |name: &str| {
+        secure_node(
+            name,
+            &authority.node(dir, name, name, rules),
+            &[],
+            std::slice::from_ref(&endpoint),
+        )
+    };
+    let (ops, typed, guest) = (client("ops"), client("typed"), client("guest"));
+    let request = |type_name: &str, name: &str| Instantiate {
+        type_name: type_name.to_owned(),
+        name: name.to_owned(),
+        wires: Vec::new(),
+        timing: None,
+        run: true,
+        owner: None,
+        configuration: None,
+        variables: Vec::new(),
+    };
+    let second = Duration::from_secs(1);
+    // The agent's queryable reaches the operator's session after a while.
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            last = Some(instantiate(&ops, "robot", &request("Plain", "one"), second));
+            matches!(last, Some(Ok(())))
+        }),
+        "ops could not instantiate: {last:?}"
+    );
+    instantiate(&ops, "robot", &request("Other", "three"), second).expect("ops builds Other");
+    // The other sessions know the agent (declarations cross), but the requests the
+    // rules do not grant are dropped by the robot's access control: nothing answers,
+    // nothing is built.
+    for client in [&typed, &guest] {
+        let querier = client
+            .session()
+            .declare_querier(coolbot_zenoh::keys::agent("robot", "Plain"))
+            .wait()
+            .expect("a querier");
+        assert!(wait_until(PATIENCE, || querier
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())));
+    }
+    let refused = instantiate(&guest, "robot", &request("Plain", "two"), second);
+    let error = refused
+        .expect_err("the guest may not instantiate")
+        .to_string();
+    assert!(
+        error.contains("no agent answered") && error.contains("access rules"),
+        "{error}"
+    );
+    instantiate(&typed, "robot", &request("Plain", "four"), second).expect("typed builds Plain");
+    let refused = instantiate(&typed, "robot", &request("Other", "five"), second);
+    assert!(
+        refused
+            .expect_err("typed may not build Other")
+            .to_string()
+            .contains("no agent answered")
+    );
+    // A request for Other on Plain's key: the access control lets it through, the
+    // agent refuses it.
+    let replies = typed
+        .session()
+        .get(coolbot_zenoh::keys::agent("robot", "Plain"))
+        .payload(serde_json::to_vec(&request("Other", "six")).expect("JSON"))
+        .timeout(second)
+        .wait()
+        .expect("a query");
+    let reply = replies.recv().expect("the agent answers");
+    let answer: ControlReply =
+        serde_json::from_slice(&reply.result().expect("an answer").payload().to_bytes())
+            .expect("a ControlReply");
+    assert_eq!(
+        answer,
+        ControlReply::Rejected {
+            reason: "the request builds a `Other` but came on the key of type `Plain`".to_owned()
+        }
+    );
+    let built = |path: &str| {
+        robot
+            .session()
+            .get(coolbot_zenoh::keys::monitor("robot", path))
+            .timeout(second)
+            .wait()
+            .expect("a query")
+            .recv()
+            .is_ok()
+    };
+    for (path, expected) in [
+        ("one", true),
+        ("two", false),
+        ("three", true),
+        ("four", true),
+        ("five", false),
+        ("six", false),
+    ] {
+        assert_eq!(built(path), expected, "{path}");
+    }
+}
+
+/// Three nodes of one CA, each with the same rules (the `nodes` line names all three,
+/// so each is heard under its own name): `robot` listens and watches; `station` and
+/// `mallory` connect to it. `mallory` stands for a program holding a good certificate
+/// that tries to speak as `station`.
+fn three_nodes(dir: &Path) -> (Node, Node, Node) {
+    let authority = Authority::new(dir, "fleet");
+    let top = "nodes = [\"robot\", \"station\", \"mallory\"]";
+    let rules = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/*\"]\n";
+    let file = |name: &str| authority.node_with(dir, name, name, top, rules);
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &file("robot"),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let connect = std::slice::from_ref(&endpoint);
+    let station = secure_node("station", &file("station"), &[], connect);
+    let mallory = secure_node("mallory", &file("mallory"), &[], connect);
+    (robot, station, mallory)
+}
+
+/// Wait until `node`'s session knows a subscriber on `key`, so that a put on it is
+/// sent.
+fn wait_heard(node: &Node, key: &str) -> zenoh::pubsub::Publisher<'static> {
+    use zenoh::Wait;
+    let publisher = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("a publisher");
+    assert!(
+        wait_until(PATIENCE, || publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())),
+        "nobody subscribes to `{key}`"
+    );
+    publisher
+}
+
+/// A monitoring event put under another node's name is refused by the receiver's
+/// access control (a forged `error` here; on a proxy's key it would fail the proxy),
+/// while the real node's events, and the forger's own, are heard.
+#[test]
+fn monitoring_events_are_heard_only_from_their_own_node() {
+    use coolbot::{Command, Controllable, MonitorEvent};
+    use coolbot_zenoh::keys;
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let (robot, station, mallory) = three_nodes(dir.path());
+    let (heard_tx, heard) = std::sync::mpsc::channel::<(String, String)>();
+    let _watch = robot
+        .session()
+        .declare_subscriber(keys::monitor("*", "*"))
+        .callback(move |sample| {
+            let payload = sample.payload().try_to_string().unwrap_or_default();
+            let _ = heard_tx.send((sample.key_expr().to_string(), payload.into_owned()));
+        })
+        .wait()
+        .expect("a subscriber");
+    let system = support::robot(&station);
+    let real_key = keys::monitor("station", "logger");
+    drop(wait_heard(&station, &real_key));
+    let forged = wait_heard(&mallory, &real_key);
+    let own = wait_heard(&mallory, &keys::monitor("mallory", "logger"));
+
+    let json = |event: &MonitorEvent| serde_json::to_string(event).expect("JSON");
+    let forged_event = MonitorEvent::Error(Some("forged by mallory".to_owned()));
+    let own_event = MonitorEvent::Error(Some("mallory's own".to_owned()));
+    // The forgery first, then mallory's own event on the same link: once the second
+    // is heard, the first would have been.
+    forged.put(json(&forged_event)).wait().expect("put");
+    own.put(json(&own_event)).wait().expect("put");
+    system
+        .handle_at("logger")
+        .expect("the logger")
+        .command(Command::SetState(Controllable::Suspended))
+        .expect("the logger suspends");
+    let real_event = MonitorEvent::State {
+        from: State::Running,
+        to: State::Suspended,
+    };
+
+    let mut all = Vec::new();
+    let wanted = [
+        (real_key.clone(), json(&real_event)),
+        (keys::monitor("mallory", "logger"), json(&own_event)),
+    ];
+    let complete = wait_until(PATIENCE, || {
+        all.extend(heard.try_iter());
+        wanted.iter().all(|event| all.contains(event))
+    });
+    assert!(complete, "heard {all:?}");
+    assert!(
+        !all.iter().any(|(_, payload)| payload.contains("forged")),
+        "a forged event was heard: {all:?}"
+    );
+    drop(system);
+}
+
+/// A queryable under another node's name is not declared to the receiver, and its
+/// answers (and a liveliness token under another name) are dropped; the forger's own
+/// queryable and token, and the real node's answers, come through.
+#[test]
+fn queryables_answer_only_under_their_own_name() {
+    use coolbot_zenoh::keys;
+    use zenoh::Wait;
+    use zenoh::query::{ConsolidationMode, QueryTarget};
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let (robot, station, mallory) = three_nodes(dir.path());
+    let system = support::robot(&station);
+    let session = mallory.session();
+    // The forgeries first, then mallory's own, of each kind, on the same link.
+    let ghost = keys::info("station", "ghost");
+    let _forged = session
+        .declare_queryable(ghost.clone())
+        .callback(|query| {
+            let _ = query.reply(query.key_expr().clone(), "forged").wait();
+        })
+        .wait()
+        .expect("a queryable");
+    let _forged_token = session
+        .liveliness()
+        .declare_token("coolbot/ghost")
+        .wait()
+        .expect("a token");
+    let real_info = keys::info("station", "logger");
+    let mallory_info = keys::info("mallory", "ghost");
+    let (on_station, own_key) = (real_info.clone(), mallory_info.clone());
+    let _own = session
+        .declare_queryable(mallory_info.clone())
+        .callback(move |query| {
+            // An answer under station's name first (it fits a query on
+            // `coolbot/*/*/s`), then mallory's own.
+            let _ = query.reply(on_station.as_str(), "forged").wait();
+            let _ = query.reply(own_key.as_str(), "own").wait();
+        })
+        .wait()
+        .expect("a queryable");
+    let _own_token = session
+        .liveliness()
+        .declare_token("coolbot/mallory/ghost")
+        .wait()
+        .expect("a token");
+
+    // Declarations: mallory's own queryable reaches the robot, the forged one never.
+    let querier = |key: &str| {
+        robot
+            .session()
+            .declare_querier(key.to_owned())
+            .wait()
+            .expect("a querier")
+    };
+    let matching = |querier: &zenoh::query::Querier<'_>| {
+        querier
+            .matching_status()
+            .wait()
+            .is_ok_and(|status| status.matching())
+    };
+    let own_querier = querier(&mallory_info);
+    assert!(wait_until(PATIENCE, || matching(&own_querier)));
+    assert!(
+        !matching(&querier(&ghost)),
+        "the forged queryable reached the robot"
+    );
+    let replies = robot
+        .session()
+        .get(ghost.clone())
+        .timeout(Duration::from_secs(1))
+        .wait()
+        .expect("a query");
+    assert!(replies.recv().is_err(), "the forged queryable answered");
+
+    // Answers: a query on every component's info reaches mallory through its own
+    // queryable, which answers under station's name too; only its own answer and the
+    // real station's come through.
+    let mut last = Vec::new();
+    let complete = wait_until(PATIENCE, || {
+        let replies = robot
+            .session()
+            .get(keys::info("*", "*"))
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .expect("a query");
+        last.clear();
+        while let Ok(reply) = replies.recv() {
+            if let Ok(sample) = reply.result() {
+                let payload = sample.payload().try_to_string().unwrap_or_default();
+                last.push((sample.key_expr().to_string(), payload.into_owned()));
+            }
+        }
+        let own = last
+            .iter()
+            .any(|(key, payload)| *key == mallory_info && payload == "own");
+        let real = last
+            .iter()
+            .any(|(key, payload)| *key == real_info && payload.contains("Plain"));
+        own && real
+    });
+    assert!(complete, "answers: {last:?}");
+    assert!(
+        !last.iter().any(|(_, payload)| payload == "forged"),
+        "a forged answer came through: {last:?}"
+    );
+
+    // Liveliness: mallory's own token is seen, the one under another name never.
+    let mut tokens = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        let replies = robot
+            .session()
+            .liveliness()
+            .get("coolbot/**")
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .expect("a liveliness query");
+        tokens.clear();
+        while let Ok(reply) = replies.recv() {
+            if let Ok(sample) = reply.result() {
+                tokens.push(sample.key_expr().to_string());
+            }
+        }
+        tokens.iter().any(|key| key == "coolbot/mallory/ghost")
+    }));
+    assert!(
+        !tokens.iter().any(|key| key == "coolbot/ghost"),
+        "{tokens:?}"
+    );
+    assert!(
+        tokens.iter().any(|key| key == "coolbot/station"),
+        "{tokens:?}"
+    );
+    drop(system);
+}
+
+/// `coolctl`'s library under access rules: the operator, whom the rules let command
+/// only the robot's base, lists the robot's components and reads a monitor (the
+/// robot's answers are heard under its own name); a command the rules refuse is
+/// reported as refused by them.
+#[test]
+fn coolctl_lists_and_reads_under_access_rules() {
+    use coolbot::{Command, Controllable};
+    use coolbot_zenoh::ControlReply;
+    use coolbot_zenoh::ctl::{Ctl, CtlError};
+    use zenoh::Wait;
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let robot = secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", RULES),
+        std::slice::from_ref(&endpoint),
+        &[],
+    );
+    let system = support::robot(&robot);
+    let security = Security::load(&authority.node(dir, "ops", "ops", RULES)).expect("ops's file");
+    let config = secure_config(&[], std::slice::from_ref(&endpoint), false, &security)
+        .expect("a TLS configuration");
+    let ctl = Ctl::new(
+        zenoh::open(config).wait().expect("a session"),
+        Duration::from_secs(1),
+    )
+    .with_security(&security)
+    .expect("ops's certificate names it");
+    let mut listed = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            listed = ctl
+                .components(Some("robot"))
+                .expect("a listing")
+                .into_iter()
+                .map(|listed| format!("{}/{}", listed.node, listed.path))
+                .collect();
+            listed.len() == 6
+        }),
+        "listed {listed:?}"
+    );
+    assert_eq!(
+        listed,
+        [
+            "robot/logger",
+            "robot/robot",
+            "robot/robot.base",
+            "robot/robot.base.motion",
+            "robot/robot.base.ranges",
+            "robot/robot.planner",
+        ]
+    );
+    let monitor = ctl.snapshot("robot/robot.base.motion").expect("a snapshot");
+    assert_eq!(monitor.state, State::Running);
+    let info = ctl.info("robot/logger").expect("the logger's shape");
+    assert_eq!(info.type_name, "Plain");
+    let suspend = Command::SetState(Controllable::Suspended);
+    assert_eq!(
+        ctl.command("robot/robot.base.ranges", &suspend)
+            .expect("allowed"),
+        ControlReply::Accepted
+    );
+    match ctl.command("robot/logger", &suspend) {
+        Err(CtlError::Refused { target, who, .. }) => {
+            assert_eq!((target.as_str(), who.as_str()), ("robot/logger", "ops"));
+        }
+        other => panic!("not refused by the rules: {other:?}"),
+    }
+    let state = |path: &str| system.handle_at(path).expect(path).snapshot().state;
+    assert_eq!(state("robot.base.ranges"), State::Suspended);
+    assert_eq!(state("logger"), State::Running);
+    drop(system);
+}
+
+/// The behaviour of the agent's `Plain` and `Other`: nothing.
+struct Idle;
+
+impl plain::Behavior for Idle {}
+impl other::Behavior for Idle {}
