@@ -150,7 +150,7 @@ fn publish_rules_gate_bridge_keys() {
             .unwrap();
         consumers
             .add(inbox::component(
-                &format!("sink{index}"),
+                format!("sink{index}"),
                 HandInbox(index, hand_sink.clone()),
             ))
             .unwrap();
@@ -169,7 +169,7 @@ fn publish_rules_gate_bridge_keys() {
             .unwrap();
         producers
             .add(numbers::component(
-                &format!("source{index}"),
+                format!("source{index}"),
                 HandNumbers(index, hand_out.clone()),
             ))
             .unwrap();
