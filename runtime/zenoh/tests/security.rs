@@ -781,3 +781,159 @@ fn coolctl_lists_and_reads_under_access_rules() {
     assert_eq!(state("logger"), State::Running);
     drop(system);
 }
+
+/// The ports of the relay the station's agent builds, for the test to drive.
+type RelayPorts = (FifoIn<u64>, DataOut<u64>);
+
+/// An instance placed on another node runs behind its proxy under access rules that
+/// grant exactly what placement needs: the robot may instantiate `Relay` on the
+/// station, command it and send on the placement's bridge keys; the station may send
+/// on them. Packets cross both ways, a command is forwarded and its effect comes back
+/// on the proxy's monitor.
+#[test]
+fn a_placement_runs_under_access_rules() {
+    use std::sync::{Arc, Mutex};
+
+    use coolbot::CompoundBuilder;
+    use coolbot_zenoh::Placer;
+    use coolbot_zenoh::agent::{Agent, Registry};
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"robot\"]\ninstantiate = [\"station/Relay\"]\n\
+                 command = [\"station/*\"]\npublish = [\"coolbot-link/station/**\"]\n\n\
+                 [[allow]]\nnodes = [\"station\"]\npublish = [\"coolbot-link/station/**\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let station = Arc::new(secure_node(
+        "station",
+        &authority.node(dir, "station", "station", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    ));
+    let robot = Arc::new(secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        &[],
+        std::slice::from_ref(&endpoint),
+    ));
+    let relay_spec = spec(
+        "Relay",
+        vec![fifo_input("i")],
+        vec![data_output("o")],
+        vec![],
+    );
+    let registry = |built: Arc<Mutex<Option<RelayPorts>>>| {
+        let mut registry = Registry::new();
+        registry
+            .register("Relay", move |name| {
+                let ports = (FifoIn::new(16, OverflowPolicy::Reject), DataOut::new());
+                let set = PortSet::new().input(&ports.0).output(&ports.1);
+                *built.lock().unwrap() = Some(ports);
+                Shell::component(name, relay_spec, set)
+            })
+            .port::<u64>("i")
+            .port::<u64>("o");
+        registry
+    };
+    let remote_ports = Arc::new(Mutex::new(None));
+    let _agent =
+        Agent::start(Arc::clone(&station), registry(Arc::clone(&remote_ports))).expect("the agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry(Arc::new(Mutex::new(None)))).install();
+
+    let out = DataOut::<u64>::new();
+    let source = Shell::component(
+        "source",
+        spec("Source", vec![], vec![data_output("d")], vec![]),
+        PortSet::new().output(&out),
+    );
+    let back = FifoIn::<u64>::new(16, OverflowPolicy::Reject);
+    let sink = Shell::component(
+        "sink",
+        spec("Sink", vec![fifo_input("f")], vec![], vec![]),
+        PortSet::new().input(&back),
+    );
+    let relay = Shell::component("relay", relay_spec, {
+        let (i, o) = (
+            FifoIn::<u64>::new(16, OverflowPolicy::Reject),
+            DataOut::<u64>::new(),
+        );
+        PortSet::new().input(&i).output(&o)
+    });
+    let compound = CompoundBuilder::new("cell", support::supervisor("working"))
+        .instance(source)
+        .instance_on("station", relay)
+        .instance(sink)
+        .connect("source.d", "relay.i")
+        .connect("relay.o", "sink.f")
+        .build()
+        .expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).expect("added");
+    system.run_all().expect("runs");
+    let proxy = cell.instance("relay").expect("the relay's proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .expect("the proxy runs: the robot may instantiate and command on the station");
+    let (remote_in, remote_out) = remote_ports
+        .lock()
+        .unwrap()
+        .clone()
+        .expect("the station's agent built the relay");
+
+    // Out: the robot's proxy outlet publishes on a key its rule names.
+    let mut got = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            out.send(1);
+            got.extend(remote_in.drain());
+            !got.is_empty()
+        }),
+        "nothing reached the station"
+    );
+    // Back: the station's outlet, on a key its rule names.
+    let mut got = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            remote_out.send(7);
+            got.extend(back.drain());
+            !got.is_empty()
+        }),
+        "nothing came back from the station"
+    );
+    assert!(got.iter().all(|&n| n == 7), "{got:?}");
+    // A command given to the proxy goes to the station (a `command` rule) and the
+    // remote monitor's answer comes back (the station is heard under its own name).
+    proxy
+        .command(coolbot::Command::SetPeriod(Duration::from_millis(25)))
+        .expect("the period is forwarded");
+    assert!(
+        wait_until(PATIENCE, || proxy.snapshot().period
+            == Some(Duration::from_millis(25))),
+        "{:?}",
+        proxy.snapshot()
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+fn fifo_input(name: &'static str) -> InputSpec {
+    InputSpec {
+        name,
+        kind: InputKind::Fifo {
+            capacity: 16,
+            policy: OverflowPolicy::Reject,
+        },
+        packet: "u64",
+        pull: false,
+    }
+}
+
+fn data_output(name: &'static str) -> OutputSpec {
+    OutputSpec {
+        name,
+        kind: OutputKind::Data,
+        packet: "u64",
+        pull: false,
+    }
+}
