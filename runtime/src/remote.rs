@@ -288,8 +288,8 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
 /// proxy's runner publishes none of its own thread's: `Driven::mirrors_times`),
 /// response times and adaptation status; and its losses: what the remote inputs lost,
 /// and what was lost on the way here (port `network`), each added to the proxy's own
-/// count at that port with an `Overflow` event. `applied` holds the remote totals
-/// already added (a new remote instance starts again from 0).
+/// count at that port with an `Overflow` event. `applied` holds the totals of the
+/// current remote instance already added (cleared when a new one is built).
 fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
     let Some(shared) = &cx.shared else {
         return;
@@ -302,12 +302,7 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
                 &mut applied.last_mut().expect("just pushed").1
             }
         };
-        // Lower than what was added: the instance was built again and counts anew.
-        let lost = if *total >= *slot {
-            *total - *slot
-        } else {
-            *total
-        };
+        let lost = total.saturating_sub(*slot);
         *slot = *total;
         shared.add_overflows(port, lost);
     }
@@ -378,6 +373,8 @@ impl Automaton for Proxy {
 
     fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
         if self.end.needs_instance() {
+            // A new remote instance counts its losses from 0 again.
+            self.applied.clear();
             self.end
                 .instantiate(cx.waker())
                 .map_err(|reason| Fault::message(format!("on node `{}`: {reason}", self.node)))?;

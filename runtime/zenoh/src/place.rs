@@ -194,6 +194,7 @@ impl coolbot::remote::Placer for Placer {
             times_asked: None,
             losses,
             reported_losses: 0,
+            losses_before: 0,
         };
         end.listen().map_err(|e| e.to_string())?;
         Ok(Some(Remote {
@@ -263,9 +264,17 @@ struct End {
     losses: TickIn,
     /// The network losses the view last reported.
     reported_losses: u64,
+    /// The network losses counted before the current generation was built (the view
+    /// reports this generation's, as the remote instance's own counts are).
+    losses_before: u64,
 }
 
 impl End {
+    /// Messages lost on the way here, over every generation.
+    fn network_losses(&self) -> u64 {
+        self.losses.overflows() + self.shared.bad_events.load(Ordering::Acquire)
+    }
+
     /// Subscribe to the outputs' keys, the instance's monitoring events and the
     /// node's liveliness.
     fn listen(&mut self) -> Result<(), Error> {
@@ -466,6 +475,7 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
 
 impl RemoteEnd for End {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
+        self.losses_before = self.network_losses();
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
         if self.generation > 0 {
@@ -581,7 +591,7 @@ impl RemoteEnd for End {
         if let Some(lost) = lock(&self.shared.lost).clone() {
             return Err(lost);
         }
-        let losses = self.losses.overflows() + self.shared.bad_events.load(Ordering::Acquire);
+        let losses = self.network_losses() - self.losses_before;
         let more_lost = losses != self.reported_losses;
         if !self.shared.changed.swap(false, Ordering::AcqRel) && !more_lost {
             return Ok(None);
@@ -590,8 +600,8 @@ impl RemoteEnd for End {
             return Ok(None);
         };
         self.reported_losses = losses;
-        // Counted here, over every generation of the instance: `overlay` adds what
-        // grew since it last looked.
+        // Counted here, for this generation: the proxy adds what grew since it last
+        // looked.
         view.port_overflows.retain(|(port, _)| port != NETWORK);
         view.port_overflows.push((NETWORK.to_owned(), losses));
         Ok(Some(view))

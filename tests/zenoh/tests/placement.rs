@@ -12,8 +12,8 @@ use coolbot::{MonitorEvent, SectionResult, State, System};
 use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh_tests::generated::{
-    asker, cell, cell_sink, cell_source, counter, doubling, nest_cell, pull_cell, pull_doubler,
-    relay,
+    asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, nest_cell, pull_cell,
+    pull_doubler,
 };
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -34,8 +34,8 @@ struct RelayPorts {
 /// A relay's behaviour: hands its ports to the test when it starts.
 struct HandRelay(Sender<RelayPorts>);
 
-impl relay::Behavior for HandRelay {
-    fn start(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+impl every_kind_relay::Behavior for HandRelay {
+    fn start(&mut self, cx: &mut every_kind_relay::Cx<'_>) -> SectionResult {
         let (i, o) = (&cx.inputs, &cx.outputs);
         let _ = self.0.send(RelayPorts {
             ti: i.ti.clone(),
@@ -117,7 +117,7 @@ impl cell::Parts for CellParts {
     fn source(&mut self) -> impl cell_source::Behavior {
         HandSource(self.source.clone())
     }
-    fn relay(&mut self) -> impl relay::Behavior {
+    fn relay(&mut self) -> impl every_kind_relay::Behavior {
         HandRelay(crossbeam_channel::bounded(1).0)
     }
     fn sink(&mut self) -> impl cell_sink::Behavior {
@@ -125,11 +125,11 @@ impl cell::Parts for CellParts {
     }
 }
 
-/// A registry of `Relay`, whose instances hand their ports to `built`.
+/// A registry of `EveryKindRelay`, whose instances hand their ports to `built`.
 fn registry(built: Sender<RelayPorts>) -> Registry {
     let mut registry = Registry::new();
-    relay::register(&mut registry, move |name| {
-        relay::component(name, HandRelay(built.clone()))
+    every_kind_relay::register(&mut registry, move |name| {
+        every_kind_relay::component(name, HandRelay(built.clone()))
     });
     registry
 }

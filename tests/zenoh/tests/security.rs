@@ -11,7 +11,9 @@ use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{InputKind, OutputKind, OverflowPolicy, SectionResult, State, System};
 use coolbot_zenoh::{Node, Security, secure_config};
-use coolbot_zenoh_tests::generated::{inbox, numbers, other, plain};
+use coolbot_zenoh_tests::generated::{
+    back, feed, guarded_cell, inbox, numbers, other, plain, relay,
+};
 use coolbot_zenoh_tests::support::{self, PATIENCE, free_port, wait_subscribed, wait_until};
 use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 
@@ -649,3 +651,159 @@ struct Idle;
 
 impl plain::Behavior for Idle {}
 impl other::Behavior for Idle {}
+
+/// The ports of the relay the station's agent builds, for the test to drive.
+type RelayPorts = (FifoIn<u64>, DataOut<u64>);
+
+/// `Relay`'s behaviour: hands its ports to the test when it starts.
+struct HandRelay(Sender<RelayPorts>);
+
+impl relay::Behavior for HandRelay {
+    fn start(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+        let _ = self.0.send((cx.inputs.i.clone(), cx.outputs.o.clone()));
+        Ok(())
+    }
+}
+
+/// `Feed`'s behaviour: hands its output to the test when it starts.
+struct HandFeed(Sender<DataOut<u64>>);
+
+impl feed::Behavior for HandFeed {
+    fn start(&mut self, cx: &mut feed::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.d.clone());
+        Ok(())
+    }
+}
+
+/// `Back`'s behaviour: hands its input to the test when it starts.
+struct HandBack(Sender<FifoIn<u64>>);
+
+impl back::Behavior for HandBack {
+    fn start(&mut self, cx: &mut back::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.inputs.f.clone());
+        Ok(())
+    }
+}
+
+/// `GuardedCell`'s parts: the feed and the back hand their ports to the test; the
+/// local relay (which the placer leaves unused: the station's runs) to nobody.
+struct GuardedParts {
+    feed: Sender<DataOut<u64>>,
+    back: Sender<FifoIn<u64>>,
+}
+
+impl guarded_cell::Supervisor for Idle {}
+
+impl guarded_cell::Parts for GuardedParts {
+    fn supervisor(&mut self) -> impl guarded_cell::Supervisor {
+        Idle
+    }
+    fn source(&mut self) -> impl feed::Behavior {
+        HandFeed(self.feed.clone())
+    }
+    fn relay(&mut self) -> impl relay::Behavior {
+        HandRelay(crossbeam_channel::bounded(1).0)
+    }
+    fn sink(&mut self) -> impl back::Behavior {
+        HandBack(self.back.clone())
+    }
+}
+
+/// An instance placed on another node runs behind its proxy under access rules that
+/// grant exactly what placement needs: the robot may instantiate `Relay` on the
+/// station, command it and send on the placement's bridge keys; the station may send
+/// on them. Packets cross both ways, a command is forwarded and its effect comes back
+/// on the proxy's monitor.
+#[test]
+fn a_placement_runs_under_access_rules() {
+    use std::sync::Arc;
+
+    use coolbot_zenoh::Placer;
+    use coolbot_zenoh::agent::{Agent, Registry};
+
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let rules = "[[allow]]\nnodes = [\"robot\"]\ninstantiate = [\"station/Relay\"]\n\
+                 command = [\"station/*\"]\npublish = [\"coolbot-link/station/**\"]\n\n\
+                 [[allow]]\nnodes = [\"station\"]\npublish = [\"coolbot-link/station/**\"]\n";
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let station = Arc::new(secure_node(
+        "station",
+        &authority.node(dir, "station", "station", rules),
+        std::slice::from_ref(&endpoint),
+        &[],
+    ));
+    let robot = Arc::new(secure_node(
+        "robot",
+        &authority.node(dir, "robot", "robot", rules),
+        &[],
+        std::slice::from_ref(&endpoint),
+    ));
+    let registry = |built: Sender<RelayPorts>| {
+        let mut registry = Registry::new();
+        relay::register(&mut registry, move |name| {
+            relay::component(name, HandRelay(built.clone()))
+        });
+        registry
+    };
+    let (built, remote_ports) = crossbeam_channel::bounded(1);
+    let _agent = Agent::start(Arc::clone(&station), registry(built)).expect("the agent");
+    let _placer = Placer::new(
+        Arc::clone(&robot),
+        registry(crossbeam_channel::bounded(1).0),
+    )
+    .install();
+
+    let (feed, fed) = crossbeam_channel::bounded(1);
+    let (back, backs) = crossbeam_channel::bounded(1);
+    let compound =
+        guarded_cell::component("cell", GuardedParts { feed, back }).expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).expect("added");
+    system.run_all().expect("runs");
+    let proxy = cell.instance("relay").expect("the relay's proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .expect("the proxy runs: the robot may instantiate and command on the station");
+    let (remote_in, remote_out) = remote_ports
+        .recv_timeout(PATIENCE)
+        .expect("the station's agent built the relay");
+    let out = fed.recv_timeout(PATIENCE).expect("the source started");
+    let back = backs.recv_timeout(PATIENCE).expect("the sink started");
+
+    // Out: the robot's proxy outlet publishes on a key its rule names.
+    let mut got = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            out.send(1);
+            got.extend(remote_in.drain());
+            !got.is_empty()
+        }),
+        "nothing reached the station"
+    );
+    // Back: the station's outlet, on a key its rule names.
+    let mut got = Vec::new();
+    assert!(
+        wait_until(PATIENCE, || {
+            remote_out.send(7);
+            got.extend(back.drain());
+            !got.is_empty()
+        }),
+        "nothing came back from the station"
+    );
+    assert!(got.iter().all(|&n| n == 7), "{got:?}");
+    // A command given to the proxy goes to the station (a `command` rule) and the
+    // remote monitor's answer comes back (the station is heard under its own name).
+    proxy
+        .command(coolbot::Command::SetPeriod(Duration::from_millis(25)))
+        .expect("the period is forwarded");
+    assert!(
+        wait_until(PATIENCE, || proxy.snapshot().period
+            == Some(Duration::from_millis(25))),
+        "{:?}",
+        proxy.snapshot()
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
