@@ -283,6 +283,11 @@ scripted!(crate::generated::goto_worker);
 scripted!(crate::generated::ignore_worker);
 scripted!(crate::generated::degrade_worker);
 scripted!(crate::generated::plain_worker);
+scripted!(crate::generated::ua_never_worker);
+scripted!(crate::generated::ua_after30ms_worker);
+scripted!(crate::generated::ua_watchdog_worker);
+scripted!(crate::generated::ua_after1s_worker);
+scripted!(crate::generated::ua_timerless_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {
