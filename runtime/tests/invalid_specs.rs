@@ -111,15 +111,19 @@ fn leak<T>(items: Vec<T>) -> &'static [T] {
     Box::leak(items.into_boxed_slice())
 }
 
-/// Adds a component `w` claiming `spec`, with `BASE`'s ports registered.
-fn add_with(spec: Spec) -> Result<(), Error> {
-    let spec: &'static Spec = Box::leak(Box::new(spec));
+/// A component `w` claiming `spec`, with `BASE`'s ports registered.
+fn bare(spec: &'static Spec) -> Component {
     let data = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
     let kick = TickIn::new();
     let feed = LastIn::<u64>::new();
     let ports = PortSet::new().input(&data).input(&kick).input(&feed);
-    let component = Component::new("w", Box::new(Bare(spec)), ports);
-    System::new().add(component).map(|_| ())
+    Component::new("w", Box::new(Bare(spec)), ports)
+}
+
+/// Adds [`bare`]`(spec)` to a new system.
+fn add_with(spec: Spec) -> Result<(), Error> {
+    let spec: &'static Spec = Box::leak(Box::new(spec));
+    System::new().add(bare(spec)).map(|_| ())
 }
 
 fn with_states(edit: impl FnOnce(&mut Vec<StateSpec>)) -> Spec {
@@ -213,4 +217,38 @@ fn components_with_bad_ports_are_refused() {
         err.to_string(),
         "component `empty`: 0 input ports registered, the spec declares 3"
     );
+}
+
+/// `BASE` without a `timing` block: its periodic `busy` state has no period, so the
+/// spec alone is refused (coolc refuses such a description: `periodic_without_period`).
+static UNTIMED: Spec = Spec {
+    timing: TimingSpec::NONE,
+    ..BASE
+};
+
+const OVERRIDE: TimingSpec = TimingSpec {
+    period: Some(Duration::from_millis(20)),
+    max_period: Some(Duration::from_millis(40)),
+    max_response: Some(Duration::from_millis(300)),
+    priority: 7,
+    qualities: &["full", "reduced", "minimal"],
+};
+
+/// (From `timing_override.rs`, whose other test runs a generated component.)
+#[test]
+fn a_spec_without_a_period_is_accepted_with_an_instance_period() {
+    let mut system = System::new();
+    let refused = system.add(bare(&UNTIMED)).unwrap_err();
+    assert_eq!(
+        refused.to_string(),
+        "component `w`: invalid spec: state `busy` has a periodic section but neither it nor the component has a period"
+    );
+    let component = bare(&UNTIMED).with_timing(OVERRIDE);
+    assert_eq!(component.timing().period, OVERRIDE.period);
+    assert_eq!(component.spec().timing.period, None);
+    let handle = system.add(component).expect("accepted with the override");
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.period, Some(Duration::from_millis(20)));
+    assert_eq!(monitor.max_response, Some(Duration::from_millis(300)));
+    assert_eq!(monitor.priority, 7);
 }
