@@ -75,6 +75,9 @@ pub struct Script {
     pub periodics: AtomicU64,
     pub handled: Mutex<Vec<String>>,
     pub injected: AtomicU32,
+    /// The `data` fifo's overflow count (`FifoIn::overflows`), as the behaviour last
+    /// saw it (each time it drains the fifo).
+    pub data_overflows: AtomicU64,
     /// A hook that blocks (once) until the sender is dropped or sends: a section that
     /// hangs past `max_response`. `returned` counts the hung calls that came back.
     pub hang: Mutex<Option<(&'static str, Receiver<()>)>>,
@@ -177,8 +180,11 @@ impl Scripted {
         }
     }
 
-    fn drained(&self, count: u64) {
+    fn drained(&self, count: u64, overflows: u64) {
         self.script.received.fetch_add(count, Ordering::SeqCst);
+        self.script
+            .data_overflows
+            .store(overflows, Ordering::SeqCst);
     }
 
     fn handled(&self, exception: &str, message: &str) {
@@ -242,7 +248,7 @@ macro_rules! scripted {
                     self.script.hit("busy.entry")?;
                     let drained = cx.inputs.data.drain().count() as u64;
                     cx.vars.count += drained;
-                    self.drained(drained);
+                    self.drained(drained, cx.inputs.data.overflows());
                     Ok(())
                 }
                 fn busy_periodic(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
@@ -252,7 +258,7 @@ macro_rules! scripted {
                         .fetch_add(1, ::std::sync::atomic::Ordering::SeqCst);
                     let drained = cx.inputs.data.drain().count() as u64;
                     cx.vars.count += drained;
-                    self.drained(drained);
+                    self.drained(drained, cx.inputs.data.overflows());
                     self.periodic_rest(cx.rt)
                 }
                 fn busy_exit(&mut self, _cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
@@ -288,6 +294,9 @@ scripted!(crate::generated::ua_after30ms_worker);
 scripted!(crate::generated::ua_watchdog_worker);
 scripted!(crate::generated::ua_after1s_worker);
 scripted!(crate::generated::ua_timerless_worker);
+scripted!(crate::generated::os_reject_worker);
+scripted!(crate::generated::os_drop_oldest_worker);
+scripted!(crate::generated::os_block_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {
