@@ -1,14 +1,16 @@
-//! The runtime's refusal of components coolc never generates: inconsistent specs and
-//! ports that do not match their spec. (Hand-built specs on purpose: every component
-//! coolc generates passes these checks; the tests of generated components are in
-//! `tests/runtime/`.)
+//! Components coolc never generates, on hand-built specs: the runtime's refusal of
+//! inconsistent specs and of ports that do not match their spec, a spec without the
+//! period its periodic state needs (accepted with an instance's timing), and a `tick`
+//! output declared `pull` (coolc refuses it: `coolc::check::connect_kind`; the runtime
+//! answers it). Every other runtime test runs generated components (`tests/runtime/`).
 
 use std::time::Duration;
 
-use coolbot::port::{FifoIn, LastIn, TickIn};
+use coolbot::port::{FifoIn, LastIn, TickIn, TickOut};
 use coolbot::{
-    Automaton, Component, Context, Error, Fault, InputKind, InputSpec, OnSpec, OverflowPolicy,
-    PeriodicSpec, PlanStep, PortSet, Section, Spec, StateSpec, System, TimingSpec, Value,
+    Automaton, Component, Context, Error, Fault, InputKind, InputSpec, OnSpec, OutputKind,
+    OutputSpec, OverflowPolicy, PeriodicSpec, PlanStep, PortSet, Section, Spec, StateSpec, System,
+    TimingSpec, Value,
 };
 
 /// A valid spec the tests break one field at a time: states `idle` (`on data`, `on
@@ -251,4 +253,104 @@ fn a_spec_without_a_period_is_accepted_with_an_instance_period() {
     assert_eq!(monitor.period, Some(Duration::from_millis(20)));
     assert_eq!(monitor.max_response, Some(Duration::from_millis(300)));
     assert_eq!(monitor.priority, 7);
+}
+
+/// A component with no state and one `tick` output declared `pull`.
+static TICK_PRODUCER: Spec = Spec {
+    type_name: "TickProducer",
+    doc: "",
+    states: &[],
+    initial: 0,
+    inputs: &[],
+    outputs: &[OutputSpec {
+        name: "tick",
+        kind: OutputKind::Tick,
+        packet: "",
+        pull: true,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+/// A component with no state and one `tick` input declared `pull` (coolc accepts
+/// this declaration, but no output it accepts can be connected to it).
+static TICK_CONSUMER: Spec = Spec {
+    type_name: "TickConsumer",
+    doc: "",
+    states: &[],
+    initial: 0,
+    inputs: &[InputSpec {
+        name: "t",
+        kind: InputKind::Tick,
+        packet: "",
+        pull: true,
+    }],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+/// `TICK_PRODUCER`'s code: each pull request is answered with one tick.
+struct TickAnswer(TickOut);
+
+impl Automaton for TickAnswer {
+    fn spec(&self) -> &'static Spec {
+        &TICK_PRODUCER
+    }
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn stop(&mut self, _cx: &mut Context) {}
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        Ok(())
+    }
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
+    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        self.0.emit();
+        Ok(())
+    }
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Ok(())
+    }
+    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
+        Err("no variables".to_owned())
+    }
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
+}
+
+/// (From `pull.rs::fifo_poster_and_tick_inputs_pull_too`, whose fifo and poster
+/// inputs pull from a generated producer.)
+#[test]
+fn a_tick_input_pulls_from_a_tick_output_declared_pull() {
+    let tick = TickOut::new();
+    let t = TickIn::new();
+    let mut system = System::new();
+    let producer = Component::new(
+        "p",
+        Box::new(TickAnswer(tick.clone())),
+        PortSet::new().output(&tick),
+    );
+    system.add(producer).expect("p");
+    let consumer = Component::new(
+        "c",
+        Box::new(Bare(&TICK_CONSUMER)),
+        PortSet::new().input(&t),
+    );
+    system.add(consumer).expect("c");
+    system.run_all().expect("run");
+    system.connect("p.tick", "c.t").expect("t");
+    assert_eq!(t.pull(Duration::from_secs(10)), Ok(1));
+    assert!(system.shutdown().clean());
 }
