@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::crossbeam_channel::{self, Receiver};
 use coolbot::{Handle, SectionResult, State, System, TaskResult};
 
-use coolbot::port::{DataOut, TickOut};
+use coolbot::port::{DataOut, FifoIn, LastIn, TickIn, TickOut};
 use coolbot::{Command, Controllable};
 
 use crate::generated::{feeder, worker};
@@ -83,6 +83,17 @@ pub struct Script {
     pub hang: Mutex<Option<(&'static str, Receiver<()>)>>,
     pub hanging: AtomicBool,
     pub returned: AtomicU32,
+    /// Clones of the worker's inputs, handed over by its `start` hook.
+    pub inputs: Mutex<Option<WorkerInputs>>,
+}
+
+/// Clones of a Worker-shaped component's inputs: the test reads them from its own
+/// thread (queue lengths, counters, latest values) without running a section.
+#[derive(Clone)]
+pub struct WorkerInputs {
+    pub data: FifoIn<u64>,
+    pub kick: TickIn,
+    pub feed: LastIn<u64>,
 }
 
 impl Script {
@@ -105,6 +116,15 @@ impl Script {
     #[allow(dead_code, reason = "used by the tests on a virtual clock only")]
     pub fn full_log(&self) -> Vec<String> {
         self.log.lock().unwrap().clone()
+    }
+
+    /// The worker's inputs (once its `start` hook has run).
+    pub fn inputs(&self) -> WorkerInputs {
+        self.inputs
+            .lock()
+            .unwrap()
+            .clone()
+            .expect("the worker hands its inputs over when it starts")
     }
 
     pub fn clear_log(&self) {
@@ -226,16 +246,21 @@ impl Scripted {
 }
 
 /// Implements the `Behavior` of generated module `$module` (shaped like `Worker`:
-/// states `idle` and `busy` with `busy`'s entry, periodic, exit and `may -> idle`, a
-/// `data` fifo of `u64`, an observable `count`, exceptions `flaky`, `fatal`, `detour`,
-/// `wobbly`) for [`Scripted`]. Invoked here, next to the generated code: a test crate
+/// states `idle` and `busy` with `busy`'s entry, periodic, exit and `may -> idle`,
+/// inputs `data` (a fifo of `u64`), `kick` (tick) and `feed` (last `u64`), an
+/// observable `count`, exceptions `flaky`, `fatal`, `detour`, `wobbly`) for [`Scripted`]. Invoked here, next to the generated code: a test crate
 /// may not implement the library's trait for the library's type.
 macro_rules! scripted {
     ($module:path) => {
         const _: () = {
             use $module as m;
             impl m::Behavior for $crate::support::Scripted {
-                fn start(&mut self, _cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                fn start(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                    *self.script.inputs.lock().unwrap() = Some($crate::support::WorkerInputs {
+                        data: cx.inputs.data.clone(),
+                        kick: cx.inputs.kick.clone(),
+                        feed: cx.inputs.feed.clone(),
+                    });
                     self.start_hook()
                 }
                 fn stop(&mut self, _cx: &mut m::Cx<'_>) {
