@@ -19,7 +19,7 @@ use coolbot_runtime_tests::support::{Rig, Script, Scripted, WAIT, WORKER, eventu
 
 /// `busy`'s `after` transitions: one `Worker` variant each (`cool/user_automaton.cool`).
 #[derive(Clone, Copy)]
-enum After {
+enum Timers {
     /// `after <u64::MAX ns> without feed -> idle` (`UaNeverWorker`).
     Never,
     /// `after 30ms -> idle` (`UaAfter30msWorker`).
@@ -32,20 +32,20 @@ enum After {
     Timerless,
 }
 
-impl After {
+impl Timers {
     fn worker(self, script: &Arc<Script>) -> Component {
         let behavior = Scripted::new(script);
         match self {
-            After::Never => ua_never_worker::component(WORKER, behavior),
-            After::After30ms => ua_after30ms_worker::component(WORKER, behavior),
-            After::Watchdog2s => ua_watchdog_worker::component(WORKER, behavior),
-            After::After1s => ua_after1s_worker::component(WORKER, behavior),
-            After::Timerless => ua_timerless_worker::component(WORKER, behavior),
+            Timers::Never => ua_never_worker::component(WORKER, behavior),
+            Timers::After30ms => ua_after30ms_worker::component(WORKER, behavior),
+            Timers::Watchdog2s => ua_watchdog_worker::component(WORKER, behavior),
+            Timers::After1s => ua_after1s_worker::component(WORKER, behavior),
+            Timers::Timerless => ua_timerless_worker::component(WORKER, behavior),
         }
     }
 }
 
-fn rig_with_after(after: After) -> Rig {
+fn rig_with_after(after: Timers) -> Rig {
     let script = Script::new();
     let component = after.worker(&script);
     Rig::start(Rig::with(System::new(), script, component))
@@ -241,7 +241,7 @@ fn timing_is_measured() {
 fn absurd_durations_mean_never_and_do_not_panic() {
     // The longest `after` a description can say (a duration literal saturates at
     // `u64::MAX` nanoseconds).
-    let rig = rig_with_after(After::Never);
+    let rig = rig_with_after(Timers::Never);
     rig.run_busy();
     let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
     patient
@@ -262,7 +262,7 @@ fn absurd_durations_mean_never_and_do_not_panic() {
 // `advance` returns once every timer due by then has fired, so the sequences are
 // exact and nothing sleeps.
 
-fn virtual_rig_with_after(after: After) -> (Rig, Arc<VirtualClock>) {
+fn virtual_rig_with_after(after: Timers) -> (Rig, Arc<VirtualClock>) {
     let clock = VirtualClock::new();
     let script = Script::new();
     let component = after.worker(&script);
@@ -280,7 +280,7 @@ fn ms(n: u64) -> Duration {
 
 #[test]
 fn on_a_virtual_clock_after_fires_at_its_delay_exactly_after_every_period_before() {
-    let (rig, clock) = virtual_rig_with_after(After::After30ms);
+    let (rig, clock) = virtual_rig_with_after(Timers::After30ms);
     // `busy` is periodic (5 ms): one millisecond at a time, the periodic section runs
     // at 5, 10, ... 25 ms, and nothing else happens before 30 ms.
     for _ in 0..29 {
@@ -298,7 +298,7 @@ fn on_a_virtual_clock_after_fires_at_its_delay_exactly_after_every_period_before
 
 #[test]
 fn on_a_virtual_clock_a_watchdog_counts_from_the_last_arrival() {
-    let (rig, clock) = virtual_rig_with_after(After::Watchdog2s);
+    let (rig, clock) = virtual_rig_with_after(Timers::Watchdog2s);
     clock.advance(ms(1500)).expect("settled");
     rig.feeder().feed.send(1);
     // The worker sees the arrival at 1.5 s (before the command's answer).
@@ -311,7 +311,7 @@ fn on_a_virtual_clock_a_watchdog_counts_from_the_last_arrival() {
 
 #[test]
 fn on_a_virtual_clock_after_timers_pause_while_suspended() {
-    let (rig, clock) = virtual_rig_with_after(After::After1s);
+    let (rig, clock) = virtual_rig_with_after(Timers::After1s);
     rig.command(Controllable::Suspended).expect("suspend");
     clock.advance(ms(1200)).expect("settled");
     rig.command(Controllable::Running).expect("resume");
@@ -328,7 +328,7 @@ fn on_a_virtual_clock_after_timers_pause_while_suspended() {
 
 #[test]
 fn on_a_virtual_clock_a_jump_over_periods_is_counted_as_missed_deadlines() {
-    let (rig, clock) = virtual_rig_with_after(After::Timerless);
+    let (rig, clock) = virtual_rig_with_after(Timers::Timerless);
     clock.advance(ms(5)).expect("settled");
     assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 1);
     assert_eq!(rig.handle.snapshot().missed_deadlines, 0);
@@ -343,7 +343,7 @@ fn on_a_virtual_clock_a_jump_over_periods_is_counted_as_missed_deadlines() {
 
 #[test]
 fn on_a_virtual_clock_a_section_past_max_response_is_tripped_when_the_clock_passes_it() {
-    let (rig, clock) = virtual_rig_with_after(After::Timerless);
+    let (rig, clock) = virtual_rig_with_after(Timers::Timerless);
     let release = rig.script.hang_in("busy.periodic");
     // The periodic section starts at 5 ms and hangs: the worker cannot settle.
     let busy = clock
