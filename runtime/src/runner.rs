@@ -1348,12 +1348,11 @@ impl Runner {
 
     /// Run the continuity plan for a failure in `state` (paper 3.5).
     fn recover(&mut self, state: usize, section: Option<Section>, failure: Failure) -> Recovery {
-        let place = match section {
-            Some(section) => format!(
-                "state `{}` ({section:?} section)",
-                self.spec.states[state].name
-            ),
-            None => format!("state `{}`", self.spec.states[state].name),
+        let place = match (self.spec.states.get(state), section) {
+            (Some(spec), Some(section)) => format!("state `{}` ({section:?} section)", spec.name),
+            (Some(spec), None) => format!("state `{}`", spec.name),
+            // No user automaton (a component that only answers pulls): no state to name.
+            (None, _) => "`running`".to_owned(),
         };
         let fault = match failure {
             Failure::Panic(message) => {

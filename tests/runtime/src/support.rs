@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::crossbeam_channel::{self, Receiver};
 use coolbot::{Handle, SectionResult, State, System, TaskResult};
 
-use coolbot::port::{DataOut, TickOut};
+use coolbot::port::{DataOut, FifoIn, LastIn, TickIn, TickOut};
 use coolbot::{Command, Controllable};
 
 use crate::generated::{feeder, worker};
@@ -75,11 +75,25 @@ pub struct Script {
     pub periodics: AtomicU64,
     pub handled: Mutex<Vec<String>>,
     pub injected: AtomicU32,
+    /// The `data` fifo's overflow count (`FifoIn::overflows`), as the behaviour last
+    /// saw it (each time it drains the fifo).
+    pub data_overflows: AtomicU64,
     /// A hook that blocks (once) until the sender is dropped or sends: a section that
     /// hangs past `max_response`. `returned` counts the hung calls that came back.
     pub hang: Mutex<Option<(&'static str, Receiver<()>)>>,
     pub hanging: AtomicBool,
     pub returned: AtomicU32,
+    /// Clones of the worker's inputs, handed over by its `start` hook.
+    pub inputs: Mutex<Option<WorkerInputs>>,
+}
+
+/// Clones of a Worker-shaped component's inputs: the test reads them from its own
+/// thread (queue lengths, counters, latest values) without running a section.
+#[derive(Clone)]
+pub struct WorkerInputs {
+    pub data: FifoIn<u64>,
+    pub kick: TickIn,
+    pub feed: LastIn<u64>,
 }
 
 impl Script {
@@ -102,6 +116,15 @@ impl Script {
     #[allow(dead_code, reason = "used by the tests on a virtual clock only")]
     pub fn full_log(&self) -> Vec<String> {
         self.log.lock().unwrap().clone()
+    }
+
+    /// The worker's inputs (once its `start` hook has run).
+    pub fn inputs(&self) -> WorkerInputs {
+        self.inputs
+            .lock()
+            .unwrap()
+            .clone()
+            .expect("the worker hands its inputs over when it starts")
     }
 
     pub fn clear_log(&self) {
@@ -177,8 +200,11 @@ impl Scripted {
         }
     }
 
-    fn drained(&self, count: u64) {
+    fn drained(&self, count: u64, overflows: u64) {
         self.script.received.fetch_add(count, Ordering::SeqCst);
+        self.script
+            .data_overflows
+            .store(overflows, Ordering::SeqCst);
     }
 
     fn handled(&self, exception: &str, message: &str) {
@@ -220,16 +246,21 @@ impl Scripted {
 }
 
 /// Implements the `Behavior` of generated module `$module` (shaped like `Worker`:
-/// states `idle` and `busy` with `busy`'s entry, periodic, exit and `may -> idle`, a
-/// `data` fifo of `u64`, an observable `count`, exceptions `flaky`, `fatal`, `detour`,
-/// `wobbly`) for [`Scripted`]. Invoked here, next to the generated code: a test crate
+/// states `idle` and `busy` with `busy`'s entry, periodic, exit and `may -> idle`,
+/// inputs `data` (a fifo of `u64`), `kick` (tick) and `feed` (last `u64`), an
+/// observable `count`, exceptions `flaky`, `fatal`, `detour`, `wobbly`) for [`Scripted`]. Invoked here, next to the generated code: a test crate
 /// may not implement the library's trait for the library's type.
 macro_rules! scripted {
     ($module:path) => {
         const _: () = {
             use $module as m;
             impl m::Behavior for $crate::support::Scripted {
-                fn start(&mut self, _cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                fn start(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                    *self.script.inputs.lock().unwrap() = Some($crate::support::WorkerInputs {
+                        data: cx.inputs.data.clone(),
+                        kick: cx.inputs.kick.clone(),
+                        feed: cx.inputs.feed.clone(),
+                    });
                     self.start_hook()
                 }
                 fn stop(&mut self, _cx: &mut m::Cx<'_>) {
@@ -242,7 +273,7 @@ macro_rules! scripted {
                     self.script.hit("busy.entry")?;
                     let drained = cx.inputs.data.drain().count() as u64;
                     cx.vars.count += drained;
-                    self.drained(drained);
+                    self.drained(drained, cx.inputs.data.overflows());
                     Ok(())
                 }
                 fn busy_periodic(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
@@ -252,7 +283,7 @@ macro_rules! scripted {
                         .fetch_add(1, ::std::sync::atomic::Ordering::SeqCst);
                     let drained = cx.inputs.data.drain().count() as u64;
                     cx.vars.count += drained;
-                    self.drained(drained);
+                    self.drained(drained, cx.inputs.data.overflows());
                     self.periodic_rest(cx.rt)
                 }
                 fn busy_exit(&mut self, _cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
@@ -283,6 +314,14 @@ scripted!(crate::generated::goto_worker);
 scripted!(crate::generated::ignore_worker);
 scripted!(crate::generated::degrade_worker);
 scripted!(crate::generated::plain_worker);
+scripted!(crate::generated::ua_never_worker);
+scripted!(crate::generated::ua_after30ms_worker);
+scripted!(crate::generated::ua_watchdog_worker);
+scripted!(crate::generated::ua_after1s_worker);
+scripted!(crate::generated::ua_timerless_worker);
+scripted!(crate::generated::os_reject_worker);
+scripted!(crate::generated::os_drop_oldest_worker);
+scripted!(crate::generated::os_block_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {

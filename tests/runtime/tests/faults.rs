@@ -2,16 +2,15 @@
 //! with the message in `error`, other components go on, restarts work, plans recover,
 //! `dead` joins the thread, and dropping a system leaves no thread behind.
 
-mod support;
-
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use coolbot::port::FifoIn;
-use coolbot::{Command, Controllable, OverflowPolicy, State, System};
-use support::worker::{self, Exception};
-use support::{Injected, Rig, Script, Scripted, WAIT, eventually};
+use coolbot::{Command, Controllable, State, System};
+use coolbot_runtime_tests::support::{
+    self, Injected, Rig, Script, Scripted, WAIT, WORKER, eventually,
+};
+use coolbot_runtime_tests::worker::{self, Exception};
 
 #[test]
 fn a_panic_goes_to_running_error_and_the_others_go_on() {
@@ -20,13 +19,7 @@ fn a_panic_goes_to_running_error_and_the_others_go_on() {
     // A second, independent worker in the same system.
     let mut rig = rig;
     let other_script = Script::new();
-    let (other, _, _) = worker::component(
-        "other",
-        Scripted {
-            script: Arc::clone(&other_script),
-            token: None,
-        },
-    );
+    let other = worker::component("other", Scripted::new(&other_script));
     let other = rig.system.add(other).expect("add other");
     other.wait_state(State::Ready, WAIT).expect("other ready");
     rig.run_busy();
@@ -54,7 +47,7 @@ fn a_panic_goes_to_running_error_and_the_others_go_on() {
     rig.command(Controllable::Running).expect("restart");
     let monitor = rig.wait_user("idle");
     assert_eq!(monitor.error, None, "a successful start clears the error");
-    rig.feeder.kick.emit();
+    rig.feeder().kick.emit();
     rig.wait_user("busy");
     let before = rig.script.periodics.load(Ordering::SeqCst);
     eventually(
@@ -88,7 +81,7 @@ fn an_undeclared_fault_goes_to_running_error() {
         times: 1,
     }));
     rig.command(Controllable::Running).expect("running");
-    rig.feeder.kick.emit();
+    rig.feeder().kick.emit();
     let monitor = rig.wait_state(State::RunningError);
     assert_eq!(
         monitor.error.as_deref(),
@@ -246,15 +239,19 @@ fn a_panicking_stop_is_recorded_and_the_transition_completes() {
     );
 }
 
+/// A rig whose worker's behaviour holds `token` (dropped with the behaviour).
+fn unstarted_with_token(token: &Arc<()>) -> Rig {
+    let script = Script::new();
+    let behavior = Scripted {
+        script: Arc::clone(&script),
+        token: Some(Arc::clone(token)),
+    };
+    Rig::with(System::new(), script, worker::component(WORKER, behavior))
+}
+
 fn rig_with_token() -> (Rig, Arc<()>) {
     let token = Arc::new(());
-    let data = FifoIn::new(4, OverflowPolicy::Reject);
-    let rig = Rig::start(Rig::unstarted_with(
-        Script::new(),
-        &worker::SPEC,
-        data,
-        Some(Arc::clone(&token)),
-    ));
+    let rig = Rig::start(unstarted_with_token(&token));
     (rig, token)
 }
 
@@ -305,8 +302,7 @@ fn rig_with_token_shutdown_report() -> coolbot::Report {
 fn a_system_that_never_started_drops_cleanly() {
     let token = Arc::new(());
     {
-        let data = FifoIn::new(4, OverflowPolicy::Reject);
-        let rig = Rig::unstarted_with(Script::new(), &worker::SPEC, data, Some(Arc::clone(&token)));
+        let rig = unstarted_with_token(&token);
         let err = rig.command(Controllable::Running).unwrap_err();
         assert!(err.reason.contains("not been started"), "{err}");
         let report = rig.system.shutdown();
@@ -414,47 +410,20 @@ fn a_section_that_returns_after_max_response_is_a_fault() {
     assert_eq!(monitor.error, None);
 }
 
+/// (A component whose ports do not match its spec, which coolc never generates, is
+/// refused too: `runtime/tests/invalid_specs.rs`.)
 #[test]
-fn components_with_the_same_name_or_bad_ports_are_refused() {
+fn components_with_the_same_name_or_a_bad_name_are_refused() {
     let mut system = System::new();
-    let (a, _, _) = worker::component(
-        "w",
-        Scripted {
-            script: Script::new(),
-            token: None,
-        },
-    );
-    let (b, _, _) = worker::component(
-        "w",
-        Scripted {
-            script: Script::new(),
-            token: None,
-        },
-    );
-    let (c, _, _) = worker::component(
-        "x.y",
-        Scripted {
-            script: Script::new(),
-            token: None,
-        },
-    );
+    let a = worker::component("w", Scripted::new(&Script::new()));
+    let b = worker::component("w", Scripted::new(&Script::new()));
+    let c = worker::component("x.y", Scripted::new(&Script::new()));
     system.add(a).expect("first");
     assert_eq!(
         system.add(b).unwrap_err().to_string(),
         "a component named `w` already exists"
     );
     assert!(matches!(system.add(c), Err(coolbot::Error::InvalidName(_))));
-    // Ports that do not match the spec.
-    let empty = coolbot::Component::new(
-        "empty",
-        Box::new(support::shell::ShellBuilder::new("z").build_automaton_for(&worker::SPEC)),
-        coolbot::PortSet::new(),
-    );
-    let err = system.add(empty).unwrap_err();
-    assert_eq!(
-        err.to_string(),
-        "component `empty`: 0 input ports registered, the spec declares 3"
-    );
 }
 
 #[test]

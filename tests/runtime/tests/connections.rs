@@ -2,60 +2,155 @@
 //! cardinality, kind and type errors, converters, disconnecting, and what inputs do
 //! while their component is not running.
 //!
-//! The consumer shells of these tests stay in `ready` (nothing is ever set running),
-//! so each kind's test also shows what it does while its component is not running:
-//! it works exactly the same; only the reading differs, which no section does then.
-
-mod support;
+//! The producers `p` and consumers `c` are generated (`cool/connections.cool`), with
+//! no automaton; each one's behaviour hands clones of its ports to the test when it
+//! starts, and the test sends and reads on them from its own thread. The consumers
+//! stay in `ready` (nothing is ever set running), so each kind's test also shows what
+//! it does while its component is not running: it works exactly the same; only the
+//! reading differs, which no section does then.
 
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
 use coolbot::{
-    ConnectError, Controllable, InputKind, MonitorEvent, OutputKind, OverflowPolicy, State, System,
+    Component, ConnectError, Controllable, MonitorEvent, OverflowPolicy, SectionResult, State,
+    System,
 };
-use support::shell::{ShellBuilder, input, output};
-use support::{Rig, Script, WAIT};
+use coolbot_runtime_tests::generated::{
+    cn_block_c, cn_block2c, cn_bytes_c, cn_bytes_p, cn_drop_oldest_c, cn_fifo1c, cn_kinds_c,
+    cn_kinds_p, cn_last_c, cn_last_poster_c, cn_many_p, cn_map_p, cn_out_p, cn_posters_c,
+    cn_queue_last_c, cn_queues_c, cn_reject_c, cn_tick_c, cn_tick_p, cn_types_c, cn_types_p,
+    cn_ufifo_c, cn_ufifo3c,
+};
+use coolbot_runtime_tests::support::{Rig, Script, WAIT};
 
-fn fifo(capacity: usize) -> InputKind {
-    InputKind::Fifo {
-        capacity,
-        policy: OverflowPolicy::Reject,
-    }
+/// A behaviour that hands clones of its component's ports to the test at `start`.
+struct Hand<T>(Sender<T>);
+
+/// `hands!(make = module: Ports, |cx| ports)`: `module::Behavior` for `Hand<Ports>`,
+/// and `make(name)`, the component with the receiver its ports arrive on.
+macro_rules! hands {
+    ($make:ident = $module:ident: $ty:ty, |$cx:ident| $ports:expr) => {
+        impl $module::Behavior for Hand<$ty> {
+            fn start(&mut self, $cx: &mut $module::Cx<'_>) -> SectionResult {
+                let _ = self.0.send($ports);
+                Ok(())
+            }
+        }
+
+        fn $make(name: &str) -> (Component, Receiver<$ty>) {
+            let (sender, receiver) = crossbeam_channel::bounded(1);
+            ($module::component(name, Hand(sender)), receiver)
+        }
+    };
 }
 
-/// A system with a producer shell `p` and a consumer shell `c`, started.
+type Bytes = Vec<u8>;
+
+hands!(tick_p = cn_tick_p: (TickOut, TickOut), |cx| (cx.outputs.a.clone(), cx.outputs.b.clone()));
+hands!(tick_c = cn_tick_c: (TickIn, TickIn), |cx| (cx.inputs.x.clone(), cx.inputs.y.clone()));
+hands!(out_p = cn_out_p: (DataOut<u64>, DataOut<u64>), |cx| (
+    cx.outputs.out.clone(),
+    cx.outputs.other.clone()
+));
+hands!(many_p = cn_many_p: (DataOut<u64>, DataOut<u64>, PosterOut<u64>, PosterOut<u64>), |cx| (
+    cx.outputs.a.clone(),
+    cx.outputs.b.clone(),
+    cx.outputs.pa.clone(),
+    cx.outputs.pb.clone()
+));
+hands!(queue_last_c = cn_queue_last_c: (FifoIn<u64>, LastIn<u64>), |cx| (
+    cx.inputs.q.clone(),
+    cx.inputs.x.clone()
+));
+hands!(reject_c = cn_reject_c: FifoIn<u64>, |cx| cx.inputs.q.clone());
+hands!(drop_oldest_c = cn_drop_oldest_c: FifoIn<u64>, |cx| cx.inputs.q.clone());
+hands!(block_c = cn_block_c: FifoIn<u64>, |cx| cx.inputs.q.clone());
+hands!(block2_c = cn_block2c: FifoIn<u64>, |cx| cx.inputs.q.clone());
+hands!(fifo1_c = cn_fifo1c: FifoIn<u64>, |cx| cx.inputs.q.clone());
+hands!(ufifo_c = cn_ufifo_c: (UfifoIn<u64>, UfifoIn<u64>), |cx| (
+    cx.inputs.capped.clone(),
+    cx.inputs.open.clone()
+));
+hands!(ufifo3_c = cn_ufifo3c: UfifoIn<u64>, |cx| cx.inputs.open.clone());
+hands!(last_c = cn_last_c: (LastIn<u64>, LastIn<u64>), |cx| (
+    cx.inputs.x.clone(),
+    cx.inputs.y.clone()
+));
+hands!(last_poster_c = cn_last_poster_c: (LastIn<u64>, PosterIn<u64>), |cx| (
+    cx.inputs.x.clone(),
+    cx.inputs.r.clone()
+));
+hands!(queues_c = cn_queues_c: (FifoIn<u64>, FifoIn<u64>, FifoIn<u64>, UfifoIn<u64>, LastIn<u64>), |cx| (
+    cx.inputs.reject.clone(),
+    cx.inputs.oldest.clone(),
+    cx.inputs.wide.clone(),
+    cx.inputs.grows.clone(),
+    cx.inputs.latest.clone()
+));
+hands!(bytes_p = cn_bytes_p: DataOut<Bytes>, |cx| cx.outputs.out.clone());
+hands!(bytes_c = cn_bytes_c: (FifoIn<Bytes>, UfifoIn<Bytes>, LastIn<Bytes>), |cx| (
+    cx.inputs.a.clone(),
+    cx.inputs.b.clone(),
+    cx.inputs.latest.clone()
+));
+hands!(map_p = cn_map_p: PosterOut<String>, |cx| cx.outputs.map.clone());
+hands!(posters_c = cn_posters_c: (PosterIn<String>, PosterIn<String>), |cx| (
+    cx.inputs.r1.clone(),
+    cx.inputs.r2.clone()
+));
+hands!(kinds_p = cn_kinds_p: (TickOut, DataOut<u64>, PosterOut<u64>), |cx| (
+    cx.outputs.tick.clone(),
+    cx.outputs.data.clone(),
+    cx.outputs.post.clone()
+));
+hands!(kinds_c = cn_kinds_c: (FifoIn<u64>, PosterIn<u64>, TickIn), |cx| (
+    cx.inputs.q.clone(),
+    cx.inputs.r.clone(),
+    cx.inputs.t.clone()
+));
+hands!(types_p = cn_types_p: (DataOut<String>, DataOut<u64>, PosterOut<u64>), |cx| (
+    cx.outputs.text.clone(),
+    cx.outputs.numbers.clone(),
+    cx.outputs.post.clone()
+));
+hands!(types_c = cn_types_c: (FifoIn<u64>, LastIn<String>, PosterIn<String>), |cx| (
+    cx.inputs.q.clone(),
+    cx.inputs.l.clone(),
+    cx.inputs.r.clone()
+));
+
+/// A system with a producer `p` and a consumer `c`, started.
 struct Pair {
     system: System,
 }
 
 impl Pair {
-    fn new(producer: ShellBuilder, consumer: ShellBuilder) -> Pair {
+    /// `p` and `c` (made by [`hands!`]'s functions), started; with their ports.
+    fn new<P, C>(
+        (producer, p_ports): (Component, Receiver<P>),
+        (consumer, c_ports): (Component, Receiver<C>),
+    ) -> (Pair, P, C) {
         let mut system = System::new();
-        system.add(producer.build()).expect("add p");
-        system.add(consumer.build()).expect("add c");
+        system.add(producer).expect("add p");
+        system.add(consumer).expect("add c");
         system.start().expect("start");
         for name in ["p", "c"] {
             let handle = system.handle(name).expect(name);
             handle.wait_state(State::Ready, WAIT).expect("ready");
         }
-        Pair { system }
+        let handed = "a component hands its ports over when it starts";
+        let p = p_ports.recv_timeout(WAIT).expect(handed);
+        let c = c_ports.recv_timeout(WAIT).expect(handed);
+        (Pair { system }, p, c)
     }
 }
 
 #[test]
 fn tick_is_n_to_m_and_counts_events() {
-    let (a, b) = (TickOut::new(), TickOut::new());
-    let (x, y) = (TickIn::new(), TickIn::new());
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("a", OutputKind::Tick, false), &a)
-            .output(output("b", OutputKind::Tick, false), &b),
-        ShellBuilder::new("c")
-            .input(input("x", InputKind::Tick, false), &x)
-            .input(input("y", InputKind::Tick, false), &y),
-    );
+    let (mut pair, (a, b), (x, y)) = Pair::new(tick_p("p"), tick_c("c"));
     for (from, to) in [
         ("p.a", "c.x"),
         ("p.a", "c.y"),
@@ -76,14 +171,7 @@ fn tick_is_n_to_m_and_counts_events() {
 
 #[test]
 fn fifo_keeps_order_and_accepts_n_producers() {
-    let (a, b) = (DataOut::<u64>::new(), DataOut::<u64>::new());
-    let q = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("a", OutputKind::Data, false), &a)
-            .output(output("b", OutputKind::Data, false), &b),
-        ShellBuilder::new("c").input(input("q", fifo(8), false), &q),
-    );
+    let (mut pair, (a, b, _, _), (q, _)) = Pair::new(many_p("p"), queue_last_c("c"));
     pair.system.connect("p.a", "c.q").expect("a");
     pair.system.connect("p.b", "c.q").expect("b");
     a.send(1);
@@ -95,24 +183,15 @@ fn fifo_keeps_order_and_accepts_n_producers() {
     assert_eq!(q.recv(), None);
 }
 
-/// Send `sent` packets into a fifo of 4 with `policy`; return the consumer's handle.
+/// Send `sent` packets into a fifo of 4 with `policy` (one consumer per policy,
+/// `cool/connections.cool`); return the pair, the fifo and the consumer's events.
 fn overflow_case(policy: OverflowPolicy, sent: u64) -> (Pair, FifoIn<u64>, Vec<MonitorEvent>) {
-    let out = DataOut::<u64>::new();
-    let q = FifoIn::<u64>::with_block_timeout(4, policy, Duration::from_millis(1));
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c").input(
-            input(
-                "q",
-                InputKind::Fifo {
-                    capacity: 4,
-                    policy,
-                },
-                false,
-            ),
-            &q,
-        ),
-    );
+    let consumer = match policy {
+        OverflowPolicy::Reject => reject_c("c"),
+        OverflowPolicy::DropOldest => drop_oldest_c("c"),
+        OverflowPolicy::Block => block_c("c"),
+    };
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), consumer);
     pair.system.connect("p.out", "c.q").expect("connect");
     let events = pair.system.handle("c").expect("c").subscribe();
     for packet in 0..sent {
@@ -167,22 +246,8 @@ fn fifo_block_waits_then_rejects_and_counts() {
 
 #[test]
 fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
-    let out = DataOut::<u64>::new();
-    let q = FifoIn::<u64>::with_block_timeout(2, OverflowPolicy::Block, WAIT);
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c").input(
-            input(
-                "q",
-                InputKind::Fifo {
-                    capacity: 2,
-                    policy: OverflowPolicy::Block,
-                },
-                false,
-            ),
-            &q,
-        ),
-    );
+    // (The producer waits up to the 100 ms a `block` fifo waits for the reader.)
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), block2_c("c"));
     pair.system.connect("p.out", "c.q").expect("connect");
     let reader = {
         let q = q.clone();
@@ -206,35 +271,7 @@ fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
 
 #[test]
 fn ufifo_grows_by_steps_up_to_its_cap_then_counts() {
-    let out = DataOut::<u64>::new();
-    let capped = UfifoIn::<u64>::new(2, Some(6));
-    let open = UfifoIn::<u64>::new(2, None);
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c")
-            .input(
-                input(
-                    "capped",
-                    InputKind::Ufifo {
-                        initial: 2,
-                        max: Some(6),
-                    },
-                    false,
-                ),
-                &capped,
-            )
-            .input(
-                input(
-                    "open",
-                    InputKind::Ufifo {
-                        initial: 2,
-                        max: None,
-                    },
-                    false,
-                ),
-                &open,
-            ),
-    );
+    let (mut pair, (out, _), (capped, open)) = Pair::new(out_p("p"), ufifo_c("c"));
     let events = pair.system.handle("c").unwrap().subscribe();
     pair.system.connect("p.out", "c.capped").expect("capped");
     // The same output feeds `open` too: each queue grows (or not) by its own rule.
@@ -262,22 +299,7 @@ fn ufifo_grows_by_steps_up_to_its_cap_then_counts() {
 
 #[test]
 fn ufifo_without_cap_keeps_everything() {
-    let out = DataOut::<u64>::new();
-    let open = UfifoIn::<u64>::new(3, None);
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c").input(
-            input(
-                "open",
-                InputKind::Ufifo {
-                    initial: 3,
-                    max: None,
-                },
-                false,
-            ),
-            &open,
-        ),
-    );
+    let (mut pair, (out, _), open) = Pair::new(out_p("p"), ufifo3_c("c"));
     pair.system.connect("p.out", "c.open").expect("open");
     for packet in 0..100 {
         out.send(packet);
@@ -290,14 +312,7 @@ fn ufifo_without_cap_keeps_everything() {
 
 #[test]
 fn last_keeps_a_local_copy_at_each_of_n_inputs() {
-    let out = DataOut::<u64>::new();
-    let (x, y) = (LastIn::<u64>::new(), LastIn::<u64>::new());
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c")
-            .input(input("x", InputKind::Last, false), &x)
-            .input(input("y", InputKind::Last, false), &y),
-    );
+    let (mut pair, (out, _), (x, y)) = Pair::new(out_p("p"), last_c("c"));
     pair.system.connect("p.out", "c.x").expect("x");
     pair.system.connect("p.out", "c.y").expect("y");
     assert_eq!(out.consumers(), 2);
@@ -314,20 +329,7 @@ fn last_keeps_a_local_copy_at_each_of_n_inputs() {
 
 #[test]
 fn last_and_poster_inputs_have_one_producer() {
-    let (a, b) = (DataOut::<u64>::new(), DataOut::<u64>::new());
-    let (pa, pb) = (PosterOut::<u64>::new(), PosterOut::<u64>::new());
-    let x = LastIn::<u64>::new();
-    let r = PosterIn::<u64>::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("a", OutputKind::Data, false), &a)
-            .output(output("b", OutputKind::Data, false), &b)
-            .output(output("pa", OutputKind::Poster, false), &pa)
-            .output(output("pb", OutputKind::Poster, false), &pb),
-        ShellBuilder::new("c")
-            .input(input("x", InputKind::Last, false), &x)
-            .input(input("r", InputKind::Poster, false), &r),
-    );
+    let (mut pair, (_a, _b, _pa, _pb), (_x, _r)) = Pair::new(many_p("p"), last_poster_c("c"));
     pair.system.connect("p.a", "c.x").expect("a");
     let err = pair.system.connect("p.b", "c.x").unwrap_err();
     assert_eq!(
@@ -346,37 +348,8 @@ fn last_and_poster_inputs_have_one_producer() {
 fn a_data_output_feeds_every_queue_with_its_own_policy() {
     // One output, four queues of different policies and a last input; a second
     // producer merges into the first queue.
-    let (out, other) = (DataOut::<u64>::new(), DataOut::<u64>::new());
-    let reject = FifoIn::<u64>::new(2, OverflowPolicy::Reject);
-    let oldest = FifoIn::<u64>::new(2, OverflowPolicy::DropOldest);
-    let wide = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
-    let grows = UfifoIn::<u64>::new(2, Some(3));
-    let latest = LastIn::<u64>::new();
-    let policy = |capacity, policy| InputKind::Fifo { capacity, policy };
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("out", OutputKind::Data, false), &out)
-            .output(output("other", OutputKind::Data, false), &other),
-        ShellBuilder::new("c")
-            .input(input("reject", fifo(2), false), &reject)
-            .input(
-                input("oldest", policy(2, OverflowPolicy::DropOldest), false),
-                &oldest,
-            )
-            .input(input("wide", fifo(8), false), &wide)
-            .input(
-                input(
-                    "grows",
-                    InputKind::Ufifo {
-                        initial: 2,
-                        max: Some(3),
-                    },
-                    false,
-                ),
-                &grows,
-            )
-            .input(input("latest", InputKind::Last, false), &latest),
-    );
+    let (mut pair, (out, other), (reject, oldest, wide, grows, latest)) =
+        Pair::new(out_p("p"), queues_c("c"));
     for to in ["reject", "oldest", "wide", "grows", "latest"] {
         pair.system
             .connect("p.out", &format!("c.{to}"))
@@ -403,29 +376,7 @@ fn a_data_output_feeds_every_queue_with_its_own_policy() {
 #[test]
 fn a_packet_sent_to_several_queues_is_shared_not_copied() {
     // A packet that owns memory goes to every input behind one pointer.
-    let out = DataOut::<Vec<u8>>::new();
-    let (a, b) = (
-        FifoIn::<Vec<u8>>::new(4, OverflowPolicy::Reject),
-        UfifoIn::<Vec<u8>>::new(4, None),
-    );
-    let latest = LastIn::<Vec<u8>>::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c")
-            .input(input("a", fifo(4), false), &a)
-            .input(
-                input(
-                    "b",
-                    InputKind::Ufifo {
-                        initial: 4,
-                        max: None,
-                    },
-                    false,
-                ),
-                &b,
-            )
-            .input(input("latest", InputKind::Last, false), &latest),
-    );
+    let (mut pair, out, (a, b, latest)) = Pair::new(bytes_p("p"), bytes_c("c"));
     for to in ["a", "b", "latest"] {
         pair.system.connect("p.out", &format!("c.{to}")).expect(to);
     }
@@ -452,14 +403,7 @@ fn a_packet_sent_to_several_queues_is_shared_not_copied() {
 
 #[test]
 fn poster_inputs_read_the_producers_latest_post() {
-    let post = PosterOut::<String>::new();
-    let (r1, r2) = (PosterIn::<String>::new(), PosterIn::<String>::new());
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("map", OutputKind::Poster, false), &post),
-        ShellBuilder::new("c")
-            .input(input("r1", InputKind::Poster, false), &r1)
-            .input(input("r2", InputKind::Poster, false), &r2),
-    );
+    let (mut pair, post, (r1, r2)) = Pair::new(map_p("p"), posters_c("c"));
     assert_eq!(r1.read(), None, "unconnected");
     pair.system.connect("p.map", "c.r1").expect("r1");
     pair.system.connect("p.map", "c.r2").expect("r2");
@@ -485,22 +429,7 @@ fn poster_inputs_read_the_producers_latest_post() {
 
 #[test]
 fn kinds_that_cannot_connect_are_rejected() {
-    let tick = TickOut::new();
-    let data = DataOut::<u64>::new();
-    let post = PosterOut::<u64>::new();
-    let q = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let r = PosterIn::<u64>::new();
-    let t = TickIn::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("tick", OutputKind::Tick, false), &tick)
-            .output(output("data", OutputKind::Data, false), &data)
-            .output(output("post", OutputKind::Poster, false), &post),
-        ShellBuilder::new("c")
-            .input(input("q", fifo(4), false), &q)
-            .input(input("r", InputKind::Poster, false), &r)
-            .input(input("t", InputKind::Tick, false), &t),
-    );
+    let (mut pair, _, _) = Pair::new(kinds_p("p"), kinds_c("c"));
     let err = pair.system.connect("p.tick", "c.q").unwrap_err();
     assert_eq!(
         err.to_string(),
@@ -539,10 +468,11 @@ fn kinds_that_cannot_connect_are_rejected() {
         pair.system.connect("x.tick", "c.q"),
         Err(ConnectError::UnknownInstance { .. })
     ));
+    // The error names the component's type (`CnKindsP`, `cool/connections.cool`).
     let err = pair.system.connect("p.nope", "c.q").unwrap_err();
     assert_eq!(
         err.to_string(),
-        "`p.nope`: component `p` (Shell) has no output port `nope`"
+        "`p.nope`: component `p` (CnKindsP) has no output port `nope`"
     );
     let err = pair.system.connect("p.data", "c.tick").unwrap_err();
     assert!(
@@ -567,22 +497,7 @@ fn kinds_that_cannot_connect_are_rejected() {
 
 #[test]
 fn packet_types_are_checked_and_converters_bridge_them() {
-    let text = DataOut::<String>::new();
-    let numbers = DataOut::<u64>::new();
-    let post = PosterOut::<u64>::new();
-    let q = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let l = LastIn::<String>::new();
-    let r = PosterIn::<String>::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("text", OutputKind::Data, false), &text)
-            .output(output("numbers", OutputKind::Data, false), &numbers)
-            .output(output("post", OutputKind::Poster, false), &post),
-        ShellBuilder::new("c")
-            .input(input("q", fifo(4), false), &q)
-            .input(input("l", InputKind::Last, false), &l)
-            .input(input("r", InputKind::Poster, false), &r),
-    );
+    let (mut pair, (text, numbers, post), (q, l, r)) = Pair::new(types_p("p"), types_c("c"));
     let err = pair.system.connect("p.text", "c.q").unwrap_err();
     assert_eq!(
         err.to_string(),
@@ -631,15 +546,7 @@ fn packet_types_are_checked_and_converters_bridge_them() {
 
 #[test]
 fn disconnecting_while_running_keeps_queued_packets() {
-    let out = DataOut::<u64>::new();
-    let q = FifoIn::<u64>::new(8, OverflowPolicy::Reject);
-    let x = LastIn::<u64>::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c")
-            .input(input("q", fifo(8), false), &q)
-            .input(input("x", InputKind::Last, false), &x),
-    );
+    let (mut pair, (out, _), (q, x)) = Pair::new(out_p("p"), queue_last_c("c"));
     pair.system.run_all().expect("run");
     pair.system.connect("p.out", "c.q").expect("q");
     pair.system.connect("p.out", "c.x").expect("x");
@@ -683,19 +590,16 @@ fn inputs_keep_working_while_the_component_is_ready_and_no_section_runs() {
     let rig = Rig::started(Script::new());
     assert_eq!(rig.handle.state(), State::Ready);
     for packet in 0..6 {
-        rig.feeder.data.send(packet);
+        rig.feeder().data.send(packet);
     }
-    rig.feeder.kick.emit();
-    rig.feeder.feed.send(41);
-    rig.feeder.feed.send(42);
-    assert_eq!(rig.inputs.data.len(), 4, "the fifo keeps queueing");
-    assert_eq!(
-        rig.inputs.data.overflows(),
-        2,
-        "and overflows by its policy"
-    );
-    assert!(rig.inputs.kick.pending(), "the tick counts");
-    assert_eq!(rig.inputs.feed.latest(), Some(42), "last keeps the latest");
+    rig.feeder().kick.emit();
+    rig.feeder().feed.send(41);
+    rig.feeder().feed.send(42);
+    let inputs = rig.script.inputs();
+    assert_eq!(inputs.data.len(), 4, "the fifo keeps queueing");
+    assert_eq!(inputs.data.overflows(), 2, "and overflows by its policy");
+    assert!(inputs.kick.pending(), "the tick counts");
+    assert_eq!(inputs.feed.latest(), Some(42), "last keeps the latest");
     assert_eq!(rig.script.log(), vec!["start"], "no section ran");
     // Going running enters `idle`: the packets that came while it was ready are
     // arrivals there, and fire `on data`; `busy` reads everything queued.
@@ -714,12 +618,12 @@ fn arrivals_while_suspended_fire_on_resume() {
     rig.wait_user("idle");
     rig.command(Controllable::Suspended).expect("suspend");
     rig.script.clear_log();
-    rig.feeder.data.send(7);
-    rig.feeder.data.send(8);
+    rig.feeder().data.send(7);
+    rig.feeder().data.send(8);
     // The packets wait; nothing runs while suspended.
     std::thread::sleep(Duration::from_millis(30));
     assert_eq!(rig.script.log(), Vec::<String>::new());
-    assert_eq!(rig.inputs.data.len(), 2);
+    assert_eq!(rig.script.inputs().data.len(), 2);
     rig.command(Controllable::Running).expect("resume");
     rig.wait_user("busy");
     rig.handle
@@ -730,13 +634,7 @@ fn arrivals_while_suspended_fire_on_resume() {
 
 #[test]
 fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
-    let out = DataOut::<u64>::new();
-    let q = FifoIn::<u64>::new(1, OverflowPolicy::Reject);
-    let pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c").input(input("q", fifo(1), false), &q),
-    );
-    let mut pair = pair;
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), fifo1_c("c"));
     pair.system.connect("p.out", "c.q").expect("connect");
     let handle = pair.system.handle("c").unwrap();
     handle.wait_state(State::Ready, WAIT).expect("ready");
@@ -757,14 +655,7 @@ fn every_observer_gets_every_event_and_a_slow_one_loses_only_its_own() {
 
 #[test]
 fn a_poster_input_sees_the_first_post_of_a_new_producer_at_once() {
-    let (pa, pb) = (PosterOut::<u64>::new(), PosterOut::<u64>::new());
-    let r = PosterIn::<u64>::new();
-    let mut pair = Pair::new(
-        ShellBuilder::new("p")
-            .output(output("pa", OutputKind::Poster, false), &pa)
-            .output(output("pb", OutputKind::Poster, false), &pb),
-        ShellBuilder::new("c").input(input("r", InputKind::Poster, false), &r),
-    );
+    let (mut pair, (_, _, pa, pb), (_, r)) = Pair::new(many_p("p"), last_poster_c("c"));
     pair.system.connect("p.pa", "c.r").expect("pa");
     for n in 0..5 {
         pa.post(n);
@@ -798,12 +689,7 @@ fn a_poster_input_sees_the_first_post_of_a_new_producer_at_once() {
 
 #[test]
 fn a_counted_subscription_counts_what_it_was_sent_and_what_it_lost() {
-    let out = DataOut::<u64>::new();
-    let q = FifoIn::<u64>::new(1, OverflowPolicy::Reject);
-    let mut pair = Pair::new(
-        ShellBuilder::new("p").output(output("out", OutputKind::Data, false), &out),
-        ShellBuilder::new("c").input(input("q", fifo(1), false), &q),
-    );
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), fifo1_c("c"));
     pair.system.connect("p.out", "c.q").expect("connect");
     let handle = pair.system.handle("c").unwrap();
     let (keeps_up, falls_behind) = (handle.subscribe_counted(), handle.subscribe_counted());

@@ -4,15 +4,11 @@
 //! The example robot's tests (`examples/mobile-base/tests/process.rs`) run a whole
 //! process: signals, a clean shutdown, the line on stderr.
 
-#![cfg(feature = "process")]
-
-mod support;
-
 use std::time::{Duration, Instant};
 
 use coolbot::State;
 use coolbot::process::{self, Process};
-use support::{Rig, Script};
+use coolbot_runtime_tests::support::{Rig, Script};
 
 /// Everything captured until `wanted` holds for one line (or a minute passes).
 fn captured_until(wanted: impl Fn(&str) -> bool) -> Vec<String> {
@@ -50,7 +46,12 @@ fn a_caught_panic_is_one_line_and_other_panics_are_not() {
         "{}",
         caught[0]
     );
-    assert!(caught[0].contains("tests/support/"), "{}", caught[0]);
+    // The location is the scripted behaviour's panic, in the support module.
+    assert!(
+        caught[0].contains("tests/runtime/src/support.rs"),
+        "{}",
+        caught[0]
+    );
 
     // A panic on a thread that is no component's: not this hook's line (the default
     // hook prints it on stderr, in full).

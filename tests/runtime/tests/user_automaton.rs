@@ -3,28 +3,52 @@
 //! control port's variables, configuration and quality. The timers' exact sequences
 //! are tested on a virtual clock (`coolbot::clock`), stepped by hand.
 
-mod support;
-
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use coolbot::port::FifoIn;
 use coolbot::{
-    AfterSpec, Clock, Command, Controllable, MonitorEvent, OverflowPolicy, State, TaskResult,
-    Value, VirtualClock,
+    Clock, Command, Component, Controllable, MonitorEvent, State, System, TaskResult, Value,
+    VirtualClock,
 };
-use support::worker::{self, FEED, IDLE};
-use support::{Rig, Script, WAIT, eventually};
+use coolbot_runtime_tests::generated::{
+    ua_after1s_worker, ua_after30ms_worker, ua_never_worker, ua_timerless_worker,
+    ua_watchdog_worker,
+};
+use coolbot_runtime_tests::support::{Rig, Script, Scripted, WAIT, WORKER, eventually};
 
-fn rig_with_after(after: Vec<AfterSpec>) -> Rig {
-    let spec = worker::spec_with_busy_after(after);
-    Rig::start(Rig::unstarted_with(
-        Script::new(),
-        spec,
-        FifoIn::new(4, OverflowPolicy::Reject),
-        None,
-    ))
+/// `busy`'s `after` transitions: one `Worker` variant each (`cool/user_automaton.cool`).
+#[derive(Clone, Copy)]
+enum Timers {
+    /// `after <u64::MAX ns> without feed -> idle` (`UaNeverWorker`).
+    Never,
+    /// `after 30ms -> idle` (`UaAfter30msWorker`).
+    After30ms,
+    /// `after 2s without feed -> idle` (`UaWatchdogWorker`).
+    Watchdog2s,
+    /// `after 1s -> idle` (`UaAfter1sWorker`).
+    After1s,
+    /// None (`UaTimerlessWorker`).
+    Timerless,
+}
+
+impl Timers {
+    fn worker(self, script: &Arc<Script>) -> Component {
+        let behavior = Scripted::new(script);
+        match self {
+            Timers::Never => ua_never_worker::component(WORKER, behavior),
+            Timers::After30ms => ua_after30ms_worker::component(WORKER, behavior),
+            Timers::Watchdog2s => ua_watchdog_worker::component(WORKER, behavior),
+            Timers::After1s => ua_after1s_worker::component(WORKER, behavior),
+            Timers::Timerless => ua_timerless_worker::component(WORKER, behavior),
+        }
+    }
+}
+
+fn rig_with_after(after: Timers) -> Rig {
+    let script = Script::new();
+    let component = after.worker(&script);
+    Rig::start(Rig::with(System::new(), script, component))
 }
 
 #[test]
@@ -125,8 +149,8 @@ fn variables_are_published_and_controllable_ones_set() {
     let rig = Rig::started(Script::new());
     let events = rig.handle.subscribe();
     rig.command(Controllable::Running).expect("running");
-    rig.feeder.data.send(1);
-    rig.feeder.data.send(2);
+    rig.feeder().data.send(1);
+    rig.feeder().data.send(2);
     let monitor = rig
         .handle
         .wait_for(|m| m.variables[0].1 == Value::UInt(2), WAIT)
@@ -215,11 +239,9 @@ fn timing_is_measured() {
 
 #[test]
 fn absurd_durations_mean_never_and_do_not_panic() {
-    let rig = rig_with_after(vec![AfterSpec {
-        delay: Duration::MAX,
-        without: Some(FEED),
-        target: IDLE,
-    }]);
+    // The longest `after` a description can say (a duration literal saturates at
+    // `u64::MAX` nanoseconds).
+    let rig = rig_with_after(Timers::Never);
     rig.run_busy();
     let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
     patient
@@ -240,15 +262,12 @@ fn absurd_durations_mean_never_and_do_not_panic() {
 // `advance` returns once every timer due by then has fired, so the sequences are
 // exact and nothing sleeps.
 
-fn virtual_rig_with_after(after: Vec<AfterSpec>) -> (Rig, Arc<VirtualClock>) {
+fn virtual_rig_with_after(after: Timers) -> (Rig, Arc<VirtualClock>) {
     let clock = VirtualClock::new();
-    let spec = worker::spec_with_busy_after(after);
-    let rig = Rig::start(Rig::unstarted_on(
-        Clock::virtual_clock(&clock),
-        Script::new(),
-        spec,
-        FifoIn::new(4, OverflowPolicy::Reject),
-    ));
+    let script = Script::new();
+    let component = after.worker(&script);
+    let system = System::with_clock(Clock::virtual_clock(&clock));
+    let rig = Rig::start(Rig::with(system, script, component));
     rig.run_busy();
     clock.settle().expect("settled");
     rig.script.clear_log();
@@ -261,11 +280,7 @@ fn ms(n: u64) -> Duration {
 
 #[test]
 fn on_a_virtual_clock_after_fires_at_its_delay_exactly_after_every_period_before() {
-    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
-        delay: ms(30),
-        without: None,
-        target: IDLE,
-    }]);
+    let (rig, clock) = virtual_rig_with_after(Timers::After30ms);
     // `busy` is periodic (5 ms): one millisecond at a time, the periodic section runs
     // at 5, 10, ... 25 ms, and nothing else happens before 30 ms.
     for _ in 0..29 {
@@ -283,13 +298,9 @@ fn on_a_virtual_clock_after_fires_at_its_delay_exactly_after_every_period_before
 
 #[test]
 fn on_a_virtual_clock_a_watchdog_counts_from_the_last_arrival() {
-    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
-        delay: Duration::from_secs(2),
-        without: Some(FEED),
-        target: IDLE,
-    }]);
+    let (rig, clock) = virtual_rig_with_after(Timers::Watchdog2s);
     clock.advance(ms(1500)).expect("settled");
-    rig.feeder.feed.send(1);
+    rig.feeder().feed.send(1);
     // The worker sees the arrival at 1.5 s (before the command's answer).
     rig.sync();
     clock.advance(ms(1999)).expect("settled");
@@ -300,11 +311,7 @@ fn on_a_virtual_clock_a_watchdog_counts_from_the_last_arrival() {
 
 #[test]
 fn on_a_virtual_clock_after_timers_pause_while_suspended() {
-    let (rig, clock) = virtual_rig_with_after(vec![AfterSpec {
-        delay: Duration::from_secs(1),
-        without: None,
-        target: IDLE,
-    }]);
+    let (rig, clock) = virtual_rig_with_after(Timers::After1s);
     rig.command(Controllable::Suspended).expect("suspend");
     clock.advance(ms(1200)).expect("settled");
     rig.command(Controllable::Running).expect("resume");
@@ -321,7 +328,7 @@ fn on_a_virtual_clock_after_timers_pause_while_suspended() {
 
 #[test]
 fn on_a_virtual_clock_a_jump_over_periods_is_counted_as_missed_deadlines() {
-    let (rig, clock) = virtual_rig_with_after(Vec::new());
+    let (rig, clock) = virtual_rig_with_after(Timers::Timerless);
     clock.advance(ms(5)).expect("settled");
     assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 1);
     assert_eq!(rig.handle.snapshot().missed_deadlines, 0);
@@ -336,7 +343,7 @@ fn on_a_virtual_clock_a_jump_over_periods_is_counted_as_missed_deadlines() {
 
 #[test]
 fn on_a_virtual_clock_a_section_past_max_response_is_tripped_when_the_clock_passes_it() {
-    let (rig, clock) = virtual_rig_with_after(Vec::new());
+    let (rig, clock) = virtual_rig_with_after(Timers::Timerless);
     let release = rig.script.hang_in("busy.periodic");
     // The periodic section starts at 5 ms and hangs: the worker cannot settle.
     let busy = clock

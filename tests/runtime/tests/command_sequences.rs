@@ -1,12 +1,10 @@
 //! A property test: random sequences of control commands, kicks and crashes keep the
 //! component in the state the transition table predicts, step after step.
 
-mod support;
-
 use coolbot::table::{Event, next};
 use coolbot::{Controllable, State};
+use coolbot_runtime_tests::support::{Rig, Script, WAIT};
 use proptest::prelude::*;
-use support::{Rig, Script, WAIT};
 
 #[derive(Debug, Clone, Copy)]
 enum Step {
@@ -54,7 +52,7 @@ fn run(steps: &[Step]) -> Result<(), TestCaseError> {
                 model = expected;
             }
             Step::Kick => {
-                rig.feeder.kick.emit();
+                rig.feeder().kick.emit();
                 if model == State::Running && !in_busy {
                     rig.wait_user("busy");
                 }
@@ -90,7 +88,7 @@ fn run(steps: &[Step]) -> Result<(), TestCaseError> {
         // through the control port (handled by the same thread), the log is empty.
         if state != State::Running {
             rig.script.clear_log();
-            rig.feeder.kick.emit();
+            rig.feeder().kick.emit();
             rig.handle
                 .command(coolbot::Command::SetPriority(1))
                 .map_err(|e| TestCaseError::fail(e.to_string()))?;

@@ -2,25 +2,32 @@
 //! sequences are exact (no thread, no real time), and they are the runtime's: the
 //! harness drives the runner's own per-event step.
 
-mod support;
-
 use std::time::Duration;
 
+use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::harness::{Harness, HarnessError};
+use coolbot::port::DataOut;
 use coolbot::{Command, Controllable, State, TaskResult, Value};
-use support::worker::{self, Exception};
-use support::{Injected, Script, Scripted};
+use coolbot_runtime_tests::generated::harness_source;
+use coolbot_runtime_tests::support::{Injected, Script, Scripted, WAIT};
+use coolbot_runtime_tests::worker::{self, Exception};
 
 fn ms(n: u64) -> Duration {
     Duration::from_millis(n)
 }
 
 fn worker(script: &std::sync::Arc<Script>) -> Harness {
-    let behavior = Scripted {
-        script: script.clone(),
-        token: None,
-    };
-    Harness::new(worker::component("w", behavior).0).unwrap()
+    Harness::new(worker::component("w", Scripted::new(script))).unwrap()
+}
+
+/// Hands the `HarnessSource`'s output to the test when it starts.
+struct Hand(Sender<DataOut<u64>>);
+
+impl harness_source::Behavior for Hand {
+    fn start(&mut self, cx: &mut harness_source::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
 }
 
 #[test]
@@ -183,11 +190,10 @@ fn wrong_ports_are_errors_that_name_them() {
 
 #[test]
 fn a_recording_replays_into_the_harness_at_its_recorded_times() {
+    use coolbot::System;
     use coolbot::clock::{Clock, VirtualClock};
     use coolbot::harness::replay::{Replay, ReplayError};
-    use coolbot::port::DataOut;
     use coolbot::record::Recorder;
-    use coolbot::{OutputKind, System};
 
     // A recording of a producer's `out` (u64), stamped by a virtual clock: packets 1
     // and 2 at 0ms, 3 at 12ms.
@@ -197,12 +203,12 @@ fn a_recording_replays_into_the_harness_at_its_recorded_times() {
     {
         let clock = VirtualClock::new();
         let mut system = System::new();
-        let out = DataOut::<u64>::new();
-        let source = support::shell::ShellBuilder::new("src")
-            .output(support::shell::output("out", OutputKind::Data, false), &out)
-            .build();
-        system.add(source).unwrap();
+        let (hand, out) = crossbeam_channel::bounded(1);
+        system
+            .add(harness_source::component("src", Hand(hand)))
+            .unwrap();
         system.run_all().unwrap();
+        let out = out.recv_timeout(WAIT).expect("the source started");
         let mut recorder = Recorder::new().clock(Clock::virtual_clock(&clock));
         recorder.tap::<u64>(&system, "src.out").unwrap();
         let recording = recorder.start(&path).unwrap();

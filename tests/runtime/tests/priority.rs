@@ -14,9 +14,9 @@ use std::time::Duration;
 
 use coolbot::crossbeam_channel::Receiver;
 use coolbot::{
-    Automaton, Command, Component, Context, Fault, Handle, MonitorEvent, OsPriority, PeriodicSpec,
-    PortSet, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec, Value,
+    Command, Handle, MonitorEvent, OsPriority, SectionResult, State, System, TimingSpec,
 };
+use coolbot_runtime_tests::generated::prio_reporter;
 use rustix::process::getpriority_process;
 use rustix::thread::gettid;
 use thread_priority::{RealtimeThreadSchedulePolicy, ThreadSchedulePolicy};
@@ -53,19 +53,11 @@ impl Seen {
 }
 
 struct Reporter {
-    spec: &'static Spec,
     seen: Arc<Seen>,
 }
 
-impl Automaton for Reporter {
-    fn spec(&self) -> &'static Spec {
-        self.spec
-    }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
+impl prio_reporter::Behavior for Reporter {
+    fn report_periodic(&mut self, _cx: &mut prio_reporter::Cx<'_>) -> SectionResult {
         let nice = getpriority_process(Some(gettid())).expect("getpriority");
         let round_robin = match thread_priority::thread_schedule_policy() {
             Ok(ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::RoundRobin)) => 1,
@@ -77,77 +69,29 @@ impl Automaton for Reporter {
         self.seen.activations.fetch_add(1, Ordering::SeqCst);
         Ok(())
     }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> SectionResult {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
-        Err(format!("no variable #{variable}"))
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
-    }
 }
 
-const STATES: &[StateSpec] = &[StateSpec {
-    name: "report",
-    entry: false,
-    exit: false,
-    periodic: Some(PeriodicSpec {
-        period: Some(Duration::from_millis(2)),
-    }),
-    on: &[],
-    after: &[],
-    may: &[],
-}];
-
-macro_rules! spec_with_priority {
-    ($name:ident, $priority:expr) => {
-        static $name: Spec = Spec {
-            type_name: "Reporter",
-            doc: "reports its thread's scheduling",
-            states: STATES,
-            initial: 0,
-            inputs: &[],
-            outputs: &[],
-            variables: &[],
-            exceptions: &[],
-            timing: TimingSpec {
-                priority: $priority,
-                ..TimingSpec::NONE
-            },
-        };
-    };
+/// `PrioReporter`'s timing (`cool/priority.cool`: priority 0) with `priority`.
+fn priority(priority: i32) -> TimingSpec {
+    TimingSpec {
+        priority,
+        ..prio_reporter::SPEC.timing
+    }
 }
-
-spec_with_priority!(DEFAULT, 0);
-spec_with_priority!(LOWER, -3);
-spec_with_priority!(HIGHER, 5);
 
 /// The nice value new threads of this process inherit (the test thread's own).
 fn base_nice() -> i32 {
     getpriority_process(Some(gettid())).expect("getpriority")
 }
 
-fn run(spec: &'static Spec) -> (System, Handle, Arc<Seen>) {
+fn run(timing: TimingSpec) -> (System, Handle, Arc<Seen>) {
     let seen = Arc::new(Seen::default());
     let reporter = Reporter {
-        spec,
         seen: Arc::clone(&seen),
     };
     let mut system = System::new();
     let handle = system
-        .add(Component::new(
-            "reporter",
-            Box::new(reporter),
-            PortSet::new(),
-        ))
+        .add(prio_reporter::component("reporter", reporter).with_timing(timing))
         .expect("add");
     system.run_all().expect("run");
     (system, handle, seen)
@@ -167,7 +111,7 @@ fn priority_events(events: &Receiver<MonitorEvent>) -> Vec<OsPriority> {
 #[test]
 fn priority_zero_leaves_the_thread_as_created() {
     let base = base_nice();
-    let (system, handle, seen) = run(&DEFAULT);
+    let (system, handle, seen) = run(prio_reporter::SPEC.timing);
     assert_eq!(handle.snapshot().os_priority, OsPriority::Inherited);
     assert_eq!(seen.fresh(), (base, false));
     assert!(system.shutdown().clean());
@@ -176,7 +120,7 @@ fn priority_zero_leaves_the_thread_as_created() {
 #[test]
 fn negative_priority_raises_the_nice_value_and_set_priority_changes_it() {
     let base = base_nice();
-    let (system, handle, seen) = run(&LOWER);
+    let (system, handle, seen) = run(priority(-3));
     let first = (base + 3).min(19);
     let snapshot = handle.snapshot();
     assert_eq!(snapshot.priority, -3);
@@ -207,7 +151,7 @@ fn negative_priority_raises_the_nice_value_and_set_priority_changes_it() {
 #[test]
 fn positive_priority_is_applied_or_its_refusal_published() {
     let base = base_nice();
-    let (system, handle, seen) = run(&HIGHER);
+    let (system, handle, seen) = run(priority(5));
     let applied = handle.snapshot().os_priority;
     let (nice, round_robin) = seen.fresh();
     println!("priority 5 on this machine: {applied:?}");

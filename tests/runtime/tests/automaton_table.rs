@@ -2,14 +2,12 @@
 //! a worker is brought into each state, given each command, and must end where
 //! `coolbot::table::next` says, having run exactly the table's actions.
 
-mod support;
-
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use coolbot::table::{Action, Event, Outcome, next};
 use coolbot::{Controllable, State};
-use support::{Rig, Script, WAIT};
+use coolbot_runtime_tests::support::{Rig, Script, WAIT};
 
 /// Bring a fresh worker into `state`; the user automaton is in `busy` for `running`
 /// and `suspended`.
@@ -208,7 +206,7 @@ fn check_starting(command: Controllable) {
         Outcome::Defer
     );
     let script = Script::new();
-    let (open, gate) = crossbeam_channel::bounded(1);
+    let (open, gate) = coolbot::crossbeam_channel::bounded(1);
     *script.start_gate.lock().unwrap() = Some(gate);
     let mut rig = Rig::unstarted(script);
     rig.system.start().expect("start");

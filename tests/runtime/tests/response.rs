@@ -5,116 +5,52 @@
 //! are short again. Work is simulated with sleeps (lower bounds), so the outcomes do
 //! not depend on the machine's load; the tests assert outcomes, never timings.
 
-mod support;
-
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use coolbot::adapt::AdaptAction;
-use coolbot::port::{DataOut, FifoIn};
-use coolbot::{
-    AdaptConfig, Automaton, Component, Context, Fault, InputKind, InputSpec, MonitorEvent, OnSpec,
-    OutputKind, OverflowPolicy, PortSet, Section, SectionResult, Spec, StateSpec, System,
-    TimingSpec, Value,
-};
-use support::shell::{self, ShellBuilder};
-use support::{WAIT, eventually};
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::DataOut;
+use coolbot::{AdaptConfig, MonitorEvent, SectionResult, System};
+use coolbot_runtime_tests::generated::{job_feeder, job_server};
+use coolbot_runtime_tests::support::{WAIT, eventually};
 
+/// `JobServer`'s `max_response` (`cool/response.cool`).
 const MAX_RESPONSE: Duration = Duration::from_millis(40);
-
-static SERVER: Spec = Spec {
-    type_name: "JobServer",
-    doc: "",
-    states: &[
-        StateSpec {
-            name: "idle",
-            entry: false,
-            exit: false,
-            periodic: None,
-            on: &[OnSpec { port: 0, target: 1 }],
-            after: &[],
-            may: &[],
-        },
-        StateSpec {
-            name: "work",
-            entry: true,
-            exit: false,
-            periodic: None,
-            on: &[OnSpec { port: 0, target: 1 }],
-            after: &[],
-            may: &[],
-        },
-    ],
-    initial: 0,
-    inputs: &[InputSpec {
-        name: "jobs",
-        kind: InputKind::Fifo {
-            capacity: 16,
-            policy: OverflowPolicy::Reject,
-        },
-        packet: "u32",
-        pull: false,
-    }],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec {
-        period: None,
-        max_period: None,
-        max_response: Some(MAX_RESPONSE),
-        priority: 0,
-        qualities: &["full", "quick"],
-    },
-};
 
 /// The jobs done: each one's number and the quality it ran at.
 type Done = Arc<Mutex<Vec<(u32, usize)>>>;
 
 /// `on jobs -> work` in both states: each arrival enters `work`, whose entry takes one
 /// job from the queue; a job `n > 0` queues job `n - 1` itself at the start of its
-/// section (so that job waits behind it), then works: 25 ms at quality 0, 1 ms at
-/// quality 1.
+/// section (on `again`, connected to its own `jobs`, so that job waits behind it),
+/// then works: 25 ms at quality 0, 1 ms at quality 1.
 struct JobServer {
-    jobs: FifoIn<u32>,
-    again: DataOut<u32>,
     /// Each job's number and the quality it ran at.
     done: Done,
 }
 
-impl Automaton for JobServer {
-    fn spec(&self) -> &'static Spec {
-        &SERVER
-    }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(&mut self, _state: usize, _section: Section, cx: &mut Context) -> SectionResult {
-        if let Some(job) = self.jobs.recv() {
+impl job_server::Behavior for JobServer {
+    fn work_entry(&mut self, cx: &mut job_server::Cx<'_>) -> SectionResult {
+        if let Some(job) = cx.inputs.jobs.recv() {
             if job > 0 {
-                self.again.send(job - 1);
+                cx.outputs.again.send(job - 1);
             }
-            let work = if cx.quality() == 0 { 25 } else { 1 };
+            let work = if cx.rt.quality() == 0 { 25 } else { 1 };
             std::thread::sleep(Duration::from_millis(work));
-            self.done.lock().expect("done").push((job, cx.quality()));
+            self.done.lock().expect("done").push((job, cx.rt.quality()));
         }
         Ok(())
     }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
+}
+
+/// Hands the feeder's output to the test when it starts.
+struct Hand(Sender<DataOut<u32>>);
+
+impl job_feeder::Behavior for Hand {
+    fn start(&mut self, cx: &mut job_feeder::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.jobs.clone());
         Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 
@@ -129,20 +65,15 @@ fn poll(
     handle.snapshot()
 }
 
-/// The server `s` and a feeder `f` whose `jobs` output feeds it; the server's own
-/// follow-up jobs go through a second feeder output to the same queue.
+/// The server `s`, whose follow-up jobs go from its `again` back to its own `jobs`,
+/// and a feeder `f` whose `jobs` output feeds it.
 fn setup() -> (System, coolbot::Handle, DataOut<u32>, Done) {
-    let jobs = FifoIn::new(16, OverflowPolicy::Reject);
-    let again = DataOut::new();
     let done = Arc::new(Mutex::new(Vec::new()));
-    let server = Component::new(
+    let server = job_server::component(
         "s",
-        Box::new(JobServer {
-            jobs: jobs.clone(),
-            again: again.clone(),
+        JobServer {
             done: Arc::clone(&done),
-        }),
-        PortSet::new().input(&jobs),
+        },
     )
     // Spare time judged from the responses alone, so that promotion does not depend
     // on what else the machine runs (the idle probe has tests of its own).
@@ -150,17 +81,16 @@ fn setup() -> (System, coolbot::Handle, DataOut<u32>, Done) {
         idle_probe: false,
         ..AdaptConfig::default()
     });
-    let feed = DataOut::new();
-    let feeder = ShellBuilder::new("f")
-        .output(shell::output("jobs", OutputKind::Data, false), &feed)
-        .output(shell::output("again", OutputKind::Data, false), &again)
-        .build();
+    let (hand, feed) = crossbeam_channel::bounded(1);
     let mut system = System::new();
     let handle = system.add(server).expect("add server");
-    system.add(feeder).expect("add feeder");
+    system
+        .add(job_feeder::component("f", Hand(hand)))
+        .expect("add feeder");
     system.connect("f.jobs", "s.jobs").expect("connect");
-    system.connect("f.again", "s.jobs").expect("connect");
+    system.connect("s.again", "s.jobs").expect("connect");
     system.run_all().expect("run");
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
     (system, handle, feed, done)
 }
 
