@@ -428,7 +428,24 @@ fn variable(checker: &mut Checker<'_, '_>, component: &ast::Component, variable:
 fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
     names::value_name(checker, &input.name);
     match &input.def {
-        ast::InputDef::Tick | ast::InputDef::Export(_) => {}
+        ast::InputDef::Tick => {
+            // No tick output answers pulls (`output`), so a tick input that pulls
+            // could never be connected.
+            if let Some(pull) = input.pull {
+                let diagnostic = checker
+                    .error(
+                        Code::ConnectKind,
+                        pull,
+                        "a `tick` input cannot pull: no tick output answers pull requests",
+                    )
+                    .with_label("`pull` on a tick input")
+                    .with_help(
+                        "remove `pull`, or make the input `last<T> pull` or `fifo<T>(n) pull`",
+                    );
+                checker.push(diagnostic);
+            }
+        }
+        ast::InputDef::Export(_) => {}
         ast::InputDef::Fifo { ty, size, policy } => {
             values::ty(checker, ty);
             values::positive(checker, size, "a fifo size");

@@ -1033,13 +1033,20 @@ impl Builder<'_> {
                         .ok()
                         .and_then(|n| n.checked_mul(factor))
                 };
+                // The runtime counts time in u64 nanoseconds: a longer duration would
+                // be cut short without a word.
+                let nanos = nanos.filter(|&n| n <= u128::from(u64::MAX));
                 let nanos = nanos.unwrap_or_else(|| {
                     self.error(
                         Code::InvalidNumber,
                         span,
-                        format!("duration `{text}` is too large"),
+                        format!(
+                            "duration `{text}` is too large (the longest is {}ns, about 584 years)",
+                            u64::MAX
+                        ),
                     );
-                    0
+                    // Not 0: that would also be reported as a zero duration.
+                    u128::from(u64::MAX)
                 });
                 Some(ast::Expr {
                     kind: ast::ExprKind::Duration(nanos),

@@ -239,8 +239,8 @@ fn timing_is_measured() {
 
 #[test]
 fn absurd_durations_mean_never_and_do_not_panic() {
-    // The longest `after` a description can say (a duration literal saturates at
-    // `u64::MAX` nanoseconds).
+    // The longest `after` a description can say (`u64::MAX` nanoseconds; a longer
+    // duration literal is an error).
     let rig = rig_with_after(Timers::Never);
     rig.run_busy();
     let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
