@@ -104,7 +104,9 @@ pub struct Monitor {
     pub overruns: u64,
     /// Packets lost at this component's inputs, all ports together.
     pub overflows: u64,
-    /// Packets lost per input port, in declaration order.
+    /// Packets lost per input port, in declaration order; a proxy adds what the
+    /// remote instance lost at its inputs, and `@network`, what was lost on the way
+    /// back from it (`docs/distribution.md`).
     pub port_overflows: Vec<(String, u64)>,
     /// The quality level (0 = best).
     pub quality: usize,
@@ -514,11 +516,19 @@ impl Shared {
         }
     }
 
+    /// `lost` packets lost at input `port`, `total` by the input's own count; the
+    /// event's total also has what [`Shared::add_overflows`] counted there, as the
+    /// snapshot does, so that totals never go back.
     pub(crate) fn announce_overflow(&self, port: &'static str, lost: u64, total: u64) {
+        let elsewhere = lock(&self.monitor)
+            .port_overflows
+            .iter()
+            .find(|(name, _)| name == port)
+            .map_or(0, |(_, n)| *n);
         self.publish(MonitorEvent::Overflow {
             port: port.to_owned(),
             lost,
-            total,
+            total: total + elsewhere,
         });
     }
 

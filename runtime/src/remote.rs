@@ -373,7 +373,8 @@ impl Automaton for Proxy {
 
     fn start(&mut self, cx: &mut Context) -> Result<(), Fault> {
         if self.end.needs_instance() {
-            // A new remote instance counts its losses from 0 again.
+            // A new remote instance: its view and loss counts start again.
+            self.view = None;
             self.applied.clear();
             self.end
                 .instantiate(cx.waker())

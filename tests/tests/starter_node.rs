@@ -385,7 +385,10 @@ fn heard(listed: &[Listed]) -> Option<u64> {
 
 /// Waits until the sink has heard more than it had when this was called.
 fn hears_on(ctl: &Ctl, what: &str) {
-    let before = heard(&ctl.components(None).unwrap_or_default()).unwrap_or(0);
+    // What it has heard so far, read from a listing that shows the sink (a listing
+    // that missed it would make any count look new).
+    let before = heard(&wait_list(ctl, what, |listed| heard(listed).is_some()))
+        .expect("the listing shows the sink");
     wait_list(ctl, what, |listed| {
         heard(listed).is_some_and(|now| now > before + 5)
     });

@@ -558,10 +558,13 @@ fn serve(
     }
     // Check every wire before building anything.
     for wire in &request.wires {
-        let (port, output) = match wire {
-            Wire::Input { port, .. } => (port, false),
-            Wire::Output { port, .. } => (port, true),
+        let (port, key, output) = match wire {
+            Wire::Input { port, key } => (port, key, false),
+            Wire::Output { port, key, .. } => (port, key, true),
         };
+        // Not under `coolbot/`: a requester must not make this node publish, or
+        // answer, on another component's monitoring or control keys.
+        keys::check_bridge_key(key).map_err(|error| error.to_string())?;
         let declared = if output {
             spec.output_index(port).is_some()
         } else {

@@ -104,6 +104,11 @@ pub fn check_bridge_key(key: &str) -> Result<(), Error> {
     if key.split('/').any(|chunk| chunk.starts_with('@')) {
         return Err(invalid("`@` chunks are reserved for the bridge's own keys"));
     }
+    if key.split('/').next() == Some(ROOT) {
+        return Err(invalid(
+            "the keys under `coolbot/` are the nodes' own (monitoring, control, agents)",
+        ));
+    }
     Ok(())
 }
 
@@ -135,7 +140,15 @@ mod tests {
     #[test]
     fn bridge_keys_are_checked() {
         assert!(check_bridge_key("robot/pose").is_ok());
-        for bad in ["robot/*", "robot/**", "a/@x", "", "a//b", "/a"] {
+        for bad in [
+            "robot/*",
+            "robot/**",
+            "a/@x",
+            "",
+            "a//b",
+            "/a",
+            "coolbot/robot/x/c",
+        ] {
             assert!(check_bridge_key(bad).is_err(), "{bad}");
         }
     }

@@ -439,7 +439,7 @@ fn waking_on_loss(deliver: DeliverFn, losses: TickIn, shared: Arc<Shared>) -> De
 }
 
 /// The pseudo-port at which a proxy's monitor counts messages lost on the network.
-const NETWORK: &str = "network";
+const NETWORK: &str = "@network";
 
 /// Apply one monitoring event to the mirrored view (what a proxy mirrors).
 fn mirror(view: &mut Monitor, event: MonitorEvent) {
@@ -475,7 +475,10 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
 
 impl RemoteEnd for End {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
-        self.losses_before = self.network_losses();
+        // What the last generation's view had not reported yet is reported with this
+        // generation's: nothing lost on the network goes uncounted.
+        self.losses_before += self.reported_losses;
+        self.reported_losses = 0;
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
         if self.generation > 0 {
@@ -510,9 +513,11 @@ impl RemoteEnd for End {
                 Err(error) => return Err(error.to_string()),
             }
         }
+        // Built there; until its snapshot came, not taken as built (the next start
+        // builds another generation, and sends this one to `dead` first).
+        let snapshot = self.snapshot()?;
         self.instantiated = true;
         *lock(&self.shared.lost) = None;
-        let snapshot = self.snapshot()?;
         *lock(&self.shared.view) = Some(snapshot);
         self.shared.changed.store(true, Ordering::Release);
         // A poster's current value, for the proxy's readers.

@@ -585,8 +585,20 @@ fn component_pattern(pattern: &str) -> Result<(&str, String), String> {
 /// A bridge key in a `publish` rule: a key expression (wildcards allowed) without `@`
 /// chunks.
 fn publish_pattern(key: &str) -> Result<(), String> {
-    zenoh::key_expr::KeyExpr::try_from(key)
+    let expr = zenoh::key_expr::KeyExpr::try_from(key)
         .map_err(|error| format!("publish `{key}`: not a key expression: {error}"))?;
+    // The node keys (monitoring, control, shapes, agents) are granted by name and
+    // `command`/`instantiate` rules only: a publish rule that reached them (`**`,
+    // `coolbot/**`) would let its nodes, and every peer's queries, in there.
+    let nodes = zenoh::key_expr::KeyExpr::try_from(format!("{}/**", keys::ROOT))
+        .map_err(|error| format!("the node keys: {error}"))?;
+    if expr.intersects(&nodes) || key == keys::ROOT {
+        return Err(format!(
+            "publish `{key}`: it reaches the node keys under `{}/`, which only `command` and \
+             `instantiate` rules open; name the bridge keys (e.g. `coolbot-link/**`)",
+            keys::ROOT
+        ));
+    }
     if key.split('/').any(|chunk| chunk.starts_with('@')) {
         return Err(format!(
             "publish `{key}`: `@` chunks are the bridge's own keys; name the bridge key"
@@ -720,6 +732,22 @@ mod tests {
         );
         assert!(rule("nodes = [\"a\"]\npublish = [\"k/@pull\"]").is_err());
         assert!(rule("nodes = [\"a\"]\npublish = [\"k//x\"]").is_err());
+        // A publish pattern that reaches the node keys would open them to its nodes
+        // (put, answer) and to every peer's queries (commands included).
+        for reaching in [
+            "**",
+            "coolbot/**",
+            "*/robot/**",
+            "coolbot",
+            "coolbot/robot/x/c",
+        ] {
+            let error = rule(&format!("nodes = [\"a\"]\npublish = [\"{reaching}\"]")).unwrap_err();
+            assert!(error.contains("node keys"), "{reaching}: {error}");
+        }
+        assert_eq!(
+            rule("nodes = [\"a\"]\npublish = [\"coolbot-link/**\"]"),
+            Ok(())
+        );
         assert_eq!(
             rule("nodes = [\"a\"]\ncommand = [\"*/base.*\", \"r/*\"]\npublish = [\"k/**\"]"),
             Ok(())

@@ -280,7 +280,7 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
         wait_until(PATIENCE, || proxy
             .snapshot()
             .port_overflows
-            .contains(&("network".to_owned(), 1))),
+            .contains(&("@network".to_owned(), 1))),
         "{:?}",
         proxy.snapshot()
     );
@@ -302,7 +302,7 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
         )
     };
     assert_eq!(at("fi"), (4, Some(4)), "{announced:?}");
-    assert_eq!(at("network"), (1, Some(1)), "{announced:?}");
+    assert_eq!(at("@network"), (1, Some(1)), "{announced:?}");
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }

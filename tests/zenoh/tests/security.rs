@@ -456,7 +456,7 @@ fn queryables_answer_only_under_their_own_name() {
         .expect("a queryable");
     let _forged_token = session
         .liveliness()
-        .declare_token("coolbot/ghost")
+        .declare_token("coolbot/station/ghost")
         .wait()
         .expect("a token");
     let real_info = keys::info("station", "logger");
@@ -559,7 +559,7 @@ fn queryables_answer_only_under_their_own_name() {
         tokens.iter().any(|key| key == "coolbot/mallory/ghost")
     }));
     assert!(
-        !tokens.iter().any(|key| key == "coolbot/ghost"),
+        !tokens.iter().any(|key| key == "coolbot/station/ghost"),
         "{tokens:?}"
     );
     assert!(
