@@ -11,6 +11,8 @@ pub mod generated {
     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
 }
 
+pub mod adapt;
+pub mod supervision;
 pub mod support;
 
 pub use generated::{feeder, worker};
