@@ -12,6 +12,7 @@ pub mod generated {
 }
 
 pub mod adapt;
+pub mod equalize;
 pub mod supervision;
 pub mod support;
 
