@@ -13,6 +13,7 @@ pub mod generated {
 
 pub mod adapt;
 pub mod equalize;
+pub mod record;
 pub mod supervision;
 pub mod support;
 
