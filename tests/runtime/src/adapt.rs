@@ -137,7 +137,7 @@ pub fn planned_sleeper(name: &str, load: &Arc<Load>) -> Component {
 /// Detection tuned for tests: quick verdicts, a strict spare test; spare time judged
 /// from the sections alone and no equalization, so that the outcomes do not depend on
 /// what else the machine runs (the idle probe and equalization have tests of their
-/// own: `runtime/src/idle.rs`, `runtime/src/adapt.rs`, `tests/equalize.rs`).
+/// own: `runtime/src/idle.rs`, `runtime/src/adapt.rs`, `equalize.rs`).
 pub fn quick() -> AdaptConfig {
     AdaptConfig {
         violations: 2,
