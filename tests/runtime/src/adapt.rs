@@ -10,7 +10,9 @@ use std::time::Duration;
 use coolbot::adapt::AdaptAction;
 use coolbot::{AdaptConfig, Adaptation, Component, Handle, Monitor, SectionResult, TimingSpec};
 
-use crate::generated::{adapt_fixed_sleeper, adapt_planned_sleeper, adapt_sleeper};
+use crate::generated::{
+    adapt_fixed_sleeper, adapt_planned_sleeper, adapt_sleeper, adapt_steady_sleeper,
+};
 
 /// Generous: the machine is shared and loaded.
 pub const WAIT: Duration = Duration::from_secs(60);
@@ -104,6 +106,13 @@ impl adapt_fixed_sleeper::Behavior for Sleeping {
     }
 }
 
+impl adapt_steady_sleeper::Behavior for Sleeping {
+    fn work_periodic(&mut self, cx: &mut adapt_steady_sleeper::Cx<'_>) -> SectionResult {
+        self.work(cx.rt);
+        Ok(())
+    }
+}
+
 impl adapt_planned_sleeper::Behavior for Sleeping {
     fn work_periodic(&mut self, cx: &mut adapt_planned_sleeper::Cx<'_>) -> SectionResult {
         self.work(cx.rt);
@@ -127,6 +136,11 @@ pub fn sleeper(name: &str, load: &Arc<Load>) -> Component {
 /// An `AdaptFixedSleeper` named `name`.
 pub fn fixed_sleeper(name: &str, load: &Arc<Load>) -> Component {
     adapt_fixed_sleeper::component(name, Sleeping::new(load))
+}
+
+/// An `AdaptSteadySleeper` named `name`.
+pub fn steady_sleeper(name: &str, load: &Arc<Load>) -> Component {
+    adapt_steady_sleeper::component(name, Sleeping::new(load))
 }
 
 /// An `AdaptPlannedSleeper` named `name`.

@@ -9,9 +9,9 @@ use std::sync::atomic::Ordering;
 use coolbot::adapt::AdaptAction;
 use coolbot::{AdaptConfig, Command, MonitorEvent, Pressure, System};
 use coolbot_runtime_tests::adapt::{
-    Load, eventually, fixed_sleeper, moves, ms, quick, sleeper, wait,
+    Load, eventually, fixed_sleeper, moves, ms, quick, sleeper, steady_sleeper, wait,
 };
-use coolbot_runtime_tests::generated::{adapt_fixed_sleeper, adapt_sleeper};
+use coolbot_runtime_tests::generated::adapt_sleeper;
 
 /// At quality 0 the section sleeps 45 ms (longer than the longest period, 40 ms), at
 /// quality 1 25 ms (within 40 ms, and not spare at ratio 0.5).
@@ -198,12 +198,7 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
     let handle = system
         .add(sleeper("s", &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
-    let fixed = system
-        .add(fixed_sleeper("f", &load).with_timing(coolbot::TimingSpec {
-            qualities: &[],
-            ..adapt_fixed_sleeper::SPEC.timing
-        }))
-        .expect("add");
+    let fixed = system.add(steady_sleeper("f", &load)).expect("add");
     system.run_all().expect("run");
     handle.command(Command::SetDegradation(4)).expect("level 4");
     let monitor = handle.snapshot();
