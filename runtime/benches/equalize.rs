@@ -9,7 +9,7 @@
 //! `cargo bench -p coolbot --bench equalize` (add `-- --quick` for a smoke run).
 
 #[cfg(target_os = "linux")]
-#[path = "../tests/equalize_common/mod.rs"]
+#[path = "equalize_common/mod.rs"]
 mod equalize_common;
 
 #[cfg(target_os = "linux")]

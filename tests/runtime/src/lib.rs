@@ -11,6 +11,10 @@ pub mod generated {
     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
 }
 
+pub mod adapt;
+pub mod equalize;
+pub mod record;
+pub mod supervision;
 pub mod support;
 
 pub use generated::{feeder, worker};

@@ -334,6 +334,14 @@ pub struct Tap {
     ports: crossbeam_channel::Sender<Feeder>,
 }
 
+impl Tap {
+    /// A tap, and where the `Feeder` running it hands its ports over when it starts.
+    pub fn new() -> (Tap, Receiver<Feeder>) {
+        let (ports, handed) = crossbeam_channel::bounded(1);
+        (Tap { ports }, handed)
+    }
+}
+
 impl feeder::Behavior for Tap {
     fn start(&mut self, cx: &mut feeder::Cx<'_>) -> SectionResult {
         let _ = self.ports.send(Feeder {

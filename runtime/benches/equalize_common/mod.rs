@@ -1,5 +1,6 @@
-//! Two periodic components that start in phase on one core (the equalization test and
-//! bench): each section spins until its thread used `WORK` of CPU time and records how
+//! Two periodic components that start in phase on one core (the equalization bench;
+//! the test, `tests/runtime/tests/equalize.rs`, runs the same on generated components):
+//! each section spins until its thread used `WORK` of CPU time and records how
 //! late it started against its deadline (`Context::deadline`) and how late it ended.
 
 use std::sync::{Arc, Mutex};
@@ -47,7 +48,7 @@ static SPINNER: Spec = Spec {
 pub type Starts = Arc<Mutex<Vec<(Instant, Duration, Duration)>>>;
 
 /// How many sections `starts` holds.
-#[allow(dead_code, reason = "the bench does not count")]
+#[allow(dead_code, reason = "the bench does not count (the test's copy does)")]
 pub fn count(starts: &Starts) -> usize {
     starts
         .lock()

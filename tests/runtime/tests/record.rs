@@ -13,189 +13,14 @@ use coolbot::record::{
     self, NOT_SERIALIZABLE, Pace, Player, QUEUE_FULL, ReadError, Reader, Record, RecordError,
     Recorder,
 };
-use coolbot::{
-    Automaton, Command, Component, CompoundBuilder, Context, Controllable, Fault, InputKind,
-    InputSpec, MonitorEvent, OutputKind, OutputSpec, OverflowPolicy, PortSet, Section,
-    SectionResult, Spec, State, StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value,
+use coolbot::{Command, Component, Controllable, MonitorEvent, SectionResult, State, System};
+use coolbot_runtime_tests::generated::{
+    record_holder, record_poster_source, record_sink, record_source,
 };
-use serde::ser::{Error as _, SerializeStruct};
-use serde::{Deserialize, Serialize, Serializer};
+use coolbot_runtime_tests::record::{Hook, Sample, sample};
 
 /// How long tests wait for anything (generous: the machine is shared).
 const WAIT: Duration = Duration::from_secs(20);
-
-/// What the recorder's thread does when it serializes a sample that carries one.
-#[derive(Debug)]
-struct Hook {
-    /// Fail to serialize.
-    fail: bool,
-    /// Told when serialization starts.
-    entered: Sender<()>,
-    /// Serialization waits for this (or its sender's drop).
-    release: Receiver<()>,
-}
-
-/// The packet type of the tests.
-#[derive(Clone, Debug, Deserialize)]
-struct Sample {
-    n: u64,
-    label: String,
-    #[serde(skip)]
-    hook: Option<Arc<Hook>>,
-}
-
-impl PartialEq for Sample {
-    fn eq(&self, other: &Sample) -> bool {
-        self.n == other.n && self.label == other.label
-    }
-}
-
-impl Serialize for Sample {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        if let Some(hook) = &self.hook {
-            if hook.fail {
-                return Err(S::Error::custom("a sample that refuses to serialize"));
-            }
-            let _ = hook.entered.send(());
-            let _ = hook.release.recv_timeout(WAIT);
-        }
-        let mut fields = serializer.serialize_struct("Sample", 2)?;
-        fields.serialize_field("n", &self.n)?;
-        fields.serialize_field("label", &self.label)?;
-        fields.end()
-    }
-}
-
-fn sample(n: u64) -> Sample {
-    Sample {
-        n,
-        label: format!("sample {n}"),
-        hook: None,
-    }
-}
-
-const IDLE: &[StateSpec] = &[StateSpec {
-    name: "idle",
-    entry: false,
-    exit: false,
-    periodic: None,
-    on: &[],
-    after: &[],
-    may: &[],
-}];
-
-static SOURCE: Spec = Spec {
-    type_name: "Source",
-    doc: "Sends what the test sends.",
-    states: IDLE,
-    initial: 0,
-    inputs: &[],
-    outputs: &[
-        OutputSpec {
-            name: "out",
-            kind: OutputKind::Data,
-            packet: "Sample",
-            pull: false,
-        },
-        OutputSpec {
-            name: "beat",
-            kind: OutputKind::Tick,
-            packet: "",
-            pull: false,
-        },
-    ],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-static SINK: Spec = Spec {
-    type_name: "Sink",
-    doc: "Queues what arrives; the test reads it.",
-    states: IDLE,
-    initial: 0,
-    inputs: &[
-        InputSpec {
-            name: "data",
-            kind: InputKind::Fifo {
-                capacity: 100_000,
-                policy: OverflowPolicy::Reject,
-            },
-            packet: "Sample",
-            pull: false,
-        },
-        InputSpec {
-            name: "beat",
-            kind: InputKind::Tick,
-            packet: "",
-            pull: false,
-        },
-    ],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-static SUPERVISOR: Spec = Spec {
-    type_name: "Holder",
-    doc: "A compound holding a source.",
-    states: IDLE,
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-/// A component with no behaviour of its own: its ports are driven by the test.
-struct Inert(&'static Spec);
-
-impl Automaton for Inert {
-    fn spec(&self) -> &'static Spec {
-        self.0
-    }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("nothing to set".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
-    }
-}
-
-struct Idle;
-
-impl Supervisor for Idle {
-    fn spec(&self) -> &'static Spec {
-        &SUPERVISOR
-    }
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut SupervisorCx<'_>,
-    ) -> SectionResult {
-        Ok(())
-    }
-}
 
 /// The test's ends of a source's outputs (`out`, `beat`).
 struct Outputs {
@@ -209,25 +34,60 @@ struct Inputs {
     beat: TickIn,
 }
 
-fn source(name: &str) -> (Component, Outputs) {
-    let outputs = Outputs {
-        out: DataOut::new(),
-        beat: TickOut::new(),
-    };
-    let ports = PortSet::new().output(&outputs.out).output(&outputs.beat);
-    (
-        Component::new(name, Box::new(Inert(&SOURCE)), ports),
-        outputs,
-    )
+/// A `RecordSource`'s behaviour: it hands clones of its outputs to the test when it
+/// starts.
+struct HandOutputs(Sender<Outputs>);
+
+impl record_source::Behavior for HandOutputs {
+    fn start(&mut self, cx: &mut record_source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(Outputs {
+            out: cx.outputs.out.clone(),
+            beat: cx.outputs.beat.clone(),
+        });
+        Ok(())
+    }
 }
 
-fn sink(name: &str) -> (Component, Inputs) {
-    let inputs = Inputs {
-        data: FifoIn::new(100_000, OverflowPolicy::Reject),
-        beat: TickIn::new(),
-    };
-    let ports = PortSet::new().input(&inputs.data).input(&inputs.beat);
-    (Component::new(name, Box::new(Inert(&SINK)), ports), inputs)
+/// A `RecordSink`'s behaviour: it hands clones of its inputs to the test when it
+/// starts.
+struct HandInputs(Sender<Inputs>);
+
+impl record_sink::Behavior for HandInputs {
+    fn start(&mut self, cx: &mut record_sink::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(Inputs {
+            data: cx.inputs.data.clone(),
+            beat: cx.inputs.beat.clone(),
+        });
+        Ok(())
+    }
+}
+
+/// A `RecordPosterSource`'s behaviour: it hands a clone of its poster to the test.
+struct HandPoster(Sender<PosterOut<Sample>>);
+
+impl record_poster_source::Behavior for HandPoster {
+    fn start(&mut self, cx: &mut record_poster_source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.map.clone());
+        Ok(())
+    }
+}
+
+/// What a handing behaviour handed over (once its component has started).
+fn handed<T>(from: &Receiver<T>) -> T {
+    from.recv_timeout(WAIT)
+        .expect("the component hands its ports over when it starts")
+}
+
+/// A `RecordSource` named `name`, and where it hands its outputs over.
+fn source(name: &str) -> (Component, Receiver<Outputs>) {
+    let (hand, outputs) = crossbeam_channel::bounded(1);
+    (record_source::component(name, HandOutputs(hand)), outputs)
+}
+
+/// A `RecordSink` named `name`, and where it hands its inputs over.
+fn sink(name: &str) -> (Component, Receiver<Inputs>) {
+    let (hand, inputs) = crossbeam_channel::bounded(1);
+    (record_sink::component(name, HandInputs(hand)), inputs)
 }
 
 /// A running system with a source `src` and a sink `sink` (not connected).
@@ -238,7 +98,7 @@ fn bench_with_ticks() -> (System, Outputs, Inputs) {
     system.add(src).expect("add src");
     system.add(consumer).expect("add sink");
     system.run_all().expect("run");
-    (system, outputs, inputs)
+    (system, handed(&outputs), handed(&inputs))
 }
 
 /// [`bench_with_ticks`], data ports only.
@@ -564,14 +424,29 @@ fn mistakes_are_clear_errors() {
     assert_eq!(record::FORMAT_VERSION, 2);
 }
 
+/// `RecordHolder`'s supervisor has no sections.
+struct Holds;
+
+impl record_holder::Supervisor for Holds {}
+
+/// `RecordHolder`'s parts: its source hands its outputs over.
+struct Holding(Option<HandOutputs>);
+
+impl record_holder::Parts for Holding {
+    fn supervisor(&mut self) -> impl record_holder::Supervisor {
+        Holds
+    }
+
+    fn src(&mut self) -> impl record_source::Behavior {
+        self.0.take().expect("one source")
+    }
+}
+
 #[test]
 fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
-    let (inner, Outputs { out, .. }) = source("src");
-    let compound = CompoundBuilder::new("base", Idle)
-        .instance(inner)
-        .export_output::<Sample>("out", "src.out")
-        .build()
-        .expect("build");
+    let (hand, outputs) = crossbeam_channel::bounded(1);
+    let compound =
+        record_holder::component("base", Holding(Some(HandOutputs(hand)))).expect("build");
     let mut system = System::new();
     system.add(compound).expect("add");
     system.start().expect("start");
@@ -594,6 +469,7 @@ fn ports_and_monitors_inside_a_compound_are_reached_by_path() {
         .and_then(|h| h.instance("src"))
         .expect("src");
     inner.wait_state(State::Running, WAIT).expect("running");
+    let Outputs { out, .. } = handed(&outputs);
     for n in 0..50 {
         out.send(sample(n));
     }
@@ -709,35 +585,15 @@ fn a_recording_dropped_after_its_system_still_ends_its_file() {
     );
 }
 
-static POSTER_SOURCE: Spec = Spec {
-    type_name: "PosterSource",
-    doc: "Posts what the test posts.",
-    states: IDLE,
-    initial: 0,
-    inputs: &[],
-    outputs: &[OutputSpec {
-        name: "map",
-        kind: OutputKind::Poster,
-        packet: "Sample",
-        pull: false,
-    }],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
 #[test]
 fn every_post_of_a_tapped_poster_output_is_recorded_or_counted() {
-    let map = PosterOut::<Sample>::new();
+    let (hand, poster) = crossbeam_channel::bounded(1);
     let mut system = System::new();
     system
-        .add(Component::new(
-            "src",
-            Box::new(Inert(&POSTER_SOURCE)),
-            PortSet::new().output(&map),
-        ))
+        .add(record_poster_source::component("src", HandPoster(hand)))
         .expect("add src");
     system.run_all().expect("run");
+    let map = handed(&poster);
     let path = temp_file("poster.mcap");
     let mut recorder = Recorder::new().capacity(4);
     recorder

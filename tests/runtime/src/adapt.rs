@@ -1,17 +1,17 @@
-//! A periodic component whose section sleeps for a time set per quality level by the
-//! test (the simulated work), so that time violations do not depend on the machine's
-//! load; and the waits the adaptation tests share.
-
-#![allow(dead_code, reason = "each test crate uses part of this module")]
+//! The adaptation tests' shared parts (`adapt.rs`, `adapt_hierarchy.rs`): the
+//! behaviour of the periodic sleepers of `cool/adapt.cool`, whose section sleeps for a
+//! time set per quality level by the test (the simulated work), so that time
+//! violations do not depend on the machine's load; and the waits the tests share.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use coolbot::adapt::AdaptAction;
-use coolbot::{
-    AdaptConfig, Adaptation, Automaton, Component, Context, Fault, Handle, Monitor, PeriodicSpec,
-    PortSet, Section, SectionResult, Spec, StateSpec, TimingSpec, Value,
+use coolbot::{AdaptConfig, Adaptation, Component, Handle, Monitor, SectionResult, TimingSpec};
+
+use crate::generated::{
+    adapt_fixed_sleeper, adapt_planned_sleeper, adapt_sleeper, adapt_steady_sleeper,
 };
 
 /// Generous: the machine is shared and loaded.
@@ -35,7 +35,8 @@ pub struct Load {
     pub last_period: AtomicU64,
     /// Busy-wait instead of sleeping (CPU work rather than waiting).
     pub spin: std::sync::atomic::AtomicBool,
-    /// Raise the spec's first exception once, in the next section.
+    /// Raise the component's exception (`AdaptPlannedSleeper`'s `noisy`) once, in the
+    /// next section.
     pub fault: std::sync::atomic::AtomicBool,
 }
 
@@ -56,68 +57,20 @@ impl Load {
     }
 }
 
-const WORK: &[StateSpec] = &[StateSpec {
-    name: "work",
-    entry: false,
-    exit: false,
-    periodic: Some(PeriodicSpec { period: None }),
-    on: &[],
-    after: &[],
-    may: &[],
-}];
-
-/// A 10 ms period that may stretch to 40 ms, two quality levels.
-pub static SLEEPER: Spec = Spec {
-    type_name: "Sleeper",
-    doc: "Sleeps in its periodic section.",
-    states: WORK,
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec {
-        period: Some(ms(10)),
-        max_period: Some(ms(40)),
-        max_response: None,
-        priority: 0,
-        qualities: &["full", "reduced"],
-    },
-};
-
-/// The same without a period interval (10 ms, quality levels only).
-pub static FIXED: Spec = Spec {
-    timing: TimingSpec {
-        max_period: None,
-        ..SLEEPER.timing
-    },
-    ..SLEEPER
-};
-
-/// [`SLEEPER`] with an exception whose continuity plan is `{ degrade; }`.
-pub static PLANNED: Spec = Spec {
-    exceptions: &[coolbot::ExceptionSpec {
-        name: "noisy",
-        description: "the readings are too noisy at this quality",
-        plan: &[coolbot::PlanStep::Degrade],
-    }],
-    ..SLEEPER
-};
-
-struct Sleeper {
-    spec: &'static Spec,
+/// The sleepers' behaviour: each periodic section sleeps (or spins) for the work
+/// `load` sets for the quality level it runs at, and records what it saw.
+pub struct Sleeping {
     load: Arc<Load>,
 }
 
-impl Automaton for Sleeper {
-    fn spec(&self) -> &'static Spec {
-        self.spec
+impl Sleeping {
+    pub fn new(load: &Arc<Load>) -> Sleeping {
+        Sleeping {
+            load: Arc::clone(load),
+        }
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(&mut self, _state: usize, _section: Section, cx: &mut Context) -> SectionResult {
+
+    fn work(&mut self, cx: &mut coolbot::Context) {
         let quality = cx.quality().min(2);
         let period = cx.period().unwrap_or_default();
         let micros = u64::try_from(period.as_micros()).unwrap_or(u64::MAX);
@@ -136,45 +89,69 @@ impl Automaton for Sleeper {
             std::thread::sleep(Duration::from_micros(work));
         }
         self.load.runs.fetch_add(1, Ordering::SeqCst);
-        if !self.spec.exceptions.is_empty() && self.load.fault.swap(false, Ordering::SeqCst) {
-            return Err(Fault::exception(0, "too noisy"));
-        }
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 
-/// A sleeper named `name` on `spec`.
-pub fn sleeper(name: &str, spec: &'static Spec, load: &Arc<Load>) -> Component {
-    Component::new(
-        name,
-        Box::new(Sleeper {
-            spec,
-            load: Arc::clone(load),
-        }),
-        PortSet::new(),
-    )
+impl adapt_sleeper::Behavior for Sleeping {
+    fn work_periodic(&mut self, cx: &mut adapt_sleeper::Cx<'_>) -> SectionResult {
+        self.work(cx.rt);
+        Ok(())
+    }
+}
+
+impl adapt_fixed_sleeper::Behavior for Sleeping {
+    fn work_periodic(&mut self, cx: &mut adapt_fixed_sleeper::Cx<'_>) -> SectionResult {
+        self.work(cx.rt);
+        Ok(())
+    }
+}
+
+impl adapt_steady_sleeper::Behavior for Sleeping {
+    fn work_periodic(&mut self, cx: &mut adapt_steady_sleeper::Cx<'_>) -> SectionResult {
+        self.work(cx.rt);
+        Ok(())
+    }
+}
+
+impl adapt_planned_sleeper::Behavior for Sleeping {
+    fn work_periodic(&mut self, cx: &mut adapt_planned_sleeper::Cx<'_>) -> SectionResult {
+        self.work(cx.rt);
+        if self.load.fault.swap(false, Ordering::SeqCst) {
+            return Err(coolbot::Fault::exception(
+                adapt_planned_sleeper::Exception::Noisy.index(),
+                "too noisy",
+            ));
+        }
+        Ok(())
+    }
+
+    fn on_noisy(&mut self, _cx: &mut adapt_planned_sleeper::Cx<'_>, _message: &str) {}
+}
+
+/// An `AdaptSleeper` named `name`.
+pub fn sleeper(name: &str, load: &Arc<Load>) -> Component {
+    adapt_sleeper::component(name, Sleeping::new(load))
+}
+
+/// An `AdaptFixedSleeper` named `name`.
+pub fn fixed_sleeper(name: &str, load: &Arc<Load>) -> Component {
+    adapt_fixed_sleeper::component(name, Sleeping::new(load))
+}
+
+/// An `AdaptSteadySleeper` named `name`.
+pub fn steady_sleeper(name: &str, load: &Arc<Load>) -> Component {
+    adapt_steady_sleeper::component(name, Sleeping::new(load))
+}
+
+/// An `AdaptPlannedSleeper` named `name`.
+pub fn planned_sleeper(name: &str, load: &Arc<Load>) -> Component {
+    adapt_planned_sleeper::component(name, Sleeping::new(load))
 }
 
 /// Detection tuned for tests: quick verdicts, a strict spare test; spare time judged
 /// from the sections alone and no equalization, so that the outcomes do not depend on
 /// what else the machine runs (the idle probe and equalization have tests of their
-/// own: `src/idle.rs`, `src/adapt.rs`, `tests/equalize.rs`).
+/// own: `runtime/src/idle.rs`, `runtime/src/adapt.rs`, `equalize.rs`).
 pub fn quick() -> AdaptConfig {
     AdaptConfig {
         violations: 2,
@@ -213,42 +190,14 @@ pub fn eventually(what: &str, f: impl Fn() -> bool) {
     }
 }
 
-/// A supervisor with one state and no sections: the compound only coordinates.
-pub struct Plain;
-
-static PLAIN: Spec = Spec {
-    type_name: "Group",
-    doc: "",
-    states: &[StateSpec {
-        name: "supervising",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-impl coolbot::Supervisor for Plain {
-    fn spec(&self) -> &'static Spec {
-        &PLAIN
-    }
-}
-
-/// A sleeper on [`SLEEPER`] with priority `priority` (negative: a nice value, which
-/// any process may set) and the quick detection settings.
+/// An `AdaptSleeper` with priority `priority` (negative: a nice value, which any
+/// process may set; a description's priorities are `0..=99`) and the quick detection
+/// settings.
 pub fn member(name: &str, priority: i32, load: &Arc<Load>) -> Component {
-    sleeper(name, &SLEEPER, load)
+    sleeper(name, load)
         .with_timing(TimingSpec {
             priority,
-            ..SLEEPER.timing
+            ..adapt_sleeper::SPEC.timing
         })
         .with_adaptation(quick())
 }

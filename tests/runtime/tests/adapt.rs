@@ -4,13 +4,14 @@
 //! The work is simulated with sleeps proportional to the quality level, so violations
 //! do not depend on the machine's load; the tests assert outcomes, never timings.
 
-mod adapt_common;
-
 use std::sync::atomic::Ordering;
 
-use adapt_common::{FIXED, Load, SLEEPER, eventually, moves, ms, quick, sleeper, wait};
 use coolbot::adapt::AdaptAction;
 use coolbot::{AdaptConfig, Command, MonitorEvent, Pressure, System};
+use coolbot_runtime_tests::adapt::{
+    Load, eventually, fixed_sleeper, moves, ms, quick, sleeper, steady_sleeper, wait,
+};
+use coolbot_runtime_tests::generated::adapt_sleeper;
 
 /// At quality 0 the section sleeps 45 ms (longer than the longest period, 40 ms), at
 /// quality 1 25 ms (within 40 ms, and not spare at ratio 0.5).
@@ -23,7 +24,7 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
     load.set(HEAVY);
     let mut system = System::new();
     let handle = system
-        .add(sleeper("s", &SLEEPER, &load).with_adaptation(quick()))
+        .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
     let events = handle.subscribe();
     system.run_all().expect("run");
@@ -127,9 +128,9 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
     assert!(system.shutdown().clean());
 }
 
-/// The period of `level` on SLEEPER's nominal path (3 period steps).
+/// The period of `level` on `AdaptSleeper`'s nominal path (3 period steps).
 fn ladder_setting(level: u32) -> (Option<std::time::Duration>, usize) {
-    coolbot::adapt::Ladder::new(&SLEEPER.timing, 3).setting(level)
+    coolbot::adapt::Ladder::new(&adapt_sleeper::SPEC.timing, 3).setting(level)
 }
 
 #[test]
@@ -138,7 +139,7 @@ fn adaptation_turned_off_leaves_period_and_quality_alone() {
     load.set(HEAVY);
     let mut system = System::new();
     let handle = system
-        .add(sleeper("s", &SLEEPER, &load).with_adaptation(AdaptConfig::off()))
+        .add(sleeper("s", &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
     system.run_all().expect("run");
     eventually("ten sections", || load.runs() >= 10);
@@ -163,9 +164,9 @@ fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_qualit
     let load = Load::new();
     load.set([15, 1, 1]);
     let mut system = System::new();
-    let default = system.add(sleeper("d", &FIXED, &load)).expect("add");
+    let default = system.add(fixed_sleeper("d", &load)).expect("add");
     let asked = system
-        .add(sleeper("a", &FIXED, &load).with_adaptation(AdaptConfig {
+        .add(fixed_sleeper("a", &load).with_adaptation(AdaptConfig {
             enabled: Some(true),
             // Never spare: no promotion probe back to quality 0.
             spare_ratio: 0.0,
@@ -195,16 +196,9 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
     load.set(LIGHT);
     let mut system = System::new();
     let handle = system
-        .add(sleeper("s", &SLEEPER, &load).with_adaptation(AdaptConfig::off()))
+        .add(sleeper("s", &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
-    let fixed = system
-        .add(
-            sleeper("f", &FIXED, &load).with_timing(coolbot::TimingSpec {
-                qualities: &[],
-                ..FIXED.timing
-            }),
-        )
-        .expect("add");
+    let fixed = system.add(steady_sleeper("f", &load)).expect("add");
     system.run_all().expect("run");
     handle.command(Command::SetDegradation(4)).expect("level 4");
     let monitor = handle.snapshot();
@@ -268,10 +262,10 @@ fn the_load_profile_tells_computing_from_waiting() {
     spinning.spin.store(true, Ordering::SeqCst);
     let mut system = System::new();
     let waiter = system
-        .add(sleeper("sleeps", &SLEEPER, &sleeping).with_adaptation(quick()))
+        .add(sleeper("sleeps", &sleeping).with_adaptation(quick()))
         .expect("add");
     let computer = system
-        .add(sleeper("spins", &SLEEPER, &spinning).with_adaptation(quick()))
+        .add(sleeper("spins", &spinning).with_adaptation(quick()))
         .expect("add");
     system.run_all().expect("run");
     eventually("fifty sections each", || {
@@ -294,7 +288,9 @@ fn the_load_profile_tells_computing_from_waiting() {
 }
 
 /// The periods a component published, in order.
-fn periods(events: &crossbeam_channel::Receiver<MonitorEvent>) -> Vec<std::time::Duration> {
+fn periods(
+    events: &coolbot::crossbeam_channel::Receiver<MonitorEvent>,
+) -> Vec<std::time::Duration> {
     events
         .try_iter()
         .filter_map(|e| match e {
@@ -315,7 +311,7 @@ fn a_quality_set_by_other_means_is_kept_and_promotions_never_lengthen_the_period
     load.set(LIGHT);
     let mut system = System::new();
     let handle = system
-        .add(sleeper("s", &SLEEPER, &load).with_adaptation(quick()))
+        .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
     system.run_all().expect("run");
     handle.command(Command::SetQuality(1)).expect("quality");
@@ -371,7 +367,7 @@ fn a_quality_set_by_other_means_leaves_the_period_steps_to_degrade() {
     load.set([15, 15, 15]);
     let mut system = System::new();
     let handle = system
-        .add(sleeper("s", &SLEEPER, &load).with_adaptation(quick()))
+        .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
     system.run_all().expect("run");
     handle.command(Command::SetQuality(1)).expect("quality");
@@ -408,21 +404,17 @@ fn odd_adaptation_settings_are_clamped() {
     light.set(LIGHT);
     let mut system = System::new();
     let strict = system
-        .add(
-            sleeper("strict", &SLEEPER, &late).with_adaptation(AdaptConfig {
-                violations: 5,
-                window: 4,
-                ..quick()
-            }),
-        )
+        .add(sleeper("strict", &late).with_adaptation(AdaptConfig {
+            violations: 5,
+            window: 4,
+            ..quick()
+        }))
         .expect("add");
     let fine = system
-        .add(
-            sleeper("fine", &SLEEPER, &light).with_adaptation(AdaptConfig {
-                period_steps: u32::MAX,
-                ..AdaptConfig::off()
-            }),
-        )
+        .add(sleeper("fine", &light).with_adaptation(AdaptConfig {
+            period_steps: u32::MAX,
+            ..AdaptConfig::off()
+        }))
         .expect("a huge period_steps is not a panic");
     system.run_all().expect("run");
     let monitor = wait(&strict, "a violation", |m| m.adaptation.level > 0);

@@ -3,167 +3,147 @@
 //! leader's, and when the leader fails another member's output takes over with no
 //! packet of the stream missing and none doubled.
 
-mod support;
-
-use std::sync::Arc;
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn};
-use coolbot::{
-    Automaton, Component, CompoundBuilder, Context, Fault, InputKind, InputSpec, OnSpec,
-    OutputKind, OutputSpec, OverflowPolicy, PortSet, Section, Spec, StateSpec, Step, System,
-    TimingSpec, Value,
+use coolbot::{Component, SectionResult, Step, System};
+use coolbot_runtime_tests::generated::types::Converters;
+use coolbot_runtime_tests::generated::{
+    block_pair, converted_pair, converted_substituted_consumer, quick_block_pair, red_block_relay,
+    red_relay, red_sink, red_source, redundant_pair, substituted_consumer,
 };
-use support::WAIT;
-use support::shell::{Idle, ShellBuilder, input, output};
+use coolbot_runtime_tests::support::{self, WAIT};
 
-const QUEUE: usize = 4096;
-
-/// A reactive relay: each packet that arrives at `input` is sent on `output`; while
-/// `fail` is set, its next section fails instead.
-static RELAY: Spec = Spec {
-    type_name: "Relay",
-    doc: "",
-    states: &[StateSpec {
-        name: "relaying",
-        entry: true,
-        exit: false,
-        periodic: None,
-        on: &[OnSpec { port: 0, target: 0 }],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[InputSpec {
-        name: "input",
-        kind: InputKind::Fifo {
-            capacity: QUEUE,
-            policy: OverflowPolicy::Reject,
-        },
-        packet: "u64",
-        pull: false,
-    }],
-    outputs: &[OutputSpec {
-        name: "output",
-        kind: OutputKind::Data,
-        packet: "u64",
-        pull: false,
-    }],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-struct Relay {
-    spec: &'static Spec,
-    input: FifoIn<u64>,
-    output: DataOut<u64>,
-    fail: Arc<AtomicBool>,
-    /// While set, its next section hangs (until it is cleared, or `fail` is set).
-    hold: Arc<AtomicBool>,
-    relayed: Arc<AtomicU64>,
-}
-
-impl Automaton for Relay {
-    fn spec(&self) -> &'static Spec {
-        self.spec
-    }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        if self.fail.swap(false, Ordering::SeqCst) {
-            return Err(Fault::message("injected"));
-        }
-        while self.hold.load(Ordering::SeqCst) {
-            if self.fail.swap(false, Ordering::SeqCst) {
-                return Err(Fault::message("injected while hung"));
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        for packet in self.input.drain() {
-            self.relayed.fetch_add(1, Ordering::SeqCst);
-            self.output.send(packet);
-        }
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
-    }
-}
-
-/// The relay with a small `Block` fifo: a producer waits while it is full.
+/// `RedBlockRelay`'s `block` fifo.
 const BLOCK_QUEUE: usize = 4;
 
-static BLOCK_RELAY: Spec = Spec {
-    type_name: "BlockRelay",
-    inputs: &[InputSpec {
-        name: "input",
-        kind: InputKind::Fifo {
-            capacity: BLOCK_QUEUE,
-            policy: OverflowPolicy::Block,
-        },
-        packet: "u64",
-        pull: false,
-    }],
-    ..RELAY
-};
-
+/// What the test holds of one relay (`RedRelay` or `RedBlockRelay`): while `fail`
+/// is set, its next section fails instead; while `hold` is set, its next section
+/// hangs (until it is cleared, or `fail` is set); `relayed` counts what it sent.
+#[derive(Clone, Default)]
 struct Member {
     fail: Arc<AtomicBool>,
     hold: Arc<AtomicBool>,
     relayed: Arc<AtomicU64>,
 }
 
-fn relay(name: &str) -> (Component, Member) {
-    relay_as(name, &RELAY)
+/// The relays' behaviour: each packet that arrives at `input` is sent on `output`.
+struct Relaying(Member);
+
+impl Relaying {
+    fn relay(&mut self, input: &FifoIn<u64>, output: &DataOut<u64>) -> SectionResult {
+        let member = &self.0;
+        if member.fail.swap(false, Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("injected"));
+        }
+        while member.hold.load(Ordering::SeqCst) {
+            if member.fail.swap(false, Ordering::SeqCst) {
+                return Err(coolbot::Fault::message("injected while hung"));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        for packet in input.drain() {
+            member.relayed.fetch_add(1, Ordering::SeqCst);
+            output.send(packet);
+        }
+        Ok(())
+    }
 }
 
-fn relay_as(name: &str, spec: &'static Spec) -> (Component, Member) {
-    let input = match spec.inputs[0].kind {
-        InputKind::Fifo { capacity, policy } => FifoIn::new(capacity, policy),
-        _ => unreachable!("the relays' input is a fifo"),
-    };
-    let output = DataOut::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let member = Member {
-        fail: Arc::new(AtomicBool::new(false)),
-        hold: Arc::new(AtomicBool::new(false)),
-        relayed: Arc::new(AtomicU64::new(0)),
-    };
-    let automaton = Relay {
-        spec,
-        input,
-        output,
-        fail: Arc::clone(&member.fail),
-        hold: Arc::clone(&member.hold),
-        relayed: Arc::clone(&member.relayed),
-    };
-    (Component::new(name, Box::new(automaton), ports), member)
+impl red_relay::Behavior for Relaying {
+    fn relaying_entry(&mut self, cx: &mut red_relay::Cx<'_>) -> SectionResult {
+        self.relay(&cx.inputs.input, &cx.outputs.output)
+    }
 }
 
-/// `p` feeds compound `k` (members `a` and `b`, redundant, behind exported `in` and
-/// `out`), which feeds `c`; the test sends through `p` and reads `c`'s queue.
+impl red_block_relay::Behavior for Relaying {
+    fn relaying_entry(&mut self, cx: &mut red_block_relay::Cx<'_>) -> SectionResult {
+        self.relay(&cx.inputs.input, &cx.outputs.output)
+    }
+}
+
+/// The parts of a compound of relays: each instance's `Member`, by name (a clone
+/// given to the generated builder shares them with the test's).
+#[derive(Clone, Default)]
+struct Relays {
+    members: Arc<Mutex<HashMap<&'static str, Member>>>,
+}
+
+impl Relays {
+    fn relaying(&mut self, instance: &'static str) -> Relaying {
+        let mut members = self.members.lock().unwrap();
+        Relaying(members.entry(instance).or_default().clone())
+    }
+
+    fn member(&self, instance: &str) -> Member {
+        self.members.lock().unwrap()[instance].clone()
+    }
+}
+
+/// A supervisor without sections (the compounds of relays have none).
+struct NoSections;
+
+/// `Relays` as the parts of compound `$module` of relays `$relay` named `$instance`.
+macro_rules! relays {
+    ($module:ident, $relay:ident: $($instance:ident),+) => {
+        impl $module::Supervisor for NoSections {}
+
+        impl $module::Parts for Relays {
+            fn supervisor(&mut self) -> impl $module::Supervisor {
+                NoSections
+            }
+            $(
+                fn $instance(&mut self) -> impl $relay::Behavior {
+                    self.relaying(stringify!($instance))
+                }
+            )+
+        }
+    };
+}
+
+relays!(redundant_pair, red_relay: a, b);
+relays!(block_pair, red_block_relay: a, b);
+relays!(quick_block_pair, red_block_relay: a, b);
+relays!(converted_pair, red_relay: a, b, t);
+relays!(substituted_consumer, red_relay: a, b, t, t2);
+relays!(converted_substituted_consumer, red_relay: a, b, t, t2);
+
+/// The converter of the descriptions (`RedTimesTen`).
+struct Convert;
+
+impl Converters for Convert {
+    fn red_times_ten(from: &u64) -> u64 {
+        from * 10
+    }
+}
+
+/// `RedSource`'s behaviour: it hands a clone of its output to the test at start.
+struct HandOut(Sender<DataOut<u64>>);
+
+impl red_source::Behavior for HandOut {
+    fn start(&mut self, cx: &mut red_source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+/// `RedSink`'s behaviour: it hands a clone of its queue to the test at start.
+struct HandIn(Sender<FifoIn<u64>>);
+
+impl red_sink::Behavior for HandIn {
+    fn start(&mut self, cx: &mut red_sink::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.inputs.inbox.clone());
+        Ok(())
+    }
+}
+
+/// `p` (a `RedSource`) feeds compound `k` (whose exported `input` and `output` stand
+/// for its redundant members `a` and `b`, or for `t`), which feeds `c` (a
+/// `RedSink`); the test sends through `p` and reads `c`'s queue.
 struct Rig {
     system: System,
     send: DataOut<u64>,
@@ -172,61 +152,40 @@ struct Rig {
     b: Member,
 }
 
-fn rig() -> Rig {
-    rig_of(&RELAY, Duration::from_secs(60))
+/// Whatever a handing behaviour handed over once the system runs.
+fn handed<T>(from: &Receiver<T>) -> T {
+    from.recv_timeout(WAIT).expect("handed over at start")
 }
 
-/// The rig with members of `spec`, whose recovery queue retries every `retry`.
-fn rig_of(spec: &'static Spec, retry: Duration) -> Rig {
-    let (a_component, a) = relay_as("a", spec);
-    let (b_component, b) = relay_as("b", spec);
-    let k = CompoundBuilder::new("k", Idle)
-        .instance(a_component)
-        .instance(b_component)
-        .redundant(&["a", "b"])
-        .export_input::<u64>("in", "a.input")
-        .export_output::<u64>("out", "a.output")
-        .recovery(retry, Duration::from_secs(120))
-        .build()
-        .expect("build k");
-    let send = DataOut::<u64>::new();
-    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
+/// The rig around compound `k`, whose instances' behaviours are `relays`'.
+fn rig_around(k: Component, relays: &Relays) -> Rig {
+    let (out, send) = crossbeam_channel::bounded(1);
+    let (inbox, received) = crossbeam_channel::bounded(1);
     let mut system = System::new();
     system
-        .add(
-            ShellBuilder::new("p")
-                .output(output("out", OutputKind::Data, false), &send)
-                .build(),
-        )
+        .add(red_source::component("p", HandOut(out)))
         .expect("add p");
     system.add(k).expect("add k");
     system
-        .add(
-            ShellBuilder::new("c")
-                .input(
-                    input(
-                        "in",
-                        InputKind::Fifo {
-                            capacity: QUEUE,
-                            policy: OverflowPolicy::Reject,
-                        },
-                        false,
-                    ),
-                    &received,
-                )
-                .build(),
-        )
+        .add(red_sink::component("c", HandIn(inbox)))
         .expect("add c");
-    system.connect("p.out", "k.in").expect("p -> k");
-    system.connect("k.out", "c.in").expect("k -> c");
+    system.connect("p.out", "k.input").expect("p -> k");
+    system.connect("k.output", "c.inbox").expect("k -> c");
     system.run_all().expect("run");
     Rig {
         system,
-        send,
-        received,
-        a,
-        b,
+        send: handed(&send),
+        received: handed(&received),
+        a: relays.member("a"),
+        b: relays.member("b"),
     }
+}
+
+/// The rig around a `RedundantPair`.
+fn rig() -> Rig {
+    let relays = Relays::default();
+    let k = redundant_pair::component("k", relays.clone()).expect("build k");
+    rig_around(k, &relays)
 }
 
 /// Whether `step` says `b` took over from `a`.
@@ -306,50 +265,15 @@ fn the_stream_loses_no_packet_and_doubles_none_across_a_failover() {
 fn a_converted_connection_inside_the_compound_reads_the_merged_stream() {
     // `a` and `b` feed `t` inside the compound through a converter; `t`'s output is
     // exported. `t` sees one stream, converted, across the failover.
-    let (a_component, a) = relay("a");
-    let (b_component, b) = relay("b");
-    let (t_component, _t) = relay("t");
-    let k = CompoundBuilder::new("k", Idle)
-        .instance(a_component)
-        .instance(b_component)
-        .instance(t_component)
-        .redundant(&["a", "b"])
-        .connect_via::<u64, u64>("a.output", "t.input", |n| n * 10)
-        .export_input::<u64>("in", "a.input")
-        .export_output::<u64>("out", "t.output")
-        .build()
-        .expect("build k");
-    let send = DataOut::<u64>::new();
-    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
-    let mut system = System::new();
-    system
-        .add(
-            ShellBuilder::new("p")
-                .output(output("out", OutputKind::Data, false), &send)
-                .build(),
-        )
-        .expect("add p");
-    system.add(k).expect("add k");
-    system
-        .add(
-            ShellBuilder::new("c")
-                .input(
-                    input(
-                        "in",
-                        InputKind::Fifo {
-                            capacity: QUEUE,
-                            policy: OverflowPolicy::Reject,
-                        },
-                        false,
-                    ),
-                    &received,
-                )
-                .build(),
-        )
-        .expect("add c");
-    system.connect("p.out", "k.in").expect("p -> k");
-    system.connect("k.out", "c.in").expect("k -> c");
-    system.run_all().expect("run");
+    let relays = Relays::default();
+    let k = converted_pair::component::<Convert>("k", relays.clone()).expect("build k");
+    let Rig {
+        system,
+        send,
+        received,
+        a,
+        b,
+    } = rig_around(k, &relays);
     let a_handle = system.handle("k").and_then(|k| k.instance("a")).expect("a");
     for n in 1..=600u64 {
         send.send(n);
@@ -408,7 +332,9 @@ fn a_hung_member_does_not_stall_the_others_and_what_it_misses_is_counted_lost() 
     // hangs in a section. Once `b`'s fifo has stayed full for `MEMBER_STALL`, `a` gets
     // every packet without waiting for `b`, and what `b` misses is counted lost at
     // its input: `b` is out of step, out of the group until it is resynchronized.
-    let rig = rig_of(&BLOCK_RELAY, Duration::from_secs(60));
+    let relays = Relays::default();
+    let k = block_pair::component("k", relays.clone()).expect("build k");
+    let rig = rig_around(k, &relays);
     let monitor = hang_b_through(&rig, 40);
     let out_of_step = monitor
         .supervision
@@ -445,7 +371,9 @@ fn a_member_that_fell_out_of_step_leads_only_after_it_is_resynchronized() {
     // goes on with no packet missing and none doubled. (Before, `b` stayed in the
     // group out of step, led after `a`'s failure and dropped the packets it numbered
     // at or below the stream's number, with no count.)
-    let rig = rig_of(&BLOCK_RELAY, Duration::from_millis(20));
+    let relays = Relays::default();
+    let k = quick_block_pair::component("k", relays.clone()).expect("build k");
+    let rig = rig_around(k, &relays);
     hang_b_through(&rig, 40);
     rig.b.hold.store(false, Ordering::SeqCst);
     let k = rig.system.handle("k").expect("k");
@@ -532,64 +460,26 @@ fn a_substituted_consumer_behind_a_converter_hands_its_queue_to_its_substitute()
     substituted_consumer_keeps_the_queue(Some(|n| n * 10));
 }
 
-/// `a` and `b` (redundant) feed `t` inside the compound (through `convert`, if
-/// given); `t2` substitutes `t`, whose output is exported. `t` hangs with packets
+/// `a` and `b` (redundant) feed `t` inside the compound (`SubstitutedConsumer`, or
+/// with `convert` `ConvertedSubstitutedConsumer`, whose `RedTimesTen` is what
+/// `convert` expects); `t2` substitutes `t`, whose output is exported. `t` hangs with packets
 /// queued, then fails: its queue moves to `t2` with the connection (and its
 /// converter), as for any consumer, and nothing is lost.
 fn substituted_consumer_keeps_the_queue(convert: Option<fn(&u64) -> u64>) {
-    let (a_component, a) = relay("a");
-    let (b_component, _) = relay("b");
-    let (t_component, t) = relay("t");
-    let (t2_component, t2) = relay("t2");
-    let k = CompoundBuilder::new("k", Idle);
+    let relays = Relays::default();
     let k = match convert {
-        Some(convert) => k.connect_via::<u64, u64>("a.output", "t.input", convert),
-        None => k.connect("a.output", "t.input"),
-    };
-    let k = k
-        .instance(a_component)
-        .instance(b_component)
-        .instance(t_component)
-        .instance(t2_component)
-        .redundant(&["a", "b"])
-        .substitute("t2", "t")
-        .on_error("t", coolbot::Policy::Substitute)
-        .export_input::<u64>("in", "a.input")
-        .export_output::<u64>("out", "t.output")
-        .recovery(Duration::from_secs(60), Duration::from_secs(120))
-        .build()
-        .expect("build k");
-    let send = DataOut::<u64>::new();
-    let received = FifoIn::<u64>::new(QUEUE, OverflowPolicy::Reject);
-    let mut system = System::new();
-    system
-        .add(
-            ShellBuilder::new("p")
-                .output(output("out", OutputKind::Data, false), &send)
-                .build(),
-        )
-        .expect("add p");
-    system.add(k).expect("add k");
-    system
-        .add(
-            ShellBuilder::new("c")
-                .input(
-                    input(
-                        "in",
-                        InputKind::Fifo {
-                            capacity: QUEUE,
-                            policy: OverflowPolicy::Reject,
-                        },
-                        false,
-                    ),
-                    &received,
-                )
-                .build(),
-        )
-        .expect("add c");
-    system.connect("p.out", "k.in").expect("p -> k");
-    system.connect("k.out", "c.in").expect("k -> c");
-    system.run_all().expect("run");
+        Some(_) => converted_substituted_consumer::component::<Convert>("k", relays.clone()),
+        None => substituted_consumer::component("k", relays.clone()),
+    }
+    .expect("build k");
+    let Rig {
+        system,
+        send,
+        received,
+        a,
+        ..
+    } = rig_around(k, &relays);
+    let (t, t2) = (relays.member("t"), relays.member("t2"));
     t.hold.store(true, Ordering::SeqCst);
     let k = system.handle("k").expect("k");
     for n in 1..=50u64 {

@@ -6,74 +6,37 @@
 //! compound. Rules read the compound's own `result` and times (the latter every
 //! supervisor period), and a supervisor state's `may` lets its sections choose.
 
-mod support;
-
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use coolbot::port::TickOut;
 use coolbot::{
-    Command, CommandError, Component, CompoundBuilder, Controllable, Handle, OutputKind, Refused,
-    Section, SectionResult, Spec, State, StateSpec, Step, Supervisor, SupervisorCx, System,
-    TaskResult, TimingSpec, Value, VarKind, VarSpec,
+    Command, CommandError, Component, CompoundBuilder, Controllable, Handle, Refused, Section,
+    SectionResult, State, Step, Supervisor, SupervisorCx, System, TaskResult, TimingSpec, Value,
 };
-use support::shell::{self, ShellBuilder};
-use support::worker;
-use support::{Script, Scripted, WAIT, eventually};
+use coolbot_runtime_tests::generated::{
+    choosing, commanding, fed_commanding, panicky, watching, worker,
+};
+use coolbot_runtime_tests::support::{Script, Scripted, Tap, WAIT, eventually};
 
 /// The answers the supervisor's sections got, in order.
 type Answers = Arc<Mutex<Vec<(String, Result<(), CommandError>)>>>;
 
-/// A supervisor with states `operating`, `stopped`, `degraded`, `probing` (entry
-/// sections), one own controllable variable `go` (an `i64`) that the test sets to
-/// move it: rules `go == 1 -> stopped`, `go == 2 -> degraded`, `go == 3 -> probing`,
-/// `go == 0 -> operating`.
+/// The supervisor of `Commanding` (`cool/supervisor_commands.cool`: states
+/// `operating`, `stopped`, `degraded`, `probing`, `strict`, each with an entry
+/// section, and one own controllable variable `go`, an `i64`, that the test sets to
+/// move it), written against the runtime's `coolbot::Supervisor` over the generated
+/// `SPEC`: its sections command `w` by name through the untyped `Commander`, whose
+/// refusals (an observable or unknown variable, a value of the wrong type, an
+/// unknown instance, a quality out of range) the typed handles cannot provoke.
 struct Commanding {
     go: i64,
     answers: Answers,
 }
 
-static STATES: [StateSpec; 5] = [
-    state("operating", &[]),
-    state("stopped", &[]),
-    state("degraded", &[]),
-    state("probing", &[]),
-    state("strict", &[]),
-];
-
-const fn state(name: &'static str, may: &'static [usize]) -> StateSpec {
-    StateSpec {
-        name,
-        entry: true,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may,
-    }
-}
-
-static COMMANDING: Spec = Spec {
-    type_name: "Commanding",
-    doc: "",
-    states: &STATES,
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[VarSpec {
-        name: "go",
-        kind: VarKind::Controllable,
-        ty: "i64",
-        doc: "",
-    }],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
 impl Supervisor for Commanding {
-    fn spec(&self) -> &'static Spec {
-        &COMMANDING
+    fn spec(&self) -> &'static coolbot::Spec {
+        &commanding::SPEC
     }
 
     fn section(
@@ -89,9 +52,11 @@ impl Supervisor for Commanding {
                 .unwrap()
                 .push((what.to_owned(), outcome));
         };
-        match COMMANDING.states[state].name {
-            "stopped" => answer("suspend", cx.instances.state("w", Controllable::Suspended)),
-            "degraded" => {
+        match commanding::UserState::ALL[state] {
+            commanding::UserState::Stopped => {
+                answer("suspend", cx.instances.state("w", Controllable::Suspended))
+            }
+            commanding::UserState::Degraded => {
                 answer("gain", cx.instances.set("w", "gain", 5_i64));
                 answer("count", cx.instances.set("w", "count", 1_u64));
                 answer("speed", cx.instances.set("w", "speed", 1_i64));
@@ -112,10 +77,12 @@ impl Supervisor for Commanding {
                 answer("quality", cx.instances.set_quality("w", 1));
                 answer("quality 2", cx.instances.set_quality("w", 2));
             }
-            "probing" => answer("run", cx.instances.state("w", Controllable::Running)),
+            commanding::UserState::Probing => {
+                answer("run", cx.instances.state("w", Controllable::Running))
+            }
             // A refusal given to `?` is the section's fault.
-            "strict" => cx.instances.set("w", "count", 1_u64)?,
-            _ => {}
+            commanding::UserState::Strict => cx.instances.set("w", "count", 1_u64)?,
+            commanding::UserState::Operating => {}
         }
         Ok(())
     }
@@ -130,6 +97,8 @@ impl Supervisor for Commanding {
     }
 }
 
+/// `Commanding`'s rules (the description's `when go == n -> ...`) as closures: a
+/// hand-written supervisor gets none from the generated builder.
 fn go_rules(builder: CompoundBuilder) -> CompoundBuilder {
     let go = |n: i64| move |view: &coolbot::View| view.own("go") == Some(&Value::from(n));
     [
@@ -147,16 +116,64 @@ fn go_rules(builder: CompoundBuilder) -> CompoundBuilder {
     })
 }
 
+/// `Commanding` over a generated `Worker` `w` (the returned component) following a
+/// fresh script.
+fn commanding(answers: &Answers, w: Component) -> CompoundBuilder {
+    go_rules(CompoundBuilder::new(
+        "base",
+        Commanding {
+            go: 0,
+            answers: Arc::clone(answers),
+        },
+    ))
+    .instance(w)
+}
+
 fn worker(name: &str) -> (Component, Arc<Script>) {
     let script = Script::new();
-    let (component, _, _) = worker::component(
-        name,
-        Scripted {
-            script: Arc::clone(&script),
-            token: None,
-        },
-    );
+    let component = worker::component(name, Scripted::new(&script));
     (component, script)
+}
+
+/// `FedCommanding`'s supervisor: `stopped` suspends `w`, and the answer is logged.
+struct Suspending {
+    answers: Answers,
+}
+
+impl fed_commanding::Supervisor for Suspending {
+    fn operating_entry(&mut self, _cx: &mut fed_commanding::Cx<'_>) -> SectionResult {
+        Ok(())
+    }
+
+    fn stopped_entry(&mut self, cx: &mut fed_commanding::Cx<'_>) -> SectionResult {
+        let outcome = cx.instances.w().suspend();
+        self.answers
+            .lock()
+            .unwrap()
+            .push(("suspend".to_owned(), outcome));
+        Ok(())
+    }
+}
+
+/// `FedCommanding` with `Suspending`, a scripted `w` and a tap for `f`.
+struct FedParts {
+    supervisor: Option<Suspending>,
+    script: Arc<Script>,
+    tap: Option<Tap>,
+}
+
+impl fed_commanding::Parts for FedParts {
+    fn supervisor(&mut self) -> impl fed_commanding::Supervisor {
+        self.supervisor.take().expect("one supervisor")
+    }
+
+    fn f(&mut self) -> impl coolbot_runtime_tests::generated::feeder::Behavior {
+        self.tap.take().expect("one feeder")
+    }
+
+    fn w(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.script)
+    }
 }
 
 fn set_go(handle: &Handle, n: i64) {
@@ -197,14 +214,7 @@ fn reason(outcome: &Result<(), CommandError>) -> Option<&Refused> {
 fn a_supervisor_suspends_resumes_and_sets_its_instance_and_each_command_is_a_step() {
     let log: Answers = Arc::default();
     let (w, _script) = worker("w");
-    let builder = go_rules(CompoundBuilder::new(
-        "base",
-        Commanding {
-            go: 0,
-            answers: Arc::clone(&log),
-        },
-    ))
-    .instance(w);
+    let builder = commanding(&log, w);
     let w = builder.instance_handle("w").unwrap();
     let mut system = System::new();
     let base = system.add(builder.build().unwrap()).unwrap();
@@ -319,14 +329,7 @@ fn a_supervisor_suspends_resumes_and_sets_its_instance_and_each_command_is_a_ste
 #[test]
 fn a_refusal_passed_to_question_mark_takes_the_compound_to_running_error() {
     let (w, _script) = worker("w");
-    let builder = go_rules(CompoundBuilder::new(
-        "base",
-        Commanding {
-            go: 0,
-            answers: Arc::default(),
-        },
-    ))
-    .instance(w);
+    let builder = commanding(&Answers::default(), w);
     let mut system = System::new();
     let base = system.add(builder.build().unwrap()).unwrap();
     system.run_all().unwrap();
@@ -353,22 +356,19 @@ fn a_refusal_passed_to_question_mark_takes_the_compound_to_running_error() {
 #[test]
 fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
     let log: Answers = Arc::default();
-    let (w, script) = worker("w");
-    let kick = TickOut::new();
-    let feeder = ShellBuilder::new("f")
-        .output(shell::output("kick", OutputKind::Tick, false), &kick)
-        .build();
-    let builder = go_rules(CompoundBuilder::new(
+    let script = Script::new();
+    let (tap, feeder) = Tap::new();
+    let builder = fed_commanding::builder(
         "base",
-        Commanding {
-            go: 0,
-            answers: Arc::clone(&log),
+        FedParts {
+            supervisor: Some(Suspending {
+                answers: Arc::clone(&log),
+            }),
+            script: Arc::clone(&script),
+            tap: Some(tap),
         },
-    ))
-    .instance(feeder)
-    .instance(w)
-    .connect("f.kick", "w.kick")
-    .on_error("w", coolbot::Policy::Ignore)
+    )
+    .unwrap()
     .command_timeout(Duration::from_millis(20));
     let w = builder.instance_handle("w").unwrap();
     let mut system = System::new();
@@ -378,7 +378,7 @@ fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
 
     // `w` hangs in its busy entry section.
     let release = script.hang_in("busy.entry");
-    kick.emit();
+    feeder.recv_timeout(WAIT).unwrap().kick.emit();
     eventually(
         || script.hanging.load(Ordering::SeqCst),
         "the worker hangs in busy.entry",
@@ -409,67 +409,57 @@ fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
     drop(system);
 }
 
-/// States `deciding` (entry, `may -> done`) and `done`; the entry section sets the
-/// compound's result, `choose` moves on once asked to.
-struct Choosing {
+/// `Choosing`'s supervisor: `done`'s entry section sets the compound's result,
+/// `deciding`'s `choose` moves on once asked to.
+struct Choose {
     choose: Arc<std::sync::atomic::AtomicBool>,
 }
 
-static CHOOSING_STATES: [StateSpec; 3] = [
-    state("deciding", &[1]),
-    state("done", &[]),
-    state("failed", &[]),
-];
-
-static CHOOSING: Spec = Spec {
-    type_name: "Choosing",
-    doc: "",
-    states: &CHOOSING_STATES,
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-impl Supervisor for Choosing {
-    fn spec(&self) -> &'static Spec {
-        &CHOOSING
-    }
-
-    fn section(
-        &mut self,
-        state: usize,
-        _section: Section,
-        cx: &mut SupervisorCx<'_>,
-    ) -> SectionResult {
-        if state == 1 {
-            cx.rt.set_result(TaskResult::Fail("given up".to_owned()));
-        }
+impl choosing::Supervisor for Choose {
+    fn deciding_entry(&mut self, _cx: &mut choosing::Cx<'_>) -> SectionResult {
         Ok(())
     }
 
-    fn choose(&mut self, state: usize, _cx: &mut SupervisorCx<'_>) -> Option<usize> {
-        (state == 0 && self.choose.load(Ordering::SeqCst)).then_some(1)
+    fn deciding_choose(&mut self, _cx: &mut choosing::Cx<'_>) -> Option<choosing::DecidingMay> {
+        self.choose
+            .load(Ordering::SeqCst)
+            .then_some(choosing::DecidingMay::Done)
+    }
+
+    fn done_entry(&mut self, cx: &mut choosing::Cx<'_>) -> SectionResult {
+        cx.rt.set_result(TaskResult::Fail("given up".to_owned()));
+        Ok(())
+    }
+
+    fn failed_entry(&mut self, _cx: &mut choosing::Cx<'_>) -> SectionResult {
+        Ok(())
+    }
+}
+
+struct ChoosingParts(Option<Choose>, Arc<Script>);
+
+impl choosing::Parts for ChoosingParts {
+    fn supervisor(&mut self) -> impl choosing::Supervisor {
+        self.0.take().expect("one supervisor")
+    }
+
+    fn w(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.1)
     }
 }
 
 #[test]
 fn a_supervisor_section_chooses_a_may_target_and_a_rule_reads_the_compounds_own_result() {
     let choose = Arc::new(std::sync::atomic::AtomicBool::new(true));
-    let (w, _) = worker("w");
-    let compound = CompoundBuilder::new(
+    let compound = choosing::component(
         "base",
-        Choosing {
-            choose: Arc::clone(&choose),
-        },
+        ChoosingParts(
+            Some(Choose {
+                choose: Arc::clone(&choose),
+            }),
+            Script::new(),
+        ),
     )
-    .instance(w)
-    .rule("done", "failed", &["result"], |view| {
-        matches!(view.own_result(), TaskResult::Fail(_))
-    })
-    .build()
     .unwrap();
     let mut system = System::new();
     let base = system.add(compound).unwrap();
@@ -481,57 +471,45 @@ fn a_supervisor_section_chooses_a_may_target_and_a_rule_reads_the_compounds_own_
     drop(system);
 }
 
-/// One state `watching` with a rule over `w.elapsed_time` only: no event announces
-/// a time, so only the periodic evaluation can fire it.
-struct Watching;
+/// `Watching`'s supervisor has no sections.
+struct Watch;
 
-static WATCHING_STATES: [StateSpec; 2] = [state("watching", &[]), state("late", &[])];
+impl watching::Supervisor for Watch {
+    fn late_entry(&mut self, _cx: &mut watching::Cx<'_>) -> SectionResult {
+        Ok(())
+    }
+}
 
-static WATCHING: Spec = Spec {
-    type_name: "Watching",
-    doc: "",
-    states: &WATCHING_STATES,
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec {
-        period: Some(Duration::from_millis(10)),
-        ..TimingSpec::NONE
-    },
-};
+struct WatchingParts(Arc<Script>, Option<Tap>);
 
-impl Supervisor for Watching {
-    fn spec(&self) -> &'static Spec {
-        &WATCHING
+impl watching::Parts for WatchingParts {
+    fn supervisor(&mut self) -> impl watching::Supervisor {
+        Watch
+    }
+
+    fn f(&mut self) -> impl coolbot_runtime_tests::generated::feeder::Behavior {
+        self.1.take().expect("one feeder")
+    }
+
+    fn w(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.0)
     }
 }
 
 #[test]
 fn a_rule_over_an_instance_time_is_evaluated_every_supervisor_period() {
-    let (w, script) = worker("w");
+    let script = Script::new();
     *script.sleep_in_periodic.lock().unwrap() = Some(Duration::from_millis(1));
-    let kick = TickOut::new();
-    let feeder = ShellBuilder::new("f")
-        .output(shell::output("kick", OutputKind::Tick, false), &kick)
-        .build();
-    let compound = CompoundBuilder::new("base", Watching)
-        .instance(feeder)
-        .instance(w)
-        .connect("f.kick", "w.kick")
-        .rule("watching", "late", &["w.elapsed_time"], |view| {
-            view.monitor("w")
-                .is_some_and(|m| m.elapsed_time >= Duration::from_millis(30))
-        })
-        .build()
-        .unwrap();
+    let (tap, feeder) = Tap::new();
+    // The rule (`when w.elapsed_time >= 30ms -> late;`) and the supervisor's 10 ms
+    // period are the description's.
+    let compound = watching::component("base", WatchingParts(script, Some(tap))).unwrap();
     let mut system = System::new();
     let base = system.add(compound).unwrap();
     system.run_all().unwrap();
     wait_user(&base, "watching");
     // Busy: its periodic section adds to its elapsed time every 5 ms.
-    kick.emit();
+    feeder.recv_timeout(WAIT).unwrap().kick.emit();
     wait_user(&base, "late");
     drop(system);
 }
@@ -547,14 +525,7 @@ fn a_quality_is_checked_against_the_instance_timing_override() {
         qualities: &["full", "reduced", "minimal"],
         ..timing
     });
-    let builder = go_rules(CompoundBuilder::new(
-        "base",
-        Commanding {
-            go: 0,
-            answers: Arc::clone(&log),
-        },
-    ))
-    .instance(w);
+    let builder = commanding(&log, w);
     let w = builder.instance_handle("w").unwrap();
     let mut system = System::new();
     let base = system.add(builder.build().unwrap()).unwrap();
@@ -569,40 +540,31 @@ fn a_quality_is_checked_against_the_instance_timing_override() {
     assert!(system.shutdown().clean());
 }
 
-/// A supervisor whose one state's entry section suspends `w`, then panics.
-struct Panicky;
+/// `Panicky`'s supervisor: its one state's entry section suspends `w`, then panics.
+struct Panics;
 
-static PANICKY_STATES: [StateSpec; 1] = [state("operating", &[])];
+impl panicky::Supervisor for Panics {
+    fn operating_entry(&mut self, cx: &mut panicky::Cx<'_>) -> SectionResult {
+        cx.instances.w().suspend().expect("w takes it");
+        panic!("the section fails after its command");
+    }
+}
 
-static PANICKY: Spec = Spec {
-    type_name: "Panicky",
-    states: &PANICKY_STATES,
-    variables: &[],
-    ..COMMANDING
-};
+struct PanickyParts(Arc<Script>);
 
-impl Supervisor for Panicky {
-    fn spec(&self) -> &'static Spec {
-        &PANICKY
+impl panicky::Parts for PanickyParts {
+    fn supervisor(&mut self) -> impl panicky::Supervisor {
+        Panics
     }
 
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        cx: &mut SupervisorCx<'_>,
-    ) -> SectionResult {
-        cx.instances
-            .state("w", Controllable::Suspended)
-            .expect("w takes it");
-        panic!("the section fails after its command");
+    fn w(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.0)
     }
 }
 
 #[test]
 fn the_commands_of_a_section_that_panics_are_published_with_it() {
-    let (w, _script) = worker("w");
-    let builder = CompoundBuilder::new("base", Panicky).instance(w);
+    let builder = panicky::builder("base", PanickyParts(Script::new())).unwrap();
     let w = builder.instance_handle("w").unwrap();
     let mut system = System::new();
     let base = system.add(builder.build().unwrap()).unwrap();
@@ -644,15 +606,7 @@ fn a_supervisor_harness_runs_the_rules_and_records_the_commands_without_threads(
     use coolbot::harness::SupervisorHarness;
     let log: Answers = Arc::default();
     let (w, _script) = worker("w");
-    let builder = go_rules(CompoundBuilder::new(
-        "base",
-        Commanding {
-            go: 0,
-            answers: Arc::clone(&log),
-        },
-    ))
-    .instance(w)
-    .rule(
+    let builder = commanding(&log, w).rule(
         "operating",
         "stopped",
         &["w.state"],

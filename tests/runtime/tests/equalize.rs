@@ -5,18 +5,16 @@
 //! (on a quiet core there is no second move at all; load from other processes on the
 //! core may make the sections coincide again later), and nothing move with
 //! equalization off; the lateness before
-//! and after is measured by `benches/equalize.rs` (timings stay out of tests).
+//! and after is measured by `runtime/benches/equalize.rs` (timings stay out of tests).
 //!
 //! One test, both cases in turn: they pin their threads to the same core.
 #![cfg(target_os = "linux")]
-
-mod equalize_common;
 
 use std::time::{Duration, Instant};
 
 use coolbot::adapt::{AdaptAction, Adaptation};
 use coolbot::{MonitorEvent, System};
-use equalize_common::{PERIOD, Starts, count, pin_to_one_core, spinner};
+use coolbot_runtime_tests::equalize::{PERIOD, Starts, count, pin_to_one_core, spinner};
 
 /// Run the pair with `equalize` until `done` says so over the `Equalized` steps seen
 /// (index of the component, step, the sections each had run when the step was seen)

@@ -2,19 +2,18 @@
 //! its instances within a homogeneity interval, selects whom to degrade, raises its
 //! current maximum level at the top, notifies its own supervisor when nested, and
 //! promotes back from the top when time is spare. Work is simulated with sleeps (see
-//! `adapt_common`); the tests assert outcomes and orders, never timings.
+//! `coolbot_runtime_tests::adapt`); the tests assert outcomes and orders, never timings.
 
-mod adapt_common;
-
-use adapt_common::{Load, Plain, check_homogeneity, member, moves, ms, wait};
 use coolbot::adapt::AdaptAction;
 use coolbot::{Command, CompoundBuilder, MonitorEvent, Pressure, System};
+use coolbot_runtime_tests::adapt::{self, Load, check_homogeneity, member, moves, ms, wait};
+use coolbot_runtime_tests::supervision::Coordinating;
 
 const HEAVY: [u64; 3] = [45, 25, 25];
 const LIGHT: [u64; 3] = [1, 1, 1];
 
 fn adaptation_steps(
-    events: &crossbeam_channel::Receiver<MonitorEvent>,
+    events: &coolbot::crossbeam_channel::Receiver<MonitorEvent>,
 ) -> Vec<coolbot::Adaptation> {
     events
         .try_iter()
@@ -35,7 +34,7 @@ fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
     heavy.set(HEAVY);
     let light = Load::new();
     light.set(LIGHT);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("a", -5, &light))
         .instance(member("b", -1, &heavy))
         .instance(member("c", -3, &light))
@@ -131,12 +130,12 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
     heavy.set(HEAVY);
     let light = Load::new();
     light.set(LIGHT);
-    let inner = CompoundBuilder::new("inner", Plain)
+    let inner = CompoundBuilder::new("inner", Coordinating)
         .instance(member("x", -1, &heavy))
         .instance(member("y", -2, &light))
         .build()
         .expect("inner");
-    let outer = CompoundBuilder::new("outer", Plain)
+    let outer = CompoundBuilder::new("outer", Coordinating)
         .instance(inner)
         .instance(member("z", -3, &light))
         .build()
@@ -202,7 +201,7 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
     hopeless.set([45, 45, 45]);
     let light = Load::new();
     light.set(LIGHT);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("hi", -1, &hopeless))
         .instance(member("lo", -4, &light))
         .adaptation(coolbot::AdaptConfig {
@@ -274,7 +273,7 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
 fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
     let heavy = Load::new();
     heavy.set(HEAVY);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("b", -1, &heavy))
         .adaptation(coolbot::AdaptConfig::off())
         .build()
@@ -287,7 +286,7 @@ fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
         m.adaptation.pressure == Pressure::Violation
     });
     let runs = heavy.runs();
-    adapt_common::eventually("five more sections", || heavy.runs() >= runs + 5);
+    adapt::eventually("five more sections", || heavy.runs() >= runs + 5);
     let monitor_now = b.snapshot();
     assert_eq!(monitor_now.adaptation.level, 0);
     assert_eq!(monitor_now.period, monitor.period);
@@ -308,7 +307,7 @@ fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
 fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
     let light = Load::new();
     light.set(LIGHT);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("a", -1, &light))
         .instance(member("b", -2, &light))
         .build()
@@ -320,7 +319,7 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
     let b = group.instance("b").expect("b");
     for handle in [&a, &b] {
         handle
-            .wait_state(coolbot::State::Running, adapt_common::WAIT)
+            .wait_state(coolbot::State::Running, adapt::WAIT)
             .expect("running");
     }
     a.command(Command::SetQuality(1)).expect("quality 1");
@@ -336,7 +335,7 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
         });
     }
     let runs = light.runs();
-    adapt_common::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
     let (a_now, b_now) = (a.snapshot(), b.snapshot());
     assert_eq!(
         (a_now.period, a_now.quality, a_now.adaptation.level),
@@ -369,7 +368,7 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
 fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
     let light = Load::new();
     light.set(LIGHT);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("a", -1, &light))
         .build()
         .expect("build");
@@ -377,7 +376,7 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let a = group.instance("a").expect("a");
-    a.wait_state(coolbot::State::Running, adapt_common::WAIT)
+    a.wait_state(coolbot::State::Running, adapt::WAIT)
         .expect("running");
     // Level 3 is above the compound's current maximum (1).
     a.command(Command::SetDegradation(3)).expect("level 3");
@@ -390,7 +389,7 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
         m.adaptation.pressure == Pressure::Spare
     });
     let runs = light.runs();
-    adapt_common::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
     let now = a.snapshot();
     assert_eq!(
         now.adaptation.level, 3,
@@ -422,7 +421,7 @@ impl coolbot::adapt::Selector for Wrong {
 fn a_selector_answer_outside_the_candidates_does_not_fail_the_compound() {
     let heavy = Load::new();
     heavy.set(HEAVY);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(member("b", -1, &heavy))
         .adaptation_selector(Wrong)
         .build()
@@ -450,11 +449,11 @@ fn a_selector_answer_outside_the_candidates_does_not_fail_the_compound() {
 fn instances_publish_their_settling_periods() {
     let light = Load::new();
     light.set(LIGHT);
-    let group = CompoundBuilder::new("group", Plain)
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(
             member("a", -1, &light).with_adaptation(coolbot::AdaptConfig {
                 hold_periods: 40,
-                ..adapt_common::quick()
+                ..adapt::quick()
             }),
         )
         .instance(member("b", -1, &light))
@@ -478,9 +477,8 @@ fn instances_publish_their_settling_periods() {
 fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
     let light = Load::new();
     light.set(LIGHT);
-    let planned = adapt_common::sleeper("p", &adapt_common::PLANNED, &light)
-        .with_adaptation(adapt_common::quick());
-    let group = CompoundBuilder::new("group", Plain)
+    let planned = adapt::planned_sleeper("p", &light).with_adaptation(adapt::quick());
+    let group = CompoundBuilder::new("group", Coordinating)
         .instance(planned)
         .instance(member("q", -1, &light))
         .build()
@@ -489,7 +487,7 @@ fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let p = group.instance("p").expect("p");
-    p.wait_state(coolbot::State::Running, adapt_common::WAIT)
+    p.wait_state(coolbot::State::Running, adapt::WAIT)
         .expect("running");
     light.fault.store(true, std::sync::atomic::Ordering::SeqCst);
     let monitor = wait(&p, "the plan's degradation", |m| m.quality == 1);
@@ -506,7 +504,7 @@ fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
         m.adaptation.pressure == Pressure::Spare
     });
     let runs = light.runs();
-    adapt_common::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
     let monitor = p.snapshot();
     assert_eq!(
         (monitor.quality, monitor.adaptation.level),

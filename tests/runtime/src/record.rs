@@ -1,0 +1,64 @@
+//! The packet of the recording tests (`record.rs`), the extern packet `RecordSample`
+//! of `cool/record.cool`: a sample whose serialization a test can hold (a slow disk)
+//! or make fail.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use coolbot::crossbeam_channel::{Receiver, Sender};
+use serde::ser::{Error as _, SerializeStruct};
+use serde::{Deserialize, Serialize, Serializer};
+
+/// How long a held serialization waits at most for its release.
+const HOLD: Duration = Duration::from_secs(20);
+
+/// What the recorder's thread does when it serializes a sample that carries one.
+#[derive(Debug)]
+pub struct Hook {
+    /// Fail to serialize.
+    pub fail: bool,
+    /// Told when serialization starts.
+    pub entered: Sender<()>,
+    /// Serialization waits for this (or its sender's drop).
+    pub release: Receiver<()>,
+}
+
+/// The packet type of the tests.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Sample {
+    pub n: u64,
+    pub label: String,
+    #[serde(skip)]
+    pub hook: Option<Arc<Hook>>,
+}
+
+impl PartialEq for Sample {
+    fn eq(&self, other: &Sample) -> bool {
+        self.n == other.n && self.label == other.label
+    }
+}
+
+impl Serialize for Sample {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        if let Some(hook) = &self.hook {
+            if hook.fail {
+                return Err(S::Error::custom("a sample that refuses to serialize"));
+            }
+            let _ = hook.entered.send(());
+            let _ = hook.release.recv_timeout(HOLD);
+        }
+        let mut fields = serializer.serialize_struct("Sample", 2)?;
+        fields.serialize_field("n", &self.n)?;
+        fields.serialize_field("label", &self.label)?;
+        fields.end()
+    }
+}
+
+/// Sample `n`, labelled `sample n`.
+pub fn sample(n: u64) -> Sample {
+    Sample {
+        n,
+        label: format!("sample {n}"),
+        hook: None,
+    }
+}
