@@ -354,3 +354,46 @@ fn a_tick_input_pulls_from_a_tick_output_declared_pull() {
     assert_eq!(t.pull(Duration::from_secs(10)), Ok(1));
     assert!(system.shutdown().clean());
 }
+
+/// A supervisor claiming a spec without states.
+struct Stateless;
+
+static STATELESS: Spec = Spec {
+    type_name: "Stateless",
+    doc: "",
+    states: &[],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Supervisor for Stateless {
+    fn spec(&self) -> &'static Spec {
+        &STATELESS
+    }
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut coolbot::SupervisorCx<'_>,
+    ) -> coolbot::SectionResult {
+        Ok(())
+    }
+}
+
+/// An atomic component may have no automaton; a supervisor may not (coolc gives a
+/// compound without a `supervisor` block a state of its own).
+#[test]
+fn a_supervisor_without_states_is_refused() {
+    let error = coolbot::CompoundBuilder::new("cell", Stateless)
+        .build()
+        .err()
+        .expect("refused");
+    assert_eq!(
+        error.to_string(),
+        "compound `cell`: supervisor: the supervisor has no state"
+    );
+}

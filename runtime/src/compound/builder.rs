@@ -593,6 +593,14 @@ impl CompoundBuilder {
             own.timing.period = Some(DEFAULT_SUPERVISION_PERIOD);
         }
         let own = &own;
+        // A supervisor always has a state (coolc gives a compound without one a
+        // `supervising` state); only an atomic component may have no automaton.
+        if own.states.is_empty() {
+            return Err(CompoundError::Supervisor {
+                compound: self.name.clone(),
+                detail: "the supervisor has no state".to_owned(),
+            });
+        }
         if let Err(detail) = own.validate() {
             return Err(CompoundError::Supervisor {
                 compound: self.name.clone(),
