@@ -388,10 +388,9 @@ impl coolbot::Supervisor for Stateless {
 /// compound without a `supervisor` block a state of its own).
 #[test]
 fn a_supervisor_without_states_is_refused() {
-    let error = coolbot::CompoundBuilder::new("cell", Stateless)
-        .build()
-        .err()
-        .expect("refused");
+    let Err(error) = coolbot::CompoundBuilder::new("cell", Stateless).build() else {
+        panic!("a supervisor without states was accepted");
+    };
     assert_eq!(
         error.to_string(),
         "compound `cell`: supervisor: the supervisor has no state"
