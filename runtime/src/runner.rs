@@ -1348,12 +1348,12 @@ impl Runner {
 
     /// Run the continuity plan for a failure in `state` (paper 3.5).
     fn recover(&mut self, state: usize, section: Option<Section>, failure: Failure) -> Recovery {
-        let place = match section {
-            Some(section) => format!(
-                "state `{}` ({section:?} section)",
-                self.spec.states[state].name
-            ),
-            None => format!("state `{}`", self.spec.states[state].name),
+        // A component without a user automaton has no state to name (a pull answer
+        // of one fails in no state).
+        let place = match (self.spec.states.get(state), section) {
+            (Some(spec), Some(section)) => format!("state `{}` ({section:?} section)", spec.name),
+            (Some(spec), None) => format!("state `{}`", spec.name),
+            (None, _) => "the component".to_owned(),
         };
         let fault = match failure {
             Failure::Panic(message) => {

@@ -14,6 +14,8 @@ use coolbot::{Command, Controllable};
 
 use crate::generated::{feeder, worker};
 
+pub mod compound;
+
 /// Panics injected into components' code print one line, without a backtrace: the
 /// default hook's backtrace (CI sets `RUST_BACKTRACE=1`) can take longer than a
 /// section's `max_response` on a loaded machine, and the section then counts as an
