@@ -36,7 +36,7 @@ impl Scripts {
                 .lock()
                 .unwrap()
                 .entry(name.to_owned())
-                .or_insert_with(Script::new),
+                .or_default(),
         )
     }
 
