@@ -1,0 +1,731 @@
+//! Compound components: driven like atomic ones, instances following the compound's
+//! state, supervisor rules on instance changes, and the fault policies (restart,
+//! substitute with the recovery queue, deadline expiry, redundancy, propagation up a
+//! three-level hierarchy), with faults injected as panics and declared exceptions.
+//!
+//! The compounds are `cool/compound.cool`'s, over the generated `Worker` (scripted:
+//! `support::compound::Scripts` gives each instance its script) and `Feeder` (its
+//! ports handed to the test). A test of the runtime's `CompoundBuilder` itself (a
+//! `Policy` the language has no word for, malformed builders) adds to a generated
+//! compound's builder. The other tests of the file are still in
+//! `runtime/tests/compound.rs`.
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use coolbot::crossbeam_channel::Receiver;
+use coolbot::{
+    Command, CompoundBuilder, CompoundError, Controllable, MonitorEvent, Policy, State, Step,
+    System, Value,
+};
+use coolbot_runtime_tests::generated::{
+    cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
+    cmp_substitution, cmp_substitution_deadline, cmp_top, feeder, worker,
+};
+use coolbot_runtime_tests::support::compound::{CompoundRig, Scripts, wait_state};
+use coolbot_runtime_tests::support::{Feeder, Injected, Script, Scripted, Tap, WAIT, eventually};
+
+/// The supervisors' log of entry sections (`operating.Entry`), shared with the test.
+type Log = Arc<Mutex<Vec<String>>>;
+
+/// Where a compound's behaviours come from: the workers follow their scripts, the
+/// feeder hands its ports over (`feed`), the supervisor logs.
+struct Parts {
+    scripts: Scripts,
+    log: Log,
+    tap: Option<Tap>,
+    feed: Option<Receiver<Feeder>>,
+}
+
+impl Parts {
+    fn new() -> Parts {
+        let (tap, feed) = Tap::new();
+        Parts {
+            scripts: Scripts::new(),
+            log: Log::default(),
+            tap: Some(tap),
+            feed: Some(feed),
+        }
+    }
+
+    fn logged(&self) -> Logged {
+        Logged(Arc::clone(&self.log))
+    }
+
+    fn worker(&self, name: &str) -> Scripted {
+        self.scripts.scripted(name)
+    }
+
+    fn feeder(&mut self) -> Tap {
+        self.tap.take().expect("one feeder per compound")
+    }
+}
+
+/// A supervisor that logs its entry sections; entering `degraded` counts `faults`.
+struct Logged(Log);
+
+impl Logged {
+    fn entered(&self, state: &str) -> coolbot::SectionResult {
+        self.0.lock().unwrap().push(format!("{state}.Entry"));
+        Ok(())
+    }
+}
+
+impl cmp_driven::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_driven::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+}
+
+impl cmp_rules::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_rules::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn degraded_entry(&mut self, cx: &mut cmp_rules::Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.faults += 1;
+        self.entered("degraded")
+    }
+}
+
+impl cmp_ordered::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_ordered::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn first_entry(&mut self, _cx: &mut cmp_ordered::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("first")
+    }
+    fn second_entry(&mut self, _cx: &mut cmp_ordered::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("second")
+    }
+}
+
+/// `Logged` for a compound whose supervisor has one state, `operating`.
+macro_rules! operating {
+    ($($m:ident),*) => {$(
+        impl $m::Supervisor for Logged {
+            fn operating_entry(&mut self, _cx: &mut $m::Cx<'_>) -> coolbot::SectionResult {
+                self.entered("operating")
+            }
+        }
+    )*};
+}
+
+operating!(
+    cmp_restart,
+    cmp_substitution,
+    cmp_substitution_deadline,
+    cmp_lone,
+    cmp_redundant,
+    cmp_mid,
+    cmp_top
+);
+
+/// `Parts` for compound `$m` with supervisor `Logged`, workers `$w` and feeder `$f`.
+macro_rules! parts {
+    ($m:ident; workers $($w:ident),*; $(feeder $f:ident)?) => {
+        impl $m::Parts for Parts {
+            fn supervisor(&mut self) -> impl $m::Supervisor {
+                self.logged()
+            }
+            $(
+                fn $w(&mut self) -> impl worker::Behavior {
+                    self.worker(stringify!($w))
+                }
+            )*
+            $(
+                fn $f(&mut self) -> impl feeder::Behavior {
+                    self.feeder()
+                }
+            )?
+        }
+    };
+}
+
+parts!(cmp_driven; workers a, b;);
+parts!(cmp_rules; workers w; feeder f);
+parts!(cmp_ordered; workers w;);
+parts!(cmp_restart; workers w; feeder f);
+parts!(cmp_substitution; workers w, b; feeder f);
+parts!(cmp_substitution_deadline; workers w, b; feeder f);
+parts!(cmp_lone; workers w; feeder f);
+parts!(cmp_redundant; workers a, b; feeder f);
+parts!(cmp_mid; workers leaf1, leaf2; feeder f);
+
+/// `CmpTop`: `mid`'s parts are the same (one set of scripts, one feeder).
+impl cmp_top::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_top::Supervisor {
+        self.logged()
+    }
+    fn mid(&mut self) -> impl cmp_mid::Parts {
+        Parts {
+            scripts: self.scripts.clone(),
+            log: Log::default(),
+            tap: self.tap.take(),
+            feed: None,
+        }
+    }
+    fn sibling(&mut self) -> impl worker::Behavior {
+        self.worker("sibling")
+    }
+}
+
+/// A rig around compound `base`, the scripts of its workers, its supervisor's log,
+/// and its feeder's ports (once it started).
+struct Base {
+    rig: CompoundRig,
+    scripts: Scripts,
+    log: Log,
+    feed: Option<Receiver<Feeder>>,
+}
+
+impl Base {
+    /// The compound `build` makes from the parts, added to a new system.
+    fn new(build: impl FnOnce(Parts) -> Result<coolbot::Component, CompoundError>) -> Base {
+        let mut parts = Parts::new();
+        let scripts = parts.scripts.clone();
+        let log = Arc::clone(&parts.log);
+        let feed = parts.feed.take();
+        Base {
+            rig: CompoundRig::new(build(parts)),
+            scripts,
+            log,
+            feed,
+        }
+    }
+
+    fn script(&self, name: &str) -> Arc<Script> {
+        self.scripts.of(name)
+    }
+
+    /// The feeder's ports (it hands them over when it starts).
+    fn feeder(&mut self) -> Feeder {
+        self.feed
+            .take()
+            .expect("a feeder")
+            .recv_timeout(WAIT)
+            .expect("the feeder started")
+    }
+}
+
+fn run(handle: &coolbot::Handle, target: Controllable) {
+    handle
+        .command(Command::SetState(target))
+        .unwrap_or_else(|e| panic!("{e}"));
+}
+
+fn wait(handle: &coolbot::Handle, state: State) -> coolbot::Monitor {
+    wait_state(handle, state)
+}
+
+/// Wait until `handle`'s user state is `user` (in whatever default state).
+fn wait_user(handle: &coolbot::Handle, user: &str) -> coolbot::Monitor {
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some(user), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"))
+}
+
+/// Wait until the supervisor's log is `expected` (`user_state` changes before the
+/// entry section runs: a state wait alone does not see the section).
+fn wait_log(log: &Mutex<Vec<String>>, expected: &[&str]) {
+    eventually(
+        || *log.lock().unwrap() == expected,
+        &format!("the supervisor's log becomes {expected:?}"),
+    );
+}
+
+fn periodic_fault(script: &Script) {
+    script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: Some(worker::Exception::Fatal),
+        times: 1,
+    }));
+}
+
+#[test]
+fn a_compound_is_driven_and_observed_like_an_atomic_component() {
+    let mut rig = Base::new(|parts| {
+        let compound = cmp_driven::component("base", parts)?;
+        assert_eq!(compound.spec().type_name, "CmpDriven");
+        Ok(compound)
+    });
+    // An atomic worker beside it, driven by the same commands.
+    let atomic = rig
+        .rig
+        .add(worker::component("atomic", Scripted::new(&Script::new())));
+    let base = rig.rig.compound.clone();
+    rig.rig.start();
+    let (a, b) = (rig.rig.instance("a"), rig.rig.instance("b"));
+    wait(&base, State::Ready);
+    wait(&atomic, State::Ready);
+    assert_eq!(a.state(), State::Ready, "instances start with the compound");
+
+    let sequence = [
+        Controllable::Running,
+        Controllable::Suspended,
+        Controllable::Running,
+        Controllable::Ready,
+        Controllable::Suspended,
+        Controllable::Ready,
+        Controllable::Running,
+    ];
+    for target in sequence {
+        run(&base, target);
+        run(&atomic, target);
+        assert_eq!(base.state(), atomic.state(), "after {target:?}");
+        let expected = target.state();
+        assert_eq!(base.state(), expected);
+        for instance in [&a, &b] {
+            assert_eq!(instance.state(), expected, "{} follows", instance.name());
+        }
+    }
+    let monitor = wait_user(&base, "operating");
+    assert_eq!(monitor.state, State::Running);
+    let names: Vec<&str> = monitor.variables.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["count", "gain", "faults"]);
+    assert_eq!(monitor.variables[0].1, Value::UInt(0));
+
+    // Mapped controllable: set through the compound, seen on the instance.
+    base.command(Command::Set("gain".to_owned(), Value::Int(7)))
+        .expect("set gain");
+    b.wait_for(|m| m.variables[1].1 == Value::Int(7), WAIT)
+        .expect("b's gain");
+    base.wait_for(|m| m.variables[1].1 == Value::Int(7), WAIT)
+        .expect("the compound republishes it");
+    let rejected = base
+        .command(Command::Set("count".to_owned(), Value::UInt(1)))
+        .expect_err("observable");
+    assert!(rejected.reason.contains("observable"), "{rejected}");
+    for command in [
+        Command::SetPriority(3),
+        Command::SetPeriod(Duration::from_millis(20)),
+        Command::SetMaxResponse(Duration::from_millis(500)),
+        Command::SetQuality(0),
+    ] {
+        base.command(command.clone()).expect("accepted");
+        atomic.command(command).expect("accepted");
+    }
+    assert!(
+        rig.log
+            .lock()
+            .unwrap()
+            .iter()
+            .all(|e| e == "operating.Entry"),
+        "only the initial supervisor state was entered: {:?}",
+        rig.log.lock().unwrap()
+    );
+
+    // dead: the supervisor first, then the instances; the threads are joined.
+    run(&base, Controllable::Dead);
+    assert_eq!(base.state(), State::Dead);
+    assert_eq!(a.state(), State::Dead);
+    assert_eq!(b.state(), State::Dead);
+    let report = rig.rig.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn rules_fire_when_an_instance_changes_state() {
+    let mut rig = Base::new(|parts| cmp_rules::component("base", parts));
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&base, "operating");
+    wait_user(&w, "idle");
+
+    // A declared exception without a plan: w goes to running_error.
+    periodic_fault(&script);
+    feed.kick.emit();
+    let monitor = wait_user(&base, "degraded");
+    assert_eq!(
+        monitor.state,
+        State::Running,
+        "ignored: the compound goes on"
+    );
+    assert_eq!(w.state(), State::RunningError);
+    base.wait_for(|m| m.variables[0].1 == Value::UInt(1), WAIT)
+        .expect("own variable published");
+
+    // Restarting w by hand fires the second rule.
+    run(&w, Controllable::Running);
+    wait_user(&base, "operating");
+    wait_log(
+        &rig.log,
+        &["operating.Entry", "degraded.Entry", "operating.Entry"],
+    );
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn rules_are_evaluated_in_declaration_order_and_on_entry() {
+    // Both rules hold when `operating` is entered: the first declared fires.
+    let mut rig = Base::new(|parts| cmp_ordered::component("base", parts));
+    rig.rig.run();
+    wait_user(&rig.rig.compound, "first");
+    wait_log(&rig.log, &["operating.Entry", "first.Entry"]);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn restart_policy_brings_the_instance_back_and_the_compound_runs_on() {
+    let mut rig = Base::new(|parts| cmp_restart::component("base", parts));
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    let events = base.subscribe();
+
+    script.panic_in(Some("busy.exit"));
+    script.inject(Some(Injected {
+        hook: "busy.periodic",
+        exception: None,
+        times: 1,
+    }));
+    feed.kick.emit();
+    eventually(
+        || script.log().iter().filter(|e| *e == "start").count() == 2,
+        "w restarted",
+    );
+    let monitor = wait_user(&w, "idle");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(script.injected.load(Ordering::SeqCst), 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(
+        events
+            .try_iter()
+            .all(|e| !matches!(e, MonitorEvent::State { .. })),
+        "the compound never left running"
+    );
+    assert!(rig.rig.shutdown().clean());
+}
+
+/// A compound `base` with primary `w` (policy substitute), its substitute `b`, and a
+/// feeder `f` whose data goes to `w.data` (`CmpSubstitution`, or with a recovery
+/// deadline of 200 ms `CmpSubstitutionDeadline`).
+struct Substitution {
+    rig: CompoundRig,
+    base: coolbot::Handle,
+    w: coolbot::Handle,
+    b: coolbot::Handle,
+    w_script: Arc<Script>,
+    b_script: Arc<Script>,
+    feed: Feeder,
+}
+
+fn substitution(short_deadline: bool) -> Substitution {
+    let mut rig = Base::new(|parts| {
+        if short_deadline {
+            cmp_substitution_deadline::component("base", parts)
+        } else {
+            cmp_substitution::component("base", parts)
+        }
+    });
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (w, b) = (rig.rig.instance("w"), rig.rig.instance("b"));
+    wait_user(&w, "idle");
+    assert_eq!(b.state(), State::Ready, "a substitute waits in ready");
+    Substitution {
+        base: rig.rig.compound.clone(),
+        w,
+        b,
+        w_script: rig.script("w"),
+        b_script: rig.script("b"),
+        rig: rig.rig,
+        feed,
+    }
+}
+
+impl Substitution {
+    /// w fails (a panic) and cannot restart until `start_fails` is cleared.
+    fn fail_primary(&self) {
+        self.w_script.start_fails.store(true, Ordering::SeqCst);
+        self.w_script.panic_in(Some("busy.periodic"));
+        self.feed.kick.emit();
+        // Packets moved to b before its initial state is entered are arrivals there.
+        wait(&self.b, State::Running);
+        assert_eq!(self.base.state(), State::Running);
+        assert_ne!(self.w.state(), State::Running);
+    }
+}
+
+#[test]
+fn a_substitute_takes_over_and_the_recovered_original_takes_its_place_back() {
+    let rig = substitution(false);
+    rig.fail_primary();
+    // The connections moved: packets go to the substitute.
+    rig.feed.data.send(1);
+    rig.feed.data.send(2);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 2,
+        "the substitute received both packets",
+    );
+    rig.base
+        .wait_for(|m| m.variables[0].1 == Value::UInt(2), WAIT)
+        .expect("the mapped variable follows the substitute");
+    // The recovery queue keeps retrying w; it fails in `start` meanwhile.
+    rig.w
+        .wait_state(State::StartingError, WAIT)
+        .expect("retried");
+    rig.w_script.panic_in(None);
+    rig.w_script.start_fails.store(false, Ordering::SeqCst);
+    // w recovers: the arrangement before the fault comes back.
+    wait(&rig.b, State::Ready);
+    assert_eq!(rig.w.state(), State::Running);
+    let before = rig.w_script.received.load(Ordering::SeqCst);
+    rig.feed.data.send(3);
+    eventually(
+        || rig.w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w receives again",
+    );
+    assert_eq!(rig.b_script.received.load(Ordering::SeqCst), 2);
+    assert_eq!(rig.base.state(), State::Running);
+    // Each step was reported on the compound's monitoring port, in order.
+    let monitor = rig
+        .base
+        .wait_for(
+            |m| m.supervision.iter().any(|s| s.step == Step::Recovered),
+            WAIT,
+        )
+        .expect("the recovery is reported");
+    let mut steps: Vec<Step> = monitor.supervision.iter().map(|s| s.step.clone()).collect();
+    steps.dedup();
+    assert_eq!(
+        steps,
+        [
+            Step::Failed,
+            Step::Enqueued,
+            Step::Substituted { by: "b".to_owned() },
+            Step::RetryFailed,
+            Step::Retried,
+            Step::Recovered
+        ]
+    );
+    // The failed retries say why: a first retry may find w still in its panicking
+    // section; the one the test waited for left it in starting_error (its `start`
+    // fails).
+    let failed: Vec<String> = monitor
+        .supervision
+        .iter()
+        .filter(|s| s.step == Step::RetryFailed)
+        .map(|s| s.to_string())
+        .collect();
+    assert!(
+        failed
+            .iter()
+            .any(|s| s == "w retry failed: starting_error after the restart"),
+        "{failed:?}"
+    );
+    assert!(monitor.supervision.iter().all(|s| s.instance == "w"));
+    assert!(monitor.supervision_steps >= 5);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn at_the_deadline_the_original_is_destroyed_and_the_substitute_stays() {
+    let rig = substitution(true);
+    let events = rig.base.subscribe();
+    rig.fail_primary();
+    wait(&rig.w, State::Dead);
+    assert_eq!(rig.b.state(), State::Running);
+    // The retirement is announced to observers as it happens.
+    let until = std::time::Instant::now() + WAIT;
+    let mut events = std::iter::from_fn(|| events.recv_deadline(until).ok());
+    let retired = events.find_map(|event| match event {
+        MonitorEvent::Supervision(step) if step.step == Step::Retired => Some(step),
+        _ => None,
+    });
+    let retired = retired.expect("a retirement event");
+    assert_eq!(retired.instance, "w");
+    assert!(retired.to_string().starts_with("w retired"), "{retired}");
+    assert_eq!(rig.base.state(), State::Running);
+    rig.feed.data.send(9);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 1,
+        "the substitute goes on",
+    );
+    // Stopped and run again, the compound keeps the substitute in the dead one's place.
+    run(&rig.base, Controllable::Ready);
+    assert_eq!(rig.b.state(), State::Ready);
+    run(&rig.base, Controllable::Running);
+    wait_user(&rig.b, "idle");
+    rig.feed.data.send(10);
+    eventually(
+        || rig.b_script.received.load(Ordering::SeqCst) == 2,
+        "the substitute still has the connections",
+    );
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn at_the_deadline_without_a_substitute_the_compound_fails() {
+    // `on error w: substitute;` needs a substitute in the language: the runtime's
+    // policy without one (the recovery queue alone) is set on the builder.
+    let mut rig = Base::new(|parts| {
+        cmp_lone::builder("base", parts)?
+            .connect("f.kick", "w.kick")
+            .on_error("w", Policy::Substitute)
+            .recovery(Duration::from_millis(30), Duration::from_millis(150))
+            .build()
+    });
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    script.start_fails.store(true, Ordering::SeqCst);
+    script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("`w` did not recover"),
+        "the error says why: {error}"
+    );
+    assert_eq!(w.state(), State::Dead);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_redundant_group_runs_while_one_member_survives() {
+    let mut rig = Base::new(|parts| cmp_redundant::component("base", parts));
+    let (a_script, b_script) = (rig.script("a"), rig.script("b"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, a, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("a"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&a, "idle");
+    wait_user(&b, "idle");
+    // Every live member receives every packet.
+    feed.data.send(1);
+    eventually(|| a_script.received.load(Ordering::SeqCst) == 1, "a got it");
+    eventually(|| b_script.received.load(Ordering::SeqCst) == 1, "b got it");
+    // a fails (a panic; its restarts fail): b goes on alone, the compound goes on.
+    a_script.start_fails.store(true, Ordering::SeqCst);
+    a_script.panic_in(Some("busy.periodic"));
+    wait(&a, State::RunningError);
+    feed.data.send(2);
+    feed.data.send(3);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 3,
+        "b gets every packet",
+    );
+    assert_eq!(base.state(), State::Running);
+    // b fails too: nobody is left.
+    b_script.panic_in(Some("busy.periodic"));
+    let monitor = wait(&base, State::RunningError);
+    assert!(
+        monitor.error.as_deref().unwrap_or("").contains("redundant"),
+        "{monitor:?}"
+    );
+    assert_eq!(a_script.received.load(Ordering::SeqCst), 1);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn faults_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
+    // mid: leaf1 (restart), leaf2 (propagate), fed by f; top: mid (propagate) and a
+    // sibling (`CmpTop`).
+    let mut rig = Base::new(|parts| cmp_top::component("top", parts));
+    let (script1, script2) = (rig.script("leaf1"), rig.script("leaf2"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let top = rig.rig.compound.clone();
+    let (mid, leaf1, leaf2) = (
+        rig.rig.instance("mid"),
+        rig.rig.instance("mid.leaf1"),
+        rig.rig.instance("mid.leaf2"),
+    );
+    wait_user(&leaf1, "idle");
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+
+    // leaf1 fails: handled in the middle.
+    periodic_fault(&script1);
+    feed.kick.emit();
+    eventually(
+        || script1.log().iter().filter(|e| *e == "start").count() == 2,
+        "leaf1 restarted by mid",
+    );
+    wait_user(&leaf1, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(top.state(), State::Running);
+
+    // leaf2 fails: mid goes to running_error, top hears it and fails too.
+    script2.panic_in(Some("busy.entry"));
+    feed.data.send(1);
+    let monitor = wait(&top, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `mid` failed") && error.contains("instance `leaf2` failed"),
+        "{error}"
+    );
+    assert_eq!(mid.state(), State::RunningError);
+    assert_eq!(leaf2.state(), State::RunningError);
+    assert_eq!(
+        leaf1.state(),
+        State::Ready,
+        "mid's stop brought its running instances to ready"
+    );
+    assert_eq!(*rig.log.lock().unwrap(), ["operating.Entry"]);
+
+    // The top restarts the whole hierarchy through its control port.
+    script2.panic_in(None);
+    run(&top, Controllable::Running);
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn malformed_compounds_are_rejected_with_clear_errors() {
+    // The runtime's builder refuses what coolc would: each mistake is added to a
+    // generated compound's builder (`CmpLone`: `w`, a worker, and `f`, a feeder).
+    let build = |f: fn(CompoundBuilder) -> CompoundBuilder| {
+        f(cmp_lone::builder("base", Parts::new()).expect("builder")).build()
+    };
+    let unknown = build(|b| b.on_error("nobody", Policy::Restart)).expect_err("unknown");
+    assert!(
+        matches!(
+            &unknown,
+            CompoundError::Unknown { compound, what: "instance", name }
+                if compound == "base" && name == "nobody"
+        ),
+        "{unknown:?}"
+    );
+    let rule =
+        build(|b| b.rule("operating", "nowhere", &["w.state"], |_| true)).expect_err("state");
+    assert!(rule.to_string().contains("`nowhere`"), "{rule}");
+    let read =
+        build(|b| b.rule("operating", "operating", &["w.speed"], |_| true)).expect_err("var");
+    assert!(read.to_string().contains("`w.speed`"), "{read}");
+    let substitute = build(|b| b.substitute("f", "w")).expect_err("interface");
+    assert!(
+        substitute.to_string().contains("same interface"),
+        "{substitute}"
+    );
+    let group = build(|b| b.redundant(&["w"])).expect_err("group of one");
+    assert!(group.to_string().contains("at least two"), "{group}");
+    let mapped = build(|b| b.map_controllable("c", "w.count")).expect_err("observable");
+    assert!(mapped.to_string().contains("observable"), "{mapped}");
+    // A bad connection is found when the compound wires it, at start.
+    let component = build(|b| b.connect("f.kick", "w.data")).expect("builds");
+    let mut system = System::new();
+    let base = system.add(component).expect("add");
+    system.start().expect("start");
+    let monitor = wait(&base, State::StartingError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .unwrap_or("")
+            .contains("cannot connect"),
+        "{monitor:?}"
+    );
+    assert!(system.shutdown().clean());
+}
