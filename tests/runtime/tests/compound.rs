@@ -20,6 +20,9 @@ use coolbot::{
     System, Value,
 };
 use coolbot_runtime_tests::generated::{
+    cmp_budget, cmp_hanging, cmp_ignore, cmp_restarting, cmp_restarting_stuck,
+};
+use coolbot_runtime_tests::generated::{
     cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
     cmp_substitution, cmp_substitution_deadline, cmp_top, feeder, worker,
 };
@@ -118,8 +121,21 @@ operating!(
     cmp_lone,
     cmp_redundant,
     cmp_mid,
-    cmp_top
+    cmp_top,
+    cmp_hanging,
+    cmp_restarting,
+    cmp_restarting_stuck,
+    cmp_budget
 );
+
+impl cmp_ignore::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_ignore::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn degraded_entry(&mut self, _cx: &mut cmp_ignore::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("degraded")
+    }
+}
 
 /// `Parts` for compound `$m` with supervisor `Logged`, workers `$w` and feeder `$f`.
 macro_rules! parts {
@@ -151,6 +167,11 @@ parts!(cmp_substitution_deadline; workers w, b; feeder f);
 parts!(cmp_lone; workers w; feeder f);
 parts!(cmp_redundant; workers a, b; feeder f);
 parts!(cmp_mid; workers leaf1, leaf2; feeder f);
+parts!(cmp_hanging; workers w, b; feeder f);
+parts!(cmp_restarting; workers w; feeder f);
+parts!(cmp_restarting_stuck; workers w; feeder f);
+parts!(cmp_budget; workers w; feeder f);
+parts!(cmp_ignore; workers w; feeder f);
 
 /// `CmpTop`: `mid`'s parts are the same (one set of scripts, one feeder).
 impl cmp_top::Parts for Parts {
@@ -728,4 +749,227 @@ fn malformed_compounds_are_rejected_with_clear_errors() {
         "{monitor:?}"
     );
     assert!(system.shutdown().clean());
+}
+
+fn starts(script: &Script) -> usize {
+    script.log().iter().filter(|e| *e == "start").count()
+}
+
+#[test]
+fn an_instance_hanging_past_max_response_is_substituted_and_recovers_once_it_returns() {
+    let mut rig = Base::new(|parts| cmp_hanging::component("base", parts));
+    let (w_script, b_script) = (rig.script("w"), rig.script("b"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&w, "idle");
+    let release = w_script.hang_in("busy.periodic");
+    feed.kick.emit();
+    // The watchdog moves w to running_error while its section still hangs; the
+    // compound substitutes it at once.
+    wait_user(&b, "idle");
+    assert!(w.is_stuck());
+    assert!(w_script.hanging.load(Ordering::SeqCst));
+    let monitor = w.snapshot();
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("still running after") && e.contains("max_response 500ms")),
+        "{monitor:?}"
+    );
+    assert_eq!(base.state(), State::Running);
+    feed.data.send(1);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 1,
+        "the substitute gets the stream",
+    );
+    // The section returns: the recovery queue restarts w, which takes its place back.
+    assert_eq!(starts(&w_script), 1, "no restart while the section hangs");
+    drop(release);
+    wait(&b, State::Ready);
+    assert_eq!(w.state(), State::Running);
+    assert_eq!(w_script.returned.load(Ordering::SeqCst), 1);
+    assert_eq!(starts(&w_script), 2);
+    let before = w_script.received.load(Ordering::SeqCst);
+    feed.data.send(2);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w has its connections back",
+    );
+    assert_eq!(b_script.received.load(Ordering::SeqCst), 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+/// A compound `base` whose instance `w` (with a 500 ms max_response) is restarted on
+/// error, within 5 restarts in a minute (backoff 1 ms..4 ms), with a recovery
+/// deadline of 30 s (`CmpRestarting`) or 150 ms (`CmpRestartingStuck`), running.
+fn restarting(
+    short_deadline: bool,
+) -> (Base, coolbot::Handle, coolbot::Handle, Arc<Script>, Feeder) {
+    let mut rig = Base::new(|parts| {
+        if short_deadline {
+            cmp_restarting_stuck::component("base", parts)
+        } else {
+            cmp_restarting::component("base", parts)
+        }
+    });
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    (rig, base, w, script, feed)
+}
+
+#[test]
+fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
+    let (rig, base, w, script, feed) = restarting(false);
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    assert!(w.is_stuck());
+    assert_eq!(base.state(), State::Running, "the compound runs on");
+    assert_eq!(starts(&script), 1);
+    drop(release);
+    eventually(|| starts(&script) == 2, "w restarted once it returned");
+    let monitor = wait_user(&w, "idle");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(monitor.overruns, 1);
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn an_instance_stuck_longer_than_the_recovery_deadline_is_propagated() {
+    let (rig, base, w, script, feed) = restarting(true);
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `w` cannot be restarted: it is stuck"),
+        "{error}"
+    );
+    assert!(w.is_stuck());
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn restart_stops_at_the_budget_and_the_fault_propagates() {
+    let (rig, base, w, script) = {
+        // w fails in its first entry at every run.
+        let mut rig = Base::new(|parts| cmp_budget::component("base", parts));
+        let script = rig.script("w");
+        script.inject(Some(Injected {
+            hook: "idle.entry",
+            exception: Some(worker::Exception::Fatal),
+            times: 1000,
+        }));
+        rig.rig.start();
+        let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+        wait(&base, State::Ready);
+        (rig, base, w, script)
+    };
+    base.command(Command::SetState(Controllable::Running))
+        .expect("running");
+    let monitor = wait(&base, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains(
+            "instance `w` failed again after 3 restart(s) within 60s (restart budget spent)"
+        ) && error.contains("exception `fatal`"),
+        "{error}"
+    );
+    assert_eq!(starts(&script), 4, "the first run and three restarts");
+    let steps: Vec<_> = monitor
+        .supervision
+        .iter()
+        .map(|s| (s.step.clone(), s.detail.starts_with("restart budget spent")))
+        .filter(|(step, _)| *step != Step::Failed)
+        .collect();
+    assert_eq!(
+        steps,
+        [
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Restarted, false),
+            (Step::Propagated, true)
+        ],
+        "{:?}",
+        monitor.supervision
+    );
+    assert_eq!(script.injected.load(Ordering::SeqCst), 4);
+    assert_eq!(w.state(), State::RunningError);
+    // The budget starts afresh when the compound is restarted.
+    script.inject(None);
+    base.command(Command::SetState(Controllable::Running))
+        .expect("restart the compound");
+    wait_user(&w, "idle");
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn ignore_leaves_the_instance_in_running_error_where_rules_see_it() {
+    let mut rig = Base::new(|parts| cmp_ignore::component("base", parts));
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    periodic_fault(&script);
+    feed.kick.emit();
+    wait_user(&base, "degraded");
+    assert_eq!(base.state(), State::Running);
+    assert_eq!(w.state(), State::RunningError, "nobody restarted it");
+    assert_eq!(starts(&script), 1);
+    wait_log(&rig.log, &["operating.Entry", "degraded.Entry"]);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn without_a_substitute_the_recovery_queue_restarts_the_instance_until_it_recovers() {
+    // The substitute policy without a substitute (the recovery queue alone) is the
+    // runtime's, not the language's: it is set on the builder.
+    let mut rig = Base::new(|parts| {
+        cmp_lone::builder("base", parts)?
+            .connect("f.kick", "w.kick")
+            .connect("f.data", "w.data")
+            .on_error("w", Policy::Substitute)
+            .recovery(Duration::from_millis(20), Duration::from_secs(30))
+            .build()
+    });
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    // w fails and cannot start again for a while: the queue keeps retrying it.
+    script.start_fails.store(true, Ordering::SeqCst);
+    periodic_fault(&script);
+    feed.kick.emit();
+    w.wait_state(State::StartingError, WAIT).expect("retried");
+    assert_eq!(base.state(), State::Running, "the compound waits for it");
+    // Packets sent meanwhile wait at w's input.
+    feed.data.send(7);
+    script.start_fails.store(false, Ordering::SeqCst);
+    // The queued packet is an arrival in the initial state of the recovered instance:
+    // it takes w to `busy`, whose entry reads it.
+    wait_user(&w, "busy");
+    eventually(
+        || script.received.load(Ordering::SeqCst) == 1,
+        "the queued packet reaches the recovered instance",
+    );
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
 }
