@@ -285,6 +285,7 @@ scripted!(crate::generated::goto_worker);
 scripted!(crate::generated::ignore_worker);
 scripted!(crate::generated::degrade_worker);
 scripted!(crate::generated::plain_worker);
+scripted!(crate::generated::deep_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {

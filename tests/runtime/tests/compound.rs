@@ -14,13 +14,16 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use coolbot::crossbeam_channel::Receiver;
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::{DataOut, FifoIn};
 use coolbot::{
     Command, CompoundBuilder, CompoundError, Controllable, MonitorEvent, Policy, State, Step,
     System, Value,
 };
 use coolbot_runtime_tests::generated::{
-    cmp_budget, cmp_hanging, cmp_ignore, cmp_restarting, cmp_restarting_stuck,
+    cmp_already, cmp_budget, cmp_cycles, cmp_exported, cmp_hanging, cmp_ignore, cmp_over_mid,
+    cmp_over_top, cmp_restarting, cmp_restarting_stuck, cmp_scan_sink, cmp_soak, cmp_source,
+    deep_worker,
 };
 use coolbot_runtime_tests::generated::{
     cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
@@ -125,8 +128,25 @@ operating!(
     cmp_hanging,
     cmp_restarting,
     cmp_restarting_stuck,
-    cmp_budget
+    cmp_budget,
+    cmp_exported,
+    cmp_soak,
+    cmp_cycles,
+    cmp_over_mid,
+    cmp_over_top
 );
+
+impl cmp_already::Supervisor for Logged {
+    fn first_entry(&mut self, _cx: &mut cmp_already::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("first")
+    }
+    fn second_entry(&mut self, _cx: &mut cmp_already::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("second")
+    }
+    fn third_entry(&mut self, _cx: &mut cmp_already::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("third")
+    }
+}
 
 impl cmp_ignore::Supervisor for Logged {
     fn operating_entry(&mut self, _cx: &mut cmp_ignore::Cx<'_>) -> coolbot::SectionResult {
@@ -172,6 +192,88 @@ parts!(cmp_restarting; workers w; feeder f);
 parts!(cmp_restarting_stuck; workers w; feeder f);
 parts!(cmp_budget; workers w; feeder f);
 parts!(cmp_ignore; workers w; feeder f);
+parts!(cmp_over_mid; workers leaf1, spare, leaf2; feeder f);
+parts!(cmp_already; workers w;);
+
+impl cmp_cycles::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_cycles::Supervisor {
+        self.logged()
+    }
+    fn w(&mut self) -> impl deep_worker::Behavior {
+        self.worker("w")
+    }
+    fn b(&mut self) -> impl deep_worker::Behavior {
+        self.worker("b")
+    }
+}
+
+impl cmp_soak::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_soak::Supervisor {
+        self.logged()
+    }
+    fn flaky(&mut self) -> impl worker::Behavior {
+        self.worker("flaky")
+    }
+    fn steady(&mut self) -> impl deep_worker::Behavior {
+        self.worker("steady")
+    }
+    fn f(&mut self) -> impl feeder::Behavior {
+        self.feeder()
+    }
+}
+
+/// `CmpOverTop`: `mid`'s parts are the same (one set of scripts, one feeder).
+impl cmp_over_top::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_over_top::Supervisor {
+        self.logged()
+    }
+    fn mid(&mut self) -> impl cmp_over_mid::Parts {
+        Parts {
+            scripts: self.scripts.clone(),
+            log: Log::default(),
+            tap: self.tap.take(),
+            feed: None,
+        }
+    }
+}
+
+/// A `CmpSource`'s behaviour: hands its output to the test when it starts.
+struct Source(Sender<DataOut<u64>>);
+
+impl cmp_source::Behavior for Source {
+    fn start(&mut self, cx: &mut cmp_source::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.try_send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+/// A `CmpScanSink`'s behaviour: hands its input to the test when it starts.
+struct Sink(Sender<FifoIn<u64>>);
+
+impl cmp_scan_sink::Behavior for Sink {
+    fn start(&mut self, cx: &mut cmp_scan_sink::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.try_send(cx.inputs.scans.clone());
+        Ok(())
+    }
+}
+
+/// `CmpExported`'s parts: `Parts`, and its source.
+struct ExportedParts(Parts, Option<Source>);
+
+impl cmp_exported::Parts for ExportedParts {
+    fn supervisor(&mut self) -> impl cmp_exported::Supervisor {
+        self.0.logged()
+    }
+    fn w(&mut self) -> impl deep_worker::Behavior {
+        self.0.worker("w")
+    }
+    fn b(&mut self) -> impl deep_worker::Behavior {
+        self.0.worker("b")
+    }
+    fn src(&mut self) -> impl cmp_source::Behavior {
+        self.1.take().expect("one source")
+    }
+}
 
 /// `CmpTop`: `mid`'s parts are the same (one set of scripts, one feeder).
 impl cmp_top::Parts for Parts {
@@ -971,5 +1073,331 @@ fn without_a_substitute_the_recovery_queue_restarts_the_instance_until_it_recove
         "the queued packet reaches the recovered instance",
     );
     assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+/// A stall check for soak loops: fails only when a counter has not moved for `WAIT`.
+struct Progress {
+    last: Option<usize>,
+    since: std::time::Instant,
+}
+
+impl Progress {
+    fn new() -> Progress {
+        Progress {
+            last: None,
+            since: std::time::Instant::now(),
+        }
+    }
+
+    /// Whether `count` moved within the last `WAIT`.
+    fn check(&mut self, count: usize) -> bool {
+        if self.last != Some(count) {
+            self.last = Some(count);
+            self.since = std::time::Instant::now();
+        }
+        self.since.elapsed() < WAIT
+    }
+}
+
+#[test]
+fn exported_ports_follow_the_substitute_and_no_packet_is_lost() {
+    let (hand, source) = crossbeam_channel::bounded(1);
+    let compound = |parts| {
+        let base = cmp_exported::component("base", ExportedParts(parts, Some(Source(hand))))?;
+        assert_eq!(base.spec().inputs.len(), 2);
+        assert_eq!(base.spec().outputs[0].name, "scan");
+        Ok(base)
+    };
+    let mut rig = Base::new(compound);
+    let (w_script, b_script) = (rig.script("w"), rig.script("b"));
+
+    // Outside: a feeder into the compound's inputs, a sink on its output.
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("f", tap));
+    let (hand, scans) = crossbeam_channel::bounded(1);
+    rig.rig.add(cmp_scan_sink::component("sink", Sink(hand)));
+    rig.rig.connect("f.data", "base.data");
+    rig.rig.connect("f.kick", "base.kick");
+    rig.rig.connect("base.scan", "sink.scans");
+    rig.rig.start();
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait(&base, State::Ready);
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let scans = scans.recv_timeout(WAIT).expect("the sink started");
+
+    // While the compound is ready, packets wait at its own input.
+    for packet in 0..5 {
+        feed.data.send(packet);
+    }
+    rig.rig.run();
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == 5,
+        "queued packets reach w once the compound runs",
+    );
+    let source = source.recv_timeout(WAIT).expect("the source started");
+    source.send(42);
+    assert_eq!(scans.recv_timeout(WAIT), Some(42), "the exported output");
+
+    // A steady stream while w fails and b takes over.
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let sent = 300;
+    for packet in 5..sent {
+        feed.data.send(packet);
+        if packet % 10 == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    wait(&b, State::Running);
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst) + b_script.received.load(Ordering::SeqCst)
+                == sent
+        },
+        "every packet reached w or b",
+    );
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    for handle in [&base, &w, &b] {
+        assert_eq!(handle.snapshot().overflows, 0, "{}", handle.name());
+    }
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn soak_ten_thousand_injected_faults_restarted_while_a_stream_goes_on() {
+    const FAULTS: u32 = 10_000;
+    // Every fault is restarted: no budget, no backoff (a zero backoff is the
+    // runtime's, not the language's: set on the builder).
+    let mut rig = Base::new(|parts| {
+        cmp_soak::builder("base", parts)?
+            .restart_budget(u32::MAX, Duration::from_secs(1))
+            .restart_backoff(Duration::ZERO, Duration::ZERO)
+            .build()
+    });
+    let (flaky_script, steady_script) = (rig.script("flaky"), rig.script("steady"));
+    // Every run of `flaky` fails in its first entry, alternately by a declared
+    // exception and by a panic, until the faults are used up.
+    flaky_script.inject(Some(Injected {
+        hook: "idle.entry",
+        exception: Some(worker::Exception::Fatal),
+        times: FAULTS / 2,
+    }));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, flaky, steady) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("flaky"),
+        rig.rig.instance("steady"),
+    );
+    let mut sent = 0;
+    // No overall time limit (the machine may be loaded): each phase fails only if it
+    // makes no progress for `WAIT`.
+    let stalled = |phase: &str| {
+        format!(
+            "{phase} stalled for {WAIT:?}: {:?} {:?}",
+            base.snapshot(),
+            flaky.snapshot()
+        )
+    };
+    let mut progress = Progress::new();
+    // Panics first (a panic comes before the injected exception in the script).
+    flaky_script.panic_in(Some("idle.entry"));
+    loop {
+        let starts = flaky_script.log().iter().filter(|e| *e == "start").count();
+        if starts > usize::try_from(FAULTS / 2).unwrap() {
+            break;
+        }
+        assert!(progress.check(starts), "{}", stalled("panics"));
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    flaky_script.panic_in(None);
+    // Then the declared exceptions, until they are used up.
+    let mut progress = Progress::new();
+    loop {
+        let injected = flaky_script.injected.load(Ordering::SeqCst);
+        if injected >= FAULTS / 2 {
+            break;
+        }
+        assert!(
+            progress.check(usize::try_from(injected).unwrap()),
+            "{}",
+            stalled("exceptions")
+        );
+        feed.data.send(sent);
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    wait_user(&flaky, "idle");
+    assert_eq!(base.state(), State::Running);
+    eventually(
+        || steady_script.received.load(Ordering::SeqCst) == sent,
+        "every packet of the stream arrived",
+    );
+    assert_eq!(steady.snapshot().overflows, 0);
+    assert_eq!(steady.state(), State::Running);
+    let report = rig.rig.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
+    const CYCLES: usize = 200;
+    let mut rig = Base::new(|parts| cmp_cycles::component("base", parts));
+    let (w_script, b_script) = (rig.script("w"), rig.script("b"));
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("f", tap));
+    rig.rig.connect("f.data", "base.data");
+    rig.rig.run();
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&w, "idle");
+    let mut sent = 0u64;
+    for cycle in 0..CYCLES {
+        // w fails in its next periodic section (half panics, half declared exceptions)
+        // while the stream goes on; b takes over; the queue restarts w, and once it
+        // runs on, w takes the stream back. (The restart can be quick: w's failure is
+        // seen through its script, not through a state that may last a millisecond.)
+        let starts_before = starts(&w_script);
+        // In the first cycle w cannot restart until b has had some of the stream
+        // (otherwise, on a loaded machine, w may be back before any packet goes out).
+        w_script.start_fails.store(cycle == 0, Ordering::SeqCst);
+        if cycle % 2 == 0 {
+            w_script.panic_in(Some("busy.periodic"));
+        } else {
+            w_script.inject(Some(Injected {
+                hook: "busy.periodic",
+                exception: Some(worker::Exception::Fatal),
+                times: 1,
+            }));
+        }
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        eventually(
+            || starts(&w_script) > starts_before,
+            &format!("cycle {cycle}: w failed and was restarted"),
+        );
+        w_script.panic_in(None);
+        for _ in 0..5 {
+            feed.data.send(sent);
+            sent += 1;
+        }
+        if cycle == 0 {
+            eventually(
+                || b_script.received.load(Ordering::SeqCst) > 0,
+                "b has some of the stream",
+            );
+            w_script.start_fails.store(false, Ordering::SeqCst);
+        }
+        // Recovered: b back on standby, w running with the stream.
+        b.wait_state(State::Ready, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        w.wait_state(State::Running, WAIT)
+            .unwrap_or_else(|t| panic!("cycle {cycle}: {t}"));
+        assert_eq!(base.state(), State::Running, "cycle {cycle}");
+    }
+    // Every packet reached w or b, or is counted as lost at an input.
+    let lost = || base.snapshot().overflows + w.snapshot().overflows + b.snapshot().overflows;
+    eventually(
+        || {
+            w_script.received.load(Ordering::SeqCst)
+                + b_script.received.load(Ordering::SeqCst)
+                + lost()
+                == sent
+        },
+        "every packet delivered or counted",
+    );
+    assert_eq!(lost(), 0, "deep queues: nothing overflowed");
+    assert!(b_script.received.load(Ordering::SeqCst) > 0);
+    assert!(w_script.log().iter().filter(|e| *e == "start").count() > CYCLES);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn overruns_are_handled_in_the_middle_or_propagated_to_the_top_of_three_levels() {
+    // mid: leaf1 (substitute: spare), leaf2 (propagate), both with a 500 ms
+    // max_response, fed by f (`CmpOverMid`, inside `CmpOverTop`).
+    let mut rig = Base::new(|parts| cmp_over_top::component("top", parts));
+    let (script1, script2) = (rig.script("leaf1"), rig.script("leaf2"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let top = rig.rig.compound.clone();
+    let (mid, leaf1, spare, leaf2) = (
+        rig.rig.instance("mid"),
+        rig.rig.instance("mid.leaf1"),
+        rig.rig.instance("mid.spare"),
+        rig.rig.instance("mid.leaf2"),
+    );
+    wait_user(&leaf1, "idle");
+    wait_user(&leaf2, "idle");
+
+    // leaf1 hangs: the middle substitutes it; the top does not notice.
+    let release1 = script1.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&spare, State::Running);
+    assert!(leaf1.is_stuck());
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(top.state(), State::Running);
+
+    // leaf2 hangs: the middle propagates, the top fails with the whole chain named.
+    let release2 = script2.hang_in("busy.periodic");
+    feed.data.send(1);
+    let monitor = wait(&top, State::RunningError);
+    let error = monitor.error.expect("error");
+    assert!(
+        error.contains("instance `mid` failed")
+            && error.contains("instance `leaf2` failed")
+            && error.contains("still running after"),
+        "{error}"
+    );
+    assert!(leaf2.is_stuck());
+    drop(release1);
+    drop(release2);
+    for (handle, script) in [(&leaf1, &script1), (&leaf2, &script2)] {
+        eventually(
+            || !handle.is_stuck() && script.returned.load(Ordering::SeqCst) == 1,
+            "the sections returned",
+        );
+    }
+    // Restarted from the top once the sections returned, the whole hierarchy runs.
+    run(&top, Controllable::Running);
+    wait_user(&leaf2, "idle");
+    assert_eq!(mid.state(), State::Running);
+    assert_eq!(leaf1.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_rule_that_already_holds_when_its_state_is_entered_fires_without_another_event() {
+    let mut rig = Base::new(|parts| cmp_already::component("base", parts));
+    rig.rig.run();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    let events = w.subscribe();
+    run(&w, Controllable::Suspended);
+    wait_user(&base, "third");
+    wait_log(&rig.log, &["first.Entry", "second.Entry", "third.Entry"]);
+    assert_eq!(
+        events.try_iter().collect::<Vec<_>>(),
+        [MonitorEvent::State {
+            from: State::Running,
+            to: State::Suspended
+        }],
+        "the only event w published"
+    );
     assert!(rig.rig.shutdown().clean());
 }
