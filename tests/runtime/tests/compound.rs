@@ -26,6 +26,10 @@ use coolbot_runtime_tests::generated::{
     deep_worker,
 };
 use coolbot_runtime_tests::generated::{
+    cmp_converted, cmp_converted_substitute, cmp_counting, cmp_counting_untimed,
+    cmp_deep_substitute, cmp_stepping, cmp_text_sink, cmp_trio, cmp_unconverted, types,
+};
+use coolbot_runtime_tests::generated::{
     cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
     cmp_substitution, cmp_substitution_deadline, cmp_top, feeder, worker,
 };
@@ -133,7 +137,12 @@ operating!(
     cmp_soak,
     cmp_cycles,
     cmp_over_mid,
-    cmp_over_top
+    cmp_over_top,
+    cmp_converted,
+    cmp_unconverted,
+    cmp_converted_substitute,
+    cmp_trio,
+    cmp_deep_substitute
 );
 
 impl cmp_already::Supervisor for Logged {
@@ -194,6 +203,122 @@ parts!(cmp_budget; workers w; feeder f);
 parts!(cmp_ignore; workers w; feeder f);
 parts!(cmp_over_mid; workers leaf1, spare, leaf2; feeder f);
 parts!(cmp_already; workers w;);
+parts!(cmp_converted_substitute; workers w, b; feeder f);
+parts!(cmp_trio; workers a, b, c;);
+parts!(cmp_stepping; workers w;);
+
+impl cmp_deep_substitute::Parts for DeepParts {
+    fn supervisor(&mut self) -> impl cmp_deep_substitute::Supervisor {
+        self.0.logged()
+    }
+    fn w(&mut self) -> impl worker::Behavior {
+        self.0.worker("w")
+    }
+    fn deep(&mut self) -> impl deep_worker::Behavior {
+        self.0.worker("deep")
+    }
+}
+
+/// The parts of a compound with a `DeepWorker`.
+struct DeepParts(Parts);
+
+/// A `CmpTextSink`'s behaviour: hands its input to the test when it starts.
+struct TextSink(Sender<FifoIn<String>>);
+
+impl cmp_text_sink::Behavior for TextSink {
+    fn start(&mut self, cx: &mut cmp_text_sink::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.try_send(cx.inputs.text.clone());
+        Ok(())
+    }
+}
+
+/// The parts of `CmpConverted` and `CmpUnconverted`: `Parts`, and the text sink.
+struct TextParts(Parts, Option<TextSink>);
+
+/// `TextParts` for compound `$m` (`f` and `sink`).
+macro_rules! text_parts {
+    ($($m:ident),*) => {$(
+        impl $m::Parts for TextParts {
+            fn supervisor(&mut self) -> impl $m::Supervisor {
+                self.0.logged()
+            }
+            fn f(&mut self) -> impl feeder::Behavior {
+                self.0.feeder()
+            }
+            fn sink(&mut self) -> impl cmp_text_sink::Behavior {
+                self.1.take().expect("one sink")
+            }
+        }
+    )*};
+}
+
+text_parts!(cmp_converted, cmp_unconverted);
+
+/// The converters of `cool/compound.cool`.
+struct Convert;
+
+/// How many times `CountedCopy` ran (one test uses it).
+static COPIES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+impl types::Converters for Convert {
+    fn number_text(from: &u64) -> String {
+        format!("#{from}")
+    }
+    fn counted_copy(from: &u64) -> u64 {
+        COPIES.fetch_add(1, Ordering::SeqCst);
+        *from
+    }
+}
+
+/// A supervisor counting its periodic sections in its local variable `count`.
+struct Counter;
+
+impl cmp_counting::Supervisor for Counter {
+    fn counting_periodic(&mut self, cx: &mut cmp_counting::Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.count += 1;
+        Ok(())
+    }
+    fn stopped_entry(&mut self, _cx: &mut cmp_counting::Cx<'_>) -> coolbot::SectionResult {
+        Ok(())
+    }
+}
+
+impl cmp_counting_untimed::Supervisor for Counter {
+    fn counting_periodic(
+        &mut self,
+        cx: &mut cmp_counting_untimed::Cx<'_>,
+    ) -> coolbot::SectionResult {
+        cx.vars.count += 1;
+        Ok(())
+    }
+    fn stopped_entry(&mut self, _cx: &mut cmp_counting_untimed::Cx<'_>) -> coolbot::SectionResult {
+        Ok(())
+    }
+}
+
+/// The parts of a compound whose supervisor is `Counter`.
+struct CounterParts(Parts);
+
+impl cmp_counting::Parts for CounterParts {
+    fn supervisor(&mut self) -> impl cmp_counting::Supervisor {
+        Counter
+    }
+    fn w(&mut self) -> impl worker::Behavior {
+        self.0.worker("w")
+    }
+}
+
+impl cmp_counting_untimed::Parts for CounterParts {
+    fn supervisor(&mut self) -> impl cmp_counting_untimed::Supervisor {
+        Counter
+    }
+    fn w(&mut self) -> impl worker::Behavior {
+        self.0.worker("w")
+    }
+}
+
+/// `CmpStepping`'s supervisor has no sections.
+impl cmp_stepping::Supervisor for Logged {}
 
 impl cmp_cycles::Parts for Parts {
     fn supervisor(&mut self) -> impl cmp_cycles::Supervisor {
@@ -1399,5 +1524,155 @@ fn a_rule_that_already_holds_when_its_state_is_entered_fires_without_another_eve
         }],
         "the only event w published"
     );
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_connection_through_a_converter_converts_inside_a_compound() {
+    let (hand, text) = crossbeam_channel::bounded(1);
+    let mut rig = Base::new(|parts| {
+        cmp_converted::component::<Convert>("base", TextParts(parts, Some(TextSink(hand))))
+    });
+    rig.rig.run();
+    let feed = rig.feeder();
+    let text = text.recv_timeout(WAIT).expect("the sink started");
+    wait(&rig.rig.compound, State::Running);
+    feed.data.send(7);
+    feed.data.send(8);
+    assert_eq!(text.recv_timeout(WAIT).as_deref(), Some("#7"));
+    assert_eq!(text.recv_timeout(WAIT).as_deref(), Some("#8"));
+    assert!(rig.rig.shutdown().clean());
+
+    // A converter whose types do not fit the ports (which coolc refuses): the
+    // compound fails to start, and says why.
+    let (hand, _text) = crossbeam_channel::bounded(1);
+    let mut rig = Base::new(|parts| {
+        cmp_unconverted::builder("base", TextParts(parts, Some(TextSink(hand))))?
+            .connect_via::<u32, String>("f.data", "sink.text", |n| n.to_string())
+            .build()
+    });
+    rig.rig.system.start().expect("start");
+    let monitor = wait(&rig.rig.compound, State::StartingError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .unwrap_or_default()
+            .contains("converter"),
+        "{monitor:?}"
+    );
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_converter_between_equal_types_is_applied_and_follows_the_substitute() {
+    let calls = &COPIES;
+    let mut rig = Base::new(|parts| cmp_converted_substitute::component::<Convert>("base", parts));
+    let (w_script, b_script) = (rig.script("w"), rig.script("b"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&w, "idle");
+    feed.data.send(1);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == 1,
+        "w receives through the converter",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 1, "the converter ran");
+
+    // w fails: the converted connection moves to b, converter included.
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    b.wait_for(
+        |m| m.state == State::Running && m.user_state.is_some(),
+        WAIT,
+    )
+    .unwrap_or_else(|t| panic!("{t}"));
+    feed.data.send(2);
+    feed.data.send(3);
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 2,
+        "b receives through the converter",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 3);
+
+    // w recovers: back to w, still converted.
+    w_script.panic_in(None);
+    w_script.start_fails.store(false, Ordering::SeqCst);
+    wait(&b, State::Ready);
+    let before = w_script.received.load(Ordering::SeqCst);
+    feed.data.send(4);
+    eventually(
+        || w_script.received.load(Ordering::SeqCst) == before + 1,
+        "w receives again",
+    );
+    assert_eq!(calls.load(Ordering::SeqCst), 4);
+    assert_eq!(b_script.received.load(Ordering::SeqCst), 2);
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_rule_reading_what_a_section_changed_is_evaluated_after_the_section() {
+    // `when count > 3 -> stopped;` reads only the local `count`, which nothing but
+    // the periodic section changes.
+    let mut rig = Base::new(|parts| cmp_counting::component("base", CounterParts(parts)));
+    rig.rig.run();
+    let base = rig.rig.compound.clone();
+    wait_user(&base, "stopped");
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_supervisor_periodic_section_without_a_period_runs_at_the_default_supervision_period() {
+    let mut rig = Base::new(|parts| {
+        let component = cmp_counting_untimed::component("base", CounterParts(parts))?;
+        assert_eq!(
+            component.spec().timing.period,
+            Some(coolbot::compound::DEFAULT_SUPERVISION_PERIOD)
+        );
+        Ok(component)
+    });
+    rig.rig.run();
+    wait_user(&rig.rig.compound, "stopped");
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn substitution_chains_are_refused_in_either_order_and_interfaces_compare_by_name() {
+    // coolc refuses these arrangements too (`check::arrangement`): the runtime's
+    // builder is given them on `CmpTrio` (workers `a`, `b`, `c`).
+    let build = |f: fn(CompoundBuilder) -> CompoundBuilder| {
+        f(cmp_trio::builder("base", Parts::new()).expect("builder")).build()
+    };
+    for chain in [
+        build(|b| b.substitute("b", "a").substitute("c", "b")),
+        build(|b| b.substitute("c", "b").substitute("b", "a")),
+        build(|b| b.substitute("b", "a").substitute("c", "a")),
+    ] {
+        let error = chain.expect_err("a chain or two substitutes");
+        assert!(error.to_string().contains("one substitute"), "{error}");
+    }
+    // A substitute whose data fifo is deeper: the same interface.
+    cmp_deep_substitute::component("base", DeepParts(Parts::new()))
+        .expect("queue sizes may differ");
+}
+
+#[test]
+fn rules_are_evaluated_on_entering_a_state_reached_by_after() {
+    let mut rig = Base::new(|parts| cmp_stepping::component("base", parts));
+    rig.rig.run();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    // w runs long before `second` is entered: no change of w announces anything
+    // there; entering the state is what makes its rule evaluated.
+    wait_user(&w, "idle");
+    wait_user(&base, "fired");
+    assert_eq!(base.state(), State::Running);
     assert!(rig.rig.shutdown().clean());
 }
