@@ -33,6 +33,9 @@ use coolbot_runtime_tests::generated::{
     cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
     cmp_substitution, cmp_substitution_deadline, cmp_top, feeder, worker,
 };
+use coolbot_runtime_tests::generated::{
+    cmp_gone, cmp_pair, cmp_quality, cmp_standby, cmp_watchdog,
+};
 use coolbot_runtime_tests::support::compound::{CompoundRig, Scripts, wait_state};
 use coolbot_runtime_tests::support::{Feeder, Injected, Script, Scripted, Tap, WAIT, eventually};
 
@@ -142,8 +145,36 @@ operating!(
     cmp_unconverted,
     cmp_converted_substitute,
     cmp_trio,
-    cmp_deep_substitute
+    cmp_deep_substitute,
+    cmp_pair,
+    cmp_gone,
+    cmp_standby
 );
+
+impl cmp_watchdog::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_watchdog::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn degraded_entry(&mut self, _cx: &mut cmp_watchdog::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("degraded")
+    }
+    /// The builder's rule moves on, never the choice.
+    fn operating_choose(
+        &mut self,
+        _cx: &mut cmp_watchdog::Cx<'_>,
+    ) -> Option<cmp_watchdog::OperatingMay> {
+        None
+    }
+}
+
+impl cmp_quality::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_quality::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn degraded_entry(&mut self, _cx: &mut cmp_quality::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("degraded")
+    }
+}
 
 impl cmp_already::Supervisor for Logged {
     fn first_entry(&mut self, _cx: &mut cmp_already::Cx<'_>) -> coolbot::SectionResult {
@@ -206,6 +237,11 @@ parts!(cmp_already; workers w;);
 parts!(cmp_converted_substitute; workers w, b; feeder f);
 parts!(cmp_trio; workers a, b, c;);
 parts!(cmp_stepping; workers w;);
+parts!(cmp_watchdog; workers w; feeder f);
+parts!(cmp_pair; workers a, b; feeder f);
+parts!(cmp_gone; workers w, b; feeder f);
+parts!(cmp_quality; workers w;);
+parts!(cmp_standby; workers w, b; feeder f);
 
 impl cmp_deep_substitute::Parts for DeepParts {
     fn supervisor(&mut self) -> impl cmp_deep_substitute::Supervisor {
@@ -1675,4 +1711,163 @@ fn rules_are_evaluated_on_entering_a_state_reached_by_after() {
     wait_user(&base, "fired");
     assert_eq!(base.state(), State::Running);
     assert!(rig.rig.shutdown().clean());
+}
+
+/// The steps of `monitor` about `instance`, with their details.
+fn steps_of(monitor: &coolbot::Monitor, instance: &str) -> Vec<(Step, String)> {
+    monitor
+        .supervision
+        .iter()
+        .filter(|s| s.instance == instance)
+        .map(|s| (s.step.clone(), s.detail.clone()))
+        .collect()
+}
+
+#[test]
+fn a_fault_is_handled_once_though_the_watchdog_trips_it_before_the_section_returns() {
+    let mut rig = Base::new(|parts| {
+        cmp_watchdog::builder("base", parts)?
+            // Fires once the compound has seen the section return (the second event of
+            // the same fault).
+            .rule("operating", "degraded", &["w.error"], |v| {
+                v.error("w").is_some_and(|e| e.ends_with("discarded"))
+            })
+            .build()
+    });
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    assert!(w.is_stuck());
+    drop(release);
+    let monitor = wait_user(&base, "degraded");
+    let steps: Vec<Step> = steps_of(&monitor, "w")
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    assert_eq!(steps, [Step::Failed, Step::Ignored]);
+    assert_eq!(w.state(), State::RunningError);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_failed_member_that_did_not_lead_its_redundant_group_is_not_substituted() {
+    let mut rig = Base::new(|parts| cmp_pair::component("base", parts));
+    let b_script = rig.script("b");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, a, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("a"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&a, "idle");
+    wait_user(&b, "idle");
+    // b (not the leader: a has the connections) fails in its entry, commanded
+    // through its own port.
+    b_script.start_fails.store(true, Ordering::SeqCst);
+    b_script.panic_in(Some("idle.entry"));
+    run(&b, Controllable::Ready);
+    run(&b, Controllable::Running);
+    let monitor = base
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == "b" && s.step == Step::Enqueued)
+            },
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("{t}"));
+    let steps: Vec<Step> = steps_of(&monitor, "b")
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    assert_eq!(steps, [Step::Failed, Step::Enqueued]);
+    // a keeps the stream.
+    feed.kick.emit();
+    wait_user(&a, "busy");
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_substitution_that_cannot_be_done_is_recorded_as_propagated_with_the_reason() {
+    let mut rig = Base::new(|parts| cmp_gone::component("base", parts));
+    let w_script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&w, "idle");
+    // The substitute is gone (killed through its own port): it cannot run.
+    run(&b, Controllable::Dead);
+    w_script.start_fails.store(true, Ordering::SeqCst);
+    w_script.panic_in(Some("busy.periodic"));
+    feed.kick.emit();
+    let monitor = wait(&base, State::RunningError);
+    let steps = steps_of(&monitor, "w");
+    let kinds: Vec<Step> = steps.iter().map(|(s, _)| s.clone()).collect();
+    assert_eq!(kinds, [Step::Failed, Step::Enqueued, Step::Propagated]);
+    let reason = &steps[2].1;
+    assert!(
+        reason.contains("`b` rejected SetState(Running)"),
+        "{reason}"
+    );
+    assert_eq!(monitor.error.as_deref(), Some(reason.as_str()));
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_rule_reading_an_instance_quality_is_evaluated_when_it_changes() {
+    let mut rig = Base::new(|parts| cmp_quality::component("base", parts));
+    rig.rig.run();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    wait_log(&rig.log, &["operating.Entry"]);
+    w.command(Command::SetQuality(1)).expect("quality");
+    wait_user(&base, "degraded");
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn packets_moved_to_a_standby_substitute_are_handled_in_its_initial_state() {
+    let mut rig = Base::new(|parts| cmp_standby::component("base", parts));
+    let (w_script, b_script) = (rig.script("w"), rig.script("b"));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w, b) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("w"),
+        rig.rig.instance("b"),
+    );
+    wait_user(&w, "idle");
+    // w hangs in a section: packets queue at its input, unread.
+    let release = w_script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(
+        || w_script.hanging.load(Ordering::SeqCst),
+        "w hangs in its section",
+    );
+    for packet in 0..3 {
+        feed.data.send(packet);
+    }
+    // The watchdog fails w; b takes over with the three packets, which fire its
+    // `on data` with nothing sent after them.
+    eventually(
+        || b_script.received.load(Ordering::SeqCst) == 3,
+        "the substitute handled the packets moved to it",
+    );
+    assert_eq!(w_script.received.load(Ordering::SeqCst), 0);
+    assert_eq!(b.snapshot().user_state.as_deref(), Some("busy"));
+    drop(release);
+    assert!(rig.rig.shutdown().clean());
+    assert_eq!(base.snapshot().overflows, 0);
 }
