@@ -14,9 +14,9 @@ use std::time::Duration;
 
 use coolbot::port::{DataOut, TickOut};
 use coolbot::{
-    Command, Component, CompoundBuilder, Controllable, Handle, MonitorEvent, OutputKind, Policy,
-    Section, SectionResult, Spec, State, StateSpec, Step, Supervisor, SupervisorCx, System,
-    TimingSpec, Value, VarKind, VarSpec,
+    Command, Component, CompoundBuilder, Controllable, Handle, OutputKind, Policy, Section,
+    SectionResult, Spec, State, StateSpec, Step, Supervisor, SupervisorCx, System, TimingSpec,
+    Value, VarKind, VarSpec,
 };
 use support::shell::{self, ShellBuilder};
 use support::worker::{self, Exception};
@@ -160,49 +160,6 @@ fn periodic_fault(script: &Script) {
         exception: Some(Exception::Fatal),
         times: 1,
     }));
-}
-
-/// The worker's spec with a deeper data fifo (so that a steady stream never overflows
-/// on a shared machine); the same for every instance, so interfaces match.
-fn deep_worker_spec() -> &'static Spec {
-    static DEEP: std::sync::OnceLock<&'static Spec> = std::sync::OnceLock::new();
-    DEEP.get_or_init(|| {
-        let mut inputs = worker::SPEC.inputs.to_vec();
-        inputs[worker::DATA].kind = coolbot::InputKind::Fifo {
-            capacity: 1024,
-            policy: coolbot::OverflowPolicy::Reject,
-        };
-        let mut spec = worker::SPEC;
-        spec.inputs = Box::leak(inputs.into_boxed_slice());
-        Box::leak(Box::new(spec))
-    })
-}
-
-fn deep_worker(name: &str) -> (Component, Arc<Script>) {
-    let script = Script::new();
-    let (component, _, _) = worker::component_with(
-        name,
-        Scripted {
-            script: Arc::clone(&script),
-            token: None,
-        },
-        deep_worker_spec(),
-        coolbot::port::FifoIn::new(1024, coolbot::OverflowPolicy::Reject),
-    );
-    (component, script)
-}
-
-/// The worker's timing with a `max_response` (500 ms) that only a deliberately hung
-/// section overruns (ordinary sections stay far below it even on a loaded machine).
-fn fast_response() -> TimingSpec {
-    TimingSpec {
-        max_response: Some(Duration::from_millis(500)),
-        ..worker::SPEC.timing
-    }
-}
-
-fn starts(script: &Script) -> usize {
-    script.log().iter().filter(|e| *e == "start").count()
 }
 
 #[test]
