@@ -82,6 +82,9 @@ pub struct Script {
     pub hang: Mutex<Option<(&'static str, Receiver<()>)>>,
     pub hanging: AtomicBool,
     pub returned: AtomicU32,
+    /// Where the component hands its `data` input when it starts, if set (for a
+    /// test that looks at the queue from its own thread).
+    pub data_port: Mutex<Option<crossbeam_channel::Sender<coolbot::port::FifoIn<u64>>>>,
 }
 
 impl Script {
@@ -231,7 +234,10 @@ macro_rules! scripted {
         const _: () = {
             use $module as m;
             impl m::Behavior for $crate::support::Scripted {
-                fn start(&mut self, _cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                fn start(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                    if let Some(hand) = self.script.data_port.lock().unwrap().as_ref() {
+                        let _ = hand.try_send(cx.inputs.data.clone());
+                    }
                     self.start_hook()
                 }
                 fn stop(&mut self, _cx: &mut m::Cx<'_>) {
@@ -286,6 +292,7 @@ scripted!(crate::generated::ignore_worker);
 scripted!(crate::generated::degrade_worker);
 scripted!(crate::generated::plain_worker);
 scripted!(crate::generated::deep_worker);
+scripted!(crate::generated::blocking_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {

@@ -7,8 +7,7 @@
 //! `support::compound::Scripts` gives each instance its script) and `Feeder` (its
 //! ports handed to the test). A test of the runtime's `CompoundBuilder` itself (a
 //! `Policy` the language has no word for, malformed builders) adds to a generated
-//! compound's builder. The other tests of the file are still in
-//! `runtime/tests/compound.rs`.
+//! compound's builder.
 
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -32,6 +31,10 @@ use coolbot_runtime_tests::generated::{
 use coolbot_runtime_tests::generated::{
     cmp_converted_cycles, cmp_gone, cmp_mapped_rule, cmp_pair, cmp_quality, cmp_standby,
     cmp_watchdog,
+};
+use coolbot_runtime_tests::generated::{
+    cmp_converted_posters, cmp_forwarding, cmp_path_mid, cmp_path_top, cmp_poster,
+    cmp_poster_reader, cmp_posters, cmp_suspended_base, cmp_suspended_fault, cmp_suspended_top,
 };
 use coolbot_runtime_tests::generated::{
     cmp_driven, cmp_lone, cmp_mid, cmp_ordered, cmp_redundant, cmp_restart, cmp_rules,
@@ -150,8 +153,133 @@ operating!(
     cmp_pair,
     cmp_gone,
     cmp_standby,
-    cmp_converted_cycles
+    cmp_converted_cycles,
+    cmp_path_top,
+    cmp_posters,
+    cmp_converted_posters,
+    cmp_suspended_base,
+    cmp_suspended_top,
+    cmp_suspended_fault,
+    cmp_forwarding
 );
+
+impl cmp_path_mid::Supervisor for Logged {
+    fn operating_entry(&mut self, _cx: &mut cmp_path_mid::Cx<'_>) -> coolbot::SectionResult {
+        self.entered("operating")
+    }
+    fn degraded_entry(&mut self, cx: &mut cmp_path_mid::Cx<'_>) -> coolbot::SectionResult {
+        cx.vars.faults += 1;
+        self.entered("degraded")
+    }
+}
+
+/// `CmpPathTop`: `mid`'s supervisor logs into the log of the `Base` (the top's own
+/// logs nowhere the test looks).
+impl cmp_path_top::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_path_top::Supervisor {
+        Logged(Log::default())
+    }
+    fn mid(&mut self) -> impl cmp_path_mid::Parts {
+        Parts {
+            scripts: self.scripts.clone(),
+            log: Arc::clone(&self.log),
+            tap: self.tap.take(),
+            feed: None,
+        }
+    }
+    fn sibling(&mut self) -> impl worker::Behavior {
+        self.worker("sibling")
+    }
+}
+
+/// `CmpSuspendedTop`: `base`'s parts are the same.
+impl cmp_suspended_top::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_suspended_top::Supervisor {
+        self.logged()
+    }
+    fn base(&mut self) -> impl cmp_suspended_base::Parts {
+        Parts {
+            scripts: self.scripts.clone(),
+            log: Log::default(),
+            tap: None,
+            feed: None,
+        }
+    }
+}
+
+impl cmp_forwarding::Parts for Parts {
+    fn supervisor(&mut self) -> impl cmp_forwarding::Supervisor {
+        self.logged()
+    }
+    fn w(&mut self) -> impl coolbot_runtime_tests::generated::blocking_worker::Behavior {
+        self.worker("w")
+    }
+}
+
+/// A `CmpPoster`'s behaviour: posts `base`, `base + 1`, ... on `map` every period;
+/// while `fail` is set it cannot start and its periodic section faults.
+struct Posting {
+    base: u64,
+    posted: u64,
+    fail: Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl cmp_poster::Behavior for Posting {
+    fn start(&mut self, _cx: &mut cmp_poster::Cx<'_>) -> coolbot::SectionResult {
+        if self.fail.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("cannot start"));
+        }
+        Ok(())
+    }
+    fn posting_periodic(&mut self, cx: &mut cmp_poster::Cx<'_>) -> coolbot::SectionResult {
+        if self.fail.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("broken"));
+        }
+        cx.outputs.map.post(self.base + self.posted);
+        self.posted += 1;
+        Ok(())
+    }
+}
+
+/// A `CmpPosterReader`'s behaviour: hands its input to the test when it starts.
+struct PosterHand(Sender<coolbot::port::PosterIn<u64>>);
+
+impl cmp_poster_reader::Behavior for PosterHand {
+    fn start(&mut self, cx: &mut cmp_poster_reader::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.try_send(cx.inputs.r.clone());
+        Ok(())
+    }
+}
+
+/// The parts of `CmpPosters` and `CmpConvertedPosters`.
+struct PosterParts {
+    parts: Parts,
+    p1: Option<Posting>,
+    p2: Option<Posting>,
+    c: Option<PosterHand>,
+}
+
+/// `PosterParts` for compound `$m`.
+macro_rules! poster_parts {
+    ($($m:ident),*) => {$(
+        impl $m::Parts for PosterParts {
+            fn supervisor(&mut self) -> impl $m::Supervisor {
+                self.parts.logged()
+            }
+            fn p1(&mut self) -> impl cmp_poster::Behavior {
+                self.p1.take().expect("one p1")
+            }
+            fn p2(&mut self) -> impl cmp_poster::Behavior {
+                self.p2.take().expect("one p2")
+            }
+            fn c(&mut self) -> impl cmp_poster_reader::Behavior {
+                self.c.take().expect("one reader")
+            }
+        }
+    )*};
+}
+
+poster_parts!(cmp_posters, cmp_converted_posters);
 
 impl cmp_mapped_rule::Supervisor for Logged {
     fn operating_entry(&mut self, _cx: &mut cmp_mapped_rule::Cx<'_>) -> coolbot::SectionResult {
@@ -269,6 +397,9 @@ parts!(cmp_gone; workers w, b; feeder f);
 parts!(cmp_quality; workers w;);
 parts!(cmp_standby; workers w, b; feeder f);
 parts!(cmp_mapped_rule; workers w, b; feeder f);
+parts!(cmp_path_mid; workers leaf; feeder f);
+parts!(cmp_suspended_base; workers a;);
+parts!(cmp_suspended_fault; workers w; feeder f);
 
 impl cmp_deep_substitute::Parts for DeepParts {
     fn supervisor(&mut self) -> impl cmp_deep_substitute::Supervisor {
@@ -333,6 +464,9 @@ impl types::Converters for Convert {
     }
     fn plus_one(from: &u64) -> u64 {
         from + 1
+    }
+    fn plus_ten(from: &u64) -> u64 {
+        from + 10
     }
 }
 
@@ -2043,5 +2177,314 @@ fn a_rule_reads_a_mapped_variable_at_the_instance_standing_in() {
     feed.data.send(2);
     let monitor = wait_user(&base, "degraded");
     assert_eq!(monitor.variables[0], ("count".to_owned(), Value::UInt(2)));
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_built_compound_reaches_its_nested_instances_by_path() {
+    // top { mid { leaf (restart), f -> leaf }, sibling }, built whole: only the top
+    // handle is kept.
+    // (`CmpPathTop` around `CmpPathMid`: `when leaf.gain == 9 -> degraded;`.)
+    let mut rig = Base::new(|parts| cmp_path_top::component("top", parts));
+    let (script, mid_log) = (rig.script("leaf"), Arc::clone(&rig.log));
+    rig.rig.run();
+    let feed = rig.feeder();
+    let top = rig.rig.compound.clone();
+
+    assert_eq!(top.instances(), ["mid", "sibling"]);
+    let mid = top.instance("mid").expect("mid");
+    assert_eq!(mid.name(), "mid");
+    assert_eq!(mid.instances(), ["leaf", "f"]);
+    let leaf = top.instance("mid.leaf").expect("mid.leaf");
+    assert_eq!(leaf.name(), "leaf");
+    assert!(leaf.instances().is_empty(), "an atomic component has none");
+    assert_eq!(
+        mid.instance("leaf").expect("leaf").name(),
+        "leaf",
+        "a path is relative to the handle it starts from"
+    );
+    for unknown in [
+        "",
+        "nope",
+        "mid.nope",
+        "mid..leaf",
+        "mid.leaf.x",
+        "sibling.x",
+        ".",
+    ] {
+        assert!(top.instance(unknown).is_none(), "`{unknown}` resolves");
+    }
+    assert!(leaf.instance("leaf").is_none(), "atomic: nothing inside");
+
+    // The snapshot is the leaf's own, live.
+    let monitor = wait_user(&leaf, "idle");
+    assert_eq!(monitor.name, "leaf");
+    assert_eq!(monitor.state, State::Running);
+    assert_eq!(
+        monitor.variables,
+        [
+            ("count".to_owned(), Value::from(0_u64)),
+            ("gain".to_owned(), Value::from(1_i64))
+        ]
+    );
+
+    // A command through the path reaches the leaf, and mid's supervisor sees it.
+    leaf.command(Command::Set("gain".to_owned(), Value::from(9_i64)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        leaf.snapshot().variables[1],
+        ("gain".to_owned(), Value::from(9_i64))
+    );
+    wait_user(&mid, "degraded");
+    wait_log(&mid_log, &["operating.Entry", "degraded.Entry"]);
+    mid.wait_for(|m| m.variables[0].1 == Value::UInt(1), WAIT)
+        .expect("mid's own variable, read through the path");
+
+    // A fault in the leaf: mid's policy restarts it, and the step is on mid's port.
+    periodic_fault(&script);
+    feed.kick.emit();
+    mid.wait_for(
+        |m| {
+            m.supervision
+                .iter()
+                .any(|s| s.instance == "leaf" && s.step == Step::Restarted)
+        },
+        WAIT,
+    )
+    .unwrap_or_else(|t| panic!("{t}"));
+    wait_user(&leaf, "idle");
+    assert_eq!(top.state(), State::Running);
+
+    // The handles outlive the compound without keeping its instances alive.
+    let report = rig.rig.shutdown();
+    assert!(report.clean(), "{report:?}");
+    assert_eq!(leaf.state(), State::Dead);
+    assert_eq!(mid.state(), State::Dead);
+    assert!(
+        leaf.command(Command::SetState(Controllable::Running))
+            .is_err()
+    );
+}
+
+/// Wait until the poster input `r` reads a value for which `wanted` holds, through
+/// `read` (`read` or `take_new`).
+fn reads(what: &str, read: impl Fn() -> Option<u64>, wanted: impl Fn(u64) -> bool) {
+    let deadline = std::time::Instant::now() + WAIT;
+    let mut last = None;
+    loop {
+        if let Some(value) = read() {
+            last = Some(value);
+            if wanted(value) {
+                return;
+            }
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for the reader to read {what}; it read {last:?} last"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// A poster reader in a compound whose producer `p1` is substituted by `p2` and then
+/// recovers: the reader reads the stand-in's post (with `read` and with `take_new`),
+/// then `p1`'s again, with or without a converter on the connection
+/// (`CmpConvertedPosters`, `CmpPosters`).
+fn a_poster_reader_follows_its_producer_through_substitution(converted: bool) {
+    let p1_fails = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let never = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (hand, r) = crossbeam_channel::bounded(1);
+    let posting = |base, fail: &Arc<std::sync::atomic::AtomicBool>| Posting {
+        base,
+        posted: 0,
+        fail: Arc::clone(fail),
+    };
+    let (p1, p2) = (posting(1_000_000, &p1_fails), posting(2_000_000, &never));
+    let mut rig = Base::new(move |parts| {
+        let parts = PosterParts {
+            parts,
+            p1: Some(p1),
+            p2: Some(p2),
+            c: Some(PosterHand(hand)),
+        };
+        if converted {
+            cmp_converted_posters::component::<Convert>("base", parts)
+        } else {
+            cmp_posters::component("base", parts)
+        }
+    });
+    let offset = if converted { 10 } else { 0 };
+    rig.rig.run();
+    let r = r.recv_timeout(WAIT).expect("the reader started");
+    let (base, p1, p2) = (
+        rig.rig.compound.clone(),
+        rig.rig.instance("p1"),
+        rig.rig.instance("p2"),
+    );
+    let from_p1 = |v: u64| (1_000_000 + offset..2_000_000).contains(&v);
+    let from_p2 = |v: u64| v >= 2_000_000 + offset;
+    reads("a post of p1", || r.read(), from_p1);
+
+    // p1 faults: p2 stands in, and the reader reads p2's posts from its first.
+    p1_fails.store(true, Ordering::SeqCst);
+    p2.wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    reads("a post of the substitute p2", || r.read(), from_p2);
+    reads("a new post of p2 with take_new", || r.take_new(), from_p2);
+
+    // p1 recovers: the reader reads p1 again.
+    p1_fails.store(false, Ordering::SeqCst);
+    wait(&p2, State::Ready);
+    p1.wait_for(|m| m.state == State::Running, WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    reads("a post of p1 after its recovery", || r.take_new(), from_p1);
+    assert_eq!(base.state(), State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_poster_reader_reads_the_substitute_after_a_substitution() {
+    a_poster_reader_follows_its_producer_through_substitution(false);
+}
+
+#[test]
+fn a_converted_poster_reader_reads_the_substitute_after_a_substitution() {
+    a_poster_reader_follows_its_producer_through_substitution(true);
+}
+
+#[test]
+fn a_suspended_compound_keeps_its_mapped_variables_current_up_the_hierarchy() {
+    // `top` runs and maps `gain` onto `base`'s, which maps it onto its worker `a`'s.
+    // `base` is suspended (and `a` with it); `a`'s gain changes meanwhile: monitoring
+    // is observation, so `base` and `top` publish the new value while `base` stays
+    // suspended. (`CmpSuspendedTop` maps it as a controllable: the language maps a
+    // variable as the kind it is.)
+    let mut rig = Base::new(|parts| cmp_suspended_top::component("top", parts));
+    rig.rig.run();
+    let top = rig.rig.compound.clone();
+    let base = rig.rig.instance("base");
+    let a = rig.rig.instance("base.a");
+    wait(&a, State::Running);
+    run(&base, Controllable::Suspended);
+    wait(&a, State::Suspended);
+    assert_eq!(top.state(), State::Running);
+    let gain = |m: &coolbot::Monitor| m.variables[0].1.clone();
+    a.command(Command::Set("gain".to_owned(), Value::Int(9)))
+        .expect("a suspended instance takes a Set");
+    base.wait_for(|m| gain(m) == Value::Int(9), WAIT)
+        .expect("the suspended compound publishes its instance's change");
+    top.wait_for(|m| gain(m) == Value::Int(9), WAIT)
+        .expect("and so does the compound above it");
+    assert_eq!(
+        base.state(),
+        State::Suspended,
+        "it observed, it did not run"
+    );
+    assert_eq!(a.state(), State::Suspended);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn a_fault_while_the_compound_is_suspended_is_handled_when_it_runs_again() {
+    // `w` (restart policy) fails while `base` is suspended (commanded to run on its
+    // own, then kicked into a panicking section): `base` observes it, and its policy
+    // waits until `base` runs again, then restarts it.
+    let mut rig = Base::new(|parts| cmp_suspended_fault::component("base", parts));
+    let script = rig.script("w");
+    rig.rig.run();
+    let feed = rig.feeder();
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait(&w, State::Running);
+    run(&base, Controllable::Suspended);
+    wait(&w, State::Suspended);
+    script.panic_in(Some("busy.periodic"));
+    run(&w, Controllable::Running);
+    feed.kick.emit();
+    wait(&w, State::RunningError);
+    // A change after the fault, published by `base` once it has taken `w`'s events
+    // up to there (the fault included).
+    w.command(Command::Set("gain".to_owned(), Value::Int(4)))
+        .expect("set gain");
+    let observed = base
+        .wait_for(|m| m.variables[0].1 == Value::Int(4), WAIT)
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert_eq!(observed.state, State::Suspended);
+    assert!(
+        observed.supervision.iter().all(|s| s.instance != "w"),
+        "no policy acted while suspended: {:?}",
+        observed.supervision
+    );
+    assert_eq!(
+        w.state(),
+        State::RunningError,
+        "not restarted while suspended"
+    );
+    // Running again: the deferred policy restarts it.
+    script.panic_in(None);
+    run(&base, Controllable::Running);
+    let restarted = base
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == "w" && s.step == Step::Restarted)
+            },
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("{t}"));
+    assert!(
+        restarted
+            .supervision
+            .iter()
+            .any(|s| s.instance == "w" && s.step == Step::Failed),
+        "{:?}",
+        restarted.supervision
+    );
+    wait(&w, State::Running);
+    assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
+    // `CmpForwarding`'s `w` is a `BlockingWorker`: its data fifo is 4 deep and blocks
+    // its producer when full; its script hands the queue to the test.
+    let mut rig = Base::new(|parts| cmp_forwarding::component("base", parts));
+    let script = rig.script("w");
+    let (hand, w_data) = crossbeam_channel::bounded(1);
+    *script.data_port.lock().unwrap() = Some(hand);
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("f", tap));
+    rig.rig.connect("f.data", "base.data");
+    rig.rig.connect("f.kick", "base.kick");
+    rig.rig.run();
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let w_data = w_data.recv_timeout(WAIT).expect("w started");
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    // w hangs in a section: its blocking queue fills with four packets, and four more
+    // wait at the compound's own input (also four deep).
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(|| script.hanging.load(Ordering::SeqCst), "w hangs");
+    for packet in 0..4 {
+        feed.data.send(packet);
+    }
+    eventually(|| w_data.len() == 4, "w's queue is full");
+    // (The compound's own queue is empty again: these four do not wait there.)
+    for packet in 4..8 {
+        feed.data.send(packet);
+    }
+    // Two round trips through the compound's control port: its turns went on, and
+    // none of them waited to push a packet into w's full queue until it gave up.
+    for _ in 0..2 {
+        base.command(Command::SetPriority(0)).expect("sync");
+    }
+    assert_eq!(w.snapshot().overflows, 0, "nothing given up at w");
+    assert_eq!(base.snapshot().overflows, 0);
+    // The section returns (w is failed and ignored): nothing was lost meanwhile.
+    drop(release);
+    w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert_eq!(w.snapshot().overflows, 0);
+    assert_eq!(base.snapshot().overflows, 0);
     assert!(rig.rig.shutdown().clean());
 }
