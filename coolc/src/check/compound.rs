@@ -59,8 +59,9 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
 }
 
 /// A `restart { }` block with no `restart` policy, or a `recovery { }` block with
-/// nothing that uses the recovery queue (no `substitute` policy, no redundant group),
-/// changes nothing at run time: a warning says so.
+/// nothing that uses the recovery queue (no `substitute` policy, no redundant group)
+/// or its deadline (no `restart` policy: an instance stuck past its `max_response`
+/// for the deadline is propagated), changes nothing at run time: a warning says so.
 fn unused_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     let policy = |name: &str| {
         component
@@ -79,11 +80,15 @@ fn unused_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
                 restart.span,
                 "it sets the budget of the `restart` policy: add `on error x: restart;` or remove the block",
             ),
-            ast::Member::Recovery(recovery) if !policy("substitute") && !grouped => (
-                "recovery",
-                recovery.span,
-                "the recovery queue holds instances whose policy is `substitute` and failed redundant members: add one or remove the block",
-            ),
+            ast::Member::Recovery(recovery)
+                if !policy("substitute") && !policy("restart") && !grouped =>
+            {
+                (
+                    "recovery",
+                    recovery.span,
+                    "the recovery queue holds instances whose policy is `substitute` and failed redundant members, and its deadline bounds how long a `restart` waits for a stuck instance: add one or remove the block",
+                )
+            }
             _ => continue,
         };
         let diagnostic = Diagnostic::warning(

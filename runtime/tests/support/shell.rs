@@ -98,14 +98,6 @@ impl ShellBuilder {
         self
     }
 
-    /// The shell's code alone, claiming another component's spec (to test port checks).
-    pub fn build_automaton_for(self, spec: &'static Spec) -> Shell {
-        Shell {
-            spec,
-            answer: self.answer,
-        }
-    }
-
     pub fn build(self) -> Component {
         let spec: &'static Spec = Box::leak(Box::new(Spec {
             type_name: "Shell",

@@ -12,6 +12,7 @@ pub mod generated {
 }
 
 pub mod adapt;
+pub mod convert;
 pub mod equalize;
 pub mod record;
 pub mod supervision;

@@ -14,6 +14,8 @@ use coolbot::{Command, Controllable};
 
 use crate::generated::{feeder, worker};
 
+pub mod compound;
+
 /// Panics injected into components' code print one line, without a backtrace: the
 /// default hook's backtrace (CI sets `RUST_BACKTRACE=1`) can take longer than a
 /// section's `max_response` on a loaded machine, and the section then counts as an
@@ -322,6 +324,8 @@ scripted!(crate::generated::ua_timerless_worker);
 scripted!(crate::generated::os_reject_worker);
 scripted!(crate::generated::os_drop_oldest_worker);
 scripted!(crate::generated::os_block_worker);
+scripted!(crate::generated::deep_worker);
+scripted!(crate::generated::blocking_worker);
 
 /// A `Worker` named `name` following `script`.
 pub fn worker(name: &str, script: &Arc<Script>) -> coolbot::Component {
@@ -344,7 +348,8 @@ impl Tap {
 
 impl feeder::Behavior for Tap {
     fn start(&mut self, cx: &mut feeder::Cx<'_>) -> SectionResult {
-        let _ = self.ports.send(Feeder {
+        // A restarted feeder starts again: the test kept the first hand-over.
+        let _ = self.ports.try_send(Feeder {
             kick: cx.outputs.kick.clone(),
             data: cx.outputs.data.clone(),
             feed: cx.outputs.feed.clone(),

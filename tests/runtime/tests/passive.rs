@@ -68,3 +68,25 @@ fn its_harness_answers_pulls_without_a_thread() {
     harness.advance(Duration::from_secs(1)).expect("advance");
     assert_eq!(harness.state(), State::Running);
 }
+
+/// Fails every pull.
+struct Refusing;
+
+impl Behavior for Refusing {
+    fn answer_next(&mut self, _cx: &mut Cx<'_>) -> Result<u64, coolbot::Fault> {
+        Err(coolbot::Fault::message("no count"))
+    }
+}
+
+#[test]
+fn a_failed_answer_takes_it_to_running_error() {
+    // No user state to name: the error names the port and the fault.
+    let mut harness = Harness::running(Refusing).expect("harness");
+    let _ = harness.pull_next();
+    assert_eq!(harness.state(), State::RunningError);
+    let error = harness.error().expect("an error");
+    assert!(
+        error.contains("answering a pull request on `next`") && error.contains("no count"),
+        "{error}"
+    );
+}

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{Component, SectionResult, Step, System};
-use coolbot_runtime_tests::generated::types::Converters;
+use coolbot_runtime_tests::convert::Convert;
 use coolbot_runtime_tests::generated::{
     block_pair, converted_pair, converted_substituted_consumer, quick_block_pair, red_block_relay,
     red_relay, red_sink, red_source, redundant_pair, substituted_consumer,
@@ -111,15 +111,6 @@ relays!(quick_block_pair, red_block_relay: a, b);
 relays!(converted_pair, red_relay: a, b, t);
 relays!(substituted_consumer, red_relay: a, b, t, t2);
 relays!(converted_substituted_consumer, red_relay: a, b, t, t2);
-
-/// The converter of the descriptions (`RedTimesTen`).
-struct Convert;
-
-impl Converters for Convert {
-    fn red_times_ten(from: &u64) -> u64 {
-        from * 10
-    }
-}
 
 /// `RedSource`'s behaviour: it hands a clone of its output to the test at start.
 struct HandOut(Sender<DataOut<u64>>);
