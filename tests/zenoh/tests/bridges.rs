@@ -170,10 +170,20 @@ fn a_full_remote_fifo_applies_its_own_policy_and_counts() {
         .expect("six packets counted lost at the full input");
     assert_eq!(monitor.port_overflows, vec![("input".to_owned(), 6)]);
     assert_eq!(sink.len(), 4);
-    let overflow_events = events
-        .try_iter()
-        .filter(|event| matches!(event, MonitorEvent::Overflow { port, .. } if port == "input"))
-        .count();
+    // Each loss is counted, then announced: the sixth event may follow the count.
+    let mut overflow_events = 0;
+    assert!(
+        wait_until(PATIENCE, || {
+            overflow_events += events
+                .try_iter()
+                .filter(
+                    |event| matches!(event, MonitorEvent::Overflow { port, .. } if port == "input"),
+                )
+                .count();
+            overflow_events >= 6
+        }),
+        "{overflow_events} overflow events"
+    );
     assert_eq!(overflow_events, 6);
     // received + overflows = sent
     assert_eq!(sink.drain().count() as u64 + monitor.overflows, 10);
@@ -717,6 +727,10 @@ fn poster_and_last_readers_ask_again_when_the_link_comes_back() {
     let (_lasts, latest) = consumer(&b, "test/relink/last", OutputKind::Data, |hand| {
         latest::component("sink", Hand(hand))
     });
+    // Both readers subscribed, as seen from the producer's node: a post published
+    // before its subscription reaches the producer would not reach a reader that had
+    // already asked for the (then empty) current value.
+    wait_subscribed(&a, "test/relink/poster");
     wait_subscribed(&a, "test/relink/last");
     post.post(pose(1));
     data.send(pose(1));

@@ -1,10 +1,12 @@
 //! Nodes with a security file (`docs/distribution.md`, "Security"): access rules on
 //! bridge keys, on the agent, on monitoring events, queryables and tokens, and
 //! `coolctl`'s library under them. Certificates are made here with rcgen: a CA and the
-//! nodes' certificates signed by it. (The `coolctl` binary under TLS and rules:
-//! `runtime/zenoh/tests/security.rs`.)
+//! nodes' certificates signed by it; and the `coolctl` binary with `--config` as an
+//! operator runs it (TLS, rules, plaintext refused off loopback), with an intruder's
+//! certificate from another CA.
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Sender};
@@ -806,4 +808,144 @@ fn a_placement_runs_under_access_rules() {
     );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
+}
+
+/// The `coolctl` binary, built in this package from its source (`Cargo.toml`).
+const COOLCTL: &str = env!("CARGO_BIN_EXE_coolctl-under-test");
+
+/// `coolctl --config FILE ARGS` reaching `endpoint` only.
+fn coolctl(config: &Path, endpoint: &str, args: &[&str]) -> Output {
+    Command::new(COOLCTL)
+        .arg("--config")
+        .arg(config)
+        .args(["--connect", endpoint, "--no-multicast", "--timeout", "1s"])
+        .args(args)
+        .output()
+        .expect("coolctl runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn tls_and_access_rules() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let robot_file = authority.node(dir, "robot", "robot", RULES);
+    let ops_file = authority.node(dir, "ops", "ops", RULES);
+    // Another CA's certificate, with the operator's name.
+    let intruder_file = Authority::new(dir, "other").node(dir, "intruder", "ops", RULES);
+
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let security = Security::load(&robot_file).expect("the robot's security file");
+    assert!(security.has_tls() && security.has_rules());
+    let config = secure_config(std::slice::from_ref(&endpoint), &[], false, &security)
+        .expect("a TLS configuration");
+    // A node opens under its certificate's common name, no other.
+    let other = secure_config(&[], &[], false, &security).expect("a TLS configuration");
+    let error = Node::open("station", other).expect_err("not station's certificate");
+    assert!(
+        error
+            .to_string()
+            .contains("the certificate is node `robot`'s"),
+        "{error}"
+    );
+    let node = Node::open("robot", config).expect("the robot's node opens");
+    let system = support::robot(&node);
+    let state = |path: &str| system.handle_at(path).expect(path).snapshot().state;
+
+    // Allowed: the operator suspends the base's motion (the first run may come before
+    // the TLS session is up: poll).
+    let mut last = None;
+    assert!(
+        wait_until(PATIENCE, || {
+            let out = coolctl(
+                &ops_file,
+                &endpoint,
+                &["set", "robot/robot.base.motion", "state", "suspended"],
+            );
+            let ok = out.status.success();
+            last = Some(out);
+            ok
+        }),
+        "the allowed command never succeeded: {last:?}"
+    );
+    assert!(
+        wait_until(PATIENCE, || state("robot.base.motion") == State::Suspended),
+        "motion is {:?}",
+        state("robot.base.motion")
+    );
+
+    // Outside the rules: the robot's access control drops the command; coolctl
+    // fails with a clear error and the logger is untouched. The operator still sees
+    // the logger (observing is open to every node of the CA).
+    let out = coolctl(
+        &ops_file,
+        &endpoint,
+        &["set", "robot/logger", "state", "suspended"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let error = text(&out.stderr);
+    assert!(
+        error.contains("no component answered at `robot/logger`")
+            && error.contains("do not let `ops` command `robot/logger`"),
+        "{error}"
+    );
+    assert_eq!(state("logger"), State::Running);
+    let listed = coolctl(&ops_file, &endpoint, &["list", "robot"]);
+    assert!(listed.status.success(), "{listed:?}");
+    assert!(
+        text(&listed.stdout).contains("logger"),
+        "{}",
+        text(&listed.stdout)
+    );
+
+    // A certificate from another CA: the TLS handshake fails, the intruder sees no
+    // node and its command does nothing.
+    let out = coolctl(&intruder_file, &endpoint, &["nodes"]);
+    assert!(!text(&out.stdout).contains("robot"), "{out:?}");
+    let out = coolctl(
+        &intruder_file,
+        &endpoint,
+        &["set", "robot/robot.base.ranges", "state", "suspended"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    assert!(
+        text(&out.stderr).contains("no node `robot`"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(state("robot.base.ranges"), State::Running);
+    drop(system);
+    drop(node);
+}
+
+#[test]
+fn plaintext_off_loopback_is_refused_without_the_flag() {
+    let out = Command::new(COOLCTL)
+        .args(["--connect", "tcp/192.0.2.1:7447", "--no-multicast", "nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let error = text(&out.stderr);
+    assert!(
+        error.starts_with("coolctl: security: `tcp/192.0.2.1:7447` is not on loopback and not TLS")
+            && error.contains("--insecure"),
+        "{error}"
+    );
+    // Without TLS, multicast scouting is off unless asked for; asked for, it needs
+    // --insecure.
+    let out = Command::new(COOLCTL)
+        .args(["--multicast", "nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(text(&out.stderr).contains("multicast scouting"), "{out:?}");
+    let out = Command::new(COOLCTL)
+        .args(["--timeout", "200ms", "nodes"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
 }

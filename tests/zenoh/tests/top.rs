@@ -1,7 +1,7 @@
 //! `coolctl top` against nodes started here: the board a node's components make,
 //! drawn at several terminal sizes (every frame whole, nothing of an earlier one
 //! left), and a node that goes away shown lost. (`coolctl top --once --json` from the
-//! real binary: `runtime/zenoh/tests/coolctl.rs`.)
+//! real binary: `tests/zenoh/tests/coolctl.rs`.)
 
 use std::time::{Duration, Instant};
 

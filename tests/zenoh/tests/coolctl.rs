@@ -3,122 +3,41 @@
 //! its timeout, with a clear message and a non-zero exit, on a node, component or port
 //! that does not exist; and `top --once --json`.
 
-mod support;
-
 use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::DataOut;
-use coolbot::{
-    Automaton, Component, Context, Fault, OutputKind, OutputSpec, PortSet, Section, Spec,
-    StateSpec, System, TimingSpec, Value, VarKind, VarSpec,
-};
+use coolbot::{SectionResult, System};
 use coolbot_zenoh::Node;
-use serde::{Deserialize, Serialize};
+use coolbot_zenoh_tests::generated::source;
+use coolbot_zenoh_tests::generated::tuner;
+use coolbot_zenoh_tests::generated::types::Reading;
+use coolbot_zenoh_tests::support::{self, PATIENCE, node, wait_until};
 
-use support::{PATIENCE, Shell, node, spec, wait_until};
+/// The `coolctl` binary, built in this package from its source (`Cargo.toml`).
+const COOLCTL: &str = env!("CARGO_BIN_EXE_coolctl-under-test");
 
-/// The packets `source.out` sends.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-struct Reading {
-    n: u64,
-    label: String,
+/// `Tuner`'s behaviour: its observables follow its configuration.
+struct Tuning;
+
+impl tuner::Behavior for Tuning {
+    fn tuning_periodic(&mut self, cx: &mut tuner::Cx<'_>) -> SectionResult {
+        cx.vars.gain = cx.config.gain;
+        cx.vars.label.clone_from(&cx.config.label);
+        Ok(())
+    }
 }
 
-/// The configuration of `tuner`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Tuning {
-    gain: f64,
-    label: String,
-}
+/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
+struct HandOut(Sender<DataOut<Reading>>);
 
-static TUNER: Spec = Spec {
-    type_name: "Tuner",
-    doc: "",
-    states: &[StateSpec {
-        name: "tuning",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[
-        VarSpec {
-            name: "gain",
-            kind: VarKind::Observable,
-            ty: "f64",
-            doc: "",
-        },
-        VarSpec {
-            name: "label",
-            kind: VarKind::Observable,
-            ty: "String",
-            doc: "",
-        },
-        VarSpec {
-            name: "limit",
-            kind: VarKind::Controllable,
-            ty: "u32",
-            doc: "",
-        },
-    ],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
-
-/// A component whose configuration (`gain`, `label`) shows in its variables.
-struct Tuner {
-    tuning: Tuning,
-    limit: u64,
-}
-
-impl Automaton for Tuner {
-    fn spec(&self) -> &'static Spec {
-        &TUNER
-    }
-    fn start(&mut self, _: &mut Context) -> Result<(), Fault> {
+impl source::Behavior for HandOut {
+    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
         Ok(())
-    }
-    fn stop(&mut self, _: &mut Context) {}
-    fn section(&mut self, _: usize, _: Section, _: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
-    fn answer(&mut self, _: usize, _: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, value: &Value) -> Result<(), String> {
-        // The fields given over the current ones, as generated code does.
-        let mut merged = serde_json::to_value(&self.tuning).map_err(|e| e.to_string())?;
-        if let (Some(fields), serde_json::Value::Object(given)) =
-            (merged.as_object_mut(), value.to_json())
-        {
-            fields.extend(given);
-        }
-        self.tuning = serde_json::from_value(merged).map_err(|e| e.to_string())?;
-        Ok(())
-    }
-    fn set(&mut self, _: usize, value: &Value) -> Result<(), String> {
-        self.limit = u64::try_from(value).map_err(|e| e.to_string())?;
-        Ok(())
-    }
-    fn get(&self, variable: usize) -> Value {
-        match variable {
-            0 => Value::Float(self.tuning.gain),
-            1 => Value::Str(self.tuning.label.clone()),
-            _ => Value::UInt(self.limit),
-        }
     }
 }
 
@@ -133,51 +52,16 @@ struct Robot {
 
 fn robot() -> Robot {
     let (node, endpoint) = node("robot", &[]);
-    let out = DataOut::<Reading>::new();
-    let idle = DataOut::<Reading>::new();
-    let source = spec(
-        "Source",
-        vec![],
-        vec![
-            OutputSpec {
-                name: "out",
-                kind: OutputKind::Data,
-                packet: "Reading",
-                pull: false,
-            },
-            OutputSpec {
-                name: "idle",
-                kind: OutputKind::Data,
-                packet: "Reading",
-                pull: false,
-            },
-        ],
-        vec![],
-    );
+    let (hand, out) = crossbeam_channel::bounded(1);
     let mut system = System::new();
     system
-        .add(Shell::component(
-            "source",
-            source,
-            PortSet::new().output(&out).output(&idle),
-        ))
+        .add(source::component("source", HandOut(hand)))
         .unwrap();
-    system
-        .add(Component::new(
-            "tuner",
-            Box::new(Tuner {
-                tuning: Tuning {
-                    gain: 1.5,
-                    label: "first".to_owned(),
-                },
-                limit: 3,
-            }),
-            PortSet::new(),
-        ))
-        .unwrap();
+    system.add(tuner::component("tuner", Tuning)).unwrap();
     system.run_all().unwrap();
     node.expose_system(&system).unwrap();
     node.echo::<Reading>(&system, "source.out").unwrap();
+    let out = out.recv_timeout(PATIENCE).expect("the source started");
     Robot {
         node,
         endpoint,
@@ -188,7 +72,7 @@ fn robot() -> Robot {
 
 /// `coolctl ARGS` reaching `endpoint` only.
 fn coolctl(endpoint: &str, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_coolctl"))
+    Command::new(COOLCTL)
         .args(["--connect", endpoint, "--no-multicast", "--timeout", "2s"])
         .args(args)
         .output()
@@ -233,9 +117,13 @@ fn get_shows_every_variable_with_kind_type_and_value_and_configure_changes_them(
     );
     assert_eq!(text(&out.stdout), "accepted\n", "{}", text(&out.stderr));
     assert!(out.status.success());
-    let after = get_tuner(&robot.endpoint);
+    // The observables follow at the next period.
+    let mut after = String::new();
     assert!(
-        after.contains("gain      observable    f64     2.25"),
+        wait_until(PATIENCE, || {
+            after = get_tuner(&robot.endpoint);
+            after.contains("gain      observable    f64     2.25")
+        }),
         "{after}"
     );
     assert!(
@@ -434,7 +322,7 @@ fn the_coolctl_binary_prints_what_the_library_prints() {
     let (station, _) = node("station", std::slice::from_ref(&endpoint));
     let expected = library_list(&station);
     let run = |args: &[&str]| {
-        let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+        let output = Command::new(COOLCTL)
             .args(["--connect", &endpoint, "--no-multicast", "--timeout", "5s"])
             .args(args)
             .output()
@@ -465,7 +353,7 @@ fn the_coolctl_binary_prints_what_the_library_prints() {
 fn coolctl_top_once_json_prints_every_node_and_component() {
     let (robot_node, endpoint) = node("json-robot", &[]);
     let system = support::robot(&robot_node);
-    let output = Command::new(env!("CARGO_BIN_EXE_coolctl"))
+    let output = Command::new(COOLCTL)
         .args([
             "--connect",
             &endpoint,
