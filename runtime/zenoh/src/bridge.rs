@@ -213,7 +213,17 @@ impl Wire {
                 return false;
             }
         };
-        if counted && !self.matching.load(Ordering::Acquire) {
+        // The flag follows a matching listener, which Zenoh calls a little after the
+        // session learns of a subscriber: when it says no, ask the publisher itself
+        // (a cold path) before counting a packet lost.
+        if counted
+            && !self.matching.load(Ordering::Acquire)
+            && !self
+                .publisher
+                .matching_status()
+                .wait()
+                .is_ok_and(|status| status.matching())
+        {
             self.lost("nothing on the network subscribes to the key");
             return false;
         }

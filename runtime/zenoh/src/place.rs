@@ -513,11 +513,11 @@ impl RemoteEnd for End {
                 Err(error) => return Err(error.to_string()),
             }
         }
-        // Built there; until its snapshot came, not taken as built (the next start
-        // builds another generation, and sends this one to `dead` first).
-        let snapshot = self.snapshot()?;
+        // Built there: a start that fails on the snapshot below is retried on this
+        // generation (the proxy forgot its view when it asked for it).
         self.instantiated = true;
         *lock(&self.shared.lost) = None;
+        let snapshot = self.snapshot()?;
         *lock(&self.shared.view) = Some(snapshot);
         self.shared.changed.store(true, Ordering::Release);
         // A poster's current value, for the proxy's readers.
