@@ -343,6 +343,18 @@ pub enum OsPriority {
     NotApplied(String),
 }
 
+/// The count of `port` in a list of per-port counts, added at 0 if missing.
+pub(crate) fn count_at<'a>(counts: &'a mut Vec<(String, u64)>, port: &str) -> &'a mut u64 {
+    let at = match counts.iter().position(|(name, _)| name == port) {
+        Some(at) => at,
+        None => {
+            counts.push((port.to_owned(), 0));
+            counts.len() - 1
+        }
+    };
+    &mut counts[at].1
+}
+
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
@@ -567,7 +579,7 @@ impl Shared {
     }
 
     /// Packets lost at `port` that no input of this component counted (a proxy's:
-    /// lost at the remote instance's input, or on the network, port `network`): added
+    /// lost at the remote instance's input, or on the network, port `@network`): added
     /// to the port's count and announced.
     pub(crate) fn add_overflows(&self, port: &str, lost: u64) {
         if lost == 0 {
@@ -575,17 +587,7 @@ impl Shared {
         }
         let counted_elsewhere = {
             let mut monitor = lock(&self.monitor);
-            let slot = match monitor
-                .port_overflows
-                .iter()
-                .position(|(name, _)| name == port)
-            {
-                Some(at) => &mut monitor.port_overflows[at].1,
-                None => {
-                    monitor.port_overflows.push((port.to_owned(), 0));
-                    &mut monitor.port_overflows.last_mut().expect("just pushed").1
-                }
-            };
+            let slot = count_at(&mut monitor.port_overflows, port);
             *slot += lost;
             *slot
         };
@@ -612,14 +614,7 @@ impl Shared {
             .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
             .collect();
         for (port, lost) in elsewhere {
-            match monitor
-                .port_overflows
-                .iter_mut()
-                .find(|(name, _)| *name == port)
-            {
-                Some(slot) => slot.1 += lost,
-                None => monitor.port_overflows.push((port, lost)),
-            }
+            *count_at(&mut monitor.port_overflows, &port) += lost;
         }
         monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
         monitor.dropped_events = self.dropped.load(Ordering::Relaxed);

@@ -295,13 +295,7 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         return;
     };
     for (port, total) in &view.port_overflows {
-        let slot = match applied.iter().position(|(name, _)| name == port) {
-            Some(at) => &mut applied[at].1,
-            None => {
-                applied.push((port.clone(), 0));
-                &mut applied.last_mut().expect("just pushed").1
-            }
-        };
+        let slot = crate::monitor::count_at(applied, port);
         let lost = total.saturating_sub(*slot);
         *slot = *total;
         shared.add_overflows(port, lost);

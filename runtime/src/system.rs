@@ -114,13 +114,13 @@ impl Component {
         }
     }
 
-    /// This component with its instances' handles (a compound's, declaration order),
-    /// published through its [`Handle::instance`].
     /// Whether it is a compound (it has instances of its own).
     pub(crate) fn is_compound(&self) -> bool {
         !self.instances.is_empty()
     }
 
+    /// This component with its instances' handles (a compound's, declaration order),
+    /// published through its [`Handle::instance`].
     pub(crate) fn with_instances(mut self, instances: Vec<Handle>) -> Component {
         self.instances = instances;
         self
