@@ -34,6 +34,7 @@ use serde::de::DeserializeOwned;
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
+use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::{Error, Node, keys};
 
 /// How long a pull over the network waits for its answer unless the bridge says
@@ -238,10 +239,11 @@ impl Wire {
     /// number after `sent`): a number is used only by a message Zenoh took, so an
     /// inlet that sees one missing knows it was lost on the way, not here (where it
     /// would be counted already).
-    fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &mut u64, packet: &P) {
-        let next = *sent + 1;
+    fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &AtomicU64, packet: &P) {
+        // Only the outlet's thread numbers: the ledger's thread only reads.
+        let next = sent.load(Ordering::Acquire) + 1;
         if self.send(encode(&(epoch, next, packet)), true) {
-            *sent = next;
+            sent.store(next, Ordering::Release);
         }
     }
 }
@@ -348,13 +350,15 @@ pub(crate) struct Outlet<T> {
     epoch: u64,
     seq: Arc<AtomicU64>,
     /// The number of the last data or tick message Zenoh took.
-    sent: u64,
+    sent: Arc<AtomicU64>,
     /// A poster outlet's last published value, or a `last` outlet's latest packet
     /// (numbered 0), served to readers that ask (late joiners, links that came back).
     posted: Arc<Mutex<Option<Vec<u8>>>>,
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
     _pull_server: Option<PullServer>,
+    /// What the inlets acknowledge (numbered streams only: not a poster, not pull).
+    _ledger: Option<OutletLedger>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -555,6 +559,19 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             OutletInput::Last(port) => PortSet::new().input(port),
             OutletInput::Poster(port) => PortSet::new().input(port),
         };
+        let sent = Arc::new(AtomicU64::new(0));
+        let ledger = if pull.is_none() && kind != InputKind::Poster {
+            Some(OutletLedger::start(
+                session,
+                &key,
+                epoch,
+                Arc::clone(&sent),
+                matches!(kind, InputKind::Fifo { .. } | InputKind::Ufifo { .. }),
+                erased.clone(),
+            )?)
+        } else {
+            None
+        };
         let outlet = Outlet {
             spec,
             input,
@@ -567,11 +584,12 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             pull: pull.is_some(),
             epoch,
             seq,
-            sent: 0,
+            sent,
             posted,
             published_once: false,
             _poster_queryable: poster_queryable,
             _pull_server: pull_server,
+            _ledger: ledger,
             _token: token,
         };
         Ok((name, outlet, ports))
@@ -601,7 +619,7 @@ impl<T: Packet + Serialize> Outlet<T> {
             return;
         }
         let wire = &self.wire;
-        let (epoch, sent) = (self.epoch, &mut self.sent);
+        let (epoch, sent) = (self.epoch, &*self.sent);
         match &self.input {
             OutletInput::Tick(port) => {
                 let mut events = port.take();
@@ -739,58 +757,6 @@ enum InletOutput<T> {
 
 pub(crate) type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
 
-/// The most outlets (epochs) an inlet remembers the last number of: a key has few
-/// producers, and each restart of one is a new epoch.
-const MAX_EPOCHS: usize = 64;
-
-/// An inlet's count of the numbered messages missing on the way: per outlet (its
-/// epoch), the numbers skipped between two received are lost, counted at the inlet's
-/// `network` input with the reason. The first message of an epoch counts nothing
-/// before it (what an outlet sent before the inlet subscribed was counted at the
-/// outlet, as sent to nobody).
-struct Gaps {
-    last: Mutex<Vec<(u64, u64)>>,
-    network: Arc<ErasedInput>,
-    key: String,
-}
-
-impl Gaps {
-    fn new(network: Arc<ErasedInput>, key: String) -> Gaps {
-        Gaps {
-            last: Mutex::new(Vec::new()),
-            network,
-            key,
-        }
-    }
-
-    fn received(&self, epoch: u64, seq: u64) {
-        if seq == 0 {
-            return; // A pull answer.
-        }
-        let missing = {
-            let mut last = lock(&self.last);
-            match last.iter_mut().find(|(e, _)| *e == epoch) {
-                Some((_, newest)) => {
-                    let missing = seq.saturating_sub(*newest + 1);
-                    *newest = (*newest).max(seq);
-                    missing
-                }
-                None => {
-                    if last.len() >= MAX_EPOCHS {
-                        last.remove(0);
-                    }
-                    last.push((epoch, seq));
-                    0
-                }
-            }
-        };
-        if missing > 0 {
-            self.network.count_loss(missing);
-            tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing)");
-        }
-    }
-}
-
 struct Inlet {
     spec: &'static Spec,
     session: zenoh::Session,
@@ -801,14 +767,18 @@ struct Inlet {
     /// Watches the producers' outlets (their liveliness tokens), to ask for the
     /// current value again when one appears.
     watcher: Option<zenoh::pubsub::Subscriber<()>>,
+    /// Answers the outlets' questions on what it has had (not a pull inlet).
+    _acks: Option<zenoh::query::Queryable<()>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
+/// What delivers a bridge key's messages on `output` (decode, the ledger's count of
+/// numbers, losses counted at `network`), and that ledger.
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
     network: ErasedInput,
     key: String,
-) -> DeliverFn {
+) -> (DeliverFn, Arc<InletLedger>) {
     let network = Arc::new(network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
@@ -816,8 +786,9 @@ fn deliverer<T: Packet + DeserializeOwned>(
         counted.count_loss(1);
         tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}");
     };
-    let gaps = Gaps::new(network, key);
-    match output {
+    let ledger = Arc::new(InletLedger::new(network, key));
+    let gaps = Arc::clone(&ledger);
+    let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => {
             Arc::new(
                 move |bytes| match postcard::from_bytes::<Numbered<u64>>(bytes) {
@@ -870,7 +841,8 @@ fn deliverer<T: Packet + DeserializeOwned>(
                 },
             )
         }
-    }
+    };
+    (deliver, ledger)
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
@@ -899,7 +871,7 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
             (InletOutput::Poster(port), ports)
         }
     };
-    (ports, deliverer(output, losses, key.to_owned()))
+    (ports, deliverer(output, losses, key.to_owned()).0)
 }
 
 /// Ask the producers on `key` for their current value (a poster's, or the latest
@@ -961,9 +933,15 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 });
             }
         }
+        // The last chunk is the inlet's process: an outlet tells a link that came
+        // back from an inlet started again (`crate::ledger`).
         let token = session
             .liveliness()
-            .declare_token(format!("{key}/@in/{}/{name}", node.name()))
+            .declare_token(format!(
+                "{key}/@in/{}/{name}/{}",
+                node.name(),
+                ledger::process(session)
+            ))
             .wait()
             .map_err(Error::zenoh)?;
         let packet = if kind == OutputKind::Tick {
@@ -1007,14 +985,22 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 (InletOutput::Poster(port), ports)
             }
         };
+        let (deliver, ledger) = deliverer(output, network.erased(), key.clone());
+        let acks = match pull {
+            Some(_) => None,
+            None => Some(
+                ledger::serve(session, &key, node.name(), &name, ledger).map_err(Error::zenoh)?,
+            ),
+        };
         let inlet = Inlet {
             spec,
             session: session.clone(),
-            deliver: deliverer(output, network.erased(), key.clone()),
+            deliver,
             key,
             pull,
             subscriber: None,
             watcher: None,
+            _acks: acks,
             _token: token,
         };
         Ok(Component::new(name, Box::new(inlet), ports))

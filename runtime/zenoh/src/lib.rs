@@ -44,6 +44,7 @@ pub mod ctl;
 pub mod echo;
 pub mod info;
 pub mod keys;
+mod ledger;
 pub mod network;
 mod node;
 pub mod place;
@@ -52,6 +53,7 @@ pub mod top;
 
 pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
 pub use crate::config::{peer_config, secure_config};
+pub use crate::ledger::LEDGER_TARGET;
 pub use crate::node::{ControlReply, Node};
 pub use crate::place::Placer;
 pub use crate::security::Security;

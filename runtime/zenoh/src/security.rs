@@ -115,12 +115,13 @@ const ALL_MESSAGES: [&str; 9] = [
 
 /// Key expressions that cover every key this crate uses: `**` does not match the
 /// verbatim `@` chunks, so those are named.
-const EVERY_KEY: [&str; 5] = [
+const EVERY_KEY: [&str; 6] = [
     "**",
     "coolbot/*/@agent/*",
     "**/@pull",
     "**/@out/**",
     "**/@in/**",
+    "**/@ack/**",
 ];
 
 fn invalid(path: &Path, reason: impl std::fmt::Display) -> Error {
@@ -402,7 +403,13 @@ impl Security {
             .rules
             .iter()
             .flat_map(|rule| &rule.publish)
-            .flat_map(|key| [key.clone(), format!("{key}/@pull")])
+            .flat_map(|key| {
+                [
+                    key.clone(),
+                    format!("{key}/@pull"),
+                    format!("{key}/@ack/**"),
+                ]
+            })
             .collect();
         let mut any = vec!["send", "watch", "observe"];
         if !bridges.is_empty() {
@@ -418,12 +425,17 @@ impl Security {
         let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
         for (index, node) in self.node_names().into_iter().enumerate() {
             let subject = format!("node-{index}");
-            let own = vec![format!("{}/{node}/**", keys::ROOT), keys::agent(node, "*")];
-            // Its inlets' tokens carry its name; its outlets' tokens too, on the
-            // bridge keys a rule lets it publish on.
+            // Its inlets acknowledge under its name (`crate::ledger`).
+            let own = vec![
+                format!("{}/{node}/**", keys::ROOT),
+                keys::agent(node, "*"),
+                format!("**/@ack/{node}/*"),
+            ];
+            // Its inlets' tokens carry its name (and their process); its outlets'
+            // tokens too, on the bridge keys a rule lets it publish on.
             let mut tokens = vec![
                 format!("{}/{node}/**", keys::ROOT),
-                format!("**/@in/{node}/*"),
+                format!("**/@in/{node}/*/*"),
             ];
             tokens.extend(
                 self.rules
@@ -790,7 +802,7 @@ mod tests {
         assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
         assert_eq!(
             keys_of("read-bridges"),
-            Some(json!(["robot/cmd", "robot/cmd/@pull"]))
+            Some(json!(["robot/cmd", "robot/cmd/@pull", "robot/cmd/@ack/**"]))
         );
         // `**` does not reach the guarded keys: commands and instantiation are granted
         // only by the rules, and the verbatim chunks the crate uses are named.
@@ -809,6 +821,7 @@ mod tests {
         ));
         assert!(includes("**/@pull", "a/b/@pull"));
         assert!(includes("**/@out/**", "a/b/@out/poster/n/x"));
+        assert!(includes("**/@ack/**", "a/b/@ack/station/inlet"));
         assert!(includes(
             "coolbot/robot/base.$*/c",
             "coolbot/robot/base.motion/c"
@@ -970,14 +983,23 @@ mod tests {
             (
                 Some("ops"),
                 "liveliness_token",
-                "link/a/@in/ops/inlet",
+                "link/a/@in/ops/inlet/0123abcd",
                 true,
             ),
             (
                 Some("ops"),
                 "liveliness_token",
-                "link/a/@in/station/inlet",
+                "link/a/@in/station/inlet/0123abcd",
                 false,
+            ),
+            // Its inlets acknowledge under its own name only.
+            (Some("ops"), "reply", "link/a/@ack/ops/inlet", true),
+            (Some("ops"), "reply", "link/a/@ack/station/inlet", false),
+            (
+                Some("mallory"),
+                "query",
+                "link/robot/out/pose/@ack/**",
+                true,
             ),
             // Everyone watches and observes; only the rules command and instantiate.
             (None, "declare_subscriber", "coolbot/robot/logger/m", true),

@@ -1,0 +1,576 @@
+//! Acknowledgments across a bridge (`docs/distribution.md`, "What happens when the
+//! network fails"): what an inlet has had of each outlet, and what an outlet counts
+//! lost when an inlet's process ends before acknowledging what it was sent.
+//!
+//! An outlet numbers its messages (1, 2, ... per epoch). An inlet keeps, per outlet
+//! epoch, the first and newest number it received, how many it received and how many
+//! it counted missing (gaps, at its own `network` input), and answers queries on
+//! `K/@ack/<node>/<name>` with that and its process (its session's id, also the last
+//! chunk of its token `K/@in/<node>/<name>/<process>`). The outlet asks every
+//! [`ACK_PERIOD`] and watches the inlets' tokens. When an inlet's process is known to
+//! have ended (its token is gone and its node answers from another process, or, on a
+//! key with one input end, another inlet has started receiving, or the outlet stops),
+//! the numbers sent after the newest it acknowledged are counted lost at the outlet's
+//! input, with an event: up to the first number its successor received, or else up to
+//! what the outlet had sent when the token went. A link that breaks and comes back
+//! keeps the same process: the inlet counts the gap itself, and the outlet nothing.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use coolbot::port::ErasedInput;
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+use zenoh::query::{ConsolidationMode, QueryTarget};
+use zenoh::sample::SampleKind;
+
+/// How often an outlet asks its inlets what they have had.
+pub(crate) const ACK_PERIOD: Duration = Duration::from_millis(100);
+
+/// How long one round of questions waits for the inlets' answers.
+const ACK_TIMEOUT: Duration = Duration::from_millis(300);
+
+/// How many rounds an outlet that stops asks, waiting for its live inlets to
+/// acknowledge everything it sent, before counting the rest lost.
+const FINAL_ROUNDS: usize = 5;
+
+/// The `tracing` target of every receipt and acknowledgment an inlet records (at
+/// `trace` level: a test's ground truth).
+pub const LEDGER_TARGET: &str = "coolbot_zenoh::ledger";
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// What an inlet has had of one outlet epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub(crate) struct Had {
+    epoch: u64,
+    first: u64,
+    newest: u64,
+    received: u64,
+    missing: u64,
+}
+
+/// An inlet's answer: its process, and what it has had of each outlet epoch.
+type Ack = (String, Vec<Had>);
+
+/// The most outlet epochs an inlet remembers: a key has few producers, and each
+/// restart of one is a new epoch.
+const MAX_EPOCHS: usize = 64;
+
+/// An inlet's side: the numbers received per outlet epoch; the numbers skipped
+/// between two received are lost, counted at the inlet's `network` input with the
+/// reason. The first message of an epoch counts nothing before it (what an outlet
+/// sent before the inlet subscribed was counted at the outlet, as sent to nobody).
+pub(crate) struct InletLedger {
+    had: Mutex<Vec<Had>>,
+    network: Arc<ErasedInput>,
+    key: String,
+}
+
+impl InletLedger {
+    pub(crate) fn new(network: Arc<ErasedInput>, key: String) -> InletLedger {
+        InletLedger {
+            had: Mutex::new(Vec::new()),
+            network,
+            key,
+        }
+    }
+
+    /// Message `seq` of outlet `epoch` arrived (0: a pull answer, not numbered).
+    pub(crate) fn received(&self, epoch: u64, seq: u64) {
+        if seq == 0 {
+            return;
+        }
+        let missing = {
+            let mut had = lock(&self.had);
+            let missing = match had.iter_mut().find(|h| h.epoch == epoch) {
+                Some(h) => {
+                    let missing = seq.saturating_sub(h.newest + 1);
+                    h.newest = h.newest.max(seq);
+                    h.received += 1;
+                    h.missing += missing;
+                    missing
+                }
+                None => {
+                    if had.len() >= MAX_EPOCHS {
+                        had.remove(0);
+                    }
+                    had.push(Had {
+                        epoch,
+                        first: seq,
+                        newest: seq,
+                        received: 1,
+                        missing: 0,
+                    });
+                    0
+                }
+            };
+            // Under the lock: a test reads receipts and acknowledgments in the order
+            // the ledger saw them.
+            tracing::trace!(target: LEDGER_TARGET, "{} received {epoch} {seq} missing {missing}", self.key);
+            missing
+        };
+        if missing > 0 {
+            self.network.count_loss(missing);
+            tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing)");
+        }
+    }
+
+    /// The answer to an outlet's question, from the inlet of `process`.
+    fn answer(&self, process: &str) -> Vec<u8> {
+        let had = lock(&self.had);
+        for h in had.iter() {
+            tracing::trace!(target: LEDGER_TARGET, "{} acknowledged {} {}", self.key, h.epoch, h.newest);
+        }
+        let ack: Ack = (process.to_owned(), had.clone());
+        postcard::to_allocvec(&ack).unwrap_or_default()
+    }
+}
+
+/// The queryable through which an inlet acknowledges: `K/@ack/<node>/<name>`.
+pub(crate) fn serve(
+    session: &zenoh::Session,
+    key: &str,
+    node: &str,
+    name: &str,
+    ledger: Arc<InletLedger>,
+) -> zenoh::Result<zenoh::query::Queryable<()>> {
+    let own = format!("{key}/@ack/{node}/{name}");
+    let process = session.zid().to_string();
+    let reply_key = own.clone();
+    session
+        .declare_queryable(own)
+        .callback(move |query| {
+            if let Err(error) = query
+                .reply(reply_key.clone(), ledger.answer(&process))
+                .wait()
+            {
+                tracing::warn!("acknowledgment not sent: {error}");
+            }
+        })
+        .wait()
+}
+
+/// The last chunk of an inlet's token: its process.
+pub(crate) fn process(session: &zenoh::Session) -> String {
+    session.zid().to_string()
+}
+
+/// One inlet as an outlet knows it: `<node>/<name>/<process>` from its token.
+#[derive(Debug, Clone)]
+struct Stream {
+    id: String,
+    node: String,
+    process: String,
+    /// What the outlet had sent when it first saw the inlet (its token comes before
+    /// its subscription: nothing numbered up to here was sent to it).
+    since: u64,
+    first: u64,
+    newest: u64,
+    alive: bool,
+    /// What the outlet had sent when the token went.
+    gone_at: Option<u64>,
+    /// Its node answers from another process: this one has ended.
+    ended: bool,
+    counted: bool,
+}
+
+impl Stream {
+    fn new(id: &str, since: u64) -> Option<Stream> {
+        let mut chunks = id.rsplitn(3, '/');
+        let process = chunks.next()?.to_owned();
+        let _name = chunks.next()?;
+        let node = chunks.next()?.to_owned();
+        Some(Stream {
+            id: id.to_owned(),
+            node,
+            process,
+            since,
+            first: 0,
+            newest: 0,
+            alive: true,
+            gone_at: None,
+            ended: false,
+            counted: false,
+        })
+    }
+}
+
+struct Book {
+    key: String,
+    epoch: u64,
+    sent: Arc<AtomicU64>,
+    /// One input end (fifo, ufifo): an inlet that starts receiving replaces the one
+    /// gone.
+    single: bool,
+    losses: ErasedInput,
+    streams: Mutex<Vec<Stream>>,
+}
+
+impl Book {
+    fn sent(&self) -> u64 {
+        self.sent.load(Ordering::Acquire)
+    }
+
+    /// The stream of token `id`, made if it is new. A process of a node seen means
+    /// every gone stream of that node from another process has ended.
+    fn seen<'s>(&self, streams: &'s mut Vec<Stream>, id: &str) -> Option<&'s mut Stream> {
+        let index = match streams.iter().position(|s| s.id == id) {
+            Some(index) => index,
+            None => {
+                streams.push(Stream::new(id, self.sent())?);
+                streams.len() - 1
+            }
+        };
+        let (node, process) = (streams[index].node.clone(), streams[index].process.clone());
+        for other in streams.iter_mut() {
+            if other.node == node && other.process != process && !other.alive {
+                other.ended = true;
+            }
+        }
+        streams.get_mut(index)
+    }
+
+    fn token(&self, id: &str, kind: SampleKind) {
+        let sent = self.sent();
+        let mut streams = lock(&self.streams);
+        if let Some(stream) = self.seen(&mut streams, id) {
+            match kind {
+                SampleKind::Put => {
+                    stream.alive = true;
+                    stream.gone_at = None;
+                }
+                SampleKind::Delete => {
+                    stream.alive = false;
+                    stream.gone_at = Some(sent);
+                }
+            }
+        }
+    }
+
+    /// An inlet's answer. Only an inlet whose token was seen counts (a late answer
+    /// from a process already settled is not a new inlet).
+    fn acknowledged(&self, node_and_name: &str, ack: &Ack) {
+        let (process, had) = ack;
+        let id = format!("{node_and_name}/{process}");
+        let mut streams = lock(&self.streams);
+        if let Some(stream) = streams.iter_mut().find(|s| s.id == id && !s.counted)
+            && let Some(h) = had.iter().find(|h| h.epoch == self.epoch)
+        {
+            if stream.first == 0 {
+                stream.first = h.first;
+            }
+            stream.newest = stream.newest.max(h.newest);
+        }
+    }
+
+    /// Count what the ended inlets were sent and never acknowledged; `stopping`:
+    /// every inlet is done (the outlet stops).
+    ///
+    /// The numbers are shared out along the inlets' succession: an inlet gone owns
+    /// those after the newest it acknowledged up to where its successor (the first
+    /// inlet seen after it went) begins, the number before the first its successor
+    /// acknowledged receiving, or, for a successor that acknowledged nothing, what
+    /// the outlet had sent when it saw it (that successor then owns all after).
+    fn settle(&self, stopping: bool) {
+        let sent = self.sent();
+        let mut streams = lock(&self.streams);
+        let snapshot = streams.clone();
+        for stream in streams.iter_mut().filter(|s| !s.counted) {
+            let successor = stream.gone_at.and_then(|gone| {
+                snapshot
+                    .iter()
+                    .filter(|s| s.id != stream.id && s.since >= gone)
+                    .min_by_key(|s| s.since)
+            });
+            let replaced = self.single && !stream.alive && successor.is_some_and(|s| s.first > 0);
+            if !(stopping || stream.ended || replaced) {
+                continue;
+            }
+            let end = match (stream.gone_at, successor) {
+                (None, _) => sent,
+                (Some(gone), None) => gone,
+                (Some(_), Some(next)) if next.first > 0 => next.first - 1,
+                (Some(_), Some(next)) if stopping || !next.alive => next.since,
+                // Its successor may still say where it began.
+                (Some(_), Some(_)) => continue,
+            };
+            stream.counted = true;
+            let lost = end.saturating_sub(stream.newest.max(stream.since));
+            if lost > 0 {
+                self.losses.count_loss(lost);
+                tracing::warn!(
+                    key = %self.key,
+                    "outlet lost {lost} packet(s): inlet {} ended before acknowledging them",
+                    stream.id
+                );
+            }
+        }
+        streams.retain(|s| !s.counted || s.alive);
+    }
+
+    /// Whether every live inlet has acknowledged everything sent.
+    fn caught_up(&self) -> bool {
+        let sent = self.sent();
+        lock(&self.streams)
+            .iter()
+            .filter(|s| s.alive && !s.counted)
+            .all(|s| s.newest.max(s.since) >= sent)
+    }
+
+    fn is_empty(&self) -> bool {
+        lock(&self.streams).iter().all(|s| s.counted)
+    }
+
+    /// One round of questions to the inlets.
+    fn ask(&self, session: &zenoh::Session) {
+        let prefix = format!("{}/@ack/", self.key);
+        let replies = match session
+            .get(format!("{}/@ack/**", self.key))
+            .target(QueryTarget::All)
+            .consolidation(ConsolidationMode::None)
+            .timeout(ACK_TIMEOUT)
+            .wait()
+        {
+            Ok(replies) => replies,
+            Err(error) => {
+                tracing::warn!(key = %self.key, "acknowledgments not asked: {error}");
+                return;
+            }
+        };
+        while let Ok(reply) = replies.recv() {
+            let Ok(sample) = reply.result() else { continue };
+            let Some(node_and_name) = sample.key_expr().as_str().strip_prefix(&prefix) else {
+                continue;
+            };
+            match postcard::from_bytes::<Ack>(&sample.payload().to_bytes()) {
+                Ok(ack) => self.acknowledged(node_and_name, &ack),
+                Err(error) => tracing::warn!(
+                    key = %self.key,
+                    "an acknowledgment that does not decode was dropped: {error}"
+                ),
+            }
+        }
+    }
+}
+
+/// An outlet's side: the inlets it has seen, asked every [`ACK_PERIOD`] on a thread
+/// of its own; dropping it settles the accounts.
+pub(crate) struct OutletLedger {
+    book: Arc<Book>,
+    session: zenoh::Session,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    watcher: Option<zenoh::pubsub::Subscriber<()>>,
+}
+
+impl OutletLedger {
+    /// The ledger of the outlet of `epoch` on `key`, whose numbered messages are
+    /// counted by `sent`, counting losses at `losses`.
+    pub(crate) fn start(
+        session: &zenoh::Session,
+        key: &str,
+        epoch: u64,
+        sent: Arc<AtomicU64>,
+        single: bool,
+        losses: ErasedInput,
+    ) -> Result<OutletLedger, crate::Error> {
+        let book = Arc::new(Book {
+            key: key.to_owned(),
+            epoch,
+            sent,
+            single,
+            losses,
+            streams: Mutex::new(Vec::new()),
+        });
+        let prefix = format!("{key}/@in/");
+        let watched = Arc::clone(&book);
+        let watcher = session
+            .liveliness()
+            .declare_subscriber(format!("{key}/@in/**"))
+            .history(true)
+            .callback(move |sample| {
+                if let Some(id) = sample.key_expr().as_str().strip_prefix(&prefix) {
+                    watched.token(id, sample.kind());
+                }
+            })
+            .wait()
+            .map_err(crate::Error::zenoh)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let (stopped, asked, on) = (Arc::clone(&stop), Arc::clone(&book), session.clone());
+        let thread = std::thread::Builder::new()
+            .name(format!("cool-net:ack:{key}"))
+            .spawn(move || {
+                while !stopped.load(Ordering::Acquire) {
+                    let next = Instant::now() + ACK_PERIOD;
+                    if !asked.is_empty() {
+                        asked.ask(&on);
+                        asked.settle(false);
+                    }
+                    // Parking may end early (a Zenoh wait unparks this thread too):
+                    // only a stop or the period's end counts.
+                    while !stopped.load(Ordering::Acquire) {
+                        let left = next.saturating_duration_since(Instant::now());
+                        if left.is_zero() {
+                            break;
+                        }
+                        std::thread::park_timeout(left);
+                    }
+                }
+            })
+            .map_err(|error| {
+                crate::Error::Zenoh(format!("cannot spawn the ack thread: {error}"))
+            })?;
+        Ok(OutletLedger {
+            book,
+            session: session.clone(),
+            stop,
+            thread: Some(thread),
+            watcher: Some(watcher),
+        })
+    }
+}
+
+impl Drop for OutletLedger {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            thread.thread().unpark();
+            let _ = thread.join();
+        }
+        drop(self.watcher.take());
+        for _ in 0..FINAL_ROUNDS {
+            if self.book.is_empty() || self.book.caught_up() {
+                break;
+            }
+            self.book.ask(&self.session);
+        }
+        self.book.settle(true);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coolbot::port::{InputPort, TickIn};
+
+    fn book(single: bool) -> (Book, TickIn) {
+        let losses = TickIn::new();
+        (
+            Book {
+                key: "k".to_owned(),
+                epoch: 7,
+                sent: Arc::new(AtomicU64::new(0)),
+                single,
+                losses: losses.erased(),
+                streams: Mutex::new(Vec::new()),
+            },
+            losses,
+        )
+    }
+
+    fn had(first: u64, newest: u64) -> Vec<Had> {
+        vec![Had {
+            epoch: 7,
+            first,
+            newest,
+            received: newest - first + 1,
+            missing: 0,
+        }]
+    }
+
+    #[test]
+    fn an_inlet_restarted_on_its_node_is_counted_up_to_its_successors_first() {
+        let (book, losses) = book(false);
+        book.token("station/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 6)));
+        book.sent.store(12, Ordering::Release);
+        book.token("station/in/aaa", SampleKind::Delete);
+        book.settle(false);
+        assert_eq!(losses.overflows(), 0, "not known to have ended yet");
+        book.token("station/in/bbb", SampleKind::Put);
+        book.sent.store(20, Ordering::Release);
+        book.acknowledged("station/in", &("bbb".to_owned(), had(14, 20)));
+        book.settle(false);
+        // 7..=13: after what `aaa` acknowledged, before what `bbb` first received.
+        assert_eq!(losses.overflows(), 7);
+        book.settle(true);
+        assert_eq!(losses.overflows(), 7, "`bbb` acknowledged everything");
+    }
+
+    #[test]
+    fn a_link_that_comes_back_with_the_same_process_counts_nothing_at_the_outlet() {
+        let (book, losses) = book(true);
+        book.token("station/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
+        book.token("station/in/aaa", SampleKind::Delete);
+        book.sent.store(20, Ordering::Release);
+        book.token("station/in/aaa", SampleKind::Put);
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 20)));
+        book.settle(true);
+        assert_eq!(losses.overflows(), 0);
+    }
+
+    #[test]
+    fn on_a_queue_key_an_inlet_that_starts_receiving_replaces_the_one_gone() {
+        let (book, losses) = book(true);
+        book.token("a/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.acknowledged("a/in", &("aaa".to_owned(), had(1, 8)));
+        book.token("a/in/aaa", SampleKind::Delete);
+        book.token("b/in/bbb", SampleKind::Put);
+        book.sent.store(30, Ordering::Release);
+        book.settle(false);
+        assert_eq!(
+            losses.overflows(),
+            0,
+            "its successor has received nothing yet"
+        );
+        book.acknowledged("b/in", &("bbb".to_owned(), had(12, 30)));
+        book.settle(false);
+        assert_eq!(losses.overflows(), 3, "9, 10, 11");
+    }
+
+    #[test]
+    fn a_successor_that_acknowledged_nothing_owns_all_after_it_was_seen() {
+        let (book, losses) = book(true);
+        book.token("sink/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.acknowledged("sink/in", &("aaa".to_owned(), had(1, 8)));
+        book.token("sink/in/aaa", SampleKind::Delete);
+        book.sent.store(12, Ordering::Release);
+        book.token("sink/in/bbb", SampleKind::Put); // seen at 12
+        book.sent.store(20, Ordering::Release);
+        book.token("sink/in/bbb", SampleKind::Delete); // never acknowledged
+        book.sent.store(25, Ordering::Release);
+        book.token("sink/in/ccc", SampleKind::Put); // seen at 25
+        book.sent.store(40, Ordering::Release);
+        book.acknowledged("sink/in", &("ccc".to_owned(), had(27, 40)));
+        book.settle(false);
+        // aaa: 9..=12; bbb: 13..=26 (up to before ccc's first).
+        assert_eq!(losses.overflows(), 4 + 14);
+    }
+
+    #[test]
+    fn an_inlet_gone_without_successor_is_counted_when_the_outlet_stops() {
+        let (book, losses) = book(false);
+        book.token("a/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.token("a/in/aaa", SampleKind::Delete);
+        book.sent.store(40, Ordering::Release);
+        book.settle(false);
+        assert_eq!(losses.overflows(), 0);
+        book.settle(true);
+        assert_eq!(
+            losses.overflows(),
+            10,
+            "never acknowledged: all it was sent"
+        );
+    }
+}
