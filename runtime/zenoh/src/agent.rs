@@ -162,15 +162,19 @@ pub(crate) trait PortBridge: Send + Sync {
         pull: Option<Duration>,
         ports: PortSet,
     ) -> Result<(PortSet, Pump), Error>;
-    /// A proxy's output of `kind` (added to `ports`), and what delivers a message of
-    /// `key` on it.
+    /// A proxy's output of `kind` (added to `ports`), what delivers a message of
+    /// `key` on it, and its ledger (which the proxy serves acknowledgments from).
     fn proxy_output(
         &self,
         ports: PortSet,
         kind: OutputKind,
         losses: ErasedInput,
         key: &str,
-    ) -> (PortSet, crate::bridge::DeliverFn);
+    ) -> (
+        PortSet,
+        crate::bridge::DeliverFn,
+        Arc<crate::ledger::InletLedger>,
+    );
     /// An inlet of `kind` on `key` (a pull inlet when `pull`, its requests waiting
     /// at most that long).
     fn inlet(
@@ -218,7 +222,11 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         kind: OutputKind,
         losses: ErasedInput,
         key: &str,
-    ) -> (PortSet, crate::bridge::DeliverFn) {
+    ) -> (
+        PortSet,
+        crate::bridge::DeliverFn,
+        Arc<crate::ledger::InletLedger>,
+    ) {
         crate::bridge::proxy_output::<T>(ports, kind, losses, key)
     }
 

@@ -35,6 +35,7 @@ use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
 use crate::ledger::{self, InletLedger, OutletLedger};
+use crate::tally::Tally;
 use crate::{Error, Node, keys};
 
 /// How long a pull over the network waits for its answer unless the bridge says
@@ -195,6 +196,9 @@ struct Wire {
     matching: Arc<AtomicBool>,
     /// Where a packet that could not be published is counted.
     losses: ErasedInput,
+    /// The newest number handed to Zenoh, in a file a restarted process reads
+    /// (`crate::tally`; numbered streams only).
+    tally: Option<Tally>,
 }
 
 impl Wire {
@@ -204,9 +208,15 @@ impl Wire {
     }
 
     /// Publish one packet; `counted`: a packet nobody subscribes to is a loss (data
-    /// and ticks; a poster's value stays available on query). Whether Zenoh took it
-    /// (if not, it was counted here).
-    fn send(&self, bytes: Result<Vec<u8>, String>, counted: bool) -> bool {
+    /// and ticks; a poster's value stays available on query); `numbered`: the
+    /// message's epoch and number, tallied before it goes to Zenoh. Whether Zenoh took
+    /// it (if not, it was counted here).
+    fn send(
+        &self,
+        bytes: Result<Vec<u8>, String>,
+        counted: bool,
+        numbered: Option<(u64, u64)>,
+    ) -> bool {
         let bytes = match bytes {
             Ok(bytes) => bytes,
             Err(reason) => {
@@ -228,7 +238,17 @@ impl Wire {
             self.lost("nothing on the network subscribes to the key");
             return false;
         }
+        // Before Zenoh has it: a process killed in between reports one message more
+        // than it sent (counted lost), never one less.
+        let tally = self.tally.as_ref().zip(numbered);
+        if let Some((tally, (epoch, number))) = tally {
+            tally.record(number);
+            tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {epoch} {number}", self.key);
+        }
         if let Err(error) = self.publisher.put(bytes).wait() {
+            if let Some((tally, (_, number))) = tally {
+                tally.record(number - 1);
+            }
             self.lost(&format!("zenoh refused it: {error}"));
             return false;
         }
@@ -242,7 +262,7 @@ impl Wire {
     fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &AtomicU64, packet: &P) {
         // Only the outlet's thread numbers: the ledger's thread only reads.
         let next = sent.load(Ordering::Acquire) + 1;
-        if self.send(encode(&(epoch, next, packet)), true) {
+        if self.send(encode(&(epoch, next, packet)), true, Some((epoch, next))) {
             sent.store(next, Ordering::Release);
         }
     }
@@ -560,7 +580,12 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             OutletInput::Poster(port) => PortSet::new().input(port),
         };
         let sent = Arc::new(AtomicU64::new(0));
-        let ledger = if pull.is_none() && kind != InputKind::Poster {
+        let numbered = pull.is_none() && kind != InputKind::Poster;
+        let (tally, ended) = match numbered.then(|| Tally::claim(node.name(), &key, epoch)) {
+            Some(Some((tally, ended))) => (Some(tally), ended),
+            _ => (None, None),
+        };
+        let ledger = if numbered {
             Some(OutletLedger::start(
                 session,
                 &key,
@@ -568,6 +593,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 Arc::clone(&sent),
                 matches!(kind, InputKind::Fifo { .. } | InputKind::Ufifo { .. }),
                 erased.clone(),
+                ended,
             )?)
         } else {
             None
@@ -580,6 +606,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 publisher,
                 matching,
                 losses: erased,
+                tally,
             },
             pull: pull.is_some(),
             epoch,
@@ -662,7 +689,7 @@ impl<T: Packet + Serialize> Outlet<T> {
                     if let Ok(bytes) = &bytes {
                         *lock(&self.posted) = Some(bytes.clone());
                     }
-                    wire.send(bytes, false);
+                    wire.send(bytes, false, None);
                 }
             }
         }
@@ -846,14 +873,14 @@ fn deliverer<T: Packet + DeserializeOwned>(
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
-/// and what delivers the messages of a bridge key on it (decode, gaps, losses counted
-/// at `losses`).
+/// what delivers the messages of a bridge key on it (decode, gaps, losses counted
+/// at `losses`), and its ledger.
 pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
     ports: PortSet,
     kind: OutputKind,
     losses: ErasedInput,
     key: &str,
-) -> (PortSet, DeliverFn) {
+) -> (PortSet, DeliverFn, Arc<InletLedger>) {
     let (output, ports) = match kind {
         OutputKind::Tick => {
             let port = TickOut::new();
@@ -871,7 +898,8 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
             (InletOutput::Poster(port), ports)
         }
     };
-    (ports, deliverer(output, losses, key.to_owned()).0)
+    let (deliver, ledger) = deliverer(output, losses, key.to_owned());
+    (ports, deliver, ledger)
 }
 
 /// Ask the producers on `key` for their current value (a poster's, or the latest
@@ -940,7 +968,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             .declare_token(format!(
                 "{key}/@in/{}/{name}/{}",
                 node.name(),
-                ledger::process(session)
+                ledger::process()
             ))
             .wait()
             .map_err(Error::zenoh)?;
@@ -989,7 +1017,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
         let acks = match pull {
             Some(_) => None,
             None => Some(
-                ledger::serve(session, &key, node.name(), &name, ledger).map_err(Error::zenoh)?,
+                ledger::serve(session, &key, node.name(), &name, ledger, || {})
+                    .map_err(Error::zenoh)?,
             ),
         };
         let inlet = Inlet {

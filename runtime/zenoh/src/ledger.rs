@@ -22,6 +22,8 @@ use std::time::{Duration, Instant};
 
 use coolbot::port::ErasedInput;
 use serde::{Deserialize, Serialize};
+
+use crate::tally::Ended;
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::sample::SampleKind;
@@ -36,9 +38,13 @@ const ACK_TIMEOUT: Duration = Duration::from_millis(300);
 /// acknowledge everything it sent, before counting the rest lost.
 const FINAL_ROUNDS: usize = 5;
 
-/// The `tracing` target of every receipt and acknowledgment an inlet records (at
-/// `trace` level: a test's ground truth).
+/// The `tracing` target of every receipt and acknowledgment an inlet records, and of
+/// every number an outlet hands to Zenoh (at `trace` level: a test's ground truth).
 pub const LEDGER_TARGET: &str = "coolbot_zenoh::ledger";
+
+/// The `tracing` target of what an outlet counts lost for an ended inlet (`trace`:
+/// `<key> counted <inlet> from <newest acknowledged> to <end>`).
+pub const OUTLET_LEDGER_TARGET: &str = "coolbot_zenoh::ledger::outlet";
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
@@ -120,45 +126,90 @@ impl InletLedger {
         }
     }
 
-    /// The answer to an outlet's question, from the inlet of `process`.
-    fn answer(&self, process: &str) -> Vec<u8> {
-        let had = lock(&self.had);
+    /// The answer to an outlet's question, from the inlet of `process`; `ended`, the
+    /// outlet epochs the question reports ended (by a process started again, from
+    /// its tally) with the newest number each sent. Numbers of an epoch this inlet
+    /// had that it never received up to that newest are counted missing, once. How
+    /// many were.
+    fn answer(&self, process: &str, ended: &[Ended]) -> (Vec<u8>, u64) {
+        let mut had = lock(&self.had);
+        let mut counted = 0;
+        for &(epoch, last) in ended {
+            if let Some(h) = had.iter_mut().find(|h| h.epoch == epoch)
+                && last > h.newest
+            {
+                let missing = last - h.newest;
+                h.newest = last;
+                h.missing += missing;
+                counted += missing;
+                tracing::trace!(target: LEDGER_TARGET, "{} ended {epoch} {last} missing {missing}", self.key);
+                tracing::warn!(
+                    key = %self.key,
+                    "inlet lost {missing} packet(s): outlet epoch {epoch} sent up to {last} before its process ended"
+                );
+            }
+        }
+        if counted > 0 {
+            self.network.count_loss(counted);
+        }
         for h in had.iter() {
             tracing::trace!(target: LEDGER_TARGET, "{} acknowledged {} {}", self.key, h.epoch, h.newest);
         }
         let ack: Ack = (process.to_owned(), had.clone());
-        postcard::to_allocvec(&ack).unwrap_or_default()
+        (postcard::to_allocvec(&ack).unwrap_or_default(), counted)
     }
 }
 
-/// The queryable through which an inlet acknowledges: `K/@ack/<node>/<name>`.
+/// The queryable through which an inlet acknowledges: `K/@ack/<node>/<name>`;
+/// `counted` runs after a question's report of ended epochs made it count packets
+/// missing.
 pub(crate) fn serve(
     session: &zenoh::Session,
     key: &str,
     node: &str,
     name: &str,
     ledger: Arc<InletLedger>,
+    counted: impl Fn() + Send + Sync + 'static,
 ) -> zenoh::Result<zenoh::query::Queryable<()>> {
     let own = format!("{key}/@ack/{node}/{name}");
-    let process = session.zid().to_string();
+    let process = process();
+    tracing::trace!(target: LEDGER_TARGET, "{key} inlet {node}/{name} of process {process}");
     let reply_key = own.clone();
     session
         .declare_queryable(own)
         .callback(move |query| {
-            if let Err(error) = query
-                .reply(reply_key.clone(), ledger.answer(&process))
-                .wait()
-            {
+            let ended = query
+                .payload()
+                .and_then(|payload| postcard::from_bytes::<Vec<Ended>>(&payload.to_bytes()).ok())
+                .unwrap_or_default();
+            let (answer, lost) = ledger.answer(&process, &ended);
+            if lost > 0 {
+                counted();
+            }
+            if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
                 tracing::warn!("acknowledgment not sent: {error}");
             }
         })
         .wait()
 }
 
-/// The last chunk of an inlet's token: its process.
-pub(crate) fn process(session: &zenoh::Session) -> String {
-    session.zid().to_string()
+/// The last chunk of an inlet's token: its process, a value drawn once per process
+/// (its start time and id; not the Zenoh session id, which a configuration may fix).
+pub(crate) fn process() -> String {
+    static PROCESS: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    PROCESS
+        .get_or_init(|| {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |elapsed| elapsed.as_nanos() as u64);
+            format!("{now:x}{:x}", std::process::id())
+        })
+        .clone()
 }
+
+/// The most settled inlets an outlet remembers (so that a settled one whose token
+/// comes back is not taken for a new inlet).
+const MAX_SETTLED: usize = 1024;
 
 /// One inlet as an outlet knows it: `<node>/<name>/<process>` from its token.
 #[derive(Debug, Clone)]
@@ -209,6 +260,11 @@ struct Book {
     single: bool,
     losses: ErasedInput,
     streams: Mutex<Vec<Stream>>,
+    /// The inlets already counted for, by id, oldest first.
+    settled: Mutex<std::collections::VecDeque<String>>,
+    /// What this outlet's killed predecessor (same node, same key) had sent, from the
+    /// tally it left: reported to the inlets with every question.
+    ended: Option<Ended>,
 }
 
 impl Book {
@@ -236,6 +292,11 @@ impl Book {
     }
 
     fn token(&self, id: &str, kind: SampleKind) {
+        // A settled inlet whose link came back after its successor took over: what
+        // it was sent is counted already (two inlets on one queue key: see the docs).
+        if lock(&self.settled).iter().any(|settled| settled == id) {
+            return;
+        }
         let sent = self.sent();
         let mut streams = lock(&self.streams);
         if let Some(stream) = self.seen(&mut streams, id) {
@@ -300,7 +361,9 @@ impl Book {
                 (Some(_), Some(_)) => continue,
             };
             stream.counted = true;
-            let lost = end.saturating_sub(stream.newest.max(stream.since));
+            let from = stream.newest.max(stream.since);
+            let lost = end.saturating_sub(from);
+            tracing::trace!(target: OUTLET_LEDGER_TARGET, "{} counted {} from {from} to {end}", self.key, stream.id);
             if lost > 0 {
                 self.losses.count_loss(lost);
                 tracing::warn!(
@@ -310,7 +373,14 @@ impl Book {
                 );
             }
         }
-        streams.retain(|s| !s.counted || s.alive);
+        let mut settled = lock(&self.settled);
+        for stream in streams.iter().filter(|s| s.counted) {
+            if settled.len() >= MAX_SETTLED {
+                settled.pop_front();
+            }
+            settled.push_back(stream.id.clone());
+        }
+        streams.retain(|s| !s.counted);
     }
 
     /// Whether every live inlet has acknowledged everything sent.
@@ -322,15 +392,23 @@ impl Book {
             .all(|s| s.newest.max(s.since) >= sent)
     }
 
+    /// The sum of the newest numbers acknowledged (grows with every new answer).
+    fn acknowledged_total(&self) -> u64 {
+        lock(&self.streams).iter().map(|s| s.newest).sum()
+    }
+
+    /// Whether there is no one to ask: no inlet to account for, nothing to report.
     fn is_empty(&self) -> bool {
-        lock(&self.streams).iter().all(|s| s.counted)
+        self.ended.is_none() && lock(&self.streams).iter().all(|s| s.counted)
     }
 
     /// One round of questions to the inlets.
     fn ask(&self, session: &zenoh::Session) {
         let prefix = format!("{}/@ack/", self.key);
+        let report: Vec<Ended> = self.ended.into_iter().collect();
         let replies = match session
             .get(format!("{}/@ack/**", self.key))
+            .payload(postcard::to_allocvec(&report).unwrap_or_default())
             .target(QueryTarget::All)
             .consolidation(ConsolidationMode::None)
             .timeout(ACK_TIMEOUT)
@@ -370,7 +448,8 @@ pub(crate) struct OutletLedger {
 
 impl OutletLedger {
     /// The ledger of the outlet of `epoch` on `key`, whose numbered messages are
-    /// counted by `sent`, counting losses at `losses`.
+    /// counted by `sent`, counting losses at `losses`; `ended`, what a killed
+    /// predecessor of it had sent (its tally).
     pub(crate) fn start(
         session: &zenoh::Session,
         key: &str,
@@ -378,6 +457,7 @@ impl OutletLedger {
         sent: Arc<AtomicU64>,
         single: bool,
         losses: ErasedInput,
+        ended: Option<Ended>,
     ) -> Result<OutletLedger, crate::Error> {
         let book = Arc::new(Book {
             key: key.to_owned(),
@@ -386,6 +466,8 @@ impl OutletLedger {
             single,
             losses,
             streams: Mutex::new(Vec::new()),
+            settled: Mutex::new(std::collections::VecDeque::new()),
+            ended,
         });
         let prefix = format!("{key}/@in/");
         let watched = Arc::clone(&book);
@@ -443,11 +525,19 @@ impl Drop for OutletLedger {
             let _ = thread.join();
         }
         drop(self.watcher.take());
+        // Ask until the live inlets have acknowledged everything, or a round brings
+        // nothing new (an inlet that does not answer is not waited for again).
+        let mut before = self.book.acknowledged_total();
         for _ in 0..FINAL_ROUNDS {
             if self.book.is_empty() || self.book.caught_up() {
                 break;
             }
             self.book.ask(&self.session);
+            let now = self.book.acknowledged_total();
+            if now == before {
+                break;
+            }
+            before = now;
         }
         self.book.settle(true);
     }
@@ -468,6 +558,8 @@ mod tests {
                 single,
                 losses: losses.erased(),
                 streams: Mutex::new(Vec::new()),
+                settled: Mutex::new(std::collections::VecDeque::new()),
+                ended: None,
             },
             losses,
         )
@@ -555,6 +647,20 @@ mod tests {
         book.settle(false);
         // aaa: 9..=12; bbb: 13..=26 (up to before ccc's first).
         assert_eq!(losses.overflows(), 4 + 14);
+    }
+
+    #[test]
+    fn an_inlet_counts_once_what_an_ended_epoch_sent_and_it_never_received() {
+        let network = TickIn::new();
+        let ledger = InletLedger::new(Arc::new(network.erased()), "k".to_owned());
+        for seq in 1..=5 {
+            ledger.received(9, seq);
+        }
+        let (_, counted) = ledger.answer("p", &[(9, 8), (4, 100)]);
+        assert_eq!(counted, 3, "6, 7, 8 (epoch 4 it never had)");
+        let (_, again) = ledger.answer("p", &[(9, 8)]);
+        assert_eq!(again, 0, "counted once");
+        assert_eq!(network.overflows(), 3);
     }
 
     #[test]

@@ -49,11 +49,12 @@ pub mod network;
 mod node;
 pub mod place;
 pub mod security;
+mod tally;
 pub mod top;
 
 pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
 pub use crate::config::{peer_config, secure_config};
-pub use crate::ledger::LEDGER_TARGET;
+pub use crate::ledger::{LEDGER_TARGET, OUTLET_LEDGER_TARGET};
 pub use crate::node::{ControlReply, Node};
 pub use crate::place::Placer;
 pub use crate::security::Security;

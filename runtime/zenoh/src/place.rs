@@ -144,7 +144,7 @@ impl coolbot::remote::Placer for Placer {
         let mut outputs = Vec::new();
         for output in spec.outputs {
             let key = format!("{base}/out/{}", output.name);
-            let (with, deliver) =
+            let (with, deliver, ledger) =
                 bridge(output.name)?.proxy_output(ports, output.kind, losses.erased(), &key);
             let deliver = waking_on_loss(deliver, losses.clone(), Arc::clone(&shared));
             ports = with;
@@ -164,6 +164,7 @@ impl coolbot::remote::Placer for Placer {
             outputs.push(ProxyOutput {
                 key,
                 deliver,
+                ledger,
                 poster: output.kind == OutputKind::Poster,
                 pull: output.pull,
             });
@@ -189,6 +190,7 @@ impl coolbot::remote::Placer for Placer {
             pumps,
             outputs,
             subscribers: Vec::new(),
+            acks: Vec::new(),
             shared,
             instantiated: false,
             times_asked: None,
@@ -232,6 +234,10 @@ impl Shared {
 struct ProxyOutput {
     key: String,
     deliver: DeliverFn,
+    /// What it has had of the remote outlets: acknowledged on `key/@ack/<node>/proxy`,
+    /// which is how an outlet started again after a kill of the instance's node
+    /// reports what its predecessor sent (`crate::ledger`).
+    ledger: Arc<crate::ledger::InletLedger>,
     /// A poster: asked for its value again after each instantiation (a late joiner's).
     poster: bool,
     /// A pull output: each request of a consumer here is a query on `key/@pull`.
@@ -255,6 +261,8 @@ struct End {
     /// The proxy's outputs, in declaration order.
     outputs: Vec<ProxyOutput>,
     subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    /// The outputs' acknowledgment queryables.
+    acks: Vec<zenoh::query::Queryable<()>>,
     shared: Arc<Shared>,
     instantiated: bool,
     /// When the remote snapshot (for its times) was last asked for.
@@ -289,6 +297,23 @@ impl End {
                     .wait()
                     .map_err(Error::zenoh)?,
             );
+            if !output.poster {
+                let shared = Arc::clone(&self.shared);
+                self.acks.push(
+                    crate::ledger::serve(
+                        session,
+                        &output.key,
+                        self.node.name(),
+                        "proxy",
+                        Arc::clone(&output.ledger),
+                        move || {
+                            shared.changed.store(true, Ordering::Release);
+                            shared.ring();
+                        },
+                    )
+                    .map_err(Error::zenoh)?,
+                );
+            }
         }
         let shared = Arc::clone(&self.shared);
         self.subscribers.push(
@@ -620,5 +645,6 @@ impl RemoteEnd for End {
             }
         }
         self.subscribers.clear();
+        self.acks.clear();
     }
 }
