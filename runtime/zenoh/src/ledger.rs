@@ -1,19 +1,22 @@
 //! Acknowledgments across a bridge (`docs/distribution.md`, "What happens when the
-//! network fails"): what an inlet has had of each outlet, and what an outlet counts
-//! lost when an inlet's process ends before acknowledging what it was sent.
+//! network fails"): what an inlet has had of each outlet, what an outlet counts lost
+//! when an inlet's process ends before acknowledging what it was sent, and what an
+//! inlet counts missing when an outlet reports that its killed predecessor had sent
+//! more than the inlet received.
 //!
 //! An outlet numbers its messages (1, 2, ... per epoch). An inlet keeps, per outlet
 //! epoch, the first and newest number it received, how many it received and how many
 //! it counted missing (gaps, at its own `network` input), and answers queries on
-//! `K/@ack/<node>/<name>` with that and its process (its session's id, also the last
-//! chunk of its token `K/@in/<node>/<name>/<process>`). The outlet asks every
+//! `K/@ack/<node>/<name>` with that and its process (drawn once per process, also the
+//! last chunk of its token `K/@in/<node>/<name>/<process>`). The outlet asks every
 //! [`ACK_PERIOD`] and watches the inlets' tokens. When an inlet's process is known to
-//! have ended (its token is gone and its node answers from another process, or, on a
-//! key with one input end, another inlet has started receiving, or the outlet stops),
-//! the numbers sent after the newest it acknowledged are counted lost at the outlet's
-//! input, with an event: up to the first number its successor received, or else up to
-//! what the outlet had sent when the token went. A link that breaks and comes back
-//! keeps the same process: the inlet counts the gap itself, and the outlet nothing.
+//! have ended (its token is gone and an inlet token on the key appears from its node
+//! with another process, or, on a key with one input end, another inlet has started
+//! receiving, or the outlet stops), the numbers sent after the newest it acknowledged
+//! are counted lost at the outlet's input, with an event, up to where its successor's
+//! share begins. A link that breaks and comes back keeps the same process: the inlet
+//! counts the gap itself, and the outlet nothing. The questions carry the epochs of
+//! killed predecessors and their newest numbers (`crate::tally`).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};

@@ -492,3 +492,119 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+/// A station process (`station-under-test`), killed when dropped.
+struct Station(std::process::Child);
+
+impl Drop for Station {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Start the station process `name`, connected to `endpoint`; it has printed `ready`
+/// and `robot` sees its node.
+fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> Station {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_station-under-test"))
+        .args([name, endpoint])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("the station starts");
+    let stdout = child.stdout.take().expect("piped");
+    let station = Station(child);
+    let ready = std::io::BufReader::new(stdout)
+        .lines()
+        .map_while(Result::ok)
+        .any(|line| line == "ready");
+    assert!(ready, "station `{name}` did not start");
+    let token = format!("coolbot/{name}");
+    assert!(
+        wait_until(PATIENCE, || robot
+            .session()
+            .liveliness()
+            .get(&token)
+            .timeout(std::time::Duration::from_millis(200))
+            .wait()
+            .is_ok_and(|replies| replies.recv().is_ok())),
+        "the robot does not see `{name}`"
+    );
+    station
+}
+
+/// Every connection kind, and pull both ways, between three OS processes: this one
+/// (the robot: the compounds, their sources and sinks, the proxies) and two station
+/// processes (`station-under-test`) whose agents build the relay and the doubler.
+/// The relay there forwards each input to the output of its kind, so what the source
+/// here sends comes back to the sink here through the station.
+#[test]
+fn every_connection_kind_crosses_between_os_processes() {
+    let (robot, endpoint) = coolbot_zenoh_tests::support::node("robot", &[]);
+    let robot = Arc::new(robot);
+    let _station = station_process("station", &endpoint, &robot);
+    let _pull_station = station_process("pull-station", &endpoint, &robot);
+    let mut types = registry(crossbeam_channel::bounded(1).0);
+    pull_doubler::register(&mut types, |name| pull_doubler::component(name, Twice));
+    let _placer = Placer::new(Arc::clone(&robot), types).install();
+
+    let (source, sources) = crossbeam_channel::bounded(1);
+    let (sink, sinks) = crossbeam_channel::bounded(1);
+    let (parts, asked) = pull_ends(21);
+    let mut system = System::new();
+    let cell = system
+        .add(cell::component("cell", CellParts { source, sink }).expect("builds"))
+        .expect("added");
+    let pull = system
+        .add(pull_cell::component("pull", parts).expect("builds"))
+        .expect("added");
+    system.run_all().expect("runs");
+    for (compound, instance) in [(&cell, "relay"), (&pull, "doubler")] {
+        compound
+            .instance(instance)
+            .expect("a proxy")
+            .wait_for(|m| m.state == State::Running, PATIENCE)
+            .unwrap_or_else(|timeout| panic!("{instance}: {timeout}"));
+    }
+    let SourcePorts { t, d, p } = handed(&sources, "the source");
+    let SinkPorts { ti, fi, li, pi } = handed(&sinks, "the sink");
+
+    // Out to the station's relay and back: a poster, ticks, and data into a last, a
+    // fifo and a ufifo input, which come back tagged by the input they went through.
+    p.post(42);
+    for _ in 0..3 {
+        t.emit();
+    }
+    for n in 1..=5 {
+        d.send(n);
+    }
+    let (mut ticks, mut through) = (0, [Vec::new(), Vec::new(), Vec::new()]);
+    let arrived = wait_until(PATIENCE, || {
+        ticks += ti.take();
+        for value in fi.drain() {
+            through[(value % 10 - 1) as usize].push(value / 10);
+        }
+        ticks == 3
+            && through[0].last() == Some(&5)
+            && through[1] == [1, 2, 3, 4, 5]
+            && through[2] == [1, 2, 3, 4, 5]
+            && li.latest().is_some()
+            && pi.read() == Some(42)
+    });
+    assert!(
+        arrived,
+        "back here: ticks {ticks}, through last/fifo/ufifo {through:?}, last {:?}, poster {:?}",
+        li.latest(),
+        pi.read()
+    );
+    // Pull, both ways in one request: the sink pulls the doubler on `pull-station`,
+    // which pulls the counter here.
+    let asked = handed(&asked, "the asker");
+    for expected in [42, 44, 46] {
+        assert_eq!(asked.pull(PATIENCE), Ok(expected));
+    }
+    assert_eq!(cell.instance("relay").unwrap().snapshot().overflows, 0);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
