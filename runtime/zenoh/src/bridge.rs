@@ -241,9 +241,8 @@ impl Wire {
         // Before Zenoh has it: a process killed in between reports one message more
         // than it sent (counted lost), never one less.
         let tally = self.tally.as_ref().zip(numbered);
-        if let Some((tally, (epoch, number))) = tally {
+        if let Some((tally, (_, number))) = tally {
             tally.record(number);
-            tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {epoch} {number}", self.key);
         }
         if let Err(error) = self.publisher.put(bytes).wait() {
             if let Some((tally, (_, number))) = tally {
@@ -251,6 +250,9 @@ impl Wire {
             }
             self.lost(&format!("zenoh refused it: {error}"));
             return false;
+        }
+        if let Some((epoch, number)) = numbered {
+            tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {epoch} {number}", self.key);
         }
         true
     }
@@ -365,6 +367,10 @@ type Numbered<T> = (u64, u64, T);
 pub(crate) struct Outlet<T> {
     spec: &'static Spec,
     input: OutletInput<T>,
+    /// What the inlets acknowledge (numbered streams only: not a poster, not pull).
+    /// Dropped first: its last questions go before the tally says the epoch stopped
+    /// cleanly.
+    _ledger: Option<OutletLedger>,
     wire: Wire,
     pull: bool,
     epoch: u64,
@@ -377,8 +383,6 @@ pub(crate) struct Outlet<T> {
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
     _pull_server: Option<PullServer>,
-    /// What the inlets acknowledge (numbered streams only: not a poster, not pull).
-    _ledger: Option<OutletLedger>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -583,7 +587,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let numbered = pull.is_none() && kind != InputKind::Poster;
         let (tally, ended) = match numbered.then(|| Tally::claim(node.name(), &key, epoch)) {
             Some(Some((tally, ended))) => (Some(tally), ended),
-            _ => (None, None),
+            _ => (None, Vec::new()),
         };
         let ledger = if numbered {
             Some(OutletLedger::start(
@@ -601,6 +605,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let outlet = Outlet {
             spec,
             input,
+            _ledger: ledger,
             wire: Wire {
                 key,
                 publisher,
@@ -616,7 +621,6 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             published_once: false,
             _poster_queryable: poster_queryable,
             _pull_server: pull_server,
-            _ledger: ledger,
             _token: token,
         };
         Ok((name, outlet, ports))

@@ -265,9 +265,9 @@ struct Book {
     streams: Mutex<Vec<Stream>>,
     /// The inlets already counted for, by id, oldest first.
     settled: Mutex<std::collections::VecDeque<String>>,
-    /// What this outlet's killed predecessor (same node, same key) had sent, from the
-    /// tally it left: reported to the inlets with every question.
-    ended: Option<Ended>,
+    /// What this outlet's killed predecessors (same node, same key) had sent, from
+    /// the tallies they left: reported to the inlets with every question.
+    ended: Vec<Ended>,
 }
 
 impl Book {
@@ -402,16 +402,15 @@ impl Book {
 
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
     fn is_empty(&self) -> bool {
-        self.ended.is_none() && lock(&self.streams).iter().all(|s| s.counted)
+        self.ended.is_empty() && lock(&self.streams).iter().all(|s| s.counted)
     }
 
     /// One round of questions to the inlets.
     fn ask(&self, session: &zenoh::Session) {
         let prefix = format!("{}/@ack/", self.key);
-        let report: Vec<Ended> = self.ended.into_iter().collect();
         let replies = match session
             .get(format!("{}/@ack/**", self.key))
-            .payload(postcard::to_allocvec(&report).unwrap_or_default())
+            .payload(postcard::to_allocvec(&self.ended).unwrap_or_default())
             .target(QueryTarget::All)
             .consolidation(ConsolidationMode::None)
             .timeout(ACK_TIMEOUT)
@@ -451,8 +450,8 @@ pub(crate) struct OutletLedger {
 
 impl OutletLedger {
     /// The ledger of the outlet of `epoch` on `key`, whose numbered messages are
-    /// counted by `sent`, counting losses at `losses`; `ended`, what a killed
-    /// predecessor of it had sent (its tally).
+    /// counted by `sent`, counting losses at `losses`; `ended`, what its killed
+    /// predecessors had sent (their tallies).
     pub(crate) fn start(
         session: &zenoh::Session,
         key: &str,
@@ -460,7 +459,7 @@ impl OutletLedger {
         sent: Arc<AtomicU64>,
         single: bool,
         losses: ErasedInput,
-        ended: Option<Ended>,
+        ended: Vec<Ended>,
     ) -> Result<OutletLedger, crate::Error> {
         let book = Arc::new(Book {
             key: key.to_owned(),
@@ -562,7 +561,7 @@ mod tests {
                 losses: losses.erased(),
                 streams: Mutex::new(Vec::new()),
                 settled: Mutex::new(std::collections::VecDeque::new()),
-                ended: None,
+                ended: Vec::new(),
             },
             losses,
         )

@@ -38,6 +38,10 @@ use zenoh::Wait;
 const KEY: &str = "test/accounting";
 const ROUNDS: usize = 50;
 
+/// Held by each soak: one at a time (each keeps a process streaming as fast as it can
+/// or every millisecond, on a 2-core machine).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// A behaviour that hands a port to the test when its component starts.
 struct Hand<T>(Sender<T>);
 
@@ -242,6 +246,9 @@ fn counted_from(lines: &std::sync::Mutex<Vec<u8>>) -> std::collections::HashMap<
 
 #[test]
 fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
+    let _alone = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let outlet_lines = outlet_counts();
     let (source, endpoint) = support::node("source", &[]);
     let mut producer = System::new();
@@ -372,6 +379,9 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
 
 #[test]
 fn a_producer_killed_fifty_times_has_every_packet_it_sent_received_or_counted_lost() {
+    let _alone = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     const KEY: &str = "test/accounting-producer";
     const LIMIT: u64 = 3_000;
     let state = tempfile::tempdir().unwrap();

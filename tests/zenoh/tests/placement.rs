@@ -515,11 +515,19 @@ fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> S
         .expect("the station starts");
     let stdout = child.stdout.take().expect("piped");
     let station = Station(child);
-    let ready = std::io::BufReader::new(stdout)
-        .lines()
-        .map_while(Result::ok)
-        .any(|line| line == "ready");
-    assert!(ready, "station `{name}` did not start");
+    let (ready, started) = crossbeam_channel::bounded(1);
+    std::thread::spawn(move || {
+        let said = std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+            .any(|line| line == "ready");
+        let _ = ready.send(said);
+    });
+    assert_eq!(
+        started.recv_timeout(PATIENCE),
+        Ok(true),
+        "station `{name}` did not start"
+    );
     let token = format!("coolbot/{name}");
     assert!(
         wait_until(PATIENCE, || robot
