@@ -6,7 +6,8 @@
 //! `<state dir>/<node>/<hash of the key>.<slot>.tally`, one held by each live outlet
 //! (an exclusive `flock`, which the kernel releases when the process dies). A file
 //! holds its outlet's epoch and the number of its newest message, written before the
-//! message goes to Zenoh (a write to the page cache, which outlives the process), and
+//! message goes to Zenoh (a store to a shared mapping of the file: the page cache,
+//! which outlives the process), and
 //! the epochs killed before it with their newest numbers, [`KEPT`] at most. An outlet
 //! that claims a slot takes over what every slot nobody holds says (a killed outlet's
 //! epoch, and what it had not reported yet) and reports it all with its questions;
@@ -127,9 +128,22 @@ fn layout(current: Ended, ended: &[Ended]) -> Vec<u8> {
     bytes
 }
 
-/// An outlet's tally, held while it lives.
+/// An outlet's tally, held while it lives: the locked file, mapped.
 pub(crate) struct Tally {
-    file: File,
+    /// Held for its lock.
+    _file: File,
+    map: std::sync::Mutex<memmap2::MmapMut>,
+}
+
+/// A shared, writable mapping of a tally `file` of [`SIZE`] bytes.
+#[allow(unsafe_code)]
+fn map(file: &File) -> std::io::Result<memmap2::MmapMut> {
+    // SAFETY: `file` is in a private directory of this user and this outlet holds its
+    // exclusive `flock` for as long as the mapping lives: no other outlet maps or
+    // writes it (they open a slot only after taking its lock), and the file is never
+    // truncated while mapped (its length is set before). The mapping is only written
+    // here, never read back.
+    unsafe { memmap2::MmapMut::map_mut(file) }
 }
 
 impl Tally {
@@ -186,18 +200,36 @@ impl Tally {
             }
         }
         kept.reverse();
-        if let Err(error) = file.write_all_at(&layout((epoch, 0), &kept), 0) {
-            tracing::warn!(%key, "no tally of what the outlet sends: {error}");
-            return None;
+        let mapped = file
+            .set_len(SIZE as u64)
+            .and_then(|()| file.write_all_at(&layout((epoch, 0), &kept), 0))
+            .and_then(|()| map(&file));
+        match mapped {
+            Ok(map) => Some((
+                Tally {
+                    _file: file,
+                    map: std::sync::Mutex::new(map),
+                },
+                kept,
+            )),
+            Err(error) => {
+                tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+                None
+            }
         }
-        Some((Tally { file }, kept))
     }
 
-    /// Message `number` is about to go to Zenoh (or, after a refusal, the newest is
-    /// `number` again).
+    /// Message `number` is about to go to Zenoh (a store to the mapped page).
     pub(crate) fn record(&self, number: u64) {
-        // A failure here loses only the report a restarted process would make.
-        let _ = self.file.write_all_at(&number.to_le_bytes(), 8);
+        self.write(8, number);
+    }
+
+    fn write(&self, at: usize, word: u64) {
+        let mut map = self
+            .map
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        map[at..at + 8].copy_from_slice(&word.to_le_bytes());
     }
 }
 
@@ -205,7 +237,7 @@ impl Drop for Tally {
     /// A clean stop: its own epoch has nothing to report (what it kept stays, for the
     /// next outlet to report again).
     fn drop(&mut self) {
-        let _ = self.file.write_all_at(&0u64.to_le_bytes(), 0);
+        self.write(0, 0);
     }
 }
 
@@ -214,10 +246,16 @@ mod tests {
     use super::*;
 
     impl Tally {
-        /// What a kill leaves: the file closed (its lock released), its epoch in it.
-        fn crash(mut self) {
-            let elsewhere = File::open("/dev/null").expect("/dev/null");
-            drop(std::mem::replace(&mut self.file, elsewhere));
+        /// What a kill leaves: the file closed (its lock released) and unmapped, its
+        /// epoch in it.
+        fn crash(self) {
+            // Not its clean stop: its fields swapped for harmless ones (leaked).
+            let mut this = std::mem::ManuallyDrop::new(self);
+            let anonymous = memmap2::MmapMut::map_anon(SIZE).expect("a mapping");
+            let map = std::mem::replace(&mut this.map, std::sync::Mutex::new(anonymous));
+            let null = File::open("/dev/null").expect("/dev/null");
+            let file = std::mem::replace(&mut this._file, null);
+            drop((map, file));
         }
     }
 
