@@ -137,8 +137,8 @@ codes! {
     ConverterMismatch => "coolc::check::converter_mismatch",
     /// A rule expression is ill-typed.
     RuleType => "coolc::check::rule_type",
-    /// A rule reads one of the compound's own default variables that rules cannot
-    /// read yet (`result`, `error`, `cpu_time`, `elapsed_time`, `quality`).
+    /// A rule reads what is not published where rules are evaluated: an instance's
+    /// `local` variable or a default controllable variable.
     UnreadableInRule => "coolc::check::unreadable_in_rule",
     /// A substitute or redundant instance has a different interface.
     InterfaceMismatch => "coolc::check::interface_mismatch",

@@ -168,6 +168,13 @@ fn placement(checker: &mut Checker<'_, '_>, component: &ast::Component) {
                 "a `link`",
                 "links belong to the atomic components that use the dependency",
             )),
+            ast::Member::Configuration(m) if !atomic => Some((
+                m.span,
+                "a `configuration`",
+                "a compound's instances take configuration overrides \
+                 (`instance n: T { field = value; }`); map their controllable variables \
+                 to set them from outside",
+            )),
             _ => None,
         };
         if let Some((span, what, help)) = problem {

@@ -53,6 +53,7 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
     }
     arrangement(checker, component, &instances);
     cardinality(checker, component, &instances);
+    unwired_substitutes(checker, component, &instances);
     duplicate_policies(checker, component);
     unconnected_transition_inputs(checker, component, &instances);
     unused_blocks(checker, component);
@@ -146,6 +147,9 @@ fn instance(
             .error(Code::TypeMismatch, node.span, "a node name cannot be empty")
             .with_label("empty");
         checker.push(diagnostic);
+    }
+    if instance.node.is_some() {
+        remote_overrides(checker, instance);
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
@@ -295,6 +299,47 @@ pub(super) fn compound_timing(checker: &mut Checker<'_, '_>, timing: &ast::Timin
             .with_label("not allowed in a compound")
             .with_help(
                 "a compound's period degrades through its instances: give the interval to the atomic components inside, and one period to the supervisor",
+            );
+        checker.push(diagnostic);
+    }
+}
+
+/// What an instance placed `on "node"` cannot carry there: the agent builds it with
+/// its type's quality levels and adaptation tuning (`coolbot_zenoh::agent`), so an
+/// instance's own `quality` levels or `adaptation` block would be dropped.
+fn remote_overrides(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
+    let quality = instance
+        .timing
+        .iter()
+        .flat_map(|timing| &timing.entries)
+        .find_map(|entry| match entry {
+            ast::TimingEntry::Quality(_, span) => Some(*span),
+            _ => None,
+        });
+    let spans = quality
+        .map(|span| (span, "its own quality levels"))
+        .into_iter()
+        .chain(
+            instance
+                .adaptation
+                .iter()
+                .map(|block| (block.span, "an `adaptation` block")),
+        );
+    for (span, what) in spans {
+        let diagnostic = checker
+            .error(
+                Code::MisplacedMember,
+                span,
+                format!(
+                    "`{}` runs on another node and cannot have {what}",
+                    instance.name.name
+                ),
+            )
+            .with_label("not carried to the node")
+            .with_help(
+                "a remote instance is built with its type's quality levels and adaptation; \
+                 its period, `max_response` and priority travel: declare the levels or the \
+                 tuning in the component type, or run the instance here",
             );
         checker.push(diagnostic);
     }
@@ -776,6 +821,10 @@ fn path(port: &ast::PortRef) -> String {
     }
 }
 
+/// One producer of an input (by instance or redundant group, and port): the output
+/// or exported input that feeds it, the instance its connection names, and where.
+type Producer = (String, String, Span);
+
 /// `last` and `poster` inputs take one producer (a connection or an export from the
 /// compound's interface); `fifo`, `ufifo` and `tick` inputs take any number, and an
 /// output feeds any number of inputs (a `data` output any number of queues, each
@@ -785,10 +834,21 @@ fn cardinality(
     component: &ast::Component,
     instances: &Instances<'_>,
 ) {
-    let mut producers: BTreeMap<(String, String), Vec<Span>> = BTreeMap::new();
+    // A redundant group's members are fed together (every connection to a member
+    // reaches all of them): they share their inputs' producers.
+    let mut groups: BTreeMap<&str, String> = BTreeMap::new();
+    for member in &component.members {
+        if let ast::Member::Redundant(redundant) = member {
+            let names: Vec<&str> = redundant.members.iter().map(|m| m.name.as_str()).collect();
+            for name in &names {
+                groups.entry(name).or_insert_with(|| names.join(", "));
+            }
+        }
+    }
+    let mut producers: BTreeMap<(String, String), Vec<Producer>> = BTreeMap::new();
     let mut seen_connections: BTreeMap<(String, String), Span> = BTreeMap::new();
     for member in &component.members {
-        let (target, span) = match member {
+        let (target, producer, span) = match member {
             ast::Member::Connect(connect) => {
                 let key = (path(&connect.from), path(&connect.to));
                 if let Some(first) = seen_connections.get(&key) {
@@ -803,28 +863,38 @@ fn cardinality(
                     checker.push(diagnostic);
                     continue;
                 }
-                seen_connections.insert(key, connect.span);
-                (&connect.to, connect.span)
+                seen_connections.insert(key.clone(), connect.span);
+                (&connect.to, key.0, connect.span)
             }
             ast::Member::Input(ast::Input {
+                name,
                 def: ast::InputDef::Export(target),
                 span,
                 ..
-            }) => (target, *span),
+            }) => (target, name.name.clone(), *span),
             _ => continue,
         };
         let Some(instance) = &target.instance else {
             continue;
         };
-        producers
-            .entry((instance.name.clone(), target.port.name.clone()))
-            .or_default()
-            .push(span);
+        let group = groups.get(instance.name.as_str());
+        let ends = producers
+            .entry((
+                group.cloned().unwrap_or_else(|| instance.name.clone()),
+                target.port.name.clone(),
+            ))
+            .or_default();
+        // One output connected to several members of a group is one producer: the
+        // runtime makes its connection to each member once.
+        if !ends.iter().any(|(other, _, _)| *other == producer) {
+            ends.push((producer, instance.name.clone(), span));
+        }
     }
-    for ((instance, port_name), spans) in producers {
-        if spans.len() < 2 {
+    for ((owner, port_name), ends) in producers {
+        if ends.len() < 2 {
             continue;
         }
+        let (_, instance, first) = &ends[0];
         let Some((_, Some(interface))) = instances.get(instance.as_str()) else {
             continue;
         };
@@ -832,19 +902,91 @@ fn cardinality(
             continue;
         };
         if matches!(port.kind, PortKind::Last | PortKind::Poster) {
-            for extra in &spans[1..] {
-                let diagnostic = checker
-                    .error(
-                        Code::ConnectCardinality,
-                        *extra,
-                        format!("`{instance}.{port_name}` is a `{}` input and takes exactly one producer", port.kind.as_str()),
+            let grouped = owner != *instance;
+            for (_, instance, extra) in &ends[1..] {
+                let kind = port.kind.as_str();
+                let (message, help) = if grouped {
+                    (
+                        format!(
+                            "`{instance}.{port_name}` is a `{kind}` input of the redundant \
+                             group `{owner}` and takes exactly one producer"
+                        ),
+                        "every member of a redundant group gets what each connection to one \
+                         of them brings: connect the group's input once, or use a `fifo` or \
+                         `ufifo` input",
                     )
+                } else {
+                    (
+                        format!(
+                            "`{instance}.{port_name}` is a `{kind}` input and takes exactly \
+                             one producer"
+                        ),
+                        "use a `fifo` or `ufifo` input to merge several producers",
+                    )
+                };
+                let diagnostic = checker
+                    .error(Code::ConnectCardinality, *extra, message)
                     .with_label("second producer")
-                    .with_secondary(spans[0], "first producer")
-                    .with_help("use a `fifo` or `ufifo` input to merge several producers");
+                    .with_secondary(*first, "first producer")
+                    .with_help(help);
                 checker.push(diagnostic);
             }
         }
+    }
+}
+
+/// A substitute takes over its original's connections and exports when it stands
+/// for it, so it is not wired itself (its own connection and the original's would
+/// then meet at its ports).
+fn unwired_substitutes(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instances: &Instances<'_>,
+) {
+    let mut ends: Vec<&ast::PortRef> = Vec::new();
+    for member in &component.members {
+        match member {
+            ast::Member::Connect(connect) => ends.extend([&connect.from, &connect.to]),
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(target),
+                ..
+            })
+            | ast::Member::Output(ast::Output {
+                def: ast::OutputDef::Export(target),
+                ..
+            }) => ends.push(target),
+            _ => {}
+        }
+    }
+    for end in ends {
+        let Some(instance) = &end.instance else {
+            continue;
+        };
+        let Some((declared, _)) = instances.get(instance.name.as_str()) else {
+            continue;
+        };
+        let Some(original) = &declared.substitutes else {
+            continue;
+        };
+        if original.name == instance.name {
+            continue;
+        }
+        let diagnostic = checker
+            .error(
+                Code::Arrangement,
+                end.span,
+                format!(
+                    "`{}` substitutes `{}` and is not wired itself",
+                    instance.name, original.name
+                ),
+            )
+            .with_label("a substitute's port")
+            .with_secondary(declared.name.span, "declared a substitute here")
+            .with_help(format!(
+                "wire `{}.{}`: its substitute takes that connection over while it stands for it",
+                original.name, end.port.name
+            ));
+        checker.push(diagnostic);
     }
 }
 
