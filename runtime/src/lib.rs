@@ -151,7 +151,7 @@ pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, Su
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
     RESPONSE_WINDOW, Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision,
-    Timeout,
+    Timeout, total_overflows,
 };
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,

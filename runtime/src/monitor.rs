@@ -343,6 +343,13 @@ pub enum OsPriority {
     NotApplied(String),
 }
 
+/// The sum of per-port loss counts, saturating (a proxy's come from the network).
+pub fn total_overflows(ports: &[(String, u64)]) -> u64 {
+    ports
+        .iter()
+        .fold(0, |total, (_, n)| total.saturating_add(*n))
+}
+
 /// The count of `port` in a list of per-port counts, added at 0 if missing.
 pub(crate) fn count_at<'a>(counts: &'a mut Vec<(String, u64)>, port: &str) -> &'a mut u64 {
     let at = match counts.iter().position(|(name, _)| name == port) {
@@ -540,7 +547,7 @@ impl Shared {
         self.publish(MonitorEvent::Overflow {
             port: port.to_owned(),
             lost,
-            total: total + elsewhere,
+            total: total.saturating_add(elsewhere),
         });
     }
 
@@ -588,7 +595,7 @@ impl Shared {
         let counted_elsewhere = {
             let mut monitor = lock(&self.monitor);
             let slot = count_at(&mut monitor.port_overflows, port);
-            *slot += lost;
+            *slot = slot.saturating_add(lost);
             *slot
         };
         let here = self
@@ -599,7 +606,7 @@ impl Shared {
         self.publish(MonitorEvent::Overflow {
             port: port.to_owned(),
             lost,
-            total: here + counted_elsewhere,
+            total: here.saturating_add(counted_elsewhere),
         });
     }
 
@@ -614,9 +621,10 @@ impl Shared {
             .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
             .collect();
         for (port, lost) in elsewhere {
-            *count_at(&mut monitor.port_overflows, &port) += lost;
+            let slot = count_at(&mut monitor.port_overflows, &port);
+            *slot = slot.saturating_add(lost);
         }
-        monitor.overflows = monitor.port_overflows.iter().map(|(_, n)| n).sum();
+        monitor.overflows = total_overflows(&monitor.port_overflows);
         monitor.dropped_events = self.dropped.load(Ordering::Relaxed);
         monitor
     }

@@ -351,7 +351,14 @@ impl InputCore {
     /// `lost` packets were lost at this input: count them and announce it.
     #[cold]
     fn overflowed(&self, lost: u64) {
-        let total = self.overflows.fetch_add(lost, Ordering::AcqRel) + lost;
+        // Saturating: a count from the network (a bridge's) may be anything.
+        let before = self
+            .overflows
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                Some(n.saturating_add(lost))
+            })
+            .unwrap_or_else(|n| n);
+        let total = before.saturating_add(lost);
         if let Some(owner) = self.owner.get()
             && let Some(shared) = owner.shared.upgrade()
         {

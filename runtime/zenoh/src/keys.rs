@@ -18,8 +18,9 @@
 //! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
 //!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
 //!   liveliness tokens that check the connection rules, `K/@out/<kind>/<node>/<name>`
-//!   (outlets) and `K/@in/<node>/<name>/<process>` (inlets; the process is the
-//!   session's id), and the inlets' acknowledgments as queries on
+//!   (outlets) and `K/@in/<node>/<name>/<process>` (inlets; the process is drawn
+//!   once per process, `crate::ledger::process`), and the inlets' acknowledgments as
+//!   queries on
 //!   `K/@ack/<node>/<name>` (`crate::ledger`).
 
 use crate::Error;

@@ -98,10 +98,11 @@ impl InletLedger {
             let mut had = lock(&self.had);
             let missing = match had.iter_mut().find(|h| h.epoch == epoch) {
                 Some(h) => {
-                    let missing = seq.saturating_sub(h.newest + 1);
+                    // Numbers come from the network: no arithmetic here may overflow.
+                    let missing = seq.saturating_sub(h.newest.saturating_add(1));
                     h.newest = h.newest.max(seq);
-                    h.received += 1;
-                    h.missing += missing;
+                    h.received = h.received.saturating_add(1);
+                    h.missing = h.missing.saturating_add(missing);
                     missing
                 }
                 None => {
@@ -136,15 +137,15 @@ impl InletLedger {
     /// many were.
     fn answer(&self, process: &str, ended: &[Ended]) -> (Vec<u8>, u64) {
         let mut had = lock(&self.had);
-        let mut counted = 0;
+        let mut counted: u64 = 0;
         for &(epoch, last) in ended {
             if let Some(h) = had.iter_mut().find(|h| h.epoch == epoch)
                 && last > h.newest
             {
                 let missing = last - h.newest;
                 h.newest = last;
-                h.missing += missing;
-                counted += missing;
+                h.missing = h.missing.saturating_add(missing);
+                counted = counted.saturating_add(missing);
                 tracing::trace!(target: LEDGER_TARGET, "{} ended {epoch} {last} missing {missing}", self.key);
                 tracing::warn!(
                     key = %self.key,
@@ -314,6 +315,19 @@ impl Book {
                 }
             }
         }
+        // A token that lingered (until its lease ran out) after its node's next
+        // process declared its own: gone now, it has ended too.
+        if kind == SampleKind::Delete
+            && let Some(index) = streams.iter().position(|s| s.id == id)
+        {
+            let (node, process) = (streams[index].node.clone(), streams[index].process.clone());
+            let succeeded = streams[index + 1..]
+                .iter()
+                .any(|s| s.node == node && s.process != process);
+            if succeeded {
+                streams[index].ended = true;
+            }
+        }
     }
 
     /// An inlet's answer. Only an inlet whose token was seen counts (a late answer
@@ -344,11 +358,21 @@ impl Book {
         let sent = self.sent();
         let mut streams = lock(&self.streams);
         let snapshot = streams.clone();
-        for stream in streams.iter_mut().filter(|s| !s.counted) {
+        for (index, stream) in streams.iter_mut().enumerate().filter(|(_, s)| !s.counted) {
+            // Seen after it went, or its node's next process (whose token may have
+            // come before this one's lingering token went).
             let successor = stream.gone_at.and_then(|gone| {
                 snapshot
                     .iter()
-                    .filter(|s| s.id != stream.id && s.since >= gone)
+                    .enumerate()
+                    .filter(|(at, s)| {
+                        s.id != stream.id
+                            && (s.since >= gone
+                                || (*at > index
+                                    && s.node == stream.node
+                                    && s.process != stream.process))
+                    })
+                    .map(|(_, s)| s)
                     .min_by_key(|s| s.since)
             });
             let replaced = self.single && !stream.alive && successor.is_some_and(|s| s.first > 0);
@@ -397,7 +421,9 @@ impl Book {
 
     /// The sum of the newest numbers acknowledged (grows with every new answer).
     fn acknowledged_total(&self) -> u64 {
-        lock(&self.streams).iter().map(|s| s.newest).sum()
+        lock(&self.streams)
+            .iter()
+            .fold(0, |total, s| total.saturating_add(s.newest))
     }
 
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
@@ -595,6 +621,53 @@ mod tests {
         assert_eq!(losses.overflows(), 7);
         book.settle(true);
         assert_eq!(losses.overflows(), 7, "`bbb` acknowledged everything");
+    }
+
+    #[test]
+    fn an_inlet_whose_token_lingers_after_its_successors_appeared_is_counted_too() {
+        let (book, losses) = book(false);
+        book.token("station/in/aaa", SampleKind::Put);
+        book.sent.store(10, Ordering::Release);
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 6)));
+        book.sent.store(12, Ordering::Release);
+        // The node's next process declares its token before the old one's lease ends.
+        book.token("station/in/bbb", SampleKind::Put);
+        book.sent.store(15, Ordering::Release);
+        book.acknowledged("station/in", &("bbb".to_owned(), had(13, 15)));
+        book.settle(false);
+        assert_eq!(losses.overflows(), 0, "`aaa` may still be alive");
+        book.token("station/in/aaa", SampleKind::Delete);
+        book.sent.store(20, Ordering::Release);
+        book.settle(false);
+        // 7..=12: after what `aaa` acknowledged, before what `bbb` first received.
+        assert_eq!(losses.overflows(), 6);
+        book.acknowledged("station/in", &("bbb".to_owned(), had(13, 20)));
+        book.settle(true);
+        assert_eq!(losses.overflows(), 6, "`bbb` acknowledged everything");
+    }
+
+    #[test]
+    fn numbers_from_the_network_never_overflow_a_count() {
+        let network = TickIn::new();
+        let ledger = InletLedger::new(Arc::new(network.erased()), "k".to_owned());
+        ledger.received(9, 1);
+        ledger.received(9, u64::MAX);
+        ledger.received(9, u64::MAX);
+        let (_, counted) = ledger.answer("p", &[(9, u64::MAX), (9, u64::MAX)]);
+        assert_eq!(counted, 0, "nothing after the newest");
+        ledger.received(3, u64::MAX - 1);
+        let (_, counted) = ledger.answer("p", &[(3, u64::MAX)]);
+        assert_eq!(counted, 1);
+        assert_eq!(network.overflows(), u64::MAX - 1, "2..MAX-1 and MAX-1..MAX");
+        ledger.received(4, 1);
+        ledger.received(4, 10);
+        assert_eq!(network.overflows(), u64::MAX, "saturated, not wrapped");
+        let (book, _) = book(false);
+        book.token("a/in/aaa", SampleKind::Put);
+        book.token("b/in/bbb", SampleKind::Put);
+        book.acknowledged("a/in", &("aaa".to_owned(), had(u64::MAX, u64::MAX)));
+        book.acknowledged("b/in", &("bbb".to_owned(), had(1, 5)));
+        assert_eq!(book.acknowledged_total(), u64::MAX);
     }
 
     #[test]

@@ -478,7 +478,7 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
                 Some(slot) => slot.1 = total,
                 None => view.port_overflows.push((port, total)),
             }
-            view.overflows = view.port_overflows.iter().map(|(_, n)| n).sum();
+            view.overflows = coolbot::total_overflows(&view.port_overflows);
         }
         MonitorEvent::LateResponse { total, .. } => view.response.late = total,
         MonitorEvent::Period(period) => view.period = period,

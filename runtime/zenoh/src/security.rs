@@ -403,13 +403,7 @@ impl Security {
             .rules
             .iter()
             .flat_map(|rule| &rule.publish)
-            .flat_map(|key| {
-                [
-                    key.clone(),
-                    format!("{key}/@pull"),
-                    format!("{key}/@ack/**"),
-                ]
-            })
+            .flat_map(|key| [key.clone(), format!("{key}/@pull")])
             .collect();
         let mut any = vec!["send", "watch", "observe"];
         if !bridges.is_empty() {
@@ -507,6 +501,17 @@ impl Security {
                     .collect(),
             );
             grant("publish", &["put"], allowed.publish.clone());
+            // Its outlets ask the inlets what they had (`crate::ledger`); nobody else
+            // may: a question reports ended epochs, which inlets count missing.
+            grant(
+                "ask",
+                &["query"],
+                allowed
+                    .publish
+                    .iter()
+                    .map(|key| format!("{key}/@ack/**"))
+                    .collect(),
+            );
             // The producer on a bridge key answers its poster and pull queries.
             grant(
                 "serve",
@@ -802,8 +807,9 @@ mod tests {
         assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
         assert_eq!(
             keys_of("read-bridges"),
-            Some(json!(["robot/cmd", "robot/cmd/@pull", "robot/cmd/@ack/**"]))
+            Some(json!(["robot/cmd", "robot/cmd/@pull"]))
         );
+        assert_eq!(keys_of("rule-0-ask"), Some(json!(["robot/cmd/@ack/**"])));
         // `**` does not reach the guarded keys: commands and instantiation are granted
         // only by the rules, and the verbatim chunks the crate uses are named.
         let includes = |pattern: &str, key: &str| {
@@ -995,8 +1001,15 @@ mod tests {
             // Its inlets acknowledge under its own name only.
             (Some("ops"), "reply", "link/a/@ack/ops/inlet", true),
             (Some("ops"), "reply", "link/a/@ack/station/inlet", false),
+            // Only a node that may publish on a key asks its inlets.
             (
                 Some("mallory"),
+                "query",
+                "link/robot/out/pose/@ack/**",
+                false,
+            ),
+            (
+                Some("station"),
                 "query",
                 "link/robot/out/pose/@ack/**",
                 true,

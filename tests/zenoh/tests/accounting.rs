@@ -302,7 +302,9 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
                 .is_some_and(|l| !l.received.is_empty())),
             "consumer {life} receives"
         );
-        std::thread::sleep(lifetime());
+        // Every fifth lives long enough to acknowledge several times (checked below).
+        let long = Duration::from_millis(450);
+        std::thread::sleep(if life % 5 == 4 { long } else { lifetime() });
         drop(process); // kill -9
         assert!(
             gone(&source, &format!("{KEY}/@in/**")),
@@ -375,6 +377,26 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
         "produced = received + missing + lost - counted both ways"
     );
     assert!(o >= own, "the outlet counted from beyond an acknowledgment");
+    // And from no nearer than the acknowledgment before the last: that answer was
+    // made a round or more before the kill, so it reached the outlet. (An outlet that
+    // ignored acknowledgments, counting from where it first saw each consumer, keeps
+    // the equation above and fails here.)
+    let from = counted_from(&outlet_lines);
+    let mut checked = 0;
+    for (i, life) in lives[..ROUNDS].iter().enumerate() {
+        if let (Some(process), [.., before, _]) = (&life.process, life.acknowledged.as_slice()) {
+            let counted = from[process];
+            assert!(
+                counted >= *before,
+                "consumer {i}: the outlet counted from {counted}, before its acknowledgment of {before}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        checked >= ROUNDS / 10,
+        "only {checked} consumers acknowledged twice or more"
+    );
 }
 
 #[test]
@@ -438,7 +460,9 @@ fn a_producer_killed_fifty_times_has_every_packet_it_sent_received_or_counted_lo
                 && drain(&input).0 > before),
             "producer {life} is heard"
         );
-        std::thread::sleep(lifetime());
+        // Every fifth lives long enough to acknowledge several times (checked below).
+        let long = Duration::from_millis(450);
+        std::thread::sleep(if life % 5 == 4 { long } else { lifetime() });
         drop(process); // kill -9
         assert!(
             gone(&node, "coolbot/accounting-producer"),
