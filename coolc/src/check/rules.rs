@@ -5,9 +5,10 @@
 //! with the instance's quality levels; `error` is a `String`, `cpu_time` and
 //! `elapsed_time` are durations. The compound's own default observables read the same
 //! way (its `quality` with its own levels). An instance's observable and controllable
-//! variables are readable; its `local` variables and the default controllable
-//! variables (`new_state`, `configuration`, `period`, `max_response`, `priority`)
-//! are not published where rules are evaluated (`coolc::check::unreadable_in_rule`).
+//! variables are readable, and its default controllable timing variables (`period`
+//! and `max_response`, durations, zero when it has none; `priority`, an integer);
+//! its `local` variables and `new_state` and `configuration` are not published where
+//! rules are evaluated (`coolc::check::unreadable_in_rule`).
 //! A bare name that is not a variable is a symbol, resolved against the other side of
 //! the comparison. An instance's `quality` levels are those of its `timing` override
 //! when it declares some.
@@ -354,6 +355,9 @@ impl Typer<'_, '_, '_> {
             }
             None => {}
         }
+        if let Some(ty) = timing_variable(&variable.name) {
+            return ty;
+        }
         if DEFAULT_CONTROLLABLES.contains(&variable.name.as_str()) {
             let diagnostic = self
                 .checker
@@ -361,13 +365,14 @@ impl Typer<'_, '_, '_> {
                     Code::UnreadableInRule,
                     variable.span,
                     format!(
-                        "`{}` is a default controllable variable: a rule cannot read it",
+                        "`{}` is a default controllable variable that is not published: a rule cannot read it",
                         variable.name
                     ),
                 )
                 .with_label("not readable in a rule")
                 .with_help(format!(
-                    "rules read the default observable variables ({}) and declared variables",
+                    "rules read the default observable variables ({}), an instance's `period`, \
+                     `max_response` and `priority`, and declared variables",
                     DEFAULT_OBSERVABLES
                         .iter()
                         .map(|name| format!("`{name}`"))
@@ -608,6 +613,17 @@ fn compatible(a: &RTy, b: &RTy) -> bool {
         }
         (RTy::Other(_), _) | (_, RTy::Other(_)) => false,
         _ => a == b,
+    }
+}
+
+/// The type of an instance's default controllable timing variable, which its
+/// monitoring port publishes: `period` and `max_response` (zero when it has none),
+/// `priority`.
+fn timing_variable(name: &str) -> Option<RTy> {
+    match name {
+        "period" | "max_response" => Some(RTy::Duration),
+        "priority" => Some(RTy::Int),
+        _ => None,
     }
 }
 

@@ -496,9 +496,11 @@ impl CompoundBuilder {
     /// an own variable `name`, or a mapped variable `name` read with [`View::mapped`]): the rule is evaluated when one of them changes, and
     /// when the supervisor enters `state` (however it got there). The compound's own
     /// defaults are read as `result`, `error`, `quality`, `cpu_time` and
-    /// `elapsed_time`. Times (`instance.cpu_time`, `instance.elapsed_time` and the
-    /// compound's own) announce no change: a rule reading them is also evaluated once
-    /// every supervisor period, on a fresh snapshot of the instances it names.
+    /// `elapsed_time`. An instance's `period` changes with an event;
+    /// `instance.cpu_time`, `instance.elapsed_time`, `instance.max_response`,
+    /// `instance.priority` and the compound's own times announce no change: a rule
+    /// reading them is also evaluated once every supervisor period, on a fresh
+    /// snapshot of the instances it names.
     pub fn rule(
         mut self,
         state: &str,
@@ -899,6 +901,9 @@ impl CompoundBuilder {
                         | "quality"
                         | "cpu_time"
                         | "elapsed_time"
+                        | "period"
+                        | "max_response"
+                        | "priority"
                 );
                 if default || self.instances[index].spec.variable_index(field).is_some() {
                     Ok(())

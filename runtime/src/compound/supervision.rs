@@ -146,6 +146,7 @@ impl Compound {
                         format!("{name}.state")
                     }
                     MonitorEvent::Quality(_) => format!("{name}.quality"),
+                    MonitorEvent::Period(_) => format!("{name}.period"),
                     MonitorEvent::Pressure(_) | MonitorEvent::Adaptation(_) => {
                         if let Some(coordinator) = self.coordinator.as_mut() {
                             coordinator.dirty = true;

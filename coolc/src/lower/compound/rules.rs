@@ -485,10 +485,18 @@ impl Scope<'_, '_> {
             "cpu_time" | "elapsed_time" | "quality" => {
                 format!("view.monitor({lit}).map(|monitor| monitor.{variable})")
             }
+            // No period (an aperiodic component) or bound reads as zero.
+            "period" | "max_response" => {
+                format!("view.monitor({lit}).map(|monitor| monitor.{variable}.unwrap_or_default())")
+            }
+            "priority" => {
+                format!("view.monitor({lit}).map(|monitor| i128::from(monitor.priority))")
+            }
             _ => return unreadable,
         };
-        // (`cpu_time` and `elapsed_time` have no change event of their own: the
-        // runtime counts them as changed every supervisor period.)
+        // (`cpu_time`, `elapsed_time`, `max_response` and `priority` have no change
+        // event of their own: the runtime counts them as changed every supervisor
+        // period.)
         self.read(format!("{instance}.{variable}"));
         self.uses_view = true;
         maybe(code, ty)

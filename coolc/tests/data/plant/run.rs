@@ -131,6 +131,24 @@ fn rules_read_every_kind_of_value() {
         .unwrap();
     assert_eq!(monitor.state, State::Running);
     assert_eq!(gauge.snapshot().quality, 2);
+    // The timing variables: `period` announces its change, `max_response` and
+    // `priority` are read every supervisor period. None alone moves the probe on.
+    gauge
+        .command(Command::SetPeriod(Duration::from_millis(30)))
+        .unwrap();
+    gauge
+        .command(Command::SetMaxResponse(Duration::from_millis(25)))
+        .unwrap();
+    assert_eq!(
+        probe.snapshot().user_state.as_deref(),
+        Some("lowered"),
+        "the priority is still 0"
+    );
+    gauge.command(Command::SetPriority(-1)).unwrap();
+    let monitor = probe
+        .wait_for(|m| m.user_state.as_deref() == Some("retimed"), WAIT)
+        .unwrap();
+    assert_eq!(monitor.state, State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
