@@ -98,10 +98,11 @@ impl InletLedger {
             let mut had = lock(&self.had);
             let missing = match had.iter_mut().find(|h| h.epoch == epoch) {
                 Some(h) => {
-                    let missing = seq.saturating_sub(h.newest + 1);
+                    // Saturating: `newest` may come from a damaged tally's report.
+                    let missing = seq.saturating_sub(h.newest.saturating_add(1));
                     h.newest = h.newest.max(seq);
-                    h.received += 1;
-                    h.missing += missing;
+                    h.received = h.received.saturating_add(1);
+                    h.missing = h.missing.saturating_add(missing);
                     missing
                 }
                 None => {
@@ -133,18 +134,19 @@ impl InletLedger {
     /// outlet epochs the question reports ended (by a process started again, from
     /// its tally) with the newest number each sent. Numbers of an epoch this inlet
     /// had that it never received up to that newest are counted missing, once. How
-    /// many were.
+    /// many were. The reported numbers come from a file a killed process left: any
+    /// value is taken without overflow.
     fn answer(&self, process: &str, ended: &[Ended]) -> (Vec<u8>, u64) {
         let mut had = lock(&self.had);
-        let mut counted = 0;
+        let mut counted = 0u64;
         for &(epoch, last) in ended {
             if let Some(h) = had.iter_mut().find(|h| h.epoch == epoch)
                 && last > h.newest
             {
                 let missing = last - h.newest;
                 h.newest = last;
-                h.missing += missing;
-                counted += missing;
+                h.missing = h.missing.saturating_add(missing);
+                counted = counted.saturating_add(missing);
                 tracing::trace!(target: LEDGER_TARGET, "{} ended {epoch} {last} missing {missing}", self.key);
                 tracing::warn!(
                     key = %self.key,
@@ -663,6 +665,20 @@ mod tests {
         let (_, again) = ledger.answer("p", &[(9, 8)]);
         assert_eq!(again, 0, "counted once");
         assert_eq!(network.overflows(), 3);
+    }
+
+    #[test]
+    fn a_damaged_report_of_an_ended_epoch_never_overflows() {
+        let network = TickIn::new();
+        let ledger = InletLedger::new(Arc::new(network.erased()), "k".to_owned());
+        ledger.received(9, 1);
+        ledger.received(5, 1);
+        let (_, counted) = ledger.answer("p", &[(9, u64::MAX), (5, u64::MAX), (u64::MAX, 3)]);
+        assert_eq!(counted, u64::MAX, "saturated");
+        ledger.received(9, 2);
+        ledger.received(9, u64::MAX);
+        let (_, again) = ledger.answer("p", &[(9, u64::MAX)]);
+        assert_eq!(again, 0);
     }
 
     #[test]
