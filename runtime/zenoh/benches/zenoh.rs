@@ -75,14 +75,31 @@ fn endpoint() -> String {
     format!("tcp/127.0.0.1:{port}")
 }
 
-/// Two nodes, `b` connected to `a`, on loopback.
-fn nodes() -> (Node, Node) {
+/// A state directory for the outlets' tallies, not the user's: in memory
+/// (`/dev/shm`) as the default one is, else in the temporary directory; removed when
+/// dropped.
+fn state_directory() -> tempfile::TempDir {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix("coolbot-bench-");
+    builder
+        .tempdir_in("/dev/shm")
+        .or_else(|_| builder.tempdir())
+        .expect("a state directory")
+}
+
+/// Two nodes, `b` connected to `a`, on loopback, their outlets' tallies in `state`.
+fn nodes(state: &std::path::Path) -> (Node, Node) {
     let a_endpoint = endpoint();
     let config = |listen: &str, connect: &[String]| {
         coolbot_zenoh::peer_config(&[listen.to_owned()], connect, false).expect("config")
     };
-    let a = Node::open("bench-a", config(&a_endpoint, &[])).expect("node a");
-    let b = Node::open("bench-b", config(&endpoint(), &[a_endpoint])).expect("node b");
+    let open = |name: &str, config| {
+        Node::open(name, config)
+            .expect(name)
+            .with_state_directory(Some(state.to_path_buf()))
+    };
+    let a = open("bench-a", config(&a_endpoint, &[]));
+    let b = open("bench-b", config(&endpoint(), &[a_endpoint]));
     (a, b)
 }
 
@@ -313,7 +330,9 @@ fn main() {
         "One-way latency over Zenoh, ping-pong (half round trip): components through bridges vs raw pub/sub",
         mode,
     );
-    let (a, b) = nodes();
+    // Declared first, removed last (after the outlets).
+    let state = state_directory();
+    let (a, b) = nodes(state.path());
     let project = project(&a, &b, per_round);
     let baseline = baseline(&a, &b);
     let (project_samples, baseline_samples) = common::alternate(

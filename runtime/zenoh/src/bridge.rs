@@ -585,9 +585,15 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         };
         let sent = Arc::new(AtomicU64::new(0));
         let numbered = pull.is_none() && kind != InputKind::Poster;
-        let (tally, ended) = match numbered.then(|| Tally::claim(node.name(), &key, epoch)) {
-            Some(Some((tally, ended))) => (Some(tally), ended),
-            _ => (None, Vec::new()),
+        // A remote placement's keys are new at every placement: no process started
+        // again would read their tally.
+        let tallied = numbered && !key.starts_with(crate::place::LINKS);
+        let (tally, ended) = match node.state_directory().filter(|_| tallied) {
+            Some(state) => match Tally::claim(state, node.name(), &key, epoch) {
+                Some((tally, ended)) => (Some(tally), ended),
+                None => (None, Vec::new()),
+            },
+            None => (None, Vec::new()),
         };
         let ledger = if numbered {
             Some(OutletLedger::start(

@@ -98,7 +98,8 @@ impl InletLedger {
             let mut had = lock(&self.had);
             let missing = match had.iter_mut().find(|h| h.epoch == epoch) {
                 Some(h) => {
-                    // Numbers come from the network: no arithmetic here may overflow.
+                    // Numbers come from the network (or a damaged tally's report): no
+                    // arithmetic here may overflow.
                     let missing = seq.saturating_sub(h.newest.saturating_add(1));
                     h.newest = h.newest.max(seq);
                     h.received = h.received.saturating_add(1);
@@ -134,7 +135,8 @@ impl InletLedger {
     /// outlet epochs the question reports ended (by a process started again, from
     /// its tally) with the newest number each sent. Numbers of an epoch this inlet
     /// had that it never received up to that newest are counted missing, once. How
-    /// many were.
+    /// many were. The reported numbers come from a file a killed process left: any
+    /// value is taken without overflow.
     fn answer(&self, process: &str, ended: &[Ended]) -> (Vec<u8>, u64) {
         let mut had = lock(&self.had);
         let mut counted: u64 = 0;
@@ -736,6 +738,20 @@ mod tests {
         let (_, again) = ledger.answer("p", &[(9, 8)]);
         assert_eq!(again, 0, "counted once");
         assert_eq!(network.overflows(), 3);
+    }
+
+    #[test]
+    fn a_damaged_report_of_an_ended_epoch_never_overflows() {
+        let network = TickIn::new();
+        let ledger = InletLedger::new(Arc::new(network.erased()), "k".to_owned());
+        ledger.received(9, 1);
+        ledger.received(5, 1);
+        let (_, counted) = ledger.answer("p", &[(9, u64::MAX), (5, u64::MAX), (u64::MAX, 3)]);
+        assert_eq!(counted, u64::MAX, "saturated");
+        ledger.received(9, 2);
+        ledger.received(9, u64::MAX);
+        let (_, again) = ledger.answer("p", &[(9, u64::MAX)]);
+        assert_eq!(again, 0);
     }
 
     #[test]

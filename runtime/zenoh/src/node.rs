@@ -2,6 +2,7 @@
 //! components' monitoring and control ports on the network and makes bridges.
 
 use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -97,6 +98,8 @@ pub struct Node {
     /// The outputs echoed, as `(component path, port)`.
     echoed: Arc<Mutex<BTreeSet<(String, String)>>>,
     echoes: Mutex<Vec<Echo>>,
+    /// Where its outlets keep their tallies (`crate::tally`); None: no tallies.
+    state: Option<PathBuf>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -149,8 +152,25 @@ impl Node {
             control_thread: Some(control_thread),
             echoed: Arc::default(),
             echoes: Mutex::new(Vec::new()),
+            state: crate::tally::state_directory(),
             _token: token,
         })
+    }
+
+    /// Keep this node's outlets' tallies (what they sent, for the process started
+    /// after a kill to report: `docs/distribution.md`, "What happens when the network
+    /// fails") in `directory` rather than in the state directory the environment
+    /// names (`COOLBOT_STATE_DIR`, ...); None: no tallies. For tests and benchmarks,
+    /// which must not write into the user's state directory. Outlets built before
+    /// keep theirs where they are.
+    pub fn with_state_directory(mut self, directory: Option<PathBuf>) -> Node {
+        self.state = directory;
+        self
+    }
+
+    /// Where this node's outlets keep their tallies (None: they keep none).
+    pub(crate) fn state_directory(&self) -> Option<&Path> {
+        self.state.as_deref()
     }
 
     /// The node's name.

@@ -12,15 +12,20 @@
 //! that claims a slot takes over what every slot nobody holds says (a killed outlet's
 //! epoch, and what it had not reported yet) and reports it all with its questions;
 //! a report counts once at an inlet, so a report repeated after another kill costs
-//! nothing. A clean stop marks its own epoch reported.
+//! nothing. A clean stop marks its own epoch reported. A claim removes the node's
+//! files that nobody holds and that have nothing to report; the keys of a remote
+//! placement (`coolbot-link/...`), new at every placement, have no tally (no process
+//! started again would ever read it).
 //!
 //! The state directory is `COOLBOT_STATE_DIR` (empty: no tally), else `coolbot` in
 //! `XDG_RUNTIME_DIR`, else `coolbot-<uid>` in `/dev/shm` (memory, like the runtime
-//! directory) or the temporary directory; it is made private (mode 0700) and must
-//! belong to the user; files are opened without following links.
+//! directory) or the temporary directory, unless the node was given one
+//! (`Node::with_state_directory`); it must belong to the user and is made private
+//! (mode 0700); files are opened without following links and used only if they are
+//! regular files of the user with one name.
 
-use std::fs::{DirBuilder, File, OpenOptions};
-use std::os::unix::fs::{DirBuilderExt, FileExt, MetadataExt, OpenOptionsExt};
+use std::fs::{DirBuilder, File, OpenOptions, Permissions};
+use std::os::unix::fs::{DirBuilderExt, FileExt, MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 
 use rustix::fs::{FlockOperation, OFlags, flock};
@@ -32,14 +37,22 @@ pub(crate) const SLOTS: usize = 4;
 pub(crate) const KEPT: usize = 16;
 
 /// The size of a tally: the outlet's epoch and newest number, then [`KEPT`] ended
-/// epochs with theirs.
-const SIZE: usize = 16 * (1 + KEPT);
+/// epochs with theirs, then [`MARK`].
+const SIZE: usize = 16 * (1 + KEPT) + 8;
+
+/// The last word of a tally: a file without it (not a tally, one of another layout,
+/// one whose outlet was killed while making it, one taken over) has nothing to report.
+const MARK: u64 = u64::from_le_bytes(*b"tally-1\n");
+
+/// How many times a claim opens a slot again when a sweep removed the file it had
+/// opened (between its open and its lock).
+const REOPENS: usize = 4;
 
 /// An epoch that ended by a kill and the newest number it handed to Zenoh.
 pub(crate) type Ended = (u64, u64);
 
-/// The state directory, or None when tallies are off.
-fn state_directory() -> Option<PathBuf> {
+/// The state directory the environment names, or None when tallies are off.
+pub(crate) fn state_directory() -> Option<PathBuf> {
     match std::env::var_os("COOLBOT_STATE_DIR") {
         Some(directory) if directory.is_empty() => None,
         Some(directory) => Some(PathBuf::from(directory)),
@@ -58,19 +71,36 @@ fn state_directory() -> Option<PathBuf> {
     }
 }
 
-/// `directory`, made private if it is new; an error unless it is a directory (not a
-/// link) of this user.
+/// `directory`, made if it is missing and made private (mode 0700) if others may use
+/// it; an error unless it is a directory (not a link) of this user.
 fn private_directory(directory: &Path) -> std::io::Result<()> {
     DirBuilder::new()
         .recursive(true)
         .mode(0o700)
         .create(directory)?;
-    let metadata = std::fs::symlink_metadata(directory)?;
+    // Opened without following a link, then checked and changed through the open
+    // descriptor: what is checked is what is changed.
+    let opened = OpenOptions::new()
+        .read(true)
+        .custom_flags((OFlags::NOFOLLOW | OFlags::DIRECTORY).bits() as i32)
+        .open(directory)?;
+    let metadata = opened.metadata()?;
     if !metadata.is_dir() || metadata.uid() != rustix::process::getuid().as_raw() {
         return Err(std::io::Error::other(format!(
             "{} is not a directory of this user",
             directory.display()
         )));
+    }
+    if metadata.mode() & 0o077 != 0 {
+        opened
+            .set_permissions(Permissions::from_mode(0o700))
+            .map_err(|error| {
+                std::io::Error::other(format!(
+                    "{} is open to others (mode {:o}) and cannot be made private: {error}",
+                    directory.display(),
+                    metadata.mode() & 0o7777
+                ))
+            })?;
     }
     Ok(())
 }
@@ -94,32 +124,67 @@ fn open(path: &Path, create: bool) -> std::io::Result<File> {
         .open(path)
 }
 
+/// Whether `file`, opened at `path`, is still the file there (false: it was removed,
+/// or another took its name); an error unless it is a regular file of this user with
+/// one name. Asked with the file's lock held, which a sweep needs to remove it.
+fn still_there(file: &File, path: &Path) -> std::io::Result<bool> {
+    let own = file.metadata()?;
+    let named = match std::fs::symlink_metadata(path) {
+        Ok(named) => named,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(error) => return Err(error),
+    };
+    if (named.dev(), named.ino()) != (own.dev(), own.ino()) {
+        return Ok(false);
+    }
+    if !own.is_file() || own.uid() != rustix::process::getuid().as_raw() || own.nlink() != 1 {
+        return Err(std::io::Error::other(format!(
+            "{} is not a regular file of this user with one name",
+            path.display()
+        )));
+    }
+    Ok(true)
+}
+
+/// `file` locked (exclusive, without waiting) and still the usable file at `path`.
+fn locked(file: &File, path: &Path) -> bool {
+    flock(file, FlockOperation::NonBlockingLockExclusive).is_ok()
+        && matches!(still_there(file, path), Ok(true))
+}
+
 /// What a tally file says, oldest first: the ended epochs it kept, then its own
 /// epoch and newest number unless a clean stop marked them reported (a killed
-/// outlet's).
+/// outlet's). Nothing from a file shorter than a tally or without its [`MARK`];
+/// the numbers of one damaged after it are only compared and saturated (at the
+/// inlets), never trusted to be in any range.
 fn read(file: &File) -> Vec<Ended> {
-    let mut bytes = vec![0u8; SIZE];
-    let length = file.read_at(&mut bytes, 0).unwrap_or(0);
-    let mut pairs: Vec<Ended> = bytes[..length]
-        .chunks_exact(16)
-        .map(|pair| {
-            let word = |at: usize| u64::from_le_bytes(pair[at..at + 8].try_into().expect("8"));
-            (word(0), word(8))
-        })
-        .collect();
-    if !pairs.is_empty() {
-        let own = pairs.remove(0);
-        pairs.push(own);
+    let mut bytes = [0u8; SIZE];
+    if file.read_exact_at(&mut bytes, 0).is_err() {
+        return Vec::new();
     }
+    let word = |at: usize| {
+        let mut word = [0u8; 8];
+        word.copy_from_slice(&bytes[at..at + 8]);
+        u64::from_le_bytes(word)
+    };
+    if word(SIZE - 8) != MARK {
+        return Vec::new();
+    }
+    let mut pairs: Vec<Ended> = (1..=KEPT)
+        .chain([0])
+        .map(|pair| (word(16 * pair), word(16 * pair + 8)))
+        .collect();
     pairs.retain(|&(epoch, newest)| epoch != 0 && newest > 0);
     pairs
 }
 
-/// `current` then `ended`, as a file holds them.
+/// `current` then `ended`, as a file holds them, and the mark.
 fn layout(current: Ended, ended: &[Ended]) -> Vec<u8> {
     let mut bytes = vec![0u8; SIZE];
+    bytes[SIZE - 8..].copy_from_slice(&MARK.to_le_bytes());
     for (at, (epoch, newest)) in std::iter::once(current)
         .chain(ended.iter().copied())
+        .take(1 + KEPT)
         .enumerate()
     {
         bytes[16 * at..16 * at + 8].copy_from_slice(&epoch.to_le_bytes());
@@ -128,52 +193,96 @@ fn layout(current: Ended, ended: &[Ended]) -> Vec<u8> {
     bytes
 }
 
+/// Remove the tally files of a node's `directory` that have nothing to report and
+/// that no outlet holds (the keys of remote placements before they had none, keys
+/// no longer used). Each is locked first and removed only if it is still the file at
+/// its name: an outlet that opened the same name meanwhile finds its file gone once
+/// it holds the lock, and opens the name again.
+fn sweep(directory: &Path) {
+    let Ok(entries) = std::fs::read_dir(directory) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path
+            .extension()
+            .is_none_or(|extension| extension != "tally")
+        {
+            continue;
+        }
+        if let Ok(file) = open(&path, false)
+            && locked(&file, &path)
+            && read(&file).is_empty()
+        {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
+}
+
 /// An outlet's tally, held while it lives: the locked file, mapped.
 pub(crate) struct Tally {
+    /// Declared (so dropped) before the file: unmapped before the lock goes.
+    map: std::sync::Mutex<memmap2::MmapMut>,
     /// Held for its lock.
     _file: File,
-    map: std::sync::Mutex<memmap2::MmapMut>,
 }
 
 /// A shared, writable mapping of a tally `file` of [`SIZE`] bytes.
 #[allow(unsafe_code)]
 fn map(file: &File) -> std::io::Result<memmap2::MmapMut> {
-    // SAFETY: `file` is in a private directory of this user and this outlet holds its
-    // exclusive `flock` for as long as the mapping lives: no other outlet maps or
-    // writes it (they open a slot only after taking its lock), and the file is never
-    // truncated while mapped (its length is set before). The mapping is only written
-    // here, never read back.
+    // SAFETY: `file` is a regular file with one name in a private directory of this
+    // user, and this outlet holds its exclusive `flock` for as long as the mapping
+    // lives (the `Tally` drops its mapping before its file): no other outlet maps,
+    // writes or removes it (they do so only after taking its lock), and the file is
+    // never truncated while mapped (its length is set before). The mapping is only
+    // written here, never read back.
     unsafe { memmap2::MmapMut::map_mut(file) }
 }
 
 impl Tally {
-    /// Claim a tally for `node`'s outlet of `epoch` on `key`, with the killed epochs
-    /// to report (from every slot nobody holds, which it takes over). None (with a
-    /// warning) when tallies are off or cannot be kept: the directory cannot be
-    /// used, or [`SLOTS`] outlets of this node on the key hold theirs.
-    pub(crate) fn claim(node: &str, key: &str, epoch: u64) -> Option<(Tally, Vec<Ended>)> {
-        let directory = state_directory()?.join(node);
-        let made = state_directory()
-            .as_deref()
-            .map_or(Ok(()), private_directory)
-            .and_then(|()| private_directory(&directory));
+    /// Claim a tally in `state` (the state directory) for `node`'s outlet of `epoch`
+    /// on `key`, with the killed epochs to report (from every slot nobody holds,
+    /// which it takes over). None (with a warning) when tallies cannot be kept: the
+    /// directory cannot be used, or [`SLOTS`] outlets of this node on the key hold
+    /// theirs.
+    pub(crate) fn claim(
+        state: &Path,
+        node: &str,
+        key: &str,
+        epoch: u64,
+    ) -> Option<(Tally, Vec<Ended>)> {
+        let directory = state.join(node);
+        let made = private_directory(state).and_then(|()| private_directory(&directory));
         if let Err(error) = made {
             tracing::warn!(%key, "no tally of what the outlet sends: {error}");
             return None;
         }
+        sweep(&directory);
         let hash = fnv(key);
         let path = |slot: usize| directory.join(format!("{hash:016x}.{slot}.tally"));
         let mut mine = None;
-        for slot in 0..SLOTS {
-            match open(&path(slot), true) {
-                Ok(file) if flock(&file, FlockOperation::NonBlockingLockExclusive).is_ok() => {
-                    mine = Some((slot, file));
-                    break;
+        'slots: for slot in 0..SLOTS {
+            for _ in 0..REOPENS {
+                let file = match open(&path(slot), true) {
+                    Ok(file) => file,
+                    Err(error) => {
+                        tracing::warn!(%key, "no tally of what the outlet sends ({}): {error}", path(slot).display());
+                        return None;
+                    }
+                };
+                if flock(&file, FlockOperation::NonBlockingLockExclusive).is_err() {
+                    continue 'slots; // another outlet's
                 }
-                Ok(_) => {}
-                Err(error) => {
-                    tracing::warn!(%key, "no tally of what the outlet sends ({}): {error}", path(slot).display());
-                    return None;
+                match still_there(&file, &path(slot)) {
+                    Ok(true) => {
+                        mine = Some((slot, file));
+                        break 'slots;
+                    }
+                    Ok(false) => {} // removed by a sweep: opened again
+                    Err(error) => {
+                        tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+                        return None;
+                    }
                 }
             }
         }
@@ -182,14 +291,18 @@ impl Tally {
             return None;
         };
         let mut ended = read(&file);
-        // What the other slots' killed outlets left, taken over.
+        // What the other slots' killed outlets left, taken over: written to this
+        // slot's file before theirs are cleared, so that a kill in between repeats a
+        // report (counted once at an inlet) rather than losing it.
+        let mut taken = Vec::new();
         for other in (0..SLOTS).filter(|&other| other != slot) {
             if let Ok(file) = open(&path(other), false)
-                && flock(&file, FlockOperation::NonBlockingLockExclusive).is_ok()
+                && locked(&file, &path(other))
             {
                 let left = read(&file);
-                if !left.is_empty() && file.write_all_at(&[0u8; SIZE], 0).is_ok() {
+                if !left.is_empty() {
                     ended.extend(left);
+                    taken.push(file);
                 }
             }
         }
@@ -200,15 +313,21 @@ impl Tally {
             }
         }
         kept.reverse();
-        let mapped = file
+        let written = file
             .set_len(SIZE as u64)
-            .and_then(|()| file.write_all_at(&layout((epoch, 0), &kept), 0))
-            .and_then(|()| map(&file));
-        match mapped {
+            .and_then(|()| file.write_all_at(&layout((epoch, 0), &kept), 0));
+        if let Err(error) = written {
+            tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+            return None;
+        }
+        for other in taken {
+            let _ = other.write_all_at(&[0u8; SIZE], 0);
+        }
+        match map(&file) {
             Ok(map) => Some((
                 Tally {
-                    _file: file,
                     map: std::sync::Mutex::new(map),
+                    _file: file,
                 },
                 kept,
             )),
@@ -259,31 +378,140 @@ mod tests {
         }
     }
 
+    /// A state directory of the test's own (the environment is not read).
+    fn state() -> tempfile::TempDir {
+        tempfile::tempdir().expect("a temporary directory")
+    }
+
+    fn slot(state: &Path, node: &str, key: &str, slot: usize) -> PathBuf {
+        state
+            .join(node)
+            .join(format!("{:016x}.{slot}.tally", fnv(key)))
+    }
+
     #[test]
     fn a_killed_epoch_is_reported_by_the_next_outlets_and_slots_are_shared() {
-        let node = format!("tally-test-{}", std::process::id());
-        let key = "test/tally";
-        let (first, ended) = Tally::claim(&node, key, 11).expect("claimed");
+        let state = state();
+        let state = state.path();
+        let (node, key) = ("node", "test/tally");
+        let (first, ended) = Tally::claim(state, node, key, 11).expect("claimed");
         assert_eq!(ended, []);
         first.record(42);
         // A second outlet of the node on the key takes another slot.
-        let (second, ended) = Tally::claim(&node, key, 12).expect("a second slot");
+        let (second, ended) = Tally::claim(state, node, key, 12).expect("a second slot");
         assert_eq!(ended, [], "the first holds its own");
         second.record(7);
         drop(second); // a clean stop: nothing to report of epoch 12
         first.record(43);
         first.crash();
-        let (third, ended) = Tally::claim(&node, key, 13).expect("claimed");
+        let (third, ended) = Tally::claim(state, node, key, 13).expect("claimed");
         assert_eq!(ended, [(11, 43)]);
         // Killed before any answer: the next outlet reports epoch 11 again.
         third.crash();
-        let (fourth, ended) = Tally::claim(&node, key, 14).expect("claimed");
+        let (fourth, ended) = Tally::claim(state, node, key, 14).expect("claimed");
         assert_eq!(ended, [(11, 43)]);
         fourth.record(3);
         fourth.crash();
-        let (fifth, ended) = Tally::claim(&node, key, 15).expect("claimed");
+        let (fifth, ended) = Tally::claim(state, node, key, 15).expect("claimed");
         assert_eq!(ended, [(11, 43), (14, 3)]);
         drop(fifth);
-        let _ = std::fs::remove_dir_all(state_directory().expect("on").join(&node));
+    }
+
+    #[test]
+    fn what_another_slot_left_moves_to_the_claimers_file() {
+        let state = state();
+        let state = state.path();
+        let (node, key) = ("node", "test/takeover");
+        let (first, _) = Tally::claim(state, node, key, 21).expect("claimed");
+        let (second, _) = Tally::claim(state, node, key, 22).expect("a second slot");
+        second.record(5);
+        second.crash(); // slot 1 says (22, 5)
+        drop(first); // slot 0: nothing to report
+        let (third, ended) = Tally::claim(state, node, key, 23).expect("claimed");
+        assert_eq!(ended, [(22, 5)]);
+        let read_slot =
+            |slot| read(&open(&self::slot(state, node, key, slot), false).expect("a slot"));
+        assert_eq!(read_slot(0), [(22, 5)], "the claimer's, slot 0");
+        assert_eq!(read_slot(1), [], "cleared");
+        drop(third);
+    }
+
+    #[test]
+    fn a_claim_removes_the_files_nobody_holds_that_have_nothing_to_report() {
+        let state = state();
+        let state = state.path();
+        let node = "node";
+        let (stopped, _) = Tally::claim(state, node, "test/stopped", 1).expect("claimed");
+        drop(stopped); // a clean stop: nothing to report
+        let (killed, _) = Tally::claim(state, node, "test/killed", 2).expect("claimed");
+        killed.record(9);
+        killed.crash(); // something to report
+        let (held, _) = Tally::claim(state, node, "test/held", 3).expect("claimed");
+        let short = slot(state, node, "test/short", 0);
+        std::fs::write(&short, [1u8; 20]).expect("a short file");
+        let (_other, _) = Tally::claim(state, node, "test/other", 4).expect("claimed");
+        assert!(!slot(state, node, "test/stopped", 0).exists(), "removed");
+        assert!(!short.exists(), "removed");
+        assert!(
+            slot(state, node, "test/killed", 0).exists(),
+            "kept to report"
+        );
+        assert!(slot(state, node, "test/held", 0).exists(), "held");
+        let (_, ended) = Tally::claim(state, node, "test/killed", 5).expect("claimed");
+        assert_eq!(ended, [(2, 9)]);
+        drop(held);
+    }
+
+    #[test]
+    fn a_short_or_garbled_file_reports_nothing_and_a_damaged_one_never_panics() {
+        let state = state();
+        let state = state.path();
+        let (node, key) = ("node", "test/garbage");
+        private_directory(&state.join(node)).expect("the node's directory");
+        std::fs::write(slot(state, node, key, 0), [0xa5u8; 40]).expect("short");
+        std::fs::write(slot(state, node, key, 1), [0xffu8; SIZE]).expect("no mark");
+        std::fs::write(slot(state, node, key, 2), [0x5au8; 3 * SIZE]).expect("long");
+        let mut damaged = vec![0xffu8; SIZE];
+        damaged[SIZE - 8..].copy_from_slice(&MARK.to_le_bytes());
+        std::fs::write(slot(state, node, key, 3), &damaged).expect("marked, damaged");
+        let (tally, ended) = Tally::claim(state, node, key, 31).expect("claimed");
+        assert_eq!(ended, [(u64::MAX, u64::MAX)], "the marked one only, once");
+        tally.record(1);
+        tally.crash();
+        let (_, ended) = Tally::claim(state, node, key, 32).expect("claimed");
+        assert_eq!(ended, [(u64::MAX, u64::MAX), (31, 1)]);
+    }
+
+    #[test]
+    fn an_existing_state_directory_is_made_private_and_odd_files_are_not_used() {
+        let state = state();
+        let state = state.path();
+        std::fs::set_permissions(state, Permissions::from_mode(0o755)).expect("chmod");
+        let (tally, _) = Tally::claim(state, "node", "test/private", 1).expect("claimed");
+        drop(tally);
+        let mode = std::fs::metadata(state).expect("the directory").mode();
+        assert_eq!(mode & 0o777, 0o700);
+        let file = slot(state, "node", "test/private", 0);
+        assert_eq!(
+            std::fs::metadata(&file).expect("kept").mode() & 0o777,
+            0o600
+        );
+        // A second name for the slot's file: not used.
+        let (killed, _) = Tally::claim(state, "node", "test/linked", 1).expect("claimed");
+        killed.record(4);
+        killed.crash();
+        let linked = slot(state, "node", "test/linked", 0);
+        std::fs::hard_link(&linked, state.join("elsewhere")).expect("a hard link");
+        assert!(Tally::claim(state, "node", "test/linked", 2).is_none());
+        // A link at the slot's name: not followed.
+        let target = state.join("target");
+        std::fs::write(&target, []).expect("a file");
+        std::os::unix::fs::symlink(&target, slot(state, "node", "test/symlink", 0))
+            .expect("a link");
+        assert!(Tally::claim(state, "node", "test/symlink", 3).is_none());
+        // The state directory a link: refused.
+        let link = state.join("link");
+        std::os::unix::fs::symlink(state.join("node"), &link).expect("a link");
+        assert!(private_directory(&link).is_err());
     }
 }

@@ -20,12 +20,15 @@ pub fn free_port() -> u16 {
         .expect("a free loopback port")
 }
 
-/// A node listening on a free loopback port, connecting to `connect`.
+/// A node listening on a free loopback port, connecting to `connect`. Its outlets
+/// keep no tally (none is written into the user's state directory; the processes
+/// `tests/accounting.rs` kills keep theirs in a temporary one).
 pub fn node(name: &str, connect: &[String]) -> (Node, String) {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let config = coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), connect, false)
         .expect("config");
-    (Node::open(name, config).expect("open node"), endpoint)
+    let node = Node::open(name, config).expect("open node");
+    (node.with_state_directory(None), endpoint)
 }
 
 /// Two nodes, the second connected to the first, each seeing the other's token.

@@ -130,10 +130,18 @@ fn spawn(command: &mut Command, life: usize, lines: &Sender<(usize, String)>) ->
     Process(child)
 }
 
-/// The consumer process, reading `KEY` from the node at `endpoint`.
-fn consumer(endpoint: &str, life: usize, lines: &Sender<(usize, String)>) -> Process {
+/// The consumer process, reading `KEY` from the node at `endpoint`, its state
+/// directory `state` (not the user's).
+fn consumer(
+    endpoint: &str,
+    state: &std::path::Path,
+    life: usize,
+    lines: &Sender<(usize, String)>,
+) -> Process {
     spawn(
-        Command::new(env!("CARGO_BIN_EXE_inlet-under-test")).args([endpoint, KEY]),
+        Command::new(env!("CARGO_BIN_EXE_inlet-under-test"))
+            .args([endpoint, KEY])
+            .env("COOLBOT_STATE_DIR", state),
         life,
         lines,
     )
@@ -250,6 +258,7 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     let outlet_lines = outlet_counts();
+    let state = tempfile::tempdir().unwrap();
     let (source, endpoint) = support::node("source", &[]);
     let mut producer = System::new();
     let kind = InputKind::Ufifo {
@@ -295,7 +304,7 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
     // acknowledging anything, some after several answers.
     let mut lifetime = lifetimes();
     for life in 0..ROUNDS {
-        let process = consumer(&endpoint, life, &lines);
+        let process = consumer(&endpoint, state.path(), life, &lines);
         assert!(
             read_until(&printed, &mut lives, |lives| lives
                 .get(life)
@@ -312,7 +321,7 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
         );
     }
     let last = ROUNDS;
-    let _final = consumer(&endpoint, last, &lines);
+    let _final = consumer(&endpoint, state.path(), last, &lines);
     assert!(read_until(&printed, &mut lives, |lives| lives
         .get(last)
         .is_some_and(|l| !l.received.is_empty())));

@@ -625,7 +625,9 @@ fn when_the_consumer_node_comes_back_packets_flow_again() {
     let listening = |name: &str| {
         let config =
             coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), &[], false).unwrap();
-        Node::open(name, config).expect("consumer node")
+        Node::open(name, config)
+            .expect("consumer node")
+            .with_state_directory(None)
     };
     let b = listening("back-b");
     let (a, _) = support::node("back-a", std::slice::from_ref(&endpoint));
@@ -755,4 +757,34 @@ fn poster_and_last_readers_ask_again_when_the_link_comes_back() {
         latest.latest()
     );
     assert!(producer.shutdown().clean());
+}
+
+/// An outlet keeps its tally in its node's state directory (here a temporary one),
+/// except on a remote placement's keys: new at every placement, no process started
+/// again would read it.
+#[test]
+fn an_outlet_keeps_a_tally_except_on_a_remote_placements_keys() {
+    let state = tempfile::tempdir().unwrap();
+    let (node, _) = support::node("tallied", &[]);
+    let node = node.with_state_directory(Some(state.path().to_path_buf()));
+    let queue = InputKind::Fifo {
+        capacity: 4,
+        policy: OverflowPolicy::Reject,
+    };
+    let _kept = node
+        .outlet::<Pose>("kept", "test/tallied", queue)
+        .build()
+        .unwrap();
+    let _linked = node
+        .outlet::<Pose>(
+            "linked",
+            "coolbot-link/elsewhere/tallied-cell-arm-1/in/input",
+            queue,
+        )
+        .build()
+        .unwrap();
+    let files = std::fs::read_dir(state.path().join("tallied"))
+        .unwrap()
+        .count();
+    assert_eq!(files, 1, "the tally of `test/tallied` only");
 }

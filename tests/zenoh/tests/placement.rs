@@ -493,13 +493,17 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     assert!(report.clean(), "{report:?}");
 }
 
-/// A station process (`station-under-test`), killed when dropped.
-struct Station(std::process::Child);
+/// A station process (`station-under-test`), killed when dropped, and its state
+/// directory (not the user's), removed after it.
+struct Station {
+    child: std::process::Child,
+    _state: tempfile::TempDir,
+}
 
 impl Drop for Station {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
 
@@ -507,14 +511,19 @@ impl Drop for Station {
 /// and `robot` sees its node.
 fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> Station {
     use std::io::BufRead;
+    let state = tempfile::tempdir().expect("a state directory");
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_station-under-test"))
         .args([name, endpoint])
+        .env("COOLBOT_STATE_DIR", state.path())
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())
         .spawn()
         .expect("the station starts");
     let stdout = child.stdout.take().expect("piped");
-    let station = Station(child);
+    let station = Station {
+        child,
+        _state: state,
+    };
     let (ready, started) = crossbeam_channel::bounded(1);
     std::thread::spawn(move || {
         let said = std::io::BufReader::new(stdout)

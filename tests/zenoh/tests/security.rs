@@ -78,7 +78,10 @@ const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base
 fn secure_node(name: &str, file: &Path, listen: &[String], connect: &[String]) -> Node {
     let security = Security::load(file).expect("a security file");
     let config = secure_config(listen, connect, false, &security).expect("a TLS configuration");
-    Node::open(name, config).expect("the node opens")
+    // No tally in the user's state directory.
+    Node::open(name, config)
+        .expect("the node opens")
+        .with_state_directory(None)
 }
 
 /// `Inbox`'s behaviour: hands its input (with its index) to the test when it starts.
