@@ -34,6 +34,9 @@ fn spawn(
     let mut child = Command::new(env!("CARGO_BIN_EXE_mobile-base"))
         .args(args)
         .env("RUST_LOG", "warn,coolbot_zenoh=info")
+        // No outlet tallies in the user's state directory (its bridges are a
+        // placement's, which keep none anyway).
+        .env("COOLBOT_STATE_DIR", "")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

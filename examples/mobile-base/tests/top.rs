@@ -20,6 +20,9 @@ fn free_port() -> u16 {
 fn example(args: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_mobile-base"))
         .args(args)
+        // No outlet tallies in the user's state directory (its bridges are a
+        // placement's, which keep none anyway).
+        .env("COOLBOT_STATE_DIR", "")
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
