@@ -51,8 +51,10 @@ pub const MAX_PERIODS: u32 = 100_000;
 
 /// The adaptation settings of a component ([`crate::Component::with_adaptation`]) or
 /// of a compound's supervisor ([`crate::CompoundBuilder::adaptation`]). Counts are in
-/// periods of the component concerned.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// periods of the component concerned. It travels with a remote instantiation
+/// (missing fields take their defaults; the runtime clamps what it is given).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct AdaptConfig {
     /// `Some(false)` turns adaptation off; `Some(true)` turns it on; `None` (the
     /// default) leaves it on where the timing block has a period interval

@@ -79,8 +79,11 @@ pub struct Placement {
     pub name: String,
     /// Its component type.
     pub spec: &'static Spec,
-    /// Its effective timing block (the instance's `timing` override, or the spec's).
+    /// Its effective timing block (the instance's `timing` override, or the spec's),
+    /// quality levels included.
     pub timing: TimingSpec,
+    /// Its adaptation settings (the instance's `adaptation` block, or the defaults).
+    pub adaptation: crate::adapt::AdaptConfig,
     /// Its configuration with the instance's overrides, when the component reports
     /// one ([`Automaton::configuration`]).
     pub configuration: Option<Value>,
@@ -221,6 +224,7 @@ pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Comp
         name: local.name().to_owned(),
         spec,
         timing: local.timing(),
+        adaptation: local.adaptation(),
         configuration: local.configuration(),
         variables,
     };

@@ -147,6 +147,11 @@ impl Component {
         self
     }
 
+    /// The instance's adaptation settings ([`Component::with_adaptation`]).
+    pub fn adaptation(&self) -> crate::adapt::AdaptConfig {
+        self.adaptation
+    }
+
     /// The effective `timing` block: the instance's override if it has one
     /// ([`Component::with_timing`]), else the spec's.
     pub fn timing(&self) -> TimingSpec {

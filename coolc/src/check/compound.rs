@@ -148,9 +148,6 @@ fn instance(
             .with_label("empty");
         checker.push(diagnostic);
     }
-    if instance.node.is_some() {
-        remote_overrides(checker, instance);
-    }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
     }
@@ -299,47 +296,6 @@ pub(super) fn compound_timing(checker: &mut Checker<'_, '_>, timing: &ast::Timin
             .with_label("not allowed in a compound")
             .with_help(
                 "a compound's period degrades through its instances: give the interval to the atomic components inside, and one period to the supervisor",
-            );
-        checker.push(diagnostic);
-    }
-}
-
-/// What an instance placed `on "node"` cannot carry there: the agent builds it with
-/// its type's quality levels and adaptation tuning (`coolbot_zenoh::agent`), so an
-/// instance's own `quality` levels or `adaptation` block would be dropped.
-fn remote_overrides(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
-    let quality = instance
-        .timing
-        .iter()
-        .flat_map(|timing| &timing.entries)
-        .find_map(|entry| match entry {
-            ast::TimingEntry::Quality(_, span) => Some(*span),
-            _ => None,
-        });
-    let spans = quality
-        .map(|span| (span, "its own quality levels"))
-        .into_iter()
-        .chain(
-            instance
-                .adaptation
-                .iter()
-                .map(|block| (block.span, "an `adaptation` block")),
-        );
-    for (span, what) in spans {
-        let diagnostic = checker
-            .error(
-                Code::MisplacedMember,
-                span,
-                format!(
-                    "`{}` runs on another node and cannot have {what}",
-                    instance.name.name
-                ),
-            )
-            .with_label("not carried to the node")
-            .with_help(
-                "a remote instance is built with its type's quality levels and adaptation; \
-                 its period, `max_response` and priority travel: declare the levels or the \
-                 tuning in the component type, or run the instance here",
             );
         checker.push(diagnostic);
     }

@@ -5,15 +5,15 @@
 
 use std::collections::BTreeMap;
 use std::marker::PhantomData;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use coolbot::port::ErasedInput;
 use coolbot::{
-    Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy, Packet,
-    PortSet, State, System, TimingSpec, Value,
+    AdaptConfig, Command, Component, Controllable, Handle, InputKind, OutputKind, OverflowPolicy,
+    Packet, PortSet, State, System, TimingSpec, Value,
 };
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -121,9 +121,8 @@ fn yes() -> bool {
     true
 }
 
-/// The fields of a timing block that travel with an instantiation (its quality
-/// levels are the type's).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// The timing block and adaptation settings that travel with an instantiation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RemoteTiming {
     /// The nominal period.
     pub period: Option<Duration>,
@@ -133,6 +132,12 @@ pub struct RemoteTiming {
     pub max_response: Option<Duration>,
     /// The priority.
     pub priority: i32,
+    /// The quality levels, best first (empty: the type's).
+    #[serde(default)]
+    pub qualities: Vec<String>,
+    /// The adaptation settings (None: the type's defaults).
+    #[serde(default)]
+    pub adaptation: Option<AdaptConfig>,
 }
 
 impl From<TimingSpec> for RemoteTiming {
@@ -142,8 +147,57 @@ impl From<TimingSpec> for RemoteTiming {
             max_period: timing.max_period,
             max_response: timing.max_response,
             priority: timing.priority,
+            qualities: timing
+                .qualities
+                .iter()
+                .map(|&level| level.to_owned())
+                .collect(),
+            adaptation: None,
         }
     }
+}
+
+/// The most quality levels a request may give, and the longest name of one.
+const MAX_LEVELS: usize = 64;
+const MAX_LEVEL_NAME: usize = 64;
+
+/// The most distinct lists of quality levels an agent keeps (each is kept for the
+/// process's life: the runtime holds levels as `&'static str`).
+const MAX_LEVEL_LISTS: usize = 256;
+
+/// Quality levels from a request as the runtime holds them: each distinct list is
+/// leaked once.
+fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
+    let valid = |level: &String| {
+        !level.is_empty()
+            && level.len() <= MAX_LEVEL_NAME
+            && level.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    };
+    if requested.len() > MAX_LEVELS || !requested.iter().all(valid) {
+        return Err(format!(
+            "quality levels must be at most {MAX_LEVELS} names of letters, digits and `_`"
+        ));
+    }
+    static KNOWN: Mutex<Vec<&'static [&'static str]>> = Mutex::new(Vec::new());
+    let mut known = KNOWN.lock().unwrap_or_else(PoisonError::into_inner);
+    let same = |list: &&&'static [&'static str]| {
+        list.len() == requested.len() && list.iter().zip(requested).all(|(a, b)| *a == b)
+    };
+    if let Some(list) = known.iter().find(same) {
+        return Ok(list);
+    }
+    if known.len() >= MAX_LEVEL_LISTS {
+        return Err(format!(
+            "this agent keeps at most {MAX_LEVEL_LISTS} distinct lists of quality levels"
+        ));
+    }
+    let list: Vec<&'static str> = requested
+        .iter()
+        .map(|level| &*Box::leak(level.clone().into_boxed_str()))
+        .collect();
+    let list: &'static [&'static str] = Box::leak(list.into_boxed_slice());
+    known.push(list);
+    Ok(list)
 }
 
 /// What pumps a proxy's input to the network.
@@ -554,15 +608,23 @@ fn serve(
     }
     let mut component = (factory.make)(&request.name)?;
     let spec = component.spec();
-    if let Some(timing) = request.timing {
+    if let Some(timing) = &request.timing {
         let own = component.timing();
+        let qualities = if timing.qualities.is_empty() {
+            own.qualities
+        } else {
+            levels(&timing.qualities)?
+        };
         component = component.with_timing(TimingSpec {
             period: timing.period,
             max_period: timing.max_period,
             max_response: timing.max_response,
             priority: timing.priority,
-            ..own
+            qualities,
         });
+        if let Some(adaptation) = timing.adaptation {
+            component = component.with_adaptation(adaptation);
+        }
     }
     // Check every wire before building anything.
     for wire in &request.wires {
@@ -733,5 +795,26 @@ pub fn instantiate(
             node: on.to_owned(),
             reason,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(list: &[&str]) -> Vec<String> {
+        list.iter().map(|&name| name.to_owned()).collect()
+    }
+
+    #[test]
+    fn quality_levels_from_a_request_are_checked_and_kept_once() {
+        let first = levels(&names(&["best", "good", "poor"])).unwrap();
+        assert_eq!(first, ["best", "good", "poor"]);
+        let again = levels(&names(&["best", "good", "poor"])).unwrap();
+        assert!(std::ptr::eq(first, again), "one copy per distinct list");
+        assert!(levels(&names(&["best", "no spaces"])).is_err());
+        assert!(levels(&names(&[""])).is_err());
+        assert!(levels(&names(&["x"; MAX_LEVELS + 1])).is_err());
+        assert!(levels(&["y".repeat(MAX_LEVEL_NAME + 1)]).is_err());
     }
 }

@@ -22,7 +22,7 @@ use coolbot::{Command, Monitor, MonitorEvent, OutputKind, PortSet, Waker};
 use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
-use crate::agent::{Instantiate, Pump, RemoteInput, Wire, instantiate};
+use crate::agent::{Instantiate, Pump, RemoteInput, RemoteTiming, Wire, instantiate};
 use crate::bridge::DeliverFn;
 use crate::{ControlReply, Error, Node, keys};
 
@@ -178,7 +178,10 @@ impl coolbot::remote::Placer for Placer {
             wires,
             configuration: placement.configuration.clone(),
             variables: placement.variables.clone(),
-            timing: Some(placement.timing.into()),
+            timing: Some(RemoteTiming {
+                adaptation: Some(placement.adaptation),
+                ..placement.timing.into()
+            }),
             run: false,
             owner: Some(self.node.name().to_owned()),
         };

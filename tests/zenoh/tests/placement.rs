@@ -5,6 +5,7 @@
 //! reader that joins late); and pull, both ways in one request.
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
@@ -13,7 +14,7 @@ use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh_tests::generated::{
     asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, nest_cell, pull_cell,
-    pull_doubler,
+    pull_doubler, tuned, tuned_cell,
 };
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -102,6 +103,7 @@ impl cell::Supervisor for Quiet {}
 impl pull_cell::Supervisor for Quiet {}
 impl nest_cell::Supervisor for Quiet {}
 impl doubling::Supervisor for Quiet {}
+impl tuned_cell::Supervisor for Quiet {}
 
 /// `Cell`'s parts: the source and sink hand their ports to the test; the local
 /// relay (which the placer leaves unused: the station's runs) hands them to nobody.
@@ -232,13 +234,11 @@ fn every_connection_kind_crosses_the_network_through_a_proxy_both_ways() {
     // and the period its monitor then shows comes back on the proxy's.
     assert_eq!(proxy.snapshot().period, None);
     proxy
-        .command(coolbot::Command::SetPeriod(
-            std::time::Duration::from_millis(25),
-        ))
+        .command(coolbot::Command::SetPeriod(Duration::from_millis(25)))
         .expect("the period is forwarded");
     assert!(
         wait_until(PATIENCE, || proxy.snapshot().period
-            == Some(std::time::Duration::from_millis(25))),
+            == Some(Duration::from_millis(25))),
         "{:?}",
         proxy.snapshot()
     );
@@ -316,7 +316,7 @@ impl pull_doubler::Behavior for Twice {
         let value = cx
             .inputs
             .x
-            .pull(std::time::Duration::from_secs(5))
+            .pull(Duration::from_secs(5))
             .map_err(|error| coolbot::Fault::message(format!("no answer at `x`: {error}")))?;
         Ok(value * 2)
     }
@@ -493,6 +493,79 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
     assert!(report.clean(), "{report:?}");
 }
 
+/// `Tuned`'s behaviour: nothing each period.
+struct Idle;
+
+impl tuned::Behavior for Idle {
+    fn going_periodic(&mut self, _cx: &mut tuned::Cx<'_>) -> SectionResult {
+        Ok(())
+    }
+}
+
+/// `TunedCell`'s parts.
+struct TunedParts;
+
+impl tuned_cell::Parts for TunedParts {
+    fn supervisor(&mut self) -> impl tuned_cell::Supervisor {
+        Quiet
+    }
+    fn tuned(&mut self) -> impl tuned::Behavior {
+        Idle
+    }
+}
+
+fn tuned_registry() -> Registry {
+    let mut registry = Registry::new();
+    tuned::register(&mut registry, |name| tuned::component(name, Idle));
+    registry
+}
+
+/// An instance's own quality levels and adaptation settings travel with it: the
+/// station builds the `Tuned` with three levels (its type has two) and adaptation
+/// off (its type's period interval would turn it on), at its own period.
+#[test]
+fn a_remote_instance_keeps_its_own_quality_levels_and_adaptation() {
+    let (station, robot) = pair("tuned-station", "tuned-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), tuned_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), tuned_registry()).install();
+
+    let compound = tuned_cell::component("cell", TunedParts).expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    let tuned = cell.instance("tuned").expect("the proxy");
+    tuned
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("{timeout}"));
+    // The station's instance, as the station publishes it.
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.session().clone(), PATIENCE);
+    let remote = || {
+        ctl.components(Some("tuned-station"))
+            .expect("the station lists")
+            .into_iter()
+            .find(|l| l.path.starts_with("tuned-robot-cell-tuned-"))
+            .expect("the station built the instance")
+    };
+    let built = remote();
+    assert_eq!(built.monitor.period, Some(Duration::from_millis(20)));
+    assert!(
+        !built.monitor.adaptation.enabled,
+        "the instance's `adaptation {{ off; }}`"
+    );
+    // Its third level exists on the station: the command goes through the proxy.
+    tuned
+        .command(coolbot::Command::SetQuality(2))
+        .expect("the station's instance has three levels");
+    assert!(
+        wait_until(PATIENCE, || remote().monitor.quality == 2),
+        "the station's instance at its third level"
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
 /// A station process (`station-under-test`), killed when dropped, and its state
 /// directory (not the user's), removed after it.
 struct Station {
@@ -543,7 +616,7 @@ fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> S
             .session()
             .liveliness()
             .get(&token)
-            .timeout(std::time::Duration::from_millis(200))
+            .timeout(Duration::from_millis(200))
             .wait()
             .is_ok_and(|replies| replies.recv().is_ok())),
         "the robot does not see `{name}`"
