@@ -159,6 +159,10 @@ codes! {
     DegradeWithoutQuality => "coolc::check::degrade_without_quality",
     /// A `restart { }` or `recovery { }` block that applies to no instance (warning).
     UnusedBlock => "coolc::check::unused_block",
+    /// Redundant members with a data output and an input that may drop packets by its
+    /// overflow policy: a failover may then skip or double packets of the merged
+    /// stream without a count (partial in the runtime; warning).
+    RedundantLossyInput => "coolc::check::redundant_lossy_input",
 }
 
 impl fmt::Display for Code {

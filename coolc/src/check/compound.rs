@@ -19,7 +19,9 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
             ast::Member::Instance(instance) => {
                 self::instance(checker, component, instance, &instances)
             }
-            ast::Member::Redundant(redundant) => self::redundant(checker, &instances, redundant),
+            ast::Member::Redundant(redundant) => {
+                self::redundant(checker, component, &instances, redundant)
+            }
             ast::Member::Connect(connect) => self::connect(checker, component, &instances, connect),
             ast::Member::Input(ast::Input {
                 def: ast::InputDef::Export(target),
@@ -428,8 +430,14 @@ fn describe_port(port: &Port) -> String {
 }
 
 /// `redundant a, b;`: distinct instances of this compound with equal interfaces.
-fn redundant(checker: &mut Checker<'_, '_>, instances: &Instances<'_>, redundant: &ast::Redundant) {
+fn redundant(
+    checker: &mut Checker<'_, '_>,
+    compound: &ast::Component,
+    instances: &Instances<'_>,
+    redundant: &ast::Redundant,
+) {
     names::duplicates(checker, redundant.members.iter(), "redundant member");
+    lossy_members(checker, compound, instances, redundant);
     let mut first: Option<(&ast::Ident, std::rc::Rc<Interface>)> = None;
     for member in &redundant.members {
         let Some((instance, interface)) = instances.get(member.name.as_str()) else {
@@ -465,6 +473,120 @@ fn redundant(checker: &mut Checker<'_, '_>, instances: &Instances<'_>, redundant
             }
         }
     }
+}
+
+/// Redundant members whose data output is read (the group's merged stream) and an input a connection of `compound` feeds that may drop packets by its
+/// overflow policy (a
+/// `fifo` that rejects or drops the oldest, a `ufifo` with a cap): members that drop
+/// different packets
+/// send different streams, and a failover to one may skip or double packets of the
+/// stream without a count (`docs/runtime.md`, "Redundancy": partial).
+fn lossy_members(
+    checker: &mut Checker<'_, '_>,
+    compound: &ast::Component,
+    instances: &Instances<'_>,
+    redundant: &ast::Redundant,
+) {
+    // The members' inputs a connection feeds (a connection to one feeds them all).
+    // Not an exported input: the compound's thread passes what arrives there on, and
+    // leaves out, counts and resynchronizes a member whose queue stays full.
+    let members: BTreeSet<&str> = redundant.members.iter().map(|m| m.name.as_str()).collect();
+    let fed: BTreeSet<&str> = compound
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Connect(connect) => Some(&connect.to),
+            _ => None,
+        })
+        .filter(|end| {
+            end.instance
+                .as_ref()
+                .is_some_and(|instance| members.contains(instance.name.as_str()))
+        })
+        .map(|end| end.port.name.as_str())
+        .collect();
+    let Some((instance, _)) = redundant
+        .members
+        .first()
+        .and_then(|member| instances.get(member.name.as_str()))
+    else {
+        return;
+    };
+    let Some((_, component)) = checker.model.component(&instance.component.name) else {
+        return;
+    };
+    // The group's merged stream: a data output of the members that is read (connected
+    // or exported).
+    let data_outputs: BTreeSet<&str> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Output(ast::Output {
+                name,
+                def: ast::OutputDef::Data(..),
+                ..
+            }) => Some(name.name.as_str()),
+            _ => None,
+        })
+        .collect();
+    let streams = compound
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Connect(connect) => Some(&connect.from),
+            ast::Member::Output(ast::Output {
+                def: ast::OutputDef::Export(target),
+                ..
+            }) => Some(target),
+            _ => None,
+        })
+        .any(|end| {
+            end.instance
+                .as_ref()
+                .is_some_and(|instance| members.contains(instance.name.as_str()))
+                && data_outputs.contains(end.port.name.as_str())
+        });
+    let lossy: Vec<String> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Input(ast::Input { name, def, .. })
+                if fed.contains(name.name.as_str()) =>
+            {
+                match def {
+                    ast::InputDef::Fifo { policy, .. } => {
+                        let policy = policy.as_ref().map_or("reject", |p| p.name.as_str());
+                        (policy != "block").then(|| format!("`{}` (`fifo`, `{policy}`)", name.name))
+                    }
+                    ast::InputDef::Ufifo { max: Some(_), .. } => {
+                        Some(format!("`{}` (`ufifo` with a cap)", name.name))
+                    }
+                    _ => None,
+                }
+            }
+            _ => None,
+        })
+        .collect();
+    if !streams || lossy.is_empty() {
+        return;
+    }
+    let diagnostic = Diagnostic::warning(
+        Code::RedundantLossyInput,
+        checker.file,
+        redundant.span,
+        format!(
+            "`{}` may drop packets at {}: redundant members that drop different packets \
+             send different streams",
+            instance.component.name,
+            lossy.join(", ")
+        ),
+    )
+    .with_label("a failover may skip or double packets of the stream, uncounted")
+    .with_help(
+        "give the members inputs that do not drop (`fifo<T>(n, block)`, an uncapped `ufifo`) \
+         where the merged stream must be exact",
+    );
+    checker.push(diagnostic);
 }
 
 /// Substitutions and redundant groups the runtime can arrange: each instance takes
