@@ -163,6 +163,10 @@ codes! {
     /// overflow policy: a failover may then skip or double packets of the merged
     /// stream without a count (partial in the runtime; warning).
     RedundantLossyInput => "coolc::check::redundant_lossy_input",
+    /// An aperiodic atomic component with a `max_response` has an input no `on`
+    /// transition handles: response times are measured at `on` transitions only
+    /// (partial in the runtime; warning).
+    UnmeasuredResponse => "coolc::check::unmeasured_response",
 }
 
 impl fmt::Display for Code {

@@ -64,6 +64,9 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
         }
     }
     automaton::automata(checker, component);
+    if component.kind == ComponentKind::Atomic {
+        unmeasured_responses(checker, component);
+    }
     if component.kind == ComponentKind::Compound {
         compound::compound(checker, component);
     }
@@ -530,6 +533,74 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
 /// never applies and is skipped (the plan goes on to its next step, or, after the
 /// last, the component goes to running error). An instance's `timing` override may
 /// declare levels of its own: the help says so.
+/// An aperiodic atomic component with a `max_response`: the runtime measures the
+/// response time of the packets an `on` transition handles (`docs/runtime.md`,
+/// "Response time"); an input no `on` transition names is read untimed, and the
+/// bound only limits how long its sections run there.
+fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let entries = || {
+        component.members.iter().flat_map(|member| match member {
+            ast::Member::Timing(timing) => timing.entries.as_slice(),
+            _ => &[],
+        })
+    };
+    let periodic = entries().any(|entry| matches!(entry, ast::TimingEntry::Period(_)));
+    let Some(bound) = entries().find_map(|entry| match entry {
+        ast::TimingEntry::MaxResponse(expr) => Some(expr.span),
+        _ => None,
+    }) else {
+        return;
+    };
+    if periodic {
+        return;
+    }
+    let handled: std::collections::BTreeSet<&str> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Automaton(automaton) => Some(&automaton.states),
+            _ => None,
+        })
+        .flatten()
+        .flat_map(|state| &state.members)
+        .filter_map(|member| match member {
+            ast::StateMember::On { port, .. } => Some(port.name.as_str()),
+            _ => None,
+        })
+        .collect();
+    let untimed: Vec<String> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Input(input) if !handled.contains(input.name.name.as_str()) => {
+                Some(format!("`{}`", input.name.name))
+            }
+            _ => None,
+        })
+        .collect();
+    if untimed.is_empty() {
+        return;
+    }
+    let diagnostic = Diagnostic::warning(
+        Code::UnmeasuredResponse,
+        checker.file,
+        bound,
+        format!(
+            "`{}` has no period: its response times are measured at `on` transitions only, \
+             and no `on` handles {}",
+            component.name.name,
+            untimed.join(", ")
+        ),
+    )
+    .with_label("not measured for those inputs")
+    .with_help(
+        "handle the input with `on input -> state;` to time its packets from arrival to the \
+         end of the transition's sections; elsewhere `max_response` only bounds how long a \
+         section runs",
+    );
+    checker.push(diagnostic);
+}
+
 fn degrade_without_quality(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,
