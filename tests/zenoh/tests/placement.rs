@@ -13,8 +13,8 @@ use coolbot::{MonitorEvent, SectionResult, State, System};
 use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh_tests::generated::{
-    asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, nest_cell, pull_cell,
-    pull_doubler, tuned, tuned_cell,
+    asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, flaky, nest_cell,
+    pull_cell, pull_doubler, restart_cell, tuned, tuned_cell,
 };
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -104,6 +104,7 @@ impl pull_cell::Supervisor for Quiet {}
 impl nest_cell::Supervisor for Quiet {}
 impl doubling::Supervisor for Quiet {}
 impl tuned_cell::Supervisor for Quiet {}
+impl restart_cell::Supervisor for Quiet {}
 
 /// `Cell`'s parts: the source and sink hand their ports to the test; the local
 /// relay (which the placer leaves unused: the station's runs) hands them to nobody.
@@ -562,6 +563,121 @@ fn a_remote_instance_keeps_its_own_quality_levels_and_adaptation() {
         wait_until(PATIENCE, || remote().monitor.quality == 2),
         "the station's instance at its third level"
     );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// `Flaky`'s behaviour: the first period after `fail` is set fails (and clears it).
+struct Flakiness;
+
+impl flaky::Behavior for Flakiness {
+    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
+        if cx.vars.fail {
+            cx.vars.fail = false;
+            return Err(coolbot::Fault::message("told to fail"));
+        }
+        cx.vars.periods += 1;
+        Ok(())
+    }
+}
+
+struct RestartParts;
+
+impl restart_cell::Parts for RestartParts {
+    fn supervisor(&mut self) -> impl restart_cell::Supervisor {
+        Quiet
+    }
+    fn flaky(&mut self) -> impl flaky::Behavior {
+        Flakiness
+    }
+}
+
+fn flaky_registry() -> Registry {
+    let mut registry = Registry::new();
+    flaky::register(&mut registry, |name| flaky::component(name, Flakiness));
+    registry
+}
+
+/// `on error flaky: restart;` for an instance on another node: the remote instance
+/// fails (a command through the proxy tells it to), the proxy goes to
+/// `running_error`, and the compound's restart commands it back to `running` in
+/// place, on its node, as it would a local instance.
+#[test]
+fn a_remote_instance_that_fails_is_restarted_on_its_node() {
+    let (station, robot) = pair("restart-station", "restart-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), flaky_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), flaky_registry()).install();
+
+    let compound = restart_cell::component("cell", RestartParts).expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    let flaky = cell.instance("flaky").expect("the proxy");
+    let periods = |m: &coolbot::Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "periods")
+            .map_or(0, |(_, value)| match value {
+                coolbot::Value::UInt(n) => *n,
+                _ => 0,
+            })
+    };
+    flaky
+        .wait_for(|m| m.state == State::Running && periods(m) > 0, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the remote instance runs: {timeout}"));
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.session().clone(), PATIENCE);
+    let built = || -> Vec<(String, State)> {
+        ctl.components(Some("restart-station"))
+            .expect("the station lists")
+            .into_iter()
+            .filter(|l| l.path.starts_with("restart-robot-cell-flaky-"))
+            .map(|l| (l.path, l.monitor.state))
+            .collect()
+    };
+    let first = built();
+    assert_eq!(first.len(), 1, "{first:?}");
+
+    let before = periods(&flaky.snapshot());
+    flaky
+        .command(coolbot::Command::Set(
+            "fail".to_owned(),
+            coolbot::Value::Bool(true),
+        ))
+        .expect("the proxy forwards the command");
+    let restarted = cell
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|step| step.instance == "flaky" && step.step == coolbot::Step::Restarted)
+            },
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("the compound restarts the instance: {timeout}"));
+    assert_eq!(restarted.state, State::Running);
+    assert!(
+        restarted
+            .supervision
+            .iter()
+            .any(|step| step.instance == "flaky"
+                && step.step == coolbot::Step::Failed
+                && step.detail.contains("told to fail")),
+        "the remote fault, with its reason: {:?}",
+        restarted.supervision
+    );
+    // Running again, in place: the same instance on the station counts on.
+    flaky
+        .wait_for(
+            |m| m.state == State::Running && periods(m) > before + 5,
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("the instance runs again: {timeout}"));
+    let again = built();
+    assert_eq!(again.len(), 1, "{again:?}");
+    assert_eq!(again[0].0, first[0].0, "restarted in place");
+    assert_eq!(cell.state(), State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
