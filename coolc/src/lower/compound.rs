@@ -894,6 +894,7 @@ mod tests {
                     when x == 0.1 || m.ratio <= -0.5 -> off;
                     when m.error != \"boom\" && m.user_state != on -> off;
                     when m.state != running -> off;
+                    when m.period > 20ms || n.max_response == 0ms || m.priority < -2 -> off;
                 }
                 state off { entry; }
             }
@@ -910,6 +911,19 @@ mod tests {
         // `cpu_time` has no change event: read under its own key, which the runtime
         // counts as changed every supervisor period.
         assert_eq!(rules[1].1, r#"&["n.quality", "m.cpu_time"]"#);
+    }
+
+    #[test]
+    fn timing_variables_read_the_monitor_under_their_own_keys() {
+        let rules = rules_of(MONITORED);
+        let (expr, reads) = &rules[6];
+        assert_eq!(reads, r#"&["m.period", "n.max_response", "m.priority"]"#);
+        assert!(
+            expr.contains("monitor.period.unwrap_or_default()")
+                && expr.contains("monitor.max_response.unwrap_or_default()")
+                && expr.contains("i128::from(monitor.priority)"),
+            "{expr}"
+        );
     }
 
     const CONTROLLED: &str = "
