@@ -308,6 +308,11 @@ pub enum MonitorEvent {
     },
     /// The period changed.
     Period(Option<Duration>),
+    /// The response bound `max_response` changed (a command).
+    MaxResponse(Option<Duration>),
+    /// The priority changed (a command; how it applies to the thread is
+    /// [`MonitorEvent::OsPriority`]).
+    Priority(i32),
     /// The quality level changed.
     Quality(usize),
     /// The configuration changed (through the control port).

@@ -288,7 +288,7 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
 
 /// Show on the proxy's monitoring port what the remote instance's shows of its
 /// timing: quality level (an event, so that rules reading `<instance>.quality` see
-/// it), period (an event), missed deadlines, overruns, CPU and elapsed time (the
+/// it), period (an event), response bound and priority, missed deadlines, overruns, CPU and elapsed time (the
 /// proxy's runner publishes none of its own thread's: `Driven::mirrors_times`),
 /// response times and adaptation status; and its losses: what the remote inputs lost,
 /// and what was lost on the way here (port `network`), each added to the proxy's own
@@ -315,6 +315,14 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         if monitor.period != view.period {
             monitor.period = view.period;
             events.push(MonitorEvent::Period(view.period));
+        }
+        if monitor.max_response != view.max_response {
+            monitor.max_response = view.max_response;
+            events.push(MonitorEvent::MaxResponse(view.max_response));
+        }
+        if monitor.priority != view.priority {
+            monitor.priority = view.priority;
+            events.push(MonitorEvent::Priority(view.priority));
         }
         monitor.missed_deadlines = view.missed_deadlines;
         monitor.overruns = view.overruns;

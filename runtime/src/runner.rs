@@ -1010,13 +1010,24 @@ impl Runner {
                     }
                 }
                 let bound = *bound;
-                self.shared
-                    .quietly(|monitor| monitor.max_response = Some(bound));
+                self.shared.update(|monitor| {
+                    if monitor.max_response == Some(bound) {
+                        return Vec::new();
+                    }
+                    monitor.max_response = Some(bound);
+                    vec![MonitorEvent::MaxResponse(Some(bound))]
+                });
                 reply(Reply::Done);
             }
             Command::SetPriority(priority) => {
                 let priority = *priority;
-                self.shared.quietly(|monitor| monitor.priority = priority);
+                self.shared.update(|monitor| {
+                    if monitor.priority == priority {
+                        return Vec::new();
+                    }
+                    monitor.priority = priority;
+                    vec![MonitorEvent::Priority(priority)]
+                });
                 self.apply_priority(priority);
                 reply(Reply::Done);
             }

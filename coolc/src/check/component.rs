@@ -529,14 +529,11 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
     }
 }
 
-/// A `degrade` step lowers the quality level by one; with fewer than two levels it
-/// never applies and is skipped (the plan goes on to its next step, or, after the
-/// last, the component goes to running error). An instance's `timing` override may
-/// declare levels of its own: the help says so.
 /// An aperiodic atomic component with a `max_response`: the runtime measures the
 /// response time of the packets an `on` transition handles (`docs/runtime.md`,
-/// "Response time"); an input no `on` transition names is read untimed, and the
-/// bound only limits how long its sections run there.
+/// "Response time"); an event input (a queue or a tick, not pulled) no `on`
+/// transition names is read untimed, and the bound only limits how long its
+/// sections run there.
 fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     let entries = || {
         component.members.iter().flat_map(|member| match member {
@@ -572,7 +569,18 @@ fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Componen
         .members
         .iter()
         .filter_map(|member| match member {
-            ast::Member::Input(input) if !handled.contains(input.name.name.as_str()) => {
+            // Event inputs (queues and ticks) the component does not pull: a `last` or
+            // `poster` input is read for its value, a pulled one answers a request.
+            ast::Member::Input(input)
+                if input.pull.is_none()
+                    && matches!(
+                        input.def,
+                        ast::InputDef::Fifo { .. }
+                            | ast::InputDef::Ufifo { .. }
+                            | ast::InputDef::Tick
+                    )
+                    && !handled.contains(input.name.name.as_str()) =>
+            {
                 Some(format!("`{}`", input.name.name))
             }
             _ => None,
@@ -601,6 +609,10 @@ fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Componen
     checker.push(diagnostic);
 }
 
+/// A `degrade` step lowers the quality level by one; with fewer than two levels it
+/// never applies and is skipped (the plan goes on to its next step, or, after the
+/// last, the component goes to running error). An instance's `timing` override may
+/// declare levels of its own: the help says so.
 fn degrade_without_quality(
     checker: &mut Checker<'_, '_>,
     component: &ast::Component,

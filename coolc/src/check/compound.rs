@@ -475,61 +475,45 @@ fn redundant(
     }
 }
 
-/// Redundant members whose data output is read (the group's merged stream) and an input a connection of `compound` feeds that may drop packets by its
-/// overflow policy (a
-/// `fifo` that rejects or drops the oldest, a `ufifo` with a cap): members that drop
-/// different packets
-/// send different streams, and a failover to one may skip or double packets of the
-/// stream without a count (`docs/runtime.md`, "Redundancy": partial).
+/// Redundant members whose data output is read (the group's merged stream) and that
+/// may drop different packets at an input they are fed through: a failover to a
+/// member that dropped packets may then skip or double packets of the stream without
+/// a count (`docs/runtime.md`, "Redundancy": partial). A `fifo` that rejects or drops
+/// the oldest, or a capped `ufifo`, may drop wherever it is fed; a `block` fifo fed by
+/// a connection drops after its timeout, while one behind an exported input is safe
+/// (the compound leaves out, counts and resynchronizes a member whose queue stays
+/// full); an uncapped `ufifo` never drops. Every member's type is read (their
+/// interfaces are equal but their policies need not be).
 fn lossy_members(
     checker: &mut Checker<'_, '_>,
     compound: &ast::Component,
     instances: &Instances<'_>,
     redundant: &ast::Redundant,
 ) {
-    // The members' inputs a connection feeds (a connection to one feeds them all).
-    // Not an exported input: the compound's thread passes what arrives there on, and
-    // leaves out, counts and resynchronizes a member whose queue stays full.
     let members: BTreeSet<&str> = redundant.members.iter().map(|m| m.name.as_str()).collect();
-    let fed: BTreeSet<&str> = compound
-        .members
-        .iter()
-        .filter_map(|member| match member {
-            ast::Member::Connect(connect) => Some(&connect.to),
-            _ => None,
-        })
-        .filter(|end| {
-            end.instance
-                .as_ref()
-                .is_some_and(|instance| members.contains(instance.name.as_str()))
-        })
-        .map(|end| end.port.name.as_str())
-        .collect();
-    let Some((instance, _)) = redundant
-        .members
-        .first()
-        .and_then(|member| instances.get(member.name.as_str()))
-    else {
-        return;
+    let of_members = |end: &&ast::PortRef| {
+        end.instance
+            .as_ref()
+            .is_some_and(|instance| members.contains(instance.name.as_str()))
     };
-    let Some((_, component)) = checker.model.component(&instance.component.name) else {
-        return;
-    };
-    // The group's merged stream: a data output of the members that is read (connected
-    // or exported).
-    let data_outputs: BTreeSet<&str> = component
-        .members
-        .iter()
-        .filter_map(|member| match member {
-            ast::Member::Output(ast::Output {
-                name,
-                def: ast::OutputDef::Data(..),
+    // The members' inputs (by port: a connection to one feeds them all), each with
+    // whether a connection feeds it (else only an export).
+    let mut fed: BTreeMap<&str, bool> = BTreeMap::new();
+    for member in &compound.members {
+        match member {
+            ast::Member::Connect(connect) if of_members(&&connect.to) => {
+                fed.insert(connect.to.port.name.as_str(), true);
+            }
+            ast::Member::Input(ast::Input {
+                def: ast::InputDef::Export(target),
                 ..
-            }) => Some(name.name.as_str()),
-            _ => None,
-        })
-        .collect();
-    let streams = compound
+            }) if of_members(&target) => {
+                fed.entry(target.port.name.as_str()).or_insert(false);
+            }
+            _ => {}
+        }
+    }
+    let read: BTreeSet<&str> = compound
         .members
         .iter()
         .filter_map(|member| match member {
@@ -540,33 +524,53 @@ fn lossy_members(
             }) => Some(target),
             _ => None,
         })
-        .any(|end| {
-            end.instance
-                .as_ref()
-                .is_some_and(|instance| members.contains(instance.name.as_str()))
-                && data_outputs.contains(end.port.name.as_str())
-        });
-    let lossy: Vec<String> = component
-        .members
-        .iter()
-        .filter_map(|member| match member {
-            ast::Member::Input(ast::Input { name, def, .. })
-                if fed.contains(name.name.as_str()) =>
-            {
-                match def {
-                    ast::InputDef::Fifo { policy, .. } => {
-                        let policy = policy.as_ref().map_or("reject", |p| p.name.as_str());
-                        (policy != "block").then(|| format!("`{}` (`fifo`, `{policy}`)", name.name))
-                    }
-                    ast::InputDef::Ufifo { max: Some(_), .. } => {
-                        Some(format!("`{}` (`ufifo` with a cap)", name.name))
-                    }
-                    _ => None,
-                }
-            }
-            _ => None,
-        })
+        .filter(of_members)
+        .map(|end| end.port.name.as_str())
         .collect();
+    let mut lossy: BTreeSet<String> = BTreeSet::new();
+    let mut streams = false;
+    for member in &redundant.members {
+        let Some((instance, _)) = instances.get(member.name.as_str()) else {
+            continue;
+        };
+        let Some((_, component)) = checker.model.component(&instance.component.name) else {
+            continue;
+        };
+        let type_name = &instance.component.name;
+        for declared in &component.members {
+            match declared {
+                ast::Member::Output(ast::Output {
+                    name,
+                    def: ast::OutputDef::Data(..),
+                    ..
+                }) if read.contains(name.name.as_str()) => streams = true,
+                ast::Member::Input(ast::Input { name, def, .. }) => {
+                    let Some(&by_connection) = fed.get(name.name.as_str()) else {
+                        continue;
+                    };
+                    let why = match def {
+                        ast::InputDef::Fifo { policy, .. } => {
+                            match policy.as_ref().map_or("reject", |p| p.name.as_str()) {
+                                "block" if by_connection => {
+                                    Some("`fifo`, `block`: fed by a connection, it drops after its timeout".to_owned())
+                                }
+                                "block" => None,
+                                policy => Some(format!("`fifo`, `{policy}`")),
+                            }
+                        }
+                        ast::InputDef::Ufifo { max: Some(_), .. } => {
+                            Some("`ufifo` with a cap".to_owned())
+                        }
+                        _ => None,
+                    };
+                    if let Some(why) = why {
+                        lossy.insert(format!("`{type_name}.{}` ({why})", name.name));
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
     if !streams || lossy.is_empty() {
         return;
     }
@@ -575,16 +579,15 @@ fn lossy_members(
         checker.file,
         redundant.span,
         format!(
-            "`{}` may drop packets at {}: redundant members that drop different packets \
-             send different streams",
-            instance.component.name,
-            lossy.join(", ")
+            "redundant members may drop different packets, and so send different streams: {}",
+            lossy.into_iter().collect::<Vec<_>>().join(", ")
         ),
     )
     .with_label("a failover may skip or double packets of the stream, uncounted")
     .with_help(
-        "give the members inputs that do not drop (`fifo<T>(n, block)`, an uncapped `ufifo`) \
-         where the merged stream must be exact",
+        "where the merged stream must be exact, feed the members through an exported `block` \
+         fifo (the compound leaves out, counts and resynchronizes a member whose queue stays \
+         full) or give them uncapped `ufifo` inputs",
     );
     checker.push(diagnostic);
 }
@@ -925,6 +928,8 @@ fn cardinality(
     }
     let mut producers: BTreeMap<(String, String), Vec<Producer>> = BTreeMap::new();
     let mut seen_connections: BTreeMap<(String, String), Span> = BTreeMap::new();
+    // (group, input port, producer) -> the converter of its first connection, where.
+    let mut converted: BTreeMap<(String, String, String), (Option<String>, Span)> = BTreeMap::new();
     for member in &component.members {
         let (target, producer, span) = match member {
             ast::Member::Connect(connect) => {
@@ -942,7 +947,58 @@ fn cardinality(
                     continue;
                 }
                 seen_connections.insert(key.clone(), connect.span);
-                (&connect.to, key.0, connect.span)
+                // A redundant group's output is one merged stream, whichever member
+                // the connection names; a converter makes another producer.
+                let from = match connect
+                    .from
+                    .instance
+                    .as_ref()
+                    .and_then(|i| groups.get(i.name.as_str()))
+                {
+                    Some(group) => format!("{group}.{}", connect.from.port.name),
+                    None => key.0,
+                };
+                let via = connect.via.as_ref().map(|via| via.name.as_str());
+                if let Some(instance) = &connect.to.instance
+                    && let Some(group) = groups.get(instance.name.as_str())
+                {
+                    let port = (group.clone(), connect.to.port.name.clone(), from.clone());
+                    let conversion = |via: Option<&str>| match via {
+                        Some(via) => format!("`{via}`"),
+                        None => "no converter".to_owned(),
+                    };
+                    match converted.get(&port) {
+                        Some((other, first)) if other.as_deref() != via => {
+                            let diagnostic = checker
+                                .error(
+                                    Code::ConnectCardinality,
+                                    connect.span,
+                                    format!(
+                                        "`{from}` reaches input `{}` of the redundant group `{group}` twice, through {} and through {}",
+                                        connect.to.port.name,
+                                        conversion(other.as_deref()),
+                                        conversion(via)
+                                    ),
+                                )
+                                .with_label("second connection")
+                                .with_secondary(*first, "first connection")
+                                .with_help(
+                                    "every member gets one connection from an output: connect it once, or feed the group from two outputs",
+                                );
+                            checker.push(diagnostic);
+                            continue;
+                        }
+                        Some(_) => {}
+                        None => {
+                            converted.insert(port, (via.map(str::to_owned), connect.span));
+                        }
+                    }
+                }
+                let producer = match via {
+                    Some(via) => format!("{from} via {via}"),
+                    None => from,
+                };
+                (&connect.to, producer, connect.span)
             }
             ast::Member::Input(ast::Input {
                 name,

@@ -496,11 +496,10 @@ impl CompoundBuilder {
     /// an own variable `name`, or a mapped variable `name` read with [`View::mapped`]): the rule is evaluated when one of them changes, and
     /// when the supervisor enters `state` (however it got there). The compound's own
     /// defaults are read as `result`, `error`, `quality`, `cpu_time` and
-    /// `elapsed_time`. An instance's `period` changes with an event;
-    /// `instance.cpu_time`, `instance.elapsed_time`, `instance.max_response`,
-    /// `instance.priority` and the compound's own times announce no change: a rule
-    /// reading them is also evaluated once every supervisor period, on a fresh
-    /// snapshot of the instances it names.
+    /// `elapsed_time`. An instance's `period`, `max_response` and `priority` change
+    /// with an event; times (`instance.cpu_time`, `instance.elapsed_time` and the
+    /// compound's own) announce no change: a rule reading them is also evaluated once
+    /// every supervisor period, on a fresh snapshot of the instances it names.
     pub fn rule(
         mut self,
         state: &str,

@@ -147,6 +147,8 @@ impl Compound {
                     }
                     MonitorEvent::Quality(_) => format!("{name}.quality"),
                     MonitorEvent::Period(_) => format!("{name}.period"),
+                    MonitorEvent::MaxResponse(_) => format!("{name}.max_response"),
+                    MonitorEvent::Priority(_) => format!("{name}.priority"),
                     MonitorEvent::Pressure(_) | MonitorEvent::Adaptation(_) => {
                         if let Some(coordinator) = self.coordinator.as_mut() {
                             coordinator.dirty = true;

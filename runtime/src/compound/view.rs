@@ -44,17 +44,12 @@ pub(super) struct Own {
 pub(super) const OWN_DEFAULTS: [&str; 5] =
     ["result", "error", "quality", "cpu_time", "elapsed_time"];
 
-/// Whether read key `read` names what changes without an event (`cpu_time`,
-/// `elapsed_time`, own or an instance's; an instance's `max_response` and
-/// `priority`): such rules are evaluated every supervisor period.
+/// Whether read key `read` names a time (`cpu_time`, `elapsed_time`, own or an
+/// instance's), which changes without an event: such rules are evaluated every
+/// supervisor period.
 pub(super) fn is_timed(read: &str) -> bool {
-    match read.rsplit_once('.') {
-        Some((_, field)) => matches!(
-            field,
-            "cpu_time" | "elapsed_time" | "max_response" | "priority"
-        ),
-        None => matches!(read, "cpu_time" | "elapsed_time"),
-    }
+    let field = read.rsplit_once('.').map_or(read, |(_, field)| field);
+    matches!(field, "cpu_time" | "elapsed_time")
 }
 
 impl View {

@@ -610,7 +610,15 @@ fn serve(
     let spec = component.spec();
     if let Some(timing) = &request.timing {
         let own = component.timing();
-        let qualities = if timing.qualities.is_empty() {
+        let own_levels = || {
+            own.qualities.len() == timing.qualities.len()
+                && own
+                    .qualities
+                    .iter()
+                    .zip(&timing.qualities)
+                    .all(|(a, b)| *a == b)
+        };
+        let qualities = if timing.qualities.is_empty() || own_levels() {
             own.qualities
         } else {
             levels(&timing.qualities)?

@@ -269,6 +269,9 @@ pub fn describe(event: &MonitorEvent) -> String {
         }
         MonitorEvent::Period(Some(period)) => format!("period {period:?}"),
         MonitorEvent::Period(None) => "period -".to_owned(),
+        MonitorEvent::MaxResponse(Some(bound)) => format!("max_response {bound:?}"),
+        MonitorEvent::MaxResponse(None) => "max_response -".to_owned(),
+        MonitorEvent::Priority(priority) => format!("priority {priority}"),
         MonitorEvent::Quality(level) => format!("quality {level}"),
         MonitorEvent::Configured => "configured".to_owned(),
         MonitorEvent::Supervision(step) => format!("supervision: {step}"),

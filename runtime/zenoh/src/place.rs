@@ -179,7 +179,8 @@ impl coolbot::remote::Placer for Placer {
             configuration: placement.configuration.clone(),
             variables: placement.variables.clone(),
             timing: Some(RemoteTiming {
-                adaptation: Some(placement.adaptation),
+                // Sanitized: JSON has no NaN (the runtime would sanitize it anyway).
+                adaptation: Some(placement.adaptation.sanitized()),
                 ..placement.timing.into()
             }),
             run: false,
@@ -488,6 +489,8 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
         }
         MonitorEvent::LateResponse { total, .. } => view.response.late = total,
         MonitorEvent::Period(period) => view.period = period,
+        MonitorEvent::MaxResponse(bound) => view.max_response = bound,
+        MonitorEvent::Priority(priority) => view.priority = priority,
         MonitorEvent::Quality(level) => view.quality = level,
         MonitorEvent::MissedDeadline { total, .. } => view.missed_deadlines = total,
         MonitorEvent::Overrun { total, .. } => view.overruns = total,

@@ -563,6 +563,21 @@ fn a_remote_instance_keeps_its_own_quality_levels_and_adaptation() {
         wait_until(PATIENCE, || remote().monitor.quality == 2),
         "the station's instance at its third level"
     );
+    // Its response bound and priority, set through the proxy, show on the proxy's
+    // monitoring port as the station's instance publishes them (rules read them).
+    tuned
+        .command(coolbot::Command::SetMaxResponse(Duration::from_millis(25)))
+        .unwrap();
+    tuned.command(coolbot::Command::SetPriority(-1)).unwrap();
+    tuned
+        .wait_for(
+            |m| m.max_response == Some(Duration::from_millis(25)) && m.priority == -1,
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("the proxy mirrors them: {timeout}"));
+    let built = remote();
+    assert_eq!(built.monitor.max_response, Some(Duration::from_millis(25)));
+    assert_eq!(built.monitor.priority, -1);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }

@@ -494,9 +494,8 @@ impl Scope<'_, '_> {
             }
             _ => return unreadable,
         };
-        // (`cpu_time`, `elapsed_time`, `max_response` and `priority` have no change
-        // event of their own: the runtime counts them as changed every supervisor
-        // period.)
+        // (`cpu_time` and `elapsed_time` have no change event of their own: the
+        // runtime counts them as changed every supervisor period.)
         self.read(format!("{instance}.{variable}"));
         self.uses_view = true;
         maybe(code, ty)

@@ -24,6 +24,11 @@ impl Supervisor for ProbeSupervisor {
         Ok(())
     }
 
+    fn paced_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let _ = cx;
+        Ok(())
+    }
+
     fn retimed_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         let _ = cx;
         Ok(())
