@@ -11,6 +11,11 @@ impl Supervisor for GateSupervisor {
         let _ = cx;
         Ok(())
     }
+
+    fn quiet_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
+        let _ = cx;
+        Ok(())
+    }
 }
 
 /// The worker runs this crate's `Worker`.

@@ -216,6 +216,16 @@ fn a_supervisor_moves_on_a_packet_at_an_exported_input() {
     handle
         .wait_for(|m| m.user_state.as_deref() == Some("open"), WAIT)
         .unwrap();
+    // The supervisor's `after 300ms without input`: the source disconnected, the gate
+    // goes quiet; connected again, it opens.
+    system.disconnect("source.out", "gate.input").unwrap();
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some("quiet"), WAIT)
+        .unwrap();
+    system.connect("source.out", "gate.input").unwrap();
+    handle
+        .wait_for(|m| m.user_state.as_deref() == Some("open"), WAIT)
+        .unwrap();
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
