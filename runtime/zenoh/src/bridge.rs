@@ -198,7 +198,7 @@ struct Wire {
     losses: ErasedInput,
     /// The newest number handed to Zenoh, in a file a restarted process reads
     /// (`crate::tally`; numbered streams only).
-    tally: Option<Tally>,
+    tally: Option<Arc<Tally>>,
 }
 
 impl Wire {
@@ -590,11 +590,15 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let tallied = numbered && !key.starts_with(crate::place::LINKS);
         let (tally, ended) = match node.state_directory().filter(|_| tallied) {
             Some(state) => match Tally::claim(state, node.name(), &key, epoch) {
-                Some((tally, ended)) => (Some(tally), ended),
+                Some((tally, ended)) => (Some(Arc::new(tally)), ended),
                 None => (None, Vec::new()),
             },
             None => (None, Vec::new()),
         };
+        let retire = tally.as_ref().filter(|_| !ended.is_empty()).map(|tally| {
+            let tally = Arc::clone(tally);
+            Box::new(move || tally.retire()) as ledger::Retire
+        });
         let ledger = if numbered {
             Some(OutletLedger::start(
                 session,
@@ -604,6 +608,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 matches!(kind, InputKind::Fifo { .. } | InputKind::Ufifo { .. }),
                 erased.clone(),
                 ended,
+                retire,
             )?)
         } else {
             None

@@ -18,7 +18,8 @@
 //! counts the gap itself, and the outlet nothing. The questions carry the epochs of
 //! killed predecessors and their newest numbers (`crate::tally`).
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::collections::HashSet;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -36,6 +37,15 @@ pub(crate) const ACK_PERIOD: Duration = Duration::from_millis(100);
 
 /// How long one round of questions waits for the inlets' answers.
 const ACK_TIMEOUT: Duration = Duration::from_millis(300);
+
+/// Rounds in a row in which every inlet the outlet knows answered a question that
+/// reported the killed epochs, after which the report is retired (each inlet has
+/// counted it: a report counts once).
+const RETIRE_ROUNDS: u32 = 3;
+
+/// What an outlet does once its killed predecessors' report is retired: clear it
+/// from its tally, so that the next outlet does not report it again.
+pub(crate) type Retire = Box<dyn Fn() + Send + Sync>;
 
 /// How many rounds an outlet that stops asks, waiting for its live inlets to
 /// acknowledge everything it sent, before counting the rest lost.
@@ -269,8 +279,12 @@ struct Book {
     /// The inlets already counted for, by id, oldest first.
     settled: Mutex<std::collections::VecDeque<String>>,
     /// What this outlet's killed predecessors (same node, same key) had sent, from
-    /// the tallies they left: reported to the inlets with every question.
-    ended: Vec<Ended>,
+    /// the tallies they left: reported to the inlets with every question until
+    /// retired ([`RETIRE_ROUNDS`]).
+    ended: Mutex<Vec<Ended>>,
+    /// Rounds in a row every known inlet answered while `ended` was reported.
+    heard: AtomicU32,
+    retire: Option<Retire>,
 }
 
 impl Book {
@@ -430,15 +444,16 @@ impl Book {
 
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
     fn is_empty(&self) -> bool {
-        self.ended.is_empty() && lock(&self.streams).iter().all(|s| s.counted)
+        lock(&self.ended).is_empty() && lock(&self.streams).iter().all(|s| s.counted)
     }
 
     /// One round of questions to the inlets.
     fn ask(&self, session: &zenoh::Session) {
         let prefix = format!("{}/@ack/", self.key);
+        let report = postcard::to_allocvec(&*lock(&self.ended)).unwrap_or_default();
         let replies = match session
             .get(format!("{}/@ack/**", self.key))
-            .payload(postcard::to_allocvec(&self.ended).unwrap_or_default())
+            .payload(report)
             .target(QueryTarget::All)
             .consolidation(ConsolidationMode::None)
             .timeout(ACK_TIMEOUT)
@@ -450,18 +465,51 @@ impl Book {
                 return;
             }
         };
+        let mut answered = HashSet::new();
         while let Ok(reply) = replies.recv() {
             let Ok(sample) = reply.result() else { continue };
             let Some(node_and_name) = sample.key_expr().as_str().strip_prefix(&prefix) else {
                 continue;
             };
             match postcard::from_bytes::<Ack>(&sample.payload().to_bytes()) {
-                Ok(ack) => self.acknowledged(node_and_name, &ack),
+                Ok(ack) => {
+                    answered.insert(format!("{node_and_name}/{}", ack.0));
+                    self.acknowledged(node_and_name, &ack);
+                }
                 Err(error) => tracing::warn!(
                     key = %self.key,
                     "an acknowledgment that does not decode was dropped: {error}"
                 ),
             }
+        }
+        self.after_round(&answered);
+    }
+
+    /// A round of questions ended, answered by the inlets `answered` (their ids):
+    /// the killed epochs' report is retired once [`RETIRE_ROUNDS`] rounds in a row
+    /// were answered by every inlet the outlet knows, all alive (one whose link is
+    /// broken may still have to count it), and at least one.
+    fn after_round(&self, answered: &HashSet<String>) {
+        let mut ended = lock(&self.ended);
+        if ended.is_empty() {
+            return;
+        }
+        let heard = {
+            let streams = lock(&self.streams);
+            let mut known = streams.iter().filter(|s| !s.counted).peekable();
+            known.peek().is_some() && known.all(|s| s.alive && answered.contains(&s.id))
+        };
+        if !heard {
+            self.heard.store(0, Ordering::Release);
+            return;
+        }
+        if self.heard.fetch_add(1, Ordering::AcqRel) + 1 < RETIRE_ROUNDS {
+            return;
+        }
+        tracing::trace!(target: OUTLET_LEDGER_TARGET, "{} retired {:?}", self.key, *ended);
+        ended.clear();
+        if let Some(retire) = &self.retire {
+            retire();
         }
     }
 }
@@ -479,7 +527,8 @@ pub(crate) struct OutletLedger {
 impl OutletLedger {
     /// The ledger of the outlet of `epoch` on `key`, whose numbered messages are
     /// counted by `sent`, counting losses at `losses`; `ended`, what its killed
-    /// predecessors had sent (their tallies).
+    /// predecessors had sent (their tallies), and `retire`, what clears it from the
+    /// tally once every inlet has heard it.
     pub(crate) fn start(
         session: &zenoh::Session,
         key: &str,
@@ -488,6 +537,7 @@ impl OutletLedger {
         single: bool,
         losses: ErasedInput,
         ended: Vec<Ended>,
+        retire: Option<Retire>,
     ) -> Result<OutletLedger, crate::Error> {
         let book = Arc::new(Book {
             key: key.to_owned(),
@@ -497,7 +547,9 @@ impl OutletLedger {
             losses,
             streams: Mutex::new(Vec::new()),
             settled: Mutex::new(std::collections::VecDeque::new()),
-            ended,
+            ended: Mutex::new(ended),
+            heard: AtomicU32::new(0),
+            retire,
         });
         let prefix = format!("{key}/@in/");
         let watched = Arc::clone(&book);
@@ -589,7 +641,9 @@ mod tests {
                 losses: losses.erased(),
                 streams: Mutex::new(Vec::new()),
                 settled: Mutex::new(std::collections::VecDeque::new()),
-                ended: Vec::new(),
+                ended: Mutex::new(Vec::new()),
+                heard: AtomicU32::new(0),
+                retire: None,
             },
             losses,
         )
@@ -646,6 +700,39 @@ mod tests {
         book.acknowledged("station/in", &("bbb".to_owned(), had(13, 20)));
         book.settle(true);
         assert_eq!(losses.overflows(), 6, "`bbb` acknowledged everything");
+    }
+
+    #[test]
+    fn a_report_is_retired_after_every_known_inlet_heard_it_three_rounds_in_a_row() {
+        let (mut book, _) = book(false);
+        let retired = Arc::new(AtomicU32::new(0));
+        let count = Arc::clone(&retired);
+        book.retire = Some(Box::new(move || {
+            count.fetch_add(1, Ordering::AcqRel);
+        }));
+        *lock(&book.ended) = vec![(3, 40)];
+        let heard = |ids: &[&str]| ids.iter().map(|&id| id.to_owned()).collect::<HashSet<_>>();
+        // Nobody known yet: nobody heard it.
+        book.after_round(&heard(&[]));
+        book.token("a/in/aaa", SampleKind::Put);
+        book.token("b/in/bbb", SampleKind::Put);
+        book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        book.after_round(&heard(&["a/in/aaa"])); // `bbb` did not answer: again
+        book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        // `bbb`'s link breaks: it may still have to hear the report.
+        book.token("b/in/bbb", SampleKind::Delete);
+        book.after_round(&heard(&["a/in/aaa"]));
+        assert_eq!(*lock(&book.ended), [(3, 40)]);
+        assert_eq!(retired.load(Ordering::Acquire), 0);
+        book.token("b/in/bbb", SampleKind::Put);
+        for _ in 0..RETIRE_ROUNDS {
+            book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        }
+        assert!(lock(&book.ended).is_empty(), "retired");
+        assert_eq!(retired.load(Ordering::Acquire), 1);
+        book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        assert_eq!(retired.load(Ordering::Acquire), 1, "once");
     }
 
     #[test]

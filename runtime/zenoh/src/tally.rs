@@ -12,7 +12,8 @@
 //! that claims a slot takes over what every slot nobody holds says (a killed outlet's
 //! epoch, and what it had not reported yet) and reports it all with its questions;
 //! a report counts once at an inlet, so a report repeated after another kill costs
-//! nothing. A clean stop marks its own epoch reported. A claim removes the node's
+//! nothing. Once every inlet has heard it (`crate::ledger`), the outlet retires it:
+//! clears it from its tally. A clean stop marks its own epoch reported. A claim removes the node's
 //! files that nobody holds and that have nothing to report; the keys of a remote
 //! placement (`coolbot-link/...`), new at every placement, have no tally (no process
 //! started again would ever read it).
@@ -338,6 +339,15 @@ impl Tally {
         }
     }
 
+    /// The killed epochs this outlet took over were reported to every inlet: clear
+    /// them, so that the next outlet on the key does not report them again.
+    pub(crate) fn retire(&self) {
+        for pair in 1..=KEPT {
+            self.write(16 * pair, 0);
+            self.write(16 * pair + 8, 0);
+        }
+    }
+
     /// Message `number` is about to go to Zenoh (a store to the mapped page).
     pub(crate) fn record(&self, number: u64) {
         self.write(8, number);
@@ -387,6 +397,21 @@ mod tests {
         state
             .join(node)
             .join(format!("{:016x}.{slot}.tally", fnv(key)))
+    }
+
+    #[test]
+    fn a_retired_report_is_not_taken_over_again() {
+        let state = tempfile::tempdir().unwrap();
+        let (first, _) = Tally::claim(state.path(), "node", "k/retire", 1).unwrap();
+        first.record(7);
+        first.crash();
+        let (second, ended) = Tally::claim(state.path(), "node", "k/retire", 2).unwrap();
+        assert_eq!(ended, [(1, 7)]);
+        second.retire();
+        second.record(3);
+        second.crash();
+        let (_third, ended) = Tally::claim(state.path(), "node", "k/retire", 3).unwrap();
+        assert_eq!(ended, [(2, 3)], "epoch 1 was retired, epoch 2 was killed");
     }
 
     #[test]
