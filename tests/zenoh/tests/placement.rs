@@ -14,7 +14,8 @@ use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh_tests::generated::{
     asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, flaky, nest_cell,
-    pull_cell, pull_doubler, restart_cell, tuned, tuned_cell,
+    pair_relay, pair_sink, pair_source, pull_cell, pull_doubler, remote_lead_pair, remote_pair,
+    restart_cell, tuned, tuned_cell,
 };
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -105,6 +106,8 @@ impl nest_cell::Supervisor for Quiet {}
 impl doubling::Supervisor for Quiet {}
 impl tuned_cell::Supervisor for Quiet {}
 impl restart_cell::Supervisor for Quiet {}
+impl remote_pair::Supervisor for Quiet {}
+impl remote_lead_pair::Supervisor for Quiet {}
 
 /// `Cell`'s parts: the source and sink hand their ports to the test; the local
 /// relay (which the placer leaves unused: the station's runs) hands them to nobody.
@@ -695,6 +698,181 @@ fn a_remote_instance_that_fails_is_restarted_on_its_node() {
     assert_eq!(cell.state(), State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
+}
+
+/// `PairRelay`'s behaviour: passes on what arrived; fails while `fail` is set.
+struct Relaying;
+
+impl pair_relay::Behavior for Relaying {
+    fn relaying_entry(&mut self, cx: &mut pair_relay::Cx<'_>) -> SectionResult {
+        if cx.vars.fail {
+            return Err(coolbot::Fault::message("told to fail"));
+        }
+        for value in cx.inputs.input.drain() {
+            cx.outputs.output.send(value);
+        }
+        Ok(())
+    }
+}
+
+struct HandPairSource(Sender<DataOut<u64>>);
+
+impl pair_source::Behavior for HandPairSource {
+    fn start(&mut self, cx: &mut pair_source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+struct HandPairSink(Sender<UfifoIn<u64>>);
+
+impl pair_sink::Behavior for HandPairSink {
+    fn start(&mut self, cx: &mut pair_sink::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.inputs.inbox.clone());
+        Ok(())
+    }
+}
+
+struct PairParts {
+    source: Sender<DataOut<u64>>,
+    sink: Sender<UfifoIn<u64>>,
+}
+
+impl remote_pair::Parts for PairParts {
+    fn supervisor(&mut self) -> impl remote_pair::Supervisor {
+        Quiet
+    }
+    fn source(&mut self) -> impl pair_source::Behavior {
+        HandPairSource(self.source.clone())
+    }
+    fn a(&mut self) -> impl pair_relay::Behavior {
+        Relaying
+    }
+    fn b(&mut self) -> impl pair_relay::Behavior {
+        Relaying
+    }
+    fn sink(&mut self) -> impl pair_sink::Behavior {
+        HandPairSink(self.sink.clone())
+    }
+}
+
+impl remote_lead_pair::Parts for PairParts {
+    fn supervisor(&mut self) -> impl remote_lead_pair::Supervisor {
+        Quiet
+    }
+    fn source(&mut self) -> impl pair_source::Behavior {
+        HandPairSource(self.source.clone())
+    }
+    fn a(&mut self) -> impl pair_relay::Behavior {
+        Relaying
+    }
+    fn b(&mut self) -> impl pair_relay::Behavior {
+        Relaying
+    }
+    fn sink(&mut self) -> impl pair_sink::Behavior {
+        HandPairSink(self.sink.clone())
+    }
+}
+
+fn relay_registry() -> Registry {
+    let mut registry = Registry::new();
+    pair_relay::register(&mut registry, |name| pair_relay::component(name, Relaying));
+    registry
+}
+
+/// A redundant group with one member on another node: both members get every
+/// packet (the remote one through its proxy), the sink reads one stream; when the
+/// leader fails, the other member continues it with no packet missing or doubled.
+/// `station` is the node the compound places `b` on; `failing`, the leader.
+fn one_stream_across_a_failover(
+    station: &str,
+    build: impl FnOnce(PairParts) -> coolbot::Component,
+    failing: &str,
+) {
+    let (station, robot) = pair(station, &format!("{station}-robot"));
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), relay_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), relay_registry()).install();
+
+    let (source, sources) = crossbeam_channel::unbounded();
+    let (sink, sinks) = crossbeam_channel::unbounded();
+    let mut system = System::new();
+    let pair = system.add(build(PairParts { source, sink })).unwrap();
+    system.run_all().unwrap();
+    let out = handed(&sources, "the source");
+    let inbox = handed(&sinks, "the sink");
+    let (a, b) = (
+        pair.instance("a").expect("a"),
+        pair.instance("b").expect("the proxy"),
+    );
+    for member in [&a, &b] {
+        member
+            .wait_for(|m| m.state == State::Running, PATIENCE)
+            .unwrap_or_else(|timeout| panic!("{timeout}"));
+    }
+    let mut seen = Vec::new();
+    let read_until = |count: usize, seen: &mut Vec<u64>| {
+        wait_until(PATIENCE, || {
+            seen.extend(inbox.drain());
+            seen.len() >= count
+        })
+    };
+    for n in 1..=50 {
+        out.send(n);
+    }
+    assert!(read_until(50, &mut seen), "the first 50: {seen:?}");
+    // The leader fails at its next packet: the other member leads on.
+    let (leader, other) = if failing == "a" { (&a, &b) } else { (&b, &a) };
+    leader
+        .command(coolbot::Command::Set(
+            "fail".to_owned(),
+            coolbot::Value::Bool(true),
+        ))
+        .unwrap();
+    for n in 51..=100 {
+        out.send(n);
+    }
+    leader
+        .wait_for(|m| m.state == State::RunningError, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("{timeout}"));
+    assert!(read_until(100, &mut seen), "all 100: {seen:?}");
+    assert_eq!(
+        seen,
+        (1..=100).collect::<Vec<u64>>(),
+        "one stream, none missing or doubled"
+    );
+    // It was the leader: the other member took its place.
+    let took_over = |m: &coolbot::Monitor| {
+        m.supervision.iter().any(|step| {
+            step.instance == failing
+                && matches!(&step.step, coolbot::Step::Substituted { by } if by != failing)
+        })
+    };
+    pair.wait_for(took_over, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the other member leads: {timeout}"));
+    assert_eq!(pair.state(), State::Running);
+    assert_eq!(other.state(), State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_redundant_group_keeps_one_stream_when_its_local_leader_fails_and_the_remote_member_leads_on() {
+    one_stream_across_a_failover(
+        "pair-station",
+        |parts| remote_pair::component("pair", parts).expect("the compound builds"),
+        "a",
+    );
+}
+
+#[test]
+fn a_redundant_group_keeps_one_stream_when_its_remote_leader_fails_and_the_local_member_leads_on() {
+    one_stream_across_a_failover(
+        "lead-station",
+        |parts| remote_lead_pair::component("pair", parts).expect("the compound builds"),
+        "b",
+    );
 }
 
 /// A station process (`station-under-test`), killed when dropped, and its state
