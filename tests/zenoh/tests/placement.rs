@@ -13,9 +13,9 @@ use coolbot::{MonitorEvent, SectionResult, State, System};
 use coolbot_zenoh::Placer;
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh_tests::generated::{
-    asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, flaky, nest_cell,
-    pair_relay, pair_sink, pair_source, pull_cell, pull_doubler, remote_lead_pair, remote_pair,
-    restart_cell, tuned, tuned_cell,
+    asker, cell, cell_sink, cell_source, counter, doubling, every_kind_relay, flaky, ignore_cell,
+    nest_cell, pair_relay, pair_sink, pair_source, pull_cell, pull_doubler, remote_lead_pair,
+    remote_pair, restart_cell, tuned, tuned_cell,
 };
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -106,6 +106,7 @@ impl nest_cell::Supervisor for Quiet {}
 impl doubling::Supervisor for Quiet {}
 impl tuned_cell::Supervisor for Quiet {}
 impl restart_cell::Supervisor for Quiet {}
+impl ignore_cell::Supervisor for Quiet {}
 impl remote_pair::Supervisor for Quiet {}
 impl remote_lead_pair::Supervisor for Quiet {}
 
@@ -696,6 +697,74 @@ fn a_remote_instance_that_fails_is_restarted_on_its_node() {
     assert_eq!(again.len(), 1, "{again:?}");
     assert_eq!(again[0].0, first[0].0, "restarted in place");
     assert_eq!(cell.state(), State::Running);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+impl ignore_cell::Parts for RestartParts {
+    fn supervisor(&mut self) -> impl ignore_cell::Supervisor {
+        Quiet
+    }
+    fn flaky(&mut self) -> impl flaky::Behavior {
+        Flakiness
+    }
+}
+
+/// `on error flaky: ignore;` for an instance on another node: the remote instance
+/// fails, its proxy shows `running_error` with the remote reason, and the compound
+/// records the step and runs on without touching it.
+#[test]
+fn a_remote_instance_whose_failure_is_ignored_stays_failed_and_the_compound_runs_on() {
+    let (station, robot) = pair("ignore-station", "ignore-robot");
+    let station = Arc::new(station);
+    let robot = Arc::new(robot);
+    let _agent = Agent::start(Arc::clone(&station), flaky_registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), flaky_registry()).install();
+
+    let compound = ignore_cell::component("cell", RestartParts).expect("the compound builds");
+    let mut system = System::new();
+    let cell = system.add(compound).unwrap();
+    system.run_all().unwrap();
+    let flaky = cell.instance("flaky").expect("the proxy");
+    flaky
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("{timeout}"));
+    flaky
+        .command(coolbot::Command::Set(
+            "fail".to_owned(),
+            coolbot::Value::Bool(true),
+        ))
+        .expect("the proxy forwards the command");
+    let ignored = cell
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|step| step.instance == "flaky" && step.step == coolbot::Step::Ignored)
+            },
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("the compound ignores the failure: {timeout}"));
+    assert_eq!(ignored.state, State::Running);
+    let failed = flaky.snapshot();
+    assert_eq!(failed.state, State::RunningError);
+    assert!(
+        failed
+            .error
+            .as_deref()
+            .unwrap_or("")
+            .contains("told to fail"),
+        "{:?}",
+        failed.error
+    );
+    assert!(
+        !cell
+            .snapshot()
+            .supervision
+            .iter()
+            .any(|step| step.instance == "flaky" && step.step == coolbot::Step::Restarted),
+        "ignored, not restarted"
+    );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
