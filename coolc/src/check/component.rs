@@ -3,7 +3,7 @@
 
 use super::model::DEFAULT_CONTROLLABLES;
 use super::model::{DEFAULT_OBSERVABLES, Ty};
-use super::{Checker, adaptation, automaton, compound, names, values};
+use super::{Checker, adaptation, automaton, compound, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
@@ -65,7 +65,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
     }
     automaton::automata(checker, component);
     if component.kind == ComponentKind::Atomic {
-        unmeasured_responses(checker, component);
+        response::unmeasured_responses(checker, component);
     }
     if component.kind == ComponentKind::Compound {
         compound::compound(checker, component);
@@ -527,86 +527,6 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
             values::duration(checker, every, "`retry ... every`");
         }
     }
-}
-
-/// An aperiodic atomic component with a `max_response`: the runtime measures the
-/// response time of the packets an `on` transition handles (`docs/runtime.md`,
-/// "Response time"); an event input (a queue or a tick, not pulled) no `on`
-/// transition names is read untimed, and the bound only limits how long its
-/// sections run there.
-fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Component) {
-    let entries = || {
-        component.members.iter().flat_map(|member| match member {
-            ast::Member::Timing(timing) => timing.entries.as_slice(),
-            _ => &[],
-        })
-    };
-    let periodic = entries().any(|entry| matches!(entry, ast::TimingEntry::Period(_)));
-    let Some(bound) = entries().find_map(|entry| match entry {
-        ast::TimingEntry::MaxResponse(expr) => Some(expr.span),
-        _ => None,
-    }) else {
-        return;
-    };
-    if periodic {
-        return;
-    }
-    let handled: std::collections::BTreeSet<&str> = component
-        .members
-        .iter()
-        .filter_map(|member| match member {
-            ast::Member::Automaton(automaton) => Some(&automaton.states),
-            _ => None,
-        })
-        .flatten()
-        .flat_map(|state| &state.members)
-        .filter_map(|member| match member {
-            ast::StateMember::On { port, .. } => Some(port.name.as_str()),
-            _ => None,
-        })
-        .collect();
-    let untimed: Vec<String> = component
-        .members
-        .iter()
-        .filter_map(|member| match member {
-            // Event inputs (queues and ticks) the component does not pull: a `last` or
-            // `poster` input is read for its value, a pulled one answers a request.
-            ast::Member::Input(input)
-                if input.pull.is_none()
-                    && matches!(
-                        input.def,
-                        ast::InputDef::Fifo { .. }
-                            | ast::InputDef::Ufifo { .. }
-                            | ast::InputDef::Tick
-                    )
-                    && !handled.contains(input.name.name.as_str()) =>
-            {
-                Some(format!("`{}`", input.name.name))
-            }
-            _ => None,
-        })
-        .collect();
-    if untimed.is_empty() {
-        return;
-    }
-    let diagnostic = Diagnostic::warning(
-        Code::UnmeasuredResponse,
-        checker.file,
-        bound,
-        format!(
-            "`{}` has no period: its response times are measured at `on` transitions only, \
-             and no `on` handles {}",
-            component.name.name,
-            untimed.join(", ")
-        ),
-    )
-    .with_label("not measured for those inputs")
-    .with_help(
-        "handle the input with `on input -> state;` to time its packets from arrival to the \
-         end of the transition's sections; elsewhere `max_response` only bounds how long a \
-         section runs",
-    );
-    checker.push(diagnostic);
 }
 
 /// A `degrade` step lowers the quality level by one; with fewer than two levels it

@@ -6,7 +6,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::model::{Interface, Model, Port, PortKind, Ty};
-use super::{Checker, adaptation, names, values};
+use super::{Checker, adaptation, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 use crate::resolve::DefKind;
@@ -152,6 +152,22 @@ fn instance(
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
+    }
+    // An instance's own `max_response` on an aperiodic type that has none (the
+    // type's own is warned about where it is declared).
+    if let Some(timing) = &instance.timing
+        && let Some(bound) = response::max_response(timing.entries.iter())
+        && let Some((_, declared)) = checker.model.component(&instance.component.name)
+        && declared.kind == ComponentKind::Atomic
+        && response::max_response(response::timing_entries(declared)).is_none()
+        && !timing
+            .entries
+            .iter()
+            .chain(response::timing_entries(declared))
+            .any(|entry| matches!(entry, ast::TimingEntry::Period(_)))
+    {
+        let what = format!("{} ({})", instance.name.name, instance.component.name);
+        response::unmeasured(checker, declared, bound, &what);
     }
     let interface = instances
         .get(instance.name.name.as_str())

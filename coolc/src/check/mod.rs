@@ -22,6 +22,7 @@ mod component;
 mod compound;
 pub mod model;
 mod names;
+mod response;
 mod rules;
 mod values;
 

@@ -1,0 +1,113 @@
+//! Response times that go unmeasured: an aperiodic atomic component's `max_response`
+//! times only the packets an `on` transition handles (`docs/runtime.md`, "Response
+//! time"); its other event inputs are read untimed (`coolc::check::unmeasured_response`,
+//! a warning), whether the bound is the type's or an instance's override.
+
+use super::Checker;
+use crate::ast::{self, Span};
+use crate::diagnostics::{Code, Diagnostic};
+
+/// An aperiodic atomic component with a `max_response`: the runtime measures the
+/// response time of the packets an `on` transition handles (`docs/runtime.md`,
+/// "Response time"); an event input (a queue or a tick, not pulled) no `on`
+/// transition names is read untimed, and the bound only limits how long its
+/// sections run there.
+pub(super) fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let entries: Vec<&ast::TimingEntry> = timing_entries(component).collect();
+    let Some(bound) = max_response(entries.iter().copied()) else {
+        return;
+    };
+    if entries
+        .iter()
+        .any(|entry| matches!(entry, ast::TimingEntry::Period(_)))
+    {
+        return;
+    }
+    unmeasured(checker, component, bound, &component.name.name);
+}
+
+/// The entries of `component`'s `timing` blocks.
+pub(super) fn timing_entries(
+    component: &ast::Component,
+) -> impl Iterator<Item = &ast::TimingEntry> {
+    component.members.iter().flat_map(|member| match member {
+        ast::Member::Timing(timing) => timing.entries.as_slice(),
+        _ => &[],
+    })
+}
+
+/// Where `entries` give a `max_response`.
+pub(super) fn max_response<'e>(
+    mut entries: impl Iterator<Item = &'e ast::TimingEntry>,
+) -> Option<Span> {
+    entries.find_map(|entry| match entry {
+        ast::TimingEntry::MaxResponse(expr) => Some(expr.span),
+        _ => None,
+    })
+}
+
+/// Warn, at `bound` in the checked file, of the event inputs of aperiodic `component`
+/// (`what`: the component, or the instance whose override gives the bound) that no
+/// `on` transition handles.
+pub(super) fn unmeasured(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    bound: Span,
+    what: &str,
+) {
+    let handled: std::collections::BTreeSet<&str> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            ast::Member::Automaton(automaton) => Some(&automaton.states),
+            _ => None,
+        })
+        .flatten()
+        .flat_map(|state| &state.members)
+        .filter_map(|member| match member {
+            ast::StateMember::On { port, .. } => Some(port.name.as_str()),
+            _ => None,
+        })
+        .collect();
+    let untimed: Vec<String> = component
+        .members
+        .iter()
+        .filter_map(|member| match member {
+            // Event inputs (queues and ticks) the component does not pull: a `last` or
+            // `poster` input is read for its value, a pulled one answers a request.
+            ast::Member::Input(input)
+                if input.pull.is_none()
+                    && matches!(
+                        input.def,
+                        ast::InputDef::Fifo { .. }
+                            | ast::InputDef::Ufifo { .. }
+                            | ast::InputDef::Tick
+                    )
+                    && !handled.contains(input.name.name.as_str()) =>
+            {
+                Some(format!("`{}`", input.name.name))
+            }
+            _ => None,
+        })
+        .collect();
+    if untimed.is_empty() {
+        return;
+    }
+    let diagnostic = Diagnostic::warning(
+        Code::UnmeasuredResponse,
+        checker.file,
+        bound,
+        format!(
+            "`{what}` has no period: its response times are measured at `on` transitions \
+             only, and no `on` handles {}",
+            untimed.join(", ")
+        ),
+    )
+    .with_label("not measured for those inputs")
+    .with_help(
+        "handle the input with `on input -> state;` to time its packets from arrival to the \
+         end of the transition's sections; elsewhere `max_response` only bounds how long a \
+         section runs",
+    );
+    checker.push(diagnostic);
+}
