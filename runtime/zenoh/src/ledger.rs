@@ -43,6 +43,11 @@ const ACK_TIMEOUT: Duration = Duration::from_millis(300);
 /// counted it: a report counts once).
 const RETIRE_ROUNDS: u32 = 3;
 
+/// How long an outlet reports its killed predecessors' epochs at least: a process
+/// just started is still finding its peers (an inlet it cannot reach yet has no
+/// token it could see), and messages of the killed epoch may still be on their way.
+const RETIRE_AFTER: Duration = Duration::from_secs(10);
+
 /// What an outlet does once its killed predecessors' report is retired: clear it
 /// from its tally, so that the next outlet does not report it again.
 pub(crate) type Retire = Box<dyn Fn() + Send + Sync>;
@@ -282,8 +287,11 @@ struct Book {
     /// the tallies they left: reported to the inlets with every question until
     /// retired ([`RETIRE_ROUNDS`]).
     ended: Mutex<Vec<Ended>>,
-    /// Rounds in a row every known inlet answered while `ended` was reported.
+    /// Rounds in a row every known inlet answered while `ended` was reported (since
+    /// the last inlet appeared).
     heard: AtomicU32,
+    /// When the outlet started: its report is retired [`RETIRE_AFTER`] after at least.
+    started: Instant,
     retire: Option<Retire>,
 }
 
@@ -299,6 +307,8 @@ impl Book {
             Some(index) => index,
             None => {
                 streams.push(Stream::new(id, self.sent())?);
+                // A newcomer must hear the report too: the rounds count again.
+                self.heard.store(0, Ordering::Release);
                 streams.len() - 1
             }
         };
@@ -487,8 +497,9 @@ impl Book {
 
     /// A round of questions ended, answered by the inlets `answered` (their ids):
     /// the killed epochs' report is retired once [`RETIRE_ROUNDS`] rounds in a row
-    /// were answered by every inlet the outlet knows, all alive (one whose link is
-    /// broken may still have to count it), and at least one.
+    /// (since the last inlet appeared) were answered by every inlet the outlet knows,
+    /// all alive (one whose link is broken may still have to count it), and at least
+    /// one, and not before [`RETIRE_AFTER`].
     fn after_round(&self, answered: &HashSet<String>) {
         let mut ended = lock(&self.ended);
         if ended.is_empty() {
@@ -501,6 +512,9 @@ impl Book {
         };
         if !heard {
             self.heard.store(0, Ordering::Release);
+            return;
+        }
+        if self.started.elapsed() < RETIRE_AFTER {
             return;
         }
         if self.heard.fetch_add(1, Ordering::AcqRel) + 1 < RETIRE_ROUNDS {
@@ -549,6 +563,7 @@ impl OutletLedger {
             settled: Mutex::new(std::collections::VecDeque::new()),
             ended: Mutex::new(ended),
             heard: AtomicU32::new(0),
+            started: Instant::now(),
             retire,
         });
         let prefix = format!("{key}/@in/");
@@ -643,6 +658,7 @@ mod tests {
                 settled: Mutex::new(std::collections::VecDeque::new()),
                 ended: Mutex::new(Vec::new()),
                 heard: AtomicU32::new(0),
+                started: Instant::now(),
                 retire: None,
             },
             losses,
@@ -712,11 +728,24 @@ mod tests {
         }));
         *lock(&book.ended) = vec![(3, 40)];
         let heard = |ids: &[&str]| ids.iter().map(|&id| id.to_owned()).collect::<HashSet<_>>();
-        // Nobody known yet: nobody heard it.
-        book.after_round(&heard(&[]));
+        // Too soon after the outlet started: its peers may not all be found yet.
         book.token("a/in/aaa", SampleKind::Put);
+        for _ in 0..RETIRE_ROUNDS {
+            book.after_round(&heard(&["a/in/aaa"]));
+        }
+        assert_eq!(*lock(&book.ended), [(3, 40)], "not before RETIRE_AFTER");
+        book.started = Instant::now()
+            .checked_sub(RETIRE_AFTER)
+            .expect("a monotonic clock that far back");
+        // `aaa` did not answer: the rounds count again.
+        book.after_round(&heard(&[]));
+        book.after_round(&heard(&["a/in/aaa"]));
+        book.after_round(&heard(&["a/in/aaa"]));
+        // A newcomer: the rounds count again from it (a third round heard by all
+        // retires nothing).
         book.token("b/in/bbb", SampleKind::Put);
         book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
+        assert_eq!(*lock(&book.ended), [(3, 40)], "counted from the newcomer");
         book.after_round(&heard(&["a/in/aaa"])); // `bbb` did not answer: again
         book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
         book.after_round(&heard(&["a/in/aaa", "b/in/bbb"]));
