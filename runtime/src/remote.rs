@@ -308,28 +308,49 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         let mut events = Vec::new();
         monitor.response = view.response;
         monitor.adaptation = view.adaptation.clone();
-        if monitor.quality != view.quality {
-            monitor.quality = view.quality;
-            events.push(MonitorEvent::Quality(view.quality));
-        }
-        if monitor.period != view.period {
-            monitor.period = view.period;
-            events.push(MonitorEvent::Period(view.period));
-        }
-        if monitor.max_response != view.max_response {
-            monitor.max_response = view.max_response;
-            events.push(MonitorEvent::MaxResponse(view.max_response));
-        }
-        if monitor.priority != view.priority {
-            monitor.priority = view.priority;
-            events.push(MonitorEvent::Priority(view.priority));
-        }
+        follow(
+            &mut monitor.quality,
+            view.quality,
+            MonitorEvent::Quality,
+            &mut events,
+        );
+        follow(
+            &mut monitor.period,
+            view.period,
+            MonitorEvent::Period,
+            &mut events,
+        );
+        follow(
+            &mut monitor.max_response,
+            view.max_response,
+            MonitorEvent::MaxResponse,
+            &mut events,
+        );
+        follow(
+            &mut monitor.priority,
+            view.priority,
+            MonitorEvent::Priority,
+            &mut events,
+        );
         monitor.missed_deadlines = view.missed_deadlines;
         monitor.overruns = view.overruns;
         monitor.cpu_time = view.cpu_time;
         monitor.elapsed_time = view.elapsed_time;
         events
     });
+}
+
+/// Set `field` to the remote value `now`, with its event when it changed.
+fn follow<T: PartialEq + Copy>(
+    field: &mut T,
+    now: T,
+    event: fn(T) -> MonitorEvent,
+    events: &mut Vec<MonitorEvent>,
+) {
+    if *field != now {
+        *field = now;
+        events.push(event(now));
+    }
 }
 
 /// Stands for an instance on another node (see the module documentation).

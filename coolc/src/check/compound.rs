@@ -153,22 +153,7 @@ fn instance(
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
     }
-    // An instance's own `max_response` on an aperiodic type that has none (the
-    // type's own is warned about where it is declared).
-    if let Some(timing) = &instance.timing
-        && let Some(bound) = response::max_response(timing.entries.iter())
-        && let Some((_, declared)) = checker.model.component(&instance.component.name)
-        && declared.kind == ComponentKind::Atomic
-        && response::max_response(response::timing_entries(declared)).is_none()
-        && !timing
-            .entries
-            .iter()
-            .chain(response::timing_entries(declared))
-            .any(|entry| matches!(entry, ast::TimingEntry::Period(_)))
-    {
-        let what = format!("{} ({})", instance.name.name, instance.component.name);
-        response::unmeasured(checker, declared, bound, &what);
-    }
+    response::instance_override(checker, instance);
     let interface = instances
         .get(instance.name.name.as_str())
         .and_then(|(_, interface)| interface.clone());

@@ -4,7 +4,7 @@
 //! a warning), whether the bound is the type's or an instance's override.
 
 use super::Checker;
-use crate::ast::{self, Span};
+use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
 /// An aperiodic atomic component with a `max_response`: the runtime measures the
@@ -24,6 +24,25 @@ pub(super) fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &as
         return;
     }
     unmeasured(checker, component, bound, &component.name.name);
+}
+
+/// An instance's own `max_response` (its `timing` override) on an aperiodic atomic
+/// type that has none: the type's own is warned about where it is declared.
+pub(super) fn instance_override(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
+    if let Some(timing) = &instance.timing
+        && let Some(bound) = max_response(timing.entries.iter())
+        && let Some((_, declared)) = checker.model.component(&instance.component.name)
+        && declared.kind == ComponentKind::Atomic
+        && max_response(timing_entries(declared)).is_none()
+        && !timing
+            .entries
+            .iter()
+            .chain(timing_entries(declared))
+            .any(|entry| matches!(entry, ast::TimingEntry::Period(_)))
+    {
+        let what = format!("{} ({})", instance.name.name, instance.component.name);
+        unmeasured(checker, declared, bound, &what);
+    }
 }
 
 /// The entries of `component`'s `timing` blocks.

@@ -165,6 +165,11 @@ const MAX_LEVEL_NAME: usize = 64;
 /// process's life: the runtime holds levels as `&'static str`).
 const MAX_LEVEL_LISTS: usize = 256;
 
+/// Whether `list` and `requested` name the same quality levels in the same order.
+fn same_levels(list: &[&str], requested: &[String]) -> bool {
+    list.len() == requested.len() && list.iter().zip(requested).all(|(a, b)| *a == b)
+}
+
 /// Quality levels from a request as the runtime holds them: each distinct list is
 /// leaked once.
 fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
@@ -180,10 +185,7 @@ fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
     }
     static KNOWN: Mutex<Vec<&'static [&'static str]>> = Mutex::new(Vec::new());
     let mut known = KNOWN.lock().unwrap_or_else(PoisonError::into_inner);
-    let same = |list: &&&'static [&'static str]| {
-        list.len() == requested.len() && list.iter().zip(requested).all(|(a, b)| *a == b)
-    };
-    if let Some(list) = known.iter().find(same) {
+    if let Some(list) = known.iter().find(|list| same_levels(list, requested)) {
         return Ok(list);
     }
     if known.len() >= MAX_LEVEL_LISTS {
@@ -610,19 +612,12 @@ fn serve(
     let spec = component.spec();
     if let Some(timing) = &request.timing {
         let own = component.timing();
-        let own_levels = || {
-            own.qualities.len() == timing.qualities.len()
-                && own
-                    .qualities
-                    .iter()
-                    .zip(&timing.qualities)
-                    .all(|(a, b)| *a == b)
-        };
-        let qualities = if timing.qualities.is_empty() || own_levels() {
-            own.qualities
-        } else {
-            levels(&timing.qualities)?
-        };
+        let qualities =
+            if timing.qualities.is_empty() || same_levels(own.qualities, &timing.qualities) {
+                own.qualities
+            } else {
+                levels(&timing.qualities)?
+            };
         component = component.with_timing(TimingSpec {
             period: timing.period,
             max_period: timing.max_period,

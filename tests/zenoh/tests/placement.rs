@@ -141,6 +141,27 @@ fn registry(built: Sender<RelayPorts>) -> Registry {
     registry
 }
 
+/// A station running an agent and a robot whose placer this thread uses, on a
+/// loopback network of their own; dropped in the reverse order of their making.
+struct Placed {
+    _placer: coolbot::remote::Installed,
+    _agent: Agent,
+    _robot: Arc<coolbot_zenoh::Node>,
+    station: Arc<coolbot_zenoh::Node>,
+}
+
+/// [`Placed`] nodes named `station` and `robot`, both with `registry`'s types.
+fn placed(station: &str, robot: &str, registry: fn() -> Registry) -> Placed {
+    let (station, robot) = pair(station, robot);
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    Placed {
+        _agent: Agent::start(Arc::clone(&station), registry()).expect("agent"),
+        _placer: Placer::new(Arc::clone(&robot), registry()).install(),
+        _robot: robot,
+        station,
+    }
+}
+
 /// What a channel's sender handed over, once it has.
 fn handed<T>(ports: &Receiver<T>, what: &str) -> T {
     ports
@@ -402,11 +423,8 @@ impl nest_cell::Parts for PullParts {
 /// input, which the proxy serves by pulling from the producer here.
 #[test]
 fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
-    let (station, robot) = pair("pull-station", "pull-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), doubler_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), doubler_registry()).install();
+    let placed = placed("pull-station", "pull-robot", doubler_registry);
+    let station = &placed.station;
 
     // The producer answers each pull with the next number: 21, 22, ...
     let (parts, asked) = pull_ends(21);
@@ -461,11 +479,8 @@ fn doubling_registry() -> Registry {
 /// ports, mirrors its supervisor's state, and a pull crosses it both ways.
 #[test]
 fn a_compound_runs_on_another_node_behind_a_proxy() {
-    let (station, robot) = pair("nest-station", "nest-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), doubling_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), doubling_registry()).install();
+    let placed = placed("nest-station", "nest-robot", doubling_registry);
+    let station = &placed.station;
 
     let (parts, asked) = pull_ends(5);
     let compound = nest_cell::component("cell", parts).expect("the compound builds");
@@ -530,11 +545,8 @@ fn tuned_registry() -> Registry {
 /// off (its type's period interval would turn it on), at its own period.
 #[test]
 fn a_remote_instance_keeps_its_own_quality_levels_and_adaptation() {
-    let (station, robot) = pair("tuned-station", "tuned-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), tuned_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), tuned_registry()).install();
+    let placed = placed("tuned-station", "tuned-robot", tuned_registry);
+    let station = &placed.station;
 
     let compound = tuned_cell::component("cell", TunedParts).expect("the compound builds");
     let mut system = System::new();
@@ -623,11 +635,8 @@ fn flaky_registry() -> Registry {
 /// place, on its node, as it would a local instance.
 #[test]
 fn a_remote_instance_that_fails_is_restarted_on_its_node() {
-    let (station, robot) = pair("restart-station", "restart-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), flaky_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), flaky_registry()).install();
+    let placed = placed("restart-station", "restart-robot", flaky_registry);
+    let station = &placed.station;
 
     let compound = restart_cell::component("cell", RestartParts).expect("the compound builds");
     let mut system = System::new();
@@ -715,11 +724,7 @@ impl ignore_cell::Parts for RestartParts {
 /// records the step and runs on without touching it.
 #[test]
 fn a_remote_instance_whose_failure_is_ignored_stays_failed_and_the_compound_runs_on() {
-    let (station, robot) = pair("ignore-station", "ignore-robot");
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), flaky_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), flaky_registry()).install();
+    let _placed = placed("ignore-station", "ignore-robot", flaky_registry);
 
     let compound = ignore_cell::component("cell", RestartParts).expect("the compound builds");
     let mut system = System::new();
@@ -858,11 +863,7 @@ fn one_stream_across_a_failover(
     build: impl FnOnce(PairParts) -> coolbot::Component,
     failing: &str,
 ) {
-    let (station, robot) = pair(station, &format!("{station}-robot"));
-    let station = Arc::new(station);
-    let robot = Arc::new(robot);
-    let _agent = Agent::start(Arc::clone(&station), relay_registry()).expect("agent");
-    let _placer = Placer::new(Arc::clone(&robot), relay_registry()).install();
+    let _placed = placed(station, &format!("{station}-robot"), relay_registry);
 
     let (source, sources) = crossbeam_channel::unbounded();
     let (sink, sinks) = crossbeam_channel::unbounded();
