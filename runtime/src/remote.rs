@@ -16,12 +16,17 @@
 //!   do its quality level, period, missed deadlines, overruns, CPU and elapsed time
 //!   (rules reading `<instance>.quality` or `.cpu_time` read the remote instance's;
 //!   the proxy's own thread's times are not published);
-//! - the remote instance failing (`running_error`), or its node being lost, is a fault
-//!   of the proxy (`running_error` with the reason), handled by the compound's policy;
+//! - the remote instance failing (`running_error`, `starting_error`), going to `dead`
+//!   without the compound's command (an operator's `coolctl set`, its agent stopping),
+//!   falling silent (its monitoring port unanswered for longer than the network
+//!   layer's bound, [`RemoteEnd::view`]) or its node being lost, is a fault of the
+//!   proxy (`running_error` with the reason), handled by the compound's policy; the
+//!   remote instance finishing its task (`end`) ends the proxy's too;
 //! - commands given to the proxy go to the remote instance (state changes, variables,
 //!   configuration, period, quality, priority, degradation), each answered by it;
 //! - a restart of the proxy (a policy's or the recovery queue's) builds the instance
-//!   again if its node lost it.
+//!   again (a new generation) if it is gone: its node lost it, it is `dead`, or it fell
+//!   silent.
 //!
 //! With no placer installed (a process that is not on a network) an `on "node"`
 //! instance runs in the compound's own process, and a `tracing` line says so.
@@ -29,6 +34,7 @@
 use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -117,8 +123,15 @@ pub trait RemoteEnd: Send + 'static {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String>;
 
     /// Whether the instance must be built again before it can run: never built, or
-    /// its node was lost since.
+    /// gone since (its node was lost, it went to `dead`, it fell silent).
     fn needs_instance(&self) -> bool;
+
+    /// How often the proxy's thread is to call [`RemoteEnd::pump`] and
+    /// [`RemoteEnd::view`] while nothing else wakes it (the end asks for the remote
+    /// snapshot then, and judges silence), if at all.
+    fn poll_every(&self) -> Option<Duration> {
+        None
+    }
 
     /// Give `command` to the remote instance; its answer.
     fn command(&mut self, command: &Command) -> Result<(), String>;
@@ -132,8 +145,9 @@ pub trait RemoteEnd: Send + 'static {
     /// why no answer came (the consumer's pull then times out).
     fn pull(&mut self, output: usize) -> Result<(), String>;
 
-    /// The remote instance's monitoring port as last heard (`Ok(None)`: nothing yet),
-    /// or why it cannot be heard: its node is lost.
+    /// The remote instance's monitoring port as last heard (`Ok(None)`: nothing new),
+    /// or why it cannot be heard: its node is lost, or it has not answered for longer
+    /// than the end's bound.
     fn view(&mut self) -> Result<Option<Monitor>, String>;
 
     /// The proxy is dead: kill the remote instance if its node is there, and stop
@@ -275,6 +289,8 @@ fn proxy(placement: &Placement, remote: Remote) -> Component {
         end: remote.end,
         view: None,
         applied: Vec::new(),
+        clock: crate::clock::Clock::real(),
+        next_poll: None,
     };
     Component::driven(placement.name.clone(), Box::new(proxy), remote.ports)
         .with_timing(TimingSpec {
@@ -362,6 +378,30 @@ struct Proxy {
     view: Option<Monitor>,
     /// The remote loss totals already added to the proxy's monitor ([`overlay`]).
     applied: Vec<(String, u64)>,
+    /// The proxy's clock (its runner's), for [`Proxy::next_poll`].
+    clock: crate::clock::Clock,
+    /// When the proxy's thread is next to look at the remote end though nothing woke
+    /// it ([`RemoteEnd::poll_every`]).
+    next_poll: Option<Instant>,
+}
+
+/// Why the remote instance's view is a fault of the proxy, if it is: it failed, or it
+/// is dead (the proxy sends `dead` only as it dies itself, and never looks again: a
+/// dead instance it sees was not its compound's doing).
+fn failure(view: &Monitor) -> Option<String> {
+    let error = view.error.clone();
+    match view.state {
+        State::RunningError | State::StartingError => {
+            Some(error.unwrap_or_else(|| "the remote instance failed".to_owned()))
+        }
+        State::Dead => Some(match error {
+            Some(error) => format!(
+                "the remote instance went to dead without this compound's command ({error})"
+            ),
+            None => "the remote instance went to dead without this compound's command".to_owned(),
+        }),
+        _ => None,
+    }
 }
 
 impl Proxy {
@@ -377,18 +417,24 @@ impl Proxy {
             Err(reason) => Err(Fault::message(reason)),
             Ok(None) => Ok(()),
             Ok(Some(view)) => {
-                let failed = matches!(view.state, State::RunningError | State::StartingError);
-                let error = view.error.clone();
+                let failed = failure(&view);
                 self.view = Some(view);
-                if failed {
-                    return Err(Fault::message(format!(
-                        "on node `{}`: {}",
-                        self.node,
-                        error.unwrap_or_else(|| "the remote instance failed".to_owned())
-                    )));
+                match failed {
+                    Some(reason) => Err(Fault::message(format!("on node `{}`: {reason}", self.node))),
+                    None => Ok(()),
                 }
-                Ok(())
             }
+        }
+    }
+
+    /// Schedule the next look at the remote end ([`RemoteEnd::poll_every`]).
+    fn schedule_poll(&mut self) {
+        let now = self.clock.now();
+        if self.next_poll.is_none_or(|due| now >= due) {
+            self.next_poll = self
+                .end
+                .poll_every()
+                .map(|every| crate::thread::later(now, every));
         }
     }
 }
@@ -490,6 +536,7 @@ impl Driven for Proxy {
     }
 
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        self.schedule_poll();
         self.end.pump();
         self.refresh()?;
         let Some(view) = &self.view else {
@@ -497,11 +544,28 @@ impl Driven for Proxy {
         };
         overlay(view, &mut self.applied, cx);
         cx.set_result(view.result.clone());
+        if view.state == State::End {
+            // The remote instance finished its task: so does the proxy (its runner
+            // looks at the request on its next turn, which the bell brings at once).
+            cx.end();
+            if let Some(waker) = cx.waker() {
+                waker.wake();
+            }
+            return Ok(None);
+        }
         let target = view
             .user_state
             .as_deref()
             .and_then(|name| self.spec.state_index(name));
         Ok(target.filter(|&target| target != state))
+    }
+
+    fn wake_at(&self) -> Option<Instant> {
+        self.next_poll
+    }
+
+    fn set_clock(&mut self, clock: &crate::clock::Clock) {
+        self.clock = clock.clone();
     }
 
     fn observe(&mut self, cx: &mut Context) {

@@ -35,8 +35,13 @@ pub const DEFAULT_REMOTE_TIMEOUT: Duration = Duration::from_secs(5);
 const REMOTE_QUEUE: (usize, usize) = (64, 65_536);
 
 /// How often a proxy asks for its remote instance's snapshot, for what changes without
-/// an event: its CPU and elapsed time.
+/// an event (its CPU and elapsed time) and to know that the instance is still heard
+/// (at most: a third of the placer's silence bound, [`Placer::silence`]).
 pub const TIMES_REFRESH: Duration = Duration::from_secs(1);
+
+/// How long a proxy's remote instance may leave its snapshot unanswered, while its
+/// node lives, before the proxy fails (unless the placer says otherwise).
+pub const DEFAULT_SILENCE: Duration = Duration::from_secs(3);
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
@@ -48,6 +53,7 @@ pub struct Placer {
     node: Arc<Node>,
     registry: Arc<crate::agent::Registry>,
     timeout: Duration,
+    silence: Duration,
 }
 
 impl std::fmt::Debug for Placer {
@@ -63,7 +69,17 @@ impl Placer {
             node,
             registry: registry.into(),
             timeout: DEFAULT_REMOTE_TIMEOUT,
+            silence: DEFAULT_SILENCE,
         }
+    }
+
+    /// How long a remote instance's monitoring port may stay unanswered (no event, no
+    /// answer to the snapshot its proxy asks for every third of it, at most every
+    /// [`TIMES_REFRESH`]) while its node lives, before its proxy fails with the reason
+    /// and the compound's policy acts. At least 30 ms.
+    pub fn silence(mut self, silence: Duration) -> Placer {
+        self.silence = silence.max(Duration::from_millis(30));
+        self
     }
 
     /// How long an instantiation, a command or a query waits for the other node.
@@ -200,6 +216,9 @@ impl coolbot::remote::Placer for Placer {
             acks: Vec::new(),
             shared,
             instantiated: false,
+            built: false,
+            silence: self.silence,
+            gone: None,
             times_asked: None,
             losses,
             reported_losses: 0,
@@ -226,6 +245,9 @@ struct Shared {
     bad_events: AtomicU64,
     /// The monitoring key of the instance's current generation.
     monitor_key: Mutex<String>,
+    /// Since when the proxy has asked the current generation for its snapshot without
+    /// hearing from it (no answer, no event); `None` while it is heard.
+    unanswered_since: Mutex<Option<Instant>>,
     waker: Mutex<Option<Waker>>,
 }
 
@@ -234,6 +256,11 @@ impl Shared {
         if let Some(waker) = lock(&self.waker).as_ref() {
             waker.wake();
         }
+    }
+
+    /// The current generation was heard from (an event, a snapshot).
+    fn heard(&self) {
+        *lock(&self.unanswered_since) = None;
     }
 }
 
@@ -271,7 +298,16 @@ struct End {
     /// The outputs' acknowledgment queryables.
     acks: Vec<zenoh::query::Queryable<()>>,
     shared: Arc<Shared>,
+    /// Whether any generation was ever built.
     instantiated: bool,
+    /// Whether the current generation was built (a failed attempt leaves it unbuilt:
+    /// the next start tries a new one).
+    built: bool,
+    /// How long the current generation may go unheard ([`Placer::silence`]).
+    silence: Duration,
+    /// Why the current generation is gone while its node lives (it fell silent), if
+    /// it is: it is built again before it runs ([`RemoteEnd::needs_instance`]).
+    gone: Option<String>,
     /// When the remote snapshot (for its times) was last asked for.
     times_asked: Option<Instant>,
     /// Messages lost on the way here: packets on the outputs' keys that do not decode
@@ -340,6 +376,7 @@ impl End {
                         shared.ring();
                         return;
                     };
+                    shared.heard();
                     if let Some(view) = lock(&shared.view).as_mut() {
                         mirror(view, event);
                         shared.changed.store(true, Ordering::Release);
@@ -396,18 +433,32 @@ impl End {
         }
     }
 
-    /// Every [`TIMES_REFRESH`], ask for the remote snapshot without waiting for it: its
+    /// Every [`End::refresh`], ask for the remote snapshot without waiting for it: its
     /// CPU and elapsed time (which change without an event) go into the view when it
-    /// comes, and the proxy is woken.
+    /// comes, the proxy is woken, and the instance counts as heard.
     fn ask_times(&mut self) {
-        if !self.instantiated
+        let every = self.refresh();
+        if !self.built
+            || self.gone.is_some()
             || self
                 .times_asked
-                .is_some_and(|asked| asked.elapsed() < TIMES_REFRESH)
+                .is_some_and(|asked| asked.elapsed() < every)
         {
             return;
         }
-        self.times_asked = Some(Instant::now());
+        let now = Instant::now();
+        // Silence counts from the first question left unanswered; after a pause in
+        // asking (the proxy was not running), from this one.
+        let paused = self
+            .times_asked
+            .is_none_or(|asked| now.saturating_duration_since(asked) > 2 * every);
+        self.times_asked = Some(now);
+        {
+            let mut since = lock(&self.shared.unanswered_since);
+            if paused || since.is_none() {
+                *since = Some(now);
+            }
+        }
         let shared = Arc::clone(&self.shared);
         let key = keys::monitor(&self.on, &self.name);
         let asked = self
@@ -419,10 +470,15 @@ impl End {
                 let Ok(sample) = reply.result() else {
                     return;
                 };
+                // The current generation's answer only.
+                if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
+                    return;
+                }
                 let Ok(snapshot) = serde_json::from_slice::<Monitor>(&sample.payload().to_bytes())
                 else {
                     return;
                 };
+                shared.heard();
                 if let Some(view) = lock(&shared.view).as_mut() {
                     view.cpu_time = snapshot.cpu_time;
                     view.elapsed_time = snapshot.elapsed_time;
@@ -436,6 +492,37 @@ impl End {
         if let Err(error) = asked {
             tracing::debug!(instance = %self.name, "the snapshot was not asked for: {error}");
         }
+    }
+
+    /// How often the remote snapshot is asked for.
+    fn refresh(&self) -> Duration {
+        TIMES_REFRESH.min(self.silence / 3)
+    }
+
+    /// Whether the current generation has gone unheard for longer than the bound (it
+    /// is then gone, with the reason).
+    fn judge_silence(&mut self) {
+        if self.gone.is_some() || !self.built {
+            return;
+        }
+        let Some(since) = *lock(&self.shared.unanswered_since) else {
+            return;
+        };
+        let silent = since.elapsed();
+        if silent > self.silence {
+            self.gone = Some(format!(
+                "the monitoring port of `{}` on node `{}` has not answered for {silent:.1?} \
+                 (the bound is {:?}), though the node lives",
+                self.name, self.on, self.silence
+            ));
+        }
+    }
+
+    /// Whether the current generation's view shows it dead.
+    fn dead(&self) -> bool {
+        lock(&self.shared.view)
+            .as_ref()
+            .is_some_and(|view| view.state == coolbot::State::Dead)
     }
 
     /// The remote instance's snapshot, asked for now.
@@ -515,7 +602,7 @@ impl RemoteEnd for End {
         self.reported_losses = 0;
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
-        if self.generation > 0 {
+        if self.built {
             // An earlier generation may still run (its node was unreachable, not
             // gone): it goes first, so that two never serve the same keys. Its node
             // also sends it to `dead` when it sees this node lost (`Instantiate::owner`).
@@ -525,6 +612,7 @@ impl RemoteEnd for End {
             }
         }
         self.generation += 1;
+        self.built = false;
         self.name = format!("{}-{}", self.root, self.generation);
         self.request.name = self.name.clone();
         *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
@@ -550,8 +638,12 @@ impl RemoteEnd for End {
         // Built there: a start that fails on the snapshot below is retried on this
         // generation (the proxy forgot its view when it asked for it).
         self.instantiated = true;
+        self.built = true;
+        self.gone = None;
+        self.times_asked = None;
         *lock(&self.shared.lost) = None;
         let snapshot = self.snapshot()?;
+        self.shared.heard();
         *lock(&self.shared.view) = Some(snapshot);
         self.shared.changed.store(true, Ordering::Release);
         // A poster's current value, for the proxy's readers.
@@ -574,12 +666,19 @@ impl RemoteEnd for End {
     }
 
     fn needs_instance(&self) -> bool {
-        !self.instantiated || lock(&self.shared.lost).is_some()
+        !self.built || lock(&self.shared.lost).is_some() || self.gone.is_some() || self.dead()
+    }
+
+    fn poll_every(&self) -> Option<Duration> {
+        Some(self.refresh())
     }
 
     fn command(&mut self, command: &Command) -> Result<(), String> {
         if let Some(lost) = lock(&self.shared.lost).clone() {
             return Err(lost);
+        }
+        if let Some(gone) = self.gone.clone() {
+            return Err(gone);
         }
         self.send(command)
     }
@@ -630,6 +729,10 @@ impl RemoteEnd for End {
         if let Some(lost) = lock(&self.shared.lost).clone() {
             return Err(lost);
         }
+        self.judge_silence();
+        if let Some(gone) = self.gone.clone() {
+            return Err(gone);
+        }
         let losses = self.network_losses() - self.losses_before;
         let more_lost = losses != self.reported_losses;
         if !self.shared.changed.swap(false, Ordering::AcqRel) && !more_lost {
@@ -647,7 +750,7 @@ impl RemoteEnd for End {
     }
 
     fn release(&mut self) {
-        if self.instantiated && lock(&self.shared.lost).is_none() {
+        if self.built && lock(&self.shared.lost).is_none() && !self.dead() {
             let dead = Command::SetState(coolbot::Controllable::Dead);
             if let Err(reason) = self.send(&dead) {
                 tracing::warn!(instance = %self.name, node = %self.on, "not released: {reason}");

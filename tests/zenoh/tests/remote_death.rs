@@ -1,0 +1,317 @@
+//! A remote instance that dies while its node lives is a fault of its proxy, whatever
+//! its cause: an operator sends it to `dead`, its node's agent stops (and takes what
+//! it built with it), or its monitoring port falls silent. Each time the compound's
+//! policy acts (here: its local substitute takes over) and the recovery queue builds a
+//! new generation of the instance on its node once one can be built.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step, System};
+use coolbot_zenoh::agent::{Agent, Registry};
+use coolbot_zenoh::ctl::Ctl;
+use coolbot_zenoh::{ControlReply, Node, Placer};
+use coolbot_zenoh_tests::generated::{dying_cell, flaky};
+use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
+use zenoh::Wait;
+
+/// `Flaky`'s behaviour: counts its periods.
+struct Counting;
+
+impl flaky::Behavior for Counting {
+    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
+        cx.vars.periods += 1;
+        Ok(())
+    }
+}
+
+struct Quiet;
+
+impl dying_cell::Supervisor for Quiet {}
+
+struct Parts;
+
+impl dying_cell::Parts for Parts {
+    fn supervisor(&mut self) -> impl dying_cell::Supervisor {
+        Quiet
+    }
+    fn flaky(&mut self) -> impl flaky::Behavior {
+        Counting
+    }
+    fn spare(&mut self) -> impl flaky::Behavior {
+        Counting
+    }
+}
+
+fn registry() -> Registry {
+    let mut registry = Registry::new();
+    flaky::register(&mut registry, |name| flaky::component(name, Counting));
+    registry
+}
+
+fn periods(monitor: &Monitor) -> u64 {
+    monitor
+        .variables
+        .iter()
+        .find(|(name, _)| name == "periods")
+        .map_or(0, |(_, value)| match value {
+            coolbot::Value::UInt(n) => *n,
+            _ => 0,
+        })
+}
+
+/// The cell's steps about `flaky` so far.
+fn steps(cell: &Handle) -> Vec<(Step, String)> {
+    cell.snapshot()
+        .supervision
+        .into_iter()
+        .filter(|step| step.instance == "flaky")
+        .map(|step| (step.step, step.detail))
+        .collect()
+}
+
+/// Wait until the cell has taken `step` about `flaky`; its detail.
+fn wait_step(cell: &Handle, step: fn(&Step) -> bool, what: &str) -> String {
+    let monitor = cell
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == "flaky" && step(&s.step))
+            },
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("{what}: {timeout}; steps {:?}", steps(cell)));
+    monitor
+        .supervision
+        .into_iter()
+        .find(|s| s.instance == "flaky" && step(&s.step))
+        .map(|s| s.detail)
+        .unwrap_or_default()
+}
+
+/// The `flaky` instances built on the station by the robot, `(path, state)`.
+fn built(ctl: &Ctl) -> Vec<(String, State)> {
+    ctl.components(Some("dying-station"))
+        .expect("the station lists")
+        .into_iter()
+        .filter(|l| l.path.starts_with("dying-robot-cell-flaky-"))
+        .map(|l| (l.path, l.monitor.state))
+        .collect()
+}
+
+/// The cell, built and running on this thread's placer, with its remote instance
+/// counting.
+fn running_cell(system: &mut System) -> Handle {
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    cell.instance("flaky")
+        .expect("the proxy")
+        .wait_for(|m| m.state == State::Running && periods(m) > 0, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the remote instance runs: {timeout}"));
+    cell
+}
+
+/// The spare stands in, the recovery queue builds the instance again on its node (a
+/// new generation, its path not `first`), and the proxy counts on.
+fn substituted_then_recovered(cell: &Handle, ctl: &Ctl, first: &str) {
+    wait_step(
+        cell,
+        |s| matches!(s, Step::Substituted { .. }),
+        "the spare stands in",
+    );
+    cell.instance("spare")
+        .unwrap()
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the spare runs: {timeout}"));
+    wait_step(
+        cell,
+        |s| *s == Step::Recovered,
+        "the instance is built again",
+    );
+    let proxy = cell.instance("flaky").unwrap();
+    let before = periods(&proxy.snapshot());
+    proxy
+        .wait_for(
+            |m| m.state == State::Running && periods(m) > before + 3,
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| panic!("the new generation counts: {timeout}"));
+    let now = built(ctl);
+    assert!(
+        now.iter()
+            .any(|(path, state)| path != first && *state == State::Running),
+        "a new generation runs on the station: {now:?}"
+    );
+}
+
+#[test]
+fn a_remote_instance_sent_to_dead_by_an_operator_is_substituted_and_built_again() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    let _agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry()).install();
+    let mut system = System::new();
+    let cell = running_cell(&mut system);
+    let ctl = Ctl::new(station.session().clone(), PATIENCE);
+    let first = built(&ctl);
+    assert_eq!(first.len(), 1, "{first:?}");
+    let first = first[0].0.clone();
+
+    // What `coolctl set dying-station/<instance> state dead` sends.
+    let answer = ctl
+        .command(
+            &format!("dying-station/{first}"),
+            &Command::SetState(Controllable::Dead),
+        )
+        .expect("the station answers");
+    assert_eq!(answer, ControlReply::Accepted);
+
+    let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy fails");
+    assert!(
+        detail.contains("dead") && detail.contains("dying-station"),
+        "the reason names the state and the node: {detail}"
+    );
+    substituted_then_recovered(&cell, &ctl, &first);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_remote_instance_whose_agent_stops_is_substituted_and_built_again_when_an_agent_returns() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    let agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry()).install();
+    let mut system = System::new();
+    let cell = running_cell(&mut system);
+    let ctl = Ctl::new(station.session().clone(), PATIENCE);
+    let first = built(&ctl)[0].0.clone();
+
+    // The agent stops (its node lives on): what it built goes with it.
+    drop(agent);
+    let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy fails");
+    assert!(detail.contains("dead"), "{detail}");
+    wait_step(
+        &cell,
+        |s| matches!(s, Step::Substituted { .. }),
+        "the spare stands in",
+    );
+    // No agent: the recovery queue's retries fail, and say why.
+    wait_step(&cell, |s| *s == Step::RetryFailed, "a retry fails");
+    assert_eq!(cell.instance("flaky").unwrap().state(), State::StartingError);
+
+    let _agent = Agent::start(Arc::clone(&station), registry()).expect("a new agent");
+    substituted_then_recovered(&cell, &ctl, &first);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// A station that builds nothing: its agent accepts every request, its control ports
+/// accept every command, and its monitoring ports answer with a running `Flaky`'s
+/// snapshot while `answering` holds (counted in `answered`), and not at all
+/// otherwise. A broken peer.
+struct Mute {
+    answering: Arc<AtomicBool>,
+    answered: Arc<AtomicU64>,
+    _queryables: Vec<zenoh::query::Queryable<()>>,
+}
+
+fn mute_station(node: &Node) -> Mute {
+    let accept = |query: zenoh::query::Query| {
+        let json = serde_json::to_vec(&ControlReply::Accepted).unwrap();
+        let _ = query.reply(query.key_expr().clone(), json).wait();
+    };
+    let mut harness = coolbot::harness::Harness::running(flaky::component("mute", Counting)).unwrap();
+    harness.advance(Duration::from_millis(20)).unwrap();
+    let snapshot = serde_json::to_vec(&harness.monitor()).unwrap();
+    let answering = Arc::new(AtomicBool::new(true));
+    let answered = Arc::new(AtomicU64::new(0));
+    let (answers, count) = (Arc::clone(&answering), Arc::clone(&answered));
+    let session = node.session();
+    let queryables = vec![
+        session
+            .declare_queryable("coolbot/dying-station/@agent/*")
+            .callback(accept)
+            .wait()
+            .unwrap(),
+        session
+            .declare_queryable("coolbot/dying-station/*/c")
+            .callback(accept)
+            .wait()
+            .unwrap(),
+        session
+            .declare_queryable("coolbot/dying-station/*/m")
+            .callback(move |query| {
+                if answers.load(Ordering::Acquire) {
+                    count.fetch_add(1, Ordering::AcqRel);
+                    let _ = query
+                        .reply(query.key_expr().clone(), snapshot.clone())
+                        .wait();
+                }
+            })
+            .wait()
+            .unwrap(),
+    ];
+    Mute {
+        answering,
+        answered,
+        _queryables: queryables,
+    }
+}
+
+#[test]
+fn a_remote_instance_whose_monitoring_port_falls_silent_is_substituted() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let robot = Arc::new(robot);
+    let mute = mute_station(&station);
+    let silence = Duration::from_millis(600);
+    let _placer = Placer::new(Arc::clone(&robot), registry())
+        .silence(silence)
+        .install();
+    let mut system = System::new();
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    let proxy = cell.instance("flaky").expect("the proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the proxy runs: {timeout}"));
+
+    // Heard for several bounds (the proxy asks every third of one): no fault while
+    // the station answers.
+    let quiet = steps(&cell);
+    let asked = mute.answered.load(Ordering::Acquire);
+    assert!(
+        wait_until(PATIENCE, || mute.answered.load(Ordering::Acquire) >= asked + 9),
+        "the proxy asks for the snapshot"
+    );
+    assert_eq!(proxy.state(), State::Running, "{:?}", steps(&cell));
+    assert_eq!(steps(&cell), quiet);
+
+    mute.answering.store(false, Ordering::Release);
+    let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy fails");
+    assert!(
+        detail.contains("has not answered") && detail.contains("dying-station"),
+        "{detail}"
+    );
+    wait_step(
+        &cell,
+        |s| matches!(s, Step::Substituted { .. }),
+        "the spare stands in",
+    );
+    // While silent, the station cannot be built on: the retries fail.
+    wait_step(&cell, |s| *s == Step::RetryFailed, "a retry fails");
+
+    mute.answering.store(true, Ordering::Release);
+    wait_step(&cell, |s| *s == Step::Recovered, "built again");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the proxy runs again: {timeout}"));
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
