@@ -12,7 +12,7 @@ use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::{ControlReply, Node, Placer};
-use coolbot_zenoh_tests::generated::{dying_cell, flaky};
+use coolbot_zenoh_tests::generated::{dying_cell, finisher, finishing_cell, flaky};
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
 
@@ -202,7 +202,10 @@ fn a_remote_instance_whose_agent_stops_is_substituted_and_built_again_when_an_ag
     );
     // No agent: the recovery queue's retries fail, and say why.
     wait_step(&cell, |s| *s == Step::RetryFailed, "a retry fails");
-    assert_eq!(cell.instance("flaky").unwrap().state(), State::StartingError);
+    assert_eq!(
+        cell.instance("flaky").unwrap().state(),
+        State::StartingError
+    );
 
     let _agent = Agent::start(Arc::clone(&station), registry()).expect("a new agent");
     substituted_then_recovered(&cell, &ctl, &first);
@@ -225,7 +228,8 @@ fn mute_station(node: &Node) -> Mute {
         let json = serde_json::to_vec(&ControlReply::Accepted).unwrap();
         let _ = query.reply(query.key_expr().clone(), json).wait();
     };
-    let mut harness = coolbot::harness::Harness::running(flaky::component("mute", Counting)).unwrap();
+    let mut harness =
+        coolbot::harness::Harness::running(flaky::component("mute", Counting)).unwrap();
     harness.advance(Duration::from_millis(20)).unwrap();
     let snapshot = serde_json::to_vec(&harness.monitor()).unwrap();
     let answering = Arc::new(AtomicBool::new(true));
@@ -287,7 +291,8 @@ fn a_remote_instance_whose_monitoring_port_falls_silent_is_substituted() {
     let quiet = steps(&cell);
     let asked = mute.answered.load(Ordering::Acquire);
     assert!(
-        wait_until(PATIENCE, || mute.answered.load(Ordering::Acquire) >= asked + 9),
+        wait_until(PATIENCE, || mute.answered.load(Ordering::Acquire)
+            >= asked + 9),
         "the proxy asks for the snapshot"
     );
     assert_eq!(proxy.state(), State::Running, "{:?}", steps(&cell));
@@ -312,6 +317,83 @@ fn a_remote_instance_whose_monitoring_port_falls_silent_is_substituted() {
     proxy
         .wait_for(|m| m.state == State::Running, PATIENCE)
         .unwrap_or_else(|timeout| panic!("the proxy runs again: {timeout}"));
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// `Finisher`'s behaviour: ends its task once told to.
+struct Finishing;
+
+impl finisher::Behavior for Finishing {
+    fn going_periodic(&mut self, cx: &mut finisher::Cx<'_>) -> SectionResult {
+        if cx.vars.finish {
+            cx.rt.end();
+        }
+        Ok(())
+    }
+}
+
+struct FinishingParts;
+
+impl finishing_cell::Supervisor for Quiet {}
+
+impl finishing_cell::Parts for FinishingParts {
+    fn supervisor(&mut self) -> impl finishing_cell::Supervisor {
+        Quiet
+    }
+    fn finisher(&mut self) -> impl finisher::Behavior {
+        Finishing
+    }
+}
+
+/// A remote instance that finishes its task (`end`) is no fault: its proxy ends too.
+#[test]
+fn a_remote_instance_that_ends_its_task_ends_its_proxy() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    let mut registry = Registry::new();
+    finisher::register(&mut registry, |name| finisher::component(name, Finishing));
+    let _agent = Agent::start(Arc::clone(&station), registry).expect("agent");
+    let mut registry = Registry::new();
+    finisher::register(&mut registry, |name| finisher::component(name, Finishing));
+    let _placer = Placer::new(Arc::clone(&robot), registry).install();
+    let mut system = System::new();
+    let cell = system
+        .add(finishing_cell::component("cell", FinishingParts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    let proxy = cell.instance("finisher").expect("the proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the proxy runs: {timeout}"));
+    proxy
+        .command(Command::Set(
+            "finish".to_owned(),
+            coolbot::Value::Bool(true),
+        ))
+        .expect("the proxy forwards the command");
+    proxy
+        .wait_for(|m| m.state == State::End, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the proxy ends: {timeout}"));
+    let ctl = Ctl::new(station.session().clone(), PATIENCE);
+    let remote: Vec<State> = ctl
+        .components(Some("dying-station"))
+        .expect("the station lists")
+        .into_iter()
+        .filter(|l| l.path.starts_with("dying-robot-cell-finisher-"))
+        .map(|l| l.monitor.state)
+        .collect();
+    assert_eq!(remote, vec![State::End]);
+    assert!(
+        !cell
+            .snapshot()
+            .supervision
+            .iter()
+            .any(|step| step.step == Step::Failed),
+        "no fault: {:?}",
+        cell.snapshot().supervision
+    );
+    assert_eq!(cell.state(), State::Running);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
