@@ -5,11 +5,11 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
-
+use crate::monitor::TaskResult;
 use crate::spec::Spec;
 use crate::table::State;
 use crate::value::{Time, Value};
+use crate::wake::Waker;
 
 /// Which section of a user state to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -90,18 +90,6 @@ impl<E: std::error::Error + Send + Sync + 'static> From<E> for Fault {
         }
         Fault::message(message)
     }
-}
-
-/// The default observable variable `result`: whether the task has finished and how.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub enum TaskResult {
-    /// No result yet.
-    #[default]
-    None,
-    /// The task succeeded, with complementary information.
-    Success(String),
-    /// The task failed, with complementary information.
-    Fail(String),
 }
 
 /// The code of one component, as the runtime drives it. `coolc` generates a glue type
@@ -266,26 +254,6 @@ impl Automaton for Atomic {
 }
 
 impl Driven for Atomic {}
-
-/// Rings a component's doorbell: the thread wakes and looks for work (see
-/// [`Context::waker`]).
-#[derive(Clone)]
-pub struct Waker {
-    pub(crate) bell: std::sync::Arc<crate::port::Doorbell>,
-}
-
-impl fmt::Debug for Waker {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("Waker").finish_non_exhaustive()
-    }
-}
-
-impl Waker {
-    /// Wake the component's thread (a no-op if it is already due to wake).
-    pub fn wake(&self) {
-        self.bell.ring_strong();
-    }
-}
 
 /// What a hook or section sees of the runtime: time, `result`, `end`, period, quality.
 ///

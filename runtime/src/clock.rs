@@ -29,9 +29,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
-use crate::port::Doorbell;
 use crate::value::Time;
-use crate::watchdog::Watch;
+use crate::wake::Doorbell;
 
 /// How long [`VirtualClock::advance`] waits (real time) for the components to settle.
 pub const SETTLE_TIMEOUT: Duration = Duration::from_secs(20);
@@ -118,6 +117,13 @@ impl std::fmt::Debug for VirtualClock {
     }
 }
 
+/// What a virtual clock tells as it advances: a component's `max_response` watch
+/// (`crate::watchdog`), which trips the section under way if it is overdue.
+pub(crate) trait Watched: Send + Sync {
+    /// The clock moved to `now`.
+    fn trip_if_due(&self, now: Instant);
+}
+
 /// The components on a virtual clock.
 #[derive(Default)]
 struct Members {
@@ -125,7 +131,7 @@ struct Members {
     /// Each component's doorbell and the time it last settled at (`None`: busy).
     components: BTreeMap<u64, Member>,
     /// The `max_response` watches of the components on the clock.
-    watches: Vec<Weak<Watch>>,
+    watches: Vec<Weak<dyn Watched>>,
 }
 
 struct Member {
@@ -152,7 +158,7 @@ impl VirtualClock {
     /// A virtual clock at time zero (an instant taken from the real clock now).
     pub fn new() -> Arc<VirtualClock> {
         // `max_response` watches count from the watchdog's epoch: take it first.
-        let _ = crate::watchdog::epoch();
+        let _ = crate::time::epoch();
         Arc::new(VirtualClock {
             base: Instant::now(),
             wall: Time::now(),
@@ -204,7 +210,8 @@ impl VirtualClock {
         // Sections past their `max_response` by now are tripped, as the watchdog does
         // in real time.
         members.watches.retain(|watch| watch.strong_count() > 0);
-        let watches: Vec<Arc<Watch>> = members.watches.iter().filter_map(Weak::upgrade).collect();
+        let watches: Vec<Arc<dyn Watched>> =
+            members.watches.iter().filter_map(Weak::upgrade).collect();
         for member in members.components.values_mut() {
             member.settled = None;
             member.bell.ring_strong();
@@ -285,7 +292,7 @@ impl VirtualClock {
     }
 
     /// Watch a component's sections against its `max_response` on this clock.
-    pub(crate) fn watch(&self, watch: &Arc<Watch>) {
-        self.lock().watches.push(Arc::downgrade(watch));
+    pub(crate) fn watch(&self, watch: Weak<dyn Watched>) {
+        self.lock().watches.push(watch);
     }
 }

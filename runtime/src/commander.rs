@@ -21,7 +21,8 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use crate::monitor::{Command, Handle, Refusal, Step, Supervision};
+use crate::handle::{Handle, Refusal};
+use crate::monitor::{Command, Step, Supervision};
 use crate::spec::{Spec, VarKind};
 use crate::table::{Controllable, State};
 use crate::value::Value;

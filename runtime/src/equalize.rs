@@ -208,7 +208,7 @@ impl Seat {
         // component that stopped its periodic sections, suspended or in another
         // state, keeps its place but is no rival).
         let active = |place: &Place| {
-            crate::thread::later(place.deadline, period.saturating_mul(2)) >= activation.deadline
+            crate::time::later(place.deadline, period.saturating_mul(2)) >= activation.deadline
         };
         let others: Vec<(Duration, Duration, &str)> = places
             .iter()
@@ -234,7 +234,7 @@ impl Seat {
         let spans: Vec<(Duration, Duration)> = others.iter().map(|(s, l, _)| (*s, *l)).collect();
         let delay = place(period, busy, &spans)?;
         if let Some(place) = places.iter_mut().find(|place| place.id == self.id) {
-            place.deadline = crate::thread::later(activation.deadline, delay);
+            place.deadline = crate::time::later(activation.deadline, delay);
         }
         Some(Shift { delay, away_from })
     }

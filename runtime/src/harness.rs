@@ -46,9 +46,10 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::automaton::TaskResult;
 use crate::clock::{Clock, VirtualClock};
-use crate::monitor::{Command, ControlMessage, Handle, Monitor, PENDING, Reply};
+use crate::handle::{ControlMessage, Handle, PENDING, Reply};
+use crate::monitor::TaskResult;
+use crate::monitor::{Command, Monitor};
 use crate::port::{
     Collected, ErasedInput, ErasedOutput, InKind, OutKind, Packet, PullError, TickIn,
 };
@@ -320,7 +321,7 @@ impl Harness {
     /// and `after` transition due by then fires at its own time, in due order, and
     /// the component settles at each (and at the end).
     pub fn advance(&mut self, by: Duration) -> Result<(), HarnessError> {
-        let target = crate::thread::later(self.clock.now(), by);
+        let target = crate::time::later(self.clock.now(), by);
         self.settle()?;
         while let Some(due) = self.runner.next_due().filter(|due| *due <= target) {
             let now = self.clock.now();

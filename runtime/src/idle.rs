@@ -209,7 +209,7 @@ fn probe(config: IdleConfig, readings: &Readings) {
     lowest_priority();
     let interval = config.interval.max(Duration::from_micros(100));
     let mut estimator = IdleEstimator::new(config);
-    let mut tick = crate::thread::later(Instant::now(), interval);
+    let mut tick = crate::time::later(Instant::now(), interval);
     while !readings.stop.load(Ordering::Acquire) {
         let now = Instant::now();
         if now < tick {
@@ -235,9 +235,9 @@ fn probe(config: IdleConfig, readings: &Readings) {
         }
         // The next tick after now: ticks missed while the CPU was busy are not
         // made up for (one late wake-up says enough).
-        tick = crate::thread::later(tick, interval);
+        tick = crate::time::later(tick, interval);
         if tick <= now {
-            tick = crate::thread::later(now, interval);
+            tick = crate::time::later(now, interval);
         }
     }
 }

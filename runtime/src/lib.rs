@@ -125,6 +125,7 @@ pub mod clock;
 mod commander;
 pub mod compound;
 pub mod equalize;
+mod handle;
 pub mod harness;
 pub mod idle;
 mod monitor;
@@ -140,17 +141,20 @@ mod system;
 pub mod table;
 pub mod tap;
 mod thread;
+mod time;
 mod value;
+mod wake;
 mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
-pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, TaskResult, Waker};
+pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult};
 pub use crate::clock::{Clock, NotSettled, VirtualClock};
 pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, Refused};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
+pub use crate::handle::Handle;
 pub use crate::monitor::{
-    Command, DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, MonitorEvent, OBSERVER_CAPACITY, OsPriority,
-    RESPONSE_WINDOW, Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision,
+    Command, DEFAULT_COMMAND_TIMEOUT, Monitor, MonitorEvent, OBSERVER_CAPACITY, RESPONSE_WINDOW,
+    Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision, TaskResult,
     Timeout, total_overflows,
 };
 pub use crate::port::{
@@ -165,7 +169,9 @@ pub use crate::system::{
     SHUTDOWN_TIMEOUT, System,
 };
 pub use crate::table::{Controllable, State};
+pub use crate::thread::OsPriority;
 pub use crate::value::{Time, Value, ValueError};
+pub use crate::wake::Waker;
 
 /// Re-exported so generated code and users need not depend on it themselves.
 pub use crossbeam_channel;

@@ -1,21 +1,19 @@
-//! The default ports: the control port `c` ([`Handle::command`]) and the monitoring
-//! port `m` ([`Handle::snapshot`], [`Handle::subscribe`], [`Handle::wait_for`]).
+//! What the default ports carry: the commands of the control port `c` and the
+//! monitoring port `m`'s [`Monitor`], events and subscriptions ([`crate::Handle`] is
+//! how a caller reaches both).
 //!
 //! The monitoring state of a component lives in one [`Shared`] (a `Mutex<Monitor>`
 //! written by the component's thread at each change) plus the observers' channels.
 //! Every change is sent to every observer as it happens; nobody polls.
 
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use serde::{Deserialize, Serialize};
 
 use crate::adapt::{AdaptStatus, Adaptation, Pressure};
-use crate::automaton::TaskResult;
-use crate::port::ErasedInput;
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
@@ -25,8 +23,20 @@ use crate::value::Value;
 /// up to this bound: an observer that keeps up costs little memory.
 pub const OBSERVER_CAPACITY: usize = 4096;
 
-/// How long [`Handle::command`] waits for the component by default.
+/// How long [`crate::Handle::command`] waits for the component by default.
 pub const DEFAULT_COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// The default observable variable `result`: whether the task has finished and how.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum TaskResult {
+    /// No result yet.
+    #[default]
+    None,
+    /// The task succeeded, with complementary information.
+    Success(String),
+    /// The task failed, with complementary information.
+    Fail(String),
+}
 
 /// A command through the control port `c`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -42,7 +52,7 @@ pub enum Command {
     /// The longest a section may run (`max_response`).
     SetMaxResponse(Duration),
     /// The priority (`priority`): applied to the component's OS thread at once (see
-    /// [`OsPriority`]; a refusal by the OS does not reject the command).
+    /// [`OsPriority`](crate::OsPriority); a refusal by the OS does not reject the command).
     SetPriority(i32),
     /// The quality level: an index into the timing block's qualities (0 = best).
     SetQuality(usize),
@@ -66,7 +76,7 @@ pub struct Rejected {
     pub reason: String,
 }
 
-/// A [`Handle::wait_for`] that did not see its condition in time.
+/// A [`crate::Handle::wait_for`] that did not see its condition in time.
 #[derive(Debug, Clone, thiserror::Error)]
 #[error("component `{}` did not reach the condition within {waited:?} (state {})", last.name, last.state)]
 pub struct Timeout {
@@ -122,7 +132,7 @@ pub struct Monitor {
     /// The priority.
     pub priority: i32,
     /// How `priority` is applied to the component's OS thread.
-    pub os_priority: OsPriority,
+    pub os_priority: crate::thread::OsPriority,
     /// Monitoring events dropped because an observer's channel was full.
     pub dropped_events: u64,
     /// Compound components only: the last [`SUPERVISION_HISTORY`] steps the supervisor
@@ -320,7 +330,7 @@ pub enum MonitorEvent {
     /// Compound components: the supervisor took a step about an instance.
     Supervision(Supervision),
     /// `priority` was applied to the component's thread, or could not be.
-    OsPriority(OsPriority),
+    OsPriority(crate::thread::OsPriority),
     /// The component's adaptation verdict changed (time violation, spare time, or
     /// neither).
     Pressure(Pressure),
@@ -328,24 +338,11 @@ pub enum MonitorEvent {
     Adaptation(Adaptation),
 }
 
-/// How a component's `priority` is applied to its OS thread (`docs/runtime.md`,
-/// "Priority"). Applying can fail (no `CAP_SYS_NICE` in a container): the component
-/// runs on regardless, and this says what holds.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub enum OsPriority {
-    /// Nothing applied: the thread has not started, or the priority is 0 and the thread
-    /// keeps the scheduling it was created with.
-    Inherited,
-    /// Real-time round-robin scheduling (Linux `SCHED_RR`) at this static priority
-    /// (1 to 99).
-    RoundRobin(i32),
-    /// Normal time-sharing scheduling at this nice value (-20, highest, to 19): a
-    /// negative priority, a priority of 0 restored, or a positive priority when
-    /// real-time scheduling was refused.
-    Nice(i32),
-    /// The OS refused, or the platform is not supported: why. The thread keeps its
-    /// previous scheduling.
-    NotApplied(String),
+/// What an input has lost so far (`crate::port`'s input ends count it): read by the
+/// monitor for its snapshot and overflow events.
+pub(crate) trait Losses: Send + Sync {
+    /// Packets lost at the input in all.
+    fn overflows(&self) -> u64;
 }
 
 /// The sum of per-port loss counts, saturating (a proxy's come from the network).
@@ -386,8 +383,8 @@ struct Observer {
     counts: Arc<Counts>,
 }
 
-/// A subscription to a component's monitoring port ([`Handle::subscribe_counted`],
-/// [`Handle::subscribe_waking`]): the events as they happen (it dereferences to their
+/// A subscription to a component's monitoring port ([`crate::Handle::subscribe_counted`],
+/// [`crate::Handle::subscribe_waking`]): the events as they happen (it dereferences to their
 /// [`Receiver`]), and how many were dropped for it because it fell behind.
 ///
 /// An observer that does not take its events falls behind: once
@@ -395,7 +392,7 @@ struct Observer {
 /// (never for the other observers, and the component never waits), and each drop is
 /// counted in [`Subscription::dropped`] (and, for all observers together, in
 /// [`Monitor::dropped_events`]). The events it does get are in order; a snapshot
-/// ([`Handle::snapshot`]) always shows the current state, whatever was dropped.
+/// ([`crate::Handle::snapshot`]) always shows the current state, whatever was dropped.
 pub struct Subscription {
     events: Receiver<MonitorEvent>,
     counts: Arc<Counts>,
@@ -449,8 +446,8 @@ pub(crate) struct Shared {
     observers: Mutex<Vec<Observer>>,
     /// Doorbells rung after every event (compound supervisors watching this component).
     /// With, for each, a flag set before it is rung (which subscription has news).
-    wakers: Mutex<Vec<(crate::automaton::Waker, Option<Arc<AtomicBool>>)>>,
-    pub(crate) inputs: Vec<(&'static str, ErasedInput)>,
+    wakers: Mutex<Vec<(crate::wake::Waker, Option<Arc<AtomicBool>>)>>,
+    pub(crate) inputs: Vec<(&'static str, Arc<dyn Losses>)>,
     dropped: AtomicU64,
     pub(crate) spawned: AtomicBool,
     /// Whether the component's thread is inside a section the max_response watchdog
@@ -470,7 +467,7 @@ impl std::fmt::Debug for Shared {
 }
 
 impl Shared {
-    pub(crate) fn new(monitor: Monitor, inputs: Vec<(&'static str, ErasedInput)>) -> Shared {
+    pub(crate) fn new(monitor: Monitor, inputs: Vec<(&'static str, Arc<dyn Losses>)>) -> Shared {
         Shared {
             monitor: Mutex::new(monitor),
             observers: Mutex::new(Vec::new()),
@@ -573,7 +570,7 @@ impl Shared {
         lock(&self.observers).retain(|o| !Arc::ptr_eq(&o.counts, &subscription.counts));
     }
 
-    pub(crate) fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Subscription {
+    pub(crate) fn subscribe_waking(&self, waker: crate::wake::Waker) -> Subscription {
         let subscription = self.subscribe();
         lock(&self.wakers).push((waker, None));
         subscription
@@ -582,7 +579,7 @@ impl Shared {
     /// [`Shared::subscribe_waking`], also setting `flag` before each ring.
     pub(crate) fn subscribe_flagged(
         &self,
-        waker: crate::automaton::Waker,
+        waker: crate::wake::Waker,
         flag: Arc<AtomicBool>,
     ) -> Receiver<MonitorEvent> {
         let subscription = self.subscribe();
@@ -607,7 +604,7 @@ impl Shared {
             .inputs
             .iter()
             .find(|(name, _)| *name == port)
-            .map_or(0, |(_, input)| input.core.overflows());
+            .map_or(0, |(_, input)| input.overflows());
         self.publish(MonitorEvent::Overflow {
             port: port.to_owned(),
             lost,
@@ -623,7 +620,7 @@ impl Shared {
         monitor.port_overflows = self
             .inputs
             .iter()
-            .map(|(name, input)| ((*name).to_owned(), input.core.overflows()))
+            .map(|(name, input)| ((*name).to_owned(), input.overflows()))
             .collect();
         for (port, lost) in elsewhere {
             let slot = count_at(&mut monitor.port_overflows, &port);
@@ -681,427 +678,7 @@ impl Shared {
 
     /// Stop ringing `bell` after events (a recorder that stopped following this
     /// component: its subscription's receiver is dropped separately).
-    pub(crate) fn forget_waker(&self, bell: &Arc<crate::port::Doorbell>) {
+    pub(crate) fn forget_waker(&self, bell: &Arc<crate::wake::Doorbell>) {
         lock(&self.wakers).retain(|(waker, _)| !Arc::ptr_eq(&waker.bell, bell));
-    }
-}
-
-/// A command on its way to the component, with the channel for its answer.
-pub(crate) struct ControlMessage {
-    pub(crate) command: Command,
-    /// Given by the component's compound's adaptation (its supervisor managing the
-    /// instance's level), not by anyone else (an operator, a policy, a test).
-    pub(crate) by_supervisor: bool,
-    pub(crate) reply: Sender<Reply>,
-    /// `PENDING`, then `TAKEN` by the component or `WITHDRAWN` by the sender.
-    pub(crate) claim: Arc<AtomicU8>,
-}
-
-pub(crate) const PENDING: u8 = 0;
-pub(crate) const TAKEN: u8 = 1;
-pub(crate) const WITHDRAWN: u8 = 2;
-
-impl ControlMessage {
-    /// Claim the message for execution; false if the sender withdrew it.
-    pub(crate) fn take(&self) -> bool {
-        self.claim
-            .compare_exchange(PENDING, TAKEN, Ordering::AcqRel, Ordering::Acquire)
-            .is_ok()
-    }
-}
-
-/// A command queued by [`Handle::post`], whose answers [`Handle::finish`] waits for
-/// (or [`Handle::poll`] looks at).
-pub(crate) struct Posted {
-    command: Command,
-    answers: Receiver<Reply>,
-    claim: Arc<AtomicU8>,
-    deadline: Instant,
-    /// [`Handle::poll`] saw the component take it (the transition is under way).
-    accepted: bool,
-}
-
-/// The component's answers to one command.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum Reply {
-    /// The command is legal; for a state change, the transition starts now.
-    Accepted,
-    /// The transition finished.
-    Done,
-    /// The command was rejected.
-    Rejected(String),
-}
-
-/// Why a command did not go through, before it is rendered into [`Rejected::reason`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum Refusal {
-    /// The component's thread has not been spawned.
-    NotStarted,
-    /// The command was given on the component's own thread.
-    OwnThread,
-    /// The component's control queue is full.
-    QueueFull,
-    /// The component's thread has ended.
-    Ended,
-    /// The component did not take the command within the handle's command timeout
-    /// (a section still running); the command was withdrawn.
-    Busy,
-    /// The component rejected it, for this reason.
-    Rejected(String),
-}
-
-impl Refusal {
-    /// The reason as [`Rejected::reason`] words it.
-    fn describe(self, timeout: Duration) -> String {
-        match self {
-            Refusal::NotStarted => "the component has not been started (System::start)".to_owned(),
-            Refusal::OwnThread => {
-                "a component cannot command itself from its own thread (use Context::end to finish)"
-                    .to_owned()
-            }
-            Refusal::QueueFull | Refusal::Ended => {
-                "the component's thread has ended or its control queue is full".to_owned()
-            }
-            Refusal::Busy => format!(
-                "busy: the component did not take the command within {timeout:?}; withdrawn"
-            ),
-            Refusal::Rejected(reason) => reason,
-        }
-    }
-}
-
-/// The control port `c` and monitoring port `m` of one component. Cheap to clone,
-/// `Send`; any number of handles may exist.
-#[derive(Clone)]
-pub struct Handle {
-    pub(crate) name: Arc<str>,
-    pub(crate) shared: Arc<Shared>,
-    pub(crate) control: Sender<ControlMessage>,
-    /// The component's doorbell: rung after each command is queued.
-    pub(crate) bell: Arc<crate::port::Doorbell>,
-    pub(crate) exited: Receiver<()>,
-    pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
-    pub(crate) command_timeout: Duration,
-    /// A compound's instances' handles, in declaration order (empty for an atomic
-    /// component). They hold the instances' ports only, never the compound's inner
-    /// system: the instances' threads end with the compound whatever handles remain.
-    pub(crate) instances: Arc<[Handle]>,
-    /// The component's output ports by name, in declaration order (recorder taps).
-    pub(crate) outputs: Arc<[(&'static str, crate::port::ErasedOutput)]>,
-    /// The component's static shape (a compound's as built: exported ports, mapped
-    /// variables).
-    pub(crate) spec: &'static crate::Spec,
-}
-
-impl std::fmt::Debug for Handle {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Handle({})", self.name)
-    }
-}
-
-impl Handle {
-    /// The component instance's name.
-    pub fn name(&self) -> &str {
-        &self.name
-    }
-
-    /// The component's static shape: its type, states, ports, variables (with their
-    /// kinds and types) and timing; a compound's as built, with its exported ports
-    /// and mapped variables.
-    pub fn spec(&self) -> &'static crate::Spec {
-        self.spec
-    }
-
-    /// The names of a compound's instances (its direct ones, in declaration order);
-    /// empty for an atomic component.
-    pub fn instances(&self) -> Vec<String> {
-        self.instances.iter().map(|h| h.name.to_string()).collect()
-    }
-
-    /// The control and monitoring ports of the instance at `path` inside this
-    /// compound: instance names separated by `.`, through nested compounds (`"base"`,
-    /// `"base.motion"`). `None` for an atomic component, an unknown name or a malformed
-    /// path (empty, or with an empty segment).
-    ///
-    /// The handle returned is the instance's own (commands reach it, snapshots are
-    /// live), as [`CompoundBuilder::instance_handle`](crate::CompoundBuilder::instance_handle)
-    /// gives on the builder. Commanding an instance goes around its compound's
-    /// supervisor, which sees the change as it sees any of the instance's changes
-    /// (a fault forced this way is handled by the instance's policy).
-    pub fn instance(&self, path: &str) -> Option<Handle> {
-        let mut handle = self;
-        for name in path.split('.') {
-            handle = handle.instances.iter().find(|h| &*h.name == name)?;
-        }
-        Some(handle.clone())
-    }
-
-    /// A handle whose commands wait at most `timeout` for the component.
-    pub fn with_command_timeout(mut self, timeout: Duration) -> Handle {
-        self.command_timeout = timeout;
-        self
-    }
-
-    fn rejected(&self, command: &Command, reason: impl Into<String>) -> Rejected {
-        Rejected {
-            component: self.name.to_string(),
-            command: format!("{command:?}"),
-            reason: reason.into(),
-        }
-    }
-
-    /// Send a command through the control port and wait for its answer.
-    ///
-    /// The component answers when its thread next looks at its control port: at once
-    /// if it is waiting, or when the user section it is running returns. A state change
-    /// returns after the transition has run (its sections and hooks), so the monitor
-    /// shows the new state; `SetState(Dead)` also joins the thread. If the component does
-    /// not take the command within the handle's command timeout (a section running
-    /// longer than that), the command is withdrawn and rejected as busy; if it took it
-    /// but the transition is still running at the timeout, `Ok` is returned and the
-    /// transition completes later.
-    pub fn command(&self, command: Command) -> Result<(), Rejected> {
-        let posted = self.post(command)?;
-        self.finish(posted)
-    }
-
-    /// The first half of [`Handle::command`]: queue the command and ring the
-    /// component, without waiting ([`System::run_all`](crate::System::run_all) posts to
-    /// every component before it waits for any).
-    pub(crate) fn post(&self, command: Command) -> Result<Posted, Rejected> {
-        let rendered = command.clone();
-        self.post_command(command)
-            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
-    }
-
-    /// [`Handle::post`], with why it failed as a [`Refusal`].
-    pub(crate) fn post_command(&self, command: Command) -> Result<Posted, Refusal> {
-        self.post_from(command, false)
-    }
-
-    /// [`Handle::post`] for a compound's adaptation managing this instance's level
-    /// (`crate::compound::adaptation`): the instance tells it from an operator's.
-    pub(crate) fn post_by_supervisor(&self, command: Command) -> Result<Posted, Rejected> {
-        let rendered = command.clone();
-        self.post_from(command, true)
-            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
-    }
-
-    fn post_from(&self, command: Command, by_supervisor: bool) -> Result<Posted, Refusal> {
-        if !self.shared.spawned.load(Ordering::Acquire) {
-            return Err(Refusal::NotStarted);
-        }
-        if self.shared.thread.get() == Some(&std::thread::current().id()) {
-            // The thread would wait for itself until the timeout.
-            return Err(Refusal::OwnThread);
-        }
-        let deadline = crate::thread::later(Instant::now(), self.command_timeout);
-        let (reply, answers) = crossbeam_channel::bounded(2);
-        let claim = Arc::new(AtomicU8::new(PENDING));
-        let message = ControlMessage {
-            command: command.clone(),
-            by_supervisor,
-            reply,
-            claim: Arc::clone(&claim),
-        };
-        match self.control.try_send(message) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) => return Err(Refusal::QueueFull),
-            Err(TrySendError::Disconnected(_)) => return Err(Refusal::Ended),
-        }
-        self.bell.ring_strong();
-        Ok(Posted {
-            command,
-            answers,
-            claim,
-            deadline,
-            accepted: false,
-        })
-    }
-
-    /// Look at the answers to `posted`, waiting at most `wait`: `None` while the
-    /// component has not finished with it (not taken yet, or its transition still
-    /// running) and its deadline has not passed; otherwise its outcome, as
-    /// [`Handle::command`] gives it (a command not taken by its deadline is withdrawn
-    /// and rejected as busy; one taken whose transition outlasts it counts as done).
-    /// For a caller that must not wait for a component that may be busy (a compound's
-    /// recovery queue: its thread passes packets on meanwhile).
-    pub(crate) fn poll(&self, posted: &mut Posted, wait: Duration) -> Option<Result<(), Rejected>> {
-        let until = crate::thread::later(Instant::now(), wait);
-        loop {
-            match posted.answers.recv_deadline(until) {
-                Ok(Reply::Accepted) => posted.accepted = true,
-                Ok(Reply::Done) => return Some(Ok(())),
-                Ok(Reply::Rejected(reason)) => {
-                    return Some(Err(self.rejected(&posted.command, reason)));
-                }
-                Err(_) => break,
-            }
-        }
-        if Instant::now() < posted.deadline {
-            return None;
-        }
-        if posted.accepted {
-            return Some(Ok(()));
-        }
-        match posted
-            .claim
-            .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
-        {
-            Ok(_) => Some(Err(self.rejected(
-                &posted.command,
-                Refusal::Busy.describe(self.command_timeout),
-            ))),
-            // Taken just now: its answers come.
-            Err(_) => {
-                posted.accepted = true;
-                None
-            }
-        }
-    }
-
-    /// The second half of [`Handle::command`]: wait for the answers to `posted`.
-    pub(crate) fn finish(&self, posted: Posted) -> Result<(), Rejected> {
-        let rendered = posted.command.clone();
-        self.finish_command(posted)
-            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
-    }
-
-    /// [`Handle::finish`], with why it failed as a [`Refusal`].
-    pub(crate) fn finish_command(&self, posted: Posted) -> Result<(), Refusal> {
-        let Posted {
-            command,
-            answers,
-            claim,
-            deadline,
-            accepted: _,
-        } = posted;
-        let is_dead = command == Command::SetState(Controllable::Dead);
-        match answers.recv_deadline(deadline) {
-            Ok(Reply::Accepted) => {}
-            Ok(Reply::Done) => return Ok(()),
-            Ok(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
-            Err(_) => {
-                if claim
-                    .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
-                    .is_ok()
-                {
-                    return Err(Refusal::Busy);
-                }
-                // Taken just now: the transition is under way.
-                if answers
-                    .recv_deadline(crate::thread::later(Instant::now(), self.command_timeout))
-                    .is_err()
-                    && !is_dead
-                {
-                    return Ok(());
-                }
-            }
-        }
-        // Accepted: wait for the transition to finish.
-        let _ = answers.recv_deadline(deadline);
-        if is_dead {
-            self.join_if_exited(deadline);
-        }
-        Ok(())
-    }
-
-    /// [`Handle::command`] with why it failed as a [`Refusal`] (a compound's
-    /// supervisor commanding its instances: `crate::commander`).
-    pub(crate) fn command_refusable(&self, command: Command) -> Result<(), Refusal> {
-        let posted = self.post_command(command)?;
-        self.finish_command(posted)
-    }
-
-    /// Wait (until `deadline`) for the thread to end, then join it.
-    pub(crate) fn join_if_exited(&self, deadline: Instant) -> Option<Result<(), String>> {
-        // The thread holds the sender of `exited`; the channel disconnects when it ends.
-        match self.exited.recv_deadline(deadline) {
-            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {}
-            _ => return None,
-        }
-        let handle = lock(&self.join).take()?;
-        Some(crate::thread::join(handle))
-    }
-
-    /// A copy of everything the monitoring port publishes now.
-    pub fn snapshot(&self) -> Monitor {
-        self.shared.snapshot()
-    }
-
-    /// The default automaton state now.
-    pub fn state(&self) -> State {
-        self.shared.state()
-    }
-
-    /// Whether the component's thread is inside a section that overran its
-    /// `max_response` and has not returned yet (the watchdog moved the component to
-    /// `running_error`; commands wait until the section returns).
-    pub fn is_stuck(&self) -> bool {
-        self.shared.stuck.load(Ordering::Acquire)
-    }
-
-    /// A new observer: every change from now on, as it happens, up to
-    /// [`OBSERVER_CAPACITY`] events waiting (beyond that, events are dropped for it:
-    /// [`Handle::subscribe_counted`] tells how many).
-    pub fn subscribe(&self) -> Receiver<MonitorEvent> {
-        self.shared.subscribe().into_events()
-    }
-
-    /// [`Handle::subscribe`], with the counts of what was published to this observer
-    /// and dropped for it ([`Subscription::dropped`]): an observer that must not lose
-    /// events silently (a recorder, a bridge, a live display) uses this.
-    pub fn subscribe_counted(&self) -> Subscription {
-        self.shared.subscribe()
-    }
-
-    /// A new counted observer whose every event also rings `waker` (a recorder or a
-    /// compound's supervisor: its thread wakes on each change, no polling).
-    pub fn subscribe_waking(&self, waker: crate::automaton::Waker) -> Subscription {
-        self.shared.subscribe_waking(waker)
-    }
-
-    /// Wait until `pred` holds for the monitor, woken by monitoring events (no polling),
-    /// for at most `timeout`. `pred` is evaluated on each event, so it should depend on
-    /// the monitor only (a change nobody announces does not wake the wait).
-    pub fn wait_for(
-        &self,
-        pred: impl Fn(&Monitor) -> bool,
-        timeout: Duration,
-    ) -> Result<Monitor, Timeout> {
-        let deadline = crate::thread::later(Instant::now(), timeout);
-        // Most waits are already satisfied: look before subscribing (a subscription
-        // allocates a channel and costs every publication a send until it is dropped).
-        let monitor = self.snapshot();
-        if pred(&monitor) {
-            return Ok(monitor);
-        }
-        // Subscribe, then look again: a change between the two looks is either in the
-        // second snapshot or announced on the channel.
-        let events = self.shared.subscribe();
-        loop {
-            let monitor = self.snapshot();
-            if pred(&monitor) {
-                return Ok(monitor);
-            }
-            match events.recv_deadline(deadline) {
-                Ok(_) => {}
-                Err(_) => {
-                    let monitor = self.snapshot();
-                    if pred(&monitor) {
-                        return Ok(monitor);
-                    }
-                    return Err(Timeout {
-                        waited: timeout,
-                        last: Box::new(monitor),
-                    });
-                }
-            }
-        }
-    }
-
-    /// Shorthand: wait until the default automaton is in `state`.
-    pub fn wait_state(&self, state: State, timeout: Duration) -> Result<Monitor, Timeout> {
-        self.wait_for(|monitor| monitor.state == state, timeout)
     }
 }

@@ -15,7 +15,7 @@
 use std::any::{Any, TypeId};
 use std::collections::VecDeque;
 use std::fmt;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock, PoisonError, RwLock, Weak};
 use std::time::{Duration, Instant};
 
@@ -23,6 +23,7 @@ use crossbeam_channel::{Receiver, Sender, TrySendError};
 
 use crate::monitor::Shared;
 use crate::spec::OverflowPolicy;
+use crate::wake::Doorbell;
 
 /// How long a producer waits on a full [`OverflowPolicy::Block`] fifo before the
 /// packet is rejected and counted, unless the port sets its own timeout.
@@ -71,172 +72,6 @@ fn next_port_id() -> usize {
     NEXT_PORT_ID.fetch_add(1, Ordering::Relaxed)
 }
 
-/// The wake-up of one component thread: rung by every command, every delivery to its
-/// inputs and every pull request to its outputs; the thread clears it at the start of
-/// each turn and waits on it when a turn finds nothing to do.
-///
-/// One atomic state: `QUIET` (cleared, the thread is looking or spinning), `RUNG`, or
-/// `SLEEPING` (the thread is parked or about to park). A ringer swaps in `RUNG` and
-/// unparks the thread only if it took `SLEEPING` away, so a ring while the thread is
-/// busy or spinning touches no other cache line.
-///
-/// Why no wake-up is lost (the classic lost-wakeup race: a ringer sees the bell already
-/// rung and skips the wake-up, while the thread has just cleared it and is about to look
-/// at stale state, then sleeps):
-///
-/// - The thread's turn is: `clear` (a `SeqCst` swap to `QUIET`), then look at
-///   everything (control queue, arrival counters, pull queues), then, if nothing was
-///   found, wait: `spin` returns as soon as it sees `RUNG`; `park_until` moves
-///   `QUIET` to `SLEEPING` by compare-and-swap (failing, and returning, if a ring came),
-///   then parks until the state is no longer `SLEEPING`. A ringer that swaps
-///   `SLEEPING` away unparks the thread (an unpark before the park makes the park
-///   return at once: the token persists), so the thread cannot sleep through a ring
-///   that came after its `clear`. Other code on the thread that parks (channels) may
-///   consume the token or wake spuriously: `park_until` rechecks the state after every
-///   return from `park`, and so do those channels.
-/// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
-///   always swaps. A swap reads the newest value: if it reads `QUIET`, the thread has
-///   not begun to sleep and will see `RUNG` (its compare-and-swap fails); if
-///   `SLEEPING`, this ringer unparks it; if `RUNG`, the thread's next `clear` reads this
-///   swap's write (or a later one: every write that follows a `RUNG` is a swap or a
-///   compare-and-swap), synchronises with it, and the look that follows sees the
-///   queued payload.
-/// - [`Doorbell::ring`] (arrivals, the per-packet path) first does a plain load and
-///   skips the swap when it reads `RUNG`. A plain load may read a stale `RUNG` that a
-///   `clear` has already overwritten (only a `clear` turns `RUNG` into anything else);
-///   that is what makes the race possible in general. Here the arrival counter's
-///   increment, this load, the thread's `clear` and its load of the counter are all
-///   `SeqCst`, so they fall in one total order: a load that reads a `RUNG` older than a
-///   `clear` comes before that `clear` in the order, hence the increment (before the
-///   load in program order) comes before the `clear` and before the thread's load of
-///   the counter after it, which therefore sees the increment. If the load reads a
-///   `RUNG` written after the thread's last `clear`, that ring makes the thread run
-///   another turn, whose `clear` and look come after it, by the same argument. On
-///   x86-64 and AArch64 a `SeqCst` load costs the same as an acquire load, so the fast
-///   path stays one load of a cache line that stays shared while the consumer is busy.
-///
-/// Waiting parks the thread (`std::thread::park`/`park_timeout`): with a timer due,
-/// it parks at once, so a periodic component sleeps like a thread in `nanosleep` and
-/// never yields its core to another process before its deadline; waiting for input
-/// only, it first spins briefly on the state, then yields a few times (as a
-/// crossbeam-channel `recv` does before it parks), so that a packet that comes back
-/// within a few microseconds costs no futex wake-up.
-pub(crate) struct Doorbell {
-    state: AtomicU8,
-    /// The component's thread, once it runs.
-    thread: OnceLock<std::thread::Thread>,
-}
-
-const QUIET: u8 = 0;
-const RUNG: u8 = 1;
-const SLEEPING: u8 = 2;
-
-/// Spin rounds (`2^k` spin hints each, `k` below this) before parking when no timer is
-/// due: 127 hints, about a microsecond.
-const SPIN_ROUNDS: u32 = 7;
-
-/// `yield_now` rounds after the spin rounds, before parking, when no timer is due.
-const YIELD_ROUNDS: u32 = 4;
-
-impl Doorbell {
-    pub(crate) fn new() -> Arc<Doorbell> {
-        Arc::new(Doorbell {
-            state: AtomicU8::new(QUIET),
-            thread: OnceLock::new(),
-        })
-    }
-
-    /// Called by the component's thread before its first turn.
-    pub(crate) fn attach(&self) {
-        let _ = self.thread.set(std::thread::current());
-    }
-
-    /// Ring after a `SeqCst` increment of an arrival counter (see the type's doc).
-    #[inline]
-    pub(crate) fn ring(&self) {
-        if self.state.load(Ordering::SeqCst) != RUNG {
-            self.ring_strong();
-        }
-    }
-
-    /// Ring after queueing a command or a pull request.
-    #[inline]
-    pub(crate) fn ring_strong(&self) {
-        if self.state.swap(RUNG, Ordering::SeqCst) == SLEEPING
-            && let Some(thread) = self.thread.get()
-        {
-            thread.unpark();
-        }
-    }
-
-    /// The thread starts a turn: rings from now on wake it again.
-    #[inline]
-    pub(crate) fn clear(&self) {
-        self.state.swap(QUIET, Ordering::SeqCst);
-    }
-
-    /// Whether anything rang since the last `clear` (may read a stale `QUIET`: a wait
-    /// that follows is still woken).
-    #[inline]
-    pub(crate) fn is_rung(&self) -> bool {
-        self.state.load(Ordering::SeqCst) == RUNG
-    }
-
-    /// Spin, then yield, briefly, until rung: true if it rang (on the component's
-    /// thread, before `park_until` when no timer is due).
-    pub(crate) fn spin(&self) -> bool {
-        for round in 0..SPIN_ROUNDS {
-            if self.is_rung() {
-                return true;
-            }
-            for _ in 0..1u32 << round {
-                std::hint::spin_loop();
-            }
-        }
-        for _ in 0..YIELD_ROUNDS {
-            if self.is_rung() {
-                return true;
-            }
-            std::thread::yield_now();
-        }
-        self.is_rung()
-    }
-
-    /// Park until rung or until `deadline` (on the component's thread).
-    pub(crate) fn park_until(&self, deadline: Option<Instant>) {
-        if self
-            .state
-            .compare_exchange(QUIET, SLEEPING, Ordering::SeqCst, Ordering::SeqCst)
-            .is_err()
-        {
-            return; // Rung since the turn's `clear`.
-        }
-        loop {
-            match deadline {
-                None => std::thread::park(),
-                Some(deadline) => {
-                    let now = Instant::now();
-                    if now >= deadline {
-                        // Back to `QUIET`, unless a ring came meanwhile (then `RUNG`
-                        // stays for the next turn's `clear`).
-                        let _ = self.state.compare_exchange(
-                            SLEEPING,
-                            QUIET,
-                            Ordering::SeqCst,
-                            Ordering::SeqCst,
-                        );
-                        return;
-                    }
-                    std::thread::park_timeout(deadline - now);
-                }
-            }
-            if self.state.load(Ordering::SeqCst) != SLEEPING {
-                return;
-            }
-        }
-    }
-}
-
 /// The component a port belongs to: its doorbell, its monitor, the port's name.
 pub(crate) struct Owner {
     pub(crate) bell: Arc<Doorbell>,
@@ -255,7 +90,7 @@ pub(crate) struct Owner {
 /// sections.
 #[derive(Debug, Default)]
 pub(crate) struct ArrivalLabel {
-    /// Nanoseconds since `crate::watchdog::epoch()`, plus one; 0: none.
+    /// Nanoseconds since `crate::time::epoch()`, plus one; 0: none.
     first: AtomicU64,
     /// The component's clock when it is virtual (else the real one is read).
     clock: OnceLock<Arc<crate::clock::VirtualClock>>,
@@ -279,7 +114,7 @@ impl ArrivalLabel {
             Some(clock) => clock.now(),
             None => Instant::now(),
         };
-        let since = now.saturating_duration_since(crate::watchdog::epoch());
+        let since = now.saturating_duration_since(crate::time::epoch());
         let nanos = u64::try_from(since.as_nanos())
             .unwrap_or(u64::MAX - 1)
             .saturating_add(1);
@@ -292,7 +127,7 @@ impl ArrivalLabel {
     pub(crate) fn take(&self) -> Option<Instant> {
         match self.first.swap(0, Ordering::AcqRel) {
             0 => None,
-            nanos => Some(crate::watchdog::epoch() + Duration::from_nanos(nanos - 1)),
+            nanos => Some(crate::time::epoch() + Duration::from_nanos(nanos - 1)),
         }
     }
 }
@@ -311,6 +146,12 @@ pub(crate) struct InputCore {
     pull_signal: OnceLock<(Sender<()>, Receiver<()>)>,
     /// The producers this input is connected to (for pull requests).
     sources: Mutex<Vec<Arc<OutputCore>>>,
+}
+
+impl crate::monitor::Losses for InputCore {
+    fn overflows(&self) -> u64 {
+        InputCore::overflows(self)
+    }
 }
 
 impl InputCore {
@@ -403,7 +244,7 @@ impl InputCore {
         timeout: Duration,
         mut ready: impl FnMut() -> Option<R>,
     ) -> Result<R, PullError> {
-        let deadline = crate::thread::later(Instant::now(), timeout);
+        let deadline = crate::time::later(Instant::now(), timeout);
         let signal = self
             .pull_signal
             .get_or_init(|| crossbeam_channel::bounded(1));

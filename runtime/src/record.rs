@@ -75,13 +75,14 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::clock::Clock;
-use crate::monitor::{Handle, MonitorEvent, Subscription};
+use crate::handle::Handle;
+use crate::monitor::{MonitorEvent, Subscription};
 use crate::port::{
-    DataOut, Deliver, Doorbell, ErasedInput, ErasedOutput, InKind, OutKind, Packet, Parcel, TickIn,
-    TickOut,
+    DataOut, Deliver, ErasedInput, ErasedOutput, InKind, OutKind, Packet, Parcel, TickIn, TickOut,
 };
 use crate::schema::Schema;
 use crate::system::System;
+use crate::wake::Doorbell;
 
 /// The version of the recording format written in every header.
 pub const FORMAT_VERSION: u32 = 2;
@@ -668,7 +669,7 @@ impl Recorder {
             counters.push(tap.counters());
             taps.push(tap);
         }
-        let waker = crate::automaton::Waker {
+        let waker = crate::wake::Waker {
             bell: Arc::clone(&bell),
         };
         let monitors = self
@@ -1278,7 +1279,7 @@ impl Writer {
                 last_flush = Instant::now();
             }
             self.bell
-                .park_until(Some(crate::thread::later(Instant::now(), FLUSH_INTERVAL)));
+                .park_until(Some(crate::time::later(Instant::now(), FLUSH_INTERVAL)));
         };
         for tap in &mut self.taps {
             tap.detach();
@@ -1434,7 +1435,7 @@ fn find_output(system: &System, path: &str) -> Result<ErasedOutput, RecordError>
 /// The input at `path`.
 fn find_input(system: &System, path: &str) -> Result<ErasedInput, RecordError> {
     let (handle, component, port) = find_component(system, path)?;
-    let inputs = &handle.shared.inputs;
+    let inputs = &handle.inputs;
     inputs
         .iter()
         .find(|(name, _)| *name == port)

@@ -39,11 +39,12 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use crate::automaton::{Automaton, Driven, Waker};
+use crate::automaton::{Automaton, Driven};
 use crate::monitor::{Command, Monitor, MonitorEvent};
 use crate::port::Packet;
 use crate::spec::{Spec, StateSpec, TimingSpec};
 use crate::table::{Controllable, State};
+use crate::wake::Waker;
 use crate::{Component, Context, Fault, PortSet, Section, Value};
 
 /// How a [`Registrar`] builds a compound: by instance name, or why not.
@@ -436,7 +437,7 @@ impl Proxy {
             self.next_poll = self
                 .end
                 .poll_every()
-                .map(|every| crate::thread::later(now, every));
+                .map(|every| crate::time::later(now, every));
         }
     }
 }

@@ -32,12 +32,16 @@ use crate::adapt::{
 use crate::automaton::{Atomic, Context, Driven, Fault, Section};
 use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
+use crate::handle::{ControlMessage, Reply};
 use crate::idle::IdleProbe;
-use crate::monitor::{Command, ControlMessage, MonitorEvent, OsPriority, Reply, Shared};
-use crate::port::{ArrivalLabel, Doorbell, InputCore, OutputCore};
+use crate::monitor::{Command, MonitorEvent, Shared};
+use crate::port::{ArrivalLabel, InputCore, OutputCore};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
-use crate::thread::{Scheduling, later, panic_message};
+use crate::thread::OsPriority;
+use crate::thread::{Scheduling, panic_message};
+use crate::time::later;
+use crate::wake::Doorbell;
 use crate::watchdog::Watch;
 
 /// How often, at most, a busy thread reads its CPU time (a system call) for the
@@ -279,7 +283,7 @@ impl Runner {
             _exit_guard: exit_guard,
         };
         runner.cx.shared = Some(Arc::clone(&runner.shared));
-        runner.cx.waker = Some(crate::automaton::Waker {
+        runner.cx.waker = Some(crate::wake::Waker {
             bell: Arc::clone(&runner.bell),
         });
         runner

@@ -7,9 +7,11 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::automaton::{Atomic, Automaton, Driven, TaskResult};
+use crate::automaton::{Atomic, Automaton, Driven};
 use crate::clock::Clock;
-use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Handle, Monitor, Shared};
+use crate::handle::Handle;
+use crate::monitor::TaskResult;
+use crate::monitor::{DEFAULT_COMMAND_TIMEOUT, Monitor, Shared};
 use crate::port::{
     ArrivalLabel, ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
 };
@@ -539,7 +541,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         nominal_period: timing.period,
         max_response: timing.max_response,
         priority: timing.priority,
-        os_priority: crate::monitor::OsPriority::Inherited,
+        os_priority: crate::thread::OsPriority::Inherited,
         dropped_events: 0,
         supervision: Vec::new(),
         supervision_steps: 0,
@@ -550,10 +552,15 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         .inputs
         .iter()
         .map(|i| i.name)
-        .zip(ports.inputs.iter().cloned())
+        .zip(
+            ports
+                .inputs
+                .iter()
+                .map(|input| Arc::clone(&input.core) as Arc<dyn crate::monitor::Losses>),
+        )
         .collect();
     let shared = Arc::new(Shared::new(monitor, named_inputs));
-    let bell = crate::port::Doorbell::new();
+    let bell = crate::wake::Doorbell::new();
     // Response times (paper 3.6) are measured for an aperiodic component with a
     // `max_response`, at the inputs an `on` transition handles.
     let labeled = timing.period.is_none() && timing.max_response.is_some();
@@ -610,6 +617,12 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         join: Arc::new(Mutex::new(None)),
         command_timeout: DEFAULT_COMMAND_TIMEOUT,
         instances: instances.into(),
+        inputs: spec
+            .inputs
+            .iter()
+            .map(|i| i.name)
+            .zip(ports.inputs.iter().cloned())
+            .collect(),
         outputs: spec
             .outputs
             .iter()
@@ -1116,19 +1129,16 @@ impl System {
         for slot in &self.slots {
             if slot.runner.is_none() {
                 let (reply, _answers) = crossbeam_channel::bounded(2);
-                let _ = slot
-                    .handle
-                    .control
-                    .try_send(crate::monitor::ControlMessage {
-                        command: crate::Command::SetState(Controllable::Dead),
-                        by_supervisor: false,
-                        reply,
-                        claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::monitor::PENDING)),
-                    });
+                let _ = slot.handle.control.try_send(crate::handle::ControlMessage {
+                    command: crate::Command::SetState(Controllable::Dead),
+                    by_supervisor: false,
+                    reply,
+                    claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),
+                });
                 slot.handle.bell.ring_strong();
             }
         }
-        let deadline = crate::thread::later(Instant::now(), SHUTDOWN_TIMEOUT);
+        let deadline = crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT);
         for slot in &mut self.slots {
             let mut joined = false;
             let mut thread_panic = None;

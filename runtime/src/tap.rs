@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crossbeam_channel::{Receiver, Sender};
 
-use crate::monitor::Handle;
+use crate::handle::Handle;
 use crate::port::{Deliver, ErasedOutput, OutKind, Packet, Parcel};
 
 /// Why [`Tap::attach`] failed.

@@ -3,7 +3,7 @@
 use std::any::Any;
 use std::io;
 use std::thread::{Builder, JoinHandle};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Spawn a named thread (`cool:<name>`; the OS may truncate the name).
 pub(crate) fn spawn(
@@ -32,11 +32,24 @@ pub(crate) fn panic_message(payload: &(dyn Any + Send)) -> String {
     }
 }
 
-/// `start + delay`, saturating at about a century from `start` instead of panicking on
-/// an absurd delay (a `Duration::MAX` timeout means "practically never").
-pub(crate) fn later(start: Instant, delay: Duration) -> Instant {
-    const CENTURY: Duration = Duration::from_secs(100 * 365 * 24 * 3600);
-    start.checked_add(delay.min(CENTURY)).unwrap_or(start)
+/// How a component's `priority` is applied to its OS thread (`docs/runtime.md`,
+/// "Priority"). Applying can fail (no `CAP_SYS_NICE` in a container): the component
+/// runs on regardless, and this says what holds.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum OsPriority {
+    /// Nothing applied: the thread has not started, or the priority is 0 and the thread
+    /// keeps the scheduling it was created with.
+    Inherited,
+    /// Real-time round-robin scheduling (Linux `SCHED_RR`) at this static priority
+    /// (1 to 99).
+    RoundRobin(i32),
+    /// Normal time-sharing scheduling at this nice value (-20, highest, to 19): a
+    /// negative priority, a priority of 0 restored, or a positive priority when
+    /// real-time scheduling was refused.
+    Nice(i32),
+    /// The OS refused, or the platform is not supported: why. The thread keeps its
+    /// previous scheduling.
+    NotApplied(String),
 }
 
 /// The timer slack given to component threads (Linux `PR_SET_TIMERSLACK`): how late the
@@ -71,7 +84,7 @@ mod os {
         thread_native_id,
     };
 
-    use crate::monitor::OsPriority;
+    use super::OsPriority;
 
     /// The highest `SCHED_RR` static priority on Linux.
     const RR_MAX: i32 = 99;
@@ -213,7 +226,7 @@ mod os {
 /// Other platforms: `priority` is recorded and published, not applied.
 #[cfg(not(target_os = "linux"))]
 mod os {
-    use crate::monitor::OsPriority;
+    use super::OsPriority;
 
     /// Real-time scheduling is not applied on this platform.
     pub(crate) fn highest_realtime() -> Option<i32> {

@@ -31,10 +31,11 @@ use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
 use crate::automaton::Section;
-use crate::clock::Clock;
+use crate::clock::{Clock, Watched};
 use crate::monitor::{MonitorEvent, Shared};
 use crate::spec::Spec;
 use crate::table::State;
+use crate::time::epoch;
 
 /// The shortest time the watchdog sleeps while no section is under way.
 pub(crate) const IDLE_POLL_FLOOR: Duration = Duration::from_millis(1);
@@ -44,13 +45,6 @@ const TRIPPED: u64 = u64::MAX;
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// The instant all watch times count from (a virtual clock takes it before its own
-/// start, so that its instants are never before it).
-pub(crate) fn epoch() -> Instant {
-    static EPOCH: OnceLock<Instant> = OnceLock::new();
-    *EPOCH.get_or_init(Instant::now)
 }
 
 fn nanos(duration: Duration) -> u64 {
@@ -122,13 +116,14 @@ impl Watch {
     pub(crate) fn set_clock(self: &Arc<Self>, clock: &Clock) {
         if let Some(virtual_clock) = clock.as_virtual() {
             self.on_virtual_clock.store(true, Ordering::Release);
-            virtual_clock.watch(self);
+            let watched: Arc<dyn Watched> = self.clone();
+            virtual_clock.watch(Arc::downgrade(&watched));
         }
     }
 
     /// The virtual clock moved to `now`: trip the section under way if it started
     /// `max_response` or more before.
-    pub(crate) fn trip_if_due(&self, now: Instant) {
+    fn trip_due(&self, now: Instant) {
         let limit = self.limit.load(Ordering::Acquire);
         let token = self.slot.load(Ordering::Acquire);
         if limit == 0 || token == 0 || token == TRIPPED {
@@ -317,5 +312,11 @@ impl Registry {
                 }
             };
         }
+    }
+}
+
+impl Watched for Watch {
+    fn trip_if_due(&self, now: Instant) {
+        self.trip_due(now);
     }
 }

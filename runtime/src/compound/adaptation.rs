@@ -7,7 +7,8 @@ use std::time::Duration;
 
 use crate::adapt::{AdaptAction, Adaptation, Decision, Levels, Member, Pressure};
 use crate::automaton::Context;
-use crate::monitor::{Command, Handle};
+use crate::handle::Handle;
+use crate::monitor::Command;
 use crate::table::{Controllable, State};
 
 use super::state::{Compound, Status};

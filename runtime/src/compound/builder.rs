@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use crate::adapt::{AdaptConfig, ProtectPriority, Selector};
 use crate::commander::{Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT};
-use crate::monitor::Handle;
+use crate::handle::Handle;
 use crate::port::{
     DataOut, ErasedInput, ErasedOutput, FifoIn, InputPort, LastIn, OutputPort, Packet, PosterIn,
     PosterOut, TickIn, TickOut, UfifoIn,

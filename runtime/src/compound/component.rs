@@ -353,13 +353,13 @@ impl Driven for Compound {
         let queue = self.queue.iter().map(|entry| {
             entry
                 .next
-                .min(crate::thread::later(entry.since, self.deadline))
+                .min(crate::time::later(entry.since, self.deadline))
         });
         // A stuck instance's return is an event; its deadline is a timer.
         let restarts = self.instances.iter().filter_map(|i| {
             let pending = i.pending?;
             Some(if i.handle.is_stuck() {
-                crate::thread::later(pending.since, self.deadline)
+                crate::time::later(pending.since, self.deadline)
             } else {
                 pending.due
             })
@@ -373,7 +373,7 @@ impl Driven for Compound {
             .exports
             .iter()
             .any(|export| export.held())
-            .then(|| crate::thread::later(self.clock.now(), EXPORT_RETRY));
+            .then(|| crate::time::later(self.clock.now(), EXPORT_RETRY));
         queue
             .chain(restarts)
             .chain(fresh)

@@ -82,7 +82,7 @@ impl Coordinator {
         indices: &[usize],
         now: Instant,
     ) {
-        let until = crate::thread::later(now, self.settling(members, monitors, indices));
+        let until = crate::time::later(now, self.settling(members, monitors, indices));
         self.settle_until = Some(self.settle_until.map_or(until, |before| before.max(until)));
     }
 

@@ -24,7 +24,7 @@ impl Compound {
         self.queue.push(Recovering {
             instance: index,
             since: now,
-            next: crate::thread::later(now, self.retry_every),
+            next: crate::time::later(now, self.retry_every),
             probation: false,
         });
     }
@@ -175,7 +175,7 @@ impl Compound {
         }
         instance.pending = Some(PendingRestart {
             since: now,
-            due: crate::thread::later(now, budget.delay(done)),
+            due: crate::time::later(now, budget.delay(done)),
         });
         self.restarts_due(now)
     }
@@ -189,7 +189,7 @@ impl Compound {
             };
             let instance = &self.instances[index];
             if instance.handle.is_stuck() {
-                if now >= crate::thread::later(pending.since, self.deadline) {
+                if now >= crate::time::later(pending.since, self.deadline) {
                     let name = instance.name.clone();
                     self.instances[index].pending = None;
                     self.step(
@@ -234,7 +234,7 @@ impl Compound {
         let mut position = 0;
         while position < self.queue.len() {
             let entry = self.queue[position];
-            if now < entry.next && now < crate::thread::later(entry.since, self.deadline) {
+            if now < entry.next && now < crate::time::later(entry.since, self.deadline) {
                 position += 1;
                 continue;
             }
@@ -267,7 +267,7 @@ impl Compound {
                 self.step(index, Step::Recovered, "");
                 continue;
             }
-            if now >= crate::thread::later(entry.since, self.deadline) {
+            if now >= crate::time::later(entry.since, self.deadline) {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
@@ -320,7 +320,7 @@ impl Compound {
             let Some(attempt) = attempt else {
                 // Not answered yet: looked at again at the next retry.
                 let entry = &mut self.queue[position];
-                entry.next = crate::thread::later(now, self.retry_every);
+                entry.next = crate::time::later(now, self.retry_every);
                 position += 1;
                 continue;
             };
@@ -334,7 +334,7 @@ impl Compound {
             }
             let entry = &mut self.queue[position];
             entry.probation = restarted;
-            entry.next = crate::thread::later(now, self.retry_every);
+            entry.next = crate::time::later(now, self.retry_every);
             position += 1;
         }
         Ok(())

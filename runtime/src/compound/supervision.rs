@@ -89,7 +89,7 @@ impl Compound {
         let now = self.clock.now();
         if self.next_timed.is_none_or(|due| now >= due) {
             let period = cx.period().unwrap_or(DEFAULT_SUPERVISION_PERIOD);
-            self.next_timed = Some(crate::thread::later(now, period));
+            self.next_timed = Some(crate::time::later(now, period));
             // An instance publishes its times without an event: read the snapshot of
             // every instance a time read names, so the rules see their times now.
             let named: BTreeSet<usize> = self

@@ -5,8 +5,8 @@
 use std::collections::HashMap;
 use std::time::Duration;
 
-use crate::automaton::TaskResult;
 use crate::monitor::Monitor;
+use crate::monitor::TaskResult;
 use crate::table::State;
 use crate::value::Value;
 
