@@ -266,6 +266,7 @@ pub struct Context {
     pub(crate) result: TaskResult,
     pub(crate) result_changed: bool,
     pub(crate) end_requested: bool,
+    pub(crate) stopping: bool,
     pub(crate) period: Option<Duration>,
     pub(crate) period_changed: bool,
     pub(crate) quality: usize,
@@ -291,6 +292,7 @@ impl Context {
             result: TaskResult::None,
             result_changed: false,
             end_requested: false,
+            stopping: false,
             period,
             period_changed: false,
             quality: 0,
@@ -332,6 +334,15 @@ impl Context {
     /// The current `result`.
     pub fn result(&self) -> &TaskResult {
         &self.result
+    }
+
+    /// Whether the component is shutting down: this call is part of its way to `dead`
+    /// (the exit section of its current user state, then `stop`), not of a transition
+    /// it will come back from. A supervisor's exit section uses it to leave its
+    /// instances as they are (a compound refuses to bring an instance to `running`
+    /// then: [`Refused::ShuttingDown`](crate::Refused::ShuttingDown)).
+    pub fn stopping(&self) -> bool {
+        self.stopping
     }
 
     /// Finish the task: when the current call returns, the exit section of the current

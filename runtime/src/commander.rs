@@ -96,6 +96,10 @@ pub enum Refused {
         /// How many levels the instance has.
         levels: usize,
     },
+    /// The compound is shutting down (its way to `dead`: its supervisor's exit
+    /// section and `stop`): no instance is brought to `running` then.
+    #[error("the compound is shutting down: no instance is brought to running")]
+    ShuttingDown,
     /// The instance rejected the command for another reason (its words).
     #[error("{0}")]
     Rejected(String),
@@ -134,6 +138,8 @@ pub struct Commander {
     timeout: Duration,
     /// Steps taken since the compound last published them.
     steps: Vec<Supervision>,
+    /// The compound is on its way to `dead` ([`Commander::set_stopping`]).
+    stopping: bool,
 }
 
 impl std::fmt::Debug for Commander {
@@ -168,6 +174,7 @@ impl Commander {
             stand_ins: None,
             timeout,
             steps: Vec::new(),
+            stopping: false,
         }
     }
 
@@ -193,6 +200,7 @@ impl Commander {
             stand_ins: Some(stand_ins),
             timeout: Duration::ZERO,
             steps: Vec::new(),
+            stopping: false,
         }
     }
 
@@ -283,6 +291,13 @@ impl Commander {
         )
     }
 
+    /// Whether the compound is on its way to `dead` ([`Context::stopping`](crate::Context::stopping)
+    /// of the section about to run): while it is, a command that would bring an
+    /// instance to `running` is refused ([`Refused::ShuttingDown`]).
+    pub(crate) fn set_stopping(&mut self, stopping: bool) {
+        self.stopping = stopping;
+    }
+
     /// The steps taken since the last call (the compound publishes them).
     pub(crate) fn take_steps(&mut self) -> Vec<Supervision> {
         std::mem::take(&mut self.steps)
@@ -297,7 +312,11 @@ impl Commander {
         command: Command,
         check: impl FnOnce(&Target) -> Option<Refused>,
     ) -> Result<(), CommandError> {
-        let outcome = self.answer(instance, &command, check);
+        let outcome = if self.stopping && command == Command::SetState(Controllable::Running) {
+            Err(Refused::ShuttingDown)
+        } else {
+            self.answer(instance, &command, check)
+        };
         let (step, detail) = match &outcome {
             Ok(()) => (
                 Step::Commanded {

@@ -757,6 +757,9 @@ impl Runner {
             return;
         };
         let from = self.state;
+        // On the way to `dead`, every call that remains (an exit section, `stop`) is
+        // told so (`Context::stopping`); nothing comes back from `dead`.
+        self.cx.stopping = to == State::Dead;
         self.run_actions(to, actions);
         if self.supervised {
             let now = self.state;

@@ -157,6 +157,7 @@ impl Automaton for Compound {
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
         self.sectioned = true;
+        self.commander.set_stopping(cx.stopping());
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,

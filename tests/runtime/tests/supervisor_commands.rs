@@ -15,7 +15,7 @@ use coolbot::{
     SectionResult, State, Step, Supervisor, SupervisorCx, System, TaskResult, TimingSpec, Value,
 };
 use coolbot_runtime_tests::generated::{
-    choosing, commanding, fed_commanding, panicky, watching, worker,
+    cell, choosing, commanding, fed_commanding, panicky, watching, worker,
 };
 use coolbot_runtime_tests::support::{Script, Scripted, Tap, WAIT, eventually};
 
@@ -686,4 +686,134 @@ fn a_supervisor_harness_runs_the_rules_and_records_the_commands_without_threads(
     );
     let error = h.set_instance_variable("w", "nope", 1_i64).unwrap_err();
     assert_eq!(error.to_string(), "instance `w` has no variable `nope`");
+}
+
+/// What `Cell`'s exit section of `halted` saw: whether the cell was stopping, and the
+/// answer to its command to run the joint.
+type Exits = Arc<Mutex<Vec<(bool, Result<(), CommandError>)>>>;
+
+/// `Cell`'s supervisor: `halted` suspends the joint on entry and runs it on exit.
+struct EmergencyStop {
+    exits: Exits,
+}
+
+impl cell::Supervisor for EmergencyStop {
+    fn halted_entry(&mut self, cx: &mut cell::Cx<'_>) -> SectionResult {
+        cx.instances.joint().suspend()?;
+        Ok(())
+    }
+
+    fn halted_exit(&mut self, cx: &mut cell::Cx<'_>) -> SectionResult {
+        let stopping = cx.rt.stopping();
+        let outcome = cx.instances.joint().run();
+        self.exits.lock().unwrap().push((stopping, outcome));
+        Ok(())
+    }
+}
+
+struct CellParts {
+    supervisor: Option<EmergencyStop>,
+    script: Arc<Script>,
+    tap: Option<Tap>,
+}
+
+impl cell::Parts for CellParts {
+    fn supervisor(&mut self) -> impl cell::Supervisor {
+        self.supervisor.take().expect("one supervisor")
+    }
+
+    fn f(&mut self) -> impl coolbot_runtime_tests::generated::feeder::Behavior {
+        self.tap.take().expect("one feeder")
+    }
+
+    fn joint(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.script)
+    }
+}
+
+fn set_estop(cell: &Handle, on: bool) {
+    cell.command(Command::Set("estop".to_owned(), Value::from(on)))
+        .unwrap_or_else(|e| panic!("{e}"));
+}
+
+/// A supervisor's exit section is told when it runs because the compound shuts down
+/// (`Context::stopping`), and a command that would bring an instance to `running`
+/// then is refused with a step that says why: an emergency stop's `halted` state,
+/// whose exit runs the joint again when a rule leaves it, does not run the joint
+/// when the cell shuts down while halted.
+#[test]
+fn a_compound_shutting_down_runs_no_instance_again() {
+    let exits: Exits = Arc::default();
+    let (tap, _feeder) = Tap::new();
+    let mut system = System::new();
+    let cell = system
+        .add(
+            cell::component(
+                "cell",
+                CellParts {
+                    supervisor: Some(EmergencyStop {
+                        exits: Arc::clone(&exits),
+                    }),
+                    script: Script::new(),
+                    tap: Some(tap),
+                },
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    let joint = cell.instance("joint").unwrap();
+    system.run_all().unwrap();
+    wait_user(&cell, "working");
+
+    // A rule leaves `halted`: its exit runs the joint again, and it is not stopping.
+    set_estop(&cell, true);
+    wait_user(&cell, "halted");
+    joint.wait_state(State::Suspended, WAIT).unwrap();
+    set_estop(&cell, false);
+    wait_user(&cell, "working");
+    joint.wait_state(State::Running, WAIT).unwrap();
+    assert!(
+        matches!(exits.lock().unwrap().as_slice(), [(false, Ok(()))]),
+        "{:?}",
+        exits.lock().unwrap()
+    );
+
+    // Halted again, then shut down: the exit section knows, and the joint stays
+    // suspended until it is dead.
+    set_estop(&cell, true);
+    wait_user(&cell, "halted");
+    joint.wait_state(State::Suspended, WAIT).unwrap();
+    let events = joint.subscribe();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    let seen = exits.lock().unwrap().clone();
+    assert_eq!(seen.len(), 2, "{seen:?}");
+    assert!(seen[1].0, "the exit section is told the cell is stopping");
+    assert_eq!(reason(&seen[1].1), Some(&Refused::ShuttingDown));
+    let states: Vec<State> = events
+        .try_iter()
+        .filter_map(|event| match event {
+            coolbot::MonitorEvent::State { to, .. } => Some(to),
+            _ => None,
+        })
+        .collect();
+    // The shutdown order: the supervisor's exit section, the compound's `stop` (its
+    // instances to `ready`), then the instances to `dead`; never `running`.
+    assert_eq!(states, [State::Ready, State::Dead]);
+    let refused = cell
+        .snapshot()
+        .supervision
+        .into_iter()
+        .find(|s| {
+            s.instance == "joint"
+                && s.step
+                    == Step::CommandRefused {
+                        command: "run".to_owned(),
+                    }
+        })
+        .expect("the refusal is a supervision step");
+    assert_eq!(
+        refused.detail,
+        "the compound is shutting down: no instance is brought to running"
+    );
 }
