@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use coolbot::adapt::{Decision, Levels, Member, ProtectPriority, Reconfiguration, decide};
 use coolbot::{
-    AdaptConfig, Automaton, Command, Component, Context, Controllable, Fault, PeriodicSpec,
-    PortSet, Pressure, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec, Value,
+    AdaptConfig, Automaton, Command, Component, Context, Controllable, PeriodicSpec, PortSet,
+    Pressure, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec,
 };
 
 static TICKER: Spec = Spec {
@@ -49,29 +49,9 @@ impl Automaton for Ticker {
     fn spec(&self) -> &'static Spec {
         &TICKER
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
     fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
         self.0.fetch_add(1, Ordering::Relaxed);
         Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 

@@ -351,23 +351,6 @@ impl Automaton for Node {
     fn spec(&self) -> &'static Spec {
         &NODE
     }
-    fn start(&mut self, _: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _: &mut Context) {}
-    fn section(&mut self, _: usize, _: Section, _: &mut Context) -> SectionResult {
-        Ok(())
-    }
-    fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
-    fn answer(&mut self, _: usize, _: &mut Context) -> SectionResult {
-        Ok(())
-    }
-    fn configure(&mut self, _: &Value) -> Result<(), String> {
-        Ok(())
-    }
     fn set(&mut self, _: usize, value: &Value) -> Result<(), String> {
         match value {
             Value::UInt(v) => {

@@ -96,42 +96,77 @@ impl<E: std::error::Error + Send + Sync + 'static> From<E> for Fault {
 /// implementing this over the user's `Behavior`; the runtime calls it only on the
 /// component's own thread, each call under `catch_unwind`. (`Any`: a harness,
 /// `crate::harness`, reads the generated glue back through it.)
+///
+/// Only [`Automaton::spec`] is required: a hand-written component implements the hooks
+/// it uses, and every other keeps its default (nothing to start or stop, no section,
+/// no choice, no answer to a pull, no configuration, no variables of its own).
 pub trait Automaton: std::any::Any + Send + 'static {
     /// The component's static shape.
     fn spec(&self) -> &'static Spec;
 
     /// Called in `starting` (on the first start and on every restart from an error or
     /// `end`): acquire resources, read the configuration. `Err` (or a panic) leads to
-    /// `starting_error`.
-    fn start(&mut self, cx: &mut Context) -> Result<(), Fault>;
+    /// `starting_error`. The default acquires nothing.
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        Ok(())
+    }
 
     /// Called when the component leaves the started world (`ready`, `running`,
     /// `suspended`) for `dead`, `end` or `running_error`: release what `start` acquired.
-    fn stop(&mut self, cx: &mut Context);
+    /// The default releases nothing.
+    fn stop(&mut self, _cx: &mut Context) {}
 
-    /// Run one section of one user state.
-    fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault>;
+    /// Run one section of one user state. The default does nothing (a component whose
+    /// spec declares no sections).
+    fn section(
+        &mut self,
+        _state: usize,
+        _section: Section,
+        _cx: &mut Context,
+    ) -> Result<(), Fault> {
+        Ok(())
+    }
 
     /// For states with `may`: after each entry or periodic section, the target (an index
-    /// into [`Spec::states`], one of the state's `may` targets) to go to, if any.
-    fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize>;
+    /// into [`Spec::states`], one of the state's `may` targets) to go to, if any. The
+    /// default stays.
+    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
+        None
+    }
 
     /// The user's handler for a raised declared exception, called before its plan runs.
-    fn exception(&mut self, exception: usize, message: &str, cx: &mut Context);
+    /// The default does nothing (the plan runs).
+    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
 
     /// A pull request arrived for output `output` (declared `pull`): compute the answer
     /// and send it on the output port; while this runs, a data output sends only to the
-    /// requesting input.
-    fn answer(&mut self, output: usize, cx: &mut Context) -> Result<(), Fault>;
+    /// requesting input. The default has no answer: a fault (a component that declares
+    /// a `pull` output implements it).
+    fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
+        let name = self.spec().outputs.get(output).map_or("?", |o| o.name);
+        Err(Fault::message(format!(
+            "output `{name}` is pulled but the component does not answer pulls"
+        )))
+    }
 
-    /// A new configuration through the control port.
-    fn configure(&mut self, configuration: &Value) -> Result<(), String>;
+    /// A new configuration through the control port. The default refuses it (the
+    /// component has no configuration).
+    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
+        Err("the component takes no configuration".to_owned())
+    }
 
-    /// Set controllable variable `variable` (an index into [`Spec::variables`]).
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String>;
+    /// Set controllable variable `variable` (an index into [`Spec::variables`]). The
+    /// default refuses (the component keeps no variables of its own).
+    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
+        let name = self.spec().variables.get(variable).map_or("?", |v| v.name);
+        Err(format!("variable `{name}` cannot be set"))
+    }
 
-    /// The current value of variable `variable`, for the monitoring port.
-    fn get(&self, variable: usize) -> Value;
+    /// The current value of variable `variable`, for the monitoring port. The default
+    /// has none ([`Value::Unit`]).
+    fn get(&self, _variable: usize) -> Value {
+        Value::Unit
+    }
 
     /// The current configuration, if the component has one to report (generated
     /// components do): what an instance declared `on "node"` is configured with on

@@ -47,30 +47,15 @@
 //!     count: u64,
 //! }
 //!
+//! // Only `spec` is required: the hooks this component does not use keep their
+//! // defaults (nothing to start or stop, no configuration, nothing to set).
 //! impl Automaton for Counter {
 //!     fn spec(&self) -> &'static Spec {
 //!         &SPEC
 //!     }
-//!     fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-//!         Ok(())
-//!     }
-//!     fn stop(&mut self, _cx: &mut Context) {}
 //!     fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
 //!         self.count += self.data.drain().count() as u64;
 //!         Ok(())
-//!     }
-//!     fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-//!         None
-//!     }
-//!     fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-//!     fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-//!         Ok(())
-//!     }
-//!     fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-//!         Ok(())
-//!     }
-//!     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-//!         Err("nothing to set".to_owned())
 //!     }
 //!     fn get(&self, _variable: usize) -> Value {
 //!         Value::from(self.count)
@@ -91,15 +76,6 @@
 //! # struct Source;
 //! # impl Automaton for Source {
 //! #     fn spec(&self) -> &'static Spec { &SOURCE }
-//! #     fn start(&mut self, _: &mut Context) -> Result<(), Fault> { Ok(()) }
-//! #     fn stop(&mut self, _: &mut Context) {}
-//! #     fn section(&mut self, _: usize, _: Section, _: &mut Context) -> SectionResult { Ok(()) }
-//! #     fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> { None }
-//! #     fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
-//! #     fn answer(&mut self, _: usize, _: &mut Context) -> Result<(), Fault> { Ok(()) }
-//! #     fn configure(&mut self, _: &Value) -> Result<(), String> { Ok(()) }
-//! #     fn set(&mut self, _: usize, _: &Value) -> Result<(), String> { Ok(()) }
-//! #     fn get(&self, _: usize) -> Value { Value::Unit }
 //! # }
 //! let out = DataOut::<u64>::new();
 //! system.add(Component::new("source", Box::new(Source), PortSet::new().output(&out)))?;

@@ -45,7 +45,7 @@ use crate::port::Packet;
 use crate::spec::{Spec, StateSpec, TimingSpec};
 use crate::table::{Controllable, State};
 use crate::wake::Waker;
-use crate::{Component, Context, Fault, PortSet, Section, Value};
+use crate::{Component, Context, Fault, PortSet, Value};
 
 /// How a [`Registrar`] builds a compound: by instance name, or why not.
 pub type MakeCompound = Box<dyn Fn(&str) -> Result<Component, String> + Send + Sync>;
@@ -461,23 +461,6 @@ impl Automaton for Proxy {
         }
         self.refresh()
     }
-
-    fn stop(&mut self, _cx: &mut Context) {}
-
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        Ok(())
-    }
-
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
 
     fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
         // No answer is not a fault of the proxy: the consumer's pull times out, as

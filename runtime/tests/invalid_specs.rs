@@ -79,33 +79,8 @@ impl Automaton for Bare {
     fn spec(&self) -> &'static Spec {
         self.0
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
         Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 
@@ -299,34 +274,12 @@ impl Automaton for TickAnswer {
     fn spec(&self) -> &'static Spec {
         &TICK_PRODUCER
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
     fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
         self.0.emit();
         Ok(())
     }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
         Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 

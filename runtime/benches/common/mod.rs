@@ -13,7 +13,7 @@
 
 use std::time::{Duration, Instant};
 
-use coolbot::{Automaton, Context, Fault, Section, SectionResult, Spec, Value};
+use coolbot::{Automaton, Context, Section, SectionResult, Spec};
 
 /// How much work a run does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -294,36 +294,8 @@ impl Automaton for Glue {
         self.spec
     }
 
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-
-    fn stop(&mut self, _cx: &mut Context) {}
-
     fn section(&mut self, _state: usize, section: Section, cx: &mut Context) -> SectionResult {
         (self.body)(section, cx)
-    }
-
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> SectionResult {
-        Ok(())
-    }
-
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-
-    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
-        Err(format!("no variable #{variable}"))
-    }
-
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 

@@ -7,8 +7,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use coolbot::{
-    AdaptConfig, Automaton, Component, Context, Fault, PeriodicSpec, PortSet, Section,
-    SectionResult, Spec, StateSpec, TimingSpec, Value,
+    AdaptConfig, Automaton, Component, Context, PeriodicSpec, PortSet, Section, SectionResult,
+    Spec, StateSpec, TimingSpec,
 };
 
 /// The period of both components.
@@ -62,10 +62,6 @@ impl Automaton for Spinner {
     fn spec(&self) -> &'static Spec {
         &SPINNER
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
     fn section(&mut self, _state: usize, _section: Section, cx: &mut Context) -> SectionResult {
         let now = Instant::now();
         let deadline = cx.deadline().unwrap_or(now);
@@ -82,22 +78,6 @@ impl Automaton for Spinner {
                 deadline.elapsed(),
             ));
         Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Ok(())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 

@@ -4,7 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use coolbot::{
-    Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Section, Spec, StateSpec,
+    Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Spec, StateSpec,
     TimingSpec, Value,
 };
 
@@ -20,36 +20,14 @@ impl Automaton for Shell {
     fn spec(&self) -> &'static Spec {
         self.spec
     }
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _cx: &mut Context) {}
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
     fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
         match self.answer.lock().unwrap().as_mut() {
             Some(answer) => answer(output),
             None => Err(Fault::message("no answer installed")),
         }
     }
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Ok(())
-    }
     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
         Err("no variables".to_owned())
-    }
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 

@@ -111,21 +111,10 @@ impl Automaton for Counter {
     fn spec(&self) -> &'static Spec {
         self.spec
     }
-    fn start(&mut self, _: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-    fn stop(&mut self, _: &mut Context) {}
     fn section(&mut self, _: usize, section: Section, _: &mut Context) -> Result<(), Fault> {
         if section == Section::Periodic {
             self.count += self.step;
         }
-        Ok(())
-    }
-    fn choose(&mut self, _: usize, _: &mut Context) -> Option<usize> {
-        None
-    }
-    fn exception(&mut self, _: usize, _: &str, _: &mut Context) {}
-    fn answer(&mut self, _: usize, _: &mut Context) -> Result<(), Fault> {
         Ok(())
     }
     fn configure(&mut self, _: &Value) -> Result<(), String> {
