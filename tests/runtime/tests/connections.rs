@@ -613,7 +613,16 @@ fn inputs_keep_working_while_the_component_is_ready_and_no_section_runs() {
 
 #[test]
 fn arrivals_while_suspended_fire_on_resume() {
-    let rig = Rig::started(Script::new());
+    // On a virtual clock: advancing it makes every component take a turn and settle
+    // after the packets have arrived, so "nothing runs" is seen, not waited for.
+    let clock = coolbot::VirtualClock::new();
+    let script = Script::new();
+    let component = coolbot_runtime_tests::support::worker("w", &script);
+    let rig = Rig::start(Rig::with(
+        coolbot::System::with_clock(coolbot::Clock::virtual_clock(&clock)),
+        script,
+        component,
+    ));
     rig.command(Controllable::Running).expect("running");
     rig.wait_user("idle");
     rig.command(Controllable::Suspended).expect("suspend");
@@ -621,7 +630,7 @@ fn arrivals_while_suspended_fire_on_resume() {
     rig.feeder().data.send(7);
     rig.feeder().data.send(8);
     // The packets wait; nothing runs while suspended.
-    std::thread::sleep(Duration::from_millis(30));
+    clock.advance(Duration::from_millis(30)).expect("settled");
     assert_eq!(rig.script.log(), Vec::<String>::new());
     assert_eq!(rig.script.inputs().data.len(), 2);
     rig.command(Controllable::Running).expect("resume");
