@@ -597,7 +597,7 @@ impl Runner {
     /// plain load of a cache line that no one writes: the ringer's swap and the
     /// thread's clear, two cache-line transfers per packet, are saved. Nothing is lost:
     /// before it parks, the thread clears the bell and looks at every source once more,
-    /// so the doorbell's protocol (`port.rs`, `Doorbell`) holds from there on. A
+    /// so the doorbell's protocol (`wake.rs`, `Doorbell`) holds from there on. A
     /// compound's bell is also rung by events that leave no source to look at, and so
     /// is any component's on a virtual clock when the clock advances: those spin on
     /// the bell.
