@@ -60,7 +60,7 @@ pub enum Command {
 pub struct Rejected {
     /// The component's name.
     pub component: String,
-    /// The command, rendered.
+    /// The command, rendered (its first `ranges::EXCERPT_CHARS` characters).
     pub command: String,
     /// Why.
     pub reason: String,
@@ -845,7 +845,7 @@ impl Handle {
     fn rejected(&self, command: &Command, reason: impl Into<String>) -> Rejected {
         Rejected {
             component: self.name.to_string(),
-            command: format!("{command:?}"),
+            command: crate::ranges::excerpt_debug(command, crate::ranges::EXCERPT_CHARS),
             reason: reason.into(),
         }
     }
