@@ -88,6 +88,49 @@ pub enum Refused {
     /// A zero period.
     #[error("a period must be positive")]
     ZeroPeriod,
+    /// A period outside the range a command may set ([`crate::ranges`]).
+    #[error("period {period:?} out of range: from {min:?} to {max:?}")]
+    PeriodOutOfRange {
+        /// The period asked for.
+        period: Duration,
+        /// The shortest allowed.
+        min: Duration,
+        /// The longest allowed.
+        max: Duration,
+    },
+    /// A zero `max_response`.
+    #[error("a max_response must be positive")]
+    ZeroMaxResponse,
+    /// A `max_response` outside the range a command may set ([`crate::ranges`]).
+    #[error("max_response {max_response:?} out of range: from {min:?} to {max:?}")]
+    MaxResponseOutOfRange {
+        /// The bound asked for.
+        max_response: Duration,
+        /// The shortest allowed.
+        min: Duration,
+        /// The longest allowed.
+        max: Duration,
+    },
+    /// A priority outside the range a command may set ([`crate::ranges`]).
+    #[error("priority {priority} out of range: from {min} to {max}")]
+    PriorityOutOfRange {
+        /// The priority asked for.
+        priority: i32,
+        /// The lowest allowed.
+        min: i32,
+        /// The highest allowed.
+        max: i32,
+    },
+    /// A real-time priority (positive) in a process that does not allow them
+    /// ([`crate::ranges::realtime_priorities_allowed`]).
+    #[error(
+        "priority {priority} is a real-time priority, which this process does not allow \
+         (COOLBOT_REALTIME_PRIORITIES=1 allows them)"
+    )]
+    RealtimePriority {
+        /// The priority asked for.
+        priority: i32,
+    },
     /// A quality level the instance does not have.
     #[error("quality level {level} out of range: the instance has {levels} level(s)")]
     QualityOutOfRange {
@@ -265,13 +308,40 @@ impl Commander {
         )
     }
 
-    /// Set the period of `instance`.
+    /// Set the period of `instance` (within [`crate::ranges`]'s range).
     pub fn set_period(&mut self, instance: &str, period: Duration) -> Result<(), CommandError> {
-        let check = |_: &Target| period.is_zero().then_some(Refused::ZeroPeriod);
+        let check = |_: &Target| crate::ranges::period(period).err();
         self.give(
             instance,
             format!("period {period:?}"),
             Command::SetPeriod(period),
+            check,
+        )
+    }
+
+    /// Set the `max_response` of `instance` (within [`crate::ranges`]'s range).
+    pub fn set_max_response(
+        &mut self,
+        instance: &str,
+        max_response: Duration,
+    ) -> Result<(), CommandError> {
+        let check = |_: &Target| crate::ranges::max_response(max_response).err();
+        self.give(
+            instance,
+            format!("max_response {max_response:?}"),
+            Command::SetMaxResponse(max_response),
+            check,
+        )
+    }
+
+    /// Set the priority of `instance` (within [`crate::ranges`]'s range; a positive,
+    /// real-time one only when the process allows them).
+    pub fn set_priority(&mut self, instance: &str, priority: i32) -> Result<(), CommandError> {
+        let check = |_: &Target| crate::ranges::priority(priority).err();
+        self.give(
+            instance,
+            format!("priority {priority}"),
+            Command::SetPriority(priority),
             check,
         )
     }

@@ -180,7 +180,7 @@ impl Handle {
     fn rejected(&self, command: &Command, reason: impl Into<String>) -> Rejected {
         Rejected {
             component: self.name.to_string(),
-            command: format!("{command:?}"),
+            command: crate::ranges::excerpt_debug(command, crate::ranges::EXCERPT_CHARS),
             reason: reason.into(),
         }
     }

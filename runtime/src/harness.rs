@@ -114,7 +114,7 @@ pub enum HarnessError {
     Rejected {
         /// The component's name.
         component: String,
-        /// The command, rendered.
+        /// The command, rendered (its first `ranges::EXCERPT_CHARS` characters).
         command: String,
         /// Its reason.
         reason: String,
@@ -379,7 +379,7 @@ impl Harness {
         let component = self.name.clone();
         let rejected = |reason: String| HarnessError::Rejected {
             component: component.clone(),
-            command: format!("{command:?}"),
+            command: crate::ranges::excerpt_debug(&command, crate::ranges::EXCERPT_CHARS),
             reason,
         };
         if self.handle.control.try_send(message).is_err() {

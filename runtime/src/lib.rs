@@ -108,6 +108,7 @@ mod monitor;
 pub mod port;
 #[cfg(feature = "process")]
 pub mod process;
+pub mod ranges;
 pub mod record;
 pub mod remote;
 mod runner;

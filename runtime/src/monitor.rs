@@ -70,7 +70,7 @@ pub enum Command {
 pub struct Rejected {
     /// The component's name.
     pub component: String,
-    /// The command, rendered.
+    /// The command, rendered (its first `ranges::EXCERPT_CHARS` characters).
     pub command: String,
     /// Why.
     pub reason: String,

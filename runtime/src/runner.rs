@@ -36,6 +36,7 @@ use crate::handle::{ControlMessage, Reply};
 use crate::idle::IdleProbe;
 use crate::monitor::{Command, MonitorEvent, Shared};
 use crate::port::{ArrivalLabel, InputCore, OutputCore};
+use crate::ranges::{EXCERPT_CHARS, REASON_CHARS, excerpt};
 use crate::spec::{AfterSpec, InputKind, PlanStep, Spec, TimingSpec, VarKind};
 use crate::table::{Action, Event, Outcome, State, next};
 use crate::thread::OsPriority;
@@ -940,6 +941,11 @@ impl Runner {
         let reply = |answer: Reply| {
             let _ = message.reply.try_send(answer);
         };
+        // Out of range, whoever sends it and whatever stands behind this component
+        // (a proxy's remote instance checks again on its own node).
+        if let Err(refused) = crate::ranges::command(&message.command) {
+            return reply(Reply::Rejected(refused.to_string()));
+        }
         // A remote instance's proxy answers some commands itself (`crate::remote`);
         // only supervised automata (compounds, proxies) have anything to say.
         if self.supervised {
@@ -972,14 +978,21 @@ impl Runner {
                         self.shared.publish(MonitorEvent::Configured);
                         reply(Reply::Done);
                     }
-                    Ok(Err(reason)) => {
-                        reply(Reply::Rejected(format!("invalid configuration: {reason}")))
-                    }
-                    Err(panic) => reply(Reply::Rejected(format!("panic in configure: {panic}"))),
+                    Ok(Err(reason)) => reply(Reply::Rejected(format!(
+                        "invalid configuration: {}",
+                        excerpt(&reason, REASON_CHARS)
+                    ))),
+                    Err(panic) => reply(Reply::Rejected(format!(
+                        "panic in configure: {}",
+                        excerpt(&panic, REASON_CHARS)
+                    ))),
                 }
             }
             Command::Set(name, value) => match self.spec.variable_index(name) {
-                None => reply(Reply::Rejected(format!("no variable `{name}`"))),
+                None => reply(Reply::Rejected(format!(
+                    "no variable `{}`",
+                    excerpt(name, EXCERPT_CHARS)
+                ))),
                 Some(index) if self.spec.variables[index].kind != VarKind::Controllable => reply(
                     Reply::Rejected(format!("`{name}` is observable, not controllable")),
                 ),
@@ -988,20 +1001,21 @@ impl Runner {
                     match self.call(|automaton, _| automaton.set(index, &value)) {
                         Ok(Ok(())) => reply(Reply::Done),
                         Ok(Err(reason)) => reply(Reply::Rejected(format!(
-                            "invalid value for `{name}`: {reason}"
+                            "invalid value for `{name}`: {}",
+                            excerpt(&reason, REASON_CHARS)
                         ))),
-                        Err(panic) => reply(Reply::Rejected(format!("panic in set: {panic}"))),
+                        Err(panic) => reply(Reply::Rejected(format!(
+                            "panic in set: {}",
+                            excerpt(&panic, REASON_CHARS)
+                        ))),
                     }
                 }
             },
+            // (In range: checked above.)
             Command::SetPeriod(period) => {
-                if period.is_zero() {
-                    reply(Reply::Rejected("a period must be positive".to_owned()));
-                } else {
-                    self.cx.set_period(*period);
-                    self.after_call();
-                    reply(Reply::Done);
-                }
+                self.cx.set_period(*period);
+                self.after_call();
+                reply(Reply::Done);
             }
             Command::SetMaxResponse(bound) => {
                 self.max_response = Some(*bound);

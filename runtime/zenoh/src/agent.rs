@@ -5,6 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::marker::PhantomData;
+use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -19,7 +20,9 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
-use crate::{ControlReply, Error, Node, keys};
+use coolbot::ranges::{EXCERPT_CHARS, REASON_CHARS, excerpt};
+
+use crate::{ControlReply, Error, Node, keys, limits};
 
 /// How long the agent waits for a new component to leave `starting`.
 const START_TIMEOUT: Duration = Duration::from_secs(10);
@@ -157,42 +160,46 @@ impl From<TimingSpec> for RemoteTiming {
     }
 }
 
-/// The most quality levels a request may give, and the longest name of one.
-const MAX_LEVELS: usize = 64;
-const MAX_LEVEL_NAME: usize = 64;
-
-/// The most distinct lists of quality levels an agent keeps (each is kept for the
-/// process's life: the runtime holds levels as `&'static str`).
-const MAX_LEVEL_LISTS: usize = 256;
-
 /// Whether `list` and `requested` name the same quality levels in the same order.
 fn same_levels(list: &[&str], requested: &[String]) -> bool {
     list.len() == requested.len() && list.iter().zip(requested).all(|(a, b)| *a == b)
 }
 
+/// Check quality levels from a request: at most [`limits::LEVELS`] names of letters,
+/// digits and `_`, each at most [`limits::LEVEL_NAME`] bytes.
+fn check_levels(requested: &[String]) -> Result<(), String> {
+    limits::LEVELS
+        .check(|| "the quality levels".to_owned(), requested.len())
+        .map_err(|exceeded| exceeded.to_string())?;
+    for (index, level) in requested.iter().enumerate() {
+        limits::LEVEL_NAME
+            .check(|| format!("quality level {index}"), level.len())
+            .map_err(|exceeded| exceeded.to_string())?;
+        if level.is_empty() || !level.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!(
+                "quality level {index} is not a name of letters, digits and `_`"
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Quality levels from a request as the runtime holds them: each distinct list is
 /// leaked once.
 fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
-    let valid = |level: &String| {
-        !level.is_empty()
-            && level.len() <= MAX_LEVEL_NAME
-            && level.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-    };
-    if requested.len() > MAX_LEVELS || !requested.iter().all(valid) {
-        return Err(format!(
-            "quality levels must be at most {MAX_LEVELS} names of letters, digits and `_`"
-        ));
-    }
+    check_levels(requested)?;
     static KNOWN: Mutex<Vec<&'static [&'static str]>> = Mutex::new(Vec::new());
     let mut known = KNOWN.lock().unwrap_or_else(PoisonError::into_inner);
     if let Some(list) = known.iter().find(|list| same_levels(list, requested)) {
         return Ok(list);
     }
-    if known.len() >= MAX_LEVEL_LISTS {
-        return Err(format!(
-            "this agent keeps at most {MAX_LEVEL_LISTS} distinct lists of quality levels"
-        ));
-    }
+    // One list more than it keeps.
+    limits::LEVEL_LISTS
+        .check(
+            || "the distinct lists of quality levels this agent would keep".to_owned(),
+            known.len() + 1,
+        )
+        .map_err(|exceeded| exceeded.to_string())?;
     let list: Vec<&'static str> = requested
         .iter()
         .map(|level| &*Box::leak(level.clone().into_boxed_str()))
@@ -207,6 +214,8 @@ pub(crate) type Pump = Box<dyn FnMut() + Send>;
 
 /// Makes the bridges of one port type.
 pub(crate) trait PortBridge: Send + Sync {
+    /// The size of one packet of this type in memory (what a queue slot holds).
+    fn packet_size(&self) -> usize;
     /// A proxy's input of `kind` (added to `ports`), published on `key`; a `pull`
     /// input serves the remote instance's pull requests on `key/@pull` instead,
     /// waiting at most `pull` for the producer.
@@ -255,6 +264,10 @@ pub(crate) trait PortBridge: Send + Sync {
 struct Typed<T>(PhantomData<fn() -> T>);
 
 impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
+    fn packet_size(&self) -> usize {
+        size_of::<T>()
+    }
+
     fn proxy_input(
         &self,
         node: &Node,
@@ -412,10 +425,122 @@ impl coolbot::remote::Registrar for Registry {
     }
 }
 
+/// How many instantiation requests wait for the agent's thread at most; one more is
+/// refused at once.
+pub const AGENT_QUEUE: usize = 16;
+
+/// What an agent has done ([`Agent::status`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AgentStatus {
+    /// Requests built.
+    pub built: u64,
+    /// Requests refused (over a limit, failing a check, failing while built,
+    /// panicking, or finding the agent busy or stopped).
+    pub refused: u64,
+    /// Requests whose serving panicked (a bug, in a factory or in the agent): each was
+    /// refused with the panic's message, what it had built went to `dead`, and the
+    /// agent served on.
+    pub panics: u64,
+    /// Why the agent's thread ended, if it did: every request is then refused with
+    /// this reason.
+    pub stopped: Option<String>,
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The refusal of a request that finds the agent stopped.
+fn stopped_reason(why: &str) -> String {
+    format!("the agent has stopped: {why}")
+}
+
+/// Hand `query` to the agent's thread, or refuse it at once, truthfully: the agent
+/// has stopped (its status says why), or too many requests wait. Under the status's
+/// lock, so that a request is either queued before the end of the thread drains the
+/// queue ([`Inbox`]) or finds the agent stopped.
+fn admit(
+    status: &Mutex<AgentStatus>,
+    requests: &crossbeam_channel::Sender<zenoh::query::Query>,
+    query: zenoh::query::Query,
+) {
+    let refusal = {
+        let mut status = lock(status);
+        let refusal = match &status.stopped {
+            Some(why) => Err((query, stopped_reason(why))),
+            None => match requests.try_send(query) {
+                Ok(()) => Ok(()),
+                Err(crossbeam_channel::TrySendError::Full(query)) => Err((
+                    query,
+                    format!(
+                        "the agent has too many requests waiting ({AGENT_QUEUE}); ask again later"
+                    ),
+                )),
+                Err(crossbeam_channel::TrySendError::Disconnected(query)) => {
+                    Err((query, stopped_reason("its thread has ended")))
+                }
+            },
+        };
+        if refusal.is_err() {
+            status.refused += 1;
+        }
+        refusal
+    };
+    if let Err((query, reason)) = refusal
+        && let Err(error) = reply(&query, &ControlReply::Rejected { reason })
+    {
+        tracing::warn!("instantiation refusal not sent: {error}");
+    }
+}
+
+/// The agent thread's end of the request queue. When the thread ends (the agent is
+/// dropped, its system did not start, or a panic escaped), the status says why, and
+/// every request still waiting is refused with that reason: none is left unanswered,
+/// and none after it is told to wait.
+struct Inbox {
+    received: crossbeam_channel::Receiver<zenoh::query::Query>,
+    status: Arc<Mutex<AgentStatus>>,
+    /// Why the thread ends, when it ends on purpose.
+    ending: Option<String>,
+}
+
+impl Drop for Inbox {
+    fn drop(&mut self) {
+        let why = self.ending.take().unwrap_or_else(|| {
+            if std::thread::panicking() {
+                tracing::error!("the agent's thread ended with a panic: it builds nothing more");
+                "its thread ended with a panic (the node's log has it)".to_owned()
+            } else {
+                "its thread has ended".to_owned()
+            }
+        });
+        let waiting: Vec<zenoh::query::Query> = {
+            let mut status = lock(&self.status);
+            status.stopped.get_or_insert(why.clone());
+            let waiting: Vec<_> = self.received.try_iter().collect();
+            status.refused += waiting.len() as u64;
+            waiting
+        };
+        for query in waiting {
+            let reason = stopped_reason(&why);
+            if let Err(error) = reply(&query, &ControlReply::Rejected { reason }) {
+                tracing::warn!("instantiation refusal not sent: {error}");
+            }
+        }
+    }
+}
+
 /// Builds components on request, on its own thread, in its own [`System`]. Dropping
 /// it stops answering and shuts that system down (every component it built is joined).
+///
+/// A request over a limit ([`crate::limits`]) or outside the control port's ranges
+/// (`coolbot::ranges`) is refused before anything is built. A panic while serving a
+/// request (a bug) refuses that request with the panic's message, sends what it had
+/// built to `dead`, is logged (`tracing` error) and counted
+/// ([`AgentStatus::panics`]), and the agent serves on.
 pub struct Agent {
     stop: Arc<AtomicBool>,
+    status: Arc<Mutex<AgentStatus>>,
     queryable: Option<zenoh::query::Queryable<()>>,
     _watcher: zenoh::pubsub::Subscriber<()>,
     thread: Option<JoinHandle<()>>,
@@ -432,21 +557,13 @@ impl Agent {
     /// of `registry`.
     pub fn start(node: Arc<Node>, registry: impl Into<Arc<Registry>>) -> Result<Agent, Error> {
         let registry: Arc<Registry> = registry.into();
-        let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(16);
+        let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(AGENT_QUEUE);
+        let status = Arc::new(Mutex::new(AgentStatus::default()));
+        let admitting = Arc::clone(&status);
         let queryable = node
             .session()
             .declare_queryable(keys::agent(node.name(), "*"))
-            .callback(move |query| {
-                if let Err(error) = requests.try_send(query) {
-                    let query = error.into_inner();
-                    let _ = reply(
-                        &query,
-                        &ControlReply::Rejected {
-                            reason: "the agent has too many requests waiting".to_owned(),
-                        },
-                    );
-                }
-            })
+            .callback(move |query| admit(&admitting, &requests, query))
             .wait()
             .map_err(Error::zenoh)?;
         // The nodes that go away (their tokens `coolbot/<node>`): their instances here
@@ -467,29 +584,35 @@ impl Agent {
             .map_err(Error::zenoh)?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
+        let serving = Arc::clone(&status);
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:agent", node.name()))
             .spawn(move || {
+                let mut inbox = Inbox {
+                    received,
+                    status: Arc::clone(&serving),
+                    ending: None,
+                };
                 let mut system = System::new();
                 if let Err(error) = system.start() {
                     tracing::error!("the agent's system does not start: {error}");
+                    inbox.ending = Some(format!("its system did not start: {error}"));
                     return;
                 }
                 // What each owner node had built here.
                 let mut owned: BTreeMap<String, Vec<Handle>> = BTreeMap::new();
                 loop {
                     crossbeam_channel::select! {
-                        recv(received) -> query => {
+                        recv(inbox.received) -> query => {
                             let Ok(query) = query else { break };
-                            let answer = match serve(&node, &registry, &mut system, &query) {
-                                Ok((owner, handles)) => {
-                                    if let Some(owner) = owner {
-                                        owned.entry(owner).or_default().extend(handles);
-                                    }
-                                    ControlReply::Accepted
-                                }
-                                Err(reason) => ControlReply::Rejected { reason },
-                            };
+                            let answer = serve_one(
+                                &node,
+                                &registry,
+                                &mut system,
+                                &query,
+                                &serving,
+                                &mut owned,
+                            );
                             if let Err(error) = reply(&query, &answer) {
                                 tracing::warn!("instantiation answer not sent: {error}");
                             }
@@ -509,6 +632,7 @@ impl Agent {
                         }
                         default(Duration::from_millis(100)) => {
                             if stopped.load(Ordering::Acquire) {
+                                inbox.ending = Some("the agent was shut down".to_owned());
                                 break;
                             }
                         }
@@ -522,10 +646,17 @@ impl Agent {
             .map_err(|error| Error::Zenoh(format!("cannot spawn the agent thread: {error}")))?;
         Ok(Agent {
             stop,
+            status,
             queryable: Some(queryable),
             _watcher: watcher,
             thread: Some(thread),
         })
+    }
+
+    /// What the agent has done so far: requests built, refused and panicked, and why
+    /// its thread ended if it did.
+    pub fn status(&self) -> AgentStatus {
+        lock(&self.status).clone()
     }
 }
 
@@ -542,6 +673,77 @@ impl Drop for Agent {
 fn reply(query: &zenoh::query::Query, answer: &ControlReply) -> zenoh::Result<()> {
     let json = serde_json::to_vec(answer).expect("a ControlReply serializes");
     query.reply(query.key_expr().clone(), json).wait()
+}
+
+/// The message of a panic payload.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(message) = payload.downcast_ref::<&str>() {
+        (*message).to_owned()
+    } else if let Some(message) = payload.downcast_ref::<String>() {
+        message.clone()
+    } else {
+        "a panic with a non-string payload".to_owned()
+    }
+}
+
+/// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and
+/// send what a refused or panicking request had built to `dead`; what an accepted
+/// one built is its owner's, in `owned`.
+fn serve_one(
+    node: &Node,
+    registry: &Registry,
+    system: &mut System,
+    query: &zenoh::query::Query,
+    status: &Mutex<AgentStatus>,
+    owned: &mut BTreeMap<String, Vec<Handle>>,
+) -> ControlReply {
+    let mut built = Vec::new();
+    let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        serve(node, registry, system, query, &mut built)
+    }));
+    let discard = |built: &[Handle]| {
+        // (Their names stay taken in this system.)
+        for handle in built {
+            let _ = handle.command(Command::SetState(Controllable::Dead));
+        }
+    };
+    match outcome {
+        Ok(Ok(owner)) => {
+            lock(status).built += 1;
+            if let Some(owner) = owner {
+                owned.entry(owner).or_default().extend(built);
+            }
+            ControlReply::Accepted
+        }
+        Ok(Err(reason)) => {
+            discard(&built);
+            lock(status).refused += 1;
+            ControlReply::Rejected { reason }
+        }
+        Err(payload) => {
+            discard(&built);
+            let message = panic_message(payload.as_ref());
+            let panics = {
+                let mut status = lock(status);
+                status.refused += 1;
+                status.panics += 1;
+                status.panics
+            };
+            tracing::error!(
+                panics,
+                "an instantiation request panicked: {}; what it had built goes to dead, \
+                 and the agent serves on",
+                excerpt(&message, REASON_CHARS)
+            );
+            ControlReply::Rejected {
+                reason: format!(
+                    "the agent failed while building this request (a panic: {}); what it \
+                     had built went to dead",
+                    excerpt(&message, REASON_CHARS)
+                ),
+            }
+        }
+    }
 }
 
 /// Wait until `handle` has left `starting` for `ready`.
@@ -567,21 +769,100 @@ fn run(handle: &Handle) -> Result<(), String> {
         .map_err(|rejected| rejected.to_string())
 }
 
-/// One instantiation request: build, bridge, run, expose. Its owner, and what was
-/// built (the instance first, then its bridges).
+/// Check the names, keys, counts, queue sizes and timing of `request` against the
+/// limits and the control port's ranges, before anything is looked up or built.
+fn check_request(request: &Instantiate) -> Result<(), String> {
+    let over = |exceeded: limits::Exceeded| exceeded.to_string();
+    let name = |what: &str, value: &str| {
+        limits::NAME
+            .check(|| what.to_owned(), value.len())
+            .map_err(over)
+    };
+    name("the type name", &request.type_name)?;
+    name("the instance name", &request.name)?;
+    if let Some(owner) = &request.owner {
+        name("the owner's name", owner)?;
+        keys::check_name(owner).map_err(|error| error.to_string())?;
+    }
+    limits::WIRES
+        .check(|| "the wires".to_owned(), request.wires.len())
+        .map_err(over)?;
+    for (index, wire) in request.wires.iter().enumerate() {
+        let (port, key) = match wire {
+            Wire::Input { port, key } | Wire::Output { port, key, .. } => (port, key),
+        };
+        name(&format!("the port name of wire {index}"), port)?;
+        keys::check_bridge_key(key).map_err(|error| error.to_string())?;
+        let queue = |what: &str, packets: usize| {
+            limits::QUEUE
+                .check(|| format!("the {what} of wire {index}"), packets)
+                .map_err(over)
+        };
+        match wire {
+            Wire::Output {
+                to: RemoteInput::Fifo { capacity },
+                ..
+            } => queue("fifo capacity", *capacity)?,
+            Wire::Output {
+                to: RemoteInput::Ufifo { initial, max },
+                ..
+            } => {
+                queue("ufifo initial size", *initial)?;
+                if let Some(max) = max {
+                    queue("ufifo cap", *max)?;
+                }
+            }
+            Wire::Input { .. } | Wire::Output { .. } => {}
+        }
+    }
+    limits::VARIABLES
+        .check(|| "the variables".to_owned(), request.variables.len())
+        .map_err(over)?;
+    for (index, (variable, _)) in request.variables.iter().enumerate() {
+        name(&format!("the name of variable {index}"), variable)?;
+    }
+    if let Some(timing) = &request.timing {
+        let timing_range = |what: &str, checked: Result<(), coolbot::Refused>| {
+            checked.map_err(|refused| format!("the timing's {what}: {refused}"))
+        };
+        if let Some(period) = timing.period {
+            timing_range("period", coolbot::ranges::period(period))?;
+        }
+        if let Some(max_period) = timing.max_period {
+            timing_range("max_period", coolbot::ranges::period(max_period))?;
+        }
+        if let Some(max_response) = timing.max_response {
+            timing_range("max_response", coolbot::ranges::max_response(max_response))?;
+        }
+        timing_range("priority", coolbot::ranges::priority(timing.priority))?;
+        check_levels(&timing.qualities)?;
+    }
+    Ok(())
+}
+
+/// One instantiation request: build, bridge, run, expose. Its owner; what was built
+/// (the instance first, then its bridges) is pushed on `built` as it is added, so
+/// that the caller can send it to `dead` if the request fails or panics.
 fn serve(
     node: &Node,
     registry: &Registry,
     system: &mut System,
     query: &zenoh::query::Query,
-) -> Result<(Option<String>, Vec<Handle>), String> {
-    let request: Instantiate = query
+    built: &mut Vec<Handle>,
+) -> Result<Option<String>, String> {
+    let payload = query
         .payload()
-        .ok_or("no request: the query carries no payload")
-        .and_then(|payload| {
-            serde_json::from_slice(&payload.to_bytes()).map_err(|_| "malformed request")
-        })
-        .map_err(str::to_owned)?;
+        .ok_or("no request: the query carries no payload")?;
+    limits::REQUEST
+        .check(|| "the request".to_owned(), payload.len())
+        .map_err(|exceeded| exceeded.to_string())?;
+    let request: Instantiate = serde_json::from_slice(&payload.to_bytes()).map_err(|error| {
+        format!(
+            "malformed request: {}",
+            excerpt(&error.to_string(), REASON_CHARS)
+        )
+    })?;
+    check_request(&request)?;
     // Access rules grant instantiation by the key's type: the request must be for it.
     let asked = query
         .key_expr()
@@ -591,8 +872,9 @@ fn serve(
         .unwrap_or_default();
     if asked != request.type_name {
         return Err(format!(
-            "the request builds a `{}` but came on the key of type `{asked}`",
-            request.type_name
+            "the request builds a `{}` but came on the key of type `{}`",
+            request.type_name,
+            excerpt(asked, EXCERPT_CHARS)
         ));
     }
     let factory = registry.types.get(&request.type_name).ok_or_else(|| {
@@ -630,14 +912,11 @@ fn serve(
         }
     }
     // Check every wire before building anything.
-    for wire in &request.wires {
-        let (port, key, output) = match wire {
-            Wire::Input { port, key } => (port, key, false),
-            Wire::Output { port, key, .. } => (port, key, true),
+    for (index, wire) in request.wires.iter().enumerate() {
+        let (port, output) = match wire {
+            Wire::Input { port, .. } => (port, false),
+            Wire::Output { port, .. } => (port, true),
         };
-        // Not under `coolbot/`: a requester must not make this node publish, or
-        // answer, on another component's monitoring or control keys.
-        keys::check_bridge_key(key).map_err(|error| error.to_string())?;
         let declared = if output {
             spec.output_index(port).is_some()
         } else {
@@ -650,102 +929,109 @@ fn serve(
                 if output { "output" } else { "input" }
             ));
         }
-        if !factory.ports.contains_key(port) {
+        let Some(bridge) = factory.ports.get(port) else {
             return Err(format!(
                 "port `{port}` of `{}` was not registered as bridgeable",
                 spec.type_name
             ));
-        }
+        };
+        // What the outlet's queue holds from the start.
+        let held = match wire {
+            Wire::Output {
+                to: RemoteInput::Fifo { capacity },
+                ..
+            } => *capacity,
+            Wire::Output {
+                to: RemoteInput::Ufifo { initial, .. },
+                ..
+            } => *initial,
+            Wire::Input { .. } | Wire::Output { .. } => 0,
+        };
+        let size = bridge.packet_size().max(1);
+        limits::QUEUE_BYTES
+            .check(
+                || format!("the queue of wire {index} ({held} packets of {size} bytes)"),
+                held.saturating_mul(size),
+            )
+            .map_err(|exceeded| exceeded.to_string())?;
     }
     let name = request.name.clone();
-    let mut handles = vec![system.add(component).map_err(|e| e.to_string())?];
-    let mut made = || -> Result<(), String> {
-        for wire in &request.wires {
-            match wire {
-                Wire::Input { port, key } => {
-                    let index = spec.input_index(port).expect("checked");
-                    let kind = match spec.inputs[index].kind {
-                        InputKind::Tick => OutputKind::Tick,
-                        InputKind::Poster => OutputKind::Poster,
-                        InputKind::Last | InputKind::Fifo { .. } | InputKind::Ufifo { .. } => {
-                            OutputKind::Data
-                        }
-                    };
-                    let bridge = format!("{name}-{port}");
-                    // A pull input pulls through the inlet: each request a query.
-                    let pull = spec.inputs[index]
-                        .pull
-                        .then_some(crate::DEFAULT_PULL_TIMEOUT);
-                    let inlet = factory.ports[port]
-                        .inlet(node, &bridge, key, kind, pull)
-                        .map_err(|e| e.to_string())?;
-                    handles.push(system.add(inlet).map_err(|e| e.to_string())?);
-                    system
-                        .connect(&format!("{bridge}.output"), &format!("{name}.{port}"))
-                        .map_err(|e| e.to_string())?;
-                }
-                Wire::Output { port, key, to } => {
-                    let bridge = format!("{name}-{port}");
-                    // A pull output is pulled through the outlet: it serves queries.
-                    let index = spec.output_index(port).expect("checked");
-                    let pull = spec.outputs[index]
-                        .pull
-                        .then_some(crate::DEFAULT_PULL_TIMEOUT);
-                    let outlet = factory.ports[port]
-                        .outlet(node, &bridge, key, to.kind(), pull)
-                        .map_err(|e| e.to_string())?;
-                    handles.push(system.add(outlet).map_err(|e| e.to_string())?);
-                    system
-                        .connect(&format!("{name}.{port}"), &format!("{bridge}.input"))
-                        .map_err(|e| e.to_string())?;
-                }
+    built.push(system.add(component).map_err(|e| e.to_string())?);
+    for wire in &request.wires {
+        match wire {
+            Wire::Input { port, key } => {
+                let index = spec.input_index(port).expect("checked");
+                let kind = match spec.inputs[index].kind {
+                    InputKind::Tick => OutputKind::Tick,
+                    InputKind::Poster => OutputKind::Poster,
+                    InputKind::Last | InputKind::Fifo { .. } | InputKind::Ufifo { .. } => {
+                        OutputKind::Data
+                    }
+                };
+                let bridge = format!("{name}-{port}");
+                // A pull input pulls through the inlet: each request a query.
+                let pull = spec.inputs[index]
+                    .pull
+                    .then_some(crate::DEFAULT_PULL_TIMEOUT);
+                let inlet = factory.ports[port]
+                    .inlet(node, &bridge, key, kind, pull)
+                    .map_err(|e| e.to_string())?;
+                built.push(system.add(inlet).map_err(|e| e.to_string())?);
+                system
+                    .connect(&format!("{bridge}.output"), &format!("{name}.{port}"))
+                    .map_err(|e| e.to_string())?;
+            }
+            Wire::Output { port, key, to } => {
+                let bridge = format!("{name}-{port}");
+                // A pull output is pulled through the outlet: it serves queries.
+                let index = spec.output_index(port).expect("checked");
+                let pull = spec.outputs[index]
+                    .pull
+                    .then_some(crate::DEFAULT_PULL_TIMEOUT);
+                let outlet = factory.ports[port]
+                    .outlet(node, &bridge, key, to.kind(), pull)
+                    .map_err(|e| e.to_string())?;
+                built.push(system.add(outlet).map_err(|e| e.to_string())?);
+                system
+                    .connect(&format!("{name}.{port}"), &format!("{bridge}.input"))
+                    .map_err(|e| e.to_string())?;
             }
         }
-        // The overrides, through the instance's control port, before it runs.
-        started(&handles[0])?;
-        let overrides = request
-            .configuration
-            .iter()
-            .map(|configuration| Command::Configure(configuration.clone()))
-            .chain(
-                request
-                    .variables
-                    .iter()
-                    .map(|(variable, value)| Command::Set(variable.clone(), value.clone())),
-            );
-        for command in overrides {
-            handles[0]
-                .command(command)
-                .map_err(|rejected| rejected.to_string())?;
-        }
-        // Bridges first, so that the instance's first packets find them running.
-        for handle in handles.iter().skip(1).rev() {
-            run(handle)?;
-        }
-        if request.run {
-            run(&handles[0])?;
-        }
-        for handle in &handles {
-            node.expose(handle).map_err(|e| e.to_string())?;
-        }
-        Ok(())
-    };
-    let outcome = made().map(|()| (request.owner.clone(), handles.clone()));
-    if outcome.is_ok() {
-        tracing::info!(
-            instance = %name,
-            type_name = %request.type_name,
-            "built for another node{}",
-            if request.run { "" } else { " (left ready)" }
+    }
+    // The overrides, through the instance's control port, before it runs.
+    started(&built[0])?;
+    let overrides = request
+        .configuration
+        .iter()
+        .map(|configuration| Command::Configure(configuration.clone()))
+        .chain(
+            request
+                .variables
+                .iter()
+                .map(|(variable, value)| Command::Set(variable.clone(), value.clone())),
         );
+    for command in overrides {
+        built[0]
+            .command(command)
+            .map_err(|rejected| rejected.to_string())?;
     }
-    if outcome.is_err() {
-        // What was built goes away (its names stay taken in this system).
-        for handle in &handles {
-            let _ = handle.command(Command::SetState(Controllable::Dead));
-        }
+    // Bridges first, so that the instance's first packets find them running.
+    for handle in built.iter().skip(1).rev() {
+        run(handle)?;
     }
-    outcome
+    if request.run {
+        run(&built[0])?;
+    }
+    for handle in built.iter() {
+        node.expose(handle).map_err(|e| e.to_string())?;
+    }
+    tracing::info!(
+        instance = %name,
+        type_name = %request.type_name,
+        "built for another node{}",
+        if request.run { "" } else { " (left ready)" }
+    );
+    Ok(request.owner.clone())
 }
 
 /// Ask the agent of node `on` to build `request`, waiting at most `timeout`.
@@ -781,16 +1067,22 @@ pub fn instantiate(
         .result()
         .map_err(|error| {
             Error::Zenoh(
-                error
-                    .payload()
-                    .try_to_string()
-                    .unwrap_or_default()
-                    .into_owned(),
+                excerpt(
+                    &error.payload().try_to_string().unwrap_or_default(),
+                    REASON_CHARS,
+                )
+                .into_owned(),
             )
         })
         .and_then(|sample| {
-            serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes())
-                .map_err(Error::zenoh)
+            let payload = sample.payload();
+            limits::REPLY
+                .check(|| "the agent's answer".to_owned(), payload.len())
+                .map_err(|exceeded| Error::Remote {
+                    node: on.to_owned(),
+                    reason: exceeded.to_string(),
+                })?;
+            serde_json::from_slice::<ControlReply>(&payload.to_bytes()).map_err(Error::zenoh)
         })?;
     match answer {
         ControlReply::Accepted => Ok(()),
@@ -805,6 +1097,90 @@ pub fn instantiate(
 mod tests {
     use super::*;
 
+    /// The reason of the refusal `replies` bring, if any.
+    fn refusal(
+        replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
+    ) -> Option<String> {
+        let reply = replies.recv().ok()?;
+        let sample = reply.result().ok()?;
+        match serde_json::from_slice(&sample.payload().to_bytes()).ok()? {
+            ControlReply::Rejected { reason } => Some(reason),
+            ControlReply::Accepted => None,
+        }
+    }
+
+    #[test]
+    fn a_request_is_answered_truthfully_when_too_many_wait_and_when_the_agent_has_stopped() {
+        let session = zenoh::open(crate::peer_config(&[], &[], false).unwrap())
+            .wait()
+            .unwrap();
+        let status = Arc::new(Mutex::new(AgentStatus::default()));
+        let (requests, received) = crossbeam_channel::bounded(AGENT_QUEUE);
+        let admitting = Arc::clone(&status);
+        let _queryable = session
+            .declare_queryable("test/agent/admit")
+            .callback(move |query| admit(&admitting, &requests, query))
+            .wait()
+            .unwrap();
+        let ask = || {
+            session
+                .get("test/agent/admit")
+                .payload("{}")
+                .timeout(Duration::from_secs(30))
+                .wait()
+                .unwrap()
+        };
+        // As many as may wait, unserved.
+        let waiting: Vec<_> = (0..AGENT_QUEUE).map(|_| ask()).collect();
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while received.len() < AGENT_QUEUE {
+            assert!(std::time::Instant::now() < deadline, "the requests wait");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(
+            refusal(ask()).as_deref(),
+            Some("the agent has too many requests waiting (16); ask again later")
+        );
+        // The thread ends: those waiting are answered with why, and every later one.
+        drop(Inbox {
+            received,
+            status: Arc::clone(&status),
+            ending: Some("a test ended it".to_owned()),
+        });
+        for replies in waiting {
+            assert_eq!(
+                refusal(replies).as_deref(),
+                Some("the agent has stopped: a test ended it")
+            );
+        }
+        assert_eq!(
+            refusal(ask()).as_deref(),
+            Some("the agent has stopped: a test ended it")
+        );
+        let status = lock(&status).clone();
+        assert_eq!(status.stopped.as_deref(), Some("a test ended it"));
+        assert_eq!(status.refused, AGENT_QUEUE as u64 + 2);
+
+        // A thread that ends with a panic says so.
+        let status = Arc::new(Mutex::new(AgentStatus::default()));
+        let (_requests, received) = crossbeam_channel::bounded(1);
+        let inbox = Inbox {
+            received,
+            status: Arc::clone(&status),
+            ending: None,
+        };
+        let ended = std::thread::spawn(move || {
+            let _inbox = inbox;
+            panic!("a bug outside any request");
+        })
+        .join();
+        assert!(ended.is_err());
+        assert_eq!(
+            lock(&status).stopped.as_deref(),
+            Some("its thread ended with a panic (the node's log has it)")
+        );
+    }
+
     fn names(list: &[&str]) -> Vec<String> {
         list.iter().map(|&name| name.to_owned()).collect()
     }
@@ -817,7 +1193,7 @@ mod tests {
         assert!(std::ptr::eq(first, again), "one copy per distinct list");
         assert!(levels(&names(&["best", "no spaces"])).is_err());
         assert!(levels(&names(&[""])).is_err());
-        assert!(levels(&names(&["x"; MAX_LEVELS + 1])).is_err());
-        assert!(levels(&["y".repeat(MAX_LEVEL_NAME + 1)]).is_err());
+        assert!(levels(&names(&["x"; limits::LEVELS.max + 1])).is_err());
+        assert!(levels(&["y".repeat(limits::LEVEL_NAME.max + 1)]).is_err());
     }
 }

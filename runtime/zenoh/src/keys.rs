@@ -23,7 +23,7 @@
 //!   queries on
 //!   `K/@ack/<node>/<name>` (`crate::ledger`).
 
-use crate::Error;
+use crate::{Error, limits};
 
 /// The root of every key this crate declares for nodes.
 pub const ROOT: &str = "coolbot";
@@ -68,8 +68,14 @@ pub fn parse_component(key: &str) -> Option<(&str, &str)> {
 }
 
 /// Check a node or component name: one key chunk, of letters, digits, `_`, `-` and
-/// `.` (dotted paths), not starting with `.`.
+/// `.` (dotted paths), not starting with `.`, at most [`limits::PATH`] bytes long.
 pub fn check_name(name: &str) -> Result<(), Error> {
+    if let Err(exceeded) = limits::PATH.check(|| "the name".to_owned(), name.len()) {
+        return Err(Error::InvalidName {
+            name: name.to_owned(),
+            reason: exceeded.to_string(),
+        });
+    }
     let reason = if name.is_empty() {
         Some("a name cannot be empty")
     } else if name.starts_with('.') || name.ends_with('.') || name.contains("..") {
@@ -92,12 +98,16 @@ pub fn check_name(name: &str) -> Result<(), Error> {
 }
 
 /// Check a bridge key: a key expression without wildcards (one connection is one key)
-/// and without `@` chunks of its own (they are the bridge's).
+/// and without `@` chunks of its own (they are the bridge's), at most [`limits::KEY`]
+/// bytes long.
 pub fn check_bridge_key(key: &str) -> Result<(), Error> {
     let invalid = |reason: &str| Error::InvalidName {
         name: key.to_owned(),
         reason: reason.to_owned(),
     };
+    if let Err(exceeded) = limits::KEY.check(|| "the key".to_owned(), key.len()) {
+        return Err(invalid(&exceeded.to_string()));
+    }
     if let Err(error) = zenoh::key_expr::KeyExpr::try_from(key) {
         return Err(invalid(&format!("not a key expression: {error}")));
     }
@@ -138,6 +148,11 @@ mod tests {
         for bad in ["", ".a", "a.", "a..b", "a/b", "a*", "@x", "é"] {
             assert!(check_name(bad).is_err(), "{bad}");
         }
+        assert!(check_name(&"a".repeat(limits::PATH.max)).is_ok());
+        let long = "a".repeat(100_000);
+        let error = check_name(&long).unwrap_err().to_string();
+        assert!(error.contains("over the limit PATH = 512 bytes"), "{error}");
+        assert!(error.len() < 300, "the name is not echoed whole: {error}");
     }
 
     #[test]
@@ -154,5 +169,10 @@ mod tests {
         ] {
             assert!(check_bridge_key(bad).is_err(), "{bad}");
         }
+        assert!(check_bridge_key(&"k".repeat(limits::KEY.max)).is_ok());
+        let error = check_bridge_key(&"k".repeat(100_000))
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("over the limit KEY = 512 bytes"), "{error}");
     }
 }

@@ -29,6 +29,8 @@
 //!   behind a proxy (`coolbot::remote`).
 //! - **A process on the network** ([`network`]): the `--node NAME` options of a
 //!   program, and the node, agent and placer they open.
+//! - **Limits** ([`limits`]): on the names, keys, sizes and counts that come from
+//!   the network, checked before anything is allocated or declared for them.
 //! - **Security** ([`security`]): TLS with mutual authentication and access rules
 //!   from a file, mapped onto Zenoh's access control; without one, a node stays on
 //!   loopback.
@@ -45,6 +47,7 @@ pub mod echo;
 pub mod info;
 pub mod keys;
 mod ledger;
+pub mod limits;
 pub mod network;
 mod node;
 pub mod place;
@@ -68,8 +71,12 @@ pub enum Error {
     /// Zenoh refused an operation (opening a session, declaring, querying).
     #[error("zenoh: {0}")]
     Zenoh(String),
-    /// A node, component or key name that cannot be used.
-    #[error("invalid name `{name}`: {reason}")]
+    /// A node, component or key name that cannot be used (its message quotes the
+    /// name's first `coolbot::ranges::EXCERPT_CHARS` characters).
+    #[error(
+        "invalid name `{}`: {reason}",
+        coolbot::ranges::excerpt(.name, coolbot::ranges::EXCERPT_CHARS)
+    )]
     InvalidName {
         /// The name.
         name: String,

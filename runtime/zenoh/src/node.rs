@@ -16,7 +16,8 @@ use zenoh::Wait;
 use crate::bridge::{InletBuilder, OutletBuilder};
 use crate::echo::{ECHO_CAPACITY, Echo};
 use crate::info::ComponentInfo;
-use crate::{Error, keys};
+use crate::{Error, keys, limits};
+use coolbot::ranges::{REASON_CHARS, excerpt};
 
 /// How often the node's threads look whether they are to stop.
 const STOP_POLL: Duration = Duration::from_millis(100);
@@ -422,21 +423,33 @@ fn reply_control(query: &zenoh::query::Query, reply: &ControlReply) -> zenoh::Re
     query.reply(query.key_expr().clone(), json).wait()
 }
 
-/// Apply one command from the network, through the component's own control port.
+/// The command a query carries: none, one over [`limits::COMMAND`] (refused
+/// undecoded) and one that does not decode are refusals, which quote at most a short
+/// prefix of what they refuse.
+fn command_of(query: &zenoh::query::Query) -> Result<Command, String> {
+    let payload = query
+        .payload()
+        .ok_or("no command: the query carries no payload")?;
+    limits::COMMAND
+        .check(|| "the command".to_owned(), payload.len())
+        .map_err(|exceeded| exceeded.to_string())?;
+    serde_json::from_slice::<Command>(&payload.to_bytes()).map_err(|error| {
+        format!(
+            "malformed command: {}",
+            excerpt(&error.to_string(), REASON_CHARS)
+        )
+    })
+}
+
+/// Apply one command from the network, through the component's own control port
+/// (whose ranges, `coolbot::ranges`, hold for it as for every command).
 fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
-    let reply = match query.payload() {
-        None => ControlReply::Rejected {
-            reason: "no command: the query carries no payload".to_owned(),
-        },
-        Some(payload) => match serde_json::from_slice::<Command>(&payload.to_bytes()) {
-            Err(error) => ControlReply::Rejected {
-                reason: format!("malformed command: {error}"),
-            },
-            Ok(command) => match handle.command(command) {
-                Ok(()) => ControlReply::Accepted,
-                Err(rejected) => ControlReply::Rejected {
-                    reason: rejected.reason,
-                },
+    let reply = match command_of(query) {
+        Err(reason) => ControlReply::Rejected { reason },
+        Ok(command) => match handle.command(command) {
+            Ok(()) => ControlReply::Accepted,
+            Err(rejected) => ControlReply::Rejected {
+                reason: rejected.reason,
             },
         },
     };

@@ -90,7 +90,7 @@ fn run(steps: &[Step]) -> Result<(), TestCaseError> {
             rig.script.clear_log();
             rig.feeder().kick.emit();
             rig.handle
-                .command(coolbot::Command::SetPriority(1))
+                .command(coolbot::Command::SetPriority(0))
                 .map_err(|e| TestCaseError::fail(e.to_string()))?;
             prop_assert_eq!(rig.script.log(), Vec::<String>::new(), "in {}", state);
             prop_assert_eq!(rig.handle.state(), model);

@@ -724,7 +724,7 @@ fn a_compound_is_driven_and_observed_like_an_atomic_component() {
         .expect_err("observable");
     assert!(rejected.reason.contains("observable"), "{rejected}");
     for command in [
-        Command::SetPriority(3),
+        Command::SetPriority(-3),
         Command::SetPeriod(Duration::from_millis(20)),
         Command::SetMaxResponse(Duration::from_millis(500)),
         Command::SetQuality(0),

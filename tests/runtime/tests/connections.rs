@@ -619,7 +619,7 @@ fn arrivals_while_suspended_fire_on_resume() {
     let script = Script::new();
     let component = coolbot_runtime_tests::support::worker("w", &script);
     let rig = Rig::start(Rig::with(
-        coolbot::System::with_clock(coolbot::Clock::virtual_clock(&clock)),
+        System::with_clock(coolbot::Clock::virtual_clock(&clock)),
         script,
         component,
     ));

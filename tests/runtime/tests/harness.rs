@@ -168,6 +168,142 @@ fn commands_and_variables_through_the_control_port() {
     );
 }
 
+/// The reason `h` gives for refusing `command`.
+fn refusal(h: &mut Harness, command: Command) -> String {
+    match h.command(command.clone()) {
+        Err(HarnessError::Rejected { reason, .. }) => reason,
+        other => panic!("{command:?} was not refused: {other:?}"),
+    }
+}
+
+#[test]
+fn commands_outside_their_ranges_are_refused_with_the_range_and_change_nothing() {
+    use coolbot::Refused;
+    use coolbot::ranges::{
+        MAX_MAX_RESPONSE, MAX_PERIOD, MAX_PRIORITY, MIN_MAX_RESPONSE, MIN_PERIOD, MIN_PRIORITY,
+        allow_realtime_priorities,
+    };
+    // (The only test of this file that sets priorities: the switch is the process's.)
+    allow_realtime_priorities(false);
+    let script = Script::new();
+    let mut h = worker(&script);
+    h.run().unwrap();
+    let hour = Duration::from_secs(3600);
+    for (command, refused) in [
+        (
+            Command::SetMaxResponse(Duration::ZERO),
+            Refused::ZeroMaxResponse,
+        ),
+        (
+            Command::SetMaxResponse(hour * 2),
+            Refused::MaxResponseOutOfRange {
+                max_response: hour * 2,
+                min: MIN_MAX_RESPONSE,
+                max: MAX_MAX_RESPONSE,
+            },
+        ),
+        (Command::SetPeriod(Duration::ZERO), Refused::ZeroPeriod),
+        (
+            Command::SetPeriod(Duration::from_micros(99)),
+            Refused::PeriodOutOfRange {
+                period: Duration::from_micros(99),
+                min: MIN_PERIOD,
+                max: MAX_PERIOD,
+            },
+        ),
+        (
+            Command::SetPriority(i32::MAX),
+            Refused::PriorityOutOfRange {
+                priority: i32::MAX,
+                min: MIN_PRIORITY,
+                max: MAX_PRIORITY,
+            },
+        ),
+        (
+            Command::SetPriority(MIN_PRIORITY - 1),
+            Refused::PriorityOutOfRange {
+                priority: MIN_PRIORITY - 1,
+                min: MIN_PRIORITY,
+                max: MAX_PRIORITY,
+            },
+        ),
+        (
+            Command::SetPriority(5),
+            Refused::RealtimePriority { priority: 5 },
+        ),
+    ] {
+        assert_eq!(refusal(&mut h, command), refused.to_string());
+    }
+    // Nothing was applied: the timing block's values hold, and a zero `max_response`
+    // (which would make every periodic section a fault) did not reach the watchdog.
+    let monitor = h.monitor();
+    assert_eq!(monitor.max_response, Some(ms(500)));
+    assert_eq!(monitor.period, Some(ms(5)));
+    assert_eq!(monitor.priority, 0);
+    h.push("data", 1u64).unwrap();
+    h.advance(ms(50)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("busy"));
+    assert_eq!(h.state(), State::Running);
+    assert_eq!(h.error(), None);
+
+    // The ends of the ranges are taken.
+    h.command(Command::SetPeriod(MIN_PERIOD)).unwrap();
+    h.command(Command::SetMaxResponse(MAX_MAX_RESPONSE))
+        .unwrap();
+    h.command(Command::SetPriority(MIN_PRIORITY)).unwrap();
+    let monitor = h.monitor();
+    assert_eq!(
+        (monitor.period, monitor.max_response, monitor.priority),
+        (Some(MIN_PERIOD), Some(MAX_MAX_RESPONSE), MIN_PRIORITY)
+    );
+    // A real-time priority, once the process allows them.
+    allow_realtime_priorities(true);
+    h.command(Command::SetPriority(5)).unwrap();
+    assert_eq!(h.monitor().priority, 5);
+    allow_realtime_priorities(false);
+    assert_eq!(
+        refusal(&mut h, Command::SetPriority(MAX_PRIORITY)),
+        Refused::RealtimePriority {
+            priority: MAX_PRIORITY
+        }
+        .to_string()
+    );
+}
+
+#[test]
+fn a_refusal_quotes_a_short_prefix_of_what_it_refuses() {
+    let script = Script::new();
+    let mut h = worker(&script);
+    let huge = "x".repeat(1 << 20);
+    // An unknown variable with a megabyte name.
+    let error = h
+        .command(Command::Set(huge.clone(), Value::Int(1)))
+        .unwrap_err();
+    let HarnessError::Rejected {
+        command, reason, ..
+    } = &error
+    else {
+        panic!("{error}");
+    };
+    assert!(reason.starts_with("no variable `xxxx"), "{reason}");
+    assert!(
+        reason.ends_with(&format!("... ({} bytes in all)`", huge.len())),
+        "{reason}"
+    );
+    assert!(command.len() < 120, "{command}");
+    assert!(error.to_string().len() < 300, "{error}");
+    // A configuration the component refuses, whose decoder quotes the value.
+    let error = h
+        .configure(Value::Json(serde_json::json!({ "scale": huge })))
+        .unwrap_err();
+    let HarnessError::Rejected { reason, .. } = &error else {
+        panic!("{error}");
+    };
+    assert!(reason.starts_with("invalid configuration:"), "{reason}");
+    assert!(reason.len() < 400, "{} bytes", reason.len());
+    assert!(error.to_string().len() < 600, "{error}");
+}
+
 #[test]
 fn wrong_ports_are_errors_that_name_them() {
     let script = Script::new();

@@ -817,3 +817,172 @@ fn a_compound_shutting_down_runs_no_instance_again() {
         "the compound is shutting down: no instance is brought to running"
     );
 }
+
+/// `Commanding`'s shape with another supervisor: entering `degraded`, it gives `w`
+/// periods, `max_response` bounds and priorities at and beyond the control port's
+/// ranges (`coolbot::ranges`).
+struct Ranging {
+    go: i64,
+    answers: Answers,
+}
+
+impl Supervisor for Ranging {
+    fn spec(&self) -> &'static coolbot::Spec {
+        &commanding::SPEC
+    }
+
+    fn section(
+        &mut self,
+        state: usize,
+        _section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        if !matches!(
+            commanding::UserState::ALL[state],
+            commanding::UserState::Degraded
+        ) {
+            return Ok(());
+        }
+        let hours = |n: u64| Duration::from_secs(3600 * n);
+        let w = &mut cx.instances;
+        let answers = [
+            ("short period", w.set_period("w", Duration::from_micros(50))),
+            ("long period", w.set_period("w", hours(2))),
+            ("period", w.set_period("w", Duration::from_millis(20))),
+            ("zero max_response", w.set_max_response("w", Duration::ZERO)),
+            ("long max_response", w.set_max_response("w", hours(2))),
+            (
+                "max_response",
+                w.set_max_response("w", Duration::from_millis(20)),
+            ),
+            ("huge priority", w.set_priority("w", i32::MAX)),
+            ("low priority", w.set_priority("w", -40)),
+            ("real-time priority", w.set_priority("w", 5)),
+            ("nice priority", w.set_priority("w", -3)),
+        ];
+        self.answers
+            .lock()
+            .unwrap()
+            .extend(answers.map(|(what, outcome)| (what.to_owned(), outcome)));
+        Ok(())
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::from(self.go)
+    }
+
+    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), String> {
+        self.go = i64::try_from(value).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}
+
+/// A supervisor's periods, bounds and priorities outside the control port's ranges
+/// are refused with typed reasons before anything reaches the instance (the
+/// stand-in records only what was sent), on the harness's virtual clock.
+#[test]
+fn a_supervisor_command_outside_its_range_is_refused_before_it_is_sent() {
+    use coolbot::harness::SupervisorHarness;
+    use coolbot::ranges::{
+        MAX_MAX_RESPONSE, MAX_PERIOD, MAX_PRIORITY, MIN_MAX_RESPONSE, MIN_PERIOD, MIN_PRIORITY,
+        allow_realtime_priorities,
+    };
+    // (The only test of this file that sets priorities: the switch is the process's.)
+    allow_realtime_priorities(false);
+    let log: Answers = Arc::default();
+    let (w, _script) = worker("w");
+    let builder = go_rules(CompoundBuilder::new(
+        "base",
+        Ranging {
+            go: 0,
+            answers: Arc::clone(&log),
+        },
+    ))
+    .instance(w);
+    let mut h = SupervisorHarness::running(builder).unwrap();
+    h.take_commands();
+    h.set("go", Value::from(2_i64)).unwrap();
+    assert_eq!(h.user_state().as_deref(), Some("degraded"));
+    let got = std::mem::take(&mut *log.lock().unwrap());
+    let by_name = |name: &str| &got.iter().find(|(n, _)| n == name).unwrap().1;
+    let hours = |n: u64| Duration::from_secs(3600 * n);
+    assert_eq!(
+        reason(by_name("short period")),
+        Some(&Refused::PeriodOutOfRange {
+            period: Duration::from_micros(50),
+            min: MIN_PERIOD,
+            max: MAX_PERIOD
+        })
+    );
+    assert_eq!(
+        reason(by_name("long period")),
+        Some(&Refused::PeriodOutOfRange {
+            period: hours(2),
+            min: MIN_PERIOD,
+            max: MAX_PERIOD
+        })
+    );
+    assert_eq!(
+        reason(by_name("zero max_response")),
+        Some(&Refused::ZeroMaxResponse)
+    );
+    assert_eq!(
+        reason(by_name("long max_response")),
+        Some(&Refused::MaxResponseOutOfRange {
+            max_response: hours(2),
+            min: MIN_MAX_RESPONSE,
+            max: MAX_MAX_RESPONSE
+        })
+    );
+    assert_eq!(
+        reason(by_name("huge priority")),
+        Some(&Refused::PriorityOutOfRange {
+            priority: i32::MAX,
+            min: MIN_PRIORITY,
+            max: MAX_PRIORITY
+        })
+    );
+    assert_eq!(
+        reason(by_name("low priority")),
+        Some(&Refused::PriorityOutOfRange {
+            priority: -40,
+            min: MIN_PRIORITY,
+            max: MAX_PRIORITY
+        })
+    );
+    assert_eq!(
+        reason(by_name("real-time priority")),
+        Some(&Refused::RealtimePriority { priority: 5 })
+    );
+    for taken in ["period", "max_response", "nice priority"] {
+        assert_eq!(by_name(taken), &Ok(()), "{taken}");
+    }
+    // Only what was taken reached the instance; each refusal is a step.
+    let w = |command| ("w".to_owned(), command);
+    assert_eq!(
+        h.take_commands(),
+        [
+            w(Command::SetPeriod(Duration::from_millis(20))),
+            w(Command::SetMaxResponse(Duration::from_millis(20))),
+            w(Command::SetPriority(-3)),
+        ]
+    );
+    let refused = steps(&h.monitor())
+        .into_iter()
+        .filter(|(step, _)| matches!(step, Step::CommandRefused { .. }))
+        .count();
+    assert_eq!(refused, 7);
+
+    // Once the process allows real-time priorities, the same command is taken.
+    allow_realtime_priorities(true);
+    h.set("go", Value::from(0_i64)).unwrap();
+    h.set("go", Value::from(2_i64)).unwrap();
+    allow_realtime_priorities(false);
+    let got = std::mem::take(&mut *log.lock().unwrap());
+    let by_name = |name: &str| &got.iter().find(|(n, _)| n == name).unwrap().1;
+    assert_eq!(by_name("real-time priority"), &Ok(()));
+    assert!(
+        h.take_commands()
+            .contains(&("w".to_owned(), Command::SetPriority(5)))
+    );
+}

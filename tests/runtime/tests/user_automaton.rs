@@ -209,9 +209,9 @@ fn configuration_and_quality_go_through_the_control_port() {
     let err = rig.handle.command(Command::SetQuality(2)).unwrap_err();
     assert_eq!(err.reason, "quality 2 out of range: 2 level(s)");
     rig.handle
-        .command(Command::SetPriority(9))
+        .command(Command::SetPriority(-9))
         .expect("priority");
-    assert_eq!(rig.handle.snapshot().priority, 9);
+    assert_eq!(rig.handle.snapshot().priority, -9);
 }
 
 #[test]
@@ -238,18 +238,35 @@ fn timing_is_measured() {
 }
 
 #[test]
-fn absurd_durations_mean_never_and_do_not_panic() {
+fn absurd_durations_mean_never_or_are_refused_and_do_not_panic() {
     // The longest `after` a description can say (`u64::MAX` nanoseconds; a longer
     // duration literal is an error).
     let rig = rig_with_after(Timers::Never);
     rig.run_busy();
     let patient = rig.handle.clone().with_command_timeout(Duration::MAX);
-    patient
+    // A period beyond the control port's range is refused, with the range.
+    let refused = patient
         .command(Command::SetPeriod(Duration::MAX))
-        .expect("a period of Duration::MAX");
+        .expect_err("a period of Duration::MAX");
+    assert_eq!(
+        refused.reason,
+        coolbot::Refused::PeriodOutOfRange {
+            period: Duration::MAX,
+            min: coolbot::ranges::MIN_PERIOD,
+            max: coolbot::ranges::MAX_PERIOD,
+        }
+        .to_string()
+    );
+    // The longest it takes: practically never, for this test.
+    patient
+        .command(Command::SetPeriod(coolbot::ranges::MAX_PERIOD))
+        .expect("the longest period");
     let monitor = rig
         .handle
-        .wait_for(|m| m.period == Some(Duration::MAX), Duration::MAX)
+        .wait_for(
+            |m| m.period == Some(coolbot::ranges::MAX_PERIOD),
+            Duration::MAX,
+        )
         .expect("waited");
     assert_eq!(monitor.user_state.as_deref(), Some("busy"));
     patient

@@ -1,0 +1,185 @@
+//! The limits on what comes from the network (`docs/distribution.md`, "Limits"):
+//! the lengths of names and keys, the size of a request or a command, the sizes of
+//! the queues a request asks for, and the counts in a request. Each is checked before
+//! anything is decoded, allocated or declared for it, and a refusal names the limit
+//! and its value ([`Exceeded`]).
+//!
+//! The periods, `max_response` bounds and priorities a request or a command may give
+//! are the control port's ranges, `coolbot::ranges`.
+
+/// One limit: its name (as the refusals and `docs/distribution.md` print it), its
+/// value and its unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limit {
+    /// The limit's name.
+    pub name: &'static str,
+    /// The largest value allowed.
+    pub max: usize,
+    /// What the value counts (`bytes`, `packets`, ...).
+    pub unit: &'static str,
+}
+
+impl Limit {
+    /// `Ok` if `value` (of `what`, for the refusal) is within the limit.
+    pub fn check(self, what: impl FnOnce() -> String, value: usize) -> Result<(), Exceeded> {
+        if value <= self.max {
+            Ok(())
+        } else {
+            Err(Exceeded {
+                limit: self,
+                what: what(),
+                value,
+            })
+        }
+    }
+}
+
+/// A value over a [`Limit`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{what}: {value} {unit}, over the limit {name} = {max} {unit}",
+    unit = .limit.unit,
+    name = .limit.name,
+    max = .limit.max
+)]
+pub struct Exceeded {
+    /// The limit.
+    pub limit: Limit,
+    /// What was over it (`the instance name`, `the fifo capacity of wire 2`).
+    pub what: String,
+    /// Its value.
+    pub value: usize,
+}
+
+/// The longest name an instantiation request gives (a type, an instance, a port, a
+/// variable, the owner node), in bytes.
+pub const NAME: Limit = Limit {
+    name: "NAME",
+    max: 128,
+    unit: "bytes",
+};
+
+/// The longest node name or component path (`robot.base.motion`) a node declares
+/// keys for, in bytes (`keys::check_name`).
+pub const PATH: Limit = Limit {
+    name: "PATH",
+    max: 512,
+    unit: "bytes",
+};
+
+/// The longest bridge key, in bytes (`keys::check_bridge_key`).
+pub const KEY: Limit = Limit {
+    name: "KEY",
+    max: 512,
+    unit: "bytes",
+};
+
+/// The largest instantiation request (its JSON) an agent decodes, in bytes.
+pub const REQUEST: Limit = Limit {
+    name: "REQUEST",
+    max: 1 << 20,
+    unit: "bytes",
+};
+
+/// The largest command (its JSON) a control key decodes, in bytes.
+pub const COMMAND: Limit = Limit {
+    name: "COMMAND",
+    max: 1 << 20,
+    unit: "bytes",
+};
+
+/// The largest answer (its JSON) a node decodes from another node's agent, in bytes.
+pub const REPLY: Limit = Limit {
+    name: "REPLY",
+    max: 64 << 10,
+    unit: "bytes",
+};
+
+/// The most wires (bridged ports) in one instantiation request.
+pub const WIRES: Limit = Limit {
+    name: "WIRES",
+    max: 128,
+    unit: "wires",
+};
+
+/// The most controllable variables one instantiation request sets.
+pub const VARIABLES: Limit = Limit {
+    name: "VARIABLES",
+    max: 128,
+    unit: "variables",
+};
+
+/// The largest queue a request asks an outlet for: a fifo's capacity, a ufifo's
+/// initial size and its cap, in packets.
+pub const QUEUE: Limit = Limit {
+    name: "QUEUE",
+    max: 65_536,
+    unit: "packets",
+};
+
+/// The most memory a queue a request asks for holds from the start: a fifo's
+/// capacity, or a ufifo's initial size, times the packet type's size in memory.
+pub const QUEUE_BYTES: Limit = Limit {
+    name: "QUEUE_BYTES",
+    max: 64 << 20,
+    unit: "bytes",
+};
+
+/// The most quality levels a request's timing gives.
+pub const LEVELS: Limit = Limit {
+    name: "LEVELS",
+    max: 64,
+    unit: "levels",
+};
+
+/// The longest quality level name, in bytes.
+pub const LEVEL_NAME: Limit = Limit {
+    name: "LEVEL_NAME",
+    max: 64,
+    unit: "bytes",
+};
+
+/// The most distinct lists of quality levels an agent keeps (each is kept for the
+/// process's life: the runtime holds levels as `&'static str`).
+pub const LEVEL_LISTS: Limit = Limit {
+    name: "LEVEL_LISTS",
+    max: 256,
+    unit: "lists",
+};
+
+/// Every limit, in the order `docs/distribution.md` lists them.
+pub const ALL: [Limit; 13] = [
+    NAME,
+    PATH,
+    KEY,
+    REQUEST,
+    COMMAND,
+    REPLY,
+    WIRES,
+    VARIABLES,
+    QUEUE,
+    QUEUE_BYTES,
+    LEVELS,
+    LEVEL_NAME,
+    LEVEL_LISTS,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_refusal_names_the_limit_and_its_value() {
+        assert_eq!(
+            QUEUE.check(|| "the fifo capacity".to_owned(), 65_536),
+            Ok(())
+        );
+        let error = QUEUE
+            .check(|| "the fifo capacity".to_owned(), 1 << 33)
+            .unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "the fifo capacity: 8589934592 packets, over the limit QUEUE = 65536 packets"
+        );
+    }
+}
