@@ -6,15 +6,16 @@
 //! key. An **inlet** stands, in the consumer's system, for the remote output: its one
 //! output (`output`) has that output's kind, and a Zenoh callback sends on it what
 //! arrives on the key (no extra thread hop on the receiving side). Packets are encoded
-//! with postcard.
+//! with postcard, and decoded strictly (`crate::codec`).
 //!
 //! No packet is lost without a counter and an event: a packet an outlet cannot
 //! publish (it does not encode, Zenoh refuses it, or nothing on the network
 //! subscribes to the key) is counted as lost at the outlet's input; a packet an inlet
-//! cannot decode is counted as lost at the inlet's `network` input; a packet that
-//! reaches a full input is handled by that input's own overflow policy. Each of these
-//! is an `overflows` count and a `MonitorEvent::Overflow` on the monitoring port of
-//! the bridge or of the consumer, and a `tracing` warning with the reason.
+//! cannot decode (or that is longer than its bound) is counted as lost at the inlet's
+//! `network` input, and so are the numbers missing on the way; a packet that reaches
+//! a full input is handled by that input's own overflow policy. Each of these is an
+//! `overflows` count and a `MonitorEvent::Overflow` on the monitoring port of the
+//! bridge or of the consumer, and a `tracing` warning with the reason.
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -34,6 +35,7 @@ use serde::de::DeserializeOwned;
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
+use crate::codec;
 use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
@@ -45,6 +47,15 @@ pub const DEFAULT_PULL_TIMEOUT: Duration = Duration::from_secs(1);
 /// The most events one tick message carries: an outlet splits a larger count, an
 /// inlet counts a message claiming more as lost (it did not come from an outlet).
 const MAX_EVENTS_PER_MESSAGE: u64 = 1 << 16;
+
+/// The longest message an inlet of a data or poster connection decodes unless the
+/// bridge says otherwise ([`InletBuilder::max_payload`]): 64 MiB. A longer one is
+/// counted lost at the inlet's `network` input, undecoded.
+pub const DEFAULT_MAX_PAYLOAD: usize = 64 << 20;
+
+/// The longest tick message: its epoch, its number and its count of events, each a
+/// `u64` of at most 10 bytes in postcard.
+const MAX_TICK_MESSAGE: usize = 30;
 
 /// How long a bridge asks the network for the other ends of its connection when it
 /// is built (the liveliness look-up that checks the cardinality rules).
@@ -100,7 +111,7 @@ fn outlet_kinds(session: &zenoh::Session, key: &str) -> Result<Vec<String>, Erro
 }
 
 fn encode<P: Serialize + ?Sized>(packet: &P) -> Result<Vec<u8>, String> {
-    postcard::to_allocvec(packet).map_err(|error| format!("does not encode: {error}"))
+    codec::encode(packet).map_err(|error| format!("does not encode: {error}"))
 }
 
 fn leak_spec(
@@ -765,6 +776,7 @@ pub struct InletBuilder<'n, T> {
     key: String,
     kind: OutputKind,
     pull: Option<Duration>,
+    max_payload: usize,
     packet: PhantomData<fn() -> T>,
 }
 
@@ -776,8 +788,18 @@ impl<'n, T> InletBuilder<'n, T> {
             key: key.to_owned(),
             kind,
             pull: None,
+            max_payload: DEFAULT_MAX_PAYLOAD,
             packet: PhantomData,
         }
+    }
+
+    /// The longest message the inlet decodes, in bytes (a data packet or a poster
+    /// value with its epoch and number; [`DEFAULT_MAX_PAYLOAD`] unless set): a longer
+    /// one is counted lost at `network` without being decoded. A tick inlet's
+    /// messages have a size of their own (at most 30 bytes), whatever this says.
+    pub fn max_payload(mut self, bytes: usize) -> Self {
+        self.max_payload = bytes;
+        self
     }
 
     /// The remote output is a `pull` output: the inlet's output is declared `pull`
@@ -814,12 +836,14 @@ struct Inlet {
     _token: zenoh::liveliness::LivelinessToken,
 }
 
-/// What delivers a bridge key's messages on `output` (decode, the ledger's count of
-/// numbers, losses counted at `network`), and that ledger.
+/// What delivers a bridge key's messages on `output` (strict decoding of payloads of
+/// at most `max_payload` bytes, the ledger's count of numbers, losses counted at
+/// `network`), and that ledger.
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
     network: ErasedInput,
     key: String,
+    max_payload: usize,
 ) -> (DeliverFn, Arc<InletLedger>) {
     let network = Arc::new(network);
     let counted = Arc::clone(&network);
@@ -833,7 +857,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => {
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Numbered<u64>>(bytes) {
+                move |bytes| match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
                     Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
                     )),
@@ -843,28 +867,25 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.emit();
                         }
                     }
-                    Err(error) => lost(format!("does not decode as events: {error}")),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
         InletOutput::Data(port) => {
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Numbered<T>>(bytes) {
+                move |bytes| match codec::decode::<Numbered<T>>(bytes, max_payload) {
                     Ok((epoch, seq, packet)) => {
                         gaps.received(epoch, seq);
                         port.send(packet);
                     }
-                    Err(error) => lost(format!(
-                        "does not decode as {}: {error}",
-                        std::any::type_name::<T>()
-                    )),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Posted<T>>(bytes) {
+                move |bytes| match codec::decode::<Posted<T>>(bytes, max_payload) {
                     Ok((epoch, seq, value)) => {
                         let mut newest = lock(&newest);
                         let newer = match *newest {
@@ -876,10 +897,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.post(value);
                         }
                     }
-                    Err(error) => lost(format!(
-                        "does not decode as a posted {}: {error}",
-                        std::any::type_name::<T>()
-                    )),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
@@ -913,7 +931,7 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
             (InletOutput::Poster(port), ports)
         }
     };
-    let (deliver, ledger) = deliverer(output, losses, key.to_owned());
+    let (deliver, ledger) = deliverer(output, losses, key.to_owned(), DEFAULT_MAX_PAYLOAD);
     (ports, deliver, ledger)
 }
 
@@ -946,6 +964,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key,
             kind,
             pull,
+            max_payload,
             packet: _,
         } = self;
         keys::check_name(&name)?;
@@ -1028,7 +1047,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 (InletOutput::Poster(port), ports)
             }
         };
-        let (deliver, ledger) = deliverer(output, network.erased(), key.clone());
+        let (deliver, ledger) = deliverer(output, network.erased(), key.clone(), max_payload);
         let acks = match pull {
             Some(_) => None,
             None => Some(

@@ -27,6 +27,7 @@ use std::time::{Duration, Instant};
 use coolbot::port::ErasedInput;
 use serde::{Deserialize, Serialize};
 
+use crate::codec;
 use crate::tally::Ended;
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
@@ -84,6 +85,15 @@ type Ack = (String, Vec<Had>);
 /// The most outlet epochs an inlet remembers: a key has few producers, and each
 /// restart of one is a new epoch.
 const MAX_EPOCHS: usize = 64;
+
+/// The longest question an inlet decodes: the killed epochs an outlet reports (at
+/// most [`crate::tally::KEPT`]), each two `u64`s of at most 10 bytes, after their
+/// count.
+const MAX_REPORT: usize = crate::tally::KEPT * 20 + 10;
+
+/// The longest acknowledgment an outlet decodes: an inlet's process (a few dozen
+/// hexadecimal digits) and [`MAX_EPOCHS`] epochs of five `u64`s.
+const MAX_ACK: usize = 256 + MAX_EPOCHS * 50 + 10;
 
 /// An inlet's side: the numbers received per outlet epoch; the numbers skipped
 /// between two received are lost, counted at the inlet's `network` input with the
@@ -177,7 +187,7 @@ impl InletLedger {
             tracing::trace!(target: LEDGER_TARGET, "{} acknowledged {} {}", self.key, h.epoch, h.newest);
         }
         let ack: Ack = (process.to_owned(), had.clone());
-        (postcard::to_allocvec(&ack).unwrap_or_default(), counted)
+        (codec::encode(&ack).unwrap_or_default(), counted)
     }
 }
 
@@ -199,10 +209,16 @@ pub(crate) fn serve(
     session
         .declare_queryable(own)
         .callback(move |query| {
-            let ended = query
-                .payload()
-                .and_then(|payload| postcard::from_bytes::<Vec<Ended>>(&payload.to_bytes()).ok())
-                .unwrap_or_default();
+            let ended = match query.payload() {
+                Some(payload) => match codec::decode::<Vec<Ended>>(&payload.to_bytes(), MAX_REPORT) {
+                    Ok(ended) => ended,
+                    Err(error) => {
+                        tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {error}");
+                        Vec::new()
+                    }
+                },
+                None => Vec::new(),
+            };
             let (answer, lost) = ledger.answer(&process, &ended);
             if lost > 0 {
                 counted();
@@ -460,7 +476,7 @@ impl Book {
     /// One round of questions to the inlets.
     fn ask(&self, session: &zenoh::Session) {
         let prefix = format!("{}/@ack/", self.key);
-        let report = postcard::to_allocvec(&*lock(&self.ended)).unwrap_or_default();
+        let report = codec::encode(&*lock(&self.ended)).unwrap_or_default();
         let replies = match session
             .get(format!("{}/@ack/**", self.key))
             .payload(report)
@@ -481,7 +497,7 @@ impl Book {
             let Some(node_and_name) = sample.key_expr().as_str().strip_prefix(&prefix) else {
                 continue;
             };
-            match postcard::from_bytes::<Ack>(&sample.payload().to_bytes()) {
+            match codec::decode::<Ack>(&sample.payload().to_bytes(), MAX_ACK) {
                 Ok(ack) => {
                     answered.insert(format!("{node_and_name}/{}", ack.0));
                     self.acknowledged(node_and_name, &ack);
