@@ -12,10 +12,12 @@
 //! publish (it does not encode, Zenoh refuses it, or nothing on the network
 //! subscribes to the key) is counted as lost at the outlet's input; a packet an inlet
 //! cannot decode (or that is longer than its bound) is counted as lost at the inlet's
-//! `network` input, and so are the numbers missing on the way; a packet that reaches
-//! a full input is handled by that input's own overflow policy. Each of these is an
-//! `overflows` count and a `MonitorEvent::Overflow` on the monitoring port of the
-//! bridge or of the consumer, and a `tracing` warning with the reason.
+//! `network` input, and so are the numbers missing on the way; a jump of an outlet's
+//! numbering out of the ledger's window is one reset at the inlet's `resets` input
+//! (`crate::ledger`); a packet that reaches a full input is handled by that input's
+//! own overflow policy. Each of these is an `overflows` count and a
+//! `MonitorEvent::Overflow` on the monitoring port of the bridge or of the consumer,
+//! and a `tracing` warning with the reason.
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -117,11 +119,11 @@ fn encode<P: Serialize + ?Sized>(packet: &P) -> Result<Vec<u8>, String> {
 fn leak_spec(
     type_name: &'static str,
     doc: &'static str,
-    input: InputSpec,
+    inputs: Vec<InputSpec>,
     output: Option<OutputSpec>,
     reacts: bool,
 ) -> &'static Spec {
-    let inputs: &'static [InputSpec] = Box::leak(Box::new([input]));
+    let inputs: &'static [InputSpec] = Box::leak(inputs.into_boxed_slice());
     let outputs: &'static [OutputSpec] = match output {
         Some(output) => Box::leak(Box::new([output])),
         None => &[],
@@ -472,12 +474,12 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let spec = leak_spec(
             "Outlet",
             "Stands for a remote input: publishes what arrives at `input` on its key.",
-            InputSpec {
+            vec![InputSpec {
                 name: "input",
                 kind,
                 packet,
                 pull: pull.is_some(),
-            },
+            }],
             None,
             pull.is_none(),
         );
@@ -836,23 +838,31 @@ struct Inlet {
     _token: zenoh::liveliness::LivelinessToken,
 }
 
+/// Where an inlet counts what goes wrong on the way: `network`, each message that
+/// does not decode or is missing from the numbering; `resets`, each time an outlet's
+/// numbering jumped out of the ledger's window (`crate::ledger`).
+struct Counters {
+    network: ErasedInput,
+    resets: ErasedInput,
+}
+
 /// What delivers a bridge key's messages on `output` (strict decoding of payloads of
 /// at most `max_payload` bytes, the ledger's count of numbers, losses counted at
-/// `network`), and that ledger.
+/// `counters`), and that ledger.
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
-    network: ErasedInput,
+    counters: Counters,
     key: String,
     max_payload: usize,
 ) -> (DeliverFn, Arc<InletLedger>) {
-    let network = Arc::new(network);
+    let network = Arc::new(counters.network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
     let lost = move |reason: String| {
         counted.count_loss(1);
         tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}");
     };
-    let ledger = Arc::new(InletLedger::new(network, key));
+    let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
     let gaps = Arc::clone(&ledger);
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => {
@@ -906,8 +916,8 @@ fn deliverer<T: Packet + DeserializeOwned>(
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
-/// what delivers the messages of a bridge key on it (decode, gaps, losses counted
-/// at `losses`), and its ledger.
+/// what delivers the messages of a bridge key on it (decode, gaps, losses and resets
+/// counted at `losses`), and its ledger.
 pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
     ports: PortSet,
     kind: OutputKind,
@@ -931,7 +941,11 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
             (InletOutput::Poster(port), ports)
         }
     };
-    let (deliver, ledger) = deliverer(output, losses, key.to_owned(), DEFAULT_MAX_PAYLOAD);
+    let counters = Counters {
+        network: losses.clone(),
+        resets: losses,
+    };
+    let (deliver, ledger) = deliverer(output, counters, key.to_owned(), DEFAULT_MAX_PAYLOAD);
     (ports, deliver, ledger)
 }
 
@@ -1011,15 +1025,16 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
         } else {
             std::any::type_name::<T>()
         };
+        let counted = |name| InputSpec {
+            name,
+            kind: InputKind::Tick,
+            packet: "event",
+            pull: false,
+        };
         let spec = leak_spec(
             "Inlet",
-            "Stands for a remote output: sends on `output` what arrives on its key; packets that do not decode are counted at `network`.",
-            InputSpec {
-                name: "network",
-                kind: InputKind::Tick,
-                packet: "event",
-                pull: false,
-            },
+            "Stands for a remote output: sends on `output` what arrives on its key; packets that do not decode or never arrive are counted at `network`, jumps of an outlet's numbering at `resets`.",
+            vec![counted("network"), counted("resets")],
             Some(OutputSpec {
                 name: "output",
                 kind,
@@ -1028,8 +1043,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             }),
             false,
         );
-        let network = TickIn::new();
-        let ports = PortSet::new().input(&network);
+        let (network, resets) = (TickIn::new(), TickIn::new());
+        let ports = PortSet::new().input(&network).input(&resets);
         let (output, ports) = match kind {
             OutputKind::Tick => {
                 let port = TickOut::new();
@@ -1047,7 +1062,11 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 (InletOutput::Poster(port), ports)
             }
         };
-        let (deliver, ledger) = deliverer(output, network.erased(), key.clone(), max_payload);
+        let counters = Counters {
+            network: network.erased(),
+            resets: resets.erased(),
+        };
+        let (deliver, ledger) = deliverer(output, counters, key.clone(), max_payload);
         let acks = match pull {
             Some(_) => None,
             None => Some(

@@ -1,6 +1,7 @@
 //! Bytes a broken or hostile peer puts on a bridge's keys, from a raw Zenoh session:
 //! a packet followed by anything, the bytes of another type, a payload over the
-//! inlet's bound. Each is counted (at the inlet's `network` input) and nothing
+//! inlet's bound, numbers that jump and ended epochs that never were. Each is counted
+//! (at the inlet's `network` input, or as one reset at its `resets` input) and nothing
 //! reaches the consumer that an outlet did not send.
 
 use std::sync::Arc;
@@ -83,16 +84,22 @@ fn put(node: &Node, key: &str, bytes: Vec<u8>) {
     node.session().put(key, bytes).wait().unwrap();
 }
 
-/// Wait until the inlet's count at `network` is this.
-fn counted(inlet: &Handle, network: u64) -> Monitor {
+/// Wait until the inlet's counts at `network` and `resets` are these.
+fn counted(inlet: &Handle, network: u64, resets: u64) -> Monitor {
     inlet
         .wait_for(
-            |m| m.port_overflows == [("network".to_owned(), network)],
+            |m| {
+                m.port_overflows
+                    == [
+                        ("network".to_owned(), network),
+                        ("resets".to_owned(), resets),
+                    ]
+            },
             PATIENCE,
         )
         .unwrap_or_else(|_| {
             panic!(
-                "expected {network} at `network`: {:?}",
+                "expected {network} at `network`, {resets} at `resets`: {:?}",
                 inlet.snapshot().port_overflows
             )
         })
@@ -142,13 +149,13 @@ fn a_packet_with_trailing_bytes_or_of_another_type_is_counted_and_not_delivered(
     let long = postcard::to_allocvec(&(u64::MAX, u64::MAX, pose(u64::MAX))).unwrap();
     assert!(long.len() > 32, "{} bytes", long.len());
     put(&a, key, long);
-    counted(&inlet, 3);
+    counted(&inlet, 3, 0);
 
     // A good one still goes through, and is the only packet the sink gets.
     put(&a, key, numbered(7, 1));
     assert!(wait_until(PATIENCE, || !sink.is_empty()));
     assert_eq!(sink.drain().collect::<Vec<_>>(), [pose(1)]);
-    let monitor = counted(&inlet, 3);
+    let monitor = counted(&inlet, 3, 0);
     assert_eq!(monitor.overflows, 3);
     let mut seen = Vec::new();
     assert!(wait_until(PATIENCE, || {
@@ -193,8 +200,8 @@ fn trailing_bytes_on_poster_and_tick_keys_are_counted_and_not_delivered() {
     let mut padded = postcard::to_allocvec(&(7u64, 1u64, 5u64)).unwrap();
     padded.extend([0; 40]);
     put(&a, events_key, padded);
-    counted(&poster_side.handle("inlet").unwrap(), 1);
-    counted(&tick_side.handle("inlet").unwrap(), 2);
+    counted(&poster_side.handle("inlet").unwrap(), 1, 0);
+    counted(&tick_side.handle("inlet").unwrap(), 2, 0);
 
     put(&a, posters, numbered(7, 2));
     put(
@@ -209,8 +216,8 @@ fn trailing_bytes_on_poster_and_tick_keys_are_counted_and_not_delivered() {
         total >= 3
     }));
     assert_eq!(total, 3, "only the good message's events");
-    counted(&poster_side.handle("inlet").unwrap(), 1);
-    counted(&tick_side.handle("inlet").unwrap(), 2);
+    counted(&poster_side.handle("inlet").unwrap(), 1, 0);
+    counted(&tick_side.handle("inlet").unwrap(), 2, 0);
 }
 
 #[test]
@@ -251,7 +258,109 @@ fn a_pull_answer_with_trailing_bytes_is_counted_and_not_delivered() {
     // Every answer counted (a request sent before the first answer may bring one
     // more), none delivered.
     assert!(wait_until(PATIENCE, || {
-        inlet.snapshot().port_overflows == [("network".to_owned(), answers.load(Ordering::SeqCst))]
+        inlet.snapshot().port_overflows
+            == [
+                ("network".to_owned(), answers.load(Ordering::SeqCst)),
+                ("resets".to_owned(), 0),
+            ]
     }));
     assert_eq!(goal.latest(), None);
+}
+
+#[test]
+fn a_forged_jump_in_the_numbers_is_one_reset_not_a_count_of_missing_packets() {
+    let (a, b) = pair("jump-a", "jump-b");
+    let key = "test/hostile/jump";
+    let (consumer, sink) = consumer(
+        b.inlet::<Pose>("inlet", key, OutputKind::Data)
+            .build()
+            .unwrap(),
+        |hand| small_queue::component("sink", Hand(hand)),
+        "sink.input",
+    );
+    let inlet = consumer.handle("inlet").unwrap();
+    let events = inlet.subscribe();
+    wait_subscribed(&a, key);
+    // Outlet 7 sends 1 and 2; a peer puts number 10^12 of the same epoch; outlet 7
+    // goes on with 3 and 5 (4 lost on the way).
+    for seq in [1, 2, 1_000_000_000_000, 3, 5] {
+        put(&a, key, numbered(7, seq));
+    }
+    let mut received = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        received.extend(sink.drain().map(|p| p.seq));
+        received.len() == 5
+    }));
+    assert_eq!(received, [1, 2, 1_000_000_000_000, 3, 5]);
+    let monitor = counted(&inlet, 1, 1);
+    assert_eq!(monitor.overflows, 2);
+    let mut seen = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        seen.extend(overflows(&events));
+        seen.len() == 2
+    }));
+    seen.sort();
+    assert_eq!(seen, [("network".to_owned(), 1), ("resets".to_owned(), 1)]);
+}
+
+/// Ask the inlets of `key` what they have had, from `node`, as an outlet does,
+/// with `report` as the question's report of ended epochs: their answers.
+fn question(node: &Node, key: &str, report: Vec<u8>) -> usize {
+    let replies = node
+        .session()
+        .get(format!("{key}/@ack/**"))
+        .payload(report)
+        .timeout(Duration::from_secs(5))
+        .wait()
+        .unwrap();
+    let mut answers = 0;
+    while let Ok(reply) = replies.recv() {
+        answers += usize::from(reply.result().is_ok());
+    }
+    answers
+}
+
+#[test]
+fn a_forged_report_of_an_ended_epoch_is_one_reset_however_often_it_is_asked() {
+    let (a, b) = pair("report-a", "report-b");
+    let key = "test/hostile/report";
+    let (consumer, sink) = consumer(
+        b.inlet::<Pose>("inlet", key, OutputKind::Data)
+            .build()
+            .unwrap(),
+        |hand| small_queue::component("sink", Hand(hand)),
+        "sink.input",
+    );
+    let inlet = consumer.handle("inlet").unwrap();
+    let events = inlet.subscribe();
+    wait_subscribed(&a, key);
+    for seq in 1..=3 {
+        put(&a, key, numbered(7, seq));
+    }
+    assert!(wait_until(PATIENCE, || sink.len() == 3));
+    // The inlet's acknowledgment queryable may not be known on `a` yet.
+    let report = |ended: &[(u64, u64)]| postcard::to_allocvec(&ended.to_vec()).unwrap();
+    assert!(wait_until(PATIENCE, || question(&a, key, report(&[])) == 1));
+
+    // Epoch 7 said to have ended at 10^12, three times (an outlet repeats its
+    // report every round): one reset. An epoch the inlet never had: nothing.
+    for _ in 0..3 {
+        let forged = report(&[(7, 1_000_000_000_000), (8, 1 << 40)]);
+        assert_eq!(question(&a, key, forged), 1);
+    }
+    counted(&inlet, 0, 1);
+    // A report with a byte after it is no report.
+    let mut trailing = report(&[(7, 10)]);
+    trailing.push(0);
+    assert_eq!(question(&a, key, trailing), 1);
+    // A report within reach counts what the inlet never received: 4 to 10.
+    assert_eq!(question(&a, key, report(&[(7, 10)])), 1);
+    let monitor = counted(&inlet, 7, 1);
+    assert_eq!(monitor.overflows, 8);
+    let mut seen = Vec::new();
+    assert!(wait_until(PATIENCE, || {
+        seen.extend(overflows(&events));
+        seen.len() == 2
+    }));
+    assert_eq!(seen, [("resets".to_owned(), 1), ("network".to_owned(), 7)]);
 }
