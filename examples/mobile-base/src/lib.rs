@@ -8,6 +8,7 @@
 //! integration test both call it.
 #![deny(missing_docs)]
 
+pub mod finite;
 pub mod mapper;
 pub mod motion_controller;
 pub mod node;

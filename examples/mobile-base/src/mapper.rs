@@ -11,6 +11,7 @@
 use std::collections::HashSet;
 use std::sync::Arc;
 
+use crate::finite::Rejected;
 use crate::generated::mapper::*;
 use crate::world::Platform;
 
@@ -20,6 +21,7 @@ pub struct Mapper {
     platform: Arc<Platform>,
     /// Cells visited, with the cell width (mm) they were mapped at.
     visited: HashSet<(u32, i64, i64)>,
+    rejected: Rejected,
 }
 
 impl Mapper {
@@ -28,14 +30,21 @@ impl Mapper {
         Mapper {
             platform,
             visited: HashSet::new(),
+            rejected: Rejected::default(),
         }
+    }
+
+    /// The poses dropped for a value that is not finite (`crate::finite`).
+    pub fn rejected(&self) -> u64 {
+        self.rejected.count()
     }
 }
 
 impl Behavior for Mapper {
     /// Maps one queued pose (the transition `on pose -> mapping` runs this).
     fn mapping_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        let Some(pose) = cx.inputs.pose.recv() else {
+        let pose = cx.inputs.pose.recv();
+        let Some(pose) = self.rejected.check(pose, cx.rt.component_name(), "pose") else {
             return Ok(());
         };
         let (width_mm, units) = if cx.rt.quality() > 0 {

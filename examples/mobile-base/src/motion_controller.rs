@@ -4,8 +4,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::finite::{Kept, Rejected};
 use crate::generated::motion_controller::*;
-use crate::generated::types::{DriveMode, Pose2D, Twist};
+use crate::generated::types::{DriveMode, Pose2D, RangeScan, Twist};
 use crate::sensing;
 use crate::world::Platform;
 
@@ -20,6 +21,9 @@ const WATCHDOG: Duration = Duration::from_millis(250);
 pub struct MotionController {
     platform: Arc<Platform>,
     last_step: Option<Instant>,
+    /// The newest finite scan of `obstacles`.
+    obstacles: Kept<RangeScan>,
+    rejected: Rejected,
 }
 
 impl MotionController {
@@ -28,7 +32,23 @@ impl MotionController {
         MotionController {
             platform,
             last_step: None,
+            obstacles: Kept::default(),
+            rejected: Rejected::default(),
         }
+    }
+
+    /// The packets dropped from the inputs for a value that is not finite
+    /// (`crate::finite`).
+    pub fn rejected(&self) -> u64 {
+        self.rejected.count()
+    }
+
+    /// The next command of `command`, if one came and its values are finite (one that
+    /// is not is dropped: the target stays).
+    fn command(&mut self, cx: &mut Cx<'_>) -> Option<Twist> {
+        let command = cx.inputs.command.recv();
+        self.rejected
+            .check(command, cx.rt.component_name(), "command")
     }
 
     /// One integration step towards `target` under the speed, acceleration and turn
@@ -48,10 +68,14 @@ impl MotionController {
         }
         let dt = gap.as_secs_f64().min(MAX_STEP);
 
-        let near = cx
-            .inputs
+        let near = self
             .obstacles
-            .latest()
+            .latest(
+                &cx.inputs.obstacles,
+                &mut self.rejected,
+                cx.rt.component_name(),
+                "obstacles",
+            )
             .map(|scan| sensing::front(&scan));
         let cautious = near.is_some_and(|d| f64::from(d) < cx.config.cautious_distance);
         if cx.vars.mode != DriveMode::Halted {
@@ -131,7 +155,7 @@ impl Behavior for MotionController {
         // Emergencies signalled before moving are stale. The command that woke the
         // controller is the first target.
         cx.inputs.halt.take();
-        if let Some(command) = cx.inputs.command.recv() {
+        if let Some(command) = self.command(cx) {
             cx.vars.target = command;
         }
         Ok(())
@@ -139,7 +163,7 @@ impl Behavior for MotionController {
 
     fn moving_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         // One command per period, in order; without a new one the last one holds.
-        if let Some(command) = cx.inputs.command.recv() {
+        if let Some(command) = self.command(cx) {
             cx.vars.target = command;
         }
         let target = cx.vars.target.clone();

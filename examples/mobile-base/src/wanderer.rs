@@ -2,7 +2,8 @@
 //! changes (or steers to a goal when `seek` is set), and turns on the spot away from
 //! obstacles that get closer than its clearance.
 
-use crate::generated::types::{RangeScan, Twist};
+use crate::finite::{Kept, Rejected};
+use crate::generated::types::{Pose2D, RangeScan, Twist};
 use crate::generated::wanderer::*;
 use crate::sensing;
 use crate::world::{Rng, wrap_angle};
@@ -24,6 +25,10 @@ pub struct Wanderer {
     turn: f64,
     /// The way ahead is blocked: the choice goes to `avoiding`.
     blocked: bool,
+    /// The newest finite packets of `scan` and `pose`.
+    scan: Kept<RangeScan>,
+    pose: Kept<Pose2D>,
+    rejected: Rejected,
 }
 
 impl Default for Wanderer {
@@ -34,7 +39,32 @@ impl Default for Wanderer {
             drift_left: 0,
             turn: 1.0,
             blocked: false,
+            scan: Kept::default(),
+            pose: Kept::default(),
+            rejected: Rejected::default(),
         }
+    }
+}
+
+impl Wanderer {
+    /// The packets dropped from the inputs for a value that is not finite
+    /// (`crate::finite`).
+    pub fn rejected(&self) -> u64 {
+        self.rejected.count()
+    }
+
+    /// The newest finite scan.
+    fn scan(&mut self, cx: &Cx<'_>) -> Option<RangeScan> {
+        let name = cx.rt.component_name();
+        self.scan
+            .latest(&cx.inputs.scan, &mut self.rejected, name, "scan")
+    }
+
+    /// The newest finite pose.
+    fn pose(&mut self, cx: &Cx<'_>) -> Option<Pose2D> {
+        let name = cx.rt.component_name();
+        self.pose
+            .latest(&cx.inputs.pose, &mut self.rejected, name, "pose")
     }
 }
 
@@ -55,7 +85,7 @@ impl Behavior for Wanderer {
     }
 
     fn wandering_periodic(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
-        let Some(scan) = cx.inputs.scan.latest() else {
+        let Some(scan) = self.scan(cx) else {
             // No scan yet: do not drive blind.
             cx.outputs.command.send(Twist {
                 linear: 0.0,
@@ -72,10 +102,11 @@ impl Behavior for Wanderer {
             });
             return Ok(());
         }
+        let pose = if cx.vars.seek { self.pose(cx) } else { None };
         let seed = cx.config.seed;
         let rng = self.rng.get_or_insert_with(|| Rng::new(seed));
         let mut angular = if cx.vars.seek {
-            match cx.inputs.pose.latest() {
+            match pose {
                 Some(pose) => {
                     let (dx, dy) = (cx.config.goal_x - pose.x, cx.config.goal_y - pose.y);
                     if dx.hypot(dy) < GOAL_RADIUS {
@@ -114,7 +145,7 @@ impl Behavior for Wanderer {
     fn avoiding_entry(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         cx.vars.avoidances += 1;
         // Turn towards the more open side.
-        if let Some(scan) = cx.inputs.scan.latest() {
+        if let Some(scan) = self.scan(cx) {
             self.turn = if side(&scan, true) >= side(&scan, false) {
                 1.0
             } else {
@@ -133,10 +164,9 @@ impl Behavior for Wanderer {
     }
 
     fn avoiding_choose(&mut self, cx: &mut Cx<'_>) -> Option<AvoidingMay> {
-        let clear =
-            cx.inputs.scan.latest().is_some_and(|scan| {
-                sensing::front(&scan) > CLEAR_AHEAD.min(1.8 * cx.config.clearance)
-            });
+        let clear = self
+            .scan(cx)
+            .is_some_and(|scan| sensing::front(&scan) > CLEAR_AHEAD.min(1.8 * cx.config.clearance));
         clear.then_some(AvoidingMay::Wandering)
     }
 }

@@ -6,15 +6,18 @@
 //! key. An **inlet** stands, in the consumer's system, for the remote output: its one
 //! output (`output`) has that output's kind, and a Zenoh callback sends on it what
 //! arrives on the key (no extra thread hop on the receiving side). Packets are encoded
-//! with postcard.
+//! with postcard, and decoded strictly (`crate::codec`).
 //!
 //! No packet is lost without a counter and an event: a packet an outlet cannot
 //! publish (it does not encode, Zenoh refuses it, or nothing on the network
 //! subscribes to the key) is counted as lost at the outlet's input; a packet an inlet
-//! cannot decode is counted as lost at the inlet's `network` input; a packet that
-//! reaches a full input is handled by that input's own overflow policy. Each of these
-//! is an `overflows` count and a `MonitorEvent::Overflow` on the monitoring port of
-//! the bridge or of the consumer, and a `tracing` warning with the reason.
+//! cannot decode (or that is longer than its bound) is counted as lost at the inlet's
+//! `network` input, and so are the numbers missing on the way; a jump of an outlet's
+//! numbering out of the ledger's window is one reset at the inlet's `resets` input
+//! (`crate::ledger`); a packet that reaches a full input is handled by that input's
+//! own overflow policy. Each of these is an `overflows` count and a
+//! `MonitorEvent::Overflow` on the monitoring port of the bridge or of the consumer,
+//! and a `tracing` warning with the reason.
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -34,6 +37,7 @@ use serde::de::DeserializeOwned;
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
+use crate::codec;
 use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
@@ -45,6 +49,15 @@ pub const DEFAULT_PULL_TIMEOUT: Duration = Duration::from_secs(1);
 /// The most events one tick message carries: an outlet splits a larger count, an
 /// inlet counts a message claiming more as lost (it did not come from an outlet).
 const MAX_EVENTS_PER_MESSAGE: u64 = 1 << 16;
+
+/// The longest message an inlet of a data or poster connection decodes unless the
+/// bridge says otherwise ([`InletBuilder::max_payload`]): 64 MiB. A longer one is
+/// counted lost at the inlet's `network` input, undecoded.
+pub const DEFAULT_MAX_PAYLOAD: usize = 64 << 20;
+
+/// The longest tick message: its epoch, its number and its count of events, each a
+/// `u64` of at most 10 bytes in postcard.
+const MAX_TICK_MESSAGE: usize = 30;
 
 /// How long a bridge asks the network for the other ends of its connection when it
 /// is built (the liveliness look-up that checks the cardinality rules).
@@ -100,17 +113,17 @@ fn outlet_kinds(session: &zenoh::Session, key: &str) -> Result<Vec<String>, Erro
 }
 
 fn encode<P: Serialize + ?Sized>(packet: &P) -> Result<Vec<u8>, String> {
-    postcard::to_allocvec(packet).map_err(|error| format!("does not encode: {error}"))
+    codec::encode(packet).map_err(|error| format!("does not encode: {error}"))
 }
 
 fn leak_spec(
     type_name: &'static str,
     doc: &'static str,
-    input: InputSpec,
+    inputs: Vec<InputSpec>,
     output: Option<OutputSpec>,
     reacts: bool,
 ) -> &'static Spec {
-    let inputs: &'static [InputSpec] = Box::leak(Box::new([input]));
+    let inputs: &'static [InputSpec] = Box::leak(inputs.into_boxed_slice());
     let outputs: &'static [OutputSpec] = match output {
         Some(output) => Box::leak(Box::new([output])),
         None => &[],
@@ -461,12 +474,12 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let spec = leak_spec(
             "Outlet",
             "Stands for a remote input: publishes what arrives at `input` on its key.",
-            InputSpec {
+            vec![InputSpec {
                 name: "input",
                 kind,
                 packet,
                 pull: pull.is_some(),
-            },
+            }],
             None,
             pull.is_none(),
         );
@@ -765,6 +778,7 @@ pub struct InletBuilder<'n, T> {
     key: String,
     kind: OutputKind,
     pull: Option<Duration>,
+    max_payload: usize,
     packet: PhantomData<fn() -> T>,
 }
 
@@ -776,8 +790,18 @@ impl<'n, T> InletBuilder<'n, T> {
             key: key.to_owned(),
             kind,
             pull: None,
+            max_payload: DEFAULT_MAX_PAYLOAD,
             packet: PhantomData,
         }
+    }
+
+    /// The longest message the inlet decodes, in bytes (a data packet or a poster
+    /// value with its epoch and number; [`DEFAULT_MAX_PAYLOAD`] unless set): a longer
+    /// one is counted lost at `network` without being decoded. A tick inlet's
+    /// messages have a size of their own (at most 30 bytes), whatever this says.
+    pub fn max_payload(mut self, bytes: usize) -> Self {
+        self.max_payload = bytes;
+        self
     }
 
     /// The remote output is a `pull` output: the inlet's output is declared `pull`
@@ -814,26 +838,36 @@ struct Inlet {
     _token: zenoh::liveliness::LivelinessToken,
 }
 
-/// What delivers a bridge key's messages on `output` (decode, the ledger's count of
-/// numbers, losses counted at `network`), and that ledger.
+/// Where an inlet counts what goes wrong on the way: `network`, each message that
+/// does not decode or is missing from the numbering; `resets`, each time an outlet's
+/// numbering jumped out of the ledger's window (`crate::ledger`).
+struct Counters {
+    network: ErasedInput,
+    resets: ErasedInput,
+}
+
+/// What delivers a bridge key's messages on `output` (strict decoding of payloads of
+/// at most `max_payload` bytes, the ledger's count of numbers, losses counted at
+/// `counters`), and that ledger.
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
-    network: ErasedInput,
+    counters: Counters,
     key: String,
+    max_payload: usize,
 ) -> (DeliverFn, Arc<InletLedger>) {
-    let network = Arc::new(network);
+    let network = Arc::new(counters.network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
     let lost = move |reason: String| {
         counted.count_loss(1);
         tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}");
     };
-    let ledger = Arc::new(InletLedger::new(network, key));
+    let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
     let gaps = Arc::clone(&ledger);
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => {
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Numbered<u64>>(bytes) {
+                move |bytes| match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
                     Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
                     )),
@@ -843,28 +877,25 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.emit();
                         }
                     }
-                    Err(error) => lost(format!("does not decode as events: {error}")),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
         InletOutput::Data(port) => {
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Numbered<T>>(bytes) {
+                move |bytes| match codec::decode::<Numbered<T>>(bytes, max_payload) {
                     Ok((epoch, seq, packet)) => {
                         gaps.received(epoch, seq);
                         port.send(packet);
                     }
-                    Err(error) => lost(format!(
-                        "does not decode as {}: {error}",
-                        std::any::type_name::<T>()
-                    )),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
             Arc::new(
-                move |bytes| match postcard::from_bytes::<Posted<T>>(bytes) {
+                move |bytes| match codec::decode::<Posted<T>>(bytes, max_payload) {
                     Ok((epoch, seq, value)) => {
                         let mut newest = lock(&newest);
                         let newer = match *newest {
@@ -876,10 +907,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.post(value);
                         }
                     }
-                    Err(error) => lost(format!(
-                        "does not decode as a posted {}: {error}",
-                        std::any::type_name::<T>()
-                    )),
+                    Err(error) => lost(error.to_string()),
                 },
             )
         }
@@ -888,8 +916,8 @@ fn deliverer<T: Packet + DeserializeOwned>(
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
-/// what delivers the messages of a bridge key on it (decode, gaps, losses counted
-/// at `losses`), and its ledger.
+/// what delivers the messages of a bridge key on it (decode, gaps, losses and resets
+/// counted at `losses`), and its ledger.
 pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
     ports: PortSet,
     kind: OutputKind,
@@ -913,7 +941,11 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
             (InletOutput::Poster(port), ports)
         }
     };
-    let (deliver, ledger) = deliverer(output, losses, key.to_owned());
+    let counters = Counters {
+        network: losses.clone(),
+        resets: losses,
+    };
+    let (deliver, ledger) = deliverer(output, counters, key.to_owned(), DEFAULT_MAX_PAYLOAD);
     (ports, deliver, ledger)
 }
 
@@ -946,6 +978,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key,
             kind,
             pull,
+            max_payload,
             packet: _,
         } = self;
         keys::check_name(&name)?;
@@ -992,15 +1025,16 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
         } else {
             std::any::type_name::<T>()
         };
+        let counted = |name| InputSpec {
+            name,
+            kind: InputKind::Tick,
+            packet: "event",
+            pull: false,
+        };
         let spec = leak_spec(
             "Inlet",
-            "Stands for a remote output: sends on `output` what arrives on its key; packets that do not decode are counted at `network`.",
-            InputSpec {
-                name: "network",
-                kind: InputKind::Tick,
-                packet: "event",
-                pull: false,
-            },
+            "Stands for a remote output: sends on `output` what arrives on its key; packets that do not decode or never arrive are counted at `network`, jumps of an outlet's numbering at `resets`.",
+            vec![counted("network"), counted("resets")],
             Some(OutputSpec {
                 name: "output",
                 kind,
@@ -1009,8 +1043,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             }),
             false,
         );
-        let network = TickIn::new();
-        let ports = PortSet::new().input(&network);
+        let (network, resets) = (TickIn::new(), TickIn::new());
+        let ports = PortSet::new().input(&network).input(&resets);
         let (output, ports) = match kind {
             OutputKind::Tick => {
                 let port = TickOut::new();
@@ -1028,7 +1062,11 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 (InletOutput::Poster(port), ports)
             }
         };
-        let (deliver, ledger) = deliverer(output, network.erased(), key.clone());
+        let counters = Counters {
+            network: network.erased(),
+            resets: resets.erased(),
+        };
+        let (deliver, ledger) = deliverer(output, counters, key.clone(), max_payload);
         let acks = match pull {
             Some(_) => None,
             None => Some(

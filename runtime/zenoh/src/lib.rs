@@ -41,6 +41,7 @@
 
 pub mod agent;
 mod bridge;
+mod codec;
 mod config;
 pub mod ctl;
 pub mod echo;
@@ -55,7 +56,7 @@ pub mod security;
 mod tally;
 pub mod top;
 
-pub use crate::bridge::{DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
+pub use crate::bridge::{DEFAULT_MAX_PAYLOAD, DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};
 pub use crate::config::{peer_config, secure_config};
 pub use crate::ledger::{LEDGER_TARGET, OUTLET_LEDGER_TARGET};
 pub use crate::node::{ControlReply, Node};

@@ -81,6 +81,8 @@ struct Life {
     acknowledged: Vec<u64>,
     /// A producer's: the newest number it handed to Zenoh.
     sent: u64,
+    /// A consumer's: the resets its ledger counted (none from an honest outlet).
+    resets: u64,
 }
 
 impl Life {
@@ -109,6 +111,8 @@ impl Life {
             self.acknowledged.push(number(at + 2).expect("a number"));
         } else if let Some(at) = words.iter().position(|w| *w == "sent") {
             self.sent = self.sent.max(number(at + 2).expect("a number"));
+        } else if words.contains(&"reset") {
+            self.resets += 1;
         }
     }
 }
@@ -386,6 +390,11 @@ fn a_consumer_killed_fifty_times_has_every_packet_received_or_counted_lost() {
         "produced = received + missing + lost - counted both ways"
     );
     assert!(o >= own, "the outlet counted from beyond an acknowledgment");
+    assert_eq!(
+        lives.iter().map(|l| l.resets).sum::<u64>(),
+        0,
+        "an honest outlet's numbers stay within the ledger's window"
+    );
     // And from no nearer than the acknowledgment before the last: that answer was
     // made a round or more before the kill, so it reached the outlet. (An outlet that
     // ignored acknowledgments, counting from where it first saw each consumer, keeps
@@ -501,5 +510,10 @@ fn a_producer_killed_fifty_times_has_every_packet_it_sent_received_or_counted_lo
     assert!(
         received + missing <= sent + ROUNDS as u64,
         "counted more than one per kill beyond what was sent: {received} + {missing} > {sent} + {ROUNDS}"
+    );
+    assert_eq!(
+        inlet.snapshot().port_overflows,
+        [("network".to_owned(), missing), ("resets".to_owned(), 0)],
+        "the killed producers' reports stay within the ledger's window"
     );
 }

@@ -205,7 +205,10 @@ fn a_packet_that_does_not_decode_is_counted_at_the_inlet() {
     let monitor = inlet
         .wait_for(|m| m.overflows == 1, PATIENCE)
         .expect("the undecodable packet counted");
-    assert_eq!(monitor.port_overflows, vec![("network".to_owned(), 1)]);
+    assert_eq!(
+        monitor.port_overflows,
+        vec![("network".to_owned(), 1), ("resets".to_owned(), 0)]
+    );
     assert!(matches!(
         events.recv_timeout(PATIENCE),
         Ok(MonitorEvent::Overflow { ref port, lost: 1, total: 1 }) if port == "network"
@@ -253,7 +256,10 @@ fn numbers_missing_on_the_way_are_counted_lost_at_the_inlet() {
     let monitor = inlet
         .wait_for(|m| m.overflows == 2, PATIENCE)
         .expect("the two missing numbers are counted");
-    assert_eq!(monitor.port_overflows, vec![("network".to_owned(), 2)]);
+    assert_eq!(
+        monitor.port_overflows,
+        vec![("network".to_owned(), 2), ("resets".to_owned(), 0)]
+    );
 }
 
 #[test]
