@@ -127,6 +127,7 @@ pub mod compound;
 pub mod equalize;
 pub mod harness;
 pub mod idle;
+pub mod log;
 mod monitor;
 pub mod port;
 #[cfg(feature = "process")]
