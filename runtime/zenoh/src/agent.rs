@@ -760,6 +760,7 @@ pub fn instantiate(
         reason: format!("the type name is not a key chunk: {error}"),
     })?;
     let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
+    let asked = std::time::Instant::now();
     let replies = node
         .session()
         .get(keys::agent(on, &request.type_name))
@@ -771,8 +772,9 @@ pub fn instantiate(
         return Err(Error::Remote {
             node: on.to_owned(),
             reason: format!(
-                "no agent answered (waited at most {timeout:?}; does the node run an agent, \
-                 and do its access rules let this node instantiate `{}` there?)",
+                "no agent answered (after {:.1?}, of at most {timeout:.1?}; does the node run an \
+                 agent, and do its access rules let this node instantiate `{}` there?)",
+                asked.elapsed(),
                 request.type_name
             ),
         });

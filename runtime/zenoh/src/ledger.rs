@@ -142,7 +142,7 @@ impl InletLedger {
         };
         if missing > 0 {
             self.network.count_loss(missing);
-            tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing)");
+            coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing){held}"));
         }
     }
 
@@ -164,10 +164,10 @@ impl InletLedger {
                 h.missing = h.missing.saturating_add(missing);
                 counted = counted.saturating_add(missing);
                 tracing::trace!(target: LEDGER_TARGET, "{} ended {epoch} {last} missing {missing}", self.key);
-                tracing::warn!(
+                coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "inlet lost {missing} packet(s): outlet epoch {epoch} sent up to {last} before its process ended"
-                );
+                    "inlet lost {missing} packet(s): outlet epoch {epoch} sent up to {last} before its process ended{held}"
+                ));
             }
         }
         if counted > 0 {
@@ -208,7 +208,7 @@ pub(crate) fn serve(
                 counted();
             }
             if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
-                tracing::warn!("acknowledgment not sent: {error}");
+                coolbot::limited!(&reply_key, |held| tracing::warn!("acknowledgment not sent: {error}{held}"));
             }
         })
         .wait()
@@ -419,11 +419,11 @@ impl Book {
             tracing::trace!(target: OUTLET_LEDGER_TARGET, "{} counted {} from {from} to {end}", self.key, stream.id);
             if lost > 0 {
                 self.losses.count_loss(lost);
-                tracing::warn!(
+                coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "outlet lost {lost} packet(s): inlet {} ended before acknowledging them",
+                    "outlet lost {lost} packet(s): inlet {} ended before acknowledging them{held}",
                     stream.id
-                );
+                ));
             }
         }
         let mut settled = lock(&self.settled);
@@ -471,7 +471,7 @@ impl Book {
         {
             Ok(replies) => replies,
             Err(error) => {
-                tracing::warn!(key = %self.key, "acknowledgments not asked: {error}");
+                coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {error}{held}"));
                 return;
             }
         };
@@ -486,10 +486,10 @@ impl Book {
                     answered.insert(format!("{node_and_name}/{}", ack.0));
                     self.acknowledged(node_and_name, &ack);
                 }
-                Err(error) => tracing::warn!(
+                Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "an acknowledgment that does not decode was dropped: {error}"
-                ),
+                    "an acknowledgment that does not decode was dropped: {error}{held}"
+                )),
             }
         }
         self.after_round(&answered);
