@@ -34,13 +34,17 @@ fn gather(ctl: &Ctl) -> Result<(Vec<String>, Vec<Listed>), CtlError> {
 }
 
 /// One board, gathered twice `interval` apart (the CPU shares are over it), with
-/// the compounds' recent supervision steps in the steps pane.
+/// the compounds' recent supervision steps in the steps pane; [`CtlError::NoNode`]
+/// when no node is alive.
 pub fn board(ctl: &Ctl, interval: Duration) -> Result<(Board, Vec<String>), CtlError> {
     let mut board = Board::new();
     let (alive, listed) = gather(ctl)?;
     board.refresh(&alive, listed, Instant::now());
     std::thread::sleep(interval);
     let (alive, listed) = gather(ctl)?;
+    if alive.is_empty() && listed.is_empty() {
+        return Err(ctl.no_node());
+    }
     board.refresh(&alive, listed, Instant::now());
     board.seed_history();
     Ok((board, alive))
@@ -82,8 +86,15 @@ fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) ->
 }
 
 /// The interactive view, until `q`: gathers every `refresh`, on its own thread, so
-/// that keys are answered while a node is slow to answer.
+/// that keys are answered while a node is slow to answer. [`CtlError::NoTerminal`]
+/// when standard output is not a terminal.
 pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(), CtlError> {
+    use std::io::IsTerminal;
+    if !std::io::stdout().is_terminal() {
+        return Err(CtlError::NoTerminal(
+            "its standard output is not one".to_owned(),
+        ));
+    }
     let started = Instant::now();
     // Every monitoring event of every component: the steps pane.
     let events = session
@@ -102,7 +113,8 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
     });
     let mut board = Board::new();
     let mut prompt: Option<String> = None;
-    let mut terminal = ratatui::init();
+    let mut terminal =
+        ratatui::try_init().map_err(|error| CtlError::NoTerminal(error.to_string()))?;
     let outcome = (|| -> Result<(), CtlError> {
         loop {
             while let Ok(result) = heard.try_recv() {
