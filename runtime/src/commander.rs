@@ -312,7 +312,10 @@ impl Commander {
             ),
         };
         if let Err(reason) = &outcome {
-            crate::limited!((&self.compound, instance), |held| tracing::warn!(compound = %self.compound, %instance, "refused {described}: {reason}{held}"));
+            crate::limited!(
+                (&self.compound, instance),
+                |held| tracing::warn!(compound = %self.compound, %instance, "refused {described}: {reason}{held}")
+            );
         } else {
             tracing::info!(compound = %self.compound, %instance, "commanded: {described}");
         }

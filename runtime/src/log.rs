@@ -144,11 +144,7 @@ impl std::fmt::Display for Held {
         } else {
             format!("{} ms", self.over.as_millis())
         };
-        write!(
-            f,
-            " (and {} more in the last {over})",
-            grouped(self.count)
-        )
+        write!(f, " (and {} more in the last {over})", grouped(self.count))
     }
 }
 
@@ -157,7 +153,7 @@ fn grouped(n: u64) -> String {
     let digits = n.to_string();
     let mut out = String::with_capacity(digits.len() + digits.len() / 3);
     for (i, digit) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i) % 3 == 0 {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
             out.push(',');
         }
         out.push(digit);
@@ -202,7 +198,13 @@ mod tests {
         assert_eq!(held.to_string(), " (and 199,999 more in the last 10 s)");
         // Then quiet for a minute: the next line goes out alone.
         let held = limiter.admit_at("k", at(t0, 70_000)).expect("let through");
-        assert_eq!(held, Held { count: 0, over: Duration::from_secs(60) });
+        assert_eq!(
+            held,
+            Held {
+                count: 0,
+                over: Duration::from_secs(60)
+            }
+        );
         assert_eq!(held.to_string(), "");
         // One held back, told with the line after the interval, whenever it comes.
         assert_eq!(limiter.admit_at("k", at(t0, 71_000)), None);
@@ -261,7 +263,10 @@ mod tests {
         ] {
             assert_eq!(grouped(n), text);
         }
-        let held = Held { count: 3, over: Duration::from_millis(250) };
+        let held = Held {
+            count: 3,
+            over: Duration::from_millis(250),
+        };
         assert_eq!(held.to_string(), " (and 3 more in the last 250 ms)");
     }
 }

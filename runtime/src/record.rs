@@ -1158,7 +1158,10 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
                     self.counters.recorded.fetch_add(1, Ordering::AcqRel);
                 }
                 Err(error) => {
-                    crate::limited!(&self.path, |held| tracing::warn!(port = %self.path, seq, "cannot serialize a packet: {error}{held}"));
+                    crate::limited!(
+                        &self.path,
+                        |held| tracing::warn!(port = %self.path, seq, "cannot serialize a packet: {error}{held}")
+                    );
                     self.counters.unserializable.fetch_add(1, Ordering::AcqRel);
                 }
             }

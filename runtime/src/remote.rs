@@ -420,7 +420,9 @@ impl Proxy {
                 let failed = failure(&view);
                 self.view = Some(view);
                 match failed {
-                    Some(reason) => Err(Fault::message(format!("on node `{}`: {reason}", self.node))),
+                    Some(reason) => {
+                        Err(Fault::message(format!("on node `{}`: {reason}", self.node)))
+                    }
                     None => Ok(()),
                 }
             }

@@ -908,7 +908,10 @@ impl Runner {
             vec![MonitorEvent::Error(error.clone())]
         });
         if new && let Some(message) = &error {
-            crate::limited!(&self.cx.name, |held| tracing::warn!(component = %self.cx.name, "{message}{held}"));
+            crate::limited!(
+                &self.cx.name,
+                |held| tracing::warn!(component = %self.cx.name, "{message}{held}")
+            );
         }
     }
 
@@ -1395,7 +1398,10 @@ impl Runner {
         for step in exception.plan {
             match *step {
                 PlanStep::Ignore => {
-                    crate::limited!((&self.cx.name, exception.name), |held| tracing::warn!(component = %self.cx.name, "exception `{}` in {place} ignored: {message}{held}", exception.name));
+                    crate::limited!(
+                        (&self.cx.name, exception.name),
+                        |held| tracing::warn!(component = %self.cx.name, "exception `{}` in {place} ignored: {message}{held}", exception.name)
+                    );
                     return Recovery::Recovered;
                 }
                 PlanStep::Goto(target) if target < self.spec.states.len() => {

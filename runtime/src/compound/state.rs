@@ -193,7 +193,10 @@ impl Compound {
     }
 
     pub(super) fn fault(&self, why: PolicyFault) -> Fault {
-        crate::limited!(&self.name, |held| tracing::warn!(compound = %self.name, "{why}{held}"));
+        crate::limited!(
+            &self.name,
+            |held| tracing::warn!(compound = %self.name, "{why}{held}")
+        );
         RunError::from(why).into()
     }
 

@@ -204,7 +204,10 @@ struct Wire {
 impl Wire {
     fn lost(&self, reason: &str) {
         self.losses.count_loss(1);
-        coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "outlet lost a packet: {reason}{held}"));
+        coolbot::limited!(
+            &self.key,
+            |held| tracing::warn!(key = %self.key, "outlet lost a packet: {reason}{held}")
+        );
     }
 
     /// Publish one packet; `counted`: a packet nobody subscribes to is a loss (data
@@ -333,7 +336,9 @@ fn pull_server(
                             Err(reason) => query.reply_err(reason).wait(),
                         };
                         if let Err(error) = result {
-                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!("pull answer not sent: {error}{held}"));
+                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+                                "pull answer not sent: {error}{held}"
+                            ));
                         }
                     }
                     Err(crossbeam_channel::RecvTimeoutError::Timeout) => {
@@ -533,7 +538,9 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                         if let Some(bytes) = current
                             && let Err(error) = query.reply(query.key_expr().clone(), bytes).wait()
                         {
-                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!("poster value not sent: {error}{held}"));
+                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+                                "poster value not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -826,7 +833,10 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let lost_key = key.clone();
     let lost = move |reason: String| {
         counted.count_loss(1);
-        coolbot::limited!(&lost_key, |held| tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}{held}"));
+        coolbot::limited!(
+            &lost_key,
+            |held| tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}{held}")
+        );
     };
     let ledger = Arc::new(InletLedger::new(network, key));
     let gaps = Arc::clone(&ledger);
@@ -1141,7 +1151,10 @@ impl Automaton for Inlet {
         {
             Ok(replies) => replies,
             Err(error) => {
-                coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "pull query not sent: {error}{held}"));
+                coolbot::limited!(
+                    &self.key,
+                    |held| tracing::warn!(key = %self.key, "pull query not sent: {error}{held}")
+                );
                 return Ok(());
             }
         };

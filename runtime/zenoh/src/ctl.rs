@@ -116,7 +116,9 @@ fn no_components(node: Option<&str>, alive: &str, waited: Duration) -> String {
     let why = "a node that only runs an agent has none until something is placed on it";
     match node {
         Some(node) => {
-            format!("node `{node}` is alive, but no component of it answered within {waited:?} ({why})")
+            format!(
+                "node `{node}` is alive, but no component of it answered within {waited:?} ({why})"
+            )
         }
         None => format!("no component answered within {waited:?} (nodes alive: {alive}; {why})"),
     }

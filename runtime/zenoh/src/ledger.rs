@@ -142,7 +142,10 @@ impl InletLedger {
         };
         if missing > 0 {
             self.network.count_loss(missing);
-            coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing){held}"));
+            coolbot::limited!(
+                &self.key,
+                |held| tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing){held}")
+            );
         }
     }
 
@@ -208,7 +211,9 @@ pub(crate) fn serve(
                 counted();
             }
             if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
-                coolbot::limited!(&reply_key, |held| tracing::warn!("acknowledgment not sent: {error}{held}"));
+                coolbot::limited!(&reply_key, |held| tracing::warn!(
+                    "acknowledgment not sent: {error}{held}"
+                ));
             }
         })
         .wait()
@@ -471,7 +476,10 @@ impl Book {
         {
             Ok(replies) => replies,
             Err(error) => {
-                coolbot::limited!(&self.key, |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {error}{held}"));
+                coolbot::limited!(
+                    &self.key,
+                    |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {error}{held}")
+                );
                 return;
             }
         };

@@ -224,7 +224,9 @@ impl Node {
                             Err(error) => query.reply_err(error.to_string()).wait(),
                         };
                         if let Err(error) = reply {
-                            coolbot::limited!(&own_key, |held| tracing::warn!("snapshot not sent: {error}{held}"));
+                            coolbot::limited!(&own_key, |held| tracing::warn!(
+                                "snapshot not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -249,7 +251,9 @@ impl Node {
                             Err(error) => query.reply_err(error.to_string()).wait(),
                         };
                         if let Err(error) = reply {
-                            coolbot::limited!(&info_key, |held| tracing::warn!("component info not sent: {error}{held}"));
+                            coolbot::limited!(&info_key, |held| tracing::warn!(
+                                "component info not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -406,10 +410,14 @@ fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
             Ok(event) => match serde_json::to_vec(&event) {
                 Ok(json) => {
                     if let Err(error) = publisher.put(json).wait() {
-                        coolbot::limited!(&stream.path, |held| tracing::warn!("monitoring event not published: {error}{held}"));
+                        coolbot::limited!(&stream.path, |held| tracing::warn!(
+                            "monitoring event not published: {error}{held}"
+                        ));
                     }
                 }
-                Err(error) => coolbot::limited!(&stream.path, |held| tracing::warn!("monitoring event does not encode: {error}{held}")),
+                Err(error) => coolbot::limited!(&stream.path, |held| tracing::warn!(
+                    "monitoring event does not encode: {error}{held}"
+                )),
             },
             // The component is gone: stop watching it.
             Err(_) => select.remove(index),
@@ -441,6 +449,8 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
         },
     };
     if let Err(error) = reply_control(query, &reply) {
-        coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!("control answer not sent: {error}{held}"));
+        coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+            "control answer not sent: {error}{held}"
+        ));
     }
 }

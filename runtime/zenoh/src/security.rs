@@ -1120,7 +1120,9 @@ mod tests {
     #[test]
     fn files_are_read_up_to_a_size_limit() {
         // An endless file ends at the limit, at once.
-        let error = Security::load(Path::new("/dev/zero")).unwrap_err().to_string();
+        let error = Security::load(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
         assert!(
             error.starts_with("security: /dev/zero: larger than 1024 KiB"),
             "{error}"
@@ -1132,7 +1134,10 @@ mod tests {
             file.set_len(len).unwrap();
             path
         };
-        assert_eq!(read_bounded(&sized("limit", MAX_FILE_SIZE)).unwrap().len() as u64, MAX_FILE_SIZE);
+        assert_eq!(
+            read_bounded(&sized("limit", MAX_FILE_SIZE)).unwrap().len() as u64,
+            MAX_FILE_SIZE
+        );
         assert!(read_bounded(&sized("over", MAX_FILE_SIZE + 1)).is_err());
         // The certificate files a security file names: checked before Zenoh reads them.
         sized("ca.pem", 10);

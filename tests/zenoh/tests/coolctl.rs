@@ -427,16 +427,28 @@ fn nowhere() -> String {
 fn what_finds_nothing_says_why_and_exits_1() {
     let endpoint = nowhere();
     for (args, message) in [
-        (&["nodes"][..], "no node is alive (none answered within 2s; this session reached no Zenoh peer"),
-        (&["list"], "no node is alive (none answered within 2s; this session reached no Zenoh peer"),
+        (
+            &["nodes"][..],
+            "no node is alive (none answered within 2s; this session reached no Zenoh peer",
+        ),
+        (
+            &["list"],
+            "no node is alive (none answered within 2s; this session reached no Zenoh peer",
+        ),
         (&["list", "robot"], "no node is alive"),
         (&["top", "--once", "--refresh", "100ms"], "no node is alive"),
-        (&["top", "--once", "--json", "--refresh", "100ms"], "no node is alive"),
+        (
+            &["top", "--once", "--json", "--refresh", "100ms"],
+            "no node is alive",
+        ),
     ] {
         let out = coolctl(&endpoint, args);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
-        assert!(stderr.starts_with("coolctl: ") && stderr.contains(message), "{args:?}: {stderr}");
+        assert!(
+            stderr.starts_with("coolctl: ") && stderr.contains(message),
+            "{args:?}: {stderr}"
+        );
         assert!(out.stdout.is_empty(), "{args:?}: {}", text(&out.stdout));
     }
     // A node alive with no component (an agent's station before anything is placed).
@@ -452,21 +464,40 @@ fn what_finds_nothing_says_why_and_exits_1() {
     );
     assert_eq!(out.status.code(), Some(1));
     assert!(
-        text(&out.stderr).contains("node `bare` is alive, but no component of it answered within 2s"),
+        text(&out.stderr)
+            .contains("node `bare` is alive, but no component of it answered within 2s"),
         "{}",
         text(&out.stderr)
     );
     // No time to answer in: refused as usage.
-    let out = coolctl_bounded(&["--connect", &endpoint, "--no-multicast", "--timeout", "0s", "list"]);
+    let out = coolctl_bounded(&[
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--timeout",
+        "0s",
+        "list",
+    ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
-    assert!(text(&out.stderr).contains("nothing answers in no time"), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("nothing answers in no time"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 #[test]
 fn files_given_are_read_up_to_a_size_limit() {
     let endpoint = nowhere();
     // Endless: refused at the limit, not read forever.
-    let out = coolctl_bounded(&["--connect", &endpoint, "--no-multicast", "--config", "/dev/zero", "nodes"]);
+    let out = coolctl_bounded(&[
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--config",
+        "/dev/zero",
+        "nodes",
+    ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(
         text(&out.stderr).contains("/dev/zero: larger than 1024 KiB"),

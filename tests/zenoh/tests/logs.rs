@@ -63,9 +63,11 @@ fn a_flood_of_packets_that_do_not_decode_is_counted_whole_and_logged_once() {
     let key = "test/flood";
     let mut consumer = System::new();
     consumer
-        .add(b.inlet::<coolbot_zenoh_tests::generated::types::Pose>("inlet", key, OutputKind::Data)
-            .build()
-            .unwrap())
+        .add(
+            b.inlet::<coolbot_zenoh_tests::generated::types::Pose>("inlet", key, OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
         .unwrap();
     consumer.add(latest::component("sink", Nothing)).unwrap();
     consumer.connect("inlet.output", "sink.input").unwrap();

@@ -164,7 +164,12 @@ fn routine_steps_are_hidden_on_demand_and_the_steps_pane_scrolls_back_to_the_sub
     assert!(
         wait_until(PATIENCE, || {
             while let Ok(Some(sample)) = events.try_recv() {
-                heard(&mut board, sample.key_expr().as_str(), &sample.payload().to_bytes(), "t");
+                heard(
+                    &mut board,
+                    sample.key_expr().as_str(),
+                    &sample.payload().to_bytes(),
+                    "t",
+                );
             }
             retries(&board) >= 12
         }),

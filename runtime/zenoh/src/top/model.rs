@@ -494,11 +494,18 @@ pub(crate) mod tests {
         };
         board.step("r/cell", &supervision("ranges", substituted), "0.0s");
         for n in 0..300 {
-            board.step("r/cell", &supervision("motion", commanded()), &format!("{n}s"));
+            board.step(
+                "r/cell",
+                &supervision("motion", commanded()),
+                &format!("{n}s"),
+            );
         }
         let steps: Vec<&str> = board.steps().collect();
         assert_eq!(steps.len(), 1 + STEPS_PER_INSTANCE);
-        assert_eq!(steps[0], "0.0s r/cell: supervision: ranges substituted by spare");
+        assert_eq!(
+            steps[0],
+            "0.0s r/cell: supervision: ranges substituted by spare"
+        );
         // The motion's newest, in order.
         assert!(steps[1].starts_with("250s r/cell: supervision: motion commanded"));
         assert!(steps[STEPS_PER_INSTANCE].starts_with("299s "));
@@ -536,7 +543,13 @@ pub(crate) mod tests {
             board.step("r/c", &supervision("w", Step::Failed), &format!("{n}s"));
         }
         board.set_page(5);
-        let first = |board: &Board| board.steps_window(5)[0].split(' ').next().unwrap().to_owned();
+        let first = |board: &Board| {
+            board.steps_window(5)[0]
+                .split(' ')
+                .next()
+                .unwrap()
+                .to_owned()
+        };
         assert_eq!(first(&board), "15s");
         // The keys move the table until the steps pane has the focus.
         board.navigate(-3);

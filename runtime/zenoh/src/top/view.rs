@@ -246,7 +246,10 @@ mod tests {
         let (width, height) = (100, 30);
         board.set_page(super::steps_rows(width, height));
         let screen = crate::top::render(&board, width, height);
-        assert!(screen.contains("39.0s r/cell: supervision: w retry failed"), "{screen}");
+        assert!(
+            screen.contains("39.0s r/cell: supervision: w retry failed"),
+            "{screen}"
+        );
         assert!(!screen.contains("w failed"), "{screen}");
         assert!(
             screen.ends_with(
@@ -257,8 +260,14 @@ mod tests {
         board.toggle_routine();
         board.toggle_focus();
         let screen = crate::top::render(&board, width, height);
-        assert!(screen.contains("┌ supervision and adaptation steps, routine hidden ─"), "{screen}");
-        assert!(screen.contains("│1.0s r/cell: supervision: w failed"), "{screen}");
+        assert!(
+            screen.contains("┌ supervision and adaptation steps, routine hidden ─"),
+            "{screen}"
+        );
+        assert!(
+            screen.contains("│1.0s r/cell: supervision: w failed"),
+            "{screen}"
+        );
         assert!(!screen.contains("retry failed"), "{screen}");
         assert!(
             screen.ends_with(
@@ -269,8 +278,14 @@ mod tests {
         board.toggle_routine();
         board.navigate(-4);
         let screen = crate::top::render(&board, width, height);
-        assert!(screen.contains("┌ supervision and adaptation steps, 4 newer below ─"), "{screen}");
-        assert!(screen.contains("│35.0s r/cell: supervision: w retry failed"), "{screen}");
+        assert!(
+            screen.contains("┌ supervision and adaptation steps, 4 newer below ─"),
+            "{screen}"
+        );
+        assert!(
+            screen.contains("│35.0s r/cell: supervision: w retry failed"),
+            "{screen}"
+        );
         assert!(!screen.contains("36.0s"), "{screen}");
     }
 }
