@@ -88,10 +88,11 @@ fn node_lost(here: &str, on: &str) -> String {
     entry.reason.clone()
 }
 
-/// The node `on` is back (its token again): logged once, with how long it was lost.
+/// The node `on` is back (its token again): logged once, with how long it was lost,
+/// at the loss's level (whoever sees the loss sees the return).
 fn node_back(here: &str, on: &str) {
     if let Some(lost) = lock(&LOST).remove(&(here.to_owned(), on.to_owned())) {
-        tracing::info!(
+        tracing::warn!(
             "node `{on}` is back after {:.1?} lost ({} instantiation(s) refused here meanwhile)",
             lost.since.elapsed(),
             lost.refused
@@ -488,9 +489,11 @@ impl End {
                         }
                         SampleKind::Put => {
                             shared.seen.store(true, Ordering::Release);
-                            if lock(&shared.absent).take().is_some() {
-                                node_back(&here, &on);
-                            }
+                            *lock(&shared.absent) = None;
+                            // (Whichever proxy hears it first; also one placed while
+                            // the node was away, when no proxy that heard the loss
+                            // is left.)
+                            node_back(&here, &on);
                         }
                     }
                     shared.ring();

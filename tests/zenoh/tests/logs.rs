@@ -215,7 +215,7 @@ fn a_node_lost_is_logged_once_when_it_goes_and_once_when_it_is_back() {
         PATIENCE,
     )
     .unwrap_or_else(|timeout| panic!("the instance recovers: {timeout}"));
-    let back = lines_with(&["INFO", "node `dying-station` is back after "]);
+    let back = lines_with(&["WARN", "node `dying-station` is back after "]);
     assert_eq!(back.len(), 1, "{back:#?}");
     let refused: usize = back[0]
         .split(" lost (")
