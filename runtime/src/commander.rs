@@ -402,7 +402,10 @@ impl Commander {
             ),
         };
         if let Err(reason) = &outcome {
-            tracing::warn!(compound = %self.compound, %instance, "refused {described}: {reason}");
+            crate::limited!(
+                (&self.compound, instance),
+                |held| tracing::warn!(compound = %self.compound, %instance, "refused {described}: {reason}{held}")
+            );
         } else {
             tracing::info!(compound = %self.compound, %instance, "commanded: {described}");
         }

@@ -104,6 +104,7 @@ pub mod equalize;
 mod handle;
 pub mod harness;
 pub mod idle;
+pub mod log;
 mod monitor;
 pub mod port;
 #[cfg(feature = "process")]

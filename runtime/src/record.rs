@@ -1159,7 +1159,10 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
                     self.counters.recorded.fetch_add(1, Ordering::AcqRel);
                 }
                 Err(error) => {
-                    tracing::warn!(port = %self.path, seq, "cannot serialize a packet: {error}");
+                    crate::limited!(
+                        &self.path,
+                        |held| tracing::warn!(port = %self.path, seq, "cannot serialize a packet: {error}{held}")
+                    );
                     self.counters.unserializable.fetch_add(1, Ordering::AcqRel);
                 }
             }
@@ -1358,17 +1361,17 @@ impl Writer {
             }
         }
         for loss in losses {
-            tracing::warn!(
+            crate::limited!(&loss.port, |held| tracing::warn!(
                 port = %loss.port,
                 lost = loss.lost,
                 total = loss.total,
-                "recorder: {} lost",
+                "recorder: {} lost{held}",
                 if self.monitors.iter().any(|m| m.path == loss.port) {
                     "monitoring events"
                 } else {
                     "packets"
                 }
-            );
+            ));
             let data = message_bytes(&loss, self.losses_channel.wrapped)
                 .map_err(|error| mcap::McapError::Io(error.into()))?;
             self.write(self.losses_channel.id, self.losses_written, loss.t, &data)?;

@@ -466,11 +466,11 @@ impl Automaton for Proxy {
         // No answer is not a fault of the proxy: the consumer's pull times out, as
         // when a local producer does not answer.
         if let Err(reason) = self.end.pull(output) {
-            tracing::warn!(
+            crate::limited!((&self.node, output), |held| tracing::warn!(
                 node = %self.node,
                 output = self.spec.outputs.get(output).map_or("?", |o| o.name),
-                "pull through the proxy: {reason}"
-            );
+                "pull through the proxy: {reason}{held}"
+            ));
         }
         Ok(())
     }
@@ -513,7 +513,7 @@ impl Driven for Proxy {
             _ => return,
         };
         if let Err(fault) = self.forward(Command::SetState(command)) {
-            tracing::warn!("{}", fault.text());
+            crate::limited!(&self.node, |held| tracing::warn!("{}{held}", fault.text()));
         }
     }
 

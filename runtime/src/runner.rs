@@ -902,17 +902,25 @@ impl Runner {
         });
     }
 
+    /// Set the error on the monitor; a new one is logged (the same error again, as
+    /// each failed retry of a recovery sets it, is not, and a component's errors are
+    /// logged at most every `log::EVERY`, with the count held back).
     fn set_error(&mut self, error: Option<String>) {
-        if let Some(message) = &error {
-            tracing::warn!(component = %self.cx.name, "{message}");
-        }
+        let mut new = false;
         self.shared.update(|monitor| {
             if monitor.error == error {
                 return Vec::new();
             }
+            new = true;
             monitor.error.clone_from(&error);
-            vec![MonitorEvent::Error(error)]
+            vec![MonitorEvent::Error(error.clone())]
         });
+        if new && let Some(message) = &error {
+            crate::limited!(
+                &self.cx.name,
+                |held| tracing::warn!(component = %self.cx.name, "{message}{held}")
+            );
+        }
     }
 
     fn publish_user(&mut self, state: Option<usize>) {
@@ -1117,10 +1125,10 @@ impl Runner {
         let applied = scheduling.apply(priority);
         match &applied {
             OsPriority::Inherited => {}
-            OsPriority::NotApplied(why) => tracing::warn!(
+            OsPriority::NotApplied(why) => crate::limited!(&self.cx.name, |held| tracing::warn!(
                 component = %self.cx.name,
-                "priority {priority} not applied to the thread: {why}"
-            ),
+                "priority {priority} not applied to the thread: {why}{held}"
+            )),
             how => {
                 tracing::info!(component = %self.cx.name, "priority {priority} applied: {how:?}")
             }
@@ -1411,7 +1419,10 @@ impl Runner {
         for step in exception.plan {
             match *step {
                 PlanStep::Ignore => {
-                    tracing::warn!(component = %self.cx.name, "exception `{}` in {place} ignored: {message}", exception.name);
+                    crate::limited!(
+                        (&self.cx.name, exception.name),
+                        |held| tracing::warn!(component = %self.cx.name, "exception `{}` in {place} ignored: {message}{held}", exception.name)
+                    );
                     return Recovery::Recovered;
                 }
                 PlanStep::Goto(target) if target < self.spec.states.len() => {

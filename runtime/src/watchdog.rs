@@ -200,7 +200,9 @@ impl Watch {
             "overrun in state `{state_name}` ({:?} section): still running after {took:?}, max_response {limit:?}",
             section_of(what)
         );
-        tracing::warn!("{message}");
+        crate::limited!(std::ptr::from_ref(self).addr(), |held| tracing::warn!(
+            "{message}{held}"
+        ));
         self.shared.update(|monitor| {
             monitor.overruns += 1;
             let mut events = vec![MonitorEvent::Overrun {

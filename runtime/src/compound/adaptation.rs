@@ -163,7 +163,10 @@ impl Compound {
                 crate::adapt::decide_explained(&members, levels, &*coordinator.selector);
             decision = decided;
             if let Some(note) = &note {
-                tracing::warn!(compound = %self.name, "adaptation: {note}");
+                crate::limited!(
+                    &self.name,
+                    |held| tracing::warn!(compound = %self.name, "adaptation: {note}{held}")
+                );
             }
             let noted = |detail: String| match &note {
                 Some(note) => format!("{detail} ({note})"),
@@ -343,6 +346,8 @@ pub(super) const DEFAULT_PENDING: Duration = Duration::from_secs(2);
 /// waits for an instance in a long section).
 pub(super) fn post(handle: &Handle, command: Command) {
     if let Err(rejected) = handle.post_by_supervisor(command) {
-        tracing::warn!("adaptation: {rejected}");
+        crate::limited!(handle.name(), |held| tracing::warn!(
+            "adaptation: {rejected}{held}"
+        ));
     }
 }

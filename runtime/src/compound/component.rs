@@ -133,7 +133,10 @@ impl Compound {
                 Controllable::Running | Controllable::Dead => false,
             };
             if follows && let Err(fault) = command(&instance.handle, target) {
-                tracing::warn!(compound = %self.name, "{fault}");
+                crate::limited!(
+                    &self.name,
+                    |held| tracing::warn!(compound = %self.name, "{fault}{held}")
+                );
             }
         }
     }

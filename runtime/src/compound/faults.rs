@@ -77,7 +77,10 @@ impl Compound {
                 self.rewire()
                     .map_err(|fault| self.propagated(index, fault))?;
                 if missing > 0 {
-                    tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group");
+                    crate::limited!(
+                        &self.name,
+                        |held| tracing::warn!(compound = %self.name, "{missing} packet(s) missing from the stream of `{by}`'s group{held}")
+                    );
                 }
                 self.step(index, Step::Substituted { by }, takeover(replayed, missing));
             } else {

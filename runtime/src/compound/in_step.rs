@@ -101,7 +101,10 @@ impl Compound {
         self.step(index, Step::OutOfStep, detail);
         let handle = &self.instances[index].handle;
         if let Err(rejected) = handle.post(Command::SetState(Controllable::Ready)) {
-            tracing::warn!(compound = %self.name, "{rejected}");
+            crate::limited!(
+                &self.name,
+                |held| tracing::warn!(compound = %self.name, "{rejected}{held}")
+            );
         }
         if let Some(system) = self.system.as_ref() {
             system.discard_queued(&self.instances[index].name);

@@ -194,7 +194,10 @@ impl Compound {
     }
 
     pub(super) fn fault(&self, why: PolicyFault) -> Fault {
-        tracing::warn!(compound = %self.name, "{why}");
+        crate::limited!(
+            &self.name,
+            |held| tracing::warn!(compound = %self.name, "{why}{held}")
+        );
         RunError::from(why).into()
     }
 

@@ -265,7 +265,10 @@ impl Compound {
     pub(super) fn observe_turn(&mut self) {
         if let Err(fault) = self.take_events(false) {
             // (Without policies nothing in it fails.)
-            tracing::warn!(compound = %self.name, "{fault}");
+            crate::limited!(
+                &self.name,
+                |held| tracing::warn!(compound = %self.name, "{fault}{held}")
+            );
         }
     }
 

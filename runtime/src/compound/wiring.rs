@@ -432,7 +432,10 @@ impl Compound {
                     tracing::info!(compound = %self.name, "{moved} pull request(s) waiting at `{old}.{}` moved to `{new}`", output.name);
                 }
                 if refused > 0 {
-                    tracing::warn!(compound = %self.name, "{refused} pull request(s) waiting at `{old}.{}` dropped: `{new}`'s request queue is full", output.name);
+                    crate::limited!(
+                        &self.name,
+                        |held| tracing::warn!(compound = %self.name, "{refused} pull request(s) waiting at `{old}.{}` dropped: `{new}`'s request queue is full{held}", output.name)
+                    );
                 }
             }
         }

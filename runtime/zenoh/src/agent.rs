@@ -489,7 +489,9 @@ fn admit(
     if let Err((query, reason)) = refusal
         && let Err(error) = reply(&query, &ControlReply::Rejected { reason })
     {
-        tracing::warn!("instantiation refusal not sent: {error}");
+        coolbot::limited!("refusal", |held| tracing::warn!(
+            "instantiation refusal not sent: {error}{held}"
+        ));
     }
 }
 
@@ -524,7 +526,9 @@ impl Drop for Inbox {
         for query in waiting {
             let reason = stopped_reason(&why);
             if let Err(error) = reply(&query, &ControlReply::Rejected { reason }) {
-                tracing::warn!("instantiation refusal not sent: {error}");
+                coolbot::limited!("refusal", |held| tracing::warn!(
+                    "instantiation refusal not sent: {error}{held}"
+                ));
             }
         }
     }
@@ -614,7 +618,9 @@ impl Agent {
                                 &mut owned,
                             );
                             if let Err(error) = reply(&query, &answer) {
-                                tracing::warn!("instantiation answer not sent: {error}");
+                                coolbot::limited!("answer", |held| tracing::warn!(
+                                    "instantiation answer not sent: {error}{held}"
+                                ));
                             }
                         }
                         recv(lost) -> name => {
@@ -1046,6 +1052,7 @@ pub fn instantiate(
         reason: format!("the type name is not a key chunk: {error}"),
     })?;
     let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
+    let asked = std::time::Instant::now();
     let replies = node
         .session()
         .get(keys::agent(on, &request.type_name))
@@ -1057,8 +1064,9 @@ pub fn instantiate(
         return Err(Error::Remote {
             node: on.to_owned(),
             reason: format!(
-                "no agent answered (waited at most {timeout:?}; does the node run an agent, \
-                 and do its access rules let this node instantiate `{}` there?)",
+                "no agent answered (after {:.1?}, of at most {timeout:.1?}; does the node run an \
+                 agent, and do its access rules let this node instantiate `{}` there?)",
+                asked.elapsed(),
                 request.type_name
             ),
         });

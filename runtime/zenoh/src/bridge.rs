@@ -217,7 +217,10 @@ struct Wire {
 impl Wire {
     fn lost(&self, reason: &str) {
         self.losses.count_loss(1);
-        tracing::warn!(key = %self.key, "outlet lost a packet: {reason}");
+        coolbot::limited!(
+            &self.key,
+            |held| tracing::warn!(key = %self.key, "outlet lost a packet: {reason}{held}")
+        );
     }
 
     /// Publish one packet; `counted`: a packet nobody subscribes to is a loss (data
@@ -346,7 +349,9 @@ fn pull_server(
                             Err(reason) => query.reply_err(reason).wait(),
                         };
                         if let Err(error) = result {
-                            tracing::warn!("pull answer not sent: {error}");
+                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+                                "pull answer not sent: {error}{held}"
+                            ));
                         }
                     }
                     Err(crossbeam_channel::RecvTimeoutError::Timeout) => {
@@ -546,7 +551,9 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                         if let Some(bytes) = current
                             && let Err(error) = query.reply(query.key_expr().clone(), bytes).wait()
                         {
-                            tracing::warn!("poster value not sent: {error}");
+                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+                                "poster value not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -860,7 +867,10 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let lost_key = key.clone();
     let lost = move |reason: String| {
         counted.count_loss(1);
-        tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}");
+        coolbot::limited!(
+            &lost_key,
+            |held| tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}{held}")
+        );
     };
     let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
     let gaps = Arc::clone(&ledger);
@@ -1135,7 +1145,7 @@ impl Automaton for Inlet {
                     && matches!(kind, Some("poster" | "last"))
                     && let Err(error) = ask_current(&session, &key, &deliver)
                 {
-                    tracing::warn!(%key, "cannot ask for the current value again: {error}");
+                    coolbot::limited!(&key, |held| tracing::warn!(%key, "cannot ask for the current value again: {error}{held}"));
                 }
             })
             .wait()
@@ -1179,18 +1189,21 @@ impl Automaton for Inlet {
         {
             Ok(replies) => replies,
             Err(error) => {
-                tracing::warn!(key = %self.key, "pull query not sent: {error}");
+                coolbot::limited!(
+                    &self.key,
+                    |held| tracing::warn!(key = %self.key, "pull query not sent: {error}{held}")
+                );
                 return Ok(());
             }
         };
         while let Ok(reply) = replies.recv() {
             match reply.result() {
                 Ok(sample) => (self.deliver)(&sample.payload().to_bytes()),
-                Err(error) => tracing::warn!(
+                Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "pull answered with an error: {}",
+                    "pull answered with an error: {}{held}",
                     error.payload().try_to_string().unwrap_or_default()
-                ),
+                )),
             }
         }
         Ok(())

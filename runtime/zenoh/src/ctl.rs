@@ -48,6 +48,35 @@ pub enum CtlError {
         /// This `coolctl`'s name in the rules (its certificate's common name).
         who: String,
     },
+    /// No node at all answered.
+    #[error("no node is alive (none answered within {waited:?}{})", if *.connected {
+        ""
+    } else {
+        "; this session reached no Zenoh peer: is a node listening at a --connect \
+         endpoint, and can this machine reach it?"
+    })]
+    NoNode {
+        /// How long it waited.
+        waited: Duration,
+        /// Whether the session was connected to any Zenoh peer or router.
+        connected: bool,
+    },
+    /// Nodes are alive, but none of the nodes asked for answered with a component.
+    #[error("{}", no_components(node.as_deref(), alive, *waited))]
+    NoComponents {
+        /// The node asked for, if one was.
+        node: Option<String>,
+        /// The nodes alive, comma-separated.
+        alive: String,
+        /// How long it waited.
+        waited: Duration,
+    },
+    /// `coolctl top` without a terminal to draw on.
+    #[error(
+        "`coolctl top` needs a terminal ({0}): `coolctl top --once` prints one screen as \
+         text, `--once --json` one snapshot as JSON"
+    )]
+    NoTerminal(String),
     /// No node of that name is alive.
     #[error("no node `{node}` is alive (nodes alive: {alive})")]
     UnknownNode {
@@ -80,6 +109,19 @@ pub enum CtlError {
     /// Writing the output failed.
     #[error(transparent)]
     Io(#[from] std::io::Error),
+}
+
+/// [`CtlError::NoComponents`]'s message.
+fn no_components(node: Option<&str>, alive: &str, waited: Duration) -> String {
+    let why = "a node that only runs an agent has none until something is placed on it";
+    match node {
+        Some(node) => {
+            format!(
+                "node `{node}` is alive, but no component of it answered within {waited:?} ({why})"
+            )
+        }
+        None => format!("no component answered within {waited:?} (nodes alive: {alive}; {why})"),
+    }
 }
 
 fn zenoh_error(error: impl std::fmt::Display) -> CtlError {
@@ -374,12 +416,54 @@ impl Ctl {
             .collect())
     }
 
-    /// `coolctl nodes`: one node name per line.
+    /// `coolctl nodes`: one node name per line; [`CtlError::NoNode`] when none is
+    /// alive.
     pub fn nodes(&self, out: &mut dyn Write) -> Result<(), CtlError> {
-        for name in self.node_names()? {
+        let names = self.node_names()?;
+        if names.is_empty() {
+            return Err(self.no_node());
+        }
+        for name in names {
             writeln!(out, "{name}")?;
         }
         Ok(())
+    }
+
+    /// No node answered: how long it waited, and whether this session reached any
+    /// Zenoh peer at all (an endpoint that cannot be reached, or nothing listening).
+    pub(crate) fn no_node(&self) -> CtlError {
+        let info = self.session.info();
+        let connected =
+            info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some();
+        CtlError::NoNode {
+            waited: self.timeout,
+            connected,
+        }
+    }
+
+    /// Why nothing was listed for `node` (or for every node): no node alive, that node
+    /// not alive, or no component answered.
+    fn nothing_listed(&self, node: Option<&str>) -> CtlError {
+        let alive = match self.node_names() {
+            Ok(alive) => alive,
+            Err(error) => return error,
+        };
+        if alive.is_empty() {
+            return self.no_node();
+        }
+        if let Some(node) = node
+            && !alive.iter().any(|name| name == node)
+        {
+            return CtlError::UnknownNode {
+                node: node.to_owned(),
+                alive: listing(&alive),
+            };
+        }
+        CtlError::NoComponents {
+            node: node.map(str::to_owned),
+            alive: listing(&alive),
+            waited: self.timeout,
+        }
     }
 
     /// Subscribe to nodes coming and going (their liveliness tokens).
@@ -467,8 +551,14 @@ impl Ctl {
     }
 
     /// `coolctl list [node]`: a table of every component with its state, user state,
-    /// quality, missed deadlines, overruns and overflows.
+    /// quality, missed deadlines, overruns and overflows. Nothing listed is an error
+    /// that says why: no node alive, `node` not alive ([`CtlError::UnknownNode`]), or
+    /// no component answered ([`CtlError::NoComponents`]).
     pub fn list(&self, node: Option<&str>, out: &mut dyn Write) -> Result<(), CtlError> {
+        let listed = self.components(node)?;
+        if listed.is_empty() {
+            return Err(self.nothing_listed(node));
+        }
         let mut rows = vec![[
             "NODE".to_owned(),
             "COMPONENT".to_owned(),
@@ -479,7 +569,7 @@ impl Ctl {
             "OVERRUNS".to_owned(),
             "OVERFLOWS".to_owned(),
         ]];
-        for listed in self.components(node)? {
+        for listed in listed {
             let monitor = &listed.monitor;
             rows.push([
                 listed.node,

@@ -79,17 +79,17 @@ impl Echo {
                             packet,
                         },
                         Err(error) => {
-                            tracing::warn!(%key, "packet {seq} does not serialize: {error}");
+                            coolbot::limited!(&key, |held| tracing::warn!(%key, "packet {seq} does not serialize: {error}{held}"));
                             continue;
                         }
                     };
                     match serde_json::to_vec(&message) {
                         Ok(json) => {
                             if let Err(error) = publisher.put(json).wait() {
-                                tracing::warn!(%key, "echo not published: {error}");
+                                coolbot::limited!(&key, |held| tracing::warn!(%key, "echo not published: {error}{held}"));
                             }
                         }
-                        Err(error) => tracing::warn!(%key, "echo does not encode: {error}"),
+                        Err(error) => coolbot::limited!(&key, |held| tracing::warn!(%key, "echo does not encode: {error}{held}")),
                     }
                 }
             })

@@ -214,14 +214,17 @@ impl InletLedger {
         };
         if missing > 0 {
             self.network.count_loss(missing);
-            tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing)");
+            coolbot::limited!(
+                &self.key,
+                |held| tracing::warn!(key = %self.key, "inlet lost {missing} packet(s) on the way (numbers missing){held}")
+            );
         }
         if reset {
             self.resets.count_loss(1);
-            tracing::warn!(
+            coolbot::limited!(&self.key, |held| tracing::warn!(
                 key = %self.key,
-                "outlet epoch {epoch} jumped to number {seq}, more than {WINDOW} from its stream: a reset, nothing counted missing"
-            );
+                "outlet epoch {epoch} jumped to number {seq}, more than {WINDOW} from its stream: a reset, nothing counted missing{held}"
+            ));
         }
     }
 
@@ -252,10 +255,10 @@ impl InletLedger {
                     e.reported = Some(last);
                     resets += 1;
                     tracing::trace!(target: LEDGER_TARGET, "{} reset {epoch} {last}", self.key);
-                    tracing::warn!(
+                    coolbot::limited!(&self.key, |held| tracing::warn!(
                         key = %self.key,
-                        "outlet epoch {epoch} reported ended at number {last}, more than {WINDOW} after what this inlet received: a reset, nothing counted missing"
-                    );
+                        "outlet epoch {epoch} reported ended at number {last}, more than {WINDOW} after what this inlet received: a reset, nothing counted missing{held}"
+                    ));
                 }
                 continue;
             }
@@ -263,10 +266,10 @@ impl InletLedger {
             h.missing = h.missing.saturating_add(missing);
             counted = counted.saturating_add(missing);
             tracing::trace!(target: LEDGER_TARGET, "{} ended {epoch} {last} missing {missing}", self.key);
-            tracing::warn!(
+            coolbot::limited!(&self.key, |held| tracing::warn!(
                 key = %self.key,
-                "inlet lost {missing} packet(s): outlet epoch {epoch} sent up to {last} before its process ended"
-            );
+                "inlet lost {missing} packet(s): outlet epoch {epoch} sent up to {last} before its process ended{held}"
+            ));
         }
         if counted > 0 {
             self.network.count_loss(counted);
@@ -303,7 +306,7 @@ pub(crate) fn serve(
                 Some(payload) => match codec::decode::<Vec<Ended>>(&payload.to_bytes(), MAX_REPORT) {
                     Ok(ended) => ended,
                     Err(error) => {
-                        tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {error}");
+                        coolbot::limited!(&reply_key, |held| tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {error}{held}"));
                         Vec::new()
                     }
                 },
@@ -314,7 +317,9 @@ pub(crate) fn serve(
                 counted();
             }
             if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
-                tracing::warn!("acknowledgment not sent: {error}");
+                coolbot::limited!(&reply_key, |held| tracing::warn!(
+                    "acknowledgment not sent: {error}{held}"
+                ));
             }
         })
         .wait()
@@ -525,11 +530,11 @@ impl Book {
             tracing::trace!(target: OUTLET_LEDGER_TARGET, "{} counted {} from {from} to {end}", self.key, stream.id);
             if lost > 0 {
                 self.losses.count_loss(lost);
-                tracing::warn!(
+                coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "outlet lost {lost} packet(s): inlet {} ended before acknowledging them",
+                    "outlet lost {lost} packet(s): inlet {} ended before acknowledging them{held}",
                     stream.id
-                );
+                ));
             }
         }
         let mut settled = lock(&self.settled);
@@ -577,7 +582,10 @@ impl Book {
         {
             Ok(replies) => replies,
             Err(error) => {
-                tracing::warn!(key = %self.key, "acknowledgments not asked: {error}");
+                coolbot::limited!(
+                    &self.key,
+                    |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {error}{held}")
+                );
                 return;
             }
         };
@@ -592,10 +600,10 @@ impl Book {
                     answered.insert(format!("{node_and_name}/{}", ack.0));
                     self.acknowledged(node_and_name, &ack);
                 }
-                Err(error) => tracing::warn!(
+                Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "an acknowledgment that does not decode was dropped: {error}"
-                ),
+                    "an acknowledgment that does not decode was dropped: {error}{held}"
+                )),
             }
         }
         self.after_round(&answered);

@@ -225,7 +225,9 @@ impl Node {
                             Err(error) => query.reply_err(error.to_string()).wait(),
                         };
                         if let Err(error) = reply {
-                            tracing::warn!("snapshot not sent: {error}");
+                            coolbot::limited!(&own_key, |held| tracing::warn!(
+                                "snapshot not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -250,7 +252,9 @@ impl Node {
                             Err(error) => query.reply_err(error.to_string()).wait(),
                         };
                         if let Err(error) = reply {
-                            tracing::warn!("component info not sent: {error}");
+                            coolbot::limited!(&info_key, |held| tracing::warn!(
+                                "component info not sent: {error}{held}"
+                            ));
                         }
                     })
                     .wait()
@@ -394,12 +398,12 @@ fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
         let stream = &mut streams[index];
         let dropped = stream.events.dropped();
         if dropped > stream.reported {
-            tracing::warn!(
+            coolbot::limited!(&stream.path, |held| tracing::warn!(
                 component = %stream.path,
                 lost = dropped - stream.reported,
                 total = dropped,
-                "monitoring events dropped before publishing (the node fell behind)"
-            );
+                "monitoring events dropped before publishing (the node fell behind){held}"
+            ));
             stream.reported = dropped;
         }
         let publisher = &stream.publisher;
@@ -407,10 +411,14 @@ fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
             Ok(event) => match serde_json::to_vec(&event) {
                 Ok(json) => {
                     if let Err(error) = publisher.put(json).wait() {
-                        tracing::warn!("monitoring event not published: {error}");
+                        coolbot::limited!(&stream.path, |held| tracing::warn!(
+                            "monitoring event not published: {error}{held}"
+                        ));
                     }
                 }
-                Err(error) => tracing::warn!("monitoring event does not encode: {error}"),
+                Err(error) => coolbot::limited!(&stream.path, |held| tracing::warn!(
+                    "monitoring event does not encode: {error}{held}"
+                )),
             },
             // The component is gone: stop watching it.
             Err(_) => select.remove(index),
@@ -454,6 +462,8 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
         },
     };
     if let Err(error) = reply_control(query, &reply) {
-        tracing::warn!("control answer not sent: {error}");
+        coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
+            "control answer not sent: {error}{held}"
+        ));
     }
 }

@@ -12,6 +12,7 @@
 //! the node lost is a fault of the proxy within the Zenoh session's lease
 //! ([`crate::peer_config`]'s `lease`).
 
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -42,6 +43,80 @@ pub const TIMES_REFRESH: Duration = Duration::from_secs(1);
 /// How long a proxy's remote instance may leave its snapshot unanswered, while its
 /// node lives, before the proxy fails (unless the placer says otherwise).
 pub const DEFAULT_SILENCE: Duration = Duration::from_secs(3);
+
+/// How long a proxy's first start waits for its node and the node's agent at most
+/// (or the placer's timeout, if shorter): less than the compound's wait for it
+/// ([`coolbot::compound::INSTANCE_START_TIMEOUT`]), so that the start fails with the
+/// proxy's reason, which names the node, rather than the compound's timeout.
+pub const FIRST_START: Duration = Duration::from_secs(4);
+
+/// The nodes this process's proxies watch that are lost now, by the placing session
+/// and the node's name: since when, and how many instantiations were refused
+/// meanwhile. A node's loss and its return are logged once each, however many proxies
+/// stand for instances on it.
+static LOST: Mutex<BTreeMap<(String, String), Lost>> = Mutex::new(BTreeMap::new());
+
+/// One lost node ([`LOST`]).
+struct Lost {
+    /// Why, with the wall-clock time of the loss: the same text for every proxy.
+    reason: String,
+    since: Instant,
+    refused: u64,
+}
+
+/// The node `on`, watched from the session `here`, is lost (its liveliness token
+/// was withdrawn): logged the first time; why, the same for every proxy on it.
+fn node_lost(here: &str, on: &str) -> String {
+    let mut lost = lock(&LOST);
+    let entry = lost
+        .entry((here.to_owned(), on.to_owned()))
+        .or_insert_with(|| {
+            let reason = format!(
+                "node `{on}` is lost (since {}: its liveliness token was withdrawn)",
+                clock_time(SystemTime::now())
+            );
+            tracing::warn!(
+                "{reason}; what runs there is a fault of its proxies, and no instantiation \
+                 is sent to it until it is back"
+            );
+            Lost {
+                reason,
+                since: Instant::now(),
+                refused: 0,
+            }
+        });
+    entry.reason.clone()
+}
+
+/// The node `on` is back (its token again): logged once, with how long it was lost,
+/// at the loss's level (whoever sees the loss sees the return).
+fn node_back(here: &str, on: &str) {
+    if let Some(lost) = lock(&LOST).remove(&(here.to_owned(), on.to_owned())) {
+        tracing::warn!(
+            "node `{on}` is back after {:.1?} lost ({} instantiation(s) refused here meanwhile)",
+            lost.since.elapsed(),
+            lost.refused
+        );
+    }
+}
+
+/// An instantiation on the lost node `on` refused without asking (counted).
+fn refused_while_lost(here: &str, on: &str) {
+    if let Some(lost) = lock(&LOST).get_mut(&(here.to_owned(), on.to_owned())) {
+        lost.refused += 1;
+    }
+}
+
+/// `t` as `HH:MM:SS UTC`.
+fn clock_time(t: SystemTime) -> String {
+    let seconds = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs()) % 86_400;
+    format!(
+        "{:02}:{:02}:{:02} UTC",
+        seconds / 3600,
+        seconds / 60 % 60,
+        seconds % 60
+    )
+}
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
@@ -239,8 +314,14 @@ struct Shared {
     view: Mutex<Option<Monitor>>,
     /// Whether `view` changed since the proxy last read it.
     changed: AtomicBool,
-    /// Why the node is lost, while it is.
+    /// Why the current generation is lost with its node, if it is (until a new one
+    /// is built).
     lost: Mutex<Option<String>>,
+    /// Why the node is lost, while it is (its token withdrawn, not back yet): no
+    /// instantiation is sent to it meanwhile.
+    absent: Mutex<Option<String>>,
+    /// Whether the node's liveliness token was ever seen.
+    seen: AtomicBool,
     /// Monitoring events of the instance that did not decode (dropped).
     bad_events: AtomicU64,
     /// The monitoring key of the instance's current generation.
@@ -371,7 +452,10 @@ impl End {
                     let Ok(event) =
                         serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes())
                     else {
-                        tracing::warn!("a monitoring event that does not decode was dropped");
+                        coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                            key = %sample.key_expr(),
+                            "a monitoring event that does not decode was dropped{held}"
+                        ));
                         shared.bad_events.fetch_add(1, Ordering::AcqRel);
                         shared.ring();
                         return;
@@ -388,17 +472,31 @@ impl End {
         );
         let shared = Arc::clone(&self.shared);
         let on = self.on.clone();
+        let here = session.zid().to_string();
         self.subscribers.push(
             session
                 .liveliness()
                 .declare_subscriber(keys::node_token(&self.on))
+                // The token as it is now too, so that a first start knows whether the
+                // node is there.
+                .history(true)
                 .callback(move |sample| {
-                    if sample.kind() == SampleKind::Delete {
-                        *lock(&shared.lost) = Some(format!(
-                            "node `{on}` is lost: its liveliness token was withdrawn"
-                        ));
-                        shared.ring();
+                    match sample.kind() {
+                        SampleKind::Delete => {
+                            let reason = node_lost(&here, &on);
+                            *lock(&shared.lost) = Some(reason.clone());
+                            *lock(&shared.absent) = Some(reason);
+                        }
+                        SampleKind::Put => {
+                            shared.seen.store(true, Ordering::Release);
+                            *lock(&shared.absent) = None;
+                            // (Whichever proxy hears it first; also one placed while
+                            // the node was away, when no proxy that heard the loss
+                            // is left.)
+                            node_back(&here, &on);
+                        }
                     }
+                    shared.ring();
                 })
                 .wait()
                 .map_err(Error::zenoh)?,
@@ -596,6 +694,12 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
 
 impl RemoteEnd for End {
     fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
+        // A node known lost is not asked: its loss was logged once, and each retry
+        // fails at once with the same reason (its return is logged once too).
+        if let Some(absent) = lock(&self.shared.absent).clone() {
+            refused_while_lost(&self.node.session().zid().to_string(), &self.on);
+            return Err(absent);
+        }
         // What the last generation's view had not reported yet is reported with this
         // generation's: nothing lost on the network goes uncounted.
         self.losses_before += self.reported_losses;
@@ -617,13 +721,29 @@ impl RemoteEnd for End {
         self.request.name = self.name.clone();
         *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
         // The first time, the node may not be reachable yet (a robot and its station
-        // started together): ask again until the timeout, every 100 ms, while nothing
-        // answers. Later (a restart after the node was lost) once: the recovery queue
-        // retries, and the proxy's thread stays free for its commands.
+        // started together): ask again every 100 ms while nothing answers, for the
+        // placer's timeout or `FIRST_START`, whichever is shorter. Later (a restart
+        // after the node was lost) once: the recovery queue retries, and the proxy's
+        // thread stays free for its commands.
         let patient = !self.instantiated;
-        let deadline = Instant::now() + self.timeout;
+        let asked = Instant::now();
+        let deadline = asked
+            + if patient {
+                self.timeout.min(FIRST_START)
+            } else {
+                self.timeout
+            };
         loop {
-            match instantiate(&self.node, &self.on, &self.request, self.timeout) {
+            // A first start's question waits at most what is left (and at least a
+            // moment).
+            let wait = if patient {
+                deadline
+                    .saturating_duration_since(Instant::now())
+                    .max(Duration::from_millis(100))
+            } else {
+                self.timeout
+            };
+            match instantiate(&self.node, &self.on, &self.request, wait) {
                 Ok(()) => break,
                 Err(Error::Remote { reason, .. })
                     if patient
@@ -631,6 +751,25 @@ impl RemoteEnd for End {
                         && Instant::now() < deadline =>
                 {
                     std::thread::sleep(Duration::from_millis(100));
+                }
+                Err(Error::Remote { reason, .. })
+                    if patient && reason.starts_with("no agent answered") =>
+                {
+                    let asking = asked.elapsed();
+                    return Err(if self.shared.seen.load(Ordering::Acquire) {
+                        format!(
+                            "node `{}`: {reason}; asked every 100 ms for {asking:.1?}",
+                            self.on
+                        )
+                    } else {
+                        format!(
+                            "node `{}` is not there: no liveliness token of it was seen in \
+                             {asking:.1?} of asking for the instance every 100 ms (is it \
+                             started, and reachable from node `{}`?)",
+                            self.on,
+                            self.node.name()
+                        )
+                    });
                 }
                 Err(error) => return Err(error.to_string()),
             }

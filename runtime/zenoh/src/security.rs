@@ -128,6 +128,34 @@ fn invalid(path: &Path, reason: impl std::fmt::Display) -> Error {
     Error::Security(format!("{}: {reason}", path.display()))
 }
 
+/// The largest file read as a security file, or as a certificate or key it names
+/// (they are a few kilobytes): a wrong path (`/dev/zero`, a disk image) is refused
+/// after this many bytes instead of read to the end.
+pub const MAX_FILE_SIZE: u64 = 1 << 20;
+
+/// The file at `path`, read whole if it holds at most [`MAX_FILE_SIZE`] bytes.
+pub(crate) fn read_bounded(path: &Path) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|error| format!("cannot read: {error}"))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_FILE_SIZE + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|error| format!("cannot read: {error}"))?;
+    if bytes.len() as u64 > MAX_FILE_SIZE {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
+/// Why a file is refused for its size.
+fn too_large() -> String {
+    format!(
+        "larger than {} KiB, the limit of a security, certificate or key file: is it the \
+         right file?",
+        MAX_FILE_SIZE / 1024
+    )
+}
+
 impl Security {
     /// No TLS and no rules: plaintext, on loopback only unless
     /// [`Security::allow_plaintext`].
@@ -139,8 +167,9 @@ impl Security {
     /// documentation and in `docs/distribution.md`). Paths inside are relative to the
     /// file's directory; the certificate files must exist.
     pub fn load(path: &Path) -> Result<Security, Error> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|error| invalid(path, format!("cannot read: {error}")))?;
+        let bytes = read_bounded(path).map_err(|reason| invalid(path, reason))?;
+        let text = String::from_utf8(bytes)
+            .map_err(|error| invalid(path, format!("not UTF-8 text: {error}")))?;
         Security::parse(&text, path)
     }
 
@@ -151,15 +180,20 @@ impl Security {
         let tls = match file.tls {
             None => None,
             Some(tls) => {
+                // (Zenoh reads them whole when the session opens: their size is
+                // checked here.)
                 let resolve = |file: PathBuf, what: &str| {
                     let full = base.join(file);
-                    if full.is_file() {
-                        Ok(full)
-                    } else {
-                        Err(invalid(
+                    match full.metadata() {
+                        Ok(meta) if meta.is_file() && meta.len() <= MAX_FILE_SIZE => Ok(full),
+                        Ok(meta) if meta.is_file() => Err(invalid(
+                            path,
+                            format!("[tls] {what}: {}: {}", full.display(), too_large()),
+                        )),
+                        _ => Err(invalid(
                             path,
                             format!("[tls] {what}: no file {}", full.display()),
-                        ))
+                        )),
                     }
                 };
                 Some(Tls {
@@ -648,7 +682,7 @@ pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Resu
 /// The common name of the PEM certificate at `path`.
 fn common_name(path: &Path) -> Result<String, Error> {
     let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
-    let bytes = std::fs::read(path).map_err(|error| bad(format!("cannot read: {error}")))?;
+    let bytes = read_bounded(path).map_err(bad)?;
     let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
         .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
     let certificate = pem
@@ -1081,6 +1115,42 @@ mod tests {
             );
         }
         assert_eq!(Security::none().grants_command("ops", "robot", "x"), None);
+    }
+
+    #[test]
+    fn files_are_read_up_to_a_size_limit() {
+        // An endless file ends at the limit, at once.
+        let error = Security::load(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.starts_with("security: /dev/zero: larger than 1024 KiB"),
+            "{error}"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let sized = |name: &str, len: u64| {
+            let path = dir.path().join(name);
+            let file = std::fs::File::create(&path).unwrap();
+            file.set_len(len).unwrap();
+            path
+        };
+        assert_eq!(
+            read_bounded(&sized("limit", MAX_FILE_SIZE)).unwrap().len() as u64,
+            MAX_FILE_SIZE
+        );
+        assert!(read_bounded(&sized("over", MAX_FILE_SIZE + 1)).is_err());
+        // The certificate files a security file names: checked before Zenoh reads them.
+        sized("ca.pem", 10);
+        sized("robot.pem", MAX_FILE_SIZE + 1);
+        sized("robot.key", 10);
+        let text = "[tls]\nca = \"ca.pem\"\ncertificate = \"robot.pem\"\nkey = \"robot.key\"\n";
+        let file = dir.path().join("security.toml");
+        std::fs::write(&file, text).unwrap();
+        let error = Security::load(&file).unwrap_err().to_string();
+        assert!(
+            error.contains("[tls] certificate: ") && error.contains("larger than 1024 KiB"),
+            "{error}"
+        );
     }
 
     #[test]

@@ -1,7 +1,9 @@
 //! The `coolctl` binary as an operator runs it, against a node started here: `list`,
 //! `set`, `get`, `configure`, `degrade` and `echo`, and every command failing within
 //! its timeout, with a clear message and a non-zero exit, on a node, component or port
-//! that does not exist; and `top --once --json`.
+//! that does not exist, an endpoint where nothing answers, a zero timeout, a file too
+//! large to be a security file, and `top` without a terminal; and `top --once
+//! --json`.
 
 use std::process::{Command, Output};
 use std::sync::Arc;
@@ -253,6 +255,10 @@ fn every_command_fails_fast_and_clearly_on_what_does_not_exist() {
             "no node `nobody` is alive",
         ),
         (
+            &["list", "nobody"],
+            "no node `nobody` is alive (nodes alive: robot)",
+        ),
+        (
             &["echo", "robot/tunr.out", "--count", "1"],
             "node `robot` has no component `tunr`",
         ),
@@ -389,4 +395,126 @@ fn coolctl_top_once_json_prints_every_node_and_component() {
     );
     assert_eq!(json["components"][1]["monitor"]["state"], "Running");
     assert!(system.shutdown().clean());
+}
+
+/// `coolctl ARGS` (global options included), killed if it has not ended within
+/// `PATIENCE`: the test fails then, rather than waiting forever.
+fn coolctl_bounded(args: &[&str]) -> Output {
+    let mut child = Command::new(COOLCTL)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("coolctl runs");
+    let deadline = Instant::now() + PATIENCE;
+    while child.try_wait().expect("coolctl's status").is_none() {
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("coolctl {args:?} did not end within {PATIENCE:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("coolctl's output")
+}
+
+/// An endpoint on loopback where nothing listens.
+fn nowhere() -> String {
+    format!("tcp/127.0.0.1:{}", support::free_port())
+}
+
+#[test]
+fn what_finds_nothing_says_why_and_exits_1() {
+    let endpoint = nowhere();
+    for (args, message) in [
+        (
+            &["nodes"][..],
+            "no node is alive (none answered within 2s; this session reached no Zenoh peer",
+        ),
+        (
+            &["list"],
+            "no node is alive (none answered within 2s; this session reached no Zenoh peer",
+        ),
+        (&["list", "robot"], "no node is alive"),
+        (&["top", "--once", "--refresh", "100ms"], "no node is alive"),
+        (
+            &["top", "--once", "--json", "--refresh", "100ms"],
+            "no node is alive",
+        ),
+    ] {
+        let out = coolctl(&endpoint, args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.starts_with("coolctl: ") && stderr.contains(message),
+            "{args:?}: {stderr}"
+        );
+        assert!(out.stdout.is_empty(), "{args:?}: {}", text(&out.stdout));
+    }
+    // A node alive with no component (an agent's station before anything is placed).
+    let (_bare, endpoint) = node("bare", &[]);
+    let mut out = coolctl(&endpoint, &["list", "bare"]);
+    assert!(
+        wait_until(PATIENCE, || {
+            out = coolctl(&endpoint, &["list", "bare"]);
+            text(&out.stderr).contains("is alive")
+        }),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr)
+            .contains("node `bare` is alive, but no component of it answered within 2s"),
+        "{}",
+        text(&out.stderr)
+    );
+    // No time to answer in: refused as usage.
+    let out = coolctl_bounded(&[
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--timeout",
+        "0s",
+        "list",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("nothing answers in no time"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn files_given_are_read_up_to_a_size_limit() {
+    let endpoint = nowhere();
+    // Endless: refused at the limit, not read forever.
+    let out = coolctl_bounded(&[
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--config",
+        "/dev/zero",
+        "nodes",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("/dev/zero: larger than 1024 KiB"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn top_without_a_terminal_says_so_and_exits_2() {
+    // Its standard output is a pipe here.
+    let out = coolctl_bounded(&["--connect", &nowhere(), "--no-multicast", "top"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("`coolctl top` needs a terminal (its standard output is not one)")
+            && stderr.contains("--once"),
+        "{stderr}"
+    );
 }

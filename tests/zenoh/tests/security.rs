@@ -967,9 +967,11 @@ fn plaintext_off_loopback_is_refused_without_the_flag() {
         .expect("coolctl runs");
     assert_eq!(out.status.code(), Some(2), "{out:?}");
     assert!(text(&out.stderr).contains("multicast scouting"), "{out:?}");
+    // On loopback without flags: not refused, and nothing there (no node alive).
     let out = Command::new(COOLCTL)
         .args(["--timeout", "200ms", "nodes"])
         .output()
         .expect("coolctl runs");
-    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    assert!(text(&out.stderr).contains("no node is alive"), "{out:?}");
 }

@@ -1,13 +1,21 @@
 //! `coolctl top` against nodes started here: the board a node's components make,
 //! drawn at several terminal sizes (every frame whole, nothing of an earlier one
-//! left), and a node that goes away shown lost. (`coolctl top --once --json` from the
-//! real binary: `tests/zenoh/tests/coolctl.rs`.)
+//! left), a node that goes away shown lost, and the steps pane of a compound whose
+//! recovery retries flood it (routine steps hidden, scrolled back to the
+//! substitution). (`coolctl top --once --json` from the real binary:
+//! `tests/zenoh/tests/coolctl.rs`.)
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use coolbot::{SectionResult, State, System};
+use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh::ctl::Ctl;
-use coolbot_zenoh::top::{Board, render};
+use coolbot_zenoh::top::{Board, heard, render};
+use coolbot_zenoh::{Placer, keys};
+use coolbot_zenoh_tests::generated::{dying_cell, flaky};
 use coolbot_zenoh_tests::support::{PATIENCE, pair, robot, wait_until};
+use zenoh::Wait;
 
 /// The board once `ctl` sees `count` components.
 fn board(ctl: &Ctl, count: usize) -> Board {
@@ -81,4 +89,113 @@ fn a_node_that_goes_away_is_shown_lost_and_the_board_goes_on() {
     let screen = render(&board, 100, 20);
     assert!(screen.contains("lost-robot/robot"), "{screen}");
     assert_eq!(screen.matches(" lost ").count(), 6, "{screen}");
+}
+
+/// `Flaky`'s behaviour: counts its periods.
+struct Counting;
+
+impl flaky::Behavior for Counting {
+    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
+        cx.vars.periods += 1;
+        Ok(())
+    }
+}
+
+struct Quiet;
+
+impl dying_cell::Supervisor for Quiet {}
+
+struct Parts;
+
+impl dying_cell::Parts for Parts {
+    fn supervisor(&mut self) -> impl dying_cell::Supervisor {
+        Quiet
+    }
+    fn flaky(&mut self) -> impl flaky::Behavior {
+        Counting
+    }
+    fn spare(&mut self) -> impl flaky::Behavior {
+        Counting
+    }
+}
+
+fn registry() -> Registry {
+    let mut registry = Registry::new();
+    flaky::register(&mut registry, |name| flaky::component(name, Counting));
+    registry
+}
+
+#[test]
+fn routine_steps_are_hidden_on_demand_and_the_steps_pane_scrolls_back_to_the_substitution() {
+    let (station, robot_node) = pair("dying-station", "steps-robot");
+    let (station, robot_node) = (Arc::new(station), Arc::new(robot_node));
+    let agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot_node), registry()).install();
+    let mut system = System::new();
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    cell.instance("flaky")
+        .unwrap()
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the remote instance runs: {timeout}"));
+    robot_node.expose_system(&system).unwrap();
+    // What `coolctl top` hears, on the station's session.
+    let events = station
+        .session()
+        .declare_subscriber(keys::monitor("*", "*"))
+        .wait()
+        .unwrap();
+    assert!(
+        wait_until(PATIENCE, || station
+            .session()
+            .get(keys::monitor("steps-robot", "cell"))
+            .wait()
+            .is_ok_and(|replies| replies.recv().is_ok())),
+        "the station hears the robot's cell"
+    );
+
+    // The agent goes: the spare stands in, and every retry of the recovery queue
+    // (every 200 ms) fails while no agent answers: routine steps, many.
+    drop(agent);
+    let mut board = Board::new();
+    let retries = |board: &Board| board.steps().filter(|s| s.contains("retry failed")).count();
+    assert!(
+        wait_until(PATIENCE, || {
+            while let Ok(Some(sample)) = events.try_recv() {
+                heard(
+                    &mut board,
+                    sample.key_expr().as_str(),
+                    &sample.payload().to_bytes(),
+                    "t",
+                );
+            }
+            retries(&board) >= 12
+        }),
+        "{:#?}",
+        board.steps().collect::<Vec<_>>()
+    );
+    let substituted = "t steps-robot/cell: supervision: flaky substituted by spare";
+    let (width, height) = (120, 24);
+    board.set_page(coolbot_zenoh::top::view::steps_rows(width, height));
+    // Shown: the newest retries; the substitution scrolled out of the pane.
+    let screen = render(&board, width, height);
+    assert!(screen.contains("flaky retry failed"), "{screen}");
+    assert!(!screen.contains(substituted), "{screen}");
+    // Routine steps hidden: the substitution is in the pane again.
+    board.toggle_routine();
+    let screen = render(&board, width, height);
+    assert!(screen.contains(substituted), "{screen}");
+    assert!(!screen.contains("retry failed"), "{screen}");
+    assert!(screen.contains("routine hidden"), "{screen}");
+    // Shown again, the pane scrolls back to it: tab, then home.
+    board.toggle_routine();
+    board.toggle_focus();
+    board.navigate_to(false);
+    let screen = render(&board, width, height);
+    assert!(screen.contains(substituted), "{screen}");
+    assert!(screen.contains("newer below"), "{screen}");
+    assert!(screen.contains("up/down scroll steps"), "{screen}");
+    let _ = system.shutdown();
 }

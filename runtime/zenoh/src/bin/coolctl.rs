@@ -13,8 +13,10 @@
 //! coolctl top [--once [--json] [--size 160x40]] [--refresh 1s]
 //! ```
 //!
-//! Exit codes: 0 done, 1 a command rejected, nothing answered, or no such node,
-//! component or port (each within `--timeout`), 2 usage or network errors.
+//! Exit codes: 0 done, 1 a command rejected, nothing answered or found (no node
+//! alive, nothing listed), or no such node, component or port (each within
+//! `--timeout`), 2 usage or network errors (`top` without a terminal, a file given
+//! that cannot be read or is too large).
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -49,8 +51,8 @@ struct Cli {
     /// TLS.
     #[arg(long, global = true)]
     insecure: bool,
-    /// How long to wait for answers (e.g. 500ms, 2s).
-    #[arg(long, global = true, default_value = "2s", value_parser = duration)]
+    /// How long to wait for answers (e.g. 500ms, 2s; more than zero).
+    #[arg(long, global = true, default_value = "2s", value_parser = timeout)]
     timeout: Duration,
     #[command(subcommand)]
     command: Action,
@@ -159,6 +161,15 @@ fn duration(text: &str) -> Result<Duration, String> {
     parse_duration(text).map_err(|error| error.to_string())
 }
 
+fn timeout(text: &str) -> Result<Duration, String> {
+    match parse_duration(text) {
+        Ok(timeout) if timeout.is_zero() => Err(format!(
+            "`{text}`: nothing answers in no time; give a timeout of more than zero (e.g. 2s)"
+        )),
+        other => other.map_err(|error| error.to_string()),
+    }
+}
+
 fn size(text: &str) -> Result<(u16, u16), String> {
     let (columns, rows) = text
         .split_once('x')
@@ -251,6 +262,8 @@ fn main() -> ExitCode {
         Err(
             error @ (CtlError::NoAnswer { .. }
             | CtlError::Refused { .. }
+            | CtlError::NoNode { .. }
+            | CtlError::NoComponents { .. }
             | CtlError::UnknownNode { .. }
             | CtlError::UnknownComponent { .. }
             | CtlError::UnknownPort(_)),

@@ -6,8 +6,18 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 /// What a key asks for.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Action {
-    /// Move the selection by this many rows.
+    /// Move by this many rows in the pane in focus: the selection, or the steps
+    /// pane's scroll (up is older).
     Select(isize),
+    /// Move by this many pages in the pane in focus.
+    Page(isize),
+    /// To the first row or the oldest step (`false`), or the last row or the newest
+    /// step (`true`).
+    End(bool),
+    /// The arrow keys move the other pane.
+    Focus,
+    /// Hide routine steps (`commanded`, `retry failed`), or show them again.
+    Routine,
     /// Command the selected component to `suspended`.
     Suspend,
     /// Command it to `running`.
@@ -27,8 +37,12 @@ pub fn action(key: KeyEvent) -> Action {
     match key.code {
         KeyCode::Up | KeyCode::Char('k') => Action::Select(-1),
         KeyCode::Down | KeyCode::Char('j') => Action::Select(1),
-        KeyCode::PageUp => Action::Select(-10),
-        KeyCode::PageDown => Action::Select(10),
+        KeyCode::PageUp => Action::Page(-1),
+        KeyCode::PageDown => Action::Page(1),
+        KeyCode::Home | KeyCode::Char('g') => Action::End(false),
+        KeyCode::End | KeyCode::Char('G') => Action::End(true),
+        KeyCode::Tab | KeyCode::BackTab => Action::Focus,
+        KeyCode::Char('f') => Action::Routine,
         KeyCode::Char('s') => Action::Suspend,
         KeyCode::Char('r') => Action::Run,
         KeyCode::Char('R') => Action::Restart,
@@ -70,6 +84,10 @@ mod tests {
         assert_eq!(action(key(KeyCode::Down)), Action::Select(1));
         assert_eq!(action(key(KeyCode::Char('R'))), Action::Restart);
         assert_eq!(action(key(KeyCode::Char('x'))), Action::None);
+        assert_eq!(action(key(KeyCode::Tab)), Action::Focus);
+        assert_eq!(action(key(KeyCode::Char('f'))), Action::Routine);
+        assert_eq!(action(key(KeyCode::PageUp)), Action::Page(-1));
+        assert_eq!(action(key(KeyCode::End)), Action::End(true));
         assert_eq!(
             action(KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL)),
             Action::Quit

@@ -26,7 +26,7 @@ use crate::ControlReply;
 use crate::ctl::{Ctl, CtlError, Listed, parse_command};
 use crate::keys;
 
-pub use model::{Board, Row};
+pub use model::{Board, Focus, Row};
 
 /// The nodes alive and their components, gathered once.
 fn gather(ctl: &Ctl) -> Result<(Vec<String>, Vec<Listed>), CtlError> {
@@ -34,13 +34,17 @@ fn gather(ctl: &Ctl) -> Result<(Vec<String>, Vec<Listed>), CtlError> {
 }
 
 /// One board, gathered twice `interval` apart (the CPU shares are over it), with
-/// the compounds' recent supervision steps in the steps pane.
+/// the compounds' recent supervision steps in the steps pane; [`CtlError::NoNode`]
+/// when no node is alive.
 pub fn board(ctl: &Ctl, interval: Duration) -> Result<(Board, Vec<String>), CtlError> {
     let mut board = Board::new();
     let (alive, listed) = gather(ctl)?;
     board.refresh(&alive, listed, Instant::now());
     std::thread::sleep(interval);
     let (alive, listed) = gather(ctl)?;
+    if alive.is_empty() && listed.is_empty() {
+        return Err(ctl.no_node());
+    }
     board.refresh(&alive, listed, Instant::now());
     board.seed_history();
     Ok((board, alive))
@@ -72,6 +76,18 @@ pub fn render(board: &Board, width: u16, height: u16) -> String {
     text
 }
 
+/// A monitoring event as a node publishes it (on `key`, `payload`), into `board`'s
+/// steps pane at `at`; what is not one is ignored.
+pub fn heard(board: &mut Board, key: &str, payload: &[u8], at: &str) {
+    let (Some((node, path)), Ok(event)) = (
+        keys::parse_component(key),
+        serde_json::from_slice::<MonitorEvent>(payload),
+    ) else {
+        return;
+    };
+    board.step(&format!("{node}/{path}"), &event, at);
+}
+
 /// What answered a command, for the status line.
 fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) -> String {
     match reply {
@@ -82,15 +98,22 @@ fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) ->
 }
 
 /// The interactive view, until `q`: gathers every `refresh`, on its own thread, so
-/// that keys are answered while a node is slow to answer.
+/// that keys are answered while a node is slow to answer. [`CtlError::NoTerminal`]
+/// when standard output is not a terminal.
 pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(), CtlError> {
+    use std::io::IsTerminal;
+    if !std::io::stdout().is_terminal() {
+        return Err(CtlError::NoTerminal(
+            "its standard output is not one".to_owned(),
+        ));
+    }
     let started = Instant::now();
     // Every monitoring event of every component: the steps pane.
     let events = session
         .declare_subscriber(keys::monitor("*", "*"))
         .wait()
         .map_err(|error| CtlError::Zenoh(error.to_string()))?;
-    let (gathered, heard) = mpsc::channel();
+    let (gathered, gatherings) = mpsc::channel();
     let gatherer = ctl.clone();
     std::thread::spawn(move || {
         loop {
@@ -102,10 +125,11 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
     });
     let mut board = Board::new();
     let mut prompt: Option<String> = None;
-    let mut terminal = ratatui::init();
+    let mut terminal =
+        ratatui::try_init().map_err(|error| CtlError::NoTerminal(error.to_string()))?;
     let outcome = (|| -> Result<(), CtlError> {
         loop {
-            while let Ok(result) = heard.try_recv() {
+            while let Ok(result) = gatherings.try_recv() {
                 match result {
                     Ok((alive, listed)) => {
                         let first = board.rows().is_empty();
@@ -118,19 +142,19 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                 }
             }
             while let Ok(Some(sample)) = events.try_recv() {
-                let key = sample.key_expr().as_str();
-                let (Some((node, path)), Ok(event)) = (
-                    keys::parse_component(key),
-                    serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes()),
-                ) else {
-                    continue;
-                };
                 let at = format!("{:.1}s", started.elapsed().as_secs_f64());
-                board.step(&format!("{node}/{path}"), &event, &at);
+                heard(
+                    &mut board,
+                    sample.key_expr().as_str(),
+                    &sample.payload().to_bytes(),
+                    &at,
+                );
             }
             if let Some(text) = &prompt {
                 board.status = format!("set {text}_  (enter: send, esc: cancel)");
             }
+            let size = terminal.size()?;
+            board.set_page(view::steps_rows(size.width, size.height));
             terminal.draw(|frame| view::draw(frame, &board))?;
             if !event::poll(Duration::from_millis(100))? {
                 continue;
@@ -167,7 +191,23 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
             match (input::action(key), &address) {
                 (input::Action::Quit, _) => return Ok(()),
                 (input::Action::Select(delta), _) => {
-                    board.select(delta);
+                    board.navigate(delta);
+                    board.status.clear();
+                }
+                (input::Action::Page(pages), _) => {
+                    board.navigate_page(pages);
+                    board.status.clear();
+                }
+                (input::Action::End(last), _) => {
+                    board.navigate_to(last);
+                    board.status.clear();
+                }
+                (input::Action::Focus, _) => {
+                    board.toggle_focus();
+                    board.status.clear();
+                }
+                (input::Action::Routine, _) => {
+                    board.toggle_routine();
                     board.status.clear();
                 }
                 (

@@ -1,18 +1,51 @@
 //! What `coolctl top` shows, without a terminal: every component of every node as
 //! last heard, the nodes that went away, the supervision and adaptation steps as
-//! they happened, the selection and the last reply. Fed by [`Board::refresh`] and
-//! [`Board::step`]; read by `view`.
+//! they happened (the newest [`STEPS_PER_INSTANCE`] of each instance, routine ones
+//! hidden on demand, scrolled), the selection, the pane the keys move, and the last
+//! reply. Fed by [`Board::refresh`] and [`Board::step`]; read by `view`.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::{Duration, Instant};
 
-use coolbot::{Monitor, MonitorEvent};
+use coolbot::{Monitor, MonitorEvent, Step, Supervision};
 use serde::Serialize;
 
 use crate::ctl::{Listed, describe};
 
-/// How many steps the steps pane keeps.
-pub const STEPS_KEPT: usize = 200;
+/// How many steps the steps pane keeps of each instance (the newest): a chatty
+/// instance's routine steps never push another's out.
+pub const STEPS_PER_INSTANCE: usize = 50;
+
+/// How many steps the steps pane keeps in all (the newest).
+pub const STEPS_KEPT: usize = 2000;
+
+/// One line of the steps pane.
+#[derive(Debug, Clone)]
+struct StepLine {
+    /// Whose step: `node/compound:instance` (or the component an adaptation step is
+    /// about).
+    whose: String,
+    /// A routine step (a supervisor's command taken, a recovery retry that failed),
+    /// hidden when the operator asks.
+    routine: bool,
+    text: String,
+}
+
+/// Which pane the arrow keys move.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Focus {
+    /// The component table: the keys select a row.
+    #[default]
+    Components,
+    /// The steps pane: the keys scroll it.
+    Steps,
+}
+
+/// Whether a supervision step is routine: a command the instance took, a retry that
+/// failed (it stays queued, and the next one comes).
+fn routine(step: &Step) -> bool {
+    matches!(step, Step::Commanded { .. } | Step::RetryFailed)
+}
 
 /// One component as `top` shows it.
 #[derive(Debug, Clone, Serialize)]
@@ -45,7 +78,17 @@ pub struct Board {
     rows: Vec<Row>,
     /// Per `node/path`: the CPU time and when it was read, for the share.
     cpu: BTreeMap<String, (Duration, Instant)>,
-    steps: VecDeque<String>,
+    steps: VecDeque<StepLine>,
+    /// How many steps `steps` holds of each instance.
+    per_instance: BTreeMap<String, usize>,
+    /// Whether routine steps are hidden.
+    hide_routine: bool,
+    /// How many shown steps the pane is scrolled back from the newest (0: it follows
+    /// the newest).
+    scroll: usize,
+    /// How many steps the pane shows at once (the view's height, for paging).
+    page: usize,
+    focus: Focus,
     selected: usize,
     /// The last reply to a command, or an error.
     pub status: String,
@@ -107,23 +150,25 @@ impl Board {
     /// adaptation step goes to the steps pane (newest last); other events are read
     /// at the next refresh.
     pub fn step(&mut self, address: &str, event: &MonitorEvent, at: &str) {
-        if matches!(
-            event,
-            MonitorEvent::Supervision(_) | MonitorEvent::Adaptation(_)
-        ) {
-            if self.steps.len() == STEPS_KEPT {
-                self.steps.pop_front();
+        let (whose, routine) = match event {
+            MonitorEvent::Supervision(step) => {
+                (format!("{address}:{}", step.instance), routine(&step.step))
             }
-            self.steps
-                .push_back(format!("{at} {address}: {}", describe(event)));
-        }
+            MonitorEvent::Adaptation(step) => (format!("{address}:{}", step.component), false),
+            _ => return,
+        };
+        self.push(StepLine {
+            whose,
+            routine,
+            text: format!("{at} {address}: {}", describe(event)),
+        });
     }
 
     /// The supervision steps the compounds' monitoring ports still hold
     /// (`Monitor::supervision`, their last steps), into the steps pane: what happened
     /// before `top` started watching (`--once` shows only these).
     pub fn seed_history(&mut self) {
-        let history: Vec<String> = self
+        let history: Vec<(String, Supervision)> = self
             .rows
             .iter()
             .flat_map(|row| {
@@ -131,25 +176,149 @@ impl Board {
                 row.monitor
                     .supervision
                     .iter()
-                    .map(move |step| format!("earlier {address}: supervision: {step}"))
+                    .map(move |step| (address.clone(), step.clone()))
             })
             .collect();
-        for line in history {
-            if self.steps.len() == STEPS_KEPT {
-                self.steps.pop_front();
+        for (address, step) in history {
+            self.push(StepLine {
+                whose: format!("{address}:{}", step.instance),
+                routine: routine(&step.step),
+                text: format!("earlier {address}: supervision: {step}"),
+            });
+        }
+    }
+
+    /// Keep `line`, the newest: the oldest of its instance goes beyond
+    /// [`STEPS_PER_INSTANCE`], the oldest of all beyond [`STEPS_KEPT`]. A pane
+    /// scrolled back stays on the steps it shows.
+    fn push(&mut self, line: StepLine) {
+        let count = self.per_instance.entry(line.whose.clone()).or_default();
+        if *count >= STEPS_PER_INSTANCE {
+            *count -= 1;
+            if let Some(oldest) = self.steps.iter().position(|s| s.whose == line.whose) {
+                self.steps.remove(oldest);
             }
-            self.steps.push_back(line);
+        }
+        if self.steps.len() >= STEPS_KEPT
+            && let Some(oldest) = self.steps.pop_front()
+            && let Some(count) = self.per_instance.get_mut(&oldest.whose)
+        {
+            *count -= 1;
+            if *count == 0 {
+                self.per_instance.remove(&oldest.whose);
+            }
+        }
+        *self.per_instance.entry(line.whose.clone()).or_default() += 1;
+        if self.scroll > 0 && self.shows(&line) {
+            self.scroll += 1;
+        }
+        self.steps.push_back(line);
+        self.scroll = self.scroll.min(self.max_scroll());
+    }
+
+    fn shows(&self, line: &StepLine) -> bool {
+        !(self.hide_routine && line.routine)
+    }
+
+    /// The steps shown (routine ones hidden if asked), oldest first.
+    pub fn steps(&self) -> impl DoubleEndedIterator<Item = &str> {
+        self.steps
+            .iter()
+            .filter(|line| self.shows(line))
+            .map(|line| line.text.as_str())
+    }
+
+    /// The steps the pane shows now, `rows` at most: the newest, or those it is
+    /// scrolled back to; oldest first.
+    pub fn steps_window(&self, rows: usize) -> Vec<&str> {
+        let shown: Vec<&str> = self.steps().collect();
+        let end = shown.len().saturating_sub(self.scroll);
+        shown[end.saturating_sub(rows)..end].to_vec()
+    }
+
+    /// How many shown steps are newer than the pane shows (0: it follows the newest).
+    pub fn scrolled(&self) -> usize {
+        self.scroll
+    }
+
+    /// How many steps the pane shows at once (the view says, from the screen's size):
+    /// the step of a page, and how far back it scrolls.
+    pub fn set_page(&mut self, rows: usize) {
+        self.page = rows;
+        self.scroll = self.scroll.min(self.max_scroll());
+    }
+
+    /// How far back the pane scrolls: until its first row is the oldest step shown.
+    fn max_scroll(&self) -> usize {
+        self.steps().count().saturating_sub(self.page.max(1))
+    }
+
+    /// Scroll the steps pane `back` steps towards the oldest (negative: towards the
+    /// newest), within what it holds.
+    pub fn scroll_steps(&mut self, back: isize) {
+        self.scroll = self
+            .scroll
+            .saturating_add_signed(back)
+            .min(self.max_scroll());
+    }
+
+    /// Hide routine steps (`commanded`, `retry failed`), or show them again; the pane
+    /// goes back to the newest.
+    pub fn toggle_routine(&mut self) {
+        self.hide_routine = !self.hide_routine;
+        self.scroll = 0;
+    }
+
+    /// Whether routine steps are hidden.
+    pub fn hides_routine(&self) -> bool {
+        self.hide_routine
+    }
+
+    /// Which pane the arrow keys move.
+    pub fn focus(&self) -> Focus {
+        self.focus
+    }
+
+    /// The arrow keys move the other pane.
+    pub fn toggle_focus(&mut self) {
+        self.focus = match self.focus {
+            Focus::Components => Focus::Steps,
+            Focus::Steps => Focus::Components,
+        };
+    }
+
+    /// An arrow key, `delta` rows down (negative: up), on the pane in focus: the
+    /// selection moves, or the steps pane scrolls (up is older).
+    pub fn navigate(&mut self, delta: isize) {
+        match self.focus {
+            Focus::Components => self.select(delta),
+            Focus::Steps => self.scroll_steps(-delta),
+        }
+    }
+
+    /// A page of rows down (negative: up) on the pane in focus.
+    pub fn navigate_page(&mut self, pages: isize) {
+        let rows = match self.focus {
+            Focus::Components => 10,
+            Focus::Steps => self.page.max(1),
+        };
+        self.navigate(pages.saturating_mul(isize::try_from(rows).unwrap_or(isize::MAX)));
+    }
+
+    /// Home (`last` false) or end: the first or last row, or the oldest or newest
+    /// step.
+    pub fn navigate_to(&mut self, last: bool) {
+        match (self.focus, last) {
+            (Focus::Components, false) => self.selected = 0,
+            (Focus::Components, true) => self.selected = self.rows.len().saturating_sub(1),
+            (Focus::Steps, false) => self.scroll = self.max_scroll(),
+            (Focus::Steps, true) => self.scroll = 0,
         }
     }
 
     /// The rows, by node and path.
     pub fn rows(&self) -> &[Row] {
         &self.rows
-    }
-
-    /// The steps, oldest first.
-    pub fn steps(&self) -> impl DoubleEndedIterator<Item = &String> + ExactSizeIterator {
-        self.steps.iter()
     }
 
     /// The selected row's index.
@@ -280,14 +449,14 @@ pub(crate) mod tests {
         board.step("a/x", &MonitorEvent::Configured, "0.0s");
         board.step(
             "a/x",
-            &MonitorEvent::Supervision(coolbot::Supervision {
+            &MonitorEvent::Supervision(Supervision {
                 instance: "w".to_owned(),
-                step: coolbot::Step::Failed,
+                step: Step::Failed,
                 detail: "boom".to_owned(),
             }),
             "1.5s",
         );
-        let steps: Vec<_> = board.steps().cloned().collect();
+        let steps: Vec<_> = board.steps().collect();
         assert_eq!(steps.len(), 1);
         assert!(steps[0].starts_with("1.5s a/x: supervision: "), "{steps:?}");
         let alive = vec!["a".to_owned()];
@@ -301,5 +470,107 @@ pub(crate) mod tests {
         board.select(-9);
         assert_eq!(board.selected(), 0);
         assert_eq!(board.rows()[1].depth, 1);
+    }
+
+    fn supervision(instance: &str, step: Step) -> MonitorEvent {
+        MonitorEvent::Supervision(Supervision {
+            instance: instance.to_owned(),
+            step,
+            detail: String::new(),
+        })
+    }
+
+    fn commanded() -> Step {
+        Step::Commanded {
+            command: "set max_speed = 0.5".to_owned(),
+        }
+    }
+
+    #[test]
+    fn each_instance_keeps_its_newest_steps_whatever_another_sends() {
+        let mut board = Board::new();
+        let substituted = Step::Substituted {
+            by: "spare".to_owned(),
+        };
+        board.step("r/cell", &supervision("ranges", substituted), "0.0s");
+        for n in 0..300 {
+            board.step(
+                "r/cell",
+                &supervision("motion", commanded()),
+                &format!("{n}s"),
+            );
+        }
+        let steps: Vec<&str> = board.steps().collect();
+        assert_eq!(steps.len(), 1 + STEPS_PER_INSTANCE);
+        assert_eq!(
+            steps[0],
+            "0.0s r/cell: supervision: ranges substituted by spare"
+        );
+        // The motion's newest, in order.
+        assert!(steps[1].starts_with("250s r/cell: supervision: motion commanded"));
+        assert!(steps[STEPS_PER_INSTANCE].starts_with("299s "));
+        // Another compound's instance of the same name is another instance.
+        board.step("r/other", &supervision("motion", Step::Failed), "300s");
+        assert_eq!(board.steps().count(), 2 + STEPS_PER_INSTANCE);
+    }
+
+    #[test]
+    fn routine_steps_are_hidden_on_demand() {
+        let mut board = Board::new();
+        board.step("r/cell", &supervision("w", Step::Failed), "1s");
+        board.step("r/cell", &supervision("w", Step::RetryFailed), "2s");
+        board.step("r/cell", &supervision("m", commanded()), "3s");
+        board.step("r/cell", &supervision("w", Step::Recovered), "4s");
+        assert_eq!(board.steps().count(), 4);
+        board.toggle_routine();
+        assert!(board.hides_routine());
+        let shown: Vec<&str> = board.steps().collect();
+        assert_eq!(
+            shown,
+            [
+                "1s r/cell: supervision: w failed",
+                "4s r/cell: supervision: w recovered"
+            ]
+        );
+        board.toggle_routine();
+        assert_eq!(board.steps().count(), 4);
+    }
+
+    #[test]
+    fn the_steps_pane_scrolls_and_stays_where_it_was_scrolled() {
+        let mut board = Board::new();
+        for n in 0..20 {
+            board.step("r/c", &supervision("w", Step::Failed), &format!("{n}s"));
+        }
+        board.set_page(5);
+        let first = |board: &Board| {
+            board.steps_window(5)[0]
+                .split(' ')
+                .next()
+                .unwrap()
+                .to_owned()
+        };
+        assert_eq!(first(&board), "15s");
+        // The keys move the table until the steps pane has the focus.
+        board.navigate(-3);
+        assert_eq!(board.scrolled(), 0);
+        board.toggle_focus();
+        assert_eq!(board.focus(), Focus::Steps);
+        board.navigate(-3);
+        assert_eq!((board.scrolled(), first(&board)), (3, "12s".to_owned()));
+        // A new step does not move what is shown.
+        board.step("r/c", &supervision("w", Step::Failed), "20s");
+        assert_eq!((board.scrolled(), first(&board)), (4, "12s".to_owned()));
+        board.navigate_page(-1);
+        assert_eq!(first(&board), "7s");
+        // No further back than the oldest, no further on than the newest.
+        board.navigate_page(-9);
+        assert_eq!(first(&board), "0s");
+        board.navigate_to(true);
+        assert_eq!((board.scrolled(), first(&board)), (0, "16s".to_owned()));
+        board.navigate(5);
+        assert_eq!(board.scrolled(), 0);
+        board.navigate_to(false);
+        assert_eq!(first(&board), "0s");
     }
 }

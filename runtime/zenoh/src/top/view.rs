@@ -1,18 +1,51 @@
 //! How `coolctl top` draws a [`Board`]: the component table (each node's tree,
 //! lost nodes greyed), the steps pane (supervision and adaptation steps, newest at
-//! the bottom), and a status line (the last reply, or the keys). Every frame is drawn
-//! whole by ratatui, so nothing of an earlier frame stays on screen, at any size.
+//! the bottom unless scrolled back; its title says what is hidden or below), and a
+//! status line (the last reply, or the keys of the pane in focus). Every frame is
+//! drawn whole by ratatui, so nothing of an earlier frame stays on screen, at any
+//! size.
 
 use ratatui::Frame;
-use ratatui::layout::{Constraint, Layout};
+use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Modifier, Style};
 use ratatui::text::Line;
 use ratatui::widgets::{Block, Cell, Paragraph, Row as TableRow, Table, TableState};
 
-use super::model::{Board, Row};
+use super::model::{Board, Focus, Row};
 
-/// The keys, shown when there is no reply to show.
-pub const HELP: &str = "up/down select  s suspend  r run  R restart  v set variable  q quit";
+/// The keys of the pane in focus, shown when there is no reply to show.
+pub fn help(board: &Board) -> String {
+    let routine = if board.hides_routine() {
+        "f show routine"
+    } else {
+        "f hide routine"
+    };
+    match board.focus() {
+        Focus::Components => format!(
+            "up/down select  tab steps  {routine}  s suspend  r run  R restart  v set variable  q quit"
+        ),
+        Focus::Steps => format!(
+            "up/down scroll steps  home/end oldest/newest  tab components  {routine}  q quit"
+        ),
+    }
+}
+
+/// The layout of a screen: the table, the steps pane, the status line.
+fn areas(area: Rect) -> [Rect; 3] {
+    let steps_height = (area.height / 3).clamp(3, 12);
+    Layout::vertical([
+        Constraint::Min(3),
+        Constraint::Length(steps_height),
+        Constraint::Length(1),
+    ])
+    .areas(area)
+}
+
+/// How many steps the steps pane shows on a screen of `width` x `height`.
+pub fn steps_rows(width: u16, height: u16) -> usize {
+    let [_, steps, _] = areas(Rect::new(0, 0, width, height));
+    usize::from(steps.height.saturating_sub(2))
+}
 
 fn duration(value: Option<std::time::Duration>) -> String {
     match value {
@@ -81,13 +114,14 @@ const HEADER: [&str; 12] = [
 /// Draw `board` on the whole frame.
 pub fn draw(frame: &mut Frame<'_>, board: &Board) {
     let area = frame.area();
-    let steps_height = (area.height / 3).clamp(3, 12);
-    let [table_area, steps_area, status_area] = Layout::vertical([
-        Constraint::Min(3),
-        Constraint::Length(steps_height),
-        Constraint::Length(1),
-    ])
-    .areas(area);
+    let [table_area, steps_area, status_area] = areas(area);
+    let focused = |pane: Focus| {
+        if board.focus() == pane {
+            Style::new().add_modifier(Modifier::BOLD)
+        } else {
+            Style::new()
+        }
+    };
 
     let rows = board.rows().iter().map(|row| {
         let style = if row.lost {
@@ -125,7 +159,11 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
     let table = Table::new(rows, widths)
         .header(TableRow::new(HEADER).style(Style::new().add_modifier(Modifier::BOLD)))
         .row_highlight_style(Style::new().add_modifier(Modifier::REVERSED))
-        .block(Block::bordered().title(" coolctl top: components "));
+        .block(
+            Block::bordered()
+                .title(" coolctl top: components ")
+                .border_style(focused(Focus::Components)),
+        );
     let mut state = TableState::new().with_selected(Some(board.selected()));
     frame.render_stateful_widget(table, table_area, &mut state);
     if board.rows().is_empty() {
@@ -142,20 +180,30 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
 
     let shown = usize::from(steps_area.height.saturating_sub(2));
     let steps: Vec<Line<'_>> = board
-        .steps()
-        .rev()
-        .take(shown)
-        .rev()
-        .map(|step| Line::from(step.as_str()))
+        .steps_window(shown)
+        .into_iter()
+        .map(Line::from)
         .collect();
+    let mut title = " supervision and adaptation steps".to_owned();
+    if board.hides_routine() {
+        title.push_str(", routine hidden");
+    }
+    if board.scrolled() > 0 {
+        title.push_str(&format!(", {} newer below", board.scrolled()));
+    }
+    title.push(' ');
     frame.render_widget(
-        Paragraph::new(steps).block(Block::bordered().title(" supervision and adaptation steps ")),
+        Paragraph::new(steps).block(
+            Block::bordered()
+                .title(title)
+                .border_style(focused(Focus::Steps)),
+        ),
         steps_area,
     );
     let status = if board.status.is_empty() {
-        HELP
+        help(board)
     } else {
-        board.status.as_str()
+        board.status.clone()
     };
     frame.render_widget(Paragraph::new(status), status_area);
 }
@@ -178,5 +226,66 @@ mod tests {
         assert_eq!(super::period(&m), "40ms/20ms");
         m.period = None;
         assert_eq!(super::period(&m), "-/20ms");
+    }
+
+    #[test]
+    fn the_steps_pane_says_what_it_hides_and_the_help_line_the_keys_of_the_pane_in_focus() {
+        use coolbot::{MonitorEvent, Step, Supervision};
+        let mut board = crate::top::Board::new();
+        let step = |instance: &str, step: Step| {
+            MonitorEvent::Supervision(Supervision {
+                instance: instance.to_owned(),
+                step,
+                detail: String::new(),
+            })
+        };
+        board.step("r/cell", &step("w", Step::Failed), "1.0s");
+        for n in 2..40 {
+            board.step("r/cell", &step("w", Step::RetryFailed), &format!("{n}.0s"));
+        }
+        let (width, height) = (100, 30);
+        board.set_page(super::steps_rows(width, height));
+        let screen = crate::top::render(&board, width, height);
+        assert!(
+            screen.contains("39.0s r/cell: supervision: w retry failed"),
+            "{screen}"
+        );
+        assert!(!screen.contains("w failed"), "{screen}");
+        assert!(
+            screen.ends_with(
+                "up/down select  tab steps  f hide routine  s suspend  r run  R restart  v set variable  q quit\n"
+            ),
+            "{screen}"
+        );
+        board.toggle_routine();
+        board.toggle_focus();
+        let screen = crate::top::render(&board, width, height);
+        assert!(
+            screen.contains("┌ supervision and adaptation steps, routine hidden ─"),
+            "{screen}"
+        );
+        assert!(
+            screen.contains("│1.0s r/cell: supervision: w failed"),
+            "{screen}"
+        );
+        assert!(!screen.contains("retry failed"), "{screen}");
+        assert!(
+            screen.ends_with(
+                "up/down scroll steps  home/end oldest/newest  tab components  f show routine  q quit\n"
+            ),
+            "{screen}"
+        );
+        board.toggle_routine();
+        board.navigate(-4);
+        let screen = crate::top::render(&board, width, height);
+        assert!(
+            screen.contains("┌ supervision and adaptation steps, 4 newer below ─"),
+            "{screen}"
+        );
+        assert!(
+            screen.contains("│35.0s r/cell: supervision: w retry failed"),
+            "{screen}"
+        );
+        assert!(!screen.contains("36.0s"), "{screen}");
     }
 }
