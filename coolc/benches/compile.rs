@@ -7,7 +7,7 @@
 //!
 //! The generated set has 1,000 atomic and 100 compound components, one file each,
 //! plus a shared types file (see [`generate`]). The scaling run does the same with ten
-//! times the input (10,000 + 1,000). Goals (issue 2, item 10): the 1,000 set checks and
+//! times the input (10,000 + 1,000). Goals: the 1,000 set checks and
 //! emits in under one second, and ten times the input costs at most twelve times the
 //! time. The baseline of the scaling figure is the 1x run of the same path.
 //!

@@ -3,7 +3,7 @@
 //! component (8 fifo connections, 9 components), against the same chain of bare
 //! threads on crossbeam-channel `bounded(16)` channels, the source sleeping to absolute
 //! deadlines. The figure is the time from the stamp to the sink's section reading it.
-//! Goal (issue 3, item 8): p50 <= 1.1x the baseline.
+//! Goal: p50 <= 1.1x the baseline.
 //!
 //! `cargo bench -p coolbot --bench chain` (add `-- --quick` for a smoke run).
 

@@ -3,10 +3,10 @@
 //! threads. One-way latency is half a round trip; every round trip is one sample.
 //! `fifo_labeled` is the fifo ping-pong between two aperiodic components with a
 //! `max_response`: every packet is stamped on arrival (temporal labeling) and every
-//! response timed, the cost of issue 15's response times next to the plain fifo's
+//! response timed, the cost of response times next to the plain fifo's
 //! (reported, without a goal of its own).
 //!
-//! Goals (issue 3, item 8): p50 <= 1.5x and p99 <= 2x the baseline.
+//! Goals: p50 <= 1.5x and p99 <= 2x the baseline.
 //!
 //! `cargo bench -p coolbot --bench latency` (add `-- --quick` for a smoke run).
 

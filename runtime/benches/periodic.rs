@@ -17,7 +17,7 @@
 //!   default timer slack (50 us), what a bare thread gets without setup.
 //!
 //! All re-anchor after a miss the same way (one period after the late activation
-//! ends), and misses are counted. Goal (issue 3, item 8): p99 <= 1.2x the baseline.
+//! ends), and misses are counted. Goal: p99 <= 1.2x the baseline.
 //!
 //! `cargo bench -p coolbot --bench periodic` (add `-- --quick` for a smoke run).
 

@@ -8,7 +8,7 @@
 //! The baseline spawns the same number of bare threads, each blocking on a
 //! crossbeam-channel `bounded(16)` with a 100 ms timeout and acknowledging its start on
 //! a channel. Each round of each side runs in a fresh child process of the benchmark
-//! (memory freed by one run would otherwise be reused by the next). No goal is set in the issue for these figures; they are reported.
+//! (memory freed by one run would otherwise be reused by the next). No goal is set for these figures; they are reported.
 //!
 //! `cargo bench -p coolbot --bench scale` (add `-- --quick` for a smoke run).
 

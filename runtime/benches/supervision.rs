@@ -29,7 +29,7 @@
 //!      Baseline: the same 101 test closures in a plain loop over a plain table of
 //!      the instances' variables.
 //!
-//! No goal is set in the issue for these figures; they are reported.
+//! No goal is set for these figures; they are reported.
 //!
 //! `cargo bench -p coolbot --bench supervision` (add `-- --quick` for a smoke run).
 

@@ -1,8 +1,12 @@
-//! The documentation agrees with the compiler: every diagnostic code is documented,
-//! every documented code exists, and every `cool` example in `docs/language.md`
-//! parses as written (examples that are members of a component are parsed inside
-//! one). The tutorial's build-script crate builds as written, and the example of
-//! everything a section can use (`docs/generated-code.md`) compiles warning-free.
+//! The documentation agrees with the compiler and the runtime: every diagnostic code is
+//! documented, every documented code exists, and every `cool` example in
+//! `docs/language.md` parses as written (examples that are members of a component are
+//! parsed inside one). Every `rust` block of the docs compiles in a test here: the
+//! examples that are whole files in the crates `coolc compile` writes for their
+//! descriptions (and their tests run), the tutorial's steps in the crate it builds,
+//! and the API fragments of the runtime and network docs inside functions of a crate
+//! that declares what they name (`FRAGMENTS`). A `rust` block no test compiles fails
+//! `every_rust_block_of_the_docs_is_compiled`.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -113,9 +117,7 @@ fn every_cool_example_in_the_language_reference_parses() {
 }
 
 fn doc(name: &str) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs")
-        .join(name);
+    let path = repository().join(name);
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
@@ -135,20 +137,252 @@ fn section<'a>(text: &'a str, heading: &str) -> &'a str {
 
 /// The fenced blocks of `text` marked `lang`, in order.
 fn blocks(text: &str, lang: &str) -> Vec<String> {
+    fences(text)
+        .into_iter()
+        .filter(|fence| fence.info == lang)
+        .map(|fence| fence.body)
+        .collect()
+}
+
+/// A fenced block of a Markdown file.
+struct Fence {
+    /// Its info string (`rust`, `cool`, `sh`, empty).
+    info: String,
+    /// The heading it stands under: the nearest one above it, the whole line.
+    heading: String,
+    /// The line its opening fence is on (1-based).
+    line: usize,
+    body: String,
+}
+
+/// The fenced blocks of `text`, in order, with the heading each stands under (a
+/// line starting with `#` inside a block is not a heading).
+fn fences(text: &str) -> Vec<Fence> {
     let mut found = Vec::new();
-    let mut current: Option<String> = None;
-    for line in text.lines() {
-        match &mut current {
-            None if line.trim_start() == format!("```{lang}") => current = Some(String::new()),
-            Some(_) if line.trim_start().starts_with("```") => found.extend(current.take()),
-            Some(body) => {
-                body.push_str(line);
-                body.push('\n');
+    let mut heading = String::new();
+    let mut open: Option<Fence> = None;
+    for (index, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        match &mut open {
+            None if trimmed.starts_with("```") => {
+                open = Some(Fence {
+                    info: trimmed.trim_start_matches('`').trim().to_owned(),
+                    heading: heading.clone(),
+                    line: index + 1,
+                    body: String::new(),
+                });
             }
+            None if line.starts_with('#') => heading = line.to_owned(),
             None => {}
+            Some(_) if trimmed.starts_with("```") => found.extend(open.take()),
+            Some(fence) => {
+                fence.body.push_str(line);
+                fence.body.push('\n');
+            }
         }
     }
     found
+}
+
+/// A `rust` block of the docs: the file (from the repository's root), the heading it
+/// stands under, and its index among the `rust` blocks under that heading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Place {
+    doc: &'static str,
+    heading: &'static str,
+    index: usize,
+}
+
+const fn place(doc: &'static str, heading: &'static str, index: usize) -> Place {
+    Place {
+        doc,
+        heading,
+        index,
+    }
+}
+
+impl Place {
+    /// The block's text.
+    fn text(&self) -> String {
+        fences(&doc(self.doc))
+            .into_iter()
+            .filter(|fence| fence.info == "rust" && fence.heading == self.heading)
+            .nth(self.index)
+            .unwrap_or_else(|| panic!("no rust block at {self:?}"))
+            .body
+    }
+}
+
+const GENERATED: &str = "docs/generated-code.md";
+const TUTORIAL: &str = "docs/tutorial.md";
+
+const WATCHER: Place = place(GENERATED, "## What a section can use", 0);
+const TALLY: Place = place(
+    GENERATED,
+    "## Testing a component alone: the generated harness",
+    0,
+);
+const TALLY_TEST: Place = place(
+    GENERATED,
+    "## Testing a component alone: the generated harness",
+    1,
+);
+const BASE_SUPERVISOR: Place = place(GENERATED, "## A compound component's generated module", 0);
+const BASE_MAIN: Place = place(GENERATED, "## A compound component's generated module", 1);
+const BASE_TEST: Place = place(
+    GENERATED,
+    "## Testing a supervisor alone: the compound's harness",
+    0,
+);
+const BUILDER_SCRIPT: Place = place(GENERATED, "## From a build script: `coolc::Builder`", 0);
+const BUILDER_LIB: Place = place(GENERATED, "## From a build script: `coolc::Builder`", 1);
+const TUTORIAL_STUBS: Place = place(TUTORIAL, "## 3. Fill in the stubs", 0);
+const TUTORIAL_NEW_STUB: Place = place(TUTORIAL, "## 6. Regenerate: your code stays", 0);
+const TUTORIAL_RESTS: Place = place(TUTORIAL, "## 7. Fill in the new stub and run again", 0);
+const TUTORIAL_BUILD_SCRIPT: Place = place(TUTORIAL, "## 8. From a build script instead", 0);
+const TUTORIAL_BUILD_LIB: Place = place(TUTORIAL, "## 8. From a build script instead", 1);
+const TUTORIAL_FAILS: Place = place(TUTORIAL, "## 9. Compose: a compound component", 0);
+const TUTORIAL_COVERS: Place = place(TUTORIAL, "## 9. Compose: a compound component", 1);
+const TUTORIAL_MAIN: Place = place(TUTORIAL, "## 9. Compose: a compound component", 2);
+
+/// The API fragments of the docs (statements that use what their page describes), each
+/// with what its function declares before it; `FRAGMENT_CRATE` declares the rest.
+const FRAGMENTS: &[(Place, &str)] = &[
+    (place("docs/runtime.md", "## Components and systems", 0), ""),
+    (
+        place("docs/runtime.md", "## The monitoring port `m`", 0),
+        "let mut system = System::new();\nlet parts = RobotParts::default();\n",
+    ),
+    (
+        place(
+            "docs/runtime.md",
+            "### The clock: real, or virtual for tests (`coolbot::clock`)",
+            0,
+        ),
+        "",
+    ),
+    (
+        place(
+            "docs/runtime.md",
+            "## Compound components and supervisors (paper 3.4, 3.5)",
+            0,
+        ),
+        "let mut system = System::new();\n",
+    ),
+    (
+        place("docs/runtime.md", "### Configuration and defaults", 0),
+        "",
+    ),
+    (
+        place(
+            "docs/tools.md",
+            "## Recording port traffic: `coolbot::record`",
+            0,
+        ),
+        "let system = System::new();\nlet other_system = System::new();\n",
+    ),
+    (
+        place("docs/distribution.md", "## The model", 0),
+        "let mut system = System::new();\n",
+    ),
+    (
+        place("docs/distribution.md", "### What is built: the agent", 0),
+        "let config = coolbot_zenoh::zenoh::Config::default();\n\
+         let robot_node = Node::open(\"robot\", coolbot_zenoh::zenoh::Config::default())?;\n",
+    ),
+];
+
+/// Every `rust` block a test of this file compiles.
+fn compiled() -> BTreeSet<Place> {
+    let whole = [
+        WATCHER,
+        TALLY,
+        TALLY_TEST,
+        BASE_SUPERVISOR,
+        BASE_MAIN,
+        BASE_TEST,
+        BUILDER_SCRIPT,
+        BUILDER_LIB,
+        TUTORIAL_STUBS,
+        TUTORIAL_NEW_STUB,
+        TUTORIAL_RESTS,
+        TUTORIAL_BUILD_SCRIPT,
+        TUTORIAL_BUILD_LIB,
+        TUTORIAL_FAILS,
+        TUTORIAL_COVERS,
+        TUTORIAL_MAIN,
+    ];
+    whole
+        .into_iter()
+        .chain(FRAGMENTS.iter().map(|(place, _)| *place))
+        .collect()
+}
+
+/// The Markdown files of the repository that show code.
+const MARKDOWN: &[&str] = &[
+    "README.md",
+    "ARCHITECTURE.md",
+    "examples/README.md",
+    "docs/distribution.md",
+    "docs/generated-code.md",
+    "docs/language.md",
+    "docs/performance.md",
+    "docs/runtime.md",
+    "docs/tools.md",
+    "docs/tutorial.md",
+];
+
+#[test]
+fn every_rust_block_of_the_docs_is_compiled() {
+    let mut found = BTreeSet::new();
+    let mut unmarked = Vec::new();
+    for &file in MARKDOWN {
+        let text = doc(file);
+        let mut under: std::collections::BTreeMap<String, usize> = Default::default();
+        for fence in fences(&text) {
+            let looks_like_rust = ["fn ", "let ", "use ", "impl "]
+                .iter()
+                .any(|word| fence.body.contains(word))
+                && fence.body.contains(';');
+            if fence.info.is_empty() && looks_like_rust {
+                unmarked.push(format!("{file}:{}", fence.line));
+            }
+            if fence.info != "rust" {
+                continue;
+            }
+            let index = under.entry(fence.heading.clone()).or_default();
+            found.insert((file.to_owned(), fence.heading.clone(), *index, fence.line));
+            *index += 1;
+        }
+    }
+    let compiled = compiled();
+    let missing: Vec<String> = found
+        .iter()
+        .filter(|(file, heading, index, _)| {
+            !compiled
+                .iter()
+                .any(|p| p.doc == file && p.heading == heading && p.index == *index)
+        })
+        .map(|(file, heading, _, line)| format!("{file}:{line} (under {heading:?})"))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "rust blocks no test compiles (compile each here, or mark a block that is not \
+         code `text`): {missing:#?}"
+    );
+    let stale: Vec<&Place> = compiled
+        .iter()
+        .filter(|p| {
+            !found.iter().any(|(file, heading, index, _)| {
+                p.doc == file && p.heading == heading && p.index == *index
+            })
+        })
+        .collect();
+    assert!(stale.is_empty(), "no such rust blocks: {stale:#?}");
+    assert!(
+        unmarked.is_empty(),
+        "blocks without a language that look like Rust: {unmarked:?}"
+    );
 }
 
 /// The repository root.
@@ -159,15 +393,14 @@ fn repository() -> std::path::PathBuf {
         .unwrap()
 }
 
-/// Runs `cargo <args>` in `dir` with the generated-crate target directory the coolc
-/// tests share (the runtime and coolc are built there once); panics with cargo's
-/// output when it fails.
-fn cargo(dir: &Path, args: &[&str]) {
+/// Runs `cargo <args>` in `dir` with the target directory `target`; panics with
+/// cargo's output when it fails.
+fn cargo_in(target: &Path, dir: &Path, args: &[&str]) {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let output = std::process::Command::new(cargo)
         .args(args)
         .current_dir(dir)
-        .env("CARGO_TARGET_DIR", repository().join("target/gen-tests"))
+        .env("CARGO_TARGET_DIR", target)
         .env_remove("RUSTFLAGS")
         .output()
         .unwrap();
@@ -180,23 +413,58 @@ fn cargo(dir: &Path, args: &[&str]) {
     );
 }
 
-/// Lowers one description for a crate named `package` on the repository's runtime.
-fn lower(name: &str, text: &str, package: &str) -> coolc::ir::Crate {
-    let checked = coolc::analyze_text(name, text)
-        .checked()
-        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
+/// Runs `cargo <args>` in `dir` with the generated-crate target directory the coolc
+/// tests share (the runtime and coolc are built there once).
+fn cargo(dir: &Path, args: &[&str]) {
+    cargo_in(&repository().join("target/gen-tests"), dir, args);
+}
+
+/// Lowers the descriptions `files` (`(name, text)`; the first is the root, the others
+/// what it imports) for a crate named `package` on the repository's runtime.
+fn lower_files(files: &[(&str, &str)], package: &str) -> coolc::ir::Crate {
+    let texts: std::collections::HashMap<std::path::PathBuf, String> = files
+        .iter()
+        .map(|(name, text)| (Path::new(name).to_owned(), (*text).to_owned()))
+        .collect();
+    let root = files[0].0;
+    let checked = coolc::analyze(&[root], &|path: &Path| {
+        texts
+            .get(path)
+            .cloned()
+            .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+    })
+    .checked()
+    .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = coolc::lower::Options {
         package: package.to_owned(),
         runtime: coolc::ir::RuntimeDep::Path(repository().join("runtime").display().to_string()),
-        sources: vec![name.to_owned()],
+        sources: vec![root.to_owned()],
         inputs: coolc::fingerprint::inputs(checked.sources().files()),
     };
     coolc::lower::lower(&checked, &options)
 }
 
+/// Lowers one description for a crate named `package` on the repository's runtime.
+fn lower(name: &str, text: &str, package: &str) -> coolc::ir::Crate {
+    lower_files(&[(name, text)], package)
+}
+
+/// The method `fn name(` of `code` (an `impl` block's, indented four spaces), from
+/// its line to its closing brace.
+fn method<'a>(code: &'a str, name: &str) -> &'a str {
+    let start = code
+        .find(&format!("    fn {name}("))
+        .unwrap_or_else(|| panic!("no method {name} in:\n{code}"));
+    let end = code[start..]
+        .find("\n    }\n")
+        .map(|i| start + i + "\n    }\n".len())
+        .unwrap_or_else(|| panic!("method {name} does not end"));
+    &code[start..end]
+}
+
 #[test]
 fn the_documented_header_is_the_starters() {
-    let text = doc("generated-code.md");
+    let text = doc(GENERATED);
     let starter = lower(
         "blinker.cool",
         &coolc::cli::starter_description("Blinker"),
@@ -211,7 +479,7 @@ fn the_documented_header_is_the_starters() {
 
 #[test]
 fn the_tutorials_description_is_the_starter() {
-    let tutorial = doc("tutorial.md");
+    let tutorial = doc(TUTORIAL);
     let described = &blocks(section(&tutorial, "## 2. "), "cool")[0];
     assert_eq!(*described, coolc::cli::starter_description("Blinker"));
 }
@@ -220,18 +488,13 @@ fn the_tutorials_description_is_the_starter() {
 fn the_tutorials_build_script_crate_builds() {
     // Section 8 as written: its Cargo.toml (the clone's paths made real), build.rs and
     // src/lib.rs, with the starter blinker's description and code.
-    let tutorial = doc("tutorial.md");
-    let text = section(&tutorial, "## 8. ");
-    let manifest = &blocks(text, "toml")[0];
-    let rust = blocks(text, "rust");
-    let file = |name: &str| {
-        rust.iter()
-            .find(|b| b.starts_with(&format!("// {name}\n")))
-            .unwrap_or_else(|| panic!("no `// {name}` block in section 8"))
-            .clone()
-    };
+    let tutorial = doc(TUTORIAL);
+    let manifest = &blocks(section(&tutorial, "## 8. "), "toml")[0];
+    let (script, lib) = (TUTORIAL_BUILD_SCRIPT.text(), TUTORIAL_BUILD_LIB.text());
+    assert!(script.starts_with("// build.rs\n"), "{script}");
+    assert!(lib.starts_with("// src/lib.rs\n"), "{lib}");
     assert!(
-        file("src/lib.rs").contains("pub mod generated {"),
+        lib.contains("pub mod generated {"),
         "the build-script form includes the generated code inside `mod generated`"
     );
     let dir = tempfile::tempdir().unwrap();
@@ -245,8 +508,8 @@ fn the_tutorials_build_script_crate_builds() {
         manifest.replace("\"../coolbot/", &format!("\"{root}")),
     )
     .unwrap();
-    std::fs::write(krate.join("build.rs"), file("build.rs")).unwrap();
-    std::fs::write(krate.join("src/lib.rs"), file("src/lib.rs")).unwrap();
+    std::fs::write(krate.join("build.rs"), script).unwrap();
+    std::fs::write(krate.join("src/lib.rs"), lib).unwrap();
     let description = coolc::cli::starter_description("Blinker");
     std::fs::write(krate.join("components/blinker.cool"), &description).unwrap();
     let lowered = lower("blinker.cool", &description, "blinker");
@@ -258,14 +521,111 @@ fn the_tutorials_build_script_crate_builds() {
     cargo(&krate, &["build", "--quiet"]);
 }
 
+/// Inserts `insertion` into `text` after the first line equal to `after` (trimmed).
+fn insert_after(text: &str, after: &str, insertion: &str) -> String {
+    let at = text
+        .find(&format!("{after}\n"))
+        .unwrap_or_else(|| panic!("no line {after:?} in:\n{text}"))
+        + after.len()
+        + 1;
+    format!("{}{insertion}{}", &text[..at], &text[at..])
+}
+
+#[test]
+fn the_tutorials_crate_builds_at_its_last_step() {
+    // The blinker of sections 2, 5 and 9 and the pair of section 9, with the code of
+    // sections 3, 6, 7 and 9: section 7's `Blinker` with section 9's
+    // `counting_periodic` and section 3's `done_entry` (as it says), and, as the
+    // crate was at section 6, section 3's code with the stub section 6 shows.
+    let tutorial = doc(TUTORIAL);
+    let fifth = blocks(section(&tutorial, "## 5. "), "cool");
+    let ninth = blocks(section(&tutorial, "## 9. "), "cool");
+    let starter = coolc::cli::starter_description("Blinker");
+    let counting = "        state counting {\n            entry;\n            periodic;\n            may -> done;\n        }\n";
+    assert!(starter.contains(counting), "{starter}");
+    let blinker = insert_after(
+        &starter,
+        "    observable count: u64 = 0;",
+        &format!("\n{}", fifth[0]),
+    )
+    .replace(counting, &fifth[1]);
+    let blinker = insert_after(&blinker, "        limit: u64 = 10;", &ninth[0]);
+    let pair = &ninth[1];
+
+    // What the tutorial says coolc writes.
+    let first = lower("blinker.cool", &starter, "blinker");
+    let written = coolc::emit::starter_component(&first.atomics[0]);
+    let stubs = TUTORIAL_STUBS.text();
+    assert!(
+        written.contains(&stubs),
+        "section 3 shows the code `coolc new` writes:\n{written}"
+    );
+    let krate = lower_files(
+        &[("pair.cool", pair), ("blinker.cool", &blinker)],
+        "blinker",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("blinker");
+    coolc::merge::write_crate(&out, &krate).unwrap();
+    let src = out.join("src");
+    let stubbed = std::fs::read_to_string(src.join("blinker.rs")).unwrap();
+    let new_stub = TUTORIAL_NEW_STUB.text();
+    assert!(
+        stubbed.contains(&new_stub),
+        "section 6 shows the stub coolc adds:\n{stubbed}"
+    );
+
+    let header = "use crate::generated::blinker::*;\n\n";
+    let rests = TUTORIAL_RESTS.text();
+    let as_before = "    // counting_periodic and done_entry as before\n";
+    assert!(rests.contains(as_before), "{rests}");
+    let last = format!(
+        "{}\n{}",
+        TUTORIAL_FAILS.text(),
+        method(&stubs, "done_entry")
+    );
+    std::fs::write(
+        src.join("blinker.rs"),
+        format!("{header}{}", rests.replace(as_before, &last)),
+    )
+    .unwrap();
+    let at_six = stubs.replacen(
+        "impl Behavior for Blinker {\n",
+        &format!("impl Behavior for Blinker {{\n{new_stub}\n"),
+        1,
+    );
+    std::fs::write(
+        src.join("at_section_6.rs"),
+        format!(
+            "//! The blinker as section 6 left it.\n\n{header}\
+             /// The starter's `Blinker`.\n#[derive(Debug, Default)]\npub struct Blinker {{}}\n\n{at_six}"
+        ),
+    )
+    .unwrap();
+    let user_pair = std::fs::read_to_string(src.join("pair.rs")).unwrap();
+    let covers = TUTORIAL_COVERS.text();
+    std::fs::write(
+        src.join("pair.rs"),
+        user_pair.replace(method(&user_pair, "covering_entry"), &covers),
+    )
+    .unwrap();
+    std::fs::write(src.join("main.rs"), TUTORIAL_MAIN.text()).unwrap();
+    let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
+    std::fs::write(src.join("lib.rs"), lib + "pub mod at_section_6;\n").unwrap();
+    cargo(
+        &out,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+}
+
 #[test]
 fn the_section_api_example_compiles_warning_free() {
     // docs/generated-code.md, "What a section can use": the description and the user
     // file, in the crate `coolc compile` writes.
-    let text = doc("generated-code.md");
+    let text = doc(GENERATED);
     let text = section(&text, "## What a section can use");
     let description = &blocks(text, "cool")[0];
-    let code = &blocks(text, "rust")[0];
+    let code = WATCHER.text();
     let krate = lower("watcher.cool", description, "watcher");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("watcher");
@@ -287,11 +647,10 @@ fn the_section_api_example_compiles_warning_free() {
 fn the_harness_example_runs() {
     // docs/generated-code.md, "Testing a component alone": the description, its code
     // and its test, in the crate `coolc compile` writes; the test passes.
-    let text = doc("generated-code.md");
+    let text = doc(GENERATED);
     let text = section(&text, "## Testing a component alone");
     let description = &blocks(text, "cool")[0];
-    let code = blocks(text, "rust");
-    let (user, test) = (&code[0], &code[1]);
+    let (user, test) = (TALLY.text(), TALLY_TEST.text());
     assert!(test.matches("#[test]").count() >= 2, "{test}");
     let krate = lower("tally.cool", description, "tally");
     let dir = tempfile::tempdir().unwrap();
@@ -305,6 +664,221 @@ fn the_harness_example_runs() {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     );
     cargo(&out, &["test", "--quiet", "--test", "tally"]);
+}
+
+/// The description of the compound example of `docs/generated-code.md`.
+fn base_description() -> String {
+    let text = doc(GENERATED);
+    blocks(
+        section(&text, "## A compound component's generated module"),
+        "cool",
+    )[0]
+    .clone()
+}
+
+#[test]
+fn the_compound_example_and_its_supervisor_tests_run() {
+    // docs/generated-code.md, "A compound component's generated module" and "Testing
+    // a supervisor alone": the description, the supervisor's code, a main and the
+    // harness tests, in the crate `my-base` that `coolc compile` writes (the motion
+    // controller keeps its stubs); the tests pass.
+    let krate = lower("base.cool", &base_description(), "my-base");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("my-base");
+    coolc::merge::write_crate(&out, &krate).unwrap();
+    std::fs::write(out.join("src/mobile_base.rs"), BASE_SUPERVISOR.text()).unwrap();
+    std::fs::write(out.join("src/main.rs"), BASE_MAIN.text()).unwrap();
+    std::fs::create_dir_all(out.join("tests")).unwrap();
+    let test = BASE_TEST.text();
+    assert!(test.matches("#[test]").count() >= 3, "{test}");
+    std::fs::write(out.join("tests/base.rs"), test).unwrap();
+    cargo(
+        &out,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    cargo(&out, &["test", "--quiet", "--test", "base"]);
+}
+
+#[test]
+fn the_compound_example_builds_from_a_build_script() {
+    // docs/generated-code.md, "From a build script": the example crate `my-base` with
+    // the documented build.rs and src/lib.rs, its description in `components/`, the
+    // supervisor's code and the motion controller's stubs.
+    let description = base_description();
+    let (script, lib) = (BUILDER_SCRIPT.text(), BUILDER_LIB.text());
+    assert!(script.contains("\"components/base.cool\""), "{script}");
+    let lowered = lower("base.cool", &description, "my-base");
+    let dir = tempfile::tempdir().unwrap();
+    let krate = dir.path().join("my-base-build");
+    std::fs::create_dir_all(krate.join("src")).unwrap();
+    std::fs::create_dir_all(krate.join("components")).unwrap();
+    let root = repository();
+    std::fs::write(
+        krate.join("Cargo.toml"),
+        format!(
+            "[package]\nname = \"my-base\"\nversion = \"0.1.0\"\nedition = \"2024\"\n\n\
+             [dependencies]\ncoolbot = {{ path = \"{runtime}\" }}\n\
+             serde = {{ version = \"1\", features = [\"derive\"] }}\n\n\
+             [build-dependencies]\ncoolc = {{ path = \"{coolc}\" }}\n",
+            runtime = root.join("runtime").display(),
+            coolc = root.join("coolc").display(),
+        ),
+    )
+    .unwrap();
+    std::fs::write(krate.join("components/base.cool"), &description).unwrap();
+    std::fs::write(krate.join("build.rs"), script).unwrap();
+    std::fs::write(krate.join("src/lib.rs"), lib).unwrap();
+    std::fs::write(krate.join("src/mobile_base.rs"), BASE_SUPERVISOR.text()).unwrap();
+    // The motion controller's stubs, as `coolc compile` writes them.
+    let scratch = dir.path().join("scratch");
+    coolc::merge::write_crate(&scratch, &lowered).unwrap();
+    std::fs::copy(
+        scratch.join("src/motion_controller.rs"),
+        krate.join("src/motion_controller.rs"),
+    )
+    .unwrap();
+    cargo(&krate, &["build", "--quiet"]);
+}
+
+/// The crate the API fragments compile in: what they name, from a description
+/// (components, compounds and packets of the docs' examples) and declarations.
+const FRAGMENT_DESCRIPTION: &str = r#"
+packet Twist { linear: f64, angular: f64 }
+packet Pose2D { x: f64, y: f64, theta: f64 }
+packet RangeScan { ranges: [f64] }
+packet Path { poses: [Pose2D] }
+packet Map { cells: [u8] }
+
+atomic MotionController {
+    controllable max_speed: f64 = 1.0;
+    observable odometry: Pose2D;
+    input command: last<Twist>;
+    input obstacles: last<RangeScan>;
+    output pose: data<Pose2D>;
+    timing { period 20ms; }
+    automaton { initial moving; state moving { periodic; } }
+}
+
+atomic RangeServer {
+    output scan: data<RangeScan>;
+    output emergency: tick;
+    timing { period 50ms; }
+    automaton { initial streaming; state streaming { periodic; } }
+}
+
+atomic SimRangeServer {
+    output scan: data<RangeScan>;
+    output emergency: tick;
+    timing { period 50ms; }
+    automaton { initial streaming; state streaming { periodic; } }
+}
+
+atomic Planner {
+    input goal: last<Pose2D>;
+    output path: data<Path>;
+    automaton { initial planning; state planning { on goal -> planning; } }
+}
+
+atomic Mapper {
+    input scan: fifo<RangeScan>(8);
+    output map: poster<Map>;
+    automaton { initial mapping; state mapping { on scan -> mapping; } }
+}
+
+compound MobileBase {
+    instance motion: MotionController;
+    instance ranges: RangeServer;
+    instance sim_ranges: SimRangeServer substitutes ranges;
+    connect ranges.scan -> motion.obstacles;
+    input command = motion.command;
+    output scan = ranges.scan;
+    observable pose = motion.odometry;
+    controllable max_speed = motion.max_speed;
+    on error ranges: substitute;
+    recovery { retry every 500ms; deadline 5s; }
+    supervisor {
+        initial operating;
+        state operating { when ranges.state == running_error -> degraded; }
+        state degraded { when ranges.state == running -> operating; }
+    }
+}
+
+compound Robot {
+    instance base: MobileBase;
+    instance mapper: Mapper;
+    connect base.scan -> mapper.scan;
+}
+"#;
+
+/// The declarations every fragment function sees.
+const FRAGMENT_CONTEXT: &str = r#"//! The API fragments of the docs, each in a function of its own (compiled, never
+//! run): `tests/tests/docs.rs`, `FRAGMENTS`.
+#![allow(unused, clippy::all)]
+
+use std::time::Duration;
+
+use coolbot::{CompoundBuilder, Policy, State, System};
+use coolbot_zenoh::Node;
+
+use crate::generated::types::{Map, Path, Pose2D, RangeScan, Twist};
+use crate::generated::{mapper, mobile_base, motion_controller, planner, range_server, robot, sim_range_server};
+use crate::motion_controller::MotionController as MyMotion;
+use crate::planner::Planner as MyPlanner;
+use crate::range_server::RangeServer as MyRanges;
+use crate::robot::RobotParts;
+use crate::sim_range_server::SimRangeServer as MySim;
+
+/// A hand-written supervisor of `MobileBase`'s shape.
+#[derive(Default)]
+struct MobileBaseSupervisor;
+
+impl coolbot::Supervisor for MobileBaseSupervisor {
+    fn spec(&self) -> &'static coolbot::Spec {
+        &mobile_base::SPEC
+    }
+}
+
+/// A converter for `connect_via`.
+fn path_to_twist(path: &Path) -> Twist {
+    Twist {
+        linear: path.poses.len() as f64,
+        angular: 0.0,
+    }
+}
+"#;
+
+#[test]
+fn every_api_fragment_of_the_docs_compiles() {
+    // Each fragment in a function returning `Result<(), Box<dyn Error>>` (so `?`
+    // works), after what `FRAGMENTS` declares for it, in a crate whose description
+    // and context declare the components, packets and helpers they name. Built with
+    // `--features network` (the network docs' fragments use `coolbot-zenoh`) in the
+    // workspace's target directory, with its lock and profile, so that the network
+    // layer the workspace's tests built is reused.
+    let krate = lower("context.cool", FRAGMENT_DESCRIPTION, "docs-fragments");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("docs-fragments");
+    coolc::merge::write_crate(&out, &krate).unwrap();
+    let mut fragments = FRAGMENT_CONTEXT.to_owned();
+    for (index, (place, before)) in FRAGMENTS.iter().enumerate() {
+        let body = place.text();
+        fragments.push_str(&format!(
+            "\n/// {}, under {:?}.\nfn fragment_{index}() -> Result<(), Box<dyn std::error::Error>> {{\n{before}{body}Ok(())\n}}\n",
+            place.doc, place.heading
+        ));
+    }
+    std::fs::write(out.join("src/fragments.rs"), fragments).unwrap();
+    let lib = std::fs::read_to_string(out.join("src/lib.rs")).unwrap();
+    std::fs::write(out.join("src/lib.rs"), lib + "mod fragments;\n").unwrap();
+    let manifest = std::fs::read_to_string(out.join("Cargo.toml")).unwrap();
+    let profile = "\n[profile.dev]\ndebug = \"line-tables-only\"\n\n[profile.dev.package.\"*\"]\ndebug = false\n";
+    std::fs::write(out.join("Cargo.toml"), manifest + profile).unwrap();
+    std::fs::copy(repository().join("Cargo.lock"), out.join("Cargo.lock")).unwrap();
+    cargo_in(
+        &repository().join("target"),
+        &out,
+        &["build", "--quiet", "--features", "network"],
+    );
 }
 
 /// The tests the "Constructs at run time" table of `docs/language.md` cites, as

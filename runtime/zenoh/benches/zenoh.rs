@@ -351,7 +351,7 @@ fn main() {
         "bridge p50",
         Figure::Time(project_samples.p50()),
         Figure::Time(baseline_samples.p50()),
-        // Issue 12: a remote connection within 1.2x of raw Zenoh pub/sub.
+        // The goal: a remote connection within 1.2x of raw Zenoh pub/sub.
         Goal::AtMost(1.2),
     );
     table.row(
