@@ -130,7 +130,8 @@ impl Compound {
                     state == State::Running
                         || (state == State::Ready && instance.status == Status::Active)
                 }
-                Controllable::Running | Controllable::Dead => false,
+                Controllable::Dead => state != State::Dead,
+                Controllable::Running => false,
             };
             if follows && let Err(fault) = command(&instance.handle, target) {
                 crate::limited!(
@@ -154,8 +155,15 @@ impl Automaton for Compound {
         Ok(())
     }
 
-    fn stop(&mut self, _cx: &mut Context) {
-        self.instances_to(Controllable::Ready);
+    fn stop(&mut self, cx: &mut Context) {
+        if cx.stopping() {
+            // Shutting down: the instances go straight to `dead`, so that their own
+            // exit sections and `stop` are told so too (a nested compound's supervisor
+            // included), last declared first.
+            self.instances_to(Controllable::Dead);
+        } else {
+            self.instances_to(Controllable::Ready);
+        }
     }
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {

@@ -15,7 +15,7 @@ use coolbot::{
     SectionResult, State, Step, Supervisor, SupervisorCx, System, TaskResult, TimingSpec, Value,
 };
 use coolbot_runtime_tests::generated::{
-    cell, choosing, commanding, fed_commanding, panicky, watching, worker,
+    cell, choosing, commanding, fed_commanding, panicky, plant, watching, worker,
 };
 use coolbot_runtime_tests::support::{Script, Scripted, Tap, WAIT, eventually};
 
@@ -736,31 +736,54 @@ fn set_estop(cell: &Handle, on: bool) {
         .unwrap_or_else(|e| panic!("{e}"));
 }
 
+/// The cell's parts: the emergency stop writing into `exits`, a scripted joint.
+fn cell_parts(exits: &Exits) -> CellParts {
+    CellParts {
+        supervisor: Some(EmergencyStop {
+            exits: Arc::clone(exits),
+        }),
+        script: Script::new(),
+        tap: Some(Tap::new().0),
+    }
+}
+
+struct PlantParts(Option<CellParts>);
+
+impl plant::Supervisor for Quiet {}
+
+struct Quiet;
+
+impl plant::Parts for PlantParts {
+    fn supervisor(&mut self) -> impl plant::Supervisor {
+        Quiet
+    }
+
+    fn cell(&mut self) -> impl cell::Parts {
+        self.0.take().expect("one cell")
+    }
+}
+
 /// A supervisor's exit section is told when it runs because the compound shuts down
 /// (`Context::stopping`), and a command that would bring an instance to `running`
 /// then is refused with a step that says why: an emergency stop's `halted` state,
 /// whose exit runs the joint again when a rule leaves it, does not run the joint
-/// when the cell shuts down while halted.
-#[test]
-fn a_compound_shutting_down_runs_no_instance_again() {
+/// when the cell shuts down while halted, whether the cell is the system's own
+/// component or an instance of another compound (`nested`).
+fn a_cell_shutting_down_runs_no_instance_again(nested: bool) {
     let exits: Exits = Arc::default();
-    let (tap, _feeder) = Tap::new();
     let mut system = System::new();
-    let cell = system
-        .add(
-            cell::component(
-                "cell",
-                CellParts {
-                    supervisor: Some(EmergencyStop {
-                        exits: Arc::clone(&exits),
-                    }),
-                    script: Script::new(),
-                    tap: Some(tap),
-                },
-            )
-            .unwrap(),
-        )
-        .unwrap();
+    let (top, cell) = if nested {
+        let plant = system
+            .add(plant::component("plant", PlantParts(Some(cell_parts(&exits)))).unwrap())
+            .unwrap();
+        let cell = plant.instance("cell").unwrap();
+        (plant, cell)
+    } else {
+        let cell = system
+            .add(cell::component("cell", cell_parts(&exits)).unwrap())
+            .unwrap();
+        (cell.clone(), cell)
+    };
     let joint = cell.instance("joint").unwrap();
     system.run_all().unwrap();
     wait_user(&cell, "working");
@@ -778,8 +801,8 @@ fn a_compound_shutting_down_runs_no_instance_again() {
         exits.lock().unwrap()
     );
 
-    // Halted again, then shut down: the exit section knows, and the joint stays
-    // suspended until it is dead.
+    // Halted again, then shut down: the exit section knows, and the joint goes from
+    // suspended to dead, never running.
     set_estop(&cell, true);
     wait_user(&cell, "halted");
     joint.wait_state(State::Suspended, WAIT).unwrap();
@@ -797,9 +820,7 @@ fn a_compound_shutting_down_runs_no_instance_again() {
             _ => None,
         })
         .collect();
-    // The shutdown order: the supervisor's exit section, the compound's `stop` (its
-    // instances to `ready`), then the instances to `dead`; never `running`.
-    assert_eq!(states, [State::Ready, State::Dead]);
+    assert_eq!(states, [State::Dead]);
     let refused = cell
         .snapshot()
         .supervision
@@ -816,6 +837,17 @@ fn a_compound_shutting_down_runs_no_instance_again() {
         refused.detail,
         "the compound is shutting down: no instance is brought to running"
     );
+    assert_eq!(top.state(), State::Dead);
+}
+
+#[test]
+fn a_compound_shutting_down_runs_no_instance_again() {
+    a_cell_shutting_down_runs_no_instance_again(false);
+}
+
+#[test]
+fn a_compound_shut_down_by_its_own_compound_runs_no_instance_again() {
+    a_cell_shutting_down_runs_no_instance_again(true);
 }
 
 /// `Commanding`'s shape with another supervisor: entering `degraded`, it gives `w`
