@@ -292,6 +292,7 @@ impl coolbot::remote::Placer for Placer {
             shared,
             instantiated: false,
             built: false,
+            maybe_built: false,
             silence: self.silence,
             gone: None,
             times_asked: None,
@@ -381,9 +382,13 @@ struct End {
     shared: Arc<Shared>,
     /// Whether any generation was ever built.
     instantiated: bool,
-    /// Whether the current generation was built (a failed attempt leaves it unbuilt:
-    /// the next start tries a new one).
+    /// Whether the current generation was built and seen (its snapshot came): a
+    /// failed attempt leaves it unbuilt, and the next start tries a new one.
     built: bool,
+    /// Whether the current generation may exist on its node though it is not
+    /// `built`: its instantiation's answer did not come, or its snapshot did not.
+    /// The next instantiation, or the release, sends it to `dead`.
+    maybe_built: bool,
     /// How long the current generation may go unheard ([`Placer::silence`]).
     silence: Duration,
     /// Why the current generation is gone while its node lives (it fell silent), if
@@ -545,18 +550,12 @@ impl End {
             return;
         }
         let now = Instant::now();
-        // Silence counts from the first question left unanswered; after a pause in
-        // asking (the proxy was not running), from this one.
-        let paused = self
-            .times_asked
-            .is_none_or(|asked| now.saturating_duration_since(asked) > 2 * every);
+        // Silence counts from the first question left unanswered, however long the
+        // proxy's thread took between questions (a pull or a command to a station
+        // that does not answer holds it); anything heard from the instance, or an
+        // answer to a command, starts it again.
         self.times_asked = Some(now);
-        {
-            let mut since = lock(&self.shared.unanswered_since);
-            if paused || since.is_none() {
-                *since = Some(now);
-            }
-        }
+        lock(&self.shared.unanswered_since).get_or_insert(now);
         let shared = Arc::clone(&self.shared);
         let key = keys::monitor(&self.on, &self.name);
         let asked = self
@@ -706,10 +705,11 @@ impl RemoteEnd for End {
         self.reported_losses = 0;
         *lock(&self.shared.waker) = waker;
         *lock(&self.shared.view) = None;
-        if self.built {
+        if self.built || self.maybe_built {
             // An earlier generation may still run (its node was unreachable, not
-            // gone): it goes first, so that two never serve the same keys. Its node
-            // also sends it to `dead` when it sees this node lost (`Instantiate::owner`).
+            // gone, or its answer was lost): it goes first, so that two never serve
+            // the same keys. Its node also sends it to `dead` when it sees this node
+            // lost (`Instantiate::owner`).
             let dead = Command::SetState(coolbot::Controllable::Dead);
             if let Err(reason) = self.send(&dead) {
                 tracing::debug!(instance = %self.name, "the earlier generation: {reason}");
@@ -717,6 +717,12 @@ impl RemoteEnd for End {
         }
         self.generation += 1;
         self.built = false;
+        // Until the agent answers, this generation may be built there.
+        self.maybe_built = true;
+        // Nothing asked of this generation yet: its silence starts with its first
+        // question.
+        *lock(&self.shared.unanswered_since) = None;
+        self.times_asked = None;
         self.name = format!("{}-{}", self.root, self.generation);
         self.request.name = self.name.clone();
         *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
@@ -771,17 +777,23 @@ impl RemoteEnd for End {
                         )
                     });
                 }
+                Err(Error::Remote { reason, .. }) if !reason.starts_with("no agent answered") => {
+                    // Refused by the agent: nothing was built.
+                    self.maybe_built = false;
+                    return Err(format!("node `{}`: {reason}", self.on));
+                }
                 Err(error) => return Err(error.to_string()),
             }
         }
-        // Built there: a start that fails on the snapshot below is retried on this
-        // generation (the proxy forgot its view when it asked for it).
+        // Built there. Seen once its snapshot comes: a start that fails on it leaves
+        // the generation unbuilt (the next start builds a new one and sends this one
+        // to `dead`), so that the proxy never runs an instance it cannot see.
         self.instantiated = true;
-        self.built = true;
         self.gone = None;
-        self.times_asked = None;
         *lock(&self.shared.lost) = None;
         let snapshot = self.snapshot()?;
+        self.built = true;
+        self.maybe_built = false;
         self.shared.heard();
         *lock(&self.shared.view) = Some(snapshot);
         self.shared.changed.store(true, Ordering::Release);
@@ -819,7 +831,18 @@ impl RemoteEnd for End {
         if let Some(gone) = self.gone.clone() {
             return Err(gone);
         }
-        self.send(command)
+        self.send(command)?;
+        // The instance answered: it is heard.
+        self.shared.heard();
+        if *command == Command::SetState(coolbot::Controllable::Ready) {
+            // Restarted in place (or stopped): what the view showed before (an error,
+            // `end`) is history; the snapshot shows the state it is in now.
+            if let Ok(snapshot) = self.snapshot() {
+                *lock(&self.shared.view) = Some(snapshot);
+                self.shared.changed.store(true, Ordering::Release);
+            }
+        }
+        Ok(())
     }
 
     fn pump(&mut self) {
@@ -889,7 +912,7 @@ impl RemoteEnd for End {
     }
 
     fn release(&mut self) {
-        if self.built && lock(&self.shared.lost).is_none() && !self.dead() {
+        if (self.built || self.maybe_built) && lock(&self.shared.lost).is_none() && !self.dead() {
             let dead = Command::SetState(coolbot::Controllable::Dead);
             if let Err(reason) = self.send(&dead) {
                 tracing::warn!(instance = %self.name, node = %self.on, "not released: {reason}");

@@ -82,7 +82,10 @@ fn a_flood_of_packets_that_do_not_decode_is_counted_whole_and_logged_once() {
     let monitor = inlet
         .wait_for(|m| m.overflows == FLOOD, PATIENCE)
         .expect("every undecodable packet counted");
-    assert_eq!(monitor.port_overflows, vec![("network".to_owned(), FLOOD)]);
+    assert_eq!(
+        monitor.port_overflows,
+        vec![("network".to_owned(), FLOOD), ("resets".to_owned(), 0)]
+    );
     let logged = lines_with(&["inlet lost a packet", key]);
     assert_eq!(logged.len(), 1, "{logged:#?}");
     assert!(consumer.shutdown().clean());
