@@ -111,6 +111,7 @@ pub mod port;
 pub mod process;
 pub mod ranges;
 pub mod record;
+mod refused;
 pub mod remote;
 mod runner;
 pub mod schema;
@@ -127,7 +128,7 @@ mod watchdog;
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult};
 pub use crate::clock::{Clock, NotSettled, VirtualClock};
-pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, Refused};
+pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::handle::Handle;
 pub use crate::monitor::{
@@ -138,6 +139,7 @@ pub use crate::monitor::{
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,
 };
+pub use crate::refused::Refused;
 pub use crate::spec::{
     AfterSpec, ExceptionSpec, InputKind, InputSpec, OnSpec, OutputKind, OutputSpec, OverflowPolicy,
     PeriodicSpec, PlanStep, Spec, StateSpec, TimingSpec, VarKind, VarSpec,

@@ -13,8 +13,8 @@ use std::fmt::{self, Write as _};
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::Duration;
 
-use crate::commander::Refused;
 use crate::monitor::Command;
+use crate::refused::Refused;
 
 /// The shortest period a command may set: 100 µs (10 kHz).
 pub const MIN_PERIOD: Duration = Duration::from_micros(100);

@@ -20,8 +20,9 @@ use std::time::Instant;
 
 use crate::automaton::{Automaton, Context, Driven, Fault, Section};
 use crate::clock::Clock;
-use crate::commander::{Commander, Refused, StandIns};
+use crate::commander::{Commander, StandIns};
 use crate::monitor::{Command, Monitor};
+use crate::refused::Refused;
 use crate::spec::Spec;
 use crate::system::Component;
 use crate::table::{Controllable, State};

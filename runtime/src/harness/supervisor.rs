@@ -21,10 +21,10 @@
 use std::ops::{Deref, DerefMut};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use crate::commander::Refused;
 use crate::compound::{CompoundBuilder, Stage};
 use crate::monitor::TaskResult;
 use crate::monitor::{Command, Monitor};
+use crate::refused::Refused;
 use crate::table::State;
 use crate::value::Value;
 

@@ -42,6 +42,21 @@ use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
 
+/// The bridges of a node: its constructors of outlets and inlets.
+impl Node {
+    /// An outlet named `name` on bridge key `key`, standing for a remote input of
+    /// `kind` (see the crate documentation and `docs/distribution.md`).
+    pub fn outlet<T>(&self, name: &str, key: &str, kind: InputKind) -> OutletBuilder<'_, T> {
+        OutletBuilder::new(self, name, key, kind)
+    }
+
+    /// An inlet named `name` on bridge key `key`, standing for a remote output of
+    /// `kind`.
+    pub fn inlet<T>(&self, name: &str, key: &str, kind: OutputKind) -> InletBuilder<'_, T> {
+        InletBuilder::new(self, name, key, kind)
+    }
+}
+
 /// How long a pull over the network waits for its answer unless the bridge says
 /// otherwise ([`OutletBuilder::pull`], [`InletBuilder::pull`]).
 pub const DEFAULT_PULL_TIMEOUT: Duration = Duration::from_secs(1);
@@ -607,7 +622,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let numbered = pull.is_none() && kind != InputKind::Poster;
         // A remote placement's keys are new at every placement: no process started
         // again would read their tally.
-        let tallied = numbered && !key.starts_with(crate::place::LINKS);
+        let tallied = numbered && !key.starts_with(keys::LINKS);
         let (tally, ended) = match node.state_directory().filter(|_| tallied) {
             Some(state) => match Tally::claim(state, node.name(), &key, epoch) {
                 Some((tally, ended)) => (Some(Arc::new(tally)), ended),

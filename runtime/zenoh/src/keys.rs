@@ -33,6 +33,11 @@ pub fn node_token(node: &str) -> String {
     format!("{ROOT}/{node}")
 }
 
+/// The prefix of every bridge key of a remote placement (`<node>/<root>/...` follow):
+/// a placement's bridges keep no tally (`crate::tally`), their keys being new at every
+/// placement.
+pub(crate) const LINKS: &str = "coolbot-link/";
+
 /// The monitoring key of the component at `path` on `node`.
 pub fn monitor(node: &str, path: &str) -> String {
     format!("{ROOT}/{node}/{path}/m")

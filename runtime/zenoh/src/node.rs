@@ -8,12 +8,11 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use coolbot::{Command, Handle, InputKind, MonitorEvent, OutputKind, System};
+use coolbot::{Command, Handle, MonitorEvent, System};
 use crossbeam_channel::{RecvTimeoutError, Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
-use crate::bridge::{InletBuilder, OutletBuilder};
 use crate::echo::{ECHO_CAPACITY, Echo};
 use crate::info::ComponentInfo;
 use crate::{Error, keys, limits};
@@ -333,18 +332,6 @@ impl Node {
         lock(&self.echoes).push(echo);
         lock(&self.echoed).insert((component.to_owned(), port.to_owned()));
         Ok(())
-    }
-
-    /// An outlet named `name` on bridge key `key`, standing for a remote input of
-    /// `kind` (see the crate documentation and `docs/distribution.md`).
-    pub fn outlet<T>(&self, name: &str, key: &str, kind: InputKind) -> OutletBuilder<'_, T> {
-        OutletBuilder::new(self, name, key, kind)
-    }
-
-    /// An inlet named `name` on bridge key `key`, standing for a remote output of
-    /// `kind`.
-    pub fn inlet<T>(&self, name: &str, key: &str, kind: OutputKind) -> InletBuilder<'_, T> {
-        InletBuilder::new(self, name, key, kind)
     }
 }
 

@@ -170,9 +170,6 @@ impl Placer {
     }
 }
 
-/// The prefix of every bridge key of a remote placement (`<node>/<root>/...` follow).
-pub(crate) const LINKS: &str = "coolbot-link/";
-
 /// The root of a proxy's names on the instance's node: the placing node, the
 /// compound, the instance, and this proxy's epoch (its creation time), so that a
 /// process started again never meets the names of its previous run. Its bridge keys
@@ -204,7 +201,7 @@ impl coolbot::remote::Placer for Placer {
         })?;
         let root = remote_root(self.node.name(), placement);
         keys::check_name(&root).map_err(|e| e.to_string())?;
-        let base = format!("{LINKS}{}/{root}", placement.node);
+        let base = format!("{}{}/{root}", keys::LINKS, placement.node);
         let bridge = |port: &str| {
             factory.ports.get(port).ok_or_else(|| {
                 format!(
