@@ -3,8 +3,9 @@
 //! Lowering takes a [`Checked`] model, which exists only when the checker found no
 //! error, and looks every name up in it (types, components, interfaces, typed rules).
 //! Everything is lowered from the resolved model alone (`crate::checked::model`):
-//! types and converters here, atomic components in `atomic`, compounds in `compound`;
-//! values are kept as written (`ast::Expr`) and compiled here, never looked up.
+//! types and converters here, atomic components in `atomic`, compounds in `compound`.
+//! Settings come evaluated in the model; constant values (defaults, initial values,
+//! overrides) are kept as written (`ast::Expr`) and compiled here, never looked up.
 //! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
 //! to something harmless (index 0, the type `()`), never a panic.
 
@@ -13,7 +14,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::ast::{self, ExprKind, Prim};
 use crate::check::model::Ty;
 use crate::checked::Checked;
-use crate::checked::model::{ComponentKind, Instance, Link, Packet, TypeDef, VarKind};
+use crate::checked::model::{ComponentKind, Duration, Instance, Link, Packet, TypeDef, VarKind};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -100,20 +101,16 @@ pub fn package_name(name: &str) -> String {
 
 /// Nanoseconds of a duration or frequency expression.
 fn duration_ns(expr: &ast::Expr) -> Option<u64> {
-    match &expr.kind {
-        ExprKind::Duration(ns) => Some(u64::try_from(*ns).unwrap_or(u64::MAX)),
-        ExprKind::Frequency(hz) if *hz > 0.0 => Some((1e9 / hz).round() as u64),
-        _ => None,
-    }
+    Duration::of(expr).map(|duration| duration.nanos)
 }
 
 fn duration_rust(ns: u64) -> String {
     format!("::std::time::Duration::from_nanos({ns})")
 }
 
-fn option_duration(expr: Option<&ast::Expr>) -> String {
-    match expr.and_then(duration_ns) {
-        Some(ns) => format!("Some({})", duration_rust(ns)),
+fn option_duration(duration: Option<&Duration>) -> String {
+    match duration {
+        Some(duration) => format!("Some({})", duration_rust(duration.nanos)),
         None => "None".to_owned(),
     }
 }
@@ -544,14 +541,6 @@ impl Lowerer<'_> {
             }
         }
         overrides
-    }
-}
-
-fn int_value(expr: &ast::Expr) -> Option<i64> {
-    match &expr.kind {
-        ExprKind::Int(n) => i64::try_from(*n).ok(),
-        ExprKind::Unary(ast::UnaryOp::Neg, inner) => int_value(inner).map(|n| -n),
-        _ => None,
     }
 }
 
