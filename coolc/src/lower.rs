@@ -14,7 +14,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::ast::{self, ExprKind, Prim};
 use crate::check::model::Ty;
 use crate::checked::Checked;
-use crate::checked::model::{ComponentKind, Duration, Instance, Link, Packet, TypeDef, VarKind};
+use crate::checked::model::{
+    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, VarKind,
+};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -557,43 +559,35 @@ fn toml_key(name: &str) -> String {
     }
 }
 
-fn toml_value(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Str(s) => ir::toml_string(s),
-        ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Int(n) => n.to_string(),
-        ExprKind::Float(x) => format!("{x:?}"),
-        ExprKind::List(items) => {
+fn toml_value(value: &TableValue) -> String {
+    match value {
+        TableValue::Str(s) => ir::toml_string(s),
+        TableValue::Bool(b) => b.to_string(),
+        TableValue::Int(n) => n.to_string(),
+        TableValue::Float(x) => format!("{x:?}"),
+        TableValue::List(items) => {
             format!(
                 "[{}]",
                 items.iter().map(toml_value).collect::<Vec<_>>().join(", ")
             )
         }
-        ExprKind::Path(parts) => ir::toml_string(
-            &parts
-                .iter()
-                .map(|p| p.name.as_str())
-                .collect::<Vec<_>>()
-                .join("."),
-        ),
-        _ => "\"\"".to_owned(),
     }
 }
 
-fn crate_spec(spec: &ast::CrateSpec) -> String {
+fn crate_spec(spec: &CrateSpec) -> String {
     match spec {
-        ast::CrateSpec::Version(v) => ir::toml_string(&v.value),
-        ast::CrateSpec::Table(entries, _) => {
+        CrateSpec::Version(v) => ir::toml_string(v),
+        CrateSpec::Table(entries) => {
             let entries: Vec<String> = entries
                 .iter()
-                .map(|e| {
+                .map(|(key, value)| {
                     // `.cool` names cannot hold `-`: Cargo's `default-features` is
                     // written `default_features`, which edition 2024 rejects as is.
-                    let key = match e.key.name.as_str() {
+                    let key = match key.as_str() {
                         "default_features" => "default-features",
                         other => other,
                     };
-                    format!("{} = {}", toml_key(key), toml_value(&e.value))
+                    format!("{} = {}", toml_key(key), toml_value(value))
                 })
                 .collect();
             format!("{{ {} }}", entries.join(", "))

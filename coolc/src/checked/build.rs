@@ -7,10 +7,10 @@
 use std::collections::BTreeMap;
 
 use super::model::{
-    Automaton, Component, Connection, Converter, Declared, Duration, Enum, ErrorPolicy, Exception,
-    Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output, OutputKind,
-    OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Recovery, Redundant, Ref, Restart,
-    State, StateMember, TimingEntry, TypeDef, Variable,
+    Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
+    Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
+    OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Recovery, Redundant,
+    Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -240,7 +240,17 @@ impl<'a> Builder<'a> {
                 ast::Member::Link(link) => out.links.push(match &link.kind {
                     ast::LinkKind::Crate { name, spec } => Link::Crate {
                         name: name.value.clone(),
-                        spec: spec.clone(),
+                        spec: match spec {
+                            ast::CrateSpec::Version(version) => {
+                                CrateSpec::Version(version.value.clone())
+                            }
+                            ast::CrateSpec::Table(entries, _) => CrateSpec::Table(
+                                entries
+                                    .iter()
+                                    .map(|e| (e.key.name.clone(), TableValue::of(&e.value)))
+                                    .collect(),
+                            ),
+                        },
                     },
                     ast::LinkKind::System { name } => Link::System(name.value.clone()),
                 }),
@@ -688,10 +698,13 @@ mod tests {
 
     #[test]
     fn settings_are_evaluated_once_in_the_model() {
-        use crate::checked::model::{Duration, ErrorPolicy, PlanStep, TimingEntry, Written};
+        use crate::checked::model::{
+            CrateSpec, Duration, ErrorPolicy, Link, PlanStep, TableValue, TimingEntry, Written,
+        };
         let checked = crate::analyze_text(
             "t.cool",
             "atomic W {\n\
+                 link crate \"x\" = { version = \"1\", features = [\"a\"], default_features = false };\n\
                  input q: fifo<u8>(2, block);\n\
                  input r: fifo<u8>(2);\n\
                  timing { period 100Hz..20ms; priority 7; }\n\
@@ -750,6 +763,20 @@ mod tests {
             members[1],
             StateMember::After { delay, .. } if delay == ns(1_000_000_000)
         ));
+        assert_eq!(
+            w.links,
+            [Link::Crate {
+                name: "x".to_owned(),
+                spec: CrateSpec::Table(vec![
+                    ("version".to_owned(), TableValue::Str("1".to_owned())),
+                    (
+                        "features".to_owned(),
+                        TableValue::List(vec![TableValue::Str("a".to_owned())])
+                    ),
+                    ("default_features".to_owned(), TableValue::Bool(false)),
+                ])
+            }]
+        );
         let c = checked.component("C").expect("C");
         assert_eq!(c.instances[0].on_error, Some(ErrorPolicy::Ignore));
         assert_eq!(c.policies[0].policy, ErrorPolicy::Ignore);

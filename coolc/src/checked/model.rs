@@ -302,11 +302,59 @@ pub enum Link {
     Crate {
         /// The crate's name.
         name: String,
-        /// Its version or table, as written.
-        spec: ast::CrateSpec,
+        /// Its version or table.
+        spec: CrateSpec,
     },
     /// `link system "name";`
     System(String),
+}
+
+/// The right-hand side of `link crate "name" = ...`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CrateSpec {
+    /// `"4"`: a version requirement.
+    Version(String),
+    /// `{ version = "0.33", features = ["x"] }`: the keys as written, in order.
+    Table(Vec<(String, TableValue)>),
+}
+
+/// A value in a crate table.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableValue {
+    /// A string (a dotted name is its text).
+    Str(String),
+    /// `true` or `false`.
+    Bool(bool),
+    /// An integer.
+    Int(u64),
+    /// A number with a point.
+    Float(f64),
+    /// `[a, b]`
+    List(Vec<TableValue>),
+}
+
+impl TableValue {
+    /// The value `expr` says (an empty string for what a table cannot hold, which
+    /// the checker reports).
+    pub fn of(expr: &ast::Expr) -> TableValue {
+        match &expr.kind {
+            ast::ExprKind::Str(text) => TableValue::Str(text.clone()),
+            ast::ExprKind::Bool(value) => TableValue::Bool(*value),
+            ast::ExprKind::Int(value) => TableValue::Int(*value),
+            ast::ExprKind::Float(value) => TableValue::Float(*value),
+            ast::ExprKind::List(items) => {
+                TableValue::List(items.iter().map(TableValue::of).collect())
+            }
+            ast::ExprKind::Path(parts) => TableValue::Str(
+                parts
+                    .iter()
+                    .map(|part| part.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join("."),
+            ),
+            _ => TableValue::Str(String::new()),
+        }
+    }
 }
 
 /// `exception name ["description"] [{ plan }];`
