@@ -10,9 +10,9 @@
 //! and what the checker resolved: every component's interface ([`Checked::interface`]:
 //! ports with their kinds and packet types through exports, variables with their
 //! types through mappings, configuration, states, quality levels) and every `when`
-//! rule typed by the one rule typer (`check::rules`). `lower` and `diagram` read only
-//! this model; what they keep as written is values ([`crate::ast::Expr`]), never a
-//! name to look up.
+//! rule typed by the one rule typer (`check::rules`), every value evaluated. `lower`
+//! and `diagram` read only this model; what they keep as written is `when` conditions
+//! ([`crate::ast::Expr`], beside their typed tree), never a name to look up.
 
 mod build;
 pub mod model;

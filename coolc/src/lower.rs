@@ -4,18 +4,18 @@
 //! error, and looks every name up in it (types, components, interfaces, typed rules).
 //! Everything is lowered from the resolved model alone (`crate::checked::model`):
 //! types and converters here, atomic components in `atomic`, compounds in `compound`.
-//! Settings come evaluated in the model; constant values (defaults, initial values,
-//! overrides) are kept as written (`ast::Expr`) and compiled here, never looked up.
+//! Values come evaluated in the model; only `when` conditions are compiled here from
+//! their written form and typed tree (`compound/rules.rs`).
 //! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
 //! to something harmless (index 0, the type `()`), never a panic.
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::ast::{self, ExprKind, Prim};
+use crate::ast::{self, Prim};
 use crate::check::model::Ty;
 use crate::checked::Checked;
 use crate::checked::model::{
-    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, VarKind,
+    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, Value, VarKind,
 };
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
@@ -101,7 +101,7 @@ pub fn package_name(name: &str) -> String {
     }
 }
 
-/// Nanoseconds of a duration or frequency expression.
+/// Nanoseconds of a duration or frequency in a `when` condition.
 fn duration_ns(expr: &ast::Expr) -> Option<u64> {
     Duration::of(expr).map(|duration| duration.nanos)
 }
@@ -263,9 +263,9 @@ impl<'a> Lowerer<'a> {
 
     /// The Rust expression of a field default: the written value, or the type's
     /// default.
-    fn field_default(&self, field_ty: &Ty, value: Option<&ast::Expr>, prefix: &str) -> String {
+    fn field_default(&self, field_ty: &Ty, value: Option<&Value>, prefix: &str) -> String {
         match value {
-            Some(expr) => self.value(expr, Some(field_ty), prefix),
+            Some(value) => self.value(value, Some(field_ty), prefix),
             None => self
                 .default_of(field_ty, &mut BTreeSet::new())
                 .unwrap_or_else(|| DEFAULT.to_owned()),
@@ -273,50 +273,44 @@ impl<'a> Lowerer<'a> {
     }
 
     /// A Rust expression for a constant `.cool` value of type `ty`.
-    fn value(&self, expr: &ast::Expr, ty: Option<&Ty>, prefix: &str) -> String {
+    fn value(&self, value: &Value, ty: Option<&Ty>, prefix: &str) -> String {
         if let Some(Ty::Optional(inner)) = ty {
-            return match &expr.kind {
-                ExprKind::None => "::core::option::Option::None".to_owned(),
+            return match value {
+                Value::None => "::core::option::Option::None".to_owned(),
                 _ => format!(
                     "::core::option::Option::Some({})",
-                    self.value(expr, Some(inner), prefix)
+                    self.value(value, Some(inner), prefix)
                 ),
             };
         }
-        match &expr.kind {
-            ExprKind::Int(n) => match ty {
+        match value {
+            Value::Int(n) => match ty {
                 Some(Ty::Float(_)) => format!("{n}.0"),
-                Some(Ty::Duration) => duration_rust(*n),
+                Some(Ty::Duration) => duration_rust(u64::try_from(*n).unwrap_or_default()),
                 _ => n.to_string(),
             },
-            ExprKind::Float(x) => format!("{x:?}"),
-            ExprKind::Str(s) => {
+            Value::Float(x) => format!("{x:?}"),
+            Value::Str(s) => {
                 format!("::std::string::String::from({})", ident::string_literal(s))
             }
-            ExprKind::Bool(b) => b.to_string(),
-            ExprKind::Duration(_) | ExprKind::Frequency(_) => {
-                duration_rust(duration_ns(expr).unwrap_or_default())
+            Value::Bool(b) => b.to_string(),
+            Value::Duration(duration) => duration_rust(duration.nanos),
+            Value::Enum { ty, variant } => {
+                format!("{prefix}{}::{}", ident::camel(ty), ident::camel(variant))
             }
-            ExprKind::EnumValue { enum_name, variant } => {
-                format!(
-                    "{prefix}{}::{}",
-                    ident::camel(&enum_name.name),
-                    ident::camel(&variant.name)
-                )
-            }
-            ExprKind::List(items) => {
+            Value::List(items) => {
                 let inner = match ty {
                     Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let items: Vec<String> =
-                    items.iter().map(|e| self.value(e, inner, prefix)).collect();
+                    items.iter().map(|v| self.value(v, inner, prefix)).collect();
                 match ty {
                     Some(Ty::Array(..)) => format!("[{}]", items.join(", ")),
                     _ => format!("::std::vec![{}]", items.join(", ")),
                 }
             }
-            ExprKind::Repeat(item, n) => {
+            Value::Repeat(item, n) => {
                 let inner = match ty {
                     Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
@@ -324,24 +318,15 @@ impl<'a> Lowerer<'a> {
                 let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
                 match ty {
-                    Some(Ty::List(_)) => format!("::std::vec![{item}; {}]", n.value),
+                    Some(Ty::List(_)) => format!("::std::vec![{item}; {n}]"),
                     // `[value; n]` needs a `Copy` value.
-                    _ if copy => format!("[{item}; {}]", n.value),
+                    _ if copy => format!("[{item}; {n}]"),
                     _ => format!("::core::array::from_fn(|_| {item})"),
                 }
             }
-            ExprKind::None => "::core::option::Option::None".to_owned(),
-            ExprKind::Unary(ast::UnaryOp::Neg, inner) => {
-                format!("-{}", self.value(inner, ty, prefix))
-            }
-            ExprKind::Unary(ast::UnaryOp::Not, inner) => {
-                format!("!{}", self.value(inner, ty, prefix))
-            }
-            // Paths and comparisons are not constant values; the checker rejects them
-            // as defaults.
-            ExprKind::Path(_) | ExprKind::Binary(..) => {
-                "::core::default::Default::default()".to_owned()
-            }
+            Value::None => "::core::option::Option::None".to_owned(),
+            // Not a constant: the checker rejects it.
+            Value::Invalid => DEFAULT.to_owned(),
         }
     }
 
@@ -360,7 +345,7 @@ impl<'a> Lowerer<'a> {
         doc: &[String],
         name: &str,
         ty: &Ty,
-        default: Option<&ast::Expr>,
+        default: Option<&Value>,
         prefix: &str,
     ) -> ir::Field {
         ir::Field {
@@ -671,7 +656,7 @@ mod tests {
     #[test]
     fn defaults_follow_the_declared_type() {
         let krate = lower_text(
-            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2] }",
+            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2], f: f32 = -2, g: i8 = -3 }",
         );
         let defaults: Vec<&str> = krate.types.packets[0]
             .fields
@@ -685,7 +670,9 @@ mod tests {
                 "::std::time::Duration::from_nanos(10000000)",
                 "[true; 2]",
                 "::core::option::Option::Some(3)",
-                "::std::vec![1, 2]"
+                "::std::vec![1, 2]",
+                "-2.0",
+                "-3"
             ]
         );
     }

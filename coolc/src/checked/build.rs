@@ -10,7 +10,7 @@ use super::model::{
     Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
     Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
     OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Recovery, Redundant,
-    Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Variable,
+    Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -71,7 +71,7 @@ pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, 
                                 doc: field.doc.0.clone(),
                                 name: field.name.name.clone(),
                                 ty: model.ty(&field.ty),
-                                default: field.default.clone(),
+                                default: field.default.as_ref().map(Value::of),
                             })
                             .collect(),
                     }));
@@ -202,7 +202,11 @@ impl<'a> Builder<'a> {
                     name: variable.name.name.clone(),
                     kind: variable.kind,
                     written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
-                    value: variable.value.clone(),
+                    value: variable
+                        .value
+                        .as_ref()
+                        .filter(|_| variable.ty.is_some())
+                        .map(Value::of),
                     mapping: match (&variable.ty, variable.value.as_ref().map(|v| &v.kind)) {
                         (None, Some(ast::ExprKind::Path(segments))) => {
                             Some(segments.iter().map(|s| s.name.clone()).collect())
@@ -226,7 +230,7 @@ impl<'a> Builder<'a> {
                                 doc: field.doc.0.clone(),
                                 name: field.name.name.clone(),
                                 ty: self.model.ty(&field.ty),
-                                default: field.default.clone(),
+                                default: field.default.as_ref().map(Value::of),
                             })
                             .collect(),
                     );
@@ -289,7 +293,7 @@ impl<'a> Builder<'a> {
                         .iter()
                         .map(|o| Override {
                             name: o.name.name.clone(),
-                            value: o.value.clone(),
+                            value: Value::of(&o.value),
                         })
                         .collect(),
                     timing: instance
@@ -699,7 +703,8 @@ mod tests {
     #[test]
     fn settings_are_evaluated_once_in_the_model() {
         use crate::checked::model::{
-            CrateSpec, Duration, ErrorPolicy, Link, PlanStep, TableValue, TimingEntry, Written,
+            CrateSpec, Duration, ErrorPolicy, Link, PlanStep, TableValue, TimingEntry, Value,
+            Written,
         };
         let checked = crate::analyze_text(
             "t.cool",
@@ -707,12 +712,13 @@ mod tests {
                  link crate \"x\" = { version = \"1\", features = [\"a\"], default_features = false };\n\
                  input q: fifo<u8>(2, block);\n\
                  input r: fifo<u8>(2);\n\
+                 configuration { gain: f64 = -2; offsets: [f32; 2] = [-0.5; 2]; }\n\
                  timing { period 100Hz..20ms; priority 7; }\n\
                  exception slip { retry 2 every 250us; }\n\
                  automaton { initial s; state s { periodic 2kHz; after 1s -> s; } }\n\
              }\n\
              compound C {\n\
-                 instance w: W;\n\
+                 instance w: W { gain = 1.5; }\n\
                  on error w: ignore;\n\
                  restart { limit 4 in 1min; backoff 20ms..3s; }\n\
                  recovery { deadline 2s; }\n\
@@ -777,7 +783,21 @@ mod tests {
                 ])
             }]
         );
+        let defaults: Vec<_> = w
+            .configuration
+            .iter()
+            .flatten()
+            .map(|f| f.default.clone())
+            .collect();
+        assert_eq!(
+            defaults,
+            [
+                Some(Value::Int(-2)),
+                Some(Value::Repeat(Box::new(Value::Float(-0.5)), 2))
+            ]
+        );
         let c = checked.component("C").expect("C");
+        assert_eq!(c.instances[0].overrides[0].value, Value::Float(1.5));
         assert_eq!(c.instances[0].on_error, Some(ErrorPolicy::Ignore));
         assert_eq!(c.policies[0].policy, ErrorPolicy::Ignore);
         let restart = c.restart.as_ref().expect("restart");

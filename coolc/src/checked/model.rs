@@ -7,10 +7,9 @@
 //! of the input it feeds, a mapped variable carries the type of what it maps, and a
 //! `when` condition carries its type from the one rule typer. Every setting is
 //! evaluated once, here: durations and periods are [`Duration`]s, priorities and
-//! counts integers, fifo and error policies enums. What stays as written is constant
-//! values ([`ast::Expr`]: configuration defaults, initial values and overrides,
-//! typed by the field they fill, and `when` conditions beside their typed tree) and
-//! names, as strings.
+//! counts integers, fifo and error policies enums, constant values (defaults,
+//! initial values, overrides) [`Value`]s. What stays as written is `when` conditions
+//! ([`ast::Expr`], beside their typed tree) and names, as strings.
 //!
 //! Members of one kind keep their source order; members of different kinds are
 //! held apart (a checked component has at most one `timing`, `configuration`,
@@ -208,8 +207,8 @@ pub struct Variable {
     pub kind: VarKind,
     /// The type as written (`None` for a mapped variable).
     pub written: Option<Ty>,
-    /// The initial value, or for a mapped variable the mapping (`motion.odometry`).
-    pub value: Option<ast::Expr>,
+    /// The initial value, when written (`None` for a mapped variable).
+    pub value: Option<Value>,
     /// A mapped variable's path (`["motion", "odometry"]`).
     pub mapping: Option<Vec<String>>,
     /// The type: as written, or that of the instance variable a mapping names
@@ -230,7 +229,7 @@ pub struct Field {
     /// Its type.
     pub ty: Ty,
     /// Its default, when written.
-    pub default: Option<ast::Expr>,
+    pub default: Option<Value>,
 }
 
 /// One entry of a `timing` block.
@@ -458,8 +457,8 @@ pub struct Instance {
 pub struct Override {
     /// The configuration field or controllable variable.
     pub name: String,
-    /// The value as written.
-    pub value: ast::Expr,
+    /// The value.
+    pub value: Value,
 }
 
 /// `redundant a, b;`
@@ -578,6 +577,70 @@ impl Duration {
                 written: Written::Hertz(hertz),
             }),
             _ => None,
+        }
+    }
+}
+
+/// A constant value: a default, an initial value or an override. Its type is that of
+/// the field or variable it fills (an integer filling a float stays an `Int`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// `true` or `false`.
+    Bool(bool),
+    /// An integer, its sign applied.
+    Int(i128),
+    /// A number with a point, its sign applied.
+    Float(f64),
+    /// A string.
+    Str(String),
+    /// A duration.
+    Duration(Duration),
+    /// `Enum::Variant`
+    Enum {
+        /// The enum's name.
+        ty: String,
+        /// The variant's name.
+        variant: String,
+    },
+    /// `[a, b]`: the items of a list or an array.
+    List(Vec<Value>),
+    /// `[value; n]`
+    Repeat(Box<Value>, u64),
+    /// `none`
+    None,
+    /// Not a constant (a path, an operator): what the checker rejects, found only in
+    /// a model built from input with errors.
+    Invalid,
+}
+
+impl Value {
+    /// The value `expr` says.
+    pub fn of(expr: &ast::Expr) -> Value {
+        match &expr.kind {
+            ast::ExprKind::Bool(value) => Value::Bool(*value),
+            ast::ExprKind::Int(value) => Value::Int((*value).into()),
+            ast::ExprKind::Float(value) => Value::Float(*value),
+            ast::ExprKind::Str(text) => Value::Str(text.clone()),
+            ast::ExprKind::Duration(_) | ast::ExprKind::Frequency(_) => {
+                Duration::of(expr).map_or(Value::Invalid, Value::Duration)
+            }
+            ast::ExprKind::EnumValue { enum_name, variant } => Value::Enum {
+                ty: enum_name.name.clone(),
+                variant: variant.name.clone(),
+            },
+            ast::ExprKind::List(items) => Value::List(items.iter().map(Value::of).collect()),
+            ast::ExprKind::Repeat(item, count) => {
+                Value::Repeat(Box::new(Value::of(item)), count.value)
+            }
+            ast::ExprKind::None => Value::None,
+            ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) => match Value::of(inner) {
+                Value::Int(value) => Value::Int(-value),
+                Value::Float(value) => Value::Float(-value),
+                _ => Value::Invalid,
+            },
+            ast::ExprKind::Unary(ast::UnaryOp::Not, _)
+            | ast::ExprKind::Binary(..)
+            | ast::ExprKind::Path(_) => Value::Invalid,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! print as written through their `Display`).
 
 use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
-use crate::checked::model::{Declared, Duration, InputKind, OutputKind, PortRef, Written};
+use crate::checked::model::{Declared, Duration, InputKind, OutputKind, PortRef, Value, Written};
 
 /// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
 pub fn input_kind(input: &Declared<InputKind>) -> String {
@@ -109,6 +109,25 @@ fn string(text: &str) -> String {
     }
     out.push('"');
     out
+}
+
+/// A constant value as `.cool` writes it.
+pub fn value(value: &Value) -> String {
+    match value {
+        Value::Bool(value) => value.to_string(),
+        Value::Int(value) => value.to_string(),
+        Value::Float(value) => float(*value),
+        Value::Str(text) => string(text),
+        Value::Duration(duration) => time(duration),
+        Value::Enum { ty, variant } => format!("{ty}::{variant}"),
+        Value::List(items) => {
+            let items: Vec<String> = items.iter().map(self::value).collect();
+            format!("[{}]", items.join(", "))
+        }
+        Value::Repeat(item, count) => format!("[{}; {count}]", self::value(item)),
+        Value::None => "none".to_owned(),
+        Value::Invalid => "?".to_owned(),
+    }
 }
 
 /// How tightly an expression binds (higher binds tighter).

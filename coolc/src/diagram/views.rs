@@ -63,11 +63,11 @@ impl<'a> Lookup<'a> {
             .variables
             .iter()
             .filter(|variable| variable.kind == kind)
-            .map(|variable| match (&variable.written, &variable.value) {
+            .map(|variable| match (&variable.written, &variable.mapping) {
                 (Some(ty), _) => format!("{}: {ty}", variable.name),
-                (None, Some(value)) => match &variable.ty {
-                    Some(ty) => format!("{}: {ty} = {}", variable.name, text::expr(value)),
-                    None => format!("{} = {}", variable.name, text::expr(value)),
+                (None, Some(path)) => match &variable.ty {
+                    Some(ty) => format!("{}: {ty} = {}", variable.name, path.join(".")),
+                    None => format!("{} = {}", variable.name, path.join(".")),
                 },
                 (None, None) => variable.name.clone(),
             })
@@ -683,7 +683,9 @@ fn variable_line(variable: &Variable) -> String {
         line.push_str(&format!(": {ty}"));
     }
     if let Some(value) = &variable.value {
-        line.push_str(&format!(" = {}", text::expr(value)));
+        line.push_str(&format!(" = {}", text::value(value)));
+    } else if let Some(path) = &variable.mapping {
+        line.push_str(&format!(" = {}", path.join(".")));
     }
     line
 }
