@@ -144,6 +144,11 @@ impl<'a> Builder<'a> {
             connections: Vec::new(),
             recovery: None,
             restart: None,
+            adaptation: self
+                .interfaces
+                .get(&component.name.name)
+                .map(|interface| interface.adaptation.clone())
+                .unwrap_or_default(),
         };
         let policies: BTreeMap<&str, ErrorPolicy> = component
             .members
@@ -714,6 +719,7 @@ mod tests {
                  input r: fifo<u8>(2);\n\
                  configuration { gain: f64 = -2; offsets: [f32; 2] = [-0.5; 2]; }\n\
                  timing { period 100Hz..20ms; priority 7; }\n\
+                 adaptation { window 8; }\n\
                  exception slip { retry 2 every 250us; }\n\
                  automaton { initial s; state s { periodic 2kHz; after 1s -> s; } }\n\
              }\n\
@@ -796,7 +802,9 @@ mod tests {
                 Some(Value::Repeat(Box::new(Value::Float(-0.5)), 2))
             ]
         );
+        assert_eq!(w.adaptation.window, Some(8));
         let c = checked.component("C").expect("C");
+        assert_eq!(c.adaptation, crate::check::model::Tuning::default());
         assert_eq!(c.instances[0].overrides[0].value, Value::Float(1.5));
         assert_eq!(c.instances[0].on_error, Some(ErrorPolicy::Ignore));
         assert_eq!(c.policies[0].policy, ErrorPolicy::Ignore);

@@ -63,6 +63,8 @@ pub struct Component {
     pub recovery: Option<Recovery>,
     /// The `restart { ... }` block.
     pub restart: Option<Restart>,
+    /// Its own `adaptation { ... }` tuning (the default when it has none).
+    pub adaptation: Tuning,
 }
 
 /// What an input port is, once exports are followed to a declared port.

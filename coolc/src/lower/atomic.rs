@@ -175,10 +175,7 @@ impl<'a> Lowerer<'a> {
             initial,
             exceptions,
             timing: self.timing(c.timing.as_deref()),
-            adaptation: self
-                .checked
-                .interface(&c.name)
-                .and_then(|interface| adaptation::written_fields(&interface.adaptation)),
+            adaptation: adaptation::written_fields(&c.adaptation),
             methods,
             section_arms,
             choose_arms,

@@ -31,10 +31,15 @@ type MappedControllable<'m> = (&'m str, &'m str, &'m str);
 
 impl<'a> Lowerer<'a> {
     /// The type of variable `name` of component `component` (through mapped
-    /// variables of nested compounds), from the component's interface.
+    /// variables of nested compounds).
     fn variable_type(&self, component: &str, name: &str) -> Option<Ty> {
-        let variable = self.checked.interface(component)?.variables.get(name)?;
-        (variable.ty != Ty::Unknown).then(|| variable.ty.clone())
+        self.checked
+            .component(component)?
+            .variables
+            .iter()
+            .find(|v| v.name == name)?
+            .ty
+            .clone()
     }
 
     /// Whether compound `c` connects through a converter, itself or in a compound it
@@ -567,10 +572,7 @@ impl<'a> Lowerer<'a> {
 
     /// The builder steps of a compound's own `adaptation { ... }`.
     fn compound_adaptation(&self, c: &Component) -> Vec<String> {
-        let Some(interface) = self.checked.interface(&c.name) else {
-            return Vec::new();
-        };
-        let tuning = &interface.adaptation;
+        let tuning = &c.adaptation;
         let config = adaptation::config(&Tuning {
             selector: None,
             ..tuning.clone()
