@@ -7,12 +7,12 @@
 //! remember. It holds no syntax tree: [`model`] is every component, packet, enum,
 //! extern packet and converter resolved ([`Checked::components`],
 //! [`Checked::types`], [`Checked::converters`]), built once by `build` from the trees
-//! and what the checker resolved: every component's interface ([`Checked::interface`]:
-//! ports with their kinds and packet types through exports, variables with their
-//! types through mappings, configuration, states, quality levels) and every `when`
-//! rule typed by the one rule typer (`check::rules`). `lower` and `diagram` read only
-//! this model; what they keep as written is values ([`crate::ast::Expr`]), never a
-//! name to look up.
+//! and what the checker resolved (every component's interface: ports with their kinds
+//! and packet types through exports, variables with their types through mappings,
+//! its adaptation tuning; every `when` rule typed by the one rule typer,
+//! `check::rules`), every value evaluated. `lower`
+//! and `diagram` read only this model; what they keep as written is `when` conditions
+//! ([`crate::ast::Expr`], beside their typed tree), never a name to look up.
 
 mod build;
 pub mod model;
@@ -21,7 +21,6 @@ use std::collections::BTreeMap;
 
 use crate::ast;
 use crate::check::Resolved;
-use crate::check::model::Interface;
 use crate::diagnostics::{self, Diagnostic, RenderOptions};
 use crate::source::SourceMap;
 
@@ -31,7 +30,6 @@ use crate::source::SourceMap;
 pub struct Checked {
     sources: SourceMap,
     warnings: Vec<Diagnostic>,
-    resolved: Resolved,
     /// Every component, resolved, in source order.
     components: Vec<model::Component>,
     /// Index into `components` by name.
@@ -60,7 +58,6 @@ impl Checked {
         Checked {
             sources,
             warnings,
-            resolved,
             components,
             by_name,
             types,
@@ -109,12 +106,6 @@ impl Checked {
     pub fn render(&self, options: RenderOptions) -> String {
         diagnostics::render(&self.sources, &self.warnings, options)
     }
-
-    /// The interface of component `name`: what it offers to the compounds that
-    /// nest it.
-    pub fn interface(&self, name: &str) -> Option<&Interface> {
-        self.resolved.interfaces.get(name)
-    }
 }
 
 #[cfg(test)]
@@ -152,8 +143,8 @@ mod tests {
         assert_eq!(types, [&RTy::Optional(Box::new(RTy::Float)), &RTy::Float]);
         assert!(
             checked
-                .interface("A")
-                .is_some_and(|a| a.variables.contains_key("level"))
+                .component("A")
+                .is_some_and(|a| a.variables.iter().any(|v| v.name == "level"))
         );
         assert!(checked.component("A").is_some() && checked.type_def("A").is_none());
     }

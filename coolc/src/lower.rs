@@ -3,17 +3,20 @@
 //! Lowering takes a [`Checked`] model, which exists only when the checker found no
 //! error, and looks every name up in it (types, components, interfaces, typed rules).
 //! Everything is lowered from the resolved model alone (`crate::checked::model`):
-//! types and converters here, atomic components in `atomic`, compounds in `compound`;
-//! values are kept as written (`ast::Expr`) and compiled here, never looked up.
+//! types and converters here, atomic components in `atomic`, compounds in `compound`.
+//! Values come evaluated in the model; only `when` conditions are compiled here from
+//! their written form and typed tree (`compound/rules.rs`).
 //! It never fails: a lookup that finds nothing (impossible in a checked model) lowers
 //! to something harmless (index 0, the type `()`), never a panic.
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::ast::{self, ExprKind, Prim};
+use crate::ast::{self, Prim};
 use crate::check::model::Ty;
 use crate::checked::Checked;
-use crate::checked::model::{ComponentKind, Instance, Link, Packet, TypeDef, VarKind};
+use crate::checked::model::{
+    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, Value, VarKind,
+};
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
 
@@ -98,22 +101,18 @@ pub fn package_name(name: &str) -> String {
     }
 }
 
-/// Nanoseconds of a duration or frequency expression.
+/// Nanoseconds of a duration or frequency in a `when` condition.
 fn duration_ns(expr: &ast::Expr) -> Option<u64> {
-    match &expr.kind {
-        ExprKind::Duration(ns) => Some(u64::try_from(*ns).unwrap_or(u64::MAX)),
-        ExprKind::Frequency(hz) if *hz > 0.0 => Some((1e9 / hz).round() as u64),
-        _ => None,
-    }
+    Duration::of(expr).map(|duration| duration.nanos)
 }
 
 fn duration_rust(ns: u64) -> String {
     format!("::std::time::Duration::from_nanos({ns})")
 }
 
-fn option_duration(expr: Option<&ast::Expr>) -> String {
-    match expr.and_then(duration_ns) {
-        Some(ns) => format!("Some({})", duration_rust(ns)),
+fn option_duration(duration: Option<&Duration>) -> String {
+    match duration {
+        Some(duration) => format!("Some({})", duration_rust(duration.nanos)),
         None => "None".to_owned(),
     }
 }
@@ -264,9 +263,9 @@ impl<'a> Lowerer<'a> {
 
     /// The Rust expression of a field default: the written value, or the type's
     /// default.
-    fn field_default(&self, field_ty: &Ty, value: Option<&ast::Expr>, prefix: &str) -> String {
+    fn field_default(&self, field_ty: &Ty, value: Option<&Value>, prefix: &str) -> String {
         match value {
-            Some(expr) => self.value(expr, Some(field_ty), prefix),
+            Some(value) => self.value(value, Some(field_ty), prefix),
             None => self
                 .default_of(field_ty, &mut BTreeSet::new())
                 .unwrap_or_else(|| DEFAULT.to_owned()),
@@ -274,50 +273,44 @@ impl<'a> Lowerer<'a> {
     }
 
     /// A Rust expression for a constant `.cool` value of type `ty`.
-    fn value(&self, expr: &ast::Expr, ty: Option<&Ty>, prefix: &str) -> String {
+    fn value(&self, value: &Value, ty: Option<&Ty>, prefix: &str) -> String {
         if let Some(Ty::Optional(inner)) = ty {
-            return match &expr.kind {
-                ExprKind::None => "::core::option::Option::None".to_owned(),
+            return match value {
+                Value::None => "::core::option::Option::None".to_owned(),
                 _ => format!(
                     "::core::option::Option::Some({})",
-                    self.value(expr, Some(inner), prefix)
+                    self.value(value, Some(inner), prefix)
                 ),
             };
         }
-        match &expr.kind {
-            ExprKind::Int(n) => match ty {
+        match value {
+            Value::Int(n) => match ty {
                 Some(Ty::Float(_)) => format!("{n}.0"),
-                Some(Ty::Duration) => duration_rust(*n),
+                Some(Ty::Duration) => duration_rust(u64::try_from(*n).unwrap_or_default()),
                 _ => n.to_string(),
             },
-            ExprKind::Float(x) => format!("{x:?}"),
-            ExprKind::Str(s) => {
+            Value::Float(x) => format!("{x:?}"),
+            Value::Str(s) => {
                 format!("::std::string::String::from({})", ident::string_literal(s))
             }
-            ExprKind::Bool(b) => b.to_string(),
-            ExprKind::Duration(_) | ExprKind::Frequency(_) => {
-                duration_rust(duration_ns(expr).unwrap_or_default())
+            Value::Bool(b) => b.to_string(),
+            Value::Duration(duration) => duration_rust(duration.nanos),
+            Value::Enum { ty, variant } => {
+                format!("{prefix}{}::{}", ident::camel(ty), ident::camel(variant))
             }
-            ExprKind::EnumValue { enum_name, variant } => {
-                format!(
-                    "{prefix}{}::{}",
-                    ident::camel(&enum_name.name),
-                    ident::camel(&variant.name)
-                )
-            }
-            ExprKind::List(items) => {
+            Value::List(items) => {
                 let inner = match ty {
                     Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
                 let items: Vec<String> =
-                    items.iter().map(|e| self.value(e, inner, prefix)).collect();
+                    items.iter().map(|v| self.value(v, inner, prefix)).collect();
                 match ty {
                     Some(Ty::Array(..)) => format!("[{}]", items.join(", ")),
                     _ => format!("::std::vec![{}]", items.join(", ")),
                 }
             }
-            ExprKind::Repeat(item, n) => {
+            Value::Repeat(item, n) => {
                 let inner = match ty {
                     Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
@@ -325,24 +318,15 @@ impl<'a> Lowerer<'a> {
                 let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
                 match ty {
-                    Some(Ty::List(_)) => format!("::std::vec![{item}; {}]", n.value),
+                    Some(Ty::List(_)) => format!("::std::vec![{item}; {n}]"),
                     // `[value; n]` needs a `Copy` value.
-                    _ if copy => format!("[{item}; {}]", n.value),
+                    _ if copy => format!("[{item}; {n}]"),
                     _ => format!("::core::array::from_fn(|_| {item})"),
                 }
             }
-            ExprKind::None => "::core::option::Option::None".to_owned(),
-            ExprKind::Unary(ast::UnaryOp::Neg, inner) => {
-                format!("-{}", self.value(inner, ty, prefix))
-            }
-            ExprKind::Unary(ast::UnaryOp::Not, inner) => {
-                format!("!{}", self.value(inner, ty, prefix))
-            }
-            // Paths and comparisons are not constant values; the checker rejects them
-            // as defaults.
-            ExprKind::Path(_) | ExprKind::Binary(..) => {
-                "::core::default::Default::default()".to_owned()
-            }
+            Value::None => "::core::option::Option::None".to_owned(),
+            // Not a constant: the checker rejects it.
+            Value::Invalid => DEFAULT.to_owned(),
         }
     }
 
@@ -361,7 +345,7 @@ impl<'a> Lowerer<'a> {
         doc: &[String],
         name: &str,
         ty: &Ty,
-        default: Option<&ast::Expr>,
+        default: Option<&Value>,
         prefix: &str,
     ) -> ir::Field {
         ir::Field {
@@ -547,14 +531,6 @@ impl Lowerer<'_> {
     }
 }
 
-fn int_value(expr: &ast::Expr) -> Option<i64> {
-    match &expr.kind {
-        ExprKind::Int(n) => i64::try_from(*n).ok(),
-        ExprKind::Unary(ast::UnaryOp::Neg, inner) => int_value(inner).map(|n| -n),
-        _ => None,
-    }
-}
-
 /// A TOML key: bare when possible, quoted otherwise.
 fn toml_key(name: &str) -> String {
     if !name.is_empty()
@@ -568,43 +544,35 @@ fn toml_key(name: &str) -> String {
     }
 }
 
-fn toml_value(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Str(s) => ir::toml_string(s),
-        ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Int(n) => n.to_string(),
-        ExprKind::Float(x) => format!("{x:?}"),
-        ExprKind::List(items) => {
+fn toml_value(value: &TableValue) -> String {
+    match value {
+        TableValue::Str(s) => ir::toml_string(s),
+        TableValue::Bool(b) => b.to_string(),
+        TableValue::Int(n) => n.to_string(),
+        TableValue::Float(x) => format!("{x:?}"),
+        TableValue::List(items) => {
             format!(
                 "[{}]",
                 items.iter().map(toml_value).collect::<Vec<_>>().join(", ")
             )
         }
-        ExprKind::Path(parts) => ir::toml_string(
-            &parts
-                .iter()
-                .map(|p| p.name.as_str())
-                .collect::<Vec<_>>()
-                .join("."),
-        ),
-        _ => "\"\"".to_owned(),
     }
 }
 
-fn crate_spec(spec: &ast::CrateSpec) -> String {
+fn crate_spec(spec: &CrateSpec) -> String {
     match spec {
-        ast::CrateSpec::Version(v) => ir::toml_string(&v.value),
-        ast::CrateSpec::Table(entries, _) => {
+        CrateSpec::Version(v) => ir::toml_string(v),
+        CrateSpec::Table(entries) => {
             let entries: Vec<String> = entries
                 .iter()
-                .map(|e| {
+                .map(|(key, value)| {
                     // `.cool` names cannot hold `-`: Cargo's `default-features` is
                     // written `default_features`, which edition 2024 rejects as is.
-                    let key = match e.key.name.as_str() {
+                    let key = match key.as_str() {
                         "default_features" => "default-features",
                         other => other,
                     };
-                    format!("{} = {}", toml_key(key), toml_value(&e.value))
+                    format!("{} = {}", toml_key(key), toml_value(value))
                 })
                 .collect();
             format!("{{ {} }}", entries.join(", "))
@@ -688,7 +656,7 @@ mod tests {
     #[test]
     fn defaults_follow_the_declared_type() {
         let krate = lower_text(
-            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2] }",
+            "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2], f: f32 = -2, g: i8 = -3 }",
         );
         let defaults: Vec<&str> = krate.types.packets[0]
             .fields
@@ -702,7 +670,9 @@ mod tests {
                 "::std::time::Duration::from_nanos(10000000)",
                 "[true; 2]",
                 "::core::option::Option::Some(3)",
-                "::std::vec![1, 2]"
+                "::std::vec![1, 2]",
+                "-2.0",
+                "-3"
             ]
         );
     }

@@ -59,7 +59,7 @@ mod tests {
         lamp.wait_for(
             |m| {
                 m.user_state.as_deref() == Some("lit")
-                    && m.variables.iter().any(|(n, v)| n == "level" && *v == coolbot::Value::UInt(5))
+                    && m.variables.iter().any(|(n, v)| n == "level" && matches!(v, coolbot::Value::UInt(l) if *l >= 5))
             },
             std::time::Duration::from_secs(20),
         )

@@ -294,3 +294,66 @@ fn doc_comments_without_an_item_go_to_the_spec_rustdoc() {
         ]
     );
 }
+
+/// The generated modules of a crate (`src/generated/*.rs`), one after the other under
+/// their paths: what lowering and the templates make of a description.
+fn generated_modules(krate: &coolc::ir::Crate) -> String {
+    emit::emit_crate(krate)
+        .iter()
+        .filter(|f| f.kind == FileKind::Generated)
+        .map(|f| format!("==> {}\n{}", f.path.display(), f.contents))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn generated_modules_of_every_ok_fixture() {
+    insta::glob!("../../tests/data", "ok/*.cool", |path| {
+        let krate = lower_file(path, "fixture");
+        insta::assert_snapshot!(generated_modules(&krate));
+    });
+}
+
+#[test]
+fn every_setting_reaches_the_generated_code() {
+    // Every fifo policy (and none), a period range in hertz, a priority, a plan's
+    // retry delay, sections with and without their own period, an `after`, every
+    // error policy, a restart budget and backoff, a recovery block giving one value
+    // of two, and an instance's timing override.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("settings.cool");
+    std::fs::write(
+        &path,
+        "packet P { x: u32 }\n\
+         atomic Worker {\n\
+             input plain: fifo<P>(4);\n\
+             input rejecting: fifo<P>(4, reject);\n\
+             input dropping: fifo<P>(8, drop_oldest);\n\
+             input blocking: fifo<P>(2, block);\n\
+             output out: data<P>;\n\
+             timing { period 100Hz..20Hz; max_response 3ms; priority 7; quality full, half; }\n\
+             exception slip { retry 3 every 250us; goto idle; }\n\
+             automaton {\n\
+                 initial idle;\n\
+                 state idle { entry; periodic 2kHz; after 1500ms without plain -> busy; }\n\
+                 state busy { periodic; on blocking -> idle; }\n\
+             }\n\
+         }\n\
+         compound Cell {\n\
+             instance a: Worker;\n\
+             instance b: Worker { timing { priority 9; period 50ms; } }\n\
+             instance c: Worker;\n\
+             instance d: Worker;\n\
+             instance spare: Worker substitutes c;\n\
+             on error a: propagate;\n\
+             on error b: restart;\n\
+             on error c: substitute;\n\
+             on error d: ignore;\n\
+             restart { limit 4 in 90s; backoff 20ms..3s; }\n\
+             recovery { deadline 2min; }\n\
+         }\n",
+    )
+    .unwrap();
+    let krate = lower_file(&path, "settings");
+    insta::assert_snapshot!(generated_modules(&krate));
+}

@@ -1,15 +1,16 @@
 //! Builds the resolved [`model`](super::model) of every component from the syntax
 //! trees and what the checker resolved: the only place after `check` where names are
-//! looked up. It never fails: on input with errors (which only tests build a model
-//! from) what cannot be resolved is left `None`.
+//! looked up, and where every setting is evaluated. It never fails: on input with
+//! errors (which only tests build a model from) what cannot be resolved is left
+//! `None`, a value that cannot be evaluated is left out (a delay is zero).
 
 use std::collections::BTreeMap;
 
 use super::model::{
-    Automaton, Component, Connection, Converter, Declared, Enum, Exception, Extern, Field, Input,
-    InputKind, Instance, InstanceRef, Link, Note, Output, OutputKind, Override, Packet, PlanStep,
-    Policy, PortRef, Recovery, Redundant, Ref, Restart, State, StateMember, TimingEntry, TypeDef,
-    Variable,
+    Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
+    Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
+    OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Recovery, Redundant,
+    Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -70,7 +71,7 @@ pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, 
                                 doc: field.doc.0.clone(),
                                 name: field.name.name.clone(),
                                 ty: model.ty(&field.ty),
-                                default: field.default.clone(),
+                                default: field.default.as_ref().map(Value::of),
                             })
                             .collect(),
                     }));
@@ -143,14 +144,20 @@ impl<'a> Builder<'a> {
             connections: Vec::new(),
             recovery: None,
             restart: None,
+            adaptation: self
+                .interfaces
+                .get(&component.name.name)
+                .map(|interface| interface.adaptation.clone())
+                .unwrap_or_default(),
         };
-        let policies: BTreeMap<&str, &str> = component
+        let policies: BTreeMap<&str, ErrorPolicy> = component
             .members
             .iter()
             .filter_map(|member| match member {
-                ast::Member::OnError(on) => {
-                    Some((on.instance.name.as_str(), on.policy.name.as_str()))
-                }
+                ast::Member::OnError(on) => Some((
+                    on.instance.name.as_str(),
+                    ErrorPolicy::named(&on.policy.name)?,
+                )),
                 _ => None,
             })
             .collect();
@@ -200,7 +207,11 @@ impl<'a> Builder<'a> {
                     name: variable.name.name.clone(),
                     kind: variable.kind,
                     written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
-                    value: variable.value.clone(),
+                    value: variable
+                        .value
+                        .as_ref()
+                        .filter(|_| variable.ty.is_some())
+                        .map(Value::of),
                     mapping: match (&variable.ty, variable.value.as_ref().map(|v| &v.kind)) {
                         (None, Some(ast::ExprKind::Path(segments))) => {
                             Some(segments.iter().map(|s| s.name.clone()).collect())
@@ -224,13 +235,13 @@ impl<'a> Builder<'a> {
                                 doc: field.doc.0.clone(),
                                 name: field.name.name.clone(),
                                 ty: self.model.ty(&field.ty),
-                                default: field.default.clone(),
+                                default: field.default.as_ref().map(Value::of),
                             })
                             .collect(),
                     );
                 }
                 ast::Member::Timing(timing) if out.timing.is_none() => {
-                    out.timing = Some(timing.entries.iter().map(timing_entry).collect());
+                    out.timing = Some(timing.entries.iter().filter_map(timing_entry).collect());
                 }
                 ast::Member::Automaton(automaton) if out.automaton.is_none() => {
                     out.automaton = Some(self.automaton(file, automaton, &states, &ports));
@@ -238,7 +249,17 @@ impl<'a> Builder<'a> {
                 ast::Member::Link(link) => out.links.push(match &link.kind {
                     ast::LinkKind::Crate { name, spec } => Link::Crate {
                         name: name.value.clone(),
-                        spec: spec.clone(),
+                        spec: match spec {
+                            ast::CrateSpec::Version(version) => {
+                                CrateSpec::Version(version.value.clone())
+                            }
+                            ast::CrateSpec::Table(entries, _) => CrateSpec::Table(
+                                entries
+                                    .iter()
+                                    .map(|e| (e.key.name.clone(), TableValue::of(&e.value)))
+                                    .collect(),
+                            ),
+                        },
                     },
                     ast::LinkKind::System { name } => Link::System(name.value.clone()),
                 }),
@@ -252,7 +273,7 @@ impl<'a> Builder<'a> {
                         .map(|step| match &step.kind {
                             ast::PlanKind::Retry { count, every } => PlanStep::Retry {
                                 count: count.value,
-                                every: every.clone(),
+                                every: delay(every),
                             },
                             ast::PlanKind::Goto(target) => {
                                 PlanStep::Goto(state_ref(&states, &target.name))
@@ -271,21 +292,19 @@ impl<'a> Builder<'a> {
                         .substitutes
                         .as_ref()
                         .map(|primary| self.instance_ref(component, &primary.name)),
-                    on_error: policies
-                        .get(instance.name.name.as_str())
-                        .map(|policy| (*policy).to_owned()),
+                    on_error: policies.get(instance.name.name.as_str()).copied(),
                     overrides: instance
                         .overrides
                         .iter()
                         .map(|o| Override {
                             name: o.name.name.clone(),
-                            value: o.value.clone(),
+                            value: Value::of(&o.value),
                         })
                         .collect(),
                     timing: instance
                         .timing
                         .as_ref()
-                        .map(|timing| timing.entries.iter().map(timing_entry).collect()),
+                        .map(|timing| timing.entries.iter().filter_map(timing_entry).collect()),
                     tuning: instance.adaptation.first().map(|block| {
                         self.interfaces
                             .get(&instance.component.name)
@@ -295,11 +314,15 @@ impl<'a> Builder<'a> {
                     }),
                     span: instance.span,
                 }),
-                ast::Member::OnError(on) => out.policies.push(Policy {
-                    instance: on.instance.name.clone(),
-                    policy: on.policy.name.clone(),
-                    span: on.span,
-                }),
+                ast::Member::OnError(on) => {
+                    if let Some(policy) = ErrorPolicy::named(&on.policy.name) {
+                        out.policies.push(Policy {
+                            instance: on.instance.name.clone(),
+                            policy,
+                            span: on.span,
+                        });
+                    }
+                }
                 ast::Member::Redundant(redundant) => out.redundant.push(Redundant {
                     members: redundant
                         .members
@@ -318,15 +341,23 @@ impl<'a> Builder<'a> {
                 }),
                 ast::Member::Recovery(recovery) if out.recovery.is_none() => {
                     out.recovery = Some(Recovery {
-                        retry_every: recovery.retry_every.clone(),
-                        deadline: recovery.deadline.clone(),
+                        retry_every: recovery.retry_every.as_ref().and_then(Duration::of),
+                        deadline: recovery.deadline.as_ref().and_then(Duration::of),
                         span: recovery.span,
                     });
                 }
                 ast::Member::Restart(restart) if out.restart.is_none() => {
                     out.restart = Some(Restart {
-                        limit: restart.limit.clone(),
-                        backoff: restart.backoff.clone(),
+                        limit: restart.limit.as_ref().and_then(|(count, window)| {
+                            let count = match count.kind {
+                                ast::ExprKind::Int(n) => u32::try_from(n).ok()?,
+                                _ => return None,
+                            };
+                            Some((count, Duration::of(window)?))
+                        }),
+                        backoff: restart.backoff.as_ref().and_then(|(first, last)| {
+                            Some((Duration::of(first)?, Duration::of(last)?))
+                        }),
                         span: restart.span,
                     });
                 }
@@ -399,7 +430,7 @@ impl<'a> Builder<'a> {
             ast::InputDef::Fifo { ty, size, policy } => InputKind::Fifo {
                 ty: self.model.ty(ty),
                 size: size.value,
-                policy: policy.as_ref().map(|p| p.name.clone()),
+                policy: policy.as_ref().and_then(|p| OverflowPolicy::named(&p.name)),
             },
             ast::InputDef::Ufifo { size, ty, max } => InputKind::Ufifo {
                 ty: self.model.ty(ty),
@@ -489,7 +520,9 @@ impl<'a> Builder<'a> {
         match member {
             ast::StateMember::Entry(_) => StateMember::Entry,
             ast::StateMember::Exit(_) => StateMember::Exit,
-            ast::StateMember::Periodic { period, .. } => StateMember::Periodic(period.clone()),
+            ast::StateMember::Periodic { period, .. } => {
+                StateMember::Periodic(period.as_ref().and_then(Duration::of))
+            }
             ast::StateMember::On {
                 port: on, target, ..
             } => StateMember::On {
@@ -502,7 +535,7 @@ impl<'a> Builder<'a> {
                 target,
                 ..
             } => StateMember::After {
-                delay: delay.clone(),
+                delay: self::delay(delay),
                 without: without.as_ref().map(port),
                 target: state(target),
             },
@@ -528,17 +561,27 @@ fn state_ref(names: &[&str], name: &str) -> Ref {
     }
 }
 
-fn timing_entry(entry: &ast::TimingEntry) -> TimingEntry {
-    match entry {
-        ast::TimingEntry::Period(interval) => {
-            TimingEntry::Period(interval.lo.clone(), interval.hi.clone())
-        }
-        ast::TimingEntry::MaxResponse(value) => TimingEntry::MaxResponse(value.clone()),
-        ast::TimingEntry::Priority(value) => TimingEntry::Priority(value.clone()),
+/// A delay: zero when it is not a duration (input with errors).
+fn delay(expr: &ast::Expr) -> Duration {
+    Duration::of(expr).unwrap_or(Duration::ZERO)
+}
+
+/// A `timing` entry evaluated (`None` when its value cannot be: input with errors).
+fn timing_entry(entry: &ast::TimingEntry) -> Option<TimingEntry> {
+    Some(match entry {
+        ast::TimingEntry::Period(interval) => TimingEntry::Period(
+            Duration::of(&interval.lo)?,
+            interval.hi.as_ref().and_then(Duration::of),
+        ),
+        ast::TimingEntry::MaxResponse(value) => TimingEntry::MaxResponse(Duration::of(value)?),
+        ast::TimingEntry::Priority(value) => TimingEntry::Priority(match value.kind {
+            ast::ExprKind::Int(n) => u8::try_from(n).ok()?,
+            _ => return None,
+        }),
         ast::TimingEntry::Quality(levels, _) => {
             TimingEntry::Quality(levels.iter().map(|l| l.name.clone()).collect())
         }
-    }
+    })
 }
 
 fn inputs(component: &ast::Component) -> impl Iterator<Item = &ast::Input> {
@@ -558,7 +601,7 @@ fn outputs(component: &ast::Component) -> impl Iterator<Item = &ast::Output> {
 #[cfg(test)]
 mod tests {
     use crate::check::model::{PortKind, Ty};
-    use crate::checked::model::{InputKind, OutputKind, StateMember};
+    use crate::checked::model::{InputKind, OutputKind, OverflowPolicy, StateMember};
 
     const TEXT: &str = "packet Twist { v: f32 }\n\
         packet Wheels { left: f32 }\n\
@@ -609,7 +652,7 @@ mod tests {
             InputKind::Fifo {
                 ty: Ty::Packet("Wheels".to_owned()),
                 size: 4,
-                policy: Some("drop_oldest".to_owned())
+                policy: Some(OverflowPolicy::DropOldest)
             }
         );
         // A mapping through a mapping has the type of the variable at the end.
@@ -660,5 +703,117 @@ mod tests {
         // Components come in source order, each once.
         let names: Vec<&str> = checked.components().map(|c| c.name.as_str()).collect();
         assert_eq!(names, ["Drive", "Inner", "Outer"]);
+    }
+
+    #[test]
+    fn settings_are_evaluated_once_in_the_model() {
+        use crate::checked::model::{
+            CrateSpec, Duration, ErrorPolicy, Link, PlanStep, TableValue, TimingEntry, Value,
+            Written,
+        };
+        let checked = crate::analyze_text(
+            "t.cool",
+            "atomic W {\n\
+                 link crate \"x\" = { version = \"1\", features = [\"a\"], default_features = false };\n\
+                 input q: fifo<u8>(2, block);\n\
+                 input r: fifo<u8>(2);\n\
+                 configuration { gain: f64 = -2; offsets: [f32; 2] = [-0.5; 2]; }\n\
+                 timing { period 100Hz..20ms; priority 7; }\n\
+                 adaptation { window 8; }\n\
+                 exception slip { retry 2 every 250us; }\n\
+                 automaton { initial s; state s { periodic 2kHz; after 1s -> s; } }\n\
+             }\n\
+             compound C {\n\
+                 instance w: W { gain = 1.5; }\n\
+                 on error w: ignore;\n\
+                 restart { limit 4 in 1min; backoff 20ms..3s; }\n\
+                 recovery { deadline 2s; }\n\
+             }",
+        )
+        .checked()
+        .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let ns = |nanos: u64| Duration {
+            nanos,
+            written: Written::Nanos(nanos.into()),
+        };
+        let w = checked.component("W").expect("W");
+        let fifo = |i: usize| match &w.inputs[i].port.as_ref().expect("declared").kind {
+            InputKind::Fifo { policy, .. } => *policy,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(fifo(0), Some(OverflowPolicy::Block));
+        assert_eq!(fifo(1), None);
+        assert_eq!(fifo(1).unwrap_or_default(), OverflowPolicy::Reject);
+        assert_eq!(
+            w.timing.as_deref(),
+            Some(
+                &[
+                    TimingEntry::Period(
+                        Duration {
+                            nanos: 10_000_000,
+                            written: Written::Hertz(100.0)
+                        },
+                        Some(ns(20_000_000))
+                    ),
+                    TimingEntry::Priority(7)
+                ][..]
+            )
+        );
+        assert_eq!(
+            w.exceptions[0].plan,
+            [PlanStep::Retry {
+                count: 2,
+                every: ns(250_000)
+            }]
+        );
+        let members = &w.automaton.as_ref().expect("automaton").states[0].members;
+        assert!(matches!(
+            members[0],
+            StateMember::Periodic(Some(Duration { nanos: 500_000, .. }))
+        ));
+        assert!(matches!(
+            members[1],
+            StateMember::After { delay, .. } if delay == ns(1_000_000_000)
+        ));
+        assert_eq!(
+            w.links,
+            [Link::Crate {
+                name: "x".to_owned(),
+                spec: CrateSpec::Table(vec![
+                    ("version".to_owned(), TableValue::Str("1".to_owned())),
+                    (
+                        "features".to_owned(),
+                        TableValue::List(vec![TableValue::Str("a".to_owned())])
+                    ),
+                    ("default_features".to_owned(), TableValue::Bool(false)),
+                ])
+            }]
+        );
+        let defaults: Vec<_> = w
+            .configuration
+            .iter()
+            .flatten()
+            .map(|f| f.default.clone())
+            .collect();
+        assert_eq!(
+            defaults,
+            [
+                Some(Value::Int(-2)),
+                Some(Value::Repeat(Box::new(Value::Float(-0.5)), 2))
+            ]
+        );
+        assert_eq!(w.adaptation.window, Some(8));
+        let c = checked.component("C").expect("C");
+        assert_eq!(c.adaptation, crate::check::model::Tuning::default());
+        assert_eq!(c.instances[0].overrides[0].value, Value::Float(1.5));
+        assert_eq!(c.instances[0].on_error, Some(ErrorPolicy::Ignore));
+        assert_eq!(c.policies[0].policy, ErrorPolicy::Ignore);
+        let restart = c.restart.as_ref().expect("restart");
+        assert_eq!(restart.limit, Some((4, ns(60_000_000_000))));
+        assert_eq!(restart.backoff, Some((ns(20_000_000), ns(3_000_000_000))));
+        let recovery = c.recovery.as_ref().expect("recovery");
+        assert_eq!(recovery.retry_every, None);
+        assert_eq!(recovery.retry_every_nanos(), 500_000_000);
+        assert_eq!(recovery.deadline_nanos(), 2_000_000_000);
     }
 }

@@ -5,9 +5,11 @@
 //! an instance knows whether its component is a compound, an exported port carries
 //! the port it reaches (through any depth of exports), a connection carries the kind
 //! of the input it feeds, a mapped variable carries the type of what it maps, and a
-//! `when` condition carries its type from the one rule typer. What stays as written
-//! is values ([`ast::Expr`]: literals, durations, frequencies, enum values and
-//! mapping paths, which name nothing left to look up) and names, as strings.
+//! `when` condition carries its type from the one rule typer. Every setting is
+//! evaluated once, here: durations and periods are [`Duration`]s, priorities and
+//! counts integers, fifo and error policies enums, constant values (defaults,
+//! initial values, overrides) [`Value`]s. What stays as written is `when` conditions
+//! ([`ast::Expr`], beside their typed tree) and names, as strings.
 //!
 //! Members of one kind keep their source order; members of different kinds are
 //! held apart (a checked component has at most one `timing`, `configuration`,
@@ -61,6 +63,8 @@ pub struct Component {
     pub recovery: Option<Recovery>,
     /// The `restart { ... }` block.
     pub restart: Option<Restart>,
+    /// Its own `adaptation { ... }` tuning (the default when it has none).
+    pub adaptation: Tuning,
 }
 
 /// What an input port is, once exports are followed to a declared port.
@@ -74,8 +78,9 @@ pub enum InputKind {
         ty: Ty,
         /// Queue length.
         size: u64,
-        /// Overflow policy, when written.
-        policy: Option<String>,
+        /// Overflow policy, when written ([`OverflowPolicy::default`] applies
+        /// otherwise).
+        policy: Option<OverflowPolicy>,
     },
     /// `ufifo<T>(size[, max m])`
     Ufifo {
@@ -204,8 +209,8 @@ pub struct Variable {
     pub kind: VarKind,
     /// The type as written (`None` for a mapped variable).
     pub written: Option<Ty>,
-    /// The initial value, or for a mapped variable the mapping (`motion.odometry`).
-    pub value: Option<ast::Expr>,
+    /// The initial value, when written (`None` for a mapped variable).
+    pub value: Option<Value>,
     /// A mapped variable's path (`["motion", "odometry"]`).
     pub mapping: Option<Vec<String>>,
     /// The type: as written, or that of the instance variable a mapping names
@@ -226,18 +231,18 @@ pub struct Field {
     /// Its type.
     pub ty: Ty,
     /// Its default, when written.
-    pub default: Option<ast::Expr>,
+    pub default: Option<Value>,
 }
 
 /// One entry of a `timing` block.
 #[derive(Clone, Debug, PartialEq)]
 pub enum TimingEntry {
     /// `period lo;` or `period lo..hi;`
-    Period(ast::Expr, Option<ast::Expr>),
+    Period(Duration, Option<Duration>),
     /// `max_response D;`
-    MaxResponse(ast::Expr),
+    MaxResponse(Duration),
     /// `priority N;`
-    Priority(ast::Expr),
+    Priority(u8),
     /// `quality a, b, c;` best first.
     Quality(Vec<String>),
 }
@@ -298,11 +303,59 @@ pub enum Link {
     Crate {
         /// The crate's name.
         name: String,
-        /// Its version or table, as written.
-        spec: ast::CrateSpec,
+        /// Its version or table.
+        spec: CrateSpec,
     },
     /// `link system "name";`
     System(String),
+}
+
+/// The right-hand side of `link crate "name" = ...`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CrateSpec {
+    /// `"4"`: a version requirement.
+    Version(String),
+    /// `{ version = "0.33", features = ["x"] }`: the keys as written, in order.
+    Table(Vec<(String, TableValue)>),
+}
+
+/// A value in a crate table.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableValue {
+    /// A string (a dotted name is its text).
+    Str(String),
+    /// `true` or `false`.
+    Bool(bool),
+    /// An integer.
+    Int(u64),
+    /// A number with a point.
+    Float(f64),
+    /// `[a, b]`
+    List(Vec<TableValue>),
+}
+
+impl TableValue {
+    /// The value `expr` says (an empty string for what a table cannot hold, which
+    /// the checker reports).
+    pub fn of(expr: &ast::Expr) -> TableValue {
+        match &expr.kind {
+            ast::ExprKind::Str(text) => TableValue::Str(text.clone()),
+            ast::ExprKind::Bool(value) => TableValue::Bool(*value),
+            ast::ExprKind::Int(value) => TableValue::Int(*value),
+            ast::ExprKind::Float(value) => TableValue::Float(*value),
+            ast::ExprKind::List(items) => {
+                TableValue::List(items.iter().map(TableValue::of).collect())
+            }
+            ast::ExprKind::Path(parts) => TableValue::Str(
+                parts
+                    .iter()
+                    .map(|part| part.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join("."),
+            ),
+            _ => TableValue::Str(String::new()),
+        }
+    }
 }
 
 /// `exception name ["description"] [{ plan }];`
@@ -326,7 +379,7 @@ pub enum PlanStep {
         /// How many times.
         count: u64,
         /// The delay between attempts.
-        every: ast::Expr,
+        every: Duration,
     },
     /// `goto state;`
     Goto(Ref),
@@ -344,7 +397,7 @@ pub enum StateMember {
     /// `exit;`
     Exit,
     /// `periodic;` or `periodic D;`
-    Periodic(Option<ast::Expr>),
+    Periodic(Option<Duration>),
     /// `on port -> target;`
     On {
         /// The input port.
@@ -355,7 +408,7 @@ pub enum StateMember {
     /// `after D [without port] -> target;`
     After {
         /// The delay.
-        delay: ast::Expr,
+        delay: Duration,
         /// The watched port.
         without: Option<Ref>,
         /// The target state.
@@ -389,7 +442,7 @@ pub struct Instance {
     /// `substitutes primary`.
     pub substitutes: Option<InstanceRef>,
     /// The policy of `on error instance: policy;`.
-    pub on_error: Option<String>,
+    pub on_error: Option<ErrorPolicy>,
     /// `{ name = value; ... }` overrides, in order.
     pub overrides: Vec<Override>,
     /// Its own `timing { ... }` entries, when written.
@@ -406,8 +459,8 @@ pub struct Instance {
 pub struct Override {
     /// The configuration field or controllable variable.
     pub name: String,
-    /// The value as written.
-    pub value: ast::Expr,
+    /// The value.
+    pub value: Value,
 }
 
 /// `redundant a, b;`
@@ -424,8 +477,8 @@ pub struct Redundant {
 pub struct Policy {
     /// The instance.
     pub instance: String,
-    /// The policy's name.
-    pub policy: String,
+    /// The policy.
+    pub policy: ErrorPolicy,
     /// Where it is written.
     pub span: Span,
 }
@@ -446,23 +499,228 @@ pub struct Connection {
 /// `recovery { retry every D; deadline D; }`
 #[derive(Clone, Debug, PartialEq)]
 pub struct Recovery {
-    /// `retry every D`
-    pub retry_every: Option<ast::Expr>,
-    /// `deadline D`
-    pub deadline: Option<ast::Expr>,
+    /// `retry every D`, when written.
+    pub retry_every: Option<Duration>,
+    /// `deadline D`, when written.
+    pub deadline: Option<Duration>,
     /// Where it is written.
     pub span: Span,
+}
+
+impl Recovery {
+    /// Nanoseconds between restarts of the queued instances when `retry every` is not
+    /// written.
+    pub const RETRY_EVERY_NANOS: u64 = 500_000_000;
+    /// Nanoseconds an instance may stay queued when `deadline` is not written.
+    pub const DEADLINE_NANOS: u64 = 5_000_000_000;
+
+    /// Nanoseconds between restarts of the queued instances: as written, or the
+    /// default.
+    pub fn retry_every_nanos(&self) -> u64 {
+        self.retry_every
+            .map_or(Self::RETRY_EVERY_NANOS, |every| every.nanos)
+    }
+
+    /// Nanoseconds an instance may stay queued: as written, or the default.
+    pub fn deadline_nanos(&self) -> u64 {
+        self.deadline
+            .map_or(Self::DEADLINE_NANOS, |deadline| deadline.nanos)
+    }
 }
 
 /// `restart { limit N in D; backoff D..D; }`
 #[derive(Clone, Debug, PartialEq)]
 pub struct Restart {
-    /// `limit N in D`
-    pub limit: Option<(ast::Expr, ast::Expr)>,
-    /// `backoff D..D`
-    pub backoff: Option<(ast::Expr, ast::Expr)>,
+    /// `limit N in D`: at most `N` restarts of one instance within any `D`.
+    pub limit: Option<(u32, Duration)>,
+    /// `backoff D..D`: the first wait and the longest.
+    pub backoff: Option<(Duration, Duration)>,
     /// Where it is written.
     pub span: Span,
+}
+
+/// A length of time, evaluated once: a duration (`500ms`) or, where a period is
+/// meant, a frequency (`100Hz`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Duration {
+    /// Nanoseconds: a frequency's period rounded to the nearest; at most `u64::MAX`.
+    pub nanos: u64,
+    /// How it is written, to print it back.
+    pub written: Written,
+}
+
+/// How a [`Duration`] is written.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Written {
+    /// A duration literal, in nanoseconds.
+    Nanos(u128),
+    /// A frequency literal, in hertz.
+    Hertz(f64),
+}
+
+impl Duration {
+    /// Zero, written `0s`: what an unevaluable delay becomes in a model built from
+    /// input with errors.
+    pub const ZERO: Duration = Duration {
+        nanos: 0,
+        written: Written::Nanos(0),
+    };
+
+    /// The duration a duration or frequency literal says (`None` for any other
+    /// expression, or a frequency that is not positive: errors the checker reports).
+    pub fn of(expr: &ast::Expr) -> Option<Duration> {
+        match expr.kind {
+            ast::ExprKind::Duration(nanos) => Some(Duration {
+                nanos: u64::try_from(nanos).unwrap_or(u64::MAX),
+                written: Written::Nanos(nanos),
+            }),
+            ast::ExprKind::Frequency(hertz) if hertz > 0.0 => Some(Duration {
+                nanos: (1e9 / hertz).round() as u64,
+                written: Written::Hertz(hertz),
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// A constant value: a default, an initial value or an override. Its type is that of
+/// the field or variable it fills (an integer filling a float stays an `Int`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// `true` or `false`.
+    Bool(bool),
+    /// An integer, its sign applied.
+    Int(i128),
+    /// A number with a point, its sign applied.
+    Float(f64),
+    /// A string.
+    Str(String),
+    /// A duration.
+    Duration(Duration),
+    /// `Enum::Variant`
+    Enum {
+        /// The enum's name.
+        ty: String,
+        /// The variant's name.
+        variant: String,
+    },
+    /// `[a, b]`: the items of a list or an array.
+    List(Vec<Value>),
+    /// `[value; n]`
+    Repeat(Box<Value>, u64),
+    /// `none`
+    None,
+    /// Not a constant (a path, an operator): what the checker rejects, found only in
+    /// a model built from input with errors.
+    Invalid,
+}
+
+impl Value {
+    /// The value `expr` says.
+    pub fn of(expr: &ast::Expr) -> Value {
+        match &expr.kind {
+            ast::ExprKind::Bool(value) => Value::Bool(*value),
+            ast::ExprKind::Int(value) => Value::Int((*value).into()),
+            ast::ExprKind::Float(value) => Value::Float(*value),
+            ast::ExprKind::Str(text) => Value::Str(text.clone()),
+            ast::ExprKind::Duration(_) | ast::ExprKind::Frequency(_) => {
+                Duration::of(expr).map_or(Value::Invalid, Value::Duration)
+            }
+            ast::ExprKind::EnumValue { enum_name, variant } => Value::Enum {
+                ty: enum_name.name.clone(),
+                variant: variant.name.clone(),
+            },
+            ast::ExprKind::List(items) => Value::List(items.iter().map(Value::of).collect()),
+            ast::ExprKind::Repeat(item, count) => {
+                Value::Repeat(Box::new(Value::of(item)), count.value)
+            }
+            ast::ExprKind::None => Value::None,
+            ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) => match Value::of(inner) {
+                Value::Int(value) => Value::Int(-value),
+                Value::Float(value) => Value::Float(-value),
+                _ => Value::Invalid,
+            },
+            ast::ExprKind::Unary(ast::UnaryOp::Not, _)
+            | ast::ExprKind::Binary(..)
+            | ast::ExprKind::Path(_) => Value::Invalid,
+        }
+    }
+}
+
+/// What a full `fifo` input does with a new packet (`fifo<T>(n, policy)`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OverflowPolicy {
+    /// `reject` (the default): the new packet is refused and counted.
+    #[default]
+    Reject,
+    /// `drop_oldest`: the oldest queued packet makes room.
+    DropOldest,
+    /// `block`: the producer waits for room, up to a timeout.
+    Block,
+}
+
+impl OverflowPolicy {
+    /// Every policy with its name in the language.
+    pub const ALL: [(&'static str, OverflowPolicy); 3] = [
+        ("reject", OverflowPolicy::Reject),
+        ("drop_oldest", OverflowPolicy::DropOldest),
+        ("block", OverflowPolicy::Block),
+    ];
+
+    /// The policy named `name`.
+    pub fn named(name: &str) -> Option<OverflowPolicy> {
+        named(&Self::ALL, name)
+    }
+
+    /// Its name in the language.
+    pub fn name(self) -> &'static str {
+        name_of(&Self::ALL, self)
+    }
+}
+
+/// What a compound does when an instance fails (`on error instance: policy;`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorPolicy {
+    /// `propagate`: the compound fails too.
+    Propagate,
+    /// `restart`: the instance is restarted, within the compound's budget.
+    Restart,
+    /// `substitute`: its substitute takes its place; it waits in the recovery queue.
+    Substitute,
+    /// `ignore`: nothing happens; the instance stays in `running_error`.
+    Ignore,
+}
+
+impl ErrorPolicy {
+    /// Every policy with its name in the language.
+    pub const ALL: [(&'static str, ErrorPolicy); 4] = [
+        ("propagate", ErrorPolicy::Propagate),
+        ("restart", ErrorPolicy::Restart),
+        ("substitute", ErrorPolicy::Substitute),
+        ("ignore", ErrorPolicy::Ignore),
+    ];
+
+    /// The policy named `name`.
+    pub fn named(name: &str) -> Option<ErrorPolicy> {
+        named(&Self::ALL, name)
+    }
+
+    /// Its name in the language.
+    pub fn name(self) -> &'static str {
+        name_of(&Self::ALL, self)
+    }
+}
+
+fn named<T: Copy>(all: &[(&'static str, T)], name: &str) -> Option<T> {
+    all.iter()
+        .find(|(known, _)| *known == name)
+        .map(|(_, value)| *value)
+}
+
+fn name_of<T: Copy + PartialEq>(all: &[(&'static str, T)], value: T) -> &'static str {
+    all.iter()
+        .find(|(_, known)| *known == value)
+        .map_or("", |(name, _)| name)
 }
 
 /// A type definition, resolved.

@@ -2,14 +2,14 @@
 //! print as written through their `Display`).
 
 use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
-use crate::checked::model::{Declared, InputKind, OutputKind, PortRef};
+use crate::checked::model::{Declared, Duration, InputKind, OutputKind, PortRef, Value, Written};
 
 /// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
 pub fn input_kind(input: &Declared<InputKind>) -> String {
     let kind = match &input.kind {
         InputKind::Tick => "tick".to_owned(),
         InputKind::Fifo { ty, size, policy } => match policy {
-            Some(policy) => format!("fifo<{ty}>({size}, {policy})"),
+            Some(policy) => format!("fifo<{ty}>({size}, {})", policy.name()),
             None => format!("fifo<{ty}>({size})"),
         },
         InputKind::Ufifo { ty, size, max } => match max {
@@ -45,10 +45,18 @@ pub fn port_ref(port: &PortRef) -> String {
 }
 
 /// `lo` or `lo..hi`.
-pub fn interval(lo: &ast::Expr, hi: Option<&ast::Expr>) -> String {
+pub fn interval(lo: &Duration, hi: Option<&Duration>) -> String {
     match hi {
-        Some(hi) => format!("{}..{}", expr(lo), expr(hi)),
-        None => expr(lo),
+        Some(hi) => format!("{}..{}", time(lo), time(hi)),
+        None => time(lo),
+    }
+}
+
+/// A duration or frequency as written (`500ms`, `100Hz`).
+pub fn time(duration: &Duration) -> String {
+    match duration.written {
+        Written::Nanos(nanos) => self::duration(nanos),
+        Written::Hertz(hertz) => frequency(hertz),
     }
 }
 
@@ -101,6 +109,25 @@ fn string(text: &str) -> String {
     }
     out.push('"');
     out
+}
+
+/// A constant value as `.cool` writes it.
+pub fn value(value: &Value) -> String {
+    match value {
+        Value::Bool(value) => value.to_string(),
+        Value::Int(value) => value.to_string(),
+        Value::Float(value) => float(*value),
+        Value::Str(text) => string(text),
+        Value::Duration(duration) => time(duration),
+        Value::Enum { ty, variant } => format!("{ty}::{variant}"),
+        Value::List(items) => {
+            let items: Vec<String> = items.iter().map(self::value).collect();
+            format!("[{}]", items.join(", "))
+        }
+        Value::Repeat(item, count) => format!("[{}; {count}]", self::value(item)),
+        Value::None => "none".to_owned(),
+        Value::Invalid => "?".to_owned(),
+    }
 }
 
 /// How tightly an expression binds (higher binds tighter).

@@ -63,11 +63,11 @@ impl<'a> Lookup<'a> {
             .variables
             .iter()
             .filter(|variable| variable.kind == kind)
-            .map(|variable| match (&variable.written, &variable.value) {
+            .map(|variable| match (&variable.written, &variable.mapping) {
                 (Some(ty), _) => format!("{}: {ty}", variable.name),
-                (None, Some(value)) => match &variable.ty {
-                    Some(ty) => format!("{}: {ty} = {}", variable.name, text::expr(value)),
-                    None => format!("{} = {}", variable.name, text::expr(value)),
+                (None, Some(path)) => match &variable.ty {
+                    Some(ty) => format!("{}: {ty} = {}", variable.name, path.join(".")),
+                    None => format!("{} = {}", variable.name, path.join(".")),
                 },
                 (None, None) => variable.name.clone(),
             })
@@ -300,10 +300,10 @@ impl<'a> Lookup<'a> {
         if let Some(recovery) = &component.recovery {
             let mut parts = Vec::new();
             if let Some(every) = &recovery.retry_every {
-                parts.push(format!("retry every {}", text::expr(every)));
+                parts.push(format!("retry every {}", text::time(every)));
             }
             if let Some(deadline) = &recovery.deadline {
-                parts.push(format!("deadline {}", text::expr(deadline)));
+                parts.push(format!("deadline {}", text::time(deadline)));
             }
             note.push((
                 recovery.span.start,
@@ -313,17 +313,13 @@ impl<'a> Lookup<'a> {
         if let Some(restart) = &component.restart {
             let mut parts = Vec::new();
             if let Some((count, window)) = &restart.limit {
-                parts.push(format!(
-                    "limit {} in {}",
-                    text::expr(count),
-                    text::expr(window)
-                ));
+                parts.push(format!("limit {} in {}", count, text::time(window)));
             }
             if let Some((first, last)) = &restart.backoff {
                 parts.push(format!(
                     "backoff {}..{}",
-                    text::expr(first),
-                    text::expr(last)
+                    text::time(first),
+                    text::time(last)
                 ));
             }
             note.push((
@@ -366,7 +362,7 @@ impl<'a> Lookup<'a> {
             lines.push(format!("on \"{node}\" (remote when on a network)"));
         }
         if let Some(policy) = &instance.on_error {
-            lines.push(format!("on error: {policy}"));
+            lines.push(format!("on error: {}", policy.name()));
         }
         let inner = self.component(&instance.component);
         match inner {
@@ -450,9 +446,9 @@ impl<'a> Lookup<'a> {
                             } => {
                                 let label = match without {
                                     Some(port) => {
-                                        format!("after {} without {port}", text::expr(delay))
+                                        format!("after {} without {port}", text::time(delay))
                                     }
-                                    None => format!("after {}", text::expr(delay)),
+                                    None => format!("after {}", text::time(delay)),
                                 };
                                 edges.push(edge(
                                     from,
@@ -687,7 +683,9 @@ fn variable_line(variable: &Variable) -> String {
         line.push_str(&format!(": {ty}"));
     }
     if let Some(value) = &variable.value {
-        line.push_str(&format!(" = {}", text::expr(value)));
+        line.push_str(&format!(" = {}", text::value(value)));
+    } else if let Some(path) = &variable.mapping {
+        line.push_str(&format!(" = {}", path.join(".")));
     }
     line
 }
@@ -699,8 +697,8 @@ fn timing_line(component: &Component) -> Option<String> {
         .iter()
         .map(|entry| match entry {
             TimingEntry::Period(lo, hi) => format!("period {}", text::interval(lo, hi.as_ref())),
-            TimingEntry::MaxResponse(value) => format!("max_response {}", text::expr(value)),
-            TimingEntry::Priority(value) => format!("priority {}", text::expr(value)),
+            TimingEntry::MaxResponse(value) => format!("max_response {}", text::time(value)),
+            TimingEntry::Priority(value) => format!("priority {value}"),
             TimingEntry::Quality(levels) => format!("quality {}", levels.join(", ")),
         })
         .collect();
@@ -716,7 +714,7 @@ fn state_lines(state: &State) -> Vec<String> {
             StateMember::Entry => Some("entry".to_owned()),
             StateMember::Exit => Some("exit".to_owned()),
             StateMember::Periodic(period) => Some(match period {
-                Some(period) => format!("periodic {}", text::expr(period)),
+                Some(period) => format!("periodic {}", text::time(period)),
                 None => "periodic".to_owned(),
             }),
             _ => None,

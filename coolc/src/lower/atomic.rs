@@ -5,13 +5,14 @@
 
 use super::automaton::{self, Lowered, SectionOwner};
 use super::{
-    GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_ns, duration_rust, int_value,
-    prim_of, prim_rust, rust_ty, serde_adapter, unique,
+    GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_rust, prim_of, prim_rust,
+    rust_ty, serde_adapter, unique,
 };
 use crate::ast::Prim;
 use crate::check::model::Ty;
 use crate::checked::model::{
-    Component, Input, InputKind, Output, OutputKind, PlanStep, TimingEntry, VarKind, Variable,
+    Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, TimingEntry,
+    VarKind, Variable,
 };
 use crate::ident;
 use crate::ir;
@@ -68,7 +69,7 @@ impl<'a> Lowerer<'a> {
                     PlanStep::Retry { count, every } => format!(
                         "::coolbot::PlanStep::Retry {{ count: {}, every: {} }}",
                         u32::try_from(*count).unwrap_or(u32::MAX),
-                        duration_rust(duration_ns(every).unwrap_or_default())
+                        duration_rust(every.nanos)
                     ),
                     PlanStep::Goto(target) => {
                         format!("::coolbot::PlanStep::Goto({})", target.index)
@@ -174,10 +175,7 @@ impl<'a> Lowerer<'a> {
             initial,
             exceptions,
             timing: self.timing(c.timing.as_deref()),
-            adaptation: self
-                .checked
-                .interface(&c.name)
-                .and_then(|interface| adaptation::written_fields(&interface.adaptation)),
+            adaptation: adaptation::written_fields(&c.adaptation),
             methods,
             section_arms,
             choose_arms,
@@ -272,16 +270,16 @@ impl<'a> Lowerer<'a> {
     }
 
     pub(super) fn timing(&self, timing: Option<&[TimingEntry]>) -> String {
-        let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0i64);
+        let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0u8);
         let mut qualities = Vec::new();
         for entry in timing.unwrap_or_default() {
             match entry {
                 TimingEntry::Period(lo, hi) => {
-                    period = duration_ns(lo);
-                    max_period = hi.as_ref().and_then(duration_ns);
+                    period = Some(lo.nanos);
+                    max_period = hi.map(|hi| hi.nanos);
                 }
-                TimingEntry::MaxResponse(e) => max_response = duration_ns(e),
-                TimingEntry::Priority(e) => priority = int_value(e).unwrap_or(0),
+                TimingEntry::MaxResponse(d) => max_response = Some(d.nanos),
+                TimingEntry::Priority(p) => priority = *p,
                 TimingEntry::Quality(names) => {
                     qualities = names.iter().map(|n| ident::string_literal(n)).collect();
                 }
@@ -296,7 +294,7 @@ impl<'a> Lowerer<'a> {
             opt(period),
             opt(max_period),
             opt(max_response),
-            priority.clamp(i32::MIN.into(), i32::MAX.into()),
+            priority,
             qualities.join(", ")
         )
     }
@@ -315,10 +313,10 @@ impl<'a> Lowerer<'a> {
             ),
             InputKind::Fifo { ty, size, policy } => {
                 let (rust, cool) = packet_type(ty);
-                let policy = match policy.as_deref() {
-                    Some("drop_oldest") => "DropOldest",
-                    Some("block") => "Block",
-                    _ => "Reject",
+                let policy = match policy.unwrap_or_default() {
+                    OverflowPolicy::Reject => "Reject",
+                    OverflowPolicy::DropOldest => "DropOldest",
+                    OverflowPolicy::Block => "Block",
                 };
                 (
                     format!("::coolbot::port::FifoIn<{rust}>"),

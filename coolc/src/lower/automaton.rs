@@ -3,7 +3,7 @@
 //! section and choice stubs with their glue arms, and, for a supervisor, its `when`
 //! rules for the rule compiler (`compound/rules.rs`).
 
-use super::{duration_ns, duration_rust, option_duration};
+use super::{duration_rust, option_duration};
 use crate::ast;
 use crate::check::Typed;
 use crate::checked::model::{Automaton, Ref, State, StateMember};
@@ -67,7 +67,7 @@ pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowe
                     target,
                 } => after.push(format!(
                     "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
-                    duration_rust(duration_ns(delay).unwrap_or_default()),
+                    duration_rust(delay.nanos),
                     match without {
                         Some(port) => format!("Some({})", port.index),
                         None => "None".to_owned(),

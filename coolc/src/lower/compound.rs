@@ -15,10 +15,11 @@ mod rules;
 use std::collections::BTreeSet;
 
 use super::automaton::{self, Lowered, SectionOwner};
-use super::{GEN_TYPES, Lowerer, adaptation, duration_ns, duration_rust, rust_ty, unique_among};
-use crate::ast;
+use super::{GEN_TYPES, Lowerer, adaptation, duration_rust, rust_ty, unique_among};
 use crate::check::model::{Tuning, Ty};
-use crate::checked::model::{Component, ComponentKind, Instance, PortRef, TimingEntry, VarKind};
+use crate::checked::model::{
+    Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, VarKind,
+};
 use crate::ident;
 use crate::ir;
 
@@ -30,10 +31,15 @@ type MappedControllable<'m> = (&'m str, &'m str, &'m str);
 
 impl<'a> Lowerer<'a> {
     /// The type of variable `name` of component `component` (through mapped
-    /// variables of nested compounds), from the component's interface.
+    /// variables of nested compounds).
     fn variable_type(&self, component: &str, name: &str) -> Option<Ty> {
-        let variable = self.checked.interface(component)?.variables.get(name)?;
-        (variable.ty != Ty::Unknown).then(|| variable.ty.clone())
+        self.checked
+            .component(component)?
+            .variables
+            .iter()
+            .find(|v| v.name == name)?
+            .ty
+            .clone()
     }
 
     /// Whether compound `c` connects through a converter, itself or in a compound it
@@ -159,11 +165,11 @@ impl<'a> Lowerer<'a> {
             }
         }
         for on in &c.policies {
-            let policy = match on.policy.as_str() {
-                "restart" => "Restart",
-                "substitute" => "Substitute",
-                "ignore" => "Ignore",
-                _ => "Propagate",
+            let policy = match on.policy {
+                ErrorPolicy::Propagate => "Propagate",
+                ErrorPolicy::Restart => "Restart",
+                ErrorPolicy::Substitute => "Substitute",
+                ErrorPolicy::Ignore => "Ignore",
             };
             ordered.push((
                 on.span.start,
@@ -182,17 +188,9 @@ impl<'a> Lowerer<'a> {
         }
         if let Some(r) = &c.restart {
             if let Some((count, window)) = &r.limit {
-                // Checked: an integer in `1..=u32::MAX` and non-zero durations.
-                let count = match count.kind {
-                    ast::ExprKind::Int(n) => u32::try_from(n).unwrap_or(u32::MAX),
-                    _ => u32::MAX,
-                };
                 ordered.push((
                     r.span.start,
-                    format!(
-                        ".restart_budget({count}, {})",
-                        duration_rust(duration_ns(window).unwrap_or(10_000_000_000))
-                    ),
+                    format!(".restart_budget({count}, {})", duration_rust(window.nanos)),
                 ));
             }
             if let Some((first, last)) = &r.backoff {
@@ -200,8 +198,8 @@ impl<'a> Lowerer<'a> {
                     r.span.start,
                     format!(
                         ".restart_backoff({}, {})",
-                        duration_rust(duration_ns(first).unwrap_or(10_000_000)),
-                        duration_rust(duration_ns(last).unwrap_or(1_000_000_000))
+                        duration_rust(first.nanos),
+                        duration_rust(last.nanos)
                     ),
                 ));
             }
@@ -222,12 +220,10 @@ impl<'a> Lowerer<'a> {
             }
         }
         if let Some(r) = &c.recovery {
-            let ns =
-                |e: Option<&ast::Expr>, default: u64| e.and_then(duration_ns).unwrap_or(default);
             steps.push(format!(
                 ".recovery({}, {})",
-                duration_rust(ns(r.retry_every.as_ref(), 500_000_000)),
-                duration_rust(ns(r.deadline.as_ref(), 5_000_000_000))
+                duration_rust(r.retry_every_nanos()),
+                duration_rust(r.deadline_nanos())
             ));
         }
 
@@ -576,10 +572,7 @@ impl<'a> Lowerer<'a> {
 
     /// The builder steps of a compound's own `adaptation { ... }`.
     fn compound_adaptation(&self, c: &Component) -> Vec<String> {
-        let Some(interface) = self.checked.interface(&c.name) else {
-            return Vec::new();
-        };
-        let tuning = &interface.adaptation;
+        let tuning = &c.adaptation;
         let config = adaptation::config(&Tuning {
             selector: None,
             ..tuning.clone()
@@ -605,16 +598,13 @@ impl<'a> Lowerer<'a> {
         for entry in timing {
             match entry {
                 TimingEntry::Period(lo, hi) => {
-                    fields.push(("period", option(duration_ns(lo))));
-                    fields.push(("max_period", option(hi.as_ref().and_then(duration_ns))));
+                    fields.push(("period", option(Some(lo.nanos))));
+                    fields.push(("max_period", option(hi.map(|hi| hi.nanos))));
                 }
-                TimingEntry::MaxResponse(e) => {
-                    fields.push(("max_response", option(duration_ns(e))));
+                TimingEntry::MaxResponse(d) => {
+                    fields.push(("max_response", option(Some(d.nanos))));
                 }
-                TimingEntry::Priority(e) => {
-                    let priority = super::int_value(e)
-                        .unwrap_or(0)
-                        .clamp(i32::MIN.into(), i32::MAX.into());
+                TimingEntry::Priority(priority) => {
                     fields.push(("priority", priority.to_string()));
                 }
                 TimingEntry::Quality(names) => {

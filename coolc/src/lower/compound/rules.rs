@@ -429,12 +429,12 @@ impl Scope<'_, '_> {
             maybe: false,
             narrow: false,
         };
-        let Some(interface) = self
+        let Some(target) = self
             .component
             .instances
             .iter()
             .find(|i| i.name == instance)
-            .and_then(|i| self.lowerer.checked.interface(&i.component))
+            .and_then(|i| self.lowerer.checked.component(&i.component))
         else {
             return unreadable;
         };
@@ -446,7 +446,7 @@ impl Scope<'_, '_> {
             narrow: false,
         };
         let ty = readable(ty);
-        if let Some(declared) = interface.variables.get(variable) {
+        if let Some(declared) = target.variables.iter().find(|v| v.name == variable) {
             let raw = match mapped {
                 Some(name) => {
                     self.read(name.to_owned());
@@ -458,7 +458,7 @@ impl Scope<'_, '_> {
                 }
             };
             self.uses_view = true;
-            let f64_field = holds_f64(&declared.ty);
+            let f64_field = declared.ty.as_ref().is_some_and(holds_f64);
             return match view_value(&raw, &ty) {
                 Some(code) => Operand {
                     narrow: !f64_field && is_float(&ty),
