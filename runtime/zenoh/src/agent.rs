@@ -24,6 +24,10 @@ use coolbot::ranges::{EXCERPT_CHARS, REASON_CHARS, excerpt};
 
 use crate::{ControlReply, Error, Node, keys, limits};
 
+/// How a refusal of an agent whose queue is full begins: the request may be asked
+/// again (a proxy's first start does, within its wait).
+pub(crate) const BUSY: &str = "the agent has too many requests waiting";
+
 /// How long the agent waits for a new component to leave `starting`.
 const START_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -470,12 +474,9 @@ fn admit(
             Some(why) => Err((query, stopped_reason(why))),
             None => match requests.try_send(query) {
                 Ok(()) => Ok(()),
-                Err(crossbeam_channel::TrySendError::Full(query)) => Err((
-                    query,
-                    format!(
-                        "the agent has too many requests waiting ({AGENT_QUEUE}); ask again later"
-                    ),
-                )),
+                Err(crossbeam_channel::TrySendError::Full(query)) => {
+                    Err((query, format!("{BUSY} ({AGENT_QUEUE}); ask again later")))
+                }
                 Err(crossbeam_channel::TrySendError::Disconnected(query)) => {
                     Err((query, stopped_reason("its thread has ended")))
                 }
@@ -840,7 +841,20 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
         if let Some(max_response) = timing.max_response {
             timing_range("max_response", coolbot::ranges::max_response(max_response))?;
         }
-        timing_range("priority", coolbot::ranges::priority(timing.priority))?;
+        // The description's own priority: within the range, and applied as a local
+        // instance's is (a real-time one the OS refuses is published, not refused
+        // here: the real-time opt-in is for commands).
+        let (min, max) = (coolbot::ranges::MIN_PRIORITY, coolbot::ranges::MAX_PRIORITY);
+        if !(min..=max).contains(&timing.priority) {
+            timing_range(
+                "priority",
+                Err(coolbot::Refused::PriorityOutOfRange {
+                    priority: timing.priority,
+                    min,
+                    max,
+                }),
+            )?;
+        }
         check_levels(&timing.qualities)?;
     }
     Ok(())

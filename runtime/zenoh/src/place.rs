@@ -201,6 +201,27 @@ impl coolbot::remote::Placer for Placer {
         })?;
         let root = remote_root(self.node.name(), placement);
         keys::check_name(&root).map_err(|e| e.to_string())?;
+        // The names the agent will be given, checked here against its limit, so that
+        // a description whose names are too long fails when it is built, not on the
+        // other node at start: the instance's (`<root>-<generation>`, the generation
+        // up to ten digits) and this node's, its owner.
+        crate::limits::NAME
+            .check(
+                || {
+                    format!(
+                        "the name `{root}-<generation>` of `{}` on node `{}`",
+                        placement.name, placement.node
+                    )
+                },
+                root.len() + 1 + u32::MAX.to_string().len(),
+            )
+            .and_then(|()| {
+                crate::limits::NAME.check(
+                    || format!("the name of node `{}`", self.node.name()),
+                    self.node.name().len(),
+                )
+            })
+            .map_err(|exceeded| exceeded.to_string())?;
         let base = format!("{}{}/{root}", keys::LINKS, placement.node);
         let bridge = |port: &str| {
             factory.ports.get(port).ok_or_else(|| {
@@ -750,7 +771,8 @@ impl RemoteEnd for End {
                 Ok(()) => break,
                 Err(Error::Remote { reason, .. })
                     if patient
-                        && reason.starts_with("no agent answered")
+                        && (reason.starts_with("no agent answered")
+                            || reason.starts_with(crate::agent::BUSY))
                         && Instant::now() < deadline =>
                 {
                     std::thread::sleep(Duration::from_millis(100));

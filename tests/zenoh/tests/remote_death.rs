@@ -397,3 +397,21 @@ fn a_remote_instance_that_ends_its_task_ends_its_proxy() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+/// Names too long for the other node's agent are refused when the compound is built,
+/// naming the limit, not at start on the other node.
+#[test]
+fn a_placement_whose_names_the_agent_would_refuse_fails_when_built() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    let _agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry()).install();
+    let long = "c".repeat(100);
+    let error = match dying_cell::component(&long, Parts) {
+        Ok(_) => panic!("a compound named with 100 characters is placed"),
+        Err(error) => error.to_string(),
+    };
+    assert!(error.contains("NAME") && error.contains("128"), "{error}");
+    // A name that fits is placed as usual.
+    assert!(dying_cell::component("cell", Parts).is_ok());
+}
