@@ -12,4 +12,5 @@ pub mod generated {
     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
 }
 
+pub mod dying;
 pub mod support;

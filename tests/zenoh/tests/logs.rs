@@ -11,10 +11,11 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use coolbot::{MonitorEvent, OutputKind, SectionResult, State, Step, System};
-use coolbot_zenoh::agent::{Agent, Instantiate, Registry, instantiate};
+use coolbot::{MonitorEvent, OutputKind, State, Step, System};
+use coolbot_zenoh::agent::{Agent, Instantiate, instantiate};
 use coolbot_zenoh::{Error, Placer};
-use coolbot_zenoh_tests::generated::{dying_cell, flaky, latest};
+use coolbot_zenoh_tests::dying::{Parts, registry};
+use coolbot_zenoh_tests::generated::{dying_cell, latest};
 use coolbot_zenoh_tests::support::{PATIENCE, node, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
 
@@ -105,40 +106,6 @@ fn a_flood_of_packets_that_do_not_decode_is_counted_whole_and_logged_once() {
         logged.len()
     );
     assert!(consumer.shutdown().clean());
-}
-
-/// `Flaky`'s behaviour: counts its periods.
-struct Counting;
-
-impl flaky::Behavior for Counting {
-    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
-        cx.vars.periods += 1;
-        Ok(())
-    }
-}
-
-struct Quiet;
-
-impl dying_cell::Supervisor for Quiet {}
-
-struct Parts;
-
-impl dying_cell::Parts for Parts {
-    fn supervisor(&mut self) -> impl dying_cell::Supervisor {
-        Quiet
-    }
-    fn flaky(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-    fn spare(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-}
-
-fn registry() -> Registry {
-    let mut registry = Registry::new();
-    flaky::register(&mut registry, |name| flaky::component(name, Counting));
-    registry
 }
 
 #[test]

@@ -12,43 +12,10 @@ use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::{ControlReply, Node, Placer};
+use coolbot_zenoh_tests::dying::{Counting, Parts, registry};
 use coolbot_zenoh_tests::generated::{dying_cell, finisher, finishing_cell, flaky};
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
-
-/// `Flaky`'s behaviour: counts its periods.
-struct Counting;
-
-impl flaky::Behavior for Counting {
-    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
-        cx.vars.periods += 1;
-        Ok(())
-    }
-}
-
-struct Quiet;
-
-impl dying_cell::Supervisor for Quiet {}
-
-struct Parts;
-
-impl dying_cell::Parts for Parts {
-    fn supervisor(&mut self) -> impl dying_cell::Supervisor {
-        Quiet
-    }
-    fn flaky(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-    fn spare(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-}
-
-fn registry() -> Registry {
-    let mut registry = Registry::new();
-    flaky::register(&mut registry, |name| flaky::component(name, Counting));
-    registry
-}
 
 fn periods(monitor: &Monitor) -> u64 {
     monitor
@@ -335,11 +302,14 @@ impl finisher::Behavior for Finishing {
 
 struct FinishingParts;
 
-impl finishing_cell::Supervisor for Quiet {}
+/// `FinishingCell`'s supervisor: nothing of its own.
+struct Still;
+
+impl finishing_cell::Supervisor for Still {}
 
 impl finishing_cell::Parts for FinishingParts {
     fn supervisor(&mut self) -> impl finishing_cell::Supervisor {
-        Quiet
+        Still
     }
     fn finisher(&mut self) -> impl finisher::Behavior {
         Finishing

@@ -8,12 +8,13 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use coolbot::{SectionResult, State, System};
-use coolbot_zenoh::agent::{Agent, Registry};
+use coolbot::{State, System};
+use coolbot_zenoh::agent::Agent;
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::top::{Board, heard, render};
 use coolbot_zenoh::{Placer, keys};
-use coolbot_zenoh_tests::generated::{dying_cell, flaky};
+use coolbot_zenoh_tests::dying::{Parts, registry};
+use coolbot_zenoh_tests::generated::dying_cell;
 use coolbot_zenoh_tests::support::{PATIENCE, pair, robot, wait_until};
 use zenoh::Wait;
 
@@ -89,40 +90,6 @@ fn a_node_that_goes_away_is_shown_lost_and_the_board_goes_on() {
     let screen = render(&board, 100, 20);
     assert!(screen.contains("lost-robot/robot"), "{screen}");
     assert_eq!(screen.matches(" lost ").count(), 6, "{screen}");
-}
-
-/// `Flaky`'s behaviour: counts its periods.
-struct Counting;
-
-impl flaky::Behavior for Counting {
-    fn going_periodic(&mut self, cx: &mut flaky::Cx<'_>) -> SectionResult {
-        cx.vars.periods += 1;
-        Ok(())
-    }
-}
-
-struct Quiet;
-
-impl dying_cell::Supervisor for Quiet {}
-
-struct Parts;
-
-impl dying_cell::Parts for Parts {
-    fn supervisor(&mut self) -> impl dying_cell::Supervisor {
-        Quiet
-    }
-    fn flaky(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-    fn spare(&mut self) -> impl flaky::Behavior {
-        Counting
-    }
-}
-
-fn registry() -> Registry {
-    let mut registry = Registry::new();
-    flaky::register(&mut registry, |name| flaky::component(name, Counting));
-    registry
 }
 
 #[test]
