@@ -751,26 +751,10 @@ impl<T: Packet + Serialize> Automaton for Outlet<T> {
         self.spec
     }
 
-    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
-        Ok(())
-    }
-
-    fn stop(&mut self, _cx: &mut Context) {}
-
     fn section(&mut self, _state: usize, section: Section, _cx: &mut Context) -> Result<(), Fault> {
         if section == Section::Entry {
             self.forward();
         }
-        Ok(())
-    }
-
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-
-    fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
         Ok(())
     }
 
@@ -780,10 +764,6 @@ impl<T: Packet + Serialize> Automaton for Outlet<T> {
 
     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
         Err("a bridge has no controllable variable".to_owned())
-    }
-
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
 
@@ -1174,21 +1154,6 @@ impl Automaton for Inlet {
         self.watcher = None;
     }
 
-    fn section(
-        &mut self,
-        _state: usize,
-        _section: Section,
-        _cx: &mut Context,
-    ) -> Result<(), Fault> {
-        Ok(())
-    }
-
-    fn choose(&mut self, _state: usize, _cx: &mut Context) -> Option<usize> {
-        None
-    }
-
-    fn exception(&mut self, _exception: usize, _message: &str, _cx: &mut Context) {}
-
     /// A pull request from the consumer: one query on `K/@pull`; every answer that
     /// arrives within the timeout is sent (to the requesting input only). No answer
     /// is not a fault: the consumer's pull times out.
@@ -1230,9 +1195,5 @@ impl Automaton for Inlet {
 
     fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
         Err("a bridge has no controllable variable".to_owned())
-    }
-
-    fn get(&self, _variable: usize) -> Value {
-        Value::Unit
     }
 }
