@@ -234,21 +234,18 @@ pub fn run(cli: Cli) -> ExitCode {
             runtime,
             check,
         } => {
-            // The name given once is kept: an existing manifest's, unless another is
-            // given.
-            let package = name
-                .clone()
-                .or_else(|| {
-                    std::fs::read_to_string(out.join("Cargo.toml"))
-                        .ok()
-                        .and_then(|text| manifest::package_name(&text))
-                })
-                .unwrap_or_else(|| dir_name(out));
-            let options = merge::WriteOptions {
-                check: *check,
-                keep_runtime: !runtime.given(),
-            };
-            compile(&cli, files, out, &package, runtime.dep(out), options).map(|_| ())
+            let creating = !out.join("Cargo.toml").exists();
+            package_for(name.as_deref(), out).and_then(|package| {
+                let options = merge::WriteOptions {
+                    check: *check,
+                    keep_runtime: !runtime.given(),
+                };
+                let krate = compile(&cli, files, out, &package, runtime.dep(out), options)?;
+                if creating && !*check {
+                    write_starter_tests(out, &krate)?;
+                }
+                Ok(())
+            })
         }
         Commands::New { name, runtime } => new(&cli, Path::new(name), runtime.dep(Path::new(name))),
         Commands::Diagram {
@@ -294,6 +291,57 @@ enum Failure {
     Stale,
     /// A usage or I/O error message.
     Usage(String),
+}
+
+/// The package name of `coolc compile`'s crate: the one given (checked as `coolc new`
+/// checks it), else the existing manifest's (the name given once is kept), else one
+/// made from the directory's name; when that is no valid package name (`-o gen`: a
+/// keyword), `cool-` goes before it, and the compile says so.
+fn package_for(given: Option<&str>, out: &Path) -> Result<String, Failure> {
+    if let Some(name) = given {
+        return match package_name_error(name) {
+            Some(why) => Err(Failure::Usage(format!(
+                "invalid package name `{name}` (--name): {why}; pass a name such as `blinker` or `my-robot`"
+            ))),
+            None => Ok(name.to_owned()),
+        };
+    }
+    if let Some(name) = std::fs::read_to_string(out.join("Cargo.toml"))
+        .ok()
+        .and_then(|text| manifest::package_name(&text))
+    {
+        return Ok(name);
+    }
+    let dir = dir_name(out);
+    let name = lower::package_name(&dir);
+    let Some(why) = package_name_error(&name) else {
+        return Ok(name);
+    };
+    let chosen = format!("cool-{name}");
+    eprintln!(
+        "coolc: `{dir}` cannot name the package ({why}): it is named `{chosen}`; pass --name to choose another"
+    );
+    Ok(chosen)
+}
+
+/// `tests/components.rs` of a crate `coolc compile` has just created, unless the file
+/// is there already.
+fn write_starter_tests(out: &Path, krate: &crate::ir::Crate) -> Result<(), Failure> {
+    let Some(text) = emit::starter_tests(krate) else {
+        return Ok(());
+    };
+    let path = out.join("tests/components.rs");
+    if path.exists() {
+        return Ok(());
+    }
+    let io = |e: std::io::Error| Failure::Usage(format!("cannot write {}: {e}", path.display()));
+    std::fs::create_dir_all(out.join("tests")).map_err(io)?;
+    std::fs::write(&path, text).map_err(io)?;
+    eprintln!(
+        "coolc: wrote {}: a test per component, in its generated harness (`cargo test`)",
+        path.display()
+    );
+    Ok(())
 }
 
 fn dir_name(path: &Path) -> String {

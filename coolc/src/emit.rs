@@ -912,6 +912,44 @@ pub fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
     }))
 }
 
+#[derive(Template)]
+#[template(path = "starter_tests.rs", escape = "none")]
+struct StarterTests<'a> {
+    lib: &'a str,
+    tests: Vec<StarterTestOf<'a>>,
+}
+
+/// One atomic component's test in [`StarterTests`].
+struct StarterTestOf<'a> {
+    /// The test's name: the module without a raw identifier's `r#`.
+    test: &'a str,
+    module: &'a str,
+    user_struct: &'a str,
+    type_name: &'a str,
+}
+
+/// The `tests/components.rs` that `coolc compile` writes when it creates a crate: one
+/// test per atomic component, which runs it in its generated harness for a second of
+/// virtual time from its stubs; `None` when the crate has no atomic component.
+pub fn starter_tests(krate: &ir::Crate) -> Option<String> {
+    let tests: Vec<StarterTestOf<'_>> = krate
+        .atomics
+        .iter()
+        .map(|c| StarterTestOf {
+            test: c.module.trim_start_matches("r#"),
+            module: &c.module,
+            user_struct: &c.user_struct,
+            type_name: &c.type_name,
+        })
+        .collect();
+    (!tests.is_empty()).then(|| {
+        format_user(&render(&StarterTests {
+            lib: &krate.lib_name,
+            tests,
+        }))
+    })
+}
+
 /// The `src/main.rs` of a new crate as its template renders it: runs every component
 /// no compound instantiates, for two seconds.
 fn render_starter_main(krate: &ir::Crate) -> String {

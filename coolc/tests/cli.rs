@@ -504,20 +504,31 @@ fn compile_check_in_json_lists_stale_files_as_json_lines() {
 }
 
 #[test]
-fn compile_into_a_new_directory_writes_a_main_that_runs() {
-    // The example descriptions (a compound over two atomics, a converter): the
-    // generated `main.rs` starts the compound, the one component nothing
-    // instantiates.
+fn compile_into_a_new_directory_writes_a_main_and_tests_that_run() {
+    // The example descriptions (a compound over two atomics, a converter), into `gen`:
+    // a keyword of Rust 2024, so no crate name; the package is named `cool-gen`, and
+    // the compile says so. The generated `main.rs` starts the compound, the one
+    // component nothing instantiates.
     let dir = tempfile::tempdir().unwrap();
     common::copy_descriptions(dir.path());
-    let out = coolc(&["compile", "mobile_base.cool", "-o", "robot"], dir.path());
+    let out = coolc(&["compile", "mobile_base.cool", "-o", "gen"], dir.path());
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    let robot = dir.path().join("robot");
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains(
+            "`gen` cannot name the package (it is a Rust keyword): it is named `cool-gen`"
+        ),
+        "{stderr}"
+    );
+    let robot = dir.path().join("gen");
+    let manifest = std::fs::read_to_string(robot.join("Cargo.toml")).unwrap();
+    assert!(manifest.contains("name = \"cool-gen\""), "{manifest}");
     let main = std::fs::read_to_string(robot.join("src/main.rs")).unwrap();
     let compact: String = main.split_whitespace().collect();
     assert!(
-        compact
-            .contains("::robot::generated::mobile_base::component::<::robot::converters::Convert"),
+        compact.contains(
+            "::cool_gen::generated::mobile_base::component::<::cool_gen::converters::Convert"
+        ),
         "{main}"
     );
     // The compound's instances are not started on their own; with the `network`
@@ -530,10 +541,71 @@ fn compile_into_a_new_directory_writes_a_main_that_runs() {
         stdout.contains("ComponentReport { name: \"mobile_base\""),
         "{stdout}"
     );
+    // A test per atomic component, in its harness, from the stubs as written.
+    let stdout = cargo(&robot, &["test", "--test", "components"]);
+    for test in [
+        "motion_controller",
+        "range_server",
+        "sim_range_server",
+        "gyro",
+        "planner",
+        "follower",
+    ] {
+        assert!(
+            stdout.contains(&format!(
+                "test {test}_runs_for_a_second_without_error ... ok"
+            )),
+            "{stdout}"
+        );
+    }
 
-    // A later compile never writes it again, not even when it is gone.
+    // A later compile never writes them again, not even when they are gone.
     std::fs::remove_file(robot.join("src/main.rs")).unwrap();
-    let out = coolc(&["compile", "mobile_base.cool", "-o", "robot"], dir.path());
+    std::fs::remove_file(robot.join("tests/components.rs")).unwrap();
+    let out = coolc(&["compile", "mobile_base.cool", "-o", "gen"], dir.path());
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(!robot.join("src/main.rs").exists());
+    assert!(!robot.join("tests/components.rs").exists());
+    // The name is the manifest's now: nothing more is said about it.
+    assert!(!text(&out.stderr).contains("cannot name the package"));
+}
+
+#[test]
+fn compile_checks_the_package_name_as_new_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = data("mobile_base.cool");
+    let ok = ok.to_str().unwrap();
+    // A name given that cargo would refuse is a usage error, and nothing is written.
+    for (name, why) in [
+        ("type", "it is a Rust keyword"),
+        ("3d", "the name cannot start with a digit"),
+        (
+            "std",
+            "it is the name of a crate of Rust's standard library",
+        ),
+    ] {
+        let out = coolc(&["compile", ok, "-o", "out", "--name", name], dir.path());
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains(&format!("invalid package name `{name}` (--name): {why}")),
+            "{stderr}"
+        );
+        assert!(!dir.path().join("out").exists(), "{name}");
+    }
+    // A directory whose name cannot be a package's gives one that can.
+    for (out_dir, package) in [
+        ("3d", "cool-3d"),
+        ("async", "cool-async"),
+        ("test", "cool-test"),
+    ] {
+        let out = coolc(&["compile", ok, "-o", out_dir], dir.path());
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        let manifest =
+            std::fs::read_to_string(dir.path().join(out_dir).join("Cargo.toml")).unwrap();
+        assert!(
+            manifest.contains(&format!("name = \"{package}\"")),
+            "{manifest}"
+        );
+    }
 }
