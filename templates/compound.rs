@@ -250,6 +250,15 @@ impl {{ h.type_name }}<'_> {
         self.commander.set("{{ h.instance }}", "{{ setter.variable }}", {{ setter.to_value }})
     }
 {%- endfor %}
+{%- for (method, variable) in h.observables %}
+
+    /// `{{ variable }}` is observable: it has no setter, and a call does not compile
+    /// (the compiler says why).
+    #[doc(hidden)]
+    pub fn {{ method }}<T: ::coolbot::ObservableOnly>(&mut self, value: T) -> ::core::result::Result<(), ::coolbot::CommandError> {
+        Err(value.refuse())
+    }
+{%- endfor %}
 {%- if let Some(config) = h.config %}
 
     /// Give it a new configuration (its `configuration` block).

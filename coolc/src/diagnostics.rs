@@ -163,6 +163,9 @@ codes! {
     /// overflow policy: a failover may then skip or double packets of the merged
     /// stream without a count (partial in the runtime; warning).
     RedundantLossyInput => "coolc::check::redundant_lossy_input",
+    /// One output connected to two members of a redundant group the same way: one
+    /// connection to a member already feeds every member (warning).
+    GroupConnectedTwice => "coolc::check::group_connected_twice",
     /// An aperiodic atomic component with a `max_response` has an input no `on`
     /// transition handles: response times are measured at `on` transitions only
     /// (partial in the runtime; warning).

@@ -576,6 +576,10 @@ pub struct Handle {
     pub component: String,
     /// One setter per controllable variable (own or mapped), in declaration order.
     pub setters: Vec<Setter>,
+    /// `(method, variable)` for each observable variable whose `set_<variable>` names
+    /// no other method: a call does not compile, with the reason
+    /// (`coolbot::ObservableOnly`).
+    pub observables: Vec<(String, String)>,
     /// The configuration type (`super::<module>::Config`) when the instance is an
     /// atomic component with a `configuration` block.
     pub config: Option<String>,

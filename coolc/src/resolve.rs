@@ -230,6 +230,23 @@ pub struct Symbols {
     pub siblings: BTreeMap<String, Vec<(PathBuf, DefKind)>>,
     /// The directory of each loaded file, by file id.
     pub dirs: Vec<PathBuf>,
+    /// Each loaded file's path, by file id.
+    pub files: Vec<PathBuf>,
+}
+
+/// `path` without `.` components and with each `..` taken back (as far as it goes).
+fn lexical(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir if out.file_name().is_some() => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// The outcome of looking a name up from one file.
@@ -261,6 +278,11 @@ impl Symbols {
                 .files()
                 .iter()
                 .map(|file| file.path.parent().unwrap_or(Path::new("")).to_owned())
+                .collect(),
+            files: sources
+                .files()
+                .iter()
+                .map(|file| file.path.clone())
                 .collect(),
             ..Symbols::default()
         };
@@ -359,6 +381,31 @@ impl Symbols {
             .and_then(|(path, _)| Some(path.file_name()?.to_string_lossy().into_owned()))
     }
 
+    /// The path that imports the file `to` from the file `from`: relative to `from`'s
+    /// directory, with `/` between components, as an `import` names it.
+    fn import_path(&self, from: FileId, to: FileId) -> Option<String> {
+        let here = lexical(self.dirs.get(from.0 as usize)?);
+        let there = lexical(&self.files.get(to.0 as usize)?.clone());
+        let common = here
+            .iter()
+            .zip(there.iter())
+            .take_while(|(a, b)| a == b)
+            .count();
+        // Above a common root nothing names the way back (an absolute path and a
+        // relative one): no path, rather than a wrong one.
+        if common == 0 && here.is_absolute() != there.is_absolute() {
+            return None;
+        }
+        let mut parts: Vec<String> = here.iter().skip(common).map(|_| "..".to_owned()).collect();
+        parts.extend(
+            there
+                .iter()
+                .skip(common)
+                .map(|part| part.to_string_lossy().into_owned()),
+        );
+        Some(parts.join("/"))
+    }
+
     /// Looks `name` up as seen from `from`.
     pub fn lookup(&self, from: FileId, name: &str) -> Lookup {
         match self.defs.get(name) {
@@ -405,11 +452,19 @@ impl Symbols {
                 None
             }
             Lookup::NotImported(def) => {
-                let path = self
-                    .paths
-                    .get(def.file.0 as usize)
-                    .cloned()
-                    .unwrap_or_default();
+                let help = match self.import_path(from, def.file) {
+                    Some(path) => format!(
+                        "`{}` is defined in `{path}`: add `import \"{path}\";` to this file",
+                        name.name
+                    ),
+                    None => format!(
+                        "`{}` is defined in `{}`: import it",
+                        name.name,
+                        self.paths
+                            .get(def.file.0 as usize)
+                            .map_or("", String::as_str)
+                    ),
+                };
                 diagnostics.push(
                     Diagnostic::error(
                         code,
@@ -418,7 +473,7 @@ impl Symbols {
                         format!("unknown {what} `{}`", name.name),
                     )
                     .with_label("not visible from this file")
-                    .with_help(format!("`{}` is defined in `{path}`: import it", name.name)),
+                    .with_help(help),
                 );
                 None
             }

@@ -263,6 +263,45 @@ fn an_unknown_name_defined_next_door_names_the_import() {
 }
 
 #[test]
+fn a_name_loaded_but_not_imported_gives_the_import_line_from_the_importing_file() {
+    // `vision/camera.cool` uses `Image` of `types/shared.cool` without importing it;
+    // the cell imports both, from a third directory: the help's path is the one to
+    // write in `vision/camera.cool`, whatever the working directory.
+    let dir = tempfile::tempdir().unwrap();
+    let cell = dir.path().join("cell");
+    for sub in ["types", "vision"] {
+        std::fs::create_dir_all(cell.join(sub)).unwrap();
+    }
+    std::fs::write(
+        cell.join("types/shared.cool"),
+        "packet Image { pixels: [u8] }\n",
+    )
+    .unwrap();
+    let camera = "atomic Camera { output frame: data<Image>; }\n";
+    std::fs::write(cell.join("vision/camera.cool"), camera).unwrap();
+    std::fs::write(
+        cell.join("cell.cool"),
+        "import \"types/shared.cool\";\nimport \"vision/camera.cool\";\ncompound Cell { instance camera: Camera; }\n",
+    )
+    .unwrap();
+    let out = coolc(&["check", "cell/cell.cool"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("`Image` is defined in `../types/shared.cool`: add `import \"../types/shared.cool\";` to this"),
+        "{stderr}"
+    );
+    // The line pasted, it checks.
+    std::fs::write(
+        cell.join("vision/camera.cool"),
+        format!("import \"../types/shared.cool\";\n{camera}"),
+    )
+    .unwrap();
+    let out = coolc(&["check", "cell/cell.cool"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
+#[test]
 fn the_name_and_runtime_given_once_are_kept() {
     let dir = tempfile::tempdir().unwrap();
     let ok = data("motion_controller.cool");

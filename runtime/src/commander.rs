@@ -368,3 +368,17 @@ impl Commander {
             })
     }
 }
+
+/// What a typed instance handle's `set_<variable>` asks of its argument when the
+/// variable is observable: no type has it, so a call does not compile, and the compiler
+/// says why. Only controllable variables are set through an instance's control port;
+/// an observable one is read from its monitoring (a supervisor's `cx.view`).
+#[diagnostic::on_unimplemented(
+    message = "an observable variable has no setter: only controllable variables are set",
+    label = "the variable this would set is observable",
+    note = "a supervisor reads an observable variable (in rules, or `cx.view.var(instance, name)`); to set it, declare it `controllable` in its component"
+)]
+pub trait ObservableOnly {
+    /// Never called: no value has a type with this trait.
+    fn refuse(self) -> CommandError;
+}

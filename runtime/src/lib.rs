@@ -128,7 +128,9 @@ mod watchdog;
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
 pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult};
 pub use crate::clock::{Clock, NotSettled, VirtualClock};
-pub use crate::commander::{CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT};
+pub use crate::commander::{
+    CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, ObservableOnly,
+};
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::handle::Handle;
 pub use crate::monitor::{

@@ -787,14 +787,30 @@ fn connect(
             PortKind::Poster => "a `poster` output connects to `poster` inputs",
             _ => "a `data` output connects to `last`, `fifo` and `ufifo` inputs",
         };
+        // Both ends in full, packet types included: a wrong kind often comes with a
+        // wrong port (`data<Detection>` into `poster<JointPosition>`).
+        let typed = |kind: PortKind, ty: Option<&Ty>| match ty {
+            Some(ty) => format!("{}<{ty}>", kind.as_str()),
+            None => kind.as_str().to_owned(),
+        };
+        let mut help = help.to_owned();
+        if let (Some(out_ty), Some(in_ty), None) = (&from.ty, &to.ty, &connect.via)
+            && !out_ty.same(in_ty)
+        {
+            help.push_str(&format!(
+                "; the packet types differ too (`{out_ty}` and `{in_ty}`): is this the port you meant?"
+            ));
+        }
         let diagnostic = checker
             .error(
                 Code::ConnectKind,
                 connect.span,
                 format!(
-                    "cannot connect a `{}` output to a `{}` input",
-                    from.kind.as_str(),
-                    to.kind.as_str()
+                    "cannot connect `{}`, a `{}` output, to `{}`, a `{}` input",
+                    path(&connect.from),
+                    typed(from.kind, from.ty.as_ref()),
+                    path(&connect.to),
+                    typed(to.kind, to.ty.as_ref()),
                 ),
             )
             .with_label("incompatible port kinds")
@@ -989,7 +1005,22 @@ fn cardinality(
                             checker.push(diagnostic);
                             continue;
                         }
-                        Some(_) => {}
+                        Some((_, first)) => {
+                            // Accepted (the runtime connects the output to each member
+                            // once), but it says something the author may not mean.
+                            let diagnostic = Diagnostic::warning(
+                                Code::GroupConnectedTwice,
+                                checker.file,
+                                connect.span,
+                                format!(
+                                    "`{from}` is connected to the redundant group `{group}` already: one connection to a member feeds every member",
+                                ),
+                            )
+                            .with_label("feeds the group a second time")
+                            .with_secondary(*first, "this connection feeds every member")
+                            .with_help("remove one of the two connections");
+                            checker.push(diagnostic);
+                        }
                         None => {
                             converted.insert(port, (via.map(str::to_owned), connect.span));
                         }
@@ -1040,15 +1071,25 @@ fn cardinality(
             let grouped = owner != *instance;
             for (_, instance, extra) in &ends[1..] {
                 let kind = port.kind.as_str();
+                // What merges several producers depends on the kind: `data` packets
+                // queue in a fifo; a poster is one producer's shared value, read on
+                // demand, so each producer needs an input of its own.
+                let merge = if port.kind == PortKind::Poster {
+                    "a `poster` input reads one producer's poster: declare one `poster` \
+                     input per producer, or merge their values in a component of its own"
+                } else {
+                    "use a `fifo` or `ufifo` input to merge several producers"
+                };
                 let (message, help) = if grouped {
                     (
                         format!(
                             "`{instance}.{port_name}` is a `{kind}` input of the redundant \
                              group `{owner}` and takes exactly one producer"
                         ),
-                        "every member of a redundant group gets what each connection to one \
-                         of them brings: connect the group's input once, or use a `fifo` or \
-                         `ufifo` input",
+                        format!(
+                            "every member of a redundant group gets what each connection to \
+                             one of them brings: connect the group's input once; else {merge}"
+                        ),
                     )
                 } else {
                     (
@@ -1056,7 +1097,7 @@ fn cardinality(
                             "`{instance}.{port_name}` is a `{kind}` input and takes exactly \
                              one producer"
                         ),
-                        "use a `fifo` or `ufifo` input to merge several producers",
+                        merge.to_owned(),
                     )
                 };
                 let diagnostic = checker

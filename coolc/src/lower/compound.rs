@@ -334,6 +334,20 @@ impl<'a> Lowerer<'a> {
                     to_value,
                 });
             }
+            // The handle's other methods keep their names: an observable `period`
+            // gets no `set_period` of its own.
+            let taken: Vec<&str> = setters
+                .iter()
+                .map(|s| s.method.as_str())
+                .chain(["set_period", "set_quality"])
+                .collect();
+            let observables = component
+                .variables
+                .iter()
+                .filter(|v| v.kind == VarKind::Observable)
+                .map(|v| (ident::method("set_", &v.name, ""), v.name.clone()))
+                .filter(|(method, _)| !taken.contains(&method.as_str()))
+                .collect();
             let config = (!lowered.compound
                 && component
                     .configuration
@@ -362,6 +376,7 @@ impl<'a> Lowerer<'a> {
                 type_name,
                 component: lowered.component.clone(),
                 setters,
+                observables,
                 config,
                 quality,
             });

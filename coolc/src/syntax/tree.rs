@@ -164,6 +164,41 @@ impl Builder<'_> {
             .push(Diagnostic::error(code, self.file, span, message));
     }
 
+    /// `substitutes a.b`: refused, since a substitute stands in its original's
+    /// compound (where it is wired like the original and its supervisor commands it).
+    fn substitute_elsewhere(
+        &mut self,
+        name: &ast::Ident,
+        component: &ast::Ident,
+        owner: &ast::Ident,
+        last: &ast::Ident,
+        path: &[ast::Ident],
+    ) {
+        let dotted: Vec<&str> = path.iter().map(|p| p.name.as_str()).collect();
+        let dotted = dotted.join(".");
+        let span = Span::new(owner.span.start, last.span.end);
+        self.diagnostics.push(
+            Diagnostic::error(
+                Code::UnknownInstance,
+                self.file,
+                span,
+                format!(
+                    "`{dotted}` is an instance inside `{}`: a substitute is declared in the compound of the instance it substitutes",
+                    owner.name
+                ),
+            )
+            .with_label("not an instance of this compound")
+            .with_help(format!(
+                "declare `instance {}: {} substitutes {};` in the component of `{}`",
+                name.name,
+                component.name,
+                last.name,
+                path.get(path.len().saturating_sub(2))
+                    .map_or(owner.name.as_str(), |p| p.name.as_str())
+            )),
+        );
+    }
+
     pub(super) fn item(&mut self, pair: P<'_>) -> Option<ast::Item> {
         let doc = docs(&pair);
         let inner = children(pair).into_iter().next()?;
@@ -627,7 +662,19 @@ impl Builder<'_> {
                 for part in parts.into_iter().skip(2) {
                     match part.as_rule() {
                         Rule::substitutes_clause => {
-                            instance.substitutes = Some(self.ident(children(part).first()?))
+                            let path: Vec<ast::Ident> =
+                                children(part).iter().map(|p| self.ident(p)).collect();
+                            match path.as_slice() {
+                                [original] => instance.substitutes = Some(original.clone()),
+                                [owner, .., last] => self.substitute_elsewhere(
+                                    &instance.name,
+                                    &instance.component,
+                                    owner,
+                                    last,
+                                    &path,
+                                ),
+                                [] => {}
+                            }
                         }
                         Rule::node_clause => {
                             instance.node = Some(self.string(children(part).first()?))

@@ -1,7 +1,8 @@
 //! The type guarantees of generated code, pinned by cases that must not compile
 //! (`tests/ui/*.rs`, each with the compiler's message in `*.stderr`): a `may` choice
-//! of a state outside the `may` list is unrepresentable, and a missing stub is a
-//! compile error that names the stub. The correct implementation in `src/lib.rs`
+//! of a state outside the `may` list is unrepresentable, a missing stub is a
+//! compile error that names the stub, and setting an instance's observable variable
+//! through its typed handle is a compile error that says why. The correct implementation in `src/lib.rs`
 //! builds, and runs in its harness here.
 
 #[test]
