@@ -45,6 +45,7 @@ pub mod lower;
 pub mod manifest;
 pub mod merge;
 pub mod resolve;
+pub mod ros;
 pub mod source;
 pub mod syntax;
 

@@ -97,6 +97,7 @@
 
 pub mod adapt;
 mod automaton;
+pub mod cdr;
 pub mod clock;
 mod commander;
 pub mod compound;

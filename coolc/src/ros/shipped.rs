@@ -1,0 +1,111 @@
+//! The interface definitions coolc ships: the common types its examples and tests
+//! use, written from the ROS 2 interface definitions (field names, types, order and
+//! constants as there) and compiled into the binary, so that coolc reads them with no
+//! ROS installed. They are the last place a type is looked up (see
+//! [`super::lookup`]); the files are under `coolc/interfaces/<package>/msg/`.
+
+use super::names::TypeName;
+
+/// Every shipped type: its package, its name and its `.msg` text, by package and name.
+pub const SHIPPED: &[(&str, &str, &str)] = &[
+    (
+        "builtin_interfaces",
+        "Duration",
+        include_str!("../../interfaces/builtin_interfaces/msg/Duration.msg"),
+    ),
+    (
+        "builtin_interfaces",
+        "Time",
+        include_str!("../../interfaces/builtin_interfaces/msg/Time.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Point",
+        include_str!("../../interfaces/geometry_msgs/msg/Point.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Pose",
+        include_str!("../../interfaces/geometry_msgs/msg/Pose.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "PoseStamped",
+        include_str!("../../interfaces/geometry_msgs/msg/PoseStamped.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "PoseWithCovariance",
+        include_str!("../../interfaces/geometry_msgs/msg/PoseWithCovariance.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Quaternion",
+        include_str!("../../interfaces/geometry_msgs/msg/Quaternion.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Transform",
+        include_str!("../../interfaces/geometry_msgs/msg/Transform.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "TransformStamped",
+        include_str!("../../interfaces/geometry_msgs/msg/TransformStamped.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Twist",
+        include_str!("../../interfaces/geometry_msgs/msg/Twist.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "TwistStamped",
+        include_str!("../../interfaces/geometry_msgs/msg/TwistStamped.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "TwistWithCovariance",
+        include_str!("../../interfaces/geometry_msgs/msg/TwistWithCovariance.msg"),
+    ),
+    (
+        "geometry_msgs",
+        "Vector3",
+        include_str!("../../interfaces/geometry_msgs/msg/Vector3.msg"),
+    ),
+    (
+        "nav_msgs",
+        "Odometry",
+        include_str!("../../interfaces/nav_msgs/msg/Odometry.msg"),
+    ),
+    (
+        "sensor_msgs",
+        "Imu",
+        include_str!("../../interfaces/sensor_msgs/msg/Imu.msg"),
+    ),
+    (
+        "sensor_msgs",
+        "LaserScan",
+        include_str!("../../interfaces/sensor_msgs/msg/LaserScan.msg"),
+    ),
+    (
+        "std_msgs",
+        "Header",
+        include_str!("../../interfaces/std_msgs/msg/Header.msg"),
+    ),
+];
+
+/// The `.msg` text of a shipped type.
+pub fn find(name: &TypeName) -> Option<&'static str> {
+    SHIPPED
+        .iter()
+        .find(|(package, type_name, _)| *package == name.package() && *type_name == name.name())
+        .map(|(_, _, text)| *text)
+}
+
+/// The names of every shipped type, by package and name.
+pub fn names() -> impl Iterator<Item = TypeName> {
+    SHIPPED.iter().map(|(package, name, _)| {
+        TypeName::new(package, name).expect("a shipped type has a valid name")
+    })
+}
