@@ -161,7 +161,7 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     variables: &[
     {%- for v in c.vars %}
     {%- if v.spec_index.is_some() %}
-        ::coolbot::VarSpec { name: "{{ v.field.cool_name }}", kind: ::coolbot::VarKind::{{ v.kind }}, ty: "{{ v.cool_ty }}", doc: {{ v.doc_literal() }} },
+        ::coolbot::VarSpec { name: "{{ v.field.cool_name }}", kind: ::coolbot::VarKind::{{ v.kind }}, ty: "{{ v.cool_ty }}", doc: {{ v.doc_literal() }}, range: {{ v.range }} },
     {%- endif %}
     {%- endfor %}
     ],

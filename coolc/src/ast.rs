@@ -432,7 +432,22 @@ pub struct Variable {
     pub ty: Option<Type>,
     /// Default value or mapping path, if any.
     pub value: Option<Expr>,
+    /// `in low..=high`, if any.
+    pub range: Option<VarRange>,
     /// The whole member.
+    pub span: Span,
+}
+
+/// `in low..=high` on a variable: the values it may be set to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VarRange {
+    /// The lowest value.
+    pub low: Expr,
+    /// The highest value.
+    pub high: Expr,
+    /// `..=` (true) or `..` (false; refused by the checker).
+    pub inclusive: bool,
+    /// From `in` to the end of `high`.
     pub span: Span,
 }
 

@@ -233,20 +233,13 @@ pub fn run(cli: Cli) -> ExitCode {
             name,
             runtime,
             check,
-        } => {
-            let creating = !out.join("Cargo.toml").exists();
-            package_for(name.as_deref(), out).and_then(|package| {
-                let options = merge::WriteOptions {
-                    check: *check,
-                    keep_runtime: !runtime.given(),
-                };
-                let krate = compile(&cli, files, out, &package, runtime.dep(out), options)?;
-                if creating && !*check {
-                    write_starter_tests(out, &krate)?;
-                }
-                Ok(())
-            })
-        }
+        } => package_for(name.as_deref(), out).and_then(|package| {
+            let options = merge::WriteOptions {
+                check: *check,
+                keep_runtime: !runtime.given(),
+            };
+            compile(&cli, files, out, &package, runtime.dep(out), options).map(|_| ())
+        }),
         Commands::New { name, runtime } => new(&cli, Path::new(name), runtime.dep(Path::new(name))),
         Commands::Diagram {
             files,
@@ -299,7 +292,9 @@ enum Failure {
 /// keyword), `cool-` goes before it, and the compile says so.
 fn package_for(given: Option<&str>, out: &Path) -> Result<String, Failure> {
     if let Some(name) = given {
-        return match package_name_error(name) {
+        // The name as the crate gets it (lowercase, `-` separated) is what cargo and
+        // Rust see: `Type` is `type`, a keyword.
+        return match name_error(name) {
             Some(why) => Err(Failure::Usage(format!(
                 "invalid package name `{name}` (--name): {why}; pass a name such as `blinker` or `my-robot`"
             ))),
@@ -318,30 +313,15 @@ fn package_for(given: Option<&str>, out: &Path) -> Result<String, Failure> {
         return Ok(name);
     };
     let chosen = format!("cool-{name}");
+    let as_package = if name == dir {
+        String::new()
+    } else {
+        format!(", as a package name `{name}`")
+    };
     eprintln!(
-        "coolc: `{dir}` cannot name the package ({why}): it is named `{chosen}`; pass --name to choose another"
+        "coolc: `{dir}`{as_package} cannot name the package ({why}): it is named `{chosen}`; pass --name to choose another"
     );
     Ok(chosen)
-}
-
-/// `tests/components.rs` of a crate `coolc compile` has just created, unless the file
-/// is there already.
-fn write_starter_tests(out: &Path, krate: &crate::ir::Crate) -> Result<(), Failure> {
-    let Some(text) = emit::starter_tests(krate) else {
-        return Ok(());
-    };
-    let path = out.join("tests/components.rs");
-    if path.exists() {
-        return Ok(());
-    }
-    let io = |e: std::io::Error| Failure::Usage(format!("cannot write {}: {e}", path.display()));
-    std::fs::create_dir_all(out.join("tests")).map_err(io)?;
-    std::fs::write(&path, text).map_err(io)?;
-    eprintln!(
-        "coolc: wrote {}: a test per component, in its generated harness (`cargo test`)",
-        path.display()
-    );
-    Ok(())
 }
 
 fn dir_name(path: &Path) -> String {
@@ -531,7 +511,7 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
     } else {
         dir_name(dir)
     };
-    if let Some(why) = package_name_error(&name) {
+    if let Some(why) = name_error(&name) {
         return Err(Failure::Usage(format!(
             "invalid package name `{name}`: {why}; pass a name such as `blinker` or `my-robot`"
         )));
@@ -583,6 +563,17 @@ fn new(cli: &Cli, dir: &Path, runtime: RuntimeDep) -> Result<(), Failure> {
             .display(),
     );
     Ok(())
+}
+
+/// Why `name`, given for a package, cannot be one: as written, or as the package
+/// name the crate gets from it (lowercase, `-` separated: `Type` is `type`).
+fn name_error(name: &str) -> Option<String> {
+    if let Some(why) = package_name_error(name) {
+        return Some(why.to_owned());
+    }
+    let package = lower::package_name(name);
+    package_name_error(&package)
+        .map(|why| format!("as a package name it is `{package}`, and {why}"))
 }
 
 /// Why `name` cannot be the package name `coolc new` gives the crate (the rules of

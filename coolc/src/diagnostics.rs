@@ -125,6 +125,9 @@ codes! {
     UfifoCap => "coolc::check::ufifo_cap",
     /// A variable declaration mixes own and mapped forms wrongly.
     BadVariable => "coolc::check::bad_variable",
+    /// A variable's range where none may be (not an own controllable number), not
+    /// inclusive, empty, or with the default outside it.
+    BadRange => "coolc::check::bad_range",
     /// A connection joins port kinds the typology table does not allow.
     ConnectKind => "coolc::check::connect_kind",
     /// A connection goes the wrong way (into an output or out of an input).

@@ -725,6 +725,14 @@ pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Ve
             FileKind::Starter,
             false,
         );
+        if let Some(tests) = render_starter_tests(krate) {
+            push(
+                PathBuf::from("tests/components.rs"),
+                tests,
+                FileKind::Starter,
+                false,
+            );
+        }
     }
     files.into_iter().unzip()
 }
@@ -928,10 +936,11 @@ struct StarterTestOf<'a> {
     type_name: &'a str,
 }
 
-/// The `tests/components.rs` that `coolc compile` writes when it creates a crate: one
-/// test per atomic component, which runs it in its generated harness for a second of
-/// virtual time from its stubs; `None` when the crate has no atomic component.
-pub fn starter_tests(krate: &ir::Crate) -> Option<String> {
+/// The `tests/components.rs` written into a crate being created, as its template
+/// renders it: one test per atomic component, which runs it in its generated harness
+/// for a second of virtual time from its stubs; `None` when the crate has no atomic
+/// component.
+fn render_starter_tests(krate: &ir::Crate) -> Option<String> {
     let tests: Vec<StarterTestOf<'_>> = krate
         .atomics
         .iter()
@@ -943,10 +952,10 @@ pub fn starter_tests(krate: &ir::Crate) -> Option<String> {
         })
         .collect();
     (!tests.is_empty()).then(|| {
-        format_user(&render(&StarterTests {
+        render(&StarterTests {
             lib: &krate.lib_name,
             tests,
-        }))
+        })
     })
 }
 

@@ -382,6 +382,8 @@ pub struct Var {
     /// Rust expression turning `value: &coolbot::Value` into
     /// `Result<field type, String>`.
     pub from_value: String,
+    /// The `Option<coolbot::VarRange>` expression of its `in low..=high`.
+    pub range: String,
 }
 
 impl Var {

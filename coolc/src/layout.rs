@@ -393,6 +393,7 @@ impl Layout {
                                         ),
                                         ("ty".to_owned(), literal(&v.cool_ty)),
                                         ("doc".to_owned(), s(&v.doc_literal())),
+                                        ("range".to_owned(), s(&v.range)),
                                     ],
                                 )
                             })

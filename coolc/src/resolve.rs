@@ -384,18 +384,15 @@ impl Symbols {
     /// The path that imports the file `to` from the file `from`: relative to `from`'s
     /// directory, with `/` between components, as an `import` names it.
     fn import_path(&self, from: FileId, to: FileId) -> Option<String> {
-        let here = lexical(self.dirs.get(from.0 as usize)?);
-        let there = lexical(&self.files.get(to.0 as usize)?.clone());
+        // Both absolute: a `..` left in a relative path would stand for a directory
+        // whose name it does not say.
+        let here = lexical(&std::path::absolute(self.dirs.get(from.0 as usize)?).ok()?);
+        let there = lexical(&std::path::absolute(self.files.get(to.0 as usize)?).ok()?);
         let common = here
             .iter()
             .zip(there.iter())
             .take_while(|(a, b)| a == b)
             .count();
-        // Above a common root nothing names the way back (an absolute path and a
-        // relative one): no path, rather than a wrong one.
-        if common == 0 && here.is_absolute() != there.is_absolute() {
-            return None;
-        }
         let mut parts: Vec<String> = here.iter().skip(common).map(|_| "..".to_owned()).collect();
         parts.extend(
             there

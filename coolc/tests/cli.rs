@@ -291,6 +291,22 @@ fn a_name_loaded_but_not_imported_gives_the_import_line_from_the_importing_file(
         stderr.contains("`Image` is defined in `../types/shared.cool`: add `import \"../types/shared.cool\";` to this"),
         "{stderr}"
     );
+    // Run from `cell/nested/`, with the camera reached through `..`: the path is
+    // still the one that leads from `vision/` to the types.
+    let nested = cell.join("nested");
+    std::fs::create_dir_all(&nested).unwrap();
+    std::fs::write(
+        nested.join("cell.cool"),
+        "import \"../types/shared.cool\";\nimport \"../vision/camera.cool\";\ncompound Cell { instance camera: Camera; }\n",
+    )
+    .unwrap();
+    let out = coolc(&["check", "cell.cool"], &nested);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("add `import \"../types/shared.cool\";` to this"),
+        "{stderr}"
+    );
     // The line pasted, it checks.
     std::fs::write(
         cell.join("vision/camera.cool"),
@@ -401,6 +417,7 @@ fn compile_check_lists_what_would_change_and_writes_nothing() {
     for file in [
         "Cargo.toml",
         "src/main.rs",
+        "tests/components.rs",
         "src/generated/lamp.rs",
         "src/lamp.rs",
     ] {
@@ -621,6 +638,18 @@ fn compile_checks_the_package_name_as_new_does() {
         (
             "std",
             "it is the name of a crate of Rust's standard library",
+        ),
+        (
+            "Type",
+            "as a package name it is `type`, and it is a Rust keyword",
+        ),
+        (
+            "Gen",
+            "as a package name it is `gen`, and it is a Rust keyword",
+        ),
+        (
+            "type-",
+            "as a package name it is `type`, and it is a Rust keyword",
         ),
     ] {
         let out = coolc(&["compile", ok, "-o", "out", "--name", name], dir.path());

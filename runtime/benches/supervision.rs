@@ -337,6 +337,7 @@ static NODE: Spec = Spec {
         kind: VarKind::Controllable,
         ty: "u64",
         doc: "",
+        range: None,
     }],
     exceptions: &[],
     timing: TimingSpec::NONE,

@@ -378,7 +378,13 @@ impl Commander {
     label = "the variable this would set is observable",
     note = "a supervisor reads an observable variable (in rules, or `cx.view.var(instance, name)`); to set it, declare it `controllable` in its component"
 )]
-pub trait ObservableOnly {
+pub trait ObservableOnly: sealed::Nothing {
     /// Never called: no value has a type with this trait.
     fn refuse(self) -> CommandError;
+}
+
+/// What keeps [`ObservableOnly`] without implementations: a trait outside code can
+/// neither name nor implement.
+mod sealed {
+    pub trait Nothing {}
 }

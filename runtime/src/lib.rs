@@ -37,7 +37,7 @@
 //!         pull: false,
 //!     }],
 //!     outputs: &[],
-//!     variables: &[VarSpec { name: "count", kind: VarKind::Observable, ty: "u64", doc: "" }],
+//!     variables: &[VarSpec { name: "count", kind: VarKind::Observable, ty: "u64", doc: "", range: None }],
 //!     exceptions: &[],
 //!     timing: TimingSpec::NONE,
 //! };
@@ -144,8 +144,9 @@ pub use crate::port::{
 };
 pub use crate::refused::Refused;
 pub use crate::spec::{
-    AfterSpec, ExceptionSpec, InputKind, InputSpec, OnSpec, OutputKind, OutputSpec, OverflowPolicy,
-    PeriodicSpec, PlanStep, Spec, StateSpec, TimingSpec, VarKind, VarSpec,
+    AfterSpec, ExceptionSpec, InputKind, InputSpec, OnSpec, OutOfRange, OutputKind, OutputSpec,
+    OverflowPolicy, PeriodicSpec, PlanStep, Spec, StateSpec, TimingSpec, VarKind, VarRange,
+    VarSpec,
 };
 pub use crate::system::{
     CONTROL_CAPACITY, Component, ComponentReport, ConnectError, Error, PortSet, Report,

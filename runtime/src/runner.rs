@@ -1004,6 +1004,21 @@ impl Runner {
                 Some(index) if self.spec.variables[index].kind != VarKind::Controllable => reply(
                     Reply::Rejected(format!("`{name}` is observable, not controllable")),
                 ),
+                // Outside its declared range: refused, whoever asks (a supervisor,
+                // coolctl, a remote compound), before the component sees it.
+                Some(index)
+                    if self.spec.variables[index]
+                        .range
+                        .is_some_and(|range| range.check(value).is_err()) =>
+                {
+                    let outside = self.spec.variables[index]
+                        .range
+                        .map(|range| range.check(value));
+                    reply(Reply::Rejected(match outside {
+                        Some(Err(outside)) => format!("invalid value for `{name}`: {outside}"),
+                        _ => format!("invalid value for `{name}`"),
+                    }))
+                }
                 Some(index) => {
                     let value = value.clone();
                     match self.call(|automaton, _| automaton.set(index, &value)) {

@@ -288,6 +288,69 @@ pub struct VarSpec {
     pub ty: &'static str,
     /// The variable's documentation.
     pub doc: &'static str,
+    /// The values a controllable variable may be set to, when its description bounds
+    /// them (`in low..=high`): a set outside is refused, whoever asks.
+    pub range: Option<VarRange>,
+}
+
+/// The values a controllable variable may be set to, both ends included
+/// (`controllable max_speed: f64 = 0.5 in 0.0..=1.0;`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VarRange {
+    /// An integer variable's range.
+    Int(i128, i128),
+    /// A float variable's range.
+    Float(f64, f64),
+}
+
+/// A value outside a variable's range ([`VarRange::check`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{value} is outside its range {range}")]
+pub struct OutOfRange {
+    /// The value refused, as a number.
+    pub value: String,
+    /// The range.
+    pub range: VarRange,
+}
+
+impl VarRange {
+    /// Whether `value` lies in the range. A value that is not a number is not judged
+    /// here (the variable's own conversion refuses it); NaN lies in no range.
+    pub fn check(&self, value: &crate::Value) -> Result<(), OutOfRange> {
+        use crate::Value;
+        let inside = match (*self, value) {
+            (VarRange::Int(low, high), Value::Int(v)) => (low..=high).contains(&i128::from(*v)),
+            (VarRange::Int(low, high), Value::UInt(v)) => (low..=high).contains(&i128::from(*v)),
+            // A float for an integer variable: its conversion refuses it.
+            (VarRange::Int(..), _) => true,
+            (VarRange::Float(low, high), Value::Float(v)) => (low..=high).contains(v),
+            #[allow(clippy::cast_precision_loss)]
+            (VarRange::Float(low, high), Value::Int(v)) => (low..=high).contains(&(*v as f64)),
+            #[allow(clippy::cast_precision_loss)]
+            (VarRange::Float(low, high), Value::UInt(v)) => (low..=high).contains(&(*v as f64)),
+            (VarRange::Float(..), _) => true,
+        };
+        if inside {
+            return Ok(());
+        }
+        let value = match value {
+            Value::Float(v) => format!("{v:?}"),
+            other => other.to_string(),
+        };
+        Err(OutOfRange {
+            value,
+            range: *self,
+        })
+    }
+}
+
+impl std::fmt::Display for VarRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            VarRange::Int(low, high) => write!(f, "{low}..={high}"),
+            VarRange::Float(low, high) => write!(f, "{low:?}..={high:?}"),
+        }
+    }
 }
 
 /// Whether a variable is read-only from outside or also settable.

@@ -295,8 +295,10 @@ fn scopes(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     names::duplicates(checker, exceptions, "exception");
     names::duplicates(checker, instances, "instance");
     for name in variables {
-        if DEFAULT_OBSERVABLES.contains(&name.name.as_str())
-            || DEFAULT_CONTROLLABLES.contains(&name.name.as_str())
+        // Compared as Rust names: `Period` becomes `period` (its field, its setter).
+        let rust = crate::ident::snake_raw(&name.name);
+        if DEFAULT_OBSERVABLES.contains(&rust.as_str())
+            || DEFAULT_CONTROLLABLES.contains(&rust.as_str())
         {
             let diagnostic = checker
                 .error(Code::Duplicate, name.span, format!("`{}` is a default variable of every component", name.name))
@@ -432,6 +434,101 @@ fn variable(checker: &mut Checker<'_, '_>, component: &ast::Component, variable:
             checker.push(diagnostic);
         }
         (None, Some(value)) => compound::mapped_variable(checker, component, variable, value),
+    }
+    if let Some(range) = &variable.range {
+        self::range(checker, variable, range);
+    }
+}
+
+/// `in low..=high`: on an own controllable variable of a number type, with bounds of
+/// its type in order, and its default inside.
+fn range(checker: &mut Checker<'_, '_>, variable: &ast::Variable, range: &ast::VarRange) {
+    let refuse =
+        |checker: &mut Checker<'_, '_>, span: Span, message: String, label: &str, help: &str| {
+            let diagnostic = checker
+                .error(Code::BadRange, span, message)
+                .with_label(label)
+                .with_help(help);
+            checker.push(diagnostic);
+        };
+    let name = &variable.name.name;
+    if variable.kind != ast::VarKind::Controllable {
+        let kind = match variable.kind {
+            ast::VarKind::Observable => "observable",
+            _ => "local",
+        };
+        return refuse(
+            checker,
+            range.span,
+            format!("`{name}` is {kind}: only a controllable variable has a range"),
+            "a range on a variable nobody sets from outside",
+            "a range bounds what the control port may set: remove it, or make the variable `controllable`",
+        );
+    }
+    let Some(ty) = &variable.ty else {
+        return refuse(
+            checker,
+            range.span,
+            format!("`{name}` is mapped: it takes the range of the instance's variable"),
+            "a range on a mapped variable",
+            "declare the range on the instance's own variable",
+        );
+    };
+    let expected = checker.model.ty(ty);
+    if !matches!(expected, Ty::Int(_) | Ty::Float(_)) {
+        return refuse(
+            checker,
+            range.span,
+            format!("`{name}` is a `{expected}`: only a number has a range"),
+            "a range on a variable that is not a number",
+            "ranges bound integer and float variables",
+        );
+    }
+    if !range.inclusive {
+        return refuse(
+            checker,
+            range.span,
+            "a range includes both ends: write `low..=high`".to_owned(),
+            "`..`",
+            "write `in low..=high`",
+        );
+    }
+    values::value(checker, &range.low, &expected);
+    values::value(checker, &range.high, &expected);
+    use crate::checked::model::Value;
+    // Integers compare as integers (exact at any width), anything else as floats.
+    let order = |a: &Value, b: &Value| match (a, b) {
+        (Value::Int(a), Value::Int(b)) => Some(a.cmp(b)),
+        (Value::Int(a), Value::Float(b)) => (*a as f64).partial_cmp(b),
+        (Value::Float(a), Value::Int(b)) => a.partial_cmp(&(*b as f64)),
+        (Value::Float(a), Value::Float(b)) => a.partial_cmp(b),
+        _ => None,
+    };
+    let (low, high) = (Value::of(&range.low), Value::of(&range.high));
+    if order(&low, &high) == Some(std::cmp::Ordering::Greater) {
+        return refuse(
+            checker,
+            range.span,
+            format!("the range of `{name}` is empty: its low end is above its high end"),
+            "empty range",
+            "write the lower bound first",
+        );
+    }
+    if let Some(default) = variable.value.as_ref()
+        && let value = Value::of(default)
+        && (order(&value, &low) == Some(std::cmp::Ordering::Less)
+            || order(&value, &high) == Some(std::cmp::Ordering::Greater))
+    {
+        let diagnostic = checker
+            .error(
+                Code::BadRange,
+                default.span,
+                format!("the default of `{name}` lies outside its range"),
+            )
+            .with_label("outside the range")
+            .with_secondary(range.span, "the range")
+            .with_help("give a default inside the range");
+        checker.push(diagnostic);
     }
 }
 

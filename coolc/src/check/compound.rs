@@ -1088,7 +1088,8 @@ fn cardinality(
                         ),
                         format!(
                             "every member of a redundant group gets what each connection to \
-                             one of them brings: connect the group's input once; else {merge}"
+                             one of them brings, so connect the group's input once. To take \
+                             several producers: {merge}"
                         ),
                     )
                 } else {

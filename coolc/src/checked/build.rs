@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 use super::model::{
     Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
     Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
-    OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Recovery, Redundant,
-    Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Value, Variable,
+    OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Range, Recovery,
+    Redundant, Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -224,6 +224,12 @@ impl<'a> Builder<'a> {
                         .and_then(|interface| interface.variables.get(&variable.name.name))
                         .map(|var| var.ty.clone())
                         .filter(|ty| *ty != Ty::Unknown),
+                    range: variable
+                        .range
+                        .as_ref()
+                        .zip(variable.ty.as_ref())
+                        .filter(|_| variable.kind == ast::VarKind::Controllable)
+                        .and_then(|(range, ty)| Range::of(range, &self.model.ty(ty))),
                     span: variable.span,
                 }),
                 ast::Member::Configuration(configuration) if out.configuration.is_none() => {

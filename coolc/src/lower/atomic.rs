@@ -10,6 +10,7 @@ use super::{
 };
 use crate::ast::Prim;
 use crate::check::model::Ty;
+use crate::checked::model::Range;
 use crate::checked::model::{
     Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, TimingEntry,
     VarKind, Variable,
@@ -252,9 +253,20 @@ impl<'a> Lowerer<'a> {
                 "super::__cool_from_value(value)".to_owned(),
             ),
         };
+        // Floats printed with `{:?}` keep their point (`1.0`, not `1`).
+        let range = match v.range {
+            None => "::core::option::Option::None".to_owned(),
+            Some(Range::Int(low, high)) => {
+                format!("::core::option::Option::Some(::coolbot::VarRange::Int({low}, {high}))")
+            }
+            Some(Range::Float(low, high)) => format!(
+                "::core::option::Option::Some(::coolbot::VarRange::Float({low:?}, {high:?}))"
+            ),
+        };
         Some(ir::Var {
             to_value,
             from_value,
+            range,
             field: ir::Field {
                 doc: v.doc.clone(),
                 name: ident::snake(&v.name),

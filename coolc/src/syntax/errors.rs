@@ -318,6 +318,8 @@ pub(super) fn rule_name(rule: Rule) -> Option<&'static str> {
         kw_restart => "`restart`",
         kw_limit => "`limit`",
         kw_in => "`in`",
+        range_op => "`..=`",
+        var_range => "`in low..=high`",
         kw_backoff => "`backoff`",
         kw_adaptation => "`adaptation`",
         _ => return None,

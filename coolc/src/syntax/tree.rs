@@ -183,8 +183,7 @@ impl Builder<'_> {
                 self.file,
                 span,
                 format!(
-                    "`{dotted}` is an instance inside `{}`: a substitute is declared in the compound of the instance it substitutes",
-                    owner.name
+                    "`{dotted}` names an instance inside another component: a substitute is declared in the compound of the instance it substitutes"
                 ),
             )
             .with_label("not an instance of this compound")
@@ -500,11 +499,24 @@ impl Builder<'_> {
                 let name = self.ident(parts.get(1)?);
                 let mut ty = None;
                 let mut value = None;
+                let mut range = None;
                 for part in &parts[2..] {
-                    if part.as_rule() == Rule::ty {
-                        ty = Some(self.ty(part.clone())?);
-                    } else {
-                        value = Some(self.expr(part.clone())?);
+                    match part.as_rule() {
+                        Rule::ty => ty = Some(self.ty(part.clone())?),
+                        Rule::var_range => {
+                            let range_span = self.span(part);
+                            let bounds = children(part.clone());
+                            let low = self.expr(bounds.first()?.clone())?;
+                            let inclusive = bounds.get(1)?.as_str() == "..=";
+                            let high = self.expr(bounds.get(2)?.clone())?;
+                            range = Some(ast::VarRange {
+                                low,
+                                high,
+                                inclusive,
+                                span: range_span,
+                            });
+                        }
+                        _ => value = Some(self.expr(part.clone())?),
                     }
                 }
                 ast::Member::Variable(ast::Variable {
@@ -514,6 +526,7 @@ impl Builder<'_> {
                     name,
                     ty,
                     value,
+                    range,
                     span,
                 })
             }

@@ -704,6 +704,7 @@ impl CompoundBuilder {
                 kind: *kind,
                 ty: declared.ty,
                 doc: declared.doc,
+                range: declared.range,
             });
             mapped.push(Mapped {
                 instance: index,
