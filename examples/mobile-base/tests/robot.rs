@@ -768,6 +768,18 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         )
         .expect("the base answers");
     assert_eq!(reply, ControlReply::Accepted);
+    // Outside the range the motion controller declares: refused, with the range.
+    let reply = ctl
+        .command(
+            &format!("{name}/robot.base"),
+            &Command::Set("max_speed".to_owned(), Value::Float(100.0)),
+        )
+        .expect("the base answers");
+    assert!(
+        matches!(&reply, ControlReply::Rejected { reason }
+            if reason.contains("100.0 is outside its range 0.0..=1.0")),
+        "{reply:?}"
+    );
     let reply = ctl
         .command(
             &format!("{name}/robot.base"),
