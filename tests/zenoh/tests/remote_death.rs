@@ -385,3 +385,67 @@ fn a_placement_whose_names_the_agent_would_refuse_fails_when_built() {
     // A name that fits is placed as usual.
     assert!(dying_cell::component("cell", Parts).is_ok());
 }
+
+/// On plaintext any peer may declare a node's liveliness token. A forged
+/// `coolbot/dying-station` token outlives the station, whose session ends without a
+/// word (as when its process is killed): the node's token says it lives on, but its
+/// proxy hears nothing from the instance it stands for, fails on that silence, and the
+/// spare stands in. A node's death does not rest on a token a peer can fake.
+#[test]
+fn a_forged_token_does_not_hide_a_station_killed_without_a_word() {
+    use coolbot_zenoh_tests::support::node;
+    let (robot, robot_endpoint) = node("dying-robot", &[]);
+    let (station, _) = node("dying-station", std::slice::from_ref(&robot_endpoint));
+    let (robot, station) = (Arc::new(robot), Arc::new(station));
+    let sees_station = |robot: &Node| {
+        wait_until(PATIENCE, || {
+            coolbot_zenoh::ctl::Ctl::new(robot.session().clone(), Duration::from_millis(500))
+                .node_names()
+                .is_ok_and(|names| names.iter().any(|n| n == "dying-station"))
+        })
+    };
+    assert!(sees_station(&robot), "the robot sees the station");
+    let _agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let _placer = Placer::new(Arc::clone(&robot), registry())
+        .silence(Duration::from_millis(600))
+        .install();
+    let mut system = System::new();
+    let cell = running_cell(&mut system);
+
+    // A peer of the robot's, not the station, declares the station's token.
+    let forger_config =
+        coolbot_zenoh::peer_config(&[], std::slice::from_ref(&robot_endpoint), false)
+            .expect("config");
+    let forger = zenoh::open(forger_config)
+        .wait()
+        .expect("the forger's session");
+    let _forged = forger
+        .liveliness()
+        .declare_token("coolbot/dying-station")
+        .wait()
+        .expect("a forged token");
+
+    // The station's session ends without a word (its agent never says goodbye).
+    station
+        .session()
+        .close()
+        .wait()
+        .expect("the station's session closes");
+    let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy fails");
+    assert!(
+        detail.contains("has not answered") && detail.contains("dying-station"),
+        "the proxy fails on its silence: {detail}"
+    );
+    wait_step(
+        &cell,
+        |s| matches!(s, Step::Substituted { .. }),
+        "the spare stands in",
+    );
+    // And all the while the station's token, forged, was there to be seen.
+    assert!(
+        sees_station(&robot),
+        "the forged token stands for the station"
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
