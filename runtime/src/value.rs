@@ -146,7 +146,7 @@ pub enum ConvertError {
     #[error("the value cannot be written as JSON")]
     Serialize(#[source] serde_json::Error),
     /// The value is not one of the type asked for.
-    #[error("not a value of the expected type")]
+    #[error("the value does not match its type")]
     Deserialize(#[source] serde_json::Error),
 }
 

@@ -118,8 +118,19 @@ fn the_base_spec_is_valid() {
 fn inconsistent_specs_are_refused_with_a_reason() {
     let mut spec = BASE;
     spec.initial = 9;
+    let refused = add_with(spec).unwrap_err();
+    // The message says what failed; the spec's fault is its source, shown once.
+    assert_eq!(refused.to_string(), "component `w`: invalid spec");
+    let source = std::error::Error::source(&refused).expect("the spec's fault");
     assert_eq!(
-        Chain(&add_with(spec).unwrap_err()).to_string(),
+        source.downcast_ref::<SpecError>(),
+        Some(&SpecError::Initial {
+            initial: 9,
+            states: 2
+        })
+    );
+    assert_eq!(
+        Chain(&refused).to_string(),
         "component `w`: invalid spec: initial state #9 does not exist (2 states)"
     );
     let spec = with_states(|states| states[0].on = &[OnSpec { port: 7, target: 0 }]);
@@ -339,5 +350,54 @@ fn a_supervisor_without_states_is_refused() {
     assert_eq!(
         error.to_string(),
         "compound `cell`: the supervisor has no state"
+    );
+}
+
+/// A supervisor with one state and nothing to do.
+struct Watching;
+
+static WATCHING: Spec = Spec {
+    type_name: "Watching",
+    doc: "",
+    states: &[StateSpec {
+        name: "watching",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Supervisor for Watching {
+    fn spec(&self) -> &'static Spec {
+        &WATCHING
+    }
+}
+
+/// Each error says what failed and keeps its cause as its source: the compound, the
+/// instance's refusal, the spec's fault, each shown once in the chain.
+#[test]
+fn a_compound_refusing_an_instance_keeps_the_chain() {
+    let mut spec = BASE;
+    spec.initial = 9;
+    let spec: &'static Spec = Box::leak(Box::new(spec));
+    let Err(error) = coolbot::CompoundBuilder::new("cell", Watching)
+        .instance(bare(spec))
+        .build()
+    else {
+        panic!("an instance with a bad spec was accepted");
+    };
+    assert_eq!(error.to_string(), "compound `cell`");
+    assert_eq!(
+        Chain(&error).to_string(),
+        "compound `cell`: component `w`: invalid spec: initial state #9 does not exist (2 states)"
     );
 }

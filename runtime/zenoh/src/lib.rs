@@ -192,3 +192,35 @@ impl Error {
         move |source| Error::Spawn { thread, source }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::error::Error as _;
+
+    use coolbot::Chain;
+
+    use super::{Error, Node};
+
+    /// A node that cannot listen where it is told: Zenoh's own error is the source of
+    /// [`Error::Zenoh`], which says what was being done, and the chain shows both once.
+    #[test]
+    fn zenohs_error_is_kept_as_the_source() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let endpoint = format!("tcp/{}", taken.local_addr().unwrap());
+        let config = crate::peer_config(&[endpoint], &[], false).unwrap();
+        let error = Node::open("taken", config).unwrap_err();
+        let Error::Zenoh { action, source } = &error else {
+            panic!("{error:?}");
+        };
+        assert_eq!(*action, "open the session");
+        assert_eq!(error.to_string(), "zenoh: cannot open the session");
+        let zenoh = error.source().expect("zenoh's error").to_string();
+        assert_eq!(zenoh, source.to_string());
+        let chain = Chain(&error).to_string();
+        assert!(
+            chain.starts_with("zenoh: cannot open the session: ") && chain.contains(&zenoh),
+            "{chain}"
+        );
+        assert_eq!(chain.matches(&zenoh).count(), 1, "{chain}");
+    }
+}

@@ -79,7 +79,7 @@ fn records_and_json_convert_to_user_types() {
     );
     assert_eq!(
         coolbot::Chain(&error).to_string(),
-        "not a value of the expected type: invalid type: string \"x\", expected struct Pose"
+        "the value does not match its type: invalid type: string \"x\", expected struct Pose"
     );
     assert_eq!(Value::from("q").to_string(), r#""q""#);
 }
