@@ -177,7 +177,7 @@ pub enum PlaceError {
         asking: Duration,
         /// The last answer: none ([`Error::NoAgent`]).
         #[source]
-        source: Error,
+        source: Box<Error>,
     },
     /// The instance's node did not answer a command or a snapshot query in time.
     #[error("node `{node}` did not answer for `{instance}` within {waited:?}")]
@@ -892,7 +892,7 @@ impl End {
                     return Err(if self.shared.seen.load(Ordering::Acquire) {
                         PlaceError::Unanswered {
                             asking,
-                            source: error,
+                            source: Box::new(error),
                         }
                     } else {
                         PlaceError::NotThere {

@@ -127,7 +127,7 @@ const EVERY_KEY: [&str; 6] = [
 ];
 
 /// Why a security file, or a certificate it names, cannot be used, or what it does not
-/// allow ([`Error::Security`](crate::Error::Security)).
+/// allow ([`Error::Security`]).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SecurityError {
