@@ -424,11 +424,16 @@ fn hostile_sizes_are_refused_and_the_station_and_its_agent_live_on() {
     }
     // A type name of 100,000 characters: the asking side refuses to make a key of
     // it, and the agent refuses it in a request on another type's key.
-    let refusal = station.refusal(&Instantiate {
-        type_name: huge.clone(),
-        ..valid("typed")
-    });
+    let refused = station
+        .ask(&Instantiate {
+            type_name: huge.clone(),
+            ..valid("typed")
+        })
+        .expect_err("a type name of 100,000 characters");
+    let refusal = Chain(&refused).to_string();
+    assert!(matches!(refused, Error::InvalidName { .. }), "{refusal}");
     assert!(refusal.contains(&names(limits::PATH)), "{refusal}");
+    assert!(refusal.len() < 400, "{refusal}");
     let payload = serde_json::to_vec(&Instantiate {
         type_name: huge.clone(),
         ..valid("typed")
