@@ -415,7 +415,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     fn configure(
         &mut self,
         configuration: &::coolbot::Value,
-    ) -> ::core::result::Result<(), ::std::string::String> {
+    ) -> ::core::result::Result<(), ::coolbot::ValueRefused> {
         self.config = super::__cool_configure(&self.config, configuration)?;
         Ok(())
     }
@@ -424,7 +424,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         &mut self,
         variable: usize,
         value: &::coolbot::Value,
-    ) -> ::core::result::Result<(), ::std::string::String> {
+    ) -> ::core::result::Result<(), ::coolbot::ValueRefused> {
 {%- if c.has_controllable() %}
         match variable {
 {%- for v in c.vars %}
@@ -435,11 +435,11 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
             }
 {%- endif %}
 {%- endfor %}
-            _ => Err(super::__cool_not_controllable(&SPEC, variable)),
+            _ => Err(::coolbot::ValueRefused::not_settable(&SPEC, variable)),
         }
 {%- else %}
         let _ = value;
-        Err(super::__cool_not_controllable(&SPEC, variable))
+        Err(::coolbot::ValueRefused::not_settable(&SPEC, variable))
 {%- endif %}
     }
 

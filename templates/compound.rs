@@ -402,7 +402,7 @@ pub fn register<R: ::coolbot::remote::Registrar>(
     registrar: &mut R,
     make: impl Fn(&str) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> + Send + Sync + 'static,
 ) {
-    registrar.compound(TYPE_NAME, ::std::boxed::Box::new(move |name: &str| make(name).map_err(|error| error.to_string())));
+    registrar.compound(TYPE_NAME, ::std::boxed::Box::new(make));
 {%- for (port, packet) in c.exported_ports %}
     registrar.port::<{{ packet }}>(TYPE_NAME, "{{ port }}");
 {%- endfor %}
@@ -483,7 +483,7 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
     {%- endif %}
     }
 
-    fn set(&mut self, variable: usize, value: &::coolbot::Value) -> ::core::result::Result<(), ::std::string::String> {
+    fn set(&mut self, variable: usize, value: &::coolbot::Value) -> ::core::result::Result<(), ::coolbot::ValueRefused> {
     {%- if c.has_controllable() %}
         let mut vars = __cool_lock(&self.vars);
         match variable {
@@ -495,11 +495,11 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
             }
         {%- endif %}
         {%- endfor %}
-            _ => Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable")),
+            _ => Err(::coolbot::ValueRefused::not_settable(&SPEC, variable)),
         }
     {%- else %}
         let _ = value;
-        Err(::std::format!("variable {variable} of {{ c.type_name }} is not controllable"))
+        Err(::coolbot::ValueRefused::not_settable(&SPEC, variable))
     {%- endif %}
     }
 }

@@ -57,14 +57,14 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
         ),
     };
     // Logs, SIGINT and SIGTERM, and the panic hook.
-    let process = coolbot::process::Process::init()?;
+    let process = coolbot::process::Process::init().map_err(|e| coolbot::Chain(&e).to_string())?;
     // On the network with `--node`, before the components are built: the placer it
     // installs on this thread puts the compounds' `on "node"` instances on their nodes.
     #[cfg(feature = "network")]
     let network = match node {
         Some(options) => {
             let network = coolbot_zenoh::network::Network::open(&options, registry())
-                .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
+                .map_err(|e| format!("node `{}` cannot open: {}", options.name, coolbot::Chain(&e)))?;
             if options.serve {
                 println!(
                     "node `{}` on the network: serving what other nodes place on it",
@@ -83,7 +83,7 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
 {%- for root in roots %}
         system
             .add({{ root }})
-            .map_err(|e| format!("cannot add a component: {e}"))?,
+            .map_err(|e| format!("cannot add a component: {}", coolbot::Chain(&e)))?,
 {%- endfor %}
     ];
     coolbot::process::watch_system(&system);
@@ -91,11 +91,13 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     if let Some(network) = &network {
         network
             .expose_system(&system)
-            .map_err(|e| format!("node `{}` cannot expose the components: {e}", network.name()))?;
+            .map_err(|e| {
+                format!("node `{}` cannot expose the components: {}", network.name(), coolbot::Chain(&e))
+            })?;
         println!("node `{}` on the network", network.name());
     }
     // Start the components' threads and command them to `running`.
-    system.run_all().map_err(|e| format!("cannot start: {e}"))?;
+    system.run_all().map_err(|e| format!("cannot start: {}", coolbot::Chain(&e)))?;
     match run_for {
         Some(duration) => {
             process.wait(duration);

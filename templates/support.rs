@@ -1,24 +1,16 @@
 /// Converts a variable or configuration value to a runtime [`coolbot::Value`].
 #[doc(hidden)]
 pub fn __cool_to_value<T: ::serde::Serialize>(value: &T) -> ::coolbot::Value {
-    ::coolbot::Value::from_serde(value).unwrap_or_else(::coolbot::Value::Str)
+    ::coolbot::Value::from_serde(value)
+        .unwrap_or_else(|error| ::coolbot::Value::Str(::coolbot::Chain(&error).to_string()))
 }
 
 /// Converts a runtime [`coolbot::Value`] to a variable or configuration value.
 #[doc(hidden)]
 pub fn __cool_from_value<T: ::serde::de::DeserializeOwned>(
     value: &::coolbot::Value,
-) -> ::core::result::Result<T, ::std::string::String> {
+) -> ::core::result::Result<T, ::coolbot::ConvertError> {
     value.to_serde()
-}
-
-/// The error of setting `variable` of a component that is not controllable.
-#[doc(hidden)]
-pub fn __cool_not_controllable(spec: &::coolbot::Spec, variable: usize) -> ::std::string::String {
-    ::std::format!(
-        "variable {variable} of {} is not controllable",
-        spec.type_name
-    )
 }
 
 /// The configuration after applying `value`: the fields it names replace the current
@@ -27,7 +19,7 @@ pub fn __cool_not_controllable(spec: &::coolbot::Spec, variable: usize) -> ::std
 pub fn __cool_configure<T: ::serde::Serialize + ::serde::de::DeserializeOwned>(
     current: &T,
     value: &::coolbot::Value,
-) -> ::core::result::Result<T, ::std::string::String> {
+) -> ::core::result::Result<T, ::coolbot::ConvertError> {
     let given = value.to_json();
     let mut merged = match ::coolbot::Value::from_serde(current)? {
         ::coolbot::Value::Json(json) => json,

@@ -379,8 +379,8 @@ pub struct Var {
     pub cool_ty: String,
     /// Rust expression turning `self.vars.<field>` into a `coolbot::Value`.
     pub to_value: String,
-    /// Rust expression turning `value: &coolbot::Value` into
-    /// `Result<field type, String>`.
+    /// Rust expression turning `value: &coolbot::Value` into a `Result` of the field
+    /// type whose error converts into `coolbot::ValueRefused`.
     pub from_value: String,
     /// The `Option<coolbot::VarRange>` expression of its `in low..=high`.
     pub range: String,

@@ -44,7 +44,8 @@ use coolbot::port::{TickIn, TickOut};
 use coolbot::{
     Automaton, Command, Component, CompoundBuilder, Context, Controllable, Fault, Handle,
     InputKind, MonitorEvent, OutputKind, Policy, PortSet, Section, SectionResult, Spec, State,
-    StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value, VarKind, VarSpec, View,
+    StateSpec, Supervisor, SupervisorCx, System, TimingSpec, Value, ValueRefused, VarKind, VarSpec,
+    View,
 };
 use crossbeam_channel::{Receiver, Sender, bounded, unbounded};
 
@@ -352,14 +353,9 @@ impl Automaton for Node {
     fn spec(&self) -> &'static Spec {
         &NODE
     }
-    fn set(&mut self, _: usize, value: &Value) -> Result<(), String> {
-        match value {
-            Value::UInt(v) => {
-                self.v = *v;
-                Ok(())
-            }
-            other => Err(format!("not a u64: {other:?}")),
-        }
+    fn set(&mut self, _: usize, value: &Value) -> Result<(), ValueRefused> {
+        self.v = u64::try_from(value).map_err(ValueRefused::other)?;
+        Ok(())
     }
     fn get(&self, _: usize) -> Value {
         Value::UInt(self.v)

@@ -5,10 +5,11 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use crate::monitor::TaskResult;
+use crate::monitor::{Rejected, TaskResult};
+use crate::refused::Refused;
 use crate::spec::Spec;
 use crate::table::State;
-use crate::value::{Time, Value};
+use crate::value::{ConvertError, Time, Value, ValueError};
 use crate::wake::Waker;
 
 /// Which section of a user state to run.
@@ -73,22 +74,79 @@ impl fmt::Display for Fault {
     }
 }
 
-/// The message is the error's, followed by each of its sources whose text it does not
-/// already hold (`instance `w` did not take `set count = 1`: `count` is observable,
-/// not controllable`): a fault keeps the whole chain as text.
+/// The message is the error's, followed by each of its sources ([`Chain`](crate::Chain):
+/// `instance `w` did not take `set count = 1`: `count` is observable, not
+/// controllable`): a fault keeps the whole chain as text.
 impl<E: std::error::Error + Send + Sync + 'static> From<E> for Fault {
     fn from(error: E) -> Fault {
-        let mut message = error.to_string();
-        let mut source = error.source();
-        while let Some(cause) = source {
-            let text = cause.to_string();
-            if !message.contains(&text) {
-                message.push_str(": ");
-                message.push_str(&text);
-            }
-            source = cause.source();
+        Fault::message(crate::Chain(&error).to_string())
+    }
+}
+
+/// Why a component did not take a value given through its control port: a new
+/// configuration ([`Automaton::configure`]) or a controllable variable's value
+/// ([`Automaton::set`], [`Supervisor::set`](crate::Supervisor::set)). The control port
+/// refuses the command with its text ([`Chain`](crate::Chain)).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ValueRefused {
+    /// The component has no configuration.
+    #[error("the component takes no configuration")]
+    NoConfiguration,
+    /// A compound has no configuration of its own (its instances have theirs).
+    #[error("a compound has no configuration of its own; configure its instances")]
+    CompoundConfiguration,
+    /// The variable is not one the component lets be set: not controllable, or not
+    /// one it keeps.
+    #[error("variable `{variable}` of {type_name} cannot be set")]
+    NotSettable {
+        /// The component type.
+        type_name: &'static str,
+        /// The variable's name (`?` for an index the spec does not have).
+        variable: &'static str,
+    },
+    /// The value does not convert to the configuration's or the variable's type.
+    #[error(transparent)]
+    Convert(#[from] ConvertError),
+    /// The value is not of the variable's kind (a number, a string, a boolean, a
+    /// duration: [`Value`]'s own conversions).
+    #[error(transparent)]
+    Value(#[from] ValueError),
+    /// A compound's mapped variable: the instance it maps to rejected the value.
+    #[error(transparent)]
+    Instance(#[from] Rejected),
+    /// A stand-in compound's mapped variable (a supervisor harness): the command to
+    /// the instance was refused.
+    #[error(transparent)]
+    Refused(#[from] Refused),
+    /// An instance on another node (`crate::remote`): its node refused the value, or
+    /// could not be asked.
+    #[error("on node `{node}`")]
+    Remote {
+        /// The node.
+        node: String,
+        /// The network layer's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A reason of the component's own (a hand-written automaton's).
+    #[error(transparent)]
+    Other(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl ValueRefused {
+    /// [`ValueRefused::NotSettable`] for variable `variable` (an index into
+    /// [`Spec::variables`]) of `spec`.
+    pub fn not_settable(spec: &'static Spec, variable: usize) -> ValueRefused {
+        ValueRefused::NotSettable {
+            type_name: spec.type_name,
+            variable: spec.variables.get(variable).map_or("?", |v| v.name),
         }
-        Fault::message(message)
+    }
+
+    /// [`ValueRefused::Other`] with a reason of the component's own.
+    pub fn other(reason: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ValueRefused {
+        ValueRefused::Other(reason.into())
     }
 }
 
@@ -150,16 +208,16 @@ pub trait Automaton: std::any::Any + Send + 'static {
     }
 
     /// A new configuration through the control port. The default refuses it (the
-    /// component has no configuration).
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Err("the component takes no configuration".to_owned())
+    /// component has no configuration: [`ValueRefused::NoConfiguration`]).
+    fn configure(&mut self, _configuration: &Value) -> Result<(), ValueRefused> {
+        Err(ValueRefused::NoConfiguration)
     }
 
     /// Set controllable variable `variable` (an index into [`Spec::variables`]). The
-    /// default refuses (the component keeps no variables of its own).
-    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
-        let name = self.spec().variables.get(variable).map_or("?", |v| v.name);
-        Err(format!("variable `{name}` cannot be set"))
+    /// default refuses (the component keeps no variables of its own:
+    /// [`ValueRefused::NotSettable`]).
+    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), ValueRefused> {
+        Err(ValueRefused::not_settable(self.spec(), variable))
     }
 
     /// The current value of variable `variable`, for the monitoring port. The default
@@ -236,16 +294,35 @@ pub(crate) trait Driven: Automaton {
     /// the current maximum degradation level of the compound's instances (paper 3.6,
     /// the homogeneity interval's upper end). `Err` rejects the command with the
     /// reason.
-    fn set_degradation(&mut self, _level: u32, _cx: &mut Context) -> Result<(), String> {
-        Err("this component has no adaptation levels".to_owned())
+    fn set_degradation(
+        &mut self,
+        _level: u32,
+        _cx: &mut Context,
+    ) -> Result<(), DegradationRefused> {
+        Err(DegradationRefused::Off)
     }
 
     /// A command that arrived through the control port, before the runner applies
     /// it: `Some(answer)` answers it here and the runner does nothing more (a remote
     /// instance's proxy, `crate::remote`, forwards it to the instance).
-    fn forward(&mut self, _command: &crate::monitor::Command) -> Option<Result<(), String>> {
+    fn forward(
+        &mut self,
+        _command: &crate::monitor::Command,
+    ) -> Option<Result<(), Box<dyn std::error::Error + Send + Sync>>> {
         None
     }
+}
+
+/// Why a compound refused `Command::SetDegradation` ([`Driven::set_degradation`]), or
+/// a component a level out of its ladder.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum DegradationRefused {
+    /// The compound does not adapt.
+    #[error("adaptation is off in this compound")]
+    Off,
+    /// Beyond the highest level.
+    #[error("degradation level {level} out of range: the highest is {max}")]
+    OutOfRange { level: u32, max: u32 },
 }
 
 /// An atomic component's automaton as the runner drives it: every compound hook keeps
@@ -274,10 +351,10 @@ impl Automaton for Atomic {
     fn answer(&mut self, output: usize, cx: &mut Context) -> Result<(), Fault> {
         self.0.answer(output, cx)
     }
-    fn configure(&mut self, configuration: &Value) -> Result<(), String> {
+    fn configure(&mut self, configuration: &Value) -> Result<(), ValueRefused> {
         self.0.configure(configuration)
     }
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), ValueRefused> {
         self.0.set(variable, value)
     }
     fn get(&self, variable: usize) -> Value {

@@ -98,6 +98,7 @@
 pub mod adapt;
 mod automaton;
 pub mod cdr;
+mod chain;
 pub mod clock;
 mod commander;
 pub mod compound;
@@ -127,7 +128,8 @@ mod wake;
 mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
-pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult};
+pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, ValueRefused};
+pub use crate::chain::Chain;
 pub use crate::clock::{Clock, NotSettled, VirtualClock};
 pub use crate::commander::{
     CommandError, Commander, DEFAULT_SUPERVISOR_COMMAND_TIMEOUT, ObservableOnly,
@@ -145,8 +147,8 @@ pub use crate::port::{
 pub use crate::refused::Refused;
 pub use crate::spec::{
     AfterSpec, ExceptionSpec, InputKind, InputSpec, OnSpec, OutOfRange, OutputKind, OutputSpec,
-    OverflowPolicy, PeriodicSpec, PlanStep, Spec, StateSpec, TimingSpec, VarKind, VarRange,
-    VarSpec,
+    OverflowPolicy, PeriodicSpec, PlanStep, Spec, SpecError, StateSpec, TimingSpec, VarKind,
+    VarRange, VarSpec,
 };
 pub use crate::system::{
     CONTROL_CAPACITY, Component, ComponentReport, ConnectError, Error, PortSet, Report,
@@ -154,7 +156,7 @@ pub use crate::system::{
 };
 pub use crate::table::{Controllable, State};
 pub use crate::thread::OsPriority;
-pub use crate::value::{Time, Value, ValueError};
+pub use crate::value::{ConvertError, Time, Value, ValueError};
 pub use crate::wake::Waker;
 
 /// Re-exported so generated code and users need not depend on it themselves.

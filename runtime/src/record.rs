@@ -169,24 +169,26 @@ pub enum RecordError {
         known: String,
     },
     /// Writing the recording failed.
-    #[error("cannot write the recording {path}: {source}")]
+    #[error("cannot write the recording {path}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The OS error.
+        #[source]
         source: std::io::Error,
     },
     /// The MCAP writer failed.
-    #[error("cannot write the recording {path}: {source}")]
+    #[error("cannot write the recording {path}")]
     Mcap {
         /// The file.
         path: PathBuf,
         /// What failed.
+        #[source]
         source: mcap::McapError,
     },
     /// The recorder's thread could not be spawned.
-    #[error("cannot spawn the recorder's thread: {0}")]
-    Spawn(std::io::Error),
+    #[error("cannot spawn the recorder's thread")]
+    Spawn(#[source] std::io::Error),
     /// The recorder's thread panicked (a bug).
     #[error("the recorder's thread panicked: {0}")]
     Panicked(String),
@@ -196,23 +198,25 @@ pub enum RecordError {
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The OS error.
+        #[source]
         source: std::io::Error,
     },
     /// The file is not MCAP, or is damaged.
-    #[error("{path}: not a readable MCAP file: {source}")]
+    #[error("{path}: not a readable MCAP file")]
     Mcap {
         /// The file.
         path: PathBuf,
         /// What is wrong.
+        #[source]
         source: mcap::McapError,
     },
     /// A message or metadata record of the recording is not what this runtime writes.
-    #[error("{path}: record {record}: {what}: {source}")]
+    #[error("{path}: record {record}: {what}")]
     Json {
         /// The file.
         path: PathBuf,
@@ -221,6 +225,7 @@ pub enum ReadError {
         /// What it was meant to be.
         what: &'static str,
         /// What is wrong.
+        #[source]
         source: serde_json::Error,
     },
     /// A message on a channel the file never declared.
@@ -252,13 +257,14 @@ pub enum ReadError {
         found: u32,
     },
     /// A packet's value does not decode into the type asked for.
-    #[error("packet {seq} of `{port}` does not decode: {source}")]
+    #[error("packet {seq} of `{port}` does not decode")]
     Decode {
         /// The port.
         port: String,
         /// The packet's sequence number.
         seq: u64,
         /// What is wrong.
+        #[source]
         source: serde_json::Error,
     },
 }

@@ -45,10 +45,15 @@ use crate::port::Packet;
 use crate::spec::{Spec, StateSpec, TimingSpec};
 use crate::table::{Controllable, State};
 use crate::wake::Waker;
-use crate::{Component, Context, Fault, PortSet, Value};
+use crate::{Chain, Component, CompoundError, Context, Fault, PortSet, Value, ValueRefused};
 
 /// How a [`Registrar`] builds a compound: by instance name, or why not.
-pub type MakeCompound = Box<dyn Fn(&str) -> Result<Component, String> + Send + Sync>;
+pub type MakeCompound = Box<dyn Fn(&str) -> Result<Component, CompoundError> + Send + Sync>;
+
+/// A network layer's error, as a [`RemoteEnd`] or a [`Placer`] returns it: the layer's
+/// own error, kept whole (its sources too); the runtime shows it with its chain
+/// ([`Chain`]).
+pub type NetworkError = Box<dyn std::error::Error + Send + Sync>;
 
 /// What a network layer is told about a component type so that its instances can be
 /// built on another node and bridged: generated crates call it from each component's
@@ -121,7 +126,7 @@ pub trait RemoteEnd: Send + 'static {
     /// Build the instance on its node and leave it `ready` (the proxy's `start`, and a
     /// restart after the node lost it); `waker` is rung whenever something changes
     /// (the instance's monitoring events, the node's liveliness). `Err`: why not.
-    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String>;
+    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), NetworkError>;
 
     /// Whether the instance must be built again before it can run: never built, or
     /// gone since (its node was lost, it went to `dead`, it fell silent).
@@ -135,7 +140,7 @@ pub trait RemoteEnd: Send + 'static {
     }
 
     /// Give `command` to the remote instance; its answer.
-    fn command(&mut self, command: &Command) -> Result<(), String>;
+    fn command(&mut self, command: &Command) -> Result<(), NetworkError>;
 
     /// Forward what waits at the proxy's inputs (called on every turn of the proxy).
     fn pump(&mut self);
@@ -144,12 +149,12 @@ pub trait RemoteEnd: Send + 'static {
     /// spec's outputs): ask the remote instance for its answer and send it on the
     /// proxy's output (this runs inside the proxy's answer to that request). `Err`:
     /// why no answer came (the consumer's pull then times out).
-    fn pull(&mut self, output: usize) -> Result<(), String>;
+    fn pull(&mut self, output: usize) -> Result<(), NetworkError>;
 
     /// The remote instance's monitoring port as last heard (`Ok(None)`: nothing new),
     /// or why it cannot be heard: its node is lost, or it has not answered for longer
     /// than the end's bound.
-    fn view(&mut self) -> Result<Option<Monitor>, String>;
+    fn view(&mut self) -> Result<Option<Monitor>, NetworkError>;
 
     /// The proxy is dead: kill the remote instance if its node is there, and stop
     /// listening.
@@ -161,7 +166,7 @@ pub trait RemoteEnd: Send + 'static {
 pub trait Placer: Send + Sync {
     /// The far end for `placement`, or `Ok(None)` if `placement.node` is this
     /// process's own node (the instance then runs here).
-    fn place(&self, placement: &Placement) -> Result<Option<Remote>, String>;
+    fn place(&self, placement: &Placement) -> Result<Option<Remote>, NetworkError>;
 }
 
 thread_local! {
@@ -210,7 +215,11 @@ pub(crate) fn placer() -> Option<Arc<dyn Placer>> {
 /// What a compound does with an instance declared `on node`: the proxy that stands
 /// for it, or the local component itself when there is no placer or the node is this
 /// process's own.
-pub(crate) fn place(compound: &str, node: &str, local: Component) -> Result<Component, String> {
+pub(crate) fn place(
+    compound: &str,
+    node: &str,
+    local: Component,
+) -> Result<Component, NetworkError> {
     let Some(placer) = placer() else {
         tracing::info!(
             compound,
@@ -405,17 +414,34 @@ fn failure(view: &Monitor) -> Option<String> {
     }
 }
 
+/// Why the remote end failed the proxy: the network layer's error, after the node.
+#[derive(Debug, thiserror::Error)]
+#[error("on node `{node}`")]
+struct OnNode {
+    node: String,
+    #[source]
+    source: NetworkError,
+}
+
 impl Proxy {
+    fn on_node(&self, source: NetworkError) -> OnNode {
+        OnNode {
+            node: self.node.clone(),
+            source,
+        }
+    }
+
     fn forward(&mut self, command: Command) -> Result<(), Fault> {
         self.end
             .command(&command)
-            .map_err(|reason| Fault::message(format!("on node `{}`: {reason}", self.node)))
+            .map_err(|source| Fault::from(self.on_node(source)))
     }
 
     /// Read the remote view; a fault when the node is lost or the instance failed.
     fn refresh(&mut self) -> Result<(), Fault> {
         match self.end.view() {
-            Err(reason) => Err(Fault::message(reason)),
+            // (The reason names the node.)
+            Err(error) => Err(Fault::message(Chain(&*error).to_string())),
             Ok(None) => Ok(()),
             Ok(Some(view)) => {
                 let failed = failure(&view);
@@ -454,7 +480,7 @@ impl Automaton for Proxy {
             self.applied.clear();
             self.end
                 .instantiate(cx.waker())
-                .map_err(|reason| Fault::message(format!("on node `{}`: {reason}", self.node)))?;
+                .map_err(|source| Fault::from(self.on_node(source)))?;
         } else {
             // A restart: the remote instance restarts too.
             self.forward(Command::SetState(Controllable::Ready))?;
@@ -465,23 +491,34 @@ impl Automaton for Proxy {
     fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
         // No answer is not a fault of the proxy: the consumer's pull times out, as
         // when a local producer does not answer.
-        if let Err(reason) = self.end.pull(output) {
+        if let Err(error) = self.end.pull(output) {
             crate::limited!((&self.node, output), |held| tracing::warn!(
                 node = %self.node,
                 output = self.spec.outputs.get(output).map_or("?", |o| o.name),
-                "pull through the proxy: {reason}{held}"
+                "pull through the proxy: {}{held}",
+                Chain(&*error)
             ));
         }
         Ok(())
     }
 
-    fn configure(&mut self, configuration: &Value) -> Result<(), String> {
-        self.end.command(&Command::Configure(configuration.clone()))
+    fn configure(&mut self, configuration: &Value) -> Result<(), ValueRefused> {
+        self.end
+            .command(&Command::Configure(configuration.clone()))
+            .map_err(|source| ValueRefused::Remote {
+                node: self.node.clone(),
+                source,
+            })
     }
 
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), ValueRefused> {
         let name = self.spec.variables[variable].name.to_owned();
-        self.end.command(&Command::Set(name, value.clone()))
+        self.end
+            .command(&Command::Set(name, value.clone()))
+            .map_err(|source| ValueRefused::Remote {
+                node: self.node.clone(),
+                source,
+            })
     }
 
     fn get(&self, variable: usize) -> Value {
@@ -562,13 +599,17 @@ impl Driven for Proxy {
         }
     }
 
-    fn forward(&mut self, command: &Command) -> Option<Result<(), String>> {
+    fn forward(&mut self, command: &Command) -> Option<Result<(), NetworkError>> {
         match command {
             Command::SetPeriod(_)
             | Command::SetMaxResponse(_)
             | Command::SetPriority(_)
             | Command::SetQuality(_)
-            | Command::SetDegradation(_) => Some(self.end.command(command)),
+            | Command::SetDegradation(_) => Some(
+                self.end
+                    .command(command)
+                    .map_err(|source| self.on_node(source).into()),
+            ),
             Command::SetState(_) | Command::Configure(_) | Command::Set(..) => None,
         }
     }

@@ -29,7 +29,8 @@ use crossbeam_channel::{Receiver, Sender};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Atomic, Context, Driven, Fault, Section};
+use crate::automaton::{Atomic, Context, DegradationRefused, Driven, Fault, Section};
+use crate::chain::Chain;
 use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::handle::{ControlMessage, Reply};
@@ -960,7 +961,7 @@ impl Runner {
             match self.automaton.forward(&message.command) {
                 None => {}
                 Some(Ok(())) => return reply(Reply::Done),
-                Some(Err(reason)) => return reply(Reply::Rejected(reason)),
+                Some(Err(error)) => return reply(Reply::Rejected(Chain(&*error).to_string())),
             }
         }
         match &message.command {
@@ -986,9 +987,9 @@ impl Runner {
                         self.shared.publish(MonitorEvent::Configured);
                         reply(Reply::Done);
                     }
-                    Ok(Err(reason)) => reply(Reply::Rejected(format!(
+                    Ok(Err(refused)) => reply(Reply::Rejected(format!(
                         "invalid configuration: {}",
-                        excerpt(&reason, REASON_CHARS)
+                        excerpt(&Chain(&refused).to_string(), REASON_CHARS)
                     ))),
                     Err(panic) => reply(Reply::Rejected(format!(
                         "panic in configure: {}",
@@ -1023,9 +1024,9 @@ impl Runner {
                     let value = value.clone();
                     match self.call(|automaton, _| automaton.set(index, &value)) {
                         Ok(Ok(())) => reply(Reply::Done),
-                        Ok(Err(reason)) => reply(Reply::Rejected(format!(
+                        Ok(Err(refused)) => reply(Reply::Rejected(format!(
                             "invalid value for `{name}`: {}",
-                            excerpt(&reason, REASON_CHARS)
+                            excerpt(&Chain(&refused).to_string(), REASON_CHARS)
                         ))),
                         Err(panic) => reply(Reply::Rejected(format!(
                             "panic in set: {}",
@@ -1091,7 +1092,7 @@ impl Runner {
                 if self.supervised {
                     match self.call(|automaton, cx| automaton.set_degradation(level, cx)) {
                         Ok(Ok(())) => reply(Reply::Done),
-                        Ok(Err(reason)) => reply(Reply::Rejected(reason)),
+                        Ok(Err(refused)) => reply(Reply::Rejected(refused.to_string())),
                         Err(panic) => reply(Reply::Rejected(format!(
                             "panic in set_degradation: {panic}"
                         ))),
@@ -1110,9 +1111,9 @@ impl Runner {
                         None | Some(0) => reply(Reply::Rejected(
                             "no adaptation levels: the timing block has no period interval and fewer than two quality levels".to_owned(),
                         )),
-                        Some(max) if level > max => reply(Reply::Rejected(format!(
-                            "degradation level {level} out of range: the highest is {max}"
-                        ))),
+                        Some(max) if level > max => reply(Reply::Rejected(
+                            DegradationRefused::OutOfRange { level, max }.to_string(),
+                        )),
                         Some(_) if pinned => {
                             self.pin_level(level);
                             reply(Reply::Done);

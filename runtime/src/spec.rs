@@ -55,65 +55,60 @@ impl Spec {
 
     /// Check that every index in the spec points at something that exists and that
     /// every periodic section has a period. `System::add` refuses a spec that fails.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         self.validate_with(&self.timing)
     }
 
     /// [`Spec::validate`] with an instance's own timing block in place of the spec's
     /// (see `Component::with_timing`): a periodic section may take its period from it.
-    pub fn validate_with(&self, timing: &TimingSpec) -> Result<(), String> {
+    pub fn validate_with(&self, timing: &TimingSpec) -> Result<(), SpecError> {
         let states = self.states.len();
         // No state: a component without a user automaton (it serves pulls in
         // `running`); its `initial` is then 0.
         if self.initial >= states.max(1) {
-            return Err(format!(
-                "initial state #{} does not exist ({states} states)",
-                self.initial
-            ));
+            return Err(SpecError::Initial {
+                initial: self.initial,
+                states,
+            });
         }
         for state in self.states {
             let name = state.name;
             for on in state.on {
                 if on.port >= self.inputs.len() {
-                    return Err(format!(
-                        "state `{name}`: `on` names input #{}, which does not exist",
-                        on.port
-                    ));
+                    return Err(SpecError::OnPort {
+                        state: name,
+                        port: on.port,
+                    });
                 }
                 if on.target >= states {
-                    return Err(format!(
-                        "state `{name}`: `on` targets state #{}, which does not exist",
-                        on.target
-                    ));
+                    return Err(SpecError::OnTarget {
+                        state: name,
+                        target: on.target,
+                    });
                 }
             }
             for after in state.after {
                 if after.target >= states {
-                    return Err(format!(
-                        "state `{name}`: `after` targets state #{}, which does not exist",
-                        after.target
-                    ));
+                    return Err(SpecError::AfterTarget {
+                        state: name,
+                        target: after.target,
+                    });
                 }
                 if after.without.is_some_and(|port| port >= self.inputs.len()) {
-                    return Err(format!(
-                        "state `{name}`: `after ... without` names an input that does not exist"
-                    ));
+                    return Err(SpecError::AfterWithout { state: name });
                 }
             }
-            if let Some(target) = state.may.iter().find(|target| **target >= states) {
-                return Err(format!(
-                    "state `{name}`: `may` targets state #{target}, which does not exist"
-                ));
+            if let Some(&target) = state.may.iter().find(|target| **target >= states) {
+                return Err(SpecError::MayTarget {
+                    state: name,
+                    target,
+                });
             }
             if let Some(periodic) = state.periodic {
                 match periodic.period.or(timing.period) {
-                    None => {
-                        return Err(format!(
-                            "state `{name}` has a periodic section but neither it nor the component has a period"
-                        ));
-                    }
+                    None => return Err(SpecError::NoPeriod { state: name }),
                     Some(period) if period.is_zero() => {
-                        return Err(format!("state `{name}`: a period must be positive"));
+                        return Err(SpecError::ZeroPeriod { state: name });
                     }
                     Some(_) => {}
                 }
@@ -124,32 +119,112 @@ impl Spec {
                 if let PlanStep::Goto(target) = step
                     && *target >= states
                 {
-                    return Err(format!(
-                        "exception `{}`: `goto` targets state #{target}, which does not exist",
-                        exception.name
-                    ));
+                    return Err(SpecError::GotoTarget {
+                        exception: exception.name,
+                        target: *target,
+                    });
                 }
             }
         }
         for input in self.inputs {
             match input.kind {
                 InputKind::Fifo { capacity: 0, .. } => {
-                    return Err(format!(
-                        "input `{}`: a fifo needs a capacity of at least 1",
-                        input.name
-                    ));
+                    return Err(SpecError::FifoCapacity { input: input.name });
                 }
                 InputKind::Ufifo { initial: 0, .. } => {
-                    return Err(format!(
-                        "input `{}`: a ufifo needs an initial size of at least 1",
-                        input.name
-                    ));
+                    return Err(SpecError::UfifoInitial { input: input.name });
                 }
                 _ => {}
             }
         }
         Ok(())
     }
+}
+
+/// What is wrong with a [`Spec`] ([`Spec::validate`]): an index that points at nothing,
+/// or a setting no component can run with (a bug in the generator or in a
+/// hand-written spec).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SpecError {
+    /// The initial state does not exist.
+    #[error("initial state #{initial} does not exist ({states} states)")]
+    Initial {
+        /// The initial state's index.
+        initial: usize,
+        /// How many states the spec has.
+        states: usize,
+    },
+    /// An `on` names an input that does not exist.
+    #[error("state `{state}`: `on` names input #{port}, which does not exist")]
+    OnPort {
+        /// The state.
+        state: &'static str,
+        /// The input's index.
+        port: usize,
+    },
+    /// An `on` targets a state that does not exist.
+    #[error("state `{state}`: `on` targets state #{target}, which does not exist")]
+    OnTarget {
+        /// The state.
+        state: &'static str,
+        /// The target's index.
+        target: usize,
+    },
+    /// An `after` targets a state that does not exist.
+    #[error("state `{state}`: `after` targets state #{target}, which does not exist")]
+    AfterTarget {
+        /// The state.
+        state: &'static str,
+        /// The target's index.
+        target: usize,
+    },
+    /// An `after ... without` names an input that does not exist.
+    #[error("state `{state}`: `after ... without` names an input that does not exist")]
+    AfterWithout {
+        /// The state.
+        state: &'static str,
+    },
+    /// A `may` target that does not exist.
+    #[error("state `{state}`: `may` targets state #{target}, which does not exist")]
+    MayTarget {
+        /// The state.
+        state: &'static str,
+        /// The target's index.
+        target: usize,
+    },
+    /// A periodic section without a period.
+    #[error("state `{state}` has a periodic section but neither it nor the component has a period")]
+    NoPeriod {
+        /// The state.
+        state: &'static str,
+    },
+    /// A periodic section with a zero period.
+    #[error("state `{state}`: a period must be positive")]
+    ZeroPeriod {
+        /// The state.
+        state: &'static str,
+    },
+    /// An exception plan's `goto` targets a state that does not exist.
+    #[error("exception `{exception}`: `goto` targets state #{target}, which does not exist")]
+    GotoTarget {
+        /// The exception.
+        exception: &'static str,
+        /// The target's index.
+        target: usize,
+    },
+    /// A fifo input of capacity 0.
+    #[error("input `{input}`: a fifo needs a capacity of at least 1")]
+    FifoCapacity {
+        /// The input.
+        input: &'static str,
+    },
+    /// A ufifo input of initial size 0.
+    #[error("input `{input}`: a ufifo needs an initial size of at least 1")]
+    UfifoInitial {
+        /// The input.
+        input: &'static str,
+    },
 }
 
 /// One state of the user automaton.

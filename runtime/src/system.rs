@@ -193,12 +193,13 @@ pub enum Error {
     InvalidName(String),
     /// The component's spec is inconsistent (a bug in the generator or a hand-written
     /// spec).
-    #[error("component `{component}`: invalid spec: {detail}")]
+    #[error("component `{component}`: invalid spec")]
     InvalidSpec {
         /// The component.
         component: String,
         /// What is wrong.
-        detail: String,
+        #[source]
+        source: crate::spec::SpecError,
     },
     /// The registered ports do not match the spec.
     #[error("component `{component}`: {detail}")]
@@ -220,11 +221,12 @@ pub enum Error {
     #[error("no component named `{0}`")]
     UnknownComponent(String),
     /// The OS refused a thread.
-    #[error("component `{component}`: cannot spawn its thread: {source}")]
+    #[error("component `{component}`: cannot spawn its thread")]
     Spawn {
         /// The component.
         component: String,
         /// The OS error.
+        #[source]
         source: std::io::Error,
     },
     /// A component did not reach a state in time.
@@ -458,10 +460,10 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         return Err(Error::InvalidName(name));
     }
     let spec = automaton.spec();
-    if let Err(detail) = spec.validate_with(&timing) {
+    if let Err(source) = spec.validate_with(&timing) {
         return Err(Error::InvalidSpec {
             component: name,
-            detail,
+            source,
         });
     }
     let mismatch = |detail: String| Error::PortMismatch {

@@ -125,16 +125,29 @@ impl Value {
     }
 
     /// Convert a serializable user value (packet, enum, struct) into a [`Value::Json`].
-    pub fn from_serde<T: Serialize>(value: &T) -> Result<Value, String> {
+    pub fn from_serde<T: Serialize>(value: &T) -> Result<Value, ConvertError> {
         serde_json::to_value(value)
             .map(Value::Json)
-            .map_err(|e| e.to_string())
+            .map_err(ConvertError::Serialize)
     }
 
     /// Convert into a deserializable user type, through JSON.
-    pub fn to_serde<T: serde::de::DeserializeOwned>(&self) -> Result<T, String> {
-        serde_json::from_value(self.to_json()).map_err(|e| e.to_string())
+    pub fn to_serde<T: serde::de::DeserializeOwned>(&self) -> Result<T, ConvertError> {
+        serde_json::from_value(self.to_json()).map_err(ConvertError::Deserialize)
     }
+}
+
+/// A user value that does not convert to or from a [`Value`] ([`Value::from_serde`],
+/// [`Value::to_serde`]); the source is serde's reason.
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    /// The user value has no JSON form (a map whose keys are not strings, a
+    /// serializer's own error).
+    #[error("the value cannot be written as JSON")]
+    Serialize(#[source] serde_json::Error),
+    /// The value is not one of the type asked for.
+    #[error("the value does not match its type")]
+    Deserialize(#[source] serde_json::Error),
 }
 
 impl fmt::Display for Value {

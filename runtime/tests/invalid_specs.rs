@@ -8,9 +8,9 @@ use std::time::Duration;
 
 use coolbot::port::{FifoIn, LastIn, TickIn, TickOut};
 use coolbot::{
-    Automaton, Component, Context, Error, Fault, InputKind, InputSpec, OnSpec, OutputKind,
-    OutputSpec, OverflowPolicy, PeriodicSpec, PlanStep, PortSet, Section, Spec, StateSpec, System,
-    TimingSpec, Value,
+    Automaton, Chain, Component, Context, Error, Fault, InputKind, InputSpec, OnSpec, OutputKind,
+    OutputSpec, OverflowPolicy, PeriodicSpec, PlanStep, PortSet, Section, Spec, SpecError,
+    StateSpec, System, TimingSpec,
 };
 
 /// A valid spec the tests break one field at a time: states `idle` (`on data`, `on
@@ -79,9 +79,6 @@ impl Automaton for Bare {
     fn spec(&self) -> &'static Spec {
         self.0
     }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
-    }
 }
 
 fn leak<T>(items: Vec<T>) -> &'static [T] {
@@ -121,28 +118,37 @@ fn the_base_spec_is_valid() {
 fn inconsistent_specs_are_refused_with_a_reason() {
     let mut spec = BASE;
     spec.initial = 9;
+    let refused = add_with(spec).unwrap_err();
+    // The message says what failed; the spec's fault is its source, shown once.
+    assert_eq!(refused.to_string(), "component `w`: invalid spec");
+    let source = std::error::Error::source(&refused).expect("the spec's fault");
     assert_eq!(
-        add_with(spec).unwrap_err().to_string(),
+        source.downcast_ref::<SpecError>(),
+        Some(&SpecError::Initial {
+            initial: 9,
+            states: 2
+        })
+    );
+    assert_eq!(
+        Chain(&refused).to_string(),
         "component `w`: invalid spec: initial state #9 does not exist (2 states)"
     );
     let spec = with_states(|states| states[0].on = &[OnSpec { port: 7, target: 0 }]);
     assert_eq!(
-        spec.validate(),
-        Err("state `idle`: `on` names input #7, which does not exist".to_owned())
+        spec.validate().unwrap_err().to_string(),
+        "state `idle`: `on` names input #7, which does not exist"
     );
     let spec = with_states(|states| states[0].may = &[5]);
     assert_eq!(
-        spec.validate(),
-        Err("state `idle`: `may` targets state #5, which does not exist".to_owned())
+        spec.validate().unwrap_err().to_string(),
+        "state `idle`: `may` targets state #5, which does not exist"
     );
     let mut spec = with_states(|states| states[0].periodic = Some(PeriodicSpec { period: None }));
     spec.timing = TimingSpec::NONE;
+    assert_eq!(spec.validate(), Err(SpecError::NoPeriod { state: "idle" }));
     assert_eq!(
-        spec.validate(),
-        Err(
-            "state `idle` has a periodic section but neither it nor the component has a period"
-                .to_owned()
-        )
+        spec.validate().unwrap_err().to_string(),
+        "state `idle` has a periodic section but neither it nor the component has a period"
     );
     let mut spec = BASE;
     spec.exceptions = &[coolbot::ExceptionSpec {
@@ -151,8 +157,8 @@ fn inconsistent_specs_are_refused_with_a_reason() {
         plan: &[PlanStep::Goto(4)],
     }];
     assert_eq!(
-        spec.validate(),
-        Err("exception `x`: `goto` targets state #4, which does not exist".to_owned())
+        spec.validate().unwrap_err().to_string(),
+        "exception `x`: `goto` targets state #4, which does not exist"
     );
     let mut spec = BASE;
     spec.inputs = leak(vec![
@@ -169,8 +175,8 @@ fn inconsistent_specs_are_refused_with_a_reason() {
         BASE.inputs[2],
     ]);
     assert_eq!(
-        spec.validate(),
-        Err("input `data`: a fifo needs a capacity of at least 1".to_owned())
+        spec.validate().unwrap_err().to_string(),
+        "input `data`: a fifo needs a capacity of at least 1"
     );
 }
 
@@ -217,7 +223,7 @@ fn a_spec_without_a_period_is_accepted_with_an_instance_period() {
     let mut system = System::new();
     let refused = system.add(bare(&UNTIMED)).unwrap_err();
     assert_eq!(
-        refused.to_string(),
+        Chain(&refused).to_string(),
         "component `w`: invalid spec: state `busy` has a periodic section but neither it nor the component has a period"
     );
     let component = bare(&UNTIMED).with_timing(OVERRIDE);
@@ -277,9 +283,6 @@ impl Automaton for TickAnswer {
     fn answer(&mut self, _output: usize, _cx: &mut Context) -> Result<(), Fault> {
         self.0.emit();
         Ok(())
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
     }
 }
 
@@ -346,6 +349,55 @@ fn a_supervisor_without_states_is_refused() {
     };
     assert_eq!(
         error.to_string(),
-        "compound `cell`: supervisor: the supervisor has no state"
+        "compound `cell`: the supervisor has no state"
+    );
+}
+
+/// A supervisor with one state and nothing to do.
+struct Watching;
+
+static WATCHING: Spec = Spec {
+    type_name: "Watching",
+    doc: "",
+    states: &[StateSpec {
+        name: "watching",
+        entry: false,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+impl coolbot::Supervisor for Watching {
+    fn spec(&self) -> &'static Spec {
+        &WATCHING
+    }
+}
+
+/// Each error says what failed and keeps its cause as its source: the compound, the
+/// instance's refusal, the spec's fault, each shown once in the chain.
+#[test]
+fn a_compound_refusing_an_instance_keeps_the_chain() {
+    let mut spec = BASE;
+    spec.initial = 9;
+    let spec: &'static Spec = Box::leak(Box::new(spec));
+    let Err(error) = coolbot::CompoundBuilder::new("cell", Watching)
+        .instance(bare(spec))
+        .build()
+    else {
+        panic!("an instance with a bad spec was accepted");
+    };
+    assert_eq!(error.to_string(), "compound `cell`");
+    assert_eq!(
+        Chain(&error).to_string(),
+        "compound `cell`: component `w`: invalid spec: initial state #9 does not exist (2 states)"
     );
 }

@@ -273,6 +273,8 @@ const FRAGMENTS: &[(Place, &str)] = &[
         place("docs/runtime.md", "### Configuration and defaults", 0),
         "",
     ),
+    (place("docs/runtime.md", "## Errors", 0), ""),
+    (place("docs/runtime.md", "## Errors", 1), ""),
     (
         place(
             "docs/tools.md",

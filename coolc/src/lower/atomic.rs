@@ -243,10 +243,7 @@ impl<'a> Lowerer<'a> {
                 } else {
                     format!("::coolbot::Value::from({receiver}.{field})")
                 },
-                format!(
-                    "<{}>::try_from(value).map_err(|error| error.to_string())",
-                    prim_rust(p)
-                ),
+                format!("<{}>::try_from(value)", prim_rust(p)),
             ),
             _ => (
                 format!("super::__cool_to_value(&{receiver}.{field})"),

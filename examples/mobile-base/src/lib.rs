@@ -514,8 +514,9 @@ fn start_recording(
     recorder.start(path).map_err(text)
 }
 
-fn text(error: impl fmt::Display) -> String {
-    error.to_string()
+/// An error with its sources, for the run's messages.
+fn text(error: impl std::error::Error) -> String {
+    coolbot::Chain(&error).to_string()
 }
 
 fn number(value: Option<&coolbot::Value>) -> f64 {

@@ -190,7 +190,7 @@ fn main() -> ExitCode {
     {
         Ok(process) => process,
         Err(error) => {
-            eprintln!("error: {error}");
+            eprintln!("error: {}", coolbot::Chain(&error));
             return ExitCode::from(2);
         }
     };

@@ -88,8 +88,14 @@ pub fn open(options: &NodeOptions) -> Result<Network, String> {
         lease: options.lease,
         ..coolbot_zenoh::network::NodeOptions::named(options.name.clone())
     };
-    let network = coolbot_zenoh::network::Network::open(&zenoh_options, registry())
-        .map_err(|e| format!("node `{}` cannot open: {e}", options.name))?;
+    let network =
+        coolbot_zenoh::network::Network::open(&zenoh_options, registry()).map_err(|e| {
+            format!(
+                "node `{}` cannot open: {}",
+                options.name,
+                coolbot::Chain(&e)
+            )
+        })?;
     Ok(Network {
         name: options.name.clone(),
         network,
@@ -102,12 +108,23 @@ impl Network {
     /// the scans.
     pub fn expose(&self, robot: &Robot) -> Result<(), String> {
         let node = self.network.node();
-        node.expose_system(robot.system())
-            .map_err(|e| format!("node `{}` cannot expose the robot: {e}", self.name))?;
+        node.expose_system(robot.system()).map_err(|e| {
+            format!(
+                "node `{}` cannot expose the robot: {}",
+                self.name,
+                coolbot::Chain(&e)
+            )
+        })?;
         // `coolctl echo` on the odometry and the scans (the ports `--record` records).
         use crate::generated::types::{Pose2D, RangeScan};
         let echo = |result: Result<(), coolbot_zenoh::Error>, port: &str| {
-            result.map_err(|e| format!("node `{}` cannot echo `{port}`: {e}", self.name))
+            result.map_err(|e| {
+                format!(
+                    "node `{}` cannot echo `{port}`: {}",
+                    self.name,
+                    coolbot::Chain(&e)
+                )
+            })
         };
         let [pose, scan] = crate::RECORDED_PORTS;
         echo(node.echo::<Pose2D>(robot.system(), pose), pose)?;

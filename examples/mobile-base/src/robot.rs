@@ -207,8 +207,9 @@ pub struct Robot {
     pub mapper: Handle,
 }
 
-fn text(error: impl std::fmt::Display) -> String {
-    error.to_string()
+/// An error with its sources, for the run's messages.
+fn text(error: impl std::error::Error) -> String {
+    coolbot::Chain(&error).to_string()
 }
 
 impl Robot {

@@ -337,12 +337,12 @@ impl CompoundBuilder {
         let name = component.name().to_owned();
         match crate::remote::place(&self.name, node, component) {
             Ok(component) => self.instance(component),
-            Err(reason) => {
+            Err(source) => {
                 self.errors.push(CompoundError::Placement {
                     compound: self.name.clone(),
                     instance: name,
                     node: node.to_owned(),
-                    reason,
+                    source,
                 });
                 self
             }
@@ -597,15 +597,14 @@ impl CompoundBuilder {
         // A supervisor always has a state (coolc gives a compound without one a
         // `supervising` state); only an atomic component may have no automaton.
         if own.states.is_empty() {
-            return Err(CompoundError::Supervisor {
+            return Err(CompoundError::NoSupervisorState {
                 compound: self.name.clone(),
-                detail: "the supervisor has no state".to_owned(),
             });
         }
-        if let Err(detail) = own.validate() {
+        if let Err(source) = own.validate() {
             return Err(CompoundError::Supervisor {
                 compound: self.name.clone(),
-                detail,
+                source,
             });
         }
         // Policies.

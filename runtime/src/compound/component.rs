@@ -8,7 +8,9 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use crate::adapt::{AdaptAction, Adaptation, Pressure};
-use crate::automaton::{Automaton, Context, Driven, Fault, Section};
+use crate::automaton::{
+    Automaton, Context, DegradationRefused, Driven, Fault, Section, ValueRefused,
+};
 use crate::monitor::Command;
 use crate::spec::Spec;
 use crate::table::{Controllable, State};
@@ -202,17 +204,17 @@ impl Automaton for Compound {
         Ok(())
     }
 
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Err("a compound has no configuration of its own; configure its instances".to_owned())
+    fn configure(&mut self, _configuration: &Value) -> Result<(), ValueRefused> {
+        Err(ValueRefused::CompoundConfiguration)
     }
 
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), ValueRefused> {
         if let Some(mapped) = self.mapped.get(variable) {
             let target = self.route(mapped.instance);
-            return self.instances[target]
+            self.instances[target]
                 .handle
-                .command(Command::Set(mapped.variable.clone(), value.clone()))
-                .map_err(|rejected| rejected.reason);
+                .command(Command::Set(mapped.variable.clone(), value.clone()))?;
+            return Ok(());
         }
         self.supervisor.set(variable - self.own_offset, value)
     }
@@ -302,16 +304,16 @@ impl Driven for Compound {
         cx.supervision.append(&mut self.steps);
     }
 
-    fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), String> {
+    fn set_degradation(&mut self, level: u32, cx: &mut Context) -> Result<(), DegradationRefused> {
         let name = self.name.clone();
         let Some(coordinator) = self.coordinator.as_mut() else {
-            return Err("adaptation is off in this compound".to_owned());
+            return Err(DegradationRefused::Off);
         };
         if level > coordinator.max_level {
-            return Err(format!(
-                "degradation level {level} out of range: the highest is {}",
-                coordinator.max_level
-            ));
+            return Err(DegradationRefused::OutOfRange {
+                level,
+                max: coordinator.max_level,
+            });
         }
         let from = coordinator.cap;
         coordinator.cap = level;

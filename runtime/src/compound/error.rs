@@ -6,6 +6,8 @@
 use std::time::Duration;
 
 use crate::monitor::{Rejected, Timeout};
+use crate::remote::NetworkError;
+use crate::spec::SpecError;
 use crate::system::{ConnectError, Error as SystemError};
 use crate::table::State;
 
@@ -13,16 +15,23 @@ use crate::table::State;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum CompoundError {
+    /// The supervisor has no state.
+    #[error("compound `{compound}`: the supervisor has no state")]
+    NoSupervisorState {
+        /// The compound.
+        compound: String,
+    },
     /// The supervisor's spec is inconsistent.
-    #[error("compound `{compound}`: supervisor: {detail}")]
+    #[error("compound `{compound}`: supervisor")]
     Supervisor {
         /// The compound.
         compound: String,
         /// What is wrong.
-        detail: String,
+        #[source]
+        source: SpecError,
     },
     /// An instance could not be added (duplicate name, bad spec, ports).
-    #[error("compound `{compound}`: {source}")]
+    #[error("compound `{compound}`")]
     Instance {
         /// The compound.
         compound: String,
@@ -31,9 +40,7 @@ pub enum CompoundError {
         source: Box<SystemError>,
     },
     /// An instance declared `on "node"` could not be placed there.
-    #[error(
-        "compound `{compound}`: instance `{instance}` cannot be placed on node `{node}`: {reason}"
-    )]
+    #[error("compound `{compound}`: instance `{instance}` cannot be placed on node `{node}`")]
     Placement {
         /// The compound.
         compound: String,
@@ -41,8 +48,9 @@ pub enum CompoundError {
         instance: String,
         /// The node.
         node: String,
-        /// Why.
-        reason: String,
+        /// Why: the network layer's error (`crate::remote::Placer`).
+        #[source]
+        source: NetworkError,
     },
     /// A name that does not resolve.
     #[error("compound `{compound}`: {what} `{name}` does not exist")]
@@ -55,7 +63,7 @@ pub enum CompoundError {
         name: String,
     },
     /// A connection breaks the connection rules.
-    #[error("compound `{compound}`: {source}")]
+    #[error("compound `{compound}`")]
     Connect {
         /// The compound.
         compound: String,

@@ -18,7 +18,7 @@ use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
-use crate::automaton::{Automaton, Context, Driven, Fault, Section};
+use crate::automaton::{Automaton, Context, Driven, Fault, Section, ValueRefused};
 use crate::clock::Clock;
 use crate::commander::{Commander, StandIns};
 use crate::monitor::{Command, Monitor};
@@ -301,22 +301,21 @@ impl Automaton for StandIn {
         Ok(())
     }
 
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Err("a compound has no configuration of its own; configure its instances".to_owned())
+    fn configure(&mut self, _configuration: &Value) -> Result<(), ValueRefused> {
+        Err(ValueRefused::CompoundConfiguration)
     }
 
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), ValueRefused> {
         if let Some(mapped) = self.mapped.get(variable) {
             // As a built compound does: a `set` command to the instance, recorded and
             // refused as any other.
             let mut stage = self.stage();
             let instance = stage.names[mapped.instance].clone();
-            return stage
-                .command(
-                    &instance,
-                    &Command::Set(mapped.variable.clone(), value.clone()),
-                )
-                .map_err(|refused| refused.to_string());
+            stage.command(
+                &instance,
+                &Command::Set(mapped.variable.clone(), value.clone()),
+            )?;
+            return Ok(());
         }
         self.supervisor.set(variable - self.own_offset, value)
     }

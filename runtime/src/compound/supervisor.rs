@@ -2,7 +2,7 @@
 //! states' sections, its own variables, its `may` choices) and the [`SupervisorCx`]
 //! its sections receive.
 
-use crate::automaton::{Context, Section, SectionResult};
+use crate::automaton::{Context, Section, SectionResult, ValueRefused};
 use crate::commander::Commander;
 use crate::spec::Spec;
 use std::time::Duration;
@@ -40,9 +40,10 @@ pub trait Supervisor: Send + 'static {
         Value::Unit
     }
 
-    /// Set own controllable variable `variable`.
-    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), String> {
-        Err(format!("variable #{variable} cannot be set"))
+    /// Set own controllable variable `variable`. The default refuses
+    /// ([`ValueRefused::NotSettable`]).
+    fn set(&mut self, variable: usize, _value: &Value) -> Result<(), ValueRefused> {
+        Err(ValueRefused::not_settable(self.spec(), variable))
     }
 
     /// For states with `may` (`spec().states[state].may`): called after each entry or

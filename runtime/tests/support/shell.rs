@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use coolbot::{
     Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Spec, StateSpec,
-    TimingSpec, Value,
+    TimingSpec,
 };
 
 type AnswerFn = Box<dyn FnMut(usize) -> Result<(), Fault> + Send>;
@@ -25,9 +25,6 @@ impl Automaton for Shell {
             Some(answer) => answer(output),
             None => Err(Fault::message("no answer installed")),
         }
-    }
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("no variables".to_owned())
     }
 }
 

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use coolbot::{
     Automaton, CompoundBuilder, Context, Fault, PeriodicSpec, PortSet, Section, Spec, StateSpec,
-    Supervisor, System, TimingSpec, Value, VarKind, VarSpec,
+    Supervisor, System, TimingSpec, Value, ValueRefused, VarKind, VarSpec,
 };
 use coolbot_zenoh::Node;
 
@@ -119,16 +119,13 @@ impl Automaton for Counter {
         }
         Ok(())
     }
-    fn configure(&mut self, _: &Value) -> Result<(), String> {
-        Err("no configuration".to_owned())
-    }
-    fn set(&mut self, variable: usize, value: &Value) -> Result<(), String> {
+    fn set(&mut self, variable: usize, value: &Value) -> Result<(), ValueRefused> {
         match variable {
             1 => {
-                self.step = u64::try_from(value).map_err(|error| error.to_string())?;
+                self.step = u64::try_from(value).map_err(ValueRefused::other)?;
                 Ok(())
             }
-            _ => Err("not controllable".to_owned()),
+            _ => Err(ValueRefused::not_settable(self.spec, variable)),
         }
     }
     fn get(&self, variable: usize) -> Value {

@@ -20,6 +20,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
+use coolbot::Chain;
 use coolbot::ranges::{EXCERPT_CHARS, REASON_CHARS, excerpt};
 
 use crate::{ControlReply, Error, Node, keys, limits};
@@ -169,16 +170,21 @@ fn same_levels(list: &[&str], requested: &[String]) -> bool {
     list.len() == requested.len() && list.iter().zip(requested).all(|(a, b)| *a == b)
 }
 
+/// A refusal's text: `error` with its sources ([`Chain`]), as the agent sends it.
+fn text<E: std::error::Error>(error: E) -> String {
+    Chain(&error).to_string()
+}
+
 /// Check quality levels from a request: at most [`limits::LEVELS`] names of letters,
 /// digits and `_`, each at most [`limits::LEVEL_NAME`] bytes.
 fn check_levels(requested: &[String]) -> Result<(), String> {
     limits::LEVELS
         .check(|| "the quality levels".to_owned(), requested.len())
-        .map_err(|exceeded| exceeded.to_string())?;
+        .map_err(text)?;
     for (index, level) in requested.iter().enumerate() {
         limits::LEVEL_NAME
             .check(|| format!("quality level {index}"), level.len())
-            .map_err(|exceeded| exceeded.to_string())?;
+            .map_err(text)?;
         if level.is_empty() || !level.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
             return Err(format!(
                 "quality level {index} is not a name of letters, digits and `_`"
@@ -203,7 +209,7 @@ fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
             || "the distinct lists of quality levels this agent would keep".to_owned(),
             known.len() + 1,
         )
-        .map_err(|exceeded| exceeded.to_string())?;
+        .map_err(text)?;
     let list: Vec<&'static str> = requested
         .iter()
         .map(|level| &*Box::leak(level.clone().into_boxed_str()))
@@ -491,7 +497,8 @@ fn admit(
         && let Err(error) = reply(&query, &ControlReply::Rejected { reason })
     {
         coolbot::limited!("refusal", |held| tracing::warn!(
-            "instantiation refusal not sent: {error}{held}"
+            "instantiation refusal not sent: {}{held}",
+            Chain(&*error)
         ));
     }
 }
@@ -528,7 +535,8 @@ impl Drop for Inbox {
             let reason = stopped_reason(&why);
             if let Err(error) = reply(&query, &ControlReply::Rejected { reason }) {
                 coolbot::limited!("refusal", |held| tracing::warn!(
-                    "instantiation refusal not sent: {error}{held}"
+                    "instantiation refusal not sent: {}{held}",
+                    Chain(&*error)
                 ));
             }
         }
@@ -570,7 +578,7 @@ impl Agent {
             .declare_queryable(keys::agent(node.name(), "*"))
             .callback(move |query| admit(&admitting, &requests, query))
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the agent's queryable"))?;
         // The nodes that go away (their tokens `coolbot/<node>`): their instances here
         // go with them.
         let (gone, lost) = crossbeam_channel::unbounded::<String>();
@@ -586,7 +594,7 @@ impl Agent {
                 }
             })
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("watch the nodes' liveliness"))?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
         let serving = Arc::clone(&status);
@@ -600,6 +608,7 @@ impl Agent {
                 };
                 let mut system = System::new();
                 if let Err(error) = system.start() {
+                    let error = Chain(&error);
                     tracing::error!("the agent's system does not start: {error}");
                     inbox.ending = Some(format!("its system did not start: {error}"));
                     return;
@@ -620,7 +629,8 @@ impl Agent {
                             );
                             if let Err(error) = reply(&query, &answer) {
                                 coolbot::limited!("answer", |held| tracing::warn!(
-                                    "instantiation answer not sent: {error}{held}"
+                                    "instantiation answer not sent: {}{held}",
+                                    Chain(&*error)
                                 ));
                             }
                         }
@@ -650,7 +660,7 @@ impl Agent {
                     tracing::warn!("the agent's system did not shut down cleanly: {report:?}");
                 }
             })
-            .map_err(|error| Error::Zenoh(format!("cannot spawn the agent thread: {error}")))?;
+            .map_err(Error::spawn("agent"))?;
         Ok(Agent {
             stop,
             status,
@@ -757,7 +767,7 @@ fn serve_one(
 fn started(handle: &Handle) -> Result<(), String> {
     let monitor = handle
         .wait_for(|m| m.state != State::Starting, START_TIMEOUT)
-        .map_err(|error| error.to_string())?;
+        .map_err(text)?;
     if monitor.state != State::Ready {
         return Err(format!(
             "`{}` did not start: {}",
@@ -773,13 +783,13 @@ fn run(handle: &Handle) -> Result<(), String> {
     started(handle)?;
     handle
         .command(Command::SetState(Controllable::Running))
-        .map_err(|rejected| rejected.to_string())
+        .map_err(text)
 }
 
 /// Check the names, keys, counts, queue sizes and timing of `request` against the
 /// limits and the control port's ranges, before anything is looked up or built.
 fn check_request(request: &Instantiate) -> Result<(), String> {
-    let over = |exceeded: limits::Exceeded| exceeded.to_string();
+    let over = text::<limits::Exceeded>;
     let name = |what: &str, value: &str| {
         limits::NAME
             .check(|| what.to_owned(), value.len())
@@ -789,7 +799,7 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
     name("the instance name", &request.name)?;
     if let Some(owner) = &request.owner {
         name("the owner's name", owner)?;
-        keys::check_name(owner).map_err(|error| error.to_string())?;
+        keys::check_name(owner).map_err(text)?;
     }
     limits::WIRES
         .check(|| "the wires".to_owned(), request.wires.len())
@@ -799,7 +809,7 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
             Wire::Input { port, key } | Wire::Output { port, key, .. } => (port, key),
         };
         name(&format!("the port name of wire {index}"), port)?;
-        keys::check_bridge_key(key).map_err(|error| error.to_string())?;
+        keys::check_bridge_key(key).map_err(text)?;
         let queue = |what: &str, packets: usize| {
             limits::QUEUE
                 .check(|| format!("the {what} of wire {index}"), packets)
@@ -830,7 +840,7 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
     }
     if let Some(timing) = &request.timing {
         let timing_range = |what: &str, checked: Result<(), coolbot::Refused>| {
-            checked.map_err(|refused| format!("the timing's {what}: {refused}"))
+            checked.map_err(|refused| format!("the timing's {what}: {}", Chain(&refused)))
         };
         if let Some(period) = timing.period {
             timing_range("period", coolbot::ranges::period(period))?;
@@ -875,7 +885,7 @@ fn serve(
         .ok_or("no request: the query carries no payload")?;
     limits::REQUEST
         .check(|| "the request".to_owned(), payload.len())
-        .map_err(|exceeded| exceeded.to_string())?;
+        .map_err(text)?;
     let request: Instantiate = serde_json::from_slice(&payload.to_bytes()).map_err(|error| {
         format!(
             "malformed request: {}",
@@ -903,14 +913,14 @@ fn serve(
             request.type_name, registry
         )
     })?;
-    keys::check_name(&request.name).map_err(|error| error.to_string())?;
+    keys::check_name(&request.name).map_err(text)?;
     if request.name.contains('.') || system.handle(&request.name).is_some() {
         return Err(format!(
             "`{}` is not a free instance name here",
             request.name
         ));
     }
-    let mut component = (factory.make)(&request.name)?;
+    let mut component = (factory.make)(&request.name).map_err(text)?;
     let spec = component.spec();
     if let Some(timing) = &request.timing {
         let own = component.timing();
@@ -973,10 +983,10 @@ fn serve(
                 || format!("the queue of wire {index} ({held} packets of {size} bytes)"),
                 held.saturating_mul(size),
             )
-            .map_err(|exceeded| exceeded.to_string())?;
+            .map_err(text)?;
     }
     let name = request.name.clone();
-    built.push(system.add(component).map_err(|e| e.to_string())?);
+    built.push(system.add(component).map_err(text)?);
     for wire in &request.wires {
         match wire {
             Wire::Input { port, key } => {
@@ -995,11 +1005,11 @@ fn serve(
                     .then_some(crate::DEFAULT_PULL_TIMEOUT);
                 let inlet = factory.ports[port]
                     .inlet(node, &bridge, key, kind, pull)
-                    .map_err(|e| e.to_string())?;
-                built.push(system.add(inlet).map_err(|e| e.to_string())?);
+                    .map_err(text)?;
+                built.push(system.add(inlet).map_err(text)?);
                 system
                     .connect(&format!("{bridge}.output"), &format!("{name}.{port}"))
-                    .map_err(|e| e.to_string())?;
+                    .map_err(text)?;
             }
             Wire::Output { port, key, to } => {
                 let bridge = format!("{name}-{port}");
@@ -1010,11 +1020,11 @@ fn serve(
                     .then_some(crate::DEFAULT_PULL_TIMEOUT);
                 let outlet = factory.ports[port]
                     .outlet(node, &bridge, key, to.kind(), pull)
-                    .map_err(|e| e.to_string())?;
-                built.push(system.add(outlet).map_err(|e| e.to_string())?);
+                    .map_err(text)?;
+                built.push(system.add(outlet).map_err(text)?);
                 system
                     .connect(&format!("{name}.{port}"), &format!("{bridge}.input"))
-                    .map_err(|e| e.to_string())?;
+                    .map_err(text)?;
             }
         }
     }
@@ -1031,9 +1041,7 @@ fn serve(
                 .map(|(variable, value)| Command::Set(variable.clone(), value.clone())),
         );
     for command in overrides {
-        built[0]
-            .command(command)
-            .map_err(|rejected| rejected.to_string())?;
+        built[0].command(command).map_err(text)?;
     }
     // Bridges first, so that the instance's first packets find them running.
     for handle in built.iter().skip(1).rev() {
@@ -1043,7 +1051,7 @@ fn serve(
         run(&built[0])?;
     }
     for handle in built.iter() {
-        node.expose(handle).map_err(|e| e.to_string())?;
+        node.expose(handle).map_err(text)?;
     }
     tracing::info!(
         instance = %name,
@@ -1054,18 +1062,21 @@ fn serve(
     Ok(request.owner.clone())
 }
 
-/// Ask the agent of node `on` to build `request`, waiting at most `timeout`.
+/// Ask the agent of node `on` to build `request`, waiting at most `timeout`. An agent
+/// that has too many requests waiting answers [`Error::Busy`]; no answer within
+/// `timeout` is [`Error::NoAgent`].
 pub fn instantiate(
     node: &Node,
     on: &str,
     request: &Instantiate,
     timeout: Duration,
 ) -> Result<(), Error> {
-    keys::check_name(&request.type_name).map_err(|error| Error::Remote {
-        node: on.to_owned(),
-        reason: format!("the type name is not a key chunk: {error}"),
+    keys::check_name(&request.type_name)?;
+    let json = serde_json::to_vec(request).map_err(|source| Error::Json {
+        what: "the instantiation request".to_owned(),
+        decoding: false,
+        source,
     })?;
-    let json = serde_json::to_vec(request).map_err(Error::zenoh)?;
     let asked = std::time::Instant::now();
     let replies = node
         .session()
@@ -1073,42 +1084,50 @@ pub fn instantiate(
         .payload(json)
         .timeout(timeout)
         .wait()
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("send the instantiation request"))?;
     let Ok(reply) = replies.recv() else {
-        return Err(Error::Remote {
+        return Err(Error::NoAgent {
             node: on.to_owned(),
-            reason: format!(
-                "no agent answered (after {:.1?}, of at most {timeout:.1?}; does the node run an \
-                 agent, and do its access rules let this node instantiate `{}` there?)",
-                asked.elapsed(),
-                request.type_name
-            ),
+            type_name: request.type_name.clone(),
+            waited: asked.elapsed(),
+            timeout,
         });
     };
     let answer = reply
         .result()
-        .map_err(|error| {
-            Error::Zenoh(
-                excerpt(
-                    &error.payload().try_to_string().unwrap_or_default(),
-                    REASON_CHARS,
-                )
-                .into_owned(),
+        .map_err(|error| Error::ErrorReply {
+            node: on.to_owned(),
+            reason: excerpt(
+                &error.payload().try_to_string().unwrap_or_default(),
+                REASON_CHARS,
             )
+            .into_owned(),
         })
         .and_then(|sample| {
             let payload = sample.payload();
             limits::REPLY
                 .check(|| "the agent's answer".to_owned(), payload.len())
-                .map_err(|exceeded| Error::Remote {
+                .map_err(|source| Error::TooLarge {
                     node: on.to_owned(),
-                    reason: exceeded.to_string(),
+                    source,
                 })?;
-            serde_json::from_slice::<ControlReply>(&payload.to_bytes()).map_err(Error::zenoh)
+            serde_json::from_slice::<ControlReply>(&payload.to_bytes()).map_err(|source| {
+                Error::Json {
+                    what: format!("node `{on}`'s answer"),
+                    decoding: true,
+                    source,
+                }
+            })
         })?;
     match answer {
         ControlReply::Accepted => Ok(()),
-        ControlReply::Rejected { reason } => Err(Error::Remote {
+        // The agent's own words for a full queue ([`admit`]): the one refusal that
+        // may be asked again.
+        ControlReply::Rejected { reason } if reason.starts_with(BUSY) => Err(Error::Busy {
+            node: on.to_owned(),
+            reason,
+        }),
+        ControlReply::Rejected { reason } => Err(Error::Refused {
             node: on.to_owned(),
             reason,
         }),

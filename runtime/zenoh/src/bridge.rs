@@ -29,8 +29,8 @@ use coolbot::port::{
     DataOut, ErasedInput, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn,
 };
 use coolbot::{
-    Automaton, Component, Context, Fault, InputKind, InputPort, InputSpec, OnSpec, OutputKind,
-    OutputSpec, Packet, PortSet, Section, Spec, StateSpec, TimingSpec, Value,
+    Automaton, Chain, Component, Context, Fault, InputKind, InputPort, InputSpec, OnSpec,
+    OutputKind, OutputSpec, Packet, PortSet, Section, Spec, StateSpec, TimingSpec,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -279,7 +279,7 @@ impl Wire {
             if let Some((tally, (_, number))) = tally {
                 tally.record(number - 1);
             }
-            self.lost(&format!("zenoh refused it: {error}"));
+            self.lost(&format!("zenoh refused it: {}", Chain(&*error)));
             return false;
         }
         if let Some((epoch, number)) = numbered {
@@ -350,7 +350,7 @@ fn pull_server(
             }
         })
         .wait()
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("declare the pull queryable"))?;
     let stop = Arc::new(AtomicBool::new(false));
     let stopped = Arc::clone(&stop);
     let thread = std::thread::Builder::new()
@@ -365,7 +365,8 @@ fn pull_server(
                         };
                         if let Err(error) = result {
                             coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
-                                "pull answer not sent: {error}{held}"
+                                "pull answer not sent: {}{held}",
+                                Chain(&*error)
                             ));
                         }
                     }
@@ -378,7 +379,7 @@ fn pull_server(
                 }
             }
         })
-        .map_err(|error| Error::Zenoh(format!("cannot spawn the pull thread: {error}")))?;
+        .map_err(Error::spawn("pull"))?;
     Ok(PullServer {
         stop,
         queryable: Some(queryable),
@@ -484,7 +485,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .liveliness()
             .declare_token(format!("{key}/@out/{kind_name}/{}/{name}", node.name()))
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the outlet's liveliness token"))?;
 
         let packet = if kind == InputKind::Tick {
             "event"
@@ -534,7 +535,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .declare_publisher(key.clone())
             .congestion_control(zenoh::qos::CongestionControl::Block)
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the outlet's publisher"))?;
         let matching = Arc::new(AtomicBool::new(
             publisher
                 .matching_status()
@@ -548,7 +549,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .callback(move |status| flag.store(status.matching(), Ordering::Release))
             .background()
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("listen for the outlet's subscribers"))?;
         let epoch = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as u64);
@@ -567,12 +568,13 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                             && let Err(error) = query.reply(query.key_expr().clone(), bytes).wait()
                         {
                             coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
-                                "poster value not sent: {error}{held}"
+                                "poster value not sent: {}{held}",
+                                Chain(&*error)
                             ));
                         }
                     })
                     .wait()
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("declare the poster queryable"))?,
             )
         } else {
             None
@@ -757,14 +759,6 @@ impl<T: Packet + Serialize> Automaton for Outlet<T> {
         }
         Ok(())
     }
-
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Err("a bridge has no configuration".to_owned())
-    }
-
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("a bridge has no controllable variable".to_owned())
-    }
 }
 
 // ---------------------------------------------------------------------------------
@@ -882,7 +876,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.emit();
                         }
                     }
-                    Err(error) => lost(error.to_string()),
+                    Err(error) => lost(Chain(&error).to_string()),
                 },
             )
         }
@@ -893,7 +887,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                         gaps.received(epoch, seq);
                         port.send(packet);
                     }
-                    Err(error) => lost(error.to_string()),
+                    Err(error) => lost(Chain(&error).to_string()),
                 },
             )
         }
@@ -912,7 +906,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             port.post(value);
                         }
                     }
-                    Err(error) => lost(error.to_string()),
+                    Err(error) => lost(Chain(&error).to_string()),
                 },
             )
         }
@@ -1024,7 +1018,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 ledger::process()
             ))
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the inlet's liveliness token"))?;
         let packet = if kind == OutputKind::Tick {
             "event"
         } else {
@@ -1076,7 +1070,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             Some(_) => None,
             None => Some(
                 ledger::serve(session, &key, node.name(), &name, ledger, || {})
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("serve the inlet's acknowledgments"))?,
             ),
         };
         let inlet = Inlet {
@@ -1111,14 +1105,17 @@ impl Automaton for Inlet {
             .declare_subscriber(self.key.clone())
             .callback(move |sample| deliver(&sample.payload().to_bytes()))
             .wait()
-            .map_err(|error| Fault::message(format!("cannot subscribe: {error}")))?;
+            .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
         self.subscriber = Some(subscriber);
         // The current value of a poster, or of a data connection to a remote `last`
         // input: asked for now (a late joiner), and again whenever a producer's outlet
         // appears on the network (a producer that starts, or a link that comes back:
         // what was posted meanwhile is not lost to this reader).
         ask_current(&self.session, &self.key, &self.deliver).map_err(|error| {
-            Fault::message(format!("cannot ask for the current value: {error}"))
+            Fault::message(format!(
+                "cannot ask for the current value: {}",
+                Chain(&*error)
+            ))
         })?;
         let (session, key, deliver) = (
             self.session.clone(),
@@ -1140,11 +1137,11 @@ impl Automaton for Inlet {
                     && matches!(kind, Some("poster" | "last"))
                     && let Err(error) = ask_current(&session, &key, &deliver)
                 {
-                    coolbot::limited!(&key, |held| tracing::warn!(%key, "cannot ask for the current value again: {error}{held}"));
+                    coolbot::limited!(&key, |held| tracing::warn!(%key, "cannot ask for the current value again: {}{held}", Chain(&*error)));
                 }
             })
             .wait()
-            .map_err(|error| Fault::message(format!("cannot watch the producers: {error}")))?;
+            .map_err(|error| Fault::message(format!("cannot watch the producers: {}", Chain(&*error))))?;
         self.watcher = Some(watcher);
         Ok(())
     }
@@ -1171,7 +1168,7 @@ impl Automaton for Inlet {
             Err(error) => {
                 coolbot::limited!(
                     &self.key,
-                    |held| tracing::warn!(key = %self.key, "pull query not sent: {error}{held}")
+                    |held| tracing::warn!(key = %self.key, "pull query not sent: {}{held}", Chain(&*error))
                 );
                 return Ok(());
             }
@@ -1187,13 +1184,5 @@ impl Automaton for Inlet {
             }
         }
         Ok(())
-    }
-
-    fn configure(&mut self, _configuration: &Value) -> Result<(), String> {
-        Err("a bridge has no configuration".to_owned())
-    }
-
-    fn set(&mut self, _variable: usize, _value: &Value) -> Result<(), String> {
-        Err("a bridge has no controllable variable".to_owned())
     }
 }

@@ -21,11 +21,12 @@ pub(crate) enum Undecodable {
         max: usize,
     },
     /// The bytes are not a value of the type.
-    #[error("does not decode as {type_name}: {source}")]
+    #[error("does not decode as {type_name}")]
     Invalid {
         /// The type expected.
         type_name: &'static str,
         /// What postcard found.
+        #[source]
         source: postcard::Error,
     },
     /// A value of the type, followed by bytes that are not part of it.

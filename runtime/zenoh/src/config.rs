@@ -35,19 +35,19 @@ pub fn secure_config(
     };
     config
         .insert_json5("mode", "\"peer\"")
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("set the mode"))?;
     config
         .insert_json5("listen/endpoints", &list(listen))
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("set the listen endpoints"))?;
     config
         .insert_json5("connect/endpoints", &list(connect))
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("set the connect endpoints"))?;
     config
         .insert_json5(
             "scouting/multicast/enabled",
             if multicast { "true" } else { "false" },
         )
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("set multicast scouting"))?;
     security.apply(&mut config)?;
     Ok(config)
 }

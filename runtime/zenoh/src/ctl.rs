@@ -17,8 +17,17 @@ use crate::{ControlReply, keys};
 #[derive(Debug, thiserror::Error)]
 pub enum CtlError {
     /// Zenoh refused an operation.
-    #[error("zenoh: {0}")]
-    Zenoh(String),
+    #[error("zenoh: cannot {action}")]
+    Zenoh {
+        /// What was being done.
+        action: &'static str,
+        /// Zenoh's error.
+        #[source]
+        source: zenoh::Error,
+    },
+    /// The network layer refused something (a name, the security file).
+    #[error(transparent)]
+    Network(#[from] crate::Error),
     /// A target that is not `<node>/<path>`.
     #[error("`{0}` is not a component address: write <node>/<path>, e.g. robot/base.motion")]
     BadTarget(String),
@@ -73,10 +82,16 @@ pub enum CtlError {
     },
     /// `coolctl top` without a terminal to draw on.
     #[error(
-        "`coolctl top` needs a terminal ({0}): `coolctl top --once` prints one screen as \
+        "`coolctl top` needs a terminal ({why}): `coolctl top --once` prints one screen as \
          text, `--once --json` one snapshot as JSON"
     )]
-    NoTerminal(String),
+    NoTerminal {
+        /// Why there is none.
+        why: &'static str,
+        /// The terminal library's error, if it said one.
+        #[source]
+        source: Option<std::io::Error>,
+    },
     /// No node of that name is alive.
     #[error("no node `{node}` is alive (nodes alive: {alive})")]
     UnknownNode {
@@ -99,13 +114,25 @@ pub enum CtlError {
     #[error("{0}")]
     UnknownPort(String),
     /// An answer that is not what a node sends.
-    #[error("`{key}` answered something that does not decode: {detail}")]
+    #[error("`{key}` answered something that does not decode")]
     Decode {
         /// The key that answered.
         key: String,
         /// What failed.
-        detail: String,
+        #[source]
+        source: serde_json::Error,
     },
+    /// A query answered with an error (its text).
+    #[error("`{key}` answered with an error: {reason}")]
+    ErrorReply {
+        /// The key that answered.
+        key: String,
+        /// The error's text.
+        reason: String,
+    },
+    /// A command that does not encode (JSON).
+    #[error("the command does not encode")]
+    Encode(#[source] serde_json::Error),
     /// Writing the output failed.
     #[error(transparent)]
     Io(#[from] std::io::Error),
@@ -124,8 +151,12 @@ fn no_components(node: Option<&str>, alive: &str, waited: Duration) -> String {
     }
 }
 
-fn zenoh_error(error: impl std::fmt::Display) -> CtlError {
-    CtlError::Zenoh(error.to_string())
+impl CtlError {
+    /// A closure turning Zenoh's error into [`CtlError::Zenoh`] for `action`, for
+    /// `map_err`.
+    pub fn zenoh(action: &'static str) -> impl FnOnce(zenoh::Error) -> CtlError {
+        move |source| CtlError::Zenoh { action, source }
+    }
 }
 
 /// A parsed `<node>/<path>` address.
@@ -395,9 +426,7 @@ impl Ctl {
     /// rather than only that nothing answered. The target node enforces its own file;
     /// this reads the same rules, as nodes that share one file do.
     pub fn with_security(mut self, security: &crate::Security) -> Result<Ctl, CtlError> {
-        let who = security
-            .identity()
-            .map_err(|error| CtlError::BadArgument(error.to_string()))?;
+        let who = security.identity()?;
         self.rules = who
             .filter(|_| security.has_rules())
             .map(|who| (security.clone(), who));
@@ -406,9 +435,11 @@ impl Ctl {
 
     /// The names of the nodes alive, sorted.
     pub fn node_names(&self) -> Result<Vec<String>, CtlError> {
-        let tokens =
-            crate::node::liveliness_keys(&self.session, &format!("{}/*", keys::ROOT), self.timeout)
-                .map_err(zenoh_error)?;
+        let tokens = crate::node::liveliness_keys(
+            &self.session,
+            &format!("{}/*", keys::ROOT),
+            self.timeout,
+        )?;
         Ok(tokens
             .iter()
             .filter_map(|key| key.strip_prefix(keys::ROOT)?.strip_prefix('/'))
@@ -473,7 +504,7 @@ impl Ctl {
             .liveliness()
             .declare_subscriber(format!("{}/*", keys::ROOT))
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("watch the nodes' liveliness"))?;
         Ok(NodeWatcher { subscriber })
     }
 
@@ -512,7 +543,7 @@ impl Ctl {
     /// node and path.
     pub fn components(&self, node: Option<&str>) -> Result<Vec<Listed>, CtlError> {
         if let Some(node) = node {
-            keys::check_name(node).map_err(|error| CtlError::BadArgument(error.to_string()))?;
+            keys::check_name(node)?;
         }
         let pattern = keys::monitor(node.unwrap_or("*"), "*");
         let replies = self
@@ -522,7 +553,7 @@ impl Ctl {
             .consolidation(ConsolidationMode::None)
             .timeout(self.timeout)
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("ask for the components' snapshots"))?;
         let mut listed = Vec::new();
         while let Ok(reply) = replies.recv() {
             let Ok(sample) = reply.result() else {
@@ -533,10 +564,10 @@ impl Ctl {
                 continue;
             };
             let monitor: Monitor =
-                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
                     CtlError::Decode {
                         key: key.to_owned(),
-                        detail: error.to_string(),
+                        source,
                     }
                 })?;
             listed.push(Listed {
@@ -592,7 +623,7 @@ impl Ctl {
             .session
             .declare_subscriber(keys::monitor(node, path))
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("subscribe to the monitoring events"))?;
         Ok(Watcher {
             address: address.to_owned(),
             subscriber,
@@ -634,30 +665,21 @@ impl Ctl {
     pub fn command(&self, address: &str, command: &Command) -> Result<ControlReply, CtlError> {
         let (node, path) = target(address)?;
         let key = keys::control(node, path);
-        let json = serde_json::to_vec(command).map_err(|error| CtlError::Decode {
-            key: key.clone(),
-            detail: error.to_string(),
-        })?;
+        let json = serde_json::to_vec(command).map_err(CtlError::Encode)?;
         let replies = self
             .session
             .get(key.clone())
             .payload(json)
             .timeout(self.timeout)
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("send the command"))?;
         match replies.recv() {
             Ok(reply) => match reply.result() {
-                Ok(sample) => {
-                    serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
-                        CtlError::Decode {
-                            key,
-                            detail: error.to_string(),
-                        }
-                    })
-                }
-                Err(error) => Err(CtlError::Decode {
+                Ok(sample) => serde_json::from_slice(&sample.payload().to_bytes())
+                    .map_err(|source| CtlError::Decode { key, source }),
+                Err(error) => Err(CtlError::ErrorReply {
                     key,
-                    detail: error
+                    reason: error
                         .payload()
                         .try_to_string()
                         .unwrap_or_default()
@@ -722,17 +744,13 @@ impl Ctl {
             .get(key.clone())
             .timeout(self.timeout)
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("query the component"))?;
         while let Ok(reply) = replies.recv() {
             let Ok(sample) = reply.result() else {
                 continue;
             };
-            return serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
-                CtlError::Decode {
-                    key,
-                    detail: error.to_string(),
-                }
-            });
+            return serde_json::from_slice(&sample.payload().to_bytes())
+                .map_err(|source| CtlError::Decode { key, source });
         }
         Err(self.missing(node, path, address))
     }
@@ -872,7 +890,7 @@ impl Ctl {
             .session
             .declare_subscriber(keys::echo(node, path, port))
             .wait()
-            .map_err(zenoh_error)?;
+            .map_err(CtlError::zenoh("subscribe to the echoed output"))?;
         let component = format!("{node}/{path}");
         let info = self.info(&component)?;
         if !info.outputs.iter().any(|output| output.name == port) {
@@ -901,14 +919,17 @@ impl Ctl {
                 },
                 None => Duration::from_secs(3600),
             };
-            let Some(sample) = subscriber.recv_timeout(wait).map_err(zenoh_error)? else {
+            let Some(sample) = subscriber
+                .recv_timeout(wait)
+                .map_err(CtlError::zenoh("receive an echoed packet"))?
+            else {
                 continue;
             };
             let echoed: Echoed =
-                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
                     CtlError::Decode {
                         key: sample.key_expr().as_str().to_owned(),
-                        detail: error.to_string(),
+                        source,
                     }
                 })?;
             summary.received += 1;
@@ -962,7 +983,11 @@ impl NodeWatcher {
     /// most `timeout`.
     pub fn next(&self, timeout: Duration) -> Result<Option<String>, CtlError> {
         loop {
-            let Some(sample) = self.subscriber.recv_timeout(timeout).map_err(zenoh_error)? else {
+            let Some(sample) = self
+                .subscriber
+                .recv_timeout(timeout)
+                .map_err(CtlError::zenoh("receive a node's liveliness change"))?
+            else {
                 return Ok(None);
             };
             let Some(node) = sample
@@ -998,14 +1023,18 @@ impl std::fmt::Debug for Watcher {
 impl Watcher {
     /// The next event as `<node>/<path> <event>`, waiting at most `timeout`.
     pub fn next(&self, timeout: Duration) -> Result<Option<String>, CtlError> {
-        let Some(sample) = self.subscriber.recv_timeout(timeout).map_err(zenoh_error)? else {
+        let Some(sample) = self
+            .subscriber
+            .recv_timeout(timeout)
+            .map_err(CtlError::zenoh("receive a monitoring event"))?
+        else {
             return Ok(None);
         };
         let event: MonitorEvent =
-            serde_json::from_slice(&sample.payload().to_bytes()).map_err(|error| {
+            serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
                 CtlError::Decode {
                     key: sample.key_expr().as_str().to_owned(),
-                    detail: error.to_string(),
+                    source,
                 }
             })?;
         Ok(Some(format!("{} {}", self.address, describe(&event))))

@@ -62,7 +62,7 @@ impl Echo {
             .declare_publisher(key.clone())
             .congestion_control(zenoh::qos::CongestionControl::Drop)
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the echo publisher"))?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
@@ -86,14 +86,14 @@ impl Echo {
                     match serde_json::to_vec(&message) {
                         Ok(json) => {
                             if let Err(error) = publisher.put(json).wait() {
-                                coolbot::limited!(&key, |held| tracing::warn!(%key, "echo not published: {error}{held}"));
+                                coolbot::limited!(&key, |held| tracing::warn!(%key, "echo not published: {}{held}", coolbot::Chain(&*error)));
                             }
                         }
                         Err(error) => coolbot::limited!(&key, |held| tracing::warn!(%key, "echo does not encode: {error}{held}")),
                     }
                 }
             })
-            .map_err(|error| Error::Zenoh(format!("cannot spawn the echo thread: {error}")))?;
+            .map_err(Error::spawn("echo"))?;
         Ok(Echo {
             stop,
             thread: Some(thread),

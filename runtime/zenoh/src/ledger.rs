@@ -23,6 +23,7 @@
 //! epoch; a message or a report further away is one reset, counted at the inlet's
 //! `resets` input.
 
+use coolbot::Chain;
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -306,7 +307,7 @@ pub(crate) fn serve(
                 Some(payload) => match codec::decode::<Vec<Ended>>(&payload.to_bytes(), MAX_REPORT) {
                     Ok(ended) => ended,
                     Err(error) => {
-                        coolbot::limited!(&reply_key, |held| tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {error}{held}"));
+                        coolbot::limited!(&reply_key, |held| tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {}{held}", Chain(&error)));
                         Vec::new()
                     }
                 },
@@ -318,7 +319,8 @@ pub(crate) fn serve(
             }
             if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
                 coolbot::limited!(&reply_key, |held| tracing::warn!(
-                    "acknowledgment not sent: {error}{held}"
+                    "acknowledgment not sent: {}{held}",
+                    Chain(&*error)
                 ));
             }
         })
@@ -584,7 +586,7 @@ impl Book {
             Err(error) => {
                 coolbot::limited!(
                     &self.key,
-                    |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {error}{held}")
+                    |held| tracing::warn!(key = %self.key, "acknowledgments not asked: {}{held}", Chain(&*error))
                 );
                 return;
             }
@@ -602,7 +604,8 @@ impl Book {
                 }
                 Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
-                    "an acknowledgment that does not decode was dropped: {error}{held}"
+                    "an acknowledgment that does not decode was dropped: {}{held}",
+                    Chain(&error)
                 )),
             }
         }
@@ -692,7 +695,7 @@ impl OutletLedger {
                 }
             })
             .wait()
-            .map_err(crate::Error::zenoh)?;
+            .map_err(crate::Error::zenoh("watch the inlets' liveliness"))?;
         let stop = Arc::new(AtomicBool::new(false));
         let (stopped, asked, on) = (Arc::clone(&stop), Arc::clone(&book), session.clone());
         let thread = std::thread::Builder::new()
@@ -715,9 +718,7 @@ impl OutletLedger {
                     }
                 }
             })
-            .map_err(|error| {
-                crate::Error::Zenoh(format!("cannot spawn the ack thread: {error}"))
-            })?;
+            .map_err(crate::Error::spawn("ack"))?;
         Ok(OutletLedger {
             book,
             session: session.clone(),

@@ -66,12 +66,30 @@ pub use crate::security::Security;
 /// Re-exported so users need not depend on it themselves (configurations, sessions).
 pub use zenoh;
 
-/// What can go wrong in this crate.
+/// What can go wrong in this crate. Each error says what failed and keeps its cause
+/// as its [`source`](std::error::Error::source) (Zenoh's own error, an OS error, a
+/// decoding error): print it with its chain, [`coolbot::Chain`].
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// Zenoh refused an operation (opening a session, declaring, querying).
-    #[error("zenoh: {0}")]
-    Zenoh(String),
+    #[error("zenoh: cannot {action}")]
+    Zenoh {
+        /// What was being done (`open the session`, `declare the agent's queryable`).
+        action: &'static str,
+        /// Zenoh's error.
+        #[source]
+        source: zenoh::Error,
+    },
+    /// A thread of the node's own could not be started.
+    #[error("cannot spawn the {thread} thread")]
+    Spawn {
+        /// Which thread (`control`, `monitor`, `agent`, ...).
+        thread: &'static str,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
     /// A node, component or key name that cannot be used (its message quotes the
     /// name's first `coolbot::ranges::EXCERPT_CHARS` characters).
     #[error(
@@ -96,20 +114,113 @@ pub enum Error {
         rule: String,
     },
     /// A security file that cannot be used, or endpoints it does not allow.
-    #[error("security: {0}")]
-    Security(String),
-    /// Another node refused a request (an instantiation), or nothing answered.
+    #[error("security")]
+    Security(#[from] security::SecurityError),
+    /// Another node's agent refused a request (an instantiation), with its reason as
+    /// it sent it.
     #[error("node `{node}`: {reason}")]
-    Remote {
+    Refused {
         /// The node asked.
         node: String,
-        /// Why.
+        /// Why, in the agent's words.
         reason: String,
+    },
+    /// Another node's agent has too many requests waiting: the request may be asked
+    /// again later.
+    #[error("node `{node}`: {reason}")]
+    Busy {
+        /// The node asked.
+        node: String,
+        /// The agent's words.
+        reason: String,
+    },
+    /// No agent answered a request within its wait.
+    #[error(
+        "node `{node}`: no agent answered (after {waited:.1?}, of at most {timeout:.1?}; does \
+         the node run an agent, and do its access rules let this node instantiate \
+         `{type_name}` there?)"
+    )]
+    NoAgent {
+        /// The node asked.
+        node: String,
+        /// The component type asked for.
+        type_name: String,
+        /// How long it waited.
+        waited: std::time::Duration,
+        /// How long it would have waited at most.
+        timeout: std::time::Duration,
+    },
+    /// Another node answered a query with an error (its text).
+    #[error("node `{node}` answered with an error: {reason}")]
+    ErrorReply {
+        /// The node asked.
+        node: String,
+        /// The error's text, its first `coolbot::ranges::REASON_CHARS` characters.
+        reason: String,
+    },
+    /// Another node's answer is over a limit ([`limits`]): not decoded.
+    #[error("node `{node}`: the answer is refused")]
+    TooLarge {
+        /// The node asked.
+        node: String,
+        /// The limit it is over.
+        #[source]
+        source: limits::Exceeded,
+    },
+    /// A message to or from another node that does not encode or decode (JSON).
+    #[error("{what} does not {}code", if *.decoding { "de" } else { "en" })]
+    Json {
+        /// What it is (`the request`, `node `station`'s answer`).
+        what: String,
+        /// Whether it was being decoded (else encoded).
+        decoding: bool,
+        /// The JSON error.
+        #[source]
+        source: serde_json::Error,
     },
 }
 
 impl Error {
-    pub(crate) fn zenoh(error: impl std::fmt::Display) -> Error {
-        Error::Zenoh(error.to_string())
+    /// A closure turning Zenoh's error into [`Error::Zenoh`] for `action`, for
+    /// `map_err`.
+    pub(crate) fn zenoh(action: &'static str) -> impl FnOnce(zenoh::Error) -> Error {
+        move |source| Error::Zenoh { action, source }
+    }
+
+    /// A closure turning an OS error into [`Error::Spawn`] for `thread`, for `map_err`.
+    pub(crate) fn spawn(thread: &'static str) -> impl FnOnce(std::io::Error) -> Error {
+        move |source| Error::Spawn { thread, source }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::error::Error as _;
+
+    use coolbot::Chain;
+
+    use super::{Error, Node};
+
+    /// A node that cannot listen where it is told: Zenoh's own error is the source of
+    /// [`Error::Zenoh`], which says what was being done, and the chain shows both once.
+    #[test]
+    fn zenohs_error_is_kept_as_the_source() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let endpoint = format!("tcp/{}", taken.local_addr().unwrap());
+        let config = crate::peer_config(&[endpoint], &[], false).unwrap();
+        let error = Node::open("taken", config).unwrap_err();
+        let Error::Zenoh { action, source } = &error else {
+            panic!("{error:?}");
+        };
+        assert_eq!(*action, "open the session");
+        assert_eq!(error.to_string(), "zenoh: cannot open the session");
+        let zenoh = error.source().expect("zenoh's error").to_string();
+        assert_eq!(zenoh, source.to_string());
+        let chain = Chain(&error).to_string();
+        assert!(
+            chain.starts_with("zenoh: cannot open the session: ") && chain.contains(&zenoh),
+            "{chain}"
+        );
+        assert_eq!(chain.matches(&zenoh).count(), 1, "{chain}");
     }
 }

@@ -198,7 +198,7 @@ impl NodeOptions {
                 "transport/link/tx/lease",
                 &self.lease.as_millis().to_string(),
             )
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("set the lease"))?;
         Ok(config)
     }
 }
@@ -295,11 +295,11 @@ mod tests {
         options.listen = args("tcp/127.0.0.1:0");
         assert!(options.config().is_ok());
         options.multicast = Some(true);
-        let error = options.config().unwrap_err().to_string();
+        let error = coolbot::Chain(&options.config().unwrap_err()).to_string();
         assert!(error.contains("multicast scouting"), "{error}");
         options.multicast = None;
         options.listen = args("tcp/0.0.0.0:7447");
-        let error = options.config().unwrap_err().to_string();
+        let error = coolbot::Chain(&options.config().unwrap_err()).to_string();
         assert!(error.contains("not on loopback"), "{error}");
         options.insecure = true;
         assert!(options.config().is_ok());

@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use coolbot::{Command, Handle, MonitorEvent, System};
+use coolbot::{Chain, Command, Handle, MonitorEvent, System};
 use crossbeam_channel::{RecvTimeoutError, Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
@@ -53,7 +53,7 @@ pub(crate) fn liveliness_keys(
         .get(pattern)
         .timeout(timeout)
         .wait()
-        .map_err(Error::zenoh)?;
+        .map_err(Error::zenoh("ask for liveliness tokens"))?;
     let mut found = Vec::new();
     while let Ok(reply) = replies.recv() {
         if let Ok(sample) = reply.result() {
@@ -118,7 +118,9 @@ impl Node {
     pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
         keys::check_name(name)?;
         crate::security::check_certificate_name(&config, name)?;
-        let session = zenoh::open(config).wait().map_err(Error::zenoh)?;
+        let session = zenoh::open(config)
+            .wait()
+            .map_err(Error::zenoh("open the session"))?;
         let token_key = keys::node_token(name);
         if !liveliness_keys(&session, &token_key, NAME_LOOKUP)?.is_empty() {
             return Err(Error::NodeNameTaken(name.to_owned()));
@@ -127,7 +129,7 @@ impl Node {
             .liveliness()
             .declare_token(token_key)
             .wait()
-            .map_err(Error::zenoh)?;
+            .map_err(Error::zenoh("declare the node's liveliness token"))?;
         let (control, requests) = crossbeam_channel::bounded::<ControlRequest>(256);
         let control_stop = Arc::new(AtomicBool::new(false));
         let stop = Arc::clone(&control_stop);
@@ -142,7 +144,7 @@ impl Node {
                     }
                 }
             })
-            .map_err(|error| Error::Zenoh(format!("cannot spawn the control thread: {error}")))?;
+            .map_err(Error::spawn("control"))?;
         Ok(Node {
             name: name.to_owned(),
             session,
@@ -204,7 +206,7 @@ impl Node {
                 .declare_publisher(monitor_key.clone())
                 .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait()
-                .map_err(Error::zenoh)?;
+                .map_err(Error::zenoh("declare a monitoring publisher"))?;
             streams.push(Stream {
                 path: path.clone(),
                 events: handle.subscribe_counted(),
@@ -225,12 +227,13 @@ impl Node {
                         };
                         if let Err(error) = reply {
                             coolbot::limited!(&own_key, |held| tracing::warn!(
-                                "snapshot not sent: {error}{held}"
+                                "snapshot not sent: {}{held}",
+                                Chain(&*error)
                             ));
                         }
                     })
                     .wait()
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("declare a monitoring queryable"))?,
             );
             let info_handle = handle.clone();
             let echoed = Arc::clone(&self.echoed);
@@ -252,12 +255,13 @@ impl Node {
                         };
                         if let Err(error) = reply {
                             coolbot::limited!(&info_key, |held| tracing::warn!(
-                                "component info not sent: {error}{held}"
+                                "component info not sent: {}{held}",
+                                Chain(&*error)
                             ));
                         }
                     })
                     .wait()
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("declare a component-info queryable"))?,
             );
             let control = self.control.clone();
             queryables.push(
@@ -275,7 +279,7 @@ impl Node {
                         }
                     })
                     .wait()
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("declare a control queryable"))?,
             );
         }
         let stop = Arc::new(AtomicBool::new(false));
@@ -283,7 +287,7 @@ impl Node {
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:m", self.name))
             .spawn(move || forward_events(&mut streams, &stopped))
-            .map_err(|error| Error::Zenoh(format!("cannot spawn the monitor thread: {error}")))?;
+            .map_err(Error::spawn("monitor"))?;
         lock(&self.exposures).push(Exposure {
             queryables,
             stop,
@@ -399,7 +403,8 @@ fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
                 Ok(json) => {
                     if let Err(error) = publisher.put(json).wait() {
                         coolbot::limited!(&stream.path, |held| tracing::warn!(
-                            "monitoring event not published: {error}{held}"
+                            "monitoring event not published: {}{held}",
+                            Chain(&*error)
                         ));
                     }
                 }
@@ -450,7 +455,8 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
     };
     if let Err(error) = reply_control(query, &reply) {
         coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
-            "control answer not sent: {error}{held}"
+            "control answer not sent: {}{held}",
+            Chain(&*error)
         ));
     }
 }

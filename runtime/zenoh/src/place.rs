@@ -18,8 +18,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use coolbot::port::{InputPort, TickIn};
-use coolbot::remote::{Placement, Remote, RemoteEnd};
-use coolbot::{Command, Monitor, MonitorEvent, OutputKind, PortSet, Waker};
+use coolbot::remote::{NetworkError, Placement, Remote, RemoteEnd};
+use coolbot::{Chain, Command, Monitor, MonitorEvent, OutputKind, PortSet, Waker};
 use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
@@ -122,6 +122,89 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// Why an instance declared `on "node"` could not be placed, built, commanded, pulled
+/// or heard: what its proxy's fault says after the node (`coolbot::remote`).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PlaceError {
+    /// The component type is not registered with the placer.
+    #[error(
+        "component type `{0}` is not registered with this node's placer (call its generated \
+         `register` function)"
+    )]
+    NotRegistered(&'static str),
+    /// A port of the type is not registered.
+    #[error(
+        "port `{port}` of `{type_name}` was not registered (call its generated `register` \
+         function)"
+    )]
+    PortNotRegistered {
+        /// The component type.
+        type_name: &'static str,
+        /// The port.
+        port: &'static str,
+    },
+    /// A name the instance would have on its node is over a limit.
+    #[error(transparent)]
+    Exceeded(#[from] crate::limits::Exceeded),
+    /// The network: Zenoh, a name, the agent's answer.
+    #[error(transparent)]
+    Network(#[from] Error),
+    /// The node is lost (its liveliness token was withdrawn): why, with since when.
+    #[error("{0}")]
+    Lost(String),
+    /// The instance's monitoring port fell silent while its node lives: why.
+    #[error("{0}")]
+    Silent(String),
+    /// No liveliness token of the node was seen while asking for the instance.
+    #[error(
+        "node `{node}` is not there: no liveliness token of it was seen in {asking:.1?} of \
+         asking for the instance every 100 ms (is it started, and reachable from node \
+         `{here}`?)"
+    )]
+    NotThere {
+        /// The node.
+        node: String,
+        /// The placing node.
+        here: String,
+        /// How long it asked.
+        asking: Duration,
+    },
+    /// The node is there, but no agent answered however often it was asked.
+    #[error("asked every 100 ms for {asking:.1?}")]
+    Unanswered {
+        /// How long it asked.
+        asking: Duration,
+        /// The last answer: none ([`Error::NoAgent`]).
+        #[source]
+        source: Box<Error>,
+    },
+    /// The instance's node did not answer a command or a snapshot query in time.
+    #[error("node `{node}` did not answer for `{instance}` within {waited:?}")]
+    NoAnswer {
+        /// The node.
+        node: String,
+        /// The instance there.
+        instance: String,
+        /// How long it waited.
+        waited: Duration,
+    },
+    /// The remote instance rejected a command (its reason).
+    #[error("{0}")]
+    Rejected(String),
+    /// A pull of an output that is not declared `pull`.
+    #[error("output #{0} is not a pull output")]
+    NotPull(usize),
+    /// No answer to a pull in time.
+    #[error("node `{node}` did not answer the pull within {waited:?}")]
+    PullUnanswered {
+        /// The node.
+        node: String,
+        /// How long it waited.
+        waited: Duration,
+    },
+}
+
 /// Places the `on "node"` instances of compounds on their nodes (install it with
 /// [`Placer::install`] on the thread that builds them, before building them).
 pub struct Placer {
@@ -187,20 +270,25 @@ fn remote_root(from: &str, placement: &Placement) -> String {
 }
 
 impl coolbot::remote::Placer for Placer {
-    fn place(&self, placement: &Placement) -> Result<Option<Remote>, String> {
+    fn place(&self, placement: &Placement) -> Result<Option<Remote>, NetworkError> {
+        Ok(self.place_here(placement)?)
+    }
+}
+
+impl Placer {
+    /// [`coolbot::remote::Placer::place`], with this crate's error.
+    fn place_here(&self, placement: &Placement) -> Result<Option<Remote>, PlaceError> {
         if placement.node == self.node.name() {
             return Ok(None);
         }
         let spec = placement.spec;
-        let factory = self.registry.types.get(spec.type_name).ok_or_else(|| {
-            format!(
-                "component type `{}` is not registered with this node's placer \
-                     (call its generated `register` function)",
-                spec.type_name
-            )
-        })?;
+        let factory = self
+            .registry
+            .types
+            .get(spec.type_name)
+            .ok_or(PlaceError::NotRegistered(spec.type_name))?;
         let root = remote_root(self.node.name(), placement);
-        keys::check_name(&root).map_err(|e| e.to_string())?;
+        keys::check_name(&root)?;
         // The names the agent will be given, checked here against its limit, so that
         // a description whose names are too long fails when it is built, not on the
         // other node at start: the instance's (`<root>-<generation>`, the generation
@@ -220,16 +308,16 @@ impl coolbot::remote::Placer for Placer {
                     || format!("the name of node `{}`", self.node.name()),
                     self.node.name().len(),
                 )
-            })
-            .map_err(|exceeded| exceeded.to_string())?;
+            })?;
         let base = format!("{}{}/{root}", keys::LINKS, placement.node);
-        let bridge = |port: &str| {
-            factory.ports.get(port).ok_or_else(|| {
-                format!(
-                    "port `{port}` of `{}` was not registered (call its generated `register` function)",
-                    spec.type_name
-                )
-            })
+        let bridge = |port: &'static str| {
+            factory
+                .ports
+                .get(port)
+                .ok_or(PlaceError::PortNotRegistered {
+                    type_name: spec.type_name,
+                    port,
+                })
         };
         let mut ports = PortSet::new();
         let mut pumps = Vec::new();
@@ -239,9 +327,8 @@ impl coolbot::remote::Placer for Placer {
             // A pull input: the remote instance's requests come back as queries, which
             // the proxy's input serves by pulling from its producer here.
             let pull = input.pull.then_some(crate::DEFAULT_PULL_TIMEOUT);
-            let (with, pump) = bridge(input.name)?
-                .proxy_input(&self.node, &key, input.kind, pull, ports)
-                .map_err(|e| e.to_string())?;
+            let (with, pump) =
+                bridge(input.name)?.proxy_input(&self.node, &key, input.kind, pull, ports)?;
             ports = with;
             pumps.push(pump);
             wires.push(Wire::Input {
@@ -318,7 +405,7 @@ impl coolbot::remote::Placer for Placer {
             reported_losses: 0,
             losses_before: 0,
         };
-        end.listen().map_err(|e| e.to_string())?;
+        end.listen()?;
         Ok(Some(Remote {
             ports,
             end: Box::new(end),
@@ -442,7 +529,7 @@ impl End {
                     .declare_subscriber(output.key.clone())
                     .callback(move |sample| deliver(&sample.payload().to_bytes()))
                     .wait()
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("subscribe to a remote output"))?,
             );
             if !output.poster {
                 let shared = Arc::clone(&self.shared);
@@ -458,7 +545,7 @@ impl End {
                             shared.ring();
                         },
                     )
-                    .map_err(Error::zenoh)?,
+                    .map_err(Error::zenoh("serve a proxy output's acknowledgments"))?,
                 );
             }
         }
@@ -491,7 +578,7 @@ impl End {
                     shared.ring();
                 })
                 .wait()
-                .map_err(Error::zenoh)?,
+                .map_err(Error::zenoh("subscribe to the remote monitoring events"))?,
         );
         let shared = Arc::clone(&self.shared);
         let on = self.on.clone();
@@ -522,14 +609,18 @@ impl End {
                     shared.ring();
                 })
                 .wait()
-                .map_err(Error::zenoh)?,
+                .map_err(Error::zenoh("watch the node's liveliness"))?,
         );
         Ok(())
     }
 
     /// Give `command` to the instance's current generation; its answer.
-    fn send(&self, command: &Command) -> Result<(), String> {
-        let json = serde_json::to_vec(command).map_err(|e| e.to_string())?;
+    fn send(&self, command: &Command) -> Result<(), PlaceError> {
+        let json = serde_json::to_vec(command).map_err(|source| Error::Json {
+            what: "the command".to_owned(),
+            decoding: false,
+            source,
+        })?;
         let replies = self
             .node
             .session()
@@ -537,21 +628,46 @@ impl End {
             .payload(json)
             .timeout(self.timeout)
             .wait()
-            .map_err(|e| e.to_string())?;
-        let reply = replies.recv().map_err(|_| {
-            format!(
-                "node `{}` did not answer for `{}` within {:?}",
-                self.on, self.name, self.timeout
-            )
-        })?;
-        let sample = reply
-            .result()
-            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
+            .map_err(Error::zenoh("send a command"))?;
+        let sample = self.answer(replies.recv().ok())?;
         match serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes()) {
             Ok(ControlReply::Accepted) => Ok(()),
-            Ok(ControlReply::Rejected { reason }) => Err(reason),
-            Err(error) => Err(format!("an answer that does not decode: {error}")),
+            Ok(ControlReply::Rejected { reason }) => Err(PlaceError::Rejected(reason)),
+            Err(source) => Err(self.undecodable(source)),
         }
+    }
+
+    /// The sample of the instance's node's answer (`None`: none came in time).
+    fn answer(
+        &self,
+        reply: Option<zenoh::query::Reply>,
+    ) -> Result<zenoh::sample::Sample, PlaceError> {
+        let reply = reply.ok_or_else(|| PlaceError::NoAnswer {
+            node: self.on.clone(),
+            instance: self.name.clone(),
+            waited: self.timeout,
+        })?;
+        reply.into_result().map_err(|error| {
+            Error::ErrorReply {
+                node: self.on.clone(),
+                reason: error
+                    .payload()
+                    .try_to_string()
+                    .unwrap_or_default()
+                    .into_owned(),
+            }
+            .into()
+        })
+    }
+
+    /// The instance's node's answer does not decode.
+    fn undecodable(&self, source: serde_json::Error) -> PlaceError {
+        Error::Json {
+            what: format!("node `{}`'s answer", self.on),
+            decoding: true,
+            source,
+        }
+        .into()
     }
 
     /// Every [`End::refresh`], ask for the remote snapshot without waiting for it: its
@@ -605,7 +721,7 @@ impl End {
             })
             .wait();
         if let Err(error) = asked {
-            tracing::debug!(instance = %self.name, "the snapshot was not asked for: {error}");
+            tracing::debug!(instance = %self.name, "the snapshot was not asked for: {}", Chain(&*error));
         }
     }
 
@@ -641,21 +757,17 @@ impl End {
     }
 
     /// The remote instance's snapshot, asked for now.
-    fn snapshot(&self) -> Result<Monitor, String> {
+    fn snapshot(&self) -> Result<Monitor, PlaceError> {
         let replies = self
             .node
             .session()
             .get(keys::monitor(&self.on, &self.name))
             .timeout(self.timeout)
             .wait()
-            .map_err(|e| e.to_string())?;
-        let reply = replies
-            .recv()
-            .map_err(|_| format!("node `{}` did not answer for `{}`", self.on, self.name))?;
-        let sample = reply
-            .result()
-            .map_err(|e| e.payload().try_to_string().unwrap_or_default().into_owned())?;
-        serde_json::from_slice(&sample.payload().to_bytes()).map_err(|e| e.to_string())
+            .map_err(Error::zenoh("ask for the remote snapshot"))?;
+        let sample = self.answer(replies.recv().ok())?;
+        serde_json::from_slice(&sample.payload().to_bytes())
+            .map_err(|source| self.undecodable(source))
     }
 }
 
@@ -709,13 +821,14 @@ fn mirror(view: &mut Monitor, event: MonitorEvent) {
     }
 }
 
-impl RemoteEnd for End {
-    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), String> {
+impl End {
+    /// [`RemoteEnd::instantiate`].
+    fn build(&mut self, waker: Option<Waker>) -> Result<(), PlaceError> {
         // A node known lost is not asked: its loss was logged once, and each retry
         // fails at once with the same reason (its return is logged once too).
         if let Some(absent) = lock(&self.shared.absent).clone() {
             refused_while_lost(&self.node.session().zid().to_string(), &self.on);
-            return Err(absent);
+            return Err(PlaceError::Lost(absent));
         }
         // What the last generation's view had not reported yet is reported with this
         // generation's: nothing lost on the network goes uncounted.
@@ -729,8 +842,8 @@ impl RemoteEnd for End {
             // the same keys. Its node also sends it to `dead` when it sees this node
             // lost (`Instantiate::owner`).
             let dead = Command::SetState(coolbot::Controllable::Dead);
-            if let Err(reason) = self.send(&dead) {
-                tracing::debug!(instance = %self.name, "the earlier generation: {reason}");
+            if let Err(error) = self.send(&dead) {
+                tracing::debug!(instance = %self.name, "the earlier generation: {}", Chain(&error));
             }
         }
         self.generation += 1;
@@ -769,39 +882,32 @@ impl RemoteEnd for End {
             };
             match instantiate(&self.node, &self.on, &self.request, wait) {
                 Ok(()) => break,
-                Err(Error::Remote { reason, .. })
-                    if patient
-                        && (reason.starts_with("no agent answered")
-                            || reason.starts_with(crate::agent::BUSY))
-                        && Instant::now() < deadline =>
+                Err(Error::NoAgent { .. } | Error::Busy { .. })
+                    if patient && Instant::now() < deadline =>
                 {
                     std::thread::sleep(Duration::from_millis(100));
                 }
-                Err(Error::Remote { reason, .. })
-                    if patient && reason.starts_with("no agent answered") =>
-                {
+                Err(error @ Error::NoAgent { .. }) if patient => {
                     let asking = asked.elapsed();
                     return Err(if self.shared.seen.load(Ordering::Acquire) {
-                        format!(
-                            "node `{}`: {reason}; asked every 100 ms for {asking:.1?}",
-                            self.on
-                        )
+                        PlaceError::Unanswered {
+                            asking,
+                            source: Box::new(error),
+                        }
                     } else {
-                        format!(
-                            "node `{}` is not there: no liveliness token of it was seen in \
-                             {asking:.1?} of asking for the instance every 100 ms (is it \
-                             started, and reachable from node `{}`?)",
-                            self.on,
-                            self.node.name()
-                        )
+                        PlaceError::NotThere {
+                            node: self.on.clone(),
+                            here: self.node.name().to_owned(),
+                            asking,
+                        }
                     });
                 }
-                Err(Error::Remote { reason, .. }) if !reason.starts_with("no agent answered") => {
+                Err(error @ (Error::Refused { .. } | Error::Busy { .. })) => {
                     // Refused by the agent: nothing was built.
                     self.maybe_built = false;
-                    return Err(format!("node `{}`: {reason}", self.on));
+                    return Err(error.into());
                 }
-                Err(error) => return Err(error.to_string()),
+                Err(error) => return Err(error.into()),
             }
         }
         // Built there. Seen once its snapshot comes: a start that fails on it leaves
@@ -834,21 +940,13 @@ impl RemoteEnd for End {
         }
         Ok(())
     }
-
-    fn needs_instance(&self) -> bool {
-        !self.built || lock(&self.shared.lost).is_some() || self.gone.is_some() || self.dead()
-    }
-
-    fn poll_every(&self) -> Option<Duration> {
-        Some(self.refresh())
-    }
-
-    fn command(&mut self, command: &Command) -> Result<(), String> {
+    /// [`RemoteEnd::command`].
+    fn command_here(&mut self, command: &Command) -> Result<(), PlaceError> {
         if let Some(lost) = lock(&self.shared.lost).clone() {
-            return Err(lost);
+            return Err(PlaceError::Lost(lost));
         }
         if let Some(gone) = self.gone.clone() {
-            return Err(gone);
+            return Err(PlaceError::Silent(gone));
         }
         self.send(command)?;
         // The instance answered: it is heard.
@@ -863,20 +961,13 @@ impl RemoteEnd for End {
         }
         Ok(())
     }
-
-    fn pump(&mut self) {
-        for pump in &mut self.pumps {
-            pump();
-        }
-        self.ask_times();
-    }
-
-    fn pull(&mut self, output: usize) -> Result<(), String> {
+    /// [`RemoteEnd::pull`].
+    fn pull_here(&mut self, output: usize) -> Result<(), PlaceError> {
         let Some(output) = self.outputs.get(output).filter(|output| output.pull) else {
-            return Err(format!("output #{output} is not a pull output"));
+            return Err(PlaceError::NotPull(output));
         };
         if let Some(lost) = lock(&self.shared.lost).clone() {
-            return Err(lost);
+            return Err(PlaceError::Lost(lost));
         }
         let replies = self
             .node
@@ -884,7 +975,7 @@ impl RemoteEnd for End {
             .get(format!("{}/@pull", output.key))
             .timeout(crate::DEFAULT_PULL_TIMEOUT)
             .wait()
-            .map_err(|error| format!("the pull query was not sent: {error}"))?;
+            .map_err(Error::zenoh("send the pull query"))?;
         // The first answer is sent on the proxy's output, to the input that asked
         // (this runs inside the proxy's answer to it); any other reply is dropped,
         // so that one request gets one answer, and the proxy's thread goes on at once.
@@ -893,26 +984,29 @@ impl RemoteEnd for End {
                 (output.deliver)(&sample.payload().to_bytes());
                 Ok(())
             }
-            Ok(Err(error)) => Err(format!(
-                "node `{}` answered the pull with an error: {}",
-                self.on,
-                error.payload().try_to_string().unwrap_or_default()
-            )),
-            Err(_) => Err(format!(
-                "node `{}` did not answer the pull within {:?}",
-                self.on,
-                crate::DEFAULT_PULL_TIMEOUT
-            )),
+            Ok(Err(error)) => Err(Error::ErrorReply {
+                node: self.on.clone(),
+                reason: error
+                    .payload()
+                    .try_to_string()
+                    .unwrap_or_default()
+                    .into_owned(),
+            }
+            .into()),
+            Err(_) => Err(PlaceError::PullUnanswered {
+                node: self.on.clone(),
+                waited: crate::DEFAULT_PULL_TIMEOUT,
+            }),
         }
     }
-
-    fn view(&mut self) -> Result<Option<Monitor>, String> {
+    /// [`RemoteEnd::view`].
+    fn view_here(&mut self) -> Result<Option<Monitor>, PlaceError> {
         if let Some(lost) = lock(&self.shared.lost).clone() {
-            return Err(lost);
+            return Err(PlaceError::Lost(lost));
         }
         self.judge_silence();
         if let Some(gone) = self.gone.clone() {
-            return Err(gone);
+            return Err(PlaceError::Silent(gone));
         }
         let losses = self.network_losses() - self.losses_before;
         let more_lost = losses != self.reported_losses;
@@ -929,12 +1023,45 @@ impl RemoteEnd for End {
         view.port_overflows.push((NETWORK.to_owned(), losses));
         Ok(Some(view))
     }
+}
+
+impl RemoteEnd for End {
+    fn instantiate(&mut self, waker: Option<Waker>) -> Result<(), NetworkError> {
+        Ok(self.build(waker)?)
+    }
+
+    fn needs_instance(&self) -> bool {
+        !self.built || lock(&self.shared.lost).is_some() || self.gone.is_some() || self.dead()
+    }
+
+    fn poll_every(&self) -> Option<Duration> {
+        Some(self.refresh())
+    }
+
+    fn command(&mut self, command: &Command) -> Result<(), NetworkError> {
+        Ok(self.command_here(command)?)
+    }
+
+    fn pump(&mut self) {
+        for pump in &mut self.pumps {
+            pump();
+        }
+        self.ask_times();
+    }
+
+    fn pull(&mut self, output: usize) -> Result<(), NetworkError> {
+        Ok(self.pull_here(output)?)
+    }
+
+    fn view(&mut self) -> Result<Option<Monitor>, NetworkError> {
+        Ok(self.view_here()?)
+    }
 
     fn release(&mut self) {
         if (self.built || self.maybe_built) && lock(&self.shared.lost).is_none() && !self.dead() {
             let dead = Command::SetState(coolbot::Controllable::Dead);
-            if let Err(reason) = self.send(&dead) {
-                tracing::warn!(instance = %self.name, node = %self.on, "not released: {reason}");
+            if let Err(error) = self.send(&dead) {
+                tracing::warn!(instance = %self.name, node = %self.on, "not released: {}", Chain(&error));
             }
         }
         self.subscribers.clear();

@@ -38,6 +38,8 @@ use std::sync::Once;
 use serde::Deserialize;
 use serde_json::{Value, json};
 
+use coolbot::Chain;
+
 use crate::{Error, keys};
 
 /// A node's security: TLS identity, access rules, and whether plaintext may leave
@@ -124,8 +126,98 @@ const EVERY_KEY: [&str; 6] = [
     "**/@ack/**",
 ];
 
-fn invalid(path: &Path, reason: impl std::fmt::Display) -> Error {
-    Error::Security(format!("{}: {reason}", path.display()))
+/// Why a security file, or a certificate it names, cannot be used, or what it does not
+/// allow ([`Error::Security`]).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SecurityError {
+    /// A file (the security file, a certificate) cannot be read.
+    #[error("{}: cannot read", .path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file larger than [`MAX_FILE_SIZE`].
+    #[error("{}: {}", .path.display(), TOO_LARGE)]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The security file is not UTF-8 text.
+    #[error("{}: not UTF-8 text", .path.display())]
+    NotText {
+        /// The file.
+        path: PathBuf,
+        /// Where it is not.
+        #[source]
+        source: std::string::FromUtf8Error,
+    },
+    /// The security file is not TOML of its format (a syntax error, an unknown field).
+    #[error("{}", .path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// The TOML error.
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A certificate that is not a PEM X.509 certificate with a common name.
+    #[error("{}: {what}", .path.display())]
+    Certificate {
+        /// The certificate's file.
+        path: PathBuf,
+        /// What it is not.
+        what: &'static str,
+        /// The parser's error, if one.
+        #[source]
+        source: Option<Box<dyn std::error::Error + Send + Sync>>,
+    },
+    /// The certificate is another node's.
+    #[error(
+        "{}: the certificate is node `{common_name}`'s: a node opens under its \
+         certificate's common name, not `{name}`",
+        .path.display()
+    )]
+    OtherNode {
+        /// The certificate's file.
+        path: PathBuf,
+        /// Its common name.
+        common_name: String,
+        /// The node's name.
+        name: String,
+    },
+    /// The security file's content is refused (its rules, its names, a `[tls]` file
+    /// missing): why.
+    #[error("{}: {reason}", .path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// An endpoint, or multicast scouting, that the security does not allow, or an
+    /// endpoint that is not one: why.
+    #[error("{0}")]
+    Endpoint(String),
+    /// A TLS or access-control setting that Zenoh's configuration refused.
+    #[error("{key}")]
+    Config {
+        /// The setting's key.
+        key: String,
+        /// Zenoh's error.
+        #[source]
+        source: zenoh::Error,
+    },
+}
+
+fn invalid(path: &Path, reason: impl std::fmt::Display) -> SecurityError {
+    SecurityError::Invalid {
+        path: path.to_owned(),
+        reason: reason.to_string(),
+    }
 }
 
 /// The largest file read as a security file, or as a certificate or key it names
@@ -134,27 +226,29 @@ fn invalid(path: &Path, reason: impl std::fmt::Display) -> Error {
 pub const MAX_FILE_SIZE: u64 = 1 << 20;
 
 /// The file at `path`, read whole if it holds at most [`MAX_FILE_SIZE`] bytes.
-pub(crate) fn read_bounded(path: &Path) -> Result<Vec<u8>, String> {
+fn read_bounded(path: &Path) -> Result<Vec<u8>, SecurityError> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|error| format!("cannot read: {error}"))?;
+    let read = |source| SecurityError::Read {
+        path: path.to_owned(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(read)?;
     let mut bytes = Vec::new();
     file.take(MAX_FILE_SIZE + 1)
         .read_to_end(&mut bytes)
-        .map_err(|error| format!("cannot read: {error}"))?;
+        .map_err(read)?;
     if bytes.len() as u64 > MAX_FILE_SIZE {
-        return Err(too_large());
+        return Err(SecurityError::TooLarge {
+            path: path.to_owned(),
+        });
     }
     Ok(bytes)
 }
 
-/// Why a file is refused for its size.
-fn too_large() -> String {
-    format!(
-        "larger than {} KiB, the limit of a security, certificate or key file: is it the \
-         right file?",
-        MAX_FILE_SIZE / 1024
-    )
-}
+/// Why a file is refused for its size (1024 KiB: [`MAX_FILE_SIZE`]).
+const TOO_LARGE: &str =
+    "larger than 1024 KiB, the limit of a security, certificate or key file: is it the right file?";
+const _: () = assert!(MAX_FILE_SIZE == 1024 * 1024, "TOO_LARGE says 1024 KiB");
 
 impl Security {
     /// No TLS and no rules: plaintext, on loopback only unless
@@ -167,15 +261,20 @@ impl Security {
     /// documentation and in `docs/distribution.md`). Paths inside are relative to the
     /// file's directory; the certificate files must exist.
     pub fn load(path: &Path) -> Result<Security, Error> {
-        let bytes = read_bounded(path).map_err(|reason| invalid(path, reason))?;
-        let text = String::from_utf8(bytes)
-            .map_err(|error| invalid(path, format!("not UTF-8 text: {error}")))?;
+        let bytes = read_bounded(path)?;
+        let text = String::from_utf8(bytes).map_err(|source| SecurityError::NotText {
+            path: path.to_owned(),
+            source,
+        })?;
         Security::parse(&text, path)
     }
 
     /// [`Security::load`] on `text`, as if read from `path`.
     pub fn parse(text: &str, path: &Path) -> Result<Security, Error> {
-        let file: File = toml::from_str(text).map_err(|error| invalid(path, error))?;
+        let file: File = toml::from_str(text).map_err(|source| SecurityError::Format {
+            path: path.to_owned(),
+            source,
+        })?;
         let base = path.parent().unwrap_or(Path::new("."));
         let tls = match file.tls {
             None => None,
@@ -188,7 +287,7 @@ impl Security {
                         Ok(meta) if meta.is_file() && meta.len() <= MAX_FILE_SIZE => Ok(full),
                         Ok(meta) if meta.is_file() => Err(invalid(
                             path,
-                            format!("[tls] {what}: {}: {}", full.display(), too_large()),
+                            format!("[tls] {what}: {}: {TOO_LARGE}", full.display()),
                         )),
                         _ => Err(invalid(
                             path,
@@ -217,13 +316,15 @@ impl Security {
                 path,
                 "`nodes` says who is heard under their own names when access rules are \
                  on: without [[allow]] rules every node of the CA may do all",
-            ));
+            )
+            .into());
         }
         if !file.allow.is_empty() && tls.is_none() {
             return Err(invalid(
                 path,
                 "[[allow]] rules name nodes by their certificate: they need [tls]",
-            ));
+            )
+            .into());
         }
         Ok(Security {
             tls,
@@ -257,6 +358,7 @@ impl Security {
             .as_ref()
             .map(|tls| common_name(&tls.certificate))
             .transpose()
+            .map_err(Error::from)
     }
 
     /// Whether these rules let the node whose certificate names `who` command the
@@ -293,27 +395,30 @@ impl Security {
         for endpoint in listen.iter().chain(connect) {
             let (protocol, loopback) = parse_endpoint(endpoint)?;
             if protocol == "tls" && self.tls.is_none() {
-                return Err(Error::Security(format!(
+                return Err(SecurityError::Endpoint(format!(
                     "`{endpoint}` is a TLS endpoint but the node has no certificate: \
                      give it a security file with [tls] (--config FILE)"
-                )));
+                ))
+                .into());
             }
             if protocol != "tls" && !loopback && !self.allow_plaintext {
-                return Err(Error::Security(format!(
+                return Err(SecurityError::Endpoint(format!(
                     "`{endpoint}` is not on loopback and not TLS: a node opens to a \
                      network with tls/ endpoints and a security file (--config FILE), \
                      or in plaintext only when told to (--insecure, allow_plaintext = true)"
-                )));
+                ))
+                .into());
             }
         }
         if multicast && !open {
-            return Err(Error::Security(
+            return Err(SecurityError::Endpoint(
                 "multicast scouting finds peers on the whole network: without TLS name \
                  loopback peers instead (--no-multicast --connect tcp/127.0.0.1:PORT), \
                  or use a security file with [tls] (--config FILE), or allow plaintext \
                  (--insecure)"
                     .to_owned(),
-            ));
+            )
+            .into());
         }
         if !open {
             static SAID: Once = Once::new();
@@ -335,7 +440,10 @@ impl Security {
         let set = |config: &mut zenoh::Config, key: &str, value: Value| {
             config
                 .insert_json5(key, &value.to_string())
-                .map_err(|error| Error::Security(format!("{key}: {error}")))
+                .map_err(|source| SecurityError::Config {
+                    key: key.to_owned(),
+                    source,
+                })
         };
         if let Some(tls) = &self.tls {
             let text = |path: &Path| json!(path.display().to_string());
@@ -637,12 +745,12 @@ fn component_pattern(pattern: &str) -> Result<(&str, String), String> {
 /// chunks.
 fn publish_pattern(key: &str) -> Result<(), String> {
     let expr = zenoh::key_expr::KeyExpr::try_from(key)
-        .map_err(|error| format!("publish `{key}`: not a key expression: {error}"))?;
+        .map_err(|error| format!("publish `{key}`: not a key expression: {}", Chain(&*error)))?;
     // The node keys (monitoring, control, shapes, agents) are granted by name and
     // `command`/`instantiate` rules only: a publish rule that reached them (`**`,
     // `coolbot/**`) would let its nodes, and every peer's queries, in there.
     let nodes = zenoh::key_expr::KeyExpr::try_from(format!("{}/**", keys::ROOT))
-        .map_err(|error| format!("the node keys: {error}"))?;
+        .map_err(|error| format!("the node keys: {}", Chain(&*error)))?;
     if expr.intersects(&nodes) || key == keys::ROOT {
         return Err(format!(
             "publish `{key}`: it reaches the node keys under `{}/`, which only `command` and \
@@ -670,37 +778,44 @@ pub(crate) fn check_certificate_name(config: &zenoh::Config, name: &str) -> Resu
     };
     let common_name = common_name(&path)?;
     if common_name != name {
-        return Err(Error::Security(format!(
-            "{}: the certificate is node `{common_name}`'s: a node opens under its \
-             certificate's common name, not `{name}`",
-            path.display()
-        )));
+        return Err(SecurityError::OtherNode {
+            path,
+            common_name,
+            name: name.to_owned(),
+        }
+        .into());
     }
     Ok(())
 }
 
 /// The common name of the PEM certificate at `path`.
-fn common_name(path: &Path) -> Result<String, Error> {
-    let bad = |reason: String| Error::Security(format!("{}: {reason}", path.display()));
-    let bytes = read_bounded(path).map_err(bad)?;
+fn common_name(path: &Path) -> Result<String, SecurityError> {
+    let bad = |what: &'static str, source: Option<Box<dyn std::error::Error + Send + Sync>>| {
+        SecurityError::Certificate {
+            path: path.to_owned(),
+            what,
+            source,
+        }
+    };
+    let bytes = read_bounded(path)?;
     let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
-        .map_err(|error| bad(format!("not a PEM certificate: {error}")))?;
+        .map_err(|error| bad("not a PEM certificate", Some(Box::new(error))))?;
     let certificate = pem
         .parse_x509()
-        .map_err(|error| bad(format!("not an X.509 certificate: {error}")))?;
+        .map_err(|error| bad("not an X.509 certificate", Some(Box::new(error))))?;
     certificate
         .subject()
         .iter_common_name()
         .next()
         .and_then(|cn| cn.as_str().ok())
         .map(str::to_owned)
-        .ok_or_else(|| bad("the certificate has no common name".to_owned()))
+        .ok_or_else(|| bad("the certificate has no common name", None))
 }
 
 /// An endpoint's protocol, and whether its address is on loopback.
-fn parse_endpoint(endpoint: &str) -> Result<(&str, bool), Error> {
+fn parse_endpoint(endpoint: &str) -> Result<(&str, bool), SecurityError> {
     let bad = || {
-        Error::Security(format!(
+        SecurityError::Endpoint(format!(
             "`{endpoint}` is not an endpoint (write e.g. tcp/127.0.0.1:7447, tls/robot.local:7447)"
         ))
     };
@@ -723,7 +838,7 @@ mod tests {
         let listen: Vec<String> = listen.iter().map(|e| (*e).to_owned()).collect();
         security
             .check(&listen, &[], multicast)
-            .map_err(|error| error.to_string())
+            .map_err(|error| Chain(&error).to_string())
     }
 
     #[test]
@@ -746,7 +861,8 @@ mod tests {
     }
 
     fn parse(text: &str) -> Result<Security, String> {
-        Security::parse(text, Path::new("/nowhere/security.toml")).map_err(|e| e.to_string())
+        Security::parse(text, Path::new("/nowhere/security.toml"))
+            .map_err(|error| Chain(&error).to_string())
     }
 
     #[test]
@@ -1120,9 +1236,7 @@ mod tests {
     #[test]
     fn files_are_read_up_to_a_size_limit() {
         // An endless file ends at the limit, at once.
-        let error = Security::load(Path::new("/dev/zero"))
-            .unwrap_err()
-            .to_string();
+        let error = Chain(&Security::load(Path::new("/dev/zero")).unwrap_err()).to_string();
         assert!(
             error.starts_with("security: /dev/zero: larger than 1024 KiB"),
             "{error}"
@@ -1146,7 +1260,7 @@ mod tests {
         let text = "[tls]\nca = \"ca.pem\"\ncertificate = \"robot.pem\"\nkey = \"robot.key\"\n";
         let file = dir.path().join("security.toml");
         std::fs::write(&file, text).unwrap();
-        let error = Security::load(&file).unwrap_err().to_string();
+        let error = Chain(&Security::load(&file).unwrap_err()).to_string();
         assert!(
             error.contains("[tls] certificate: ") && error.contains("larger than 1024 KiB"),
             "{error}"

@@ -29,6 +29,7 @@ use std::fs::{DirBuilder, File, OpenOptions, Permissions};
 use std::os::unix::fs::{DirBuilderExt, FileExt, MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 
+use coolbot::Chain;
 use rustix::fs::{FlockOperation, OFlags, flock};
 
 /// How many outlets of one node on one key keep a tally at once.
@@ -95,15 +96,25 @@ fn private_directory(directory: &Path) -> std::io::Result<()> {
     if metadata.mode() & 0o077 != 0 {
         opened
             .set_permissions(Permissions::from_mode(0o700))
-            .map_err(|error| {
-                std::io::Error::other(format!(
-                    "{} is open to others (mode {:o}) and cannot be made private: {error}",
-                    directory.display(),
-                    metadata.mode() & 0o7777
-                ))
+            .map_err(|source| {
+                std::io::Error::other(NotPrivate {
+                    directory: directory.to_owned(),
+                    mode: metadata.mode() & 0o7777,
+                    source,
+                })
             })?;
     }
     Ok(())
+}
+
+/// A state directory open to others that could not be made private.
+#[derive(Debug, thiserror::Error)]
+#[error("{} is open to others (mode {mode:o}) and cannot be made private", .directory.display())]
+struct NotPrivate {
+    directory: PathBuf,
+    mode: u32,
+    #[source]
+    source: std::io::Error,
 }
 
 /// FNV-1a, 64 bits: a file name for a key (stable across Rust releases, unlike the
@@ -255,7 +266,7 @@ impl Tally {
         let directory = state.join(node);
         let made = private_directory(state).and_then(|()| private_directory(&directory));
         if let Err(error) = made {
-            tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+            tracing::warn!(%key, "no tally of what the outlet sends: {}", Chain(&error));
             return None;
         }
         sweep(&directory);
@@ -267,7 +278,7 @@ impl Tally {
                 let file = match open(&path(slot), true) {
                     Ok(file) => file,
                     Err(error) => {
-                        tracing::warn!(%key, "no tally of what the outlet sends ({}): {error}", path(slot).display());
+                        tracing::warn!(%key, "no tally of what the outlet sends ({}): {}", path(slot).display(), Chain(&error));
                         return None;
                     }
                 };
@@ -281,7 +292,7 @@ impl Tally {
                     }
                     Ok(false) => {} // removed by a sweep: opened again
                     Err(error) => {
-                        tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+                        tracing::warn!(%key, "no tally of what the outlet sends: {}", Chain(&error));
                         return None;
                     }
                 }
@@ -318,7 +329,7 @@ impl Tally {
             .set_len(SIZE as u64)
             .and_then(|()| file.write_all_at(&layout((epoch, 0), &kept), 0));
         if let Err(error) = written {
-            tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+            tracing::warn!(%key, "no tally of what the outlet sends: {}", Chain(&error));
             return None;
         }
         for other in taken {
@@ -333,7 +344,7 @@ impl Tally {
                 kept,
             )),
             Err(error) => {
-                tracing::warn!(%key, "no tally of what the outlet sends: {error}");
+                tracing::warn!(%key, "no tally of what the outlet sends: {}", Chain(&error));
                 None
             }
         }

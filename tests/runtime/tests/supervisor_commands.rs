@@ -91,8 +91,8 @@ impl Supervisor for Commanding {
         Value::from(self.go)
     }
 
-    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), String> {
-        self.go = i64::try_from(value).map_err(|e| e.to_string())?;
+    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), coolbot::ValueRefused> {
+        self.go = i64::try_from(value)?;
         Ok(())
     }
 }
@@ -903,8 +903,8 @@ impl Supervisor for Ranging {
         Value::from(self.go)
     }
 
-    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), String> {
-        self.go = i64::try_from(value).map_err(|e| e.to_string())?;
+    fn set(&mut self, _variable: usize, value: &Value) -> Result<(), coolbot::ValueRefused> {
+        self.go = i64::try_from(value)?;
         Ok(())
     }
 }

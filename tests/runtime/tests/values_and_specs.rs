@@ -55,11 +55,11 @@ fn records_and_json_convert_to_user_types() {
         ("name".to_owned(), Value::from("a")),
     ]);
     assert_eq!(
-        record.to_serde::<Pose>(),
-        Ok(Pose {
+        record.to_serde::<Pose>().expect("a Pose"),
+        Pose {
             x: 1.0,
             name: "a".to_owned()
-        })
+        }
     );
     assert_eq!(record.field("x"), Some(Value::Float(1.0)));
     assert_eq!(record.field("y"), None);
@@ -72,7 +72,15 @@ fn records_and_json_convert_to_user_types() {
         json.field("name"),
         Some(Value::Json(serde_json::json!("b")))
     );
-    assert!(Value::Str("x".to_owned()).to_serde::<Pose>().is_err());
+    let error = Value::Str("x".to_owned()).to_serde::<Pose>().unwrap_err();
+    assert!(
+        matches!(error, coolbot::ConvertError::Deserialize(_)),
+        "{error:?}"
+    );
+    assert_eq!(
+        coolbot::Chain(&error).to_string(),
+        "the value does not match its type: invalid type: string \"x\", expected struct Pose"
+    );
     assert_eq!(Value::from("q").to_string(), r#""q""#);
 }
 

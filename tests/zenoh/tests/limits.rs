@@ -10,7 +10,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use coolbot::{SectionResult, Value};
+use coolbot::{Chain, SectionResult, Value};
 use coolbot_zenoh::agent::{
     Agent, Instantiate, Registry, RemoteInput, RemoteTiming, Wire, instantiate,
 };
@@ -61,10 +61,8 @@ impl Station {
         assert!(
             wait_until(PATIENCE, || match station.ask(&valid("first")) {
                 Ok(()) => true,
-                Err(Error::Remote { reason, .. }) if reason.starts_with("no agent answered") => {
-                    false
-                }
-                Err(error) => panic!("the first request was refused: {error}"),
+                Err(Error::NoAgent { .. }) => false,
+                Err(error) => panic!("the first request was refused: {}", Chain(&error)),
             }),
             "the agent never answered"
         );
@@ -78,7 +76,7 @@ impl Station {
     /// The agent's reason for refusing `request`.
     fn refusal(&self, request: &Instantiate) -> String {
         match self.ask(request) {
-            Err(Error::Remote { reason, .. }) => reason,
+            Err(Error::Refused { reason, .. }) => reason,
             other => panic!("expected a refusal, got {other:?}"),
         }
     }
@@ -426,11 +424,16 @@ fn hostile_sizes_are_refused_and_the_station_and_its_agent_live_on() {
     }
     // A type name of 100,000 characters: the asking side refuses to make a key of
     // it, and the agent refuses it in a request on another type's key.
-    let refusal = station.refusal(&Instantiate {
-        type_name: huge.clone(),
-        ..valid("typed")
-    });
+    let refused = station
+        .ask(&Instantiate {
+            type_name: huge.clone(),
+            ..valid("typed")
+        })
+        .expect_err("a type name of 100,000 characters");
+    let refusal = Chain(&refused).to_string();
+    assert!(matches!(refused, Error::InvalidName { .. }), "{refusal}");
     assert!(refusal.contains(&names(limits::PATH)), "{refusal}");
+    assert!(refusal.len() < 400, "{refusal}");
     let payload = serde_json::to_vec(&Instantiate {
         type_name: huge.clone(),
         ..valid("typed")
@@ -494,9 +497,9 @@ fn an_answer_over_its_limit_from_another_nodes_agent_is_refused_undecoded() {
     let mut reason = String::new();
     assert!(wait_until(PATIENCE, || {
         match instantiate(&robot, "impostor", &valid("x"), Duration::from_secs(5)) {
-            Err(Error::Remote { reason: got, .. }) if got.starts_with("no agent answered") => false,
-            Err(Error::Remote { reason: got, .. }) => {
-                reason = got;
+            Err(Error::NoAgent { .. }) => false,
+            Err(error @ Error::TooLarge { .. }) => {
+                reason = Chain(&error).to_string();
                 true
             }
             other => panic!("expected a refusal, got {other:?}"),

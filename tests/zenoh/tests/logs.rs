@@ -240,10 +240,14 @@ fn a_node_that_never_comes_fails_the_first_start_naming_it() {
         owner: None,
     };
     match instantiate(&robot, "dying-station", &request, Duration::from_secs(5)) {
-        Err(Error::Remote { node, reason }) => {
-            assert_eq!(node, "dying-station");
+        Err(error @ Error::NoAgent { .. }) => {
             assert!(
-                reason.starts_with("no agent answered (after ")
+                matches!(&error, Error::NoAgent { node, .. } if node == "dying-station"),
+                "{error:?}"
+            );
+            let reason = error.to_string();
+            assert!(
+                reason.starts_with("node `dying-station`: no agent answered (after ")
                     && reason.contains(", of at most 5.0s;"),
                 "{reason}"
             );

@@ -327,8 +327,8 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     assert!(wait_until(PATIENCE, || {
         match instantiate(&robot, "workstation", &request, Duration::from_secs(5)) {
             Ok(()) => true,
-            Err(Error::Remote { reason, .. }) if reason.starts_with("no agent answered") => false,
-            Err(error) => panic!("instantiation refused: {error}"),
+            Err(Error::NoAgent { .. }) => false,
+            Err(error) => panic!("instantiation refused: {}", coolbot::Chain(&error)),
         }
     }));
     support::wait_subscribed(&robot, "test/agent/in");
@@ -365,7 +365,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     // Refusals say why.
     let refused =
         |request: &Instantiate| match instantiate(&robot, "workstation", request, PATIENCE) {
-            Err(Error::Remote { reason, .. }) => reason,
+            Err(Error::Refused { reason, .. }) => reason,
             other => panic!("expected a refusal, got {other:?}"),
         };
     assert!(refused(&request).contains("not a free instance name"));

@@ -379,7 +379,7 @@ fn a_placement_whose_names_the_agent_would_refuse_fails_when_built() {
     let long = "c".repeat(100);
     let error = match dying_cell::component(&long, Parts) {
         Ok(_) => panic!("a compound named with 100 characters is placed"),
-        Err(error) => error.to_string(),
+        Err(error) => coolbot::Chain(&error).to_string(),
     };
     assert!(error.contains("NAME") && error.contains("128"), "{error}");
     // A name that fits is placed as usual.

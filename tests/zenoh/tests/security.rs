@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::{DataOut, FifoIn};
-use coolbot::{InputKind, OutputKind, OverflowPolicy, SectionResult, State, System};
+use coolbot::{Chain, InputKind, OutputKind, OverflowPolicy, SectionResult, State, System};
 use coolbot_zenoh::{Node, Security, secure_config};
 use coolbot_zenoh_tests::generated::{
     back, feed, guarded_cell, inbox, numbers, other, plain, relay,
@@ -856,11 +856,10 @@ fn tls_and_access_rules() {
         .expect("a TLS configuration");
     // A node opens under its certificate's common name, no other.
     let other = secure_config(&[], &[], false, &security).expect("a TLS configuration");
-    let error = Node::open("station", other).expect_err("not station's certificate");
+    let error =
+        Chain(&Node::open("station", other).expect_err("not station's certificate")).to_string();
     assert!(
-        error
-            .to_string()
-            .contains("the certificate is node `robot`'s"),
+        error.contains("the certificate is node `robot`'s"),
         "{error}"
     );
     let node = Node::open("robot", config).expect("the robot's node opens");

@@ -23,6 +23,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
+use coolbot::Chain;
 use coolbot_zenoh::ctl::{Ctl, CtlError, parse_duration};
 
 /// Look at and command the CoolBOT components of the nodes on the network.
@@ -157,28 +158,28 @@ enum Action {
     },
 }
 
-fn duration(text: &str) -> Result<Duration, String> {
-    parse_duration(text).map_err(|error| error.to_string())
+fn duration(text: &str) -> Result<Duration, CtlError> {
+    parse_duration(text)
 }
 
-fn timeout(text: &str) -> Result<Duration, String> {
+fn timeout(text: &str) -> Result<Duration, CtlError> {
     match parse_duration(text) {
-        Ok(timeout) if timeout.is_zero() => Err(format!(
+        Ok(timeout) if timeout.is_zero() => Err(CtlError::BadArgument(format!(
             "`{text}`: nothing answers in no time; give a timeout of more than zero (e.g. 2s)"
-        )),
-        other => other.map_err(|error| error.to_string()),
+        ))),
+        other => other,
     }
 }
 
-fn size(text: &str) -> Result<(u16, u16), String> {
-    let (columns, rows) = text
-        .split_once('x')
-        .ok_or_else(|| format!("`{text}` is not COLUMNSxROWS (e.g. 160x40)"))?;
+fn size(text: &str) -> Result<(u16, u16), CtlError> {
+    let (columns, rows) = text.split_once('x').ok_or_else(|| {
+        CtlError::BadArgument(format!("`{text}` is not COLUMNSxROWS (e.g. 160x40)"))
+    })?;
     let parse = |n: &str| {
         n.parse::<u16>()
             .ok()
             .filter(|n| (10..=1000).contains(n))
-            .ok_or_else(|| format!("`{n}` is not a size from 10 to 1000"))
+            .ok_or_else(|| CtlError::BadArgument(format!("`{n}` is not a size from 10 to 1000")))
     };
     Ok((parse(columns)?, parse(rows)?))
 }
@@ -187,18 +188,16 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     let security = match &cli.config {
         Some(path) => coolbot_zenoh::Security::load(path),
         None => Ok(coolbot_zenoh::Security::none()),
-    }
-    .map_err(|error| CtlError::BadArgument(error.to_string()))?
+    }?
     .allow_plaintext(cli.insecure);
     // Multicast scouting reaches the whole network: on by default only under TLS.
     let multicast = cli.multicast || (!cli.no_multicast && security.has_tls());
-    let config = coolbot_zenoh::secure_config(&cli.listen, &cli.connect, multicast, &security)
-        .map_err(|error| CtlError::BadArgument(error.to_string()))?;
+    let config = coolbot_zenoh::secure_config(&cli.listen, &cli.connect, multicast, &security)?;
     let session = {
         use zenoh::Wait;
         zenoh::open(config)
             .wait()
-            .map_err(|error| CtlError::Zenoh(error.to_string()))?
+            .map_err(CtlError::zenoh("open the session"))?
     };
     let ctl = Ctl::new(session.clone(), cli.timeout).with_security(&security)?;
     match cli.command {
@@ -268,11 +267,11 @@ fn main() -> ExitCode {
             | CtlError::UnknownComponent { .. }
             | CtlError::UnknownPort(_)),
         ) => {
-            eprintln!("coolctl: {error}");
+            eprintln!("coolctl: {}", Chain(&error));
             ExitCode::from(1)
         }
         Err(error) => {
-            eprintln!("coolctl: {error}");
+            eprintln!("coolctl: {}", Chain(&error));
             ExitCode::from(2)
         }
     }

@@ -16,7 +16,7 @@ pub mod view;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use coolbot::{Command, Controllable, MonitorEvent};
+use coolbot::{Chain, Command, Controllable, MonitorEvent};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
@@ -26,7 +26,7 @@ use crate::ControlReply;
 use crate::ctl::{Ctl, CtlError, Listed, parse_command};
 use crate::keys;
 
-pub use model::{Board, Focus, Row};
+pub use model::{Board, Focus, NoTarget, Row};
 
 /// The nodes alive and their components, gathered once.
 fn gather(ctl: &Ctl) -> Result<(Vec<String>, Vec<Listed>), CtlError> {
@@ -93,7 +93,7 @@ fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) ->
     match reply {
         Ok(ControlReply::Accepted) => format!("{address}: {what}: accepted"),
         Ok(ControlReply::Rejected { reason }) => format!("{address}: {what}: rejected: {reason}"),
-        Err(error) => format!("{address}: {what}: {error}"),
+        Err(error) => format!("{address}: {what}: {}", Chain(&error)),
     }
 }
 
@@ -103,16 +103,17 @@ fn answered(address: &str, what: &str, reply: Result<ControlReply, CtlError>) ->
 pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(), CtlError> {
     use std::io::IsTerminal;
     if !std::io::stdout().is_terminal() {
-        return Err(CtlError::NoTerminal(
-            "its standard output is not one".to_owned(),
-        ));
+        return Err(CtlError::NoTerminal {
+            why: "its standard output is not one",
+            source: None,
+        });
     }
     let started = Instant::now();
     // Every monitoring event of every component: the steps pane.
     let events = session
         .declare_subscriber(keys::monitor("*", "*"))
         .wait()
-        .map_err(|error| CtlError::Zenoh(error.to_string()))?;
+        .map_err(CtlError::zenoh("subscribe to the monitoring events"))?;
     let (gathered, gatherings) = mpsc::channel();
     let gatherer = ctl.clone();
     std::thread::spawn(move || {
@@ -125,8 +126,10 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
     });
     let mut board = Board::new();
     let mut prompt: Option<String> = None;
-    let mut terminal =
-        ratatui::try_init().map_err(|error| CtlError::NoTerminal(error.to_string()))?;
+    let mut terminal = ratatui::try_init().map_err(|source| CtlError::NoTerminal {
+        why: "it cannot be set up",
+        source: Some(source),
+    })?;
     let outcome = (|| -> Result<(), CtlError> {
         loop {
             while let Ok(result) = gatherings.try_recv() {
@@ -138,7 +141,7 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                             board.seed_history();
                         }
                     }
-                    Err(error) => board.status = format!("gathering: {error}"),
+                    Err(error) => board.status = format!("gathering: {}", Chain(&error)),
                 }
             }
             while let Ok(Some(sample)) = events.try_recv() {
@@ -180,8 +183,8 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                             (Ok(address), Ok(command)) => {
                                 answered(address, &text, ctl.command(address, &command))
                             }
-                            (Err(why), _) => why.clone(),
-                            (_, Err(error)) => format!("{text}: {error}"),
+                            (Err(why), _) => why.to_string(),
+                            (_, Err(error)) => format!("{text}: {}", Chain(&error)),
                         };
                     }
                 }
@@ -216,7 +219,7 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                     | input::Action::Run
                     | input::Action::Restart,
                     Err(why),
-                ) => board.status = why.clone(),
+                ) => board.status = why.to_string(),
                 (input::Action::Prompt, Ok(_)) => prompt = Some(String::new()),
                 (input::Action::Suspend, Ok(address)) => {
                     let reply = ctl.command(address, &state(Controllable::Suspended));

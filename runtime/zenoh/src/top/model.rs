@@ -105,6 +105,22 @@ pub struct Snapshot<'a> {
     pub components: &'a [Row],
 }
 
+/// Why the selected row cannot be commanded ([`Board::command_target`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NoTarget {
+    /// No row is selected.
+    #[error("no component selected")]
+    NoneSelected,
+    /// The row's node is lost: a command could only time out.
+    #[error("node `{node}` is lost: no command sent to `{address}`")]
+    Lost {
+        /// The node.
+        node: String,
+        /// The component's address.
+        address: String,
+    },
+}
+
 impl Board {
     /// An empty board.
     pub fn new() -> Board {
@@ -334,14 +350,13 @@ impl Board {
     /// The address of the selected component, to command; why not when there is none
     /// or its node is lost (no command is sent to a node that is not there: it could
     /// only time out).
-    pub fn command_target(&self) -> Result<String, String> {
+    pub fn command_target(&self) -> Result<String, NoTarget> {
         match self.selected_row() {
-            None => Err("no component selected".to_owned()),
-            Some(row) if row.lost => Err(format!(
-                "node `{}` is lost: no command sent to `{}`",
-                row.node,
-                row.address()
-            )),
+            None => Err(NoTarget::NoneSelected),
+            Some(row) if row.lost => Err(NoTarget::Lost {
+                node: row.node.clone(),
+                address: row.address(),
+            }),
             Some(row) => Ok(row.address()),
         }
     }
@@ -416,9 +431,17 @@ pub(crate) mod tests {
         // A lost row is not commanded; a live one is.
         assert_eq!(board.command_target(), Ok("a/x".to_owned()));
         board.select(1);
+        let lost = board.command_target().unwrap_err();
         assert_eq!(
-            board.command_target(),
-            Err("node `b` is lost: no command sent to `b/y`".to_owned())
+            lost,
+            NoTarget::Lost {
+                node: "b".to_owned(),
+                address: "b/y".to_owned()
+            }
+        );
+        assert_eq!(
+            lost.to_string(),
+            "node `b` is lost: no command sent to `b/y`"
         );
         board.select(-1);
         // `b` comes back with another component: the old rows go.
