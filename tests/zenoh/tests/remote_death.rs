@@ -399,7 +399,7 @@ fn a_forged_token_does_not_hide_a_station_killed_without_a_word() {
     let (robot, station) = (Arc::new(robot), Arc::new(station));
     let sees_station = |robot: &Node| {
         wait_until(PATIENCE, || {
-            coolbot_zenoh::ctl::Ctl::new(robot.session().clone(), Duration::from_millis(500))
+            Ctl::new(robot.session().clone(), Duration::from_millis(500))
                 .node_names()
                 .is_ok_and(|names| names.iter().any(|n| n == "dying-station"))
         })
