@@ -119,6 +119,38 @@ fn builder_single_file_holds_every_module() {
 }
 
 #[test]
+fn builder_finds_ros_types_in_the_directories_given() {
+    // `coolbot_test/msg/Everything` is in `tests/data/ros` only.
+    let dir = tempfile::tempdir().unwrap();
+    let robot = dir.path().join("robot.cool");
+    std::fs::write(
+        &robot,
+        "import ros \"coolbot_test/msg/Everything\";\natomic A { input all: last<Everything>; }\n",
+    )
+    .unwrap();
+    let error = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .compile(&[&robot])
+        .unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .contains("no `.msg` file defines `coolbot_test/msg/Everything`"),
+        "{error}"
+    );
+    let written = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .ros_path(data("ros"))
+        .compile(&[&robot])
+        .unwrap();
+    let text = std::fs::read_to_string(written).unwrap();
+    assert!(text.contains("pub type Everything = ros::coolbot_test::Everything;"));
+    assert!(text.contains("impl ::coolbot::ros::RosType for Everything"));
+}
+
+#[test]
 fn builder_reports_diagnostics() {
     let out = tempfile::tempdir().unwrap();
     let bad = out.path().join("bad.cool");

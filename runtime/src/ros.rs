@@ -177,7 +177,8 @@ mod tests {
 
     #[test]
     fn a_value_over_its_bound_is_refused_when_decoded() {
-        let cases: [(fn(&mut Bounds), &str); 4] = [
+        type Change = fn(&mut Bounds);
+        let cases: [(Change, &str); 4] = [
             (
                 |b| b.few.push(4),
                 "expected a sequence of at most 3 elements",
@@ -223,8 +224,8 @@ mod tests {
                 tuple_struct map struct enum identifier ignored_any
             }
         }
-        let error = <Bounded<3> as DeserializeAs<'_, Vec<i32>>>::deserialize_as(Stream)
-            .unwrap_err();
+        let error =
+            <Bounded<3> as DeserializeAs<'_, Vec<i32>>>::deserialize_as(Stream).unwrap_err();
         assert_eq!(
             error.to_string(),
             "more than 3 elements, expected a sequence of at most 3 elements"
