@@ -151,6 +151,34 @@ fn builder_finds_ros_types_in_the_directories_given() {
 }
 
 #[test]
+fn ros_types_with_every_msg_feature() {
+    // `tests/data/ros_robot/robot.cool` imports the shipped `LaserScan`, `Imu` and
+    // `Odometry` and test types with every `.msg` feature (`tests/data/ros` and
+    // `tests/data/ros_robot/ros`): the types module is what `ros_crate.rs` builds,
+    // runs and checks against rosbags.
+    let search = coolc::ros::Search::new()
+        .with_dir(data("ros"))
+        .with_dir(data("ros_robot/ros"));
+    let root = data("ros_robot/robot.cool");
+    let read = |p: &Path| std::fs::read_to_string(p);
+    let checked = coolc::analyze_with(&[&root], &read, &|_| Vec::new(), &search)
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
+    let options = lower::Options {
+        package: "robot".to_owned(),
+        runtime: RuntimeDep::Version("0.1".to_owned()),
+        sources: vec!["robot.cool".to_owned()],
+        inputs: coolc::fingerprint::inputs(&[]),
+    };
+    let files = emit::emit_crate(&lower::lower(&checked, &options));
+    let types = files
+        .iter()
+        .find(|f| f.path == Path::new("src/generated/types.rs"))
+        .unwrap();
+    insta::assert_snapshot!(types.contents);
+}
+
+#[test]
 fn builder_reports_diagnostics() {
     let out = tempfile::tempdir().unwrap();
     let bad = out.path().join("bad.cool");

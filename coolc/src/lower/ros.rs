@@ -190,10 +190,29 @@ fn constant(constant: &Constant) -> ir::RosConstant {
         ref base => base_ty(base),
     };
     ir::RosConstant {
-        doc: vec![format!("`{} {}`", constant.ty, constant.name)],
+        doc: vec![format!(
+            "`{} {}={}`",
+            constant.ty,
+            constant.name,
+            written(&constant.value)
+        )],
         name: ident::escape(&constant.name),
         ty,
         value: scalar_rust(&constant.value, &constant.ty, false),
+    }
+}
+
+/// A constant's value as a doc comment shows it.
+fn written(value: &Value) -> String {
+    match value {
+        Value::Bool(value) => value.to_string(),
+        Value::Int(value) => value.to_string(),
+        Value::Float(value) => value.to_string(),
+        Value::String(text) => format!("{text:?}"),
+        Value::Array(items) => {
+            let items: Vec<String> = items.iter().map(written).collect();
+            format!("[{}]", items.join(", "))
+        }
     }
 }
 
