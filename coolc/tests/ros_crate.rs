@@ -86,3 +86,81 @@ fn a_robot_sends_ros_types_through_ports_and_speaks_cdr_with_rosbags() {
         ],
     );
 }
+
+/// The fenced blocks of `text` under the heading `heading` (up to the next heading of
+/// its level): `(info string, body)`.
+fn blocks_under(text: &str, heading: &str) -> Vec<(String, String)> {
+    let start = text
+        .find(&format!("\n{heading}\n"))
+        .unwrap_or_else(|| panic!("no section {heading:?}"));
+    let rest = &text[start + heading.len() + 2..];
+    let end = rest.find("\n## ").unwrap_or(rest.len());
+    let mut blocks = Vec::new();
+    let mut open: Option<(String, String)> = None;
+    for line in rest[..end].lines() {
+        match (&mut open, line.strip_prefix("```")) {
+            (None, Some(info)) => open = Some((info.to_owned(), String::new())),
+            (Some(_), Some(_)) => blocks.extend(open.take()),
+            (Some((_, body)), None) => {
+                body.push_str(line);
+                body.push('\n');
+            }
+            (None, None) => {}
+        }
+    }
+    blocks
+}
+
+#[test]
+fn the_imu_description_of_the_ros_docs_checks_builds_and_runs() {
+    // `docs/ros2.md`, "A description with ROS 2 types": its description imports
+    // `sensor_msgs/msg/Imu` and converts it to a packet of its own; its Rust blocks
+    // (each opening with the comment `// <path>`) are the crate's files.
+    let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/ros2.md");
+    let text = std::fs::read_to_string(docs).unwrap();
+    let blocks = blocks_under(&text, "## A description with ROS 2 types");
+    let dir = tempfile::tempdir().unwrap();
+    let description = dir.path().join("navigation.cool");
+    let cool: Vec<&String> = blocks
+        .iter()
+        .filter(|(info, _)| info == "cool")
+        .map(|(_, body)| body)
+        .collect();
+    assert_eq!(cool.len(), 1, "one description in the section");
+    std::fs::write(&description, cool[0]).unwrap();
+    let krate = dir.path().join("imu-nav");
+    compile_with(&description, &krate, "imu-nav", &coolc::ros::Search::new());
+    let mut files = Vec::new();
+    for (_, body) in blocks.iter().filter(|(info, _)| info == "rust") {
+        let path = body
+            .lines()
+            .next()
+            .and_then(|line| line.strip_prefix("// "))
+            .unwrap_or_else(|| panic!("a rust block opens with `// <path>`:\n{body}"));
+        let file = krate.join(path);
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+        std::fs::write(&file, body).unwrap();
+        files.push(path.to_owned());
+    }
+    assert_eq!(
+        files,
+        [
+            "src/converters.rs",
+            "src/imu_driver.rs",
+            "src/compass.rs",
+            "tests/navigation.rs"
+        ]
+    );
+    common::cargo(&krate, &["fmt", "--check"]);
+    common::cargo(
+        &krate,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    );
+    let output = common::cargo(&krate, &["test", "--test", "navigation"]);
+    for test in [
+        "the_compass_turns_with_the_imu",
+        "an_imu_reading_is_what_ros_2_sends",
+    ] {
+        assert!(output.contains(&format!("test {test} ... ok")), "{output}");
+    }
+}
