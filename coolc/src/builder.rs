@@ -40,6 +40,12 @@ pub enum BuildError {
     /// The descriptions have errors; the rendered diagnostics are inside.
     #[error("the .cool descriptions have errors:\n{0}")]
     Diagnostics(String),
+    /// A directory given with [`Builder::ros_path`] is not a directory.
+    #[error("ros_path {}: not a directory", path.display())]
+    RosPath {
+        /// The path given.
+        path: PathBuf,
+    },
     /// `OUT_DIR` is not set and no output directory was given.
     #[error("OUT_DIR is not set: call Builder::out_dir or run from a build script")]
     NoOutDir,
@@ -120,6 +126,9 @@ impl Builder {
     /// errors returns them rendered, and a build script that unwraps fails the build
     /// showing them.
     pub fn compile<P: AsRef<Path>>(&self, files: &[P]) -> Result<PathBuf, BuildError> {
+        if let Some(path) = self.ros_paths.iter().find(|path| !path.is_dir()) {
+            return Err(BuildError::RosPath { path: path.clone() });
+        }
         // With the sibling scan the CLI does: an unknown name that a `.cool` file next
         // to the one using it defines gets help naming the `import` to add.
         let analysis = crate::analyze_with(

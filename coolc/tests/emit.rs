@@ -139,6 +139,16 @@ fn builder_finds_ros_types_in_the_directories_given() {
             .contains("no `.msg` file defines `coolbot_test/msg/Everything`"),
         "{error}"
     );
+    let error = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .ros_path(dir.path().join("elsewhere"))
+        .compile(&[&robot])
+        .unwrap_err();
+    assert!(
+        matches!(error, coolc::builder::BuildError::RosPath { .. }),
+        "{error}"
+    );
     let written = coolc::Builder::new()
         .out_dir(dir.path())
         .cargo_output(false)

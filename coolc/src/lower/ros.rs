@@ -56,6 +56,19 @@ fn struct_path(name: &ros::TypeName) -> String {
 fn message(ros: &RosMessage) -> ir::RosMessage {
     let message = &ros.message;
     let mut fields: Vec<ir::Field> = message.fields.iter().map(field).collect();
+    // When every default is the one the field's type gives, the struct derives
+    // `Default` (as clippy asks) rather than spell the same values out.
+    let derivable = message.fields.iter().all(|field| {
+        field
+            .default
+            .as_ref()
+            .is_none_or(|(value, _)| is_type_default(value, field.ty.cardinality))
+    });
+    if derivable {
+        for (ir, field) in fields.iter_mut().zip(&message.fields) {
+            ir.default = type_default(&field.ty);
+        }
+    }
     if fields.is_empty() {
         fields.push(ir::Field {
             doc: vec![
@@ -95,14 +108,20 @@ fn field(field: &Field) -> ir::Field {
         ty: field_ty(&field.ty),
         default: match &field.default {
             Some((value, _)) => value_rust(value, &field.ty),
-            None => match field.ty.cardinality {
-                Cardinality::Array(size) if size > 32 => {
-                    format!("::core::array::from_fn(|_| {DEFAULT})")
-                }
-                _ => DEFAULT.to_owned(),
-            },
+            None => type_default(&field.ty),
         },
         serde_with: adapter(&field.ty).map(|adapter| format!("{SERDE_WITH}As::<{adapter}>")),
+    }
+}
+
+/// The Rust expression of the default value of a field's type (`Default` for arrays
+/// stops at 32 elements).
+fn type_default(ty: &FieldType) -> String {
+    match ty.cardinality {
+        Cardinality::Array(size) if size > 32 => {
+            format!("::core::array::from_fn(|_| {DEFAULT})")
+        }
+        _ => DEFAULT.to_owned(),
     }
 }
 
@@ -199,6 +218,21 @@ fn constant(constant: &Constant) -> ir::RosConstant {
         name: ident::escape(&constant.name),
         ty,
         value: scalar_rust(&constant.value, &constant.ty, false),
+    }
+}
+
+/// Whether a field's default value is the one its Rust type's `Default` gives: zero
+/// (not `-0.0`), `false`, an empty string or sequence, an array of those.
+fn is_type_default(value: &Value, cardinality: Cardinality) -> bool {
+    match (value, cardinality) {
+        (Value::Array(items), Cardinality::Array(_)) => items
+            .iter()
+            .all(|item| is_type_default(item, Cardinality::Single)),
+        (Value::Array(items), _) => items.is_empty(),
+        (Value::Bool(value), _) => !value,
+        (Value::Int(value), _) => *value == 0,
+        (Value::Float(value), _) => *value == 0.0 && value.is_sign_positive(),
+        (Value::String(text), _) => text.is_empty(),
     }
 }
 
@@ -333,6 +367,23 @@ mod tests {
             assert_eq!(field_ty(&ty), rust, "{ty}");
             assert_eq!(adapter(&ty).as_deref(), serde, "{ty}");
         }
+    }
+
+    #[test]
+    fn a_default_equal_to_the_types_is_left_to_its_default() {
+        let single = Cardinality::Single;
+        assert!(is_type_default(&Value::Int(0), single));
+        assert!(is_type_default(&Value::Float(0.0), single));
+        assert!(!is_type_default(&Value::Float(-0.0), single));
+        assert!(is_type_default(&Value::String(String::new()), single));
+        let zeros = Value::Array(vec![Value::Int(0), Value::Int(0)]);
+        assert!(is_type_default(&zeros, Cardinality::Array(2)));
+        assert!(!is_type_default(&zeros, Cardinality::Unbounded));
+        assert!(is_type_default(
+            &Value::Array(vec![]),
+            Cardinality::Bounded(3)
+        ));
+        assert!(!is_type_default(&Value::Bool(true), single));
     }
 
     #[test]
