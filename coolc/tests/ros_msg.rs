@@ -750,15 +750,19 @@ fn search_from_env_reads_ament_prefix_path() {
     );
 }
 
-/// The `rust` block of `docs/ros2.md` is the doc example of `coolc::ros`, which runs
-/// as a doc test: the two must stay the same text.
+/// The `rust` block of `docs/ros2.md`, "The library: `coolc::ros`", is the doc
+/// example of `coolc::ros`, which runs as a doc test: the two must stay the same text.
 #[test]
 fn the_documented_example_is_the_module_doc_test() {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
     let doc = std::fs::read_to_string(manifest.join("../docs/ros2.md")).unwrap();
-    let start = doc
-        .find("```rust\n")
-        .expect("docs/ros2.md has a rust block")
+    let section = doc
+        .find("\n## The library: `coolc::ros`\n")
+        .expect("docs/ros2.md documents the library");
+    let start = section
+        + doc[section..]
+            .find("```rust\n")
+            .expect("the library's section has a rust block")
         + 8;
     let documented = &doc[start..start + doc[start..].find("```\n").unwrap()];
     let module = std::fs::read_to_string(manifest.join("src/ros/mod.rs")).unwrap();
