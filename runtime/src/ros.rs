@@ -209,6 +209,18 @@ mod tests {
     }
 
     #[test]
+    fn a_type_with_bounds_has_the_schema_of_its_plain_fields() {
+        // What a recording of a port carrying it writes (`crate::record`).
+        let schema = crate::schema::of::<Bounds>();
+        assert_eq!(schema.derived, "traced");
+        let properties = &schema.schema["properties"];
+        assert_eq!(properties["few"]["type"], "array");
+        assert_eq!(properties["label"]["type"], "string");
+        assert_eq!(properties["tags"]["items"]["type"], "string");
+        assert_eq!(properties["pair"]["type"], "array");
+    }
+
+    #[test]
     fn a_sequence_of_unknown_length_is_cut_at_its_bound() {
         struct Stream;
         impl<'de> Deserializer<'de> for Stream {
