@@ -62,7 +62,7 @@ pub struct Analysis {
     /// Every loaded file; `FileId(i)` is `sources.files()[i]`.
     pub sources: SourceMap,
     /// One syntax tree per loaded file, in `FileId` order (roots first, then imports
-    /// depth first).
+    /// depth first, then the `.msg` files of `import ros` types, each with no item).
     pub files: Vec<ast::File>,
     /// Every diagnostic: syntax errors per file in file order, then resolution and
     /// check diagnostics.
