@@ -66,3 +66,65 @@ pub trait Converters {
 {%- endfor %}
 }
 {% endif %}
+{%- if !types.ros.is_empty() %}
+
+
+/// The ROS 2 message types the descriptions import (`import ros`) and every type
+/// they reference, one module per package; the types module names each imported one.
+#[allow(
+    clippy::approx_constant,
+    reason = "constants and defaults are the values the `.msg` files write"
+)]
+pub mod ros {
+{%- for package in types.ros %}
+{%- if !loop.first %}
+{% endif %}
+    /// The ROS 2 package `{{ package.package }}`.
+    pub mod {{ package.module }} {
+    {%- for message in package.messages %}
+    {%- let p = message.packet %}
+    {%- if !loop.first %}
+{% endif %}
+{%- call m::doc(&p.doc) %}{% endcall %}
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %})]
+pub struct {{ p.name }} {
+{%- for f in p.fields %}
+{%- call m::doc(&f.doc) %}{% endcall %}
+    {%- if f.renamed() %}
+    #[serde(rename = "{{ f.cool_name }}")]
+    {%- endif %}
+    {%- if let Some(adapter) = f.serde_with %}
+    #[serde(with = "{{ adapter }}")]
+    {%- endif %}
+    pub {{ f.name }}: {{ f.ty }},
+{%- endfor %}
+}
+{% if p.writes_default() %}
+impl ::core::default::Default for {{ p.name }} {
+    fn default() -> Self {
+        Self {
+        {%- for f in p.fields %}
+            {{ f.name }}: {{ f.default }},
+        {%- endfor %}
+        }
+    }
+}
+{% endif %}
+{%- if !message.constants.is_empty() %}
+impl {{ p.name }} {
+{%- for c in message.constants %}
+{%- call m::doc(&c.doc) %}{% endcall %}
+    pub const {{ c.name }}: {{ c.ty }} = {{ c.value }};
+{%- endfor %}
+}
+{% endif %}
+impl ::coolbot::ros::RosType for {{ p.name }} {
+    const NAME: &'static str = {{ message.name }};
+    const DDS_NAME: &'static str = {{ message.dds_name }};
+    const TYPE_HASH: &'static str = {{ message.hash }};
+}
+    {%- endfor %}
+    }
+{%- endfor %}
+}
+{%- endif %}

@@ -111,6 +111,8 @@ pub struct File {
 pub enum Item {
     /// `import "other.cool";`
     Import(Import),
+    /// `import ros "pkg/msg/Type" [as Name];`
+    RosImport(RosImport),
     /// `packet Name { field: Type, ... }`
     Packet(Packet),
     /// `enum Name { A, B }`
@@ -130,6 +132,54 @@ pub struct Import {
     pub path: StrLit,
     /// The whole item.
     pub span: Span,
+}
+
+/// `import ros "sensor_msgs/msg/LaserScan" [as Scan];`: a ROS 2 message type used as
+/// a packet type, under its own name or the one after `as`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosImport {
+    /// Doc comment.
+    pub doc: Doc,
+    /// The type's full name as written (`sensor_msgs/msg/LaserScan`).
+    pub ros_name: StrLit,
+    /// The name after `as`, if written.
+    pub alias: Option<Ident>,
+    /// The name the descriptions use: the alias, else the type's own name
+    /// ([`RosImport::own_name`]); `None` when neither is written as a name.
+    pub name: Option<Ident>,
+    /// The whole item.
+    pub span: Span,
+}
+
+impl RosImport {
+    /// The type's own name in `ros_name`, the text after the last `/`, as a name the
+    /// descriptions can use (with the span of that text inside the string); `None`
+    /// when it is not an identifier.
+    pub fn own_name(ros_name: &StrLit) -> Option<Ident> {
+        let text = &ros_name.value;
+        let last = text.rsplit('/').next().unwrap_or(text);
+        let mut chars = last.chars();
+        let identifier = chars
+            .next()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            && chars.all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !identifier || matches!(last, "true" | "false" | "none") {
+            return None;
+        }
+        // The span covers the quotes; with an escape inside, offsets in the value are
+        // not offsets in the text, and the name's span is the whole string.
+        let raw_len = ros_name.span.len().saturating_sub(2);
+        let span = if raw_len == text.len() {
+            let end = ros_name.span.end - 1;
+            Span::new(end - last.len(), end)
+        } else {
+            ros_name.span
+        };
+        Some(Ident {
+            name: last.to_owned(),
+            span,
+        })
+    }
 }
 
 /// `packet Name { field: Type = default, ... }`

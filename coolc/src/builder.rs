@@ -40,6 +40,12 @@ pub enum BuildError {
     /// The descriptions have errors; the rendered diagnostics are inside.
     #[error("the .cool descriptions have errors:\n{0}")]
     Diagnostics(String),
+    /// A directory given with [`Builder::ros_path`] is not a directory.
+    #[error("ros_path {}: not a directory", path.display())]
+    RosPath {
+        /// The path given.
+        path: PathBuf,
+    },
     /// `OUT_DIR` is not set and no output directory was given.
     #[error("OUT_DIR is not set: call Builder::out_dir or run from a build script")]
     NoOutDir,
@@ -66,6 +72,7 @@ pub struct Builder {
     file_name: Option<String>,
     cargo_output: bool,
     format: bool,
+    ros_paths: Vec<PathBuf>,
 }
 
 impl Builder {
@@ -76,6 +83,7 @@ impl Builder {
             file_name: None,
             cargo_output: true,
             format: false,
+            ros_paths: Vec::new(),
         }
     }
 
@@ -106,20 +114,32 @@ impl Builder {
         self
     }
 
+    /// Adds a directory of ROS 2 interface packages (`dir/<package>/msg/<Type>.msg`)
+    /// where `import ros` types are looked up, after those already given and before
+    /// `AMENT_PREFIX_PATH` and the types coolc ships (as `coolc --ros-path`).
+    pub fn ros_path(mut self, dir: impl Into<PathBuf>) -> Builder {
+        self.ros_paths.push(dir.into());
+        self
+    }
+
     /// Compiles `files` (and their imports). On success returns the written path; on
     /// errors returns them rendered, and a build script that unwraps fails the build
     /// showing them.
     pub fn compile<P: AsRef<Path>>(&self, files: &[P]) -> Result<PathBuf, BuildError> {
+        if let Some(path) = self.ros_paths.iter().find(|path| !path.is_dir()) {
+            return Err(BuildError::RosPath { path: path.clone() });
+        }
         // With the sibling scan the CLI does: an unknown name that a `.cool` file next
         // to the one using it defines gets help naming the `import` to add.
-        let analysis = crate::analyze_with_siblings(
+        let analysis = crate::analyze_with(
             files,
             &|path: &Path| std::fs::read_to_string(path),
             &files_in,
+            &crate::ros::Search::from_env(self.ros_paths.iter().cloned()),
         );
         if self.cargo_output {
-            for file in analysis.sources.files() {
-                println!("cargo:rerun-if-changed={}", file.path.display());
+            for line in self.rerun_lines(&analysis.sources) {
+                println!("{line}");
             }
         }
         let checked = analysis
@@ -166,6 +186,27 @@ impl Builder {
     }
 }
 
+impl Builder {
+    /// The `cargo:rerun-if-*` lines of a compile that read `sources`: each file read
+    /// but the shipped `.msg` files (not files: cargo would run the script again on
+    /// every build), each directory given with [`Builder::ros_path`] (for a type
+    /// added to it), and `AMENT_PREFIX_PATH`.
+    fn rerun_lines(&self, sources: &crate::SourceMap) -> Vec<String> {
+        let files = sources
+            .files()
+            .iter()
+            .filter(|file| !file.path.starts_with(crate::ros::lookup::SHIPPED_DIR))
+            .map(|file| &file.path);
+        files
+            .chain(&self.ros_paths)
+            .map(|path| format!("cargo:rerun-if-changed={}", path.display()))
+            .chain(std::iter::once(
+                "cargo:rerun-if-env-changed=AMENT_PREFIX_PATH".to_owned(),
+            ))
+            .collect()
+    }
+}
+
 /// The files of directory `dir` (`""` is the current directory), for the help on an
 /// unknown name that a file next to the one using it defines (the CLI lists
 /// directories the same way).
@@ -182,4 +223,39 @@ pub(crate) fn files_in(dir: &Path) -> Vec<PathBuf> {
         .filter_map(Result::ok)
         .map(|entry| dir.join(entry.file_name()))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::Builder;
+
+    #[test]
+    fn a_build_script_watches_every_file_read_but_the_shipped_ones() {
+        let files = [
+            ("robot.cool", "import ros \"my_msgs/msg/Reading\";\n"),
+            ("ros/my_msgs/msg/Reading.msg", "std_msgs/Header header\n"),
+        ];
+        let loader = |path: &Path| {
+            files
+                .iter()
+                .find(|(name, _)| Path::new(name) == path)
+                .map(|(_, text)| text.to_string())
+                .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+        };
+        let builder = Builder::new().ros_path("ros");
+        let search = crate::ros::Search::new().with_dir("ros");
+        let analysis = crate::analyze_with(&["robot.cool"], &loader, &|_| Vec::new(), &search);
+        assert!(!analysis.has_errors());
+        assert_eq!(
+            builder.rerun_lines(&analysis.sources),
+            [
+                "cargo:rerun-if-changed=robot.cool",
+                "cargo:rerun-if-changed=ros/my_msgs/msg/Reading.msg",
+                "cargo:rerun-if-changed=ros",
+                "cargo:rerun-if-env-changed=AMENT_PREFIX_PATH",
+            ]
+        );
+    }
 }

@@ -5,8 +5,9 @@
 //! an analysis with errors: `lower` and `diagram` take one, so "generate only from
 //! descriptions that passed the checker" is a type, not a convention each caller must
 //! remember. It holds no syntax tree: [`model`] is every component, packet, enum,
-//! extern packet and converter resolved ([`Checked::components`],
-//! [`Checked::types`], [`Checked::converters`]), built once by `build` from the trees
+//! extern packet, ROS import and converter resolved ([`Checked::components`],
+//! [`Checked::types`], [`Checked::converters`]) and every ROS 2 message type read
+//! ([`Checked::ros_messages`], with its hash), built once by `build` from the trees
 //! and what the checker resolved (every component's interface: ports with their kinds
 //! and packet types through exports, variables with their types through mappings,
 //! its adaptation tuning; every `when` rule typed by the one rule typer,
@@ -38,6 +39,8 @@ pub struct Checked {
     types: Vec<model::TypeDef>,
     /// Every converter, resolved, in source order.
     converters: Vec<model::Converter>,
+    /// Every ROS 2 message type imported or referenced, by name.
+    ros: Vec<model::RosMessage>,
 }
 
 impl Checked {
@@ -47,7 +50,18 @@ impl Checked {
         files: Vec<ast::File>,
         warnings: Vec<Diagnostic>,
         resolved: Resolved,
+        ros: crate::ros::Interfaces,
     ) -> Checked {
+        // Every type loaded has a hash: none has an error in a checked analysis.
+        let ros = ros
+            .messages()
+            .filter_map(|message| {
+                Some(model::RosMessage {
+                    message: message.clone(),
+                    hash: ros.hash(&message.name)?,
+                })
+            })
+            .collect();
         let components = build::components(&files, &resolved);
         let (types, converters) = build::types(&files, &resolved);
         let by_name = components
@@ -62,11 +76,12 @@ impl Checked {
             by_name,
             types,
             converters,
+            ros,
         }
     }
 
-    /// Every packet, enum and extern packet, in source order (files in `FileId`
-    /// order), each once.
+    /// Every packet, enum, extern packet and ROS import, in source order (files in
+    /// `FileId` order), each once.
     pub fn types(&self) -> &[model::TypeDef] {
         &self.types
     }
@@ -76,7 +91,13 @@ impl Checked {
         &self.converters
     }
 
-    /// The packet, enum or extern packet named `name`.
+    /// Every ROS 2 message type the descriptions import (`import ros`), and every type
+    /// those reference, directly or not: each once, by package and name.
+    pub fn ros_messages(&self) -> &[model::RosMessage] {
+        &self.ros
+    }
+
+    /// The packet, enum, extern packet or ROS import named `name`.
     pub fn type_def(&self, name: &str) -> Option<&model::TypeDef> {
         self.types.iter().find(|def| def.name() == name)
     }

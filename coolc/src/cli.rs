@@ -33,6 +33,12 @@ pub struct Cli {
     #[arg(long, value_enum, default_value_t = MessageFormat::Human, global = true)]
     pub message_format: MessageFormat,
 
+    /// A directory of ROS 2 interface packages (`DIR/<package>/msg/<Type>.msg`) where
+    /// `import ros` types are looked up, before `AMENT_PREFIX_PATH` and the types
+    /// coolc ships; repeat it for several, searched in order.
+    #[arg(long = "ros-path", value_name = "DIR", global = true)]
+    pub ros_paths: Vec<PathBuf>,
+
     /// The command.
     #[command(subcommand)]
     pub command: Commands,
@@ -352,10 +358,19 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Checked, Failure> {
             )));
         }
     }
-    let analysis = crate::analyze_with_siblings(
+    for dir in &cli.ros_paths {
+        if !dir.is_dir() {
+            return Err(Failure::Usage(format!(
+                "--ros-path {}: not a directory",
+                dir.display()
+            )));
+        }
+    }
+    let analysis = crate::analyze_with(
         files,
         &|path: &Path| std::fs::read_to_string(path),
         &crate::builder::files_in,
+        &crate::ros::Search::from_env(cli.ros_paths.iter().cloned()),
     );
     if !analysis.diagnostics.is_empty() {
         let rendered = analysis.render(render_options(cli));

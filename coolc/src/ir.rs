@@ -133,10 +133,51 @@ pub struct Types {
     pub packets: Vec<Packet>,
     /// Enums.
     pub enums: Vec<Enum>,
-    /// Extern packets (type aliases).
+    /// Extern packets and ROS imports (type aliases), in source order.
     pub externs: Vec<Extern>,
     /// Converters, as methods of the `Converters` trait.
     pub converters: Vec<Converter>,
+    /// The ROS 2 message types (module `ros`), one module per package, by package.
+    pub ros: Vec<RosPackage>,
+}
+
+/// The module of one ROS 2 package in the types module's `ros` module.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosPackage {
+    /// The package's name.
+    pub package: String,
+    /// Module name (the package's name, keyword-escaped).
+    pub module: String,
+    /// Its message types, by name.
+    pub messages: Vec<RosMessage>,
+}
+
+/// One ROS 2 message type: a packet struct, its constants and its names.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosMessage {
+    /// The struct (it always has a `Default`).
+    pub packet: Packet,
+    /// Its constants, as associated consts.
+    pub constants: Vec<RosConstant>,
+    /// `coolbot::ros::RosType::NAME`, a Rust string literal.
+    pub name: String,
+    /// `coolbot::ros::RosType::DDS_NAME`, a Rust string literal.
+    pub dds_name: String,
+    /// `coolbot::ros::RosType::TYPE_HASH`, a Rust string literal.
+    pub hash: String,
+}
+
+/// A constant of a ROS 2 message type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosConstant {
+    /// Doc lines.
+    pub doc: Doc,
+    /// Rust name.
+    pub name: String,
+    /// Rust type.
+    pub ty: String,
+    /// Rust expression of its value.
+    pub value: String,
 }
 
 /// A packet struct.

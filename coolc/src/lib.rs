@@ -62,13 +62,15 @@ pub struct Analysis {
     /// Every loaded file; `FileId(i)` is `sources.files()[i]`.
     pub sources: SourceMap,
     /// One syntax tree per loaded file, in `FileId` order (roots first, then imports
-    /// depth first).
+    /// depth first, then the `.msg` files of `import ros` types, each with no item).
     pub files: Vec<ast::File>,
     /// Every diagnostic: syntax errors per file in file order, then resolution and
     /// check diagnostics.
     pub diagnostics: Vec<Diagnostic>,
     /// What the checker resolved (handed on by [`Analysis::checked`]).
     resolved: check::Resolved,
+    /// The ROS 2 message types imported (`import ros`) and every type they reference.
+    ros: ros::Interfaces,
 }
 
 impl Analysis {
@@ -103,6 +105,7 @@ impl Analysis {
             self.files,
             self.diagnostics,
             self.resolved,
+            self.ros,
         ))
     }
 
@@ -110,7 +113,13 @@ impl Analysis {
     /// rejects (defence in depth: lowering escapes what it must even then).
     #[cfg(test)]
     pub(crate) fn assume_checked(self) -> Checked {
-        Checked::new(self.sources, self.files, self.diagnostics, self.resolved)
+        Checked::new(
+            self.sources,
+            self.files,
+            self.diagnostics,
+            self.resolved,
+            self.ros,
+        )
     }
 }
 
@@ -118,7 +127,8 @@ impl Analysis {
 ///
 /// `loader` reads one file; it receives the root paths as given and import paths
 /// joined to the importing file's directory (lexically normalised). A root or import
-/// it cannot read is a diagnostic, never a panic.
+/// it cannot read is a diagnostic, never a panic. ROS 2 message types (`import ros`)
+/// are found among the ones coolc ships only ([`analyze_with`] takes other places).
 pub fn analyze<P: AsRef<Path>>(
     roots: &[P],
     loader: &dyn Fn(&Path) -> std::io::Result<String>,
@@ -135,7 +145,20 @@ pub fn analyze_with_siblings<P: AsRef<Path>>(
     loader: &dyn Fn(&Path) -> std::io::Result<String>,
     list: &dyn Fn(&Path) -> Vec<std::path::PathBuf>,
 ) -> Analysis {
+    analyze_with(roots, loader, list, &ros::Search::new())
+}
+
+/// Like [`analyze_with_siblings`]; the `.msg` files of the ROS 2 message types the
+/// descriptions import (`import ros`) are looked up through `ros` (`docs/ros2.md`,
+/// "Where types are found"), read with `loader` and added to the sources.
+pub fn analyze_with<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    list: &dyn Fn(&Path) -> Vec<std::path::PathBuf>,
+    ros: &ros::Search,
+) -> Analysis {
     let mut loaded = resolve::load(roots, loader);
+    let interfaces = resolve::load_ros(&mut loaded, ros, loader);
     let mut symbols = resolve::Symbols::build(
         &loaded.sources,
         &loaded.files,
@@ -149,6 +172,7 @@ pub fn analyze_with_siblings<P: AsRef<Path>>(
         files: loaded.files,
         diagnostics: loaded.diagnostics,
         resolved,
+        ros: interfaces,
     }
 }
 

@@ -25,6 +25,7 @@ mod atomic;
 mod automaton;
 mod compound;
 pub mod harness;
+mod ros;
 
 /// What the caller decides about the emitted crate.
 #[derive(Clone, Debug)]
@@ -152,7 +153,7 @@ fn rust_ty(ty: &Ty, prefix: &str) -> String {
         Ty::Str => prim_rust(Prim::String).to_owned(),
         Ty::Time => prim_rust(Prim::Time).to_owned(),
         Ty::Duration => prim_rust(Prim::Duration).to_owned(),
-        Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) => {
+        Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) | Ty::Ros { name, .. } => {
             format!("{prefix}{}", ident::camel(name))
         }
         Ty::List(inner) => format!("::std::vec::Vec<{}>", rust_ty(inner, prefix)),
@@ -222,7 +223,9 @@ impl<'a> Lowerer<'a> {
             | Ty::Time
             | Ty::Duration
             | Ty::List(_)
-            | Ty::Optional(_) => Some(DEFAULT.to_owned()),
+            | Ty::Optional(_)
+            // A ROS message type always has one (`lower::ros`).
+            | Ty::Ros { .. } => Some(DEFAULT.to_owned()),
             Ty::Array(inner, n) => {
                 let item = self.default_of(inner, visiting)?;
                 Some(if *n <= 32 && item == DEFAULT {
@@ -335,7 +338,12 @@ impl<'a> Lowerer<'a> {
         match ty {
             Ty::Bool | Ty::Int(_) | Ty::Float(_) | Ty::Time | Ty::Duration | Ty::Enum(_) => true,
             Ty::Optional(inner) | Ty::Array(inner, _) => self.is_copy(inner),
-            Ty::Str | Ty::List(_) | Ty::Packet(_) | Ty::Extern(_) | Ty::Unknown => false,
+            Ty::Str
+            | Ty::List(_)
+            | Ty::Packet(_)
+            | Ty::Extern(_)
+            | Ty::Ros { .. }
+            | Ty::Unknown => false,
         }
     }
 
@@ -397,8 +405,25 @@ impl<'a> Lowerer<'a> {
                     name: ident::camel(&e.name),
                     path: e.rust_path.clone(),
                 }),
+                TypeDef::Ros(r) => {
+                    let mut doc = r.doc.clone();
+                    if !doc.is_empty() {
+                        doc.push(String::new());
+                    }
+                    doc.push(format!("The ROS 2 message type `{}`.", r.ros));
+                    types.externs.push(ir::Extern {
+                        doc,
+                        name: ident::camel(&r.name),
+                        path: format!(
+                            "ros::{}::{}",
+                            ident::escape(r.ros.package()),
+                            ident::escape(r.ros.name())
+                        ),
+                    });
+                }
             }
         }
+        types.ros = ros::packages(self.checked);
         for c in self.checked.converters() {
             let method = ident::snake(&c.name);
             let stub_body = if let Some(default) = self.stub_default(&c.to) {

@@ -2,16 +2,20 @@
 //!
 //! [`load`] reads the roots and, depth first, every file they import (paths relative
 //! to the importing file, lexically normalised), parsing each as it is read; an
-//! import cycle is reported with the whole cycle. [`Symbols`] is the table of
-//! top-level items (packets, enums, extern packets, converters, components): one
-//! namespace across all files, because they all end up in one generated crate. A file
-//! sees its own items and those of the files it imports, directly or not.
+//! import cycle is reported with the whole cycle. [`load_ros`] then reads the ROS 2
+//! message types the files import (`import ros`), and every type they reference.
+//! [`Symbols`] is the table of top-level items (packets, enums, extern packets, ROS
+//! imports, converters, components): one namespace across all files, because they all
+//! end up in one generated crate. A file sees its own items and those of the files it
+//! imports, directly or not. The same ROS type imported under the same name in several
+//! files is one definition, seen from each of them.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Component, Path, PathBuf};
 
 use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
+use crate::ros;
 use crate::source::SourceMap;
 use crate::syntax;
 
@@ -146,6 +150,100 @@ fn load_file(
     id
 }
 
+/// Reads the ROS 2 message types the loaded files import (`import ros`) and every type
+/// they reference, through `search` (`docs/ros2.md`, "Where types are found"). Each
+/// `.msg` file read joins the sources with an empty syntax tree (file ids stay indices
+/// of `files`); its diagnostics join `loaded.diagnostics`, each with a note at the
+/// `import ros` that needs the file. A type no file defines is reported at the import
+/// (or the field of another `.msg` file) that names it.
+pub fn load_ros(
+    loaded: &mut Loaded,
+    search: &ros::Search,
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+) -> ros::Interfaces {
+    let imports: Vec<(FileId, ast::StrLit)> = loaded
+        .files
+        .iter()
+        .flat_map(|file| {
+            file.items.iter().filter_map(|item| match item {
+                ast::Item::RosImport(import) => Some((file.id, import.ros_name.clone())),
+                _ => None,
+            })
+        })
+        .collect();
+    if imports.is_empty() {
+        return ros::Interfaces::default();
+    }
+    let wanted: Vec<ros::Wanted<'_>> = imports
+        .iter()
+        .map(|(file, name)| ros::Wanted {
+            name: &name.value,
+            file: *file,
+            span: name.span,
+        })
+        .collect();
+    let first_new = loaded.sources.files().len();
+    let interfaces = ros::load(search, &wanted, &mut loaded.sources, loader);
+    for index in first_new..loaded.sources.files().len() {
+        loaded.files.push(ast::File {
+            id: FileId(index as u32),
+            items: Vec::new(),
+        });
+        loaded.imports.push(Vec::new());
+    }
+    let needed = needed_by(&interfaces, &imports);
+    for diagnostic in &interfaces.diagnostics {
+        let mut diagnostic = diagnostic.clone();
+        if let Some(((file, import), type_name)) = needed.get(&diagnostic.file) {
+            let label = if *type_name == import.value {
+                "imported here".to_owned()
+            } else {
+                format!("`{}` needs `{type_name}`", import.value)
+            };
+            diagnostic = diagnostic.with_other(*file, import.span, label);
+        }
+        loaded.diagnostics.push(diagnostic);
+    }
+    interfaces
+}
+
+/// For each `.msg` file loaded, the first import (in file order) that needs it, and the
+/// name of the type the file defines.
+fn needed_by<'i>(
+    interfaces: &ros::Interfaces,
+    imports: &'i [(FileId, ast::StrLit)],
+) -> BTreeMap<FileId, (&'i (FileId, ast::StrLit), String)> {
+    let mut needed = BTreeMap::new();
+    for import in imports {
+        let Ok(top) = ros::TypeName::parse(&import.1.value) else {
+            continue;
+        };
+        let mut todo = vec![top];
+        let mut seen = BTreeSet::new();
+        while let Some(name) = todo.pop() {
+            if !seen.insert(name.clone()) {
+                continue;
+            }
+            let Some(message) = interfaces.get(&name) else {
+                continue;
+            };
+            needed
+                .entry(message.file)
+                .or_insert_with(|| (import, name.to_string()));
+            todo.extend(
+                message
+                    .fields
+                    .iter()
+                    .filter_map(|field| match &field.ty.base {
+                        ros::msg::Base::Nested(nested) => Some(nested.clone()),
+                        _ => None,
+                    }),
+            );
+        }
+    }
+    needed
+}
+
 /// Removes `.` and resolves `..` lexically (never touching the filesystem).
 pub fn normalize(path: &Path) -> PathBuf {
     let mut out = PathBuf::new();
@@ -175,6 +273,8 @@ pub enum DefKind {
     Enum,
     /// `extern packet`
     ExternPacket,
+    /// `import ros`
+    RosMessage,
     /// `converter`
     Converter,
     /// `atomic` or `compound`
@@ -188,6 +288,7 @@ impl DefKind {
             DefKind::Packet => "packet",
             DefKind::Enum => "enum",
             DefKind::ExternPacket => "extern packet",
+            DefKind::RosMessage => "ROS message type",
             DefKind::Converter => "converter",
             DefKind::Component => "component",
         }
@@ -197,7 +298,7 @@ impl DefKind {
     pub fn is_type(self) -> bool {
         matches!(
             self,
-            DefKind::Packet | DefKind::Enum | DefKind::ExternPacket
+            DefKind::Packet | DefKind::Enum | DefKind::ExternPacket | DefKind::RosMessage
         )
     }
 }
@@ -220,6 +321,9 @@ pub struct Def {
 pub struct Symbols {
     /// Every top-level name, first definition wins.
     pub defs: BTreeMap<String, Def>,
+    /// For a name of `defs` that an `import ros` defines, the other files that import
+    /// the same type under the same name: one definition, seen from each.
+    pub shared: BTreeMap<String, BTreeSet<FileId>>,
     /// For each file, the files whose items it sees (itself included).
     pub visible: Vec<BTreeSet<FileId>>,
     /// Display paths by file id, for messages.
@@ -303,6 +407,13 @@ impl Symbols {
                     name_span: name.span,
                 };
                 match symbols.defs.get(&name.name) {
+                    Some(first) if same_ros_import(files, first, &def) => {
+                        symbols
+                            .shared
+                            .entry(name.name.clone())
+                            .or_default()
+                            .insert(file.id);
+                    }
                     Some(first) => diagnostics.push(
                         Diagnostic::error(
                             Code::Duplicate,
@@ -312,7 +423,13 @@ impl Symbols {
                         )
                         .with_label(format!("{} `{}` defined again here", kind.describe(), name.name))
                         .with_other(first.file, first.name_span, format!("first defined here as a {}", first.kind.describe()))
-                        .with_help("every packet, enum, converter and component needs its own name, across all files"),
+                        .with_help(match item {
+                            ast::Item::RosImport(import) => format!(
+                                "give the imported type another name: `import ros \"{}\" as Other{};`",
+                                import.ros_name.value, name.name
+                            ),
+                            _ => "every packet, enum, converter and component needs its own name, across all files".to_owned(),
+                        }),
                     ),
                     None => {
                         symbols.defs.insert(name.name.clone(), def);
@@ -405,17 +522,17 @@ impl Symbols {
 
     /// Looks `name` up as seen from `from`.
     pub fn lookup(&self, from: FileId, name: &str) -> Lookup {
-        match self.defs.get(name) {
-            None => Lookup::Missing,
-            Some(def)
-                if self
-                    .visible
-                    .get(from.0 as usize)
-                    .is_none_or(|v| v.contains(&def.file)) =>
-            {
-                Lookup::Found(*def)
-            }
-            Some(def) => Lookup::NotImported(*def),
+        let Some(def) = self.defs.get(name) else {
+            return Lookup::Missing;
+        };
+        let Some(visible) = self.visible.get(from.0 as usize) else {
+            return Lookup::Found(*def);
+        };
+        let shared = self.shared.get(name);
+        if visible.contains(&def.file) || shared.is_some_and(|s| !s.is_disjoint(visible)) {
+            Lookup::Found(*def)
+        } else {
+            Lookup::NotImported(*def)
         }
     }
 
@@ -487,6 +604,10 @@ impl Symbols {
                     format!("unknown {what} `{}`", name.name),
                 )
                 .with_label("not found");
+                let shipped = accept
+                    .contains(&DefKind::RosMessage)
+                    .then(|| ros::shipped::names().find(|ros| ros.name() == name.name))
+                    .flatten();
                 if let Some(file) = self.sibling(from, &name.name, accept) {
                     diagnostic = diagnostic.with_help(format!(
                         "`{}` is defined in `{file}` next to this file: add `import \"{file}\";`",
@@ -494,6 +615,10 @@ impl Symbols {
                     ));
                 } else if let Some(near) = closest(&name.name, candidates) {
                     diagnostic = diagnostic.with_help(format!("did you mean `{near}`?"));
+                } else if let Some(ros) = shipped {
+                    diagnostic = diagnostic.with_help(format!(
+                        "for the ROS 2 message type `{ros}`, add `import ros \"{ros}\";`"
+                    ));
                 }
                 diagnostics.push(diagnostic);
                 None
@@ -502,10 +627,22 @@ impl Symbols {
     }
 }
 
-/// What a top-level item defines, and its name (`None` for an import).
+/// Whether `second` imports the same ROS type under the same name as `first` (both are
+/// then one definition).
+fn same_ros_import(files: &[ast::File], first: &Def, second: &Def) -> bool {
+    let ros_name = |def: &Def| match files.get(def.file.0 as usize)?.items.get(def.item)? {
+        ast::Item::RosImport(import) => Some(import.ros_name.value.as_str()),
+        _ => None,
+    };
+    ros_name(first).is_some_and(|name| ros_name(second) == Some(name))
+}
+
+/// What a top-level item defines, and its name (`None` for an import, and for a ROS
+/// import whose name is not a name).
 fn def_of(item: &ast::Item) -> Option<(DefKind, &ast::Ident)> {
     Some(match item {
         ast::Item::Import(_) => return None,
+        ast::Item::RosImport(import) => (DefKind::RosMessage, import.name.as_ref()?),
         ast::Item::Packet(packet) => (DefKind::Packet, &packet.name),
         ast::Item::Enum(def) => (DefKind::Enum, &def.name),
         ast::Item::ExternPacket(def) => (DefKind::ExternPacket, &def.name),

@@ -46,6 +46,59 @@ fn help_everywhere() {
 }
 
 #[test]
+fn ros_types_are_looked_up_in_each_ros_path_given() {
+    // `coolbot_test/msg/Everything` is in `tests/data/ros` only.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("robot.cool"),
+        "import ros \"coolbot_test/msg/Everything\";\natomic A { input all: last<Everything>; }\n",
+    )
+    .unwrap();
+    let ros = data("ros");
+    let ros = ros.to_str().unwrap();
+    let out = coolc(&["check", "robot.cool"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("no `.msg` file defines `coolbot_test/msg/Everything`"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = coolc(
+        &[
+            "check",
+            "--ros-path",
+            "elsewhere",
+            "--ros-path",
+            ros,
+            "robot.cool",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--ros-path elsewhere: not a directory"));
+    std::fs::create_dir(dir.path().join("elsewhere")).unwrap();
+    let out = coolc(
+        &[
+            "check",
+            "--ros-path",
+            "elsewhere",
+            "--ros-path",
+            ros,
+            "robot.cool",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = coolc(
+        &["compile", "robot.cool", "-o", "out", "--ros-path", ros],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let types = std::fs::read_to_string(dir.path().join("out/src/generated/types.rs")).unwrap();
+    assert!(types.contains("pub mod coolbot_test {"), "{types}");
+}
+
+#[test]
 fn exit_codes() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("broken.cool"), BROKEN).unwrap();

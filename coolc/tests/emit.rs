@@ -119,6 +119,76 @@ fn builder_single_file_holds_every_module() {
 }
 
 #[test]
+fn builder_finds_ros_types_in_the_directories_given() {
+    // `coolbot_test/msg/Everything` is in `tests/data/ros` only.
+    let dir = tempfile::tempdir().unwrap();
+    let robot = dir.path().join("robot.cool");
+    std::fs::write(
+        &robot,
+        "import ros \"coolbot_test/msg/Everything\";\natomic A { input all: last<Everything>; }\n",
+    )
+    .unwrap();
+    let error = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .compile(&[&robot])
+        .unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .contains("no `.msg` file defines `coolbot_test/msg/Everything`"),
+        "{error}"
+    );
+    let error = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .ros_path(dir.path().join("elsewhere"))
+        .compile(&[&robot])
+        .unwrap_err();
+    assert!(
+        matches!(error, coolc::builder::BuildError::RosPath { .. }),
+        "{error}"
+    );
+    let written = coolc::Builder::new()
+        .out_dir(dir.path())
+        .cargo_output(false)
+        .ros_path(data("ros"))
+        .compile(&[&robot])
+        .unwrap();
+    let text = std::fs::read_to_string(written).unwrap();
+    assert!(text.contains("pub type Everything = ros::coolbot_test::Everything;"));
+    assert!(text.contains("impl ::coolbot::ros::RosType for Everything"));
+}
+
+#[test]
+fn ros_types_with_every_msg_feature() {
+    // `tests/data/ros_robot/robot.cool` imports the shipped `LaserScan`, `Imu` and
+    // `Odometry` and test types with every `.msg` feature (`tests/data/ros` and
+    // `tests/data/ros_robot/ros`): the types module is what `ros_crate.rs` builds,
+    // runs and checks against rosbags.
+    let search = coolc::ros::Search::new()
+        .with_dir(data("ros"))
+        .with_dir(data("ros_robot/ros"));
+    let root = data("ros_robot/robot.cool");
+    let read = |p: &Path| std::fs::read_to_string(p);
+    let checked = coolc::analyze_with(&[&root], &read, &|_| Vec::new(), &search)
+        .checked()
+        .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
+    let options = lower::Options {
+        package: "robot".to_owned(),
+        runtime: RuntimeDep::Version("0.1".to_owned()),
+        sources: vec!["robot.cool".to_owned()],
+        inputs: coolc::fingerprint::inputs(&[]),
+    };
+    let files = emit::emit_crate(&lower::lower(&checked, &options));
+    let types = files
+        .iter()
+        .find(|f| f.path == Path::new("src/generated/types.rs"))
+        .unwrap();
+    insta::assert_snapshot!(types.contents);
+}
+
+#[test]
 fn builder_reports_diagnostics() {
     let out = tempfile::tempdir().unwrap();
     let bad = out.path().join("bad.cool");

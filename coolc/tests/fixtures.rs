@@ -1,6 +1,7 @@
 //! Fixture suites: every `tests/data/ok/*.cool` analyzes without a diagnostic, every
 //! `tests/data/err/*.cool` yields at least one error, and the rendered diagnostics of
-//! each err fixture (no colour, 80 columns) are snapshotted.
+//! each err fixture (no colour, 80 columns) are snapshotted. `import ros` types are
+//! found in `tests/data/ros` (`<package>/msg/<Type>.msg`), then among the shipped ones.
 
 use std::path::{Path, PathBuf};
 
@@ -18,9 +19,12 @@ fn analyze_fixture(path: &Path) -> Analysis {
         .strip_prefix(&base)
         .expect("fixture under tests/data")
         .to_owned();
-    coolc::analyze(&[relative], &|p: &Path| {
-        std::fs::read_to_string(base.join(p))
-    })
+    coolc::analyze_with(
+        &[relative],
+        &|p: &Path| std::fs::read_to_string(base.join(p)),
+        &|_| Vec::new(),
+        &coolc::ros::Search::new().with_dir("ros"),
+    )
 }
 
 #[test]
@@ -226,4 +230,123 @@ fn an_unknown_name_in_a_sibling_file_gets_the_import_to_add() {
     );
     // The sibling was only scanned: it is not part of the analysis.
     assert_eq!(analysis.files.len(), 1);
+}
+
+/// A loader over in-memory files.
+fn memory<'a>(files: &'a [(&'a str, &'a str)]) -> impl Fn(&Path) -> std::io::Result<String> + 'a {
+    move |path: &Path| {
+        files
+            .iter()
+            .find(|(name, _)| Path::new(name) == path)
+            .map(|(_, text)| text.to_string())
+            .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+    }
+}
+
+#[test]
+fn one_ros_type_imported_by_two_files_under_one_name_is_one_definition() {
+    // `user.cool` imports only `right.cool`; both `left.cool` and `right.cool` import
+    // the same type as `Scan`: the name is seen from `user.cool`, and no duplicate.
+    // Another type under the same name is a duplicate.
+    let files = [
+        (
+            "root.cool",
+            "import \"left.cool\";\nimport \"user.cool\";\n",
+        ),
+        (
+            "left.cool",
+            "import ros \"sensor_msgs/msg/LaserScan\" as Scan;\natomic L { output s: data<Scan>; }\n",
+        ),
+        (
+            "user.cool",
+            "import \"right.cool\";\natomic U { input s: last<Scan>; }\n",
+        ),
+        (
+            "right.cool",
+            "import ros \"sensor_msgs/msg/LaserScan\" as Scan;\n",
+        ),
+    ];
+    let analysis = coolc::analyze(&["root.cool"], &memory(&files));
+    assert!(
+        analysis.diagnostics.is_empty(),
+        "{}",
+        analysis.render(RenderOptions::plain())
+    );
+    // The `.msg` files read are sources too, each with an (empty) syntax tree: ids
+    // stay indices.
+    let paths: Vec<String> = analysis
+        .sources
+        .files()
+        .iter()
+        .map(|f| analysis.sources.display_path(f.id))
+        .collect();
+    assert_eq!(
+        paths[4..],
+        [
+            "<shipped>/sensor_msgs/msg/LaserScan.msg",
+            "<shipped>/std_msgs/msg/Header.msg",
+            "<shipped>/builtin_interfaces/msg/Time.msg",
+        ]
+    );
+    assert_eq!(analysis.files.len(), analysis.sources.files().len());
+    for (index, file) in analysis.files.iter().enumerate() {
+        assert_eq!(file.id.0 as usize, index);
+    }
+
+    let files = [
+        (
+            "root.cool",
+            "import ros \"sensor_msgs/msg/LaserScan\" as Scan;\nimport \"other.cool\";\n",
+        ),
+        (
+            "other.cool",
+            "import ros \"sensor_msgs/msg/Imu\" as Scan;\n",
+        ),
+    ];
+    let analysis = coolc::analyze(&["root.cool"], &memory(&files));
+    let codes: Vec<&str> = analysis
+        .diagnostics
+        .iter()
+        .map(|d| d.code.as_str())
+        .collect();
+    assert_eq!(codes, ["coolc::resolve::duplicate"]);
+}
+
+#[test]
+fn ros_types_are_looked_up_in_the_directories_given_then_among_the_shipped_ones() {
+    // A `Header` of the directory's own replaces the shipped one; `analyze` alone
+    // knows only the shipped ones.
+    let files = [
+        (
+            "main.cool",
+            "import ros \"std_msgs/msg/Header\";\nimport ros \"my_msgs/msg/Reading\";\n",
+        ),
+        ("dir/std_msgs/msg/Header.msg", "int32 mine\n"),
+        (
+            "dir/my_msgs/msg/Reading.msg",
+            "std_msgs/Header header\nfloat64 value\n",
+        ),
+    ];
+    let search = coolc::ros::Search::new().with_dir("dir");
+    let analysis = coolc::analyze_with(&["main.cool"], &memory(&files), &|_| Vec::new(), &search);
+    assert!(
+        analysis.diagnostics.is_empty(),
+        "{}",
+        analysis.render(RenderOptions::plain())
+    );
+    let paths: Vec<String> = analysis.sources.files()[1..]
+        .iter()
+        .map(|f| analysis.sources.display_path(f.id))
+        .collect();
+    assert_eq!(
+        paths,
+        ["dir/std_msgs/msg/Header.msg", "dir/my_msgs/msg/Reading.msg"]
+    );
+    let analysis = coolc::analyze(&["main.cool"], &memory(&files));
+    let messages: Vec<&str> = analysis
+        .diagnostics
+        .iter()
+        .map(|d| d.message.as_str())
+        .collect();
+    assert_eq!(messages, ["no `.msg` file defines `my_msgs/msg/Reading`"]);
 }

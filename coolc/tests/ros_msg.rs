@@ -270,6 +270,8 @@ const BAD: &[(&str, Code, &str)] = &[
     ("uint8 a 256\n", Code::InvalidNumber, "256"),
     ("int8 a -129\n", Code::InvalidNumber, "-129"),
     ("byte a -1\n", Code::InvalidNumber, "-1"),
+    ("float32 a 1e39\n", Code::InvalidNumber, "1e39"),
+    ("float32[] a [1.0, -3.5e38]\n", Code::InvalidNumber, "-3.5e38"),
     ("bool b yes\n", Code::TypeMismatch, "yes"),
     ("float64 f 1,5\n", Code::TypeMismatch, "1,5"),
     ("string<=3 s \"abcd\"\n", Code::TypeMismatch, "\"abcd\""),
@@ -287,6 +289,7 @@ const BAD: &[(&str, Code, &str)] = &[
     ("string<=3 S=\"a\"\n", Code::MisplacedMember, "string<=3"),
     ("int32 A=\n", Code::UnexpectedToken, "="),
     ("uint8 A=300\n", Code::InvalidNumber, "300"),
+    ("float32 A=1e39\n", Code::InvalidNumber, "1e39"),
     ("bool B=2\n", Code::TypeMismatch, "2"),
     // Duplicates (reported at the second).
     ("int32 a\nint32 b\nfloat64 a\n", Code::Duplicate, "a"),
@@ -538,12 +541,9 @@ fn a_missing_wanted_type_is_reported_where_it_was_asked_for() {
             ),
         ]
     );
-    assert!(
-        interfaces.diagnostics[0]
-            .help
-            .as_deref()
-            .unwrap()
-            .contains("<package>/msg/<Type>")
+    assert_eq!(
+        interfaces.diagnostics[0].help.as_deref(),
+        Some("write `sensor_msgs/msg/LaserScan`")
     );
 }
 
@@ -750,15 +750,19 @@ fn search_from_env_reads_ament_prefix_path() {
     );
 }
 
-/// The `rust` block of `docs/ros2.md` is the doc example of `coolc::ros`, which runs
-/// as a doc test: the two must stay the same text.
+/// The `rust` block of `docs/ros2.md`, "The library: `coolc::ros`", is the doc
+/// example of `coolc::ros`, which runs as a doc test: the two must stay the same text.
 #[test]
 fn the_documented_example_is_the_module_doc_test() {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
     let doc = std::fs::read_to_string(manifest.join("../docs/ros2.md")).unwrap();
-    let start = doc
-        .find("```rust\n")
-        .expect("docs/ros2.md has a rust block")
+    let section = doc
+        .find("\n## The library: `coolc::ros`\n")
+        .expect("docs/ros2.md documents the library");
+    let start = section
+        + doc[section..]
+            .find("```rust\n")
+            .expect("the library's section has a rust block")
         + 8;
     let documented = &doc[start..start + doc[start..].find("```\n").unwrap()];
     let module = std::fs::read_to_string(manifest.join("src/ros/mod.rs")).unwrap();
@@ -771,4 +775,22 @@ fn the_documented_example_is_the_module_doc_test() {
         .take_while(|line| *line != "```")
         .collect();
     assert_eq!(documented, format!("{}\n", lines.join("\n")));
+}
+
+#[test]
+fn a_float32_value_fits_up_to_the_largest_f32() {
+    let message = clean("float32 a 3.4028235e38\nfloat32 b -inf\nfloat64 c 1e39\nfloat32 D=nan\n");
+    let defaults: Vec<Option<f64>> = message
+        .fields
+        .iter()
+        .map(|f| match &f.default {
+            Some((Value::Float(value), _)) => Some(*value),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        defaults,
+        [Some(3.4028235e38), Some(f64::NEG_INFINITY), Some(1e39)]
+    );
+    assert!(matches!(message.constants[0].value, Value::Float(v) if v.is_nan()));
 }

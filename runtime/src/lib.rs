@@ -115,6 +115,7 @@ pub mod ranges;
 pub mod record;
 mod refused;
 pub mod remote;
+pub mod ros;
 mod runner;
 pub mod schema;
 mod spec;

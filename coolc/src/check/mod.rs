@@ -9,7 +9,8 @@
 //! (types, defaults, sizes, timing), `component` (members and their placement),
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
 //! (instances, connections, interfaces, containment), `adaptation` (`adaptation`
-//! blocks) and `rules` (typed supervisor rule expressions). `model` computes what a component offers to others (ports,
+//! blocks), `ros` (the names `import ros` gives) and `rules` (typed supervisor rule
+//! expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
 //!
 //! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol
@@ -23,6 +24,7 @@ mod compound;
 pub mod model;
 mod names;
 mod response;
+mod ros;
 mod rules;
 mod values;
 
@@ -111,6 +113,7 @@ impl Checker<'_, '_> {
     fn item(&mut self, item: &ast::Item) {
         match item {
             ast::Item::Import(_) => {}
+            ast::Item::RosImport(import) => ros::import(self, import),
             ast::Item::Packet(packet) => {
                 names::type_name(self, &packet.name);
                 names::duplicates(self, packet.fields.iter().map(|f| &f.name), "field");

@@ -35,6 +35,14 @@ pub enum Ty {
     Enum(String),
     /// An extern packet, by name.
     Extern(String),
+    /// A ROS 2 message type (`import ros`), by the name the descriptions use and the
+    /// type's full name (`sensor_msgs/msg/LaserScan`, as written in the import).
+    Ros {
+        /// The name in the descriptions (the import's alias, else the type's name).
+        name: String,
+        /// The type's full name.
+        ros: String,
+    },
     /// `[T]`
     List(Box<Ty>),
     /// `[T; N]`
@@ -52,6 +60,8 @@ impl Ty {
             (Ty::Unknown, _) | (_, Ty::Unknown) => true,
             (Ty::List(a), Ty::List(b)) | (Ty::Optional(a), Ty::Optional(b)) => a.same(b),
             (Ty::Array(a, n), Ty::Array(b, m)) => n == m && a.same(b),
+            // Two names of one ROS type are the same type.
+            (Ty::Ros { ros: a, .. }, Ty::Ros { ros: b, .. }) => a == b,
             _ => self == other,
         }
     }
@@ -65,7 +75,9 @@ impl fmt::Display for Ty {
             Ty::Str => f.write_str("String"),
             Ty::Time => f.write_str("Time"),
             Ty::Duration => f.write_str("Duration"),
-            Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) => f.write_str(name),
+            Ty::Packet(name) | Ty::Enum(name) | Ty::Extern(name) | Ty::Ros { name, .. } => {
+                f.write_str(name)
+            }
             Ty::List(inner) => write!(f, "[{inner}]"),
             Ty::Array(inner, n) => write!(f, "[{inner}; {n}]"),
             Ty::Optional(inner) => write!(f, "{inner}?"),
@@ -331,6 +343,15 @@ impl<'a> Model<'a> {
         }
     }
 
+    /// The `import ros` that defines `name`.
+    pub fn ros_import(&self, name: &str) -> Option<&'a ast::RosImport> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::RosImport(import) => Some(import),
+            _ => None,
+        }
+    }
+
     /// The converter named `name`.
     pub fn converter(&self, name: &str) -> Option<(FileId, &'a ast::Converter)> {
         let def = self.symbols.defs.get(name)?;
@@ -356,6 +377,13 @@ impl<'a> Model<'a> {
                     Some(DefKind::Packet) => Ty::Packet(name.name.clone()),
                     Some(DefKind::Enum) => Ty::Enum(name.name.clone()),
                     Some(DefKind::ExternPacket) => Ty::Extern(name.name.clone()),
+                    Some(DefKind::RosMessage) => match self.ros_import(&name.name) {
+                        Some(import) => Ty::Ros {
+                            name: name.name.clone(),
+                            ros: import.ros_name.value.clone(),
+                        },
+                        None => Ty::Unknown,
+                    },
                     _ => Ty::Unknown,
                 }
             }

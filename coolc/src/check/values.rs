@@ -17,7 +17,12 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
             symbols.resolve(
                 checker.file,
                 name,
-                &[DefKind::Packet, DefKind::Enum, DefKind::ExternPacket],
+                &[
+                    DefKind::Packet,
+                    DefKind::Enum,
+                    DefKind::ExternPacket,
+                    DefKind::RosMessage,
+                ],
                 Code::UnknownType,
                 "type",
                 checker.diagnostics,
@@ -240,6 +245,11 @@ fn value_error(
             expr,
             expected,
             Some("`Time` values have no literal; leave the default out".into()),
+        )),
+        (Ty::Ros { .. }, _) => Err(mismatch(
+            expr,
+            expected,
+            Some("ROS message types have no literal; leave the default out (the type's own defaults apply)".into()),
         )),
         (Ty::Packet(_) | Ty::Extern(_), _) => Err(mismatch(
             expr,

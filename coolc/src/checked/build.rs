@@ -10,7 +10,8 @@ use super::model::{
     Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
     Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
     OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Range, Recovery,
-    Redundant, Ref, Restart, State, StateMember, TableValue, TimingEntry, TypeDef, Value, Variable,
+    Redundant, Ref, Restart, RosImport, State, StateMember, TableValue, TimingEntry, TypeDef,
+    Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -44,8 +45,8 @@ pub(super) fn components(files: &[ast::File], resolved: &Resolved) -> Vec<Compon
     out
 }
 
-/// Every packet, enum and extern packet, then every converter, in source order
-/// (files in `FileId` order), each once (the one the symbol table names).
+/// Every packet, enum, extern packet and ROS import, then every converter, in source
+/// order (files in `FileId` order), each once (the one the symbol table names).
 pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, Vec<Converter>) {
     let model = Model::new(files, &resolved.symbols);
     let named_here = |file: FileId, name: &str| {
@@ -93,6 +94,21 @@ pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, 
                         name: def.name.name.clone(),
                         rust_path: def.rust_path.value.clone(),
                     }));
+                }
+                ast::Item::RosImport(import) => {
+                    let (Some(name), Ok(ros)) = (
+                        &import.name,
+                        crate::ros::TypeName::parse(&import.ros_name.value),
+                    ) else {
+                        continue;
+                    };
+                    if named_here(file.id, &name.name) {
+                        types.push(TypeDef::Ros(RosImport {
+                            doc: import.doc.0.clone(),
+                            name: name.name.clone(),
+                            ros,
+                        }));
+                    }
                 }
                 ast::Item::Converter(def) if named_here(file.id, &def.name.name) => {
                     converters.push(Converter {

@@ -18,6 +18,7 @@
 use crate::ast::{self, FileId, Span};
 use crate::check::Typed;
 use crate::check::model::{PortKind, Tuning, Ty};
+use crate::ros::{Message, TypeHash, TypeName};
 
 pub use crate::ast::{ComponentKind, VarKind};
 
@@ -764,6 +765,8 @@ pub enum TypeDef {
     Enum(Enum),
     /// `extern packet Name = "path";`
     Extern(Extern),
+    /// `import ros "pkg/msg/Type" [as Name];`
+    Ros(RosImport),
 }
 
 impl TypeDef {
@@ -773,8 +776,30 @@ impl TypeDef {
             TypeDef::Packet(packet) => &packet.name,
             TypeDef::Enum(def) => &def.name,
             TypeDef::Extern(def) => &def.name,
+            TypeDef::Ros(def) => &def.name,
         }
     }
+}
+
+/// `import ros "pkg/msg/Type" [as Name];`: a name for a ROS 2 message type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosImport {
+    /// Its doc comment.
+    pub doc: Vec<String>,
+    /// The name the descriptions use.
+    pub name: String,
+    /// The type.
+    pub ros: TypeName,
+}
+
+/// A ROS 2 message type of the crate: one imported, or one that an imported type
+/// references (directly or not).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RosMessage {
+    /// Its `.msg` file, read.
+    pub message: Message,
+    /// Its RIHS01 type hash.
+    pub hash: TypeHash,
 }
 
 /// `packet Name { fields }`

@@ -56,10 +56,16 @@ pub fn load(
     for want in wanted {
         match TypeName::parse(want.name) {
             Ok(name) => queue.push_back((name, want.file, want.span)),
-            Err(error) => missing.push(
-                Diagnostic::error(Code::UnknownType, want.file, want.span, error.to_string())
-                    .with_help("a ROS 2 message type is named `<package>/msg/<Type>`, as `sensor_msgs/msg/LaserScan`"),
-            ),
+            Err(error) => {
+                let help = match want.name.split('/').collect::<Vec<_>>()[..] {
+                    [package, name] => format!("write `{package}/msg/{name}`"),
+                    _ => "a ROS 2 message type is named `<package>/msg/<Type>`, as `sensor_msgs/msg/LaserScan`".to_owned(),
+                };
+                missing.push(
+                    Diagnostic::error(Code::UnknownType, want.file, want.span, error.to_string())
+                        .with_help(help),
+                );
+            }
         }
     }
     let mut seen = HashSet::new();

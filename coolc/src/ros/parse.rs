@@ -500,6 +500,19 @@ impl Parser<'_> {
             },
             Base::Float32 | Base::Float64 => {
                 match text.parse::<f64>() {
+                    // Rust's rule for a literal: it must not round to infinity.
+                    Ok(value)
+                        if *base == Base::Float32
+                            && value.is_finite()
+                            && (value as f32).is_infinite() =>
+                    {
+                        self.error(
+                            Code::InvalidNumber,
+                            span,
+                            format!("`{text}` does not fit a `float32` (at most {:e})", f32::MAX),
+                        );
+                        None
+                    }
                     Ok(value) => Some(Value::Float(value)),
                     Err(_) => {
                         self.error(

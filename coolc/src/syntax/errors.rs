@@ -322,6 +322,8 @@ pub(super) fn rule_name(rule: Rule) -> Option<&'static str> {
         var_range => "`in low..=high`",
         kw_backoff => "`backoff`",
         kw_adaptation => "`adaptation`",
+        kw_ros => "`ros`",
+        kw_as => "`as`",
         _ => return None,
     })
 }

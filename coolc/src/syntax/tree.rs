@@ -114,6 +114,8 @@ pub(super) fn is_keyword(rule: Rule) -> bool {
             | Rule::kw_in
             | Rule::kw_backoff
             | Rule::kw_adaptation
+            | Rule::kw_ros
+            | Rule::kw_as
     )
 }
 
@@ -206,6 +208,21 @@ impl Builder<'_> {
             Rule::import => {
                 let path = self.string(&children(inner).into_iter().next()?);
                 ast::Item::Import(ast::Import { path, span })
+            }
+            Rule::ros_import => {
+                let parts = children(inner);
+                let ros_name = self.string(parts.first()?);
+                let alias = parts.get(1).map(|p| self.ident(p));
+                let name = alias
+                    .clone()
+                    .or_else(|| ast::RosImport::own_name(&ros_name));
+                ast::Item::RosImport(ast::RosImport {
+                    doc,
+                    ros_name,
+                    alias,
+                    name,
+                    span,
+                })
             }
             Rule::packet => {
                 let mut parts = children(inner).into_iter();

@@ -1,6 +1,7 @@
 //! Helpers shared by the tests that write, build and run generated crates.
 #![allow(dead_code, reason = "each test binary uses a different subset")]
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -42,7 +43,18 @@ pub fn copy_descriptions(dir: &Path) {
 
 /// Analyzes `root`, lowers it and writes (or merges into) the crate `out`.
 pub fn compile(root: &Path, out: &Path, package: &str) -> merge::Report {
-    let checked = coolc::analyze(&[root], &|p: &Path| std::fs::read_to_string(p))
+    compile_with(root, out, package, &coolc::ros::Search::new())
+}
+
+/// [`compile`], with `import ros` types looked up through `ros`.
+pub fn compile_with(
+    root: &Path,
+    out: &Path,
+    package: &str,
+    ros: &coolc::ros::Search,
+) -> merge::Report {
+    let read = |p: &Path| std::fs::read_to_string(p);
+    let checked = coolc::analyze_with(&[root], &read, &|_| Vec::new(), ros)
         .checked()
         .unwrap_or_else(|analysis| panic!("{}", analysis.render(coolc::RenderOptions::plain())));
     let options = lower::Options {
@@ -57,6 +69,11 @@ pub fn compile(root: &Path, out: &Path, package: &str) -> merge::Report {
 /// Runs `cargo <args>` in `dir` with the shared generated-crate target directory;
 /// panics with cargo's output when it fails; returns its stdout.
 pub fn cargo(dir: &Path, args: &[&str]) -> String {
+    cargo_with_env(dir, args, &[])
+}
+
+/// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
+pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
     let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let output = Command::new(cargo)
@@ -64,6 +81,7 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
         .current_dir(dir)
         .env("CARGO_TARGET_DIR", target)
         .env_remove("RUSTFLAGS")
+        .envs(env.iter().copied())
         .output()
         .unwrap();
     assert!(
@@ -81,6 +99,17 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
 /// rustfmt-clean and clippy-clean under `-D warnings`; runs `tests/run.rs` and asserts
 /// that each of `tests` passed.
 pub fn fill_check_and_run(krate: &Path, data_dir: &str, user_files: &[&str], tests: &[&str]) {
+    fill_check_and_run_with_env(krate, data_dir, user_files, tests, &[]);
+}
+
+/// [`fill_check_and_run`], with the variables `env` set for the tests.
+pub fn fill_check_and_run_with_env(
+    krate: &Path,
+    data_dir: &str,
+    user_files: &[&str],
+    tests: &[&str],
+    env: &[(&str, &OsStr)],
+) {
     for name in user_files {
         std::fs::copy(data(data_dir).join(name), krate.join("src").join(name)).unwrap();
     }
@@ -91,7 +120,7 @@ pub fn fill_check_and_run(krate: &Path, data_dir: &str, user_files: &[&str], tes
         krate,
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     );
-    let output = cargo(krate, &["test", "--test", "run"]);
+    let output = cargo_with_env(krate, &["test", "--test", "run"], env);
     for test in tests {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }
