@@ -183,14 +183,15 @@ impl Commander {
                 Some(v) if v.kind != VarKind::Controllable => {
                     Some(Refused::NotControllable(variable.to_owned()))
                 }
-                Some(_) => None,
+                // Outside its declared range: refused here as the instance would.
+                Some(v) => v.range.and_then(|range| {
+                    range.check(&value).err().map(|outside| {
+                        Refused::InvalidValue(format!("invalid value for `{variable}`: {outside}"))
+                    })
+                }),
             };
-        self.give(
-            instance,
-            described,
-            Command::Set(variable.to_owned(), value),
-            check,
-        )
+        let command = Command::Set(variable.to_owned(), value.clone());
+        self.give(instance, described, command, check)
     }
 
     /// Give `instance` a new configuration (its `configuration` block's record; the

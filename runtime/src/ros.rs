@@ -75,7 +75,10 @@ impl<'de, T, A: DeserializeAs<'de, T>, const N: usize> Visitor<'de> for BoundedV
         if let Some(len) = seq.size_hint().filter(|len| *len > N) {
             return Err(de::Error::invalid_length(len, &self));
         }
-        let mut items = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(N));
+        // Room for what the input announces, within the bound and within a cautious
+        // amount of memory: the announcement is the sender's.
+        let cautious = (1 << 20) / size_of::<T>().max(1);
+        let mut items = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(N).min(cautious));
         while let Some(item) = seq.next_element::<DeserializeAsWrap<T, A>>()? {
             if items.len() == N {
                 return Err(de::Error::custom(format_args!(
@@ -89,7 +92,8 @@ impl<'de, T, A: DeserializeAs<'de, T>, const N: usize> Visitor<'de> for BoundedV
 }
 
 /// The serde adapter of a bounded string (`.msg` `string<=N`, a `String`): at most `N`
-/// characters. Decoding a longer string is an error; encoding writes what it is given.
+/// bytes, as ROS 2 bounds a `string` (a `char` is a byte). Decoding a longer string is
+/// an error; encoding writes what it is given.
 pub struct BoundedString<const N: usize>;
 
 impl<const N: usize> SerializeAs<String> for BoundedString<N> {
@@ -101,11 +105,10 @@ impl<const N: usize> SerializeAs<String> for BoundedString<N> {
 impl<'de, const N: usize> DeserializeAs<'de, String> for BoundedString<N> {
     fn deserialize_as<D: Deserializer<'de>>(deserializer: D) -> Result<String, D::Error> {
         let text = String::deserialize(deserializer)?;
-        let count = text.chars().count();
-        if count > N {
+        if text.len() > N {
             return Err(de::Error::invalid_length(
-                count,
-                &format!("a string of at most {N} characters").as_str(),
+                text.len(),
+                &format!("a string of at most {N} bytes").as_str(),
             ));
         }
         Ok(text)
@@ -135,7 +138,7 @@ mod tests {
     fn fits() -> Bounds {
         Bounds {
             few: vec![1, 2, 3],
-            label: "çaça".into(),
+            label: "ça!".into(),
             tags: vec!["abc".into(), String::new()],
             pair: ["ab".into(), "c".into()],
         }
@@ -185,15 +188,15 @@ mod tests {
             ),
             (
                 |b| b.label.push('x'),
-                "invalid length 5, expected a string of at most 4 characters",
+                "invalid length 5, expected a string of at most 4 bytes",
             ),
             (
                 |b| b.tags[1] = "abcd".into(),
-                "invalid length 4, expected a string of at most 3 characters",
+                "invalid length 4, expected a string of at most 3 bytes",
             ),
             (
                 |b| b.pair[0] = "abc".into(),
-                "invalid length 3, expected a string of at most 2 characters",
+                "invalid length 3, expected a string of at most 2 bytes",
             ),
         ];
         for (change, expected) in cases {

@@ -1368,6 +1368,23 @@ impl Runner {
     }
 
     fn run_start(&mut self) -> Result<(), String> {
+        // A ranged variable starts inside its range, however its value was given (an
+        // instance's override, the variables a component was built with).
+        for (index, variable) in self.spec.variables.iter().enumerate() {
+            let Some(range) = variable.range else {
+                continue;
+            };
+            let automaton = &*self.automaton;
+            let Ok(value) = catch_unwind(AssertUnwindSafe(|| automaton.get(index))) else {
+                continue;
+            };
+            if let Err(outside @ crate::OutOfRange::Outside { .. }) = range.check(&value) {
+                return Err(format!(
+                    "the initial value of `{}`: {outside}",
+                    variable.name
+                ));
+            }
+        }
         match self.call(|automaton, cx| automaton.start(cx)) {
             Ok(Ok(())) => {
                 self.set_error(None);

@@ -374,46 +374,95 @@ pub struct VarSpec {
 pub enum VarRange {
     /// An integer variable's range.
     Int(i128, i128),
-    /// A float variable's range.
+    /// An `f64` variable's range.
     Float(f64, f64),
+    /// An `f32` variable's range: a value is judged as the `f32` it is stored as.
+    F32(f32, f32),
 }
 
-/// A value outside a variable's range ([`VarRange::check`]).
+/// A value a ranged variable refuses ([`VarRange::check`]).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{value} is outside its range {range}")]
-pub struct OutOfRange {
-    /// The value refused, as a number.
-    pub value: String,
-    /// The range.
-    pub range: VarRange,
+pub enum OutOfRange {
+    /// A number outside the range.
+    #[error("{value} is outside its range {range}")]
+    Outside {
+        /// The value refused, as a number.
+        value: String,
+        /// The range.
+        range: VarRange,
+    },
+    /// Not a number: a ranged variable takes numbers only.
+    #[error("a {kind} is not a number, and the variable takes numbers in {range}")]
+    NotANumber {
+        /// The kind of value given ([`crate::Value::kind_name`]).
+        kind: &'static str,
+        /// The range.
+        range: VarRange,
+    },
+}
+
+/// A number, however a value carries it.
+enum Number {
+    Int(i128),
+    Float(f64),
+}
+
+impl Number {
+    /// The number `value` holds: an integer, a float, or a JSON number (what a command
+    /// decoded from JSON may carry); `None` for anything else.
+    fn of(value: &crate::Value) -> Option<Number> {
+        use crate::Value;
+        match value {
+            Value::Int(v) => Some(Number::Int(i128::from(*v))),
+            Value::UInt(v) => Some(Number::Int(i128::from(*v))),
+            Value::Float(v) => Some(Number::Float(*v)),
+            Value::Json(serde_json::Value::Number(n)) => n
+                .as_i64()
+                .map(|v| Number::Int(i128::from(v)))
+                .or_else(|| n.as_u64().map(|v| Number::Int(i128::from(v))))
+                .or_else(|| n.as_f64().map(Number::Float)),
+            _ => None,
+        }
+    }
+
+    #[allow(clippy::cast_precision_loss)]
+    fn float(&self) -> f64 {
+        match *self {
+            Number::Int(v) => v as f64,
+            Number::Float(v) => v,
+        }
+    }
 }
 
 impl VarRange {
-    /// Whether `value` lies in the range. A value that is not a number is not judged
-    /// here (the variable's own conversion refuses it); NaN lies in no range.
+    /// Whether `value` lies in the range: a number of any kind (NaN lies in no range);
+    /// anything else is refused, since a ranged variable is a number.
     pub fn check(&self, value: &crate::Value) -> Result<(), OutOfRange> {
-        use crate::Value;
-        let inside = match (*self, value) {
-            (VarRange::Int(low, high), Value::Int(v)) => (low..=high).contains(&i128::from(*v)),
-            (VarRange::Int(low, high), Value::UInt(v)) => (low..=high).contains(&i128::from(*v)),
+        let Some(number) = Number::of(value) else {
+            return Err(OutOfRange::NotANumber {
+                kind: value.kind_name(),
+                range: *self,
+            });
+        };
+        #[allow(clippy::cast_possible_truncation)]
+        let (inside, shown) = match (*self, &number) {
+            (VarRange::Int(low, high), Number::Int(v)) => ((low..=high).contains(v), v.to_string()),
             // A float for an integer variable: its conversion refuses it.
-            (VarRange::Int(..), _) => true,
-            (VarRange::Float(low, high), Value::Float(v)) => (low..=high).contains(v),
-            #[allow(clippy::cast_precision_loss)]
-            (VarRange::Float(low, high), Value::Int(v)) => (low..=high).contains(&(*v as f64)),
-            #[allow(clippy::cast_precision_loss)]
-            (VarRange::Float(low, high), Value::UInt(v)) => (low..=high).contains(&(*v as f64)),
-            (VarRange::Float(..), _) => true,
+            (VarRange::Int(..), Number::Float(_)) => (true, String::new()),
+            (VarRange::Float(low, high), number) => {
+                let v = number.float();
+                ((low..=high).contains(&v), format!("{v:?}"))
+            }
+            (VarRange::F32(low, high), number) => {
+                let v = number.float() as f32;
+                ((low..=high).contains(&v), format!("{v:?}"))
+            }
         };
         if inside {
             return Ok(());
         }
-        let value = match value {
-            Value::Float(v) => format!("{v:?}"),
-            other => other.to_string(),
-        };
-        Err(OutOfRange {
-            value,
+        Err(OutOfRange::Outside {
+            value: shown,
             range: *self,
         })
     }
@@ -424,6 +473,7 @@ impl std::fmt::Display for VarRange {
         match self {
             VarRange::Int(low, high) => write!(f, "{low}..={high}"),
             VarRange::Float(low, high) => write!(f, "{low:?}..={high:?}"),
+            VarRange::F32(low, high) => write!(f, "{low:?}..={high:?}"),
         }
     }
 }

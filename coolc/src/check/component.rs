@@ -2,7 +2,7 @@
 //! may appear once, per-scope duplicates, variables, ports and exceptions.
 
 use super::model::DEFAULT_CONTROLLABLES;
-use super::model::{DEFAULT_OBSERVABLES, Ty};
+use super::model::{DEFAULT_OBSERVABLES, Number, Range, Ty};
 use super::{Checker, adaptation, automaton, compound, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
@@ -495,17 +495,21 @@ fn range(checker: &mut Checker<'_, '_>, variable: &ast::Variable, range: &ast::V
     }
     values::value(checker, &range.low, &expected);
     values::value(checker, &range.high, &expected);
-    use crate::checked::model::Value;
-    // Integers compare as integers (exact at any width), anything else as floats.
-    let order = |a: &Value, b: &Value| match (a, b) {
-        (Value::Int(a), Value::Int(b)) => Some(a.cmp(b)),
-        (Value::Int(a), Value::Float(b)) => (*a as f64).partial_cmp(b),
-        (Value::Float(a), Value::Int(b)) => a.partial_cmp(&(*b as f64)),
-        (Value::Float(a), Value::Float(b)) => a.partial_cmp(b),
-        _ => None,
+    let Some(bounds) = Range::of(range, &expected) else {
+        // Ends that are not numbers of the type: reported just above, or beyond what
+        // the type holds.
+        if Number::of(&range.low).is_some() && Number::of(&range.high).is_some() {
+            refuse(
+                checker,
+                range.span,
+                format!("the range of `{name}` has an end beyond what a `{expected}` holds"),
+                "not a finite value of the type",
+                "write ends the variable's type can hold",
+            );
+        }
+        return;
     };
-    let (low, high) = (Value::of(&range.low), Value::of(&range.high));
-    if order(&low, &high) == Some(std::cmp::Ordering::Greater) {
+    if bounds.is_empty() {
         return refuse(
             checker,
             range.span,
@@ -515,15 +519,14 @@ fn range(checker: &mut Checker<'_, '_>, variable: &ast::Variable, range: &ast::V
         );
     }
     if let Some(default) = variable.value.as_ref()
-        && let value = Value::of(default)
-        && (order(&value, &low) == Some(std::cmp::Ordering::Less)
-            || order(&value, &high) == Some(std::cmp::Ordering::Greater))
+        && let Some(value) = Number::of(default)
+        && !bounds.contains(value)
     {
         let diagnostic = checker
             .error(
                 Code::BadRange,
                 default.span,
-                format!("the default of `{name}` lies outside its range"),
+                format!("the default of `{name}` lies outside its range {bounds}"),
             )
             .with_label("outside the range")
             .with_secondary(range.span, "the range")

@@ -174,6 +174,25 @@ fn instance(
             .config
             .get(&override_.name.name)
             .or(controllable.map(|var| &var.ty));
+        // A controllable's override meets its range, as a set would.
+        if let Some(var) = controllable
+            && let Some(range) = var.range.filter(|range| !range.is_empty())
+            && let Some(value) = super::model::Number::of(&override_.value)
+            && !range.contains(value)
+        {
+            let diagnostic = checker
+                .error(
+                    Code::BadRange,
+                    override_.value.span,
+                    format!(
+                        "`{}` of `{}` takes values in {range}",
+                        override_.name.name, instance.component.name
+                    ),
+                )
+                .with_label("outside the variable's range")
+                .with_help("give a value inside the range its component declares");
+            checker.push(diagnostic);
+        }
         match expected {
             Some(expected) => values::value(checker, &override_.value, expected),
             None => {

@@ -158,8 +158,108 @@ pub struct Var {
     pub kind: ast::VarKind,
     /// Its type.
     pub ty: Ty,
+    /// Its range (`in low..=high`), when it is an own controllable number with one
+    /// the checker accepts.
+    pub range: Option<Range>,
     /// Where it is declared.
     pub span: Span,
+}
+
+/// A constant number as written: an integer or a float, its sign applied.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Number {
+    /// An integer.
+    Int(i128),
+    /// A number with a point.
+    Float(f64),
+}
+
+impl Number {
+    /// The number `expr` writes, if it writes one.
+    pub fn of(expr: &ast::Expr) -> Option<Number> {
+        match &expr.kind {
+            ast::ExprKind::Int(value) => Some(Number::Int((*value).into())),
+            ast::ExprKind::Float(value) => Some(Number::Float(*value)),
+            ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) => match Number::of(inner)? {
+                Number::Int(value) => Some(Number::Int(-value)),
+                Number::Float(value) => Some(Number::Float(-value)),
+            },
+            _ => None,
+        }
+    }
+
+    #[allow(clippy::cast_precision_loss)]
+    fn float(self) -> f64 {
+        match self {
+            Number::Int(value) => value as f64,
+            Number::Float(value) => value,
+        }
+    }
+}
+
+/// The values a controllable variable may be set to, both ends included, in the
+/// variable's own kind of number (an `f32` variable's ends rounded to `f32`, as its
+/// values are stored).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Range {
+    /// An integer variable's range.
+    Int(i128, i128),
+    /// An `f64` variable's range.
+    Float(f64, f64),
+    /// An `f32` variable's range.
+    F32(f32, f32),
+}
+
+impl Range {
+    /// The range `range` says for a variable of type `ty`: `None` unless its ends are
+    /// numbers of the type (finite, within `f32` for an `f32`).
+    #[allow(clippy::cast_possible_truncation)]
+    pub fn of(range: &ast::VarRange, ty: &Ty) -> Option<Range> {
+        let (low, high) = (Number::of(&range.low)?, Number::of(&range.high)?);
+        match (ty, low, high) {
+            (Ty::Int(_), Number::Int(low), Number::Int(high)) => Some(Range::Int(low, high)),
+            (Ty::Float(ast::Prim::F32), low, high) => {
+                let (low, high) = (low.float() as f32, high.float() as f32);
+                (low.is_finite() && high.is_finite()).then_some(Range::F32(low, high))
+            }
+            (Ty::Float(_), low, high) => {
+                let (low, high) = (low.float(), high.float());
+                (low.is_finite() && high.is_finite()).then_some(Range::Float(low, high))
+            }
+            _ => None,
+        }
+    }
+
+    /// Whether the range holds no value (its low end above its high end).
+    pub fn is_empty(&self) -> bool {
+        match *self {
+            Range::Int(low, high) => low > high,
+            Range::Float(low, high) => low > high,
+            Range::F32(low, high) => low > high,
+        }
+    }
+
+    /// Whether `number` lies in the range, judged as the variable stores it.
+    #[allow(clippy::cast_possible_truncation)]
+    pub fn contains(&self, number: Number) -> bool {
+        match (*self, number) {
+            (Range::Int(low, high), Number::Int(value)) => (low..=high).contains(&value),
+            // A float for an integer: a type error, reported as one.
+            (Range::Int(..), Number::Float(_)) => true,
+            (Range::Float(low, high), number) => (low..=high).contains(&number.float()),
+            (Range::F32(low, high), number) => (low..=high).contains(&(number.float() as f32)),
+        }
+    }
+}
+
+impl fmt::Display for Range {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Range::Int(low, high) => write!(f, "{low}..={high}"),
+            Range::Float(low, high) => write!(f, "{low:?}..={high:?}"),
+            Range::F32(low, high) => write!(f, "{low:?}..={high:?}"),
+        }
+    }
 }
 
 /// What a component offers.
@@ -503,6 +603,14 @@ impl<'a> Model<'a> {
                         .entry(variable.name.name.clone())
                         .or_insert(Var {
                             kind: variable.kind,
+                            range: variable
+                                .range
+                                .as_ref()
+                                .filter(|_| {
+                                    variable.kind == ast::VarKind::Controllable
+                                        && variable.ty.is_some()
+                                })
+                                .and_then(|range| Range::of(range, &ty)),
                             ty,
                             span: variable.span,
                         });

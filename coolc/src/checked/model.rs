@@ -17,6 +17,7 @@
 
 use crate::ast::{self, FileId, Span};
 use crate::check::Typed;
+pub use crate::check::model::Range;
 use crate::check::model::{PortKind, Tuning, Ty};
 use crate::ros::{Message, TypeHash, TypeName};
 
@@ -222,36 +223,6 @@ pub struct Variable {
     pub range: Option<Range>,
     /// Where it is written (members of different kinds interleave by it).
     pub span: Span,
-}
-
-/// The values a controllable variable may be set to, both ends included.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Range {
-    /// An integer variable's range.
-    Int(i128, i128),
-    /// A float variable's range.
-    Float(f64, f64),
-}
-
-impl Range {
-    /// The range `range` says for a variable of type `ty`, when it is one the checker
-    /// accepts (a number type, constant ends of it).
-    pub fn of(range: &ast::VarRange, ty: &Ty) -> Option<Range> {
-        let (low, high) = (Value::of(&range.low), Value::of(&range.high));
-        match (ty, low, high) {
-            (Ty::Int(_), Value::Int(low), Value::Int(high)) => Some(Range::Int(low, high)),
-            (Ty::Float(_), low, high) => {
-                #[allow(clippy::cast_precision_loss)]
-                let float = |value: Value| match value {
-                    Value::Int(n) => Some(n as f64),
-                    Value::Float(x) => Some(x),
-                    _ => None,
-                };
-                Some(Range::Float(float(low)?, float(high)?))
-            }
-            _ => None,
-        }
-    }
 }
 
 /// A configuration field.

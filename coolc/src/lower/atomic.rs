@@ -259,6 +259,9 @@ impl<'a> Lowerer<'a> {
             Some(Range::Float(low, high)) => format!(
                 "::core::option::Option::Some(::coolbot::VarRange::Float({low:?}, {high:?}))"
             ),
+            Some(Range::F32(low, high)) => {
+                format!("::core::option::Option::Some(::coolbot::VarRange::F32({low:?}, {high:?}))")
+            }
         };
         Some(ir::Var {
             to_value,

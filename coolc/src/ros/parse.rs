@@ -533,14 +533,13 @@ impl Parser<'_> {
                     );
                     return None;
                 };
-                let length = value.chars().count() as u64;
+                // ROS 2 bounds a string in bytes (a `char` is a byte).
+                let length = value.len() as u64;
                 if let Some(bound) = bound.filter(|bound| length > *bound) {
                     self.error(
                         Code::TypeMismatch,
                         span,
-                        format!(
-                            "this string has {length} characters; a `{base}` holds at most {bound}"
-                        ),
+                        format!("this string has {length} bytes; a `{base}` holds at most {bound}"),
                     );
                     return None;
                 }

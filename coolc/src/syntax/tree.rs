@@ -1070,6 +1070,14 @@ impl Builder<'_> {
             }
             Rule::float => {
                 let value = pair.as_str().replace('_', "").parse::<f64>().unwrap_or(0.0);
+                // `1e999` parses as infinity, which no Rust literal writes.
+                if !value.is_finite() {
+                    self.error(
+                        Code::InvalidNumber,
+                        span,
+                        format!("`{}` is beyond the largest `f64`", pair.as_str()),
+                    );
+                }
                 Some(ast::Expr {
                     kind: ast::ExprKind::Float(value),
                     span,
