@@ -8,3 +8,8 @@
 {% macro header(line) -%}
 {{ line }}
 {%- endmacro %}
+
+{#- A packet's struct and, when its defaults are not the fields' own, its `Default`. -#}
+{% macro packet(p) -%}
+#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %}
+{%- endmacro %}

@@ -11,7 +11,7 @@ pub type {{ e.name }} = {{ e.path }};
 
 
 {% call m::doc(&p.doc) %}{% endcall %}
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %})]
+{% call m::packet(p) %}{% endcall %})]
 pub struct {{ p.name }} {
 {%- for f in p.fields %}
 {%- call m::doc(&f.doc) %}{% endcall %}
@@ -86,7 +86,7 @@ pub mod ros {
     {%- if !loop.first %}
 {% endif %}
 {%- call m::doc(&p.doc) %}{% endcall %}
-#[derive(Clone, Debug, PartialEq, ::serde::Serialize, ::serde::Deserialize{% if p.derives_default() %}, Default{% endif %})]
+{% call m::packet(p) %}{% endcall %})]
 pub struct {{ p.name }} {
 {%- for f in p.fields %}
 {%- call m::doc(&f.doc) %}{% endcall %}
