@@ -64,7 +64,7 @@ struct Args {
     #[arg(long, requires = "node", value_parser = parse_duration)]
     lease: Option<Duration>,
     /// With --node: listen on this Zenoh endpoint (e.g. `tcp/127.0.0.1:7447`; off
-    /// loopback, `tls/0.0.0.0:7447` with --config, or tcp with --insecure); repeatable.
+    /// loopback, `quic/0.0.0.0:7447` with --config, or tcp with --insecure); repeatable.
     #[arg(long, requires = "node", value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// With --node: connect to this Zenoh endpoint; repeatable.

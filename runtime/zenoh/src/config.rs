@@ -16,8 +16,8 @@ pub fn peer_config(
     secure_config(listen, connect, multicast, &Security::none())
 }
 
-/// [`peer_config`] under `security`: endpoints are checked against it (`tls/`
-/// endpoints need its TLS; `tcp/` endpoints off loopback, and multicast scouting,
+/// [`peer_config`] under `security`: endpoints are checked against it (`quic/` and
+/// `tls/` endpoints need its TLS; `tcp/` endpoints off loopback, and multicast scouting,
 /// need TLS or plaintext allowed), then its TLS and access rules are written into the
 /// configuration (`docs/distribution.md`, "Security"). Multicast scouting finds peers
 /// on a LAN without naming them; tests and machines without multicast name their

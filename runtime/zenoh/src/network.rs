@@ -31,7 +31,7 @@ network options (a build with the `network` feature):
   --serve              with --node: run no components of this program, only what other
                        nodes place on this one, until stopped
   --listen ENDPOINT    with --node: listen on ENDPOINT (e.g. tcp/127.0.0.1:7447, or
-                       tls/0.0.0.0:7447 with --config); repeatable
+                       quic/0.0.0.0:7447 with --config); repeatable
   --connect ENDPOINT   with --node: connect to ENDPOINT; repeatable
   --config FILE        with --node: the security file (TLS certificates, access rules);
                        without one the node stays on loopback

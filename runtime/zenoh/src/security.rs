@@ -382,8 +382,8 @@ impl Security {
         )
     }
 
-    /// Check the endpoints and scouting against this security: `tls/` endpoints need
-    /// TLS; `tcp/` endpoints off loopback and multicast scouting need TLS or plaintext
+    /// Check the endpoints and scouting against this security: `tls/` and `quic/`
+    /// endpoints need TLS (a `tls/` one is warned about); `tcp/` endpoints off loopback and multicast scouting need TLS or plaintext
     /// allowed.
     pub(crate) fn check(
         &self,
@@ -394,17 +394,29 @@ impl Security {
         let open = self.tls.is_some() || self.allow_plaintext;
         for endpoint in listen.iter().chain(connect) {
             let (protocol, loopback) = parse_endpoint(endpoint)?;
-            if protocol == "tls" && self.tls.is_none() {
+            let secure = matches!(protocol, "tls" | "quic");
+            if secure && self.tls.is_none() {
                 return Err(SecurityError::Endpoint(format!(
                     "`{endpoint}` is a TLS endpoint but the node has no certificate: \
                      give it a security file with [tls] (--config FILE)"
                 ))
                 .into());
             }
-            if protocol != "tls" && !loopback && !self.allow_plaintext {
+            if protocol == "tls" {
+                static SAID: Once = Once::new();
+                SAID.call_once(|| {
+                    tracing::warn!(
+                        "`{endpoint}`: Zenoh's tls/ link reads and writes one TLS session \
+                         at once; under two-way traffic it closes and the node looks lost \
+                         to its peers: use quic/ endpoints, with the same security file \
+                         (docs/distribution.md, \"Which secure link\")"
+                    );
+                });
+            }
+            if !secure && !loopback && !self.allow_plaintext {
                 return Err(SecurityError::Endpoint(format!(
                     "`{endpoint}` is not on loopback and not TLS: a node opens to a \
-                     network with tls/ endpoints and a security file (--config FILE), \
+                     network with quic/ (or tls/) endpoints and a security file (--config FILE), \
                      or in plaintext only when told to (--insecure, allow_plaintext = true)"
                 ))
                 .into());
@@ -816,7 +828,7 @@ fn common_name(path: &Path) -> Result<String, SecurityError> {
 fn parse_endpoint(endpoint: &str) -> Result<(&str, bool), SecurityError> {
     let bad = || {
         SecurityError::Endpoint(format!(
-            "`{endpoint}` is not an endpoint (write e.g. tcp/127.0.0.1:7447, tls/robot.local:7447)"
+            "`{endpoint}` is not an endpoint (write e.g. tcp/127.0.0.1:7447, quic/robot.local:7447)"
         ))
     };
     let address = endpoint.split(['?', '#']).next().unwrap_or_default();
