@@ -2,7 +2,6 @@
 
 use super::*;
 
-
 /// A component's own adaptation: its ladder, its detector and where it stands.
 pub(super) struct Local {
     /// Whether detection runs (`AdaptConfig::enabled_for`).

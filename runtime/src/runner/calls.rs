@@ -175,8 +175,24 @@ impl Runner {
         if cpu.is_none() && self.elapsed == self.elapsed_published {
             return;
         }
+        let delta = self.elapsed.saturating_sub(self.elapsed_published);
         self.elapsed_published = self.elapsed;
         let elapsed = self.elapsed;
+        // In an execution group the thread's CPU time is shared out among the members
+        // in proportion to the time spent in their calls.
+        let cpu = match &self.group {
+            None => cpu,
+            Some(membership) => {
+                let total = membership.shared.add_elapsed(delta);
+                cpu.map(|cpu| {
+                    if total.is_zero() {
+                        Duration::ZERO
+                    } else {
+                        cpu.mul_f64((elapsed.as_secs_f64() / total.as_secs_f64()).min(1.0))
+                    }
+                })
+            }
+        };
         let clock = self.clock;
         let load = self.adapt.as_mut().map(|adapt| {
             if let Some(cpu) = cpu {
@@ -249,7 +265,12 @@ impl Runner {
     }
 
     /// Run the continuity plan for a failure in `state` (paper 3.5).
-    pub(super) fn recover(&mut self, state: usize, section: Option<Section>, failure: Failure) -> Recovery {
+    pub(super) fn recover(
+        &mut self,
+        state: usize,
+        section: Option<Section>,
+        failure: Failure,
+    ) -> Recovery {
         let place = match (self.spec.states.get(state), section) {
             (Some(spec), Some(section)) => format!("state `{}` ({section:?} section)", spec.name),
             (Some(spec), None) => format!("state `{}`", spec.name),
@@ -328,5 +349,4 @@ impl Runner {
         self.set_error(Some(message));
         self.apply(Event::Fault);
     }
-
 }

@@ -198,6 +198,12 @@ impl Runner {
     /// Apply `priority` to this thread and publish what holds (an event and a log line
     /// when it changed; a refusal never fails the component).
     pub(super) fn apply_priority(&mut self, priority: i32) {
+        if let Some(membership) = &self.group {
+            // An execution group's thread runs at the highest priority its members ask
+            // for; what holds is published on every member's monitor.
+            membership.shared.apply_priority(membership.index, priority);
+            return;
+        }
         let Some(scheduling) = self.scheduling.as_mut() else {
             return;
         };
@@ -236,5 +242,4 @@ impl Runner {
             vec![MonitorEvent::Quality(quality)]
         });
     }
-
 }

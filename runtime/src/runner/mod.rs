@@ -49,6 +49,7 @@ use crate::watchdog::Watch;
 mod adapt;
 mod calls;
 mod control;
+pub(crate) mod group;
 mod states;
 mod wait;
 
@@ -209,6 +210,11 @@ pub(crate) struct Runner {
     labels: Vec<Option<Arc<ArrivalLabel>>>,
     /// The last `RESPONSE_WINDOW` response times.
     responses: VecDeque<Duration>,
+    /// Its place in an execution group (`group`), when it runs in one.
+    group: Option<group::Membership>,
+    /// The instant its periodic deadlines count from, in an execution group (the
+    /// group's start): each deadline is on the grid of its period from there.
+    anchor: Option<Instant>,
     /// Dropped last, when the thread ends: handles see their `exited` channel close.
     _exit_guard: Sender<()>,
 }
@@ -290,6 +296,8 @@ impl Runner {
             harnessed: false,
             labels: Vec::new(),
             responses: VecDeque::new(),
+            group: None,
+            anchor: None,
             _exit_guard: exit_guard,
         };
         runner.cx.shared = Some(Arc::clone(&runner.shared));
@@ -323,6 +331,12 @@ impl Runner {
             unreachable!("checked just above");
         }
         driven
+    }
+
+    /// Whether the automaton is a compound's or a proxy's (it supervises): it cannot
+    /// join an execution group.
+    pub(crate) fn supervises(&self) -> bool {
+        self.supervised
     }
 
     /// Measure response times at these inputs (`None`: not measured).
@@ -580,10 +594,25 @@ impl Runner {
         later(base, after.delay)
     }
 
+    /// The first periodic deadline after `now` for `period`: a period later, or in an
+    /// execution group the next instant of its grid (multiples of `period` from the
+    /// group's start), so that members with harmonic periods are due together.
+    fn deadline_after(&self, now: Instant, period: Duration) -> Instant {
+        let Some(anchor) = self.anchor else {
+            return later(now, period);
+        };
+        let step = period.as_nanos().max(1);
+        let steps = now.saturating_duration_since(anchor).as_nanos() / step + 1;
+        let offset = steps.saturating_mul(step);
+        later(
+            anchor,
+            Duration::from_nanos(u64::try_from(offset).unwrap_or(u64::MAX)),
+        )
+    }
+
     fn period_of(&self, state: usize) -> Option<Duration> {
         self.spec.states[state]
             .periodic
             .and_then(|periodic| periodic.period.or(self.cx.period))
     }
-
 }

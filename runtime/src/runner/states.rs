@@ -135,7 +135,9 @@ impl Runner {
                 *arrival += pause;
             }
         }
-        self.next_periodic = self.period_of(self.user).map(|period| later(now, period));
+        self.next_periodic = self
+            .period_of(self.user)
+            .map(|period| self.deadline_after(now, period));
     }
 
     pub(super) fn set_state(&mut self, to: State) {
@@ -265,7 +267,9 @@ impl Runner {
                 let _ = label.take();
             }
         }
-        self.next_periodic = self.period_of(target).map(|period| later(now, period));
+        self.next_periodic = self
+            .period_of(target)
+            .map(|period| self.deadline_after(now, period));
         if self.supervised {
             // The supervisor evaluates the new state's rules on its next turn (its
             // `wake_at` asks for that turn at once).
@@ -329,7 +333,7 @@ impl Runner {
                         total: monitor.missed_deadlines,
                     }]
                 });
-                next = later(now, period);
+                next = self.deadline_after(now, period);
             }
             self.next_periodic = Some(next);
         }
@@ -403,7 +407,7 @@ impl Runner {
         if self.user_entered && self.state == State::Running {
             self.next_periodic = self
                 .period_of(self.user)
-                .map(|period| later(self.time.now(), period));
+                .map(|period| self.deadline_after(self.time.now(), period));
             self.reanchored = true;
         }
     }

@@ -174,5 +174,4 @@ impl Runner {
         self.update_cpu(false);
         self.bell.park_until(None);
     }
-
 }
