@@ -878,11 +878,12 @@ impl System {
     /// The members of group `group` in the order they run: data-flow order over the
     /// connections among them (those into `last` and `poster` inputs left out when
     /// they close a cycle), ties in the order given.
-    fn group_order(&self, group: usize) -> Result<Vec<usize>, GroupError> {
+    fn group_order(&self, group: usize, planned: &[Link]) -> Result<Vec<usize>, GroupError> {
         let members = &self.groups[group].members;
         let inner: Vec<&Link> = self
             .links
             .iter()
+            .chain(planned)
             .filter(|link| {
                 link.from.0 != link.to.0
                     && members.contains(&link.from.0)
@@ -937,13 +938,24 @@ impl System {
     }
 
     /// Check every execution group's connections as its start will (a pull between
-    /// members, a cycle with nothing to break it).
-    pub(crate) fn check_groups(&self) -> Result<(), Error> {
+    /// members, a cycle with nothing to break it), with the connections `planned`
+    /// (`(output, input)` addresses: a compound's, made when it starts) as if made.
+    pub(crate) fn check_groups(&self, planned: &[(&str, &str)]) -> Result<(), Error> {
+        let planned: Vec<Link> = planned
+            .iter()
+            .filter_map(|(from, to)| {
+                Some(Link {
+                    from: self.parse(from, true).ok()?,
+                    to: self.parse(to, false).ok()?,
+                })
+            })
+            .collect();
         for group in 0..self.groups.len() {
-            self.group_order(group).map_err(|source| Error::Group {
-                group: self.groups[group].name.clone(),
-                source,
-            })?;
+            self.group_order(group, &planned)
+                .map_err(|source| Error::Group {
+                    group: self.groups[group].name.clone(),
+                    source,
+                })?;
         }
         Ok(())
     }
@@ -964,10 +976,12 @@ impl System {
         if self.groups[group].join.is_some() {
             return Ok(());
         }
-        let order = self.group_order(group).map_err(|source| Error::Group {
-            group: self.groups[group].name.clone(),
-            source,
-        })?;
+        let order = self
+            .group_order(group, &[])
+            .map_err(|source| Error::Group {
+                group: self.groups[group].name.clone(),
+                source,
+            })?;
         let mut runners = Vec::with_capacity(order.len());
         for index in &order {
             if let Some(mut runner) = self.slots[*index].runner.take() {

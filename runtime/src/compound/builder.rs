@@ -597,7 +597,8 @@ impl CompoundBuilder {
         if !self.errors.is_empty() {
             return Err(self.errors.swap_remove(0));
         }
-        if let Err(source) = self.system.check_groups() {
+        let planned: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
+        if let Err(source) = self.system.check_groups(&planned) {
             return Err(CompoundError::Instance {
                 compound: self.name.clone(),
                 source: Box::new(source),

@@ -366,3 +366,95 @@ fn members_are_commanded_and_monitored_each_on_its_own_ports() {
     assert!(report.clean(), "{report:?}");
     let _ = WAIT;
 }
+
+/// `a -> b -> c` grouped inside compound `base`, with `b2`, a compound around one more
+/// `Stage`, substituting `b` on its own thread outside the group.
+fn supervised(log: &Log, b: Step) -> (System, Arc<VirtualClock>) {
+    use coolbot::{CompoundBuilder, Policy};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let substitute = CompoundBuilder::new("b2", Coordinating)
+        .instance(stage::component("inner", step("b2", log)))
+        .export_input::<u64>("feed", "inner.feed")
+        .export_output::<u64>("out", "inner.out")
+        .build()
+        .expect("b2");
+    let base = CompoundBuilder::new("base", Coordinating)
+        .instance(stage::component("a", step("a", log)))
+        .instance(stage::component("b", b))
+        .instance(stage::component("c", step("c", log)))
+        .instance(substitute)
+        .connect("a.out", "b.feed")
+        .connect("b.out", "c.feed")
+        .thread("control", &["a", "b", "c"])
+        .substitute("b2", "b")
+        .on_error("b", Policy::Substitute)
+        .build()
+        .expect("base");
+    system.add(base).expect("base");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    (system, clock)
+}
+
+#[test]
+fn a_failed_member_is_substituted_by_a_compound_outside_the_group() {
+    let log = Log::default();
+    let b = Step {
+        panic_at: Some(2),
+        ..step("b", &log)
+    };
+    let (system, clock) = supervised(&log, b);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    // `b` panics; the compound's supervisor puts `b2` in its place: `b2` runs on its
+    // own thread, fed by `a` and feeding `c`, which stay on the group's thread.
+    let b2 = system.handle_at("base.b2").expect("b2");
+    let mut ticks = 0;
+    while !log.take().contains(&"b2:2".to_owned()) {
+        tick(&clock);
+        ticks += 1;
+        assert!(ticks < 10, "no substitution: {:?}", b2.snapshot());
+    }
+    assert_eq!(
+        system.handle_at("base.b").expect("b").state(),
+        State::RunningError
+    );
+    let base = system.handle("base").expect("base");
+    assert_eq!(base.state(), State::Running);
+    tick(&clock);
+    let mut lines = log.take();
+    lines.sort();
+    // (`b2` and `c` are on two threads: their order within the period is not fixed;
+    // `c` reads the newest of `b2`'s packets.)
+    assert_eq!(lines, ["a:1", "b2:2", "c:3"]);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_compound_refuses_a_group_that_cannot_run() {
+    use coolbot::{CompoundBuilder, CompoundError};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let log = Log::default();
+    let hop = |name| Hop {
+        name,
+        log: log.clone(),
+    };
+    let built = CompoundBuilder::new("base", Coordinating)
+        .instance(relay::component("r1", hop("r1")))
+        .instance(relay::component("r2", hop("r2")))
+        .connect("r1.out", "r2.feed")
+        .connect("r2.out", "r1.feed")
+        .thread("loop", &["r1", "r2"])
+        .build();
+    let Err(error) = built else {
+        panic!("a cycle of queues was accepted");
+    };
+    assert!(matches!(error, CompoundError::Instance { .. }));
+    assert_eq!(
+        coolbot::Chain(&error).to_string(),
+        "compound `base`: execution group `loop`: its members' connections form a cycle through `r1`, `r2` with no `last` or `poster` input to break it"
+    );
+}
