@@ -152,7 +152,7 @@ pub use crate::spec::{
     VarRange, VarSpec,
 };
 pub use crate::system::{
-    CONTROL_CAPACITY, Component, ComponentReport, ConnectError, Error, PortSet, Report,
+    CONTROL_CAPACITY, Component, ComponentReport, ConnectError, Error, GroupError, PortSet, Report,
     SHUTDOWN_TIMEOUT, System,
 };
 pub use crate::table::{Controllable, State};

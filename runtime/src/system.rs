@@ -244,6 +244,60 @@ pub enum Error {
     /// A command was rejected.
     #[error(transparent)]
     Rejected(#[from] crate::monitor::Rejected),
+    /// An execution group cannot be made or started ([`System::group`]).
+    #[error("execution group `{group}`")]
+    Group {
+        /// The group.
+        group: String,
+        /// What is wrong with it.
+        #[source]
+        source: GroupError,
+    },
+}
+
+/// Why an execution group ([`System::group`]) cannot be made or started.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GroupError {
+    /// A group with no member.
+    #[error("it has no member")]
+    Empty,
+    /// A group name that is already a group's.
+    #[error("a group of that name already exists")]
+    DuplicateName,
+    /// No component with this name.
+    #[error("no component named `{0}`")]
+    UnknownMember(String),
+    /// A compound (or a remote instance's proxy): it supervises components on threads
+    /// of their own and cannot share one.
+    #[error("`{0}` is not an atomic component (a compound or a proxy runs on a thread of its own)")]
+    NotAtomic(String),
+    /// A component named twice, in this group or in two.
+    #[error("`{member}` is already in group `{group}`")]
+    TwiceGrouped {
+        /// The component.
+        member: String,
+        /// The group it is in.
+        group: String,
+    },
+    /// The component already runs on a thread of its own.
+    #[error("`{0}` has already started on a thread of its own")]
+    Started(String),
+    /// A member pulls from another member: the pull would wait for a turn of the very
+    /// thread that waits.
+    #[error(
+        "`{input}` pulls from `{output}`, a member of the same group: the pull would wait for its own thread"
+    )]
+    Pull {
+        /// The pulling input's address.
+        input: String,
+        /// The answering output's address.
+        output: String,
+    },
+    /// A cycle of connections among members with no `last` or `poster` input on it.
+    #[error(
+        "its members' connections form a cycle through {0} with no `last` or `poster` input to break it"
+    )]
+    Cycle(String),
 }
 
 /// Why a connection could not be made or removed.
@@ -339,6 +393,19 @@ pub enum ConnectError {
         /// The input address.
         to: String,
     },
+    /// A pull between two members of one execution group (the pull would wait for
+    /// its own thread).
+    #[error(
+        "cannot connect `{from}` to pull input `{to}`: both run in execution group `{group}`, and a pull would wait for its own thread"
+    )]
+    PullInGroup {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The group.
+        group: String,
+    },
     /// Already connected.
     #[error("`{from}` is already connected to `{to}`")]
     AlreadyConnected {
@@ -399,6 +466,17 @@ struct Slot {
     inputs: Vec<ErasedInput>,
     outputs: Vec<ErasedOutput>,
     runner: Option<Runner>,
+    /// The execution group it runs in (an index into `System::groups`).
+    group: Option<usize>,
+}
+
+/// An execution group: components that run on one thread (`System::group`).
+struct GroupSlot {
+    name: String,
+    /// Its members, as given.
+    members: Vec<usize>,
+    /// The group's thread, once started and until joined.
+    join: Option<std::thread::JoinHandle<()>>,
 }
 
 /// One connection.
@@ -413,6 +491,7 @@ pub struct System {
     slots: Vec<Slot>,
     names: HashMap<String, usize>,
     links: Vec<Link>,
+    groups: Vec<GroupSlot>,
     started: bool,
     /// The clock the components' timers read (`crate::clock`).
     clock: Clock,
@@ -683,6 +762,7 @@ impl System {
             slots: Vec::new(),
             names: HashMap::new(),
             links: Vec::new(),
+            groups: Vec::new(),
             started: false,
             clock: Clock::real(),
         }
@@ -730,6 +810,7 @@ impl System {
             inputs,
             outputs,
             runner: Some(runner),
+            group: None,
         });
         if self.started {
             self.spawn(index)?;
@@ -737,7 +818,199 @@ impl System {
         Ok(handle)
     }
 
+    /// Put the components `members` (added, atomic, not started) on one thread named
+    /// after the group (`docs/runtime.md`, "Execution groups"): from
+    /// [`System::start`] on, the thread runs each member's turn in data-flow order
+    /// (a member after those connected to its inputs, else in the order given), and
+    /// a packet one member sends is seen by the next one in the same pass. Each
+    /// member keeps its own automaton, control and monitoring ports, timing and
+    /// faults. A pull between two members, and a cycle of connections with no `last`
+    /// or `poster` input on it, are refused when the group starts.
+    pub fn group(&mut self, name: &str, members: &[&str]) -> Result<(), Error> {
+        let refuse = |source: GroupError| Error::Group {
+            group: name.to_owned(),
+            source,
+        };
+        if members.is_empty() {
+            return Err(refuse(GroupError::Empty));
+        }
+        if self.groups.iter().any(|group| group.name == name) {
+            return Err(refuse(GroupError::DuplicateName));
+        }
+        let mut indices: Vec<usize> = Vec::with_capacity(members.len());
+        for member in members {
+            let Some(&index) = self.names.get(*member) else {
+                return Err(refuse(GroupError::UnknownMember((*member).to_owned())));
+            };
+            let slot = &self.slots[index];
+            if let Some(group) = slot.group {
+                return Err(refuse(GroupError::TwiceGrouped {
+                    member: (*member).to_owned(),
+                    group: self.groups[group].name.clone(),
+                }));
+            }
+            if indices.contains(&index) {
+                return Err(refuse(GroupError::TwiceGrouped {
+                    member: (*member).to_owned(),
+                    group: name.to_owned(),
+                }));
+            }
+            let Some(runner) = &slot.runner else {
+                return Err(refuse(GroupError::Started((*member).to_owned())));
+            };
+            if runner.supervises() {
+                return Err(refuse(GroupError::NotAtomic((*member).to_owned())));
+            }
+            indices.push(index);
+        }
+        let group = self.groups.len();
+        for index in &indices {
+            self.slots[*index].group = Some(group);
+        }
+        self.groups.push(GroupSlot {
+            name: name.to_owned(),
+            members: indices,
+            join: None,
+        });
+        Ok(())
+    }
+
+    /// The members of group `group` in the order they run: data-flow order over the
+    /// connections among them (those into `last` and `poster` inputs left out when
+    /// they close a cycle), ties in the order given.
+    fn group_order(&self, group: usize, planned: &[Link]) -> Result<Vec<usize>, GroupError> {
+        let members = &self.groups[group].members;
+        let inner: Vec<&Link> = self
+            .links
+            .iter()
+            .chain(planned)
+            .filter(|link| {
+                link.from.0 != link.to.0
+                    && members.contains(&link.from.0)
+                    && members.contains(&link.to.0)
+            })
+            .collect();
+        for link in &inner {
+            if self.slots[link.to.0].spec.inputs[link.to.1].pull {
+                return Err(GroupError::Pull {
+                    input: self.address(link.to, false),
+                    output: self.address(link.from, true),
+                });
+            }
+        }
+        let sort = |edges: &[&&Link]| -> Result<Vec<usize>, Vec<usize>> {
+            let mut left: Vec<usize> = members.clone();
+            let mut order = Vec::with_capacity(left.len());
+            while !left.is_empty() {
+                let ready = left.iter().position(|member| {
+                    !edges
+                        .iter()
+                        .any(|link| link.to.0 == *member && left.contains(&link.from.0))
+                });
+                match ready {
+                    Some(position) => order.push(left.remove(position)),
+                    None => return Err(left),
+                }
+            }
+            Ok(order)
+        };
+        let all: Vec<&&Link> = inner.iter().collect();
+        if let Ok(order) = sort(&all) {
+            return Ok(order);
+        }
+        let breaking: Vec<&&Link> = inner
+            .iter()
+            .filter(|link| {
+                !matches!(
+                    self.slots[link.to.0].inputs[link.to.1].kind,
+                    InKind::Last | InKind::Poster
+                )
+            })
+            .collect();
+        sort(&breaking).map_err(|left| {
+            GroupError::Cycle(
+                left.iter()
+                    .map(|index| format!("`{}`", self.slots[*index].name))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            )
+        })
+    }
+
+    /// Check every execution group's connections as its start will (a pull between
+    /// members, a cycle with nothing to break it), with the connections `planned`
+    /// (`(output, input)` addresses: a compound's, made when it starts) as if made.
+    pub(crate) fn check_groups(&self, planned: &[(&str, &str)]) -> Result<(), Error> {
+        let planned: Vec<Link> = planned
+            .iter()
+            .filter_map(|(from, to)| {
+                Some(Link {
+                    from: self.parse(from, true).ok()?,
+                    to: self.parse(to, false).ok()?,
+                })
+            })
+            .collect();
+        for group in 0..self.groups.len() {
+            self.group_order(group, &planned)
+                .map_err(|source| Error::Group {
+                    group: self.groups[group].name.clone(),
+                    source,
+                })?;
+        }
+        Ok(())
+    }
+
+    /// `instance.port` of an output (`output`) or an input.
+    fn address(&self, (slot, port): (usize, usize), output: bool) -> String {
+        let spec = self.slots[slot].spec;
+        let port = if output {
+            spec.outputs[port].name
+        } else {
+            spec.inputs[port].name
+        };
+        format!("{}.{}", self.slots[slot].name, port)
+    }
+
+    /// Start group `group`'s thread with its members' runners.
+    fn spawn_group(&mut self, group: usize) -> Result<(), Error> {
+        if self.groups[group].join.is_some() {
+            return Ok(());
+        }
+        let order = self
+            .group_order(group, &[])
+            .map_err(|source| Error::Group {
+                group: self.groups[group].name.clone(),
+                source,
+            })?;
+        let mut runners = Vec::with_capacity(order.len());
+        for index in &order {
+            if let Some(mut runner) = self.slots[*index].runner.take() {
+                if !self.clock.is_real() {
+                    runner.set_clock(self.clock.clone());
+                }
+                runners.push(runner);
+            }
+        }
+        let name = self.groups[group].name.clone();
+        let body = crate::runner::group::Group::new(&name, runners);
+        let join =
+            crate::thread::spawn(&name, move || body.run()).map_err(|source| Error::Spawn {
+                component: name.clone(),
+                source,
+            })?;
+        for index in &order {
+            let shared = &self.slots[*index].handle.shared;
+            let _ = shared.thread.set(join.thread().id());
+            shared.spawned.store(true, Ordering::Release);
+        }
+        self.groups[group].join = Some(join);
+        Ok(())
+    }
+
     fn spawn(&mut self, index: usize) -> Result<(), Error> {
+        if let Some(group) = self.slots[index].group {
+            return self.spawn_group(group);
+        }
         let slot = &mut self.slots[index];
         let Some(mut runner) = slot.runner.take() else {
             return Ok(());
@@ -926,6 +1199,17 @@ impl System {
         let output_pull = self.slots[out_slot].spec.outputs[out_port].pull;
         if input_pull && !output_pull {
             return Err(ConnectError::PullMismatch { from, to });
+        }
+        if input_pull
+            && out_slot != in_slot
+            && let (Some(a), Some(b)) = (self.slots[out_slot].group, self.slots[in_slot].group)
+            && a == b
+        {
+            return Err(ConnectError::PullInGroup {
+                from,
+                to,
+                group: self.groups[a].name.clone(),
+            });
         }
         Ok(link)
     }
@@ -1141,10 +1425,36 @@ impl System {
             }
         }
         let deadline = crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT);
+        // A group thread ends when its last member is dead.
+        let mut group_ends: Vec<(bool, Option<String>)> = Vec::with_capacity(self.groups.len());
+        for group in &mut self.groups {
+            let end = match group.join.take() {
+                None => (false, None),
+                Some(join) => {
+                    while !join.is_finished() && Instant::now() < deadline {
+                        std::thread::sleep(Duration::from_millis(1));
+                    }
+                    if join.is_finished() {
+                        match crate::thread::join(join) {
+                            Ok(()) => (true, None),
+                            Err(message) => (true, Some(message)),
+                        }
+                    } else {
+                        group.join = Some(join);
+                        (false, None)
+                    }
+                }
+            };
+            group_ends.push(end);
+        }
         for slot in &mut self.slots {
             let mut joined = false;
             let mut thread_panic = None;
-            if slot.runner.take().is_none() {
+            if let Some(group) = slot.group {
+                if slot.runner.take().is_none() {
+                    (joined, thread_panic) = group_ends[group].clone();
+                }
+            } else if slot.runner.take().is_none() {
                 match slot.handle.join_if_exited(deadline) {
                     Some(Ok(())) => joined = true,
                     Some(Err(message)) => {
@@ -1176,6 +1486,7 @@ impl System {
         self.slots.clear();
         self.names.clear();
         self.links.clear();
+        self.groups.clear();
         report
     }
 }

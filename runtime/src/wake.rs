@@ -171,6 +171,46 @@ impl Doorbell {
             }
         }
     }
+
+    /// Park until any of `bells` rings or until `deadline`: the thread of an execution
+    /// group (`crate::runner::group`), to which every one of its members' bells is
+    /// attached. The protocol is each bell's own, applied to all: every bell goes from
+    /// `QUIET` to `SLEEPING` before the thread parks (one found `RUNG` returns at
+    /// once, a ring after its move unparks the thread), and on return every bell still
+    /// `SLEEPING` goes back to `QUIET`, so that a ring while the group works is a plain
+    /// store, never an unpark.
+    pub(crate) fn park_any(bells: &[&Doorbell], deadline: Option<Instant>) {
+        let mut asleep = true;
+        for bell in bells {
+            if let Err(RUNG) =
+                bell.state
+                    .compare_exchange(QUIET, SLEEPING, Ordering::SeqCst, Ordering::SeqCst)
+            {
+                asleep = false;
+                break;
+            }
+        }
+        while asleep {
+            match deadline {
+                None => std::thread::park(),
+                Some(deadline) => {
+                    let now = Instant::now();
+                    if now >= deadline {
+                        break;
+                    }
+                    std::thread::park_timeout(deadline - now);
+                }
+            }
+            asleep = bells
+                .iter()
+                .all(|bell| bell.state.load(Ordering::SeqCst) == SLEEPING);
+        }
+        for bell in bells {
+            let _ =
+                bell.state
+                    .compare_exchange(SLEEPING, QUIET, Ordering::SeqCst, Ordering::SeqCst);
+        }
+    }
 }
 
 /// Rings a component's doorbell: the thread wakes and looks for work (see

@@ -454,6 +454,18 @@ impl CompoundBuilder {
         self
     }
 
+    /// `thread name { a, b, ... }`: the instances `members` (atomic, local) run on one
+    /// thread, an execution group ([`System::group`](crate::System::group)).
+    pub fn thread(mut self, name: &str, members: &[&str]) -> CompoundBuilder {
+        if let Err(source) = self.system.group(name, members) {
+            self.errors.push(CompoundError::Instance {
+                compound: self.name.clone(),
+                source: Box::new(source),
+            });
+        }
+        self
+    }
+
     /// `redundant a, b, ...;`
     pub fn redundant(mut self, members: &[&str]) -> CompoundBuilder {
         self.groups
@@ -584,6 +596,13 @@ impl CompoundBuilder {
     pub(crate) fn resolve(&mut self) -> Result<Resolved, CompoundError> {
         if !self.errors.is_empty() {
             return Err(self.errors.swap_remove(0));
+        }
+        let planned: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
+        if let Err(source) = self.system.check_groups(&planned) {
+            return Err(CompoundError::Instance {
+                compound: self.name.clone(),
+                source: Box::new(source),
+            });
         }
         let mut own = *self.supervisor.spec();
         let unperiodic = own

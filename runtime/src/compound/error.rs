@@ -30,7 +30,8 @@ pub enum CompoundError {
         #[source]
         source: SpecError,
     },
-    /// An instance could not be added (duplicate name, bad spec, ports).
+    /// An instance could not be added (duplicate name, bad spec, ports), or instances
+    /// could not share a thread (an execution group).
     #[error("compound `{compound}`")]
     Instance {
         /// The compound.

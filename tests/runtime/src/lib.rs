@@ -18,4 +18,4 @@ pub mod record;
 pub mod supervision;
 pub mod support;
 
-pub use generated::{feeder, worker};
+pub use generated::{feeder, relay, stage, worker};

@@ -1,0 +1,250 @@
+//! An 8-stage chain at 1 kHz three ways, in one run: the 8 stages as components in
+//! one execution group; a hand-written thread calling the same 8 stage functions in
+//! order with the same packets (the baseline); and the same components threaded as
+//! by default, one thread each. Each stage does about 0.5 us of work (a calibrated
+//! loop) on the packet's value and sends the packet on (a fifo connection); the first
+//! stage is periodic and stamps the packet, the last one reads the stamp after its
+//! work. The figure is the time from the stamp to the end of the last stage's work.
+//! Goals: the group's p50 <= 1.5x and p99 <= 2x the hand loop's; the threaded chain
+//! at least 20x the group's (end to end, p50). Also printed: the overhead per member
+//! per cycle, (group p50 - hand p50) / 8.
+//!
+//! `cargo bench -p coolbot --bench group` (add `-- --quick` for a smoke run).
+
+#[macro_use]
+mod common;
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{
+    Component, InputKind, OutputKind, OverflowPolicy, PeriodicSpec, PortSet, Section, System,
+};
+use crossbeam_channel::{Sender, bounded};
+
+use common::{Figure, Glue, Goal, Mode, Samples, Table};
+
+const STAGES: usize = 8;
+const PERIOD: Duration = Duration::from_millis(1);
+const CAPACITY: usize = 16;
+const ROUNDS: usize = 4;
+const WARMUP: usize = 20;
+/// The work of one stage.
+const WORK: Duration = Duration::from_nanos(500);
+
+/// What travels along the chain: the first stage's stamp and the value each stage
+/// works on.
+type Packet = (Instant, u64);
+
+one_state_spec! {
+    static SOURCE = "Source",
+    inputs: [],
+    outputs: [("output", OutputKind::Data)],
+    on: [],
+    periodic: Some(PeriodicSpec { period: Some(PERIOD) }),
+}
+
+one_state_spec! {
+    static RELAY = "Relay",
+    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
+    outputs: [("output", OutputKind::Data)],
+    on: [0],
+    periodic: None,
+}
+
+one_state_spec! {
+    static SINK = "Sink",
+    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
+    outputs: [],
+    on: [0],
+    periodic: None,
+}
+
+/// One stage's work: `rounds` rounds of a mixing function.
+fn work(value: u64, rounds: u32) -> u64 {
+    let mut x = value;
+    for _ in 0..rounds {
+        x = black_box(x.wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(17) ^ 0x5bd1);
+    }
+    x
+}
+
+/// How many rounds of `work` take about `WORK`.
+fn calibrate() -> u32 {
+    let mut rounds = 1_000u32;
+    let started = Instant::now();
+    let mut x = 0;
+    for _ in 0..1_000 {
+        x = work(x, rounds);
+    }
+    black_box(x);
+    let per_call = started.elapsed() / 1_000;
+    rounds = ((u128::from(rounds) * WORK.as_nanos()) / per_call.as_nanos().max(1)) as u32;
+    rounds.max(1)
+}
+
+fn source(rounds: u32) -> Component {
+    let output = DataOut::<Packet>::new();
+    let ports = PortSet::new().output(&output);
+    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
+        if section == Section::Periodic {
+            let stamp = Instant::now();
+            output.send((stamp, work(1, rounds)));
+        }
+        Ok(())
+    });
+    Component::new("stage0", Glue::boxed(&SOURCE, body), ports)
+}
+
+fn relay(index: usize, rounds: u32) -> Component {
+    let input = FifoIn::<Packet>::new(CAPACITY, OverflowPolicy::Reject);
+    let output = DataOut::<Packet>::new();
+    let ports = PortSet::new().input(&input).output(&output);
+    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
+        if section == Section::Entry {
+            for (stamp, value) in input.drain() {
+                output.send((stamp, work(value, rounds)));
+            }
+        }
+        Ok(())
+    });
+    Component::new(format!("stage{index}"), Glue::boxed(&RELAY, body), ports)
+}
+
+fn sink(count: usize, rounds: u32, done: Sender<Vec<Duration>>) -> Component {
+    let input = FifoIn::<Packet>::new(CAPACITY, OverflowPolicy::Reject);
+    let ports = PortSet::new().input(&input);
+    let mut samples = Vec::with_capacity(count + WARMUP);
+    let mut done = Some(done);
+    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
+        if section == Section::Entry && done.is_some() {
+            for (stamp, value) in input.drain() {
+                black_box(work(value, rounds));
+                samples.push(stamp.elapsed());
+            }
+            if samples.len() >= count + WARMUP
+                && let Some(done) = done.take()
+            {
+                let _ = done.send(samples.split_off(WARMUP));
+            }
+        }
+        Ok(())
+    });
+    Component::new(
+        format!("stage{}", STAGES - 1),
+        Glue::boxed(&SINK, body),
+        ports,
+    )
+}
+
+/// The chain as components, in one group (`grouped`) or one thread each.
+fn components_round(count: usize, rounds: u32, grouped: bool) -> Vec<Duration> {
+    let (done, samples) = bounded(1);
+    let mut system = System::new();
+    system.add(sink(count, rounds, done)).expect("add sink");
+    for index in (1..STAGES - 1).rev() {
+        system.add(relay(index, rounds)).expect("add relay");
+    }
+    system.add(source(rounds)).expect("add source");
+    for index in 0..STAGES - 1 {
+        system
+            .connect(
+                &format!("stage{index}.output"),
+                &format!("stage{}.input", index + 1),
+            )
+            .expect("connect");
+    }
+    if grouped {
+        let names: Vec<String> = (0..STAGES).map(|index| format!("stage{index}")).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        system.group("chain", &names).expect("group");
+    }
+    system.run_all().expect("run");
+    let samples = common::expect(&samples, Duration::from_secs(60), "chain");
+    let report = system.shutdown();
+    assert!(report.clean(), "unclean shutdown: {report:?}");
+    samples
+}
+
+/// The hand loop: one thread sleeping to absolute deadlines, calling the 8 stage
+/// functions in order, each packet handed on by value.
+fn hand_round(count: usize, rounds: u32) -> Vec<Duration> {
+    let mut samples = Vec::with_capacity(count + WARMUP);
+    let mut next = Instant::now() + PERIOD;
+    while samples.len() < count + WARMUP {
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        }
+        let mut packet: Packet = (Instant::now(), work(1, rounds));
+        for _ in 1..STAGES {
+            packet = black_box((packet.0, work(packet.1, rounds)));
+        }
+        samples.push(packet.0.elapsed());
+        next += PERIOD;
+        let now = Instant::now();
+        if next <= now {
+            next = now + PERIOD;
+        }
+    }
+    samples.split_off(WARMUP)
+}
+
+fn main() {
+    let mode = Mode::from_env();
+    let per_round = mode.scale(4_000, 100) / ROUNDS;
+    let rounds = calibrate();
+    let mut table = Table::new(
+        "8-stage chain at 1 kHz: one execution group against a hand loop and one thread per stage",
+        mode,
+    );
+    let (mut group, mut hand, mut threaded) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..ROUNDS {
+        hand.extend(hand_round(per_round, rounds));
+        group.extend(components_round(per_round, rounds, true));
+        threaded.extend(components_round(per_round, rounds, false));
+    }
+    let (group, hand, threaded) = (
+        Samples::new(group),
+        Samples::new(hand),
+        Samples::new(threaded),
+    );
+    table.row(
+        "group vs hand loop, p50",
+        Figure::Time(group.p50()),
+        Figure::Time(hand.p50()),
+        Goal::AtMost(1.5),
+    );
+    table.row(
+        "group vs hand loop, p99",
+        Figure::Time(group.p99()),
+        Figure::Time(hand.p99()),
+        Goal::AtMost(2.0),
+    );
+    table.row(
+        "threaded vs group, p50",
+        Figure::Time(threaded.p50()),
+        Figure::Time(group.p50()),
+        Goal::AtLeast(20.0),
+    );
+    table.row(
+        "threaded vs group, p99",
+        Figure::Time(threaded.p99()),
+        Figure::Time(group.p99()),
+        Goal::None,
+    );
+    let per_member = |a: Duration, b: Duration| a.saturating_sub(b) / STAGES as u32;
+    table.note(&format!(
+        "overhead per member per cycle (group - hand loop) / {STAGES}: p50 {:?}, p99 {:?}; \
+         {} work rounds a stage (~{WORK:?}); {} packets per side; max group {:?}, hand {:?}, threaded {:?}",
+        per_member(group.p50(), hand.p50()),
+        per_member(group.p99(), hand.p99()),
+        rounds,
+        group.len(),
+        group.max(),
+        hand.max(),
+        threaded.max()
+    ));
+    table.print();
+}

@@ -1,0 +1,251 @@
+//! An execution group: several atomic components' runners on one thread
+//! (`docs/runtime.md`, "Execution groups").
+//!
+//! Each member keeps its own runner, so its own automaton, control port, monitor,
+//! timers, exceptions and `catch_unwind`: the group thread only calls
+//! [`Runner::turn`] on each member in turn, in data-flow order, where a component's
+//! thread would call it in its loop. A pass takes every member once, up to
+//! [`TURNS_PER_PASS`] turns each while it has work; a packet a member sends during its
+//! turn is at the next member's input when that member's turn looks, so a chain runs
+//! through in one pass. Passes repeat while any member worked; then the thread waits
+//! on all the members' doorbells at once ([`Doorbell::park_any`]) until one rings or
+//! the nearest member timer is due.
+//!
+//! Members' periodic deadlines fall on one grid, multiples of each member's period
+//! from the group's start (`Runner::deadline_after`), so that members with harmonic
+//! periods are due at the same instants and run in one pass.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use crate::monitor::{MonitorEvent, Shared};
+use crate::thread::{OsPriority, Scheduling};
+use crate::wake::Doorbell;
+
+use super::{Runner, Turn};
+
+/// The most turns one member takes in one pass while it has work, before the next
+/// member's turn (a member flooded with input does not starve the others).
+pub(crate) const TURNS_PER_PASS: usize = 64;
+
+/// What a group's members share: the time spent in their calls (to share out the
+/// thread's CPU time) and the thread's priority.
+pub(crate) struct GroupShared {
+    /// The group's name.
+    name: String,
+    /// Nanoseconds spent in user calls, summed over the members, as published.
+    elapsed: AtomicU64,
+    priority: Mutex<Priority>,
+}
+
+/// The group thread's scheduling and what each member asks of it.
+struct Priority {
+    /// The thread's OS scheduling, once it runs.
+    scheduling: Option<Scheduling>,
+    /// Each member's `priority`, by member index.
+    wanted: Vec<i32>,
+    /// Each member's monitor, by member index.
+    monitors: Vec<Arc<Shared>>,
+}
+
+/// A runner's place in a group.
+pub(crate) struct Membership {
+    pub(crate) index: usize,
+    pub(crate) shared: Arc<GroupShared>,
+}
+
+impl GroupShared {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Priority> {
+        self.priority.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Member `index` asks for `priority`: the thread takes the highest any member
+    /// asks for, and every member's monitor shows what holds.
+    pub(crate) fn apply_priority(&self, index: usize, priority: i32) {
+        let mut state = self.lock();
+        if let Some(wanted) = state.wanted.get_mut(index) {
+            *wanted = priority;
+        }
+        let highest = state.wanted.iter().copied().max().unwrap_or(priority);
+        let Some(scheduling) = state.scheduling.as_mut() else {
+            return;
+        };
+        let applied = scheduling.apply(highest);
+        if let OsPriority::NotApplied(why) = &applied {
+            crate::limited!(&self.name, |held| tracing::warn!(
+                group = %self.name,
+                "priority {highest} not applied to the group's thread: {why}{held}"
+            ));
+        }
+        for monitor in &state.monitors {
+            let applied = applied.clone();
+            monitor.update(|monitor| {
+                if monitor.os_priority == applied {
+                    return Vec::new();
+                }
+                monitor.os_priority = applied.clone();
+                vec![MonitorEvent::OsPriority(applied)]
+            });
+        }
+    }
+
+    /// A member published `delta` more time in its calls; the sum over the members.
+    pub(crate) fn add_elapsed(&self, delta: Duration) -> Duration {
+        let delta = u64::try_from(delta.as_nanos()).unwrap_or(u64::MAX);
+        let total = self
+            .elapsed
+            .fetch_add(delta, Ordering::Relaxed)
+            .saturating_add(delta);
+        Duration::from_nanos(total)
+    }
+}
+
+/// The runners of one group, in the order they run.
+pub(crate) struct Group {
+    name: String,
+    members: Vec<Option<Runner>>,
+}
+
+impl Group {
+    /// `runners` in data-flow order: each one runs after those that feed it.
+    pub(crate) fn new(name: &str, mut runners: Vec<Runner>) -> Group {
+        let shared = Arc::new(GroupShared {
+            name: name.to_owned(),
+            elapsed: AtomicU64::new(0),
+            priority: Mutex::new(Priority {
+                scheduling: None,
+                wanted: vec![0; runners.len()],
+                monitors: runners
+                    .iter()
+                    .map(|runner| Arc::clone(&runner.shared))
+                    .collect(),
+            }),
+        });
+        for (index, runner) in runners.iter_mut().enumerate() {
+            runner.group = Some(Membership {
+                index,
+                shared: Arc::clone(&shared),
+            });
+            // Equalization moves a thread's phase; a member's phase is the group's.
+            if let Some(adapt) = runner.adapt.as_mut() {
+                adapt.equalize = false;
+            }
+        }
+        Group {
+            name: name.to_owned(),
+            members: runners.into_iter().map(Some).collect(),
+        }
+    }
+
+    /// The group thread's body.
+    pub(crate) fn run(mut self) {
+        crate::thread::set_timer_slack();
+        let epoch = self
+            .members
+            .iter()
+            .flatten()
+            .next()
+            .map(|runner| runner.time.now());
+        for runner in self.members.iter_mut().flatten() {
+            runner.bell.attach();
+            if let Some(clock) = runner.time.as_virtual() {
+                runner.on_clock = Some(clock.join(&runner.cx.name, Arc::clone(&runner.bell)));
+            }
+            runner.anchor = epoch;
+        }
+        if let Some(membership) = self.members.iter().flatten().find_map(|r| r.group.as_ref()) {
+            membership.shared.lock().scheduling = Some(Scheduling::of_current_thread());
+        }
+        for runner in self.members.iter_mut().flatten() {
+            let mut priority = 0;
+            runner.shared.quietly(|monitor| priority = monitor.priority);
+            runner.apply_priority(priority);
+            runner.begin();
+        }
+        tracing::debug!(group = %self.name, members = self.members.len(), "execution group runs");
+        loop {
+            let worked = self.pass();
+            if self.members.iter().all(Option::is_none) {
+                break;
+            }
+            if !worked {
+                self.wait();
+            }
+        }
+    }
+
+    /// Every member once, in order, while it has work; true if any worked.
+    fn pass(&mut self) -> bool {
+        let mut worked = false;
+        for slot in &mut self.members {
+            let Some(runner) = slot.as_mut() else {
+                continue;
+            };
+            for _ in 0..TURNS_PER_PASS {
+                match runner.turn() {
+                    Turn::Dead => {
+                        runner.end();
+                        if let (Some(clock), Some(id)) = (runner.time.as_virtual(), runner.on_clock)
+                        {
+                            clock.leave(id);
+                        }
+                        // Dropping the runner tells its handles that it has ended.
+                        *slot = None;
+                        break;
+                    }
+                    Turn::Worked => {
+                        worked = true;
+                        if runner.idle() {
+                            break;
+                        }
+                    }
+                    Turn::Stopped | Turn::Idle => break,
+                }
+            }
+        }
+        worked
+    }
+
+    /// Wait for a ring at any member or the nearest member timer.
+    fn wait(&mut self) {
+        let mut deadline: Option<Instant> = None;
+        for runner in self.members.iter_mut().flatten() {
+            if let Some(due) = runner.next_due() {
+                deadline = Some(deadline.map_or(due, |d| d.min(due)));
+            }
+            runner.clock = runner.time.now();
+            runner.update_cpu(false);
+        }
+        let clock = self
+            .members
+            .iter()
+            .flatten()
+            .next()
+            .and_then(|runner| runner.time.as_virtual().cloned());
+        let bells: Vec<&Doorbell> = self
+            .members
+            .iter()
+            .flatten()
+            .map(|runner| &*runner.bell)
+            .collect();
+        match clock {
+            Some(clock) => {
+                // A virtual timer: never a real timeout. With nothing due now, every
+                // member settles and the thread waits for a ring (the clock rings
+                // every member's bell when it advances).
+                let now = clock.now();
+                if deadline.is_some_and(|due| due <= now) {
+                    return;
+                }
+                for runner in self.members.iter().flatten() {
+                    if let Some(id) = runner.on_clock {
+                        clock.settled(id, now);
+                    }
+                }
+                Doorbell::park_any(&bells, None);
+            }
+            None => Doorbell::park_any(&bells, deadline),
+        }
+    }
+}

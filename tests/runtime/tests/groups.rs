@@ -1,0 +1,460 @@
+//! Execution groups (`docs/runtime.md`, "Execution groups"): several atomic components
+//! on one thread, run in data-flow order, each keeping its own automaton, ports,
+//! timing and faults. On the virtual clock: a pass runs before the group settles, so
+//! what a packet causes within the group is done when `advance` returns.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use coolbot::{
+    Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
+};
+use coolbot_runtime_tests::support::WAIT;
+use coolbot_runtime_tests::{relay, stage};
+
+const PERIOD: Duration = Duration::from_millis(10);
+
+/// What the stages did, in the order they did it.
+#[derive(Clone, Default)]
+struct Log(Arc<Mutex<Vec<String>>>);
+
+impl Log {
+    fn push(&self, line: String) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(line);
+    }
+
+    fn take(&self) -> Vec<String> {
+        std::mem::take(&mut *self.0.lock().unwrap_or_else(PoisonError::into_inner))
+    }
+}
+
+/// A periodic stage: its input plus one, sent on and logged as `name:value`.
+struct Step {
+    name: &'static str,
+    log: Log,
+    count: u64,
+    /// Panic in this period (counting from 1).
+    panic_at: Option<u64>,
+    /// In this period, let the clock run on 20 ms inside the section (an overrun of
+    /// the 5 ms `max_response`).
+    overrun_at: Option<(u64, Arc<VirtualClock>)>,
+}
+
+impl stage::Behavior for Step {
+    fn work_periodic(&mut self, cx: &mut stage::Cx<'_>) -> SectionResult {
+        self.count += 1;
+        if self.panic_at == Some(self.count) {
+            panic!("{} broke", self.name);
+        }
+        if let Some((at, clock)) = &self.overrun_at
+            && *at == self.count
+        {
+            // The other members are on this thread: nobody settles now.
+            let _ = clock.advance_with_timeout(Duration::from_millis(20), Duration::ZERO);
+        }
+        let value = cx.inputs.feed.latest().unwrap_or(0) + 1;
+        self.log.push(format!("{}:{value}", self.name));
+        cx.outputs.out.send(value);
+        Ok(())
+    }
+}
+
+/// An aperiodic stage: each packet plus one, sent on and logged.
+struct Hop {
+    name: &'static str,
+    log: Log,
+}
+
+impl relay::Behavior for Hop {
+    fn relay_entry(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+        while let Some(value) = cx.inputs.feed.recv() {
+            self.log.push(format!("{}:{}", self.name, value + 1));
+            cx.outputs.out.send(value + 1);
+        }
+        Ok(())
+    }
+}
+
+fn step(name: &'static str, log: &Log) -> Step {
+    Step {
+        name,
+        log: log.clone(),
+        count: 0,
+        panic_at: None,
+        overrun_at: None,
+    }
+}
+
+/// A system on a fresh virtual clock.
+fn system() -> (System, Arc<VirtualClock>) {
+    let clock = VirtualClock::new();
+    (System::with_clock(Clock::virtual_clock(&clock)), clock)
+}
+
+/// Three periodic stages `a -> b -> c` (`last` inputs), grouped in the order `c, b, a`.
+fn chain(log: &Log, b: Step) -> (System, Arc<VirtualClock>) {
+    let (mut system, clock) = system();
+    system
+        .add(stage::component("a", step("a", log)))
+        .expect("a");
+    system.add(stage::component("b", b)).expect("b");
+    system
+        .add(stage::component("c", step("c", log)))
+        .expect("c");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.connect("b.out", "c.feed").expect("b -> c");
+    system.group("control", &["c", "b", "a"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    (system, clock)
+}
+
+fn tick(clock: &VirtualClock) {
+    clock.advance(PERIOD).expect("settled");
+}
+
+#[test]
+fn members_run_in_data_flow_order_and_see_each_others_packets_in_the_same_pass() {
+    let log = Log::default();
+    let (system, clock) = chain(&log, step("b", &log));
+    tick(&clock);
+    // Given as `c, b, a`, run as `a, b, c`: each sees what the one before sent in
+    // this very period.
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    // Nothing runs between periods.
+    clock.advance(PERIOD / 2).expect("settled");
+    assert_eq!(log.take(), Vec::<String>::new());
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    assert!(report.components.iter().all(|c| c.state == State::Dead));
+}
+
+#[test]
+fn aperiodic_members_run_when_their_inputs_arrive_within_the_pass() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    system
+        .add(stage::component("a", step("a", &log)))
+        .expect("a");
+    let hop = |name| Hop {
+        name,
+        log: log.clone(),
+    };
+    system.add(relay::component("r2", hop("r2"))).expect("r2");
+    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system.connect("a.out", "r1.feed").expect("a -> r1");
+    system.connect("r1.out", "r2.feed").expect("r1 -> r2");
+    system.group("chain", &["r2", "r1", "a"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    // Settled means the group's pass is over: the relays have run, no waiting.
+    assert_eq!(log.take(), ["a:1", "r1:2", "r2:3"]);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "r1:2", "r2:3"]);
+}
+
+#[test]
+fn a_panicking_member_fails_alone_and_the_group_runs_on() {
+    let log = Log::default();
+    let b = Step {
+        panic_at: Some(2),
+        ..step("b", &log)
+    };
+    let (system, clock) = chain(&log, b);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    tick(&clock);
+    // `b` failed; `c` reads `b`'s last packet; `a` and `c` run on.
+    assert_eq!(log.take(), ["a:1", "c:3"]);
+    let b = system.handle("b").expect("b");
+    let monitor = b.snapshot();
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("panic") && e.contains("b broke")),
+        "{monitor:?}"
+    );
+    for other in ["a", "c"] {
+        assert_eq!(system.handle(other).expect(other).state(), State::Running);
+    }
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "c:3"]);
+    // Recovery: `b` restarts on the group's thread and is back in the next period.
+    b.command(Command::SetState(Controllable::Running))
+        .expect("restart");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+}
+
+#[test]
+fn a_suspended_member_is_skipped_until_resumed() {
+    let log = Log::default();
+    let (system, clock) = chain(&log, step("b", &log));
+    let b = system.handle("b").expect("b");
+    b.command(Command::SetState(Controllable::Suspended))
+        .expect("suspend");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "c:1"]);
+    b.command(Command::SetState(Controllable::Running))
+        .expect("resume");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+}
+
+#[test]
+fn an_overrun_is_charged_to_the_member_that_overran() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let a = Step {
+        overrun_at: Some((2, Arc::clone(&clock))),
+        ..step("a", &log)
+    };
+    system.add(stage::component("a", a)).expect("a");
+    system
+        .add(stage::component("b", step("b", &log)))
+        .expect("b");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.group("control", &["a", "b"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2"]);
+    tick(&clock);
+    // `a`'s section ran 20 ms against a `max_response` of 5 ms (what it sent went
+    // out): the overrun is `a`'s; `b` ran after it, late, and did not overrun.
+    assert_eq!(log.take(), ["a:1", "b:2"]);
+    let (a, b) = (
+        system.handle("a").expect("a"),
+        system.handle("b").expect("b"),
+    );
+    let monitor = a.snapshot();
+    assert_eq!(monitor.overruns, 1);
+    assert_eq!(monitor.state, State::RunningError);
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.starts_with("overrun in state `work`")),
+        "{monitor:?}"
+    );
+    assert_eq!(b.snapshot().overruns, 0);
+    assert_eq!(b.state(), State::Running);
+    tick(&clock);
+    assert_eq!(log.take(), ["b:2"]);
+}
+
+#[test]
+fn a_group_is_refused_with_what_is_wrong() {
+    let log = Log::default();
+    let (mut system, _clock) = system();
+    system
+        .add(stage::component("a", step("a", &log)))
+        .expect("a");
+    system
+        .add(stage::component("b", step("b", &log)))
+        .expect("b");
+    let refusal = |result: Result<(), Error>| match result {
+        Err(Error::Group { source, .. }) => source,
+        other => panic!("not a group's refusal: {other:?}"),
+    };
+    assert_eq!(refusal(system.group("g", &[])), GroupError::Empty);
+    assert_eq!(
+        refusal(system.group("g", &["a", "x"])),
+        GroupError::UnknownMember("x".to_owned())
+    );
+    assert_eq!(
+        refusal(system.group("g", &["a", "a"])),
+        GroupError::TwiceGrouped {
+            member: "a".to_owned(),
+            group: "g".to_owned()
+        }
+    );
+    system.group("g", &["a"]).expect("g");
+    assert_eq!(
+        refusal(system.group("h", &["b", "a"])),
+        GroupError::TwiceGrouped {
+            member: "a".to_owned(),
+            group: "g".to_owned()
+        }
+    );
+    assert_eq!(
+        refusal(system.group("g", &["b"])),
+        GroupError::DuplicateName
+    );
+    system.start().expect("start");
+    system
+        .add(stage::component("late", step("late", &log)))
+        .expect("late");
+    assert_eq!(
+        refusal(system.group("h", &["late"])),
+        GroupError::Started("late".to_owned())
+    );
+    let error = system.group("h", &["late"]).unwrap_err();
+    assert_eq!(
+        coolbot::Chain(&error).to_string(),
+        "execution group `h`: `late` has already started on a thread of its own"
+    );
+}
+
+#[test]
+fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
+    let log = Log::default();
+    let hop = |name| Hop {
+        name,
+        log: log.clone(),
+    };
+    let (mut system, _clock) = system();
+    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system.add(relay::component("r2", hop("r2"))).expect("r2");
+    system.connect("r1.out", "r2.feed").expect("r1 -> r2");
+    system.connect("r2.out", "r1.feed").expect("r2 -> r1");
+    system.group("loop", &["r1", "r2"]).expect("group");
+    match system.start() {
+        Err(Error::Group { group, source }) => {
+            assert_eq!(group, "loop");
+            assert_eq!(source, GroupError::Cycle("`r1`, `r2`".to_owned()));
+        }
+        other => panic!("started: {other:?}"),
+    }
+    // Through a `last` input the cycle is broken there: `a` runs first (it is fed
+    // only by a `last` input), then `r1`.
+    let (mut system, clock) = self::system();
+    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system
+        .add(stage::component("a", step("a", &log)))
+        .expect("a");
+    system.connect("a.out", "r1.feed").expect("a -> r1");
+    system.connect("r1.out", "a.feed").expect("r1 -> a");
+    system.group("loop", &["r1", "a"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "r1:2"]);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:3", "r1:4"]);
+}
+
+#[test]
+fn members_are_commanded_and_monitored_each_on_its_own_ports() {
+    let log = Log::default();
+    let (system, clock) = chain(&log, step("b", &log));
+    let c = system.handle("c").expect("c");
+    c.command(Command::SetPeriod(PERIOD * 2)).expect("period");
+    clock.settle().expect("settled");
+    tick(&clock);
+    tick(&clock);
+    // `c` now runs every other period, on the group's grid.
+    assert_eq!(log.take(), ["a:1", "b:2", "a:1", "b:2", "c:3"]);
+    assert_eq!(c.snapshot().period, Some(PERIOD * 2));
+    assert_eq!(
+        system.handle("b").expect("b").snapshot().period,
+        Some(PERIOD)
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    let _ = WAIT;
+}
+
+/// `a -> b -> c` grouped inside compound `base`, with `b2`, a compound around one more
+/// `Stage`, substituting `b` on its own thread outside the group.
+fn supervised(log: &Log, b: Step) -> (System, Arc<VirtualClock>) {
+    use coolbot::{CompoundBuilder, Policy};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let substitute = CompoundBuilder::new("b2", Coordinating)
+        .instance(stage::component("inner", step("b2", log)))
+        .export_input::<u64>("feed", "inner.feed")
+        .export_output::<u64>("out", "inner.out")
+        .build()
+        .expect("b2");
+    let base = CompoundBuilder::new("base", Coordinating)
+        .instance(stage::component("a", step("a", log)))
+        .instance(stage::component("b", b))
+        .instance(stage::component("c", step("c", log)))
+        .instance(substitute)
+        .connect("a.out", "b.feed")
+        .connect("b.out", "c.feed")
+        .thread("control", &["a", "b", "c"])
+        .substitute("b2", "b")
+        .on_error("b", Policy::Substitute)
+        .build()
+        .expect("base");
+    system.add(base).expect("base");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    (system, clock)
+}
+
+#[test]
+fn a_failed_member_is_substituted_by_a_compound_outside_the_group() {
+    let log = Log::default();
+    let b = Step {
+        panic_at: Some(2),
+        ..step("b", &log)
+    };
+    let (system, clock) = supervised(&log, b);
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    // `b` panics; the compound's supervisor puts `b2` in its place: `b2` runs on its
+    // own thread, fed by `a` and feeding `c`, which stay on the group's thread.
+    let b2 = system.handle_at("base.b2").expect("b2");
+    let mut ticks = 0;
+    while !log.take().contains(&"b2:2".to_owned()) {
+        tick(&clock);
+        ticks += 1;
+        assert!(ticks < 10, "no substitution: {:?}", b2.snapshot());
+    }
+    assert_eq!(
+        system.handle_at("base.b").expect("b").state(),
+        State::RunningError
+    );
+    let base = system.handle("base").expect("base");
+    assert_eq!(base.state(), State::Running);
+    tick(&clock);
+    let mut lines = log.take();
+    lines.sort();
+    // (`b2` and `c` are on two threads: their order within the period is not fixed;
+    // `c` reads the newest of `b2`'s packets.)
+    assert_eq!(lines, ["a:1", "b2:2", "c:3"]);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
+fn a_compound_refuses_a_group_that_cannot_run() {
+    use coolbot::{CompoundBuilder, CompoundError};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let log = Log::default();
+    let hop = |name| Hop {
+        name,
+        log: log.clone(),
+    };
+    let built = CompoundBuilder::new("base", Coordinating)
+        .instance(relay::component("r1", hop("r1")))
+        .instance(relay::component("r2", hop("r2")))
+        .connect("r1.out", "r2.feed")
+        .connect("r2.out", "r1.feed")
+        .thread("loop", &["r1", "r2"])
+        .build();
+    let Err(error) = built else {
+        panic!("a cycle of queues was accepted");
+    };
+    assert!(matches!(error, CompoundError::Instance { .. }));
+    assert_eq!(
+        coolbot::Chain(&error).to_string(),
+        "compound `base`: execution group `loop`: its members' connections form a cycle through `r1`, `r2` with no `last` or `poster` input to break it"
+    );
+}
