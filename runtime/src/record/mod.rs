@@ -94,6 +94,44 @@ const FLUSH_INTERVAL: Duration = Duration::from_millis(100);
 /// Why a tap, a monitor, a route or a recording could not be set up, or failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
+    /// A rosbag2 recording ([`RecordFormat::Ros2`]) given a port whose packets are not
+    /// a ROS 2 message type, or tapped without saying it is one.
+    #[error(
+        "`{path}` carries `{carries}`, not a ROS 2 message type: a rosbag2 recording takes only ports tapped with `tap_ros` (record the others in a recording of the coolbot format)"
+    )]
+    NotRosType {
+        /// The port.
+        path: String,
+        /// What it carries (its Rust type, or `tick events`).
+        carries: String,
+    },
+    /// A rosbag2 recording ([`RecordFormat::Ros2`]) asked to record monitoring events,
+    /// which are not a ROS 2 message type.
+    #[error(
+        "the monitoring port of `{component}` is not a ROS 2 topic: a rosbag2 recording holds no monitoring events (record them in a recording of the coolbot format)"
+    )]
+    MonitorNotRos {
+        /// The component.
+        component: String,
+    },
+    /// A ROS 2 topic name that ROS 2 does not accept.
+    #[error("`{topic}` is not a ROS 2 topic name: {reason}")]
+    BadTopic {
+        /// The name.
+        topic: String,
+        /// Which rule it breaks.
+        reason: &'static str,
+    },
+    /// Two ports recorded on one ROS 2 topic.
+    #[error("`{path}` and `{other}` would both be recorded on topic `{topic}`")]
+    SameTopic {
+        /// The topic.
+        topic: String,
+        /// The port tapped last.
+        path: String,
+        /// The port tapped first.
+        other: String,
+    },
     /// Not `component.port`.
     #[error("`{path}` is not a `component.port` path")]
     BadPath {
@@ -241,6 +279,26 @@ pub enum ReadError {
         /// The version found.
         found: u32,
     },
+    /// A packet's CDR bytes (a rosbag2 recording's message) do not decode into the
+    /// type asked for.
+    #[error("packet {seq} of `{port}` does not decode")]
+    DecodeCdr {
+        /// The port (or topic).
+        port: String,
+        /// The packet's sequence number.
+        seq: u64,
+        /// What is wrong.
+        #[source]
+        source: crate::cdr::CdrError,
+    },
+    /// A rosbag2 bag directory that does not hold exactly one MCAP file.
+    #[error("{path}: a rosbag2 bag directory with {found} MCAP files; one is read")]
+    BagFiles {
+        /// The directory.
+        path: PathBuf,
+        /// How many `.mcap` files it holds.
+        found: usize,
+    },
     /// A packet's value does not decode into the type asked for.
     #[error("packet {seq} of `{port}` does not decode")]
     Decode {
@@ -258,12 +316,14 @@ mod paths;
 mod player;
 mod reader;
 mod recorder;
+mod rosbag2;
 mod tap;
 mod writer;
 
 pub use player::{Pace, Played, Player};
 pub use reader::Reader;
 pub use recorder::{Recorder, Recording};
+pub use rosbag2::{OFFERED_QOS_PROFILES, RecordFormat, UnknownFormat};
 
 /// The `reason` of a loss record: the producer found the tap's queue full.
 pub const QUEUE_FULL: &str = "queue full";
@@ -317,13 +377,26 @@ pub struct PacketRecord {
     pub port: String,
     /// Its number among the packets sent on this output since the recording started.
     pub seq: u64,
-    /// The packet, as serde serialized it.
+    /// The packet, as serde serialized it (`null` for a message of a rosbag2
+    /// recording: see `cdr`).
     pub value: serde_json::Value,
+    /// The message's CDR bytes, with their encapsulation header, for a message of a
+    /// rosbag2 recording (message encoding `cdr`); `None` otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cdr: Option<Vec<u8>>,
 }
 
 impl PacketRecord {
-    /// The packet as a `T`.
+    /// The packet as a `T`: from its JSON value, or from its CDR bytes
+    /// ([`crate::cdr::from_slice`]) for a message of a rosbag2 recording.
     pub fn decode<T: DeserializeOwned>(&self) -> Result<T, ReadError> {
+        if let Some(bytes) = &self.cdr {
+            return crate::cdr::from_slice(bytes).map_err(|source| ReadError::DecodeCdr {
+                port: self.port.clone(),
+                seq: self.seq,
+                source,
+            });
+        }
         T::deserialize(&self.value).map_err(|source| ReadError::Decode {
             port: self.port.clone(),
             seq: self.seq,

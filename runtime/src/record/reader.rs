@@ -2,14 +2,15 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
 
+use super::writer::LOSS_METADATA;
 use super::{
     END_METADATA, EventRecord, FORMAT_VERSION, HEADER_METADATA, Header, LOSSES_TOPIC, PacketRecord,
-    ReadError, Record,
+    PortInfo, ReadError, Record,
 };
 
 /// Reads a recording: the [`Header`] at once, then the records as an iterator (packets,
@@ -19,6 +20,16 @@ use super::{
 /// It streams the file (one record in memory at a time). A recording whose process
 /// died before [`Recording::finish`] holds every chunk flushed until then; the
 /// reader yields them, then an error for the cut-off end.
+///
+/// It reads rosbag2 bags too: a recording of the [`RecordFormat::Ros2`] format, and
+/// (through [`Reader::open`], which reads the file's summary) a bag that another
+/// program wrote, whose ports are then its topics (each `cdr` channel: its topic as
+/// path, its schema's name as type, kind `data`), its start the first message's time,
+/// and each message's `seq` its number on its topic (rosbag2 writes every sequence
+/// as 0).
+///
+/// [`Recording::finish`]: super::Recording::finish
+/// [`RecordFormat::Ros2`]: super::RecordFormat::Ros2
 pub struct Reader {
     pub(super) path: PathBuf,
     pub(super) header: Header,
@@ -40,6 +51,10 @@ pub(super) enum Topic {
         path: String,
         wrapped: bool,
         last: Option<u64>,
+        /// Its messages are CDR.
+        cdr: bool,
+        /// Its sequence numbers are counted, not read (a bag another program wrote).
+        counted: bool,
     },
     /// A monitored component's events.
     Events { component: String, wrapped: bool },
@@ -51,6 +66,8 @@ pub(super) enum Topic {
 
 /// An MCAP record, owned, as far as a [`Reader`] cares.
 pub(super) enum Raw {
+    /// The MCAP header: its profile.
+    Header(String),
     Metadata(mcap::records::Metadata),
     Channel(mcap::records::Channel),
     Message(mcap::records::MessageHeader, Vec<u8>),
@@ -65,18 +82,40 @@ impl std::fmt::Debug for Reader {
 }
 
 impl Reader {
-    /// Open the recording at `path` and read its header.
+    /// Open the recording at `path` and read its header: an MCAP file, or a rosbag2
+    /// bag directory holding one (`metadata.yaml` is not read: the MCAP file holds
+    /// what it says).
     pub fn open(path: impl AsRef<Path>) -> Result<Reader, ReadError> {
-        let path = path.as_ref().to_path_buf();
-        let file = File::open(&path).map_err(|source| ReadError::Io {
+        let mut path = path.as_ref().to_path_buf();
+        if path.is_dir() {
+            path = bag_file(&path)?;
+        }
+        let io = |source| ReadError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut file = File::open(&path).map_err(io)?;
+        // A bag another program wrote has no header: its ports are read from the
+        // summary at the end of the file.
+        let summary = read_summary(&mut file).map_err(|source| ReadError::Mcap {
             path: path.clone(),
             source,
         })?;
-        Reader::new(path, Box::new(BufReader::new(file)))
+        file.seek(SeekFrom::Start(0)).map_err(io)?;
+        Reader::read(path, Box::new(BufReader::new(file)), summary)
     }
 
-    /// Read a recording from `input` (`path` names it in errors).
+    /// Read a recording from `input` (`path` names it in errors). A rosbag2 bag that
+    /// another program wrote is read only by [`Reader::open`].
     pub fn new(path: PathBuf, input: Box<dyn Read + Send>) -> Result<Reader, ReadError> {
+        Reader::read(path, input, None)
+    }
+
+    fn read(
+        path: PathBuf,
+        input: Box<dyn Read + Send>,
+        summary: Option<mcap::Summary>,
+    ) -> Result<Reader, ReadError> {
         let mut reader = Reader {
             path,
             header: Header {
@@ -93,6 +132,7 @@ impl Reader {
             done: false,
         };
         // The header metadata comes before any channel.
+        let mut profile = String::new();
         loop {
             let raw = match reader.next_raw() {
                 Some(Ok(raw)) => raw,
@@ -115,9 +155,15 @@ impl Reader {
                         .map_err(|source| reader.json("header", source))?;
                     return Ok(reader);
                 }
+                Raw::Channel(channel) if profile == "ros2" && summary.is_some() => {
+                    reader.header = foreign_header(summary.as_ref());
+                    reader.declare(channel);
+                    return Ok(reader);
+                }
                 Raw::Channel(_) | Raw::Message(..) | Raw::DataEnd => {
                     return Err(reader.no_header());
                 }
+                Raw::Header(found) => profile = found,
                 Raw::Metadata(_) | Raw::Other => {}
             }
         }
@@ -188,6 +234,7 @@ impl Reader {
                 mcap::sans_io::LinearReadEvent::Record { data, opcode } => {
                     self.record += 1;
                     let raw = match mcap::parse_record(opcode, data) {
+                        Ok(mcap::records::Record::Header(header)) => Raw::Header(header.profile),
                         Ok(mcap::records::Record::Metadata(metadata)) => Raw::Metadata(metadata),
                         Ok(mcap::records::Record::Channel(channel)) => Raw::Channel(channel),
                         Ok(mcap::records::Record::Message { header, data }) => {
@@ -221,11 +268,23 @@ impl Reader {
                 component: component.clone(),
                 wrapped,
             }
+        } else if channel.message_encoding == "cdr" {
+            // A rosbag2 recording's port, or a topic of a bag another program wrote.
+            let port = channel.metadata.get("coolbot.port").cloned();
+            Topic::Port {
+                counted: port.is_none(),
+                path: port.unwrap_or(channel.topic),
+                wrapped: false,
+                last: None,
+                cdr: true,
+            }
         } else if channel.metadata.contains_key("coolbot.kind") {
             Topic::Port {
                 path: channel.topic,
                 wrapped,
                 last: None,
+                cdr: false,
+                counted: false,
             }
         } else {
             Topic::Other
@@ -264,6 +323,8 @@ impl Reader {
                 path,
                 wrapped,
                 last,
+                cdr,
+                counted,
             } => {
                 // The MCAP sequence is the packet's number modulo 2^32: the number is
                 // the one nearest the last one read (packets sent from several threads
@@ -271,6 +332,7 @@ impl Reader {
                 // not always a wrap).
                 let low = u64::from(header.sequence);
                 let seq = match *last {
+                    _ if *counted => last.map_or(0, |previous| previous + 1),
                     None => low,
                     Some(previous) => {
                         let candidate = (previous & !0xffff_ffff) | low;
@@ -287,12 +349,22 @@ impl Reader {
                 };
                 *last = Some(seq);
                 let port = path.clone();
+                if *cdr {
+                    return Ok(Some(Record::Packet(PacketRecord {
+                        t,
+                        port,
+                        seq,
+                        value: serde_json::Value::Null,
+                        cdr: Some(data.to_vec()),
+                    })));
+                }
                 let value = parse(*wrapped).map_err(|source| self.json("a packet", source))?;
                 Ok(Some(Record::Packet(PacketRecord {
                     t,
                     port,
                     seq,
                     value,
+                    cdr: None,
                 })))
             }
             Topic::Events { component, wrapped } => {
@@ -340,6 +412,14 @@ impl Iterator for Reader {
                     Ok(None) => {}
                     Err(error) => return Some(Err(error)),
                 },
+                Raw::Metadata(metadata) if metadata.name == LOSS_METADATA => {
+                    let text = metadata.metadata.get("loss").cloned().unwrap_or_default();
+                    return Some(
+                        serde_json::from_str(&text)
+                            .map(Record::Lost)
+                            .map_err(|source| self.json("a loss", source)),
+                    );
+                }
                 Raw::Metadata(metadata) if metadata.name == END_METADATA => {
                     let text = metadata
                         .metadata
@@ -354,9 +434,85 @@ impl Iterator for Reader {
                 }
                 // The summary section repeats the channels: nothing more to read.
                 Raw::DataEnd => self.done = true,
-                Raw::Metadata(_) | Raw::Other => {}
+                Raw::Header(_) | Raw::Metadata(_) | Raw::Other => {}
             }
         }
         None
+    }
+}
+
+/// The one MCAP file of the rosbag2 bag directory `dir`.
+fn bag_file(dir: &Path) -> Result<PathBuf, ReadError> {
+    let io = |source| ReadError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let path = entry.map_err(io)?.path();
+        if path.extension().is_some_and(|ext| ext == "mcap") {
+            files.push(path);
+        }
+    }
+    match <[PathBuf; 1]>::try_from(files) {
+        Ok([file]) => Ok(file),
+        Err(files) => Err(ReadError::BagFiles {
+            path: dir.to_path_buf(),
+            found: files.len(),
+        }),
+    }
+}
+
+/// The summary section of an MCAP file (`None` if it has none).
+fn read_summary(file: &mut File) -> mcap::McapResult<Option<mcap::Summary>> {
+    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader};
+    let mut reader = SummaryReader::new();
+    while let Some(event) = reader.next_event() {
+        match event? {
+            SummaryReadEvent::ReadRequest(need) => {
+                let read = file.read(reader.insert(need))?;
+                reader.notify_read(read);
+            }
+            SummaryReadEvent::SeekRequest(to) => {
+                reader.notify_seeked(file.seek(to)?);
+            }
+        }
+    }
+    Ok(reader.finish())
+}
+
+/// The header of a rosbag2 bag that another program wrote: its `cdr` channels as
+/// ports, in channel order, and its first message's time as its start.
+fn foreign_header(summary: Option<&mcap::Summary>) -> Header {
+    let mut ports = Vec::new();
+    let mut start_unix_ns = 0;
+    if let Some(summary) = summary {
+        let mut channels: Vec<_> = summary.channels.values().collect();
+        channels.sort_by_key(|channel| channel.id);
+        for channel in channels {
+            if channel.message_encoding != "cdr" {
+                continue;
+            }
+            ports.push(PortInfo {
+                path: channel.topic.clone(),
+                type_name: channel
+                    .schema
+                    .as_ref()
+                    .map(|schema| schema.name.clone())
+                    .unwrap_or_default(),
+                kind: "data".to_owned(),
+            });
+        }
+        start_unix_ns = summary
+            .stats
+            .as_ref()
+            .map_or(0, |stats| stats.message_start_time);
+    }
+    Header {
+        version: FORMAT_VERSION,
+        start_unix_ns,
+        capacity: 0,
+        ports,
+        monitors: Vec::new(),
     }
 }

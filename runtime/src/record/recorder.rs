@@ -16,8 +16,9 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::paths::find_output;
+use super::rosbag2::{OFFERED_QOS_PROFILES, RecordFormat, RosTopic, check_topic, topic_of};
 use super::tap::{Counters, Pending, PendingTap, PendingTicks, nanos};
-use super::writer::{Followed, Writer};
+use super::writer::{Bag, Followed, Writer};
 use super::{
     DEFAULT_TAP_CAPACITY, EVENTS_SUFFIX, FORMAT_VERSION, HEADER_METADATA, Header, LOSS_EVENTS,
     LOSSES_TOPIC, Loss, LossRecord, PortInfo, PortSummary, RecordError, Summary,
@@ -26,6 +27,7 @@ use crate::clock::Clock;
 use crate::handle::Handle;
 use crate::monitor::MonitorEvent;
 use crate::port::{OutKind, Packet};
+use crate::ros::RosType;
 use crate::schema::Schema;
 use crate::system::System;
 use crate::wake::Doorbell;
@@ -51,6 +53,7 @@ pub struct Recorder {
     pub(super) clock: Clock,
     pub(super) taps: Vec<Box<dyn PendingTap>>,
     pub(super) monitors: Vec<(String, Handle)>,
+    pub(super) format: RecordFormat,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -59,6 +62,7 @@ impl std::fmt::Debug for Recorder {
         let monitors: Vec<&str> = self.monitors.iter().map(|(p, _)| p.as_str()).collect();
         f.debug_struct("Recorder")
             .field("capacity", &self.capacity)
+            .field("format", &self.format)
             .field("taps", &taps)
             .field("monitors", &monitors)
             .finish()
@@ -79,7 +83,17 @@ impl Recorder {
             clock: Clock::real(),
             taps: Vec::new(),
             monitors: Vec::new(),
+            format: RecordFormat::Coolbot,
         }
+    }
+
+    /// Write the recording in `format` ([`RecordFormat::Coolbot`] by default). A
+    /// [`RecordFormat::Ros2`] recording takes only ports tapped with
+    /// [`Recorder::tap_ros`] or [`Recorder::tap_ros_on`]: [`Recorder::start`] refuses
+    /// any other tap, and any monitor, naming it.
+    pub fn format(mut self, format: RecordFormat) -> Recorder {
+        self.format = format;
+        self
     }
 
     /// How many packets each tap's queue holds (at least 1) while the recorder's thread
@@ -105,7 +119,7 @@ impl Recorder {
         system: &System,
         path: &str,
     ) -> Result<&mut Recorder, RecordError> {
-        self.tap_as::<T>(system, path, crate::schema::of::<T>)
+        self.tap_as::<T>(system, path, crate::schema::of::<T>, None)
     }
 
     /// [`Recorder::tap`] with the channel's JSON Schema given (for a type whose
@@ -116,7 +130,49 @@ impl Recorder {
         path: &str,
         schema: serde_json::Value,
     ) -> Result<&mut Recorder, RecordError> {
-        self.tap_as::<T>(system, path, move || Schema::given(schema))
+        self.tap_as::<T>(system, path, move || Schema::given(schema), None)
+    }
+
+    /// Record the data output at `path`, whose packets are the ROS 2 message type
+    /// `T`, on the ROS 2 topic its path names (`robot.base.scan` on
+    /// `/robot/base/scan`). In a [`RecordFormat::Ros2`] recording its messages are CDR
+    /// on that topic; in a [`RecordFormat::Coolbot`] one it is recorded as
+    /// [`Recorder::tap`] records it.
+    pub fn tap_ros<T: Packet + Serialize + DeserializeOwned + RosType>(
+        &mut self,
+        system: &System,
+        path: &str,
+    ) -> Result<&mut Recorder, RecordError> {
+        self.tap_ros_on::<T>(system, path, &topic_of(path))
+    }
+
+    /// [`Recorder::tap_ros`] on the ROS 2 topic `topic` (`/scan`: a fully qualified
+    /// name, as ROS 2 accepts it).
+    pub fn tap_ros_on<T: Packet + Serialize + DeserializeOwned + RosType>(
+        &mut self,
+        system: &System,
+        path: &str,
+        topic: &str,
+    ) -> Result<&mut Recorder, RecordError> {
+        check_topic(topic)?;
+        if let Some(other) = self
+            .taps
+            .iter()
+            .find(|t| t.ros().is_some_and(|ros| ros.topic == topic))
+        {
+            return Err(RecordError::SameTopic {
+                topic: topic.to_owned(),
+                path: path.to_owned(),
+                other: other.path().to_owned(),
+            });
+        }
+        let ros = RosTopic {
+            topic: topic.to_owned(),
+            type_name: T::NAME,
+            hash: T::TYPE_HASH,
+            definition: T::MESSAGE_DEFINITION,
+        };
+        self.tap_as::<T>(system, path, crate::schema::of::<T>, Some(ros))
     }
 
     pub(super) fn tap_as<T: Packet + Serialize>(
@@ -124,6 +180,7 @@ impl Recorder {
         system: &System,
         path: &str,
         schema: impl FnOnce() -> Schema,
+        ros: Option<RosTopic>,
     ) -> Result<&mut Recorder, RecordError> {
         if self.taps.iter().any(|t| t.path() == path) {
             return Err(RecordError::Duplicate(path.to_owned()));
@@ -148,6 +205,7 @@ impl Recorder {
             kind: output.kind.name(),
             output,
             schema: schema(),
+            ros,
             marker: std::marker::PhantomData,
         }));
         Ok(self)
@@ -192,21 +250,55 @@ impl Recorder {
         Ok(self)
     }
 
-    /// Attach the taps and start recording into the MCAP file at `path` (created or
-    /// truncated).
+    /// Attach the taps and start recording at `path`: into the MCAP file at `path`
+    /// (created or truncated) in the [`RecordFormat::Coolbot`] format; into the
+    /// rosbag2 bag directory `path` (created: it must not exist) in the
+    /// [`RecordFormat::Ros2`] format, which then holds `<name>_0.mcap` (`<name>` the
+    /// directory's name) and, once the recording finishes, `metadata.yaml`.
     pub fn start(self, path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let path = path.as_ref().to_path_buf();
-        let file = File::create(&path).map_err(|source| RecordError::Io {
-            path: path.clone(),
+        let ros2 = self.format == RecordFormat::Ros2;
+        if ros2 {
+            if let Some(tap) = self.taps.iter().find(|tap| tap.ros().is_none()) {
+                return Err(RecordError::NotRosType {
+                    path: tap.path().to_owned(),
+                    carries: if tap.kind() == "tick" {
+                        "tick events".to_owned()
+                    } else {
+                        tap.type_name().to_owned()
+                    },
+                });
+            }
+            if let Some((component, _)) = self.monitors.first() {
+                return Err(RecordError::MonitorNotRos {
+                    component: component.clone(),
+                });
+            }
+        }
+        let (file_path, bag) = if ros2 {
+            std::fs::create_dir(&path).map_err(|source| RecordError::Io {
+                path: path.clone(),
+                source,
+            })?;
+            let name = path
+                .file_name()
+                .map_or_else(|| "bag".into(), |name| name.to_string_lossy().into_owned());
+            let file = format!("{name}_0.mcap");
+            (path.join(&file), Some(file))
+        } else {
+            (path.clone(), None)
+        };
+        let file = File::create(&file_path).map_err(|source| RecordError::Io {
+            path: file_path.clone(),
             source,
         })?;
         let mcap_error = |source| RecordError::Mcap {
-            path: path.clone(),
+            path: file_path.clone(),
             source,
         };
         let mut mcap = mcap::WriteOptions::new()
             .compression(None)
-            .profile("")
+            .profile(if ros2 { "ros2" } else { "" })
             .library(concat!("coolbot-", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(mcap_error)?;
@@ -237,9 +329,20 @@ impl Recorder {
         })
         .map_err(mcap_error)?;
 
-        // One channel per tapped output, per monitored component, and for the losses.
+        // One channel per tapped output, per monitored component, and for the losses
+        // (in a rosbag2 recording, one per tapped output: its topic).
         let mut channels = Vec::new();
+        let mut schemas = BTreeMap::new();
+        let mut topics = Vec::new();
         for tap in &mut pending {
+            if let (Some(ros), true) = (tap.ros(), ros2) {
+                let channel =
+                    add_ros_channel(&mut mcap, &mut schemas, ros, tap.path(), tap.type_name())
+                        .map_err(mcap_error)?;
+                topics.push((ros.clone(), channel.id));
+                channels.push(channel);
+                continue;
+            }
             let schema = tap.schema();
             let mut metadata = BTreeMap::new();
             metadata.insert("coolbot.kind".to_owned(), tap.kind().to_owned());
@@ -262,14 +365,20 @@ impl Recorder {
             .map_err(mcap_error)?;
             monitor_channels.push(out);
         }
-        let losses_channel = add_channel(
-            &mut mcap,
-            "coolbot::record::LossRecord",
-            LOSSES_TOPIC,
-            &crate::schema::of::<LossRecord>(),
-            BTreeMap::new(),
-        )
-        .map_err(mcap_error)?;
+        let losses_channel = if ros2 {
+            None
+        } else {
+            Some(
+                add_channel(
+                    &mut mcap,
+                    "coolbot::record::LossRecord",
+                    LOSSES_TOPIC,
+                    &crate::schema::of::<LossRecord>(),
+                    BTreeMap::new(),
+                )
+                .map_err(mcap_error)?,
+            )
+        };
         mcap.flush().map_err(mcap_error)?;
 
         let bell = Doorbell::new();
@@ -299,8 +408,16 @@ impl Recorder {
             .collect();
         let (loss_sender, losses) = crossbeam_channel::bounded(LOSS_EVENTS);
         let stop = Arc::new(AtomicBool::new(false));
+        let bag = bag.map(|file| Bag {
+            dir: path.clone(),
+            file,
+            topics,
+            counts: BTreeMap::new(),
+            span: None,
+        });
         let thread = Writer {
-            path: path.clone(),
+            path: file_path,
+            bag,
             mcap,
             start,
             start_unix_ns,
@@ -350,11 +467,14 @@ impl Start {
     }
 }
 
-/// A channel of the recording: its id, and whether its messages are wrapped.
+/// A channel of the recording: its id, and how its messages are written.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Channel {
     pub(super) id: u16,
+    /// JSON, wrapped in `{"value": ...}`.
     pub(super) wrapped: bool,
+    /// CDR (a rosbag2 recording's channel).
+    pub(super) cdr: bool,
 }
 
 /// Add a JSON channel on `topic` with `schema` (wrapped when its values are not
@@ -381,7 +501,47 @@ pub(super) fn add_channel(
         if wrapped { "value" } else { "" }.to_owned(),
     );
     let id = mcap.add_channel(schema_id, topic, "json", &metadata)?;
-    Ok(Channel { id, wrapped })
+    Ok(Channel {
+        id,
+        wrapped,
+        cdr: false,
+    })
+}
+
+/// Add a rosbag2 channel for `ros` (and its type's schema, once per type): message
+/// encoding `cdr`, rosbag2's metadata (`offered_qos_profiles`, `topic_type_hash`) and
+/// the recorded port (`coolbot.port`, `coolbot.kind`, `coolbot.type`).
+fn add_ros_channel(
+    mcap: &mut McapWriter,
+    schemas: &mut BTreeMap<&'static str, u16>,
+    ros: &RosTopic,
+    path: &str,
+    type_name: &str,
+) -> Result<Channel, mcap::McapError> {
+    let schema_id = match schemas.get(ros.type_name) {
+        Some(id) => *id,
+        None => {
+            let id = mcap.add_schema(ros.type_name, "ros2msg", ros.definition.as_bytes())?;
+            schemas.insert(ros.type_name, id);
+            id
+        }
+    };
+    let metadata = BTreeMap::from([
+        (
+            "offered_qos_profiles".to_owned(),
+            OFFERED_QOS_PROFILES.to_owned(),
+        ),
+        ("topic_type_hash".to_owned(), ros.hash.to_owned()),
+        ("coolbot.port".to_owned(), path.to_owned()),
+        ("coolbot.kind".to_owned(), "data".to_owned()),
+        ("coolbot.type".to_owned(), type_name.to_owned()),
+    ]);
+    let id = mcap.add_channel(schema_id, &ros.topic, "cdr", &metadata)?;
+    Ok(Channel {
+        id,
+        wrapped: false,
+        cdr: true,
+    })
 }
 
 /// The MCAP writer of a recording.
@@ -407,7 +567,7 @@ impl std::fmt::Debug for Recording {
 }
 
 impl Recording {
-    /// The file being written.
+    /// The file being written (the bag directory of a rosbag2 recording).
     pub fn path(&self) -> &Path {
         &self.path
     }

@@ -9,6 +9,7 @@ use crossbeam_channel::{Receiver, Sender};
 use serde::Serialize;
 
 use super::recorder::{Channel, Start};
+use super::rosbag2::RosTopic;
 use super::{NOT_SERIALIZABLE, PortSummary, QUEUE_FULL, message_bytes};
 use crate::port::{Deliver, ErasedInput, ErasedOutput, Packet, Parcel, TickIn};
 use crate::schema::Schema;
@@ -22,6 +23,8 @@ pub(super) trait PendingTap: Send {
     fn kind(&self) -> &'static str;
     /// The JSON Schema of its messages.
     fn schema(&self) -> Schema;
+    /// Its topic and type, for a port of a ROS 2 message type tapped as one.
+    fn ros(&self) -> Option<&RosTopic>;
     fn attach(
         self: Box<Self>,
         capacity: usize,
@@ -37,6 +40,7 @@ pub(super) struct Pending<T> {
     pub(super) kind: &'static str,
     pub(super) output: ErasedOutput,
     pub(super) schema: Schema,
+    pub(super) ros: Option<RosTopic>,
     pub(super) marker: std::marker::PhantomData<fn() -> T>,
 }
 
@@ -55,6 +59,10 @@ impl<T: Packet + Serialize> PendingTap for Pending<T> {
 
     fn schema(&self) -> Schema {
         self.schema.clone()
+    }
+
+    fn ros(&self) -> Option<&RosTopic> {
+        self.ros.as_ref()
     }
 
     fn attach(
@@ -114,6 +122,10 @@ impl PendingTap for PendingTicks {
             "title": "tick",
             "type": "null",
         }))
+    }
+
+    fn ros(&self) -> Option<&RosTopic> {
+        None
     }
 
     fn attach(
@@ -306,7 +318,13 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
 
     fn drain(&mut self, lines: &mut Vec<Line>) {
         for (t, seq, value) in self.receiver.try_iter() {
-            match message_bytes(&value, self.channel.wrapped) {
+            let bytes = if self.channel.cdr {
+                crate::cdr::to_vec(&value)
+                    .map_err(|error| Box::new(error) as Box<dyn std::error::Error>)
+            } else {
+                message_bytes(&value, self.channel.wrapped).map_err(|error| error.into())
+            };
+            match bytes {
                 Ok(data) => {
                     lines.push(Line {
                         t,

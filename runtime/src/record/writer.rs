@@ -10,6 +10,7 @@ use std::time::Instant;
 use crossbeam_channel::Sender;
 
 use super::recorder::{Channel, McapWriter, Start};
+use super::rosbag2::{RosTopic, TopicCount, bag_metadata, metadata_yaml};
 use super::tap::{Line, Tap};
 use super::{
     END_METADATA, FLUSH_INTERVAL, Loss, LossRecord, MonitorSummary, QUEUE_FULL, RecordError,
@@ -45,6 +46,43 @@ impl Followed {
     }
 }
 
+/// The name of the metadata record that holds one loss in a rosbag2 recording (key
+/// `loss`, a JSON [`LossRecord`]): a rosbag2 bag holds CDR messages of ROS 2 types
+/// only.
+pub(super) const LOSS_METADATA: &str = "coolbot.loss";
+
+/// A rosbag2 recording's bag: its directory, its MCAP file's name, its topics and
+/// what was written on each (for `metadata.yaml`).
+pub(super) struct Bag {
+    pub(super) dir: PathBuf,
+    pub(super) file: String,
+    /// Each topic and its channel.
+    pub(super) topics: Vec<(RosTopic, u16)>,
+    /// Messages written per channel.
+    pub(super) counts: BTreeMap<u16, u64>,
+    /// The first and last message's `log_time`.
+    pub(super) span: Option<(u64, u64)>,
+}
+
+impl Bag {
+    /// The bag's metadata (rosbag2's `BagMetadata`, serialized).
+    fn metadata(&self) -> String {
+        let topics: Vec<TopicCount<'_>> = self
+            .topics
+            .iter()
+            .map(|(topic, channel)| TopicCount {
+                topic,
+                messages: self.counts.get(channel).copied().unwrap_or(0),
+            })
+            .collect();
+        // rosbag2 writes an empty bag's start as the largest time.
+        let (start, duration) = self
+            .span
+            .map_or((i64::MAX as u64, 0), |(first, last)| (first, last - first));
+        bag_metadata(&self.file, &topics, start, duration)
+    }
+}
+
 /// The recorder's thread.
 pub(super) struct Writer {
     pub(super) path: PathBuf,
@@ -54,7 +92,11 @@ pub(super) struct Writer {
     pub(super) start_unix_ns: u64,
     pub(super) taps: Vec<Box<dyn Tap>>,
     pub(super) monitors: Vec<Followed>,
-    pub(super) losses_channel: Channel,
+    /// The losses' channel (a rosbag2 recording writes each loss as a metadata record
+    /// [`LOSS_METADATA`] instead).
+    pub(super) losses_channel: Option<Channel>,
+    /// What a rosbag2 recording writes beside its messages.
+    pub(super) bag: Option<Bag>,
     /// Loss messages written so far (their sequence numbers).
     pub(super) losses_written: u64,
     pub(super) bell: Arc<Doorbell>,
@@ -97,10 +139,18 @@ impl Writer {
         for tap in &mut self.taps {
             tap.detach();
         }
-        result.map_err(|source| RecordError::Mcap {
+        let summary = result.map_err(|source| RecordError::Mcap {
             path: self.path.clone(),
             source,
-        })
+        })?;
+        if let Some(bag) = &self.bag {
+            // Last, as rosbag2 does: a bag without it was cut off (`ros2 bag reindex`
+            // writes it again from the MCAP file).
+            let path = bag.dir.join("metadata.yaml");
+            std::fs::write(&path, metadata_yaml(&bag.metadata()))
+                .map_err(|source| RecordError::Io { path, source })?;
+        }
+        Ok(summary)
     }
 
     /// Write one message.
@@ -112,6 +162,12 @@ impl Writer {
         data: &[u8],
     ) -> mcap::McapResult<()> {
         let time = self.start_unix_ns.saturating_add(t);
+        if let Some(bag) = &mut self.bag {
+            *bag.counts.entry(channel).or_default() += 1;
+            bag.span = Some(bag.span.map_or((time, time), |(first, last)| {
+                (first.min(time), last.max(time))
+            }));
+        }
         self.mcap.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id: channel,
@@ -188,9 +244,21 @@ impl Writer {
                     "packets"
                 }
             ));
-            let data = message_bytes(&loss, self.losses_channel.wrapped)
-                .map_err(|error| mcap::McapError::Io(error.into()))?;
-            self.write(self.losses_channel.id, self.losses_written, loss.t, &data)?;
+            match self.losses_channel {
+                Some(channel) => {
+                    let data = message_bytes(&loss, channel.wrapped)
+                        .map_err(|error| mcap::McapError::Io(error.into()))?;
+                    self.write(channel.id, self.losses_written, loss.t, &data)?;
+                }
+                None => {
+                    // (A loss record of strings and numbers always serializes.)
+                    let text = serde_json::to_string(&loss).unwrap_or_default();
+                    self.mcap.write_metadata(&mcap::records::Metadata {
+                        name: LOSS_METADATA.to_owned(),
+                        metadata: BTreeMap::from([("loss".to_owned(), text)]),
+                    })?;
+                }
+            }
             self.losses_written += 1;
             let _ = self.losses.try_send(loss);
         }
@@ -220,6 +288,13 @@ impl Writer {
             name: END_METADATA.to_owned(),
             metadata: BTreeMap::from([("summary".to_owned(), text)]),
         })?;
+        if let Some(bag) = &self.bag {
+            // The bag's metadata in the file too, as rosbag2 writes it when it closes.
+            self.mcap.write_metadata(&mcap::records::Metadata {
+                name: "rosbag2".to_owned(),
+                metadata: BTreeMap::from([("serialized_metadata".to_owned(), bag.metadata())]),
+            })?;
+        }
         self.mcap.finish()?;
         Ok(summary)
     }
