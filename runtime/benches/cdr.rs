@@ -95,7 +95,11 @@ fn main() {
     });
     let micros = |d: Duration| d.as_secs_f64() * 1e6;
     let ratio = |a: Duration, b: Duration| a.as_secs_f64() / b.as_secs_f64();
-    println!("LaserScan, 720 beams: CDR {} bytes, postcard {} bytes", cdr.len(), post.len());
+    println!(
+        "LaserScan, 720 beams: CDR {} bytes, postcard {} bytes",
+        cdr.len(),
+        post.len()
+    );
     println!(
         "encode  CDR {:8.2} us  postcard {:8.2} us  ratio {:.2}x",
         micros(cdr_encode),
