@@ -122,6 +122,7 @@ impl ::coolbot::ros::RosType for {{ p.name }} {
     const NAME: &'static str = {{ message.name }};
     const DDS_NAME: &'static str = {{ message.dds_name }};
     const TYPE_HASH: &'static str = {{ message.hash }};
+    const MESSAGE_DEFINITION: &'static str = {{ message.definition }};
 }
     {%- endfor %}
     }

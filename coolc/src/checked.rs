@@ -52,13 +52,15 @@ impl Checked {
         resolved: Resolved,
         ros: crate::ros::Interfaces,
     ) -> Checked {
-        // Every type loaded has a hash: none has an error in a checked analysis.
+        // Every type loaded has a hash and a definition: none has an error in a checked
+        // analysis.
         let ros = ros
             .messages()
             .filter_map(|message| {
                 Some(model::RosMessage {
                     message: message.clone(),
                     hash: ros.hash(&message.name)?,
+                    definition: ros.definition(&message.name, &sources)?,
                 })
             })
             .collect();

@@ -165,6 +165,8 @@ pub struct RosMessage {
     pub dds_name: String,
     /// `coolbot::ros::RosType::TYPE_HASH`, a Rust string literal.
     pub hash: String,
+    /// `coolbot::ros::RosType::MESSAGE_DEFINITION`, a Rust string literal.
+    pub definition: String,
 }
 
 /// A constant of a ROS 2 message type.

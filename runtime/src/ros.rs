@@ -41,6 +41,10 @@ pub trait RosType {
     const DDS_NAME: &'static str;
     /// Its RIHS01 type hash (REP-2016): `RIHS01_` and 64 lowercase hex digits.
     const TYPE_HASH: &'static str;
+    /// Its full message definition as a rosbag2 bag holds it (the schema of encoding
+    /// `ros2msg`): its `.msg` text, then for each type it references, directly or
+    /// not, a line of 80 `=`, a line `MSG: pkg/Type` and that type's `.msg` text.
+    const MESSAGE_DEFINITION: &'static str;
 }
 
 /// The serde adapter of a bounded sequence (`.msg` `T[<=N]`, a `Vec<T>`): at most `N`

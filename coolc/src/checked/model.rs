@@ -771,6 +771,9 @@ pub struct RosMessage {
     pub message: Message,
     /// Its RIHS01 type hash.
     pub hash: TypeHash,
+    /// Its full message definition as a rosbag2 bag holds it: its `.msg` text, then
+    /// each type it references (`crate::ros::definition`).
+    pub definition: String,
 }
 
 /// `packet Name { fields }`

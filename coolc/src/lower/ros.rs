@@ -92,6 +92,7 @@ fn message(ros: &RosMessage) -> ir::RosMessage {
         name: ident::string_literal(&message.name.to_string()),
         dds_name: ident::string_literal(&message.name.dds_name()),
         hash: ident::string_literal(&ros.hash.to_string()),
+        definition: ident::string_literal(&ros.definition),
     }
 }
 

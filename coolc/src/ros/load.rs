@@ -15,6 +15,7 @@ use crate::ast::{FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, Severity};
 use crate::source::SourceMap;
 
+use super::definition;
 use super::description::{self, TypeDescription};
 use super::hash::TypeHash;
 use super::lookup::{LookupError, Search};
@@ -157,6 +158,18 @@ impl Interfaces {
     /// The RIHS01 hash of `name` (see [`Interfaces::description`] for `None`).
     pub fn hash(&self, name: &TypeName) -> Option<TypeHash> {
         self.description(name).map(|d| TypeHash::of(&d))
+    }
+
+    /// The full message definition of `name` as rosbag2 writes it in a bag
+    /// ([`super::definition`]), from the texts in `sources` (where [`load`] put them);
+    /// `None` as for [`Interfaces::description`].
+    pub fn definition(&self, name: &TypeName, sources: &SourceMap) -> Option<String> {
+        self.description(name)?;
+        let get = |name: &TypeName| {
+            self.get(name)
+                .map(|message| (message, sources.text(message.file)))
+        };
+        definition::full_text(name, &get)
     }
 
     /// A diagnostic for each circle of types containing themselves, at the field that

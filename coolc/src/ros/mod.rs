@@ -11,7 +11,8 @@
 //! - `shipped`: the `.msg` files compiled into coolc;
 //! - `load`: a set of types and every type they reference ([`Interfaces`]);
 //! - `description`: the type description of a type ([`TypeDescription`]);
-//! - `hash`: its RIHS01 hash ([`TypeHash`]).
+//! - `hash`: its RIHS01 hash ([`TypeHash`]);
+//! - `definition`: its full message definition as a rosbag2 bag holds it.
 //!
 //! ```
 //! use std::path::Path;
@@ -41,6 +42,7 @@
 //! );
 //! ```
 
+pub mod definition;
 pub mod description;
 pub mod hash;
 pub mod load;

@@ -62,3 +62,15 @@ pub fn sample(n: u64) -> Sample {
         hook: None,
     }
 }
+
+/// The sample as a ROS 2 message type, `coolbot_test/msg/Sample` (`uint64 n`,
+/// `string label`: its fields in order), so that a rosbag2 recording takes it and
+/// its serialization can still be held. The hash is rosbags' (`hash_rihs01`) for
+/// that definition.
+impl coolbot::ros::RosType for Sample {
+    const NAME: &'static str = "coolbot_test/msg/Sample";
+    const DDS_NAME: &'static str = "coolbot_test::msg::dds_::Sample_";
+    const TYPE_HASH: &'static str =
+        "RIHS01_05a37d5b6436413f50ea217f8295c383cd7ec93bf6934dfe8c58257a26303f09";
+    const MESSAGE_DEFINITION: &'static str = "uint64 n\nstring label\n";
+}

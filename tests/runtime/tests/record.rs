@@ -11,8 +11,9 @@ use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::{DataOut, FifoIn, PosterOut, TickIn, TickOut};
 use coolbot::record::{
     self, NOT_SERIALIZABLE, Pace, Player, QUEUE_FULL, ReadError, Reader, Record, RecordError,
-    Recorder,
+    RecordFormat, Recorder,
 };
+use coolbot::ros::RosType;
 use coolbot::{Command, Component, Controllable, MonitorEvent, SectionResult, State, System};
 use coolbot_runtime_tests::generated::{
     record_holder, record_poster_source, record_sink, record_source,
@@ -900,5 +901,360 @@ fn a_recording_on_a_virtual_clock_is_stamped_with_its_times() {
         .map(|item| item.expect("a packet").0.t)
         .collect();
     assert_eq!(times, [0, 10_000_000, 10_001_000]);
+    drop(system);
+}
+
+/// A fresh path for a bag directory (the recorder creates it).
+fn bag_path(name: &str) -> std::path::PathBuf {
+    let path = temp_file(name);
+    let _ = std::fs::remove_dir_all(&path);
+    path
+}
+
+#[test]
+fn a_ros2_recording_is_a_rosbag2_bag_of_cdr_messages() {
+    let (system, out, _data) = bench();
+    let bag = bag_path("samples_bag");
+    let mut recorder = Recorder::new().format(RecordFormat::Ros2);
+    recorder
+        .tap_ros_on::<Sample>(&system, "src.out", "/samples")
+        .expect("tap");
+    let recording = recorder.start(&bag).expect("start");
+    for n in 0..3 {
+        out.send(sample(n));
+    }
+    let summary = recording.finish().expect("finish");
+    assert_eq!((summary.ports[0].sent, summary.ports[0].recorded), (3, 3));
+
+    // The MCAP file, read with the `mcap` crate: profile `ros2`, the type's schema,
+    // the topic's channel as rosbag2 writes them, CDR messages.
+    let file = bag.join("samples_bag_0.mcap");
+    let bytes = std::fs::read(&file).expect("the bag's MCAP file");
+    let mut stream = mcap::read::LinearReader::new(&bytes).expect("MCAP");
+    let Some(Ok(mcap::records::Record::Header(header))) = stream.next() else {
+        panic!("an MCAP header first");
+    };
+    assert_eq!(header.profile, "ros2");
+    let found = mcap::Summary::read(&bytes)
+        .expect("an MCAP summary")
+        .expect("a summary section");
+    assert_eq!(found.channels.len(), 1, "one channel: the topic");
+    let channel = found.channels.values().next().expect("a channel");
+    assert_eq!(
+        (channel.topic.as_str(), channel.message_encoding.as_str()),
+        ("/samples", "cdr")
+    );
+    assert_eq!(
+        channel.metadata["offered_qos_profiles"],
+        record::OFFERED_QOS_PROFILES
+    );
+    assert_eq!(
+        channel.metadata["topic_type_hash"],
+        <Sample as RosType>::TYPE_HASH
+    );
+    let schema = channel.schema.as_ref().expect("a schema");
+    assert_eq!(
+        (schema.name.as_str(), schema.encoding.as_str()),
+        ("coolbot_test/msg/Sample", "ros2msg")
+    );
+    assert_eq!(&schema.data[..], b"uint64 n\nstring label\n");
+    let mut times = Vec::new();
+    for (n, message) in mcap::MessageStream::new(&bytes)
+        .expect("messages")
+        .enumerate()
+    {
+        let message = message.expect("a message");
+        let n = u64::try_from(n).unwrap();
+        assert_eq!(
+            message.data.as_ref(),
+            coolbot::cdr::to_vec(&sample(n)).unwrap(),
+            "message {n} is the sample's CDR"
+        );
+        assert_eq!(message.log_time, message.publish_time);
+        times.push(message.log_time);
+    }
+    assert_eq!(times.len(), 3);
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+
+    // `metadata.yaml`, and the same metadata in the file, as rosbag2 writes them.
+    let yaml = std::fs::read_to_string(bag.join("metadata.yaml")).expect("metadata.yaml");
+    let duration = times[2] - times[0];
+    let expected = format!(
+        "rosbag2_bagfile_information:
+  version: 9
+  storage_identifier: mcap
+  duration:
+    nanoseconds: {duration}
+  starting_time:
+    nanoseconds_since_epoch: {start}
+  message_count: 3
+  topics_with_message_count:
+    - topic_metadata:
+        name: /samples
+        type: coolbot_test/msg/Sample
+        serialization_format: cdr
+        offered_qos_profiles:
+          - history: keep_last
+            depth: 10
+            reliability: reliable
+            durability: volatile
+            deadline:
+              sec: 9223372036
+              nsec: 854775807
+            lifespan:
+              sec: 9223372036
+              nsec: 854775807
+            liveliness: automatic
+            liveliness_lease_duration:
+              sec: 9223372036
+              nsec: 854775807
+            avoid_ros_namespace_conventions: false
+        type_description_hash: {hash}
+      message_count: 3
+  compression_format: \"\"
+  compression_mode: \"\"
+  relative_file_paths:
+    - \"samples_bag_0.mcap\"
+  files:
+    - path: \"samples_bag_0.mcap\"
+      starting_time:
+        nanoseconds_since_epoch: {start}
+      duration:
+        nanoseconds: {duration}
+      message_count: 3
+  custom_data: ~
+  ros_distro: coolbot
+",
+        start = times[0],
+        hash = <Sample as RosType>::TYPE_HASH,
+    );
+    assert_eq!(yaml, expected);
+    let mut rosbag2 = None;
+    for record in mcap::read::LinearReader::new(&bytes).expect("MCAP") {
+        if let mcap::records::Record::Metadata(metadata) = record.expect("a record")
+            && metadata.name == "rosbag2"
+        {
+            rosbag2 = Some(metadata.metadata["serialized_metadata"].clone());
+        }
+    }
+    let inner: String = yaml
+        .lines()
+        .skip(1)
+        .map(|line| line.strip_prefix("  ").unwrap_or(line))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_eq!(rosbag2.as_deref(), Some(inner.as_str()));
+
+    // And our own reader reads it back, by port path.
+    let reader = Reader::open(&bag).expect("open the bag directory");
+    assert_eq!(reader.header().ports[0].path, "src.out");
+    let read: Vec<(u64, Sample)> = reader
+        .packets::<Sample>("src.out")
+        .map(|item| {
+            let (packet, value) = item.expect("decodes");
+            (packet.seq, value)
+        })
+        .collect();
+    assert_eq!(read, (0..3).map(|n| (n, sample(n))).collect::<Vec<_>>());
+    drop(system);
+}
+
+#[test]
+fn a_ros2_recording_refuses_what_is_not_a_ros_type_naming_it() {
+    let (system, _outputs, _inputs) = bench_with_ticks();
+    let ros2 = || Recorder::new().format(RecordFormat::Ros2);
+    let mut recorder = ros2();
+    recorder.tap::<Sample>(&system, "src.out").expect("tap");
+    let error = recorder.start(bag_path("refused_a")).unwrap_err();
+    assert!(
+        matches!(&error, RecordError::NotRosType { path, .. } if path == "src.out"),
+        "{error}"
+    );
+    assert!(error.to_string().contains("tap_ros"), "{error}");
+    let mut recorder = ros2();
+    recorder.tap_ticks(&system, "src.beat").expect("tap ticks");
+    let error = recorder.start(bag_path("refused_b")).unwrap_err();
+    assert!(
+        matches!(&error, RecordError::NotRosType { path, carries } if path == "src.beat" && carries == "tick events"),
+        "{error}"
+    );
+    let mut recorder = ros2();
+    recorder.monitor(&system, "src").expect("monitor");
+    let error = recorder.start(bag_path("refused_c")).unwrap_err();
+    assert!(
+        matches!(&error, RecordError::MonitorNotRos { component } if component == "src"),
+        "{error}"
+    );
+    // Nothing was created for a refused recording.
+    assert!(!bag_path("refused_a").exists());
+
+    let mut recorder = ros2();
+    let error = recorder
+        .tap_ros_on::<Sample>(&system, "src.out", "samples")
+        .unwrap_err();
+    assert!(matches!(error, RecordError::BadTopic { .. }), "{error}");
+    // The default topic is the path's.
+    recorder.tap_ros::<Sample>(&system, "src.out").expect("tap");
+    let error = recorder
+        .tap_ros_on::<Sample>(&system, "sink.data", "/src/out")
+        .unwrap_err();
+    assert!(matches!(error, RecordError::SameTopic { .. }), "{error}");
+    // A bag directory is never written over.
+    let taken = bag_path("taken");
+    std::fs::create_dir_all(&taken).unwrap();
+    let error = recorder.start(&taken).unwrap_err();
+    assert!(matches!(error, RecordError::Io { .. }), "{error}");
+    drop(system);
+}
+
+#[test]
+fn a_port_tapped_as_ros_in_the_coolbot_format_is_recorded_as_json() {
+    let (system, out, _data) = bench();
+    let path = temp_file("ros_as_json.mcap");
+    let mut recorder = Recorder::new();
+    recorder.tap_ros::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&path).expect("start");
+    out.send(sample(4));
+    recording.finish().expect("finish");
+    let records = records(&path);
+    assert_eq!(packets(&records, "src.out"), [(0, sample(4))]);
+    assert!(records.iter().all(|record| match record {
+        Record::Packet(packet) => packet.cdr.is_none(),
+        _ => true,
+    }));
+    drop(system);
+}
+
+#[test]
+fn a_ros2_recording_writes_its_losses_as_metadata_records() {
+    let (system, out, _data) = bench();
+    let bag = bag_path("lossy_bag");
+    let mut recorder = Recorder::new().format(RecordFormat::Ros2).capacity(4);
+    recorder.tap_ros::<Sample>(&system, "src.out").expect("tap");
+    let recording = recorder.start(&bag).expect("start");
+    // As in the coolbot format: the first packet holds the recorder's thread, 4 wait,
+    // the next 6 are lost.
+    let (entered_sender, entered) = crossbeam_channel::bounded(1);
+    let (release, gate) = crossbeam_channel::bounded(1);
+    let mut first = sample(0);
+    first.hook = Some(Arc::new(Hook {
+        fail: false,
+        entered: entered_sender,
+        release: gate,
+    }));
+    out.send(first);
+    entered.recv_timeout(WAIT).expect("the recorder serializes");
+    for n in 1..=10 {
+        out.send(sample(n));
+    }
+    release.send(()).expect("release");
+    let summary = recording.finish().expect("finish");
+    let port = &summary.ports[0];
+    assert_eq!((port.sent, port.recorded, port.lost), (11, 5, 6));
+    let records = records(&bag);
+    assert_eq!(
+        packets(&records, "src.out")
+            .iter()
+            .map(|(seq, _)| *seq)
+            .collect::<Vec<_>>(),
+        [0, 1, 2, 3, 4]
+    );
+    let lost: u64 = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Lost(loss) if loss.port == "src.out" && loss.reason == QUEUE_FULL => {
+                Some(loss.lost)
+            }
+            _ => None,
+        })
+        .sum();
+    assert_eq!(lost, 6, "the bag says how many were lost");
+    assert_eq!(records.last(), Some(&Record::End(summary)));
+    // Only the topic's channel: the losses are metadata records.
+    let bytes = std::fs::read(bag.join("lossy_bag_0.mcap")).unwrap();
+    let found = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert_eq!(found.channels.len(), 1);
+    drop(system);
+}
+
+/// A rosbag2 bag as another program writes it: profile `ros2`, no CoolBOT header,
+/// every sequence 0.
+fn foreign_bag(dir: &std::path::Path, samples: &[Sample]) {
+    std::fs::create_dir_all(dir).unwrap();
+    let file = std::fs::File::create(dir.join("foreign_0.mcap")).unwrap();
+    let mut mcap = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(std::io::BufWriter::new(file))
+        .unwrap();
+    let schema = mcap
+        .add_schema(
+            "coolbot_test/msg/Sample",
+            "ros2msg",
+            b"uint64 n\nstring label\n",
+        )
+        .unwrap();
+    let channel = mcap
+        .add_channel(schema, "/samples", "cdr", &BTreeMap::new())
+        .unwrap();
+    for (n, value) in samples.iter().enumerate() {
+        let time = 1_700_000_000_000_000_000 + u64::try_from(n).unwrap() * 1_000_000;
+        mcap.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: 0,
+                log_time: time,
+                publish_time: time,
+            },
+            &coolbot::cdr::to_vec(value).unwrap(),
+        )
+        .unwrap();
+    }
+    mcap.finish().unwrap();
+}
+
+#[test]
+fn a_bag_another_program_wrote_replays_by_topic() {
+    let bag = bag_path("foreign");
+    let sent: Vec<Sample> = (0..5).map(sample).collect();
+    foreign_bag(&bag, &sent);
+    let reader = Reader::open(&bag).expect("open");
+    assert_eq!(reader.header().ports.len(), 1);
+    assert_eq!(
+        (
+            reader.header().ports[0].path.as_str(),
+            reader.header().ports[0].type_name.as_str()
+        ),
+        ("/samples", "coolbot_test/msg/Sample")
+    );
+    let read: Vec<(u64, u64, Sample)> = reader
+        .packets::<Sample>("/samples")
+        .map(|item| {
+            let (packet, value) = item.expect("decodes");
+            (packet.t, packet.seq, value)
+        })
+        .collect();
+    assert_eq!(
+        read,
+        sent.iter()
+            .enumerate()
+            .map(|(n, s)| {
+                let n = u64::try_from(n).unwrap();
+                (n * 1_000_000, n, s.clone())
+            })
+            .collect::<Vec<_>>(),
+        "times from the first message, sequences counted"
+    );
+    let (system, _out, data) = bench();
+    let mut player = Player::open(&bag).expect("open");
+    player
+        .route::<Sample>("/samples", &system, "sink.data")
+        .expect("route");
+    let played = player.play(Pace::AsFastAsPossible).expect("play");
+    assert_eq!(played.sent["/samples"], 5);
+    assert_eq!(data.drain().collect::<Vec<_>>(), sent);
+    // Read as a stream (no summary), the bag has no header to say what it holds.
+    let stream = std::fs::File::open(bag.join("foreign_0.mcap")).unwrap();
+    let error = Reader::new(bag.clone(), Box::new(stream)).unwrap_err();
+    assert!(matches!(error, ReadError::NoHeader { .. }), "{error}");
     drop(system);
 }
