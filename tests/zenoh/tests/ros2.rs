@@ -22,8 +22,8 @@ use coolbot::{ConnectError, System};
 use coolbot_zenoh::ros2::{self, Participant, RosError, RosOptions};
 use coolbot_zenoh_tests::generated::types::ros::builtin_interfaces::Time;
 use coolbot_zenoh_tests::generated::types::ros::std_msgs::Header;
-use coolbot_zenoh_tests::generated::types::{LaserScan, Twist};
-use coolbot_zenoh_tests::generated::{drive, lidar};
+use coolbot_zenoh_tests::generated::types::{LaserScan, Ranges, Speed, Twist};
+use coolbot_zenoh_tests::generated::{drive, lidar, ranger, wheels};
 use coolbot_zenoh_tests::support::{PATIENCE, free_port, wait_until};
 use serde_json::{Value, json};
 use zenoh::Wait;
@@ -189,6 +189,20 @@ impl lidar::Behavior for Hand<DataOut<LaserScan>> {
 impl drive::Behavior for Hand<FifoIn<Twist>> {
     fn start(&mut self, cx: &mut drive::Cx<'_>) -> coolbot::SectionResult {
         let _ = self.0.send(cx.inputs.cmd.clone());
+        Ok(())
+    }
+}
+
+impl ranger::Behavior for Hand<DataOut<Ranges>> {
+    fn start(&mut self, cx: &mut ranger::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.outputs.ranges.clone());
+        Ok(())
+    }
+}
+
+impl wheels::Behavior for Hand<FifoIn<Speed>> {
+    fn start(&mut self, cx: &mut wheels::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.inputs.speed.clone());
         Ok(())
     }
 }
@@ -428,4 +442,76 @@ fn a_port_of_another_type_is_a_typed_error() {
         ros2::router_config("tcp/192.0.2.1:7447").is_err(),
         "a router off loopback without a security file"
     );
+}
+
+/// The program's own packets cross through converters: its ranges go out as
+/// `LaserScan`, the SDK's `Twist` comes in as its `Speed`.
+#[test]
+fn converters_carry_the_programs_own_packets() {
+    let port = free_port();
+    let _router = Script::start(ROUTER, &[port.to_string()]);
+    _router.next("ready");
+    let config = ros2::router_config(&format!("tcp/127.0.0.1:{port}")).unwrap();
+    let session = zenoh::open(config).wait().unwrap();
+    let ros = Participant::open(&session, &RosOptions::default()).unwrap();
+    let mut system = System::new();
+    let (hand_ranges, ranges) = crossbeam_channel::bounded(1);
+    let (hand_speed, speeds) = crossbeam_channel::bounded(1);
+    system
+        .add(ranger::component("ranger", Hand(hand_ranges)))
+        .unwrap();
+    system
+        .add(wheels::component("wheels", Hand(hand_speed)))
+        .unwrap();
+    ros.publish_via(&mut system, "/scan", "ranger.ranges", |r: &Ranges| {
+        LaserScan {
+            header: Header {
+                stamp: Time {
+                    sec: r.seq as i32,
+                    nanosec: 0,
+                },
+                frame_id: "ranger".into(),
+            },
+            ranges: vec![r.near, r.far],
+            ..LaserScan::default()
+        }
+    })
+    .unwrap();
+    ros.subscribe_via(&mut system, "/cmd_vel", "wheels.speed", |t: &Twist| Speed {
+        forward: t.linear.x,
+        turn: t.angular.z,
+    })
+    .unwrap();
+    system.run_all().unwrap();
+    let ranges: DataOut<Ranges> = ranges.recv_timeout(PATIENCE).unwrap();
+    let speeds: FifoIn<Speed> = speeds.recv_timeout(PATIENCE).unwrap();
+    let mut sdk = sdk(port);
+    sdk.next("ready");
+    let mut seq = 0;
+    let received = loop {
+        seq += 1;
+        ranges.send(Ranges {
+            seq,
+            near: 0.5,
+            far: 7.25,
+        });
+        if let Some(line) = sdk.poll("scan", Duration::from_millis(100)) {
+            break line;
+        }
+        assert!(seq < 300, "the SDK's subscriber received no scan");
+    };
+    assert_eq!(received["frame"], "ranger");
+    assert_eq!(received["ranges"], json!([0.5, 7.25]));
+    let mut speed = None;
+    for _ in 0..300 {
+        sdk.order(json!({"do": "twist", "x": 0.75, "yaw": 0.125}));
+        if wait_until(Duration::from_millis(100), || !speeds.is_empty()) {
+            speed = speeds.drain().next();
+            break;
+        }
+    }
+    let speed = speed.expect("the SDK's twist reaches the wheels");
+    assert_eq!((speed.forward, speed.turn), (0.75, 0.125));
+    drop(sdk);
+    assert!(system.shutdown().clean());
 }

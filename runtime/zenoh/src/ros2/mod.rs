@@ -320,6 +320,58 @@ impl Participant {
             })
     }
 
+    /// Publish on `topic` what the output `output` sends, each packet converted to
+    /// the topic's type by `convert` (a `.cool` converter, on the producer's thread):
+    /// [`Participant::publish`] for an output of the program's own packets.
+    pub fn publish_via<A, T>(
+        &self,
+        system: &mut System,
+        topic: &str,
+        output: &str,
+        convert: impl Fn(&A) -> T + Send + Sync + 'static,
+    ) -> Result<(), RosError>
+    where
+        A: Packet,
+        T: RosType + Packet + Serialize,
+    {
+        let name = component_name("pub", topic);
+        let component = self.publisher::<T>(&name, topic).build()?;
+        add(system, component, &name)?;
+        system
+            .connect_via(output, &format!("{name}.input"), convert)
+            .map_err(|source| RosError::Connect {
+                port: output.to_owned(),
+                topic: topic.to_owned(),
+                source: Box::new(source),
+            })
+    }
+
+    /// Deliver what arrives on `topic` at the input `input`, each message converted
+    /// by `convert` (on the subscription's side): [`Participant::subscribe`] for an
+    /// input of the program's own packets.
+    pub fn subscribe_via<T, B>(
+        &self,
+        system: &mut System,
+        topic: &str,
+        input: &str,
+        convert: impl Fn(&T) -> B + Send + Sync + 'static,
+    ) -> Result<(), RosError>
+    where
+        T: RosType + Packet + DeserializeOwned,
+        B: Packet,
+    {
+        let name = component_name("sub", topic);
+        let component = self.subscriber::<T>(&name, topic).build()?;
+        add(system, component, &name)?;
+        system
+            .connect_via(&format!("{name}.output"), input, convert)
+            .map_err(|source| RosError::Connect {
+                port: input.to_owned(),
+                topic: topic.to_owned(),
+                source: Box::new(source),
+            })
+    }
+
     /// What went through each topic so far, in the order they were made.
     pub fn counts(&self) -> Vec<TopicCount> {
         lock(&self.inner.topics)
