@@ -31,6 +31,8 @@
 //!   program, and the node, agent and placer they open.
 //! - **Limits** ([`limits`]): on the names, keys, sizes and counts that come from
 //!   the network, checked before anything is allocated or declared for them.
+//! - **ROS 2 topics** ([`ros2`]): a ROS 2 node on the rmw_zenoh wire, its publishers
+//!   and subscriptions components connected to ports of ROS types (`docs/ros2.md`).
 //! - **Security** ([`security`]): TLS with mutual authentication and access rules
 //!   from a file, mapped onto Zenoh's access control; without one, a node stays on
 //!   loopback.
@@ -52,6 +54,7 @@ pub mod limits;
 pub mod network;
 mod node;
 pub mod place;
+pub mod ros2;
 pub mod security;
 mod tally;
 pub mod top;

@@ -147,8 +147,24 @@ pub const LEVEL_LISTS: Limit = Limit {
     unit: "lists",
 };
 
+/// The longest ROS 2 node name, namespace or fully qualified topic name a participant
+/// declares keys for, in bytes (`docs/ros2.md`).
+pub const ROS_NAME: Limit = Limit {
+    name: "ROS_NAME",
+    max: 255,
+    unit: "bytes",
+};
+
+/// The longest message a ROS 2 subscription decodes unless it says otherwise, in
+/// bytes: a longer one is counted lost, undecoded (`docs/ros2.md`).
+pub const ROS_PAYLOAD: Limit = Limit {
+    name: "ROS_PAYLOAD",
+    max: 64 << 20,
+    unit: "bytes",
+};
+
 /// Every limit, in the order `docs/distribution.md` lists them.
-pub const ALL: [Limit; 13] = [
+pub const ALL: [Limit; 15] = [
     NAME,
     PATH,
     KEY,
@@ -162,6 +178,8 @@ pub const ALL: [Limit; 13] = [
     LEVELS,
     LEVEL_NAME,
     LEVEL_LISTS,
+    ROS_NAME,
+    ROS_PAYLOAD,
 ];
 
 #[cfg(test)]
