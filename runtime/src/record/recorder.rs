@@ -336,9 +336,8 @@ impl Recorder {
         let mut topics = Vec::new();
         for tap in &mut pending {
             if let (Some(ros), true) = (tap.ros(), ros2) {
-                let channel =
-                    add_ros_channel(&mut mcap, &mut schemas, ros, tap.path(), tap.type_name())
-                        .map_err(mcap_error)?;
+                let channel = add_ros_channel(&mut mcap, &mut schemas, ros, tap.as_ref())
+                    .map_err(mcap_error)?;
                 topics.push((ros.clone(), channel.id));
                 channels.push(channel);
                 continue;
@@ -515,8 +514,7 @@ fn add_ros_channel(
     mcap: &mut McapWriter,
     schemas: &mut BTreeMap<&'static str, u16>,
     ros: &RosTopic,
-    path: &str,
-    type_name: &str,
+    tap: &dyn PendingTap,
 ) -> Result<Channel, mcap::McapError> {
     let schema_id = match schemas.get(ros.type_name) {
         Some(id) => *id,
@@ -532,9 +530,9 @@ fn add_ros_channel(
             OFFERED_QOS_PROFILES.to_owned(),
         ),
         ("topic_type_hash".to_owned(), ros.hash.to_owned()),
-        ("coolbot.port".to_owned(), path.to_owned()),
-        ("coolbot.kind".to_owned(), "data".to_owned()),
-        ("coolbot.type".to_owned(), type_name.to_owned()),
+        ("coolbot.port".to_owned(), tap.path().to_owned()),
+        ("coolbot.kind".to_owned(), tap.kind().to_owned()),
+        ("coolbot.type".to_owned(), tap.type_name().to_owned()),
     ]);
     let id = mcap.add_channel(schema_id, &ros.topic, "cdr", &metadata)?;
     Ok(Channel {

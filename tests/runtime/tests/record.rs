@@ -911,6 +911,34 @@ fn bag_path(name: &str) -> std::path::PathBuf {
     path
 }
 
+/// A poster output recorded in a bag keeps its kind: the channel's `coolbot.kind`,
+/// and the port's kind as the reader gives it back.
+#[test]
+fn a_poster_in_a_ros2_recording_is_a_poster() {
+    let (hand, poster) = crossbeam_channel::bounded(1);
+    let mut system = System::new();
+    system
+        .add(record_poster_source::component("src", HandPoster(hand)))
+        .expect("add src");
+    system.run_all().expect("run");
+    let map = handed(&poster);
+    let bag = bag_path("poster_bag");
+    let mut recorder = Recorder::new().format(RecordFormat::Ros2);
+    recorder.tap_ros::<Sample>(&system, "src.map").expect("tap");
+    let recording = recorder.start(&bag).expect("start");
+    map.post(sample(1));
+    let summary = recording.finish().expect("finish");
+    assert_eq!(summary.ports[0].sent, 1);
+    let bytes = std::fs::read(bag.join("poster_bag_0.mcap")).expect("the bag's MCAP file");
+    let found = mcap::Summary::read(&bytes)
+        .expect("an MCAP summary")
+        .expect("a summary section");
+    let channel = found.channels.values().next().expect("a channel");
+    assert_eq!(channel.metadata["coolbot.kind"], "poster");
+    let reader = Reader::open(&bag).expect("open");
+    assert_eq!(reader.header().ports[0].kind, "poster");
+}
+
 #[test]
 fn a_ros2_recording_is_a_rosbag2_bag_of_cdr_messages() {
     let (system, out, _data) = bench();

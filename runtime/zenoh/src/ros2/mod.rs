@@ -30,6 +30,7 @@ use coolbot::{
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use zenoh::Wait;
+use zenoh::bytes::ZBytes;
 
 use self::wire::{Attachment, EntityKind, NodeInfo, TopicInfo};
 pub use self::wire::{BadName, History, Qos, Reliability};
@@ -676,7 +677,7 @@ impl<T> SubscriberBuilder<'_, T> {
     }
 }
 
-type Deliver = Arc<dyn Fn(&[u8], Option<&[u8]>) + Send + Sync>;
+type Deliver = Arc<dyn Fn(&ZBytes, Option<&ZBytes>) + Send + Sync>;
 
 impl<T: RosType + Packet + DeserializeOwned> SubscriberBuilder<'_, T> {
     /// Declare the subscription's liveliness token and return the component (add it
@@ -744,9 +745,11 @@ impl<T: RosType + Packet + DeserializeOwned> SubscriberBuilder<'_, T> {
 }
 
 /// A received message as a packet, or why not.
+/// Lengths are checked before anything is copied: a payload or an attachment that
+/// Zenoh holds in fragments is made contiguous only once it is known to fit.
 fn decode<T: DeserializeOwned>(
-    payload: &[u8],
-    attachment: Option<&[u8]>,
+    payload: &ZBytes,
+    attachment: Option<&ZBytes>,
     max_payload: usize,
 ) -> Result<T, String> {
     if payload.len() > max_payload {
@@ -756,9 +759,16 @@ fn decode<T: DeserializeOwned>(
         ));
     }
     if let Some(attachment) = attachment {
-        Attachment::decode(attachment).map_err(|error| error.to_string())?;
+        if attachment.len() != wire::ATTACHMENT_LEN {
+            return Err(format!(
+                "an attachment of {} bytes, not {}",
+                attachment.len(),
+                wire::ATTACHMENT_LEN
+            ));
+        }
+        Attachment::decode(&attachment.to_bytes()).map_err(|error| error.to_string())?;
     }
-    coolbot::cdr::from_slice::<T>(payload).map_err(|error| Chain(&error).to_string())
+    coolbot::cdr::from_slice::<T>(&payload.to_bytes()).map_err(|error| Chain(&error).to_string())
 }
 
 struct RosSubscriber {
@@ -784,8 +794,7 @@ impl Automaton for RosSubscriber {
             .session
             .declare_subscriber(self.key.clone())
             .callback(move |sample| {
-                let attachment = sample.attachment().map(|bytes| bytes.to_bytes());
-                deliver(&sample.payload().to_bytes(), attachment.as_deref());
+                deliver(sample.payload(), sample.attachment());
             })
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
