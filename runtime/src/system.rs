@@ -16,7 +16,7 @@ use crate::port::{
     ArrivalLabel, ErasedInput, ErasedOutput, InKind, InputPort, OutKind, OutputPort, Owner, Packet,
 };
 use crate::runner::Runner;
-use crate::spec::{InputKind, OutputKind, Spec, TimingSpec};
+use crate::spec::{InputKind, OutputKind, OverflowPolicy, Spec, TimingSpec};
 use crate::table::{Controllable, State};
 use crate::value::Value;
 
@@ -293,6 +293,17 @@ pub enum GroupError {
         /// The answering output's address.
         output: String,
     },
+    /// A member's `block` fifo fed by another member: a full queue would stop the very
+    /// thread that empties it.
+    #[error(
+        "`{input}`, a `block` fifo, is fed by `{output}`, a member of the same group: a full queue would stop the thread that empties it (use `reject` or `drop_oldest`, or keep them apart)"
+    )]
+    Block {
+        /// The blocking input's address.
+        input: String,
+        /// The feeding output's address.
+        output: String,
+    },
     /// A cycle of connections among members with no `last` or `poster` input on it.
     #[error(
         "its members' connections form a cycle through {0} with no `last` or `poster` input to break it"
@@ -491,6 +502,9 @@ pub struct System {
     slots: Vec<Slot>,
     names: HashMap<String, usize>,
     links: Vec<Link>,
+    /// Connections a compound makes once its system has started (it checked them
+    /// with [`System::check_groups`]): its groups' order counts them as made.
+    planned: Vec<Link>,
     groups: Vec<GroupSlot>,
     started: bool,
     /// The clock the components' timers read (`crate::clock`).
@@ -762,6 +776,7 @@ impl System {
             slots: Vec::new(),
             names: HashMap::new(),
             links: Vec::new(),
+            planned: Vec::new(),
             groups: Vec::new(),
             started: false,
             clock: Clock::real(),
@@ -876,11 +891,13 @@ impl System {
     }
 
     /// The members of group `group` in the order they run: data-flow order over the
-    /// connections among them (those into `last` and `poster` inputs left out when
-    /// they close a cycle), ties in the order given.
+    /// connections among them, ties in the order given. When the members left all
+    /// wait for one another (a cycle), one connection among them into a `last` or
+    /// `poster` input is set aside (the one of the earliest member given), and the
+    /// sort goes on; connections off the cycle keep their order.
     fn group_order(&self, group: usize, planned: &[Link]) -> Result<Vec<usize>, GroupError> {
         let members = &self.groups[group].members;
-        let inner: Vec<&Link> = self
+        let mut edges: Vec<&Link> = self
             .links
             .iter()
             .chain(planned)
@@ -890,57 +907,69 @@ impl System {
                     && members.contains(&link.to.0)
             })
             .collect();
-        for link in &inner {
-            if self.slots[link.to.0].spec.inputs[link.to.1].pull {
+        for link in &edges {
+            let input = &self.slots[link.to.0].spec.inputs[link.to.1];
+            if input.pull {
                 return Err(GroupError::Pull {
                     input: self.address(link.to, false),
                     output: self.address(link.from, true),
                 });
             }
-        }
-        let sort = |edges: &[&&Link]| -> Result<Vec<usize>, Vec<usize>> {
-            let mut left: Vec<usize> = members.clone();
-            let mut order = Vec::with_capacity(left.len());
-            while !left.is_empty() {
-                let ready = left.iter().position(|member| {
-                    !edges
-                        .iter()
-                        .any(|link| link.to.0 == *member && left.contains(&link.from.0))
+            if let InputKind::Fifo {
+                policy: OverflowPolicy::Block,
+                ..
+            } = input.kind
+            {
+                return Err(GroupError::Block {
+                    input: self.address(link.to, false),
+                    output: self.address(link.from, true),
                 });
-                match ready {
-                    Some(position) => order.push(left.remove(position)),
-                    None => return Err(left),
+            }
+        }
+        let mut left: Vec<usize> = members.clone();
+        let mut order = Vec::with_capacity(left.len());
+        while !left.is_empty() {
+            let waits = |member: usize, edges: &[&Link]| {
+                edges
+                    .iter()
+                    .any(|link| link.to.0 == member && left.contains(&link.from.0))
+            };
+            if let Some(position) = left.iter().position(|member| !waits(*member, &edges)) {
+                order.push(left.remove(position));
+                continue;
+            }
+            let breaking = left.iter().find_map(|member| {
+                edges.iter().position(|link| {
+                    link.to.0 == *member
+                        && left.contains(&link.from.0)
+                        && matches!(
+                            self.slots[link.to.0].inputs[link.to.1].kind,
+                            InKind::Last | InKind::Poster
+                        )
+                })
+            });
+            match breaking {
+                Some(edge) => {
+                    edges.swap_remove(edge);
+                }
+                None => {
+                    return Err(GroupError::Cycle(
+                        left.iter()
+                            .map(|index| format!("`{}`", self.slots[*index].name))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    ));
                 }
             }
-            Ok(order)
-        };
-        let all: Vec<&&Link> = inner.iter().collect();
-        if let Ok(order) = sort(&all) {
-            return Ok(order);
         }
-        let breaking: Vec<&&Link> = inner
-            .iter()
-            .filter(|link| {
-                !matches!(
-                    self.slots[link.to.0].inputs[link.to.1].kind,
-                    InKind::Last | InKind::Poster
-                )
-            })
-            .collect();
-        sort(&breaking).map_err(|left| {
-            GroupError::Cycle(
-                left.iter()
-                    .map(|index| format!("`{}`", self.slots[*index].name))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            )
-        })
+        Ok(order)
     }
 
     /// Check every execution group's connections as its start will (a pull between
     /// members, a cycle with nothing to break it), with the connections `planned`
     /// (`(output, input)` addresses: a compound's, made when it starts) as if made.
-    pub(crate) fn check_groups(&self, planned: &[(&str, &str)]) -> Result<(), Error> {
+    /// They are kept: the groups' order at start counts them as made.
+    pub(crate) fn check_groups(&mut self, planned: &[(&str, &str)]) -> Result<(), Error> {
         let planned: Vec<Link> = planned
             .iter()
             .filter_map(|(from, to)| {
@@ -957,6 +986,7 @@ impl System {
                     source,
                 })?;
         }
+        self.planned = planned;
         Ok(())
     }
 
@@ -977,7 +1007,7 @@ impl System {
             return Ok(());
         }
         let order = self
-            .group_order(group, &[])
+            .group_order(group, &self.planned)
             .map_err(|source| Error::Group {
                 group: self.groups[group].name.clone(),
                 source,

@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
-use coolbot_runtime_tests::support::WAIT;
+use coolbot_runtime_tests::generated::blocking_relay;
 use coolbot_runtime_tests::{relay, stage};
 
 const PERIOD: Duration = Duration::from_millis(10);
@@ -364,10 +364,9 @@ fn members_are_commanded_and_monitored_each_on_its_own_ports() {
     );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
-    let _ = WAIT;
 }
 
-/// `a -> b -> c` grouped inside compound `base`, with `b2`, a compound around one more
+/// `a -> b -> c` grouped (given as `c, b, a`) inside compound `base`, with `b2`, a compound around one more
 /// `Stage`, substituting `b` on its own thread outside the group.
 fn supervised(log: &Log, b: Step) -> (System, Arc<VirtualClock>) {
     use coolbot::{CompoundBuilder, Policy};
@@ -387,7 +386,9 @@ fn supervised(log: &Log, b: Step) -> (System, Arc<VirtualClock>) {
         .instance(substitute)
         .connect("a.out", "b.feed")
         .connect("b.out", "c.feed")
-        .thread("control", &["a", "b", "c"])
+        // Given against the data flow: the compound makes its connections once its
+        // system has started, and the group's order counts them all the same.
+        .thread("control", &["c", "b", "a"])
         .substitute("b2", "b")
         .on_error("b", Policy::Substitute)
         .build()
@@ -457,4 +458,84 @@ fn a_compound_refuses_a_group_that_cannot_run() {
         coolbot::Chain(&error).to_string(),
         "compound `base`: execution group `loop`: its members' connections form a cycle through `r1`, `r2` with no `last` or `poster` input to break it"
     );
+}
+
+/// A `block` fifo fed by another member would stop, when full, the very thread that
+/// empties it: refused when the group starts, naming both ends.
+#[test]
+fn a_blocking_queue_between_members_is_refused() {
+    let log = Log::default();
+    let (mut system, _clock) = system();
+    system
+        .add(relay::component(
+            "r1",
+            Hop {
+                name: "r1",
+                log: log.clone(),
+            },
+        ))
+        .expect("r1");
+    system
+        .add(blocking_relay::component("r2", BlockingHop))
+        .expect("r2");
+    system.connect("r1.out", "r2.feed").expect("r1 -> r2");
+    system.group("g", &["r1", "r2"]).expect("group");
+    match system.start() {
+        Err(Error::Group { group, source }) => {
+            assert_eq!(group, "g");
+            assert_eq!(
+                source,
+                GroupError::Block {
+                    input: "r2.feed".to_owned(),
+                    output: "r1.out".to_owned(),
+                }
+            );
+        }
+        other => panic!("started: {other:?}"),
+    }
+}
+
+/// `BlockingRelay`'s behaviour: drains its queue.
+struct BlockingHop;
+
+impl blocking_relay::Behavior for BlockingHop {
+    fn relay_entry(&mut self, cx: &mut blocking_relay::Cx<'_>) -> SectionResult {
+        while cx.inputs.feed.recv().is_some() {}
+        Ok(())
+    }
+}
+
+/// A cycle among some members sets aside one `last` input on the cycle only: a
+/// chain beside it keeps its data-flow order.
+#[test]
+fn a_cycle_breaks_only_on_the_cycle() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    for name in ["b", "a"] {
+        system
+            .add(stage::component(name, step(name, &log)))
+            .expect(name);
+    }
+    system
+        .add(relay::component(
+            "r",
+            Hop {
+                name: "r",
+                log: log.clone(),
+            },
+        ))
+        .expect("r");
+    system
+        .add(stage::component("c", step("c", &log)))
+        .expect("c");
+    // A chain `a -> b` (into `b`'s `last` input), and a cycle `c -> r -> c` broken at
+    // `c`'s `last` input.
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.connect("c.out", "r.feed").expect("c -> r");
+    system.connect("r.out", "c.feed").expect("r -> c");
+    system.group("g", &["b", "a", "r", "c"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:1", "r:2"]);
 }
