@@ -491,6 +491,9 @@ pub struct System {
     slots: Vec<Slot>,
     names: HashMap<String, usize>,
     links: Vec<Link>,
+    /// Connections a compound makes when it starts, after its groups' threads have
+    /// started: each group's data-flow order counts them as made.
+    planned: Vec<Link>,
     groups: Vec<GroupSlot>,
     started: bool,
     /// The clock the components' timers read (`crate::clock`).
@@ -762,6 +765,7 @@ impl System {
             slots: Vec::new(),
             names: HashMap::new(),
             links: Vec::new(),
+            planned: Vec::new(),
             groups: Vec::new(),
             started: false,
             clock: Clock::real(),
@@ -939,8 +943,10 @@ impl System {
 
     /// Check every execution group's connections as its start will (a pull between
     /// members, a cycle with nothing to break it), with the connections `planned`
-    /// (`(output, input)` addresses: a compound's, made when it starts) as if made.
-    pub(crate) fn check_groups(&self, planned: &[(&str, &str)]) -> Result<(), Error> {
+    /// (`(output, input)` addresses: a compound's, made when it starts, after its
+    /// groups' threads have started) as if made; keep them, so that each group's
+    /// data-flow order counts them when its thread starts.
+    pub(crate) fn plan_groups(&mut self, planned: &[(&str, &str)]) -> Result<(), Error> {
         let planned: Vec<Link> = planned
             .iter()
             .filter_map(|(from, to)| {
@@ -957,6 +963,7 @@ impl System {
                     source,
                 })?;
         }
+        self.planned = planned;
         Ok(())
     }
 
@@ -977,7 +984,7 @@ impl System {
             return Ok(());
         }
         let order = self
-            .group_order(group, &[])
+            .group_order(group, &self.planned)
             .map_err(|source| Error::Group {
                 group: self.groups[group].name.clone(),
                 source,

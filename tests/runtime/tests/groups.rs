@@ -9,6 +9,7 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
+use coolbot_runtime_tests::generated::control_loop;
 use coolbot_runtime_tests::support::WAIT;
 use coolbot_runtime_tests::{relay, stage};
 
@@ -457,4 +458,102 @@ fn a_compound_refuses_a_group_that_cannot_run() {
         coolbot::Chain(&error).to_string(),
         "compound `base`: execution group `loop`: its members' connections form a cycle through `r1`, `r2` with no `last` or `poster` input to break it"
     );
+}
+
+/// The parts of `ControlLoop` (`cool/groups.cool`): every stage logs into `log`; the
+/// controller panics in its second period.
+struct LoopParts {
+    log: Log,
+}
+
+/// `ControlLoop` has no supervisor of its own to write.
+struct Quiet;
+
+impl control_loop::Supervisor for Quiet {}
+
+impl control_loop::Parts for LoopParts {
+    fn supervisor(&mut self) -> impl control_loop::Supervisor {
+        Quiet
+    }
+    fn imu(&mut self) -> impl stage::Behavior {
+        step("imu", &self.log)
+    }
+    fn estimator(&mut self) -> impl stage::Behavior {
+        step("estimator", &self.log)
+    }
+    fn controller(&mut self) -> impl stage::Behavior {
+        Step {
+            panic_at: Some(2),
+            ..step("controller", &self.log)
+        }
+    }
+    fn driver(&mut self) -> impl stage::Behavior {
+        step("driver", &self.log)
+    }
+    fn spare(&mut self) -> impl stage::Behavior {
+        step("spare", &self.log)
+    }
+}
+
+#[test]
+fn a_generated_compound_runs_its_thread_group_and_substitutes_a_failed_member() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let control = control_loop::component("control", LoopParts { log: log.clone() })
+        .expect("the description's group builds");
+    system.add(control).expect("control");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // Grouped as `driver, controller, estimator, imu`, run in data-flow order: the
+    // chain goes through in one pass. `driver`'s period is twice the others'.
+    tick(&clock);
+    assert_eq!(log.take(), ["imu:1", "estimator:2", "controller:3"]);
+    clock.advance(PERIOD).expect("settled");
+    // The controller panics in its second period; `driver` reads its last packet.
+    assert_eq!(log.take(), ["imu:1", "estimator:2", "driver:4"]);
+    let controller = system.handle_at("control.controller").expect("controller");
+    let monitor = controller.snapshot();
+    assert_eq!(monitor.state, State::RunningError, "{monitor:?}");
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("controller broke")),
+        "{monitor:?}"
+    );
+    // `spare` takes the controller's place, on its own thread, fed by `estimator` and
+    // feeding `driver`, which stay on the group's thread.
+    let mut ticks = 0;
+    while !log.take().contains(&"spare:3".to_owned()) {
+        tick(&clock);
+        ticks += 1;
+        assert!(
+            ticks < 10,
+            "no substitution: {:?}",
+            system.handle("control")
+        );
+    }
+    assert_eq!(
+        system.handle("control").expect("control").state(),
+        State::Running
+    );
+    // Two periods: `driver` runs in one of them, reading what `spare` sent.
+    tick(&clock);
+    tick(&clock);
+    let mut lines = log.take();
+    lines.sort();
+    assert_eq!(
+        lines,
+        [
+            "driver:4",
+            "estimator:2",
+            "estimator:2",
+            "imu:1",
+            "imu:1",
+            "spare:3",
+            "spare:3"
+        ]
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
 }
