@@ -195,7 +195,7 @@ fn periods(checker: &mut Checker<'_, '_>, members: &[Member<'_>]) {
         let Some(period) = member.period.filter(|p| *p > 0) else {
             continue;
         };
-        if period % base != 0 {
+        if !period.is_multiple_of(base) {
             let diagnostic = checker
                 .error(
                     Code::ThreadPeriods,
@@ -222,7 +222,7 @@ fn periods(checker: &mut Checker<'_, '_>, members: &[Member<'_>]) {
 /// A period in nanoseconds, written in the largest unit that divides it.
 fn nanos(nanos: u64) -> String {
     for (unit, size) in [("s", 1_000_000_000), ("ms", 1_000_000), ("us", 1_000)] {
-        if nanos % size == 0 {
+        if nanos.is_multiple_of(size) {
             return format!("{}{unit}", nanos / size);
         }
     }
