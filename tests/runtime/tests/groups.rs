@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
-use coolbot_runtime_tests::generated::control_loop;
+use coolbot_runtime_tests::generated::{control_loop, last_loop};
 use coolbot_runtime_tests::support::WAIT;
 use coolbot_runtime_tests::{relay, stage};
 
@@ -554,6 +554,44 @@ fn a_generated_compound_runs_its_thread_group_and_substitutes_a_failed_member() 
             "spare:3"
         ]
     );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// The parts of `LastLoop`: both stages log into `log`.
+struct PingPong {
+    log: Log,
+}
+
+impl last_loop::Supervisor for Quiet {}
+
+impl last_loop::Parts for PingPong {
+    fn supervisor(&mut self) -> impl last_loop::Supervisor {
+        Quiet
+    }
+    fn ping(&mut self) -> impl stage::Behavior {
+        step("ping", &self.log)
+    }
+    fn pong(&mut self) -> impl stage::Behavior {
+        step("pong", &self.log)
+    }
+}
+
+#[test]
+fn a_cycle_that_coolc_accepts_the_runtime_runs() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let both = last_loop::component("both", PingPong { log: log.clone() })
+        .expect("a cycle through `last` inputs builds");
+    system.add(both).expect("both");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // Written `pong, ping`, connected both ways through `last` inputs: no data-flow
+    // order, so the order written; each reads what the other sent before.
+    tick(&clock);
+    assert_eq!(log.take(), ["pong:1", "ping:2"]);
+    tick(&clock);
+    assert_eq!(log.take(), ["pong:3", "ping:4"]);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
