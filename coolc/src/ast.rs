@@ -384,6 +384,8 @@ pub enum Member {
     Instance(Instance),
     /// `redundant a, b, ...;`
     Redundant(Redundant),
+    /// `thread name { a, b, ... }`
+    Thread(Thread),
     /// `connect a.out -> b.in [via Converter];`
     Connect(Connect),
     /// `on error instance: policy;`
@@ -793,6 +795,17 @@ pub struct Override {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Redundant {
     /// The redundant instances.
+    pub members: Vec<Ident>,
+    /// The whole member.
+    pub span: Span,
+}
+
+/// `thread name { a, b, ... }`: an execution group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Thread {
+    /// The group's name.
+    pub name: Ident,
+    /// The instances on the group's thread, as written.
     pub members: Vec<Ident>,
     /// The whole member.
     pub span: Span,

@@ -147,6 +147,25 @@ codes! {
     InterfaceMismatch => "coolc::check::interface_mismatch",
     /// An instance takes part in more than one substitution or redundant group.
     Arrangement => "coolc::check::arrangement",
+    /// An execution group's member that is not an instance of its compound.
+    ThreadUnknownMember => "coolc::check::thread_unknown_member",
+    /// An execution group's member that is an instance of a compound.
+    ThreadNotAtomic => "coolc::check::thread_not_atomic",
+    /// An execution group's member that runs on another node (`on "node"`).
+    ThreadRemoteMember => "coolc::check::thread_remote_member",
+    /// An instance named twice in one execution group, or in two.
+    ThreadTwice => "coolc::check::thread_twice",
+    /// An execution group with no member.
+    ThreadEmpty => "coolc::check::thread_empty",
+    /// Two execution groups of one compound with one name.
+    ThreadDuplicateName => "coolc::check::thread_duplicate_name",
+    /// An execution group whose members' periods are not harmonic.
+    ThreadPeriods => "coolc::check::thread_periods",
+    /// A member of an execution group pulls from another member.
+    ThreadPull => "coolc::check::thread_pull",
+    /// A cycle of connections among an execution group's members with no `last` or
+    /// `poster` input on it.
+    ThreadCycle => "coolc::check::thread_cycle",
     /// A compound contains itself.
     SelfContaining => "coolc::check::self_containing",
     /// A packet contains itself by value (an infinitely large type).

@@ -60,6 +60,7 @@ const MEMBER_KEYWORDS: &[&str] = &[
     "supervisor",
     "instance",
     "redundant",
+    "thread",
     "connect",
     "on",
     "recovery",

@@ -502,8 +502,8 @@ pub struct System {
     slots: Vec<Slot>,
     names: HashMap<String, usize>,
     links: Vec<Link>,
-    /// Connections a compound makes once its system has started (it checked them
-    /// with [`System::check_groups`]): its groups' order counts them as made.
+    /// Connections a compound makes when it starts, after its groups' threads have
+    /// started: each group's data-flow order counts them as made.
     planned: Vec<Link>,
     groups: Vec<GroupSlot>,
     started: bool,
@@ -967,9 +967,10 @@ impl System {
 
     /// Check every execution group's connections as its start will (a pull between
     /// members, a cycle with nothing to break it), with the connections `planned`
-    /// (`(output, input)` addresses: a compound's, made when it starts) as if made.
-    /// They are kept: the groups' order at start counts them as made.
-    pub(crate) fn check_groups(&mut self, planned: &[(&str, &str)]) -> Result<(), Error> {
+    /// (`(output, input)` addresses: a compound's, made when it starts, after its
+    /// groups' threads have started) as if made; keep them, so that each group's
+    /// data-flow order counts them when its thread starts.
+    pub(crate) fn plan_groups(&mut self, planned: &[(&str, &str)]) -> Result<(), Error> {
         let planned: Vec<Link> = planned
             .iter()
             .filter_map(|(from, to)| {

@@ -59,6 +59,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             ast::Member::Automaton(_)
             | ast::Member::Instance(_)
             | ast::Member::Redundant(_)
+            | ast::Member::Thread(_)
             | ast::Member::Connect(_)
             | ast::Member::OnError(_) => {}
         }
@@ -86,6 +87,11 @@ fn placement(checker: &mut Checker<'_, '_>, component: &ast::Component) {
                 m.span,
                 "`redundant`",
                 "redundancy groups instances of a compound",
+            )),
+            ast::Member::Thread(m) if atomic => Some((
+                m.span,
+                "`thread`",
+                "an execution group puts instances of a compound on one thread",
             )),
             ast::Member::Connect(m) if atomic => Some((
                 m.span,

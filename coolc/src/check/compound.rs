@@ -54,6 +54,7 @@ pub(super) fn compound(checker: &mut Checker<'_, '_>, component: &ast::Component
         }
     }
     arrangement(checker, component, &instances);
+    super::thread::threads(checker, component);
     cardinality(checker, component, &instances);
     unwired_substitutes(checker, component, &instances);
     duplicate_policies(checker, component);

@@ -8,9 +8,9 @@
 //! The submodules group the rules: `names` (keywords, naming, duplicates), `values`
 //! (types, defaults, sizes, timing), `component` (members and their placement),
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
-//! (instances, connections, interfaces, containment), `adaptation` (`adaptation`
-//! blocks), `ros` (the names `import ros` gives) and `rules` (typed supervisor rule
-//! expressions). `model` computes what a component offers to others (ports,
+//! (instances, connections, interfaces, containment), `thread` (execution groups),
+//! `adaptation` (`adaptation` blocks), `ros` (the names `import ros` gives) and
+//! `rules` (typed supervisor rule expressions). `model` computes what a component offers to others (ports,
 //! variables, states), looking through compounds' exported ports.
 //!
 //! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol
@@ -26,6 +26,7 @@ mod names;
 mod response;
 mod ros;
 mod rules;
+mod thread;
 mod values;
 
 use std::collections::{BTreeMap, BTreeSet};

@@ -10,8 +10,8 @@ use super::model::{
     Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
     Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
     OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Range, Recovery,
-    Redundant, Ref, Restart, RosImport, State, StateMember, TableValue, TimingEntry, TypeDef,
-    Value, Variable,
+    Redundant, Ref, Restart, RosImport, State, StateMember, TableValue, Thread, TimingEntry,
+    TypeDef, Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
 use crate::check::model::{Interface, Model, Tuning, Ty};
@@ -156,6 +156,7 @@ impl<'a> Builder<'a> {
             exceptions: Vec::new(),
             instances: Vec::new(),
             redundant: Vec::new(),
+            threads: Vec::new(),
             policies: Vec::new(),
             connections: Vec::new(),
             recovery: None,
@@ -352,6 +353,15 @@ impl<'a> Builder<'a> {
                         .map(|member| member.name.clone())
                         .collect(),
                     span: redundant.span,
+                }),
+                ast::Member::Thread(thread) => out.threads.push(Thread {
+                    name: thread.name.name.clone(),
+                    members: thread
+                        .members
+                        .iter()
+                        .map(|member| member.name.clone())
+                        .collect(),
+                    span: thread.span,
                 }),
                 ast::Member::Connect(connect) => out.connections.push(Connection {
                     from: self.port_ref(component, &connect.from),

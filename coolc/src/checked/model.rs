@@ -57,6 +57,8 @@ pub struct Component {
     pub instances: Vec<Instance>,
     /// `redundant a, b;` groups.
     pub redundant: Vec<Redundant>,
+    /// `thread name { a, b }` execution groups, in source order.
+    pub threads: Vec<Thread>,
     /// `on error instance: policy;` members, in source order.
     pub policies: Vec<Policy>,
     /// `connect` members, in source order.
@@ -471,6 +473,17 @@ pub struct Override {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Redundant {
     /// The instances, by name.
+    pub members: Vec<String>,
+    /// Where it is written.
+    pub span: Span,
+}
+
+/// `thread name { a, b }`: instances on one thread, an execution group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Thread {
+    /// The group's name.
+    pub name: String,
+    /// The instances, by name, in the order written.
     pub members: Vec<String>,
     /// Where it is written.
     pub span: Span,

@@ -147,7 +147,8 @@ impl<'a> Lookup<'a> {
     // Structure.
 
     /// A compound's instances (nested compounds as groups), connections, exported
-    /// ports, variables, policies, substitutions and redundant groups (Figure 5).
+    /// ports, variables, policies, substitutions and redundant groups (Figure 5), and
+    /// each instance's execution group (`thread name`) as a line of its box.
     pub(super) fn structure(&self, component: &Component) -> Diagram {
         let mut edges = Vec::new();
         let group = self.compound_group(
@@ -210,7 +211,12 @@ impl<'a> Lookup<'a> {
         // Instances, with redundant members gathered in a dashed group.
         let mut instance_items: Vec<(String, Item)> = Vec::new();
         for instance in &component.instances {
-            let item = self.instance_item(instance, prefix, edges, depth);
+            let thread = component
+                .threads
+                .iter()
+                .find(|thread| thread.members.contains(&instance.name))
+                .map(|thread| thread.name.as_str());
+            let item = self.instance_item(instance, thread, prefix, edges, depth);
             instance_items.push((instance.name.clone(), item));
         }
         for (index, redundant) in component.redundant.iter().enumerate() {
@@ -350,12 +356,17 @@ impl<'a> Lookup<'a> {
     fn instance_item(
         &self,
         instance: &Instance,
+        thread: Option<&str>,
         prefix: &str,
         edges: &mut Vec<Edge>,
         depth: usize,
     ) -> Item {
         let path = join(prefix, &instance.name);
         let mut lines = vec![format!("{}: {}", instance.name, instance.component)];
+        if let Some(thread) = thread {
+            // An execution group: the instances that share its thread.
+            lines.push(format!("thread {thread}"));
+        }
         if let Some(node) = &instance.node {
             // `on "node"`: on that node behind a proxy when the process is on a
             // network, else in the compound's process (`docs/distribution.md`).

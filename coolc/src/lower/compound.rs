@@ -186,6 +186,17 @@ impl<'a> Lowerer<'a> {
                 format!(".redundant(&[{}])", members.join(", ")),
             ));
         }
+        for t in &c.threads {
+            let members: Vec<String> = t.members.iter().map(|m| ident::string_literal(m)).collect();
+            ordered.push((
+                t.span.start,
+                format!(
+                    ".thread({}, &[{}])",
+                    ident::string_literal(&t.name),
+                    members.join(", ")
+                ),
+            ));
+        }
         if let Some(r) = &c.restart {
             if let Some((count, window)) = &r.limit {
                 ordered.push((
@@ -1101,6 +1112,32 @@ mod tests {
         assert!(c.rules[1].expr.contains("!(view"));
         assert_eq!(c.rules[1].vars_param, None);
         assert_eq!(c.rules[1].call, "__cool_rule_1");
+    }
+
+    #[test]
+    fn an_execution_group_is_a_thread_step_in_its_place() {
+        let c = &compounds_of(
+            "
+            atomic Leaf { input feed: last<u32>; output out: data<u32>; }
+            compound Loop {
+                instance a: Leaf;
+                instance b: Leaf;
+                instance c: Leaf;
+                on error a: restart;
+                thread control { b, a }
+                connect a.out -> b.feed;
+                thread other { c }
+            }
+            ",
+        )[0];
+        assert_eq!(
+            c.steps,
+            [
+                r#".on_error("a", ::coolbot::Policy::Restart)"#,
+                r#".thread("control", &["b", "a"])"#,
+                r#".thread("other", &["c"])"#,
+            ]
+        );
     }
 
     #[test]

@@ -310,6 +310,7 @@ pub(super) fn rule_name(rule: Rule) -> Option<&'static str> {
         kw_instance => "`instance`",
         kw_substitutes => "`substitutes`",
         kw_redundant => "`redundant`",
+        kw_thread => "`thread`",
         kw_connect => "`connect`",
         kw_via => "`via`",
         kw_error => "`error`",

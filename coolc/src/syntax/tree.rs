@@ -104,6 +104,7 @@ pub(super) fn is_keyword(rule: Rule) -> bool {
             | Rule::kw_instance
             | Rule::kw_substitutes
             | Rule::kw_redundant
+            | Rule::kw_thread
             | Rule::kw_connect
             | Rule::kw_via
             | Rule::kw_error
@@ -748,6 +749,15 @@ impl Builder<'_> {
             Rule::redundant => {
                 let members = children(inner).iter().map(|p| self.ident(p)).collect();
                 ast::Member::Redundant(ast::Redundant { members, span })
+            }
+            Rule::thread => {
+                let mut names = children(inner).into_iter().map(|p| self.ident(&p));
+                let name = names.next()?;
+                ast::Member::Thread(ast::Thread {
+                    name,
+                    members: names.collect(),
+                    span,
+                })
             }
             Rule::connect => {
                 let parts = children(inner);

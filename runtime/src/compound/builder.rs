@@ -598,7 +598,7 @@ impl CompoundBuilder {
             return Err(self.errors.swap_remove(0));
         }
         let planned: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
-        if let Err(source) = self.system.check_groups(&planned) {
+        if let Err(source) = self.system.plan_groups(&planned) {
             return Err(CompoundError::Instance {
                 compound: self.name.clone(),
                 source: Box::new(source),

@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
-use coolbot_runtime_tests::generated::blocking_relay;
+use coolbot_runtime_tests::generated::{blocking_relay, control_loop, last_loop};
 use coolbot_runtime_tests::{relay, stage};
 
 const PERIOD: Duration = Duration::from_millis(10);
@@ -538,4 +538,140 @@ fn a_cycle_breaks_only_on_the_cycle() {
     clock.settle().expect("settled");
     tick(&clock);
     assert_eq!(log.take(), ["a:1", "b:2", "c:1", "r:2"]);
+}
+
+/// The parts of `ControlLoop` (`cool/groups.cool`): every stage logs into `log`; the
+/// controller panics in its second period.
+struct LoopParts {
+    log: Log,
+}
+
+/// `ControlLoop` has no supervisor of its own to write.
+struct Quiet;
+
+impl control_loop::Supervisor for Quiet {}
+
+impl control_loop::Parts for LoopParts {
+    fn supervisor(&mut self) -> impl control_loop::Supervisor {
+        Quiet
+    }
+    fn imu(&mut self) -> impl stage::Behavior {
+        step("imu", &self.log)
+    }
+    fn estimator(&mut self) -> impl stage::Behavior {
+        step("estimator", &self.log)
+    }
+    fn controller(&mut self) -> impl stage::Behavior {
+        Step {
+            panic_at: Some(2),
+            ..step("controller", &self.log)
+        }
+    }
+    fn driver(&mut self) -> impl stage::Behavior {
+        step("driver", &self.log)
+    }
+    fn spare(&mut self) -> impl stage::Behavior {
+        step("spare", &self.log)
+    }
+}
+
+#[test]
+fn a_generated_compound_runs_its_thread_group_and_substitutes_a_failed_member() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let control = control_loop::component("control", LoopParts { log: log.clone() })
+        .expect("the description's group builds");
+    system.add(control).expect("control");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // Grouped as `driver, controller, estimator, imu`, run in data-flow order: the
+    // chain goes through in one pass. `driver`'s period is twice the others'.
+    tick(&clock);
+    assert_eq!(log.take(), ["imu:1", "estimator:2", "controller:3"]);
+    clock.advance(PERIOD).expect("settled");
+    // The controller panics in its second period; `driver` reads its last packet.
+    assert_eq!(log.take(), ["imu:1", "estimator:2", "driver:4"]);
+    let controller = system.handle_at("control.controller").expect("controller");
+    let monitor = controller.snapshot();
+    assert_eq!(monitor.state, State::RunningError, "{monitor:?}");
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("controller broke")),
+        "{monitor:?}"
+    );
+    // `spare` takes the controller's place, on its own thread, fed by `estimator` and
+    // feeding `driver`, which stay on the group's thread.
+    let mut ticks = 0;
+    while !log.take().contains(&"spare:3".to_owned()) {
+        tick(&clock);
+        ticks += 1;
+        assert!(
+            ticks < 10,
+            "no substitution: {:?}",
+            system.handle("control")
+        );
+    }
+    assert_eq!(
+        system.handle("control").expect("control").state(),
+        State::Running
+    );
+    // Two periods: `driver` runs in one of them, reading what `spare` sent.
+    tick(&clock);
+    tick(&clock);
+    let mut lines = log.take();
+    lines.sort();
+    assert_eq!(
+        lines,
+        [
+            "driver:4",
+            "estimator:2",
+            "estimator:2",
+            "imu:1",
+            "imu:1",
+            "spare:3",
+            "spare:3"
+        ]
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// The parts of `LastLoop`: both stages log into `log`.
+struct PingPong {
+    log: Log,
+}
+
+impl last_loop::Supervisor for Quiet {}
+
+impl last_loop::Parts for PingPong {
+    fn supervisor(&mut self) -> impl last_loop::Supervisor {
+        Quiet
+    }
+    fn ping(&mut self) -> impl stage::Behavior {
+        step("ping", &self.log)
+    }
+    fn pong(&mut self) -> impl stage::Behavior {
+        step("pong", &self.log)
+    }
+}
+
+#[test]
+fn a_cycle_that_coolc_accepts_the_runtime_runs() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let both = last_loop::component("both", PingPong { log: log.clone() })
+        .expect("a cycle through `last` inputs builds");
+    system.add(both).expect("both");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // Written `pong, ping`, connected both ways through `last` inputs: no data-flow
+    // order, so the order written; each reads what the other sent before.
+    tick(&clock);
+    assert_eq!(log.take(), ["pong:1", "ping:2"]);
+    tick(&clock);
+    assert_eq!(log.take(), ["pong:3", "ping:4"]);
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
 }
