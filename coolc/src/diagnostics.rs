@@ -163,6 +163,8 @@ codes! {
     ThreadPeriods => "coolc::check::thread_periods",
     /// A member of an execution group pulls from another member.
     ThreadPull => "coolc::check::thread_pull",
+    /// A member's `block` fifo is fed by another member of its execution group.
+    ThreadBlock => "coolc::check::thread_block",
     /// A cycle of connections among an execution group's members with no `last` or
     /// `poster` input on it.
     ThreadCycle => "coolc::check::thread_cycle",

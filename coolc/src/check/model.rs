@@ -147,6 +147,8 @@ pub struct Port {
     pub ty: Option<Ty>,
     /// `pull` was written.
     pub pull: bool,
+    /// A `fifo` input whose overflow policy is `block`.
+    pub block: bool,
     /// Where it is declared (in the component's file).
     pub span: Span,
 }
@@ -539,8 +541,11 @@ impl<'a> Model<'a> {
                         ast::InputDef::Tick => {
                             Some(self.port(PortKind::Tick, None, input.pull, input.span))
                         }
-                        ast::InputDef::Fifo { ty, .. } => {
-                            Some(self.port(PortKind::Fifo, Some(ty), input.pull, input.span))
+                        ast::InputDef::Fifo { ty, policy, .. } => {
+                            let mut port =
+                                self.port(PortKind::Fifo, Some(ty), input.pull, input.span);
+                            port.block = policy.as_ref().is_some_and(|p| p.name == "block");
+                            Some(port)
                         }
                         ast::InputDef::Ufifo { ty, .. } => {
                             Some(self.port(PortKind::Ufifo, Some(ty), input.pull, input.span))
@@ -654,6 +659,7 @@ impl<'a> Model<'a> {
             kind,
             ty: ty.map(|ty| self.ty(ty)),
             pull: pull.is_some(),
+            block: false,
             span,
         }
     }

@@ -230,7 +230,8 @@ fn nanos(nanos: u64) -> String {
 }
 
 /// The connections among the members: none into a `pull` input (the pull would wait
-/// for the thread that waits), and no cycle unless a `last` or `poster` input is on
+/// for the thread that waits) nor into a `block` fifo (a full queue would stop the
+/// thread that empties it), and no cycle unless a `last` or `poster` input is on
 /// it (a queue cycle has no order to run in). As the runtime decides: connections
 /// between two different members, as written.
 fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Member<'_>]) {
@@ -279,6 +280,28 @@ fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Mem
                 .with_help(
                     "take one of the two out of the group, or let the input read what is sent \
                      (no `pull`)",
+                );
+            checker.push(diagnostic);
+            continue;
+        }
+        if port.block {
+            let diagnostic = checker
+                .error(
+                    Code::ThreadBlock,
+                    members[to].ident.span,
+                    format!(
+                        "`{}.{}`, a `block` fifo, is fed by `{}.{}`, a member of the same group: a full queue would stop the thread that empties it",
+                        members[to].ident.name,
+                        connect.to.port.name,
+                        members[from].ident.name,
+                        connect.from.port.name
+                    ),
+                )
+                .with_label("blocks a member")
+                .with_secondary(connect.span, "the connection")
+                .with_help(
+                    "give the fifo another policy (`reject`, `drop_oldest`), or take one of \
+                     the two out of the group",
                 );
             checker.push(diagnostic);
             continue;
