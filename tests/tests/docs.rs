@@ -284,6 +284,14 @@ const FRAGMENTS: &[(Place, &str)] = &[
         "let system = System::new();\nlet other_system = System::new();\n",
     ),
     (
+        place(
+            "docs/tools.md",
+            "### rosbag2 bags: `RecordFormat::Ros2`",
+            0,
+        ),
+        "let system = System::new();\n",
+    ),
+    (
         place("docs/distribution.md", "## The model", 0),
         "let mut system = System::new();\n",
     ),
@@ -745,6 +753,9 @@ fn the_compound_example_builds_from_a_build_script() {
 /// The crate the API fragments compile in: what they name, from a description
 /// (components, compounds and packets of the docs' examples) and declarations.
 const FRAGMENT_DESCRIPTION: &str = r#"
+import ros "sensor_msgs/msg/LaserScan";
+import ros "nav_msgs/msg/Odometry";
+
 packet Twist { linear: f64, angular: f64 }
 packet Pose2D { x: f64, y: f64, theta: f64 }
 packet RangeScan { ranges: [f64] }
@@ -822,7 +833,7 @@ use std::time::Duration;
 use coolbot::{CompoundBuilder, Policy, State, System};
 use coolbot_zenoh::Node;
 
-use crate::generated::types::{Map, Path, Pose2D, RangeScan, Twist};
+use crate::generated::types::{LaserScan, Map, Odometry, Path, Pose2D, RangeScan, Twist};
 use crate::generated::{mapper, mobile_base, motion_controller, planner, range_server, robot, sim_range_server};
 use crate::motion_controller::MotionController as MyMotion;
 use crate::planner::Planner as MyPlanner;
