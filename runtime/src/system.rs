@@ -1416,7 +1416,7 @@ impl System {
             if slot.runner.is_none() {
                 let (reply, _answers) = crossbeam_channel::bounded(2);
                 let _ = slot.handle.control.try_send(crate::handle::ControlMessage {
-                    command: crate::Command::SetState(Controllable::Dead),
+                    command: Box::new(crate::Command::SetState(Controllable::Dead)),
                     by_supervisor: false,
                     reply,
                     claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),
