@@ -465,7 +465,9 @@ struct Slot {
     handle: Handle,
     inputs: Vec<ErasedInput>,
     outputs: Vec<ErasedOutput>,
-    runner: Option<Runner>,
+    /// Boxed: once the thread runs, the slot keeps only the pointer's room (the
+    /// system's table holds one slot per component for its whole life).
+    runner: Option<Box<Runner>>,
     /// The execution group it runs in (an index into `System::groups`).
     group: Option<usize>,
 }
@@ -809,7 +811,7 @@ impl System {
             handle: handle.clone(),
             inputs,
             outputs,
-            runner: Some(runner),
+            runner: Some(Box::new(runner)),
             group: None,
         });
         if self.started {
@@ -988,7 +990,7 @@ impl System {
                 if !self.clock.is_real() {
                     runner.set_clock(self.clock.clone());
                 }
-                runners.push(runner);
+                runners.push(*runner);
             }
         }
         let name = self.groups[group].name.clone();
