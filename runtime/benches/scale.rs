@@ -7,8 +7,11 @@
 //! state at 100 ms and an `on input` transition, with its ports connected in a ring.
 //! The baseline spawns the same number of bare threads, each blocking on a
 //! crossbeam-channel `bounded(16)` with a 100 ms timeout and acknowledging its start on
-//! a channel. Each round of each side runs in a fresh child process of the benchmark
-//! (memory freed by one run would otherwise be reused by the next). No goal is set for these figures; they are reported.
+//! a channel. The same components also run in 10 execution groups of 100 consecutive
+//! nodes (`System::group`), against one thread each: goal, at most 0.3x the memory per
+//! component. Each round of each side runs in a fresh child process of the benchmark
+//! (memory freed by one run would otherwise be reused by the next). The components
+//! against bare threads have no goal; those figures are reported.
 //!
 //! `cargo bench -p coolbot --bench scale` (add `-- --quick` for a smoke run).
 
@@ -26,6 +29,8 @@ use crossbeam_channel::bounded;
 use common::{Figure, Glue, Goal, Mode, Table};
 
 const ROUNDS: usize = 3;
+/// How many execution groups share the components on the grouped side.
+const GROUPS: usize = 10;
 
 one_state_spec! {
     static NODE = "Node",
@@ -50,8 +55,9 @@ fn node(index: usize) -> Component {
     Component::new(format!("node{index}"), Glue::boxed(&NODE, body), ports)
 }
 
-/// Time to all running, and RSS bytes per component.
-fn project_round(count: usize) -> Round {
+/// Time to all running, and RSS bytes per component: one thread each, or (`grouped`)
+/// in [`GROUPS`] execution groups of consecutive nodes.
+fn project_round(count: usize, grouped: bool) -> Round {
     let before = common::rss_bytes().expect("/proc/self/statm");
     let mut system = System::new();
     let mut handles = Vec::with_capacity(count);
@@ -65,6 +71,15 @@ fn project_round(count: usize) -> Round {
                 &format!("node{}.input", (index + 1) % count),
             )
             .expect("connect");
+    }
+    if grouped {
+        let names: Vec<String> = (0..count).map(|index| format!("node{index}")).collect();
+        for (group, members) in names.chunks(count.div_ceil(GROUPS)).enumerate() {
+            let members: Vec<&str> = members.iter().map(String::as_str).collect();
+            system
+                .group(&format!("group{group}"), &members)
+                .expect("group");
+        }
     }
     let (took, result) = common::time(|| system.run_all());
     result.expect("run all");
@@ -165,7 +180,8 @@ fn main() {
     if let Some(at) = args.iter().position(|a| a == "--child") {
         let count = args[at + 2].parse().expect("count");
         let (took, memory, stop) = match args[at + 1].as_str() {
-            "project" => project_round(count),
+            "project" => project_round(count, false),
+            "grouped" => project_round(count, true),
             _ => baseline_round(count),
         };
         println!("{} {memory} {}", took.as_secs_f64(), stop.as_secs_f64());
@@ -174,11 +190,12 @@ fn main() {
     let mode = Mode::from_env();
     let count = mode.scale(1_000, 100);
     let mut table = Table::new(&format!("{count} components in one process"), mode);
-    let (project, baseline) = common::alternate(
-        ROUNDS,
-        || vec![in_child("project", count)],
-        || vec![in_child("baseline", count)],
-    );
+    let (mut project, mut baseline, mut grouped) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..ROUNDS {
+        baseline.push(in_child("baseline", count));
+        project.push(in_child("project", count));
+        grouped.push(in_child("grouped", count));
+    }
     let start =
         |rounds: &[Round]| median(rounds.iter().map(|r| r.0).collect(), |d| d.as_secs_f64());
     let memory = |rounds: &[Round]| median(rounds.iter().map(|r| r.1).collect(), |m| *m);
@@ -199,6 +216,24 @@ fn main() {
         "shutdown, all joined",
         Figure::Time(stop(&project)),
         Figure::Time(stop(&baseline)),
+        Goal::None,
+    );
+    table.row(
+        &format!("in {GROUPS} groups vs a thread each: start to all running"),
+        Figure::Time(start(&grouped)),
+        Figure::Time(start(&project)),
+        Goal::None,
+    );
+    table.row(
+        &format!("in {GROUPS} groups vs a thread each: RSS per component"),
+        Figure::Bytes(memory(&grouped)),
+        Figure::Bytes(memory(&project)),
+        Goal::AtMost(0.3),
+    );
+    table.row(
+        &format!("in {GROUPS} groups vs a thread each: shutdown, all joined"),
+        Figure::Time(stop(&grouped)),
+        Figure::Time(stop(&project)),
         Goal::None,
     );
     table.note(&format!(

@@ -291,6 +291,15 @@ impl VirtualClock {
         self.settled.notify_all();
     }
 
+    /// A component has work at the clock's time (a command it is handling): it is
+    /// busy until it settles again, so that [`VirtualClock::settle`] after a command
+    /// waits for what the command caused.
+    pub(crate) fn busy(&self, id: u64) {
+        if let Some(member) = self.lock().components.get_mut(&id) {
+            member.settled = None;
+        }
+    }
+
     /// Watch a component's sections against its `max_response` on this clock.
     pub(crate) fn watch(&self, watch: Weak<dyn Watched>) {
         self.lock().watches.push(watch);

@@ -20,7 +20,9 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// A command on its way to the component, with the channel for its answer.
 pub(crate) struct ControlMessage {
-    pub(crate) command: Command,
+    /// Boxed: a control queue's slots are allocated with the queue, and a slot holds a
+    /// pointer rather than the largest command (32 slots of each component's queue).
+    pub(crate) command: Box<Command>,
     /// Given by the component's compound's adaptation (its supervisor managing the
     /// instance's level), not by anyone else (an operator, a policy, a test).
     pub(crate) by_supervisor: bool,
@@ -234,7 +236,7 @@ impl Handle {
         let (reply, answers) = crossbeam_channel::bounded(2);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let message = ControlMessage {
-            command: command.clone(),
+            command: Box::new(command.clone()),
             by_supervisor,
             reply,
             claim: Arc::clone(&claim),

@@ -371,7 +371,7 @@ impl Harness {
     pub fn command(&mut self, command: Command) -> Result<(), HarnessError> {
         let (reply, answers) = crossbeam_channel::bounded(2);
         let message = ControlMessage {
-            command: command.clone(),
+            command: Box::new(command.clone()),
             by_supervisor: false,
             reply,
             claim: Arc::new(std::sync::atomic::AtomicU8::new(PENDING)),

@@ -476,7 +476,9 @@ struct Slot {
     handle: Handle,
     inputs: Vec<ErasedInput>,
     outputs: Vec<ErasedOutput>,
-    runner: Option<Runner>,
+    /// Boxed: once the thread runs, the slot keeps only the pointer's room (the
+    /// system's table holds one slot per component for its whole life).
+    runner: Option<Box<Runner>>,
     /// The execution group it runs in (an index into `System::groups`).
     group: Option<usize>,
 }
@@ -824,7 +826,7 @@ impl System {
             handle: handle.clone(),
             inputs,
             outputs,
-            runner: Some(runner),
+            runner: Some(Box::new(runner)),
             group: None,
         });
         if self.started {
@@ -1019,7 +1021,7 @@ impl System {
                 if !self.clock.is_real() {
                     runner.set_clock(self.clock.clone());
                 }
-                runners.push(runner);
+                runners.push(*runner);
             }
         }
         let name = self.groups[group].name.clone();
@@ -1447,7 +1449,7 @@ impl System {
             if slot.runner.is_none() {
                 let (reply, _answers) = crossbeam_channel::bounded(2);
                 let _ = slot.handle.control.try_send(crate::handle::ControlMessage {
-                    command: crate::Command::SetState(Controllable::Dead),
+                    command: Box::new(crate::Command::SetState(Controllable::Dead)),
                     by_supervisor: false,
                     reply,
                     claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),

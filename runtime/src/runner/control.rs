@@ -27,7 +27,7 @@ impl Runner {
                 Some(Err(error)) => return reply(Reply::Rejected(Chain(&*error).to_string())),
             }
         }
-        match &message.command {
+        match &*message.command {
             Command::SetState(target) => match next(self.state, Event::Command(*target)) {
                 Outcome::Go { .. } => {
                     reply(Reply::Accepted);

@@ -7,9 +7,11 @@
 //! thread would call it in its loop. A pass takes every member once, up to
 //! [`TURNS_PER_PASS`] turns each while it has work; a packet a member sends during its
 //! turn is at the next member's input when that member's turn looks, so a chain runs
-//! through in one pass. Passes repeat while any member worked; then the thread waits
-//! on all the members' doorbells at once ([`Doorbell::park_any`]) until one rings or
-//! the nearest member timer is due.
+//! through in one pass. After a pass the thread waits on all the members' doorbells at
+//! once ([`Doorbell::park_any`]) until one rings or the nearest member timer is due; a
+//! bell rung during the pass, or a timer already due, makes the wait return at once
+//! for the next pass. Only a member cut off at its turns' limit makes the next pass
+//! start without a wait.
 //!
 //! Members' periodic deadlines fall on one grid, multiples of each member's period
 //! from the group's start (`Runner::deadline_after`), so that members with harmonic
@@ -165,25 +167,41 @@ impl Group {
         }
         tracing::debug!(group = %self.name, members = self.members.len(), "execution group runs");
         loop {
-            let worked = self.pass();
+            let more = self.pass();
             if self.members.iter().all(Option::is_none) {
                 break;
             }
-            if !worked {
+            if !more {
                 self.wait();
             }
         }
     }
 
-    /// Every member once, in order, while it has work; true if any worked.
+    /// Every member once, in order, while it has work; true if a member still has
+    /// work known to be waiting (it took its [`TURNS_PER_PASS`] turns).
+    ///
+    /// Anything else that came during the pass rang a member's bell or is a timer due,
+    /// and [`Group::wait`] returns at once for it: the pass that would find nothing is
+    /// not made.
     fn pass(&mut self) -> bool {
-        let mut worked = false;
+        let mut more = false;
+        // The latest clock reading on this thread: an untimed member's turn on the
+        // real clock starts from it instead of reading the clock (see
+        // `Runner::untimed`; the reading is the end of the previous member's turn).
+        let mut reading: Option<Instant> = None;
         for slot in &mut self.members {
             let Some(runner) = slot.as_mut() else {
                 continue;
             };
-            for _ in 0..TURNS_PER_PASS {
-                match runner.turn() {
+            let mut turns = 0;
+            loop {
+                if runner.untimed && runner.time.is_real() {
+                    runner.found_at = reading;
+                }
+                let turn = runner.turn();
+                reading = Some(runner.clock);
+                turns += 1;
+                match turn {
                     Turn::Dead => {
                         runner.end();
                         if let (Some(clock), Some(id)) = (runner.time.as_virtual(), runner.on_clock)
@@ -194,27 +212,29 @@ impl Group {
                         *slot = None;
                         break;
                     }
-                    Turn::Worked => {
-                        worked = true;
-                        if runner.idle() {
-                            break;
-                        }
+                    Turn::Worked if runner.idle() => break,
+                    Turn::Worked if turns == TURNS_PER_PASS => {
+                        more = true;
+                        break;
                     }
+                    Turn::Worked => {}
                     Turn::Stopped | Turn::Idle => break,
                 }
             }
         }
-        worked
+        more
     }
 
     /// Wait for a ring at any member or the nearest member timer.
     fn wait(&mut self) {
         let mut deadline: Option<Instant> = None;
+        let mut now = None;
         for runner in self.members.iter_mut().flatten() {
             if let Some(due) = runner.next_due() {
                 deadline = Some(deadline.map_or(due, |d| d.min(due)));
             }
-            runner.clock = runner.time.now();
+            // One reading for all: the members share the clock.
+            runner.clock = *now.get_or_insert_with(|| runner.time.now());
             runner.update_cpu(false);
         }
         let clock = self
@@ -234,8 +254,10 @@ impl Group {
                 // A virtual timer: never a real timeout. With nothing due now, every
                 // member settles and the thread waits for a ring (the clock rings
                 // every member's bell when it advances).
+                // A bell rung during the last pass is work at the clock's time: no
+                // member settles before it is done.
                 let now = clock.now();
-                if deadline.is_some_and(|due| due <= now) {
+                if deadline.is_some_and(|due| due <= now) || bells.iter().any(|b| b.is_rung()) {
                     return;
                 }
                 for runner in self.members.iter().flatten() {

@@ -473,7 +473,18 @@ impl Runner {
         {
             self.handle_control(message);
         }
+        // `is_empty` first: two loads, where an empty `try_recv` also fences (a bell
+        // rung by a delivery finds no command far more often than one).
+        if self.state != State::Dead
+            && !self.control.is_empty()
+            && let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock)
+        {
+            // Busy before any reply: a test that commanded it and settles the clock
+            // waits for the rest of this turn (and, in a group, of the pass).
+            clock.busy(id);
+        }
         while self.state != State::Dead
+            && !self.control.is_empty()
             && let Ok(message) = self.control.try_recv()
         {
             self.handle_control(message);

@@ -66,11 +66,14 @@ impl stage::Behavior for Step {
 struct Hop {
     name: &'static str,
     log: Log,
+    /// Real time each packet takes before it is logged (a slow member).
+    pause: Duration,
 }
 
 impl relay::Behavior for Hop {
     fn relay_entry(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
         while let Some(value) = cx.inputs.feed.recv() {
+            std::thread::sleep(self.pause);
             self.log.push(format!("{}:{}", self.name, value + 1));
             cx.outputs.out.send(value + 1);
         }
@@ -144,6 +147,7 @@ fn aperiodic_members_run_when_their_inputs_arrive_within_the_pass() {
     let hop = |name| Hop {
         name,
         log: log.clone(),
+        pause: Duration::ZERO,
     };
     system.add(relay::component("r2", hop("r2"))).expect("r2");
     system.add(relay::component("r1", hop("r1"))).expect("r1");
@@ -157,6 +161,60 @@ fn aperiodic_members_run_when_their_inputs_arrive_within_the_pass() {
     assert_eq!(log.take(), ["a:1", "r1:2", "r2:3"]);
     tick(&clock);
     assert_eq!(log.take(), ["a:1", "r1:2", "r2:3"]);
+}
+
+#[test]
+fn settling_after_a_command_waits_for_the_rest_of_the_groups_pass() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    system
+        .add(stage::component("a", step("a", &log)))
+        .expect("a");
+    system
+        .add(relay::component(
+            "r1",
+            Hop {
+                name: "r1",
+                log: log.clone(),
+                pause: Duration::ZERO,
+            },
+        ))
+        .expect("r1");
+    // Slow: it logs well after `r1`'s command is answered.
+    system
+        .add(relay::component(
+            "r2",
+            Hop {
+                name: "r2",
+                log: log.clone(),
+                pause: Duration::from_millis(50),
+            },
+        ))
+        .expect("r2");
+    system.connect("a.out", "r1.feed").expect("a -> r1");
+    system.connect("r1.out", "r2.feed").expect("r1 -> r2");
+    system.group("chain", &["r1", "r2"]).expect("group");
+    system.start().expect("started");
+    for name in ["a", "r2"] {
+        system
+            .handle(name)
+            .expect(name)
+            .command(Command::SetState(Controllable::Running))
+            .expect("running");
+    }
+    clock.settle().expect("settled");
+    tick(&clock);
+    // `r1` is still `ready`: `a`'s packet waits at its input.
+    assert_eq!(log.take(), ["a:1"]);
+    // Running, `r1` relays the packet as it enters its state, before its command is
+    // answered; `r2` takes it later in the same pass. Settling waits for that.
+    system
+        .handle("r1")
+        .expect("r1")
+        .command(Command::SetState(Controllable::Running))
+        .expect("running");
+    clock.settle().expect("settled");
+    assert_eq!(log.take(), ["r1:2", "r2:3"]);
 }
 
 #[test]
@@ -314,6 +372,7 @@ fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
     let hop = |name| Hop {
         name,
         log: log.clone(),
+        pause: Duration::ZERO,
     };
     let (mut system, _clock) = system();
     system.add(relay::component("r1", hop("r1"))).expect("r1");
@@ -442,6 +501,7 @@ fn a_compound_refuses_a_group_that_cannot_run() {
     let hop = |name| Hop {
         name,
         log: log.clone(),
+        pause: Duration::ZERO,
     };
     let built = CompoundBuilder::new("base", Coordinating)
         .instance(relay::component("r1", hop("r1")))
