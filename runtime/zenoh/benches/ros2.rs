@@ -71,6 +71,7 @@ impl RosType for Stamp {
     const DDS_NAME: &'static str = "coolbot_bench::msg::dds_::Stamp_";
     const TYPE_HASH: &'static str =
         "RIHS01_0000000000000000000000000000000000000000000000000000000000000000";
+    const MESSAGE_DEFINITION: &'static str = "uint64 nanos\n";
 }
 
 /// A packet that carries a stamp.
