@@ -82,6 +82,8 @@ pub fn join(system: &mut System, setup: &RosSetup) -> Result<RosNode, String> {
             Convert::twist_from_ros,
         )
         .map_err(text)?;
+    // The publishers and the subscription run with the robot.
+    system.run_all().map_err(text)?;
     Ok(RosNode {
         participant,
         session,

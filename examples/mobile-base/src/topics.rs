@@ -44,7 +44,7 @@ impl Behavior for Relay {
 /// the converters, and sets it running.
 pub fn add_relay(system: &mut System) -> Result<(), String> {
     let component = ros_topics::component(RELAY, Relay);
-    let relay = system.add(component).map_err(text)?;
+    system.add(component).map_err(text)?;
     system
         .connect_via(
             &format!("{ROBOT}.scan"),
@@ -59,16 +59,8 @@ pub fn add_relay(system: &mut System) -> Result<(), String> {
             Convert::pose_to_odometry,
         )
         .map_err(text)?;
-    // Added to a started system, it starts at once.
-    relay
-        .wait_for(
-            |m| m.state != coolbot::State::Starting,
-            std::time::Duration::from_secs(10),
-        )
-        .map_err(text)?;
-    relay
-        .command(coolbot::Command::SetState(coolbot::Controllable::Running))
-        .map_err(|rejected| format!("{RELAY}: {rejected}"))?;
+    // Added to a started system, it starts at once; it runs with the robot.
+    system.run_all().map_err(text)?;
     Ok(())
 }
 

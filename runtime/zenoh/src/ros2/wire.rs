@@ -509,9 +509,8 @@ mod tests {
         // Expected values: Python's `xxhash` 3.x,
         // `xxhash.xxh3_128_intdigest(token).to_bytes(16, "little")`; the last token
         // is past 128 bytes, XXH3's long-input path.
-        let hex = |bytes: [u8; GID_LEN]| -> String {
-            bytes.iter().map(|b| format!("{b:02x}")).collect()
-        };
+        let hex =
+            |bytes: [u8; GID_LEN]| -> String { bytes.iter().map(|b| format!("{b:02x}")).collect() };
         assert_eq!(hex(gid("")), "7f498d4624c30160d8984701d306aa99");
         assert_eq!(
             hex(gid("@ros2_lv/0/a/0/0/NN/%/%/x")),
