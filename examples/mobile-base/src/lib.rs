@@ -8,15 +8,20 @@
 //! integration test both call it.
 #![deny(missing_docs)]
 
+pub mod converters;
 pub mod finite;
 pub mod mapper;
 pub mod motion_controller;
 pub mod node;
 pub mod range_server;
 pub mod robot;
+#[cfg(feature = "ros2")]
+pub mod ros;
 pub mod sensing;
 pub mod sim_range_server;
 pub mod status;
+pub mod teleop;
+pub mod topics;
 pub mod wanderer;
 pub mod world;
 
@@ -36,7 +41,7 @@ use coolbot::adapt::{AdaptAction, Adaptation};
 use coolbot::{Handle, Monitor, MonitorEvent, State, Step, Supervision};
 
 use crate::node::NodeOptions;
-use crate::robot::{BASE, MAPPER, MOTION, RANGES, Robot, SIM_RANGES, Setup, WANDERER};
+use crate::robot::{BASE, MAPPER, MOTION, RANGES, ROBOT, Robot, SIM_RANGES, Setup, WANDERER};
 use crate::world::{FaultKind, Overload, Platform, SensorFault, World};
 
 /// How the run shows itself.
@@ -79,8 +84,15 @@ pub struct Options {
     pub stop: Arc<AtomicBool>,
     /// Record the odometry (`base.motion.pose`), the scans (`base.scan`, from
     /// whichever range server stands in) and the base's monitoring events into this
-    /// file (`coolbot::record`, MCAP).
+    /// file (`coolbot::record`, MCAP); with `record_format` `Ros2`, the ROS 2 topics
+    /// into a rosbag2 bag directory instead.
     pub record: Option<std::path::PathBuf>,
+    /// The format of `record`: CoolBOT's own, or a rosbag2 bag of the ROS 2 topics
+    /// (`/scan`, `/odom`, and with `ros2` `/cmd_vel`; no monitoring events).
+    pub record_format: coolbot::record::RecordFormat,
+    /// Join ROS 2 (`--ros2`): publish `/scan` and `/odom`, take `/cmd_vel`.
+    #[cfg(feature = "ros2")]
+    pub ros2: Option<ros::RosSetup>,
     /// A simulated processor shortage (`--load 3s..9s`): meanwhile the range server's
     /// scans cost time ([`world::OVERLOAD_COST_PER_BEAM`]), so that the runtime
     /// degrades it, and promotes it back after.
@@ -105,6 +117,9 @@ impl Default for Options {
             display: Display::Auto,
             stop: Arc::new(AtomicBool::new(false)),
             record: None,
+            record_format: coolbot::record::RecordFormat::Coolbot,
+            #[cfg(feature = "ros2")]
+            ros2: None,
             load: None,
             node: None,
         }
@@ -278,6 +293,13 @@ pub struct Summary {
     pub supervision: Vec<SupervisionStep>,
     /// The base supervisor's states, in the order its monitoring port reported them.
     pub user_states: Vec<String>,
+    /// The robot supervisor's states (`autonomous`, `teleoperated`), in the order its
+    /// monitoring port reported them.
+    pub drive_states: Vec<String>,
+    /// Outside commands the robot's `teleop` took and refused (not finite).
+    pub teleop: (u64, u64),
+    /// With ROS 2 (`--ros2`): what went through each topic.
+    pub topics: Vec<TopicCount>,
     /// The base supervisor's last state.
     pub supervisor: String,
     /// The base's own `mode` at the end.
@@ -309,6 +331,21 @@ pub struct Summary {
     pub responses: Option<(coolbot::ResponseTimes, Option<Duration>)>,
     /// With `node`: the node's name and how many components it exposed.
     pub node: Option<(String, usize)>,
+}
+
+/// What went through one ROS 2 topic of the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TopicCount {
+    /// The fully qualified topic (`/scan`).
+    pub topic: String,
+    /// Its message type (`sensor_msgs/msg/LaserScan`).
+    pub type_name: String,
+    /// Published (else subscribed).
+    pub outgoing: bool,
+    /// Messages published, or received and delivered.
+    pub messages: u64,
+    /// Packets not published, or messages received that did not decode.
+    pub lost: u64,
 }
 
 impl Summary {
@@ -442,6 +479,25 @@ impl fmt::Display for Summary {
             self.base_faults,
             self.user_states.join(" -> ")
         )?;
+        writeln!(
+            f,
+            "  robot supervisor     {}; outside commands {} taken, {} refused",
+            self.drive_states.join(" -> "),
+            self.teleop.0,
+            self.teleop.1
+        )?;
+        for (i, count) in self.topics.iter().enumerate() {
+            let label = if i == 0 { "ROS 2 topics" } else { "" };
+            writeln!(
+                f,
+                "  {label:<20} {} {} {} ({}), {} lost",
+                count.topic,
+                if count.outgoing { "out" } else { "in" },
+                count.messages,
+                count.type_name,
+                count.lost
+            )?;
+        }
         let before: Vec<String> = self
             .states_before_shutdown
             .iter()
@@ -494,6 +550,32 @@ impl fmt::Display for Summary {
 /// The ports `--record` taps: the motion controller's odometry and the base's
 /// exported scans (from whichever range server stands in).
 pub const RECORDED_PORTS: [&str; 2] = ["robot.base.motion.pose", "robot.base.scan"];
+
+/// Starts recording the ROS 2 topics into a rosbag2 bag: `/scan` and `/odom` from the
+/// relay (`crate::topics`), and `/cmd_vel` as it came in when `cmd_vel` names the
+/// subscription's output.
+fn start_bag(
+    robot: &Robot,
+    path: &std::path::Path,
+    cmd_vel: Option<&str>,
+) -> Result<coolbot::record::Recording, String> {
+    use coolbot::record::{RecordFormat, Recorder};
+    use generated::types::{LaserScan, Odometry, RosTwist};
+    let system = robot.system();
+    let mut recorder = Recorder::new().format(RecordFormat::Ros2);
+    recorder
+        .tap_ros_on::<LaserScan>(system, topics::SCAN_PORT, topics::SCAN)
+        .map_err(text)?;
+    recorder
+        .tap_ros_on::<Odometry>(system, topics::ODOM_PORT, topics::ODOM)
+        .map_err(text)?;
+    if let Some(port) = cmd_vel {
+        recorder
+            .tap_ros_on::<RosTwist>(system, port, topics::CMD_VEL)
+            .map_err(text)?;
+    }
+    recorder.start(path).map_err(text)
+}
 
 /// Starts recording the odometry, the scans and the base's monitoring events.
 fn start_recording(
@@ -616,6 +698,7 @@ struct Events {
     supervision: Vec<SupervisionStep>,
     adaptation: Vec<AdaptationStep>,
     user_states: Vec<String>,
+    drive_states: Vec<String>,
 }
 
 impl Events {
@@ -631,11 +714,18 @@ impl Events {
             .and_then(|h| h.snapshot().user_state)
             .into_iter()
             .collect();
+        let drive_states = handles
+            .iter()
+            .find(|h| h.name() == ROBOT)
+            .and_then(|h| h.snapshot().user_state)
+            .into_iter()
+            .collect();
         Events {
             receivers,
             supervision: Vec::new(),
             adaptation: Vec::new(),
             user_states,
+            drive_states,
         }
     }
 
@@ -667,6 +757,12 @@ impl Events {
                     {
                         lines.push(format!("{time:6.2}s {name}: supervisor -> {state}"));
                         self.user_states.push(state);
+                    }
+                    MonitorEvent::UserState(Some(state))
+                        if *name == ROBOT && self.drive_states.last() != Some(&state) =>
+                    {
+                        lines.push(format!("{time:6.2}s {name}: supervisor -> {state}"));
+                        self.drive_states.push(state);
                     }
                     MonitorEvent::Supervision(step) => {
                         let step = SupervisionStep {
@@ -743,11 +839,37 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         Some(node) => Some(node::open(node)?),
         None => None,
     };
-    let robot = Robot::start(&platform, &setup)?;
+    let mut robot = Robot::start(&platform, &setup)?;
     // A panic the runtime catches in one of the robot's components prints one line
     // (under `coolbot::process`'s panic hook, when the program installed it).
     coolbot::process::watch_system(robot.system());
+    let bag =
+        options.record.is_some() && options.record_format == coolbot::record::RecordFormat::Ros2;
+    #[cfg(feature = "ros2")]
+    let speaks_ros = bag || options.ros2.is_some();
+    #[cfg(not(feature = "ros2"))]
+    let speaks_ros = bag;
+    if speaks_ros && let Err(error) = topics::add_relay(robot.system_mut()) {
+        let _ = robot.shutdown();
+        return Err(error);
+    }
+    #[cfg(feature = "ros2")]
+    let ros_node = match &options.ros2 {
+        Some(setup) => match ros::join(robot.system_mut(), setup) {
+            Ok(node) => Some(node),
+            Err(error) => {
+                let _ = robot.shutdown();
+                return Err(error);
+            }
+        },
+        None => None,
+    };
+    #[cfg(feature = "ros2")]
+    let cmd_vel = ros_node.as_ref().map(ros::RosNode::cmd_vel_port);
+    #[cfg(not(feature = "ros2"))]
+    let cmd_vel: Option<String> = None;
     let recording = match &options.record {
+        Some(path) if bag => Some(start_bag(&robot, path, cmd_vel.as_deref())?),
         Some(path) => Some(start_recording(&robot, path)?),
         None => None,
     };
@@ -890,6 +1012,13 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         Some(recording) => Some(recording.finish().map_err(text)?),
         None => None,
     };
+    #[cfg(feature = "ros2")]
+    let topics = ros_node
+        .as_ref()
+        .map(ros::RosNode::counts)
+        .unwrap_or_default();
+    #[cfg(not(feature = "ros2"))]
+    let topics = Vec::new();
     let handles = [
         robot.robot.clone(),
         robot.base.clone(),
@@ -898,6 +1027,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let exposed = node.map(|node| (node.name().to_owned(), lines.len()));
     coolbot::process::forget_system(robot.system());
     let report = robot.shutdown();
+    // The ROS 2 node leaves once its publishers and subscription are dead.
+    #[cfg(feature = "ros2")]
+    if let Some(node) = ros_node {
+        node.close();
+    }
     // The variables as the components left them, each from its own monitoring port:
     // read after the last section ran, so that they agree with the platform's ground
     // truth.
@@ -906,6 +1040,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let ranges = monitor(&format!("{BASE}.{RANGES}"));
     let sim_ranges = monitor(&format!("{BASE}.{SIM_RANGES}"));
     let mapper = monitor(MAPPER);
+    let teleop = monitor(robot::TELEOP);
     let final_states: Vec<(String, State)> = handles
         .iter()
         .map(|h| (h.name().to_owned(), h.state()))
@@ -956,6 +1091,12 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         ),
         supervision: events.supervision,
         user_states: events.user_states,
+        drive_states: events.drive_states,
+        teleop: (
+            variable(teleop.as_ref(), "received") as u64,
+            variable(teleop.as_ref(), "refused") as u64,
+        ),
+        topics,
         supervisor: base.user_state.clone().unwrap_or_else(|| "-".to_owned()),
         mode: word(&base, "mode"),
         base_faults: variable(Some(&base), "faults") as u64,

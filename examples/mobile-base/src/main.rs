@@ -93,6 +93,49 @@ struct Args {
     /// (MCAP: Foxglove and the MCAP tools open it; see docs/tools.md).
     #[arg(long, value_name = "FILE")]
     record: Option<std::path::PathBuf>,
+    /// The format of --record: `coolbot` (MCAP, above) or `ros2` (a rosbag2 bag
+    /// directory of the ROS 2 topics /scan and /odom, with --ros2 /cmd_vel too:
+    /// `ros2 bag info FILE` reads it).
+    #[arg(long, value_name = "FORMAT", requires = "record", default_value = "coolbot", value_parser = parse_format)]
+    record_format: coolbot::record::RecordFormat,
+    /// Join ROS 2 over Zenoh as rmw_zenoh does: publish /scan
+    /// (sensor_msgs/msg/LaserScan) and /odom (nav_msgs/msg/Odometry), and drive the
+    /// base by /cmd_vel (geometry_msgs/msg/Twist) while Twists keep arriving.
+    #[cfg(feature = "ros2")]
+    #[arg(long)]
+    ros2: bool,
+    /// With --ros2: the Zenoh router ROS 2 runs on (`ros2 run rmw_zenoh_cpp rmw_zenohd`).
+    #[cfg(feature = "ros2")]
+    #[arg(
+        long,
+        requires = "ros2",
+        value_name = "ENDPOINT",
+        default_value = "tcp/127.0.0.1:7447"
+    )]
+    ros_router: String,
+    /// With --ros2: the ROS domain id (ROS_DOMAIN_ID).
+    #[cfg(feature = "ros2")]
+    #[arg(long, requires = "ros2", value_name = "N", default_value_t = 0)]
+    ros_domain: u32,
+    /// With --ros2: the node's namespace; the topics are in it (`/robot1`: /robot1/scan).
+    #[cfg(feature = "ros2")]
+    #[arg(long, requires = "ros2", value_name = "NS", default_value = "/")]
+    ros_namespace: String,
+    /// With --ros2: the node's name.
+    #[cfg(feature = "ros2")]
+    #[arg(
+        long,
+        requires = "ros2",
+        value_name = "NAME",
+        default_value = "mobile_base"
+    )]
+    ros_node: String,
+}
+
+/// Parses a recording format: `coolbot` or `ros2`.
+fn parse_format(text: &str) -> Result<coolbot::record::RecordFormat, String> {
+    text.parse()
+        .map_err(|_| format!("`{text}` is not a recording format: coolbot or ros2"))
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -213,6 +256,14 @@ fn main() -> ExitCode {
             Output::Lines => Display::Lines,
         },
         record: args.record,
+        record_format: args.record_format,
+        #[cfg(feature = "ros2")]
+        ros2: args.ros2.then(|| mobile_base::ros::RosSetup {
+            router: args.ros_router.clone(),
+            domain: args.ros_domain,
+            namespace: args.ros_namespace.clone(),
+            node: args.ros_node.clone(),
+        }),
         load: args.load,
         node: args.node.map(|name| {
             let named = NodeOptions::named(name);

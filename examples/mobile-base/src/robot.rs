@@ -18,13 +18,14 @@ use coolbot::{Command, Controllable, Handle, Report, State, System, Value};
 
 use crate::generated::types::BaseMode;
 use crate::generated::{
-    mapper, mobile_base, motion_controller, range_server, robot, sim_range_server, wanderer,
+    mapper, mobile_base, motion_controller, range_server, robot, sim_range_server, teleop, wanderer,
 };
 use crate::mapper::Mapper;
 use crate::motion_controller::MotionController;
 use crate::range_server::RangeServer;
 use crate::sensing::Overrides;
 use crate::sim_range_server::SimRangeServer;
+use crate::teleop::Teleop;
 use crate::wanderer::Wanderer;
 use crate::world::Platform;
 
@@ -38,6 +39,8 @@ pub const WANDERER: &str = "wanderer";
 pub const FALLBACK: &str = "fallback";
 /// Instance `mapper` of `Robot`.
 pub const MAPPER: &str = "mapper";
+/// Instance `teleop` of `Robot`.
+pub const TELEOP: &str = "teleop";
 /// Instance `motion` of `MobileBase`.
 pub const MOTION: &str = "motion";
 /// Instance `ranges` of `MobileBase`.
@@ -131,12 +134,24 @@ impl mobile_base::Supervisor for BaseSupervisor {
     }
 }
 
-/// `Robot` has no supervisor sections: its supervisor only runs the description's
-/// policies (a failing `base` or `wanderer` propagates).
+/// `Robot`'s supervisor sections: `teleoperated` lets the outside commands drive the
+/// base (sets `teleop`'s controllable `follow`), `autonomous` gives it back to the
+/// wanderer. The description's `when` rules move between them on `teleop`'s user
+/// state; each move is the supervisor's user state on the robot's monitoring port.
 #[derive(Debug)]
 pub struct RobotSupervisor;
 
-impl robot::Supervisor for RobotSupervisor {}
+impl robot::Supervisor for RobotSupervisor {
+    fn autonomous_entry(&mut self, cx: &mut robot::Cx<'_>) -> coolbot::SectionResult {
+        cx.instances.teleop().set_follow(false)?;
+        Ok(())
+    }
+
+    fn teleoperated_entry(&mut self, cx: &mut robot::Cx<'_>) -> coolbot::SectionResult {
+        cx.instances.teleop().set_follow(true)?;
+        Ok(())
+    }
+}
 
 /// The behaviours of `MobileBase`'s instances: the motion controller and both range
 /// servers on the shared platform.
@@ -189,6 +204,10 @@ impl robot::Parts for RobotParts {
 
     fn mapper(&mut self) -> impl mapper::Behavior {
         Mapper::new(Arc::clone(&self.base.platform))
+    }
+
+    fn teleop(&mut self) -> impl teleop::Behavior {
+        Teleop::default()
     }
 }
 
@@ -296,6 +315,12 @@ impl Robot {
         &self.system
     }
 
+    /// The system the robot runs on, to add components beside it (ROS 2 topics:
+    /// `crate::topics`, `crate::ros`).
+    pub fn system_mut(&mut self) -> &mut System {
+        &mut self.system
+    }
+
     /// Shuts the robot down: `Robot` goes `dead`, taking its instances (and theirs)
     /// with it.
     pub fn shutdown(self) -> Report {
@@ -313,7 +338,7 @@ mod tests {
         assert_eq!(names, [MOTION, RANGES, SIM_RANGES]);
         assert_eq!(mobile_base::SUBSTITUTES, &[(SIM_RANGES, RANGES)]);
         let names: Vec<&str> = robot::INSTANCES.iter().map(|(n, _)| *n).collect();
-        assert_eq!(names, [BASE, WANDERER, FALLBACK, MAPPER]);
+        assert_eq!(names, [BASE, WANDERER, FALLBACK, MAPPER, TELEOP]);
         assert_eq!(robot::SUBSTITUTES, &[(FALLBACK, WANDERER)]);
     }
 }

@@ -733,6 +733,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         "robot.base.sim_ranges",
         "robot.fallback",
         "robot.mapper",
+        "robot.teleop",
         "robot.wanderer",
     ];
     let deadline = Instant::now() + Duration::from_secs(60);

@@ -8,14 +8,14 @@
 //! not decode is counted at the subscription's `network` input, not delivered.
 //!
 //! The Python is `$COOLBOT_PYTHON`, else `target/pyenv/bin/python`; `.ci/run` makes
-//! it. Without it these tests fail, saying how to set it up.
+//! it. Without it these tests fail, saying how to set it up (`ros2_python`, shared
+//! with the example robot's test against the same node).
 
-use std::io::{BufRead, BufReader, Write};
-use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+mod ros2_python;
+
 use std::time::Duration;
 
-use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::ros::RosType;
 use coolbot::{ConnectError, System};
@@ -25,37 +25,9 @@ use coolbot_zenoh_tests::generated::types::ros::std_msgs::Header;
 use coolbot_zenoh_tests::generated::types::{LaserScan, Ranges, Speed, Twist};
 use coolbot_zenoh_tests::generated::{drive, lidar, ranger, wheels};
 use coolbot_zenoh_tests::support::{PATIENCE, free_port, wait_until};
+use ros2_python::{ROUTER, Script, interfaces};
 use serde_json::{Value, json};
 use zenoh::Wait;
-
-const SETUP: &str = "python3 -m venv target/pyenv && target/pyenv/bin/pip install \
-zenoh-ros2-sdk==0.1.8 eclipse-zenoh==1.10.2, then run the tests from the repository \
-root, or set COOLBOT_PYTHON to that python";
-
-fn python() -> PathBuf {
-    if let Some(python) = std::env::var_os("COOLBOT_PYTHON") {
-        return python.into();
-    }
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/pyenv/bin/python");
-    if venv.exists() {
-        return venv;
-    }
-    panic!("COOLBOT_PYTHON is not set and target/pyenv does not exist: {SETUP}");
-}
-
-/// A Zenoh router on `port` (eclipse-zenoh), until stdin closes.
-const ROUTER: &str = r#"
-import sys, zenoh
-port = sys.argv[1]
-config = zenoh.Config()
-config.insert_json5("mode", '"router"')
-config.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
-config.insert_json5("scouting/multicast/enabled", "false")
-session = zenoh.open(config)
-print('{"kind": "ready"}', flush=True)
-sys.stdin.read()
-session.close()
-"#;
 
 /// A ROS 2 node of zenoh-ros2-sdk on the router at `port`: a subscriber of `/scan`
 /// and a publisher of `/cmd_vel`, the message definitions read from `dir`; it prints
@@ -102,79 +74,6 @@ for line in sys.stdin:
             out(kind="info", topic=order["topic"], publishers=endpoints(info.publishers),
                 subscribers=endpoints(info.subscribers))
 "#;
-
-/// A Python process and the JSON lines it prints.
-struct Script {
-    child: Child,
-    stdin: Option<ChildStdin>,
-    lines: Receiver<Value>,
-}
-
-impl Script {
-    fn start(script: &str, args: &[String]) -> Script {
-        let mut child = Command::new(python())
-            .arg("-c")
-            .arg(script)
-            .args(args)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap_or_else(|error| panic!("cannot run python ({error}): {SETUP}"));
-        let stdout = child.stdout.take().expect("piped stdout");
-        let (sender, lines) = crossbeam_channel::unbounded();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Ok(value) = serde_json::from_str::<Value>(&line) {
-                    let _ = sender.send(value);
-                }
-            }
-        });
-        let stdin = child.stdin.take();
-        Script {
-            child,
-            stdin,
-            lines,
-        }
-    }
-
-    /// The next line of `kind`, skipping others, within the patience.
-    fn next(&self, kind: &str) -> Value {
-        let deadline = std::time::Instant::now() + PATIENCE;
-        loop {
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            let line = self
-                .lines
-                .recv_timeout(left)
-                .unwrap_or_else(|_| panic!("no `{kind}` line from the python process"));
-            if line["kind"] == kind {
-                return line;
-            }
-        }
-    }
-
-    /// The next line of `kind` within `wait`, if any.
-    fn poll(&self, kind: &str, wait: Duration) -> Option<Value> {
-        while let Ok(line) = self.lines.recv_timeout(wait) {
-            if line["kind"] == kind {
-                return Some(line);
-            }
-        }
-        None
-    }
-
-    fn order(&mut self, order: Value) {
-        let stdin = self.stdin.as_mut().expect("stdin open");
-        writeln!(stdin, "{order}").expect("the python process reads its orders");
-    }
-}
-
-impl Drop for Script {
-    fn drop(&mut self) {
-        drop(self.stdin.take());
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 /// A behaviour that hands a port to the test when its component starts.
 struct Hand<T>(Sender<T>);
@@ -275,11 +174,7 @@ fn robot() -> Robot {
 }
 
 fn sdk(port: u16) -> Script {
-    let interfaces = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../coolc/interfaces");
-    Script::start(
-        SDK,
-        &[port.to_string(), interfaces.to_string_lossy().into_owned()],
-    )
+    Script::start(SDK, &[port.to_string(), interfaces()])
 }
 
 #[test]

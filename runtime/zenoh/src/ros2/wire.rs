@@ -198,15 +198,11 @@ impl TopicInfo {
     }
 }
 
-/// An entity's GID: the first 16 bytes of the SHA-256 of its liveliness token.
-/// rmw_zenoh hashes the token too (XXH3-128); a GID is an opaque identifier that a
-/// receiver takes from the attachment as it comes, so only its uniqueness matters.
+/// An entity's GID, as rmw_zenoh makes it: the XXH3-128 of its liveliness token's
+/// key expression, its low 64 bits then its high 64 bits, each little endian (the
+/// 128-bit value in little-endian byte order).
 pub fn gid(token: &str) -> [u8; GID_LEN] {
-    use sha2::Digest;
-    let digest = sha2::Sha256::digest(token.as_bytes());
-    let mut gid = [0u8; GID_LEN];
-    gid.copy_from_slice(&digest[..GID_LEN]);
-    gid
+    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
 }
 
 /// What each message carries beside its payload.
@@ -509,16 +505,22 @@ mod tests {
     }
 
     #[test]
-    fn the_gid_is_the_head_of_the_tokens_sha_256() {
-        // SHA-256 of no bytes starts e3b0c442 98fc1c14 9afbf4c8 996fb924.
+    fn the_gid_is_the_xxh3_128_of_the_token() {
+        // Expected values: Python's `xxhash` 3.x,
+        // `xxhash.xxh3_128_intdigest(token).to_bytes(16, "little")`; the last token
+        // is past 128 bytes, XXH3's long-input path.
+        let hex =
+            |bytes: [u8; GID_LEN]| -> String { bytes.iter().map(|b| format!("{b:02x}")).collect() };
+        assert_eq!(hex(gid("")), "7f498d4624c30160d8984701d306aa99");
         assert_eq!(
-            gid(""),
-            0xe3b0_c442_98fc_1c14_9afb_f4c8_996f_b924_u128.to_be_bytes()
+            hex(gid("@ros2_lv/0/a/0/0/NN/%/%/x")),
+            "0dd45bdf862279489bb0d3e09d07474d"
         );
-        assert_ne!(
-            gid("@ros2_lv/0/a/0/0/NN/%/%/x"),
-            gid("@ros2_lv/0/a/0/0/NN/%/%/y")
-        );
+        let publisher = "@ros2_lv/0/0123456789abcdef0123456789abcdef/0/1/MP/%/%/talker/\
+            %chatter/std_msgs::msg::dds_::String_/\
+            RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18/::,7:,:,:,,";
+        assert!(publisher.len() > 128);
+        assert_eq!(hex(gid(publisher)), "0cf037d088b0aae8f10816401289d361");
     }
 
     #[test]
