@@ -284,11 +284,7 @@ const FRAGMENTS: &[(Place, &str)] = &[
         "let system = System::new();\nlet other_system = System::new();\n",
     ),
     (
-        place(
-            "docs/tools.md",
-            "### rosbag2 bags: `RecordFormat::Ros2`",
-            0,
-        ),
+        place("docs/tools.md", "### rosbag2 bags: `RecordFormat::Ros2`", 0),
         "let system = System::new();\n",
     ),
     (

@@ -532,6 +532,7 @@ fn a_blocking_queue_between_members_is_refused() {
             Hop {
                 name: "r1",
                 log: log.clone(),
+                pause: Duration::ZERO,
             },
         ))
         .expect("r1");
@@ -582,6 +583,7 @@ fn a_cycle_breaks_only_on_the_cycle() {
             Hop {
                 name: "r",
                 log: log.clone(),
+                pause: Duration::ZERO,
             },
         ))
         .expect("r");
