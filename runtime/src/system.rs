@@ -417,6 +417,19 @@ pub enum ConnectError {
         /// The group.
         group: String,
     },
+    /// A `block` fifo fed by another member of its execution group (a full queue
+    /// would stop the thread that empties it).
+    #[error(
+        "cannot connect `{from}` to `block` fifo `{to}`: both run in execution group `{group}`, and a full queue would stop the thread that empties it"
+    )]
+    BlockInGroup {
+        /// The output address.
+        from: String,
+        /// The input address.
+        to: String,
+        /// The group.
+        group: String,
+    },
     /// Already connected.
     #[error("`{from}` is already connected to `{to}`")]
     AlreadyConnected {
@@ -940,6 +953,27 @@ impl System {
                 order.push(left.remove(position));
                 continue;
             }
+            // Whether `to` is reached from `from` over the connections among the
+            // members left: a connection `u -> v` is on a cycle when `v` reaches `u`.
+            let reaches = |from: usize, to: usize, edges: &[&Link]| {
+                let mut seen = vec![from];
+                let mut next = vec![from];
+                while let Some(at) = next.pop() {
+                    if at == to {
+                        return true;
+                    }
+                    for link in edges {
+                        if link.from.0 == at
+                            && left.contains(&link.to.0)
+                            && !seen.contains(&link.to.0)
+                        {
+                            seen.push(link.to.0);
+                            next.push(link.to.0);
+                        }
+                    }
+                }
+                false
+            };
             let breaking = left.iter().find_map(|member| {
                 edges.iter().position(|link| {
                     link.to.0 == *member
@@ -948,6 +982,7 @@ impl System {
                             self.slots[link.to.0].inputs[link.to.1].kind,
                             InKind::Last | InKind::Poster
                         )
+                        && reaches(link.to.0, link.from.0, &edges)
                 })
             });
             match breaking {
@@ -1239,6 +1274,20 @@ impl System {
             && a == b
         {
             return Err(ConnectError::PullInGroup {
+                from,
+                to,
+                group: self.groups[a].name.clone(),
+            });
+        }
+        if let InputKind::Fifo {
+            policy: OverflowPolicy::Block,
+            ..
+        } = self.slots[in_slot].spec.inputs[in_port].kind
+            && out_slot != in_slot
+            && let (Some(a), Some(b)) = (self.slots[out_slot].group, self.slots[in_slot].group)
+            && a == b
+        {
+            return Err(ConnectError::BlockInGroup {
                 from,
                 to,
                 group: self.groups[a].name.clone(),

@@ -1,9 +1,11 @@
 //! Execution groups, `thread name { a, b, ... }`: what the runtime refuses to run on
-//! one thread (`System::group`, `GroupError`), found before it runs. Members are local
-//! instances of atomic components of this compound, each in one group; a group has a
-//! member and a name of its own; the members' periods are harmonic; no member pulls
-//! from another; and the connections among the members form no cycle unless a `last`
-//! or `poster` input is on it.
+//! one thread (`System::group`, `GroupError`), found before it runs, and two rules of
+//! the language beside: members are local instances (the runtime refuses a remote
+//! one's proxy, but runs the instance here in a program without a network) and their
+//! periods are harmonic (the runtime runs any period, each on its own grid). Members are instances of atomic components of this
+//! compound, each in one group; a group has a member and a name of its own; no member
+//! pulls from another or feeds another's `block` fifo; and the connections among the
+//! members form no cycle unless a `last` or `poster` input is on it.
 
 use std::collections::{BTreeMap, BTreeSet};
 

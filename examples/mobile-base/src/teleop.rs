@@ -64,17 +64,19 @@ impl Behavior for Teleop {
         self.take_remote(cx);
         let follow = cx.vars.follow;
         Self::pass_wanderer(cx, follow);
-        if follow && let Some(command) = &self.newest {
+        // A command as old as the timeout is not sent: `choose`, which runs after
+        // this section, goes quiet in this very period.
+        if follow
+            && !stale(self.since, cx)
+            && let Some(command) = &self.newest
+        {
             cx.outputs.command.send(command.clone());
         }
         Ok(())
     }
 
     fn commanded_choose(&mut self, cx: &mut Cx<'_>) -> Option<CommandedMay> {
-        let now = cx.rt.now().0;
-        let since = self.since.map_or(0, |since| since.0);
-        let timeout = u64::try_from(cx.config.timeout.as_nanos()).unwrap_or(u64::MAX);
-        if now.saturating_sub(since) < timeout {
+        if !stale(self.since, cx) {
             return None;
         }
         // Stale from here on: `quiet` starts with none.
@@ -82,4 +84,12 @@ impl Behavior for Teleop {
         self.since = None;
         Some(CommandedMay::Quiet)
     }
+}
+
+/// Whether the newest command, received at `since`, is as old as the timeout.
+fn stale(since: Option<coolbot::Time>, cx: &Cx<'_>) -> bool {
+    let now = cx.rt.now().0;
+    let since = since.map_or(0, |since| since.0);
+    let timeout = u64::try_from(cx.config.timeout.as_nanos()).unwrap_or(u64::MAX);
+    now.saturating_sub(since) >= timeout
 }

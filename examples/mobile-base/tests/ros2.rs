@@ -310,13 +310,22 @@ fn the_robot_talks_ros_2_with_the_python_node_both_ways() {
     assert!(count_after(&stdout, "/odom out") > 0, "{stdout}");
     let received = count_after(&stdout, "/cmd_vel in");
     assert!(received > 0, "{stdout}");
+    // (A pause of the machine longer than the teleop timeout between two Twists may
+    // hand the base back and forth once more: first and last are what is sure.)
+    let history = stdout
+        .lines()
+        .find_map(|line| line.strip_prefix("  robot supervisor     "))
+        .and_then(|rest| rest.split(';').next())
+        .unwrap_or_default();
     assert!(
-        stdout.contains("robot supervisor     autonomous -> teleoperated -> autonomous"),
+        history.starts_with("autonomous -> teleoperated") && history.ends_with("-> autonomous"),
         "{stdout}"
     );
-    // Every Twist delivered reached `teleop`: the finite ones taken, the NaN refused.
+    // The Twists delivered reached `teleop`: the finite ones taken, the NaN refused
+    // (its queue, 16 deep, drops the oldest, counted on its monitor, if the robot
+    // stalls longer than 16 Twists take to come).
     let taken = count_after(&stdout, "outside commands");
-    assert_eq!(taken + 1, received, "{stdout}");
+    assert!(taken > 0 && taken < received, "{stdout}");
     assert!(
         stdout.contains(&format!("outside commands {taken} taken, 1 refused")),
         "{stdout}"

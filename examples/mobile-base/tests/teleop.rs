@@ -66,9 +66,25 @@ fn outside_commands_drive_the_base_while_they_arrive_and_the_supervisor_lets_the
     // Outside commands stop: after 500 ms the switch is quiet again.
     h.advance(Duration::from_millis(400)).unwrap();
     assert_eq!(h.user_state(), Some(UserState::Commanded));
-    h.advance(Duration::from_millis(200)).unwrap();
-    assert_eq!(h.user_state(), Some(UserState::Quiet));
-    h.sent_command().unwrap();
+    let sent = h.sent_command().unwrap();
+    assert!(
+        !sent.is_empty() && sent.iter().all(|t| *t == twist(0.2, -0.4)),
+        "{sent:?}"
+    );
+    // Period by period until quiet: the command goes each period, and not in the
+    // period that goes quiet (it is as old as the timeout then).
+    let mut periods = 0;
+    loop {
+        h.advance(PERIOD).unwrap();
+        let sent = h.sent_command().unwrap();
+        if h.user_state() == Some(UserState::Quiet) {
+            assert!(sent.is_empty(), "a stale command was sent: {sent:?}");
+            break;
+        }
+        assert_eq!(sent, [twist(0.2, -0.4)]);
+        periods += 1;
+        assert!(periods < 10, "never quiet");
+    }
     // Quiet with `follow` still set (until the supervisor moves): nothing stale is sent.
     h.push_wander(twist(0.3, 0.0)).unwrap();
     h.advance(PERIOD).unwrap();

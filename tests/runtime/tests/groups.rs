@@ -541,6 +541,30 @@ fn a_blocking_queue_between_members_is_refused() {
         .expect("r2");
     system.connect("r1.out", "r2.feed").expect("r1 -> r2");
     system.group("g", &["r1", "r2"]).expect("group");
+    // Connected once grouped: refused at once.
+    system.disconnect("r1.out", "r2.feed").expect("r1 -/-> r2");
+    let refused = system.connect("r1.out", "r2.feed").unwrap_err();
+    assert_eq!(
+        refused.to_string(),
+        "cannot connect `r1.out` to `block` fifo `r2.feed`: both run in execution group `g`, and a full queue would stop the thread that empties it"
+    );
+    // Connected before grouping: refused when the group starts.
+    let (mut system, _clock) = self::system();
+    system
+        .add(relay::component(
+            "r1",
+            Hop {
+                name: "r1",
+                log: log.clone(),
+                pause: Duration::ZERO,
+            },
+        ))
+        .expect("r1");
+    system
+        .add(blocking_relay::component("r2", BlockingHop))
+        .expect("r2");
+    system.connect("r1.out", "r2.feed").expect("r1 -> r2");
+    system.group("g", &["r1", "r2"]).expect("group");
     match system.start() {
         Err(Error::Group { group, source }) => {
             assert_eq!(group, "g");
@@ -736,4 +760,37 @@ fn a_cycle_that_coolc_accepts_the_runtime_runs() {
     assert_eq!(log.take(), ["pong:3", "ping:4"]);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
+}
+
+/// Set aside only on the cycle: with `c -> r -> c` (into `c`'s `last` input) and `r`
+/// also feeding `d`'s `last` input, `d` runs after `r` though it is given first.
+#[test]
+fn a_last_input_off_the_cycle_keeps_its_order() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    system
+        .add(stage::component("d", step("d", &log)))
+        .expect("d");
+    system
+        .add(relay::component(
+            "r",
+            Hop {
+                name: "r",
+                log: log.clone(),
+                pause: Duration::ZERO,
+            },
+        ))
+        .expect("r");
+    system
+        .add(stage::component("c", step("c", &log)))
+        .expect("c");
+    system.connect("c.out", "r.feed").expect("c -> r");
+    system.connect("r.out", "c.feed").expect("r -> c");
+    system.connect("r.out", "d.feed").expect("r -> d");
+    system.group("g", &["d", "r", "c"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    // `d` reads what `r` sent in this very pass.
+    assert_eq!(log.take(), ["c:1", "r:2", "d:3"]);
 }
