@@ -5,7 +5,7 @@
 
 use coolbot::System;
 use coolbot_zenoh::ros2::{self, Direction, Participant, RosOptions};
-use zenoh::Wait;
+use coolbot_zenoh::zenoh::Wait;
 
 use crate::TopicCount;
 use crate::converters::Convert;
@@ -57,10 +57,7 @@ fn text(error: impl std::error::Error) -> String {
 /// must be on `system`) and delivers `/cmd_vel` to the robot's `teleop`. The topics
 /// are relative names: in the node's namespace.
 pub fn join(system: &mut System, setup: &RosSetup) -> Result<RosNode, String> {
-    let config = ros2::router_config(&setup.router).map_err(text)?;
-    let session = zenoh::open(config)
-        .wait()
-        .map_err(|error| format!("cannot open a Zenoh session to {}: {error}", setup.router))?;
+    let session = ros2::open_router(&setup.router).map_err(text)?;
     let options = RosOptions {
         domain: setup.domain,
         namespace: setup.namespace.clone(),

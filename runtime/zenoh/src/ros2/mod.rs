@@ -123,6 +123,15 @@ pub fn router_config(endpoint: &str) -> Result<zenoh::Config, RosError> {
     Ok(config)
 }
 
+/// A Zenoh session as rmw_zenoh's default one ([`router_config`]): a client of the
+/// router at `endpoint`, for [`Participant::open`].
+pub fn open_router(endpoint: &str) -> Result<zenoh::Session, RosError> {
+    let config = router_config(endpoint)?;
+    zenoh::open(config)
+        .wait()
+        .map_err(zenoh_error("open a session to the ROS 2 router"))
+}
+
 /// A participant's identity on the ROS 2 graph.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RosOptions {
