@@ -312,6 +312,7 @@ pub enum ReadError {
     },
 }
 
+mod channel;
 mod paths;
 mod player;
 mod reader;

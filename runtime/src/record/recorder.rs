@@ -9,15 +9,16 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use crossbeam_channel::Receiver;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::channel::{Channel, McapWriter, Start, nanos};
 use super::paths::find_output;
 use super::rosbag2::{OFFERED_QOS_PROFILES, RecordFormat, RosTopic, check_topic, topic_of};
-use super::tap::{Counters, Pending, PendingTap, PendingTicks, nanos};
+use super::tap::{Counters, Pending, PendingTap, PendingTicks};
 use super::writer::{Bag, Followed, Writer};
 use super::{
     DEFAULT_TAP_CAPACITY, EVENTS_SUFFIX, FORMAT_VERSION, HEADER_METADATA, Header, LOSS_EVENTS,
@@ -445,37 +446,6 @@ impl Recorder {
     }
 }
 
-/// The start of a recording on its clock.
-#[derive(Clone)]
-pub(super) struct Start {
-    pub(super) clock: Clock,
-    pub(super) at: Instant,
-}
-
-impl Start {
-    pub(super) fn on(clock: Clock) -> Start {
-        Start {
-            at: clock.now(),
-            clock,
-        }
-    }
-
-    /// Nanoseconds since the start.
-    pub(super) fn since(&self) -> u64 {
-        nanos(self.clock.now().saturating_duration_since(self.at))
-    }
-}
-
-/// A channel of the recording: its id, and how its messages are written.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Channel {
-    pub(super) id: u16,
-    /// JSON, wrapped in `{"value": ...}`.
-    pub(super) wrapped: bool,
-    /// CDR (a rosbag2 recording's channel).
-    pub(super) cdr: bool,
-}
-
 /// Add a JSON channel on `topic` with `schema` (wrapped when its values are not
 /// objects), named after the Rust type `type_name`.
 pub(super) fn add_channel(
@@ -541,9 +511,6 @@ fn add_ros_channel(
         cdr: true,
     })
 }
-
-/// The MCAP writer of a recording.
-pub(super) type McapWriter = mcap::Writer<BufWriter<File>>;
 
 /// A recording in progress. [`Recording::finish`] detaches the taps, writes what is
 /// still queued and the `end` record, and returns the counts; dropping it does the

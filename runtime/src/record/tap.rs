@@ -3,12 +3,11 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
 use serde::Serialize;
 
-use super::recorder::{Channel, Start};
+use super::channel::{Channel, Start};
 use super::rosbag2::RosTopic;
 use super::{NOT_SERIALIZABLE, PortSummary, QUEUE_FULL, message_bytes};
 use crate::port::{Deliver, ErasedInput, ErasedOutput, Packet, Parcel, TickIn};
@@ -274,10 +273,6 @@ impl<T: Packet> Deliver<T> for TapSink<T> {
         }
         self.bell.ring_strong();
     }
-}
-
-pub(super) fn nanos(duration: Duration) -> u64 {
-    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
 }
 
 /// The recorder thread's side of a tap.

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use crossbeam_channel::Sender;
 
-use super::recorder::{Channel, McapWriter, Start};
+use super::channel::{Channel, McapWriter, Start};
 use super::rosbag2::{RosTopic, TopicCount, bag_metadata, metadata_yaml};
 use super::tap::{Line, Tap};
 use super::{
