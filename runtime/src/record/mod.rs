@@ -1,6 +1,6 @@
 //! Recording and replay of port traffic, like a rosbag for CoolBOT systems.
 //!
-//! A [`Recorder`] taps data outputs of a running [`System`] by path (`"base.motion.pose"`:
+//! A [`Recorder`] taps data outputs of a running [`System`](crate::System) by path (`"base.motion.pose"`:
 //! a component of the system, instances of compounds through their names, then the
 //! port) and monitoring ports of chosen components, and writes what it sees to a file
 //! from its own thread. A tap is one more consumer of the output, never a connection:
@@ -8,7 +8,7 @@
 //! and a full queue never blocks the producer: the packet is counted as lost, and the
 //! loss is written into the recording, sent on [`Recording::losses`] and logged). A
 //! monitoring port is followed through the recorder's own counted
-//! [`Subscription`], bounded by
+//! [`Subscription`](crate::Subscription), bounded by
 //! [`OBSERVER_CAPACITY`](crate::OBSERVER_CAPACITY): events dropped for it when the
 //! recorder falls behind are lost the same way, counted, written and reported.
 //!

@@ -14,7 +14,7 @@ use super::{
 };
 
 /// Reads a recording: the [`Header`] at once, then the records as an iterator (packets,
-/// losses and events in file order, then the [`Summary`] as [`Record::End`] if the
+/// losses and events in file order, then the [`Summary`](super::Summary) as [`Record::End`] if the
 /// recording ended cleanly).
 ///
 /// It streams the file (one record in memory at a time). A recording whose process
