@@ -292,6 +292,10 @@ const FRAGMENTS: &[(Place, &str)] = &[
         "let mut system = System::new();\n",
     ),
     (
+        place("docs/ros2.md", "## Topics on the rmw_zenoh wire", 0),
+        "type Twist = crate::generated::types::RosTwist;\nlet mut system = System::new();\n",
+    ),
+    (
         place("docs/distribution.md", "### What is built: the agent", 0),
         "let config = coolbot_zenoh::zenoh::Config::default();\n\
          let robot_node = Node::open(\"robot\", coolbot_zenoh::zenoh::Config::default())?;\n",
@@ -321,7 +325,72 @@ fn compiled() -> BTreeSet<Place> {
     whole
         .into_iter()
         .chain(FRAGMENTS.iter().map(|(place, _)| *place))
+        .chain(ELSEWHERE.iter().map(|(place, _)| *place))
+        .chain(std::iter::once(ROS_LIBRARY))
         .collect()
+}
+
+/// `rust` blocks that a test of another crate builds and runs, with that test's file:
+/// the test reads its blocks from the docs by their heading
+/// (`the_docs_name_where_their_blocks_are_built_elsewhere`).
+const ELSEWHERE: &[(Place, &str)] = &[
+    (
+        place("docs/ros2.md", "## A description with ROS 2 types", 0),
+        "coolc/tests/ros_crate.rs",
+    ),
+    (
+        place("docs/ros2.md", "## A description with ROS 2 types", 1),
+        "coolc/tests/ros_crate.rs",
+    ),
+    (
+        place("docs/ros2.md", "## A description with ROS 2 types", 2),
+        "coolc/tests/ros_crate.rs",
+    ),
+    (
+        place("docs/ros2.md", "## A description with ROS 2 types", 3),
+        "coolc/tests/ros_crate.rs",
+    ),
+];
+
+/// The example of `coolc::ros`, which is the module's doc example (a doctest of
+/// `coolc`): `the_ros_library_block_is_the_doctest_of_coolc_ros` keeps them the same.
+const ROS_LIBRARY: Place = place("docs/ros2.md", "## The library: `coolc::ros`", 0);
+
+#[test]
+fn the_docs_name_where_their_blocks_are_built_elsewhere() {
+    for (place, file) in ELSEWHERE {
+        let test = doc(file);
+        let heading = place.heading.trim_start_matches('#').trim_start();
+        assert!(
+            test.contains(place.doc) && test.contains(&format!("\"{}\"", place.heading)),
+            "{file} does not read the blocks of {} under {heading:?}",
+            place.doc
+        );
+        assert!(!place.text().trim().is_empty());
+    }
+}
+
+#[test]
+fn the_ros_library_block_is_the_doctest_of_coolc_ros() {
+    let module = doc("coolc/src/ros/mod.rs");
+    let doctest: String = module
+        .lines()
+        .filter_map(|line| line.strip_prefix("//!"))
+        .map(|line| line.strip_prefix(' ').unwrap_or(line))
+        .skip_while(|line| !line.starts_with("```"))
+        .skip(1)
+        .take_while(|line| !line.starts_with("```"))
+        .map(|line| format!("{line}\n"))
+        .collect();
+    assert!(
+        !doctest.is_empty(),
+        "coolc/src/ros/mod.rs has a doc example"
+    );
+    assert_eq!(
+        ROS_LIBRARY.text(),
+        doctest,
+        "docs/ros2.md's `coolc::ros` example differs from the doctest of coolc/src/ros/mod.rs"
+    );
 }
 
 /// The Markdown files of the repository that show code.
@@ -333,6 +402,7 @@ const MARKDOWN: &[&str] = &[
     "docs/generated-code.md",
     "docs/language.md",
     "docs/performance.md",
+    "docs/ros2.md",
     "docs/runtime.md",
     "docs/tools.md",
     "docs/tutorial.md",
@@ -751,6 +821,7 @@ fn the_compound_example_builds_from_a_build_script() {
 const FRAGMENT_DESCRIPTION: &str = r#"
 import ros "sensor_msgs/msg/LaserScan";
 import ros "nav_msgs/msg/Odometry";
+import ros "geometry_msgs/msg/Twist" as RosTwist;
 
 packet Twist { linear: f64, angular: f64 }
 packet Pose2D { x: f64, y: f64, theta: f64 }
