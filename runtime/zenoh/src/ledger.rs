@@ -89,7 +89,8 @@ pub(crate) struct Had {
 type Ack = (String, Vec<Had>);
 
 /// The most outlet epochs an inlet remembers: a key has few producers, and each
-/// restart of one is a new epoch.
+/// restart of one is a new epoch. Beyond, the epoch with the fewest messages
+/// received is forgotten.
 const MAX_EPOCHS: usize = 64;
 
 /// How far from the newest number of its epoch a message's number, or an ended
@@ -189,7 +190,18 @@ impl InletLedger {
                 }
                 None => {
                     if epochs.len() >= MAX_EPOCHS {
-                        epochs.remove(0);
+                        // The epoch with the fewest messages goes (the oldest of
+                        // those): a peer that puts one message each of many epochs
+                        // it makes up replaces its own, never a stream with a
+                        // history, which would then start again from whatever came
+                        // next (a reset for the stream's next message, when that
+                        // was a forged number).
+                        let fewest = epochs
+                            .iter()
+                            .enumerate()
+                            .min_by_key(|(at, e)| (e.had.received, *at))
+                            .map_or(0, |(at, _)| at);
+                        epochs.remove(fewest);
                     }
                     epochs.push(Epoch {
                         had: Had {
@@ -933,6 +945,29 @@ mod tests {
         let (answer, _) = ledger.answer("p", &[]);
         let (_, had): Ack = codec::decode(&answer, MAX_ACK).unwrap();
         assert_eq!((had[0].newest, had[0].received, had[0].missing), (6, 6, 1));
+    }
+
+    #[test]
+    fn epochs_made_up_one_message_each_never_push_out_a_stream() {
+        let (ledger, network, resets) = inlet();
+        for seq in 1..=3 {
+            ledger.received(9, seq);
+        }
+        // A peer puts one message each of more epochs than the inlet remembers.
+        for epoch in 100..100 + 2 * MAX_EPOCHS as u64 {
+            ledger.received(epoch, u64::MAX - epoch);
+        }
+        // Then a number of the stream's epoch out of the window, and the stream
+        // goes on (5: 4 was lost on the way).
+        ledger.received(9, 1 << 40);
+        ledger.received(9, 5);
+        ledger.received(9, 6);
+        assert_eq!((network.overflows(), resets.overflows()), (1, 1));
+        let (answer, _) = ledger.answer("p", &[]);
+        let (_, had): Ack = codec::decode(&answer, MAX_ACK).unwrap();
+        assert_eq!(had.len(), MAX_EPOCHS);
+        let stream = had.iter().find(|h| h.epoch == 9).expect("the stream kept");
+        assert_eq!((stream.first, stream.newest, stream.missing), (1, 6, 1));
     }
 
     #[test]

@@ -1,0 +1,85 @@
+//! The hostile peer of `tests/hostile.rs`, for longer (`docs/performance.md`,
+//! "A hostile peer"): the same seeded fuzz of every key kind against the robot and
+//! its station, two processes on loopback, with many more actions; then the counts
+//! checked, and the figures printed: actions per kind, what each node counted, the
+//! memory of both processes, the robot's CPU and its missed deadlines.
+//!
+//! ```sh
+//! cargo bench -p mobile-base --features network --bench hostile             # 100,000 actions
+//! cargo bench -p mobile-base --features network --bench hostile -- --quick  # 10,000
+//! ```
+
+#[path = "../tests/fuzz/mod.rs"]
+mod fuzz;
+
+use std::time::{Duration, Instant};
+
+use fuzz::{Fuzzer, PATIENCE, Processes, cpu, rss_kib};
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let actions: u64 = if quick { 10_000 } else { 100_000 };
+    let mut processes = Processes::start("2h");
+    let mut fuzzer = Fuzzer::connect(&processes.endpoints, 0x00c0_01b0_7f);
+    fuzzer.oversized_left = 3;
+    let before = fuzz::wait_for("the counts", || fuzzer.counts());
+    let rss_before = (rss_kib(&processes.robot), rss_kib(&processes.station));
+    let cpu_before = cpu(&processes.robot);
+    let missed_before = fuzzer.missed_deadlines();
+    let started = Instant::now();
+    let mut peak = rss_before;
+    for n in 1..=actions {
+        fuzzer.step();
+        if n % 1_000 == 0 {
+            processes.drain();
+            assert!(processes.alive(), "{}", processes.seen.join("\n"));
+            peak.0 = peak.0.max(rss_kib(&processes.robot));
+            peak.1 = peak.1.max(rss_kib(&processes.station));
+        }
+    }
+    let took = started.elapsed();
+    let cpu_robot = cpu(&processes.robot) - cpu_before;
+    let expected = fuzzer.expected(&before);
+    let mut last = None;
+    let deadline = Instant::now() + PATIENCE;
+    while last != Some(expected) && Instant::now() < deadline {
+        last = fuzzer.counts();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let rss_after = (rss_kib(&processes.robot), rss_kib(&processes.station));
+    let missed = fuzzer.missed_deadlines() - missed_before;
+    let figures = &fuzzer.figures;
+    println!(
+        "{} actions in {took:.1?} (seed {:#x})",
+        figures.total(),
+        0x00c0_01b0_7fu64
+    );
+    for (kind, n) in &figures.sent {
+        println!("  {kind:<45} {n:>8}");
+    }
+    println!("counted before   {before:?}");
+    println!("counted after    {last:?}");
+    println!("expected         {expected:?}");
+    println!(
+        "refused {} commands and requests; accepted {}; unanswered {}",
+        figures.refused,
+        figures.accepted.len(),
+        figures.unanswered.len()
+    );
+    println!(
+        "RSS robot {} -> {} KiB (peak {}), station {} -> {} KiB (peak {})",
+        rss_before.0, rss_after.0, peak.0, rss_before.1, rss_after.1, peak.1
+    );
+    println!(
+        "robot CPU {cpu_robot:.1?} over {took:.1?} ({:.0} %); deadlines missed {missed}",
+        cpu_robot.as_secs_f64() / took.as_secs_f64() * 100.0
+    );
+    drop(fuzzer);
+    let (status, out) = processes.stop_robot();
+    let clean = out.contains("clean: every component dead, every thread joined");
+    println!("robot exit {status}, shutdown clean: {clean}");
+    let station = processes.stop_station();
+    println!("station exit {station}");
+    assert_eq!(last, Some(expected), "the counts");
+    assert!(status.success() && clean, "{out}");
+}
