@@ -357,6 +357,10 @@ pub(crate) fn process() -> String {
 /// comes back is not taken for a new inlet).
 const MAX_SETTLED: usize = 1024;
 
+/// The most inlets gone an outlet keeps without knowing that they ended (a link
+/// that may come back); beyond, the oldest is counted as ended.
+const MAX_GONE: usize = 256;
+
 /// One inlet as an outlet knows it: `<node>/<name>/<process>` from its token.
 #[derive(Debug, Clone)]
 struct Stream {
@@ -431,6 +435,16 @@ impl Book {
         let index = match streams.iter().position(|s| s.id == id) {
             Some(index) => index,
             None => {
+                // Inlets gone and not known to have ended stay until the outlet stops
+                // (their link may come back): beyond [`MAX_GONE`], the oldest is
+                // taken as ended and counted, so that tokens a peer declares and
+                // withdraws under made-up names do not pile up.
+                let mut gone = streams.iter_mut().filter(|s| !s.alive && !s.ended);
+                if let Some(oldest) = gone.next()
+                    && gone.count() + 1 >= MAX_GONE
+                {
+                    oldest.ended = true;
+                }
                 streams.push(Stream::new(id, self.sent())?);
                 // A newcomer must hear the report too: the rounds count again.
                 self.heard.store(0, Ordering::Release);
@@ -1081,6 +1095,29 @@ mod tests {
         book.settle(false);
         // aaa: 9..=12; bbb: 13..=26 (up to before ccc's first).
         assert_eq!(losses.overflows(), 4 + 14);
+    }
+
+    #[test]
+    fn tokens_made_up_and_withdrawn_do_not_pile_up() {
+        let (book, losses) = book(false);
+        book.sent.store(10, Ordering::Release);
+        // Each under a node name of its own (a node's next process would end the
+        // ones before).
+        for n in 0..4 * MAX_GONE {
+            let id = format!("fuzz{n}/in/p");
+            book.token(&id, SampleKind::Put);
+            book.token(&id, SampleKind::Delete);
+            book.settle(false);
+        }
+        assert!(
+            lock(&book.streams).len() <= MAX_GONE,
+            "{} inlets kept",
+            lock(&book.streams).len()
+        );
+        // Nothing was sent while they were there.
+        assert_eq!(losses.overflows(), 0);
+        book.settle(true);
+        assert!(lock(&book.streams).is_empty());
     }
 
     #[test]
