@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use fuzz::{Fuzzer, PATIENCE, Processes, cpu, rss_kib};
 
 /// Actions of the fuzz: packets, questions, tokens, commands and requests.
-const ACTIONS: u64 = 6_000;
+const ACTIONS: u64 = 3_000;
 
 const SEED: u64 = 0x00c0_01b0_7fu64;
 
