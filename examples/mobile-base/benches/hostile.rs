@@ -25,7 +25,8 @@ fn main() {
     let before = fuzz::wait_for("the counts", || fuzzer.counts());
     let rss_before = (rss_kib(&processes.robot), rss_kib(&processes.station));
     let cpu_before = cpu(&processes.robot);
-    let missed_before = fuzzer.missed_deadlines();
+    let missed_before = fuzzer.missed_by_component();
+    let load_before = loadavg();
     let started = Instant::now();
     let mut peak = rss_before;
     for n in 1..=actions {
@@ -47,7 +48,18 @@ fn main() {
         std::thread::sleep(Duration::from_millis(50));
     }
     let rss_after = (rss_kib(&processes.robot), rss_kib(&processes.station));
-    let missed = fuzzer.missed_deadlines() - missed_before;
+    let missed: Vec<(String, u64)> = fuzzer
+        .missed_by_component()
+        .into_iter()
+        .map(|(path, n)| {
+            let before = missed_before
+                .iter()
+                .find(|(p, _)| *p == path)
+                .map_or(0, |(_, n)| *n);
+            (path, n - before)
+        })
+        .filter(|(_, n)| *n > 0)
+        .collect();
     let figures = &fuzzer.figures;
     println!(
         "{} actions in {took:.1?} (seed {:#x})",
@@ -71,9 +83,10 @@ fn main() {
         rss_before.0, rss_after.0, peak.0, rss_before.1, rss_after.1, peak.1
     );
     println!(
-        "robot CPU {cpu_robot:.1?} over {took:.1?} ({:.0} %); deadlines missed {missed}",
+        "robot CPU {cpu_robot:.1?} over {took:.1?} ({:.0} %); deadlines missed {missed:?}",
         cpu_robot.as_secs_f64() / took.as_secs_f64() * 100.0
     );
+    println!("load average before {load_before}, after {}", loadavg());
     drop(fuzzer);
     let (status, out) = processes.stop_robot();
     let clean = out.contains("clean: every component dead, every thread joined");
@@ -82,4 +95,16 @@ fn main() {
     println!("station exit {station}");
     assert_eq!(last, Some(expected), "the counts");
     assert!(status.success() && clean, "{out}");
+}
+
+/// The first three fields of `/proc/loadavg`.
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|text| {
+            text.split_whitespace()
+                .take(3)
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .unwrap_or_default()
 }

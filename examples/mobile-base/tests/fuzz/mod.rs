@@ -1008,10 +1008,20 @@ impl Fuzzer {
 
     /// The deadlines the robot's components missed so far, summed.
     pub fn missed_deadlines(&self) -> u64 {
+        self.missed_by_component().iter().map(|(_, n)| n).sum()
+    }
+
+    /// The deadlines each of the robot's components missed so far.
+    pub fn missed_by_component(&self) -> Vec<(String, u64)> {
         self.ctl
             .components(Some("robot"))
-            .map(|listed| listed.iter().map(|c| c.monitor.missed_deadlines).sum())
-            .unwrap_or(0)
+            .map(|listed| {
+                listed
+                    .into_iter()
+                    .map(|c| (c.path, c.monitor.missed_deadlines))
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 
     /// What the counts must be, from `before`, after what was sent.
