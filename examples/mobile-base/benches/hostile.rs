@@ -20,7 +20,7 @@ fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let actions: u64 = if quick { 10_000 } else { 100_000 };
     let mut processes = Processes::start("2h");
-    let mut fuzzer = Fuzzer::connect(&processes.endpoints, 0x00c0_01b0_7f);
+    let mut fuzzer = Fuzzer::connect(&processes.endpoints, fuzz::SEED);
     fuzzer.oversized_left = 3;
     let before = fuzz::wait_for("the counts", || fuzzer.counts());
     let rss_before = (rss_kib(&processes.robot), rss_kib(&processes.station));
@@ -64,7 +64,7 @@ fn main() {
     println!(
         "{} actions in {took:.1?} (seed {:#x})",
         figures.total(),
-        0x00c0_01b0_7fu64
+        fuzz::SEED
     );
     for (kind, n) in &figures.sent {
         println!("  {kind:<45} {n:>8}");

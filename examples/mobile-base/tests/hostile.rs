@@ -15,12 +15,10 @@ use fuzz::{Fuzzer, PATIENCE, Processes, cpu, rss_kib};
 /// Actions of the fuzz: packets, questions, tokens, commands and requests.
 const ACTIONS: u64 = 3_000;
 
-const SEED: u64 = 0x00c0_01b0_7fu64;
-
 #[test]
 fn a_hostile_peer_crashes_nothing_and_every_bad_packet_is_counted() {
     let mut processes = Processes::start("10min");
-    let mut fuzzer = Fuzzer::connect(&processes.endpoints, SEED);
+    let mut fuzzer = Fuzzer::connect(&processes.endpoints, fuzz::SEED);
     let before = fuzz::wait_for("the counts", || fuzzer.counts());
     let rss_before = (rss_kib(&processes.robot), rss_kib(&processes.station));
     let cpu_before = cpu(&processes.robot);

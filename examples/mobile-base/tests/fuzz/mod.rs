@@ -51,6 +51,9 @@ use serde::de::DeserializeOwned;
 /// Generous: the machine is shared and may be loaded.
 pub const PATIENCE: Duration = Duration::from_secs(60);
 
+/// The seed of the test's and the bench's runs.
+pub const SEED: u64 = 0xc001_b07f;
+
 /// The ledger's window (`runtime/zenoh/src/ledger.rs`): a jump further is a reset.
 const WINDOW: u64 = 1 << 20;
 
@@ -674,7 +677,7 @@ impl Fuzzer {
                 // The live epoch, a number out of the window (each jump far from the
                 // one before): one reset.
                 self.jumps += 1;
-                let seq = if self.jumps % 2 == 0 {
+                let seq = if self.jumps.is_multiple_of(2) {
                     self.jumps << 40
                 } else {
                     u64::MAX - (self.jumps << 40)
