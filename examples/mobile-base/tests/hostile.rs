@@ -40,10 +40,12 @@ fn a_hostile_peer_crashes_nothing_and_every_bad_packet_is_counted() {
         std::thread::sleep(Duration::from_millis(50));
     }
     let figures = &fuzzer.figures;
+    processes.drain();
     assert_eq!(
         last,
         Some(expected),
-        "counted (from {before:?}) against what was sent: {figures:#?}"
+        "counted (from {before:?}) against what was sent: {figures:#?}\n{}",
+        processes.seen.join("\n")
     );
     // Every bad command and request answered, and refused.
     assert!(figures.accepted.is_empty(), "{:#?}", figures.accepted);
