@@ -18,11 +18,14 @@
 //! - **acknowledgments**: questions on `K/@ack/**` with random or truncated reports,
 //!   reports over the bound, epochs never seen, and the live epoch reported ended far
 //!   beyond the window (one reset each at the inlet that has the epoch).
+//! - **answers** to the outlets' acknowledgment questions from a made-up inlet:
+//!   random bytes, answers cut short, extreme numbers.
 //! - **queries** on `K` and `K/@pull` with random payloads, and on shape keys.
 //! - **liveliness**: tokens of inlets and outlets under made-up names on the
 //!   bridges' keys, and of made-up nodes; each withdrawn again.
 //! - **monitoring**: events that do not decode on the instance's monitoring key
-//!   (counted at the proxy's `@network`), and on the robot's own.
+//!   (counted at the proxy's `@network`), and on the robot's own; bytes on an echoed
+//!   output's key.
 //! - **control**: commands that do not decode, are over `COMMAND`, are of another
 //!   type, or are out of range, to every component of both nodes: each refused.
 //! - **agent**: requests that do not decode, are over `REQUEST`, are of another type
@@ -493,6 +496,9 @@ pub struct Fuzzer {
     pub figures: Figures,
     /// How many oversized (64 MiB) packets to send at most.
     pub oversized_left: u32,
+    /// Answers to the outlets' acknowledgment questions, under a made-up inlet
+    /// (kept for the run).
+    _answers: Vec<zenoh::query::Queryable<()>>,
 }
 
 impl Fuzzer {
@@ -550,7 +556,55 @@ impl Fuzzer {
                 && paths.iter().any(|p| p.starts_with("station/")))
             .then_some(paths)
         });
+        // Every outlet's questions are also answered by a made-up inlet: random
+        // bytes, answers cut short, and extreme numbers (what a forged
+        // acknowledgment can do is documented; that it breaks nothing is shown).
+        let answers = BRIDGES
+            .iter()
+            .enumerate()
+            .map(|(n, bridge)| {
+                let mut rng = Rng::new(seed ^ (n as u64 + 1));
+                let key = format!("{}/@ack/fuzz/answers", bridge.key(&placement));
+                let reply_key = key.clone();
+                let rng = std::sync::Mutex::new(rng.next());
+                session
+                    .declare_queryable(key)
+                    .callback(move |query| {
+                        let mut state = rng.lock().unwrap_or_else(|e| e.into_inner());
+                        let mut rng = Rng::new(*state);
+                        *state = rng.next();
+                        let epochs: Vec<(u64, u64, u64, u64, u64)> = (0..rng.index(70))
+                            .map(|_| {
+                                (
+                                    rng.extreme(),
+                                    rng.extreme(),
+                                    rng.extreme(),
+                                    rng.extreme(),
+                                    rng.extreme(),
+                                )
+                            })
+                            .collect();
+                        let process = "p".repeat(rng.index(300));
+                        let mut bytes = encode(&(process, epochs));
+                        match rng.below(3) {
+                            0 => {
+                                let cut = rng.index(bytes.len());
+                                bytes.truncate(cut);
+                            }
+                            1 => {
+                                let len = rng.index(400);
+                                bytes = rng.bytes(len);
+                            }
+                            _ => {}
+                        }
+                        let _ = query.reply(reply_key.clone(), bytes).wait();
+                    })
+                    .wait()
+                    .expect("a queryable")
+            })
+            .collect();
         Fuzzer {
+            _answers: answers,
             session,
             ctl,
             placement,
@@ -790,6 +844,14 @@ impl Fuzzer {
 
     /// Events that do not decode on monitoring keys.
     fn monitoring(&mut self) {
+        // An echoed output's key too (`coolctl echo` reads it; nothing in a node).
+        if self.rng.below(4) == 0 {
+            let len = self.rng.index(200);
+            let bytes = self.rng.bytes(len);
+            self.put("coolbot/robot/robot.base.motion/o/pose", bytes);
+            self.figures.count("echo: bytes on an echoed output's key");
+            return;
+        }
         let instance_key = format!("coolbot/station/{}/m", self.placement.instance);
         let key = if self.rng.below(2) == 0 {
             instance_key.clone()
