@@ -5,7 +5,7 @@
 //! memory of both processes, the robot's CPU and its missed deadlines.
 //!
 //! ```sh
-//! cargo bench -p mobile-base --features network --bench hostile             # 100,000 actions
+//! cargo bench -p mobile-base --features network --bench hostile             # 50,000 actions
 //! cargo bench -p mobile-base --features network --bench hostile -- --quick  # 10,000
 //! ```
 
@@ -18,7 +18,7 @@ use fuzz::{Fuzzer, PATIENCE, Processes, cpu, rss_kib};
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
-    let actions: u64 = if quick { 10_000 } else { 100_000 };
+    let actions: u64 = if quick { 10_000 } else { 50_000 };
     let mut processes = Processes::start("2h");
     let mut fuzzer = Fuzzer::connect(&processes.endpoints, fuzz::SEED);
     fuzzer.oversized_left = 3;
