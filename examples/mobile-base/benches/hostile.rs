@@ -19,7 +19,7 @@ use fuzz::{Fuzzer, PATIENCE, Processes, cpu, rss_kib};
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let actions: u64 = if quick { 10_000 } else { 50_000 };
-    let mut processes = Processes::start("2h");
+    let mut processes = Processes::start("120min");
     let mut fuzzer = Fuzzer::connect(&processes.endpoints, fuzz::SEED);
     fuzzer.oversized_left = 3;
     let before = fuzz::wait_for("the counts", || fuzzer.counts());
