@@ -34,8 +34,14 @@ fn main() {
         if n % 1_000 == 0 {
             processes.drain();
             assert!(processes.alive(), "{}", processes.seen.join("\n"));
-            peak.0 = peak.0.max(rss_kib(&processes.robot));
-            peak.1 = peak.1.max(rss_kib(&processes.station));
+            let rss = (rss_kib(&processes.robot), rss_kib(&processes.station));
+            peak = (peak.0.max(rss.0), peak.1.max(rss.1));
+            if n % 10_000 == 0 {
+                println!(
+                    "after {n:>6} actions: RSS robot {} KiB, station {} KiB",
+                    rss.0, rss.1
+                );
+            }
         }
     }
     let took = started.elapsed();
