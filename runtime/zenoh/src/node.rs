@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use coolbot::{Chain, Command, Handle, MonitorEvent, System};
+use coolbot::{Chain, Command, Controllable, Handle, MonitorEvent, System};
 use crossbeam_channel::{RecvTimeoutError, Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
@@ -82,8 +82,9 @@ impl Drop for Exposure {
     }
 }
 
-/// A command received on a control key, with the handle it is for.
-type ControlRequest = (zenoh::query::Query, Handle);
+/// A command received on a control key, with the handle it is for and, for an
+/// instance inside a compound, the compound's path.
+type ControlRequest = (zenoh::query::Query, Handle, Option<Arc<str>>);
 
 /// A process on the network: a name, a Zenoh session, a liveliness token
 /// `coolbot/<name>`, and the components it exposes. Dropping it stops exposing them
@@ -138,7 +139,9 @@ impl Node {
             .spawn(move || {
                 loop {
                     match requests.recv_timeout(STOP_POLL) {
-                        Ok((query, handle)) => serve_command(&query, &handle),
+                        Ok((query, handle, compound)) => {
+                            serve_command(&query, &handle, compound.as_deref());
+                        }
                         Err(RecvTimeoutError::Timeout) if !stop.load(Ordering::Acquire) => {}
                         Err(_) => break,
                     }
@@ -199,7 +202,15 @@ impl Node {
         }
         let mut queryables = Vec::new();
         let mut streams = Vec::new();
+        let root = handle.name().to_owned();
         for (path, handle) in components {
+            // An instance's compound: its path but the last instance name.
+            let compound: Option<Arc<str>> = (path != root)
+                .then(|| {
+                    path.rsplit_once('.')
+                        .map(|(compound, _)| Arc::from(compound))
+                })
+                .flatten();
             let monitor_key = keys::monitor(&self.name, &path);
             let publisher = self
                 .session
@@ -268,8 +279,10 @@ impl Node {
                 self.session
                     .declare_queryable(keys::control(&self.name, &path))
                     .callback(move |query| {
-                        if let Err(error) = control.try_send((query, handle.clone())) {
-                            let (query, _) = error.into_inner();
+                        if let Err(error) =
+                            control.try_send((query, handle.clone(), compound.clone()))
+                        {
+                            let (query, _, _) = error.into_inner();
                             let _ = reply_control(
                                 &query,
                                 &ControlReply::Rejected {
@@ -442,10 +455,21 @@ fn command_of(query: &zenoh::query::Query) -> Result<Command, String> {
 }
 
 /// Apply one command from the network, through the component's own control port
-/// (whose ranges, `coolbot::ranges`, hold for it as for every command).
-fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
+/// (whose ranges, `coolbot::ranges`, hold for it as for every command). An instance
+/// inside a compound (`compound`, its path) is not sent to `dead` from the network:
+/// its life is its compound's, which would not see that death as a fault.
+fn serve_command(query: &zenoh::query::Query, handle: &Handle, compound: Option<&str>) {
     let reply = match command_of(query) {
         Err(reason) => ControlReply::Rejected { reason },
+        Ok(Command::SetState(Controllable::Dead)) if let Some(compound) = compound => {
+            ControlReply::Rejected {
+                reason: format!(
+                    "`{}` is an instance of `{compound}`: it goes to dead with its compound, \
+                     not alone (send dead to `{compound}`)",
+                    handle.name()
+                ),
+            }
+        }
         Ok(command) => match handle.command(command) {
             Ok(()) => ControlReply::Accepted,
             Err(rejected) => ControlReply::Rejected {
