@@ -165,6 +165,7 @@ pub fn analyze_with<P: AsRef<Path>>(
         &loaded.imports,
         &mut loaded.diagnostics,
     );
+    symbols.note_unloaded(&loaded.files, &interfaces);
     symbols.add_siblings(&loaded.sources, list, loader);
     let resolved = check::check(&loaded.files, symbols, &mut loaded.diagnostics);
     Analysis {
