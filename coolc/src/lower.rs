@@ -11,11 +11,10 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::ast::{self, Prim};
-use crate::check::model::Ty;
 use crate::checked::Checked;
 use crate::checked::model::{
-    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, Value, VarKind,
+    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, Prim, TableValue, Ty, TypeDef,
+    Value, VarKind,
 };
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
@@ -100,11 +99,6 @@ pub fn package_name(name: &str) -> String {
     } else {
         trimmed.to_owned()
     }
-}
-
-/// Nanoseconds of a duration or frequency in a `when` condition.
-fn duration_ns(expr: &ast::Expr) -> Option<u64> {
-    Duration::of(expr).map(|duration| duration.nanos)
 }
 
 fn duration_rust(ns: u64) -> String {

@@ -299,7 +299,7 @@ fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Mem
         };
         let flaw = if port.pull {
             Some(&PULL_IN_GROUP)
-        } else if port.block {
+        } else if port.block() {
             Some(&BLOCK_IN_GROUP)
         } else {
             None
@@ -323,7 +323,7 @@ fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Mem
             checker.push(diagnostic);
             continue;
         }
-        if !matches!(port.kind, PortKind::Last | PortKind::Poster) {
+        if !matches!(port.kind(), PortKind::Last | PortKind::Poster) {
             edges.push((from, to, connect.span));
         }
     }

@@ -8,12 +8,9 @@ use super::{
     GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_rust, prim_of, prim_rust,
     rust_ty, serde_adapter, unique,
 };
-use crate::ast::Prim;
-use crate::check::model::Ty;
-use crate::checked::model::Range;
 use crate::checked::model::{
-    Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, TimingEntry,
-    VarKind, Variable,
+    Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, Prim, Range,
+    TimingEntry, Ty, VarKind, Variable,
 };
 use crate::ident;
 use crate::ir;

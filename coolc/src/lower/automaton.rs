@@ -5,8 +5,7 @@
 
 use super::{duration_rust, option_duration};
 use crate::ast;
-use crate::check::Typed;
-use crate::checked::model::{Automaton, Ref, State, StateMember};
+use crate::checked::model::{Automaton, Ref, State, StateMember, Typed};
 use crate::ident;
 use crate::ir;
 

@@ -16,9 +16,8 @@ use std::collections::BTreeSet;
 
 use super::automaton::{self, Lowered, SectionOwner};
 use super::{GEN_TYPES, Lowerer, adaptation, duration_rust, rust_ty, unique_among};
-use crate::check::model::{Tuning, Ty};
 use crate::checked::model::{
-    Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, VarKind,
+    Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, Tuning, Ty, VarKind,
 };
 use crate::ident;
 use crate::ir;
