@@ -31,7 +31,7 @@
 
 pub mod ast;
 pub mod builder;
-pub mod check;
+pub(crate) mod check;
 pub mod checked;
 pub mod cli;
 pub mod diagnostics;

@@ -490,8 +490,6 @@ impl fmt::Display for Range {
 /// What a component offers.
 #[derive(Clone, Debug, Default)]
 pub struct Interface {
-    /// The file of the component.
-    pub file: FileId,
     /// Input ports by name.
     pub inputs: BTreeMap<String, Port>,
     /// Output ports by name.
@@ -724,16 +722,13 @@ impl<'a> Model<'a> {
         if let Some(found) = self.interfaces.borrow().get(name) {
             return found.clone();
         }
-        let Some((file, component)) = self.component(name) else {
+        let Some((_, component)) = self.component(name) else {
             return Rc::new(Interface::default());
         };
         if !self.in_progress.borrow_mut().insert(name.to_owned()) {
-            return Rc::new(Interface {
-                file,
-                ..Interface::default()
-            });
+            return Rc::new(Interface::default());
         }
-        let interface = Rc::new(self.compute(file, component));
+        let interface = Rc::new(self.compute(component));
         self.in_progress.borrow_mut().remove(name);
         self.interfaces
             .borrow_mut()
@@ -752,11 +747,8 @@ impl<'a> Model<'a> {
         })
     }
 
-    fn compute(&self, file: FileId, component: &ast::Component) -> Interface {
-        let mut interface = Interface {
-            file,
-            ..Interface::default()
-        };
+    fn compute(&self, component: &ast::Component) -> Interface {
+        let mut interface = Interface::default();
         for member in &component.members {
             match member {
                 ast::Member::Input(input) => {
