@@ -657,6 +657,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         supervision_steps: 0,
         adaptation: crate::adapt::AdaptStatus::default(),
         response: crate::monitor::ResponseTimes::default(),
+        group: None,
     };
     let named_inputs = spec
         .inputs

@@ -314,6 +314,49 @@ fn an_overrun_is_charged_to_the_member_that_overran() {
 }
 
 #[test]
+fn each_members_monitor_shows_its_group_and_the_groups_cycles() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let a = Step {
+        overrun_at: Some((2, Arc::clone(&clock))),
+        ..step("a", &log)
+    };
+    system.add(stage::component("a", a)).expect("a");
+    system
+        .add(stage::component("b", step("b", &log)))
+        .expect("b");
+    system
+        .add(stage::component("alone", step("alone", &log)))
+        .expect("alone");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.group("control", &["b", "a"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    let group = |name: &str| system.handle(name).expect(name).snapshot().group;
+    let first = group("a").expect("a is a member");
+    assert_eq!(first.name, "control");
+    assert_eq!(first.members, ["a", "b"]);
+    assert_eq!(first.period, Some(PERIOD));
+    assert!(first.cycles > 0);
+    assert_eq!(first.overruns, 0);
+    assert_eq!(group("b"), Some(first.clone()));
+    assert_eq!(group("alone"), None);
+    // `a`'s section lets the clock run on 20 ms: the cycle it is in takes 20 ms,
+    // longer than the group's 10 ms period.
+    tick(&clock);
+    let second = group("b").expect("b is a member");
+    assert_eq!(second.overruns, 1);
+    assert_eq!(second.worst_cycle, Duration::from_millis(20));
+    assert!(second.cycles > first.cycles);
+    tick(&clock);
+    let third = group("b").expect("b is a member");
+    assert_eq!(third.overruns, 1);
+    assert_eq!(third.last_cycle, Duration::ZERO);
+}
+
+#[test]
 fn a_group_is_refused_with_what_is_wrong() {
     let log = Log::default();
     let (mut system, _clock) = system();
