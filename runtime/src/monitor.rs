@@ -179,6 +179,25 @@ pub struct GroupStatus {
     pub overruns: u64,
 }
 
+thread_local! {
+    /// On an execution group's thread: the address of the monitor of the member whose
+    /// turn runs now (0 between turns, and on a component's own thread).
+    static TURN: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// The member whose monitor is `shared` takes its turn on this thread (`None`: the
+/// turns are over).
+pub(crate) fn set_turn(shared: Option<&Arc<Shared>>) {
+    TURN.set(shared.map_or(0, |shared| Arc::as_ptr(shared) as usize));
+}
+
+/// Whether `shared` is the monitor of the group member whose turn runs on this
+/// thread now (`None`: no member's turn runs on it).
+pub(crate) fn turn_is(shared: &Arc<Shared>) -> Option<bool> {
+    let turn = TURN.get();
+    (turn != 0).then(|| turn == Arc::as_ptr(shared) as usize)
+}
+
 /// An execution group's cycle figures, written by its thread only (plain loads and
 /// stores, no read-modify-write) and read by every member's snapshot.
 #[derive(Debug)]

@@ -211,6 +211,8 @@ impl Group {
             let Some(runner) = slot.as_mut() else {
                 continue;
             };
+            // The panic hook (`crate::process`) names the member whose turn it is.
+            crate::monitor::set_turn(Some(&runner.shared));
             let mut turns = 0;
             loop {
                 if runner.untimed && runner.time.is_real() {
@@ -240,6 +242,7 @@ impl Group {
                 }
             }
         }
+        crate::monitor::set_turn(None);
         if let (Some(start), Some(end)) = (start, reading) {
             self.cycles.cycle(end.saturating_duration_since(start));
         }
