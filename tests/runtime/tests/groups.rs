@@ -81,6 +81,15 @@ impl relay::Behavior for Hop {
     }
 }
 
+/// An aperiodic stage named `name` that takes no time, logging into `log`.
+fn hop(name: &'static str, log: &Log) -> Hop {
+    Hop {
+        name,
+        log: log.clone(),
+        pause: Duration::ZERO,
+    }
+}
+
 fn step(name: &'static str, log: &Log) -> Step {
     Step {
         name,
@@ -144,13 +153,12 @@ fn aperiodic_members_run_when_their_inputs_arrive_within_the_pass() {
     system
         .add(stage::component("a", step("a", &log)))
         .expect("a");
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
-    system.add(relay::component("r2", hop("r2"))).expect("r2");
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system
+        .add(relay::component("r2", hop("r2", &log)))
+        .expect("r2");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
     system.connect("a.out", "r1.feed").expect("a -> r1");
     system.connect("r1.out", "r2.feed").expect("r1 -> r2");
     system.group("chain", &["r2", "r1", "a"]).expect("group");
@@ -171,23 +179,15 @@ fn settling_after_a_command_waits_for_the_rest_of_the_groups_pass() {
         .add(stage::component("a", step("a", &log)))
         .expect("a");
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     // Slow: it logs well after `r1`'s command is answered.
     system
         .add(relay::component(
             "r2",
             Hop {
-                name: "r2",
-                log: log.clone(),
                 pause: Duration::from_millis(50),
+                ..hop("r2", &log)
             },
         ))
         .expect("r2");
@@ -412,14 +412,13 @@ fn a_group_is_refused_with_what_is_wrong() {
 #[test]
 fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
     let log = Log::default();
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
     let (mut system, _clock) = system();
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
-    system.add(relay::component("r2", hop("r2"))).expect("r2");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
+    system
+        .add(relay::component("r2", hop("r2", &log)))
+        .expect("r2");
     system.connect("r1.out", "r2.feed").expect("r1 -> r2");
     system.connect("r2.out", "r1.feed").expect("r2 -> r1");
     system.group("loop", &["r1", "r2"]).expect("group");
@@ -433,7 +432,9 @@ fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
     // Through a `last` input the cycle is broken there: `a` runs first (it is fed
     // only by a `last` input), then `r1`.
     let (mut system, clock) = self::system();
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
     system
         .add(stage::component("a", step("a", &log)))
         .expect("a");
@@ -541,14 +542,9 @@ fn a_compound_refuses_a_group_that_cannot_run() {
     use coolbot::{CompoundBuilder, CompoundError};
     use coolbot_runtime_tests::supervision::Coordinating;
     let log = Log::default();
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
     let built = CompoundBuilder::new("base", Coordinating)
-        .instance(relay::component("r1", hop("r1")))
-        .instance(relay::component("r2", hop("r2")))
+        .instance(relay::component("r1", hop("r1", &log)))
+        .instance(relay::component("r2", hop("r2", &log)))
         .connect("r1.out", "r2.feed")
         .connect("r2.out", "r1.feed")
         .thread("loop", &["r1", "r2"])
@@ -570,14 +566,7 @@ fn a_blocking_queue_between_members_is_refused() {
     let log = Log::default();
     let (mut system, _clock) = system();
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     system
         .add(blocking_relay::component("r2", BlockingHop))
@@ -594,14 +583,7 @@ fn a_blocking_queue_between_members_is_refused() {
     // Connected before grouping: refused when the group starts.
     let (mut system, _clock) = self::system();
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     system
         .add(blocking_relay::component("r2", BlockingHop))
@@ -645,14 +627,7 @@ fn a_cycle_breaks_only_on_the_cycle() {
             .expect(name);
     }
     system
-        .add(relay::component(
-            "r",
-            Hop {
-                name: "r",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r", hop("r", &log)))
         .expect("r");
     system
         .add(stage::component("c", step("c", &log)))
@@ -815,14 +790,7 @@ fn a_last_input_off_the_cycle_keeps_its_order() {
         .add(stage::component("d", step("d", &log)))
         .expect("d");
     system
-        .add(relay::component(
-            "r",
-            Hop {
-                name: "r",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r", hop("r", &log)))
         .expect("r");
     system
         .add(stage::component("c", step("c", &log)))
