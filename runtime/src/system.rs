@@ -1504,7 +1504,7 @@ impl System {
                     reply,
                     claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),
                 });
-                slot.handle.bell.ring_strong();
+                slot.handle.bell.ring_command();
             }
         }
         let deadline = crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT);
