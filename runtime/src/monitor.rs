@@ -195,7 +195,7 @@ pub(crate) fn set_turn(shared: Option<&Arc<Shared>>) {
 /// thread now (`None`: no member's turn runs on it).
 pub(crate) fn turn_is(shared: &Arc<Shared>) -> Option<bool> {
     let turn = TURN.get();
-    (turn != 0).then(|| turn == Arc::as_ptr(shared) as usize)
+    (turn != 0).then_some(turn == Arc::as_ptr(shared) as usize)
 }
 
 /// An execution group's cycle figures, written by its thread only (plain loads and
