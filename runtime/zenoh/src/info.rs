@@ -4,6 +4,8 @@
 //! ([`crate::Node::echo`]). `coolctl get` reads it to show types beside values;
 //! `coolctl echo` to tell a port that is not echoed from one that does not exist.
 
+use std::collections::BTreeMap;
+
 use coolbot::{Spec, VarKind};
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +24,11 @@ pub struct ComponentInfo {
     pub qualities: Vec<String>,
     /// The outputs the node echoes on the network (`coolctl echo`).
     pub echoed: Vec<String>,
+    /// The JSON Schema of each echoed output's packets, by port (the schema a
+    /// recording writes for the port, [`coolbot::schema::of`]; `coolctl foxglove`
+    /// advertises it). Empty from a node that sends none.
+    #[serde(default)]
+    pub schemas: BTreeMap<String, serde_json::Value>,
 }
 
 /// One variable.
@@ -47,8 +54,8 @@ pub struct PortInfo {
 }
 
 impl ComponentInfo {
-    /// The shape of `spec`, with the outputs `echoed`.
-    pub fn of(spec: &Spec, echoed: Vec<String>) -> ComponentInfo {
+    /// The shape of `spec`, with the outputs echoed and their packets' schemas.
+    pub fn of(spec: &Spec, echoed: BTreeMap<String, serde_json::Value>) -> ComponentInfo {
         ComponentInfo {
             type_name: spec.type_name.to_owned(),
             variables: spec
@@ -88,7 +95,8 @@ impl ComponentInfo {
                 .iter()
                 .map(|q| (*q).to_owned())
                 .collect(),
-            echoed,
+            echoed: echoed.keys().cloned().collect(),
+            schemas: echoed,
         }
     }
 }
