@@ -425,3 +425,300 @@ fn supervision_and_adaptation_steps_reach_the_log() {
         "{degraded}"
     );
 }
+
+/// The next `parameterValues` answer to request `id`, as `name -> value`.
+fn parameter_values(client: &Client, id: &str) -> std::collections::BTreeMap<String, Value> {
+    let values = client.next_where("parameterValues", |v| v["id"] == id);
+    values["parameters"]
+        .as_array()
+        .expect("parameters")
+        .iter()
+        .map(|p| {
+            (
+                p["name"].as_str().expect("a name").to_owned(),
+                p["value"].clone(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn parameters_show_and_set_controllable_variables_with_the_components_checks() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let (_server, url) = serve(&fox, &[]);
+    let mut client = Client::start(&modules, &url);
+    let info = client.next_where("serverInfo", |_| true);
+    let capabilities = info["capabilities"].to_string();
+    assert!(
+        capabilities.contains("\"parameters\"") && capabilities.contains("\"services\""),
+        "{info}"
+    );
+    client.advertised(&["/fox/tuner/monitor", "/fox/robot.base.motion/monitor"]);
+
+    client.order(json!({ "do": "getParameters", "names": [], "id": "all" }));
+    let all = parameter_values(&client, "all");
+    assert_eq!(all["fox/tuner/limit"], 3, "{all:?}");
+    assert_eq!(all["fox/tuner/period"], 0.005, "{all:?}");
+    assert_eq!(all["fox/tuner/quality"], 0, "{all:?}");
+    assert_eq!(all["fox/robot.base.motion/max_speed"], 0.0, "{all:?}");
+    // Observables are not parameters.
+    assert!(!all.contains_key("fox/tuner/gain"), "{all:?}");
+
+    // Set: the component's variable changes.
+    client.order(json!({ "do": "setParameters", "id": "limit",
+        "parameters": [{ "name": "fox/tuner/limit", "value": 7 }] }));
+    assert_eq!(parameter_values(&client, "limit")["fox/tuner/limit"], 7);
+    let limit = || {
+        tuner
+            .snapshot()
+            .variables
+            .iter()
+            .find(|(name, _)| name == "limit")
+            .map(|(_, value)| value.to_json())
+    };
+    assert_eq!(limit(), Some(json!(7)));
+
+    // The component's own checks refuse a value its type cannot hold; the client is
+    // told, and the value stays.
+    client.order(json!({ "do": "setParameters", "id": "negative",
+        "parameters": [{ "name": "fox/tuner/limit", "value": -1 }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        status["level"] == 2 && message.contains("fox/tuner/limit") && message.contains("rejected"),
+        "{status}"
+    );
+    assert_eq!(parameter_values(&client, "negative")["fox/tuner/limit"], 7);
+    assert_eq!(limit(), Some(json!(7)));
+
+    // The control port's ranges refuse a zero period, as for `coolctl set`.
+    client.order(json!({ "do": "setParameters", "id": "period",
+        "parameters": [{ "name": "fox/tuner/period", "value": 0.0, "type": "float64" }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        message.contains("fox/tuner/period") && message.contains("rejected"),
+        "{status}"
+    );
+    assert_eq!(
+        parameter_values(&client, "period")["fox/tuner/period"],
+        0.005
+    );
+    assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(5)));
+
+    // A float period in range is taken.
+    client.order(json!({ "do": "setParameters", "id": "period2",
+        "parameters": [{ "name": "fox/tuner/period", "value": 0.01, "type": "float64" }] }));
+    assert_eq!(
+        parameter_values(&client, "period2")["fox/tuner/period"],
+        0.01
+    );
+    assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(10)));
+
+    // A name that is no parameter.
+    client.order(json!({ "do": "setParameters", "id": "nope",
+        "parameters": [{ "name": "fox/tuner/gain", "value": 2.0 }] }));
+    let status = client.next_where("status", |_| true);
+    assert!(
+        status["message"]
+            .as_str()
+            .unwrap()
+            .contains("`fox/tuner/gain` is not a parameter"),
+        "{status}"
+    );
+}
+
+#[test]
+fn services_suspend_run_and_restart_a_component() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let (_server, url) = serve(&fox, &[]);
+    let mut client = Client::start(&modules, &url);
+    let services = client.next_where("services", |_| true);
+    for name in ["suspend", "run", "restart"] {
+        assert!(
+            services["services"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|s| s["name"] == name),
+            "{services}"
+        );
+    }
+    let call = |client: &mut Client, service: &str, component: &str, id: u32| {
+        client.order(json!({ "do": "call", "service": service, "callId": id,
+            "request": { "component": component } }));
+    };
+    call(&mut client, "suspend", "fox/tuner", 1);
+    let answer = client.next_where("serviceCallResponse", |a| a["callId"] == 1);
+    assert_eq!(answer["data"], "{\"accepted\":true}", "{answer}");
+    assert_eq!(tuner.snapshot().state, coolbot::State::Suspended);
+
+    call(&mut client, "run", "fox/tuner", 2);
+    client.next_where("serviceCallResponse", |a| a["callId"] == 2);
+    assert_eq!(tuner.snapshot().state, coolbot::State::Running);
+
+    // Restart: ready, then running (the component's `start` hook is not run again,
+    // its user automaton restarts from its initial state).
+    let events = tuner.subscribe();
+    call(&mut client, "restart", "fox/tuner", 3);
+    client.next_where("serviceCallResponse", |a| a["callId"] == 3);
+    let states: Vec<coolbot::State> = events
+        .try_iter()
+        .filter_map(|event| match event {
+            coolbot::MonitorEvent::State { to, .. } => Some(to),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        states,
+        [coolbot::State::Ready, coolbot::State::Running],
+        "restarted"
+    );
+
+    // A component that does not exist: a failure that says so.
+    call(&mut client, "suspend", "fox/nobody", 4);
+    let failure = client.next_where("serviceCallFailure", |f| f["callId"] == 4);
+    assert!(
+        failure["message"].as_str().unwrap().contains("nobody"),
+        "{failure}"
+    );
+}
+
+/// A certificate authority for the access-rules test: its certificate in
+/// `dir/<name>-ca.pem`, and what signs.
+struct Authority {
+    ca: PathBuf,
+    issuer: rcgen::Issuer<'static, rcgen::KeyPair>,
+}
+
+impl Authority {
+    fn new(dir: &Path, name: &str) -> Authority {
+        use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
+        let key = KeyPair::generate().expect("a CA key");
+        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.self_signed(&key).expect("a self-signed CA");
+        let ca = dir.join(format!("{name}-ca.pem"));
+        std::fs::write(&ca, certificate.pem()).expect("write the CA");
+        Authority {
+            ca,
+            issuer: Issuer::new(params, key),
+        }
+    }
+
+    /// The security file of `name`'s certificate, with `rules` after its `[tls]`.
+    fn node(&self, dir: &Path, name: &str, rules: &str) -> PathBuf {
+        use rcgen::{CertificateParams, DnType, KeyPair};
+        let key = KeyPair::generate().expect("a node key");
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                .expect("node params");
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
+        std::fs::write(dir.join(format!("{name}.pem")), certificate.pem()).expect("write");
+        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).expect("write");
+        let path = dir.join(format!("{name}.toml"));
+        let ca = self.ca.file_name().expect("a file").to_string_lossy();
+        std::fs::write(
+            &path,
+            format!(
+                "[tls]\nca = \"{ca}\"\ncertificate = \"{name}.pem\"\nkey = \"{name}.key\"\n\n{rules}"
+            ),
+        )
+        .expect("write the security file");
+        path
+    }
+}
+
+/// The operator `ops` may command the robot's base and what is inside it, nothing
+/// else.
+const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base.*\"]\n";
+
+#[test]
+fn the_nodes_access_rules_hold_for_parameters_and_services() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let robot_file = authority.node(dir, "robot", RULES);
+    let ops_file = authority.node(dir, "ops", RULES);
+    let endpoint = format!("quic/127.0.0.1:{}", support::free_port());
+    let security = coolbot_zenoh::Security::load(&robot_file).expect("the security file");
+    let config =
+        coolbot_zenoh::secure_config(std::slice::from_ref(&endpoint), &[], false, &security)
+            .expect("a TLS configuration");
+    let node = Node::open("robot", config)
+        .expect("the robot's node opens")
+        .with_state_directory(None);
+    let system = support::robot(&node);
+
+    let server = Process::start(Command::new(COOLCTL).args([
+        "--config",
+        ops_file.to_str().expect("a UTF-8 path"),
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--timeout",
+        "2s",
+        "foxglove",
+        "--bind",
+        "127.0.0.1:0",
+        "--refresh",
+        "100ms",
+    ]));
+    let line = server.line();
+    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let mut client = Client::start(&modules, &url);
+    client.advertised(&["/robot/logger/monitor", "/robot/robot.base.motion/monitor"]);
+
+    // Allowed: the base's motion.
+    client.order(json!({ "do": "setParameters", "id": "speed",
+        "parameters": [{ "name": "robot/robot.base.motion/max_speed", "value": 0.5,
+                         "type": "float64" }] }));
+    assert_eq!(
+        parameter_values(&client, "speed")["robot/robot.base.motion/max_speed"],
+        0.5
+    );
+    let motion = system.handle_at("robot.base.motion").expect("motion");
+    assert!(
+        motion
+            .snapshot()
+            .variables
+            .iter()
+            .any(|(name, value)| name == "max_speed" && value.to_json() == json!(0.5))
+    );
+
+    // Outside the rules: the logger, neither by a parameter nor by a service.
+    client.order(json!({ "do": "setParameters", "id": "priority",
+        "parameters": [{ "name": "robot/logger/priority", "value": 3 }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        message.contains("do not let `ops` command `robot/logger`"),
+        "{status}"
+    );
+    let logger = system.handle("logger").expect("the logger");
+    assert_ne!(logger.snapshot().priority, 3);
+    client.order(json!({ "do": "call", "service": "suspend", "callId": 1,
+        "request": { "component": "robot/logger" } }));
+    let failure = client.next_where("serviceCallFailure", |f| f["callId"] == 1);
+    assert!(
+        failure["message"]
+            .as_str()
+            .unwrap()
+            .contains("do not let `ops` command `robot/logger`"),
+        "{failure}"
+    );
+    assert_eq!(logger.snapshot().state, coolbot::State::Running);
+}

@@ -11,12 +11,17 @@
 //! - `/coolbot/log`: every supervision and adaptation step of every component, as
 //!   `foxglove.Log`.
 //!
+//! Parameters `<node>/<path>/<variable>`: every component's controllable variables
+//! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
+//! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
+//!
 //! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
 //! declared and no snapshot asked for it until a client subscribes, and both end when
 //! the last one unsubscribes.
 
 mod channels;
 mod matching;
+pub mod params;
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
@@ -26,7 +31,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
-use foxglove::websocket::{ChannelView, Client, ServerListener};
+use foxglove::websocket::{
+    AnyClient, ChannelView, Client, GetParametersResponder, Parameter, ParameterHandler,
+    ServerListener, SetParametersResponder,
+};
 use foxglove::{ChannelId, Context, RawChannel, WebSocketServer, WebSocketServerHandle};
 use zenoh::Wait;
 
@@ -98,6 +106,17 @@ impl Options {
 enum Order {
     Subscribe(ChannelId),
     Unsubscribe(ChannelId),
+    Get {
+        names: Vec<String>,
+        responder: GetParametersResponder,
+    },
+    Set {
+        client: AnyClient,
+        parameters: Vec<Parameter>,
+        responder: SetParametersResponder,
+    },
+    WatchParameters(Vec<String>),
+    UnwatchParameters(Vec<String>),
     Stop,
 }
 
@@ -115,12 +134,52 @@ impl ServerListener for Listener {
     fn on_unsubscribe(&self, _client: Client, channel: ChannelView<'_>) {
         let _ = self.orders.send(Order::Unsubscribe(channel.id()));
     }
+
+    fn on_parameters_subscribe(&self, names: Vec<String>) {
+        let _ = self.orders.send(Order::WatchParameters(names));
+    }
+
+    fn on_parameters_unsubscribe(&self, names: Vec<String>) {
+        let _ = self.orders.send(Order::UnwatchParameters(names));
+    }
+}
+
+/// Takes the clients' parameter requests to the server's thread (they ask the nodes,
+/// which waits).
+struct Parameters {
+    orders: Sender<Order>,
+}
+
+impl ParameterHandler for Parameters {
+    fn get(
+        &self,
+        _client: AnyClient,
+        names: Vec<String>,
+        _request_id: Option<String>,
+        responder: GetParametersResponder,
+    ) {
+        let _ = self.orders.send(Order::Get { names, responder });
+    }
+
+    fn set(
+        &self,
+        client: AnyClient,
+        parameters: Vec<Parameter>,
+        _request_id: Option<String>,
+        responder: SetParametersResponder,
+    ) {
+        let _ = self.orders.send(Order::Set {
+            client,
+            parameters,
+            responder,
+        });
+    }
 }
 
 /// A running `coolctl foxglove`: the server, and the thread that follows the nodes.
 /// Dropping it stops both.
 pub struct Server {
-    handle: Option<WebSocketServerHandle>,
+    handle: Option<Arc<WebSocketServerHandle>>,
     orders: Sender<Order>,
     thread: Option<JoinHandle<()>>,
     stop: Arc<std::sync::atomic::AtomicBool>,
@@ -157,11 +216,16 @@ impl Server {
             .listener(Arc::new(Listener {
                 orders: orders.clone(),
             }))
+            .parameter_handler(Arc::new(Parameters {
+                orders: orders.clone(),
+            }))
+            .services(params::services(&ctl))
             .start_blocking()
             .map_err(|source| FoxgloveError::Server {
                 action: "start",
                 source,
             })?;
+        let handle = Arc::new(handle);
         let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let counts = Arc::new(Counts::default());
         let mut follower = Follower {
@@ -173,6 +237,8 @@ impl Server {
             channels: HashMap::new(),
             known: BTreeMap::new(),
             counts: Arc::clone(&counts),
+            server: Arc::clone(&handle),
+            watched: BTreeMap::new(),
         };
         follower.discover();
         let stopped = Arc::clone(&stop);
@@ -191,7 +257,7 @@ impl Server {
 
     /// The port the server listens on.
     pub fn port(&self) -> u16 {
-        self.handle.as_ref().map_or(0, WebSocketServerHandle::port)
+        self.handle.as_ref().map_or(0, |handle| handle.port())
     }
 
     /// What the server dropped so far.
@@ -208,7 +274,7 @@ impl Drop for Server {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
-        if let Some(handle) = self.handle.take() {
+        if let Some(handle) = self.handle.take().and_then(Arc::into_inner) {
             drop(handle.stop());
         }
     }
@@ -244,9 +310,13 @@ struct Follower {
     patterns: Vec<String>,
     refresh: Duration,
     channels: HashMap<ChannelId, Served>,
-    /// The components already served, `node/path`.
-    known: BTreeMap<String, ()>,
+    /// The components already served, `node/path`, with their controllable
+    /// variables.
+    known: BTreeMap<String, Vec<String>>,
     counts: Arc<Counts>,
+    server: Arc<WebSocketServerHandle>,
+    /// The parameters clients subscribed to, with the value last sent.
+    watched: BTreeMap<String, Option<Parameter>>,
 }
 
 impl Follower {
@@ -256,9 +326,34 @@ impl Follower {
             match orders.recv_timeout(next.saturating_duration_since(Instant::now())) {
                 Ok(Order::Subscribe(id)) => self.subscribe(id),
                 Ok(Order::Unsubscribe(id)) => self.unsubscribe(id),
+                Ok(Order::Get { names, responder }) => {
+                    let parameters = self.parameters(&names);
+                    responder.respond(parameters);
+                }
+                Ok(Order::Set {
+                    client,
+                    parameters,
+                    responder,
+                }) => {
+                    let current = self.set(&client, parameters);
+                    responder.respond(current);
+                    self.publish_watched();
+                }
+                Ok(Order::WatchParameters(names)) => {
+                    for name in names {
+                        self.watched.insert(name, None);
+                    }
+                    self.publish_watched();
+                }
+                Ok(Order::UnwatchParameters(names)) => {
+                    for name in names {
+                        self.watched.remove(&name);
+                    }
+                }
                 Err(RecvTimeoutError::Timeout) => {
                     self.discover();
                     self.poll_monitors();
+                    self.publish_watched();
                     next = Instant::now() + self.refresh;
                 }
                 Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => break,
@@ -323,7 +418,8 @@ impl Follower {
                     continue;
                 }
             };
-            self.known.insert(address.clone(), ());
+            self.known
+                .insert(address.clone(), params::controllables(&info));
             let monitor = channels::monitor(&self.context, &address);
             self.add(
                 monitor,
@@ -453,6 +549,92 @@ impl Follower {
         if served.subscribers == 0 {
             served.subscriber = None;
             served.cpu = None;
+        }
+    }
+
+    /// The parameters named (all when none is), with their values now.
+    fn parameters(&self, names: &[String]) -> Vec<Parameter> {
+        let snapshots: BTreeMap<String, coolbot::Monitor> = match self.ctl.components(None) {
+            Ok(listed) => listed
+                .into_iter()
+                .map(|listed| (format!("{}/{}", listed.node, listed.path), listed.monitor))
+                .collect(),
+            Err(error) => {
+                coolbot::limited!("foxglove:parameters", |held| tracing::warn!(
+                    "cannot read the parameters: {}{held}",
+                    coolbot::Chain(&error)
+                ));
+                return Vec::new();
+            }
+        };
+        let mut parameters = Vec::new();
+        for (address, variables) in &self.known {
+            let Some(monitor) = snapshots.get(address) else {
+                continue;
+            };
+            for variable in variables {
+                let name = params::parameter_name(address, variable);
+                if names.is_empty() || names.contains(&name) {
+                    parameters.push(params::parameter(name, variable, monitor));
+                }
+            }
+        }
+        parameters
+    }
+
+    /// Set each parameter through its component's control key; tell `client` each
+    /// refusal; the values of the parameters named, now.
+    fn set(&self, client: &AnyClient, parameters: Vec<Parameter>) -> Vec<Parameter> {
+        let mut names = Vec::new();
+        for parameter in parameters {
+            let outcome = (|| {
+                let unknown = || params::SetError::Unknown(parameter.name.clone());
+                let (address, variable) =
+                    params::split_name(&parameter.name).ok_or_else(unknown)?;
+                if !self
+                    .known
+                    .get(address)
+                    .is_some_and(|variables| variables.iter().any(|v| v == variable))
+                {
+                    return Err(unknown());
+                }
+                let value = parameter
+                    .value
+                    .as_ref()
+                    .ok_or_else(|| params::SetError::Value {
+                        name: parameter.name.clone(),
+                        why: "no value given".to_owned(),
+                    })?;
+                let command =
+                    params::command(&parameter.name, variable, value, parameter.r#type.as_ref())?;
+                params::apply(&self.ctl, &parameter.name, address, &command)
+            })();
+            if let Err(error) = outcome {
+                client.send_error(coolbot::Chain(&error).to_string());
+            }
+            names.push(parameter.name);
+        }
+        self.parameters(&names)
+    }
+
+    /// Send the watched parameters whose values changed.
+    fn publish_watched(&mut self) {
+        if self.watched.is_empty() {
+            return;
+        }
+        let names: Vec<String> = self.watched.keys().cloned().collect();
+        let mut changed = Vec::new();
+        for parameter in self.parameters(&names) {
+            let last = self.watched.get_mut(&parameter.name);
+            if let Some(last) = last
+                && last.as_ref() != Some(&parameter)
+            {
+                *last = Some(parameter.clone());
+                changed.push(parameter);
+            }
+        }
+        if !changed.is_empty() {
+            self.server.publish_parameter_values(changed);
         }
     }
 
