@@ -21,8 +21,8 @@ use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::DataOut;
 use coolbot::{SectionResult, System};
 use coolbot_zenoh::Node;
-use coolbot_zenoh_tests::generated::types::Reading;
-use coolbot_zenoh_tests::generated::{source, tuner};
+use coolbot_zenoh_tests::generated::types::{Reading, RoverPose, RoverScan};
+use coolbot_zenoh_tests::generated::{rover, source, tuner};
 use coolbot_zenoh_tests::support::{self, PATIENCE, node, wait_until};
 use serde_json::{Value, json};
 use zenoh::Wait;
@@ -721,4 +721,126 @@ fn the_nodes_access_rules_hold_for_parameters_and_services() {
         "{failure}"
     );
     assert_eq!(logger.snapshot().state, coolbot::State::Running);
+}
+
+/// `Rover`'s behaviour: it hands its outputs to the test when it starts.
+struct HandRover(Sender<(DataOut<RoverPose>, DataOut<RoverScan>)>);
+
+impl rover::Behavior for HandRover {
+    fn start(&mut self, cx: &mut rover::Cx<'_>) -> SectionResult {
+        let _ = self
+            .0
+            .send((cx.outputs.pose.clone(), cx.outputs.scan.clone()));
+        Ok(())
+    }
+}
+
+/// The mapping of the rover's outputs, in a file of `dir`.
+const MAP: &str = r#"
+[[pose]]
+port = "rover/rover.pose"
+x = "x"
+y = "y"
+yaw = "theta"
+frame = "odom"
+child = "base_link"
+
+[[laser_scan]]
+port = "rover/rover.scan"
+ranges = "us"
+start_angle = 0.0
+step = 1.5707963267948966
+range_offset = 0.5
+frame = "base_link"
+"#;
+
+#[test]
+fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let (node, endpoint) = node("rover", &[]);
+    let (hand, outputs) = crossbeam_channel::bounded(1);
+    let mut system = System::new();
+    system
+        .add(rover::component("rover", HandRover(hand)))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    node.echo::<RoverPose>(&system, "rover.pose").unwrap();
+    node.echo::<RoverScan>(&system, "rover.scan").unwrap();
+    let (pose, scan) = outputs.recv_timeout(PATIENCE).expect("the rover started");
+    let sending = Arc::new(AtomicBool::new(true));
+    let running = Arc::clone(&sending);
+    let sender = std::thread::spawn(move || {
+        while running.load(Ordering::Acquire) {
+            pose.send(RoverPose {
+                x: 1.0,
+                y: 2.0,
+                theta: std::f64::consts::FRAC_PI_2,
+            });
+            scan.send(RoverScan {
+                us: [1.0, 2.0, 3.0, 4.0],
+            });
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    });
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let map = dir.path().join("map.toml");
+    std::fs::write(&map, MAP).expect("write the mapping");
+
+    let server = Process::start(Command::new(COOLCTL).args([
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "foxglove",
+        "--bind",
+        "127.0.0.1:0",
+        "--map",
+        map.to_str().expect("a UTF-8 path"),
+    ]));
+    let line = server.line();
+    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let mut client = Client::start(&modules, &url);
+    let channels = client.advertised(&[
+        "/rover/rover.pose/pose",
+        "/rover/rover.pose/tf",
+        "/rover/rover.scan/laser_scan",
+    ]);
+    assert_eq!(
+        channels["/rover/rover.pose/pose"]["schemaName"],
+        "foxglove.PoseInFrame"
+    );
+    assert_eq!(
+        channels["/rover/rover.pose/tf"]["schemaName"],
+        "foxglove.FrameTransform"
+    );
+    assert_eq!(
+        channels["/rover/rover.scan/laser_scan"]["schemaName"],
+        "foxglove.LaserScan"
+    );
+    // No --port: the packets themselves are not served.
+    assert!(!channels.contains_key("/rover/rover.pose"), "{channels:?}");
+
+    for topic in [
+        "/rover/rover.pose/pose",
+        "/rover/rover.pose/tf",
+        "/rover/rover.scan/laser_scan",
+    ] {
+        client.order(json!({ "do": "subscribe", "topic": topic, "count": 1 }));
+    }
+    let pose = client.messages("/rover/rover.pose/pose", 1).remove(0);
+    assert_eq!(pose["frame_id"], "odom");
+    // (JavaScript prints whole numbers without a point.)
+    assert_eq!(pose["pose"]["position"], json!({ "x": 1, "y": 2, "z": 0 }));
+    let z = pose["pose"]["orientation"]["z"].as_f64().unwrap();
+    assert!((z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-9, "{pose}");
+    let tf = client.messages("/rover/rover.pose/tf", 1).remove(0);
+    assert_eq!(tf["parent_frame_id"], "odom");
+    assert_eq!(tf["child_frame_id"], "base_link");
+    let laser = client.messages("/rover/rover.scan/laser_scan", 1).remove(0);
+    assert_eq!(laser["ranges"], json!([1.5, 2.5, 3.5, 4.5]));
+    assert_eq!(laser["end_angle"], 3.0 * std::f64::consts::FRAC_PI_2);
+    sending.store(false, Ordering::Release);
+    sender.join().expect("the sender ends");
 }

@@ -125,6 +125,9 @@ pub struct Monitoring {
     pub overflows: u64,
     /// Monitoring events dropped for slow observers in all.
     pub dropped_events: u64,
+    /// Its variables (observable and controllable) by name, as JSON (a plot reads
+    /// `variables.speed.linear`).
+    pub variables: serde_json::Map<String, Value>,
 }
 
 fn seconds(duration: Option<Duration>) -> Option<f64> {
@@ -151,6 +154,11 @@ impl Monitoring {
             overruns: monitor.overruns,
             overflows: monitor.overflows,
             dropped_events: monitor.dropped_events,
+            variables: monitor
+                .variables
+                .iter()
+                .map(|(name, value)| (name.clone(), value.to_json()))
+                .collect(),
         }
     }
 
@@ -176,11 +184,12 @@ impl Monitoring {
                 "overruns": count,
                 "overflows": count,
                 "dropped_events": count,
+                "variables": { "type": "object" },
             },
             "required": [
                 "timestamp", "state", "state_code", "user_state", "period", "nominal_period",
                 "quality", "level", "cpu_share", "missed_deadlines", "overruns", "overflows",
-                "dropped_events",
+                "dropped_events", "variables",
             ],
             "additionalProperties": false,
         })

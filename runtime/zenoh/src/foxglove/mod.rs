@@ -9,7 +9,10 @@
 //! - `/<node>/<path>/monitor`: a component's monitoring, one [`channels::Monitoring`]
 //!   per refresh;
 //! - `/coolbot/log`: every supervision and adaptation step of every component, as
-//!   `foxglove.Log`.
+//!   `foxglove.Log`;
+//! - `/<node>/<path>.<port>/pose`, `.../tf`, `.../laser_scan`: an echoed output a
+//!   mapping file names, as `foxglove.PoseInFrame`, `foxglove.FrameTransform` and
+//!   `foxglove.LaserScan` ([`wellknown`]).
 //!
 //! Parameters `<node>/<path>/<variable>`: every component's controllable variables
 //! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
@@ -22,6 +25,7 @@
 mod channels;
 mod matching;
 pub mod params;
+pub mod wellknown;
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
@@ -68,6 +72,9 @@ pub enum FoxgloveError {
         #[source]
         source: foxglove::FoxgloveError,
     },
+    /// The mapping file cannot be used.
+    #[error("the mapping file")]
+    Map(#[from] wellknown::MapError),
     /// The server's thread could not be started.
     #[error("cannot spawn the foxglove thread")]
     Spawn(#[source] std::io::Error),
@@ -81,6 +88,8 @@ pub struct Options {
     /// Patterns of the echoed outputs to serve, `NODE/PATH.PORT` with `*` for any
     /// characters (e.g. `robot/robot.base.*`); none: none.
     pub ports: Vec<String>,
+    /// The outputs to show as Foxglove's well-known messages.
+    pub mappings: wellknown::Mappings,
     /// How often the nodes are asked for new components, and a watched component's
     /// monitoring is read.
     pub refresh: Duration,
@@ -233,6 +242,7 @@ impl Server {
             session,
             context,
             patterns: options.ports,
+            mappings: options.mappings,
             refresh: options.refresh,
             channels: HashMap::new(),
             known: BTreeMap::new(),
@@ -282,9 +292,11 @@ impl Drop for Server {
 
 /// What a channel stands for.
 enum Source {
-    /// An echoed output, on its echo key; `wrap`: the packets are not JSON objects
-    /// and go as `{"value": ...}`.
-    Port { key: String, wrap: bool },
+    /// An echoed output, on its echo key, each packet made a message by `transform`.
+    Port {
+        key: String,
+        transform: wellknown::Transform,
+    },
     /// A component's monitoring, read each refresh.
     Monitor { address: String },
     /// Every supervision and adaptation step.
@@ -308,6 +320,7 @@ struct Follower {
     session: zenoh::Session,
     context: Arc<Context>,
     patterns: Vec<String>,
+    mappings: wellknown::Mappings,
     refresh: Duration,
     channels: HashMap<ChannelId, Served>,
     /// The components already served, `node/path`, with their controllable
@@ -429,34 +442,70 @@ impl Follower {
             );
             for port in &info.echoed {
                 let name = format!("{address}.{port}");
-                if !self.patterns.iter().any(|pattern| matches(pattern, &name)) {
-                    continue;
+                let key = keys::echo(&listed.node, &listed.path, port);
+                let mut transforms = Vec::new();
+                if self.patterns.iter().any(|pattern| matches(pattern, &name)) {
+                    let schema = coolbot::schema::Schema::given(
+                        info.schemas
+                            .get(port)
+                            .cloned()
+                            .unwrap_or_else(|| serde_json::json!({})),
+                    );
+                    transforms.push(wellknown::Transform::Raw {
+                        wrap: !schema.is_object(),
+                    });
                 }
-                let packet = info
-                    .outputs
+                for map in self
+                    .mappings
+                    .pose
                     .iter()
-                    .find(|output| &output.name == port)
-                    .map_or("packet", |output| output.packet.as_str());
-                let schema = coolbot::schema::Schema::given(
-                    info.schemas
-                        .get(port)
-                        .cloned()
-                        .unwrap_or_else(|| serde_json::json!({})),
-                );
-                let wrap = !schema.is_object();
-                let body = if wrap {
-                    schema.wrapped()
-                } else {
-                    schema.schema
-                };
-                let channel = channels::port(&self.context, &name, packet, &body);
-                self.add(
-                    channel,
-                    Source::Port {
-                        key: keys::echo(&listed.node, &listed.path, port),
-                        wrap,
-                    },
-                );
+                    .filter(|m| matches(&m.port, &name))
+                {
+                    transforms.push(wellknown::Transform::Pose(map.clone()));
+                    transforms.push(wellknown::Transform::Tf(map.clone()));
+                }
+                for map in self
+                    .mappings
+                    .laser_scan
+                    .iter()
+                    .filter(|m| matches(&m.port, &name))
+                {
+                    transforms.push(wellknown::Transform::Scan(map.clone()));
+                }
+                for transform in transforms {
+                    let topic = format!("{name}{}", transform.suffix());
+                    let channel = match transform.schema() {
+                        Some((schema_name, schema)) => {
+                            channels::port(&self.context, &topic, schema_name, &schema)
+                        }
+                        None => {
+                            let packet = info
+                                .outputs
+                                .iter()
+                                .find(|output| &output.name == port)
+                                .map_or("packet", |output| output.packet.as_str());
+                            let schema = coolbot::schema::Schema::given(
+                                info.schemas
+                                    .get(port)
+                                    .cloned()
+                                    .unwrap_or_else(|| serde_json::json!({})),
+                            );
+                            let body = if schema.is_object() {
+                                schema.schema
+                            } else {
+                                schema.wrapped()
+                            };
+                            channels::port(&self.context, &topic, packet, &body)
+                        }
+                    };
+                    self.add(
+                        channel,
+                        Source::Port {
+                            key: key.clone(),
+                            transform,
+                        },
+                    );
+                }
             }
         }
     }
@@ -472,26 +521,22 @@ impl Follower {
         let channel = Arc::clone(&served.channel);
         let counts = Arc::clone(&self.counts);
         let declared = match &served.source {
-            Source::Port { key, wrap } => {
-                let wrap = *wrap;
+            Source::Port { key, transform } => {
+                let transform = transform.clone();
                 let topic = channel.topic().to_owned();
                 Some(
                     self.session
                         .declare_subscriber(key.clone())
                         .callback(move |sample| {
-                            match serde_json::from_slice::<Echoed>(&sample.payload().to_bytes()) {
-                                Ok(echoed) => {
-                                    let packet = if wrap {
-                                        serde_json::json!({ "value": echoed.packet })
-                                    } else {
-                                        echoed.packet
-                                    };
-                                    channel.log(packet.to_string().as_bytes());
-                                }
+                            let echoed = serde_json::from_slice::<Echoed>(&sample.payload().to_bytes())
+                                .map_err(|error| error.to_string())
+                                .and_then(|echoed| transform.apply(echoed.packet));
+                            match echoed {
+                                Ok(message) => channel.log(message.to_string().as_bytes()),
                                 Err(error) => {
                                     counts.undecoded.fetch_add(1, Ordering::Relaxed);
                                     coolbot::limited!(&topic, |held| tracing::warn!(
-                                        "an echoed packet for {topic} does not decode (dropped): {error}{held}"
+                                        "an echoed packet for {topic} does not fit (dropped): {error}{held}"
                                     ));
                                 }
                             }
