@@ -2,7 +2,8 @@
 //! component's static shape from its `Spec` (type, variables with their kinds and
 //! types, ports, quality levels) and the outputs the node echoes
 //! ([`crate::Node::echo`]). `coolctl get` reads it to show types beside values;
-//! `coolctl echo` to tell a port that is not echoed from one that does not exist.
+//! `coolctl echo` to tell a port that is not echoed from one that does not exist;
+//! `coolctl foxglove` to advertise an echoed port with its packets' JSON Schema.
 
 use std::collections::BTreeMap;
 

@@ -205,6 +205,8 @@ fn serve(fox: &Fox, ports: &[&str]) -> (Process, String) {
 /// The Node client on `url`, its lines as JSON.
 struct Client {
     process: Process,
+    /// Lines read while looking for others.
+    aside: std::cell::RefCell<std::collections::VecDeque<Value>>,
 }
 
 impl Client {
@@ -216,27 +218,42 @@ impl Client {
                 .arg(url)
                 .env("NODE_PATH", modules),
         );
-        Client { process }
+        Client {
+            process,
+            aside: Default::default(),
+        }
     }
 
-    /// The next line of `kind` for which `accept` holds, skipping others.
+    /// The first line of `kind` for which `accept` holds, among those set aside and
+    /// then as they come; the others are set aside for later calls.
     fn next_where(&self, kind: &str, mut accept: impl FnMut(&Value) -> bool) -> Value {
+        let matches = |value: &Value, accept: &mut dyn FnMut(&Value) -> bool| {
+            value["kind"] == kind && accept(value)
+        };
+        {
+            let mut aside = self.aside.borrow_mut();
+            if let Some(at) = aside.iter().position(|v| matches(v, &mut accept)) {
+                return aside.remove(at).expect("a line set aside");
+            }
+        }
         let deadline = Instant::now() + PATIENCE;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
-            let line = self
-                .process
-                .lines
-                .recv_timeout(left)
-                .unwrap_or_else(|_| panic!("no `{kind}` line from the client"));
+            let line = self.process.lines.recv_timeout(left).unwrap_or_else(|_| {
+                panic!(
+                    "no `{kind}` line from the client; set aside: {:?}",
+                    self.aside.borrow()
+                )
+            });
             let value: Value = serde_json::from_str(&line)
                 .unwrap_or_else(|error| panic!("the client printed `{line}`: {error}"));
             if value["kind"] == "error" {
                 panic!("the client: {value}");
             }
-            if value["kind"] == kind && accept(&value) {
+            if matches(&value, &mut accept) {
                 return value;
             }
+            self.aside.borrow_mut().push_back(value);
         }
     }
 
@@ -841,6 +858,51 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
     let laser = client.messages("/rover/rover.scan/laser_scan", 1).remove(0);
     assert_eq!(laser["ranges"], json!([1.5, 2.5, 3.5, 4.5]));
     assert_eq!(laser["end_angle"], 3.0 * std::f64::consts::FRAC_PI_2);
+
+    // A controllable variable's declared range holds for its parameter.
+    let gain = || {
+        system
+            .handle("rover")
+            .expect("the rover")
+            .snapshot()
+            .variables
+            .iter()
+            .find(|(name, _)| name == "gain")
+            .map(|(_, value)| value.to_json())
+    };
+    client.order(json!({ "do": "setParameters", "id": "over",
+        "parameters": [{ "name": "rover/rover/gain", "value": 2.0, "type": "float64" }] }));
+    let status = client.next_where("status", |_| true);
+    assert!(
+        status["message"]
+            .as_str()
+            .unwrap()
+            .contains("`rover/rover/gain`: rejected"),
+        "{status}"
+    );
+    assert_eq!(parameter_values(&client, "over")["rover/rover/gain"], 0.5);
+    assert_eq!(gain(), Some(json!(0.5)));
+    client.order(json!({ "do": "setParameters", "id": "in",
+        "parameters": [{ "name": "rover/rover/gain", "value": 0.25, "type": "float64" }] }));
+    assert_eq!(parameter_values(&client, "in")["rover/rover/gain"], 0.25);
+    assert_eq!(gain(), Some(json!(0.25)));
     sending.store(false, Ordering::Release);
     sender.join().expect("the sender ends");
+}
+
+/// Off loopback, the server needs the security file or `--insecure`, as a node's
+/// endpoints do; the refusal comes before anything listens.
+#[test]
+fn serving_off_loopback_is_refused_without_the_security_file() {
+    let out = Command::new(COOLCTL)
+        .args(["--no-multicast", "foxglove", "--bind", "192.0.2.1:8765"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let error = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        error.contains("coolctl foxglove: `192.0.2.1:8765` is not on loopback")
+            && error.contains("give the security file (--config) or --insecure"),
+        "{error}"
+    );
 }
