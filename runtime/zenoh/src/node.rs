@@ -1,7 +1,7 @@
 //! A [`Node`]: one per process, named, holding the Zenoh session; it exposes
 //! components' monitoring and control ports on the network and makes bridges.
 
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -96,8 +96,9 @@ pub struct Node {
     control: Sender<ControlRequest>,
     control_stop: Arc<AtomicBool>,
     control_thread: Option<JoinHandle<()>>,
-    /// The outputs echoed, as `(component path, port)`.
-    echoed: Arc<Mutex<BTreeSet<(String, String)>>>,
+    /// The outputs echoed, as `(component path, port)`, with their packets' JSON
+    /// Schemas.
+    echoed: Arc<Mutex<BTreeMap<(String, String), serde_json::Value>>>,
     echoes: Mutex<Vec<Echo>>,
     /// Where its outlets keep their tallies (`crate::tally`); None: no tallies.
     state: Option<PathBuf>,
@@ -256,8 +257,8 @@ impl Node {
                     .callback(move |query| {
                         let ports = lock(&echoed)
                             .iter()
-                            .filter(|(path, _)| *path == info_path)
-                            .map(|(_, port)| port.clone())
+                            .filter(|((path, _), _)| *path == info_path)
+                            .map(|((_, port), schema)| (port.clone(), schema.clone()))
                             .collect();
                         let info = ComponentInfo::of(info_handle.spec(), ports);
                         let reply = match serde_json::to_vec(&info) {
@@ -325,8 +326,9 @@ impl Node {
     /// `coolbot/<node>/<component>/o/<port>`, from a thread of the node's. The
     /// producer is never slowed (`docs/tools.md`, "coolctl echo"): packets beyond
     /// [`ECHO_CAPACITY`] waiting are dropped for the echo and counted. The echo lasts
-    /// as long as the node.
-    pub fn echo<T: coolbot::port::Packet + Serialize>(
+    /// as long as the node. The component's info (`.../s`) carries the JSON Schema of
+    /// `T` for the port, traced as a recording traces it ([`coolbot::schema::of`]).
+    pub fn echo<T: coolbot::port::Packet + Serialize + serde::de::DeserializeOwned>(
         &self,
         system: &System,
         path: &str,
@@ -347,7 +349,8 @@ impl Node {
             .map_err(|error| invalid(error.to_string()))?;
         let echo = Echo::start(&self.session, keys::echo(&self.name, component, port), tap)?;
         lock(&self.echoes).push(echo);
-        lock(&self.echoed).insert((component.to_owned(), port.to_owned()));
+        let schema = coolbot::schema::of::<T>().schema;
+        lock(&self.echoed).insert((component.to_owned(), port.to_owned()), schema);
         Ok(())
     }
 }
