@@ -60,6 +60,11 @@ pub const SEED: u64 = 0xc001_b07f;
 /// The ledger's window (`runtime/zenoh/src/ledger.rs`): a jump further is a reset.
 const WINDOW: u64 = 1 << 20;
 
+/// How long a question whose answer the counts depend on waits (a reset the fuzzer
+/// expects, a command that must be refused): an answer comes at once unless the
+/// machine is loaded, and one that comes late must still be counted.
+const ANSWER: Duration = Duration::from_secs(30);
+
 /// A deterministic generator (splitmix64): the same seed, the same packets.
 pub struct Rng(u64);
 
@@ -789,7 +794,7 @@ impl Fuzzer {
                 // inlet that has it (its answer shows whether it does).
                 self.jumps += 1;
                 let last = u64::MAX - (self.jumps << 40);
-                let answers = self.ask(&key, encode(&vec![(epoch, last)]), Duration::from_secs(5));
+                let answers = self.ask(&key, encode(&vec![(epoch, last)]), ANSWER);
                 self.figures.count("ack: the live epoch ended far ahead");
                 let had = answers.iter().any(|answer| {
                     postcard::from_bytes::<(String, Vec<(u64, u64, u64, u64, u64)>)>(answer)
@@ -956,7 +961,7 @@ impl Fuzzer {
                 )
             }
         };
-        let answers = self.ask(&key, bytes, Duration::from_secs(5));
+        let answers = self.ask(&key, bytes, ANSWER);
         self.figures.count(kind);
         self.answered(format!("{kind} to {component}"), answers);
     }
@@ -1048,7 +1053,7 @@ impl Fuzzer {
                 )
             }
         };
-        let answers = self.ask(&key, bytes, Duration::from_secs(5));
+        let answers = self.ask(&key, bytes, ANSWER);
         self.figures.count(kind);
         self.answered(format!("{kind} to {node}"), answers);
     }
