@@ -8,7 +8,7 @@
 //! call [`component`] to get a `coolbot::Component` to add to a `coolbot::System`.
 {%- if !c.doc.is_empty() %}
 //!
-{{- l.doc(&c.doc, 0, "//!") }}
+{{- l.module_doc(&c.doc) }}
 {%- endif %}
 
 /// The `configuration` block: the default controllable variable `configuration`.
@@ -19,7 +19,7 @@ pub struct Config {}
 {%- else %}
 pub struct Config {
 {%- for f in c.config %}
-{{- l.doc(&f.doc, 4, "///") }}
+{{- l.member_doc(&f.doc) }}
 {%- if f.renamed() %}
     #[serde(rename = "{{ f.cool_name }}")]
 {%- endif %}
@@ -46,7 +46,7 @@ pub struct Vars {}
 {%- else %}
 pub struct Vars {
 {%- for v in c.vars %}
-{{- l.doc(&v.field.doc, 4, "///") }}
+{{- l.member_doc(&v.field.doc) }}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
 {{ l.decl(&v.field.name, &v.field.ty) }}
 {%- endfor %}
@@ -67,7 +67,7 @@ pub struct Inputs {}
 {%- else %}
 pub struct Inputs {
 {%- for p in c.inputs %}
-{{- l.doc(&p.doc, 4, "///") }}
+{{- l.member_doc(&p.doc) }}
 {{ l.decl(&p.field, &p.handle) }}
 {%- endfor %}
 }
@@ -79,7 +79,7 @@ pub struct Outputs {}
 {%- else %}
 pub struct Outputs {
 {%- for p in c.outputs %}
-{{- l.doc(&p.doc, 4, "///") }}
+{{- l.member_doc(&p.doc) }}
 {{ l.decl(&p.field, &p.handle) }}
 {%- endfor %}
 }
@@ -92,8 +92,8 @@ pub enum UserState {}
 {%- else %}
 pub enum UserState {
 {%- for s in c.states %}
-{{- l.doc(&s.doc, 4, "///") }}
-{{ l.line(4, &format!("{},", s.variant)) }}
+{{- l.member_doc(&s.doc) }}
+{{ l.variant(&s.variant) }}
 {%- endfor %}
 }
 {%- endif %}
@@ -109,7 +109,7 @@ impl UserState {
 {%- else %}
         match self {
 {%- for s in c.states %}
-{{ l.arm(12, &format!("UserState::{}", s.variant), &loop.index0.to_string()) }}
+{{ l.index_arm("UserState", &s.variant, loop.index0) }}
 {%- endfor %}
         }
 {%- endif %}
@@ -122,7 +122,7 @@ impl UserState {
 {%- else %}
         match self {
 {%- for s in c.states %}
-{{ l.arm(12, &format!("UserState::{}", s.variant), &format!("{:?}", s.cool_name)) }}
+{{ l.name_arm(&s.variant, &s.cool_name) }}
 {%- endfor %}
         }
 {%- endif %}
@@ -137,7 +137,7 @@ impl UserState {
 pub enum {{ may_enum }} {
 {%- for (variant, _, name) in s.may %}
     /// Go to state `{{ name }}`.
-{{ l.line(4, &format!("{},", variant)) }}
+{{ l.variant(variant) }}
 {%- endfor %}
 }
 
@@ -146,7 +146,7 @@ impl {{ may_enum }} {
     pub fn state(self) -> UserState {
         match self {
 {%- for (variant, index, _) in s.may %}
-{{ l.arm(12, &format!("{}::{}", may_enum, variant), &format!("UserState::ALL[{}]", index)) }}
+{{ l.may_arm(may_enum, variant, index) }}
 {%- endfor %}
         }
     }
@@ -162,8 +162,8 @@ pub enum Exception {}
 {%- else %}
 pub enum Exception {
 {%- for e in c.exceptions %}
-{{- l.doc(&e.doc, 4, "///") }}
-{{ l.line(4, &format!("{},", e.variant)) }}
+{{- l.member_doc(&e.doc) }}
+{{ l.variant(&e.variant) }}
 {%- endfor %}
 }
 {%- endif %}
@@ -176,7 +176,7 @@ impl Exception {
 {%- else %}
         match self {
 {%- for e in c.exceptions %}
-{{ l.arm(12, &format!("Exception::{}", e.variant), &loop.index0.to_string()) }}
+{{ l.index_arm("Exception", &e.variant, loop.index0) }}
 {%- endfor %}
         }
 {%- endif %}
@@ -225,13 +225,13 @@ pub trait Behavior: ::core::marker::Send + 'static {
     }
 {%- for method in c.methods %}
 {{ "" }}
-{{- l.doc(&method.doc, 4, "///") }}
-{{ l.signature(4, &method.signature, ";") }}
+{{- l.member_doc(&method.doc) }}
+{{ l.declaration(&method.signature) }}
 {%- endfor %}
 }
 
 /// The static shape of the component, read by the runtime.
-{{- l.doc(&c.notes, 0, "///") }}
+{{- l.item_doc(&c.notes) }}
 {{ l.spec(c) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.
@@ -281,10 +281,10 @@ pub fn register<R: ::coolbot::remote::Registrar>(
 ) {
     registrar.component(SPEC.type_name, ::std::boxed::Box::new(make));
 {%- for p in c.inputs %}
-    registrar.port::<{{ p.rust_packet() }}>(SPEC.type_name, "{{ p.cool_name }}");
+    registrar.port::<{{ p.rust_packet }}>(SPEC.type_name, "{{ p.cool_name }}");
 {%- endfor %}
 {%- for p in c.outputs %}
-    registrar.port::<{{ p.rust_packet() }}>(SPEC.type_name, "{{ p.cool_name }}");
+    registrar.port::<{{ p.rust_packet }}>(SPEC.type_name, "{{ p.cool_name }}");
 {%- endfor %}
 }
 
@@ -346,7 +346,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         let (behavior, mut cx) = self.parts(rt);
         match (state, section) {
 {%- for (pattern, call) in c.section_arms %}
-{{ l.arm(12, &pattern, &call) }}
+{{ l.section_arm(pattern, call) }}
 {%- endfor %}
             _ => Ok(()),
         }
@@ -379,14 +379,14 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         let (behavior, mut cx) = self.parts(rt);
         if exception == 0 {
 {%- for e in c.exceptions %}
-{{ l.short(12, &format!("behavior.{}(&mut cx, message);", e.handler)) }}
+{{ l.exception_call(&e.handler) }}
 {%- endfor %}
         }
 {%- else %}
         let (behavior, mut cx) = self.parts(rt);
         match exception {
 {%- for e in c.exceptions %}
-{{ l.arm(12, &loop.index0.to_string(), &format!("behavior.{}(&mut cx, message)", e.handler)) }}
+{{ l.exception_arm(loop.index0, &e.handler) }}
 {%- endfor %}
             _ => {}
         }
@@ -402,8 +402,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         match output {
 {%- for arm in c.answer_arms %}
             {{ arm.output }} => {
-{{ l.short(16, &format!("let packet = behavior.{}(&mut cx)?;", arm.method)) }}
-{{ l.short(16, &format!("cx.outputs.{}.{}(packet);", arm.field, arm.send)) }}
+{{ l.answer(arm) }}
                 Ok(())
             }
 {%- endfor %}
@@ -430,7 +429,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
 {%- for v in c.vars %}
 {%- if v.controllable() %}
             {{ v.spec_index.unwrap_or_default() }} => {
-{{ l.assign(16, &format!("self.vars.{}", v.field.name), &format!("{}?", v.from_value)) }}
+{{ l.set_var(v) }}
                 Ok(())
             }
 {%- endif %}
@@ -448,7 +447,7 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
         match variable {
 {%- for v in c.vars %}
 {%- if let Some(index) = v.spec_index %}
-{{ l.short(12, &format!("{} => {},", index, v.to_value)) }}
+{{ l.get_arm(index, v) }}
 {%- endif %}
 {%- endfor %}
             _ => ::coolbot::Value::Unit,

@@ -117,29 +117,17 @@ impl<B: Behavior> Harness<B> {
     }
 {%- for m in h.inputs %}
 {{ "" }}
-{{- l.doc(&m.doc, 4, "///") }}
-{{ l.signature(4, &m.signature, " {") }}
-{%- for line in m.body %}
-{{ l.short(8, line) }}
-{%- endfor %}
+{{- l.harness_method(&m.doc, &m.signature, &m.body) }}
     }
 {%- endfor %}
 {%- for m in h.outputs %}
 {{ "" }}
-{{- l.doc(&m.doc, 4, "///") }}
-{{ l.signature(4, &m.signature, " {") }}
-{%- for line in m.body %}
-{{ l.short(8, line) }}
-{%- endfor %}
+{{- l.harness_method(&m.doc, &m.signature, &m.body) }}
     }
 {%- endfor %}
 {%- for m in h.setters %}
 {{ "" }}
-{{- l.doc(&m.doc, 4, "///") }}
-{{ l.signature(4, &m.signature, " {") }}
-{%- for line in m.body %}
-{{ l.short(8, line) }}
-{%- endfor %}
+{{- l.harness_method(&m.doc, &m.signature, &m.body) }}
     }
 {%- endfor %}
 }

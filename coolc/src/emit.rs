@@ -528,7 +528,7 @@ fn converter_methods(krate: &ir::Crate) -> Vec<ir::Method> {
             doc: c.doc.clone(),
             signature: String::new(),
             user_signature: format!("fn {}(from: &{}) -> {}", c.method, c.user_from, c.user_to),
-            stub_body: c.stub_body.lines().map(str::to_owned).collect(),
+            stub_body: c.stub_body.clone(),
         })
         .collect()
 }

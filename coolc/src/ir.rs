@@ -1,9 +1,170 @@
 //! The intermediate representation the templates print.
 //!
-//! `lower` builds it from checked ASTs. **Invariant:** every string here is final
-//! Rust (an identifier, a type path, an expression, a literal) or final TOML; the
-//! templates only loop over these structures and print them. Orders are source
-//! orders.
+//! `lower` builds it from the checked model. **Invariant:** every string here is
+//! final Rust (an identifier, a type path, an expression, a literal) or final TOML,
+//! and every expression `layout` may break over lines is a [`Code`] tree; nothing
+//! reads Rust back from text, and the templates only loop over these structures and
+//! print them. Orders are source orders.
+
+use std::fmt;
+
+/// A Rust expression, split where rustfmt may break its lines: `lower` builds these
+/// trees and `layout` lays them out (no Rust is read back from text). Printed with
+/// `{}`, a tree is its one-line form.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Code {
+    /// Text with no bracket rustfmt would break at: a path, a literal, `-1`,
+    /// `[false; 8]`.
+    Atom(String),
+    /// `path { name: value, ... }`.
+    Struct(String, Vec<(String, Code)>),
+    /// `callee(args)`.
+    Call(String, Vec<Code>),
+    /// `&[items]`, `[items]` or `::std::vec![items]`: the opening text, the items.
+    List(String, Vec<Code>),
+    /// `[item; count]`, kept on one line.
+    Repeat(Box<Code>, u64),
+    /// A shape `layout` has no rule for (a closure, `vec![item; n]`): printed as it
+    /// is, and the file it is in is left to the formatter.
+    Other(String),
+}
+
+impl Code {
+    /// [`Code::Atom`].
+    pub fn atom(text: impl Into<String>) -> Code {
+        Code::Atom(text.into())
+    }
+
+    /// A string literal for `text`.
+    pub fn string(text: &str) -> Code {
+        Code::Atom(crate::ident::string_literal(text))
+    }
+
+    /// [`Code::Call`].
+    pub fn call(callee: impl Into<String>, args: Vec<Code>) -> Code {
+        Code::Call(callee.into(), args)
+    }
+
+    /// [`Code::Struct`].
+    pub fn structure(path: impl Into<String>, fields: Vec<(&str, Code)>) -> Code {
+        Code::Struct(
+            path.into(),
+            fields
+                .into_iter()
+                .map(|(name, value)| (name.to_owned(), value))
+                .collect(),
+        )
+    }
+
+    /// A slice literal `&[items]`.
+    pub fn slice(items: Vec<Code>) -> Code {
+        Code::List("&[".to_owned(), items)
+    }
+
+    /// `Some(code)`.
+    pub fn some(code: Code) -> Code {
+        Code::call("Some", vec![code])
+    }
+
+    /// `Some(code)`, or `None`.
+    pub fn option(code: Option<Code>) -> Code {
+        code.map_or_else(|| Code::atom("None"), Code::some)
+    }
+
+    /// This code with every call `from()` (no argument) made a call of `to`.
+    pub fn replace_call(&self, from: &str, to: &str) -> Code {
+        match self {
+            Code::Atom(text) => Code::Atom(text.clone()),
+            Code::Other(text) => {
+                Code::Other(text.replace(&format!("{from}()"), &format!("{to}()")))
+            }
+            Code::Struct(path, fields) => Code::Struct(
+                path.clone(),
+                fields
+                    .iter()
+                    .map(|(name, value)| (name.clone(), value.replace_call(from, to)))
+                    .collect(),
+            ),
+            Code::Call(callee, args) => Code::Call(
+                if callee == from && args.is_empty() {
+                    to.to_owned()
+                } else {
+                    callee.clone()
+                },
+                args.iter().map(|arg| arg.replace_call(from, to)).collect(),
+            ),
+            Code::List(open, items) => Code::List(
+                open.clone(),
+                items
+                    .iter()
+                    .map(|item| item.replace_call(from, to))
+                    .collect(),
+            ),
+            Code::Repeat(item, count) => {
+                Code::Repeat(Box::new(item.replace_call(from, to)), *count)
+            }
+        }
+    }
+}
+
+impl fmt::Display for Code {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fn list(f: &mut fmt::Formatter<'_>, items: &[Code]) -> fmt::Result {
+            for (i, item) in items.iter().enumerate() {
+                if i > 0 {
+                    f.write_str(", ")?;
+                }
+                write!(f, "{item}")?;
+            }
+            Ok(())
+        }
+        match self {
+            Code::Atom(text) | Code::Other(text) => f.write_str(text),
+            Code::Struct(path, fields) if fields.is_empty() => write!(f, "{path} {{}}"),
+            Code::Struct(path, fields) => {
+                write!(f, "{path} {{ ")?;
+                for (i, (name, value)) in fields.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{name}: {value}")?;
+                }
+                f.write_str(" }")
+            }
+            Code::Call(callee, args) => {
+                write!(f, "{callee}(")?;
+                list(f, args)?;
+                f.write_str(")")
+            }
+            Code::List(open, items) => {
+                f.write_str(open)?;
+                list(f, items)?;
+                f.write_str("]")
+            }
+            Code::Repeat(item, count) => write!(f, "[{item}; {count}]"),
+        }
+    }
+}
+
+/// One line of a user stub's body.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum StubLine {
+    /// A `//` comment.
+    Comment(String),
+    /// A statement, `;` included (a short one, kept on its line).
+    Statement(String),
+    /// The body's value.
+    Value(Code),
+}
+
+impl fmt::Display for StubLine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StubLine::Comment(text) | StubLine::Statement(text) => f.write_str(text),
+            StubLine::Value(code) => write!(f, "{code}"),
+        }
+    }
+}
 
 /// Where the generated crate finds the runtime crate `coolbot`.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -208,7 +369,7 @@ pub struct Field {
     /// Rust type.
     pub ty: String,
     /// Rust expression of its default value.
-    pub default: String,
+    pub default: Code,
     /// The `#[serde(with = "...")]` adapter of a type holding an array longer than 32
     /// elements (serde's own impls stop at 32), or `None`.
     pub serde_with: Option<String>,
@@ -221,26 +382,22 @@ pub fn derive_default(fields: &[Field]) -> bool {
 }
 
 /// Whether a default expression equals its type's `Default::default()`.
-fn default_equivalent(expr: &str) -> bool {
-    if let Some(inner) = expr.strip_prefix('[').and_then(|e| e.strip_suffix(']')) {
-        return match inner.rsplit_once("; ") {
-            // `Default` for arrays stops at 32 elements.
-            Some((item, count)) if count.parse::<u64>().is_ok_and(|n| n <= 32) => {
-                default_equivalent(item)
-            }
+fn default_equivalent(code: &Code) -> bool {
+    match code {
+        // `Default` for arrays stops at 32 elements.
+        Code::Repeat(item, count) => *count <= 32 && default_equivalent(item),
+        Code::Atom(text) => matches!(
+            text.as_str(),
+            "0" | "0.0" | "false" | "::core::option::Option::None"
+        ),
+        Code::Call(callee, args) => match (callee.as_str(), args.as_slice()) {
+            ("::core::default::Default::default", []) => true,
+            ("::std::string::String::from", [Code::Atom(text)]) => text == "\"\"",
             _ => false,
-        };
+        },
+        Code::List(open, items) => open == "::std::vec![" && items.is_empty(),
+        Code::Struct(..) | Code::Other(_) => false,
     }
-    matches!(
-        expr,
-        "::core::default::Default::default()"
-            | "0"
-            | "0.0"
-            | "false"
-            | "::core::option::Option::None"
-            | "::std::string::String::from(\"\")"
-            | "::std::vec![]"
-    )
 }
 
 impl Field {
@@ -312,8 +469,8 @@ pub struct Converter {
     pub user_from: String,
     /// Output type, as seen from user code.
     pub user_to: String,
-    /// The stub body of the user implementation (statements).
-    pub stub_body: String,
+    /// The stub body of the user implementation, one line each.
+    pub stub_body: Vec<StubLine>,
 }
 
 /// An atomic component's generated module.
@@ -342,7 +499,7 @@ pub struct Atomic {
     /// Declared exceptions (index = exception id).
     pub exceptions: Vec<ExceptionIr>,
     /// Rust expression of the `coolbot::TimingSpec`.
-    pub timing: String,
+    pub timing: Code,
     /// The fields of its `adaptation { ... }` (`coolbot::AdaptConfig` fields, as
     /// `name: value`), if it has a block that says anything.
     pub adaptation: Option<Vec<String>>,
@@ -452,25 +609,18 @@ pub struct Port {
     pub field: String,
     /// Rust handle type.
     pub handle: String,
+    /// The Rust type of its packets (`()` for a tick port).
+    pub rust_packet: String,
+    /// Its kind as written (`tick`, `fifo`, `ufifo`, `last`, `poster`, `data`).
+    pub kind_name: &'static str,
     /// Rust expression building the handle.
-    pub ctor: String,
+    pub ctor: Code,
     /// Rust expression of its `InputKind`/`OutputKind`.
-    pub kind: String,
+    pub kind: Code,
     /// Packet type as written (empty for ticks).
     pub packet: String,
     /// Pull model.
     pub pull: bool,
-}
-
-impl Port {
-    /// The Rust type of its packets: the handle's type argument (`()` for a tick
-    /// port, whose handle has none).
-    pub fn rust_packet(&self) -> &str {
-        match (self.handle.find('<'), self.handle.rfind('>')) {
-            (Some(open), Some(close)) if open < close => &self.handle[open + 1..close],
-            _ => "()",
-        }
-    }
 }
 
 /// A state of the user automaton.
@@ -487,7 +637,7 @@ pub struct State {
     /// `may` targets: (variant in the may enum, target state index, target name).
     pub may: Vec<(String, usize, String)>,
     /// Rust expression of its `coolbot::StateSpec`.
-    pub spec: String,
+    pub spec: Code,
 }
 
 /// A declared exception.
@@ -502,7 +652,7 @@ pub struct ExceptionIr {
     /// Handler method name.
     pub handler: String,
     /// Rust expression of its `coolbot::ExceptionSpec`.
-    pub spec: String,
+    pub spec: Code,
 }
 
 /// One required method of `Behavior`, with its user stub.
@@ -516,8 +666,8 @@ pub struct Method {
     pub signature: String,
     /// The signature in the user file.
     pub user_signature: String,
-    /// The stub body (statements, one per line).
-    pub stub_body: Vec<String>,
+    /// The stub body, one line each.
+    pub stub_body: Vec<StubLine>,
 }
 
 /// One `choose` dispatch arm.
@@ -597,7 +747,7 @@ pub struct Compound {
     /// `section` dispatch arms: `(pattern, call)`.
     pub section_arms: Vec<(String, String)>,
     /// Rust expression of the supervisor's `coolbot::TimingSpec`.
-    pub timing: String,
+    pub timing: Code,
     /// The `when` rules, in declaration order.
     pub rules: Vec<Rule>,
     /// `choose` dispatch arms: one per supervisor state with `may`.

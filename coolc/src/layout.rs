@@ -8,7 +8,9 @@
 //! fields take at most 18 columns (`struct_lit_width`), a call's arguments and an
 //! array's items at most 60 (`fn_call_width`, `array_width`), a method chain at most
 //! 60 (`chain_width`), and a lone struct-literal argument or array item "overflows"
-//! (opens on the line of its parent). Anything these rules do not cover, or that
+//! (opens on the line of its parent). Expressions come as the [`Code`] trees `lower`
+//! built (no Rust text is parsed here), and each template piece is named for what it
+//! prints, its indentation fixed here. Anything these rules do not cover, or that
 //! comes near the edge of them (a line over 100 columns, a list of short items that
 //! rustfmt would pack several per line), clears [`Layout::ok`]: the caller then runs
 //! the real formatter over the file. So a strange description costs time, never a
@@ -16,6 +18,8 @@
 //! against `rustfmt` on every fixture and example.
 
 use std::cell::Cell;
+
+use crate::ir::{Code, StubLine};
 
 /// rustfmt's `max_width`.
 const MAX_WIDTH: usize = 100;
@@ -41,19 +45,6 @@ impl Default for Layout {
             ok: Cell::new(true),
         }
     }
-}
-
-/// A Rust expression as the lowering writes it, split where rustfmt may break lines.
-#[derive(Clone, Debug, PartialEq, Eq)]
-enum Node {
-    /// Anything without a bracket rustfmt would break at: a path, literal, `-1`.
-    Atom(String),
-    /// `Path { field: value, ... }`.
-    Struct(String, Vec<(String, Node)>),
-    /// `callee(args)`.
-    Call(String, Vec<Node>),
-    /// `&[items]`, `[items]` or `::std::vec![items]`: the opening text, the items.
-    List(String, Vec<Node>),
 }
 
 fn spaces(n: usize) -> String {
@@ -92,6 +83,110 @@ impl Layout {
                 out.push(' ');
                 out.push_str(line);
             }
+        }
+        out
+    }
+
+    /// The module's `//!` doc lines.
+    pub fn module_doc(&self, lines: &[String]) -> String {
+        self.doc(lines, 0, "//!")
+    }
+
+    /// An item's `///` doc lines.
+    pub fn item_doc(&self, lines: &[String]) -> String {
+        self.doc(lines, 0, "///")
+    }
+
+    /// A member's `///` doc lines (a field, variant or method, at indent 4).
+    pub fn member_doc(&self, lines: &[String]) -> String {
+        self.doc(lines, 4, "///")
+    }
+
+    /// An enum variant `Name,`.
+    pub fn variant(&self, name: &str) -> String {
+        self.line(4, &format!("{name},"))
+    }
+
+    /// The arm `Enum::Variant => index,` of an `index` method.
+    pub fn index_arm(&self, ty: &str, variant: &str, index: &usize) -> String {
+        self.arm(12, &format!("{ty}::{variant}"), &index.to_string())
+    }
+
+    /// The arm `UserState::Variant => "name",` of `UserState::name`.
+    pub fn name_arm(&self, variant: &str, name: &str) -> String {
+        self.arm(12, &format!("UserState::{variant}"), &format!("{name:?}"))
+    }
+
+    /// The arm `May::Variant => UserState::ALL[index],` of a `may` enum's `state`.
+    pub fn may_arm(&self, may_enum: &str, variant: &str, index: &usize) -> String {
+        self.arm(
+            12,
+            &format!("{may_enum}::{variant}"),
+            &format!("UserState::ALL[{index}]"),
+        )
+    }
+
+    /// A required method of `Behavior`: its signature and `;`.
+    pub fn declaration(&self, signature: &str) -> String {
+        self.signature(4, signature, ";")
+    }
+
+    /// An arm of the glue's `section` dispatch.
+    pub fn section_arm(&self, pattern: &str, call: &str) -> String {
+        self.arm(12, pattern, call)
+    }
+
+    /// The glue's call of the only exception handler.
+    pub fn exception_call(&self, handler: &str) -> String {
+        self.short(12, &format!("behavior.{handler}(&mut cx, message);"))
+    }
+
+    /// An arm of the glue's exception dispatch.
+    pub fn exception_arm(&self, index: &usize, handler: &str) -> String {
+        self.arm(
+            12,
+            &index.to_string(),
+            &format!("behavior.{handler}(&mut cx, message)"),
+        )
+    }
+
+    /// The body of an arm of the glue's `answer`: the pull answer, then its send.
+    pub fn answer(&self, arm: &crate::ir::AnswerArm) -> String {
+        format!(
+            "{}\n{}",
+            self.short(
+                16,
+                &format!("let packet = behavior.{}(&mut cx)?;", arm.method)
+            ),
+            self.short(
+                16,
+                &format!("cx.outputs.{}.{}(packet);", arm.field, arm.send)
+            )
+        )
+    }
+
+    /// The assignment of an arm of the glue's `set`.
+    pub fn set_var(&self, var: &crate::ir::Var) -> String {
+        self.assign(
+            16,
+            &format!("self.vars.{}", var.field.name),
+            &format!("{}?", var.from_value),
+        )
+    }
+
+    /// An arm of the glue's `get`.
+    pub fn get_arm(&self, index: &usize, var: &crate::ir::Var) -> String {
+        self.short(12, &format!("{index} => {},", var.to_value))
+    }
+
+    /// A method of the typed harness, up to its closing brace: doc, signature, body.
+    pub fn harness_method(&self, doc: &[String], signature: &str, body: &[String]) -> String {
+        let mut out = self.member_doc(doc);
+        out.push('\n');
+        out.push_str(&self.signature(4, signature, " {"));
+        for line in body {
+            out.push('\n');
+            out.push_str(&self.short(8, line));
         }
         out
     }
@@ -170,14 +265,20 @@ impl Layout {
         let mut out = self.signature(4, &method.user_signature, " {");
         for line in &method.stub_body {
             out.push('\n');
-            if line.starts_with("//") {
-                out.push_str(&spaces(8));
-                out.push_str(line);
-            } else if let Some(node) = parse(line) {
-                out.push_str(&spaces(8));
-                out.push_str(&self.node(&node, 8, 8, 0, false));
-            } else {
-                out.push_str(&self.short(8, line));
+            match line {
+                StubLine::Comment(text) => {
+                    out.push_str(&spaces(8));
+                    out.push_str(text);
+                }
+                // A value with a shape these rules do not cover is short: one line.
+                StubLine::Value(code) if Self::has_other(code) => {
+                    out.push_str(&self.short(8, &code.to_string()));
+                }
+                StubLine::Value(code) => {
+                    out.push_str(&spaces(8));
+                    out.push_str(&self.node(code, 8, 8, 0, false));
+                }
+                StubLine::Statement(text) => out.push_str(&self.short(8, text)),
             }
         }
         out.push_str("\n    }");
@@ -186,30 +287,30 @@ impl Layout {
 
     /// `Self { field: default, ... }`, the body of a `Default` impl at indent 8.
     pub fn defaults(&self, fields: &[crate::ir::Field]) -> String {
-        let fields: Vec<(String, String)> = fields
+        let fields: Vec<(String, Code)> = fields
             .iter()
             .map(|f| (f.name.clone(), f.default.clone()))
             .collect();
-        self.struct_lit("Self", &fields, 8, 8, 0)
+        self.struct_lit("Self", fields, 8, 8, 0)
     }
 
     /// [`Layout::defaults`] of the variables.
     pub fn var_defaults(&self, vars: &[crate::ir::Var]) -> String {
-        let fields: Vec<(String, String)> = vars
+        let fields: Vec<(String, Code)> = vars
             .iter()
             .map(|v| (v.field.name.clone(), v.field.default.clone()))
             .collect();
-        self.struct_lit("Self", &fields, 8, 8, 0)
+        self.struct_lit("Self", fields, 8, 8, 0)
     }
 
     /// `pub const ALL: [UserState; n] = [...];` at indent 4.
     pub fn all_states(&self, c: &crate::ir::Atomic) -> String {
         let head = format!("pub const ALL: [UserState; {}] = ", c.states.len());
-        let list = Node::List(
+        let list = Code::List(
             "[".to_owned(),
             c.states
                 .iter()
-                .map(|s| Node::Atom(format!("UserState::{}", s.variant)))
+                .map(|s| Code::Atom(format!("UserState::{}", s.variant)))
                 .collect(),
         );
         format!("{head}{};", self.node(&list, 4, 4 + head.len(), 1, false))
@@ -218,13 +319,13 @@ impl Layout {
     /// `let var = Ty { field: ctor, ... };` at indent 4, for the port structs.
     pub fn ports_struct(&self, var: &str, ty: &str, ports: &[crate::ir::Port]) -> String {
         let head = format!("let {var} = ");
-        let fields: Vec<(String, String)> = ports
+        let fields: Vec<(String, Code)> = ports
             .iter()
             .map(|p| (p.field.clone(), p.ctor.clone()))
             .collect();
         format!(
             "{head}{};",
-            self.struct_lit(ty, &fields, 4, 4 + head.len(), 1)
+            self.struct_lit(ty, fields, 4, 4 + head.len(), 1)
         )
     }
 
@@ -295,41 +396,18 @@ impl Layout {
         self.line(indent, text)
     }
 
-    /// The expression `text` laid out with the first line starting at column `used`
-    /// and continuation lines at `indent`, followed by `suffix` columns.
-    #[cfg(test)]
-    fn expr(&self, text: &str, indent: usize, used: usize, suffix: usize) -> String {
-        match parse(text) {
-            Some(node) => self.node(&node, indent, used, suffix, false),
-            None => {
-                self.fail();
-                text.to_owned()
-            }
-        }
-    }
-
-    /// A struct literal `path { name: value, ... }` (values as the lowering writes
-    /// them) laid out as the right-hand side starting at column `used`.
+    /// A struct literal `path { name: value, ... }` laid out as the right-hand side
+    /// starting at column `used`.
     pub fn struct_lit(
         &self,
         path: &str,
-        fields: &[(String, String)],
+        fields: Vec<(String, Code)>,
         indent: usize,
         used: usize,
         suffix: usize,
     ) -> String {
-        let mut parsed = Vec::new();
-        for (name, value) in fields {
-            match parse(value) {
-                Some(node) => parsed.push((name.clone(), node)),
-                None => {
-                    self.fail();
-                    parsed.push((name.clone(), Node::Atom(value.clone())));
-                }
-            }
-        }
         self.node(
-            &Node::Struct(path.to_owned(), parsed),
+            &Code::Struct(path.to_owned(), fields),
             indent,
             used,
             suffix,
@@ -339,33 +417,28 @@ impl Layout {
 
     /// The `SPEC` static of an atomic component (see `templates/atomic.rs`).
     pub fn spec(&self, c: &crate::ir::Atomic) -> String {
-        let s = |t: &str| Node::Atom(t.to_owned());
-        let parsed = |t: &str| {
-            parse(t).unwrap_or_else(|| {
-                self.fail();
-                Node::Atom(t.to_owned())
-            })
-        };
+        let s = |t: &str| Code::Atom(t.to_owned());
+        let literal = Code::string;
         let port = |kind: &str, p: &crate::ir::Port| {
-            Node::Struct(
+            Code::Struct(
                 format!("::coolbot::{kind}Spec"),
                 vec![
                     ("name".to_owned(), literal(&p.cool_name)),
-                    ("kind".to_owned(), parsed(&p.kind)),
+                    ("kind".to_owned(), p.kind.clone()),
                     ("packet".to_owned(), literal(&p.packet)),
                     ("pull".to_owned(), s(if p.pull { "true" } else { "false" })),
                 ],
             )
         };
-        let list = |items: Vec<Node>| Node::List("&[".to_owned(), items);
-        let spec = Node::Struct(
+        let list = Code::slice;
+        let spec = Code::Struct(
             "::coolbot::Spec".to_owned(),
             vec![
                 ("type_name".to_owned(), literal(&c.type_name)),
                 ("doc".to_owned(), s(&c.doc_literal())),
                 (
                     "states".to_owned(),
-                    list(c.states.iter().map(|st| parsed(&st.spec)).collect()),
+                    list(c.states.iter().map(|st| st.spec.clone()).collect()),
                 ),
                 ("initial".to_owned(), s(&c.initial.to_string())),
                 (
@@ -383,7 +456,7 @@ impl Layout {
                             .iter()
                             .filter(|v| v.spec_index.is_some())
                             .map(|v| {
-                                Node::Struct(
+                                Code::Struct(
                                     "::coolbot::VarSpec".to_owned(),
                                     vec![
                                         ("name".to_owned(), literal(&v.field.cool_name)),
@@ -402,9 +475,9 @@ impl Layout {
                 ),
                 (
                     "exceptions".to_owned(),
-                    list(c.exceptions.iter().map(|e| parsed(&e.spec)).collect()),
+                    list(c.exceptions.iter().map(|e| e.spec.clone()).collect()),
                 ),
-                ("timing".to_owned(), parsed(&c.timing)),
+                ("timing".to_owned(), c.timing.clone()),
             ],
         );
         let head = "pub static SPEC: ::coolbot::Spec = ";
@@ -413,11 +486,12 @@ impl Layout {
 
     /// One-line form of `node` when rustfmt's width rules allow one (ignoring the
     /// room left on the line).
-    fn flat(node: &Node) -> Option<String> {
+    fn flat(node: &Code) -> Option<String> {
         match node {
-            Node::Atom(text) => Some(text.clone()),
-            Node::Struct(path, fields) if fields.is_empty() => Some(format!("{path} {{}}")),
-            Node::Struct(path, fields) => {
+            Code::Atom(text) | Code::Other(text) => Some(text.clone()),
+            Code::Repeat(..) => Some(node.to_string()),
+            Code::Struct(path, fields) if fields.is_empty() => Some(format!("{path} {{}}")),
+            Code::Struct(path, fields) => {
                 let body = fields
                     .iter()
                     .map(|(name, value)| Self::flat(value).map(|v| format!("{name}: {v}")))
@@ -425,7 +499,7 @@ impl Layout {
                     .join(", ");
                 (body.len() <= STRUCT_LIT_WIDTH).then(|| format!("{path} {{ {body} }}"))
             }
-            Node::Call(callee, args) => {
+            Code::Call(callee, args) => {
                 let inner = args
                     .iter()
                     .map(Self::flat)
@@ -433,7 +507,7 @@ impl Layout {
                     .join(", ");
                 (inner.len() <= LIST_WIDTH).then(|| format!("{callee}({inner})"))
             }
-            Node::List(open, items) => {
+            Code::List(open, items) => {
                 let inner = items
                     .iter()
                     .map(Self::flat)
@@ -450,27 +524,30 @@ impl Layout {
     /// as rustfmt leaves it.
     fn node(
         &self,
-        node: &Node,
+        node: &Code,
         indent: usize,
         used: usize,
         suffix: usize,
         long_string: bool,
     ) -> String {
+        if Self::has_other(node) {
+            self.fail();
+        }
         if let Some(flat) = Self::flat(node) {
             if used + flat.len() + suffix <= MAX_WIDTH {
                 return flat;
             }
-            if long_string && matches!(node, Node::Atom(t) if t.starts_with('"')) {
+            if long_string && matches!(node, Code::Atom(t) if t.starts_with('"')) {
                 return flat;
             }
         }
         let inner = spaces(indent + 4);
         match node {
-            Node::Atom(text) => {
+            Code::Atom(_) | Code::Other(_) | Code::Repeat(..) => {
                 self.fail();
-                text.clone()
+                node.to_string()
             }
-            Node::Struct(path, fields) => {
+            Code::Struct(path, fields) => {
                 if fields.is_empty() || used + path.len() + 2 > MAX_WIDTH {
                     self.fail();
                 }
@@ -487,8 +564,8 @@ impl Layout {
                 out.push('}');
                 out
             }
-            Node::Call(callee, args) => match &args[..] {
-                [arg @ (Node::Struct(..) | Node::List(..))] => {
+            Code::Call(callee, args) => match &args[..] {
+                [arg @ (Code::Struct(..) | Code::List(..))] => {
                     let start = used + callee.len() + 1;
                     format!(
                         "{callee}({})",
@@ -497,11 +574,11 @@ impl Layout {
                 }
                 _ => {
                     self.fail();
-                    Self::one_line(node)
+                    node.to_string()
                 }
             },
-            Node::List(open, items) => match &items[..] {
-                [item @ Node::Struct(..)] => {
+            Code::List(open, items) => match &items[..] {
+                [item @ Code::Struct(..)] => {
                     let start = used + open.len();
                     format!(
                         "{open}{}]",
@@ -509,10 +586,10 @@ impl Layout {
                     )
                 }
                 _ => {
-                    if items
-                        .iter()
-                        .any(|i| matches!(i, Node::Atom(t) if t.len() <= SHORT_ITEM))
-                        || items.len() < 2
+                    if items.iter().any(|i| {
+                        matches!(i, Code::Atom(_) | Code::Repeat(..))
+                            && i.to_string().len() <= SHORT_ITEM
+                    }) || items.len() < 2
                     {
                         self.fail();
                     }
@@ -530,208 +607,15 @@ impl Layout {
         }
     }
 
-    /// `node` on one line whatever the width rules say (for failed layouts).
-    fn one_line(node: &Node) -> String {
+    /// Whether `node` holds a shape these rules do not cover.
+    fn has_other(node: &Code) -> bool {
         match node {
-            Node::Atom(text) => text.clone(),
-            Node::Struct(path, fields) => format!(
-                "{path} {{ {} }}",
-                fields
-                    .iter()
-                    .map(|(n, v)| format!("{n}: {}", Self::one_line(v)))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-            Node::Call(callee, args) => format!(
-                "{callee}({})",
-                args.iter()
-                    .map(Self::one_line)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-            Node::List(open, items) => format!(
-                "{open}{}]",
-                items
-                    .iter()
-                    .map(Self::one_line)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            Code::Atom(_) => false,
+            Code::Other(_) => true,
+            Code::Repeat(item, _) => Self::has_other(item),
+            Code::Struct(_, fields) => fields.iter().any(|(_, value)| Self::has_other(value)),
+            Code::Call(_, items) | Code::List(_, items) => items.iter().any(Self::has_other),
         }
-    }
-}
-
-/// A string literal for `text`, as the lowering writes them.
-fn literal(text: &str) -> Node {
-    Node::Atom(crate::ident::string_literal(text))
-}
-
-/// Parses an expression of the shapes above; `None` for anything else (a method
-/// chain, a closure, a repeat array, a char literal).
-fn parse(text: &str) -> Option<Node> {
-    let mut parser = Parser {
-        text: text.as_bytes(),
-        at: 0,
-    };
-    let node = parser.expr()?;
-    parser.skip_spaces();
-    (parser.at == parser.text.len()).then_some(node)
-}
-
-struct Parser<'a> {
-    text: &'a [u8],
-    at: usize,
-}
-
-impl Parser<'_> {
-    fn peek(&self) -> Option<u8> {
-        self.text.get(self.at).copied()
-    }
-
-    fn skip_spaces(&mut self) {
-        while self.peek() == Some(b' ') {
-            self.at += 1;
-        }
-    }
-
-    fn eat(&mut self, s: &str) -> bool {
-        if self.text[self.at..].starts_with(s.as_bytes()) {
-            self.at += s.len();
-            true
-        } else {
-            false
-        }
-    }
-
-    fn text_from(&self, start: usize) -> Option<String> {
-        String::from_utf8(self.text[start..self.at].to_vec()).ok()
-    }
-
-    fn expr(&mut self) -> Option<Node> {
-        self.skip_spaces();
-        let start = self.at;
-        if self.eat("&[") || self.eat("[") {
-            let open = self.text_from(start)?;
-            let items_at = self.at;
-            if let Some(items) = self.items(b']') {
-                return Some(Node::List(open, items));
-            }
-            // `[item; count]` with a plain item: one atom, as rustfmt keeps it.
-            self.at = items_at;
-            self.expr()?;
-            self.skip_spaces();
-            if !self.eat(";") {
-                return None;
-            }
-            while self.peek().is_some_and(|b| b != b']' && b != b'[') {
-                self.at += 1;
-            }
-            if !self.eat("]") {
-                return None;
-            }
-            return Some(Node::Atom(self.text_from(start)?));
-        }
-        // The head: up to a bracket or separator, string literals whole.
-        while let Some(byte) = self.peek() {
-            match byte {
-                b'"' => self.string()?,
-                b'{' | b'(' | b'[' | b',' | b')' | b']' | b'}' | b';' => break,
-                b'\'' | b'|' | b'\n' => return None,
-                _ => self.at += 1,
-            }
-        }
-        let head = self.text_from(start)?.trim().to_owned();
-        if head.is_empty() {
-            return None;
-        }
-        // A field access or method call (not the point of a number): a chain, which
-        // rustfmt breaks past `chain_width`.
-        let chained = head
-            .as_bytes()
-            .windows(2)
-            .any(|w| w[1] == b'.' && !w[0].is_ascii_digit())
-            || head.starts_with('.');
-        match self.peek() {
-            Some(b'{') => {
-                self.at += 1;
-                let mut fields = Vec::new();
-                loop {
-                    self.skip_spaces();
-                    if self.eat("}") {
-                        break;
-                    }
-                    let name_start = self.at;
-                    while self
-                        .peek()
-                        .is_some_and(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'#')
-                    {
-                        self.at += 1;
-                    }
-                    let name = self.text_from(name_start)?;
-                    if name.is_empty() || !self.eat(": ") {
-                        return None;
-                    }
-                    fields.push((name, self.expr()?));
-                    self.skip_spaces();
-                    if !self.eat(",") {
-                        self.skip_spaces();
-                        if !self.eat("}") {
-                            return None;
-                        }
-                        break;
-                    }
-                }
-                Some(Node::Struct(head, fields))
-            }
-            Some(b'(') if !chained => {
-                self.at += 1;
-                let args = self.items(b')')?;
-                Some(Node::Call(head, args))
-            }
-            Some(b'(') => None,
-            Some(b'[') if head.ends_with('!') => {
-                self.at += 1;
-                Some(Node::List(format!("{head}["), self.items(b']')?))
-            }
-            Some(b'[') => None,
-            _ if chained && head.len() > CHAIN_WIDTH => None,
-            _ => Some(Node::Atom(head)),
-        }
-    }
-
-    /// Comma-separated expressions up to `close` (consumed).
-    fn items(&mut self, close: u8) -> Option<Vec<Node>> {
-        let mut items = Vec::new();
-        loop {
-            self.skip_spaces();
-            if self.peek() == Some(close) {
-                self.at += 1;
-                return Some(items);
-            }
-            items.push(self.expr()?);
-            self.skip_spaces();
-            match self.peek() {
-                Some(b',') => self.at += 1,
-                Some(b) if b == close => {
-                    self.at += 1;
-                    return Some(items);
-                }
-                _ => return None,
-            }
-        }
-    }
-
-    fn string(&mut self) -> Option<()> {
-        self.at += 1;
-        while let Some(byte) = self.peek() {
-            self.at += 1;
-            match byte {
-                b'\\' => self.at += 1,
-                b'"' => return Some(()),
-                _ => {}
-            }
-        }
-        None
     }
 }
 
@@ -739,49 +623,36 @@ impl Parser<'_> {
 mod tests {
     use super::*;
 
+    fn on_spec(port: &str) -> Code {
+        Code::structure(
+            "X",
+            vec![("port", Code::atom(port)), ("target", Code::atom("1"))],
+        )
+    }
+
     #[test]
-    fn parses_the_lowering_shapes() {
+    fn code_prints_on_one_line_as_written() {
+        let code = Code::slice(vec![on_spec("0"), Code::string("a, b")]);
+        assert_eq!(code.to_string(), "&[X { port: 0, target: 1 }, \"a, b\"]");
         assert_eq!(
-            parse("::coolbot::OnSpec { port: 0, target: 1 }"),
-            Some(Node::Struct(
-                "::coolbot::OnSpec".to_owned(),
-                vec![
-                    ("port".to_owned(), Node::Atom("0".to_owned())),
-                    ("target".to_owned(), Node::Atom("1".to_owned()))
-                ]
-            ))
+            Code::call("f", vec![Code::Other("|x| x".to_owned())]).to_string(),
+            "f(|x| x)"
         );
-        assert_eq!(
-            parse("&[\"a, b\", 1.5]"),
-            Some(Node::List(
-                "&[".to_owned(),
-                vec![
-                    Node::Atom("\"a, b\"".to_owned()),
-                    Node::Atom("1.5".to_owned())
-                ]
-            ))
-        );
-        assert_eq!(parse("a.b(c)"), None);
-        assert_eq!(
-            parse("[false; 8]"),
-            Some(Node::Atom("[false; 8]".to_owned()))
-        );
-        assert_eq!(parse("f(|x| x)"), None);
     }
 
     #[test]
     fn struct_literals_follow_struct_lit_width() {
         let layout = Layout::default();
         assert_eq!(
-            layout.expr("X { port: 0, target: 1 }", 0, 0, 0),
+            layout.node(&on_spec("0"), 0, 0, 0, false),
             "X { port: 0, target: 1 }"
         );
         assert_eq!(
-            layout.expr("X { port: 10, target: 1 }", 0, 0, 0),
+            layout.node(&on_spec("10"), 0, 0, 0, false),
             "X {\n    port: 10,\n    target: 1,\n}"
         );
         assert_eq!(
-            layout.expr("&[X { port: 10, target: 1 }]", 4, 4, 1),
+            layout.node(&Code::slice(vec![on_spec("10")]), 4, 4, 1, false),
             "&[X {\n        port: 10,\n        target: 1,\n    }]"
         );
         assert!(layout.ok());
@@ -790,11 +661,17 @@ mod tests {
     #[test]
     fn uncertain_shapes_clear_ok() {
         let layout = Layout::default();
-        let long = format!("&[{}]", vec!["1"; 40].join(", "));
-        let _ = layout.expr(&long, 0, 0, 0);
+        let long = Code::slice(vec![Code::atom("1"); 40]);
+        let _ = layout.node(&long, 0, 0, 0, false);
         assert!(!layout.ok());
         let layout = Layout::default();
-        let _ = layout.expr("a.b().c()", 0, 0, 0);
+        let _ = layout.node(
+            &Code::call("f", vec![Code::Other("|x| x".to_owned())]),
+            0,
+            0,
+            0,
+            false,
+        );
         assert!(!layout.ok());
     }
 }

@@ -31,7 +31,7 @@
 
 pub mod ast;
 pub mod builder;
-pub mod check;
+pub(crate) mod check;
 pub mod checked;
 pub mod cli;
 pub mod diagnostics;
@@ -165,6 +165,7 @@ pub fn analyze_with<P: AsRef<Path>>(
         &loaded.imports,
         &mut loaded.diagnostics,
     );
+    symbols.note_unloaded(&loaded.files, &interfaces);
     symbols.add_siblings(&loaded.sources, list, loader);
     let resolved = check::check(&loaded.files, symbols, &mut loaded.diagnostics);
     Analysis {

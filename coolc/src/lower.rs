@@ -11,11 +11,10 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::ast::{self, Prim};
-use crate::check::model::Ty;
 use crate::checked::Checked;
 use crate::checked::model::{
-    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, TableValue, TypeDef, Value, VarKind,
+    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, Prim, TableValue, Ty, TypeDef,
+    Value, VarKind,
 };
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
@@ -57,7 +56,12 @@ const GEN_TYPES: &str = "super::types::";
 /// Path of the types module as seen from user files.
 const USER_TYPES: &str = "crate::generated::types::";
 /// The default value of a type that implements `Default`.
-const DEFAULT: &str = "::core::default::Default::default()";
+const DEFAULT: &str = "::core::default::Default::default";
+
+/// [`DEFAULT`] called.
+fn default_code() -> ir::Code {
+    ir::Code::call(DEFAULT, Vec::new())
+}
 
 struct Lowerer<'a> {
     /// The checked model: every name lowering meets is looked up in it.
@@ -102,20 +106,20 @@ pub fn package_name(name: &str) -> String {
     }
 }
 
-/// Nanoseconds of a duration or frequency in a `when` condition.
-fn duration_ns(expr: &ast::Expr) -> Option<u64> {
-    Duration::of(expr).map(|duration| duration.nanos)
-}
-
 fn duration_rust(ns: u64) -> String {
     format!("::std::time::Duration::from_nanos({ns})")
 }
 
-fn option_duration(duration: Option<&Duration>) -> String {
-    match duration {
-        Some(duration) => format!("Some({})", duration_rust(duration.nanos)),
-        None => "None".to_owned(),
-    }
+/// `::std::time::Duration::from_nanos(ns)`.
+fn duration_code(ns: u64) -> ir::Code {
+    ir::Code::call(
+        "::std::time::Duration::from_nanos",
+        vec![ir::Code::atom(ns.to_string())],
+    )
+}
+
+fn option_duration(duration: Option<&Duration>) -> ir::Code {
+    ir::Code::option(duration.map(|duration| duration_code(duration.nanos)))
 }
 
 /// The path of the serde_with crate as generated code sees it (re-exported by the
@@ -214,7 +218,7 @@ impl<'a> Lowerer<'a> {
     /// Arrays longer than 32 elements, or of elements without `Default`, are built
     /// with `core::array::from_fn`: the standard library implements `Default` for
     /// arrays only up to 32 elements.
-    fn default_of(&self, ty: &Ty, visiting: &mut BTreeSet<String>) -> Option<String> {
+    fn default_of(&self, ty: &Ty, visiting: &mut BTreeSet<String>) -> Option<ir::Code> {
         match ty {
             Ty::Bool
             | Ty::Int(_)
@@ -225,19 +229,19 @@ impl<'a> Lowerer<'a> {
             | Ty::List(_)
             | Ty::Optional(_)
             // A ROS message type always has one (`lower::ros`).
-            | Ty::Ros { .. } => Some(DEFAULT.to_owned()),
+            | Ty::Ros { .. } => Some(default_code()),
             Ty::Array(inner, n) => {
                 let item = self.default_of(inner, visiting)?;
-                Some(if *n <= 32 && item == DEFAULT {
-                    DEFAULT.to_owned()
+                Some(if *n <= 32 && item == default_code() {
+                    default_code()
                 } else {
-                    format!("::core::array::from_fn(|_| {item})")
+                    ir::Code::Other(format!("::core::array::from_fn(|_| {item})"))
                 })
             }
             Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
-                Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(DEFAULT.to_owned()),
+                Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(default_code()),
                 Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
-                    Some(DEFAULT.to_owned())
+                    Some(default_code())
                 }
                 _ => None,
             },
@@ -247,9 +251,9 @@ impl<'a> Lowerer<'a> {
 
     /// The default value of `ty` as a user stub writes it (`Default::default()` when
     /// the type implements `Default`).
-    fn stub_default(&self, ty: &Ty) -> Option<String> {
+    fn stub_default(&self, ty: &Ty) -> Option<ir::Code> {
         let default = self.default_of(ty, &mut BTreeSet::new())?;
-        Some(default.replace(DEFAULT, "Default::default()"))
+        Some(default.replace_call(DEFAULT, "Default::default"))
     }
 
     fn packet_defaultable(&self, packet: &Packet, visiting: &mut BTreeSet<String>) -> bool {
@@ -266,51 +270,51 @@ impl<'a> Lowerer<'a> {
 
     /// The Rust expression of a field default: the written value, or the type's
     /// default.
-    fn field_default(&self, field_ty: &Ty, value: Option<&Value>, prefix: &str) -> String {
+    fn field_default(&self, field_ty: &Ty, value: Option<&Value>, prefix: &str) -> ir::Code {
         match value {
             Some(value) => self.value(value, Some(field_ty), prefix),
             None => self
                 .default_of(field_ty, &mut BTreeSet::new())
-                .unwrap_or_else(|| DEFAULT.to_owned()),
+                .unwrap_or_else(default_code),
         }
     }
 
     /// A Rust expression for a constant `.cool` value of type `ty`.
-    fn value(&self, value: &Value, ty: Option<&Ty>, prefix: &str) -> String {
+    fn value(&self, value: &Value, ty: Option<&Ty>, prefix: &str) -> ir::Code {
+        use ir::Code;
         if let Some(Ty::Optional(inner)) = ty {
             return match value {
-                Value::None => "::core::option::Option::None".to_owned(),
-                _ => format!(
-                    "::core::option::Option::Some({})",
-                    self.value(value, Some(inner), prefix)
+                Value::None => Code::atom("::core::option::Option::None"),
+                _ => Code::call(
+                    "::core::option::Option::Some",
+                    vec![self.value(value, Some(inner), prefix)],
                 ),
             };
         }
         match value {
             Value::Int(n) => match ty {
-                Some(Ty::Float(_)) => format!("{n}.0"),
-                Some(Ty::Duration) => duration_rust(u64::try_from(*n).unwrap_or_default()),
-                _ => n.to_string(),
+                Some(Ty::Float(_)) => Code::atom(format!("{n}.0")),
+                Some(Ty::Duration) => duration_code(u64::try_from(*n).unwrap_or_default()),
+                _ => Code::atom(n.to_string()),
             },
-            Value::Float(x) => format!("{x:?}"),
-            Value::Str(s) => {
-                format!("::std::string::String::from({})", ident::string_literal(s))
-            }
-            Value::Bool(b) => b.to_string(),
-            Value::Duration(duration) => duration_rust(duration.nanos),
-            Value::Enum { ty, variant } => {
-                format!("{prefix}{}::{}", ident::camel(ty), ident::camel(variant))
-            }
+            Value::Float(x) => Code::atom(format!("{x:?}")),
+            Value::Str(s) => Code::call("::std::string::String::from", vec![Code::string(s)]),
+            Value::Bool(b) => Code::atom(b.to_string()),
+            Value::Duration(duration) => duration_code(duration.nanos),
+            Value::Enum { ty, variant } => Code::atom(format!(
+                "{prefix}{}::{}",
+                ident::camel(ty),
+                ident::camel(variant)
+            )),
             Value::List(items) => {
                 let inner = match ty {
                     Some(Ty::List(inner) | Ty::Array(inner, _)) => Some(&**inner),
                     _ => None,
                 };
-                let items: Vec<String> =
-                    items.iter().map(|v| self.value(v, inner, prefix)).collect();
+                let items: Vec<Code> = items.iter().map(|v| self.value(v, inner, prefix)).collect();
                 match ty {
-                    Some(Ty::Array(..)) => format!("[{}]", items.join(", ")),
-                    _ => format!("::std::vec![{}]", items.join(", ")),
+                    Some(Ty::Array(..)) => Code::List("[".to_owned(), items),
+                    _ => Code::List("::std::vec![".to_owned(), items),
                 }
             }
             Value::Repeat(item, n) => {
@@ -321,15 +325,15 @@ impl<'a> Lowerer<'a> {
                 let copy = inner.is_some_and(|t| self.is_copy(t));
                 let item = self.value(item, inner, prefix);
                 match ty {
-                    Some(Ty::List(_)) => format!("::std::vec![{item}; {n}]"),
+                    Some(Ty::List(_)) => Code::Other(format!("::std::vec![{item}; {n}]")),
                     // `[value; n]` needs a `Copy` value.
-                    _ if copy => format!("[{item}; {n}]"),
-                    _ => format!("::core::array::from_fn(|_| {item})"),
+                    _ if copy => Code::Repeat(Box::new(item), *n),
+                    _ => Code::Other(format!("::core::array::from_fn(|_| {item})")),
                 }
             }
-            Value::None => "::core::option::Option::None".to_owned(),
+            Value::None => Code::atom("::core::option::Option::None"),
             // Not a constant: the checker rejects it.
-            Value::Invalid => DEFAULT.to_owned(),
+            Value::Invalid => default_code(),
         }
     }
 
@@ -427,21 +431,25 @@ impl<'a> Lowerer<'a> {
         for c in self.checked.converters() {
             let method = ident::snake(&c.name);
             let stub_body = if let Some(default) = self.stub_default(&c.to) {
-                format!(
-                    "// Converter `{}`: build the output packet from `from`.\n\
-                     let _ = from;\n\
-                     {default}",
-                    c.name
-                )
+                vec![
+                    ir::StubLine::Comment(format!(
+                        "// Converter `{}`: build the output packet from `from`.",
+                        c.name
+                    )),
+                    ir::StubLine::Statement("let _ = from;".to_owned()),
+                    ir::StubLine::Value(default),
+                ]
             } else {
-                format!(
-                    "let _ = from;\n\
-                     panic!({})",
-                    ident::string_literal(&format!(
-                        "converter `{}` is not written yet: fill in `{}` in src/converters.rs",
-                        c.name, method
-                    ))
-                )
+                vec![
+                    ir::StubLine::Statement("let _ = from;".to_owned()),
+                    ir::StubLine::Value(ir::Code::call(
+                        "panic!",
+                        vec![ir::Code::string(&format!(
+                            "converter `{}` is not written yet: fill in `{}` in src/converters.rs",
+                            c.name, method
+                        ))],
+                    )),
+                ]
             };
             types.converters.push(ir::Converter {
                 doc: c.doc.clone(),
@@ -534,7 +542,7 @@ impl Lowerer<'_> {
                 {
                     overrides.push((
                         ident::snake(&f.name),
-                        self.value(&o.value, Some(&f.ty), GEN_TYPES),
+                        self.value(&o.value, Some(&f.ty), GEN_TYPES).to_string(),
                     ));
                 }
             } else {
@@ -546,7 +554,7 @@ impl Lowerer<'_> {
                     if let Some(ty) = &v.written {
                         overrides.push((
                             ident::snake(&v.name),
-                            self.value(&o.value, Some(ty), GEN_TYPES),
+                            self.value(&o.value, Some(ty), GEN_TYPES).to_string(),
                         ));
                     }
                 }
@@ -683,10 +691,10 @@ mod tests {
         let krate = lower_text(
             "packet P { a: f64 = 1.5, b: Duration = 10ms, c: [bool; 2] = [true; 2], d: u8? = 3, e: [u8] = [1, 2], f: f32 = -2, g: i8 = -3 }",
         );
-        let defaults: Vec<&str> = krate.types.packets[0]
+        let defaults: Vec<String> = krate.types.packets[0]
             .fields
             .iter()
-            .map(|f| f.default.as_str())
+            .map(|f| f.default.to_string())
             .collect();
         assert_eq!(
             defaults,

@@ -336,6 +336,10 @@ pub struct Symbols {
     pub dirs: Vec<PathBuf>,
     /// Each loaded file's path, by file id.
     pub files: Vec<PathBuf>,
+    /// Names of `import ros` types whose `.msg` file was not found or not valid
+    /// ([`Symbols::note_unloaded`]): never offered as "did you mean" (the import is
+    /// what is misspelt).
+    pub unloaded: BTreeSet<String>,
 }
 
 /// `path` without `.` components and with each `..` taken back (as far as it goes).
@@ -448,6 +452,21 @@ impl Symbols {
             symbols.visible.push(seen);
         }
         symbols
+    }
+
+    /// Records which `import ros` names have no loaded type in `interfaces`.
+    pub fn note_unloaded(&mut self, files: &[ast::File], interfaces: &ros::Interfaces) {
+        for file in files {
+            for item in &file.items {
+                if let ast::Item::RosImport(import) = item
+                    && let Some((_, name)) = def_of(item)
+                    && !ros::TypeName::parse(&import.ros_name.value)
+                        .is_ok_and(|ros| interfaces.get(&ros).is_some())
+                {
+                    self.unloaded.insert(name.name.clone());
+                }
+            }
+        }
     }
 
     /// Records the top-level names of the `.cool` files next to the loaded ones that
@@ -595,7 +614,9 @@ impl Symbols {
                 let candidates = self
                     .defs
                     .iter()
-                    .filter(|(_, def)| accept.contains(&def.kind))
+                    .filter(|(name, def)| {
+                        accept.contains(&def.kind) && !self.unloaded.contains(*name)
+                    })
                     .map(|(name, _)| name.as_str());
                 let mut diagnostic = Diagnostic::error(
                     code,

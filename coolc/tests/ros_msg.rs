@@ -501,7 +501,8 @@ fn a_missing_type_is_reported_where_it_is_used_naming_every_place_searched() {
     assert_eq!(
         diagnostic.help.as_deref(),
         Some(
-            "looked for\n  /msgs/geometry_msgs/msg/Pointt.msg\n  <shipped>/geometry_msgs/msg/Pointt.msg"
+            "looked for\n  /msgs/geometry_msgs/msg/Pointt.msg\n  <shipped>/geometry_msgs/msg/Pointt.msg\n\
+             did you mean `geometry_msgs/msg/Point`?"
         )
     );
     assert!(interfaces.description(&name("my_msgs/msg/Thing")).is_none());

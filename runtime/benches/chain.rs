@@ -12,114 +12,32 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use coolbot::port::{DataOut, FifoIn};
-use coolbot::{
-    Component, InputKind, OutputKind, OverflowPolicy, PeriodicSpec, PortSet, Section, System,
-};
-use crossbeam_channel::{Sender, bounded};
+use crossbeam_channel::bounded;
 
-use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use common::chain::{self, CAPACITY, Collector, Stages};
+use common::{Figure, Goal, Mode, Samples, Table};
 
 const HOPS: usize = 8;
-const PERIOD: Duration = Duration::from_millis(1);
-const CAPACITY: usize = 16;
 const ROUNDS: usize = 20;
-const WARMUP: usize = 20;
 
-one_state_spec! {
-    static SOURCE = "Source",
-    inputs: [],
-    outputs: [("output", OutputKind::Data)],
-    on: [],
-    periodic: Some(PeriodicSpec { period: Some(PERIOD) }),
-}
+/// The stamp alone, passed on as it is.
+#[derive(Clone)]
+struct Stamp;
 
-one_state_spec! {
-    static RELAY = "Relay",
-    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
-    outputs: [("output", OutputKind::Data)],
-    on: [0],
-    periodic: None,
-}
+impl Stages for Stamp {
+    type Packet = Instant;
 
-one_state_spec! {
-    static SINK = "Sink",
-    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
-    outputs: [],
-    on: [0],
-    periodic: None,
-}
-
-fn source() -> Component {
-    let output = DataOut::<Instant>::new();
-    let ports = PortSet::new().output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Periodic {
-            output.send(Instant::now());
-        }
-        Ok(())
-    });
-    Component::new("stage0", Glue::boxed(&SOURCE, body), ports)
-}
-
-fn relay(index: usize) -> Component {
-    let input = FifoIn::<Instant>::new(CAPACITY, OverflowPolicy::Reject);
-    let output = DataOut::<Instant>::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry {
-            for stamp in input.drain() {
-                output.send(stamp);
-            }
-        }
-        Ok(())
-    });
-    Component::new(format!("stage{index}"), Glue::boxed(&RELAY, body), ports)
-}
-
-fn sink(count: usize, done: Sender<Vec<Duration>>) -> Component {
-    let input = FifoIn::<Instant>::new(CAPACITY, OverflowPolicy::Reject);
-    let ports = PortSet::new().input(&input);
-    let mut samples = Vec::with_capacity(count + WARMUP);
-    let mut done = Some(done);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry && done.is_some() {
-            for stamp in input.drain() {
-                samples.push(stamp.elapsed());
-            }
-            if samples.len() >= count + WARMUP
-                && let Some(done) = done.take()
-            {
-                let _ = done.send(samples.split_off(WARMUP));
-            }
-        }
-        Ok(())
-    });
-    Component::new(format!("stage{HOPS}"), Glue::boxed(&SINK, body), ports)
-}
-
-fn project_round(count: usize) -> Vec<Duration> {
-    let (done, samples) = bounded(1);
-    let mut system = System::new();
-    // Downstream first, so that every stage runs before packets reach it.
-    system.add(sink(count, done)).expect("add sink");
-    for index in (1..HOPS).rev() {
-        system.add(relay(index)).expect("add relay");
+    fn first(&self) -> Instant {
+        Instant::now()
     }
-    system.add(source()).expect("add source");
-    for index in 0..HOPS {
-        system
-            .connect(
-                &format!("stage{index}.output"),
-                &format!("stage{}.input", index + 1),
-            )
-            .expect("connect");
+
+    fn pass(&self, stamp: Instant) -> Instant {
+        stamp
     }
-    system.run_all().expect("run");
-    let samples = common::expect(&samples, Duration::from_secs(60), "chain");
-    let report = system.shutdown();
-    assert!(report.clean(), "unclean shutdown: {report:?}");
-    samples
+
+    fn last(&self, stamp: Instant) -> Instant {
+        stamp
+    }
 }
 
 fn baseline_round(count: usize) -> Vec<Duration> {
@@ -137,30 +55,15 @@ fn baseline_round(count: usize) -> Vec<Duration> {
         }));
     }
     let sink = std::thread::spawn(move || {
-        let mut samples = Vec::with_capacity(count + WARMUP);
+        let mut samples = Collector::new(count);
         for stamp in upstream.iter() {
-            samples.push(stamp.elapsed());
-            if samples.len() >= count + WARMUP {
+            if samples.push(stamp.elapsed()) {
                 break;
             }
         }
-        samples.split_off(WARMUP)
+        samples.take()
     });
-    let mut next = Instant::now() + PERIOD;
-    while !sink.is_finished() {
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        }
-        if first.send(Instant::now()).is_err() {
-            break;
-        }
-        next += PERIOD;
-        let now = Instant::now();
-        if next <= now {
-            next = now + PERIOD;
-        }
-    }
+    chain::paced(|| !sink.is_finished() && first.send(Instant::now()).is_ok());
     drop(first);
     let samples = sink.join().expect("sink thread");
     for relay in relays {
@@ -175,7 +78,7 @@ fn main() {
     let mut table = Table::new("8-hop chain at 1 kHz, end-to-end latency", mode);
     let (project, baseline) = common::alternate(
         ROUNDS,
-        || project_round(per_round),
+        || chain::components_round(HOPS, per_round, &Stamp, None),
         || baseline_round(per_round),
     );
     let (project, baseline) = (Samples::new(project), Samples::new(baseline));

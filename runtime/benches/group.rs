@@ -19,19 +19,13 @@ mod common;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use coolbot::port::{DataOut, FifoIn};
-use coolbot::{
-    Component, InputKind, OutputKind, OverflowPolicy, PeriodicSpec, PortSet, Section, System,
-};
-use crossbeam_channel::{Sender, bounded};
+use crossbeam_channel::bounded;
 
-use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use common::chain::{self, CAPACITY, Collector, PERIOD, Stages};
+use common::{Figure, Goal, Mode, Samples, Table};
 
 const STAGES: usize = 8;
-const PERIOD: Duration = Duration::from_millis(1);
-const CAPACITY: usize = 16;
 const ROUNDS: usize = 4;
-const WARMUP: usize = 20;
 /// The work of one stage.
 const WORK: Duration = Duration::from_nanos(500);
 /// The goal for the group's overhead per member per cycle.
@@ -41,30 +35,6 @@ const OVERHEAD_GOAL: Duration = Duration::from_nanos(150);
 /// works on.
 type Packet = (Instant, u64);
 
-one_state_spec! {
-    static SOURCE = "Source",
-    inputs: [],
-    outputs: [("output", OutputKind::Data)],
-    on: [],
-    periodic: Some(PeriodicSpec { period: Some(PERIOD) }),
-}
-
-one_state_spec! {
-    static RELAY = "Relay",
-    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
-    outputs: [("output", OutputKind::Data)],
-    on: [0],
-    periodic: None,
-}
-
-one_state_spec! {
-    static SINK = "Sink",
-    inputs: [("input", InputKind::Fifo { capacity: CAPACITY, policy: OverflowPolicy::Reject })],
-    outputs: [],
-    on: [0],
-    periodic: None,
-}
-
 /// One stage's work: `rounds` rounds of a mixing function.
 fn work(value: u64, rounds: u32) -> u64 {
     let mut x = value;
@@ -72,6 +42,30 @@ fn work(value: u64, rounds: u32) -> u64 {
         x = black_box(x.wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(17) ^ 0x5bd1);
     }
     x
+}
+
+/// Every stage does `work` on the packet's value (`rounds` rounds).
+#[derive(Clone, Copy)]
+struct Working {
+    rounds: u32,
+}
+
+impl Stages for Working {
+    type Packet = Packet;
+
+    fn first(&self) -> Packet {
+        let stamp = Instant::now();
+        (stamp, work(1, self.rounds))
+    }
+
+    fn pass(&self, (stamp, value): Packet) -> Packet {
+        (stamp, work(value, self.rounds))
+    }
+
+    fn last(&self, (stamp, value): Packet) -> Instant {
+        black_box(work(value, self.rounds));
+        stamp
+    }
 }
 
 /// How many rounds of `work` take about `WORK`, measured as the chain runs them: 8
@@ -99,87 +93,10 @@ fn calibrate() -> u32 {
     rounds
 }
 
-fn source(rounds: u32) -> Component {
-    let output = DataOut::<Packet>::new();
-    let ports = PortSet::new().output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Periodic {
-            let stamp = Instant::now();
-            output.send((stamp, work(1, rounds)));
-        }
-        Ok(())
-    });
-    Component::new("stage0", Glue::boxed(&SOURCE, body), ports)
-}
-
-fn relay(index: usize, rounds: u32) -> Component {
-    let input = FifoIn::<Packet>::new(CAPACITY, OverflowPolicy::Reject);
-    let output = DataOut::<Packet>::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry {
-            for (stamp, value) in input.drain() {
-                output.send((stamp, work(value, rounds)));
-            }
-        }
-        Ok(())
-    });
-    Component::new(format!("stage{index}"), Glue::boxed(&RELAY, body), ports)
-}
-
-fn sink(count: usize, rounds: u32, done: Sender<Vec<Duration>>) -> Component {
-    let input = FifoIn::<Packet>::new(CAPACITY, OverflowPolicy::Reject);
-    let ports = PortSet::new().input(&input);
-    let mut samples = Vec::with_capacity(count + WARMUP);
-    let mut done = Some(done);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry && done.is_some() {
-            for (stamp, value) in input.drain() {
-                black_box(work(value, rounds));
-                samples.push(stamp.elapsed());
-            }
-            if samples.len() >= count + WARMUP
-                && let Some(done) = done.take()
-            {
-                let _ = done.send(samples.split_off(WARMUP));
-            }
-        }
-        Ok(())
-    });
-    Component::new(
-        format!("stage{}", STAGES - 1),
-        Glue::boxed(&SINK, body),
-        ports,
-    )
-}
-
 /// The chain as components, in one group (`grouped`) or one thread each.
 fn components_round(count: usize, rounds: u32, grouped: bool) -> Vec<Duration> {
-    let (done, samples) = bounded(1);
-    let mut system = System::new();
-    system.add(sink(count, rounds, done)).expect("add sink");
-    for index in (1..STAGES - 1).rev() {
-        system.add(relay(index, rounds)).expect("add relay");
-    }
-    system.add(source(rounds)).expect("add source");
-    for index in 0..STAGES - 1 {
-        system
-            .connect(
-                &format!("stage{index}.output"),
-                &format!("stage{}.input", index + 1),
-            )
-            .expect("connect");
-    }
-    if grouped {
-        let names: Vec<String> = (0..STAGES).map(|index| format!("stage{index}")).collect();
-        let names: Vec<&str> = names.iter().map(String::as_str).collect();
-        system.group("chain", &names).expect("group");
-    }
-    system.run_all().expect("run");
-    let samples = common::expect(&samples, Duration::from_secs(60), "chain");
-    let report = system.shutdown();
-    assert!(report.clean(), "unclean shutdown: {report:?}");
-    samples
+    let group = grouped.then_some("chain");
+    chain::components_round(STAGES - 1, count, &Working { rounds }, group)
 }
 
 /// The hand loop: one thread sleeping to absolute deadlines, calling the 8 stage
@@ -188,13 +105,8 @@ fn components_round(count: usize, rounds: u32, grouped: bool) -> Vec<Duration> {
 /// it (the same packets, the same connections); otherwise it is handed on by value.
 fn hand_round(count: usize, rounds: u32, queued: bool) -> Vec<Duration> {
     let links: Vec<_> = (1..STAGES).map(|_| bounded::<Packet>(CAPACITY)).collect();
-    let mut samples = Vec::with_capacity(count + WARMUP);
-    let mut next = Instant::now() + PERIOD;
-    while samples.len() < count + WARMUP {
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        }
+    let mut samples = Collector::new(count);
+    chain::paced(|| {
         let mut packet: Packet = (Instant::now(), work(1, rounds));
         for (sender, receiver) in &links {
             if queued {
@@ -207,14 +119,9 @@ fn hand_round(count: usize, rounds: u32, queued: bool) -> Vec<Duration> {
                 packet = black_box((packet.0, work(packet.1, rounds)));
             }
         }
-        samples.push(packet.0.elapsed());
-        next += PERIOD;
-        let now = Instant::now();
-        if next <= now {
-            next = now + PERIOD;
-        }
-    }
-    samples.split_off(WARMUP)
+        !samples.push(packet.0.elapsed())
+    });
+    samples.take()
 }
 
 fn main() {

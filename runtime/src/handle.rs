@@ -246,7 +246,7 @@ impl Handle {
             Err(TrySendError::Full(_)) => return Err(Refusal::QueueFull),
             Err(TrySendError::Disconnected(_)) => return Err(Refusal::Ended),
         }
-        self.bell.ring_strong();
+        self.bell.ring_command();
         Ok(Posted {
             command,
             answers,

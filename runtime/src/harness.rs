@@ -387,7 +387,7 @@ impl Harness {
                 "the control queue is full or the component is dead".to_owned(),
             ));
         }
-        self.handle.bell.ring_strong();
+        self.handle.bell.ring_command();
         self.settle()?;
         let mut answered = false;
         while let Ok(answer) = answers.try_recv() {

@@ -138,9 +138,9 @@ pub use crate::commander::{
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::handle::Handle;
 pub use crate::monitor::{
-    Command, DEFAULT_COMMAND_TIMEOUT, Monitor, MonitorEvent, OBSERVER_CAPACITY, RESPONSE_WINDOW,
-    Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision, TaskResult,
-    Timeout, total_overflows,
+    Command, DEFAULT_COMMAND_TIMEOUT, GroupStatus, Monitor, MonitorEvent, OBSERVER_CAPACITY,
+    RESPONSE_WINDOW, Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision,
+    TaskResult, Timeout, total_overflows,
 };
 pub use crate::port::{
     DEFAULT_BLOCK_TIMEOUT, InputPort, OutputPort, PULL_REQUEST_CAPACITY, Packet, PullError,

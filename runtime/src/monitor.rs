@@ -148,6 +148,121 @@ pub struct Monitor {
     /// packet's arrival to the end of the `on` transition that handled it.
     #[serde(default)]
     pub response: ResponseTimes,
+    /// The execution group the component runs in, with the group's cycle figures;
+    /// `None` for a component on a thread of its own (`docs/runtime.md`, "Execution
+    /// groups").
+    #[serde(default)]
+    pub group: Option<GroupStatus>,
+}
+
+/// An execution group as each member's monitor shows it: its name, its members in
+/// the order they run, and its cycles. A cycle is one pass of the group's thread
+/// over its members; the group's period is the shortest period in effect among its
+/// members, and a cycle longer than that period is an overrun (the next cycle
+/// starts late for someone).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct GroupStatus {
+    /// The group's name (its thread's name).
+    pub name: String,
+    /// The members, in the order each cycle runs them (data-flow order).
+    pub members: Vec<String>,
+    /// Cycles run since the group's thread started.
+    pub cycles: u64,
+    /// How long the last cycle took.
+    pub last_cycle: Duration,
+    /// The longest cycle so far.
+    pub worst_cycle: Duration,
+    /// The shortest period in effect among the members, as the last wait saw it;
+    /// `None` while no member is periodic.
+    pub period: Option<Duration>,
+    /// Cycles that took longer than `period`.
+    pub overruns: u64,
+}
+
+thread_local! {
+    /// On an execution group's thread: the address of the monitor of the member whose
+    /// turn runs now (0 between turns, and on a component's own thread).
+    static TURN: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// The member whose monitor is `shared` takes its turn on this thread (`None`: the
+/// turns are over).
+pub(crate) fn set_turn(shared: Option<&Arc<Shared>>) {
+    TURN.set(shared.map_or(0, |shared| Arc::as_ptr(shared) as usize));
+}
+
+/// Whether `shared` is the monitor of the group member whose turn runs on this
+/// thread now (`None`: no member's turn runs on it).
+pub(crate) fn turn_is(shared: &Arc<Shared>) -> Option<bool> {
+    let turn = TURN.get();
+    (turn != 0).then_some(turn == Arc::as_ptr(shared) as usize)
+}
+
+/// An execution group's cycle figures, written by its thread only (plain loads and
+/// stores, no read-modify-write) and read by every member's snapshot.
+#[derive(Debug)]
+pub(crate) struct GroupCycles {
+    name: String,
+    members: Vec<String>,
+    cycles: AtomicU64,
+    last_ns: AtomicU64,
+    worst_ns: AtomicU64,
+    /// The period in nanoseconds; 0 for none.
+    period_ns: AtomicU64,
+    overruns: AtomicU64,
+}
+
+impl GroupCycles {
+    pub(crate) fn new(name: &str, members: Vec<String>) -> GroupCycles {
+        GroupCycles {
+            name: name.to_owned(),
+            members,
+            cycles: AtomicU64::new(0),
+            last_ns: AtomicU64::new(0),
+            worst_ns: AtomicU64::new(0),
+            period_ns: AtomicU64::new(0),
+            overruns: AtomicU64::new(0),
+        }
+    }
+
+    /// A cycle took `took` (called by the group's thread only).
+    pub(crate) fn cycle(&self, took: Duration) {
+        let took = u64::try_from(took.as_nanos()).unwrap_or(u64::MAX);
+        let bump = |counter: &AtomicU64| {
+            counter.store(
+                counter.load(Ordering::Relaxed).saturating_add(1),
+                Ordering::Relaxed,
+            );
+        };
+        bump(&self.cycles);
+        self.last_ns.store(took, Ordering::Relaxed);
+        if took > self.worst_ns.load(Ordering::Relaxed) {
+            self.worst_ns.store(took, Ordering::Relaxed);
+        }
+        let period = self.period_ns.load(Ordering::Relaxed);
+        if period > 0 && took > period {
+            bump(&self.overruns);
+        }
+    }
+
+    /// The group's period is now `period` (called by the group's thread only).
+    pub(crate) fn set_period(&self, period: Option<Duration>) {
+        let ns = period.map_or(0, |p| u64::try_from(p.as_nanos()).unwrap_or(u64::MAX));
+        self.period_ns.store(ns, Ordering::Relaxed);
+    }
+
+    fn status(&self) -> GroupStatus {
+        let period = self.period_ns.load(Ordering::Relaxed);
+        GroupStatus {
+            name: self.name.clone(),
+            members: self.members.clone(),
+            cycles: self.cycles.load(Ordering::Relaxed),
+            last_cycle: Duration::from_nanos(self.last_ns.load(Ordering::Relaxed)),
+            worst_cycle: Duration::from_nanos(self.worst_ns.load(Ordering::Relaxed)),
+            period: (period > 0).then(|| Duration::from_nanos(period)),
+            overruns: self.overruns.load(Ordering::Relaxed),
+        }
+    }
 }
 
 /// How many responses [`ResponseTimes::p50`] and [`ResponseTimes::p99`] are taken
@@ -458,6 +573,8 @@ pub(crate) struct Shared {
     /// A compound's supervisor decides this component's adaptation level: its runner
     /// only detects and publishes its verdicts (set when the compound is built).
     pub(crate) adapt_managed: AtomicBool,
+    /// The execution group the component runs in, once its thread runs.
+    pub(crate) group: std::sync::OnceLock<Arc<GroupCycles>>,
 }
 
 impl std::fmt::Debug for Shared {
@@ -478,6 +595,7 @@ impl Shared {
             stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
             adapt_managed: AtomicBool::new(false),
+            group: std::sync::OnceLock::new(),
         }
     }
 
@@ -628,6 +746,7 @@ impl Shared {
         }
         monitor.overflows = total_overflows(&monitor.port_overflows);
         monitor.dropped_events = self.dropped.load(Ordering::Relaxed);
+        monitor.group = self.group.get().map(|group| group.status());
         monitor
     }
 

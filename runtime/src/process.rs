@@ -489,7 +489,8 @@ pub fn forget_system(system: &System) {
 }
 
 /// The watched component whose thread is the calling one: its dotted path and
-/// handle. Matched by thread id, else (a restarted instance runs on a new thread) by
+/// handle. Matched by the member whose turn runs on an execution group's thread,
+/// else by thread id, else (a restarted instance runs on a new thread) by
 /// the thread's name `cool:<name>` when one component only has that name.
 fn current_component() -> Option<(String, Handle)> {
     fn walk(handle: &Handle, path: String, out: &mut Vec<(String, Handle)>) {
@@ -504,11 +505,13 @@ fn current_component() -> Option<(String, Handle)> {
         walk(root, root.name.to_string(), &mut all);
     }
     drop(watched);
+    // On an execution group's thread, the member whose turn it is; on a
+    // component's own thread, the component whose thread it is.
     let thread = std::thread::current();
-    if let Some(found) = all
-        .iter()
-        .find(|(_, h)| h.shared.thread.get() == Some(&thread.id()))
-    {
+    if let Some(found) = all.iter().find(|(_, h)| {
+        crate::monitor::turn_is(&h.shared)
+            .unwrap_or_else(|| h.shared.thread.get() == Some(&thread.id()))
+    }) {
         return Some(found.clone());
     }
     let name = thread.name()?.strip_prefix("cool:")?;

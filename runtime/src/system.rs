@@ -657,6 +657,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         supervision_steps: 0,
         adaptation: crate::adapt::AdaptStatus::default(),
         response: crate::monitor::ResponseTimes::default(),
+        group: None,
     };
     let named_inputs = spec
         .inputs
@@ -1503,7 +1504,7 @@ impl System {
                     reply,
                     claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),
                 });
-                slot.handle.bell.ring_strong();
+                slot.handle.bell.ring_command();
             }
         }
         let deadline = crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT);

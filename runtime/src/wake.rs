@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::time::Instant;
 
 /// The wake-up of one component thread: rung by every command, every delivery to its
@@ -59,6 +59,15 @@ use std::time::Instant;
 /// within a few microseconds costs no futex wake-up.
 pub(crate) struct Doorbell {
     state: AtomicU8,
+    /// Set after a command is queued on the component's control queue, before the
+    /// ring ([`Doorbell::ring_command`]): a turn reads the control queue only when it
+    /// finds it set, so a turn rung by an arrival touches none of the queue's cache
+    /// lines. Why no command is missed: the sender's store comes after its push and
+    /// before its ring, all `SeqCst` with the thread's `clear` and its load here. A
+    /// load that reads `false` comes before the store in their total order, so the
+    /// ring comes after the `clear` and the next wait returns at once; the next turn's
+    /// load comes after the ring, sees the mark, and the queue holds the command.
+    commands: AtomicBool,
     /// The component's thread, once it runs.
     thread: OnceLock<std::thread::Thread>,
 }
@@ -78,6 +87,7 @@ impl Doorbell {
     pub(crate) fn new() -> Arc<Doorbell> {
         Arc::new(Doorbell {
             state: AtomicU8::new(QUIET),
+            commands: AtomicBool::new(false),
             thread: OnceLock::new(),
         })
     }
@@ -103,6 +113,20 @@ impl Doorbell {
         {
             thread.unpark();
         }
+    }
+
+    /// Ring after queueing a command on the component's control queue.
+    #[inline]
+    pub(crate) fn ring_command(&self) {
+        self.commands.store(true, Ordering::SeqCst);
+        self.ring_strong();
+    }
+
+    /// Whether a command was queued since the last call that said so (then the mark
+    /// is cleared: the caller reads the control queue until it is empty).
+    #[inline]
+    pub(crate) fn take_commands(&self) -> bool {
+        self.commands.load(Ordering::SeqCst) && self.commands.swap(false, Ordering::SeqCst)
     }
 
     /// The thread starts a turn: rings from now on wake it again.
@@ -230,5 +254,28 @@ impl Waker {
     /// Wake the component's thread (a no-op if it is already due to wake).
     pub fn wake(&self) {
         self.bell.ring_strong();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_command_ring_marks_commands_and_taking_the_mark_clears_it() {
+        let bell = Doorbell::new();
+        assert!(!bell.take_commands());
+        // An arrival's ring and a pull request's leave no mark.
+        bell.ring();
+        bell.ring_strong();
+        assert!(bell.is_rung());
+        assert!(!bell.take_commands());
+        bell.clear();
+        // A command's ring marks it, once however many came.
+        bell.ring_command();
+        bell.ring_command();
+        assert!(bell.is_rung());
+        assert!(bell.take_commands());
+        assert!(!bell.take_commands());
     }
 }

@@ -399,6 +399,7 @@ const MARKDOWN: &[&str] = &[
     "ARCHITECTURE.md",
     "examples/README.md",
     "docs/distribution.md",
+    "docs/foxglove.md",
     "docs/generated-code.md",
     "docs/language.md",
     "docs/performance.md",

@@ -433,9 +433,9 @@ fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
 }
 
 fn same_port(a: &Port, b: &Port) -> bool {
-    a.kind == b.kind
+    a.kind() == b.kind()
         && a.pull == b.pull
-        && match (&a.ty, &b.ty) {
+        && match (a.ty(), b.ty()) {
             (Some(x), Some(y)) => x.same(y),
             (None, None) => true,
             _ => false,
@@ -444,9 +444,9 @@ fn same_port(a: &Port, b: &Port) -> bool {
 
 fn describe_port(port: &Port) -> String {
     let pull = if port.pull { " pull" } else { "" };
-    match &port.ty {
-        Some(ty) => format!("{}<{ty}>{pull}", port.kind.as_str()),
-        None => format!("{}{pull}", port.kind.as_str()),
+    match port.ty() {
+        Some(ty) => format!("{}<{ty}>{pull}", port.kind().as_str()),
+        None => format!("{}{pull}", port.kind().as_str()),
     }
 }
 
@@ -793,7 +793,7 @@ fn connect(
         return;
     };
     let allowed = matches!(
-        (from.kind, to.kind),
+        (from.kind(), to.kind()),
         (PortKind::Tick, PortKind::Tick)
             | (PortKind::Poster, PortKind::Poster)
             | (
@@ -802,7 +802,7 @@ fn connect(
             )
     );
     if !allowed {
-        let help = match from.kind {
+        let help = match from.kind() {
             PortKind::Tick => "a `tick` output connects to `tick` inputs",
             PortKind::Poster => "a `poster` output connects to `poster` inputs",
             _ => "a `data` output connects to `last`, `fifo` and `ufifo` inputs",
@@ -814,7 +814,7 @@ fn connect(
             None => kind.as_str().to_owned(),
         };
         let mut help = help.to_owned();
-        if let (Some(out_ty), Some(in_ty), None) = (&from.ty, &to.ty, &connect.via)
+        if let (Some(out_ty), Some(in_ty), None) = (from.ty(), to.ty(), &connect.via)
             && !out_ty.same(in_ty)
         {
             help.push_str(&format!(
@@ -828,9 +828,9 @@ fn connect(
                 format!(
                     "cannot connect `{}`, a `{}` output, to `{}`, a `{}` input",
                     path(&connect.from),
-                    typed(from.kind, from.ty.as_ref()),
+                    typed(from.kind(), from.ty()),
                     path(&connect.to),
-                    typed(to.kind, to.ty.as_ref()),
+                    typed(to.kind(), to.ty()),
                 ),
             )
             .with_label("incompatible port kinds")
@@ -853,7 +853,7 @@ fn connect(
             .with_help("add `pull` to the output's declaration");
         checker.push(diagnostic);
     }
-    let (Some(out_ty), Some(in_ty)) = (&from.ty, &to.ty) else {
+    let (Some(out_ty), Some(in_ty)) = (from.ty(), to.ty()) else {
         if let Some(via) = &connect.via {
             let diagnostic = checker
                 .error(
@@ -1087,14 +1087,14 @@ fn cardinality(
         let Some(port) = interface.inputs.get(&port_name) else {
             continue;
         };
-        if matches!(port.kind, PortKind::Last | PortKind::Poster) {
+        if matches!(port.kind(), PortKind::Last | PortKind::Poster) {
             let grouped = owner != *instance;
             for (_, instance, extra) in &ends[1..] {
-                let kind = port.kind.as_str();
+                let kind = port.kind().as_str();
                 // What merges several producers depends on the kind: `data` packets
                 // queue in a fifo; a poster is one producer's shared value, read on
                 // demand, so each producer needs an input of its own.
-                let merge = if port.kind == PortKind::Poster {
+                let merge = if port.kind() == PortKind::Poster {
                     "a `poster` input reads one producer's poster: declare one `poster` \
                      input per producer, or merge their values in a component of its own"
                 } else {

@@ -107,7 +107,7 @@ pub fn prim_name(prim: ast::Prim) -> &'static str {
     }
 }
 
-/// The kinds of port (paper Figure 3).
+/// The kinds of port (paper Figure 3): the tag of an [`InputKind`] or [`OutputKind`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum PortKind {
     /// `tick` (input or output)
@@ -138,19 +138,242 @@ impl PortKind {
     }
 }
 
-/// A port as seen from outside.
+/// What an input port is: its kind with its packet type and settings, evaluated.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Port {
-    /// Its kind.
-    pub kind: PortKind,
-    /// Its packet type (`None` for ticks).
-    pub ty: Option<Ty>,
+pub enum InputKind {
+    /// `tick`
+    Tick,
+    /// `fifo<T>(size[, policy])`
+    Fifo {
+        /// Packet type.
+        ty: Ty,
+        /// Queue length.
+        size: u64,
+        /// Overflow policy, when written ([`OverflowPolicy::default`] applies
+        /// otherwise).
+        policy: Option<OverflowPolicy>,
+    },
+    /// `ufifo<T>(size[, max m])`
+    Ufifo {
+        /// Packet type.
+        ty: Ty,
+        /// Initial length and growth step.
+        size: u64,
+        /// Growth cap, when written.
+        max: Option<u64>,
+    },
+    /// `last<T>`
+    Last(Ty),
+    /// `poster<T>`
+    Poster(Ty),
+}
+
+impl InputKind {
+    /// The input as written (`None` for an export, which has no kind of its own).
+    fn of(def: &ast::InputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<InputKind> {
+        Some(match def {
+            ast::InputDef::Tick => InputKind::Tick,
+            ast::InputDef::Fifo {
+                ty: packet,
+                size,
+                policy,
+            } => InputKind::Fifo {
+                ty: ty(packet),
+                size: size.value,
+                policy: policy.as_ref().and_then(|p| OverflowPolicy::named(&p.name)),
+            },
+            ast::InputDef::Ufifo {
+                ty: packet,
+                size,
+                max,
+            } => InputKind::Ufifo {
+                ty: ty(packet),
+                size: size.value,
+                max: max.as_ref().map(|m| m.value),
+            },
+            ast::InputDef::Last(packet) => InputKind::Last(ty(packet)),
+            ast::InputDef::Poster(packet) => InputKind::Poster(ty(packet)),
+            ast::InputDef::Export(_) => return None,
+        })
+    }
+
+    /// The port kind (and so the connection kind an input forms, paper Figure 3).
+    pub fn port_kind(&self) -> PortKind {
+        match self {
+            InputKind::Tick => PortKind::Tick,
+            InputKind::Fifo { .. } => PortKind::Fifo,
+            InputKind::Ufifo { .. } => PortKind::Ufifo,
+            InputKind::Last(_) => PortKind::Last,
+            InputKind::Poster(_) => PortKind::Poster,
+        }
+    }
+
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            InputKind::Tick => None,
+            InputKind::Fifo { ty, .. } | InputKind::Ufifo { ty, .. } => Some(ty),
+            InputKind::Last(ty) | InputKind::Poster(ty) => Some(ty),
+        }
+    }
+}
+
+/// What an output port is: its kind with its packet type.
+#[derive(Clone, Debug, PartialEq)]
+pub enum OutputKind {
+    /// `tick`
+    Tick,
+    /// `data<T>`
+    Data(Ty),
+    /// `poster<T>`
+    Poster(Ty),
+}
+
+impl OutputKind {
+    /// The output as written (`None` for an export).
+    fn of(def: &ast::OutputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<OutputKind> {
+        Some(match def {
+            ast::OutputDef::Tick => OutputKind::Tick,
+            ast::OutputDef::Data(packet) => OutputKind::Data(ty(packet)),
+            ast::OutputDef::Poster(packet) => OutputKind::Poster(ty(packet)),
+            ast::OutputDef::Export(_) => return None,
+        })
+    }
+
+    /// The port kind.
+    pub fn port_kind(&self) -> PortKind {
+        match self {
+            OutputKind::Tick => PortKind::Tick,
+            OutputKind::Data(_) => PortKind::Data,
+            OutputKind::Poster(_) => PortKind::Poster,
+        }
+    }
+
+    /// The packet type (`None` for a tick).
+    pub fn packet(&self) -> Option<&Ty> {
+        match self {
+            OutputKind::Tick => None,
+            OutputKind::Data(ty) | OutputKind::Poster(ty) => Some(ty),
+        }
+    }
+}
+
+/// What a full `fifo` input does with a new packet (`fifo<T>(n, policy)`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OverflowPolicy {
+    /// `reject` (the default): the new packet is refused and counted.
+    #[default]
+    Reject,
+    /// `drop_oldest`: the oldest queued packet makes room.
+    DropOldest,
+    /// `block`: the producer waits for room, up to a timeout.
+    Block,
+}
+
+impl OverflowPolicy {
+    /// Every policy with its name in the language.
+    pub const ALL: [(&'static str, OverflowPolicy); 3] = [
+        ("reject", OverflowPolicy::Reject),
+        ("drop_oldest", OverflowPolicy::DropOldest),
+        ("block", OverflowPolicy::Block),
+    ];
+
+    /// The policy named `name`.
+    pub fn named(name: &str) -> Option<OverflowPolicy> {
+        Self::ALL
+            .iter()
+            .find(|(known, _)| *known == name)
+            .map(|(_, policy)| *policy)
+    }
+
+    /// Its name in the language.
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, known)| *known == self)
+            .map_or("", |(name, _)| name)
+    }
+}
+
+/// A declared port: its kind and whether it is `pull`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Declared<K> {
+    /// The kind, with its packet type.
+    pub kind: K,
     /// `pull` was written.
     pub pull: bool,
-    /// A `fifo` input whose overflow policy is `block`.
-    pub block: bool,
+}
+
+/// An input's or an output's kind.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Declaration {
+    /// An input port.
+    Input(InputKind),
+    /// An output port.
+    Output(OutputKind),
+}
+
+/// A port as seen from outside: for an export, the port it reaches (through every
+/// level of exports), at the export's span.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Port {
+    /// Its kind, with its packet type and settings.
+    pub declared: Declaration,
+    /// `pull` was written.
+    pub pull: bool,
     /// Where it is declared (in the component's file).
     pub span: Span,
+}
+
+impl Port {
+    /// Its kind.
+    pub fn kind(&self) -> PortKind {
+        match &self.declared {
+            Declaration::Input(kind) => kind.port_kind(),
+            Declaration::Output(kind) => kind.port_kind(),
+        }
+    }
+
+    /// Its packet type (`None` for ticks).
+    pub fn ty(&self) -> Option<&Ty> {
+        match &self.declared {
+            Declaration::Input(kind) => kind.packet(),
+            Declaration::Output(kind) => kind.packet(),
+        }
+    }
+
+    /// A `fifo` input whose overflow policy is `block`.
+    pub fn block(&self) -> bool {
+        matches!(
+            self.declared,
+            Declaration::Input(InputKind::Fifo {
+                policy: Some(OverflowPolicy::Block),
+                ..
+            })
+        )
+    }
+
+    /// The input it is, with `pull` (`None` for an output).
+    pub fn input(&self) -> Option<Declared<InputKind>> {
+        match &self.declared {
+            Declaration::Input(kind) => Some(Declared {
+                kind: kind.clone(),
+                pull: self.pull,
+            }),
+            Declaration::Output(_) => None,
+        }
+    }
+
+    /// The output it is, with `pull` (`None` for an input).
+    pub fn output(&self) -> Option<Declared<OutputKind>> {
+        match &self.declared {
+            Declaration::Output(kind) => Some(Declared {
+                kind: kind.clone(),
+                pull: self.pull,
+            }),
+            Declaration::Input(_) => None,
+        }
+    }
 }
 
 /// A variable as seen from outside.
@@ -267,8 +490,6 @@ impl fmt::Display for Range {
 /// What a component offers.
 #[derive(Clone, Debug, Default)]
 pub struct Interface {
-    /// The file of the component.
-    pub file: FileId,
     /// Input ports by name.
     pub inputs: BTreeMap<String, Port>,
     /// Output ports by name.
@@ -501,16 +722,13 @@ impl<'a> Model<'a> {
         if let Some(found) = self.interfaces.borrow().get(name) {
             return found.clone();
         }
-        let Some((file, component)) = self.component(name) else {
+        let Some((_, component)) = self.component(name) else {
             return Rc::new(Interface::default());
         };
         if !self.in_progress.borrow_mut().insert(name.to_owned()) {
-            return Rc::new(Interface {
-                file,
-                ..Interface::default()
-            });
+            return Rc::new(Interface::default());
         }
-        let interface = Rc::new(self.compute(file, component));
+        let interface = Rc::new(self.compute(component));
         self.in_progress.borrow_mut().remove(name);
         self.interfaces
             .borrow_mut()
@@ -529,41 +747,21 @@ impl<'a> Model<'a> {
         })
     }
 
-    fn compute(&self, file: FileId, component: &ast::Component) -> Interface {
-        let mut interface = Interface {
-            file,
-            ..Interface::default()
-        };
+    fn compute(&self, component: &ast::Component) -> Interface {
+        let mut interface = Interface::default();
         for member in &component.members {
             match member {
                 ast::Member::Input(input) => {
                     let port = match &input.def {
-                        ast::InputDef::Tick => {
-                            Some(self.port(PortKind::Tick, None, input.pull, input.span))
-                        }
-                        ast::InputDef::Fifo { ty, policy, .. } => {
-                            let mut port =
-                                self.port(PortKind::Fifo, Some(ty), input.pull, input.span);
-                            port.block = policy.as_ref().is_some_and(|p| p.name == "block");
-                            Some(port)
-                        }
-                        ast::InputDef::Ufifo { ty, .. } => {
-                            Some(self.port(PortKind::Ufifo, Some(ty), input.pull, input.span))
-                        }
-                        ast::InputDef::Last(ty) => {
-                            Some(self.port(PortKind::Last, Some(ty), input.pull, input.span))
-                        }
-                        ast::InputDef::Poster(ty) => {
-                            Some(self.port(PortKind::Poster, Some(ty), input.pull, input.span))
-                        }
-                        ast::InputDef::Export(target) => {
-                            self.exported(component, target, true).map(|mut port| {
-                                port.span = input.span;
-                                port
-                            })
-                        }
+                        ast::InputDef::Export(target) => self.exported(component, target, true),
+                        def => InputKind::of(def, |ty| self.ty(ty)).map(|kind| Port {
+                            declared: Declaration::Input(kind),
+                            pull: input.pull.is_some(),
+                            span: input.span,
+                        }),
                     };
-                    if let Some(port) = port {
+                    if let Some(mut port) = port {
+                        port.span = input.span;
                         interface
                             .inputs
                             .entry(input.name.name.clone())
@@ -572,23 +770,15 @@ impl<'a> Model<'a> {
                 }
                 ast::Member::Output(output) => {
                     let port = match &output.def {
-                        ast::OutputDef::Tick => {
-                            Some(self.port(PortKind::Tick, None, output.pull, output.span))
-                        }
-                        ast::OutputDef::Data(ty) => {
-                            Some(self.port(PortKind::Data, Some(ty), output.pull, output.span))
-                        }
-                        ast::OutputDef::Poster(ty) => {
-                            Some(self.port(PortKind::Poster, Some(ty), output.pull, output.span))
-                        }
-                        ast::OutputDef::Export(target) => {
-                            self.exported(component, target, false).map(|mut port| {
-                                port.span = output.span;
-                                port
-                            })
-                        }
+                        ast::OutputDef::Export(target) => self.exported(component, target, false),
+                        def => OutputKind::of(def, |ty| self.ty(ty)).map(|kind| Port {
+                            declared: Declaration::Output(kind),
+                            pull: output.pull.is_some(),
+                            span: output.span,
+                        }),
                     };
-                    if let Some(port) = port {
+                    if let Some(mut port) = port {
+                        port.span = output.span;
                         interface
                             .outputs
                             .entry(output.name.name.clone())
@@ -652,16 +842,6 @@ impl<'a> Model<'a> {
             }
         }
         interface
-    }
-
-    fn port(&self, kind: PortKind, ty: Option<&ast::Type>, pull: Option<Span>, span: Span) -> Port {
-        Port {
-            kind,
-            ty: ty.map(|ty| self.ty(ty)),
-            pull: pull.is_some(),
-            block: false,
-            span,
-        }
     }
 
     /// The port an export names, through the instance's component.

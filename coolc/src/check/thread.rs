@@ -231,6 +231,39 @@ fn nanos(nanos: u64) -> String {
     format!("{nanos}ns")
 }
 
+/// A connection between two members of one group that the group cannot run: the
+/// diagnostic's parts (the message is "`to.port`{fed} `from.port`, a member of the
+/// same group: {because}").
+struct InGroup {
+    code: Code,
+    fed: &'static str,
+    because: &'static str,
+    label: &'static str,
+    connection: &'static str,
+    help: &'static str,
+}
+
+/// A `pull` input fed by a member of its own group.
+const PULL_IN_GROUP: InGroup = InGroup {
+    code: Code::ThreadPull,
+    fed: " pulls from",
+    because: "the pull would wait for its own thread",
+    label: "pulls from a member",
+    connection: "the pull connection",
+    help: "take one of the two out of the group, or let the input read what is sent (no `pull`)",
+};
+
+/// A `block` fifo fed by a member of its own group.
+const BLOCK_IN_GROUP: InGroup = InGroup {
+    code: Code::ThreadBlock,
+    fed: ", a `block` fifo, is fed by",
+    because: "a full queue would stop the thread that empties it",
+    label: "blocks a member",
+    connection: "the connection",
+    help: "give the fifo another policy (`reject`, `drop_oldest`), or take one of the two out \
+           of the group",
+};
+
 /// The connections among the members: none into a `pull` input (the pull would wait
 /// for the thread that waits) nor into a `block` fifo (a full queue would stop the
 /// thread that empties it), and no cycle unless a `last` or `poster` input is on
@@ -264,51 +297,33 @@ fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Mem
         let Some(port) = interface.inputs.get(&connect.to.port.name) else {
             continue;
         };
-        if port.pull {
+        let flaw = if port.pull {
+            Some(&PULL_IN_GROUP)
+        } else if port.block() {
+            Some(&BLOCK_IN_GROUP)
+        } else {
+            None
+        };
+        if let Some(flaw) = flaw {
+            let (from, to) = (&members[from], &members[to]);
+            let message = format!(
+                "`{}.{}`{} `{}.{}`, a member of the same group: {}",
+                to.ident.name,
+                connect.to.port.name,
+                flaw.fed,
+                from.ident.name,
+                connect.from.port.name,
+                flaw.because,
+            );
             let diagnostic = checker
-                .error(
-                    Code::ThreadPull,
-                    members[to].ident.span,
-                    format!(
-                        "`{}.{}` pulls from `{}.{}`, a member of the same group: the pull would wait for its own thread",
-                        members[to].ident.name,
-                        connect.to.port.name,
-                        members[from].ident.name,
-                        connect.from.port.name
-                    ),
-                )
-                .with_label("pulls from a member")
-                .with_secondary(connect.span, "the pull connection")
-                .with_help(
-                    "take one of the two out of the group, or let the input read what is sent \
-                     (no `pull`)",
-                );
+                .error(flaw.code, to.ident.span, message)
+                .with_label(flaw.label)
+                .with_secondary(connect.span, flaw.connection)
+                .with_help(flaw.help);
             checker.push(diagnostic);
             continue;
         }
-        if port.block {
-            let diagnostic = checker
-                .error(
-                    Code::ThreadBlock,
-                    members[to].ident.span,
-                    format!(
-                        "`{}.{}`, a `block` fifo, is fed by `{}.{}`, a member of the same group: a full queue would stop the thread that empties it",
-                        members[to].ident.name,
-                        connect.to.port.name,
-                        members[from].ident.name,
-                        connect.from.port.name
-                    ),
-                )
-                .with_label("blocks a member")
-                .with_secondary(connect.span, "the connection")
-                .with_help(
-                    "give the fifo another policy (`reject`, `drop_oldest`), or take one of \
-                     the two out of the group",
-                );
-            checker.push(diagnostic);
-            continue;
-        }
-        if !matches!(port.kind, PortKind::Last | PortKind::Poster) {
+        if !matches!(port.kind(), PortKind::Last | PortKind::Poster) {
             edges.push((from, to, connect.span));
         }
     }

@@ -9,17 +9,12 @@ use std::collections::BTreeMap;
 use super::model::{
     Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
     Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
-    OutputKind, OverflowPolicy, Override, Packet, PlanStep, Policy, PortRef, Range, Recovery,
-    Redundant, Ref, Restart, RosImport, State, StateMember, TableValue, Thread, TimingEntry,
-    TypeDef, Value, Variable,
+    Override, Packet, PlanStep, Policy, PortRef, Range, Recovery, Redundant, Ref, Restart,
+    RosImport, State, StateMember, TableValue, Thread, TimingEntry, TypeDef, Value, Variable,
 };
 use crate::ast::{self, FileId, Span};
-use crate::check::model::{Interface, Model, Tuning, Ty};
+use crate::check::model::{Interface, Model, Port, Tuning, Ty};
 use crate::check::{Resolved, Typed};
-
-/// Exports nested deeper than this are not followed (a checked model has no
-/// containment cycle; this only bounds a model built from input with errors).
-const MAX_DEPTH: usize = 64;
 
 /// Every component of `files`, in source order (files in `FileId` order), each once
 /// (the one the symbol table names).
@@ -197,6 +192,9 @@ impl<'a> Builder<'a> {
         let ports: Vec<&str> = inputs(component)
             .map(|input| input.name.name.as_str())
             .collect();
+        // Ports come from the interface the checker computed (exports followed there,
+        // once).
+        let own = self.interfaces.get(&component.name.name);
         for member in &component.members {
             match member {
                 ast::Member::Input(input) => out.inputs.push(Input {
@@ -206,7 +204,9 @@ impl<'a> Builder<'a> {
                         ast::InputDef::Export(target) => Some(self.port_ref(component, target)),
                         _ => None,
                     },
-                    port: self.declared_input(component, input, 0),
+                    port: own
+                        .and_then(|own| own.inputs.get(&input.name.name))
+                        .and_then(Port::input),
                     span: input.span,
                 }),
                 ast::Member::Output(output) => out.outputs.push(Output {
@@ -216,7 +216,9 @@ impl<'a> Builder<'a> {
                         ast::OutputDef::Export(target) => Some(self.port_ref(component, target)),
                         _ => None,
                     },
-                    port: self.declared_output(component, output, 0),
+                    port: own
+                        .and_then(|own| own.outputs.get(&output.name.name))
+                        .and_then(Port::output),
                     span: output.span,
                 }),
                 ast::Member::Variable(variable) => out.variables.push(Variable {
@@ -444,71 +446,14 @@ impl<'a> Builder<'a> {
         port: &ast::PortRef,
     ) -> Option<Declared<InputKind>> {
         let owner = match &port.instance {
-            Some(instance) => self.instance_component(component, &instance.name)?,
-            None => component,
+            Some(instance) => &Model::instance(component, &instance.name)?.component.name,
+            None => &component.name.name,
         };
-        let input = inputs(owner).find(|input| input.name.name == port.port.name)?;
-        self.declared_input(owner, input, 0)
-    }
-
-    fn declared_input(
-        &self,
-        component: &ast::Component,
-        input: &ast::Input,
-        depth: usize,
-    ) -> Option<Declared<InputKind>> {
-        let kind = match &input.def {
-            ast::InputDef::Tick => InputKind::Tick,
-            ast::InputDef::Fifo { ty, size, policy } => InputKind::Fifo {
-                ty: self.model.ty(ty),
-                size: size.value,
-                policy: policy.as_ref().and_then(|p| OverflowPolicy::named(&p.name)),
-            },
-            ast::InputDef::Ufifo { size, ty, max } => InputKind::Ufifo {
-                ty: self.model.ty(ty),
-                size: size.value,
-                max: max.as_ref().map(|m| m.value),
-            },
-            ast::InputDef::Last(ty) => InputKind::Last(self.model.ty(ty)),
-            ast::InputDef::Poster(ty) => InputKind::Poster(self.model.ty(ty)),
-            ast::InputDef::Export(target) => {
-                if depth > MAX_DEPTH {
-                    return None;
-                }
-                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
-                let input = inputs(inner).find(|i| i.name.name == target.port.name)?;
-                return self.declared_input(inner, input, depth + 1);
-            }
-        };
-        Some(Declared {
-            kind,
-            pull: input.pull.is_some(),
-        })
-    }
-
-    fn declared_output(
-        &self,
-        component: &ast::Component,
-        output: &ast::Output,
-        depth: usize,
-    ) -> Option<Declared<OutputKind>> {
-        let kind = match &output.def {
-            ast::OutputDef::Tick => OutputKind::Tick,
-            ast::OutputDef::Data(ty) => OutputKind::Data(self.model.ty(ty)),
-            ast::OutputDef::Poster(ty) => OutputKind::Poster(self.model.ty(ty)),
-            ast::OutputDef::Export(target) => {
-                if depth > MAX_DEPTH {
-                    return None;
-                }
-                let inner = self.instance_component(component, &target.instance.as_ref()?.name)?;
-                let output = outputs(inner).find(|o| o.name.name == target.port.name)?;
-                return self.declared_output(inner, output, depth + 1);
-            }
-        };
-        Some(Declared {
-            kind,
-            pull: output.pull.is_some(),
-        })
+        self.interfaces
+            .get(owner)?
+            .inputs
+            .get(&port.port.name)?
+            .input()
     }
 
     fn automaton(
@@ -619,13 +564,6 @@ fn timing_entry(entry: &ast::TimingEntry) -> Option<TimingEntry> {
 fn inputs(component: &ast::Component) -> impl Iterator<Item = &ast::Input> {
     component.members.iter().filter_map(|m| match m {
         ast::Member::Input(input) => Some(input),
-        _ => None,
-    })
-}
-
-fn outputs(component: &ast::Component) -> impl Iterator<Item = &ast::Output> {
-    component.members.iter().filter_map(|m| match m {
-        ast::Member::Output(output) => Some(output),
         _ => None,
     })
 }

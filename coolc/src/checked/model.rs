@@ -16,12 +16,14 @@
 //! automaton, `recovery` and `restart` block).
 
 use crate::ast::{self, FileId, Span};
-use crate::check::Typed;
-pub use crate::check::model::Range;
-use crate::check::model::{PortKind, Tuning, Ty};
+pub use crate::check::model::{
+    DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Declared, InputKind, OutputKind,
+    OverflowPolicy, PortKind, RESULTS, Range, SelectorKind, Tuning, Ty,
+};
+pub use crate::check::{RTy, Typed, strip};
 use crate::ros::{Message, TypeHash, TypeName};
 
-pub use crate::ast::{ComponentKind, VarKind};
+pub use crate::ast::{ComponentKind, Prim, VarKind};
 
 /// A component, resolved.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,87 +71,6 @@ pub struct Component {
     pub restart: Option<Restart>,
     /// Its own `adaptation { ... }` tuning (the default when it has none).
     pub adaptation: Tuning,
-}
-
-/// What an input port is, once exports are followed to a declared port.
-#[derive(Clone, Debug, PartialEq)]
-pub enum InputKind {
-    /// `tick`
-    Tick,
-    /// `fifo<T>(size[, policy])`
-    Fifo {
-        /// Packet type.
-        ty: Ty,
-        /// Queue length.
-        size: u64,
-        /// Overflow policy, when written ([`OverflowPolicy::default`] applies
-        /// otherwise).
-        policy: Option<OverflowPolicy>,
-    },
-    /// `ufifo<T>(size[, max m])`
-    Ufifo {
-        /// Packet type.
-        ty: Ty,
-        /// Initial length and growth step.
-        size: u64,
-        /// Growth cap, when written.
-        max: Option<u64>,
-    },
-    /// `last<T>`
-    Last(Ty),
-    /// `poster<T>`
-    Poster(Ty),
-}
-
-impl InputKind {
-    /// The port kind (and so the connection kind an input forms, paper Figure 3).
-    pub fn port_kind(&self) -> PortKind {
-        match self {
-            InputKind::Tick => PortKind::Tick,
-            InputKind::Fifo { .. } => PortKind::Fifo,
-            InputKind::Ufifo { .. } => PortKind::Ufifo,
-            InputKind::Last(_) => PortKind::Last,
-            InputKind::Poster(_) => PortKind::Poster,
-        }
-    }
-    /// The packet type (`None` for a tick).
-    pub fn packet(&self) -> Option<&Ty> {
-        match self {
-            InputKind::Tick => None,
-            InputKind::Fifo { ty, .. } | InputKind::Ufifo { ty, .. } => Some(ty),
-            InputKind::Last(ty) | InputKind::Poster(ty) => Some(ty),
-        }
-    }
-}
-
-/// What an output port is, once exports are followed to a declared port.
-#[derive(Clone, Debug, PartialEq)]
-pub enum OutputKind {
-    /// `tick`
-    Tick,
-    /// `data<T>`
-    Data(Ty),
-    /// `poster<T>`
-    Poster(Ty),
-}
-
-impl OutputKind {
-    /// The packet type (`None` for a tick).
-    pub fn packet(&self) -> Option<&Ty> {
-        match self {
-            OutputKind::Tick => None,
-            OutputKind::Data(ty) | OutputKind::Poster(ty) => Some(ty),
-        }
-    }
-}
-
-/// A declared port: its kind and whether it is `pull`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Declared<K> {
-    /// The kind, with its packet type.
-    pub kind: K,
-    /// `pull` was written.
-    pub pull: bool,
 }
 
 /// An input port.
@@ -661,37 +582,6 @@ impl Value {
             | ast::ExprKind::Binary(..)
             | ast::ExprKind::Path(_) => Value::Invalid,
         }
-    }
-}
-
-/// What a full `fifo` input does with a new packet (`fifo<T>(n, policy)`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum OverflowPolicy {
-    /// `reject` (the default): the new packet is refused and counted.
-    #[default]
-    Reject,
-    /// `drop_oldest`: the oldest queued packet makes room.
-    DropOldest,
-    /// `block`: the producer waits for room, up to a timeout.
-    Block,
-}
-
-impl OverflowPolicy {
-    /// Every policy with its name in the language.
-    pub const ALL: [(&'static str, OverflowPolicy); 3] = [
-        ("reject", OverflowPolicy::Reject),
-        ("drop_oldest", OverflowPolicy::DropOldest),
-        ("block", OverflowPolicy::Block),
-    ];
-
-    /// The policy named `name`.
-    pub fn named(name: &str) -> Option<OverflowPolicy> {
-        named(&Self::ALL, name)
-    }
-
-    /// Its name in the language.
-    pub fn name(self) -> &'static str {
-        name_of(&Self::ALL, self)
     }
 }
 

@@ -2,11 +2,10 @@
 
 use super::text;
 use super::{Diagram, Edge, EdgeStyle, End, Group, Item, Node, Ports, Shape, View, join};
-use crate::check::model::{DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES};
 use crate::checked::Checked;
 use crate::checked::model::{
-    Component, ComponentKind, Input, Instance, InstanceRef, Output, PortRef, State, StateMember,
-    TimingEntry, VarKind, Variable,
+    Component, ComponentKind, DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, Input, Instance,
+    InstanceRef, Output, PortRef, State, StateMember, TimingEntry, VarKind, Variable,
 };
 
 /// The checked model the views are drawn from.

@@ -3,7 +3,7 @@
 //! and `CompoundBuilder::adaptation`, and a selector for
 //! `CompoundBuilder::adaptation_selector`.
 
-use crate::check::model::{SelectorKind, Tuning};
+use crate::checked::model::{SelectorKind, Tuning};
 
 /// The `coolbot::AdaptConfig` a tuning says, or `None` when it says nothing (the
 /// runtime's default then applies).

@@ -5,15 +5,12 @@
 
 use super::automaton::{self, Lowered, SectionOwner};
 use super::{
-    GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_rust, prim_of, prim_rust,
+    GEN_TYPES, Lowerer, SERDE_WITH, USER_TYPES, adaptation, duration_code, prim_of, prim_rust,
     rust_ty, serde_adapter, unique,
 };
-use crate::ast::Prim;
-use crate::check::model::Ty;
-use crate::checked::model::Range;
 use crate::checked::model::{
-    Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, TimingEntry,
-    VarKind, Variable,
+    Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, Prim, Range,
+    TimingEntry, Ty, VarKind, Variable,
 };
 use crate::ident;
 use crate::ir;
@@ -63,20 +60,28 @@ impl<'a> Lowerer<'a> {
         for e in &c.exceptions {
             let name = &e.name;
             let handler = unique(ident::method("on_", name, ""), &methods);
-            let plan: Vec<String> = e
+            let plan: Vec<ir::Code> = e
                 .plan
                 .iter()
                 .map(|step| match step {
-                    PlanStep::Retry { count, every } => format!(
-                        "::coolbot::PlanStep::Retry {{ count: {}, every: {} }}",
-                        u32::try_from(*count).unwrap_or(u32::MAX),
-                        duration_rust(every.nanos)
+                    PlanStep::Retry { count, every } => ir::Code::structure(
+                        "::coolbot::PlanStep::Retry",
+                        vec![
+                            (
+                                "count",
+                                ir::Code::atom(
+                                    u32::try_from(*count).unwrap_or(u32::MAX).to_string(),
+                                ),
+                            ),
+                            ("every", duration_code(every.nanos)),
+                        ],
                     ),
-                    PlanStep::Goto(target) => {
-                        format!("::coolbot::PlanStep::Goto({})", target.index)
-                    }
-                    PlanStep::Ignore => "::coolbot::PlanStep::Ignore".to_owned(),
-                    PlanStep::Degrade => "::coolbot::PlanStep::Degrade".to_owned(),
+                    PlanStep::Goto(target) => ir::Code::call(
+                        "::coolbot::PlanStep::Goto",
+                        vec![ir::Code::atom(target.index.to_string())],
+                    ),
+                    PlanStep::Ignore => ir::Code::atom("::coolbot::PlanStep::Ignore"),
+                    PlanStep::Degrade => ir::Code::atom("::coolbot::PlanStep::Degrade"),
                 })
                 .collect();
             let description = e.description.as_deref().unwrap_or("");
@@ -88,8 +93,10 @@ impl<'a> Lowerer<'a> {
                 signature: format!("fn {handler}(&mut self, cx: &mut Cx<'_>, message: &str)"),
                 user_signature: format!("fn {handler}(&mut self, cx: &mut Cx<'_>, message: &str)"),
                 stub_body: vec![
-                    format!("// Exception `{name}` was raised; its continuity plan runs next."),
-                    "let _ = (cx, message);".to_owned(),
+                    ir::StubLine::Comment(format!(
+                        "// Exception `{name}` was raised; its continuity plan runs next."
+                    )),
+                    ir::StubLine::Statement("let _ = (cx, message);".to_owned()),
                 ],
             });
             exceptions.push(ir::ExceptionIr {
@@ -97,11 +104,13 @@ impl<'a> Lowerer<'a> {
                 cool_name: name.clone(),
                 variant: ident::camel(name),
                 handler,
-                spec: format!(
-                    "::coolbot::ExceptionSpec {{ name: {}, description: {}, plan: &[{}] }}",
-                    ident::string_literal(name),
-                    ident::string_literal(description),
-                    plan.join(", ")
+                spec: ir::Code::structure(
+                    "::coolbot::ExceptionSpec",
+                    vec![
+                        ("name", ir::Code::string(name)),
+                        ("description", ir::Code::string(description)),
+                        ("plan", ir::Code::slice(plan)),
+                    ],
                 ),
             });
         }
@@ -120,21 +129,24 @@ impl<'a> Lowerer<'a> {
             let name = &output.name;
             let stub_body = if let Some(default) = self.stub_default(ty) {
                 vec![
-                    format!(
+                    ir::StubLine::Comment(format!(
                         "// A consumer pulled from output `{name}`: compute the packet to answer with."
-                    ),
-                    "let _ = cx;".to_owned(),
-                    format!("Ok({default})"),
+                    )),
+                    ir::StubLine::Statement("let _ = cx;".to_owned()),
+                    ir::StubLine::Value(ir::Code::call("Ok", vec![default])),
                 ]
             } else {
                 vec![
-                    "let _ = cx;".to_owned(),
-                    format!(
-                        "Err(coolbot::Fault::message({}))",
-                        ident::string_literal(&format!(
-                            "the pull answer `{method}` is not written yet"
-                        ))
-                    ),
+                    ir::StubLine::Statement("let _ = cx;".to_owned()),
+                    ir::StubLine::Value(ir::Code::call(
+                        "Err",
+                        vec![ir::Code::call(
+                            "coolbot::Fault::message",
+                            vec![ir::Code::string(&format!(
+                                "the pull answer `{method}` is not written yet"
+                            ))],
+                        )],
+                    )),
                 ]
             };
             methods.push(ir::Method {
@@ -205,7 +217,7 @@ impl<'a> Lowerer<'a> {
             Some(d) => (rust_ty(ty, GEN_TYPES), d),
             None => (
                 format!("::core::option::Option<{}>", rust_ty(ty, GEN_TYPES)),
-                "::core::option::Option::None".to_owned(),
+                ir::Code::atom("::core::option::Option::None"),
             ),
         };
         let has_default = default.is_some();
@@ -281,7 +293,7 @@ impl<'a> Lowerer<'a> {
         })
     }
 
-    pub(super) fn timing(&self, timing: Option<&[TimingEntry]>) -> String {
+    pub(super) fn timing(&self, timing: Option<&[TimingEntry]>) -> ir::Code {
         let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0u8);
         let mut qualities = Vec::new();
         for entry in timing.unwrap_or_default() {
@@ -293,137 +305,119 @@ impl<'a> Lowerer<'a> {
                 TimingEntry::MaxResponse(d) => max_response = Some(d.nanos),
                 TimingEntry::Priority(p) => priority = *p,
                 TimingEntry::Quality(names) => {
-                    qualities = names.iter().map(|n| ident::string_literal(n)).collect();
+                    qualities = names.iter().map(|n| ir::Code::string(n)).collect();
                 }
             }
         }
-        let opt = |ns: Option<u64>| match ns {
-            Some(ns) => format!("Some({})", duration_rust(ns)),
-            None => "None".to_owned(),
-        };
-        format!(
-            "::coolbot::TimingSpec {{ period: {}, max_period: {}, max_response: {}, priority: {}, qualities: &[{}] }}",
-            opt(period),
-            opt(max_period),
-            opt(max_response),
-            priority,
-            qualities.join(", ")
+        let opt = |ns: Option<u64>| ir::Code::option(ns.map(duration_code));
+        ir::Code::structure(
+            "::coolbot::TimingSpec",
+            vec![
+                ("period", opt(period)),
+                ("max_period", opt(max_period)),
+                ("max_response", opt(max_response)),
+                ("priority", ir::Code::atom(priority.to_string())),
+                ("qualities", ir::Code::slice(qualities)),
+            ],
         )
     }
 
     /// A declared input as a port of the generated struct (`None` for an export
     /// whose port could not be followed, which a checked model does not have).
     pub(super) fn input(&self, input: &Input) -> Option<ir::Port> {
+        use ir::Code;
         let declared = input.port.as_ref()?;
-        let field = ident::snake(&input.name);
-        let (handle, ctor, kind, packet) = match &declared.kind {
-            InputKind::Tick => (
-                "::coolbot::port::TickIn".to_owned(),
-                "::coolbot::port::TickIn::new()".to_owned(),
-                "::coolbot::InputKind::Tick".to_owned(),
-                String::new(),
-            ),
-            InputKind::Fifo { ty, size, policy } => {
-                let (rust, cool) = packet_type(ty);
-                let policy = match policy.unwrap_or_default() {
-                    OverflowPolicy::Reject => "Reject",
-                    OverflowPolicy::DropOldest => "DropOldest",
-                    OverflowPolicy::Block => "Block",
-                };
+        let kind_path = |kind: &str| format!("::coolbot::InputKind::{kind}");
+        let (handle, args, kind) = match &declared.kind {
+            InputKind::Tick => ("TickIn", Vec::new(), Code::atom(kind_path("Tick"))),
+            InputKind::Fifo { size, policy, .. } => {
+                let policy = Code::atom(format!(
+                    "::coolbot::OverflowPolicy::{}",
+                    match policy.unwrap_or_default() {
+                        OverflowPolicy::Reject => "Reject",
+                        OverflowPolicy::DropOldest => "DropOldest",
+                        OverflowPolicy::Block => "Block",
+                    }
+                ));
+                let size = Code::atom(size.to_string());
                 (
-                    format!("::coolbot::port::FifoIn<{rust}>"),
-                    format!(
-                        "::coolbot::port::FifoIn::new({size}, ::coolbot::OverflowPolicy::{policy})"
+                    "FifoIn",
+                    vec![size.clone(), policy.clone()],
+                    Code::structure(
+                        kind_path("Fifo"),
+                        vec![("capacity", size), ("policy", policy)],
                     ),
-                    format!(
-                        "::coolbot::InputKind::Fifo {{ capacity: {size}, policy: ::coolbot::OverflowPolicy::{policy} }}"
-                    ),
-                    cool,
                 )
             }
-            InputKind::Ufifo { size, ty, max } => {
-                let (rust, cool) = packet_type(ty);
-                let max = match max {
-                    Some(m) => format!("Some({m})"),
-                    None => "None".to_owned(),
-                };
+            InputKind::Ufifo { size, max, .. } => {
+                let size = Code::atom(size.to_string());
+                let max = Code::option(max.map(|max| Code::atom(max.to_string())));
                 (
-                    format!("::coolbot::port::UfifoIn<{rust}>"),
-                    format!("::coolbot::port::UfifoIn::new({size}, {max})"),
-                    format!("::coolbot::InputKind::Ufifo {{ initial: {size}, max: {max} }}"),
-                    cool,
+                    "UfifoIn",
+                    vec![size.clone(), max.clone()],
+                    Code::structure(kind_path("Ufifo"), vec![("initial", size), ("max", max)]),
                 )
             }
-            InputKind::Last(ty) => {
-                let (rust, cool) = packet_type(ty);
-                (
-                    format!("::coolbot::port::LastIn<{rust}>"),
-                    "::coolbot::port::LastIn::new()".to_owned(),
-                    "::coolbot::InputKind::Last".to_owned(),
-                    cool,
-                )
-            }
-            InputKind::Poster(ty) => {
-                let (rust, cool) = packet_type(ty);
-                (
-                    format!("::coolbot::port::PosterIn<{rust}>"),
-                    "::coolbot::port::PosterIn::new()".to_owned(),
-                    "::coolbot::InputKind::Poster".to_owned(),
-                    cool,
-                )
-            }
+            InputKind::Last(_) => ("LastIn", Vec::new(), Code::atom(kind_path("Last"))),
+            InputKind::Poster(_) => ("PosterIn", Vec::new(), Code::atom(kind_path("Poster"))),
         };
-        Some(ir::Port {
-            doc: input.doc.clone(),
-            cool_name: input.name.clone(),
-            field,
-            handle,
-            ctor,
+        Some(port(
+            &input.doc,
+            &input.name,
+            (handle, declared.kind.port_kind().as_str()),
+            declared.kind.packet(),
+            args,
             kind,
-            packet,
-            pull: declared.pull,
-        })
+            declared.pull,
+        ))
     }
 
     /// A declared output as a port of the generated struct (as [`Self::input`]).
     pub(super) fn output(&self, output: &Output) -> Option<ir::Port> {
         let declared = output.port.as_ref()?;
-        let field = ident::snake(&output.name);
-        let (handle, ctor, kind, packet) = match &declared.kind {
-            OutputKind::Tick => (
-                "::coolbot::port::TickOut".to_owned(),
-                "::coolbot::port::TickOut::new()".to_owned(),
-                "::coolbot::OutputKind::Tick".to_owned(),
-                String::new(),
-            ),
-            OutputKind::Data(ty) => {
-                let (rust, cool) = packet_type(ty);
-                (
-                    format!("::coolbot::port::DataOut<{rust}>"),
-                    "::coolbot::port::DataOut::new()".to_owned(),
-                    "::coolbot::OutputKind::Data".to_owned(),
-                    cool,
-                )
-            }
-            OutputKind::Poster(ty) => {
-                let (rust, cool) = packet_type(ty);
-                (
-                    format!("::coolbot::port::PosterOut<{rust}>"),
-                    "::coolbot::port::PosterOut::new()".to_owned(),
-                    "::coolbot::OutputKind::Poster".to_owned(),
-                    cool,
-                )
-            }
+        let (handle, kind) = match &declared.kind {
+            OutputKind::Tick => ("TickOut", "Tick"),
+            OutputKind::Data(_) => ("DataOut", "Data"),
+            OutputKind::Poster(_) => ("PosterOut", "Poster"),
         };
-        Some(ir::Port {
-            doc: output.doc.clone(),
-            cool_name: output.name.clone(),
-            field,
-            handle,
-            ctor,
-            kind,
-            packet,
-            pull: declared.pull,
-        })
+        Some(port(
+            &output.doc,
+            &output.name,
+            (handle, declared.kind.port_kind().as_str()),
+            declared.kind.packet(),
+            Vec::new(),
+            ir::Code::atom(format!("::coolbot::OutputKind::{kind}")),
+            declared.pull,
+        ))
+    }
+}
+
+/// A port of the generated struct: its handle `::coolbot::port::<handle>` (generic
+/// over the packet type, none for a tick), built by `new(args)`, and its kind's name.
+fn port(
+    doc: &[String],
+    name: &str,
+    (handle, kind_name): (&str, &'static str),
+    packet: Option<&Ty>,
+    args: Vec<ir::Code>,
+    kind: ir::Code,
+    pull: bool,
+) -> ir::Port {
+    let path = format!("::coolbot::port::{handle}");
+    let (rust, cool) = packet.map_or_else(|| ("()".to_owned(), String::new()), packet_type);
+    ir::Port {
+        doc: doc.to_vec(),
+        cool_name: name.to_owned(),
+        field: ident::snake(name),
+        handle: match packet {
+            Some(_) => format!("{path}<{rust}>"),
+            None => path.clone(),
+        },
+        rust_packet: rust,
+        kind_name,
+        ctor: ir::Code::call(format!("{path}::new"), args),
+        kind,
+        packet: cool,
+        pull,
     }
 }

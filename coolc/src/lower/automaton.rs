@@ -3,10 +3,9 @@
 //! section and choice stubs with their glue arms, and, for a supervisor, its `when`
 //! rules for the rule compiler (`compound/rules.rs`).
 
-use super::{duration_rust, option_duration};
+use super::{duration_code, option_duration};
 use crate::ast;
-use crate::check::Typed;
-use crate::checked::model::{Automaton, Ref, State, StateMember};
+use crate::checked::model::{Automaton, Ref, State, StateMember, Typed};
 use crate::ident;
 use crate::ir;
 
@@ -52,27 +51,29 @@ pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowe
                 StateMember::Entry => entry = true,
                 StateMember::Exit => exit = true,
                 StateMember::Periodic(period) => {
-                    periodic = Some(format!(
-                        "Some(::coolbot::PeriodicSpec {{ period: {} }})",
-                        option_duration(period.as_ref())
-                    ));
+                    periodic = Some(ir::Code::some(ir::Code::structure(
+                        "::coolbot::PeriodicSpec",
+                        vec![("period", option_duration(period.as_ref()))],
+                    )));
                 }
-                StateMember::On { port, target } => on.push(format!(
-                    "::coolbot::OnSpec {{ port: {}, target: {} }}",
-                    port.index, target.index
+                StateMember::On { port, target } => on.push(ir::Code::structure(
+                    "::coolbot::OnSpec",
+                    vec![("port", index_code(port)), ("target", index_code(target))],
                 )),
                 StateMember::After {
                     delay,
                     without,
                     target,
-                } => after.push(format!(
-                    "::coolbot::AfterSpec {{ delay: {}, without: {}, target: {} }}",
-                    duration_rust(delay.nanos),
-                    match without {
-                        Some(port) => format!("Some({})", port.index),
-                        None => "None".to_owned(),
-                    },
-                    target.index
+                } => after.push(ir::Code::structure(
+                    "::coolbot::AfterSpec",
+                    vec![
+                        ("delay", duration_code(delay.nanos)),
+                        (
+                            "without",
+                            ir::Code::option(without.as_ref().map(index_code)),
+                        ),
+                        ("target", index_code(target)),
+                    ],
                 )),
                 StateMember::May(targets) => may_targets(targets, &mut may),
                 StateMember::When {
@@ -113,16 +114,27 @@ pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowe
                 &mut choose_arms,
             );
         }
-        let spec = format!(
-            "::coolbot::StateSpec {{ name: {}, entry: {entry}, exit: {exit}, periodic: {}, on: &[{}], after: &[{}], may: &[{}] }}",
-            ident::string_literal(name),
-            periodic.unwrap_or_else(|| "None".to_owned()),
-            on.join(", "),
-            after.join(", "),
-            may.iter()
-                .map(|(_, i, _)| i.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
+        let spec = ir::Code::structure(
+            "::coolbot::StateSpec",
+            vec![
+                ("name", ir::Code::string(name)),
+                ("entry", ir::Code::atom(entry.to_string())),
+                ("exit", ir::Code::atom(exit.to_string())),
+                (
+                    "periodic",
+                    periodic.unwrap_or_else(|| ir::Code::atom("None")),
+                ),
+                ("on", ir::Code::slice(on)),
+                ("after", ir::Code::slice(after)),
+                (
+                    "may",
+                    ir::Code::slice(
+                        may.iter()
+                            .map(|(_, i, _)| ir::Code::atom(i.to_string()))
+                            .collect(),
+                    ),
+                ),
+            ],
         );
         states.push(ir::State {
             doc: state.doc.clone(),
@@ -141,6 +153,11 @@ pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowe
         choose_arms,
         when,
     }
+}
+
+/// The index a state or port reference resolved to.
+fn index_code(reference: &Ref) -> ir::Code {
+    ir::Code::atom(reference.index.to_string())
 }
 
 /// Adds `may` targets `targets` to `may` as `(variant, index, name)`, each once.
@@ -183,9 +200,11 @@ pub(super) fn choose_stub(
         ),
         user_signature: format!("fn {method}(&mut self, cx: &mut Cx<'_>) -> Option<{may_enum}>"),
         stub_body: vec![
-            format!("// State `{name}`: return Some({may_enum}::...) to leave it."),
-            "let _ = cx;".to_owned(),
-            "None".to_owned(),
+            ir::StubLine::Comment(format!(
+                "// State `{name}`: return Some({may_enum}::...) to leave it."
+            )),
+            ir::StubLine::Statement("let _ = cx;".to_owned()),
+            ir::StubLine::Value(ir::Code::atom("None")),
         ],
     });
     choose_arms.push(ir::ChooseArm {
@@ -316,9 +335,11 @@ pub(super) fn section_stubs(
                 "fn {method}(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult"
             ),
             stub_body: vec![
-                format!("// {comment_state} `{name}`, {suffix} section: {when}."),
-                "let _ = cx;".to_owned(),
-                "Ok(())".to_owned(),
+                ir::StubLine::Comment(format!(
+                    "// {comment_state} `{name}`, {suffix} section: {when}."
+                )),
+                ir::StubLine::Statement("let _ = cx;".to_owned()),
+                ir::StubLine::Value(ir::Code::call("Ok", vec![ir::Code::atom("()")])),
             ],
         });
         section_arms.push((

@@ -16,9 +16,8 @@ use std::collections::BTreeSet;
 
 use super::automaton::{self, Lowered, SectionOwner};
 use super::{GEN_TYPES, Lowerer, adaptation, duration_rust, rust_ty, unique_among};
-use crate::check::model::{Tuning, Ty};
 use crate::checked::model::{
-    Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, VarKind,
+    Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, Tuning, Ty, VarKind,
 };
 use crate::ident;
 use crate::ir;
@@ -253,8 +252,13 @@ impl<'a> Lowerer<'a> {
             signature: String::new(),
             user_signature: "fn supervisor(&mut self) -> impl Supervisor".to_owned(),
             stub_body: vec![
-                "// The supervisor: its sections are the `impl Supervisor` above.".to_owned(),
-                format!("{name}Supervisor::default()"),
+                ir::StubLine::Comment(
+                    "// The supervisor: its sections are the `impl Supervisor` above.".to_owned(),
+                ),
+                ir::StubLine::Value(ir::Code::call(
+                    format!("{name}Supervisor::default"),
+                    Vec::new(),
+                )),
             ],
         }];
         all_parts.extend(parts);
@@ -485,9 +489,9 @@ impl<'a> Lowerer<'a> {
                     let value = if self.ty_defaultable(&ty) {
                         value
                     } else {
-                        format!("::core::option::Option::Some({value})")
+                        ir::Code::call("::core::option::Option::Some", vec![value])
                     };
-                    mapped_overrides.push((field, value));
+                    mapped_overrides.push((field, value.to_string()));
                 }
             }
         }
@@ -664,14 +668,14 @@ impl<'a> Lowerer<'a> {
             (
                 format!("impl crate::generated::{module}::Parts"),
                 format!(
-                    "crate::{module}::{}Parts::default()",
+                    "crate::{module}::{}Parts::default",
                     ident::camel_raw(&i.component)
                 ),
             )
         } else {
             (
                 format!("impl crate::generated::{module}::Behavior"),
-                format!("crate::{module}::{}::default()", ident::camel(&i.component)),
+                format!("crate::{module}::{}::default", ident::camel(&i.component)),
             )
         };
         ir::Method {
@@ -680,12 +684,12 @@ impl<'a> Lowerer<'a> {
             signature: String::new(),
             user_signature: format!("fn {}(&mut self) -> {returns}", i.method),
             stub_body: vec![
-                format!(
+                ir::StubLine::Comment(format!(
                     "// Instance `{}`: the {} it runs.",
                     i.name,
                     if i.compound { "parts" } else { "behavior" }
-                ),
-                body,
+                )),
+                ir::StubLine::Value(ir::Code::call(body, Vec::new())),
             ],
         }
     }
@@ -706,9 +710,17 @@ impl<'a> Lowerer<'a> {
                 variant: ident::camel(IMPLICIT_STATE),
                 may_enum: None,
                 may: Vec::new(),
-                spec: format!(
-                    "::coolbot::StateSpec {{ name: {}, entry: false, exit: false, periodic: None, on: &[], after: &[], may: &[] }}",
-                    ident::string_literal(IMPLICIT_STATE)
+                spec: ir::Code::structure(
+                    "::coolbot::StateSpec",
+                    vec![
+                        ("name", ir::Code::string(IMPLICIT_STATE)),
+                        ("entry", ir::Code::atom("false")),
+                        ("exit", ir::Code::atom("false")),
+                        ("periodic", ir::Code::atom("None")),
+                        ("on", ir::Code::slice(Vec::new())),
+                        ("after", ir::Code::slice(Vec::new())),
+                        ("may", ir::Code::slice(Vec::new())),
+                    ],
                 ),
             });
         }
@@ -998,7 +1010,7 @@ mod tests {
         let compound = &compounds_of(CONTROLLED)[0];
         let on = &compound.states[0];
         assert_eq!(on.may_enum.as_deref(), Some("OnMay"));
-        assert!(on.spec.contains("may: &[1]"), "{}", on.spec);
+        assert!(on.spec.to_string().contains("may: &[1]"), "{}", on.spec);
         assert!(compound.methods.iter().any(|m| m.name == "on_choose"));
         assert_eq!(compound.choose_arms.len(), 1);
         assert_eq!(compound.choose_arms[0].targets, [("Off".to_owned(), 1)]);

@@ -28,26 +28,9 @@ pub struct Method {
     pub body: Vec<String>,
 }
 
-/// The port's kind as its handle type says (`::coolbot::port::FifoIn<T>` is a fifo).
-fn handle_kind(handle: &str) -> &str {
-    let before = &handle[..handle.find('<').unwrap_or(handle.len())];
-    let name = before.rsplit("::").next().unwrap_or(before);
-    match name {
-        "TickIn" | "TickOut" => "tick",
-        "FifoIn" => "fifo",
-        "UfifoIn" => "ufifo",
-        "LastIn" => "last",
-        "PosterIn" | "PosterOut" => "poster",
-        "DataOut" => "data",
-        _ => "",
-    }
-}
-
-/// The packet type inside a handle type (`FifoIn<T>` gives `T`), `None` for ticks.
-fn packet_of(handle: &str) -> Option<&str> {
-    let open = handle.find('<')?;
-    let close = handle.rfind('>')?;
-    (close > open).then(|| &handle[open + 1..close])
+/// The Rust type of a port's packets, `None` for a tick port.
+fn packet_of(port: &ir::Port) -> Option<&str> {
+    (port.kind_name != "tick").then_some(port.rust_packet.as_str())
 }
 
 /// A method name from a prefix and a field (without `r#`: `push_type` is no keyword).
@@ -64,8 +47,8 @@ pub fn harness(c: &ir::Atomic) -> Harness {
     let mut inputs = Vec::new();
     for port in &c.inputs {
         let name = string(&port.cool_name);
-        let kind = handle_kind(&port.handle);
-        match packet_of(&port.handle) {
+        let kind = port.kind_name;
+        match packet_of(port) {
             None => {
                 inputs.push(Method {
                     doc: vec![format!(
@@ -128,7 +111,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
     let mut outputs = Vec::new();
     for port in &c.outputs {
         let name = string(&port.cool_name);
-        match packet_of(&port.handle) {
+        match packet_of(port) {
             None => outputs.push(Method {
                 doc: vec![format!(
                     "The events tick output `{}` emitted since the last call.",
@@ -152,7 +135,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     ),
                     body: vec![format!("self.inner.take_sent({name})")],
                 });
-                if handle_kind(&port.handle) == "poster" {
+                if port.kind_name == "poster" {
                     outputs.push(Method {
                         doc: vec![format!(
                             "The value poster output `{}` holds now.",
@@ -214,25 +197,33 @@ pub fn harness(c: &ir::Atomic) -> Harness {
 
 #[cfg(test)]
 mod tests {
-    use super::{handle_kind, packet_of};
-
     #[test]
-    fn kinds_and_packets_come_from_the_handle_types() {
-        let fifo = "::coolbot::port::FifoIn<::std::vec::Vec<super::types::Range>>";
-        assert_eq!(handle_kind(fifo), "fifo");
+    fn methods_follow_each_port_kind_and_packet() {
+        let checked = crate::analyze_text(
+            "t.cool",
+            "atomic A { input t: tick; input q: fifo<[f32; 72]>(2); input s: poster<u8>; \
+             output o: tick; output p: poster<f32>; }",
+        )
+        .checked()
+        .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let krate = crate::lower::lower(&checked, &crate::lower::Options::default());
+        let harness = super::harness(&krate.atomics[0]);
+        let signatures: Vec<&str> = harness
+            .inputs
+            .iter()
+            .chain(&harness.outputs)
+            .map(|m| m.signature.as_str())
+            .collect();
         assert_eq!(
-            packet_of(fifo),
-            Some("::std::vec::Vec<super::types::Range>")
-        );
-        assert_eq!(handle_kind("::coolbot::port::TickIn"), "tick");
-        assert_eq!(packet_of("::coolbot::port::TickIn"), None);
-        assert_eq!(
-            handle_kind("::coolbot::port::PosterOut<[f32; 72]>"),
-            "poster"
-        );
-        assert_eq!(
-            packet_of("::coolbot::port::PosterOut<[f32; 72]>"),
-            Some("[f32; 72]")
+            signatures,
+            [
+                "pub fn tick_t(&mut self) -> HarnessResult<()>",
+                "pub fn push_q(&mut self, packet: [f32; 72]) -> HarnessResult<()>",
+                "pub fn post_s(&mut self, packet: u8) -> HarnessResult<()>",
+                "pub fn ticks_o(&mut self) -> HarnessResult<u64>",
+                "pub fn sent_p(&mut self) -> HarnessResult<::std::vec::Vec<f32>>",
+                "pub fn posted_p(&self) -> HarnessResult<::core::option::Option<f32>>",
+            ]
         );
     }
 }

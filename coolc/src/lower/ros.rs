@@ -17,7 +17,7 @@ use crate::ir;
 use crate::ros::msg::{Base, Cardinality, Constant, Field, FieldType, Value};
 use crate::{ident, ros};
 
-use super::{DEFAULT, SERDE_WITH};
+use super::{SERDE_WITH, default_code};
 
 /// The path of the runtime's ROS module as generated code sees it.
 const COOLBOT_ROS: &str = "::coolbot::ros::";
@@ -77,7 +77,7 @@ fn message(ros: &RosMessage) -> ir::RosMessage {
             name: PLACEHOLDER.to_owned(),
             cool_name: PLACEHOLDER.to_owned(),
             ty: "u8".to_owned(),
-            default: "0".to_owned(),
+            default: ir::Code::atom("0"),
             serde_with: None,
         });
     }
@@ -117,12 +117,12 @@ fn field(field: &Field) -> ir::Field {
 
 /// The Rust expression of the default value of a field's type (`Default` for arrays
 /// stops at 32 elements).
-fn type_default(ty: &FieldType) -> String {
+fn type_default(ty: &FieldType) -> ir::Code {
     match ty.cardinality {
         Cardinality::Array(size) if size > 32 => {
-            format!("::core::array::from_fn(|_| {DEFAULT})")
+            ir::Code::Other(format!("::core::array::from_fn(|_| {})", default_code()))
         }
-        _ => DEFAULT.to_owned(),
+        _ => default_code(),
     }
 }
 
@@ -252,19 +252,30 @@ fn written(value: &Value) -> String {
 }
 
 /// The Rust expression of a field's default value.
-fn value_rust(value: &Value, ty: &FieldType) -> String {
+fn value_rust(value: &Value, ty: &FieldType) -> ir::Code {
     match (value, ty.cardinality) {
         (Value::Array(items), cardinality) => {
-            let items: Vec<String> = items
+            let items: Vec<ir::Code> = items
                 .iter()
-                .map(|item| scalar_rust(item, &ty.base, true))
+                .map(|item| scalar_code(item, &ty.base))
                 .collect();
             match cardinality {
-                Cardinality::Array(_) => format!("[{}]", items.join(", ")),
-                _ => format!("::std::vec![{}]", items.join(", ")),
+                Cardinality::Array(_) => ir::Code::List("[".to_owned(), items),
+                _ => ir::Code::List("::std::vec![".to_owned(), items),
             }
         }
-        (value, _) => scalar_rust(value, &ty.base, true),
+        (value, _) => scalar_code(value, &ty.base),
+    }
+}
+
+/// [`scalar_rust`] of an owned value (a string is a `String`).
+fn scalar_code(value: &Value, base: &Base) -> ir::Code {
+    match value {
+        Value::String(text) => {
+            ir::Code::call("::std::string::String::from", vec![ir::Code::string(text)])
+        }
+        Value::Array(_) => default_code(),
+        value => ir::Code::atom(scalar_rust(value, base, true)),
     }
 }
 
@@ -283,7 +294,7 @@ fn scalar_rust(value: &Value, base: &Base, owned: bool) -> String {
         }
         Value::String(text) => ident::string_literal(text),
         // An array inside an array does not exist: `.msg` has none.
-        Value::Array(_) => DEFAULT.to_owned(),
+        Value::Array(_) => default_code().to_string(),
     }
 }
 

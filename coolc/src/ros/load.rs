@@ -22,6 +22,7 @@ use super::lookup::{LookupError, Search};
 use super::msg::{Base, Message};
 use super::names::TypeName;
 use super::parse::parse;
+use super::shipped;
 
 /// A type asked for, and where it was asked for (diagnostics point there).
 #[derive(Clone, Copy, Debug)]
@@ -109,6 +110,8 @@ fn not_found(error: LookupError, file: FileId, span: Span) -> Diagnostic {
             }
             if name.name() == "Header" && name.package() != "std_msgs" {
                 help.push_str("\nthe standard header is `std_msgs/Header`");
+            } else if let Some(near) = shipped::nearest(&name) {
+                help.push_str(&format!("\ndid you mean `{near}`?"));
             }
             Diagnostic::error(Code::UnknownType, file, span, message).with_help(help)
         }

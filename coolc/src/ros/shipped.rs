@@ -5,6 +5,7 @@
 //! [`super::lookup`]); the files are under `coolc/interfaces/<package>/msg/`.
 
 use super::names::TypeName;
+use crate::diagnostics::closest;
 
 /// Every shipped type: its package, its name and its `.msg` text, by package and name.
 pub const SHIPPED: &[(&str, &str, &str)] = &[
@@ -108,4 +109,23 @@ pub fn names() -> impl Iterator<Item = TypeName> {
     SHIPPED.iter().map(|(package, name, _)| {
         TypeName::new(package, name).expect("a shipped type has a valid name")
     })
+}
+
+/// The shipped type whose name is nearest `name` (`Twistt` for `Twist`, in the same
+/// package; else the same type in the nearest package), for "did you mean" help.
+pub fn nearest(name: &TypeName) -> Option<TypeName> {
+    let same_package: Vec<&str> = SHIPPED
+        .iter()
+        .filter(|(package, _, _)| *package == name.package())
+        .map(|(_, type_name, _)| *type_name)
+        .collect();
+    if let Some(near) = closest(name.name(), same_package) {
+        return TypeName::new(name.package(), near).ok();
+    }
+    let same_type: Vec<&str> = SHIPPED
+        .iter()
+        .filter(|(_, type_name, _)| *type_name == name.name())
+        .map(|(package, _, _)| *package)
+        .collect();
+    closest(name.package(), same_type).and_then(|near| TypeName::new(near, name.name()).ok())
 }

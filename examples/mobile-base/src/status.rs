@@ -361,6 +361,7 @@ mod tests {
             supervision_steps: 0,
             adaptation: coolbot::AdaptStatus::default(),
             response: coolbot::ResponseTimes::default(),
+            group: None,
         }
     }
 

@@ -1,5 +1,6 @@
 //! The measurement kit shared by the runtime benchmarks: run modes, per-sample
-//! statistics, the result table, and the hand-written component glue.
+//! statistics, the result table, the hand-written component glue, and a chain of
+//! components at 1 kHz with its baselines' parts (`chain`).
 //!
 //! Every benchmark measures the runtime and its baseline in the same process,
 //! alternating rounds of each so that a change in machine load hits both sides, and
@@ -341,3 +342,5 @@ macro_rules! one_state_spec {
         };
     };
 }
+
+pub mod chain;

@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::monitor::{MonitorEvent, Shared};
+use crate::monitor::{GroupCycles, MonitorEvent, Shared};
 use crate::thread::{OsPriority, Scheduling};
 use crate::wake::Doorbell;
 
@@ -107,6 +107,8 @@ impl GroupShared {
 pub(crate) struct Group {
     name: String,
     members: Vec<Option<Runner>>,
+    /// The cycle figures every member's monitor shows.
+    cycles: Arc<GroupCycles>,
 }
 
 impl Group {
@@ -124,7 +126,15 @@ impl Group {
                     .collect(),
             }),
         });
+        let cycles = Arc::new(GroupCycles::new(
+            name,
+            runners
+                .iter()
+                .map(|runner| runner.cx.name.clone())
+                .collect(),
+        ));
         for (index, runner) in runners.iter_mut().enumerate() {
+            let _ = runner.shared.group.set(Arc::clone(&cycles));
             runner.group = Some(Membership {
                 index,
                 shared: Arc::clone(&shared),
@@ -137,6 +147,7 @@ impl Group {
         Group {
             name: name.to_owned(),
             members: runners.into_iter().map(Some).collect(),
+            cycles,
         }
     }
 
@@ -188,11 +199,20 @@ impl Group {
         // The latest clock reading on this thread: an untimed member's turn on the
         // real clock starts from it instead of reading the clock (see
         // `Runner::untimed`; the reading is the end of the previous member's turn).
-        let mut reading: Option<Instant> = None;
+        // The first is the cycle's start.
+        let start = self
+            .members
+            .iter()
+            .flatten()
+            .next()
+            .map(|runner| runner.time.now());
+        let mut reading = start;
         for slot in &mut self.members {
             let Some(runner) = slot.as_mut() else {
                 continue;
             };
+            // The panic hook (`crate::process`) names the member whose turn it is.
+            crate::monitor::set_turn(Some(&runner.shared));
             let mut turns = 0;
             loop {
                 if runner.untimed && runner.time.is_real() {
@@ -222,6 +242,10 @@ impl Group {
                 }
             }
         }
+        crate::monitor::set_turn(None);
+        if let (Some(start), Some(end)) = (start, reading) {
+            self.cycles.cycle(end.saturating_duration_since(start));
+        }
         more
     }
 
@@ -229,14 +253,19 @@ impl Group {
     fn wait(&mut self) {
         let mut deadline: Option<Instant> = None;
         let mut now = None;
+        let mut period: Option<Duration> = None;
         for runner in self.members.iter_mut().flatten() {
             if let Some(due) = runner.next_due() {
                 deadline = Some(deadline.map_or(due, |d| d.min(due)));
+            }
+            if let Some(own) = runner.cx.period {
+                period = Some(period.map_or(own, |p| p.min(own)));
             }
             // One reading for all: the members share the clock.
             runner.clock = *now.get_or_insert_with(|| runner.time.now());
             runner.update_cpu(false);
         }
+        self.cycles.set_period(period);
         let clock = self
             .members
             .iter()

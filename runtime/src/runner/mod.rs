@@ -427,8 +427,11 @@ impl Runner {
             Some(reading) => reading,
             None => self.time.now(),
         };
-        // 1. Control first.
-        if (rung || !self.deferred.is_empty()) && !self.drain_control() {
+        // 1. Control first. The control queue is read only when a command was queued
+        // (`Doorbell::take_commands`), or when the wait that found this turn's work
+        // looked at the queue itself.
+        let commands = self.polled || (rung && self.bell.take_commands());
+        if (rung || !self.deferred.is_empty()) && !self.drain_control(commands) {
             return Turn::Dead;
         }
         if self.state != State::Running {
@@ -466,8 +469,9 @@ impl Runner {
         }
     }
 
-    /// Handle every waiting command; false once the component is dead.
-    fn drain_control(&mut self) -> bool {
+    /// Handle every deferred command, and with `commands` every waiting one; false
+    /// once the component is dead.
+    fn drain_control(&mut self, commands: bool) -> bool {
         while self.state != State::Starting
             && let Some(message) = self.deferred.pop_front()
         {
@@ -475,6 +479,9 @@ impl Runner {
         }
         // `is_empty` first: two loads, where an empty `try_recv` also fences (a bell
         // rung by a delivery finds no command far more often than one).
+        if !commands {
+            return self.state != State::Dead;
+        }
         if self.state != State::Dead
             && !self.control.is_empty()
             && let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock)

@@ -135,7 +135,10 @@ fn encode<P: Serialize + ?Sized>(packet: &P) -> Result<Vec<u8>, String> {
     codec::encode(packet).map_err(|error| format!("does not encode: {error}"))
 }
 
-fn leak_spec(
+/// The spec of a forwarding component (a bridge's, a ROS 2 endpoint's): one state,
+/// `forwarding`, whose entry runs at each packet on input 0 if it `reacts`; made once
+/// per component built and never freed (a `Spec` is `'static`).
+pub(crate) fn leak_spec(
     type_name: &'static str,
     doc: &'static str,
     inputs: Vec<InputSpec>,

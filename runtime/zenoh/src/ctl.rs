@@ -28,6 +28,10 @@ pub enum CtlError {
     /// The network layer refused something (a name, the security file).
     #[error(transparent)]
     Network(#[from] crate::Error),
+    /// `coolctl foxglove` cannot serve.
+    #[cfg(feature = "foxglove")]
+    #[error("coolctl foxglove")]
+    Foxglove(#[source] Box<crate::foxglove::FoxgloveError>),
     /// A target that is not `<node>/<path>`.
     #[error("`{0}` is not a component address: write <node>/<path>, e.g. robot/base.motion")]
     BadTarget(String),

@@ -2,7 +2,10 @@
 //! component's static shape from its `Spec` (type, variables with their kinds and
 //! types, ports, quality levels) and the outputs the node echoes
 //! ([`crate::Node::echo`]). `coolctl get` reads it to show types beside values;
-//! `coolctl echo` to tell a port that is not echoed from one that does not exist.
+//! `coolctl echo` to tell a port that is not echoed from one that does not exist;
+//! `coolctl foxglove` to advertise an echoed port with its packets' JSON Schema.
+
+use std::collections::BTreeMap;
 
 use coolbot::{Spec, VarKind};
 use serde::{Deserialize, Serialize};
@@ -22,6 +25,11 @@ pub struct ComponentInfo {
     pub qualities: Vec<String>,
     /// The outputs the node echoes on the network (`coolctl echo`).
     pub echoed: Vec<String>,
+    /// The JSON Schema of each echoed output's packets, by port (the schema a
+    /// recording writes for the port, [`coolbot::schema::of`]; `coolctl foxglove`
+    /// advertises it). Empty from a node that sends none.
+    #[serde(default)]
+    pub schemas: BTreeMap<String, serde_json::Value>,
 }
 
 /// One variable.
@@ -47,8 +55,8 @@ pub struct PortInfo {
 }
 
 impl ComponentInfo {
-    /// The shape of `spec`, with the outputs `echoed`.
-    pub fn of(spec: &Spec, echoed: Vec<String>) -> ComponentInfo {
+    /// The shape of `spec`, with the outputs echoed and their packets' schemas.
+    pub fn of(spec: &Spec, echoed: BTreeMap<String, serde_json::Value>) -> ComponentInfo {
         ComponentInfo {
             type_name: spec.type_name.to_owned(),
             variables: spec
@@ -88,7 +96,8 @@ impl ComponentInfo {
                 .iter()
                 .map(|q| (*q).to_owned())
                 .collect(),
-            echoed,
+            echoed: echoed.keys().cloned().collect(),
+            schemas: echoed,
         }
     }
 }

@@ -89,7 +89,8 @@ pub(crate) struct Had {
 type Ack = (String, Vec<Had>);
 
 /// The most outlet epochs an inlet remembers: a key has few producers, and each
-/// restart of one is a new epoch.
+/// restart of one is a new epoch. Beyond, the epoch with the fewest messages
+/// received is forgotten.
 const MAX_EPOCHS: usize = 64;
 
 /// How far from the newest number of its epoch a message's number, or an ended
@@ -189,7 +190,18 @@ impl InletLedger {
                 }
                 None => {
                     if epochs.len() >= MAX_EPOCHS {
-                        epochs.remove(0);
+                        // The epoch with the fewest messages goes (the oldest of
+                        // those): a peer that puts one message each of many epochs
+                        // it makes up replaces its own, never a stream with a
+                        // history, which would then start again from whatever came
+                        // next (a reset for the stream's next message, when that
+                        // was a forged number).
+                        let fewest = epochs
+                            .iter()
+                            .enumerate()
+                            .min_by_key(|(at, e)| (e.had.received, *at))
+                            .map_or(0, |(at, _)| at);
+                        epochs.remove(fewest);
                     }
                     epochs.push(Epoch {
                         had: Had {
@@ -345,6 +357,10 @@ pub(crate) fn process() -> String {
 /// comes back is not taken for a new inlet).
 const MAX_SETTLED: usize = 1024;
 
+/// The most inlets gone an outlet keeps without knowing that they ended (a link
+/// that may come back); beyond, the oldest is counted as ended.
+const MAX_GONE: usize = 256;
+
 /// One inlet as an outlet knows it: `<node>/<name>/<process>` from its token.
 #[derive(Debug, Clone)]
 struct Stream {
@@ -419,6 +435,16 @@ impl Book {
         let index = match streams.iter().position(|s| s.id == id) {
             Some(index) => index,
             None => {
+                // Inlets gone and not known to have ended stay until the outlet stops
+                // (their link may come back): beyond [`MAX_GONE`], the oldest is
+                // taken as ended and counted, so that tokens a peer declares and
+                // withdraws under made-up names do not pile up.
+                let mut gone = streams.iter_mut().filter(|s| !s.alive && !s.ended);
+                if let Some(oldest) = gone.next()
+                    && gone.count() + 1 >= MAX_GONE
+                {
+                    oldest.ended = true;
+                }
                 streams.push(Stream::new(id, self.sent())?);
                 // A newcomer must hear the report too: the rounds count again.
                 self.heard.store(0, Ordering::Release);
@@ -936,6 +962,29 @@ mod tests {
     }
 
     #[test]
+    fn epochs_made_up_one_message_each_never_push_out_a_stream() {
+        let (ledger, network, resets) = inlet();
+        for seq in 1..=3 {
+            ledger.received(9, seq);
+        }
+        // A peer puts one message each of more epochs than the inlet remembers.
+        for epoch in 100..100 + 2 * MAX_EPOCHS as u64 {
+            ledger.received(epoch, u64::MAX - epoch);
+        }
+        // Then a number of the stream's epoch out of the window, and the stream
+        // goes on (5: 4 was lost on the way).
+        ledger.received(9, 1 << 40);
+        ledger.received(9, 5);
+        ledger.received(9, 6);
+        assert_eq!((network.overflows(), resets.overflows()), (1, 1));
+        let (answer, _) = ledger.answer("p", &[]);
+        let (_, had): Ack = codec::decode(&answer, MAX_ACK).unwrap();
+        assert_eq!(had.len(), MAX_EPOCHS);
+        let stream = had.iter().find(|h| h.epoch == 9).expect("the stream kept");
+        assert_eq!((stream.first, stream.newest, stream.missing), (1, 6, 1));
+    }
+
+    #[test]
     fn the_window_is_the_largest_gap_counted_missing() {
         let (ledger, network, resets) = inlet();
         ledger.received(9, 1);
@@ -1046,6 +1095,29 @@ mod tests {
         book.settle(false);
         // aaa: 9..=12; bbb: 13..=26 (up to before ccc's first).
         assert_eq!(losses.overflows(), 4 + 14);
+    }
+
+    #[test]
+    fn tokens_made_up_and_withdrawn_do_not_pile_up() {
+        let (book, losses) = book(false);
+        book.sent.store(10, Ordering::Release);
+        // Each under a node name of its own (a node's next process would end the
+        // ones before).
+        for n in 0..4 * MAX_GONE {
+            let id = format!("fuzz{n}/in/p");
+            book.token(&id, SampleKind::Put);
+            book.token(&id, SampleKind::Delete);
+            book.settle(false);
+        }
+        assert!(
+            lock(&book.streams).len() <= MAX_GONE,
+            "{} inlets kept",
+            lock(&book.streams).len()
+        );
+        // Nothing was sent while they were there.
+        assert_eq!(losses.overflows(), 0);
+        book.settle(true);
+        assert!(lock(&book.streams).is_empty());
     }
 
     #[test]

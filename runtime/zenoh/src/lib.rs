@@ -20,8 +20,9 @@
 //!   liveliness token `coolbot/<node>` per node.
 //! - **Echoed outputs** ([`Node::echo`]): the packets of chosen outputs as JSON, for
 //!   `coolctl echo`; and each component's static shape on query ([`info`]).
-//! - **`coolctl`**, the command-line tool over those keys ([`ctl`]), and its live view
-//!   `coolctl top` ([`top`]).
+//! - **`coolctl`**, the command-line tool over those keys ([`ctl`]), its live view
+//!   `coolctl top` ([`top`]), and `coolctl foxglove`, the components as a Foxglove
+//!   WebSocket server (`foxglove`, with the feature of that name, on by default).
 //! - **Remote instantiation** ([`agent`]): an agent builds registered component
 //!   types on request from another node, bridges their ports, runs and exposes them.
 //! - **Remote instances from the description** ([`place`]): a [`Placer`] installed
@@ -49,6 +50,8 @@ mod codec;
 mod config;
 pub mod ctl;
 pub mod echo;
+#[cfg(feature = "foxglove")]
+pub mod foxglove;
 pub mod info;
 pub mod keys;
 mod ledger;

@@ -1,14 +1,14 @@
 //! A [`Node`]: one per process, named, holding the Zenoh session; it exposes
 //! components' monitoring and control ports on the network and makes bridges.
 
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use coolbot::{Chain, Command, Handle, MonitorEvent, System};
+use coolbot::{Chain, Command, Controllable, Handle, MonitorEvent, System};
 use crossbeam_channel::{RecvTimeoutError, Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
@@ -82,8 +82,9 @@ impl Drop for Exposure {
     }
 }
 
-/// A command received on a control key, with the handle it is for.
-type ControlRequest = (zenoh::query::Query, Handle);
+/// A command received on a control key, with the handle it is for and, for an
+/// instance inside a compound, the compound's path.
+type ControlRequest = (zenoh::query::Query, Handle, Option<Arc<str>>);
 
 /// A process on the network: a name, a Zenoh session, a liveliness token
 /// `coolbot/<name>`, and the components it exposes. Dropping it stops exposing them
@@ -95,8 +96,9 @@ pub struct Node {
     control: Sender<ControlRequest>,
     control_stop: Arc<AtomicBool>,
     control_thread: Option<JoinHandle<()>>,
-    /// The outputs echoed, as `(component path, port)`.
-    echoed: Arc<Mutex<BTreeSet<(String, String)>>>,
+    /// The outputs echoed, as `(component path, port)`, with their packets' JSON
+    /// Schemas.
+    echoed: Arc<Mutex<BTreeMap<(String, String), serde_json::Value>>>,
     echoes: Mutex<Vec<Echo>>,
     /// Where its outlets keep their tallies (`crate::tally`); None: no tallies.
     state: Option<PathBuf>,
@@ -142,7 +144,9 @@ impl Node {
             .spawn(move || {
                 loop {
                     match requests.recv_timeout(STOP_POLL) {
-                        Ok((query, handle)) => serve_command(&query, &handle),
+                        Ok((query, handle, compound)) => {
+                            serve_command(&query, &handle, compound.as_deref());
+                        }
                         Err(RecvTimeoutError::Timeout) if !stop.load(Ordering::Acquire) => {}
                         Err(_) => break,
                     }
@@ -215,7 +219,15 @@ impl Node {
         }
         let mut queryables = Vec::new();
         let mut streams = Vec::new();
+        let root = handle.name().to_owned();
         for (path, handle) in components {
+            // An instance's compound: its path but the last instance name.
+            let compound: Option<Arc<str>> = (path != root)
+                .then(|| {
+                    path.rsplit_once('.')
+                        .map(|(compound, _)| Arc::from(compound))
+                })
+                .flatten();
             let monitor_key = keys::monitor(&self.name, &path);
             let publisher = self
                 .session
@@ -261,8 +273,8 @@ impl Node {
                     .callback(move |query| {
                         let ports = lock(&echoed)
                             .iter()
-                            .filter(|(path, _)| *path == info_path)
-                            .map(|(_, port)| port.clone())
+                            .filter(|((path, _), _)| *path == info_path)
+                            .map(|((_, port), schema)| (port.clone(), schema.clone()))
                             .collect();
                         let info = ComponentInfo::of(info_handle.spec(), ports);
                         let reply = match serde_json::to_vec(&info) {
@@ -284,8 +296,10 @@ impl Node {
                 self.session
                     .declare_queryable(keys::control(&self.name, &path))
                     .callback(move |query| {
-                        if let Err(error) = control.try_send((query, handle.clone())) {
-                            let (query, _) = error.into_inner();
+                        if let Err(error) =
+                            control.try_send((query, handle.clone(), compound.clone()))
+                        {
+                            let (query, _, _) = error.into_inner();
                             let _ = reply_control(
                                 &query,
                                 &ControlReply::Rejected {
@@ -328,8 +342,9 @@ impl Node {
     /// `coolbot/<node>/<component>/o/<port>`, from a thread of the node's. The
     /// producer is never slowed (`docs/tools.md`, "coolctl echo"): packets beyond
     /// [`ECHO_CAPACITY`] waiting are dropped for the echo and counted. The echo lasts
-    /// as long as the node.
-    pub fn echo<T: coolbot::port::Packet + Serialize>(
+    /// as long as the node. The component's info (`.../s`) carries the JSON Schema of
+    /// `T` for the port, traced as a recording traces it ([`coolbot::schema::of`]).
+    pub fn echo<T: coolbot::port::Packet + Serialize + serde::de::DeserializeOwned>(
         &self,
         system: &System,
         path: &str,
@@ -350,7 +365,8 @@ impl Node {
             .map_err(|error| invalid(error.to_string()))?;
         let echo = Echo::start(&self.session, keys::echo(&self.name, component, port), tap)?;
         lock(&self.echoes).push(echo);
-        lock(&self.echoed).insert((component.to_owned(), port.to_owned()));
+        let schema = coolbot::schema::of::<T>().schema;
+        lock(&self.echoed).insert((component.to_owned(), port.to_owned()), schema);
         Ok(())
     }
 }
@@ -458,10 +474,21 @@ fn command_of(query: &zenoh::query::Query) -> Result<Command, String> {
 }
 
 /// Apply one command from the network, through the component's own control port
-/// (whose ranges, `coolbot::ranges`, hold for it as for every command).
-fn serve_command(query: &zenoh::query::Query, handle: &Handle) {
+/// (whose ranges, `coolbot::ranges`, hold for it as for every command). An instance
+/// inside a compound (`compound`, its path) is not sent to `dead` from the network:
+/// its life is its compound's, which would not see that death as a fault.
+fn serve_command(query: &zenoh::query::Query, handle: &Handle, compound: Option<&str>) {
     let reply = match command_of(query) {
         Err(reason) => ControlReply::Rejected { reason },
+        Ok(Command::SetState(Controllable::Dead)) if let Some(compound) = compound => {
+            ControlReply::Rejected {
+                reason: format!(
+                    "`{}` is an instance of `{compound}`: it goes to dead with its compound, \
+                     not alone (send dead to `{compound}`)",
+                    handle.name()
+                ),
+            }
+        }
         Ok(command) => match handle.command(command) {
             Ok(()) => ControlReply::Accepted,
             Err(rejected) => ControlReply::Rejected {

@@ -128,6 +128,43 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
     assert!(system.shutdown().clean());
 }
 
+#[test]
+fn a_member_of_an_execution_group_degrades_and_is_promoted_back_on_the_groups_thread() {
+    let (load, other) = (Load::new(), Load::new());
+    load.set(HEAVY);
+    other.set(LIGHT);
+    let mut system = System::new();
+    let handle = system
+        .add(sleeper("s", &load).with_adaptation(quick()))
+        .expect("add s");
+    let steady = system.add(steady_sleeper("t", &other)).expect("add t");
+    system.group("pair", &["s", "t"]).expect("the group");
+    system.run_all().expect("run");
+
+    // The member's ladder, its detector and its level work as on a thread of its own:
+    // down to 40 ms and quality 1, which its section sees.
+    let monitor = wait(&handle, "fully degraded", |m| m.adaptation.level == 4);
+    assert_eq!(monitor.group.map(|g| g.name), Some("pair".to_owned()));
+    assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
+    eventually("a section at quality 1", || {
+        load.lowest_quality.load(Ordering::SeqCst) == 1
+    });
+    // The other member, with nothing to degrade, keeps its period and runs on.
+    let runs = other.runs();
+    eventually("the other member runs on", || other.runs() >= runs + 5);
+    assert_eq!(steady.snapshot().period, Some(ms(10)));
+    assert_eq!(steady.snapshot().adaptation.level, 0);
+
+    // The load drops: promoted back to nominal.
+    load.set(LIGHT);
+    let monitor = wait(&handle, "back to nominal", |m| m.adaptation.level == 0);
+    assert_eq!((monitor.period, monitor.quality), (Some(ms(10)), 0));
+    eventually("a section at 10 ms again", || {
+        load.last_period.load(Ordering::SeqCst) == 10_000
+    });
+    assert!(system.shutdown().clean());
+}
+
 /// The period of `level` on `AdaptSleeper`'s nominal path (3 period steps).
 fn ladder_setting(level: u32) -> (Option<std::time::Duration>, usize) {
     coolbot::adapt::Ladder::new(&adapt_sleeper::SPEC.timing, 3).setting(level)

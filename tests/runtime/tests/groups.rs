@@ -81,6 +81,15 @@ impl relay::Behavior for Hop {
     }
 }
 
+/// An aperiodic stage named `name` that takes no time, logging into `log`.
+fn hop(name: &'static str, log: &Log) -> Hop {
+    Hop {
+        name,
+        log: log.clone(),
+        pause: Duration::ZERO,
+    }
+}
+
 fn step(name: &'static str, log: &Log) -> Step {
     Step {
         name,
@@ -144,13 +153,12 @@ fn aperiodic_members_run_when_their_inputs_arrive_within_the_pass() {
     system
         .add(stage::component("a", step("a", &log)))
         .expect("a");
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
-    system.add(relay::component("r2", hop("r2"))).expect("r2");
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system
+        .add(relay::component("r2", hop("r2", &log)))
+        .expect("r2");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
     system.connect("a.out", "r1.feed").expect("a -> r1");
     system.connect("r1.out", "r2.feed").expect("r1 -> r2");
     system.group("chain", &["r2", "r1", "a"]).expect("group");
@@ -171,23 +179,15 @@ fn settling_after_a_command_waits_for_the_rest_of_the_groups_pass() {
         .add(stage::component("a", step("a", &log)))
         .expect("a");
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     // Slow: it logs well after `r1`'s command is answered.
     system
         .add(relay::component(
             "r2",
             Hop {
-                name: "r2",
-                log: log.clone(),
                 pause: Duration::from_millis(50),
+                ..hop("r2", &log)
             },
         ))
         .expect("r2");
@@ -314,6 +314,49 @@ fn an_overrun_is_charged_to_the_member_that_overran() {
 }
 
 #[test]
+fn each_members_monitor_shows_its_group_and_the_groups_cycles() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let a = Step {
+        overrun_at: Some((2, Arc::clone(&clock))),
+        ..step("a", &log)
+    };
+    system.add(stage::component("a", a)).expect("a");
+    system
+        .add(stage::component("b", step("b", &log)))
+        .expect("b");
+    system
+        .add(stage::component("alone", step("alone", &log)))
+        .expect("alone");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.group("control", &["b", "a"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    let group = |name: &str| system.handle(name).expect(name).snapshot().group;
+    let first = group("a").expect("a is a member");
+    assert_eq!(first.name, "control");
+    assert_eq!(first.members, ["a", "b"]);
+    assert_eq!(first.period, Some(PERIOD));
+    assert!(first.cycles > 0);
+    assert_eq!(first.overruns, 0);
+    assert_eq!(group("b"), Some(first.clone()));
+    assert_eq!(group("alone"), None);
+    // `a`'s section lets the clock run on 20 ms: the cycle it is in takes 20 ms,
+    // longer than the group's 10 ms period.
+    tick(&clock);
+    let second = group("b").expect("b is a member");
+    assert_eq!(second.overruns, 1);
+    assert_eq!(second.worst_cycle, Duration::from_millis(20));
+    assert!(second.cycles > first.cycles);
+    tick(&clock);
+    let third = group("b").expect("b is a member");
+    assert_eq!(third.overruns, 1);
+    assert_eq!(third.last_cycle, Duration::ZERO);
+}
+
+#[test]
 fn a_group_is_refused_with_what_is_wrong() {
     let log = Log::default();
     let (mut system, _clock) = system();
@@ -369,14 +412,13 @@ fn a_group_is_refused_with_what_is_wrong() {
 #[test]
 fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
     let log = Log::default();
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
     let (mut system, _clock) = system();
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
-    system.add(relay::component("r2", hop("r2"))).expect("r2");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
+    system
+        .add(relay::component("r2", hop("r2", &log)))
+        .expect("r2");
     system.connect("r1.out", "r2.feed").expect("r1 -> r2");
     system.connect("r2.out", "r1.feed").expect("r2 -> r1");
     system.group("loop", &["r1", "r2"]).expect("group");
@@ -390,7 +432,9 @@ fn a_cycle_of_queues_inside_a_group_is_refused_and_a_last_input_breaks_one() {
     // Through a `last` input the cycle is broken there: `a` runs first (it is fed
     // only by a `last` input), then `r1`.
     let (mut system, clock) = self::system();
-    system.add(relay::component("r1", hop("r1"))).expect("r1");
+    system
+        .add(relay::component("r1", hop("r1", &log)))
+        .expect("r1");
     system
         .add(stage::component("a", step("a", &log)))
         .expect("a");
@@ -498,14 +542,9 @@ fn a_compound_refuses_a_group_that_cannot_run() {
     use coolbot::{CompoundBuilder, CompoundError};
     use coolbot_runtime_tests::supervision::Coordinating;
     let log = Log::default();
-    let hop = |name| Hop {
-        name,
-        log: log.clone(),
-        pause: Duration::ZERO,
-    };
     let built = CompoundBuilder::new("base", Coordinating)
-        .instance(relay::component("r1", hop("r1")))
-        .instance(relay::component("r2", hop("r2")))
+        .instance(relay::component("r1", hop("r1", &log)))
+        .instance(relay::component("r2", hop("r2", &log)))
         .connect("r1.out", "r2.feed")
         .connect("r2.out", "r1.feed")
         .thread("loop", &["r1", "r2"])
@@ -527,14 +566,7 @@ fn a_blocking_queue_between_members_is_refused() {
     let log = Log::default();
     let (mut system, _clock) = system();
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     system
         .add(blocking_relay::component("r2", BlockingHop))
@@ -551,14 +583,7 @@ fn a_blocking_queue_between_members_is_refused() {
     // Connected before grouping: refused when the group starts.
     let (mut system, _clock) = self::system();
     system
-        .add(relay::component(
-            "r1",
-            Hop {
-                name: "r1",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r1", hop("r1", &log)))
         .expect("r1");
     system
         .add(blocking_relay::component("r2", BlockingHop))
@@ -602,14 +627,7 @@ fn a_cycle_breaks_only_on_the_cycle() {
             .expect(name);
     }
     system
-        .add(relay::component(
-            "r",
-            Hop {
-                name: "r",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r", hop("r", &log)))
         .expect("r");
     system
         .add(stage::component("c", step("c", &log)))
@@ -772,14 +790,7 @@ fn a_last_input_off_the_cycle_keeps_its_order() {
         .add(stage::component("d", step("d", &log)))
         .expect("d");
     system
-        .add(relay::component(
-            "r",
-            Hop {
-                name: "r",
-                log: log.clone(),
-                pause: Duration::ZERO,
-            },
-        ))
+        .add(relay::component("r", hop("r", &log)))
         .expect("r");
     system
         .add(stage::component("c", step("c", &log)))

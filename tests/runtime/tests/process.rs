@@ -8,7 +8,18 @@ use std::time::{Duration, Instant};
 
 use coolbot::State;
 use coolbot::process::{self, Process};
+use coolbot_runtime_tests::stage;
 use coolbot_runtime_tests::support::{Rig, Script};
+
+/// A periodic stage that panics in every section when told to.
+struct Breaks(bool);
+
+impl stage::Behavior for Breaks {
+    fn work_periodic(&mut self, _cx: &mut stage::Cx<'_>) -> coolbot::SectionResult {
+        assert!(!self.0, "the second member broke");
+        Ok(())
+    }
+}
 
 /// Everything captured until `wanted` holds for one line (or a minute passes).
 fn captured_until(wanted: impl Fn(&str) -> bool) -> Vec<String> {
@@ -67,6 +78,33 @@ fn a_caught_panic_is_one_line_and_other_panics_are_not() {
             .all(|line| !line.contains("outside any component")),
         "a panic outside components was taken for a component's"
     );
+
+    // Two components on one thread (an execution group): the line names the one
+    // whose section panicked, not the first on the thread.
+    let mut grouped = coolbot::System::new();
+    grouped
+        .add(stage::component("steady", Breaks(false)))
+        .expect("steady");
+    grouped
+        .add(stage::component("breaking", Breaks(true)))
+        .expect("breaking");
+    grouped
+        .group("control", &["steady", "breaking"])
+        .expect("the group");
+    grouped.run_all().expect("running");
+    process::watch_system(&grouped);
+    let lines = captured_until(|line| line.contains("the second member broke"));
+    let caught: Vec<&String> = lines
+        .iter()
+        .filter(|line| line.contains("the second member broke"))
+        .collect();
+    assert!(
+        caught[0].starts_with("panic caught in breaking (running, work): "),
+        "{}",
+        caught[0]
+    );
+    process::forget_system(&grouped);
+    assert!(grouped.shutdown().clean());
 
     // Forgotten components are no longer named: their panics print in full too.
     let shutdown = process.shutdown(rig.system);

@@ -13,8 +13,8 @@ use coolbot::port::{DataOut, FifoIn};
 use coolbot::{Component, SectionResult, Step, System};
 use coolbot_runtime_tests::convert::Convert;
 use coolbot_runtime_tests::generated::{
-    block_pair, converted_pair, converted_substituted_consumer, quick_block_pair, red_block_relay,
-    red_relay, red_sink, red_source, redundant_pair, substituted_consumer,
+    block_pair, converted_pair, converted_substituted_consumer, grouped_pair, quick_block_pair,
+    red_block_relay, red_relay, red_sink, red_source, redundant_pair, substituted_consumer,
 };
 use coolbot_runtime_tests::support::{self, WAIT};
 
@@ -107,6 +107,7 @@ macro_rules! relays {
 
 relays!(redundant_pair, red_relay: a, b);
 relays!(block_pair, red_block_relay: a, b);
+relays!(grouped_pair, red_relay: a, b);
 relays!(quick_block_pair, red_block_relay: a, b);
 relays!(converted_pair, red_relay: a, b, t);
 relays!(substituted_consumer, red_relay: a, b, t, t2);
@@ -250,6 +251,46 @@ fn the_stream_loses_no_packet_and_doubles_none_across_a_failover() {
         assert_eq!(rig.received.overflows(), 0);
         assert!(rig.system.shutdown().clean());
     }
+}
+
+#[test]
+fn members_of_an_execution_group_fail_over_with_no_packet_lost_or_doubled() {
+    // `a` and `b` share one thread: the leader fails in the middle of the stream, and
+    // `b`, on the same thread, takes over with the stream exact.
+    let relays = Relays::default();
+    let k = grouped_pair::component("k", relays.clone()).expect("build k");
+    let rig = rig_around(k, &relays);
+    let k = rig.system.handle("k").expect("k");
+    let (a, b) = (
+        k.instance("a").expect("a").snapshot(),
+        k.instance("b").expect("b").snapshot(),
+    );
+    let group = a.group.expect("a runs in the group");
+    assert_eq!(
+        (group.name.as_str(), &group.members),
+        ("pair", &vec!["a".to_owned(), "b".to_owned()])
+    );
+    assert_eq!(b.group.map(|g| g.name), Some("pair".to_owned()));
+    let a = k.instance("a").expect("a");
+    for n in 1..=1000u64 {
+        rig.send.send(n);
+        if n == 400 {
+            rig.a.fail.store(true, Ordering::SeqCst);
+        }
+        if n == 401 {
+            a.wait_for(|m| m.state == coolbot::State::RunningError, WAIT)
+                .expect("a fails");
+        }
+    }
+    assert_eq!(collect(&rig.received, 1000), (1..=1000).collect::<Vec<_>>());
+    let monitor = k
+        .wait_for(|m| m.supervision.iter().any(took_over), WAIT)
+        .unwrap_or_else(|_| panic!("b took over: {:?}", k.snapshot()));
+    assert_eq!(monitor.state, coolbot::State::Running);
+    assert_eq!(rig.b.relayed.load(Ordering::SeqCst), 1000);
+    assert_eq!(rig.received.recv_timeout(Duration::from_millis(50)), None);
+    assert_eq!(rig.received.overflows(), 0);
+    assert!(rig.system.shutdown().clean());
 }
 
 #[test]

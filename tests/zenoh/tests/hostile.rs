@@ -29,6 +29,17 @@ fn numbered(epoch: u64, seq: u64) -> Vec<u8> {
     postcard::to_allocvec(&(epoch, seq, pose(seq))).unwrap()
 }
 
+/// A tick message, as an outlet of `epoch` sends its `seq`-th carrying `events`.
+fn ticks(epoch: u64, seq: u64, events: u64) -> Vec<u8> {
+    postcard::to_allocvec(&(epoch, seq, events)).unwrap()
+}
+
+/// `bytes` with `more` after them.
+fn followed(mut bytes: Vec<u8>, more: &[u8]) -> Vec<u8> {
+    bytes.extend_from_slice(more);
+    bytes
+}
+
 /// A behaviour that hands its input port to the test when its component starts.
 struct Hand<T>(Sender<T>);
 
@@ -135,9 +146,7 @@ fn a_packet_with_trailing_bytes_or_of_another_type_is_counted_and_not_delivered(
     wait_subscribed(&a, key);
 
     // A valid message with anything after it.
-    let mut trailing = numbered(7, 1);
-    trailing.push(0);
-    put(&a, key, trailing);
+    put(&a, key, followed(numbered(7, 1), &[0]));
     // Another type whose first bytes make a `Pose` (three floats: `x`, then `seq`
     // from the first byte of the second).
     put(
@@ -190,25 +199,15 @@ fn trailing_bytes_on_poster_and_tick_keys_are_counted_and_not_delivered() {
     wait_subscribed(&a, posters);
     wait_subscribed(&a, events_key);
 
-    let mut posted = numbered(7, 1);
-    posted.extend([0; 8]);
-    put(&a, posters, posted);
-    let mut events = postcard::to_allocvec(&(7u64, 1u64, 5u64)).unwrap();
-    events.push(1);
-    put(&a, events_key, events);
+    put(&a, posters, followed(numbered(7, 1), &[0; 8]));
+    put(&a, events_key, followed(ticks(7, 1, 5), &[1]));
     // Longer than any tick message (three `u64`s), though it decodes as one.
-    let mut padded = postcard::to_allocvec(&(7u64, 1u64, 5u64)).unwrap();
-    padded.extend([0; 40]);
-    put(&a, events_key, padded);
+    put(&a, events_key, followed(ticks(7, 1, 5), &[0; 40]));
     counted(&poster_side.handle("inlet").unwrap(), 1, 0);
     counted(&tick_side.handle("inlet").unwrap(), 2, 0);
 
     put(&a, posters, numbered(7, 2));
-    put(
-        &a,
-        events_key,
-        postcard::to_allocvec(&(7u64, 1u64, 3u64)).unwrap(),
-    );
+    put(&a, events_key, ticks(7, 1, 3));
     assert!(wait_until(PATIENCE, || reader.read() == Some(pose(2))));
     let mut total = 0;
     assert!(wait_until(PATIENCE, || {
@@ -231,8 +230,7 @@ fn a_pull_answer_with_trailing_bytes_is_counted_and_not_delivered() {
         .session()
         .declare_queryable(format!("{key}/@pull"))
         .callback(move |query| {
-            let mut bytes = postcard::to_allocvec(&(7u64, 0u64, pose(1))).unwrap();
-            bytes.push(0);
+            let bytes = followed(numbered(7, 0), &[0]);
             if query.reply(query.key_expr().clone(), bytes).wait().is_ok() {
                 answered.fetch_add(1, Ordering::SeqCst);
             }
@@ -350,9 +348,7 @@ fn a_forged_report_of_an_ended_epoch_is_one_reset_however_often_it_is_asked() {
     }
     counted(&inlet, 0, 1);
     // A report with a byte after it is no report.
-    let mut trailing = report(&[(7, 10)]);
-    trailing.push(0);
-    assert_eq!(question(&a, key, trailing), 1);
+    assert_eq!(question(&a, key, followed(report(&[(7, 10)]), &[0])), 1);
     // A report within reach counts what the inlet never received: 4 to 10.
     assert_eq!(question(&a, key, report(&[(7, 10)])), 1);
     let monitor = counted(&inlet, 7, 1);

@@ -109,6 +109,43 @@ fn coolctl_set_answers_as_the_control_port_does() {
 }
 
 #[test]
+fn an_instance_inside_a_compound_is_not_sent_to_dead_from_the_network() {
+    let (node, station) = pair("robot", "station");
+    let system = robot(&node);
+    let ctl = ctl(&station);
+    let dead = Command::SetState(Controllable::Dead);
+    // Its compound would not see it as a fault: refused, and it runs on.
+    match ctl.command("robot/robot.base.motion", &dead).unwrap() {
+        ControlReply::Rejected { reason } => assert_eq!(
+            reason,
+            "`motion` is an instance of `robot.base`: it goes to dead with its compound, \
+             not alone (send dead to `robot.base`)"
+        ),
+        ControlReply::Accepted => panic!("motion accepted dead"),
+    }
+    let robot = system.handle("robot").unwrap();
+    let motion = robot.instance("base.motion").unwrap();
+    assert_eq!(motion.snapshot().state, State::Running);
+    // Other commands still reach it; a component of its own goes to dead.
+    assert_eq!(
+        ctl.command(
+            "robot/robot.base.motion",
+            &Command::SetState(Controllable::Suspended)
+        )
+        .unwrap(),
+        ControlReply::Accepted
+    );
+    assert_eq!(
+        ctl.command("robot/logger", &dead).unwrap(),
+        ControlReply::Accepted
+    );
+    let logger = system.handle("logger").unwrap();
+    logger
+        .wait_for(|m| m.state == State::Dead, PATIENCE)
+        .expect("the logger goes to dead");
+}
+
+#[test]
 fn a_malformed_command_is_rejected_with_the_reason() {
     let (node, station) = pair("robot", "station");
     let _system = robot(&node);

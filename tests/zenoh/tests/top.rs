@@ -166,3 +166,64 @@ fn routine_steps_are_hidden_on_demand_and_the_steps_pane_scrolls_back_to_the_sub
     assert!(screen.contains("up/down scroll steps"), "{screen}");
     let _ = system.shutdown();
 }
+
+#[test]
+fn an_execution_groups_members_sit_together_with_their_thread_and_the_groups_cycles() {
+    use coolbot_zenoh_tests::generated::plain;
+    use coolbot_zenoh_tests::support::Quiet;
+    let (robot_node, station) = pair("group-robot", "group-station");
+    let mut system = System::new();
+    for name in ["drive", "logger", "scan"] {
+        system.add(plain::component(name, Quiet)).unwrap();
+    }
+    // Given (and run, nothing connecting them) as `scan, drive`.
+    system.group("control", &["scan", "drive"]).unwrap();
+    system.run_all().unwrap();
+    robot_node.expose_system(&system).unwrap();
+    let ctl = Ctl::new(station.session().clone(), Duration::from_secs(5));
+    let board = board(&ctl, 3);
+    // The members together, in the order they run, where the first by name would be.
+    let rows: Vec<(&str, Option<&str>)> = board
+        .rows()
+        .iter()
+        .map(|row| {
+            (
+                row.path.as_str(),
+                row.monitor.group.as_ref().map(|g| g.name.as_str()),
+            )
+        })
+        .collect();
+    assert_eq!(
+        rows,
+        [
+            ("scan", Some("control")),
+            ("drive", Some("control")),
+            ("logger", None)
+        ]
+    );
+    let groups = board.groups();
+    assert_eq!(groups.len(), 1, "{groups:?}");
+    assert_eq!(groups[0].status.members, ["scan", "drive"]);
+    assert!(groups[0].status.cycles > 0, "{groups:?}");
+    let screen = render(&board, 160, 20);
+    let thread = |name: &str| {
+        let line = screen
+            .lines()
+            .find(|line| line.starts_with(&format!("│group-robot/{name} ")))
+            .unwrap_or_else(|| panic!("no row of {name}: {screen}"));
+        line.split_whitespace()
+            .nth(11)
+            .unwrap_or_default()
+            .to_owned()
+    };
+    assert_eq!(
+        ["scan", "drive", "logger"].map(thread),
+        ["control", "control", "own"]
+    );
+    assert!(
+        screen.contains("│thread control in group-robot: scan > drive; cycle "),
+        "{screen}"
+    );
+    assert!(screen.contains(" 0 overruns in "), "{screen}");
+    assert!(system.shutdown().clean());
+}

@@ -4,11 +4,11 @@
 //! boolean expression that is `false` when a value it reads is missing, with the read
 //! keys that make the runtime evaluate it.
 
-use super::super::{GEN_TYPES, Lowerer, duration_ns, duration_rust};
-use crate::ast::{self, BinaryOp, ExprKind, Prim, UnaryOp};
-use crate::check::model::{DEFAULT_STATES, RESULTS, Ty};
-use crate::check::{RTy, Typed};
-use crate::checked::model::{Component, VarKind};
+use super::super::{GEN_TYPES, Lowerer, duration_rust};
+use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
+use crate::checked::model::{
+    Component, DEFAULT_STATES, Duration, Prim, RESULTS, RTy, Ty, Typed, VarKind,
+};
 use crate::ident;
 use crate::ir;
 use crate::lower::automaton::When;
@@ -278,7 +278,7 @@ impl Scope<'_, '_> {
             ExprKind::Str(s) => known(ident::string_literal(s), RTy::Str),
             ExprKind::Bool(b) => known(b.to_string(), RTy::Bool),
             ExprKind::Duration(_) => known(
-                duration_rust(duration_ns(expr).unwrap_or_default()),
+                duration_rust(Duration::of(expr).map_or(0, |duration| duration.nanos)),
                 RTy::Duration,
             ),
             ExprKind::None => known(String::new(), RTy::NoneLit),
@@ -696,7 +696,7 @@ fn symbol(name: &str, resolved: &RTy) -> Operand {
         maybe: false,
         narrow: false,
     };
-    match crate::check::strip(resolved) {
+    match crate::checked::model::strip(resolved) {
         // The checker's names; `coolbot::State` variants are their camel case.
         RTy::State if DEFAULT_STATES.contains(&name) => plain(
             format!("::coolbot::State::{}", ident::camel(name)),

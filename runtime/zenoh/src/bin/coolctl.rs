@@ -11,6 +11,7 @@
 //! coolctl degrade <node>/<path> LEVEL
 //! coolctl echo <node>/<path>.<port> [--hz 10] [--count N] [--for 10s]
 //! coolctl top [--once [--json] [--size 160x40]] [--refresh 1s]
+//! coolctl foxglove [--bind 127.0.0.1:8765] [--port 'NODE/PATH.PORT'...] [--map FILE] [--refresh 1s]
 //! ```
 //!
 //! Exit codes: 0 done, 1 a command rejected, nothing answered or found (no node
@@ -140,6 +141,27 @@ enum Action {
         #[arg(long, default_value = "1s", value_parser = duration)]
         refresh: Duration,
     },
+    /// Serve the nodes' components to Foxglove (its WebSocket protocol): the echoed
+    /// outputs the patterns select, every component's monitoring, the supervision
+    /// and adaptation steps; until stopped (Ctrl-C).
+    Foxglove {
+        /// Listen here (off loopback only with --config or --insecure; port 0: any
+        /// free port, printed).
+        #[arg(long, default_value = coolbot_zenoh::foxglove::DEFAULT_BIND)]
+        bind: std::net::SocketAddr,
+        /// Serve the echoed outputs NODE/PATH.PORT that match (`*`: any characters,
+        /// e.g. 'robot/*'); repeatable.
+        #[arg(long = "port", value_name = "PATTERN")]
+        ports: Vec<String>,
+        /// Show the outputs this file names as Foxglove's well-known messages (poses,
+        /// transforms, laser scans; docs/foxglove.md, "Well-known messages").
+        #[arg(long, value_name = "FILE")]
+        map: Option<std::path::PathBuf>,
+        /// How often the nodes are asked for new components, and a watched
+        /// component's monitoring is read.
+        #[arg(long, default_value = "1s", value_parser = duration)]
+        refresh: Duration,
+    },
     /// Print the packets an echoed output sends, one JSON line each (a summary with
     /// the packets skipped and lost goes to stderr at the end).
     Echo {
@@ -222,6 +244,34 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
         }
         Action::Top { refresh, .. } => {
             coolbot_zenoh::top::run(&ctl, &session, refresh).map(|()| true)
+        }
+        Action::Foxglove {
+            bind,
+            ports,
+            map,
+            refresh,
+        } => {
+            let foxglove = |error| CtlError::Foxglove(Box::new(error));
+            let mappings = match map {
+                Some(path) => coolbot_zenoh::foxglove::wellknown::Mappings::load(&path)
+                    .map_err(|error| foxglove(error.into()))?,
+                None => Default::default(),
+            };
+            let options = coolbot_zenoh::foxglove::Options {
+                bind,
+                ports,
+                mappings,
+                refresh,
+                secured: cli.config.is_some(),
+                insecure: cli.insecure,
+            };
+            let server = coolbot_zenoh::foxglove::Server::start(ctl, session.clone(), options)
+                .map_err(foxglove)?;
+            writeln!(out, "serving ws://{}:{}", bind.ip(), server.port())?;
+            out.flush()?;
+            loop {
+                std::thread::park();
+            }
         }
         Action::Nodes { watch: false, .. } => ctl.nodes(out).map(|()| true),
         Action::Nodes {

@@ -24,8 +24,8 @@ use coolbot::InputPort;
 use coolbot::port::{DataOut, ErasedInput, FifoIn, TickIn};
 use coolbot::ros::RosType;
 use coolbot::{
-    Automaton, Chain, Component, Context, Fault, InputKind, InputSpec, OnSpec, OutputKind,
-    OutputSpec, OverflowPolicy, Packet, PortSet, Section, Spec, StateSpec, System, TimingSpec,
+    Automaton, Chain, Component, Context, Fault, InputKind, InputSpec, OutputKind, OutputSpec,
+    OverflowPolicy, Packet, PortSet, Section, Spec, System,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -460,45 +460,6 @@ struct Endpoint {
     counts: Arc<Counts>,
 }
 
-fn leak_spec(
-    type_name: &'static str,
-    doc: &'static str,
-    input: InputSpec,
-    output: Option<OutputSpec>,
-    reacts: bool,
-) -> &'static Spec {
-    let inputs: &'static [InputSpec] = Box::leak(Box::new([input]));
-    let outputs: &'static [OutputSpec] = match output {
-        Some(output) => Box::leak(Box::new([output])),
-        None => &[],
-    };
-    let on: &'static [OnSpec] = if reacts {
-        &[OnSpec { port: 0, target: 0 }]
-    } else {
-        &[]
-    };
-    let states: &'static [StateSpec] = Box::leak(Box::new([StateSpec {
-        name: "forwarding",
-        entry: reacts,
-        exit: false,
-        periodic: None,
-        on,
-        after: &[],
-        may: &[],
-    }]));
-    Box::leak(Box::new(Spec {
-        type_name,
-        doc,
-        states,
-        initial: 0,
-        inputs,
-        outputs,
-        variables: &[],
-        exceptions: &[],
-        timing: TimingSpec::NONE,
-    }))
-}
-
 // ---------------------------------------------------------------------------------
 // Publishers.
 
@@ -560,15 +521,15 @@ impl<T: RosType + Packet + Serialize> PublisherBuilder<'_, T> {
             capacity,
             policy: OverflowPolicy::Reject,
         };
-        let spec = leak_spec(
+        let spec = crate::bridge::leak_spec(
             "RosPublisher",
             "Publishes what arrives at `input` on a ROS 2 topic (rmw_zenoh's wire).",
-            InputSpec {
+            vec![InputSpec {
                 name: "input",
                 kind,
                 packet: std::any::type_name::<T>(),
                 pull: false,
-            },
+            }],
             None,
             true,
         );
@@ -702,15 +663,15 @@ impl<T: RosType + Packet + DeserializeOwned> SubscriberBuilder<'_, T> {
             packet: _,
         } = self;
         let endpoint = participant.endpoint::<T>(&topic, EntityKind::Subscription, qos)?;
-        let spec = leak_spec(
+        let spec = crate::bridge::leak_spec(
             "RosSubscriber",
             "Sends on `output` each message of a ROS 2 topic (rmw_zenoh's wire); messages that do not decode are counted at `network`.",
-            InputSpec {
+            vec![InputSpec {
                 name: "network",
                 kind: InputKind::Tick,
                 packet: "event",
                 pull: false,
-            },
+            }],
             Some(OutputSpec {
                 name: "output",
                 kind: OutputKind::Data,

@@ -1,7 +1,9 @@
 //! `coolctl top`: a live view of every component of every node on the network
 //! (`docs/tools.md`, "`coolctl top`"): the component tree with each default and user
 //! state, period, quality, adaptation level, CPU share, missed deadlines, overruns,
-//! overflows, dropped events and last error; the supervision and adaptation steps as
+//! overflows, dropped events and last error, and the thread it runs on (each
+//! execution group's members together, the group's cycles below the table); the
+//! supervision and adaptation steps as
 //! they happen; keys to suspend, run, restart a component or set a controllable
 //! variable, with the reply shown. A node that goes away stays on screen, marked
 //! lost, until it comes back.

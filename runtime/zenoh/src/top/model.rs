@@ -72,6 +72,64 @@ impl Row {
     }
 }
 
+/// Where a row sorts: by node, then by path, except that the members of an
+/// execution group (siblings, in one compound or at the top of a node) sit
+/// together, in the order they run, where the first of them by name would be.
+fn order(row: &Row) -> (String, Vec<(String, usize)>) {
+    let mut key: Vec<(String, usize)> = row.path.split('.').map(|s| (s.to_owned(), 0)).collect();
+    if let (Some(group), Some(last)) = (&row.monitor.group, key.last_mut()) {
+        let first = group.members.iter().min().unwrap_or(&last.0).clone();
+        let place = group.members.iter().position(|m| *m == last.0);
+        *last = (first, place.map_or(usize::MAX, |p| p + 1));
+    }
+    (row.node.clone(), key)
+}
+
+/// One execution group as `top` sums it up (under the component table).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GroupLine {
+    /// Its node.
+    pub node: String,
+    /// The path of the compound it is in (empty at the top of a node).
+    pub within: String,
+    /// What its members' monitors show of it (the newest).
+    pub status: coolbot::GroupStatus,
+}
+
+impl std::fmt::Display for GroupLine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = &self.status;
+        let place = if self.within.is_empty() {
+            self.node.clone()
+        } else {
+            format!("{}/{}", self.node, self.within)
+        };
+        write!(
+            f,
+            "thread {} in {place}: {}; cycle {}, worst {}",
+            g.name,
+            g.members.join(" > "),
+            short(g.last_cycle),
+            short(g.worst_cycle)
+        )?;
+        if let Some(period) = g.period {
+            write!(f, ", period {}", short(period))?;
+        }
+        write!(f, ", {} overruns in {} cycles", g.overruns, g.cycles)
+    }
+}
+
+/// A duration as `top` prints a cycle: microseconds under a millisecond.
+pub fn short(d: Duration) -> String {
+    if d < Duration::from_millis(1) {
+        format!("{}us", d.as_micros())
+    } else if d < Duration::from_secs(1) {
+        format!("{:.1}ms", d.as_secs_f64() * 1e3)
+    } else {
+        format!("{:.1}s", d.as_secs_f64())
+    }
+}
+
 /// Everything `top` shows.
 #[derive(Debug, Default)]
 pub struct Board {
@@ -157,7 +215,7 @@ impl Board {
                 lost: false,
             });
         }
-        rows.sort_by(|a, b| (&a.node, &a.path).cmp(&(&b.node, &b.path)));
+        rows.sort_by_cached_key(order);
         self.rows = rows;
         self.selected = self.selected.min(self.rows.len().saturating_sub(1));
     }
@@ -332,9 +390,35 @@ impl Board {
         }
     }
 
-    /// The rows, by node and path.
+    /// The rows, by node and path (an execution group's members together, in the
+    /// order they run).
     pub fn rows(&self) -> &[Row] {
         &self.rows
+    }
+
+    /// The execution groups of the live rows, each once, in the rows' order, with
+    /// the figures of its member heard last.
+    pub fn groups(&self) -> Vec<GroupLine> {
+        let mut lines: Vec<GroupLine> = Vec::new();
+        for row in self.rows.iter().filter(|row| !row.lost) {
+            let Some(status) = &row.monitor.group else {
+                continue;
+            };
+            let within = row.path.rsplit_once('.').map_or("", |(w, _)| w).to_owned();
+            let line = GroupLine {
+                node: row.node.clone(),
+                within,
+                status: status.clone(),
+            };
+            match lines.iter_mut().find(|l| {
+                (&l.node, &l.within, &l.status.name) == (&line.node, &line.within, &status.name)
+            }) {
+                Some(seen) if seen.status.cycles < status.cycles => *seen = line,
+                Some(_) => {}
+                None => lines.push(line),
+            }
+        }
+        lines
     }
 
     /// The selected row's index.

@@ -1,5 +1,7 @@
 //! How `coolctl top` draws a [`Board`]: the component table (each node's tree,
-//! lost nodes greyed), the steps pane (supervision and adaptation steps, newest at
+//! lost nodes greyed, the thread each component runs on), the execution groups'
+//! pane (each group's members in order and its cycles; only when there is a group),
+//! the steps pane (supervision and adaptation steps, newest at
 //! the bottom unless scrolled back; its title says what is hidden or below), and a
 //! status line (the last reply, or the keys of the pane in focus). Every frame is
 //! drawn whole by ratatui, so nothing of an earlier frame stays on screen, at any
@@ -92,11 +94,17 @@ fn cells(row: &Row) -> Vec<String> {
         m.overruns.to_string(),
         m.overflows.to_string(),
         m.dropped_events.to_string(),
+        m.group
+            .as_ref()
+            .map_or_else(|| "own".to_owned(), |group| group.name.clone()),
         m.error.clone().unwrap_or_default(),
     ]
 }
 
-const HEADER: [&str; 12] = [
+/// The thread column's index: a group's name, or `own`.
+const THREAD: usize = 11;
+
+const HEADER: [&str; 13] = [
     "COMPONENT",
     "STATE",
     "USER",
@@ -108,13 +116,36 @@ const HEADER: [&str; 12] = [
     "OVERRUN",
     "OVERFL",
     "DROPPED",
+    "THREAD",
     "LAST ERROR",
 ];
+
+/// `columns` without the thread column unless `threads`.
+fn shown<T>(threads: bool, columns: Vec<T>) -> impl Iterator<Item = T> {
+    columns
+        .into_iter()
+        .enumerate()
+        .filter(move |(index, _)| threads || *index != THREAD)
+        .map(|(_, column)| column)
+}
 
 /// Draw `board` on the whole frame.
 pub fn draw(frame: &mut Frame<'_>, board: &Board) {
     let area = frame.area();
     let [table_area, steps_area, status_area] = areas(area);
+    // The groups' pane takes the bottom of the table's area, one line a group.
+    let groups = board.groups();
+    let (table_area, groups_area) = if groups.is_empty() {
+        (table_area, None)
+    } else {
+        let lines = u16::try_from(groups.len()).unwrap_or(u16::MAX);
+        let [table, pane] = Layout::vertical([
+            Constraint::Min(3),
+            Constraint::Length(lines.saturating_add(2)),
+        ])
+        .areas(table_area);
+        (table, Some(pane))
+    };
     let focused = |pane: Focus| {
         if board.focus() == pane {
             Style::new().add_modifier(Modifier::BOLD)
@@ -123,13 +154,16 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
         }
     };
 
+    // The thread column only when some component runs in an execution group
+    // (otherwise every row's is `own`).
+    let threads = board.rows().iter().any(|row| row.monitor.group.is_some());
     let rows = board.rows().iter().map(|row| {
         let style = if row.lost {
             Style::new().add_modifier(Modifier::DIM)
         } else {
             Style::new()
         };
-        TableRow::new(cells(row).into_iter().map(Cell::from)).style(style)
+        TableRow::new(shown(threads, cells(row)).map(Cell::from)).style(style)
     });
     // The component column fits the longest name, up to half the screen.
     let longest = board
@@ -142,22 +176,38 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
     let first = u16::try_from(longest)
         .unwrap_or(u16::MAX)
         .min(area.width / 2);
-    let widths = [
-        Constraint::Length(first),
-        Constraint::Length(13),
-        Constraint::Length(10),
-        Constraint::Length(10),
-        Constraint::Length(2),
-        Constraint::Length(4),
-        Constraint::Length(5),
-        Constraint::Length(6),
-        Constraint::Length(7),
-        Constraint::Length(6),
-        Constraint::Length(7),
-        Constraint::Fill(1),
-    ];
+    // The thread column fits the longest group name, up to 16.
+    let thread = board
+        .rows()
+        .iter()
+        .map(|row| cells(row)[THREAD].chars().count())
+        .max()
+        .unwrap_or(0)
+        .clamp(HEADER[THREAD].len(), 16);
+    let widths: Vec<Constraint> = shown(
+        threads,
+        vec![
+            Constraint::Length(first),
+            Constraint::Length(13),
+            Constraint::Length(10),
+            Constraint::Length(10),
+            Constraint::Length(2),
+            Constraint::Length(4),
+            Constraint::Length(5),
+            Constraint::Length(6),
+            Constraint::Length(7),
+            Constraint::Length(6),
+            Constraint::Length(7),
+            Constraint::Length(u16::try_from(thread).unwrap_or(16)),
+            Constraint::Fill(1),
+        ],
+    )
+    .collect();
     let table = Table::new(rows, widths)
-        .header(TableRow::new(HEADER).style(Style::new().add_modifier(Modifier::BOLD)))
+        .header(
+            TableRow::new(shown(threads, HEADER.to_vec()))
+                .style(Style::new().add_modifier(Modifier::BOLD)),
+        )
         .row_highlight_style(Style::new().add_modifier(Modifier::REVERSED))
         .block(
             Block::bordered()
@@ -175,6 +225,17 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
                 "no CoolBOT node answered (yet): start one with --node, or name it with --connect",
             ),
             line,
+        );
+    }
+
+    if let Some(pane) = groups_area {
+        let lines: Vec<Line<'_>> = groups
+            .iter()
+            .map(|group| Line::from(group.to_string()))
+            .collect();
+        frame.render_widget(
+            Paragraph::new(lines).block(Block::bordered().title(" execution groups ")),
+            pane,
         );
     }
 

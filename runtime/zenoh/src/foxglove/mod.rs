@@ -1,0 +1,721 @@
+//! `coolctl foxglove`: the components of the nodes on the network as a Foxglove
+//! WebSocket server (`docs/foxglove.md`), on the Foxglove SDK's server (the
+//! `foxglove` crate, this crate's `foxglove` feature).
+//!
+//! Channels, all JSON with a JSON Schema:
+//! - `/<node>/<path>.<port>`: the packets of an echoed output that a `--port`
+//!   pattern selects ([`crate::Node::echo`]), with the schema the node traced for its
+//!   packet type (as a recording does, [`coolbot::schema`]);
+//! - `/<node>/<path>/monitor`: a component's monitoring, one [`channels::Monitoring`]
+//!   per refresh;
+//! - `/coolbot/log`: every supervision and adaptation step of every component, as
+//!   `foxglove.Log`;
+//! - `/<node>/<path>.<port>/pose`, `.../tf`, `.../laser_scan`: an echoed output a
+//!   mapping file names, as `foxglove.PoseInFrame`, `foxglove.FrameTransform` and
+//!   `foxglove.LaserScan` ([`wellknown`]).
+//!
+//! Parameters `<node>/<path>/<variable>`: every component's controllable variables
+//! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
+//! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
+//!
+//! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
+//! declared and no snapshot asked for it until a client subscribes, and both end when
+//! the last one unsubscribes.
+
+mod channels;
+mod matching;
+pub mod params;
+pub mod wellknown;
+
+use std::collections::{BTreeMap, HashMap};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use foxglove::websocket::{
+    AnyClient, ChannelView, Client, GetParametersResponder, Parameter, ParameterHandler,
+    ServerListener, SetParametersResponder,
+};
+use foxglove::{ChannelId, Context, RawChannel, WebSocketServer, WebSocketServerHandle};
+use zenoh::Wait;
+
+use crate::ctl::Ctl;
+use crate::echo::Echoed;
+use crate::keys;
+
+pub use channels::{LOG_TOPIC, Monitoring};
+pub use matching::matches;
+
+/// The address `coolctl foxglove` serves on unless told otherwise.
+pub const DEFAULT_BIND: &str = "127.0.0.1:8765";
+
+/// What can go wrong in `coolctl foxglove`.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FoxgloveError {
+    /// An address off loopback without a security file or `--insecure`.
+    #[error(
+        "`{0}` is not on loopback: serving the nodes' components there lets any host that \
+         reaches it watch and command them; give the security file (--config) or \
+         --insecure"
+    )]
+    OffLoopback(SocketAddr),
+    /// The Foxglove server refused to start or to make a channel.
+    #[error("the Foxglove server cannot {action}")]
+    Server {
+        /// What was being done.
+        action: &'static str,
+        /// The SDK's error.
+        #[source]
+        source: foxglove::FoxgloveError,
+    },
+    /// The mapping file cannot be used.
+    #[error("the mapping file")]
+    Map(#[from] wellknown::MapError),
+    /// The server's thread could not be started.
+    #[error("cannot spawn the foxglove thread")]
+    Spawn(#[source] std::io::Error),
+}
+
+/// How `coolctl foxglove` serves.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Where the WebSocket server listens (port 0: any free port).
+    pub bind: SocketAddr,
+    /// Patterns of the echoed outputs to serve, `NODE/PATH.PORT` with `*` for any
+    /// characters (e.g. `robot/robot.base.*`); none: none.
+    pub ports: Vec<String>,
+    /// The outputs to show as Foxglove's well-known messages.
+    pub mappings: wellknown::Mappings,
+    /// How often the nodes are asked for new components, and a watched component's
+    /// monitoring is read.
+    pub refresh: Duration,
+    /// Whether the security file was given (a bind off loopback needs it or
+    /// `insecure`).
+    pub secured: bool,
+    /// Serve off loopback without a security file.
+    pub insecure: bool,
+}
+
+impl Options {
+    /// Refuse an address off loopback without a security file or `insecure`.
+    pub fn check(&self) -> Result<(), FoxgloveError> {
+        if self.bind.ip().is_loopback() || self.secured || self.insecure {
+            Ok(())
+        } else {
+            Err(FoxgloveError::OffLoopback(self.bind))
+        }
+    }
+}
+
+/// What a client asked, for the server's thread.
+enum Order {
+    Subscribe(ChannelId),
+    Unsubscribe(ChannelId),
+    Get {
+        names: Vec<String>,
+        responder: GetParametersResponder,
+    },
+    Set {
+        client: AnyClient,
+        parameters: Vec<Parameter>,
+        responder: SetParametersResponder,
+    },
+    WatchParameters(Vec<String>),
+    UnwatchParameters(Vec<String>),
+    Stop,
+}
+
+/// Tells the server's thread what the clients subscribe to (the SDK calls it from
+/// its own tasks, which must not wait: the orders are queued).
+struct Listener {
+    orders: Sender<Order>,
+}
+
+impl ServerListener for Listener {
+    fn on_subscribe(&self, _client: Client, channel: ChannelView<'_>) {
+        let _ = self.orders.send(Order::Subscribe(channel.id()));
+    }
+
+    fn on_unsubscribe(&self, _client: Client, channel: ChannelView<'_>) {
+        let _ = self.orders.send(Order::Unsubscribe(channel.id()));
+    }
+
+    fn on_parameters_subscribe(&self, names: Vec<String>) {
+        let _ = self.orders.send(Order::WatchParameters(names));
+    }
+
+    fn on_parameters_unsubscribe(&self, names: Vec<String>) {
+        let _ = self.orders.send(Order::UnwatchParameters(names));
+    }
+}
+
+/// Takes the clients' parameter requests to the server's thread (they ask the nodes,
+/// which waits).
+struct Parameters {
+    orders: Sender<Order>,
+}
+
+impl ParameterHandler for Parameters {
+    fn get(
+        &self,
+        _client: AnyClient,
+        names: Vec<String>,
+        _request_id: Option<String>,
+        responder: GetParametersResponder,
+    ) {
+        let _ = self.orders.send(Order::Get { names, responder });
+    }
+
+    fn set(
+        &self,
+        client: AnyClient,
+        parameters: Vec<Parameter>,
+        _request_id: Option<String>,
+        responder: SetParametersResponder,
+    ) {
+        let _ = self.orders.send(Order::Set {
+            client,
+            parameters,
+            responder,
+        });
+    }
+}
+
+/// A running `coolctl foxglove`: the server, and the thread that follows the nodes.
+/// Dropping it stops both.
+pub struct Server {
+    handle: Option<Arc<WebSocketServerHandle>>,
+    orders: Sender<Order>,
+    thread: Option<JoinHandle<()>>,
+    stop: Arc<std::sync::atomic::AtomicBool>,
+    counts: Arc<Counts>,
+}
+
+impl std::fmt::Debug for Server {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Server").finish_non_exhaustive()
+    }
+}
+
+/// What the server has dropped: messages from the network that do not decode.
+#[derive(Debug, Default)]
+pub struct Counts {
+    /// Echoed packets and monitoring events that did not decode (dropped, warned).
+    pub undecoded: AtomicU64,
+}
+
+impl Server {
+    /// Start serving the nodes `ctl` reaches on `options.bind`.
+    pub fn start(
+        ctl: Ctl,
+        session: zenoh::Session,
+        options: Options,
+    ) -> Result<Server, FoxgloveError> {
+        options.check()?;
+        let context = Context::new();
+        let (orders, received) = crossbeam_channel::unbounded();
+        let handle = WebSocketServer::new()
+            .name("coolctl foxglove")
+            .bind(options.bind.ip().to_string(), options.bind.port())
+            .context(&context)
+            .listener(Arc::new(Listener {
+                orders: orders.clone(),
+            }))
+            .parameter_handler(Arc::new(Parameters {
+                orders: orders.clone(),
+            }))
+            .services(params::services(&ctl))
+            .start_blocking()
+            .map_err(|source| FoxgloveError::Server {
+                action: "start",
+                source,
+            })?;
+        let handle = Arc::new(handle);
+        let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let counts = Arc::new(Counts::default());
+        let mut follower = Follower {
+            ctl,
+            session,
+            context,
+            patterns: options.ports,
+            mappings: options.mappings,
+            refresh: options.refresh,
+            channels: HashMap::new(),
+            known: BTreeMap::new(),
+            counts: Arc::clone(&counts),
+            server: Arc::clone(&handle),
+            watched: BTreeMap::new(),
+        };
+        follower.discover();
+        let stopped = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name("cool-net:foxglove".to_owned())
+            .spawn(move || follower.run(&received, &stopped))
+            .map_err(FoxgloveError::Spawn)?;
+        Ok(Server {
+            handle: Some(handle),
+            orders,
+            thread: Some(thread),
+            stop,
+            counts,
+        })
+    }
+
+    /// The port the server listens on.
+    pub fn port(&self) -> u16 {
+        self.handle.as_ref().map_or(0, |handle| handle.port())
+    }
+
+    /// What the server dropped so far.
+    pub fn counts(&self) -> &Counts {
+        &self.counts
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        // Wakes the thread at once.
+        let _ = self.orders.send(Order::Stop);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+        if let Some(handle) = self.handle.take().and_then(Arc::into_inner) {
+            drop(handle.stop());
+        }
+    }
+}
+
+/// What a channel stands for.
+enum Source {
+    /// An echoed output, on its echo key, each packet made a message by `transform`.
+    Port {
+        key: String,
+        transform: wellknown::Transform,
+    },
+    /// A component's monitoring, read each refresh.
+    Monitor { address: String },
+    /// Every supervision and adaptation step.
+    Log,
+}
+
+/// One channel: what it stands for, its subscribers, and what runs while it has any.
+struct Served {
+    channel: Arc<RawChannel>,
+    source: Source,
+    subscribers: usize,
+    /// The Zenoh subscriber of a port or of the log, while subscribed.
+    subscriber: Option<zenoh::pubsub::Subscriber<()>>,
+    /// A monitored component's last CPU time and when it was read.
+    cpu: Option<(Duration, Instant)>,
+}
+
+/// The server's thread: finds the components, serves the subscribed channels.
+struct Follower {
+    ctl: Ctl,
+    session: zenoh::Session,
+    context: Arc<Context>,
+    patterns: Vec<String>,
+    mappings: wellknown::Mappings,
+    refresh: Duration,
+    channels: HashMap<ChannelId, Served>,
+    /// The components already served, `node/path`, with their controllable
+    /// variables.
+    known: BTreeMap<String, Vec<String>>,
+    counts: Arc<Counts>,
+    server: Arc<WebSocketServerHandle>,
+    /// The parameters clients subscribed to, with the value last sent.
+    watched: BTreeMap<String, Option<Parameter>>,
+}
+
+impl Follower {
+    fn run(&mut self, orders: &Receiver<Order>, stop: &std::sync::atomic::AtomicBool) {
+        let mut next = Instant::now() + self.refresh;
+        while !stop.load(Ordering::Acquire) {
+            match orders.recv_timeout(next.saturating_duration_since(Instant::now())) {
+                Ok(Order::Subscribe(id)) => self.subscribe(id),
+                Ok(Order::Unsubscribe(id)) => self.unsubscribe(id),
+                Ok(Order::Get { names, responder }) => {
+                    let parameters = self.parameters(&names);
+                    responder.respond(parameters);
+                }
+                Ok(Order::Set {
+                    client,
+                    parameters,
+                    responder,
+                }) => {
+                    let current = self.set(&client, parameters);
+                    responder.respond(current);
+                    self.publish_watched();
+                }
+                Ok(Order::WatchParameters(names)) => {
+                    for name in names {
+                        self.watched.insert(name, None);
+                    }
+                    self.publish_watched();
+                }
+                Ok(Order::UnwatchParameters(names)) => {
+                    for name in names {
+                        self.watched.remove(&name);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    self.discover();
+                    self.poll_monitors();
+                    self.publish_watched();
+                    next = Instant::now() + self.refresh;
+                }
+                Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+            }
+        }
+    }
+
+    fn add(&mut self, channel: Result<Arc<RawChannel>, foxglove::FoxgloveError>, source: Source) {
+        match channel {
+            Ok(channel) => {
+                self.channels.insert(
+                    channel.id(),
+                    Served {
+                        channel,
+                        source,
+                        subscribers: 0,
+                        subscriber: None,
+                        cpu: None,
+                    },
+                );
+            }
+            Err(error) => coolbot::limited!("foxglove:channel", |held| tracing::warn!(
+                "a channel is not served: {}{held}",
+                coolbot::Chain(&error)
+            )),
+        }
+    }
+
+    /// Serve the components not served yet: their monitoring, and the echoed outputs
+    /// the patterns select; and the log, once.
+    fn discover(&mut self) {
+        if self
+            .channels
+            .values()
+            .all(|served| !matches!(served.source, Source::Log))
+        {
+            let log = channels::log(&self.context);
+            self.add(log, Source::Log);
+        }
+        let listed = match self.ctl.components(None) {
+            Ok(listed) => listed,
+            Err(error) => {
+                coolbot::limited!("foxglove:discover", |held| tracing::warn!(
+                    "cannot list the components: {}{held}",
+                    coolbot::Chain(&error)
+                ));
+                return;
+            }
+        };
+        for listed in listed {
+            let address = format!("{}/{}", listed.node, listed.path);
+            if self.known.contains_key(&address) {
+                continue;
+            }
+            let info = match self.ctl.info(&address) {
+                Ok(info) => info,
+                Err(error) => {
+                    coolbot::limited!(&address, |held| tracing::warn!(
+                        "no shape for {address}: {}{held}",
+                        coolbot::Chain(&error)
+                    ));
+                    continue;
+                }
+            };
+            self.known
+                .insert(address.clone(), params::controllables(&info));
+            let monitor = channels::monitor(&self.context, &address);
+            self.add(
+                monitor,
+                Source::Monitor {
+                    address: address.clone(),
+                },
+            );
+            for port in &info.echoed {
+                let name = format!("{address}.{port}");
+                let key = keys::echo(&listed.node, &listed.path, port);
+                let mut transforms = Vec::new();
+                if self.patterns.iter().any(|pattern| matches(pattern, &name)) {
+                    let schema = coolbot::schema::Schema::given(
+                        info.schemas
+                            .get(port)
+                            .cloned()
+                            .unwrap_or_else(|| serde_json::json!({})),
+                    );
+                    transforms.push(wellknown::Transform::Raw {
+                        wrap: !schema.is_object(),
+                    });
+                }
+                for map in self
+                    .mappings
+                    .pose
+                    .iter()
+                    .filter(|m| matches(&m.port, &name))
+                {
+                    transforms.push(wellknown::Transform::Pose(map.clone()));
+                    transforms.push(wellknown::Transform::Tf(map.clone()));
+                }
+                for map in self
+                    .mappings
+                    .laser_scan
+                    .iter()
+                    .filter(|m| matches(&m.port, &name))
+                {
+                    transforms.push(wellknown::Transform::Scan(map.clone()));
+                }
+                for transform in transforms {
+                    let topic = format!("{name}{}", transform.suffix());
+                    let channel = match transform.schema() {
+                        Some((schema_name, schema)) => {
+                            channels::port(&self.context, &topic, schema_name, &schema)
+                        }
+                        None => {
+                            let packet = info
+                                .outputs
+                                .iter()
+                                .find(|output| &output.name == port)
+                                .map_or("packet", |output| output.packet.as_str());
+                            let schema = coolbot::schema::Schema::given(
+                                info.schemas
+                                    .get(port)
+                                    .cloned()
+                                    .unwrap_or_else(|| serde_json::json!({})),
+                            );
+                            let body = if schema.is_object() {
+                                schema.schema
+                            } else {
+                                schema.wrapped()
+                            };
+                            channels::port(&self.context, &topic, packet, &body)
+                        }
+                    };
+                    self.add(
+                        channel,
+                        Source::Port {
+                            key: key.clone(),
+                            transform,
+                        },
+                    );
+                }
+            }
+        }
+    }
+
+    fn subscribe(&mut self, id: ChannelId) {
+        let Some(served) = self.channels.get_mut(&id) else {
+            return;
+        };
+        served.subscribers += 1;
+        if served.subscribers > 1 {
+            return;
+        }
+        let channel = Arc::clone(&served.channel);
+        let counts = Arc::clone(&self.counts);
+        let declared = match &served.source {
+            Source::Port { key, transform } => {
+                let transform = transform.clone();
+                let topic = channel.topic().to_owned();
+                Some(
+                    self.session
+                        .declare_subscriber(key.clone())
+                        .callback(move |sample| {
+                            let echoed = serde_json::from_slice::<Echoed>(&sample.payload().to_bytes())
+                                .map_err(|error| error.to_string())
+                                .and_then(|echoed| transform.apply(echoed.packet));
+                            match echoed {
+                                Ok(message) => channel.log(message.to_string().as_bytes()),
+                                Err(error) => {
+                                    counts.undecoded.fetch_add(1, Ordering::Relaxed);
+                                    coolbot::limited!(&topic, |held| tracing::warn!(
+                                        "an echoed packet for {topic} does not fit (dropped): {error}{held}"
+                                    ));
+                                }
+                            }
+                        })
+                        .wait(),
+                )
+            }
+            Source::Log => Some(
+                self.session
+                    .declare_subscriber(keys::monitor("*", "*"))
+                    .callback(move |sample| {
+                        let key = sample.key_expr().as_str();
+                        let Some((node, path)) = keys::parse_component(key) else {
+                            return;
+                        };
+                        match serde_json::from_slice::<coolbot::MonitorEvent>(
+                            &sample.payload().to_bytes(),
+                        ) {
+                            Ok(event) => {
+                                if let Some(log) = channels::log_entry(node, path, &event) {
+                                    channel.log(log.to_string().as_bytes());
+                                }
+                            }
+                            Err(error) => {
+                                counts.undecoded.fetch_add(1, Ordering::Relaxed);
+                                coolbot::limited!(key, |held| tracing::warn!(
+                                    "a monitoring event on {key} does not decode (dropped): {error}{held}"
+                                ));
+                            }
+                        }
+                    })
+                    .wait(),
+            ),
+            Source::Monitor { .. } => None,
+        };
+        match declared {
+            Some(Ok(subscriber)) => served.subscriber = Some(subscriber),
+            Some(Err(error)) => coolbot::limited!("foxglove:subscribe", |held| tracing::warn!(
+                "cannot subscribe for {}: {}{held}",
+                served.channel.topic(),
+                coolbot::Chain(&*error)
+            )),
+            None => {}
+        }
+        if matches!(served.source, Source::Monitor { .. }) {
+            self.poll_monitors();
+        }
+    }
+
+    fn unsubscribe(&mut self, id: ChannelId) {
+        let Some(served) = self.channels.get_mut(&id) else {
+            return;
+        };
+        served.subscribers = served.subscribers.saturating_sub(1);
+        if served.subscribers == 0 {
+            served.subscriber = None;
+            served.cpu = None;
+        }
+    }
+
+    /// The parameters named (all when none is), with their values now.
+    fn parameters(&self, names: &[String]) -> Vec<Parameter> {
+        let snapshots: BTreeMap<String, coolbot::Monitor> = match self.ctl.components(None) {
+            Ok(listed) => listed
+                .into_iter()
+                .map(|listed| (format!("{}/{}", listed.node, listed.path), listed.monitor))
+                .collect(),
+            Err(error) => {
+                coolbot::limited!("foxglove:parameters", |held| tracing::warn!(
+                    "cannot read the parameters: {}{held}",
+                    coolbot::Chain(&error)
+                ));
+                return Vec::new();
+            }
+        };
+        let mut parameters = Vec::new();
+        for (address, variables) in &self.known {
+            let Some(monitor) = snapshots.get(address) else {
+                continue;
+            };
+            for variable in variables {
+                let name = params::parameter_name(address, variable);
+                if names.is_empty() || names.contains(&name) {
+                    parameters.push(params::parameter(name, variable, monitor));
+                }
+            }
+        }
+        parameters
+    }
+
+    /// Set each parameter through its component's control key; tell `client` each
+    /// refusal; the values of the parameters named, now.
+    fn set(&self, client: &AnyClient, parameters: Vec<Parameter>) -> Vec<Parameter> {
+        let mut names = Vec::new();
+        for parameter in parameters {
+            let outcome = (|| {
+                let unknown = || params::SetError::Unknown(parameter.name.clone());
+                let (address, variable) =
+                    params::split_name(&parameter.name).ok_or_else(unknown)?;
+                if !self
+                    .known
+                    .get(address)
+                    .is_some_and(|variables| variables.iter().any(|v| v == variable))
+                {
+                    return Err(unknown());
+                }
+                let value = parameter
+                    .value
+                    .as_ref()
+                    .ok_or_else(|| params::SetError::Value {
+                        name: parameter.name.clone(),
+                        why: "no value given".to_owned(),
+                    })?;
+                let command =
+                    params::command(&parameter.name, variable, value, parameter.r#type.as_ref())?;
+                params::apply(&self.ctl, &parameter.name, address, &command)
+            })();
+            if let Err(error) = outcome {
+                client.send_error(coolbot::Chain(&error).to_string());
+            }
+            names.push(parameter.name);
+        }
+        self.parameters(&names)
+    }
+
+    /// Send the watched parameters whose values changed.
+    fn publish_watched(&mut self) {
+        if self.watched.is_empty() {
+            return;
+        }
+        let names: Vec<String> = self.watched.keys().cloned().collect();
+        let mut changed = Vec::new();
+        for parameter in self.parameters(&names) {
+            let last = self.watched.get_mut(&parameter.name);
+            if let Some(last) = last
+                && last.as_ref() != Some(&parameter)
+            {
+                *last = Some(parameter.clone());
+                changed.push(parameter);
+            }
+        }
+        if !changed.is_empty() {
+            self.server.publish_parameter_values(changed);
+        }
+    }
+
+    /// Read the monitoring of every subscribed monitor channel's component.
+    fn poll_monitors(&mut self) {
+        let now = std::time::SystemTime::now();
+        for served in self.channels.values_mut() {
+            let Source::Monitor { address } = &served.source else {
+                continue;
+            };
+            if served.subscribers == 0 {
+                continue;
+            }
+            let monitor = match self.ctl.snapshot(address) {
+                Ok(monitor) => monitor,
+                Err(error) => {
+                    coolbot::limited!(address, |held| tracing::warn!(
+                        "no monitoring from {address}: {}{held}",
+                        coolbot::Chain(&error)
+                    ));
+                    continue;
+                }
+            };
+            let read = Instant::now();
+            let cpu_share = served.cpu.and_then(|(cpu, at)| {
+                let wall = read.duration_since(at);
+                (!wall.is_zero()).then(|| {
+                    monitor.cpu_time.saturating_sub(cpu).as_secs_f64() / wall.as_secs_f64()
+                })
+            });
+            served.cpu = Some((monitor.cpu_time, read));
+            let message = Monitoring::of(&monitor, cpu_share, now);
+            match serde_json::to_vec(&message) {
+                Ok(json) => served.channel.log(&json),
+                Err(error) => tracing::warn!("monitoring does not encode: {error}"),
+            }
+        }
+    }
+}

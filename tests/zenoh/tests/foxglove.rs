@@ -1,0 +1,908 @@
+//! `coolctl foxglove` against a client that is not ours: `@foxglove/ws-protocol`'s
+//! `FoxgloveClient` (npm) in Node, every message checked against its channel's JSON
+//! Schema by Ajv (`tests/foxglove/client.cjs`). The real `coolctl` binary serves a
+//! real node: the client receives the advertisements, subscribes, decodes the echoed
+//! packets, the monitoring and the supervision log; a channel nobody watches has no
+//! Zenoh subscriber behind it.
+//!
+//! The client's packages are in `$COOLBOT_FOXGLOVE_CLIENT` (a `node_modules`
+//! directory), else `target/foxglove-client/node_modules`; `.ci/run` installs them.
+//! Without them these tests fail under CI (`CI` set) and say they are skipped
+//! elsewhere, with the command that installs them.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::DataOut;
+use coolbot::{SectionResult, System};
+use coolbot_zenoh::Node;
+use coolbot_zenoh_tests::generated::types::{Reading, RoverPose, RoverScan};
+use coolbot_zenoh_tests::generated::{rover, source, tuner};
+use coolbot_zenoh_tests::support::{self, PATIENCE, node, wait_until};
+use serde_json::{Value, json};
+use zenoh::Wait;
+
+const COOLCTL: &str = env!("CARGO_BIN_EXE_coolctl-under-test");
+
+/// How to install the client's packages.
+const SETUP: &str = "npm install --prefix target/foxglove-client @foxglove/ws-protocol@0.8.0 \
+ws@8.18.3 ajv@8.17.1 (from the repository root), or set COOLBOT_FOXGLOVE_CLIENT to a \
+node_modules directory holding them";
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The client's `node_modules`, or None (the test is skipped, said on stderr) when
+/// it is not installed outside CI; a panic under CI.
+fn client_modules() -> Option<PathBuf> {
+    let modules = std::env::var_os("COOLBOT_FOXGLOVE_CLIENT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target/foxglove-client/node_modules"));
+    if modules.join("@foxglove/ws-protocol").is_dir() {
+        return Some(modules);
+    }
+    let missing = format!(
+        "the Foxglove client is not installed at {}: {SETUP}",
+        modules.display()
+    );
+    if std::env::var_os("CI").is_some() {
+        panic!("{missing}");
+    }
+    eprintln!("skipped: {missing}");
+    None
+}
+
+/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
+struct HandOut(Sender<DataOut<Reading>>);
+
+impl source::Behavior for HandOut {
+    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+/// `Tuner`'s behaviour: its observables follow its configuration.
+struct Tuning;
+
+impl tuner::Behavior for Tuning {
+    fn tuning_periodic(&mut self, cx: &mut tuner::Cx<'_>) -> SectionResult {
+        cx.vars.gain = cx.config.gain;
+        Ok(())
+    }
+}
+
+/// A node `fox` with `source` (its `out` echoed, `idle` not), `tuner`, and the
+/// network tests' robot (compounds), running; a thread sending readings on `out`
+/// until dropped.
+struct Fox {
+    node: Node,
+    endpoint: String,
+    _system: System,
+    _robot: System,
+    sending: Arc<AtomicBool>,
+}
+
+impl Drop for Fox {
+    fn drop(&mut self) {
+        self.sending.store(false, Ordering::Release);
+    }
+}
+
+fn fox() -> Fox {
+    let (node, endpoint) = node("fox", &[]);
+    let (hand, out) = crossbeam_channel::bounded(1);
+    let mut system = System::new();
+    system
+        .add(source::component("source", HandOut(hand)))
+        .unwrap();
+    system.add(tuner::component("tuner", Tuning)).unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    node.echo::<Reading>(&system, "source.out").unwrap();
+    let robot = support::robot(&node);
+    let out = out.recv_timeout(PATIENCE).expect("the source started");
+    let sending = Arc::new(AtomicBool::new(true));
+    let running = Arc::clone(&sending);
+    std::thread::spawn(move || {
+        let mut n = 0;
+        while running.load(Ordering::Acquire) {
+            out.send(Reading {
+                n,
+                label: format!("reading {n}"),
+            });
+            n += 1;
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    });
+    Fox {
+        node,
+        endpoint,
+        _system: system,
+        _robot: robot,
+        sending,
+    }
+}
+
+/// A child process whose stdout lines are read on a thread.
+struct Process {
+    child: Child,
+    stdin: Option<ChildStdin>,
+    lines: Receiver<String>,
+}
+
+impl Process {
+    fn start(command: &mut Command) -> Process {
+        let mut child = command
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("the process starts");
+        let stdout = child.stdout.take().expect("piped stdout");
+        let (sender, lines) = crossbeam_channel::unbounded();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = sender.send(line);
+            }
+        });
+        let stdin = child.stdin.take();
+        Process {
+            child,
+            stdin,
+            lines,
+        }
+    }
+
+    fn line(&self) -> String {
+        self.lines
+            .recv_timeout(PATIENCE)
+            .expect("a line from the process")
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        drop(self.stdin.take());
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `coolctl foxglove` serving `fox` on a free port, with the echoed outputs `ports`
+/// select; its URL.
+fn serve(fox: &Fox, ports: &[&str]) -> (Process, String) {
+    let mut command = Command::new(COOLCTL);
+    command.args([
+        "--connect",
+        &fox.endpoint,
+        "--no-multicast",
+        "--timeout",
+        "2s",
+        "foxglove",
+        "--bind",
+        "127.0.0.1:0",
+        "--refresh",
+        "100ms",
+    ]);
+    for port in ports {
+        command.args(["--port", port]);
+    }
+    let server = Process::start(&mut command);
+    let line = server.line();
+    let url = line
+        .strip_prefix("serving ")
+        .unwrap_or_else(|| panic!("coolctl foxglove said `{line}`"))
+        .to_owned();
+    (server, url)
+}
+
+/// The Node client on `url`, its lines as JSON.
+struct Client {
+    process: Process,
+    /// Lines read while looking for others.
+    aside: std::cell::RefCell<std::collections::VecDeque<Value>>,
+}
+
+impl Client {
+    fn start(modules: &Path, url: &str) -> Client {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/foxglove/client.cjs");
+        let process = Process::start(
+            Command::new("node")
+                .arg(script)
+                .arg(url)
+                .env("NODE_PATH", modules),
+        );
+        Client {
+            process,
+            aside: Default::default(),
+        }
+    }
+
+    /// The first line of `kind` for which `accept` holds, among those set aside and
+    /// then as they come; the others are set aside for later calls.
+    fn next_where(&self, kind: &str, mut accept: impl FnMut(&Value) -> bool) -> Value {
+        let matches = |value: &Value, accept: &mut dyn FnMut(&Value) -> bool| {
+            value["kind"] == kind && accept(value)
+        };
+        {
+            let mut aside = self.aside.borrow_mut();
+            if let Some(at) = aside.iter().position(|v| matches(v, &mut accept)) {
+                return aside.remove(at).expect("a line set aside");
+            }
+        }
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = self.process.lines.recv_timeout(left).unwrap_or_else(|_| {
+                panic!(
+                    "no `{kind}` line from the client; set aside: {:?}",
+                    self.aside.borrow()
+                )
+            });
+            let value: Value = serde_json::from_str(&line)
+                .unwrap_or_else(|error| panic!("the client printed `{line}`: {error}"));
+            if value["kind"] == "error" {
+                panic!("the client: {value}");
+            }
+            if matches(&value, &mut accept) {
+                return value;
+            }
+            self.aside.borrow_mut().push_back(value);
+        }
+    }
+
+    fn order(&mut self, order: Value) {
+        let stdin = self.process.stdin.as_mut().expect("stdin open");
+        writeln!(stdin, "{order}").expect("the client reads its orders");
+    }
+
+    /// The advertisements until every topic of `expected` was advertised, by topic.
+    fn advertised(&self, expected: &[&str]) -> std::collections::BTreeMap<String, Value> {
+        let mut seen = std::collections::BTreeMap::new();
+        while !expected.iter().all(|topic| seen.contains_key(*topic)) {
+            let channel = self.next_where("advertise", |_| true);
+            seen.insert(channel["topic"].as_str().unwrap().to_owned(), channel);
+        }
+        seen
+    }
+
+    /// The next `count` messages of `topic`, each checked valid against its schema.
+    fn messages(&self, topic: &str, count: usize) -> Vec<Value> {
+        (0..count)
+            .map(|_| {
+                let message = self.next_where("message", |m| m["topic"] == topic);
+                assert_eq!(
+                    message["valid"], true,
+                    "a message of {topic} does not validate: {message}"
+                );
+                message["data"].clone()
+            })
+            .collect()
+    }
+}
+
+/// Whether some subscriber (of another session) is on `key`, as a publisher of the
+/// node's session sees it.
+fn has_subscriber(node: &Node, key: &str) -> bool {
+    let probe = node
+        .session()
+        .declare_publisher(key.to_owned())
+        .wait()
+        .expect("a probe publisher");
+    // The probe's matching status settles once the session has told it what it knows.
+    std::thread::sleep(Duration::from_millis(200));
+    probe
+        .matching_status()
+        .wait()
+        .is_ok_and(|status| status.matching())
+}
+
+#[test]
+fn a_foxglove_client_sees_channels_subscribes_and_decodes_them() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let (_server, url) = serve(&fox, &["fox/source.*"]);
+    let client = Client::start(&modules, &url);
+    let info = client.next_where("serverInfo", |_| true);
+    assert_eq!(info["name"], "coolctl foxglove", "{info}");
+
+    let channels = client.advertised(&[
+        "/fox/source.out",
+        "/fox/source/monitor",
+        "/fox/tuner/monitor",
+        "/fox/robot.base.motion/monitor",
+        "/coolbot/log",
+    ]);
+    let out = &channels["/fox/source.out"];
+    assert_eq!(out["encoding"], "json", "{out}");
+    assert_eq!(out["schemaEncoding"], "jsonschema", "{out}");
+    assert_eq!(out["schemaName"], "Reading", "{out}");
+    assert_eq!(out["schemaError"], Value::Null, "{out}");
+    assert_eq!(channels["/coolbot/log"]["schemaName"], "foxglove.Log");
+    assert_eq!(
+        channels["/fox/tuner/monitor"]["schemaName"],
+        "coolbot.Monitoring"
+    );
+    // `idle` is not echoed: no channel.
+    assert!(!channels.contains_key("/fox/source.idle"), "{channels:?}");
+
+    let mut client = client;
+    client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 3 }));
+    let readings = client.messages("/fox/source.out", 3);
+    for reading in &readings {
+        let n = reading["n"].as_u64().expect("n is a number");
+        assert_eq!(reading["label"], format!("reading {n}"), "{reading}");
+    }
+
+    client.order(json!({ "do": "subscribe", "topic": "/fox/tuner/monitor", "count": 2 }));
+    let monitoring = client.messages("/fox/tuner/monitor", 2);
+    assert_eq!(monitoring[1]["state"], "running", "{}", monitoring[1]);
+    assert_eq!(monitoring[1]["state_code"], 2);
+    assert_eq!(monitoring[1]["period"], 0.005);
+    assert_eq!(monitoring[1]["nominal_period"], 0.005);
+    assert!(
+        monitoring[1]["cpu_share"].is_number(),
+        "the second reading has a CPU share: {}",
+        monitoring[1]
+    );
+}
+
+#[test]
+fn a_channel_nobody_watches_has_no_zenoh_subscriber() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let (_server, url) = serve(&fox, &["fox/*"]);
+    let mut client = Client::start(&modules, &url);
+    client.advertised(&["/fox/source.out"]);
+    let key = coolbot_zenoh::keys::echo("fox", "source", "out");
+    assert!(
+        !has_subscriber(&fox.node, &key),
+        "advertised but not subscribed: no subscriber on {key}"
+    );
+    client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 1 }));
+    client.messages("/fox/source.out", 1);
+    assert!(has_subscriber(&fox.node, &key), "subscribed: {key} is");
+    client.order(json!({ "do": "unsubscribe", "topic": "/fox/source.out" }));
+    assert!(
+        wait_until(PATIENCE, || !has_subscriber(&fox.node, &key)),
+        "unsubscribed: {key} is not any more"
+    );
+}
+
+#[test]
+fn supervision_and_adaptation_steps_reach_the_log() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let (_server, url) = serve(&fox, &[]);
+    let mut client = Client::start(&modules, &url);
+    client.advertised(&["/coolbot/log", "/fox/robot/monitor"]);
+    client.order(json!({ "do": "subscribe", "topic": "/coolbot/log" }));
+    client.next_where("subscribed", |_| true);
+    let key = coolbot_zenoh::keys::monitor("fox", "robot.base");
+    assert!(wait_until(PATIENCE, || has_subscriber(&fox.node, &key)));
+    // Events as a node publishes them on a compound's monitoring key: a step of each
+    // kind, an event that is neither (not logged), and bytes that do not decode
+    // (dropped, counted by the server).
+    let publish = |event: &[u8]| {
+        fox.node
+            .session()
+            .put(key.clone(), event.to_vec())
+            .wait()
+            .expect("published");
+    };
+    let json = |event: &coolbot::MonitorEvent| serde_json::to_vec(event).unwrap();
+    publish(b"not an event");
+    publish(&json(&coolbot::MonitorEvent::Quality(1)));
+    publish(&json(&coolbot::MonitorEvent::Supervision(
+        coolbot::Supervision {
+            instance: "motion".to_owned(),
+            step: coolbot::Step::Failed,
+            detail: "wheel jammed".to_owned(),
+        },
+    )));
+    publish(&json(&coolbot::MonitorEvent::Adaptation(
+        coolbot::Adaptation {
+            component: "motion".to_owned(),
+            action: coolbot::adapt::AdaptAction::Degraded,
+            from: 0,
+            to: 1,
+            period: Some(Duration::from_millis(20)),
+            quality: None,
+            detail: "deadlines missed".to_owned(),
+        },
+    )));
+    let logs = client.messages("/coolbot/log", 2);
+    assert_eq!(logs[0]["name"], "fox/robot.base", "{}", logs[0]);
+    assert_eq!(logs[0]["level"], 3, "a failure is a warning: {}", logs[0]);
+    let failed = logs[0]["message"].as_str().unwrap();
+    assert!(
+        failed.starts_with("supervision: motion failed") && failed.contains("wheel jammed"),
+        "{failed}"
+    );
+    assert_eq!(
+        logs[1]["level"], 2,
+        "an adaptation step is information: {}",
+        logs[1]
+    );
+    let degraded = logs[1]["message"].as_str().unwrap();
+    assert!(
+        degraded.starts_with("adaptation: motion Degraded 0 -> 1"),
+        "{degraded}"
+    );
+}
+
+/// The next `parameterValues` answer to request `id`, as `name -> value`.
+fn parameter_values(client: &Client, id: &str) -> std::collections::BTreeMap<String, Value> {
+    let values = client.next_where("parameterValues", |v| v["id"] == id);
+    values["parameters"]
+        .as_array()
+        .expect("parameters")
+        .iter()
+        .map(|p| {
+            (
+                p["name"].as_str().expect("a name").to_owned(),
+                p["value"].clone(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn parameters_show_and_set_controllable_variables_with_the_components_checks() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let (_server, url) = serve(&fox, &[]);
+    let mut client = Client::start(&modules, &url);
+    let info = client.next_where("serverInfo", |_| true);
+    let capabilities = info["capabilities"].to_string();
+    assert!(
+        capabilities.contains("\"parameters\"") && capabilities.contains("\"services\""),
+        "{info}"
+    );
+    client.advertised(&["/fox/tuner/monitor", "/fox/robot.base.motion/monitor"]);
+
+    client.order(json!({ "do": "getParameters", "names": [], "id": "all" }));
+    let all = parameter_values(&client, "all");
+    assert_eq!(all["fox/tuner/limit"], 3, "{all:?}");
+    assert_eq!(all["fox/tuner/period"], 0.005, "{all:?}");
+    assert_eq!(all["fox/tuner/quality"], 0, "{all:?}");
+    assert_eq!(all["fox/robot.base.motion/max_speed"], 0.0, "{all:?}");
+    // Observables are not parameters.
+    assert!(!all.contains_key("fox/tuner/gain"), "{all:?}");
+
+    // Set: the component's variable changes.
+    client.order(json!({ "do": "setParameters", "id": "limit",
+        "parameters": [{ "name": "fox/tuner/limit", "value": 7 }] }));
+    assert_eq!(parameter_values(&client, "limit")["fox/tuner/limit"], 7);
+    let limit = || {
+        tuner
+            .snapshot()
+            .variables
+            .iter()
+            .find(|(name, _)| name == "limit")
+            .map(|(_, value)| value.to_json())
+    };
+    assert_eq!(limit(), Some(json!(7)));
+
+    // The component's own checks refuse a value its type cannot hold; the client is
+    // told, and the value stays.
+    client.order(json!({ "do": "setParameters", "id": "negative",
+        "parameters": [{ "name": "fox/tuner/limit", "value": -1 }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        status["level"] == 2 && message.contains("fox/tuner/limit") && message.contains("rejected"),
+        "{status}"
+    );
+    assert_eq!(parameter_values(&client, "negative")["fox/tuner/limit"], 7);
+    assert_eq!(limit(), Some(json!(7)));
+
+    // The control port's ranges refuse a zero period, as for `coolctl set`.
+    client.order(json!({ "do": "setParameters", "id": "period",
+        "parameters": [{ "name": "fox/tuner/period", "value": 0.0, "type": "float64" }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        message.contains("fox/tuner/period") && message.contains("rejected"),
+        "{status}"
+    );
+    assert_eq!(
+        parameter_values(&client, "period")["fox/tuner/period"],
+        0.005
+    );
+    assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(5)));
+
+    // A float period in range is taken.
+    client.order(json!({ "do": "setParameters", "id": "period2",
+        "parameters": [{ "name": "fox/tuner/period", "value": 0.01, "type": "float64" }] }));
+    assert_eq!(
+        parameter_values(&client, "period2")["fox/tuner/period"],
+        0.01
+    );
+    assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(10)));
+
+    // A name that is no parameter.
+    client.order(json!({ "do": "setParameters", "id": "nope",
+        "parameters": [{ "name": "fox/tuner/gain", "value": 2.0 }] }));
+    let status = client.next_where("status", |_| true);
+    assert!(
+        status["message"]
+            .as_str()
+            .unwrap()
+            .contains("`fox/tuner/gain` is not a parameter"),
+        "{status}"
+    );
+}
+
+#[test]
+fn services_suspend_run_and_restart_a_component() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let (_server, url) = serve(&fox, &[]);
+    let mut client = Client::start(&modules, &url);
+    let services = client.next_where("services", |_| true);
+    for name in ["suspend", "run", "restart"] {
+        assert!(
+            services["services"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|s| s["name"] == name),
+            "{services}"
+        );
+    }
+    let call = |client: &mut Client, service: &str, component: &str, id: u32| {
+        client.order(json!({ "do": "call", "service": service, "callId": id,
+            "request": { "component": component } }));
+    };
+    call(&mut client, "suspend", "fox/tuner", 1);
+    let answer = client.next_where("serviceCallResponse", |a| a["callId"] == 1);
+    assert_eq!(answer["data"], "{\"accepted\":true}", "{answer}");
+    assert_eq!(tuner.snapshot().state, coolbot::State::Suspended);
+
+    call(&mut client, "run", "fox/tuner", 2);
+    client.next_where("serviceCallResponse", |a| a["callId"] == 2);
+    assert_eq!(tuner.snapshot().state, coolbot::State::Running);
+
+    // Restart: ready, then running (the component's `start` hook is not run again,
+    // its user automaton restarts from its initial state).
+    let events = tuner.subscribe();
+    call(&mut client, "restart", "fox/tuner", 3);
+    client.next_where("serviceCallResponse", |a| a["callId"] == 3);
+    let states: Vec<coolbot::State> = events
+        .try_iter()
+        .filter_map(|event| match event {
+            coolbot::MonitorEvent::State { to, .. } => Some(to),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        states,
+        [coolbot::State::Ready, coolbot::State::Running],
+        "restarted"
+    );
+
+    // A component that does not exist: a failure that says so.
+    call(&mut client, "suspend", "fox/nobody", 4);
+    let failure = client.next_where("serviceCallFailure", |f| f["callId"] == 4);
+    assert!(
+        failure["message"].as_str().unwrap().contains("nobody"),
+        "{failure}"
+    );
+}
+
+/// A certificate authority for the access-rules test: its certificate in
+/// `dir/<name>-ca.pem`, and what signs.
+struct Authority {
+    ca: PathBuf,
+    issuer: rcgen::Issuer<'static, rcgen::KeyPair>,
+}
+
+impl Authority {
+    fn new(dir: &Path, name: &str) -> Authority {
+        use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
+        let key = KeyPair::generate().expect("a CA key");
+        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.self_signed(&key).expect("a self-signed CA");
+        let ca = dir.join(format!("{name}-ca.pem"));
+        std::fs::write(&ca, certificate.pem()).expect("write the CA");
+        Authority {
+            ca,
+            issuer: Issuer::new(params, key),
+        }
+    }
+
+    /// The security file of `name`'s certificate, with `rules` after its `[tls]`.
+    fn node(&self, dir: &Path, name: &str, rules: &str) -> PathBuf {
+        use rcgen::{CertificateParams, DnType, KeyPair};
+        let key = KeyPair::generate().expect("a node key");
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                .expect("node params");
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
+        std::fs::write(dir.join(format!("{name}.pem")), certificate.pem()).expect("write");
+        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).expect("write");
+        let path = dir.join(format!("{name}.toml"));
+        let ca = self.ca.file_name().expect("a file").to_string_lossy();
+        std::fs::write(
+            &path,
+            format!(
+                "[tls]\nca = \"{ca}\"\ncertificate = \"{name}.pem\"\nkey = \"{name}.key\"\n\n{rules}"
+            ),
+        )
+        .expect("write the security file");
+        path
+    }
+}
+
+/// The operator `ops` may command the robot's base and what is inside it, nothing
+/// else.
+const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base.*\"]\n";
+
+#[test]
+fn the_nodes_access_rules_hold_for_parameters_and_services() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "fleet");
+    let robot_file = authority.node(dir, "robot", RULES);
+    let ops_file = authority.node(dir, "ops", RULES);
+    let endpoint = format!("quic/127.0.0.1:{}", support::free_port());
+    let security = coolbot_zenoh::Security::load(&robot_file).expect("the security file");
+    let config =
+        coolbot_zenoh::secure_config(std::slice::from_ref(&endpoint), &[], false, &security)
+            .expect("a TLS configuration");
+    let node = Node::open("robot", config)
+        .expect("the robot's node opens")
+        .with_state_directory(None);
+    let system = support::robot(&node);
+
+    let server = Process::start(Command::new(COOLCTL).args([
+        "--config",
+        ops_file.to_str().expect("a UTF-8 path"),
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "--timeout",
+        "2s",
+        "foxglove",
+        "--bind",
+        "127.0.0.1:0",
+        "--refresh",
+        "100ms",
+    ]));
+    let line = server.line();
+    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let mut client = Client::start(&modules, &url);
+    client.advertised(&["/robot/logger/monitor", "/robot/robot.base.motion/monitor"]);
+
+    // Allowed: the base's motion.
+    client.order(json!({ "do": "setParameters", "id": "speed",
+        "parameters": [{ "name": "robot/robot.base.motion/max_speed", "value": 0.5,
+                         "type": "float64" }] }));
+    assert_eq!(
+        parameter_values(&client, "speed")["robot/robot.base.motion/max_speed"],
+        0.5
+    );
+    let motion = system.handle_at("robot.base.motion").expect("motion");
+    assert!(
+        motion
+            .snapshot()
+            .variables
+            .iter()
+            .any(|(name, value)| name == "max_speed" && value.to_json() == json!(0.5))
+    );
+
+    // Outside the rules: the logger, neither by a parameter nor by a service.
+    client.order(json!({ "do": "setParameters", "id": "priority",
+        "parameters": [{ "name": "robot/logger/priority", "value": 3 }] }));
+    let status = client.next_where("status", |_| true);
+    let message = status["message"].as_str().unwrap();
+    assert!(
+        message.contains("do not let `ops` command `robot/logger`"),
+        "{status}"
+    );
+    let logger = system.handle("logger").expect("the logger");
+    assert_ne!(logger.snapshot().priority, 3);
+    client.order(json!({ "do": "call", "service": "suspend", "callId": 1,
+        "request": { "component": "robot/logger" } }));
+    let failure = client.next_where("serviceCallFailure", |f| f["callId"] == 1);
+    assert!(
+        failure["message"]
+            .as_str()
+            .unwrap()
+            .contains("do not let `ops` command `robot/logger`"),
+        "{failure}"
+    );
+    assert_eq!(logger.snapshot().state, coolbot::State::Running);
+}
+
+/// `Rover`'s behaviour: it hands its outputs to the test when it starts.
+struct HandRover(Sender<(DataOut<RoverPose>, DataOut<RoverScan>)>);
+
+impl rover::Behavior for HandRover {
+    fn start(&mut self, cx: &mut rover::Cx<'_>) -> SectionResult {
+        let _ = self
+            .0
+            .send((cx.outputs.pose.clone(), cx.outputs.scan.clone()));
+        Ok(())
+    }
+}
+
+/// The mapping of the rover's outputs, in a file of `dir`.
+const MAP: &str = r#"
+[[pose]]
+port = "rover/rover.pose"
+x = "x"
+y = "y"
+yaw = "theta"
+frame = "odom"
+child = "base_link"
+
+[[laser_scan]]
+port = "rover/rover.scan"
+ranges = "us"
+start_angle = 0.0
+step = 1.5707963267948966
+range_offset = 0.5
+frame = "base_link"
+"#;
+
+#[test]
+fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let (node, endpoint) = node("rover", &[]);
+    let (hand, outputs) = crossbeam_channel::bounded(1);
+    let mut system = System::new();
+    system
+        .add(rover::component("rover", HandRover(hand)))
+        .unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    node.echo::<RoverPose>(&system, "rover.pose").unwrap();
+    node.echo::<RoverScan>(&system, "rover.scan").unwrap();
+    let (pose, scan) = outputs.recv_timeout(PATIENCE).expect("the rover started");
+    let sending = Arc::new(AtomicBool::new(true));
+    let running = Arc::clone(&sending);
+    let sender = std::thread::spawn(move || {
+        while running.load(Ordering::Acquire) {
+            pose.send(RoverPose {
+                x: 1.0,
+                y: 2.0,
+                theta: std::f64::consts::FRAC_PI_2,
+            });
+            scan.send(RoverScan {
+                us: [1.0, 2.0, 3.0, 4.0],
+            });
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    });
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let map = dir.path().join("map.toml");
+    std::fs::write(&map, MAP).expect("write the mapping");
+
+    let server = Process::start(Command::new(COOLCTL).args([
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "foxglove",
+        "--bind",
+        "127.0.0.1:0",
+        "--map",
+        map.to_str().expect("a UTF-8 path"),
+    ]));
+    let line = server.line();
+    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let mut client = Client::start(&modules, &url);
+    let channels = client.advertised(&[
+        "/rover/rover.pose/pose",
+        "/rover/rover.pose/tf",
+        "/rover/rover.scan/laser_scan",
+    ]);
+    assert_eq!(
+        channels["/rover/rover.pose/pose"]["schemaName"],
+        "foxglove.PoseInFrame"
+    );
+    assert_eq!(
+        channels["/rover/rover.pose/tf"]["schemaName"],
+        "foxglove.FrameTransform"
+    );
+    assert_eq!(
+        channels["/rover/rover.scan/laser_scan"]["schemaName"],
+        "foxglove.LaserScan"
+    );
+    // No --port: the packets themselves are not served.
+    assert!(!channels.contains_key("/rover/rover.pose"), "{channels:?}");
+
+    for topic in [
+        "/rover/rover.pose/pose",
+        "/rover/rover.pose/tf",
+        "/rover/rover.scan/laser_scan",
+    ] {
+        client.order(json!({ "do": "subscribe", "topic": topic, "count": 1 }));
+    }
+    let pose = client.messages("/rover/rover.pose/pose", 1).remove(0);
+    assert_eq!(pose["frame_id"], "odom");
+    // (JavaScript prints whole numbers without a point.)
+    assert_eq!(pose["pose"]["position"], json!({ "x": 1, "y": 2, "z": 0 }));
+    let z = pose["pose"]["orientation"]["z"].as_f64().unwrap();
+    assert!((z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-9, "{pose}");
+    let tf = client.messages("/rover/rover.pose/tf", 1).remove(0);
+    assert_eq!(tf["parent_frame_id"], "odom");
+    assert_eq!(tf["child_frame_id"], "base_link");
+    let laser = client.messages("/rover/rover.scan/laser_scan", 1).remove(0);
+    assert_eq!(laser["ranges"], json!([1.5, 2.5, 3.5, 4.5]));
+    assert_eq!(laser["end_angle"], 3.0 * std::f64::consts::FRAC_PI_2);
+
+    // A controllable variable's declared range holds for its parameter.
+    let gain = || {
+        system
+            .handle("rover")
+            .expect("the rover")
+            .snapshot()
+            .variables
+            .iter()
+            .find(|(name, _)| name == "gain")
+            .map(|(_, value)| value.to_json())
+    };
+    client.order(json!({ "do": "setParameters", "id": "over",
+        "parameters": [{ "name": "rover/rover/gain", "value": 2.0, "type": "float64" }] }));
+    let status = client.next_where("status", |_| true);
+    assert!(
+        status["message"]
+            .as_str()
+            .unwrap()
+            .contains("`rover/rover/gain`: rejected"),
+        "{status}"
+    );
+    assert_eq!(parameter_values(&client, "over")["rover/rover/gain"], 0.5);
+    assert_eq!(gain(), Some(json!(0.5)));
+    client.order(json!({ "do": "setParameters", "id": "in",
+        "parameters": [{ "name": "rover/rover/gain", "value": 0.25, "type": "float64" }] }));
+    assert_eq!(parameter_values(&client, "in")["rover/rover/gain"], 0.25);
+    assert_eq!(gain(), Some(json!(0.25)));
+    sending.store(false, Ordering::Release);
+    sender.join().expect("the sender ends");
+}
+
+/// Off loopback, the server needs the security file or `--insecure`, as a node's
+/// endpoints do; the refusal comes before anything listens.
+#[test]
+fn serving_off_loopback_is_refused_without_the_security_file() {
+    let out = Command::new(COOLCTL)
+        .args(["--no-multicast", "foxglove", "--bind", "192.0.2.1:8765"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let error = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        error.contains("coolctl foxglove: `192.0.2.1:8765` is not on loopback")
+            && error.contains("give the security file (--config) or --insecure"),
+        "{error}"
+    );
+}
