@@ -9,8 +9,8 @@
 #[path = "../../benches/common/mod.rs"]
 #[macro_use]
 mod common;
+mod setup;
 
-use std::net::TcpListener;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
@@ -65,60 +65,6 @@ fn stamp() -> u64 {
 
 fn since(stamp_ns: u64) -> Duration {
     Duration::from_nanos(stamp().saturating_sub(stamp_ns))
-}
-
-fn endpoint() -> String {
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .expect("a free loopback port")
-        .port();
-    format!("tcp/127.0.0.1:{port}")
-}
-
-/// A state directory for the outlets' tallies, not the user's: in memory
-/// (`/dev/shm`) as the default one is, else in the temporary directory; removed when
-/// dropped.
-fn state_directory() -> tempfile::TempDir {
-    let mut builder = tempfile::Builder::new();
-    builder.prefix("coolbot-bench-");
-    builder
-        .tempdir_in("/dev/shm")
-        .or_else(|_| builder.tempdir())
-        .expect("a state directory")
-}
-
-/// Two nodes, `b` connected to `a`, on loopback, their outlets' tallies in `state`.
-fn nodes(state: &std::path::Path) -> (Node, Node) {
-    let a_endpoint = endpoint();
-    let config = |listen: &str, connect: &[String]| {
-        coolbot_zenoh::peer_config(&[listen.to_owned()], connect, false).expect("config")
-    };
-    let open = |name: &str, config| {
-        Node::open(name, config)
-            .expect(name)
-            .with_state_directory(Some(state.to_path_buf()))
-    };
-    let a = open("bench-a", config(&a_endpoint, &[]));
-    let b = open("bench-b", config(&endpoint(), &[a_endpoint]));
-    (a, b)
-}
-
-/// Wait until `node`'s session knows a subscriber on `key`.
-fn wait_subscribed(node: &Node, key: &str) {
-    let publisher = node
-        .session()
-        .declare_publisher(key.to_owned())
-        .wait()
-        .expect("probe publisher");
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !publisher
-        .matching_status()
-        .wait()
-        .is_ok_and(|status| status.matching())
-    {
-        assert!(Instant::now() < deadline, "no subscriber on `{key}`");
-        std::thread::sleep(Duration::from_millis(5));
-    }
 }
 
 /// The pinging side: on a kick, runs `per_round + WARMUP` round trips and sends the
@@ -234,8 +180,8 @@ fn project(a: &Node, b: &Node, per_round: usize) -> Project {
         .expect("connect");
     far.run_all().expect("run far");
     near.run_all().expect("run near");
-    wait_subscribed(a, "bench/ping");
-    wait_subscribed(b, "bench/pong");
+    setup::wait_subscribed(a.session(), "bench/ping");
+    setup::wait_subscribed(b.session(), "bench/pong");
     Project {
         kick,
         samples,
@@ -301,8 +247,8 @@ fn baseline(a: &Node, b: &Node) -> Baseline {
             }
         }
     });
-    wait_subscribed(a, "bench/raw/ping");
-    wait_subscribed(b, "bench/raw/pong");
+    setup::wait_subscribed(a.session(), "bench/raw/ping");
+    setup::wait_subscribed(b.session(), "bench/raw/pong");
     Baseline {
         to_echo,
         back,
@@ -331,8 +277,8 @@ fn main() {
         mode,
     );
     // Declared first, removed last (after the outlets).
-    let state = state_directory();
-    let (a, b) = nodes(state.path());
+    let state = setup::state_directory();
+    let (a, b) = setup::nodes(state.path());
     let project = project(&a, &b, per_round);
     let baseline = baseline(&a, &b);
     let (project_samples, baseline_samples) = common::alternate(

@@ -6,7 +6,9 @@
 //! key. An **inlet** stands, in the consumer's system, for the remote output: its one
 //! output (`output`) has that output's kind, and a Zenoh callback sends on it what
 //! arrives on the key (no extra thread hop on the receiving side). Packets are encoded
-//! with postcard, and decoded strictly (`crate::codec`).
+//! with postcard, and decoded strictly (`crate::codec`); a large numbered message is
+//! encoded straight into shared memory, which Zenoh passes as such to a node on the
+//! same host (`crate::shm`).
 //!
 //! No packet is lost without a counter and an event: a packet an outlet cannot
 //! publish (it does not encode, Zenoh refuses it, or nothing on the network
@@ -35,10 +37,12 @@ use coolbot::{
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use zenoh::Wait;
+use zenoh::bytes::ZBytes;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
 use crate::codec;
 use crate::ledger::{self, InletLedger, OutletLedger};
+use crate::shm::Arena;
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
 
@@ -230,6 +234,8 @@ struct Wire {
     /// The newest number handed to Zenoh, in a file a restarted process reads
     /// (`crate::tally`; numbered streams only).
     tally: Option<Arc<Tally>>,
+    /// Where a large numbered message is written (`crate::shm`).
+    arena: Arena,
 }
 
 impl Wire {
@@ -247,7 +253,7 @@ impl Wire {
     /// it (if not, it was counted here).
     fn send(
         &self,
-        bytes: Result<Vec<u8>, String>,
+        bytes: Result<ZBytes, String>,
         counted: bool,
         numbered: Option<(u64, u64)>,
     ) -> bool {
@@ -298,7 +304,11 @@ impl Wire {
     fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &AtomicU64, packet: &P) {
         // Only the outlet's thread numbers: the ledger's thread only reads.
         let next = sent.load(Ordering::Acquire) + 1;
-        if self.send(encode(&(epoch, next, packet)), true, Some((epoch, next))) {
+        let message = self
+            .arena
+            .encode(&(epoch, next, packet))
+            .map_err(|error| format!("does not encode: {error}"));
+        if self.send(message, true, Some((epoch, next))) {
             sent.store(next, Ordering::Release);
         }
     }
@@ -663,6 +673,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 matching,
                 losses: erased,
                 tally,
+                arena: Arena::new(session, node.shared_memory_counters()),
             },
             pull: pull.is_some(),
             epoch,
@@ -744,7 +755,7 @@ impl<T: Packet + Serialize> Outlet<T> {
                     if let Ok(bytes) = &bytes {
                         *lock(&self.posted) = Some(bytes.clone());
                     }
-                    wire.send(bytes, false, None);
+                    wire.send(bytes.map(ZBytes::from), false, None);
                 }
             }
         }
@@ -827,6 +838,8 @@ struct Inlet {
     session: zenoh::Session,
     key: String,
     deliver: DeliverFn,
+    /// The node's shared-memory counts (what arrived in shared memory).
+    shared: Arc<crate::shm::Counters>,
     pull: Option<Duration>,
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
     /// Watches the producers' outlets (their liveliness tokens), to ask for the
@@ -1080,6 +1093,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             spec,
             session: session.clone(),
             deliver,
+            shared: node.shared_memory_counters(),
             key,
             pull,
             subscriber: None,
@@ -1103,10 +1117,14 @@ impl Automaton for Inlet {
             return Ok(());
         }
         let deliver = Arc::clone(&self.deliver);
+        let shared = Arc::clone(&self.shared);
         let subscriber = self
             .session
             .declare_subscriber(self.key.clone())
-            .callback(move |sample| deliver(&sample.payload().to_bytes()))
+            .callback(move |sample| {
+                shared.received(sample.payload());
+                deliver(&sample.payload().to_bytes());
+            })
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
         self.subscriber = Some(subscriber);

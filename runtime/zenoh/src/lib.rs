@@ -30,6 +30,8 @@
 //!   behind a proxy (`coolbot::remote`).
 //! - **A process on the network** ([`network`]): the `--node NAME` options of a
 //!   program, and the node, agent and placer they open.
+//! - **Same host** ([`Node::shared_memory`]): a large message of a bridge is written
+//!   once into shared memory, which a node on the same host reads in place.
 //! - **Limits** ([`limits`]): on the names, keys, sizes and counts that come from
 //!   the network, checked before anything is allocated or declared for them.
 //! - **ROS 2 topics** ([`ros2`]): a ROS 2 node on the rmw_zenoh wire, its publishers
@@ -59,6 +61,7 @@ mod node;
 pub mod place;
 pub mod ros2;
 pub mod security;
+mod shm;
 mod tally;
 pub mod top;
 
@@ -68,6 +71,7 @@ pub use crate::ledger::{LEDGER_TARGET, OUTLET_LEDGER_TARGET};
 pub use crate::node::{ControlReply, Node};
 pub use crate::place::Placer;
 pub use crate::security::Security;
+pub use crate::shm::{SHARED_THRESHOLD, SharedMemoryCounts};
 
 /// Re-exported so users need not depend on it themselves (configurations, sessions).
 pub use zenoh;

@@ -102,6 +102,8 @@ pub struct Node {
     echoes: Mutex<Vec<Echo>>,
     /// Where its outlets keep their tallies (`crate::tally`); None: no tallies.
     state: Option<PathBuf>,
+    /// What its bridges did with shared memory (`crate::shm`).
+    shared: Arc<crate::shm::Counters>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -120,6 +122,8 @@ impl Node {
     pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
         keys::check_name(name)?;
         crate::security::check_certificate_name(&config, name)?;
+        // Before its own: what a killed process left on this host is freed.
+        crate::shm::reclaim();
         let session = zenoh::open(config)
             .wait()
             .map_err(Error::zenoh("open the session"))?;
@@ -159,6 +163,7 @@ impl Node {
             echoed: Arc::default(),
             echoes: Mutex::new(Vec::new()),
             state: crate::tally::state_directory(),
+            shared: Arc::default(),
             _token: token,
         })
     }
@@ -187,6 +192,17 @@ impl Node {
     /// The node's Zenoh session.
     pub fn session(&self) -> &zenoh::Session {
         &self.session
+    }
+
+    /// What this node's bridges did with shared memory: messages its outlets wrote
+    /// into it or, the pool being full, encoded on the heap; messages its inlets
+    /// received in it (`docs/distribution.md`, "Same host: shared memory").
+    pub fn shared_memory(&self) -> crate::SharedMemoryCounts {
+        self.shared.counts()
+    }
+
+    pub(crate) fn shared_memory_counters(&self) -> Arc<crate::shm::Counters> {
+        Arc::clone(&self.shared)
     }
 
     /// Expose the component behind `handle` and, for a compound, every instance inside

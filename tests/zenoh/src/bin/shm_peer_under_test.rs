@@ -1,0 +1,178 @@
+//! The other process of `tests/shm.rs`, on the same host as the test:
+//!
+//! - `consume NAME ENDPOINT KEY on|off`: node NAME, connected to ENDPOINT with shared
+//!   memory on or off, reads frames on KEY through an inlet into a queue, and prints
+//!   `frame <number> <ok|bad> <received in shared memory>` for each (`ok`: every byte
+//!   is what the test wrote);
+//! - `hold ENDPOINT KEY`: a raw Zenoh subscriber on KEY that keeps every sample it gets
+//!   (a consumer that holds packets), and prints `held <count> <in shared memory>`;
+//! - `produce NAME KEY`: node NAME, alone, sends large frames through an outlet on KEY
+//!   until one was written into shared memory, then prints `ready`.
+//!
+//! It prints `ready` once it listens (consume, hold), and runs until it is killed.
+
+use std::io::Write;
+
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{InputKind, OutputKind, OverflowPolicy, System};
+use coolbot_zenoh::Node;
+use coolbot_zenoh_tests::generated::types::Chunk;
+use coolbot_zenoh_tests::generated::{shm_queue, shm_source};
+use zenoh::Wait;
+
+/// A behaviour that hands its port over when its component starts.
+struct Hand<T>(Sender<T>);
+
+impl shm_source::Behavior for Hand<DataOut<Chunk>> {
+    fn start(&mut self, cx: &mut shm_source::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+impl shm_queue::Behavior for Hand<FifoIn<Chunk>> {
+    fn start(&mut self, cx: &mut shm_queue::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.inputs.input.clone());
+        Ok(())
+    }
+}
+
+fn config(connect: &[String], shared_memory: bool) -> zenoh::Config {
+    let mut config = coolbot_zenoh::peer_config(&[], connect, false).expect("a configuration");
+    config
+        .insert_json5(
+            "transport/shared_memory/enabled",
+            if shared_memory { "true" } else { "false" },
+        )
+        .expect("the shared-memory setting");
+    config
+}
+
+/// Whether every byte of `frame` is the one the test wrote.
+fn intact(frame: &Chunk) -> bool {
+    frame
+        .bytes
+        .iter()
+        .enumerate()
+        .all(|(i, byte)| *byte == (frame.number as usize + i) as u8)
+}
+
+fn say(line: &str) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}
+
+fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
+    let node = Node::open(name, config(&[endpoint], shared_memory)).expect("the node opens");
+    let mut system = System::new();
+    system
+        .add(
+            node.inlet::<Chunk>("inlet", key, OutputKind::Data)
+                .build()
+                .expect("the inlet"),
+        )
+        .expect("added");
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system
+        .add(shm_queue::component("queue", Hand(hand)))
+        .expect("added");
+    system
+        .connect("inlet.output", "queue.input")
+        .expect("connected");
+    system.run_all().expect("runs");
+    let input = handed.recv().expect("the queue's input");
+    say("ready");
+    loop {
+        match input.recv() {
+            Some(frame) => {
+                let verdict = if intact(&frame) { "ok" } else { "bad" };
+                say(&format!(
+                    "frame {} {verdict} {}",
+                    frame.number,
+                    node.shared_memory().received
+                ));
+            }
+            // A peer's poll, not a test's wait: the test waits on these lines.
+            None => std::thread::sleep(std::time::Duration::from_millis(1)),
+        }
+    }
+}
+
+fn hold(endpoint: String, key: &str) -> ! {
+    let session = zenoh::open(config(&[endpoint], true))
+        .wait()
+        .expect("the session opens");
+    let subscriber = session
+        .declare_subscriber(key)
+        .wait()
+        .expect("the subscriber");
+    say("ready");
+    let mut held = Vec::new();
+    let mut shared = 0;
+    while let Ok(sample) = subscriber.recv() {
+        if sample.payload().as_shm().is_some() {
+            shared += 1;
+        }
+        held.push(sample);
+        say(&format!("held {} {shared}", held.len()));
+    }
+    panic!("the session closed");
+}
+
+fn produce(name: &str, key: &str) -> ! {
+    let node = Node::open(name, config(&[], true)).expect("the node opens");
+    let mut system = System::new();
+    let kind = InputKind::Fifo {
+        capacity: 4,
+        policy: OverflowPolicy::Block,
+    };
+    system
+        .add(
+            node.outlet::<Chunk>("outlet", key, kind)
+                .build()
+                .expect("the outlet"),
+        )
+        .expect("added");
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system
+        .add(shm_source::component("producer", Hand(hand)))
+        .expect("added");
+    system
+        .connect("producer.out", "outlet.input")
+        .expect("connected");
+    system.run_all().expect("runs");
+    let out = handed.recv().expect("the producer's output");
+    let mut number = 0;
+    while node.shared_memory().shared == 0 {
+        number += 1;
+        out.send(Chunk {
+            number,
+            bytes: vec![0; 64 << 10],
+        });
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    say("ready");
+    loop {
+        std::thread::park();
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    match args.as_slice() {
+        ["consume", name, endpoint, key, shm] => {
+            consume(name, (*endpoint).to_owned(), key, *shm == "on")
+        }
+        ["hold", endpoint, key] => hold((*endpoint).to_owned(), key),
+        ["produce", name, key] => produce(name, key),
+        _ => {
+            eprintln!(
+                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | hold ENDPOINT KEY | produce NAME KEY"
+            );
+            std::process::exit(2);
+        }
+    }
+}

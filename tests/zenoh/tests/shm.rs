@@ -1,0 +1,260 @@
+//! Same host: a bridge between two processes passes its large messages through shared
+//! memory (`docs/distribution.md`, "Same host: shared memory"). The other process is
+//! `shm-peer-under-test`; the test waits on the lines it prints, with a deadline.
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::DataOut;
+use coolbot::{InputKind, OverflowPolicy, System};
+use coolbot_zenoh::{Node, SHARED_THRESHOLD};
+use coolbot_zenoh_tests::generated::shm_source;
+use coolbot_zenoh_tests::generated::types::Chunk;
+use coolbot_zenoh_tests::support::{self, PATIENCE};
+
+/// A frame large enough for shared memory.
+const LARGE: usize = 256 << 10;
+
+/// The producer's behaviour: hands its output over when it starts.
+struct Hand(Sender<DataOut<Chunk>>);
+
+impl shm_source::Behavior for Hand {
+    fn start(&mut self, cx: &mut shm_source::Cx<'_>) -> coolbot::SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+/// The other process, killed (`kill -9`) when dropped; its stdout's lines on a channel.
+struct Peer {
+    child: Child,
+    lines: Receiver<String>,
+}
+
+impl Peer {
+    fn start(args: &[&str]) -> Peer {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_shm-peer-under-test"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("the peer starts");
+        let stdout = child.stdout.take().expect("its stdout");
+        let (send, lines) = crossbeam_channel::unbounded();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if send.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let peer = Peer { child, lines };
+        peer.next_matching(|line| line == "ready");
+        peer
+    }
+
+    /// The next line `accept` takes, within the patience.
+    fn next_matching(&self, mut accept: impl FnMut(&str) -> bool) -> String {
+        let deadline = std::time::Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) if accept(&line) => return line,
+                Ok(_) => {}
+                Err(_) => panic!("the peer did not print the line awaited within {PATIENCE:?}"),
+            }
+        }
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Peer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A producer node listening on loopback, with a frame source connected to an outlet
+/// on `key`; `config` adjusts its configuration.
+fn producer(
+    name: &str,
+    key: &str,
+    config: impl FnOnce(&mut zenoh::Config),
+) -> (Node, String, System, DataOut<Chunk>) {
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let mut zenoh_config =
+        coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), &[], false).expect("config");
+    config(&mut zenoh_config);
+    let node = Node::open(name, zenoh_config)
+        .expect("the node opens")
+        .with_state_directory(None);
+    let mut system = System::new();
+    let kind = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Block,
+    };
+    system
+        .add(
+            node.outlet::<Chunk>("outlet", key, kind)
+                .build()
+                .expect("the outlet"),
+        )
+        .expect("added");
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system
+        .add(shm_source::component("source", Hand(hand)))
+        .expect("added");
+    system
+        .connect("source.out", "outlet.input")
+        .expect("connected");
+    system.run_all().expect("runs");
+    let out = handed.recv().expect("the source's output");
+    (node, endpoint, system, out)
+}
+
+fn frame(number: u64, size: usize) -> Chunk {
+    Chunk {
+        number,
+        bytes: (0..size).map(|i| (number as usize + i) as u8).collect(),
+    }
+}
+
+/// A consumer's line `frame <number> <ok|bad> <received in shared memory>`.
+fn parse_frame(line: &str) -> Option<(u64, bool, u64)> {
+    let mut fields = line.strip_prefix("frame ")?.split(' ');
+    let number = fields.next()?.parse().ok()?;
+    let ok = fields.next()? == "ok";
+    let shared = fields.next()?.parse().ok()?;
+    Some((number, ok, shared))
+}
+
+/// Send `count` large frames (and as many small ones between them) to a consumer
+/// process; what it received, in order, and how many arrived in shared memory.
+fn stream_to(consumer_memory: &str, key: &str, name: &str) -> (Node, Vec<u64>, u64) {
+    let (node, endpoint, system, out) = producer(&format!("{name}-producer"), key, |_| {});
+    let consumer = Peer::start(&[
+        "consume",
+        &format!("{name}-consumer"),
+        &endpoint,
+        key,
+        consumer_memory,
+    ]);
+    support::wait_subscribed(&node, key);
+    let count = 20u64;
+    for number in 1..=2 * count {
+        let size = if number % 2 == 0 { LARGE } else { 16 };
+        out.send(frame(number, size));
+    }
+    let mut received = Vec::new();
+    let mut shared = 0;
+    while received.len() < 2 * count as usize {
+        let line = consumer.next_matching(|line| line.starts_with("frame "));
+        let (number, ok, in_shared) = parse_frame(&line).expect("a frame line");
+        assert!(ok, "frame {number} arrived with other bytes than were sent");
+        received.push(number);
+        shared = in_shared;
+    }
+    assert!(system.shutdown().clean(), "unclean shutdown");
+    (node, received, shared)
+}
+
+#[test]
+fn large_packets_to_a_process_on_this_host_are_written_once_into_shared_memory() {
+    let (node, received, shared) = stream_to("on", "test/shm/same_host", "shm-same");
+    assert_eq!(
+        received,
+        (1..=40).collect::<Vec<_>>(),
+        "every frame, in order"
+    );
+    // The 20 large frames went into shared memory, and crossed as such; the 20 small
+    // ones (under the threshold) did not.
+    const { assert!(16 < SHARED_THRESHOLD && LARGE > SHARED_THRESHOLD) };
+    let counts = node.shared_memory();
+    assert_eq!((counts.shared, counts.copied), (20, 0), "{counts:?}");
+    assert_eq!(shared, 20, "received in shared memory");
+}
+
+#[test]
+fn a_consumer_that_cannot_map_shared_memory_gets_every_packet_over_the_link() {
+    // A consumer with shared memory off stands for one on another host: the link
+    // carries the bytes of what the outlet wrote into shared memory.
+    let (node, received, shared) = stream_to("off", "test/shm/link", "shm-link");
+    assert_eq!(
+        received,
+        (1..=40).collect::<Vec<_>>(),
+        "every frame, in order"
+    );
+    assert_eq!(shared, 0, "nothing arrived in shared memory");
+    assert_eq!(node.shared_memory().shared, 20);
+}
+
+#[test]
+fn a_consumer_that_holds_packets_does_not_block_the_producer() {
+    let key = "test/shm/held";
+    // A pool of 1 MiB: four of these frames fill it.
+    let (node, endpoint, system, out) = producer("shm-held-producer", key, |config| {
+        config
+            .insert_json5(
+                "transport/shared_memory/transport_optimization/pool_size",
+                "1048576",
+            )
+            .expect("the pool's size");
+    });
+    let holder = Peer::start(&["hold", &endpoint, key]);
+    support::wait_subscribed(&node, key);
+    let count = 24u64;
+    for number in 1..=count {
+        out.send(frame(number, LARGE));
+    }
+    // Every frame reaches the holder, which keeps them all: those that found no room
+    // in the pool went over the link, counted as copied.
+    let line = holder.next_matching(|line| line.starts_with(&format!("held {count} ")));
+    let in_shared: u64 = line
+        .rsplit(' ')
+        .next()
+        .and_then(|n| n.parse().ok())
+        .expect("a count");
+    let counts = node.shared_memory();
+    assert_eq!(counts.shared + counts.copied, count, "{counts:?}");
+    assert!(counts.copied > 0, "the pool never filled: {counts:?}");
+    assert!(counts.shared > 0, "{counts:?}");
+    assert_eq!(in_shared, counts.shared, "{counts:?}");
+    let outlet = system.handle("outlet").expect("the outlet");
+    assert_eq!(outlet.snapshot().overflows, 0, "nothing was lost");
+    assert!(system.shutdown().clean(), "unclean shutdown");
+}
+
+/// The shared-memory segments `pid` has open.
+fn segments_of(pid: u32) -> BTreeSet<PathBuf> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .expect("the peer's descriptors")
+        .filter_map(|entry| std::fs::read_link(entry.ok()?.path()).ok())
+        .filter(|target| {
+            target.starts_with("/dev/shm") && target.extension().is_some_and(|e| e == "zenoh")
+        })
+        .collect()
+}
+
+#[test]
+fn a_segment_left_by_a_killed_process_is_reclaimed_when_a_node_opens() {
+    let producer = Peer::start(&["produce", "shm-killed-producer", "test/shm/killed"]);
+    let segments = segments_of(producer.child.id());
+    assert!(!segments.is_empty(), "the producer maps no segment");
+    producer.kill();
+    // Left behind: nothing removed them.
+    assert!(segments.iter().all(|segment| segment.exists()));
+    let _node = Node::open(
+        "shm-reclaimer",
+        coolbot_zenoh::peer_config(&[], &[], false).expect("config"),
+    )
+    .expect("the node opens");
+    let left: Vec<_> = segments.iter().filter(|s| s.exists()).collect();
+    assert!(left.is_empty(), "not reclaimed: {left:?}");
+}
