@@ -13,8 +13,8 @@
 //! of the crate's components on this one. The same binary started with `--node
 //! station --serve` runs only what other nodes place on it. The options are those of
 //! `coolbot_zenoh::network::USAGE` (`--listen`, `--connect`, `--config FILE` for TLS
-//! and access rules, `--insecure`, `--multicast`, `--lease`); without a security file
-//! the node stays on loopback.
+//! and access rules, `--insecure`, `--multicast`, `--lease`, `--silence`); without a
+//! security file the node stays on loopback.
 //!
 //! `coolc` wrote this file when it created the crate and never changes it: it is
 //! yours. It starts each component that no compound of the crate instantiated at
@@ -37,7 +37,7 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
         return Err(match flag.split('=').next() {
             Some(
                 "--node" | "--serve" | "--listen" | "--connect" | "--multicast" | "--no-multicast"
-                | "--lease" | "--config" | "--insecure",
+                | "--lease" | "--silence" | "--config" | "--insecure",
             ) => {
                 format!("`{flag}`: this build has no network support; build with `--features network`")
             }

@@ -155,6 +155,48 @@ pub struct Monitor {
     pub group: Option<GroupStatus>,
 }
 
+impl Monitor {
+    /// The monitoring state of component `name` of type `spec` as it starts, with
+    /// its effective timing block `timing`: `starting`, nothing measured, nothing
+    /// lost, its variables not yet published.
+    pub(crate) fn starting(
+        name: String,
+        spec: &crate::spec::Spec,
+        timing: &crate::spec::TimingSpec,
+    ) -> Monitor {
+        Monitor {
+            name,
+            state: State::Starting,
+            user_state: None,
+            result: TaskResult::None,
+            error: None,
+            variables: spec
+                .variables
+                .iter()
+                .map(|v| (v.name.to_owned(), Value::Unit))
+                .collect(),
+            cpu_time: Duration::ZERO,
+            elapsed_time: Duration::ZERO,
+            missed_deadlines: 0,
+            overruns: 0,
+            overflows: 0,
+            port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
+            quality: 0,
+            period: timing.period,
+            nominal_period: timing.period,
+            max_response: timing.max_response,
+            priority: timing.priority,
+            os_priority: crate::thread::OsPriority::Inherited,
+            dropped_events: 0,
+            supervision: Vec::new(),
+            supervision_steps: 0,
+            adaptation: AdaptStatus::default(),
+            response: ResponseTimes::default(),
+            group: None,
+        }
+    }
+}
+
 /// An execution group as each member's monitor shows it: its name, its members in
 /// the order they run, and its cycles. A cycle is one pass of the group's thread
 /// over its members; the group's period is the shortest period in effect among its

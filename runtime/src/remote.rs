@@ -437,13 +437,17 @@ impl Proxy {
             .map_err(|source| Fault::from(self.on_node(source)))
     }
 
-    /// Read the remote view; a fault when the node is lost or the instance failed.
-    fn refresh(&mut self) -> Result<(), Fault> {
+    /// Read the remote view and show it on the proxy's monitor ([`overlay`]); a fault
+    /// when the node is lost or the instance failed. A failing view is shown too:
+    /// the losses it reports are counted before the fault (the network layer counts
+    /// them reported, and a new instance's counts start again).
+    fn refresh(&mut self, cx: &Context) -> Result<(), Fault> {
         match self.end.view() {
             // (The reason names the node.)
             Err(error) => Err(Fault::message(Chain(&*error).to_string())),
             Ok(None) => Ok(()),
             Ok(Some(view)) => {
+                overlay(&view, &mut self.applied, cx);
                 let failed = failure(&view);
                 self.view = Some(view);
                 match failed {
@@ -485,7 +489,7 @@ impl Automaton for Proxy {
             // A restart: the remote instance restarts too.
             self.forward(Command::SetState(Controllable::Ready))?;
         }
-        self.refresh()
+        self.refresh(cx)
     }
 
     fn answer(&mut self, output: usize, _cx: &mut Context) -> Result<(), Fault> {
@@ -561,10 +565,11 @@ impl Driven for Proxy {
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
         self.schedule_poll();
         self.end.pump();
-        self.refresh()?;
+        self.refresh(cx)?;
         let Some(view) = &self.view else {
             return Ok(None);
         };
+        // On every turn, new view or not (idempotent: only what changed is published).
         overlay(view, &mut self.applied, cx);
         cx.set_result(view.result.clone());
         if view.state == State::End {
@@ -612,5 +617,103 @@ impl Driven for Proxy {
             ),
             Command::SetState(_) | Command::Configure(_) | Command::Set(..) => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+    use std::sync::{Arc, Mutex};
+
+    use super::{Automaton, Driven, NetworkError, Proxy, RemoteEnd};
+    use crate::Context;
+    use crate::monitor::{Command, Monitor, Shared};
+    use crate::spec::{Spec, TimingSpec};
+    use crate::table::State;
+    use crate::wake::Waker;
+
+    static SPEC: Spec = Spec {
+        type_name: "Far",
+        doc: "",
+        states: &[],
+        initial: 0,
+        inputs: &[],
+        outputs: &[],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    };
+
+    /// A far end that returns the views the test queued, one per look.
+    struct Queued(Arc<Mutex<VecDeque<Monitor>>>);
+
+    impl RemoteEnd for Queued {
+        fn instantiate(&mut self, _waker: Option<Waker>) -> Result<(), NetworkError> {
+            Ok(())
+        }
+        fn needs_instance(&self) -> bool {
+            false
+        }
+        fn command(&mut self, _command: &Command) -> Result<(), NetworkError> {
+            Ok(())
+        }
+        fn pump(&mut self) {}
+        fn pull(&mut self, _output: usize) -> Result<(), NetworkError> {
+            Ok(())
+        }
+        fn view(&mut self) -> Result<Option<Monitor>, NetworkError> {
+            Ok(self.0.lock().expect("views").pop_front())
+        }
+        fn release(&mut self) {}
+    }
+
+    /// The far instance's view: in `state`, with `lost` counted on the way here.
+    fn view(state: State, lost: u64) -> Monitor {
+        let mut view = Monitor::starting("far".to_owned(), &SPEC, &TimingSpec::NONE);
+        view.state = state;
+        view.port_overflows.push(("@network".to_owned(), lost));
+        view
+    }
+
+    fn network(shared: &Shared) -> u64 {
+        shared
+            .snapshot()
+            .port_overflows
+            .iter()
+            .find(|(port, _)| port == "@network")
+            .map_or(0, |(_, lost)| *lost)
+    }
+
+    #[test]
+    fn losses_in_the_view_that_fails_the_proxy_are_counted() {
+        let views = Arc::new(Mutex::new(VecDeque::from([
+            view(State::Running, 3),
+            view(State::RunningError, 10),
+        ])));
+        let mut proxy = Proxy {
+            spec: &SPEC,
+            node: "far".to_owned(),
+            end: Box::new(Queued(Arc::clone(&views))),
+            view: None,
+            applied: Vec::new(),
+            clock: crate::clock::Clock::real(),
+            next_poll: None,
+        };
+        let shared = Arc::new(Shared::new(
+            Monitor::starting("proxy".to_owned(), &SPEC, &TimingSpec::NONE),
+            Vec::new(),
+        ));
+        let mut cx = Context::new("proxy", None);
+        cx.shared = Some(Arc::clone(&shared));
+
+        // A restart of a running proxy: the far instance's view comes, running.
+        proxy.start(&mut cx).expect("the far instance runs");
+        assert_eq!(network(&shared), 3);
+        // Then it fails, with 7 more lost on the way: the fault, and all 10 counted.
+        let fault = proxy
+            .supervise(0, &mut cx)
+            .expect_err("the far instance failed");
+        assert!(fault.text().contains("on node `far`"), "{}", fault.text());
+        assert_eq!(network(&shared), 10);
     }
 }

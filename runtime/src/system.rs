@@ -629,36 +629,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         }
     }
 
-    let monitor = Monitor {
-        name: name.clone(),
-        state: State::Starting,
-        user_state: None,
-        result: TaskResult::None,
-        error: None,
-        variables: spec
-            .variables
-            .iter()
-            .map(|v| (v.name.to_owned(), Value::Unit))
-            .collect(),
-        cpu_time: Duration::ZERO,
-        elapsed_time: Duration::ZERO,
-        missed_deadlines: 0,
-        overruns: 0,
-        overflows: 0,
-        port_overflows: spec.inputs.iter().map(|i| (i.name.to_owned(), 0)).collect(),
-        quality: 0,
-        period: timing.period,
-        nominal_period: timing.period,
-        max_response: timing.max_response,
-        priority: timing.priority,
-        os_priority: crate::thread::OsPriority::Inherited,
-        dropped_events: 0,
-        supervision: Vec::new(),
-        supervision_steps: 0,
-        adaptation: crate::adapt::AdaptStatus::default(),
-        response: crate::monitor::ResponseTimes::default(),
-        group: None,
-    };
+    let monitor = Monitor::starting(name.clone(), spec, &timing);
     let named_inputs = spec
         .inputs
         .iter()

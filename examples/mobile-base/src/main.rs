@@ -63,6 +63,10 @@ struct Args {
     /// `2s`, the default); an instance on a lost node is a fault of its proxy.
     #[arg(long, requires = "node", value_parser = parse_duration)]
     lease: Option<Duration>,
+    /// With --node: how long the wanderer, placed on the station, may leave its
+    /// monitoring unanswered before its proxy fails (e.g. `3s`, the default).
+    #[arg(long, requires = "node", value_parser = parse_duration)]
+    silence: Option<Duration>,
     /// With --node: listen on this Zenoh endpoint (e.g. `tcp/127.0.0.1:7447`; off
     /// loopback, `quic/0.0.0.0:7447` with --config, or tcp with --insecure); repeatable.
     #[arg(long, requires = "node", value_name = "ENDPOINT")]
@@ -278,6 +282,7 @@ fn main() -> ExitCode {
                 security: args.config,
                 insecure: args.insecure,
                 lease: args.lease.unwrap_or(named.lease),
+                silence: args.silence.unwrap_or(named.silence),
                 ..named
             }
         }),

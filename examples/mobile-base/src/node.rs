@@ -28,6 +28,9 @@ pub struct NodeOptions {
     /// The Zenoh session lease: a peer that stops answering is lost after it (and an
     /// instance on it is a fault of its proxy).
     pub lease: std::time::Duration,
+    /// How long an instance placed on another node may leave its monitoring port
+    /// unanswered before its proxy fails.
+    pub silence: std::time::Duration,
 }
 
 impl NodeOptions {
@@ -40,7 +43,9 @@ impl NodeOptions {
             multicast: None,
             security: None,
             insecure: false,
+            // coolbot-zenoh's defaults (a build without the network has no such crate).
             lease: std::time::Duration::from_secs(2),
+            silence: std::time::Duration::from_secs(3),
         }
     }
 }
@@ -86,6 +91,7 @@ pub fn open(options: &NodeOptions) -> Result<Network, String> {
         security: options.security.clone(),
         insecure: options.insecure,
         lease: options.lease,
+        silence: options.silence,
         ..coolbot_zenoh::network::NodeOptions::named(options.name.clone())
     };
     let network =

@@ -31,6 +31,22 @@ fn a_hostile_peer_crashes_nothing_and_every_bad_packet_is_counted() {
     processes.drain();
     assert!(processes.alive(), "{}", processes.seen.join("\n"));
 
+    // One generation of the wanderer all along: placed again, its counts would
+    // start over under a new name (the lease and silence bounds rule that out).
+    let instance = &fuzzer.placement.instance;
+    let placed: Vec<String> = fuzzer
+        .ctl
+        .components(Some("station"))
+        .expect("the station lists its components")
+        .into_iter()
+        .map(|listed| listed.path)
+        .filter(|path| !path.starts_with(instance.as_str()))
+        .collect();
+    assert!(
+        placed.is_empty(),
+        "the station runs more than `{instance}`: {placed:?}"
+    );
+
     // Every bad packet counted, every forged jump one reset, nothing else.
     let expected = fuzzer.expected(&before);
     let mut last = None;

@@ -3,6 +3,7 @@
 //!
 //! [`NodeOptions::take_args`] takes `--node NAME`, `--listen ENDPOINT`,
 //! `--connect ENDPOINT`, `--multicast` / `--no-multicast`, `--lease DURATION`,
+//! `--silence DURATION`,
 //! `--config FILE` (the security file, [`crate::Security`]), `--insecure` and
 //! `--serve` out of a program's arguments and leaves the rest to the program. [`Network::open`] then opens
 //! the node (`coolctl` sees it), starts its agent (other nodes may build the
@@ -40,7 +41,10 @@ network options (a build with the `network` feature):
                        TLS; needs TLS or --insecure)
   --no-multicast       with --node: do not (the default without TLS)
   --lease DURATION     with --node: the session lease, after which a silent peer is
-                       lost (default 2s)";
+                       lost (default 2s)
+  --silence DURATION   with --node: how long an instance this node placed on another
+                       may leave its monitoring unanswered before its proxy fails
+                       (default 3s)";
 
 /// Where a node is on the network, and what it does there.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -60,6 +64,9 @@ pub struct NodeOptions {
     pub insecure: bool,
     /// The Zenoh session lease: a peer that stops answering is lost after it.
     pub lease: Duration,
+    /// How long an instance placed on another node may leave its monitoring port
+    /// unanswered before its proxy fails ([`crate::Placer::silence`]).
+    pub silence: Duration,
     /// Run only what other nodes place on this one (`--serve`).
     pub serve: bool,
 }
@@ -76,6 +83,9 @@ pub enum OptionsError {
     /// `--lease` with something that is not a duration.
     #[error("`--lease {0}`: not a duration (e.g. 2s, 500ms)")]
     Lease(String),
+    /// `--silence` with something that is not a duration.
+    #[error("`--silence {0}`: not a duration (e.g. 3s, 500ms)")]
+    Silence(String),
     /// `--node` twice.
     #[error("`--node` is given twice")]
     TwoNodes,
@@ -96,6 +106,7 @@ impl NodeOptions {
             security: None,
             insecure: false,
             lease: DEFAULT_LEASE,
+            silence: crate::place::DEFAULT_SILENCE,
             serve: false,
         }
     }
@@ -120,6 +131,7 @@ impl NodeOptions {
                 "--listen" => "--listen",
                 "--connect" => "--connect",
                 "--lease" => "--lease",
+                "--silence" => "--silence",
                 "--config" => "--config",
                 "--insecure" => "--insecure",
                 "--multicast" => "--multicast",
@@ -165,6 +177,11 @@ impl NodeOptions {
                     let text = value()?;
                     options.lease = crate::ctl::parse_duration(&text)
                         .map_err(|_| OptionsError::Lease(text.clone()))?;
+                }
+                "--silence" => {
+                    let text = value()?;
+                    options.silence = crate::ctl::parse_duration(&text)
+                        .map_err(|_| OptionsError::Silence(text.clone()))?;
                 }
                 "--config" => options.security = Some(value()?.into()),
                 "--insecure" => options.insecure = true,
@@ -224,7 +241,9 @@ impl Network {
         let node = Arc::new(Node::open(&options.name, options.config()?)?);
         let registry = registry.into();
         let agent = Agent::start(Arc::clone(&node), Arc::clone(&registry))?;
-        let placer = crate::Placer::new(Arc::clone(&node), registry).install();
+        let placer = crate::Placer::new(Arc::clone(&node), registry)
+            .silence(options.silence)
+            .install();
         Ok(Network {
             node,
             _agent: agent,
@@ -259,7 +278,7 @@ mod tests {
     #[test]
     fn network_options_are_taken_and_the_rest_is_left() {
         let mut given = args(
-            "30 --node robot --listen tcp/127.0.0.1:7447 -v --lease=500ms --no-multicast --connect tcp/10.0.0.2:7447 --config=sec.toml --insecure",
+            "30 --node robot --listen tcp/127.0.0.1:7447 -v --lease=500ms --no-multicast --connect tcp/10.0.0.2:7447 --config=sec.toml --insecure --silence 10s",
         );
         let options = NodeOptions::take_args(&mut given).unwrap().unwrap();
         assert_eq!(given, args("30 -v"));
@@ -273,6 +292,7 @@ mod tests {
                 security: Some("sec.toml".into()),
                 insecure: true,
                 lease: Duration::from_millis(500),
+                silence: Duration::from_secs(10),
                 serve: false,
             }
         );
@@ -321,6 +341,10 @@ mod tests {
         assert_eq!(
             NodeOptions::take_args(&mut args("--node a --lease soon")),
             Err(OptionsError::Lease("soon".into()))
+        );
+        assert_eq!(
+            NodeOptions::take_args(&mut args("--node a --silence=never")),
+            Err(OptionsError::Silence("never".into()))
         );
         assert_eq!(
             NodeOptions::take_args(&mut args("--node a --node b")),

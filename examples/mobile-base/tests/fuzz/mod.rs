@@ -57,6 +57,14 @@ pub const PATIENCE: Duration = Duration::from_secs(60);
 /// The seed of the test's and the bench's runs.
 pub const SEED: u64 = 0xc001_b07f;
 
+/// The session lease both processes run with: far longer than the fuzz can stall
+/// either on a loaded machine.
+const LEASE: &str = "30s";
+
+/// How long the wanderer may leave its monitoring unanswered before the robot's
+/// proxy fails and places it again (`--silence`).
+const SILENCE: &str = "60s";
+
 /// The ledger's window (`runtime/zenoh/src/ledger.rs`): a jump further is a reset.
 const WINDOW: u64 = 1 << 20;
 
@@ -190,8 +198,9 @@ pub struct Processes {
 }
 
 impl Processes {
-    /// Starts the station, then the robot (for `duration`), and waits until the
-    /// robot's status shows the wanderer running on the station.
+    /// Starts the station, then the robot (for `duration`), with the lease and
+    /// silence bounds [`LEASE`] and [`SILENCE`], and waits until the robot's status
+    /// shows the wanderer running on the station.
     pub fn start(duration: &str) -> Processes {
         let station = format!("tcp/127.0.0.1:{}", free_port());
         let robot = format!("tcp/127.0.0.1:{}", free_port());
@@ -205,6 +214,10 @@ impl Processes {
                 "--listen",
                 &station,
                 "--no-multicast",
+                // Counting is tested here, not liveness: a loaded machine must not
+                // make either side declare the other lost.
+                "--lease",
+                LEASE,
             ],
             &sender,
         );
@@ -231,6 +244,12 @@ impl Processes {
                 "--connect",
                 &station,
                 "--no-multicast",
+                "--lease",
+                LEASE,
+                // Nor the wanderer placed again after a slow answer: its counts would
+                // start over under a new name.
+                "--silence",
+                SILENCE,
                 "--duration",
                 duration,
                 "--output",
