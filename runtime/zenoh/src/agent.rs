@@ -567,8 +567,23 @@ impl std::fmt::Debug for Agent {
 
 impl Agent {
     /// Answer instantiation requests on `coolbot/<node>/@agent/<type>` with the types
-    /// of `registry`.
+    /// of `registry`, running at most [`limits::INSTANCES`] instances at once.
     pub fn start(node: Arc<Node>, registry: impl Into<Arc<Registry>>) -> Result<Agent, Error> {
+        Agent::start_with_cap(node, registry, limits::INSTANCES.max)
+    }
+
+    /// [`Agent::start`], running at most `instances` instances at once (a node that
+    /// knows how many it is to run; the refusal beyond them names
+    /// [`limits::INSTANCES`] with this value).
+    pub fn start_with_cap(
+        node: Arc<Node>,
+        registry: impl Into<Arc<Registry>>,
+        instances: usize,
+    ) -> Result<Agent, Error> {
+        let cap = limits::Limit {
+            max: instances,
+            ..limits::INSTANCES
+        };
         let registry: Arc<Registry> = registry.into();
         let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(AGENT_QUEUE);
         let status = Arc::new(Mutex::new(AgentStatus::default()));
@@ -615,6 +630,8 @@ impl Agent {
                 }
                 // What each owner node had built here.
                 let mut owned: BTreeMap<String, Vec<Handle>> = BTreeMap::new();
+                // Every instance built here, until it is found dead.
+                let mut instances: Vec<Handle> = Vec::new();
                 loop {
                     crossbeam_channel::select! {
                         recv(inbox.received) -> query => {
@@ -626,6 +643,7 @@ impl Agent {
                                 &query,
                                 &serving,
                                 &mut owned,
+                                (&mut instances, cap),
                             );
                             if let Err(error) = reply(&query, &answer) {
                                 coolbot::limited!("answer", |held| tracing::warn!(
@@ -713,9 +731,16 @@ fn serve_one(
     query: &zenoh::query::Query,
     status: &Mutex<AgentStatus>,
     owned: &mut BTreeMap<String, Vec<Handle>>,
+    (instances, cap): (&mut Vec<Handle>, limits::Limit),
 ) -> ControlReply {
     let mut built = Vec::new();
+    instances.retain(|instance| instance.state() != State::Dead);
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        cap.check(
+            || "the instances this agent runs with this one".to_owned(),
+            instances.len() + 1,
+        )
+        .map_err(text)?;
         serve(node, registry, system, query, &mut built)
     }));
     let discard = |built: &[Handle]| {
@@ -727,6 +752,7 @@ fn serve_one(
     match outcome {
         Ok(Ok(owner)) => {
             lock(status).built += 1;
+            instances.extend(built.first().cloned());
             if let Some(owner) = owner {
                 owned.entry(owner).or_default().extend(built);
             }

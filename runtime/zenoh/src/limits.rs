@@ -125,6 +125,14 @@ pub const QUEUE_BYTES: Limit = Limit {
     unit: "bytes",
 };
 
+/// The most instances an agent runs at once for other nodes (those not yet `dead`):
+/// each is a component on a thread of its own, with its bridges' ends.
+pub const INSTANCES: Limit = Limit {
+    name: "INSTANCES",
+    max: 1024,
+    unit: "instances",
+};
+
 /// The most quality levels a request's timing gives.
 pub const LEVELS: Limit = Limit {
     name: "LEVELS",
@@ -164,7 +172,7 @@ pub const ROS_PAYLOAD: Limit = Limit {
 };
 
 /// Every limit, in the order `docs/distribution.md` lists them.
-pub const ALL: [Limit; 15] = [
+pub const ALL: [Limit; 16] = [
     NAME,
     PATH,
     KEY,
@@ -175,6 +183,7 @@ pub const ALL: [Limit; 15] = [
     VARIABLES,
     QUEUE,
     QUEUE_BYTES,
+    INSTANCES,
     LEVELS,
     LEVEL_NAME,
     LEVEL_LISTS,

@@ -45,13 +45,19 @@ struct Station {
 
 impl Station {
     fn start() -> Station {
+        Station::start_with_cap(limits::INSTANCES.max)
+    }
+
+    /// A station whose agent runs at most `instances` instances at once.
+    fn start_with_cap(instances: usize) -> Station {
         let (robot, station) = pair("robot", "station");
         let station = Arc::new(station);
         let mut registry = Registry::new();
         doubler::register(&mut registry, |name| doubler::component(name, Doubling));
         frame_relay::register(&mut registry, |name| frame_relay::component(name, Relaying));
         registry.register("Bomb", |name| panic!("a factory bug building `{name}`"));
-        let agent = Agent::start(Arc::clone(&station), registry).expect("the agent");
+        let agent =
+            Agent::start_with_cap(Arc::clone(&station), registry, instances).expect("the agent");
         let station = Station {
             robot,
             agent,
@@ -598,4 +604,42 @@ fn the_documentation_lists_every_limit_with_its_value() {
         let row = format!("| `{}` | {} {} |", limit.name, limit.max, limit.unit);
         assert!(doc.contains(&row), "docs/distribution.md lacks `{row}`");
     }
+}
+
+#[test]
+fn an_agent_runs_at_most_its_cap_of_instances_and_builds_again_when_one_is_dead() {
+    // The same check as at the default cap (`INSTANCES`), with fewer instances to build.
+    let cap = 4;
+    let station = Station::start_with_cap(cap);
+    let limit = Limit {
+        max: cap,
+        ..limits::INSTANCES
+    };
+    // `first` runs already: fill the agent up to its cap.
+    for index in 1..cap {
+        station.still_builds(&format!("many{index}"));
+    }
+    let reason = station.refusal(&valid("one-too-many"));
+    assert!(reason.contains(&names(limit)), "{reason}");
+    assert!(
+        reason.contains("the instances this agent runs with this one: 5 instances"),
+        "{reason}"
+    );
+    // One goes to dead: there is room for one more, and only one.
+    let ctl = coolbot_zenoh::ctl::Ctl::new(station.robot.session().clone(), PATIENCE);
+    let reply = ctl
+        .command(
+            "station/many1",
+            &coolbot::Command::SetState(coolbot::Controllable::Dead),
+        )
+        .expect("the station answers");
+    assert_eq!(reply, ControlReply::Accepted);
+    // (It is dead once its thread has taken the command: ask until then.)
+    assert!(
+        wait_until(PATIENCE, || station.ask(&valid("one-more")).is_ok()),
+        "no room after an instance went to dead"
+    );
+    let reason = station.refusal(&valid("one-too-many"));
+    assert!(reason.contains(&names(limit)), "{reason}");
+    assert_eq!(station.agent.status().panics, 0);
 }
