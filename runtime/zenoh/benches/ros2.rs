@@ -10,8 +10,8 @@
 #[path = "../../benches/common/mod.rs"]
 #[macro_use]
 mod common;
+mod setup;
 
-use std::net::TcpListener;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -22,9 +22,9 @@ use coolbot_zenoh::Node;
 use coolbot_zenoh::ros2::{Participant, RosOptions};
 use crossbeam_channel::{Receiver, Sender, bounded};
 use serde::{Deserialize, Serialize};
-use zenoh::Wait;
 
 use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use setup::{nodes, state_directory, wait_subscribed};
 
 /// Round trips discarded at the start of every round.
 const WARMUP: usize = 100;
@@ -97,59 +97,6 @@ fn stamp() -> u64 {
 
 fn since(stamp_ns: u64) -> Duration {
     Duration::from_nanos(stamp().saturating_sub(stamp_ns))
-}
-
-fn endpoint() -> String {
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .expect("a free loopback port")
-        .port();
-    format!("tcp/127.0.0.1:{port}")
-}
-
-/// A state directory for the outlets' tallies, not the user's: in memory
-/// (`/dev/shm`) as the default one is, else in the temporary directory; removed when
-/// dropped.
-fn state_directory() -> tempfile::TempDir {
-    let mut builder = tempfile::Builder::new();
-    builder.prefix("coolbot-bench-");
-    builder
-        .tempdir_in("/dev/shm")
-        .or_else(|_| builder.tempdir())
-        .expect("a state directory")
-}
-
-/// Two nodes, `b` connected to `a`, on loopback, their outlets' tallies in `state`.
-fn nodes(state: &std::path::Path) -> (Node, Node) {
-    let a_endpoint = endpoint();
-    let config = |listen: &str, connect: &[String]| {
-        coolbot_zenoh::peer_config(&[listen.to_owned()], connect, false).expect("config")
-    };
-    let open = |name: &str, config| {
-        Node::open(name, config)
-            .expect(name)
-            .with_state_directory(Some(state.to_path_buf()))
-    };
-    let a = open("bench-a", config(&a_endpoint, &[]));
-    let b = open("bench-b", config(&endpoint(), &[a_endpoint]));
-    (a, b)
-}
-
-/// Wait until `session` knows a subscriber on `key`.
-fn wait_subscribed(session: &zenoh::Session, key: &str) {
-    let publisher = session
-        .declare_publisher(key.to_owned())
-        .wait()
-        .expect("probe publisher");
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !publisher
-        .matching_status()
-        .wait()
-        .is_ok_and(|status| status.matching())
-    {
-        assert!(Instant::now() < deadline, "no subscriber on `{key}`");
-        std::thread::sleep(Duration::from_millis(5));
-    }
 }
 
 /// The pinging side: on a kick, runs `per_round + WARMUP` round trips and sends the
