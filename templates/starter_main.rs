@@ -31,9 +31,10 @@
 //! its kernel closes the process's connections, and the camera's proxy fails at once
 //! with "node `drivers` is lost". The compound's policy acts (`substitute`: the spare
 //! takes the camera's place; `restart`: the camera is commanded back to `running`
-//! within the restart budget, and a fault beyond it propagates), and when the drivers
-//! process is started again the recovery queue builds the camera there. Without
-//! `--node`, the camera runs in this process as any instance does.
+//! within the restart budget, which brings it back only if the process is back by
+//! then), and when the drivers process is started again the recovery queue builds
+//! the camera there. Without `--node`, the camera runs in this process as any
+//! instance does.
 //!
 //! `coolc` wrote this file when it created the crate and never changes it: it is
 //! yours. It starts each component that no compound of the crate instantiated at
