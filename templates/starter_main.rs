@@ -19,8 +19,9 @@
 //! A driver whose native library may crash (a camera SDK, a serial driver written in
 //! C) runs in a process of its own on the same host, so that its segmentation fault
 //! or abort ends that process and not the robot: describe it `instance camera: Camera
-//! on "drivers";` (with `instance spare: Camera substitutes camera;` and `on error
-//! camera: substitute;`), and start this binary twice:
+//! on "drivers";` (with `instance spare: Camera substitutes camera;`, `on error
+//! camera: substitute;` and a `recovery` deadline long enough for the process to
+//! come back), and start this binary twice:
 //!
 //! ```sh
 //! cargo run --features network -- --node drivers --serve --listen tcp/127.0.0.1:7447
