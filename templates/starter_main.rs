@@ -16,6 +16,27 @@
 //! and access rules, `--insecure`, `--multicast`, `--lease`, `--silence`); without a
 //! security file the node stays on loopback.
 //!
+//! A driver whose native library may crash (a camera SDK, a serial driver written in
+//! C) runs in a process of its own on the same host, so that its segmentation fault
+//! or abort ends that process and not the robot: describe it `instance camera: Camera
+//! on "drivers";` (with `instance spare: Camera substitutes camera;`, `on error
+//! camera: substitute;` and a `recovery` deadline long enough for the process to
+//! come back), and start this binary twice:
+//!
+//! ```sh
+//! cargo run --features network -- --node drivers --serve --listen tcp/127.0.0.1:7447
+//! cargo run --features network -- forever --node robot --connect tcp/127.0.0.1:7447
+//! ```
+//!
+//! When the drivers process dies (`kill -9`, a segmentation fault), the robot runs on:
+//! its kernel closes the process's connections, and the camera's proxy fails at once
+//! with "node `drivers` is lost". The compound's policy acts (`substitute`: the spare
+//! takes the camera's place; `restart`: the camera is commanded back to `running`
+//! within the restart budget, which brings it back only if the process is back by
+//! then), and when the drivers process is started again the recovery queue builds
+//! the camera there. Without `--node`, the camera runs in this process as any
+//! instance does.
+//!
 //! `coolc` wrote this file when it created the crate and never changes it: it is
 //! yours. It starts each component that no compound of the crate instantiated at
 //! that time; a component described later is not added here by itself.

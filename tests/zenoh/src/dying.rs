@@ -1,12 +1,61 @@
 //! `DyingCell` (`cool/placement.cool`): a counting `Flaky` on the dying station with a
 //! local spare, its parts and the registry both nodes use. The tests of a remote
 //! instance's death, of the logs while a node is lost, and of `coolctl top`'s steps
-//! pane share it.
+//! pane share it; the tests of a remote instance's death, and of a driver in a
+//! process of its own, share the waits for a compound's steps.
 
-use coolbot::SectionResult;
+use coolbot::{Handle, Monitor, SectionResult, Step};
 use coolbot_zenoh::agent::Registry;
 
 use crate::generated::{dying_cell, flaky};
+use crate::support::PATIENCE;
+
+/// The value of the `u64` variable `name` in `monitor` (0 when it has none).
+pub fn counted(monitor: &Monitor, name: &str) -> u64 {
+    monitor
+        .variables
+        .iter()
+        .find(|(variable, _)| variable == name)
+        .map_or(0, |(_, value)| match value {
+            coolbot::Value::UInt(n) => *n,
+            _ => 0,
+        })
+}
+
+/// The steps `compound` has taken about `instance` so far, each with its detail.
+pub fn steps(compound: &Handle, instance: &str) -> Vec<(Step, String)> {
+    compound
+        .snapshot()
+        .supervision
+        .into_iter()
+        .filter(|step| step.instance == instance)
+        .map(|step| (step.step, step.detail))
+        .collect()
+}
+
+/// Waits (at most [`PATIENCE`]) until `compound` has taken a step about `instance`
+/// for which `step` holds; the detail of the first such step. Panics with `what` and
+/// the steps so far when none comes.
+pub fn wait_step(compound: &Handle, instance: &str, step: fn(&Step) -> bool, what: &str) -> String {
+    let monitor = compound
+        .wait_for(
+            |m| {
+                m.supervision
+                    .iter()
+                    .any(|s| s.instance == instance && step(&s.step))
+            },
+            PATIENCE,
+        )
+        .unwrap_or_else(|timeout| {
+            panic!("{what}: {timeout}; steps {:?}", steps(compound, instance))
+        });
+    monitor
+        .supervision
+        .into_iter()
+        .find(|s| s.instance == instance && step(&s.step))
+        .map(|s| s.detail)
+        .unwrap_or_default()
+}
 
 /// `Flaky`'s behaviour: counts its periods.
 pub struct Counting;

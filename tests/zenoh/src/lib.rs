@@ -13,4 +13,5 @@ pub mod generated {
 }
 
 pub mod dying;
+pub mod isolation;
 pub mod support;

@@ -1,6 +1,7 @@
 //! What the network tests share: two nodes on loopback with explicit endpoints and
-//! multicast scouting off, waiting for conditions, a TCP forwarder whose link a test
-//! can cut, and the robot's system (generated components, `cool/robot.cool`).
+//! multicast scouting off, waiting for conditions, a node in a process of its own
+//! (one of this package's binaries), a TCP forwarder whose link a test can cut, and
+//! the robot's system (generated components, `cool/robot.cool`).
 
 use std::net::TcpListener;
 use std::time::{Duration, Instant};
@@ -81,6 +82,84 @@ pub fn wait_subscribed(node: &Node, key: &str) {
             .is_ok_and(|status| status.matching())),
         "no subscriber on `{key}`"
     );
+}
+
+/// A node in a process of its own: one of this package's binaries, started by a test,
+/// killed (`kill -9`) when dropped. It keeps no outlet tallies (a placement's bridges
+/// keep none anyway).
+pub struct NodeProcess {
+    child: std::process::Child,
+}
+
+impl NodeProcess {
+    /// Starts `program` (a `CARGO_BIN_EXE_...` path) with `args`, a process that opens
+    /// the node `name` and prints `ready` once it serves. Returns when it has, and
+    /// `observer` sees the node's liveliness token.
+    pub fn start(program: &str, args: &[&str], name: &str, observer: &Node) -> NodeProcess {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(program)
+            .args(args)
+            .env("COOLBOT_STATE_DIR", "")
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|error| panic!("`{program}` does not start: {error}"));
+        let stdout = child.stdout.take().expect("piped");
+        let process = NodeProcess { child };
+        let (ready, started) = coolbot::crossbeam_channel::bounded(1);
+        std::thread::spawn(move || {
+            let mut lines = std::io::BufReader::new(stdout)
+                .lines()
+                .map_while(Result::ok);
+            let said = lines.any(|line| line == "ready");
+            let _ = ready.send(said);
+            // Read on, so that the process never writes into a closed pipe.
+            lines.for_each(drop);
+        });
+        assert_eq!(
+            started.recv_timeout(PATIENCE),
+            Ok(true),
+            "node `{name}`'s process did not start"
+        );
+        let token = format!("coolbot/{name}");
+        assert!(
+            wait_until(PATIENCE, || observer
+                .session()
+                .liveliness()
+                .get(&token)
+                .timeout(Duration::from_millis(200))
+                .wait()
+                .is_ok_and(|replies| replies.recv().is_ok())),
+            "node `{}` does not see `{name}`",
+            observer.name()
+        );
+        process
+    }
+
+    /// Waits (at most [`PATIENCE`]) for the process to end by itself: how it ended.
+    /// Panics if it runs on.
+    pub fn wait_end(mut self) -> std::process::ExitStatus {
+        let mut status = None;
+        let ended = wait_until(PATIENCE, || {
+            status = self.child.try_wait().expect("the process's status");
+            status.is_some()
+        });
+        assert!(ended, "the process runs on");
+        status.expect("ended")
+    }
+
+    /// `kill -9`: how it ended.
+    pub fn kill(mut self) -> std::process::ExitStatus {
+        self.child.kill().expect("the process is killed");
+        self.child.wait().expect("the process's status")
+    }
+}
+
+impl Drop for NodeProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
 
 /// A TCP forwarder between two nodes on loopback, so that a test can break the link

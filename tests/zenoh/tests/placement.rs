@@ -17,7 +17,7 @@ use coolbot_zenoh_tests::generated::{
     nest_cell, pair_relay, pair_sink, pair_source, pull_cell, pull_doubler, remote_lead_pair,
     remote_pair, restart_cell, tuned, tuned_cell,
 };
-use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
+use coolbot_zenoh_tests::support::{NodeProcess, PATIENCE, pair, wait_until};
 use zenoh::Wait;
 
 /// The ports of a relay, as its behaviour hands them over when it starts.
@@ -947,62 +947,15 @@ fn a_redundant_group_keeps_one_stream_when_its_remote_leader_fails_and_the_local
     );
 }
 
-/// A station process (`station-under-test`), killed when dropped, and its state
-/// directory (not the user's), removed after it.
-struct Station {
-    child: std::process::Child,
-    _state: tempfile::TempDir,
-}
-
-impl Drop for Station {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Start the station process `name`, connected to `endpoint`; it has printed `ready`
-/// and `robot` sees its node.
-fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> Station {
-    use std::io::BufRead;
-    let state = tempfile::tempdir().expect("a state directory");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_station-under-test"))
-        .args([name, endpoint])
-        .env("COOLBOT_STATE_DIR", state.path())
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .expect("the station starts");
-    let stdout = child.stdout.take().expect("piped");
-    let station = Station {
-        child,
-        _state: state,
-    };
-    let (ready, started) = crossbeam_channel::bounded(1);
-    std::thread::spawn(move || {
-        let said = std::io::BufReader::new(stdout)
-            .lines()
-            .map_while(Result::ok)
-            .any(|line| line == "ready");
-        let _ = ready.send(said);
-    });
-    assert_eq!(
-        started.recv_timeout(PATIENCE),
-        Ok(true),
-        "station `{name}` did not start"
-    );
-    let token = format!("coolbot/{name}");
-    assert!(
-        wait_until(PATIENCE, || robot
-            .session()
-            .liveliness()
-            .get(&token)
-            .timeout(Duration::from_millis(200))
-            .wait()
-            .is_ok_and(|replies| replies.recv().is_ok())),
-        "the robot does not see `{name}`"
-    );
-    station
+/// Start the station process `name` (`station-under-test`), connected to
+/// `endpoint`; it has printed `ready` and `robot` sees its node.
+fn station_process(name: &str, endpoint: &str, robot: &coolbot_zenoh::Node) -> NodeProcess {
+    NodeProcess::start(
+        env!("CARGO_BIN_EXE_station-under-test"),
+        &[name, endpoint],
+        name,
+        robot,
+    )
 }
 
 /// Every connection kind, and pull both ways, between three OS processes: this one

@@ -12,50 +12,23 @@ use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::{ControlReply, Node, Placer};
-use coolbot_zenoh_tests::dying::{Counting, Parts, registry};
+use coolbot_zenoh_tests::dying::{self, Counting, Parts, counted, registry};
 use coolbot_zenoh_tests::generated::{dying_cell, finisher, finishing_cell, flaky};
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
 
 fn periods(monitor: &Monitor) -> u64 {
-    monitor
-        .variables
-        .iter()
-        .find(|(name, _)| name == "periods")
-        .map_or(0, |(_, value)| match value {
-            coolbot::Value::UInt(n) => *n,
-            _ => 0,
-        })
+    counted(monitor, "periods")
 }
 
 /// The cell's steps about `flaky` so far.
 fn steps(cell: &Handle) -> Vec<(Step, String)> {
-    cell.snapshot()
-        .supervision
-        .into_iter()
-        .filter(|step| step.instance == "flaky")
-        .map(|step| (step.step, step.detail))
-        .collect()
+    dying::steps(cell, "flaky")
 }
 
 /// Wait until the cell has taken `step` about `flaky`; its detail.
 fn wait_step(cell: &Handle, step: fn(&Step) -> bool, what: &str) -> String {
-    let monitor = cell
-        .wait_for(
-            |m| {
-                m.supervision
-                    .iter()
-                    .any(|s| s.instance == "flaky" && step(&s.step))
-            },
-            PATIENCE,
-        )
-        .unwrap_or_else(|timeout| panic!("{what}: {timeout}; steps {:?}", steps(cell)));
-    monitor
-        .supervision
-        .into_iter()
-        .find(|s| s.instance == "flaky" && step(&s.step))
-        .map(|s| s.detail)
-        .unwrap_or_default()
+    dying::wait_step(cell, "flaky", step, what)
 }
 
 /// The `flaky` instances built on the station by the robot, `(path, state)`.
