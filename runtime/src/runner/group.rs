@@ -258,7 +258,7 @@ impl Group {
             if let Some(due) = runner.next_due() {
                 deadline = Some(deadline.map_or(due, |d| d.min(due)));
             }
-            if let Some(own) = runner.cx.period {
+            if let Some(own) = runner.periodic_now() {
                 period = Some(period.map_or(own, |p| p.min(own)));
             }
             // One reading for all: the members share the clock.

@@ -628,6 +628,17 @@ impl Runner {
         )
     }
 
+    /// The period of the periodic section the component runs now: `None` unless it
+    /// is `running` in a user state with a periodic section (not suspended, not
+    /// starting, not in a state without one).
+    pub(crate) fn periodic_now(&self) -> Option<Duration> {
+        if self.state != State::Running || !self.user_entered {
+            return None;
+        }
+        self.next_periodic?;
+        self.period_of(self.user)
+    }
+
     fn period_of(&self, state: usize) -> Option<Duration> {
         self.spec.states[state]
             .periodic
