@@ -13,9 +13,10 @@
 //! for the next pass. Only a member cut off at its turns' limit makes the next pass
 //! start without a wait.
 //!
-//! A pass starts by asking the processor to fetch every member's turn state into its
-//! cache (`Runner::prefetch`): after a period asleep it is mostly out of the cache, and
-//! the fetches overlap instead of each turn waiting for its own in turn. The wait
+//! A pass starts by asking the processor to fetch the members' turn state into its
+//! cache (`Runner::prefetch`; in a large group, [`PREFETCH_AHEAD`] members ahead of
+//! the turn): after a period asleep it is mostly out of the cache, and the fetches
+//! overlap instead of each turn waiting for its own in turn. The wait
 //! allocates nothing, and reads the thread's CPU time once for all the members.
 //!
 //! Members' periodic deadlines fall on one grid, multiples of each member's period
@@ -35,6 +36,12 @@ use super::{Runner, Turn};
 /// The most turns one member takes in one pass while it has work, before the next
 /// member's turn (a member flooded with input does not starve the others).
 pub(crate) const TURNS_PER_PASS: usize = 64;
+
+/// How many members ahead of the one whose turn begins a pass has asked the processor
+/// to fetch into its cache (`Runner::prefetch`): enough for every member of a typical
+/// group to be fetched at the pass's start, few enough that a large group's runners
+/// (over 1 KiB each) do not push those of the next turns out of the cache.
+const PREFETCH_AHEAD: usize = 16;
 
 /// How many members' doorbells a group's wait holds without allocating.
 const INLINE_BELLS: usize = 32;
@@ -215,10 +222,16 @@ impl Group {
             .next()
             .map(|runner| runner.time.now());
         let mut reading = start;
-        for runner in self.members.iter().flatten() {
+        // The first `PREFETCH_AHEAD` members' turn state is fetched now, and each
+        // later member's as the turn `PREFETCH_AHEAD` members before it begins.
+        for runner in self.members.iter().take(PREFETCH_AHEAD).flatten() {
             runner.prefetch();
         }
-        for slot in &mut self.members {
+        for index in 0..self.members.len() {
+            if let Some(Some(ahead)) = self.members.get(index + PREFETCH_AHEAD) {
+                ahead.prefetch();
+            }
+            let slot = &mut self.members[index];
             let Some(runner) = slot.as_mut() else {
                 continue;
             };

@@ -404,6 +404,39 @@ fn the_groups_period_is_the_shortest_among_members_running_a_periodic_section() 
 }
 
 #[test]
+fn a_large_group_waits_on_every_members_doorbell() {
+    // More members than the group's wait holds without allocating (32).
+    const MEMBERS: usize = 40;
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let names: Vec<&'static str> = (0..MEMBERS)
+        .map(|index| &*format!("s{index}").leak())
+        .collect();
+    for &name in &names {
+        system
+            .add(stage::component(name, step(name, &log)))
+            .expect("stage");
+    }
+    system.group("large", &names).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take().len(), MEMBERS);
+    // A command rings only the last member's bell: the group wakes for it.
+    let last = system.handle(names[MEMBERS - 1]).expect("last");
+    last.command(Command::SetState(Controllable::Suspended))
+        .expect("suspended");
+    clock.settle().expect("settled");
+    tick(&clock);
+    let ran = log.take();
+    assert_eq!(ran.len(), MEMBERS - 1);
+    assert!(
+        !ran.contains(&format!("{}:1", names[MEMBERS - 1])),
+        "{ran:?}"
+    );
+}
+
+#[test]
 fn a_group_is_refused_with_what_is_wrong() {
     let log = Log::default();
     let (mut system, _clock) = system();
