@@ -199,8 +199,9 @@ impl Monitor {
 
 /// An execution group as each member's monitor shows it: its name, its members in
 /// the order they run, and its cycles. A cycle is one pass of the group's thread
-/// over its members; the group's period is the shortest period in effect among its
-/// members, and a cycle longer than that period is an overrun (the next cycle
+/// over its members; the group's period is the shortest period among the members
+/// running a periodic section now (`running`, in a user state with a periodic
+/// section), and a cycle longer than that period is an overrun (the next cycle
 /// starts late for someone).
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct GroupStatus {
@@ -214,8 +215,8 @@ pub struct GroupStatus {
     pub last_cycle: Duration,
     /// The longest cycle so far.
     pub worst_cycle: Duration,
-    /// The shortest period in effect among the members, as the last wait saw it;
-    /// `None` while no member is periodic.
+    /// The shortest period among the members running a periodic section, as the
+    /// last wait saw it; `None` while no member runs one.
     pub period: Option<Duration>,
     /// Cycles that took longer than `period`.
     pub overruns: u64,

@@ -159,6 +159,16 @@ impl Runner {
     /// Publish the elapsed time (if it changed) and the thread's CPU time (a system
     /// call: at most once per `CPU_TIME_REFRESH` unless `force`).
     pub(super) fn update_cpu(&mut self, force: bool) {
+        self.update_cpu_from(force, &mut thread_cpu_time);
+    }
+
+    /// [`Runner::update_cpu`], with the thread's CPU time read by `read_cpu` (an
+    /// execution group reads it once for all its members).
+    pub(super) fn update_cpu_from(
+        &mut self,
+        force: bool,
+        read_cpu: &mut dyn FnMut() -> Option<Duration>,
+    ) {
         if self.mirrors_times {
             return;
         }
@@ -166,9 +176,7 @@ impl Runner {
             force || self.clock.saturating_duration_since(self.cpu_updated) >= CPU_TIME_REFRESH;
         let cpu = if refresh_cpu {
             self.cpu_updated = self.time.now();
-            cpu_time::ThreadTime::try_now()
-                .ok()
-                .map(|time| time.as_duration())
+            read_cpu()
         } else {
             None
         };
@@ -349,4 +357,11 @@ impl Runner {
         self.set_error(Some(message));
         self.apply(Event::Fault);
     }
+}
+
+/// The calling thread's CPU time (a system call); `None` where it cannot be read.
+pub(super) fn thread_cpu_time() -> Option<Duration> {
+    cpu_time::ThreadTime::try_now()
+        .ok()
+        .map(|time| time.as_duration())
 }

@@ -122,6 +122,19 @@ pub(crate) enum Turn {
     Idle,
 }
 
+/// What a runner knows of one of its inputs: one record per input, so that looking at
+/// an input reads one cache line.
+#[derive(Debug, Clone, Copy)]
+struct Track {
+    /// The arrival counter already looked at.
+    seen: u64,
+    /// When the input last had an arrival (or the state was entered), for watchdogs.
+    last_arrival: Instant,
+    /// Arrivals since the current user state was entered, not yet used by an `on`
+    /// transition.
+    pending: bool,
+}
+
 /// Everything one component thread owns.
 pub(crate) struct Runner {
     automaton: Box<dyn Driven>,
@@ -139,13 +152,8 @@ pub(crate) struct Runner {
     user: usize,
     /// Whether the current user state's entry has run (its exit is due on leaving).
     user_entered: bool,
-    /// Arrival counters already looked at, per input.
-    seen: Vec<u64>,
-    /// Inputs with arrivals since the current user state was entered, not yet used by an
-    /// `on` transition.
-    pending: Vec<bool>,
-    /// When each input last had an arrival (or the state was entered), for watchdogs.
-    last_arrival: Vec<Instant>,
+    /// What the runner knows of each input, by input index.
+    tracks: Vec<Track>,
     entered_at: Instant,
     suspended_at: Option<Instant>,
     next_periodic: Option<Instant>,
@@ -260,9 +268,14 @@ impl Runner {
             state: State::Starting,
             user: spec.initial,
             user_entered: false,
-            seen: vec![0; count],
-            pending: vec![false; count],
-            last_arrival: vec![now; count],
+            tracks: vec![
+                Track {
+                    seen: 0,
+                    last_arrival: now,
+                    pending: false,
+                };
+                count
+            ],
             entered_at: now,
             suspended_at: None,
             next_periodic: None,
@@ -353,8 +366,8 @@ impl Runner {
         self.entered_at = now;
         self.cpu_updated = now;
         self.clock = now;
-        for arrival in &mut self.last_arrival {
-            *arrival = now;
+        for track in &mut self.tracks {
+            track.last_arrival = now;
         }
         self.cx.entered_at = now;
         self.cx.clock = clock.clone();
@@ -571,10 +584,10 @@ impl Runner {
         let fired = state_spec
             .on
             .iter()
-            .filter(|on| self.pending.get(on.port) == Some(&true))
+            .filter(|on| self.tracks.get(on.port).is_some_and(|track| track.pending))
             .min_by_key(|on| on.port);
         if let Some(on) = fired {
-            self.pending[on.port] = false;
+            self.tracks[on.port].pending = false;
             let arrived = self
                 .labels
                 .get(on.port)
@@ -591,22 +604,21 @@ impl Runner {
     }
 
     fn notice_arrivals(&mut self, now: Instant) {
-        for (index, input) in self.inputs.iter().enumerate() {
+        for (input, track) in self.inputs.iter().zip(&mut self.tracks) {
             let arrivals = input.arrivals();
-            if arrivals != self.seen[index] {
-                self.seen[index] = arrivals;
-                self.pending[index] = true;
-                self.last_arrival[index] = now;
+            if arrivals != track.seen {
+                track.seen = arrivals;
+                track.pending = true;
+                track.last_arrival = now;
             }
         }
     }
 
     fn after_due(&self, after: &AfterSpec) -> Instant {
         let base = match after.without {
-            Some(port) => self
-                .last_arrival
-                .get(port)
-                .map_or(self.entered_at, |t| (*t).max(self.entered_at)),
+            Some(port) => self.tracks.get(port).map_or(self.entered_at, |track| {
+                track.last_arrival.max(self.entered_at)
+            }),
             None => self.entered_at,
         };
         later(base, after.delay)
@@ -626,6 +638,17 @@ impl Runner {
             anchor,
             Duration::from_nanos(u64::try_from(offset).unwrap_or(u64::MAX)),
         )
+    }
+
+    /// The period of the periodic section the component runs now: `None` unless it
+    /// is `running` in a user state with a periodic section (not suspended, not
+    /// starting, not in a state without one).
+    pub(crate) fn periodic_now(&self) -> Option<Duration> {
+        if self.state != State::Running || !self.user_entered {
+            return None;
+        }
+        self.next_periodic?;
+        self.period_of(self.user)
     }
 
     fn period_of(&self, state: usize) -> Option<Duration> {

@@ -131,8 +131,8 @@ impl Runner {
             let pause = now.saturating_duration_since(since);
             self.entered_at += pause;
             self.cx.entered_at = self.entered_at;
-            for arrival in &mut self.last_arrival {
-                *arrival += pause;
+            for track in &mut self.tracks {
+                track.last_arrival += pause;
             }
         }
         self.next_periodic = self
@@ -256,12 +256,13 @@ impl Runner {
                 self.spec.inputs.get(index).map(|spec| spec.kind),
                 Some(InputKind::Tick) | None
             );
-            self.pending[index] = unseen_count && data && arrivals != self.seen[index];
-            self.seen[index] = arrivals;
-            self.last_arrival[index] = now;
+            let track = &mut self.tracks[index];
+            track.pending = unseen_count && data && arrivals != track.seen;
+            track.seen = arrivals;
+            track.last_arrival = now;
             // Arrivals before the state was entered are no events in it: their stamp
             // would time a later packet's response from them.
-            if !self.pending[index]
+            if !track.pending
                 && let Some(Some(label)) = self.labels.get(index)
             {
                 let _ = label.take();

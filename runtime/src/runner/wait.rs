@@ -55,7 +55,7 @@ impl Runner {
             && !self.cx.end_requested
             && self.pending_choice.is_none()
             && (self.polled || !self.bell.is_rung())
-            && !self.pending.contains(&true)
+            && !self.tracks.iter().any(|track| track.pending)
             && !self.pull_requests_waiting()
     }
 
@@ -69,8 +69,8 @@ impl Runner {
             || self
                 .inputs
                 .iter()
-                .zip(&self.seen)
-                .any(|(input, seen)| input.arrivals() != *seen)
+                .zip(&self.tracks)
+                .any(|(input, track)| input.arrivals() != track.seen)
             || self.pull_requests_waiting()
     }
 

@@ -357,6 +357,86 @@ fn each_members_monitor_shows_its_group_and_the_groups_cycles() {
 }
 
 #[test]
+fn the_groups_period_is_the_shortest_among_members_running_a_periodic_section() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    // `slow` lets the clock run on 20 ms inside its second section.
+    let slow = Step {
+        overrun_at: Some((2, Arc::clone(&clock))),
+        ..step("slow", &log)
+    };
+    system.add(stage::component("slow", slow)).expect("slow");
+    system
+        .add(stage::component("fast", step("fast", &log)))
+        .expect("fast");
+    system
+        .connect("slow.out", "fast.feed")
+        .expect("slow -> fast");
+    system.group("control", &["slow", "fast"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    let (slow, fast) = (
+        system.handle("slow").expect("slow"),
+        system.handle("fast").expect("fast"),
+    );
+    slow.command(Command::SetPeriod(PERIOD * 4))
+        .expect("period");
+    fast.command(Command::SetState(Controllable::Suspended))
+        .expect("suspend");
+    clock.settle().expect("settled");
+    clock.advance(PERIOD * 4).expect("settled");
+    assert_eq!(log.take(), ["slow:1"]);
+    // The suspended member's 10 ms is not the group's period: `slow`'s 40 ms is.
+    let group = slow.snapshot().group.expect("a member");
+    assert_eq!(group.period, Some(PERIOD * 4));
+    // A 20 ms cycle is within the group's period: no overrun of the group (the
+    // section's own overrun of `max_response` is `slow`'s).
+    clock.advance(PERIOD * 4).expect("settled");
+    assert_eq!(log.take(), ["slow:1"]);
+    let group = fast.snapshot().group.expect("a member");
+    assert_eq!(group.worst_cycle, Duration::from_millis(20));
+    assert_eq!(group.overruns, 0);
+    assert_eq!(slow.snapshot().overruns, 1);
+    // No member runs a periodic section now: the group has no period.
+    clock.advance(PERIOD * 4).expect("settled");
+    assert_eq!(fast.snapshot().group.expect("a member").period, None);
+}
+
+#[test]
+fn a_large_group_waits_on_every_members_doorbell() {
+    // More members than the group's wait holds without allocating (32).
+    const MEMBERS: usize = 40;
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let names: Vec<&'static str> = (0..MEMBERS)
+        .map(|index| &*format!("s{index}").leak())
+        .collect();
+    for &name in &names {
+        system
+            .add(stage::component(name, step(name, &log)))
+            .expect("stage");
+    }
+    system.group("large", &names).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take().len(), MEMBERS);
+    // A command rings only the last member's bell: the group wakes for it.
+    let last = system.handle(names[MEMBERS - 1]).expect("last");
+    last.command(Command::SetState(Controllable::Suspended))
+        .expect("suspended");
+    clock.settle().expect("settled");
+    tick(&clock);
+    let ran = log.take();
+    assert_eq!(ran.len(), MEMBERS - 1);
+    assert!(
+        !ran.contains(&format!("{}:1", names[MEMBERS - 1])),
+        "{ran:?}"
+    );
+}
+
+#[test]
 fn a_group_is_refused_with_what_is_wrong() {
     let log = Log::default();
     let (mut system, _clock) = system();
