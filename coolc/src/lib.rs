@@ -102,7 +102,6 @@ impl Analysis {
         }
         Ok(Checked::new(
             self.sources,
-            self.files,
             self.diagnostics,
             self.resolved,
             self.ros,
@@ -113,13 +112,7 @@ impl Analysis {
     /// rejects (defence in depth: lowering escapes what it must even then).
     #[cfg(test)]
     pub(crate) fn assume_checked(self) -> Checked {
-        Checked::new(
-            self.sources,
-            self.files,
-            self.diagnostics,
-            self.resolved,
-            self.ros,
-        )
+        Checked::new(self.sources, self.diagnostics, self.resolved, self.ros)
     }
 }
 
@@ -167,7 +160,7 @@ pub fn analyze_with<P: AsRef<Path>>(
     );
     symbols.note_unloaded(&loaded.files, &interfaces);
     symbols.add_siblings(&loaded.sources, list, loader);
-    let resolved = check::check(&loaded.files, symbols, &mut loaded.diagnostics);
+    let resolved = check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
     Analysis {
         sources: loaded.sources,
         files: loaded.files,
