@@ -11,8 +11,8 @@
 //! variables with their types through mappings, its adaptation tuning, every `when`
 //! rule typed by the one rule typer, `check::rules`), every value evaluated; and
 //! every ROS 2 message type read ([`Checked::ros_messages`], with its hash). `lower`
-//! and `diagram` read only this model; what they keep as written is `when` conditions
-//! ([`crate::ast::Expr`], beside their typed tree), never a name to look up.
+//! and `diagram` read only this model (a `when` condition is its typed tree), never a
+//! syntax tree, and look no name up.
 
 pub use crate::check::model;
 
@@ -133,7 +133,7 @@ impl Checked {
 #[cfg(test)]
 mod tests {
     use crate::checked::model::RTy;
-    use crate::checked::model::StateMember;
+    use crate::checked::model::{BinaryOp, Node, StateMember};
 
     #[test]
     fn rules_are_typed_with_their_symbols_resolved() {
@@ -149,7 +149,7 @@ mod tests {
         let compound = checked.component("C").expect("C");
         let automaton = compound.automaton.as_ref().expect("a supervisor");
         let Some(StateMember::When {
-            typed: Some(typed), ..
+            condition: typed, ..
         }) = automaton.states[0].members.first()
         else {
             panic!("a typed when rule: {automaton:?}");
@@ -163,6 +163,18 @@ mod tests {
         assert_eq!(types, [&RTy::State, &RTy::State]);
         let types: Vec<&RTy> = level.operands.iter().map(|t| &t.ty).collect();
         assert_eq!(types, [&RTy::Optional(Box::new(RTy::Float)), &RTy::Float]);
+        // The typed tree is the expression: each node says what it is.
+        assert_eq!(typed.node, Node::Binary(BinaryOp::And));
+        assert_eq!(state.node, Node::Binary(BinaryOp::Eq));
+        assert_eq!(
+            state.operands[0].node,
+            Node::Path(vec!["a".to_owned(), "state".to_owned()])
+        );
+        assert_eq!(
+            state.operands[1].node,
+            Node::Path(vec!["running_error".to_owned()])
+        );
+        assert_eq!(level.operands[1].node, Node::Float(0.5));
         assert!(
             checked
                 .component("A")

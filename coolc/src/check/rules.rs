@@ -15,8 +15,8 @@
 
 use super::Checker;
 use super::model::{
-    Component, DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Model, RESULTS, RTy, Ty,
-    Typed, strip,
+    Component, DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Model, Node, RESULTS,
+    RTy, Ty, Typed, strip,
 };
 use crate::ast::{self, BinaryOp};
 use crate::diagnostics::Code;
@@ -37,10 +37,12 @@ fn from_ty(ty: &Ty) -> RTy {
 }
 
 impl Typed {
-    fn leaf(ty: RTy) -> Typed {
+    /// The node `expr` with type `ty` and its typed operands.
+    fn node(expr: &ast::Expr, ty: RTy, operands: Vec<Typed>) -> Typed {
         Typed {
             ty,
-            operands: Vec::new(),
+            node: Node::of(&expr.kind),
+            operands,
         }
     }
 }
@@ -115,10 +117,7 @@ impl Typer<'_, '_, '_> {
                         self.mismatch(expr, format!("`-` needs a number, found {ty}"))
                     }
                 };
-                return Typed {
-                    ty,
-                    operands: vec![operand],
-                };
+                return Typed::node(expr, ty, vec![operand]);
             }
             E::Binary(op @ (BinaryOp::And | BinaryOp::Or), left, right) => {
                 let mut operands = Vec::with_capacity(2);
@@ -132,14 +131,15 @@ impl Typer<'_, '_, '_> {
                     }
                     operands.push(typed);
                 }
-                return Typed {
-                    ty: RTy::Bool,
-                    operands,
-                };
+                return Typed::node(expr, RTy::Bool, operands);
             }
             E::Binary(op, left, right) => return self.comparison(expr, *op, left, right),
         };
-        Typed::leaf(ty)
+        // A leaf (a list's items stay untyped: no rule reads a list).
+        Typed {
+            ty,
+            ..Typed::untyped(expr)
+        }
     }
 
     /// Infers an operand; a bare symbol on its own is an unknown variable.
@@ -359,10 +359,8 @@ impl Typer<'_, '_, '_> {
             }
             _ => {}
         }
-        let typed = |left_typed, right_typed| Typed {
-            ty: RTy::Bool,
-            operands: vec![left_typed, right_typed],
-        };
+        let typed =
+            |left_typed, right_typed| Typed::node(expr, RTy::Bool, vec![left_typed, right_typed]);
         let (left_ty, right_ty) = (&left_typed.ty, &right_typed.ty);
         if matches!(left_ty, RTy::Unknown) || matches!(right_ty, RTy::Unknown) {
             return typed(left_typed, right_typed);

@@ -195,10 +195,11 @@ impl<'a> Model<'a> {
                 for state in component.automaton.iter_mut().flat_map(|a| &mut a.states) {
                     for member in &mut state.members {
                         if let StateMember::When {
-                            condition, typed, ..
+                            condition, span, ..
                         } = member
+                            && let Some(typed) = rules.get(&(file, *span))
                         {
-                            *typed = rules.get(&(file, condition.span)).cloned();
+                            *condition = typed.clone();
                         }
                     }
                 }
@@ -691,9 +692,9 @@ impl<'a> Model<'a> {
             ast::StateMember::When {
                 condition, target, ..
             } => StateMember::When {
-                condition: condition.clone(),
-                // Set by `finish`, once every rule is typed.
-                typed: None,
+                // Typed by `finish`, once every rule is.
+                condition: Typed::untyped(condition),
+                span: condition.span,
                 target: state(target),
             },
         }
@@ -831,7 +832,7 @@ mod tests {
         let state = &outer.automaton.as_ref().expect("supervisor").states[0];
         assert!(matches!(
             &state.members[0],
-            StateMember::When { typed: Some(typed), target, .. }
+            StateMember::When { condition: typed, target, .. }
                 if typed.ty == crate::checked::model::RTy::Bool && target.name == "s"
         ));
         let inner = checked.component("Inner").expect("Inner");

@@ -5,11 +5,10 @@
 //! knows whether its component is a compound, an exported port carries the port it
 //! reaches (through any depth of exports), a connection carries the kind of the input
 //! it feeds, a mapped variable carries the type of what it maps, and a `when`
-//! condition carries its type from the one rule typer. Every setting is evaluated
+//! condition is the tree the one rule typer typed. Every setting is evaluated
 //! once, here: durations and periods are [`Duration`]s, priorities and counts
 //! integers, fifo and error policies enums, constant values (defaults, initial values,
-//! overrides) [`Value`]s. What stays as written is `when` conditions ([`ast::Expr`],
-//! beside their typed tree) and names, as strings.
+//! overrides) [`Value`]s. Names stay as strings.
 //!
 //! Members of one kind keep their source order; members of different kinds are
 //! held apart (a checked component has at most one `timing`, `configuration`,
@@ -23,7 +22,7 @@ use super::types::{
 use crate::ast::{self, FileId, Span};
 use crate::ros::{Message, TypeHash, TypeName};
 
-pub use crate::ast::{ComponentKind, Prim, VarKind};
+pub use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
 
 /// A component, resolved.
 #[derive(Clone, Debug, PartialEq)]
@@ -493,11 +492,11 @@ pub enum StateMember {
     May(Vec<Ref>),
     /// `when condition -> target;`
     When {
-        /// The condition as written.
-        condition: ast::Expr,
-        /// The condition typed by the rule typer (`None` only if it was not typed,
-        /// which a checked model does not have).
-        typed: Option<Typed>,
+        /// The condition, typed by the rule typer (every node of an untyped rule,
+        /// which a checked model does not have, is [`RTy::Unknown`](super::RTy)).
+        condition: Typed,
+        /// Where the condition is written.
+        span: Span,
         /// The target state.
         target: Ref,
     },
@@ -721,12 +720,12 @@ impl Value {
                 Value::Repeat(Box::new(Value::of(item)), count.value)
             }
             ast::ExprKind::None => Value::None,
-            ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) => match Value::of(inner) {
+            ast::ExprKind::Unary(UnaryOp::Neg, inner) => match Value::of(inner) {
                 Value::Int(value) => Value::Int(-value),
                 Value::Float(value) => Value::Float(-value),
                 _ => Value::Invalid,
             },
-            ast::ExprKind::Unary(ast::UnaryOp::Not, _)
+            ast::ExprKind::Unary(UnaryOp::Not, _)
             | ast::ExprKind::Binary(..)
             | ast::ExprKind::Path(_) => Value::Invalid,
         }

@@ -669,16 +669,99 @@ impl fmt::Display for RTy {
     }
 }
 
-/// A rule expression as the checker typed it: the same shape as its `ast::Expr`,
-/// one operand per operand of a unary or binary operator (none otherwise). A bare
-/// name compared with a state, result or quality level carries the type it resolved
-/// to (`State`, `UserState`, `Result`, `Quality`), never `Symbol`.
+/// A rule expression as the checker typed it: the expression itself, node by node,
+/// each node with its type and its operands (those of a unary or binary operator,
+/// the items of a list; none otherwise). A bare name compared with a state, result or
+/// quality level carries the type it resolved to (`State`, `UserState`, `Result`,
+/// `Quality`), never `Symbol`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Typed {
     /// The node's type.
     pub ty: RTy,
-    /// The typed operands of a unary or binary operator, in order.
+    /// What the node is.
+    pub node: Node,
+    /// Its operands, in order.
     pub operands: Vec<Typed>,
+}
+
+/// What a node of a rule expression is, without its operands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Node {
+    /// An integer literal (a sign is a [`Node::Unary`]).
+    Int(u64),
+    /// A floating-point literal.
+    Float(f64),
+    /// A string literal, unescaped.
+    Str(String),
+    /// `true` / `false`.
+    Bool(bool),
+    /// A duration literal, in nanoseconds.
+    Duration(u128),
+    /// A frequency literal, in hertz.
+    Frequency(f64),
+    /// `a`, `a.b`: a variable, an instance's variable or a symbol.
+    Path(Vec<String>),
+    /// `Enum::Variant`
+    EnumValue {
+        /// The enum type.
+        enum_name: String,
+        /// The variant.
+        variant: String,
+    },
+    /// `[a, b, c]` (the items are the operands).
+    List,
+    /// `[value; n]` (the value is the operand).
+    Repeat(u64),
+    /// `none`
+    None,
+    /// `!e`, `-e`
+    Unary(ast::UnaryOp),
+    /// `a op b`
+    Binary(ast::BinaryOp),
+}
+
+impl Node {
+    /// The node `kind` is.
+    pub fn of(kind: &ast::ExprKind) -> Node {
+        use ast::ExprKind as E;
+        match kind {
+            E::Int(value) => Node::Int(*value),
+            E::Float(value) => Node::Float(*value),
+            E::Str(text) => Node::Str(text.clone()),
+            E::Bool(value) => Node::Bool(*value),
+            E::Duration(nanos) => Node::Duration(*nanos),
+            E::Frequency(hertz) => Node::Frequency(*hertz),
+            E::Path(parts) => Node::Path(parts.iter().map(|part| part.name.clone()).collect()),
+            E::EnumValue { enum_name, variant } => Node::EnumValue {
+                enum_name: enum_name.name.clone(),
+                variant: variant.name.clone(),
+            },
+            E::List(_) => Node::List,
+            E::Repeat(_, count) => Node::Repeat(count.value),
+            E::None => Node::None,
+            E::Unary(op, _) => Node::Unary(*op),
+            E::Binary(op, ..) => Node::Binary(*op),
+        }
+    }
+}
+
+impl Typed {
+    /// `expr` with every node of type [`RTy::Unknown`]: what a rule the checker did
+    /// not type stays (only in a model of input with errors).
+    pub fn untyped(expr: &ast::Expr) -> Typed {
+        use ast::ExprKind as E;
+        let operands: Vec<&ast::Expr> = match &expr.kind {
+            E::List(items) => items.iter().collect(),
+            E::Repeat(item, _) | E::Unary(_, item) => vec![&**item],
+            E::Binary(_, left, right) => vec![&**left, &**right],
+            _ => Vec::new(),
+        };
+        Typed {
+            ty: RTy::Unknown,
+            node: Node::of(&expr.kind),
+            operands: operands.into_iter().map(Typed::untyped).collect(),
+        }
+    }
 }
 
 /// The type inside every `?` layer.
