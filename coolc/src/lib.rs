@@ -32,21 +32,21 @@
 pub mod ast;
 pub mod builder;
 pub(crate) mod check;
-pub mod checked;
+pub(crate) mod checked;
 pub mod cli;
 pub mod diagnostics;
 pub mod diagram;
 pub mod emit;
 pub mod fingerprint;
-pub mod ident;
+pub(crate) mod ident;
 pub mod ir;
 mod layout;
 pub mod lower;
-pub mod manifest;
+pub(crate) mod manifest;
 pub mod merge;
-pub mod resolve;
+pub(crate) mod resolve;
 pub mod ros;
-pub mod source;
+pub(crate) mod source;
 pub mod syntax;
 
 use std::path::Path;
