@@ -1,26 +1,23 @@
-//! The checked model: an [`crate::Analysis`] without errors, and everything the checker
-//! resolved in it.
+//! The checked model: an [`crate::Analysis`] without errors, and the model the
+//! checker resolved and ran over.
 //!
 //! A [`Checked`] can only be obtained from [`crate::Analysis::checked`], which refuses
 //! an analysis with errors: `lower` and `diagram` take one, so "generate only from
 //! descriptions that passed the checker" is a type, not a convention each caller must
 //! remember. It holds no syntax tree: [`model`] is every component, packet, enum,
 //! extern packet, ROS import and converter resolved ([`Checked::components`],
-//! [`Checked::types`], [`Checked::converters`]) and every ROS 2 message type read
-//! ([`Checked::ros_messages`], with its hash), built once by `build` from the trees
-//! and what the checker resolved (every component's interface: ports with their kinds
-//! and packet types through exports, variables with their types through mappings,
-//! its adaptation tuning; every `when` rule typed by the one rule typer,
-//! `check::rules`), every value evaluated. `lower`
-//! and `diagram` read only this model; what they keep as written is `when` conditions
-//! ([`crate::ast::Expr`], beside their typed tree), never a name to look up.
+//! [`Checked::types`], [`Checked::converters`]), each component once, by the model
+//! the checks consult (ports with their kinds and packet types through exports,
+//! variables with their types through mappings, its adaptation tuning, every `when`
+//! rule typed by the one rule typer, `check::rules`), every value evaluated; and
+//! every ROS 2 message type read ([`Checked::ros_messages`], with its hash). `lower`
+//! and `diagram` read only this model (a `when` condition is its typed tree), never a
+//! syntax tree, and look no name up.
 
-mod build;
-pub mod model;
+pub use crate::check::model;
 
 use std::collections::BTreeMap;
 
-use crate::ast;
 use crate::check::Resolved;
 use crate::diagnostics::{self, Diagnostic, RenderOptions};
 use crate::source::SourceMap;
@@ -47,7 +44,6 @@ impl Checked {
     /// Only [`crate::Analysis::checked`] builds one, after finding no error.
     pub(crate) fn new(
         sources: SourceMap,
-        files: Vec<ast::File>,
         warnings: Vec<Diagnostic>,
         resolved: Resolved,
         ros: crate::ros::Interfaces,
@@ -64,8 +60,11 @@ impl Checked {
                 })
             })
             .collect();
-        let components = build::components(&files, &resolved);
-        let (types, converters) = build::types(&files, &resolved);
+        let Resolved {
+            components,
+            types,
+            converters,
+        } = resolved;
         let by_name = components
             .iter()
             .enumerate()
@@ -133,8 +132,8 @@ impl Checked {
 
 #[cfg(test)]
 mod tests {
-    use crate::check::RTy;
-    use crate::checked::model::StateMember;
+    use crate::checked::model::RTy;
+    use crate::checked::model::{BinaryOp, Node, StateMember};
 
     #[test]
     fn rules_are_typed_with_their_symbols_resolved() {
@@ -150,7 +149,7 @@ mod tests {
         let compound = checked.component("C").expect("C");
         let automaton = compound.automaton.as_ref().expect("a supervisor");
         let Some(StateMember::When {
-            typed: Some(typed), ..
+            condition: typed, ..
         }) = automaton.states[0].members.first()
         else {
             panic!("a typed when rule: {automaton:?}");
@@ -164,6 +163,18 @@ mod tests {
         assert_eq!(types, [&RTy::State, &RTy::State]);
         let types: Vec<&RTy> = level.operands.iter().map(|t| &t.ty).collect();
         assert_eq!(types, [&RTy::Optional(Box::new(RTy::Float)), &RTy::Float]);
+        // The typed tree is the expression: each node says what it is.
+        assert_eq!(typed.node, Node::Binary(BinaryOp::And));
+        assert_eq!(state.node, Node::Binary(BinaryOp::Eq));
+        assert_eq!(
+            state.operands[0].node,
+            Node::Path(vec!["a".to_owned(), "state".to_owned()])
+        );
+        assert_eq!(
+            state.operands[1].node,
+            Node::Path(vec!["running_error".to_owned()])
+        );
+        assert_eq!(level.operands[1].node, Node::Float(0.5));
         assert!(
             checked
                 .component("A")

@@ -4,12 +4,9 @@
 //! modules, fields and methods; `UpperCamelCase` for types and variants). A result
 //! that is a Rust keyword is escaped as a raw identifier (`r#type`); the few keywords
 //! that cannot be raw (`self`, `Self`, `super`, `crate`, `_`) get a trailing `_`
-//! instead. Names coolc invents for itself start with [`RESERVED_PREFIX`] (or its
+//! instead. Names coolc invents for itself start with `__cool_` (or its
 //! camel form `__Cool`), which user names cannot produce after conversion because
 //! conversion never yields a leading `__`.
-
-/// Prefix of every internal generated name (functions, fields, types).
-pub const RESERVED_PREFIX: &str = "__cool_";
 
 /// Keywords of Rust 2024 (strict and reserved) that need escaping as identifiers.
 const KEYWORDS: &[&str] = &[

@@ -32,21 +32,21 @@
 pub mod ast;
 pub mod builder;
 pub(crate) mod check;
-pub mod checked;
+pub(crate) mod checked;
 pub mod cli;
 pub mod diagnostics;
 pub mod diagram;
 pub mod emit;
 pub mod fingerprint;
-pub mod ident;
+pub(crate) mod ident;
 pub mod ir;
 mod layout;
 pub mod lower;
-pub mod manifest;
+pub(crate) mod manifest;
 pub mod merge;
-pub mod resolve;
+pub(crate) mod resolve;
 pub mod ros;
-pub mod source;
+pub(crate) mod source;
 pub mod syntax;
 
 use std::path::Path;
@@ -102,7 +102,6 @@ impl Analysis {
         }
         Ok(Checked::new(
             self.sources,
-            self.files,
             self.diagnostics,
             self.resolved,
             self.ros,
@@ -113,13 +112,7 @@ impl Analysis {
     /// rejects (defence in depth: lowering escapes what it must even then).
     #[cfg(test)]
     pub(crate) fn assume_checked(self) -> Checked {
-        Checked::new(
-            self.sources,
-            self.files,
-            self.diagnostics,
-            self.resolved,
-            self.ros,
-        )
+        Checked::new(self.sources, self.diagnostics, self.resolved, self.ros)
     }
 }
 
@@ -167,7 +160,7 @@ pub fn analyze_with<P: AsRef<Path>>(
     );
     symbols.note_unloaded(&loaded.files, &interfaces);
     symbols.add_siblings(&loaded.sources, list, loader);
-    let resolved = check::check(&loaded.files, symbols, &mut loaded.diagnostics);
+    let resolved = check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
     Analysis {
         sources: loaded.sources,
         files: loaded.files,

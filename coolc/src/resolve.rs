@@ -293,14 +293,6 @@ impl DefKind {
             DefKind::Component => "component",
         }
     }
-
-    /// True for kinds usable as a type.
-    pub fn is_type(self) -> bool {
-        matches!(
-            self,
-            DefKind::Packet | DefKind::Enum | DefKind::ExternPacket | DefKind::RosMessage
-        )
-    }
 }
 
 /// A top-level definition: where it is.

@@ -5,7 +5,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::model::{Interface, Model, Port, PortKind, Ty};
+use super::model::{Component, Model, Port, PortKind, Ty, Variable};
 use super::{Checker, adaptation, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
@@ -112,7 +112,7 @@ fn unused_blocks(checker: &mut Checker<'_, '_>, component: &ast::Component) {
 
 /// The instances of a compound by name, with the interface of their component
 /// (`None` when the component is unknown, already reported).
-type Instances<'c> = BTreeMap<&'c str, (&'c ast::Instance, Option<std::rc::Rc<Interface>>)>;
+type Instances<'c> = BTreeMap<&'c str, (&'c ast::Instance, Option<std::rc::Rc<Component>>)>;
 
 fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -> Instances<'c> {
     let mut out = BTreeMap::new();
@@ -129,7 +129,7 @@ fn instances<'c>(checker: &mut Checker<'_, '_>, component: &'c ast::Component) -
             "component",
             checker.diagnostics,
         );
-        let interface = def.map(|_| checker.model.interface(&instance.component.name));
+        let interface = def.map(|_| checker.model.resolved(&instance.component.name));
         out.entry(instance.name.name.as_str())
             .or_insert((instance, interface));
     }
@@ -167,14 +167,15 @@ fn instance(
         let Some(interface) = &interface else {
             continue;
         };
+        let fields = interface.fields_by_name();
         let controllable = interface
-            .variables
-            .get(&override_.name.name)
+            .variable(&override_.name.name)
             .filter(|var| var.kind == ast::VarKind::Controllable);
-        let expected = interface
-            .config
-            .get(&override_.name.name)
-            .or(controllable.map(|var| &var.ty));
+        let controllable_ty = controllable.map(Variable::resolved_ty);
+        let expected = fields
+            .get(override_.name.name.as_str())
+            .copied()
+            .or(controllable_ty.as_ref());
         // A controllable's override meets its range, as a set would.
         if let Some(var) = controllable
             && let Some(range) = var.range.filter(|range| !range.is_empty())
@@ -197,16 +198,15 @@ fn instance(
         match expected {
             Some(expected) => values::value(checker, &override_.value, expected),
             None => {
-                let candidates: Vec<&str> = interface
-                    .config
+                let candidates: Vec<&str> = fields
                     .keys()
-                    .map(String::as_str)
+                    .copied()
                     .chain(
                         interface
-                            .variables
-                            .iter()
+                            .variables_by_name()
+                            .into_iter()
                             .filter(|(_, var)| var.kind == ast::VarKind::Controllable)
-                            .map(|(name, _)| name.as_str()),
+                            .map(|(name, _)| name),
                     )
                     .collect();
                 checker.unknown(
@@ -280,7 +280,7 @@ fn instance_adaptation(checker: &mut Checker<'_, '_>, instance: &ast::Instance) 
         adaptation::adapts(own_timing.chain(instance.timing.iter().flat_map(|t| t.entries.iter())));
     let window = checker
         .model
-        .interface(&instance.component.name)
+        .resolved(&instance.component.name)
         .adaptation
         .window
         .map(u64::from);
@@ -384,13 +384,13 @@ fn substitute(
 
 /// What differs between two interfaces: ports (direction, kind, packet type) and
 /// observable variables.
-fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
+fn interface_differences(a: &Component, b: &Component) -> Vec<String> {
     let mut out = Vec::new();
     for (direction, ours, theirs) in [
-        ("input", &a.inputs, &b.inputs),
-        ("output", &a.outputs, &b.outputs),
+        ("input", a.input_ports(), b.input_ports()),
+        ("output", a.output_ports(), b.output_ports()),
     ] {
-        let names: BTreeSet<&String> = ours.keys().chain(theirs.keys()).collect();
+        let names: BTreeSet<&str> = ours.keys().chain(theirs.keys()).copied().collect();
         for name in names {
             match (ours.get(name), theirs.get(name)) {
                 (Some(p), Some(q)) if !same_port(p, q) => {
@@ -408,11 +408,11 @@ fn interface_differences(a: &Interface, b: &Interface) -> Vec<String> {
     }
     // Observable and controllable variables (mapped ones and `Set` commands follow
     // whoever stands for the instance).
-    let exposed = |i: &Interface| -> BTreeMap<String, (ast::VarKind, Ty)> {
-        i.variables
-            .iter()
+    let exposed = |i: &Component| -> BTreeMap<String, (ast::VarKind, Ty)> {
+        i.variables_by_name()
+            .into_iter()
             .filter(|(_, v)| v.kind != ast::VarKind::Local)
-            .map(|(n, v)| (n.clone(), (v.kind, v.ty.clone())))
+            .map(|(n, v)| (n.to_owned(), (v.kind, v.resolved_ty())))
             .collect()
     };
     let (ours, theirs) = (exposed(a), exposed(b));
@@ -459,7 +459,7 @@ fn redundant(
 ) {
     names::duplicates(checker, redundant.members.iter(), "redundant member");
     lossy_members(checker, compound, instances, redundant);
-    let mut first: Option<(&ast::Ident, std::rc::Rc<Interface>)> = None;
+    let mut first: Option<(&ast::Ident, std::rc::Rc<Component>)> = None;
     for member in &redundant.members {
         let Some((instance, interface)) = instances.get(member.name.as_str()) else {
             checker.unknown(
@@ -713,14 +713,25 @@ fn endpoint(
         return None;
     };
     let interface = interface.as_ref()?;
+    let name = target.port.name.as_str();
     let (wanted, other, wanted_name, other_name) = match direction {
-        Direction::Input => (&interface.inputs, &interface.outputs, "input", "output"),
-        Direction::Output => (&interface.outputs, &interface.inputs, "output", "input"),
+        Direction::Input => (
+            interface.input(name),
+            interface.output(name),
+            "input",
+            "output",
+        ),
+        Direction::Output => (
+            interface.output(name),
+            interface.input(name),
+            "output",
+            "input",
+        ),
     };
-    if let Some(port) = wanted.get(&target.port.name) {
-        return Some(port.clone());
+    if wanted.is_some() {
+        return wanted;
     }
-    if other.contains_key(&target.port.name) {
+    if other.is_some() {
         let help = match direction {
             Direction::Input => {
                 "a connection goes from an output to an input: `connect a.out -> b.in;`"
@@ -751,7 +762,11 @@ fn endpoint(
             " in `{}` (component `{}`)",
             instance_name.name, instance.component.name
         ),
-        wanted.keys().map(String::as_str),
+        match direction {
+            Direction::Input => interface.input_ports(),
+            Direction::Output => interface.output_ports(),
+        }
+        .into_keys(),
     );
     None
 }
@@ -1084,7 +1099,7 @@ fn cardinality(
         let Some((_, Some(interface))) = instances.get(instance.as_str()) else {
             continue;
         };
-        let Some(port) = interface.inputs.get(&port_name) else {
+        let Some(port) = interface.input(&port_name) else {
             continue;
         };
         if matches!(port.kind(), PortKind::Last | PortKind::Poster) {
@@ -1364,8 +1379,8 @@ pub(super) fn mapped_variable(
     if checker.model.component(&instance.component.name).is_none() {
         return;
     }
-    let interface = checker.model.interface(&instance.component.name);
-    match interface.variables.get(&variable_name.name) {
+    let interface = checker.model.resolved(&instance.component.name);
+    match interface.variable(&variable_name.name) {
         Some(var) if var.kind == variable.kind => {}
         Some(var) => {
             let diagnostic = checker
@@ -1386,10 +1401,10 @@ pub(super) fn mapped_variable(
         }
         None => {
             let candidates: Vec<&str> = interface
-                .variables
-                .iter()
+                .variables_by_name()
+                .into_iter()
                 .filter(|(_, var)| var.kind == variable.kind)
-                .map(|(name, _)| name.as_str())
+                .map(|(name, _)| name)
                 .collect();
             checker.unknown(
                 Code::UnknownVariable,

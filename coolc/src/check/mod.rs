@@ -10,11 +10,12 @@
 //! `automaton` (states, transitions, reachability, periods, plans), `compound`
 //! (instances, connections, interfaces, containment), `thread` (execution groups),
 //! `adaptation` (`adaptation` blocks), `ros` (the names `import ros` gives) and
-//! `rules` (typed supervisor rule expressions). `model` computes what a component offers to others (ports,
-//! variables, states), looking through compounds' exported ports.
+//! `rules` (typed supervisor rule expressions). `model` is the one semantic model the
+//! checks consult: each component resolved once (ports through exports, variables
+//! through mappings, settings evaluated).
 //!
-//! What the checks resolve is kept: [`check`] returns a [`Resolved`] (the symbol
-//! table, every component's interface, every `when` rule typed), which
+//! The model the checks ran over is kept: [`check`] returns a [`Resolved`] (every
+//! component, type and converter, each `when` rule with its typed tree), which
 //! `crate::Checked` hands to `lower` and `diagram` once there are no errors.
 
 mod adaptation;
@@ -31,40 +32,30 @@ mod values;
 
 use std::collections::{BTreeMap, BTreeSet};
 
-pub use rules::{RTy, Typed, strip};
+use model::Typed;
 
 use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
-use crate::resolve::{DefKind, Symbols};
+use crate::resolve::Symbols;
 
 /// What the checks resolved: the model `lower` and `diagram` read (through
 /// `crate::Checked`, which exists only when there are no errors).
 #[derive(Clone, Debug, Default)]
 pub struct Resolved {
-    /// The top-level symbol table.
-    pub(crate) symbols: Symbols,
-    /// The interface of every component, by name.
-    pub(crate) interfaces: BTreeMap<String, model::Interface>,
-    /// Every `when` condition, typed, by its file and span.
-    pub(crate) rules: BTreeMap<(FileId, Span), Typed>,
+    /// Every component, resolved, in source order.
+    pub(crate) components: Vec<model::Component>,
+    /// Every packet, enum, extern packet and ROS import, in source order.
+    pub(crate) types: Vec<model::TypeDef>,
+    /// Every converter, in source order.
+    pub(crate) converters: Vec<model::Converter>,
 }
 
-/// Runs every check over every file and returns what they resolved.
-pub fn check(files: &[ast::File], symbols: Symbols, diagnostics: &mut Vec<Diagnostic>) -> Resolved {
-    let (interfaces, rules) = run(files, &symbols, diagnostics);
-    Resolved {
-        symbols,
-        interfaces,
-        rules,
-    }
-}
-
-type Outcome = (
-    BTreeMap<String, model::Interface>,
-    BTreeMap<(FileId, Span), Typed>,
-);
-
-fn run(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagnostic>) -> Outcome {
+/// Runs every check over every file and returns the model they checked.
+pub fn check(
+    files: &[ast::File],
+    symbols: &Symbols,
+    diagnostics: &mut Vec<Diagnostic>,
+) -> Resolved {
     let model = model::Model::new(files, symbols);
     // A file with syntax errors lost what failed to parse: checks that need the whole
     // picture (reachability) would only report the loss again.
@@ -89,13 +80,12 @@ fn run(files: &[ast::File], symbols: &Symbols, diagnostics: &mut Vec<Diagnostic>
     }
     compound::self_containing(&mut checker, files);
     let rules = std::mem::take(&mut checker.rules);
-    let interfaces = symbols
-        .defs
-        .iter()
-        .filter(|(_, def)| def.kind == DefKind::Component)
-        .map(|(name, _)| (name.clone(), (*model.interface(name)).clone()))
-        .collect();
-    (interfaces, rules)
+    let (types, converters) = model.types();
+    Resolved {
+        components: model.finish(&rules),
+        types,
+        converters,
+    }
 }
 
 /// The state shared by the checks: the model and where diagnostics go.

@@ -13,97 +13,13 @@
 //! the comparison. An instance's `quality` levels are those of its `timing` override
 //! when it declares some.
 
-use std::fmt;
-
 use super::Checker;
 use super::model::{
-    DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Interface, Model, RESULTS, Ty,
+    Component, DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Model, Node, RESULTS,
+    RTy, Ty, Typed, strip,
 };
 use crate::ast::{self, BinaryOp};
 use crate::diagnostics::Code;
-
-/// The type of a rule expression: the one rule typer's output, read by `lower`
-/// (which compiles each node to Rust by its type) as well as by the checks here.
-#[derive(Clone, Debug, PartialEq)]
-pub enum RTy {
-    /// `bool`
-    Bool,
-    /// Any integer (rules widen every integer to one type).
-    Int,
-    /// `f32` or `f64`.
-    Float,
-    /// `String`
-    Str,
-    /// `Duration`
-    Duration,
-    /// `Time`
-    Time,
-    /// An enum, by its `.cool` name.
-    Enum(String),
-    /// `T?`
-    Optional(Box<RTy>),
-    /// A default automaton state.
-    State,
-    /// A user state of the named component, with its states.
-    UserState(String, Vec<String>),
-    /// `none`, `success` or `fail`.
-    Result,
-    /// A quality level of the named component.
-    Quality(String, Vec<String>),
-    /// The `none` literal.
-    NoneLit,
-    /// A bare name that is not a variable.
-    Symbol(ast::Ident),
-    /// Anything else (a packet, a list, a frequency), described: a rule cannot read
-    /// it, it only compares with `none` when optional.
-    Other(String),
-    /// Already reported.
-    Unknown,
-}
-
-impl RTy {
-    /// The type as a noun without its article ("float", "optional float"); `None` for
-    /// the kinds that are not named with an article (`none`, a symbol, a description).
-    fn noun(&self) -> Option<String> {
-        Some(match self {
-            RTy::Bool => "bool".to_owned(),
-            RTy::Int => "integer".to_owned(),
-            RTy::Float => "float".to_owned(),
-            RTy::Str => "string".to_owned(),
-            RTy::Duration => "duration".to_owned(),
-            RTy::Time => "time".to_owned(),
-            RTy::Enum(name) => format!("`{name}` value"),
-            RTy::Optional(inner) => match inner.noun() {
-                Some(noun) => format!("optional {noun}"),
-                None => format!("optional {inner}"),
-            },
-            RTy::State => "default automaton state".to_owned(),
-            RTy::UserState(component, _) => format!("user state of `{component}`"),
-            RTy::Result => "result".to_owned(),
-            RTy::Quality(component, _) => format!("quality level of `{component}`"),
-            RTy::Unknown => "unknown type".to_owned(),
-            RTy::NoneLit | RTy::Symbol(_) | RTy::Other(_) => return None,
-        })
-    }
-}
-
-/// Every type reads the same way in messages: "a float", "a string", "an optional
-/// integer", "a `Mode` value".
-impl fmt::Display for RTy {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if let Some(noun) = self.noun() {
-            // ("a user state": the vowel of "user" is not sounded as one.)
-            let vowel = noun.starts_with(['a', 'e', 'i', 'o', 'u']) && !noun.starts_with("user");
-            return write!(f, "{} {noun}", if vowel { "an" } else { "a" });
-        }
-        match self {
-            RTy::NoneLit => f.write_str("`none`"),
-            RTy::Symbol(name) => write!(f, "`{}`", name.name),
-            RTy::Other(description) => f.write_str(description),
-            _ => Ok(()),
-        }
-    }
-}
 
 fn from_ty(ty: &Ty) -> RTy {
     match ty {
@@ -120,23 +36,13 @@ fn from_ty(ty: &Ty) -> RTy {
     }
 }
 
-/// A rule expression as the checker typed it: the same shape as its `ast::Expr`,
-/// one operand per operand of a unary or binary operator (none otherwise). A bare
-/// name compared with a state, result or quality level carries the type it resolved
-/// to (`State`, `UserState`, `Result`, `Quality`), never `Symbol`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Typed {
-    /// The node's type.
-    pub ty: RTy,
-    /// The typed operands of a unary or binary operator, in order.
-    pub operands: Vec<Typed>,
-}
-
 impl Typed {
-    fn leaf(ty: RTy) -> Typed {
+    /// The node `expr` with type `ty` and its typed operands.
+    fn node(expr: &ast::Expr, ty: RTy, operands: Vec<Typed>) -> Typed {
         Typed {
             ty,
-            operands: Vec::new(),
+            node: Node::of(&expr.kind),
+            operands,
         }
     }
 }
@@ -147,7 +53,7 @@ pub(super) fn rule(
     component: &ast::Component,
     condition: &ast::Expr,
 ) -> Typed {
-    let own = checker.model.interface(&component.name.name);
+    let own = checker.model.resolved(&component.name.name);
     let mut typer = Typer {
         checker,
         component,
@@ -179,7 +85,7 @@ pub(super) fn rule(
 struct Typer<'c, 'a, 'd> {
     checker: &'c mut Checker<'a, 'd>,
     component: &'c ast::Component,
-    own: &'c Interface,
+    own: &'c Component,
 }
 
 impl Typer<'_, '_, '_> {
@@ -211,10 +117,7 @@ impl Typer<'_, '_, '_> {
                         self.mismatch(expr, format!("`-` needs a number, found {ty}"))
                     }
                 };
-                return Typed {
-                    ty,
-                    operands: vec![operand],
-                };
+                return Typed::node(expr, ty, vec![operand]);
             }
             E::Binary(op @ (BinaryOp::And | BinaryOp::Or), left, right) => {
                 let mut operands = Vec::with_capacity(2);
@@ -228,14 +131,15 @@ impl Typer<'_, '_, '_> {
                     }
                     operands.push(typed);
                 }
-                return Typed {
-                    ty: RTy::Bool,
-                    operands,
-                };
+                return Typed::node(expr, RTy::Bool, operands);
             }
             E::Binary(op, left, right) => return self.comparison(expr, *op, left, right),
         };
-        Typed::leaf(ty)
+        // A leaf (a list's items stay untyped: no rule reads a list).
+        Typed {
+            ty,
+            ..Typed::untyped(expr)
+        }
     }
 
     /// Infers an operand; a bare symbol on its own is an unknown variable.
@@ -290,8 +194,8 @@ impl Typer<'_, '_, '_> {
     fn path(&mut self, expr: &ast::Expr, segments: &[ast::Ident]) -> RTy {
         match segments {
             [name] => {
-                if let Some(var) = self.own.variables.get(&name.name) {
-                    return from_ty(&var.ty);
+                if let Some(var) = self.own.variable(&name.name) {
+                    return from_ty(&var.resolved_ty());
                 }
                 default_variable(&name.name, &self.component.name.name, self.own)
                     .unwrap_or_else(|| RTy::Symbol(name.clone()))
@@ -332,9 +236,9 @@ impl Typer<'_, '_, '_> {
         {
             return RTy::Unknown;
         }
-        let interface = self.checker.model.interface(&instance.component.name);
-        match interface.variables.get(&variable.name) {
-            Some(var) if var.kind != ast::VarKind::Local => return from_ty(&var.ty),
+        let interface = self.checker.model.resolved(&instance.component.name);
+        match interface.variable(&variable.name) {
+            Some(var) if var.kind != ast::VarKind::Local => return from_ty(&var.resolved_ty()),
             Some(_) => {
                 let diagnostic = self
                     .checker
@@ -390,10 +294,10 @@ impl Typer<'_, '_, '_> {
             };
         }
         let candidates: Vec<&str> = interface
-            .variables
-            .iter()
+            .variables_by_name()
+            .into_iter()
             .filter(|(_, v)| v.kind != ast::VarKind::Local)
-            .map(|(n, _)| n.as_str())
+            .map(|(n, _)| n)
             .chain(DEFAULT_OBSERVABLES.iter().copied())
             .collect();
         self.checker.unknown(
@@ -410,7 +314,12 @@ impl Typer<'_, '_, '_> {
     }
 
     fn unknown_variable(&mut self, name: &ast::Ident) {
-        let mut candidates: Vec<String> = self.own.variables.keys().cloned().collect();
+        let mut candidates: Vec<String> = self
+            .own
+            .variables_by_name()
+            .keys()
+            .map(|name| (*name).to_owned())
+            .collect();
         candidates.extend(DEFAULT_OBSERVABLES.iter().map(|s| s.to_string()));
         let context = format!(" in `{}`", self.component.name.name);
         self.checker.unknown(
@@ -450,10 +359,8 @@ impl Typer<'_, '_, '_> {
             }
             _ => {}
         }
-        let typed = |left_typed, right_typed| Typed {
-            ty: RTy::Bool,
-            operands: vec![left_typed, right_typed],
-        };
+        let typed =
+            |left_typed, right_typed| Typed::node(expr, RTy::Bool, vec![left_typed, right_typed]);
         let (left_ty, right_ty) = (&left_typed.ty, &right_typed.ty);
         if matches!(left_ty, RTy::Unknown) || matches!(right_ty, RTy::Unknown) {
             return typed(left_typed, right_typed);
@@ -595,14 +502,6 @@ impl Typer<'_, '_, '_> {
     }
 }
 
-/// The type inside every `?` layer.
-pub fn strip(ty: &RTy) -> &RTy {
-    match ty {
-        RTy::Optional(inner) => strip(inner),
-        other => other,
-    }
-}
-
 fn compatible(a: &RTy, b: &RTy) -> bool {
     match (a, b) {
         (RTy::Optional(_), RTy::NoneLit) | (RTy::NoneLit, RTy::Optional(_)) => true,
@@ -628,14 +527,14 @@ fn timing_variable(name: &str) -> Option<RTy> {
 }
 
 /// The type of a default observable variable of `component`.
-fn default_variable(name: &str, component: &str, interface: &Interface) -> Option<RTy> {
+fn default_variable(name: &str, component: &str, interface: &Component) -> Option<RTy> {
     Some(match name {
         "state" => RTy::State,
-        "user_state" => RTy::UserState(component.to_owned(), interface.states.clone()),
+        "user_state" => RTy::UserState(component.to_owned(), interface.user_states()),
         "result" => RTy::Result,
         "error" => RTy::Str,
         "cpu_time" | "elapsed_time" => RTy::Duration,
-        "quality" => RTy::Quality(component.to_owned(), interface.quality.clone()),
+        "quality" => RTy::Quality(component.to_owned(), interface.quality()),
         _ => return None,
     })
 }

@@ -291,10 +291,8 @@ fn flow(checker: &mut Checker<'_, '_>, compound: &ast::Component, members: &[Mem
         if from == to {
             continue;
         }
-        let interface = checker
-            .model
-            .interface(&members[to].instance.component.name);
-        let Some(port) = interface.inputs.get(&connect.to.port.name) else {
+        let interface = checker.model.resolved(&members[to].instance.component.name);
+        let Some(port) = interface.input(&connect.to.port.name) else {
             continue;
         };
         let flaw = if port.pull {

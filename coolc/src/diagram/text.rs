@@ -1,8 +1,10 @@
 //! Port kinds and values printed back as `.cool` text, for diagram labels (types
 //! print as written through their `Display`).
 
-use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
-use crate::checked::model::{Declared, Duration, InputKind, OutputKind, PortRef, Value, Written};
+use crate::checked::model::{
+    BinaryOp, Declared, Duration, InputKind, Node, OutputKind, PortRef, Typed, UnaryOp, Value,
+    Written,
+};
 
 /// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
 pub fn input_kind(input: &Declared<InputKind>) -> String {
@@ -131,62 +133,63 @@ pub fn value(value: &Value) -> String {
 }
 
 /// How tightly an expression binds (higher binds tighter).
-fn precedence(expr: &ast::Expr) -> u8 {
-    match &expr.kind {
-        ExprKind::Binary(BinaryOp::Or, ..) => 1,
-        ExprKind::Binary(BinaryOp::And, ..) => 2,
-        ExprKind::Binary(..) => 3,
-        ExprKind::Unary(..) => 4,
+fn precedence(expr: &Typed) -> u8 {
+    match &expr.node {
+        Node::Binary(BinaryOp::Or) => 1,
+        Node::Binary(BinaryOp::And) => 2,
+        Node::Binary(_) => 3,
+        Node::Unary(_) => 4,
         _ => 5,
     }
 }
 
-/// An expression as written, with the parentheses its shape needs.
-pub fn expr(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Int(value) => value.to_string(),
-        ExprKind::Float(value) => float(*value),
-        ExprKind::Str(text) => string(text),
-        ExprKind::Bool(value) => value.to_string(),
-        ExprKind::Duration(nanos) => duration(*nanos),
-        ExprKind::Frequency(hertz) => frequency(*hertz),
-        ExprKind::Path(parts) => parts
-            .iter()
-            .map(|part| part.name.as_str())
-            .collect::<Vec<_>>()
-            .join("."),
-        ExprKind::EnumValue { enum_name, variant } => {
-            format!("{}::{}", enum_name.name, variant.name)
-        }
-        ExprKind::List(items) => {
-            let items: Vec<String> = items.iter().map(self::expr).collect();
+/// A rule expression as written, with the parentheses its shape needs.
+pub fn expr(expr: &Typed) -> String {
+    let operand = |index: usize| expr.operands.get(index);
+    match &expr.node {
+        Node::Int(value) => value.to_string(),
+        Node::Float(value) => float(*value),
+        Node::Str(text) => string(text),
+        Node::Bool(value) => value.to_string(),
+        Node::Duration(nanos) => duration(*nanos),
+        Node::Frequency(hertz) => frequency(*hertz),
+        Node::Path(parts) => parts.join("."),
+        Node::EnumValue { enum_name, variant } => format!("{enum_name}::{variant}"),
+        Node::List => {
+            let items: Vec<String> = expr.operands.iter().map(self::expr).collect();
             format!("[{}]", items.join(", "))
         }
-        ExprKind::Repeat(item, count) => format!("[{}; {}]", self::expr(item), count.value),
-        ExprKind::None => "none".to_owned(),
-        ExprKind::Unary(op, operand) => {
+        Node::Repeat(count) => format!(
+            "[{}; {count}]",
+            operand(0).map_or_else(String::new, self::expr)
+        ),
+        Node::None => "none".to_owned(),
+        Node::Unary(op) => {
             let op = match op {
                 UnaryOp::Not => "!",
                 UnaryOp::Neg => "-",
             };
-            format!("{op}{}", operand_text(operand, 4, false))
+            format!("{op}{}", operand_text(operand(0), 4, false))
         }
-        ExprKind::Binary(op, left, right) => {
+        Node::Binary(op) => {
             let own = precedence(expr);
             // Comparisons do not chain: a comparison operand of a comparison keeps its
             // parentheses on both sides.
             let strict = own == 3;
             format!(
                 "{} {} {}",
-                operand_text(left, own, strict),
+                operand_text(operand(0), own, strict),
                 op.as_str(),
-                operand_text(right, own, true)
+                operand_text(operand(1), own, true)
             )
         }
     }
 }
 
-fn operand_text(operand: &ast::Expr, parent: u8, strict: bool) -> String {
+fn operand_text(operand: Option<&Typed>, parent: u8, strict: bool) -> String {
+    let Some(operand) = operand else {
+        return String::new();
+    };
     let own = precedence(operand);
     if own < parent || (strict && own == parent) {
         format!("({})", expr(operand))
@@ -198,30 +201,21 @@ fn operand_text(operand: &ast::Expr, parent: u8, strict: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::checked::model::StateMember;
 
     fn condition(text: &str) -> String {
         let source = format!(
             "atomic A {{ observable x: u32 = 0; observable y: bool = true; automaton {{ initial s; state s {{ }} }} }}\ncompound C {{ instance a: A; observable f: u32 = 0; supervisor {{ initial s; state s {{ when {text} -> s; }} }} }}"
         );
-        let analysis = crate::analyze_text("c.cool", &source);
-        let component = analysis.files[0]
-            .items
-            .iter()
-            .find_map(|item| match item {
-                ast::Item::Component(c) if c.name.name == "C" => Some(c),
-                _ => None,
-            })
-            .expect("C");
-        let automaton = component
-            .members
-            .iter()
-            .find_map(|m| match m {
-                ast::Member::Automaton(a) => Some(a),
-                _ => None,
-            })
+        let checked = crate::analyze_text("c.cool", &source)
+            .checked()
+            .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let automaton = checked
+            .component("C")
+            .and_then(|c| c.automaton.as_ref())
             .expect("supervisor");
         match &automaton.states[0].members[0] {
-            ast::StateMember::When { condition, .. } => expr(condition),
+            StateMember::When { condition, .. } => expr(condition),
             other => panic!("not a rule: {other:?}"),
         }
     }

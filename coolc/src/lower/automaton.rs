@@ -4,7 +4,6 @@
 //! rules for the rule compiler (`compound/rules.rs`).
 
 use super::{duration_code, option_duration};
-use crate::ast;
 use crate::checked::model::{Automaton, Ref, State, StateMember, Typed};
 use crate::ident;
 use crate::ir;
@@ -21,12 +20,10 @@ pub(super) struct Lowered<'m> {
     pub(super) when: Vec<When<'m>>,
 }
 
-/// A supervisor's `when` rule: its state, its condition as written and typed, and
-/// its target.
+/// A supervisor's `when` rule: its state, its typed condition, and its target.
 pub(super) struct When<'m> {
     pub(super) state: String,
-    pub(super) condition: &'m ast::Expr,
-    pub(super) typed: Option<&'m Typed>,
+    pub(super) condition: &'m Typed,
     pub(super) target: String,
 }
 
@@ -77,13 +74,10 @@ pub(super) fn states(automaton: Option<&Automaton>, owner: SectionOwner) -> Lowe
                 )),
                 StateMember::May(targets) => may_targets(targets, &mut may),
                 StateMember::When {
-                    condition,
-                    typed,
-                    target,
+                    condition, target, ..
                 } => when.push(When {
                     state: name.clone(),
                     condition,
-                    typed: typed.as_ref(),
                     target: target.name.clone(),
                 }),
             }

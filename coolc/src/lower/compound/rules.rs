@@ -5,9 +5,8 @@
 //! keys that make the runtime evaluate it.
 
 use super::super::{GEN_TYPES, Lowerer, duration_rust};
-use crate::ast::{self, BinaryOp, ExprKind, UnaryOp};
 use crate::checked::model::{
-    Component, DEFAULT_STATES, Duration, Prim, RESULTS, RTy, Ty, Typed, VarKind,
+    BinaryOp, Component, DEFAULT_STATES, Node, Prim, RESULTS, RTy, Ty, Typed, UnaryOp, VarKind,
 };
 use crate::ident;
 use crate::ir;
@@ -23,7 +22,6 @@ pub(super) fn compile<'a>(
     let mut rules = Vec::new();
     for rule in when {
         let (state, condition, target) = (&rule.state, rule.condition, &rule.target);
-        let typed = rule.typed.unwrap_or(&UNKNOWN);
         let mut scope = Scope {
             lowerer,
             component: c,
@@ -32,7 +30,7 @@ pub(super) fn compile<'a>(
             uses_view: false,
             uses_vars: false,
         };
-        let expr = scope.boolean(condition, typed);
+        let expr = scope.boolean(condition);
         let function = format!("__cool_rule_{}", rules.len());
         let reads: Vec<String> = scope
             .reads
@@ -83,6 +81,7 @@ fn result_pattern(symbol: &str) -> Option<&'static str> {
 /// reads as a missing value.
 static UNKNOWN: Typed = Typed {
     ty: RTy::Unknown,
+    node: Node::None,
     operands: Vec::new(),
 };
 
@@ -156,64 +155,71 @@ struct Scope<'a, 'b> {
 }
 
 /// A rule condition as written (for the generated documentation).
-fn show(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Int(n) => n.to_string(),
-        ExprKind::Float(x) => format!("{x:?}"),
-        ExprKind::Str(s) => format!("{s:?}"),
-        ExprKind::Bool(b) => b.to_string(),
-        ExprKind::Duration(ns) => match *ns {
+fn show(typed: &Typed) -> String {
+    match &typed.node {
+        Node::Int(n) => n.to_string(),
+        Node::Float(x) => format!("{x:?}"),
+        Node::Str(s) => format!("{s:?}"),
+        Node::Bool(b) => b.to_string(),
+        Node::Duration(ns) => match *ns {
             ns if ns > 0 && ns % 60_000_000_000 == 0 => format!("{}min", ns / 60_000_000_000),
             ns if ns > 0 && ns % 1_000_000_000 == 0 => format!("{}s", ns / 1_000_000_000),
             ns if ns > 0 && ns % 1_000_000 == 0 => format!("{}ms", ns / 1_000_000),
             ns if ns > 0 && ns % 1_000 == 0 => format!("{}us", ns / 1_000),
             ns => format!("{ns}ns"),
         },
-        ExprKind::Frequency(hz) => format!("{hz}Hz"),
-        ExprKind::Path(parts) => parts
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect::<Vec<_>>()
-            .join("."),
-        ExprKind::EnumValue { enum_name, variant } => {
-            format!("{}::{}", enum_name.name, variant.name)
-        }
-        ExprKind::List(items) => format!(
+        Node::Frequency(hz) => format!("{hz}Hz"),
+        Node::Path(parts) => parts.join("."),
+        Node::EnumValue { enum_name, variant } => format!("{enum_name}::{variant}"),
+        Node::List => format!(
             "[{}]",
-            items.iter().map(show).collect::<Vec<_>>().join(", ")
+            typed
+                .operands
+                .iter()
+                .map(show)
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
-        ExprKind::Repeat(item, n) => format!("[{}; {}]", show(item), n.value),
-        ExprKind::None => "none".to_owned(),
-        ExprKind::Unary(UnaryOp::Not, inner) => format!("!{}", show_operand(inner)),
-        ExprKind::Unary(UnaryOp::Neg, inner) => format!("-{}", show_operand(inner)),
-        ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-            let side = |e: &ast::Expr| {
+        Node::Repeat(n) => format!("[{}; {n}]", show(part(typed, 0))),
+        Node::None => "none".to_owned(),
+        Node::Unary(UnaryOp::Not) => format!("!{}", show_operand(part(typed, 0))),
+        Node::Unary(UnaryOp::Neg) => format!("-{}", show_operand(part(typed, 0))),
+        Node::Binary(op @ (BinaryOp::And | BinaryOp::Or)) => {
+            let side = |e: &Typed| {
                 if needs_parens(*op, e) {
                     format!("({})", show(e))
                 } else {
                     show(e)
                 }
             };
-            format!("{} {} {}", side(l), op.as_str(), side(r))
+            format!(
+                "{} {} {}",
+                side(part(typed, 0)),
+                op.as_str(),
+                side(part(typed, 1))
+            )
         }
-        ExprKind::Binary(op, l, r) => {
-            format!("{} {} {}", show_operand(l), op.as_str(), show_operand(r))
-        }
+        Node::Binary(op) => format!(
+            "{} {} {}",
+            show_operand(part(typed, 0)),
+            op.as_str(),
+            show_operand(part(typed, 1))
+        ),
     }
 }
 
-fn show_operand(expr: &ast::Expr) -> String {
-    match &expr.kind {
-        ExprKind::Binary(..) => format!("({})", show(expr)),
-        _ => show(expr),
+fn show_operand(typed: &Typed) -> String {
+    match &typed.node {
+        Node::Binary(..) => format!("({})", show(typed)),
+        _ => show(typed),
     }
 }
 
 /// Whether `operand` of logical operator `op` needs parentheses: an `||` inside an
 /// `&&` (comparisons and `&&` bind tighter than `||`, comparisons tighter than
 /// `&&`).
-fn needs_parens(op: BinaryOp, operand: &ast::Expr) -> bool {
-    op == BinaryOp::And && matches!(operand.kind, ExprKind::Binary(BinaryOp::Or, ..))
+fn needs_parens(op: BinaryOp, operand: &Typed) -> bool {
+    op == BinaryOp::And && matches!(operand.node, Node::Binary(BinaryOp::Or))
 }
 
 impl Scope<'_, '_> {
@@ -223,27 +229,26 @@ impl Scope<'_, '_> {
         }
     }
 
-    /// A boolean Rust expression for `expr`, typed `typed` by the checker (a missing
-    /// or unreadable value makes the comparison that reads it `false`).
-    fn boolean(&mut self, expr: &ast::Expr, typed: &Typed) -> String {
-        match &expr.kind {
-            ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), l, r) => {
-                let l = self.logic_operand(*op, l, part(typed, 0));
-                let r = self.logic_operand(*op, r, part(typed, 1));
+    /// A boolean Rust expression for the node `typed` (a missing or unreadable value
+    /// makes the comparison that reads it `false`).
+    fn boolean(&mut self, typed: &Typed) -> String {
+        match &typed.node {
+            Node::Binary(op @ (BinaryOp::And | BinaryOp::Or)) => {
+                let l = self.logic_operand(*op, part(typed, 0));
+                let r = self.logic_operand(*op, part(typed, 1));
                 format!("{l} {} {r}", op.as_str())
             }
-            ExprKind::Binary(op, l, r) => {
-                self.comparison(*op, (l, part(typed, 0)), (r, part(typed, 1)))
-            }
-            ExprKind::Unary(UnaryOp::Not, inner) => {
-                let text = self.boolean(inner, part(typed, 0));
-                match &inner.kind {
-                    ExprKind::Binary(..) => format!("!({text})"),
+            Node::Binary(op) => self.comparison(*op, part(typed, 0), part(typed, 1)),
+            Node::Unary(UnaryOp::Not) => {
+                let inner = part(typed, 0);
+                let text = self.boolean(inner);
+                match &inner.node {
+                    Node::Binary(..) => format!("!({text})"),
                     _ => format!("!{text}"),
                 }
             }
             _ => {
-                let operand = self.operand(expr, typed);
+                let operand = self.operand(typed);
                 match (operand.ty, operand.maybe) {
                     (RTy::Bool, false) => operand.code,
                     (RTy::Bool, true) => format!("{}.unwrap_or(false)", operand.code),
@@ -255,9 +260,9 @@ impl Scope<'_, '_> {
 
     /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
     /// would read it otherwise (an `||` inside an `&&`).
-    fn logic_operand(&mut self, op: BinaryOp, expr: &ast::Expr, typed: &Typed) -> String {
-        let text = self.boolean(expr, typed);
-        if needs_parens(op, expr) {
+    fn logic_operand(&mut self, op: BinaryOp, typed: &Typed) -> String {
+        let text = self.boolean(typed);
+        if needs_parens(op, typed) {
             format!("({text})")
         } else {
             text
@@ -265,32 +270,28 @@ impl Scope<'_, '_> {
     }
 
     /// An operand of a comparison (or a bare boolean).
-    fn operand(&mut self, expr: &ast::Expr, typed: &Typed) -> Operand {
+    fn operand(&mut self, typed: &Typed) -> Operand {
         let known = |code: String, ty: RTy| Operand {
             code,
             ty,
             maybe: false,
             narrow: false,
         };
-        match &expr.kind {
-            ExprKind::Int(n) => known(n.to_string(), RTy::Int),
-            ExprKind::Float(x) => known(format!("{x:?}"), RTy::Float),
-            ExprKind::Str(s) => known(ident::string_literal(s), RTy::Str),
-            ExprKind::Bool(b) => known(b.to_string(), RTy::Bool),
-            ExprKind::Duration(_) => known(
-                duration_rust(Duration::of(expr).map_or(0, |duration| duration.nanos)),
+        match &typed.node {
+            Node::Int(n) => known(n.to_string(), RTy::Int),
+            Node::Float(x) => known(format!("{x:?}"), RTy::Float),
+            Node::Str(s) => known(ident::string_literal(s), RTy::Str),
+            Node::Bool(b) => known(b.to_string(), RTy::Bool),
+            Node::Duration(nanos) => known(
+                duration_rust(u64::try_from(*nanos).unwrap_or(u64::MAX)),
                 RTy::Duration,
             ),
-            ExprKind::None => known(String::new(), RTy::NoneLit),
-            ExprKind::EnumValue { enum_name, variant } => known(
-                format!(
-                    "{}::{}",
-                    enum_path(&enum_name.name),
-                    ident::camel(&variant.name)
-                ),
-                RTy::Enum(enum_name.name.clone()),
+            Node::None => known(String::new(), RTy::NoneLit),
+            Node::EnumValue { enum_name, variant } => known(
+                format!("{}::{}", enum_path(enum_name), ident::camel(variant)),
+                RTy::Enum(enum_name.clone()),
             ),
-            ExprKind::Unary(UnaryOp::Neg, inner) => match self.operand(inner, part(typed, 0)) {
+            Node::Unary(UnaryOp::Neg) => match self.operand(part(typed, 0)) {
                 Operand {
                     code,
                     ty: ty @ (RTy::Int | RTy::Float),
@@ -313,19 +314,15 @@ impl Scope<'_, '_> {
                 },
                 _ => known(String::new(), RTy::Unknown),
             },
-            ExprKind::Unary(UnaryOp::Not, _) | ExprKind::Binary(..) => {
-                known(format!("({})", self.boolean(expr, typed)), RTy::Bool)
+            Node::Unary(UnaryOp::Not) | Node::Binary(..) => {
+                known(format!("({})", self.boolean(typed)), RTy::Bool)
             }
-            ExprKind::Path(segments) => match segments.as_slice() {
-                [name] => self.own(&name.name, &typed.ty),
-                [instance, variable] => {
-                    self.variable_operand(&instance.name, &variable.name, None, &typed.ty)
-                }
+            Node::Path(segments) => match segments.as_slice() {
+                [name] => self.own(name, &typed.ty),
+                [instance, variable] => self.variable_operand(instance, variable, None, &typed.ty),
                 _ => known(String::new(), RTy::Unknown),
             },
-            ExprKind::Frequency(_) | ExprKind::List(_) | ExprKind::Repeat(..) => {
-                known(String::new(), RTy::Unknown)
-            }
+            Node::Frequency(_) | Node::List | Node::Repeat(_) => known(String::new(), RTy::Unknown),
         }
     }
 
@@ -502,14 +499,9 @@ impl Scope<'_, '_> {
     }
 
     /// `left op right`, each with its typed node.
-    fn comparison(
-        &mut self,
-        op: BinaryOp,
-        (left, left_typed): (&ast::Expr, &Typed),
-        (right, right_typed): (&ast::Expr, &Typed),
-    ) -> String {
-        let mut l = self.operand(left, left_typed);
-        let mut r = self.operand(right, right_typed);
+    fn comparison(&mut self, op: BinaryOp, left: &Typed, right: &Typed) -> String {
+        let mut l = self.operand(left);
+        let mut r = self.operand(right);
         if unreadable(&l.ty) || unreadable(&r.ty) {
             return "false".to_owned();
         }
@@ -670,11 +662,11 @@ fn ordering(rust_op: &str, l: &Operand, r: &Operand) -> String {
 
 /// A float literal (`0.1`, `-0.1`) as an `f64` holding its `f32` rounding, or `None`
 /// for anything else (and for a literal beyond `f32`'s range, which no `f32` equals).
-fn f32_literal(expr: &ast::Expr) -> Option<String> {
-    let (negative, value) = match &expr.kind {
-        ExprKind::Float(x) => (false, *x),
-        ExprKind::Unary(UnaryOp::Neg, inner) => match &inner.kind {
-            ExprKind::Float(x) => (true, *x),
+fn f32_literal(typed: &Typed) -> Option<String> {
+    let (negative, value) = match &typed.node {
+        Node::Float(x) => (false, *x),
+        Node::Unary(UnaryOp::Neg) => match &part(typed, 0).node {
+            Node::Float(x) => (true, *x),
             _ => return None,
         },
         _ => return None,

@@ -1,18 +1,10 @@
-//! What each component offers to the others, computed from the AST.
-//!
-//! An [`Interface`] lists a component's ports (with kinds and packet types), its
-//! variables, configuration fields, user states and quality levels. A compound's
-//! exported ports and mapped variables are looked up through its instances, so the
-//! interface of a compound is what its users see. Containment cycles are cut (the
-//! inner interface is empty); `compound::self_containing` reports them.
+//! The vocabulary of the model: resolved types, port kinds with their settings,
+//! ranges, adaptation tuning, the default automaton's names, and the type of a typed
+//! rule expression.
 
-use std::cell::RefCell;
-use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
-use std::rc::Rc;
 
-use crate::ast::{self, FileId, Span};
-use crate::resolve::{DefKind, Symbols};
+use crate::ast::{self, Span};
 
 /// A resolved type.
 #[derive(Clone, Debug, PartialEq)]
@@ -170,7 +162,7 @@ pub enum InputKind {
 
 impl InputKind {
     /// The input as written (`None` for an export, which has no kind of its own).
-    fn of(def: &ast::InputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<InputKind> {
+    pub(crate) fn of(def: &ast::InputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<InputKind> {
         Some(match def {
             ast::InputDef::Tick => InputKind::Tick,
             ast::InputDef::Fifo {
@@ -231,7 +223,7 @@ pub enum OutputKind {
 
 impl OutputKind {
     /// The output as written (`None` for an export).
-    fn of(def: &ast::OutputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<OutputKind> {
+    pub(crate) fn of(def: &ast::OutputDef, ty: impl Fn(&ast::Type) -> Ty) -> Option<OutputKind> {
         Some(match def {
             ast::OutputDef::Tick => OutputKind::Tick,
             ast::OutputDef::Data(packet) => OutputKind::Data(ty(packet)),
@@ -376,20 +368,6 @@ impl Port {
     }
 }
 
-/// A variable as seen from outside.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Var {
-    /// Observable, controllable or local.
-    pub kind: ast::VarKind,
-    /// Its type.
-    pub ty: Ty,
-    /// Its range (`in low..=high`), when it is an own controllable number with one
-    /// the checker accepts.
-    pub range: Option<Range>,
-    /// Where it is declared.
-    pub span: Span,
-}
-
 /// A constant number as written: an integer or a float, its sign applied.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Number {
@@ -485,25 +463,6 @@ impl fmt::Display for Range {
             Range::F32(low, high) => write!(f, "{low:?}..={high:?}"),
         }
     }
-}
-
-/// What a component offers.
-#[derive(Clone, Debug, Default)]
-pub struct Interface {
-    /// Input ports by name.
-    pub inputs: BTreeMap<String, Port>,
-    /// Output ports by name.
-    pub outputs: BTreeMap<String, Port>,
-    /// Own and mapped variables by name.
-    pub variables: BTreeMap<String, Var>,
-    /// Configuration fields by name.
-    pub config: BTreeMap<String, Ty>,
-    /// User automaton states, in source order.
-    pub states: Vec<String>,
-    /// Quality levels, best first.
-    pub quality: Vec<String>,
-    /// The component's own `adaptation { ... }` tuning (default when it has none).
-    pub adaptation: Tuning,
 }
 
 /// What an `adaptation { ... }` block says (`check::adaptation` checks it; a key not
@@ -627,249 +586,188 @@ pub const DEFAULT_CONTROLLABLES: &[&str] = &[
     "priority",
 ];
 
-/// The AST plus lookups and memoised interfaces.
-pub struct Model<'a> {
-    /// All files.
-    pub files: &'a [ast::File],
-    /// The top-level symbols.
-    pub symbols: &'a Symbols,
-    interfaces: RefCell<BTreeMap<String, Rc<Interface>>>,
-    in_progress: RefCell<BTreeSet<String>>,
+/// The type of a rule expression: the one rule typer's output, read by `lower`
+/// (which compiles each node to Rust by its type) as well as by the checks here.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RTy {
+    /// `bool`
+    Bool,
+    /// Any integer (rules widen every integer to one type).
+    Int,
+    /// `f32` or `f64`.
+    Float,
+    /// `String`
+    Str,
+    /// `Duration`
+    Duration,
+    /// `Time`
+    Time,
+    /// An enum, by its `.cool` name.
+    Enum(String),
+    /// `T?`
+    Optional(Box<RTy>),
+    /// A default automaton state.
+    State,
+    /// A user state of the named component, with its states.
+    UserState(String, Vec<String>),
+    /// `none`, `success` or `fail`.
+    Result,
+    /// A quality level of the named component.
+    Quality(String, Vec<String>),
+    /// The `none` literal.
+    NoneLit,
+    /// A bare name that is not a variable.
+    Symbol(ast::Ident),
+    /// Anything else (a packet, a list, a frequency), described: a rule cannot read
+    /// it, it only compares with `none` when optional.
+    Other(String),
+    /// Already reported.
+    Unknown,
 }
 
-impl<'a> Model<'a> {
-    /// A model over `files`.
-    pub fn new(files: &'a [ast::File], symbols: &'a Symbols) -> Self {
-        Model {
-            files,
-            symbols,
-            interfaces: RefCell::default(),
-            in_progress: RefCell::default(),
-        }
-    }
-
-    /// The component named `name`, with its file.
-    pub fn component(&self, name: &str) -> Option<(FileId, &'a ast::Component)> {
-        let def = self.symbols.defs.get(name)?;
-        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
-            ast::Item::Component(component) => Some((def.file, component)),
-            _ => None,
-        }
-    }
-
-    /// The enum named `name`.
-    pub fn enum_def(&self, name: &str) -> Option<&'a ast::EnumDef> {
-        let def = self.symbols.defs.get(name)?;
-        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
-            ast::Item::Enum(def) => Some(def),
-            _ => None,
-        }
-    }
-
-    /// The `import ros` that defines `name`.
-    pub fn ros_import(&self, name: &str) -> Option<&'a ast::RosImport> {
-        let def = self.symbols.defs.get(name)?;
-        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
-            ast::Item::RosImport(import) => Some(import),
-            _ => None,
-        }
-    }
-
-    /// The converter named `name`.
-    pub fn converter(&self, name: &str) -> Option<(FileId, &'a ast::Converter)> {
-        let def = self.symbols.defs.get(name)?;
-        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
-            ast::Item::Converter(converter) => Some((def.file, converter)),
-            _ => None,
-        }
-    }
-
-    /// Resolves a written type (unknown names give [`Ty::Unknown`]).
-    pub fn ty(&self, ty: &ast::Type) -> Ty {
-        match &ty.kind {
-            ast::TypeKind::Prim(prim) => match prim {
-                ast::Prim::Bool => Ty::Bool,
-                ast::Prim::F32 | ast::Prim::F64 => Ty::Float(*prim),
-                ast::Prim::String => Ty::Str,
-                ast::Prim::Time => Ty::Time,
-                ast::Prim::Duration => Ty::Duration,
-                other => Ty::Int(*other),
+impl RTy {
+    /// The type as a noun without its article ("float", "optional float"); `None` for
+    /// the kinds that are not named with an article (`none`, a symbol, a description).
+    fn noun(&self) -> Option<String> {
+        Some(match self {
+            RTy::Bool => "bool".to_owned(),
+            RTy::Int => "integer".to_owned(),
+            RTy::Float => "float".to_owned(),
+            RTy::Str => "string".to_owned(),
+            RTy::Duration => "duration".to_owned(),
+            RTy::Time => "time".to_owned(),
+            RTy::Enum(name) => format!("`{name}` value"),
+            RTy::Optional(inner) => match inner.noun() {
+                Some(noun) => format!("optional {noun}"),
+                None => format!("optional {inner}"),
             },
-            ast::TypeKind::Named(name) => {
-                match self.symbols.defs.get(&name.name).map(|def| def.kind) {
-                    Some(DefKind::Packet) => Ty::Packet(name.name.clone()),
-                    Some(DefKind::Enum) => Ty::Enum(name.name.clone()),
-                    Some(DefKind::ExternPacket) => Ty::Extern(name.name.clone()),
-                    Some(DefKind::RosMessage) => match self.ros_import(&name.name) {
-                        Some(import) => Ty::Ros {
-                            name: name.name.clone(),
-                            ros: import.ros_name.value.clone(),
-                        },
-                        None => Ty::Unknown,
-                    },
-                    _ => Ty::Unknown,
-                }
-            }
-            ast::TypeKind::List(inner) => Ty::List(Box::new(self.ty(inner))),
-            ast::TypeKind::Array(inner, size) => Ty::Array(Box::new(self.ty(inner)), size.value),
-            ast::TypeKind::Optional(inner) => Ty::Optional(Box::new(self.ty(inner))),
-        }
-    }
-
-    /// The interface of component `name` (empty when unknown or when asked again
-    /// while being computed, i.e. inside a containment cycle).
-    pub fn interface(&self, name: &str) -> Rc<Interface> {
-        if let Some(found) = self.interfaces.borrow().get(name) {
-            return found.clone();
-        }
-        let Some((_, component)) = self.component(name) else {
-            return Rc::new(Interface::default());
-        };
-        if !self.in_progress.borrow_mut().insert(name.to_owned()) {
-            return Rc::new(Interface::default());
-        }
-        let interface = Rc::new(self.compute(component));
-        self.in_progress.borrow_mut().remove(name);
-        self.interfaces
-            .borrow_mut()
-            .insert(name.to_owned(), interface.clone());
-        interface
-    }
-
-    /// The component type of instance `instance` inside `component`.
-    pub fn instance<'c>(
-        component: &'c ast::Component,
-        instance: &str,
-    ) -> Option<&'c ast::Instance> {
-        component.members.iter().find_map(|member| match member {
-            ast::Member::Instance(found) if found.name.name == instance => Some(found),
-            _ => None,
+            RTy::State => "default automaton state".to_owned(),
+            RTy::UserState(component, _) => format!("user state of `{component}`"),
+            RTy::Result => "result".to_owned(),
+            RTy::Quality(component, _) => format!("quality level of `{component}`"),
+            RTy::Unknown => "unknown type".to_owned(),
+            RTy::NoneLit | RTy::Symbol(_) | RTy::Other(_) => return None,
         })
     }
+}
 
-    fn compute(&self, component: &ast::Component) -> Interface {
-        let mut interface = Interface::default();
-        for member in &component.members {
-            match member {
-                ast::Member::Input(input) => {
-                    let port = match &input.def {
-                        ast::InputDef::Export(target) => self.exported(component, target, true),
-                        def => InputKind::of(def, |ty| self.ty(ty)).map(|kind| Port {
-                            declared: Declaration::Input(kind),
-                            pull: input.pull.is_some(),
-                            span: input.span,
-                        }),
-                    };
-                    if let Some(mut port) = port {
-                        port.span = input.span;
-                        interface
-                            .inputs
-                            .entry(input.name.name.clone())
-                            .or_insert(port);
-                    }
-                }
-                ast::Member::Output(output) => {
-                    let port = match &output.def {
-                        ast::OutputDef::Export(target) => self.exported(component, target, false),
-                        def => OutputKind::of(def, |ty| self.ty(ty)).map(|kind| Port {
-                            declared: Declaration::Output(kind),
-                            pull: output.pull.is_some(),
-                            span: output.span,
-                        }),
-                    };
-                    if let Some(mut port) = port {
-                        port.span = output.span;
-                        interface
-                            .outputs
-                            .entry(output.name.name.clone())
-                            .or_insert(port);
-                    }
-                }
-                ast::Member::Variable(variable) => {
-                    let ty = match (&variable.ty, &variable.value) {
-                        (Some(ty), _) => self.ty(ty),
-                        (None, Some(value)) => self
-                            .mapped_variable(component, value)
-                            .unwrap_or(Ty::Unknown),
-                        (None, None) => Ty::Unknown,
-                    };
-                    interface
-                        .variables
-                        .entry(variable.name.name.clone())
-                        .or_insert(Var {
-                            kind: variable.kind,
-                            range: variable
-                                .range
-                                .as_ref()
-                                .filter(|_| {
-                                    variable.kind == ast::VarKind::Controllable
-                                        && variable.ty.is_some()
-                                })
-                                .and_then(|range| Range::of(range, &ty)),
-                            ty,
-                            span: variable.span,
-                        });
-                }
-                ast::Member::Configuration(configuration) => {
-                    for field in &configuration.fields {
-                        interface
-                            .config
-                            .entry(field.name.name.clone())
-                            .or_insert_with(|| self.ty(&field.ty));
-                    }
-                }
-                ast::Member::Automaton(automaton) => {
-                    for state in &automaton.states {
-                        if !interface.states.contains(&state.name.name) {
-                            interface.states.push(state.name.name.clone());
-                        }
-                    }
-                }
-                // The first block (a second one is an error).
-                ast::Member::Adaptation(block) if interface.adaptation == Tuning::default() => {
-                    interface.adaptation = Tuning::of(block);
-                }
-                ast::Member::Timing(timing) => {
-                    for entry in &timing.entries {
-                        if let ast::TimingEntry::Quality(levels, _) = entry {
-                            interface
-                                .quality
-                                .extend(levels.iter().map(|level| level.name.clone()));
-                        }
-                    }
-                }
-                _ => {}
-            }
+/// Every type reads the same way in messages: "a float", "a string", "an optional
+/// integer", "a `Mode` value".
+impl fmt::Display for RTy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(noun) = self.noun() {
+            // ("a user state": the vowel of "user" is not sounded as one.)
+            let vowel = noun.starts_with(['a', 'e', 'i', 'o', 'u']) && !noun.starts_with("user");
+            return write!(f, "{} {noun}", if vowel { "an" } else { "a" });
         }
-        interface
+        match self {
+            RTy::NoneLit => f.write_str("`none`"),
+            RTy::Symbol(name) => write!(f, "`{}`", name.name),
+            RTy::Other(description) => f.write_str(description),
+            _ => Ok(()),
+        }
     }
+}
 
-    /// The port an export names, through the instance's component.
-    pub fn exported(
-        &self,
-        component: &ast::Component,
-        target: &ast::PortRef,
-        input: bool,
-    ) -> Option<Port> {
-        let instance = Self::instance(component, &target.instance.as_ref()?.name)?;
-        let inner = self.interface(&instance.component.name);
-        let ports = if input { &inner.inputs } else { &inner.outputs };
-        ports.get(&target.port.name).cloned()
+/// A rule expression as the checker typed it: the expression itself, node by node,
+/// each node with its type and its operands (those of a unary or binary operator,
+/// the items of a list; none otherwise). A bare name compared with a state, result or
+/// quality level carries the type it resolved to (`State`, `UserState`, `Result`,
+/// `Quality`), never `Symbol`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Typed {
+    /// The node's type.
+    pub ty: RTy,
+    /// What the node is.
+    pub node: Node,
+    /// Its operands, in order.
+    pub operands: Vec<Typed>,
+}
+
+/// What a node of a rule expression is, without its operands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Node {
+    /// An integer literal (a sign is a [`Node::Unary`]).
+    Int(u64),
+    /// A floating-point literal.
+    Float(f64),
+    /// A string literal, unescaped.
+    Str(String),
+    /// `true` / `false`.
+    Bool(bool),
+    /// A duration literal, in nanoseconds.
+    Duration(u128),
+    /// A frequency literal, in hertz.
+    Frequency(f64),
+    /// `a`, `a.b`: a variable, an instance's variable or a symbol.
+    Path(Vec<String>),
+    /// `Enum::Variant`
+    EnumValue {
+        /// The enum type.
+        enum_name: String,
+        /// The variant.
+        variant: String,
+    },
+    /// `[a, b, c]` (the items are the operands).
+    List,
+    /// `[value; n]` (the value is the operand).
+    Repeat(u64),
+    /// `none`
+    None,
+    /// `!e`, `-e`
+    Unary(ast::UnaryOp),
+    /// `a op b`
+    Binary(ast::BinaryOp),
+}
+
+impl Node {
+    /// The node `kind` is.
+    pub fn of(kind: &ast::ExprKind) -> Node {
+        use ast::ExprKind as E;
+        match kind {
+            E::Int(value) => Node::Int(*value),
+            E::Float(value) => Node::Float(*value),
+            E::Str(text) => Node::Str(text.clone()),
+            E::Bool(value) => Node::Bool(*value),
+            E::Duration(nanos) => Node::Duration(*nanos),
+            E::Frequency(hertz) => Node::Frequency(*hertz),
+            E::Path(parts) => Node::Path(parts.iter().map(|part| part.name.clone()).collect()),
+            E::EnumValue { enum_name, variant } => Node::EnumValue {
+                enum_name: enum_name.name.clone(),
+                variant: variant.name.clone(),
+            },
+            E::List(_) => Node::List,
+            E::Repeat(_, count) => Node::Repeat(count.value),
+            E::None => Node::None,
+            E::Unary(op, _) => Node::Unary(*op),
+            E::Binary(op, ..) => Node::Binary(*op),
+        }
     }
+}
 
-    /// The type of the instance variable a mapped variable names.
-    pub fn mapped_variable(&self, component: &ast::Component, value: &ast::Expr) -> Option<Ty> {
-        let ast::ExprKind::Path(segments) = &value.kind else {
-            return None;
+impl Typed {
+    /// `expr` with every node of type [`RTy::Unknown`]: what a rule the checker did
+    /// not type stays (only in a model of input with errors).
+    pub fn untyped(expr: &ast::Expr) -> Typed {
+        use ast::ExprKind as E;
+        let operands: Vec<&ast::Expr> = match &expr.kind {
+            E::List(items) => items.iter().collect(),
+            E::Repeat(item, _) | E::Unary(_, item) => vec![&**item],
+            E::Binary(_, left, right) => vec![&**left, &**right],
+            _ => Vec::new(),
         };
-        let [instance, variable] = segments.as_slice() else {
-            return None;
-        };
-        let instance = Self::instance(component, &instance.name)?;
-        let inner = self.interface(&instance.component.name);
-        inner
-            .variables
-            .get(&variable.name)
-            .map(|var| var.ty.clone())
+        Typed {
+            ty: RTy::Unknown,
+            node: Node::of(&expr.kind),
+            operands: operands.into_iter().map(Typed::untyped).collect(),
+        }
+    }
+}
+
+/// The type inside every `?` layer.
+pub fn strip(ty: &RTy) -> &RTy {
+    match ty {
+        RTy::Optional(inner) => strip(inner),
+        other => other,
     }
 }

@@ -1,29 +1,28 @@
-//! The resolved components of a checked model: what `lower` and `diagram` read
-//! instead of the syntax tree.
+//! The resolved components, types and converters: the one model the checks consult
+//! and `lower` and `diagram` read instead of the syntax tree.
 //!
-//! Every name a component refers to is resolved here, once, by `checked::build`:
-//! an instance knows whether its component is a compound, an exported port carries
-//! the port it reaches (through any depth of exports), a connection carries the kind
-//! of the input it feeds, a mapped variable carries the type of what it maps, and a
-//! `when` condition carries its type from the one rule typer. Every setting is
-//! evaluated once, here: durations and periods are [`Duration`]s, priorities and
-//! counts integers, fifo and error policies enums, constant values (defaults,
-//! initial values, overrides) [`Value`]s. What stays as written is `when` conditions
-//! ([`ast::Expr`], beside their typed tree) and names, as strings.
+//! Every name a component refers to is resolved here, once, by `build`: an instance
+//! knows whether its component is a compound, an exported port carries the port it
+//! reaches (through any depth of exports), a connection carries the kind of the input
+//! it feeds, a mapped variable carries the type of what it maps, and a `when`
+//! condition is the tree the one rule typer typed. Every setting is evaluated
+//! once, here: durations and periods are [`Duration`]s, priorities and counts
+//! integers, fifo and error policies enums, constant values (defaults, initial values,
+//! overrides) [`Value`]s. Names stay as strings.
 //!
 //! Members of one kind keep their source order; members of different kinds are
 //! held apart (a checked component has at most one `timing`, `configuration`,
 //! automaton, `recovery` and `restart` block).
 
-use crate::ast::{self, FileId, Span};
-pub use crate::check::model::{
-    DEFAULT_CONTROLLABLES, DEFAULT_OBSERVABLES, DEFAULT_STATES, Declared, InputKind, OutputKind,
-    OverflowPolicy, PortKind, RESULTS, Range, SelectorKind, Tuning, Ty,
+use std::collections::BTreeMap;
+
+use super::types::{
+    Declaration, Declared, InputKind, OutputKind, Port, PortKind, Range, Tuning, Ty, Typed,
 };
-pub use crate::check::{RTy, Typed, strip};
+use crate::ast::{self, FileId, Span};
 use crate::ros::{Message, TypeHash, TypeName};
 
-pub use crate::ast::{ComponentKind, Prim, VarKind};
+pub use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
 
 /// A component, resolved.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,6 +72,123 @@ pub struct Component {
     pub adaptation: Tuning,
 }
 
+impl Component {
+    /// A component with no member: what an unknown name resolves to, and what a
+    /// component resolves to inside its own containment cycle (which the checker
+    /// reports).
+    pub(crate) fn empty(name: &str) -> Component {
+        Component {
+            name: name.to_owned(),
+            file: FileId(0),
+            kind: ComponentKind::Atomic,
+            doc: Vec::new(),
+            notes: Vec::new(),
+            links: Vec::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            variables: Vec::new(),
+            configuration: None,
+            timing: None,
+            automaton: None,
+            exceptions: Vec::new(),
+            instances: Vec::new(),
+            redundant: Vec::new(),
+            threads: Vec::new(),
+            policies: Vec::new(),
+            connections: Vec::new(),
+            recovery: None,
+            restart: None,
+            adaptation: Tuning::default(),
+        }
+    }
+
+    /// The input `name` as others see it: the first one declared with that name
+    /// whose kind is known (an export's is the port it reaches).
+    pub(crate) fn input(&self, name: &str) -> Option<Port> {
+        self.inputs
+            .iter()
+            .filter(|input| input.name == name)
+            .find_map(Input::seen)
+    }
+
+    /// The output `name` as others see it (as for [`Component::input`]).
+    pub(crate) fn output(&self, name: &str) -> Option<Port> {
+        self.outputs
+            .iter()
+            .filter(|output| output.name == name)
+            .find_map(Output::seen)
+    }
+
+    /// Every input others see, by name.
+    pub(crate) fn input_ports(&self) -> BTreeMap<&str, Port> {
+        let mut ports = BTreeMap::new();
+        for input in &self.inputs {
+            if let Some(port) = input.seen() {
+                ports.entry(input.name.as_str()).or_insert(port);
+            }
+        }
+        ports
+    }
+
+    /// Every output others see, by name.
+    pub(crate) fn output_ports(&self) -> BTreeMap<&str, Port> {
+        let mut ports = BTreeMap::new();
+        for output in &self.outputs {
+            if let Some(port) = output.seen() {
+                ports.entry(output.name.as_str()).or_insert(port);
+            }
+        }
+        ports
+    }
+
+    /// The variable `name` (the first declared with that name).
+    pub(crate) fn variable(&self, name: &str) -> Option<&Variable> {
+        self.variables.iter().find(|variable| variable.name == name)
+    }
+
+    /// Every variable by name (the first declared with each name).
+    pub(crate) fn variables_by_name(&self) -> BTreeMap<&str, &Variable> {
+        let mut variables = BTreeMap::new();
+        for variable in &self.variables {
+            variables.entry(variable.name.as_str()).or_insert(variable);
+        }
+        variables
+    }
+
+    /// Every configuration field by name (the first declared with each name).
+    pub(crate) fn fields_by_name(&self) -> BTreeMap<&str, &Ty> {
+        let mut fields = BTreeMap::new();
+        for field in self.configuration.iter().flatten() {
+            fields.entry(field.name.as_str()).or_insert(&field.ty);
+        }
+        fields
+    }
+
+    /// The user automaton's states, each once, in source order.
+    pub(crate) fn user_states(&self) -> Vec<String> {
+        let mut states: Vec<String> = Vec::new();
+        for state in self.automaton.iter().flat_map(|a| &a.states) {
+            if !states.contains(&state.name) {
+                states.push(state.name.clone());
+            }
+        }
+        states
+    }
+
+    /// The quality levels of its `timing` block, best first.
+    pub(crate) fn quality(&self) -> Vec<String> {
+        self.timing
+            .iter()
+            .flatten()
+            .filter_map(|entry| match entry {
+                TimingEntry::Quality(levels) => Some(levels.iter().cloned()),
+                _ => None,
+            })
+            .flatten()
+            .collect()
+    }
+}
+
 /// An input port.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Input {
@@ -90,6 +206,18 @@ pub struct Input {
     pub span: Span,
 }
 
+impl Input {
+    /// The port as others see it (`None` when its kind is not known).
+    fn seen(&self) -> Option<Port> {
+        let declared = self.port.as_ref()?;
+        Some(Port {
+            declared: Declaration::Input(declared.kind.clone()),
+            pull: declared.pull,
+            span: self.span,
+        })
+    }
+}
+
 /// An output port.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
@@ -103,6 +231,18 @@ pub struct Output {
     pub port: Option<Declared<OutputKind>>,
     /// Where it is written.
     pub span: Span,
+}
+
+impl Output {
+    /// The port as others see it (`None` when its kind is not known).
+    fn seen(&self) -> Option<Port> {
+        let declared = self.port.as_ref()?;
+        Some(Port {
+            declared: Declaration::Output(declared.kind.clone()),
+            pull: declared.pull,
+            span: self.span,
+        })
+    }
 }
 
 /// `instance.port` or a compound's own `port`, resolved.
@@ -146,6 +286,13 @@ pub struct Variable {
     pub range: Option<Range>,
     /// Where it is written (members of different kinds interleave by it).
     pub span: Span,
+}
+
+impl Variable {
+    /// Its type, [`Ty::Unknown`] when it has none that resolved.
+    pub(crate) fn resolved_ty(&self) -> Ty {
+        self.ty.clone().unwrap_or(Ty::Unknown)
+    }
 }
 
 /// A configuration field.
@@ -345,11 +492,11 @@ pub enum StateMember {
     May(Vec<Ref>),
     /// `when condition -> target;`
     When {
-        /// The condition as written.
-        condition: ast::Expr,
-        /// The condition typed by the rule typer (`None` only if it was not typed,
-        /// which a checked model does not have).
-        typed: Option<Typed>,
+        /// The condition, typed by the rule typer (every node of an untyped rule,
+        /// which a checked model does not have, is [`RTy::Unknown`](super::RTy)).
+        condition: Typed,
+        /// Where the condition is written.
+        span: Span,
         /// The target state.
         target: Ref,
     },
@@ -573,12 +720,12 @@ impl Value {
                 Value::Repeat(Box::new(Value::of(item)), count.value)
             }
             ast::ExprKind::None => Value::None,
-            ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) => match Value::of(inner) {
+            ast::ExprKind::Unary(UnaryOp::Neg, inner) => match Value::of(inner) {
                 Value::Int(value) => Value::Int(-value),
                 Value::Float(value) => Value::Float(-value),
                 _ => Value::Invalid,
             },
-            ast::ExprKind::Unary(ast::UnaryOp::Not, _)
+            ast::ExprKind::Unary(UnaryOp::Not, _)
             | ast::ExprKind::Binary(..)
             | ast::ExprKind::Path(_) => Value::Invalid,
         }

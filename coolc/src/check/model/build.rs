@@ -1,133 +1,310 @@
-//! Builds the resolved [`model`](super::model) of every component from the syntax
-//! trees and what the checker resolved: the only place after `check` where names are
-//! looked up, and where every setting is evaluated. It never fails: on input with
-//! errors (which only tests build a model from) what cannot be resolved is left
-//! `None`, a value that cannot be evaluated is left out (a delay is zero).
+//! Resolves the model from the syntax trees: [`Model`] looks names up in them and
+//! builds each component once, when it is first asked for (exports are followed and
+//! mapped variables typed through the components they reach, each built once too).
+//! Inside its own containment cycle a component is empty; `compound::self_containing`
+//! reports the cycle. This is the only place where names are looked up and settings
+//! evaluated. It never fails: on input with errors what cannot be resolved is left
+//! `None`, and a value that cannot be evaluated is left out (a delay is zero).
 
-use std::collections::BTreeMap;
+use std::cell::RefCell;
+use std::collections::{BTreeMap, BTreeSet};
+use std::rc::Rc;
 
-use super::model::{
-    Automaton, Component, Connection, Converter, CrateSpec, Declared, Duration, Enum, ErrorPolicy,
-    Exception, Extern, Field, Input, InputKind, Instance, InstanceRef, Link, Note, Output,
-    Override, Packet, PlanStep, Policy, PortRef, Range, Recovery, Redundant, Ref, Restart,
-    RosImport, State, StateMember, TableValue, Thread, TimingEntry, TypeDef, Value, Variable,
+use super::component::{
+    Automaton, Component, Connection, Converter, CrateSpec, Duration, Enum, ErrorPolicy, Exception,
+    Extern, Field, Input, Instance, InstanceRef, Link, Note, Output, Override, Packet, PlanStep,
+    Policy, PortRef, Recovery, Redundant, Ref, Restart, RosImport, State, StateMember, TableValue,
+    Thread, TimingEntry, TypeDef, Value, Variable,
 };
+use super::types::{Declared, InputKind, OutputKind, PortKind, Range, Tuning, Ty, Typed};
 use crate::ast::{self, FileId, Span};
-use crate::check::model::{Interface, Model, Port, Tuning, Ty};
-use crate::check::{Resolved, Typed};
+use crate::resolve::{DefKind, Symbols};
 
-/// Every component of `files`, in source order (files in `FileId` order), each once
-/// (the one the symbol table names).
-pub(super) fn components(files: &[ast::File], resolved: &Resolved) -> Vec<Component> {
-    let builder = Builder {
-        model: Model::new(files, &resolved.symbols),
-        interfaces: &resolved.interfaces,
-        rules: &resolved.rules,
-    };
-    let mut out = Vec::new();
-    for file in files {
-        for item in &file.items {
-            if let ast::Item::Component(component) = item
-                && builder
-                    .model
-                    .component(&component.name.name)
-                    .is_some_and(|(at, _)| at == file.id)
-            {
-                out.push(builder.component(file.id, component));
-            }
-        }
-    }
-    out
+/// The syntax trees with their lookups, and every component resolved so far.
+pub(crate) struct Model<'a> {
+    /// All files.
+    pub files: &'a [ast::File],
+    /// The top-level symbols.
+    pub symbols: &'a Symbols,
+    components: RefCell<BTreeMap<String, Rc<Component>>>,
+    in_progress: RefCell<BTreeSet<String>>,
 }
 
-/// Every packet, enum, extern packet and ROS import, then every converter, in source
-/// order (files in `FileId` order), each once (the one the symbol table names).
-pub(super) fn types(files: &[ast::File], resolved: &Resolved) -> (Vec<TypeDef>, Vec<Converter>) {
-    let model = Model::new(files, &resolved.symbols);
-    let named_here = |file: FileId, name: &str| {
-        resolved
-            .symbols
-            .defs
-            .get(name)
-            .is_some_and(|def| def.file == file)
-    };
-    let mut types = Vec::new();
-    let mut converters = Vec::new();
-    for file in files {
-        for item in &file.items {
-            match item {
-                ast::Item::Packet(packet) if named_here(file.id, &packet.name.name) => {
-                    types.push(TypeDef::Packet(Packet {
-                        doc: packet.doc.0.clone(),
-                        name: packet.name.name.clone(),
-                        fields: packet
-                            .fields
-                            .iter()
-                            .map(|field| Field {
-                                doc: field.doc.0.clone(),
-                                name: field.name.name.clone(),
-                                ty: model.ty(&field.ty),
-                                default: field.default.as_ref().map(Value::of),
-                            })
-                            .collect(),
-                    }));
-                }
-                ast::Item::Enum(def) if named_here(file.id, &def.name.name) => {
-                    types.push(TypeDef::Enum(Enum {
-                        doc: def.doc.0.clone(),
-                        name: def.name.name.clone(),
-                        variants: def
-                            .variants
-                            .iter()
-                            .map(|v| (v.doc.0.clone(), v.name.name.clone()))
-                            .collect(),
-                    }));
-                }
-                ast::Item::ExternPacket(def) if named_here(file.id, &def.name.name) => {
-                    types.push(TypeDef::Extern(Extern {
-                        doc: def.doc.0.clone(),
-                        name: def.name.name.clone(),
-                        rust_path: def.rust_path.value.clone(),
-                    }));
-                }
-                ast::Item::RosImport(import) => {
-                    let (Some(name), Ok(ros)) = (
-                        &import.name,
-                        crate::ros::TypeName::parse(&import.ros_name.value),
-                    ) else {
-                        continue;
-                    };
-                    if named_here(file.id, &name.name) {
-                        types.push(TypeDef::Ros(RosImport {
-                            doc: import.doc.0.clone(),
+impl<'a> Model<'a> {
+    /// A model over `files`.
+    pub fn new(files: &'a [ast::File], symbols: &'a Symbols) -> Self {
+        Model {
+            files,
+            symbols,
+            components: RefCell::default(),
+            in_progress: RefCell::default(),
+        }
+    }
+
+    /// The component named `name`, with its file.
+    pub fn component(&self, name: &str) -> Option<(FileId, &'a ast::Component)> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Component(component) => Some((def.file, component)),
+            _ => None,
+        }
+    }
+
+    /// The enum named `name`.
+    pub fn enum_def(&self, name: &str) -> Option<&'a ast::EnumDef> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Enum(def) => Some(def),
+            _ => None,
+        }
+    }
+
+    /// The `import ros` that defines `name`.
+    pub fn ros_import(&self, name: &str) -> Option<&'a ast::RosImport> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::RosImport(import) => Some(import),
+            _ => None,
+        }
+    }
+
+    /// The converter named `name`.
+    pub fn converter(&self, name: &str) -> Option<(FileId, &'a ast::Converter)> {
+        let def = self.symbols.defs.get(name)?;
+        match self.files.get(def.file.0 as usize)?.items.get(def.item)? {
+            ast::Item::Converter(converter) => Some((def.file, converter)),
+            _ => None,
+        }
+    }
+
+    /// Resolves a written type (unknown names give [`Ty::Unknown`]).
+    pub fn ty(&self, ty: &ast::Type) -> Ty {
+        match &ty.kind {
+            ast::TypeKind::Prim(prim) => match prim {
+                ast::Prim::Bool => Ty::Bool,
+                ast::Prim::F32 | ast::Prim::F64 => Ty::Float(*prim),
+                ast::Prim::String => Ty::Str,
+                ast::Prim::Time => Ty::Time,
+                ast::Prim::Duration => Ty::Duration,
+                other => Ty::Int(*other),
+            },
+            ast::TypeKind::Named(name) => {
+                match self.symbols.defs.get(&name.name).map(|def| def.kind) {
+                    Some(DefKind::Packet) => Ty::Packet(name.name.clone()),
+                    Some(DefKind::Enum) => Ty::Enum(name.name.clone()),
+                    Some(DefKind::ExternPacket) => Ty::Extern(name.name.clone()),
+                    Some(DefKind::RosMessage) => match self.ros_import(&name.name) {
+                        Some(import) => Ty::Ros {
                             name: name.name.clone(),
-                            ros,
-                        }));
+                            ros: import.ros_name.value.clone(),
+                        },
+                        None => Ty::Unknown,
+                    },
+                    _ => Ty::Unknown,
+                }
+            }
+            ast::TypeKind::List(inner) => Ty::List(Box::new(self.ty(inner))),
+            ast::TypeKind::Array(inner, size) => Ty::Array(Box::new(self.ty(inner)), size.value),
+            ast::TypeKind::Optional(inner) => Ty::Optional(Box::new(self.ty(inner))),
+        }
+    }
+
+    /// The component type of instance `instance` inside `component`.
+    pub fn instance<'c>(
+        component: &'c ast::Component,
+        instance: &str,
+    ) -> Option<&'c ast::Instance> {
+        component.members.iter().find_map(|member| match member {
+            ast::Member::Instance(found) if found.name.name == instance => Some(found),
+            _ => None,
+        })
+    }
+
+    /// Component `name`, resolved (empty when unknown, or when asked for again while
+    /// it is being resolved, i.e. inside a containment cycle).
+    pub fn resolved(&self, name: &str) -> Rc<Component> {
+        if let Some(found) = self.components.borrow().get(name) {
+            return found.clone();
+        }
+        let Some((file, component)) = self.component(name) else {
+            return Rc::new(Component::empty(name));
+        };
+        if !self.in_progress.borrow_mut().insert(name.to_owned()) {
+            return Rc::new(Component::empty(name));
+        }
+        let resolved = Rc::new(self.build(file, component));
+        self.in_progress.borrow_mut().remove(name);
+        self.components
+            .borrow_mut()
+            .insert(name.to_owned(), resolved.clone());
+        resolved
+    }
+
+    /// Every component, resolved, in source order (files in `FileId` order), each
+    /// once (the one the symbol table names), with what needs the whole model: each
+    /// connection's kind, each instance's tuning over its component's, each `when`
+    /// condition's typed tree (from `rules`, by file and span).
+    pub fn finish(self, rules: &BTreeMap<(FileId, Span), Typed>) -> Vec<Component> {
+        let mut names = Vec::new();
+        for file in self.files {
+            for item in &file.items {
+                if let ast::Item::Component(component) = item
+                    && self
+                        .component(&component.name.name)
+                        .is_some_and(|(at, _)| at == file.id)
+                {
+                    names.push(component.name.name.clone());
+                }
+            }
+        }
+        // What each component's connections and instances reach.
+        let reached: Vec<Reached> = names
+            .iter()
+            .map(|name| {
+                let component = self.resolved(name);
+                let kinds = component
+                    .connections
+                    .iter()
+                    .map(|connection| self.connection_kind(&component, &connection.to))
+                    .collect();
+                let tunings = component
+                    .instances
+                    .iter()
+                    .map(|instance| {
+                        let own = instance.tuning.as_ref()?;
+                        Some(self.resolved(&instance.component).adaptation.overlaid(own))
+                    })
+                    .collect();
+                Reached { kinds, tunings }
+            })
+            .collect();
+        let mut memo = self.components.into_inner();
+        names
+            .iter()
+            .zip(reached)
+            .filter_map(|(name, Reached { kinds, tunings })| {
+                let mut component =
+                    Rc::try_unwrap(memo.remove(name)?).unwrap_or_else(|shared| (*shared).clone());
+                for (connection, kind) in component.connections.iter_mut().zip(kinds) {
+                    connection.kind = kind;
+                }
+                for (instance, tuning) in component.instances.iter_mut().zip(tunings) {
+                    instance.tuning = tuning;
+                }
+                let file = component.file;
+                for state in component.automaton.iter_mut().flat_map(|a| &mut a.states) {
+                    for member in &mut state.members {
+                        if let StateMember::When {
+                            condition, span, ..
+                        } = member
+                            && let Some(typed) = rules.get(&(file, *span))
+                        {
+                            *condition = typed.clone();
+                        }
                     }
                 }
-                ast::Item::Converter(def) if named_here(file.id, &def.name.name) => {
-                    converters.push(Converter {
-                        doc: def.doc.0.clone(),
-                        name: def.name.name.clone(),
-                        from: model.ty(&def.from),
-                        to: model.ty(&def.to),
-                    });
+                Some(component)
+            })
+            .collect()
+    }
+
+    /// The kind of the input a connection's `to` end reaches: an instance's input,
+    /// or for a bare port the compound's own.
+    fn connection_kind(&self, component: &Component, to: &PortRef) -> Option<PortKind> {
+        let owner = match &to.instance {
+            Some(instance) => {
+                let instance = component
+                    .instances
+                    .iter()
+                    .find(|found| found.name == instance.name)?;
+                self.resolved(&instance.component)
+            }
+            None => self.resolved(&component.name),
+        };
+        Some(owner.input(&to.port)?.kind())
+    }
+
+    /// Every packet, enum, extern packet and ROS import, then every converter, in source
+    /// order (files in `FileId` order), each once (the one the symbol table names).
+    pub fn types(&self) -> (Vec<TypeDef>, Vec<Converter>) {
+        let model = self;
+        let named_here = |file: FileId, name: &str| {
+            self.symbols
+                .defs
+                .get(name)
+                .is_some_and(|def| def.file == file)
+        };
+        let mut types = Vec::new();
+        let mut converters = Vec::new();
+        for file in self.files {
+            for item in &file.items {
+                match item {
+                    ast::Item::Packet(packet) if named_here(file.id, &packet.name.name) => {
+                        types.push(TypeDef::Packet(Packet {
+                            doc: packet.doc.0.clone(),
+                            name: packet.name.name.clone(),
+                            fields: packet
+                                .fields
+                                .iter()
+                                .map(|field| Field {
+                                    doc: field.doc.0.clone(),
+                                    name: field.name.name.clone(),
+                                    ty: model.ty(&field.ty),
+                                    default: field.default.as_ref().map(Value::of),
+                                })
+                                .collect(),
+                        }));
+                    }
+                    ast::Item::Enum(def) if named_here(file.id, &def.name.name) => {
+                        types.push(TypeDef::Enum(Enum {
+                            doc: def.doc.0.clone(),
+                            name: def.name.name.clone(),
+                            variants: def
+                                .variants
+                                .iter()
+                                .map(|v| (v.doc.0.clone(), v.name.name.clone()))
+                                .collect(),
+                        }));
+                    }
+                    ast::Item::ExternPacket(def) if named_here(file.id, &def.name.name) => {
+                        types.push(TypeDef::Extern(Extern {
+                            doc: def.doc.0.clone(),
+                            name: def.name.name.clone(),
+                            rust_path: def.rust_path.value.clone(),
+                        }));
+                    }
+                    ast::Item::RosImport(import) => {
+                        let (Some(name), Ok(ros)) = (
+                            &import.name,
+                            crate::ros::TypeName::parse(&import.ros_name.value),
+                        ) else {
+                            continue;
+                        };
+                        if named_here(file.id, &name.name) {
+                            types.push(TypeDef::Ros(RosImport {
+                                doc: import.doc.0.clone(),
+                                name: name.name.clone(),
+                                ros,
+                            }));
+                        }
+                    }
+                    ast::Item::Converter(def) if named_here(file.id, &def.name.name) => {
+                        converters.push(Converter {
+                            doc: def.doc.0.clone(),
+                            name: def.name.name.clone(),
+                            from: model.ty(&def.from),
+                            to: model.ty(&def.to),
+                        });
+                    }
+                    _ => {}
                 }
-                _ => {}
             }
         }
+        (types, converters)
     }
-    (types, converters)
-}
 
-struct Builder<'a> {
-    model: Model<'a>,
-    interfaces: &'a BTreeMap<String, Interface>,
-    rules: &'a BTreeMap<(FileId, Span), Typed>,
-}
-
-impl<'a> Builder<'a> {
-    fn component(&self, file: FileId, component: &ast::Component) -> Component {
+    /// Builds one component: its members in one walk.
+    fn build(&self, file: FileId, component: &ast::Component) -> Component {
         let mut out = Component {
             name: component.name.name.clone(),
             file,
@@ -156,11 +333,7 @@ impl<'a> Builder<'a> {
             connections: Vec::new(),
             recovery: None,
             restart: None,
-            adaptation: self
-                .interfaces
-                .get(&component.name.name)
-                .map(|interface| interface.adaptation.clone())
-                .unwrap_or_default(),
+            adaptation: Tuning::default(),
         };
         let policies: BTreeMap<&str, ErrorPolicy> = component
             .members
@@ -192,9 +365,6 @@ impl<'a> Builder<'a> {
         let ports: Vec<&str> = inputs(component)
             .map(|input| input.name.name.as_str())
             .collect();
-        // Ports come from the interface the checker computed (exports followed there,
-        // once).
-        let own = self.interfaces.get(&component.name.name);
         for member in &component.members {
             match member {
                 ast::Member::Input(input) => out.inputs.push(Input {
@@ -204,9 +374,16 @@ impl<'a> Builder<'a> {
                         ast::InputDef::Export(target) => Some(self.port_ref(component, target)),
                         _ => None,
                     },
-                    port: own
-                        .and_then(|own| own.inputs.get(&input.name.name))
-                        .and_then(Port::input),
+                    port: match &input.def {
+                        ast::InputDef::Export(target) => self
+                            .exported(component, target)
+                            .and_then(|inner| inner.input(&target.port.name))
+                            .and_then(|port| port.input()),
+                        def => InputKind::of(def, |ty| self.ty(ty)).map(|kind| Declared {
+                            kind,
+                            pull: input.pull.is_some(),
+                        }),
+                    },
                     span: input.span,
                 }),
                 ast::Member::Output(output) => out.outputs.push(Output {
@@ -216,16 +393,23 @@ impl<'a> Builder<'a> {
                         ast::OutputDef::Export(target) => Some(self.port_ref(component, target)),
                         _ => None,
                     },
-                    port: own
-                        .and_then(|own| own.outputs.get(&output.name.name))
-                        .and_then(Port::output),
+                    port: match &output.def {
+                        ast::OutputDef::Export(target) => self
+                            .exported(component, target)
+                            .and_then(|inner| inner.output(&target.port.name))
+                            .and_then(|port| port.output()),
+                        def => OutputKind::of(def, |ty| self.ty(ty)).map(|kind| Declared {
+                            kind,
+                            pull: output.pull.is_some(),
+                        }),
+                    },
                     span: output.span,
                 }),
                 ast::Member::Variable(variable) => out.variables.push(Variable {
                     doc: variable.doc.0.clone(),
                     name: variable.name.name.clone(),
                     kind: variable.kind,
-                    written: variable.ty.as_ref().map(|ty| self.model.ty(ty)),
+                    written: variable.ty.as_ref().map(|ty| self.ty(ty)),
                     value: variable
                         .value
                         .as_ref()
@@ -237,39 +421,40 @@ impl<'a> Builder<'a> {
                         }
                         _ => None,
                     },
-                    ty: self
-                        .interfaces
-                        .get(&component.name.name)
-                        .and_then(|interface| interface.variables.get(&variable.name.name))
-                        .map(|var| var.ty.clone())
-                        .filter(|ty| *ty != Ty::Unknown),
+                    ty: match (&variable.ty, &variable.value) {
+                        (Some(ty), _) => Some(self.ty(ty)),
+                        (None, Some(value)) => self.mapped_variable(component, value),
+                        (None, None) => None,
+                    }
+                    .filter(|ty| *ty != Ty::Unknown),
                     range: variable
                         .range
                         .as_ref()
                         .zip(variable.ty.as_ref())
                         .filter(|_| variable.kind == ast::VarKind::Controllable)
-                        .and_then(|(range, ty)| Range::of(range, &self.model.ty(ty))),
+                        .and_then(|(range, ty)| Range::of(range, &self.ty(ty))),
                     span: variable.span,
                 }),
-                ast::Member::Configuration(configuration) if out.configuration.is_none() => {
-                    out.configuration = Some(
-                        configuration
-                            .fields
-                            .iter()
-                            .map(|field| Field {
-                                doc: field.doc.0.clone(),
-                                name: field.name.name.clone(),
-                                ty: self.model.ty(&field.ty),
-                                default: field.default.as_ref().map(Value::of),
-                            })
-                            .collect(),
+                // Every block's fields (a second block is an error).
+                ast::Member::Configuration(configuration) => {
+                    out.configuration.get_or_insert_with(Vec::new).extend(
+                        configuration.fields.iter().map(|field| Field {
+                            doc: field.doc.0.clone(),
+                            name: field.name.name.clone(),
+                            ty: self.ty(&field.ty),
+                            default: field.default.as_ref().map(Value::of),
+                        }),
                     );
+                }
+                // The first block that says something (a second one is an error).
+                ast::Member::Adaptation(block) if out.adaptation == Tuning::default() => {
+                    out.adaptation = Tuning::of(block);
                 }
                 ast::Member::Timing(timing) if out.timing.is_none() => {
                     out.timing = Some(timing.entries.iter().filter_map(timing_entry).collect());
                 }
                 ast::Member::Automaton(automaton) if out.automaton.is_none() => {
-                    out.automaton = Some(self.automaton(file, automaton, &states, &ports));
+                    out.automaton = Some(self.automaton(automaton, &states, &ports));
                 }
                 ast::Member::Link(link) => out.links.push(match &link.kind {
                     ast::LinkKind::Crate { name, spec } => Link::Crate {
@@ -330,13 +515,8 @@ impl<'a> Builder<'a> {
                         .timing
                         .as_ref()
                         .map(|timing| timing.entries.iter().filter_map(timing_entry).collect()),
-                    tuning: instance.adaptation.first().map(|block| {
-                        self.interfaces
-                            .get(&instance.component.name)
-                            .map(|interface| interface.adaptation.clone())
-                            .unwrap_or_default()
-                            .overlaid(&Tuning::of(block))
-                    }),
+                    // Its own block, laid on its component's tuning by `finish`.
+                    tuning: instance.adaptation.first().map(Tuning::of),
                     span: instance.span,
                 }),
                 ast::Member::OnError(on) => {
@@ -369,9 +549,8 @@ impl<'a> Builder<'a> {
                     from: self.port_ref(component, &connect.from),
                     to: self.port_ref(component, &connect.to),
                     via: connect.via.as_ref().map(|via| via.name.clone()),
-                    kind: self
-                        .target_input(component, &connect.to)
-                        .map(|declared| declared.kind.port_kind()),
+                    // Set by `finish`, once every component is resolved.
+                    kind: None,
                 }),
                 ast::Member::Recovery(recovery) if out.recovery.is_none() => {
                     out.recovery = Some(Recovery {
@@ -402,8 +581,7 @@ impl<'a> Builder<'a> {
     }
 
     fn is_compound(&self, name: &str) -> bool {
-        self.model
-            .component(name)
+        self.component(name)
             .is_some_and(|(_, c)| c.kind == ast::ComponentKind::Compound)
     }
 
@@ -414,9 +592,7 @@ impl<'a> Builder<'a> {
         name: &str,
     ) -> Option<&'a ast::Component> {
         let instance = Model::instance(component, name)?;
-        self.model
-            .component(&instance.component.name)
-            .map(|(_, c)| c)
+        self.component(&instance.component.name).map(|(_, c)| c)
     }
 
     fn instance_ref(&self, component: &ast::Component, name: &str) -> InstanceRef {
@@ -438,31 +614,26 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// The input a connection's `to` end reaches: an instance's input, or for a bare
-    /// port the compound's own.
-    fn target_input(
-        &self,
-        component: &ast::Component,
-        port: &ast::PortRef,
-    ) -> Option<Declared<InputKind>> {
-        let owner = match &port.instance {
-            Some(instance) => &Model::instance(component, &instance.name)?.component.name,
-            None => &component.name.name,
-        };
-        self.interfaces
-            .get(owner)?
-            .inputs
-            .get(&port.port.name)?
-            .input()
+    /// The component whose port an export names, through the instance's component.
+    fn exported(&self, component: &ast::Component, target: &ast::PortRef) -> Option<Rc<Component>> {
+        let instance = Self::instance(component, &target.instance.as_ref()?.name)?;
+        Some(self.resolved(&instance.component.name))
     }
 
-    fn automaton(
-        &self,
-        file: FileId,
-        automaton: &ast::Automaton,
-        states: &[&str],
-        ports: &[&str],
-    ) -> Automaton {
+    /// The type of the instance variable a mapped variable names.
+    fn mapped_variable(&self, component: &ast::Component, value: &ast::Expr) -> Option<Ty> {
+        let ast::ExprKind::Path(segments) = &value.kind else {
+            return None;
+        };
+        let [instance, variable] = segments.as_slice() else {
+            return None;
+        };
+        let instance = Self::instance(component, &instance.name)?;
+        let inner = self.resolved(&instance.component.name);
+        inner.variable(&variable.name)?.ty.clone()
+    }
+
+    fn automaton(&self, automaton: &ast::Automaton, states: &[&str], ports: &[&str]) -> Automaton {
         Automaton {
             initial: automaton
                 .initial
@@ -478,7 +649,7 @@ impl<'a> Builder<'a> {
                     members: state
                         .members
                         .iter()
-                        .map(|member| self.state_member(file, member, states, ports))
+                        .map(|member| self.state_member(member, states, ports))
                         .collect(),
                 })
                 .collect(),
@@ -487,7 +658,6 @@ impl<'a> Builder<'a> {
 
     fn state_member(
         &self,
-        file: FileId,
         member: &ast::StateMember,
         states: &[&str],
         ports: &[&str],
@@ -522,12 +692,20 @@ impl<'a> Builder<'a> {
             ast::StateMember::When {
                 condition, target, ..
             } => StateMember::When {
-                condition: condition.clone(),
-                typed: self.rules.get(&(file, condition.span)).cloned(),
+                // Typed by `finish`, once every rule is.
+                condition: Typed::untyped(condition),
+                span: condition.span,
                 target: state(target),
             },
         }
     }
+}
+
+/// What a component's connections and instances reach in the others: each
+/// connection's kind, each instance's tuning.
+struct Reached {
+    kinds: Vec<Option<PortKind>>,
+    tunings: Vec<Option<Tuning>>,
 }
 
 /// `name` resolved to its index in `names` (0 when absent: input with errors).
@@ -654,8 +832,8 @@ mod tests {
         let state = &outer.automaton.as_ref().expect("supervisor").states[0];
         assert!(matches!(
             &state.members[0],
-            StateMember::When { typed: Some(typed), target, .. }
-                if typed.ty == crate::check::RTy::Bool && target.name == "s"
+            StateMember::When { condition: typed, target, .. }
+                if typed.ty == crate::checked::model::RTy::Bool && target.name == "s"
         ));
         let inner = checked.component("Inner").expect("Inner");
         assert_eq!(
