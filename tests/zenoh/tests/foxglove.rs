@@ -3,14 +3,15 @@
 //! Schema by Ajv (`tests/foxglove/client.cjs`). The real `coolctl` binary serves a
 //! real node: the client receives the advertisements, subscribes, decodes the echoed
 //! packets, the monitoring and the supervision log; a channel nobody watches has no
-//! Zenoh subscriber behind it.
+//! Zenoh subscriber behind it; a node killed (`robot-under-test`, its own process)
+//! has its channels unadvertised until it comes back.
 //!
 //! The client's packages are in `$COOLBOT_FOXGLOVE_CLIENT` (a `node_modules`
 //! directory), else `target/foxglove-client/node_modules`; `.ci/run` installs them.
 //! Without them these tests fail under CI (`CI` set) and say they are skipped
 //! elsewhere, with the command that installs them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -139,6 +140,12 @@ impl Process {
         self.lines
             .recv_timeout(PATIENCE)
             .expect("a line from the process")
+    }
+
+    /// Kill the process (`kill -9`, before its input closes) and reap it.
+    fn kill(mut self) {
+        self.child.kill().expect("the process is killed");
+        self.child.wait().expect("the process is reaped");
     }
 }
 
@@ -842,6 +849,71 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
     assert_eq!(gain(), Some(json!(0.25)));
     sending.store(false, Ordering::Release);
     sender.join().expect("the sender ends");
+}
+
+/// Node `name` in a process of its own (`robot-under-test`), running the network
+/// tests' robot, connected to `endpoint`.
+fn robot_process(name: &str, endpoint: &str) -> Process {
+    let process =
+        Process::start(Command::new(env!("CARGO_BIN_EXE_robot-under-test")).args([name, endpoint]));
+    assert_eq!(process.line(), "ready");
+    process
+}
+
+/// Channels of node `far`, its own process, that the test follows.
+const FAR: [&str; 2] = ["/far/logger/monitor", "/far/robot.base.motion/monitor"];
+
+#[test]
+fn a_node_killed_has_its_channels_unadvertised_until_it_comes_back() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    // `far` connects to coolctl, which listens, so that a new `far` finds it again.
+    let listen = format!("tcp/127.0.0.1:{}", support::free_port());
+    let (_server, url) = coolctl_foxglove(
+        &[
+            "--connect",
+            &fox.endpoint,
+            "--listen",
+            &listen,
+            "--timeout",
+            "2s",
+        ],
+        &["--refresh", "100ms"],
+    );
+    let far = robot_process("far", &listen);
+    let mut client = Client::start(&modules, &url);
+    let channels = client.advertised(&[FAR[0], FAR[1], "/fox/tuner/monitor"]);
+    let id = |channel: &Value| channel["id"].as_u64().expect("a channel id");
+    let before: BTreeSet<u64> = FAR.iter().map(|topic| id(&channels[*topic])).collect();
+    let fox_tuner = id(&channels["/fox/tuner/monitor"]);
+
+    // Killed: its token goes, its channels are unadvertised; fox's stay.
+    far.kill();
+    let mut gone = BTreeSet::new();
+    while !before.is_subset(&gone) {
+        let unadvertised = client.next_where("unadvertise", |_| true);
+        let ids = unadvertised["ids"].as_array().expect("ids");
+        gone.extend(ids.iter().map(|id| id.as_u64().expect("an id")));
+    }
+    assert!(!gone.contains(&fox_tuner), "fox's channels stay: {gone:?}");
+
+    // Back: advertised again, under new ids, and served.
+    let _far = robot_process("far", &listen);
+    let mut again = BTreeMap::new();
+    while again.len() < FAR.len() {
+        let channel = client.next_where("advertise", |channel| {
+            FAR.iter().any(|topic| channel["topic"] == *topic) && !before.contains(&id(channel))
+        });
+        again.insert(
+            channel["topic"].as_str().expect("a topic").to_owned(),
+            id(&channel),
+        );
+    }
+    client.order(json!({ "do": "subscribe", "topic": FAR[0], "count": 1 }));
+    let monitoring = client.messages(FAR[0], 1);
+    assert_eq!(monitoring[0]["state"], "running", "{}", monitoring[0]);
 }
 
 /// Off loopback, the server needs the security file or `--insecure`, as a node's
