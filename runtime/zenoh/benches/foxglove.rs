@@ -12,7 +12,8 @@
 //!   connections, a round trip kicked every millisecond) whose outputs are echoed and
 //!   served, the client subscribed to both, against the same ping-pong on two
 //!   components nothing is attached to, in the same system, rounds alternated. Goal:
-//!   p50 <= 1.05x.
+//!   p50 <= 1.05x. Reported beside it: a third pair whose outputs are echoed but
+//!   served to nobody (the echo's own share).
 //!
 //! `cargo bench -p coolbot-zenoh --bench foxglove` (add `-- --quick` for a smoke run).
 
@@ -453,13 +454,19 @@ fn main() {
     }
     let served = pair(&mut system, "served_", per_round);
     let bare = pair(&mut system, "bare_", per_round);
+    let echoed = pair(&mut system, "echoed_", per_round);
     system.run_all().expect("run");
     node.expose_system(&system).expect("expose");
     for name in &names {
         node.echo::<Reading>(&system, &format!("{name}.out"))
             .expect("echo");
     }
-    for port in ["served_ping.output", "served_pong.output"] {
+    for port in [
+        "served_ping.output",
+        "served_pong.output",
+        "echoed_ping.output",
+        "echoed_pong.output",
+    ] {
         node.echo::<u64>(&system, port).expect("echo");
     }
 
@@ -538,10 +545,19 @@ fn main() {
         CHANNELS as u64 * HZ
     ));
 
-    // Latency: the served pair against the bare one, rounds alternated.
-    let (project, baseline) =
-        common::alternate(ROUNDS, || latency_round(&served), || latency_round(&bare));
-    let (project, baseline) = (Samples::new(project), Samples::new(baseline));
+    // Latency: the served and the echoed pair against the bare one, rounds
+    // alternated.
+    let (mut project, mut baseline, mut echo_only) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..ROUNDS {
+        baseline.extend(latency_round(&bare));
+        project.extend(latency_round(&served));
+        echo_only.extend(latency_round(&echoed));
+    }
+    let (project, baseline, echo_only) = (
+        Samples::new(project),
+        Samples::new(baseline),
+        Samples::new(echo_only),
+    );
     table.row(
         "ping-pong p50, served",
         Figure::Time(project.p50()),
@@ -552,6 +568,12 @@ fn main() {
         "ping-pong p99, served",
         Figure::Time(project.p99()),
         Figure::Time(baseline.p99()),
+        Goal::None,
+    );
+    table.row(
+        "ping-pong p50, echoed only",
+        Figure::Time(echo_only.p50()),
+        Figure::Time(baseline.p50()),
         Goal::None,
     );
     table.note(&format!(
