@@ -1,14 +1,22 @@
 //! What the network tests share: two nodes on loopback with explicit endpoints and
 //! multicast scouting off, waiting for conditions, a node in a process of its own
-//! (one of this package's binaries), a TCP forwarder whose link a test can cut, and
-//! the robot's system (generated components, `cool/robot.cool`).
+//! (one of this package's binaries), a TCP forwarder whose link a test can cut, the
+//! robot's system (generated components, `cool/robot.cool`), a node with an echoed
+//! source and a tuner, and a certificate authority for security files.
 
 use std::net::TcpListener;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use crate::generated::{base, motion, plain, robot as robot_compound};
+use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::port::DataOut;
+use coolbot::{SectionResult, System};
 use coolbot_zenoh::Node;
+use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 use zenoh::Wait;
+
+use crate::generated::types::Reading;
+use crate::generated::{base, motion, plain, robot as robot_compound, source, tuner};
 
 /// Generous: the machine is shared and may be loaded.
 pub const PATIENCE: Duration = Duration::from_secs(30);
@@ -258,8 +266,8 @@ impl robot_compound::Parts for Quiet {
 /// The robot's system of the network tests: a compound `robot` (holding a compound
 /// `base` with `motion` and `ranges`, and a `planner`) and an atomic `logger`
 /// (`cool/robot.cool`), running, exposed on `node`.
-pub fn robot(node: &Node) -> coolbot::System {
-    let mut system = coolbot::System::new();
+pub fn robot(node: &Node) -> System {
+    let mut system = System::new();
     system
         .add(robot_compound::component("robot", Quiet).expect("the robot builds"))
         .unwrap();
@@ -267,4 +275,110 @@ pub fn robot(node: &Node) -> coolbot::System {
     system.run_all().unwrap();
     node.expose_system(&system).unwrap();
     system
+}
+
+/// `Tuner`'s behaviour: its observables follow its configuration.
+pub struct Tuning;
+
+impl tuner::Behavior for Tuning {
+    fn tuning_periodic(&mut self, cx: &mut tuner::Cx<'_>) -> SectionResult {
+        cx.vars.gain = cx.config.gain;
+        cx.vars.label.clone_from(&cx.config.label);
+        Ok(())
+    }
+}
+
+/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
+pub struct HandOut(pub Sender<DataOut<Reading>>);
+
+impl source::Behavior for HandOut {
+    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
+        let _ = self.0.send(cx.outputs.out.clone());
+        Ok(())
+    }
+}
+
+/// A node with `tuner` and `source` running (`source`'s output `out` echoed, `idle`
+/// not), the endpoint to reach it, and `out` to send on.
+pub struct Sourced {
+    /// The node, listening on `endpoint`.
+    pub node: Node,
+    /// Where the node listens (`tcp/127.0.0.1:<port>`).
+    pub endpoint: String,
+    /// The system of `tuner` and `source`, exposed on the node.
+    pub system: System,
+    /// `source`'s output, echoed.
+    pub out: DataOut<Reading>,
+}
+
+/// Node `name` with a [`Sourced`] system, running.
+pub fn sourced(name: &str) -> Sourced {
+    let (node, endpoint) = node(name, &[]);
+    let (hand, out) = crossbeam_channel::bounded(1);
+    let mut system = System::new();
+    system
+        .add(source::component("source", HandOut(hand)))
+        .unwrap();
+    system.add(tuner::component("tuner", Tuning)).unwrap();
+    system.run_all().unwrap();
+    node.expose_system(&system).unwrap();
+    node.echo::<Reading>(&system, "source.out").unwrap();
+    let out = out.recv_timeout(PATIENCE).expect("the source started");
+    Sourced {
+        node,
+        endpoint,
+        system,
+        out,
+    }
+}
+
+/// A certificate authority: its certificate in `dir/<name>-ca.pem`, and what signs.
+pub struct Authority {
+    ca: PathBuf,
+    issuer: Issuer<'static, KeyPair>,
+}
+
+impl Authority {
+    /// A new authority named `name`, its certificate written in `dir`.
+    pub fn new(dir: &Path, name: &str) -> Authority {
+        let key = KeyPair::generate().expect("a CA key");
+        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.self_signed(&key).expect("a self-signed CA");
+        let ca = dir.join(format!("{name}-ca.pem"));
+        std::fs::write(&ca, certificate.pem()).expect("write the CA");
+        Authority {
+            ca,
+            issuer: Issuer::new(params, key),
+        }
+    }
+
+    /// A security file `dir/<file>.toml` for the node whose certificate's common name
+    /// is `name`, with `rules` (TOML `[[allow]]` tables) after its `[tls]` table.
+    pub fn node(&self, dir: &Path, file: &str, name: &str, rules: &str) -> PathBuf {
+        self.node_with(dir, file, name, "", rules)
+    }
+
+    /// [`Authority::node`] with `top` (top-level keys) before the `[tls]` table.
+    pub fn node_with(&self, dir: &Path, file: &str, name: &str, top: &str, rules: &str) -> PathBuf {
+        let key = KeyPair::generate().expect("a node key");
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                .expect("node params");
+        params.distinguished_name.push(DnType::CommonName, name);
+        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
+        std::fs::write(dir.join(format!("{file}.pem")), certificate.pem()).expect("write");
+        std::fs::write(dir.join(format!("{file}.key")), key.serialize_pem()).expect("write");
+        let path = dir.join(format!("{file}.toml"));
+        let ca = self.ca.file_name().expect("a file").to_string_lossy();
+        std::fs::write(
+            &path,
+            format!(
+                "{top}\n[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
+            ),
+        )
+        .expect("write the security file");
+        path
+    }
 }

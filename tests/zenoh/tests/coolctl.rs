@@ -10,66 +10,17 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::DataOut;
-use coolbot::{SectionResult, System};
 use coolbot_zenoh::Node;
-use coolbot_zenoh_tests::generated::source;
-use coolbot_zenoh_tests::generated::tuner;
 use coolbot_zenoh_tests::generated::types::Reading;
-use coolbot_zenoh_tests::support::{self, PATIENCE, node, wait_until};
+use coolbot_zenoh_tests::support::{self, PATIENCE, Sourced, node, wait_until};
 
 /// The `coolctl` binary, built in this package from its source (`Cargo.toml`).
 const COOLCTL: &str = env!("CARGO_BIN_EXE_coolctl-under-test");
 
-/// `Tuner`'s behaviour: its observables follow its configuration.
-struct Tuning;
-
-impl tuner::Behavior for Tuning {
-    fn tuning_periodic(&mut self, cx: &mut tuner::Cx<'_>) -> SectionResult {
-        cx.vars.gain = cx.config.gain;
-        cx.vars.label.clone_from(&cx.config.label);
-        Ok(())
-    }
-}
-
-/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
-struct HandOut(Sender<DataOut<Reading>>);
-
-impl source::Behavior for HandOut {
-    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
-
 /// Node `robot` with `tuner` and `source` (its output `out` echoed, `idle` not),
 /// running; and the endpoint to reach it.
-struct Robot {
-    node: Node,
-    endpoint: String,
-    system: System,
-    out: DataOut<Reading>,
-}
-
-fn robot() -> Robot {
-    let (node, endpoint) = node("robot", &[]);
-    let (hand, out) = crossbeam_channel::bounded(1);
-    let mut system = System::new();
-    system
-        .add(source::component("source", HandOut(hand)))
-        .unwrap();
-    system.add(tuner::component("tuner", Tuning)).unwrap();
-    system.run_all().unwrap();
-    node.expose_system(&system).unwrap();
-    node.echo::<Reading>(&system, "source.out").unwrap();
-    let out = out.recv_timeout(PATIENCE).expect("the source started");
-    Robot {
-        node,
-        endpoint,
-        system,
-        out,
-    }
+fn robot() -> Sourced {
+    support::sourced("robot")
 }
 
 /// `coolctl ARGS` reaching `endpoint` only.

@@ -3,13 +3,15 @@
 //! Schema by Ajv (`tests/foxglove/client.cjs`). The real `coolctl` binary serves a
 //! real node: the client receives the advertisements, subscribes, decodes the echoed
 //! packets, the monitoring and the supervision log; a channel nobody watches has no
-//! Zenoh subscriber behind it.
+//! Zenoh subscriber behind it; a node killed (`robot-under-test`, its own process)
+//! has its channels unadvertised until it comes back.
 //!
 //! The client's packages are in `$COOLBOT_FOXGLOVE_CLIENT` (a `node_modules`
 //! directory), else `target/foxglove-client/node_modules`; `.ci/run` installs them.
 //! Without them these tests fail under CI (`CI` set) and say they are skipped
 //! elsewhere, with the command that installs them.
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -21,9 +23,9 @@ use coolbot::crossbeam_channel::{self, Receiver, Sender};
 use coolbot::port::DataOut;
 use coolbot::{SectionResult, System};
 use coolbot_zenoh::Node;
+use coolbot_zenoh_tests::generated::rover;
 use coolbot_zenoh_tests::generated::types::{Reading, RoverPose, RoverScan};
-use coolbot_zenoh_tests::generated::{rover, source, tuner};
-use coolbot_zenoh_tests::support::{self, PATIENCE, node, wait_until};
+use coolbot_zenoh_tests::support::{self, Authority, PATIENCE, Sourced, node, wait_until};
 use serde_json::{Value, json};
 use zenoh::Wait;
 
@@ -58,33 +60,13 @@ fn client_modules() -> Option<PathBuf> {
     None
 }
 
-/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
-struct HandOut(Sender<DataOut<Reading>>);
-
-impl source::Behavior for HandOut {
-    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
-
-/// `Tuner`'s behaviour: its observables follow its configuration.
-struct Tuning;
-
-impl tuner::Behavior for Tuning {
-    fn tuning_periodic(&mut self, cx: &mut tuner::Cx<'_>) -> SectionResult {
-        cx.vars.gain = cx.config.gain;
-        Ok(())
-    }
-}
-
 /// A node `fox` with `source` (its `out` echoed, `idle` not), `tuner`, and the
 /// network tests' robot (compounds), running; a thread sending readings on `out`
 /// until dropped.
 struct Fox {
     node: Node,
     endpoint: String,
-    _system: System,
+    system: System,
     _robot: System,
     sending: Arc<AtomicBool>,
 }
@@ -96,18 +78,13 @@ impl Drop for Fox {
 }
 
 fn fox() -> Fox {
-    let (node, endpoint) = node("fox", &[]);
-    let (hand, out) = crossbeam_channel::bounded(1);
-    let mut system = System::new();
-    system
-        .add(source::component("source", HandOut(hand)))
-        .unwrap();
-    system.add(tuner::component("tuner", Tuning)).unwrap();
-    system.run_all().unwrap();
-    node.expose_system(&system).unwrap();
-    node.echo::<Reading>(&system, "source.out").unwrap();
+    let Sourced {
+        node,
+        endpoint,
+        system,
+        out,
+    } = support::sourced("fox");
     let robot = support::robot(&node);
-    let out = out.recv_timeout(PATIENCE).expect("the source started");
     let sending = Arc::new(AtomicBool::new(true));
     let running = Arc::clone(&sending);
     std::thread::spawn(move || {
@@ -124,7 +101,7 @@ fn fox() -> Fox {
     Fox {
         node,
         endpoint,
-        _system: system,
+        system,
         _robot: robot,
         sending,
     }
@@ -164,6 +141,12 @@ impl Process {
             .recv_timeout(PATIENCE)
             .expect("a line from the process")
     }
+
+    /// Kill the process (`kill -9`, before its input closes) and reap it.
+    fn kill(mut self) {
+        self.child.kill().expect("the process is killed");
+        self.child.wait().expect("the process is reaped");
+    }
 }
 
 impl Drop for Process {
@@ -174,26 +157,15 @@ impl Drop for Process {
     }
 }
 
-/// `coolctl foxglove` serving `fox` on a free port, with the echoed outputs `ports`
-/// select; its URL.
-fn serve(fox: &Fox, ports: &[&str]) -> (Process, String) {
-    let mut command = Command::new(COOLCTL);
-    command.args([
-        "--connect",
-        &fox.endpoint,
-        "--no-multicast",
-        "--timeout",
-        "2s",
-        "foxglove",
-        "--bind",
-        "127.0.0.1:0",
-        "--refresh",
-        "100ms",
-    ]);
-    for port in ports {
-        command.args(["--port", port]);
-    }
-    let server = Process::start(&mut command);
+/// `coolctl GLOBAL foxglove --bind 127.0.0.1:0 ARGS`, multicast scouting off: the
+/// server, and the URL it serves on.
+fn coolctl_foxglove(global: &[&str], args: &[&str]) -> (Process, String) {
+    let server = Process::start(
+        Command::new(COOLCTL)
+            .args(global)
+            .args(["--no-multicast", "foxglove", "--bind", "127.0.0.1:0"])
+            .args(args),
+    );
     let line = server.line();
     let url = line
         .strip_prefix("serving ")
@@ -202,11 +174,23 @@ fn serve(fox: &Fox, ports: &[&str]) -> (Process, String) {
     (server, url)
 }
 
+/// `coolctl foxglove` serving `fox` on a free port, with the echoed outputs `ports`
+/// select; its URL.
+fn serve(fox: &Fox, ports: &[&str]) -> (Process, String) {
+    let mut args = vec!["--refresh", "100ms"];
+    for port in ports {
+        args.extend(["--port", port]);
+    }
+    coolctl_foxglove(&["--connect", &fox.endpoint, "--timeout", "2s"], &args)
+}
+
 /// The Node client on `url`, its lines as JSON.
 struct Client {
     process: Process,
     /// Lines read while looking for others.
     aside: std::cell::RefCell<std::collections::VecDeque<Value>>,
+    /// The number of the last request sent.
+    requests: u32,
 }
 
 impl Client {
@@ -221,6 +205,7 @@ impl Client {
         Client {
             process,
             aside: Default::default(),
+            requests: 0,
         }
     }
 
@@ -257,14 +242,46 @@ impl Client {
         }
     }
 
+    /// The first line of `kind` for which `accept` holds among those set aside, taken.
+    fn aside_where(&self, kind: &str, accept: impl Fn(&Value) -> bool) -> Option<Value> {
+        let mut aside = self.aside.borrow_mut();
+        let at = aside
+            .iter()
+            .position(|value| value["kind"] == kind && accept(value))?;
+        aside.remove(at)
+    }
+
+    /// Set parameter `name` to `value` (typed `float64` when `float`): the value
+    /// the server answers the parameter has then, and the error status it sent
+    /// before its answer (a refusal), if any.
+    fn set_parameter(&mut self, name: &str, value: Value, float: bool) -> Set {
+        self.requests += 1;
+        let id = format!("set-{}", self.requests);
+        let mut parameter = json!({ "name": name, "value": value });
+        if float {
+            parameter["type"] = json!("float64");
+        }
+        self.order(json!({ "do": "setParameters", "id": id, "parameters": [parameter] }));
+        let answer = parameter_values(self, &id);
+        // The server sends a refusal before its answer, on the same ordered stream.
+        let refused = self.aside_where("status", |_| true).map(|status| {
+            assert_eq!(status["level"], 2, "a refusal is an error: {status}");
+            status["message"].as_str().expect("a message").to_owned()
+        });
+        Set {
+            value: answer.get(name).cloned().unwrap_or(Value::Null),
+            refused,
+        }
+    }
+
     fn order(&mut self, order: Value) {
         let stdin = self.process.stdin.as_mut().expect("stdin open");
         writeln!(stdin, "{order}").expect("the client reads its orders");
     }
 
     /// The advertisements until every topic of `expected` was advertised, by topic.
-    fn advertised(&self, expected: &[&str]) -> std::collections::BTreeMap<String, Value> {
-        let mut seen = std::collections::BTreeMap::new();
+    fn advertised(&self, expected: &[&str]) -> BTreeMap<String, Value> {
+        let mut seen = BTreeMap::new();
         while !expected.iter().all(|topic| seen.contains_key(*topic)) {
             let channel = self.next_where("advertise", |_| true);
             seen.insert(channel["topic"].as_str().unwrap().to_owned(), channel);
@@ -284,6 +301,31 @@ impl Client {
                 message["data"].clone()
             })
             .collect()
+    }
+}
+
+/// What setting a parameter got ([`Client::set_parameter`]).
+#[derive(Debug)]
+struct Set {
+    /// The parameter's value in the server's answer.
+    value: Value,
+    /// The error status the server sent, when it refused.
+    refused: Option<String>,
+}
+
+impl Set {
+    /// The value, the set taken (no refusal).
+    fn taken(self) -> Value {
+        assert_eq!(self.refused, None, "the set was refused");
+        self.value
+    }
+
+    /// The refusal's message (the set was refused), and the value then.
+    fn refusal(self) -> (String, Value) {
+        let message = self
+            .refused
+            .unwrap_or_else(|| panic!("the set was taken, not refused: {:?}", self.value));
+        (message, self.value)
     }
 }
 
@@ -444,7 +486,7 @@ fn supervision_and_adaptation_steps_reach_the_log() {
 }
 
 /// The next `parameterValues` answer to request `id`, as `name -> value`.
-fn parameter_values(client: &Client, id: &str) -> std::collections::BTreeMap<String, Value> {
+fn parameter_values(client: &Client, id: &str) -> BTreeMap<String, Value> {
     let values = client.next_where("parameterValues", |v| v["id"] == id);
     values["parameters"]
         .as_array()
@@ -465,7 +507,7 @@ fn parameters_show_and_set_controllable_variables_with_the_components_checks() {
         return;
     };
     let fox = fox();
-    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let tuner = fox.system.handle("tuner").expect("the tuner");
     let (_server, url) = serve(&fox, &[]);
     let mut client = Client::start(&modules, &url);
     let info = client.next_where("serverInfo", |_| true);
@@ -486,9 +528,8 @@ fn parameters_show_and_set_controllable_variables_with_the_components_checks() {
     assert!(!all.contains_key("fox/tuner/gain"), "{all:?}");
 
     // Set: the component's variable changes.
-    client.order(json!({ "do": "setParameters", "id": "limit",
-        "parameters": [{ "name": "fox/tuner/limit", "value": 7 }] }));
-    assert_eq!(parameter_values(&client, "limit")["fox/tuner/limit"], 7);
+    let set = client.set_parameter("fox/tuner/limit", json!(7), false);
+    assert_eq!(set.taken(), 7);
     let limit = || {
         tuner
             .snapshot()
@@ -501,52 +542,41 @@ fn parameters_show_and_set_controllable_variables_with_the_components_checks() {
 
     // The component's own checks refuse a value its type cannot hold; the client is
     // told, and the value stays.
-    client.order(json!({ "do": "setParameters", "id": "negative",
-        "parameters": [{ "name": "fox/tuner/limit", "value": -1 }] }));
-    let status = client.next_where("status", |_| true);
-    let message = status["message"].as_str().unwrap();
+    let (message, value) = client
+        .set_parameter("fox/tuner/limit", json!(-1), false)
+        .refusal();
     assert!(
-        status["level"] == 2 && message.contains("fox/tuner/limit") && message.contains("rejected"),
-        "{status}"
+        message.contains("fox/tuner/limit") && message.contains("rejected"),
+        "{message}"
     );
-    assert_eq!(parameter_values(&client, "negative")["fox/tuner/limit"], 7);
+    assert_eq!(value, 7);
     assert_eq!(limit(), Some(json!(7)));
 
     // The control port's ranges refuse a zero period, as for `coolctl set`.
-    client.order(json!({ "do": "setParameters", "id": "period",
-        "parameters": [{ "name": "fox/tuner/period", "value": 0.0, "type": "float64" }] }));
-    let status = client.next_where("status", |_| true);
-    let message = status["message"].as_str().unwrap();
+    let (message, value) = client
+        .set_parameter("fox/tuner/period", json!(0.0), true)
+        .refusal();
     assert!(
         message.contains("fox/tuner/period") && message.contains("rejected"),
-        "{status}"
+        "{message}"
     );
-    assert_eq!(
-        parameter_values(&client, "period")["fox/tuner/period"],
-        0.005
-    );
+    assert_eq!(value, 0.005);
     assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(5)));
 
     // A float period in range is taken.
-    client.order(json!({ "do": "setParameters", "id": "period2",
-        "parameters": [{ "name": "fox/tuner/period", "value": 0.01, "type": "float64" }] }));
-    assert_eq!(
-        parameter_values(&client, "period2")["fox/tuner/period"],
-        0.01
-    );
+    let set = client.set_parameter("fox/tuner/period", json!(0.01), true);
+    assert_eq!(set.taken(), 0.01);
     assert_eq!(tuner.snapshot().period, Some(Duration::from_millis(10)));
 
     // A name that is no parameter.
-    client.order(json!({ "do": "setParameters", "id": "nope",
-        "parameters": [{ "name": "fox/tuner/gain", "value": 2.0 }] }));
-    let status = client.next_where("status", |_| true);
+    let (message, value) = client
+        .set_parameter("fox/tuner/gain", json!(2.0), false)
+        .refusal();
     assert!(
-        status["message"]
-            .as_str()
-            .unwrap()
-            .contains("`fox/tuner/gain` is not a parameter"),
-        "{status}"
+        message.contains("`fox/tuner/gain` is not a parameter"),
+        "{message}"
     );
+    assert_eq!(value, Value::Null, "no value for what is no parameter");
 }
 
 #[test]
@@ -555,7 +585,7 @@ fn services_suspend_run_and_restart_a_component() {
         return;
     };
     let fox = fox();
-    let tuner = fox._system.handle("tuner").expect("the tuner");
+    let tuner = fox.system.handle("tuner").expect("the tuner");
     let (_server, url) = serve(&fox, &[]);
     let mut client = Client::start(&modules, &url);
     let services = client.next_where("services", |_| true);
@@ -609,53 +639,6 @@ fn services_suspend_run_and_restart_a_component() {
     );
 }
 
-/// A certificate authority for the access-rules test: its certificate in
-/// `dir/<name>-ca.pem`, and what signs.
-struct Authority {
-    ca: PathBuf,
-    issuer: rcgen::Issuer<'static, rcgen::KeyPair>,
-}
-
-impl Authority {
-    fn new(dir: &Path, name: &str) -> Authority {
-        use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
-        let key = KeyPair::generate().expect("a CA key");
-        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
-        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        params.distinguished_name.push(DnType::CommonName, name);
-        let certificate = params.self_signed(&key).expect("a self-signed CA");
-        let ca = dir.join(format!("{name}-ca.pem"));
-        std::fs::write(&ca, certificate.pem()).expect("write the CA");
-        Authority {
-            ca,
-            issuer: Issuer::new(params, key),
-        }
-    }
-
-    /// The security file of `name`'s certificate, with `rules` after its `[tls]`.
-    fn node(&self, dir: &Path, name: &str, rules: &str) -> PathBuf {
-        use rcgen::{CertificateParams, DnType, KeyPair};
-        let key = KeyPair::generate().expect("a node key");
-        let mut params =
-            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
-                .expect("node params");
-        params.distinguished_name.push(DnType::CommonName, name);
-        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
-        std::fs::write(dir.join(format!("{name}.pem")), certificate.pem()).expect("write");
-        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).expect("write");
-        let path = dir.join(format!("{name}.toml"));
-        let ca = self.ca.file_name().expect("a file").to_string_lossy();
-        std::fs::write(
-            &path,
-            format!(
-                "[tls]\nca = \"{ca}\"\ncertificate = \"{name}.pem\"\nkey = \"{name}.key\"\n\n{rules}"
-            ),
-        )
-        .expect("write the security file");
-        path
-    }
-}
-
 /// The operator `ops` may command the robot's base and what is inside it, nothing
 /// else.
 const RULES: &str = "[[allow]]\nnodes = [\"ops\"]\ncommand = [\"robot/robot.base.*\"]\n";
@@ -668,8 +651,8 @@ fn the_nodes_access_rules_hold_for_parameters_and_services() {
     let dir = tempfile::tempdir().expect("a temporary directory");
     let dir = dir.path();
     let authority = Authority::new(dir, "fleet");
-    let robot_file = authority.node(dir, "robot", RULES);
-    let ops_file = authority.node(dir, "ops", RULES);
+    let robot_file = authority.node(dir, "robot", "robot", RULES);
+    let ops_file = authority.node(dir, "ops", "ops", RULES);
     let endpoint = format!("quic/127.0.0.1:{}", support::free_port());
     let security = coolbot_zenoh::Security::load(&robot_file).expect("the security file");
     let config =
@@ -680,33 +663,24 @@ fn the_nodes_access_rules_hold_for_parameters_and_services() {
         .with_state_directory(None);
     let system = support::robot(&node);
 
-    let server = Process::start(Command::new(COOLCTL).args([
-        "--config",
-        ops_file.to_str().expect("a UTF-8 path"),
-        "--connect",
-        &endpoint,
-        "--no-multicast",
-        "--timeout",
-        "2s",
-        "foxglove",
-        "--bind",
-        "127.0.0.1:0",
-        "--refresh",
-        "100ms",
-    ]));
-    let line = server.line();
-    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let ops_file = ops_file.to_str().expect("a UTF-8 path");
+    let (_server, url) = coolctl_foxglove(
+        &[
+            "--config",
+            ops_file,
+            "--connect",
+            &endpoint,
+            "--timeout",
+            "2s",
+        ],
+        &["--refresh", "100ms"],
+    );
     let mut client = Client::start(&modules, &url);
     client.advertised(&["/robot/logger/monitor", "/robot/robot.base.motion/monitor"]);
 
     // Allowed: the base's motion.
-    client.order(json!({ "do": "setParameters", "id": "speed",
-        "parameters": [{ "name": "robot/robot.base.motion/max_speed", "value": 0.5,
-                         "type": "float64" }] }));
-    assert_eq!(
-        parameter_values(&client, "speed")["robot/robot.base.motion/max_speed"],
-        0.5
-    );
+    let set = client.set_parameter("robot/robot.base.motion/max_speed", json!(0.5), true);
+    assert_eq!(set.taken(), 0.5);
     let motion = system.handle_at("robot.base.motion").expect("motion");
     assert!(
         motion
@@ -717,13 +691,12 @@ fn the_nodes_access_rules_hold_for_parameters_and_services() {
     );
 
     // Outside the rules: the logger, neither by a parameter nor by a service.
-    client.order(json!({ "do": "setParameters", "id": "priority",
-        "parameters": [{ "name": "robot/logger/priority", "value": 3 }] }));
-    let status = client.next_where("status", |_| true);
-    let message = status["message"].as_str().unwrap();
+    let (message, _) = client
+        .set_parameter("robot/logger/priority", json!(3), false)
+        .refusal();
     assert!(
         message.contains("do not let `ops` command `robot/logger`"),
-        "{status}"
+        "{message}"
     );
     let logger = system.handle("logger").expect("the logger");
     assert_ne!(logger.snapshot().priority, 3);
@@ -806,18 +779,10 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
     let map = dir.path().join("map.toml");
     std::fs::write(&map, MAP).expect("write the mapping");
 
-    let server = Process::start(Command::new(COOLCTL).args([
-        "--connect",
-        &endpoint,
-        "--no-multicast",
-        "foxglove",
-        "--bind",
-        "127.0.0.1:0",
-        "--map",
-        map.to_str().expect("a UTF-8 path"),
-    ]));
-    let line = server.line();
-    let url = line.strip_prefix("serving ").expect("serving").to_owned();
+    let (_server, url) = coolctl_foxglove(
+        &["--connect", &endpoint],
+        &["--map", map.to_str().expect("a UTF-8 path")],
+    );
     let mut client = Client::start(&modules, &url);
     let channels = client.advertised(&[
         "/rover/rover.pose/pose",
@@ -870,24 +835,85 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
             .find(|(name, _)| name == "gain")
             .map(|(_, value)| value.to_json())
     };
-    client.order(json!({ "do": "setParameters", "id": "over",
-        "parameters": [{ "name": "rover/rover/gain", "value": 2.0, "type": "float64" }] }));
-    let status = client.next_where("status", |_| true);
+    let (message, value) = client
+        .set_parameter("rover/rover/gain", json!(2.0), true)
+        .refusal();
     assert!(
-        status["message"]
-            .as_str()
-            .unwrap()
-            .contains("`rover/rover/gain`: rejected"),
-        "{status}"
+        message.contains("`rover/rover/gain`: rejected"),
+        "{message}"
     );
-    assert_eq!(parameter_values(&client, "over")["rover/rover/gain"], 0.5);
+    assert_eq!(value, 0.5);
     assert_eq!(gain(), Some(json!(0.5)));
-    client.order(json!({ "do": "setParameters", "id": "in",
-        "parameters": [{ "name": "rover/rover/gain", "value": 0.25, "type": "float64" }] }));
-    assert_eq!(parameter_values(&client, "in")["rover/rover/gain"], 0.25);
+    let set = client.set_parameter("rover/rover/gain", json!(0.25), true);
+    assert_eq!(set.taken(), 0.25);
     assert_eq!(gain(), Some(json!(0.25)));
     sending.store(false, Ordering::Release);
     sender.join().expect("the sender ends");
+}
+
+/// Node `name` in a process of its own (`robot-under-test`), running the network
+/// tests' robot, connected to `endpoint`.
+fn robot_process(name: &str, endpoint: &str) -> Process {
+    let process =
+        Process::start(Command::new(env!("CARGO_BIN_EXE_robot-under-test")).args([name, endpoint]));
+    assert_eq!(process.line(), "ready");
+    process
+}
+
+/// Channels of node `far`, its own process, that the test follows.
+const FAR: [&str; 2] = ["/far/logger/monitor", "/far/robot.base.motion/monitor"];
+
+#[test]
+fn a_node_killed_has_its_channels_unadvertised_until_it_comes_back() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    // `far` connects to coolctl, which listens, so that a new `far` finds it again.
+    let listen = format!("tcp/127.0.0.1:{}", support::free_port());
+    let (_server, url) = coolctl_foxglove(
+        &[
+            "--connect",
+            &fox.endpoint,
+            "--listen",
+            &listen,
+            "--timeout",
+            "2s",
+        ],
+        &["--refresh", "100ms"],
+    );
+    let far = robot_process("far", &listen);
+    let mut client = Client::start(&modules, &url);
+    let channels = client.advertised(&[FAR[0], FAR[1], "/fox/tuner/monitor"]);
+    let id = |channel: &Value| channel["id"].as_u64().expect("a channel id");
+    let before: BTreeSet<u64> = FAR.iter().map(|topic| id(&channels[*topic])).collect();
+    let fox_tuner = id(&channels["/fox/tuner/monitor"]);
+
+    // Killed: its token goes, its channels are unadvertised; fox's stay.
+    far.kill();
+    let mut gone = BTreeSet::new();
+    while !before.is_subset(&gone) {
+        let unadvertised = client.next_where("unadvertise", |_| true);
+        let ids = unadvertised["ids"].as_array().expect("ids");
+        gone.extend(ids.iter().map(|id| id.as_u64().expect("an id")));
+    }
+    assert!(!gone.contains(&fox_tuner), "fox's channels stay: {gone:?}");
+
+    // Back: advertised again, under new ids, and served.
+    let _far = robot_process("far", &listen);
+    let mut again = BTreeMap::new();
+    while again.len() < FAR.len() {
+        let channel = client.next_where("advertise", |channel| {
+            FAR.iter().any(|topic| channel["topic"] == *topic) && !before.contains(&id(channel))
+        });
+        again.insert(
+            channel["topic"].as_str().expect("a topic").to_owned(),
+            id(&channel),
+        );
+    }
+    client.order(json!({ "do": "subscribe", "topic": FAR[0], "count": 1 }));
+    let monitoring = client.messages(FAR[0], 1);
+    assert_eq!(monitoring[0]["state"], "running", "{}", monitoring[0]);
 }
 
 /// Off loopback, the server needs the security file or `--insecure`, as a node's

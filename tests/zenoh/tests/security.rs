@@ -1,11 +1,11 @@
 //! Nodes with a security file (`docs/distribution.md`, "Security"): access rules on
 //! bridge keys, on the agent, on monitoring events, queryables and tokens, and
-//! `coolctl`'s library under them. Certificates are made here with rcgen: a CA and the
-//! nodes' certificates signed by it; and the `coolctl` binary with `--config` as an
+//! `coolctl`'s library under them. Certificates are made with rcgen
+//! (`support::Authority`): a CA and the nodes' certificates signed by it; and the `coolctl` binary with `--config` as an
 //! operator runs it (TLS, rules, plaintext refused off loopback), with an intruder's
 //! certificate from another CA.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
@@ -16,58 +16,9 @@ use coolbot_zenoh::{Node, Security, secure_config};
 use coolbot_zenoh_tests::generated::{
     back, feed, guarded_cell, inbox, numbers, other, plain, relay,
 };
-use coolbot_zenoh_tests::support::{self, PATIENCE, free_port, wait_subscribed, wait_until};
-use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
-
-/// A certificate authority: its certificate in `dir/<name>-ca.pem`, and what signs.
-struct Authority {
-    ca: PathBuf,
-    issuer: Issuer<'static, KeyPair>,
-}
-
-impl Authority {
-    fn new(dir: &Path, name: &str) -> Authority {
-        let key = KeyPair::generate().expect("a CA key");
-        let mut params = CertificateParams::new(Vec::<String>::new()).expect("CA params");
-        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        params.distinguished_name.push(DnType::CommonName, name);
-        let certificate = params.self_signed(&key).expect("a self-signed CA");
-        let ca = dir.join(format!("{name}-ca.pem"));
-        std::fs::write(&ca, certificate.pem()).expect("write the CA");
-        Authority {
-            ca,
-            issuer: Issuer::new(params, key),
-        }
-    }
-
-    /// A security file for the node whose certificate's common name is `name`, with
-    /// `rules` (TOML `[[allow]]` tables) after its `[tls]` table.
-    fn node(&self, dir: &Path, file: &str, name: &str, rules: &str) -> PathBuf {
-        self.node_with(dir, file, name, "", rules)
-    }
-
-    /// [`Authority::node`] with `top` (top-level keys) before the `[tls]` table.
-    fn node_with(&self, dir: &Path, file: &str, name: &str, top: &str, rules: &str) -> PathBuf {
-        let key = KeyPair::generate().expect("a node key");
-        let mut params =
-            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
-                .expect("node params");
-        params.distinguished_name.push(DnType::CommonName, name);
-        let certificate = params.signed_by(&key, &self.issuer).expect("signed");
-        std::fs::write(dir.join(format!("{file}.pem")), certificate.pem()).expect("write");
-        std::fs::write(dir.join(format!("{file}.key")), key.serialize_pem()).expect("write");
-        let path = dir.join(format!("{file}.toml"));
-        let ca = self.ca.file_name().expect("a file").to_string_lossy();
-        std::fs::write(
-            &path,
-            format!(
-                "{top}\n[tls]\nca = \"{ca}\"\ncertificate = \"{file}.pem\"\nkey = \"{file}.key\"\n\n{rules}"
-            ),
-        )
-        .expect("write the security file");
-        path
-    }
-}
+use coolbot_zenoh_tests::support::{
+    self, Authority, PATIENCE, free_port, wait_subscribed, wait_until,
+};
 
 /// The rules every node of the test reads: the operator `ops` may command the robot's
 /// base and what is inside it, nothing else.

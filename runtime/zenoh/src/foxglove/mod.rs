@@ -21,6 +21,9 @@
 //! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
 //! declared and no snapshot asked for it until a client subscribes, and both end when
 //! the last one unsubscribes.
+//!
+//! A node's channels live as long as its liveliness token: when the token goes, they
+//! are unadvertised; when it comes back, they are advertised again (new ids).
 
 mod channels;
 mod matching;
@@ -75,6 +78,9 @@ pub enum FoxgloveError {
     /// The mapping file cannot be used.
     #[error("the mapping file")]
     Map(#[from] wellknown::MapError),
+    /// The nodes' liveliness tokens cannot be watched.
+    #[error("cannot watch the nodes' liveliness tokens")]
+    Liveliness(#[source] zenoh::Error),
     /// The server's thread could not be started.
     #[error("cannot spawn the foxglove thread")]
     Spawn(#[source] std::io::Error),
@@ -126,6 +132,11 @@ enum Order {
     },
     WatchParameters(Vec<String>),
     UnwatchParameters(Vec<String>),
+    /// A node's liveliness token came (`true`) or went (`false`).
+    Node {
+        name: String,
+        alive: bool,
+    },
     Stop,
 }
 
@@ -235,6 +246,7 @@ impl Server {
                 source,
             })?;
         let handle = Arc::new(handle);
+        let nodes = watch_nodes(&session, orders.clone())?;
         let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let counts = Arc::new(Counts::default());
         let mut follower = Follower {
@@ -249,6 +261,7 @@ impl Server {
             counts: Arc::clone(&counts),
             server: Arc::clone(&handle),
             watched: BTreeMap::new(),
+            _nodes: nodes,
         };
         follower.discover();
         let stopped = Arc::clone(&stop);
@@ -308,6 +321,8 @@ struct Served {
     channel: Arc<RawChannel>,
     source: Source,
     subscribers: usize,
+    /// The node the channel's component is on (none: the log).
+    node: Option<String>,
     /// The Zenoh subscriber of a port or of the log, while subscribed.
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
     /// A monitored component's last CPU time and when it was read.
@@ -330,6 +345,36 @@ struct Follower {
     server: Arc<WebSocketServerHandle>,
     /// The parameters clients subscribed to, with the value last sent.
     watched: BTreeMap<String, Option<Parameter>>,
+    /// The nodes' liveliness tokens, coming and going, as [`Order::Node`].
+    _nodes: zenoh::pubsub::Subscriber<()>,
+}
+
+/// Send an [`Order::Node`] on `orders` each time a node's liveliness token comes or
+/// goes.
+fn watch_nodes(
+    session: &zenoh::Session,
+    orders: Sender<Order>,
+) -> Result<zenoh::pubsub::Subscriber<()>, FoxgloveError> {
+    session
+        .liveliness()
+        .declare_subscriber(keys::node_token("*"))
+        .callback(move |sample| {
+            let Some(name) = sample
+                .key_expr()
+                .as_str()
+                .strip_prefix(keys::ROOT)
+                .and_then(|rest| rest.strip_prefix('/'))
+            else {
+                return;
+            };
+            let alive = sample.kind() == zenoh::sample::SampleKind::Put;
+            let _ = orders.send(Order::Node {
+                name: name.to_owned(),
+                alive,
+            });
+        })
+        .wait()
+        .map_err(FoxgloveError::Liveliness)
 }
 
 impl Follower {
@@ -363,6 +408,8 @@ impl Follower {
                         self.watched.remove(&name);
                     }
                 }
+                Ok(Order::Node { name, alive: false }) => self.forget(&name),
+                Ok(Order::Node { alive: true, .. }) => self.discover(),
                 Err(RecvTimeoutError::Timeout) => {
                     self.discover();
                     self.poll_monitors();
@@ -374,7 +421,12 @@ impl Follower {
         }
     }
 
-    fn add(&mut self, channel: Result<Arc<RawChannel>, foxglove::FoxgloveError>, source: Source) {
+    fn add(
+        &mut self,
+        channel: Result<Arc<RawChannel>, foxglove::FoxgloveError>,
+        source: Source,
+        node: Option<&str>,
+    ) {
         match channel {
             Ok(channel) => {
                 self.channels.insert(
@@ -382,6 +434,7 @@ impl Follower {
                     Served {
                         channel,
                         source,
+                        node: node.map(str::to_owned),
                         subscribers: 0,
                         subscriber: None,
                         cpu: None,
@@ -404,7 +457,7 @@ impl Follower {
             .all(|served| !matches!(served.source, Source::Log))
         {
             let log = channels::log(&self.context);
-            self.add(log, Source::Log);
+            self.add(log, Source::Log, None);
         }
         let listed = match self.ctl.components(None) {
             Ok(listed) => listed,
@@ -439,6 +492,7 @@ impl Follower {
                 Source::Monitor {
                     address: address.clone(),
                 },
+                Some(&listed.node),
             );
             for port in &info.echoed {
                 let name = format!("{address}.{port}");
@@ -504,10 +558,27 @@ impl Follower {
                             key: key.clone(),
                             transform,
                         },
+                        Some(&listed.node),
                     );
                 }
             }
         }
+    }
+
+    /// Unadvertise the channels of node `name` (its token went), and forget its
+    /// components, so that the next discovery after it comes back serves them again.
+    fn forget(&mut self, name: &str) {
+        self.channels.retain(|_, served| {
+            if served.node.as_deref() == Some(name) {
+                served.channel.close();
+                false
+            } else {
+                true
+            }
+        });
+        let prefix = format!("{name}/");
+        self.known
+            .retain(|address, _| !address.starts_with(&prefix));
     }
 
     fn subscribe(&mut self, id: ChannelId) {
