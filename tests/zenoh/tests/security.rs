@@ -32,8 +32,7 @@ const SECURE: &str = "quic";
 /// `connect`.
 fn secure_node(name: &str, file: &Path, listen: &[String], connect: &[String]) -> Node {
     let security = Security::load(file).expect("a security file");
-    let mut config =
-        secure_config(listen, connect, false, &security).expect("a TLS configuration");
+    let mut config = secure_config(listen, connect, false, &security).expect("a TLS configuration");
     // What is tested is the secure link: large payloads go over it, not around it
     // through this host's shared memory (whose buffers Zenoh may also invalidate
     // before a starved receiver maps them: "Same host: shared memory", limits).
