@@ -28,10 +28,11 @@ pub enum CtlError {
     /// The network layer refused something (a name, the security file).
     #[error(transparent)]
     Network(#[from] crate::Error),
-    /// `coolctl foxglove` cannot serve.
+    /// `coolctl foxglove` cannot serve. (The source is a `foxglove::FoxgloveError`,
+    /// boxed whole: the operator's commands do not depend on the server built on them.)
     #[cfg(feature = "foxglove")]
     #[error("coolctl foxglove")]
-    Foxglove(#[source] Box<crate::foxglove::FoxgloveError>),
+    Foxglove(#[source] Box<dyn std::error::Error + Send + Sync>),
     /// A target that is not `<node>/<path>`.
     #[error("`{0}` is not a component address: write <node>/<path>, e.g. robot/base.motion")]
     BadTarget(String),

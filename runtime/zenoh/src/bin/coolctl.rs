@@ -251,7 +251,8 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             map,
             refresh,
         } => {
-            let foxglove = |error| CtlError::Foxglove(Box::new(error));
+            let foxglove =
+                |error: coolbot_zenoh::foxglove::FoxgloveError| CtlError::Foxglove(Box::new(error));
             let mappings = match map {
                 Some(path) => coolbot_zenoh::foxglove::wellknown::Mappings::load(&path)
                     .map_err(|error| foxglove(error.into()))?,
