@@ -114,7 +114,7 @@ impl NodeProcess {
             .unwrap_or_else(|error| panic!("`{program}` does not start: {error}"));
         let stdout = child.stdout.take().expect("piped");
         let process = NodeProcess { child };
-        let (ready, started) = coolbot::crossbeam_channel::bounded(1);
+        let (ready, started) = crossbeam_channel::bounded(1);
         std::thread::spawn(move || {
             let mut lines = std::io::BufReader::new(stdout)
                 .lines()
