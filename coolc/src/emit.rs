@@ -92,7 +92,7 @@ struct GeneratedMod<'a> {
 }
 
 /// The manifest as the first compile writes it: the template, its entries filled in
-/// by [`manifest::update`].
+/// by `manifest::update`.
 pub fn cargo_toml(krate: &ir::Crate) -> String {
     let template = render(&CargoToml { krate });
     match manifest::update(&template, krate, true) {
