@@ -8,15 +8,19 @@ use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::DataOut;
-use coolbot::{SectionResult, System};
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
+use coolbot::{Component, InputKind, Packet, SectionResult, System};
 use coolbot_zenoh::Node;
 use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 use zenoh::Wait;
 
-use crate::generated::types::Reading;
-use crate::generated::{base, motion, plain, robot as robot_compound, source, tuner};
+use crate::generated::types::{Chunk, LaserScan, Pose, Ranges, Reading, Speed, Twist};
+use crate::generated::{
+    base, drive, goal, growing_queue, latest, lidar, motion, plain, pose_source, poster_source,
+    queue, ranger, reader, robot as robot_compound, shm_queue, shm_source, small_queue, source,
+    tick_source, ticks, tiny_queue, tuner, two_source, wheels, wide_queue,
+};
 
 /// Generous: the machine is shared and may be loaded.
 pub const PATIENCE: Duration = Duration::from_secs(30);
@@ -288,14 +292,79 @@ impl tuner::Behavior for Tuning {
     }
 }
 
-/// `Source`'s behaviour: it hands its output `out` to the test when it starts.
-pub struct HandOut(pub Sender<DataOut<Reading>>);
+/// A behaviour that hands one of its component's ports to the test when the
+/// component starts; the test then sends or reads on it from its own thread.
+pub struct Hand<T>(pub Sender<T>);
 
-impl source::Behavior for HandOut {
-    fn start(&mut self, cx: &mut source::Cx<'_>) -> SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
+/// Implements the `Behavior` of generated module `$module` for [`Hand`] of `$port`:
+/// `start` hands over `cx.$side.$field`.
+macro_rules! hand {
+    ($module:ident, $port:ty, $side:ident . $field:ident) => {
+        impl $module::Behavior for Hand<$port> {
+            fn start(&mut self, cx: &mut $module::Cx<'_>) -> SectionResult {
+                let _ = self.0.send(cx.$side.$field.clone());
+                Ok(())
+            }
+        }
+    };
+}
+
+hand!(source, DataOut<Reading>, outputs.out);
+hand!(pose_source, DataOut<Pose>, outputs.out);
+hand!(poster_source, PosterOut<Pose>, outputs.out);
+hand!(tick_source, TickOut, outputs.out);
+hand!(shm_source, DataOut<Chunk>, outputs.out);
+hand!(lidar, DataOut<LaserScan>, outputs.scan);
+hand!(ranger, DataOut<Ranges>, outputs.ranges);
+hand!(wide_queue, FifoIn<Pose>, inputs.input);
+hand!(queue, FifoIn<Pose>, inputs.input);
+hand!(small_queue, FifoIn<Pose>, inputs.input);
+hand!(tiny_queue, FifoIn<Pose>, inputs.input);
+hand!(growing_queue, UfifoIn<Pose>, inputs.input);
+hand!(shm_queue, FifoIn<Chunk>, inputs.input);
+hand!(latest, LastIn<Pose>, inputs.input);
+hand!(reader, PosterIn<Pose>, inputs.input);
+hand!(ticks, TickIn, inputs.input);
+hand!(goal, LastIn<Pose>, inputs.goal);
+hand!(drive, FifoIn<Twist>, inputs.cmd);
+hand!(wheels, FifoIn<Speed>, inputs.speed);
+
+impl two_source::Behavior for Hand<(PosterOut<Pose>, DataOut<Pose>)> {
+    fn start(&mut self, cx: &mut two_source::Cx<'_>) -> SectionResult {
+        let _ = self
+            .0
+            .send((cx.outputs.post.clone(), cx.outputs.data.clone()));
         Ok(())
     }
+}
+
+/// A system of `source` feeding an outlet named `outlet` on `key`, which takes its
+/// packets as `kind`, running; `source`'s behaviour hands its output `out` over
+/// through `handed`. Returns the system and that output.
+pub fn outlet_fed<T>(
+    node: &Node,
+    key: &str,
+    kind: InputKind,
+    source: Component,
+    handed: &Receiver<DataOut<T>>,
+) -> (System, DataOut<T>)
+where
+    T: Packet + serde::Serialize + serde::de::DeserializeOwned,
+{
+    let mut system = System::new();
+    let from = format!("{}.out", source.name());
+    system
+        .add(
+            node.outlet::<T>("outlet", key, kind)
+                .build()
+                .expect("the outlet"),
+        )
+        .expect("added");
+    system.add(source).expect("added");
+    system.connect(&from, "outlet.input").expect("connected");
+    system.run_all().expect("runs");
+    let out = handed.recv().expect("the source's output");
+    (system, out)
 }
 
 /// A node with `tuner` and `source` running (`source`'s output `out` echoed, `idle`
@@ -316,9 +385,7 @@ pub fn sourced(name: &str) -> Sourced {
     let (node, endpoint) = node(name, &[]);
     let (hand, out) = crossbeam_channel::bounded(1);
     let mut system = System::new();
-    system
-        .add(source::component("source", HandOut(hand)))
-        .unwrap();
+    system.add(source::component("source", Hand(hand))).unwrap();
     system.add(tuner::component("tuner", Tuning)).unwrap();
     system.run_all().unwrap();
     node.expose_system(&system).unwrap();

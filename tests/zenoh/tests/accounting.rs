@@ -32,7 +32,7 @@ use coolbot::port::{DataOut, UfifoIn};
 use coolbot::{InputKind, System};
 use coolbot_zenoh_tests::generated::types::Pose;
 use coolbot_zenoh_tests::generated::{growing_queue, pose_source};
-use coolbot_zenoh_tests::support::{self, PATIENCE, wait_until};
+use coolbot_zenoh_tests::support::{self, Hand, PATIENCE, wait_until};
 use zenoh::Wait;
 
 const KEY: &str = "test/accounting";
@@ -41,23 +41,6 @@ const ROUNDS: usize = 50;
 /// Held by each soak: one at a time (each keeps a process streaming as fast as it can
 /// or every millisecond, on a 2-core machine).
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// A behaviour that hands a port to the test when its component starts.
-struct Hand<T>(Sender<T>);
-
-impl pose_source::Behavior for Hand<DataOut<Pose>> {
-    fn start(&mut self, cx: &mut pose_source::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
-
-impl growing_queue::Behavior for Hand<UfifoIn<Pose>> {
-    fn start(&mut self, cx: &mut growing_queue::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.input.clone());
-        Ok(())
-    }
-}
 
 /// A process of the test, killed (`kill -9`) when dropped.
 struct Process(Child);

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::{DataOut, FifoIn, LastIn, PosterIn, PosterOut, TickIn, TickOut, UfifoIn};
+use coolbot::port::DataOut;
 use coolbot::{Component, InputKind, MonitorEvent, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::{Error, Node};
 use coolbot_zenoh_tests::generated::types::Pose;
@@ -15,51 +15,13 @@ use coolbot_zenoh_tests::generated::{
     goal, growing_queue, latest, pose_source, poster_source, pull_source, queue, reader,
     small_queue, tick_source, ticks, tiny_queue, two_source, wide_queue,
 };
-use coolbot_zenoh_tests::support::{self, PATIENCE, pair, wait_subscribed, wait_until};
+use coolbot_zenoh_tests::support::{self, Hand, PATIENCE, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
 
 fn pose(seq: u64) -> Pose {
     Pose {
         x: seq as f64 / 2.0,
         seq,
-    }
-}
-
-/// A behaviour that hands a port (or ports) to the test when its component starts.
-struct Hand<T>(Sender<T>);
-
-/// Implements the `Behavior` of generated module `$module` for [`Hand`] of `$port`:
-/// `start` hands over `cx.$side.$field`.
-macro_rules! hand {
-    ($module:ident, $port:ty, $side:ident . $field:ident) => {
-        impl $module::Behavior for Hand<$port> {
-            fn start(&mut self, cx: &mut $module::Cx<'_>) -> coolbot::SectionResult {
-                let _ = self.0.send(cx.$side.$field.clone());
-                Ok(())
-            }
-        }
-    };
-}
-
-hand!(pose_source, DataOut<Pose>, outputs.out);
-hand!(poster_source, PosterOut<Pose>, outputs.out);
-hand!(tick_source, TickOut, outputs.out);
-hand!(wide_queue, FifoIn<Pose>, inputs.input);
-hand!(queue, FifoIn<Pose>, inputs.input);
-hand!(small_queue, FifoIn<Pose>, inputs.input);
-hand!(tiny_queue, FifoIn<Pose>, inputs.input);
-hand!(growing_queue, UfifoIn<Pose>, inputs.input);
-hand!(latest, LastIn<Pose>, inputs.input);
-hand!(reader, PosterIn<Pose>, inputs.input);
-hand!(ticks, TickIn, inputs.input);
-hand!(goal, LastIn<Pose>, inputs.goal);
-
-impl two_source::Behavior for Hand<(PosterOut<Pose>, DataOut<Pose>)> {
-    fn start(&mut self, cx: &mut two_source::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self
-            .0
-            .send((cx.outputs.post.clone(), cx.outputs.data.clone()));
-        Ok(())
     }
 }
 

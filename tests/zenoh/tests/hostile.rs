@@ -9,12 +9,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use coolbot::crossbeam_channel::{self, Receiver, Sender};
-use coolbot::port::{FifoIn, LastIn, PosterIn, TickIn};
 use coolbot::{Component, Handle, Monitor, MonitorEvent, OutputKind, System};
 use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::types::Pose;
 use coolbot_zenoh_tests::generated::{goal, reader, small_queue, ticks};
-use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_subscribed, wait_until};
+use coolbot_zenoh_tests::support::{Hand, PATIENCE, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
 
 fn pose(seq: u64) -> Pose {
@@ -38,37 +37,6 @@ fn ticks(epoch: u64, seq: u64, events: u64) -> Vec<u8> {
 fn followed(mut bytes: Vec<u8>, more: &[u8]) -> Vec<u8> {
     bytes.extend_from_slice(more);
     bytes
-}
-
-/// A behaviour that hands its input port to the test when its component starts.
-struct Hand<T>(Sender<T>);
-
-impl small_queue::Behavior for Hand<FifoIn<Pose>> {
-    fn start(&mut self, cx: &mut small_queue::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.input.clone());
-        Ok(())
-    }
-}
-
-impl reader::Behavior for Hand<PosterIn<Pose>> {
-    fn start(&mut self, cx: &mut reader::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.input.clone());
-        Ok(())
-    }
-}
-
-impl ticks::Behavior for Hand<TickIn> {
-    fn start(&mut self, cx: &mut ticks::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.input.clone());
-        Ok(())
-    }
-}
-
-impl goal::Behavior for Hand<LastIn<Pose>> {
-    fn start(&mut self, cx: &mut goal::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.goal.clone());
-        Ok(())
-    }
 }
 
 /// The consumer's system: `inlet` into `sink` (built by `sink`, connected at

@@ -15,7 +15,7 @@ mod ros2_python;
 
 use std::time::Duration;
 
-use coolbot::crossbeam_channel::{self, Sender};
+use coolbot::crossbeam_channel;
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::ros::RosType;
 use coolbot::{ConnectError, System};
@@ -24,7 +24,7 @@ use coolbot_zenoh_tests::generated::types::ros::builtin_interfaces::Time;
 use coolbot_zenoh_tests::generated::types::ros::std_msgs::Header;
 use coolbot_zenoh_tests::generated::types::{LaserScan, Ranges, Speed, Twist};
 use coolbot_zenoh_tests::generated::{drive, lidar, ranger, wheels};
-use coolbot_zenoh_tests::support::{PATIENCE, free_port, wait_until};
+use coolbot_zenoh_tests::support::{Hand, PATIENCE, free_port, wait_until};
 use ros2_python::{ROUTER, Script, interfaces};
 use serde_json::{Value, json};
 use zenoh::Wait;
@@ -74,37 +74,6 @@ for line in sys.stdin:
             out(kind="info", topic=order["topic"], publishers=endpoints(info.publishers),
                 subscribers=endpoints(info.subscribers))
 "#;
-
-/// A behaviour that hands a port to the test when its component starts.
-struct Hand<T>(Sender<T>);
-
-impl lidar::Behavior for Hand<DataOut<LaserScan>> {
-    fn start(&mut self, cx: &mut lidar::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.scan.clone());
-        Ok(())
-    }
-}
-
-impl drive::Behavior for Hand<FifoIn<Twist>> {
-    fn start(&mut self, cx: &mut drive::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.cmd.clone());
-        Ok(())
-    }
-}
-
-impl ranger::Behavior for Hand<DataOut<Ranges>> {
-    fn start(&mut self, cx: &mut ranger::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.ranges.clone());
-        Ok(())
-    }
-}
-
-impl wheels::Behavior for Hand<FifoIn<Speed>> {
-    fn start(&mut self, cx: &mut wheels::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.speed.clone());
-        Ok(())
-    }
-}
 
 fn scan(sec: i32) -> LaserScan {
     LaserScan {

@@ -7,26 +7,16 @@ use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 
-use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::crossbeam_channel::{self, Receiver};
 use coolbot::port::DataOut;
 use coolbot::{InputKind, OverflowPolicy, System};
 use coolbot_zenoh::{Node, SHARED_THRESHOLD};
 use coolbot_zenoh_tests::generated::shm_source;
 use coolbot_zenoh_tests::generated::types::Chunk;
-use coolbot_zenoh_tests::support::{self, PATIENCE};
+use coolbot_zenoh_tests::support::{self, Hand, PATIENCE};
 
 /// A frame large enough for shared memory.
 const LARGE: usize = 256 << 10;
-
-/// The producer's behaviour: hands its output over when it starts.
-struct Hand(Sender<DataOut<Chunk>>);
-
-impl shm_source::Behavior for Hand {
-    fn start(&mut self, cx: &mut shm_source::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
 
 /// The other process, killed (`kill -9`) when dropped; its stdout's lines on a channel.
 struct Peer {
@@ -95,27 +85,13 @@ fn producer(
     let node = Node::open(name, zenoh_config)
         .expect("the node opens")
         .with_state_directory(None);
-    let mut system = System::new();
     let kind = InputKind::Fifo {
         capacity: 64,
         policy: OverflowPolicy::Block,
     };
-    system
-        .add(
-            node.outlet::<Chunk>("outlet", key, kind)
-                .build()
-                .expect("the outlet"),
-        )
-        .expect("added");
     let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(shm_source::component("source", Hand(hand)))
-        .expect("added");
-    system
-        .connect("source.out", "outlet.input")
-        .expect("connected");
-    system.run_all().expect("runs");
-    let out = handed.recv().expect("the source's output");
+    let source = shm_source::component("source", Hand(hand));
+    let (system, out) = support::outlet_fed(&node, key, kind, source, &handed);
     (node, endpoint, system, out)
 }
 

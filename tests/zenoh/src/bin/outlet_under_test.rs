@@ -5,23 +5,13 @@
 //! `<key> sent <epoch> <number>`, written to its tally first). It prints `ready` once
 //! the outlet runs, and runs until it is killed.
 
-use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::DataOut;
-use coolbot::{InputKind, System};
+use coolbot::InputKind;
+use coolbot::crossbeam_channel;
 use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::pose_source;
 use coolbot_zenoh_tests::generated::types::Pose;
+use coolbot_zenoh_tests::support::{Hand, outlet_fed};
 use tracing_subscriber::EnvFilter;
-
-/// The producer's behaviour: hands its output over when it starts.
-struct Hand(Sender<DataOut<Pose>>);
-
-impl pose_source::Behavior for Hand {
-    fn start(&mut self, cx: &mut pose_source::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -45,27 +35,13 @@ fn main() {
         .init();
     let config = coolbot_zenoh::peer_config(&[], &[endpoint], false).expect("a configuration");
     let node = Node::open("accounting-producer", config).expect("the node opens");
-    let mut system = System::new();
     let kind = InputKind::Ufifo {
         initial: 64,
         max: Some(1 << 20),
     };
-    system
-        .add(
-            node.outlet::<Pose>("outlet", &key, kind)
-                .build()
-                .expect("the outlet"),
-        )
-        .expect("added");
     let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(pose_source::component("producer", Hand(hand)))
-        .expect("added");
-    system
-        .connect("producer.out", "outlet.input")
-        .expect("connected");
-    system.run_all().expect("runs");
-    let out = handed.recv().expect("the producer's output");
+    let producer = pose_source::component("producer", Hand(hand));
+    let (_system, out) = outlet_fed(&node, &key, kind, producer, &handed);
     println!("ready");
     for seq in 1..=limit {
         out.send(Pose { x: seq as f64, seq });

@@ -13,30 +13,13 @@
 
 use std::io::Write;
 
-use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::{DataOut, FifoIn};
+use coolbot::crossbeam_channel;
 use coolbot::{InputKind, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::types::Chunk;
 use coolbot_zenoh_tests::generated::{shm_queue, shm_source};
+use coolbot_zenoh_tests::support::{Hand, outlet_fed};
 use zenoh::Wait;
-
-/// A behaviour that hands its port over when its component starts.
-struct Hand<T>(Sender<T>);
-
-impl shm_source::Behavior for Hand<DataOut<Chunk>> {
-    fn start(&mut self, cx: &mut shm_source::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.outputs.out.clone());
-        Ok(())
-    }
-}
-
-impl shm_queue::Behavior for Hand<FifoIn<Chunk>> {
-    fn start(&mut self, cx: &mut shm_queue::Cx<'_>) -> coolbot::SectionResult {
-        let _ = self.0.send(cx.inputs.input.clone());
-        Ok(())
-    }
-}
 
 fn config(connect: &[String], shared_memory: bool) -> zenoh::Config {
     let mut config = coolbot_zenoh::peer_config(&[], connect, false).expect("a configuration");
@@ -123,27 +106,13 @@ fn hold(endpoint: String, key: &str) -> ! {
 
 fn produce(name: &str, key: &str) -> ! {
     let node = Node::open(name, config(&[], true)).expect("the node opens");
-    let mut system = System::new();
     let kind = InputKind::Fifo {
         capacity: 4,
         policy: OverflowPolicy::Block,
     };
-    system
-        .add(
-            node.outlet::<Chunk>("outlet", key, kind)
-                .build()
-                .expect("the outlet"),
-        )
-        .expect("added");
     let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(shm_source::component("producer", Hand(hand)))
-        .expect("added");
-    system
-        .connect("producer.out", "outlet.input")
-        .expect("connected");
-    system.run_all().expect("runs");
-    let out = handed.recv().expect("the producer's output");
+    let producer = shm_source::component("producer", Hand(hand));
+    let (_system, out) = outlet_fed(&node, key, kind, producer, &handed);
     let mut number = 0;
     while node.shared_memory().shared == 0 {
         number += 1;
