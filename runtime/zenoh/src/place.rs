@@ -524,10 +524,14 @@ impl End {
         // A pull output's answers come as replies to its queries, not on the key.
         for output in self.outputs.iter().filter(|output| !output.pull) {
             let deliver = Arc::clone(&output.deliver);
+            let counters = self.node.shared_memory_counters();
             self.subscribers.push(
                 session
                     .declare_subscriber(output.key.clone())
-                    .callback(move |sample| deliver(&sample.payload().to_bytes()))
+                    .callback(move |sample| {
+                        counters.received(sample.payload());
+                        deliver(&sample.payload().to_bytes());
+                    })
                     .wait()
                     .map_err(Error::zenoh("subscribe to a remote output"))?,
             );

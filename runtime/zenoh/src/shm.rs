@@ -38,7 +38,8 @@ pub struct SharedMemoryCounts {
     /// instead, because the pool was full (or shared memory is off): sent over the link
     /// all the same, not lost.
     pub copied: u64,
-    /// Messages its inlets received in shared memory (from a node on this host).
+    /// Messages its inlets, and the outputs of the proxies of its instances placed on
+    /// another node, received in shared memory (from a node on this host).
     pub received: u64,
 }
 
@@ -59,7 +60,8 @@ impl Counters {
         }
     }
 
-    /// An inlet received `payload`: counted when it is in shared memory.
+    /// An inlet or a proxy's output received `payload`: counted when it is in shared
+    /// memory.
     pub(crate) fn received(&self, payload: &ZBytes) {
         if payload.as_shm().is_some() {
             self.received.fetch_add(1, Ordering::Relaxed);

@@ -51,9 +51,11 @@ impl camera_rig::Parts for Parts {
     }
 }
 
-/// A registry of a `Native` driver: the drivers process builds it for the robot.
+/// A registry of a `Native` driver and a camera (`crate::camera`): the drivers
+/// process builds them for the robot.
 pub fn registry() -> Registry {
     let mut registry = Registry::new();
     native_driver::register(&mut registry, |name| native_driver::component(name, Native));
+    crate::camera::register(&mut registry);
     registry
 }

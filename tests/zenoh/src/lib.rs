@@ -12,6 +12,7 @@ pub mod generated {
     include!(concat!(env!("OUT_DIR"), "/cool.rs"));
 }
 
+pub mod camera;
 pub mod dying;
 pub mod isolation;
 pub mod support;

@@ -160,6 +160,11 @@ impl NodeProcess {
         status.expect("ended")
     }
 
+    /// The process's id.
+    pub fn id(&self) -> u32 {
+        self.child.id()
+    }
+
     /// `kill -9`: how it ended.
     pub fn kill(mut self) -> std::process::ExitStatus {
         self.child.kill().expect("the process is killed");

@@ -12,8 +12,9 @@ use std::sync::Arc;
 use coolbot::{Command, Handle, State, Step, System, Value};
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::{Node, Placer};
+use coolbot_zenoh_tests::camera::Parts as VisionParts;
 use coolbot_zenoh_tests::dying::{counted, wait_step};
-use coolbot_zenoh_tests::generated::camera_rig;
+use coolbot_zenoh_tests::generated::{camera_rig, vision};
 use coolbot_zenoh_tests::isolation::{Parts, registry};
 use coolbot_zenoh_tests::support::{NodeProcess, PATIENCE, node};
 
@@ -174,4 +175,34 @@ fn a_driver_that_segfaults_ends_only_its_process_and_is_substituted_then_built_a
         "the drivers process dies of a segmentation fault: {status:?}"
     );
     substituted_then_built_again(robot, &first);
+}
+
+/// A camera (`cool/camera.cool`) in the drivers process streams its 640 x 480 RGB
+/// images to a detector in the robot's process: each image arrives whole, through
+/// shared memory (the two nodes are on one host), counted by the robot's node as
+/// received there.
+#[test]
+fn a_camera_in_the_drivers_process_streams_whole_images_through_shared_memory() {
+    let (node, endpoint) = node("robot", &[]);
+    let node = Arc::new(node);
+    let _drivers = drivers(&endpoint, &node);
+    let placer = Placer::new(Arc::clone(&node), registry()).install();
+    let mut system = System::new();
+    let vision = system
+        .add(vision::component("vision", VisionParts).expect("the vision system builds"))
+        .expect("added");
+    system.run_all().expect("runs");
+    let detector = vision.instance("detector").expect("the detector");
+    detector
+        .wait_for(|m| counted(m, "seen") >= 5, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("images reach the detector: {timeout}"));
+    assert_eq!(counted(&detector.snapshot(), "bad"), 0, "every image whole");
+    assert!(
+        node.shared_memory().received >= 5,
+        "the images came through shared memory: {:?}",
+        node.shared_memory()
+    );
+    let report = system.shutdown();
+    assert!(report.clean(), "shutdown: {report:?}");
+    drop(placer);
 }

@@ -1,7 +1,8 @@
 //! The drivers process of `tests/isolation.rs`, as the starter `main` coolc writes
 //! runs one: `drivers-under-test --node drivers --serve --connect ENDPOINT` (the
 //! options of `coolbot_zenoh::network::NodeOptions`) opens the node, whose agent
-//! builds a `NativeDriver` (`cool/isolation.cool`) when another node places one here.
+//! builds a `NativeDriver` (`cool/isolation.cool`) or a `Camera` (`cool/camera.cool`,
+//! for `benches/camera.rs`) when another node places one here.
 //! It prints `ready` once the node is open, and serves until it is killed, its input
 //! closes, or the driver it runs crashes it.
 
