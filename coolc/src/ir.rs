@@ -1,16 +1,19 @@
 //! The intermediate representation the templates print.
 //!
-//! `lower` builds it from the checked model. **Invariant:** every string here is
-//! final Rust (an identifier, a type path, an expression, a literal) or final TOML,
-//! and every expression `layout` may break over lines is a [`Code`] tree; nothing
-//! reads Rust back from text, and the templates only loop over these structures and
-//! print them. Orders are source orders.
+//! `lower` builds it from the checked model. **Invariant:** every expression is a
+//! [`Code`] tree (a `SPEC` entry, a default, a port constructor, a compound's builder
+//! steps and instance builds, a rule's condition and test); every string here is
+//! final Rust with no expression structure (an identifier, a type path, a literal, a
+//! signature, a short stub statement) or final TOML. Nothing reads Rust back from
+//! text, and the templates only loop over these structures and print them. Orders
+//! are source orders.
 
 use std::fmt;
 
-/// A Rust expression, split where rustfmt may break its lines: `lower` builds these
-/// trees and `layout` lays them out (no Rust is read back from text). Printed with
-/// `{}`, a tree is its one-line form.
+/// A Rust expression as a tree: `lower` builds these trees, `layout` lays out the
+/// shapes it has rules for (atoms, struct literals, calls, lists) and the Rust
+/// formatter the others; no Rust is read back from text. Printed with `{}`, a tree
+/// is its one-line form.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Code {
     /// Text with no bracket rustfmt would break at: a path, a literal, `-1`,
@@ -18,14 +21,37 @@ pub enum Code {
     Atom(String),
     /// `path { name: value, ... }`.
     Struct(String, Vec<(String, Code)>),
-    /// `callee(args)`.
+    /// `callee(args)`, a function, a tuple variant or a macro (`callee` ends in
+    /// `!`).
     Call(String, Vec<Code>),
     /// `&[items]`, `[items]` or `::std::vec![items]`: the opening text, the items.
     List(String, Vec<Code>),
     /// `[item; count]`, kept on one line.
     Repeat(Box<Code>, u64),
-    /// A shape `layout` has no rule for (a closure, `vec![item; n]`): printed as it
-    /// is, and the file it is in is left to the formatter.
+    /// `path { name: value, ..., ..rest }`: the fields it names, the rest from
+    /// `rest`.
+    StructRest(String, Vec<(String, Code)>, Box<Code>),
+    /// `receiver.method(args)`.
+    Method(Box<Code>, String, Vec<Code>),
+    /// `receiver.field`.
+    Field(Box<Code>, String),
+    /// `operand?`.
+    Try(Box<Code>),
+    /// A prefix operator and its operand: `!x`, `-x`, `&x`.
+    Unary(&'static str, Box<Code>),
+    /// `left op right`.
+    Binary(Box<Code>, &'static str, Box<Code>),
+    /// `(inner)`.
+    Paren(Box<Code>),
+    /// `|params| body`, or `move |params| body` when it moves (`params` is the
+    /// pattern list as written: `left`, `(left, right)`, `view: &T`).
+    Closure(bool, String, Box<Code>),
+    /// `{ let name = value; ... tail }`.
+    Block(Vec<(String, Code)>, Box<Code>),
+    /// `match scrutinee { pattern => value, ... }`.
+    Match(Box<Code>, Vec<(String, Code)>),
+    /// A shape no rule covers (`vec![item; n]`): printed as it is, and the file it
+    /// is in is left to the formatter.
     Other(String),
 }
 
@@ -71,38 +97,154 @@ impl Code {
         code.map_or_else(|| Code::atom("None"), Code::some)
     }
 
+    /// `::core::option::Option::Some(code)`, by its full path.
+    pub fn core_some(code: Code) -> Code {
+        Code::call("::core::option::Option::Some", vec![code])
+    }
+
+    /// `::core::option::Option::None`, by its full path.
+    pub fn core_none() -> Code {
+        Code::atom("::core::option::Option::None")
+    }
+
+    /// `self.method(args)`.
+    pub fn method(self, method: impl Into<String>, args: Vec<Code>) -> Code {
+        Code::Method(Box::new(self), method.into(), args)
+    }
+
+    /// `self.field`.
+    pub fn field(self, field: impl Into<String>) -> Code {
+        Code::Field(Box::new(self), field.into())
+    }
+
+    /// `self?`.
+    pub fn try_op(self) -> Code {
+        Code::Try(Box::new(self))
+    }
+
+    /// `op self` for a prefix operator `op`.
+    pub fn prefix(op: &'static str, operand: Code) -> Code {
+        Code::Unary(op, Box::new(operand))
+    }
+
+    /// `&self`.
+    pub fn reference(self) -> Code {
+        Code::prefix("&", self)
+    }
+
+    /// `left op right`.
+    pub fn binary(left: Code, op: &'static str, right: Code) -> Code {
+        Code::Binary(Box::new(left), op, Box::new(right))
+    }
+
+    /// `(self)`.
+    pub fn paren(self) -> Code {
+        Code::Paren(Box::new(self))
+    }
+
+    /// `|params| body`.
+    pub fn closure(params: impl Into<String>, body: Code) -> Code {
+        Code::Closure(false, params.into(), Box::new(body))
+    }
+
+    /// `move |params| body`.
+    pub fn move_closure(params: impl Into<String>, body: Code) -> Code {
+        Code::Closure(true, params.into(), Box::new(body))
+    }
+
     /// This code with every call `from()` (no argument) made a call of `to`.
     pub fn replace_call(&self, from: &str, to: &str) -> Code {
         match self {
-            Code::Atom(text) => Code::Atom(text.clone()),
-            Code::Other(text) => {
-                Code::Other(text.replace(&format!("{from}()"), &format!("{to}()")))
+            Code::Call(callee, args) if callee == from && args.is_empty() => {
+                Code::call(to, Vec::new())
             }
-            Code::Struct(path, fields) => Code::Struct(
-                path.clone(),
-                fields
-                    .iter()
-                    .map(|(name, value)| (name.clone(), value.replace_call(from, to)))
-                    .collect(),
-            ),
-            Code::Call(callee, args) => Code::Call(
-                if callee == from && args.is_empty() {
-                    to.to_owned()
-                } else {
-                    callee.clone()
-                },
-                args.iter().map(|arg| arg.replace_call(from, to)).collect(),
-            ),
-            Code::List(open, items) => Code::List(
-                open.clone(),
-                items
-                    .iter()
-                    .map(|item| item.replace_call(from, to))
-                    .collect(),
-            ),
-            Code::Repeat(item, count) => {
-                Code::Repeat(Box::new(item.replace_call(from, to)), *count)
+            _ => self.map_operands(&|operand| operand.replace_call(from, to)),
+        }
+    }
+
+    /// This code with every part equal to `from` replaced by `to`.
+    pub fn replace(&self, from: &Code, to: &Code) -> Code {
+        if self == from {
+            to.clone()
+        } else {
+            self.map_operands(&|operand| operand.replace(from, to))
+        }
+    }
+
+    /// Whether `part` is this code or a part of it.
+    pub fn contains(&self, part: &Code) -> bool {
+        self == part
+            || self
+                .operands()
+                .into_iter()
+                .any(|operand| operand.contains(part))
+    }
+
+    /// The codes this one is made of, in order.
+    fn operands(&self) -> Vec<&Code> {
+        match self {
+            Code::Atom(_) | Code::Other(_) => Vec::new(),
+            Code::Struct(_, fields) => fields.iter().map(|(_, value)| value).collect(),
+            Code::StructRest(_, fields, rest) => fields
+                .iter()
+                .map(|(_, value)| value)
+                .chain([rest.as_ref()])
+                .collect(),
+            Code::Call(_, items) | Code::List(_, items) => items.iter().collect(),
+            Code::Method(receiver, _, args) => {
+                [receiver.as_ref()].into_iter().chain(args).collect()
             }
+            Code::Repeat(operand, _)
+            | Code::Field(operand, _)
+            | Code::Try(operand)
+            | Code::Unary(_, operand)
+            | Code::Paren(operand)
+            | Code::Closure(_, _, operand) => vec![operand.as_ref()],
+            Code::Binary(left, _, right) => vec![left.as_ref(), right.as_ref()],
+            Code::Block(lets, tail) => lets
+                .iter()
+                .map(|(_, value)| value)
+                .chain([tail.as_ref()])
+                .collect(),
+            Code::Match(scrutinee, arms) => [scrutinee.as_ref()]
+                .into_iter()
+                .chain(arms.iter().map(|(_, value)| value))
+                .collect(),
+        }
+    }
+
+    /// This code with `f` applied to each of its operands ([`Code::operands`]).
+    fn map_operands(&self, f: &dyn Fn(&Code) -> Code) -> Code {
+        let all = |items: &[Code]| -> Vec<Code> { items.iter().map(f).collect() };
+        let fields = |fields: &[(String, Code)]| -> Vec<(String, Code)> {
+            fields
+                .iter()
+                .map(|(name, value)| (name.clone(), f(value)))
+                .collect()
+        };
+        let boxed = |code: &Code| Box::new(f(code));
+        match self {
+            Code::Atom(_) | Code::Other(_) => self.clone(),
+            Code::Struct(path, named) => Code::Struct(path.clone(), fields(named)),
+            Code::StructRest(path, named, rest) => {
+                Code::StructRest(path.clone(), fields(named), boxed(rest))
+            }
+            Code::Call(callee, args) => Code::Call(callee.clone(), all(args)),
+            Code::List(open, items) => Code::List(open.clone(), all(items)),
+            Code::Repeat(item, count) => Code::Repeat(boxed(item), *count),
+            Code::Method(receiver, method, args) => {
+                Code::Method(boxed(receiver), method.clone(), all(args))
+            }
+            Code::Field(receiver, field) => Code::Field(boxed(receiver), field.clone()),
+            Code::Try(operand) => Code::Try(boxed(operand)),
+            Code::Unary(op, operand) => Code::Unary(op, boxed(operand)),
+            Code::Binary(left, op, right) => Code::Binary(boxed(left), op, boxed(right)),
+            Code::Paren(inner) => Code::Paren(boxed(inner)),
+            Code::Closure(moves, params, body) => {
+                Code::Closure(*moves, params.clone(), boxed(body))
+            }
+            Code::Block(lets, tail) => Code::Block(fields(lets), boxed(tail)),
+            Code::Match(scrutinee, arms) => Code::Match(boxed(scrutinee), fields(arms)),
         }
     }
 }
@@ -118,18 +260,30 @@ impl fmt::Display for Code {
             }
             Ok(())
         }
+        fn fields(f: &mut fmt::Formatter<'_>, fields: &[(String, Code)]) -> fmt::Result {
+            for (i, (name, value)) in fields.iter().enumerate() {
+                if i > 0 {
+                    f.write_str(", ")?;
+                }
+                write!(f, "{name}: {value}")?;
+            }
+            Ok(())
+        }
         match self {
             Code::Atom(text) | Code::Other(text) => f.write_str(text),
-            Code::Struct(path, fields) if fields.is_empty() => write!(f, "{path} {{}}"),
-            Code::Struct(path, fields) => {
+            Code::Struct(path, named) if named.is_empty() => write!(f, "{path} {{}}"),
+            Code::Struct(path, named) => {
                 write!(f, "{path} {{ ")?;
-                for (i, (name, value)) in fields.iter().enumerate() {
-                    if i > 0 {
-                        f.write_str(", ")?;
-                    }
-                    write!(f, "{name}: {value}")?;
-                }
+                fields(f, named)?;
                 f.write_str(" }")
+            }
+            Code::StructRest(path, named, rest) => {
+                write!(f, "{path} {{ ")?;
+                fields(f, named)?;
+                if !named.is_empty() {
+                    f.write_str(", ")?;
+                }
+                write!(f, "..{rest} }}")
             }
             Code::Call(callee, args) => {
                 write!(f, "{callee}(")?;
@@ -142,6 +296,39 @@ impl fmt::Display for Code {
                 f.write_str("]")
             }
             Code::Repeat(item, count) => write!(f, "[{item}; {count}]"),
+            Code::Method(receiver, method, args) => {
+                write!(f, "{receiver}.{method}(")?;
+                list(f, args)?;
+                f.write_str(")")
+            }
+            Code::Field(receiver, field) => write!(f, "{receiver}.{field}"),
+            Code::Try(operand) => write!(f, "{operand}?"),
+            Code::Unary(op, operand) => write!(f, "{op}{operand}"),
+            Code::Binary(left, op, right) => write!(f, "{left} {op} {right}"),
+            Code::Paren(inner) => write!(f, "({inner})"),
+            Code::Closure(moves, params, body) => {
+                if *moves {
+                    f.write_str("move ")?;
+                }
+                write!(f, "|{params}| {body}")
+            }
+            Code::Block(lets, tail) => {
+                f.write_str("{ ")?;
+                for (name, value) in lets {
+                    write!(f, "let {name} = {value}; ")?;
+                }
+                write!(f, "{tail} }}")
+            }
+            Code::Match(scrutinee, arms) => {
+                write!(f, "match {scrutinee} {{ ")?;
+                for (i, (pattern, value)) in arms.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{pattern} => {value}")?;
+                }
+                f.write_str(" }")
+            }
         }
     }
 }
@@ -396,7 +583,7 @@ fn default_equivalent(code: &Code) -> bool {
             _ => false,
         },
         Code::List(open, items) => open == "::std::vec![" && items.is_empty(),
-        Code::Struct(..) | Code::Other(_) => false,
+        _ => false,
     }
 }
 
@@ -501,12 +688,12 @@ pub struct Atomic {
     /// Rust expression of the `coolbot::TimingSpec`.
     pub timing: Code,
     /// The fields of its `adaptation { ... }` (`coolbot::AdaptConfig` fields, as
-    /// `name: value`), if it has a block that says anything.
-    pub adaptation: Option<Vec<String>>,
+    /// `(name, value)`), if it has a block that says anything.
+    pub adaptation: Option<Vec<(String, Code)>>,
     /// Behavior trait methods (the stubs), in a stable order.
     pub methods: Vec<Method>,
     /// `section` dispatch arms: `(pattern, call)`.
-    pub section_arms: Vec<(String, String)>,
+    pub section_arms: Vec<(String, Code)>,
     /// `choose` dispatch arms: `(state index, state name, may enum)`.
     pub choose_arms: Vec<ChooseArm>,
     /// `answer` dispatch arms: `(output index, method, send call)`.
@@ -577,13 +764,14 @@ pub struct Var {
     pub spec_index: Option<usize>,
     /// The variable's type as written in `.cool`.
     pub cool_ty: String,
-    /// Rust expression turning `self.vars.<field>` into a `coolbot::Value`.
-    pub to_value: String,
+    /// Rust expression turning the field (`self.vars.<field>` in an atomic
+    /// component's glue, `vars.<field>` in a compound's) into a `coolbot::Value`.
+    pub to_value: Code,
     /// Rust expression turning `value: &coolbot::Value` into a `Result` of the field
     /// type whose error converts into `coolbot::ValueRefused`.
-    pub from_value: String,
+    pub from_value: Code,
     /// The `Option<coolbot::VarRange>` expression of its `in low..=high`.
-    pub range: String,
+    pub range: Code,
 }
 
 impl Var {
@@ -595,6 +783,23 @@ impl Var {
     /// Whether it can be set through the control port.
     pub fn controllable(&self) -> bool {
         self.kind == "Controllable"
+    }
+
+    /// Its `coolbot::VarSpec` (observable and controllable variables only).
+    pub fn spec(&self) -> Code {
+        Code::structure(
+            "::coolbot::VarSpec",
+            vec![
+                ("name", Code::string(&self.field.cool_name)),
+                (
+                    "kind",
+                    Code::atom(format!("::coolbot::VarKind::{}", self.kind)),
+                ),
+                ("ty", Code::string(&self.cool_ty)),
+                ("doc", Code::atom(self.doc_literal())),
+                ("range", self.range.clone()),
+            ],
+        )
     }
 }
 
@@ -621,6 +826,27 @@ pub struct Port {
     pub packet: String,
     /// Pull model.
     pub pull: bool,
+}
+
+impl Port {
+    /// Its `coolbot::InputSpec` (`input`) or `coolbot::OutputSpec`, under `name` (a
+    /// compound's exported port is named by its export, not by the port it reaches).
+    pub fn spec(&self, name: &str, input: bool) -> Code {
+        let path = if input {
+            "::coolbot::InputSpec"
+        } else {
+            "::coolbot::OutputSpec"
+        };
+        Code::structure(
+            path,
+            vec![
+                ("name", Code::string(name)),
+                ("kind", self.kind.clone()),
+                ("packet", Code::string(&self.packet)),
+                ("pull", Code::atom(if self.pull { "true" } else { "false" })),
+            ],
+        )
+    }
 }
 
 /// A state of the user automaton.
@@ -721,18 +947,18 @@ pub struct Compound {
     /// The `Parts` methods (`supervisor` first, then one per instance) with their
     /// user stubs.
     pub parts: Vec<Method>,
-    /// The builder calls after the instances and connections, in order (exports,
-    /// mapped variables, policies, redundant groups, substitutes, recovery), each a
-    /// Rust method call starting with `.`.
-    pub steps: Vec<String>,
+    /// The builder's method calls after the instances and connections, in order
+    /// (exports, mapped variables, policies, redundant groups, substitutes,
+    /// recovery): each a [`Code::Call`] of the method, printed after a `.`.
+    pub steps: Vec<Code>,
     /// The `Mapped` fields: one per mapped controllable variable.
     pub mapped: Vec<MappedField>,
     /// `coolbot::InputSpec` expressions of the exported inputs, in order (what the
     /// builder gives the compound; listed in `SPEC` so that a supervisor's `on` and
     /// `without` validate).
-    pub input_specs: Vec<String>,
+    pub input_specs: Vec<Code>,
     /// `coolbot::OutputSpec` expressions of the exported outputs, in order.
-    pub output_specs: Vec<String>,
+    pub output_specs: Vec<Code>,
     /// Every exported port, inputs then outputs: its name and the Rust type of its
     /// packets (`()` for a tick port), for the network layer's registration.
     pub exported_ports: Vec<(String, String)>,
@@ -745,7 +971,7 @@ pub struct Compound {
     /// The `Supervisor` trait methods (one per section), with their user stubs.
     pub methods: Vec<Method>,
     /// `section` dispatch arms: `(pattern, call)`.
-    pub section_arms: Vec<(String, String)>,
+    pub section_arms: Vec<(String, Code)>,
     /// Rust expression of the supervisor's `coolbot::TimingSpec`.
     pub timing: Code,
     /// The `when` rules, in declaration order.
@@ -793,7 +1019,7 @@ pub struct Setter {
     /// The value's Rust type.
     pub ty: String,
     /// The `coolbot::Value` expression of `value`.
-    pub to_value: String,
+    pub to_value: Code,
 }
 
 impl Instance {
@@ -888,16 +1114,10 @@ pub struct Instance {
     pub node: Option<String>,
     /// Rust expression building its `coolbot::Component` (`?` applies to nested
     /// compounds); `None` when the component is unknown.
-    pub build: Option<String>,
-    /// Rust expression of its `timing { ... }` override, if any.
-    pub timing: Option<String>,
+    pub build: Option<Code>,
     /// Overrides the generated code cannot apply (a nested compound's mapped
     /// controllable variables), by name.
     pub unapplied: Vec<String>,
-    /// Configuration overrides: `(field, Rust value)`.
-    pub config_overrides: Vec<(String, String)>,
-    /// Controllable variable overrides: `(field, Rust value)`.
-    pub var_overrides: Vec<(String, String)>,
 }
 
 /// One `connect` of a compound.
@@ -921,7 +1141,7 @@ pub struct Rule {
     /// The target state, as a Rust string literal.
     pub target: String,
     /// The `reads` slice expression (`&["ranges.state", "faults"]`).
-    pub reads: String,
+    pub reads: Code,
     /// The rule function's name.
     pub function: String,
     /// Its `&coolbot::View` parameter name (`view`, or `_` when unused).
@@ -929,9 +1149,104 @@ pub struct Rule {
     /// Its `&Vars` parameter name, when the rule reads own variables.
     pub vars_param: Option<String>,
     /// The condition as a Rust `bool` expression.
-    pub expr: String,
+    pub expr: Code,
     /// The test passed to `CompoundBuilder::rule`.
-    pub call: String,
+    pub call: Code,
     /// A line documenting the rule.
     pub doc: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expression_trees_print_as_rust() {
+        let x = || Code::atom("x");
+        let cases = [
+            (
+                Code::StructRest(
+                    "S".to_owned(),
+                    vec![("a".to_owned(), Code::atom("1"))],
+                    Box::new(Code::call("S::default", Vec::new())),
+                ),
+                "S { a: 1, ..S::default() }",
+            ),
+            (
+                Code::StructRest("S".to_owned(), Vec::new(), Box::new(x())),
+                "S { ..x }",
+            ),
+            (
+                x().field("f")
+                    .method("g", vec![Code::atom("1"), Code::atom("2")]),
+                "x.f.g(1, 2)",
+            ),
+            (Code::call("f", Vec::new()).try_op(), "f()?"),
+            (
+                Code::binary(
+                    Code::prefix("!", x()),
+                    "&&",
+                    Code::binary(Code::prefix("-", x()), "<", x().reference()).paren(),
+                ),
+                "!x && (-x < &x)",
+            ),
+            (
+                x().method(
+                    "zip",
+                    vec![
+                        Code::closure("(l, r)", Code::atom("l")),
+                        Code::closure("", x()),
+                    ],
+                ),
+                "x.zip(|(l, r)| l, || x)",
+            ),
+            (
+                Code::Block(
+                    vec![("y".to_owned(), x())],
+                    Box::new(Code::move_closure("v: &V", Code::atom("y"))),
+                ),
+                "{ let y = x; move |v: &V| y }",
+            ),
+            (
+                Code::Match(
+                    Box::new(x()),
+                    vec![
+                        ("A(t)".to_owned(), Code::core_some(Code::atom("t"))),
+                        ("_".to_owned(), Code::core_none()),
+                    ],
+                ),
+                "match x { A(t) => ::core::option::Option::Some(t), _ => ::core::option::Option::None }",
+            ),
+        ];
+        for (code, text) in cases {
+            assert_eq!(code.to_string(), text);
+        }
+    }
+
+    #[test]
+    fn replace_swaps_a_part_wherever_it_is() {
+        let held = Code::atom("self").field("vars").field("x");
+        let code = Code::call(
+            "to",
+            vec![Code::call("wrap", vec![held.clone().reference()]).reference()],
+        );
+        assert!(code.contains(&held));
+        assert!(!code.contains(&Code::atom("self").field("vars").field("y")));
+        let replaced = code.replace(&held, &Code::atom("value"));
+        assert_eq!(replaced.to_string(), "to(&wrap(&value))");
+        assert!(!replaced.contains(&held));
+    }
+
+    #[test]
+    fn replace_call_reaches_into_closures() {
+        let default = "::core::default::Default::default";
+        let code = Code::call(
+            "::core::array::from_fn",
+            vec![Code::closure("_", Code::call(default, Vec::new()))],
+        );
+        assert_eq!(
+            code.replace_call(default, "Default::default").to_string(),
+            "::core::array::from_fn(|_| Default::default())"
+        );
+    }
 }

@@ -169,7 +169,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
         .iter()
         .filter(|var| var.controllable())
         .filter_map(|var| {
-            let field = format!("self.vars.{}", var.field.name);
+            let field = super::atomic::glue_vars().field(var.field.name.as_str());
             // The glue's conversion of the field, applied to the argument.
             var.to_value.contains(&field).then(|| Method {
                 doc: vec![format!(
@@ -182,7 +182,10 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     var.field.ty
                 ),
                 body: vec![
-                    format!("let value = {};", var.to_value.replace(&field, "value")),
+                    format!(
+                        "let value = {};",
+                        var.to_value.replace(&field, &ir::Code::atom("value"))
+                    ),
                     format!("self.inner.set({}, value)", string(&var.field.cool_name)),
                 ],
             })
