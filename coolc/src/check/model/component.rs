@@ -73,9 +73,9 @@ pub struct Component {
 }
 
 impl Component {
-    /// A component with no member: what an unknown name resolves to, and what a
+    /// A component with no member: what an unknown name resolves to, what a
     /// component resolves to inside its own containment cycle (which the checker
-    /// reports).
+    /// reports), and what building a component starts from.
     pub(crate) fn empty(name: &str) -> Component {
         Component {
             name: name.to_owned(),
