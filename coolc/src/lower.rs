@@ -23,7 +23,7 @@ mod adaptation;
 mod atomic;
 mod automaton;
 mod compound;
-pub mod harness;
+pub(crate) mod harness;
 mod ros;
 
 /// What the caller decides about the emitted crate.
@@ -92,7 +92,7 @@ pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
 }
 
 /// A Cargo package name made from `name` (lowercase, `-` separated).
-pub fn package_name(name: &str) -> String {
+pub(crate) fn package_name(name: &str) -> String {
     let snake = ident::snake_raw(name);
     let cleaned: String = snake
         .chars()

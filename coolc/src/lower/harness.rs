@@ -8,24 +8,24 @@ use crate::ir;
 
 /// What the harness template prints for one atomic component.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Harness {
+pub(crate) struct Harness {
     /// One method (sometimes two) per input.
-    pub inputs: Vec<Method>,
+    pub(crate) inputs: Vec<Method>,
     /// One method (sometimes two) per output.
-    pub outputs: Vec<Method>,
+    pub(crate) outputs: Vec<Method>,
     /// One typed setter per controllable variable.
-    pub setters: Vec<Method>,
+    pub(crate) setters: Vec<Method>,
 }
 
 /// One method of the typed harness: its doc line, signature and one-line body.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Method {
+pub(crate) struct Method {
     /// Its doc line.
-    pub doc: ir::Doc,
+    pub(crate) doc: ir::Doc,
     /// `pub fn name(&mut self, ...) -> ...`, without the body.
-    pub signature: String,
+    pub(crate) signature: String,
     /// The body's lines: statements, then the returned expression.
-    pub body: Vec<String>,
+    pub(crate) body: Vec<String>,
 }
 
 /// The Rust type of a port's packets, `None` for a tick port.
@@ -43,7 +43,7 @@ fn string(text: &str) -> String {
 }
 
 /// The harness of `c`.
-pub fn harness(c: &ir::Atomic) -> Harness {
+pub(crate) fn harness(c: &ir::Atomic) -> Harness {
     let mut inputs = Vec::new();
     for port in &c.inputs {
         let name = string(&port.cool_name);

@@ -22,7 +22,7 @@ use super::types::{
 use crate::ast::{self, FileId, Span};
 use crate::ros::{Message, TypeHash, TypeName};
 
-pub use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
+pub(crate) use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
 
 /// A component, resolved.
 #[derive(Clone, Debug, PartialEq)]
