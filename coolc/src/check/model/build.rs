@@ -140,6 +140,11 @@ impl<'a> Model<'a> {
         resolved
     }
 
+    /// Component `name`, resolved, when a component of that name is declared.
+    pub fn known(&self, name: &str) -> Option<Rc<Component>> {
+        self.component(name).map(|_| self.resolved(name))
+    }
+
     /// Every component, resolved, in source order (files in `FileId` order), each
     /// once (the one the symbol table names), with what needs the whole model: each
     /// connection's kind, each instance's tuning over its component's, each `when`
