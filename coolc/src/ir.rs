@@ -340,6 +340,8 @@ pub(crate) enum StubLine {
     Comment(String),
     /// A statement, `;` included (a short one, kept on its line).
     Statement(String),
+    /// `let name = value;` (a short one, kept on its line).
+    Let(String, Code),
     /// The body's value.
     Value(Code),
 }
@@ -348,6 +350,7 @@ impl fmt::Display for StubLine {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             StubLine::Comment(text) | StubLine::Statement(text) => f.write_str(text),
+            StubLine::Let(name, value) => write!(f, "let {name} = {value};"),
             StubLine::Value(code) => write!(f, "{code}"),
         }
     }

@@ -180,13 +180,13 @@ impl Layout {
     }
 
     /// A method of the typed harness, up to its closing brace: doc, signature, body.
-    pub fn harness_method(&self, doc: &[String], signature: &str, body: &[String]) -> String {
+    pub fn harness_method(&self, doc: &[String], signature: &str, body: &[StubLine]) -> String {
         let mut out = self.member_doc(doc);
         out.push('\n');
         out.push_str(&self.signature(4, signature, " {"));
         for line in body {
             out.push('\n');
-            out.push_str(&self.short(8, line));
+            out.push_str(&self.body_line(line));
         }
         out
     }
@@ -265,24 +265,21 @@ impl Layout {
         let mut out = self.signature(4, &method.user_signature, " {");
         for line in &method.stub_body {
             out.push('\n');
-            match line {
-                StubLine::Comment(text) => {
-                    out.push_str(&spaces(8));
-                    out.push_str(text);
-                }
-                // A value with a shape these rules do not cover is short: one line.
-                StubLine::Value(code) if Self::has_other(code) => {
-                    out.push_str(&self.short(8, &code.to_string()));
-                }
-                StubLine::Value(code) => {
-                    out.push_str(&spaces(8));
-                    out.push_str(&self.node(code, 8, 8, 0, false));
-                }
-                StubLine::Statement(text) => out.push_str(&self.short(8, text)),
-            }
+            out.push_str(&self.body_line(line));
         }
         out.push_str("\n    }");
         out
+    }
+
+    /// One line of a method's body, at indent 8.
+    fn body_line(&self, line: &StubLine) -> String {
+        match line {
+            StubLine::Comment(text) => format!("{}{text}", spaces(8)),
+            // A value with a shape these rules do not cover is short: one line.
+            StubLine::Value(code) if Self::has_other(code) => self.short(8, &code.to_string()),
+            StubLine::Value(code) => format!("{}{}", spaces(8), self.node(code, 8, 8, 0, false)),
+            StubLine::Statement(_) | StubLine::Let(..) => self.short(8, &line.to_string()),
+        }
     }
 
     /// `Self { field: default, ... }`, the body of a `Default` impl at indent 8.
