@@ -263,8 +263,8 @@ pub fn component_with(
     ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports)
     {%- if let Some(fields) = c.adaptation %}.with_adaptation(
         ::coolbot::AdaptConfig {
-        {%- for field in fields %}
-            {{ field }},
+        {%- for (name, value) in fields %}
+            {{ name }}: {{ value }},
         {%- endfor %}
             ..::coolbot::AdaptConfig::default()
         },

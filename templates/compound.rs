@@ -161,7 +161,7 @@ pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
     variables: &[
     {%- for v in c.vars %}
     {%- if v.spec_index.is_some() %}
-        ::coolbot::VarSpec { name: "{{ v.field.cool_name }}", kind: ::coolbot::VarKind::{{ v.kind }}, ty: "{{ v.cool_ty }}", doc: {{ v.doc_literal() }}, range: {{ v.range }} },
+        {{ v.spec() }},
     {%- endif %}
     {%- endfor %}
     ],
@@ -387,7 +387,7 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
     {%- endif %}
 {%- endfor %}
 {%- for step in c.steps %}
-        {{ step }}
+        .{{ step }}
 {%- endfor %}
 {%- for r in c.rules %}
         .rule({{ r.state }}, {{ r.target }}, {{ r.reads }}, {{ r.call }})

@@ -31,18 +31,13 @@ impl Span {
     }
 
     /// The smallest span covering both `self` and `other`.
-    pub fn join(self, other: Span) -> Span {
+    pub(crate) fn join(self, other: Span) -> Span {
         Span::new(self.start.min(other.start), self.end.max(other.end))
     }
 
     /// Length in bytes.
-    pub fn len(self) -> usize {
+    pub(crate) fn len(self) -> usize {
         self.end - self.start
-    }
-
-    /// True for an empty span.
-    pub fn is_empty(self) -> bool {
-        self.start == self.end
     }
 }
 
@@ -54,11 +49,11 @@ impl From<Span> for miette::SourceSpan {
 
 /// A name as written, with where it was written.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub struct Ident {
+pub(crate) struct Ident {
     /// The identifier text.
-    pub name: String,
+    pub(crate) name: String,
     /// Where it appears.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 impl fmt::Display for Ident {
@@ -70,31 +65,26 @@ impl fmt::Display for Ident {
 /// `///` doc comment lines attached to the next item or member, without the `///`
 /// and with one leading space removed. Empty when there is none.
 #[derive(Clone, Debug, PartialEq, Eq, Default)]
-pub struct Doc(pub Vec<String>);
+pub(crate) struct Doc(pub Vec<String>);
 
-impl Doc {
-    /// True when no doc comment was written.
-    pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
-    }
-}
+impl Doc {}
 
 /// A string literal, unescaped, with its span (quotes included).
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct StrLit {
+pub(crate) struct StrLit {
     /// The unescaped contents.
-    pub value: String,
+    pub(crate) value: String,
     /// Where it appears, quotes included.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// A non-negative integer literal used where only a count or size makes sense.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct IntLit {
+pub(crate) struct IntLit {
     /// The value as written.
-    pub value: u64,
+    pub(crate) value: u64,
     /// Where it appears.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// One parsed source file.
@@ -103,12 +93,12 @@ pub struct File {
     /// The file within the source map.
     pub id: FileId,
     /// The items in source order.
-    pub items: Vec<Item>,
+    pub(crate) items: Vec<Item>,
 }
 
 /// A top-level item.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Item {
+pub(crate) enum Item {
     /// `import "other.cool";`
     Import(Import),
     /// `import ros "pkg/msg/Type" [as Name];`
@@ -127,35 +117,35 @@ pub enum Item {
 
 /// `import "path.cool";`: the path is relative to the importing file.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Import {
+pub(crate) struct Import {
     /// The path as written.
-    pub path: StrLit,
+    pub(crate) path: StrLit,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `import ros "sensor_msgs/msg/LaserScan" [as Scan];`: a ROS 2 message type used as
 /// a packet type, under its own name or the one after `as`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct RosImport {
+pub(crate) struct RosImport {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// The type's full name as written (`sensor_msgs/msg/LaserScan`).
-    pub ros_name: StrLit,
+    pub(crate) ros_name: StrLit,
     /// The name after `as`, if written.
-    pub alias: Option<Ident>,
+    pub(crate) alias: Option<Ident>,
     /// The name the descriptions use: the alias, else the type's own name
     /// ([`RosImport::own_name`]); `None` when neither is written as a name.
-    pub name: Option<Ident>,
+    pub(crate) name: Option<Ident>,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 impl RosImport {
     /// The type's own name in `ros_name`, the text after the last `/`, as a name the
     /// descriptions can use (with the span of that text inside the string); `None`
     /// when it is not an identifier.
-    pub fn own_name(ros_name: &StrLit) -> Option<Ident> {
+    pub(crate) fn own_name(ros_name: &StrLit) -> Option<Ident> {
         let text = &ros_name.value;
         let last = text.rsplit('/').next().unwrap_or(text);
         let mut chars = last.chars();
@@ -184,94 +174,94 @@ impl RosImport {
 
 /// `packet Name { field: Type = default, ... }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Packet {
+pub(crate) struct Packet {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// The packet type name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Fields in declaration order.
-    pub fields: Vec<Field>,
+    pub(crate) fields: Vec<Field>,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `name: Type` or `name: Type = default`, in packets and `configuration` blocks.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Field {
+pub(crate) struct Field {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Field name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Declared type.
-    pub ty: Type,
+    pub(crate) ty: Type,
     /// Default value, if written.
-    pub default: Option<Expr>,
+    pub(crate) default: Option<Expr>,
     /// The whole field.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `enum Name { A, B, C }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct EnumDef {
+pub(crate) struct EnumDef {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// The enum type name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Variants in declaration order.
-    pub variants: Vec<Variant>,
+    pub(crate) variants: Vec<Variant>,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// One enum variant.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Variant {
+pub(crate) struct Variant {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Variant name.
-    pub name: Ident,
+    pub(crate) name: Ident,
 }
 
 /// `extern packet Name = "crate::Type";`
 #[derive(Clone, Debug, PartialEq)]
-pub struct ExternPacket {
+pub(crate) struct ExternPacket {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// The name used in descriptions.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// The Rust type path it stands for.
-    pub rust_path: StrLit,
+    pub(crate) rust_path: StrLit,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `converter Name: From -> To;`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Converter {
+pub(crate) struct Converter {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Converter name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Packet type it reads.
-    pub from: Type,
+    pub(crate) from: Type,
     /// Packet type it produces.
-    pub to: Type,
+    pub(crate) to: Type,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// A type as written.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Type {
+pub(crate) struct Type {
     /// What kind of type.
-    pub kind: TypeKind,
+    pub(crate) kind: TypeKind,
     /// Where it appears.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// The shapes a type can take.
 #[derive(Clone, Debug, PartialEq)]
-pub enum TypeKind {
+pub(crate) enum TypeKind {
     /// A primitive type.
     Prim(Prim),
     /// A packet, enum or extern packet, by name.
@@ -286,7 +276,7 @@ pub enum TypeKind {
 
 /// The primitive types of the language.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Prim {
+pub(crate) enum Prim {
     /// `bool`
     Bool,
     /// `i8`
@@ -322,39 +312,39 @@ pub enum Prim {
 /// Both kinds share one member list; the checker reports members that the kind does
 /// not allow (an `instance` in an atomic, an `automaton` in a compound).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Component {
+pub(crate) struct Component {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Atomic or compound.
-    pub kind: ComponentKind,
+    pub(crate) kind: ComponentKind,
     /// Span of the `atomic`/`compound` keyword.
-    pub kind_span: Span,
+    pub(crate) kind_span: Span,
     /// Component type name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Members in source order.
-    pub members: Vec<Member>,
+    pub(crate) members: Vec<Member>,
     /// Doc comments on constructs inside the component that have no generated Rust
     /// item of their own (timing entries, transitions, connections, ...), in source
     /// order.
-    pub notes: Vec<Note>,
+    pub(crate) notes: Vec<Note>,
     /// The whole item.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// A doc comment on a construct without a generated Rust item of its own: lowering
 /// prints it in the rustdoc of the component's `SPEC`, after the construct's text.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Note {
+pub(crate) struct Note {
     /// The construct as written, up to its first `{` or `;`, in backticks, with its
     /// context: `` `period 100ms` ``, ``state `moving`: `on halt -> stopped` ``.
-    pub subject: String,
+    pub(crate) subject: String,
     /// The doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
 }
 
 /// The two kinds of component.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ComponentKind {
+pub(crate) enum ComponentKind {
     /// Embodied as one thread.
     Atomic,
     /// A composition of instances under a supervisor.
@@ -363,7 +353,7 @@ pub enum ComponentKind {
 
 /// One member of a component body.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Member {
+pub(crate) enum Member {
     /// `link crate "name" = "version";` / `link crate "name" = { ... };` / `link system "m";`
     Link(Link),
     /// `configuration { field: Type = default; ... }`
@@ -400,16 +390,16 @@ pub enum Member {
 
 /// A `link` member: a dependency of the generated crate.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Link {
+pub(crate) struct Link {
     /// Crate or system library.
-    pub kind: LinkKind,
+    pub(crate) kind: LinkKind,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// What a `link` names.
 #[derive(Clone, Debug, PartialEq)]
-pub enum LinkKind {
+pub(crate) enum LinkKind {
     /// `link crate "name" = spec;`: a Cargo dependency.
     Crate {
         /// Crate name.
@@ -426,7 +416,7 @@ pub enum LinkKind {
 
 /// The right-hand side of `link crate "name" = ...`.
 #[derive(Clone, Debug, PartialEq)]
-pub enum CrateSpec {
+pub(crate) enum CrateSpec {
     /// `"4"`: a version requirement.
     Version(StrLit),
     /// `{ version = "0.33", features = ["x"] }`: TOML-like key/value pairs.
@@ -435,29 +425,29 @@ pub enum CrateSpec {
 
 /// `key = value` inside an inline crate table.
 #[derive(Clone, Debug, PartialEq)]
-pub struct TableEntry {
+pub(crate) struct TableEntry {
     /// The key.
-    pub key: Ident,
+    pub(crate) key: Ident,
     /// The value: a string, bool, integer or list of strings.
-    pub value: Expr,
+    pub(crate) value: Expr,
     /// The whole entry.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `configuration { field: Type = default; ... }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Configuration {
+pub(crate) struct Configuration {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Configuration fields.
-    pub fields: Vec<Field>,
+    pub(crate) fields: Vec<Field>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// How a variable is exposed (paper 3.1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum VarKind {
+pub(crate) enum VarKind {
     /// Published on the monitoring port `m`.
     Observable,
     /// Set through the control port `c`.
@@ -471,56 +461,56 @@ pub enum VarKind {
 /// An own variable has `ty`; a mapped one has no `ty` and a path `value`. The checker
 /// decides which it is and rejects other combinations.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Variable {
+pub(crate) struct Variable {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Observable, controllable or local.
-    pub kind: VarKind,
+    pub(crate) kind: VarKind,
     /// Span of the kind keyword.
-    pub kind_span: Span,
+    pub(crate) kind_span: Span,
     /// Variable name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Declared type, if any.
-    pub ty: Option<Type>,
+    pub(crate) ty: Option<Type>,
     /// Default value or mapping path, if any.
-    pub value: Option<Expr>,
+    pub(crate) value: Option<Expr>,
     /// `in low..=high`, if any.
-    pub range: Option<VarRange>,
+    pub(crate) range: Option<VarRange>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `in low..=high` on a variable: the values it may be set to.
 #[derive(Clone, Debug, PartialEq)]
-pub struct VarRange {
+pub(crate) struct VarRange {
     /// The lowest value.
-    pub low: Expr,
+    pub(crate) low: Expr,
     /// The highest value.
-    pub high: Expr,
+    pub(crate) high: Expr,
     /// `..=` (true) or `..` (false; refused by the checker).
-    pub inclusive: bool,
+    pub(crate) inclusive: bool,
     /// From `in` to the end of `high`.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// An input port declaration.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Input {
+pub(crate) struct Input {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Port name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// The port's kind, or the exported port it maps to.
-    pub def: InputDef,
+    pub(crate) def: InputDef,
     /// Span of `pull`, when the input uses the pull model.
-    pub pull: Option<Span>,
+    pub(crate) pull: Option<Span>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// What an input port is.
 #[derive(Clone, Debug, PartialEq)]
-pub enum InputDef {
+pub(crate) enum InputDef {
     /// `tick`
     Tick,
     /// `fifo<T>(n)` or `fifo<T>(n, policy)`
@@ -551,23 +541,23 @@ pub enum InputDef {
 
 /// An output port declaration.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Output {
+pub(crate) struct Output {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Port name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// The port's kind, or the exported port it maps to.
-    pub def: OutputDef,
+    pub(crate) def: OutputDef,
     /// Span of `pull`, when the output answers pull requests (a user stub computes
     /// each answer).
-    pub pull: Option<Span>,
+    pub(crate) pull: Option<Span>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// What an output port is.
 #[derive(Clone, Debug, PartialEq)]
-pub enum OutputDef {
+pub(crate) enum OutputDef {
     /// `tick`
     Tick,
     /// `data<T>`: connects to `last`, `fifo` and `ufifo` inputs.
@@ -580,27 +570,27 @@ pub enum OutputDef {
 
 /// `instance.port`, or a bare `port` meaning the compound's own port.
 #[derive(Clone, Debug, PartialEq)]
-pub struct PortRef {
+pub(crate) struct PortRef {
     /// The instance, when written.
-    pub instance: Option<Ident>,
+    pub(crate) instance: Option<Ident>,
     /// The port.
-    pub port: Ident,
+    pub(crate) port: Ident,
     /// The whole reference.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `timing { period ...; max_response ...; priority ...; quality ...; }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Timing {
+pub(crate) struct Timing {
     /// Entries in source order.
-    pub entries: Vec<TimingEntry>,
+    pub(crate) entries: Vec<TimingEntry>,
     /// The whole block.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// One entry of a `timing` block.
 #[derive(Clone, Debug, PartialEq)]
-pub enum TimingEntry {
+pub(crate) enum TimingEntry {
     /// `period 10ms;` or `period 10ms..40ms;` (frequencies allowed).
     Period(Interval),
     /// `max_response 20ms;`
@@ -613,42 +603,42 @@ pub enum TimingEntry {
 
 /// `lo` or `lo..hi`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Interval {
+pub(crate) struct Interval {
     /// Nominal (lower) bound.
-    pub lo: Expr,
+    pub(crate) lo: Expr,
     /// Upper bound, if an interval was written.
-    pub hi: Option<Expr>,
+    pub(crate) hi: Option<Expr>,
     /// The whole interval.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `exception name ["description"] [{ plan }];`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Exception {
+pub(crate) struct Exception {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Exception name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Human description, if written.
-    pub description: Option<StrLit>,
+    pub(crate) description: Option<StrLit>,
     /// Continuity plan steps, tried in order; empty when there is no plan.
-    pub plan: Vec<PlanStep>,
+    pub(crate) plan: Vec<PlanStep>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// One step of a continuity plan (paper 3.5).
 #[derive(Clone, Debug, PartialEq)]
-pub struct PlanStep {
+pub(crate) struct PlanStep {
     /// What the step does.
-    pub kind: PlanKind,
+    pub(crate) kind: PlanKind,
     /// The whole step.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// The continuity plan actions.
 #[derive(Clone, Debug, PartialEq)]
-pub enum PlanKind {
+pub(crate) enum PlanKind {
     /// `retry N every D;`: run the failing section again.
     Retry {
         /// How many times.
@@ -667,22 +657,22 @@ pub enum PlanKind {
 /// The user automaton: `automaton { ... }` in an atomic, `supervisor { ... }` in a
 /// compound.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Automaton {
+pub(crate) struct Automaton {
     /// `automaton` or `supervisor`.
-    pub keyword: AutomatonKeyword,
+    pub(crate) keyword: AutomatonKeyword,
     /// Span of the keyword.
-    pub keyword_span: Span,
+    pub(crate) keyword_span: Span,
     /// Every `initial NAME;` written (the checker wants exactly one).
-    pub initial: Vec<Ident>,
+    pub(crate) initial: Vec<Ident>,
     /// States in source order.
-    pub states: Vec<State>,
+    pub(crate) states: Vec<State>,
     /// The whole block.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// Which keyword opened an automaton block.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum AutomatonKeyword {
+pub(crate) enum AutomatonKeyword {
     /// `automaton`
     Automaton,
     /// `supervisor`
@@ -691,23 +681,23 @@ pub enum AutomatonKeyword {
 
 /// `state name { ... }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct State {
+pub(crate) struct State {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// State name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// Sections and transitions in source order.
-    pub members: Vec<StateMember>,
+    pub(crate) members: Vec<StateMember>,
     /// The doc comment of each member (`members[i]`'s is `member_docs[i]`), empty
     /// when none was written.
-    pub member_docs: Vec<Doc>,
+    pub(crate) member_docs: Vec<Doc>,
     /// The whole state.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// Sections and transitions inside a state.
 #[derive(Clone, Debug, PartialEq)]
-pub enum StateMember {
+pub(crate) enum StateMember {
     /// `entry;`
     Entry(Span),
     /// `exit;`
@@ -759,137 +749,137 @@ pub enum StateMember {
 
 /// `instance name: Component [substitutes other] [on "node"] [{ overrides }];`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Instance {
+pub(crate) struct Instance {
     /// Doc comment.
-    pub doc: Doc,
+    pub(crate) doc: Doc,
     /// Instance name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// The component type instantiated.
-    pub component: Ident,
+    pub(crate) component: Ident,
     /// The instance this one substitutes, if any.
-    pub substitutes: Option<Ident>,
+    pub(crate) substitutes: Option<Ident>,
     /// The node it runs on, for remote instantiation.
-    pub node: Option<StrLit>,
+    pub(crate) node: Option<StrLit>,
     /// `name = value;` overrides of configuration fields or controllable variables.
-    pub overrides: Vec<Override>,
+    pub(crate) overrides: Vec<Override>,
     /// A `timing { ... }` override.
-    pub timing: Option<Timing>,
+    pub(crate) timing: Option<Timing>,
     /// `adaptation { ... }` overrides, in source order (more than one is an error).
-    pub adaptation: Vec<Adaptation>,
+    pub(crate) adaptation: Vec<Adaptation>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `name = value;` inside an instance body.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Override {
+pub(crate) struct Override {
     /// Configuration field or controllable variable.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// New value.
-    pub value: Expr,
+    pub(crate) value: Expr,
     /// The whole override.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `redundant a, b;`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Redundant {
+pub(crate) struct Redundant {
     /// The redundant instances.
-    pub members: Vec<Ident>,
+    pub(crate) members: Vec<Ident>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `thread name { a, b, ... }`: an execution group.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Thread {
+pub(crate) struct Thread {
     /// The group's name.
-    pub name: Ident,
+    pub(crate) name: Ident,
     /// The instances on the group's thread, as written.
-    pub members: Vec<Ident>,
+    pub(crate) members: Vec<Ident>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `connect from -> to [via Converter];`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Connect {
+pub(crate) struct Connect {
     /// The output end.
-    pub from: PortRef,
+    pub(crate) from: PortRef,
     /// The input end.
-    pub to: PortRef,
+    pub(crate) to: PortRef,
     /// The converter, if any.
-    pub via: Option<Ident>,
+    pub(crate) via: Option<Ident>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `on error instance: policy;`
 #[derive(Clone, Debug, PartialEq)]
-pub struct OnError {
+pub(crate) struct OnError {
     /// The instance.
-    pub instance: Ident,
+    pub(crate) instance: Ident,
     /// `propagate`, `restart`, `substitute` or `ignore` (checked later).
-    pub policy: Ident,
+    pub(crate) policy: Ident,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `recovery { retry every D; deadline D; }`
 #[derive(Clone, Debug, PartialEq)]
-pub struct Recovery {
+pub(crate) struct Recovery {
     /// How often instances in the recovery queue are restarted.
-    pub retry_every: Option<Expr>,
+    pub(crate) retry_every: Option<Expr>,
     /// How long an instance may stay in the queue.
-    pub deadline: Option<Expr>,
+    pub(crate) deadline: Option<Expr>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `restart { limit N in D; backoff D..D; }`: the budget and backoff of the compound's
 /// `restart` policy.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Restart {
+pub(crate) struct Restart {
     /// `limit N in D`: at most `N` restarts of one instance within any `D`.
-    pub limit: Option<(Expr, Expr)>,
+    pub(crate) limit: Option<(Expr, Expr)>,
     /// `backoff D..D`: the first wait before a repeated restart, and the longest.
-    pub backoff: Option<(Expr, Expr)>,
+    pub(crate) backoff: Option<(Expr, Expr)>,
     /// The whole member.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// `adaptation { off; }` or `adaptation { window 4; hold 5; ... }`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Adaptation {
+pub(crate) struct Adaptation {
     /// Entries in source order.
-    pub entries: Vec<AdaptEntry>,
+    pub(crate) entries: Vec<AdaptEntry>,
     /// The whole block.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// One `key [value];` entry of an `adaptation` block (the checker knows the keys).
 #[derive(Clone, Debug, PartialEq)]
-pub struct AdaptEntry {
+pub(crate) struct AdaptEntry {
     /// `off`, `window`, `violations`, `hold`, `settle`, `homogeneity`, `selector`, ...
-    pub key: Ident,
+    pub(crate) key: Ident,
     /// The value, absent for `off`.
-    pub value: Option<Expr>,
+    pub(crate) value: Option<Expr>,
     /// The whole entry.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// An expression: default values, rule conditions, timing values, overrides.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Expr {
+pub(crate) struct Expr {
     /// What kind of expression.
-    pub kind: ExprKind,
+    pub(crate) kind: ExprKind,
     /// Where it appears.
-    pub span: Span,
+    pub(crate) span: Span,
 }
 
 /// The expression forms.
 #[derive(Clone, Debug, PartialEq)]
-pub enum ExprKind {
+pub(crate) enum ExprKind {
     /// An integer literal (sign is a [`UnaryOp::Neg`]).
     Int(u64),
     /// A floating-point literal.
@@ -926,7 +916,7 @@ pub enum ExprKind {
 
 /// Prefix operators.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum UnaryOp {
+pub(crate) enum UnaryOp {
     /// `!`
     Not,
     /// `-`
@@ -935,7 +925,7 @@ pub enum UnaryOp {
 
 /// Infix operators, loosest first: `||`, `&&`, comparisons.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum BinaryOp {
+pub(crate) enum BinaryOp {
     /// `||`
     Or,
     /// `&&`
@@ -956,7 +946,7 @@ pub enum BinaryOp {
 
 impl BinaryOp {
     /// The operator as written in `.cool` (and in Rust).
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             BinaryOp::Or => "||",
             BinaryOp::And => "&&",

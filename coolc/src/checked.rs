@@ -14,7 +14,7 @@
 //! and `diagram` read only this model (a `when` condition is its typed tree), never a
 //! syntax tree, and look no name up.
 
-pub use crate::check::model;
+pub(crate) use crate::check::model;
 
 use std::collections::BTreeMap;
 
@@ -83,34 +83,34 @@ impl Checked {
 
     /// Every packet, enum, extern packet and ROS import, in source order (files in
     /// `FileId` order), each once.
-    pub fn types(&self) -> &[model::TypeDef] {
+    pub(crate) fn types(&self) -> &[model::TypeDef] {
         &self.types
     }
 
     /// Every converter, in source order, each once.
-    pub fn converters(&self) -> &[model::Converter] {
+    pub(crate) fn converters(&self) -> &[model::Converter] {
         &self.converters
     }
 
     /// Every ROS 2 message type the descriptions import (`import ros`), and every type
     /// those reference, directly or not: each once, by package and name.
-    pub fn ros_messages(&self) -> &[model::RosMessage] {
+    pub(crate) fn ros_messages(&self) -> &[model::RosMessage] {
         &self.ros
     }
 
     /// The packet, enum, extern packet or ROS import named `name`.
-    pub fn type_def(&self, name: &str) -> Option<&model::TypeDef> {
+    pub(crate) fn type_def(&self, name: &str) -> Option<&model::TypeDef> {
         self.types.iter().find(|def| def.name() == name)
     }
 
     /// The resolved component named `name`.
-    pub fn component(&self, name: &str) -> Option<&model::Component> {
+    pub(crate) fn component(&self, name: &str) -> Option<&model::Component> {
         self.components.get(*self.by_name.get(name)?)
     }
 
     /// Every resolved component, in source order (files in `FileId` order), each
     /// once.
-    pub fn components(&self) -> impl Iterator<Item = &model::Component> {
+    pub(crate) fn components(&self) -> impl Iterator<Item = &model::Component> {
         self.components.iter()
     }
 

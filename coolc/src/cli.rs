@@ -18,11 +18,11 @@ use crate::{
 };
 
 /// Exit code: no error.
-pub const EXIT_OK: u8 = 0;
+pub(crate) const EXIT_OK: u8 = 0;
 /// Exit code: the descriptions have errors.
-pub const EXIT_DIAGNOSTICS: u8 = 1;
+pub(crate) const EXIT_DIAGNOSTICS: u8 = 1;
 /// Exit code: bad usage or an I/O error.
-pub const EXIT_USAGE: u8 = 2;
+pub(crate) const EXIT_USAGE: u8 = 2;
 
 /// Compile CoolBOT `.cool` component descriptions into Rust crates.
 #[derive(Debug, Parser)]
@@ -31,22 +31,22 @@ pub struct Cli {
     /// How diagnostics are printed: `human` (stderr) or `json` (one object per line
     /// on stdout; `compile --check` lists the files that would change the same way).
     #[arg(long, value_enum, default_value_t = MessageFormat::Human, global = true)]
-    pub message_format: MessageFormat,
+    pub(crate) message_format: MessageFormat,
 
     /// A directory of ROS 2 interface packages (`DIR/<package>/msg/<Type>.msg`) where
     /// `import ros` types are looked up, before `AMENT_PREFIX_PATH` and the types
     /// coolc ships; repeat it for several, searched in order.
     #[arg(long = "ros-path", value_name = "DIR", global = true)]
-    pub ros_paths: Vec<PathBuf>,
+    pub(crate) ros_paths: Vec<PathBuf>,
 
     /// The command.
     #[command(subcommand)]
-    pub command: Commands,
+    pub(crate) command: Commands,
 }
 
 /// Diagnostic output formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MessageFormat {
+pub(crate) enum MessageFormat {
     /// Rendered for a person, on stderr.
     Human,
     /// JSON lines on stdout, for editors and CI.
@@ -55,7 +55,7 @@ pub enum MessageFormat {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Commands {
+pub(crate) enum Commands {
     /// Check descriptions and report every error, without writing anything.
     Check {
         /// The `.cool` files (their imports are followed).
@@ -119,7 +119,7 @@ pub enum Commands {
 
 /// The views of `coolc diagram`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ViewArg {
+pub(crate) enum ViewArg {
     /// Ports by kind and direction, the default ports `c` and `m`, variables.
     Interface,
     /// A compound's instances, connections, exports, policies and groups.
@@ -132,7 +132,7 @@ pub enum ViewArg {
 
 /// The formats of `coolc diagram`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum DiagramFormat {
+pub(crate) enum DiagramFormat {
     /// Graphviz DOT (`dot -Tsvg`).
     Dot,
     /// One mermaid flowchart.
@@ -144,14 +144,14 @@ pub enum DiagramFormat {
 /// How the generated `Cargo.toml` names the runtime crate `coolbot`.
 #[derive(Debug, Args)]
 #[group(multiple = false)]
-pub struct RuntimeArgs {
+pub(crate) struct RuntimeArgs {
     /// Depend on the runtime by path (default: this coolc's own `runtime/` directory
     /// when it exists).
     #[arg(long)]
-    pub runtime_path: Option<PathBuf>,
+    pub(crate) runtime_path: Option<PathBuf>,
     /// Depend on the runtime by version from crates.io.
     #[arg(long)]
-    pub runtime_version: Option<String>,
+    pub(crate) runtime_version: Option<String>,
 }
 
 impl RuntimeArgs {
@@ -178,25 +178,16 @@ impl RuntimeArgs {
 
 /// The `runtime/` directory of the repository this coolc was built from, if it still
 /// exists.
-pub fn repository_runtime() -> Option<PathBuf> {
+pub(crate) fn repository_runtime() -> Option<PathBuf> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
     let path = path.canonicalize().ok()?;
     path.join("Cargo.toml").exists().then_some(path)
 }
 
-/// The runtime dependency used when none is given: the repository's runtime by
-/// path, else `coolbot = "0.1"`.
-pub fn default_runtime() -> RuntimeDep {
-    match repository_runtime() {
-        Some(path) => RuntimeDep::Path(path.display().to_string()),
-        None => RuntimeDep::Version("0.1".to_owned()),
-    }
-}
-
 /// How the manifest in `out` names `runtime`: relative when `out` lies inside the
 /// directory holding the runtime (a crate inside the repository stays relocatable),
 /// absolute otherwise.
-pub fn runtime_path_from(runtime: &Path, out: &Path) -> PathBuf {
+pub(crate) fn runtime_path_from(runtime: &Path, out: &Path) -> PathBuf {
     let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
     let out = normalize(&out);
     let runtime = normalize(runtime);
@@ -593,7 +584,7 @@ fn name_error(name: &str) -> Option<String> {
 
 /// Why `name` cannot be the package name `coolc new` gives the crate (the rules of
 /// `cargo new`), or `None` when it can.
-pub fn package_name_error(name: &str) -> Option<&'static str> {
+pub(crate) fn package_name_error(name: &str) -> Option<&'static str> {
     let Some(first) = name.chars().next() else {
         return Some("the name cannot be empty");
     };

@@ -233,7 +233,7 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     /// An error with a primary label.
-    pub fn error(code: Code, file: FileId, span: Span, message: impl Into<String>) -> Self {
+    pub(crate) fn error(code: Code, file: FileId, span: Span, message: impl Into<String>) -> Self {
         Diagnostic {
             code,
             severity: Severity::Error,
@@ -249,7 +249,12 @@ impl Diagnostic {
     }
 
     /// A warning with a primary label.
-    pub fn warning(code: Code, file: FileId, span: Span, message: impl Into<String>) -> Self {
+    pub(crate) fn warning(
+        code: Code,
+        file: FileId,
+        span: Span,
+        message: impl Into<String>,
+    ) -> Self {
         Diagnostic {
             severity: Severity::Warning,
             ..Diagnostic::error(code, file, span, message)
@@ -257,7 +262,7 @@ impl Diagnostic {
     }
 
     /// Sets the text of the primary label.
-    pub fn with_label(mut self, message: impl Into<String>) -> Self {
+    pub(crate) fn with_label(mut self, message: impl Into<String>) -> Self {
         if let Some(label) = self.labels.first_mut() {
             label.message = message.into();
         }
@@ -265,7 +270,7 @@ impl Diagnostic {
     }
 
     /// Adds a secondary label in the same file.
-    pub fn with_secondary(mut self, span: Span, message: impl Into<String>) -> Self {
+    pub(crate) fn with_secondary(mut self, span: Span, message: impl Into<String>) -> Self {
         self.labels.push(Label {
             span,
             message: message.into(),
@@ -275,7 +280,7 @@ impl Diagnostic {
 
     /// Points at something elsewhere: a secondary label when it is in the same file,
     /// a related note otherwise.
-    pub fn with_other(self, file: FileId, span: Span, message: impl Into<String>) -> Self {
+    pub(crate) fn with_other(self, file: FileId, span: Span, message: impl Into<String>) -> Self {
         if file == self.file {
             self.with_secondary(span, message)
         } else {
@@ -290,13 +295,13 @@ impl Diagnostic {
     }
 
     /// Sets the help text.
-    pub fn with_help(mut self, help: impl Into<String>) -> Self {
+    pub(crate) fn with_help(mut self, help: impl Into<String>) -> Self {
         self.help = Some(help.into());
         self
     }
 
     /// Adds a related diagnostic.
-    pub fn with_related(mut self, related: Diagnostic) -> Self {
+    pub(crate) fn with_related(mut self, related: Diagnostic) -> Self {
         self.related.push(related);
         self
     }
@@ -614,7 +619,10 @@ fn to_json(sources: &SourceMap, diagnostic: &Diagnostic) -> JsonDiagnostic {
 
 /// The closest candidate to `name` (edit distance at most a third of its length, at
 /// least 1), for "did you mean" help. Ties go to the first candidate.
-pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn closest<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
     let limit = (name.chars().count() / 3).max(1);
     let mut best: Option<(usize, &str)> = None;
     for candidate in candidates {

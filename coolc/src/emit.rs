@@ -47,13 +47,13 @@ pub struct EmittedFile {
 
 /// A user file's stubs, for merging into an existing file.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct StubSet {
+pub(crate) struct StubSet {
     /// Path of the user file relative to the crate root.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Last path segment of the trait the `impl` block implements.
-    pub trait_name: String,
+    pub(crate) trait_name: String,
     /// `(method name, stub text)` in order; the text is indented for an impl block.
-    pub stubs: Vec<(String, String)>,
+    pub(crate) stubs: Vec<(String, String)>,
 }
 
 /// How emission lays out the Rust files it writes.
@@ -93,7 +93,7 @@ struct GeneratedMod<'a> {
 
 /// The manifest as the first compile writes it: the template, its entries filled in
 /// by `manifest::update`.
-pub fn cargo_toml(krate: &ir::Crate) -> String {
+pub(crate) fn cargo_toml(krate: &ir::Crate) -> String {
     let template = render(&CargoToml { krate });
     match manifest::update(&template, krate, true) {
         Ok(updated) => updated.text,
@@ -223,15 +223,6 @@ fn pretty(code: &str) -> String {
     }
     out.push_str(&prettyplease::unparse(&file));
     out
-}
-
-/// Formats one piece of generated Rust: `rustfmt` when it is installed (keeping the
-/// templates' blank lines), else `prettyplease`; either way it must parse.
-pub fn format_generated(code: &str) -> String {
-    match rustfmt_stdin(code) {
-        Some(text) => text,
-        None => pretty(code),
-    }
 }
 
 fn rustfmt_program() -> std::ffi::OsString {
@@ -385,7 +376,7 @@ fn rustfmt_files(files: &[(&Path, &str)]) -> Option<Vec<String>> {
 
 /// Who formats generated code in this process, for caches of formatted files:
 /// `rustfmt` and its version, or the built-in printer.
-pub fn formatter_id() -> String {
+pub(crate) fn formatter_id() -> String {
     match rustfmt_version() {
         Some(version) => version.to_owned(),
         None => format!("prettyplease (coolc {})", env!("CARGO_PKG_VERSION")),
@@ -401,7 +392,7 @@ fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool)
 /// Which files of a crate to render: all, those whose templates need a formatter,
 /// or those whose templates are written in rustfmt's layout (see `layout`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Part {
+pub(crate) enum Part {
     /// Every file.
     All,
     /// The files a formatter lays out: `types.rs`, compound modules and their user
@@ -534,7 +525,7 @@ fn converter_methods(krate: &ir::Crate) -> Vec<ir::Method> {
 }
 
 /// User module names declared in `src/lib.rs`, in order.
-pub fn user_modules(krate: &ir::Crate) -> Vec<String> {
+pub(crate) fn user_modules(krate: &ir::Crate) -> Vec<String> {
     let mut modules = Vec::new();
     if !krate.types.converters.is_empty() {
         modules.push("converters".to_owned());
@@ -554,7 +545,7 @@ fn extract_stub(text: &str, name: &str) -> Option<String> {
 
 /// The stubs of every user file, for merging, taken from the emitted user files
 /// `files` (so they are formatted like a fresh file).
-pub fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
+pub(crate) fn stub_sets(krate: &ir::Crate, files: &[EmittedFile]) -> Vec<StubSet> {
     let by_path: std::collections::HashMap<&Path, &str> = files
         .iter()
         .map(|f| (f.path.as_path(), f.contents.as_str()))
@@ -606,7 +597,7 @@ pub fn emit_crate(krate: &ir::Crate) -> Vec<EmittedFile> {
 }
 
 /// [`emit_crate`], formatted or not (see [`Formatting`]).
-pub fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<EmittedFile> {
+pub(crate) fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<EmittedFile> {
     let (mut files, laid_out) = render_crate(krate);
     match formatting {
         Formatting::Formatted => {
@@ -638,7 +629,7 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
 }
 
 /// [`render_crate`] of one [`Part`] (the files in the same order).
-pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
+pub(crate) fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
     let mut files: Vec<(EmittedFile, bool)> = Vec::new();
     let mut push = |path: PathBuf, contents: String, kind: FileKind, laid_out: bool| {
         files.push((
@@ -739,7 +730,7 @@ pub fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Ve
 
 /// Formats the Rust files of `files` marked in `needs` (see the module doc); the
 /// others are checked to parse in debug builds.
-pub fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
+pub(crate) fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
     let selected: Vec<usize> = (0..files.len())
         .filter(|&i| needs[i] && is_rust(&files[i].path))
         .collect();
@@ -913,7 +904,7 @@ struct StarterTest<'a> {
 
 /// The test `coolc new` writes for its starter component (in the crate's `tests/`):
 /// it drives the component in its generated harness.
-pub fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
+pub(crate) fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
     format_user(&render(&StarterTest {
         c,
         lib: &krate.lib_name,

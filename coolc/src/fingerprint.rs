@@ -10,7 +10,7 @@ use crate::source::SourceFile;
 
 /// 64-bit FNV-1a, fed in pieces.
 #[derive(Clone, Copy, Debug)]
-pub struct Fnv1a(u64);
+pub(crate) struct Fnv1a(u64);
 
 impl Default for Fnv1a {
     fn default() -> Self {
@@ -20,7 +20,7 @@ impl Default for Fnv1a {
 
 impl Fnv1a {
     /// Adds `bytes`.
-    pub fn write(&mut self, bytes: &[u8]) {
+    pub(crate) fn write(&mut self, bytes: &[u8]) {
         for byte in bytes {
             self.0 ^= u64::from(*byte);
             self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
@@ -28,13 +28,13 @@ impl Fnv1a {
     }
 
     /// The hash of everything written so far.
-    pub fn finish(self) -> u64 {
+    pub(crate) fn finish(self) -> u64 {
         self.0
     }
 }
 
 /// The 64-bit FNV-1a hash of `bytes`.
-pub fn fnv1a(bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
     let mut hash = Fnv1a::default();
     hash.write(bytes);
     hash.finish()
@@ -49,7 +49,7 @@ pub fn inputs(files: &[SourceFile]) -> String {
 }
 
 /// [`inputs`] over the texts themselves.
-pub fn inputs_of<'a>(texts: impl IntoIterator<Item = &'a [u8]>) -> String {
+pub(crate) fn inputs_of<'a>(texts: impl IntoIterator<Item = &'a [u8]>) -> String {
     let mut hash = Fnv1a::default();
     hash.write(b"coolc ");
     hash.write(env!("CARGO_PKG_VERSION").as_bytes());

@@ -132,8 +132,8 @@ impl Layout {
     }
 
     /// An arm of the glue's `section` dispatch.
-    pub fn section_arm(&self, pattern: &str, call: &str) -> String {
-        self.arm(12, pattern, call)
+    pub fn section_arm(&self, pattern: &str, call: &Code) -> String {
+        self.arm(12, pattern, &call.to_string())
     }
 
     /// The glue's call of the only exception handler.
@@ -170,7 +170,7 @@ impl Layout {
         self.assign(
             16,
             &format!("self.vars.{}", var.field.name),
-            &format!("{}?", var.from_value),
+            &var.from_value.clone().try_op().to_string(),
         )
     }
 
@@ -180,13 +180,13 @@ impl Layout {
     }
 
     /// A method of the typed harness, up to its closing brace: doc, signature, body.
-    pub fn harness_method(&self, doc: &[String], signature: &str, body: &[String]) -> String {
+    pub fn harness_method(&self, doc: &[String], signature: &str, body: &[StubLine]) -> String {
         let mut out = self.member_doc(doc);
         out.push('\n');
         out.push_str(&self.signature(4, signature, " {"));
         for line in body {
             out.push('\n');
-            out.push_str(&self.short(8, line));
+            out.push_str(&self.body_line(line));
         }
         out
     }
@@ -265,24 +265,21 @@ impl Layout {
         let mut out = self.signature(4, &method.user_signature, " {");
         for line in &method.stub_body {
             out.push('\n');
-            match line {
-                StubLine::Comment(text) => {
-                    out.push_str(&spaces(8));
-                    out.push_str(text);
-                }
-                // A value with a shape these rules do not cover is short: one line.
-                StubLine::Value(code) if Self::has_other(code) => {
-                    out.push_str(&self.short(8, &code.to_string()));
-                }
-                StubLine::Value(code) => {
-                    out.push_str(&spaces(8));
-                    out.push_str(&self.node(code, 8, 8, 0, false));
-                }
-                StubLine::Statement(text) => out.push_str(&self.short(8, text)),
-            }
+            out.push_str(&self.body_line(line));
         }
         out.push_str("\n    }");
         out
+    }
+
+    /// One line of a method's body, at indent 8.
+    fn body_line(&self, line: &StubLine) -> String {
+        match line {
+            StubLine::Comment(text) => format!("{}{text}", spaces(8)),
+            // A value with a shape these rules do not cover is short: one line.
+            StubLine::Value(code) if Self::has_other(code) => self.short(8, &code.to_string()),
+            StubLine::Value(code) => format!("{}{}", spaces(8), self.node(code, 8, 8, 0, false)),
+            StubLine::Statement(_) | StubLine::Let(..) => self.short(8, &line.to_string()),
+        }
     }
 
     /// `Self { field: default, ... }`, the body of a `Default` impl at indent 8.
@@ -419,17 +416,6 @@ impl Layout {
     pub fn spec(&self, c: &crate::ir::Atomic) -> String {
         let s = |t: &str| Code::Atom(t.to_owned());
         let literal = Code::string;
-        let port = |kind: &str, p: &crate::ir::Port| {
-            Code::Struct(
-                format!("::coolbot::{kind}Spec"),
-                vec![
-                    ("name".to_owned(), literal(&p.cool_name)),
-                    ("kind".to_owned(), p.kind.clone()),
-                    ("packet".to_owned(), literal(&p.packet)),
-                    ("pull".to_owned(), s(if p.pull { "true" } else { "false" })),
-                ],
-            )
-        };
         let list = Code::slice;
         let spec = Code::Struct(
             "::coolbot::Spec".to_owned(),
@@ -443,11 +429,21 @@ impl Layout {
                 ("initial".to_owned(), s(&c.initial.to_string())),
                 (
                     "inputs".to_owned(),
-                    list(c.inputs.iter().map(|p| port("Input", p)).collect()),
+                    list(
+                        c.inputs
+                            .iter()
+                            .map(|p| p.spec(&p.cool_name, true))
+                            .collect(),
+                    ),
                 ),
                 (
                     "outputs".to_owned(),
-                    list(c.outputs.iter().map(|p| port("Output", p)).collect()),
+                    list(
+                        c.outputs
+                            .iter()
+                            .map(|p| p.spec(&p.cool_name, false))
+                            .collect(),
+                    ),
                 ),
                 (
                     "variables".to_owned(),
@@ -455,21 +451,7 @@ impl Layout {
                         c.vars
                             .iter()
                             .filter(|v| v.spec_index.is_some())
-                            .map(|v| {
-                                Code::Struct(
-                                    "::coolbot::VarSpec".to_owned(),
-                                    vec![
-                                        ("name".to_owned(), literal(&v.field.cool_name)),
-                                        (
-                                            "kind".to_owned(),
-                                            s(&format!("::coolbot::VarKind::{}", v.kind)),
-                                        ),
-                                        ("ty".to_owned(), literal(&v.cool_ty)),
-                                        ("doc".to_owned(), s(&v.doc_literal())),
-                                        ("range".to_owned(), s(&v.range)),
-                                    ],
-                                )
-                            })
+                            .map(crate::ir::Var::spec)
                             .collect(),
                     ),
                 ),
@@ -488,8 +470,7 @@ impl Layout {
     /// room left on the line).
     fn flat(node: &Code) -> Option<String> {
         match node {
-            Code::Atom(text) | Code::Other(text) => Some(text.clone()),
-            Code::Repeat(..) => Some(node.to_string()),
+            Code::Atom(text) => Some(text.clone()),
             Code::Struct(path, fields) if fields.is_empty() => Some(format!("{path} {{}}")),
             Code::Struct(path, fields) => {
                 let body = fields
@@ -515,6 +496,8 @@ impl Layout {
                     .join(", ");
                 (inner.len() <= LIST_WIDTH).then(|| format!("{open}{inner}]"))
             }
+            // Kept on one line, or a shape these rules do not cover.
+            _ => Some(node.to_string()),
         }
     }
 
@@ -543,7 +526,7 @@ impl Layout {
         }
         let inner = spaces(indent + 4);
         match node {
-            Code::Atom(_) | Code::Other(_) | Code::Repeat(..) => {
+            Code::Atom(_) | Code::Repeat(..) => {
                 self.fail();
                 node.to_string()
             }
@@ -604,6 +587,11 @@ impl Layout {
                     out
                 }
             },
+            // A shape these rules do not cover (`has_other` failed already).
+            _ => {
+                self.fail();
+                node.to_string()
+            }
         }
     }
 
@@ -611,10 +599,33 @@ impl Layout {
     fn has_other(node: &Code) -> bool {
         match node {
             Code::Atom(_) => false,
-            Code::Other(_) => true,
             Code::Repeat(item, _) => Self::has_other(item),
             Code::Struct(_, fields) => fields.iter().any(|(_, value)| Self::has_other(value)),
             Code::Call(_, items) | Code::List(_, items) => items.iter().any(Self::has_other),
+            _ => Self::uncovered(node),
+        }
+    }
+
+    /// Whether `node` itself is a shape these rules do not cover (a closure, a
+    /// method call, an operator...): the formatter lays it out.
+    fn uncovered(node: &Code) -> bool {
+        match node {
+            Code::Atom(_)
+            | Code::Struct(..)
+            | Code::Call(..)
+            | Code::List(..)
+            | Code::Repeat(..) => false,
+            Code::StructRest(..)
+            | Code::Method(..)
+            | Code::Field(..)
+            | Code::Try(_)
+            | Code::Unary(..)
+            | Code::Binary(..)
+            | Code::Paren(_)
+            | Code::Closure(..)
+            | Code::Block(..)
+            | Code::Match(..)
+            | Code::Other(_) => true,
         }
     }
 }
@@ -635,7 +646,7 @@ mod tests {
         let code = Code::slice(vec![on_spec("0"), Code::string("a, b")]);
         assert_eq!(code.to_string(), "&[X { port: 0, target: 1 }, \"a, b\"]");
         assert_eq!(
-            Code::call("f", vec![Code::Other("|x| x".to_owned())]).to_string(),
+            Code::call("f", vec![Code::closure("x", Code::atom("x"))]).to_string(),
             "f(|x| x)"
         );
     }
@@ -666,7 +677,7 @@ mod tests {
         assert!(!layout.ok());
         let layout = Layout::default();
         let _ = layout.node(
-            &Code::call("f", vec![Code::Other("|x| x".to_owned())]),
+            &Code::call("f", vec![Code::closure("x", Code::atom("x"))]),
             0,
             0,
             0,

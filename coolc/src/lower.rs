@@ -23,7 +23,7 @@ mod adaptation;
 mod atomic;
 mod automaton;
 mod compound;
-pub mod harness;
+pub(crate) mod harness;
 mod ros;
 
 /// What the caller decides about the emitted crate.
@@ -92,7 +92,7 @@ pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
 }
 
 /// A Cargo package name made from `name` (lowercase, `-` separated).
-pub fn package_name(name: &str) -> String {
+pub(crate) fn package_name(name: &str) -> String {
     let snake = ident::snake_raw(name);
     let cleaned: String = snake
         .chars()
@@ -106,16 +106,17 @@ pub fn package_name(name: &str) -> String {
     }
 }
 
-fn duration_rust(ns: u64) -> String {
-    format!("::std::time::Duration::from_nanos({ns})")
-}
-
 /// `::std::time::Duration::from_nanos(ns)`.
 fn duration_code(ns: u64) -> ir::Code {
     ir::Code::call(
         "::std::time::Duration::from_nanos",
         vec![ir::Code::atom(ns.to_string())],
     )
+}
+
+/// `::core::array::from_fn(|_| item)`.
+fn array_from_fn(item: ir::Code) -> ir::Code {
+    ir::Code::call("::core::array::from_fn", vec![ir::Code::closure("_", item)])
 }
 
 fn option_duration(duration: Option<&Duration>) -> ir::Code {
@@ -235,7 +236,7 @@ impl<'a> Lowerer<'a> {
                 Some(if *n <= 32 && item == default_code() {
                     default_code()
                 } else {
-                    ir::Code::Other(format!("::core::array::from_fn(|_| {item})"))
+                    array_from_fn(item)
                 })
             }
             Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
@@ -284,11 +285,8 @@ impl<'a> Lowerer<'a> {
         use ir::Code;
         if let Some(Ty::Optional(inner)) = ty {
             return match value {
-                Value::None => Code::atom("::core::option::Option::None"),
-                _ => Code::call(
-                    "::core::option::Option::Some",
-                    vec![self.value(value, Some(inner), prefix)],
-                ),
+                Value::None => Code::core_none(),
+                _ => Code::core_some(self.value(value, Some(inner), prefix)),
             };
         }
         match value {
@@ -328,10 +326,10 @@ impl<'a> Lowerer<'a> {
                     Some(Ty::List(_)) => Code::Other(format!("::std::vec![{item}; {n}]")),
                     // `[value; n]` needs a `Copy` value.
                     _ if copy => Code::Repeat(Box::new(item), *n),
-                    _ => Code::Other(format!("::core::array::from_fn(|_| {item})")),
+                    _ => array_from_fn(item),
                 }
             }
-            Value::None => Code::atom("::core::option::Option::None"),
+            Value::None => Code::core_none(),
             // Not a constant: the checker rejects it.
             Value::Invalid => default_code(),
         }
@@ -524,10 +522,10 @@ fn unique_among<'t>(name: String, taken: impl Iterator<Item = &'t str> + Clone) 
 
 impl Lowerer<'_> {
     /// An instance's overrides of configuration fields (`config`) or controllable
-    /// variables (`!config`), as `(field, Rust value)`: a name that is both sets both.
+    /// variables (`!config`), as `(field, value)`: a name that is both sets both.
     /// A compound's own controllable variables count; its mapped ones do not (they
     /// have no `Vars` field).
-    fn overrides(&self, instance: &Instance, config: bool) -> Vec<(String, String)> {
+    fn overrides(&self, instance: &Instance, config: bool) -> Vec<(String, ir::Code)> {
         let Some(component) = self.checked.component(&instance.component) else {
             return Vec::new();
         };
@@ -542,7 +540,7 @@ impl Lowerer<'_> {
                 {
                     overrides.push((
                         ident::snake(&f.name),
-                        self.value(&o.value, Some(&f.ty), GEN_TYPES).to_string(),
+                        self.value(&o.value, Some(&f.ty), GEN_TYPES),
                     ));
                 }
             } else {
@@ -554,7 +552,7 @@ impl Lowerer<'_> {
                     if let Some(ty) = &v.written {
                         overrides.push((
                             ident::snake(&v.name),
-                            self.value(&o.value, Some(ty), GEN_TYPES).to_string(),
+                            self.value(&o.value, Some(ty), GEN_TYPES),
                         ));
                     }
                 }

@@ -1,6 +1,6 @@
 //! Parsing: `.cool` text to [`ast::File`] with byte spans.
 //!
-//! **Invariant:** parsing never fails. [`parse`] returns the items it could build plus
+//! **Invariant:** parsing never fails. `parse` returns the items it could build plus
 //! every syntax error. The text is parsed one item at a time (`item_step`); when an
 //! item does not parse, a component is retried member by member (`component_head`,
 //! then `member_step`), an automaton state by state (`automaton_head`,
@@ -72,7 +72,7 @@ const MEMBER_KEYWORDS: &[&str] = &[
 const STATE_MEMBER_KEYWORDS: &[&str] = &["entry", "exit", "periodic", "on", "after", "may", "when"];
 
 /// Parses one file. Never fails: returns what it could build and every syntax error.
-pub fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
+pub(crate) fn parse(file: FileId, text: &str) -> (ast::File, Vec<Diagnostic>) {
     let deepest = match nesting(file, text) {
         Ok(deepest) => deepest,
         Err(diagnostic) => {

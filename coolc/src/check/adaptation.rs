@@ -3,7 +3,7 @@
 //! only where the timing adapts.
 
 use super::Checker;
-use super::model::SelectorKind;
+use super::model::{SelectorKind, TimingEntry};
 use super::values::describe;
 use crate::ast::{self, Span};
 use crate::diagnostics::{Code, Diagnostic};
@@ -284,14 +284,14 @@ fn selector(checker: &mut Checker<'_, '_>, entry: &ast::AdaptEntry) {
 
 /// Whether a timing (a component's entries, then an instance's, which replace them)
 /// adapts: a period interval, or no period with `max_response` and quality levels.
-pub(super) fn adapts<'t>(entries: impl IntoIterator<Item = &'t ast::TimingEntry>) -> bool {
+pub(super) fn adapts<'t>(entries: impl IntoIterator<Item = &'t TimingEntry>) -> bool {
     let (mut period, mut response, mut quality) = (None, false, false);
     for entry in entries {
         match entry {
-            ast::TimingEntry::Period(interval) => period = Some(interval.hi.is_some()),
-            ast::TimingEntry::MaxResponse(_) => response = true,
-            ast::TimingEntry::Quality(levels, _) => quality = levels.len() > 1,
-            ast::TimingEntry::Priority(_) => {}
+            TimingEntry::Period(_, hi) => period = Some(hi.is_some()),
+            TimingEntry::MaxResponse(_) => response = true,
+            TimingEntry::Quality(levels) => quality = levels.len() > 1,
+            TimingEntry::Priority(_) => {}
         }
     }
     match period {

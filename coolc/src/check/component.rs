@@ -45,13 +45,10 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             ast::Member::Restart(restart) => self::restart(checker, restart),
             ast::Member::Adaptation(block) => {
                 let compound = component.kind == ComponentKind::Compound;
-                let own_timing = component.members.iter().flat_map(|member| match member {
-                    ast::Member::Timing(timing) => timing.entries.as_slice(),
-                    _ => &[],
-                });
+                let resolved = checker.model.resolved(&component.name.name);
                 let target = adaptation::Target {
                     compound,
-                    adapts: compound || adaptation::adapts(own_timing),
+                    adapts: compound || adaptation::adapts(resolved.timing.iter().flatten()),
                     window: None,
                 };
                 adaptation::block(checker, block, target);

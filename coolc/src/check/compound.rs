@@ -5,7 +5,10 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::model::{Component, Model, Port, PortKind, Ty, Variable};
+use super::model::{
+    Component, InputKind, Model, OutputKind, OverflowPolicy, Port, PortKind, StateMember, Ty,
+    Variable,
+};
 use super::{Checker, adaptation, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
@@ -223,19 +226,22 @@ fn instance(
         values::timing(checker, timing);
         let nested = checker
             .model
-            .component(&instance.component.name)
-            .is_some_and(|(_, def)| def.kind == ComponentKind::Compound);
+            .known(&instance.component.name)
+            .is_some_and(|def| def.kind == ComponentKind::Compound);
         if nested {
             compound_timing(checker, timing, &instance.component.name);
         }
     }
-    instance_adaptation(checker, instance);
-    let _ = component;
+    instance_adaptation(checker, component, instance);
 }
 
 /// An instance's `adaptation { ... }`: once, on an instance of an atomic component,
 /// checked against the timing that applies to the instance.
-fn instance_adaptation(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
+fn instance_adaptation(
+    checker: &mut Checker<'_, '_>,
+    compound: &ast::Component,
+    instance: &ast::Instance,
+) {
     let [block, rest @ ..] = instance.adaptation.as_slice() else {
         return;
     };
@@ -251,7 +257,7 @@ fn instance_adaptation(checker: &mut Checker<'_, '_>, instance: &ast::Instance) 
             .with_help("merge the two blocks");
         checker.push(diagnostic);
     }
-    let Some((_, def)) = checker.model.component(&instance.component.name) else {
+    let Some(def) = checker.model.known(&instance.component.name) else {
         return;
     };
     if def.kind == ComponentKind::Compound {
@@ -272,18 +278,16 @@ fn instance_adaptation(checker: &mut Checker<'_, '_>, instance: &ast::Instance) 
         checker.push(diagnostic);
         return;
     }
-    let own_timing = def.members.iter().flat_map(|member| match member {
-        ast::Member::Timing(timing) => timing.entries.as_slice(),
-        _ => &[],
-    });
-    let adapts =
-        adaptation::adapts(own_timing.chain(instance.timing.iter().flat_map(|t| t.entries.iter())));
-    let window = checker
-        .model
-        .resolved(&instance.component.name)
-        .adaptation
-        .window
-        .map(u64::from);
+    // Its component's timing, then the instance's override of it.
+    let enclosing = checker.model.resolved(&compound.name.name);
+    let overrides = enclosing
+        .instances
+        .iter()
+        .find(|resolved| resolved.name == instance.name.name)
+        .and_then(|resolved| resolved.timing.as_deref())
+        .unwrap_or_default();
+    let adapts = adaptation::adapts(def.timing.iter().flatten().chain(overrides));
+    let window = def.adaptation.window.map(u64::from);
     adaptation::block(
         checker,
         block,
@@ -551,44 +555,43 @@ fn lossy_members(
     let mut lossy: BTreeSet<String> = BTreeSet::new();
     let mut streams = false;
     for member in &redundant.members {
-        let Some((instance, _)) = instances.get(member.name.as_str()) else {
-            continue;
-        };
-        let Some((_, component)) = checker.model.component(&instance.component.name) else {
+        // Its type's own declared ports.
+        let Some((instance, Some(component))) = instances.get(member.name.as_str()) else {
             continue;
         };
         let type_name = &instance.component.name;
-        for declared in &component.members {
-            match declared {
-                ast::Member::Output(ast::Output {
-                    name,
-                    def: ast::OutputDef::Data(..),
-                    ..
-                }) if read.contains(name.name.as_str()) => streams = true,
-                ast::Member::Input(ast::Input { name, def, .. }) => {
-                    let Some(&by_connection) = fed.get(name.name.as_str()) else {
-                        continue;
-                    };
-                    let why = match def {
-                        ast::InputDef::Fifo { policy, .. } => {
-                            match policy.as_ref().map_or("reject", |p| p.name.as_str()) {
-                                "block" if by_connection => {
-                                    Some("`fifo`, `block`: fed by a connection, it drops after its timeout".to_owned())
-                                }
-                                "block" => None,
-                                policy => Some(format!("`fifo`, `{policy}`")),
-                            }
-                        }
-                        ast::InputDef::Ufifo { max: Some(_), .. } => {
-                            Some("`ufifo` with a cap".to_owned())
-                        }
-                        _ => None,
-                    };
-                    if let Some(why) = why {
-                        lossy.insert(format!("`{type_name}.{}` ({why})", name.name));
-                    }
+        streams |= component.outputs.iter().any(|output| {
+            output.export.is_none()
+                && read.contains(output.name.as_str())
+                && matches!(
+                    output.port.as_ref().map(|port| &port.kind),
+                    Some(OutputKind::Data(_))
+                )
+        });
+        for input in component
+            .inputs
+            .iter()
+            .filter(|input| input.export.is_none())
+        {
+            let Some(&by_connection) = fed.get(input.name.as_str()) else {
+                continue;
+            };
+            let why = match input.port.as_ref().map(|port| &port.kind) {
+                Some(InputKind::Fifo { policy, .. }) => match policy.unwrap_or_default() {
+                    OverflowPolicy::Block if by_connection => Some(
+                        "`fifo`, `block`: fed by a connection, it drops after its timeout"
+                            .to_owned(),
+                    ),
+                    OverflowPolicy::Block => None,
+                    policy => Some(format!("`fifo`, `{}`", policy.name())),
+                },
+                Some(InputKind::Ufifo { max: Some(_), .. }) => {
+                    Some("`ufifo` with a cap".to_owned())
                 }
-                _ => {}
+                _ => None,
+            };
+            if let Some(why) = why {
+                lossy.insert(format!("`{type_name}.{}` ({why})", input.name));
             }
         }
     }
@@ -1470,27 +1473,23 @@ fn unconnected_transition_inputs(
         if instance.substitutes.is_some() {
             continue;
         }
-        let Some((_, inner)) = checker.model.component(&instance.component.name) else {
+        let Some(inner) = checker.model.known(&instance.component.name) else {
             continue;
         };
-        let mut waited: Vec<&ast::Ident> = Vec::new();
-        for member in &inner.members {
-            let ast::Member::Automaton(automaton) = member else {
-                continue;
-            };
-            for state in &automaton.states {
-                for state_member in &state.members {
-                    match state_member {
-                        ast::StateMember::On { port, .. } => waited.push(port),
-                        ast::StateMember::After {
-                            without: Some(port),
-                            ..
-                        } => waited.push(port),
-                        _ => {}
-                    }
-                }
-            }
-        }
+        // The ports its automaton waits on: `on port`, `after d without port`.
+        let waited = inner
+            .automaton
+            .iter()
+            .flat_map(|automaton| &automaton.states)
+            .flat_map(|state| &state.members)
+            .filter_map(|member| match member {
+                StateMember::On { port, .. }
+                | StateMember::After {
+                    without: Some(port),
+                    ..
+                } => Some(port),
+                _ => None,
+            });
         let mut warned = BTreeSet::new();
         for port in waited {
             if fed.contains(&(name.to_string(), port.name.clone()))

@@ -4,6 +4,7 @@
 //! a warning), whether the bound is the type's or an instance's override.
 
 use super::Checker;
+use super::model::{Component, InputKind, StateMember, TimingEntry};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
@@ -23,7 +24,8 @@ pub(super) fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &as
     {
         return;
     }
-    unmeasured(checker, component, bound, &component.name.name);
+    let resolved = checker.model.resolved(&component.name.name);
+    unmeasured(checker, &resolved, bound, &component.name.name);
 }
 
 /// An instance's own `max_response` (its `timing` override) on an aperiodic atomic
@@ -31,17 +33,20 @@ pub(super) fn unmeasured_responses(checker: &mut Checker<'_, '_>, component: &as
 pub(super) fn instance_override(checker: &mut Checker<'_, '_>, instance: &ast::Instance) {
     if let Some(timing) = &instance.timing
         && let Some(bound) = max_response(timing.entries.iter())
-        && let Some((_, declared)) = checker.model.component(&instance.component.name)
+        && let Some(declared) = checker.model.known(&instance.component.name)
         && declared.kind == ComponentKind::Atomic
-        && max_response(timing_entries(declared)).is_none()
+        && !declared
+            .timing
+            .iter()
+            .flatten()
+            .any(|entry| matches!(entry, TimingEntry::MaxResponse(_) | TimingEntry::Period(..)))
         && !timing
             .entries
             .iter()
-            .chain(timing_entries(declared))
             .any(|entry| matches!(entry, ast::TimingEntry::Period(_)))
     {
         let what = format!("{} ({})", instance.name.name, instance.component.name);
-        unmeasured(checker, declared, bound, &what);
+        unmeasured(checker, &declared, bound, &what);
     }
 }
 
@@ -70,44 +75,35 @@ pub(super) fn max_response<'e>(
 /// `on` transition handles.
 pub(super) fn unmeasured(
     checker: &mut Checker<'_, '_>,
-    component: &ast::Component,
+    component: &Component,
     bound: Span,
     what: &str,
 ) {
     let handled: std::collections::BTreeSet<&str> = component
-        .members
+        .automaton
         .iter()
-        .filter_map(|member| match member {
-            ast::Member::Automaton(automaton) => Some(&automaton.states),
-            _ => None,
-        })
-        .flatten()
+        .flat_map(|automaton| &automaton.states)
         .flat_map(|state| &state.members)
         .filter_map(|member| match member {
-            ast::StateMember::On { port, .. } => Some(port.name.as_str()),
+            StateMember::On { port, .. } => Some(port.name.as_str()),
             _ => None,
         })
         .collect();
     let untimed: Vec<String> = component
-        .members
+        .inputs
         .iter()
-        .filter_map(|member| match member {
+        .filter(|input| {
             // Event inputs (queues and ticks) the component does not pull: a `last` or
             // `poster` input is read for its value, a pulled one answers a request.
-            ast::Member::Input(input)
-                if input.pull.is_none()
+            input.port.as_ref().is_some_and(|port| {
+                !port.pull
                     && matches!(
-                        input.def,
-                        ast::InputDef::Fifo { .. }
-                            | ast::InputDef::Ufifo { .. }
-                            | ast::InputDef::Tick
+                        port.kind,
+                        InputKind::Fifo { .. } | InputKind::Ufifo { .. } | InputKind::Tick
                     )
-                    && !handled.contains(input.name.name.as_str()) =>
-            {
-                Some(format!("`{}`", input.name.name))
-            }
-            _ => None,
+            }) && !handled.contains(input.name.as_str())
         })
+        .map(|input| format!("`{}`", input.name))
         .collect();
     if untimed.is_empty() {
         return;

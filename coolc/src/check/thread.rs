@@ -10,7 +10,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::Checker;
-use super::model::{Model, PortKind};
+use super::model::{Model, PortKind, TimingEntry};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::Code;
 
@@ -116,7 +116,7 @@ fn member<'c>(
         );
         return None;
     };
-    let (_, component) = checker.model.component(&instance.component.name)?;
+    let component = checker.model.known(&instance.component.name)?;
     if component.kind == ComponentKind::Compound {
         let diagnostic = checker
             .error(
@@ -151,16 +151,14 @@ fn member<'c>(
         checker.push(diagnostic);
         return None;
     }
-    let period = period(instance.timing.as_ref()).or_else(|| {
-        component
-            .members
-            .iter()
-            .rev()
-            .find_map(|member| match member {
-                ast::Member::Timing(timing) => period(Some(timing)),
-                _ => None,
-            })
-    });
+    // The instance's override, else its component's `timing`.
+    let enclosing = checker.model.resolved(&compound.name.name);
+    let own = enclosing
+        .instances
+        .iter()
+        .find(|resolved| resolved.name == ident.name)
+        .and_then(|resolved| resolved.timing.as_deref());
+    let period = period(own).or_else(|| period(component.timing.as_deref()));
     Some(Member {
         ident,
         instance,
@@ -170,14 +168,9 @@ fn member<'c>(
 
 /// The nominal period of a `timing` block (its last `period` entry's lower bound), in
 /// nanoseconds as the runtime gets it (a frequency's period rounded to the nearest).
-fn period(timing: Option<&ast::Timing>) -> Option<u64> {
-    timing?.entries.iter().rev().find_map(|entry| match entry {
-        ast::TimingEntry::Period(interval) => match interval.lo.kind {
-            ast::ExprKind::Duration(nanos) => u64::try_from(nanos).ok(),
-            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-            ast::ExprKind::Frequency(hertz) if hertz > 0.0 => Some((1e9 / hertz).round() as u64),
-            _ => None,
-        },
+fn period(timing: Option<&[TimingEntry]>) -> Option<u64> {
+    timing?.iter().rev().find_map(|entry| match entry {
+        TimingEntry::Period(lo, _) => Some(lo.nanos),
         _ => None,
     })
 }

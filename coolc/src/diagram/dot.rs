@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use super::{Diagram, EdgeStyle, End, Group, Item, Node, Shape};
 
 /// The DOT text of one diagram.
-pub fn render(diagram: &Diagram) -> String {
+pub(crate) fn render(diagram: &Diagram) -> String {
     let mut anchors = BTreeMap::new();
     collect_anchors(&diagram.items, &mut anchors);
     let mut out = String::new();
@@ -220,7 +220,7 @@ fn port_cell(port: Option<&(String, String)>, align: &str) -> String {
 }
 
 /// Escapes text for an HTML-like label (`<`, `>`, `&`, `"`).
-pub fn html_escape(text: &str) -> String {
+pub(crate) fn html_escape(text: &str) -> String {
     let mut out = String::new();
     for c in text.chars() {
         match c {
@@ -236,7 +236,7 @@ pub fn html_escape(text: &str) -> String {
 }
 
 /// A DOT quoted string: `"` and `\` escaped, newlines as `\n` (centred lines).
-pub fn quote(text: &str) -> String {
+pub(crate) fn quote(text: &str) -> String {
     let mut out = String::from("\"");
     for c in text.chars() {
         match c {

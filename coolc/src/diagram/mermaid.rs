@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use super::{Diagram, EdgeStyle, Group, Item, Node, Shape};
 
 /// The mermaid text of one diagram.
-pub fn render(diagram: &Diagram) -> String {
+pub(crate) fn render(diagram: &Diagram) -> String {
     let mut ids = Ids::default();
     let mut out = String::new();
     out.push_str(&format!("%% {}\n", diagram.title().replace('\n', " ")));
@@ -149,7 +149,7 @@ fn text(lines: &[String]) -> String {
 }
 
 /// Escapes one line for a quoted mermaid label.
-pub fn escape(line: &str) -> String {
+pub(crate) fn escape(line: &str) -> String {
     let mut out = String::new();
     for c in line.chars() {
         match c {

@@ -5,7 +5,7 @@
 //! and 4).
 //!
 //! Each view builds a [`Diagram`] (nodes, nested groups, edges: no format in it), which
-//! [`dot`] and [`mermaid`] print. It takes a [`Checked`] model (there are no errors,
+//! `dot` and `mermaid` print. It takes a [`Checked`] model (there are no errors,
 //! names resolve) and finds components through it; output depends only on the
 //! descriptions (source order, identifiers from names), never on hashing or
 //! addresses.
@@ -14,9 +14,9 @@ use crate::ast::FileId;
 use crate::checked::Checked;
 use crate::checked::model::{Component, ComponentKind};
 
-pub mod dot;
-pub mod mermaid;
-pub mod text;
+pub(crate) mod dot;
+pub(crate) mod mermaid;
+pub(crate) mod text;
 mod views;
 
 /// Which drawing of a component.
@@ -32,7 +32,7 @@ pub enum View {
 
 impl View {
     /// The view's name on the command line.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             View::Interface => "interface",
             View::Structure => "structure",
@@ -81,15 +81,15 @@ pub enum SelectError {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Diagram {
     /// The component drawn.
-    pub component: String,
+    pub(crate) component: String,
     /// The view.
-    pub view: View,
+    pub(crate) view: View,
     /// Left to right (`true`) or top to bottom.
-    pub left_to_right: bool,
+    pub(crate) left_to_right: bool,
     /// The top-level items (a group without a frame).
-    pub items: Vec<Item>,
+    pub(crate) items: Vec<Item>,
     /// Every edge, in a stable order.
-    pub edges: Vec<Edge>,
+    pub(crate) edges: Vec<Edge>,
 }
 
 impl Diagram {
@@ -101,7 +101,7 @@ impl Diagram {
 
 /// A node or a group of items.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Item {
+pub(crate) enum Item {
     /// A node.
     Node(Node),
     /// A framed group (a cluster).
@@ -111,22 +111,22 @@ pub enum Item {
 /// A framed group of items: a nested compound, a redundant group, a state holding
 /// an automaton.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Group {
+pub(crate) struct Group {
     /// Unique in the diagram (shared with nodes' ids).
-    pub id: String,
+    pub(crate) id: String,
     /// Label lines.
-    pub label: Vec<String>,
+    pub(crate) label: Vec<String>,
     /// Dashed frame (redundant groups).
-    pub dashed: bool,
+    pub(crate) dashed: bool,
     /// Rounded frame (states).
-    pub rounded: bool,
+    pub(crate) rounded: bool,
     /// What it holds.
-    pub items: Vec<Item>,
+    pub(crate) items: Vec<Item>,
 }
 
 /// How a node is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Shape {
+pub(crate) enum Shape {
     /// A rectangle (components, instances).
     Box,
     /// A rounded rectangle (states).
@@ -141,31 +141,31 @@ pub enum Shape {
 
 /// A node.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Node {
+pub(crate) struct Node {
     /// Unique in the diagram.
-    pub id: String,
+    pub(crate) id: String,
     /// Label lines (the first is the name).
-    pub lines: Vec<String>,
+    pub(crate) lines: Vec<String>,
     /// Its shape.
-    pub shape: Shape,
+    pub(crate) shape: Shape,
     /// Dashed outline (default ports).
-    pub dashed: bool,
+    pub(crate) dashed: bool,
     /// Ports drawn on the node (DOT records); edges may end at them.
-    pub ports: Option<Ports>,
+    pub(crate) ports: Option<Ports>,
 }
 
 /// The ports drawn on an instance node: inputs on the left, outputs on the right.
 #[derive(Clone, Debug, PartialEq, Default)]
-pub struct Ports {
+pub(crate) struct Ports {
     /// `(port id, label)`.
-    pub inputs: Vec<(String, String)>,
+    pub(crate) inputs: Vec<(String, String)>,
     /// `(port id, label)`.
-    pub outputs: Vec<(String, String)>,
+    pub(crate) outputs: Vec<(String, String)>,
 }
 
 /// How an edge is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EdgeStyle {
+pub(crate) enum EdgeStyle {
     /// A plain arrow.
     Solid,
     /// A dashed arrow (`may` transitions, substitutions).
@@ -176,32 +176,32 @@ pub enum EdgeStyle {
 
 /// An edge between nodes (or node ports, or groups).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Edge {
+pub(crate) struct Edge {
     /// Where it starts.
-    pub from: End,
+    pub(crate) from: End,
     /// Where it ends.
-    pub to: End,
+    pub(crate) to: End,
     /// Label lines.
-    pub label: Vec<String>,
+    pub(crate) label: Vec<String>,
     /// Where ports are not drawn on nodes (mermaid), the port names it joins, shown
     /// first in the label.
-    pub ports: Option<String>,
+    pub(crate) ports: Option<String>,
     /// Its style.
-    pub style: EdgeStyle,
+    pub(crate) style: EdgeStyle,
 }
 
 /// One end of an edge: a node, a port of a node, or a group.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct End {
+pub(crate) struct End {
     /// A node or group id.
-    pub id: String,
+    pub(crate) id: String,
     /// A port id of that node.
-    pub port: Option<String>,
+    pub(crate) port: Option<String>,
 }
 
 impl End {
     /// The node or group `id`.
-    pub fn node(id: impl Into<String>) -> End {
+    pub(crate) fn node(id: impl Into<String>) -> End {
         End {
             id: id.into(),
             port: None,

@@ -7,7 +7,7 @@ use crate::checked::model::{
 };
 
 /// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
-pub fn input_kind(input: &Declared<InputKind>) -> String {
+pub(crate) fn input_kind(input: &Declared<InputKind>) -> String {
     let kind = match &input.kind {
         InputKind::Tick => "tick".to_owned(),
         InputKind::Fifo { ty, size, policy } => match policy {
@@ -25,7 +25,7 @@ pub fn input_kind(input: &Declared<InputKind>) -> String {
 }
 
 /// An output's kind as written (`data<Pose2D>`, `tick`), with ` pull`.
-pub fn output_kind(output: &Declared<OutputKind>) -> String {
+pub(crate) fn output_kind(output: &Declared<OutputKind>) -> String {
     let kind = match &output.kind {
         OutputKind::Tick => "tick".to_owned(),
         OutputKind::Data(ty) => format!("data<{ty}>"),
@@ -39,7 +39,7 @@ fn with_pull(kind: String, pull: bool) -> String {
 }
 
 /// `instance.port`, or `port`.
-pub fn port_ref(port: &PortRef) -> String {
+pub(crate) fn port_ref(port: &PortRef) -> String {
     match &port.instance {
         Some(instance) => format!("{}.{}", instance.name, port.port),
         None => port.port.clone(),
@@ -47,7 +47,7 @@ pub fn port_ref(port: &PortRef) -> String {
 }
 
 /// `lo` or `lo..hi`.
-pub fn interval(lo: &Duration, hi: Option<&Duration>) -> String {
+pub(crate) fn interval(lo: &Duration, hi: Option<&Duration>) -> String {
     match hi {
         Some(hi) => format!("{}..{}", time(lo), time(hi)),
         None => time(lo),
@@ -55,7 +55,7 @@ pub fn interval(lo: &Duration, hi: Option<&Duration>) -> String {
 }
 
 /// A duration or frequency as written (`500ms`, `100Hz`).
-pub fn time(duration: &Duration) -> String {
+pub(crate) fn time(duration: &Duration) -> String {
     match duration.written {
         Written::Nanos(nanos) => self::duration(nanos),
         Written::Hertz(hertz) => frequency(hertz),
@@ -63,7 +63,7 @@ pub fn time(duration: &Duration) -> String {
 }
 
 /// A duration in the largest unit that divides it (`2s`, `500ms`, `1min`).
-pub fn duration(nanos: u128) -> String {
+pub(crate) fn duration(nanos: u128) -> String {
     const UNITS: [(u128, &str); 5] = [
         (60_000_000_000, "min"),
         (1_000_000_000, "s"),
@@ -114,7 +114,7 @@ fn string(text: &str) -> String {
 }
 
 /// A constant value as `.cool` writes it.
-pub fn value(value: &Value) -> String {
+pub(crate) fn value(value: &Value) -> String {
     match value {
         Value::Bool(value) => value.to_string(),
         Value::Int(value) => value.to_string(),
@@ -144,7 +144,7 @@ fn precedence(expr: &Typed) -> u8 {
 }
 
 /// A rule expression as written, with the parentheses its shape needs.
-pub fn expr(expr: &Typed) -> String {
+pub(crate) fn expr(expr: &Typed) -> String {
     let operand = |index: usize| expr.operands.get(index);
     match &expr.node {
         Node::Int(value) => value.to_string(),

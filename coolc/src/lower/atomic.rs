@@ -13,7 +13,12 @@ use crate::checked::model::{
     TimingEntry, Ty, VarKind, Variable,
 };
 use crate::ident;
-use crate::ir;
+use crate::ir::{self, Code};
+
+/// `self.vars`: where an atomic component's glue holds its variables.
+pub(super) fn glue_vars() -> Code {
+    Code::atom("self").field("vars")
+}
 
 /// The Rust type (under the component modules' path to the types) and the `.cool`
 /// name of a packet type.
@@ -34,7 +39,7 @@ impl<'a> Lowerer<'a> {
         let vars: Vec<ir::Var> = c
             .variables
             .iter()
-            .filter_map(|v| self.variable(v, &mut spec_index, "self.vars"))
+            .filter_map(|v| self.variable(v, &mut spec_index, &glue_vars()))
             .collect();
         // An atomic's ports are all declared (exports are a compound's).
         let inputs: Vec<(&Input, ir::Port)> = c
@@ -60,28 +65,26 @@ impl<'a> Lowerer<'a> {
         for e in &c.exceptions {
             let name = &e.name;
             let handler = unique(ident::method("on_", name, ""), &methods);
-            let plan: Vec<ir::Code> = e
+            let plan: Vec<Code> = e
                 .plan
                 .iter()
                 .map(|step| match step {
-                    PlanStep::Retry { count, every } => ir::Code::structure(
+                    PlanStep::Retry { count, every } => Code::structure(
                         "::coolbot::PlanStep::Retry",
                         vec![
                             (
                                 "count",
-                                ir::Code::atom(
-                                    u32::try_from(*count).unwrap_or(u32::MAX).to_string(),
-                                ),
+                                Code::atom(u32::try_from(*count).unwrap_or(u32::MAX).to_string()),
                             ),
                             ("every", duration_code(every.nanos)),
                         ],
                     ),
-                    PlanStep::Goto(target) => ir::Code::call(
+                    PlanStep::Goto(target) => Code::call(
                         "::coolbot::PlanStep::Goto",
-                        vec![ir::Code::atom(target.index.to_string())],
+                        vec![Code::atom(target.index.to_string())],
                     ),
-                    PlanStep::Ignore => ir::Code::atom("::coolbot::PlanStep::Ignore"),
-                    PlanStep::Degrade => ir::Code::atom("::coolbot::PlanStep::Degrade"),
+                    PlanStep::Ignore => Code::atom("::coolbot::PlanStep::Ignore"),
+                    PlanStep::Degrade => Code::atom("::coolbot::PlanStep::Degrade"),
                 })
                 .collect();
             let description = e.description.as_deref().unwrap_or("");
@@ -104,12 +107,12 @@ impl<'a> Lowerer<'a> {
                 cool_name: name.clone(),
                 variant: ident::camel(name),
                 handler,
-                spec: ir::Code::structure(
+                spec: Code::structure(
                     "::coolbot::ExceptionSpec",
                     vec![
-                        ("name", ir::Code::string(name)),
-                        ("description", ir::Code::string(description)),
-                        ("plan", ir::Code::slice(plan)),
+                        ("name", Code::string(name)),
+                        ("description", Code::string(description)),
+                        ("plan", Code::slice(plan)),
                     ],
                 ),
             });
@@ -133,16 +136,16 @@ impl<'a> Lowerer<'a> {
                         "// A consumer pulled from output `{name}`: compute the packet to answer with."
                     )),
                     ir::StubLine::Statement("let _ = cx;".to_owned()),
-                    ir::StubLine::Value(ir::Code::call("Ok", vec![default])),
+                    ir::StubLine::Value(Code::call("Ok", vec![default])),
                 ]
             } else {
                 vec![
                     ir::StubLine::Statement("let _ = cx;".to_owned()),
-                    ir::StubLine::Value(ir::Code::call(
+                    ir::StubLine::Value(Code::call(
                         "Err",
-                        vec![ir::Code::call(
+                        vec![Code::call(
                             "coolbot::Fault::message",
-                            vec![ir::Code::string(&format!(
+                            vec![Code::string(&format!(
                                 "the pull answer `{method}` is not written yet"
                             ))],
                         )],
@@ -198,12 +201,12 @@ impl<'a> Lowerer<'a> {
 
     /// A declared variable (`observable`/`controllable`/`local` with a type) as a
     /// `Vars` field; `receiver` is the Rust expression holding the `Vars` in the glue
-    /// (`self.vars`). Observable and controllable ones take the next `spec_index`.
+    /// ([`glue_vars`]). Observable and controllable ones take the next `spec_index`.
     pub(super) fn variable(
         &self,
         v: &Variable,
         spec_index: &mut usize,
-        receiver: &str,
+        receiver: &Code,
     ) -> Option<ir::Var> {
         let ty = v.written.as_ref()?;
         let default = if v.value.is_none() && !self.ty_defaultable(ty) {
@@ -217,7 +220,7 @@ impl<'a> Lowerer<'a> {
             Some(d) => (rust_ty(ty, GEN_TYPES), d),
             None => (
                 format!("::core::option::Option<{}>", rust_ty(ty, GEN_TYPES)),
-                ir::Code::atom("::core::option::Option::None"),
+                Code::atom("::core::option::Option::None"),
             ),
         };
         let has_default = default.is_some();
@@ -240,40 +243,61 @@ impl<'a> Lowerer<'a> {
                 format!("::core::option::Option<{adapter}>")
             }
         });
+        let held = receiver.clone().field(field.as_str());
+        let value = || Code::atom("value");
+        let to_value_call = |value: Code| Code::call("super::__cool_to_value", vec![value]);
         let (to_value, from_value) = match (&adapter, prim_of(ty)) {
             (Some(adapter), _) => (
-                format!(
-                    "super::__cool_to_value(&{SERDE_WITH}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&{receiver}.{field}))"
+                to_value_call(
+                    Code::call(
+                        format!("{SERDE_WITH}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new"),
+                        vec![held.reference()],
+                    )
+                    .reference(),
                 ),
-                format!(
-                    "super::__cool_from_value::<{SERDE_WITH}de::DeserializeAsWrap<{rust_ty}, {adapter}>>(value).map({SERDE_WITH}de::DeserializeAsWrap::into_inner)"
+                Code::call(
+                    format!(
+                        "super::__cool_from_value::<{SERDE_WITH}de::DeserializeAsWrap<{rust_ty}, {adapter}>>"
+                    ),
+                    vec![value()],
+                )
+                .method(
+                    "map",
+                    vec![Code::atom(format!(
+                        "{SERDE_WITH}de::DeserializeAsWrap::into_inner"
+                    ))],
                 ),
             ),
             (None, Some(p)) if has_default => (
-                if p == Prim::String {
-                    format!("::coolbot::Value::from({receiver}.{field}.clone())")
-                } else {
-                    format!("::coolbot::Value::from({receiver}.{field})")
-                },
-                format!("<{}>::try_from(value)", prim_rust(p)),
+                Code::call(
+                    "::coolbot::Value::from",
+                    vec![if p == Prim::String {
+                        held.method("clone", Vec::new())
+                    } else {
+                        held
+                    }],
+                ),
+                Code::call(format!("<{}>::try_from", prim_rust(p)), vec![value()]),
             ),
             _ => (
-                format!("super::__cool_to_value(&{receiver}.{field})"),
-                "super::__cool_from_value(value)".to_owned(),
+                to_value_call(held.reference()),
+                Code::call("super::__cool_from_value", vec![value()]),
             ),
         };
         // Floats printed with `{:?}` keep their point (`1.0`, not `1`).
+        let range_of = |kind: &str, low: String, high: String| {
+            Code::core_some(Code::call(
+                format!("::coolbot::VarRange::{kind}"),
+                vec![Code::atom(low), Code::atom(high)],
+            ))
+        };
         let range = match v.range {
-            None => "::core::option::Option::None".to_owned(),
-            Some(Range::Int(low, high)) => {
-                format!("::core::option::Option::Some(::coolbot::VarRange::Int({low}, {high}))")
+            None => Code::core_none(),
+            Some(Range::Int(low, high)) => range_of("Int", low.to_string(), high.to_string()),
+            Some(Range::Float(low, high)) => {
+                range_of("Float", format!("{low:?}"), format!("{high:?}"))
             }
-            Some(Range::Float(low, high)) => format!(
-                "::core::option::Option::Some(::coolbot::VarRange::Float({low:?}, {high:?}))"
-            ),
-            Some(Range::F32(low, high)) => {
-                format!("::core::option::Option::Some(::coolbot::VarRange::F32({low:?}, {high:?}))")
-            }
+            Some(Range::F32(low, high)) => range_of("F32", format!("{low:?}"), format!("{high:?}")),
         };
         Some(ir::Var {
             to_value,
@@ -293,7 +317,7 @@ impl<'a> Lowerer<'a> {
         })
     }
 
-    pub(super) fn timing(&self, timing: Option<&[TimingEntry]>) -> ir::Code {
+    pub(super) fn timing(&self, timing: Option<&[TimingEntry]>) -> Code {
         let (mut period, mut max_period, mut max_response, mut priority) = (None, None, None, 0u8);
         let mut qualities = Vec::new();
         for entry in timing.unwrap_or_default() {
@@ -305,19 +329,19 @@ impl<'a> Lowerer<'a> {
                 TimingEntry::MaxResponse(d) => max_response = Some(d.nanos),
                 TimingEntry::Priority(p) => priority = *p,
                 TimingEntry::Quality(names) => {
-                    qualities = names.iter().map(|n| ir::Code::string(n)).collect();
+                    qualities = names.iter().map(|n| Code::string(n)).collect();
                 }
             }
         }
-        let opt = |ns: Option<u64>| ir::Code::option(ns.map(duration_code));
-        ir::Code::structure(
+        let opt = |ns: Option<u64>| Code::option(ns.map(duration_code));
+        Code::structure(
             "::coolbot::TimingSpec",
             vec![
                 ("period", opt(period)),
                 ("max_period", opt(max_period)),
                 ("max_response", opt(max_response)),
-                ("priority", ir::Code::atom(priority.to_string())),
-                ("qualities", ir::Code::slice(qualities)),
+                ("priority", Code::atom(priority.to_string())),
+                ("qualities", Code::slice(qualities)),
             ],
         )
     }
@@ -386,7 +410,7 @@ impl<'a> Lowerer<'a> {
             (handle, declared.kind.port_kind().as_str()),
             declared.kind.packet(),
             Vec::new(),
-            ir::Code::atom(format!("::coolbot::OutputKind::{kind}")),
+            Code::atom(format!("::coolbot::OutputKind::{kind}")),
             declared.pull,
         ))
     }
@@ -399,8 +423,8 @@ fn port(
     name: &str,
     (handle, kind_name): (&str, &'static str),
     packet: Option<&Ty>,
-    args: Vec<ir::Code>,
-    kind: ir::Code,
+    args: Vec<Code>,
+    kind: Code,
     pull: bool,
 ) -> ir::Port {
     let path = format!("::coolbot::port::{handle}");
@@ -415,7 +439,7 @@ fn port(
         },
         rust_packet: rust,
         kind_name,
-        ctor: ir::Code::call(format!("{path}::new"), args),
+        ctor: Code::call(format!("{path}::new"), args),
         kind,
         packet: cool,
         pull,

@@ -14,7 +14,7 @@ pub(super) struct Lowered<'m> {
     /// The index of the initial state.
     pub(super) initial: usize,
     pub(super) methods: Vec<ir::Method>,
-    pub(super) section_arms: Vec<(String, String)>,
+    pub(super) section_arms: Vec<(String, ir::Code)>,
     pub(super) choose_arms: Vec<ir::ChooseArm>,
     /// Every `when` rule, in order (a supervisor's).
     pub(super) when: Vec<When<'m>>,
@@ -276,7 +276,7 @@ pub(super) fn section_stubs(
     state: &StateSections<'_>,
     owner: SectionOwner,
     methods: &mut Vec<ir::Method>,
-    section_arms: &mut Vec<(String, String)>,
+    section_arms: &mut Vec<(String, ir::Code)>,
 ) {
     let (subject, of_state, comment_state, receiver) = match owner {
         SectionOwner::Atomic => ("automaton", "state", "State", "behavior"),
@@ -338,7 +338,10 @@ pub(super) fn section_stubs(
         });
         section_arms.push((
             format!("({}, ::coolbot::Section::{section})", state.index),
-            format!("{receiver}.{method}(&mut cx)"),
+            ir::Code::atom(receiver).method(
+                method,
+                vec![ir::Code::prefix("&mut ", ir::Code::atom("cx"))],
+            ),
         ));
     }
 }

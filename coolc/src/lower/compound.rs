@@ -15,12 +15,12 @@ mod rules;
 use std::collections::BTreeSet;
 
 use super::automaton::{self, Lowered, SectionOwner};
-use super::{GEN_TYPES, Lowerer, adaptation, duration_rust, rust_ty, unique_among};
+use super::{GEN_TYPES, Lowerer, adaptation, duration_code, rust_ty, unique_among};
 use crate::checked::model::{
     Component, ComponentKind, ErrorPolicy, Instance, PortRef, TimingEntry, Tuning, Ty, VarKind,
 };
 use crate::ident;
-use crate::ir;
+use crate::ir::{self, Code};
 
 /// The supervisor state of a compound that declares none.
 const IMPLICIT_STATE: &str = "supervising";
@@ -68,7 +68,7 @@ impl<'a> Lowerer<'a> {
     pub(super) fn compound(&self, c: &'a Component, module: String) -> ir::Compound {
         // Builder steps with where their member is written: they follow source
         // order across member kinds.
-        let mut ordered: Vec<(usize, String)> = Vec::new();
+        let mut ordered: Vec<(usize, Code)> = Vec::new();
         let mut input_specs = Vec::new();
         let mut output_specs = Vec::new();
         let mut exported_ports = Vec::new();
@@ -97,44 +97,23 @@ impl<'a> Lowerer<'a> {
             let Some(target) = &input.export else {
                 continue;
             };
-            let name = ident::string_literal(&input.name);
-            let target_lit = ident::string_literal(&port_address(target));
-            let packet = match input.port.as_ref().map(|p| p.kind.packet()) {
-                Some(Some(ty)) => rust_ty(ty, GEN_TYPES),
-                _ => "()".to_owned(),
-            };
-            exported_ports.push((input.name.clone(), packet));
-            let step = match input.port.as_ref().map(|p| p.kind.packet()) {
-                Some(None) => format!(".export_tick_input({name}, {target_lit})"),
-                Some(Some(ty)) => format!(
-                    ".export_input::<{}>({name}, {target_lit})",
-                    rust_ty(ty, GEN_TYPES)
-                ),
-                None => format!(".export_input::<()>({name}, {target_lit})"),
-            };
+            let packet = input.port.as_ref().map(|p| p.kind.packet());
+            let step = export_step(&input.name, target, packet, true);
+            exported_ports.push((input.name.clone(), packet_rust(packet)));
             ordered.push((input.span.start, step));
-            input_specs.extend(export_spec(&input.name, self.input(input), true));
+            input_specs.extend(self.input(input).map(|port| port.spec(&input.name, true)));
         }
         for output in &c.outputs {
             let Some(target) = &output.export else {
                 continue;
             };
-            output_specs.extend(export_spec(&output.name, self.output(output), false));
-            let packet = match output.port.as_ref().map(|p| p.kind.packet()) {
-                Some(Some(ty)) => rust_ty(ty, GEN_TYPES),
-                _ => "()".to_owned(),
-            };
-            exported_ports.push((output.name.clone(), packet));
-            let name = ident::string_literal(&output.name);
-            let target_lit = ident::string_literal(&port_address(target));
-            let step = match output.port.as_ref().map(|p| p.kind.packet()) {
-                Some(None) => format!(".export_tick_output({name}, {target_lit})"),
-                Some(Some(ty)) => format!(
-                    ".export_output::<{}>({name}, {target_lit})",
-                    rust_ty(ty, GEN_TYPES)
-                ),
-                None => format!(".export_output::<()>({name}, {target_lit})"),
-            };
+            output_specs.extend(
+                self.output(output)
+                    .map(|port| port.spec(&output.name, false)),
+            );
+            let packet = output.port.as_ref().map(|p| p.kind.packet());
+            exported_ports.push((output.name.clone(), packet_rust(packet)));
+            let step = export_step(&output.name, target, packet, false);
             ordered.push((output.span.start, step));
         }
         let mut vars = Vec::new();
@@ -142,7 +121,7 @@ impl<'a> Lowerer<'a> {
         for v in &c.variables {
             match (&v.written, &v.mapping) {
                 (Some(_), _) => {
-                    if let Some(var) = self.variable(v, &mut spec_index, "vars") {
+                    if let Some(var) = self.variable(v, &mut spec_index, &Code::atom("vars")) {
                         vars.push(var);
                     }
                 }
@@ -153,10 +132,9 @@ impl<'a> Lowerer<'a> {
                     };
                     ordered.push((
                         v.span.start,
-                        format!(
-                            ".{call}({}, {})",
-                            ident::string_literal(&v.name),
-                            ident::string_literal(&path.join("."))
+                        Code::call(
+                            call,
+                            vec![Code::string(&v.name), Code::string(&path.join("."))],
                         ),
                     ));
                 }
@@ -165,75 +143,72 @@ impl<'a> Lowerer<'a> {
         }
         for on in &c.policies {
             let policy = match on.policy {
-                ErrorPolicy::Propagate => "Propagate",
-                ErrorPolicy::Restart => "Restart",
-                ErrorPolicy::Substitute => "Substitute",
-                ErrorPolicy::Ignore => "Ignore",
+                ErrorPolicy::Propagate => "::coolbot::Policy::Propagate",
+                ErrorPolicy::Restart => "::coolbot::Policy::Restart",
+                ErrorPolicy::Substitute => "::coolbot::Policy::Substitute",
+                ErrorPolicy::Ignore => "::coolbot::Policy::Ignore",
             };
             ordered.push((
                 on.span.start,
-                format!(
-                    ".on_error({}, ::coolbot::Policy::{policy})",
-                    ident::string_literal(&on.instance)
+                Code::call(
+                    "on_error",
+                    vec![Code::string(&on.instance), Code::atom(policy)],
                 ),
             ));
         }
         for r in &c.redundant {
-            let members: Vec<String> = r.members.iter().map(|m| ident::string_literal(m)).collect();
             ordered.push((
                 r.span.start,
-                format!(".redundant(&[{}])", members.join(", ")),
+                Code::call("redundant", vec![names(&r.members)]),
             ));
         }
         for t in &c.threads {
-            let members: Vec<String> = t.members.iter().map(|m| ident::string_literal(m)).collect();
             ordered.push((
                 t.span.start,
-                format!(
-                    ".thread({}, &[{}])",
-                    ident::string_literal(&t.name),
-                    members.join(", ")
-                ),
+                Code::call("thread", vec![Code::string(&t.name), names(&t.members)]),
             ));
         }
         if let Some(r) = &c.restart {
             if let Some((count, window)) = &r.limit {
                 ordered.push((
                     r.span.start,
-                    format!(".restart_budget({count}, {})", duration_rust(window.nanos)),
+                    Code::call(
+                        "restart_budget",
+                        vec![Code::atom(count.to_string()), duration_code(window.nanos)],
+                    ),
                 ));
             }
             if let Some((first, last)) = &r.backoff {
                 ordered.push((
                     r.span.start,
-                    format!(
-                        ".restart_backoff({}, {})",
-                        duration_rust(first.nanos),
-                        duration_rust(last.nanos)
+                    Code::call(
+                        "restart_backoff",
+                        vec![duration_code(first.nanos), duration_code(last.nanos)],
                     ),
                 ));
             }
         }
         // Stable: the two steps of one `restart` block keep their order.
         ordered.sort_by_key(|(start, _)| *start);
-        let mut steps: Vec<String> = ordered.into_iter().map(|(_, step)| step).collect();
-        steps.extend(self.compound_adaptation(c));
+        let mut steps: Vec<Code> = ordered.into_iter().map(|(_, step)| step).collect();
+        steps.extend(compound_adaptation(c));
         // Substitutes after every instance (a substitute may be declared before the
         // instance it stands for).
         for i in &instances {
             if let Some(primary) = &i.substitutes {
-                steps.push(format!(
-                    ".substitute({}, {})",
-                    ident::string_literal(&i.name),
-                    ident::string_literal(primary)
+                steps.push(Code::call(
+                    "substitute",
+                    vec![Code::string(&i.name), Code::string(primary)],
                 ));
             }
         }
         if let Some(r) = &c.recovery {
-            steps.push(format!(
-                ".recovery({}, {})",
-                duration_rust(r.retry_every_nanos()),
-                duration_rust(r.deadline_nanos())
+            steps.push(Code::call(
+                "recovery",
+                vec![
+                    duration_code(r.retry_every_nanos()),
+                    duration_code(r.deadline_nanos()),
+                ],
             ));
         }
 
@@ -255,10 +230,7 @@ impl<'a> Lowerer<'a> {
                 ir::StubLine::Comment(
                     "// The supervisor: its sections are the `impl Supervisor` above.".to_owned(),
                 ),
-                ir::StubLine::Value(ir::Code::call(
-                    format!("{name}Supervisor::default"),
-                    Vec::new(),
-                )),
+                ir::StubLine::Value(Code::call(format!("{name}Supervisor::default"), Vec::new())),
             ],
         }];
         all_parts.extend(parts);
@@ -331,16 +303,26 @@ impl<'a> Lowerer<'a> {
                 let rust_ty = rust_ty(&ty, GEN_TYPES);
                 // A type holding an array longer than 32 elements goes through its
                 // serde_with adapter, as the instance's own variable does.
+                let value = Code::atom("value");
                 let to_value = match (super::serde_adapter(&ty), &ty) {
-                    (Some(adapter), _) => format!(
-                        "super::__cool_to_value(&{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new(&value))",
-                        super::SERDE_WITH
+                    (Some(adapter), _) => Code::call(
+                        "super::__cool_to_value",
+                        vec![
+                            Code::call(
+                                format!(
+                                    "{}ser::SerializeAsWrap::<{rust_ty}, {adapter}>::new",
+                                    super::SERDE_WITH
+                                ),
+                                vec![value.reference()],
+                            )
+                            .reference(),
+                        ],
                     ),
                     (
                         None,
                         Ty::Bool | Ty::Int(_) | Ty::Float(_) | Ty::Str | Ty::Time | Ty::Duration,
-                    ) => "::coolbot::Value::from(value)".to_owned(),
-                    (None, _) => "super::__cool_to_value(&value)".to_owned(),
+                    ) => Code::call("::coolbot::Value::from", vec![value]),
+                    (None, _) => Code::call("super::__cool_to_value", vec![value.reference()]),
                 };
                 setters.push(ir::Setter {
                     method: ident::method("set_", &v.name, ""),
@@ -456,7 +438,6 @@ impl<'a> Lowerer<'a> {
         let target = self.checked.component(&i.component);
         let module = target.and_then(|t| self.modules.get(t.name.as_str()).cloned());
         let compound = target.is_some_and(|t| t.kind == ComponentKind::Compound);
-        let name = ident::string_literal(&i.name);
         let config_overrides = self.overrides(i, true);
         let var_overrides = self.overrides(i, false);
         // The enclosing compound's mapped controllables that name this instance:
@@ -477,7 +458,7 @@ impl<'a> Lowerer<'a> {
                 .iter()
                 .any(|(n, _, _)| ident::snake(n) == field)
         };
-        let mut mapped_overrides: Vec<(String, String)> = Vec::new();
+        let mut mapped_overrides: Vec<(String, Code)> = Vec::new();
         if let Some(t) = target.filter(|_| compound) {
             for o in &i.overrides {
                 let field = ident::snake(&o.name);
@@ -489,13 +470,13 @@ impl<'a> Lowerer<'a> {
                     let value = if self.ty_defaultable(&ty) {
                         value
                     } else {
-                        ir::Code::call("::core::option::Option::Some", vec![value])
+                        Code::core_some(value)
                     };
-                    mapped_overrides.push((field, value.to_string()));
+                    mapped_overrides.push((field, value));
                 }
             }
         }
-        let component = module.as_ref().map(|module| {
+        let build = module.as_ref().map(|module| {
             let (config_fields, var_fields) = target.map(field_counts).unwrap_or_default();
             let vars_from_mapped: Vec<(String, String)> = from_mapped
                 .iter()
@@ -540,24 +521,23 @@ impl<'a> Lowerer<'a> {
                 Some(t) if compound && self.uses_converters(t, &mut BTreeSet::new()) => "::<C>",
                 _ => "",
             };
+            let function = if plain { "component" } else { "component_with" };
+            let mut args = vec![
+                Code::string(&i.name),
+                Code::atom("parts").method(method.as_str(), Vec::new()),
+            ];
             match (compound, plain) {
-                (true, true) => format!(
-                    "super::{module}::component{converters}({name}, parts.{method}())?"
-                ),
-                (true, false) => format!(
-                    "super::{module}::component_with{converters}({name}, parts.{method}(), {vars}, {nested})?"
-                ),
-                (false, true) => format!("super::{module}::component({name}, parts.{method}())"),
-                (false, false) => format!(
-                    "super::{module}::component_with({name}, parts.{method}(), {config}, {vars})"
-                ),
+                (_, true) => {}
+                (true, false) => args.extend([vars, nested]),
+                (false, false) => args.extend([config, vars]),
             }
+            let build = Code::call(format!("super::{module}::{function}{converters}"), args);
+            if compound { build.try_op() } else { build }
         });
-        let var_overrides: Vec<(String, String)> =
-            var_overrides.into_iter().chain(mapped_overrides).collect();
         let applied: BTreeSet<&str> = config_overrides
             .iter()
             .chain(&var_overrides)
+            .chain(&mapped_overrides)
             .map(|(field, _)| field.as_str())
             .collect();
         let unapplied: Vec<String> = i
@@ -566,22 +546,18 @@ impl<'a> Lowerer<'a> {
             .filter(|o| !applied.contains(ident::snake(&o.name).as_str()))
             .map(|o| o.name.clone())
             .collect();
-        let timing = match (&module, &i.timing) {
-            (Some(module), Some(t)) => {
-                Some(self.timing_override(t, &format!("super::{module}::SPEC.timing")))
+        let build = match (build, &module, &i.timing) {
+            (Some(build), Some(module), Some(timing)) => {
+                let base = Code::atom(format!("super::{module}::SPEC")).field("timing");
+                Some(build.method("with_timing", vec![timing_override(timing, base)]))
             }
-            _ => None,
-        };
-        let component = match (component, &timing) {
-            (Some(build), Some(timing)) => Some(format!("{build}.with_timing({timing})")),
-            (build, _) => build,
+            (build, _, _) => build,
         };
         // Checked: only an instance of an atomic component has an `adaptation` block.
-        let component = match (component, &i.tuning) {
-            (Some(build), Some(tuning)) => Some(format!(
-                "{build}.with_adaptation({})",
-                adaptation::config_always(tuning)
-            )),
+        let build = match (build, &i.tuning) {
+            (Some(build), Some(tuning)) => {
+                Some(build.method("with_adaptation", vec![adaptation::config_always(tuning)]))
+            }
             (build, _) => build,
         };
         ir::Instance {
@@ -592,73 +568,9 @@ impl<'a> Lowerer<'a> {
             compound,
             substitutes: i.substitutes.as_ref().map(|s| s.name.clone()),
             node: i.node.clone(),
-            build: component,
-            timing,
+            build,
             unapplied,
-            config_overrides,
-            var_overrides,
         }
-    }
-
-    /// The builder steps of a compound's own `adaptation { ... }`.
-    fn compound_adaptation(&self, c: &Component) -> Vec<String> {
-        let tuning = &c.adaptation;
-        let config = adaptation::config(&Tuning {
-            selector: None,
-            ..tuning.clone()
-        });
-        config
-            .map(|config| format!(".adaptation({config})"))
-            .into_iter()
-            .chain(
-                adaptation::selector(tuning)
-                    .map(|selector| format!(".adaptation_selector({selector})")),
-            )
-            .collect()
-    }
-
-    /// An instance's `timing { ... }`: the entries it names replace those of the
-    /// component's block (`base`), the others are kept.
-    fn timing_override(&self, timing: &[TimingEntry], base: &str) -> String {
-        let mut fields = Vec::new();
-        let option = |ns: Option<u64>| match ns {
-            Some(ns) => format!("::core::option::Option::Some({})", duration_rust(ns)),
-            None => "::core::option::Option::None".to_owned(),
-        };
-        for entry in timing {
-            match entry {
-                TimingEntry::Period(lo, hi) => {
-                    fields.push(("period", option(Some(lo.nanos))));
-                    fields.push(("max_period", option(hi.map(|hi| hi.nanos))));
-                }
-                TimingEntry::MaxResponse(d) => {
-                    fields.push(("max_response", option(Some(d.nanos))));
-                }
-                TimingEntry::Priority(priority) => {
-                    fields.push(("priority", priority.to_string()));
-                }
-                TimingEntry::Quality(names) => {
-                    let names: Vec<String> =
-                        names.iter().map(|n| ident::string_literal(n)).collect();
-                    fields.push(("qualities", format!("&[{}]", names.join(", "))));
-                }
-            }
-        }
-        // A later entry of the same kind wins, as in a component's block.
-        let mut text = String::from("::coolbot::TimingSpec { ");
-        let mut named = Vec::new();
-        for (index, (field, value)) in fields.iter().enumerate() {
-            if fields[index + 1..].iter().any(|(f, _)| f == field) {
-                continue;
-            }
-            named.push(*field);
-            text.push_str(&format!("{field}: {value}, "));
-        }
-        if named.len() < 5 {
-            text.push_str(&format!("..{base}"));
-        }
-        text.push_str(" }");
-        text
     }
 
     /// The `Parts` method of an instance, with its user stub.
@@ -689,7 +601,7 @@ impl<'a> Lowerer<'a> {
                     i.name,
                     if i.compound { "parts" } else { "behavior" }
                 )),
-                ir::StubLine::Value(ir::Code::call(body, Vec::new())),
+                ir::StubLine::Value(Code::call(body, Vec::new())),
             ],
         }
     }
@@ -710,16 +622,16 @@ impl<'a> Lowerer<'a> {
                 variant: ident::camel(IMPLICIT_STATE),
                 may_enum: None,
                 may: Vec::new(),
-                spec: ir::Code::structure(
+                spec: Code::structure(
                     "::coolbot::StateSpec",
                     vec![
-                        ("name", ir::Code::string(IMPLICIT_STATE)),
-                        ("entry", ir::Code::atom("false")),
-                        ("exit", ir::Code::atom("false")),
-                        ("periodic", ir::Code::atom("None")),
-                        ("on", ir::Code::slice(Vec::new())),
-                        ("after", ir::Code::slice(Vec::new())),
-                        ("may", ir::Code::slice(Vec::new())),
+                        ("name", Code::string(IMPLICIT_STATE)),
+                        ("entry", Code::atom("false")),
+                        ("exit", Code::atom("false")),
+                        ("periodic", Code::atom("None")),
+                        ("on", Code::slice(Vec::new())),
+                        ("after", Code::slice(Vec::new())),
+                        ("may", Code::slice(Vec::new())),
                     ],
                 ),
             });
@@ -737,73 +649,153 @@ impl<'a> Lowerer<'a> {
 fn fields(
     module: &str,
     kind: &str,
-    overrides: &[(String, String)],
+    overrides: &[(String, Code)],
     from_mapped: &[(String, String)],
     all: usize,
     optional: bool,
-) -> String {
+) -> Code {
     let path = format!("super::{module}::{kind}");
+    let default_path = format!("{path}::default");
+    let default = || Code::call(default_path.as_str(), Vec::new());
     let mut named: Vec<&str> = Vec::new();
-    for (field, _) in overrides.iter().chain(from_mapped) {
+    for field in overrides
+        .iter()
+        .map(|(f, _)| f)
+        .chain(from_mapped.iter().map(|(f, _)| f))
+    {
         if !named.contains(&field.as_str()) {
             named.push(field);
         }
     }
     if named.is_empty() {
-        return format!("{path}::default()");
+        return default();
     }
     let mut entries = Vec::new();
     for field in &named {
         let written = overrides.iter().find(|(f, _)| f == field).map(|(_, v)| {
             if optional {
-                format!("::core::option::Option::Some({v})")
+                Code::core_some(v.clone())
             } else {
                 v.clone()
             }
         });
-        let given: Vec<String> = from_mapped
+        let mut given = from_mapped
             .iter()
             .filter(|(f, _)| f == field)
-            .map(|(_, m)| format!("mapped.{m}"))
-            .collect();
-        let value = match (given.split_first(), written.as_ref()) {
-            (None, Some(written)) => written.clone(),
-            (None, None) => format!("{path}::default().{field}"),
-            (Some((first, rest)), written) => {
-                let mut chain = first.clone();
-                for other in rest {
-                    chain.push_str(&format!(".or({other})"));
-                }
+            .map(|(_, m)| Code::atom("mapped").field(m.as_str()));
+        let value = match (given.next(), written) {
+            (None, Some(written)) => written,
+            (None, None) => default().field(*field),
+            (Some(first), written) => {
+                let chain = given.fold(first, |chain, other| chain.method("or", vec![other]));
                 match (optional, written) {
-                    (true, Some(written)) => format!("{chain}.or({written})"),
+                    (true, Some(written)) => chain.method("or", vec![written]),
                     (true, None) => chain,
-                    (false, Some(written)) => format!("{chain}.unwrap_or({written})"),
-                    (false, None) => {
-                        format!("{chain}.unwrap_or_else(|| {path}::default().{field})")
-                    }
+                    (false, Some(written)) => chain.method("unwrap_or", vec![written]),
+                    (false, None) => chain.method(
+                        "unwrap_or_else",
+                        vec![Code::closure("", default().field(*field))],
+                    ),
                 }
             }
         };
-        entries.push(format!("{field}: {value}"));
+        entries.push(((*field).to_owned(), value));
     }
     if named.len() < all {
-        entries.push(format!("..{path}::default()"));
+        Code::StructRest(path, entries, Box::new(default()))
+    } else {
+        Code::Struct(path, entries)
     }
-    format!("{path} {{ {} }}", entries.join(", "))
 }
 
-/// The spec entry (`coolbot::InputSpec`/`OutputSpec`) of exported input or output
-/// `name` whose declared port (the one the export reaches) lowers to `port`.
-fn export_spec(name: &str, port: Option<ir::Port>, input: bool) -> Option<String> {
-    let port = port?;
-    let kind = if input { "InputSpec" } else { "OutputSpec" };
-    Some(format!(
-        "::coolbot::{kind} {{ name: {}, kind: {}, packet: {}, pull: {} }}",
-        ident::string_literal(name),
-        port.kind,
-        ident::string_literal(&port.packet),
-        port.pull
-    ))
+/// The builder steps of a compound's own `adaptation { ... }`.
+fn compound_adaptation(c: &Component) -> Vec<Code> {
+    let tuning = &c.adaptation;
+    let config = adaptation::config(&Tuning {
+        selector: None,
+        ..tuning.clone()
+    });
+    config
+        .map(|config| Code::call("adaptation", vec![config]))
+        .into_iter()
+        .chain(
+            adaptation::selector(tuning)
+                .map(|selector| Code::call("adaptation_selector", vec![selector])),
+        )
+        .collect()
+}
+
+/// An instance's `timing { ... }`: the entries it names replace those of the
+/// component's block (`base`), the others are kept.
+fn timing_override(timing: &[TimingEntry], base: Code) -> Code {
+    let mut fields = Vec::new();
+    let option = |ns: Option<u64>| match ns {
+        Some(ns) => Code::core_some(duration_code(ns)),
+        None => Code::core_none(),
+    };
+    for entry in timing {
+        match entry {
+            TimingEntry::Period(lo, hi) => {
+                fields.push(("period", option(Some(lo.nanos))));
+                fields.push(("max_period", option(hi.map(|hi| hi.nanos))));
+            }
+            TimingEntry::MaxResponse(d) => {
+                fields.push(("max_response", option(Some(d.nanos))));
+            }
+            TimingEntry::Priority(priority) => {
+                fields.push(("priority", Code::atom(priority.to_string())));
+            }
+            TimingEntry::Quality(names) => {
+                fields.push(("qualities", self::names(names)));
+            }
+        }
+    }
+    // A later entry of the same kind wins, as in a component's block.
+    let mut named: Vec<(String, Code)> = Vec::new();
+    for (index, (field, value)) in fields.iter().enumerate() {
+        if fields[index + 1..].iter().any(|(f, _)| f == field) {
+            continue;
+        }
+        named.push(((*field).to_owned(), value.clone()));
+    }
+    let path = "::coolbot::TimingSpec".to_owned();
+    if named.len() < 5 {
+        Code::StructRest(path, named, Box::new(base))
+    } else {
+        Code::Struct(path, named)
+    }
+}
+
+/// The builder step exporting input (`input`) or output `name` as `target`,
+/// whose port carries `packet` (`Some(None)`: a tick port; `None`: unknown).
+fn export_step(name: &str, target: &PortRef, packet: Option<Option<&Ty>>, input: bool) -> Code {
+    let (tick, typed) = if input {
+        ("export_tick_input", "export_input")
+    } else {
+        ("export_tick_output", "export_output")
+    };
+    let method = match packet {
+        Some(None) => tick.to_owned(),
+        _ => format!("{typed}::<{}>", packet_rust(packet)),
+    };
+    Code::call(
+        method,
+        vec![Code::string(name), Code::string(&port_address(target))],
+    )
+}
+
+/// The Rust type of the packets of an exported port (`()` for a tick port or an
+/// unknown one).
+fn packet_rust(packet: Option<Option<&Ty>>) -> String {
+    match packet {
+        Some(Some(ty)) => rust_ty(ty, GEN_TYPES),
+        _ => "()".to_owned(),
+    }
+}
+
+/// The slice `&["a", "b"]` of names.
+fn names(names: &[String]) -> Code {
+    Code::slice(names.iter().map(|name| Code::string(name)).collect())
 }
 
 /// How many fields an atomic component's `Config` and `Vars` have.
@@ -843,7 +835,7 @@ fn port_address(port: &PortRef) -> String {
 
 #[cfg(test)]
 mod tests {
-    use crate::ir;
+    use crate::ir::{self, Code};
     use crate::lower::{Options, lower};
 
     const TEXT: &str = "
@@ -879,6 +871,11 @@ mod tests {
         compound Outer { instance inner: Box { gain = 2.0; } }
     ";
 
+    /// Each code's one-line text.
+    fn texts(codes: &[Code]) -> Vec<String> {
+        codes.iter().map(Code::to_string).collect()
+    }
+
     fn compounds() -> Vec<ir::Compound> {
         compounds_of(TEXT)
     }
@@ -897,7 +894,7 @@ mod tests {
         compounds_of(text)[0]
             .rules
             .iter()
-            .map(|r| (r.expr.clone(), r.reads.clone()))
+            .map(|r| (r.expr.to_string(), r.reads.to_string()))
             .collect()
     }
 
@@ -1025,19 +1022,23 @@ mod tests {
             (motion.method.as_str(), motion.type_name.as_str()),
             ("motion", "MotionInstance")
         );
-        let setters: Vec<(&str, &str, &str)> = motion
+        let setters: Vec<(&str, &str, String)> = motion
             .setters
             .iter()
-            .map(|s| (s.method.as_str(), s.ty.as_str(), s.to_value.as_str()))
+            .map(|s| (s.method.as_str(), s.ty.as_str(), s.to_value.to_string()))
             .collect();
         assert_eq!(
             setters,
             [
-                ("set_speed", "f64", "::coolbot::Value::from(value)"),
+                (
+                    "set_speed",
+                    "f64",
+                    "::coolbot::Value::from(value)".to_owned()
+                ),
                 (
                     "set_label",
                     "::std::string::String",
-                    "::coolbot::Value::from(value)"
+                    "::coolbot::Value::from(value)".to_owned()
                 ),
             ]
         );
@@ -1105,25 +1106,37 @@ mod tests {
     #[test]
     fn rules_compile_with_their_reads() {
         let c = &compounds()[0];
-        let reads: Vec<&str> = c.rules.iter().map(|r| r.reads.as_str()).collect();
+        let reads: Vec<String> = c.rules.iter().map(|r| r.reads.to_string()).collect();
         // A local variable is not in the supervisor's spec: not a read.
         assert_eq!(
             reads,
             [r#"&["a.state", "mode"]"#, r#"&["level", "a.user_state"]"#]
         );
-        assert!(c.rules[0].expr.starts_with("(view"), "{}", c.rules[0].expr);
+        let exprs: Vec<String> = c.rules.iter().map(|r| r.expr.to_string()).collect();
+        // The condition is a tree: `(a || b) && c`, its operator at the root.
         assert!(
-            c.rules[0].expr.contains("|| i128::from(vars.faults) > 2)"),
-            "{}",
+            matches!(&c.rules[0].expr, Code::Binary(left, "&&", _)
+                if matches!(left.as_ref(), Code::Paren(_))),
+            "{:?}",
             c.rules[0].expr
         );
+        assert!(exprs[0].starts_with("(view"), "{}", exprs[0]);
+        assert!(
+            exprs[0].contains("|| i128::from(vars.faults) > 2)"),
+            "{}",
+            exprs[0]
+        );
         assert_eq!(c.rules[0].vars_param.as_deref(), Some("vars"));
+        assert_eq!(
+            c.rules[0].call.to_string(),
+            "{ let vars = ::std::sync::Arc::clone(&vars); move |view: &::coolbot::View| __cool_rule_0(view, &__cool_lock(&vars)) }"
+        );
         // A mapped variable reads the instance standing in for `a` now.
-        assert!(c.rules[1].expr.contains(r#"view.mapped("level")"#));
-        assert!(!c.rules[1].expr.contains(r#"view.var("a", "level")"#));
-        assert!(c.rules[1].expr.contains("!(view"));
+        assert!(exprs[1].contains(r#"view.mapped("level")"#));
+        assert!(!exprs[1].contains(r#"view.var("a", "level")"#));
+        assert!(exprs[1].contains("!(view"));
         assert_eq!(c.rules[1].vars_param, None);
-        assert_eq!(c.rules[1].call, "__cool_rule_1");
+        assert_eq!(c.rules[1].call.to_string(), "__cool_rule_1");
     }
 
     #[test]
@@ -1143,11 +1156,11 @@ mod tests {
             ",
         )[0];
         assert_eq!(
-            c.steps,
+            texts(&c.steps),
             [
-                r#".on_error("a", ::coolbot::Policy::Restart)"#,
-                r#".thread("control", &["b", "a"])"#,
-                r#".thread("other", &["c"])"#,
+                r#"on_error("a", ::coolbot::Policy::Restart)"#,
+                r#"thread("control", &["b", "a"])"#,
+                r#"thread("other", &["c"])"#,
             ]
         );
     }
@@ -1156,25 +1169,25 @@ mod tests {
     fn builder_steps_follow_the_description() {
         let c = &compounds()[0];
         assert_eq!(
-            c.steps,
+            texts(&c.steps),
             [
-                r#".export_input::<u32>("input", "a.input")"#,
-                r#".export_output::<u32>("out", "a.out")"#,
-                r#".map_observable("level", "a.level")"#,
-                r#".map_controllable("gain", "a.gain")"#,
-                r#".on_error("a", ::coolbot::Policy::Substitute)"#,
-                r#".substitute("b", "a")"#,
+                r#"export_input::<u32>("input", "a.input")"#,
+                r#"export_output::<u32>("out", "a.out")"#,
+                r#"map_observable("level", "a.level")"#,
+                r#"map_controllable("gain", "a.gain")"#,
+                r#"on_error("a", ::coolbot::Policy::Substitute)"#,
+                r#"substitute("b", "a")"#,
             ]
         );
         assert_eq!(
-            c.input_specs,
+            texts(&c.input_specs),
             [
                 "::coolbot::InputSpec { name: \"input\", kind: ::coolbot::InputKind::Fifo { capacity: 4, policy: ::coolbot::OverflowPolicy::Reject }, packet: \"u32\", pull: false }"
             ]
         );
         assert_eq!(c.output_specs.len(), 1);
         let a = &c.instances[0];
-        let build = a.build.as_deref().unwrap();
+        let build = a.build.as_ref().unwrap().to_string();
         assert!(
             build.ends_with(
                 ".with_timing(::coolbot::TimingSpec { priority: 3, ..super::leaf::SPEC.timing })"
@@ -1215,11 +1228,16 @@ mod tests {
     fn nested_compounds_and_implicit_supervisors() {
         let outer = &compounds()[1];
         // An override of the nested compound's mapped controllable `gain`.
+        let build = outer.instances[0].build.as_ref().unwrap();
         assert_eq!(
-            outer.instances[0].build.as_deref(),
-            Some(
-                r#"super::r#box::component_with("inner", parts.inner(), super::r#box::Vars::default(), super::r#box::Mapped { gain: ::core::option::Option::Some(2.0) })?"#
-            )
+            build.to_string(),
+            r#"super::r#box::component_with("inner", parts.inner(), super::r#box::Vars::default(), super::r#box::Mapped { gain: ::core::option::Option::Some(2.0) })?"#
+        );
+        // A tree: the nested compound's builder call, then `?`.
+        assert!(
+            matches!(build, Code::Try(call) if matches!(call.as_ref(), Code::Call(callee, args)
+                if callee == "super::r#box::component_with" && args.len() == 4)),
+            "{build:?}"
         );
         assert!(outer.instances[0].unapplied.is_empty());
         // Box's own `Mapped` feeds its instance `a`.
@@ -1229,8 +1247,9 @@ mod tests {
         assert!(
             inner.instances[0]
                 .build
-                .as_deref()
+                .as_ref()
                 .unwrap()
+                .to_string()
                 .contains("gain: mapped.gain.unwrap_or_else(|| super::leaf::Vars::default().gain)"),
             "{:?}",
             inner.instances[0].build

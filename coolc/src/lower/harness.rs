@@ -4,28 +4,28 @@
 //! `coolbot::harness::Harness`, which drives the component's generated glue exactly
 //! as a component thread would.
 
-use crate::ir;
+use crate::ir::{self, Code};
 
 /// What the harness template prints for one atomic component.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Harness {
+pub(crate) struct Harness {
     /// One method (sometimes two) per input.
-    pub inputs: Vec<Method>,
+    pub(crate) inputs: Vec<Method>,
     /// One method (sometimes two) per output.
-    pub outputs: Vec<Method>,
+    pub(crate) outputs: Vec<Method>,
     /// One typed setter per controllable variable.
-    pub setters: Vec<Method>,
+    pub(crate) setters: Vec<Method>,
 }
 
 /// One method of the typed harness: its doc line, signature and one-line body.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Method {
+pub(crate) struct Method {
     /// Its doc line.
-    pub doc: ir::Doc,
+    pub(crate) doc: ir::Doc,
     /// `pub fn name(&mut self, ...) -> ...`, without the body.
-    pub signature: String,
+    pub(crate) signature: String,
     /// The body's lines: statements, then the returned expression.
-    pub body: Vec<String>,
+    pub(crate) body: Vec<ir::StubLine>,
 }
 
 /// The Rust type of a port's packets, `None` for a tick port.
@@ -38,15 +38,17 @@ fn method(prefix: &str, field: &str) -> String {
     format!("{prefix}_{}", field.trim_start_matches("r#"))
 }
 
-fn string(text: &str) -> String {
-    crate::ident::string_literal(text)
+/// `self.inner.method(args)`: a call of the untyped harness, the method's value.
+fn inner(method: &str, args: Vec<Code>) -> Vec<ir::StubLine> {
+    let call = Code::atom("self").field("inner").method(method, args);
+    vec![ir::StubLine::Value(call)]
 }
 
 /// The harness of `c`.
-pub fn harness(c: &ir::Atomic) -> Harness {
+pub(crate) fn harness(c: &ir::Atomic) -> Harness {
     let mut inputs = Vec::new();
     for port in &c.inputs {
-        let name = string(&port.cool_name);
+        let name = Code::string(&port.cool_name);
         let kind = port.kind_name;
         match packet_of(port) {
             None => {
@@ -59,7 +61,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                         "pub fn {}(&mut self) -> HarnessResult<()>",
                         method("tick", &port.field)
                     ),
-                    body: vec![format!("self.inner.tick({name})")],
+                    body: inner("tick", vec![name.clone()]),
                 });
                 if port.pull {
                     inputs.push(Method {
@@ -71,7 +73,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                             "pub fn {}(&mut self) -> HarnessResult<()>",
                             method("answer", &port.field)
                         ),
-                        body: vec![format!("self.inner.answer_tick({name})")],
+                        body: inner("answer_tick", vec![name.clone()]),
                     });
                 }
             }
@@ -90,7 +92,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                         "pub fn {}(&mut self, packet: {packet}) -> HarnessResult<()>",
                         method(verb, &port.field)
                     ),
-                    body: vec![format!("self.inner.push({name}, packet)")],
+                    body: inner("push", vec![name.clone(), Code::atom("packet")]),
                 });
                 if port.pull {
                     inputs.push(Method {
@@ -102,7 +104,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                             "pub fn {}(&mut self, packet: {packet}) -> HarnessResult<()>",
                             method("answer", &port.field)
                         ),
-                        body: vec![format!("self.inner.answer({name}, packet)")],
+                        body: inner("answer", vec![name.clone(), Code::atom("packet")]),
                     });
                 }
             }
@@ -110,7 +112,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
     }
     let mut outputs = Vec::new();
     for port in &c.outputs {
-        let name = string(&port.cool_name);
+        let name = Code::string(&port.cool_name);
         match packet_of(port) {
             None => outputs.push(Method {
                 doc: vec![format!(
@@ -121,7 +123,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     "pub fn {}(&mut self) -> HarnessResult<u64>",
                     method("ticks", &port.field)
                 ),
-                body: vec![format!("self.inner.take_ticks({name})")],
+                body: inner("take_ticks", vec![name.clone()]),
             }),
             Some(packet) => {
                 outputs.push(Method {
@@ -133,7 +135,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                         "pub fn {}(&mut self) -> HarnessResult<::std::vec::Vec<{packet}>>",
                         method("sent", &port.field)
                     ),
-                    body: vec![format!("self.inner.take_sent({name})")],
+                    body: inner("take_sent", vec![name.clone()]),
                 });
                 if port.kind_name == "poster" {
                     outputs.push(Method {
@@ -145,7 +147,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                             "pub fn {}(&self) -> HarnessResult<::core::option::Option<{packet}>>",
                             method("posted", &port.field)
                         ),
-                        body: vec![format!("self.inner.posted({name})")],
+                        body: inner("posted", vec![name.clone()]),
                     });
                 }
             }
@@ -160,7 +162,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     "pub fn {}(&mut self) -> HarnessResult<()>",
                     method("pull", &port.field)
                 ),
-                body: vec![format!("self.inner.pull({name})")],
+                body: inner("pull", vec![name.clone()]),
             });
         }
     }
@@ -169,7 +171,7 @@ pub fn harness(c: &ir::Atomic) -> Harness {
         .iter()
         .filter(|var| var.controllable())
         .filter_map(|var| {
-            let field = format!("self.vars.{}", var.field.name);
+            let field = super::atomic::glue_vars().field(var.field.name.as_str());
             // The glue's conversion of the field, applied to the argument.
             var.to_value.contains(&field).then(|| Method {
                 doc: vec![format!(
@@ -181,10 +183,16 @@ pub fn harness(c: &ir::Atomic) -> Harness {
                     method("set", &var.field.name),
                     var.field.ty
                 ),
-                body: vec![
-                    format!("let value = {};", var.to_value.replace(&field, "value")),
-                    format!("self.inner.set({}, value)", string(&var.field.cool_name)),
-                ],
+                body: [ir::StubLine::Let(
+                    "value".to_owned(),
+                    var.to_value.replace(&field, &Code::atom("value")),
+                )]
+                .into_iter()
+                .chain(inner(
+                    "set",
+                    vec![Code::string(&var.field.cool_name), Code::atom("value")],
+                ))
+                .collect(),
             })
         })
         .collect();
@@ -197,6 +205,35 @@ pub fn harness(c: &ir::Atomic) -> Harness {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_setter_converts_its_argument_as_the_glue_converts_the_field() {
+        let checked = crate::analyze_text(
+            "t.cool",
+            "atomic A { controllable speed: f64 = 1.0; controllable big: [u8; 40]; }",
+        )
+        .checked()
+        .unwrap_or_else(|a| panic!("{}", a.render(crate::RenderOptions::plain())));
+        let krate = crate::lower::lower(&checked, &crate::lower::Options::default());
+        let bodies: Vec<Vec<String>> = super::harness(&krate.atomics[0])
+            .setters
+            .iter()
+            .map(|m| m.body.iter().map(ToString::to_string).collect())
+            .collect();
+        assert_eq!(
+            bodies,
+            [
+                vec![
+                    "let value = ::coolbot::Value::from(value);".to_owned(),
+                    r#"self.inner.set("speed", value)"#.to_owned(),
+                ],
+                vec![
+                    "let value = super::__cool_to_value(&::coolbot::serde_with::ser::SerializeAsWrap::<[u8; 40], [::coolbot::serde_with::Same; 40]>::new(&value));".to_owned(),
+                    r#"self.inner.set("big", value)"#.to_owned(),
+                ],
+            ]
+        );
+    }
     #[test]
     fn methods_follow_each_port_kind_and_packet() {
         let checked = crate::analyze_text(

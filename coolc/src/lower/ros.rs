@@ -119,9 +119,7 @@ fn field(field: &Field) -> ir::Field {
 /// stops at 32 elements).
 fn type_default(ty: &FieldType) -> ir::Code {
     match ty.cardinality {
-        Cardinality::Array(size) if size > 32 => {
-            ir::Code::Other(format!("::core::array::from_fn(|_| {})", default_code()))
-        }
+        Cardinality::Array(size) if size > 32 => super::array_from_fn(default_code()),
         _ => default_code(),
     }
 }

@@ -10,12 +10,12 @@ use super::msg::{Base, Message};
 use super::names::TypeName;
 
 /// The line between two definitions.
-pub const SEPARATOR: &str =
+pub(crate) const SEPARATOR: &str =
     "================================================================================";
 
 /// The full definition of `name`, from each type's message and `.msg` text given by
 /// `get`; `None` when it, or a type it references, is not there.
-pub fn full_text<'a>(
+pub(crate) fn full_text<'a>(
     name: &TypeName,
     get: &dyn Fn(&TypeName) -> Option<(&'a Message, &'a str)>,
 ) -> Option<String> {

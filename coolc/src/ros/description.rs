@@ -67,31 +67,31 @@ pub mod type_id {
     /// A nested message type.
     pub const NESTED_TYPE: u8 = 1;
     /// `int8`.
-    pub const INT8: u8 = 2;
+    pub(crate) const INT8: u8 = 2;
     /// `uint8` (and `.msg` `char`).
     pub const UINT8: u8 = 3;
     /// `int16`.
-    pub const INT16: u8 = 4;
+    pub(crate) const INT16: u8 = 4;
     /// `uint16`.
-    pub const UINT16: u8 = 5;
+    pub(crate) const UINT16: u8 = 5;
     /// `int32`.
-    pub const INT32: u8 = 6;
+    pub(crate) const INT32: u8 = 6;
     /// `uint32`.
-    pub const UINT32: u8 = 7;
+    pub(crate) const UINT32: u8 = 7;
     /// `int64`.
-    pub const INT64: u8 = 8;
+    pub(crate) const INT64: u8 = 8;
     /// `uint64`.
-    pub const UINT64: u8 = 9;
+    pub(crate) const UINT64: u8 = 9;
     /// `float32`.
-    pub const FLOAT: u8 = 10;
+    pub(crate) const FLOAT: u8 = 10;
     /// `float64`.
-    pub const DOUBLE: u8 = 11;
+    pub(crate) const DOUBLE: u8 = 11;
     /// `bool`.
     pub const BOOLEAN: u8 = 15;
     /// `byte`.
     pub const BYTE: u8 = 16;
     /// `string`.
-    pub const STRING: u8 = 17;
+    pub(crate) const STRING: u8 = 17;
     /// `wstring`.
     pub const WSTRING: u8 = 18;
     /// `string<=N`.
@@ -99,16 +99,16 @@ pub mod type_id {
     /// `wstring<=N`.
     pub const BOUNDED_WSTRING: u8 = 22;
     /// Added to a base id for a fixed array (`T[N]`).
-    pub const ARRAY: u8 = 48;
+    pub(crate) const ARRAY: u8 = 48;
     /// Added to a base id for a bounded sequence (`T[<=N]`).
-    pub const BOUNDED_SEQUENCE: u8 = 96;
+    pub(crate) const BOUNDED_SEQUENCE: u8 = 96;
     /// Added to a base id for an unbounded sequence (`T[]`).
-    pub const UNBOUNDED_SEQUENCE: u8 = 144;
+    pub(crate) const UNBOUNDED_SEQUENCE: u8 = 144;
 }
 
 /// The description of `name`: `None` when `name` or a type it references is not
 /// given by `get`.
-pub fn describe<'m>(
+pub(crate) fn describe<'m>(
     name: &TypeName,
     get: impl Fn(&TypeName) -> Option<&'m Message>,
 ) -> Option<TypeDescription> {
@@ -142,7 +142,7 @@ fn nested(message: &Message) -> impl Iterator<Item = &TypeName> {
 }
 
 /// One type's own description.
-pub fn individual(message: &Message) -> IndividualTypeDescription {
+pub(crate) fn individual(message: &Message) -> IndividualTypeDescription {
     let mut fields: Vec<FieldDescription> = message
         .fields
         .iter()
@@ -169,7 +169,7 @@ pub fn individual(message: &Message) -> IndividualTypeDescription {
 }
 
 /// A field type's description.
-pub fn field_type(ty: &FieldType) -> FieldTypeDescription {
+pub(crate) fn field_type(ty: &FieldType) -> FieldTypeDescription {
     let (base_id, string_capacity, nested_type_name) = match &ty.base {
         Base::Bool => (type_id::BOOLEAN, 0, String::new()),
         Base::Byte => (type_id::BYTE, 0, String::new()),

@@ -24,11 +24,6 @@ impl TypeHash {
     pub fn of(description: &TypeDescription) -> TypeHash {
         TypeHash(Sha256::digest(hashed_json(description).as_bytes()).into())
     }
-
-    /// The 32 bytes of the digest.
-    pub fn bytes(&self) -> &[u8; 32] {
-        &self.0
-    }
 }
 
 /// `RIHS01_` and the digest in lowercase hex: how ROS 2 prints and sends it.

@@ -1,5 +1,5 @@
 //! Loads message types and every type they reference: each file found
-//! ([`super::lookup`]), added to the [`SourceMap`] and parsed ([`super::parse`]), its
+//! (`lookup`), added to the [`SourceMap`] and parsed ([`super::parse`]), its
 //! nested types loaded in turn. A type no place defines is a diagnostic at the
 //! reference that needs it, naming every file looked for; types that contain
 //! themselves are a diagnostic at the field that closes the circle.
@@ -166,7 +166,7 @@ impl Interfaces {
     /// The full message definition of `name` as rosbag2 writes it in a bag
     /// ([`super::definition`]), from the texts in `sources` (where [`load`] put them);
     /// `None` as for [`Interfaces::description`].
-    pub fn definition(&self, name: &TypeName, sources: &SourceMap) -> Option<String> {
+    pub(crate) fn definition(&self, name: &TypeName, sources: &SourceMap) -> Option<String> {
         self.description(name)?;
         let get = |name: &TypeName| {
             self.get(name)

@@ -25,16 +25,16 @@ pub struct Search {
 
 /// A `.msg` file found.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Found {
+pub(crate) struct Found {
     /// Its path (for a shipped type, `<shipped>/<pkg>/msg/<Type>.msg`).
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Its text.
-    pub text: String,
+    pub(crate) text: String,
 }
 
 /// Why a type's file was not found.
 #[derive(Debug, thiserror::Error)]
-pub enum LookupError {
+pub(crate) enum LookupError {
     /// No place holds it.
     #[error("no `.msg` file defines `{name}`")]
     Missing {
@@ -55,7 +55,7 @@ pub enum LookupError {
 }
 
 /// The directory shipped types are shown under in diagnostics.
-pub const SHIPPED_DIR: &str = "<shipped>";
+pub(crate) const SHIPPED_DIR: &str = "<shipped>";
 
 impl Search {
     /// The shipped types only.
@@ -92,7 +92,7 @@ impl Search {
     }
 
     /// The files looked at for `name`, in order (the shipped one last, under
-    /// [`SHIPPED_DIR`], whether or not it exists).
+    /// `SHIPPED_DIR`, whether or not it exists).
     pub fn candidates(&self, name: &TypeName) -> Vec<PathBuf> {
         let relative = name.relative_path();
         self.dirs
@@ -109,7 +109,7 @@ impl Search {
 
     /// Finds and reads the file of `name`. A file the loader reports as not found is
     /// skipped; any other read error stops the search.
-    pub fn find(
+    pub(crate) fn find(
         &self,
         name: &TypeName,
         loader: &dyn Fn(&Path) -> io::Result<String>,

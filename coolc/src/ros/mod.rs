@@ -42,13 +42,13 @@
 //! );
 //! ```
 
-pub mod definition;
+pub(crate) mod definition;
 pub mod description;
 pub mod hash;
 pub mod load;
-pub mod lookup;
+pub(crate) mod lookup;
 pub mod msg;
-pub mod names;
+pub(crate) mod names;
 pub mod parse;
 pub mod shipped;
 

@@ -113,7 +113,7 @@ pub enum Base {
 
 impl Base {
     /// The primitive types by their `.msg` keyword (strings unbounded).
-    pub const PRIMITIVES: &'static [(&'static str, Base)] = &[
+    pub(crate) const PRIMITIVES: &'static [(&'static str, Base)] = &[
         ("bool", Base::Bool),
         ("byte", Base::Byte),
         ("char", Base::Char),
@@ -132,7 +132,7 @@ impl Base {
     ];
 
     /// The primitive type of a `.msg` keyword.
-    pub fn primitive(keyword: &str) -> Option<Base> {
+    pub(crate) fn primitive(keyword: &str) -> Option<Base> {
         Base::PRIMITIVES
             .iter()
             .find(|(name, _)| *name == keyword)
@@ -140,7 +140,7 @@ impl Base {
     }
 
     /// The range of an integer type (`byte` and `char` are 0..=255).
-    pub fn integer_range(&self) -> Option<(i128, i128)> {
+    pub(crate) fn integer_range(&self) -> Option<(i128, i128)> {
         let bits = |bits: u32, signed: bool| {
             if signed {
                 (-(1i128 << (bits - 1)), (1i128 << (bits - 1)) - 1)

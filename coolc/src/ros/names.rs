@@ -12,7 +12,7 @@ use std::fmt;
 use std::path::PathBuf;
 
 /// True for a valid package name (`sensor_msgs`).
-pub fn is_package_name(name: &str) -> bool {
+pub(crate) fn is_package_name(name: &str) -> bool {
     snake(
         name,
         |c| c.is_ascii_lowercase(),
@@ -21,12 +21,12 @@ pub fn is_package_name(name: &str) -> bool {
 }
 
 /// True for a valid field name (`angle_min`): the package rule.
-pub fn is_field_name(name: &str) -> bool {
+pub(crate) fn is_field_name(name: &str) -> bool {
     is_package_name(name)
 }
 
 /// True for a valid constant name (`STATUS_FIX`).
-pub fn is_constant_name(name: &str) -> bool {
+pub(crate) fn is_constant_name(name: &str) -> bool {
     snake(
         name,
         |c| c.is_ascii_uppercase(),
@@ -35,7 +35,7 @@ pub fn is_constant_name(name: &str) -> bool {
 }
 
 /// True for a valid message name (`LaserScan`).
-pub fn is_message_name(name: &str) -> bool {
+pub(crate) fn is_message_name(name: &str) -> bool {
     let mut chars = name.chars();
     chars.next().is_some_and(|c| c.is_ascii_uppercase()) && chars.all(|c| c.is_ascii_alphanumeric())
 }
@@ -66,7 +66,7 @@ fn snake(name: &str, first: impl Fn(char) -> bool, rest: impl Fn(char) -> bool) 
 /// The name of a message type: its package and its name (`sensor_msgs/msg/LaserScan`).
 ///
 /// Both parts follow the naming rules: a `TypeName` is only made by
-/// [`TypeName::new`] or [`TypeName::parse`], which check them.
+/// `TypeName::new` or [`TypeName::parse`], which check them.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct TypeName {
     package: String,
@@ -89,7 +89,7 @@ pub enum BadTypeName {
 
 impl TypeName {
     /// The type `name` of `package`, if both follow the naming rules.
-    pub fn new(package: &str, name: &str) -> Result<TypeName, BadTypeName> {
+    pub(crate) fn new(package: &str, name: &str) -> Result<TypeName, BadTypeName> {
         if !is_package_name(package) {
             return Err(BadTypeName::Package(package.to_owned()));
         }
@@ -111,12 +111,12 @@ impl TypeName {
     }
 
     /// The package (`sensor_msgs`).
-    pub fn package(&self) -> &str {
+    pub(crate) fn package(&self) -> &str {
         &self.package
     }
 
     /// The type's own name (`LaserScan`).
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.name
     }
 

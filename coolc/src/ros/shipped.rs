@@ -2,13 +2,13 @@
 //! use, written from the ROS 2 interface definitions (field names, types, order and
 //! constants as there) and compiled into the binary, so that coolc reads them with no
 //! ROS installed. They are the last place a type is looked up (see
-//! [`super::lookup`]); the files are under `coolc/interfaces/<package>/msg/`.
+//! `lookup`); the files are under `coolc/interfaces/<package>/msg/`.
 
 use super::names::TypeName;
 use crate::diagnostics::closest;
 
 /// Every shipped type: its package, its name and its `.msg` text, by package and name.
-pub const SHIPPED: &[(&str, &str, &str)] = &[
+pub(crate) const SHIPPED: &[(&str, &str, &str)] = &[
     (
         "builtin_interfaces",
         "Duration",
@@ -97,7 +97,7 @@ pub const SHIPPED: &[(&str, &str, &str)] = &[
 ];
 
 /// The `.msg` text of a shipped type.
-pub fn find(name: &TypeName) -> Option<&'static str> {
+pub(crate) fn find(name: &TypeName) -> Option<&'static str> {
     SHIPPED
         .iter()
         .find(|(package, type_name, _)| *package == name.package() && *type_name == name.name())
@@ -113,7 +113,7 @@ pub fn names() -> impl Iterator<Item = TypeName> {
 
 /// The shipped type whose name is nearest `name` (`Twistt` for `Twist`, in the same
 /// package; else the same type in the nearest package), for "did you mean" help.
-pub fn nearest(name: &TypeName) -> Option<TypeName> {
+pub(crate) fn nearest(name: &TypeName) -> Option<TypeName> {
     let same_package: Vec<&str> = SHIPPED
         .iter()
         .filter(|(package, _, _)| *package == name.package())

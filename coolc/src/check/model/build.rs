@@ -140,6 +140,11 @@ impl<'a> Model<'a> {
         resolved
     }
 
+    /// Component `name`, resolved, when a component of that name is declared.
+    pub fn known(&self, name: &str) -> Option<Rc<Component>> {
+        self.component(name).map(|_| self.resolved(name))
+    }
+
     /// Every component, resolved, in source order (files in `FileId` order), each
     /// once (the one the symbol table names), with what needs the whole model: each
     /// connection's kind, each instance's tuning over its component's, each `when`
@@ -306,7 +311,6 @@ impl<'a> Model<'a> {
     /// Builds one component: its members in one walk.
     fn build(&self, file: FileId, component: &ast::Component) -> Component {
         let mut out = Component {
-            name: component.name.name.clone(),
             file,
             kind: component.kind,
             doc: component.doc.0.clone(),
@@ -318,22 +322,7 @@ impl<'a> Model<'a> {
                     doc: note.doc.0.clone(),
                 })
                 .collect(),
-            links: Vec::new(),
-            inputs: Vec::new(),
-            outputs: Vec::new(),
-            variables: Vec::new(),
-            configuration: None,
-            timing: None,
-            automaton: None,
-            exceptions: Vec::new(),
-            instances: Vec::new(),
-            redundant: Vec::new(),
-            threads: Vec::new(),
-            policies: Vec::new(),
-            connections: Vec::new(),
-            recovery: None,
-            restart: None,
-            adaptation: Tuning::default(),
+            ..Component::empty(&component.name.name)
         };
         let policies: BTreeMap<&str, ErrorPolicy> = component
             .members

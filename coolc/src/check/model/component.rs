@@ -22,7 +22,7 @@ use super::types::{
 use crate::ast::{self, FileId, Span};
 use crate::ros::{Message, TypeHash, TypeName};
 
-pub use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
+pub(crate) use crate::ast::{BinaryOp, ComponentKind, Prim, UnaryOp, VarKind};
 
 /// A component, resolved.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,9 +73,9 @@ pub struct Component {
 }
 
 impl Component {
-    /// A component with no member: what an unknown name resolves to, and what a
+    /// A component with no member: what an unknown name resolves to, what a
     /// component resolves to inside its own containment cycle (which the checker
-    /// reports).
+    /// reports), and what building a component starts from.
     pub(crate) fn empty(name: &str) -> Component {
         Component {
             name: name.to_owned(),

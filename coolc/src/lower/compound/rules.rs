@@ -4,12 +4,12 @@
 //! boolean expression that is `false` when a value it reads is missing, with the read
 //! keys that make the runtime evaluate it.
 
-use super::super::{GEN_TYPES, Lowerer, duration_rust};
+use super::super::{GEN_TYPES, Lowerer, duration_code};
 use crate::checked::model::{
     BinaryOp, Component, DEFAULT_STATES, Node, Prim, RESULTS, RTy, Ty, Typed, UnaryOp, VarKind,
 };
 use crate::ident;
-use crate::ir;
+use crate::ir::{self, Code};
 use crate::lower::automaton::When;
 
 /// The rules of compound `c`, from each `when` of its supervisor in order (its
@@ -32,21 +32,33 @@ pub(super) fn compile<'a>(
         };
         let expr = scope.boolean(condition);
         let function = format!("__cool_rule_{}", rules.len());
-        let reads: Vec<String> = scope
-            .reads
-            .iter()
-            .map(|r| ident::string_literal(r))
-            .collect();
-        let call = match (scope.uses_view, scope.uses_vars) {
-            (_, true) => format!(
-                "{{ let vars = ::std::sync::Arc::clone(&vars); move |view: &::coolbot::View| {function}(view, &__cool_lock(&vars)) }}"
-            ),
-            (_, false) => function.clone(),
+        let reads = Code::slice(scope.reads.iter().map(|r| Code::string(r)).collect());
+        // A rule reading the own variables locks them for its evaluation.
+        let call = if scope.uses_vars {
+            let vars = || Code::atom("vars");
+            Code::Block(
+                vec![(
+                    "vars".to_owned(),
+                    Code::call("::std::sync::Arc::clone", vec![vars().reference()]),
+                )],
+                Box::new(Code::move_closure(
+                    "view: &::coolbot::View",
+                    Code::call(
+                        function.as_str(),
+                        vec![
+                            Code::atom("view"),
+                            Code::call("__cool_lock", vec![vars().reference()]).reference(),
+                        ],
+                    ),
+                )),
+            )
+        } else {
+            Code::atom(function.as_str())
         };
         rules.push(ir::Rule {
             state: ident::string_literal(state),
             target: ident::string_literal(target),
-            reads: format!("&[{}]", reads.join(", ")),
+            reads,
             view_param: if scope.uses_view { "view" } else { "_" }.to_owned(),
             vars_param: if scope.uses_vars {
                 Some("vars".to_owned())
@@ -130,10 +142,10 @@ fn unreadable(ty: &RTy) -> bool {
     matches!(ty, RTy::Unknown | RTy::Other(_) | RTy::Symbol(_))
 }
 
-/// A rule operand: Rust text and its type.
+/// A rule operand: its Rust expression and its type.
 #[derive(Clone, Debug)]
 struct Operand {
-    code: String,
+    code: Code,
     ty: RTy,
     /// `code` is an `Option` of the value (a read from the view that may be
     /// missing); `false` when `code` is the value itself.
@@ -141,6 +153,32 @@ struct Operand {
     /// An `f32` (or `f32?`) widened to `f64`: a float literal it is compared with is
     /// rounded to `f32` first.
     narrow: bool,
+}
+
+impl Operand {
+    /// The value `code` of type `ty`, present.
+    fn known(code: Code, ty: RTy) -> Operand {
+        Operand {
+            code,
+            ty,
+            maybe: false,
+            narrow: false,
+        }
+    }
+
+    /// `code`, an `Option` of a value of type `ty` read from the view.
+    fn maybe(code: Code, ty: RTy) -> Operand {
+        Operand {
+            maybe: true,
+            ..Operand::known(code, ty)
+        }
+    }
+
+    /// What generated code cannot read (a comparison with it is `false`; its code
+    /// is never printed).
+    fn unreadable() -> Operand {
+        Operand::known(Code::atom(""), RTy::Unknown)
+    }
 }
 
 /// A compound's scope for rules and exports.
@@ -231,28 +269,30 @@ impl Scope<'_, '_> {
 
     /// A boolean Rust expression for the node `typed` (a missing or unreadable value
     /// makes the comparison that reads it `false`).
-    fn boolean(&mut self, typed: &Typed) -> String {
+    fn boolean(&mut self, typed: &Typed) -> Code {
         match &typed.node {
             Node::Binary(op @ (BinaryOp::And | BinaryOp::Or)) => {
                 let l = self.logic_operand(*op, part(typed, 0));
                 let r = self.logic_operand(*op, part(typed, 1));
-                format!("{l} {} {r}", op.as_str())
+                Code::binary(l, op.as_str(), r)
             }
             Node::Binary(op) => self.comparison(*op, part(typed, 0), part(typed, 1)),
             Node::Unary(UnaryOp::Not) => {
                 let inner = part(typed, 0);
-                let text = self.boolean(inner);
+                let code = self.boolean(inner);
                 match &inner.node {
-                    Node::Binary(..) => format!("!({text})"),
-                    _ => format!("!{text}"),
+                    Node::Binary(..) => Code::prefix("!", code.paren()),
+                    _ => Code::prefix("!", code),
                 }
             }
             _ => {
                 let operand = self.operand(typed);
                 match (operand.ty, operand.maybe) {
                     (RTy::Bool, false) => operand.code,
-                    (RTy::Bool, true) => format!("{}.unwrap_or(false)", operand.code),
-                    _ => "false".to_owned(),
+                    (RTy::Bool, true) => {
+                        operand.code.method("unwrap_or", vec![Code::atom("false")])
+                    }
+                    _ => Code::atom("false"),
                 }
             }
         }
@@ -260,35 +300,34 @@ impl Scope<'_, '_> {
 
     /// An operand of `&&` or `||` (`op`): parenthesized only where Rust's precedence
     /// would read it otherwise (an `||` inside an `&&`).
-    fn logic_operand(&mut self, op: BinaryOp, typed: &Typed) -> String {
-        let text = self.boolean(typed);
+    fn logic_operand(&mut self, op: BinaryOp, typed: &Typed) -> Code {
+        let code = self.boolean(typed);
         if needs_parens(op, typed) {
-            format!("({text})")
+            code.paren()
         } else {
-            text
+            code
         }
     }
 
     /// An operand of a comparison (or a bare boolean).
     fn operand(&mut self, typed: &Typed) -> Operand {
-        let known = |code: String, ty: RTy| Operand {
-            code,
-            ty,
-            maybe: false,
-            narrow: false,
-        };
+        let known = Operand::known;
         match &typed.node {
-            Node::Int(n) => known(n.to_string(), RTy::Int),
-            Node::Float(x) => known(format!("{x:?}"), RTy::Float),
-            Node::Str(s) => known(ident::string_literal(s), RTy::Str),
-            Node::Bool(b) => known(b.to_string(), RTy::Bool),
+            Node::Int(n) => known(Code::atom(n.to_string()), RTy::Int),
+            Node::Float(x) => known(Code::atom(format!("{x:?}")), RTy::Float),
+            Node::Str(s) => known(Code::string(s), RTy::Str),
+            Node::Bool(b) => known(Code::atom(b.to_string()), RTy::Bool),
             Node::Duration(nanos) => known(
-                duration_rust(u64::try_from(*nanos).unwrap_or(u64::MAX)),
+                duration_code(u64::try_from(*nanos).unwrap_or(u64::MAX)),
                 RTy::Duration,
             ),
-            Node::None => known(String::new(), RTy::NoneLit),
+            Node::None => known(Code::atom(""), RTy::NoneLit),
             Node::EnumValue { enum_name, variant } => known(
-                format!("{}::{}", enum_path(enum_name), ident::camel(variant)),
+                Code::atom(format!(
+                    "{}::{}",
+                    enum_path(enum_name),
+                    ident::camel(variant)
+                )),
                 RTy::Enum(enum_name.clone()),
             ),
             Node::Unary(UnaryOp::Neg) => match self.operand(part(typed, 0)) {
@@ -299,7 +338,7 @@ impl Scope<'_, '_> {
                     narrow,
                 } => Operand {
                     narrow,
-                    ..known(format!("-{code}"), ty)
+                    ..known(Code::prefix("-", code), ty)
                 },
                 Operand {
                     code,
@@ -307,34 +346,35 @@ impl Scope<'_, '_> {
                     maybe: true,
                     narrow,
                 } => Operand {
-                    code: format!("{code}.map(|value| -value)"),
-                    ty,
-                    maybe: true,
                     narrow,
+                    ..Operand::maybe(
+                        code.method(
+                            "map",
+                            vec![Code::closure(
+                                "value",
+                                Code::prefix("-", Code::atom("value")),
+                            )],
+                        ),
+                        ty,
+                    )
                 },
-                _ => known(String::new(), RTy::Unknown),
+                _ => Operand::unreadable(),
             },
             Node::Unary(UnaryOp::Not) | Node::Binary(..) => {
-                known(format!("({})", self.boolean(typed)), RTy::Bool)
+                known(self.boolean(typed).paren(), RTy::Bool)
             }
             Node::Path(segments) => match segments.as_slice() {
                 [name] => self.own(name, &typed.ty),
                 [instance, variable] => self.variable_operand(instance, variable, None, &typed.ty),
-                _ => known(String::new(), RTy::Unknown),
+                _ => Operand::unreadable(),
             },
-            Node::Frequency(_) | Node::List | Node::Repeat(_) => known(String::new(), RTy::Unknown),
+            Node::Frequency(_) | Node::List | Node::Repeat(_) => Operand::unreadable(),
         }
     }
 
     /// A bare name of type `ty`: an own variable, a mapped one, an own default
     /// variable, or a symbol (`ty` is then what the checker resolved it to).
     fn own(&mut self, name: &str, ty: &RTy) -> Operand {
-        let unreadable = Operand {
-            code: String::new(),
-            ty: RTy::Unknown,
-            maybe: false,
-            narrow: false,
-        };
         let component = self.component;
         let variable = component.variables.iter().find(|v| v.name == name);
         if let Some(v) = variable {
@@ -344,15 +384,15 @@ impl Scope<'_, '_> {
                         self.read(name.to_owned());
                     }
                     self.uses_vars = true;
-                    let field = format!("vars.{}", ident::snake(name));
+                    let field = Code::atom("vars").field(ident::snake(name));
                     let has_default = v.value.is_some() || self.lowerer.ty_defaultable(declared);
                     let f64_field = holds_f64(declared);
                     let ty = readable(ty);
                     if !has_default {
                         // Held as `Option<T>` until set: read it as a missing value.
-                        return own_value(&format!("{field}.as_ref()"), &ty, true, f64_field);
+                        return own_value(field.method("as_ref", Vec::new()), &ty, true, f64_field);
                     }
-                    own_value(&field, &ty, false, f64_field)
+                    own_value(field, &ty, false, f64_field)
                 }
                 (None, Some(path)) => match path.as_slice() {
                     // Read with `view.mapped(name)`, from the instance standing for
@@ -360,50 +400,31 @@ impl Scope<'_, '_> {
                     [instance, variable] => {
                         self.variable_operand(instance, variable, Some(name), ty)
                     }
-                    _ => unreadable,
+                    _ => Operand::unreadable(),
                 },
-                (None, None) => unreadable,
+                (None, None) => Operand::unreadable(),
             };
         }
+        let view = |method: &str| Code::atom("view").method(method, Vec::new());
         match name {
             // Rules are evaluated while the compound runs.
-            "state" => Operand {
-                code: "::coolbot::State::Running".to_owned(),
-                ty: RTy::State,
-                maybe: false,
-                narrow: false,
-            },
+            "state" => Operand::known(Code::atom("::coolbot::State::Running"), RTy::State),
             // A rule is evaluated in its own supervisor state.
-            "user_state" => Operand {
-                code: ident::string_literal(&self.state),
-                ty: readable(ty),
-                maybe: false,
-                narrow: false,
-            },
+            "user_state" => Operand::known(Code::string(&self.state), readable(ty)),
             // The compound's own default observables, copied into the view at each
             // supervision turn.
             "result" | "error" | "cpu_time" | "elapsed_time" | "quality" => {
                 self.read(name.to_owned());
                 self.uses_view = true;
-                let (code, ty, maybe) = match name {
-                    "result" => (
-                        "::core::option::Option::Some(view.own_result())".to_owned(),
-                        RTy::Result,
-                        true,
-                    ),
-                    "error" => (
-                        "view.own_error().unwrap_or(\"\")".to_owned(),
+                match name {
+                    "result" => Operand::maybe(Code::core_some(view("own_result")), RTy::Result),
+                    "error" => Operand::known(
+                        view("own_error").method("unwrap_or", vec![Code::string("")]),
                         RTy::Str,
-                        false,
                     ),
-                    "quality" => ("view.own_quality()".to_owned(), readable(ty), false),
-                    _ => (format!("view.own_{name}()"), RTy::Duration, false),
-                };
-                Operand {
-                    code,
-                    ty,
-                    maybe,
-                    narrow: false,
+                    "quality" => Operand::known(view("own_quality"), readable(ty)),
+                    "cpu_time" => Operand::known(view("own_cpu_time"), RTy::Duration),
+                    _ => Operand::known(view("own_elapsed_time"), RTy::Duration),
                 }
             }
             _ => symbol(name, ty),
@@ -420,12 +441,6 @@ impl Scope<'_, '_> {
         mapped: Option<&str>,
         ty: &RTy,
     ) -> Operand {
-        let unreadable = Operand {
-            code: String::new(),
-            ty: RTy::Unknown,
-            maybe: false,
-            narrow: false,
-        };
         let Some(target) = self
             .component
             .instances
@@ -433,77 +448,70 @@ impl Scope<'_, '_> {
             .find(|i| i.name == instance)
             .and_then(|i| self.lowerer.checked.component(&i.component))
         else {
-            return unreadable;
+            return Operand::unreadable();
         };
-        let lit = ident::string_literal(instance);
-        let maybe = |code: String, ty: RTy| Operand {
-            code,
-            ty,
-            maybe: true,
-            narrow: false,
-        };
+        let view = |method: &str, args: Vec<Code>| Code::atom("view").method(method, args);
+        let lit = Code::string(instance);
         let ty = readable(ty);
         if let Some(declared) = target.variables.iter().find(|v| v.name == variable) {
             let raw = match mapped {
                 Some(name) => {
                     self.read(name.to_owned());
-                    format!("view.mapped({})", ident::string_literal(name))
+                    view("mapped", vec![Code::string(name)])
                 }
                 None => {
                     self.read(format!("{instance}.{variable}"));
-                    format!("view.var({lit}, {})", ident::string_literal(variable))
+                    view("var", vec![lit, Code::string(variable)])
                 }
             };
             self.uses_view = true;
             let f64_field = declared.ty.as_ref().is_some_and(holds_f64);
-            return match view_value(&raw, &ty) {
+            return match view_value(raw, &ty) {
                 Some(code) => Operand {
                     narrow: !f64_field && is_float(&ty),
-                    ..maybe(code, ty)
+                    ..Operand::maybe(code, ty)
                 },
-                None => unreadable,
+                None => Operand::unreadable(),
             };
         }
+        let monitor = |read: Code| {
+            view("monitor", vec![lit.clone()]).method("map", vec![Code::closure("monitor", read)])
+        };
+        let field = |name: &str| Code::atom("monitor").field(name);
         let code = match variable {
-            "state" => format!("view.state({lit})"),
-            "user_state" => format!("view.user_state({lit})"),
-            "result" => format!("view.result({lit})"),
+            "state" => view("state", vec![lit.clone()]),
+            "user_state" => view("user_state", vec![lit.clone()]),
+            "result" => view("result", vec![lit.clone()]),
             // No error reads as the empty one: `error != "x"` holds then.
             "error" => {
                 self.read(format!("{instance}.error"));
                 self.uses_view = true;
-                return Operand {
-                    code: format!("view.error({lit}).unwrap_or(\"\")"),
-                    ty: RTy::Str,
-                    maybe: false,
-                    narrow: false,
-                };
+                return Operand::known(
+                    view("error", vec![lit]).method("unwrap_or", vec![Code::string("")]),
+                    RTy::Str,
+                );
             }
-            "cpu_time" | "elapsed_time" | "quality" => {
-                format!("view.monitor({lit}).map(|monitor| monitor.{variable})")
-            }
+            "cpu_time" | "elapsed_time" | "quality" => monitor(field(variable)),
             // No period (an aperiodic component) or bound reads as zero.
             "period" | "max_response" => {
-                format!("view.monitor({lit}).map(|monitor| monitor.{variable}.unwrap_or_default())")
+                monitor(field(variable).method("unwrap_or_default", Vec::new()))
             }
-            "priority" => {
-                format!("view.monitor({lit}).map(|monitor| i128::from(monitor.priority))")
-            }
-            _ => return unreadable,
+            "priority" => monitor(Code::call("i128::from", vec![field("priority")])),
+            _ => return Operand::unreadable(),
         };
         // (`cpu_time` and `elapsed_time` have no change event of their own: the
         // runtime counts them as changed every supervisor period.)
         self.read(format!("{instance}.{variable}"));
         self.uses_view = true;
-        maybe(code, ty)
+        Operand::maybe(code, ty)
     }
 
     /// `left op right`, each with its typed node.
-    fn comparison(&mut self, op: BinaryOp, left: &Typed, right: &Typed) -> String {
+    fn comparison(&mut self, op: BinaryOp, left: &Typed, right: &Typed) -> Code {
         let mut l = self.operand(left);
         let mut r = self.operand(right);
         if unreadable(&l.ty) || unreadable(&r.ty) {
-            return "false".to_owned();
+            return Code::atom("false");
         }
         // An `f32` compared with a float literal: the literal rounded to `f32`, as the
         // variable holds it.
@@ -520,24 +528,19 @@ impl Scope<'_, '_> {
         // `user_state == on`: a missing user state (the automaton has not started)
         // differs from every state, for `!=` too.
         if matches!(l.ty, RTy::UserState(..)) && l.maybe != r.maybe {
-            let (maybe, plain) = if l.maybe { (&l, &r) } else { (&r, &l) };
-            return format!(
-                "{} {} ::core::option::Option::Some({})",
-                maybe.code,
-                op.as_str(),
-                plain.code
-            );
+            let (maybe, plain) = if l.maybe { (l, r) } else { (r, l) };
+            return Code::binary(maybe.code, op.as_str(), Code::core_some(plain.code));
         }
         // `x != v` is `!(x == v)`, also when a side is missing.
         if op == BinaryOp::Ne && (l.maybe || r.maybe) {
-            return format!("!({})", self.compare(BinaryOp::Eq, l, r));
+            return Code::prefix("!", self.compare(BinaryOp::Eq, l, r).paren());
         }
         self.compare(op, l, r)
     }
 
     /// `l op r`, both operands resolved (`!=` over a missing value is handled by
     /// the caller).
-    fn compare(&mut self, op: BinaryOp, mut l: Operand, mut r: Operand) -> String {
+    fn compare(&mut self, op: BinaryOp, mut l: Operand, mut r: Operand) -> Code {
         let rust_op = op.as_str();
         // `x == none`, `x != none`.
         if r.ty == RTy::NoneLit {
@@ -549,93 +552,109 @@ impl Scope<'_, '_> {
                 _ => "is_none",
             };
             return match (&r.ty, r.maybe) {
-                (RTy::Optional(_), false) => format!("{}.{test}()", r.code),
-                (RTy::Optional(_), true) => {
-                    format!("{}.is_some_and(|value| value.{test}())", r.code)
-                }
-                (RTy::Result, _) => {
-                    let pattern = "::coolbot::TaskResult::None";
-                    let negate = if op == BinaryOp::Ne { "!" } else { "" };
-                    format!(
-                        "{}.is_some_and(|result| {negate}::core::matches!(result, {pattern}))",
-                        r.code
-                    )
-                }
-                _ => "false".to_owned(),
+                (RTy::Optional(_), false) => r.code.method(test, Vec::new()),
+                (RTy::Optional(_), true) => r.code.method(
+                    "is_some_and",
+                    vec![Code::closure(
+                        "value",
+                        Code::atom("value").method(test, Vec::new()),
+                    )],
+                ),
+                (RTy::Result, _) => r.code.method(
+                    "is_some_and",
+                    vec![Code::closure(
+                        "result",
+                        matches_result(op, Code::atom("::coolbot::TaskResult::None")),
+                    )],
+                ),
+                _ => Code::atom("false"),
             };
         }
         // `result == fail`: a pattern match.
         if l.ty == RTy::Result && r.ty == RTy::Result {
-            return self.result_comparison(op, &l, &r);
+            return result_comparison(op, l, r);
         }
         let l_opt = matches!(l.ty, RTy::Optional(_));
         let r_opt = matches!(r.ty, RTy::Optional(_));
         // An ordering with an optional side: `none` satisfies none of them.
         if (l_opt || r_opt) && op != BinaryOp::Eq && op != BinaryOp::Ne {
-            return ordering(rust_op, &l, &r);
+            return ordering(rust_op, l, r);
         }
         // One optional side and one plain side: the plain side is wrapped in `Some`.
-        let bind = |operand: &Operand, name: &str, wrap: bool| -> (String, String) {
+        let bind = |operand: &Operand, name: &str, wrap: bool| -> Code {
             let owned_text = operand.ty == RTy::Optional(Box::new(RTy::Str));
             let value = if operand.maybe && owned_text {
-                format!("{name}.as_deref()")
+                Code::atom(name).method("as_deref", Vec::new())
             } else if operand.maybe {
-                name.to_owned()
+                Code::atom(name)
             } else {
                 operand.code.clone()
             };
-            let value = if wrap {
-                format!("::core::option::Option::Some({value})")
-            } else {
-                value
-            };
-            (operand.code.clone(), value)
+            if wrap { Code::core_some(value) } else { value }
         };
-        let (l_source, l_value) = bind(&l, "left", r_opt && !l_opt);
-        let (r_source, r_value) = bind(&r, "right", l_opt && !r_opt);
-        let test = format!("{l_value} {rust_op} {r_value}");
+        let l_value = bind(&l, "left", r_opt && !l_opt);
+        let r_value = bind(&r, "right", l_opt && !r_opt);
+        let test = Code::binary(l_value, rust_op, r_value);
+        let is_some_and = |source: Code, params: &str| {
+            source.method("is_some_and", vec![Code::closure(params, test.clone())])
+        };
         match (l.maybe, r.maybe) {
             (false, false) => test,
-            (true, false) => format!("{l_source}.is_some_and(|left| {test})"),
-            (false, true) => format!("{r_source}.is_some_and(|right| {test})"),
-            (true, true) => {
-                format!("{l_source}.zip({r_source}).is_some_and(|(left, right)| {test})")
-            }
+            (true, false) => is_some_and(l.code, "left"),
+            (false, true) => is_some_and(r.code, "right"),
+            (true, true) => is_some_and(l.code.method("zip", vec![r.code]), "(left, right)"),
         }
     }
+}
 
-    /// A comparison of two results: by kind (`none`, `success`, `fail`).
-    fn result_comparison(&mut self, op: BinaryOp, l: &Operand, r: &Operand) -> String {
-        let negate = if op == BinaryOp::Ne { "!" } else { "" };
-        // A symbol side is a pattern.
-        let pattern = |operand: &Operand| -> Option<String> {
-            (!operand.maybe).then(|| operand.code.clone())
-        };
-        match (pattern(l), pattern(r)) {
-            (Some(p), None) | (None, Some(p)) => {
-                let source = if l.maybe { &l.code } else { &r.code };
-                format!("{source}.is_some_and(|result| {negate}::core::matches!(result, {p}))")
-            }
-            (None, None) => format!(
-                "{}.zip({}).is_some_and(|(left, right)| ::core::mem::discriminant(left) {} ::core::mem::discriminant(right))",
-                l.code,
-                r.code,
-                op.as_str()
-            ),
-            (Some(a), Some(b)) => (if (a == b) == (op != BinaryOp::Ne) {
-                "true"
+/// `::core::matches!(result, pattern)`, negated for `!=` (`op`).
+fn matches_result(op: BinaryOp, pattern: Code) -> Code {
+    let test = Code::call("::core::matches!", vec![Code::atom("result"), pattern]);
+    if op == BinaryOp::Ne {
+        Code::prefix("!", test)
+    } else {
+        test
+    }
+}
+
+/// A comparison of two results: by kind (`none`, `success`, `fail`).
+fn result_comparison(op: BinaryOp, l: Operand, r: Operand) -> Code {
+    // A symbol side is a pattern.
+    match (l.maybe, r.maybe) {
+        (true, false) | (false, true) => {
+            let (source, pattern) = if l.maybe {
+                (l.code, r.code)
             } else {
-                "false"
-            })
-            .to_owned(),
+                (r.code, l.code)
+            };
+            source.method(
+                "is_some_and",
+                vec![Code::closure("result", matches_result(op, pattern))],
+            )
         }
+        (true, true) => {
+            let discriminant =
+                |name: &str| Code::call("::core::mem::discriminant", vec![Code::atom(name)]);
+            l.code.method("zip", vec![r.code]).method(
+                "is_some_and",
+                vec![Code::closure(
+                    "(left, right)",
+                    Code::binary(discriminant("left"), op.as_str(), discriminant("right")),
+                )],
+            )
+        }
+        (false, false) => Code::atom(if (l.code == r.code) == (op != BinaryOp::Ne) {
+            "true"
+        } else {
+            "false"
+        }),
     }
 }
 
 /// `l op r` for an ordering `op` with an optional side: every `Option` layer (a
 /// missing read, an optional value) is opened with `is_some_and`, so a missing value
 /// or `none` makes it `false`.
-fn ordering(rust_op: &str, l: &Operand, r: &Operand) -> String {
+fn ordering(rust_op: &'static str, l: Operand, r: Operand) -> Code {
     let layers = |operand: &Operand| {
         usize::from(matches!(operand.ty, RTy::Optional(_))) + usize::from(operand.maybe)
     };
@@ -643,26 +662,30 @@ fn ordering(rust_op: &str, l: &Operand, r: &Operand) -> String {
         if layers(operand) == 0 {
             operand.code.clone()
         } else {
-            name.to_owned()
+            Code::atom(name)
         }
     };
-    let open = |operand: &Operand, name: &str, inner: String| -> String {
+    let is_some_and = |source: Code, name: &str, inner: Code| {
+        source.method("is_some_and", vec![Code::closure(name, inner)])
+    };
+    let open = |operand: &Operand, name: &str, inner: Code| -> Code {
         match layers(operand) {
             0 => inner,
-            1 => format!("{}.is_some_and(|{name}| {inner})", operand.code),
-            _ => format!(
-                "{}.is_some_and(|{name}| {name}.is_some_and(|{name}| {inner}))",
-                operand.code
+            1 => is_some_and(operand.code.clone(), name, inner),
+            _ => is_some_and(
+                operand.code.clone(),
+                name,
+                is_some_and(Code::atom(name), name, inner),
             ),
         }
     };
-    let test = format!("{} {rust_op} {}", value(l, "left"), value(r, "right"));
-    open(l, "left", open(r, "right", test))
+    let test = Code::binary(value(&l, "left"), rust_op, value(&r, "right"));
+    open(&l, "left", open(&r, "right", test))
 }
 
 /// A float literal (`0.1`, `-0.1`) as an `f64` holding its `f32` rounding, or `None`
 /// for anything else (and for a literal beyond `f32`'s range, which no `f32` equals).
-fn f32_literal(typed: &Typed) -> Option<String> {
+fn f32_literal(typed: &Typed) -> Option<Code> {
     let (negative, value) = match &typed.node {
         Node::Float(x) => (false, *x),
         Node::Unary(UnaryOp::Neg) => match &part(typed, 0).node {
@@ -677,88 +700,81 @@ fn f32_literal(typed: &Typed) -> Option<String> {
         return None;
     }
     let sign = if negative { "-" } else { "" };
-    Some(format!("f64::from({sign}{narrow:?}_f32)"))
+    Some(Code::call(
+        "f64::from",
+        vec![Code::atom(format!("{sign}{narrow:?}_f32"))],
+    ))
 }
 
 /// A symbol of the type the checker resolved it to (the other side's, without `?`).
 fn symbol(name: &str, resolved: &RTy) -> Operand {
-    let plain = |code: String, ty: RTy| Operand {
-        code,
-        ty,
-        maybe: false,
-        narrow: false,
-    };
+    let plain = Operand::known;
     match crate::checked::model::strip(resolved) {
         // The checker's names; `coolbot::State` variants are their camel case.
         RTy::State if DEFAULT_STATES.contains(&name) => plain(
-            format!("::coolbot::State::{}", ident::camel(name)),
+            Code::atom(format!("::coolbot::State::{}", ident::camel(name))),
             RTy::State,
         ),
         ty @ RTy::UserState(_, states) if states.iter().any(|s| s == name) => {
-            plain(ident::string_literal(name), ty.clone())
+            plain(Code::string(name), ty.clone())
         }
         RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
-            Some(pattern) => plain(pattern.to_owned(), RTy::Result),
-            None => plain(String::new(), RTy::Unknown),
+            Some(pattern) => plain(Code::atom(pattern), RTy::Result),
+            None => Operand::unreadable(),
         },
         ty @ RTy::Quality(_, levels) => match levels.iter().position(|l| l == name) {
-            Some(index) => plain(format!("{index}_usize"), ty.clone()),
-            None => plain(String::new(), RTy::Unknown),
+            Some(index) => plain(Code::atom(format!("{index}_usize")), ty.clone()),
+            None => Operand::unreadable(),
         },
-        _ => plain(String::new(), RTy::Unknown),
+        _ => Operand::unreadable(),
     }
 }
 
 /// An own variable's field read as a rule operand (`maybe` when it is held as an
 /// `Option` reference until set).
-fn own_value(field: &str, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
-    let unreadable = Operand {
-        code: String::new(),
-        ty: RTy::Unknown,
-        maybe: false,
-        narrow: false,
+fn own_value(field: Code, ty: &RTy, maybe: bool, f64_field: bool) -> Operand {
+    // `value.as_ref().map(|_| ())`: whether an optional packet is present.
+    let presence = |value: Code| {
+        value
+            .method("as_ref", Vec::new())
+            .method("map", vec![Code::closure("_", Code::atom("()"))])
     };
     if maybe {
         // `Option<&T>`: only the types whose value can be copied out of a reference,
         // and an optional packet's presence.
         let code = match ty {
-            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => format!("{field}.copied()"),
-            RTy::Optional(inner) if matches!(inner.as_ref(), RTy::Other(_)) => {
-                format!("{field}.map(|value| value.as_ref().map(|_| ()))")
+            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => {
+                field.method("copied", Vec::new())
             }
-            _ => return unreadable,
+            RTy::Optional(inner) if matches!(inner.as_ref(), RTy::Other(_)) => field.method(
+                "map",
+                vec![Code::closure("value", presence(Code::atom("value")))],
+            ),
+            _ => return Operand::unreadable(),
         };
-        return Operand {
-            code,
-            ty: ty.clone(),
-            maybe: true,
-            narrow: false,
-        };
+        return Operand::maybe(code, ty.clone());
     }
     let code = match ty {
-        RTy::Int => format!("i128::from({field})"),
-        RTy::Float if f64_field => field.to_owned(),
-        RTy::Float => format!("f64::from({field})"),
-        RTy::Str => format!("{field}.as_str()"),
-        RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
+        RTy::Int => Code::call("i128::from", vec![field]),
+        RTy::Float if f64_field => field,
+        RTy::Float => Code::call("f64::from", vec![field]),
+        RTy::Str => field.method("as_str", Vec::new()),
+        RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field,
         RTy::Optional(inner) => match inner.as_ref() {
-            RTy::Int => format!("{field}.map(i128::from)"),
-            RTy::Float if f64_field => field.to_owned(),
-            RTy::Float => format!("{field}.map(f64::from)"),
-            RTy::Str => format!("{field}.as_deref()"),
-            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field.to_owned(),
+            RTy::Int => field.method("map", vec![Code::atom("i128::from")]),
+            RTy::Float if f64_field => field,
+            RTy::Float => field.method("map", vec![Code::atom("f64::from")]),
+            RTy::Str => field.method("as_deref", Vec::new()),
+            RTy::Bool | RTy::Duration | RTy::Time | RTy::Enum(_) => field,
             // Present or not (compared with `none` only).
-            RTy::Other(_) => format!("{field}.as_ref().map(|_| ())"),
-            _ => return unreadable,
+            RTy::Other(_) => presence(field),
+            _ => return Operand::unreadable(),
         },
-        _ => return unreadable,
+        _ => return Operand::unreadable(),
     };
-    let narrow = !f64_field && is_float(ty);
     Operand {
-        code,
-        ty: ty.clone(),
-        maybe: false,
-        narrow,
+        narrow: !f64_field && is_float(ty),
+        ..Operand::known(code, ty.clone())
     }
 }
 
@@ -773,34 +789,57 @@ fn is_float(ty: &RTy) -> bool {
 
 /// Reads an instance variable's `Option<&coolbot::Value>` (`raw`) as an `Option` of
 /// the operand's Rust value.
-fn view_value(raw: &str, ty: &RTy) -> Option<String> {
-    let decode = |rust: &str| format!("{raw}.and_then(|value| <{rust}>::try_from(value).ok())");
-    let serde = |rust: &str| {
-        format!("{raw}.and_then(|value| super::__cool_from_value::<{rust}>(value).ok())")
+fn view_value(raw: Code, ty: &RTy) -> Option<Code> {
+    let value = || Code::atom("value");
+    // `raw.and_then(|value| body)`.
+    let and_then = |body: Code| {
+        raw.clone()
+            .method("and_then", vec![Code::closure("value", body)])
     };
+    let try_from = |rust: &str| Code::call(format!("<{rust}>::try_from"), vec![value()]);
+    let decode = |rust: &str| and_then(try_from(rust).method("ok", Vec::new()));
+    let serde = |rust: &str| {
+        and_then(
+            Code::call(format!("super::__cool_from_value::<{rust}>"), vec![value()])
+                .method("ok", Vec::new()),
+        )
+    };
+    let widen = |rust: &str| try_from(rust).method("map", vec![Code::atom("i128::from")]);
     Some(match ty {
         RTy::Bool => decode("bool"),
-        RTy::Int => format!(
-            "{raw}.and_then(|value| <i64>::try_from(value).map(i128::from).or_else(|_| <u64>::try_from(value).map(i128::from)).ok())"
+        RTy::Int => and_then(
+            widen("i64")
+                .method("or_else", vec![Code::closure("_", widen("u64"))])
+                .method("ok", Vec::new()),
         ),
         RTy::Float => decode("f64"),
-        RTy::Str => format!(
-            "{raw}.and_then(|value| match value {{ ::coolbot::Value::Str(text) => ::core::option::Option::Some(text.as_str()), _ => ::core::option::Option::None }})"
-        ),
+        RTy::Str => and_then(Code::Match(
+            Box::new(value()),
+            vec![
+                (
+                    "::coolbot::Value::Str(text)".to_owned(),
+                    Code::core_some(Code::atom("text").method("as_str", Vec::new())),
+                ),
+                ("_".to_owned(), Code::core_none()),
+            ],
+        )),
         RTy::Duration => decode("::std::time::Duration"),
         RTy::Time => decode("::coolbot::Time"),
         RTy::Enum(name) => serde(&enum_path(name)),
         RTy::Optional(inner) => match inner.as_ref() {
             RTy::Bool => serde("::core::option::Option<bool>"),
-            RTy::Int => format!(
-                "{}.map(|value| value.map(i128::from))",
-                serde("::core::option::Option<i64>")
+            RTy::Int => serde("::core::option::Option<i64>").method(
+                "map",
+                vec![Code::closure(
+                    "value",
+                    value().method("map", vec![Code::atom("i128::from")]),
+                )],
             ),
             RTy::Float => serde("::core::option::Option<f64>"),
             RTy::Duration => serde("::core::option::Option<::std::time::Duration>"),
             RTy::Time => serde("::core::option::Option<::coolbot::Time>"),
             RTy::Enum(name) => serde(&format!("::core::option::Option<{}>", enum_path(name))),
-            // Owned: compared through `as_deref` (see `Scope::comparison`).
+            // Owned: compared through `as_deref` (see `Scope::compare`).
             RTy::Str => serde("::core::option::Option<::std::string::String>"),
             // Present or not (compared with `none` only): any value decodes.
             RTy::Other(_) => serde("::core::option::Option<::serde::de::IgnoredAny>"),
