@@ -6,12 +6,21 @@ impl Runner {
     /// The thread's body.
     pub(crate) fn run(mut self) {
         self.bell.attach();
+        self.claim_sends();
         if let Some(clock) = self.time.as_virtual() {
             self.on_clock = Some(clock.join(&self.cx.name, Arc::clone(&self.bell)));
         }
         self.run_loop();
         if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
             clock.leave(id);
+        }
+    }
+
+    /// This thread sends on the component's data outputs without their sinks' lock
+    /// (`crate::port::Sinks`).
+    pub(super) fn claim_sends(&self) {
+        for output in &self.outputs {
+            output.claim_sends();
         }
     }
 
