@@ -84,11 +84,10 @@ const SPIN: Duration = Duration::from_micros(4);
 const BATCH_PAUSE: u32 = 32;
 
 /// The longest pause of a component that stays behind its producer (about 13 us on
-/// the development machine): on a machine whose cache-line transfers cost more than
-/// the rest of a delivery, a consumer pausing 0.8 us held a fifo(1024) producer to
-/// about 11 M packets/s and a `last` one to 14 M/s; pausing up to 13 us, to 30 and
-/// 28 M/s (`benches/throughput.rs`, both cores free). A fifo(1024) fed at that rate
-/// fills in about 34 us: the longest pause leaves it room.
+/// the development machine). There, with both cores free, a consumer pausing 0.8 us
+/// held a fifo(1024) producer to about 11 M packets/s and a `last` one to 14 M/s;
+/// pausing up to 13 us, to 30 and 28 M/s (`benches/throughput.rs`). A fifo(1024) fed
+/// at that rate fills in about 34 us: the longest pause leaves it room.
 const BATCH_PAUSE_MAX: u32 = 512;
 
 /// Spin hints between two clock reads while spinning (a hint takes about 25 ns on the
