@@ -18,7 +18,8 @@
 //! producer); every consumer re-enters its state on each arrival (`on input -> work`)
 //! and reads everything available in its entry section.
 //!
-//! `cargo bench -p coolbot --bench throughput` (add `-- --quick` for a smoke run).
+//! `cargo bench -p coolbot --bench throughput` (add `-- --quick` for a smoke run, or
+//! `-- fifo last` for only the rows named).
 
 #[macro_use]
 mod common;
@@ -274,11 +275,17 @@ fn main() {
     let mode = Mode::from_env();
     let count = mode.scale(1_000_000, 50_000) as u64;
     let mut table = Table::new("Throughput of 8-byte packets", mode);
+    // `cargo bench --bench throughput -- fifo last` measures only the kinds named.
+    let named: Vec<String> = std::env::args().skip(1).collect();
     for (kind, goal) in [
         (Kind::Fifo, Goal::AtLeast(0.5)),
         (Kind::Last, Goal::AtLeast(1.0)),
         (Kind::Poster, Goal::AtLeast(0.5)),
     ] {
+        let short = format!("{kind:?}").to_lowercase();
+        if named.iter().any(|arg| !arg.starts_with('-')) && !named.contains(&short) {
+            continue;
+        }
         let consumers = if kind == Kind::Poster { CONSUMERS } else { 1 };
         let mut rounds = Vec::new();
         let mut baseline = Vec::new();

@@ -503,7 +503,7 @@ pub(super) fn data_target<T: Packet>(input: &ErasedInput) -> Option<Arc<dyn Deli
 
 impl<T: Packet> DataOutInner<T> {
     fn add_sink(&self, output: &ErasedOutput, input: &ErasedInput, target: Arc<dyn Deliver<T>>) {
-        update_list(&self.sinks, |sinks| {
+        self.sinks.update(&self.core, |sinks| {
             sinks.push(Sink {
                 input_id: input.core.id,
                 target,
@@ -522,23 +522,23 @@ impl<T: Packet> DataOutInner<T> {
         new: &ErasedInput,
         target: Arc<dyn Deliver<T>>,
     ) {
-        // Senders hold the read lock while delivering: under the write lock nothing is
-        // in flight, so the queued packets move before any newer one arrives at `new`.
-        let mut sinks = write(&self.sinks);
-        let mut items: Vec<_> = sinks
-            .iter()
-            .filter(|sink| sink.input_id != old.core.id)
-            .cloned()
-            .collect();
-        items.push(Sink {
-            input_id: new.core.id,
-            target,
-        });
-        *sinks = Arc::from(items);
-        if old.type_id == new.type_id && old.kind == new.kind {
-            old.end.transfer(new);
-        }
-        drop(sinks);
+        // Under the change, no delivery to the old snapshot is in flight (`Sinks`):
+        // the queued packets move before any newer one arrives at `new`.
+        self.sinks.update_then(
+            &self.core,
+            |sinks| {
+                sinks.retain(|sink| sink.input_id != old.core.id);
+                sinks.push(Sink {
+                    input_id: new.core.id,
+                    target,
+                });
+            },
+            || {
+                if old.type_id == new.type_id && old.kind == new.kind {
+                    old.end.transfer(new);
+                }
+            },
+        );
         old.core.remove_source(output.core.id);
         new.core.add_source(Arc::clone(&output.core));
     }
@@ -563,7 +563,7 @@ impl<T: Packet> OutputEnd for DataOutInner<T> {
     }
 
     fn unlink(&self, output: &ErasedOutput, input: &ErasedInput) {
-        update_list(&self.sinks, |sinks| {
+        self.sinks.update(&self.core, |sinks| {
             sinks.retain(|sink| sink.input_id != input.core.id)
         });
         input.core.remove_source(output.core.id);
@@ -586,7 +586,7 @@ impl<T: Packet> OutputEnd for DataOutInner<T> {
         ) else {
             return false;
         };
-        update_list(&out.sinks, |sinks| {
+        out.sinks.update(&out.core, |sinks| {
             sinks.push(Sink {
                 input_id: id,
                 target: Arc::new(DataForward { to }),
@@ -596,9 +596,8 @@ impl<T: Packet> OutputEnd for DataOutInner<T> {
     }
 
     fn remove_sink(&self, id: usize) {
-        update_list(&self.sinks, |sinks| {
-            sinks.retain(|sink| sink.input_id != id)
-        });
+        self.sinks
+            .update(&self.core, |sinks| sinks.retain(|sink| sink.input_id != id));
     }
 
     fn merge(&self, lanes: usize) -> Option<Arc<dyn MergeEnd>> {

@@ -10,21 +10,23 @@ pub(super) struct DataForward<T> {
 
 impl<T: Packet> Deliver<T> for DataForward<T> {
     fn deliver(&self, packet: Parcel<T>) {
-        dispatch(&read(&self.to.sinks), packet);
+        dispatch(&self.to.sinks.read(), packet);
     }
 
     fn answers(&self, id: usize) -> bool {
-        read(&self.to.sinks)
+        self.to
+            .sinks
+            .read()
             .iter()
             .any(|sink| sink.input_id == id || sink.target.answers(id))
     }
 
     fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
-        dispatch_answer(&read(&self.to.sinks), packet, id);
+        dispatch_answer(&self.to.sinks.read(), packet, id);
     }
 
     fn lost(&self, count: u64) {
-        for sink in read(&self.to.sinks).iter() {
+        for sink in self.to.sinks.read().iter() {
             sink.target.lost(count);
         }
     }
@@ -88,7 +90,7 @@ pub(crate) fn tap_data<T: Packet>(from: &ErasedOutput, tap: Arc<dyn Deliver<T>>)
         target: tap,
     };
     if let Some(out) = output_as::<DataOutInner<T>>(from) {
-        update_list(&out.sinks, |sinks| sinks.push(sink));
+        out.sinks.update(&out.core, |sinks| sinks.push(sink));
     } else {
         output_as::<PosterOutInner<T>>(from)?.add_tap(sink);
     }

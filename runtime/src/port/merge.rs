@@ -102,14 +102,18 @@ impl<T: Packet> Deliver<T> for LaneSink<T> {
     }
 
     fn answers(&self, id: usize) -> bool {
-        read(&self.merge.out.inner.sinks)
+        self.merge
+            .out
+            .inner
+            .sinks
+            .read()
             .iter()
             .any(|sink| sink.input_id == id || sink.target.answers(id))
     }
 
     fn deliver_answer(&self, packet: Parcel<T>, id: usize) {
         // A pull answer is for its requester, not part of the stream.
-        dispatch_answer(&read(&self.merge.out.inner.sinks), packet, id);
+        dispatch_answer(&self.merge.out.inner.sinks.read(), packet, id);
     }
 }
 
@@ -126,7 +130,7 @@ impl<T: Packet> MergeEnd for Arc<Merge<T>> {
             merge: Arc::clone(self),
             lane,
         };
-        update_list(&out.sinks, |sinks| {
+        out.sinks.update(&out.core, |sinks| {
             sinks.push(Sink {
                 input_id: next_port_id(),
                 target: Arc::new(sink),
@@ -157,7 +161,7 @@ impl<T: Packet> MergeEnd for Arc<Merge<T>> {
         if missing > 0 {
             // The stream's consumers never get them: lost there, counted and
             // announced, so that sent = received + lost holds at each of them.
-            for sink in read(&self.out.inner.sinks).iter() {
+            for sink in self.out.inner.sinks.read().iter() {
                 sink.target.lost(missing);
             }
         }

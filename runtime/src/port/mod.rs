@@ -5,7 +5,8 @@
 //! user's sections. The packet buffer of a connection lives at its input end; an
 //! output keeps a snapshot of its connected inputs (`RwLock<Arc<[..]>>`, replaced only
 //! on connect and disconnect), so sending takes no global lock and allocates nothing
-//! beyond the clone of the packet for each extra consumer.
+//! beyond the clone of the packet for each extra consumer; a data output's component
+//! thread sends to its own copy of the snapshot, without the lock ([`Sinks`]).
 //!
 //! Each delivery bumps the input's arrival counter and rings its component's
 //! `Doorbell` (one three-state atomic beside the component's thread handle: a rung
@@ -32,6 +33,7 @@ mod harness;
 mod input;
 mod merge;
 mod output;
+mod sinks;
 
 pub(crate) use delivery::*;
 pub use erased::*;
@@ -40,6 +42,7 @@ pub(crate) use harness::*;
 pub use input::*;
 pub(crate) use merge::*;
 pub use output::*;
+pub(crate) use sinks::*;
 
 /// How long a producer waits on a full [`OverflowPolicy::Block`] fifo before the
 /// packet is rejected and counted, unless the port sets its own timeout.
@@ -290,6 +293,9 @@ pub(crate) struct OutputCore {
     requests: OnceLock<(Sender<usize>, Receiver<usize>)>,
     /// While the producer answers a pull request: the requesting input's id (0: none).
     answering_to: AtomicUsize,
+    /// The thread that sends on this output without the sinks' lock (its token, see
+    /// [`OutputCore::claim_sends`]; 0: none).
+    sender: AtomicU64,
     /// Where pull requests go instead of this output's own queue: a compound's
     /// exported port passes them on to the port it stands for (see [`PullRoute`]).
     route: Mutex<Option<PullRoute>>,
@@ -317,6 +323,7 @@ impl OutputCore {
             owner: OnceLock::new(),
             requests: OnceLock::new(),
             answering_to: AtomicUsize::new(0),
+            sender: AtomicU64::new(0),
             route: Mutex::new(None),
         })
     }

@@ -94,7 +94,7 @@ impl<T> Clone for DataOut<T> {
 
 pub(crate) struct DataOutInner<T> {
     pub(super) core: Arc<OutputCore>,
-    pub(super) sinks: RwLock<Arc<[Sink<T>]>>,
+    pub(super) sinks: Sinks<T>,
 }
 
 impl<T: Packet> DataOut<T> {
@@ -103,7 +103,7 @@ impl<T: Packet> DataOut<T> {
         DataOut {
             inner: Arc::new(DataOutInner {
                 core: OutputCore::new(),
-                sinks: RwLock::new(Arc::from([])),
+                sinks: Sinks::new(),
             }),
         }
     }
@@ -116,21 +116,23 @@ impl<T: Packet> DataOut<T> {
     pub fn send(&self, packet: T) {
         let answering = self.inner.core.answering_to.load(Ordering::Relaxed);
         if answering != 0 {
-            dispatch_answer(&read(&self.inner.sinks), Parcel::Owned(packet), answering);
+            dispatch_answer(&self.inner.sinks.read(), Parcel::Owned(packet), answering);
             return;
         }
-        dispatch(&read(&self.inner.sinks), Parcel::Owned(packet));
+        self.inner
+            .sinks
+            .send(&self.inner.core, Parcel::Owned(packet));
     }
 
     /// Send a packet that may already be shared (a compound's relay passing on what
     /// arrived at its exported input), as [`DataOut::send`] does.
     pub(crate) fn send_parcel(&self, packet: Parcel<T>) {
-        dispatch(&read(&self.inner.sinks), packet);
+        self.inner.sinks.send(&self.inner.core, packet);
     }
 
     /// How many inputs are connected.
     pub fn consumers(&self) -> usize {
-        read(&self.inner.sinks).len()
+        self.inner.sinks.read().len()
     }
 }
 

@@ -342,8 +342,8 @@ impl<T: Packet + Serialize> Tap for Attached<T> {
 
     fn detach(&mut self) {
         if let Some(id) = self.id.take() {
-            // Senders deliver under the sinks' read lock: once the write that removes
-            // the tap returns, no delivery to it is in flight.
+            // A change of the sinks waits for the deliveries in flight (`port::Sinks`):
+            // once the one that removes the tap returns, none is on its way to it.
             crate::port::unforward(&self.output, id);
         }
     }

@@ -177,6 +177,7 @@ impl Group {
             .map(|runner| runner.time.now());
         for runner in self.members.iter_mut().flatten() {
             runner.bell.attach();
+            runner.claim_sends();
             if let Some(clock) = runner.time.as_virtual() {
                 runner.on_clock = Some(clock.join(&runner.cx.name, Arc::clone(&runner.bell)));
             }

@@ -78,8 +78,17 @@ const SPIN: Duration = Duration::from_micros(4);
 /// arrive undisturbed and be handled in one turn: with both cores free, a `last`
 /// consumer went from 0.7x-1.5x of a bounded channel's rate to 3x-4x, a fifo(1024)
 /// from 1.4x to 2.5x (`benches/throughput.rs`). A component that keeps up, or
-/// answers a request (a ping-pong), never pauses.
+/// answers a request (a ping-pong), never pauses. The pause doubles with each turn
+/// in a row that ends with work waiting, up to [`BATCH_PAUSE_MAX`], and is back to
+/// this as soon as a turn ends with nothing waiting.
 const BATCH_PAUSE: u32 = 32;
+
+/// The longest pause of a component that stays behind its producer (about 13 us on
+/// the development machine). There, with both cores free, a consumer pausing 0.8 us
+/// held a fifo(1024) producer to about 11 M packets/s and a `last` one to 14 M/s;
+/// pausing up to 13 us, to 30 and 28 M/s (`benches/throughput.rs`). A fifo(1024) fed
+/// at that rate fills in about 34 us: the longest pause leaves it room.
+const BATCH_PAUSE_MAX: u32 = 512;
 
 /// Spin hints between two clock reads while spinning (a hint takes about 25 ns on the
 /// development machine, a clock read about 30 ns). A component without timers that
@@ -190,6 +199,8 @@ pub(crate) struct Runner {
     /// The last wait found work by looking at the sources (`wait_for_input`), not at
     /// the bell: the next turn does not clear the bell.
     found_by_polling: bool,
+    /// The next pause behind a faster producer, in spin hints (see `BATCH_PAUSE`).
+    batch_pause: u32,
     /// When the last wait found its work while spinning: the spin's last clock
     /// reading, which the next turn starts from (see `SPIN_BATCH`). Only for a
     /// component without timers (`untimed`).
@@ -296,6 +307,7 @@ impl Runner {
             mirrors_times,
             arrivals_count_on_entry: false,
             found_by_polling: false,
+            batch_pause: BATCH_PAUSE,
             found_at: None,
             untimed: !supervised
                 && spec

@@ -6,12 +6,21 @@ impl Runner {
     /// The thread's body.
     pub(crate) fn run(mut self) {
         self.bell.attach();
+        self.claim_sends();
         if let Some(clock) = self.time.as_virtual() {
             self.on_clock = Some(clock.join(&self.cx.name, Arc::clone(&self.bell)));
         }
         self.run_loop();
         if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
             clock.leave(id);
+        }
+    }
+
+    /// This thread sends on the component's data outputs without their sinks' lock
+    /// (`crate::port::Sinks`).
+    pub(super) fn claim_sends(&self) {
+        for output in &self.outputs {
+            output.claim_sends();
         }
     }
 
@@ -135,13 +144,15 @@ impl Runner {
         if polling && self.work_waiting() {
             // Work came during the turn: the component is behind a faster producer.
             // Let it deliver a batch undisturbed before the next turn (see
-            // `BATCH_PAUSE`).
-            for _ in 0..BATCH_PAUSE {
+            // `BATCH_PAUSE`), longer each turn in a row that ends behind.
+            for _ in 0..self.batch_pause {
                 std::hint::spin_loop();
             }
+            self.batch_pause = next_pause(self.batch_pause, true);
             self.found_by_polling = true;
             return;
         }
+        self.batch_pause = next_pause(self.batch_pause, false);
         let idle_since = Instant::now();
         let mut read_at = idle_since;
         'spin: loop {
@@ -173,5 +184,33 @@ impl Runner {
         }
         self.update_cpu(false);
         self.bell.park_until(None);
+    }
+}
+
+/// The pause before the turn after this one, from this one's: doubled after a turn
+/// that ended `behind` a faster producer (up to `BATCH_PAUSE_MAX`), back to
+/// `BATCH_PAUSE` after one that did not.
+fn next_pause(pause: u32, behind: bool) -> u32 {
+    if behind {
+        pause.saturating_mul(2).min(BATCH_PAUSE_MAX)
+    } else {
+        BATCH_PAUSE
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_pause_behind_a_producer_doubles_up_to_its_cap_and_resets_once_caught_up() {
+        let mut pauses = vec![BATCH_PAUSE];
+        for _ in 0..5 {
+            let last = pauses[pauses.len() - 1];
+            pauses.push(next_pause(last, true));
+        }
+        assert_eq!(pauses, [32, 64, 128, 256, 512, 512]);
+        let pause = BATCH_PAUSE_MAX;
+        assert_eq!(next_pause(pause, false), BATCH_PAUSE);
     }
 }

@@ -1,0 +1,434 @@
+//! A data output's sinks, and how its component's thread sends to them without a lock.
+//!
+//! The sinks are a snapshot (`Arc<[Sink<T>]>`) under a `RwLock`, replaced whole on
+//! every connection change. A sender normally holds the read lock while it delivers,
+//! so that a change (the write lock) waits for deliveries in flight: once it
+//! returns, no packet is on its way to a sink it removed, and the packets queued at
+//! an input it replaced can be moved on without one arriving behind them.
+//!
+//! The read lock costs two atomic read-modify-write operations per packet, as much as
+//! the rest of a delivery. So the thread that owns the output (its component's
+//! thread, or its execution group's: [`OutputCore::claim_sends`]) sends without it:
+//!
+//! - it keeps its own copy of the snapshot, with the snapshot's version, in a
+//!   thread-local cache (so the copy lives as long as it uses it);
+//! - each send marks the output `busy` (a plain store), then reads the version; if
+//!   it is the cached one, it delivers to the cached snapshot and clears `busy`;
+//!   otherwise it clears `busy` and sends under the read lock, as any other thread
+//!   does, and caches the snapshot it read there;
+//! - a change replaces the snapshot and bumps the version under the write lock, then
+//!   waits until `busy` is clear before it goes on (and releases the lock).
+//!
+//! Why no delivery from a replaced snapshot is in flight when a change goes on: the
+//! owner's store to `busy` and its load of the version are separated by a light
+//! fence, the change's bump and its load of `busy` by a heavy one ([`light_fence`],
+//! [`heavy_fence`]), so that one of the two loads sees the other side's store. If the
+//! change sees `busy`, it waits for the owner's clear (a release store after the
+//! delivery: the delivery happens before the change goes on). If not, the owner sees
+//! the new version and takes the read lock, which waits for the change. On Linux the
+//! light fence is only a compiler fence and the heavy one the `membarrier` system
+//! call (`MEMBARRIER_CMD_PRIVATE_EXPEDITED`), which makes every running thread of
+//! the process execute a full barrier: a send then costs no atomic read-modify-write
+//! for the lock. Elsewhere, or if the kernel refuses `membarrier`, both are
+//! sequentially consistent fences (one full fence per send).
+//!
+//! Only the owner uses `busy` (a single writer, so plain stores suffice); a send
+//! nested in another on the same output (a converter sending on the output it is
+//! delivering for) takes the read lock. A snapshot the owner cached stays alive until
+//! its next send on the output or the end of its thread.
+
+use std::any::Any;
+use std::cell::{Cell, RefCell};
+use std::sync::atomic::{compiler_fence, fence};
+
+use super::*;
+
+/// The sinks of a data output (see the module's doc).
+pub(crate) struct Sinks<T> {
+    list: RwLock<Arc<[Sink<T>]>>,
+    /// Bumped under the write lock with every change of `list`.
+    version: AtomicU64,
+    /// Set by the owner thread while it delivers to its cached snapshot.
+    busy: AtomicBool,
+    /// Where the owner thread's cache keeps this output's snapshot (its index there).
+    slot: AtomicUsize,
+    /// How many changes found the owner delivering and waited for it.
+    #[cfg(test)]
+    waited: AtomicU64,
+}
+
+impl<T: Packet> Sinks<T> {
+    pub(super) fn new() -> Sinks<T> {
+        Sinks {
+            list: RwLock::new(Arc::from([])),
+            version: AtomicU64::new(0),
+            busy: AtomicBool::new(false),
+            slot: AtomicUsize::new(usize::MAX),
+            #[cfg(test)]
+            waited: AtomicU64::new(0),
+        }
+    }
+
+    /// The snapshot, read-locked: no change goes on while the guard lives.
+    pub(super) fn read(&self) -> std::sync::RwLockReadGuard<'_, Arc<[Sink<T>]>> {
+        read(&self.list)
+    }
+
+    /// Replace the snapshot with `f` applied to a copy of it (`core`: the output's).
+    pub(super) fn update(&self, core: &OutputCore, f: impl FnOnce(&mut Vec<Sink<T>>)) {
+        self.update_then(core, f, || {});
+    }
+
+    /// [`Sinks::update`], then `then` before any packet is sent to the new snapshot:
+    /// no delivery to the old one is in flight by then.
+    pub(super) fn update_then<R>(
+        &self,
+        core: &OutputCore,
+        f: impl FnOnce(&mut Vec<Sink<T>>),
+        then: impl FnOnce() -> R,
+    ) -> R {
+        let mut list = write(&self.list);
+        let mut items: Vec<Sink<T>> = list.iter().cloned().collect();
+        f(&mut items);
+        *list = Arc::from(items);
+        self.version.fetch_add(1, Ordering::SeqCst);
+        // An owner is set before its first send, which reads the snapshot under the
+        // read lock: with none seen here, no send reads a cached one.
+        if core.sender.load(Ordering::Acquire) != 0 {
+            heavy_fence();
+            let mut round = 0u32;
+            while self.busy.load(Ordering::Acquire) {
+                #[cfg(test)]
+                if round == 0 {
+                    self.waited.fetch_add(1, Ordering::Relaxed);
+                }
+                backoff(&mut round);
+            }
+        }
+        let result = then();
+        drop(list);
+        result
+    }
+
+    /// Deliver `packet` to every sink (see [`dispatch`]).
+    #[inline]
+    pub(super) fn send(&self, core: &OutputCore, packet: Parcel<T>) {
+        let sender = core.sender.load(Ordering::Relaxed);
+        let packet = if sender != 0 && sender == token() && !self.busy.load(Ordering::Relaxed) {
+            match self.send_cached(packet) {
+                None => return,
+                Some(packet) => packet,
+            }
+        } else {
+            packet
+        };
+        self.send_locked(core, packet);
+    }
+
+    /// The owner's send to its cached snapshot; the packet back if the cache is not
+    /// current (then nothing was delivered).
+    #[inline]
+    fn send_cached(&self, packet: Parcel<T>) -> Option<Parcel<T>> {
+        self.busy.store(true, Ordering::Relaxed);
+        let asymmetric = light_fence();
+        let version = self.version.load(if asymmetric {
+            Ordering::Relaxed
+        } else {
+            Ordering::SeqCst
+        });
+        let mut packet = Some(packet);
+        let _ = CACHE.try_with(|cache| {
+            let Ok(cache) = cache.try_borrow() else {
+                return;
+            };
+            let Some(entry) = cache.get(self.slot.load(Ordering::Relaxed)) else {
+                return;
+            };
+            if entry.sinks != self.id() || entry.version != version {
+                return;
+            }
+            if let (Some(list), Some(packet)) =
+                (entry.list.downcast_ref::<Arc<[Sink<T>]>>(), packet.take())
+            {
+                dispatch(list, packet);
+            }
+        });
+        self.busy.store(false, Ordering::Release);
+        packet
+    }
+
+    /// A send under the read lock; the owner caches the snapshot it read.
+    #[cold]
+    fn send_locked(&self, core: &OutputCore, packet: Parcel<T>) {
+        let list = read(&self.list);
+        let version = self.version.load(Ordering::Relaxed);
+        dispatch(&list, packet);
+        let sender = core.sender.load(Ordering::Relaxed);
+        if sender == 0 || sender != token() {
+            return;
+        }
+        let snapshot = Arc::clone(&list);
+        drop(list);
+        let replaced = CACHE.try_with(|cache| {
+            let Ok(mut cache) = cache.try_borrow_mut() else {
+                return None;
+            };
+            let entry = Cached {
+                sinks: self.id(),
+                version,
+                list: Box::new(snapshot),
+            };
+            let slot = self.slot.load(Ordering::Relaxed);
+            match cache.get_mut(slot) {
+                Some(cached) if cached.sinks == self.id() => Some(std::mem::replace(cached, entry)),
+                _ => {
+                    self.slot.store(cache.len(), Ordering::Relaxed);
+                    cache.push(entry);
+                    None
+                }
+            }
+        });
+        // (The replaced snapshot is dropped outside the cache's borrow: dropping it
+        // may drop the last handle of an input, and its packets.)
+        drop(replaced);
+    }
+
+    /// This output's key in its owner's cache (the sinks' address, unique while the
+    /// output lives): the entry at `slot` was pushed by this output's owner for it,
+    /// and the key checks it once more.
+    fn id(&self) -> usize {
+        std::ptr::from_ref(self).addr()
+    }
+}
+
+/// One snapshot in a thread's cache.
+struct Cached {
+    sinks: usize,
+    version: u64,
+    /// The `Arc<[Sink<T>]>`.
+    list: Box<dyn Any>,
+}
+
+thread_local! {
+    /// The snapshots of the outputs this thread owns.
+    static CACHE: RefCell<Vec<Cached>> = const { RefCell::new(Vec::new()) };
+    /// This thread's token (0: not drawn yet).
+    static TOKEN: Cell<u64> = const { Cell::new(0) };
+}
+
+/// The calling thread's token: a number no other thread of the process has.
+#[inline]
+pub(super) fn token() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    TOKEN.with(|token| match token.get() {
+        0 => {
+            let drawn = NEXT.fetch_add(1, Ordering::Relaxed);
+            token.set(drawn);
+            drawn
+        }
+        drawn => drawn,
+    })
+}
+
+/// Wait a little longer each round (a change waiting for a send in flight).
+fn backoff(round: &mut u32) {
+    *round += 1;
+    if *round < 64 {
+        std::hint::spin_loop();
+    } else if *round < 80 {
+        std::thread::yield_now();
+    } else {
+        std::thread::sleep(Duration::from_micros(50));
+    }
+}
+
+static ASYMMETRIC: OnceLock<bool> = OnceLock::new();
+
+/// Whether the process's threads can be fenced by `membarrier` (registered once).
+#[inline]
+fn asymmetric() -> bool {
+    match ASYMMETRIC.get() {
+        Some(registered) => *registered,
+        None => *ASYMMETRIC.get_or_init(register),
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn register() -> bool {
+    use rustix::thread::{MembarrierCommand, MembarrierQuery, membarrier, membarrier_query};
+    membarrier_query()
+        .contains(MembarrierQuery::PRIVATE_EXPEDITED | MembarrierQuery::REGISTER_PRIVATE_EXPEDITED)
+        && membarrier(MembarrierCommand::RegisterPrivateExpedited).is_ok()
+        && membarrier(MembarrierCommand::PrivateExpedited).is_ok()
+}
+
+#[cfg(not(target_os = "linux"))]
+fn register() -> bool {
+    false
+}
+
+/// The sender's fence: between its store to `busy` and its load of the version.
+/// Returns whether it was only a compiler fence (the heavy fence does the rest).
+#[inline]
+fn light_fence() -> bool {
+    if asymmetric() {
+        compiler_fence(Ordering::SeqCst);
+        true
+    } else {
+        fence(Ordering::SeqCst);
+        false
+    }
+}
+
+/// The change's fence: between its bump of the version and its load of `busy`.
+fn heavy_fence() {
+    #[cfg(target_os = "linux")]
+    if asymmetric() {
+        use rustix::thread::{MembarrierCommand, membarrier};
+        // Registered, the expedited command cannot fail (the kernel's contract); the
+        // global one (slower: it waits for every CPU) orders the same threads.
+        if membarrier(MembarrierCommand::PrivateExpedited).is_err() {
+            let _ = membarrier(MembarrierCommand::Global);
+        }
+    }
+    fence(Ordering::SeqCst);
+}
+
+impl OutputCore {
+    /// Let the calling thread (a component's, or its execution group's) send on this
+    /// output without the sinks' lock, if no thread was let before.
+    pub(crate) fn claim_sends(&self) {
+        // Register for `membarrier` before any send relies on it.
+        let _ = asymmetric();
+        let _ = self
+            .sender
+            .compare_exchange(0, token(), Ordering::AcqRel, Ordering::Acquire);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Instant;
+
+    use super::*;
+
+    /// A data output of `u64` with two fifo inputs, the output connected to `a`
+    /// through a converter that lets `gate` decide when packet 2 goes on.
+    struct Rig {
+        out: DataOut<u64>,
+        a: FifoIn<u64>,
+        b: FifoIn<u64>,
+    }
+
+    fn rig(gate: Option<(Sender<()>, Receiver<()>)>) -> Rig {
+        let (out, a, b) = (
+            DataOut::new(),
+            FifoIn::new(16, OverflowPolicy::Reject),
+            FifoIn::new(16, OverflowPolicy::Reject),
+        );
+        let convert = move |packet: &u64| {
+            if *packet == 2
+                && let Some((entered, release)) = &gate
+            {
+                let _ = entered.send(());
+                let _ = release.recv_timeout(Duration::from_secs(30));
+            }
+            *packet
+        };
+        assert!(link_converted::<u64, u64>(
+            &out.erased(),
+            &a.erased(),
+            Arc::new(convert)
+        ));
+        Rig { out, a, b }
+    }
+
+    fn relink(rig: &Rig) {
+        assert!(relink_converted::<u64, u64>(
+            &rig.out.erased(),
+            Some(&rig.a.erased()),
+            &rig.b.erased(),
+            Arc::new(|packet: &u64| *packet),
+        ));
+    }
+
+    /// A thread that owns `out` and sends each packet it receives.
+    fn owner(out: &DataOut<u64>) -> (Sender<u64>, std::thread::JoinHandle<()>) {
+        let (tx, rx) = crossbeam_channel::unbounded::<u64>();
+        let out = out.clone();
+        let thread = std::thread::spawn(move || {
+            out.erased().core.claim_sends();
+            for packet in rx {
+                out.send(packet);
+            }
+        });
+        (tx, thread)
+    }
+
+    fn poll_until(what: &str, mut done: impl FnMut() -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while !done() {
+            assert!(Instant::now() < deadline, "timed out waiting for {what}");
+            std::thread::yield_now();
+        }
+    }
+
+    #[test]
+    fn a_relink_waits_for_the_owners_delivery_in_flight_and_moves_its_packet() {
+        let (entered_tx, entered) = crossbeam_channel::bounded(1);
+        let (release, release_rx) = crossbeam_channel::bounded(1);
+        let rig = Arc::new(rig(Some((entered_tx, release_rx))));
+        let (send, thread) = owner(&rig.out);
+        // Packet 1 is sent under the lock (and the snapshot cached), packet 2 from the
+        // cache: the converter holds it there.
+        send.send(1).expect("owner alive");
+        send.send(2).expect("owner alive");
+        entered
+            .recv_timeout(Duration::from_secs(30))
+            .expect("packet 2 in the converter");
+        let relinked = Arc::new(AtomicBool::new(false));
+        let relinker = {
+            let (rig, relinked) = (Arc::clone(&rig), Arc::clone(&relinked));
+            std::thread::spawn(move || {
+                relink(&rig);
+                relinked.store(true, Ordering::Release);
+            })
+        };
+        // The relink replaces the snapshot, then finds packet 2 on its way and waits.
+        poll_until("the relink to wait or return", || {
+            relinked.load(Ordering::Acquire)
+                || rig.out.inner.sinks.waited.load(Ordering::Relaxed) > 0
+        });
+        assert!(
+            !relinked.load(Ordering::Acquire),
+            "the relink returned with a delivery in flight"
+        );
+        release.send(()).expect("converter waiting");
+        relinker.join().expect("relinker");
+        drop(send);
+        thread.join().expect("owner");
+        // Packet 2 reached `a` before the relink moved what `a` held: both at `b`.
+        assert_eq!(rig.b.drain().collect::<Vec<_>>(), [1, 2]);
+        assert!(rig.a.is_empty());
+    }
+
+    #[test]
+    fn the_owners_next_send_follows_a_change_made_by_another_thread() {
+        let rig = rig(None);
+        let (send, thread) = owner(&rig.out);
+        send.send(1).expect("owner alive");
+        poll_until("packet 1 at a", || rig.a.len() == 1);
+        // Cached now: the next send reads the version, sees the change, reads the new
+        // snapshot.
+        relink(&rig);
+        send.send(2).expect("owner alive");
+        poll_until("packet 2 at b", || rig.b.len() == 2);
+        rig.out.erased().unlink(&rig.b.erased());
+        send.send(3).expect("owner alive");
+        send.send(4).expect("owner alive");
+        drop(send);
+        thread.join().expect("owner");
+        assert_eq!(rig.b.drain().collect::<Vec<_>>(), [1, 2]);
+        assert!(rig.a.is_empty());
+    }
+}
