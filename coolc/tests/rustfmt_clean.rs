@@ -70,9 +70,15 @@ fn on_disk(path: PathBuf) -> (PathBuf, String) {
 /// Asserts every Rust file of the crate is rustfmt-clean; returns how many atomic
 /// modules and user files took the fast path (no formatter).
 fn assert_clean(name: &str, krate: &coolc::ir::Crate) -> (usize, usize) {
+    let (atomics, users, _) = assert_clean_listed(name, krate);
+    (atomics, users)
+}
+
+/// [`assert_clean`], with the paths of every file that took the fast path.
+fn assert_clean_listed(name: &str, krate: &coolc::ir::Crate) -> (usize, usize, Vec<PathBuf>) {
     let (_, laid_out) = emit::render_crate(krate);
     let files = emit::emit_crate(krate);
-    let mut fast = (0, 0);
+    let mut fast = (0, 0, Vec::new());
     for (file, laid_out) in files.iter().zip(laid_out) {
         if file.path.extension().is_none_or(|e| e != "rs") {
             continue;
@@ -112,6 +118,9 @@ fn assert_clean(name: &str, krate: &coolc::ir::Crate) -> (usize, usize) {
         if laid_out && file.kind == FileKind::User {
             fast.1 += 1;
         }
+        if laid_out {
+            fast.2.push(file.path.clone());
+        }
     }
     fast
 }
@@ -142,10 +151,18 @@ fn examples_emit_rustfmt_clean_files_without_a_formatter() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mobile_base.cool"),
     ] {
         let name = root.display().to_string();
+        let example = root.starts_with(Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples"));
         let krate = lower_files(&[on_disk(root)], "mobile-base");
-        let (atomics, users) = assert_clean(&name, &krate);
-        // The realistic descriptions take the fast path throughout.
+        let (atomics, users, laid_out) = assert_clean_listed(&name, &krate);
+        // The realistic descriptions take the fast path throughout, the example's
+        // compound module included (the test copy's rules go to the formatter).
         assert_eq!(atomics, krate.atomics.len(), "{name}: atomic modules");
+        if example {
+            assert!(
+                laid_out.contains(&PathBuf::from("src/generated/robot.rs")),
+                "{name}: the compound module"
+            );
+        }
         assert_eq!(users, krate.atomics.len() + 1, "{name}: user files");
     }
 }
