@@ -540,7 +540,7 @@ impl Layout {
         name: &str,
         pairs: impl IntoIterator<Item = (&'p str, &'p str)>,
     ) -> String {
-        let head = format!("pub const {name}: &[(&str, &str)] = ");
+        let head = format!("pub const {name}: &[(&str, &str)] =");
         let list = Code::slice(
             pairs
                 .into_iter()
@@ -555,7 +555,19 @@ impl Layout {
                 })
                 .collect(),
         );
-        format!("{head}{};", self.node(&list, 0, head.len(), 1, false))
+        // On the line of its name when it fits, else alone on the next line when it
+        // fits there (rustfmt's choice), else one pair per line.
+        if let Some(flat) = Self::flat(&list) {
+            let same_line = format!("{head} {flat};");
+            if same_line.len() <= MAX_WIDTH {
+                return same_line;
+            }
+            let next_line = format!("    {flat};");
+            if next_line.len() <= MAX_WIDTH {
+                return format!("{head}\n{next_line}");
+            }
+        }
+        format!("{head} {};", self.node(&list, 0, head.len() + 1, 1, false))
     }
 
     /// The compound's `SPEC` static (see `templates/compound.rs`).

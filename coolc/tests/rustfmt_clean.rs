@@ -230,3 +230,39 @@ atomic {camel} {{
     }
     assert!(taken > 0, "no description took the fast path");
 }
+
+/// A compound's tables of pairs at the edges of rustfmt's rules: on the line of their
+/// name, alone on the next line, and one pair per line.
+#[test]
+fn compound_tables_stay_rustfmt_clean() {
+    for n in [1, 13, 14, 15, 16, 30] {
+        let a = format!("a{}", "x".repeat(n - 1));
+        let b = format!("b{}", "x".repeat(n - 1));
+        let text = format!(
+            r#"
+atomic Worker {{
+    automaton {{ initial working; state working {{ entry; }} }}
+}}
+
+/// Two workers, their names {n} long.
+compound Cell {{
+    instance {a}: Worker;
+    instance {b}: Worker;
+}}
+"#
+        );
+        let krate = lower_files(&[(PathBuf::from(format!("pairs_{n}.cool")), text)], "pairs");
+        assert_clean(&format!("names {n}"), &krate);
+        // The file is in rustfmt's layout but for, at most, items formatted alone
+        // (the builder's long `instance` calls): the tables need no formatter.
+        let (rendered, laid_out) = emit::render_crate(&krate);
+        let cell = rendered
+            .iter()
+            .position(|f| f.path == Path::new("src/generated/cell.rs"))
+            .unwrap();
+        assert!(
+            laid_out[cell] || rendered[cell].contents.contains("coolc-item-format"),
+            "names {n}: the compound module is left to the formatter"
+        );
+    }
+}
