@@ -1,3 +1,5 @@
+{#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`), which lays out the
+    parts that depend on the description and says when the result needs a formatter. -#}
 {%- import "macros.rs" as m -%}
 {% call m::header(krate.header()) %}{% endcall %}
 //! Generated code of compound component `{{ c.type_name }}`.
@@ -9,100 +11,100 @@
 //! first. The supervisor's `when` rules are compiled below, one function each.
 {%- if !c.doc.is_empty() %}
 //!
-{%- for line in c.doc %}
-//! {{ line }}
-{%- endfor %}
+{{- l.module_doc(&c.doc) }}
 {%- endif %}
 
 /// The compound's component type name.
 pub const TYPE_NAME: &str = "{{ c.type_name }}";
 
 /// The instances: `(instance name, component type name)`, in declaration order.
-pub const INSTANCES: &[(&str, &str)] = &[
-{%- for i in c.instances %}
-    ("{{ i.name }}", "{{ i.component }}"),
-{%- endfor %}
-];
+{{ l.pairs("INSTANCES", c.instance_pairs()) }}
 
 /// The substitutes: `(instance, the instance it substitutes)`.
-pub const SUBSTITUTES: &[(&str, &str)] = &[
-{%- for i in c.instances %}
-{%- if let Some(other) = i.substitutes %}
-    ("{{ i.name }}", "{{ other }}"),
-{%- endif %}
-{%- endfor %}
-];
+{{ l.pairs("SUBSTITUTES", c.substitute_pairs()) }}
 
 /// The connections `(from, to)` as `instance.port`, in declaration order (those
 /// through a converter included).
-pub const CONNECTIONS: &[(&str, &str)] = &[
-{%- for k in c.connections %}
-    ("{{ k.from }}", "{{ k.to }}"),
-{%- endfor %}
-];
+{{ l.pairs("CONNECTIONS", c.connection_pairs()) }}
 
 /// The supervisor's own variables: observable, controllable and local (mapped
 /// variables are the instances': the runtime reads and sets them there).
 #[derive(Clone, Debug{% if c.vars_derive_default() %}, Default{% endif %})]
+{%- if c.vars.is_empty() %}
+pub struct Vars {}
+{%- else %}
 pub struct Vars {
 {%- for v in c.vars %}
-{%- call m::doc(&v.field.doc) %}{% endcall %}
+{{- l.member_doc(&v.field.doc) }}
     /// ({{ v.kind }} variable `{{ v.field.cool_name }}: {{ v.cool_ty }}`.)
-    pub {{ v.field.name }}: {{ v.field.ty }},
+{{ l.decl(&v.field.name, &v.field.ty) }}
 {%- endfor %}
 }
+{%- endif %}
+{%- if !c.vars_derive_default() %}
 
-{% if !c.vars_derive_default() %}
 impl ::core::default::Default for Vars {
     fn default() -> Self {
-        Self {
-        {%- for v in c.vars %}
-            {{ v.field.name }}: {{ v.field.default }},
-        {%- endfor %}
-        }
+        {{ l.var_defaults(&c.vars) }}
     }
 }
-{% endif %}
+{%- endif %}
 
 /// Initial values of the mapped controllable variables, for an enclosing compound's
 /// instance overrides (`None`: the instance's own value).
 #[derive(Clone, Debug, Default)]
+{%- if c.mapped.is_empty() %}
+pub struct Mapped {}
+{%- else %}
 pub struct Mapped {
 {%- for m in c.mapped %}
     /// `controllable {{ m.cool_name }} = {{ m.target }};`
-    pub {{ m.name }}: ::core::option::Option<{{ m.ty }}>,
+{{ l.mapped_decl(m) }}
 {%- endfor %}
 }
+{%- endif %}
 
 /// The supervisor's states (its user automaton).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+{%- if c.states.is_empty() %}
+pub enum UserState {}
+{%- else %}
 pub enum UserState {
 {%- for s in c.states %}
-{%- call m::doc(&s.doc) %}{% endcall %}
-    {{ s.variant }},
+{{- l.member_doc(&s.doc) }}
+{{ l.variant(&s.variant) }}
 {%- endfor %}
 }
+{%- endif %}
 
 impl UserState {
     /// Every state, in declaration order.
-    pub const ALL: [UserState; {{ c.states.len() }}] = [{% for s in c.states %}UserState::{{ s.variant }},{% endfor %}];
+    {{ l.all_supervisor_states(c) }}
 
     /// The state's index in [`SPEC`]`.states`.
     pub fn index(self) -> usize {
+{%- if c.states.is_empty() %}
+        match self {}
+{%- else %}
         match self {
-        {%- for s in c.states %}
-            UserState::{{ s.variant }} => {{ loop.index0 }},
-        {%- endfor %}
+{%- for s in c.states %}
+{{ l.index_arm("UserState", &s.variant, loop.index0) }}
+{%- endfor %}
         }
+{%- endif %}
     }
 
     /// The state's name as written in the description.
     pub fn name(self) -> &'static str {
+{%- if c.states.is_empty() %}
+        match self {}
+{%- else %}
         match self {
-        {%- for s in c.states %}
-            UserState::{{ s.variant }} => "{{ s.cool_name }}",
-        {%- endfor %}
+{%- for s in c.states %}
+{{ l.name_arm(&s.variant, &s.cool_name) }}
+{%- endfor %}
         }
+{%- endif %}
     }
 }
 
@@ -115,7 +117,7 @@ impl UserState {
 pub enum {{ may_enum }} {
 {%- for (variant, _, name) in s.may %}
     /// Go to state `{{ name }}`.
-    {{ variant }},
+{{ l.variant(variant) }}
 {%- endfor %}
 }
 
@@ -123,9 +125,9 @@ impl {{ may_enum }} {
     /// The target state.
     pub fn state(self) -> UserState {
         match self {
-        {%- for (variant, index, _) in s.may %}
-            {{ may_enum }}::{{ variant }} => UserState::ALL[{{ index }}],
-        {%- endfor %}
+{%- for (variant, index, _) in s.may %}
+{{ l.may_arm(may_enum, variant, index) }}
+{%- endfor %}
         }
     }
 }
@@ -136,38 +138,8 @@ impl {{ may_enum }} {
 /// variables, its timing, and the exported ports as the compound will have them
 /// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
 /// adds the mapped variables).
-{%- for line in c.notes %}
-///{% if !line.is_empty() %} {{ line }}{% endif %}
-{%- endfor %}
-pub static SPEC: ::coolbot::Spec = ::coolbot::Spec {
-    type_name: "{{ c.type_name }}",
-    doc: {{ c.doc_literal() }},
-    states: &[
-    {%- for s in c.states %}
-        {{ s.spec }},
-    {%- endfor %}
-    ],
-    initial: {{ c.initial }},
-    inputs: &[
-    {%- for spec in c.input_specs %}
-        {{ spec }},
-    {%- endfor %}
-    ],
-    outputs: &[
-    {%- for spec in c.output_specs %}
-        {{ spec }},
-    {%- endfor %}
-    ],
-    variables: &[
-    {%- for v in c.vars %}
-    {%- if v.spec_index.is_some() %}
-        {{ v.spec() }},
-    {%- endif %}
-    {%- endfor %}
-    ],
-    exceptions: &[],
-    timing: {{ c.timing }},
-};
+{{- l.item_doc(&c.notes) }}
+{{ l.compound_spec(c) }}
 
 /// What a supervisor section sees.
 pub struct Cx<'a> {
@@ -190,7 +162,9 @@ impl<'a> Cx<'a> {
             vars,
             rt: &mut *cx.rt,
             view: cx.view,
-            instances: Instances { commander: &mut *cx.instances },
+            instances: Instances {
+                commander: &mut *cx.instances,
+            },
         }
     }
 }
@@ -205,16 +179,20 @@ pub struct Instances<'a> {
     commander: &'a mut ::coolbot::Commander,
 }
 
+{% if c.handles.is_empty() -%}
+impl Instances<'_> {}
+{%- else -%}
 impl Instances<'_> {
 {%- for h in c.handles %}
 {%- if !loop.first %}
 {% endif %}
     /// Instance `{{ h.instance }}`, a `{{ h.component }}`.
-    pub fn {{ h.method }}(&mut self) -> {{ h.type_name }}<'_> {
-        {{ h.type_name }} { commander: &mut *self.commander }
+{{ l.open_fn(4, &h.accessor_signature("")) }}
+{{ l.handle_lit(&h.type_name, "commander", "&mut *self.commander") }}
     }
 {%- endfor %}
 }
+{%- endif %}
 {%- for h in c.handles %}
 
 /// Commands to instance `{{ h.instance }}` (a `{{ h.component }}`), through its control
@@ -226,28 +204,28 @@ pub struct {{ h.type_name }}<'a> {
 impl {{ h.type_name }}<'_> {
     /// Bring it to `suspended` (its user automaton frozen in its state).
     pub fn suspend(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Suspended)
+{{ l.instance_call("self.commander", "state", &h.instance, "::coolbot::Controllable::Suspended") }}
     }
 
     /// Bring it to `running` (resumed, or started again after an error).
     pub fn run(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Running)
+{{ l.instance_call("self.commander", "state", &h.instance, "::coolbot::Controllable::Running") }}
     }
 
     /// Bring it to `ready` (its user automaton left).
     pub fn ready(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Ready)
+{{ l.instance_call("self.commander", "state", &h.instance, "::coolbot::Controllable::Ready") }}
     }
 
     /// Bring it to `dead` (its thread ends; it takes no command after this).
     pub fn dead(&mut self) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.state("{{ h.instance }}", ::coolbot::Controllable::Dead)
+{{ l.instance_call("self.commander", "state", &h.instance, "::coolbot::Controllable::Dead") }}
     }
 {%- for setter in h.setters %}
 
     /// Set its controllable variable `{{ setter.variable }}`.
-    pub fn {{ setter.method }}(&mut self, value: {{ setter.ty }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.set("{{ h.instance }}", "{{ setter.variable }}", {{ setter.to_value }})
+{{ l.open_fn(4, &setter.signature("::core::result::Result<(), ::coolbot::CommandError>")) }}
+{{ l.setter_call("self.commander", "set", &h.instance, setter) }}
     }
 {%- endfor %}
 {%- for (method, variable) in h.observables %}
@@ -255,27 +233,30 @@ impl {{ h.type_name }}<'_> {
     /// `{{ variable }}` is observable: it has no setter, and a call does not compile
     /// (the compiler says why).
     #[doc(hidden)]
-    pub fn {{ method }}<T: ::coolbot::ObservableOnly>(&mut self, value: T) -> ::core::result::Result<(), ::coolbot::CommandError> {
+{{ l.open_fn(4, &ir::Handle::refusal_signature(method)) }}
         Err(value.refuse())
     }
 {%- endfor %}
 {%- if let Some(config) = h.config %}
 
     /// Give it a new configuration (its `configuration` block).
-    pub fn configure(&mut self, configuration: {{ config }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.configure("{{ h.instance }}", super::__cool_to_value(&configuration))
+{{ l.open_fn(4, &ir::Handle::configure_signature(config)) }}
+{{ l.instance_call("self.commander", "configure", &h.instance, "super::__cool_to_value(&configuration)") }}
     }
 {%- endif %}
 
     /// Set its period.
-    pub fn set_period(&mut self, period: ::core::time::Duration) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.set_period("{{ h.instance }}", period)
+    pub fn set_period(
+        &mut self,
+        period: ::core::time::Duration,
+    ) -> ::core::result::Result<(), ::coolbot::CommandError> {
+{{ l.instance_call("self.commander", "set_period", &h.instance, "period") }}
     }
 {%- if let Some((quality, _)) = h.quality %}
 
     /// Set its quality level.
-    pub fn set_quality(&mut self, level: {{ quality }}) -> ::core::result::Result<(), ::coolbot::CommandError> {
-        self.commander.set_quality("{{ h.instance }}", level.index())
+{{ l.open_fn(4, &ir::Handle::quality_signature(quality, "::core::result::Result<(), ::coolbot::CommandError>")) }}
+{{ l.instance_call("self.commander", "set_quality", &h.instance, "level.index()") }}
     }
 {%- endif %}
 }
@@ -286,7 +267,7 @@ impl {{ h.type_name }}<'_> {
 pub enum {{ quality }} {
 {%- for (variant, level) in levels %}
     /// Level `{{ level }}`.
-    {{ variant }},
+{{ l.variant(variant) }}
 {%- endfor %}
 }
 
@@ -294,9 +275,9 @@ impl {{ quality }} {
     /// The level's index (0 = best).
     pub fn index(self) -> usize {
         match self {
-        {%- for (variant, _) in levels %}
-            {{ quality }}::{{ variant }} => {{ loop.index0 }},
-        {%- endfor %}
+{%- for (variant, _) in levels %}
+{{ l.index_arm(quality, variant, loop.index0) }}
+{%- endfor %}
         }
     }
 }
@@ -306,14 +287,19 @@ impl {{ quality }} {
 /// The supervisor's code: one required method per section of its states. Its
 /// transitions are the description's `when` rules; a section that fails takes the
 /// compound to `running_error`.
+{% if c.methods.is_empty() -%}
+pub trait Supervisor: ::core::marker::Send + 'static {}
+{%- else -%}
 pub trait Supervisor: ::core::marker::Send + 'static {
 {%- for method in c.methods %}
 {%- if !loop.first %}
-{% endif %}
-{%- call m::doc(&method.doc) %}{% endcall %}
-    {{ method.signature }};
+{{ "" }}
+{%- endif %}
+{{- l.member_doc(&method.doc) }}
+{{ l.declaration(&method.signature) }}
 {%- endfor %}
 }
+{%- endif %}
 
 /// Where the compound's behaviours come from: its supervisor and one method per
 /// instance (substitutes and redundant members included: every instance is built).
@@ -324,24 +310,28 @@ pub trait Parts {
 {%- if let Some(module) = i.module %}
 
     /// Instance `{{ i.name }}`, a `{{ i.component }}`.
-    {%- if i.compound %}
-    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Parts;
-    {%- else %}
-    fn {{ i.method }}(&mut self) -> impl super::{{ module }}::Behavior;
-    {%- endif %}
+{{ l.part_declaration(i, module) }}
 {%- endif %}
 {%- endfor %}
 }
 
 /// The compound `{{ c.type_name }}` named `name`, with its supervisor and instances
 /// from `parts`: [`builder`], built.
-pub fn component{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+pub fn component{{ c.generics() }}(
+    name: impl ::core::convert::Into<::std::string::String>,
+    parts: impl Parts,
+) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
     builder{{ c.turbofish() }}(name, parts)?.build()
 }
 
 /// Like [`component`], starting from the given own variables and initial values of
 /// the mapped controllable ones (an enclosing compound's instance overrides use it).
-pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
+pub fn component_with{{ c.generics() }}(
+    name: impl ::core::convert::Into<::std::string::String>,
+    parts: impl Parts,
+    vars: Vars,
+    mapped: Mapped,
+) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> {
     builder_with{{ c.turbofish() }}(name, parts, vars, mapped)?.build()
 }
 
@@ -350,13 +340,22 @@ pub fn component_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::
 /// their overrides), the connections, the exported ports, the mapped variables, the
 /// `on error` policies, the substitutes, the redundant groups, the recovery queue and
 /// the supervisor's rules. Fails when a nested compound cannot be built.
-pub fn builder{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, parts: impl Parts) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+pub fn builder{{ c.generics() }}(
+    name: impl ::core::convert::Into<::std::string::String>,
+    parts: impl Parts,
+) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
     builder_with{{ c.turbofish() }}(name, parts, Vars::default(), Mapped::default())
 }
 
+{{ l.begin_item() }}
 /// Like [`builder`], starting from the given own variables and initial values of the
 /// mapped controllable ones.
-pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::string::String>, mut parts: impl Parts, vars: Vars, mapped: Mapped) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
+pub fn builder_with{{ c.generics() }}(
+    name: impl ::core::convert::Into<::std::string::String>,
+    mut parts: impl Parts,
+    vars: Vars,
+    mapped: Mapped,
+) -> ::core::result::Result<::coolbot::CompoundBuilder, ::coolbot::CompoundError> {
     {%- if c.mapped.is_empty() %}
     let _ = mapped;
     {%- endif %}
@@ -367,32 +366,26 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
         vars{% if c.rules_use_vars() %}: ::std::sync::Arc::clone(&vars){% endif %},
     };
     Ok(::coolbot::CompoundBuilder::new(name, supervisor)
-{%- for i in c.instances %}
-{%- if let Some(build) = i.build %}
+{%- for step in c.builder_steps() %}
+{%- let last = loop.last %}
+{%- match step %}
+{%- when ir::BuilderStep::Instance with (i, build) %}
     {%- if !i.unapplied.is_empty() %}
         // Not applied: overrides of `{{ i.name }}`'s mapped variables {{ i.unapplied_text() }} (set them through its control port once it runs).
     {%- endif %}
-    {%- if let Some(node) = i.node %}
-        .instance_on("{{ node }}", {{ build }})
-    {%- else %}
-        .instance({{ build }})
-    {%- endif %}
+{{ l.instance_step(i, build, last) }}
+{%- when ir::BuilderStep::Connect with (k) %}
+{{ l.connect_step(k, last) }}
+{%- when ir::BuilderStep::Step with (step) %}
+{{ l.builder_step(step, last) }}
+{%- when ir::BuilderStep::Rule with (r) %}
+{{ l.rule_step(r, last) }}
+{%- endmatch %}
+{%- endfor %}
+{%- if c.builder_steps().is_empty() %})
 {%- endif %}
-{%- endfor %}
-{%- for k in c.connections %}
-    {%- if let Some(method) = k.via %}
-        .connect_via("{{ k.from }}", "{{ k.to }}", <C as super::types::Converters>::{{ method }})
-    {%- else %}
-        .connect("{{ k.from }}", "{{ k.to }}")
-    {%- endif %}
-{%- endfor %}
-{%- for step in c.steps %}
-        .{{ step }}
-{%- endfor %}
-{%- for r in c.rules %}
-        .rule({{ r.state }}, {{ r.target }}, {{ r.reads }}, {{ r.call }})
-{%- endfor %})
 }
+{{ l.end_item() }}
 
 /// Tells a network layer how to build `{{ c.type_name }}` on another node (its
 /// supervisor and every instance, there) and bridge its exported ports (an instance
@@ -400,24 +393,39 @@ pub fn builder_with{{ c.generics() }}(name: impl ::core::convert::Into<::std::st
 /// with this crate's parts.
 pub fn register<R: ::coolbot::remote::Registrar>(
     registrar: &mut R,
-    make: impl Fn(&str) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError> + Send + Sync + 'static,
+    make: impl Fn(&str) -> ::core::result::Result<::coolbot::Component, ::coolbot::CompoundError>
+    + Send
+    + Sync
+    + 'static,
 ) {
     registrar.compound(TYPE_NAME, ::std::boxed::Box::new(make));
 {%- for (port, packet) in c.exported_ports %}
-    registrar.port::<{{ packet }}>(TYPE_NAME, "{{ port }}");
+{{ l.register_port(packet, port) }}
 {%- endfor %}
 }
-{% for r in c.rules %}
+{%- for r in c.rules %}
+
+{{ l.begin_item() }}
 /// Rule {{ r.doc }}.
-#[allow(clippy::eq_op, clippy::nonminimal_bool, clippy::bool_comparison, clippy::overly_complex_bool_expr, clippy::neg_cmp_op_on_partial_ord, clippy::comparison_to_empty)]
-fn {{ r.function }}({{ r.view_param }}: &::coolbot::View{% if let Some(vars) = r.vars_param %}, {{ vars }}: &Vars{% endif %}) -> bool {
-    {{ r.expr }}
+#[allow(
+    clippy::eq_op,
+    clippy::nonminimal_bool,
+    clippy::bool_comparison,
+    clippy::overly_complex_bool_expr,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::comparison_to_empty
+)]
+{{ l.open_fn(0, &r.signature()) }}
+{{ l.expr_line(4, &r.expr, "") }}
 }
-{% endfor %}
+{{ l.end_item() }}
+{%- endfor %}
 {%- if c.locks() %}
+
 /// The supervisor's variables, shared with the rules that read them.
 fn __cool_lock(vars: &::std::sync::Mutex<Vars>) -> ::std::sync::MutexGuard<'_, Vars> {
-    vars.lock().unwrap_or_else(::std::sync::PoisonError::into_inner)
+    vars.lock()
+        .unwrap_or_else(::std::sync::PoisonError::into_inner)
 }
 {%- endif %}
 
@@ -432,7 +440,12 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
         &SPEC
     }
 
-    fn section(&mut self, state: usize, section: ::coolbot::Section, cx: &mut ::coolbot::SupervisorCx<'_>) -> ::coolbot::SectionResult {
+    fn section(
+        &mut self,
+        state: usize,
+        section: ::coolbot::Section,
+        cx: &mut ::coolbot::SupervisorCx<'_>,
+    ) -> ::coolbot::SectionResult {
     {%- if c.section_arms.is_empty() %}
         let _ = (state, section, cx, &self.supervisor);
         Ok(())
@@ -441,15 +454,19 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
         let mut vars = __cool_lock(vars);
         let mut cx = Cx::__cool_new(&mut vars, cx);
         match (state, section) {
-        {%- for (pattern, call) in c.section_arms %}
-            {{ pattern }} => {{ call }},
-        {%- endfor %}
+{%- for (pattern, call) in c.section_arms %}
+{{ l.section_arm(pattern, call) }}
+{%- endfor %}
             _ => Ok(()),
         }
     {%- endif %}
     }
 
-    fn choose(&mut self, state: usize, cx: &mut ::coolbot::SupervisorCx<'_>) -> ::core::option::Option<usize> {
+    fn choose(
+        &mut self,
+        state: usize,
+        cx: &mut ::coolbot::SupervisorCx<'_>,
+    ) -> ::core::option::Option<usize> {
     {%- if c.choose_arms.is_empty() %}
         let _ = (state, cx, &self.supervisor);
         None
@@ -458,9 +475,9 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
         let mut vars = __cool_lock(vars);
         let mut cx = Cx::__cool_new(&mut vars, cx);
         match state {
-        {%- for arm in c.choose_arms %}
-            {{ arm.state }} => supervisor.{{ arm.method }}(&mut cx).map(|target| target.state().index()),
-        {%- endfor %}
+{%- for arm in c.choose_arms %}
+{{ l.supervisor_choose_arm(arm.state, &arm.method) }}
+{%- endfor %}
             _ => None,
         }
     {%- endif %}
@@ -470,11 +487,11 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
     {%- if c.has_exposed() %}
         let vars = __cool_lock(&self.vars);
         match variable {
-        {%- for v in c.vars %}
-        {%- if let Some(index) = v.spec_index %}
-            {{ index }} => {{ v.to_value }},
-        {%- endif %}
-        {%- endfor %}
+{%- for v in c.vars %}
+{%- if let Some(index) = v.spec_index %}
+{{ l.get_arm(index, v) }}
+{%- endif %}
+{%- endfor %}
             _ => ::coolbot::Value::Unit,
         }
     {%- else %}
@@ -483,18 +500,22 @@ impl<S: Supervisor> ::coolbot::Supervisor for __CoolSupervisor<S> {
     {%- endif %}
     }
 
-    fn set(&mut self, variable: usize, value: &::coolbot::Value) -> ::core::result::Result<(), ::coolbot::ValueRefused> {
+    fn set(
+        &mut self,
+        variable: usize,
+        value: &::coolbot::Value,
+    ) -> ::core::result::Result<(), ::coolbot::ValueRefused> {
     {%- if c.has_controllable() %}
         let mut vars = __cool_lock(&self.vars);
         match variable {
-        {%- for v in c.vars %}
-        {%- if v.controllable() %}
+{%- for v in c.vars %}
+{%- if v.controllable() %}
             {{ v.spec_index.unwrap_or_default() }} => {
-                vars.{{ v.field.name }} = {{ v.from_value }}?;
+{{ l.set_locked_var(v) }}
                 Ok(())
             }
-        {%- endif %}
-        {%- endfor %}
+{%- endif %}
+{%- endfor %}
             _ => Err(::coolbot::ValueRefused::not_settable(&SPEC, variable)),
         }
     {%- else %}
@@ -521,15 +542,18 @@ pub struct Harness {
 impl Harness {
     /// The compound with the supervisor of `parts` (its instances' behaviours are
     /// built but never run), started: `ready`, every instance `ready`.
-    pub fn new{{ c.generics() }}(parts: impl Parts) -> HarnessResult<Self> {
-        let builder = builder{{ c.turbofish() }}("{{ c.module.trim_start_matches("r#") }}", parts)
-            .map_err(|error| ::coolbot::harness::HarnessError::Compound(::std::boxed::Box::new(error)))?;
-        Ok(Harness { inner: ::coolbot::harness::SupervisorHarness::new(builder)? })
+{{ l.open_fn(4, &c.harness_signature("new")) }}
+{{ l.harness_builder(c) }}
+            ::coolbot::harness::HarnessError::Compound(::std::boxed::Box::new(error))
+        })?;
+        Ok(Harness {
+            inner: ::coolbot::harness::SupervisorHarness::new(builder)?,
+        })
     }
 
     /// [`Harness::new`], then `running`: the supervisor enters its initial state and
     /// the instances run.
-    pub fn running{{ c.generics() }}(parts: impl Parts) -> HarnessResult<Self> {
+{{ l.open_fn(4, &c.harness_signature("running")) }}
         let mut harness = Self::new{{ c.turbofish() }}(parts)?;
         harness.inner.run()?;
         Ok(harness)
@@ -576,14 +600,18 @@ impl Harness {
     }
 
     /// The commands the supervisor gave its instances since the last call, in order.
-    pub fn take_commands(&mut self) -> ::std::vec::Vec<(::std::string::String, ::coolbot::Command)> {
+    pub fn take_commands(
+        &mut self,
+    ) -> ::std::vec::Vec<(::std::string::String, ::coolbot::Command)> {
         self.inner.take_commands()
     }
 
     /// The stand-ins of the instances, to set what the rules read of them:
     /// `harness.instances().motion().set_state(coolbot::State::RunningError)?`.
     pub fn instances(&mut self) -> StandIns<'_> {
-        StandIns { inner: &mut self.inner }
+        StandIns {
+            inner: &mut self.inner,
+        }
     }
 }
 
@@ -595,16 +623,20 @@ pub struct StandIns<'a> {
     inner: &'a mut ::coolbot::harness::SupervisorHarness,
 }
 
+{% if c.handles.is_empty() -%}
+impl StandIns<'_> {}
+{%- else -%}
 impl StandIns<'_> {
 {%- for h in c.handles %}
 {%- if !loop.first %}
 {% endif %}
     /// The stand-in of instance `{{ h.instance }}` (a `{{ h.component }}`).
-    pub fn {{ h.method }}(&mut self) -> {{ h.type_name }}StandIn<'_> {
-        {{ h.type_name }}StandIn { inner: &mut *self.inner }
+{{ l.open_fn(4, &h.accessor_signature("StandIn")) }}
+{{ l.handle_lit(&format!("{}StandIn", h.type_name), "inner", "&mut *self.inner") }}
     }
 {%- endfor %}
 }
+{%- endif %}
 {%- for h in c.handles %}
 
 /// What the test sets of instance `{{ h.instance }}` (a `{{ h.component }}`) in a
@@ -617,47 +649,54 @@ pub struct {{ h.type_name }}StandIn<'a> {
 impl {{ h.type_name }}StandIn<'_> {
     /// Its default state is now `state` (e.g. `running_error`).
     pub fn set_state(&mut self, state: ::coolbot::State) -> HarnessResult<()> {
-        self.inner.set_instance_state("{{ h.instance }}", state)
+{{ l.instance_call("self.inner", "set_instance_state", &h.instance, "state") }}
     }
 
     /// Its user state is now the one named `user_state` (one of its automaton's), or
     /// none.
-    pub fn set_user_state(&mut self, user_state: ::core::option::Option<&str>) -> HarnessResult<()> {
-        self.inner.set_instance_user_state("{{ h.instance }}", user_state)
+    pub fn set_user_state(
+        &mut self,
+        user_state: ::core::option::Option<&str>,
+    ) -> HarnessResult<()> {
+{{ l.instance_call("self.inner", "set_instance_user_state", &h.instance, "user_state") }}
     }
 
     /// Its task result is now `result`.
     pub fn set_result(&mut self, result: ::coolbot::TaskResult) -> HarnessResult<()> {
-        self.inner.set_instance_result("{{ h.instance }}", result)
+{{ l.instance_call("self.inner", "set_instance_result", &h.instance, "result") }}
     }
 
     /// Its last error is now `error`.
     pub fn set_error(&mut self, error: ::core::option::Option<&str>) -> HarnessResult<()> {
-        self.inner.set_instance_error("{{ h.instance }}", error)
+{{ l.instance_call("self.inner", "set_instance_error", &h.instance, "error") }}
     }
 
     /// Its variable `variable` (observable or controllable, by name) is now `value`.
-    pub fn put(&mut self, variable: &str, value: impl ::core::convert::Into<::coolbot::Value>) -> HarnessResult<()> {
-        self.inner.set_instance_variable("{{ h.instance }}", variable, value)
+    pub fn put(
+        &mut self,
+        variable: &str,
+        value: impl ::core::convert::Into<::coolbot::Value>,
+    ) -> HarnessResult<()> {
+{{ l.instance_call("self.inner", "set_instance_variable", &h.instance, "variable, value") }}
     }
 {%- for setter in h.setters %}
 
     /// Its controllable variable `{{ setter.variable }}` is now `value`.
-    pub fn {{ setter.method }}(&mut self, value: {{ setter.ty }}) -> HarnessResult<()> {
-        self.inner.set_instance_variable("{{ h.instance }}", "{{ setter.variable }}", {{ setter.to_value }})
+{{ l.open_fn(4, &setter.signature("HarnessResult<()>")) }}
+{{ l.setter_call("self.inner", "set_instance_variable", &h.instance, setter) }}
     }
 {%- endfor %}
 {%- if let Some((quality, _)) = h.quality %}
 
     /// Its quality level is now `level`.
-    pub fn set_quality(&mut self, level: {{ quality }}) -> HarnessResult<()> {
-        self.inner.set_instance_quality("{{ h.instance }}", level.index())
+{{ l.open_fn(4, &ir::Handle::quality_signature(quality, "HarnessResult<()>")) }}
+{{ l.instance_call("self.inner", "set_instance_quality", &h.instance, "level.index()") }}
     }
 {%- endif %}
 
     /// What it shows now.
     pub fn monitor(&self) -> HarnessResult<::coolbot::Monitor> {
-        self.inner.instance("{{ h.instance }}")
+{{ l.instance_call("self.inner", "instance", &h.instance, "") }}
     }
 }
 {%- endfor %}

@@ -11,9 +11,11 @@
 //! emits in under one second, and ten times the input costs at most twelve times the
 //! time. The baseline of the scaling figure is the 1x run of the same path.
 //!
-//! Most generated files come out of their templates in rustfmt's layout; the others
-//! (compound modules, `types.rs`, compound user files) are formatted with the
-//! `rustfmt` program when it is installed, else with `prettyplease`. The `Builder`
+//! Most generated files come out of their templates in rustfmt's layout (of a
+//! compound module, the rule functions and the builder may still go to the formatter,
+//! each on its own); the others (`types.rs`, compound user files, `src/main.rs`,
+//! `tests/components.rs`) are formatted with the `rustfmt` program when it is
+//! installed, else with `prettyplease`. The `Builder`
 //! (build scripts) writes one unformatted file by default. All three paths are
 //! measured, each in a child process of this benchmark (`RUSTFMT` names a missing
 //! program for the `Builtin` and `Unformatted` rows).

@@ -1,12 +1,14 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
 //! **Invariant:** emission cannot fail on user input. Most files come out of their
-//! templates already in `rustfmt`'s layout (the atomic modules, the generated
-//! `mod.rs`, the user files of atomic components and `src/lib.rs`: see `layout`), so
-//! no formatter runs for them. The others, and any file whose layout `layout` is not
-//! certain of, are formatted with `rustfmt` when it is installed (one run over all of
-//! them), else generated ones are printed with `prettyplease` and user ones keep the
-//! templates' layout. Each file is parsed at most once: by `rustfmt` or by `syn` for
+//! templates already in `rustfmt`'s layout (the atomic and compound modules, the
+//! generated `mod.rs`, the user files of atomic components and `src/lib.rs`: see
+//! `layout`), so no formatter runs for them. In a compound module, a top-level item
+//! whose layout `layout` is not certain of (a rule function, the builder) is formatted
+//! alone, the rest of the file kept. The other files, and any file whose layout
+//! `layout` is not certain of outside such items, are formatted with `rustfmt` when it
+//! is installed (one run over all of them), else generated ones are printed with
+//! `prettyplease` and user ones keep the templates' layout. Each file is parsed at most once: by `rustfmt` or by `syn` for
 //! `prettyplease`, and by `syn` in debug builds where no formatter parses it. A file
 //! that does not parse is a template bug and panics with the offending text (the test
 //! suite also compiles every generated crate). Output depends only on the IR.
@@ -16,7 +18,7 @@ use std::process::{Command, Stdio};
 
 use askama::Template;
 
-use crate::layout::Layout;
+use crate::layout::{ITEM_BEGIN, ITEM_END, ITEM_END_FORMAT, Layout};
 use crate::{ident, ir, manifest};
 
 /// Who owns an emitted file.
@@ -145,6 +147,7 @@ struct HarnessRs<'a> {
 struct CompoundRs<'a> {
     krate: &'a ir::Crate,
     c: &'a ir::Compound,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -383,10 +386,105 @@ pub(crate) fn formatter_id() -> String {
     }
 }
 
-/// A rendered template and whether it is already in `rustfmt`'s layout.
+/// A rendered template and whether it is already in `rustfmt`'s layout. A file in
+/// that layout but for some of its items keeps their markers (see
+/// `Layout::begin_item`) and is not: [`format_files`] formats those items alone.
 fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool) {
     let text = render(template);
-    (text, layout.ok())
+    if layout.ok() && text.contains(ITEM_END_FORMAT) {
+        return (text, false);
+    }
+    (strip_items(&text), layout.ok())
+}
+
+/// Whether a marker line of an item (see `Layout::begin_item`).
+fn is_item_marker(line: &str) -> bool {
+    line == ITEM_BEGIN || line == ITEM_END || line == ITEM_END_FORMAT
+}
+
+/// `text` without the item marker lines.
+fn strip_items(text: &str) -> String {
+    if !text.contains(ITEM_BEGIN) {
+        return text.to_owned();
+    }
+    let mut out = String::with_capacity(text.len());
+    for line in text.split_inclusive('\n') {
+        if !is_item_marker(line.trim_end_matches('\n')) {
+            out.push_str(line);
+        }
+    }
+    out
+}
+
+/// The items of `text` to format (see `Layout::begin_item`), each a range of
+/// lines (marker lines excluded).
+fn items_to_format(text: &str) -> Vec<std::ops::Range<usize>> {
+    let mut items = Vec::new();
+    let mut start = None;
+    for (index, line) in text.split('\n').enumerate() {
+        if line == ITEM_BEGIN {
+            start = Some(index + 1);
+        } else if line == ITEM_END_FORMAT {
+            if let Some(start) = start.take() {
+                items.push(start..index);
+            }
+        } else if line == ITEM_END {
+            start = None;
+        }
+    }
+    items
+}
+
+/// The comment line between two items given to `rustfmt` in one file.
+const ITEM_BOUNDARY: &str = "// coolc: next item";
+
+/// The items of `text` to format, as one Rust file for `rustfmt` (top-level items
+/// are formatted each on its own, so each comes out as it would in `text`).
+fn items_file(text: &str) -> String {
+    let lines: Vec<&str> = text.split('\n').collect();
+    let items: Vec<String> = items_to_format(text)
+        .into_iter()
+        .map(|range| lines[range].join("\n"))
+        .collect();
+    let mut out = items.join(&format!("\n\n{ITEM_BOUNDARY}\n\n"));
+    out.push('\n');
+    out
+}
+
+/// `text` with its items to format replaced by `formatted` (`rustfmt`'s output of
+/// [`items_file`]), its markers removed; `None` when the items do not match.
+fn with_formatted_items(text: &str, formatted: &str) -> Option<String> {
+    let parts: Vec<&str> = formatted
+        .split(&format!("\n{ITEM_BOUNDARY}\n"))
+        .map(|part| part.trim_matches('\n'))
+        .collect();
+    let items = items_to_format(text);
+    if parts.len() != items.len() {
+        return None;
+    }
+    let lines: Vec<&str> = text.split('\n').collect();
+    let mut out = String::with_capacity(text.len() + formatted.len());
+    let mut next = 0;
+    for (range, part) in items.iter().zip(parts) {
+        for line in &lines[next..range.start] {
+            if !is_item_marker(line) {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+        out.push_str(part);
+        out.push('\n');
+        next = range.end;
+    }
+    for (index, line) in lines[next..].iter().enumerate() {
+        if !is_item_marker(line) {
+            out.push_str(line);
+            if next + index + 1 < lines.len() {
+                out.push('\n');
+            }
+        }
+    }
+    Some(out)
 }
 
 /// Which files of a crate to render: all, those whose templates need a formatter,
@@ -395,8 +493,8 @@ fn render_laid_out<T: Template>(template: &T, layout: &Layout) -> (String, bool)
 pub(crate) enum Part {
     /// Every file.
     All,
-    /// The files a formatter lays out: `types.rs`, compound modules and their user
-    /// files, `build.rs`, `src/converters.rs`, `src/main.rs`.
+    /// The files a formatter lays out: `types.rs`, the user files of compounds,
+    /// `build.rs`, `src/converters.rs`, `src/main.rs`, `tests/components.rs`.
     NeedsFormatter,
     /// The others (some of which may still turn out to need the formatter).
     LaidOut,
@@ -453,9 +551,15 @@ fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bo
         });
         modules.extend(atomics);
     }
-    if part.wants(false) {
+    if part.wants(true) {
         for c in &krate.compounds {
-            modules.push((c.module.clone(), render(&CompoundRs { krate, c }), false));
+            let template = CompoundRs {
+                krate,
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            modules.push((c.module.clone(), text, laid_out));
         }
     }
     modules
@@ -478,7 +582,10 @@ pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
             part.push_str("pub mod ");
             part.push_str(&module);
             part.push_str(" {\n");
-            for line in text.lines().filter(|l| !l.starts_with("// @generated")) {
+            for line in text
+                .lines()
+                .filter(|l| !l.starts_with("// @generated") && !is_item_marker(l))
+            {
                 part.push_str(line);
                 part.push('\n');
             }
@@ -605,6 +712,9 @@ pub(crate) fn emit_crate_with(krate: &ir::Crate, formatting: Formatting) -> Vec<
             format_files(&mut files, &needs);
         }
         Formatting::Unformatted => {
+            for file in &mut files {
+                file.contents = strip_items(&file.contents);
+            }
             if cfg!(debug_assertions) {
                 par_map(&files, |f| {
                     if is_rust(&f.path) {
@@ -737,29 +847,53 @@ pub(crate) fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
     if cfg!(debug_assertions) {
         par_map(files, |f| {
             if is_rust(&f.path) {
-                debug_check_parses(&f.contents);
+                debug_check_parses(&strip_items(&f.contents));
             }
         });
     }
+    // A file with items to format gives rustfmt those items only.
+    let inputs: Vec<String> = selected
+        .iter()
+        .map(|&i| {
+            let text = &files[i].contents;
+            if text.contains(ITEM_END_FORMAT) {
+                items_file(text)
+            } else {
+                text.clone()
+            }
+        })
+        .collect();
     let rust: Vec<(&Path, &str)> = selected
         .iter()
-        .map(|&i| (files[i].path.as_path(), files[i].contents.as_str()))
+        .zip(&inputs)
+        .map(|(&i, input)| (files[i].path.as_path(), input.as_str()))
         .collect();
     // rustfmt fails on Rust that does not parse, and then the fallback below parses
     // every file: a template bug is caught on both paths.
     let formatted: Vec<Option<String>> = match rustfmt_files(&rust) {
-        Some(formatted) => formatted.into_iter().map(Some).collect(),
+        Some(formatted) => selected
+            .iter()
+            .zip(formatted)
+            .map(|(&i, new)| {
+                let text = &files[i].contents;
+                if !text.contains(ITEM_END_FORMAT) {
+                    return Some(new);
+                }
+                with_formatted_items(text, &new).or_else(|| rustfmt_stdin(&strip_items(text)))
+            })
+            .collect(),
         // The files are independent: print them on every core.
         None => par_map(&selected, |&i| {
             let file = &files[i];
             // Without rustfmt, user files keep the templates' own layout
             // (`prettyplease` would drop their comments).
-            (file.kind == FileKind::Generated).then(|| pretty(&file.contents))
+            (file.kind == FileKind::Generated).then(|| pretty(&strip_items(&file.contents)))
         }),
     };
     for (i, new) in selected.into_iter().zip(formatted) {
-        if let Some(new) = new {
-            files[i].contents = new;
+        match new {
+            Some(new) => files[i].contents = new,
+            None => files[i].contents = strip_items(&files[i].contents),
         }
     }
 }
@@ -959,4 +1093,34 @@ fn render_starter_main(krate: &ir::Crate) -> String {
 /// `render_starter_main`, formatted like a user file.
 pub fn starter_main(krate: &ir::Crate) -> String {
     format_user(&render_starter_main(krate))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file whose second item is marked for the formatter: only that item goes to
+    /// it, and its formatted text replaces it, markers gone.
+    #[test]
+    fn marked_items_alone_are_formatted() {
+        let text = format!(
+            "//! Module.\n\n{ITEM_BEGIN}\nfn kept() {{}}\n{ITEM_END}\n\n{ITEM_BEGIN}\n/// Doc.\nfn   messy( ) {{ 1 }}\n{ITEM_END_FORMAT}\n\nfn tail() {{}}\n"
+        );
+        let items = items_file(&text);
+        assert_eq!(items, "/// Doc.\nfn   messy( ) { 1 }\n");
+        let formatted = "/// Doc.\nfn messy() {\n    1\n}\n";
+        assert_eq!(
+            with_formatted_items(&text, formatted).as_deref(),
+            Some(
+                "//! Module.\n\nfn kept() {}\n\n/// Doc.\nfn messy() {\n    1\n}\n\nfn tail() {}\n"
+            )
+        );
+        // Output that does not split into as many items is refused.
+        let two = format!("{formatted}\n{ITEM_BOUNDARY}\n\nfn other() {{}}\n");
+        assert_eq!(with_formatted_items(&text, &two), None);
+        assert_eq!(
+            strip_items(&text),
+            "//! Module.\n\nfn kept() {}\n\n/// Doc.\nfn   messy( ) { 1 }\n\nfn tail() {}\n"
+        );
+    }
 }

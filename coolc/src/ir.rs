@@ -1033,10 +1033,129 @@ impl Instance {
     }
 }
 
+/// One call of the chain that builds a compound (`CompoundBuilder`), in order.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum BuilderStep<'a> {
+    /// `.instance(build)` or `.instance_on(node, build)`.
+    Instance(&'a Instance, &'a Code),
+    /// `.connect(..)` or `.connect_via(..)`.
+    Connect(&'a Connection),
+    /// Another step (policies, exports, substitutes, recovery...).
+    Step(&'a Code),
+    /// `.rule(..)`.
+    Rule(&'a Rule),
+}
+
+impl Handle {
+    /// The signature of the refusing setter `method` of an observable variable.
+    pub(crate) fn refusal_signature(method: &str) -> String {
+        format!(
+            "pub fn {method}<T: ::coolbot::ObservableOnly>(&mut self, value: T) -> ::core::result::Result<(), ::coolbot::CommandError>"
+        )
+    }
+
+    /// The signature of `configure`, taking a `config`.
+    pub(crate) fn configure_signature(config: &str) -> String {
+        format!(
+            "pub fn configure(&mut self, configuration: {config}) -> ::core::result::Result<(), ::coolbot::CommandError>"
+        )
+    }
+
+    /// The signature of `set_quality`, taking a `quality` and returning `ret`.
+    pub(crate) fn quality_signature(quality: &str, ret: &str) -> String {
+        format!("pub fn set_quality(&mut self, level: {quality}) -> {ret}")
+    }
+
+    /// The signature of its accessor, returning `{type_name}{suffix}<'_>`.
+    pub(crate) fn accessor_signature(&self, suffix: &str) -> String {
+        format!(
+            "pub fn {}(&mut self) -> {}{suffix}<'_>",
+            self.method, self.type_name
+        )
+    }
+}
+
+impl Setter {
+    /// Its signature, returning `ret`.
+    pub(crate) fn signature(&self, ret: &str) -> String {
+        format!(
+            "pub fn {}(&mut self, value: {}) -> {ret}",
+            self.method, self.ty
+        )
+    }
+
+    /// The arguments after the instance's name: the variable's name and value.
+    pub(crate) fn args(&self) -> Vec<Code> {
+        vec![
+            Code::atom(format!("\"{}\"", self.variable)),
+            self.to_value.clone(),
+        ]
+    }
+}
+
+impl Rule {
+    /// Its function's signature.
+    pub(crate) fn signature(&self) -> String {
+        let vars = self
+            .vars_param
+            .as_ref()
+            .map_or(String::new(), |vars| format!(", {vars}: &Vars"));
+        format!(
+            "fn {}({}: &::coolbot::View{vars}) -> bool",
+            self.function, self.view_param
+        )
+    }
+}
+
 impl Compound {
     /// The doc comment as a Rust string literal.
     pub(crate) fn doc_literal(&self) -> String {
         doc_literal(&self.doc)
+    }
+
+    /// The signature of the harness's constructor `name` (`new`, `running`).
+    pub(crate) fn harness_signature(&self, name: &str) -> String {
+        format!(
+            "pub fn {name}{}(parts: impl Parts) -> HarnessResult<Self>",
+            self.generics()
+        )
+    }
+
+    /// `(instance, component type)` of every instance.
+    pub(crate) fn instance_pairs(&self) -> Vec<(&str, &str)> {
+        self.instances
+            .iter()
+            .map(|i| (i.name.as_str(), i.component.as_str()))
+            .collect()
+    }
+
+    /// `(instance, the instance it substitutes)`.
+    pub(crate) fn substitute_pairs(&self) -> Vec<(&str, &str)> {
+        self.instances
+            .iter()
+            .filter_map(|i| Some((i.name.as_str(), i.substitutes.as_deref()?)))
+            .collect()
+    }
+
+    /// `(from, to)` of every connection.
+    pub(crate) fn connection_pairs(&self) -> Vec<(&str, &str)> {
+        self.connections
+            .iter()
+            .map(|k| (k.from.as_str(), k.to.as_str()))
+            .collect()
+    }
+
+    /// The calls of the chain that builds the compound, in order.
+    pub(crate) fn builder_steps(&self) -> Vec<BuilderStep<'_>> {
+        let mut steps: Vec<BuilderStep<'_>> = self
+            .instances
+            .iter()
+            .filter_map(|i| Some(BuilderStep::Instance(i, i.build.as_ref()?)))
+            .collect();
+        steps.extend(self.connections.iter().map(BuilderStep::Connect));
+        steps.extend(self.steps.iter().map(BuilderStep::Step));
+        steps.extend(self.rules.iter().map(BuilderStep::Rule));
+        steps
     }
 
     /// Whether `Vars` derives `Default`.

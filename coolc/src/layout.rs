@@ -1,5 +1,6 @@
-//! rustfmt's layout, computed while rendering, for the shapes of Rust that the atomic
-//! and user templates emit, so that those files need no formatter at run time.
+//! rustfmt's layout, computed while rendering, for the shapes of Rust that the atomic,
+//! compound and user templates emit, so that those files need no formatter at run
+//! time.
 //!
 //! The templates are written in the layout `rustfmt` (edition 2024, default
 //! configuration: `max_width` 100, block indentation) gives them; what depends on the
@@ -13,7 +14,10 @@
 //! prints, its indentation fixed here. Anything these rules do not cover, or that
 //! comes near the edge of them (a line over 100 columns, a list of short items that
 //! rustfmt would pack several per line), clears [`Layout::ok`]: the caller then runs
-//! the real formatter over the file. So a strange description costs time, never a
+//! the real formatter over the file, or over the one top-level item it happened in
+//! when the template marked that item (see [`Layout::begin_item`]: rustfmt lays out
+//! each top-level item on its own, so the item comes out as it would in the whole
+//! file). So a strange description costs time, never a
 //! file that `cargo fmt` would change. `coolc/tests/rustfmt_clean.rs` checks the claim
 //! against `rustfmt` on every fixture and example.
 
@@ -33,16 +37,28 @@ const CHAIN_WIDTH: usize = 60;
 /// (`short_array_element_width_threshold`): such lists are not laid out here.
 const SHORT_ITEM: usize = 10;
 
-/// Lays out pieces of one file and records whether every piece is certain.
+/// The line that opens an item whose layout is decided on its own (see
+/// [`Layout::begin_item`]).
+pub(crate) const ITEM_BEGIN: &str = "\u{1}coolc-item\u{1}";
+/// The line that closes such an item when it is in rustfmt's layout.
+pub(crate) const ITEM_END: &str = "\u{1}coolc-item-end\u{1}";
+/// The line that closes such an item when the formatter must lay it out.
+pub(crate) const ITEM_END_FORMAT: &str = "\u{1}coolc-item-format\u{1}";
+
+/// Lays out pieces of one file and records whether every piece is certain: of the
+/// whole file, or of the top-level item being rendered (see [`Layout::begin_item`]).
 #[derive(Debug)]
 pub struct Layout {
     ok: Cell<bool>,
+    /// Inside an item: whether a piece of it is uncertain.
+    item: Cell<Option<bool>>,
 }
 
 impl Default for Layout {
     fn default() -> Layout {
         Layout {
             ok: Cell::new(true),
+            item: Cell::new(None),
         }
     }
 }
@@ -67,7 +83,29 @@ impl Layout {
                 std::panic::Location::caller()
             );
         }
-        self.ok.set(false);
+        match self.item.get() {
+            Some(_) => self.item.set(Some(true)),
+            None => self.ok.set(false),
+        }
+    }
+
+    /// Opens a top-level item (its doc comment, attributes and body, up to
+    /// [`Layout::end_item`]) whose pieces are judged on their own: when one of them
+    /// is uncertain, the formatter lays out that item alone, not the file. rustfmt
+    /// formats each top-level item on its own, so its text is the same either way.
+    /// The marker is a line of its own, removed at emission.
+    pub fn begin_item(&self) -> &'static str {
+        self.item.set(Some(false));
+        ITEM_BEGIN
+    }
+
+    /// Closes the item [`Layout::begin_item`] opened: the marker says whether the
+    /// formatter must lay it out.
+    pub fn end_item(&self) -> &'static str {
+        match self.item.take() {
+            Some(true) => ITEM_END_FORMAT,
+            _ => ITEM_END,
+        }
     }
 
     /// Doc-comment lines (`marker` is `///` or `//!`), each on its own line at
@@ -170,6 +208,16 @@ impl Layout {
         self.assign(
             16,
             &format!("self.vars.{}", var.field.name),
+            &var.from_value.clone().try_op().to_string(),
+        )
+    }
+
+    /// The assignment of an arm of the compound's `set` (its variables locked as
+    /// `vars`).
+    pub fn set_locked_var(&self, var: &crate::ir::Var) -> String {
+        self.assign(
+            16,
+            &format!("vars.{}", var.field.name),
             &var.from_value.clone().try_op().to_string(),
         )
     }
@@ -302,10 +350,19 @@ impl Layout {
 
     /// `pub const ALL: [UserState; n] = [...];` at indent 4.
     pub fn all_states(&self, c: &crate::ir::Atomic) -> String {
-        let head = format!("pub const ALL: [UserState; {}] = ", c.states.len());
+        self.all_of(&c.states)
+    }
+
+    /// [`Layout::all_states`] of a compound's supervisor.
+    pub fn all_supervisor_states(&self, c: &crate::ir::Compound) -> String {
+        self.all_of(&c.states)
+    }
+
+    fn all_of(&self, states: &[crate::ir::State]) -> String {
+        let head = format!("pub const ALL: [UserState; {}] = ", states.len());
         let list = Code::List(
             "[".to_owned(),
-            c.states
+            states
                 .iter()
                 .map(|s| Code::Atom(format!("UserState::{}", s.variant)))
                 .collect(),
@@ -345,8 +402,18 @@ impl Layout {
 
     /// A choice arm of the glue's `choose`, at indent 12.
     pub fn choose_arm(&self, state: &usize, method: &str) -> String {
+        self.choose_arm_of("behavior", *state, method)
+    }
+
+    /// A choice arm of the compound's `choose` (the user supervisor's method), at
+    /// indent 12.
+    pub fn supervisor_choose_arm(&self, state: &usize, method: &str) -> String {
+        self.choose_arm_of("supervisor", *state, method)
+    }
+
+    fn choose_arm_of(&self, root: &str, state: usize, method: &str) -> String {
         let calls = [
-            "behavior".to_owned(),
+            root.to_owned(),
             format!(".{method}(&mut cx)"),
             ".map(|target| target.state().index())".to_owned(),
         ];
@@ -464,6 +531,352 @@ impl Layout {
         );
         let head = "pub static SPEC: ::coolbot::Spec = ";
         format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
+    }
+
+    /// `pub const NAME: &[(&str, &str)] = &[("a", "b"), ...];`, a table of pairs of
+    /// names at indent 0.
+    pub fn pairs<'p>(
+        &self,
+        name: &str,
+        pairs: impl IntoIterator<Item = (&'p str, &'p str)>,
+    ) -> String {
+        let head = format!("pub const {name}: &[(&str, &str)] =");
+        let list = Code::slice(
+            pairs
+                .into_iter()
+                .map(|(a, b)| {
+                    Code::call(
+                        "",
+                        vec![
+                            Code::atom(format!("\"{a}\"")),
+                            Code::atom(format!("\"{b}\"")),
+                        ],
+                    )
+                })
+                .collect(),
+        );
+        // On the line of its name when it fits, else alone on the next line when it
+        // fits there (rustfmt's choice), else one pair per line.
+        if let Some(flat) = Self::flat(&list) {
+            let same_line = format!("{head} {flat};");
+            if same_line.len() <= MAX_WIDTH {
+                return same_line;
+            }
+            let next_line = format!("    {flat};");
+            if next_line.len() <= MAX_WIDTH {
+                return format!("{head}\n{next_line}");
+            }
+        }
+        format!("{head} {};", self.node(&list, 0, head.len() + 1, 1, false))
+    }
+
+    /// The compound's `SPEC` static (see `templates/compound.rs`).
+    pub fn compound_spec(&self, c: &crate::ir::Compound) -> String {
+        let s = |t: &str| Code::Atom(t.to_owned());
+        let spec = Code::Struct(
+            "::coolbot::Spec".to_owned(),
+            vec![
+                (
+                    "type_name".to_owned(),
+                    Code::atom(format!("\"{}\"", c.type_name)),
+                ),
+                ("doc".to_owned(), s(&c.doc_literal())),
+                (
+                    "states".to_owned(),
+                    Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
+                ),
+                ("initial".to_owned(), s(&c.initial.to_string())),
+                ("inputs".to_owned(), Code::slice(c.input_specs.clone())),
+                ("outputs".to_owned(), Code::slice(c.output_specs.clone())),
+                (
+                    "variables".to_owned(),
+                    Code::slice(
+                        c.vars
+                            .iter()
+                            .filter(|v| v.spec_index.is_some())
+                            .map(crate::ir::Var::spec)
+                            .collect(),
+                    ),
+                ),
+                ("exceptions".to_owned(), s("&[]")),
+                ("timing".to_owned(), c.timing.clone()),
+            ],
+        );
+        let head = "pub static SPEC: ::coolbot::Spec = ";
+        format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
+    }
+
+    /// A mapped controllable variable's field of `Mapped`, at indent 4.
+    pub fn mapped_decl(&self, m: &crate::ir::MappedField) -> String {
+        self.decl(&m.name, &format!("::core::option::Option<{}>", m.ty))
+    }
+
+    /// An instance's method of the `Parts` trait, at indent 4.
+    pub fn part_declaration(&self, i: &crate::ir::Instance, module: &str) -> String {
+        let bound = if i.compound { "Parts" } else { "Behavior" };
+        self.declaration(&format!(
+            "fn {}(&mut self) -> impl super::{module}::{bound}",
+            i.method
+        ))
+    }
+
+    /// A signature at `indent` followed by ` {` (see [`Layout::signature`]; one of
+    /// exactly `max_width` columns stays on its line).
+    pub fn open_fn(&self, indent: usize, signature: &str) -> String {
+        let one = format!("{signature} {{");
+        if indent + one.len() == MAX_WIDTH {
+            return self.line(indent, &one);
+        }
+        self.signature(indent, signature, " {")
+    }
+
+    /// `path {\n field: value,\n}` at indent 8, the body of an accessor returning a
+    /// handle whose one field borrows from `self` (always over `struct_lit_width`).
+    pub fn handle_lit(&self, path: &str, field: &str, value: &str) -> String {
+        let lit = Code::Struct(path.to_owned(), vec![(field.to_owned(), Code::atom(value))]);
+        format!("{}{}", spaces(8), self.node(&lit, 8, 8, 0, false))
+    }
+
+    /// `receiver.method(args)` then `tail` at `indent`, `receiver` a root and one
+    /// field (`self.commander`: with the call, a chain of two links): on one line
+    /// within `chain_width`, else the receiver alone and the call on the next line.
+    pub fn field_call(
+        &self,
+        indent: usize,
+        receiver: &str,
+        method: &str,
+        args: &[Code],
+        tail: &str,
+    ) -> String {
+        let Some(call) = Self::one_line(&Code::call(method, args.to_vec())) else {
+            // Arguments too wide for one line: the call stays on the receiver's line
+            // and they go one per line (rustfmt's choice for two or more of them).
+            if args.len() < 2 {
+                self.fail();
+            }
+            let mut out = self.line(indent, &format!("{receiver}.{method}("));
+            for arg in args {
+                out.push('\n');
+                out.push_str(&self.expr_line(indent + 4, arg, ","));
+            }
+            out.push('\n');
+            out.push_str(&self.line(indent, &format!("){tail}")));
+            return out;
+        };
+        let one = format!("{receiver}.{call}");
+        if one.len() <= CHAIN_WIDTH && indent + one.len() + tail.len() <= MAX_WIDTH {
+            return self.line(indent, &format!("{one}{tail}"));
+        }
+        format!(
+            "{}\n{}",
+            self.line(indent, receiver),
+            self.line(indent + 4, &format!(".{call}{tail}"))
+        )
+    }
+
+    /// [`Layout::field_call`] at indent 8 (a method's whole body) whose arguments
+    /// are the instance's name (a string literal), then the paths or short
+    /// expressions `rest` (separated by `, `).
+    pub fn instance_call(
+        &self,
+        receiver: &str,
+        method: &str,
+        instance: &str,
+        rest: &str,
+    ) -> String {
+        let mut args = vec![Code::atom(format!("\"{instance}\""))];
+        args.extend(
+            rest.split(", ")
+                .filter(|arg| !arg.is_empty())
+                .map(Code::atom),
+        );
+        self.field_call(8, receiver, method, &args, "")
+    }
+
+    /// [`Layout::instance_call`] with a setter's arguments (the variable's name and
+    /// value).
+    pub fn setter_call(
+        &self,
+        receiver: &str,
+        method: &str,
+        instance: &str,
+        setter: &crate::ir::Setter,
+    ) -> String {
+        let mut args = vec![Code::atom(format!("\"{instance}\""))];
+        args.extend(setter.args());
+        self.field_call(8, receiver, method, &args, "")
+    }
+
+    /// `registrar.port::<packet>(TYPE_NAME, "port");` at indent 4.
+    pub fn register_port(&self, packet: &str, port: &str) -> String {
+        let call = Code::atom("registrar").method(
+            format!("port::<{packet}>"),
+            vec![Code::atom("TYPE_NAME"), Code::atom(format!("\"{port}\""))],
+        );
+        self.expr_line(4, &call, ";")
+    }
+
+    /// `code` then `tail` as one line at `indent`, when rustfmt keeps it on one line
+    /// (see [`Layout::one_line`]).
+    pub fn expr_line(&self, indent: usize, code: &Code, tail: &str) -> String {
+        match Self::one_line(code) {
+            Some(text) => self.line(indent, &format!("{text}{tail}")),
+            None => {
+                self.fail();
+                format!("{}{code}{tail}", spaces(indent))
+            }
+        }
+    }
+
+    /// One call `.method(args)` of the compound builder's chain, at indent 8 (`last`:
+    /// followed by the `)` of `Ok(`): on one line when it fits, else one argument per
+    /// line. A lone argument too long for the line, or a closure last, is left to
+    /// the formatter (rustfmt may open it on the call's line).
+    pub fn builder_step(&self, step: &Code, last: &bool) -> String {
+        let tail = if *last { ")" } else { "" };
+        let Code::Call(method, args) = step else {
+            self.fail();
+            return format!("{}.{step}{tail}", spaces(8));
+        };
+        if let Some(text) = Self::one_line(step)
+            && 8 + 1 + text.len() + tail.len() <= MAX_WIDTH
+        {
+            return format!("{}.{text}{tail}", spaces(8));
+        }
+        if args.len() < 2
+            || matches!(
+                args.last(),
+                Some(Code::Closure(..) | Code::Block(..) | Code::Match(..))
+            )
+        {
+            self.fail();
+        }
+        let mut out = self.line(8, &format!(".{method}("));
+        for arg in args {
+            out.push('\n');
+            out.push_str(&self.expr_line(12, arg, ","));
+        }
+        out.push('\n');
+        out.push_str(&self.line(8, &format!("){tail}")));
+        out
+    }
+
+    /// `.instance(build)` or `.instance_on("node", build)` of the builder's chain.
+    pub fn instance_step(&self, i: &crate::ir::Instance, build: &Code, last: &bool) -> String {
+        let step = match &i.node {
+            Some(node) => Code::call(
+                "instance_on",
+                vec![Code::atom(format!("\"{node}\"")), build.clone()],
+            ),
+            None => Code::call("instance", vec![build.clone()]),
+        };
+        self.builder_step(&step, last)
+    }
+
+    /// `.connect(from, to)` or `.connect_via(from, to, converter)` of the builder's
+    /// chain.
+    pub fn connect_step(&self, k: &crate::ir::Connection, last: &bool) -> String {
+        let mut args = vec![
+            Code::atom(format!("\"{}\"", k.from)),
+            Code::atom(format!("\"{}\"", k.to)),
+        ];
+        let method = match &k.via {
+            Some(method) => {
+                args.push(Code::atom(format!(
+                    "<C as super::types::Converters>::{method}"
+                )));
+                "connect_via"
+            }
+            None => "connect",
+        };
+        self.builder_step(&Code::call(method, args), last)
+    }
+
+    /// `.rule(state, target, reads, test)` of the builder's chain.
+    pub fn rule_step(&self, r: &crate::ir::Rule, last: &bool) -> String {
+        let step = Code::call(
+            "rule",
+            vec![
+                Code::atom(r.state.clone()),
+                Code::atom(r.target.clone()),
+                r.reads.clone(),
+                r.call.clone(),
+            ],
+        );
+        self.builder_step(&step, last)
+    }
+
+    /// The first line of the compound harness's `new`: the builder, its error
+    /// mapped by a closure that opens on this line.
+    pub fn harness_builder(&self, c: &crate::ir::Compound) -> String {
+        let call = format!(
+            "builder{}(\"{}\", parts)",
+            c.turbofish(),
+            c.module.trim_start_matches("r#")
+        );
+        self.line(8, &format!("let builder = {call}.map_err(|error| {{"))
+    }
+
+    /// One-line form of `code` when rustfmt keeps it on one line: every call's
+    /// arguments within `fn_call_width`, every chain of two links or more within
+    /// `chain_width`, every struct literal within `struct_lit_width`. `None` for the
+    /// shapes these rules do not cover (closures, blocks, `match`, a struct with a
+    /// rest) and for what rustfmt would break.
+    fn one_line(code: &Code) -> Option<String> {
+        let text = match code {
+            Code::Atom(text) => text.clone(),
+            Code::Struct(..) | Code::List(..) | Code::Repeat(..) => {
+                if Self::has_other(code) {
+                    return None;
+                }
+                Self::flat(code)?
+            }
+            Code::Call(callee, args) => {
+                format!("{callee}({})", Self::args_line(args)?)
+            }
+            Code::Method(receiver, method, args) => {
+                format!(
+                    "{}.{method}({})",
+                    Self::one_line(receiver)?,
+                    Self::args_line(args)?
+                )
+            }
+            Code::Field(receiver, field) => format!("{}.{field}", Self::one_line(receiver)?),
+            Code::Try(operand) => format!("{}?", Self::one_line(operand)?),
+            Code::Unary(op, operand) => format!("{op}{}", Self::one_line(operand)?),
+            Code::Binary(left, op, right) => {
+                format!("{} {op} {}", Self::one_line(left)?, Self::one_line(right)?)
+            }
+            Code::Paren(inner) => format!("({})", Self::one_line(inner)?),
+            Code::StructRest(..)
+            | Code::Closure(..)
+            | Code::Block(..)
+            | Code::Match(..)
+            | Code::Other(_) => return None,
+        };
+        if Self::links(code) >= 2 && text.len() > CHAIN_WIDTH {
+            return None;
+        }
+        Some(text)
+    }
+
+    /// The arguments of a call on one line, within `fn_call_width`.
+    fn args_line(args: &[Code]) -> Option<String> {
+        let text = args
+            .iter()
+            .map(Self::one_line)
+            .collect::<Option<Vec<_>>>()?
+            .join(", ");
+        (text.len() <= LIST_WIDTH).then_some(text)
+    }
+
+    /// How many links (method calls and fields) the chain `code` ends has.
+    fn links(code: &Code) -> usize {
+        match code {
+            Code::Method(receiver, ..) | Code::Field(receiver, _) => 1 + Self::links(receiver),
+            Code::Try(operand) => Self::links(operand),
+            _ => 0,
+        }
     }
 
     /// One-line form of `node` when rustfmt's width rules allow one (ignoring the

@@ -70,9 +70,15 @@ fn on_disk(path: PathBuf) -> (PathBuf, String) {
 /// Asserts every Rust file of the crate is rustfmt-clean; returns how many atomic
 /// modules and user files took the fast path (no formatter).
 fn assert_clean(name: &str, krate: &coolc::ir::Crate) -> (usize, usize) {
+    let (atomics, users, _) = assert_clean_listed(name, krate);
+    (atomics, users)
+}
+
+/// [`assert_clean`], with the paths of every file that took the fast path.
+fn assert_clean_listed(name: &str, krate: &coolc::ir::Crate) -> (usize, usize, Vec<PathBuf>) {
     let (_, laid_out) = emit::render_crate(krate);
     let files = emit::emit_crate(krate);
-    let mut fast = (0, 0);
+    let mut fast = (0, 0, Vec::new());
     for (file, laid_out) in files.iter().zip(laid_out) {
         if file.path.extension().is_none_or(|e| e != "rs") {
             continue;
@@ -112,6 +118,9 @@ fn assert_clean(name: &str, krate: &coolc::ir::Crate) -> (usize, usize) {
         if laid_out && file.kind == FileKind::User {
             fast.1 += 1;
         }
+        if laid_out {
+            fast.2.push(file.path.clone());
+        }
     }
     fast
 }
@@ -142,10 +151,18 @@ fn examples_emit_rustfmt_clean_files_without_a_formatter() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mobile_base.cool"),
     ] {
         let name = root.display().to_string();
+        let example = root.starts_with(Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples"));
         let krate = lower_files(&[on_disk(root)], "mobile-base");
-        let (atomics, users) = assert_clean(&name, &krate);
-        // The realistic descriptions take the fast path throughout.
+        let (atomics, users, laid_out) = assert_clean_listed(&name, &krate);
+        // The realistic descriptions take the fast path throughout, the example's
+        // compound module included (the test copy's rules go to the formatter).
         assert_eq!(atomics, krate.atomics.len(), "{name}: atomic modules");
+        if example {
+            assert!(
+                laid_out.contains(&PathBuf::from("src/generated/robot.rs")),
+                "{name}: the compound module"
+            );
+        }
         assert_eq!(users, krate.atomics.len() + 1, "{name}: user files");
     }
 }
@@ -212,4 +229,40 @@ atomic {camel} {{
         taken += fast;
     }
     assert!(taken > 0, "no description took the fast path");
+}
+
+/// A compound's tables of pairs at the edges of rustfmt's rules: on the line of their
+/// name, alone on the next line, and one pair per line.
+#[test]
+fn compound_tables_stay_rustfmt_clean() {
+    for n in [1, 13, 14, 15, 16, 30] {
+        let a = format!("a{}", "x".repeat(n - 1));
+        let b = format!("b{}", "x".repeat(n - 1));
+        let text = format!(
+            r#"
+atomic Worker {{
+    automaton {{ initial working; state working {{ entry; }} }}
+}}
+
+/// Two workers, their names {n} long.
+compound Cell {{
+    instance {a}: Worker;
+    instance {b}: Worker;
+}}
+"#
+        );
+        let krate = lower_files(&[(PathBuf::from(format!("pairs_{n}.cool")), text)], "pairs");
+        assert_clean(&format!("names {n}"), &krate);
+        // The file is in rustfmt's layout but for, at most, items formatted alone
+        // (the builder's long `instance` calls): the tables need no formatter.
+        let (rendered, laid_out) = emit::render_crate(&krate);
+        let cell = rendered
+            .iter()
+            .position(|f| f.path == Path::new("src/generated/cell.rs"))
+            .unwrap();
+        assert!(
+            laid_out[cell] || rendered[cell].contents.contains("coolc-item-format"),
+            "names {n}: the compound module is left to the formatter"
+        );
+    }
 }
