@@ -26,17 +26,18 @@ use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
-use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
-use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, PortSet, Section, System};
-use crossbeam_channel::{Receiver, Sender, bounded};
+use coolbot::port::DataOut;
+use coolbot::{Component, OutputKind, PortSet, System};
+use crossbeam_channel::{Sender, bounded};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use setup::pingpong::{KICK, Pace, pair, stamp};
 
 /// Channels served, and their rate.
 const CHANNELS: usize = 20;
@@ -45,8 +46,6 @@ const HZ: u64 = 100;
 const WARMUP: usize = 50;
 /// Latency rounds of project and baseline, alternated.
 const ROUNDS: usize = 10;
-/// How often a ping-pong round trip is started.
-const KICK: Duration = Duration::from_millis(1);
 
 /// What each of the 20 components sends: a robot-sized packet.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -65,45 +64,6 @@ one_state_spec! {
     periodic: None,
 }
 
-const QUEUE: InputKind = InputKind::Fifo {
-    capacity: 4,
-    policy: OverflowPolicy::Reject,
-};
-
-one_state_spec! {
-    static PING_SPEC = "Ping",
-    inputs: [("input", QUEUE), ("kick", InputKind::Tick)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0, 1],
-    periodic: None,
-}
-
-one_state_spec! {
-    static PONG_SPEC = "Pong",
-    inputs: [("input", QUEUE)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0],
-    periodic: None,
-}
-
-one_state_spec! {
-    static KICK_SPEC = "Kick",
-    inputs: [],
-    outputs: [("kick", OutputKind::Tick)],
-    on: [],
-    periodic: None,
-}
-
-/// Stamps are nanoseconds since one instant of this process.
-fn stamp() -> u64 {
-    static BASE: OnceLock<Instant> = OnceLock::new();
-    BASE.get_or_init(Instant::now).elapsed().as_nanos() as u64
-}
-
-fn since(stamp_ns: u64) -> Duration {
-    Duration::from_nanos(stamp().saturating_sub(stamp_ns))
-}
-
 /// A source: its output handed to the test's sending thread.
 fn source(name: &str) -> (Component, DataOut<Reading>) {
     let out = DataOut::<Reading>::new();
@@ -114,94 +74,6 @@ fn source(name: &str) -> (Component, DataOut<Reading>) {
         ports,
     );
     (component, out)
-}
-
-/// The pinging side: on each kick, one round trip unless one is in flight; after
-/// `count + WARMUP` samples, sends them (warm-up dropped) on `done` and starts over.
-fn ping(name: &str, count: usize, done: Sender<Vec<Duration>>) -> Component {
-    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let kick = TickIn::new();
-    let output = DataOut::<u64>::new();
-    let ports = PortSet::new().input(&input).input(&kick).output(&output);
-    let mut samples = Vec::with_capacity(count + WARMUP);
-    let mut in_flight = false;
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section != Section::Entry {
-            return Ok(());
-        }
-        if let Some(sent) = input.recv() {
-            samples.push(since(sent) / 2);
-            in_flight = false;
-            if samples.len() == count + WARMUP {
-                let _ = done.send(samples.split_off(WARMUP));
-                samples.clear();
-            }
-        }
-        if kick.take() > 0 && !in_flight {
-            in_flight = true;
-            output.send(stamp());
-        }
-        Ok(())
-    });
-    Component::new(name, Glue::boxed(&PING_SPEC, body), ports)
-}
-
-/// The echo side: sends back every stamp it takes.
-fn pong(name: &str) -> Component {
-    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let output = DataOut::<u64>::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry {
-            while let Some(stamp) = input.recv() {
-                output.send(stamp);
-            }
-        }
-        Ok(())
-    });
-    Component::new(name, Glue::boxed(&PONG_SPEC, body), ports)
-}
-
-/// A ping-pong pair `<prefix>ping` and `<prefix>pong` with its kicker.
-struct Pair {
-    kick: TickOut,
-    samples: Receiver<Vec<Duration>>,
-}
-
-fn pair(system: &mut System, prefix: &str, count: usize) -> Pair {
-    let (done, samples) = bounded(1);
-    let kick = TickOut::new();
-    let (ping_name, pong_name, kicker) = (
-        format!("{prefix}ping"),
-        format!("{prefix}pong"),
-        format!("{prefix}kicker"),
-    );
-    system.add(pong(&pong_name)).expect("pong");
-    system.add(ping(&ping_name, count, done)).expect("ping");
-    system
-        .add(Component::new(
-            &kicker,
-            Glue::boxed(&KICK_SPEC, Box::new(|_, _| Ok(()))),
-            PortSet::new().output(&kick),
-        ))
-        .expect("kicker");
-    let mut connect = |from: String, to: String| system.connect(&from, &to).expect("connect");
-    connect(format!("{ping_name}.output"), format!("{pong_name}.input"));
-    connect(format!("{pong_name}.output"), format!("{ping_name}.input"));
-    connect(format!("{kicker}.kick"), format!("{ping_name}.kick"));
-    Pair { kick, samples }
-}
-
-/// One latency round of `pair`: a kick every [`KICK`] until its samples come.
-fn latency_round(pair: &Pair) -> Vec<Duration> {
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        pair.kick.emit();
-        if let Ok(samples) = pair.samples.recv_timeout(KICK) {
-            return samples;
-        }
-        assert!(Instant::now() < deadline, "benchmark stalled: ping-pong");
-    }
 }
 
 /// CPU time of a thread or a process's threads, from `schedstat` (nanoseconds on a
@@ -452,9 +324,8 @@ fn main() {
         outputs.push(out);
         names.push(name);
     }
-    let served = pair(&mut system, "served_", per_round);
-    let bare = pair(&mut system, "bare_", per_round);
-    let echoed = pair(&mut system, "echoed_", per_round);
+    let [served, bare, echoed] = ["served_", "bare_", "echoed_"]
+        .map(|prefix| pair::<u64>(&mut system, prefix, Pace::PerKick, per_round, WARMUP));
     system.run_all().expect("run");
     node.expose_system(&system).expect("expose");
     for name in &names {
@@ -549,9 +420,9 @@ fn main() {
     // alternated.
     let (mut project, mut baseline, mut echo_only) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..ROUNDS {
-        baseline.extend(latency_round(&bare));
-        project.extend(latency_round(&served));
-        echo_only.extend(latency_round(&echoed));
+        baseline.extend(bare.round("bare ping-pong"));
+        project.extend(served.round("served ping-pong"));
+        echo_only.extend(echoed.round("echoed ping-pong"));
     }
     let (project, baseline, echo_only) = (
         Samples::new(project),

@@ -12,53 +12,20 @@
 mod common;
 mod setup;
 
-use std::sync::OnceLock;
-use std::time::{Duration, Instant};
-
-use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
 use coolbot::ros::RosType;
-use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, PortSet, Section, System};
+use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::Node;
 use coolbot_zenoh::ros2::{Participant, RosOptions};
-use crossbeam_channel::{Receiver, Sender, bounded};
 use serde::{Deserialize, Serialize};
 
-use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use common::{Figure, Goal, Mode, Samples, Table};
+use setup::pingpong::{Pace, Pinger, Stamped, pong};
 use setup::{nodes, state_directory, wait_subscribed};
 
 /// Round trips discarded at the start of every round.
 const WARMUP: usize = 100;
 /// Rounds of each side, alternated.
 const ROUNDS: usize = 10;
-
-const QUEUE: InputKind = InputKind::Fifo {
-    capacity: 4,
-    policy: OverflowPolicy::Reject,
-};
-
-one_state_spec! {
-    static PING_SPEC = "Ping",
-    inputs: [("input", QUEUE), ("kick", InputKind::Tick)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0, 1],
-    periodic: None,
-}
-
-one_state_spec! {
-    static PONG_SPEC = "Pong",
-    inputs: [("input", QUEUE)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0],
-    periodic: None,
-}
-
-one_state_spec! {
-    static KICK_SPEC = "Kick",
-    inputs: [],
-    outputs: [("kick", OutputKind::Tick)],
-    on: [],
-    periodic: None,
-}
 
 /// The packet both hops carry: a stamp, as a ROS 2 message type of one `uint64`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -74,12 +41,6 @@ impl RosType for Stamp {
     const MESSAGE_DEFINITION: &'static str = "uint64 nanos\n";
 }
 
-/// A packet that carries a stamp.
-trait Stamped: coolbot::Packet + Serialize + serde::de::DeserializeOwned + RosType {
-    fn at(nanos: u64) -> Self;
-    fn nanos(&self) -> u64;
-}
-
 impl Stamped for Stamp {
     fn at(nanos: u64) -> Stamp {
         Stamp { nanos }
@@ -89,97 +50,24 @@ impl Stamped for Stamp {
     }
 }
 
-/// Stamps are nanoseconds since one instant of this process (both ends are in it).
-fn stamp() -> u64 {
-    static BASE: OnceLock<Instant> = OnceLock::new();
-    BASE.get_or_init(Instant::now).elapsed().as_nanos() as u64
-}
-
-fn since(stamp_ns: u64) -> Duration {
-    Duration::from_nanos(stamp().saturating_sub(stamp_ns))
-}
-
-/// The pinging side: on a kick, runs `per_round + WARMUP` round trips and sends the
-/// samples (warm-up dropped) on `done`.
-fn ping<P: Stamped>(per_round: usize, done: Sender<Vec<Duration>>) -> Component {
-    let input = FifoIn::<P>::new(4, OverflowPolicy::Reject);
-    let kick = TickIn::new();
-    let output = DataOut::<P>::new();
-    let ports = PortSet::new().input(&input).input(&kick).output(&output);
-    let mut samples = Vec::with_capacity(per_round + WARMUP);
-    let mut remaining = 0usize;
-    let mut in_flight = false;
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section != Section::Entry {
-            return Ok(());
-        }
-        if kick.take() > 0 {
-            remaining = per_round + WARMUP;
-            samples.clear();
-        }
-        if let Some(sent) = input.recv() {
-            samples.push(since(sent.nanos()) / 2);
-            in_flight = false;
-        }
-        if !in_flight {
-            if remaining > 0 {
-                remaining -= 1;
-                in_flight = true;
-                output.send(P::at(stamp()));
-            } else if samples.len() == per_round + WARMUP {
-                let _ = done.send(samples.split_off(WARMUP));
-                samples.clear();
-            }
-        }
-        Ok(())
-    });
-    Component::new("ping", Glue::boxed(&PING_SPEC, body), ports)
-}
-
-/// The echo side: sends back every stamp it takes.
-fn pong<P: Stamped>() -> Component {
-    let input = FifoIn::<P>::new(4, OverflowPolicy::Reject);
-    let output = DataOut::<P>::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry {
-            while let Some(stamp) = input.recv() {
-                output.send(stamp);
-            }
-        }
-        Ok(())
-    });
-    Component::new("pong", Glue::boxed(&PONG_SPEC, body), ports)
-}
-
 /// One side: ping on node a, pong on node b, one hop each way.
 struct Side {
-    kick: TickOut,
-    samples: Receiver<Vec<Duration>>,
+    pinger: Pinger,
     systems: (System, System),
 }
 
 /// The systems of a side, ping's (with its kicker) and pong's, before their hops.
-fn side(per_round: usize) -> (System, System, TickOut, Receiver<Vec<Duration>>) {
-    let (done, samples) = bounded(1);
-    let kick = TickOut::new();
+fn side(per_round: usize) -> (System, System, Pinger) {
     let mut near = System::new();
-    near.add(ping::<Stamp>(per_round, done)).expect("ping");
-    near.add(Component::new(
-        "kicker",
-        Glue::boxed(&KICK_SPEC, Box::new(|_, _| Ok(()))),
-        PortSet::new().output(&kick),
-    ))
-    .expect("kicker");
-    near.connect("kicker.kick", "ping.kick").expect("connect");
+    let pinger = Pinger::add::<Stamp>(&mut near, "", Pace::Burst, per_round, WARMUP);
     let mut far = System::new();
-    far.add(pong::<Stamp>()).expect("pong");
-    (near, far, kick, samples)
+    far.add(pong::<Stamp>("pong")).expect("pong");
+    (near, far, pinger)
 }
 
 /// The ROS 2 side: a participant on each node's session, `/ping` and `/pong` topics.
 fn ros_side(a: &Node, b: &Node, per_round: usize) -> Side {
-    let (mut near, mut far, kick, samples) = side(per_round);
+    let (mut near, mut far, pinger) = side(per_round);
     let options = |node: &str| RosOptions {
         domain: 42,
         node: node.to_owned(),
@@ -205,8 +93,7 @@ fn ros_side(a: &Node, b: &Node, per_round: usize) -> Side {
     wait_subscribed(a.session(), &key("ping"));
     wait_subscribed(b.session(), &key("pong"));
     Side {
-        kick,
-        samples,
+        pinger,
         systems: (near, far),
     }
 }
@@ -217,7 +104,7 @@ fn bridge_side(a: &Node, b: &Node, per_round: usize) -> Side {
         capacity: 64,
         policy: OverflowPolicy::Reject,
     };
-    let (mut near, mut far, kick, samples) = side(per_round);
+    let (mut near, mut far, pinger) = side(per_round);
     let built = |component: Result<Component, coolbot_zenoh::Error>| component.expect("bridge");
     near.add(built(
         a.outlet::<Stamp>("to_pong", "bench/ping", bridge).build(),
@@ -250,15 +137,9 @@ fn bridge_side(a: &Node, b: &Node, per_round: usize) -> Side {
     wait_subscribed(a.session(), "bench/ping");
     wait_subscribed(b.session(), "bench/pong");
     Side {
-        kick,
-        samples,
+        pinger,
         systems: (near, far),
     }
-}
-
-fn round(side: &Side, what: &str) -> Vec<Duration> {
-    side.kick.emit();
-    common::expect(&side.samples, Duration::from_secs(120), what)
 }
 
 fn main() {
@@ -275,8 +156,8 @@ fn main() {
     let bridge = bridge_side(&a, &b, per_round);
     let (ros_samples, bridge_samples) = common::alternate(
         ROUNDS,
-        || round(&ros, "ROS 2 ping-pong"),
-        || round(&bridge, "bridge ping-pong"),
+        || ros.pinger.round("ROS 2 ping-pong"),
+        || bridge.pinger.round("bridge ping-pong"),
     );
     let (ros_samples, bridge_samples) = (Samples::new(ros_samples), Samples::new(bridge_samples));
     table.row(

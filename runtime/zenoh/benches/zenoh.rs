@@ -11,119 +11,25 @@
 mod common;
 mod setup;
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use coolbot::port::{DataOut, FifoIn, TickIn, TickOut};
-use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, PortSet, Section, System};
+use coolbot::{InputKind, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::Node;
-use crossbeam_channel::{Receiver, Sender, bounded};
 use zenoh::Wait;
 
-use common::{Figure, Glue, Goal, Mode, Samples, Table};
+use common::{Figure, Goal, Mode, Samples, Table};
+use setup::pingpong::{Pace, Pinger, pong, since, stamp};
 
 /// Round trips discarded at the start of every round.
 const WARMUP: usize = 100;
 /// Rounds of project and baseline, alternated.
 const ROUNDS: usize = 10;
 
-const QUEUE: InputKind = InputKind::Fifo {
-    capacity: 4,
-    policy: OverflowPolicy::Reject,
-};
-
-one_state_spec! {
-    static PING_SPEC = "Ping",
-    inputs: [("input", QUEUE), ("kick", InputKind::Tick)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0, 1],
-    periodic: None,
-}
-
-one_state_spec! {
-    static PONG_SPEC = "Pong",
-    inputs: [("input", QUEUE)],
-    outputs: [("output", OutputKind::Data)],
-    on: [0],
-    periodic: None,
-}
-
-one_state_spec! {
-    static KICK_SPEC = "Kick",
-    inputs: [],
-    outputs: [("kick", OutputKind::Tick)],
-    on: [],
-    periodic: None,
-}
-
-/// Stamps are nanoseconds since one instant of this process (both ends are in it).
-fn stamp() -> u64 {
-    static BASE: OnceLock<Instant> = OnceLock::new();
-    BASE.get_or_init(Instant::now).elapsed().as_nanos() as u64
-}
-
-fn since(stamp_ns: u64) -> Duration {
-    Duration::from_nanos(stamp().saturating_sub(stamp_ns))
-}
-
-/// The pinging side: on a kick, runs `per_round + WARMUP` round trips and sends the
-/// samples (warm-up dropped) on `done`.
-fn ping(per_round: usize, done: Sender<Vec<Duration>>) -> Component {
-    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let kick = TickIn::new();
-    let output = DataOut::<u64>::new();
-    let ports = PortSet::new().input(&input).input(&kick).output(&output);
-    let mut samples = Vec::with_capacity(per_round + WARMUP);
-    let mut remaining = 0usize;
-    let mut in_flight = false;
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section != Section::Entry {
-            return Ok(());
-        }
-        if kick.take() > 0 {
-            remaining = per_round + WARMUP;
-            samples.clear();
-        }
-        if let Some(sent) = input.recv() {
-            samples.push(since(sent) / 2);
-            in_flight = false;
-        }
-        if !in_flight {
-            if remaining > 0 {
-                remaining -= 1;
-                in_flight = true;
-                output.send(stamp());
-            } else if samples.len() == per_round + WARMUP {
-                let _ = done.send(samples.split_off(WARMUP));
-                samples.clear();
-            }
-        }
-        Ok(())
-    });
-    Component::new("ping", Glue::boxed(&PING_SPEC, body), ports)
-}
-
-/// The echo side: sends back every stamp it takes.
-fn pong() -> Component {
-    let input = FifoIn::<u64>::new(4, OverflowPolicy::Reject);
-    let output = DataOut::<u64>::new();
-    let ports = PortSet::new().input(&input).output(&output);
-    let body = Box::new(move |section: Section, _: &mut coolbot::Context| {
-        if section == Section::Entry {
-            while let Some(stamp) = input.recv() {
-                output.send(stamp);
-            }
-        }
-        Ok(())
-    });
-    Component::new("pong", Glue::boxed(&PONG_SPEC, body), ports)
-}
-
 /// The project: ping on node a, pong on node b, bridged both ways.
 struct Project {
-    kick: TickOut,
-    samples: Receiver<Vec<Duration>>,
+    pinger: Pinger,
     systems: (System, System),
 }
 
@@ -132,16 +38,8 @@ fn project(a: &Node, b: &Node, per_round: usize) -> Project {
         capacity: 16,
         policy: OverflowPolicy::Block,
     };
-    let (done, samples) = bounded(1);
-    let kick = TickOut::new();
     let mut near = System::new();
-    near.add(ping(per_round, done)).expect("ping");
-    near.add(Component::new(
-        "kicker",
-        Glue::boxed(&KICK_SPEC, Box::new(|_, _| Ok(()))),
-        PortSet::new().output(&kick),
-    ))
-    .expect("kicker");
+    let pinger = Pinger::add::<u64>(&mut near, "", Pace::Burst, per_round, WARMUP);
     near.add(
         a.outlet::<u64>("to_pong", "bench/ping", bridge)
             .build()
@@ -158,10 +56,9 @@ fn project(a: &Node, b: &Node, per_round: usize) -> Project {
         .expect("connect");
     near.connect("from_pong.output", "ping.input")
         .expect("connect");
-    near.connect("kicker.kick", "ping.kick").expect("connect");
 
     let mut far = System::new();
-    far.add(pong()).expect("pong");
+    far.add(pong::<u64>("pong")).expect("pong");
     far.add(
         b.inlet::<u64>("from_ping", "bench/ping", OutputKind::Data)
             .build()
@@ -183,19 +80,9 @@ fn project(a: &Node, b: &Node, per_round: usize) -> Project {
     setup::wait_subscribed(a.session(), "bench/ping");
     setup::wait_subscribed(b.session(), "bench/pong");
     Project {
-        kick,
-        samples,
+        pinger,
         systems: (near, far),
     }
-}
-
-fn project_round(project: &Project) -> Vec<Duration> {
-    project.kick.emit();
-    common::expect(
-        &project.samples,
-        Duration::from_secs(120),
-        "bridge ping-pong",
-    )
 }
 
 /// The baseline: raw Zenoh on the same two sessions, an echo thread on b.
@@ -283,7 +170,7 @@ fn main() {
     let baseline = baseline(&a, &b);
     let (project_samples, baseline_samples) = common::alternate(
         ROUNDS,
-        || project_round(&project),
+        || project.pinger.round("bridge ping-pong"),
         || baseline_round(&baseline, per_round),
     );
     let (near, far) = project.systems;

@@ -1,6 +1,6 @@
-//! The setup the bridge benchmarks share: free loopback endpoints, a state directory
-//! for the outlets' tallies, nodes on explicit endpoints, and the wait for a
-//! subscriber.
+//! The setup the network benchmarks share: free loopback endpoints, a state directory
+//! for the outlets' tallies, nodes on explicit endpoints, the wait for a subscriber,
+//! and the latency benchmarks' ping-pong (`pingpong`).
 
 #![allow(
     dead_code,
@@ -13,6 +13,8 @@ use std::time::{Duration, Instant};
 
 use coolbot_zenoh::Node;
 use zenoh::Wait;
+
+pub mod pingpong;
 
 /// A free loopback TCP endpoint.
 pub fn endpoint() -> String {
