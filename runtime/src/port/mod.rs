@@ -6,7 +6,7 @@
 //! output keeps a snapshot of its connected inputs (`RwLock<Arc<[..]>>`, replaced only
 //! on connect and disconnect), so sending takes no global lock and allocates nothing
 //! beyond the clone of the packet for each extra consumer; a data output's component
-//! thread sends to its own copy of the snapshot, without the lock ([`Sinks`]).
+//! thread sends to its own copy of the snapshot, without the lock (`sinks.rs`).
 //!
 //! Each delivery bumps the input's arrival counter and rings its component's
 //! `Doorbell` (one three-state atomic beside the component's thread handle: a rung
