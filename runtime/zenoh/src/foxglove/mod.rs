@@ -46,7 +46,7 @@ use foxglove::{ChannelId, Context, RawChannel, WebSocketServer, WebSocketServerH
 use zenoh::Wait;
 
 use crate::ctl::Ctl;
-use crate::echo::Echoed;
+use crate::echo::EchoedRaw;
 use crate::keys;
 
 pub use channels::{LOG_TOPIC, Monitoring};
@@ -599,11 +599,12 @@ impl Follower {
                     self.session
                         .declare_subscriber(key.clone())
                         .callback(move |sample| {
-                            let echoed = serde_json::from_slice::<Echoed>(&sample.payload().to_bytes())
+                            let payload = sample.payload().to_bytes();
+                            let message = serde_json::from_slice::<EchoedRaw<'_>>(&payload)
                                 .map_err(|error| error.to_string())
-                                .and_then(|echoed| transform.apply(echoed.packet));
-                            match echoed {
-                                Ok(message) => channel.log(message.to_string().as_bytes()),
+                                .and_then(|echoed| transform.message(echoed.packet));
+                            match message {
+                                Ok(message) => channel.log(&message),
                                 Err(error) => {
                                     counts.undecoded.fetch_add(1, Ordering::Relaxed);
                                     coolbot::limited!(&topic, |held| tracing::warn!(
