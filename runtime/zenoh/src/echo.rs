@@ -2,20 +2,22 @@
 //! ([`crate::Node::echo`], a `coolbot::tap::Tap`) and publishes each packet as JSON on
 //! `coolbot/<node>/<path>/o/<port>`, from one thread of its own for all its echoes.
 //!
-//! **Invariant:** the producer is never slowed. A packet costs its producer one copy
-//! into the tap's queue and nothing more: the tap drops a packet its queue has no room
-//! for (counted), and nothing ever waits on that queue, so the producer never wakes a
-//! thread. The echo thread takes what every queue holds once per [`ECHO_TICK`],
-//! writes each packet's JSON once, straight from its type, only while a subscriber
-//! matches the output's key, and publishes without waiting (congestion control
-//! `Drop`). Every message carries the packet's sequence number and the node's drop
-//! count, so a subscriber counts every packet it did not get.
+//! **Invariant:** the producer is never slowed. The tap is attached only while a
+//! subscriber matches the output's key: an output nobody echoes costs its producer
+//! nothing. While attached, a packet costs its producer one copy into the tap's queue
+//! and nothing more: the tap drops a packet its queue has no room for (counted), and
+//! nothing ever waits on that queue, so the producer never wakes a thread. The echo
+//! thread takes what every queue holds once per [`ECHO_TICK`], writes each packet's
+//! JSON once, straight from its type, and publishes it without waiting (congestion
+//! control `Drop`). Every message carries the packet's sequence number and the
+//! node's drop count, so a subscriber counts every packet it did not get.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use coolbot::Handle;
 use coolbot::port::Packet;
 use coolbot::tap::Tap;
 use crossbeam_channel::{RecvTimeoutError, Sender};
@@ -29,15 +31,17 @@ pub const ECHO_CAPACITY: usize = 256;
 
 /// How often the echo thread takes the packets the taps hold: an echoed output may
 /// send up to [`ECHO_CAPACITY`] packets in this time before any is dropped.
-pub const ECHO_TICK: Duration = Duration::from_millis(5);
+pub const ECHO_TICK: Duration = Duration::from_millis(10);
 
 /// One echoed packet on the network.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Echoed {
-    /// The packet's number among those the output sent since the echo began (0 first);
-    /// a gap is packets this subscriber did not get.
+    /// The packet's number among those the output sent since the tap was attached
+    /// (when a first subscriber came; 0 first): a gap is packets this subscriber did
+    /// not get.
     pub seq: u64,
-    /// Packets the node dropped so far because its echo queue was full.
+    /// Packets the node dropped since the tap was attached because its queue was
+    /// full.
     pub dropped: u64,
     /// The packet, as serde writes it in JSON.
     pub packet: serde_json::Value,
@@ -60,9 +64,10 @@ pub(crate) struct EchoedRaw<'a> {
     pub packet: &'a serde_json::value::RawValue,
 }
 
-/// One echoed output: its tap, where it is published, and whether anyone listens.
+/// One echoed output: its tap while anyone listens, and where it is published.
 trait Echoing: Send {
-    /// Publish every packet the tap holds (take and drop them when nobody listens).
+    /// Attach or detach the tap as a subscriber matches or not; publish every packet
+    /// the tap holds.
     fn publish(&mut self);
 
     /// Packets waiting in the tap.
@@ -76,7 +81,11 @@ trait Echoing: Send {
 
 struct Port<T> {
     key: String,
-    tap: Tap<T>,
+    /// The component and its output's name, to attach the tap to.
+    handle: Handle,
+    port: String,
+    /// Attached while a subscriber matches.
+    tap: Option<Tap<T>>,
     publisher: zenoh::pubsub::Publisher<'static>,
     /// Whether a subscriber matches the key, as Zenoh's matching listener last said.
     matched: Arc<AtomicBool>,
@@ -86,13 +95,26 @@ struct Port<T> {
 impl<T: Packet + Serialize> Echoing for Port<T> {
     fn publish(&mut self) {
         let key = &self.key;
-        while let Ok((seq, packet)) = self.tap.receiver().try_recv() {
-            if !self.matched.load(Ordering::Acquire) {
-                continue;
+        let matched = self.matched.load(Ordering::Acquire);
+        if matched != self.tap.is_some() {
+            // Detaching drops what waits: nobody listens any more.
+            self.tap = None;
+            if matched {
+                match Tap::attach(&self.handle, &self.port, ECHO_CAPACITY) {
+                    Ok(tap) => self.tap = Some(tap),
+                    Err(error) => coolbot::limited!(key, |held| tracing::warn!(
+                        %key, "the echo's tap cannot be attached: {error}{held}"
+                    )),
+                }
             }
+        }
+        let Some(tap) = &self.tap else {
+            return;
+        };
+        while let Ok((seq, packet)) = tap.receiver().try_recv() {
             let message = Outgoing {
                 seq,
-                dropped: self.tap.dropped(),
+                dropped: tap.dropped(),
                 packet: &packet,
             };
             match serde_json::to_vec(&message) {
@@ -114,7 +136,7 @@ impl<T: Packet + Serialize> Echoing for Port<T> {
 
     #[cfg(test)]
     fn waiting(&self) -> usize {
-        self.tap.receiver().len()
+        self.tap.as_ref().map_or(0, |tap| tap.receiver().len())
     }
 
     #[cfg(test)]
@@ -136,14 +158,16 @@ pub(crate) struct Echoes {
 }
 
 impl Echoes {
-    /// Publish every packet of `tap` on `key`, from the echo thread of `node`, until
-    /// stopped.
+    /// Publish every packet output `port` of `handle` sends, of type `T`, on `key`,
+    /// from the echo thread of `node`, while a subscriber matches `key`, until stopped.
+    /// `tap`, attached to that output, shows it can be tapped; it is kept if a
+    /// subscriber matches already.
     pub(crate) fn add<T: Packet + Serialize>(
         &self,
         session: &zenoh::Session,
         node: &str,
         key: String,
-        tap: Tap<T>,
+        (handle, port, tap): (Handle, &str, Tap<T>),
     ) -> Result<(), Error> {
         let publisher = session
             .declare_publisher(key.clone())
@@ -175,8 +199,11 @@ impl Echoes {
                 .map_err(Error::spawn("echo"))?;
             *thread = Some((stop, handle));
         }
+        let tap = matched.load(Ordering::Acquire).then_some(tap);
         lock(&self.ports).push(Box::new(Port {
             key,
+            handle,
+            port: port.to_owned(),
             tap,
             publisher,
             matched,
@@ -278,7 +305,9 @@ mod tests {
         let handle = system.handle("source").unwrap();
         let tap = Tap::<u64>::attach(&handle, "out", ECHO_CAPACITY).unwrap();
         let echoes = Echoes::default();
-        echoes.add(&session, "test", KEY.to_owned(), tap).unwrap();
+        echoes
+            .add(&session, "test", KEY.to_owned(), (handle, "out", tap))
+            .unwrap();
         Fixture {
             session,
             system,
@@ -304,10 +333,12 @@ mod tests {
             f(&*ports[0])
         }
 
-        /// A subscriber to the echo, once the echo knows it.
+        /// A subscriber to the echo, once the echo knows it and has tapped the
+        /// output (its only consumer).
         fn subscribe(&self) -> Subscriber<FifoChannelHandler<Sample>> {
             let subscriber = self.session.declare_subscriber(KEY).wait().unwrap();
             until(|| self.held(|port| port.matched()));
+            until(|| self.out.consumers() == 1);
             subscriber
         }
 
@@ -352,28 +383,25 @@ mod tests {
         fixture.finish();
     }
 
-    /// While nobody subscribes, the echo thread still empties the tap (its packets
-    /// neither written nor published): a subscriber that comes later gets what is
-    /// sent after, and nothing was dropped meanwhile.
+    /// The output is tapped only while a subscriber matches: before the first and
+    /// after the last, its sends reach its connections only. A subscriber's first
+    /// packet is the first sent once the tap is attached, numbered 0.
     #[test]
-    fn an_output_nobody_listens_to_is_taken_and_not_published() {
+    fn an_output_is_tapped_only_while_someone_listens() {
         let fixture = fixture();
-        let rounds = 3;
-        for _ in 0..rounds {
-            fixture.held(|port| {
-                assert!(!port.matched());
-                for n in 0..ECHO_CAPACITY as u64 {
-                    fixture.out.send(n);
-                }
-            });
-            until(|| fixture.held(|port| port.waiting() == 0));
+        let consumers = || fixture.out.consumers();
+        until(|| consumers() == 0);
+        for n in 0..2 * ECHO_CAPACITY as u64 {
+            fixture.out.send(n);
         }
         let subscriber = fixture.subscribe();
         fixture.out.send(1000);
         let message = next(&subscriber);
-        assert_eq!(message.seq, rounds * ECHO_CAPACITY as u64);
+        assert_eq!((message.seq, message.dropped), (0, 0));
         assert_eq!(message.packet, serde_json::json!(1000));
-        assert_eq!(message.dropped, 0);
+        drop(subscriber);
+        until(|| !fixture.held(|port| port.matched()));
+        until(|| consumers() == 0);
         fixture.finish();
     }
 }

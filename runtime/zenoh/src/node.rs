@@ -341,9 +341,10 @@ impl Node {
     /// for `coolctl echo`: each packet as JSON ([`crate::echo::Echoed`]) on
     /// `coolbot/<node>/<component>/o/<port>`, from the node's one echo thread, every
     /// [`crate::echo::ECHO_TICK`], while a subscriber matches that key. The producer
-    /// is never slowed (`docs/tools.md`, "coolctl echo"): each packet costs it one copy
-    /// into a queue, and packets beyond [`ECHO_CAPACITY`] waiting are dropped for the
-    /// echo and counted. The echo lasts
+    /// is never slowed (`docs/tools.md`, "coolctl echo"): the output is tapped only
+    /// while a subscriber matches, each packet then costs it one copy into a queue,
+    /// and packets beyond [`ECHO_CAPACITY`] waiting are dropped for the echo and
+    /// counted. The echo lasts
     /// as long as the node. The component's info (`.../s`) carries the JSON Schema of
     /// `T` for the port, traced as a recording traces it ([`coolbot::schema::of`]).
     pub fn echo<T: coolbot::port::Packet + Serialize + serde::de::DeserializeOwned>(
@@ -369,7 +370,7 @@ impl Node {
             &self.session,
             &self.name,
             keys::echo(&self.name, component, port),
-            tap,
+            (handle, port, tap),
         )?;
         let schema = coolbot::schema::of::<T>().schema;
         lock(&self.echoed).insert((component.to_owned(), port.to_owned()), schema);
