@@ -4,7 +4,8 @@
 //!
 //! **Invariant:** the producer is never slowed. The tap is attached only while a
 //! subscriber matches the output's key: an output nobody echoes costs its producer
-//! nothing. While attached, a packet costs its producer one copy into the tap's queue
+//! nothing (attaching and detaching take the output's lock on its connections once
+//! each). While attached, a packet costs its producer one copy into the tap's queue
 //! and nothing more: the tap drops a packet its queue has no room for (counted), and
 //! nothing ever waits on that queue, so the producer never wakes a thread. The echo
 //! thread takes what every queue holds once per [`ECHO_TICK`], writes each packet's
@@ -186,7 +187,7 @@ impl Echoes {
         if thread.is_none() {
             let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
             let ports = Arc::clone(&self.ports);
-            let handle = std::thread::Builder::new()
+            let worker = std::thread::Builder::new()
                 .name(format!("cool-net:{node}:o"))
                 .spawn(move || {
                     // A tick at a time, until the stop sender is dropped.
@@ -197,7 +198,7 @@ impl Echoes {
                     }
                 })
                 .map_err(Error::spawn("echo"))?;
-            *thread = Some((stop, handle));
+            *thread = Some((stop, worker));
         }
         let tap = matched.load(Ordering::Acquire).then_some(tap);
         lock(&self.ports).push(Box::new(Port {
