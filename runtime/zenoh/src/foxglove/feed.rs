@@ -100,15 +100,12 @@ fn queue(capacity: usize, counts: Arc<Counts>) -> (Inlet, Receiver<Waiting>) {
 /// Log every packet waiting on its channel, as its message.
 fn log_waiting(waiting: &Receiver<Waiting>, counts: &Counts) {
     for (route, payload) in waiting.try_iter() {
-        match message(&route, &payload) {
-            Ok(()) => {}
-            Err(error) => {
-                counts.undecoded.fetch_add(1, Ordering::Relaxed);
-                let topic = route.channel.topic();
-                coolbot::limited!(topic, |held| tracing::warn!(
-                    "an echoed packet for {topic} does not fit (dropped): {error}{held}"
-                ));
-            }
+        if let Err(error) = message(&route, &payload) {
+            counts.undecoded.fetch_add(1, Ordering::Relaxed);
+            let topic = route.channel.topic();
+            coolbot::limited!(topic, |held| tracing::warn!(
+                "an echoed packet for {topic} does not fit (dropped): {error}{held}"
+            ));
         }
     }
 }
