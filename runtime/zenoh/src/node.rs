@@ -13,7 +13,7 @@ use crossbeam_channel::{RecvTimeoutError, Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
-use crate::echo::{ECHO_CAPACITY, Echo};
+use crate::echo::{ECHO_CAPACITY, Echoes};
 use crate::info::ComponentInfo;
 use crate::{Error, keys, limits};
 use coolbot::ranges::{REASON_CHARS, excerpt};
@@ -99,7 +99,7 @@ pub struct Node {
     /// The outputs echoed, as `(component path, port)`, with their packets' JSON
     /// Schemas.
     echoed: Arc<Mutex<BTreeMap<(String, String), serde_json::Value>>>,
-    echoes: Mutex<Vec<Echo>>,
+    echoes: Echoes,
     /// Where its outlets keep their tallies (`crate::tally`); None: no tallies.
     state: Option<PathBuf>,
     /// What its bridges did with shared memory (`crate::shm`).
@@ -161,7 +161,7 @@ impl Node {
             control_stop,
             control_thread: Some(control_thread),
             echoed: Arc::default(),
-            echoes: Mutex::new(Vec::new()),
+            echoes: Echoes::default(),
             state: crate::tally::state_directory(),
             shared: Arc::default(),
             _token: token,
@@ -339,9 +339,12 @@ impl Node {
     /// Echo output `path` of `system` (`component.port`, the component through
     /// nested compounds: `"robot.base.scan"`), whose packets are `T`, on the network
     /// for `coolctl echo`: each packet as JSON ([`crate::echo::Echoed`]) on
-    /// `coolbot/<node>/<component>/o/<port>`, from a thread of the node's. The
-    /// producer is never slowed (`docs/tools.md`, "coolctl echo"): packets beyond
-    /// [`ECHO_CAPACITY`] waiting are dropped for the echo and counted. The echo lasts
+    /// `coolbot/<node>/<component>/o/<port>`, from the node's one echo thread, every
+    /// [`crate::echo::ECHO_TICK`], while a subscriber matches that key. The producer
+    /// is never slowed (`docs/tools.md`, "coolctl echo"): the output is tapped only
+    /// while a subscriber matches, each packet then costs it one copy into a queue,
+    /// and packets beyond [`ECHO_CAPACITY`] waiting are dropped for the echo and
+    /// counted. The echo lasts
     /// as long as the node. The component's info (`.../s`) carries the JSON Schema of
     /// `T` for the port, traced as a recording traces it ([`coolbot::schema::of`]).
     pub fn echo<T: coolbot::port::Packet + Serialize + serde::de::DeserializeOwned>(
@@ -363,8 +366,12 @@ impl Node {
             .ok_or_else(|| invalid(format!("no component `{component}` in the system")))?;
         let tap = coolbot::tap::Tap::<T>::attach(&handle, port, ECHO_CAPACITY)
             .map_err(|error| invalid(error.to_string()))?;
-        let echo = Echo::start(&self.session, keys::echo(&self.name, component, port), tap)?;
-        lock(&self.echoes).push(echo);
+        self.echoes.add(
+            &self.session,
+            &self.name,
+            keys::echo(&self.name, component, port),
+            (handle, port, tap),
+        )?;
         let schema = coolbot::schema::of::<T>().schema;
         lock(&self.echoed).insert((component.to_owned(), port.to_owned()), schema);
         Ok(())
@@ -373,7 +380,7 @@ impl Node {
 
 impl Drop for Node {
     fn drop(&mut self) {
-        lock(&self.echoes).clear();
+        self.echoes.stop();
         lock(&self.exposures).clear();
         self.control_stop.store(true, Ordering::Release);
         if let Some(thread) = self.control_thread.take() {

@@ -18,6 +18,9 @@
 //! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
 //! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
 //!
+//! Echoed packets reach their channels through the feed ([`FEED_TICK`]): Zenoh's
+//! callback queues them, a task on the WebSocket server's one thread logs them.
+//!
 //! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
 //! declared and no snapshot asked for it until a client subscribes, and both end when
 //! the last one unsubscribes.
@@ -26,6 +29,7 @@
 //! are unadvertised; when it comes back, they are advertised again (new ids).
 
 mod channels;
+mod feed;
 mod matching;
 pub mod params;
 pub mod wellknown;
@@ -46,10 +50,10 @@ use foxglove::{ChannelId, Context, RawChannel, WebSocketServer, WebSocketServerH
 use zenoh::Wait;
 
 use crate::ctl::Ctl;
-use crate::echo::Echoed;
 use crate::keys;
 
 pub use channels::{LOG_TOPIC, Monitoring};
+pub use feed::{FEED_CAPACITY, FEED_TICK};
 pub use matching::matches;
 
 /// The address `coolctl foxglove` serves on unless told otherwise.
@@ -199,11 +203,15 @@ impl ParameterHandler for Parameters {
 /// A running `coolctl foxglove`: the server, and the thread that follows the nodes.
 /// Dropping it stops both.
 pub struct Server {
+    /// The WebSocket server's runtime: one worker thread.
+    runtime: Option<tokio::runtime::Runtime>,
     handle: Option<Arc<WebSocketServerHandle>>,
     orders: Sender<Order>,
     thread: Option<JoinHandle<()>>,
     stop: Arc<std::sync::atomic::AtomicBool>,
     counts: Arc<Counts>,
+    /// The task that logs the echoed packets on their channels.
+    feed: Option<feed::Feed>,
 }
 
 impl std::fmt::Debug for Server {
@@ -212,11 +220,14 @@ impl std::fmt::Debug for Server {
     }
 }
 
-/// What the server has dropped: messages from the network that do not decode.
+/// What the server has dropped.
 #[derive(Debug, Default)]
 pub struct Counts {
     /// Echoed packets and monitoring events that did not decode (dropped, warned).
     pub undecoded: AtomicU64,
+    /// Echoed packets that found the server's queue full ([`FEED_CAPACITY`] waiting:
+    /// the server falls behind; dropped, warned).
+    pub overflowed: AtomicU64,
 }
 
 impl Server {
@@ -229,7 +240,14 @@ impl Server {
         options.check()?;
         let context = Context::new();
         let (orders, received) = crossbeam_channel::unbounded();
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("cool-net:ws")
+            .enable_all()
+            .build()
+            .map_err(FoxgloveError::Spawn)?;
         let handle = WebSocketServer::new()
+            .tokio_runtime(runtime.handle())
             .name("coolctl foxglove")
             .bind(options.bind.ip().to_string(), options.bind.port())
             .context(&context)
@@ -249,7 +267,9 @@ impl Server {
         let nodes = watch_nodes(&session, orders.clone())?;
         let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let counts = Arc::new(Counts::default());
+        let feed = feed::Feed::start(runtime.handle(), Arc::clone(&counts));
         let mut follower = Follower {
+            inlet: feed.inlet(),
             ctl,
             session,
             context,
@@ -270,11 +290,13 @@ impl Server {
             .spawn(move || follower.run(&received, &stopped))
             .map_err(FoxgloveError::Spawn)?;
         Ok(Server {
+            runtime: Some(runtime),
             handle: Some(handle),
             orders,
             thread: Some(thread),
             stop,
             counts,
+            feed: Some(feed),
         })
     }
 
@@ -297,9 +319,11 @@ impl Drop for Server {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+        drop(self.feed.take());
         if let Some(handle) = self.handle.take().and_then(Arc::into_inner) {
             drop(handle.stop());
         }
+        drop(self.runtime.take());
     }
 }
 
@@ -342,6 +366,8 @@ struct Follower {
     /// variables.
     known: BTreeMap<String, Vec<String>>,
     counts: Arc<Counts>,
+    /// Where the echoed packets queue for the feed's thread.
+    inlet: feed::Inlet,
     server: Arc<WebSocketServerHandle>,
     /// The parameters clients subscribed to, with the value last sent.
     watched: BTreeMap<String, Option<Parameter>>,
@@ -593,25 +619,15 @@ impl Follower {
         let counts = Arc::clone(&self.counts);
         let declared = match &served.source {
             Source::Port { key, transform } => {
-                let transform = transform.clone();
-                let topic = channel.topic().to_owned();
+                let route = Arc::new(feed::Route {
+                    channel: Arc::clone(&channel),
+                    transform: transform.clone(),
+                });
+                let inlet = self.inlet.clone();
                 Some(
                     self.session
                         .declare_subscriber(key.clone())
-                        .callback(move |sample| {
-                            let echoed = serde_json::from_slice::<Echoed>(&sample.payload().to_bytes())
-                                .map_err(|error| error.to_string())
-                                .and_then(|echoed| transform.apply(echoed.packet));
-                            match echoed {
-                                Ok(message) => channel.log(message.to_string().as_bytes()),
-                                Err(error) => {
-                                    counts.undecoded.fetch_add(1, Ordering::Relaxed);
-                                    coolbot::limited!(&topic, |held| tracing::warn!(
-                                        "an echoed packet for {topic} does not fit (dropped): {error}{held}"
-                                    ));
-                                }
-                            }
-                        })
+                        .callback(move |sample| inlet.push(&route, sample.payload().clone()))
                         .wait(),
                 )
             }

@@ -25,10 +25,12 @@
 //! a mapping does not fit (a field missing or not a number) is dropped, counted and
 //! warned about.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 use serde::Deserialize;
+use serde_json::value::RawValue;
 use serde_json::{Value, json};
 
 use super::channels::Stamp;
@@ -171,6 +173,30 @@ fn yaw_quaternion(yaw: f64) -> Value {
 }
 
 impl Transform {
+    /// The message of `packet` (its JSON as the node wrote it) as the channel sends
+    /// it, or why the packet does not fit. The packet itself is passed on as written,
+    /// and wrapped by writing around it; only the well-known messages read it.
+    pub(super) fn message<'p>(&self, packet: &'p RawValue) -> Result<Cow<'p, [u8]>, String> {
+        match self {
+            Transform::Raw { wrap: false } => Ok(Cow::Borrowed(packet.get().as_bytes())),
+            Transform::Raw { wrap: true } => {
+                const OPEN: &[u8] = b"{\"value\":";
+                let mut message = Vec::with_capacity(OPEN.len() + packet.get().len() + 1);
+                message.extend_from_slice(OPEN);
+                message.extend_from_slice(packet.get().as_bytes());
+                message.push(b'}');
+                Ok(Cow::Owned(message))
+            }
+            Transform::Pose(_) | Transform::Tf(_) | Transform::Scan(_) => {
+                let packet: Value =
+                    serde_json::from_str(packet.get()).map_err(|error| error.to_string())?;
+                serde_json::to_vec(&self.apply(packet)?)
+                    .map(Cow::Owned)
+                    .map_err(|error| error.to_string())
+            }
+        }
+    }
+
     /// The message of `packet`, or why the packet does not fit.
     pub(super) fn apply(&self, packet: Value) -> Result<Value, String> {
         match self {
@@ -413,6 +439,43 @@ mod tests {
             .apply(json!({ "x": 1.0, "theta": 0.0, "stamp": 1 }))
             .unwrap_err();
         assert_eq!(error, "no number at `at.y`");
+    }
+
+    fn raw(json: &str) -> Box<RawValue> {
+        RawValue::from_string(json.to_owned()).expect("JSON")
+    }
+
+    #[test]
+    fn a_packet_is_passed_on_as_written_and_wrapped_by_writing_around_it() {
+        // Not in serde_json's key order: written anew, it would come out sorted.
+        let packet = raw(r#"{"z":1,"a":[2.5,"x"]}"#);
+        let message = Transform::Raw { wrap: false }.message(&packet).unwrap();
+        assert!(matches!(message, Cow::Borrowed(_)), "copied");
+        assert_eq!(&*message, br#"{"z":1,"a":[2.5,"x"]}"#);
+        let number = raw("42");
+        let wrapped = Transform::Raw { wrap: true }.message(&number).unwrap();
+        assert_eq!(&*wrapped, br#"{"value":42}"#);
+        let wrapped = Transform::Raw { wrap: true }.message(&packet).unwrap();
+        let value: Value = serde_json::from_slice(&wrapped).expect("JSON");
+        assert_eq!(value, json!({ "value": { "z": 1, "a": [2.5, "x"] } }));
+    }
+
+    #[test]
+    fn a_mapped_packet_is_read_and_its_message_written() {
+        let packet = raw(r#"{"x":1.5,"at":{"y":-2.0},"theta":0.0,"stamp":3000000007}"#);
+        let message = Transform::Pose(pose_map()).message(&packet).unwrap();
+        let pose: Value = serde_json::from_slice(&message).expect("JSON");
+        assert_eq!(
+            pose,
+            Transform::Pose(pose_map())
+                .apply(serde_json::from_str(packet.get()).unwrap())
+                .unwrap()
+        );
+        let unfit = raw(r#"{"x":1.0,"theta":0.0,"stamp":1}"#);
+        assert_eq!(
+            Transform::Tf(pose_map()).message(&unfit).unwrap_err(),
+            "no number at `at.y`"
+        );
     }
 
     /// The example's layout draws what `coolctl foxglove --map map.toml` serves for
