@@ -13,7 +13,7 @@
 //! is gone (`--parent`).
 
 use std::io::{BufRead, BufReader, Read};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, mpsc};
@@ -124,6 +124,31 @@ impl Settings {
     }
 }
 
+/// Why the drivers process could not be started, or its node did not serve.
+#[derive(Debug, thiserror::Error)]
+pub enum DriversError {
+    /// The program did not start.
+    #[error("the drivers process `{program}` does not start")]
+    Spawn {
+        /// The program.
+        program: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A thread (the keeper, or one reading the process's output) did not start.
+    #[error("a thread for the drivers process does not start")]
+    Thread(#[source] std::io::Error),
+    /// The first process did not say that its node serves in time.
+    #[error("the drivers process did not serve within {within:?} ({how})")]
+    NotServing {
+        /// How long it was given.
+        within: Duration,
+        /// How it ended (it is killed if it had not).
+        how: String,
+    },
+}
+
 /// What became of the drivers processes of a run (the summary's line).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct DriversReport {
@@ -148,22 +173,20 @@ fn ending(status: ExitStatus) -> String {
 /// Starts a drivers process; its output goes to `lines`, each line prefixed, and the
 /// line that says it serves also to `serving`.
 fn spawn(
-    program: &PathBuf,
+    program: &Path,
     args: &[String],
     lines: &mpsc::Sender<String>,
     serving: Option<mpsc::Sender<()>>,
-) -> Result<Child, String> {
+) -> Result<Child, DriversError> {
     let mut child = Command::new(program)
         .args(args)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .map_err(|e| {
-            format!(
-                "the drivers process `{}` does not start: {e}",
-                program.display()
-            )
+        .map_err(|source| DriversError::Spawn {
+            program: program.to_owned(),
+            source,
         })?;
     let pid = child.id();
     let forward = |stream: Box<dyn Read + Send>, serving: Option<mpsc::Sender<()>>| {
@@ -191,7 +214,7 @@ fn spawn(
         .map(|s| Box::new(s) as Box<dyn Read + Send>);
     for (stream, serving) in [(stdout, serving), (stderr, None)] {
         if let Some(stream) = stream {
-            forward(stream, serving).map_err(|e| format!("a thread for its output: {e}"))?;
+            forward(stream, serving).map_err(DriversError::Thread)?;
         }
     }
     let _ = lines.send(format!("drivers process {pid} started (node `{NODE}`)"));
@@ -215,7 +238,7 @@ impl Keeper {
         settings: Settings,
         clock: impl Fn() -> Duration + Send + 'static,
         lines: mpsc::Sender<String>,
-    ) -> Result<Keeper, String> {
+    ) -> Result<Keeper, DriversError> {
         let (serving, served) = mpsc::channel();
         let program = drivers.program.clone();
         let mut child = spawn(&program, &settings.args(clock()), &lines, Some(serving))?;
@@ -228,14 +251,14 @@ impl Keeper {
             if ended.is_some() || Instant::now() >= deadline {
                 let _ = child.kill();
                 let status = child.wait().map(ending).unwrap_or_default();
-                return Err(format!(
-                    "the drivers process did not serve within {FIRST_START:?} ({})",
-                    if ended.is_some() {
+                return Err(DriversError::NotServing {
+                    within: FIRST_START,
+                    how: if ended.is_some() {
                         status
                     } else {
                         "killed".to_owned()
-                    }
-                ));
+                    },
+                });
             }
         }
         let stop = Arc::new(AtomicBool::new(false));
@@ -243,7 +266,7 @@ impl Keeper {
         let thread = std::thread::Builder::new()
             .name("drivers-keeper".to_owned())
             .spawn(move || keep(child, &program, &settings, &clock, &lines, &stopping))
-            .map_err(|e| format!("the drivers process's keeper: {e}"))?;
+            .map_err(DriversError::Thread)?;
         Ok(Keeper {
             stop,
             thread: Some(thread),
@@ -274,7 +297,7 @@ impl Drop for Keeper {
 /// when told.
 fn keep(
     mut child: Child,
-    program: &PathBuf,
+    program: &Path,
     settings: &Settings,
     clock: &dyn Fn() -> Duration,
     lines: &mpsc::Sender<String>,
@@ -314,7 +337,7 @@ fn keep(
                             break;
                         }
                         Err(error) => {
-                            let _ = lines.send(error);
+                            let _ = lines.send(coolbot::Chain(&error).to_string());
                             std::thread::sleep(RESTART_PAUSE);
                         }
                     }

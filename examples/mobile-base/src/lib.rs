@@ -947,12 +947,10 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                 load: options.load,
             };
             let clock = Arc::clone(&platform);
-            Some(drivers::Keeper::start(
-                drivers,
-                settings,
-                move || clock.uptime(),
-                drivers_lines,
-            )?)
+            Some(
+                drivers::Keeper::start(drivers, settings, move || clock.uptime(), drivers_lines)
+                    .map_err(text)?,
+            )
         }
         _ => None,
     };

@@ -299,7 +299,8 @@ fn text(error: impl std::error::Error) -> String {
 }
 
 impl Robot {
-    /// [`Robot::ready`], then [`Robot::run`].
+    /// Builds the robot, starts it, applies `setup` through the control ports and sets
+    /// it running (`ready`, then `run`).
     pub fn start(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
         let robot = Robot::ready(platform, setup)?;
         if let Err(error) = robot.run() {
@@ -313,7 +314,7 @@ impl Robot {
     /// [`Ranges::Drivers`]), starts it (every instance at every level starts; the
     /// substitute stays `ready`) and applies `setup` through the control ports: the
     /// robot is `ready`, nothing moves yet.
-    pub fn ready(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
+    pub(crate) fn ready(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
         let parts = RobotParts {
             base: BaseParts {
                 platform: Arc::clone(platform),
@@ -386,7 +387,7 @@ impl Robot {
     }
 
     /// Sets the robot running.
-    pub fn run(&self) -> Result<(), String> {
+    pub(crate) fn run(&self) -> Result<(), String> {
         self.robot
             .command(Command::SetState(Controllable::Running))
             .map_err(|rejected| format!("{}: {rejected}", self.robot.name()))
