@@ -926,6 +926,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     // opened first: its placer puts the wanderer (`on "station"`) on its node, or the
     // range server (`on "drivers"`, `--drivers`) on the drivers process, which is
     // started next and serves before the robot is built.
+    if cfg!(not(feature = "network")) && options.drivers.is_some() {
+        return Err("`--drivers`: this build has no network support; build the example with \
+             `--features network` (cargo run --release -p mobile-base --features network -- --drivers)"
+            .to_owned());
+    }
     let node_options = match &options.drivers {
         Some(_) => Some(robot_node(options)?),
         None => options.node.clone(),
