@@ -19,7 +19,7 @@ use std::process::{Command, Stdio};
 use askama::Template;
 
 use crate::layout::{ITEM_BEGIN, ITEM_END, ITEM_END_FORMAT, Layout};
-use crate::{ident, ir, manifest};
+use crate::{ir, manifest};
 
 /// Who owns an emitted file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,6 +123,7 @@ impl<'a> GeneratedMod<'a> {
 struct TypesRs<'a> {
     krate: &'a ir::Crate,
     types: &'a ir::Types,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -167,12 +168,14 @@ struct UserComponent<'a> {
 #[template(path = "user_compound.rs", escape = "none")]
 struct UserCompound<'a> {
     c: &'a ir::Compound,
+    l: Layout,
 }
 
 #[derive(Template)]
 #[template(path = "user_converters.rs", escape = "none")]
 struct UserConverters<'a> {
     methods: &'a [ir::Method],
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -521,15 +524,14 @@ fn render_modules(krate: &ir::Crate) -> Vec<(String, String, bool)> {
 /// [`render_modules`] of one [`Part`].
 fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bool)> {
     let mut modules = Vec::new();
-    if part.wants(false) {
-        modules.push((
-            krate.types.module.clone(),
-            render(&TypesRs {
-                krate,
-                types: &krate.types,
-            }),
-            false,
-        ));
+    if part.wants(true) {
+        let template = TypesRs {
+            krate,
+            types: &krate.types,
+            l: Layout::default(),
+        };
+        let (text, laid_out) = render_laid_out(&template, &template.l);
+        modules.push((krate.types.module.clone(), text, laid_out));
     }
     if part.wants(true) {
         let atomics = par_map(&krate.atomics, |c| {
@@ -800,38 +802,44 @@ pub(crate) fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFi
             push(path, text, FileKind::User, laid_out);
         }
     }
-    if part.wants(false) {
+    if part.wants(true) {
         for c in &krate.compounds {
-            push(
-                user_path(&c.module),
-                render(&UserCompound { c }),
-                FileKind::User,
-                false,
-            );
+            let template = UserCompound {
+                c,
+                l: Layout::default(),
+            };
+            let (text, laid_out) = render_laid_out(&template, &template.l);
+            push(user_path(&c.module), text, FileKind::User, laid_out);
         }
     }
-    if !krate.types.converters.is_empty() && part.wants(false) {
+    if !krate.types.converters.is_empty() && part.wants(true) {
         let methods = converter_methods(krate);
+        let template = UserConverters {
+            methods: &methods,
+            l: Layout::default(),
+        };
+        let (text, laid_out) = render_laid_out(&template, &template.l);
         push(
             PathBuf::from("src/converters.rs"),
-            render(&UserConverters { methods: &methods }),
+            text,
             FileKind::User,
-            false,
+            laid_out,
         );
     }
-    if part.wants(false) {
+    if part.wants(true) {
+        let (main, laid_out) = render_starter_main(krate);
         push(
             PathBuf::from("src/main.rs"),
-            render_starter_main(krate),
+            main,
             FileKind::Starter,
-            false,
+            laid_out,
         );
-        if let Some(tests) = render_starter_tests(krate) {
+        if let Some((tests, laid_out)) = render_starter_tests(krate) {
             push(
                 PathBuf::from("tests/components.rs"),
                 tests,
                 FileKind::Starter,
-                false,
+                laid_out,
             );
         }
     }
@@ -953,75 +961,9 @@ struct StarterComponent<'a> {
 
 #[derive(Template)]
 #[template(path = "starter_main.rs", escape = "none")]
-struct StarterMain {
-    /// One expression per component to run: its `coolbot::Component`.
-    roots: Vec<String>,
-    /// One statement per atomic component type: its registration with the network
-    /// layer's `registry`.
-    registrations: Vec<String>,
-}
-
-impl StarterMain {
-    /// The components no compound of `krate` instantiates, each built from the
-    /// user's default behaviours (compounds with `?`).
-    fn new(krate: &ir::Crate) -> StarterMain {
-        let instantiated: std::collections::BTreeSet<&str> = krate
-            .compounds
-            .iter()
-            .flat_map(|c| c.instances.iter().map(|i| i.component.as_str()))
-            .collect();
-        let lib = &krate.lib_name;
-        let mut roots = Vec::new();
-        let atomics = krate.atomics.iter().map(|c| {
-            let module = &c.module;
-            format!(
-                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component(name, ::{lib}::{module}::{}::default()) }})",
-                c.user_struct
-            )
-        });
-        let compounds = krate.compounds.iter().map(|c| {
-            let module = &c.module;
-            let generics = if c.uses_converters {
-                format!("::<::{lib}::converters::Convert>")
-            } else {
-                String::new()
-            };
-            format!(
-                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component{generics}(name, ::{lib}::{module}::{}::default()) }})",
-                c.user_struct
-            )
-        });
-        let registrations = atomics.chain(compounds).collect();
-        for c in &krate.atomics {
-            if !instantiated.contains(c.type_name.as_str()) {
-                let module = &c.module;
-                roots.push(format!(
-                    "::{lib}::generated::{module}::component({}, ::{lib}::{module}::{}::default())",
-                    ident::string_literal(module.trim_start_matches("r#")),
-                    c.user_struct
-                ));
-            }
-        }
-        for c in &krate.compounds {
-            if !instantiated.contains(c.type_name.as_str()) {
-                let module = &c.module;
-                let generics = if c.uses_converters {
-                    format!("::<::{lib}::converters::Convert>")
-                } else {
-                    String::new()
-                };
-                roots.push(format!(
-                    "::{lib}::generated::{module}::component{generics}({}, ::{lib}::{module}::{}::default())?",
-                    ident::string_literal(module.trim_start_matches("r#")),
-                    c.user_struct
-                ));
-            }
-        }
-        StarterMain {
-            roots,
-            registrations,
-        }
-    }
+struct StarterMain<'a> {
+    starter: &'a ir::Starter,
+    l: Layout,
 }
 
 /// The filled-in user file of the `coolc new` starter component.
@@ -1048,51 +990,41 @@ pub(crate) fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
 #[derive(Template)]
 #[template(path = "starter_tests.rs", escape = "none")]
 struct StarterTests<'a> {
-    lib: &'a str,
-    tests: Vec<StarterTestOf<'a>>,
+    tests: &'a [ir::StarterTest],
+    l: Layout,
 }
 
-/// One atomic component's test in [`StarterTests`].
-struct StarterTestOf<'a> {
-    /// The test's name: the module without a raw identifier's `r#`.
-    test: &'a str,
-    module: &'a str,
-    user_struct: &'a str,
-    type_name: &'a str,
-}
-
-/// The `tests/components.rs` written into a crate being created, as its template
-/// renders it: one test per atomic component, which runs it in its generated harness
-/// for a second of virtual time from its stubs; `None` when the crate has no atomic
-/// component.
-fn render_starter_tests(krate: &ir::Crate) -> Option<String> {
-    let tests: Vec<StarterTestOf<'_>> = krate
-        .atomics
-        .iter()
-        .map(|c| StarterTestOf {
-            test: c.module.trim_start_matches("r#"),
-            module: &c.module,
-            user_struct: &c.user_struct,
-            type_name: &c.type_name,
-        })
-        .collect();
+/// The `tests/components.rs` written into a crate being created, and whether it is
+/// in rustfmt's layout: one test per atomic component, which runs it in its
+/// generated harness for a second of virtual time from its stubs; `None` when the
+/// crate has no atomic component.
+fn render_starter_tests(krate: &ir::Crate) -> Option<(String, bool)> {
+    let tests = &krate.starter.tests;
     (!tests.is_empty()).then(|| {
-        render(&StarterTests {
-            lib: &krate.lib_name,
+        let template = StarterTests {
             tests,
-        })
+            l: Layout::default(),
+        };
+        render_laid_out(&template, &template.l)
     })
 }
 
-/// The `src/main.rs` of a new crate as its template renders it: runs every component
-/// no compound instantiates, for two seconds.
-fn render_starter_main(krate: &ir::Crate) -> String {
-    render(&StarterMain::new(krate))
+/// The `src/main.rs` of a new crate, and whether it is in rustfmt's layout: runs
+/// every component no compound instantiates, for two seconds.
+fn render_starter_main(krate: &ir::Crate) -> (String, bool) {
+    let template = StarterMain {
+        starter: &krate.starter,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
 /// `render_starter_main`, formatted like a user file.
 pub fn starter_main(krate: &ir::Crate) -> String {
-    format_user(&render_starter_main(krate))
+    match render_starter_main(krate) {
+        (text, true) => text,
+        (text, false) => format_user(&text),
+    }
 }
 
 #[cfg(test)]

@@ -416,6 +416,35 @@ pub struct Crate {
     pub atomics: Vec<Atomic>,
     /// Compound components, in source order.
     pub(crate) compounds: Vec<Compound>,
+    /// What the compile that creates the crate writes into its starter files.
+    pub(crate) starter: Starter,
+}
+
+/// The code of the starter files (`src/main.rs`, `tests/components.rs`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Starter {
+    /// One expression per component no compound instantiates: its
+    /// `coolbot::Component` (a compound's ends in `?`), atomic ones first.
+    pub(crate) roots: Vec<Code>,
+    /// One registration call per component type, with the network layer's
+    /// `registry`.
+    pub(crate) registrations: Vec<Code>,
+    /// One test per atomic component.
+    pub(crate) tests: Vec<StarterTest>,
+}
+
+/// The starter test of one atomic component: it runs in its generated harness for
+/// a second of virtual time from its stubs.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct StarterTest {
+    /// The test function's name.
+    pub(crate) name: String,
+    /// The user's behaviour, by default.
+    pub(crate) behavior: Code,
+    /// The running harness of `behavior`.
+    pub(crate) harness: Code,
+    /// The assertion that the component is in no error.
+    pub(crate) check: Code,
 }
 
 impl Crate {
@@ -661,6 +690,20 @@ pub(crate) struct Converter {
     pub(crate) user_to: String,
     /// The stub body of the user implementation, one line each.
     pub(crate) stub_body: Vec<StubLine>,
+}
+
+impl Converter {
+    /// Its method's signature in the `Converters` trait.
+    pub(crate) fn signature(&self) -> String {
+        format!("fn {}(from: &{}) -> {}", self.method, self.from, self.to)
+    }
+}
+
+impl RosConstant {
+    /// Its declaration up to the `=` before its value.
+    pub(crate) fn lhs(&self) -> String {
+        format!("pub const {}: {} =", self.name, self.ty)
+    }
 }
 
 /// An atomic component's generated module.
@@ -1162,6 +1205,14 @@ impl Compound {
     pub(crate) fn vars_derive_default(&self) -> bool {
         let fields: Vec<Field> = self.vars.iter().map(|v| v.field.clone()).collect();
         derive_default(&fields)
+    }
+
+    /// Whether the builder's chain carries comments (overrides of an instance's
+    /// mapped variables that are not applied).
+    pub(crate) fn builder_notes(&self) -> bool {
+        self.instances
+            .iter()
+            .any(|i| i.build.is_some() && !i.unapplied.is_empty())
     }
 
     /// Whether any own variable is controllable.

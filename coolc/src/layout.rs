@@ -25,6 +25,8 @@ use std::cell::Cell;
 
 use crate::ir::{Code, StubLine};
 
+pub(crate) mod expr;
+
 /// rustfmt's `max_width`.
 const MAX_WIDTH: usize = 100;
 /// rustfmt's `struct_lit_width` (the default "small heuristics").
@@ -250,6 +252,127 @@ impl Layout {
         self.line(4, &format!("#[serde(with = \"{adapter}\")]"))
     }
 
+    /// `#[serde(with = "adapter")]` at `indent`.
+    pub fn serde_with_at(&self, indent: usize, adapter: &str) -> String {
+        self.line(indent, &format!("#[serde(with = \"{adapter}\")]"))
+    }
+
+    /// `#[serde(rename = "name")]` at `indent`.
+    pub fn serde_rename(&self, indent: usize, name: &str) -> String {
+        self.line(indent, &format!("#[serde(rename = \"{name}\")]"))
+    }
+
+    /// A packet field's declaration `pub name: ty,` at `indent`.
+    pub fn field_decl(&self, indent: usize, f: &crate::ir::Field) -> String {
+        self.line(indent, &format!("pub {}: {},", f.name, f.ty))
+    }
+
+    /// The indentation `indent` before a fixed piece of a template.
+    pub fn open(&self, indent: &usize) -> String {
+        spaces(*indent)
+    }
+
+    /// Doc-comment lines at `indent`, each followed by a newline (nothing when there
+    /// are none): what comes before an item's attributes.
+    pub fn doc_lines(&self, lines: &[String], indent: usize) -> String {
+        let mut out = self.doc(lines, indent, "///");
+        if !out.is_empty() {
+            out.remove(0);
+            out.push('\n');
+        }
+        out
+    }
+
+    /// `#[derive(items)]` at `indent` (rustfmt's `format_derive`): on one line when
+    /// it fits, else its items on one line of their own, else one per line.
+    pub fn derive(&self, indent: usize, items: &[&str]) -> String {
+        let joined = items.join(", ");
+        // The list is laid out with a trailing comma, removed on one line.
+        let listed = joined.len() + 1;
+        let argument_width = MAX_WIDTH.saturating_sub(indent + 4);
+        let one_line_budget = MAX_WIDTH.saturating_sub(indent + "#[derive()]".len() + 3);
+        let pad = spaces(indent);
+        if joined.len() <= argument_width && listed <= one_line_budget {
+            return self.line(indent, &format!("#[derive({joined})]"));
+        }
+        let inner = spaces(indent + 4);
+        if joined.len() <= argument_width {
+            return format!("{pad}#[derive(\n{inner}{joined},\n{pad})]");
+        }
+        let mut out = format!("{pad}#[derive(");
+        for item in items {
+            out.push('\n');
+            out.push_str(&self.line(indent + 4, &format!("{item},")));
+        }
+        out.push('\n');
+        out.push_str(&pad);
+        out.push_str(")]");
+        out
+    }
+
+    /// A packet's derives at `indent`.
+    pub fn packet_derive(&self, p: &crate::ir::Packet, indent: &usize) -> String {
+        let mut items = vec![
+            "Clone",
+            "Debug",
+            "PartialEq",
+            "::serde::Serialize",
+            "::serde::Deserialize",
+        ];
+        if p.derives_default() {
+            items.push("Default");
+        }
+        self.derive(*indent, &items)
+    }
+
+    /// An enum's derives.
+    pub fn enum_derive(&self, e: &crate::ir::Enum) -> String {
+        let mut items = vec![
+            "Clone",
+            "Copy",
+            "Debug",
+            "PartialEq",
+            "Eq",
+            "Hash",
+            "PartialOrd",
+            "Ord",
+            "::serde::Serialize",
+            "::serde::Deserialize",
+        ];
+        if !e.variants.is_empty() {
+            items.push("Default");
+        }
+        self.derive(0, &items)
+    }
+
+    /// `pub type Name = path;` of an extern packet or a ROS import.
+    pub fn type_alias(&self, e: &crate::ir::Extern) -> String {
+        self.line(0, &format!("pub type {} = {};", e.name, e.path))
+    }
+
+    /// `Self { field: default, ... }`, the body of a packet's `Default` impl at
+    /// `indent`.
+    pub fn default_body(&self, fields: &[crate::ir::Field], indent: usize) -> String {
+        let fields: Vec<(String, Code)> = fields
+            .iter()
+            .map(|f| (f.name.clone(), f.default.clone()))
+            .collect();
+        self.statement(indent, &Code::Struct("Self".to_owned(), fields), "")
+    }
+
+    /// `lhs value;` at `indent`, `lhs` ending in `=` (a constant), `value` a
+    /// literal.
+    pub fn const_item(&self, indent: usize, lhs: &str, value: &str) -> String {
+        let printer = expr::Printer::default();
+        match printer.assign(indent, lhs, &Code::atom(value)) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                self.fail();
+                format!("{}{lhs} {value};", spaces(indent))
+            }
+        }
+    }
+
     /// A match arm `pattern => body,` at `indent`, `body` a short expression.
     pub fn arm(&self, indent: usize, pattern: &str, body: &str) -> String {
         if body.len() > CHAIN_WIDTH {
@@ -323,10 +446,9 @@ impl Layout {
     fn body_line(&self, line: &StubLine) -> String {
         match line {
             StubLine::Comment(text) => format!("{}{text}", spaces(8)),
-            // A value with a shape these rules do not cover is short: one line.
-            StubLine::Value(code) if Self::has_other(code) => self.short(8, &code.to_string()),
-            StubLine::Value(code) => format!("{}{}", spaces(8), self.node(code, 8, 8, 0, false)),
-            StubLine::Statement(_) | StubLine::Let(..) => self.short(8, &line.to_string()),
+            StubLine::Value(code) => self.statement(8, code, ""),
+            StubLine::Let(name, value) => self.let_statement(8, name, None, value),
+            StubLine::Statement(_) => self.short(8, &line.to_string()),
         }
     }
 
@@ -761,6 +883,136 @@ impl Layout {
         out
     }
 
+    /// `code` then `tail` as a statement (`tail` is `;`) or a block's tail
+    /// expression (`tail` empty) at `indent`, in rustfmt's layout of expressions
+    /// (`expr`); left to the formatter when that layout is not certain.
+    pub fn statement(&self, indent: usize, code: &Code, tail: &str) -> String {
+        let printer = expr::Printer::default();
+        match printer.statement(indent, code, tail) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                if std::env::var_os("COOLC_LAYOUT_DEBUG").is_some() {
+                    eprintln!("coolc: not laid out: {code}{tail}");
+                }
+                self.fail();
+                format!("{}{code}{tail}", spaces(indent))
+            }
+        }
+    }
+
+    /// `let pattern: ty = value;` at `indent` (see [`Layout::statement`]).
+    pub fn let_statement(
+        &self,
+        indent: usize,
+        pattern: &str,
+        ty: Option<&str>,
+        value: &Code,
+    ) -> String {
+        let printer = expr::Printer::default();
+        match printer.let_statement(indent, pattern, ty, value) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                self.fail();
+                let ty = ty.map_or(String::new(), |ty| format!(": {ty}"));
+                format!("{}let {pattern}{ty} = {value};", spaces(indent))
+            }
+        }
+    }
+
+    /// `let handles: [coolbot::Handle; n] = [...];` of the starter `main`: each of
+    /// `roots` added to the system, its error mapped to a message.
+    pub fn handles(&self, roots: &[Code]) -> String {
+        let items = roots
+            .iter()
+            .map(|root| {
+                let message = Code::call(
+                    "format!",
+                    vec![
+                        Code::string("cannot add a component: {}"),
+                        Code::call("coolbot::Chain", vec![Code::atom("&e")]),
+                    ],
+                );
+                Code::atom("system")
+                    .method("add", vec![root.clone()])
+                    .method("map_err", vec![Code::closure("e", message)])
+                    .try_op()
+            })
+            .collect();
+        let ty = format!("[coolbot::Handle; {}]", roots.len());
+        self.let_statement(4, "handles", Some(&ty), &Code::List("[".to_owned(), items))
+    }
+
+    /// The first line of test function `name` (no parameters).
+    pub fn test_fn(&self, name: &str) -> String {
+        self.line(0, &format!("fn {name}() {{"))
+    }
+
+    /// The body of a rule's function: its condition.
+    pub fn rule_body(&self, r: &crate::ir::Rule) -> String {
+        self.statement(4, &r.expr, "")
+    }
+
+    /// The tail of the compound's `builder_with`: the runtime's builder and its
+    /// chain of steps (instances, connections, policies, rules), in `Ok(...)`.
+    pub fn builder_chain(&self, c: &crate::ir::Compound) -> String {
+        let mut chain = Code::call(
+            "::coolbot::CompoundBuilder::new",
+            vec![Code::atom("name"), Code::atom("supervisor")],
+        );
+        for step in c.builder_steps() {
+            chain = match step {
+                crate::ir::BuilderStep::Instance(i, build) => match &i.node {
+                    Some(node) => chain.method(
+                        "instance_on",
+                        vec![Code::atom(format!("\"{node}\"")), build.clone()],
+                    ),
+                    None => chain.method("instance", vec![build.clone()]),
+                },
+                crate::ir::BuilderStep::Connect(k) => {
+                    let Code::Call(method, args) = Self::connect_call(k) else {
+                        unreachable!("a connection is a call");
+                    };
+                    chain.method(method, args)
+                }
+                crate::ir::BuilderStep::Step(Code::Call(method, args)) => {
+                    chain.method(method.as_str(), args.clone())
+                }
+                crate::ir::BuilderStep::Step(other) => {
+                    self.fail();
+                    chain.method(other.to_string(), Vec::new())
+                }
+                crate::ir::BuilderStep::Rule(r) => chain.method(
+                    "rule",
+                    vec![
+                        Code::atom(r.state.clone()),
+                        Code::atom(r.target.clone()),
+                        r.reads.clone(),
+                        r.call.clone(),
+                    ],
+                ),
+            };
+        }
+        self.statement(4, &Code::call("Ok", vec![chain]), "")
+    }
+
+    /// `connect(from, to)` or `connect_via(from, to, converter)`.
+    fn connect_call(k: &crate::ir::Connection) -> Code {
+        let mut args = vec![
+            Code::atom(format!("\"{}\"", k.from)),
+            Code::atom(format!("\"{}\"", k.to)),
+        ];
+        let method = match &k.via {
+            Some(method) => {
+                args.push(Code::atom(format!(
+                    "<C as super::types::Converters>::{method}"
+                )));
+                "connect_via"
+            }
+            None => "connect",
+        };
+        Code::call(method, args)
+    }
+
     /// `.instance(build)` or `.instance_on("node", build)` of the builder's chain.
     pub fn instance_step(&self, i: &crate::ir::Instance, build: &Code, last: &bool) -> String {
         let step = match &i.node {
@@ -776,20 +1028,7 @@ impl Layout {
     /// `.connect(from, to)` or `.connect_via(from, to, converter)` of the builder's
     /// chain.
     pub fn connect_step(&self, k: &crate::ir::Connection, last: &bool) -> String {
-        let mut args = vec![
-            Code::atom(format!("\"{}\"", k.from)),
-            Code::atom(format!("\"{}\"", k.to)),
-        ];
-        let method = match &k.via {
-            Some(method) => {
-                args.push(Code::atom(format!(
-                    "<C as super::types::Converters>::{method}"
-                )));
-                "connect_via"
-            }
-            None => "connect",
-        };
-        self.builder_step(&Code::call(method, args), last)
+        self.builder_step(&Self::connect_call(k), last)
     }
 
     /// `.rule(state, target, reads, test)` of the builder's chain.

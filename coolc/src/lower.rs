@@ -25,6 +25,7 @@ mod automaton;
 mod compound;
 pub(crate) mod harness;
 mod ros;
+mod starter;
 
 /// What the caller decides about the emitted crate.
 #[derive(Clone, Debug)]
@@ -487,7 +488,7 @@ impl<'a> Lowerer<'a> {
             }
         }
         let package = package_name(&options.package);
-        ir::Crate {
+        let mut krate = ir::Crate {
             lib_name: package.replace('-', "_"),
             package,
             runtime: options.runtime.clone(),
@@ -498,7 +499,10 @@ impl<'a> Lowerer<'a> {
             types,
             atomics,
             compounds,
-        }
+            starter: ir::Starter::default(),
+        };
+        krate.starter = starter::starter(&krate);
+        krate
     }
 }
 
