@@ -139,7 +139,7 @@ impl {{ may_enum }} {
 /// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
 /// adds the mapped variables).
 {{- l.item_doc(&c.notes) }}
-{{ l.compound_spec(c) }}
+{{ l.spec(&c.spec) }}
 
 /// What a supervisor section sees.
 pub struct Cx<'a> {

@@ -231,6 +231,21 @@ fn pretty(code: &str) -> String {
     out
 }
 
+/// `text` with each of its items to format (see `Layout::begin_item`) printed by
+/// `prettyplease` on its own, its markers removed, the rest kept as it is.
+fn pretty_items(text: &str) -> String {
+    let lines: Vec<&str> = text.split('\n').collect();
+    let items: Vec<String> = items_to_format(text)
+        .into_iter()
+        .map(|range| prettyplease::unparse(&check_parses(&lines[range].join("\n"))))
+        .collect();
+    let printed = items.join(&format!("\n{ITEM_BOUNDARY}\n"));
+    match with_formatted_items(text, &printed) {
+        Some(text) => text,
+        None => panic!("coolc bug: the items of a file do not match their printing"),
+    }
+}
+
 fn rustfmt_program() -> std::ffi::OsString {
     std::env::var_os("RUSTFMT").unwrap_or_else(|| "rustfmt".into())
 }
@@ -521,50 +536,64 @@ fn render_modules(krate: &ir::Crate) -> Vec<(String, String, bool)> {
     render_modules_part(krate, Part::All)
 }
 
-/// [`render_modules`] of one [`Part`].
+/// [`render_modules`] of one [`Part`] (all of them are in rustfmt's layout but
+/// where [`Layout`] says otherwise).
 fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bool)> {
-    let mut modules = Vec::new();
-    if part.wants(true) {
-        let template = TypesRs {
-            krate,
-            types: &krate.types,
-            l: Layout::default(),
+    if !part.wants(true) {
+        return Vec::new();
+    }
+    let mut jobs = vec![Job::Types];
+    jobs.extend(krate.atomics.iter().map(Job::Atomic));
+    jobs.extend(krate.compounds.iter().map(Job::Compound));
+    par_map(&jobs, |job| {
+        let (module, (text, laid_out)) = match *job {
+            Job::Types => (&krate.types.module, render_types(krate)),
+            Job::Atomic(c) => (&c.module, render_atomic(krate, c)),
+            Job::Compound(c) => (&c.module, render_compound(krate, c)),
+            _ => unreachable!("only modules are listed"),
         };
-        let (text, laid_out) = render_laid_out(&template, &template.l);
-        modules.push((krate.types.module.clone(), text, laid_out));
-    }
-    if part.wants(true) {
-        let atomics = par_map(&krate.atomics, |c| {
-            let template = AtomicRs {
-                krate,
-                c,
-                l: Layout::default(),
-            };
-            let (mut text, laid_out) = render_laid_out(&template, &template.l);
-            let harness = HarnessRs {
-                c,
-                h: crate::lower::harness::harness(c),
-                l: Layout::default(),
-            };
-            let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
-            text.push('\n');
-            text.push_str(&harness_text);
-            (c.module.clone(), text, laid_out && harness_laid_out)
-        });
-        modules.extend(atomics);
-    }
-    if part.wants(true) {
-        for c in &krate.compounds {
-            let template = CompoundRs {
-                krate,
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            modules.push((c.module.clone(), text, laid_out));
-        }
-    }
-    modules
+        (module.clone(), text, laid_out)
+    })
+}
+
+/// The types module and whether it is in rustfmt's layout.
+fn render_types(krate: &ir::Crate) -> (String, bool) {
+    let template = TypesRs {
+        krate,
+        types: &krate.types,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
+}
+
+/// An atomic component's module, its typed harness appended, and whether it is in
+/// rustfmt's layout.
+fn render_atomic(krate: &ir::Crate, c: &ir::Atomic) -> (String, bool) {
+    let template = AtomicRs {
+        krate,
+        c,
+        l: Layout::default(),
+    };
+    let (mut text, laid_out) = render_laid_out(&template, &template.l);
+    let harness = HarnessRs {
+        c,
+        h: crate::lower::harness::harness(c),
+        l: Layout::default(),
+    };
+    let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
+    text.push('\n');
+    text.push_str(&harness_text);
+    (text, laid_out && harness_laid_out)
+}
+
+/// A compound component's module and whether it is in rustfmt's layout.
+fn render_compound(krate: &ir::Crate, c: &ir::Compound) -> (String, bool) {
+    let template = CompoundRs {
+        krate,
+        c,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
 /// Every generated module in one file, for `include!` from `OUT_DIR` (the
@@ -742,108 +771,158 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
 
 /// [`render_crate`] of one [`Part`] (the files in the same order).
 pub(crate) fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
-    let mut files: Vec<(EmittedFile, bool)> = Vec::new();
-    let mut push = |path: PathBuf, contents: String, kind: FileKind, laid_out: bool| {
-        files.push((
-            EmittedFile {
-                path,
-                contents,
-                kind,
-            },
-            laid_out,
-        ));
-    };
+    // Only `build.rs` is written for the formatter.
+    let mut jobs = Vec::new();
     if part.wants(true) {
-        push(
-            PathBuf::from("Cargo.toml"),
-            cargo_toml(krate),
-            FileKind::Manifest,
-            true,
-        );
+        jobs.push(Job::Manifest);
     }
     if !krate.system_libs.is_empty() && part.wants(false) {
-        push(
-            PathBuf::from("build.rs"),
-            render(&BuildRs { krate }),
-            FileKind::Generated,
-            false,
-        );
+        jobs.push(Job::BuildRs);
     }
     if part.wants(true) {
-        let (generated_mod, certain) = GeneratedMod::new(krate);
-        push(
-            PathBuf::from("src/generated/mod.rs"),
-            render(&generated_mod),
-            FileKind::Generated,
-            certain,
-        );
-    }
-    for (module, text, laid_out) in render_modules_part(krate, part) {
-        let path = format!("src/generated/{}.rs", module.trim_start_matches("r#"));
-        push(PathBuf::from(path), text, FileKind::Generated, laid_out);
-    }
-    if part.wants(true) {
-        let (modules, certain) = rustfmt_module_order(user_modules(krate));
-        push(
-            PathBuf::from("src/lib.rs"),
-            render(&UserLib { modules: &modules }),
-            FileKind::User,
-            certain,
-        );
-        let users = par_map(&krate.atomics, |c| {
-            let template = UserComponent {
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            (user_path(&c.module), text, laid_out)
-        });
-        for (path, text, laid_out) in users {
-            push(path, text, FileKind::User, laid_out);
+        jobs.push(Job::GeneratedMod);
+        jobs.push(Job::Types);
+        jobs.extend(krate.atomics.iter().map(Job::Atomic));
+        jobs.extend(krate.compounds.iter().map(Job::Compound));
+        jobs.push(Job::UserLib);
+        jobs.extend(krate.atomics.iter().map(Job::UserAtomic));
+        jobs.extend(krate.compounds.iter().map(Job::UserCompound));
+        if !krate.types.converters.is_empty() {
+            jobs.push(Job::Converters);
+        }
+        jobs.push(Job::Main);
+        if !krate.starter.tests.is_empty() {
+            jobs.push(Job::Tests);
         }
     }
-    if part.wants(true) {
-        for c in &krate.compounds {
-            let template = UserCompound {
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            push(user_path(&c.module), text, FileKind::User, laid_out);
-        }
-    }
-    if !krate.types.converters.is_empty() && part.wants(true) {
-        let methods = converter_methods(krate);
-        let template = UserConverters {
-            methods: &methods,
-            l: Layout::default(),
-        };
-        let (text, laid_out) = render_laid_out(&template, &template.l);
-        push(
-            PathBuf::from("src/converters.rs"),
-            text,
-            FileKind::User,
-            laid_out,
-        );
-    }
-    if part.wants(true) {
-        let (main, laid_out) = render_starter_main(krate);
-        push(
-            PathBuf::from("src/main.rs"),
-            main,
-            FileKind::Starter,
-            laid_out,
-        );
-        if let Some((tests, laid_out)) = render_starter_tests(krate) {
-            push(
-                PathBuf::from("tests/components.rs"),
-                tests,
-                FileKind::Starter,
+    // The files are independent: rendered on every core.
+    par_map(&jobs, |job| job.render(krate)).into_iter().unzip()
+}
+
+/// One file of a crate to render.
+#[derive(Clone, Copy, Debug)]
+enum Job<'a> {
+    Manifest,
+    BuildRs,
+    GeneratedMod,
+    Types,
+    Atomic(&'a ir::Atomic),
+    Compound(&'a ir::Compound),
+    UserLib,
+    UserAtomic(&'a ir::Atomic),
+    UserCompound(&'a ir::Compound),
+    Converters,
+    Main,
+    Tests,
+}
+
+impl Job<'_> {
+    /// The file and whether it is in rustfmt's layout.
+    fn render(self, krate: &ir::Crate) -> (EmittedFile, bool) {
+        let file = |path: PathBuf, (contents, laid_out): (String, bool), kind| {
+            (
+                EmittedFile {
+                    path,
+                    contents,
+                    kind,
+                },
                 laid_out,
-            );
+            )
+        };
+        let generated = |module: &str| {
+            PathBuf::from(format!(
+                "src/generated/{}.rs",
+                module.trim_start_matches("r#")
+            ))
+        };
+        match self {
+            Job::Manifest => file(
+                "Cargo.toml".into(),
+                (cargo_toml(krate), true),
+                FileKind::Manifest,
+            ),
+            Job::BuildRs => file(
+                "build.rs".into(),
+                (render(&BuildRs { krate }), false),
+                FileKind::Generated,
+            ),
+            Job::GeneratedMod => {
+                let (template, certain) = GeneratedMod::new(krate);
+                file(
+                    "src/generated/mod.rs".into(),
+                    (render(&template), certain),
+                    FileKind::Generated,
+                )
+            }
+            Job::Types => file(
+                generated(&krate.types.module),
+                render_types(krate),
+                FileKind::Generated,
+            ),
+            Job::Atomic(c) => file(
+                generated(&c.module),
+                render_atomic(krate, c),
+                FileKind::Generated,
+            ),
+            Job::Compound(c) => file(
+                generated(&c.module),
+                render_compound(krate, c),
+                FileKind::Generated,
+            ),
+            Job::UserLib => {
+                let (modules, certain) = rustfmt_module_order(user_modules(krate));
+                file(
+                    "src/lib.rs".into(),
+                    (render(&UserLib { modules: &modules }), certain),
+                    FileKind::User,
+                )
+            }
+            Job::UserAtomic(c) => {
+                let template = UserComponent {
+                    c,
+                    l: Layout::default(),
+                };
+                file(
+                    user_path(&c.module),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::UserCompound(c) => {
+                let template = UserCompound {
+                    c,
+                    l: Layout::default(),
+                };
+                file(
+                    user_path(&c.module),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::Converters => {
+                let methods = converter_methods(krate);
+                let template = UserConverters {
+                    methods: &methods,
+                    l: Layout::default(),
+                };
+                file(
+                    "src/converters.rs".into(),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::Main => file(
+                "src/main.rs".into(),
+                render_starter_main(krate),
+                FileKind::Starter,
+            ),
+            Job::Tests => file(
+                "tests/components.rs".into(),
+                render_starter_tests(krate),
+                FileKind::Starter,
+            ),
         }
     }
-    files.into_iter().unzip()
 }
 
 /// Formats the Rust files of `files` marked in `needs` (see the module doc); the
@@ -894,8 +973,15 @@ pub(crate) fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
         None => par_map(&selected, |&i| {
             let file = &files[i];
             // Without rustfmt, user files keep the templates' own layout
-            // (`prettyplease` would drop their comments).
-            (file.kind == FileKind::Generated).then(|| pretty(&strip_items(&file.contents)))
+            // (`prettyplease` would drop their comments); a file with items to
+            // format gets those printed, each on its own, and keeps the rest.
+            (file.kind == FileKind::Generated).then(|| {
+                if file.contents.contains(ITEM_END_FORMAT) {
+                    pretty_items(&file.contents)
+                } else {
+                    pretty(&strip_items(&file.contents))
+                }
+            })
         }),
     };
     for (i, new) in selected.into_iter().zip(formatted) {
@@ -994,19 +1080,16 @@ struct StarterTests<'a> {
     l: Layout,
 }
 
-/// The `tests/components.rs` written into a crate being created, and whether it is
-/// in rustfmt's layout: one test per atomic component, which runs it in its
-/// generated harness for a second of virtual time from its stubs; `None` when the
-/// crate has no atomic component.
-fn render_starter_tests(krate: &ir::Crate) -> Option<(String, bool)> {
-    let tests = &krate.starter.tests;
-    (!tests.is_empty()).then(|| {
-        let template = StarterTests {
-            tests,
-            l: Layout::default(),
-        };
-        render_laid_out(&template, &template.l)
-    })
+/// The `tests/components.rs` written into a crate being created (when it has an
+/// atomic component), and whether it is in rustfmt's layout: one test per atomic
+/// component, which runs it in its generated harness for a second of virtual time
+/// from its stubs.
+fn render_starter_tests(krate: &ir::Crate) -> (String, bool) {
+    let template = StarterTests {
+        tests: &krate.starter.tests,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
 /// The `src/main.rs` of a new crate, and whether it is in rustfmt's layout: runs
@@ -1030,6 +1113,19 @@ pub fn starter_main(krate: &ir::Crate) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Without rustfmt, a file's items to format are printed by `prettyplease`, each
+    /// on its own; the rest of the file keeps its layout.
+    #[test]
+    fn without_rustfmt_marked_items_alone_are_printed() {
+        let text = format!(
+            "//! Module.\n\nfn   kept( ) {{}}\n\n{ITEM_BEGIN}\n/// Doc.\nfn   messy( ) -> u8 {{ 1 }}\n{ITEM_END_FORMAT}\n"
+        );
+        assert_eq!(
+            pretty_items(&text),
+            "//! Module.\n\nfn   kept( ) {}\n\n/// Doc.\nfn messy() -> u8 {\n    1\n}\n"
+        );
+    }
 
     /// A file whose second item is marked for the formatter: only that item goes to
     /// it, and its formatted text replaces it, markers gone.

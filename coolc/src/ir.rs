@@ -709,6 +709,8 @@ impl RosConstant {
 /// An atomic component's generated module.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Atomic {
+    /// Its `coolbot::Spec` literal.
+    pub(crate) spec: Code,
     /// Doc lines.
     pub(crate) doc: Doc,
     /// The component type name as written.
@@ -971,6 +973,8 @@ pub(crate) struct AnswerArm {
 /// A compound component's generated module.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Compound {
+    /// Its supervisor's `coolbot::Spec` literal.
+    pub(crate) spec: Code,
     /// Doc lines.
     pub(crate) doc: Doc,
     /// Doc lines added to `SPEC`'s rustdoc ([`notes`]).

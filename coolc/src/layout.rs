@@ -69,6 +69,10 @@ fn spaces(n: usize) -> String {
     " ".repeat(n)
 }
 
+fn push_spaces(out: &mut String, n: usize) {
+    out.extend(std::iter::repeat_n(' ', n));
+}
+
 impl Layout {
     /// Whether everything laid out so far is exactly what rustfmt would write.
     pub fn ok(&self) -> bool {
@@ -601,58 +605,11 @@ impl Layout {
         )
     }
 
-    /// The `SPEC` static of an atomic component (see `templates/atomic.rs`).
-    pub fn spec(&self, c: &crate::ir::Atomic) -> String {
-        let s = |t: &str| Code::Atom(t.to_owned());
-        let literal = Code::string;
-        let list = Code::slice;
-        let spec = Code::Struct(
-            "::coolbot::Spec".to_owned(),
-            vec![
-                ("type_name".to_owned(), literal(&c.type_name)),
-                ("doc".to_owned(), s(&c.doc_literal())),
-                (
-                    "states".to_owned(),
-                    list(c.states.iter().map(|st| st.spec.clone()).collect()),
-                ),
-                ("initial".to_owned(), s(&c.initial.to_string())),
-                (
-                    "inputs".to_owned(),
-                    list(
-                        c.inputs
-                            .iter()
-                            .map(|p| p.spec(&p.cool_name, true))
-                            .collect(),
-                    ),
-                ),
-                (
-                    "outputs".to_owned(),
-                    list(
-                        c.outputs
-                            .iter()
-                            .map(|p| p.spec(&p.cool_name, false))
-                            .collect(),
-                    ),
-                ),
-                (
-                    "variables".to_owned(),
-                    list(
-                        c.vars
-                            .iter()
-                            .filter(|v| v.spec_index.is_some())
-                            .map(crate::ir::Var::spec)
-                            .collect(),
-                    ),
-                ),
-                (
-                    "exceptions".to_owned(),
-                    list(c.exceptions.iter().map(|e| e.spec.clone()).collect()),
-                ),
-                ("timing".to_owned(), c.timing.clone()),
-            ],
-        );
+    /// The `SPEC` static of a component (see `templates/atomic.rs`): `spec`, the
+    /// `coolbot::Spec` literal `lower` built.
+    pub fn spec(&self, spec: &Code) -> String {
         let head = "pub static SPEC: ::coolbot::Spec = ";
-        format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
+        format!("{head}{};", self.node(spec, 0, head.len(), 1, false))
     }
 
     /// `pub const NAME: &[(&str, &str)] = &[("a", "b"), ...];`, a table of pairs of
@@ -690,42 +647,6 @@ impl Layout {
             }
         }
         format!("{head} {};", self.node(&list, 0, head.len() + 1, 1, false))
-    }
-
-    /// The compound's `SPEC` static (see `templates/compound.rs`).
-    pub fn compound_spec(&self, c: &crate::ir::Compound) -> String {
-        let s = |t: &str| Code::Atom(t.to_owned());
-        let spec = Code::Struct(
-            "::coolbot::Spec".to_owned(),
-            vec![
-                (
-                    "type_name".to_owned(),
-                    Code::atom(format!("\"{}\"", c.type_name)),
-                ),
-                ("doc".to_owned(), s(&c.doc_literal())),
-                (
-                    "states".to_owned(),
-                    Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
-                ),
-                ("initial".to_owned(), s(&c.initial.to_string())),
-                ("inputs".to_owned(), Code::slice(c.input_specs.clone())),
-                ("outputs".to_owned(), Code::slice(c.output_specs.clone())),
-                (
-                    "variables".to_owned(),
-                    Code::slice(
-                        c.vars
-                            .iter()
-                            .filter(|v| v.spec_index.is_some())
-                            .map(crate::ir::Var::spec)
-                            .collect(),
-                    ),
-                ),
-                ("exceptions".to_owned(), s("&[]")),
-                ("timing".to_owned(), c.timing.clone()),
-            ],
-        );
-        let head = "pub static SPEC: ::coolbot::Spec = ";
-        format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
     }
 
     /// A mapped controllable variable's field of `Mapped`, at indent 4.
@@ -1153,6 +1074,38 @@ impl Layout {
         }
     }
 
+    /// The width of [`Layout::flat`]'s form of `node`, computed without writing it.
+    fn flat_width(node: &Code) -> Option<usize> {
+        let list = |items: &[Code]| -> Option<usize> {
+            let mut width = 2 * items.len().saturating_sub(1);
+            for item in items {
+                width += Self::flat_width(item)?;
+            }
+            Some(width)
+        };
+        match node {
+            Code::Atom(text) => Some(text.len()),
+            Code::Struct(path, fields) if fields.is_empty() => Some(path.len() + 3),
+            Code::Struct(path, fields) => {
+                let mut body = 2 * (fields.len() - 1);
+                for (name, value) in fields {
+                    body += name.len() + 2 + Self::flat_width(value)?;
+                }
+                (body <= STRUCT_LIT_WIDTH).then_some(path.len() + 5 + body)
+            }
+            Code::Call(callee, args) => {
+                let inner = list(args)?;
+                (inner <= LIST_WIDTH).then_some(callee.len() + 2 + inner)
+            }
+            Code::List(open, items) => {
+                let inner = list(items)?;
+                (inner <= LIST_WIDTH).then_some(open.len() + 1 + inner)
+            }
+            // Kept on one line, or a shape these rules do not cover.
+            _ => Some(node.to_string().len()),
+        }
+    }
+
     /// `node` with its first line starting at column `used` (continuations at
     /// `indent`), `suffix` columns following it on its last line. A string literal
     /// that is a struct field's whole value may run past `max_width` (`long_string`),
@@ -1168,57 +1121,71 @@ impl Layout {
         if Self::has_other(node) {
             self.fail();
         }
-        if let Some(flat) = Self::flat(node) {
-            if used + flat.len() + suffix <= MAX_WIDTH {
-                return flat;
-            }
-            if long_string && matches!(node, Code::Atom(t) if t.starts_with('"')) {
-                return flat;
-            }
+        let mut out = String::new();
+        self.node_into(node, indent, used, suffix, long_string, &mut out);
+        out
+    }
+
+    /// [`Layout::node`], written at the end of `out`.
+    fn node_into(
+        &self,
+        node: &Code,
+        indent: usize,
+        used: usize,
+        suffix: usize,
+        long_string: bool,
+        out: &mut String,
+    ) {
+        use std::fmt::Write as _;
+        if let Some(width) = Self::flat_width(node)
+            && (used + width + suffix <= MAX_WIDTH
+                || long_string && matches!(node, Code::Atom(t) if t.starts_with('"')))
+        {
+            // The one-line form is the tree's own printing.
+            let _ = write!(out, "{node}");
+            return;
         }
-        let inner = spaces(indent + 4);
         match node {
             Code::Atom(_) | Code::Repeat(..) => {
                 self.fail();
-                node.to_string()
+                let _ = write!(out, "{node}");
             }
             Code::Struct(path, fields) => {
                 if fields.is_empty() || used + path.len() + 2 > MAX_WIDTH {
                     self.fail();
                 }
-                let mut out = format!("{path} {{\n");
+                out.push_str(path);
+                out.push_str(" {\n");
                 for (name, value) in fields {
                     let start = indent + 4 + name.len() + 2;
-                    out.push_str(&inner);
+                    push_spaces(out, indent + 4);
                     out.push_str(name);
                     out.push_str(": ");
-                    out.push_str(&self.node(value, indent + 4, start, 1, true));
+                    self.node_into(value, indent + 4, start, 1, true, out);
                     out.push_str(",\n");
                 }
-                out.push_str(&spaces(indent));
+                push_spaces(out, indent);
                 out.push('}');
-                out
             }
             Code::Call(callee, args) => match &args[..] {
                 [arg @ (Code::Struct(..) | Code::List(..))] => {
                     let start = used + callee.len() + 1;
-                    format!(
-                        "{callee}({})",
-                        self.node(arg, indent, start, suffix + 1, false)
-                    )
+                    out.push_str(callee);
+                    out.push('(');
+                    self.node_into(arg, indent, start, suffix + 1, false, out);
+                    out.push(')');
                 }
                 _ => {
                     self.fail();
-                    node.to_string()
+                    let _ = write!(out, "{node}");
                 }
             },
             Code::List(open, items) => match &items[..] {
                 [item @ Code::Struct(..)] => {
                     let start = used + open.len();
-                    format!(
-                        "{open}{}]",
-                        self.node(item, indent, start, suffix + 1, false)
-                    )
+                    out.push_str(open);
+                    self.node_into(item, indent, start, suffix + 1, false, out);
+                    out.push(']');
                 }
                 _ => {
                     if items.iter().any(|i| {
@@ -1228,21 +1195,21 @@ impl Layout {
                     {
                         self.fail();
                     }
-                    let mut out = format!("{open}\n");
+                    out.push_str(open);
+                    out.push('\n');
                     for item in items {
-                        out.push_str(&inner);
-                        out.push_str(&self.node(item, indent + 4, indent + 4, 1, false));
+                        push_spaces(out, indent + 4);
+                        self.node_into(item, indent + 4, indent + 4, 1, false, out);
                         out.push_str(",\n");
                     }
-                    out.push_str(&spaces(indent));
+                    push_spaces(out, indent);
                     out.push(']');
-                    out
                 }
             },
             // A shape these rules do not cover (`has_other` failed already).
             _ => {
                 self.fail();
-                node.to_string()
+                let _ = write!(out, "{node}");
             }
         }
     }

@@ -266,17 +266,36 @@ impl Writer {
     /// Writes `contents` to `path` unless it holds them already; whether it did (in a
     /// check: whether it would).
     fn write_if_changed(self, path: &Path, contents: &str) -> io::Result<bool> {
-        if fs::read_to_string(path).is_ok_and(|old| old == contents) {
-            return Ok(false);
+        match fs::read(path) {
+            Ok(old) if old == contents.as_bytes() => return Ok(false),
+            Ok(_) => {}
+            Err(error) if error.kind() == io::ErrorKind::NotFound => {
+                return self.create(path, contents).map(|()| true);
+            }
+            Err(error) => return Err(error),
         }
         if self.check {
             return Ok(true);
         }
-        if let Some(parent) = path.parent() {
-            fs::create_dir_all(parent)?;
-        }
         fs::write(path, contents)?;
         Ok(true)
+    }
+
+    /// Writes the missing file `path` (not in a check), creating its directory when
+    /// that is missing too.
+    fn create(self, path: &Path, contents: &str) -> io::Result<()> {
+        if self.check {
+            return Ok(());
+        }
+        match fs::write(path, contents) {
+            Err(error) if error.kind() == io::ErrorKind::NotFound => {
+                if let Some(parent) = path.parent() {
+                    fs::create_dir_all(parent)?;
+                }
+                fs::write(path, contents)
+            }
+            written => written,
+        }
     }
 
     /// Writes `contents` to the existing file `path` (not in a check).
@@ -321,7 +340,7 @@ fn merge_user_file(
     let text = match fs::read_to_string(&path) {
         Ok(text) => text,
         Err(error) if error.kind() == io::ErrorKind::NotFound => {
-            writer.write_if_changed(&path, &file.contents)?;
+            writer.create(&path, &file.contents)?;
             result.created = true;
             return Ok(result);
         }

@@ -11,7 +11,8 @@
 //! the formatter. Nothing here is guessed: a layout is returned only when it is
 //! rustfmt's.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
+use std::collections::HashMap;
 
 use crate::ir::Code;
 
@@ -57,7 +58,7 @@ const SPECIAL_MACROS: &[(&str, usize)] = &[
 ];
 
 /// An indentation: the block indentation and a visual alignment past it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 struct Indent {
     block: usize,
     align: usize,
@@ -105,7 +106,7 @@ fn push_spaces(text: &mut String, n: usize) {
 /// Where an expression is written: the width left for it on its first line, the
 /// indentation of its continuation lines and the columns used before it past that
 /// indentation (rustfmt's `Shape`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub(crate) struct Shape {
     width: usize,
     indent: Indent,
@@ -419,7 +420,11 @@ pub(crate) struct Printer {
     /// How many macro calls the current expression is inside.
     in_macro: Cell<usize>,
     /// Every closure laid out with a block rustfmt adds around its body.
-    added_blocks: std::cell::RefCell<Vec<String>>,
+    added_blocks: RefCell<Vec<String>>,
+    /// The layouts of the trees met so far, by tree (its address: the trees outlive
+    /// the printer), shape and state: rustfmt lays out a tree again in each layout
+    /// it tries around it.
+    memo: RefCell<HashMap<(usize, Shape, bool, usize), Option<String>>>,
 }
 
 /// How a list's items are laid out (rustfmt's `DefinitiveListTactic`).
@@ -544,6 +549,26 @@ impl Printer {
         if self.unsure.get() {
             return None;
         }
+        // Atoms are cheap, and some are made while printing (they would share
+        // addresses): not remembered.
+        if matches!(code, Code::Atom(_)) {
+            return self.expr_uncached(code, shape);
+        }
+        let key = (
+            std::ptr::from_ref(code) as usize,
+            shape,
+            self.one_line_chain.get(),
+            self.in_macro.get(),
+        );
+        if let Some(known) = self.memo.borrow().get(&key) {
+            return known.clone();
+        }
+        let result = self.expr_uncached(code, shape);
+        self.memo.borrow_mut().insert(key, result.clone());
+        result
+    }
+
+    fn expr_uncached(&self, code: &Code, shape: Shape) -> Option<String> {
         match code {
             Code::Atom(text) => match atom_kind(text) {
                 // `a.b` is a chain of a field, `&a` a prefix operator on `a`.
