@@ -38,6 +38,7 @@ use std::path::{Path, PathBuf};
 use syn::spanned::Spanned;
 
 use crate::emit::{self, EmittedFile, FileKind, StubSet};
+use crate::par::par_map;
 use crate::{ir, manifest};
 
 /// What writing a crate did (in a check: would do), for the CLI to report.
@@ -513,7 +514,7 @@ fn format_with_cache(
     laid_out: &[bool],
 ) -> (Vec<EmittedFile>, Vec<Option<String>>) {
     let indices: Vec<usize> = (0..files.len()).collect();
-    let looked_up = emit::par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
+    let looked_up = par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
     let mut needs = vec![false; files.len()];
     let mut rendered_prints = vec![None; files.len()];
     for (i, entry) in looked_up.into_iter().enumerate() {
@@ -562,7 +563,7 @@ pub(crate) fn write_crate_with(
             let (files, laid_out) = emit::render_crate_part(krate, emit::Part::LaidOut);
             // Generated files already in rustfmt's layout are written at once.
             let indices: Vec<usize> = (0..files.len()).collect();
-            let written = emit::par_map(&indices, |&i| {
+            let written = par_map(&indices, |&i| {
                 let file = &files[i];
                 (laid_out[i] && file.kind == FileKind::Generated)
                     .then(|| writer.write_if_changed(&dir.join(&file.path), &file.contents))
@@ -682,7 +683,7 @@ fn write_files_except(
         .iter()
         .filter(|f| f.kind == FileKind::Generated)
         .collect();
-    let written = emit::par_map(&generated, |file| match context.done.get(&file.path) {
+    let written = par_map(&generated, |file| match context.done.get(&file.path) {
         Some(written) => Ok(*written),
         None => writer.write_if_changed(&dir.join(&file.path), &file.contents),
     });
@@ -713,7 +714,7 @@ fn write_files_except(
     }
     // User files: each read and merged on every core, the results applied in order.
     let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
-    let merged = emit::par_map(&users, |file| {
+    let merged = par_map(&users, |file| {
         merge_user_file(writer, dir, file, &sets, &user_modules)
     });
     for (file, merged) in users.iter().zip(merged) {
@@ -767,7 +768,7 @@ fn write_files_except(
             .iter()
             .filter(|f| matches!(f.kind, FileKind::User | FileKind::Starter))
             .collect();
-        for written in emit::par_map(&users, |file| {
+        for written in par_map(&users, |file| {
             writer.write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
         }) {
             written?;
