@@ -1,14 +1,14 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
-//! **Invariant:** emission cannot fail on user input. Most files come out of their
-//! templates already in `rustfmt`'s layout (the atomic and compound modules, the
-//! generated `mod.rs`, the user files of atomic components and `src/lib.rs`: see
-//! `layout`), so no formatter runs for them. In a compound module, a top-level item
-//! whose layout `layout` is not certain of (a rule function, the builder) is formatted
-//! alone, the rest of the file kept. The other files, and any file whose layout
-//! `layout` is not certain of outside such items, are formatted with `rustfmt` when it
-//! is installed (one run over all of them), else generated ones are printed with
-//! `prettyplease` and user ones keep the templates' layout. Each file is parsed at most once: by `rustfmt` or by `syn` for
+//! **Invariant:** emission cannot fail on user input. Every file but `build.rs` comes
+//! out of its template already in `rustfmt`'s layout (see `layout`), so no formatter
+//! runs for it. In a compound module, a top-level item whose layout `layout` is not
+//! certain of (a rule function, the builder) is formatted alone, the rest of the file
+//! kept. `build.rs`, and any file whose layout `layout` is not certain of outside such
+//! items, are formatted with `rustfmt` when it is installed (one run over all of
+//! them), else generated ones are printed with `prettyplease` (a compound module's
+//! uncertain items alone) and user ones keep the templates' layout. The files are
+//! rendered on every core. Each file is parsed at most once: by `rustfmt` or by `syn` for
 //! `prettyplease`, and by `syn` in debug builds where no formatter parses it. A file
 //! that does not parse is a template bug and panics with the offending text (the test
 //! suite also compiles every generated crate). Output depends only on the IR.
@@ -512,8 +512,7 @@ fn with_formatted_items(text: &str, formatted: &str) -> Option<String> {
 pub(crate) enum Part {
     /// Every file.
     All,
-    /// The files a formatter lays out: `types.rs`, the user files of compounds,
-    /// `build.rs`, `src/converters.rs`, `src/main.rs`, `tests/components.rs`.
+    /// The files a formatter lays out: `build.rs`.
     NeedsFormatter,
     /// The others (some of which may still turn out to need the formatter).
     LaidOut,
@@ -607,24 +606,29 @@ pub fn single_file(krate: &ir::Crate) -> String {
 /// [`single_file`], formatted with `prettyplease` (one module per thread) or not at
 /// all ([`Formatting::Unformatted`]).
 pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
-    let mut parts: Vec<String> = render_modules(krate)
-        .into_iter()
-        .map(|(module, text, _)| {
-            let mut part = String::with_capacity(text.len() + module.len() + 16);
-            part.push_str("pub mod ");
-            part.push_str(&module);
-            part.push_str(" {\n");
-            for line in text
-                .lines()
-                .filter(|l| !l.starts_with("// @generated") && !is_item_marker(l))
-            {
-                part.push_str(line);
-                part.push('\n');
-            }
-            part.push_str("}\n");
-            part
-        })
-        .collect();
+    let modules = render_modules(krate);
+    let mut parts: Vec<String> = par_map(&modules, |(module, text, _)| {
+        // The module's text without its header line and item markers.
+        let body = match text.split_once('\n') {
+            Some((first, rest)) if first.starts_with("// @generated") => rest,
+            _ => text.as_str(),
+        };
+        let body = if body.contains(ITEM_BEGIN) {
+            std::borrow::Cow::Owned(strip_items(body))
+        } else {
+            std::borrow::Cow::Borrowed(body)
+        };
+        let mut part = String::with_capacity(body.len() + module.len() + 16);
+        part.push_str("pub mod ");
+        part.push_str(module);
+        part.push_str(" {\n");
+        part.push_str(&body);
+        if !body.ends_with('\n') {
+            part.push('\n');
+        }
+        part.push_str("}\n");
+        part
+    });
     // The support functions, taken from the generated `mod.rs`.
     let mod_rs = render(&GeneratedMod::new(krate).0);
     if let Some(start) = mod_rs.find("/// Converts a variable") {
@@ -639,7 +643,10 @@ pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
             parts
         }
     };
-    let mut out = krate.header();
+    let header = krate.header();
+    let mut out =
+        String::with_capacity(header.len() + 1 + parts.iter().map(String::len).sum::<usize>());
+    out.push_str(&header);
     out.push('\n');
     for part in parts {
         out.push_str(&part);

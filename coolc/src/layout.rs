@@ -1,6 +1,6 @@
-//! rustfmt's layout, computed while rendering, for the shapes of Rust that the atomic,
-//! compound and user templates emit, so that those files need no formatter at run
-//! time.
+//! rustfmt's layout, computed while rendering, for the shapes of Rust that the
+//! templates emit (every file of a crate but `build.rs`), so that those files need no
+//! formatter at run time.
 //!
 //! The templates are written in the layout `rustfmt` (edition 2024, default
 //! configuration: `max_width` 100, block indentation) gives them; what depends on the
@@ -11,7 +11,9 @@
 //! 60 (`chain_width`), and a lone struct-literal argument or array item "overflows"
 //! (opens on the line of its parent). Expressions come as the [`Code`] trees `lower`
 //! built (no Rust text is parsed here), and each template piece is named for what it
-//! prints, its indentation fixed here. Anything these rules do not cover, or that
+//! prints, its indentation fixed here. A whole statement or expression (a rule's
+//! condition, a compound's builder chain, the starter `main`'s calls, a stub's value)
+//! goes to [`expr`], rustfmt's own rules for expressions ported. Anything these rules do not cover, or that
 //! comes near the edge of them (a line over 100 columns, a list of short items that
 //! rustfmt would pack several per line), clears [`Layout::ok`]: the caller then runs
 //! the real formatter over the file, or over the one top-level item it happened in

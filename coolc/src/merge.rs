@@ -537,10 +537,10 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
 
 /// Writes the crate for `krate` into `dir`, merging into existing user files: renders
 /// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
-/// last compile (see the module doc), and writes the files ([`write_emitted`]). The
-/// files whose templates need a formatter are rendered and formatted on a thread of
-/// their own (the formatter is a `rustfmt` process) while the others are rendered and
-/// written. With [`WriteOptions::check`] nothing is written and the report says what
+/// last compile (see the module doc), and writes the files ([`write_files_except`]). The
+/// files whose templates need a formatter (`build.rs`) are rendered and formatted on a
+/// thread of their own (the formatter is a `rustfmt` process) while the others are
+/// rendered and written, on every core. With [`WriteOptions::check`] nothing is written and the report says what
 /// would be.
 pub(crate) fn write_crate_with(
     dir: &Path,

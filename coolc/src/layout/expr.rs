@@ -411,6 +411,10 @@ fn prefix_operand(text: &str) -> &str {
     text
 }
 
+/// A tree's address, the shape it is laid out in, and the printer's state
+/// (`one_line_chain`, `in_macro`).
+type MemoKey = (usize, Shape, bool, usize);
+
 /// The ported rules, and whether anything not ported was met.
 #[derive(Debug, Default)]
 pub(crate) struct Printer {
@@ -424,7 +428,7 @@ pub(crate) struct Printer {
     /// The layouts of the trees met so far, by tree (its address: the trees outlive
     /// the printer), shape and state: rustfmt lays out a tree again in each layout
     /// it tries around it.
-    memo: RefCell<HashMap<(usize, Shape, bool, usize), Option<String>>>,
+    memo: RefCell<HashMap<MemoKey, Option<String>>>,
 }
 
 /// How a list's items are laid out (rustfmt's `DefinitiveListTactic`).
@@ -1339,7 +1343,7 @@ impl Printer {
 
     /// The operands of `code` flattened through its left side while the operator is
     /// `code`'s, with the operators between them.
-    fn flatten<'c>(code: &'c Code) -> (Vec<&'c Code>, Vec<&'static str>) {
+    fn flatten(code: &Code) -> (Vec<&Code>, Vec<&'static str>) {
         let Code::Binary(_, top, _) = code else {
             return (vec![code], Vec::new());
         };
@@ -1413,7 +1417,10 @@ impl Printer {
         if first_line_width(&result) > shape.width {
             return None;
         }
-        if !(!result.contains('\n') || last_text.starts_with('{'))
+        // A last operand laid out on several lines only when it opens a block, or
+        // when it does not start with `(` after a short first part.
+        if result.contains('\n')
+            && !last_text.starts_with('{')
             && (last_text.starts_with('(') || prefix_len > TAB)
         {
             return None;
@@ -1884,7 +1891,7 @@ mod tests {
             if depth == 0 {
                 return self.atom();
             }
-            let mut args = |g: &mut Gen, max: usize| -> Vec<Code> {
+            let args = |g: &mut Gen, max: usize| -> Vec<Code> {
                 let n = g.below(max + 1);
                 (0..n).map(|_| g.code(depth - 1)).collect()
             };

@@ -836,6 +836,38 @@ fn port_address(port: &PortRef) -> String {
     }
 }
 
+/// The `coolbot::Spec` of compound `c`: the supervisor's states, the ports it exports,
+/// its own exposed variables and its timing (`coolbot::CompoundBuilder::build`
+/// completes it).
+fn spec(c: &ir::Compound) -> Code {
+    Code::structure(
+        "::coolbot::Spec",
+        vec![
+            ("type_name", Code::atom(format!("\"{}\"", c.type_name))),
+            ("doc", Code::atom(c.doc_literal())),
+            (
+                "states",
+                Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
+            ),
+            ("initial", Code::atom(c.initial.to_string())),
+            ("inputs", Code::slice(c.input_specs.clone())),
+            ("outputs", Code::slice(c.output_specs.clone())),
+            (
+                "variables",
+                Code::slice(
+                    c.vars
+                        .iter()
+                        .filter(|v| v.spec_index.is_some())
+                        .map(ir::Var::spec)
+                        .collect(),
+                ),
+            ),
+            ("exceptions", Code::atom("&[]")),
+            ("timing", c.timing.clone()),
+        ],
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use crate::ir::{self, Code};
@@ -1268,36 +1300,4 @@ mod tests {
         assert_eq!(outer.states[0].cool_name, "supervising");
         assert!(outer.methods.is_empty());
     }
-}
-
-/// The `coolbot::Spec` of compound `c`: the supervisor's states, the ports it exports,
-/// its own exposed variables and its timing (`coolbot::CompoundBuilder::build`
-/// completes it).
-fn spec(c: &ir::Compound) -> Code {
-    Code::structure(
-        "::coolbot::Spec",
-        vec![
-            ("type_name", Code::atom(format!("\"{}\"", c.type_name))),
-            ("doc", Code::atom(c.doc_literal())),
-            (
-                "states",
-                Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
-            ),
-            ("initial", Code::atom(c.initial.to_string())),
-            ("inputs", Code::slice(c.input_specs.clone())),
-            ("outputs", Code::slice(c.output_specs.clone())),
-            (
-                "variables",
-                Code::slice(
-                    c.vars
-                        .iter()
-                        .filter(|v| v.spec_index.is_some())
-                        .map(ir::Var::spec)
-                        .collect(),
-                ),
-            ),
-            ("exceptions", Code::atom("&[]")),
-            ("timing", c.timing.clone()),
-        ],
-    )
 }
