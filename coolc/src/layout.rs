@@ -290,7 +290,8 @@ impl Layout {
     }
 
     /// `#[derive(items)]` at `indent` (rustfmt's `format_derive`): on one line when
-    /// it fits, else its items on one line of their own, else one per line.
+    /// it fits, else one item per line when they do not fit on one line of their own
+    /// (which is left to the formatter).
     pub fn derive(&self, indent: usize, items: &[&str]) -> String {
         let joined = items.join(", ");
         // The list is laid out with a trailing comma, removed on one line.
@@ -301,9 +302,9 @@ impl Layout {
         if joined.len() <= argument_width && listed <= one_line_budget {
             return self.line(indent, &format!("#[derive({joined})]"));
         }
-        let inner = spaces(indent + 4);
         if joined.len() <= argument_width {
-            return format!("{pad}#[derive(\n{inner}{joined},\n{pad})]");
+            // rustfmt puts the items on one line of their own: not written here.
+            self.fail();
         }
         let mut out = format!("{pad}#[derive(");
         for item in items {
