@@ -11,14 +11,12 @@
 //! emits in under one second, and ten times the input costs at most twelve times the
 //! time. The baseline of the scaling figure is the 1x run of the same path.
 //!
-//! Most generated files come out of their templates in rustfmt's layout (of a
-//! compound module, the rule functions and the builder may still go to the formatter,
-//! each on its own); the others (`types.rs`, compound user files, `src/main.rs`,
-//! `tests/components.rs`) are formatted with the `rustfmt` program when it is
-//! installed, else with `prettyplease`. The `Builder`
-//! (build scripts) writes one unformatted file by default. All three paths are
-//! measured, each in a child process of this benchmark (`RUSTFMT` names a missing
-//! program for the `Builtin` and `Unformatted` rows).
+//! Every file of these crates comes out of its template in rustfmt's layout (what
+//! coolc's layout is not certain of would go to the `rustfmt` program when it is
+//! installed, else to `prettyplease`: nothing here). The `Builder` (build scripts)
+//! writes one unformatted file by default. All three paths are measured, each in a
+//! child process of this benchmark (`RUSTFMT` names a missing program for the
+//! `Builtin` and `Unformatted` rows).
 //!
 //! The crates are written into a temporary directory under [`scratch_root`]: a tmpfs
 //! when the machine has one, so that the figures measure coolc and not the state of a
@@ -436,7 +434,7 @@ fn child(set: &str, rounds: usize, formatter: Formatter) {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Formatter {
     /// As shipped when `rustfmt` is installed: the files not emitted in rustfmt's
-    /// layout are formatted by one `rustfmt` run.
+    /// layout (none in the generated sets) are formatted by one `rustfmt` run.
     Rustfmt,
     /// `RUSTFMT` names a program that does not exist, so coolc formats with its
     /// built-in fallback (`prettyplease`, in process).
