@@ -232,7 +232,7 @@ pub trait Behavior: ::core::marker::Send + 'static {
 
 /// The static shape of the component, read by the runtime.
 {{- l.item_doc(&c.notes) }}
-{{ l.spec(c) }}
+{{ l.spec(&c.spec) }}
 
 /// Builds an unstarted `{{ c.type_name }}` named `name` running `behavior`.
 pub fn component(

@@ -139,7 +139,7 @@ impl {{ may_enum }} {
 /// (`coolbot::CompoundBuilder::build` replaces them with the ports it exports, and
 /// adds the mapped variables).
 {{- l.item_doc(&c.notes) }}
-{{ l.compound_spec(c) }}
+{{ l.spec(&c.spec) }}
 
 /// What a supervisor section sees.
 pub struct Cx<'a> {
@@ -365,6 +365,7 @@ pub fn builder_with{{ c.generics() }}(
         supervisor: parts.supervisor(),
         vars{% if c.rules_use_vars() %}: ::std::sync::Arc::clone(&vars){% endif %},
     };
+{%- if c.builder_notes() %}
     Ok(::coolbot::CompoundBuilder::new(name, supervisor)
 {%- for step in c.builder_steps() %}
 {%- let last = loop.last %}
@@ -383,6 +384,9 @@ pub fn builder_with{{ c.generics() }}(
 {%- endmatch %}
 {%- endfor %}
 {%- if c.builder_steps().is_empty() %})
+{%- endif %}
+{%- else %}
+{{ l.builder_chain(c) }}
 {%- endif %}
 }
 {{ l.end_item() }}
@@ -416,7 +420,7 @@ pub fn register<R: ::coolbot::remote::Registrar>(
     clippy::comparison_to_empty
 )]
 {{ l.open_fn(0, &r.signature()) }}
-{{ l.expr_line(4, &r.expr, "") }}
+{{ l.rule_body(r) }}
 }
 {{ l.end_item() }}
 {%- endfor %}

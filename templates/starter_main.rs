@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`). -#}
 //! Runs the crate's components as a process an operator can run and stop
 //! (`coolbot::process`): for two seconds, or as many as the first argument says
 //! (`cargo run -- 30`), or until stopped (`cargo run -- forever`); SIGINT (Ctrl-C) and
@@ -50,8 +51,8 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     #[cfg(feature = "network")]
     let (node, args) = {
         let mut args = args;
-        let node = coolbot_zenoh::network::NodeOptions::take_args(&mut args)
-            .map_err(|e| e.to_string())?;
+        let node =
+            coolbot_zenoh::network::NodeOptions::take_args(&mut args).map_err(|e| e.to_string())?;
         (node, args)
     };
     if let Some(flag) = args.iter().find(|arg| arg.starts_with("--")) {
@@ -60,7 +61,9 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
                 "--node" | "--serve" | "--listen" | "--connect" | "--multicast" | "--no-multicast"
                 | "--lease" | "--silence" | "--config" | "--insecure",
             ) => {
-                format!("`{flag}`: this build has no network support; build with `--features network`")
+                format!(
+                    "`{flag}`: this build has no network support; build with `--features network`"
+                )
             }
             _ => format!("unknown option `{flag}`"),
         }
@@ -84,8 +87,14 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     #[cfg(feature = "network")]
     let network = match node {
         Some(options) => {
-            let network = coolbot_zenoh::network::Network::open(&options, registry())
-                .map_err(|e| format!("node `{}` cannot open: {}", options.name, coolbot::Chain(&e)))?;
+            let network =
+                coolbot_zenoh::network::Network::open(&options, registry()).map_err(|e| {
+                    format!(
+                        "node `{}` cannot open: {}",
+                        options.name,
+                        coolbot::Chain(&e)
+                    )
+                })?;
             if options.serve {
                 println!(
                     "node `{}` on the network: serving what other nodes place on it",
@@ -100,25 +109,23 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
         None => None,
     };
     let mut system = coolbot::System::new();
-    let handles: [coolbot::Handle; {{ roots.len() }}] = [
-{%- for root in roots %}
-        system
-            .add({{ root }})
-            .map_err(|e| format!("cannot add a component: {}", coolbot::Chain(&e)))?,
-{%- endfor %}
-    ];
+{{ l.handles(&starter.roots) }}
     coolbot::process::watch_system(&system);
     #[cfg(feature = "network")]
     if let Some(network) = &network {
-        network
-            .expose_system(&system)
-            .map_err(|e| {
-                format!("node `{}` cannot expose the components: {}", network.name(), coolbot::Chain(&e))
-            })?;
+        network.expose_system(&system).map_err(|e| {
+            format!(
+                "node `{}` cannot expose the components: {}",
+                network.name(),
+                coolbot::Chain(&e)
+            )
+        })?;
         println!("node `{}` on the network", network.name());
     }
     // Start the components' threads and command them to `running`.
-    system.run_all().map_err(|e| format!("cannot start: {}", coolbot::Chain(&e)))?;
+    system
+        .run_all()
+        .map_err(|e| format!("cannot start: {}", coolbot::Chain(&e)))?;
     match run_for {
         Some(duration) => {
             process.wait(duration);
@@ -144,8 +151,8 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
 #[cfg(feature = "network")]
 fn registry() -> coolbot_zenoh::agent::Registry {
     let mut registry = coolbot_zenoh::agent::Registry::new();
-{%- for registration in registrations %}
-    {{ registration }};
+{%- for registration in starter.registrations %}
+{{ l.statement(4, registration, ";") }}
 {%- endfor %}
     registry
 }

@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`). -#}
 //! Tests of the crate's components, each alone in its generated harness
 //! (`generated::<component>::Harness`): built with in-memory ports on a virtual
 //! clock, driven on the test's thread exactly as its component thread would run it,
@@ -10,13 +11,13 @@
 //! it: it is yours.
 
 use std::time::Duration;
-{% for t in tests %}
+{%- for t in tests %}
 
 #[test]
-fn {{ t.test }}_runs_for_a_second_without_error() {
-    let behavior = ::{{ lib }}::{{ t.module }}::{{ t.user_struct }}::default();
-    let mut harness = ::{{ lib }}::generated::{{ t.module }}::Harness::running(behavior).unwrap();
+{{ l.test_fn(&t.name) }}
+{{ l.let_statement(4, "behavior", None, &t.behavior) }}
+{{ l.let_statement(4, "mut harness", None, &t.harness) }}
     harness.advance(Duration::from_secs(1)).unwrap();
-    assert_eq!(harness.error(), None, "{{ t.type_name }} is in {}", harness.state());
+{{ l.statement(4, &t.check, ";") }}
 }
 {%- endfor %}

@@ -1,73 +1,50 @@
+{#- Written in rustfmt's layout: see coolc/src/layout.rs (`l`), which lays out the
+    parts that depend on the description and says when the result needs a formatter. -#}
 {%- import "macros.rs" as m -%}
 {% call m::header(krate.header()) %}{% endcall %}
 //! Packets, enums, extern packets and converters of the descriptions.
-{% for e in types.externs %}
+{%- for e in types.externs %}
 
-
-{% call m::doc(&e.doc) %}{% endcall %}
-pub type {{ e.name }} = {{ e.path }};
-{% endfor %}
+{{ l.doc_lines(&e.doc, 0) }}{{ l.type_alias(e) }}
+{%- endfor %}
 {%- for p in types.packets %}
 
-
-{% call m::doc(&p.doc) %}{% endcall %}
-{% call m::packet(p) %}{% endcall %})]
-pub struct {{ p.name }} {
-{%- for f in p.fields %}
-{%- call m::doc(&f.doc) %}{% endcall %}
-    {%- if f.renamed() %}
-    #[serde(rename = "{{ f.cool_name }}")]
-    {%- endif %}
-    {%- if let Some(adapter) = f.serde_with %}
-    #[serde(with = "{{ adapter }}")]
-    {%- endif %}
-    pub {{ f.name }}: {{ f.ty }},
-{%- endfor %}
-}
-{% if p.writes_default() %}
-impl ::core::default::Default for {{ p.name }} {
-    fn default() -> Self {
-        Self {
-        {%- for f in p.fields %}
-            {{ f.name }}: {{ f.default }},
-        {%- endfor %}
-        }
-    }
-}
-{% endif %}
+{{ l.doc_lines(&p.doc, 0) }}{% call packet(p, 0) %}{% endcall %}
 {%- endfor %}
 {%- for e in types.enums %}
 
-
-{% call m::doc(&e.doc) %}{% endcall %}
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, ::serde::Serialize, ::serde::Deserialize{% if !e.variants.is_empty() %}, Default{% endif %})]
+{{ l.doc_lines(&e.doc, 0) }}{{ l.enum_derive(e) }}
+{%- if e.variants.is_empty() %}
+pub enum {{ e.name }} {}
+{%- else %}
 pub enum {{ e.name }} {
 {%- for v in e.variants %}
-{%- call m::doc(&v.doc) %}{% endcall %}
-    {%- if loop.first %}
+{{- l.member_doc(&v.doc) }}
+{%- if loop.first %}
     #[default]
-    {%- endif %}
-    {%- if v.name != v.cool_name %}
-    #[serde(rename = "{{ v.cool_name }}")]
-    {%- endif %}
-    {{ v.name }},
+{%- endif %}
+{%- if v.name != v.cool_name %}
+{{ l.serde_rename(4, &v.cool_name) }}
+{%- endif %}
+{{ l.variant(&v.name) }}
 {%- endfor %}
 }
+{%- endif %}
 {%- endfor %}
-{% if !types.converters.is_empty() %}
+{%- if !types.converters.is_empty() %}
+
 /// The converters of the descriptions: implement this trait in `src/converters.rs`.
 ///
 /// A connection declared `via` a converter calls its method on every packet.
 pub trait Converters {
 {%- for c in types.converters %}
-{%- call m::doc(&c.doc) %}{% endcall %}
+{{- l.member_doc(&c.doc) }}
     /// Converter `{{ c.cool_name }}`.
-    fn {{ c.method }}(from: &{{ c.from }}) -> {{ c.to }};
+{{ l.declaration(&c.signature()) }}
 {%- endfor %}
 }
-{% endif %}
+{%- endif %}
 {%- if !types.ros.is_empty() %}
-
 
 /// The ROS 2 message types the descriptions import (`import ros`) and every type
 /// they reference, one module per package; the types module names each imported one.
@@ -78,54 +55,64 @@ pub trait Converters {
 pub mod ros {
 {%- for package in types.ros %}
 {%- if !loop.first %}
-{% endif %}
+{{ "" }}
+{%- endif %}
     /// The ROS 2 package `{{ package.package }}`.
     pub mod {{ package.module }} {
-    {%- for message in package.messages %}
-    {%- let p = message.packet %}
-    {%- if !loop.first %}
-{% endif %}
-{%- call m::doc(&p.doc) %}{% endcall %}
-{% call m::packet(p) %}{% endcall %})]
-pub struct {{ p.name }} {
-{%- for f in p.fields %}
-{%- call m::doc(&f.doc) %}{% endcall %}
-    {%- if f.renamed() %}
-    #[serde(rename = "{{ f.cool_name }}")]
-    {%- endif %}
-    {%- if let Some(adapter) = f.serde_with %}
-    #[serde(with = "{{ adapter }}")]
-    {%- endif %}
-    pub {{ f.name }}: {{ f.ty }},
-{%- endfor %}
-}
-{% if p.writes_default() %}
-impl ::core::default::Default for {{ p.name }} {
-    fn default() -> Self {
-        Self {
-        {%- for f in p.fields %}
-            {{ f.name }}: {{ f.default }},
-        {%- endfor %}
-        }
-    }
-}
-{% endif %}
+{%- for message in package.messages %}
+{%- let p = message.packet %}
+{%- if !loop.first %}
+{{ "" }}
+{%- endif %}
+{{ l.doc_lines(&p.doc, 8) }}{% call packet(p, 8) %}{% endcall %}
 {%- if !message.constants.is_empty() %}
-impl {{ p.name }} {
+
+        impl {{ p.name }} {
 {%- for c in message.constants %}
-{%- call m::doc(&c.doc) %}{% endcall %}
-    pub const {{ c.name }}: {{ c.ty }} = {{ c.value }};
+{{- l.doc(&c.doc, 12, "///") }}
+{{ l.const_item(12, &c.lhs(), &c.value) }}
 {%- endfor %}
-}
-{% endif %}
-impl ::coolbot::ros::RosType for {{ p.name }} {
-    const NAME: &'static str = {{ message.name }};
-    const DDS_NAME: &'static str = {{ message.dds_name }};
-    const TYPE_HASH: &'static str = {{ message.hash }};
-    const MESSAGE_DEFINITION: &'static str = {{ message.definition }};
-}
-    {%- endfor %}
+        }
+{%- endif %}
+
+        impl ::coolbot::ros::RosType for {{ p.name }} {
+{{ l.const_item(12, "const NAME: &'static str =", &message.name) }}
+{{ l.const_item(12, "const DDS_NAME: &'static str =", &message.dds_name) }}
+{{ l.const_item(12, "const TYPE_HASH: &'static str =", &message.hash) }}
+{{ l.const_item(12, "const MESSAGE_DEFINITION: &'static str =", &message.definition) }}
+        }
+{%- endfor %}
     }
 {%- endfor %}
 }
 {%- endif %}
+
+{#- A packet's struct at `indent` and, when its defaults are not the fields' own,
+    its `Default`. -#}
+{% macro packet(p, indent) -%}
+{{ l.packet_derive(p, indent) }}
+{%- if p.fields.is_empty() %}
+{{ l.open(indent) }}pub struct {{ p.name }} {}
+{%- else %}
+{{ l.open(indent) }}pub struct {{ p.name }} {
+{%- for f in p.fields %}
+{{- l.doc(&f.doc, indent + 4, "///") }}
+{%- if f.renamed() %}
+{{ l.serde_rename(indent + 4, &f.cool_name) }}
+{%- endif %}
+{%- if let Some(adapter) = f.serde_with %}
+{{ l.serde_with_at(indent + 4, adapter) }}
+{%- endif %}
+{{ l.field_decl(indent + 4, f) }}
+{%- endfor %}
+{{ l.open(indent) }}}
+{%- endif %}
+{%- if p.writes_default() %}
+
+{{ l.open(indent) }}impl ::core::default::Default for {{ p.name }} {
+{{ l.open(indent) }}    fn default() -> Self {
+{{ l.default_body(&p.fields, indent + 8) }}
+{{ l.open(indent) }}    }
+{{ l.open(indent) }}}
+{%- endif %}
+{%- endmacro %}

@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout, like user_component.rs. -#}
 //! The parts of compound `{{ c.type_name }}`: its supervisor's sections and which
 //! behaviour each instance runs.
 //!
@@ -13,22 +14,30 @@ use crate::generated::{{ c.module }}::*;
 #[derive(Debug, Default)]
 pub struct {{ c.supervisor_struct }} {}
 
+{% if c.methods.is_empty() -%}
+impl Supervisor for {{ c.supervisor_struct }} {}
+{%- else -%}
 impl Supervisor for {{ c.supervisor_struct }} {
 {%- for method in c.methods %}
 {%- if !loop.first %}
 {% endif %}
-{% include "user_stub.rs" %}
+{{ l.stub(method) }}
 {%- endfor %}
 }
+{%- endif %}
 
 /// The behaviours `{{ c.type_name }}`'s instances run: by default this crate's own.
 #[derive(Debug, Default)]
 pub struct {{ c.user_struct }} {}
 
+{% if c.parts.is_empty() -%}
+impl Parts for {{ c.user_struct }} {}
+{%- else -%}
 impl Parts for {{ c.user_struct }} {
 {%- for method in c.parts %}
 {%- if !loop.first %}
 {% endif %}
-{% include "user_stub.rs" %}
+{{ l.stub(method) }}
 {%- endfor %}
 }
+{%- endif %}

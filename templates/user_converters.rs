@@ -1,3 +1,4 @@
+{#- Written in rustfmt's layout, like user_component.rs. -#}
 //! The converters of the descriptions: fill in the stubs.
 //!
 //! `coolc` wrote this file once and never overwrites it; new converters get new stubs
@@ -11,6 +12,6 @@ impl crate::generated::types::Converters for Convert {
 {%- for method in methods %}
 {%- if !loop.first %}
 {% endif %}
-{% include "user_stub.rs" %}
+{{ l.stub(method) }}
 {%- endfor %}
 }

@@ -11,17 +11,16 @@
 //! emits in under one second, and ten times the input costs at most twelve times the
 //! time. The baseline of the scaling figure is the 1x run of the same path.
 //!
-//! Most generated files come out of their templates in rustfmt's layout (of a
-//! compound module, the rule functions and the builder may still go to the formatter,
-//! each on its own); the others (`types.rs`, compound user files, `src/main.rs`,
-//! `tests/components.rs`) are formatted with the `rustfmt` program when it is
-//! installed, else with `prettyplease`. The `Builder`
-//! (build scripts) writes one unformatted file by default. All three paths are
-//! measured, each in a child process of this benchmark (`RUSTFMT` names a missing
-//! program for the `Builtin` and `Unformatted` rows).
+//! Every file of these crates comes out of its template in rustfmt's layout (what
+//! coolc's layout is not certain of would go to the `rustfmt` program when it is
+//! installed, else to `prettyplease`: nothing here). The `Builder` (build scripts)
+//! writes one unformatted file by default. All three paths are measured, each in a
+//! child process of this benchmark (`RUSTFMT` names a missing program for the
+//! `Builtin` and `Unformatted` rows).
 //!
-//! Temporary directories are made under cargo's `CARGO_TARGET_TMPDIR` (see
-//! [`in_child`]).
+//! The crates are written into a temporary directory under [`scratch_root`]: a tmpfs
+//! when the machine has one, so that the figures measure coolc and not the state of a
+//! disk (see there).
 //!
 //! `cargo bench -p coolc --bench compile` (add `-- --quick` to skip the 10x runs).
 //! `--write-set SET DIR` writes a set's descriptions into DIR, to time the `coolc`
@@ -435,7 +434,7 @@ fn child(set: &str, rounds: usize, formatter: Formatter) {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Formatter {
     /// As shipped when `rustfmt` is installed: the files not emitted in rustfmt's
-    /// layout are formatted by one `rustfmt` run.
+    /// layout (none in the generated sets) are formatted by one `rustfmt` run.
     Rustfmt,
     /// `RUSTFMT` names a program that does not exist, so coolc formats with its
     /// built-in fallback (`prettyplease`, in process).
@@ -455,13 +454,34 @@ impl Formatter {
     }
 }
 
-/// The benchmark's own scratch directory under `CARGO_TARGET_TMPDIR`, removed at the
-/// end of [`main`] (see [`run`]).
+/// Where the benchmark writes its crates: `COOLC_BENCH_DIR` when it is set, else
+/// `/dev/shm` (a tmpfs) when the machine has it, else cargo's `CARGO_TARGET_TMPDIR`.
+///
+/// A disk measures more than coolc: on an ext4 file system without a journal (this
+/// project's development machine), creating a file skips every inode freed in the
+/// last minutes of its group, reading each one's inode table block, so a compile
+/// that creates its 3,306 files (crate, user files and `.coolc/stubs/`) shortly after
+/// the deletion of many files (the previous run of this benchmark removes about
+/// 100,000) spends 0.1 to 0.4 ms of kernel time on each. `COOLC_BENCH_DIR` under a
+/// disk measures that.
+fn scratch_root() -> PathBuf {
+    if let Some(dir) = std::env::var_os("COOLC_BENCH_DIR") {
+        return PathBuf::from(dir);
+    }
+    let shm = Path::new("/dev/shm");
+    if shm.is_dir() {
+        return shm.to_path_buf();
+    }
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+}
+
+/// The benchmark's own scratch directory under [`scratch_root`], removed at the end
+/// of [`main`] (see [`run`]).
 fn scratch() -> &'static Path {
     static SCRATCH: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
     SCRATCH
         .get_or_init(|| {
-            tempfile::TempDir::with_prefix_in("coolc-bench-", env!("CARGO_TARGET_TMPDIR"))
+            tempfile::TempDir::with_prefix_in("coolc-bench-", scratch_root())
                 .expect("scratch directory")
         })
         .path()
@@ -481,10 +501,8 @@ fn in_child(set: &str, rounds: usize, formatter: Formatter) -> Times {
     if formatter != Formatter::Rustfmt {
         command.env("RUSTFMT", "/nonexistent/coolc-bench-no-rustfmt");
     }
-    // Output and formatter scratch files go under the target directory, where a
-    // crate is compiled, not in /tmp: on the development machine /tmp's file system
-    // takes milliseconds per file creation (ext4 scanning for recently deleted
-    // inodes after the many test runs that churn it), which would measure the disk.
+    // Output and formatter scratch files go under the scratch directory (see
+    // `scratch_root`).
     command.env("TMPDIR", scratch());
     let output = command.output().expect("run the child");
     assert!(
@@ -571,8 +589,9 @@ fn main() {
         || std::env::var("COOLBOT_BENCH_QUICK").is_ok_and(|v| !v.is_empty() && v != "0");
     let rounds = if quick { 1 } else { 3 };
     println!(
-        "### coolc: check and compile times ({} run, median of {rounds} per example row, one round per generated set)\n",
-        if quick { "quick" } else { "full" }
+        "### coolc: check and compile times ({} run, median of {rounds} per example row, one round per generated set; crates written under {})\n",
+        if quick { "quick" } else { "full" },
+        scratch_root().display()
     );
     println!(
         "| input | size | path | check (analyze) | lower | emit: render, format, write | first compile (check + lower + emit) | recompile, nothing changed | output |"

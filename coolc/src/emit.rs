@@ -1,14 +1,14 @@
 //! Emission: the IR printed through the askama templates in `templates/`, formatted.
 //!
-//! **Invariant:** emission cannot fail on user input. Most files come out of their
-//! templates already in `rustfmt`'s layout (the atomic and compound modules, the
-//! generated `mod.rs`, the user files of atomic components and `src/lib.rs`: see
-//! `layout`), so no formatter runs for them. In a compound module, a top-level item
-//! whose layout `layout` is not certain of (a rule function, the builder) is formatted
-//! alone, the rest of the file kept. The other files, and any file whose layout
-//! `layout` is not certain of outside such items, are formatted with `rustfmt` when it
-//! is installed (one run over all of them), else generated ones are printed with
-//! `prettyplease` and user ones keep the templates' layout. Each file is parsed at most once: by `rustfmt` or by `syn` for
+//! **Invariant:** emission cannot fail on user input. Every file but `build.rs` comes
+//! out of its template already in `rustfmt`'s layout (see `layout`), so no formatter
+//! runs for it. In a compound module, a top-level item whose layout `layout` is not
+//! certain of (a rule function, the builder) is formatted alone, the rest of the file
+//! kept. `build.rs`, and any file whose layout `layout` is not certain of outside such
+//! items, are formatted with `rustfmt` when it is installed (one run over all of
+//! them), else generated ones are printed with `prettyplease` (a compound module's
+//! uncertain items alone) and user ones keep the templates' layout. The files are
+//! rendered on every core. Each file is parsed at most once: by `rustfmt` or by `syn` for
 //! `prettyplease`, and by `syn` in debug builds where no formatter parses it. A file
 //! that does not parse is a template bug and panics with the offending text (the test
 //! suite also compiles every generated crate). Output depends only on the IR.
@@ -19,7 +19,8 @@ use std::process::{Command, Stdio};
 use askama::Template;
 
 use crate::layout::{ITEM_BEGIN, ITEM_END, ITEM_END_FORMAT, Layout};
-use crate::{ident, ir, manifest};
+use crate::par::par_map;
+use crate::{ir, manifest};
 
 /// Who owns an emitted file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,6 +124,7 @@ impl<'a> GeneratedMod<'a> {
 struct TypesRs<'a> {
     krate: &'a ir::Crate,
     types: &'a ir::Types,
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -167,12 +169,14 @@ struct UserComponent<'a> {
 #[template(path = "user_compound.rs", escape = "none")]
 struct UserCompound<'a> {
     c: &'a ir::Compound,
+    l: Layout,
 }
 
 #[derive(Template)]
 #[template(path = "user_converters.rs", escape = "none")]
 struct UserConverters<'a> {
     methods: &'a [ir::Method],
+    l: Layout,
 }
 
 #[derive(Template)]
@@ -226,6 +230,21 @@ fn pretty(code: &str) -> String {
     }
     out.push_str(&prettyplease::unparse(&file));
     out
+}
+
+/// `text` with each of its items to format (see `Layout::begin_item`) printed by
+/// `prettyplease` on its own, its markers removed, the rest kept as it is.
+fn pretty_items(text: &str) -> String {
+    let lines: Vec<&str> = text.split('\n').collect();
+    let items: Vec<String> = items_to_format(text)
+        .into_iter()
+        .map(|range| prettyplease::unparse(&check_parses(&lines[range].join("\n"))))
+        .collect();
+    let printed = items.join(&format!("\n{ITEM_BOUNDARY}\n"));
+    match with_formatted_items(text, &printed) {
+        Some(text) => text,
+        None => panic!("coolc bug: the items of a file do not match their printing"),
+    }
 }
 
 fn rustfmt_program() -> std::ffi::OsString {
@@ -493,8 +512,7 @@ fn with_formatted_items(text: &str, formatted: &str) -> Option<String> {
 pub(crate) enum Part {
     /// Every file.
     All,
-    /// The files a formatter lays out: `types.rs`, the user files of compounds,
-    /// `build.rs`, `src/converters.rs`, `src/main.rs`, `tests/components.rs`.
+    /// The files a formatter lays out: `build.rs`.
     NeedsFormatter,
     /// The others (some of which may still turn out to need the formatter).
     LaidOut,
@@ -518,51 +536,64 @@ fn render_modules(krate: &ir::Crate) -> Vec<(String, String, bool)> {
     render_modules_part(krate, Part::All)
 }
 
-/// [`render_modules`] of one [`Part`].
+/// [`render_modules`] of one [`Part`] (all of them are in rustfmt's layout but
+/// where [`Layout`] says otherwise).
 fn render_modules_part(krate: &ir::Crate, part: Part) -> Vec<(String, String, bool)> {
-    let mut modules = Vec::new();
-    if part.wants(false) {
-        modules.push((
-            krate.types.module.clone(),
-            render(&TypesRs {
-                krate,
-                types: &krate.types,
-            }),
-            false,
-        ));
+    if !part.wants(true) {
+        return Vec::new();
     }
-    if part.wants(true) {
-        let atomics = par_map(&krate.atomics, |c| {
-            let template = AtomicRs {
-                krate,
-                c,
-                l: Layout::default(),
-            };
-            let (mut text, laid_out) = render_laid_out(&template, &template.l);
-            let harness = HarnessRs {
-                c,
-                h: crate::lower::harness::harness(c),
-                l: Layout::default(),
-            };
-            let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
-            text.push('\n');
-            text.push_str(&harness_text);
-            (c.module.clone(), text, laid_out && harness_laid_out)
-        });
-        modules.extend(atomics);
-    }
-    if part.wants(true) {
-        for c in &krate.compounds {
-            let template = CompoundRs {
-                krate,
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            modules.push((c.module.clone(), text, laid_out));
-        }
-    }
-    modules
+    let mut jobs = vec![Job::Types];
+    jobs.extend(krate.atomics.iter().map(Job::Atomic));
+    jobs.extend(krate.compounds.iter().map(Job::Compound));
+    par_map(&jobs, |job| {
+        let (module, (text, laid_out)) = match *job {
+            Job::Types => (&krate.types.module, render_types(krate)),
+            Job::Atomic(c) => (&c.module, render_atomic(krate, c)),
+            Job::Compound(c) => (&c.module, render_compound(krate, c)),
+            _ => unreachable!("only modules are listed"),
+        };
+        (module.clone(), text, laid_out)
+    })
+}
+
+/// The types module and whether it is in rustfmt's layout.
+fn render_types(krate: &ir::Crate) -> (String, bool) {
+    let template = TypesRs {
+        krate,
+        types: &krate.types,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
+}
+
+/// An atomic component's module, its typed harness appended, and whether it is in
+/// rustfmt's layout.
+fn render_atomic(krate: &ir::Crate, c: &ir::Atomic) -> (String, bool) {
+    let template = AtomicRs {
+        krate,
+        c,
+        l: Layout::default(),
+    };
+    let (mut text, laid_out) = render_laid_out(&template, &template.l);
+    let harness = HarnessRs {
+        c,
+        h: crate::lower::harness::harness(c),
+        l: Layout::default(),
+    };
+    let (harness_text, harness_laid_out) = render_laid_out(&harness, &harness.l);
+    text.push('\n');
+    text.push_str(&harness_text);
+    (text, laid_out && harness_laid_out)
+}
+
+/// A compound component's module and whether it is in rustfmt's layout.
+fn render_compound(krate: &ir::Crate, c: &ir::Compound) -> (String, bool) {
+    let template = CompoundRs {
+        krate,
+        c,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
 /// Every generated module in one file, for `include!` from `OUT_DIR` (the
@@ -575,24 +606,29 @@ pub fn single_file(krate: &ir::Crate) -> String {
 /// [`single_file`], formatted with `prettyplease` (one module per thread) or not at
 /// all ([`Formatting::Unformatted`]).
 pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
-    let mut parts: Vec<String> = render_modules(krate)
-        .into_iter()
-        .map(|(module, text, _)| {
-            let mut part = String::with_capacity(text.len() + module.len() + 16);
-            part.push_str("pub mod ");
-            part.push_str(&module);
-            part.push_str(" {\n");
-            for line in text
-                .lines()
-                .filter(|l| !l.starts_with("// @generated") && !is_item_marker(l))
-            {
-                part.push_str(line);
-                part.push('\n');
-            }
-            part.push_str("}\n");
-            part
-        })
-        .collect();
+    let modules = render_modules(krate);
+    let mut parts: Vec<String> = par_map(&modules, |(module, text, _)| {
+        // The module's text without its header line and item markers.
+        let body = match text.split_once('\n') {
+            Some((first, rest)) if first.starts_with("// @generated") => rest,
+            _ => text.as_str(),
+        };
+        let body = if body.contains(ITEM_BEGIN) {
+            std::borrow::Cow::Owned(strip_items(body))
+        } else {
+            std::borrow::Cow::Borrowed(body)
+        };
+        let mut part = String::with_capacity(body.len() + module.len() + 16);
+        part.push_str("pub mod ");
+        part.push_str(module);
+        part.push_str(" {\n");
+        part.push_str(&body);
+        if !body.ends_with('\n') {
+            part.push('\n');
+        }
+        part.push_str("}\n");
+        part
+    });
     // The support functions, taken from the generated `mod.rs`.
     let mod_rs = render(&GeneratedMod::new(krate).0);
     if let Some(start) = mod_rs.find("/// Converts a variable") {
@@ -607,7 +643,10 @@ pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
             parts
         }
     };
-    let mut out = krate.header();
+    let header = krate.header();
+    let mut out =
+        String::with_capacity(header.len() + 1 + parts.iter().map(String::len).sum::<usize>());
+    out.push_str(&header);
     out.push('\n');
     for part in parts {
         out.push_str(&part);
@@ -740,102 +779,158 @@ pub fn render_crate(krate: &ir::Crate) -> (Vec<EmittedFile>, Vec<bool>) {
 
 /// [`render_crate`] of one [`Part`] (the files in the same order).
 pub(crate) fn render_crate_part(krate: &ir::Crate, part: Part) -> (Vec<EmittedFile>, Vec<bool>) {
-    let mut files: Vec<(EmittedFile, bool)> = Vec::new();
-    let mut push = |path: PathBuf, contents: String, kind: FileKind, laid_out: bool| {
-        files.push((
-            EmittedFile {
-                path,
-                contents,
-                kind,
-            },
-            laid_out,
-        ));
-    };
+    // Only `build.rs` is written for the formatter.
+    let mut jobs = Vec::new();
     if part.wants(true) {
-        push(
-            PathBuf::from("Cargo.toml"),
-            cargo_toml(krate),
-            FileKind::Manifest,
-            true,
-        );
+        jobs.push(Job::Manifest);
     }
     if !krate.system_libs.is_empty() && part.wants(false) {
-        push(
-            PathBuf::from("build.rs"),
-            render(&BuildRs { krate }),
-            FileKind::Generated,
-            false,
-        );
+        jobs.push(Job::BuildRs);
     }
     if part.wants(true) {
-        let (generated_mod, certain) = GeneratedMod::new(krate);
-        push(
-            PathBuf::from("src/generated/mod.rs"),
-            render(&generated_mod),
-            FileKind::Generated,
-            certain,
-        );
-    }
-    for (module, text, laid_out) in render_modules_part(krate, part) {
-        let path = format!("src/generated/{}.rs", module.trim_start_matches("r#"));
-        push(PathBuf::from(path), text, FileKind::Generated, laid_out);
-    }
-    if part.wants(true) {
-        let (modules, certain) = rustfmt_module_order(user_modules(krate));
-        push(
-            PathBuf::from("src/lib.rs"),
-            render(&UserLib { modules: &modules }),
-            FileKind::User,
-            certain,
-        );
-        let users = par_map(&krate.atomics, |c| {
-            let template = UserComponent {
-                c,
-                l: Layout::default(),
-            };
-            let (text, laid_out) = render_laid_out(&template, &template.l);
-            (user_path(&c.module), text, laid_out)
-        });
-        for (path, text, laid_out) in users {
-            push(path, text, FileKind::User, laid_out);
+        jobs.push(Job::GeneratedMod);
+        jobs.push(Job::Types);
+        jobs.extend(krate.atomics.iter().map(Job::Atomic));
+        jobs.extend(krate.compounds.iter().map(Job::Compound));
+        jobs.push(Job::UserLib);
+        jobs.extend(krate.atomics.iter().map(Job::UserAtomic));
+        jobs.extend(krate.compounds.iter().map(Job::UserCompound));
+        if !krate.types.converters.is_empty() {
+            jobs.push(Job::Converters);
+        }
+        jobs.push(Job::Main);
+        if !krate.starter.tests.is_empty() {
+            jobs.push(Job::Tests);
         }
     }
-    if part.wants(false) {
-        for c in &krate.compounds {
-            push(
-                user_path(&c.module),
-                render(&UserCompound { c }),
-                FileKind::User,
-                false,
-            );
-        }
-    }
-    if !krate.types.converters.is_empty() && part.wants(false) {
-        let methods = converter_methods(krate);
-        push(
-            PathBuf::from("src/converters.rs"),
-            render(&UserConverters { methods: &methods }),
-            FileKind::User,
-            false,
-        );
-    }
-    if part.wants(false) {
-        push(
-            PathBuf::from("src/main.rs"),
-            render_starter_main(krate),
-            FileKind::Starter,
-            false,
-        );
-        if let Some(tests) = render_starter_tests(krate) {
-            push(
-                PathBuf::from("tests/components.rs"),
-                tests,
+    // The files are independent: rendered on every core.
+    par_map(&jobs, |job| job.render(krate)).into_iter().unzip()
+}
+
+/// One file of a crate to render.
+#[derive(Clone, Copy, Debug)]
+enum Job<'a> {
+    Manifest,
+    BuildRs,
+    GeneratedMod,
+    Types,
+    Atomic(&'a ir::Atomic),
+    Compound(&'a ir::Compound),
+    UserLib,
+    UserAtomic(&'a ir::Atomic),
+    UserCompound(&'a ir::Compound),
+    Converters,
+    Main,
+    Tests,
+}
+
+impl Job<'_> {
+    /// The file and whether it is in rustfmt's layout.
+    fn render(self, krate: &ir::Crate) -> (EmittedFile, bool) {
+        let file = |path: PathBuf, (contents, laid_out): (String, bool), kind| {
+            (
+                EmittedFile {
+                    path,
+                    contents,
+                    kind,
+                },
+                laid_out,
+            )
+        };
+        let generated = |module: &str| {
+            PathBuf::from(format!(
+                "src/generated/{}.rs",
+                module.trim_start_matches("r#")
+            ))
+        };
+        match self {
+            Job::Manifest => file(
+                "Cargo.toml".into(),
+                (cargo_toml(krate), true),
+                FileKind::Manifest,
+            ),
+            Job::BuildRs => file(
+                "build.rs".into(),
+                (render(&BuildRs { krate }), false),
+                FileKind::Generated,
+            ),
+            Job::GeneratedMod => {
+                let (template, certain) = GeneratedMod::new(krate);
+                file(
+                    "src/generated/mod.rs".into(),
+                    (render(&template), certain),
+                    FileKind::Generated,
+                )
+            }
+            Job::Types => file(
+                generated(&krate.types.module),
+                render_types(krate),
+                FileKind::Generated,
+            ),
+            Job::Atomic(c) => file(
+                generated(&c.module),
+                render_atomic(krate, c),
+                FileKind::Generated,
+            ),
+            Job::Compound(c) => file(
+                generated(&c.module),
+                render_compound(krate, c),
+                FileKind::Generated,
+            ),
+            Job::UserLib => {
+                let (modules, certain) = rustfmt_module_order(user_modules(krate));
+                file(
+                    "src/lib.rs".into(),
+                    (render(&UserLib { modules: &modules }), certain),
+                    FileKind::User,
+                )
+            }
+            Job::UserAtomic(c) => {
+                let template = UserComponent {
+                    c,
+                    l: Layout::default(),
+                };
+                file(
+                    user_path(&c.module),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::UserCompound(c) => {
+                let template = UserCompound {
+                    c,
+                    l: Layout::default(),
+                };
+                file(
+                    user_path(&c.module),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::Converters => {
+                let methods = converter_methods(krate);
+                let template = UserConverters {
+                    methods: &methods,
+                    l: Layout::default(),
+                };
+                file(
+                    "src/converters.rs".into(),
+                    render_laid_out(&template, &template.l),
+                    FileKind::User,
+                )
+            }
+            Job::Main => file(
+                "src/main.rs".into(),
+                render_starter_main(krate),
                 FileKind::Starter,
-                false,
-            );
+            ),
+            Job::Tests => file(
+                "tests/components.rs".into(),
+                render_starter_tests(krate),
+                FileKind::Starter,
+            ),
         }
     }
-    files.into_iter().unzip()
 }
 
 /// Formats the Rust files of `files` marked in `needs` (see the module doc); the
@@ -886,8 +981,15 @@ pub(crate) fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
         None => par_map(&selected, |&i| {
             let file = &files[i];
             // Without rustfmt, user files keep the templates' own layout
-            // (`prettyplease` would drop their comments).
-            (file.kind == FileKind::Generated).then(|| pretty(&strip_items(&file.contents)))
+            // (`prettyplease` would drop their comments); a file with items to
+            // format gets those printed, each on its own, and keeps the rest.
+            (file.kind == FileKind::Generated).then(|| {
+                if file.contents.contains(ITEM_END_FORMAT) {
+                    pretty_items(&file.contents)
+                } else {
+                    pretty(&strip_items(&file.contents))
+                }
+            })
         }),
     };
     for (i, new) in selected.into_iter().zip(formatted) {
@@ -896,43 +998,6 @@ pub(crate) fn format_files(files: &mut [EmittedFile], needs: &[bool]) {
             None => files[i].contents = strip_items(&files[i].contents),
         }
     }
-}
-
-/// `f` applied to every item on `std::thread::available_parallelism` threads (which
-/// take the next item as they finish one), results in the items' order. A panic in
-/// `f` is propagated.
-pub(crate) fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    let threads = std::thread::available_parallelism()
-        .map_or(1, std::num::NonZero::get)
-        .min(items.len());
-    if threads <= 1 {
-        return items.iter().map(f).collect();
-    }
-    let next = AtomicUsize::new(0);
-    let work = || {
-        let mut done = Vec::new();
-        loop {
-            let index = next.fetch_add(1, Ordering::Relaxed);
-            let Some(item) = items.get(index) else {
-                break;
-            };
-            done.push((index, f(item)));
-        }
-        done
-    };
-    let mut done: Vec<(usize, R)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..threads).map(|_| scope.spawn(work)).collect();
-        workers
-            .into_iter()
-            .flat_map(|worker| match worker.join() {
-                Ok(done) => done,
-                Err(panic) => std::panic::resume_unwind(panic),
-            })
-            .collect()
-    });
-    done.sort_unstable_by_key(|(index, _)| *index);
-    done.into_iter().map(|(_, result)| result).collect()
 }
 
 /// Formats one hand-laid-out user file (comments matter) with `rustfmt` when it is
@@ -953,75 +1018,9 @@ struct StarterComponent<'a> {
 
 #[derive(Template)]
 #[template(path = "starter_main.rs", escape = "none")]
-struct StarterMain {
-    /// One expression per component to run: its `coolbot::Component`.
-    roots: Vec<String>,
-    /// One statement per atomic component type: its registration with the network
-    /// layer's `registry`.
-    registrations: Vec<String>,
-}
-
-impl StarterMain {
-    /// The components no compound of `krate` instantiates, each built from the
-    /// user's default behaviours (compounds with `?`).
-    fn new(krate: &ir::Crate) -> StarterMain {
-        let instantiated: std::collections::BTreeSet<&str> = krate
-            .compounds
-            .iter()
-            .flat_map(|c| c.instances.iter().map(|i| i.component.as_str()))
-            .collect();
-        let lib = &krate.lib_name;
-        let mut roots = Vec::new();
-        let atomics = krate.atomics.iter().map(|c| {
-            let module = &c.module;
-            format!(
-                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component(name, ::{lib}::{module}::{}::default()) }})",
-                c.user_struct
-            )
-        });
-        let compounds = krate.compounds.iter().map(|c| {
-            let module = &c.module;
-            let generics = if c.uses_converters {
-                format!("::<::{lib}::converters::Convert>")
-            } else {
-                String::new()
-            };
-            format!(
-                "::{lib}::generated::{module}::register(&mut registry, |name| {{ ::{lib}::generated::{module}::component{generics}(name, ::{lib}::{module}::{}::default()) }})",
-                c.user_struct
-            )
-        });
-        let registrations = atomics.chain(compounds).collect();
-        for c in &krate.atomics {
-            if !instantiated.contains(c.type_name.as_str()) {
-                let module = &c.module;
-                roots.push(format!(
-                    "::{lib}::generated::{module}::component({}, ::{lib}::{module}::{}::default())",
-                    ident::string_literal(module.trim_start_matches("r#")),
-                    c.user_struct
-                ));
-            }
-        }
-        for c in &krate.compounds {
-            if !instantiated.contains(c.type_name.as_str()) {
-                let module = &c.module;
-                let generics = if c.uses_converters {
-                    format!("::<::{lib}::converters::Convert>")
-                } else {
-                    String::new()
-                };
-                roots.push(format!(
-                    "::{lib}::generated::{module}::component{generics}({}, ::{lib}::{module}::{}::default())?",
-                    ident::string_literal(module.trim_start_matches("r#")),
-                    c.user_struct
-                ));
-            }
-        }
-        StarterMain {
-            roots,
-            registrations,
-        }
-    }
+struct StarterMain<'a> {
+    starter: &'a ir::Starter,
+    l: Layout,
 }
 
 /// The filled-in user file of the `coolc new` starter component.
@@ -1048,56 +1047,56 @@ pub(crate) fn starter_test(krate: &ir::Crate, c: &ir::Atomic) -> String {
 #[derive(Template)]
 #[template(path = "starter_tests.rs", escape = "none")]
 struct StarterTests<'a> {
-    lib: &'a str,
-    tests: Vec<StarterTestOf<'a>>,
+    tests: &'a [ir::StarterTest],
+    l: Layout,
 }
 
-/// One atomic component's test in [`StarterTests`].
-struct StarterTestOf<'a> {
-    /// The test's name: the module without a raw identifier's `r#`.
-    test: &'a str,
-    module: &'a str,
-    user_struct: &'a str,
-    type_name: &'a str,
+/// The `tests/components.rs` written into a crate being created (when it has an
+/// atomic component), and whether it is in rustfmt's layout: one test per atomic
+/// component, which runs it in its generated harness for a second of virtual time
+/// from its stubs.
+fn render_starter_tests(krate: &ir::Crate) -> (String, bool) {
+    let template = StarterTests {
+        tests: &krate.starter.tests,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
-/// The `tests/components.rs` written into a crate being created, as its template
-/// renders it: one test per atomic component, which runs it in its generated harness
-/// for a second of virtual time from its stubs; `None` when the crate has no atomic
-/// component.
-fn render_starter_tests(krate: &ir::Crate) -> Option<String> {
-    let tests: Vec<StarterTestOf<'_>> = krate
-        .atomics
-        .iter()
-        .map(|c| StarterTestOf {
-            test: c.module.trim_start_matches("r#"),
-            module: &c.module,
-            user_struct: &c.user_struct,
-            type_name: &c.type_name,
-        })
-        .collect();
-    (!tests.is_empty()).then(|| {
-        render(&StarterTests {
-            lib: &krate.lib_name,
-            tests,
-        })
-    })
-}
-
-/// The `src/main.rs` of a new crate as its template renders it: runs every component
-/// no compound instantiates, for two seconds.
-fn render_starter_main(krate: &ir::Crate) -> String {
-    render(&StarterMain::new(krate))
+/// The `src/main.rs` of a new crate, and whether it is in rustfmt's layout: runs
+/// every component no compound instantiates, for two seconds.
+fn render_starter_main(krate: &ir::Crate) -> (String, bool) {
+    let template = StarterMain {
+        starter: &krate.starter,
+        l: Layout::default(),
+    };
+    render_laid_out(&template, &template.l)
 }
 
 /// `render_starter_main`, formatted like a user file.
 pub fn starter_main(krate: &ir::Crate) -> String {
-    format_user(&render_starter_main(krate))
+    match render_starter_main(krate) {
+        (text, true) => text,
+        (text, false) => format_user(&text),
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Without rustfmt, a file's items to format are printed by `prettyplease`, each
+    /// on its own; the rest of the file keeps its layout.
+    #[test]
+    fn without_rustfmt_marked_items_alone_are_printed() {
+        let text = format!(
+            "//! Module.\n\nfn   kept( ) {{}}\n\n{ITEM_BEGIN}\n/// Doc.\nfn   messy( ) -> u8 {{ 1 }}\n{ITEM_END_FORMAT}\n"
+        );
+        assert_eq!(
+            pretty_items(&text),
+            "//! Module.\n\nfn   kept( ) {}\n\n/// Doc.\nfn messy() -> u8 {\n    1\n}\n"
+        );
+    }
 
     /// A file whose second item is marked for the formatter: only that item goes to
     /// it, and its formatted text replaces it, markers gone.

@@ -416,6 +416,35 @@ pub struct Crate {
     pub atomics: Vec<Atomic>,
     /// Compound components, in source order.
     pub(crate) compounds: Vec<Compound>,
+    /// What the compile that creates the crate writes into its starter files.
+    pub(crate) starter: Starter,
+}
+
+/// The code of the starter files (`src/main.rs`, `tests/components.rs`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Starter {
+    /// One expression per component no compound instantiates: its
+    /// `coolbot::Component` (a compound's ends in `?`), atomic ones first.
+    pub(crate) roots: Vec<Code>,
+    /// One registration call per component type, with the network layer's
+    /// `registry`.
+    pub(crate) registrations: Vec<Code>,
+    /// One test per atomic component.
+    pub(crate) tests: Vec<StarterTest>,
+}
+
+/// The starter test of one atomic component: it runs in its generated harness for
+/// a second of virtual time from its stubs.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct StarterTest {
+    /// The test function's name.
+    pub(crate) name: String,
+    /// The user's behaviour, by default.
+    pub(crate) behavior: Code,
+    /// The running harness of `behavior`.
+    pub(crate) harness: Code,
+    /// The assertion that the component is in no error.
+    pub(crate) check: Code,
 }
 
 impl Crate {
@@ -663,9 +692,25 @@ pub(crate) struct Converter {
     pub(crate) stub_body: Vec<StubLine>,
 }
 
+impl Converter {
+    /// Its method's signature in the `Converters` trait.
+    pub(crate) fn signature(&self) -> String {
+        format!("fn {}(from: &{}) -> {}", self.method, self.from, self.to)
+    }
+}
+
+impl RosConstant {
+    /// Its declaration up to the `=` before its value.
+    pub(crate) fn lhs(&self) -> String {
+        format!("pub const {}: {} =", self.name, self.ty)
+    }
+}
+
 /// An atomic component's generated module.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Atomic {
+    /// Its `coolbot::Spec` literal.
+    pub(crate) spec: Code,
     /// Doc lines.
     pub(crate) doc: Doc,
     /// The component type name as written.
@@ -928,6 +973,8 @@ pub(crate) struct AnswerArm {
 /// A compound component's generated module.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Compound {
+    /// Its supervisor's `coolbot::Spec` literal.
+    pub(crate) spec: Code,
     /// Doc lines.
     pub(crate) doc: Doc,
     /// Doc lines added to `SPEC`'s rustdoc ([`notes`]).
@@ -1162,6 +1209,14 @@ impl Compound {
     pub(crate) fn vars_derive_default(&self) -> bool {
         let fields: Vec<Field> = self.vars.iter().map(|v| v.field.clone()).collect();
         derive_default(&fields)
+    }
+
+    /// Whether the builder's chain carries comments (overrides of an instance's
+    /// mapped variables that are not applied).
+    pub(crate) fn builder_notes(&self) -> bool {
+        self.instances
+            .iter()
+            .any(|i| i.build.is_some() && !i.unapplied.is_empty())
     }
 
     /// Whether any own variable is controllable.

@@ -1,6 +1,6 @@
-//! rustfmt's layout, computed while rendering, for the shapes of Rust that the atomic,
-//! compound and user templates emit, so that those files need no formatter at run
-//! time.
+//! rustfmt's layout, computed while rendering, for the shapes of Rust that the
+//! templates emit (every file of a crate but `build.rs`), so that those files need no
+//! formatter at run time.
 //!
 //! The templates are written in the layout `rustfmt` (edition 2024, default
 //! configuration: `max_width` 100, block indentation) gives them; what depends on the
@@ -11,7 +11,9 @@
 //! 60 (`chain_width`), and a lone struct-literal argument or array item "overflows"
 //! (opens on the line of its parent). Expressions come as the [`Code`] trees `lower`
 //! built (no Rust text is parsed here), and each template piece is named for what it
-//! prints, its indentation fixed here. Anything these rules do not cover, or that
+//! prints, its indentation fixed here. A whole statement or expression (a rule's
+//! condition, a compound's builder chain, the starter `main`'s calls, a stub's value)
+//! goes to [`expr`], rustfmt's own rules for expressions ported. Anything these rules do not cover, or that
 //! comes near the edge of them (a line over 100 columns, a list of short items that
 //! rustfmt would pack several per line), clears [`Layout::ok`]: the caller then runs
 //! the real formatter over the file, or over the one top-level item it happened in
@@ -24,6 +26,8 @@
 use std::cell::Cell;
 
 use crate::ir::{Code, StubLine};
+
+pub(crate) mod expr;
 
 /// rustfmt's `max_width`.
 const MAX_WIDTH: usize = 100;
@@ -65,6 +69,10 @@ impl Default for Layout {
 
 fn spaces(n: usize) -> String {
     " ".repeat(n)
+}
+
+fn push_spaces(out: &mut String, n: usize) {
+    out.extend(std::iter::repeat_n(' ', n));
 }
 
 impl Layout {
@@ -250,6 +258,128 @@ impl Layout {
         self.line(4, &format!("#[serde(with = \"{adapter}\")]"))
     }
 
+    /// `#[serde(with = "adapter")]` at `indent`.
+    pub fn serde_with_at(&self, indent: usize, adapter: &str) -> String {
+        self.line(indent, &format!("#[serde(with = \"{adapter}\")]"))
+    }
+
+    /// `#[serde(rename = "name")]` at `indent`.
+    pub fn serde_rename(&self, indent: usize, name: &str) -> String {
+        self.line(indent, &format!("#[serde(rename = \"{name}\")]"))
+    }
+
+    /// A packet field's declaration `pub name: ty,` at `indent`.
+    pub fn field_decl(&self, indent: usize, f: &crate::ir::Field) -> String {
+        self.line(indent, &format!("pub {}: {},", f.name, f.ty))
+    }
+
+    /// The indentation `indent` before a fixed piece of a template.
+    pub fn open(&self, indent: &usize) -> String {
+        spaces(*indent)
+    }
+
+    /// Doc-comment lines at `indent`, each followed by a newline (nothing when there
+    /// are none): what comes before an item's attributes.
+    pub fn doc_lines(&self, lines: &[String], indent: usize) -> String {
+        let mut out = self.doc(lines, indent, "///");
+        if !out.is_empty() {
+            out.remove(0);
+            out.push('\n');
+        }
+        out
+    }
+
+    /// `#[derive(items)]` at `indent` (rustfmt's `format_derive`): on one line when
+    /// it fits, else one item per line when they do not fit on one line of their own
+    /// (which is left to the formatter).
+    pub fn derive(&self, indent: usize, items: &[&str]) -> String {
+        let joined = items.join(", ");
+        // The list is laid out with a trailing comma, removed on one line.
+        let listed = joined.len() + 1;
+        let argument_width = MAX_WIDTH.saturating_sub(indent + 4);
+        let one_line_budget = MAX_WIDTH.saturating_sub(indent + "#[derive()]".len() + 3);
+        let pad = spaces(indent);
+        if joined.len() <= argument_width && listed <= one_line_budget {
+            return self.line(indent, &format!("#[derive({joined})]"));
+        }
+        if joined.len() <= argument_width {
+            // rustfmt puts the items on one line of their own: not written here.
+            self.fail();
+        }
+        let mut out = format!("{pad}#[derive(");
+        for item in items {
+            out.push('\n');
+            out.push_str(&self.line(indent + 4, &format!("{item},")));
+        }
+        out.push('\n');
+        out.push_str(&pad);
+        out.push_str(")]");
+        out
+    }
+
+    /// A packet's derives at `indent`.
+    pub fn packet_derive(&self, p: &crate::ir::Packet, indent: &usize) -> String {
+        let mut items = vec![
+            "Clone",
+            "Debug",
+            "PartialEq",
+            "::serde::Serialize",
+            "::serde::Deserialize",
+        ];
+        if p.derives_default() {
+            items.push("Default");
+        }
+        self.derive(*indent, &items)
+    }
+
+    /// An enum's derives.
+    pub fn enum_derive(&self, e: &crate::ir::Enum) -> String {
+        let mut items = vec![
+            "Clone",
+            "Copy",
+            "Debug",
+            "PartialEq",
+            "Eq",
+            "Hash",
+            "PartialOrd",
+            "Ord",
+            "::serde::Serialize",
+            "::serde::Deserialize",
+        ];
+        if !e.variants.is_empty() {
+            items.push("Default");
+        }
+        self.derive(0, &items)
+    }
+
+    /// `pub type Name = path;` of an extern packet or a ROS import.
+    pub fn type_alias(&self, e: &crate::ir::Extern) -> String {
+        self.line(0, &format!("pub type {} = {};", e.name, e.path))
+    }
+
+    /// `Self { field: default, ... }`, the body of a packet's `Default` impl at
+    /// `indent`.
+    pub fn default_body(&self, fields: &[crate::ir::Field], indent: usize) -> String {
+        let fields: Vec<(String, Code)> = fields
+            .iter()
+            .map(|f| (f.name.clone(), f.default.clone()))
+            .collect();
+        self.statement(indent, &Code::Struct("Self".to_owned(), fields), "")
+    }
+
+    /// `lhs value;` at `indent`, `lhs` ending in `=` (a constant), `value` a
+    /// literal.
+    pub fn const_item(&self, indent: usize, lhs: &str, value: &str) -> String {
+        let printer = expr::Printer::default();
+        match printer.assign(indent, lhs, &Code::atom(value)) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                self.fail();
+                format!("{}{lhs} {value};", spaces(indent))
+            }
+        }
+    }
+
     /// A match arm `pattern => body,` at `indent`, `body` a short expression.
     pub fn arm(&self, indent: usize, pattern: &str, body: &str) -> String {
         if body.len() > CHAIN_WIDTH {
@@ -323,10 +453,9 @@ impl Layout {
     fn body_line(&self, line: &StubLine) -> String {
         match line {
             StubLine::Comment(text) => format!("{}{text}", spaces(8)),
-            // A value with a shape these rules do not cover is short: one line.
-            StubLine::Value(code) if Self::has_other(code) => self.short(8, &code.to_string()),
-            StubLine::Value(code) => format!("{}{}", spaces(8), self.node(code, 8, 8, 0, false)),
-            StubLine::Statement(_) | StubLine::Let(..) => self.short(8, &line.to_string()),
+            StubLine::Value(code) => self.statement(8, code, ""),
+            StubLine::Let(name, value) => self.let_statement(8, name, None, value),
+            StubLine::Statement(_) => self.short(8, &line.to_string()),
         }
     }
 
@@ -479,58 +608,11 @@ impl Layout {
         )
     }
 
-    /// The `SPEC` static of an atomic component (see `templates/atomic.rs`).
-    pub fn spec(&self, c: &crate::ir::Atomic) -> String {
-        let s = |t: &str| Code::Atom(t.to_owned());
-        let literal = Code::string;
-        let list = Code::slice;
-        let spec = Code::Struct(
-            "::coolbot::Spec".to_owned(),
-            vec![
-                ("type_name".to_owned(), literal(&c.type_name)),
-                ("doc".to_owned(), s(&c.doc_literal())),
-                (
-                    "states".to_owned(),
-                    list(c.states.iter().map(|st| st.spec.clone()).collect()),
-                ),
-                ("initial".to_owned(), s(&c.initial.to_string())),
-                (
-                    "inputs".to_owned(),
-                    list(
-                        c.inputs
-                            .iter()
-                            .map(|p| p.spec(&p.cool_name, true))
-                            .collect(),
-                    ),
-                ),
-                (
-                    "outputs".to_owned(),
-                    list(
-                        c.outputs
-                            .iter()
-                            .map(|p| p.spec(&p.cool_name, false))
-                            .collect(),
-                    ),
-                ),
-                (
-                    "variables".to_owned(),
-                    list(
-                        c.vars
-                            .iter()
-                            .filter(|v| v.spec_index.is_some())
-                            .map(crate::ir::Var::spec)
-                            .collect(),
-                    ),
-                ),
-                (
-                    "exceptions".to_owned(),
-                    list(c.exceptions.iter().map(|e| e.spec.clone()).collect()),
-                ),
-                ("timing".to_owned(), c.timing.clone()),
-            ],
-        );
+    /// The `SPEC` static of a component (see `templates/atomic.rs`): `spec`, the
+    /// `coolbot::Spec` literal `lower` built.
+    pub fn spec(&self, spec: &Code) -> String {
         let head = "pub static SPEC: ::coolbot::Spec = ";
-        format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
+        format!("{head}{};", self.node(spec, 0, head.len(), 1, false))
     }
 
     /// `pub const NAME: &[(&str, &str)] = &[("a", "b"), ...];`, a table of pairs of
@@ -568,42 +650,6 @@ impl Layout {
             }
         }
         format!("{head} {};", self.node(&list, 0, head.len() + 1, 1, false))
-    }
-
-    /// The compound's `SPEC` static (see `templates/compound.rs`).
-    pub fn compound_spec(&self, c: &crate::ir::Compound) -> String {
-        let s = |t: &str| Code::Atom(t.to_owned());
-        let spec = Code::Struct(
-            "::coolbot::Spec".to_owned(),
-            vec![
-                (
-                    "type_name".to_owned(),
-                    Code::atom(format!("\"{}\"", c.type_name)),
-                ),
-                ("doc".to_owned(), s(&c.doc_literal())),
-                (
-                    "states".to_owned(),
-                    Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
-                ),
-                ("initial".to_owned(), s(&c.initial.to_string())),
-                ("inputs".to_owned(), Code::slice(c.input_specs.clone())),
-                ("outputs".to_owned(), Code::slice(c.output_specs.clone())),
-                (
-                    "variables".to_owned(),
-                    Code::slice(
-                        c.vars
-                            .iter()
-                            .filter(|v| v.spec_index.is_some())
-                            .map(crate::ir::Var::spec)
-                            .collect(),
-                    ),
-                ),
-                ("exceptions".to_owned(), s("&[]")),
-                ("timing".to_owned(), c.timing.clone()),
-            ],
-        );
-        let head = "pub static SPEC: ::coolbot::Spec = ";
-        format!("{head}{};", self.node(&spec, 0, head.len(), 1, false))
     }
 
     /// A mapped controllable variable's field of `Mapped`, at indent 4.
@@ -761,6 +807,136 @@ impl Layout {
         out
     }
 
+    /// `code` then `tail` as a statement (`tail` is `;`) or a block's tail
+    /// expression (`tail` empty) at `indent`, in rustfmt's layout of expressions
+    /// (`expr`); left to the formatter when that layout is not certain.
+    pub fn statement(&self, indent: usize, code: &Code, tail: &str) -> String {
+        let printer = expr::Printer::default();
+        match printer.statement(indent, code, tail) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                if std::env::var_os("COOLC_LAYOUT_DEBUG").is_some() {
+                    eprintln!("coolc: not laid out: {code}{tail}");
+                }
+                self.fail();
+                format!("{}{code}{tail}", spaces(indent))
+            }
+        }
+    }
+
+    /// `let pattern: ty = value;` at `indent` (see [`Layout::statement`]).
+    pub fn let_statement(
+        &self,
+        indent: usize,
+        pattern: &str,
+        ty: Option<&str>,
+        value: &Code,
+    ) -> String {
+        let printer = expr::Printer::default();
+        match printer.let_statement(indent, pattern, ty, value) {
+            Some(text) => format!("{}{text}", spaces(indent)),
+            None => {
+                self.fail();
+                let ty = ty.map_or(String::new(), |ty| format!(": {ty}"));
+                format!("{}let {pattern}{ty} = {value};", spaces(indent))
+            }
+        }
+    }
+
+    /// `let handles: [coolbot::Handle; n] = [...];` of the starter `main`: each of
+    /// `roots` added to the system, its error mapped to a message.
+    pub fn handles(&self, roots: &[Code]) -> String {
+        let items = roots
+            .iter()
+            .map(|root| {
+                let message = Code::call(
+                    "format!",
+                    vec![
+                        Code::string("cannot add a component: {}"),
+                        Code::call("coolbot::Chain", vec![Code::atom("&e")]),
+                    ],
+                );
+                Code::atom("system")
+                    .method("add", vec![root.clone()])
+                    .method("map_err", vec![Code::closure("e", message)])
+                    .try_op()
+            })
+            .collect();
+        let ty = format!("[coolbot::Handle; {}]", roots.len());
+        self.let_statement(4, "handles", Some(&ty), &Code::List("[".to_owned(), items))
+    }
+
+    /// The first line of test function `name` (no parameters).
+    pub fn test_fn(&self, name: &str) -> String {
+        self.line(0, &format!("fn {name}() {{"))
+    }
+
+    /// The body of a rule's function: its condition.
+    pub fn rule_body(&self, r: &crate::ir::Rule) -> String {
+        self.statement(4, &r.expr, "")
+    }
+
+    /// The tail of the compound's `builder_with`: the runtime's builder and its
+    /// chain of steps (instances, connections, policies, rules), in `Ok(...)`.
+    pub fn builder_chain(&self, c: &crate::ir::Compound) -> String {
+        let mut chain = Code::call(
+            "::coolbot::CompoundBuilder::new",
+            vec![Code::atom("name"), Code::atom("supervisor")],
+        );
+        for step in c.builder_steps() {
+            chain = match step {
+                crate::ir::BuilderStep::Instance(i, build) => match &i.node {
+                    Some(node) => chain.method(
+                        "instance_on",
+                        vec![Code::atom(format!("\"{node}\"")), build.clone()],
+                    ),
+                    None => chain.method("instance", vec![build.clone()]),
+                },
+                crate::ir::BuilderStep::Connect(k) => {
+                    let Code::Call(method, args) = Self::connect_call(k) else {
+                        unreachable!("a connection is a call");
+                    };
+                    chain.method(method, args)
+                }
+                crate::ir::BuilderStep::Step(Code::Call(method, args)) => {
+                    chain.method(method.as_str(), args.clone())
+                }
+                crate::ir::BuilderStep::Step(other) => {
+                    self.fail();
+                    chain.method(other.to_string(), Vec::new())
+                }
+                crate::ir::BuilderStep::Rule(r) => chain.method(
+                    "rule",
+                    vec![
+                        Code::atom(r.state.clone()),
+                        Code::atom(r.target.clone()),
+                        r.reads.clone(),
+                        r.call.clone(),
+                    ],
+                ),
+            };
+        }
+        self.statement(4, &Code::call("Ok", vec![chain]), "")
+    }
+
+    /// `connect(from, to)` or `connect_via(from, to, converter)`.
+    fn connect_call(k: &crate::ir::Connection) -> Code {
+        let mut args = vec![
+            Code::atom(format!("\"{}\"", k.from)),
+            Code::atom(format!("\"{}\"", k.to)),
+        ];
+        let method = match &k.via {
+            Some(method) => {
+                args.push(Code::atom(format!(
+                    "<C as super::types::Converters>::{method}"
+                )));
+                "connect_via"
+            }
+            None => "connect",
+        };
+        Code::call(method, args)
+    }
+
     /// `.instance(build)` or `.instance_on("node", build)` of the builder's chain.
     pub fn instance_step(&self, i: &crate::ir::Instance, build: &Code, last: &bool) -> String {
         let step = match &i.node {
@@ -776,20 +952,7 @@ impl Layout {
     /// `.connect(from, to)` or `.connect_via(from, to, converter)` of the builder's
     /// chain.
     pub fn connect_step(&self, k: &crate::ir::Connection, last: &bool) -> String {
-        let mut args = vec![
-            Code::atom(format!("\"{}\"", k.from)),
-            Code::atom(format!("\"{}\"", k.to)),
-        ];
-        let method = match &k.via {
-            Some(method) => {
-                args.push(Code::atom(format!(
-                    "<C as super::types::Converters>::{method}"
-                )));
-                "connect_via"
-            }
-            None => "connect",
-        };
-        self.builder_step(&Code::call(method, args), last)
+        self.builder_step(&Self::connect_call(k), last)
     }
 
     /// `.rule(state, target, reads, test)` of the builder's chain.
@@ -914,6 +1077,38 @@ impl Layout {
         }
     }
 
+    /// The width of [`Layout::flat`]'s form of `node`, computed without writing it.
+    fn flat_width(node: &Code) -> Option<usize> {
+        let list = |items: &[Code]| -> Option<usize> {
+            let mut width = 2 * items.len().saturating_sub(1);
+            for item in items {
+                width += Self::flat_width(item)?;
+            }
+            Some(width)
+        };
+        match node {
+            Code::Atom(text) => Some(text.len()),
+            Code::Struct(path, fields) if fields.is_empty() => Some(path.len() + 3),
+            Code::Struct(path, fields) => {
+                let mut body = 2 * (fields.len() - 1);
+                for (name, value) in fields {
+                    body += name.len() + 2 + Self::flat_width(value)?;
+                }
+                (body <= STRUCT_LIT_WIDTH).then_some(path.len() + 5 + body)
+            }
+            Code::Call(callee, args) => {
+                let inner = list(args)?;
+                (inner <= LIST_WIDTH).then_some(callee.len() + 2 + inner)
+            }
+            Code::List(open, items) => {
+                let inner = list(items)?;
+                (inner <= LIST_WIDTH).then_some(open.len() + 1 + inner)
+            }
+            // Kept on one line, or a shape these rules do not cover.
+            _ => Some(node.to_string().len()),
+        }
+    }
+
     /// `node` with its first line starting at column `used` (continuations at
     /// `indent`), `suffix` columns following it on its last line. A string literal
     /// that is a struct field's whole value may run past `max_width` (`long_string`),
@@ -929,57 +1124,71 @@ impl Layout {
         if Self::has_other(node) {
             self.fail();
         }
-        if let Some(flat) = Self::flat(node) {
-            if used + flat.len() + suffix <= MAX_WIDTH {
-                return flat;
-            }
-            if long_string && matches!(node, Code::Atom(t) if t.starts_with('"')) {
-                return flat;
-            }
+        let mut out = String::new();
+        self.node_into(node, indent, used, suffix, long_string, &mut out);
+        out
+    }
+
+    /// [`Layout::node`], written at the end of `out`.
+    fn node_into(
+        &self,
+        node: &Code,
+        indent: usize,
+        used: usize,
+        suffix: usize,
+        long_string: bool,
+        out: &mut String,
+    ) {
+        use std::fmt::Write as _;
+        if let Some(width) = Self::flat_width(node)
+            && (used + width + suffix <= MAX_WIDTH
+                || long_string && matches!(node, Code::Atom(t) if t.starts_with('"')))
+        {
+            // The one-line form is the tree's own printing.
+            let _ = write!(out, "{node}");
+            return;
         }
-        let inner = spaces(indent + 4);
         match node {
             Code::Atom(_) | Code::Repeat(..) => {
                 self.fail();
-                node.to_string()
+                let _ = write!(out, "{node}");
             }
             Code::Struct(path, fields) => {
                 if fields.is_empty() || used + path.len() + 2 > MAX_WIDTH {
                     self.fail();
                 }
-                let mut out = format!("{path} {{\n");
+                out.push_str(path);
+                out.push_str(" {\n");
                 for (name, value) in fields {
                     let start = indent + 4 + name.len() + 2;
-                    out.push_str(&inner);
+                    push_spaces(out, indent + 4);
                     out.push_str(name);
                     out.push_str(": ");
-                    out.push_str(&self.node(value, indent + 4, start, 1, true));
+                    self.node_into(value, indent + 4, start, 1, true, out);
                     out.push_str(",\n");
                 }
-                out.push_str(&spaces(indent));
+                push_spaces(out, indent);
                 out.push('}');
-                out
             }
             Code::Call(callee, args) => match &args[..] {
                 [arg @ (Code::Struct(..) | Code::List(..))] => {
                     let start = used + callee.len() + 1;
-                    format!(
-                        "{callee}({})",
-                        self.node(arg, indent, start, suffix + 1, false)
-                    )
+                    out.push_str(callee);
+                    out.push('(');
+                    self.node_into(arg, indent, start, suffix + 1, false, out);
+                    out.push(')');
                 }
                 _ => {
                     self.fail();
-                    node.to_string()
+                    let _ = write!(out, "{node}");
                 }
             },
             Code::List(open, items) => match &items[..] {
                 [item @ Code::Struct(..)] => {
                     let start = used + open.len();
-                    format!(
-                        "{open}{}]",
-                        self.node(item, indent, start, suffix + 1, false)
-                    )
+                    out.push_str(open);
+                    self.node_into(item, indent, start, suffix + 1, false, out);
+                    out.push(']');
                 }
                 _ => {
                     if items.iter().any(|i| {
@@ -989,21 +1198,21 @@ impl Layout {
                     {
                         self.fail();
                     }
-                    let mut out = format!("{open}\n");
+                    out.push_str(open);
+                    out.push('\n');
                     for item in items {
-                        out.push_str(&inner);
-                        out.push_str(&self.node(item, indent + 4, indent + 4, 1, false));
+                        push_spaces(out, indent + 4);
+                        self.node_into(item, indent + 4, indent + 4, 1, false, out);
                         out.push_str(",\n");
                     }
-                    out.push_str(&spaces(indent));
+                    push_spaces(out, indent);
                     out.push(']');
-                    out
                 }
             },
             // A shape these rules do not cover (`has_other` failed already).
             _ => {
                 self.fail();
-                node.to_string()
+                let _ = write!(out, "{node}");
             }
         }
     }

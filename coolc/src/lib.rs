@@ -44,6 +44,7 @@ mod layout;
 pub mod lower;
 pub(crate) mod manifest;
 pub mod merge;
+mod par;
 pub(crate) mod resolve;
 pub mod ros;
 pub(crate) mod source;

@@ -18,6 +18,7 @@ use crate::checked::model::{
 };
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
+use crate::par::par_map;
 
 mod adaptation;
 mod atomic;
@@ -25,6 +26,7 @@ mod automaton;
 mod compound;
 pub(crate) mod harness;
 mod ros;
+mod starter;
 
 /// What the caller decides about the emitted crate.
 #[derive(Clone, Debug)]
@@ -480,14 +482,28 @@ impl<'a> Lowerer<'a> {
                     }
                 }
             }
+        }
+        // The components are lowered each on its own: on every core.
+        enum Lowered {
+            Atomic(ir::Atomic),
+            Compound(ir::Compound),
+        }
+        let components: Vec<_> = self.checked.components().collect();
+        let lowered = par_map(&components, |c| {
             let module = self.modules[c.name.as_str()].clone();
             match c.kind {
-                ComponentKind::Atomic => atomics.push(self.atomic(c, module)),
-                ComponentKind::Compound => compounds.push(self.compound(c, module)),
+                ComponentKind::Atomic => Lowered::Atomic(self.atomic(c, module)),
+                ComponentKind::Compound => Lowered::Compound(self.compound(c, module)),
+            }
+        });
+        for component in lowered {
+            match component {
+                Lowered::Atomic(atomic) => atomics.push(atomic),
+                Lowered::Compound(compound) => compounds.push(compound),
             }
         }
         let package = package_name(&options.package);
-        ir::Crate {
+        let mut krate = ir::Crate {
             lib_name: package.replace('-', "_"),
             package,
             runtime: options.runtime.clone(),
@@ -498,7 +514,10 @@ impl<'a> Lowerer<'a> {
             types,
             atomics,
             compounds,
-        }
+            starter: ir::Starter::default(),
+        };
+        krate.starter = starter::starter(&krate);
+        krate
     }
 }
 

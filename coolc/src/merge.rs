@@ -38,6 +38,7 @@ use std::path::{Path, PathBuf};
 use syn::spanned::Spanned;
 
 use crate::emit::{self, EmittedFile, FileKind, StubSet};
+use crate::par::par_map;
 use crate::{ir, manifest};
 
 /// What writing a crate did (in a check: would do), for the CLI to report.
@@ -266,17 +267,36 @@ impl Writer {
     /// Writes `contents` to `path` unless it holds them already; whether it did (in a
     /// check: whether it would).
     fn write_if_changed(self, path: &Path, contents: &str) -> io::Result<bool> {
-        if fs::read_to_string(path).is_ok_and(|old| old == contents) {
-            return Ok(false);
+        match fs::read(path) {
+            Ok(old) if old == contents.as_bytes() => return Ok(false),
+            Ok(_) => {}
+            Err(error) if error.kind() == io::ErrorKind::NotFound => {
+                return self.create(path, contents).map(|()| true);
+            }
+            Err(error) => return Err(error),
         }
         if self.check {
             return Ok(true);
         }
-        if let Some(parent) = path.parent() {
-            fs::create_dir_all(parent)?;
-        }
         fs::write(path, contents)?;
         Ok(true)
+    }
+
+    /// Writes the missing file `path` (not in a check), creating its directory when
+    /// that is missing too.
+    fn create(self, path: &Path, contents: &str) -> io::Result<()> {
+        if self.check {
+            return Ok(());
+        }
+        match fs::write(path, contents) {
+            Err(error) if error.kind() == io::ErrorKind::NotFound => {
+                if let Some(parent) = path.parent() {
+                    fs::create_dir_all(parent)?;
+                }
+                fs::write(path, contents)
+            }
+            written => written,
+        }
     }
 
     /// Writes `contents` to the existing file `path` (not in a check).
@@ -321,7 +341,7 @@ fn merge_user_file(
     let text = match fs::read_to_string(&path) {
         Ok(text) => text,
         Err(error) if error.kind() == io::ErrorKind::NotFound => {
-            writer.write_if_changed(&path, &file.contents)?;
+            writer.create(&path, &file.contents)?;
             result.created = true;
             return Ok(result);
         }
@@ -494,7 +514,7 @@ fn format_with_cache(
     laid_out: &[bool],
 ) -> (Vec<EmittedFile>, Vec<Option<String>>) {
     let indices: Vec<usize> = (0..files.len()).collect();
-    let looked_up = emit::par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
+    let looked_up = par_map(&indices, |&i| look_up(dir, cache, &files[i], laid_out[i]));
     let mut needs = vec![false; files.len()];
     let mut rendered_prints = vec![None; files.len()];
     for (i, entry) in looked_up.into_iter().enumerate() {
@@ -517,10 +537,10 @@ pub fn write_crate(dir: &Path, krate: &ir::Crate) -> io::Result<Report> {
 
 /// Writes the crate for `krate` into `dir`, merging into existing user files: renders
 /// it ([`emit::render_crate`]), formats what needs a formatter and changed since the
-/// last compile (see the module doc), and writes the files ([`write_emitted`]). The
-/// files whose templates need a formatter are rendered and formatted on a thread of
-/// their own (the formatter is a `rustfmt` process) while the others are rendered and
-/// written. With [`WriteOptions::check`] nothing is written and the report says what
+/// last compile (see the module doc), and writes the files ([`write_files_except`]). The
+/// files whose templates need a formatter (`build.rs`) are rendered and formatted on a
+/// thread of their own (the formatter is a `rustfmt` process) while the others are
+/// rendered and written, on every core. With [`WriteOptions::check`] nothing is written and the report says what
 /// would be.
 pub(crate) fn write_crate_with(
     dir: &Path,
@@ -543,7 +563,7 @@ pub(crate) fn write_crate_with(
             let (files, laid_out) = emit::render_crate_part(krate, emit::Part::LaidOut);
             // Generated files already in rustfmt's layout are written at once.
             let indices: Vec<usize> = (0..files.len()).collect();
-            let written = emit::par_map(&indices, |&i| {
+            let written = par_map(&indices, |&i| {
                 let file = &files[i];
                 (laid_out[i] && file.kind == FileKind::Generated)
                     .then(|| writer.write_if_changed(&dir.join(&file.path), &file.contents))
@@ -663,7 +683,7 @@ fn write_files_except(
         .iter()
         .filter(|f| f.kind == FileKind::Generated)
         .collect();
-    let written = emit::par_map(&generated, |file| match context.done.get(&file.path) {
+    let written = par_map(&generated, |file| match context.done.get(&file.path) {
         Some(written) => Ok(*written),
         None => writer.write_if_changed(&dir.join(&file.path), &file.contents),
     });
@@ -694,7 +714,7 @@ fn write_files_except(
     }
     // User files: each read and merged on every core, the results applied in order.
     let users: Vec<&EmittedFile> = files.iter().filter(|f| f.kind == FileKind::User).collect();
-    let merged = emit::par_map(&users, |file| {
+    let merged = par_map(&users, |file| {
         merge_user_file(writer, dir, file, &sets, &user_modules)
     });
     for (file, merged) in users.iter().zip(merged) {
@@ -748,7 +768,7 @@ fn write_files_except(
             .iter()
             .filter(|f| matches!(f.kind, FileKind::User | FileKind::Starter))
             .collect();
-        for written in emit::par_map(&users, |file| {
+        for written in par_map(&users, |file| {
             writer.write_if_changed(&dir.join(".coolc/stubs").join(&file.path), &file.contents)
         }) {
             written?;

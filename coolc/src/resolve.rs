@@ -1,8 +1,9 @@
 //! Resolution: imports followed, top-level names to definitions.
 //!
 //! [`load`] reads the roots and, depth first, every file they import (paths relative
-//! to the importing file, lexically normalised), parsing each as it is read; an
-//! import cycle is reported with the whole cycle. [`load_ros`] then reads the ROS 2
+//! to the importing file, lexically normalised), parsing each as it is read (the
+//! roots are read and parsed ahead, on every core: a file's id is its place in the
+//! walk); an import cycle is reported with the whole cycle. [`load_ros`] then reads the ROS 2
 //! message types the files import (`import ros`), and every type they reference.
 //! [`Symbols`] is the table of top-level items (packets, enums, extern packets, ROS
 //! imports, converters, components): one namespace across all files, because they all
@@ -10,11 +11,12 @@
 //! imports, directly or not. The same ROS type imported under the same name in several
 //! files is one definition, seen from each of them.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Component, Path, PathBuf};
 
 use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
+use crate::par::par_map;
 use crate::ros;
 use crate::source::SourceMap;
 use crate::syntax;
@@ -38,15 +40,20 @@ pub fn load<P: AsRef<Path>>(
     loader: &dyn Fn(&Path) -> std::io::Result<String>,
 ) -> Loaded {
     let mut loaded = Loaded::default();
+    let mut ahead = parse_ahead(roots, loader);
     for root in roots {
         let path = normalize(root.as_ref());
         if loaded.sources.find(&path).is_some() {
             continue;
         }
-        match loader(&path) {
+        match read_file(&path, loader, &mut ahead) {
             Ok(text) => {
                 let mut stack = Vec::new();
-                load_file(&mut loaded, path, text, loader, &mut stack);
+                let mut reader = Reader {
+                    loader,
+                    ahead: &mut ahead,
+                };
+                load_file(&mut loaded, path, text, &mut reader, &mut stack);
             }
             Err(error) => {
                 let id = add_file(&mut loaded, path.clone(), String::new());
@@ -67,6 +74,69 @@ pub fn load<P: AsRef<Path>>(
     loaded
 }
 
+/// The id a file parsed ahead of the walk has until the walk reaches it.
+const UNPLACED: FileId = FileId(u32::MAX);
+
+/// A file read, and parsed when it was read ahead (its id still [`UNPLACED`]).
+struct Read {
+    text: String,
+    parsed: Option<(ast::File, Vec<Diagnostic>)>,
+}
+
+/// The roots read and parsed before the walk, on every core: the parse of a file
+/// depends on its text alone, and the walk gives it its id.
+fn parse_ahead<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+) -> HashMap<PathBuf, Read> {
+    let mut seen = BTreeSet::new();
+    let texts: Vec<(PathBuf, String)> = roots
+        .iter()
+        .map(|root| normalize(root.as_ref()))
+        .filter(|path| seen.insert(path.clone()))
+        // A root that cannot be read is read again by the walk, which reports it.
+        .filter_map(|path| loader(&path).ok().map(|text| (path, text)))
+        .collect();
+    let parsed = par_map(&texts, |(_, text)| syntax::parse(UNPLACED, text));
+    texts
+        .into_iter()
+        .zip(parsed)
+        .map(|((path, text), parsed)| {
+            let parsed = Some(parsed);
+            (path, Read { text, parsed })
+        })
+        .collect()
+}
+
+/// The text of `path`: read ahead, else through `loader`.
+fn read_file(
+    path: &Path,
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    ahead: &mut HashMap<PathBuf, Read>,
+) -> std::io::Result<Read> {
+    match ahead.remove(path) {
+        Some(read) => Ok(read),
+        None => loader(path).map(|text| Read { text, parsed: None }),
+    }
+}
+
+/// How the walk reads the files it meets.
+struct Reader<'a, 'b> {
+    loader: &'a dyn Fn(&Path) -> std::io::Result<String>,
+    ahead: &'b mut HashMap<PathBuf, Read>,
+}
+
+/// `diagnostic`, and those related to it, in file `id` where they were in
+/// [`UNPLACED`].
+fn place(diagnostic: &mut Diagnostic, id: FileId) {
+    if diagnostic.file == UNPLACED {
+        diagnostic.file = id;
+    }
+    for related in &mut diagnostic.related {
+        place(related, id);
+    }
+}
+
 fn add_file(loaded: &mut Loaded, path: PathBuf, text: String) -> FileId {
     let id = loaded.sources.add(path, text);
     loaded.files.push(ast::File {
@@ -82,12 +152,21 @@ fn add_file(loaded: &mut Loaded, path: PathBuf, text: String) -> FileId {
 fn load_file(
     loaded: &mut Loaded,
     path: PathBuf,
-    text: String,
-    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    read: Read,
+    reader: &mut Reader<'_, '_>,
     stack: &mut Vec<FileId>,
 ) -> FileId {
-    let id = add_file(loaded, path.clone(), text);
-    let (file, diagnostics) = syntax::parse(id, loaded.sources.text(id));
+    let id = add_file(loaded, path.clone(), read.text);
+    let (file, diagnostics) = match read.parsed {
+        Some((mut file, mut diagnostics)) => {
+            file.id = id;
+            for diagnostic in &mut diagnostics {
+                place(diagnostic, id);
+            }
+            (file, diagnostics)
+        }
+        None => syntax::parse(id, loaded.sources.text(id)),
+    };
     loaded.diagnostics.extend(diagnostics);
     let imports: Vec<ast::Import> = file
         .items
@@ -129,9 +208,9 @@ fn load_file(
             }
             continue;
         }
-        match loader(&target) {
+        match read_file(&target, reader.loader, reader.ahead) {
             Ok(text) => {
-                let imported = load_file(loaded, target, text, loader, stack);
+                let imported = load_file(loaded, target, text, reader, stack);
                 loaded.imports[id.0 as usize].push(imported);
             }
             Err(error) => loaded.diagnostics.push(
@@ -698,5 +777,37 @@ mod tests {
             normalize(Path::new("../x.cool")),
             PathBuf::from("../x.cool")
         );
+    }
+
+    /// Roots parsed ahead get the ids of their place in the walk, and so do their
+    /// syntax errors: `a` first, then `c` it imports, then `b`.
+    #[test]
+    fn roots_parsed_ahead_take_their_place_in_the_walk() {
+        let texts: BTreeMap<&str, &str> = [
+            ("a.cool", "import \"c.cool\";\npacket A { x: f64 }\n"),
+            ("b.cool", "packet B { x: }\n"),
+            ("c.cool", "packet C { x: f64 }\n"),
+        ]
+        .into_iter()
+        .collect();
+        let loader = |path: &Path| {
+            texts
+                .get(path.to_str().unwrap_or_default())
+                .map(|text| (*text).to_owned())
+                .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
+        };
+        let loaded = load(&["a.cool", "b.cool"], &loader);
+        let id = |name: &str| loaded.sources.find(Path::new(name)).unwrap();
+        assert_eq!(
+            [id("a.cool"), id("c.cool"), id("b.cool")],
+            [FileId(0), FileId(1), FileId(2)]
+        );
+        for (index, file) in loaded.files.iter().enumerate() {
+            assert_eq!(file.id, FileId(index as u32));
+        }
+        assert!(!loaded.diagnostics.is_empty());
+        for diagnostic in &loaded.diagnostics {
+            assert_eq!(diagnostic.file, id("b.cool"), "{diagnostic:?}");
+        }
     }
 }

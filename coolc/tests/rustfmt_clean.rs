@@ -154,16 +154,28 @@ fn examples_emit_rustfmt_clean_files_without_a_formatter() {
         let example = root.starts_with(Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples"));
         let krate = lower_files(&[on_disk(root)], "mobile-base");
         let (atomics, users, laid_out) = assert_clean_listed(&name, &krate);
-        // The realistic descriptions take the fast path throughout, the example's
-        // compound module included (the test copy's rules go to the formatter).
+        // The realistic descriptions take the fast path throughout: every atomic
+        // module, every user file (atomic and compound, `src/lib.rs`), and for the
+        // example every Rust file of the crate.
         assert_eq!(atomics, krate.atomics.len(), "{name}: atomic modules");
+        let user_files = emit::emit_crate(&krate)
+            .iter()
+            .filter(|f| f.kind == FileKind::User)
+            .count();
+        assert_eq!(users, user_files, "{name}: user files");
         if example {
-            assert!(
-                laid_out.contains(&PathBuf::from("src/generated/robot.rs")),
-                "{name}: the compound module"
-            );
+            let (files, _) = emit::render_crate(&krate);
+            for file in files
+                .iter()
+                .filter(|f| f.path.extension().is_some_and(|e| e == "rs"))
+            {
+                assert!(
+                    laid_out.contains(&file.path),
+                    "{name}: {} goes to the formatter",
+                    file.path.display()
+                );
+            }
         }
-        assert_eq!(users, krate.atomics.len() + 1, "{name}: user files");
     }
 }
 

@@ -173,7 +173,8 @@ impl<'a> Lowerer<'a> {
             });
         }
 
-        ir::Atomic {
+        let mut atomic = ir::Atomic {
+            spec: Code::atom(""),
             doc: c.doc.clone(),
             notes: ir::notes(
                 c.notes
@@ -196,7 +197,9 @@ impl<'a> Lowerer<'a> {
             section_arms,
             choose_arms,
             answer_arms,
-        }
+        };
+        atomic.spec = spec(&atomic);
+        atomic
     }
 
     /// A declared variable (`observable`/`controllable`/`local` with a type) as a
@@ -444,4 +447,55 @@ fn port(
         packet: cool,
         pull,
     }
+}
+
+/// The `coolbot::Spec` of atomic component `c`: its states, ports, exposed
+/// variables, exceptions and timing.
+fn spec(c: &ir::Atomic) -> Code {
+    let list = Code::slice;
+    Code::structure(
+        "::coolbot::Spec",
+        vec![
+            ("type_name", Code::string(&c.type_name)),
+            ("doc", Code::atom(c.doc_literal())),
+            (
+                "states",
+                list(c.states.iter().map(|st| st.spec.clone()).collect()),
+            ),
+            ("initial", Code::atom(c.initial.to_string())),
+            (
+                "inputs",
+                list(
+                    c.inputs
+                        .iter()
+                        .map(|p| p.spec(&p.cool_name, true))
+                        .collect(),
+                ),
+            ),
+            (
+                "outputs",
+                list(
+                    c.outputs
+                        .iter()
+                        .map(|p| p.spec(&p.cool_name, false))
+                        .collect(),
+                ),
+            ),
+            (
+                "variables",
+                list(
+                    c.vars
+                        .iter()
+                        .filter(|v| v.spec_index.is_some())
+                        .map(ir::Var::spec)
+                        .collect(),
+                ),
+            ),
+            (
+                "exceptions",
+                list(c.exceptions.iter().map(|e| e.spec.clone()).collect()),
+            ),
+            ("timing", c.timing.clone()),
+        ],
+    )
 }

@@ -234,7 +234,8 @@ impl<'a> Lowerer<'a> {
             ],
         }];
         all_parts.extend(parts);
-        ir::Compound {
+        let mut compound = ir::Compound {
+            spec: Code::atom(""),
             doc: c.doc.clone(),
             notes: ir::notes(
                 c.notes
@@ -263,7 +264,9 @@ impl<'a> Lowerer<'a> {
             timing: self.timing(c.timing.as_deref()),
             rules,
             handles,
-        }
+        };
+        compound.spec = spec(&compound);
+        compound
     }
 
     /// The typed handles of `c`'s instances for the supervisor's `Cx`: one per
@@ -831,6 +834,38 @@ fn port_address(port: &PortRef) -> String {
         Some(instance) => format!("{}.{}", instance.name, port.port),
         None => port.port.clone(),
     }
+}
+
+/// The `coolbot::Spec` of compound `c`: the supervisor's states, the ports it exports,
+/// its own exposed variables and its timing (`coolbot::CompoundBuilder::build`
+/// completes it).
+fn spec(c: &ir::Compound) -> Code {
+    Code::structure(
+        "::coolbot::Spec",
+        vec![
+            ("type_name", Code::atom(format!("\"{}\"", c.type_name))),
+            ("doc", Code::atom(c.doc_literal())),
+            (
+                "states",
+                Code::slice(c.states.iter().map(|st| st.spec.clone()).collect()),
+            ),
+            ("initial", Code::atom(c.initial.to_string())),
+            ("inputs", Code::slice(c.input_specs.clone())),
+            ("outputs", Code::slice(c.output_specs.clone())),
+            (
+                "variables",
+                Code::slice(
+                    c.vars
+                        .iter()
+                        .filter(|v| v.spec_index.is_some())
+                        .map(ir::Var::spec)
+                        .collect(),
+                ),
+            ),
+            ("exceptions", Code::atom("&[]")),
+            ("timing", c.timing.clone()),
+        ],
+    )
 }
 
 #[cfg(test)]

@@ -80,11 +80,12 @@ pub(super) fn compile<'a>(
 
 /// The `coolbot::TaskResult` pattern a `result` symbol (`check::model::RESULTS`)
 /// stands for.
-fn result_pattern(symbol: &str) -> Option<&'static str> {
+fn result_pattern(symbol: &str) -> Option<Code> {
+    let any = |variant: &str| Code::call(variant, vec![Code::atom("_")]);
     match symbol {
-        "none" => Some("::coolbot::TaskResult::None"),
-        "success" => Some("::coolbot::TaskResult::Success(_)"),
-        "fail" => Some("::coolbot::TaskResult::Fail(_)"),
+        "none" => Some(Code::atom("::coolbot::TaskResult::None")),
+        "success" => Some(any("::coolbot::TaskResult::Success")),
+        "fail" => Some(any("::coolbot::TaskResult::Fail")),
         _ => None,
     }
 }
@@ -719,7 +720,7 @@ fn symbol(name: &str, resolved: &RTy) -> Operand {
             plain(Code::string(name), ty.clone())
         }
         RTy::Result => match result_pattern(name).filter(|_| RESULTS.contains(&name)) {
-            Some(pattern) => plain(Code::atom(pattern), RTy::Result),
+            Some(pattern) => plain(pattern, RTy::Result),
             None => Operand::unreadable(),
         },
         ty @ RTy::Quality(_, levels) => match levels.iter().position(|l| l == name) {
