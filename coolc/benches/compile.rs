@@ -18,9 +18,9 @@
 //! child process of this benchmark (`RUSTFMT` names a missing program for the
 //! `Builtin` and `Unformatted` rows).
 //!
-//! The crates are written into a temporary directory under [`scratch_root`]: a tmpfs
-//! when the machine has one, so that the figures measure coolc and not the state of a
-//! disk (see there).
+//! The crates are written into a temporary directory under [`scratch_root`]: cargo's
+//! `CARGO_TARGET_TMPDIR` on the disk, as a user's crate is, unless `COOLC_BENCH_DIR`
+//! names another (`/dev/shm` measures coolc without the disk: see there).
 //!
 //! `cargo bench -p coolc --bench compile` (add `-- --quick` to skip the 10x runs).
 //! `--write-set SET DIR` writes a set's descriptions into DIR, to time the `coolc`
@@ -455,22 +455,18 @@ impl Formatter {
 }
 
 /// Where the benchmark writes its crates: `COOLC_BENCH_DIR` when it is set, else
-/// `/dev/shm` (a tmpfs) when the machine has it, else cargo's `CARGO_TARGET_TMPDIR`.
+/// cargo's `CARGO_TARGET_TMPDIR`, on the disk as a user's crate is.
 ///
 /// A disk measures more than coolc: on an ext4 file system without a journal (this
 /// project's development machine), creating a file skips every inode freed in the
 /// last minutes of its group, reading each one's inode table block, so a compile
 /// that creates its 3,306 files (crate, user files and `.coolc/stubs/`) shortly after
 /// the deletion of many files (the previous run of this benchmark removes about
-/// 100,000) spends 0.1 to 0.4 ms of kernel time on each. `COOLC_BENCH_DIR` under a
-/// disk measures that.
+/// 100,000) spends 0.1 to 0.4 ms of kernel time on each. `COOLC_BENCH_DIR=/dev/shm`
+/// (a tmpfs) leaves that out.
 fn scratch_root() -> PathBuf {
     if let Some(dir) = std::env::var_os("COOLC_BENCH_DIR") {
         return PathBuf::from(dir);
-    }
-    let shm = Path::new("/dev/shm");
-    if shm.is_dir() {
-        return shm.to_path_buf();
     }
     PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
 }
