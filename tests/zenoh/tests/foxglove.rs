@@ -406,19 +406,29 @@ fn a_channel_nobody_watches_has_no_zenoh_subscriber() {
     let (_server, url) = serve(&fox, &["fox/*"]);
     let mut client = Client::start(&modules, &url);
     client.advertised(&["/fox/source.out"]);
-    let key = coolbot_zenoh::keys::echo("fox", "source", "out");
-    assert!(
-        !has_subscriber(&fox.node, &key),
-        "advertised but not subscribed: no subscriber on {key}"
-    );
+    // The output's key, which has the node tap it, and the node's batches.
+    let keys = [
+        coolbot_zenoh::keys::echo("fox", "source", "out"),
+        coolbot_zenoh::keys::echoes("fox"),
+    ];
+    for key in &keys {
+        assert!(
+            !has_subscriber(&fox.node, key),
+            "advertised but not subscribed: no subscriber on {key}"
+        );
+    }
     client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 1 }));
     client.messages("/fox/source.out", 1);
-    assert!(has_subscriber(&fox.node, &key), "subscribed: {key} is");
+    for key in &keys {
+        assert!(has_subscriber(&fox.node, key), "subscribed: {key} is");
+    }
     client.order(json!({ "do": "unsubscribe", "topic": "/fox/source.out" }));
-    assert!(
-        wait_until(PATIENCE, || !has_subscriber(&fox.node, &key)),
-        "unsubscribed: {key} is not any more"
-    );
+    for key in &keys {
+        assert!(
+            wait_until(PATIENCE, || !has_subscriber(&fox.node, key)),
+            "unsubscribed: {key} is not any more"
+        );
+    }
 }
 
 #[test]

@@ -18,8 +18,9 @@
 //! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
 //! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
 //!
-//! Echoed packets reach their channels through the feed ([`FEED_TICK`]): Zenoh's
-//! callback queues them, a task on the WebSocket server's one thread logs them.
+//! Echoed packets reach their channels through the feed ([`feed`]): Zenoh's callback
+//! queues each node's batches, a task on the WebSocket server's one thread splits
+//! them and logs each packet on the channels of its output.
 //!
 //! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
 //! declared and no snapshot asked for it until a client subscribes, and both end when
@@ -223,10 +224,12 @@ impl std::fmt::Debug for Server {
 /// What the server has dropped.
 #[derive(Debug, Default)]
 pub struct Counts {
-    /// Echoed packets and monitoring events that did not decode (dropped, warned).
+    /// Batches of echoed packets, echoed packets and monitoring events that did not
+    /// decode, or did not fit their channel (dropped, warned).
     pub undecoded: AtomicU64,
-    /// Echoed packets that found the server's queue full ([`FEED_CAPACITY`] waiting:
-    /// the server falls behind; dropped, warned).
+    /// Batches of echoed packets (a node's packets of one echo tick) that found the
+    /// server's queue full ([`FEED_CAPACITY`] waiting: the server falls behind;
+    /// dropped, warned).
     pub overflowed: AtomicU64,
 }
 
@@ -270,6 +273,8 @@ impl Server {
         let feed = feed::Feed::start(runtime.handle(), Arc::clone(&counts));
         let mut follower = Follower {
             inlet: feed.inlet(),
+            routes: feed.routes(),
+            batches: HashMap::new(),
             ctl,
             session,
             context,
@@ -329,9 +334,11 @@ impl Drop for Server {
 
 /// What a channel stands for.
 enum Source {
-    /// An echoed output, on its echo key, each packet made a message by `transform`.
+    /// An echoed output, `output` (`<path>.<port>`) asked for on its echo key, each
+    /// packet made a message by `transform`.
     Port {
         key: String,
+        output: String,
         transform: wellknown::Transform,
     },
     /// A component's monitoring, read each refresh.
@@ -347,7 +354,8 @@ struct Served {
     subscribers: usize,
     /// The node the channel's component is on (none: the log).
     node: Option<String>,
-    /// The Zenoh subscriber of a port or of the log, while subscribed.
+    /// The Zenoh subscriber of the log, or the one that asks a node for a port's
+    /// packets, while subscribed.
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
     /// A monitored component's last CPU time and when it was read.
     cpu: Option<(Duration, Instant)>,
@@ -368,6 +376,11 @@ struct Follower {
     counts: Arc<Counts>,
     /// Where the echoed packets queue for the feed's thread.
     inlet: feed::Inlet,
+    /// The channels the feed logs each output's packets on.
+    routes: Arc<feed::Routes>,
+    /// The subscriber of each node's batches of echoed packets, while a client
+    /// subscribes one of its outputs' channels.
+    batches: HashMap<String, zenoh::pubsub::Subscriber<()>>,
     server: Arc<WebSocketServerHandle>,
     /// The parameters clients subscribed to, with the value last sent.
     watched: BTreeMap<String, Option<Parameter>>,
@@ -582,6 +595,7 @@ impl Follower {
                         channel,
                         Source::Port {
                             key: key.clone(),
+                            output: format!("{}.{port}", listed.path),
                             transform,
                         },
                         Some(&listed.node),
@@ -605,6 +619,8 @@ impl Follower {
         let prefix = format!("{name}/");
         self.known
             .retain(|address, _| !address.starts_with(&prefix));
+        self.routes.forget(name);
+        self.batches.remove(name);
     }
 
     fn subscribe(&mut self, id: ChannelId) {
@@ -618,16 +634,46 @@ impl Follower {
         let channel = Arc::clone(&served.channel);
         let counts = Arc::clone(&self.counts);
         let declared = match &served.source {
-            Source::Port { key, transform } => {
-                let route = Arc::new(feed::Route {
-                    channel: Arc::clone(&channel),
-                    transform: transform.clone(),
-                });
-                let inlet = self.inlet.clone();
+            Source::Port {
+                key,
+                output,
+                transform,
+            } => {
+                let node = served.node.clone().unwrap_or_default();
+                self.routes.add(
+                    &node,
+                    output,
+                    Arc::new(feed::Route {
+                        channel: Arc::clone(&channel),
+                        transform: transform.clone(),
+                    }),
+                );
+                // The node's batches first, so that none holding the output's first
+                // packets is missed; then the output's key, which has the node tap it.
+                if !self.batches.contains_key(&node) {
+                    let inlet = self.inlet.clone();
+                    let from: Arc<str> = Arc::from(node.as_str());
+                    match self
+                        .session
+                        .declare_subscriber(keys::echoes(&node))
+                        .callback(move |sample| inlet.push(&from, sample.payload().clone()))
+                        .wait()
+                    {
+                        Ok(subscriber) => {
+                            self.batches.insert(node, subscriber);
+                        }
+                        Err(error) => coolbot::limited!("foxglove:subscribe", |held| {
+                            tracing::warn!(
+                                "cannot subscribe to the echoes of {node}: {}{held}",
+                                coolbot::Chain(&*error)
+                            )
+                        }),
+                    }
+                }
                 Some(
                     self.session
                         .declare_subscriber(key.clone())
-                        .callback(move |sample| inlet.push(&route, sample.payload().clone()))
+                        .callback(|_| {})
                         .wait(),
                 )
             }
@@ -681,6 +727,11 @@ impl Follower {
         if served.subscribers == 0 {
             served.subscriber = None;
             served.cpu = None;
+            if let (Source::Port { output, .. }, Some(node)) = (&served.source, &served.node)
+                && self.routes.remove(node, output, id)
+            {
+                self.batches.remove(node);
+            }
         }
     }
 
