@@ -303,7 +303,22 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     }
 }
 
+/// Zenoh's runtimes in `coolctl` unless `ZENOH_RUNTIME` says otherwise: every one
+/// handed over to `net`, so all of Zenoh's work runs on one thread. A client's
+/// traffic needs no more, and a sample received then wakes one thread, not three
+/// (`docs/performance.md`, "Foxglove").
+const ZENOH_RUNTIME: &str =
+    "(rx: (handover: net), tx: (handover: net), acc: (handover: net), app: (handover: net))";
+
 fn main() -> ExitCode {
+    if std::env::var_os("ZENOH_RUNTIME").is_none() {
+        // SAFETY: the first thing `main` does: no other thread exists yet that could
+        // read the environment meanwhile (Zenoh reads it when it starts its runtimes).
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
+        }
+    }
     let cli = Cli::parse();
     let stdout = std::io::stdout();
     match run(cli, &mut stdout.lock()) {
