@@ -37,6 +37,7 @@ pub mod wellknown;
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -89,6 +90,18 @@ pub enum FoxgloveError {
     /// The server's thread could not be started.
     #[error("cannot spawn the foxglove thread")]
     Spawn(#[source] std::io::Error),
+    /// The WebSocket's TLS certificate or key cannot be read.
+    #[error("the WebSocket's TLS certificate or key")]
+    Tls(#[source] crate::security::SecurityError),
+}
+
+/// The certificate and key the WebSocket serves `wss://` with.
+#[derive(Debug, Clone)]
+pub struct TlsFiles {
+    /// The server's certificate (PEM, X.509; the first one in the file is sent).
+    pub certificate: PathBuf,
+    /// Its private key (PEM, PKCS#8).
+    pub key: PathBuf,
 }
 
 /// How `coolctl foxglove` serves.
@@ -109,9 +122,16 @@ pub struct Options {
     pub secured: bool,
     /// Serve off loopback without a security file.
     pub insecure: bool,
+    /// Speak `wss://` with this certificate and key (none: plain `ws://`).
+    pub tls: Option<TlsFiles>,
 }
 
 impl Options {
+    /// The URL scheme clients use: `wss` with TLS, else `ws`.
+    pub fn scheme(&self) -> &'static str {
+        if self.tls.is_some() { "wss" } else { "ws" }
+    }
+
     /// Refuse an address off loopback without a security file or `insecure`.
     pub fn check(&self) -> Result<(), FoxgloveError> {
         if self.bind.ip().is_loopback() || self.secured || self.insecure {
@@ -249,7 +269,15 @@ impl Server {
             .enable_all()
             .build()
             .map_err(FoxgloveError::Spawn)?;
-        let handle = WebSocketServer::new()
+        let mut server = WebSocketServer::new();
+        if let Some(tls) = &options.tls {
+            let read = |path| crate::security::read_bounded(path).map_err(FoxgloveError::Tls);
+            server = server.tls(foxglove::websocket::TlsIdentity {
+                cert: read(&tls.certificate)?,
+                key: read(&tls.key)?,
+            });
+        }
+        let handle = server
             .tokio_runtime(runtime.handle())
             .name("coolctl foxglove")
             .bind(options.bind.ip().to_string(), options.bind.port())
