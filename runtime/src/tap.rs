@@ -1,8 +1,10 @@
 //! Taps: a copy of every packet a data or poster output sends, into a bounded queue
 //! an observer reads (`coolctl echo` through `coolbot-zenoh`, a live display). A tap
 //! is one more sink of the output, as the recorder's are ([`crate::record`]), not a
-//! connection. **Invariant:** a tap never blocks its producer: a packet that finds the
-//! queue full is dropped for the tap only, and counted ([`Tap::dropped`]).
+//! connection. Each packet is stamped with the wall-clock time it was sent, read on
+//! the producer's thread as it sends. **Invariant:** a tap never blocks its producer:
+//! a packet that finds the queue full is dropped for the tap only, and counted
+//! ([`Tap::dropped`]).
 
 use std::any::TypeId;
 use std::sync::Arc;
@@ -12,6 +14,7 @@ use crossbeam_channel::{Receiver, Sender};
 
 use crate::handle::Handle;
 use crate::port::{Deliver, ErasedOutput, OutKind, Packet, Parcel};
+use crate::value::Time;
 
 /// Why [`Tap::attach`] failed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -56,14 +59,18 @@ struct Counts {
 }
 
 struct Sink<T> {
-    sender: Sender<(u64, T)>,
+    sender: Sender<(u64, Time, T)>,
     counts: Arc<Counts>,
 }
 
 impl<T: Packet> Deliver<T> for Sink<T> {
     fn deliver(&self, packet: Parcel<T>) {
         let seq = self.counts.sent.fetch_add(1, Ordering::AcqRel);
-        if self.sender.try_send((seq, packet.into_owned())).is_err() {
+        if self
+            .sender
+            .try_send((seq, Time::now(), packet.into_owned()))
+            .is_err()
+        {
             self.counts.dropped.fetch_add(1, Ordering::AcqRel);
         }
     }
@@ -74,7 +81,7 @@ impl<T: Packet> Deliver<T> for Sink<T> {
 pub struct Tap<T> {
     output: ErasedOutput,
     id: usize,
-    receiver: Receiver<(u64, T)>,
+    receiver: Receiver<(u64, Time, T)>,
     counts: Arc<Counts>,
 }
 
@@ -136,8 +143,9 @@ impl<T: Packet> Tap<T> {
     }
 
     /// The queue of tapped packets, each with its sequence number (0 for the first
-    /// packet sent after the tap was attached: a gap is packets dropped for the tap).
-    pub fn receiver(&self) -> &Receiver<(u64, T)> {
+    /// packet sent after the tap was attached: a gap is packets dropped for the tap)
+    /// and when the output sent it.
+    pub fn receiver(&self) -> &Receiver<(u64, Time, T)> {
         &self.receiver
     }
 

@@ -9,7 +9,7 @@ use coolbot::{Command, Controllable, Monitor, MonitorEvent, Value};
 use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
-use crate::echo::Echoed;
+use crate::echo::EchoedRaw;
 use crate::info::ComponentInfo;
 use crate::{ControlReply, keys};
 
@@ -891,9 +891,17 @@ impl Ctl {
             }
             None => None,
         };
-        let subscriber = self
+        // The node's batches first, so that none holding this output's first packets
+        // is missed; then the output's key, which has the node tap it.
+        let batches = self
+            .session
+            .declare_subscriber(keys::echoes(node))
+            .wait()
+            .map_err(CtlError::zenoh("subscribe to the echoed outputs"))?;
+        let _asking = self
             .session
             .declare_subscriber(keys::echo(node, path, port))
+            .callback(|_| {})
             .wait()
             .map_err(CtlError::zenoh("subscribe to the echoed output"))?;
         let component = format!("{node}/{path}");
@@ -916,7 +924,7 @@ impl Ctl {
         let mut summary = EchoSummary::default();
         let mut next_seq = None;
         let mut next_print = Instant::now();
-        while count.is_none_or(|count| summary.printed < count) {
+        'batches: while count.is_none_or(|count| summary.printed < count) {
             let wait = match deadline {
                 Some(deadline) => match deadline.checked_duration_since(Instant::now()) {
                     Some(left) => left,
@@ -924,36 +932,40 @@ impl Ctl {
                 },
                 None => Duration::from_secs(3600),
             };
-            let Some(sample) = subscriber
+            let Some(sample) = batches
                 .recv_timeout(wait)
-                .map_err(CtlError::zenoh("receive an echoed packet"))?
+                .map_err(CtlError::zenoh("receive echoed packets"))?
             else {
                 continue;
             };
-            let echoed: Echoed =
-                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
-                    CtlError::Decode {
-                        key: sample.key_expr().as_str().to_owned(),
-                        source,
-                    }
+            let payload = sample.payload().to_bytes();
+            let batch: Vec<EchoedRaw<'_>> =
+                serde_json::from_slice(&payload).map_err(|source| CtlError::Decode {
+                    key: sample.key_expr().as_str().to_owned(),
+                    source,
                 })?;
-            summary.received += 1;
-            summary.node_dropped = echoed.dropped;
-            if let Some(expected) = next_seq {
-                summary.lost += echoed.seq.saturating_sub(expected);
+            for echoed in batch.iter().filter(|echoed| echoed.output == full) {
+                if count.is_some_and(|count| summary.printed >= count) {
+                    break 'batches;
+                }
+                summary.received += 1;
+                summary.node_dropped = echoed.dropped;
+                if let Some(expected) = next_seq {
+                    summary.lost += echoed.seq.saturating_sub(expected);
+                }
+                next_seq = Some(echoed.seq + 1);
+                let now = Instant::now();
+                if now < next_print {
+                    summary.skipped += 1;
+                    continue;
+                }
+                if let Some(interval) = interval {
+                    next_print = now + interval;
+                }
+                writeln!(out, "{}", echoed.packet.get())?;
+                out.flush()?;
+                summary.printed += 1;
             }
-            next_seq = Some(echoed.seq + 1);
-            let now = Instant::now();
-            if now < next_print {
-                summary.skipped += 1;
-                continue;
-            }
-            if let Some(interval) = interval {
-                next_print = now + interval;
-            }
-            writeln!(out, "{}", echoed.packet)?;
-            out.flush()?;
-            summary.printed += 1;
         }
         Ok(summary)
     }

@@ -1,18 +1,29 @@
 //! Echoed outputs (`coolctl echo`): a node taps an output it was asked to echo
-//! ([`crate::Node::echo`], a `coolbot::tap::Tap`) and publishes each packet as JSON on
-//! `coolbot/<node>/<path>/o/<port>`, from one thread of its own for all its echoes.
+//! ([`crate::Node::echo`], a `coolbot::tap::Tap`) and publishes its packets as JSON,
+//! from one thread of its own for all its echoes.
+//!
+//! A reader asks for an output by subscribing to its key,
+//! `coolbot/<node>/<path>/o/<port>` ([`crate::keys::echo`]), and reads the packets on
+//! the node's batch key, `coolbot/<node>/o` ([`crate::keys::echoes`]): every
+//! [`ECHO_TICK`] the node publishes there one sample holding the packets every tapped
+//! output sent since the last, a JSON array of [`Echoed`], each naming its output.
+//! One sample a tick, however many outputs and packets, is what makes an echo cheap
+//! to carry and to receive: Zenoh's costs are per sample.
 //!
 //! **Invariant:** the producer is never slowed. The tap is attached only while a
 //! subscriber matches the output's key: an output nobody echoes costs its producer
 //! nothing (attaching and detaching take the output's lock on its connections once
-//! each). While attached, a packet costs its producer one copy into the tap's queue
-//! and nothing more: the tap drops a packet its queue has no room for (counted), and
-//! nothing ever waits on that queue, so the producer never wakes a thread. The echo
-//! thread takes what every queue holds once per [`ECHO_TICK`], writes each packet's
-//! JSON once, straight from its type, and publishes it without waiting (congestion
-//! control `Drop`). Every message carries the packet's sequence number and the
-//! node's drop count, so a subscriber counts every packet it did not get.
+//! each). While attached, a packet costs its producer a clock reading and one copy
+//! into the tap's queue, nothing more: the tap drops a packet its queue has no room
+//! for (counted), and nothing ever waits on that queue, so the producer never wakes a
+//! thread. The echo thread takes what every queue holds once per [`ECHO_TICK`],
+//! writes each packet's JSON once, straight from its type, into the tick's batch, and
+//! publishes the batch without waiting (congestion control `Drop`). Every packet
+//! carries its sequence number and the node's drop count, so a subscriber counts
+//! every packet it did not get, and the time it was sent, so that a reader places it
+//! in time however it was batched.
 
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -30,13 +41,17 @@ use crate::Error;
 /// How many packets wait in an echo's tap before the newest are dropped.
 pub const ECHO_CAPACITY: usize = 256;
 
-/// How often the echo thread takes the packets the taps hold: an echoed output may
-/// send up to [`ECHO_CAPACITY`] packets in this time before any is dropped.
-pub const ECHO_TICK: Duration = Duration::from_millis(10);
+/// How often the echo thread takes the packets the taps hold and publishes them: an
+/// echoed output may send up to [`ECHO_CAPACITY`] packets in this time before any is
+/// dropped. 50 batches a second: a live view's rate, and few enough wake-ups for
+/// the node and its readers.
+pub const ECHO_TICK: Duration = Duration::from_millis(20);
 
-/// One echoed packet on the network.
+/// One echoed packet on the network, an element of a node's batch.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Echoed {
+    /// The output, `<path>.<port>` (`robot.base.scan`).
+    pub output: String,
     /// The packet's number among those the output sent since the tap was attached
     /// (when a first subscriber came; 0 first): a gap is packets this subscriber did
     /// not get.
@@ -44,6 +59,9 @@ pub struct Echoed {
     /// Packets the node dropped since the tap was attached because its queue was
     /// full.
     pub dropped: u64,
+    /// When the output sent it (the node's wall clock, nanoseconds since the Unix
+    /// epoch).
+    pub sent: coolbot::Time,
     /// The packet, as serde writes it in JSON.
     pub packet: serde_json::Value,
 }
@@ -51,26 +69,75 @@ pub struct Echoed {
 /// An [`Echoed`] as the node writes it: the packet serialized from its own type.
 #[derive(Serialize)]
 struct Outgoing<'a, T> {
+    output: &'a str,
     seq: u64,
     dropped: u64,
+    sent: coolbot::Time,
     packet: &'a T,
 }
 
-/// What a reader that passes the packet on takes of an [`Echoed`]: the packet's JSON,
-/// checked and left as the node wrote it (`coolctl foxglove`'s feed).
-#[cfg(feature = "foxglove")]
+/// What a reader takes of an [`Echoed`]: its output and numbers, and the packet's
+/// JSON, checked and left as the node wrote it.
 #[derive(Debug, Deserialize)]
 pub(crate) struct EchoedRaw<'a> {
+    /// The output, `<path>.<port>`.
+    #[serde(borrow)]
+    pub output: Cow<'a, str>,
+    /// As in [`Echoed`].
+    pub seq: u64,
+    /// As in [`Echoed`].
+    pub dropped: u64,
+    /// As in [`Echoed`].
+    #[cfg_attr(
+        not(feature = "foxglove"),
+        expect(dead_code, reason = "read by `coolctl foxglove` only")
+    )]
+    pub sent: coolbot::Time,
     /// The packet's JSON.
     #[serde(borrow)]
     pub packet: &'a serde_json::value::RawValue,
 }
 
-/// One echoed output: its tap while anyone listens, and where it is published.
+/// The packets of one tick, written as a JSON array of [`Echoed`] as they are taken.
+#[derive(Default)]
+struct Batch {
+    json: Vec<u8>,
+    packets: usize,
+}
+
+impl Batch {
+    /// Append `packet`; on an error, the batch is as it was.
+    fn push<T: Serialize>(&mut self, packet: &Outgoing<'_, T>) -> serde_json::Result<()> {
+        let start = self.json.len();
+        self.json.push(if self.packets == 0 { b'[' } else { b',' });
+        match serde_json::to_writer(&mut self.json, packet) {
+            Ok(()) => {
+                self.packets += 1;
+                Ok(())
+            }
+            Err(error) => {
+                self.json.truncate(start);
+                Err(error)
+            }
+        }
+    }
+
+    /// The array, none when no packet came; the batch is empty again.
+    fn take(&mut self) -> Option<Vec<u8>> {
+        if self.packets == 0 {
+            return None;
+        }
+        self.json.push(b']');
+        self.packets = 0;
+        Some(std::mem::take(&mut self.json))
+    }
+}
+
+/// One echoed output: its tap while anyone listens.
 trait Echoing: Send {
-    /// Attach or detach the tap as a subscriber matches or not; publish every packet
-    /// the tap holds.
-    fn publish(&mut self);
+    /// Attach or detach the tap as a subscriber matches or not; append every packet
+    /// the tap holds to `batch`.
+    fn take(&mut self, batch: &mut Batch);
 
     /// Packets waiting in the tap.
     #[cfg(test)]
@@ -82,20 +149,25 @@ trait Echoing: Send {
 }
 
 struct Port<T> {
+    /// `<path>.<port>`, as the batch names it.
+    output: String,
+    /// The output's own key, for the warnings.
     key: String,
     /// The component and its output's name, to attach the tap to.
     handle: Handle,
     port: String,
     /// Attached while a subscriber matches.
     tap: Option<Tap<T>>,
-    publisher: zenoh::pubsub::Publisher<'static>,
+    /// Declared on the output's key for its matching status only: the packets go in
+    /// the node's batch.
+    _publisher: zenoh::pubsub::Publisher<'static>,
     /// Whether a subscriber matches the key, as Zenoh's matching listener last said.
     matched: Arc<AtomicBool>,
     _listener: zenoh::matching::MatchingListener<()>,
 }
 
 impl<T: Packet + Serialize> Echoing for Port<T> {
-    fn publish(&mut self) {
+    fn take(&mut self, batch: &mut Batch) {
         let key = &self.key;
         let matched = self.matched.load(Ordering::Acquire);
         if matched != self.tap.is_some() {
@@ -113,25 +185,19 @@ impl<T: Packet + Serialize> Echoing for Port<T> {
         let Some(tap) = &self.tap else {
             return;
         };
-        while let Ok((seq, packet)) = tap.receiver().try_recv() {
+        while let Ok((seq, sent, packet)) = tap.receiver().try_recv() {
             let message = Outgoing {
+                output: &self.output,
                 seq,
                 dropped: tap.dropped(),
+                sent,
                 packet: &packet,
             };
-            match serde_json::to_vec(&message) {
-                Ok(json) => {
-                    if let Err(error) = self.publisher.put(json).wait() {
-                        coolbot::limited!(
-                            key,
-                            |held| tracing::warn!(%key, "echo not published: {}{held}", coolbot::Chain(&*error))
-                        );
-                    }
-                }
-                Err(error) => coolbot::limited!(
+            if let Err(error) = batch.push(&message) {
+                coolbot::limited!(
                     key,
                     |held| tracing::warn!(%key, "packet {seq} does not serialize: {error}{held}")
-                ),
+                );
             }
         }
     }
@@ -160,20 +226,19 @@ pub(crate) struct Echoes {
 }
 
 impl Echoes {
-    /// Publish every packet output `port` of `handle` sends, of type `T`, on `key`,
-    /// from the echo thread of `node`, while a subscriber matches `key`, until stopped.
-    /// `tap`, attached to that output, shows it can be tapped; it is kept if a
-    /// subscriber matches already.
+    /// Publish every packet output `port` of `handle` sends, of type `T`, in the
+    /// batches of `node`, from its echo thread, while a subscriber matches `key`,
+    /// until stopped. `tap`, attached to that output, shows it can be tapped; it is
+    /// kept if a subscriber matches already.
     pub(crate) fn add<T: Packet + Serialize>(
         &self,
         session: &zenoh::Session,
         node: &str,
-        key: String,
+        (output, key): (String, String),
         (handle, port, tap): (Handle, &str, Tap<T>),
     ) -> Result<(), Error> {
         let publisher = session
             .declare_publisher(key.clone())
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
             .wait()
             .map_err(Error::zenoh("declare the echo publisher"))?;
         let matched = Arc::new(AtomicBool::new(false));
@@ -186,15 +251,30 @@ impl Echoes {
             .map_err(Error::zenoh("watch the echo's subscribers"))?;
         let mut thread = lock(&self.thread);
         if thread.is_none() {
+            let batches = session
+                .declare_publisher(crate::keys::echoes(node))
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .wait()
+                .map_err(Error::zenoh("declare the echo publisher"))?;
             let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
             let ports = Arc::clone(&self.ports);
             let worker = std::thread::Builder::new()
                 .name(format!("cool-net:{node}:o"))
                 .spawn(move || {
+                    let mut batch = Batch::default();
                     // A tick at a time, until the stop sender is dropped.
                     while let Err(RecvTimeoutError::Timeout) = stopped.recv_timeout(ECHO_TICK) {
                         for port in lock(&ports).iter_mut() {
-                            port.publish();
+                            port.take(&mut batch);
+                        }
+                        let Some(json) = batch.take() else {
+                            continue;
+                        };
+                        if let Err(error) = batches.put(json).wait() {
+                            let key = batches.key_expr().as_str();
+                            coolbot::limited!(key, |held| tracing::warn!(
+                                %key, "echoes not published: {}{held}", coolbot::Chain(&*error)
+                            ));
                         }
                     }
                 })
@@ -203,11 +283,12 @@ impl Echoes {
         }
         let tap = matched.load(Ordering::Acquire).then_some(tap);
         lock(&self.ports).push(Box::new(Port {
+            output,
             key,
             handle,
             port: port.to_owned(),
             tap,
-            publisher,
+            _publisher: publisher,
             matched,
             _listener: listener,
         }));
@@ -232,6 +313,7 @@ impl Drop for Echoes {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::VecDeque;
     use std::time::Instant;
 
     use coolbot::port::DataOut;
@@ -258,18 +340,26 @@ mod tests {
         }],
         initial: 0,
         inputs: &[],
-        outputs: &[OutputSpec {
-            name: "out",
-            kind: OutputKind::Data,
-            packet: "u64",
-            pull: false,
-        }],
+        outputs: &[
+            OutputSpec {
+                name: "out",
+                kind: OutputKind::Data,
+                packet: "u64",
+                pull: false,
+            },
+            OutputSpec {
+                name: "other",
+                kind: OutputKind::Data,
+                packet: "u64",
+                pull: false,
+            },
+        ],
         variables: &[],
         exceptions: &[],
         timing: TimingSpec::NONE,
     };
 
-    /// A component that only owns its output; the test sends on it.
+    /// A component that only owns its outputs; the test sends on them.
     struct Source;
 
     impl Automaton for Source {
@@ -279,25 +369,28 @@ mod tests {
     }
 
     const KEY: &str = "coolbot/test/source/o/out";
+    const OTHER: &str = "coolbot/test/source/o/other";
+    const BATCHES: &str = "coolbot/test/o";
     const PATIENCE: Duration = Duration::from_secs(30);
 
-    /// A running `source`, its output echoed on [`KEY`], on a session of its own (no
-    /// network).
+    /// A running `source`, its outputs echoed by node `test` ([`KEY`], [`OTHER`]),
+    /// on a session of its own (no network).
     struct Fixture {
         session: zenoh::Session,
         system: System,
         out: DataOut<u64>,
+        other: DataOut<u64>,
         echoes: Echoes,
     }
 
     fn fixture() -> Fixture {
-        let out = DataOut::<u64>::new();
+        let (out, other) = (DataOut::<u64>::new(), DataOut::<u64>::new());
         let mut system = System::new();
         system
             .add(Component::new(
                 "source",
                 Box::new(Source),
-                PortSet::new().output(&out),
+                PortSet::new().output(&out).output(&other),
             ))
             .unwrap();
         system.run_all().unwrap();
@@ -305,15 +398,23 @@ mod tests {
             .wait()
             .unwrap();
         let handle = system.handle("source").unwrap();
-        let tap = Tap::<u64>::attach(&handle, "out", ECHO_CAPACITY).unwrap();
         let echoes = Echoes::default();
-        echoes
-            .add(&session, "test", KEY.to_owned(), (handle, "out", tap))
-            .unwrap();
+        for (port, key) in [("out", KEY), ("other", OTHER)] {
+            let tap = Tap::<u64>::attach(&handle, port, ECHO_CAPACITY).unwrap();
+            echoes
+                .add(
+                    &session,
+                    "test",
+                    (format!("source.{port}"), key.to_owned()),
+                    (handle.clone(), port, tap),
+                )
+                .unwrap();
+        }
         Fixture {
             session,
             system,
             out,
+            other,
             echoes,
         }
     }
@@ -327,21 +428,72 @@ mod tests {
         }
     }
 
-    impl Fixture {
-        /// Run `f` on the echoed output while the echo thread cannot take from its
-        /// tap (each tick's work waits for the ports' lock).
-        fn held<R>(&self, f: impl FnOnce(&dyn Echoing) -> R) -> R {
-            let ports = lock(&self.echoes.ports);
-            f(&*ports[0])
+    /// A reader of the node's batches, asking for some outputs.
+    struct Reader {
+        batches: Subscriber<FifoChannelHandler<Sample>>,
+        _asking: Vec<Subscriber<()>>,
+        /// Packets of batches received, not yet read.
+        pending: VecDeque<Echoed>,
+    }
+
+    impl Reader {
+        /// The next batch, whole.
+        fn batch(&self) -> Vec<Echoed> {
+            let sample = self
+                .batches
+                .recv_timeout(PATIENCE)
+                .unwrap()
+                .expect("a batch of echoed packets");
+            serde_json::from_slice(&sample.payload().to_bytes()).unwrap()
         }
 
-        /// A subscriber to the echo, once the echo knows it and has tapped the
-        /// output (its only consumer).
-        fn subscribe(&self) -> Subscriber<FifoChannelHandler<Sample>> {
-            let subscriber = self.session.declare_subscriber(KEY).wait().unwrap();
-            until(|| self.held(|port| port.matched()));
-            until(|| self.out.consumers() == 1);
-            subscriber
+        /// The next packet.
+        fn next(&mut self) -> Echoed {
+            while self.pending.is_empty() {
+                let batch = self.batch();
+                self.pending.extend(batch);
+            }
+            self.pending.pop_front().unwrap()
+        }
+    }
+
+    impl Fixture {
+        /// Run `f` on the echoed outputs while the echo thread cannot take from their
+        /// taps (each tick's work waits for the ports' lock).
+        fn held<R>(&self, f: impl FnOnce(&[Box<dyn Echoing>]) -> R) -> R {
+            let ports = lock(&self.echoes.ports);
+            f(&ports)
+        }
+
+        /// A reader asking for the outputs of `keys`, once the echo knows it and has
+        /// tapped them (their only consumer).
+        fn subscribe(&self, keys: &[&str]) -> Reader {
+            let batches = self.session.declare_subscriber(BATCHES).wait().unwrap();
+            let asking = keys
+                .iter()
+                .map(|key| {
+                    self.session
+                        .declare_subscriber(*key)
+                        .callback(|_| {})
+                        .wait()
+                        .unwrap()
+                })
+                .collect();
+            let index = |key: &str| usize::from(key == OTHER);
+            until(|| self.held(|ports| keys.iter().all(|key| ports[index(key)].matched())));
+            for key in keys {
+                let output = if *key == OTHER {
+                    &self.other
+                } else {
+                    &self.out
+                };
+                until(|| output.consumers() == 1);
+            }
+            Reader {
+                batches,
+                _asking: asking,
+                pending: VecDeque::new(),
+            }
         }
 
         fn finish(self) {
@@ -350,44 +502,76 @@ mod tests {
         }
     }
 
-    fn next(subscriber: &Subscriber<FifoChannelHandler<Sample>>) -> Echoed {
-        let sample = subscriber
-            .recv_timeout(PATIENCE)
-            .unwrap()
-            .expect("an echoed packet");
-        serde_json::from_slice(&sample.payload().to_bytes()).unwrap()
-    }
-
     /// The producer's sends only fill the tap; the echo thread takes them at its
     /// tick. Packets beyond the tap's capacity by then are dropped and counted: the
     /// messages say how many, and a subscriber sees the gap.
     #[test]
     fn packets_wait_for_the_tick_and_those_beyond_the_capacity_are_counted() {
         let fixture = fixture();
-        let subscriber = fixture.subscribe();
+        let mut reader = fixture.subscribe(&[KEY]);
         let extra = 10;
         let capacity = ECHO_CAPACITY as u64;
-        fixture.held(|port| {
+        fixture.held(|ports| {
             for n in 0..capacity + extra {
                 fixture.out.send(n);
             }
-            assert_eq!(port.waiting(), ECHO_CAPACITY);
+            assert_eq!(ports[0].waiting(), ECHO_CAPACITY);
         });
         for n in 0..capacity {
-            let message = next(&subscriber);
+            let message = reader.next();
+            assert_eq!(message.output, "source.out");
             assert_eq!((message.seq, message.packet.as_u64()), (n, Some(n)));
             assert_eq!(message.dropped, extra);
         }
         fixture.out.send(7);
-        let after = next(&subscriber);
+        let after = reader.next();
         assert_eq!(after.seq, capacity + extra, "the gap");
         assert_eq!(after.dropped, extra);
         fixture.finish();
     }
 
+    /// What every tapped output sent in a tick goes in one sample on the node's batch
+    /// key, in order per output, each packet naming its output and stamped with the
+    /// time it was sent.
+    #[test]
+    fn a_tick_publishes_the_packets_of_every_output_in_one_sample() {
+        let fixture = fixture();
+        let reader = fixture.subscribe(&[KEY, OTHER]);
+        let before = coolbot::Time::now();
+        fixture.held(|_| {
+            for n in 0..3 {
+                fixture.out.send(n);
+                fixture.other.send(100 + n);
+            }
+        });
+        let after = coolbot::Time::now();
+        let batch = reader.batch();
+        assert!(
+            batch
+                .iter()
+                .all(|echoed| (before..=after).contains(&echoed.sent)),
+            "each stamped when it was sent: {batch:?}"
+        );
+        let of = |output: &str| -> Vec<(u64, Option<u64>)> {
+            batch
+                .iter()
+                .filter(|echoed| echoed.output == output)
+                .map(|echoed| (echoed.seq, echoed.packet.as_u64()))
+                .collect()
+        };
+        assert_eq!(batch.len(), 6, "one sample: {batch:?}");
+        assert_eq!(of("source.out"), [(0, Some(0)), (1, Some(1)), (2, Some(2))]);
+        assert_eq!(
+            of("source.other"),
+            [(0, Some(100)), (1, Some(101)), (2, Some(102))]
+        );
+        fixture.finish();
+    }
+
     /// The output is tapped only while a subscriber matches: before the first and
     /// after the last, its sends reach its connections only. A subscriber's first
-    /// packet is the first sent once the tap is attached, numbered 0.
+    /// packet is the first sent once the tap is attached, numbered 0. An output
+    /// nobody asks for is not in the batches.
     #[test]
     fn an_output_is_tapped_only_while_someone_listens() {
         let fixture = fixture();
@@ -396,13 +580,16 @@ mod tests {
         for n in 0..2 * ECHO_CAPACITY as u64 {
             fixture.out.send(n);
         }
-        let subscriber = fixture.subscribe();
+        let mut reader = fixture.subscribe(&[KEY]);
+        fixture.other.send(1);
         fixture.out.send(1000);
-        let message = next(&subscriber);
+        let message = reader.next();
+        assert_eq!(message.output, "source.out");
         assert_eq!((message.seq, message.dropped), (0, 0));
         assert_eq!(message.packet, serde_json::json!(1000));
-        drop(subscriber);
-        until(|| !fixture.held(|port| port.matched()));
+        assert_eq!(fixture.other.consumers(), 0, "`other` is not tapped");
+        drop(reader);
+        until(|| !fixture.held(|ports| ports[0].matched()));
         until(|| consumers() == 0);
         fixture.finish();
     }

@@ -9,8 +9,10 @@
 //! - `coolbot/<node>/<path>/s`: a component's static shape on query (JSON
 //!   [`crate::info::ComponentInfo`]: variables with kinds and types, ports, the
 //!   outputs echoed).
-//! - `coolbot/<node>/<path>/o/<port>`: the packets of an echoed output (JSON
-//!   [`crate::echo::Echoed`], `coolctl echo`).
+//! - `coolbot/<node>/<path>/o/<port>`: an echoed output, subscribed to ask for its
+//!   packets (`coolctl echo`); the node taps the output while a subscriber matches.
+//! - `coolbot/<node>/o`: the packets of the node's echoed outputs, one sample per echo
+//!   tick (a JSON array of [`crate::echo::Echoed`]).
 //! - `coolbot/<node>/@agent/<type>`: the agent of a node (remote instantiation): a
 //!   query whose payload is a JSON [`crate::agent::Instantiate`] for a component of
 //!   type `<type>`, answered with a JSON [`crate::ControlReply`]. The type is in the
@@ -53,9 +55,16 @@ pub fn info(node: &str, path: &str) -> String {
     format!("{ROOT}/{node}/{path}/s")
 }
 
-/// The key on which `node` echoes output `port` of the component at `path`.
+/// The key whose subscribers ask `node` for output `port` of the component at `path`
+/// (the node taps it while one matches).
 pub fn echo(node: &str, path: &str, port: &str) -> String {
     format!("{ROOT}/{node}/{path}/o/{port}")
+}
+
+/// The key on which `node` publishes the packets of its echoed outputs, a batch per
+/// echo tick.
+pub fn echoes(node: &str) -> String {
+    format!("{ROOT}/{node}/o")
 }
 
 /// The key on which node `node`'s agent takes requests to build a `type_name`

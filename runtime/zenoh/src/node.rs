@@ -338,9 +338,10 @@ impl Node {
 
     /// Echo output `path` of `system` (`component.port`, the component through
     /// nested compounds: `"robot.base.scan"`), whose packets are `T`, on the network
-    /// for `coolctl echo`: each packet as JSON ([`crate::echo::Echoed`]) on
-    /// `coolbot/<node>/<component>/o/<port>`, from the node's one echo thread, every
-    /// [`crate::echo::ECHO_TICK`], while a subscriber matches that key. The producer
+    /// for `coolctl echo`: each packet as JSON ([`crate::echo::Echoed`]) in the
+    /// node's batches on `coolbot/<node>/o`, from the node's one echo thread, every
+    /// [`crate::echo::ECHO_TICK`], while a subscriber matches the output's key,
+    /// `coolbot/<node>/<component>/o/<port>`. The producer
     /// is never slowed (`docs/tools.md`, "coolctl echo"): the output is tapped only
     /// while a subscriber matches, each packet then costs it one copy into a queue,
     /// and packets beyond [`ECHO_CAPACITY`] waiting are dropped for the echo and
@@ -369,7 +370,7 @@ impl Node {
         self.echoes.add(
             &self.session,
             &self.name,
-            keys::echo(&self.name, component, port),
+            (path.to_owned(), keys::echo(&self.name, component, port)),
             (handle, port, tap),
         )?;
         let schema = coolbot::schema::of::<T>().schema;

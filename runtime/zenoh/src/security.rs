@@ -226,7 +226,7 @@ fn invalid(path: &Path, reason: impl std::fmt::Display) -> SecurityError {
 pub const MAX_FILE_SIZE: u64 = 1 << 20;
 
 /// The file at `path`, read whole if it holds at most [`MAX_FILE_SIZE`] bytes.
-fn read_bounded(path: &Path) -> Result<Vec<u8>, SecurityError> {
+pub(crate) fn read_bounded(path: &Path) -> Result<Vec<u8>, SecurityError> {
     use std::io::Read;
     let read = |source| SecurityError::Read {
         path: path.to_owned(),

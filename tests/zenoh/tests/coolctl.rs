@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::types::Reading;
 use coolbot_zenoh_tests::support::{self, PATIENCE, Sourced, node, wait_until};
+use zenoh::Wait;
 
 /// The `coolctl` binary, built in this package from its source (`Cargo.toml`).
 const COOLCTL: &str = env!("CARGO_BIN_EXE_coolctl-under-test");
@@ -169,7 +170,33 @@ fn echo_prints_packets_as_json_lines_and_counts_what_it_skips() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no skipped count in {summary}"));
     assert!(skipped > 0, "{summary}");
+
+    // A node's batch holds the packets of every output someone asks for: `echo` prints
+    // its own output's only. Batches naming another output come all along.
+    let others = {
+        let stop = Arc::clone(&stop);
+        let session = robot.node.session().clone();
+        std::thread::spawn(move || {
+            let other = r#"[{"output":"source.idle","seq":0,"dropped":0,"sent":1,"packet":{"n":7,"label":"not asked for"}}]"#;
+            while !stop.load(Ordering::Relaxed) {
+                session.put("coolbot/robot/o", other).wait().unwrap();
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        })
+    };
+    let out = coolctl(
+        &robot.endpoint,
+        &["echo", "robot/source.out", "--for", "1s"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<Reading> = text(&out.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("a JSON packet per line"))
+        .collect();
+    assert!(!lines.is_empty());
+    assert!(lines.iter().all(|line| line.label == "r"), "{lines:?}");
     stop.store(true, Ordering::Relaxed);
+    others.join().unwrap();
     let sent = producer.join().unwrap();
     assert!(sent > 0);
     drop(robot.node);

@@ -195,12 +195,18 @@ struct Client {
 
 impl Client {
     fn start(modules: &Path, url: &str) -> Client {
+        Client::start_with(modules, url, &[])
+    }
+
+    /// [`Client::start`] with `env` in the client's environment.
+    fn start_with(modules: &Path, url: &str, env: &[(&str, &Path)]) -> Client {
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/foxglove/client.cjs");
         let process = Process::start(
             Command::new("node")
                 .arg(script)
                 .arg(url)
-                .env("NODE_PATH", modules),
+                .env("NODE_PATH", modules)
+                .envs(env.iter().copied()),
         );
         Client {
             process,
@@ -406,19 +412,29 @@ fn a_channel_nobody_watches_has_no_zenoh_subscriber() {
     let (_server, url) = serve(&fox, &["fox/*"]);
     let mut client = Client::start(&modules, &url);
     client.advertised(&["/fox/source.out"]);
-    let key = coolbot_zenoh::keys::echo("fox", "source", "out");
-    assert!(
-        !has_subscriber(&fox.node, &key),
-        "advertised but not subscribed: no subscriber on {key}"
-    );
+    // The output's key, which has the node tap it, and the node's batches.
+    let keys = [
+        coolbot_zenoh::keys::echo("fox", "source", "out"),
+        coolbot_zenoh::keys::echoes("fox"),
+    ];
+    for key in &keys {
+        assert!(
+            !has_subscriber(&fox.node, key),
+            "advertised but not subscribed: no subscriber on {key}"
+        );
+    }
     client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 1 }));
     client.messages("/fox/source.out", 1);
-    assert!(has_subscriber(&fox.node, &key), "subscribed: {key} is");
+    for key in &keys {
+        assert!(has_subscriber(&fox.node, key), "subscribed: {key} is");
+    }
     client.order(json!({ "do": "unsubscribe", "topic": "/fox/source.out" }));
-    assert!(
-        wait_until(PATIENCE, || !has_subscriber(&fox.node, &key)),
-        "unsubscribed: {key} is not any more"
-    );
+    for key in &keys {
+        assert!(
+            wait_until(PATIENCE, || !has_subscriber(&fox.node, key)),
+            "unsubscribed: {key} is not any more"
+        );
+    }
 }
 
 #[test]
@@ -918,6 +934,78 @@ fn a_node_killed_has_its_channels_unadvertised_until_it_comes_back() {
 
 /// Off loopback, the server needs the security file or `--insecure`, as a node's
 /// endpoints do; the refusal comes before anything listens.
+/// With a certificate and its key, the server speaks `wss://` only: a client that
+/// trusts the certificate's authority is served; one that speaks plain `ws://` to the
+/// same port is not.
+#[test]
+fn with_a_certificate_the_server_speaks_wss_only() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let fox = fox();
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let dir = dir.path();
+    let authority = Authority::new(dir, "viewers");
+    // `server.pem` and `server.key`, for localhost and 127.0.0.1.
+    authority.node(dir, "server", "server", "");
+    let (certificate, key) = (dir.join("server.pem"), dir.join("server.key"));
+    let (_server, url) = coolctl_foxglove(
+        &["--connect", &fox.endpoint, "--timeout", "2s"],
+        &[
+            "--refresh",
+            "100ms",
+            "--port",
+            "fox/*",
+            "--tls-certificate",
+            certificate.to_str().unwrap(),
+            "--tls-key",
+            key.to_str().unwrap(),
+        ],
+    );
+    let port = url
+        .strip_prefix("wss://127.0.0.1:")
+        .unwrap_or_else(|| panic!("not a wss URL: {url}"));
+    let ca = dir.join("viewers-ca.pem");
+    let mut client = Client::start_with(&modules, &url, &[("NODE_EXTRA_CA_CERTS", &ca)]);
+    client.advertised(&["/fox/source.out"]);
+    client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 1 }));
+    client.messages("/fox/source.out", 1);
+
+    let plain = Client::start(&modules, &format!("ws://127.0.0.1:{port}"));
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = plain
+            .process
+            .lines
+            .recv_timeout(left)
+            .expect("the plain client opens or fails");
+        let value: Value = serde_json::from_str(&line).expect("a JSON line");
+        assert_ne!(value["kind"], "open", "plain ws:// was served");
+        if value["kind"] == "error" || value["kind"] == "close" {
+            break;
+        }
+    }
+}
+
+#[test]
+fn a_tls_certificate_that_cannot_be_read_is_refused() {
+    let out = Command::new(COOLCTL)
+        .args(["--no-multicast", "foxglove", "--bind", "127.0.0.1:0"])
+        .args(["--tls-certificate", "/nonexistent/server.pem"])
+        .args(["--tls-key", "/nonexistent/server.key"])
+        .output()
+        .expect("coolctl runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let error = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        error.contains(
+            "the WebSocket's TLS certificate or key: /nonexistent/server.pem: cannot read"
+        ),
+        "{error}"
+    );
+}
+
 #[test]
 fn serving_off_loopback_is_refused_without_the_security_file() {
     let out = Command::new(COOLCTL)

@@ -868,12 +868,13 @@ impl Fuzzer {
 
     /// Events that do not decode on monitoring keys.
     fn monitoring(&mut self) {
-        // An echoed output's key too (`coolctl echo` reads it; nothing in a node).
+        // A node's batch of echoed packets too (`coolctl echo` reads it; nothing in a
+        // node).
         if self.rng.below(4) == 0 {
             let len = self.rng.index(200);
             let bytes = self.rng.bytes(len);
-            self.put("coolbot/robot/robot.base.motion/o/pose", bytes);
-            self.figures.count("echo: bytes on an echoed output's key");
+            self.put("coolbot/robot/o", bytes);
+            self.figures.count("echo: bytes on a node's echo batch key");
             return;
         }
         let instance_key = format!("coolbot/station/{}/m", self.placement.instance);

@@ -12,6 +12,7 @@
 //! coolctl echo <node>/<path>.<port> [--hz 10] [--count N] [--for 10s]
 //! coolctl top [--once [--json] [--size 160x40]] [--refresh 1s]
 //! coolctl foxglove [--bind 127.0.0.1:8765] [--port 'NODE/PATH.PORT'...] [--map FILE] [--refresh 1s]
+//!                  [--tls-certificate FILE --tls-key FILE]
 //! ```
 //!
 //! Exit codes: 0 done, 1 a command rejected, nothing answered or found (no node
@@ -161,6 +162,12 @@ enum Action {
         /// component's monitoring is read.
         #[arg(long, default_value = "1s", value_parser = duration)]
         refresh: Duration,
+        /// Speak wss:// (TLS) with this certificate (PEM); with --tls-key.
+        #[arg(long, value_name = "FILE", requires = "tls_key")]
+        tls_certificate: Option<std::path::PathBuf>,
+        /// The certificate's private key (PEM, PKCS#8); with --tls-certificate.
+        #[arg(long, value_name = "FILE", requires = "tls_certificate")]
+        tls_key: Option<std::path::PathBuf>,
     },
     /// Print the packets an echoed output sends, one JSON line each (a summary with
     /// the packets skipped and lost goes to stderr at the end).
@@ -250,6 +257,8 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             ports,
             map,
             refresh,
+            tls_certificate,
+            tls_key,
         } => {
             let foxglove =
                 |error: coolbot_zenoh::foxglove::FoxgloveError| CtlError::Foxglove(Box::new(error));
@@ -265,10 +274,14 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
                 refresh,
                 secured: cli.config.is_some(),
                 insecure: cli.insecure,
+                tls: tls_certificate.zip(tls_key).map(|(certificate, key)| {
+                    coolbot_zenoh::foxglove::TlsFiles { certificate, key }
+                }),
             };
+            let scheme = options.scheme();
             let server = coolbot_zenoh::foxglove::Server::start(ctl, session.clone(), options)
                 .map_err(foxglove)?;
-            writeln!(out, "serving ws://{}:{}", bind.ip(), server.port())?;
+            writeln!(out, "serving {scheme}://{}:{}", bind.ip(), server.port())?;
             out.flush()?;
             loop {
                 std::thread::park();
@@ -303,7 +316,22 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
     }
 }
 
+/// Zenoh's runtimes in `coolctl` unless `ZENOH_RUNTIME` says otherwise: every one
+/// handed over to `net`, so all of Zenoh's work runs on one thread. A client's
+/// traffic needs no more, and a sample received then wakes one thread, not three
+/// (`docs/performance.md`, "Foxglove").
+const ZENOH_RUNTIME: &str =
+    "(rx: (handover: net), tx: (handover: net), acc: (handover: net), app: (handover: net))";
+
 fn main() -> ExitCode {
+    if std::env::var_os("ZENOH_RUNTIME").is_none() {
+        // SAFETY: the first thing `main` does: no other thread exists yet that could
+        // read the environment meanwhile (Zenoh reads it when it starts its runtimes).
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
+        }
+    }
     let cli = Cli::parse();
     let stdout = std::io::stdout();
     match run(cli, &mut stdout.lock()) {

@@ -1,64 +1,127 @@
-//! The way from the echoed outputs to the WebSocket. Zenoh's callback only queues
-//! each echoed packet as it came (its payload shared, not copied); a task on the
-//! WebSocket server's own runtime takes what waits every [`FEED_TICK`], makes each
-//! packet its channel's message and logs it. The messages of a tick reach the
-//! server's client tasks on the thread that runs them, which wakes once per tick
-//! rather than once per message; nothing waits on the queue, so Zenoh's thread wakes
-//! no thread either. **Invariant:** nothing is lost silently: a packet that finds the
-//! queue full, or that does not decode or fit its channel, is dropped, counted
-//! ([`super::Counts`]) and warned about (rate-limited).
+//! The way from the echoed outputs to the WebSocket. A node publishes its echoed
+//! packets a batch per echo tick ([`crate::echo`]); Zenoh's callback only queues each
+//! batch as it came (its payload shared, not copied) and wakes the feed's task, on
+//! the WebSocket server's own runtime, if it waits. The task splits every batch
+//! waiting and logs each packet on the channels of its output that clients subscribe
+//! ([`Routes`]), made their messages, then sleeps a [`FEED_TICK`] before it waits
+//! again: the batches that come meanwhile wake nothing. So the server's thread wakes
+//! at most once a tick while packets come, and not at all while none does; the
+//! messages of a tick reach the client tasks on that thread, and each keeps the time
+//! its packet was sent. **Invariant:** nothing is lost silently: a batch that finds
+//! the queue full or does not decode, and a packet that does not fit its channel, are
+//! dropped, counted ([`super::Counts`]) and warned about (rate-limited).
 
-use std::sync::Arc;
+use std::collections::HashMap;
 use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use foxglove::RawChannel;
+use foxglove::{ChannelId, RawChannel};
+use tokio::sync::Notify;
 use zenoh::bytes::ZBytes;
 
 use super::Counts;
 use super::wellknown::Transform;
 use crate::echo::EchoedRaw;
 
-/// How often the feed logs what waits.
-pub const FEED_TICK: Duration = Duration::from_millis(10);
+/// The feed takes what waits at most once in this time, so that the WebSocket
+/// server's thread wakes at most 20 times a second while packets come (each message
+/// keeps the time its packet was sent).
+pub const FEED_TICK: Duration = Duration::from_millis(50);
 
-/// How many echoed packets wait for the feed before the newest are dropped.
-pub const FEED_CAPACITY: usize = 4096;
+/// How many batches of echoed packets wait for the feed before the newest are
+/// dropped (a batch: a node's packets of one echo tick).
+pub const FEED_CAPACITY: usize = 256;
 
-/// Where an echoed output's packets go: its channel, and what makes them messages.
+/// Where an echoed output's packets go: a channel, and what makes them its messages.
 pub(super) struct Route {
     pub(super) channel: Arc<RawChannel>,
     pub(super) transform: Transform,
 }
 
-/// An echoed packet waiting, with its route.
-type Waiting = (Arc<Route>, ZBytes);
+/// The routes of the outputs whose channels clients subscribe, by node and output
+/// (`<path>.<port>`).
+#[derive(Default)]
+pub(super) struct Routes(Mutex<Table>);
+
+/// Routes by node, then by output.
+type Table = HashMap<String, HashMap<String, Vec<Arc<Route>>>>;
+
+impl Routes {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Table> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Log the packets of `output` on `node` on `route`'s channel too.
+    pub(super) fn add(&self, node: &str, output: &str, route: Arc<Route>) {
+        self.lock()
+            .entry(node.to_owned())
+            .or_default()
+            .entry(output.to_owned())
+            .or_default()
+            .push(route);
+    }
+
+    /// Stop logging the packets of `output` on `node` on `channel`; whether `node`
+    /// has no route left.
+    pub(super) fn remove(&self, node: &str, output: &str, channel: ChannelId) -> bool {
+        let mut routes = self.lock();
+        let Some(outputs) = routes.get_mut(node) else {
+            return true;
+        };
+        if let Some(list) = outputs.get_mut(output) {
+            list.retain(|route| route.channel.id() != channel);
+            if list.is_empty() {
+                outputs.remove(output);
+            }
+        }
+        let none = outputs.is_empty();
+        if none {
+            routes.remove(node);
+        }
+        none
+    }
+
+    /// Forget every route of `node`.
+    pub(super) fn forget(&self, node: &str) {
+        self.lock().remove(node);
+    }
+}
+
+/// A batch waiting, with the node that published it.
+type Waiting = (Arc<str>, ZBytes);
 
 /// The queue's end that Zenoh's callbacks hold.
 #[derive(Clone)]
 pub(super) struct Inlet {
     sender: Sender<Waiting>,
     counts: Arc<Counts>,
+    wake: Arc<Notify>,
 }
 
 impl Inlet {
-    /// Queue `payload`, an echoed packet for `route`; count it dropped if the queue is
-    /// full.
-    pub(super) fn push(&self, route: &Arc<Route>, payload: ZBytes) {
-        if let Err(TrySendError::Full(_)) = self.sender.try_send((Arc::clone(route), payload)) {
-            self.counts.overflowed.fetch_add(1, Ordering::Relaxed);
-            let topic = route.channel.topic();
-            coolbot::limited!("foxglove:feed", |held| tracing::warn!(
-                "the server falls behind: a packet for {topic} is dropped{held}"
-            ));
+    /// Queue `payload`, a batch of echoed packets from `node`, and wake the feed;
+    /// count it dropped if the queue is full.
+    pub(super) fn push(&self, node: &Arc<str>, payload: ZBytes) {
+        match self.sender.try_send((Arc::clone(node), payload)) {
+            Ok(()) => self.wake.notify_one(),
+            Err(TrySendError::Full(_)) => {
+                self.counts.overflowed.fetch_add(1, Ordering::Relaxed);
+                coolbot::limited!("foxglove:feed", |held| tracing::warn!(
+                    "the server falls behind: a batch of echoed packets from {node} is dropped{held}"
+                ));
+            }
+            Err(TrySendError::Disconnected(_)) => {}
         }
     }
 }
 
-/// The queue and the task that takes from it; dropping it ends the task.
+/// The queue, the routes, and the task that takes from the queue; dropping it ends
+/// the task.
 pub(super) struct Feed {
     inlet: Inlet,
+    routes: Arc<Routes>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -67,21 +130,38 @@ impl Feed {
     /// `counts`.
     pub(super) fn start(runtime: &tokio::runtime::Handle, counts: Arc<Counts>) -> Feed {
         let (inlet, waiting) = queue(FEED_CAPACITY, counts);
-        let counts = Arc::clone(&inlet.counts);
+        let routes = Arc::new(Routes::default());
+        let (counts, wake, taken) = (
+            Arc::clone(&inlet.counts),
+            Arc::clone(&inlet.wake),
+            Arc::clone(&routes),
+        );
         let task = runtime.spawn(async move {
-            let mut ticks = tokio::time::interval(FEED_TICK);
-            ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
             loop {
-                ticks.tick().await;
-                log_waiting(&waiting, &counts);
+                // Asleep while nothing comes. A batch queued since the last wait left
+                // a permit: it is taken at once.
+                wake.notified().await;
+                log_waiting(&waiting, &taken, &counts);
+                // At most one wake a tick: the batches that come meanwhile find no
+                // waiter, wake nothing and leave a permit.
+                tokio::time::sleep(FEED_TICK).await;
             }
         });
-        Feed { inlet, task }
+        Feed {
+            inlet,
+            routes,
+            task,
+        }
     }
 
     /// The end to queue on.
     pub(super) fn inlet(&self) -> Inlet {
         self.inlet.clone()
+    }
+
+    /// The routes the feed logs on.
+    pub(super) fn routes(&self) -> Arc<Routes> {
+        Arc::clone(&self.routes)
     }
 }
 
@@ -91,71 +171,263 @@ impl Drop for Feed {
     }
 }
 
-/// A queue of `capacity` packets: its inlet, and the end [`log_waiting`] takes from.
+/// A queue of `capacity` batches: its inlet, and the end [`log_waiting`] takes from.
 fn queue(capacity: usize, counts: Arc<Counts>) -> (Inlet, Receiver<Waiting>) {
     let (sender, receiver) = crossbeam_channel::bounded(capacity);
-    (Inlet { sender, counts }, receiver)
+    let wake = Arc::new(Notify::new());
+    (
+        Inlet {
+            sender,
+            counts,
+            wake,
+        },
+        receiver,
+    )
 }
 
-/// Log every packet waiting on its channel, as its message.
-fn log_waiting(waiting: &Receiver<Waiting>, counts: &Counts) {
-    for (route, payload) in waiting.try_iter() {
-        if let Err(error) = message(&route, &payload) {
-            counts.undecoded.fetch_add(1, Ordering::Relaxed);
-            let topic = route.channel.topic();
-            coolbot::limited!(topic, |held| tracing::warn!(
-                "an echoed packet for {topic} does not fit (dropped): {error}{held}"
-            ));
+/// Log every packet of every batch waiting on the channels of its output.
+fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
+    for (node, payload) in waiting.try_iter() {
+        let payload = payload.to_bytes();
+        let batch = match serde_json::from_slice::<Vec<EchoedRaw<'_>>>(&payload) {
+            Ok(batch) => batch,
+            Err(error) => {
+                counts.undecoded.fetch_add(1, Ordering::Relaxed);
+                coolbot::limited!(&*node, |held| tracing::warn!(
+                    "a batch of echoed packets from {node} does not decode (dropped): {error}{held}"
+                ));
+                continue;
+            }
+        };
+        let routes = routes.lock();
+        let Some(outputs) = routes.get(&*node) else {
+            continue;
+        };
+        for echoed in &batch {
+            for route in outputs.get(&*echoed.output).into_iter().flatten() {
+                if let Err(error) = message(route, echoed.packet, echoed.sent) {
+                    counts.undecoded.fetch_add(1, Ordering::Relaxed);
+                    let topic = route.channel.topic();
+                    coolbot::limited!(topic, |held| tracing::warn!(
+                        "an echoed packet for {topic} does not fit (dropped): {error}{held}"
+                    ));
+                }
+            }
         }
     }
 }
 
-/// Log the echoed packet `payload` on `route`'s channel.
-fn message(route: &Route, payload: &ZBytes) -> Result<(), String> {
-    let payload = payload.to_bytes();
-    let echoed = serde_json::from_slice::<EchoedRaw<'_>>(&payload).map_err(|e| e.to_string())?;
-    let message = route.transform.message(echoed.packet)?;
-    route.channel.log(&message);
+/// Log the echoed packet `packet`, sent at `sent`, on `route`'s channel, at the time
+/// it was sent.
+fn message(
+    route: &Route,
+    packet: &serde_json::value::RawValue,
+    sent: coolbot::Time,
+) -> Result<(), String> {
+    let message = route.transform.message(packet, sent)?;
+    route.channel.log_with_meta(
+        &message,
+        foxglove::PartialMetadata {
+            log_time: Some(sent.as_nanos()),
+        },
+    );
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use foxglove::{Context, Metadata, Sink, SinkId};
 
-    fn route() -> Arc<Route> {
-        let context = foxglove::Context::new();
+    use super::*;
+    use crate::foxglove::wellknown::PoseMap;
+
+    /// Keeps what is logged on every channel: (topic, message, log time).
+    struct Kept {
+        id: SinkId,
+        logged: Mutex<Vec<(String, String, u64)>>,
+    }
+
+    impl Sink for Kept {
+        fn id(&self) -> SinkId {
+            self.id
+        }
+
+        fn log(
+            &self,
+            channel: &RawChannel,
+            msg: &[u8],
+            metadata: &Metadata,
+        ) -> Result<(), foxglove::FoxgloveError> {
+            self.logged.lock().unwrap().push((
+                channel.topic().to_owned(),
+                String::from_utf8_lossy(msg).into_owned(),
+                metadata.log_time,
+            ));
+            Ok(())
+        }
+    }
+
+    fn route(context: &Arc<Context>, topic: &str, transform: Transform) -> Arc<Route> {
         let channel = context
-            .channel_builder("/test")
+            .channel_builder(topic)
             .message_encoding("json")
             .build_raw()
             .expect("a channel");
-        Arc::new(Route {
-            channel,
-            transform: Transform::Raw { wrap: false },
-        })
+        Arc::new(Route { channel, transform })
     }
 
-    /// Packets beyond the queue's capacity are dropped and counted; those queued are
-    /// taken at the next tick, and one that does not decode is counted too.
+    /// When the packets of the tests were sent, plus their sequence numbers.
+    const SENT: u64 = 7_000_000_000;
+
+    /// A batch of `(output, seq, packet)`.
+    fn batch(packets: &[(&str, u64, &str)]) -> ZBytes {
+        let frames: Vec<String> = packets
+            .iter()
+            .map(|(output, seq, packet)| {
+                format!(
+                    r#"{{"output":"{output}","seq":{seq},"dropped":0,"sent":{},"packet":{packet}}}"#,
+                    SENT + seq
+                )
+            })
+            .collect();
+        ZBytes::from(format!("[{}]", frames.join(",")))
+    }
+
+    /// Each packet of a batch goes to the routes of its output, in order, as the node
+    /// wrote it, logged at the time it was sent; an output nobody routes is passed
+    /// over, as are the batches of a node with no route. Batches beyond the queue's capacity are dropped and counted; a
+    /// batch that does not decode, and a packet that does not fit its channel, are
+    /// counted too.
     #[test]
-    fn a_full_queue_drops_and_counts_and_a_packet_that_does_not_decode_is_counted() {
+    fn batches_are_split_on_their_routes_and_what_is_lost_is_counted() {
         let counts = Arc::new(Counts::default());
         let (inlet, waiting) = queue(4, Arc::clone(&counts));
-        let route = route();
-        let good = ZBytes::from(r#"{"seq":0,"dropped":0,"packet":{"x":1}}"#);
-        for _ in 0..3 {
-            inlet.push(&route, good.clone());
-        }
-        inlet.push(&route, ZBytes::from("not JSON"));
+        let context = Context::new();
+        let kept = Arc::new(Kept {
+            id: SinkId::next(),
+            logged: Mutex::new(Vec::new()),
+        });
+        context.add_sink(kept.clone());
+        let routes = Routes::default();
+        let pose: PoseMap = serde_json::from_value(serde_json::json!({
+            "port": "*", "x": "x", "y": "y", "yaw": "theta",
+            "frame": "odom", "child": "base_link",
+        }))
+        .unwrap();
+        routes.add(
+            "n",
+            "a.out",
+            route(&context, "/n/a.out", Transform::Raw { wrap: false }),
+        );
+        routes.add(
+            "n",
+            "a.out",
+            route(&context, "/n/a.out/pose", Transform::Pose(pose)),
+        );
+        routes.add(
+            "n",
+            "b.out",
+            route(&context, "/n/b.out", Transform::Raw { wrap: true }),
+        );
+        let (node, other): (Arc<str>, Arc<str>) = (Arc::from("n"), Arc::from("m"));
+        inlet.push(
+            &node,
+            batch(&[
+                ("a.out", 0, r#"{"x":1,"y":2,"theta":0}"#),
+                ("b.out", 0, "7"),
+                ("c.out", 0, "8"),
+                ("a.out", 1, r#"{"x":3}"#),
+            ]),
+        );
+        inlet.push(&node, ZBytes::from("not JSON"));
+        inlet.push(&other, batch(&[("a.out", 0, "{}")]));
+        inlet.push(&node, batch(&[("b.out", 1, "9")]));
         for _ in 0..2 {
-            inlet.push(&route, good.clone());
+            inlet.push(&node, batch(&[("b.out", 2, "10")]));
         }
         assert_eq!(counts.overflowed.load(Ordering::Relaxed), 2);
-        assert_eq!(waiting.len(), 4);
-        log_waiting(&waiting, &counts);
+        log_waiting(&waiting, &routes, &counts);
         assert!(waiting.is_empty());
-        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 1);
-        assert_eq!(counts.overflowed.load(Ordering::Relaxed), 2);
+        let logged = kept.logged.lock().unwrap().clone();
+        let topics: Vec<&str> = logged.iter().map(|(topic, ..)| topic.as_str()).collect();
+        let times: Vec<u64> = logged.iter().map(|(.., time)| time - SENT).collect();
+        assert_eq!(
+            topics,
+            [
+                "/n/a.out",
+                "/n/a.out/pose",
+                "/n/b.out",
+                "/n/a.out",
+                "/n/b.out"
+            ]
+        );
+        assert_eq!(times, [0, 0, 0, 1, 1]);
+        assert_eq!(logged[0].1, r#"{"x":1,"y":2,"theta":0}"#);
+        assert_eq!(logged[2].1, r#"{"value":7}"#);
+        assert_eq!(logged[3].1, r#"{"x":3}"#);
+        assert_eq!(logged[4].1, r#"{"value":9}"#);
+        // The batch that does not decode, and the pose without `y`.
+        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 2);
+    }
+
+    /// The feed sleeps until a batch comes and logs it at once; then it takes what
+    /// waits at most once a tick: a batch that comes within the tick waits for its
+    /// end.
+    #[test]
+    fn the_feed_takes_a_batch_at_once_then_at_most_once_a_tick() {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .start_paused(true)
+            .build()
+            .unwrap();
+        let context = Context::new();
+        let kept = Arc::new(Kept {
+            id: SinkId::next(),
+            logged: Mutex::new(Vec::new()),
+        });
+        context.add_sink(kept.clone());
+        let feed = Feed::start(runtime.handle(), Arc::new(Counts::default()));
+        let route = route(&context, "/n/a.out", Transform::Raw { wrap: false });
+        feed.routes().add("n", "a.out", route);
+        let node: Arc<str> = Arc::from("n");
+        let logged = || kept.logged.lock().unwrap().len();
+        // Runs what is ready on the runtime, the clock standing still.
+        let settle = || {
+            runtime.block_on(async {
+                for _ in 0..10 {
+                    tokio::task::yield_now().await;
+                }
+            })
+        };
+        settle();
+        feed.inlet().push(&node, batch(&[("a.out", 0, "1")]));
+        settle();
+        assert_eq!(logged(), 1, "at once");
+        feed.inlet().push(&node, batch(&[("a.out", 1, "2")]));
+        settle();
+        assert_eq!(logged(), 1, "within the tick");
+        runtime.block_on(tokio::time::advance(FEED_TICK - Duration::from_millis(1)));
+        settle();
+        assert_eq!(logged(), 1, "still within the tick");
+        runtime.block_on(tokio::time::advance(Duration::from_millis(1)));
+        settle();
+        assert_eq!(logged(), 2, "at the tick's end");
+    }
+
+    /// A node's last route gone, it has none; another output's keep it.
+    #[test]
+    fn a_node_has_routes_until_its_last_is_removed() {
+        let context = Context::new();
+        let routes = Routes::default();
+        let (a, b) = (
+            route(&context, "/n/a.out", Transform::Raw { wrap: false }),
+            route(&context, "/n/b.out", Transform::Raw { wrap: false }),
+        );
+        let (a_id, b_id) = (a.channel.id(), b.channel.id());
+        routes.add("n", "a.out", a);
+        routes.add("n", "b.out", b);
+        assert!(!routes.remove("n", "a.out", a_id));
+        assert!(routes.remove("n", "b.out", b_id));
+        assert!(routes.remove("n", "b.out", b_id), "none left, still");
     }
 }

@@ -18,8 +18,9 @@
 //! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
 //! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
 //!
-//! Echoed packets reach their channels through the feed ([`FEED_TICK`]): Zenoh's
-//! callback queues them, a task on the WebSocket server's one thread logs them.
+//! Echoed packets reach their channels through the feed ([`feed`]): Zenoh's callback
+//! queues each node's batches, a task on the WebSocket server's one thread splits
+//! them and logs each packet on the channels of its output.
 //!
 //! **Invariant:** a channel nobody subscribes costs nothing: no Zenoh subscriber is
 //! declared and no snapshot asked for it until a client subscribes, and both end when
@@ -36,6 +37,7 @@ pub mod wellknown;
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -88,6 +90,18 @@ pub enum FoxgloveError {
     /// The server's thread could not be started.
     #[error("cannot spawn the foxglove thread")]
     Spawn(#[source] std::io::Error),
+    /// The WebSocket's TLS certificate or key cannot be read.
+    #[error("the WebSocket's TLS certificate or key")]
+    Tls(#[source] crate::security::SecurityError),
+}
+
+/// The certificate and key the WebSocket serves `wss://` with.
+#[derive(Debug, Clone)]
+pub struct TlsFiles {
+    /// The server's certificate (PEM, X.509; the first one in the file is sent).
+    pub certificate: PathBuf,
+    /// Its private key (PEM, PKCS#8).
+    pub key: PathBuf,
 }
 
 /// How `coolctl foxglove` serves.
@@ -108,9 +122,16 @@ pub struct Options {
     pub secured: bool,
     /// Serve off loopback without a security file.
     pub insecure: bool,
+    /// Speak `wss://` with this certificate and key (none: plain `ws://`).
+    pub tls: Option<TlsFiles>,
 }
 
 impl Options {
+    /// The URL scheme clients use: `wss` with TLS, else `ws`.
+    pub fn scheme(&self) -> &'static str {
+        if self.tls.is_some() { "wss" } else { "ws" }
+    }
+
     /// Refuse an address off loopback without a security file or `insecure`.
     pub fn check(&self) -> Result<(), FoxgloveError> {
         if self.bind.ip().is_loopback() || self.secured || self.insecure {
@@ -223,10 +244,12 @@ impl std::fmt::Debug for Server {
 /// What the server has dropped.
 #[derive(Debug, Default)]
 pub struct Counts {
-    /// Echoed packets and monitoring events that did not decode (dropped, warned).
+    /// Batches of echoed packets, echoed packets and monitoring events that did not
+    /// decode, or did not fit their channel (dropped, warned).
     pub undecoded: AtomicU64,
-    /// Echoed packets that found the server's queue full ([`FEED_CAPACITY`] waiting:
-    /// the server falls behind; dropped, warned).
+    /// Batches of echoed packets (a node's packets of one echo tick) that found the
+    /// server's queue full ([`FEED_CAPACITY`] waiting: the server falls behind;
+    /// dropped, warned).
     pub overflowed: AtomicU64,
 }
 
@@ -246,7 +269,15 @@ impl Server {
             .enable_all()
             .build()
             .map_err(FoxgloveError::Spawn)?;
-        let handle = WebSocketServer::new()
+        let mut server = WebSocketServer::new();
+        if let Some(tls) = &options.tls {
+            let read = |path| crate::security::read_bounded(path).map_err(FoxgloveError::Tls);
+            server = server.tls(foxglove::websocket::TlsIdentity {
+                cert: read(&tls.certificate)?,
+                key: read(&tls.key)?,
+            });
+        }
+        let handle = server
             .tokio_runtime(runtime.handle())
             .name("coolctl foxglove")
             .bind(options.bind.ip().to_string(), options.bind.port())
@@ -270,6 +301,8 @@ impl Server {
         let feed = feed::Feed::start(runtime.handle(), Arc::clone(&counts));
         let mut follower = Follower {
             inlet: feed.inlet(),
+            routes: feed.routes(),
+            batches: HashMap::new(),
             ctl,
             session,
             context,
@@ -329,9 +362,11 @@ impl Drop for Server {
 
 /// What a channel stands for.
 enum Source {
-    /// An echoed output, on its echo key, each packet made a message by `transform`.
+    /// An echoed output, `output` (`<path>.<port>`) asked for on its echo key, each
+    /// packet made a message by `transform`.
     Port {
         key: String,
+        output: String,
         transform: wellknown::Transform,
     },
     /// A component's monitoring, read each refresh.
@@ -347,7 +382,8 @@ struct Served {
     subscribers: usize,
     /// The node the channel's component is on (none: the log).
     node: Option<String>,
-    /// The Zenoh subscriber of a port or of the log, while subscribed.
+    /// The Zenoh subscriber of the log, or the one that asks a node for a port's
+    /// packets, while subscribed.
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
     /// A monitored component's last CPU time and when it was read.
     cpu: Option<(Duration, Instant)>,
@@ -368,6 +404,11 @@ struct Follower {
     counts: Arc<Counts>,
     /// Where the echoed packets queue for the feed's thread.
     inlet: feed::Inlet,
+    /// The channels the feed logs each output's packets on.
+    routes: Arc<feed::Routes>,
+    /// The subscriber of each node's batches of echoed packets, while a client
+    /// subscribes one of its outputs' channels.
+    batches: HashMap<String, zenoh::pubsub::Subscriber<()>>,
     server: Arc<WebSocketServerHandle>,
     /// The parameters clients subscribed to, with the value last sent.
     watched: BTreeMap<String, Option<Parameter>>,
@@ -582,6 +623,7 @@ impl Follower {
                         channel,
                         Source::Port {
                             key: key.clone(),
+                            output: format!("{}.{port}", listed.path),
                             transform,
                         },
                         Some(&listed.node),
@@ -605,6 +647,8 @@ impl Follower {
         let prefix = format!("{name}/");
         self.known
             .retain(|address, _| !address.starts_with(&prefix));
+        self.routes.forget(name);
+        self.batches.remove(name);
     }
 
     fn subscribe(&mut self, id: ChannelId) {
@@ -618,16 +662,46 @@ impl Follower {
         let channel = Arc::clone(&served.channel);
         let counts = Arc::clone(&self.counts);
         let declared = match &served.source {
-            Source::Port { key, transform } => {
-                let route = Arc::new(feed::Route {
-                    channel: Arc::clone(&channel),
-                    transform: transform.clone(),
-                });
-                let inlet = self.inlet.clone();
+            Source::Port {
+                key,
+                output,
+                transform,
+            } => {
+                let node = served.node.clone().unwrap_or_default();
+                self.routes.add(
+                    &node,
+                    output,
+                    Arc::new(feed::Route {
+                        channel: Arc::clone(&channel),
+                        transform: transform.clone(),
+                    }),
+                );
+                // The node's batches first, so that none holding the output's first
+                // packets is missed; then the output's key, which has the node tap it.
+                if !self.batches.contains_key(&node) {
+                    let inlet = self.inlet.clone();
+                    let from: Arc<str> = Arc::from(node.as_str());
+                    match self
+                        .session
+                        .declare_subscriber(keys::echoes(&node))
+                        .callback(move |sample| inlet.push(&from, sample.payload().clone()))
+                        .wait()
+                    {
+                        Ok(subscriber) => {
+                            self.batches.insert(node, subscriber);
+                        }
+                        Err(error) => coolbot::limited!("foxglove:subscribe", |held| {
+                            tracing::warn!(
+                                "cannot subscribe to the echoes of {node}: {}{held}",
+                                coolbot::Chain(&*error)
+                            )
+                        }),
+                    }
+                }
                 Some(
                     self.session
                         .declare_subscriber(key.clone())
-                        .callback(move |sample| inlet.push(&route, sample.payload().clone()))
+                        .callback(|_| {})
                         .wait(),
                 )
             }
@@ -681,6 +755,11 @@ impl Follower {
         if served.subscribers == 0 {
             served.subscriber = None;
             served.cpu = None;
+            if let (Source::Port { output, .. }, Some(node)) = (&served.source, &served.node)
+                && self.routes.remove(node, output, id)
+            {
+                self.batches.remove(node);
+            }
         }
     }
 

@@ -21,13 +21,12 @@
 //! ```
 //!
 //! Each mapping may name `stamp`, a field holding nanoseconds since the Unix epoch
-//! (a `Time`); without it a message is stamped when `coolctl` receives it. A packet
+//! (a `Time`); without it a message is stamped when the output sent the packet. A packet
 //! a mapping does not fit (a field missing or not a number) is dropped, counted and
 //! warned about.
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
-use std::time::SystemTime;
 
 use serde::Deserialize;
 use serde_json::value::RawValue;
@@ -152,9 +151,12 @@ fn number(packet: &Value, path: &str) -> Result<f64, String> {
         .ok_or_else(|| format!("no number at `{path}`"))
 }
 
-fn stamp(packet: &Value, path: Option<&str>) -> Result<Stamp, String> {
+fn stamp(packet: &Value, path: Option<&str>, sent: coolbot::Time) -> Result<Stamp, String> {
     match path {
-        None => Ok(Stamp::of(SystemTime::now())),
+        None => Ok(Stamp {
+            sec: sent.as_nanos() / 1_000_000_000,
+            nsec: (sent.as_nanos() % 1_000_000_000) as u32,
+        }),
         Some(path) => {
             let nanos = field(packet, path)
                 .and_then(Value::as_u64)
@@ -173,10 +175,14 @@ fn yaw_quaternion(yaw: f64) -> Value {
 }
 
 impl Transform {
-    /// The message of `packet` (its JSON as the node wrote it) as the channel sends
-    /// it, or why the packet does not fit. The packet itself is passed on as written,
+    /// The message of `packet` (its JSON as the node wrote it), sent at `sent`, as
+    /// the channel sends it, or why the packet does not fit. The packet itself is passed on as written,
     /// and wrapped by writing around it; only the well-known messages read it.
-    pub(super) fn message<'p>(&self, packet: &'p RawValue) -> Result<Cow<'p, [u8]>, String> {
+    pub(super) fn message<'p>(
+        &self,
+        packet: &'p RawValue,
+        sent: coolbot::Time,
+    ) -> Result<Cow<'p, [u8]>, String> {
         match self {
             Transform::Raw { wrap: false } => Ok(Cow::Borrowed(packet.get().as_bytes())),
             Transform::Raw { wrap: true } => {
@@ -190,20 +196,20 @@ impl Transform {
             Transform::Pose(_) | Transform::Tf(_) | Transform::Scan(_) => {
                 let packet: Value =
                     serde_json::from_str(packet.get()).map_err(|error| error.to_string())?;
-                serde_json::to_vec(&self.apply(packet)?)
+                serde_json::to_vec(&self.apply(packet, sent)?)
                     .map(Cow::Owned)
                     .map_err(|error| error.to_string())
             }
         }
     }
 
-    /// The message of `packet`, or why the packet does not fit.
-    pub(super) fn apply(&self, packet: Value) -> Result<Value, String> {
+    /// The message of `packet`, sent at `sent`, or why the packet does not fit.
+    pub(super) fn apply(&self, packet: Value, sent: coolbot::Time) -> Result<Value, String> {
         match self {
             Transform::Raw { wrap: true } => Ok(json!({ "value": packet })),
             Transform::Raw { wrap: false } => Ok(packet),
             Transform::Pose(map) => Ok(json!({
-                "timestamp": stamp(&packet, map.stamp.as_deref())?,
+                "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                 "frame_id": map.frame,
                 "pose": {
                     "position": {
@@ -215,7 +221,7 @@ impl Transform {
                 },
             })),
             Transform::Tf(map) => Ok(json!({
-                "timestamp": stamp(&packet, map.stamp.as_deref())?,
+                "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                 "parent_frame_id": map.frame,
                 "child_frame_id": map.child,
                 "translation": {
@@ -239,7 +245,7 @@ impl Transform {
                     .collect::<Result<Vec<f64>, String>>()?;
                 let end = map.start_angle + map.step * ranges.len().saturating_sub(1) as f64;
                 Ok(json!({
-                    "timestamp": stamp(&packet, map.stamp.as_deref())?,
+                    "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                     "frame_id": map.frame,
                     "pose": {
                         "position": { "x": 0.0, "y": 0.0, "z": 0.0 },
@@ -381,6 +387,9 @@ pub fn laser_scan_schema() -> Value {
 mod tests {
     use super::*;
 
+    /// When the packets of the tests were sent.
+    const SENT: coolbot::Time = coolbot::Time::from_nanos(5_000_000_011);
+
     fn pose_map() -> PoseMap {
         PoseMap {
             port: "*".to_owned(),
@@ -397,7 +406,9 @@ mod tests {
     fn a_pose_is_a_pose_in_frame_and_a_transform() {
         let packet = json!({ "x": 1.5, "at": { "y": -2.0 }, "theta": std::f64::consts::PI,
             "stamp": 3_000_000_007u64 });
-        let pose = Transform::Pose(pose_map()).apply(packet.clone()).unwrap();
+        let pose = Transform::Pose(pose_map())
+            .apply(packet.clone(), SENT)
+            .unwrap();
         assert_eq!(pose["frame_id"], "odom");
         assert_eq!(pose["timestamp"], json!({ "sec": 3, "nsec": 7 }));
         assert_eq!(
@@ -407,7 +418,7 @@ mod tests {
         let q = &pose["pose"]["orientation"];
         assert!((q["z"].as_f64().unwrap() - 1.0).abs() < 1e-12, "{q}");
         assert!(q["w"].as_f64().unwrap().abs() < 1e-12, "{q}");
-        let tf = Transform::Tf(pose_map()).apply(packet).unwrap();
+        let tf = Transform::Tf(pose_map()).apply(packet, SENT).unwrap();
         assert_eq!(tf["parent_frame_id"], "odom");
         assert_eq!(tf["child_frame_id"], "base_link");
         assert_eq!(tf["translation"]["y"], -2.0);
@@ -425,8 +436,10 @@ mod tests {
             stamp: None,
         };
         let scan = Transform::Scan(map)
-            .apply(json!({ "us": [1.0, 2.0, 3.0] }))
+            .apply(json!({ "us": [1.0, 2.0, 3.0] }), SENT)
             .unwrap();
+        // No stamp field: the time the output sent the packet.
+        assert_eq!(scan["timestamp"], json!({ "sec": 5, "nsec": 11 }));
         assert_eq!(scan["ranges"], json!([1.25, 2.25, 3.25]));
         assert_eq!(scan["start_angle"], 0.0);
         assert_eq!(scan["end_angle"], 1.0);
@@ -436,7 +449,7 @@ mod tests {
     #[test]
     fn a_packet_the_mapping_does_not_fit_is_refused_with_the_field() {
         let error = Transform::Pose(pose_map())
-            .apply(json!({ "x": 1.0, "theta": 0.0, "stamp": 1 }))
+            .apply(json!({ "x": 1.0, "theta": 0.0, "stamp": 1 }), SENT)
             .unwrap_err();
         assert_eq!(error, "no number at `at.y`");
     }
@@ -449,13 +462,19 @@ mod tests {
     fn a_packet_is_passed_on_as_written_and_wrapped_by_writing_around_it() {
         // Not in serde_json's key order: written anew, it would come out sorted.
         let packet = raw(r#"{"z":1,"a":[2.5,"x"]}"#);
-        let message = Transform::Raw { wrap: false }.message(&packet).unwrap();
+        let message = Transform::Raw { wrap: false }
+            .message(&packet, SENT)
+            .unwrap();
         assert!(matches!(message, Cow::Borrowed(_)), "copied");
         assert_eq!(&*message, br#"{"z":1,"a":[2.5,"x"]}"#);
         let number = raw("42");
-        let wrapped = Transform::Raw { wrap: true }.message(&number).unwrap();
+        let wrapped = Transform::Raw { wrap: true }
+            .message(&number, SENT)
+            .unwrap();
         assert_eq!(&*wrapped, br#"{"value":42}"#);
-        let wrapped = Transform::Raw { wrap: true }.message(&packet).unwrap();
+        let wrapped = Transform::Raw { wrap: true }
+            .message(&packet, SENT)
+            .unwrap();
         let value: Value = serde_json::from_slice(&wrapped).expect("JSON");
         assert_eq!(value, json!({ "value": { "z": 1, "a": [2.5, "x"] } }));
     }
@@ -463,17 +482,17 @@ mod tests {
     #[test]
     fn a_mapped_packet_is_read_and_its_message_written() {
         let packet = raw(r#"{"x":1.5,"at":{"y":-2.0},"theta":0.0,"stamp":3000000007}"#);
-        let message = Transform::Pose(pose_map()).message(&packet).unwrap();
+        let message = Transform::Pose(pose_map()).message(&packet, SENT).unwrap();
         let pose: Value = serde_json::from_slice(&message).expect("JSON");
         assert_eq!(
             pose,
             Transform::Pose(pose_map())
-                .apply(serde_json::from_str(packet.get()).unwrap())
+                .apply(serde_json::from_str(packet.get()).unwrap(), SENT)
                 .unwrap()
         );
         let unfit = raw(r#"{"x":1.0,"theta":0.0,"stamp":1}"#);
         assert_eq!(
-            Transform::Tf(pose_map()).message(&unfit).unwrap_err(),
+            Transform::Tf(pose_map()).message(&unfit, SENT).unwrap_err(),
             "no number at `at.y`"
         );
     }
