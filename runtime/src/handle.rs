@@ -40,6 +40,18 @@ pub(crate) const TAKEN: u8 = 1;
 pub(crate) const WITHDRAWN: u8 = 2;
 
 impl ControlMessage {
+    /// A message carrying `command`, and where its answers arrive.
+    pub(crate) fn new(command: Command, by_supervisor: bool) -> (Self, Arc<Mailbox<Reply>>) {
+        let (reply, answers) = crate::mailbox::answers(REPLIES);
+        let message = ControlMessage {
+            command: Box::new(command),
+            by_supervisor,
+            reply,
+            claim: Arc::new(AtomicU8::new(PENDING)),
+        };
+        (message, answers)
+    }
+
     /// Claim the message for execution; false if the sender withdrew it.
     pub(crate) fn take(&self) -> bool {
         self.claim
@@ -237,14 +249,8 @@ impl Handle {
             return Err(Refusal::OwnThread);
         }
         let deadline = crate::time::later(Instant::now(), self.command_timeout);
-        let (reply, answers) = crate::mailbox::answers(REPLIES);
-        let claim = Arc::new(AtomicU8::new(PENDING));
-        let message = ControlMessage {
-            command: Box::new(command.clone()),
-            by_supervisor,
-            reply,
-            claim: Arc::clone(&claim),
-        };
+        let (message, answers) = ControlMessage::new(command.clone(), by_supervisor);
+        let claim = Arc::clone(&message.claim);
         match self.control.post(message) {
             Ok(()) => {}
             Err((PostError::Full, _)) => return Err(Refusal::QueueFull),

@@ -47,7 +47,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use crate::clock::{Clock, VirtualClock};
-use crate::handle::{ControlMessage, Handle, PENDING, Reply};
+use crate::handle::{ControlMessage, Handle, Reply};
 use crate::monitor::TaskResult;
 use crate::monitor::{Command, Monitor};
 use crate::port::{
@@ -369,13 +369,7 @@ impl Harness {
     /// Send `command` through the control port, settle, and return the component's
     /// answer.
     pub fn command(&mut self, command: Command) -> Result<(), HarnessError> {
-        let (reply, answers) = crate::mailbox::answers(crate::handle::REPLIES);
-        let message = ControlMessage {
-            command: Box::new(command.clone()),
-            by_supervisor: false,
-            reply,
-            claim: Arc::new(std::sync::atomic::AtomicU8::new(PENDING)),
-        };
+        let (message, answers) = ControlMessage::new(command.clone(), false);
         let component = self.name.clone();
         let rejected = |reason: String| HarnessError::Rejected {
             component: component.clone(),

@@ -1471,13 +1471,11 @@ impl System {
         // Tell everyone first, so that components stop in parallel.
         for slot in &self.slots {
             if slot.runner.is_none() {
-                let (reply, _answers) = crate::mailbox::answers(crate::handle::REPLIES);
-                let _ = slot.handle.control.post(crate::handle::ControlMessage {
-                    command: Box::new(crate::Command::SetState(Controllable::Dead)),
-                    by_supervisor: false,
-                    reply,
-                    claim: Arc::new(std::sync::atomic::AtomicU8::new(crate::handle::PENDING)),
-                });
+                let (message, _answers) = crate::handle::ControlMessage::new(
+                    crate::Command::SetState(Controllable::Dead),
+                    false,
+                );
+                let _ = slot.handle.control.post(message);
                 slot.handle.bell.ring_command();
             }
         }

@@ -528,7 +528,13 @@ pub struct Fuzzer {
 impl Fuzzer {
     /// Connects to both nodes, finds the placement and the bridges' live epochs.
     pub fn connect(endpoints: &[String], seed: u64) -> Fuzzer {
-        let config = coolbot_zenoh::peer_config(&[], endpoints, false).expect("a configuration");
+        let mut config =
+            coolbot_zenoh::peer_config(&[], endpoints, false).expect("a configuration");
+        // A peer of another host: its messages come by the link, none through this
+        // host's shared memory.
+        config
+            .insert_json5("transport/shared_memory/enabled", "false")
+            .expect("shared memory off");
         let session = zenoh::open(config).wait().expect("a session");
         let ctl = Ctl::new(session.clone(), Duration::from_secs(5));
         let placement = wait_for("the placement's tokens", || {

@@ -519,13 +519,9 @@ mod tests {
             .as_array()
             .expect("plot paths")
         {
-            let path = path["value"].as_str().expect("a path");
-            topics.push(
-                path.split_once(".variables.")
-                    .expect("a variable")
-                    .0
-                    .to_owned(),
-            );
+            let (topic, fields) = message_path(path["value"].as_str().expect("a path"));
+            assert!(fields.starts_with(".variables."), "{fields}");
+            topics.push(topic);
         }
         topics.push(
             panels["RosOut!steps"]["topicToRender"]
@@ -569,6 +565,45 @@ mod tests {
         }
         assert_eq!(topics.len(), 6, "{topics:?}");
         assert!(panels.get("Parameters!robot").is_some());
+    }
+
+    /// A Foxglove message path's topic and the rest: an unquoted topic name is made of
+    /// `/`, letters, digits, `_` and `-` only, so a topic with a dot in it is quoted
+    /// (`"/robot/robot.base/monitor".variables.x`), `\\` and `\"` escaped inside.
+    fn message_path(path: &str) -> (String, &str) {
+        if let Some(quoted) = path.strip_prefix('"') {
+            let mut topic = String::new();
+            let mut chars = quoted.char_indices();
+            while let Some((at, c)) = chars.next() {
+                match c {
+                    '"' => return (topic, &quoted[at + 1..]),
+                    '\\' => topic.push(chars.next().expect("an escaped character").1),
+                    c => topic.push(c),
+                }
+            }
+            panic!("an unterminated quoted topic in `{path}`");
+        }
+        let end = path
+            .find(|c: char| !(c.is_ascii_alphanumeric() || "/_-".contains(c)))
+            .unwrap_or(path.len());
+        (path[..end].to_owned(), &path[end..])
+    }
+
+    #[test]
+    fn a_message_path_reads_its_topic_as_foxglove_does() {
+        assert_eq!(
+            message_path("/a/b.c.d"),
+            ("/a/b".to_owned(), ".c.d"),
+            "a dot ends an unquoted topic"
+        );
+        assert_eq!(
+            message_path(r#""/a/b.c".d"#),
+            ("/a/b.c".to_owned(), ".d")
+        );
+        assert_eq!(
+            message_path(r#""/a\"b".d"#),
+            ("/a\"b".to_owned(), ".d")
+        );
     }
 
     #[test]
