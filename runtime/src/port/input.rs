@@ -79,12 +79,15 @@ impl<T> Clone for FifoIn<T> {
     }
 }
 
+/// A fifo input's queue: both ends of one bounded channel.
+type Queue<T> = (Sender<Parcel<T>>, Receiver<Parcel<T>>);
+
 pub(crate) struct FifoInner<T> {
     pub(super) core: Arc<InputCore>,
     /// The queue, made by the first packet delivered or the first blocking receive:
     /// an input no packet has reached holds no buffer (a bounded channel of 16 small
     /// packets is about 1 KiB).
-    channel: OnceLock<(Sender<Parcel<T>>, Receiver<Parcel<T>>)>,
+    channel: OnceLock<Queue<T>>,
     pub(super) policy: OverflowPolicy,
     pub(super) capacity: usize,
     pub(super) block_timeout: Duration,
@@ -112,7 +115,7 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
 impl<T: Packet> FifoInner<T> {
     /// The queue, made now if no packet came yet.
     #[inline]
-    fn queue(&self) -> &(Sender<Parcel<T>>, Receiver<Parcel<T>>) {
+    fn queue(&self) -> &Queue<T> {
         self.channel
             .get_or_init(|| crossbeam_channel::bounded(self.capacity))
     }
