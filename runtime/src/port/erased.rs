@@ -214,16 +214,15 @@ impl<T: Packet> InputEnd for FifoInner<T> {
     }
 
     fn transfer(&self, to: &ErasedInput) -> u64 {
-        transfer_queue(self.receiver.try_iter().collect(), to)
+        transfer_queue(self.drain().collect(), to)
     }
 
     fn discard(&self) -> u64 {
-        self.receiver.try_iter().count() as u64
+        self.drain().count() as u64
     }
 
     fn room(&self) -> Option<usize> {
-        (self.policy == OverflowPolicy::Block)
-            .then(|| self.capacity.saturating_sub(self.receiver.len()))
+        (self.policy == OverflowPolicy::Block).then(|| self.capacity.saturating_sub(self.queued()))
     }
 }
 

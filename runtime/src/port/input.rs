@@ -79,10 +79,15 @@ impl<T> Clone for FifoIn<T> {
     }
 }
 
+/// A fifo input's queue: both ends of one bounded channel.
+type Queue<T> = (Sender<Parcel<T>>, Receiver<Parcel<T>>);
+
 pub(crate) struct FifoInner<T> {
     pub(super) core: Arc<InputCore>,
-    pub(super) sender: Sender<Parcel<T>>,
-    pub(super) receiver: Receiver<Parcel<T>>,
+    /// The queue, made by the first packet delivered or the first blocking receive:
+    /// an input no packet has reached holds no buffer (a bounded channel of 16 small
+    /// packets is about 1 KiB).
+    channel: OnceLock<Queue<T>>,
     pub(super) policy: OverflowPolicy,
     pub(super) capacity: usize,
     pub(super) block_timeout: Duration,
@@ -97,7 +102,7 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
 
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
-        match self.sender.try_send(packet) {
+        match self.sender().try_send(packet) {
             Ok(()) => {}
             Err(TrySendError::Full(packet)) => self.deliver_full(packet),
             // The receiver lives in `self`, so the channel cannot be disconnected.
@@ -108,6 +113,40 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
 }
 
 impl<T: Packet> FifoInner<T> {
+    /// The queue, made now if no packet came yet.
+    #[inline]
+    fn queue(&self) -> &Queue<T> {
+        self.channel
+            .get_or_init(|| crossbeam_channel::bounded(self.capacity))
+    }
+
+    #[inline]
+    fn sender(&self) -> &Sender<Parcel<T>> {
+        &self.queue().0
+    }
+
+    /// The queue's receiving end, if a packet ever came (else nothing is queued).
+    #[inline]
+    pub(super) fn receiver(&self) -> Option<&Receiver<Parcel<T>>> {
+        self.channel.get().map(|(_, receiver)| receiver)
+    }
+
+    /// Every packet queued now, oldest first.
+    pub(super) fn drain(&self) -> impl Iterator<Item = Parcel<T>> + '_ {
+        self.receiver().into_iter().flat_map(Receiver::try_iter)
+    }
+
+    /// The oldest queued packet.
+    #[inline]
+    fn take(&self) -> Option<Parcel<T>> {
+        self.receiver()?.try_recv().ok()
+    }
+
+    /// How many packets are queued.
+    pub(super) fn queued(&self) -> usize {
+        self.receiver().map_or(0, Receiver::len)
+    }
+
     #[cold]
     fn deliver_full(&self, packet: Parcel<T>) {
         match self.policy {
@@ -115,10 +154,10 @@ impl<T: Packet> FifoInner<T> {
             OverflowPolicy::DropOldest => {
                 let mut packet = packet;
                 loop {
-                    if self.receiver.try_recv().is_ok() {
+                    if self.take().is_some() {
                         self.core.overflowed(1);
                     }
-                    match self.sender.try_send(packet) {
+                    match self.sender().try_send(packet) {
                         Ok(()) => break,
                         Err(TrySendError::Full(back)) => packet = back,
                         Err(TrySendError::Disconnected(_)) => break,
@@ -127,7 +166,7 @@ impl<T: Packet> FifoInner<T> {
             }
             OverflowPolicy::Block => {
                 if self
-                    .sender
+                    .sender()
                     .send_timeout(packet, self.block_timeout)
                     .is_err()
                 {
@@ -151,12 +190,10 @@ impl<T: Packet> FifoIn<T> {
         block_timeout: Duration,
     ) -> FifoIn<T> {
         let capacity = capacity.max(1);
-        let (sender, receiver) = crossbeam_channel::bounded(capacity);
         FifoIn {
             inner: Arc::new(FifoInner {
                 core: InputCore::new(),
-                sender,
-                receiver,
+                channel: OnceLock::new(),
                 policy,
                 capacity,
                 block_timeout,
@@ -168,23 +205,23 @@ impl<T: Packet> FifoIn<T> {
     /// shared among them: taking it by value copies it if another input still holds
     /// it ([`FifoIn::recv_shared`] never copies).
     pub fn recv(&self) -> Option<T> {
-        self.inner.receiver.try_recv().ok().map(Parcel::into_owned)
+        self.inner.take().map(Parcel::into_owned)
     }
 
     /// The oldest queued packet, behind a shared pointer: a packet sent to several
     /// inputs is not copied for this one.
     pub fn recv_shared(&self) -> Option<Arc<T>> {
-        self.inner.receiver.try_recv().ok().map(Parcel::into_shared)
+        self.inner.take().map(Parcel::into_shared)
     }
 
     /// Every packet queued now, oldest first.
     pub fn drain(&self) -> impl Iterator<Item = T> + '_ {
-        self.inner.receiver.try_iter().map(Parcel::into_owned)
+        self.inner.drain().map(Parcel::into_owned)
     }
 
     /// The oldest queued packet as it was delivered (owned or shared).
     pub(crate) fn recv_parcel(&self) -> Option<Parcel<T>> {
-        self.inner.receiver.try_recv().ok()
+        self.inner.take()
     }
 
     /// Wait up to `timeout` for a packet. This blocks the calling thread: meant for
@@ -192,7 +229,8 @@ impl<T: Packet> FifoIn<T> {
     /// react to arrivals with `on` transitions instead.
     pub fn recv_timeout(&self, timeout: Duration) -> Option<T> {
         self.inner
-            .receiver
+            .queue()
+            .1
             .recv_timeout(timeout)
             .ok()
             .map(Parcel::into_owned)
@@ -200,12 +238,12 @@ impl<T: Packet> FifoIn<T> {
 
     /// The number of queued packets.
     pub fn len(&self) -> usize {
-        self.inner.receiver.len()
+        self.inner.queued()
     }
 
     /// Whether the queue is empty.
     pub fn is_empty(&self) -> bool {
-        self.inner.receiver.is_empty()
+        self.inner.queued() == 0
     }
 
     /// The queue's capacity.
@@ -587,5 +625,45 @@ impl<T: Packet> PosterIn<T> {
 impl<T: Packet> Default for PosterIn<T> {
     fn default() -> Self {
         PosterIn::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fifo_holds_no_queue_until_its_first_packet_and_then_queues_as_before() {
+        let (out, fifo) = (
+            DataOut::<u64>::new(),
+            FifoIn::<u64>::new(2, OverflowPolicy::Reject),
+        );
+        assert!(out.erased().link(&fifo.erased()));
+        // Connected, nothing sent: no queue, and it reads as empty.
+        assert!(fifo.inner.channel.get().is_none());
+        assert_eq!((fifo.recv(), fifo.len(), fifo.is_empty()), (None, 0, true));
+        assert_eq!(fifo.drain().count(), 0);
+        assert!(fifo.inner.channel.get().is_none());
+        for packet in 1..=3 {
+            out.send(packet);
+        }
+        assert!(fifo.inner.channel.get().is_some());
+        // Its capacity and policy hold: the third packet was rejected and counted.
+        assert_eq!((fifo.len(), fifo.overflows()), (2, 1));
+        assert_eq!(fifo.drain().collect::<Vec<_>>(), [1, 2]);
+    }
+
+    #[test]
+    fn a_receiver_waiting_before_the_first_packet_gets_it() {
+        let (out, fifo) = (
+            DataOut::<u64>::new(),
+            FifoIn::<u64>::new(4, OverflowPolicy::Reject),
+        );
+        assert!(out.erased().link(&fifo.erased()));
+        let waiting = fifo.clone();
+        let receiver = std::thread::spawn(move || waiting.recv_timeout(Duration::from_secs(30)));
+        // Sent whether the receiver made the queue already or not: one queue either way.
+        out.send(7);
+        assert_eq!(receiver.join().expect("receiver"), Some(7));
     }
 }

@@ -215,8 +215,9 @@ pub(crate) struct Runner {
     scheduling: Option<Scheduling>,
     /// Adaptation (paper 3.6): the ladder, the detector, the level; `None` for a
     /// component with no ladder and no detection, and for compounds (whose
-    /// supervisor adapts, `compound/adaptation.rs`).
-    adapt: Option<Local>,
+    /// supervisor adapts, `compound/adaptation.rs`). Boxed: most components have
+    /// none, and a group holds its members' runners side by side.
+    adapt: Option<Box<Local>>,
     /// How long the last user call ran.
     last_took: Duration,
     /// Driven by a harness (`crate::harness`) on the caller's thread, on a virtual
@@ -264,7 +265,8 @@ impl Runner {
             .map(|limit| Watch::new(spec, Arc::clone(&shared), Some(limit), &Clock::real()));
         let adapt = (!supervised)
             .then(|| Local::new(adaptation, &timing))
-            .flatten();
+            .flatten()
+            .map(Box::new);
         let mut runner = Runner {
             cx: Context::new(name, timing.period),
             automaton,
