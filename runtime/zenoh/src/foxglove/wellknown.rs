@@ -596,14 +596,8 @@ mod tests {
             ("/a/b".to_owned(), ".c.d"),
             "a dot ends an unquoted topic"
         );
-        assert_eq!(
-            message_path(r#""/a/b.c".d"#),
-            ("/a/b.c".to_owned(), ".d")
-        );
-        assert_eq!(
-            message_path(r#""/a\"b".d"#),
-            ("/a\"b".to_owned(), ".d")
-        );
+        assert_eq!(message_path(r#""/a/b.c".d"#), ("/a/b.c".to_owned(), ".d"));
+        assert_eq!(message_path(r#""/a\"b".d"#), ("/a\"b".to_owned(), ".d"));
     }
 
     #[test]
