@@ -26,8 +26,8 @@
 //! reader's compare-and-swap fails, and is tried again, if a producer published
 //! between its look and its swap. Readers take turns under a mutex that no producer
 //! touches. Producers take turns too (there is one back cell, and the sequence number
-//! comes from the last publish), without a read-modify-write in the common case: the
-//! thread that published last holds a *bias* ([`Turns`]).
+//! comes from the last publish), without a read-modify-write in the common case: a
+//! thread that publishes alone holds a *bias* ([`Turns`]).
 
 #![allow(
     unsafe_code,
@@ -66,8 +66,9 @@ pub(crate) struct Slot<T> {
 // turn at a time, each turn synchronised with the one before), the front cell by the
 // reader holding `front`'s lock, and the middle cell by no one; a cell changes role
 // only through an atomic read-modify-write of the word (release on the side that
-// gives it up, acquire on the side that takes it). Packets cross threads (`T: Send`)
-// and readers clone them from shared references on any thread (`T: Sync`).
+// gives it up, acquire on the side that takes it), whose low bits no one else writes
+// (`InputCore::arrived` adds above them). Packets cross threads (`T: Send`) and
+// readers clone them from shared references on any thread (`T: Sync`).
 unsafe impl<T: Send + Sync> Sync for Slot<T> {}
 
 /// The producers' side of the slot.
@@ -91,7 +92,7 @@ struct Front {
     index: usize,
     /// The sequence number of the packet in the front cell (0: none yet).
     seq: u64,
-    /// The sequence number [`Reading::taken`] holds.
+    /// The sequence number of the last packet taken as new.
     taken: u64,
 }
 
