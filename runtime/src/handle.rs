@@ -7,8 +7,9 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Sender, TrySendError};
+use crossbeam_channel::Receiver;
 
+use crate::mailbox::{Closer, Mailbox, PostError};
 use crate::monitor::{Command, Monitor, MonitorEvent, Rejected, Shared, Subscription, Timeout};
 use crate::table::{Controllable, State};
 
@@ -20,16 +21,19 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// A command on its way to the component, with the channel for its answer.
 pub(crate) struct ControlMessage {
-    /// Boxed: a control queue's slots are allocated with the queue, and a slot holds a
-    /// pointer rather than the largest command (32 slots of each component's queue).
+    /// Boxed: a queued message stays small whatever the largest command.
     pub(crate) command: Box<Command>,
     /// Given by the component's compound's adaptation (its supervisor managing the
     /// instance's level), not by anyone else (an operator, a policy, a test).
     pub(crate) by_supervisor: bool,
-    pub(crate) reply: Sender<Reply>,
+    /// Where the component answers: closed when the message is dropped.
+    pub(crate) reply: Closer<Reply>,
     /// `PENDING`, then `TAKEN` by the component or `WITHDRAWN` by the sender.
     pub(crate) claim: Arc<AtomicU8>,
 }
+
+/// How many answers one command gets at most (accepted, then done).
+pub(crate) const REPLIES: usize = 2;
 
 pub(crate) const PENDING: u8 = 0;
 pub(crate) const TAKEN: u8 = 1;
@@ -48,7 +52,7 @@ impl ControlMessage {
 /// (or [`Handle::poll`] looks at).
 pub(crate) struct Posted {
     command: Command,
-    answers: Receiver<Reply>,
+    answers: Arc<Mailbox<Reply>>,
     claim: Arc<AtomicU8>,
     deadline: Instant,
     /// [`Handle::poll`] saw the component take it (the transition is under way).
@@ -110,10 +114,10 @@ impl Refusal {
 pub struct Handle {
     pub(crate) name: Arc<str>,
     pub(crate) shared: Arc<Shared>,
-    pub(crate) control: Sender<ControlMessage>,
+    /// The control port's queue, closed when the component's thread ends.
+    pub(crate) control: Arc<Mailbox<ControlMessage>>,
     /// The component's doorbell: rung after each command is queued.
     pub(crate) bell: Arc<crate::wake::Doorbell>,
-    pub(crate) exited: Receiver<()>,
     pub(crate) join: Arc<Mutex<Option<JoinHandle<()>>>>,
     pub(crate) command_timeout: Duration,
     /// A compound's instances' handles, in declaration order (empty for an atomic
@@ -233,7 +237,7 @@ impl Handle {
             return Err(Refusal::OwnThread);
         }
         let deadline = crate::time::later(Instant::now(), self.command_timeout);
-        let (reply, answers) = crossbeam_channel::bounded(2);
+        let (reply, answers) = crate::mailbox::answers(REPLIES);
         let claim = Arc::new(AtomicU8::new(PENDING));
         let message = ControlMessage {
             command: Box::new(command.clone()),
@@ -241,10 +245,10 @@ impl Handle {
             reply,
             claim: Arc::clone(&claim),
         };
-        match self.control.try_send(message) {
+        match self.control.post(message) {
             Ok(()) => {}
-            Err(TrySendError::Full(_)) => return Err(Refusal::QueueFull),
-            Err(TrySendError::Disconnected(_)) => return Err(Refusal::Ended),
+            Err((PostError::Full, _)) => return Err(Refusal::QueueFull),
+            Err((PostError::Closed, _)) => return Err(Refusal::Ended),
         }
         self.bell.ring_command();
         Ok(Posted {
@@ -266,13 +270,13 @@ impl Handle {
     pub(crate) fn poll(&self, posted: &mut Posted, wait: Duration) -> Option<Result<(), Rejected>> {
         let until = crate::time::later(Instant::now(), wait);
         loop {
-            match posted.answers.recv_deadline(until) {
-                Ok(Reply::Accepted) => posted.accepted = true,
-                Ok(Reply::Done) => return Some(Ok(())),
-                Ok(Reply::Rejected(reason)) => {
+            match posted.answers.take_until(until) {
+                Some(Reply::Accepted) => posted.accepted = true,
+                Some(Reply::Done) => return Some(Ok(())),
+                Some(Reply::Rejected(reason)) => {
                     return Some(Err(self.rejected(&posted.command, reason)));
                 }
-                Err(_) => break,
+                None => break,
             }
         }
         if Instant::now() < posted.deadline {
@@ -314,11 +318,11 @@ impl Handle {
             accepted: _,
         } = posted;
         let is_dead = command == Command::SetState(Controllable::Dead);
-        match answers.recv_deadline(deadline) {
-            Ok(Reply::Accepted) => {}
-            Ok(Reply::Done) => return Ok(()),
-            Ok(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
-            Err(_) => {
+        match answers.take_until(deadline) {
+            Some(Reply::Accepted) => {}
+            Some(Reply::Done) => return Ok(()),
+            Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
+            None => {
                 if claim
                     .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
                     .is_ok()
@@ -327,8 +331,8 @@ impl Handle {
                 }
                 // Taken just now: the transition is under way.
                 if answers
-                    .recv_deadline(crate::time::later(Instant::now(), self.command_timeout))
-                    .is_err()
+                    .take_until(crate::time::later(Instant::now(), self.command_timeout))
+                    .is_none()
                     && !is_dead
                 {
                     return Ok(());
@@ -336,7 +340,7 @@ impl Handle {
             }
         }
         // Accepted: wait for the transition to finish.
-        let _ = answers.recv_deadline(deadline);
+        let _ = answers.take_until(deadline);
         if is_dead {
             self.join_if_exited(deadline);
         }
@@ -352,10 +356,9 @@ impl Handle {
 
     /// Wait (until `deadline`) for the thread to end, then join it.
     pub(crate) fn join_if_exited(&self, deadline: Instant) -> Option<Result<(), String>> {
-        // The thread holds the sender of `exited`; the channel disconnects when it ends.
-        match self.exited.recv_deadline(deadline) {
-            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {}
-            _ => return None,
+        // The thread's end closes its control queue.
+        if !self.control.wait_closed(deadline) {
+            return None;
         }
         let handle = lock(&self.join).take()?;
         Some(crate::thread::join(handle))

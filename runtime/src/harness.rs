@@ -369,7 +369,7 @@ impl Harness {
     /// Send `command` through the control port, settle, and return the component's
     /// answer.
     pub fn command(&mut self, command: Command) -> Result<(), HarnessError> {
-        let (reply, answers) = crossbeam_channel::bounded(2);
+        let (reply, answers) = crate::mailbox::answers(crate::handle::REPLIES);
         let message = ControlMessage {
             command: Box::new(command.clone()),
             by_supervisor: false,
@@ -382,7 +382,7 @@ impl Harness {
             command: crate::ranges::excerpt_debug(&command, crate::ranges::EXCERPT_CHARS),
             reason,
         };
-        if self.handle.control.try_send(message).is_err() {
+        if self.handle.control.post(message).is_err() {
             return Err(rejected(
                 "the control queue is full or the component is dead".to_owned(),
             ));
@@ -390,7 +390,7 @@ impl Harness {
         self.handle.bell.ring_command();
         self.settle()?;
         let mut answered = false;
-        while let Ok(answer) = answers.try_recv() {
+        while let Some(answer) = answers.take() {
             answered = true;
             if let Reply::Rejected(reason) = answer {
                 return Err(rejected(reason));

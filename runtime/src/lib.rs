@@ -107,6 +107,7 @@ mod handle;
 pub mod harness;
 pub mod idle;
 pub mod log;
+mod mailbox;
 mod monitor;
 pub mod port;
 #[cfg(feature = "process")]

@@ -688,14 +688,12 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
             port.core.accept_pulls();
         }
     }
-    let (control_sender, control) = crossbeam_channel::bounded(CONTROL_CAPACITY);
-    let (exit_guard, exited) = crossbeam_channel::bounded(1);
+    let control = crate::mailbox::Mailbox::new(CONTROL_CAPACITY);
     let handle = Handle {
         name: Arc::from(name.as_str()),
         shared: Arc::clone(&shared),
-        control: control_sender,
+        control: Arc::clone(&control),
         bell: Arc::clone(&bell),
-        exited,
         join: Arc::new(Mutex::new(None)),
         command_timeout: DEFAULT_COMMAND_TIMEOUT,
         instances: instances.into(),
@@ -723,17 +721,22 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         bell,
         ports.inputs.iter().map(|p| Arc::clone(&p.core)).collect(),
         ports.outputs.iter().map(|p| Arc::clone(&p.core)).collect(),
-        exit_guard,
     );
     runner.set_labels(labels);
     Ok(Prepared {
         name,
         spec,
         handle,
-        inputs: ports.inputs,
-        outputs: ports.outputs,
+        // (Held as long as the system: no room for ports never registered.)
+        inputs: exact(ports.inputs),
+        outputs: exact(ports.outputs),
         runner,
     })
+}
+
+fn exact<T>(mut ports: Vec<T>) -> Vec<T> {
+    ports.shrink_to_fit();
+    ports
 }
 
 fn kind_matches_input(spec: InputKind, erased: InKind) -> bool {
@@ -1468,8 +1471,8 @@ impl System {
         // Tell everyone first, so that components stop in parallel.
         for slot in &self.slots {
             if slot.runner.is_none() {
-                let (reply, _answers) = crossbeam_channel::bounded(2);
-                let _ = slot.handle.control.try_send(crate::handle::ControlMessage {
+                let (reply, _answers) = crate::mailbox::answers(crate::handle::REPLIES);
+                let _ = slot.handle.control.post(crate::handle::ControlMessage {
                     command: Box::new(crate::Command::SetState(Controllable::Dead)),
                     by_supervisor: false,
                     reply,

@@ -9,6 +9,7 @@
 #![deny(missing_docs)]
 
 pub mod converters;
+pub mod drivers;
 pub mod finite;
 pub mod mapper;
 pub mod motion_controller;
@@ -40,8 +41,11 @@ use std::time::{Duration, Instant};
 use coolbot::adapt::{AdaptAction, Adaptation};
 use coolbot::{Handle, Monitor, MonitorEvent, State, Step, Supervision};
 
+use crate::drivers::{Drivers, DriversReport};
 use crate::node::NodeOptions;
-use crate::robot::{BASE, MAPPER, MOTION, RANGES, ROBOT, Robot, SIM_RANGES, Setup, WANDERER};
+use crate::robot::{
+    BASE, MAPPER, MOTION, RANGES, ROBOT, Ranges, Robot, SIM_RANGES, Setup, WANDERER,
+};
 use crate::world::{FaultKind, Overload, Platform, SensorFault, World};
 
 /// How the run shows itself.
@@ -100,6 +104,11 @@ pub struct Options {
     /// Expose every component on the network as this Zenoh node (`--node`), for
     /// `coolctl`.
     pub node: Option<NodeOptions>,
+    /// Run the range server in a process of its own, the node `drivers`, started and
+    /// kept by this one (`--drivers`, `crate::drivers`; needs the `network` feature).
+    /// The robot is then on the network as `node`, or as the node `robot` on a
+    /// loopback port of its own.
+    pub drivers: Option<Drivers>,
 }
 
 impl Default for Options {
@@ -122,6 +131,7 @@ impl Default for Options {
             ros2: None,
             load: None,
             node: None,
+            drivers: None,
         }
     }
 }
@@ -331,6 +341,8 @@ pub struct Summary {
     pub responses: Option<(coolbot::ResponseTimes, Option<Duration>)>,
     /// With `node`: the node's name and how many components it exposed.
     pub node: Option<(String, usize)>,
+    /// With `drivers`: what became of the drivers processes.
+    pub drivers: Option<DriversReport>,
 }
 
 /// What went through one ROS 2 topic of the run.
@@ -529,6 +541,24 @@ impl fmt::Display for Summary {
                 .collect();
             writeln!(f, "  recorded             {}", ports.join("; "))?;
         }
+        if let Some(drivers) = &self.drivers {
+            let ended = if drivers.ended.is_empty() {
+                "none ended while the robot ran".to_owned()
+            } else {
+                format!(
+                    "{} ended while the robot ran ({})",
+                    drivers.ended.len(),
+                    drivers.ended.join(", ")
+                )
+            };
+            writeln!(
+                f,
+                "  drivers process      started {} time{}, {ended}; at the end: {}",
+                drivers.started,
+                if drivers.started == 1 { "" } else { "s" },
+                drivers.stopped.as_deref().unwrap_or("-")
+            )?;
+        }
         if let Some((name, count)) = &self.node {
             writeln!(
                 f,
@@ -657,13 +687,16 @@ fn qualities(type_name: &str) -> &'static [&'static str] {
 /// The instances a compound type declares, `(name, type)`, from the generated code
 /// (empty for an atomic type).
 fn declared(type_name: &str) -> &'static [(&'static str, &'static str)] {
-    if type_name == generated::robot::TYPE_NAME {
-        generated::robot::INSTANCES
-    } else if type_name == generated::mobile_base::TYPE_NAME {
-        generated::mobile_base::INSTANCES
-    } else {
-        &[]
-    }
+    use generated::{isolated_base, isolated_robot, mobile_base, robot};
+    [
+        (robot::TYPE_NAME, robot::INSTANCES),
+        (mobile_base::TYPE_NAME, mobile_base::INSTANCES),
+        (isolated_robot::TYPE_NAME, isolated_robot::INSTANCES),
+        (isolated_base::TYPE_NAME, isolated_base::INSTANCES),
+    ]
+    .into_iter()
+    .find(|(name, _)| *name == type_name)
+    .map_or(&[], |(_, instances)| instances)
 }
 
 /// The table's rows below `handle` (a component of type `type_name` at `depth`):
@@ -800,29 +833,80 @@ impl Events {
     }
 }
 
-/// `--serve`: this process is a node of the robot's network that runs what other
-/// nodes place on it (the wanderer, for a robot started with `--node`), until `stop`
-/// is set. Returns the node's name.
-pub fn serve(node: &NodeOptions, stop: &AtomicBool) -> Result<String, String> {
-    let network = node::open(node)?;
+/// The injected sensor fault of `options`, if any.
+fn sensor_fault(options: &Options) -> Option<SensorFault> {
+    options.fault_after.map(|after| SensorFault {
+        after,
+        outage: options.outage,
+        kind: options.fault_kind,
+    })
+}
+
+/// `--serve`: this process is the node `options.node` of the robot's network, and
+/// runs what other nodes place on it (the wanderer on a station, the range server on
+/// `drivers`), until `options.stop` is set, or until the process `parent` is no longer
+/// this one's parent (`--parent`: a drivers process started by a robot ends with it).
+/// A range server built here reads a sensor board of this process, with the fault,
+/// shortage, noise, seed and scan rate of `options`. Returns the node's name.
+pub fn serve(options: &Options, parent: Option<u32>) -> Result<String, String> {
+    let Some(node) = &options.node else {
+        return Err("`--serve` needs `--node`".to_owned());
+    };
+    let board = node::Board {
+        platform: Arc::new(
+            Platform::new(
+                World::example(),
+                World::example_start(),
+                sensor_fault(options),
+            )
+            .with_overload(options.load),
+        ),
+        overrides: sensing::Overrides {
+            noise: options.noise,
+            seed: Some(options.seed),
+            frequency: options.scan_rate,
+        },
+    };
+    let network = node::open(node, &board)?;
     println!(
         "node `{}` on the network: serving what other nodes place on it",
         network.name()
     );
-    while !stop.load(Ordering::Acquire) {
+    let orphaned = || parent.is_some_and(|parent| std::os::unix::process::parent_id() != parent);
+    while !options.stop.load(Ordering::Acquire) && !orphaned() {
         std::thread::sleep(Duration::from_millis(50));
     }
+    if orphaned() {
+        println!(
+            "node `{}`: the process that started it is gone",
+            network.name()
+        );
+    }
     Ok(network.name().to_owned())
+}
+
+/// The node the robot opens with `--drivers`: `options.node`, or `robot`; listening
+/// on a loopback port of its own when no endpoint is given, so that the drivers
+/// process can connect to it.
+fn robot_node(options: &Options) -> Result<NodeOptions, String> {
+    let mut node = options
+        .node
+        .clone()
+        .unwrap_or_else(|| NodeOptions::named(ROBOT));
+    if node.listen.is_empty() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|listener| listener.local_addr())
+            .map_err(|e| format!("no loopback port for the robot's node: {e}"))?
+            .port();
+        node.listen.push(format!("tcp/127.0.0.1:{port}"));
+    }
+    Ok(node)
 }
 
 /// Builds the robot, runs it for `options.duration` (or until `options.stop`), shuts
 /// it down and reports.
 pub fn run(options: &Options) -> Result<Summary, String> {
-    let fault = options.fault_after.map(|after| SensorFault {
-        after,
-        outage: options.outage,
-        kind: options.fault_kind,
-    });
+    let fault = sensor_fault(options);
     let platform = Arc::new(
         Platform::new(World::example(), World::example_start(), fault).with_overload(options.load),
     );
@@ -832,14 +916,50 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         goal: options.goal,
         max_speed: options.max_speed,
         scan_rate: options.scan_rate,
+        ranges: if options.drivers.is_some() {
+            Ranges::Drivers
+        } else {
+            Ranges::Here
+        },
     };
     // On the network only when asked: nothing of Zenoh runs otherwise. The node is
-    // opened first: its placer puts the wanderer (`on "station"`) on its node.
-    let network = match &options.node {
-        Some(node) => Some(node::open(node)?),
+    // opened first: its placer puts the wanderer (`on "station"`) on its node, or the
+    // range server (`on "drivers"`, `--drivers`) on the drivers process, which is
+    // started next and serves before the robot is built.
+    if cfg!(not(feature = "network")) && options.drivers.is_some() {
+        return Err("`--drivers`: this build has no network support; build the example with \
+             `--features network` (cargo run --release -p mobile-base --features network -- --drivers)"
+            .to_owned());
+    }
+    let node_options = match &options.drivers {
+        Some(_) => Some(robot_node(options)?),
+        None => options.node.clone(),
+    };
+    let network = match &node_options {
+        Some(node) => Some(node::open(node, &node::Board::example())?),
         None => None,
     };
-    let mut robot = Robot::start(&platform, &setup)?;
+    let (drivers_lines, drivers_said) = std::sync::mpsc::channel();
+    let keeper = match (&options.drivers, &node_options) {
+        (Some(drivers), Some(node)) => {
+            let settings = drivers::Settings {
+                connect: node.listen.clone(),
+                lease: node.lease,
+                noise: options.noise,
+                seed: options.seed,
+                scan_rate: options.scan_rate,
+                fault,
+                load: options.load,
+            };
+            let clock = Arc::clone(&platform);
+            Some(
+                drivers::Keeper::start(drivers, settings, move || clock.uptime(), drivers_lines)
+                    .map_err(text)?,
+            )
+        }
+        _ => None,
+    };
+    let mut robot = Robot::ready(&platform, &setup)?;
     // A panic the runtime catches in one of the robot's components prints one line
     // (under `coolbot::process`'s panic hook, when the program installed it).
     coolbot::process::watch_system(robot.system());
@@ -868,10 +988,18 @@ pub fn run(options: &Options) -> Result<Summary, String> {
     let cmd_vel = ros_node.as_ref().map(ros::RosNode::cmd_vel_port);
     #[cfg(not(feature = "ros2"))]
     let cmd_vel: Option<String> = None;
+    // Recording from before the robot runs: its first packets are in the file.
     let recording = match &options.record {
-        Some(path) if bag => Some(start_bag(&robot, path, cmd_vel.as_deref())?),
-        Some(path) => Some(start_recording(&robot, path)?),
-        None => None,
+        Some(path) if bag => start_bag(&robot, path, cmd_vel.as_deref()).map(Some),
+        Some(path) => start_recording(&robot, path).map(Some),
+        None => Ok(None),
+    };
+    let recording = match recording.and_then(|recording| robot.run().map(|()| recording)) {
+        Ok(recording) => recording,
+        Err(error) => {
+            let _ = robot.shutdown();
+            return Err(error);
+        }
     };
     let node = match network {
         Some(network) => match network.expose(&robot) {
@@ -888,12 +1016,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
 
     // Every component at every level, each read from its own monitoring port.
     let mut lines = Vec::new();
-    walk(
-        robot.robot.clone(),
-        generated::robot::TYPE_NAME,
-        0,
-        &mut lines,
-    );
+    walk(robot.robot.clone(), robot.type_name(), 0, &mut lines);
 
     let display = match options.display {
         Display::Auto if std::io::stdout().is_terminal() => Display::Table,
@@ -924,6 +1047,11 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         }
         // What the monitoring ports reported since the last turn.
         let mut fresh = events.take(at);
+        fresh.extend(
+            drivers_said
+                .try_iter()
+                .map(|line| format!("{:6.2}s {line}", at.as_secs_f64())),
+        );
         fresh.extend(coolbot::process::take_output());
         if display == Display::Lines {
             let mut out = stdout.lock();
@@ -1024,9 +1152,15 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         robot.base.clone(),
         robot.wanderer.clone(),
     ];
-    let exposed = node.map(|node| (node.name().to_owned(), lines.len()));
+    let exposed = node
+        .as_ref()
+        .map(|node| (node.name().to_owned(), lines.len()));
     coolbot::process::forget_system(robot.system());
     let report = robot.shutdown();
+    // The node leaves after the robot: the proxies of its remote instances have sent
+    // them to `dead`. Then the drivers process ends.
+    drop(node);
+    let drivers = keeper.map(drivers::Keeper::stop);
     // The ROS 2 node leaves once its publishers and subscription are dead.
     #[cfg(feature = "ros2")]
     if let Some(node) = ros_node {
@@ -1111,6 +1245,7 @@ pub fn run(options: &Options) -> Result<Summary, String> {
         levels,
         responses: mapper.as_ref().map(|m| (m.response, m.max_response)),
         node: exposed,
+        drivers,
     })
 }
 

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
+use mobile_base::drivers::Drivers;
 use mobile_base::node::NodeOptions;
 use mobile_base::world::{FaultKind, Overload};
 use mobile_base::{Display, Options};
@@ -56,9 +57,20 @@ struct Args {
     #[arg(long, value_name = "NAME")]
     node: Option<String>,
     /// With --node: do not run the robot; run what other nodes place on this one (the
-    /// wanderer, declared `on "station"`: `--node station --serve`) until stopped.
+    /// wanderer, declared `on "station"`: `--node station --serve`; the range server,
+    /// `on "drivers"` with --drivers: `--node drivers --serve`) until stopped.
     #[arg(long, requires = "node")]
     serve: bool,
+    /// With --serve: end when the process PID is no longer this one's parent (a
+    /// drivers process started by a robot ends with it).
+    #[arg(long, requires = "serve", value_name = "PID", hide = true)]
+    parent: Option<u32>,
+    /// Run the range server in a process of its own on this host, the node `drivers`:
+    /// this binary with `--node drivers --serve`, which the robot starts, starts again
+    /// when it ends, and stops at the end. The robot is on the network too (--node, or
+    /// the node `robot` on a loopback port). Needs the `network` feature.
+    #[arg(long, conflicts_with_all = ["serve", "config"])]
+    drivers: bool,
     /// With --node: the Zenoh session lease, after which a silent peer is lost (e.g.
     /// `2s`, the default); an instance on a lost node is a fault of its proxy.
     #[arg(long, requires = "node", value_parser = parse_duration)]
@@ -286,14 +298,11 @@ fn main() -> ExitCode {
                 ..named
             }
         }),
+        drivers: None,
         stop: process.stop_flag(),
     };
     if args.serve {
-        let node = options
-            .node
-            .as_ref()
-            .expect("clap: --serve requires --node");
-        return match mobile_base::serve(node, &options.stop) {
+        return match mobile_base::serve(&options, args.parent) {
             Ok(name) => {
                 println!("node `{name}` stopped");
                 ExitCode::SUCCESS
@@ -304,6 +313,21 @@ fn main() -> ExitCode {
             }
         };
     }
+    let options = if args.drivers {
+        let program = match std::env::current_exe() {
+            Ok(program) => program,
+            Err(error) => {
+                eprintln!("error: --drivers: this program's path: {error}");
+                return ExitCode::from(2);
+            }
+        };
+        Options {
+            drivers: Some(Drivers { program }),
+            ..options
+        }
+    } else {
+        options
+    };
     match mobile_base::run(&options) {
         Ok(summary) => {
             println!("\n{summary}");

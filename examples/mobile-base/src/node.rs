@@ -51,7 +51,8 @@ impl NodeOptions {
 }
 
 /// The process on the network: its node, the placer that puts the robot's
-/// `on "node"` instances on their nodes (the wanderer `on "station"`), and the agent
+/// `on "node"` instances on their nodes (the wanderer `on "station"`, the range
+/// server `on "drivers"` with `--drivers`), and the agent
 /// that builds such instances here when another node asks
 /// (`coolbot_zenoh::network::Network`). Open it before the robot is built, on the
 /// thread that builds it (the placer is installed on that thread); the robot's
@@ -69,21 +70,57 @@ impl Network {
     }
 }
 
+/// What a range server built in this process for another node reads: the process's
+/// own simulated sensor board (the room, and the injected fault and processor
+/// shortage of its command line), at the pose of the range server's `pose` input.
+#[derive(Clone, Debug)]
+pub struct Board {
+    /// The board: a platform of this process, which no motion controller drives.
+    pub platform: std::sync::Arc<crate::world::Platform>,
+    /// The run's `--noise`, `--seed` and `--scan-rate`.
+    pub overrides: crate::sensing::Overrides,
+}
+
+impl Board {
+    /// A board in the example room, with no fault, no shortage and no overrides.
+    pub fn example() -> Board {
+        use crate::world::{Platform, World};
+        Board {
+            platform: std::sync::Arc::new(Platform::new(
+                World::example(),
+                World::example_start(),
+                None,
+            )),
+            overrides: crate::sensing::Overrides::default(),
+        }
+    }
+}
+
 /// The component types this process can run for another node, and whose ports it
-/// can bridge: the wanderer (the one instance the robot's description places).
+/// can bridge: the instances the robot's descriptions place, the wanderer
+/// (`on "station"`) and the range server (`on "drivers"`, on `board`).
 #[cfg(feature = "network")]
-fn registry() -> coolbot_zenoh::agent::Registry {
-    use crate::generated::wanderer;
+fn registry(board: &Board) -> coolbot_zenoh::agent::Registry {
+    use crate::generated::{range_server, wanderer};
     let mut registry = coolbot_zenoh::agent::Registry::new();
     wanderer::register(&mut registry, |name| {
         wanderer::component(name, crate::wanderer::Wanderer::default())
     });
+    let board = board.clone();
+    range_server::register(&mut registry, move |name| {
+        let server = crate::range_server::RangeServer::new(
+            std::sync::Arc::clone(&board.platform),
+            board.overrides,
+        );
+        range_server::component(name, server)
+    });
     registry
 }
 
-/// Opens the node, installs its placer and starts its agent.
+/// Opens the node, installs its placer and starts its agent; a range server built
+/// here for another node reads `board`.
 #[cfg(feature = "network")]
-pub fn open(options: &NodeOptions) -> Result<Network, String> {
+pub fn open(options: &NodeOptions, board: &Board) -> Result<Network, String> {
     let zenoh_options = coolbot_zenoh::network::NodeOptions {
         listen: options.listen.clone(),
         connect: options.connect.clone(),
@@ -95,7 +132,7 @@ pub fn open(options: &NodeOptions) -> Result<Network, String> {
         ..coolbot_zenoh::network::NodeOptions::named(options.name.clone())
     };
     let network =
-        coolbot_zenoh::network::Network::open(&zenoh_options, registry()).map_err(|e| {
+        coolbot_zenoh::network::Network::open(&zenoh_options, registry(board)).map_err(|e| {
             format!(
                 "node `{}` cannot open: {}",
                 options.name,
@@ -142,7 +179,7 @@ impl Network {
 /// Without the `network` feature there is no Zenoh in the build: `--node` says how
 /// to get it.
 #[cfg(not(feature = "network"))]
-pub fn open(options: &NodeOptions) -> Result<Network, String> {
+pub fn open(options: &NodeOptions, _board: &Board) -> Result<Network, String> {
     Err(format!(
         "node `{}`: this build has no network support; build the example with \
          `--features network` (cargo run --release -p mobile-base --features network -- --node {})",

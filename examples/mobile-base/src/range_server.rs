@@ -10,14 +10,20 @@ use std::time::Instant;
 
 use crate::generated::range_server::*;
 use crate::generated::types::RangeScan;
-use crate::sensing::{self, Overrides};
+use crate::sensing::{self, Odometry, Overrides};
 use crate::world::{FaultKind, IR_BEAMS, Platform, Rng, US_BEAMS};
 
 /// The range server's code: the driver of the platform's sensor suite.
+///
+/// The simulated sensor board reads the world at the pose of the `pose` input (the
+/// odometry), not at the platform's own: a range server in another process (`--drivers`)
+/// has a board of its own, which no motion controller drives. Until a pose comes it
+/// reads nothing.
 #[derive(Debug)]
 pub struct RangeServer {
     platform: Arc<Platform>,
     overrides: Overrides,
+    odometry: Odometry,
     rng: Option<Rng>,
     /// The last scan read (published or not).
     last: Option<RangeScan>,
@@ -33,11 +39,17 @@ impl RangeServer {
         RangeServer {
             platform,
             overrides,
+            odometry: Odometry::default(),
             rng: None,
             last: None,
             published: None,
             odd: false,
         }
+    }
+
+    /// The poses dropped from `pose` for a value that is not finite (`crate::finite`).
+    pub fn rejected(&self) -> u64 {
+        self.odometry.rejected()
     }
 
     /// Reads the sensors once, at the quality the runtime asks for, and publishes the
@@ -53,12 +65,19 @@ impl RangeServer {
         let config = cx.config;
         let seed = self.overrides.seed.unwrap_or(config.seed);
         let rng = self.rng.get_or_insert_with(|| Rng::new(seed));
-        let readings = self.platform.read_sensors(
-            f64::from(config.ir_max_range),
-            f64::from(config.us_max_range),
-            self.overrides.noise.unwrap_or(config.noise),
-            rng,
-        );
+        let pose = self.odometry.pose(&cx.inputs.pose, cx.rt.component_name());
+        let readings = match pose {
+            Some(pose) => self.platform.read_sensors(
+                pose,
+                f64::from(config.ir_max_range),
+                f64::from(config.us_max_range),
+                self.overrides.noise.unwrap_or(config.noise),
+                rng,
+            ),
+            // No pose yet: nowhere to read the world from (the board answers).
+            None if self.platform.sensors_answering() => return Ok(()),
+            None => None,
+        };
         let Some(mut readings) = readings else {
             if self
                 .platform

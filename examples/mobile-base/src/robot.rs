@@ -10,6 +10,11 @@
 //! one shared simulated [`Platform`]) and what the mobile base's supervisor sections
 //! do ([`BaseSupervisor`]), then starts the whole robot as one component
 //! ([`Robot::start`]).
+//!
+//! The robot is built from `Robot`, or from `IsolatedRobot` ([`Ranges::Drivers`],
+//! `--drivers`): the same robot on `IsolatedBase`, whose range server is placed on the
+//! node `drivers`, a process of its own. The same parts and supervisor sections serve
+//! both (each generated trait is implemented for each compound by one macro).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -18,7 +23,8 @@ use coolbot::{Command, Controllable, Handle, Report, State, System, Value};
 
 use crate::generated::types::BaseMode;
 use crate::generated::{
-    mapper, mobile_base, motion_controller, range_server, robot, sim_range_server, teleop, wanderer,
+    isolated_base, isolated_robot, mapper, mobile_base, motion_controller, range_server, robot,
+    sim_range_server, teleop, wanderer,
 };
 use crate::mapper::Mapper;
 use crate::motion_controller::MotionController;
@@ -48,6 +54,28 @@ pub const RANGES: &str = "ranges";
 /// Instance `sim_ranges` of `MobileBase` (`substitutes ranges`).
 pub const SIM_RANGES: &str = "sim_ranges";
 
+/// Where the range server runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Ranges {
+    /// In the robot's process, on the base's control thread with the motion
+    /// controller (the compound `Robot`).
+    #[default]
+    Here,
+    /// In the process of the node `drivers` (the compound `IsolatedRobot`, `--drivers`;
+    /// without a placer installed on the building thread, here all the same).
+    Drivers,
+}
+
+impl Ranges {
+    /// The type of the top compound that puts the range server there.
+    pub fn type_name(self) -> &'static str {
+        match self {
+            Ranges::Here => robot::TYPE_NAME,
+            Ranges::Drivers => isolated_robot::TYPE_NAME,
+        }
+    }
+}
+
 /// How the robot is set up beyond the descriptions' defaults (the command line).
 #[derive(Clone, Debug, Default)]
 pub struct Setup {
@@ -62,6 +90,8 @@ pub struct Setup {
     pub max_speed: Option<f64>,
     /// The range servers' controllable `frequency` (Hz), if not the default.
     pub scan_rate: Option<f64>,
+    /// Where the range server runs.
+    pub ranges: Ranges,
 }
 
 /// The forward speed limit (m/s) of the motion controller while the simulated range
@@ -83,56 +113,65 @@ pub struct BaseSupervisor {
     max_speed: Option<f64>,
 }
 
-impl mobile_base::Supervisor for BaseSupervisor {
-    fn operating_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        cx.vars.mode = BaseMode::Normal;
-        if cx.view.state(MOTION) == Some(State::Suspended) {
-            cx.instances.motion().run()?;
+/// `BaseSupervisor` for the generated `Supervisor` of a base compound (`MobileBase`,
+/// `IsolatedBase`: the same states and sections).
+macro_rules! base_supervisor {
+    ($base:ident) => {
+        impl $base::Supervisor for BaseSupervisor {
+            fn operating_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                cx.vars.mode = BaseMode::Normal;
+                if cx.view.state(MOTION) == Some(State::Suspended) {
+                    cx.instances.motion().run()?;
+                }
+                Ok(())
+            }
+
+            fn operating_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                Ok(())
+            }
+
+            fn degraded_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                cx.vars.mode = BaseMode::Degraded;
+                cx.vars.faults = cx.vars.faults.saturating_add(1);
+                let limit = cx
+                    .view
+                    .var(MOTION, "max_speed")
+                    .and_then(|value| f64::try_from(value).ok());
+                if let Some(limit) = limit.filter(|limit| *limit > DEGRADED_MAX_SPEED) {
+                    cx.instances.motion().set_max_speed(DEGRADED_MAX_SPEED)?;
+                    self.max_speed = Some(limit);
+                }
+                Ok(())
+            }
+
+            fn degraded_exit(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                if let Some(limit) = self.max_speed.take() {
+                    cx.instances.motion().set_max_speed(limit)?;
+                }
+                Ok(())
+            }
+
+            fn degraded_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                Ok(())
+            }
+
+            fn stopped_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                cx.vars.mode = BaseMode::Stopped;
+                // The platform moves only when the motion controller's periodic section
+                // drives it: suspended, it stands still.
+                cx.instances.motion().suspend()?;
+                Ok(())
+            }
+
+            fn stopped_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                Ok(())
+            }
         }
-        Ok(())
-    }
-
-    fn operating_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        Ok(())
-    }
-
-    fn degraded_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        cx.vars.mode = BaseMode::Degraded;
-        cx.vars.faults = cx.vars.faults.saturating_add(1);
-        let limit = cx
-            .view
-            .var(MOTION, "max_speed")
-            .and_then(|value| f64::try_from(value).ok());
-        if let Some(limit) = limit.filter(|limit| *limit > DEGRADED_MAX_SPEED) {
-            cx.instances.motion().set_max_speed(DEGRADED_MAX_SPEED)?;
-            self.max_speed = Some(limit);
-        }
-        Ok(())
-    }
-
-    fn degraded_exit(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        if let Some(limit) = self.max_speed.take() {
-            cx.instances.motion().set_max_speed(limit)?;
-        }
-        Ok(())
-    }
-
-    fn degraded_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        Ok(())
-    }
-
-    fn stopped_entry(&mut self, cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        cx.vars.mode = BaseMode::Stopped;
-        // The platform moves only when the motion controller's periodic section
-        // drives it: suspended, it stands still.
-        cx.instances.motion().suspend()?;
-        Ok(())
-    }
-
-    fn stopped_periodic(&mut self, _cx: &mut mobile_base::Cx<'_>) -> coolbot::SectionResult {
-        Ok(())
-    }
+    };
 }
+
+base_supervisor!(mobile_base);
+base_supervisor!(isolated_base);
 
 /// `Robot`'s supervisor sections: `teleoperated` lets the outside commands drive the
 /// base (sets `teleop`'s controllable `follow`), `autonomous` gives it back to the
@@ -141,82 +180,110 @@ impl mobile_base::Supervisor for BaseSupervisor {
 #[derive(Debug)]
 pub struct RobotSupervisor;
 
-impl robot::Supervisor for RobotSupervisor {
-    fn autonomous_entry(&mut self, cx: &mut robot::Cx<'_>) -> coolbot::SectionResult {
-        cx.instances.teleop().set_follow(false)?;
-        Ok(())
-    }
+/// `RobotSupervisor` for the generated `Supervisor` of a top compound (`Robot`,
+/// `IsolatedRobot`).
+macro_rules! robot_supervisor {
+    ($robot:ident) => {
+        impl $robot::Supervisor for RobotSupervisor {
+            fn autonomous_entry(&mut self, cx: &mut $robot::Cx<'_>) -> coolbot::SectionResult {
+                cx.instances.teleop().set_follow(false)?;
+                Ok(())
+            }
 
-    fn teleoperated_entry(&mut self, cx: &mut robot::Cx<'_>) -> coolbot::SectionResult {
-        cx.instances.teleop().set_follow(true)?;
-        Ok(())
-    }
+            fn teleoperated_entry(&mut self, cx: &mut $robot::Cx<'_>) -> coolbot::SectionResult {
+                cx.instances.teleop().set_follow(true)?;
+                Ok(())
+            }
+        }
+    };
 }
 
-/// The behaviours of `MobileBase`'s instances: the motion controller and both range
-/// servers on the shared platform.
+robot_supervisor!(robot);
+robot_supervisor!(isolated_robot);
+
+/// The behaviours of `MobileBase`'s (or `IsolatedBase`'s) instances: the motion
+/// controller and both range servers on the shared platform (a range server placed on
+/// the node `drivers` is built there, on that process's own platform: `crate::node`).
 #[derive(Clone, Debug)]
 pub struct BaseParts {
     platform: Arc<Platform>,
     overrides: Overrides,
 }
 
-impl mobile_base::Parts for BaseParts {
-    fn supervisor(&mut self) -> impl mobile_base::Supervisor {
-        BaseSupervisor::default()
-    }
+/// `BaseParts` for the generated `Parts` of a base compound.
+macro_rules! base_parts {
+    ($base:ident) => {
+        impl $base::Parts for BaseParts {
+            fn supervisor(&mut self) -> impl $base::Supervisor {
+                BaseSupervisor::default()
+            }
 
-    fn motion(&mut self) -> impl motion_controller::Behavior {
-        MotionController::new(Arc::clone(&self.platform))
-    }
+            fn motion(&mut self) -> impl motion_controller::Behavior {
+                MotionController::new(Arc::clone(&self.platform))
+            }
 
-    fn ranges(&mut self) -> impl range_server::Behavior {
-        RangeServer::new(Arc::clone(&self.platform), self.overrides)
-    }
+            fn ranges(&mut self) -> impl range_server::Behavior {
+                RangeServer::new(Arc::clone(&self.platform), self.overrides)
+            }
 
-    fn sim_ranges(&mut self) -> impl sim_range_server::Behavior {
-        SimRangeServer::new(Arc::clone(&self.platform), self.overrides)
-    }
+            fn sim_ranges(&mut self) -> impl sim_range_server::Behavior {
+                SimRangeServer::new(Arc::clone(&self.platform), self.overrides)
+            }
+        }
+    };
 }
 
-/// The behaviours of `Robot`'s instances: the mobile base and the wanderer.
+base_parts!(mobile_base);
+base_parts!(isolated_base);
+
+/// The behaviours of `Robot`'s (or `IsolatedRobot`'s) instances: the mobile base and
+/// the wanderer.
 #[derive(Debug)]
 pub struct RobotParts {
     base: BaseParts,
 }
 
-impl robot::Parts for RobotParts {
-    fn supervisor(&mut self) -> impl robot::Supervisor {
-        RobotSupervisor
-    }
+/// `RobotParts` for the generated `Parts` of a top compound, on its base compound.
+macro_rules! robot_parts {
+    ($robot:ident, $base:ident) => {
+        impl $robot::Parts for RobotParts {
+            fn supervisor(&mut self) -> impl $robot::Supervisor {
+                RobotSupervisor
+            }
 
-    fn base(&mut self) -> impl mobile_base::Parts {
-        self.base.clone()
-    }
+            fn base(&mut self) -> impl $base::Parts {
+                self.base.clone()
+            }
 
-    fn wanderer(&mut self) -> impl wanderer::Behavior {
-        Wanderer::default()
-    }
+            fn wanderer(&mut self) -> impl wanderer::Behavior {
+                Wanderer::default()
+            }
 
-    fn fallback(&mut self) -> impl wanderer::Behavior {
-        Wanderer::default()
-    }
+            fn fallback(&mut self) -> impl wanderer::Behavior {
+                Wanderer::default()
+            }
 
-    fn mapper(&mut self) -> impl mapper::Behavior {
-        Mapper::new(Arc::clone(&self.base.platform))
-    }
+            fn mapper(&mut self) -> impl mapper::Behavior {
+                Mapper::new(Arc::clone(&self.base.platform))
+            }
 
-    fn teleop(&mut self) -> impl teleop::Behavior {
-        Teleop::default()
-    }
+            fn teleop(&mut self) -> impl teleop::Behavior {
+                Teleop::default()
+            }
+        }
+    };
 }
 
-/// The running robot: one `Robot` component on a system, and the monitoring ports at
-/// each level.
+robot_parts!(robot, mobile_base);
+robot_parts!(isolated_robot, isolated_base);
+
+/// The running robot: one `Robot` (or `IsolatedRobot`) component on a system, and the
+/// monitoring ports at each level.
 #[derive(Debug)]
 pub struct Robot {
     system: System,
-    /// The `Robot` compound's control and monitoring ports.
+    ranges: Ranges,
+    /// The top compound's control and monitoring ports.
     pub robot: Handle,
     /// Instance `base` (the `MobileBase` compound) of `Robot`.
     pub base: Handle,
@@ -232,10 +299,22 @@ fn text(error: impl std::error::Error) -> String {
 }
 
 impl Robot {
-    /// Builds `Robot` with the generated `robot::builder`, starts it (every instance at
-    /// every level starts; the substitute stays `ready`), applies `setup` through the
-    /// control ports, and sets it running.
+    /// Builds the robot, starts it, applies `setup` through the control ports and sets
+    /// it running (`ready`, then `run`).
     pub fn start(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
+        let robot = Robot::ready(platform, setup)?;
+        if let Err(error) = robot.run() {
+            let _ = robot.shutdown();
+            return Err(error);
+        }
+        Ok(robot)
+    }
+
+    /// Builds `Robot` with the generated `robot::builder` (`IsolatedRobot` for
+    /// [`Ranges::Drivers`]), starts it (every instance at every level starts; the
+    /// substitute stays `ready`) and applies `setup` through the control ports: the
+    /// robot is `ready`, nothing moves yet.
+    pub(crate) fn ready(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
         let parts = RobotParts {
             base: BaseParts {
                 platform: Arc::clone(platform),
@@ -246,13 +325,17 @@ impl Robot {
                 },
             },
         };
-        let built = robot::component(ROBOT, parts).map_err(text)?;
+        let built = match setup.ranges {
+            Ranges::Here => robot::component(ROBOT, parts),
+            Ranges::Drivers => isolated_robot::component(ROBOT, parts),
+        }
+        .map_err(text)?;
         let mut system = System::new();
         let robot = system.add(built).map_err(text)?;
         let instance = |path: &str| {
             robot
                 .instance(path)
-                .ok_or_else(|| format!("`Robot` has no instance `{path}`"))
+                .ok_or_else(|| format!("`{}` has no instance `{path}`", setup.ranges.type_name()))
         };
         let (base, wanderer, mapper) = (instance(BASE)?, instance(WANDERER)?, instance(MAPPER)?);
         system.start().map_err(text)?;
@@ -287,7 +370,6 @@ impl Robot {
                 Command::Set("max_speed".to_owned(), Value::Float(speed)),
             ));
         }
-        commands.push((&robot, Command::SetState(Controllable::Running)));
         for (handle, command) in commands {
             if let Err(rejected) = handle.command(command) {
                 let _ = system.shutdown();
@@ -296,11 +378,24 @@ impl Robot {
         }
         Ok(Robot {
             system,
+            ranges: setup.ranges,
             robot,
             base,
             wanderer,
             mapper,
         })
+    }
+
+    /// Sets the robot running.
+    pub(crate) fn run(&self) -> Result<(), String> {
+        self.robot
+            .command(Command::SetState(Controllable::Running))
+            .map_err(|rejected| format!("{}: {rejected}", self.robot.name()))
+    }
+
+    /// The type of the top compound (`Robot`, or `IsolatedRobot`).
+    pub fn type_name(&self) -> &'static str {
+        self.ranges.type_name()
     }
 
     /// The control and monitoring ports of the instance at `path` inside `Robot`
@@ -340,5 +435,22 @@ mod tests {
         let names: Vec<&str> = robot::INSTANCES.iter().map(|(n, _)| *n).collect();
         assert_eq!(names, [BASE, WANDERER, FALLBACK, MAPPER, TELEOP]);
         assert_eq!(robot::SUBSTITUTES, &[(FALLBACK, WANDERER)]);
+        // The isolated variant has the same instances, by the same names and types.
+        assert_eq!(isolated_base::SUBSTITUTES, mobile_base::SUBSTITUTES);
+        let types = |instances: &[(&str, &str)]| -> Vec<String> {
+            instances.iter().map(|(n, t)| format!("{n}: {t}")).collect()
+        };
+        assert_eq!(
+            types(isolated_base::INSTANCES),
+            types(mobile_base::INSTANCES)
+        );
+        assert_eq!(isolated_robot::SUBSTITUTES, robot::SUBSTITUTES);
+        let top = |instances: &[(&str, &str)]| -> Vec<String> {
+            instances
+                .iter()
+                .map(|(n, t)| format!("{n}: {}", t.replace("IsolatedBase", "MobileBase")))
+                .collect()
+        };
+        assert_eq!(top(isolated_robot::INSTANCES), top(robot::INSTANCES));
     }
 }

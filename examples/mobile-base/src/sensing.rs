@@ -4,9 +4,11 @@
 use std::time::Duration;
 
 use coolbot::Time;
+use coolbot::port::LastIn;
 
-use crate::generated::types::RangeScan;
-use crate::world::{IR_BEAMS, Readings};
+use crate::finite::{Kept, Rejected};
+use crate::generated::types::{Pose2D, RangeScan};
+use crate::world::{IR_BEAMS, Pose, Readings};
 
 /// Settings of a run that replace the descriptions' for both range servers (the
 /// command line's `--noise`, `--seed` and `--scan-rate`).
@@ -18,6 +20,34 @@ pub struct Overrides {
     pub seed: Option<u64>,
     /// Scan frequency (Hz): the controllable `frequency` each start begins with.
     pub frequency: Option<f64>,
+}
+
+/// Where a range server reads the world: the newest pose of its `pose` input (the
+/// motion controller's odometry, which in this simulation is the true pose). A pose
+/// with a value that is not finite is dropped and counted (`crate::finite`), and the
+/// one before it stays.
+#[derive(Debug, Default)]
+pub struct Odometry {
+    newest: Kept<Pose2D>,
+    rejected: Rejected,
+}
+
+impl Odometry {
+    /// The newest finite pose of `input` (of `component`), `None` before one came.
+    pub fn pose(&mut self, input: &LastIn<Pose2D>, component: &str) -> Option<Pose> {
+        self.newest
+            .latest(input, &mut self.rejected, component, "pose")
+            .map(|pose| Pose {
+                x: pose.x,
+                y: pose.y,
+                theta: pose.theta,
+            })
+    }
+
+    /// The poses dropped for a value that is not finite.
+    pub fn rejected(&self) -> u64 {
+        self.rejected.count()
+    }
 }
 
 /// Infrared beams that watch the way ahead (within about 65 degrees of straight on).

@@ -1,13 +1,13 @@
 //! `SimRangeServer`: the simulated backup of `RangeServer`, with the same interface.
-//! It computes what the sensors would read from the map and the platform's odometry,
-//! so it keeps working while the sensor board is down. The mobile base substitutes it
-//! for a failed `RangeServer`.
+//! It computes what the sensors would read from the map at the odometry pose (its
+//! `pose` input), so it keeps working while the sensor board is down. The mobile base
+//! substitutes it for a failed `RangeServer`.
 
 use std::sync::Arc;
 
 use crate::generated::sim_range_server::*;
 use crate::generated::types::RangeScan;
-use crate::sensing::{self, Overrides};
+use crate::sensing::{self, Odometry, Overrides};
 use crate::world::Platform;
 
 /// The simulated range server's code.
@@ -15,6 +15,7 @@ use crate::world::Platform;
 pub struct SimRangeServer {
     platform: Arc<Platform>,
     overrides: Overrides,
+    odometry: Odometry,
     last: Option<RangeScan>,
 }
 
@@ -25,19 +26,27 @@ impl SimRangeServer {
         SimRangeServer {
             platform,
             overrides,
+            odometry: Odometry::default(),
             last: None,
         }
     }
 
-    /// Computes one scan from the map at the odometry pose and publishes it.
+    /// The poses dropped from `pose` for a value that is not finite (`crate::finite`).
+    pub fn rejected(&self) -> u64 {
+        self.odometry.rejected()
+    }
+
+    /// Computes one scan from the map at the odometry pose and publishes it (nothing
+    /// before a pose came).
     fn read(&mut self, cx: &mut Cx<'_>) -> coolbot::SectionResult {
         if let Some(period) = sensing::period_for(cx.vars.frequency)
             && cx.rt.period() != Some(period)
         {
             cx.rt.set_period(period);
         }
-        // The odometry pose (in this simulation, odometry does not drift).
-        let pose = self.platform.truth().pose;
+        let Some(pose) = self.odometry.pose(&cx.inputs.pose, cx.rt.component_name()) else {
+            return Ok(());
+        };
         let readings = self.platform.world().sense(
             pose,
             f64::from(cx.config.ir_max_range),

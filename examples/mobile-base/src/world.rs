@@ -522,10 +522,15 @@ impl Platform {
         self.fault
     }
 
-    /// Reads the sensor suite at the robot's true pose, with Gaussian noise of
-    /// standard deviation `noise` on every range. `None` during an outage.
+    /// Reads the sensor suite of a robot at `pose`, with Gaussian noise of standard
+    /// deviation `noise` on every range. `None` during an outage.
+    ///
+    /// The pose is the range server's to give (the odometry it hears, which in this
+    /// simulation is the true pose): so a sensor board in another process, which no
+    /// motion controller drives, reads the world where the robot is.
     pub fn read_sensors(
         &self,
+        pose: Pose,
         ir_max: f64,
         us_max: f64,
         noise: f64,
@@ -534,7 +539,6 @@ impl Platform {
         if !self.sensors_answering() {
             return None;
         }
-        let pose = self.truth_mut().pose;
         let mut readings = self.world.sense(pose, ir_max, us_max);
         if noise > 0.0 {
             for r in &mut readings.ir {

@@ -266,11 +266,14 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
         wanderer::component(name, mobile_base::wanderer::Wanderer::default())
     });
     let _agent = Agent::start(Arc::clone(&station), registry).expect("the agent");
-    let network = mobile_base::node::open(&NodeOptions {
-        connect: vec![listen.clone()],
-        multicast: Some(false),
-        ..NodeOptions::named("robot")
-    })
+    let network = mobile_base::node::open(
+        &NodeOptions {
+            connect: vec![listen.clone()],
+            multicast: Some(false),
+            ..NodeOptions::named("robot")
+        },
+        &mobile_base::node::Board::example(),
+    )
     .expect("the robot's node");
 
     let platform = Arc::new(Platform::new(

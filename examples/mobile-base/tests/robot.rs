@@ -878,3 +878,37 @@ fn the_mappers_responses_grow_late_under_a_processor_shortage_its_quality_drops_
     );
     assert!(robot.shutdown().clean());
 }
+
+#[test]
+fn the_range_server_runs_first_on_the_control_thread_though_it_reads_the_odometry() {
+    use mobile_base::robot::{Robot, Setup};
+    use mobile_base::world::{Platform, World};
+    use std::sync::Arc;
+
+    // `motion.pose -> ranges.pose` closes a cycle with `ranges.scan -> motion.obstacles`;
+    // both are `last` inputs, and the group sets aside the one into its first member.
+    let platform = Arc::new(Platform::new(
+        World::example(),
+        World::example_start(),
+        None,
+    ));
+    let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
+    for member in ["base.ranges", "base.motion"] {
+        let group = robot
+            .instance(member)
+            .expect("an instance")
+            .snapshot()
+            .group
+            .expect("a member of a group");
+        assert_eq!(
+            (group.name.as_str(), group.members.as_slice()),
+            (
+                "control",
+                ["ranges".to_owned(), "motion".to_owned()].as_slice()
+            ),
+            "{member}"
+        );
+    }
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+}

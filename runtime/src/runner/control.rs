@@ -11,7 +11,7 @@ impl Runner {
             return; // Withdrawn by a sender that gave up waiting.
         }
         let reply = |answer: Reply| {
-            let _ = message.reply.try_send(answer);
+            let _ = message.reply.post(answer);
         };
         // Out of range, whoever sends it and whatever stands behind this component
         // (a proxy's remote instance checks again on its own node).

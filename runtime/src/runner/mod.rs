@@ -24,8 +24,6 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Sender};
-
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
@@ -35,6 +33,7 @@ use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
 use crate::handle::{ControlMessage, Reply};
 use crate::idle::IdleProbe;
+use crate::mailbox::{Closer, Mailbox};
 use crate::monitor::{Command, MonitorEvent, Shared};
 use crate::port::{ArrivalLabel, InputCore, OutputCore};
 use crate::ranges::{EXCERPT_CHARS, REASON_CHARS, excerpt};
@@ -152,7 +151,6 @@ pub(crate) struct Runner {
     timing: TimingSpec,
     cx: Context,
     shared: Arc<Shared>,
-    control: Receiver<ControlMessage>,
     bell: Arc<Doorbell>,
     inputs: Vec<Arc<InputCore>>,
     outputs: Vec<Arc<OutputCore>>,
@@ -234,8 +232,10 @@ pub(crate) struct Runner {
     /// The instant its periodic deadlines count from, in an execution group (the
     /// group's start): each deadline is on the grid of its period from there.
     anchor: Option<Instant>,
-    /// Dropped last, when the thread ends: handles see their `exited` channel close.
-    _exit_guard: Sender<()>,
+    /// The control port's queue. The last field, so dropped last, when the thread
+    /// has ended: closing it tells the handles (`Handle::join_if_exited`), and drops
+    /// the commands still queued (their senders see no answer coming).
+    control: Closer<ControlMessage>,
 }
 
 impl Runner {
@@ -249,11 +249,10 @@ impl Runner {
         timing: TimingSpec,
         adaptation: AdaptConfig,
         shared: Arc<Shared>,
-        control: Receiver<ControlMessage>,
+        control: Arc<Mailbox<ControlMessage>>,
         bell: Arc<Doorbell>,
         inputs: Vec<Arc<InputCore>>,
         outputs: Vec<Arc<OutputCore>>,
-        exit_guard: Sender<()>,
     ) -> Runner {
         let spec = automaton.spec();
         let now = Instant::now();
@@ -272,7 +271,7 @@ impl Runner {
             spec,
             timing,
             shared,
-            control,
+            control: Closer::taker(control),
             bell,
             inputs,
             outputs,
@@ -323,7 +322,6 @@ impl Runner {
             responses: VecDeque::new(),
             group: None,
             anchor: None,
-            _exit_guard: exit_guard,
         };
         runner.cx.shared = Some(Arc::clone(&runner.shared));
         runner.cx.waker = Some(crate::wake::Waker {
@@ -485,9 +483,9 @@ impl Runner {
     /// commands that arrived while the component went dead.
     pub(crate) fn end(&mut self) {
         self.update_cpu(true);
-        while let Ok(message) = self.control.try_recv() {
+        while let Some(message) = self.control.take() {
             if message.take() {
-                let _ = message.reply.try_send(Reply::Rejected(
+                let _ = message.reply.post(Reply::Rejected(
                     "the component is dead: its thread has ended".to_owned(),
                 ));
             }
@@ -502,8 +500,8 @@ impl Runner {
         {
             self.handle_control(message);
         }
-        // `is_empty` first: two loads, where an empty `try_recv` also fences (a bell
-        // rung by a delivery finds no command far more often than one).
+        // (`take` looks at the queue's length before it locks: a bell rung by a
+        // delivery finds no command far more often than one.)
         if !commands {
             return self.state != State::Dead;
         }
@@ -516,8 +514,7 @@ impl Runner {
             clock.busy(id);
         }
         while self.state != State::Dead
-            && !self.control.is_empty()
-            && let Ok(message) = self.control.try_recv()
+            && let Some(message) = self.control.take()
         {
             self.handle_control(message);
         }

@@ -18,7 +18,14 @@
 //! on a packet that serializes its bytes as one slice (`bridge-shm-bytes`: what a
 //! `Vec<u8>` costs in serde, byte by byte, set apart from what the bridge costs).
 //!
-//! `cargo bench -p coolbot-zenoh --bench shm` (add `-- --quick` for a smoke run).
+//! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
+//! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
+//! connection, and to 3 on a fifo connection each; the producer's CPU per packet with
+//! 3 consumers against 1 (no copy per consumer: about 1x; a copy each: about 3x), the
+//! consumers' CPU, and the messages the producer wrote into shared memory.
+//!
+//! `cargo bench -p coolbot-zenoh --bench shm` (add `-- --quick` for a smoke run; name
+//! engines, or `fan`, to run only those).
 
 #[path = "../../benches/common/mod.rs"]
 #[macro_use]
@@ -422,6 +429,17 @@ fn bridge_receiver<P: Payload>(
     stream: Stream,
     done: Sender<Received>,
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
+    bridge_receiver_on::<P>(KEY, address, shm, stream, done)
+}
+
+/// A receiver node listening on `address`: an inlet on `key` into a sink.
+fn bridge_receiver_on<P: Payload>(
+    key: &str,
+    address: &str,
+    shm: bool,
+    stream: Stream,
+    done: Sender<Received>,
+) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
     let state = setup::state_directory();
     let node = setup::node("receiver", setup::config(address, &[], shm), state.path());
     let input = FifoIn::<P>::new(64, OverflowPolicy::Block);
@@ -446,7 +464,7 @@ fn bridge_receiver<P: Payload>(
     system.add(sink).expect("sink");
     system
         .add(
-            node.inlet::<P>("from_sender", KEY, OutputKind::Data)
+            node.inlet::<P>("from_sender", key, OutputKind::Data)
                 .build()
                 .expect("inlet"),
         )
@@ -459,10 +477,37 @@ fn bridge_receiver<P: Payload>(
 }
 
 fn bridge_sender<P: Payload>(address: &str, shm: bool, stream: Stream) {
+    bridge_sender_to::<P>(&[address.to_owned()], &[(KEY, 1)], BRIDGE, shm, stream);
+}
+
+/// How many inlets `session` knows on `key` (their liveliness tokens).
+fn inlets(session: &zenoh::Session, key: &str) -> usize {
+    session
+        .liveliness()
+        .get(format!("{key}/@in/**"))
+        .wait()
+        .map_or(0, |replies| {
+            replies
+                .iter()
+                .filter(|reply| reply.result().is_ok())
+                .count()
+        })
+}
+
+/// A sender node connected to `addresses`: one source whose output feeds an outlet
+/// of `kind` on each key of `keys`; each key has as many inlets as it says, which the
+/// sender waits for before it streams.
+fn bridge_sender_to<P: Payload>(
+    addresses: &[String],
+    keys: &[(&str, usize)],
+    kind: InputKind,
+    shm: bool,
+    stream: Stream,
+) {
     let state = setup::state_directory();
     let node = setup::node(
         "sender",
-        setup::config(&setup::endpoint(), &[address.to_owned()], shm),
+        setup::config(&setup::endpoint(), addresses, shm),
         state.path(),
     );
     let output = DataOut::<P>::new();
@@ -474,30 +519,239 @@ fn bridge_sender<P: Payload>(address: &str, shm: bool, stream: Stream) {
             PortSet::new().output(&output),
         ))
         .expect("source");
-    system
-        .add(
-            node.outlet::<P>("to_receiver", KEY, BRIDGE)
-                .build()
-                .expect("outlet"),
-        )
-        .expect("outlet");
-    system
-        .connect("source.output", "to_receiver.input")
-        .expect("connect");
+    let outlets: Vec<String> = (0..keys.len())
+        .map(|i| format!("to_receiver_{i}"))
+        .collect();
+    for (outlet, (key, _)) in outlets.iter().zip(keys) {
+        system
+            .add(node.outlet::<P>(outlet, key, kind).build().expect("outlet"))
+            .expect("outlet");
+        system
+            .connect("source.output", &format!("{outlet}.input"))
+            .expect("connect");
+    }
     system.run_all().expect("run");
-    setup::wait_subscribed(node.session(), KEY);
+    for (key, count) in keys {
+        setup::wait_subscribed(node.session(), key);
+        let deadline = Instant::now() + LIMIT;
+        while inlets(node.session(), key) < *count {
+            assert!(Instant::now() < deadline, "{count} inlets on `{key}`");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
     let frame = vec![7u8; stream.size];
     paced(stream, |number| {
         let mut packet = frame.clone();
         stamp(&mut packet, number);
         output.send(P::from(packet));
     });
-    let lost = system
-        .handle("to_receiver")
-        .map_or(0, |handle| handle.snapshot().overflows);
-    assert_eq!(lost, 0, "the outlet lost packets");
+    for outlet in &outlets {
+        let lost = system
+            .handle(outlet)
+            .map_or(0, |handle| handle.snapshot().overflows);
+        assert_eq!(lost, 0, "the outlet lost packets");
+    }
+    let shared = node.shared_memory();
+    println!("shared {} {}", shared.shared, shared.copied);
     assert!(system.shutdown().clean(), "unclean shutdown");
     drop(state);
+}
+
+// ---------------------------------------------------------------------------------
+// Fan-out: one producer, consumers in processes of their own.
+
+/// How a producer reaches its consumers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fan {
+    /// One `last` connection: one outlet, one key, an inlet in each consumer.
+    Last,
+    /// One fifo connection per consumer (a fifo is N outputs to 1 input): an outlet
+    /// and a key for each, all fed by the one output.
+    Fifos,
+}
+
+impl Fan {
+    fn name(self) -> &'static str {
+        match self {
+            Fan::Last => "last",
+            Fan::Fifos => "fifos",
+        }
+    }
+
+    /// The key of consumer `i`.
+    fn key(self, i: usize) -> String {
+        match self {
+            Fan::Last => format!("{KEY}/fan"),
+            Fan::Fifos => format!("{KEY}/fan_{i}"),
+        }
+    }
+}
+
+/// A fan-out child's part: `fan receive <address> <key> <size> <count> <period_ns>`,
+/// or `fan send <last|fifos> <consumers> <address,...> <size> <count> <period_ns>`.
+fn fan_peer(args: &[String]) {
+    let number = |at: usize| -> u64 { args[at].parse().expect("a number") };
+    let stream = |at: usize| Stream {
+        size: number(at) as usize,
+        count: number(at + 1) as usize,
+        period: Duration::from_nanos(number(at + 2)),
+    };
+    match args[0].as_str() {
+        "receive" => {
+            let stream = stream(3);
+            let (done, result) = bounded(1);
+            let (_state, _node, system) =
+                bridge_receiver_on::<Bytes>(&args[2], &args[1], true, stream, done);
+            println!("ready");
+            let received = common::expect(&result, LIMIT, "fan-out stream");
+            let lost = system
+                .handle("from_sender")
+                .map_or(0, |handle| handle.snapshot().overflows);
+            assert_eq!(lost, 0, "the inlet counted losses");
+            assert!(system.shutdown().clean(), "unclean shutdown");
+            let samples = Samples::new(received.latencies);
+            println!(
+                "result {} {} {}",
+                samples.len(),
+                received.cpu.as_nanos(),
+                samples.p50().as_nanos()
+            );
+        }
+        "send" => {
+            let fan = if args[1] == Fan::Last.name() {
+                Fan::Last
+            } else {
+                Fan::Fifos
+            };
+            let consumers = number(2) as usize;
+            let addresses: Vec<String> = args[3].split(',').map(str::to_owned).collect();
+            let keys: Vec<String> = (0..consumers).map(|i| fan.key(i)).collect();
+            let (keys, kind): (Vec<(&str, usize)>, InputKind) = match fan {
+                Fan::Last => (vec![(&keys[0], consumers)], InputKind::Last),
+                Fan::Fifos => (keys.iter().map(|k| (k.as_str(), 1)).collect(), BRIDGE),
+            };
+            bridge_sender_to::<Bytes>(&addresses, &keys, kind, true, stream(4));
+        }
+        other => panic!("no fan-out role `{other}`"),
+    }
+}
+
+/// A fan-out run: CPU per packet of the producer and of the average consumer, the
+/// fewest packets a consumer received, its p50 latency, and the messages the producer
+/// wrote into shared memory and copied.
+struct FanRun {
+    producer: Duration,
+    consumer: Duration,
+    received: u64,
+    p50: Duration,
+    shared: (u64, u64),
+}
+
+fn fan(fan: Fan, consumers: usize, stream: Stream) -> FanRun {
+    let me = std::env::current_exe().expect("this bench's path");
+    let numbers = [
+        stream.size.to_string(),
+        stream.count.to_string(),
+        stream.period.as_nanos().to_string(),
+    ];
+    let mut receivers = Vec::new();
+    let mut addresses = Vec::new();
+    for i in 0..consumers {
+        let address = setup::endpoint();
+        let mut child = Command::new(&me)
+            .args(["fan", "receive", &address, &fan.key(i)])
+            .args(&numbers)
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("spawn a consumer");
+        let mut stdout = BufReader::new(child.stdout.take().expect("its stdout"));
+        line(&mut stdout, "ready");
+        receivers.push((child, stdout));
+        addresses.push(address);
+    }
+    let mut sender = Command::new(&me)
+        .args([
+            "fan",
+            "send",
+            fan.name(),
+            &consumers.to_string(),
+            &addresses.join(","),
+        ])
+        .args(&numbers)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("spawn the producer");
+    let mut from_sender = BufReader::new(sender.stdout.take().expect("its stdout"));
+    let sent = line(&mut from_sender, "result");
+    let results: Vec<Vec<u64>> = receivers
+        .iter_mut()
+        .map(|(_, stdout)| line(stdout, "result"))
+        .collect();
+    drop(sender.stdin.take());
+    let shared = line(&mut from_sender, "shared");
+    assert!(
+        sender.wait().expect("producer").success(),
+        "producer failed"
+    );
+    for (mut child, _) in receivers {
+        assert!(child.wait().expect("consumer").success(), "consumer failed");
+    }
+    let packets = stream.count as u32;
+    let consumer_cpu: u64 = results.iter().map(|r| r[1]).sum();
+    FanRun {
+        producer: Duration::from_nanos(sent[0]) / packets,
+        consumer: Duration::from_nanos(consumer_cpu) / (packets * consumers as u32),
+        received: results.iter().map(|r| r[0]).min().unwrap_or(0),
+        p50: Duration::from_nanos(results.iter().map(|r| r[2]).max().unwrap_or(0)),
+        shared: (shared[0], shared[1]),
+    }
+}
+
+/// The fan-out rows: a 4 MiB packet at 30 Hz to 1 and to 3 consumer processes
+/// through one `last` connection, and to 3 through a fifo connection each.
+fn fan_out(table: &mut Table, large: Stream) {
+    let one = fan(Fan::Last, 1, large);
+    let three = fan(Fan::Last, 3, large);
+    let fifos = fan(Fan::Fifos, 3, large);
+    for (what, run) in [
+        ("1 consumer", &one),
+        ("3 consumers, one last connection", &three),
+        ("3 consumers, a fifo connection each", &fifos),
+    ] {
+        println!(
+            "  fan-out to {what}: producer {:?} CPU per packet, consumer {:?}; fewest received {} of {}, p50 {:?}; written into shared memory {}, copied {}",
+            run.producer,
+            run.consumer,
+            run.received,
+            large.count,
+            run.p50,
+            run.shared.0,
+            run.shared.1,
+        );
+    }
+    table.row(
+        "4 MiB fan-out, producer CPU/packet, 3 consumers vs 1 (one last connection)",
+        Figure::Time(three.producer),
+        Figure::Time(one.producer),
+        Goal::AtMost(1.5),
+    );
+    table.row(
+        "4 MiB fan-out, consumer CPU/packet, 3 consumers vs 1",
+        Figure::Time(three.consumer),
+        Figure::Time(one.consumer),
+        Goal::None,
+    );
+    table.row(
+        "4 MiB fan-out, producer CPU/packet, 3 fifo connections vs 1 consumer",
+        Figure::Time(fifos.producer),
+        Figure::Time(one.producer),
+        Goal::None,
+    );
+    table.note(&format!(
+        "fan-out: packets whose bytes serialize as one slice, {} at 30 Hz; messages written into shared memory by the producer (the end message included): 1 consumer {}, 3 on one last connection {}, 3 on a fifo each {}",
+        large.count, one.shared.0, three.shared.0, fifos.shared.0
+    ));
 }
 
 // ---------------------------------------------------------------------------------
@@ -652,9 +906,10 @@ fn run(engine: Engine, stream: Stream, tag: usize) -> Run {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.first().map(String::as_str) == Some("peer") {
-        peer(&args[1..]);
-        return;
+    match args.first().map(String::as_str) {
+        Some("peer") => return peer(&args[1..]),
+        Some("fan") => return fan_peer(&args[1..]),
+        _ => {}
     }
     let mode = Mode::from_env();
     let small = Stream {
@@ -701,10 +956,16 @@ fn main() {
             .map(|(_, a, b)| (a, b))
     };
     let mut table = Table::new(
-        "Two processes on one host: the bridge with shared memory against the engines",
+        "Processes on one host: the bridge with shared memory against the engines, and its fan-out",
         mode,
     );
+    // `-- fan`: the fan-out rows (also when no engine is chosen).
+    let fans = chosen.is_empty() || chosen.iter().any(|c| c == "fan");
     let Some((shm_small, shm_large)) = figure(Engine::BridgeShm) else {
+        if fans {
+            fan_out(&mut table, large);
+            table.print();
+        }
         return;
     };
     let against = |table: &mut Table, baseline: Engine, goals: (Goal, Goal)| {
@@ -769,5 +1030,8 @@ fn main() {
         "64 B: {} packets one every {:?}; 4 MiB: {} packets at 30 Hz; CPU from /proc/self/stat (10 ms ticks) of both processes",
         small.count, small.period, large.count
     ));
+    if fans {
+        fan_out(&mut table, large);
+    }
     table.print();
 }

@@ -57,7 +57,8 @@ struct Outgoing<'a, T> {
 }
 
 /// What a reader that passes the packet on takes of an [`Echoed`]: the packet's JSON,
-/// checked and left as the node wrote it.
+/// checked and left as the node wrote it (`coolctl foxglove`'s feed).
+#[cfg(feature = "foxglove")]
 #[derive(Debug, Deserialize)]
 pub(crate) struct EchoedRaw<'a> {
     /// The packet's JSON.

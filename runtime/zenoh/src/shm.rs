@@ -19,11 +19,14 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
-use zenoh::shm::{Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider};
+use zenoh::shm::{
+    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState,
+};
 
 /// The smallest message an outlet writes into shared memory: below it, a message
 /// costs less to copy through the link than a buffer costs to allocate and free.
@@ -43,12 +46,17 @@ pub struct SharedMemoryCounts {
     pub received: u64,
 }
 
-/// A node's counts, shared by its bridges.
+/// How long the first large message of a node waits for its session's pool to be made.
+const POOL_WAIT: Duration = Duration::from_secs(5);
+
+/// A node's counts, and its session's pool, shared by its bridges.
 #[derive(Debug, Default)]
 pub(crate) struct Counters {
     shared: AtomicU64,
     copied: AtomicU64,
     received: AtomicU64,
+    /// The session's pool, asked of the session once for the whole node.
+    pool: OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
 }
 
 impl Counters {
@@ -67,12 +75,42 @@ impl Counters {
             self.received.fetch_add(1, Ordering::Relaxed);
         }
     }
+
+    /// `session`'s pool (Zenoh makes it on first use, and the node's first large
+    /// message waits for it, at most [`POOL_WAIT`]): None when shared memory is off or
+    /// the pool could not be made (memory that cannot be locked, `ulimit -l`).
+    ///
+    /// The node asks once, and asks by polling: Zenoh 1.10 hands the pool it is making
+    /// to one blocking waiter only, and leaves its own state waiting for good, so that
+    /// any later asker (another outlet of the node, Zenoh's own transport) would be
+    /// told there is none.
+    fn pool(&self, session: &zenoh::Session) -> Option<&Arc<ShmProvider<PosixShmProviderBackend>>> {
+        self.pool
+            .get_or_init(|| {
+                let deadline = Instant::now() + POOL_WAIT;
+                loop {
+                    match session.get_shm_provider() {
+                        ShmProviderState::Ready(pool) => return Some(pool),
+                        ShmProviderState::Initializing(_) if Instant::now() < deadline => {
+                            std::thread::sleep(Duration::from_millis(1));
+                        }
+                        ShmProviderState::Initializing(_) => {
+                            tracing::warn!(
+                                "no shared-memory pool after {POOL_WAIT:?}: large messages go over the link"
+                            );
+                            return None;
+                        }
+                        ShmProviderState::Disabled | ShmProviderState::Error => return None,
+                    }
+                }
+            })
+            .as_ref()
+    }
 }
 
-/// An outlet's way into its session's shared memory.
+/// An outlet's way into its session's shared memory (the node's pool).
 pub(crate) struct Arena {
     session: zenoh::Session,
-    provider: OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
     counters: Arc<Counters>,
 }
 
@@ -80,18 +118,8 @@ impl Arena {
     pub(crate) fn new(session: &zenoh::Session, counters: Arc<Counters>) -> Arena {
         Arena {
             session: session.clone(),
-            provider: OnceLock::new(),
             counters,
         }
-    }
-
-    /// The session's pool (Zenoh makes it on first use, and the first large message
-    /// waits for it once): None when shared memory is off or the pool could not be
-    /// made (memory that cannot be locked, `ulimit -l`).
-    fn provider(&self) -> Option<&Arc<ShmProvider<PosixShmProviderBackend>>> {
-        self.provider
-            .get_or_init(|| self.session.get_shm_provider().wait())
-            .as_ref()
     }
 
     /// `value` encoded as a message: in shared memory when it is at least
@@ -104,7 +132,7 @@ impl Arena {
         if size < SHARED_THRESHOLD {
             return Ok(crate::codec::encode(value)?.into());
         }
-        let buffer = self.provider().and_then(|provider| {
+        let buffer = self.counters.pool(&self.session).and_then(|provider| {
             // Never waits: a full pool is collected and defragmented once, then the
             // message goes on the heap.
             provider

@@ -14,6 +14,7 @@ use coolbot_zenoh::{Node, SHARED_THRESHOLD};
 use coolbot_zenoh_tests::generated::shm_source;
 use coolbot_zenoh_tests::generated::types::Chunk;
 use coolbot_zenoh_tests::support::{self, Hand, PATIENCE};
+use zenoh::Wait;
 
 /// A frame large enough for shared memory.
 const LARGE: usize = 256 << 10;
@@ -71,13 +72,15 @@ impl Drop for Peer {
     }
 }
 
-/// A producer node listening on loopback, with a frame source connected to an outlet
-/// on `key`; `config` adjusts its configuration.
-fn producer(
-    name: &str,
-    key: &str,
-    config: impl FnOnce(&mut zenoh::Config),
-) -> (Node, String, System, DataOut<Chunk>) {
+/// A fifo of 64 that blocks its producer when full.
+const QUEUE: InputKind = InputKind::Fifo {
+    capacity: 64,
+    policy: OverflowPolicy::Block,
+};
+
+/// A node listening on loopback, keeping no tallies; `config` adjusts its
+/// configuration. The node and its endpoint.
+fn listening(name: &str, config: impl FnOnce(&mut zenoh::Config)) -> (Node, String) {
     let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
     let mut zenoh_config =
         coolbot_zenoh::peer_config(std::slice::from_ref(&endpoint), &[], false).expect("config");
@@ -85,14 +88,55 @@ fn producer(
     let node = Node::open(name, zenoh_config)
         .expect("the node opens")
         .with_state_directory(None);
-    let kind = InputKind::Fifo {
-        capacity: 64,
-        policy: OverflowPolicy::Block,
-    };
+    (node, endpoint)
+}
+
+/// A producer node listening on loopback, with a frame source connected to an outlet
+/// on `key` standing for an input of `kind`; `config` adjusts its configuration.
+fn producer_of(
+    name: &str,
+    key: &str,
+    kind: InputKind,
+    config: impl FnOnce(&mut zenoh::Config),
+) -> (Node, String, System, DataOut<Chunk>) {
+    let (node, endpoint) = listening(name, config);
     let (hand, handed) = crossbeam_channel::bounded(1);
     let source = shm_source::component("source", Hand(hand));
     let (system, out) = support::outlet_fed(&node, key, kind, source, &handed);
     (node, endpoint, system, out)
+}
+
+/// A producer node listening on loopback, with a frame source connected to an outlet
+/// on `key` (a fifo); `config` adjusts its configuration.
+fn producer(
+    name: &str,
+    key: &str,
+    config: impl FnOnce(&mut zenoh::Config),
+) -> (Node, String, System, DataOut<Chunk>) {
+    producer_of(name, key, QUEUE, config)
+}
+
+/// Waits until `node` knows `count` inlets on `key` (their liveliness tokens). Asked
+/// after the consumers said `ready`: the answer comes over each link after their
+/// subscribers' declarations.
+fn wait_inlets(node: &Node, key: &str, count: usize) {
+    let inlets = || {
+        node.session()
+            .liveliness()
+            .get(format!("{key}/@in/**"))
+            .wait()
+            .map_or(0, |replies| {
+                replies
+                    .iter()
+                    .filter(|reply| reply.result().is_ok())
+                    .count()
+            })
+    };
+    assert!(
+        support::wait_until(PATIENCE, || inlets() == count),
+        "{count} inlets on `{key}`: {}",
+        inlets()
+    );
 }
 
 fn frame(number: u64, size: usize) -> Chunk {
@@ -155,6 +199,87 @@ fn large_packets_to_a_process_on_this_host_are_written_once_into_shared_memory()
     let counts = node.shared_memory();
     assert_eq!((counts.shared, counts.copied), (20, 0), "{counts:?}");
     assert_eq!(shared, 20, "received in shared memory");
+}
+
+/// Sends `count` large frames on `out`, one at a time: each once every consumer has
+/// printed the one before (so that a `last` outlet publishes every one). Checks that
+/// each consumer got every frame, intact and in order; how many each received in
+/// shared memory.
+fn fan_out(out: &DataOut<Chunk>, consumers: &[Peer], count: u64) -> Vec<u64> {
+    let mut shared = vec![0; consumers.len()];
+    for number in 1..=count {
+        out.send(frame(number, LARGE));
+        for (consumer, shared) in consumers.iter().zip(&mut shared) {
+            let line = consumer.next_matching(|line| line.starts_with("frame "));
+            let (got, ok, in_shared) = parse_frame(&line).expect("a frame line");
+            assert_eq!((got, ok), (number, true), "frame {number}, intact");
+            *shared = in_shared;
+        }
+    }
+    shared
+}
+
+#[test]
+fn a_packet_to_three_consumer_processes_is_written_into_shared_memory_once() {
+    // One `last` connection to three processes: one outlet, one key, three inlets.
+    let key = "test/shm/fan_out";
+    let (node, endpoint, system, out) =
+        producer_of("shm-fan-producer", key, InputKind::Last, |_| {});
+    let consumers: Vec<Peer> = (1..=3)
+        .map(|i| Peer::start(&["consume", &format!("shm-fan-{i}"), &endpoint, key, "on"]))
+        .collect();
+    wait_inlets(&node, key, 3);
+    let count = 20;
+    let received = fan_out(&out, &consumers, count);
+    // Each frame was written into shared memory once, and each consumer mapped that
+    // one buffer: no copy of the payload per consumer.
+    let counts = node.shared_memory();
+    assert_eq!((counts.shared, counts.copied), (count, 0), "{counts:?}");
+    assert_eq!(received, [count; 3], "received in shared memory by each");
+    assert!(system.shutdown().clean(), "unclean shutdown");
+}
+
+#[test]
+fn one_output_to_three_fifo_connections_in_three_processes_writes_a_copy_for_each() {
+    // A fifo connection is N outputs to 1 input: three consumer processes are three
+    // keys, three outlets on one output, and each outlet writes its own copy.
+    let (node, endpoint) = listening("shm-fifos-producer", |_| {});
+    let mut system = System::new();
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system
+        .add(shm_source::component("source", Hand(hand)))
+        .expect("added");
+    let keys = ["test/shm/fifo_1", "test/shm/fifo_2", "test/shm/fifo_3"];
+    for (i, key) in keys.iter().enumerate() {
+        let outlet = format!("outlet_{i}");
+        system
+            .add(
+                node.outlet::<Chunk>(&outlet, key, QUEUE)
+                    .build()
+                    .expect("the outlet"),
+            )
+            .expect("added");
+        system
+            .connect("source.out", &format!("{outlet}.input"))
+            .expect("connected");
+    }
+    system.run_all().expect("runs");
+    let out = handed.recv().expect("the source's output");
+    let consumers: Vec<Peer> = keys
+        .iter()
+        .enumerate()
+        .map(|(i, key)| Peer::start(&["consume", &format!("shm-fifos-{i}"), &endpoint, key, "on"]))
+        .collect();
+    for key in keys {
+        wait_inlets(&node, key, 1);
+    }
+    let count = 10;
+    let received = fan_out(&out, &consumers, count);
+    // Every outlet of the node writes into the node's one pool: none goes on the heap.
+    let counts = node.shared_memory();
+    assert_eq!((counts.shared, counts.copied), (3 * count, 0), "{counts:?}");
+    assert_eq!(received, [count; 3], "received in shared memory by each");
+    assert!(system.shutdown().clean(), "unclean shutdown");
 }
 
 #[test]
