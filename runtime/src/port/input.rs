@@ -437,16 +437,18 @@ impl<T: Packet> LastIn<T> {
 
     /// The latest packet, only if it is newer than the last one `take_new` returned.
     pub fn take_new(&self) -> Option<T> {
-        self.inner
-            .slot
-            .read(|reading| reading.take_new()?.as_ref().map(|p| p.get().clone()))
+        self.inner.slot.read(|reading| {
+            reading
+                .take_new(|packet| packet.as_ref().map(|p| p.get().clone()))
+                .flatten()
+        })
     }
 
     /// [`LastIn::take_new`] behind a shared pointer (see [`LastIn::latest_shared`]).
     pub fn take_new_shared(&self) -> Option<Arc<T>> {
         self.inner
             .slot
-            .read(|reading| Self::share(reading.take_new()?))
+            .read(|reading| reading.take_new(Self::share).flatten())
     }
 
     /// The packet in `slot`, made shared in place if it was owned.

@@ -28,6 +28,14 @@
 //! touches. Producers take turns too (there is one back cell, and the sequence number
 //! comes from the last publish), without a read-modify-write in the common case: a
 //! thread that publishes alone holds a *bias* ([`Turns`]).
+//!
+//! The invariant, for any number of producers and readers: at most one producer
+//! holds the turn (the back cell and the last sequence number) at a time, each turn
+//! after the one before it; at most one reader holds the front cell; the middle
+//! cell is no one's. A cell passes from one side to the other only through the
+//! word, so a packet is read only once its write is over, and dropped only by the
+//! side that took it out of the word's cells. The producers' half rests on each
+//! thread's busy flag having that thread as its only writer ([`Turns`]).
 
 #![allow(
     unsafe_code,
@@ -114,13 +122,15 @@ impl<'a, T> Reading<'a, T> {
         self.seq > *self.taken
     }
 
-    /// The packet, if it is new; from now on it is taken.
-    pub(crate) fn take_new(self) -> Option<&'a mut Option<Parcel<T>>> {
+    /// `f` applied to the packet, if it is new; once `f` returns, the packet is
+    /// taken (if `f` unwinds, as a packet's `Clone` may, it is still new).
+    pub(crate) fn take_new<R>(self, f: impl FnOnce(&mut Option<Parcel<T>>) -> R) -> Option<R> {
         if !self.is_new() {
             return None;
         }
+        let result = f(self.packet);
         *self.taken = self.seq;
-        Some(self.packet)
+        Some(result)
     }
 }
 
@@ -192,10 +202,12 @@ impl<T: Packet> Slot<T> {
     /// `f` applied to the newest packet, under the readers' lock; the packet read
     /// before it is dropped after the lock is let go.
     pub(crate) fn read<R>(&self, f: impl FnOnce(Reading<'_, T>) -> R) -> R {
+        // Declared before the guard, so dropped after it even when `f` unwinds (a
+        // packet's `Clone` may panic): no packet's drop code runs under the lock.
+        let mut read_before = None;
         let mut front = lock(&self.front);
         let word = &self.core.arrivals;
         let mut current = word.load(Ordering::Acquire);
-        let mut read_before = None;
         if current & FRESH != 0 {
             // SAFETY: the front cell is the readers', and this reader holds their lock.
             read_before = unsafe { (*self.cells[front.index].get()).take() };
@@ -235,26 +247,52 @@ impl<T: Packet> Slot<T> {
     }
 }
 
+thread_local! {
+    /// The calling thread's busy flag: set while it publishes under a slot's bias.
+    /// Only its thread writes it; a revoker reads it through the clone kept with the
+    /// grant ([`Streak::grantee`]), which keeps it alive after its thread ends.
+    static BUSY: Arc<AtomicBool> = Arc::new(AtomicBool::new(false));
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Run once by `Turns::run` between its first look at `biased` and its busy
+    /// flag's set: where a test pauses a producer that is about to lose its bias.
+    static BEFORE_BUSY: std::cell::Cell<Option<Box<dyn FnOnce()>>> =
+        const { std::cell::Cell::new(None) };
+}
+
 /// The producers' turns: the thread that publishes alone publishes without a lock.
 ///
-/// A thread that published `needed` times in a row under the lock is *biased*: from
-/// then on it marks itself busy (a plain store), reads `biased` again behind a light
-/// fence and, if it is still biased, publishes without the lock. Another thread
-/// takes the lock, revokes the bias (`biased` back to 0), and goes on only once the
-/// biased thread is seen not busy: the revocation's store and its look at `busy` are
-/// separated by the heavy fence, the biased thread's store to `busy` and its look at
-/// `biased` by the light one (the pair the sinks use, `sinks.rs`), so one of the two
-/// looks sees the other side's store: either the revoker sees the biased thread
-/// busy and waits for its release store (the publish happens before the revoker's),
-/// or the biased thread sees the revocation and takes the lock. Each revocation
-/// doubles `needed`, so a slot fed by several threads at once ends up publishing
-/// under the lock, at a mutex's cost, rather than revoking again and again.
+/// A thread that published `needed` times in a row under the lock is *granted* the
+/// bias: `biased` holds its token, and the lock's [`Streak::grantee`] a clone of its
+/// busy flag ([`BUSY`], its own, which no other thread writes). From then on it
+/// marks itself busy (a plain store), reads `biased` again behind a light fence and,
+/// if it is still biased, publishes without the lock. Another thread takes the lock,
+/// revokes the bias (`biased` back to 0), and goes on only once the grantee's flag
+/// is seen clear: the revocation's store and its look at the flag are separated by
+/// the heavy fence, the grantee's store to its flag and its look at `biased` by the
+/// light one (the pair the sinks use, `sinks.rs`), so one of the two looks sees the
+/// other side's store: either the revoker sees the grantee busy and waits for its
+/// release store (the publish happens before the revoker's), or the grantee sees
+/// the revocation and takes the lock. Each revocation doubles `needed`, so a slot fed
+/// by several threads at once ends up publishing under the lock, at a mutex's cost,
+/// rather than revoking again and again.
+///
+/// The invariant: a turn is held by the thread in `run_locked` (under the lock) or
+/// by the grantee between its flag's set and clear with `biased` seen equal to its
+/// token, never by two at once. It rests on each flag having one writer: a thread
+/// that lost its bias (it read its token in `biased` before the revocation) sets and
+/// clears its own flag, which no revoker of a later grant looks at; were the flag
+/// shared, its clear could hide a later grantee's publish from the next revoker.
 struct Turns {
-    /// The biased thread's token (`sinks::token`; 0: none). Changed under `lock`.
+    /// The grantee's token (`sinks::token`; 0: none). Written under `lock`, with
+    /// `Streak::grantee`.
     biased: AtomicU64,
-    /// Set by the biased thread while it publishes.
-    busy: AtomicBool,
     lock: Mutex<Streak>,
+    /// Revocations that waited for a publish in flight.
+    #[cfg(test)]
+    waited: AtomicU64,
 }
 
 /// Who published under the lock lately.
@@ -265,17 +303,21 @@ struct Streak {
     count: u64,
     /// How many times in a row bias a thread.
     needed: u64,
+    /// The grantee's busy flag, while `biased` is not 0 (`None` exactly when it is).
+    grantee: Option<Arc<AtomicBool>>,
 }
 
 impl Turns {
     fn new() -> Turns {
         Turns {
             biased: AtomicU64::new(0),
-            busy: AtomicBool::new(false),
+            #[cfg(test)]
+            waited: AtomicU64::new(0),
             lock: Mutex::new(Streak {
                 thread: 0,
                 count: 0,
                 needed: 1,
+                grantee: None,
             }),
         }
     }
@@ -284,45 +326,73 @@ impl Turns {
     #[inline]
     fn run<R>(&self, f: impl FnOnce() -> R) -> R {
         let me = token();
+        let mut f = Some(f);
+        // Relaxed: only a hint. `biased` holds `me` only if this thread stored it (a
+        // grant is made by its grantee, under the lock); a grant revoked since is
+        // caught by the look behind the fence below, which decides.
         if self.biased.load(Ordering::Relaxed) == me {
-            self.busy.store(true, Ordering::Relaxed);
-            let asymmetric = light_fence();
-            let still = self.biased.load(if asymmetric {
-                Ordering::Relaxed
-            } else {
-                Ordering::SeqCst
-            }) == me;
-            if still {
+            #[cfg(test)]
+            if let Some(hook) = BEFORE_BUSY.take() {
+                hook();
+            }
+            // (`try_with` fails only while the thread's locals are being torn down:
+            // then the lock.)
+            let fast = BUSY.try_with(|busy| {
+                // Relaxed, then the light fence: the store is ordered before the look
+                // at `biased` below, the half of the pair with the revoker's heavy
+                // fence. Only this thread writes `busy`.
+                busy.store(true, Ordering::Relaxed);
+                let asymmetric = light_fence();
+                let still = self.biased.load(if asymmetric {
+                    Ordering::Relaxed
+                } else {
+                    Ordering::SeqCst
+                }) == me;
                 // (`f` runs no user code: it cannot unwind with `busy` set.)
-                let result = f();
-                self.busy.store(false, Ordering::Release);
+                let result = if still { f.take().map(|f| f()) } else { None };
+                // Release: a revoker that reads this clear (acquire) comes after the
+                // publish; a revoker that read the flag clear before the set above
+                // made this look see the revocation (`still` false).
+                busy.store(false, Ordering::Release);
+                result
+            });
+            if let Ok(Some(result)) = fast {
                 return result;
             }
-            self.busy.store(false, Ordering::Release);
         }
-        self.run_locked(me, f)
+        match f {
+            Some(f) => self.run_locked(me, f),
+            None => unreachable!("a turn's work ran without returning"),
+        }
     }
 
     /// Run `f` under the lock, revoking the bias first if a thread holds it.
     #[cold]
     fn run_locked<R>(&self, me: u64, f: impl FnOnce() -> R) -> R {
         let mut streak = lock(&self.lock);
-        if self.biased.load(Ordering::Relaxed) != 0 {
+        if let Some(busy) = streak.grantee.take() {
+            // SeqCst, then the heavy fence: the revocation is ordered before the look
+            // at the grantee's flag below (the other half of the pair in `run`).
             self.biased.store(0, Ordering::SeqCst);
             heavy_fence();
-            // A read-modify-write reads the newest `busy`: `false` means the biased
-            // thread's last publish is over (its release store), and this one comes
-            // after it.
+            // A read-modify-write reads the newest value of the flag: `false` means
+            // the grantee's last publish is over (acquire, of its release store), and
+            // this one comes after it; a later set by the grantee sees the revocation
+            // (the fences' pair) and takes the lock.
             let mut round = 0;
-            while self
-                .busy
+            while busy
                 .compare_exchange(false, false, Ordering::Acquire, Ordering::Relaxed)
                 .is_err()
             {
+                #[cfg(test)]
+                if round == 0 {
+                    self.waited.fetch_add(1, Ordering::Relaxed);
+                }
                 backoff(&mut round);
             }
             streak.needed = streak.needed.saturating_mul(2);
         }
+        debug_assert_eq!(self.biased.load(Ordering::Relaxed), 0);
         let result = f();
         if streak.thread == me {
             streak.count = streak.count.saturating_add(1);
@@ -330,7 +400,13 @@ impl Turns {
             streak.thread = me;
             streak.count = 1;
         }
-        if streak.count >= streak.needed {
+        if streak.count >= streak.needed
+            && let Ok(busy) = BUSY.try_with(Arc::clone)
+        {
+            streak.grantee = Some(busy);
+            // Relaxed: only this thread acts on `me` in `biased` (its fast path,
+            // which sees its own store), and it holds the lock here, after every
+            // publish before this one.
             self.biased.store(me, Ordering::Relaxed);
         }
         result
@@ -353,6 +429,9 @@ mod tests {
 
     /// Publishes per producer thread when several race (Miri runs far fewer).
     const PRODUCER_UPDATES: u64 = if cfg!(miri) { 20 } else { 100_000 };
+
+    /// Turns per thread in the mutual exclusion test (Miri runs far fewer).
+    const TURNS: u64 = if cfg!(miri) { 60 } else { 200_000 };
 
     /// Fails the test when a wait for the other threads has lasted too long.
     struct Patience(Instant);
@@ -675,5 +754,279 @@ mod tests {
         });
         go_on.send(()).expect("the drop waits");
         assert_eq!(on, reader.join().expect("reader"));
+    }
+
+    /// A packet of several words, each the update's number: a read that mixed two
+    /// writes shows two numbers.
+    type Wide = [u64; 8];
+
+    #[test]
+    fn four_producers_and_two_readers_tear_nothing_and_count_every_update() {
+        const PRODUCERS: u64 = 4;
+        const READERS: usize = 2;
+        let input = LastIn::<Wide>::new();
+        let start = Arc::new(Barrier::new(PRODUCERS as usize + READERS));
+        let done = Arc::new(AtomicU64::new(0));
+        let producers: Vec<_> = (0..PRODUCERS)
+            .map(|producer| {
+                let (input, start, done) = (input.clone(), Arc::clone(&start), Arc::clone(&done));
+                thread::spawn(move || {
+                    start.wait();
+                    for n in 1..=PRODUCER_UPDATES {
+                        // Every update's number is distinct: its producer in the low
+                        // bits.
+                        deliver(&input, [n * PRODUCERS + producer; 8]);
+                        if n % 64 == 0 {
+                            // Bursts: a producer alone for a while earns the bias,
+                            // which the next one revokes.
+                            thread::yield_now();
+                        }
+                    }
+                    done.fetch_add(1, Ordering::Release);
+                })
+            })
+            .collect();
+        let readers: Vec<_> = (0..READERS)
+            .map(|_| {
+                let (input, start, done) = (input.clone(), Arc::clone(&start), Arc::clone(&done));
+                thread::spawn(move || {
+                    start.wait();
+                    let (patience, mut last_seq, mut reads) = (Patience::new(), 0, 0u64);
+                    let mut newest = [0; PRODUCERS as usize];
+                    while done.load(Ordering::Acquire) < PRODUCERS {
+                        patience.check("the producers");
+                        let (packet, seq) = input.inner.slot.read(|reading| {
+                            (reading.packet.as_ref().map(|p| *p.get()), reading.seq)
+                        });
+                        assert!(
+                            seq >= last_seq,
+                            "the sequence number went back: {last_seq} then {seq}"
+                        );
+                        last_seq = seq;
+                        if let Some(packet) = packet {
+                            assert!(
+                                packet.iter().all(|word| *word == packet[0]),
+                                "a torn packet: {packet:?}"
+                            );
+                            let (producer, n) = (packet[0] % PRODUCERS, packet[0] / PRODUCERS);
+                            let newest = &mut newest[producer as usize];
+                            assert!(n >= *newest, "producer {producer}: {n} after {newest}");
+                            *newest = n;
+                        }
+                        reads += 1;
+                        if reads % 16 == 0 {
+                            thread::yield_now();
+                        }
+                    }
+                })
+            })
+            .collect();
+        for handle in producers.into_iter().chain(readers) {
+            handle.join().expect("a producer or reader");
+        }
+        let total = PRODUCERS * PRODUCER_UPDATES;
+        assert_eq!(
+            input.received(),
+            total,
+            "an update was lost or counted twice"
+        );
+        assert_eq!(seq(&input), total);
+        let last = input.latest().expect("a packet");
+        assert!(last.iter().all(|word| *word == last[0]));
+        assert_eq!(
+            last[0] / PRODUCERS,
+            PRODUCER_UPDATES,
+            "the newest is a last update"
+        );
+    }
+
+    /// A counter that only the turn's holder touches, with no atomic of its own: two
+    /// holders at once lose increments (and Miri reports the data race).
+    struct Counter(UnsafeCell<u64>);
+
+    // SAFETY: the test's threads touch the counter only on the producers' turn.
+    unsafe impl Sync for Counter {}
+
+    #[test]
+    fn turns_are_held_by_one_thread_at_a_time_in_bursts_and_at_once() {
+        const THREADS: u64 = 4;
+        let turns = Arc::new(Turns::new());
+        let counter = Arc::new(Counter(UnsafeCell::new(0)));
+        let start = Arc::new(Barrier::new(THREADS as usize));
+        let threads: Vec<_> = (0..THREADS)
+            .map(|id| {
+                let (turns, counter, start) =
+                    (Arc::clone(&turns), Arc::clone(&counter), Arc::clone(&start));
+                thread::spawn(move || {
+                    start.wait();
+                    for n in 0..TURNS {
+                        turns.run(|| {
+                            // SAFETY: the turn is this thread's (the property tested).
+                            unsafe {
+                                let value = std::ptr::read_volatile(counter.0.get());
+                                std::ptr::write_volatile(counter.0.get(), value + 1);
+                            }
+                        });
+                        // Bursts of different lengths per thread: each earns the bias
+                        // now and then and loses it to the others.
+                        if n % (8 << id) == 0 {
+                            thread::yield_now();
+                        }
+                    }
+                })
+            })
+            .collect();
+        for handle in threads {
+            handle.join().expect("a thread");
+        }
+        // SAFETY: every thread that touched the counter was joined.
+        assert_eq!(unsafe { *counter.0.get() }, THREADS * TURNS);
+    }
+
+    #[test]
+    fn a_producer_that_lost_the_bias_does_not_let_a_third_into_the_next_holders_turn() {
+        let turns = Arc::new(Turns::new());
+        // Set while the second holder's turn runs; a turn that starts meanwhile
+        // overlaps it.
+        let inside = Arc::new(AtomicBool::new(false));
+        let overlapped = Arc::new(AtomicBool::new(false));
+        // The first producer: one turn under the lock grants it the bias; its next
+        // turn stops after its first look at `biased` (it is still its own).
+        let (paused_tx, paused) = crossbeam_channel::bounded(1);
+        let (resume_tx, resume) = crossbeam_channel::bounded::<()>(1);
+        let first = {
+            let (turns, inside, overlapped) = (
+                Arc::clone(&turns),
+                Arc::clone(&inside),
+                Arc::clone(&overlapped),
+            );
+            thread::spawn(move || {
+                turns.run(|| ());
+                assert_eq!(turns.biased.load(Ordering::Relaxed), token());
+                BEFORE_BUSY.set(Some(Box::new(move || {
+                    paused_tx.send(()).expect("the test waits");
+                    let _ = resume.recv_timeout(Duration::from_secs(30));
+                })));
+                turns.run(|| {
+                    if inside.load(Ordering::SeqCst) {
+                        overlapped.store(true, Ordering::SeqCst);
+                    }
+                });
+            })
+        };
+        paused
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the first producer paused");
+        // The second revokes that bias, earns it with two turns in a row, and holds
+        // its next turn, unlocked, until told.
+        let (holding_tx, holding) = crossbeam_channel::bounded(1);
+        let (leave_tx, leave) = crossbeam_channel::bounded::<()>(1);
+        let second = {
+            let (turns, inside) = (Arc::clone(&turns), Arc::clone(&inside));
+            thread::spawn(move || {
+                turns.run(|| ());
+                turns.run(|| ());
+                assert_eq!(turns.biased.load(Ordering::Relaxed), token());
+                turns.run(|| {
+                    inside.store(true, Ordering::SeqCst);
+                    holding_tx.send(()).expect("the test waits");
+                    let _ = leave.recv_timeout(Duration::from_secs(30));
+                    inside.store(false, Ordering::SeqCst);
+                });
+            })
+        };
+        holding
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the second producer holds its turn");
+        // The first goes on: it finds its bias gone, so it takes the lock and revokes
+        // the second's, which must wait for the turn in progress.
+        resume_tx.send(()).expect("the first producer waits");
+        let patience = Patience::new();
+        while turns.waited.load(Ordering::Relaxed) == 0 && !first.is_finished() {
+            patience.check("the first producer");
+            thread::yield_now();
+        }
+        leave_tx.send(()).expect("the second producer waits");
+        first.join().expect("the first producer");
+        second.join().expect("the second producer");
+        assert!(
+            !overlapped.load(Ordering::SeqCst),
+            "a turn ran inside the bias holder's"
+        );
+        assert_eq!(turns.waited.load(Ordering::Relaxed), 1);
+    }
+
+    /// A packet whose `Clone` panics.
+    #[derive(Default)]
+    struct Fragile {
+        /// Reports its drop, and waits (the packet read before the one that panics).
+        held: Option<Held>,
+    }
+
+    impl Clone for Fragile {
+        fn clone(&self) -> Self {
+            match &self.held {
+                Some(held) => Fragile {
+                    held: Some(held.clone()),
+                },
+                None => panic!("this packet cannot be cloned"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_panicking_clone_leaves_the_slot_usable_and_drops_nothing_under_the_readers_lock() {
+        let (dropping, dropped) = crossbeam_channel::unbounded();
+        let (go_on, wait) = crossbeam_channel::unbounded();
+        let input = LastIn::<Fragile>::new();
+        deliver(
+            &input,
+            Fragile {
+                held: Some(Held {
+                    dropping,
+                    go_on: wait,
+                }),
+            },
+        );
+        // The reader's clone is dropped at once: let it go on.
+        let reader = {
+            let input = input.clone();
+            thread::spawn(move || drop(input.take_new()))
+        };
+        dropped
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the clone dropped");
+        go_on.send(()).expect("the drop waits");
+        reader.join().expect("reader");
+        // The next packet's clone panics, after the read took the packet read before
+        // out of its cell: that packet is dropped as the reader unwinds.
+        deliver(&input, Fragile::default());
+        let reader = {
+            let input = input.clone();
+            thread::spawn(move || {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| input.take_new())).is_err()
+            })
+        };
+        dropped
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the packet read before dropped");
+        let other = input.clone();
+        returns("another reader", move || {
+            assert_eq!(other.inner.slot.read(|reading| reading.seq), 2)
+        });
+        go_on.send(()).expect("the drop waits");
+        assert!(reader.join().expect("reader"), "the clone did not panic");
+        // The slot goes on: the packet whose clone panicked is still new, and the
+        // next update replaces it.
+        assert!(input.inner.slot.read(|reading| reading.is_new()));
+        deliver(&input, Fragile::default());
+        assert_eq!(input.received(), 3);
+        assert_eq!(seq(&input), 3);
+        let read = input
+            .inner
+            .slot
+            .read(|reading| reading.take_new(|packet| packet.is_some()));
+        assert_eq!(read, Some(true));
+        assert!(input.take_new().is_none());
     }
 }
