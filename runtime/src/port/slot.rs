@@ -42,7 +42,7 @@
     reason = "the cells are shared by the protocol above, each use argued at its block"
 )]
 
-use std::cell::UnsafeCell;
+use std::cell::{Cell, UnsafeCell};
 
 use crossbeam_utils::CachePadded;
 
@@ -248,25 +248,39 @@ impl<T: Packet> Slot<T> {
 }
 
 thread_local! {
-    /// The calling thread's busy flag: set while it publishes under a slot's bias.
+    /// The calling thread's busy flag, set while it publishes under a slot's bias.
     /// Only its thread writes it; a revoker reads it through the clone kept with the
     /// grant ([`Streak::grantee`]), which keeps it alive after its thread ends.
-    static BUSY: Arc<AtomicBool> = Arc::new(AtomicBool::new(false));
+    static FLAG: Flag = Flag(Arc::new(AtomicBool::new(false)));
+    /// The address of this thread's flag, for the unlocked path (no lazy state to
+    /// check): null until the thread is first granted a bias, and again from the
+    /// moment its flag's owner is dropped, as the thread ends.
+    static BUSY: Cell<*const AtomicBool> = const { Cell::new(std::ptr::null()) };
+}
+
+/// A thread's busy flag, owned by the thread (`FLAG`).
+struct Flag(Arc<AtomicBool>);
+
+impl Drop for Flag {
+    fn drop(&mut self) {
+        // From now on the thread's turns take the lock: `BUSY` never points at a
+        // flag the thread no longer owns.
+        BUSY.set(std::ptr::null());
+    }
 }
 
 #[cfg(test)]
 thread_local! {
     /// Run once by `Turns::run` between its first look at `biased` and its busy
     /// flag's set: where a test pauses a producer that is about to lose its bias.
-    static BEFORE_BUSY: std::cell::Cell<Option<Box<dyn FnOnce()>>> =
-        const { std::cell::Cell::new(None) };
+    static BEFORE_BUSY: Cell<Option<Box<dyn FnOnce()>>> = const { Cell::new(None) };
 }
 
 /// The producers' turns: the thread that publishes alone publishes without a lock.
 ///
 /// A thread that published `needed` times in a row under the lock is *granted* the
 /// bias: `biased` holds its token, and the lock's [`Streak::grantee`] a clone of its
-/// busy flag ([`BUSY`], its own, which no other thread writes). From then on it
+/// busy flag ([`FLAG`], its own, which no other thread writes). From then on it
 /// marks itself busy (a plain store), reads `biased` again behind a light fence and,
 /// if it is still biased, publishes without the lock. Another thread takes the lock,
 /// revokes the bias (`biased` back to 0), and goes on only once the grantee's flag
@@ -326,7 +340,6 @@ impl Turns {
     #[inline]
     fn run<R>(&self, f: impl FnOnce() -> R) -> R {
         let me = token();
-        let mut f = Some(f);
         // Relaxed: only a hint. `biased` holds `me` only if this thread stored it (a
         // grant is made by its grantee, under the lock); a grant revoked since is
         // caught by the look behind the fence below, which decides.
@@ -335,9 +348,12 @@ impl Turns {
             if let Some(hook) = BEFORE_BUSY.take() {
                 hook();
             }
-            // (`try_with` fails only while the thread's locals are being torn down:
-            // then the lock.)
-            let fast = BUSY.try_with(|busy| {
+            let flag = BUSY.get();
+            if !flag.is_null() {
+                // SAFETY: not null, `BUSY` points at this thread's flag, which its
+                // `FLAG` owns until it is dropped (which nulls `BUSY` first), on this
+                // thread, not in the middle of this call.
+                let busy = unsafe { &*flag };
                 // Relaxed, then the light fence: the store is ordered before the look
                 // at `biased` below, the half of the pair with the revoker's heavy
                 // fence. Only this thread writes `busy`.
@@ -348,22 +364,19 @@ impl Turns {
                 } else {
                     Ordering::SeqCst
                 }) == me;
-                // (`f` runs no user code: it cannot unwind with `busy` set.)
-                let result = if still { f.take().map(|f| f()) } else { None };
-                // Release: a revoker that reads this clear (acquire) comes after the
-                // publish; a revoker that read the flag clear before the set above
-                // made this look see the revocation (`still` false).
+                // Release (both stores): a revoker that reads a clear (acquire) comes
+                // after this thread's publish; one that read the flag clear before
+                // the set above made this look see the revocation (`still` false).
+                if still {
+                    // (`f` runs no user code: it cannot unwind with `busy` set.)
+                    let result = f();
+                    busy.store(false, Ordering::Release);
+                    return result;
+                }
                 busy.store(false, Ordering::Release);
-                result
-            });
-            if let Ok(Some(result)) = fast {
-                return result;
             }
         }
-        match f {
-            Some(f) => self.run_locked(me, f),
-            None => unreachable!("a turn's work ran without returning"),
-        }
+        self.run_locked(me, f)
     }
 
     /// Run `f` under the lock, revoking the bias first if a thread holds it.
@@ -400,8 +413,13 @@ impl Turns {
             streak.thread = me;
             streak.count = 1;
         }
+        // (`try_with` fails only once the thread's flag is dropped, as it ends: no
+        // grant then.)
         if streak.count >= streak.needed
-            && let Ok(busy) = BUSY.try_with(Arc::clone)
+            && let Ok(busy) = FLAG.try_with(|flag| {
+                BUSY.set(Arc::as_ptr(&flag.0));
+                Arc::clone(&flag.0)
+            })
         {
             streak.grantee = Some(busy);
             // Relaxed: only this thread acts on `me` in `biased` (its fast path,
