@@ -248,12 +248,10 @@ impl<T: Packet> InputEnd for LastInner<T> {
 
     fn transfer(&self, to: &ErasedInput) -> u64 {
         // Only a packet the old consumer has not taken yet is handed on.
-        let unread = {
-            let slot = lock(&self.slot);
-            (slot.1 > self.read_seq.load(Ordering::Acquire))
-                .then(|| slot.0.clone())
-                .flatten()
-        };
+        let unread = self
+            .slot
+            .read(|reading| reading.is_new().then(|| reading.packet.clone()))
+            .flatten();
         match unread {
             Some(packet) => transfer_queue(vec![packet], to),
             None => 0,
@@ -375,7 +373,7 @@ impl<T: Packet> InputPort for LastIn<T> {
             kind: InKind::Last,
             type_id: TypeId::of::<T>(),
             type_name: std::any::type_name::<T>(),
-            core: Arc::clone(&self.inner.core),
+            core: Arc::clone(self.inner.core()),
             end: self.inner.clone(),
         }
     }

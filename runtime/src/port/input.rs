@@ -426,30 +426,28 @@ impl<T> Clone for LastIn<T> {
 }
 
 pub(crate) struct LastInner<T> {
-    pub(super) core: Arc<InputCore>,
-    /// The latest packet and its sequence number (1 for the first packet).
-    pub(super) slot: Mutex<(Option<Parcel<T>>, u64)>,
-    /// The sequence number the consumer last read with `take_new`.
-    pub(super) read_seq: AtomicU64,
+    /// The latest packet, its sequence number (1 for the first packet) and the one
+    /// the consumer last read with `take_new`; its core is the input's.
+    pub(super) slot: Slot<T>,
+}
+
+impl<T> LastInner<T> {
+    pub(super) fn core(&self) -> &Arc<InputCore> {
+        self.slot.core()
+    }
 }
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
     fn lost(&self, count: u64) {
         if count > 0 {
-            self.core.overflowed(count);
+            self.core().overflowed(count);
         }
     }
 
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
-        let replaced = {
-            let mut slot = lock(&self.slot);
-            slot.1 += 1;
-            slot.0.replace(packet)
-        };
-        // (The replaced packet is dropped outside the lock.)
-        drop(replaced);
-        self.core.arrived();
+        // (The replaced packet is dropped outside any lock.)
+        self.slot.publish(packet);
     }
 }
 
@@ -457,47 +455,38 @@ impl<T: Packet> LastIn<T> {
     /// A new, empty last input.
     pub fn new() -> LastIn<T> {
         LastIn {
-            inner: Arc::new(LastInner {
-                core: InputCore::new(),
-                slot: Mutex::new((None, 0)),
-                read_seq: AtomicU64::new(0),
-            }),
+            inner: Arc::new(LastInner { slot: Slot::new() }),
         }
     }
 
     /// The latest packet received, if any (a clone of the local copy).
     pub fn latest(&self) -> Option<T> {
-        lock(&self.inner.slot).0.as_ref().map(|p| p.get().clone())
+        self.inner
+            .slot
+            .read(|reading| reading.packet.as_ref().map(|p| p.get().clone()))
     }
 
     /// The latest packet received, behind a shared pointer: not copied when its
     /// producer shares it among several inputs ([`FifoIn::recv_shared`]); else moved
     /// once into a shared allocation that later reads reuse.
     pub fn latest_shared(&self) -> Option<Arc<T>> {
-        let mut slot = lock(&self.inner.slot);
-        Self::share(&mut slot.0)
+        self.inner.slot.read(|reading| Self::share(reading.packet))
     }
 
     /// The latest packet, only if it is newer than the last one `take_new` returned.
     pub fn take_new(&self) -> Option<T> {
-        let slot = lock(&self.inner.slot);
-        if slot.1 > self.inner.read_seq.load(Ordering::Acquire) {
-            self.inner.read_seq.store(slot.1, Ordering::Release);
-            slot.0.as_ref().map(|p| p.get().clone())
-        } else {
-            None
-        }
+        self.inner.slot.read(|reading| {
+            reading
+                .take_new(|packet| packet.as_ref().map(|p| p.get().clone()))
+                .flatten()
+        })
     }
 
     /// [`LastIn::take_new`] behind a shared pointer (see [`LastIn::latest_shared`]).
     pub fn take_new_shared(&self) -> Option<Arc<T>> {
-        let mut slot = lock(&self.inner.slot);
-        if slot.1 > self.inner.read_seq.load(Ordering::Acquire) {
-            self.inner.read_seq.store(slot.1, Ordering::Release);
-            Self::share(&mut slot.0)
-        } else {
-            None
-        }
+        self.inner
+            .slot
+            .read(|reading| reading.take_new(Self::share).flatten())
     }
 
     /// The packet in `slot`, made shared in place if it was owned.
@@ -509,17 +498,17 @@ impl<T: Packet> LastIn<T> {
 
     /// How many packets have been received in all.
     pub fn received(&self) -> u64 {
-        lock(&self.inner.slot).1
+        self.inner.core().arrivals()
     }
 
     /// Ask the producer for a packet (pull model).
     pub fn request(&self) -> Result<(), PullError> {
-        self.inner.core.request()
+        self.inner.core().request()
     }
 
     /// Request a packet and wait until a newer one than the last `take_new` arrives.
     pub fn pull(&self, timeout: Duration) -> Result<T, PullError> {
-        self.inner.core.pull_with(timeout, || self.take_new())
+        self.inner.core().pull_with(timeout, || self.take_new())
     }
 }
 

@@ -34,6 +34,7 @@ mod input;
 mod merge;
 mod output;
 mod sinks;
+mod slot;
 
 pub(crate) use delivery::*;
 pub use erased::*;
@@ -43,6 +44,7 @@ pub use input::*;
 pub(crate) use merge::*;
 pub use output::*;
 pub(crate) use sinks::*;
+pub(crate) use slot::*;
 
 /// How long a producer waits on a full [`OverflowPolicy::Block`] fifo before the
 /// packet is rejected and counted, unless the port sets its own timeout.
@@ -155,7 +157,11 @@ impl ArrivalLabel {
 pub(crate) struct InputCore {
     pub(crate) id: usize,
     pub(crate) owner: OnceLock<Owner>,
+    /// The arrival count, in the bits from `count_shift` up: a last input keeps its
+    /// slot's state in the bits below and counts its arrivals with the same atomic
+    /// operation that stores a packet (`slot.rs`).
     arrivals: AtomicU64,
+    count_shift: u32,
     overflows: AtomicU64,
     /// Of `overflows`, the packets a compound's exported input left this input out
     /// of (its redundant member stalled): they put the member out of step.
@@ -175,10 +181,17 @@ impl crate::monitor::Losses for InputCore {
 
 impl InputCore {
     fn new() -> Arc<InputCore> {
+        InputCore::counting_from(0, 0)
+    }
+
+    /// A core whose arrival count is kept in the bits of `arrivals` from
+    /// `count_shift` up, the bits below starting as `low`.
+    fn counting_from(count_shift: u32, low: u64) -> Arc<InputCore> {
         Arc::new(InputCore {
             id: next_port_id(),
             owner: OnceLock::new(),
-            arrivals: AtomicU64::new(0),
+            arrivals: AtomicU64::new(low),
+            count_shift,
             overflows: AtomicU64::new(0),
             left_behind: AtomicU64::new(0),
             pull_waiting: AtomicBool::new(false),
@@ -190,14 +203,25 @@ impl InputCore {
     /// A packet or event was stored: count it, wake the component and any puller.
     #[inline]
     fn arrived(&self) {
+        // (A last input's slot counts its own arrivals: `arrived_by`. Were this called
+        // on its core, the bits below the count would still be left alone.)
+        debug_assert_eq!(self.count_shift, 0);
+        // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
+        self.arrived_by(|arrivals| arrivals.fetch_add(1 << self.count_shift, Ordering::SeqCst));
+    }
+
+    /// A packet is stored and counted by `count`, a `SeqCst` read-modify-write of
+    /// the arrival counter that adds one to the count (a last input's publish: it
+    /// stores the packet too); then the component and any puller are woken.
+    #[inline]
+    fn arrived_by<R>(&self, count: impl FnOnce(&AtomicU64) -> R) -> R {
         let owner = self.owner.get();
         // Stamp before counting: the count publishes the stamp, so a component that
         // sees the arrival also sees its time (at worst a response goes unmeasured).
         if let Some(label) = owner.and_then(|owner| owner.label.as_ref()) {
             label.stamp();
         }
-        // `SeqCst`: part of the doorbell's no-lost-wake-up argument (`Doorbell`).
-        self.arrivals.fetch_add(1, Ordering::SeqCst);
+        let counted = count(&self.arrivals);
         if let Some(owner) = owner {
             owner.bell.ring();
         }
@@ -206,6 +230,7 @@ impl InputCore {
         {
             let _ = signal.0.try_send(());
         }
+        counted
     }
 
     /// `lost` packets were lost at this input: count them and announce it.
@@ -226,8 +251,9 @@ impl InputCore {
         }
     }
 
+    /// How many packets or events arrived (only compared, to see new ones).
     pub(crate) fn arrivals(&self) -> u64 {
-        self.arrivals.load(Ordering::SeqCst)
+        self.arrivals.load(Ordering::SeqCst) >> self.count_shift
     }
 
     pub(crate) fn overflows(&self) -> u64 {

@@ -230,8 +230,9 @@ pub(super) fn token() -> u64 {
     })
 }
 
-/// Wait a little longer each round (a change waiting for a send in flight).
-fn backoff(round: &mut u32) {
+/// Wait a little longer each round (a change waiting for a send in flight, a
+/// revoked bias for a publish in flight: `slot.rs`).
+pub(super) fn backoff(round: &mut u32) {
     *round += 1;
     if *round < 64 {
         std::hint::spin_loop();
@@ -253,7 +254,7 @@ fn asymmetric() -> bool {
     }
 }
 
-#[cfg(target_os = "linux")]
+#[cfg(all(target_os = "linux", not(miri)))]
 fn register() -> bool {
     use rustix::thread::{MembarrierCommand, MembarrierQuery, membarrier, membarrier_query};
     membarrier_query()
@@ -262,7 +263,8 @@ fn register() -> bool {
         && membarrier(MembarrierCommand::PrivateExpedited).is_ok()
 }
 
-#[cfg(not(target_os = "linux"))]
+/// (Miri runs no `membarrier`: both fences are sequentially consistent ones there.)
+#[cfg(any(not(target_os = "linux"), miri))]
 fn register() -> bool {
     false
 }
@@ -270,7 +272,7 @@ fn register() -> bool {
 /// The sender's fence: between its store to `busy` and its load of the version.
 /// Returns whether it was only a compiler fence (the heavy fence does the rest).
 #[inline]
-fn light_fence() -> bool {
+pub(super) fn light_fence() -> bool {
     if asymmetric() {
         compiler_fence(Ordering::SeqCst);
         true
@@ -281,7 +283,7 @@ fn light_fence() -> bool {
 }
 
 /// The change's fence: between its bump of the version and its load of `busy`.
-fn heavy_fence() {
+pub(super) fn heavy_fence() {
     #[cfg(target_os = "linux")]
     if asymmetric() {
         use rustix::thread::{MembarrierCommand, membarrier};
