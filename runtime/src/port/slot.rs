@@ -299,6 +299,11 @@ thread_local! {
 /// that lost its bias (it read its token in `biased` before the revocation) sets and
 /// clears its own flag, which no revoker of a later grant looks at; were the flag
 /// shared, its clear could hide a later grantee's publish from the next revoker.
+///
+/// A thread has one flag for every slot it publishes to: a revoker of one slot also
+/// waits out the grantee's publishes to its other slots. That costs the revoker time
+/// (the grantee's flag is clear between any two of its publishes); it never lets two
+/// threads into one turn.
 struct Turns {
     /// The grantee's token (`sinks::token`; 0: none). Written under `lock`, with
     /// `Streak::grantee`.
@@ -345,7 +350,9 @@ impl Turns {
         // caught by the look behind the fence below, which decides.
         if self.biased.load(Ordering::Relaxed) == me {
             #[cfg(test)]
-            if let Some(hook) = BEFORE_BUSY.take() {
+            // `try_with`: a publish from another thread-local's destructor may come
+            // after this one's.
+            if let Ok(Some(hook)) = BEFORE_BUSY.try_with(Cell::take) {
                 hook();
             }
             let flag = BUSY.get();
