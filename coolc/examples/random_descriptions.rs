@@ -1,4 +1,4 @@
-//! The larger run of the random-description property (`tests/valid_descriptions.rs`
+//! The larger run of the random-description property (`tests/all/valid_descriptions.rs`
 //! runs a fixed sample in the test suite): draws `--count` descriptions with the same
 //! generator (`tests/support/random.rs`), checks each one, emits every accepted one
 //! as a crate of one workspace, `cargo check`s the workspace once, and prints how many

@@ -20,7 +20,7 @@
 //! when the template marked that item (see [`Layout::begin_item`]: rustfmt lays out
 //! each top-level item on its own, so the item comes out as it would in the whole
 //! file). So a strange description costs time, never a
-//! file that `cargo fmt` would change. `coolc/tests/rustfmt_clean.rs` checks the claim
+//! file that `cargo fmt` would change. `coolc/tests/all/rustfmt_clean.rs` checks the claim
 //! against `rustfmt` on every fixture and example.
 
 use std::cell::Cell;

@@ -3,7 +3,7 @@
 //! language does not let a tick output be `pull` (`coolc::check::connect_kind`), so
 //! no generated component has one (and none can feed a pulled tick input), though the
 //! runtime answers a pull of a tick output with an event. Every other kind is in
-//! `tests/runtime/tests/exports.rs`, on generated components.
+//! `tests/runtime/tests/all/exports.rs`, on generated components.
 
 mod support;
 

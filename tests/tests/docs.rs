@@ -336,19 +336,19 @@ fn compiled() -> BTreeSet<Place> {
 const ELSEWHERE: &[(Place, &str)] = &[
     (
         place("docs/ros2.md", "## A description with ROS 2 types", 0),
-        "coolc/tests/ros_crate.rs",
+        "coolc/tests/all/ros_crate.rs",
     ),
     (
         place("docs/ros2.md", "## A description with ROS 2 types", 1),
-        "coolc/tests/ros_crate.rs",
+        "coolc/tests/all/ros_crate.rs",
     ),
     (
         place("docs/ros2.md", "## A description with ROS 2 types", 2),
-        "coolc/tests/ros_crate.rs",
+        "coolc/tests/all/ros_crate.rs",
     ),
     (
         place("docs/ros2.md", "## A description with ROS 2 types", 3),
-        "coolc/tests/ros_crate.rs",
+        "coolc/tests/all/ros_crate.rs",
     ),
 ];
 

@@ -1,5 +1,5 @@
 //! The generator of random valid descriptions, shared by the property test
-//! (`tests/valid_descriptions.rs`) and the larger run
+//! (`tests/all/valid_descriptions.rs`) and the larger run
 //! (`examples/random_descriptions.rs`): each includes this file as a module.
 //!
 //! [`describe`] draws one description from a seed: packets with arrays of any

@@ -1,5 +1,5 @@
 //! The scenario of the exported-port tests, shared by `exports_tick_pull.rs` here and
-//! `tests/runtime/tests/exports.rs` (which includes this file by its path): a
+//! `tests/runtime/tests/all/exports.rs` (which includes this file by its path): a
 //! compound's exported ports behave as an atomic component's. For a port kind, pushed
 //! and pulled, the same scenario runs once against an atomic component's port and
 //! once against a compound exporting that port of the same component, and must see

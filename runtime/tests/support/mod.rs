@@ -1,7 +1,7 @@
 //! What `exports_tick_pull.rs` needs beside its test: port-only components over
 //! hand-built specs (`shell`), for a `tick` output declared `pull`, which the language
 //! refuses and the runtime supports; and the exported-port scenario (`exports`), which
-//! `tests/runtime/tests/exports.rs` runs on generated components. Every other runtime
+//! `tests/runtime/tests/all/exports.rs` runs on generated components. Every other runtime
 //! test runs components coolc generates (`tests/runtime`).
 
 pub mod exports;

@@ -1,7 +1,7 @@
 //! `coolbot::process`'s panic hook: a panic the runtime catches in a watched
 //! component is one line naming it, its states and the message; a panic on another
 //! thread goes to the previous hook (the default: printed in full), not to that line.
-//! The example robot's tests (`examples/mobile-base/tests/process.rs`) run a whole
+//! The example robot's tests (`examples/mobile-base/tests/all/process.rs`) run a whole
 //! process: signals, a clean shutdown, the line on stderr.
 
 use std::time::{Duration, Instant};

@@ -1,4 +1,4 @@
-//! The drivers process of `tests/isolation.rs`, as the starter `main` coolc writes
+//! The drivers process of `tests/all/isolation.rs`, as the starter `main` coolc writes
 //! runs one: `drivers-under-test --node drivers --serve --connect ENDPOINT` (the
 //! options of `coolbot_zenoh::network::NodeOptions`) opens the node, whose agent
 //! builds a `NativeDriver` (`cool/isolation.cool`) or a `Camera` (`cool/camera.cool`,

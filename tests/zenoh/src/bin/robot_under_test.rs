@@ -1,4 +1,4 @@
-//! The robot process of `tests/foxglove.rs`: node NAME, connected to the endpoint
+//! The robot process of `tests/all/foxglove.rs`: node NAME, connected to the endpoint
 //! given, runs the network tests' robot (`support::robot`). It prints `ready` once the
 //! robot runs, and runs until it is killed or its input closes.
 

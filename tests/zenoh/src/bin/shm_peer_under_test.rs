@@ -1,4 +1,4 @@
-//! The other process of `tests/shm.rs`, on the same host as the test:
+//! The other process of `tests/all/shm.rs`, on the same host as the test:
 //!
 //! - `consume NAME ENDPOINT KEY on|off`: node NAME, connected to ENDPOINT with shared
 //!   memory on or off, reads frames on KEY through an inlet into a queue, and prints

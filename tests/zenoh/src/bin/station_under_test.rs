@@ -1,4 +1,4 @@
-//! The station process of `tests/placement.rs`: node NAME, connected to the endpoint
+//! The station process of `tests/all/placement.rs`: node NAME, connected to the endpoint
 //! given, runs an agent that builds, on request, the relay of every connection kind
 //! (`EveryKindRelay`, `cool/placement.cool`), whose behaviour forwards each input to
 //! the output of its kind, and the pull doubler (`PullDoubler`). It prints `ready`

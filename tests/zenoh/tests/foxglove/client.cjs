@@ -1,6 +1,6 @@
 // A Foxglove WebSocket client that is not ours: @foxglove/ws-protocol's
 // FoxgloveClient over the `ws` package, validating every message against its
-// channel's JSON Schema with Ajv. Run by tests/zenoh/tests/foxglove.rs with NODE_PATH
+// channel's JSON Schema with Ajv. Run by tests/zenoh/tests/all/foxglove.rs with NODE_PATH
 // at the packages `.ci/run` installs (target/foxglove-client/node_modules).
 //
 // Usage: node client.cjs ws://127.0.0.1:PORT

@@ -5,7 +5,7 @@
 //! converter), and publish variables on their monitoring ports; a compound exporting
 //! poster, tick and pull outputs is read as its atomic instance would be.
 
-mod common;
+use crate::common;
 
 use common::{cargo, compile, copy_descriptions, data, fill_check_and_run};
 

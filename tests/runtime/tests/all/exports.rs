@@ -11,7 +11,7 @@
 //! the scenario varies it; a tick output cannot be `pull` in the language, so the two
 //! pulled tick cases are in `runtime/tests/exports_tick_pull.rs`.
 
-#[path = "../../../runtime/tests/support/exports.rs"]
+#[path = "../../../../runtime/tests/support/exports.rs"]
 mod scenario;
 
 use std::sync::Arc;

@@ -5,12 +5,12 @@
 //! emitted for a fixed sample of them must build without a warning (all in one
 //! workspace so the sample costs one build) and run.
 //!
-//! The generator (`support/random.rs`, shared with the larger run of
+//! The generator (`tests/support/random.rs`, shared with the larger run of
 //! `examples/random_descriptions.rs`) draws from a seed (proptest picks the seeds; a
 //! failure prints the seed, and `describe(seed)` reproduces the description).
 
-mod common;
-#[path = "support/random.rs"]
+use crate::common;
+#[path = "../support/random.rs"]
 mod random;
 
 use std::path::Path;

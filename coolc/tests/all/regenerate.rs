@@ -2,7 +2,7 @@
 //! an exception and a component) to the description, regenerate. The filled code is
 //! byte-for-byte intact, the new stubs are there, and the crate builds.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! component in its own test; a broken description fails the build showing the
 //! rendered diagnostic.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! The `coolc` binary: `--help`, exit codes 0 / 1 / 2, JSON diagnostics, `compile`
 //! options, and `coolc new` producing a crate that builds and runs.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

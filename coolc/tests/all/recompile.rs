@@ -4,7 +4,7 @@
 //! changed description changes only its own files below the generated header (which
 //! names the inputs' hash).
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;

@@ -7,7 +7,7 @@
 //! The Python with rosbags is `$COOLBOT_PYTHON`, else `target/pyenv/bin/python`;
 //! `.ci/run` makes it. Without it the rosbags test fails, saying how to set it up.
 
-mod common;
+use crate::common;
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};

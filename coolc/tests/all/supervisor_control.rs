@@ -5,7 +5,7 @@
 //! own result, error and CPU time and the drive's controllable speed and elapsed
 //! time.
 
-mod common;
+use crate::common;
 
 use common::{compile, data, fill_check_and_run};
 

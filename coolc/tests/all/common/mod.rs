@@ -1,5 +1,5 @@
 //! Helpers shared by the tests that write, build and run generated crates.
-#![allow(dead_code, reason = "each test binary uses a different subset")]
+#![allow(dead_code, reason = "not every test uses every helper")]
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
