@@ -18,7 +18,7 @@
 //! (`period`, `max_response`, `priority`, `quality` and its own); services `suspend`,
 //! `run`, `restart` with a request `{"component": "<node>/<path>"}` ([`params`]).
 //!
-//! Echoed packets reach their channels through the feed ([`feed`]): Zenoh's callback
+//! Echoed packets reach their channels through the feed (`feed.rs`): Zenoh's callback
 //! queues each node's batches, a task on the WebSocket server's one thread splits
 //! them and logs each packet on the channels of its output.
 //!
