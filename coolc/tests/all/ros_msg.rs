@@ -738,8 +738,13 @@ fn search_from_env_child() {
 #[test]
 fn search_from_env_reads_ament_prefix_path() {
     let value = std::env::join_paths(["/opt/one", "/opt/two"]).unwrap();
+    // The child's name as the test binary lists it: its module path without the crate.
+    let child = match module_path!().split_once("::") {
+        Some((_, module)) => format!("{module}::search_from_env_child"),
+        None => "search_from_env_child".to_owned(),
+    };
     let output = std::process::Command::new(std::env::current_exe().unwrap())
-        .args(["--ignored", "--exact", "search_from_env_child"])
+        .args(["--ignored", "--exact", &child])
         .env("AMENT_PREFIX_PATH", value)
         .output()
         .unwrap();
