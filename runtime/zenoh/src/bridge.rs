@@ -734,12 +734,16 @@ impl<T: Packet + Serialize> Outlet<T> {
             }
             OutletInput::Last(port) => {
                 if let Some(packet) = port.take_new() {
+                    let before = sent.load(Ordering::Acquire);
+                    wire.send_numbered(epoch, sent, &packet);
                     // The latest, for a reader that asks (a late joiner, a link that
-                    // came back): numbered 0, not part of the stream.
-                    if let Ok(bytes) = encode(&(epoch, 0u64, &packet)) {
+                    // came back), with the number it went with (a reader that had
+                    // it from the stream drops it), or 0 when Zenoh did not take it.
+                    let number = sent.load(Ordering::Acquire);
+                    let number = if number > before { number } else { 0 };
+                    if let Ok(bytes) = encode(&(epoch, number, &packet)) {
                         *lock(&self.posted) = Some(bytes);
                     }
-                    wire.send_numbered(epoch, sent, &packet);
                 }
             }
             OutletInput::Poster(port) => {
@@ -831,7 +835,50 @@ enum InletOutput<T> {
     Poster(PosterOut<T>),
 }
 
-pub(crate) type DeliverFn = Arc<dyn Fn(&[u8]) + Send + Sync>;
+/// What delivers one message of a bridge key, and how it came.
+pub(crate) type DeliverFn = Arc<dyn Fn(&[u8], Via) + Send + Sync>;
+
+/// How a message reached an inlet: on the key's stream (numbered, counted by the
+/// ledger), or as the answer to a query (a pull, or the current value of a `last`
+/// or poster outlet), which the ledger does not count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Via {
+    Stream,
+    Answer,
+}
+
+/// The numbered packet an inlet of data delivered last, per outlet epoch: the
+/// current value of a `last` outlet, asked for when the inlet starts or when an
+/// outlet appears, may be one the stream brought already or will bring, and a
+/// reader gets each packet once.
+#[derive(Default)]
+struct Delivered {
+    newest: Option<(u64, u64)>,
+}
+
+impl Delivered {
+    /// Whether message `seq` of `epoch`, come `via`, is one not delivered yet (and
+    /// now taken as delivered). On the stream, only a repeat of the number an
+    /// answer delivered is dropped (what else the stream brings is the ledger's to
+    /// count); an answer is dropped when the stream, or another answer, delivered
+    /// that number or a newer one of its epoch already.
+    fn fresh(&mut self, epoch: u64, seq: u64, via: Via) -> bool {
+        if seq == 0 {
+            // A pull answer, or a value the outlet could not number: not part of
+            // the stream.
+            return true;
+        }
+        let fresh = match (via, self.newest) {
+            (Via::Stream, Some(newest)) => newest != (epoch, seq),
+            (Via::Answer, Some((e, s))) => e != epoch || seq > s,
+            (_, None) => true,
+        };
+        if fresh {
+            self.newest = Some((epoch, seq));
+        }
+        fresh
+    }
+}
 
 struct Inlet {
     spec: &'static Spec,
@@ -880,28 +927,33 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
     let gaps = Arc::clone(&ledger);
     let deliver: DeliverFn = match output {
-        InletOutput::Tick(port) => {
-            Arc::new(
-                move |bytes| match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
-                    Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
-                        "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
-                    )),
-                    Ok((epoch, seq, events)) => {
+        InletOutput::Tick(port) => Arc::new(move |bytes, via| {
+            match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
+                Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
+                    "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
+                )),
+                Ok((epoch, seq, events)) => {
+                    if via == Via::Stream {
                         gaps.received(epoch, seq);
-                        for _ in 0..events {
-                            port.emit();
-                        }
                     }
-                    Err(error) => lost(Chain(&error).to_string()),
-                },
-            )
-        }
+                    for _ in 0..events {
+                        port.emit();
+                    }
+                }
+                Err(error) => lost(Chain(&error).to_string()),
+            }
+        }),
         InletOutput::Data(port) => {
+            let delivered = Mutex::new(Delivered::default());
             Arc::new(
-                move |bytes| match codec::decode::<Numbered<T>>(bytes, max_payload) {
+                move |bytes, via| match codec::decode::<Numbered<T>>(bytes, max_payload) {
                     Ok((epoch, seq, packet)) => {
-                        gaps.received(epoch, seq);
-                        port.send(packet);
+                        if via == Via::Stream {
+                            gaps.received(epoch, seq);
+                        }
+                        if lock(&delivered).fresh(epoch, seq, via) {
+                            port.send(packet);
+                        }
                     }
                     Err(error) => lost(Chain(&error).to_string()),
                 },
@@ -910,7 +962,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
             Arc::new(
-                move |bytes| match codec::decode::<Posted<T>>(bytes, max_payload) {
+                move |bytes, _via| match codec::decode::<Posted<T>>(bytes, max_payload) {
                     Ok((epoch, seq, value)) => {
                         let mut newest = lock(&newest);
                         let newer = match *newest {
@@ -976,7 +1028,7 @@ pub(crate) fn ask_current(
         .get(key.to_owned())
         .callback(move |reply| {
             if let Ok(sample) = reply.result() {
-                deliver(&sample.payload().to_bytes());
+                deliver(&sample.payload().to_bytes(), Via::Answer);
             }
         })
         .wait()
@@ -1123,7 +1175,7 @@ impl Automaton for Inlet {
             .declare_subscriber(self.key.clone())
             .callback(move |sample| {
                 shared.received(sample.payload());
-                deliver(&sample.payload().to_bytes());
+                deliver(&sample.payload().to_bytes(), Via::Stream);
             })
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
@@ -1196,7 +1248,7 @@ impl Automaton for Inlet {
         };
         while let Ok(reply) = replies.recv() {
             match reply.result() {
-                Ok(sample) => (self.deliver)(&sample.payload().to_bytes()),
+                Ok(sample) => (self.deliver)(&sample.payload().to_bytes(), Via::Answer),
                 Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
                     "pull answered with an error: {}{held}",
@@ -1205,5 +1257,42 @@ impl Automaton for Inlet {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Delivered, Via};
+
+    #[test]
+    fn the_current_value_of_a_last_outlet_is_delivered_once_whichever_way_comes_first() {
+        // The stream brought 1; the answer to the start's question is 1 as well.
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(7, 1, Via::Stream));
+        assert!(!delivered.fresh(7, 1, Via::Answer), "a repeat");
+        assert!(delivered.fresh(7, 2, Via::Stream));
+        // An answer older than what the stream brought is stale.
+        assert!(!delivered.fresh(7, 1, Via::Answer), "stale");
+        // The answer came first: the stream's copy is the repeat.
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(7, 5, Via::Answer), "a late joiner's value");
+        assert!(!delivered.fresh(7, 5, Via::Stream), "a repeat");
+        assert!(delivered.fresh(7, 6, Via::Stream));
+        // Another outlet epoch (the producer started again) is news.
+        assert!(delivered.fresh(8, 1, Via::Answer));
+        // Unnumbered answers (pulls) are never repeats.
+        assert!(delivered.fresh(8, 0, Via::Answer));
+        assert!(delivered.fresh(8, 0, Via::Answer));
+    }
+
+    #[test]
+    fn the_stream_drops_only_an_exact_repeat_of_the_last_number() {
+        // What else the stream brings (a stray old number, another epoch's) is the
+        // ledger's to count, and is delivered as before.
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(7, 10, Via::Stream));
+        assert!(delivered.fresh(7, 3, Via::Stream));
+        assert!(delivered.fresh(9, 3, Via::Stream));
+        assert!(!delivered.fresh(9, 3, Via::Stream));
     }
 }

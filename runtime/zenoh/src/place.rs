@@ -24,7 +24,7 @@ use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
 use crate::agent::{Instantiate, Pump, RemoteInput, RemoteTiming, Wire, instantiate};
-use crate::bridge::DeliverFn;
+use crate::bridge::{DeliverFn, Via};
 use crate::{ControlReply, Error, Node, keys};
 
 /// How long an instantiation, a command or a snapshot query waits for the other node
@@ -530,7 +530,7 @@ impl End {
                     .declare_subscriber(output.key.clone())
                     .callback(move |sample| {
                         counters.received(sample.payload());
-                        deliver(&sample.payload().to_bytes());
+                        deliver(&sample.payload().to_bytes(), Via::Stream);
                     })
                     .wait()
                     .map_err(Error::zenoh("subscribe to a remote output"))?,
@@ -778,9 +778,9 @@ impl End {
 /// `deliver`, which also wakes the proxy when a message was lost (it then shows the
 /// loss on its monitor at once).
 fn waking_on_loss(deliver: DeliverFn, losses: TickIn, shared: Arc<Shared>) -> DeliverFn {
-    Arc::new(move |bytes: &[u8]| {
+    Arc::new(move |bytes: &[u8], via| {
         let before = losses.overflows();
-        deliver(bytes);
+        deliver(bytes, via);
         if losses.overflows() != before {
             shared.changed.store(true, Ordering::Release);
             shared.ring();
@@ -936,7 +936,7 @@ impl End {
                     .get(output.key.clone())
                     .callback(move |reply| {
                         if let Ok(sample) = reply.result() {
-                            deliver(&sample.payload().to_bytes());
+                            deliver(&sample.payload().to_bytes(), Via::Answer);
                         }
                     })
                     .wait();
@@ -985,7 +985,7 @@ impl End {
         // so that one request gets one answer, and the proxy's thread goes on at once.
         match replies.recv().map(|reply| reply.into_result()) {
             Ok(Ok(sample)) => {
-                (output.deliver)(&sample.payload().to_bytes());
+                (output.deliver)(&sample.payload().to_bytes(), Via::Answer);
                 Ok(())
             }
             Ok(Err(error)) => Err(Error::ErrorReply {
