@@ -10,8 +10,9 @@
 //! the rest of a delivery. So the thread that owns the output (its component's
 //! thread, or its execution group's: [`OutputCore::claim_sends`]) sends without it:
 //!
-//! - it keeps its own copy of the snapshot, with the snapshot's version, in a
-//!   thread-local cache (so the copy lives as long as it uses it);
+//! - it keeps its own copy of the snapshot, with the snapshot's version, in the
+//!   sinks (`owned`: only the owner thread touches it, and never while it is
+//!   delivering from it);
 //! - each send marks the output `busy` (a plain store), then reads the version; if
 //!   it is the cached one, it delivers to the cached snapshot and clears `busy`;
 //!   otherwise it clears `busy` and sends under the read lock, as any other thread
@@ -34,14 +35,22 @@
 //!
 //! Only the owner uses `busy` (a single writer, so plain stores suffice); a send
 //! nested in another on the same output (a converter sending on the output it is
-//! delivering for) takes the read lock. A snapshot the owner cached stays alive until
-//! its next send on the output or the end of its thread.
+//! delivering for) takes the read lock, and does not replace the owner's copy. A
+//! snapshot the owner cached stays alive until its next send on the output or the
+//! end of the output.
 
-use std::any::Any;
-use std::cell::{Cell, RefCell};
+#![allow(
+    unsafe_code,
+    reason = "the owner's copy of the snapshot is shared by the protocol above, each use argued at its block"
+)]
+
+use std::cell::{Cell, UnsafeCell};
 use std::sync::atomic::{compiler_fence, fence};
 
 use super::*;
+
+/// A snapshot and its version.
+type Versioned<T> = (u64, Arc<[Sink<T>]>);
 
 /// The sinks of a data output (see the module's doc).
 pub(crate) struct Sinks<T> {
@@ -50,8 +59,10 @@ pub(crate) struct Sinks<T> {
     version: AtomicU64,
     /// Set by the owner thread while it delivers to its cached snapshot.
     busy: AtomicBool,
-    /// Where the owner thread's cache keeps this output's snapshot (its index there).
-    slot: AtomicUsize,
+    /// The owner thread's copy of the snapshot and its version. Touched only by the
+    /// thread whose token is the output's `sender` (a claim that never changes),
+    /// read while it delivers, written only when it is not delivering from it.
+    owned: UnsafeCell<Option<Versioned<T>>>,
     /// How many changes found the owner delivering and waited for it.
     #[cfg(test)]
     waited: AtomicU64,
@@ -63,7 +74,7 @@ impl<T: Packet> Sinks<T> {
             list: RwLock::new(Arc::from([])),
             version: AtomicU64::new(0),
             busy: AtomicBool::new(false),
-            slot: AtomicUsize::new(usize::MAX),
+            owned: UnsafeCell::new(None),
             #[cfg(test)]
             waited: AtomicU64::new(0),
         }
@@ -136,23 +147,18 @@ impl<T: Packet> Sinks<T> {
         } else {
             Ordering::SeqCst
         });
-        let mut packet = Some(packet);
-        let _ = CACHE.try_with(|cache| {
-            let Ok(cache) = cache.try_borrow() else {
-                return;
-            };
-            let Some(entry) = cache.get(self.slot.load(Ordering::Relaxed)) else {
-                return;
-            };
-            if entry.sinks != self.id() || entry.version != version {
-                return;
-            }
-            if let (Some(list), Some(packet)) =
-                (entry.list.downcast_ref::<Arc<[Sink<T>]>>(), packet.take())
-            {
+        // SAFETY: only the owner thread gets here (its token is the sender's), and
+        // not from inside one of its own deliveries on this output (`busy` was
+        // clear): the only writer of `owned` is this thread, which writes it only
+        // while `busy` is clear, so no write happens while this reference lives.
+        let owned = unsafe { &*self.owned.get() };
+        let packet = match owned {
+            Some((cached, list)) if *cached == version => {
                 dispatch(list, packet);
+                None
             }
-        });
+            _ => Some(packet),
+        };
         self.busy.store(false, Ordering::Release);
         packet
     }
@@ -164,54 +170,29 @@ impl<T: Packet> Sinks<T> {
         let version = self.version.load(Ordering::Relaxed);
         dispatch(&list, packet);
         let sender = core.sender.load(Ordering::Relaxed);
-        if sender == 0 || sender != token() {
+        // A send nested in the owner's delivery from its copy (`busy`) leaves the
+        // copy alone: the outer delivery reads it.
+        if sender == 0 || sender != token() || self.busy.load(Ordering::Relaxed) {
             return;
         }
         let snapshot = Arc::clone(&list);
         drop(list);
-        let replaced = CACHE.try_with(|cache| {
-            let Ok(mut cache) = cache.try_borrow_mut() else {
-                return None;
-            };
-            let entry = Cached {
-                sinks: self.id(),
-                version,
-                list: Box::new(snapshot),
-            };
-            let slot = self.slot.load(Ordering::Relaxed);
-            match cache.get_mut(slot) {
-                Some(cached) if cached.sinks == self.id() => Some(std::mem::replace(cached, entry)),
-                _ => {
-                    self.slot.store(cache.len(), Ordering::Relaxed);
-                    cache.push(entry);
-                    None
-                }
-            }
-        });
-        // (The replaced snapshot is dropped outside the cache's borrow: dropping it
-        // may drop the last handle of an input, and its packets.)
+        // SAFETY: this is the owner thread (its token is the sender's) and it is
+        // not delivering from its copy (`busy` is clear; it is set only by this
+        // thread): no other reference to `owned` exists while this one lives.
+        let replaced = unsafe { &mut *self.owned.get() }.replace((version, snapshot));
+        // (The replaced snapshot is dropped after the write: dropping it may drop the
+        // last handle of an input, and its packets, whose drop code may send here.)
         drop(replaced);
     }
-
-    /// This output's key in its owner's cache (the sinks' address, unique while the
-    /// output lives): the entry at `slot` was pushed by this output's owner for it,
-    /// and the key checks it once more.
-    fn id(&self) -> usize {
-        std::ptr::from_ref(self).addr()
-    }
 }
 
-/// One snapshot in a thread's cache.
-struct Cached {
-    sinks: usize,
-    version: u64,
-    /// The `Arc<[Sink<T>]>`.
-    list: Box<dyn Any>,
-}
+// SAFETY: `owned` is touched by one thread only (the module's doc and the uses'
+// comments); the rest is `Sync` as the snapshot's `RwLock` and atomics are, for
+// sinks that may be shared between threads.
+unsafe impl<T> Sync for Sinks<T> where Arc<[Sink<T>]>: Send + Sync {}
 
 thread_local! {
-    /// The snapshots of the outputs this thread owns.
-    static CACHE: RefCell<Vec<Cached>> = const { RefCell::new(Vec::new()) };
     /// This thread's token (0: not drawn yet).
     static TOKEN: Cell<u64> = const { Cell::new(0) };
 }
@@ -432,5 +413,42 @@ mod tests {
         thread.join().expect("owner");
         assert_eq!(rig.b.drain().collect::<Vec<_>>(), [1, 2]);
         assert!(rig.a.is_empty());
+    }
+
+    #[test]
+    fn a_send_nested_in_the_owners_delivery_goes_under_the_lock_and_keeps_the_owners_copy() {
+        // The converter to `a` sends packet 10 on the output it is delivering for,
+        // when it converts packet 2: once while the owner delivers under the lock
+        // (packet 1 caches the snapshot), once from its copy (packet 2).
+        let (out, a) = (
+            DataOut::<u64>::new(),
+            FifoIn::new(16, OverflowPolicy::Reject),
+        );
+        let again = Mutex::new(None::<DataOut<u64>>);
+        let nested = Arc::new(again);
+        let inner = Arc::clone(&nested);
+        let convert = move |packet: &u64| {
+            if *packet == 2
+                && let Some(out) = inner.lock().expect("the output").as_ref()
+            {
+                out.send(10);
+            }
+            *packet
+        };
+        assert!(link_converted::<u64, u64>(
+            &out.erased(),
+            &a.erased(),
+            Arc::new(convert)
+        ));
+        *nested.lock().expect("the output") = Some(out.clone());
+        let (send, thread) = owner(&out);
+        for packet in [1, 2, 3, 2] {
+            send.send(packet).expect("owner alive");
+        }
+        drop(send);
+        thread.join().expect("owner");
+        // The nested packet arrives before the one whose conversion sent it.
+        assert_eq!(a.drain().collect::<Vec<u64>>(), [1, 10, 2, 3, 10, 2]);
+        nested.lock().expect("the output").take();
     }
 }
