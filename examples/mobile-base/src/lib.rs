@@ -120,16 +120,17 @@ pub struct Options {
 /// `clock` (`coolbot::System::with_clock`), so do the simulated platform's uptime,
 /// faults and processor shortage ([`world::Platform::with_clock`]), the run's
 /// duration and the stop request; each turn of the run advances the clock by `step`
-/// (`coolbot::VirtualClock::advance`: every timer due by then has fired and every
-/// component has settled when it returns) instead of sleeping. What the run does
+/// ([`world::Platform::advance`]: every timer due by then has fired and every
+/// component has settled when it returns, but for a section taking the simulated
+/// shortage's processor time) instead of sleeping. What the run does
 /// then depends on no real time, so not on the machine's load. Not with `node` or
 /// `drivers` (other processes and the network keep real time).
 #[derive(Clone)]
 pub struct VirtualTime {
     /// The clock.
     pub clock: Arc<coolbot::VirtualClock>,
-    /// How far each turn of the run advances it (the smallest period of the robot's
-    /// components, 10 ms, keeps every period's timing).
+    /// How far each turn of the run advances it (10 ms, half the smallest period of
+    /// the robot's components, keeps every period's timing).
     pub step: Duration,
     /// Called after each step with the run's time (since the start): a test's way to
     /// act at a time of the run (a stop request at 1.5 s: [`Options::stop`]).

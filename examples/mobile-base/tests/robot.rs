@@ -14,8 +14,8 @@ use coolbot::{Clock, Handle, Monitor, State, Step, VirtualClock};
 use mobile_base::world::{Platform, SensorFault, World};
 use mobile_base::{Display, Options, Summary, VirtualTime};
 
-/// How far the tests advance the virtual clock at a time: the smallest period of the
-/// robot's components (the base's supervisor).
+/// How far the tests advance the virtual clock at a time: half the smallest period of
+/// the robot's components (20 ms: the motion controller's, `teleop`'s).
 const STEP: Duration = Duration::from_millis(10);
 
 /// A run of the robot on a virtual clock (the options' own, or a new one advanced
