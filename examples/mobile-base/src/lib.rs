@@ -109,6 +109,59 @@ pub struct Options {
     /// The robot is then on the network as `node`, or as the node `robot` on a
     /// loopback port of its own.
     pub drivers: Option<Drivers>,
+    /// Run on a virtual clock instead of the real one (tests): the robot's system, the
+    /// simulated platform and the run itself read that clock only, and the run moves it
+    /// forward itself, one step at a time, where it would otherwise sleep (see
+    /// [`VirtualTime`]). `None` (the binary): the real clock.
+    pub virtual_time: Option<VirtualTime>,
+}
+
+/// A run on a virtual clock ([`Options::virtual_time`]): the robot's system runs on
+/// `clock` (`coolbot::System::with_clock`), so do the simulated platform's uptime,
+/// faults and processor shortage ([`world::Platform::with_clock`]), the run's
+/// duration and the stop request; each turn of the run advances the clock by `step`
+/// ([`world::Platform::advance`]: every timer due by then has fired and every
+/// component has settled when it returns, but for a section taking the simulated
+/// shortage's processor time) instead of sleeping. What the run does
+/// then depends on no real time, so not on the machine's load. Not with `node` or
+/// `drivers` (other processes and the network keep real time).
+#[derive(Clone)]
+pub struct VirtualTime {
+    /// The clock.
+    pub clock: Arc<coolbot::VirtualClock>,
+    /// How far each turn of the run advances it (10 ms, half the smallest period of
+    /// the robot's components, keeps every period's timing).
+    pub step: Duration,
+    /// Called after each step with the run's time (since the start): a test's way to
+    /// act at a time of the run (a stop request at 1.5 s: [`Options::stop`]).
+    pub after_step: Option<Arc<dyn Fn(Duration) + Send + Sync>>,
+}
+
+impl VirtualTime {
+    /// A new virtual clock, advanced 10 ms a turn.
+    pub fn new() -> VirtualTime {
+        VirtualTime {
+            clock: coolbot::VirtualClock::new(),
+            step: Duration::from_millis(10),
+            after_step: None,
+        }
+    }
+}
+
+impl Default for VirtualTime {
+    fn default() -> Self {
+        VirtualTime::new()
+    }
+}
+
+impl fmt::Debug for VirtualTime {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("VirtualTime")
+            .field("clock", &self.clock)
+            .field("step", &self.step)
+            .field("after_step", &self.after_step.is_some())
+            .finish()
+    }
 }
 
 impl Default for Options {
@@ -132,6 +185,7 @@ impl Default for Options {
             load: None,
             node: None,
             drivers: None,
+            virtual_time: None,
         }
     }
 }
@@ -592,7 +646,9 @@ fn start_bag(
     use coolbot::record::{RecordFormat, Recorder};
     use generated::types::{LaserScan, Odometry, RosTwist};
     let system = robot.system();
-    let mut recorder = Recorder::new().format(RecordFormat::Ros2);
+    let mut recorder = Recorder::new()
+        .format(RecordFormat::Ros2)
+        .clock(system.clock().clone());
     recorder
         .tap_ros_on::<LaserScan>(system, topics::SCAN_PORT, topics::SCAN)
         .map_err(text)?;
@@ -615,7 +671,7 @@ fn start_recording(
     use coolbot::record::Recorder;
     use generated::types::{Pose2D, RangeScan};
     let system = robot.system();
-    let mut recorder = Recorder::new();
+    let mut recorder = Recorder::new().clock(system.clock().clone());
     recorder
         .tap::<Pose2D>(system, RECORDED_PORTS[0])
         .map_err(text)?;
@@ -907,9 +963,19 @@ fn robot_node(options: &Options) -> Result<NodeOptions, String> {
 /// it down and reports.
 pub fn run(options: &Options) -> Result<Summary, String> {
     let fault = sensor_fault(options);
-    let platform = Arc::new(
-        Platform::new(World::example(), World::example_start(), fault).with_overload(options.load),
-    );
+    let virtual_time = options.virtual_time.as_ref();
+    if virtual_time.is_some() && (options.node.is_some() || options.drivers.is_some()) {
+        return Err(
+            "a run on a virtual clock has no node and no drivers process: they keep real time"
+                .to_owned(),
+        );
+    }
+    let mut platform =
+        Platform::new(World::example(), World::example_start(), fault).with_overload(options.load);
+    if let Some(time) = virtual_time {
+        platform = platform.with_clock(coolbot::Clock::virtual_clock(&time.clock));
+    }
+    let platform = Arc::new(platform);
     let setup = Setup {
         noise: options.noise,
         seed: options.seed,
@@ -1116,7 +1182,19 @@ pub fn run(options: &Options) -> Result<Summary, String> {
                 let _ = out.flush();
             }
         }
-        std::thread::sleep(Duration::from_millis(20));
+        match virtual_time {
+            None => std::thread::sleep(Duration::from_millis(20)),
+            // The run's own turn moves the time (and waits for the robot to settle).
+            Some(time) => {
+                if let Err(error) = platform.advance(time.step) {
+                    let _ = robot.shutdown();
+                    return Err(format!("the robot on its virtual clock: {error}"));
+                }
+                if let Some(after_step) = &time.after_step {
+                    after_step(platform.uptime().saturating_sub(started));
+                }
+            }
+        }
     };
 
     if display == Display::Table {

@@ -299,6 +299,8 @@ fn main() -> ExitCode {
             }
         }),
         drivers: None,
+        // The binary runs on the real clock.
+        virtual_time: None,
         stop: process.stop_flag(),
     };
     if args.serve {

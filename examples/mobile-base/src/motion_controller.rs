@@ -54,7 +54,8 @@ impl MotionController {
     /// One integration step towards `target` under the speed, acceleration and turn
     /// limits; publishes the odometry.
     fn step(&mut self, cx: &mut Cx<'_>, target: Twist) -> coolbot::SectionResult {
-        let now = Instant::now();
+        // The run's clock (a virtual one in tests), as the runtime's periods are.
+        let now = self.platform.now();
         let gap = self
             .last_step
             .map_or(Duration::ZERO, |last| now.duration_since(last));

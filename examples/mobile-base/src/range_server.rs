@@ -103,12 +103,10 @@ impl RangeServer {
         // The simulated processor shortage (`--load`): processing the beams takes
         // time, whatever the machine's real load.
         let cost = self.platform.processing_cost(beams);
-        if !cost.is_zero() {
-            std::thread::sleep(cost);
-        }
+        self.platform.spend(cx.rt.component_name(), cost);
         let scan = sensing::scan(stamp, &readings);
         cx.vars.nearest = sensing::nearest(&scan);
-        let now = Instant::now();
+        let now = self.platform.now();
         let since = self.published.map(|at| now.duration_since(at));
         if sensing::publish_due(since, cx.vars.frequency, cx.rt.period()) {
             self.published = Some(now);

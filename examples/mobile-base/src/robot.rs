@@ -281,6 +281,8 @@ robot_parts!(isolated_robot, isolated_base);
 /// monitoring ports at each level.
 #[derive(Debug)]
 pub struct Robot {
+    /// The simulated platform its components share.
+    platform: Arc<Platform>,
     system: System,
     ranges: Ranges,
     /// The top compound's control and monitoring ports.
@@ -300,7 +302,9 @@ fn text(error: impl std::error::Error) -> String {
 
 impl Robot {
     /// Builds the robot, starts it, applies `setup` through the control ports and sets
-    /// it running (`ready`, then `run`).
+    /// it running (`ready`, then `run`). Its system runs on the platform's clock
+    /// ([`Platform::with_clock`]: a virtual clock in tests, which the test advances
+    /// with [`Platform::advance`]).
     pub fn start(platform: &Arc<Platform>, setup: &Setup) -> Result<Robot, String> {
         let robot = Robot::ready(platform, setup)?;
         if let Err(error) = robot.run() {
@@ -330,7 +334,9 @@ impl Robot {
             Ranges::Drivers => isolated_robot::component(ROBOT, parts),
         }
         .map_err(text)?;
-        let mut system = System::new();
+        // The platform's clock is the system's: on a virtual clock (tests) every
+        // component, at every level, and the simulated platform read the same time.
+        let mut system = System::with_clock(platform.clock().clone());
         let robot = system.add(built).map_err(text)?;
         let instance = |path: &str| {
             robot
@@ -348,6 +354,13 @@ impl Robot {
                 "the robot did not start: {}",
                 started.error.unwrap_or_else(|| started.state.to_string())
             ));
+        }
+        // The components that share a thread (an execution group) wait together for a
+        // section that takes the platform's processor time (`Platform::spend`).
+        for path in [format!("{BASE}.{RANGES}"), MAPPER.to_owned()] {
+            if let Some(group) = robot.instance(&path).and_then(|h| h.snapshot().group) {
+                platform.share_thread(&group.members);
+            }
         }
 
         // The run's settings, through the control ports while the robot is `ready`.
@@ -377,6 +390,7 @@ impl Robot {
             }
         }
         Ok(Robot {
+            platform: Arc::clone(platform),
             system,
             ranges: setup.ranges,
             robot,
@@ -419,6 +433,8 @@ impl Robot {
     /// Shuts the robot down: `Robot` goes `dead`, taking its instances (and theirs)
     /// with it.
     pub fn shutdown(self) -> Report {
+        // A section taking the platform's processor time on a virtual clock returns.
+        self.platform.release();
         self.system.shutdown()
     }
 }

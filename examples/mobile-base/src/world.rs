@@ -11,6 +11,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
+use coolbot::{Clock, NotSettled, VirtualClock};
+
 /// The robot's radius (m): it is a disc.
 pub const ROBOT_RADIUS: f64 = 0.18;
 /// Number of infrared beams, fanned over the front half.
@@ -367,12 +369,33 @@ pub struct Truth {
 #[derive(Debug)]
 pub struct Platform {
     world: World,
+    /// The run's clock: the real one, or the virtual clock the robot's system runs on
+    /// (tests).
+    clock: Clock,
     epoch: Instant,
     fault: Option<SensorFault>,
     overload: Option<Overload>,
     /// An overload switched on by hand ([`Platform::set_overloaded`]).
     overloaded: AtomicBool,
     truth: Mutex<Truth>,
+    /// On a virtual clock: the sections taking processor time now ([`Platform::spend`]).
+    spending: Mutex<Spending>,
+}
+
+/// On a virtual clock, the sections that take processor time ([`Platform::spend`]):
+/// each waits until the clock reaches the end of its cost, and the components on its
+/// thread with it.
+#[derive(Debug, Default)]
+struct Spending {
+    /// The component spending and the time its cost ends.
+    now: Vec<(String, Instant)>,
+    /// The components sharing a thread (an execution group), by member.
+    threads: Vec<Vec<String>>,
+    /// Set once the robot shuts down: nobody waits any more.
+    released: bool,
+    /// How long the components last took to settle ([`Platform::advance`] starts
+    /// from half of it: a loaded machine is slower).
+    settle_wait: Duration,
 }
 
 /// What one call of [`Platform::drive`] did.
@@ -393,6 +416,7 @@ impl Platform {
         let front = world.front_clearance(start);
         Platform {
             world,
+            clock: Clock::real(),
             epoch: Instant::now(),
             fault,
             overload: None,
@@ -404,6 +428,7 @@ impl Platform {
                 min_front_clearance: front,
                 contacts: 0,
             }),
+            spending: Mutex::new(Spending::default()),
         }
     }
 
@@ -413,10 +438,145 @@ impl Platform {
         self
     }
 
+    /// The same platform on `clock`: its uptime, its fault and shortage windows and
+    /// the time its shortage costs ([`Platform::spend`]) are that clock's, and the robot
+    /// built on it runs its system on it ([`crate::robot::Robot::start`]). On a virtual
+    /// clock the platform reads no real time: a test advances it.
+    pub fn with_clock(mut self, clock: Clock) -> Platform {
+        self.epoch = clock.now();
+        self.clock = clock;
+        self
+    }
+
+    /// The run's clock (the real one unless [`Platform::with_clock`] said otherwise).
+    pub fn clock(&self) -> &Clock {
+        &self.clock
+    }
+
+    /// The time now on the run's clock.
+    pub fn now(&self) -> Instant {
+        self.clock.now()
+    }
+
+    /// Takes `cost` of processor time in the section of `component` under way
+    /// ([`Platform::processing_cost`]). On the real clock the section sleeps for it. On
+    /// a virtual clock it waits until the clock has moved on by `cost`
+    /// ([`Platform::advance`] moves it, and does not wait for the section meanwhile):
+    /// the runtime measures the section that long, the components on its thread wait
+    /// for it, and the others run on, as they would on the real clock.
+    pub fn spend(&self, component: &str, cost: Duration) {
+        if cost.is_zero() {
+            return;
+        }
+        let Some(clock) = self.clock.as_virtual() else {
+            std::thread::sleep(cost);
+            return;
+        };
+        let until = clock.now() + cost;
+        {
+            let mut spending = self.spending();
+            if spending.released {
+                return;
+            }
+            spending.now.push((component.to_owned(), until));
+        }
+        // The clock's time is read until it gets there (it moves from another thread).
+        while clock.now() < until && !self.spending().released {
+            std::thread::sleep(Duration::from_micros(50));
+        }
+        let mut spending = self.spending();
+        if let Some(at) = spending.now.iter().position(|(name, _)| name == component) {
+            spending.now.swap_remove(at);
+        }
+    }
+
+    fn spending(&self) -> MutexGuard<'_, Spending> {
+        self.spending.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// `members` run on one thread (an execution group): while one of them takes
+    /// processor time ([`Platform::spend`]), the others wait for it.
+    pub fn share_thread(&self, members: &[String]) {
+        let mut spending = self.spending();
+        if !spending.threads.iter().any(|t| t == members) {
+            spending.threads.push(members.to_vec());
+        }
+    }
+
+    /// The robot is shutting down: a section taking processor time on a virtual clock
+    /// returns at once (the clock no longer moves).
+    pub fn release(&self) {
+        self.spending().released = true;
+    }
+
+    /// On a virtual clock: moves it on by `by` (`VirtualClock::advance`) and waits
+    /// until every component on it has settled, except those whose section is still
+    /// taking processor time ([`Platform::spend`]) at the new time, and the members of
+    /// their thread. `Ok` at once on the real clock.
+    pub fn advance(&self, by: Duration) -> Result<(), NotSettled> {
+        let Some(clock) = self.clock.as_virtual() else {
+            return Ok(());
+        };
+        // How long to wait for the components to settle before looking at who is
+        // busy: short at first (a section taking processor time never settles), longer
+        // each time some other component is still busy (a loaded machine).
+        let mut wait = (self.spending().settle_wait / 2).max(Duration::from_millis(1));
+        let deadline = Instant::now() + coolbot::clock::SETTLE_TIMEOUT;
+        let mut result = clock.advance_with_timeout(by, wait);
+        loop {
+            let Err(not_settled) = result else {
+                self.spending().settle_wait = wait;
+                return Ok(());
+            };
+            if not_settled
+                .busy
+                .iter()
+                .all(|name| self.busy_spending(clock, name))
+            {
+                self.spending().settle_wait = wait;
+                return Ok(());
+            }
+            if Instant::now() >= deadline {
+                return Err(NotSettled {
+                    timeout: coolbot::clock::SETTLE_TIMEOUT,
+                    ..not_settled
+                });
+            }
+            // Once more at the same time (every component looks again and settles),
+            // waiting longer.
+            wait = (wait * 2).min(Duration::from_millis(500));
+            result = clock.advance_with_timeout(Duration::ZERO, wait);
+        }
+    }
+
+    /// Whether `component` is taking processor time past the clock's time now, or
+    /// shares its thread with one that is.
+    fn busy_spending(&self, clock: &VirtualClock, component: &str) -> bool {
+        let now = clock.now();
+        let spending = self.spending();
+        spending.now.iter().any(|(name, until)| {
+            *until > now
+                && (name == component
+                    || spending.threads.iter().any(|members| {
+                        members.iter().any(|m| m == name) && members.iter().any(|m| m == component)
+                    }))
+        })
+    }
+
     /// Switches a simulated processor shortage on or off by hand (tests), besides the
     /// window given to [`Platform::with_overload`].
     pub fn set_overloaded(&self, on: bool) {
         self.overloaded.store(on, Ordering::Relaxed);
+        self.tell_idle(!on && !self.overloaded());
+    }
+
+    /// On a virtual clock, what the idle probe would say (`VirtualClock::set_idle`): no
+    /// spare time while the processor is short. (On the real clock the probe measures
+    /// it.)
+    fn tell_idle(&self, idle: bool) {
+        if let Some(clock) = self.clock.as_virtual() {
+            clock.set_idle(idle);
+        }
     }
 
     /// The simulated shortage window, if any.
@@ -434,9 +594,12 @@ impl Platform {
     }
 
     /// What processing a scan of `beams` beams costs now: nothing normally,
-    /// [`OVERLOAD_COST_PER_BEAM`] a beam while the processor is short.
+    /// [`OVERLOAD_COST_PER_BEAM`] a beam while the processor is short (on a virtual
+    /// clock, the idle probe is told meanwhile that the processor has no spare time).
     pub fn processing_cost(&self, beams: usize) -> Duration {
-        if self.overloaded() {
+        let overloaded = self.overloaded();
+        self.tell_idle(!overloaded);
+        if overloaded {
             OVERLOAD_COST_PER_BEAM * u32::try_from(beams).unwrap_or(u32::MAX)
         } else {
             Duration::ZERO
@@ -454,7 +617,7 @@ impl Platform {
 
     /// Time since the platform was powered on (the run's clock).
     pub fn uptime(&self) -> Duration {
-        self.epoch.elapsed()
+        self.clock.now().saturating_duration_since(self.epoch)
     }
 
     /// A copy of the ground truth.

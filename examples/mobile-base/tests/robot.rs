@@ -1,12 +1,38 @@
 //! The robot, headless: the same system the `mobile-base` binary runs, for a few
 //! seconds, with assertions on what it did.
+//!
+//! On a virtual clock (`coolbot::VirtualClock`): the robot's system, the simulated
+//! platform (its uptime, faults and processor shortage) and the run read that clock
+//! only, and the tests (or the run itself, `mobile_base::VirtualTime`) advance it a
+//! step at a time, so that what the robot does depends on no real time and not on the
+//! machine's load. Only the network test keeps the real clock: it waits for no timer.
 
+use std::sync::Arc;
 use std::time::Duration;
 
-use coolbot::{State, Step};
-use mobile_base::{Display, Options, Summary};
+use coolbot::{Clock, Handle, Monitor, State, Step, VirtualClock};
+use mobile_base::world::{Platform, SensorFault, World};
+use mobile_base::{Display, Options, Summary, VirtualTime};
 
+/// How far the tests advance the virtual clock at a time: half the smallest period of
+/// the robot's components (20 ms: the motion controller's, `teleop`'s).
+const STEP: Duration = Duration::from_millis(10);
+
+/// A run of the robot on a virtual clock (the options' own, or a new one advanced
+/// [`STEP`] a turn).
 fn run(options: Options) -> Summary {
+    let virtual_time = options.virtual_time.clone().unwrap_or(VirtualTime {
+        step: STEP,
+        ..VirtualTime::new()
+    });
+    run_on(Options {
+        virtual_time: Some(virtual_time),
+        ..options
+    })
+}
+
+/// A run of the robot as `options` say (on the real clock without `virtual_time`).
+fn run_on(options: Options) -> Summary {
     let summary = mobile_base::run(&Options {
         display: Display::Quiet,
         ..options
@@ -14,6 +40,51 @@ fn run(options: Options) -> Summary {
     .expect("the robot builds and starts");
     eprintln!("{summary}");
     summary
+}
+
+/// A simulated platform on a new virtual clock, with an optional sensor fault: the
+/// robot started on it runs on that clock, which the test advances
+/// (`Platform::advance`).
+fn platform(fault: Option<SensorFault>) -> Arc<Platform> {
+    let clock = VirtualClock::new();
+    let platform = Platform::new(World::example(), World::example_start(), fault)
+        .with_clock(Clock::virtual_clock(&clock));
+    Arc::new(platform)
+}
+
+/// One [`STEP`] of the platform's virtual clock.
+fn step(platform: &Platform) {
+    platform.advance(STEP).expect("the robot settles");
+}
+
+/// Advances the platform's clock [`STEP`] by step until `pred` holds for the monitor
+/// of `handle` (read from its own monitoring port after each step), for at most
+/// `limit` of virtual time, and returns that monitor.
+fn step_until(
+    platform: &Platform,
+    handle: &Handle,
+    pred: impl Fn(&Monitor) -> bool,
+    limit: Duration,
+) -> Option<Monitor> {
+    let until = platform.uptime() + limit;
+    loop {
+        let monitor = handle.snapshot();
+        if pred(&monitor) {
+            return Some(monitor);
+        }
+        if platform.uptime() >= until {
+            return None;
+        }
+        step(platform);
+    }
+}
+
+/// Advances the platform's clock by `by`, [`STEP`] by step.
+fn advance(platform: &Platform, by: Duration) {
+    let until = platform.uptime() + by;
+    while platform.uptime() < until {
+        step(platform);
+    }
 }
 
 fn assert_clean_shutdown(summary: &Summary) {
@@ -199,19 +270,25 @@ fn a_range_server_that_does_not_recover_is_retired_and_the_substitute_stays() {
 
 #[test]
 fn a_stop_request_ends_the_run_early_and_cleanly() {
-    let options = Options {
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    // The request comes 1.5 s into the run (as SIGINT would set the flag).
+    let request = Arc::clone(&stop);
+    let summary = run(Options {
         duration: Duration::from_secs(30),
         max_speed: Some(0.3),
         scan_rate: Some(10.0),
+        stop,
+        virtual_time: Some(VirtualTime {
+            step: STEP,
+            after_step: Some(Arc::new(move |at| {
+                if at >= Duration::from_millis(1500) {
+                    request.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            })),
+            ..VirtualTime::new()
+        }),
         ..Options::default()
-    };
-    let stop = options.stop.clone();
-    let stopper = std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_millis(1500));
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
     });
-    let summary = run(options);
-    stopper.join().unwrap();
     assert!(summary.interrupted);
     assert!(summary.elapsed < Duration::from_secs(10), "{summary}");
     // At 10 Hz, about 15 scans in 1.5 s (not the 30 of the default 20 Hz).
@@ -219,79 +296,72 @@ fn a_stop_request_ends_the_run_early_and_cleanly() {
     assert_clean_shutdown(&summary);
 }
 
-/// Waits (at most `timeout`) until `pred` holds for the monitor of the base's
-/// instance `name` (read live from its own monitoring port), and returns that monitor.
+/// Advances the platform's clock (at most `limit`) until `pred` holds for the monitor
+/// of the base's instance `name` (read from its own monitoring port), and returns that
+/// monitor.
 fn wait_member(
     robot: &mobile_base::robot::Robot,
+    platform: &Platform,
     name: &str,
-    pred: impl Fn(&coolbot::Monitor) -> bool,
-    timeout: Duration,
-) -> Option<coolbot::Monitor> {
+    pred: impl Fn(&Monitor) -> bool,
+    limit: Duration,
+) -> Option<Monitor> {
     let handle = robot.instance(&format!("base.{name}"))?;
-    let deadline = std::time::Instant::now() + timeout;
-    loop {
-        let monitor = handle.snapshot();
-        if pred(&monitor) {
-            return Some(monitor);
-        }
-        if std::time::Instant::now() >= deadline {
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    step_until(platform, &handle, pred, limit)
 }
 
 #[test]
 fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     use coolbot::{Command, Controllable};
     use mobile_base::robot::{MOTION, Robot, Setup};
-    use mobile_base::world::{Platform, World};
-    use std::sync::Arc;
 
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        None,
-    ));
+    let platform = platform(None);
     let setup = Setup {
         noise: Some(0.0),
         seed: 1,
         ..Setup::default()
     };
     let robot = Robot::start(&platform, &setup).expect("the robot starts");
-    let moving = |m: &coolbot::Monitor| {
+    let moving = |m: &Monitor| {
         m.state == State::Running
             && m.variables.iter().any(|(name, value)| {
                 name == "speed" && value.to_json()["linear"].as_f64().is_some_and(|v| v > 0.05)
             })
     };
-    wait_member(&robot, MOTION, moving, Duration::from_secs(3)).expect("the base gets going");
+    wait_member(&robot, &platform, MOTION, moving, Duration::from_secs(3))
+        .expect("the base gets going");
     // Freeze the whole robot mid-motion (the compounds pass `suspended` down to every
     // instance) for longer than the platform's set-point watchdog.
     robot
         .robot
         .command(Command::SetState(Controllable::Suspended))
         .unwrap();
-    std::thread::sleep(Duration::from_millis(400));
+    advance(&platform, Duration::from_millis(400));
     robot
         .robot
         .command(Command::SetState(Controllable::Running))
         .unwrap();
-    let trips = |m: &coolbot::Monitor| {
+    let trips = |m: &Monitor| {
         m.variables
             .iter()
             .find(|(name, _)| name == "watchdog_trips")
             .and_then(|(_, value)| value.to_json().as_u64())
             .unwrap_or(0)
     };
-    let after = wait_member(&robot, MOTION, |m| trips(m) >= 1, Duration::from_secs(2))
-        .expect("the watchdog exception was raised");
+    let after = wait_member(
+        &robot,
+        &platform,
+        MOTION,
+        |m| trips(m) >= 1,
+        Duration::from_secs(2),
+    )
+    .expect("the watchdog exception was raised");
     // The plan (`retry 3 every 20ms`) recovered: still running, no error, moving on.
     assert_eq!(after.state, State::Running);
     assert_eq!(after.error, None);
     // Moving on: the odometry gets past where the platform was just now.
     let distance = platform.truth().distance;
-    let odometry = |m: &coolbot::Monitor| {
+    let odometry = |m: &Monitor| {
         m.variables
             .iter()
             .find(|(name, _)| name == "distance")
@@ -300,6 +370,7 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     };
     wait_member(
         &robot,
+        &platform,
         MOTION,
         |m| odometry(m) > distance + 0.05,
         Duration::from_secs(3),
@@ -315,17 +386,11 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
 fn a_hold_stops_the_platform_and_its_release_drives_on() {
     use coolbot::{Command, MonitorEvent, Value};
     use mobile_base::robot::{MOTION, Robot, Setup};
-    use mobile_base::world::{Platform, World};
-    use std::sync::Arc;
 
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        None,
-    ));
+    let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let motion = robot.instance("base.motion").expect("base.motion");
-    let odometry = |m: &coolbot::Monitor| {
+    let odometry = |m: &Monitor| {
         m.variables
             .iter()
             .find(|(name, _)| name == "distance")
@@ -334,6 +399,7 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
     };
     wait_member(
         &robot,
+        &platform,
         MOTION,
         |m| odometry(m) > 0.05,
         Duration::from_secs(5),
@@ -347,19 +413,23 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
         .base
         .command(Command::Set("hold".to_owned(), Value::Bool(true)))
         .unwrap();
-    robot
-        .base
-        .wait_for(
-            |m| m.user_state.as_deref() == Some("stopped"),
-            Duration::from_secs(5),
-        )
-        .expect("the base stops");
-    motion
-        .wait_state(State::Suspended, Duration::from_secs(5))
-        .expect("the motion controller is suspended");
+    step_until(
+        &platform,
+        &robot.base,
+        |m| m.user_state.as_deref() == Some("stopped"),
+        Duration::from_secs(5),
+    )
+    .expect("the base stops");
+    step_until(
+        &platform,
+        &motion,
+        |m| m.state == State::Suspended,
+        Duration::from_secs(5),
+    )
+    .expect("the motion controller is suspended");
     let commanded = |command: &str| {
         let command = command.to_owned();
-        move |m: &coolbot::Monitor| {
+        move |m: &Monitor| {
             m.supervision.iter().any(|s| {
                 s.instance == MOTION
                     && s.step
@@ -369,13 +439,19 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
             })
         }
     };
-    robot
-        .base
-        .wait_for(commanded("suspend"), Duration::from_secs(5))
-        .expect("the command is a step on the base's monitoring port");
+    step_until(
+        &platform,
+        &robot.base,
+        commanded("suspend"),
+        Duration::from_secs(5),
+    )
+    .expect("the command is a step on the base's monitoring port");
     // Suspended, the motion controller runs no section: the platform does not move
-    // (the ground truth is what it drove; a suspended controller drives nothing).
+    // (the ground truth is what it drove; a suspended controller drives nothing),
+    // however long it is held.
     let held_at = platform.truth().distance;
+    advance(&platform, Duration::from_secs(1));
+    assert_eq!(platform.truth().distance, held_at);
     assert_eq!(motion.state(), State::Suspended);
 
     // Released: `operating` resumes it and the platform drives on.
@@ -383,12 +459,16 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
         .base
         .command(Command::Set("hold".to_owned(), Value::Bool(false)))
         .unwrap();
-    robot
-        .base
-        .wait_for(commanded("run"), Duration::from_secs(5))
-        .expect("`operating` resumes the motion controller");
+    step_until(
+        &platform,
+        &robot.base,
+        commanded("run"),
+        Duration::from_secs(5),
+    )
+    .expect("`operating` resumes the motion controller");
     wait_member(
         &robot,
+        &platform,
         MOTION,
         |m| odometry(m) > held_at + 0.05,
         Duration::from_secs(5),
@@ -412,41 +492,36 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
 fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_port() {
     use coolbot::MonitorEvent;
     use mobile_base::robot::{Robot, Setup};
-    use mobile_base::world::{FaultKind, Platform, SensorFault, World};
-    use std::sync::Arc;
+    use mobile_base::world::FaultKind;
 
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        Some(SensorFault {
-            after: Duration::from_millis(600),
-            outage: Duration::from_millis(600),
-            kind: FaultKind::Raise,
-        }),
-    ));
+    let platform = platform(Some(SensorFault {
+        after: Duration::from_millis(600),
+        outage: Duration::from_millis(600),
+        kind: FaultKind::Raise,
+    }));
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let events = robot.base.subscribe();
     // The state it is in now, then every change the base's monitoring port publishes.
     let mut states: Vec<String> = robot.base.snapshot().user_state.into_iter().collect();
     let mut modes: Vec<String> = Vec::new();
-    let deadline = std::time::Instant::now() + Duration::from_secs(8);
-    while states.len() < 3 {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
-        match events.recv_timeout(left) {
-            Ok(MonitorEvent::UserState(Some(state))) if states.last() != Some(&state) => {
-                states.push(state);
+    while states.len() < 3 && platform.uptime() < Duration::from_secs(8) {
+        step(&platform);
+        for event in events.try_iter() {
+            match event {
+                MonitorEvent::UserState(Some(state)) if states.last() != Some(&state) => {
+                    states.push(state);
+                }
+                MonitorEvent::Variable { name, value } if name == "mode" => {
+                    modes.push(mobile_base::status::value(&value));
+                }
+                _ => {}
             }
-            Ok(MonitorEvent::Variable { name, value }) if name == "mode" => {
-                modes.push(mobile_base::status::value(&value));
-            }
-            Ok(_) => {}
-            Err(_) => break,
         }
     }
     assert_eq!(states, ["operating", "degraded", "operating"]);
     // The supervisor's entry sections set `mode` and counted the fault.
     assert!(modes.starts_with(&["Degraded".to_owned()]), "{modes:?}");
-    let var = |monitor: &coolbot::Monitor, name: &str| {
+    let var = |monitor: &Monitor, name: &str| {
         monitor
             .variables
             .iter()
@@ -454,13 +529,13 @@ fn the_base_supervisor_goes_degraded_and_back_to_operating_on_its_monitoring_por
             .map(|(_, v)| mobile_base::status::value(v))
     };
     // `operating`'s entry section runs just after the state change is published.
-    let monitor = robot
-        .base
-        .wait_for(
-            |m| var(m, "mode").as_deref() == Some("Normal"),
-            Duration::from_secs(1),
-        )
-        .expect("`operating`'s entry section sets `mode` back to Normal");
+    let monitor = step_until(
+        &platform,
+        &robot.base,
+        |m| var(m, "mode").as_deref() == Some("Normal"),
+        Duration::from_secs(1),
+    )
+    .expect("`operating`'s entry section sets `mode` back to Normal");
     assert_eq!(var(&monitor, "faults").as_deref(), Some("1"));
     // While the substitute stood in, `degraded` drove the motion controller at the
     // cautious speed, and its exit put the limit back.
@@ -529,29 +604,25 @@ fn a_recorded_run_holds_every_odometry_and_scan_packet_or_counts_it_lost() {
 
 #[test]
 fn a_processor_shortage_degrades_the_range_server_and_it_is_promoted_back_after() {
+    use coolbot::MonitorEvent;
     use coolbot::adapt::{AdaptAction, Adaptation};
-    use coolbot::{Monitor, MonitorEvent};
     use mobile_base::robot::{RANGES, Robot, Setup};
-    use mobile_base::world::{Platform, World};
-    use std::sync::Arc;
-    use std::time::Instant;
 
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        None,
-    ));
+    let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let ranges = robot.instance("base.ranges").expect("base.ranges");
     let events = ranges.subscribe();
     let base_events = robot.base.subscribe();
     let mut own: Vec<Adaptation> = Vec::new();
     let mut decisions: Vec<Adaptation> = Vec::new();
-    // Waits (generously: the machine may be loaded) for `pred` on the range server's
+    // Advances the clock (at most `limit`) until `pred` holds on the range server's
     // monitoring port, keeping the adaptation steps the range server and the base
-    // published meanwhile.
-    let mut wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, timeout: Duration| {
-        let deadline = Instant::now() + timeout;
+    // published meanwhile. During the shortage a scan takes its time on the virtual
+    // clock (`Platform::spend`: the section waits while the clock moves on), and the
+    // idle probe says the processor has none to spare (`VirtualClock::set_idle`): the
+    // machine's real load plays no part.
+    let mut wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, limit: Duration| {
+        let until = platform.uptime() + limit;
         loop {
             for event in events.try_iter() {
                 if let MonitorEvent::Adaptation(step) = event {
@@ -570,13 +641,13 @@ fn a_processor_shortage_degrades_the_range_server_and_it_is_promoted_back_after(
                 return monitor;
             }
             assert!(
-                Instant::now() < deadline,
-                "{what}: not within {timeout:?}; the range server: period {:?}, quality {}, {:?}",
+                platform.uptime() < until,
+                "{what}: not within {limit:?}; the range server: period {:?}, quality {}, {:?}",
                 monitor.period,
                 monitor.quality,
                 monitor.adaptation
             );
-            std::thread::sleep(Duration::from_millis(20));
+            step(&platform);
         }
     };
     let scans = |m: &Monitor| {
@@ -716,7 +787,9 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         ..Options::default()
     };
     let stop = options.stop.clone();
-    let runner = std::thread::spawn(move || run(options));
+    // On the real clock: the network and the station keep real time; nothing here
+    // waits for a timer, the test polls with a deadline.
+    let runner = std::thread::spawn(move || run_on(options));
 
     // What `coolctl --connect <endpoint> --no-multicast list <name>` does.
     let probe = Node::open(
@@ -800,35 +873,29 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
 
 #[test]
 fn the_mappers_responses_grow_late_under_a_processor_shortage_its_quality_drops_and_comes_back() {
-    use coolbot::Monitor;
     use mobile_base::robot::{Robot, Setup};
-    use mobile_base::world::{Platform, World};
-    use std::sync::Arc;
-    use std::time::Instant;
 
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        None,
-    ));
+    let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
-    // Waits (generously: the machine may be loaded) for `pred` on the mapper's
-    // monitoring port.
-    let wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, timeout: Duration| {
-        let deadline = Instant::now() + timeout;
+    // Advances the clock (at most `limit`) until `pred` holds on the mapper's
+    // monitoring port. During the shortage a pose takes its time on the virtual clock
+    // (`Platform::spend`: the section waits while the clock moves on, and the poses
+    // that come meanwhile queue), whatever the machine's real load.
+    let wait = |what: &str, pred: &dyn Fn(&Monitor) -> bool, limit: Duration| {
+        let until = platform.uptime() + limit;
         loop {
             let monitor = robot.mapper.snapshot();
             if pred(&monitor) {
                 return monitor;
             }
             assert!(
-                Instant::now() < deadline,
-                "{what}: not within {timeout:?}; the mapper: quality {}, {:?}, {:?}",
+                platform.uptime() < until,
+                "{what}: not within {limit:?}; the mapper: quality {}, {:?}, {:?}",
                 monitor.quality,
                 monitor.response,
                 monitor.adaptation
             );
-            std::thread::sleep(Duration::from_millis(20));
+            step(&platform);
         }
     };
 
@@ -882,16 +949,10 @@ fn the_mappers_responses_grow_late_under_a_processor_shortage_its_quality_drops_
 #[test]
 fn the_range_server_runs_first_on_the_control_thread_though_it_reads_the_odometry() {
     use mobile_base::robot::{Robot, Setup};
-    use mobile_base::world::{Platform, World};
-    use std::sync::Arc;
 
     // `motion.pose -> ranges.pose` closes a cycle with `ranges.scan -> motion.obstacles`;
     // both are `last` inputs, and the group sets aside the one into its first member.
-    let platform = Arc::new(Platform::new(
-        World::example(),
-        World::example_start(),
-        None,
-    ));
+    let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     for member in ["base.ranges", "base.motion"] {
         let group = robot

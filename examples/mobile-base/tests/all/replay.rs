@@ -12,7 +12,7 @@ use mobile_base::generated::motion_controller::{Harness, UserState};
 use mobile_base::generated::types::{DriveMode, RangeScan};
 use mobile_base::motion_controller::MotionController;
 use mobile_base::world::{Platform, World};
-use mobile_base::{Display, Options, RECORDED_PORTS, sensing};
+use mobile_base::{Display, Options, RECORDED_PORTS, VirtualTime, sensing};
 
 const PERIOD: Duration = Duration::from_millis(20);
 
@@ -22,10 +22,12 @@ fn the_motion_controller_replays_the_scans_of_a_recorded_run_in_its_harness() {
     let dir = std::env::temp_dir().join(format!("mobile-base-replay-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join("run.mcap");
+    // On a virtual clock, as the recording's stamps then are (`VirtualTime`).
     let summary = mobile_base::run(&Options {
         display: Display::Quiet,
         duration: Duration::from_secs(2),
         record: Some(path.clone()),
+        virtual_time: Some(VirtualTime::new()),
         ..Options::default()
     })
     .expect("the robot runs");
