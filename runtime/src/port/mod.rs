@@ -154,29 +154,13 @@ impl ArrivalLabel {
 }
 
 /// The kind-independent part of every input end.
-/// A value alone on its cache line (64 bytes; the adjacent-line prefetch of some
-/// processors pairs lines, which `CachePadded`'s 128 would cover, at twice the size
-/// for every input).
-#[repr(align(64))]
-pub(crate) struct OwnLine<T>(T);
-
-impl<T> std::ops::Deref for OwnLine<T> {
-    type Target = T;
-    fn deref(&self) -> &T {
-        &self.0
-    }
-}
-
 pub(crate) struct InputCore {
     pub(crate) id: usize,
     pub(crate) owner: OnceLock<Owner>,
     /// The arrival count, in the bits from `count_shift` up: a last input keeps its
     /// slot's state in the bits below and counts its arrivals with the same atomic
-    /// operation that stores a packet (`slot.rs`). On a cache line of its own: the
-    /// consumer writes it (a last input's reader) or reads it on every look, and
-    /// the producer's reads of the fields around it (the owner, whether a puller
-    /// waits) then find their line where they left it.
-    arrivals: OwnLine<AtomicU64>,
+    /// operation that stores a packet (`slot.rs`).
+    arrivals: AtomicU64,
     count_shift: u32,
     overflows: AtomicU64,
     /// Of `overflows`, the packets a compound's exported input left this input out
@@ -206,7 +190,7 @@ impl InputCore {
         Arc::new(InputCore {
             id: next_port_id(),
             owner: OnceLock::new(),
-            arrivals: OwnLine(AtomicU64::new(low)),
+            arrivals: AtomicU64::new(low),
             count_shift,
             overflows: AtomicU64::new(0),
             left_behind: AtomicU64::new(0),
