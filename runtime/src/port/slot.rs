@@ -58,13 +58,12 @@ const FRESH: u64 = 0b100;
 
 /// The newest packet of a last input (see the module's doc).
 ///
-/// Each cell, the producers' side and the readers' side have cache lines of their
-/// own: a reader's lock does not take a line the producer writes, nor does a reader
-/// emptying its front cell take the line of the producer's back cell.
+/// The cells, the producers' side and the readers' side have cache lines of their own:
+/// a reader's lock does not take a line the producer writes.
 pub(crate) struct Slot<T> {
     /// The input's core, whose arrival counter is the slot's word.
     core: Arc<InputCore>,
-    cells: [CachePadded<UnsafeCell<Option<Parcel<T>>>>; 3],
+    cells: CachePadded<[UnsafeCell<Option<Parcel<T>>>; 3]>,
     producers: CachePadded<Producers>,
     /// The readers' side.
     front: CachePadded<Mutex<Front>>,
@@ -147,7 +146,7 @@ impl<T: Packet> Slot<T> {
         // Cell 0 is the front, cell 1 the middle, cell 2 the back.
         Slot {
             core: InputCore::counting_from(COUNT_SHIFT, 1),
-            cells: [const { CachePadded::new(UnsafeCell::new(None)) }; 3],
+            cells: CachePadded::new([const { UnsafeCell::new(None) }; 3]),
             producers: CachePadded::new(Producers {
                 back: UnsafeCell::new(Back { index: 2, seq: 0 }),
                 turns: Turns::new(),
