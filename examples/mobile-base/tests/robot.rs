@@ -761,7 +761,7 @@ fn with_a_node_every_component_answers_coolctl_on_the_network() {
         .map(|address| address.port())
         .expect("a free loopback port");
     let station_endpoint = format!("tcp/127.0.0.1:{station_port}");
-    let station = std::sync::Arc::new(
+    let station = Arc::new(
         Node::open(
             "station",
             peer_config(std::slice::from_ref(&station_endpoint), &[], false).expect("config"),
