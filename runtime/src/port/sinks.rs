@@ -49,6 +49,16 @@ use std::sync::atomic::{compiler_fence, fence};
 
 use super::*;
 
+/// Clears the owner's `busy` flag when dropped (a release store: the delivery
+/// happens before a change that sees it clear goes on).
+struct Idle<'a>(&'a AtomicBool);
+
+impl Drop for Idle<'_> {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Release);
+    }
+}
+
 /// A snapshot and its version.
 type Versioned<T> = (u64, Arc<[Sink<T>]>);
 
@@ -141,6 +151,10 @@ impl<T: Packet> Sinks<T> {
     #[inline]
     fn send_cached(&self, packet: Parcel<T>) -> Option<Parcel<T>> {
         self.busy.store(true, Ordering::Relaxed);
+        // Cleared when the delivery ends, also by a panic in it (a converter's,
+        // which the component's thread catches): a change waiting for `busy` would
+        // otherwise wait for ever.
+        let _idle = Idle(&self.busy);
         let asymmetric = light_fence();
         let version = self.version.load(if asymmetric {
             Ordering::Relaxed
@@ -152,15 +166,13 @@ impl<T: Packet> Sinks<T> {
         // clear): the only writer of `owned` is this thread, which writes it only
         // while `busy` is clear, so no write happens while this reference lives.
         let owned = unsafe { &*self.owned.get() };
-        let packet = match owned {
+        match owned {
             Some((cached, list)) if *cached == version => {
                 dispatch(list, packet);
                 None
             }
             _ => Some(packet),
-        };
-        self.busy.store(false, Ordering::Release);
-        packet
+        }
     }
 
     /// A send under the read lock; the owner caches the snapshot it read.
@@ -450,5 +462,48 @@ mod tests {
         // The nested packet arrives before the one whose conversion sent it.
         assert_eq!(a.drain().collect::<Vec<u64>>(), [1, 10, 2, 3, 10, 2]);
         nested.lock().expect("the output").take();
+    }
+
+    #[test]
+    fn a_panic_in_the_owners_delivery_leaves_no_change_waiting() {
+        let (out, a) = (
+            DataOut::<u64>::new(),
+            FifoIn::new(16, OverflowPolicy::Reject),
+        );
+        let convert = |packet: &u64| {
+            assert!(*packet != 2, "a converter that panics on 2");
+            *packet
+        };
+        assert!(link_converted::<u64, u64>(
+            &out.erased(),
+            &a.erased(),
+            Arc::new(convert)
+        ));
+        let owner = {
+            let out = out.clone();
+            std::thread::spawn(move || {
+                out.erased().core.claim_sends();
+                // Packet 1 under the lock (the snapshot cached), 2 from the cache:
+                // its converter panics, and the thread catches it, as a
+                // component's thread does.
+                out.send(1);
+                let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| out.send(2)));
+                assert!(caught.is_err(), "the converter panicked");
+                out.send(3);
+            })
+        };
+        owner.join().expect("owner");
+        // A change waits for the owner's delivery in flight: there is none.
+        let unlinked = Arc::new(AtomicBool::new(false));
+        let changer = {
+            let (out, a, unlinked) = (out.clone(), a.clone(), Arc::clone(&unlinked));
+            std::thread::spawn(move || {
+                out.erased().unlink(&a.erased());
+                unlinked.store(true, Ordering::Release);
+            })
+        };
+        poll_until("the unlink to return", || unlinked.load(Ordering::Acquire));
+        changer.join().expect("changer");
+        assert_eq!(a.drain().collect::<Vec<u64>>(), [1, 3]);
     }
 }

@@ -425,7 +425,8 @@ pub(crate) struct Outlet<T> {
     /// The number of the last data or tick message Zenoh took.
     sent: Arc<AtomicU64>,
     /// A poster outlet's last published value, or a `last` outlet's latest packet
-    /// (numbered 0), served to readers that ask (late joiners, links that came back).
+    /// (with the number it went with, or 0 if Zenoh did not take it), served to
+    /// readers that ask (late joiners, links that came back).
     posted: Arc<Mutex<Option<Vec<u8>>>>,
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
@@ -847,36 +848,76 @@ pub(crate) enum Via {
     Answer,
 }
 
-/// The numbered packet an inlet of data delivered last, per outlet epoch: the
-/// current value of a `last` outlet, asked for when the inlet starts or when an
-/// outlet appears, may be one the stream brought already or will bring, and a
-/// reader gets each packet once.
+/// How far an answer's number may run ahead of the stream for the stream's
+/// messages behind it to be dropped as stale: the messages in flight on the stream
+/// when the outlet answered. Further behind, the answer is forgotten and the stream
+/// delivered as it comes (so a peer that answers with a made-up number can hold
+/// back at most this many of a stream's packets).
+const ANSWER_AHEAD: u64 = 256;
+
+/// The outlet epochs an inlet of data remembers for [`Delivered`].
+const DELIVERED_EPOCHS: usize = 16;
+
+/// What an inlet of data delivered, per outlet epoch: the newest number the stream
+/// brought, and the number of the current value an answer delivered ahead of it.
+/// The current value of a `last` outlet, asked for when the inlet starts or when an
+/// outlet appears, may be one the stream brought already or will bring: a reader
+/// gets each packet once, and never an older one after it.
 #[derive(Default)]
 struct Delivered {
-    newest: Option<(u64, u64)>,
+    /// `(epoch, newest on the stream, answered ahead of the stream)`, oldest first.
+    epochs: Vec<(u64, u64, Option<u64>)>,
 }
 
 impl Delivered {
-    /// Whether message `seq` of `epoch`, come `via`, is one not delivered yet (and
-    /// now taken as delivered). On the stream, only a repeat of the number an
-    /// answer delivered is dropped (what else the stream brings is the ledger's to
-    /// count); an answer is dropped when the stream, or another answer, delivered
-    /// that number or a newer one of its epoch already.
+    /// Whether message `seq` of `epoch`, come `via`, is to be delivered (and is now
+    /// taken as delivered). An answer is dropped when the stream, or another
+    /// answer, delivered that number or a newer one of its epoch; the stream's
+    /// message is dropped when an answer delivered it, or a newer one at most
+    /// [`ANSWER_AHEAD`] ahead. Anything else the stream brings is delivered (the
+    /// ledger counts what is missing).
     fn fresh(&mut self, epoch: u64, seq: u64, via: Via) -> bool {
         if seq == 0 {
             // A pull answer, or a value the outlet could not number: not part of
             // the stream.
             return true;
         }
-        let fresh = match (via, self.newest) {
-            (Via::Stream, Some(newest)) => newest != (epoch, seq),
-            (Via::Answer, Some((e, s))) => e != epoch || seq > s,
-            (_, None) => true,
+        let at = match self.epochs.iter().position(|(e, _, _)| *e == epoch) {
+            Some(at) => at,
+            None => {
+                if self.epochs.len() >= DELIVERED_EPOCHS {
+                    self.epochs.remove(0);
+                }
+                self.epochs.push((epoch, 0, None));
+                self.epochs.len() - 1
+            }
         };
-        if fresh {
-            self.newest = Some((epoch, seq));
+        let (_, stream, answered) = &mut self.epochs[at];
+        match via {
+            Via::Stream => {
+                *stream = (*stream).max(seq);
+                match *answered {
+                    Some(ahead) if seq < ahead && ahead - seq <= ANSWER_AHEAD => false,
+                    Some(ahead) if seq == ahead => {
+                        *answered = None;
+                        false
+                    }
+                    Some(_) => {
+                        *answered = None;
+                        true
+                    }
+                    None => true,
+                }
+            }
+            Via::Answer => {
+                if seq <= *stream || answered.is_some_and(|ahead| seq <= ahead) {
+                    false
+                } else {
+                    *answered = Some(seq);
+                    true
+                }
+            }
         }
-        fresh
     }
 }
 
@@ -951,7 +992,10 @@ fn deliverer<T: Packet + DeserializeOwned>(
                         if via == Via::Stream {
                             gaps.received(epoch, seq);
                         }
-                        if lock(&delivered).fresh(epoch, seq, via) {
+                        // Under the lock: the stream and an answer come on different
+                        // threads, and the one taken as newer is sent last.
+                        let mut delivered = lock(&delivered);
+                        if delivered.fresh(epoch, seq, via) {
                             port.send(packet);
                         }
                     }
@@ -1262,7 +1306,7 @@ impl Automaton for Inlet {
 
 #[cfg(test)]
 mod tests {
-    use super::{Delivered, Via};
+    use super::{ANSWER_AHEAD, Delivered, Via};
 
     #[test]
     fn the_current_value_of_a_last_outlet_is_delivered_once_whichever_way_comes_first() {
@@ -1286,13 +1330,40 @@ mod tests {
     }
 
     #[test]
-    fn the_stream_drops_only_an_exact_repeat_of_the_last_number() {
-        // What else the stream brings (a stray old number, another epoch's) is the
-        // ledger's to count, and is delivered as before.
+    fn an_answer_ahead_of_the_stream_holds_back_the_older_packets_behind_it() {
+        // The stream had 8; the answer brings 10 before the stream's 9 and 10.
         let mut delivered = Delivered::default();
-        assert!(delivered.fresh(7, 10, Via::Stream));
+        assert!(delivered.fresh(7, 8, Via::Stream));
+        assert!(delivered.fresh(7, 10, Via::Answer));
+        assert!(
+            !delivered.fresh(7, 9, Via::Stream),
+            "older than what was delivered"
+        );
+        assert!(!delivered.fresh(7, 10, Via::Stream), "a repeat");
+        assert!(delivered.fresh(7, 11, Via::Stream));
+        assert!(!delivered.fresh(7, 10, Via::Answer), "stale");
+        // Two outlets interleaved on one key: each epoch keeps its own numbers.
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(1, 3, Via::Stream));
+        assert!(delivered.fresh(2, 5, Via::Stream));
+        assert!(!delivered.fresh(1, 3, Via::Answer), "epoch 1 had it");
+        assert!(!delivered.fresh(2, 4, Via::Answer), "epoch 2 had newer");
+    }
+
+    #[test]
+    fn an_answer_numbered_far_ahead_holds_back_at_most_a_bounded_run_of_the_stream() {
+        // A peer answers with a made-up number far ahead of the stream.
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(7, 1, Via::Stream));
+        assert!(delivered.fresh(7, 1_000_000, Via::Answer));
+        // The stream's next packet is further behind than an honest answer runs
+        // ahead: the answer is forgotten, and the stream delivered as it comes.
+        assert!(delivered.fresh(7, 2, Via::Stream));
         assert!(delivered.fresh(7, 3, Via::Stream));
-        assert!(delivered.fresh(9, 3, Via::Stream));
-        assert!(!delivered.fresh(9, 3, Via::Stream));
+        // An answer just ahead holds back only the packets between.
+        assert!(delivered.fresh(7, 3 + ANSWER_AHEAD, Via::Answer));
+        assert!(!delivered.fresh(7, 4, Via::Stream));
+        assert!(delivered.fresh(7, 4 + ANSWER_AHEAD, Via::Stream));
+        assert!(delivered.fresh(7, 5 + ANSWER_AHEAD, Via::Stream));
     }
 }
