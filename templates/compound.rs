@@ -187,7 +187,7 @@ impl Instances<'_> {
 {%- if !loop.first %}
 {% endif %}
     /// Instance `{{ h.instance }}`, a `{{ h.component }}`.
-{{ l.open_fn(4, &h.accessor_signature("")) }}
+{{ l.open_method(&h.accessor_signature("")) }}
 {{ l.handle_lit(&h.type_name, "commander", "&mut *self.commander") }}
     }
 {%- endfor %}
@@ -224,7 +224,7 @@ impl {{ h.type_name }}<'_> {
 {%- for setter in h.setters %}
 
     /// Set its controllable variable `{{ setter.variable }}`.
-{{ l.open_fn(4, &setter.signature("::core::result::Result<(), ::coolbot::CommandError>")) }}
+{{ l.open_method(&setter.signature("::core::result::Result<(), ::coolbot::CommandError>")) }}
 {{ l.setter_call("self.commander", "set", &h.instance, setter) }}
     }
 {%- endfor %}
@@ -233,14 +233,14 @@ impl {{ h.type_name }}<'_> {
     /// `{{ variable }}` is observable: it has no setter, and a call does not compile
     /// (the compiler says why).
     #[doc(hidden)]
-{{ l.open_fn(4, &ir::Handle::refusal_signature(method)) }}
+{{ l.open_method(&ir::Handle::refusal_signature(method)) }}
         Err(value.refuse())
     }
 {%- endfor %}
 {%- if let Some(config) = h.config %}
 
     /// Give it a new configuration (its `configuration` block).
-{{ l.open_fn(4, &ir::Handle::configure_signature(config)) }}
+{{ l.open_method(&ir::Handle::configure_signature(config)) }}
 {{ l.instance_call("self.commander", "configure", &h.instance, "super::__cool_to_value(&configuration)") }}
     }
 {%- endif %}
@@ -255,7 +255,7 @@ impl {{ h.type_name }}<'_> {
 {%- if let Some((quality, _)) = h.quality %}
 
     /// Set its quality level.
-{{ l.open_fn(4, &ir::Handle::quality_signature(quality, "::core::result::Result<(), ::coolbot::CommandError>")) }}
+{{ l.open_method(&ir::Handle::quality_signature(quality, "::core::result::Result<(), ::coolbot::CommandError>")) }}
 {{ l.instance_call("self.commander", "set_quality", &h.instance, "level.index()") }}
     }
 {%- endif %}
@@ -419,7 +419,7 @@ pub fn register<R: ::coolbot::remote::Registrar>(
     clippy::neg_cmp_op_on_partial_ord,
     clippy::comparison_to_empty
 )]
-{{ l.open_fn(0, &r.signature()) }}
+{{ l.open_item_fn(&r.signature()) }}
 {{ l.rule_body(r) }}
 }
 {{ l.end_item() }}
@@ -546,7 +546,7 @@ pub struct Harness {
 impl Harness {
     /// The compound with the supervisor of `parts` (its instances' behaviours are
     /// built but never run), started: `ready`, every instance `ready`.
-{{ l.open_fn(4, &c.harness_signature("new")) }}
+{{ l.open_method(&c.harness_signature("new")) }}
 {{ l.harness_builder(c) }}
             ::coolbot::harness::HarnessError::Compound(::std::boxed::Box::new(error))
         })?;
@@ -557,7 +557,7 @@ impl Harness {
 
     /// [`Harness::new`], then `running`: the supervisor enters its initial state and
     /// the instances run.
-{{ l.open_fn(4, &c.harness_signature("running")) }}
+{{ l.open_method(&c.harness_signature("running")) }}
         let mut harness = Self::new{{ c.turbofish() }}(parts)?;
         harness.inner.run()?;
         Ok(harness)
@@ -635,8 +635,8 @@ impl StandIns<'_> {
 {%- if !loop.first %}
 {% endif %}
     /// The stand-in of instance `{{ h.instance }}` (a `{{ h.component }}`).
-{{ l.open_fn(4, &h.accessor_signature("StandIn")) }}
-{{ l.handle_lit(&format!("{}StandIn", h.type_name), "inner", "&mut *self.inner") }}
+{{ l.open_method(&h.accessor_signature("StandIn")) }}
+{{ l.handle_lit(&h.stand_in_type(), "inner", "&mut *self.inner") }}
     }
 {%- endfor %}
 }
@@ -686,14 +686,14 @@ impl {{ h.type_name }}StandIn<'_> {
 {%- for setter in h.setters %}
 
     /// Its controllable variable `{{ setter.variable }}` is now `value`.
-{{ l.open_fn(4, &setter.signature("HarnessResult<()>")) }}
+{{ l.open_method(&setter.signature("HarnessResult<()>")) }}
 {{ l.setter_call("self.inner", "set_instance_variable", &h.instance, setter) }}
     }
 {%- endfor %}
 {%- if let Some((quality, _)) = h.quality %}
 
     /// Its quality level is now `level`.
-{{ l.open_fn(4, &ir::Handle::quality_signature(quality, "HarnessResult<()>")) }}
+{{ l.open_method(&ir::Handle::quality_signature(quality, "HarnessResult<()>")) }}
 {{ l.instance_call("self.inner", "set_instance_quality", &h.instance, "level.index()") }}
     }
 {%- endif %}

@@ -152,7 +152,7 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
 fn registry() -> coolbot_zenoh::agent::Registry {
     let mut registry = coolbot_zenoh::agent::Registry::new();
 {%- for registration in starter.registrations %}
-{{ l.statement(4, registration, ";") }}
+{{ l.body_statement(registration) }}
 {%- endfor %}
     registry
 }

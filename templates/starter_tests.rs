@@ -15,9 +15,9 @@ use std::time::Duration;
 
 #[test]
 {{ l.test_fn(&t.name) }}
-{{ l.let_statement(4, "behavior", None, &t.behavior) }}
-{{ l.let_statement(4, "mut harness", None, &t.harness) }}
+{{ l.body_let("behavior", &t.behavior) }}
+{{ l.body_let("mut harness", &t.harness) }}
     harness.advance(Duration::from_secs(1)).unwrap();
-{{ l.statement(4, &t.check, ";") }}
+{{ l.body_statement(&t.check) }}
 }
 {%- endfor %}

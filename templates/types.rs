@@ -24,7 +24,7 @@ pub enum {{ e.name }} {
     #[default]
 {%- endif %}
 {%- if v.name != v.cool_name %}
-{{ l.serde_rename(4, &v.cool_name) }}
+{{ l.variant_rename(&v.cool_name) }}
 {%- endif %}
 {{ l.variant(&v.name) }}
 {%- endfor %}
@@ -69,17 +69,17 @@ pub mod ros {
 
         impl {{ p.name }} {
 {%- for c in message.constants %}
-{{- l.doc(&c.doc, 12, "///") }}
-{{ l.const_item(12, &c.lhs(), &c.value) }}
+{{- l.ros_const_doc(&c.doc) }}
+{{ l.ros_const(&c.lhs(), &c.value) }}
 {%- endfor %}
         }
 {%- endif %}
 
         impl ::coolbot::ros::RosType for {{ p.name }} {
-{{ l.const_item(12, "const NAME: &'static str =", &message.name) }}
-{{ l.const_item(12, "const DDS_NAME: &'static str =", &message.dds_name) }}
-{{ l.const_item(12, "const TYPE_HASH: &'static str =", &message.hash) }}
-{{ l.const_item(12, "const MESSAGE_DEFINITION: &'static str =", &message.definition) }}
+{{ l.ros_const("const NAME: &'static str =", &message.name) }}
+{{ l.ros_const("const DDS_NAME: &'static str =", &message.dds_name) }}
+{{ l.ros_const("const TYPE_HASH: &'static str =", &message.hash) }}
+{{ l.ros_const("const MESSAGE_DEFINITION: &'static str =", &message.definition) }}
         }
 {%- endfor %}
     }
@@ -96,14 +96,14 @@ pub mod ros {
 {%- else %}
 {{ l.open(indent) }}pub struct {{ p.name }} {
 {%- for f in p.fields %}
-{{- l.doc(&f.doc, indent + 4, "///") }}
+{{- l.field_doc(&f.doc, indent) }}
 {%- if f.renamed() %}
-{{ l.serde_rename(indent + 4, &f.cool_name) }}
+{{ l.field_rename(indent, &f.cool_name) }}
 {%- endif %}
 {%- if let Some(adapter) = f.serde_with %}
-{{ l.serde_with_at(indent + 4, adapter) }}
+{{ l.field_serde_with(indent, adapter) }}
 {%- endif %}
-{{ l.field_decl(indent + 4, f) }}
+{{ l.field_decl(indent, f) }}
 {%- endfor %}
 {{ l.open(indent) }}}
 {%- endif %}
@@ -111,7 +111,7 @@ pub mod ros {
 
 {{ l.open(indent) }}impl ::core::default::Default for {{ p.name }} {
 {{ l.open(indent) }}    fn default() -> Self {
-{{ l.default_body(&p.fields, indent + 8) }}
+{{ l.default_body(&p.fields, indent) }}
 {{ l.open(indent) }}    }
 {{ l.open(indent) }}}
 {%- endif %}

@@ -1120,6 +1120,11 @@ impl Handle {
             self.method, self.type_name
         )
     }
+
+    /// The type of its stand-in's handle (the harness's `stand_ins()` accessors).
+    pub(crate) fn stand_in_type(&self) -> String {
+        format!("{}StandIn", self.type_name)
+    }
 }
 
 impl Setter {

@@ -31,6 +31,9 @@ pub(crate) mod expr;
 
 /// rustfmt's `max_width`.
 const MAX_WIDTH: usize = 100;
+
+/// The indent of a member of an `impl` in a ROS 2 package's module (`ros::<package>`).
+const ROS_MEMBER: usize = 12;
 /// rustfmt's `struct_lit_width` (the default "small heuristics").
 const STRUCT_LIT_WIDTH: usize = 18;
 /// rustfmt's `fn_call_width` and `array_width`.
@@ -258,19 +261,33 @@ impl Layout {
         self.line(4, &format!("#[serde(with = \"{adapter}\")]"))
     }
 
-    /// `#[serde(with = "adapter")]` at `indent`.
-    pub fn serde_with_at(&self, indent: usize, adapter: &str) -> String {
-        self.line(indent, &format!("#[serde(with = \"{adapter}\")]"))
+    /// A field's `#[serde(with = "adapter")]`, in a struct item at `item`.
+    pub fn field_serde_with(&self, item: &usize, adapter: &str) -> String {
+        self.line(*item + 4, &format!("#[serde(with = \"{adapter}\")]"))
     }
 
-    /// `#[serde(rename = "name")]` at `indent`.
-    pub fn serde_rename(&self, indent: usize, name: &str) -> String {
+    /// A field's `#[serde(rename = "name")]`, in a struct item at `item`.
+    pub fn field_rename(&self, item: &usize, name: &str) -> String {
+        self.serde_rename(*item + 4, name)
+    }
+
+    /// An enum variant's `#[serde(rename = "name")]`, in an enum at the top of a module.
+    pub fn variant_rename(&self, name: &str) -> String {
+        self.serde_rename(4, name)
+    }
+
+    fn serde_rename(&self, indent: usize, name: &str) -> String {
         self.line(indent, &format!("#[serde(rename = \"{name}\")]"))
     }
 
-    /// A packet field's declaration `pub name: ty,` at `indent`.
-    pub fn field_decl(&self, indent: usize, f: &crate::ir::Field) -> String {
-        self.line(indent, &format!("pub {}: {},", f.name, f.ty))
+    /// A packet field's declaration `pub name: ty,`, in a struct item at `item`.
+    pub fn field_decl(&self, item: &usize, f: &crate::ir::Field) -> String {
+        self.line(*item + 4, &format!("pub {}: {},", f.name, f.ty))
+    }
+
+    /// A field's doc comment, in a struct item at `item`.
+    pub fn field_doc(&self, lines: &[String], item: &usize) -> String {
+        self.doc(lines, *item + 4, "///")
     }
 
     /// The indentation `indent` before a fixed piece of a template.
@@ -357,9 +374,10 @@ impl Layout {
         self.line(0, &format!("pub type {} = {};", e.name, e.path))
     }
 
-    /// `Self { field: default, ... }`, the body of a packet's `Default` impl at
-    /// `indent`.
-    pub fn default_body(&self, fields: &[crate::ir::Field], indent: usize) -> String {
+    /// `Self { field: default, ... }`, the body of the `Default` impl of a packet item
+    /// at `item`.
+    pub fn default_body(&self, fields: &[crate::ir::Field], item: &usize) -> String {
+        let indent = *item + 8;
         let fields: Vec<(String, Code)> = fields
             .iter()
             .map(|f| (f.name.clone(), f.default.clone()))
@@ -367,9 +385,20 @@ impl Layout {
         self.statement(indent, &Code::Struct("Self".to_owned(), fields), "")
     }
 
+    /// An associated constant `lhs value;` of a ROS 2 message type (in its `impl` in
+    /// its package's module of `ros`), `lhs` ending in `=`, `value` a literal.
+    pub fn ros_const(&self, lhs: &str, value: &str) -> String {
+        self.const_item(ROS_MEMBER, lhs, value)
+    }
+
+    /// A ROS 2 constant's doc comment (see [`Layout::ros_const`]).
+    pub fn ros_const_doc(&self, lines: &[String]) -> String {
+        self.doc(lines, ROS_MEMBER, "///")
+    }
+
     /// `lhs value;` at `indent`, `lhs` ending in `=` (a constant), `value` a
     /// literal.
-    pub fn const_item(&self, indent: usize, lhs: &str, value: &str) -> String {
+    fn const_item(&self, indent: usize, lhs: &str, value: &str) -> String {
         let printer = expr::Printer::default();
         match printer.assign(indent, lhs, &Code::atom(value)) {
             Some(text) => format!("{}{text}", spaces(indent)),
@@ -666,9 +695,19 @@ impl Layout {
         ))
     }
 
+    /// A method's signature and its ` {` in an `impl` block (see [`Layout::open_fn_at`]).
+    pub fn open_method(&self, signature: &str) -> String {
+        self.open_fn_at(4, signature)
+    }
+
+    /// A free function's signature and its ` {`, an item of a module.
+    pub fn open_item_fn(&self, signature: &str) -> String {
+        self.open_fn_at(0, signature)
+    }
+
     /// A signature at `indent` followed by ` {` (see [`Layout::signature`]; one of
     /// exactly `max_width` columns stays on its line).
-    pub fn open_fn(&self, indent: usize, signature: &str) -> String {
+    fn open_fn_at(&self, indent: usize, signature: &str) -> String {
         let one = format!("{signature} {{");
         if indent + one.len() == MAX_WIDTH {
             return self.line(indent, &one);
@@ -807,10 +846,20 @@ impl Layout {
         out
     }
 
+    /// `code;`, a statement of a free function's body.
+    pub fn body_statement(&self, code: &Code) -> String {
+        self.statement(4, code, ";")
+    }
+
+    /// `let pattern = value;`, a statement of a free function's body.
+    pub fn body_let(&self, pattern: &str, value: &Code) -> String {
+        self.let_statement(4, pattern, None, value)
+    }
+
     /// `code` then `tail` as a statement (`tail` is `;`) or a block's tail
     /// expression (`tail` empty) at `indent`, in rustfmt's layout of expressions
     /// (`expr`); left to the formatter when that layout is not certain.
-    pub fn statement(&self, indent: usize, code: &Code, tail: &str) -> String {
+    fn statement(&self, indent: usize, code: &Code, tail: &str) -> String {
         let printer = expr::Printer::default();
         match printer.statement(indent, code, tail) {
             Some(text) => format!("{}{text}", spaces(indent)),
@@ -825,7 +874,7 @@ impl Layout {
     }
 
     /// `let pattern: ty = value;` at `indent` (see [`Layout::statement`]).
-    pub fn let_statement(
+    fn let_statement(
         &self,
         indent: usize,
         pattern: &str,
