@@ -104,6 +104,145 @@ pub fn of<T: DeserializeOwned>() -> Schema {
     }
 }
 
+/// `schema` (an object's, as [`of`] writes it or [`Schema::wrapped`] wraps it) in the
+/// part of JSON Schema that the Foxglove and Lichtblick viewers read (their
+/// `parseJsonSchema`, which refuses a whole channel or recording channel for one
+/// property outside it): an object whose properties each have one `type`, `boolean`,
+/// `string`, `number`, `integer`, `object` (with `properties`) or `array` (of one of
+/// the others but `array`), or are a `oneOf` of numeric `const`s.
+///
+/// What the viewers cannot read is written in that part where the values still fit:
+/// a value that may be `null` (an `Option`, a float, which `serde_json` writes as
+/// `null` when it is not finite) has its one type and `"nullable": true` (OpenAPI's
+/// keyword, which Ajv reads and the viewers pass over) instead of a list of types or
+/// an `anyOf`; an enum of unit variants is a string with its `enum`; a map is an
+/// object with no properties. A property whose values no such schema describes (a
+/// tuple, an array of arrays or of enums, an enum with data, a unit, a type that
+/// could not be traced) is left out of `properties`: its values stay in every
+/// message, and a viewer shows them without a type.
+pub fn for_viewers(schema: &Value) -> Value {
+    let mut object = viewer_object(schema);
+    for key in ["$schema", "description"] {
+        if let Some(value) = schema.get(key) {
+            object[key] = value.clone();
+        }
+    }
+    object
+}
+
+/// An object schema with each property in the viewers' form (see [`for_viewers`]),
+/// those without one left out.
+fn viewer_object(schema: &Value) -> Value {
+    let mut properties = Map::new();
+    for (name, property) in schema
+        .get("properties")
+        .and_then(Value::as_object)
+        .into_iter()
+        .flatten()
+    {
+        if let Some(property) = viewer_property(property) {
+            properties.insert(name.clone(), property);
+        }
+    }
+    let required: Vec<&Value> = schema
+        .get("required")
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+        .filter(|name| {
+            name.as_str()
+                .is_some_and(|name| properties.contains_key(name))
+        })
+        .collect();
+    let mut object = json!({ "type": "object", "properties": properties });
+    if !required.is_empty() {
+        object["required"] = json!(required);
+    }
+    if let Some(title) = schema.get("title") {
+        object["title"] = title.clone();
+    }
+    object
+}
+
+/// A property's schema in the viewers' form (see [`for_viewers`]); None when no
+/// schema they read describes its values.
+fn viewer_property(schema: &Value) -> Option<Value> {
+    let is_null = |case: &Value| case.get("type").and_then(Value::as_str) == Some("null");
+    if let Some(cases) = schema.get("anyOf").and_then(Value::as_array) {
+        let mut others = cases.iter().filter(|case| !is_null(case));
+        let (Some(only), None) = (others.next(), others.next()) else {
+            return None;
+        };
+        return (cases.len() == 2)
+            .then(|| viewer_property(only))
+            .flatten()
+            .map(nullable);
+    }
+    if let Some(cases) = schema.get("oneOf").and_then(Value::as_array) {
+        let consts: Option<Vec<&Value>> = cases.iter().map(|case| case.get("const")).collect();
+        let consts = consts?;
+        if consts.iter().all(|value| value.is_number()) {
+            return Some(schema.clone());
+        }
+        if !consts.iter().all(|value| value.is_string()) {
+            return None;
+        }
+        let mut names = json!({ "type": "string", "enum": consts });
+        if let Some(title) = schema.get("title") {
+            names["title"] = title.clone();
+        }
+        return Some(names);
+    }
+    let (ty, may_be_null) = match schema.get("type")? {
+        Value::String(ty) => (ty.as_str(), false),
+        Value::Array(types) => {
+            let mut others = types.iter().filter(|ty| ty.as_str() != Some("null"));
+            let (Some(Value::String(only)), None) = (others.next(), others.next()) else {
+                return None;
+            };
+            (only.as_str(), types.len() == 2)
+        }
+        _ => return None,
+    };
+    let mut lowered = match ty {
+        "boolean" | "string" | "number" | "integer" => {
+            let mut scalar = schema.clone();
+            scalar["type"] = Value::from(ty);
+            scalar
+        }
+        "object" => viewer_object(schema),
+        "array" if schema.get("prefixItems").is_none() => {
+            let items = viewer_property(schema.get("items")?)?;
+            let readable = ["boolean", "string", "number", "integer", "object"];
+            if !items
+                .get("type")
+                .and_then(Value::as_str)
+                .is_some_and(|ty| readable.contains(&ty))
+            {
+                return None;
+            }
+            let mut array = schema.clone();
+            array["items"] = items;
+            array
+        }
+        _ => return None,
+    };
+    if may_be_null {
+        lowered = nullable(lowered);
+    }
+    Some(lowered)
+}
+
+/// `schema` that also accepts `null` (`nullable`, and `null` among an `enum`'s values,
+/// as Ajv requires).
+fn nullable(mut schema: Value) -> Value {
+    schema["nullable"] = Value::Bool(true);
+    if let Some(values) = schema.get_mut("enum").and_then(Value::as_array_mut) {
+        values.push(Value::Null);
+    }
+    schema
+}
+
 /// The type's last path segment (`RangeScan` for `robot::types::RangeScan`), generics
 /// kept.
 fn short_name(type_name: &str) -> &str {
@@ -347,6 +486,80 @@ mod tests {
         assert_eq!(p["path"]["items"]["prefixItems"][1]["type"], "boolean");
         assert_eq!(p["tags"]["additionalProperties"]["maximum"], 65535);
         assert_eq!(p["corners"]["maxItems"], 2);
+    }
+
+    #[derive(Deserialize)]
+    #[allow(dead_code, reason = "only traced")]
+    enum Gear {
+        Low,
+        High,
+    }
+
+    #[derive(Deserialize)]
+    #[allow(dead_code, reason = "only traced")]
+    struct Reading {
+        pose: Pose,
+        gear: Gear,
+        spare: Option<Gear>,
+        range: Option<f64>,
+        ranges: Vec<f32>,
+        grid: [[f32; 2]; 2],
+        unit: (),
+    }
+
+    /// Every property of `object` in the part of JSON Schema the Foxglove and
+    /// Lichtblick viewers read (their `parseJsonSchema`'s rules).
+    fn viewers_read(object: &serde_json::Value, at: &str) {
+        assert_eq!(object["type"], "object", "{at}");
+        for (name, property) in object["properties"].as_object().expect("properties") {
+            let at = format!("{at}.{name}");
+            if let Some(cases) = property["oneOf"].as_array() {
+                assert!(cases.iter().all(|case| case["const"].is_number()), "{at}");
+                continue;
+            }
+            match property["type"].as_str().expect(&at) {
+                "boolean" | "string" | "number" | "integer" => {}
+                "object" => viewers_read(property, &at),
+                "array" => match property["items"]["type"].as_str().expect(&at) {
+                    "boolean" | "string" | "number" | "integer" => {}
+                    "object" => viewers_read(&property["items"], &at),
+                    other => panic!("{at}: an array of {other}"),
+                },
+                other => panic!("{at}: {other}"),
+            }
+        }
+    }
+
+    #[test]
+    fn the_viewers_form_keeps_what_they_read_and_leaves_out_what_they_cannot() {
+        let viewers = super::for_viewers(&of::<Reading>().schema);
+        viewers_read(&viewers, "Reading");
+        let p = &viewers["properties"];
+        assert_eq!(viewers["title"], "Reading");
+        assert_eq!(p["range"], json!({ "type": "number", "nullable": true }));
+        assert_eq!(
+            p["ranges"]["items"],
+            json!({ "type": "number", "nullable": true })
+        );
+        assert_eq!(p["gear"]["enum"], json!(["Low", "High"]));
+        assert_eq!(p["spare"]["enum"], json!(["Low", "High", null]));
+        let pose = &p["pose"]["properties"];
+        assert_eq!(pose["label"], json!({ "type": "string", "nullable": true }));
+        assert_eq!(pose["tags"], json!({ "type": "object", "properties": {} }));
+        // What is left out is not required either.
+        assert_eq!(
+            p["pose"]["required"],
+            json!(["x", "label", "tags", "corners"])
+        );
+        assert_eq!(pose["corners"]["items"]["type"], "integer");
+        // A tuple list, an enum with data, an array of arrays and a unit: left out.
+        for (object, name) in [(pose, "path"), (pose, "mode"), (p, "grid"), (p, "unit")] {
+            assert!(object.get(name).is_none(), "{name}: {object}");
+        }
+        // A value that is not an object, wrapped: its `value` is read.
+        let number = super::for_viewers(&of::<f64>().wrapped());
+        viewers_read(&number, "f64");
+        assert_eq!(number["properties"]["value"]["nullable"], true);
     }
 
     #[test]

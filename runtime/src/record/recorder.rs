@@ -461,6 +461,9 @@ pub(super) fn add_channel(
     } else {
         schema.schema.clone()
     };
+    // In the part of JSON Schema the Foxglove and Lichtblick viewers read: they refuse
+    // a channel for one property outside it.
+    let data = crate::schema::for_viewers(&data);
     // (A JSON value always serializes.)
     let bytes = serde_json::to_vec(&data).unwrap_or_default();
     let schema_id = mcap.add_schema(type_name, "jsonschema", &bytes)?;

@@ -165,7 +165,8 @@ impl Monitoring {
     /// Its JSON Schema.
     pub fn schema() -> Value {
         let count = json!({ "type": "integer", "minimum": 0 });
-        let seconds = json!({ "type": ["number", "null"] });
+        // In the part of JSON Schema the viewers read (`coolbot::schema::for_viewers`).
+        let seconds = json!({ "type": "number", "nullable": true });
         json!({
             "$schema": coolbot::schema::DIALECT,
             "title": MONITORING_SCHEMA,
@@ -179,12 +180,12 @@ impl Monitoring {
                 "nominal_period": seconds,
                 "quality": count,
                 "level": count,
-                "cpu_share": { "type": ["number", "null"], "minimum": 0 },
+                "cpu_share": { "type": "number", "nullable": true, "minimum": 0 },
                 "missed_deadlines": count,
                 "overruns": count,
                 "overflows": count,
                 "dropped_events": count,
-                "variables": { "type": "object" },
+                "variables": { "type": "object", "properties": {} },
             },
             "required": [
                 "timestamp", "state", "state_code", "user_state", "period", "nominal_period",

@@ -224,7 +224,9 @@ fn message(
     packet: &serde_json::value::RawValue,
     sent: coolbot::Time,
 ) -> Result<(), String> {
-    let message = route.transform.message(packet, sent)?;
+    let Some(message) = route.transform.message(packet, sent)? else {
+        return Ok(());
+    };
     route.channel.log_with_meta(
         &message,
         foxglove::PartialMetadata {

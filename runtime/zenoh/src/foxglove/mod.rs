@@ -584,6 +584,10 @@ impl Follower {
                 {
                     transforms.push(wellknown::Transform::Pose(map.clone()));
                     transforms.push(wellknown::Transform::Tf(map.clone()));
+                    transforms.push(wellknown::Transform::Path(
+                        map.clone(),
+                        wellknown::Trail::default(),
+                    ));
                 }
                 for map in self
                     .mappings
@@ -616,6 +620,7 @@ impl Follower {
                             } else {
                                 schema.wrapped()
                             };
+                            let body = coolbot::schema::for_viewers(&body);
                             channels::port(&self.context, &topic, packet, &body)
                         }
                     };

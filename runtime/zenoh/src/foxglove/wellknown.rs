@@ -3,7 +3,8 @@
 //! the fields that hold a pose or a scan.
 //!
 //! ```toml
-//! [[pose]]                       # -> foxglove.PoseInFrame and foxglove.FrameTransform
+//! [[pose]]                       # -> foxglove.PoseInFrame, foxglove.FrameTransform
+//!                                #    and foxglove.PosesInFrame (the path)
 //! port = "*/robot.base.motion.pose"
 //! x = "x"                        # the fields (dotted paths into the packet's JSON)
 //! y = "y"
@@ -20,13 +21,19 @@
 //! frame = "base_link"
 //! ```
 //!
+//! A pose's path is the poses the output sent while a client watched it, one kept each
+//! time the pose moved [`PATH_STEP`] or turned [`PATH_TURN`] from the last one kept,
+//! the newest [`PATH_POINTS`]; a message goes out only when a pose is kept.
+//!
 //! Each mapping may name `stamp`, a field holding nanoseconds since the Unix epoch
 //! (a `Time`); without it a message is stamped when the output sent the packet. A packet
 //! a mapping does not fit (a field missing or not a number) is dropped, counted and
 //! warned about.
 
 use std::borrow::Cow;
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, PoisonError};
 
 use serde::Deserialize;
 use serde_json::value::RawValue;
@@ -126,6 +133,49 @@ impl Mappings {
     }
 }
 
+/// How far a pose moves from the last one its path kept before the path keeps it (m).
+pub const PATH_STEP: f64 = 0.05;
+
+/// How far a pose turns from the last one its path kept before the path keeps it (rad).
+pub const PATH_TURN: f64 = 0.2;
+
+/// The most poses a path holds (the oldest go first).
+pub const PATH_POINTS: usize = 500;
+
+/// The poses a path channel has kept (`x`, `y`, `yaw`), shared by its clones: one
+/// channel's.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Trail(Arc<Mutex<VecDeque<[f64; 3]>>>);
+
+impl PartialEq for Trail {
+    fn eq(&self, other: &Trail) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Trail {
+    /// Keeps `pose` if it moved or turned far enough from the last one kept; the poses
+    /// kept if it was kept.
+    fn keep(&self, pose: [f64; 3]) -> Option<Vec<[f64; 3]>> {
+        let mut poses = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(last) = poses.back() {
+            let moved = (pose[0] - last[0]).hypot(pose[1] - last[1]);
+            let turned = (pose[2] - last[2])
+                .sin()
+                .atan2((pose[2] - last[2]).cos())
+                .abs();
+            if moved < PATH_STEP && turned < PATH_TURN {
+                return None;
+            }
+        }
+        if poses.len() == PATH_POINTS {
+            poses.pop_front();
+        }
+        poses.push_back(pose);
+        Some(poses.iter().copied().collect())
+    }
+}
+
 /// What a channel makes of an echoed packet.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) enum Transform {
@@ -137,6 +187,8 @@ pub(super) enum Transform {
     Tf(PoseMap),
     /// A `foxglove.LaserScan`.
     Scan(ScanMap),
+    /// A `foxglove.PosesInFrame`: the pose's path.
+    Path(PoseMap, Trail),
 }
 
 /// The field at dotted `path` in `packet`.
@@ -176,39 +228,48 @@ fn yaw_quaternion(yaw: f64) -> Value {
 
 impl Transform {
     /// The message of `packet` (its JSON as the node wrote it), sent at `sent`, as
-    /// the channel sends it, or why the packet does not fit. The packet itself is passed on as written,
-    /// and wrapped by writing around it; only the well-known messages read it.
+    /// the channel sends it (None: nothing to send, a path that kept no pose), or why
+    /// the packet does not fit. The packet itself is passed on as written, and wrapped
+    /// by writing around it; only the well-known messages read it.
     pub(super) fn message<'p>(
         &self,
         packet: &'p RawValue,
         sent: coolbot::Time,
-    ) -> Result<Cow<'p, [u8]>, String> {
+    ) -> Result<Option<Cow<'p, [u8]>>, String> {
         match self {
-            Transform::Raw { wrap: false } => Ok(Cow::Borrowed(packet.get().as_bytes())),
+            Transform::Raw { wrap: false } => Ok(Some(Cow::Borrowed(packet.get().as_bytes()))),
             Transform::Raw { wrap: true } => {
                 const OPEN: &[u8] = b"{\"value\":";
                 let mut message = Vec::with_capacity(OPEN.len() + packet.get().len() + 1);
                 message.extend_from_slice(OPEN);
                 message.extend_from_slice(packet.get().as_bytes());
                 message.push(b'}');
-                Ok(Cow::Owned(message))
+                Ok(Some(Cow::Owned(message)))
             }
-            Transform::Pose(_) | Transform::Tf(_) | Transform::Scan(_) => {
+            Transform::Pose(_) | Transform::Tf(_) | Transform::Scan(_) | Transform::Path(..) => {
                 let packet: Value =
                     serde_json::from_str(packet.get()).map_err(|error| error.to_string())?;
-                serde_json::to_vec(&self.apply(packet, sent)?)
-                    .map(Cow::Owned)
+                let Some(message) = self.apply(packet, sent)? else {
+                    return Ok(None);
+                };
+                serde_json::to_vec(&message)
+                    .map(|bytes| Some(Cow::Owned(bytes)))
                     .map_err(|error| error.to_string())
             }
         }
     }
 
-    /// The message of `packet`, sent at `sent`, or why the packet does not fit.
-    pub(super) fn apply(&self, packet: Value, sent: coolbot::Time) -> Result<Value, String> {
-        match self {
-            Transform::Raw { wrap: true } => Ok(json!({ "value": packet })),
-            Transform::Raw { wrap: false } => Ok(packet),
-            Transform::Pose(map) => Ok(json!({
+    /// The message of `packet`, sent at `sent` (None: nothing to send), or why the
+    /// packet does not fit.
+    pub(super) fn apply(
+        &self,
+        packet: Value,
+        sent: coolbot::Time,
+    ) -> Result<Option<Value>, String> {
+        let message = match self {
+            Transform::Raw { wrap: true } => json!({ "value": packet }),
+            Transform::Raw { wrap: false } => packet,
+            Transform::Pose(map) => json!({
                 "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                 "frame_id": map.frame,
                 "pose": {
@@ -219,8 +280,8 @@ impl Transform {
                     },
                     "orientation": yaw_quaternion(number(&packet, &map.yaw)?),
                 },
-            })),
-            Transform::Tf(map) => Ok(json!({
+            }),
+            Transform::Tf(map) => json!({
                 "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                 "parent_frame_id": map.frame,
                 "child_frame_id": map.child,
@@ -230,7 +291,7 @@ impl Transform {
                     "z": 0.0,
                 },
                 "rotation": yaw_quaternion(number(&packet, &map.yaw)?),
-            })),
+            }),
             Transform::Scan(map) => {
                 let ranges = field(&packet, &map.ranges)
                     .and_then(Value::as_array)
@@ -244,7 +305,7 @@ impl Transform {
                     })
                     .collect::<Result<Vec<f64>, String>>()?;
                 let end = map.start_angle + map.step * ranges.len().saturating_sub(1) as f64;
-                Ok(json!({
+                json!({
                     "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
                     "frame_id": map.frame,
                     "pose": {
@@ -255,9 +316,34 @@ impl Transform {
                     "end_angle": end,
                     "ranges": ranges,
                     "intensities": [],
-                }))
+                })
             }
-        }
+            Transform::Path(map, trail) => {
+                let pose = [
+                    number(&packet, &map.x)?,
+                    number(&packet, &map.y)?,
+                    number(&packet, &map.yaw)?,
+                ];
+                let Some(poses) = trail.keep(pose) else {
+                    return Ok(None);
+                };
+                let poses: Vec<Value> = poses
+                    .iter()
+                    .map(|[x, y, yaw]| {
+                        json!({
+                            "position": { "x": x, "y": y, "z": 0.0 },
+                            "orientation": yaw_quaternion(*yaw),
+                        })
+                    })
+                    .collect();
+                json!({
+                    "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
+                    "frame_id": map.frame,
+                    "poses": poses,
+                })
+            }
+        };
+        Ok(Some(message))
     }
 
     /// The schema name and JSON Schema of its messages (None: the packet's own).
@@ -267,6 +353,7 @@ impl Transform {
             Transform::Pose(_) => Some(("foxglove.PoseInFrame", pose_in_frame_schema())),
             Transform::Tf(_) => Some(("foxglove.FrameTransform", frame_transform_schema())),
             Transform::Scan(_) => Some(("foxglove.LaserScan", laser_scan_schema())),
+            Transform::Path(..) => Some(("foxglove.PosesInFrame", poses_in_frame_schema())),
         }
     }
 
@@ -278,6 +365,7 @@ impl Transform {
             Transform::Pose(_) => "/pose",
             Transform::Tf(_) => "/tf",
             Transform::Scan(_) => "/laser_scan",
+            Transform::Path(..) => "/path",
         }
     }
 }
@@ -345,6 +433,21 @@ pub fn pose_in_frame_schema() -> Value {
     })
 }
 
+/// `foxglove.PosesInFrame` in JSON Schema.
+pub fn poses_in_frame_schema() -> Value {
+    json!({
+        "$schema": coolbot::schema::DIALECT,
+        "title": "foxglove.PosesInFrame",
+        "type": "object",
+        "properties": {
+            "timestamp": time_schema(),
+            "frame_id": { "type": "string" },
+            "poses": { "type": "array", "items": pose_schema() },
+        },
+        "required": ["timestamp", "frame_id", "poses"],
+    })
+}
+
 /// `foxglove.FrameTransform` in JSON Schema.
 pub fn frame_transform_schema() -> Value {
     json!({
@@ -408,7 +511,8 @@ mod tests {
             "stamp": 3_000_000_007u64 });
         let pose = Transform::Pose(pose_map())
             .apply(packet.clone(), SENT)
-            .unwrap();
+            .unwrap()
+            .expect("a message per packet");
         assert_eq!(pose["frame_id"], "odom");
         assert_eq!(pose["timestamp"], json!({ "sec": 3, "nsec": 7 }));
         assert_eq!(
@@ -418,7 +522,10 @@ mod tests {
         let q = &pose["pose"]["orientation"];
         assert!((q["z"].as_f64().unwrap() - 1.0).abs() < 1e-12, "{q}");
         assert!(q["w"].as_f64().unwrap().abs() < 1e-12, "{q}");
-        let tf = Transform::Tf(pose_map()).apply(packet, SENT).unwrap();
+        let tf = Transform::Tf(pose_map())
+            .apply(packet, SENT)
+            .unwrap()
+            .expect("a message per packet");
         assert_eq!(tf["parent_frame_id"], "odom");
         assert_eq!(tf["child_frame_id"], "base_link");
         assert_eq!(tf["translation"]["y"], -2.0);
@@ -437,7 +544,8 @@ mod tests {
         };
         let scan = Transform::Scan(map)
             .apply(json!({ "us": [1.0, 2.0, 3.0] }), SENT)
-            .unwrap();
+            .unwrap()
+            .expect("a message per packet");
         // No stamp field: the time the output sent the packet.
         assert_eq!(scan["timestamp"], json!({ "sec": 5, "nsec": 11 }));
         assert_eq!(scan["ranges"], json!([1.25, 2.25, 3.25]));
@@ -454,6 +562,45 @@ mod tests {
         assert_eq!(error, "no number at `at.y`");
     }
 
+    #[test]
+    fn a_path_keeps_a_pose_each_step_or_turn_and_its_newest_ones() {
+        let path = Transform::Path(pose_map(), Trail::default());
+        let at = |x: f64, theta: f64| {
+            path.apply(
+                json!({ "x": x, "at": { "y": 0.0 }, "theta": theta, "stamp": 1 }),
+                SENT,
+            )
+            .unwrap()
+        };
+        let first = at(0.0, 0.0).expect("the first pose is kept");
+        assert_eq!(first["frame_id"], "odom");
+        assert_eq!(first["poses"].as_array().unwrap().len(), 1);
+        assert!(at(PATH_STEP / 2.0, PATH_TURN / 2.0).is_none(), "too close");
+        let moved = at(PATH_STEP, 0.0).expect("a step away");
+        assert_eq!(moved["poses"][1]["position"]["x"], PATH_STEP);
+        // A turn from +179 to -179 degrees is 2 degrees, not 358.
+        let pi = std::f64::consts::PI;
+        at(PATH_STEP, pi - 0.01).expect("turned");
+        assert!(
+            at(PATH_STEP, -pi + 0.01).is_none(),
+            "a small turn across pi"
+        );
+        // A clone is the same channel's path: it keeps one trail.
+        let clone = path.clone();
+        assert_eq!(clone, path);
+        assert_ne!(Transform::Path(pose_map(), Trail::default()), path);
+        let mut last = None;
+        for step in 0..PATH_POINTS + 10 {
+            last = at(2.0 + step as f64, 0.0).or(last);
+        }
+        let poses = last.expect("kept")["poses"].as_array().unwrap().clone();
+        assert_eq!(poses.len(), PATH_POINTS);
+        assert_eq!(
+            poses[PATH_POINTS - 1]["position"]["x"],
+            2.0 + (PATH_POINTS + 9) as f64
+        );
+    }
+
     fn raw(json: &str) -> Box<RawValue> {
         RawValue::from_string(json.to_owned()).expect("JSON")
     }
@@ -464,17 +611,20 @@ mod tests {
         let packet = raw(r#"{"z":1,"a":[2.5,"x"]}"#);
         let message = Transform::Raw { wrap: false }
             .message(&packet, SENT)
-            .unwrap();
+            .unwrap()
+            .expect("a message per packet");
         assert!(matches!(message, Cow::Borrowed(_)), "copied");
         assert_eq!(&*message, br#"{"z":1,"a":[2.5,"x"]}"#);
         let number = raw("42");
         let wrapped = Transform::Raw { wrap: true }
             .message(&number, SENT)
-            .unwrap();
+            .unwrap()
+            .expect("a message per packet");
         assert_eq!(&*wrapped, br#"{"value":42}"#);
         let wrapped = Transform::Raw { wrap: true }
             .message(&packet, SENT)
-            .unwrap();
+            .unwrap()
+            .expect("a message per packet");
         let value: Value = serde_json::from_slice(&wrapped).expect("JSON");
         assert_eq!(value, json!({ "value": { "z": 1, "a": [2.5, "x"] } }));
     }
@@ -482,13 +632,17 @@ mod tests {
     #[test]
     fn a_mapped_packet_is_read_and_its_message_written() {
         let packet = raw(r#"{"x":1.5,"at":{"y":-2.0},"theta":0.0,"stamp":3000000007}"#);
-        let message = Transform::Pose(pose_map()).message(&packet, SENT).unwrap();
+        let message = Transform::Pose(pose_map())
+            .message(&packet, SENT)
+            .unwrap()
+            .expect("a message per packet");
         let pose: Value = serde_json::from_slice(&message).expect("JSON");
         assert_eq!(
             pose,
             Transform::Pose(pose_map())
                 .apply(serde_json::from_str(packet.get()).unwrap(), SENT)
                 .unwrap()
+                .expect("a message per packet")
         );
         let unfit = raw(r#"{"x":1.0,"theta":0.0,"stamp":1}"#);
         assert_eq!(
@@ -499,7 +653,7 @@ mod tests {
 
     /// The example's layout draws what `coolctl foxglove --map map.toml` serves for
     /// the robot run as `--node robot`: the mapped outputs, the monitoring of the
-    /// motion controller and the range server, the log.
+    /// motion controller, the range server and its simulated backup, the log.
     #[test]
     fn the_example_robots_layout_reads_served_topics() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/mobile-base/foxglove");
@@ -553,9 +707,15 @@ mod tests {
             let monitor = [
                 "/robot/robot.base.motion/monitor",
                 "/robot/robot.base.ranges/monitor",
+                "/robot/robot.base.sim_ranges/monitor",
             ]
             .contains(&topic);
-            pose("/pose") || pose("/tf") || scan || monitor || topic == super::super::LOG_TOPIC
+            pose("/pose")
+                || pose("/tf")
+                || pose("/path")
+                || scan
+                || monitor
+                || topic == super::super::LOG_TOPIC
         };
         for topic in &topics {
             assert!(
@@ -563,7 +723,7 @@ mod tests {
                 "the layout reads `{topic}`, which is not served"
             );
         }
-        assert_eq!(topics.len(), 6, "{topics:?}");
+        assert_eq!(topics.len(), 8, "{topics:?}");
         assert!(panels.get("Parameters!robot").is_some());
     }
 

@@ -821,7 +821,9 @@ fn an_mcap_reader_of_its_own_finds_the_schemas_channels_and_counts() {
     // A tick is not an object: wrapped as `{"value": null}`.
     let beat = channel("src.beat");
     let schema = json_of(&beat.schema.as_ref().expect("schema").data);
-    assert_eq!(schema["properties"]["value"]["type"], "null");
+    // A tick's value is `null`, which the viewers' part of JSON Schema has no type
+    // for: the wrapped schema names no property (`coolbot::schema::for_viewers`).
+    assert_eq!(schema["properties"], serde_json::json!({}), "{schema}");
     assert_eq!(beat.metadata["coolbot.wrapped"], "value");
     let losses = channel("coolbot/losses");
     let schema = json_of(&losses.schema.as_ref().expect("schema").data);

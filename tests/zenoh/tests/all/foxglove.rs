@@ -381,6 +381,11 @@ fn a_foxglove_client_sees_channels_subscribes_and_decodes_them() {
     );
     // `idle` is not echoed: no channel.
     assert!(!channels.contains_key("/fox/source.idle"), "{channels:?}");
+    // The viewers read every schema (one property they cannot read loses the channel).
+    for channel in channels.values() {
+        assert_eq!(channel["viewerError"], Value::Null, "{channel}");
+        assert_eq!(channel["schemaError"], Value::Null, "{channel}");
+    }
 
     let mut client = client;
     client.order(json!({ "do": "subscribe", "topic": "/fox/source.out", "count": 3 }));
@@ -761,7 +766,7 @@ frame = "base_link"
 "#;
 
 #[test]
-fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
+fn mapped_outputs_are_foxglove_poses_transforms_paths_and_laser_scans() {
     let Some(modules) = client_modules() else {
         return;
     };
@@ -803,8 +808,12 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
     let channels = client.advertised(&[
         "/rover/rover.pose/pose",
         "/rover/rover.pose/tf",
+        "/rover/rover.pose/path",
         "/rover/rover.scan/laser_scan",
     ]);
+    for channel in channels.values() {
+        assert_eq!(channel["viewerError"], Value::Null, "{channel}");
+    }
     assert_eq!(
         channels["/rover/rover.pose/pose"]["schemaName"],
         "foxglove.PoseInFrame"
@@ -817,12 +826,17 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
         channels["/rover/rover.scan/laser_scan"]["schemaName"],
         "foxglove.LaserScan"
     );
+    assert_eq!(
+        channels["/rover/rover.pose/path"]["schemaName"],
+        "foxglove.PosesInFrame"
+    );
     // No --port: the packets themselves are not served.
     assert!(!channels.contains_key("/rover/rover.pose"), "{channels:?}");
 
     for topic in [
         "/rover/rover.pose/pose",
         "/rover/rover.pose/tf",
+        "/rover/rover.pose/path",
         "/rover/rover.scan/laser_scan",
     ] {
         client.order(json!({ "do": "subscribe", "topic": topic, "count": 1 }));
@@ -836,6 +850,14 @@ fn mapped_outputs_are_foxglove_poses_transforms_and_laser_scans() {
     let tf = client.messages("/rover/rover.pose/tf", 1).remove(0);
     assert_eq!(tf["parent_frame_id"], "odom");
     assert_eq!(tf["child_frame_id"], "base_link");
+    // The rover stands still: its path is the one pose it kept.
+    let path = client.messages("/rover/rover.pose/path", 1).remove(0);
+    assert_eq!(path["frame_id"], "odom");
+    assert_eq!(
+        path["poses"],
+        json!([{ "position": { "x": 1, "y": 2, "z": 0 }, "orientation": pose["pose"]["orientation"] }]),
+        "{path}"
+    );
     let laser = client.messages("/rover/rover.scan/laser_scan", 1).remove(0);
     assert_eq!(laser["ranges"], json!([1.5, 2.5, 3.5, 4.5]));
     assert_eq!(laser["end_angle"], 3.0 * std::f64::consts::FRAC_PI_2);

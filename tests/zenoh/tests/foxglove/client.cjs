@@ -7,7 +7,9 @@
 // It prints one JSON line per thing it sees (`kind`: open, serverInfo, advertise,
 // message, status, parameterValues, services, serviceCallResponse,
 // serviceCallFailure, close, error) and does what each JSON line of stdin says
-// (`do`: subscribe, unsubscribe, getParameters, setParameters, call).
+// (`do`: subscribe, unsubscribe, getParameters, setParameters, call). An advertised
+// channel's `schemaError` says why Ajv could not compile its schema, its
+// `viewerError` why the Foxglove and Lichtblick viewers would refuse it.
 
 "use strict";
 
@@ -44,12 +46,60 @@ client.on("serverInfo", (info) =>
   out({ kind: "serverInfo", name: info.name, capabilities: info.capabilities }),
 );
 client.on("status", (status) => out({ kind: "status", level: status.level, message: status.message }));
+// Why the Foxglove and Lichtblick viewers would refuse a channel's JSON Schema, or
+// null: the rules of their `parseJsonSchema` (which refuses the whole channel for one
+// property it cannot read): an object whose properties each have one `type`,
+// `boolean`, `string`, `number`, `integer`, `object` or `array` (of one of the others
+// but `array`), or a `oneOf` of numeric `const`s.
+function viewerError(schema, at) {
+  if (schema.type !== "object") {
+    return `${at}: "type" is ${JSON.stringify(schema.type)}, not "object"`;
+  }
+  for (const [name, property] of Object.entries(schema.properties ?? {})) {
+    const where = `${at}.${name}`;
+    if (Array.isArray(property.oneOf)) {
+      if (!property.oneOf.every((alternative) => typeof alternative.const === "number")) {
+        return `${where}: oneOf alternatives must have number values`;
+      }
+      continue;
+    }
+    switch (property.type) {
+      case "boolean":
+      case "string":
+      case "number":
+      case "integer":
+        break;
+      case "object": {
+        const nested = viewerError(property, where);
+        if (nested) return nested;
+        break;
+      }
+      case "array": {
+        const items = property.items ?? {};
+        if (items.type === "object") {
+          const nested = viewerError(items, where);
+          if (nested) return nested;
+        } else if (!["boolean", "string", "number", "integer"].includes(items.type)) {
+          return `${where}: an array of ${JSON.stringify(items.type)}`;
+        }
+        break;
+      }
+      default:
+        return `${where}: unsupported type ${JSON.stringify(property.type)}`;
+    }
+  }
+  return null;
+}
+
 client.on("advertise", (advertised) => {
   for (const channel of advertised) {
     let validate = null;
     let schemaError = null;
+    let viewer = null;
     try {
-      validate = ajv.compile(JSON.parse(channel.schema));
+      const schema = JSON.parse(channel.schema);
+      viewer = viewerError(schema, channel.schemaName);
+      validate = ajv.compile(schema);
     } catch (error) {
       schemaError = String(error.message);
     }
@@ -63,6 +113,7 @@ client.on("advertise", (advertised) => {
       schemaName: channel.schemaName,
       schemaEncoding: channel.schemaEncoding,
       schemaError,
+      viewerError: viewer,
     });
   }
 });
