@@ -6,85 +6,12 @@
 //! recovery queue builds the wanderer there again and the fallback stands down.
 #![cfg(feature = "network")]
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use rustix::process::{Pid, Signal, kill_process};
 
-/// Generous: the machine is shared and may be loaded.
-const PATIENCE: Duration = Duration::from_secs(60);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
-}
-
-/// Starts the binary with `args`; every line of its stdout and stderr goes to `lines`
-/// tagged with `who` (`robot: ...`, `station stderr: ...`), and its stdout is kept
-/// in the joined string.
-fn spawn(
-    who: &'static str,
-    args: &[&str],
-    lines: &mpsc::Sender<String>,
-) -> (Child, std::thread::JoinHandle<String>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mobile-base"))
-        .args(args)
-        .env("RUST_LOG", "warn,coolbot_zenoh=info")
-        // No outlet tallies in the user's state directory (its bridges are a
-        // placement's, which keep none anyway).
-        .env("COOLBOT_STATE_DIR", "")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the example starts");
-    let stderr = child.stderr.take().expect("piped");
-    let errors = lines.clone();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines() {
-            let Ok(line) = line else { break };
-            let _ = errors.send(format!("{who} stderr: {line}"));
-        }
-    });
-    let stdout = child.stdout.take().expect("piped");
-    let lines = lines.clone();
-    let reader = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in BufReader::new(stdout).lines() {
-            let Ok(line) = line else { break };
-            all.push_str(&line);
-            all.push('\n');
-            let _ = lines.send(format!("{who}: {line}"));
-        }
-        all
-    });
-    (child, reader)
-}
-
-/// Waits for a line (of either process) for which `wanted` holds; the lines seen
-/// meanwhile are kept in `seen`, and printed if none comes.
-fn wait_line(
-    lines: &mpsc::Receiver<String>,
-    seen: &mut Vec<String>,
-    what: &str,
-    wanted: impl Fn(&str) -> bool,
-) -> String {
-    let deadline = Instant::now() + PATIENCE;
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match lines.recv_timeout(left) {
-            Ok(line) if wanted(&line) => return line,
-            Ok(line) => seen.push(line),
-            Err(error) => panic!(
-                "no line {what} within {PATIENCE:?} ({error}); seen:\n{}",
-                seen.join("\n")
-            ),
-        }
-    }
-}
+use crate::support::{free_port, spawn, wait_line};
 
 #[test]
 fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is_lost() {
@@ -101,7 +28,7 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
         "1s",
     ];
     let (sender, lines) = mpsc::channel();
-    let (mut station, _) = spawn("station", &station_args, &sender);
+    let (mut station, _) = spawn("station", &station_args, "warn,coolbot_zenoh=info", &sender);
     let mut seen = Vec::new();
     let serving = |l: &str| l.starts_with("station: node `station` on the network");
     wait_line(&lines, &mut seen, "of the station serving", serving);
@@ -120,6 +47,7 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
             "--output",
             "lines",
         ],
+        "warn,coolbot_zenoh=info",
         &sender,
     );
     let built = |l: &str| {
@@ -171,7 +99,7 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
     );
 
     // The station is back: the wanderer is built there again and takes over.
-    let (mut station, _) = spawn("station", &station_args, &sender);
+    let (mut station, _) = spawn("station", &station_args, "warn,coolbot_zenoh=info", &sender);
     wait_line(
         &lines,
         &mut seen,
@@ -219,6 +147,7 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
             "--output",
             "lines",
         ],
+        "warn,coolbot_zenoh=info",
         &sender,
     );
     wait_line(

@@ -8,10 +8,7 @@
 #![cfg(feature = "network")]
 
 use std::collections::HashSet;
-use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
 
 use coolbot::record::Reader;
 use mobile_base::RECORDED_PORTS;
@@ -20,37 +17,7 @@ use mobile_base::sensing;
 use mobile_base::world::{Pose, World};
 use rustix::process::{Pid, Signal, kill_process};
 
-/// Generous: the machine is shared and may be loaded.
-const PATIENCE: Duration = Duration::from_secs(60);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
-}
-
-/// Waits for a line of the robot for which `wanted` holds; the lines seen meanwhile
-/// are kept in `seen`, and printed if none comes.
-fn wait_line(
-    lines: &mpsc::Receiver<String>,
-    seen: &mut Vec<String>,
-    what: &str,
-    wanted: impl Fn(&str) -> bool,
-) -> String {
-    let deadline = Instant::now() + PATIENCE;
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match lines.recv_timeout(left) {
-            Ok(line) if wanted(&line) => return line,
-            Ok(line) => seen.push(line),
-            Err(error) => panic!(
-                "no line {what} within {PATIENCE:?} ({error}); seen:\n{}",
-                seen.join("\n")
-            ),
-        }
-    }
-}
+use crate::support::{free_port, spawn, wait_line};
 
 /// The pid in a line `... drivers process <pid> started ...`.
 fn started_pid(line: &str) -> u32 {
@@ -91,8 +58,10 @@ fn with_drivers_the_range_server_runs_in_its_own_process_and_a_kill_9_is_substit
     std::fs::create_dir_all(&dir).expect("temp dir");
     let recording = dir.join("run.mcap");
     let listen = format!("tcp/127.0.0.1:{}", free_port());
-    let mut robot = Command::new(env!("CARGO_BIN_EXE_mobile-base"))
-        .args([
+    let (sender, lines) = mpsc::channel();
+    let (mut robot, out) = spawn(
+        "",
+        &[
             "--drivers",
             "--node",
             "robot",
@@ -108,32 +77,11 @@ fn with_drivers_the_range_server_runs_in_its_own_process_and_a_kill_9_is_substit
             "--noise",
             "0",
             "--record",
-        ])
-        .arg(&recording)
-        .env("RUST_LOG", "warn")
-        .env("COOLBOT_STATE_DIR", "")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the example starts");
-    let (sender, lines) = mpsc::channel();
-    let stderr = robot.stderr.take().expect("piped");
-    let errors = sender.clone();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = errors.send(format!("stderr: {line}"));
-        }
-    });
-    let stdout = robot.stdout.take().expect("piped");
-    let out = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            all.push_str(&line);
-            all.push('\n');
-            let _ = sender.send(line);
-        }
-        all
-    });
+            recording.to_str().expect("a UTF-8 path"),
+        ],
+        "warn",
+        &sender,
+    );
     let mut seen = Vec::new();
     let says = |text: &'static str| move |l: &str| l.contains(text);
     let status = |a: &'static str, b: &'static str| {

@@ -11,5 +11,6 @@ mod process;
 mod ranges;
 mod replay;
 mod supervisor;
+mod support;
 mod teleop;
 mod top;

@@ -9,8 +9,7 @@ use std::time::{Duration, Instant};
 
 use rustix::process::{Pid, Signal, kill_process};
 
-/// Generous: the machine is shared and may be loaded.
-const PATIENCE: Duration = Duration::from_secs(60);
+use crate::support::{PATIENCE, wait_line};
 
 fn robot(args: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_mobile-base"))
@@ -49,19 +48,6 @@ fn stderr_of(child: &mut Child) -> std::thread::JoinHandle<String> {
     })
 }
 
-/// Waits for a line of `lines` for which `wanted` holds.
-fn wait_line(lines: &mpsc::Receiver<String>, wanted: impl Fn(&str) -> bool) -> String {
-    let deadline = Instant::now() + PATIENCE;
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match lines.recv_timeout(left) {
-            Ok(line) if wanted(&line) => return line,
-            Ok(_) => {}
-            Err(error) => panic!("no such line within {PATIENCE:?}: {error}"),
-        }
-    }
-}
-
 fn wait_exit(child: &mut Child) -> std::process::ExitStatus {
     let deadline = Instant::now() + PATIENCE;
     loop {
@@ -81,7 +67,7 @@ fn stopped_by(signal: Signal, name: &str) {
     let (lines, stdout) = follow(&mut child);
     let stderr = stderr_of(&mut child);
     // Running: a first status line came out.
-    wait_line(&lines, |line| {
+    wait_line(&lines, &mut Vec::new(), "of the robot running", |line| {
         line.starts_with('[') && line.contains("robot=")
     });
     let pid = Pid::from_raw(i32::try_from(child.id()).expect("a pid")).expect("a pid");

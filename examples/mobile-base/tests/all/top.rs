@@ -8,14 +8,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const PATIENCE: Duration = Duration::from_secs(60);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
-}
+use crate::support::{PATIENCE, free_port};
 
 fn example(args: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_mobile-base"))
