@@ -187,7 +187,7 @@ impl Instances<'_> {
 {%- if !loop.first %}
 {% endif %}
     /// Instance `{{ h.instance }}`, a `{{ h.component }}`.
-{{ l.open_method(&h.accessor_signature("")) }}
+{{ l.open_method(&h.accessor_signature()) }}
 {{ l.handle_lit(&h.type_name, "commander", "&mut *self.commander") }}
     }
 {%- endfor %}
@@ -635,7 +635,7 @@ impl StandIns<'_> {
 {%- if !loop.first %}
 {% endif %}
     /// The stand-in of instance `{{ h.instance }}` (a `{{ h.component }}`).
-{{ l.open_method(&h.accessor_signature("StandIn")) }}
+{{ l.open_method(&h.stand_in_accessor_signature()) }}
 {{ l.handle_lit(&h.stand_in_type(), "inner", "&mut *self.inner") }}
     }
 {%- endfor %}
@@ -646,11 +646,11 @@ impl StandIns<'_> {
 /// What the test sets of instance `{{ h.instance }}` (a `{{ h.component }}`) in a
 /// [`Harness`]: each change is an event of the instance, and the supervisor's rules
 /// that read it are evaluated at once.
-pub struct {{ h.type_name }}StandIn<'a> {
+pub struct {{ h.stand_in_type() }}<'a> {
     inner: &'a mut ::coolbot::harness::SupervisorHarness,
 }
 
-impl {{ h.type_name }}StandIn<'_> {
+impl {{ h.stand_in_type() }}<'_> {
     /// Its default state is now `state` (e.g. `running_error`).
     pub fn set_state(&mut self, state: ::coolbot::State) -> HarnessResult<()> {
 {{ l.instance_call("self.inner", "set_instance_state", &h.instance, "state") }}

@@ -5,15 +5,15 @@
 //! Packets, enums, extern packets and converters of the descriptions.
 {%- for e in types.externs %}
 
-{{ l.doc_lines(&e.doc, 0) }}{{ l.type_alias(e) }}
+{{ l.item_doc_lines(&e.doc) }}{{ l.type_alias(e) }}
 {%- endfor %}
 {%- for p in types.packets %}
 
-{{ l.doc_lines(&p.doc, 0) }}{% call packet(p, 0) %}{% endcall %}
+{% call packet(p, 0) %}{% endcall %}
 {%- endfor %}
 {%- for e in types.enums %}
 
-{{ l.doc_lines(&e.doc, 0) }}{{ l.enum_derive(e) }}
+{{ l.item_doc_lines(&e.doc) }}{{ l.enum_derive(e) }}
 {%- if e.variants.is_empty() %}
 pub enum {{ e.name }} {}
 {%- else %}
@@ -64,7 +64,7 @@ pub mod ros {
 {%- if !loop.first %}
 {{ "" }}
 {%- endif %}
-{{ l.doc_lines(&p.doc, 8) }}{% call packet(p, 8) %}{% endcall %}
+{% call packet(p, 8) %}{% endcall %}
 {%- if !message.constants.is_empty() %}
 
         impl {{ p.name }} {
@@ -90,7 +90,7 @@ pub mod ros {
 {#- A packet's struct at `indent` and, when its defaults are not the fields' own,
     its `Default`. -#}
 {% macro packet(p, indent) -%}
-{{ l.packet_derive(p, indent) }}
+{{ l.doc_lines(&p.doc, indent) }}{{ l.packet_derive(p, indent) }}
 {%- if p.fields.is_empty() %}
 {{ l.open(indent) }}pub struct {{ p.name }} {}
 {%- else %}

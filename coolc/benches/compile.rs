@@ -638,8 +638,13 @@ fn main() {
     let rounds = if quick { 1 } else { 3 };
     let (small_rounds, large_rounds) = if quick { (1, 0) } else { SET_ROUNDS };
     let waited = wait_for_last_removal();
+    let large = if quick {
+        "no 10x rows".to_owned()
+    } else {
+        format!("of {large_rounds} per 10x row")
+    };
     println!(
-        "### coolc: check and compile times ({} run, median of {rounds} per example row, of {small_rounds} per 1x row and of {large_rounds} per 10x row; crates written under {})\n",
+        "### coolc: check and compile times ({} run, median of {rounds} per example row, of {small_rounds} per 1x row, {large}; crates written under {})\n",
         if quick { "quick" } else { "full" },
         scratch_root().display()
     );

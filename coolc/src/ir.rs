@@ -1113,15 +1113,25 @@ impl Handle {
         format!("pub fn set_quality(&mut self, level: {quality}) -> {ret}")
     }
 
-    /// The signature of its accessor, returning `{type_name}{suffix}<'_>`.
-    pub(crate) fn accessor_signature(&self, suffix: &str) -> String {
+    /// The signature of its accessor, returning `{type_name}<'_>`.
+    pub(crate) fn accessor_signature(&self) -> String {
         format!(
-            "pub fn {}(&mut self) -> {}{suffix}<'_>",
+            "pub fn {}(&mut self) -> {}<'_>",
             self.method, self.type_name
         )
     }
 
-    /// The type of its stand-in's handle (the harness's `stand_ins()` accessors).
+    /// The signature of its stand-in's accessor, returning its stand-in's handle.
+    pub(crate) fn stand_in_accessor_signature(&self) -> String {
+        format!(
+            "pub fn {}(&mut self) -> {}<'_>",
+            self.method,
+            self.stand_in_type()
+        )
+    }
+
+    /// The type of its stand-in's handle (`StandIns`, the harness's stand-ins of its
+    /// instances).
     pub(crate) fn stand_in_type(&self) -> String {
         format!("{}StandIn", self.type_name)
     }

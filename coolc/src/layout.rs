@@ -295,10 +295,15 @@ impl Layout {
         spaces(*indent)
     }
 
+    /// Doc-comment lines of an item at the top of a module (see [`Layout::doc_lines`]).
+    pub fn item_doc_lines(&self, lines: &[String]) -> String {
+        self.doc_lines(lines, &0)
+    }
+
     /// Doc-comment lines at `indent`, each followed by a newline (nothing when there
     /// are none): what comes before an item's attributes.
-    pub fn doc_lines(&self, lines: &[String], indent: usize) -> String {
-        let mut out = self.doc(lines, indent, "///");
+    pub fn doc_lines(&self, lines: &[String], indent: &usize) -> String {
+        let mut out = self.doc(lines, *indent, "///");
         if !out.is_empty() {
             out.remove(0);
             out.push('\n');

@@ -13,7 +13,9 @@
 //! What cannot be traced this way (a type whose `Deserialize` is hand-written to accept
 //! anything, `#[serde(untagged)]` or internally tagged enums, `#[serde(flatten)]`) gets
 //! the permissive schema `{}` and the reason in [`Schema::derived`]; a caller that
-//! knows better gives the schema itself (`Recorder::tap_with_schema`). An enum's
+//! knows better gives the schema itself (`Recorder::tap_with_schema`). Recordings and
+//! `coolctl foxglove` write every schema, traced or given, in the part of JSON Schema
+//! the Foxglove viewers read ([`for_viewers`]). An enum's
 //! variants are traced one pass each; one still untraced after [`MAX_PASSES`] passes
 //! gets `{}` for its own schema, the rest of the type keeps its exact schema.
 
@@ -55,6 +57,18 @@ impl Schema {
     /// them as `{"value": ...}`, which plotting tools expect).
     pub fn is_object(&self) -> bool {
         self.schema.get("type").and_then(Value::as_str) == Some("object")
+    }
+
+    /// The schema of the JSON a recording or a Foxglove channel carries for a value
+    /// of this schema (the value itself when it is an object, else wrapped, see
+    /// [`Schema::wrapped`]), in the part of JSON Schema the viewers read
+    /// ([`for_viewers`]).
+    pub fn for_viewers(&self) -> Value {
+        if self.is_object() {
+            for_viewers(&self.schema)
+        } else {
+            for_viewers(&self.wrapped())
+        }
     }
 
     /// The schema of `{"value": <a value of this schema>}`.
@@ -117,9 +131,9 @@ pub fn of<T: DeserializeOwned>() -> Schema {
 /// keyword, which Ajv reads and the viewers pass over) instead of a list of types or
 /// an `anyOf`; an enum of unit variants is a string with its `enum`; a map is an
 /// object with no properties. A property whose values no such schema describes (a
-/// tuple, an array of arrays or of enums, an enum with data, a unit, a type that
-/// could not be traced) is left out of `properties`: its values stay in every
-/// message, and a viewer shows them without a type.
+/// tuple, an array of arrays or of enums with data, an enum with data, a unit, a type
+/// that could not be traced, a `$ref`) is left out of `properties`: its values stay in
+/// every message, and a viewer shows them without a type.
 pub fn for_viewers(schema: &Value) -> Value {
     let mut object = viewer_object(schema);
     for key in ["$schema", "description"] {
@@ -173,14 +187,16 @@ fn viewer_property(schema: &Value) -> Option<Value> {
         let (Some(only), None) = (others.next(), others.next()) else {
             return None;
         };
+        // A `oneOf` of numeric constants has no `type` to be `nullable` with.
         return (cases.len() == 2)
             .then(|| viewer_property(only))
             .flatten()
+            .filter(|inner| inner.get("type").is_some())
             .map(nullable);
     }
     if let Some(cases) = schema.get("oneOf").and_then(Value::as_array) {
         let consts: Option<Vec<&Value>> = cases.iter().map(|case| case.get("const")).collect();
-        let consts = consts?;
+        let consts = consts.filter(|consts| !consts.is_empty())?;
         if consts.iter().all(|value| value.is_number()) {
             return Some(schema.clone());
         }
@@ -222,6 +238,7 @@ fn viewer_property(schema: &Value) -> Option<Value> {
                 return None;
             }
             let mut array = schema.clone();
+            array["type"] = Value::from("array");
             array["items"] = items;
             array
         }
@@ -556,6 +573,20 @@ mod tests {
         for (object, name) in [(pose, "path"), (pose, "mode"), (p, "grid"), (p, "unit")] {
             assert!(object.get(name).is_none(), "{name}: {object}");
         }
+        // Given shapes `of` does not write: a list of types on an array, an optional
+        // `oneOf` of numbers (no `type` to be nullable with), an empty `oneOf`.
+        let given = super::for_viewers(&json!({ "type": "object", "properties": {
+            "a": { "type": ["array", "null"], "items": { "type": "number" } },
+            "b": { "anyOf": [{ "oneOf": [{ "const": 1, "title": "one" }] }, { "type": "null" }] },
+            "c": { "oneOf": [] },
+        } }));
+        viewers_read(&given, "given");
+        assert_eq!(
+            given["properties"]["a"],
+            json!({ "type": "array", "items": { "type": "number" }, "nullable": true })
+        );
+        assert!(given["properties"].get("b").is_none(), "{given}");
+        assert!(given["properties"].get("c").is_none(), "{given}");
         // A value that is not an object, wrapped: its `value` is read.
         let number = super::for_viewers(&of::<f64>().wrapped());
         viewers_read(&number, "f64");

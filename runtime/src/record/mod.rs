@@ -21,7 +21,9 @@
 //!   tapped `ports` with their Rust `type` and `kind`, the monitored components);
 //! - one channel per tapped output, its topic the output's path, its schema the packet
 //!   type's ([`crate::schema`]: traced from the type's serde `Deserialize`, or given to
-//!   [`Recorder::tap_with_schema`]), its metadata `coolbot.kind` (`data`, `poster`,
+//!   [`Recorder::tap_with_schema`]) in the part of JSON Schema the Foxglove viewers read
+//!   ([`crate::schema::for_viewers`]; a given schema also whole in the metadata
+//!   `coolbot.schema.given`), its metadata `coolbot.kind` (`data`, `poster`,
 //!   `tick`), `coolbot.type` (the Rust type), `coolbot.schema` (how the schema was
 //!   obtained) and `coolbot.wrapped` (`value` when a packet that is not a JSON object is
 //!   written as `{"value": packet}`, since plotting tools address fields of objects;

@@ -124,7 +124,10 @@ impl Recorder {
     }
 
     /// [`Recorder::tap`] with the channel's JSON Schema given (for a type whose
-    /// `Deserialize` cannot be traced, see [`crate::schema`]).
+    /// `Deserialize` cannot be traced, see [`crate::schema`]). The channel's schema is
+    /// its part the Foxglove viewers read ([`crate::schema::for_viewers`]: no `$ref`,
+    /// no `allOf`, no union of several types); the metadata `coolbot.schema.given`
+    /// holds it whole.
     pub fn tap_with_schema<T: Packet + Serialize>(
         &mut self,
         system: &System,
@@ -456,14 +459,13 @@ pub(super) fn add_channel(
     mut metadata: BTreeMap<String, String>,
 ) -> Result<Channel, mcap::McapError> {
     let wrapped = !schema.is_object();
-    let data = if wrapped {
-        schema.wrapped()
-    } else {
-        schema.schema.clone()
-    };
     // In the part of JSON Schema the Foxglove and Lichtblick viewers read: they refuse
-    // a channel for one property outside it.
-    let data = crate::schema::for_viewers(&data);
+    // a channel for one property outside it. A schema given by the caller is kept
+    // whole in the channel's metadata.
+    let data = schema.for_viewers();
+    if schema.derived == "given" {
+        metadata.insert("coolbot.schema.given".to_owned(), schema.schema.to_string());
+    }
     // (A JSON value always serializes.)
     let bytes = serde_json::to_vec(&data).unwrap_or_default();
     let schema_id = mcap.add_schema(type_name, "jsonschema", &bytes)?;

@@ -564,14 +564,14 @@ impl Follower {
             for port in &info.echoed {
                 let name = format!("{address}.{port}");
                 let key = keys::echo(&listed.node, &listed.path, port);
+                let schema = coolbot::schema::Schema::given(
+                    info.schemas
+                        .get(port)
+                        .cloned()
+                        .unwrap_or_else(|| serde_json::json!({})),
+                );
                 let mut transforms = Vec::new();
                 if self.patterns.iter().any(|pattern| matches(pattern, &name)) {
-                    let schema = coolbot::schema::Schema::given(
-                        info.schemas
-                            .get(port)
-                            .cloned()
-                            .unwrap_or_else(|| serde_json::json!({})),
-                    );
                     transforms.push(wellknown::Transform::Raw {
                         wrap: !schema.is_object(),
                     });
@@ -609,18 +609,7 @@ impl Follower {
                                 .iter()
                                 .find(|output| &output.name == port)
                                 .map_or("packet", |output| output.packet.as_str());
-                            let schema = coolbot::schema::Schema::given(
-                                info.schemas
-                                    .get(port)
-                                    .cloned()
-                                    .unwrap_or_else(|| serde_json::json!({})),
-                            );
-                            let body = if schema.is_object() {
-                                schema.schema
-                            } else {
-                                schema.wrapped()
-                            };
-                            let body = coolbot::schema::for_viewers(&body);
+                            let body = schema.for_viewers();
                             channels::port(&self.context, &topic, packet, &body)
                         }
                     };
@@ -661,6 +650,9 @@ impl Follower {
             return;
         };
         served.subscribers += 1;
+        if let Source::Port { transform, .. } = &served.source {
+            transform.subscribed();
+        }
         if served.subscribers > 1 {
             return;
         }
@@ -760,6 +752,9 @@ impl Follower {
         if served.subscribers == 0 {
             served.subscriber = None;
             served.cpu = None;
+            if let Source::Port { transform, .. } = &served.source {
+                transform.unwatched();
+            }
             if let (Source::Port { output, .. }, Some(node)) = (&served.source, &served.node)
                 && self.routes.remove(node, output, id)
             {

@@ -145,7 +145,15 @@ pub const PATH_POINTS: usize = 500;
 /// The poses a path channel has kept (`x`, `y`, `yaw`), shared by its clones: one
 /// channel's.
 #[derive(Debug, Clone, Default)]
-pub(super) struct Trail(Arc<Mutex<VecDeque<[f64; 3]>>>);
+pub(super) struct Trail(Arc<Mutex<Kept>>);
+
+#[derive(Debug, Default)]
+struct Kept {
+    poses: VecDeque<[f64; 3]>,
+    /// A client subscribed since the last message: the next pose sends the path
+    /// whether it is kept or not.
+    resend: bool,
+}
 
 impl PartialEq for Trail {
     fn eq(&self, other: &Trail) -> bool {
@@ -154,25 +162,30 @@ impl PartialEq for Trail {
 }
 
 impl Trail {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Kept> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
     /// Keeps `pose` if it moved or turned far enough from the last one kept; the poses
-    /// kept if it was kept.
+    /// kept if it was kept, or if a client subscribed since the last message.
     fn keep(&self, pose: [f64; 3]) -> Option<Vec<[f64; 3]>> {
-        let mut poses = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some(last) = poses.back() {
+        let mut kept = self.lock();
+        let far = kept.poses.back().is_none_or(|last| {
             let moved = (pose[0] - last[0]).hypot(pose[1] - last[1]);
-            let turned = (pose[2] - last[2])
-                .sin()
-                .atan2((pose[2] - last[2]).cos())
-                .abs();
-            if moved < PATH_STEP && turned < PATH_TURN {
-                return None;
+            let turn = pose[2] - last[2];
+            let turned = turn.sin().atan2(turn.cos()).abs();
+            moved >= PATH_STEP || turned >= PATH_TURN
+        });
+        if far {
+            if kept.poses.len() == PATH_POINTS {
+                kept.poses.pop_front();
             }
+            kept.poses.push_back(pose);
+        } else if !kept.resend {
+            return None;
         }
-        if poses.len() == PATH_POINTS {
-            poses.pop_front();
-        }
-        poses.push_back(pose);
-        Some(poses.iter().copied().collect())
+        kept.resend = false;
+        Some(kept.poses.iter().copied().collect())
     }
 }
 
@@ -221,12 +234,45 @@ fn stamp(packet: &Value, path: Option<&str>, sent: coolbot::Time) -> Result<Stam
     }
 }
 
+/// The pose (`x`, `y`, `yaw`) a pose mapping reads in `packet`.
+fn pose_of(packet: &Value, map: &PoseMap) -> Result<[f64; 3], String> {
+    Ok([
+        number(packet, &map.x)?,
+        number(packet, &map.y)?,
+        number(packet, &map.yaw)?,
+    ])
+}
+
+/// A `foxglove.Pose` in the plane.
+fn pose_json([x, y, yaw]: [f64; 3]) -> Value {
+    json!({
+        "position": { "x": x, "y": y, "z": 0.0 },
+        "orientation": yaw_quaternion(yaw),
+    })
+}
+
 /// The quaternion of a rotation by `yaw` about z.
 fn yaw_quaternion(yaw: f64) -> Value {
     json!({ "x": 0.0, "y": 0.0, "z": (yaw / 2.0).sin(), "w": (yaw / 2.0).cos() })
 }
 
 impl Transform {
+    /// A client subscribed to its channel: a path sends what it holds with the next
+    /// packet, kept or not.
+    pub(super) fn subscribed(&self) {
+        if let Transform::Path(_, trail) = self {
+            trail.lock().resend = true;
+        }
+    }
+
+    /// The last client left its channel: a path forgets its poses (the next client's
+    /// starts anew, not joined to where the robot was then).
+    pub(super) fn unwatched(&self) {
+        if let Transform::Path(_, trail) = self {
+            *trail.lock() = Kept::default();
+        }
+    }
+
     /// The message of `packet` (its JSON as the node wrote it), sent at `sent`, as
     /// the channel sends it (None: nothing to send, a path that kept no pose), or why
     /// the packet does not fit. The packet itself is passed on as written, and wrapped
@@ -269,29 +315,24 @@ impl Transform {
         let message = match self {
             Transform::Raw { wrap: true } => json!({ "value": packet }),
             Transform::Raw { wrap: false } => packet,
-            Transform::Pose(map) => json!({
-                "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
-                "frame_id": map.frame,
-                "pose": {
-                    "position": {
-                        "x": number(&packet, &map.x)?,
-                        "y": number(&packet, &map.y)?,
-                        "z": 0.0,
-                    },
-                    "orientation": yaw_quaternion(number(&packet, &map.yaw)?),
-                },
-            }),
-            Transform::Tf(map) => json!({
-                "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
-                "parent_frame_id": map.frame,
-                "child_frame_id": map.child,
-                "translation": {
-                    "x": number(&packet, &map.x)?,
-                    "y": number(&packet, &map.y)?,
-                    "z": 0.0,
-                },
-                "rotation": yaw_quaternion(number(&packet, &map.yaw)?),
-            }),
+            Transform::Pose(map) => {
+                let pose = pose_json(pose_of(&packet, map)?);
+                json!({
+                    "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
+                    "frame_id": map.frame,
+                    "pose": pose,
+                })
+            }
+            Transform::Tf(map) => {
+                let [x, y, yaw] = pose_of(&packet, map)?;
+                json!({
+                    "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
+                    "parent_frame_id": map.frame,
+                    "child_frame_id": map.child,
+                    "translation": { "x": x, "y": y, "z": 0.0 },
+                    "rotation": yaw_quaternion(yaw),
+                })
+            }
             Transform::Scan(map) => {
                 let ranges = field(&packet, &map.ranges)
                     .and_then(Value::as_array)
@@ -319,28 +360,15 @@ impl Transform {
                 })
             }
             Transform::Path(map, trail) => {
-                let pose = [
-                    number(&packet, &map.x)?,
-                    number(&packet, &map.y)?,
-                    number(&packet, &map.yaw)?,
-                ];
+                // Read whole before a pose is kept: a packet that does not fit adds
+                // nothing to the path.
+                let pose = pose_of(&packet, map)?;
+                let timestamp = stamp(&packet, map.stamp.as_deref(), sent)?;
                 let Some(poses) = trail.keep(pose) else {
                     return Ok(None);
                 };
-                let poses: Vec<Value> = poses
-                    .iter()
-                    .map(|[x, y, yaw]| {
-                        json!({
-                            "position": { "x": x, "y": y, "z": 0.0 },
-                            "orientation": yaw_quaternion(*yaw),
-                        })
-                    })
-                    .collect();
-                json!({
-                    "timestamp": stamp(&packet, map.stamp.as_deref(), sent)?,
-                    "frame_id": map.frame,
-                    "poses": poses,
-                })
+                let poses: Vec<Value> = poses.into_iter().map(pose_json).collect();
+                json!({ "timestamp": timestamp, "frame_id": map.frame, "poses": poses })
             }
         };
         Ok(Some(message))
@@ -588,6 +616,23 @@ mod tests {
         // A clone is the same channel's path: it keeps one trail.
         let clone = path.clone();
         assert_eq!(clone, path);
+        // A client that subscribes gets the path with the next pose, kept or not.
+        path.subscribed();
+        let again = at(PATH_STEP, -pi + 0.01).expect("sent again to the new client");
+        assert_eq!(again["poses"].as_array().unwrap().len(), 3);
+        assert!(at(PATH_STEP, -pi + 0.01).is_none(), "once");
+        // A packet that does not fit (no stamp) adds nothing.
+        let unfit = path.apply(json!({ "x": 9.0, "at": { "y": 0.0 }, "theta": 0.0 }), SENT);
+        assert!(unfit.is_err());
+        assert_eq!(
+            at(PATH_STEP, -pi + 0.01),
+            None,
+            "the pose at x = 9 was not kept"
+        );
+        // Nobody watches: the path starts anew.
+        path.unwatched();
+        let anew = at(5.0, 0.0).expect("the first pose again");
+        assert_eq!(anew["poses"].as_array().unwrap().len(), 1);
         assert_ne!(Transform::Path(pose_map(), Trail::default()), path);
         let mut last = None;
         for step in 0..PATH_POINTS + 10 {
@@ -674,6 +719,15 @@ mod tests {
             .expect("plot paths")
         {
             let (topic, fields) = message_path(path["value"].as_str().expect("a path"));
+            // A filter on the message first (`{state=="running"}`) reads its state.
+            let fields = match fields.strip_prefix("{") {
+                Some(filter) => {
+                    let (filter, rest) = filter.split_once('}').expect("a closed filter");
+                    assert!(filter.starts_with("state=="), "{filter}");
+                    rest
+                }
+                None => fields,
+            };
             assert!(fields.starts_with(".variables."), "{fields}");
             topics.push(topic);
         }

@@ -824,6 +824,11 @@ fn an_mcap_reader_of_its_own_finds_the_schemas_channels_and_counts() {
     // A tick's value is `null`, which the viewers' part of JSON Schema has no type
     // for: the wrapped schema names no property (`coolbot::schema::for_viewers`).
     assert_eq!(schema["properties"], serde_json::json!({}), "{schema}");
+    // A schema given (the tick's is the runtime's) is kept whole beside it.
+    let given: serde_json::Value =
+        serde_json::from_str(&beat.metadata["coolbot.schema.given"]).expect("JSON");
+    assert_eq!(given["type"], "null", "{given}");
+    assert!(!out.metadata.contains_key("coolbot.schema.given"));
     assert_eq!(beat.metadata["coolbot.wrapped"], "value");
     let losses = channel("coolbot/losses");
     let schema = json_of(&losses.schema.as_ref().expect("schema").data);

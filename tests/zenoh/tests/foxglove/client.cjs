@@ -48,14 +48,19 @@ client.on("serverInfo", (info) =>
 client.on("status", (status) => out({ kind: "status", level: status.level, message: status.message }));
 // Why the Foxglove and Lichtblick viewers would refuse a channel's JSON Schema, or
 // null: the rules of their `parseJsonSchema` (which refuses the whole channel for one
-// property it cannot read): an object whose properties each have one `type`,
-// `boolean`, `string`, `number`, `integer`, `object` or `array` (of one of the others
-// but `array`), or a `oneOf` of numeric `const`s.
+// property it cannot read): an object with `properties`, each with one `type`,
+// `boolean`, `string` (no `contentEncoding` but base64), `number`, `integer`, `object`
+// or `array` (of one of the others but `array`, with no `contentEncoding`), or a
+// `oneOf` of numeric `const`s.
 function viewerError(schema, at) {
   if (schema.type !== "object") {
     return `${at}: "type" is ${JSON.stringify(schema.type)}, not "object"`;
   }
-  for (const [name, property] of Object.entries(schema.properties ?? {})) {
+  // Lichtblick reads a missing `properties` as none; Foxglove Studio throws.
+  if (typeof schema.properties !== "object" || schema.properties === null) {
+    return `${at}: no "properties"`;
+  }
+  for (const [name, property] of Object.entries(schema.properties)) {
     const where = `${at}.${name}`;
     if (Array.isArray(property.oneOf)) {
       if (!property.oneOf.every((alternative) => typeof alternative.const === "number")) {
@@ -64,8 +69,12 @@ function viewerError(schema, at) {
       continue;
     }
     switch (property.type) {
-      case "boolean":
       case "string":
+        if (property.contentEncoding !== undefined && property.contentEncoding !== "base64") {
+          return `${where}: contentEncoding ${JSON.stringify(property.contentEncoding)}`;
+        }
+        break;
+      case "boolean":
       case "number":
       case "integer":
         break;
@@ -81,6 +90,8 @@ function viewerError(schema, at) {
           if (nested) return nested;
         } else if (!["boolean", "string", "number", "integer"].includes(items.type)) {
           return `${where}: an array of ${JSON.stringify(items.type)}`;
+        } else if (items.contentEncoding !== undefined) {
+          return `${where}: items with a contentEncoding`;
         }
         break;
       }
