@@ -5,6 +5,7 @@
 //! module is the network layer's).
 
 mod distributed;
+mod docs;
 mod drivers;
 mod finite;
 mod process;
