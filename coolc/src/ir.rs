@@ -1130,8 +1130,7 @@ impl Handle {
         )
     }
 
-    /// The type of its stand-in's handle (`StandIns`, the harness's stand-ins of its
-    /// instances).
+    /// The type of its stand-in's handle (what the harness's `StandIns` gives for it).
     pub(crate) fn stand_in_type(&self) -> String {
         format!("{}StandIn", self.type_name)
     }

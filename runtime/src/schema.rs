@@ -224,6 +224,12 @@ fn viewer_property(schema: &Value) -> Option<Value> {
         "boolean" | "string" | "number" | "integer" => {
             let mut scalar = schema.clone();
             scalar["type"] = Value::from(ty);
+            // The viewers decode base64 only; other encoded strings stay strings.
+            if scalar.get("contentEncoding").and_then(Value::as_str) != Some("base64")
+                && let Some(object) = scalar.as_object_mut()
+            {
+                object.remove("contentEncoding");
+            }
             scalar
         }
         "object" => viewer_object(schema),
@@ -236,6 +242,11 @@ fn viewer_property(schema: &Value) -> Option<Value> {
                 .is_some_and(|ty| readable.contains(&ty))
             {
                 return None;
+            }
+            let mut items = items;
+            if let Some(object) = items.as_object_mut() {
+                // Not even base64 in an array's items.
+                object.remove("contentEncoding");
             }
             let mut array = schema.clone();
             array["type"] = Value::from("array");
@@ -254,7 +265,9 @@ fn viewer_property(schema: &Value) -> Option<Value> {
 /// as Ajv requires).
 fn nullable(mut schema: Value) -> Value {
     schema["nullable"] = Value::Bool(true);
-    if let Some(values) = schema.get_mut("enum").and_then(Value::as_array_mut) {
+    if let Some(values) = schema.get_mut("enum").and_then(Value::as_array_mut)
+        && !values.contains(&Value::Null)
+    {
         values.push(Value::Null);
     }
     schema
@@ -535,10 +548,16 @@ mod tests {
                 continue;
             }
             match property["type"].as_str().expect(&at) {
-                "boolean" | "string" | "number" | "integer" => {}
+                "string" => {
+                    let encoding = property.get("contentEncoding");
+                    assert!(encoding.is_none_or(|e| e == "base64"), "{at}");
+                }
+                "boolean" | "number" | "integer" => {}
                 "object" => viewers_read(property, &at),
                 "array" => match property["items"]["type"].as_str().expect(&at) {
-                    "boolean" | "string" | "number" | "integer" => {}
+                    "boolean" | "string" | "number" | "integer" => {
+                        assert!(property["items"].get("contentEncoding").is_none(), "{at}");
+                    }
                     "object" => viewers_read(&property["items"], &at),
                     other => panic!("{at}: an array of {other}"),
                 },
@@ -579,6 +598,9 @@ mod tests {
             "a": { "type": ["array", "null"], "items": { "type": "number" } },
             "b": { "anyOf": [{ "oneOf": [{ "const": 1, "title": "one" }] }, { "type": "null" }] },
             "c": { "oneOf": [] },
+            "d": { "type": "string", "contentEncoding": "gzip" },
+            "e": { "type": "array", "items": { "type": "string", "contentEncoding": "base64" } },
+            "f": { "type": ["string", "null"], "enum": ["x", null] },
         } }));
         viewers_read(&given, "given");
         assert_eq!(
@@ -587,6 +609,12 @@ mod tests {
         );
         assert!(given["properties"].get("b").is_none(), "{given}");
         assert!(given["properties"].get("c").is_none(), "{given}");
+        assert_eq!(given["properties"]["d"], json!({ "type": "string" }));
+        assert_eq!(
+            given["properties"]["e"]["items"],
+            json!({ "type": "string" })
+        );
+        assert_eq!(given["properties"]["f"]["enum"], json!(["x", null]));
         // A value that is not an object, wrapped: its `value` is read.
         let number = super::for_viewers(&of::<f64>().wrapped());
         viewers_read(&number, "f64");

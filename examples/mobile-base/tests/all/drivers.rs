@@ -82,6 +82,8 @@ fn with_drivers_the_range_server_runs_in_its_own_process_and_a_kill_9_is_substit
         "warn",
         &sender,
     );
+    // Only the robot's pipes hold a sender: its early end fails the waits at once.
+    drop(sender);
     let mut seen = Vec::new();
     let says = |text: &'static str| move |l: &str| l.contains(text);
     let status = |a: &'static str, b: &'static str| {

@@ -651,6 +651,11 @@ impl Follower {
         };
         served.subscribers += 1;
         if let Source::Port { transform, .. } = &served.source {
+            if served.subscribers == 1 {
+                // A packet that went through its route as the last client left may
+                // have kept a pose since.
+                transform.unwatched();
+            }
             transform.subscribed();
         }
         if served.subscribers > 1 {
