@@ -7,9 +7,9 @@
 //! `String`, `T[N]` `[T; N]`, `T[<=N]` and `T[]` `Vec<T>`, a message type the struct of
 //! its package's module. Bounded strings and sequences decode through
 //! `coolbot::ros::{BoundedString, Bounded}`, arrays longer than 32 through
-//! `serde_with`'s `[Same; N]`. A message without fields gets the one field rosidl gives
-//! it, so that its CDR is ROS 2's. `Default` gives each field its `.msg` default,
-//! else its type's.
+//! `serde_with`'s `[Same; N]`, unbounded byte sequences through its `Bytes` (one
+//! slice). A message without fields gets the one field rosidl gives it, so that its
+//! CDR is ROS 2's. `Default` gives each field its `.msg` default, else its type's.
 
 use crate::checked::Checked;
 use crate::checked::model::RosMessage;
@@ -178,8 +178,8 @@ fn field_ty(ty: &FieldType) -> String {
     }
 }
 
-/// The `serde_with` adapter of a field, when it needs one: a bound to check, or an
-/// array longer than serde's own impls go (32).
+/// The `serde_with` adapter of a field, when it needs one: a bound to check, an array
+/// longer than serde's own impls go (32), or a sequence of bytes (one slice).
 fn adapter(ty: &FieldType) -> Option<String> {
     let element = match ty.base {
         Base::String(Some(bound)) | Base::WString(Some(bound)) => {
@@ -198,6 +198,11 @@ fn adapter(ty: &FieldType) -> Option<String> {
             Some(element) => format!("{COOLBOT_ROS}Bounded<{bound}, {element}>"),
             None => format!("{COOLBOT_ROS}Bounded<{bound}>"),
         }),
+        // A sequence of bytes (an image's `data`) as one slice, not byte by byte: CDR
+        // writes both alike (a length, then the bytes).
+        Cardinality::Unbounded if matches!(ty.base, Base::Byte | Base::Char | Base::Uint8) => {
+            Some(format!("{SERDE_WITH}Bytes"))
+        }
         Cardinality::Unbounded => element.map(|element| format!("::std::vec::Vec<{element}>")),
     }
 }
@@ -329,7 +334,7 @@ mod tests {
             (
                 ty(Base::Byte, Cardinality::Unbounded),
                 "::std::vec::Vec<u8>",
-                None,
+                Some("::coolbot::serde_with::Bytes"),
             ),
             (ty(Base::Float64, Cardinality::Array(9)), "[f64; 9]", None),
             (

@@ -13,10 +13,9 @@
 //! memory (a provider of its own, each packet written once into a `ZShmMut` and
 //! put; the descriptor still travels over the TCP link); raw iceoryx2
 //! (publish-subscribe of a byte slice, an event service whose listener the receiver
-//! blocks on); the coolbot bridge with shared memory off (today's TCP bridge: an
-//! outlet and an inlet, `Vec<u8>` packets) and on; and the bridge with shared memory
-//! on a packet that serializes its bytes as one slice (`bridge-shm-bytes`: what a
-//! `Vec<u8>` costs in serde, byte by byte, set apart from what the bridge costs).
+//! blocks on); the coolbot bridge with shared memory off (the TCP bridge: an outlet
+//! and an inlet) and on. The bridge carries a packet of one `[u8]` field as coolc
+//! generates it (its bytes serialized as one slice).
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
@@ -58,17 +57,15 @@ enum Engine {
     Iceoryx2,
     BridgeTcp,
     BridgeShm,
-    BridgeShmBytes,
 }
 
 impl Engine {
-    const ALL: [Engine; 6] = [
+    const ALL: [Engine; 5] = [
         Engine::ZenohTcp,
         Engine::ZenohShm,
         Engine::Iceoryx2,
         Engine::BridgeTcp,
         Engine::BridgeShm,
-        Engine::BridgeShmBytes,
     ];
 
     fn name(self) -> &'static str {
@@ -78,7 +75,6 @@ impl Engine {
             Engine::Iceoryx2 => "iceoryx2",
             Engine::BridgeTcp => "bridge-tcp",
             Engine::BridgeShm => "bridge-shm",
-            Engine::BridgeShmBytes => "bridge-shm-bytes",
         }
     }
 
@@ -364,58 +360,12 @@ one_state_spec! {
     periodic: None,
 }
 
-/// What the bridge carries: bytes, as a `Vec<u8>` (serde: a sequence, byte by byte) or
-/// as [`Bytes`] (serde: one slice).
-trait Payload:
-    coolbot::Packet + serde::Serialize + serde::de::DeserializeOwned + From<Vec<u8>> + AsRef<[u8]>
-{
-}
-
-impl<T> Payload for T where
-    T: coolbot::Packet
-        + serde::Serialize
-        + serde::de::DeserializeOwned
-        + From<Vec<u8>>
-        + AsRef<[u8]>
-{
-}
-
-/// Bytes that serialize as one slice (as `serde_bytes` does).
-#[derive(Clone)]
-struct Bytes(Vec<u8>);
-
-impl From<Vec<u8>> for Bytes {
-    fn from(bytes: Vec<u8>) -> Bytes {
-        Bytes(bytes)
-    }
-}
-
-impl AsRef<[u8]> for Bytes {
-    fn as_ref(&self) -> &[u8] {
-        &self.0
-    }
-}
-
-impl serde::Serialize for Bytes {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.serialize_bytes(&self.0)
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for Bytes {
-    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Bytes, D::Error> {
-        struct Visit;
-        impl serde::de::Visitor<'_> for Visit {
-            type Value = Bytes;
-            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                f.write_str("bytes")
-            }
-            fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Bytes, E> {
-                Ok(Bytes(bytes.to_vec()))
-            }
-        }
-        deserializer.deserialize_bytes(Visit)
-    }
+/// What the bridge carries: a packet of one `[u8]` field, as coolc generates it (its
+/// bytes serialized as one slice).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+struct Frame {
+    #[serde(with = "coolbot::serde_with::As::<coolbot::serde_with::Bytes>")]
+    bytes: Vec<u8>,
 }
 
 const BRIDGE: InputKind = InputKind::Fifo {
@@ -423,17 +373,17 @@ const BRIDGE: InputKind = InputKind::Fifo {
     policy: OverflowPolicy::Block,
 };
 
-fn bridge_receiver<P: Payload>(
+fn bridge_receiver(
     address: &str,
     shm: bool,
     stream: Stream,
     done: Sender<Received>,
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
-    bridge_receiver_on::<P>(KEY, address, shm, stream, done)
+    bridge_receiver_on(KEY, address, shm, stream, done)
 }
 
 /// A receiver node listening on `address`: an inlet on `key` into a sink.
-fn bridge_receiver_on<P: Payload>(
+fn bridge_receiver_on(
     key: &str,
     address: &str,
     shm: bool,
@@ -442,7 +392,7 @@ fn bridge_receiver_on<P: Payload>(
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
     let state = setup::state_directory();
     let node = setup::node("receiver", setup::config(address, &[], shm), state.path());
-    let input = FifoIn::<P>::new(64, OverflowPolicy::Block);
+    let input = FifoIn::<Frame>::new(64, OverflowPolicy::Block);
     let mut collector = Collector::new(done, stream.count);
     let ports = PortSet::new().input(&input);
     let sink = Component::new(
@@ -452,7 +402,7 @@ fn bridge_receiver_on<P: Payload>(
             Box::new(move |section, _| {
                 if section == Section::Entry {
                     while let Some(packet) = input.recv() {
-                        collector.arrived(packet.as_ref());
+                        collector.arrived(&packet.bytes);
                     }
                 }
                 Ok(())
@@ -464,7 +414,7 @@ fn bridge_receiver_on<P: Payload>(
     system.add(sink).expect("sink");
     system
         .add(
-            node.inlet::<P>("from_sender", key, OutputKind::Data)
+            node.inlet::<Frame>("from_sender", key, OutputKind::Data)
                 .build()
                 .expect("inlet"),
         )
@@ -476,8 +426,8 @@ fn bridge_receiver_on<P: Payload>(
     (state, node, system)
 }
 
-fn bridge_sender<P: Payload>(address: &str, shm: bool, stream: Stream) {
-    bridge_sender_to::<P>(&[address.to_owned()], &[(KEY, 1)], BRIDGE, shm, stream);
+fn bridge_sender(address: &str, shm: bool, stream: Stream) {
+    bridge_sender_to(&[address.to_owned()], &[(KEY, 1)], BRIDGE, shm, stream);
 }
 
 /// How many inlets `session` knows on `key` (their liveliness tokens).
@@ -497,7 +447,7 @@ fn inlets(session: &zenoh::Session, key: &str) -> usize {
 /// A sender node connected to `addresses`: one source whose output feeds an outlet
 /// of `kind` on each key of `keys`; each key has as many inlets as it says, which the
 /// sender waits for before it streams.
-fn bridge_sender_to<P: Payload>(
+fn bridge_sender_to(
     addresses: &[String],
     keys: &[(&str, usize)],
     kind: InputKind,
@@ -510,7 +460,7 @@ fn bridge_sender_to<P: Payload>(
         setup::config(&setup::endpoint(), addresses, shm),
         state.path(),
     );
-    let output = DataOut::<P>::new();
+    let output = DataOut::<Frame>::new();
     let mut system = System::new();
     system
         .add(Component::new(
@@ -524,7 +474,11 @@ fn bridge_sender_to<P: Payload>(
         .collect();
     for (outlet, (key, _)) in outlets.iter().zip(keys) {
         system
-            .add(node.outlet::<P>(outlet, key, kind).build().expect("outlet"))
+            .add(
+                node.outlet::<Frame>(outlet, key, kind)
+                    .build()
+                    .expect("outlet"),
+            )
             .expect("outlet");
         system
             .connect("source.output", &format!("{outlet}.input"))
@@ -543,7 +497,7 @@ fn bridge_sender_to<P: Payload>(
     paced(stream, |number| {
         let mut packet = frame.clone();
         stamp(&mut packet, number);
-        output.send(P::from(packet));
+        output.send(Frame { bytes: packet });
     });
     for outlet in &outlets {
         let lost = system
@@ -601,7 +555,7 @@ fn fan_peer(args: &[String]) {
             let stream = stream(3);
             let (done, result) = bounded(1);
             let (_state, _node, system) =
-                bridge_receiver_on::<Bytes>(&args[2], &args[1], true, stream, done);
+                bridge_receiver_on(&args[2], &args[1], true, stream, done);
             println!("ready");
             let received = common::expect(&result, LIMIT, "fan-out stream");
             let lost = system
@@ -630,7 +584,7 @@ fn fan_peer(args: &[String]) {
                 Fan::Last => (vec![(&keys[0], consumers)], InputKind::Last),
                 Fan::Fifos => (keys.iter().map(|k| (k.as_str(), 1)).collect(), BRIDGE),
             };
-            bridge_sender_to::<Bytes>(&addresses, &keys, kind, true, stream(4));
+            bridge_sender_to(&addresses, &keys, kind, true, stream(4));
         }
         other => panic!("no fan-out role `{other}`"),
     }
@@ -777,17 +731,9 @@ fn peer(args: &[String]) {
                     ready();
                     common::expect(&result, LIMIT, "zenoh stream")
                 }
-                Engine::BridgeTcp | Engine::BridgeShm | Engine::BridgeShmBytes => {
-                    let (_state, _node, system) = if engine == Engine::BridgeShmBytes {
-                        bridge_receiver::<Bytes>(address, true, stream, done)
-                    } else {
-                        bridge_receiver::<Vec<u8>>(
-                            address,
-                            engine == Engine::BridgeShm,
-                            stream,
-                            done,
-                        )
-                    };
+                Engine::BridgeTcp | Engine::BridgeShm => {
+                    let (_state, _node, system) =
+                        bridge_receiver(address, engine == Engine::BridgeShm, stream, done);
                     ready();
                     let received = common::expect(&result, LIMIT, "bridge stream");
                     let lost = system
@@ -818,9 +764,8 @@ fn peer(args: &[String]) {
                     zenoh_sender(address, engine == Engine::ZenohShm, stream)
                 }
                 Engine::BridgeTcp | Engine::BridgeShm => {
-                    bridge_sender::<Vec<u8>>(address, engine == Engine::BridgeShm, stream)
+                    bridge_sender(address, engine == Engine::BridgeShm, stream)
                 }
-                Engine::BridgeShmBytes => bridge_sender::<Bytes>(address, true, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::send(address, stream),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -1008,24 +953,6 @@ fn main() {
         (Goal::AtMost(0.2), Goal::AtMost(0.2)),
     );
     against(&mut table, Engine::ZenohTcp, (Goal::None, Goal::None));
-    if let Some((small, large)) = figure(Engine::BridgeShmBytes) {
-        table.row(
-            "64 B p50, bridge-shm-bytes vs zenoh-shm",
-            Figure::Time(small.latencies.0),
-            Figure::Time(
-                figure(Engine::ZenohShm).map_or(small.latencies.0, |(s, _)| s.latencies.0),
-            ),
-            Goal::None,
-        );
-        table.row(
-            "4 MiB CPU/packet, bridge-shm-bytes vs zenoh-shm",
-            Figure::Time(large.cpu_per_packet),
-            Figure::Time(
-                figure(Engine::ZenohShm).map_or(large.cpu_per_packet, |(_, l)| l.cpu_per_packet),
-            ),
-            Goal::None,
-        );
-    }
     table.note(&format!(
         "64 B: {} packets one every {:?}; 4 MiB: {} packets at 30 Hz; CPU from /proc/self/stat (10 ms ticks) of both processes",
         small.count, small.period, large.count
