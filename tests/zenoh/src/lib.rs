@@ -15,4 +15,5 @@ pub mod generated {
 pub mod camera;
 pub mod dying;
 pub mod isolation;
+pub mod soak;
 pub mod support;

@@ -17,9 +17,9 @@ use zenoh::Wait;
 
 use crate::generated::types::{Chunk, LaserScan, Pose, Ranges, Reading, Speed, Twist};
 use crate::generated::{
-    base, drive, goal, growing_queue, latest, lidar, motion, plain, pose_source, poster_source,
-    queue, ranger, reader, robot as robot_compound, shm_queue, shm_source, small_queue, source,
-    tick_source, ticks, tiny_queue, tuner, two_source, wheels, wide_queue,
+    base, chunk_queue, drive, goal, growing_queue, latest, lidar, motion, plain, pose_source,
+    poster_source, queue, ranger, reader, robot as robot_compound, shm_queue, shm_source,
+    small_queue, source, tick_source, ticks, tiny_queue, tuner, two_source, wheels, wide_queue,
 };
 
 /// Generous: the machine is shared and may be loaded.
@@ -327,6 +327,7 @@ hand!(small_queue, FifoIn<Pose>, inputs.input);
 hand!(tiny_queue, FifoIn<Pose>, inputs.input);
 hand!(growing_queue, UfifoIn<Pose>, inputs.input);
 hand!(shm_queue, FifoIn<Chunk>, inputs.input);
+hand!(chunk_queue, UfifoIn<Chunk>, inputs.input);
 hand!(latest, LastIn<Pose>, inputs.input);
 hand!(reader, PosterIn<Pose>, inputs.input);
 hand!(ticks, TickIn, inputs.input);
