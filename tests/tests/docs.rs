@@ -1,17 +1,25 @@
 //! The documentation agrees with the compiler and the runtime: every diagnostic code is
 //! documented, every documented code exists, and every `cool` example in
 //! `docs/language.md` parses as written (examples that are members of a component are
-//! parsed inside one). Every `rust` block of the docs compiles in a test here: the
-//! examples that are whole files in the crates `coolc compile` writes for their
-//! descriptions (and their tests run), the tutorial's steps in the crate it builds,
-//! and the API fragments of the runtime and network docs inside functions of a crate
-//! that declares what they name (`FRAGMENTS`). A `rust` block no test compiles fails
-//! `every_rust_block_of_the_docs_is_compiled`.
+//! parsed inside one). Every `rust` block of the docs is compiled: the examples that
+//! are whole files in the crates `coolc compile` writes for their descriptions (and
+//! their tests run) and the tutorial's steps in the crate it builds, here; the API
+//! fragments of the runtime and network docs in functions of the workspace member
+//! `coolbot-docs-fragments` (`tests/docs-fragments`), whose table `FRAGMENTS` this
+//! file shares, and which `every_api_fragment_of_the_docs_compiles` checks. A `rust`
+//! block no test compiles fails `every_rust_block_of_the_docs_is_compiled`.
 
 use std::collections::BTreeSet;
 use std::path::Path;
 
 use coolc::diagnostics::Code;
+
+/// The table of the API fragments and how a block is found, shared with the build
+/// script of `coolbot-docs-fragments`, which compiles them.
+#[path = "../docs-fragments/places.rs"]
+mod places;
+
+use places::{FRAGMENTS, Place, doc, fences, place, repository};
 
 fn language_md() -> String {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/language.md");
@@ -116,11 +124,6 @@ fn every_cool_example_in_the_language_reference_parses() {
     assert!(checked >= 10, "only {checked} examples were checked");
 }
 
-fn doc(name: &str) -> String {
-    let path = repository().join(name);
-    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
 /// The text of `text` from the heading starting with `heading` to the next heading of
 /// the same level.
 fn section<'a>(text: &'a str, heading: &str) -> &'a str {
@@ -142,75 +145,6 @@ fn blocks(text: &str, lang: &str) -> Vec<String> {
         .filter(|fence| fence.info == lang)
         .map(|fence| fence.body)
         .collect()
-}
-
-/// A fenced block of a Markdown file.
-struct Fence {
-    /// Its info string (`rust`, `cool`, `sh`, empty).
-    info: String,
-    /// The heading it stands under: the nearest one above it, the whole line.
-    heading: String,
-    /// The line its opening fence is on (1-based).
-    line: usize,
-    body: String,
-}
-
-/// The fenced blocks of `text`, in order, with the heading each stands under (a
-/// line starting with `#` inside a block is not a heading).
-fn fences(text: &str) -> Vec<Fence> {
-    let mut found = Vec::new();
-    let mut heading = String::new();
-    let mut open: Option<Fence> = None;
-    for (index, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        match &mut open {
-            None if trimmed.starts_with("```") => {
-                open = Some(Fence {
-                    info: trimmed.trim_start_matches('`').trim().to_owned(),
-                    heading: heading.clone(),
-                    line: index + 1,
-                    body: String::new(),
-                });
-            }
-            None if line.starts_with('#') => heading = line.to_owned(),
-            None => {}
-            Some(_) if trimmed.starts_with("```") => found.extend(open.take()),
-            Some(fence) => {
-                fence.body.push_str(line);
-                fence.body.push('\n');
-            }
-        }
-    }
-    found
-}
-
-/// A `rust` block of the docs: the file (from the repository's root), the heading it
-/// stands under, and its index among the `rust` blocks under that heading.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-struct Place {
-    doc: &'static str,
-    heading: &'static str,
-    index: usize,
-}
-
-const fn place(doc: &'static str, heading: &'static str, index: usize) -> Place {
-    Place {
-        doc,
-        heading,
-        index,
-    }
-}
-
-impl Place {
-    /// The block's text.
-    fn text(&self) -> String {
-        fences(&doc(self.doc))
-            .into_iter()
-            .filter(|fence| fence.info == "rust" && fence.heading == self.heading)
-            .nth(self.index)
-            .unwrap_or_else(|| panic!("no rust block at {self:?}"))
-            .body
-    }
 }
 
 const GENERATED: &str = "docs/generated-code.md";
@@ -244,63 +178,6 @@ const TUTORIAL_BUILD_LIB: Place = place(TUTORIAL, "## 8. From a build script ins
 const TUTORIAL_FAILS: Place = place(TUTORIAL, "## 9. Compose: a compound component", 0);
 const TUTORIAL_COVERS: Place = place(TUTORIAL, "## 9. Compose: a compound component", 1);
 const TUTORIAL_MAIN: Place = place(TUTORIAL, "## 9. Compose: a compound component", 2);
-
-/// The API fragments of the docs (statements that use what their page describes), each
-/// with what its function declares before it; `FRAGMENT_CRATE` declares the rest.
-const FRAGMENTS: &[(Place, &str)] = &[
-    (place("docs/runtime.md", "## Components and systems", 0), ""),
-    (
-        place("docs/runtime.md", "## The monitoring port `m`", 0),
-        "let mut system = System::new();\nlet parts = RobotParts::default();\n",
-    ),
-    (
-        place(
-            "docs/runtime.md",
-            "### The clock: real, or virtual for tests (`coolbot::clock`)",
-            0,
-        ),
-        "",
-    ),
-    (
-        place(
-            "docs/runtime.md",
-            "## Compound components and supervisors (paper 3.4, 3.5)",
-            0,
-        ),
-        "let mut system = System::new();\n",
-    ),
-    (
-        place("docs/runtime.md", "### Configuration and defaults", 0),
-        "",
-    ),
-    (place("docs/runtime.md", "## Errors", 0), ""),
-    (place("docs/runtime.md", "## Errors", 1), ""),
-    (
-        place(
-            "docs/tools.md",
-            "## Recording port traffic: `coolbot::record`",
-            0,
-        ),
-        "let system = System::new();\nlet other_system = System::new();\n",
-    ),
-    (
-        place("docs/tools.md", "### rosbag2 bags: `RecordFormat::Ros2`", 0),
-        "let system = System::new();\n",
-    ),
-    (
-        place("docs/distribution.md", "## The model", 0),
-        "let mut system = System::new();\n",
-    ),
-    (
-        place("docs/ros2.md", "## Topics on the rmw_zenoh wire", 0),
-        "type Twist = crate::generated::types::RosTwist;\nlet mut system = System::new();\n",
-    ),
-    (
-        place("docs/distribution.md", "### What is built: the agent", 0),
-        "let config = coolbot_zenoh::zenoh::Config::default();\n\
-         let robot_node = Node::open(\"robot\", coolbot_zenoh::zenoh::Config::default())?;\n",
-    ),
-];
 
 /// Every `rust` block a test of this file compiles.
 fn compiled() -> BTreeSet<Place> {
@@ -462,22 +339,15 @@ fn every_rust_block_of_the_docs_is_compiled() {
     );
 }
 
-/// The repository root.
-fn repository() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .canonicalize()
-        .unwrap()
-}
-
-/// Runs `cargo <args>` in `dir` with the target directory `target`; panics with
-/// cargo's output when it fails.
-fn cargo_in(target: &Path, dir: &Path, args: &[&str]) {
+/// Runs `cargo <args>` in `dir` with the generated-crate target directory the coolc
+/// tests share (the runtime and coolc are built there once); panics with cargo's
+/// output when it fails.
+fn cargo(dir: &Path, args: &[&str]) {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let output = std::process::Command::new(cargo)
         .args(args)
         .current_dir(dir)
-        .env("CARGO_TARGET_DIR", target)
+        .env("CARGO_TARGET_DIR", repository().join("target/gen-tests"))
         .env_remove("RUSTFLAGS")
         .output()
         .unwrap();
@@ -488,12 +358,6 @@ fn cargo_in(target: &Path, dir: &Path, args: &[&str]) {
         String::from_utf8_lossy(&output.stdout),
         String::from_utf8_lossy(&output.stderr)
     );
-}
-
-/// Runs `cargo <args>` in `dir` with the generated-crate target directory the coolc
-/// tests share (the runtime and coolc are built there once).
-fn cargo(dir: &Path, args: &[&str]) {
-    cargo_in(&repository().join("target/gen-tests"), dir, args);
 }
 
 /// Lowers the descriptions `files` (`(name, text)`; the first is the root, the others
@@ -817,149 +681,28 @@ fn the_compound_example_builds_from_a_build_script() {
     cargo(&krate, &["build", "--quiet"]);
 }
 
-/// The crate the API fragments compile in: what they name, from a description
-/// (components, compounds and packets of the docs' examples) and declarations.
-const FRAGMENT_DESCRIPTION: &str = r#"
-import ros "sensor_msgs/msg/LaserScan";
-import ros "nav_msgs/msg/Odometry";
-import ros "geometry_msgs/msg/Twist" as RosTwist;
-
-packet Twist { linear: f64, angular: f64 }
-packet Pose2D { x: f64, y: f64, theta: f64 }
-packet RangeScan { ranges: [f64] }
-packet Path { poses: [Pose2D] }
-packet Map { cells: [u8] }
-
-atomic MotionController {
-    controllable max_speed: f64 = 1.0;
-    observable odometry: Pose2D;
-    input command: last<Twist>;
-    input obstacles: last<RangeScan>;
-    output pose: data<Pose2D>;
-    timing { period 20ms; }
-    automaton { initial moving; state moving { periodic; } }
-}
-
-atomic RangeServer {
-    output scan: data<RangeScan>;
-    output emergency: tick;
-    timing { period 50ms; }
-    automaton { initial streaming; state streaming { periodic; } }
-}
-
-atomic SimRangeServer {
-    output scan: data<RangeScan>;
-    output emergency: tick;
-    timing { period 50ms; }
-    automaton { initial streaming; state streaming { periodic; } }
-}
-
-atomic Planner {
-    input goal: last<Pose2D>;
-    output path: data<Path>;
-    automaton { initial planning; state planning { on goal -> planning; } }
-}
-
-atomic Mapper {
-    input scan: fifo<RangeScan>(8);
-    output map: poster<Map>;
-    automaton { initial mapping; state mapping { on scan -> mapping; } }
-}
-
-compound MobileBase {
-    instance motion: MotionController;
-    instance ranges: RangeServer;
-    instance sim_ranges: SimRangeServer substitutes ranges;
-    connect ranges.scan -> motion.obstacles;
-    input command = motion.command;
-    output scan = ranges.scan;
-    observable pose = motion.odometry;
-    controllable max_speed = motion.max_speed;
-    on error ranges: substitute;
-    recovery { retry every 500ms; deadline 5s; }
-    supervisor {
-        initial operating;
-        state operating { when ranges.state == running_error -> degraded; }
-        state degraded { when ranges.state == running -> operating; }
-    }
-}
-
-compound Robot {
-    instance base: MobileBase;
-    instance mapper: Mapper;
-    connect base.scan -> mapper.scan;
-}
-"#;
-
-/// The declarations every fragment function sees.
-const FRAGMENT_CONTEXT: &str = r#"//! The API fragments of the docs, each in a function of its own (compiled, never
-//! run): `tests/tests/docs.rs`, `FRAGMENTS`.
-#![allow(unused, clippy::all)]
-
-use std::time::Duration;
-
-use coolbot::{CompoundBuilder, Policy, State, System};
-use coolbot_zenoh::Node;
-
-use crate::generated::types::{LaserScan, Map, Odometry, Path, Pose2D, RangeScan, Twist};
-use crate::generated::{mapper, mobile_base, motion_controller, planner, range_server, robot, sim_range_server};
-use crate::motion_controller::MotionController as MyMotion;
-use crate::planner::Planner as MyPlanner;
-use crate::range_server::RangeServer as MyRanges;
-use crate::robot::RobotParts;
-use crate::sim_range_server::SimRangeServer as MySim;
-
-/// A hand-written supervisor of `MobileBase`'s shape.
-#[derive(Default)]
-struct MobileBaseSupervisor;
-
-impl coolbot::Supervisor for MobileBaseSupervisor {
-    fn spec(&self) -> &'static coolbot::Spec {
-        &mobile_base::SPEC
-    }
-}
-
-/// A converter for `connect_via`.
-fn path_to_twist(path: &Path) -> Twist {
-    Twist {
-        linear: path.poses.len() as f64,
-        angular: 0.0,
-    }
-}
-"#;
-
 #[test]
 fn every_api_fragment_of_the_docs_compiles() {
-    // Each fragment in a function returning `Result<(), Box<dyn Error>>` (so `?`
-    // works), after what `FRAGMENTS` declares for it, in a crate whose description
-    // and context declare the components, packets and helpers they name. Built with
-    // `--features network` (the network docs' fragments use `coolbot-zenoh`) in the
-    // workspace's target directory, with its lock and profile, so that the network
-    // layer the workspace's tests built is reused.
-    let krate = lower("context.cool", FRAGMENT_DESCRIPTION, "docs-fragments");
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("docs-fragments");
-    coolc::merge::write_crate(&out, &krate).unwrap();
-    let mut fragments = FRAGMENT_CONTEXT.to_owned();
-    for (index, (place, before)) in FRAGMENTS.iter().enumerate() {
-        let body = place.text();
-        fragments.push_str(&format!(
-            "\n/// {}, under {:?}.\nfn fragment_{index}() -> Result<(), Box<dyn std::error::Error>> {{\n{before}{body}Ok(())\n}}\n",
-            place.doc, place.heading
-        ));
-    }
-    std::fs::write(out.join("src/fragments.rs"), fragments).unwrap();
-    let lib = std::fs::read_to_string(out.join("src/lib.rs")).unwrap();
-    std::fs::write(out.join("src/lib.rs"), lib + "mod fragments;\n").unwrap();
-    let manifest = std::fs::read_to_string(out.join("Cargo.toml")).unwrap();
-    let profile = "\n[profile.dev]\ndebug = \"line-tables-only\"\n\n[profile.dev.package.\"*\"]\ndebug = false\n";
-    std::fs::write(out.join("Cargo.toml"), manifest + profile).unwrap();
-    std::fs::copy(repository().join("Cargo.lock"), out.join("Cargo.lock")).unwrap();
-    cargo_in(
-        &repository().join("target"),
-        &out,
-        &["build", "--quiet", "--features", "network"],
+    // `coolbot-docs-fragments` compiles them (a workspace member this test links, so
+    // it built before): its build script wrote one function per entry of `FRAGMENTS`,
+    // each from its doc as the doc reads now.
+    let compiled = coolbot_docs_fragments::COMPILED;
+    assert_eq!(
+        compiled.len(),
+        FRAGMENTS.len(),
+        "coolbot-docs-fragments compiled {compiled:#?}"
     );
+    for (fragment, (place, _)) in compiled.iter().zip(FRAGMENTS) {
+        assert_eq!(
+            (fragment.doc, fragment.heading, fragment.index),
+            (place.doc, place.heading, place.index),
+        );
+        assert_eq!(
+            fragment.text,
+            place.text(),
+            "coolbot-docs-fragments compiled an older text of {place:?}"
+        );
+    }
 }
 
 /// The tests the "Constructs at run time" table of `docs/language.md` cites, as
