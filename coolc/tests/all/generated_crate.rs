@@ -126,8 +126,9 @@ fn a_compound_hierarchy_runs_and_survives_a_leaf_fault() {
 fn arrays_of_any_length_build_default_and_round_trip() {
     // `tests/data/arrays`: arrays longer than serde's and `Default`'s 32 elements in
     // packets (plain, nested, optional, in lists, of strings), in a configuration and
-    // in variables, with and without written defaults; the run tests check defaults,
-    // serde round trips and a running system that carries them.
+    // in variables, with and without written defaults, and `[u8]` as one slice; the
+    // run tests check defaults, serde round trips (a `[u8]` in the bytes of a
+    // sequence) and a running system that carries them.
     let dir = tempfile::tempdir().unwrap();
     let description = dir.path().join("arrays.cool");
     std::fs::copy(data("arrays/arrays.cool"), &description).unwrap();
@@ -140,6 +141,7 @@ fn arrays_of_any_length_build_default_and_round_trip() {
         &[
             "long_arrays_get_their_defaults",
             "long_arrays_round_trip_through_serde",
+            "byte_lists_encode_as_sequences_of_their_bytes_do",
             "long_arrays_flow_through_a_running_system",
             "a_supervisor_sets_a_long_array_through_its_typed_handle",
         ],

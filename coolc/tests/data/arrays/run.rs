@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use arrays::generated::types::{Frame, LaserScan};
+use arrays::generated::types::{Blob, Frame, LaserScan};
 use arrays::generated::{recorder, scanner};
 use coolbot::{Command, Monitor, System, Value};
 
@@ -44,6 +44,42 @@ fn long_arrays_get_their_defaults() {
     assert_eq!(vars.limits, [0; 64]);
     assert_eq!(vars.frame, frame);
     assert_eq!(recorder::Vars::default().ranges, [0.0; 72]);
+}
+
+#[test]
+fn byte_lists_encode_as_sequences_of_their_bytes_do() {
+    let mut cells: [Vec<u8>; 40] = std::array::from_fn(|_| Vec::new());
+    cells[39] = vec![9; 3];
+    let blob = Blob {
+        bytes: vec![1, 2, 255],
+        parts: vec![vec![], vec![7; 5]],
+        cells: Some(cells.clone()),
+    };
+    // The same fields as sequences serialized byte by byte (the long array through
+    // `Same`: serde's own impls stop at 32 elements).
+    #[derive(serde::Serialize)]
+    struct Sequences {
+        bytes: Vec<u8>,
+        parts: Vec<Vec<u8>>,
+        #[serde(with = "coolbot::serde_with::As::<Option<[coolbot::serde_with::Same; 40]>>")]
+        cells: Option<[Vec<u8>; 40]>,
+    }
+    let sequences = Sequences {
+        bytes: blob.bytes.clone(),
+        parts: blob.parts.clone(),
+        cells: Some(cells),
+    };
+    let cdr = coolbot::cdr::to_vec(&blob).unwrap();
+    assert_eq!(cdr, coolbot::cdr::to_vec(&sequences).unwrap());
+    assert_eq!(coolbot::cdr::from_slice::<Blob>(&cdr).unwrap(), blob);
+    let value = Value::from_serde(&blob).unwrap();
+    assert_eq!(value, Value::from_serde(&sequences).unwrap());
+    let Value::Json(json) = &value else {
+        panic!("not JSON: {value:?}")
+    };
+    assert_eq!(json["bytes"].as_array().unwrap().len(), 3);
+    assert_eq!(json["bytes"][2], 255);
+    assert_eq!(value.to_serde::<Blob>().unwrap(), blob);
 }
 
 #[test]
