@@ -397,6 +397,24 @@ fn a_forged_token_does_not_hide_a_station_killed_without_a_word() {
         .declare_token("coolbot/dying-station")
         .wait()
         .expect("a forged token");
+    // Declared after it on the same link, so the robot has the forged token once it
+    // sees this one (else the station could end before the forged token arrives, and
+    // the robot would see the node's token go).
+    let _after = forger
+        .liveliness()
+        .declare_token("test/dying/forged")
+        .wait()
+        .expect("a second token");
+    assert!(
+        wait_until(PATIENCE, || robot
+            .session()
+            .liveliness()
+            .get("test/dying/forged")
+            .timeout(Duration::from_millis(500))
+            .wait()
+            .is_ok_and(|replies| replies.recv().is_ok())),
+        "the robot sees the forger's tokens"
+    );
 
     // The station's session ends without a word (its agent never says goodbye).
     station
