@@ -2,9 +2,10 @@
 //! into `$OUT_DIR/cool.rs` with `coolc::Builder`, and writes `$OUT_DIR/fragments.rs`:
 //! each fragment of `places::FRAGMENTS`, read from its doc, in a function of its own,
 //! then `COMPILED`, what was compiled from where. Each function is a file of its own
-//! named after its place, `$OUT_DIR/fragments/<doc>/<heading's anchor>-<index>.rs`
-//! (its comment names the doc, line and heading), so that a compiler error in a
-//! fragment says which block of the docs no longer compiles.
+//! named after its place,
+//! `$OUT_DIR/fragments/<doc>/<entry>-<heading's anchor>-<index>.rs` (its comment
+//! names the doc, line and heading), so that a compiler error in a fragment says
+//! which block of the docs no longer compiles.
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
@@ -28,9 +29,11 @@ fn main() {
     for (index, (place, before)) in places::FRAGMENTS.iter().enumerate() {
         docs.insert(place.doc);
         let fence = place.fence();
-        let path =
-            dir.join(place.doc)
-                .join(format!("{}-{}.rs", anchor(place.heading), place.index));
+        let path = dir.join(place.doc).join(format!(
+            "{index}-{}-{}.rs",
+            anchor(place.heading),
+            place.index
+        ));
         let function = format!(
             "/// {}:{}, under {:?}.\n\
              fn fragment_{index}() -> Result<(), Box<dyn std::error::Error>> {{\n\

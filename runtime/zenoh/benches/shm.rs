@@ -15,7 +15,8 @@
 //! (publish-subscribe of a byte slice, an event service whose listener the receiver
 //! blocks on); the coolbot bridge with shared memory off (the TCP bridge: an outlet
 //! and an inlet) and on. The bridge carries a packet of one `[u8]` field as coolc
-//! generates it (its bytes serialized as one slice).
+//! generates it (its bytes serialized as one slice); `bridge-shm-lent` carries it as a
+//! `coolbot::Bytes`, which the receiver decodes in place, in the sender's buffer.
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
@@ -57,15 +58,17 @@ enum Engine {
     Iceoryx2,
     BridgeTcp,
     BridgeShm,
+    BridgeShmLent,
 }
 
 impl Engine {
-    const ALL: [Engine; 5] = [
+    const ALL: [Engine; 6] = [
         Engine::ZenohTcp,
         Engine::ZenohShm,
         Engine::Iceoryx2,
         Engine::BridgeTcp,
         Engine::BridgeShm,
+        Engine::BridgeShmLent,
     ];
 
     fn name(self) -> &'static str {
@@ -75,6 +78,7 @@ impl Engine {
             Engine::Iceoryx2 => "iceoryx2",
             Engine::BridgeTcp => "bridge-tcp",
             Engine::BridgeShm => "bridge-shm",
+            Engine::BridgeShmLent => "bridge-shm-lent",
         }
     }
 
@@ -368,22 +372,57 @@ struct Frame {
     bytes: Vec<u8>,
 }
 
+/// The same packet with its bytes a `coolbot::Bytes`, which a receiver on this host
+/// decodes in place (`bridge-shm-lent`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+struct LentFrame {
+    bytes: coolbot::Bytes,
+}
+
+/// A packet of bytes the bridge carries.
+trait Payload: coolbot::Packet + serde::Serialize + serde::de::DeserializeOwned {
+    fn wrap(bytes: Vec<u8>) -> Self;
+    fn bytes(&self) -> &[u8];
+}
+
+impl Payload for Frame {
+    fn wrap(bytes: Vec<u8>) -> Frame {
+        Frame { bytes }
+    }
+
+    fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+impl Payload for LentFrame {
+    fn wrap(bytes: Vec<u8>) -> LentFrame {
+        LentFrame {
+            bytes: bytes.into(),
+        }
+    }
+
+    fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
 const BRIDGE: InputKind = InputKind::Fifo {
     capacity: 64,
     policy: OverflowPolicy::Block,
 };
 
-fn bridge_receiver(
+fn bridge_receiver<P: Payload>(
     address: &str,
     shm: bool,
     stream: Stream,
     done: Sender<Received>,
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
-    bridge_receiver_on(KEY, address, shm, stream, done)
+    bridge_receiver_on::<P>(KEY, address, shm, stream, done)
 }
 
 /// A receiver node listening on `address`: an inlet on `key` into a sink.
-fn bridge_receiver_on(
+fn bridge_receiver_on<P: Payload>(
     key: &str,
     address: &str,
     shm: bool,
@@ -392,7 +431,7 @@ fn bridge_receiver_on(
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
     let state = setup::state_directory();
     let node = setup::node("receiver", setup::config(address, &[], shm), state.path());
-    let input = FifoIn::<Frame>::new(64, OverflowPolicy::Block);
+    let input = FifoIn::<P>::new(64, OverflowPolicy::Block);
     let mut collector = Collector::new(done, stream.count);
     let ports = PortSet::new().input(&input);
     let sink = Component::new(
@@ -402,7 +441,7 @@ fn bridge_receiver_on(
             Box::new(move |section, _| {
                 if section == Section::Entry {
                     while let Some(packet) = input.recv() {
-                        collector.arrived(&packet.bytes);
+                        collector.arrived(packet.bytes());
                     }
                 }
                 Ok(())
@@ -414,7 +453,7 @@ fn bridge_receiver_on(
     system.add(sink).expect("sink");
     system
         .add(
-            node.inlet::<Frame>("from_sender", key, OutputKind::Data)
+            node.inlet::<P>("from_sender", key, OutputKind::Data)
                 .build()
                 .expect("inlet"),
         )
@@ -426,8 +465,8 @@ fn bridge_receiver_on(
     (state, node, system)
 }
 
-fn bridge_sender(address: &str, shm: bool, stream: Stream) {
-    bridge_sender_to(&[address.to_owned()], &[(KEY, 1)], BRIDGE, shm, stream);
+fn bridge_sender<P: Payload>(address: &str, shm: bool, stream: Stream) {
+    bridge_sender_to::<P>(&[address.to_owned()], &[(KEY, 1)], BRIDGE, shm, stream);
 }
 
 /// How many inlets `session` knows on `key` (their liveliness tokens).
@@ -447,7 +486,7 @@ fn inlets(session: &zenoh::Session, key: &str) -> usize {
 /// A sender node connected to `addresses`: one source whose output feeds an outlet
 /// of `kind` on each key of `keys`; each key has as many inlets as it says, which the
 /// sender waits for before it streams.
-fn bridge_sender_to(
+fn bridge_sender_to<P: Payload>(
     addresses: &[String],
     keys: &[(&str, usize)],
     kind: InputKind,
@@ -460,7 +499,7 @@ fn bridge_sender_to(
         setup::config(&setup::endpoint(), addresses, shm),
         state.path(),
     );
-    let output = DataOut::<Frame>::new();
+    let output = DataOut::<P>::new();
     let mut system = System::new();
     system
         .add(Component::new(
@@ -474,11 +513,7 @@ fn bridge_sender_to(
         .collect();
     for (outlet, (key, _)) in outlets.iter().zip(keys) {
         system
-            .add(
-                node.outlet::<Frame>(outlet, key, kind)
-                    .build()
-                    .expect("outlet"),
-            )
+            .add(node.outlet::<P>(outlet, key, kind).build().expect("outlet"))
             .expect("outlet");
         system
             .connect("source.output", &format!("{outlet}.input"))
@@ -497,7 +532,7 @@ fn bridge_sender_to(
     paced(stream, |number| {
         let mut packet = frame.clone();
         stamp(&mut packet, number);
-        output.send(Frame { bytes: packet });
+        output.send(P::wrap(packet));
     });
     for outlet in &outlets {
         let lost = system
@@ -555,7 +590,7 @@ fn fan_peer(args: &[String]) {
             let stream = stream(3);
             let (done, result) = bounded(1);
             let (_state, _node, system) =
-                bridge_receiver_on(&args[2], &args[1], true, stream, done);
+                bridge_receiver_on::<Frame>(&args[2], &args[1], true, stream, done);
             println!("ready");
             let received = common::expect(&result, LIMIT, "fan-out stream");
             let lost = system
@@ -584,7 +619,7 @@ fn fan_peer(args: &[String]) {
                 Fan::Last => (vec![(&keys[0], consumers)], InputKind::Last),
                 Fan::Fifos => (keys.iter().map(|k| (k.as_str(), 1)).collect(), BRIDGE),
             };
-            bridge_sender_to(&addresses, &keys, kind, true, stream(4));
+            bridge_sender_to::<Frame>(&addresses, &keys, kind, true, stream(4));
         }
         other => panic!("no fan-out role `{other}`"),
     }
@@ -731,9 +766,12 @@ fn peer(args: &[String]) {
                     ready();
                     common::expect(&result, LIMIT, "zenoh stream")
                 }
-                Engine::BridgeTcp | Engine::BridgeShm => {
-                    let (_state, _node, system) =
-                        bridge_receiver(address, engine == Engine::BridgeShm, stream, done);
+                Engine::BridgeTcp | Engine::BridgeShm | Engine::BridgeShmLent => {
+                    let (_state, _node, system) = if engine == Engine::BridgeShmLent {
+                        bridge_receiver::<LentFrame>(address, true, stream, done)
+                    } else {
+                        bridge_receiver::<Frame>(address, engine == Engine::BridgeShm, stream, done)
+                    };
                     ready();
                     let received = common::expect(&result, LIMIT, "bridge stream");
                     let lost = system
@@ -764,8 +802,9 @@ fn peer(args: &[String]) {
                     zenoh_sender(address, engine == Engine::ZenohShm, stream)
                 }
                 Engine::BridgeTcp | Engine::BridgeShm => {
-                    bridge_sender(address, engine == Engine::BridgeShm, stream)
+                    bridge_sender::<Frame>(address, engine == Engine::BridgeShm, stream)
                 }
+                Engine::BridgeShmLent => bridge_sender::<LentFrame>(address, true, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::send(address, stream),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -953,6 +992,22 @@ fn main() {
         (Goal::AtMost(0.2), Goal::AtMost(0.2)),
     );
     against(&mut table, Engine::ZenohTcp, (Goal::None, Goal::None));
+    // The same goals for a packet whose bytes the receiver reads in place.
+    if let Some((_, lent)) = figure(Engine::BridgeShmLent) {
+        for (baseline, goal) in [
+            (Engine::ZenohShm, Goal::AtMost(1.2)),
+            (Engine::BridgeTcp, Goal::AtMost(0.2)),
+        ] {
+            if let Some((_, large)) = figure(baseline) {
+                table.row(
+                    &format!("4 MiB CPU/packet, bridge-shm-lent vs {}", baseline.name()),
+                    Figure::Time(lent.cpu_per_packet),
+                    Figure::Time(large.cpu_per_packet),
+                    goal,
+                );
+            }
+        }
+    }
     table.note(&format!(
         "64 B: {} packets one every {:?}; 4 MiB: {} packets at 30 Hz; CPU from /proc/self/stat (10 ms ticks) of both processes",
         small.count, small.period, large.count

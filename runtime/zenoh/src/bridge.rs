@@ -1218,8 +1218,7 @@ impl Automaton for Inlet {
             .session
             .declare_subscriber(self.key.clone())
             .callback(move |sample| {
-                shared.received(sample.payload());
-                deliver(&sample.payload().to_bytes(), Via::Stream);
+                shared.received(sample.payload(), |bytes| deliver(bytes, Via::Stream));
             })
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;

@@ -529,8 +529,7 @@ impl End {
                 session
                     .declare_subscriber(output.key.clone())
                     .callback(move |sample| {
-                        counters.received(sample.payload());
-                        deliver(&sample.payload().to_bytes(), Via::Stream);
+                        counters.received(sample.payload(), |bytes| deliver(bytes, Via::Stream));
                     })
                     .wait()
                     .map_err(Error::zenoh("subscribe to a remote output"))?,

@@ -9,7 +9,9 @@
 //! [`SHARED_THRESHOLD`] bytes straight into a buffer of its session's shared-memory
 //! pool (postcard encodes into the buffer: the one copy of the payload on the
 //! producer's side), and an inlet on the same host decodes it in place, then drops
-//! it, which frees the buffer.
+//! it, which frees the buffer; a `coolbot::Bytes` in the packet is not copied but
+//! shares the buffer, lent to the decoding (`coolbot::lend`), and keeps it from the
+//! pool while the packet lives.
 //!
 //! The pool is bounded (Zenoh's `transport/shared_memory/transport_optimization/
 //! pool_size`, 16 MiB by default). When it is full, because consumers still hold
@@ -69,10 +71,16 @@ impl Counters {
     }
 
     /// An inlet or a proxy's output received `payload`: counted when it is in shared
-    /// memory.
-    pub(crate) fn received(&self, payload: &ZBytes) {
-        if payload.as_shm().is_some() {
-            self.received.fetch_add(1, Ordering::Relaxed);
+    /// memory, and handed to `deliver`. A payload in shared memory is lent to its
+    /// decoding ([`coolbot::lend`]): a [`coolbot::Bytes`] decoded from it shares the
+    /// buffer (no copy) and keeps it from the pool while it lives.
+    pub(crate) fn received(&self, payload: &ZBytes, deliver: impl FnOnce(&[u8])) {
+        match payload.as_shm() {
+            Some(buffer) => {
+                self.received.fetch_add(1, Ordering::Relaxed);
+                coolbot::lend(buffer.to_owned(), deliver);
+            }
+            None => deliver(&payload.to_bytes()),
         }
     }
 

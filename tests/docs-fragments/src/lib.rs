@@ -5,8 +5,8 @@
 //! `coolc::Builder`, the behaviours below as `coolc compile` writes their stubs) and
 //! the declarations of `fragments`. A fragment that no longer compiles fails the
 //! workspace's build, in a file named after its place
-//! (`$OUT_DIR/fragments/<doc>/<heading's anchor>-<index>.rs`, its function's comment
-//! giving the doc's line); `tests/tests/docs.rs` checks that `COMPILED` is every
+//! (`$OUT_DIR/fragments/<doc>/<entry>-<heading's anchor>-<index>.rs`, its function's
+//! comment giving the doc's line); `tests/tests/docs.rs` checks that `COMPILED` is every
 //! fragment of the table, as the docs read now.
 
 /// The code `coolc` generated from `cool/fragments.cool` (in `OUT_DIR`).

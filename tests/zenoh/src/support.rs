@@ -15,12 +15,22 @@ use coolbot_zenoh::Node;
 use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 use zenoh::Wait;
 
-use crate::generated::types::{Chunk, LaserScan, Pose, Ranges, Reading, Speed, Twist};
+use crate::generated::types::{Chunk, LaserScan, Picture, Pose, Ranges, Reading, Speed, Twist};
 use crate::generated::{
-    base, chunk_queue, drive, goal, growing_queue, latest, lidar, motion, plain, pose_source,
-    poster_source, queue, ranger, reader, robot as robot_compound, shm_queue, shm_source,
-    small_queue, source, tick_source, ticks, tiny_queue, tuner, two_source, wheels, wide_queue,
+    base, chunk_queue, drive, goal, growing_queue, latest, lidar, motion, picture_queue,
+    picture_source, plain, pose_source, poster_source, queue, ranger, reader,
+    robot as robot_compound, shm_queue, shm_source, small_queue, source, tick_source, ticks,
+    tiny_queue, tuner, two_source, wheels, wide_queue,
 };
+
+/// Ends this process when its standard input closes: a test's child process whose test
+/// died (killed, or stopped by a timeout) without killing it does not run on.
+pub fn exit_when_stdin_closes() {
+    std::thread::spawn(|| {
+        let _ = std::io::copy(&mut std::io::stdin(), &mut std::io::sink());
+        std::process::exit(0);
+    });
+}
 
 /// Generous: the machine is shared and may be loaded.
 pub const PATIENCE: Duration = Duration::from_secs(30);
@@ -328,6 +338,8 @@ hand!(tiny_queue, FifoIn<Pose>, inputs.input);
 hand!(growing_queue, UfifoIn<Pose>, inputs.input);
 hand!(shm_queue, FifoIn<Chunk>, inputs.input);
 hand!(chunk_queue, UfifoIn<Chunk>, inputs.input);
+hand!(picture_source, DataOut<Picture>, outputs.out);
+hand!(picture_queue, FifoIn<Picture>, inputs.input);
 hand!(latest, LastIn<Pose>, inputs.input);
 hand!(reader, PosterIn<Pose>, inputs.input);
 hand!(ticks, TickIn, inputs.input);

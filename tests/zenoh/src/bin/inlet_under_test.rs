@@ -4,7 +4,7 @@
 //! what the inlet's ledger records (`coolbot_zenoh::LEDGER_TARGET` at trace level),
 //! one line each as it happens: every numbered message received, and every
 //! acknowledgment answered. It prints `ready` once the inlet runs, and runs until it
-//! is killed.
+//! is killed or its standard input closes.
 
 use coolbot::{OutputKind, System};
 use coolbot_zenoh::Node;
@@ -13,6 +13,7 @@ use coolbot_zenoh_tests::soak::Streamed;
 use tracing_subscriber::EnvFilter;
 
 fn main() {
+    coolbot_zenoh_tests::support::exit_when_stdin_closes();
     let mut args = std::env::args().skip(1);
     let (Some(endpoint), Some(key), what) = (args.next(), args.next(), args.next()) else {
         eprintln!("usage: inlet-under-test ENDPOINT KEY [poses|chunks]");

@@ -4,7 +4,7 @@
 //! given), and prints on stdout
 //! what the outlet hands to Zenoh (`coolbot_zenoh::LEDGER_TARGET` at trace level:
 //! `<key> sent <epoch> <number>`, written to its tally first). It prints `ready` once
-//! the outlet runs, and runs until it is killed.
+//! the outlet runs, and runs until it is killed or its standard input closes.
 
 use coolbot::crossbeam_channel;
 use coolbot_zenoh::Node;
@@ -14,6 +14,7 @@ use coolbot_zenoh_tests::support::outlet_fed;
 use tracing_subscriber::EnvFilter;
 
 fn main() {
+    coolbot_zenoh_tests::support::exit_when_stdin_closes();
     let mut args = std::env::args().skip(1);
     let (Some(endpoint), Some(key), Some(what)) = (args.next(), args.next(), args.next()) else {
         eprintln!("usage: outlet-under-test ENDPOINT KEY poses|chunks [LIMIT]");
@@ -52,7 +53,7 @@ fn produce<P: Streamed>(endpoint: String, key: &str, limit: u64) {
     println!("ready");
     for seq in 1..=limit {
         out.send(P::numbered(seq));
-        // Let the outlet's thread keep up (the queue grows otherwise, unbounded).
+        // Let the outlet's thread keep up (a queue of poses grows otherwise).
         if seq % P::BURST == 0 {
             std::thread::sleep(P::PAUSE);
         }

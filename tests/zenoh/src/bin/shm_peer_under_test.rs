@@ -6,6 +6,10 @@
 //!   is what the test wrote);
 //! - `hold ENDPOINT KEY`: a raw Zenoh subscriber on KEY that keeps every sample it gets
 //!   (a consumer that holds packets), and prints `held <count> <in shared memory>`;
+//! - `read-in-place NAME ENDPOINT KEY`: node NAME, connected to ENDPOINT, reads images
+//!   on KEY through an inlet into a queue, and prints `image <number> <ok|bad>
+//!   <lent|copied>` for each (`lent`: its pixels, a `coolbot::Bytes`, were decoded in
+//!   place);
 //! - `produce NAME KEY`: node NAME, alone, sends large frames through an outlet on KEY
 //!   until one was written into shared memory, then prints `ready`.
 //!
@@ -16,8 +20,8 @@ use std::io::Write;
 use coolbot::crossbeam_channel;
 use coolbot::{InputKind, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::Node;
-use coolbot_zenoh_tests::generated::types::Chunk;
-use coolbot_zenoh_tests::generated::{shm_queue, shm_source};
+use coolbot_zenoh_tests::generated::types::{Chunk, Picture};
+use coolbot_zenoh_tests::generated::{picture_queue, shm_queue, shm_source};
 use coolbot_zenoh_tests::support::{Hand, outlet_fed};
 use zenoh::Wait;
 
@@ -83,6 +87,51 @@ fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
     }
 }
 
+fn read_in_place(name: &str, endpoint: String, key: &str) -> ! {
+    let node = Node::open(name, config(&[endpoint], true)).expect("the node opens");
+    let mut system = System::new();
+    system
+        .add(
+            node.inlet::<Picture>("inlet", key, OutputKind::Data)
+                .build()
+                .expect("the inlet"),
+        )
+        .expect("added");
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    system
+        .add(picture_queue::component("queue", Hand(hand)))
+        .expect("added");
+    system
+        .connect("inlet.output", "queue.input")
+        .expect("connected");
+    system.run_all().expect("runs");
+    let input = handed.recv().expect("the queue's input");
+    say("ready");
+    loop {
+        match input.recv() {
+            Some(image) => {
+                let ok = image
+                    .pixels
+                    .iter()
+                    .enumerate()
+                    .all(|(i, byte)| *byte == (image.number as usize + i) as u8);
+                say(&format!(
+                    "image {} {} {}",
+                    image.number,
+                    if ok { "ok" } else { "bad" },
+                    if image.pixels.is_lent() {
+                        "lent"
+                    } else {
+                        "copied"
+                    }
+                ));
+            }
+            // A peer's poll, not a test's wait: the test waits on these lines.
+            None => std::thread::sleep(std::time::Duration::from_millis(1)),
+        }
+    }
+}
+
 fn hold(endpoint: String, key: &str) -> ! {
     let session = zenoh::open(config(&[endpoint], true))
         .wait()
@@ -135,11 +184,12 @@ fn main() {
         ["consume", name, endpoint, key, shm] => {
             consume(name, (*endpoint).to_owned(), key, *shm == "on")
         }
+        ["read-in-place", name, endpoint, key] => read_in_place(name, (*endpoint).to_owned(), key),
         ["hold", endpoint, key] => hold((*endpoint).to_owned(), key),
         ["produce", name, key] => produce(name, key),
         _ => {
             eprintln!(
-                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | hold ENDPOINT KEY | produce NAME KEY"
+                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY | hold ENDPOINT KEY | produce NAME KEY"
             );
             std::process::exit(2);
         }

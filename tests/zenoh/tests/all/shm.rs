@@ -11,8 +11,8 @@ use coolbot::crossbeam_channel::{self, Receiver};
 use coolbot::port::DataOut;
 use coolbot::{InputKind, OverflowPolicy, System};
 use coolbot_zenoh::{Node, SHARED_THRESHOLD};
-use coolbot_zenoh_tests::generated::shm_source;
-use coolbot_zenoh_tests::generated::types::Chunk;
+use coolbot_zenoh_tests::generated::types::{Chunk, Picture};
+use coolbot_zenoh_tests::generated::{picture_source, shm_source};
 use coolbot_zenoh_tests::support::{self, Hand, PATIENCE};
 use zenoh::Wait;
 
@@ -199,6 +199,42 @@ fn large_packets_to_a_process_on_this_host_are_written_once_into_shared_memory()
     let counts = node.shared_memory();
     assert_eq!((counts.shared, counts.copied), (20, 0), "{counts:?}");
     assert_eq!(shared, 20, "received in shared memory");
+}
+
+#[test]
+fn bytes_from_a_process_on_this_host_are_read_in_place() {
+    // An image's pixels are a `coolbot::Bytes`: the consumer's inlet decodes the large
+    // ones where they arrived, in the producer's buffer of shared memory (no copy),
+    // and copies the small ones, which cross the link.
+    let key = "test/shm/in_place";
+    let (node, endpoint) = listening("shm-in-place-producer", |_| {});
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    let source = picture_source::component("source", Hand(hand));
+    let (system, out) = support::outlet_fed(&node, key, QUEUE, source, &handed);
+    let consumer = Peer::start(&["read-in-place", "shm-in-place-consumer", &endpoint, key]);
+    support::wait_subscribed(&node, key);
+    for number in 1..=20u64 {
+        let size = if number % 2 == 0 { LARGE } else { 16 };
+        out.send(Picture {
+            number,
+            pixels: (0..size)
+                .map(|i| (number as usize + i) as u8)
+                .collect::<Vec<_>>()
+                .into(),
+        });
+    }
+    for number in 1..=20u64 {
+        let line = consumer.next_matching(|line| line.starts_with("image "));
+        let expected = if number % 2 == 0 { "lent" } else { "copied" };
+        assert_eq!(line, format!("image {number} ok {expected}"));
+    }
+    assert_eq!(
+        node.shared_memory().shared,
+        10,
+        "{:?}",
+        node.shared_memory()
+    );
+    assert!(system.shutdown().clean(), "unclean shutdown");
 }
 
 /// Sends `count` large frames on `out`, one at a time: each once every consumer has
