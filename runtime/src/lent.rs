@@ -185,6 +185,15 @@ impl<'de> Visitor<'de> for BytesVisitor {
         Ok(Bytes::from(bytes))
     }
 
+    /// A string, as its UTF-8 bytes (as a `[u8]` field reads one).
+    fn visit_str<E: de::Error>(self, text: &str) -> Result<Bytes, E> {
+        Ok(Bytes::from(text.as_bytes().to_vec()))
+    }
+
+    fn visit_string<E: de::Error>(self, text: String) -> Result<Bytes, E> {
+        Ok(Bytes::from(text.into_bytes()))
+    }
+
     fn visit_seq<A: de::SeqAccess<'de>>(self, mut seq: A) -> Result<Bytes, A::Error> {
         let mut bytes = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(1 << 16));
         while let Some(byte) = seq.next_element::<u8>()? {
@@ -261,12 +270,22 @@ mod tests {
     }
 
     #[test]
-    fn bytes_read_json_arrays_and_write_them() {
+    fn bytes_read_json_arrays_and_strings_and_write_arrays() {
         let frame: Frame = serde_json::from_str(r#"{"number":1,"pixels":[4,5]}"#).unwrap();
         assert_eq!(&*frame.pixels, &[4, 5]);
         assert_eq!(
             serde_json::to_string(&frame).unwrap(),
             r#"{"number":1,"pixels":[4,5]}"#
         );
+        // Through a JSON value too (as `coolbot::Value` reads packets), and a string
+        // as its UTF-8 bytes, as a `[u8]` field reads one.
+        let value = serde_json::json!({"number": 2, "pixels": [6, 7]});
+        let frame: Frame = serde_json::from_value(value).unwrap();
+        assert_eq!(&*frame.pixels, &[6, 7]);
+        let value = serde_json::json!({"number": 3, "pixels": "ab"});
+        let frame: Frame = serde_json::from_value(value).unwrap();
+        assert_eq!(&*frame.pixels, b"ab");
+        let frame: Frame = serde_json::from_str(r#"{"number":3,"pixels":"ab"}"#).unwrap();
+        assert_eq!(&*frame.pixels, b"ab");
     }
 }
