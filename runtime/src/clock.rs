@@ -29,6 +29,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
+use crate::time::nanos;
 use crate::value::Time;
 use crate::wake::Doorbell;
 
@@ -148,10 +149,6 @@ pub struct NotSettled {
     pub timeout: Duration,
     /// The components that had not settled.
     pub busy: Vec<String>,
-}
-
-fn nanos(duration: Duration) -> u64 {
-    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
 }
 
 impl VirtualClock {

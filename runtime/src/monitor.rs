@@ -607,6 +607,10 @@ pub(crate) struct Shared {
     wakers: Mutex<Vec<(crate::wake::Waker, Option<Arc<AtomicBool>>)>>,
     pub(crate) inputs: Vec<(&'static str, Arc<dyn Losses>)>,
     dropped: AtomicU64,
+    /// Nanoseconds spent in user calls, as the component's runner published them:
+    /// the monitor's `elapsed_time`, kept outside its lock (a group member publishes
+    /// it each cycle, and a store costs less than the lock).
+    elapsed: AtomicU64,
     pub(crate) spawned: AtomicBool,
     /// Whether the component's thread is inside a section the max_response watchdog
     /// tripped (it has not returned yet).
@@ -634,6 +638,7 @@ impl Shared {
             wakers: Mutex::new(Vec::new()),
             inputs,
             dropped: AtomicU64::new(0),
+            elapsed: AtomicU64::new(0),
             spawned: AtomicBool::new(false),
             stuck: AtomicBool::new(false),
             thread: std::sync::OnceLock::new(),
@@ -773,8 +778,20 @@ impl Shared {
         });
     }
 
+    /// Publish the time spent in user calls (the monitor's `elapsed_time`), in
+    /// nanoseconds.
+    pub(crate) fn set_elapsed(&self, nanos: u64) {
+        self.elapsed.store(nanos, Ordering::Relaxed);
+    }
+
+    /// The time spent in user calls, as last published.
+    pub(crate) fn elapsed(&self) -> Duration {
+        Duration::from_nanos(self.elapsed.load(Ordering::Relaxed))
+    }
+
     pub(crate) fn snapshot(&self) -> Monitor {
         let mut monitor = lock(&self.monitor).clone();
+        monitor.elapsed_time = self.elapsed();
         // The stored counts are those added by `add_overflows` (0 for most
         // components); the inputs' own counts come on top.
         let elsewhere = std::mem::take(&mut monitor.port_overflows);

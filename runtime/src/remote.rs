@@ -361,9 +361,9 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         monitor.missed_deadlines = view.missed_deadlines;
         monitor.overruns = view.overruns;
         monitor.cpu_time = view.cpu_time;
-        monitor.elapsed_time = view.elapsed_time;
         events
     });
+    shared.set_elapsed(crate::time::nanos(view.elapsed_time));
 }
 
 /// Set `field` to the remote value `now`, with its event when it changed.

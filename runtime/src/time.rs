@@ -1,5 +1,6 @@
 //! Instants: the process's time origin, which watch times and arrival labels count
-//! from, and saturating addition. The bottom layer: it uses nothing of the crate.
+//! from, saturating addition, and durations as nanoseconds. The bottom layer: it uses
+//! nothing of the crate.
 
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
@@ -16,4 +17,9 @@ pub(crate) fn epoch() -> Instant {
 pub(crate) fn later(start: Instant, delay: Duration) -> Instant {
     const CENTURY: Duration = Duration::from_secs(100 * 365 * 24 * 3600);
     start.checked_add(delay.min(CENTURY)).unwrap_or(start)
+}
+
+/// `duration` in nanoseconds, saturating at `u64::MAX` (about 584 years).
+pub(crate) fn nanos(duration: Duration) -> u64 {
+    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
 }

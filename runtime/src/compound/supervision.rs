@@ -27,7 +27,7 @@ pub(super) fn refresh_own_defaults(view: &mut View, cx: &Context, changed: &mut 
             error: monitor.error.clone(),
             quality: monitor.quality,
             cpu_time: monitor.cpu_time,
-            elapsed_time: monitor.elapsed_time,
+            elapsed_time: shared.elapsed(),
         };
     });
     let before = std::mem::replace(&mut view.compound, now);

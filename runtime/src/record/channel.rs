@@ -3,7 +3,7 @@
 
 use std::fs::File;
 use std::io::BufWriter;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use crate::clock::Clock;
 
@@ -41,7 +41,4 @@ pub(super) struct Channel {
 /// The MCAP writer of a recording.
 pub(super) type McapWriter = mcap::Writer<BufWriter<File>>;
 
-/// A duration in nanoseconds (saturated).
-pub(super) fn nanos(duration: Duration) -> u64 {
-    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
-}
+pub(super) use crate::time::nanos;

@@ -47,7 +47,7 @@ impl Runner {
         self.last_took = took;
         // Elapsed time is accumulated here and published with the CPU time (see
         // `update_timing`), keeping the monitor lock off the per-call path.
-        self.elapsed += took;
+        self.elapsed = self.elapsed.saturating_add(crate::time::nanos(took));
         let bound = self.max_response.filter(|bound| tripped || took > *bound);
         if bound.is_some() && !tripped {
             // (A tripped call was counted by the watchdog.)
@@ -172,10 +172,9 @@ impl Runner {
         if self.mirrors_times {
             return;
         }
-        let refresh_cpu =
-            force || self.clock.saturating_duration_since(self.cpu_updated) >= CPU_TIME_REFRESH;
+        let refresh_cpu = force || self.clock >= self.cpu_due;
         let cpu = if refresh_cpu {
-            self.cpu_updated = self.time.now();
+            self.cpu_due = self.time.now() + CPU_TIME_REFRESH;
             read_cpu()
         } else {
             None
@@ -193,14 +192,15 @@ impl Runner {
             Some(membership) => {
                 let total = membership.shared.add_elapsed(delta);
                 cpu.map(|cpu| {
-                    if total.is_zero() {
+                    if total == 0 {
                         Duration::ZERO
                     } else {
-                        cpu.mul_f64((elapsed.as_secs_f64() / total.as_secs_f64()).min(1.0))
+                        cpu.mul_f64((elapsed as f64 / total as f64).min(1.0))
                     }
                 })
             }
         };
+        self.shared.set_elapsed(elapsed);
         let clock = self.clock;
         let load = self.adapt.as_mut().map(|adapt| {
             if let Some(cpu) = cpu {
@@ -208,8 +208,10 @@ impl Runner {
             }
             (adapt.detector.load(), adapt.cpu_share)
         });
+        if cpu.is_none() && load.is_none() {
+            return;
+        }
         self.shared.quietly(|monitor| {
-            monitor.elapsed_time = elapsed;
             if let Some((load, cpu_share)) = load {
                 monitor.adaptation.load = load;
                 monitor.adaptation.cpu_share = cpu_share;

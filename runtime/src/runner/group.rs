@@ -107,14 +107,12 @@ impl GroupShared {
         }
     }
 
-    /// A member published `delta` more time in its calls; the sum over the members.
-    pub(crate) fn add_elapsed(&self, delta: Duration) -> Duration {
-        let delta = u64::try_from(delta.as_nanos()).unwrap_or(u64::MAX);
-        let total = self
-            .elapsed
+    /// A member published `delta` more nanoseconds in its calls; the sum over the
+    /// members, in nanoseconds.
+    pub(crate) fn add_elapsed(&self, delta: u64) -> u64 {
+        self.elapsed
             .fetch_add(delta, Ordering::Relaxed)
-            .saturating_add(delta);
-        Duration::from_nanos(total)
+            .saturating_add(delta)
     }
 }
 

@@ -171,7 +171,9 @@ pub(crate) struct Runner {
     /// The max_response watchdog's view of this component's sections (while it has a
     /// `max_response`).
     watch: Option<Arc<Watch>>,
-    cpu_updated: Instant,
+    /// When the thread's CPU time is next read (`CPU_TIME_REFRESH` after the last
+    /// reading): compared with the clock, which costs less than a difference.
+    cpu_due: Instant,
     /// The latest clock reading: taken once per turn and at the end of each user call,
     /// and passed down instead of reading the clock again.
     clock: Instant,
@@ -182,9 +184,11 @@ pub(crate) struct Runner {
     on_clock: Option<u64>,
     /// Whether the spec declares a `pull` output (otherwise no pull queue is looked at).
     has_pull: bool,
-    /// Wall-clock time spent in user calls, and the value last published.
-    elapsed: Duration,
-    elapsed_published: Duration,
+    /// Wall-clock time spent in user calls, and the value last published, in
+    /// nanoseconds (added and published each cycle: integers cost less than
+    /// `Duration`'s normalised arithmetic).
+    elapsed: u64,
+    elapsed_published: u64,
     /// The user state last published on the monitor.
     published_user: Option<usize>,
     /// Whether the automaton is a compound's (its supervision hooks are called).
@@ -296,13 +300,13 @@ impl Runner {
             deferred: VecDeque::new(),
             max_response: timing.max_response,
             watch,
-            cpu_updated: now,
+            cpu_due: now + CPU_TIME_REFRESH,
             clock: now,
             time: Clock::real(),
             on_clock: None,
             has_pull: spec.outputs.iter().any(|output| output.pull),
-            elapsed: Duration::ZERO,
-            elapsed_published: Duration::ZERO,
+            elapsed: 0,
+            elapsed_published: 0,
             published_user: None,
             supervised,
             mirrors_times,
@@ -376,7 +380,7 @@ impl Runner {
         }
         let now = clock.now();
         self.entered_at = now;
-        self.cpu_updated = now;
+        self.cpu_due = now + CPU_TIME_REFRESH;
         self.clock = now;
         for track in &mut self.tracks {
             track.last_arrival = now;
