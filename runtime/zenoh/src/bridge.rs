@@ -333,6 +333,22 @@ impl Drop for PullServer {
 
 type PullFn = Box<dyn Fn(Duration) -> Result<Vec<u8>, String> + Send>;
 
+/// What a poster or `last` outlet serves to a reader that asks: its latest packet,
+/// with the outlet's epoch and the number it was sent with (a `last` packet Zenoh did
+/// not take: 0).
+struct Latest<T> {
+    epoch: u64,
+    number: u64,
+    packet: T,
+}
+
+impl<T: Serialize> Latest<T> {
+    /// The message a reader gets, as the stream would have carried it.
+    fn encode(&self) -> Result<Vec<u8>, String> {
+        encode(&(self.epoch, self.number, &self.packet))
+    }
+}
+
 /// A pull answer: what `pull` returns, encoded as a message of the outlet's `epoch`
 /// numbered 0 (an answer is not part of the numbered stream), its error as text.
 fn encoded_pull<P: Serialize>(
@@ -426,8 +442,10 @@ pub(crate) struct Outlet<T> {
     sent: Arc<AtomicU64>,
     /// A poster outlet's last published value, or a `last` outlet's latest packet
     /// (with the number it went with, or 0 if Zenoh did not take it), served to
-    /// readers that ask (late joiners, links that came back).
-    posted: Arc<Mutex<Option<Vec<u8>>>>,
+    /// readers that ask (late joiners, links that came back). Kept as the packet
+    /// itself, moved here after it was sent, and encoded only when a reader asks: a
+    /// large packet is not encoded twice on every send.
+    posted: Arc<Mutex<Option<Latest<T>>>>,
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
     _pull_server: Option<PullServer>,
@@ -568,7 +586,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as u64);
         let seq = Arc::new(AtomicU64::new(0));
-        let posted = Arc::new(Mutex::new(None::<Vec<u8>>));
+        let posted = Arc::new(Mutex::new(None::<Latest<T>>));
         let poster_queryable = if matches!(kind, InputKind::Poster | InputKind::Last)
             && pull.is_none()
         {
@@ -577,10 +595,13 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 session
                     .declare_queryable(key.clone())
                     .callback(move |query| {
-                        let current = lock(&posted).clone();
-                        if let Some(bytes) = current
-                            && let Err(error) = query.reply(query.key_expr().clone(), bytes).wait()
-                        {
+                        let current = lock(&posted).as_ref().map(Latest::encode);
+                        let reply = match current {
+                            None => return,
+                            Some(Ok(bytes)) => query.reply(query.key_expr().clone(), bytes).wait(),
+                            Some(Err(error)) => Err(error.into()),
+                        };
+                        if let Err(error) = reply {
                             coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
                                 "poster value not sent: {}{held}",
                                 Chain(&*error)
@@ -742,9 +763,11 @@ impl<T: Packet + Serialize> Outlet<T> {
                     // it from the stream drops it), or 0 when Zenoh did not take it.
                     let number = sent.load(Ordering::Acquire);
                     let number = if number > before { number } else { 0 };
-                    if let Ok(bytes) = encode(&(epoch, number, &packet)) {
-                        *lock(&self.posted) = Some(bytes);
-                    }
+                    *lock(&self.posted) = Some(Latest {
+                        epoch,
+                        number,
+                        packet,
+                    });
                 }
             }
             OutletInput::Poster(port) => {
@@ -756,11 +779,13 @@ impl<T: Packet + Serialize> Outlet<T> {
                 if let Some(value) = value {
                     self.published_once = true;
                     let seq = self.seq.fetch_add(1, Ordering::AcqRel) + 1;
-                    let bytes = encode(&(self.epoch, seq, value));
-                    if let Ok(bytes) = &bytes {
-                        *lock(&self.posted) = Some(bytes.clone());
-                    }
+                    let bytes = encode(&(self.epoch, seq, &value));
                     wire.send(bytes.map(ZBytes::from), false, None);
+                    *lock(&self.posted) = Some(Latest {
+                        epoch: self.epoch,
+                        number: seq,
+                        packet: value,
+                    });
                 }
             }
         }
