@@ -18,7 +18,8 @@
 use std::io::Write;
 
 use coolbot::crossbeam_channel;
-use coolbot::{InputKind, OutputKind, OverflowPolicy, System};
+use coolbot::port::FifoIn;
+use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, Packet, System};
 use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::types::{Chunk, Picture};
 use coolbot_zenoh_tests::generated::{picture_queue, shm_queue, shm_source};
@@ -51,85 +52,86 @@ fn say(line: &str) {
     let _ = out.flush();
 }
 
-fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
+/// Node `name`, connected to `endpoint`, running an inlet of `P` on `key` into the
+/// queue `queue` makes (its behaviour hands over its input): the queue's input, the
+/// node and the system (both kept by the caller as long as it reads).
+fn inlet_into_queue<P>(
+    name: &str,
+    endpoint: String,
+    key: &str,
+    shared_memory: bool,
+    queue: impl FnOnce(Hand<FifoIn<P>>) -> Component,
+) -> (FifoIn<P>, Node, System)
+where
+    P: Packet + serde::Serialize + serde::de::DeserializeOwned,
+{
     let node = Node::open(name, config(&[endpoint], shared_memory)).expect("the node opens");
     let mut system = System::new();
     system
         .add(
-            node.inlet::<Chunk>("inlet", key, OutputKind::Data)
+            node.inlet::<P>("inlet", key, OutputKind::Data)
                 .build()
                 .expect("the inlet"),
         )
         .expect("added");
     let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(shm_queue::component("queue", Hand(hand)))
-        .expect("added");
+    system.add(queue(Hand(hand))).expect("added");
     system
         .connect("inlet.output", "queue.input")
         .expect("connected");
     system.run_all().expect("runs");
     let input = handed.recv().expect("the queue's input");
     say("ready");
+    (input, node, system)
+}
+
+/// Each packet `input` gets, to `report`; polls, as a peer does (the test waits on
+/// the lines it prints, not on this).
+fn each<P: Packet>(input: &FifoIn<P>, mut report: impl FnMut(P)) -> ! {
     loop {
         match input.recv() {
-            Some(frame) => {
-                let verdict = if intact(&frame) { "ok" } else { "bad" };
-                say(&format!(
-                    "frame {} {verdict} {}",
-                    frame.number,
-                    node.shared_memory().received
-                ));
-            }
-            // A peer's poll, not a test's wait: the test waits on these lines.
+            Some(packet) => report(packet),
             None => std::thread::sleep(std::time::Duration::from_millis(1)),
         }
     }
 }
 
+fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
+    let (input, node, _system) =
+        inlet_into_queue::<Chunk>(name, endpoint, key, shared_memory, |hand| {
+            shm_queue::component("queue", hand)
+        });
+    each(&input, |frame| {
+        let verdict = if intact(&frame) { "ok" } else { "bad" };
+        say(&format!(
+            "frame {} {verdict} {}",
+            frame.number,
+            node.shared_memory().received
+        ));
+    })
+}
+
 fn read_in_place(name: &str, endpoint: String, key: &str) -> ! {
-    let node = Node::open(name, config(&[endpoint], true)).expect("the node opens");
-    let mut system = System::new();
-    system
-        .add(
-            node.inlet::<Picture>("inlet", key, OutputKind::Data)
-                .build()
-                .expect("the inlet"),
-        )
-        .expect("added");
-    let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(picture_queue::component("queue", Hand(hand)))
-        .expect("added");
-    system
-        .connect("inlet.output", "queue.input")
-        .expect("connected");
-    system.run_all().expect("runs");
-    let input = handed.recv().expect("the queue's input");
-    say("ready");
-    loop {
-        match input.recv() {
-            Some(image) => {
-                let ok = image
-                    .pixels
-                    .iter()
-                    .enumerate()
-                    .all(|(i, byte)| *byte == (image.number as usize + i) as u8);
-                say(&format!(
-                    "image {} {} {}",
-                    image.number,
-                    if ok { "ok" } else { "bad" },
-                    if image.pixels.is_lent() {
-                        "lent"
-                    } else {
-                        "copied"
-                    }
-                ));
+    let (input, _node, _system) = inlet_into_queue::<Picture>(name, endpoint, key, true, |hand| {
+        picture_queue::component("queue", hand)
+    });
+    each(&input, |image| {
+        let ok = image
+            .pixels
+            .iter()
+            .enumerate()
+            .all(|(i, byte)| *byte == (image.number as usize + i) as u8);
+        say(&format!(
+            "image {} {} {}",
+            image.number,
+            if ok { "ok" } else { "bad" },
+            if image.pixels.is_lent() {
+                "lent"
+            } else {
+                "copied"
             }
-            // A peer's poll, not a test's wait: the test waits on these lines.
-            None => std::thread::sleep(std::time::Duration::from_millis(1)),
-        }
-    }
+        ));
+    })
 }
 
 fn hold(endpoint: String, key: &str) -> ! {
