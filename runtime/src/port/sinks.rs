@@ -33,11 +33,13 @@
 //! for the lock. Elsewhere, or if the kernel refuses `membarrier`, both are
 //! sequentially consistent fences (one full fence per send).
 //!
-//! Only the owner uses `busy` (a single writer, so plain stores suffice); a send
-//! nested in another on the same output (a converter sending on the output it is
-//! delivering for) takes the read lock, and does not replace the owner's copy. A
-//! snapshot the owner cached stays alive until its next send on the output or the
-//! end of the output.
+//! Only the owner uses `busy` (a single writer, so plain stores suffice). A send
+//! nested in the owner's delivery from its copy (a converter sending on the output it
+//! is delivering for) delivers from that copy too: it is part of the delivery in
+//! flight, which a change waits for, so it must not wait for the read lock a waiting
+//! change holds. A send nested in a delivery under the read lock takes the read lock
+//! again, and neither replaces the owner's copy. A snapshot the owner cached stays
+//! alive until its next send on the output or the end of the output.
 
 #![allow(
     unsafe_code,
@@ -135,7 +137,11 @@ impl<T: Packet> Sinks<T> {
     #[inline]
     pub(super) fn send(&self, core: &OutputCore, packet: Parcel<T>) {
         let sender = core.sender.load(Ordering::Relaxed);
-        let packet = if sender != 0 && sender == token() && !self.busy.load(Ordering::Relaxed) {
+        let packet = if sender != 0 && sender == token() {
+            if self.busy.load(Ordering::Relaxed) {
+                self.send_nested(packet);
+                return;
+            }
             match self.send_cached(packet) {
                 None => return,
                 Some(packet) => packet,
@@ -144,6 +150,22 @@ impl<T: Packet> Sinks<T> {
             packet
         };
         self.send_locked(core, packet);
+    }
+
+    /// A send by the owner from inside its own delivery from its copy (`busy` is
+    /// set): to the same copy. A change that replaced the snapshot meanwhile holds
+    /// the write lock and waits for `busy` to clear, so the read lock would never
+    /// come; this delivery is part of the one the change waits for.
+    #[cold]
+    fn send_nested(&self, packet: Parcel<T>) {
+        // SAFETY: only the owner thread gets here (its token is the sender's), inside
+        // its delivery from `owned` (`busy` is set only there, by this thread): the
+        // outer delivery holds a shared reference to it, and `owned` is written only
+        // while `busy` is clear, so this second shared reference meets no write.
+        let owned = unsafe { &*self.owned.get() };
+        if let Some((_, list)) = owned {
+            dispatch(list, packet);
+        }
     }
 
     /// The owner's send to its cached snapshot; the packet back if the cache is not
@@ -428,7 +450,7 @@ mod tests {
     }
 
     #[test]
-    fn a_send_nested_in_the_owners_delivery_goes_under_the_lock_and_keeps_the_owners_copy() {
+    fn a_send_nested_in_the_owners_delivery_keeps_the_owners_copy() {
         // The converter to `a` sends packet 10 on the output it is delivering for,
         // when it converts packet 2: once while the owner delivers under the lock
         // (packet 1 caches the snapshot), once from its copy (packet 2).
@@ -462,6 +484,71 @@ mod tests {
         // The nested packet arrives before the one whose conversion sent it.
         assert_eq!(a.drain().collect::<Vec<u64>>(), [1, 10, 2, 3, 10, 2]);
         nested.lock().expect("the output").take();
+    }
+
+    #[test]
+    fn a_send_nested_in_the_owners_delivery_does_not_wait_for_a_relink_that_waits_for_it() {
+        // The converter to `a` holds packet 2 (sent from the owner's copy) until
+        // released, then sends packet 10 on the same output. Meanwhile a relink has
+        // replaced the snapshot and waits, under the write lock, for that delivery.
+        let (entered_tx, entered) = crossbeam_channel::bounded(1);
+        let (release, release_rx) = crossbeam_channel::bounded::<()>(1);
+        let (out, a, b) = (
+            DataOut::<u64>::new(),
+            FifoIn::<u64>::new(16, OverflowPolicy::Reject),
+            FifoIn::<u64>::new(16, OverflowPolicy::Reject),
+        );
+        let again = Arc::new(Mutex::new(None::<DataOut<u64>>));
+        let inner = Arc::clone(&again);
+        let convert = move |packet: &u64| {
+            if *packet == 2 {
+                let _ = entered_tx.send(());
+                let _ = release_rx.recv_timeout(Duration::from_secs(30));
+                if let Some(out) = inner.lock().expect("the output").as_ref() {
+                    out.send(10);
+                }
+            }
+            *packet
+        };
+        assert!(link_converted::<u64, u64>(
+            &out.erased(),
+            &a.erased(),
+            Arc::new(convert)
+        ));
+        *again.lock().expect("the output") = Some(out.clone());
+        let (send, thread) = owner(&out);
+        send.send(1).expect("owner alive");
+        send.send(2).expect("owner alive");
+        entered
+            .recv_timeout(Duration::from_secs(30))
+            .expect("packet 2 in the converter");
+        let relinked = Arc::new(AtomicBool::new(false));
+        let relinker = {
+            let (out, a, b, relinked) = (out.clone(), a.clone(), b.clone(), Arc::clone(&relinked));
+            std::thread::spawn(move || {
+                assert!(relink_converted::<u64, u64>(
+                    &out.erased(),
+                    Some(&a.erased()),
+                    &b.erased(),
+                    Arc::new(|packet: &u64| *packet),
+                ));
+                relinked.store(true, Ordering::Release);
+            })
+        };
+        poll_until("the relink to wait for the delivery", || {
+            out.inner.sinks.waited.load(Ordering::Relaxed) > 0
+        });
+        release.send(()).expect("converter waiting");
+        // Deadlocked, the relink would never return: the nested send waiting for the
+        // read lock, the relink for the delivery that sends it.
+        poll_until("the relink to return", || relinked.load(Ordering::Acquire));
+        relinker.join().expect("relinker");
+        drop(send);
+        thread.join().expect("owner");
+        again.lock().expect("the output").take();
+        // Both deliveries were in flight before the relink moved what `a` held.
+        assert_eq!(b.drain().collect::<Vec<u64>>(), [1, 10, 2]);
+        assert!(a.is_empty());
     }
 
     #[test]
