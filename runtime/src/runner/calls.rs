@@ -45,8 +45,8 @@ impl Runner {
         self.clock = self.time.now();
         let took = self.clock.saturating_duration_since(started);
         self.last_took = took;
-        // Elapsed time is accumulated here and published with the CPU time (see
-        // `update_timing`), keeping the monitor lock off the per-call path.
+        // Elapsed time is accumulated here and published before the thread waits
+        // (`update_cpu_from`), off the per-call path.
         self.elapsed = self.elapsed.saturating_add(crate::time::nanos(took));
         let bound = self.max_response.filter(|bound| tripped || took > *bound);
         if bound.is_some() && !tripped {
