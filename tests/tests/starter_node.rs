@@ -6,8 +6,8 @@
 //! robot: its instance is dead).
 //!
 //! The crate is built in the workspace's target directory with the workspace's
-//! `Cargo.lock` and profile, so that the network layer `cargo test --workspace` has
-//! built already is reused rather than built again.
+//! `Cargo.lock`, profile and feature sets ([`WORKSPACE_FEATURES`]), so that the network
+//! layer `cargo test --workspace` has built already is reused rather than built again.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -53,6 +53,45 @@ fn free_port() -> u16 {
         .expect("a free port")
 }
 
+/// Test only, not what coolc writes: dependencies that give the crates this crate
+/// shares with the workspace the feature sets `cargo test --workspace` resolves for
+/// them, so that Cargo reuses the workspace's build of Zenoh and its stack. Cargo
+/// resolves features per build: a crate whose features differ (tokio without
+/// `test-util`, say) is another build of it, and so is every crate above it (all of
+/// Zenoh). The workspace's come from its members' dev-dependencies, which
+/// `cargo test --workspace` unifies too:
+///
+/// - tokio's `test-util` and tungstenite's defaults: `coolbot-zenoh`'s dev-dependencies;
+/// - regex-automata's and regex-syntax's: insta and proptest, dev-dependencies of coolc
+///   and others (and tempfile's, through insta);
+/// - toml_edit's defaults: coolc, a dependency of `coolbot-tests`;
+/// - for the build's host (proc macros and build scripts): coolc as the members'
+///   build-dependency (askama: winnow's `simd`; toml_edit; serde_json) with its
+///   dev-dependency insta (tempfile: fastrand's and once_cell's `std`).
+///
+/// Renamed (`ws-…`), so that the generated code cannot use them by their names, and
+/// never built for their own sake: Cargo links the workspace's builds and a crate
+/// without a build script builds no build-dependencies. The declarations only make the
+/// build faster: if they no longer resolve, the crate is built as coolc wrote it, and
+/// if the workspace's features drift from them, Zenoh is compiled again (slower, as
+/// before). `coolbot` and `coolbot-zenoh` are compiled for this crate whatever it
+/// declares (Cargo hashes a path dependency's location relative to the workspace).
+const WORKSPACE_FEATURES: (&str, &str) = (
+    "ws-tokio = { package = \"tokio\", version = \"1\", features = [\"test-util\"] }
+ws-tungstenite = { package = \"tungstenite\", version = \"0.30\" }
+ws-insta = { package = \"insta\", version = \"1.49\", features = [\"glob\", \"json\"] }
+ws-proptest = { package = \"proptest\", version = \"1.12\", default-features = false, features = [\"std\", \"bit-set\"] }
+ws-toml_edit = { package = \"toml_edit\", version = \"0.25\" }
+",
+    "
+[build-dependencies]
+ws-askama = { package = \"askama\", version = \"0.16\" }
+ws-insta = { package = \"insta\", version = \"1.49\", features = [\"glob\", \"json\"] }
+ws-serde_json = { package = \"serde_json\", version = \"1\" }
+ws-toml_edit = { package = \"toml_edit\", version = \"0.25\" }
+",
+);
+
 /// Writes the crate `package` for `description` into `dir` as `coolc compile` into a
 /// new directory does (with the starter `main`), replaces the user files `user`
 /// (`(file in src/, text)`), and builds it with `--features network`. Returns the
@@ -84,10 +123,40 @@ fn build(
     );
     // The workspace's profile (a user may add one: the manifest keeps it) and lock.
     let profile = "\n[profile.dev]\ndebug = \"line-tables-only\"\n\n[profile.dev.package.\"*\"]\ndebug = false\n";
-    std::fs::write(dir.join("Cargo.toml"), manifest + profile).unwrap();
+    let manifest = manifest + profile;
     std::fs::copy(repository().join("Cargo.lock"), dir.join("Cargo.lock")).unwrap();
-    let target = repository().join("target");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    // The workspace's feature sets, if Cargo resolves them with the crates of the lock.
+    let (dependencies, build_dependencies) = WORKSPACE_FEATURES;
+    assert!(manifest.contains("\n[dependencies]\n"), "{manifest}");
+    let sharing = manifest.replacen(
+        "\n[dependencies]\n",
+        &format!("\n[dependencies]\n{dependencies}"),
+        1,
+    ) + build_dependencies;
+    std::fs::write(dir.join("Cargo.toml"), &sharing).unwrap();
+    let resolved = Command::new(&cargo)
+        .args([
+            "tree",
+            "--quiet",
+            "--offline",
+            "--features",
+            "network",
+            "--depth",
+            "0",
+        ])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    if !resolved.status.success() {
+        eprintln!(
+            "the workspace's feature sets do not resolve (built as coolc wrote it, Zenoh again):\n{}",
+            String::from_utf8_lossy(&resolved.stderr)
+        );
+        std::fs::write(dir.join("Cargo.toml"), &manifest).unwrap();
+        std::fs::copy(repository().join("Cargo.lock"), dir.join("Cargo.lock")).unwrap();
+    }
+    let target = repository().join("target");
     let output = Command::new(cargo)
         .args(["build", "--quiet", "--features", "network"])
         .current_dir(dir)
