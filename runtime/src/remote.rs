@@ -330,6 +330,9 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         *slot = *total;
         shared.add_overflows(port, lost);
     }
+    // Before the CPU time, as a runner publishes them: a snapshot never shows a CPU
+    // time newer than the elapsed time.
+    shared.set_elapsed(crate::time::nanos(view.elapsed_time));
     shared.update(|monitor| {
         let mut events = Vec::new();
         monitor.response = view.response;
@@ -363,7 +366,6 @@ fn overlay(view: &Monitor, applied: &mut Vec<(String, u64)>, cx: &Context) {
         monitor.cpu_time = view.cpu_time;
         events
     });
-    shared.set_elapsed(crate::time::nanos(view.elapsed_time));
 }
 
 /// Set `field` to the remote value `now`, with its event when it changed.

@@ -15,8 +15,9 @@
 //!   delivering from it);
 //! - each send marks the output `busy` (a plain store), then reads the version; if
 //!   it is the cached one, it delivers to the cached snapshot and clears `busy`;
-//!   otherwise it clears `busy` and sends under the read lock, as any other thread
-//!   does, and caches the snapshot it read there;
+//!   otherwise it clears `busy`, reads the snapshot under the read lock, caches it
+//!   and sets `busy` again before it lets the lock go, then delivers from the new
+//!   copy and clears `busy` (no owner's delivery runs under the lock);
 //! - a change replaces the snapshot and bumps the version under the write lock, then
 //!   waits until `busy` is clear before it goes on (and releases the lock).
 //!
@@ -26,7 +27,9 @@
 //! [`heavy_fence`]), so that one of the two loads sees the other side's store. If the
 //! change sees `busy`, it waits for the owner's clear (a release store after the
 //! delivery: the delivery happens before the change goes on). If not, the owner sees
-//! the new version and takes the read lock, which waits for the change. On Linux the
+//! the new version and takes the read lock, which waits for the change (and a change
+//! that takes the write lock after the owner set `busy` under the read lock sees it
+//! set: the lock orders them). On Linux the
 //! light fence is only a compiler fence and the heavy one the `membarrier` system
 //! call (`MEMBARRIER_CMD_PRIVATE_EXPEDITED`), which makes every running thread of
 //! the process execute a full barrier: a send then costs no atomic read-modify-write
@@ -34,12 +37,14 @@
 //! sequentially consistent fences (one full fence per send).
 //!
 //! Only the owner uses `busy` (a single writer, so plain stores suffice). A send
-//! nested in the owner's delivery from its copy (a converter sending on the output it
-//! is delivering for) delivers from that copy too: it is part of the delivery in
+//! nested in the owner's delivery (a converter sending on the output it is
+//! delivering for) delivers from the owner's copy too: it is part of the delivery in
 //! flight, which a change waits for, so it must not wait for the read lock a waiting
-//! change holds. A send nested in a delivery under the read lock takes the read lock
-//! again, and neither replaces the owner's copy. A snapshot the owner cached stays
-//! alive until its next send on the output or the end of the output.
+//! change holds. A send from another thread delivers under the read lock; one nested
+//! in such a delivery takes the read lock again, which a change waiting for the
+//! write lock refuses: a converter on a shared output must not send on that output.
+//! A snapshot the owner cached stays alive until its next send on the output or the
+//! end of the output.
 
 #![allow(
     unsafe_code,
@@ -197,26 +202,39 @@ impl<T: Packet> Sinks<T> {
         }
     }
 
-    /// A send under the read lock; the owner caches the snapshot it read.
+    /// A send under the read lock. The owner caches the snapshot it read and marks
+    /// itself `busy` before it lets the lock go, then delivers from its copy: a send
+    /// nested in that delivery goes to the same copy ([`Sinks::send_nested`]), and a
+    /// change waits for the delivery as for any from the copy.
     #[cold]
     fn send_locked(&self, core: &OutputCore, packet: Parcel<T>) {
         let list = read(&self.list);
-        let version = self.version.load(Ordering::Relaxed);
-        dispatch(&list, packet);
         let sender = core.sender.load(Ordering::Relaxed);
-        // A send nested in the owner's delivery from its copy (`busy`) leaves the
-        // copy alone: the outer delivery reads it.
-        if sender == 0 || sender != token() || self.busy.load(Ordering::Relaxed) {
+        if sender == 0 || sender != token() {
+            dispatch(&list, packet);
             return;
         }
+        let version = self.version.load(Ordering::Relaxed);
         let snapshot = Arc::clone(&list);
-        drop(list);
         // SAFETY: this is the owner thread (its token is the sender's) and it is
-        // not delivering from its copy (`busy` is clear; it is set only by this
-        // thread): no other reference to `owned` exists while this one lives.
+        // not delivering from its copy (`busy` is clear: a send nested in such a
+        // delivery went to `send_nested`, and `busy` is set only by this thread):
+        // no other reference to `owned` exists while this one lives.
         let replaced = unsafe { &mut *self.owned.get() }.replace((version, snapshot));
-        // (The replaced snapshot is dropped after the write: dropping it may drop the
-        // last handle of an input, and its packets, whose drop code may send here.)
+        // Set while the read lock is held: a change, which takes the write lock
+        // after this unlock, sees it and waits for the delivery below.
+        self.busy.store(true, Ordering::Relaxed);
+        let idle = Idle(&self.busy);
+        drop(list);
+        // SAFETY: the owner thread, with `busy` set: `owned` is not written until
+        // it clears (the write above is over).
+        if let Some((_, list)) = unsafe { &*self.owned.get() } {
+            dispatch(list, packet);
+        }
+        drop(idle);
+        // (The replaced snapshot is dropped after the delivery: dropping it may drop
+        // the last handle of an input, and its packets, whose drop code may send
+        // here.)
         drop(replaced);
     }
 }
@@ -452,8 +470,8 @@ mod tests {
     #[test]
     fn a_send_nested_in_the_owners_delivery_keeps_the_owners_copy() {
         // The converter to `a` sends packet 10 on the output it is delivering for,
-        // when it converts packet 2: once while the owner delivers under the lock
-        // (packet 1 caches the snapshot), once from its copy (packet 2).
+        // each time it converts packet 2: both times nested in a delivery from the
+        // owner's copy (packet 1 cached it).
         let (out, a) = (
             DataOut::<u64>::new(),
             FifoIn::new(16, OverflowPolicy::Reject),
@@ -487,10 +505,22 @@ mod tests {
     }
 
     #[test]
-    fn a_send_nested_in_the_owners_delivery_does_not_wait_for_a_relink_that_waits_for_it() {
-        // The converter to `a` holds packet 2 (sent from the owner's copy) until
-        // released, then sends packet 10 on the same output. Meanwhile a relink has
-        // replaced the snapshot and waits, under the write lock, for that delivery.
+    fn a_send_nested_in_the_owners_delivery_from_its_copy_does_not_wait_for_a_relink() {
+        // Packet 1 caches the snapshot: packet 2 goes from the owner's copy.
+        nested_send_during_a_relink(&[1], &[1, 10, 2]);
+    }
+
+    #[test]
+    fn a_send_nested_in_the_owners_first_delivery_does_not_wait_for_a_relink() {
+        // Packet 2 is the first: the owner reads the snapshot under the lock.
+        nested_send_during_a_relink(&[], &[10, 2]);
+    }
+
+    /// The owner sends `before`, then packet 2, which the converter to `a` holds
+    /// until released, then sends packet 10 on the same output. Meanwhile a relink
+    /// replaces the snapshot and waits, under the write lock, for that delivery; the
+    /// relink must return, and `b` hold `expected`.
+    fn nested_send_during_a_relink(before: &[u64], expected: &[u64]) {
         let (entered_tx, entered) = crossbeam_channel::bounded(1);
         let (release, release_rx) = crossbeam_channel::bounded::<()>(1);
         let (out, a, b) = (
@@ -517,8 +547,9 @@ mod tests {
         ));
         *again.lock().expect("the output") = Some(out.clone());
         let (send, thread) = owner(&out);
-        send.send(1).expect("owner alive");
-        send.send(2).expect("owner alive");
+        for packet in before.iter().chain(&[2]) {
+            send.send(*packet).expect("owner alive");
+        }
         entered
             .recv_timeout(Duration::from_secs(30))
             .expect("packet 2 in the converter");
@@ -540,14 +571,15 @@ mod tests {
         });
         release.send(()).expect("converter waiting");
         // Deadlocked, the relink would never return: the nested send waiting for the
-        // read lock, the relink for the delivery that sends it.
+        // read lock, the relink for the delivery that sends it. (Had the delivery
+        // held the read lock, the relink would not have reached its wait above.)
         poll_until("the relink to return", || relinked.load(Ordering::Acquire));
         relinker.join().expect("relinker");
         drop(send);
         thread.join().expect("owner");
         again.lock().expect("the output").take();
-        // Both deliveries were in flight before the relink moved what `a` held.
-        assert_eq!(b.drain().collect::<Vec<u64>>(), [1, 10, 2]);
+        // Every delivery was in flight before the relink moved what `a` held.
+        assert_eq!(b.drain().collect::<Vec<u64>>(), expected);
         assert!(a.is_empty());
     }
 

@@ -445,7 +445,7 @@ pub(crate) struct Outlet<T> {
     /// readers that ask (late joiners, links that came back). Kept as the packet
     /// itself, moved here after it was sent, and encoded only when a reader asks: a
     /// large packet is not encoded twice on every send.
-    posted: Arc<Mutex<Option<Latest<T>>>>,
+    posted: Arc<Mutex<Option<Arc<Latest<T>>>>>,
     published_once: bool,
     _poster_queryable: Option<zenoh::query::Queryable<()>>,
     _pull_server: Option<PullServer>,
@@ -586,7 +586,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as u64);
         let seq = Arc::new(AtomicU64::new(0));
-        let posted = Arc::new(Mutex::new(None::<Latest<T>>));
+        let posted = Arc::new(Mutex::new(None::<Arc<Latest<T>>>));
         let poster_queryable = if matches!(kind, InputKind::Poster | InputKind::Last)
             && pull.is_none()
         {
@@ -595,7 +595,10 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
                 session
                     .declare_queryable(key.clone())
                     .callback(move |query| {
-                        let current = lock(&posted).as_ref().map(Latest::encode);
+                        // Encoded outside the lock: the outlet's next store does not
+                        // wait for it.
+                        let latest = lock(&posted).clone();
+                        let current = latest.as_deref().map(Latest::encode);
                         let reply = match current {
                             None => return,
                             Some(Ok(bytes)) => query.reply(query.key_expr().clone(), bytes).wait(),
@@ -712,6 +715,13 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
 }
 
 impl<T: Packet + Serialize> Outlet<T> {
+    /// Keep `latest` for readers that ask; the one it replaces is dropped after the
+    /// lock is let go (dropping a packet may run code of its own: a lent buffer's).
+    fn post(&self, latest: Latest<T>) {
+        let replaced = lock(&self.posted).replace(Arc::new(latest));
+        drop(replaced);
+    }
+
     /// `ports` with this outlet's input added (a proxy's input, `crate::place`).
     pub(crate) fn add_input(&self, ports: PortSet) -> PortSet {
         match &self.input {
@@ -763,7 +773,7 @@ impl<T: Packet + Serialize> Outlet<T> {
                     // it from the stream drops it), or 0 when Zenoh did not take it.
                     let number = sent.load(Ordering::Acquire);
                     let number = if number > before { number } else { 0 };
-                    *lock(&self.posted) = Some(Latest {
+                    self.post(Latest {
                         epoch,
                         number,
                         packet,
@@ -780,12 +790,14 @@ impl<T: Packet + Serialize> Outlet<T> {
                     self.published_once = true;
                     let seq = self.seq.fetch_add(1, Ordering::AcqRel) + 1;
                     let bytes = encode(&(self.epoch, seq, &value));
-                    wire.send(bytes.map(ZBytes::from), false, None);
-                    *lock(&self.posted) = Some(Latest {
+                    // Kept before it is sent: a reader whose subscription missed it
+                    // on the stream and asks now gets it, not the one before.
+                    self.post(Latest {
                         epoch: self.epoch,
                         number: seq,
                         packet: value,
                     });
+                    wire.send(bytes.map(ZBytes::from), false, None);
                 }
             }
         }
