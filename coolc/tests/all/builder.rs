@@ -111,9 +111,11 @@ fn builder_in_a_build_script() {
         LAMP.replace("initial dark;", "initial dark"),
     )
     .unwrap();
-    let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests");
+    let target = common::gen_target();
     let cargo_bin = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    common::locked_as_workspace(krate);
     let failed = Command::new(cargo_bin)
+        .args(common::GEN_PROFILE)
         .args(["build"])
         .current_dir(krate)
         .env("CARGO_TARGET_DIR", target)

@@ -101,9 +101,11 @@ fn a_sample_of_random_descriptions_builds_without_warnings() {
         ),
     )
     .unwrap();
-    let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests");
+    let target = common::gen_target();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    common::locked_as_workspace(dir.path());
     let output = Command::new(cargo)
+        .args(common::GEN_PROFILE)
         .args([
             "build",
             "--workspace",

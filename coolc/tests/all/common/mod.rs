@@ -72,11 +72,36 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
     cargo_with_env(dir, args, &[])
 }
 
+/// How every generated crate of the tests is built, in the target directory they
+/// share (`target/gen-tests`): with the workspace's `Cargo.lock` (`locked_as_workspace`)
+/// and without debug information for dependencies (a `cargo` argument, before the
+/// command), as the workspace builds. The same everywhere, or the shared directory
+/// holds two builds of every dependency.
+pub const GEN_PROFILE: [&str; 2] = ["--config", "profile.dev.package.\"*\".debug=false"];
+
+/// The shared target directory of the generated crates.
+pub fn gen_target() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests")
+}
+
+/// Gives the crate or workspace at `dir` the workspace's `Cargo.lock` (unless it has
+/// one): its dependencies resolve to the versions the workspace builds and tests,
+/// offline, rather than to whatever the registry offers today.
+pub fn locked_as_workspace(dir: &Path) {
+    let lock = dir.join("Cargo.lock");
+    if !lock.exists() {
+        let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.lock");
+        std::fs::copy(workspace, lock).unwrap();
+    }
+}
+
 /// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
 pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
-    let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/gen-tests");
+    let target = gen_target();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    locked_as_workspace(dir);
     let output = Command::new(cargo)
+        .args(GEN_PROFILE)
         .args(args)
         .current_dir(dir)
         .env("CARGO_TARGET_DIR", target)
