@@ -467,6 +467,38 @@ mod tests {
         assert!(rig.a.is_empty());
     }
 
+    /// Connects `out` to `a` through a converter that, converting packet 2, sends
+    /// packet 10 on `out` (after `gate`'s signal and release, if given). Returns the
+    /// converter's handle of `out`: emptied at the end of the test, or the output and
+    /// its converter keep each other alive.
+    fn resending(
+        out: &DataOut<u64>,
+        a: &FifoIn<u64>,
+        gate: Option<(Sender<()>, Receiver<()>)>,
+    ) -> Arc<Mutex<Option<DataOut<u64>>>> {
+        let again = Arc::new(Mutex::new(None::<DataOut<u64>>));
+        let inner = Arc::clone(&again);
+        let convert = move |packet: &u64| {
+            if *packet == 2 {
+                if let Some((entered, release)) = &gate {
+                    let _ = entered.send(());
+                    let _ = release.recv_timeout(Duration::from_secs(30));
+                }
+                if let Some(out) = inner.lock().expect("the output").as_ref() {
+                    out.send(10);
+                }
+            }
+            *packet
+        };
+        assert!(link_converted::<u64, u64>(
+            &out.erased(),
+            &a.erased(),
+            Arc::new(convert)
+        ));
+        *again.lock().expect("the output") = Some(out.clone());
+        again
+    }
+
     #[test]
     fn a_send_nested_in_the_owners_delivery_keeps_the_owners_copy() {
         // The converter to `a` sends packet 10 on the output it is delivering for,
@@ -476,23 +508,7 @@ mod tests {
             DataOut::<u64>::new(),
             FifoIn::new(16, OverflowPolicy::Reject),
         );
-        let again = Mutex::new(None::<DataOut<u64>>);
-        let nested = Arc::new(again);
-        let inner = Arc::clone(&nested);
-        let convert = move |packet: &u64| {
-            if *packet == 2
-                && let Some(out) = inner.lock().expect("the output").as_ref()
-            {
-                out.send(10);
-            }
-            *packet
-        };
-        assert!(link_converted::<u64, u64>(
-            &out.erased(),
-            &a.erased(),
-            Arc::new(convert)
-        ));
-        *nested.lock().expect("the output") = Some(out.clone());
+        let nested = resending(&out, &a, None);
         let (send, thread) = owner(&out);
         for packet in [1, 2, 3, 2] {
             send.send(packet).expect("owner alive");
@@ -528,24 +544,7 @@ mod tests {
             FifoIn::<u64>::new(16, OverflowPolicy::Reject),
             FifoIn::<u64>::new(16, OverflowPolicy::Reject),
         );
-        let again = Arc::new(Mutex::new(None::<DataOut<u64>>));
-        let inner = Arc::clone(&again);
-        let convert = move |packet: &u64| {
-            if *packet == 2 {
-                let _ = entered_tx.send(());
-                let _ = release_rx.recv_timeout(Duration::from_secs(30));
-                if let Some(out) = inner.lock().expect("the output").as_ref() {
-                    out.send(10);
-                }
-            }
-            *packet
-        };
-        assert!(link_converted::<u64, u64>(
-            &out.erased(),
-            &a.erased(),
-            Arc::new(convert)
-        ));
-        *again.lock().expect("the output") = Some(out.clone());
+        let again = resending(&out, &a, Some((entered_tx, release_rx)));
         let (send, thread) = owner(&out);
         for packet in before.iter().chain(&[2]) {
             send.send(*packet).expect("owner alive");
