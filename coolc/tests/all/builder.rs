@@ -6,7 +6,6 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::Command;
 
 use common::{cargo, runtime};
 use coolc::ir::RuntimeDep;
@@ -111,16 +110,7 @@ fn builder_in_a_build_script() {
         LAMP.replace("initial dark;", "initial dark"),
     )
     .unwrap();
-    let target = common::gen_target();
-    let cargo_bin = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    common::locked_as_workspace(krate);
-    let failed = Command::new(cargo_bin)
-        .args(common::GEN_PROFILE)
-        .args(["build"])
-        .current_dir(krate)
-        .env("CARGO_TARGET_DIR", target)
-        .output()
-        .unwrap();
+    let failed = common::gen_cargo(krate).args(["build"]).output().unwrap();
     assert!(!failed.status.success());
     let stderr = String::from_utf8_lossy(&failed.stderr);
     assert!(stderr.contains("coolc::syntax"), "{stderr}");

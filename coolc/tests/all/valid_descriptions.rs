@@ -102,18 +102,13 @@ fn a_sample_of_random_descriptions_builds_without_warnings() {
     )
     .unwrap();
     let target = common::gen_target();
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    common::locked_as_workspace(dir.path());
-    let output = Command::new(cargo)
-        .args(common::GEN_PROFILE)
+    let output = common::gen_cargo(dir.path())
         .args([
             "build",
             "--workspace",
             "--all-targets",
             "--message-format=short",
         ])
-        .current_dir(dir.path())
-        .env("CARGO_TARGET_DIR", &target)
         .env_remove("RUSTFLAGS")
         .output()
         .unwrap();

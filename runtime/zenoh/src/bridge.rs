@@ -789,14 +789,15 @@ impl<T: Packet + Serialize> Outlet<T> {
                 if let Some(value) = value {
                     self.published_once = true;
                     let seq = self.seq.fetch_add(1, Ordering::AcqRel) + 1;
-                    let bytes = encode(&(self.epoch, seq, &value));
-                    // Kept before it is sent: a reader whose subscription missed it
-                    // on the stream and asks now gets it, not the one before.
-                    self.post(Latest {
+                    let latest = Latest {
                         epoch: self.epoch,
                         number: seq,
                         packet: value,
-                    });
+                    };
+                    let bytes = latest.encode();
+                    // Kept before it is sent: a reader whose subscription missed it
+                    // on the stream and asks now gets it, not the one before.
+                    self.post(latest);
                     wire.send(bytes.map(ZBytes::from), false, None);
                 }
             }

@@ -95,16 +95,24 @@ pub fn locked_as_workspace(dir: &Path) {
     }
 }
 
-/// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
-pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
-    let target = gen_target();
+/// A `cargo` command for the generated crate or workspace at `dir`, built as every
+/// generated crate of the tests is: in [`gen_target`], with the workspace's lock
+/// ([`locked_as_workspace`]) and [`GEN_PROFILE`]; the command's arguments follow.
+pub fn gen_cargo(dir: &Path) -> Command {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     locked_as_workspace(dir);
-    let output = Command::new(cargo)
+    let mut command = Command::new(cargo);
+    command
         .args(GEN_PROFILE)
-        .args(args)
         .current_dir(dir)
-        .env("CARGO_TARGET_DIR", target)
+        .env("CARGO_TARGET_DIR", gen_target());
+    command
+}
+
+/// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
+pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
+    let output = gen_cargo(dir)
+        .args(args)
         .env_remove("RUSTFLAGS")
         .envs(env.iter().copied())
         .output()
