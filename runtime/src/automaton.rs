@@ -373,7 +373,8 @@ impl Driven for Atomic {}
 /// thread; changes (result, end, period) take effect when the call returns.
 #[derive(Debug)]
 pub struct Context {
-    pub(crate) name: String,
+    /// Shared with the component's handle.
+    pub(crate) name: std::sync::Arc<str>,
     pub(crate) entered_at: Instant,
     pub(crate) result: TaskResult,
     pub(crate) result_changed: bool,
@@ -397,7 +398,7 @@ pub struct Context {
 impl Context {
     /// A context for component `name` (the runtime makes these; tests of user code may
     /// too).
-    pub fn new(name: impl Into<String>, period: Option<Duration>) -> Context {
+    pub fn new(name: impl Into<std::sync::Arc<str>>, period: Option<Duration>) -> Context {
         Context {
             name: name.into(),
             entered_at: Instant::now(),

@@ -246,7 +246,7 @@ pub(crate) fn turn_is(shared: &Arc<Shared>) -> Option<bool> {
 #[derive(Debug)]
 pub(crate) struct GroupCycles {
     name: String,
-    members: Vec<String>,
+    members: Vec<Arc<str>>,
     cycles: AtomicU64,
     last_ns: AtomicU64,
     worst_ns: AtomicU64,
@@ -256,7 +256,7 @@ pub(crate) struct GroupCycles {
 }
 
 impl GroupCycles {
-    pub(crate) fn new(name: &str, members: Vec<String>) -> GroupCycles {
+    pub(crate) fn new(name: &str, members: Vec<Arc<str>>) -> GroupCycles {
         GroupCycles {
             name: name.to_owned(),
             members,
@@ -298,7 +298,7 @@ impl GroupCycles {
         let period = self.period_ns.load(Ordering::Relaxed);
         GroupStatus {
             name: self.name.clone(),
-            members: self.members.clone(),
+            members: self.members.iter().map(|name| name.to_string()).collect(),
             cycles: self.cycles.load(Ordering::Relaxed),
             last_cycle: Duration::from_nanos(self.last_ns.load(Ordering::Relaxed)),
             worst_cycle: Duration::from_nanos(self.worst_ns.load(Ordering::Relaxed)),

@@ -484,16 +484,26 @@ impl Report {
 
 /// One component inside a system.
 struct Slot {
-    name: String,
+    /// The handle's name (one allocation for both, and for the system's index).
+    name: Arc<str>,
     spec: &'static Spec,
+    /// Holds the component's ports too (`Handle::inputs`, `Handle::outputs`).
     handle: Handle,
-    inputs: Vec<ErasedInput>,
-    outputs: Vec<ErasedOutput>,
     /// Boxed: once the thread runs, the slot keeps only the pointer's room (the
     /// system's table holds one slot per component for its whole life).
     runner: Option<Box<Runner>>,
     /// The execution group it runs in (an index into `System::groups`).
     group: Option<usize>,
+}
+
+impl Slot {
+    fn input(&self, port: usize) -> &ErasedInput {
+        &self.handle.inputs[port].1
+    }
+
+    fn output(&self, port: usize) -> &ErasedOutput {
+        &self.handle.outputs[port].1
+    }
 }
 
 /// An execution group: components that run on one thread (`System::group`).
@@ -515,7 +525,7 @@ struct Link {
 /// Runs components: each added component gets its own named thread when started.
 pub struct System {
     slots: Vec<Slot>,
-    names: HashMap<String, usize>,
+    names: HashMap<Arc<str>, usize>,
     links: Vec<Link>,
     /// Connections a compound makes when it starts, after its groups' threads have
     /// started: each group's data-flow order counts them as made.
@@ -712,7 +722,7 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         spec,
     };
     let mut runner = Runner::new(
-        &name,
+        Arc::clone(&handle.name),
         automaton,
         timing,
         adaptation,
@@ -727,7 +737,6 @@ pub(crate) fn prepare(component: Component) -> Result<Prepared, Error> {
         name,
         spec,
         handle,
-        // (Held as long as the system: no room for ports never registered.)
         inputs: exact(ports.inputs),
         outputs: exact(ports.outputs),
         runner,
@@ -795,25 +804,22 @@ impl System {
     /// Add a component; it starts with the system (or at once if the system has
     /// started). Duplicate names and ports that do not match the spec are rejected.
     pub fn add(&mut self, component: Component) -> Result<Handle, Error> {
-        if self.names.contains_key(&component.name) {
+        if self.names.contains_key(component.name.as_str()) {
             return Err(Error::DuplicateName(component.name));
         }
         let Prepared {
-            name,
             spec,
             handle,
-            inputs,
-            outputs,
             runner,
+            ..
         } = prepare(component)?;
         let index = self.slots.len();
-        self.names.insert(name.clone(), index);
+        let name = Arc::clone(&handle.name);
+        self.names.insert(Arc::clone(&name), index);
         self.slots.push(Slot {
             name,
             spec,
             handle: handle.clone(),
-            inputs,
-            outputs,
             runner: Some(Box::new(runner)),
             group: None,
         });
@@ -954,7 +960,7 @@ impl System {
                     link.to.0 == *member
                         && left.contains(&link.from.0)
                         && matches!(
-                            self.slots[link.to.0].inputs[link.to.1].kind,
+                            self.slots[link.to.0].input(link.to.1).kind,
                             InKind::Last | InKind::Poster
                         )
                         && reaches(link.to.0, link.from.0, &edges)
@@ -1031,7 +1037,7 @@ impl System {
                 if !self.clock.is_real() {
                     runner.set_clock(self.clock.clone());
                 }
-                runners.push(*runner);
+                runners.push(runner);
             }
         }
         let name = self.groups[group].name.clone();
@@ -1064,7 +1070,7 @@ impl System {
         }
         let join = crate::thread::spawn(&slot.name, move || runner.run()).map_err(|source| {
             Error::Spawn {
-                component: slot.name.clone(),
+                component: slot.name.to_string(),
                 source,
             }
         })?;
@@ -1101,7 +1107,7 @@ impl System {
                 .handle
                 .wait_for(|m| m.state != State::Starting, SHUTDOWN_TIMEOUT)
                 .map_err(|t| Error::Timeout {
-                    component: slot.name.clone(),
+                    component: slot.name.to_string(),
                     state: t.last.state,
                     wanted: State::Ready,
                     waited: t.waited,
@@ -1143,7 +1149,7 @@ impl System {
 
     /// The names of the components, in the order they were added.
     pub fn names(&self) -> Vec<&str> {
-        self.slots.iter().map(|slot| slot.name.as_str()).collect()
+        self.slots.iter().map(|slot| &*slot.name).collect()
     }
 
     fn parse(&self, address: &str, output: bool) -> Result<(usize, usize), ConnectError> {
@@ -1184,8 +1190,8 @@ impl System {
             from: (out_slot, out_port),
             to: (in_slot, in_port),
         };
-        let output = &self.slots[out_slot].outputs[out_port];
-        let input = &self.slots[in_slot].inputs[in_port];
+        let output = &self.slots[out_slot].output(out_port);
+        let input = &self.slots[in_slot].input(in_port);
         let (from, to) = (from.to_owned(), to.to_owned());
         let allowed = match output.kind {
             OutKind::Tick => "tick",
@@ -1276,8 +1282,8 @@ impl System {
     /// no packet already queued is lost.
     pub fn connect(&mut self, from: &str, to: &str) -> Result<(), ConnectError> {
         let link = self.check(from, to)?;
-        let output = &self.slots[link.from.0].outputs[link.from.1];
-        let input = &self.slots[link.to.0].inputs[link.to.1];
+        let output = &self.slots[link.from.0].output(link.from.1);
+        let input = &self.slots[link.to.0].input(link.to.1);
         if output.type_id != input.type_id || !output.link(input) {
             return Err(ConnectError::TypeMismatch {
                 from: from.to_owned(),
@@ -1300,8 +1306,8 @@ impl System {
         convert: impl Fn(&A) -> B + Send + Sync + 'static,
     ) -> Result<(), ConnectError> {
         let link = self.check(from, to)?;
-        let output = &self.slots[link.from.0].outputs[link.from.1];
-        let input = &self.slots[link.to.0].inputs[link.to.1];
+        let output = &self.slots[link.from.0].output(link.from.1);
+        let input = &self.slots[link.to.0].input(link.to.1);
         let linked = output.type_id == TypeId::of::<A>()
             && input.type_id == TypeId::of::<B>()
             && output.kind != OutKind::Tick
@@ -1338,8 +1344,8 @@ impl System {
             });
         };
         self.links.remove(position);
-        let output = &self.slots[out_slot].outputs[out_port];
-        let input = &self.slots[in_slot].inputs[in_port];
+        let output = &self.slots[out_slot].output(out_port);
+        let input = &self.slots[in_slot].input(in_port);
         output.unlink(input);
         Ok(())
     }
@@ -1347,13 +1353,13 @@ impl System {
     /// The input port at `instance.port`.
     pub(crate) fn input_port(&self, address: &str) -> Result<ErasedInput, ConnectError> {
         let (slot, port) = self.parse(address, false)?;
-        Ok(self.slots[slot].inputs[port].clone())
+        Ok(self.slots[slot].input(port).clone())
     }
 
     /// The output port at `instance.port`.
     pub(crate) fn output_port(&self, address: &str) -> Result<ErasedOutput, ConnectError> {
         let (slot, port) = self.parse(address, true)?;
-        Ok(self.slots[slot].outputs[port].clone())
+        Ok(self.slots[slot].output(port).clone())
     }
 
     /// Replace the connection `old` (`(output, input)` addresses) by one from `from`
@@ -1389,10 +1395,10 @@ impl System {
                 return Err(error);
             }
         };
-        let output = &self.slots[link.from.0].outputs[link.from.1];
-        let input = &self.slots[link.to.0].inputs[link.to.1];
-        let old_output = &self.slots[old_link.from.0].outputs[old_link.from.1];
-        let old_input = &self.slots[old_link.to.0].inputs[old_link.to.1];
+        let output = &self.slots[link.from.0].output(link.from.1);
+        let input = &self.slots[link.to.0].input(link.to.1);
+        let old_output = &self.slots[old_link.from.0].output(old_link.from.1);
+        let old_input = &self.slots[old_link.to.0].input(old_link.to.1);
         let made = if old_link.from == link.from {
             old_link.to == link.to || make(output, input, Some(old_input))
         } else if make(output, input, None) {
@@ -1422,9 +1428,9 @@ impl System {
     pub(crate) fn discard_queued(&self, name: &str) -> u64 {
         self.slots
             .iter()
-            .filter(|slot| slot.name == name)
-            .flat_map(|slot| &slot.inputs)
-            .map(ErasedInput::discard_queued)
+            .filter(|slot| &*slot.name == name)
+            .flat_map(|slot| slot.handle.inputs.iter())
+            .map(|(_, input)| input.discard_queued())
             .sum()
     }
 
@@ -1433,9 +1439,9 @@ impl System {
     pub(crate) fn left_behind(&self, name: &str) -> u64 {
         self.slots
             .iter()
-            .filter(|slot| slot.name == name)
-            .flat_map(|slot| &slot.inputs)
-            .map(|input| input.core.left_behind())
+            .filter(|slot| &*slot.name == name)
+            .flat_map(|slot| slot.handle.inputs.iter())
+            .map(|(_, input)| input.core.left_behind())
             .sum()
     }
 
@@ -1530,7 +1536,7 @@ impl System {
             }
             let monitor = slot.handle.snapshot();
             report.components.push(ComponentReport {
-                name: slot.name.clone(),
+                name: slot.name.to_string(),
                 state: monitor.state,
                 result: monitor.result,
                 error: monitor.error,

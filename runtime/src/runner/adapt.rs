@@ -188,7 +188,7 @@ impl Runner {
             Pressure::Violation if !adapt.exhausted => {
                 adapt.exhausted = true;
                 let step = Adaptation {
-                    component: self.cx.name.clone(),
+                    component: self.cx.name.to_string(),
                     action: AdaptAction::Exhausted,
                     from: level,
                     to: level,
@@ -263,7 +263,7 @@ impl Runner {
     /// promotions now `floor`) as an `Adaptation` step saying `why`.
     pub(super) fn publish_move(&self, from: u32, level: u32, floor: u32, why: &str) {
         let step = Adaptation {
-            component: self.cx.name.clone(),
+            component: self.cx.name.to_string(),
             action: if level < from {
                 AdaptAction::Promoted
             } else {

@@ -249,7 +249,7 @@ impl Runner {
         reason = "one constructor wiring the thread's parts"
     )]
     pub(crate) fn new(
-        name: &str,
+        name: Arc<str>,
         automaton: Box<dyn Driven>,
         timing: TimingSpec,
         adaptation: AdaptConfig,

@@ -388,7 +388,7 @@ impl Runner {
             *next = later(*next, shift.delay);
         }
         let step = Adaptation {
-            component: self.cx.name.clone(),
+            component: self.cx.name.to_string(),
             action: AdaptAction::Equalized,
             from: level,
             to: level,

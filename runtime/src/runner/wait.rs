@@ -3,8 +3,10 @@
 use super::*;
 
 impl Runner {
-    /// The thread's body.
-    pub(crate) fn run(mut self) {
+    /// The thread's body. The runner stays where it was boxed: moved onto the
+    /// thread's stack, it would take a page or more of every component thread's
+    /// stack, as many as the frames around it happen to need.
+    pub(crate) fn run(mut self: Box<Self>) {
         self.bell.attach();
         self.claim_sends();
         if let Some(clock) = self.time.as_virtual() {
