@@ -116,3 +116,43 @@ fn builder_in_a_build_script() {
     assert!(stderr.contains("coolc::syntax"), "{stderr}");
     assert!(stderr.contains("lamp.cool"), "{stderr}");
 }
+
+/// The compile-fail cases' crate (`tests/compile-fail`) holds the code `coolc`
+/// generates from its `gate.cool` checked in, so that trybuild's build of the cases
+/// needs no `coolc`: it must be what `coolc` generates today. With `COOLC_BLESS=1`
+/// the test writes it instead (then run the cases, `TRYBUILD=overwrite` if their
+/// messages moved).
+#[test]
+fn generated_code_of_the_compile_fail_cases_is_current() {
+    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/compile-fail");
+    let out = tempfile::tempdir().expect("temporary directory");
+    let description = crate_dir.join("gate.cool");
+    let generated = coolc::Builder::new()
+        .out_dir(out.path())
+        .cargo_output(false)
+        .compile(&[&description])
+        .expect("gate.cool compiles");
+    // The header names the description as the crate's directory sees it.
+    let generated = std::fs::read_to_string(generated)
+        .expect("generated code")
+        .replacen(
+            &format!(" from {}; ", description.display()),
+            " from gate.cool; ",
+            1,
+        );
+    let checked_in_path = crate_dir.join("src/cool.rs");
+    let checked_in = std::fs::read_to_string(&checked_in_path).unwrap_or_default();
+    if generated == checked_in {
+        return;
+    }
+    if std::env::var_os("COOLC_BLESS").is_some_and(|v| v == "1") {
+        std::fs::write(&checked_in_path, generated).expect("write src/cool.rs");
+        return;
+    }
+    panic!(
+        "{} is not what coolc generates from gate.cool today: run \
+         `COOLC_BLESS=1 cargo test -p coolc --test all generated_code_of_the_compile_fail_cases_is_current`, \
+         then `TRYBUILD=overwrite cargo test -p coolbot-compile-fail` and review both diffs",
+        checked_in_path.display()
+    );
+}

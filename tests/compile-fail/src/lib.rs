@@ -1,10 +1,13 @@
 //! The generated code the compile-fail cases (`tests/ui/*.rs`) implement, and a
 //! correct implementation of it that builds (so a case fails for its own reason only).
 
-/// The code `coolc` generated from `gate.cool` (in `OUT_DIR`).
+/// The code `coolc` generated from `gate.cool`, checked in (`src/cool.rs`): a build
+/// script running `coolc` would make trybuild compile `coolc` and everything it
+/// depends on for its cases. coolc's tests check that it is what `coolc` generates
+/// today (`generated_code_of_the_compile_fail_cases_is_current`).
 #[allow(missing_docs, unused_qualifications)]
 pub mod generated {
-    include!(concat!(env!("OUT_DIR"), "/cool.rs"));
+    include!("cool.rs");
 }
 
 use generated::gate::{Behavior, Cx, OpenMay};
