@@ -16,6 +16,8 @@ use coolc::diagnostics::Code;
 
 /// The table of the API fragments and how a block is found, shared with the build
 /// script of `coolbot-docs-fragments`, which compiles them.
+#[path = "../../coolc/tests/all/common/generated_crates.rs"]
+mod generated_crates;
 #[path = "../docs-fragments/places.rs"]
 mod places;
 
@@ -339,22 +341,11 @@ fn every_rust_block_of_the_docs_is_compiled() {
     );
 }
 
-/// Runs `cargo <args>` in `dir` with the generated-crate target directory the coolc
-/// tests share (the runtime and coolc are built there once), as they build there: with
-/// the workspace's `Cargo.lock` and without debug information for dependencies
-/// (`coolc/tests/all/common`, `GEN_PROFILE`); panics with cargo's output when it
-/// fails.
+/// Runs `cargo <args>` in `dir` as coolc's tests build the crates they generate
+/// ([`generated_crates::gen_cargo`]); panics with cargo's output when it fails.
 fn cargo(dir: &Path, args: &[&str]) {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let lock = dir.join("Cargo.lock");
-    if !lock.exists() {
-        std::fs::copy(repository().join("Cargo.lock"), lock).unwrap();
-    }
-    let output = std::process::Command::new(cargo)
-        .args(["--config", "profile.dev.package.\"*\".debug=false"])
+    let output = generated_crates::gen_cargo(dir)
         .args(args)
-        .current_dir(dir)
-        .env("CARGO_TARGET_DIR", repository().join("target/gen-tests"))
         .env_remove("RUSTFLAGS")
         .output()
         .unwrap();
