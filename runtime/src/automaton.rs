@@ -393,6 +393,20 @@ pub struct Context {
     pub(crate) shared: Option<std::sync::Arc<crate::monitor::Shared>>,
     /// The clock the component's timers read (`crate::clock`).
     pub(crate) clock: crate::clock::Clock,
+    /// How the component takes time of its clock ([`Context::spend`]).
+    pub(crate) spends: Spends,
+}
+
+/// How a component's section takes time of its clock ([`Context::spend`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) enum Spends {
+    /// It has not joined a virtual clock: it sleeps.
+    #[default]
+    Sleeping,
+    /// On a virtual clock, as the member with this id.
+    Member(u64),
+    /// In a harness: the clock is the component's own, and moves by itself.
+    Harnessed,
 }
 
 impl Context {
@@ -414,6 +428,7 @@ impl Context {
             supervision: Vec::new(),
             shared: None,
             clock: crate::clock::Clock::real(),
+            spends: Spends::Sleeping,
         }
     }
 
@@ -494,6 +509,32 @@ impl Context {
     /// The component instance's name.
     pub fn component_name(&self) -> &str {
         &self.name
+    }
+
+    /// Take `cost` of time in the section under way, as if it computed that long (a
+    /// simulated workload, a model of a slow driver): the section is measured that
+    /// much longer, and a `max_response` it exceeds trips. On the real clock the
+    /// thread sleeps for `cost`. On a virtual clock it waits until the clock has moved
+    /// on by `cost`, and `VirtualClock::advance` does not wait for it meanwhile, nor
+    /// for the other members of its execution group (their thread is busy): the
+    /// components on other threads run on, as they would on the real clock. In a
+    /// [`Harness`](crate::harness::Harness), whose clock is the component's own, the
+    /// clock moves on by `cost`. A component whose system shuts down stops waiting.
+    pub fn spend(&mut self, cost: Duration) {
+        if cost.is_zero() {
+            return;
+        }
+        match (self.spends, self.clock.as_virtual()) {
+            (Spends::Member(id), Some(clock)) => clock.spend(id, cost),
+            (Spends::Harnessed, Some(clock)) => {
+                // Nothing else runs on a harness's clock: none to wait for.
+                let _ = clock.advance_with_timeout(cost, Duration::ZERO);
+            }
+            (_, None) => std::thread::sleep(cost),
+            // On a virtual clock it has not joined (a context made by hand): the
+            // clock would never be waited for.
+            (Spends::Sleeping, Some(_)) => {}
+        }
     }
 }
 

@@ -23,6 +23,12 @@
 //!
 //! Settling covers timers, not data: a packet sent during the step is handled as
 //! usual, and a test waits for its effect as it would with the real clock.
+//!
+//! A section can take time of the clock as if it computed that long
+//! ([`Context::spend`](crate::Context::spend)): it waits until the clock has moved on
+//! by that much, and meanwhile `advance` does not wait for it, nor for the members of
+//! its execution group (its thread is busy), to settle; it is measured that long, and
+//! a `max_response` it exceeds trips as it would in real time.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -108,6 +114,8 @@ pub struct VirtualClock {
     offset: AtomicU64,
     state: Mutex<Members>,
     settled: Condvar,
+    /// Notified when the clock moves (or a section taking its time is released).
+    moved: Condvar,
     /// What the idle probe would say ([`VirtualClock::set_idle`]).
     idle: AtomicBool,
 }
@@ -139,6 +147,12 @@ struct Member {
     name: String,
     bell: Arc<Doorbell>,
     settled: Option<Instant>,
+    /// The thread it runs on (the members of an execution group share one).
+    thread: std::thread::ThreadId,
+    /// Until when a section of it takes the clock's time ([`VirtualClock::spend`]).
+    spending: Option<Instant>,
+    /// Its system is shutting down: a section taking the clock's time returns at once.
+    released: bool,
 }
 
 /// Why [`VirtualClock::advance`] returned before every component settled.
@@ -162,6 +176,7 @@ impl VirtualClock {
             offset: AtomicU64::new(0),
             state: Mutex::new(Members::default()),
             settled: Condvar::new(),
+            moved: Condvar::new(),
             idle: AtomicBool::new(true),
         })
     }
@@ -214,6 +229,7 @@ impl VirtualClock {
             member.bell.ring_strong();
         }
         drop(members);
+        self.moved.notify_all();
         for watch in watches {
             watch.trip_if_due(now);
         }
@@ -225,10 +241,20 @@ impl VirtualClock {
         let deadline = Instant::now() + timeout;
         let mut members = self.lock();
         loop {
+            // A thread whose section takes the clock's time past `now` is busy until
+            // then: its members are not waited for.
+            let spending: Vec<std::thread::ThreadId> = members
+                .components
+                .values()
+                .filter(|member| member.spending.is_some_and(|until| until > now))
+                .map(|member| member.thread)
+                .collect();
             let busy: Vec<String> = members
                 .components
                 .values()
-                .filter(|member| member.settled.is_none_or(|at| at < now))
+                .filter(|member| {
+                    member.settled.is_none_or(|at| at < now) && !spending.contains(&member.thread)
+                })
                 .map(|member| member.name.clone())
                 .collect();
             if busy.is_empty() {
@@ -267,6 +293,9 @@ impl VirtualClock {
                 name: name.to_owned(),
                 bell,
                 settled: None,
+                thread: std::thread::current().id(),
+                spending: None,
+                released: false,
             },
         );
         id
@@ -295,6 +324,46 @@ impl VirtualClock {
         if let Some(member) = self.lock().components.get_mut(&id) {
             member.settled = None;
         }
+    }
+
+    /// The section of component `id` under way takes `cost` of the clock's time: wait
+    /// until the clock has moved on by `cost` (see the module's documentation), or
+    /// the component's system shuts down ([`VirtualClock::release`]).
+    pub(crate) fn spend(&self, id: u64, cost: Duration) {
+        let mut members = self.lock();
+        let until = self.now() + cost;
+        match members.components.get_mut(&id) {
+            Some(member) if !member.released => member.spending = Some(until),
+            _ => return,
+        }
+        self.settled.notify_all();
+        while self.now() < until
+            && members
+                .components
+                .get(&id)
+                .is_some_and(|member| !member.released)
+        {
+            members = self
+                .moved
+                .wait(members)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+        if let Some(member) = members.components.get_mut(&id) {
+            member.spending = None;
+        }
+    }
+
+    /// The components whose doorbells are `bells` are shutting down: a section of
+    /// theirs taking the clock's time returns at once, now and from now on.
+    pub(crate) fn release(&self, bells: &[&Arc<Doorbell>]) {
+        let mut members = self.lock();
+        for member in members.components.values_mut() {
+            if bells.iter().any(|bell| Arc::ptr_eq(bell, &member.bell)) {
+                member.released = true;
+            }
+        }
+        drop(members);
+        self.moved.notify_all();
     }
 
     /// Watch a component's sections against its `max_response` on this clock.

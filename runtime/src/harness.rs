@@ -308,7 +308,11 @@ impl Harness {
         for _ in 0..MAX_TURNS {
             match self.runner.turn() {
                 Turn::Worked => {}
-                Turn::Idle | Turn::Stopped | Turn::Dead => return Ok(()),
+                Turn::Idle | Turn::Stopped | Turn::Dead => {
+                    // What a component's thread publishes before it waits.
+                    self.runner.publish_elapsed();
+                    return Ok(());
+                }
             }
         }
         Err(HarnessError::NotQuiescent {

@@ -115,6 +115,7 @@ pub const FRAGMENTS: &[(Place, &str)] = &[
         ),
         "",
     ),
+    (place("docs/runtime.md", "#### Taking time", 0), ""),
     (
         place(
             "docs/runtime.md",

@@ -53,7 +53,7 @@ impl Behavior for Mapper {
             (100, 12)
         };
         let cost = self.platform.processing_cost(units);
-        self.platform.spend(cx.rt.component_name(), cost);
+        cx.rt.spend(cost);
         let cell = |metres: f64| (metres * 1000.0 / f64::from(width_mm)).floor() as i64;
         self.visited.insert((width_mm, cell(pose.x), cell(pose.y)));
         cx.vars.cells = u32::try_from(self.visited.len()).unwrap_or(u32::MAX);

@@ -103,7 +103,7 @@ impl RangeServer {
         // The simulated processor shortage (`--load`): processing the beams takes
         // time, whatever the machine's real load.
         let cost = self.platform.processing_cost(beams);
-        self.platform.spend(cx.rt.component_name(), cost);
+        cx.rt.spend(cost);
         let scan = sensing::scan(stamp, &readings);
         cx.vars.nearest = sensing::nearest(&scan);
         let now = self.platform.now();

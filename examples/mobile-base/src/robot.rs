@@ -281,8 +281,6 @@ robot_parts!(isolated_robot, isolated_base);
 /// monitoring ports at each level.
 #[derive(Debug)]
 pub struct Robot {
-    /// The simulated platform its components share.
-    platform: Arc<Platform>,
     system: System,
     ranges: Ranges,
     /// The top compound's control and monitoring ports.
@@ -355,14 +353,6 @@ impl Robot {
                 started.error.unwrap_or_else(|| started.state.to_string())
             ));
         }
-        // The components that share a thread (an execution group) wait together for a
-        // section that takes the platform's processor time (`Platform::spend`).
-        for path in [format!("{BASE}.{RANGES}"), MAPPER.to_owned()] {
-            if let Some(group) = robot.instance(&path).and_then(|h| h.snapshot().group) {
-                platform.share_thread(&group.members);
-            }
-        }
-
         // The run's settings, through the control ports while the robot is `ready`.
         let mut config = serde_json::json!({ "seed": setup.seed });
         if let Some((x, y)) = setup.goal {
@@ -390,7 +380,6 @@ impl Robot {
             }
         }
         Ok(Robot {
-            platform: Arc::clone(platform),
             system,
             ranges: setup.ranges,
             robot,
@@ -433,8 +422,6 @@ impl Robot {
     /// Shuts the robot down: `Robot` goes `dead`, taking its instances (and theirs)
     /// with it.
     pub fn shutdown(self) -> Report {
-        // A section taking the platform's processor time on a virtual clock returns.
-        self.platform.release();
         self.system.shutdown()
     }
 }

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-use coolbot::{Clock, NotSettled, VirtualClock};
+use coolbot::{Clock, NotSettled};
 
 /// The robot's radius (m): it is a disc.
 pub const ROBOT_RADIUS: f64 = 0.18;
@@ -378,24 +378,6 @@ pub struct Platform {
     /// An overload switched on by hand ([`Platform::set_overloaded`]).
     overloaded: AtomicBool,
     truth: Mutex<Truth>,
-    /// On a virtual clock: the sections taking processor time now ([`Platform::spend`]).
-    spending: Mutex<Spending>,
-}
-
-/// On a virtual clock, the sections that take processor time ([`Platform::spend`]):
-/// each waits until the clock reaches the end of its cost, and the components on its
-/// thread with it.
-#[derive(Debug, Default)]
-struct Spending {
-    /// The component spending and the time its cost ends.
-    now: Vec<(String, Instant)>,
-    /// The components sharing a thread (an execution group), by member.
-    threads: Vec<Vec<String>>,
-    /// Set once the robot shuts down: nobody waits any more.
-    released: bool,
-    /// How long the components last took to settle ([`Platform::advance`] starts
-    /// from half of it: a loaded machine is slower).
-    settle_wait: Duration,
 }
 
 /// What one call of [`Platform::drive`] did.
@@ -428,7 +410,6 @@ impl Platform {
                 min_front_clearance: front,
                 contacts: 0,
             }),
-            spending: Mutex::new(Spending::default()),
         }
     }
 
@@ -458,109 +439,15 @@ impl Platform {
         self.clock.now()
     }
 
-    /// Takes `cost` of processor time in the section of `component` under way
-    /// ([`Platform::processing_cost`]). On the real clock the section sleeps for it. On
-    /// a virtual clock it waits until the clock has moved on by `cost`
-    /// ([`Platform::advance`] moves it, and does not wait for the section meanwhile):
-    /// the runtime measures the section that long, the components on its thread wait
-    /// for it, and the others run on, as they would on the real clock.
-    pub fn spend(&self, component: &str, cost: Duration) {
-        if cost.is_zero() {
-            return;
-        }
-        let Some(clock) = self.clock.as_virtual() else {
-            std::thread::sleep(cost);
-            return;
-        };
-        let until = clock.now() + cost;
-        {
-            let mut spending = self.spending();
-            if spending.released {
-                return;
-            }
-            spending.now.push((component.to_owned(), until));
-        }
-        // The clock's time is read until it gets there (it moves from another thread).
-        while clock.now() < until && !self.spending().released {
-            std::thread::sleep(Duration::from_micros(50));
-        }
-        let mut spending = self.spending();
-        if let Some(at) = spending.now.iter().position(|(name, _)| name == component) {
-            spending.now.swap_remove(at);
-        }
-    }
-
-    fn spending(&self) -> MutexGuard<'_, Spending> {
-        self.spending.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
-    /// `members` run on one thread (an execution group): while one of them takes
-    /// processor time ([`Platform::spend`]), the others wait for it.
-    pub fn share_thread(&self, members: &[String]) {
-        let mut spending = self.spending();
-        if !spending.threads.iter().any(|t| t == members) {
-            spending.threads.push(members.to_vec());
-        }
-    }
-
-    /// The robot is shutting down: a section taking processor time on a virtual clock
-    /// returns at once (the clock no longer moves).
-    pub fn release(&self) {
-        self.spending().released = true;
-    }
-
-    /// On a virtual clock: moves it on by `by` (`VirtualClock::advance`) and waits
-    /// until every component on it has settled, except those whose section is still
-    /// taking processor time ([`Platform::spend`]) at the new time, and the members of
-    /// their thread. `Ok` at once on the real clock.
+    /// On a virtual clock: moves it on by `by` and waits until every component on it
+    /// has settled (`VirtualClock::advance`; one whose section is taking processor
+    /// time past the new time, `Context::spend`, and the members of its execution
+    /// group, are not waited for). `Ok` at once on the real clock.
     pub fn advance(&self, by: Duration) -> Result<(), NotSettled> {
-        let Some(clock) = self.clock.as_virtual() else {
-            return Ok(());
-        };
-        // How long to wait for the components to settle before looking at who is
-        // busy: short at first (a section taking processor time never settles), longer
-        // each time some other component is still busy (a loaded machine).
-        let mut wait = (self.spending().settle_wait / 2).max(Duration::from_millis(1));
-        let deadline = Instant::now() + coolbot::clock::SETTLE_TIMEOUT;
-        let mut result = clock.advance_with_timeout(by, wait);
-        loop {
-            let Err(not_settled) = result else {
-                self.spending().settle_wait = wait;
-                return Ok(());
-            };
-            if not_settled
-                .busy
-                .iter()
-                .all(|name| self.busy_spending(clock, name))
-            {
-                self.spending().settle_wait = wait;
-                return Ok(());
-            }
-            if Instant::now() >= deadline {
-                return Err(NotSettled {
-                    timeout: coolbot::clock::SETTLE_TIMEOUT,
-                    ..not_settled
-                });
-            }
-            // Once more at the same time (every component looks again and settles),
-            // waiting longer.
-            wait = (wait * 2).min(Duration::from_millis(500));
-            result = clock.advance_with_timeout(Duration::ZERO, wait);
+        match self.clock.as_virtual() {
+            Some(clock) => clock.advance(by),
+            None => Ok(()),
         }
-    }
-
-    /// Whether `component` is taking processor time past the clock's time now, or
-    /// shares its thread with one that is.
-    fn busy_spending(&self, clock: &VirtualClock, component: &str) -> bool {
-        let now = clock.now();
-        let spending = self.spending();
-        spending.now.iter().any(|(name, until)| {
-            *until > now
-                && (name == component
-                    || spending.threads.iter().any(|members| {
-                        members.iter().any(|m| m == name) && members.iter().any(|m| m == component)
-                    }))
-        })
     }
 
     /// Switches a simulated processor shortage on or off by hand (tests), besides the

@@ -162,6 +162,12 @@ impl Runner {
         self.update_cpu_from(force, &mut thread_cpu_time);
     }
 
+    /// Publish the elapsed time (if it changed) and no CPU time: a harness runs the
+    /// component on the test's thread, whose CPU time is not the component's.
+    pub(crate) fn publish_elapsed(&mut self) {
+        self.update_cpu_from(false, &mut || None);
+    }
+
     /// [`Runner::update_cpu`], with the thread's CPU time read by `read_cpu` (an
     /// execution group reads it once for all its members).
     pub(super) fn update_cpu_from(

@@ -184,7 +184,9 @@ impl Group {
             runner.bell.attach();
             runner.claim_sends();
             if let Some(clock) = runner.time.as_virtual() {
-                runner.on_clock = Some(clock.join(&runner.cx.name, Arc::clone(&runner.bell)));
+                let id = clock.join(&runner.cx.name, Arc::clone(&runner.bell));
+                runner.on_clock = Some(id);
+                runner.cx.spends = crate::automaton::Spends::Member(id);
             }
             runner.anchor = epoch;
         }

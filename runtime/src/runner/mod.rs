@@ -398,6 +398,7 @@ impl Runner {
     pub(crate) fn harness_on(&mut self, clock: Clock) {
         self.set_clock(clock);
         self.harnessed = true;
+        self.cx.spends = crate::automaton::Spends::Harnessed;
     }
 
     /// On a virtual clock: this component has nothing due at the clock's time and is

@@ -10,7 +10,9 @@ impl Runner {
         self.bell.attach();
         self.claim_sends();
         if let Some(clock) = self.time.as_virtual() {
-            self.on_clock = Some(clock.join(&self.cx.name, Arc::clone(&self.bell)));
+            let id = clock.join(&self.cx.name, Arc::clone(&self.bell));
+            self.on_clock = Some(id);
+            self.cx.spends = crate::automaton::Spends::Member(id);
         }
         self.run_loop();
         if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {

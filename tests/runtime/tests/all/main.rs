@@ -24,6 +24,7 @@ mod record;
 mod redundancy;
 mod response;
 mod rosbag2_interop;
+mod spend;
 mod supervisor_commands;
 mod timing_override;
 mod user_automaton;

@@ -1,0 +1,198 @@
+//! A section that takes time of its clock (`Context::spend`, `docs/runtime.md`,
+//! "Taking time"): on a virtual clock it is measured that long and trips its
+//! `max_response`, `advance` does not wait for it nor for its execution group, and
+//! its system's shutdown does not wait for the clock; in a harness the clock moves
+//! on by itself.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use coolbot::{Clock, SectionResult, State, System, VirtualClock};
+use coolbot_runtime_tests::stage;
+
+/// `Stage`'s period (its `max_response` is 5 ms).
+const PERIOD: Duration = Duration::from_millis(10);
+
+/// What the stages did, in order: `name:period` at the start of each periodic section,
+/// `name:period done` at its end.
+#[derive(Clone, Default)]
+struct Log(Arc<Mutex<Vec<String>>>);
+
+impl Log {
+    fn push(&self, line: String) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(line);
+    }
+
+    fn take(&self) -> Vec<String> {
+        std::mem::take(&mut *self.0.lock().unwrap_or_else(PoisonError::into_inner))
+    }
+}
+
+/// A periodic stage that takes `costs[n]` of its clock's time in its `n`th period
+/// (from 0; nothing past the list).
+struct Busy {
+    name: &'static str,
+    log: Log,
+    costs: Vec<Duration>,
+    period: usize,
+}
+
+impl stage::Behavior for Busy {
+    fn work_periodic(&mut self, cx: &mut stage::Cx<'_>) -> SectionResult {
+        let (name, period) = (self.name, self.period);
+        self.log.push(format!("{name}:{period}"));
+        if let Some(cost) = self.costs.get(period) {
+            cx.rt.spend(*cost);
+        }
+        self.period += 1;
+        self.log.push(format!("{name}:{period} done"));
+        cx.outputs
+            .out
+            .send(u64::try_from(period).unwrap_or(u64::MAX));
+        Ok(())
+    }
+}
+
+fn busy(name: &'static str, log: &Log, costs: &[u64]) -> Busy {
+    Busy {
+        name,
+        log: log.clone(),
+        costs: costs.iter().copied().map(Duration::from_millis).collect(),
+        period: 0,
+    }
+}
+
+fn ms(n: u64) -> Duration {
+    Duration::from_millis(n)
+}
+
+#[test]
+fn a_section_taking_clock_time_is_measured_that_long_and_trips_its_max_response() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    // Period 0: 3 ms, within the 5 ms `max_response`; period 1: 8 ms, beyond it.
+    let a = system
+        .add(stage::component("a", busy("a", &log, &[3, 8])))
+        .expect("a");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // The first period takes 3 ms of the clock: `advance` does not wait for it, and
+    // it is not done before the clock gets there.
+    clock.advance(PERIOD).expect("settled");
+    assert_eq!(log.take(), ["a:0"]);
+    clock.advance(ms(2)).expect("settled");
+    assert_eq!(log.take(), Vec::<String>::new());
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(log.take(), ["a:0 done"]);
+    let monitor = a.snapshot();
+    assert_eq!(monitor.elapsed_time, ms(3));
+    assert_eq!(monitor.overruns, 0);
+    // The second period: its 8 ms trip the watchdog at 5 ms (counted then); the
+    // section's outcome is discarded when it returns, and the component fails.
+    clock.advance(ms(7)).expect("settled");
+    assert_eq!(log.take(), ["a:1"]);
+    clock.advance(ms(5)).expect("settled");
+    assert_eq!(a.snapshot().overruns, 1);
+    assert_eq!(log.take(), Vec::<String>::new());
+    clock.advance(ms(3)).expect("settled");
+    assert_eq!(log.take(), ["a:1 done"]);
+    let monitor = a.snapshot();
+    assert_eq!(monitor.state, State::RunningError);
+    assert_eq!(monitor.elapsed_time, ms(11));
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|e| e.starts_with("overrun in state `work`")),
+        "{monitor:?}"
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn advancing_waits_neither_for_a_member_taking_clock_time_nor_for_its_group() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    // `a` takes 4 ms in its first period; `b` shares its thread; `alone` has one of
+    // its own.
+    system
+        .add(stage::component("a", busy("a", &log, &[4])))
+        .expect("a");
+    system
+        .add(stage::component("b", busy("b", &log, &[])))
+        .expect("b");
+    system
+        .add(stage::component("alone", busy("alone", &log, &[])))
+        .expect("alone");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.group("control", &["a", "b"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // `alone` ran its first period; `a` is in the middle of its own, and `b` waits for
+    // the thread.
+    clock.advance(PERIOD).expect("settled");
+    let mut first = log.take();
+    first.sort();
+    assert_eq!(first, ["a:0", "alone:0", "alone:0 done"]);
+    clock.advance(ms(3)).expect("settled");
+    assert_eq!(log.take(), Vec::<String>::new());
+    // At 4 ms `a` is done, and `b` runs after it in the same pass.
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(log.take(), ["a:0 done", "b:0", "b:0 done"]);
+    // The next period, nobody takes time: all three run and settle at 10 ms.
+    clock.advance(PERIOD - ms(4)).expect("settled");
+    let mut second = log.take();
+    second.sort();
+    assert_eq!(
+        second,
+        [
+            "a:1",
+            "a:1 done",
+            "alone:1",
+            "alone:1 done",
+            "b:1",
+            "b:1 done"
+        ]
+    );
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn shutting_down_does_not_wait_for_a_section_taking_clock_time() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    system
+        .add(stage::component("a", busy("a", &log, &[3_600_000])))
+        .expect("a");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    clock.advance(PERIOD).expect("settled");
+    assert_eq!(log.take(), ["a:0"]);
+    // An hour of the clock that nobody advances: the shutdown ends the section.
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    assert_eq!(log.take(), ["a:0 done"]);
+    assert_eq!(clock.elapsed(), PERIOD);
+}
+
+#[test]
+fn in_a_harness_a_section_taking_clock_time_moves_the_clock_on() {
+    let log = Log::default();
+    let mut harness = stage::Harness::running(busy("a", &log, &[3])).expect("running");
+    // The first period, at 10 ms, takes 3 ms: the clock is at 13 ms when it is done,
+    // past the 10 ms asked for.
+    harness.advance(PERIOD).expect("advanced");
+    assert_eq!(log.take(), ["a:0", "a:0 done"]);
+    assert_eq!(harness.inner().elapsed(), ms(13));
+    assert_eq!(harness.inner().monitor().elapsed_time, ms(3));
+    // The second, at 20 ms, takes none.
+    harness.advance(PERIOD).expect("advanced");
+    assert_eq!(log.take(), ["a:1", "a:1 done"]);
+    assert_eq!(harness.inner().elapsed(), ms(23));
+}
