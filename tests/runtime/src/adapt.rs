@@ -8,7 +8,10 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use coolbot::adapt::AdaptAction;
-use coolbot::{AdaptConfig, Adaptation, Component, Handle, Monitor, SectionResult, TimingSpec};
+use coolbot::{
+    AdaptConfig, Adaptation, Clock, Component, Handle, Monitor, SectionResult, System, TimingSpec,
+    VirtualClock,
+};
 
 use crate::generated::{
     adapt_fixed_sleeper, adapt_planned_sleeper, adapt_sleeper, adapt_steady_sleeper,
@@ -38,6 +41,8 @@ pub struct Load {
     /// Raise the component's exception (`AdaptPlannedSleeper`'s `noisy`) once, in the
     /// next section.
     pub fault: std::sync::atomic::AtomicBool,
+    /// A section is taking its work's time now.
+    pub busy: std::sync::atomic::AtomicBool,
 }
 
 impl Load {
@@ -86,7 +91,11 @@ impl Sleeping {
                 std::hint::spin_loop();
             }
         } else {
-            std::thread::sleep(Duration::from_micros(work));
+            // The clock's time: a sleep on the real clock, the virtual clock's time
+            // in a test that steps it.
+            self.load.busy.store(true, Ordering::SeqCst);
+            cx.spend(Duration::from_micros(work));
+            self.load.busy.store(false, Ordering::SeqCst);
         }
         self.load.runs.fetch_add(1, Ordering::SeqCst);
     }
@@ -174,11 +183,52 @@ pub fn moves(history: &[Adaptation]) -> Vec<(String, AdaptAction, u32, u32)> {
         .collect()
 }
 
-/// Wait for `pred` on `handle`'s monitor, panicking with the last monitor.
-pub fn wait(handle: &Handle, what: &str, pred: impl Fn(&Monitor) -> bool) -> Monitor {
-    handle
-        .wait_for(pred, WAIT)
-        .unwrap_or_else(|timeout| panic!("{what}: {timeout}: {:#?}", timeout.last))
+/// A system on a fresh virtual clock.
+pub fn on_virtual_clock() -> (System, Arc<VirtualClock>) {
+    let clock = VirtualClock::new();
+    (System::with_clock(Clock::virtual_clock(&clock)), clock)
+}
+
+/// The virtual time a test steps at most before it gives up on a condition.
+pub const VIRTUAL_LIMIT: Duration = Duration::from_secs(120);
+
+/// Step `clock` a millisecond at a time until `pred` holds of `handle`'s monitor;
+/// panics with the last monitor after [`VIRTUAL_LIMIT`] of virtual time.
+pub fn step_until(
+    clock: &VirtualClock,
+    handle: &Handle,
+    what: &str,
+    pred: impl Fn(&Monitor) -> bool,
+) -> Monitor {
+    let mut last = handle.snapshot();
+    step_until_true(clock, what, || {
+        last = handle.snapshot();
+        pred(&last)
+    });
+    last
+}
+
+/// Step `clock` a millisecond at a time until `f` holds; panics after
+/// [`VIRTUAL_LIMIT`] of virtual time.
+pub fn step_until_true(clock: &VirtualClock, what: &str, mut f: impl FnMut() -> bool) {
+    let until = clock.elapsed() + VIRTUAL_LIMIT;
+    while !f() {
+        assert!(
+            clock.elapsed() < until,
+            "not {what} within {VIRTUAL_LIMIT:?} of the virtual clock"
+        );
+        clock.advance(ms(1)).expect("settled");
+    }
+}
+
+/// Step `clock` until no section of a component working `load` is taking its time:
+/// the component has settled and starts nothing before the clock moves again, so a
+/// command to it is taken at once (during a section taking the clock's time, it would
+/// wait for the clock).
+pub fn at_rest(clock: &VirtualClock, load: &Load) {
+    step_until_true(clock, "the section's work done", || {
+        !load.busy.load(Ordering::SeqCst)
+    });
 }
 
 /// Wait until `f` holds, polling (for counters no event announces).

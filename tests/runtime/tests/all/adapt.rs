@@ -1,15 +1,17 @@
 //! Adaptation of a component no compound supervises (paper 3.6, local level): under
 //! time violations it stretches its period step by step within its interval, then
 //! lowers its quality; when time is spare again it is promoted back, quality first.
-//! The work is simulated with sleeps proportional to the quality level, so violations
-//! do not depend on the machine's load; the tests assert outcomes, never timings.
+//! On a virtual clock: the work is time the sections take of it (`Context::spend`),
+//! set per quality level, so that every verdict and step is the same on every run and
+//! every machine (the load profile's test, about CPU time, runs on the real clock).
 
 use std::sync::atomic::Ordering;
 
 use coolbot::adapt::AdaptAction;
 use coolbot::{AdaptConfig, Command, MonitorEvent, Pressure, System};
 use coolbot_runtime_tests::adapt::{
-    Load, eventually, fixed_sleeper, moves, ms, quick, sleeper, steady_sleeper, wait,
+    Load, at_rest, eventually, fixed_sleeper, moves, ms, on_virtual_clock, quick, sleeper,
+    steady_sleeper, step_until, step_until_true,
 };
 use coolbot_runtime_tests::generated::adapt_sleeper;
 
@@ -22,7 +24,7 @@ const LIGHT: [u64; 3] = [1, 1, 1];
 fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back() {
     let load = Load::new();
     load.set(HEAVY);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
@@ -30,7 +32,9 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
     system.run_all().expect("run");
 
     // Degraded to the bottom of the ladder: 40 ms and quality 1.
-    let monitor = wait(&handle, "fully degraded", |m| m.adaptation.level == 4);
+    let monitor = step_until(&clock, &handle, "fully degraded", |m| {
+        m.adaptation.level == 4
+    });
     assert_eq!(monitor.period, Some(ms(40)));
     assert_eq!(monitor.quality, 1);
     assert_eq!(monitor.adaptation.max_level, 4);
@@ -53,16 +57,15 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
         ]
     );
     // The section itself saw the changes through its context.
-    eventually("a section at quality 1", || {
+    step_until_true(&clock, "a section at quality 1", || {
         load.lowest_quality.load(Ordering::SeqCst) == 1
     });
     assert_eq!(load.longest_period.load(Ordering::SeqCst), 40_000);
 
     // Stable at the bottom: ten more sections, and no promotion probe (25 ms of 40
-    // is not spare at ratio 0.5). (A late wake-up on a loaded machine could still
-    // make a violation there, reported as `Exhausted`: allowed.)
+    // is not spare at ratio 0.5), nor any other step.
     let runs = load.runs();
-    eventually("ten more sections", || load.runs() >= runs + 10);
+    step_until_true(&clock, "ten more sections", || load.runs() >= runs + 10);
     let monitor = handle.snapshot();
     assert_eq!(monitor.adaptation.level, 4);
     assert!(
@@ -70,43 +73,44 @@ fn a_standalone_component_degrades_frequency_then_quality_and_is_promoted_back()
             .adaptation
             .history
             .iter()
-            .all(|step| matches!(step.action, AdaptAction::Degraded | AdaptAction::Exhausted)),
+            .all(|step| step.action == AdaptAction::Degraded),
         "{:#?}",
         monitor.adaptation.history
     );
 
-    // The load drops: promoted back to nominal, quality first.
+    // The load drops: promoted back to nominal one level at a time, quality first,
+    // each level with its own period.
     load.set(LIGHT);
-    let monitor = wait(&handle, "back to nominal", |m| m.adaptation.level == 0);
+    let monitor = step_until(&clock, &handle, "back to nominal", |m| {
+        m.adaptation.level == 0
+    });
     assert_eq!(monitor.period, Some(ms(10)));
     assert_eq!(monitor.quality, 0);
-    // (A late wake-up on a loaded machine can make a violation during promotion, and
-    // a degradation between promotions: the checks are properties of the steps, not
-    // one exact sequence.)
-    let history = &monitor.adaptation.history;
-    let promoted: Vec<_> = history
+    let steps: Vec<_> = monitor
+        .adaptation
+        .history
         .iter()
-        .filter(|step| step.action == AdaptAction::Promoted)
+        .map(|step| (step.action, step.from, step.to, step.period, step.quality))
         .collect();
-    let first = promoted.first().expect("promotions");
+    let (degraded, promoted) = (AdaptAction::Degraded, AdaptAction::Promoted);
     assert_eq!(
-        (first.from, first.to, first.period, first.quality),
-        (4, 3, Some(ms(40)), Some(0)),
-        "the quality first"
+        steps,
+        [
+            (degraded, 0, 1, Some(ms(20)), Some(0)),
+            (degraded, 1, 2, Some(ms(30)), Some(0)),
+            (degraded, 2, 3, Some(ms(40)), Some(0)),
+            (degraded, 3, 4, Some(ms(40)), Some(1)),
+            (promoted, 4, 3, Some(ms(40)), Some(0)),
+            (promoted, 3, 2, Some(ms(30)), Some(0)),
+            (promoted, 2, 1, Some(ms(20)), Some(0)),
+            (promoted, 1, 0, Some(ms(10)), Some(0)),
+        ]
     );
-    for step in &promoted {
-        assert_eq!(step.to + 1, step.from, "one level at a time: {step}");
+    for step in &monitor.adaptation.history {
         let (period, _) = ladder_setting(step.to);
         assert_eq!(step.period, period, "the period of its level: {step}");
     }
-    let moved = moves(history);
-    for pair in moved.windows(2) {
-        assert_eq!(
-            pair[1].2, pair[0].3,
-            "each step starts where the last ended: {moved:?}"
-        );
-    }
-    eventually("a section at 10 ms again", || {
+    step_until_true(&clock, "a section at 10 ms again", || {
         load.last_period.load(Ordering::SeqCst) == 10_000
     });
 
@@ -133,7 +137,7 @@ fn a_member_of_an_execution_group_degrades_and_is_promoted_back_on_the_groups_th
     let (load, other) = (Load::new(), Load::new());
     load.set(HEAVY);
     other.set(LIGHT);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add s");
@@ -143,23 +147,29 @@ fn a_member_of_an_execution_group_degrades_and_is_promoted_back_on_the_groups_th
 
     // The member's ladder, its detector and its level work as on a thread of its own:
     // down to 40 ms and quality 1, which its section sees.
-    let monitor = wait(&handle, "fully degraded", |m| m.adaptation.level == 4);
+    let monitor = step_until(&clock, &handle, "fully degraded", |m| {
+        m.adaptation.level == 4
+    });
     assert_eq!(monitor.group.map(|g| g.name), Some("pair".to_owned()));
     assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
-    eventually("a section at quality 1", || {
+    step_until_true(&clock, "a section at quality 1", || {
         load.lowest_quality.load(Ordering::SeqCst) == 1
     });
     // The other member, with nothing to degrade, keeps its period and runs on.
     let runs = other.runs();
-    eventually("the other member runs on", || other.runs() >= runs + 5);
+    step_until_true(&clock, "the other member runs on", || {
+        other.runs() >= runs + 5
+    });
     assert_eq!(steady.snapshot().period, Some(ms(10)));
     assert_eq!(steady.snapshot().adaptation.level, 0);
 
     // The load drops: promoted back to nominal.
     load.set(LIGHT);
-    let monitor = wait(&handle, "back to nominal", |m| m.adaptation.level == 0);
+    let monitor = step_until(&clock, &handle, "back to nominal", |m| {
+        m.adaptation.level == 0
+    });
     assert_eq!((monitor.period, monitor.quality), (Some(ms(10)), 0));
-    eventually("a section at 10 ms again", || {
+    step_until_true(&clock, "a section at 10 ms again", || {
         load.last_period.load(Ordering::SeqCst) == 10_000
     });
     assert!(system.shutdown().clean());
@@ -174,19 +184,24 @@ fn ladder_setting(level: u32) -> (Option<std::time::Duration>, usize) {
 fn adaptation_turned_off_leaves_period_and_quality_alone() {
     let load = Load::new();
     load.set(HEAVY);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
     system.run_all().expect("run");
-    eventually("ten sections", || load.runs() >= 10);
-    let monitor = wait(&handle, "missed deadlines", |m| m.missed_deadlines >= 5);
+    step_until_true(&clock, "ten sections", || load.runs() >= 10);
+    let monitor = step_until(&clock, &handle, "missed deadlines", |m| {
+        m.missed_deadlines >= 5
+    });
     assert_eq!(monitor.period, Some(ms(10)));
     assert_eq!(monitor.quality, 0);
     assert!(!monitor.adaptation.enabled);
     assert_eq!(monitor.adaptation.pressure, Pressure::Nominal);
     assert!(monitor.adaptation.history.is_empty());
-    // The ladder is still there for the control port.
+    // The ladder is still there for the control port (the work stops, so that the
+    // component is at rest between two sections when it is commanded).
+    load.set([0, 0, 0]);
+    at_rest(&clock, &load);
     handle
         .command(Command::SetDegradation(2))
         .expect("level 2 of 4");
@@ -200,7 +215,7 @@ fn adaptation_turned_off_leaves_period_and_quality_alone() {
 fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_quality_only() {
     let load = Load::new();
     load.set([15, 1, 1]);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let default = system.add(fixed_sleeper("d", &load)).expect("add");
     let asked = system
         .add(fixed_sleeper("a", &load).with_adaptation(AdaptConfig {
@@ -211,7 +226,9 @@ fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_qualit
         }))
         .expect("add");
     system.run_all().expect("run");
-    let monitor = wait(&asked, "quality lowered", |m| m.adaptation.level == 1);
+    let monitor = step_until(&clock, &asked, "quality lowered", |m| {
+        m.adaptation.level == 1
+    });
     assert_eq!(monitor.quality, 1);
     assert_eq!(
         monitor.period,
@@ -220,7 +237,9 @@ fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_qualit
     );
     assert!(monitor.adaptation.enabled);
     // The other one, same work, same spec, default settings: off.
-    let monitor = wait(&default, "missed deadlines", |m| m.missed_deadlines >= 5);
+    let monitor = step_until(&clock, &default, "missed deadlines", |m| {
+        m.missed_deadlines >= 5
+    });
     assert!(!monitor.adaptation.enabled);
     assert_eq!(monitor.adaptation.max_level, 1);
     assert_eq!((monitor.quality, monitor.adaptation.level), (0, 0));
@@ -231,15 +250,17 @@ fn without_a_period_interval_adaptation_is_off_unless_asked_and_then_uses_qualit
 fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
     let load = Load::new();
     load.set(LIGHT);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(AdaptConfig::off()))
         .expect("add");
     let fixed = system.add(steady_sleeper("f", &load)).expect("add");
     system.run_all().expect("run");
+    at_rest(&clock, &load);
     handle.command(Command::SetDegradation(4)).expect("level 4");
     let monitor = handle.snapshot();
     assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
+    at_rest(&clock, &load);
     handle.command(Command::SetDegradation(1)).expect("level 1");
     let monitor = handle.snapshot();
     assert_eq!((monitor.period, monitor.quality), (Some(ms(20)), 0));
@@ -250,19 +271,23 @@ fn set_degradation_goes_through_the_ladder_and_rejects_what_is_not_on_it() {
             ("s".to_owned(), AdaptAction::Promoted, 4, 1),
         ]
     );
+    at_rest(&clock, &load);
     let rejected = handle.command(Command::SetDegradation(5)).unwrap_err();
     assert_eq!(
         rejected.reason,
         "degradation level 5 out of range: the highest is 4"
     );
+    at_rest(&clock, &load);
     let rejected = fixed.command(Command::SetDegradation(1)).unwrap_err();
     assert!(
         rejected.reason.starts_with("no adaptation levels"),
         "{rejected}"
     );
     // A period set by other means moves the level with it.
+    at_rest(&clock, &load);
     handle.command(Command::SetPeriod(ms(35))).expect("period");
     assert_eq!(handle.snapshot().adaptation.level, 3);
+    at_rest(&clock, &load);
     handle.command(Command::SetQuality(1)).expect("quality");
     let monitor = handle.snapshot();
     assert_eq!(monitor.adaptation.level, 4);
@@ -346,11 +371,12 @@ fn periods(
 fn a_quality_set_by_other_means_is_kept_and_promotions_never_lengthen_the_period() {
     let load = Load::new();
     load.set(LIGHT);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
     system.run_all().expect("run");
+    at_rest(&clock, &load);
     handle.command(Command::SetQuality(1)).expect("quality");
     let monitor = handle.snapshot();
     assert_eq!((monitor.period, monitor.quality), (Some(ms(10)), 1));
@@ -360,6 +386,7 @@ fn a_quality_set_by_other_means_is_kept_and_promotions_never_lengthen_the_period
         "10 ms (step 0) at quality 1"
     );
     // Further along: 30 ms, then the quality set again.
+    at_rest(&clock, &load);
     handle.command(Command::SetDegradation(3)).expect("level 3");
     assert_eq!(
         (handle.snapshot().period, handle.snapshot().quality),
@@ -368,7 +395,7 @@ fn a_quality_set_by_other_means_is_kept_and_promotions_never_lengthen_the_period
     );
     let events = handle.subscribe();
     // Spare time: promoted to the floor, the period shortening at every step.
-    let monitor = wait(&handle, "promoted to its floor", |m| {
+    let monitor = step_until(&clock, &handle, "promoted to its floor", |m| {
         m.adaptation.level == 1 && m.period == Some(ms(10))
     });
     assert_eq!(monitor.quality, 1, "the quality set is kept");
@@ -380,12 +407,14 @@ fn a_quality_set_by_other_means_is_kept_and_promotions_never_lengthen_the_period
     assert_eq!(periods.last(), Some(&ms(10)), "{periods:?}");
     // The floor holds: more spare periods, no promotion below it.
     let runs = load.runs();
-    eventually("twenty more sections", || load.runs() >= runs + 20);
+    step_until_true(&clock, "twenty more sections", || load.runs() >= runs + 20);
     let monitor = handle.snapshot();
     assert_eq!((monitor.adaptation.level, monitor.quality), (1, 1));
+    at_rest(&clock, &load);
     let rejected = handle.command(Command::SetDegradation(0)).unwrap_err();
     assert!(rejected.reason.contains("below 1"), "{rejected}");
     // The same means release it.
+    at_rest(&clock, &load);
     handle.command(Command::SetQuality(0)).expect("quality 0");
     let monitor = handle.snapshot();
     assert_eq!(
@@ -402,13 +431,14 @@ fn a_quality_set_by_other_means_leaves_the_period_steps_to_degrade() {
     let load = Load::new();
     // 15 ms of work at every quality: too long for 10 ms, fine at 20 ms and more.
     load.set([15, 15, 15]);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let handle = system
         .add(sleeper("s", &load).with_adaptation(quick()))
         .expect("add");
     system.run_all().expect("run");
+    at_rest(&clock, &load);
     handle.command(Command::SetQuality(1)).expect("quality");
-    let monitor = wait(&handle, "degraded for time", |m| {
+    let monitor = step_until(&clock, &handle, "degraded for time", |m| {
         m.adaptation
             .history
             .iter()
@@ -439,7 +469,7 @@ fn odd_adaptation_settings_are_clamped() {
     late.set([45, 45, 45]);
     let light = Load::new();
     light.set(LIGHT);
-    let mut system = System::new();
+    let (mut system, clock) = on_virtual_clock();
     let strict = system
         .add(sleeper("strict", &late).with_adaptation(AdaptConfig {
             violations: 5,
@@ -454,13 +484,15 @@ fn odd_adaptation_settings_are_clamped() {
         }))
         .expect("a huge period_steps is not a panic");
     system.run_all().expect("run");
-    let monitor = wait(&strict, "a violation", |m| m.adaptation.level > 0);
+    let monitor = step_until(&clock, &strict, "a violation", |m| m.adaptation.level > 0);
     assert!(monitor.period > Some(ms(10)), "{monitor:#?}");
     let monitor = fine.snapshot();
     let max = monitor.adaptation.max_level;
     assert_eq!(max, coolbot::adapt::MAX_PERIOD_STEPS + 1);
+    at_rest(&clock, &light);
     fine.command(Command::SetPeriod(ms(25))).expect("period");
     assert_eq!(fine.snapshot().adaptation.level, max / 2);
+    at_rest(&clock, &light);
     fine.command(Command::SetDegradation(max)).expect("the top");
     let monitor = fine.snapshot();
     assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));

@@ -1,12 +1,13 @@
 //! Adaptation inside compounds (paper 3.6, Figures 6 and 7): the supervisor degrades
 //! its instances within a homogeneity interval, selects whom to degrade, raises its
 //! current maximum level at the top, notifies its own supervisor when nested, and
-//! promotes back from the top when time is spare. Work is simulated with sleeps (see
-//! `coolbot_runtime_tests::adapt`); the tests assert outcomes and orders, never timings.
+//! promotes back from the top when time is spare. On a virtual clock: the work is time
+//! the sections take of it (`Context::spend`, see `coolbot_runtime_tests::adapt`), so
+//! every verdict, step and order is the same on every run and every machine.
 
 use coolbot::adapt::AdaptAction;
-use coolbot::{Command, CompoundBuilder, MonitorEvent, Pressure, System};
-use coolbot_runtime_tests::adapt::{self, Load, check_homogeneity, member, moves, ms, wait};
+use coolbot::{Command, CompoundBuilder, MonitorEvent, Pressure};
+use coolbot_runtime_tests::adapt::{self, Load, check_homogeneity, member, moves, ms};
 use coolbot_runtime_tests::supervision::Coordinating;
 
 const HEAVY: [u64; 3] = [45, 25, 25];
@@ -40,13 +41,13 @@ fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
         .instance(member("c", -3, &light))
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     let events = group.subscribe();
     system.run_all().expect("run");
     let b = group.instance("b").expect("b");
 
-    let monitor = wait(&b, "b fits at the bottom of its ladder", |m| {
+    let monitor = adapt::step_until(&clock, &b, "b fits at the bottom of its ladder", |m| {
         m.adaptation.level == 4
     });
     assert_eq!((monitor.period, monitor.quality), (Some(ms(40)), 1));
@@ -88,14 +89,14 @@ fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
     heavy.set(LIGHT);
     for name in ["a", "b", "c"] {
         let handle = group.instance(name).expect("instance");
-        let monitor = wait(&handle, "nominal", |m| m.adaptation.level == 0);
+        let monitor = adapt::step_until(&clock, &handle, "nominal", |m| m.adaptation.level == 0);
         assert_eq!(
             (monitor.period, monitor.quality),
             (Some(ms(10)), 0),
             "{name}"
         );
     }
-    let monitor = wait(&group, "floor 0", |m| m.adaptation.floor == 0);
+    let monitor = adapt::step_until(&clock, &group, "floor 0", |m| m.adaptation.floor == 0);
     assert!(monitor.adaptation.level <= 1);
     steps.extend(adaptation_steps(&events));
     assert_eq!(
@@ -140,7 +141,7 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
         .instance(member("z", -3, &light))
         .build()
         .expect("outer");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let outer = system.add(outer).expect("add");
     let outer_events = outer.subscribe();
     system.run_all().expect("run");
@@ -148,7 +149,7 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
     let x = outer.instance("inner.x").expect("x");
     assert_eq!(inner.snapshot().adaptation.max_level, 4);
 
-    wait(&x, "x at the bottom of its ladder", |m| {
+    adapt::step_until(&clock, &x, "x at the bottom of its ladder", |m| {
         m.adaptation.level == 4
     });
     let inner_monitor = inner.snapshot();
@@ -175,9 +176,11 @@ fn a_nested_compound_notifies_its_supervisor_which_grants_levels() {
     heavy.set(LIGHT);
     for path in ["inner.x", "inner.y", "z"] {
         let handle = outer.instance(path).expect(path);
-        wait(&handle, path, |m| m.adaptation.level == 0);
+        adapt::step_until(&clock, &handle, path, |m| m.adaptation.level == 0);
     }
-    let inner_monitor = wait(&inner, "inner granted nothing", |m| m.adaptation.level == 0);
+    let inner_monitor = adapt::step_until(&clock, &inner, "inner granted nothing", |m| {
+        m.adaptation.level == 0
+    });
     assert!(
         inner_monitor
             .adaptation
@@ -210,14 +213,14 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
         })
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     let events = group.subscribe();
     system.run_all().expect("run");
     let lo = group.instance("lo").expect("lo");
 
     // (The step is published before the turn's verdict: wait for both.)
-    wait(&group, "exhausted, under a time violation", |m| {
+    adapt::step_until(&clock, &group, "exhausted, under a time violation", |m| {
         m.adaptation
             .history
             .iter()
@@ -225,7 +228,7 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
             && m.adaptation.pressure == Pressure::Violation
     });
     // (The suspension is queued at lo's control port; it takes it between sections.)
-    wait(&lo, "lo suspended", |m| {
+    adapt::step_until(&clock, &lo, "lo suspended", |m| {
         m.state == coolbot::State::Suspended
     });
     let steps = adaptation_steps(&events);
@@ -246,11 +249,11 @@ fn exhausted_degradation_suspends_the_lowest_priority_instance_until_time_is_spa
     assert_eq!(levels, [4, 4]);
 
     hopeless.set(LIGHT);
-    wait(&lo, "lo resumed and promoted", |m| {
+    adapt::step_until(&clock, &lo, "lo resumed and promoted", |m| {
         m.state == coolbot::State::Running && m.adaptation.level == 0
     });
     let hi = group.instance("hi").expect("hi");
-    wait(&hi, "hi promoted", |m| m.adaptation.level == 0);
+    adapt::step_until(&clock, &hi, "hi promoted", |m| m.adaptation.level == 0);
     let steps = adaptation_steps(&events);
     let resumed = steps
         .iter()
@@ -278,15 +281,15 @@ fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
         .adaptation(coolbot::AdaptConfig::off())
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let b = group.instance("b").expect("b");
-    let monitor = wait(&b, "a violation, published", |m| {
+    let monitor = adapt::step_until(&clock, &b, "a violation, published", |m| {
         m.adaptation.pressure == Pressure::Violation
     });
     let runs = heavy.runs();
-    adapt::eventually("five more sections", || heavy.runs() >= runs + 5);
+    adapt::step_until_true(&clock, "five more sections", || heavy.runs() >= runs + 5);
     let monitor_now = b.snapshot();
     assert_eq!(monitor_now.adaptation.level, 0);
     assert_eq!(monitor_now.period, monitor.period);
@@ -312,7 +315,7 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
         .instance(member("b", -2, &light))
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let a = group.instance("a").expect("a");
@@ -330,12 +333,12 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
     // Both have spare time: the supervisor sees their verdicts (it decides on
     // every change of verdict), and twenty sections more.
     for handle in [&a, &b] {
-        wait(handle, "spare time", |m| {
+        adapt::step_until(&clock, handle, "spare time", |m| {
             m.adaptation.pressure == Pressure::Spare
         });
     }
     let runs = light.runs();
-    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::step_until_true(&clock, "twenty more sections", || light.runs() >= runs + 20);
     let (a_now, b_now) = (a.snapshot(), b.snapshot());
     assert_eq!(
         (a_now.period, a_now.quality, a_now.adaptation.level),
@@ -372,7 +375,7 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
         .instance(member("a", -1, &light))
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let a = group.instance("a").expect("a");
@@ -385,11 +388,11 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
         (monitor.adaptation.level, monitor.adaptation.min_level),
         (3, 3)
     );
-    wait(&a, "spare time", |m| {
+    adapt::step_until(&clock, &a, "spare time", |m| {
         m.adaptation.pressure == Pressure::Spare
     });
     let runs = light.runs();
-    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::step_until_true(&clock, "twenty more sections", || light.runs() >= runs + 20);
     let now = a.snapshot();
     assert_eq!(
         now.adaptation.level, 3,
@@ -397,6 +400,7 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
         now.adaptation.history
     );
     // The operator releases it: level 0, nothing kept.
+    adapt::at_rest(&clock, &light);
     a.command(Command::SetDegradation(0)).expect("level 0");
     let monitor = a.snapshot();
     assert_eq!(
@@ -426,11 +430,11 @@ fn a_selector_answer_outside_the_candidates_does_not_fail_the_compound() {
         .adaptation_selector(Wrong)
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let b = group.instance("b").expect("b");
-    wait(&b, "b degraded", |m| m.adaptation.level >= 1);
+    adapt::step_until(&clock, &b, "b degraded", |m| m.adaptation.level >= 1);
     let monitor = group.snapshot();
     assert_eq!(monitor.state, coolbot::State::Running, "{monitor:#?}");
     let step = monitor
@@ -459,12 +463,14 @@ fn instances_publish_their_settling_periods() {
         .instance(member("b", -1, &light))
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let a = group.instance("a").expect("a");
     let b = group.instance("b").expect("b");
-    wait(&a, "running", |m| m.state == coolbot::State::Running);
+    adapt::step_until(&clock, &a, "running", |m| {
+        m.state == coolbot::State::Running
+    });
     assert_eq!(a.snapshot().adaptation.settle_periods, 40 + 3 + 1);
     assert_eq!(b.snapshot().adaptation.settle_periods, 2 + 3 + 1);
     assert!(system.shutdown().clean());
@@ -483,14 +489,14 @@ fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
         .instance(member("q", -1, &light))
         .build()
         .expect("build");
-    let mut system = System::new();
+    let (mut system, clock) = adapt::on_virtual_clock();
     let group = system.add(group).expect("add");
     system.run_all().expect("run");
     let p = group.instance("p").expect("p");
     p.wait_state(coolbot::State::Running, adapt::WAIT)
         .expect("running");
     light.fault.store(true, std::sync::atomic::Ordering::SeqCst);
-    let monitor = wait(&p, "the plan's degradation", |m| m.quality == 1);
+    let monitor = adapt::step_until(&clock, &p, "the plan's degradation", |m| m.quality == 1);
     assert_eq!(monitor.state, coolbot::State::Running);
     assert_eq!(
         (
@@ -500,11 +506,11 @@ fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
         ),
         (Some(ms(10)), 1, 1)
     );
-    wait(&p, "spare time", |m| {
+    adapt::step_until(&clock, &p, "spare time", |m| {
         m.adaptation.pressure == Pressure::Spare
     });
     let runs = light.runs();
-    adapt::eventually("twenty more sections", || light.runs() >= runs + 20);
+    adapt::step_until_true(&clock, "twenty more sections", || light.runs() >= runs + 20);
     let monitor = p.snapshot();
     assert_eq!(
         (monitor.quality, monitor.adaptation.level),
