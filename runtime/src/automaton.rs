@@ -395,6 +395,8 @@ pub struct Context {
     pub(crate) clock: crate::clock::Clock,
     /// How the component takes time of its clock ([`Context::spend`]).
     pub(crate) spends: Spends,
+    /// A section of the user automaton is under way (not a hook).
+    pub(crate) in_section: bool,
 }
 
 /// How a component's section takes time of its clock ([`Context::spend`]).
@@ -412,9 +414,14 @@ pub(crate) enum Spends {
 impl Context {
     /// A context for component `name` (the runtime makes these; tests of user code may
     /// too).
-    pub fn new(name: impl Into<std::sync::Arc<str>>, period: Option<Duration>) -> Context {
+    pub fn new(name: impl Into<String>, period: Option<Duration>) -> Context {
+        Context::named(std::sync::Arc::from(name.into()), period)
+    }
+
+    /// [`Context::new`] with the name the component's handle holds.
+    pub(crate) fn named(name: std::sync::Arc<str>, period: Option<Duration>) -> Context {
         Context {
-            name: name.into(),
+            name,
             entered_at: Instant::now(),
             result: TaskResult::None,
             result_changed: false,
@@ -429,6 +436,7 @@ impl Context {
             shared: None,
             clock: crate::clock::Clock::real(),
             spends: Spends::Sleeping,
+            in_section: false,
         }
     }
 
@@ -517,11 +525,17 @@ impl Context {
     /// thread sleeps for `cost`. On a virtual clock it waits until the clock has moved
     /// on by `cost`, and `VirtualClock::advance` does not wait for it meanwhile, nor
     /// for the other members of its execution group (their thread is busy): the
-    /// components on other threads run on, as they would on the real clock. In a
+    /// components on other threads run on, as they would on the real clock; a section
+    /// whose system shuts down stops waiting. In a
     /// [`Harness`](crate::harness::Harness), whose clock is the component's own, the
-    /// clock moves on by `cost`. A component whose system shuts down stops waiting.
+    /// clock moves on by `cost`. Outside a section (the `start` and `stop` hooks, an
+    /// exception handler) it takes no time of a virtual clock: the system's start
+    /// and shutdown wait for those in real time.
     pub fn spend(&mut self, cost: Duration) {
         if cost.is_zero() {
+            return;
+        }
+        if !self.in_section && !self.clock.is_real() {
             return;
         }
         match (self.spends, self.clock.as_virtual()) {

@@ -141,6 +141,14 @@ struct Members {
     components: BTreeMap<u64, Member>,
     /// The `max_response` watches of the components on the clock.
     watches: Vec<Weak<dyn Watched>>,
+    /// The offset (nanoseconds) up to which the watches have been tripped: a section
+    /// taking the clock's time returns only once the time it waited for is both
+    /// reached and checked against its `max_response`.
+    tripped: u64,
+    /// The doorbells of the components whose systems shut down
+    /// ([`VirtualClock::release`]), so that one joining the clock later is released
+    /// too.
+    released: Vec<Weak<Doorbell>>,
 }
 
 struct Member {
@@ -229,10 +237,16 @@ impl VirtualClock {
             member.bell.ring_strong();
         }
         drop(members);
-        self.moved.notify_all();
         for watch in watches {
             watch.trip_if_due(now);
         }
+        // Only now may a section taking the clock's time up to `now` return: its
+        // `max_response` has been checked at `now`, whatever the threads' timing.
+        {
+            let mut members = self.lock();
+            members.tripped = members.tripped.max(offset);
+        }
+        self.moved.notify_all();
         self.wait_settled(now, timeout)
     }
 
@@ -287,6 +301,10 @@ impl VirtualClock {
         let mut members = self.lock();
         let id = members.next;
         members.next += 1;
+        let released = members
+            .released
+            .iter()
+            .any(|gone| std::ptr::eq(gone.as_ptr(), Arc::as_ptr(&bell)));
         members.components.insert(
             id,
             Member {
@@ -295,7 +313,7 @@ impl VirtualClock {
                 settled: None,
                 thread: std::thread::current().id(),
                 spending: None,
-                released: false,
+                released,
             },
         );
         id
@@ -331,13 +349,15 @@ impl VirtualClock {
     /// the component's system shuts down ([`VirtualClock::release`]).
     pub(crate) fn spend(&self, id: u64, cost: Duration) {
         let mut members = self.lock();
-        let until = self.now() + cost;
+        let offset = self.offset.load(Ordering::Acquire);
+        let end = offset.saturating_add(nanos(cost));
+        let until = crate::time::later(self.now(), cost);
         match members.components.get_mut(&id) {
             Some(member) if !member.released => member.spending = Some(until),
             _ => return,
         }
         self.settled.notify_all();
-        while self.now() < until
+        while members.tripped < end
             && members
                 .components
                 .get(&id)
@@ -362,6 +382,10 @@ impl VirtualClock {
                 member.released = true;
             }
         }
+        members.released.retain(|gone| gone.strong_count() > 0);
+        members
+            .released
+            .extend(bells.iter().map(|bell| Arc::downgrade(bell)));
         drop(members);
         self.moved.notify_all();
     }

@@ -1472,15 +1472,20 @@ impl System {
         self.stop_all()
     }
 
-    fn stop_all(&mut self) -> Report {
-        let mut report = Report::default();
-        // A section taking time of a virtual clock (`Context::spend`) would wait for
-        // an advance that may never come: it returns now.
+    /// The components are about to be shut down: on a virtual clock, a section of
+    /// theirs taking the clock's time (`Context::spend`) would wait for an advance
+    /// that may never come; it returns now, and any later one at once.
+    pub(crate) fn release_spending(&self) {
         if let Some(clock) = self.clock.as_virtual() {
             let bells: Vec<&Arc<crate::wake::Doorbell>> =
                 self.slots.iter().map(|slot| &slot.handle.bell).collect();
             clock.release(&bells);
         }
+    }
+
+    fn stop_all(&mut self) -> Report {
+        let mut report = Report::default();
+        self.release_spending();
         // Tell everyone first, so that components stop in parallel.
         for slot in &self.slots {
             if slot.runner.is_none() {

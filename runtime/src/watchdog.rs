@@ -121,8 +121,9 @@ impl Watch {
         }
     }
 
-    /// The virtual clock moved to `now`: trip the section under way if it started
-    /// `max_response` or more before.
+    /// The virtual clock moved to `now`: trip the section under way if it started more
+    /// than `max_response` before (as the runner judges a section that returns: one
+    /// that took exactly `max_response` did not overrun).
     fn trip_due(&self, now: Instant) {
         let limit = self.limit.load(Ordering::Acquire);
         let token = self.slot.load(Ordering::Acquire);
@@ -130,7 +131,7 @@ impl Watch {
             return;
         }
         let now_n = nanos(now.saturating_duration_since(epoch()));
-        if (token - 1).saturating_add(limit) <= now_n {
+        if (token - 1).saturating_add(limit) < now_n {
             self.trip(token, now);
         }
     }

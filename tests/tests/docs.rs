@@ -346,7 +346,6 @@ fn every_rust_block_of_the_docs_is_compiled() {
 fn cargo(dir: &Path, args: &[&str]) {
     let output = generated_crates::gen_cargo(dir)
         .args(args)
-        .env_remove("RUSTFLAGS")
         .output()
         .unwrap();
     assert!(

@@ -109,7 +109,6 @@ fn a_sample_of_random_descriptions_builds_without_warnings() {
             "--all-targets",
             "--message-format=short",
         ])
-        .env_remove("RUSTFLAGS")
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);

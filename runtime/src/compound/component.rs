@@ -161,7 +161,10 @@ impl Automaton for Compound {
         if cx.stopping() {
             // Shutting down: the instances go straight to `dead`, so that their own
             // exit sections and `stop` are told so too (a nested compound's supervisor
-            // included), last declared first.
+            // included), last declared first; none waits for a virtual clock first.
+            if let Some(system) = &self.system {
+                system.release_spending();
+            }
             self.instances_to(Controllable::Dead);
         } else {
             self.instances_to(Controllable::Ready);

@@ -40,7 +40,9 @@ impl Runner {
         }
         let automaton = &mut *self.automaton;
         let cx = &mut self.cx;
+        cx.in_section = watched.is_some();
         let result = catch_unwind(AssertUnwindSafe(|| body(automaton, cx)));
+        self.cx.in_section = false;
         let tripped = watched.is_some() && self.watch.as_ref().is_some_and(|watch| watch.end());
         self.clock = self.time.now();
         let took = self.clock.saturating_duration_since(started);

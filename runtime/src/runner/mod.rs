@@ -272,7 +272,7 @@ impl Runner {
             .flatten()
             .map(Box::new);
         let mut runner = Runner {
-            cx: Context::new(name, timing.period),
+            cx: Context::named(name, timing.period),
             automaton,
             spec,
             timing,

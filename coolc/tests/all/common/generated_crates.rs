@@ -36,7 +36,9 @@ fn locked_as_workspace(dir: &Path) {
 
 /// A `cargo` command for the generated crate or workspace at `dir`, built as every
 /// generated crate of the tests is: in [`gen_target`], with the workspace's lock
-/// ([`locked_as_workspace`]) and [`GEN_PROFILE`]; the command's arguments follow.
+/// ([`locked_as_workspace`]) and [`GEN_PROFILE`], and without the flags the test
+/// itself was built with (`RUSTFLAGS`: they would make another build of every
+/// dependency there); the command's arguments follow.
 pub fn gen_cargo(dir: &Path) -> Command {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     locked_as_workspace(dir);
@@ -44,6 +46,7 @@ pub fn gen_cargo(dir: &Path) -> Command {
     command
         .args(GEN_PROFILE)
         .current_dir(dir)
-        .env("CARGO_TARGET_DIR", gen_target());
+        .env("CARGO_TARGET_DIR", gen_target())
+        .env_remove("RUSTFLAGS");
     command
 }

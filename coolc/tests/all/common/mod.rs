@@ -79,7 +79,6 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
 pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
     let output = gen_cargo(dir)
         .args(args)
-        .env_remove("RUSTFLAGS")
         .envs(env.iter().copied())
         .output()
         .unwrap();

@@ -375,10 +375,11 @@ fn on_a_virtual_clock_a_section_past_max_response_is_tripped_when_the_clock_pass
         || rig.script.hanging.load(Ordering::SeqCst),
         "the section started at 5 ms",
     );
-    // 499 ms into the section: under its max_response (500 ms).
-    let _ = clock.advance_with_timeout(ms(499), ms(1));
+    // 500 ms into the section: its max_response, not over it (a section that
+    // returned now would not have overrun either).
+    let _ = clock.advance_with_timeout(ms(500), ms(1));
     assert_eq!(rig.handle.snapshot().overruns, 0);
-    // 500 ms: tripped at once, as the watchdog does in real time.
+    // Past it: tripped at once, as the watchdog does in real time.
     let _ = clock.advance_with_timeout(ms(1), ms(1));
     let monitor = rig.handle.snapshot();
     assert_eq!(monitor.overruns, 1);
