@@ -420,7 +420,8 @@ impl Platform {
     }
 
     /// The same platform on `clock`: its uptime, its fault and shortage windows and
-    /// the time its shortage costs ([`Platform::spend`]) are that clock's, and the robot
+    /// the time its shortage costs (taken by the sections with `Context::spend`) are
+    /// that clock's, and the robot
     /// built on it runs its system on it ([`crate::robot::Robot::start`]). On a virtual
     /// clock the platform reads no real time: a test advances it.
     pub fn with_clock(mut self, clock: Clock) -> Platform {
