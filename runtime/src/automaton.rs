@@ -528,9 +528,12 @@ impl Context {
     /// components on other threads run on, as they would on the real clock; a section
     /// whose system shuts down stops waiting. In a
     /// [`Harness`](crate::harness::Harness), whose clock is the component's own, the
-    /// clock moves on by `cost`. Outside a section (the `start` and `stop` hooks, an
-    /// exception handler) it takes no time of a virtual clock: the system's start
-    /// and shutdown wait for those in real time.
+    /// clock moves on by `cost`. On a virtual clock only the entry, exit and periodic
+    /// sections take its time: in the other calls of an automaton (the `start` and
+    /// `stop` hooks, an exception handler, a `may` choice, a pull's answer) `spend`
+    /// takes none, since their callers wait for them in real time (on the real clock
+    /// it sleeps in all of them). A command whose transition runs a section that
+    /// takes the clock's time counts as taken once the section does.
     pub fn spend(&mut self, cost: Duration) {
         if cost.is_zero() {
             return;
@@ -539,7 +542,16 @@ impl Context {
             return;
         }
         match (self.spends, self.clock.as_virtual()) {
-            (Spends::Member(id), Some(clock)) => clock.spend(id, cost),
+            (Spends::Member(id), Some(clock)) => {
+                let taking = self.shared.as_ref().map(|shared| &shared.taking_clock_time);
+                if let Some(taking) = taking {
+                    taking.store(true, std::sync::atomic::Ordering::Release);
+                }
+                clock.spend(id, cost);
+                if let Some(taking) = taking {
+                    taking.store(false, std::sync::atomic::Ordering::Release);
+                }
+            }
             (Spends::Harnessed, Some(clock)) => {
                 // Nothing else runs on a harness's clock: none to wait for.
                 let _ = clock.advance_with_timeout(cost, Duration::ZERO);

@@ -157,8 +157,9 @@ struct Member {
     settled: Option<Instant>,
     /// The thread it runs on (the members of an execution group share one).
     thread: std::thread::ThreadId,
-    /// Until when a section of it takes the clock's time ([`VirtualClock::spend`]).
-    spending: Option<Instant>,
+    /// Until when (nanoseconds since the clock's start) a section of it takes the
+    /// clock's time ([`VirtualClock::spend`]).
+    spending: Option<u64>,
     /// Its system is shutting down: a section taking the clock's time returns at once.
     released: bool,
 }
@@ -257,10 +258,11 @@ impl VirtualClock {
         loop {
             // A thread whose section takes the clock's time past `now` is busy until
             // then: its members are not waited for.
+            let at = nanos(now.saturating_duration_since(self.base));
             let spending: Vec<std::thread::ThreadId> = members
                 .components
                 .values()
-                .filter(|member| member.spending.is_some_and(|until| until > now))
+                .filter(|member| member.spending.is_some_and(|end| end > at))
                 .map(|member| member.thread)
                 .collect();
             let busy: Vec<String> = members
@@ -349,11 +351,12 @@ impl VirtualClock {
     /// the component's system shuts down ([`VirtualClock::release`]).
     pub(crate) fn spend(&self, id: u64, cost: Duration) {
         let mut members = self.lock();
-        let offset = self.offset.load(Ordering::Acquire);
-        let end = offset.saturating_add(nanos(cost));
-        let until = crate::time::later(self.now(), cost);
+        let end = self
+            .offset
+            .load(Ordering::Acquire)
+            .saturating_add(nanos(cost));
         match members.components.get_mut(&id) {
-            Some(member) if !member.released => member.spending = Some(until),
+            Some(member) if !member.released => member.spending = Some(end),
             _ => return,
         }
         self.settled.notify_all();

@@ -336,8 +336,11 @@ impl Handle {
                     return Err(Refusal::Busy);
                 }
                 // Taken just now: the transition is under way.
-                if answers
-                    .take_until(crate::time::later(Instant::now(), self.command_timeout))
+                if self
+                    .transition_done(
+                        &answers,
+                        crate::time::later(Instant::now(), self.command_timeout),
+                    )
                     .is_none()
                     && !is_dead
                 {
@@ -346,11 +349,29 @@ impl Handle {
             }
         }
         // Accepted: wait for the transition to finish.
-        let _ = answers.take_until(deadline);
+        let _ = self.transition_done(&answers, deadline);
         if is_dead {
             self.join_if_exited(deadline);
         }
         Ok(())
+    }
+
+    /// Wait until `deadline` for the answer that ends a transition under way, or until
+    /// the transition takes time of a virtual clock (`Context::spend`): only the
+    /// clock can end it then, and whoever moves the clock may be the one waiting, so
+    /// the command counts as taken, as one whose transition outlasts its deadline.
+    fn transition_done(&self, answers: &Mailbox<Reply>, deadline: Instant) -> Option<Reply> {
+        /// How often a long transition is looked at for taking clock time.
+        const LOOK: Duration = Duration::from_millis(2);
+        loop {
+            let slice = crate::time::later(Instant::now(), LOOK).min(deadline);
+            if let Some(reply) = answers.take_until(slice) {
+                return Some(reply);
+            }
+            if Instant::now() >= deadline || self.shared.taking_clock_time.load(Ordering::Acquire) {
+                return None;
+            }
+        }
     }
 
     /// [`Handle::command`] with why it failed as a [`Refusal`] (a compound's

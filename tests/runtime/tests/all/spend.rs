@@ -7,9 +7,11 @@
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
-use coolbot::{Clock, CompoundBuilder, SectionResult, State, System, VirtualClock};
-use coolbot_runtime_tests::stage;
+use coolbot::{
+    Clock, Command, CompoundBuilder, Controllable, SectionResult, State, System, VirtualClock,
+};
 use coolbot_runtime_tests::supervision::Coordinating;
+use coolbot_runtime_tests::{relay, stage};
 
 /// `Stage`'s period (its `max_response` is 5 ms).
 const PERIOD: Duration = Duration::from_millis(10);
@@ -295,4 +297,69 @@ fn a_compounds_shutdown_ends_its_instance_taking_clock_time_cleanly() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
     assert_eq!(log.take(), ["a:0 done"]);
+}
+
+/// A relay whose entry section takes `cost` of its clock's time.
+struct SlowEntry {
+    log: Log,
+    cost: Duration,
+}
+
+impl relay::Behavior for SlowEntry {
+    fn relay_entry(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+        self.log.push("r:entry".to_owned());
+        cx.rt.spend(self.cost);
+        self.log.push("r:entry done".to_owned());
+        Ok(())
+    }
+}
+
+#[test]
+fn a_command_whose_transition_takes_clock_time_counts_as_taken() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let r = system
+        .add(relay::component(
+            "r",
+            SlowEntry {
+                log: log.clone(),
+                cost: ms(10),
+            },
+        ))
+        .expect("r");
+    system.start().expect("started");
+    // `run` enters the initial state, whose entry section takes 10 ms of the clock:
+    // only an advance can end it, so the command is answered once the section takes
+    // that time, whatever its timeout (here an hour, which the command would
+    // otherwise wait out: the poll's deadline would fail the test first).
+    let patient = r.clone().with_command_timeout(Duration::from_secs(3_600));
+    let commanding =
+        std::thread::spawn(move || patient.command(Command::SetState(Controllable::Running)));
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while !commanding.is_finished() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the command waited for the clock"
+        );
+        std::thread::sleep(ms(1));
+    }
+    commanding.join().expect("no panic").expect("taken");
+    assert_eq!(log.take(), ["r:entry"]);
+    clock.advance(ms(10)).expect("settled");
+    assert_eq!(log.take(), ["r:entry done"]);
+    assert_eq!(r.state(), State::Running);
+    assert!(system.shutdown().clean());
+}
+
+#[test]
+fn a_section_may_take_more_time_than_an_instant_can_hold() {
+    let log = Log::default();
+    // Two hundred years, past what the clock's instants reach (about a hundred).
+    let (system, clock, _) = one_stage(&log, &[200 * 365 * 24 * 3_600 * 1_000]);
+    clock
+        .advance(Duration::from_secs(150 * 365 * 24 * 3_600))
+        .expect("the section is not waited for");
+    assert_eq!(log.take(), ["a:0"]);
+    assert!(system.shutdown().clean());
 }
