@@ -544,13 +544,7 @@ impl Context {
         match (self.spends, self.clock.as_virtual()) {
             (Spends::Member(id), Some(clock)) => {
                 let taking = self.shared.as_ref().map(|shared| &shared.taking_clock_time);
-                if let Some(taking) = taking {
-                    taking.store(true, std::sync::atomic::Ordering::Release);
-                }
-                clock.spend(id, cost);
-                if let Some(taking) = taking {
-                    taking.store(false, std::sync::atomic::Ordering::Release);
-                }
+                clock.spend(id, cost, taking);
             }
             (Spends::Harnessed, Some(clock)) => {
                 // Nothing else runs on a harness's clock: none to wait for.

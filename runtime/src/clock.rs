@@ -348,8 +348,9 @@ impl VirtualClock {
 
     /// The section of component `id` under way takes `cost` of the clock's time: wait
     /// until the clock has moved on by `cost` (see the module's documentation), or
-    /// the component's system shuts down ([`VirtualClock::release`]).
-    pub(crate) fn spend(&self, id: u64, cost: Duration) {
+    /// the component's system shuts down ([`VirtualClock::release`]). `taking` is
+    /// set meanwhile (the component's `Shared::taking_clock_time`).
+    pub(crate) fn spend(&self, id: u64, cost: Duration, taking: Option<&AtomicBool>) {
         let mut members = self.lock();
         let end = self
             .offset
@@ -358,6 +359,11 @@ impl VirtualClock {
         match members.components.get_mut(&id) {
             Some(member) if !member.released => member.spending = Some(end),
             _ => return,
+        }
+        // Told under the lock, with its end recorded: an advance after whoever reads
+        // it counts from the same time.
+        if let Some(taking) = taking {
+            taking.store(true, Ordering::Release);
         }
         self.settled.notify_all();
         while members.tripped < end
@@ -370,6 +376,9 @@ impl VirtualClock {
                 .moved
                 .wait(members)
                 .unwrap_or_else(PoisonError::into_inner);
+        }
+        if let Some(taking) = taking {
+            taking.store(false, Ordering::Release);
         }
         if let Some(member) = members.components.get_mut(&id) {
             member.spending = None;

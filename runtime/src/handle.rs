@@ -368,7 +368,10 @@ impl Handle {
             if let Some(reply) = answers.take_until(slice) {
                 return Some(reply);
             }
-            if Instant::now() >= deadline || self.shared.taking_clock_time.load(Ordering::Acquire) {
+            if Instant::now() >= deadline
+                || answers.is_closed()
+                || self.shared.taking_clock_time.load(Ordering::Acquire)
+            {
                 return None;
             }
         }

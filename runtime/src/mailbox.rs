@@ -124,6 +124,11 @@ impl<M> Mailbox<M> {
         letters
     }
 
+    /// Whether the mailbox is closed (its other end is gone).
+    pub(crate) fn is_closed(&self) -> bool {
+        self.lock().closed
+    }
+
     /// Whether nothing is queued (one load, no lock).
     pub(crate) fn is_empty(&self) -> bool {
         self.len.load(Ordering::Acquire) == 0
