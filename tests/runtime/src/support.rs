@@ -16,6 +16,30 @@ use crate::generated::{feeder, worker};
 
 pub mod compound;
 
+/// What components did, in the order they did it: lines their code pushes from
+/// their threads and the test takes.
+#[derive(Clone, Default)]
+pub struct Log(Arc<Mutex<Vec<String>>>);
+
+impl Log {
+    pub fn push(&self, line: String) {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(line);
+    }
+
+    /// The lines pushed since the last take.
+    pub fn take(&self) -> Vec<String> {
+        std::mem::take(
+            &mut *self
+                .0
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+}
+
 /// Panics injected into components' code print one line, without a backtrace: the
 /// default hook's backtrace (CI sets `RUST_BACKTRACE=1`) can take longer than a
 /// section's `max_response` on a loaded machine, and the section then counts as an

@@ -3,33 +3,17 @@
 //! timing and faults. On the virtual clock: a pass runs before the group settles, so
 //! what a packet causes within the group is done when `advance` returns.
 
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::Arc;
 use std::time::Duration;
 
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
 use coolbot_runtime_tests::generated::{blocking_relay, control_loop, last_loop};
+use coolbot_runtime_tests::support::Log;
 use coolbot_runtime_tests::{relay, stage};
 
 const PERIOD: Duration = Duration::from_millis(10);
-
-/// What the stages did, in the order they did it.
-#[derive(Clone, Default)]
-struct Log(Arc<Mutex<Vec<String>>>);
-
-impl Log {
-    fn push(&self, line: String) {
-        self.0
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push(line);
-    }
-
-    fn take(&self) -> Vec<String> {
-        std::mem::take(&mut *self.0.lock().unwrap_or_else(PoisonError::into_inner))
-    }
-}
 
 /// A periodic stage: its input plus one, sent on and logged as `name:value`.
 struct Step {

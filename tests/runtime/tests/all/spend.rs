@@ -4,35 +4,18 @@
 //! its system's shutdown does not wait for the clock; in a harness the clock moves
 //! on by itself.
 
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::Arc;
 use std::time::Duration;
 
 use coolbot::{
     Clock, Command, CompoundBuilder, Controllable, SectionResult, State, System, VirtualClock,
 };
 use coolbot_runtime_tests::supervision::Coordinating;
+use coolbot_runtime_tests::support::Log;
 use coolbot_runtime_tests::{relay, stage};
 
 /// `Stage`'s period (its `max_response` is 5 ms).
 const PERIOD: Duration = Duration::from_millis(10);
-
-/// What the stages did, in order: `name:period` at the start of each periodic section,
-/// `name:period done` at its end.
-#[derive(Clone, Default)]
-struct Log(Arc<Mutex<Vec<String>>>);
-
-impl Log {
-    fn push(&self, line: String) {
-        self.0
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push(line);
-    }
-
-    fn take(&self) -> Vec<String> {
-        std::mem::take(&mut *self.0.lock().unwrap_or_else(PoisonError::into_inner))
-    }
-}
 
 /// A periodic stage that takes `costs[n]` of its clock's time in its `n`th period
 /// (from 0; nothing past the list), and `start_cost` in its `start` hook.
@@ -82,17 +65,10 @@ fn ms(n: u64) -> Duration {
 #[test]
 fn a_section_taking_clock_time_is_measured_that_long_and_trips_its_max_response() {
     let log = Log::default();
-    let clock = VirtualClock::new();
-    let mut system = System::with_clock(Clock::virtual_clock(&clock));
     // Period 0: 3 ms, within the 5 ms `max_response`; period 1: 8 ms, beyond it.
-    let a = system
-        .add(stage::component("a", busy("a", &log, &[3, 8])))
-        .expect("a");
-    system.run_all().expect("running");
-    clock.settle().expect("settled");
     // The first period takes 3 ms of the clock: `advance` does not wait for it, and
     // it is not done before the clock gets there.
-    clock.advance(PERIOD).expect("settled");
+    let (system, clock, a) = one_stage(&log, &[3, 8]);
     assert_eq!(log.take(), ["a:0"]);
     clock.advance(ms(2)).expect("settled");
     assert_eq!(log.take(), Vec::<String>::new());
@@ -177,14 +153,7 @@ fn advancing_waits_neither_for_a_member_taking_clock_time_nor_for_its_group() {
 #[test]
 fn shutting_down_does_not_wait_for_a_section_taking_clock_time() {
     let log = Log::default();
-    let clock = VirtualClock::new();
-    let mut system = System::with_clock(Clock::virtual_clock(&clock));
-    system
-        .add(stage::component("a", busy("a", &log, &[3_600_000])))
-        .expect("a");
-    system.run_all().expect("running");
-    clock.settle().expect("settled");
-    clock.advance(PERIOD).expect("settled");
+    let (system, clock, _) = one_stage(&log, &[3_600_000]);
     assert_eq!(log.take(), ["a:0"]);
     // An hour of the clock that nobody advances: the shutdown ends the section.
     let report = system.shutdown();
