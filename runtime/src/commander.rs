@@ -157,15 +157,12 @@ impl Commander {
     /// `suspended`, `dead`), as its control port's `new_state` does. Returns when the
     /// transition has run (its sections and hooks).
     pub fn state(&mut self, instance: &str, target: Controllable) -> Result<(), CommandError> {
-        let verb = match target {
-            Controllable::Ready => "ready",
-            Controllable::Running => "run",
-            Controllable::Suspended => "suspend",
-            Controllable::Dead => "dead",
-        };
-        self.give(instance, verb.to_owned(), Command::SetState(target), |_| {
-            None
-        })
+        self.give(
+            instance,
+            target.verb().to_owned(),
+            Command::SetState(target),
+            |_| None,
+        )
     }
 
     /// Set controllable variable `variable` of `instance` to `value`.

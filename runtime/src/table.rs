@@ -110,6 +110,17 @@ impl Controllable {
             Controllable::Dead => State::Dead,
         }
     }
+
+    /// The command as written for people (`ready`, `run`, `suspend`, `dead`), as
+    /// supervision steps name it.
+    pub fn verb(self) -> &'static str {
+        match self {
+            Controllable::Ready => "ready",
+            Controllable::Running => "run",
+            Controllable::Suspended => "suspend",
+            Controllable::Dead => "dead",
+        }
+    }
 }
 
 /// What can happen to the default automaton.

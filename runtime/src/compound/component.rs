@@ -11,7 +11,7 @@ use crate::adapt::{AdaptAction, Adaptation, Pressure};
 use crate::automaton::{
     Automaton, Context, DegradationRefused, Driven, Fault, Section, ValueRefused,
 };
-use crate::monitor::Command;
+use crate::monitor::{Command, Step};
 use crate::spec::Spec;
 use crate::table::{Controllable, State};
 use crate::value::Value;
@@ -122,9 +122,11 @@ impl Compound {
     }
 
     /// Bring every instance that runs (or is suspended) to `target`, last declared
-    /// first.
-    pub(super) fn instances_to(&mut self, target: Controllable) {
-        for instance in self.instances.iter().rev() {
+    /// first. A command an instance does not take is a `CommandRefused` step,
+    /// published when the call returns.
+    pub(super) fn instances_to(&mut self, target: Controllable, cx: &mut Context) {
+        for index in (0..self.instances.len()).rev() {
+            let instance = &self.instances[index];
             let state = instance.handle.state();
             let follows = match target {
                 Controllable::Ready => matches!(state, State::Running | State::Suspended),
@@ -135,13 +137,35 @@ impl Compound {
                 Controllable::Dead => state != State::Dead,
                 Controllable::Running => false,
             };
-            if follows && let Err(fault) = command(&instance.handle, target) {
+            if !follows {
+                continue;
+            }
+            // `ready` and `suspend` wait as long as a supervisor's command does; `dead`
+            // (shutting down) as long as the instance's handle waits.
+            let outcome = if target == Controllable::Dead {
+                command(&instance.handle, target)
+            } else {
+                let bounded = instance
+                    .handle
+                    .clone()
+                    .with_command_timeout(self.commander.timeout());
+                command(&bounded, target)
+            };
+            if let Err(fault) = outcome {
                 crate::limited!(
                     &self.name,
                     |held| tracing::warn!(compound = %self.name, "{fault}{held}")
                 );
+                self.step(
+                    index,
+                    Step::CommandRefused {
+                        command: target.verb().to_owned(),
+                    },
+                    fault.text().to_owned(),
+                );
             }
         }
+        cx.supervision.append(&mut self.steps);
     }
 }
 
@@ -165,9 +189,9 @@ impl Automaton for Compound {
             if let Some(system) = &self.system {
                 system.release_spending();
             }
-            self.instances_to(Controllable::Dead);
+            self.instances_to(Controllable::Dead, cx);
         } else {
-            self.instances_to(Controllable::Ready);
+            self.instances_to(Controllable::Ready, cx);
         }
     }
 
@@ -256,10 +280,10 @@ impl Driven for Compound {
         Ok(())
     }
 
-    fn after_transition(&mut self, _from: State, to: State, _cx: &mut Context) {
+    fn after_transition(&mut self, _from: State, to: State, cx: &mut Context) {
         match to {
-            State::Ready => self.instances_to(Controllable::Ready),
-            State::Suspended => self.instances_to(Controllable::Suspended),
+            State::Ready => self.instances_to(Controllable::Ready, cx),
+            State::Suspended => self.instances_to(Controllable::Suspended, cx),
             State::Dead => {
                 if let Some(system) = self.system.take() {
                     let report = system.shutdown();

@@ -409,6 +409,78 @@ fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
     drop(system);
 }
 
+/// A compound suspended as a whole suspends its instances after it ("The instances
+/// follow the compound"): one hung in a section does not take the command within the
+/// compound's command timeout, and the refusal is a `CommandRefused` step on the
+/// compound's monitoring port, not only a log line. The compound's own transition
+/// still completes.
+#[test]
+fn an_instance_that_does_not_follow_its_compound_is_a_refused_step() {
+    let log: Answers = Arc::default();
+    let script = Script::new();
+    let (tap, feeder) = Tap::new();
+    let builder = fed_commanding::builder(
+        "base",
+        FedParts {
+            supervisor: Some(Suspending {
+                answers: Arc::clone(&log),
+            }),
+            script: Arc::clone(&script),
+            tap: Some(tap),
+        },
+    )
+    .unwrap()
+    .command_timeout(Duration::from_millis(20));
+    let w = builder.instance_handle("w").unwrap();
+    let mut system = System::new();
+    let base = system.add(builder.build().unwrap()).unwrap();
+    system.run_all().unwrap();
+    wait_user(&base, "operating");
+
+    let release = script.hang_in("busy.entry");
+    feeder.recv_timeout(WAIT).unwrap().kick.emit();
+    eventually(
+        || script.hanging.load(Ordering::SeqCst),
+        "the worker hangs in busy.entry",
+    );
+    base.command(Command::SetState(Controllable::Suspended))
+        .expect("the compound suspends");
+    assert_eq!(base.state(), State::Suspended);
+    let monitor = base
+        .wait_for(
+            |m| {
+                m.supervision.iter().any(|s| {
+                    s.step
+                        == Step::CommandRefused {
+                            command: "suspend".to_owned(),
+                        }
+                })
+            },
+            WAIT,
+        )
+        .unwrap_or_else(|t| panic!("{t}"));
+    let refused = monitor
+        .supervision
+        .iter()
+        .find(|s| matches!(s.step, Step::CommandRefused { .. }))
+        .unwrap();
+    assert_eq!(refused.instance, "w");
+    assert!(
+        refused
+            .detail
+            .contains("busy: the component did not take the command within 20ms"),
+        "{refused:?}"
+    );
+    // The withdrawn command had no effect once the section returns.
+    drop(release);
+    eventually(
+        || script.returned.load(Ordering::SeqCst) == 1,
+        "the hung section returns",
+    );
+    assert_ne!(w.state(), State::Suspended);
+    drop(system);
+}
+
 /// `Choosing`'s supervisor: `done`'s entry section sets the compound's result,
 /// `deciding`'s `choose` moves on once asked to.
 struct Choose {
