@@ -397,6 +397,21 @@ pub struct Context {
     pub(crate) spends: Spends,
     /// A section of the user automaton is under way (not a hook).
     pub(crate) in_section: bool,
+    /// While a command's transition runs: who to tell once one of its sections takes
+    /// time of a virtual clock ([`Context::spend`]).
+    pub(crate) transition_waiter: Option<TransitionWaiter>,
+}
+
+/// The sender of a command whose transition is under way, told once a section of the
+/// transition takes time of a virtual clock: only the clock can end the section
+/// then, and whoever moves the clock may be the one waiting, so the sender counts
+/// the command as taken.
+pub(crate) struct TransitionWaiter(pub(crate) Box<dyn FnOnce() + Send>);
+
+impl fmt::Debug for TransitionWaiter {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("TransitionWaiter")
+    }
 }
 
 /// How a component's section takes time of its clock ([`Context::spend`]).
@@ -437,6 +452,7 @@ impl Context {
             clock: crate::clock::Clock::real(),
             spends: Spends::Sleeping,
             in_section: false,
+            transition_waiter: None,
         }
     }
 
@@ -543,8 +559,8 @@ impl Context {
         }
         match (self.spends, self.clock.as_virtual()) {
             (Spends::Member(id), Some(clock)) => {
-                let taking = self.shared.as_ref().map(|shared| &shared.taking_clock_time);
-                clock.spend(id, cost, taking);
+                let told = self.transition_waiter.take().map(|waiter| waiter.0);
+                clock.spend(id, cost, told);
             }
             (Spends::Harnessed, Some(clock)) => {
                 // Nothing else runs on a harness's clock: none to wait for.

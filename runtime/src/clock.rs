@@ -348,9 +348,11 @@ impl VirtualClock {
 
     /// The section of component `id` under way takes `cost` of the clock's time: wait
     /// until the clock has moved on by `cost` (see the module's documentation), or
-    /// the component's system shuts down ([`VirtualClock::release`]). `taking` is
-    /// set meanwhile (the component's `Shared::taking_clock_time`).
-    pub(crate) fn spend(&self, id: u64, cost: Duration, taking: Option<&AtomicBool>) {
+    /// the component's system shuts down ([`VirtualClock::release`]). `told` is
+    /// called once the section's end is recorded, under the clock's lock (a command
+    /// waiting for the transition this section is part of learns it there: an
+    /// advance made after it learns counts from the same time).
+    pub(crate) fn spend(&self, id: u64, cost: Duration, told: Option<Box<dyn FnOnce() + Send>>) {
         let mut members = self.lock();
         let end = self
             .offset
@@ -360,10 +362,8 @@ impl VirtualClock {
             Some(member) if !member.released => member.spending = Some(end),
             _ => return,
         }
-        // Told under the lock, with its end recorded: an advance after whoever reads
-        // it counts from the same time.
-        if let Some(taking) = taking {
-            taking.store(true, Ordering::Release);
+        if let Some(told) = told {
+            told();
         }
         self.settled.notify_all();
         while members.tripped < end
@@ -376,9 +376,6 @@ impl VirtualClock {
                 .moved
                 .wait(members)
                 .unwrap_or_else(PoisonError::into_inner);
-        }
-        if let Some(taking) = taking {
-            taking.store(false, Ordering::Release);
         }
         if let Some(member) = members.components.get_mut(&id) {
             member.spending = None;

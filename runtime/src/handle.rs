@@ -32,8 +32,8 @@ pub(crate) struct ControlMessage {
     pub(crate) claim: Arc<AtomicU8>,
 }
 
-/// How many answers one command gets at most (accepted, then done).
-pub(crate) const REPLIES: usize = 2;
+/// How many answers one command gets at most (accepted, taking clock time, done).
+pub(crate) const REPLIES: usize = 3;
 
 pub(crate) const PENDING: u8 = 0;
 pub(crate) const TAKEN: u8 = 1;
@@ -76,6 +76,9 @@ pub(crate) struct Posted {
 pub(crate) enum Reply {
     /// The command is legal; for a state change, the transition starts now.
     Accepted,
+    /// A section of the transition takes time of a virtual clock (`Context::spend`):
+    /// the command counts as taken.
+    TakingClockTime,
     /// The transition finished.
     Done,
     /// The command was rejected.
@@ -278,7 +281,8 @@ impl Handle {
         loop {
             match posted.answers.take_until(until) {
                 Some(Reply::Accepted) => posted.accepted = true,
-                Some(Reply::Done) => return Some(Ok(())),
+                // (Taking time of a virtual clock: counts as taken, as in `finish`.)
+                Some(Reply::Done | Reply::TakingClockTime) => return Some(Ok(())),
                 Some(Reply::Rejected(reason)) => {
                     return Some(Err(self.rejected(&posted.command, reason)));
                 }
@@ -324,57 +328,37 @@ impl Handle {
             accepted: _,
         } = posted;
         let is_dead = command == Command::SetState(Controllable::Dead);
-        match answers.take_until(deadline) {
-            Some(Reply::Accepted) => {}
-            Some(Reply::Done) => return Ok(()),
-            Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
-            None => {
-                if claim
-                    .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
-                    .is_ok()
-                {
-                    return Err(Refusal::Busy);
-                }
-                // Taken just now: the transition is under way.
-                if self
-                    .transition_done(
-                        &answers,
-                        crate::time::later(Instant::now(), self.command_timeout),
-                    )
-                    .is_none()
-                    && !is_dead
-                {
-                    return Ok(());
+        let mut until = deadline;
+        // The component took it (its `Accepted` may come after the claim).
+        let mut taken = false;
+        loop {
+            match answers.take_until(until) {
+                Some(Reply::Accepted) => taken = true,
+                // A section of the transition takes time of a virtual clock: only the
+                // clock can end it, and whoever moves the clock may be the one
+                // waiting, so the command counts as taken, as one whose transition
+                // outlasts its time.
+                Some(Reply::Done | Reply::TakingClockTime) => break,
+                Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
+                // The transition outlasts its time: it counts as taken.
+                None if taken => break,
+                None => {
+                    if claim
+                        .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+                        .is_ok()
+                    {
+                        return Err(Refusal::Busy);
+                    }
+                    // Taken just now: given as long again to finish its transition.
+                    taken = true;
+                    until = crate::time::later(Instant::now(), self.command_timeout);
                 }
             }
         }
-        // Accepted: wait for the transition to finish.
-        let _ = self.transition_done(&answers, deadline);
         if is_dead {
-            self.join_if_exited(deadline);
+            self.join_if_exited(until);
         }
         Ok(())
-    }
-
-    /// Wait until `deadline` for the answer that ends a transition under way, or until
-    /// the transition takes time of a virtual clock (`Context::spend`): only the
-    /// clock can end it then, and whoever moves the clock may be the one waiting, so
-    /// the command counts as taken, as one whose transition outlasts its deadline.
-    fn transition_done(&self, answers: &Mailbox<Reply>, deadline: Instant) -> Option<Reply> {
-        /// How often a long transition is looked at for taking clock time.
-        const LOOK: Duration = Duration::from_millis(2);
-        loop {
-            let slice = crate::time::later(Instant::now(), LOOK).min(deadline);
-            if let Some(reply) = answers.take_until(slice) {
-                return Some(reply);
-            }
-            if Instant::now() >= deadline
-                || answers.is_closed()
-                || self.shared.taking_clock_time.load(Ordering::Acquire)
-            {
-                return None;
-            }
-        }
     }
 
     /// [`Handle::command`] with why it failed as a [`Refusal`] (a compound's

@@ -124,11 +124,6 @@ impl<M> Mailbox<M> {
         letters
     }
 
-    /// Whether the mailbox is closed (its other end is gone).
-    pub(crate) fn is_closed(&self) -> bool {
-        self.lock().closed
-    }
-
     /// Whether nothing is queued (one load, no lock).
     pub(crate) fn is_empty(&self) -> bool {
         self.len.load(Ordering::Acquire) == 0
@@ -189,6 +184,13 @@ impl<M> Closer<M> {
             mailbox,
             discard: false,
         }
+    }
+}
+
+impl<M> Closer<M> {
+    /// The mailbox this end closes, to post to from elsewhere while this end lives.
+    pub(crate) fn mailbox(&self) -> Arc<Mailbox<M>> {
+        Arc::clone(&self.mailbox)
     }
 }
 

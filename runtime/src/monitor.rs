@@ -622,9 +622,6 @@ pub(crate) struct Shared {
     pub(crate) adapt_managed: AtomicBool,
     /// The execution group the component runs in, once its thread runs.
     pub(crate) group: std::sync::OnceLock<Arc<GroupCycles>>,
-    /// A section of the component is taking time of its virtual clock
-    /// (`Context::spend`): a command whose transition waits for it counts as taken.
-    pub(crate) taking_clock_time: AtomicBool,
 }
 
 impl std::fmt::Debug for Shared {
@@ -647,7 +644,6 @@ impl Shared {
             thread: std::sync::OnceLock::new(),
             adapt_managed: AtomicBool::new(false),
             group: std::sync::OnceLock::new(),
-            taking_clock_time: AtomicBool::new(false),
         }
     }
 

@@ -31,7 +31,12 @@ impl Runner {
             Command::SetState(target) => match next(self.state, Event::Command(*target)) {
                 Outcome::Go { .. } => {
                     reply(Reply::Accepted);
+                    let answers = message.reply.mailbox();
+                    self.cx.transition_waiter = Some(TransitionWaiter(Box::new(move || {
+                        let _ = answers.post(Reply::TakingClockTime);
+                    })));
                     self.apply(Event::Command(*target));
+                    self.cx.transition_waiter = None;
                     reply(Reply::Done);
                 }
                 Outcome::Stay => reply(Reply::Done),

@@ -27,7 +27,9 @@ use std::time::{Duration, Instant};
 use crate::adapt::{
     AdaptAction, AdaptConfig, Adaptation, Detector, Floor, Ladder, Observation, Pressure, Setting,
 };
-use crate::automaton::{Atomic, Context, DegradationRefused, Driven, Fault, Section};
+use crate::automaton::{
+    Atomic, Context, DegradationRefused, Driven, Fault, Section, TransitionWaiter,
+};
 use crate::chain::Chain;
 use crate::clock::Clock;
 use crate::equalize::{Activation, Board, EqualizeConfig, Seat, ThreadStats};
