@@ -535,6 +535,18 @@ impl Context {
         &self.name
     }
 
+    /// How a command this call gives waits: in the time of a virtual clock in a
+    /// section of a member of one (as [`Context::spend`] takes its time), else in
+    /// real time (`None`).
+    pub(crate) fn clock_wait(&self) -> Option<crate::clock::ClockWait> {
+        match (self.spends, self.clock.as_virtual()) {
+            (Spends::Member(id), Some(clock)) if self.in_section => Some(
+                crate::clock::ClockWait::new(std::sync::Arc::clone(clock), id),
+            ),
+            _ => None,
+        }
+    }
+
     /// Take `cost` of time in the section under way, as if it computed that long (a
     /// simulated workload, a model of a slow driver): the section is measured that
     /// much longer, and a `max_response` it exceeds trips. On the real clock the

@@ -162,6 +162,9 @@ struct Member {
     spending: Option<u64>,
     /// Its system is shutting down: a section taking the clock's time returns at once.
     released: bool,
+    /// The command whose answer it waits for in the clock's time
+    /// ([`ClockWait::wait`]); `spending` holds that wait's end.
+    awaiting: Option<u64>,
 }
 
 /// Why [`VirtualClock::advance`] returned before every component settled.
@@ -172,6 +175,79 @@ pub struct NotSettled {
     pub timeout: Duration,
     /// The components that had not settled.
     pub busy: Vec<String>,
+}
+
+/// A member of a virtual clock that waits, in a section, for another component's
+/// answer (a supervisor's command to its instance): it waits in the clock's time,
+/// as a section taking the clock's time does, until the answer comes or the clock
+/// reaches the wait's end. Meanwhile `advance` does not wait for it: the component it
+/// waits for may need the clock to move to answer.
+#[derive(Clone, Debug)]
+pub(crate) struct ClockWait {
+    clock: Arc<VirtualClock>,
+    id: u64,
+}
+
+/// How a [`ClockWait::wait`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Waited {
+    /// The answer came (or its sender is gone).
+    Answered,
+    /// The clock reached the wait's end first.
+    TimedOut,
+    /// The member's system shuts down (or it left the clock): the wait goes on in
+    /// real time.
+    Off,
+}
+
+/// Given with a command by a [`ClockWait`]er: the component answering it tells the
+/// waiter each time it posts an answer (and the command's message once more when it
+/// is dropped, `crate::handle::ControlMessage`).
+#[derive(Clone)]
+pub(crate) struct AnswerNotice {
+    clock: Arc<VirtualClock>,
+    id: u64,
+    command: u64,
+}
+
+impl AnswerNotice {
+    /// The command's number, for [`ClockWait::wait`].
+    pub(crate) fn command(&self) -> u64 {
+        self.command
+    }
+
+    /// An answer was posted.
+    pub(crate) fn answered(&self) {
+        self.clock.answered(self.id, self.command);
+    }
+}
+
+impl ClockWait {
+    /// Member `id` of `clock`.
+    pub(crate) fn new(clock: Arc<VirtualClock>, id: u64) -> ClockWait {
+        ClockWait { clock, id }
+    }
+
+    /// The clock's time now.
+    pub(crate) fn now(&self) -> Instant {
+        self.clock.now()
+    }
+
+    /// A new command's notice, for the component that answers it.
+    pub(crate) fn notice(&self) -> AnswerNotice {
+        static COMMANDS: AtomicU64 = AtomicU64::new(0);
+        AnswerNotice {
+            clock: Arc::clone(&self.clock),
+            id: self.id,
+            command: COMMANDS.fetch_add(1, Ordering::Relaxed),
+        }
+    }
+
+    /// Wait until `answered()` (an answer to `command`, the number of its
+    /// [`AnswerNotice`], is posted), or the clock reaches `until`.
+    pub(crate) fn wait(&self, command: u64, until: Instant, answered: &dyn Fn() -> bool) -> Waited {
+        self.clock.wait_answer(self.id, command, until, answered)
+    }
 }
 
 impl VirtualClock {
@@ -316,6 +392,7 @@ impl VirtualClock {
                 thread: std::thread::current().id(),
                 spending: None,
                 released,
+                awaiting: None,
             },
         );
         id
@@ -349,9 +426,9 @@ impl VirtualClock {
     /// The section of component `id` under way takes `cost` of the clock's time: wait
     /// until the clock has moved on by `cost` (see the module's documentation), or
     /// the component's system shuts down ([`VirtualClock::release`]). `told` is
-    /// called once the section's end is recorded, under the clock's lock (a command
-    /// waiting for the transition this section is part of learns it there: an
-    /// advance made after it learns counts from the same time).
+    /// called once the section's end is recorded (a command waiting for the
+    /// transition this section is part of learns it there: an advance made after it
+    /// learns counts from the same time).
     pub(crate) fn spend(&self, id: u64, cost: Duration, told: Option<Box<dyn FnOnce() + Send>>) {
         let mut members = self.lock();
         let end = self
@@ -362,10 +439,15 @@ impl VirtualClock {
             Some(member) if !member.released => member.spending = Some(end),
             _ => return,
         }
-        if let Some(told) = told {
-            told();
-        }
         self.settled.notify_all();
+        if let Some(told) = told {
+            // After the end is recorded: whoever learns it and then advances the
+            // clock counts from the same time. Outside the lock: the one told may
+            // wait in the clock's time ([`ClockWait`]).
+            drop(members);
+            told();
+            members = self.lock();
+        }
         while members.tripped < end
             && members
                 .components
@@ -380,6 +462,77 @@ impl VirtualClock {
         if let Some(member) = members.components.get_mut(&id) {
             member.spending = None;
         }
+    }
+
+    /// [`ClockWait::wait`]: member `id` waits for an answer to `command`.
+    fn wait_answer(
+        &self,
+        id: u64,
+        command: u64,
+        until: Instant,
+        answered: &dyn Fn() -> bool,
+    ) -> Waited {
+        let end = nanos(until.saturating_duration_since(self.base));
+        let mut members = self.lock();
+        if answered() {
+            return Waited::Answered;
+        }
+        match members.components.get_mut(&id) {
+            Some(member) if !member.released => {
+                member.spending = Some(end);
+                member.awaiting = Some(command);
+            }
+            _ => return Waited::Off,
+        }
+        self.settled.notify_all();
+        let waited = loop {
+            if answered() {
+                break Waited::Answered;
+            }
+            let tripped = members.tripped;
+            let Some(member) = members.components.get_mut(&id) else {
+                break Waited::Off;
+            };
+            if member.released {
+                break Waited::Off;
+            }
+            if tripped >= end {
+                break Waited::TimedOut;
+            }
+            if member.awaiting.is_none() {
+                // Told of an answer that is not there to take (the command's message
+                // was dropped before its answers closed): still waiting.
+                member.spending = Some(end);
+                member.awaiting = Some(command);
+                self.settled.notify_all();
+            }
+            members = self
+                .moved
+                .wait(members)
+                .unwrap_or_else(PoisonError::into_inner);
+        };
+        if let Some(member) = members.components.get_mut(&id)
+            && member.awaiting == Some(command)
+        {
+            member.awaiting = None;
+            member.spending = None;
+        }
+        waited
+    }
+
+    /// An answer to `command`, which member `id` may be waiting for, was posted: the
+    /// member no longer waits in the clock's time (it is busy again: an `advance`
+    /// from now on waits for it to settle), and it is woken.
+    fn answered(&self, id: u64, command: u64) {
+        let mut members = self.lock();
+        if let Some(member) = members.components.get_mut(&id)
+            && member.awaiting == Some(command)
+        {
+            member.awaiting = None;
+            member.spending = None;
+        }
+        drop(members);
+        self.moved.notify_all();
     }
 
     /// The components whose doorbells are `bells` are shutting down: a section of

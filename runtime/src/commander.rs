@@ -21,6 +21,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use crate::clock::ClockWait;
 use crate::handle::{Handle, Refusal};
 use crate::monitor::{Command, Step, Supervision};
 use crate::refused::Refused;
@@ -79,6 +80,9 @@ pub struct Commander {
     steps: Vec<Supervision>,
     /// The compound is on its way to `dead` ([`Commander::set_stopping`]).
     stopping: bool,
+    /// The section giving commands now runs on a virtual clock: they wait in its
+    /// time ([`Commander::set_clock_wait`]).
+    clock_wait: Option<ClockWait>,
 }
 
 impl std::fmt::Debug for Commander {
@@ -114,6 +118,7 @@ impl Commander {
             timeout,
             steps: Vec::new(),
             stopping: false,
+            clock_wait: None,
         }
     }
 
@@ -140,6 +145,7 @@ impl Commander {
             timeout: Duration::ZERO,
             steps: Vec::new(),
             stopping: false,
+            clock_wait: None,
         }
     }
 
@@ -262,6 +268,14 @@ impl Commander {
         self.stopping = stopping;
     }
 
+    /// The call about to give commands runs on a virtual clock (`Some`: a supervisor's
+    /// section, `Context::clock_wait`): each command waits for the instance in the
+    /// clock's time, its timeout counted in it, so that an instance whose section
+    /// takes the clock's time (`Context::spend`) answers once the clock has moved on.
+    pub(crate) fn set_clock_wait(&mut self, wait: Option<ClockWait>) {
+        self.clock_wait = wait;
+    }
+
     /// The steps taken since the last call (the compound publishes them).
     pub(crate) fn take_steps(&mut self) -> Vec<Supervision> {
         std::mem::take(&mut self.steps)
@@ -345,7 +359,7 @@ impl Commander {
             return Err(Refused::Dead);
         }
         handle
-            .command_refusable(command.clone())
+            .command_refusable(command.clone(), self.clock_wait.as_ref())
             .map_err(|refusal| match refusal {
                 Refusal::NotStarted => Refused::NotStarted,
                 Refusal::Ended => Refused::Dead,

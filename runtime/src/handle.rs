@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::Receiver;
 
+use crate::clock::{AnswerNotice, ClockWait, Waited};
 use crate::mailbox::{Closer, Mailbox, PostError};
 use crate::monitor::{Command, Monitor, MonitorEvent, Rejected, Shared, Subscription, Timeout};
 use crate::table::{Controllable, State};
@@ -30,6 +31,18 @@ pub(crate) struct ControlMessage {
     pub(crate) reply: Closer<Reply>,
     /// `PENDING`, then `TAKEN` by the component or `WITHDRAWN` by the sender.
     pub(crate) claim: Arc<AtomicU8>,
+    /// A sender waiting in a virtual clock's time: told of each answer, and when the
+    /// message is dropped (after `reply`, declared before it, closes the answers).
+    pub(crate) notice: Option<NoticeOnDrop>,
+}
+
+/// A message's [`AnswerNotice`], given once more when the message is dropped.
+pub(crate) struct NoticeOnDrop(pub(crate) AnswerNotice);
+
+impl Drop for NoticeOnDrop {
+    fn drop(&mut self) {
+        self.0.answered();
+    }
 }
 
 /// How many answers one command gets at most (accepted, taking clock time, done).
@@ -48,8 +61,17 @@ impl ControlMessage {
             by_supervisor,
             reply,
             claim: Arc::new(AtomicU8::new(PENDING)),
+            notice: None,
         };
         (message, answers)
+    }
+
+    /// Post `answer`, and tell a sender waiting in a virtual clock's time.
+    pub(crate) fn answer(&self, answer: Reply) {
+        let _ = self.reply.post(answer);
+        if let Some(notice) = &self.notice {
+            notice.0.answered();
+        }
     }
 
     /// Claim the message for execution; false if the sender withdrew it.
@@ -69,6 +91,10 @@ pub(crate) struct Posted {
     deadline: Instant,
     /// [`Handle::poll`] saw the component take it (the transition is under way).
     accepted: bool,
+    /// Posted by a section on a virtual clock: it waits in the clock's time, until the
+    /// clock's deadline here (then, once its system shuts down, in real time until
+    /// `deadline`); the command's number.
+    on_clock: Option<(ClockWait, Instant, u64)>,
 }
 
 /// The component's answers to one command.
@@ -244,6 +270,17 @@ impl Handle {
     }
 
     fn post_from(&self, command: Command, by_supervisor: bool) -> Result<Posted, Refusal> {
+        self.post_waiting(command, by_supervisor, None)
+    }
+
+    /// [`Handle::post_from`] by a sender that waits for the answers in the time of a
+    /// virtual clock (`clock_wait`: a supervisor's section).
+    fn post_waiting(
+        &self,
+        command: Command,
+        by_supervisor: bool,
+        clock_wait: Option<&ClockWait>,
+    ) -> Result<Posted, Refusal> {
         if !self.shared.spawned.load(Ordering::Acquire) {
             return Err(Refusal::NotStarted);
         }
@@ -252,7 +289,14 @@ impl Handle {
             return Err(Refusal::OwnThread);
         }
         let deadline = crate::time::later(Instant::now(), self.command_timeout);
-        let (message, answers) = ControlMessage::new(command.clone(), by_supervisor);
+        let (mut message, answers) = ControlMessage::new(command.clone(), by_supervisor);
+        let on_clock = clock_wait.map(|wait| {
+            let notice = wait.notice();
+            let number = notice.command();
+            message.notice = Some(NoticeOnDrop(notice));
+            let until = crate::time::later(wait.now(), self.command_timeout);
+            (wait.clone(), until, number)
+        });
         let claim = Arc::clone(&message.claim);
         match self.control.post(message) {
             Ok(()) => {}
@@ -266,6 +310,7 @@ impl Handle {
             claim,
             deadline,
             accepted: false,
+            on_clock,
         })
     }
 
@@ -326,13 +371,14 @@ impl Handle {
             claim,
             deadline,
             accepted: _,
+            mut on_clock,
         } = posted;
         let is_dead = command == Command::SetState(Controllable::Dead);
         let mut until = deadline;
         // The component took it (its `Accepted` may come after the claim).
         let mut taken = false;
         loop {
-            match answers.take_until(until) {
+            match next_answer(&answers, until, &mut on_clock) {
                 Some(Reply::Accepted) => taken = true,
                 // A section of the transition takes time of a virtual clock: only the
                 // clock can end it, and whoever moves the clock may be the one
@@ -352,6 +398,9 @@ impl Handle {
                     // Taken just now: given as long again to finish its transition.
                     taken = true;
                     until = crate::time::later(Instant::now(), self.command_timeout);
+                    if let Some((wait, clock_until, _)) = &mut on_clock {
+                        *clock_until = crate::time::later(wait.now(), self.command_timeout);
+                    }
                 }
             }
         }
@@ -362,9 +411,14 @@ impl Handle {
     }
 
     /// [`Handle::command`] with why it failed as a [`Refusal`] (a compound's
-    /// supervisor commanding its instances: `crate::commander`).
-    pub(crate) fn command_refusable(&self, command: Command) -> Result<(), Refusal> {
-        let posted = self.post_command(command)?;
+    /// supervisor commanding its instances: `crate::commander`), waiting in the time
+    /// of a virtual clock with `clock_wait` (a supervisor's section on one).
+    pub(crate) fn command_refusable(
+        &self,
+        command: Command,
+        clock_wait: Option<&ClockWait>,
+    ) -> Result<(), Refusal> {
+        let posted = self.post_waiting(command, false, clock_wait)?;
         self.finish_command(posted)
     }
 
@@ -458,4 +512,23 @@ impl Handle {
     pub fn wait_state(&self, state: State, timeout: Duration) -> Result<Monitor, Timeout> {
         self.wait_for(|monitor| monitor.state == state, timeout)
     }
+}
+
+/// The next answer in `answers`, waiting until `until` (real time), or with
+/// `on_clock` in the time of a virtual clock until its deadline there; `None` when
+/// none came by then (or the component dropped the command unanswered). Once the
+/// waiter's system shuts down, the wait goes on in real time.
+fn next_answer(
+    answers: &Mailbox<Reply>,
+    until: Instant,
+    on_clock: &mut Option<(ClockWait, Instant, u64)>,
+) -> Option<Reply> {
+    if let Some((wait, clock_until, number)) = on_clock {
+        let came = || !answers.is_empty() || answers.is_closed();
+        match wait.wait(*number, *clock_until, &came) {
+            Waited::Answered | Waited::TimedOut => return answers.take_until(Instant::now()),
+            Waited::Off => *on_clock = None,
+        }
+    }
+    answers.take_until(until)
 }

@@ -125,6 +125,11 @@ impl<M> Mailbox<M> {
     }
 
     /// Whether nothing is queued (one load, no lock).
+    /// Whether the mailbox is closed (its other end is gone).
+    pub(crate) fn is_closed(&self) -> bool {
+        self.lock().closed
+    }
+
     pub(crate) fn is_empty(&self) -> bool {
         self.len.load(Ordering::Acquire) == 0
     }

@@ -198,6 +198,7 @@ impl Automaton for Compound {
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
         self.sectioned = true;
         self.commander.set_stopping(cx.stopping());
+        self.commander.set_clock_wait(cx.clock_wait());
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,
@@ -214,6 +215,7 @@ impl Automaton for Compound {
     }
 
     fn choose(&mut self, state: usize, cx: &mut Context) -> Option<usize> {
+        self.commander.set_clock_wait(cx.clock_wait());
         let mut scx = SupervisorCx {
             rt: cx,
             view: &self.view,

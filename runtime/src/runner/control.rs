@@ -10,9 +10,7 @@ impl Runner {
         if !message.take() {
             return; // Withdrawn by a sender that gave up waiting.
         }
-        let reply = |answer: Reply| {
-            let _ = message.reply.post(answer);
-        };
+        let reply = |answer: Reply| message.answer(answer);
         // Out of range, whoever sends it and whatever stands behind this component
         // (a proxy's remote instance checks again on its own node).
         if let Err(refused) = crate::ranges::command(&message.command) {
@@ -32,8 +30,12 @@ impl Runner {
                 Outcome::Go { .. } => {
                     reply(Reply::Accepted);
                     let answers = message.reply.mailbox();
+                    let notice = message.notice.as_ref().map(|notice| notice.0.clone());
                     self.cx.transition_waiter = Some(TransitionWaiter(Box::new(move || {
                         let _ = answers.post(Reply::TakingClockTime);
+                        if let Some(notice) = notice {
+                            notice.answered();
+                        }
                     })));
                     self.apply(Event::Command(*target));
                     self.cx.transition_waiter = None;

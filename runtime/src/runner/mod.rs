@@ -494,7 +494,7 @@ impl Runner {
         self.update_cpu(true);
         while let Some(message) = self.control.take() {
             if message.take() {
-                let _ = message.reply.post(Reply::Rejected(
+                message.answer(Reply::Rejected(
                     "the component is dead: its thread has ended".to_owned(),
                 ));
             }

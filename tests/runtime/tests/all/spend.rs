@@ -8,8 +8,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use coolbot::{
-    Clock, Command, CompoundBuilder, Controllable, SectionResult, State, System, VirtualClock,
+    Clock, Command, CompoundBuilder, Controllable, Section, SectionResult, Spec, State, Supervisor,
+    SupervisorCx, System, Value, VirtualClock,
 };
+use coolbot_runtime_tests::generated::cmp_counting;
 use coolbot_runtime_tests::supervision::Coordinating;
 use coolbot_runtime_tests::support::Log;
 use coolbot_runtime_tests::{relay, stage};
@@ -330,5 +332,110 @@ fn a_section_may_take_more_time_than_an_instant_can_hold() {
         .advance(Duration::from_secs(150 * 365 * 24 * 3_600))
         .expect("the section is not waited for");
     assert_eq!(log.take(), ["a:0"]);
+    assert!(system.shutdown().clean());
+}
+
+/// A supervisor with the shape of `CmpCounting` (a periodic section every 2 ms),
+/// whose first periodic section past 11 ms (at 12 ms: `a`'s first period, from 10 ms,
+/// takes the clock's time then) commands `a` to suspend, and logs the answer with
+/// the clock's time.
+struct SuspendsA {
+    log: Log,
+    clock: Arc<VirtualClock>,
+    commanded: bool,
+}
+
+impl Supervisor for SuspendsA {
+    fn spec(&self) -> &'static Spec {
+        &cmp_counting::SPEC
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::UInt(0)
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        if section != Section::Periodic || self.commanded || self.clock.elapsed() < ms(11) {
+            return Ok(());
+        }
+        self.commanded = true;
+        let at = self.clock.elapsed();
+        self.log.push(format!("k: suspend a at {at:?}"));
+        let answer = match cx.instances.state("a", Controllable::Suspended) {
+            Ok(()) => "taken".to_owned(),
+            Err(refused) => refused.reason.to_string(),
+        };
+        self.log
+            .push(format!("k: {answer} at {:?}", self.clock.elapsed()));
+        Ok(())
+    }
+}
+
+/// A compound `k` over `a`, whose period 0 takes `cost` of the clock's time, its
+/// supervisor's commands waiting at most `timeout`.
+fn commanding_a_spender(cost: u64, timeout: Duration) -> (System, Arc<VirtualClock>, Log) {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let supervisor = SuspendsA {
+        log: log.clone(),
+        clock: Arc::clone(&clock),
+        commanded: false,
+    };
+    let k = CompoundBuilder::new("k", supervisor)
+        .instance(stage::component("a", busy("a", &log, &[cost])))
+        .command_timeout(timeout)
+        .build()
+        .expect("build");
+    system.add(k).expect("k");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    (system, clock, log)
+}
+
+/// A supervisor's command to an instance whose section takes the clock's time waits
+/// for it in the clock's time: the instance takes it once its section returned, at
+/// the time the clock reached, and `advance` never waits for the supervisor
+/// meanwhile.
+#[test]
+fn a_supervisor_commanding_an_instance_taking_clock_time_waits_in_the_clocks_time() {
+    let (system, clock, log) = commanding_a_spender(4, Duration::from_millis(250));
+    for _ in 0..16 {
+        clock.advance(ms(1)).expect("settled");
+    }
+    assert_eq!(
+        log.take(),
+        [
+            "a:0",
+            "k: suspend a at 12ms",
+            "a:0 done",
+            "k: taken at 14ms"
+        ]
+    );
+    assert!(system.shutdown().clean());
+}
+
+/// Its timeout is counted in the clock's time too: one the section outlasts ends at
+/// the advance that reaches it, and the command, never taken, is withdrawn.
+#[test]
+fn a_supervisor_command_an_instance_taking_clock_time_outlasts_is_withdrawn_in_the_clocks_time() {
+    let (system, clock, log) = commanding_a_spender(4, Duration::from_millis(1));
+    for _ in 0..16 {
+        clock.advance(ms(1)).expect("settled");
+    }
+    assert_eq!(
+        log.take(),
+        [
+            "a:0",
+            "k: suspend a at 12ms",
+            "k: the instance did not take the command within 1ms (busy in a section); withdrawn at 13ms",
+            "a:0 done",
+        ]
+    );
     assert!(system.shutdown().clean());
 }
