@@ -16,6 +16,10 @@ use crate::generated::{feeder, worker};
 
 pub mod compound;
 
+/// What [`Script::hang_in`] returns: dropping it (or sending on it) lets the hung
+/// hook return.
+pub type Release = crossbeam_channel::Sender<()>;
+
 /// What components did, in the order they did it: lines their code pushes from
 /// their threads and the test takes.
 #[derive(Clone, Default)]
@@ -166,7 +170,7 @@ impl Script {
     }
 
     /// Make `hook` hang (once) until the returned sender sends or is dropped.
-    pub fn hang_in(&self, hook: &'static str) -> crossbeam_channel::Sender<()> {
+    pub fn hang_in(&self, hook: &'static str) -> Release {
         let (release, gate) = crossbeam_channel::bounded(1);
         *self.hang.lock().unwrap() = Some((hook, gate));
         release

@@ -376,9 +376,10 @@ impl Supervisor for SuspendsA {
     }
 }
 
-/// A compound `k` over `a`, whose period 0 takes `cost` of the clock's time, its
-/// supervisor's commands waiting at most `timeout`.
-fn commanding_a_spender(cost: u64, timeout: Duration) -> (System, Arc<VirtualClock>, Log) {
+/// A compound `k` over `a`, whose first period (from 10 ms) takes 4 ms of the clock's
+/// time, its supervisor's commands waiting at most `timeout`: what they did over the
+/// clock's first 16 ms, in 1 ms steps, and a clean shutdown.
+fn commanding_a_spender(timeout: Duration) -> Vec<String> {
     let log = Log::default();
     let clock = VirtualClock::new();
     let mut system = System::with_clock(Clock::virtual_clock(&clock));
@@ -388,14 +389,19 @@ fn commanding_a_spender(cost: u64, timeout: Duration) -> (System, Arc<VirtualClo
         commanded: false,
     };
     let k = CompoundBuilder::new("k", supervisor)
-        .instance(stage::component("a", busy("a", &log, &[cost])))
+        .instance(stage::component("a", busy("a", &log, &[4])))
         .command_timeout(timeout)
         .build()
         .expect("build");
     system.add(k).expect("k");
     system.run_all().expect("running");
     clock.settle().expect("settled");
-    (system, clock, log)
+    for _ in 0..16 {
+        clock.advance(ms(1)).expect("settled");
+    }
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+    log.take()
 }
 
 /// A supervisor's command to an instance whose section takes the clock's time waits
@@ -404,12 +410,8 @@ fn commanding_a_spender(cost: u64, timeout: Duration) -> (System, Arc<VirtualClo
 /// meanwhile.
 #[test]
 fn a_supervisor_commanding_an_instance_taking_clock_time_waits_in_the_clocks_time() {
-    let (system, clock, log) = commanding_a_spender(4, Duration::from_millis(250));
-    for _ in 0..16 {
-        clock.advance(ms(1)).expect("settled");
-    }
     assert_eq!(
-        log.take(),
+        commanding_a_spender(Duration::from_millis(250)),
         [
             "a:0",
             "k: suspend a at 12ms",
@@ -417,19 +419,14 @@ fn a_supervisor_commanding_an_instance_taking_clock_time_waits_in_the_clocks_tim
             "k: taken at 14ms"
         ]
     );
-    assert!(system.shutdown().clean());
 }
 
 /// Its timeout is counted in the clock's time too: one the section outlasts ends at
 /// the advance that reaches it, and the command, never taken, is withdrawn.
 #[test]
 fn a_supervisor_command_an_instance_taking_clock_time_outlasts_is_withdrawn_in_the_clocks_time() {
-    let (system, clock, log) = commanding_a_spender(4, Duration::from_millis(1));
-    for _ in 0..16 {
-        clock.advance(ms(1)).expect("settled");
-    }
     assert_eq!(
-        log.take(),
+        commanding_a_spender(Duration::from_millis(1)),
         [
             "a:0",
             "k: suspend a at 12ms",
@@ -437,5 +434,4 @@ fn a_supervisor_command_an_instance_taking_clock_time_outlasts_is_withdrawn_in_t
             "a:0 done",
         ]
     );
-    assert!(system.shutdown().clean());
 }

@@ -17,7 +17,7 @@ use coolbot::{
 use coolbot_runtime_tests::generated::{
     cell, choosing, commanding, fed_commanding, panicky, plant, watching, worker,
 };
-use coolbot_runtime_tests::support::{Script, Scripted, Tap, WAIT, eventually};
+use coolbot_runtime_tests::support::{Release, Script, Scripted, Tap, WAIT, eventually};
 
 /// The answers the supervisor's sections got, in order.
 type Answers = Arc<Mutex<Vec<(String, Result<(), CommandError>)>>>;
@@ -353,8 +353,19 @@ fn a_refusal_passed_to_question_mark_takes_the_compound_to_running_error() {
     drop(system);
 }
 
-#[test]
-fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
+/// `base` (`FedCommanding` with `Suspending`, a 20 ms command timeout) running, its
+/// instance `w` hung in its busy entry section until the returned release is
+/// dropped.
+struct Hung {
+    system: System,
+    base: Handle,
+    w: Handle,
+    log: Answers,
+    script: Arc<Script>,
+    release: Release,
+}
+
+fn hung_worker() -> Hung {
     let log: Answers = Arc::default();
     let script = Script::new();
     let (tap, feeder) = Tap::new();
@@ -375,14 +386,32 @@ fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
     let base = system.add(builder.build().unwrap()).unwrap();
     system.run_all().unwrap();
     wait_user(&base, "operating");
-
-    // `w` hangs in its busy entry section.
     let release = script.hang_in("busy.entry");
     feeder.recv_timeout(WAIT).unwrap().kick.emit();
     eventually(
         || script.hanging.load(Ordering::SeqCst),
         "the worker hangs in busy.entry",
     );
+    Hung {
+        system,
+        base,
+        w,
+        log,
+        script,
+        release,
+    }
+}
+
+#[test]
+fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
+    let Hung {
+        system,
+        base,
+        w,
+        log,
+        script,
+        release,
+    } = hung_worker();
     set_go(&base, 1);
     let got = answers(&log, 1);
     assert!(
@@ -416,33 +445,14 @@ fn a_command_to_a_hung_instance_is_refused_within_the_bound() {
 /// still completes.
 #[test]
 fn an_instance_that_does_not_follow_its_compound_is_a_refused_step() {
-    let log: Answers = Arc::default();
-    let script = Script::new();
-    let (tap, feeder) = Tap::new();
-    let builder = fed_commanding::builder(
-        "base",
-        FedParts {
-            supervisor: Some(Suspending {
-                answers: Arc::clone(&log),
-            }),
-            script: Arc::clone(&script),
-            tap: Some(tap),
-        },
-    )
-    .unwrap()
-    .command_timeout(Duration::from_millis(20));
-    let w = builder.instance_handle("w").unwrap();
-    let mut system = System::new();
-    let base = system.add(builder.build().unwrap()).unwrap();
-    system.run_all().unwrap();
-    wait_user(&base, "operating");
-
-    let release = script.hang_in("busy.entry");
-    feeder.recv_timeout(WAIT).unwrap().kick.emit();
-    eventually(
-        || script.hanging.load(Ordering::SeqCst),
-        "the worker hangs in busy.entry",
-    );
+    let Hung {
+        system,
+        base,
+        w,
+        script,
+        release,
+        ..
+    } = hung_worker();
     base.command(Command::SetState(Controllable::Suspended))
         .expect("the compound suspends");
     assert_eq!(base.state(), State::Suspended);
