@@ -155,8 +155,9 @@ struct Member {
     name: String,
     bell: Arc<Doorbell>,
     settled: Option<Instant>,
-    /// The thread it runs on (the members of an execution group share one).
-    thread: std::thread::ThreadId,
+    /// The thread it runs on (the members of an execution group share one), once it
+    /// runs ([`VirtualClock::bind_thread`]).
+    thread: Option<std::thread::ThreadId>,
     /// Until when (nanoseconds since the clock's start) a section of it takes the
     /// clock's time ([`VirtualClock::spend`]).
     spending: Option<u64>,
@@ -165,6 +166,35 @@ struct Member {
     /// The command whose answer it waits for in the clock's time
     /// ([`ClockWait::wait`]); `spending` holds that wait's end.
     awaiting: Option<u64>,
+}
+
+/// A component's place on a virtual clock, taken before its thread starts (so that
+/// [`VirtualClock::settle`] right after its system started waits for it): it leaves
+/// the clock when dropped (its runner's end, or a thread that could not start).
+pub(crate) struct ClockPlace {
+    clock: Arc<VirtualClock>,
+    id: u64,
+}
+
+impl ClockPlace {
+    /// Join `clock` as `name`, rung through `bell`.
+    pub(crate) fn join(clock: &Arc<VirtualClock>, name: &str, bell: Arc<Doorbell>) -> ClockPlace {
+        ClockPlace {
+            clock: Arc::clone(clock),
+            id: clock.join(name, bell),
+        }
+    }
+
+    /// Its id on the clock.
+    pub(crate) fn id(&self) -> u64 {
+        self.id
+    }
+}
+
+impl Drop for ClockPlace {
+    fn drop(&mut self) {
+        self.clock.leave(self.id);
+    }
 }
 
 /// Why [`VirtualClock::advance`] returned before every component settled.
@@ -329,7 +359,7 @@ impl VirtualClock {
 
     /// Wait until every component has settled at `now` or later.
     fn wait_settled(&self, now: Instant, timeout: Duration) -> Result<(), NotSettled> {
-        let deadline = Instant::now() + timeout;
+        let deadline = crate::time::later(Instant::now(), timeout);
         let mut members = self.lock();
         loop {
             // A thread whose section takes the clock's time past `now` is busy until
@@ -339,13 +369,16 @@ impl VirtualClock {
                 .components
                 .values()
                 .filter(|member| member.spending.is_some_and(|end| end > at))
-                .map(|member| member.thread)
+                .filter_map(|member| member.thread)
                 .collect();
             let busy: Vec<String> = members
                 .components
                 .values()
                 .filter(|member| {
-                    member.settled.is_none_or(|at| at < now) && !spending.contains(&member.thread)
+                    member.settled.is_none_or(|at| at < now)
+                        && !member
+                            .thread
+                            .is_some_and(|thread| spending.contains(&thread))
                 })
                 .map(|member| member.name.clone())
                 .collect();
@@ -389,13 +422,20 @@ impl VirtualClock {
                 name: name.to_owned(),
                 bell,
                 settled: None,
-                thread: std::thread::current().id(),
+                thread: None,
                 spending: None,
                 released,
                 awaiting: None,
             },
         );
         id
+    }
+
+    /// Component `id` runs on the calling thread from now on.
+    pub(crate) fn bind_thread(&self, id: u64) {
+        if let Some(member) = self.lock().components.get_mut(&id) {
+            member.thread = Some(std::thread::current().id());
+        }
     }
 
     /// A component's thread ended.

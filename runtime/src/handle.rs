@@ -52,6 +52,15 @@ pub(crate) const PENDING: u8 = 0;
 pub(crate) const TAKEN: u8 = 1;
 pub(crate) const WITHDRAWN: u8 = 2;
 
+impl Posted {
+    /// Withdraw it unless the component took it already; whether it was withdrawn.
+    pub(crate) fn withdraw(&self) -> bool {
+        self.claim
+            .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+}
+
 impl ControlMessage {
     /// A message carrying `command`, and where its answers arrive.
     pub(crate) fn new(command: Command, by_supervisor: bool) -> (Self, Arc<Mailbox<Reply>>) {
@@ -72,6 +81,11 @@ impl ControlMessage {
         if let Some(notice) = &self.notice {
             notice.0.answered();
         }
+    }
+
+    /// Whether its sender withdrew it (it waits in the queue to be dropped).
+    pub(crate) fn withdrawn(&self) -> bool {
+        self.claim.load(Ordering::Acquire) == WITHDRAWN
     }
 
     /// Claim the message for execution; false if the sender withdrew it.
@@ -298,10 +312,10 @@ impl Handle {
             (wait.clone(), until, number)
         });
         let claim = Arc::clone(&message.claim);
-        match self.control.post(message) {
+        match self.post_control(message) {
             Ok(()) => {}
-            Err((PostError::Full, _)) => return Err(Refusal::QueueFull),
-            Err((PostError::Closed, _)) => return Err(Refusal::Ended),
+            Err(PostError::Full) => return Err(Refusal::QueueFull),
+            Err(PostError::Closed) => return Err(Refusal::Ended),
         }
         self.bell.ring_command();
         Ok(Posted {
@@ -312,6 +326,22 @@ impl Handle {
             accepted: false,
             on_clock,
         })
+    }
+
+    /// Queue `message` on the control port. A full queue first drops the commands
+    /// their senders withdrew (a component busy in a long section keeps them until it
+    /// takes them): they take no room from a later command, `dead` at shutdown
+    /// included.
+    pub(crate) fn post_control(&self, message: ControlMessage) -> Result<(), PostError> {
+        match self.control.post(message) {
+            Err((PostError::Full, message)) => {
+                if self.control.retain(|queued| !queued.withdrawn()) == 0 {
+                    return Err(PostError::Full);
+                }
+                self.control.post(message).map_err(|(error, _)| error)
+            }
+            outcome => outcome.map_err(|(error, _)| error),
+        }
     }
 
     /// Look at the answers to `posted`, waiting at most `wait`: `None` while the
@@ -334,7 +364,16 @@ impl Handle {
                 None => break,
             }
         }
-        if Instant::now() < posted.deadline {
+        // Dropped unanswered and never taken: the component's thread ended with it
+        // queued.
+        let closed = posted.answers.is_closed();
+        if closed && !posted.accepted && posted.claim.load(Ordering::Acquire) == PENDING {
+            return Some(Err(self.rejected(
+                &posted.command,
+                Refusal::Ended.describe(self.command_timeout),
+            )));
+        }
+        if !closed && Instant::now() < posted.deadline {
             return None;
         }
         if posted.accepted {
@@ -365,45 +404,8 @@ impl Handle {
 
     /// [`Handle::finish`], with why it failed as a [`Refusal`].
     pub(crate) fn finish_command(&self, posted: Posted) -> Result<(), Refusal> {
-        let Posted {
-            command,
-            answers,
-            claim,
-            deadline,
-            accepted: _,
-            mut on_clock,
-        } = posted;
-        let is_dead = command == Command::SetState(Controllable::Dead);
-        let mut until = deadline;
-        // The component took it (its `Accepted` may come after the claim).
-        let mut taken = false;
-        loop {
-            match next_answer(&answers, until, &mut on_clock) {
-                Some(Reply::Accepted) => taken = true,
-                // A section of the transition takes time of a virtual clock: only the
-                // clock can end it, and whoever moves the clock may be the one
-                // waiting, so the command counts as taken, as one whose transition
-                // outlasts its time.
-                Some(Reply::Done | Reply::TakingClockTime) => break,
-                Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
-                // The transition outlasts its time: it counts as taken.
-                None if taken => break,
-                None => {
-                    if claim
-                        .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
-                        .is_ok()
-                    {
-                        return Err(Refusal::Busy);
-                    }
-                    // Taken just now: given as long again to finish its transition.
-                    taken = true;
-                    until = crate::time::later(Instant::now(), self.command_timeout);
-                    if let Some((wait, clock_until, _)) = &mut on_clock {
-                        *clock_until = crate::time::later(wait.now(), self.command_timeout);
-                    }
-                }
-            }
-        }
+        let is_dead = posted.command == Command::SetState(Controllable::Dead);
+        let until = wait_for_answers(posted, self.command_timeout)?;
         if is_dead {
             self.join_if_exited(until);
         }
@@ -514,6 +516,55 @@ impl Handle {
     }
 }
 
+/// Wait for the answers to `posted`: `Ok` with the time it waited until once the
+/// component took the command and finished it (or its transition outlasts the wait,
+/// or takes time of a virtual clock); else why not. A command not taken by its
+/// deadline is withdrawn (`Busy`); one taken just then is given `timeout` again for
+/// its answers.
+fn wait_for_answers(posted: Posted, timeout: Duration) -> Result<Instant, Refusal> {
+    let Posted {
+        answers,
+        claim,
+        deadline,
+        mut on_clock,
+        ..
+    } = posted;
+    let mut until = deadline;
+    // The component took it (its `Accepted` may come after the claim).
+    let mut taken = false;
+    loop {
+        match next_answer(&answers, until, &mut on_clock) {
+            Some(Reply::Accepted) => taken = true,
+            // A section of the transition takes time of a virtual clock: only the
+            // clock can end it, and whoever moves the clock may be the one waiting, so
+            // the command counts as taken, as one whose transition outlasts its time.
+            Some(Reply::Done | Reply::TakingClockTime) => return Ok(until),
+            Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
+            // The transition outlasts its time: it counts as taken.
+            None if taken => return Ok(until),
+            None => {
+                // Dropped unanswered and never taken: the component's thread ended
+                // with it queued.
+                if answers.is_closed() && claim.load(Ordering::Acquire) == PENDING {
+                    return Err(Refusal::Ended);
+                }
+                if claim
+                    .compare_exchange(PENDING, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+                    .is_ok()
+                {
+                    return Err(Refusal::Busy);
+                }
+                // Taken just now: given as long again to finish its transition.
+                taken = true;
+                until = crate::time::later(Instant::now(), timeout);
+                if let Some((wait, clock_until, _)) = &mut on_clock {
+                    *clock_until = crate::time::later(wait.now(), timeout);
+                }
+            }
+        }
+    }
+}
+
 /// The next answer in `answers`, waiting until `until` (real time), or with
 /// `on_clock` in the time of a virtual clock until its deadline there; `None` when
 /// none came by then (or the component dropped the command unanswered). Once the
@@ -531,4 +582,78 @@ fn next_answer(
         }
     }
     answers.take_until(until)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `message` as posted, its deadline already past.
+    fn overdue(message: &ControlMessage, answers: Arc<Mailbox<Reply>>) -> Posted {
+        Posted {
+            command: (*message.command).clone(),
+            answers,
+            claim: Arc::clone(&message.claim),
+            deadline: Instant::now(),
+            accepted: false,
+            on_clock: None,
+        }
+    }
+
+    fn configure() -> (ControlMessage, Arc<Mailbox<Reply>>) {
+        ControlMessage::new(Command::Configure(crate::Value::Unit), false)
+    }
+
+    #[test]
+    fn a_command_not_taken_by_its_deadline_is_withdrawn() {
+        let (message, answers) = configure();
+        let posted = overdue(&message, answers);
+        assert_eq!(
+            wait_for_answers(posted, Duration::from_secs(60)),
+            Err(Refusal::Busy)
+        );
+        assert!(message.withdrawn());
+        assert!(!message.take());
+    }
+
+    #[test]
+    fn a_command_dropped_unanswered_and_never_taken_says_the_component_ended() {
+        let (message, answers) = configure();
+        let posted = overdue(&message, answers);
+        drop(message);
+        assert_eq!(
+            wait_for_answers(posted, Duration::from_secs(60)),
+            Err(Refusal::Ended)
+        );
+    }
+
+    /// Taken before its deadline, refused after it: the refusal is the outcome (the
+    /// wait that follows a command taken just then reads every answer).
+    #[test]
+    fn a_refusal_after_the_deadline_of_a_command_taken_in_time_is_a_refusal() {
+        let (message, answers) = configure();
+        assert!(message.take());
+        let posted = overdue(&message, answers);
+        let component = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(10));
+            message.answer(Reply::Rejected("invalid".to_owned()));
+        });
+        let outcome = wait_for_answers(posted, Duration::from_secs(60));
+        component.join().expect("no panic");
+        assert_eq!(outcome, Err(Refusal::Rejected("invalid".to_owned())));
+    }
+
+    /// A transition whose section takes time of a virtual clock counts as taken at
+    /// once, whatever time is left.
+    #[test]
+    fn a_transition_taking_clock_time_counts_as_taken() {
+        let (message, answers) =
+            ControlMessage::new(Command::SetState(Controllable::Running), false);
+        assert!(message.take());
+        message.answer(Reply::Accepted);
+        message.answer(Reply::TakingClockTime);
+        let mut posted = overdue(&message, answers);
+        posted.deadline = crate::time::later(Instant::now(), Duration::from_secs(3_600));
+        assert!(wait_for_answers(posted, Duration::from_secs(3_600)).is_ok());
+    }
 }

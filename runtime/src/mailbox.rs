@@ -124,12 +124,32 @@ impl<M> Mailbox<M> {
         letters
     }
 
-    /// Whether nothing is queued (one load, no lock).
+    /// Keep only the messages `keep` keeps; how many were dropped (after the lock is
+    /// released: a message's own drop may take other locks).
+    pub(crate) fn retain(&self, mut keep: impl FnMut(&M) -> bool) -> usize {
+        let dropped: Vec<M> = {
+            let mut letters = self.lock();
+            let queue = std::mem::take(&mut letters.queue);
+            let mut dropped = Vec::new();
+            for message in queue {
+                if keep(&message) {
+                    letters.queue.push_back(message);
+                } else {
+                    dropped.push(message);
+                }
+            }
+            self.len.store(letters.queue.len(), Ordering::Release);
+            dropped
+        };
+        dropped.len()
+    }
+
     /// Whether the mailbox is closed (its other end is gone).
     pub(crate) fn is_closed(&self) -> bool {
         self.lock().closed
     }
 
+    /// Whether nothing is queued (one load, no lock).
     pub(crate) fn is_empty(&self) -> bool {
         self.len.load(Ordering::Acquire) == 0
     }

@@ -1036,6 +1036,7 @@ impl System {
             if let Some(mut runner) = self.slots[*index].runner.take() {
                 if !self.clock.is_real() {
                     runner.set_clock(self.clock.clone());
+                    runner.join_clock();
                 }
                 runners.push(runner);
             }
@@ -1067,6 +1068,7 @@ impl System {
         // (A compound puts its instances on the same clock.)
         if !self.clock.is_real() {
             runner.set_clock(self.clock.clone());
+            runner.join_clock();
         }
         let join = crate::thread::spawn(&slot.name, move || runner.run()).map_err(|source| {
             Error::Spawn {
@@ -1493,7 +1495,9 @@ impl System {
                     crate::Command::SetState(Controllable::Dead),
                     false,
                 );
-                let _ = slot.handle.control.post(message);
+                if let Err(error) = slot.handle.post_control(message) {
+                    tracing::warn!(component = %slot.handle.name(), "`dead` not queued at shutdown: {error:?}");
+                }
                 slot.handle.bell.ring_command();
             }
         }

@@ -409,7 +409,7 @@ impl Driven for Compound {
         });
         let dirty = self.coordinator.as_ref().is_some_and(|c| c.dirty);
         let settle = self.coordinator.as_ref().and_then(|c| c.settle_until);
-        let fresh = (self.fresh || self.sectioned || dirty).then(Instant::now);
+        let fresh = (self.fresh || self.sectioned || dirty).then(|| self.clock.now());
         // Packets held at an exported input (the instance's `Block` fifo was full):
         // retried soon.
         let held = self

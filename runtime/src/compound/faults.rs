@@ -274,17 +274,19 @@ impl Compound {
                 self.queue.remove(position);
                 let name = self.instances[index].name.clone();
                 self.instances[index].status = Status::Destroyed;
-                self.instances[index].retry = None;
+                // A retry not taken yet never runs it again; one under way (a slow
+                // `start`) is followed by `dead`.
+                if let Some(retry) = self.instances[index].retry.take() {
+                    retry.withdraw();
+                }
                 let moves = self.update_standing();
                 self.moves.extend(moves);
+                // Sent without waiting: its thread takes it as soon as it can (after a
+                // section or a restart under way), whenever that is, and the
+                // compound's thread goes on.
                 let handle = &self.instances[index].handle;
-                if handle.is_stuck() {
-                    // Its thread takes the command when (if) the section returns.
-                    if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
-                        tracing::warn!(compound = %self.name, "{rejected}");
-                    }
-                } else if let Err(fault) = command(handle, Controllable::Dead) {
-                    tracing::warn!(compound = %self.name, "{fault}");
+                if let Err(rejected) = handle.post(Command::SetState(Controllable::Dead)) {
+                    tracing::warn!(compound = %self.name, "{rejected}");
                 }
                 // What is still queued at its inputs will never be read: lost there,
                 // counted and announced (on its monitoring port).

@@ -23,6 +23,7 @@
 //! from the group's start (`Runner::deadline_after`), so that members with harmonic
 //! periods are due at the same instants and run in one pass.
 
+use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
@@ -183,11 +184,7 @@ impl Group {
         for runner in self.members.iter_mut().flatten() {
             runner.bell.attach();
             runner.claim_sends();
-            if let Some(clock) = runner.time.as_virtual() {
-                let id = clock.join(&runner.cx.name, Arc::clone(&runner.bell));
-                runner.on_clock = Some(id);
-                runner.cx.spends = crate::automaton::Spends::Member(id);
-            }
+            runner.bind_clock();
             runner.anchor = epoch;
         }
         if let Some(membership) = self.members.iter().flatten().find_map(|r| r.group.as_ref()) {
@@ -256,12 +253,20 @@ impl Group {
                 match turn {
                     Turn::Dead => {
                         runner.end();
-                        if let (Some(clock), Some(id)) = (runner.time.as_virtual(), runner.on_clock)
-                        {
-                            clock.leave(id);
+                        // Dropping the runner leaves its clock and tells its handles
+                        // that it has ended. Its
+                        // automaton's own `Drop` is user code: a panic there ends this
+                        // member only, not the group's thread.
+                        let member = Arc::clone(&runner.cx.name);
+                        let ended = slot.take();
+                        if let Err(panic) = catch_unwind(AssertUnwindSafe(move || drop(ended))) {
+                            tracing::error!(
+                                group = %self.name,
+                                component = %member,
+                                "the component's drop panicked: {}",
+                                crate::thread::panic_message(panic.as_ref())
+                            );
                         }
-                        // Dropping the runner tells its handles that it has ended.
-                        *slot = None;
                         break;
                     }
                     Turn::Worked if runner.idle() => break,

@@ -182,8 +182,11 @@ pub(crate) struct Runner {
     /// The clock every reading comes from (`crate::clock`): the real one unless the
     /// system was given a virtual clock.
     time: Clock,
-    /// This component's id on a virtual clock, once its thread runs.
+    /// This component's id on a virtual clock, once it joined it
+    /// ([`Runner::join_clock`]).
     on_clock: Option<u64>,
+    /// Its place on that clock: left when the runner is dropped.
+    clock_place: Option<crate::clock::ClockPlace>,
     /// Whether the spec declares a `pull` output (otherwise no pull queue is looked at).
     has_pull: bool,
     /// Wall-clock time spent in user calls, and the value last published, in
@@ -306,6 +309,7 @@ impl Runner {
             clock: now,
             time: Clock::real(),
             on_clock: None,
+            clock_place: None,
             has_pull: spec.outputs.iter().any(|output| output.pull),
             elapsed: 0,
             elapsed_published: 0,
@@ -373,6 +377,32 @@ impl Runner {
     /// Measure response times at these inputs (`None`: not measured).
     pub(crate) fn set_labels(&mut self, labels: Vec<Option<Arc<ArrivalLabel>>>) {
         self.labels = labels;
+    }
+
+    /// Join the virtual clock it runs on, if it does and has not yet: before its
+    /// thread starts (`System`'s spawn), so that an `advance` or a `settle` right after
+    /// the system started waits for it; its thread binds itself to the place when it
+    /// runs.
+    pub(crate) fn join_clock(&mut self) {
+        if self.on_clock.is_some() {
+            return;
+        }
+        if let Some(clock) = self.time.as_virtual() {
+            let place =
+                crate::clock::ClockPlace::join(clock, &self.cx.name, Arc::clone(&self.bell));
+            self.on_clock = Some(place.id());
+            self.cx.spends = crate::automaton::Spends::Member(place.id());
+            self.clock_place = Some(place);
+        }
+    }
+
+    /// The calling thread runs it from now on: joined to its virtual clock (if it was
+    /// not yet), bound to the thread there.
+    pub(super) fn bind_clock(&mut self) {
+        self.join_clock();
+        if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
+            clock.bind_thread(id);
+        }
     }
 
     /// Run on `clock` (before the thread starts): every timer reads it.

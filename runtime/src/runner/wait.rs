@@ -9,15 +9,9 @@ impl Runner {
     pub(crate) fn run(mut self: Box<Self>) {
         self.bell.attach();
         self.claim_sends();
-        if let Some(clock) = self.time.as_virtual() {
-            let id = clock.join(&self.cx.name, Arc::clone(&self.bell));
-            self.on_clock = Some(id);
-            self.cx.spends = crate::automaton::Spends::Member(id);
-        }
+        self.bind_clock();
         self.run_loop();
-        if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
-            clock.leave(id);
-        }
+        // (Dropping the runner leaves the clock.)
     }
 
     /// This thread sends on the component's data outputs without their sinks' lock

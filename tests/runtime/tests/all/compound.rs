@@ -2466,3 +2466,69 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
     assert_eq!(base.snapshot().overflows, 0);
     assert!(rig.rig.shutdown().clean());
 }
+
+/// The same on a virtual clock: the state entered by a rule asks for a turn at once
+/// (`Compound::wake_at`'s `fresh`), but as a real `Instant::now()`, which the runner
+/// compares with the virtual time: later than it, so the compound settles and parks
+/// with the rule of `second` never evaluated.
+#[test]
+fn on_a_virtual_clock_a_rule_that_already_holds_when_its_state_is_entered_fires() {
+    let mut parts = Parts::new();
+    let log = Arc::clone(&parts.log);
+    let _ = parts.feed.take();
+    let mut rig = CompoundRig::on_virtual_clock(cmp_already::component("base", parts));
+    rig.run();
+    let clock = rig.clock.clone().expect("a virtual clock");
+    let (base, w) = (rig.compound.clone(), rig.instance("w"));
+    wait_user(&w, "idle");
+    // Real time passes, as it does in any test, while the virtual clock stays at
+    // zero: a turn asked for at a real instant would be later than the clock's now.
+    std::thread::sleep(Duration::from_millis(20));
+    run(&w, Controllable::Suspended);
+    eventually(
+        || log.lock().unwrap().iter().any(|l| l == "second.Entry"),
+        "second entered",
+    );
+    clock.settle().expect("settles");
+    assert_eq!(
+        base.snapshot().user_state.as_deref(),
+        Some("third"),
+        "second's rule held when it was entered"
+    );
+    assert!(rig.shutdown().clean());
+}
+
+/// An instance retired at its recovery deadline while a retry's restart is still
+/// under way (its `start` is slow) is sent `dead` with the handle's whole command
+/// timeout (the compound's thread waits 2 s), withdrawn as busy, and then runs on:
+/// the retry's `running` completes and nothing sends `dead` again.
+#[test]
+fn an_instance_retired_during_a_slow_restart_does_not_run_on() {
+    let rig = substitution(true);
+    let events = rig.base.subscribe();
+    // The first retry's restart hangs in `start` past the deadline (200 ms) and the
+    // `dead` command's timeout.
+    let release = rig.w_script.hang_in("start");
+    rig.w_script.panic_in(Some("busy.periodic"));
+    rig.feed.kick.emit();
+    wait(&rig.b, State::Running);
+    rig.w_script.panic_in(None);
+    let until = std::time::Instant::now() + WAIT;
+    let mut events = std::iter::from_fn(|| events.recv_deadline(until).ok());
+    assert!(
+        events.any(|event| matches!(
+            event,
+            MonitorEvent::Supervision(step) if step.step == Step::Retired
+        )),
+        "w retired"
+    );
+    drop(release);
+    // Once its `start` returns, w must not be left running outside the arrangement.
+    let outcome = rig.w.wait_state(State::Dead, Duration::from_secs(3));
+    assert!(
+        outcome.is_ok(),
+        "retired, yet w is {:?}",
+        rig.w.snapshot().state
+    );
+    assert!(rig.rig.shutdown().clean());
+}

@@ -347,6 +347,36 @@ fn a_command_is_withdrawn_if_a_long_section_outlasts_the_command_timeout() {
     );
 }
 
+/// Withdrawn commands wait in the control queue until the thread takes them; they
+/// take no room from later ones: a component hung in a section through more
+/// withdrawn commands than its queue holds refuses each as busy, never "queue full"
+/// (a full queue drops the withdrawn ones first: a shutdown's `dead` finds room).
+#[test]
+fn withdrawn_commands_do_not_fill_the_control_queue() {
+    let rig = Rig::started(Script::new());
+    rig.run_busy();
+    let release = rig.script.hang_in("busy.periodic");
+    eventually(
+        || rig.script.hanging.load(Ordering::SeqCst),
+        "hung in a periodic section",
+    );
+    let impatient = rig
+        .handle
+        .clone()
+        .with_command_timeout(Duration::from_millis(1));
+    for _ in 0..2 * coolbot::CONTROL_CAPACITY {
+        let refused = impatient
+            .command(Command::SetQuality(0))
+            .expect_err("the component is busy");
+        assert!(refused.reason.starts_with("busy"), "{refused}");
+    }
+    // Once the section returns, the withdrawn commands are dropped unapplied.
+    drop(release);
+    rig.command(Controllable::Suspended)
+        .expect("applied after the section");
+    assert_eq!(rig.handle.state(), State::Suspended);
+}
+
 #[test]
 fn a_section_that_returns_after_max_response_is_a_fault() {
     let rig = Rig::started(Script::new());

@@ -237,6 +237,53 @@ fn a_panicking_member_fails_alone_and_the_group_runs_on() {
     assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
 }
 
+/// A stage whose behaviour panics when it is dropped (user code the runtime runs
+/// when the component's thread, here its group's, lets the component go).
+struct PanicsWhenDropped(Step);
+
+impl stage::Behavior for PanicsWhenDropped {
+    fn work_periodic(&mut self, cx: &mut stage::Cx<'_>) -> SectionResult {
+        self.0.work_periodic(cx)
+    }
+}
+
+impl Drop for PanicsWhenDropped {
+    fn drop(&mut self) {
+        panic!("{} broke as it was dropped", self.0.name);
+    }
+}
+
+#[test]
+fn a_member_whose_drop_panics_ends_alone() {
+    coolbot_runtime_tests::support::quiet_component_panics();
+    let log = Log::default();
+    let (mut system, clock) = system();
+    system
+        .add(stage::component("a", step("a", &log)))
+        .expect("a");
+    let b = system
+        .add(stage::component("b", PanicsWhenDropped(step("b", &log))))
+        .expect("b");
+    system.connect("a.out", "b.feed").expect("a -> b");
+    system.group("control", &["a", "b"]).expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2"]);
+    b.command(Command::SetState(Controllable::Dead))
+        .expect("dead");
+    assert_eq!(b.state(), State::Dead);
+    // The group's thread dropped `b` and runs on: `a` answers and keeps its period.
+    let a = system.handle("a").expect("a");
+    a.command(Command::SetState(Controllable::Suspended))
+        .expect("a answers");
+    a.command(Command::SetState(Controllable::Running))
+        .expect("a answers");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1"]);
+}
+
 #[test]
 fn a_suspended_member_is_skipped_until_resumed() {
     let log = Log::default();

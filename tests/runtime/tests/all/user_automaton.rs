@@ -387,3 +387,53 @@ fn on_a_virtual_clock_a_section_past_max_response_is_tripped_when_the_clock_pass
     drop(release);
     clock.settle().expect("settled once the section returned");
 }
+
+/// A periodic stage whose `start` hook takes a moment of real time.
+struct SlowStart;
+
+impl coolbot_runtime_tests::stage::Behavior for SlowStart {
+    fn start(&mut self, _cx: &mut coolbot_runtime_tests::stage::Cx<'_>) -> coolbot::SectionResult {
+        std::thread::sleep(Duration::from_millis(2));
+        Ok(())
+    }
+
+    fn work_periodic(
+        &mut self,
+        _cx: &mut coolbot_runtime_tests::stage::Cx<'_>,
+    ) -> coolbot::SectionResult {
+        Ok(())
+    }
+}
+
+/// A component joins its system's virtual clock before its thread starts, so that
+/// `settle` right after `System::start` waits for it to leave `starting` (each try
+/// races its thread's start hook against the test).
+#[test]
+fn settling_right_after_the_system_started_waits_for_every_component() {
+    for _ in 0..20 {
+        let clock = VirtualClock::new();
+        let mut system = System::with_clock(Clock::virtual_clock(&clock));
+        let c = system
+            .add(coolbot_runtime_tests::stage::component("c", SlowStart))
+            .expect("c");
+        system.start().expect("started");
+        clock.settle().expect("settled");
+        assert_eq!(c.state(), State::Ready);
+        assert!(system.shutdown().clean());
+    }
+}
+
+/// Settling may be waited for without a bound.
+#[test]
+fn advancing_may_wait_for_ever_to_settle() {
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    system
+        .add(coolbot_runtime_tests::stage::component("c", SlowStart))
+        .expect("c");
+    system.run_all().expect("running");
+    clock
+        .advance_with_timeout(Duration::from_millis(10), Duration::MAX)
+        .expect("settled");
+    assert!(system.shutdown().clean());
+}
