@@ -168,7 +168,6 @@ pub(crate) struct Runner {
     next_periodic: Option<Instant>,
     reanchored: bool,
     pending_choice: Option<usize>,
-    deferred: VecDeque<ControlMessage>,
     max_response: Option<Duration>,
     /// The max_response watchdog's view of this component's sections (while it has a
     /// `max_response`).
@@ -302,7 +301,6 @@ impl Runner {
             next_periodic: None,
             reanchored: false,
             pending_choice: None,
-            deferred: VecDeque::new(),
             max_response: timing.max_response,
             watch,
             cpu_due: now + CPU_TIME_REFRESH,
@@ -493,7 +491,7 @@ impl Runner {
         // (`Doorbell::take_commands`), or when the wait that found this turn's work
         // looked at the queue itself.
         let commands = self.polled || (rung && self.bell.take_commands());
-        if (rung || !self.deferred.is_empty()) && !self.drain_control(commands) {
+        if rung && !self.drain_control(commands) {
             return Turn::Dead;
         }
         if self.state != State::Running {
@@ -531,14 +529,9 @@ impl Runner {
         }
     }
 
-    /// Handle every deferred command, and with `commands` every waiting one; false
-    /// once the component is dead.
+    /// With `commands`, handle every waiting command; false once the component is
+    /// dead.
     fn drain_control(&mut self, commands: bool) -> bool {
-        while self.state != State::Starting
-            && let Some(message) = self.deferred.pop_front()
-        {
-            self.handle_control(message);
-        }
         // (`take` looks at the queue's length before it locks: a bell rung by a
         // delivery finds no command far more often than one.)
         if !commands {

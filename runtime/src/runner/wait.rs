@@ -71,8 +71,7 @@ impl Runner {
     /// that is not a compound's has one of these behind it (a compound's bell is also
     /// rung by its instances' events and its `Waker`s, which leave nothing to look at).
     pub(super) fn work_waiting(&self) -> bool {
-        !self.deferred.is_empty()
-            || !self.control.is_empty()
+        !self.control.is_empty()
             || self
                 .inputs
                 .iter()
