@@ -328,7 +328,7 @@ impl Runner {
                     .saturating_add(1);
                 missed_any = true;
                 self.shared.update(|monitor| {
-                    monitor.missed_deadlines += missed;
+                    monitor.missed_deadlines = monitor.missed_deadlines.saturating_add(missed);
                     vec![MonitorEvent::MissedDeadline {
                         missed,
                         total: monitor.missed_deadlines,
