@@ -539,10 +539,17 @@ impl Context {
     /// section of a member of one (as [`Context::spend`] takes its time), else in
     /// real time (`None`).
     pub(crate) fn clock_wait(&self) -> Option<crate::clock::ClockWait> {
+        self.in_section.then(|| self.member_clock_wait()).flatten()
+    }
+
+    /// Waiting in the time of the virtual clock this component is a member of (in or
+    /// out of a section), if it is one's.
+    pub(crate) fn member_clock_wait(&self) -> Option<crate::clock::ClockWait> {
         match (self.spends, self.clock.as_virtual()) {
-            (Spends::Member(id), Some(clock)) if self.in_section => Some(
-                crate::clock::ClockWait::new(std::sync::Arc::clone(clock), id),
-            ),
+            (Spends::Member(id), Some(clock)) => Some(crate::clock::ClockWait::new(
+                std::sync::Arc::clone(clock),
+                id,
+            )),
             _ => None,
         }
     }

@@ -270,6 +270,19 @@ impl Handle {
             .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
     }
 
+    /// [`Handle::post`] by a sender on a virtual clock (`clock_wait`): its
+    /// [`Handle::poll`] looks at the answers until the clock moves, and its deadline is
+    /// in the clock's time.
+    pub(crate) fn post_on_clock(
+        &self,
+        command: Command,
+        clock_wait: Option<&ClockWait>,
+    ) -> Result<Posted, Rejected> {
+        let rendered = command.clone();
+        self.post_waiting(command, false, clock_wait)
+            .map_err(|refusal| self.rejected(&rendered, refusal.describe(self.command_timeout)))
+    }
+
     /// [`Handle::post`], with why it failed as a [`Refusal`].
     pub(crate) fn post_command(&self, command: Command) -> Result<Posted, Refusal> {
         self.post_from(command, false)
@@ -354,7 +367,23 @@ impl Handle {
     pub(crate) fn poll(&self, posted: &mut Posted, wait: Duration) -> Option<Result<(), Rejected>> {
         let until = crate::time::later(Instant::now(), wait);
         loop {
-            match posted.answers.take_until(until) {
+            let answer = match posted.on_clock.take() {
+                // Posted on a virtual clock: looked at until the clock moves, in its time
+                // (the component answers at the clock's time unless it is taking some).
+                Some(on_clock) => {
+                    let (wait, _, number) = &on_clock;
+                    let answers = &posted.answers;
+                    let came = || !answers.is_empty() || answers.is_closed();
+                    let moved = crate::time::later(wait.now(), Duration::from_nanos(1));
+                    let waited = wait.wait(*number, moved, &came);
+                    if waited != Waited::Off {
+                        posted.on_clock = Some(on_clock);
+                    }
+                    posted.answers.take_until(Instant::now())
+                }
+                None => posted.answers.take_until(until),
+            };
+            match answer {
                 Some(Reply::Accepted) => posted.accepted = true,
                 // (Taking time of a virtual clock: counts as taken, as in `finish`.)
                 Some(Reply::Done | Reply::TakingClockTime) => return Some(Ok(())),
@@ -373,7 +402,11 @@ impl Handle {
                 Refusal::Ended.describe(self.command_timeout),
             )));
         }
-        if !closed && Instant::now() < posted.deadline {
+        let overdue = match &posted.on_clock {
+            Some((wait, until, _)) => wait.now() >= *until,
+            None => Instant::now() >= posted.deadline,
+        };
+        if !closed && !overdue {
             return None;
         }
         if posted.accepted {

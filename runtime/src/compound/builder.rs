@@ -889,6 +889,7 @@ impl CompoundBuilder {
             timed,
             next_timed: None,
             moves: Vec::new(),
+            clock_wait: None,
             clock: crate::clock::Clock::real(),
             deferred_faults: false,
         };

@@ -311,6 +311,7 @@ impl Driven for Compound {
     }
 
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
+        self.clock_wait = cx.member_clock_wait();
         let outcome = self.supervise_turn(state, cx);
         if let Some(coordinator) = self.coordinator.as_mut()
             && coordinator

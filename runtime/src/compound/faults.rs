@@ -8,7 +8,10 @@ use crate::automaton::Fault;
 use crate::monitor::{Command, Step};
 
 /// How long a recovery retry waits for the instance's answer before the compound's
-/// thread goes on (the answer is looked at again at the next retry).
+/// thread goes on (the answer is looked at again at the next retry). On a virtual
+/// clock it waits until the clock moves instead, in the clock's time: an instance
+/// that restarts at the clock's time answers at that time, whatever real time it
+/// takes.
 const RETRY_LOOK: Duration = Duration::from_millis(10);
 use crate::table::{Controllable, State};
 
@@ -352,10 +355,10 @@ impl Compound {
         let instance = &mut self.instances[index];
         let mut posted = match instance.retry.take() {
             Some(posted) => posted,
-            None => match instance
-                .handle
-                .post(Command::SetState(Controllable::Running))
-            {
+            None => match instance.handle.post_on_clock(
+                Command::SetState(Controllable::Running),
+                self.clock_wait.as_ref(),
+            ) {
                 Ok(posted) => posted,
                 Err(rejected) => {
                     return Some(Err(Fault::from(RunError::from(rejected)).text().to_owned()));

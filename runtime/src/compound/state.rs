@@ -158,6 +158,9 @@ pub(super) struct Compound {
     /// The clock its timers read (the runner's: a virtual one in tests), which its
     /// instances run on too.
     pub(super) clock: Clock,
+    /// On a virtual clock, how its thread waits in the clock's time (for the answer
+    /// to a recovery retry): set at each supervision turn.
+    pub(super) clock_wait: Option<crate::clock::ClockWait>,
 }
 
 pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {

@@ -17,10 +17,16 @@ use coolbot_runtime_tests::support::WAIT;
 use coolbot_runtime_tests::support::compound::{CompoundRig, count};
 
 /// A `ClockTrippable`'s behaviour: its answer to a pull of `trip` fails while `fails`
-/// is set.
-struct Trippable(Arc<AtomicBool>);
+/// is set; its `start` hook takes `slow_start` of real time (a driver opening a
+/// device).
+struct Trippable(Arc<AtomicBool>, Duration);
 
 impl clock_trippable::Behavior for Trippable {
+    fn start(&mut self, _cx: &mut clock_trippable::Cx<'_>) -> coolbot::SectionResult {
+        std::thread::sleep(self.1);
+        Ok(())
+    }
+
     fn answer_trip(&mut self, _cx: &mut clock_trippable::Cx<'_>) -> Result<u64, coolbot::Fault> {
         if self.0.load(Ordering::SeqCst) {
             return Err(coolbot::Fault::message("tripped"));
@@ -45,10 +51,22 @@ struct NoSections;
 impl clock_restarting::Supervisor for NoSections {}
 impl clock_recovering::Supervisor for NoSections {}
 
-/// The parts of either compound: `w` fails while `fails`, `s` while `s_fails`.
+/// The parts of either compound: `w` fails while `fails`, `s` while `s_fails`; `w`'s
+/// `start` takes `slow_start` of real time.
 struct Parts {
     fails: Arc<AtomicBool>,
     s_fails: Arc<AtomicBool>,
+    slow_start: Duration,
+}
+
+impl Parts {
+    fn new(fails: &Arc<AtomicBool>, s_fails: &Arc<AtomicBool>) -> Parts {
+        Parts {
+            fails: Arc::clone(fails),
+            s_fails: Arc::clone(s_fails),
+            slow_start: Duration::ZERO,
+        }
+    }
 }
 
 impl clock_restarting::Parts for Parts {
@@ -56,7 +74,7 @@ impl clock_restarting::Parts for Parts {
         NoSections
     }
     fn w(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.fails))
+        Trippable(Arc::clone(&self.fails), self.slow_start)
     }
 }
 
@@ -65,10 +83,10 @@ impl clock_recovering::Parts for Parts {
         NoSections
     }
     fn w(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.fails))
+        Trippable(Arc::clone(&self.fails), self.slow_start)
     }
     fn s(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.s_fails))
+        Trippable(Arc::clone(&self.s_fails), Duration::ZERO)
     }
 }
 
@@ -115,7 +133,10 @@ fn the_restart_backoff_runs_on_the_virtual_clock() {
     // second 40 ms after its fault, the third 80 ms after its fault, in clock time.
     let fails = Arc::new(AtomicBool::new(true));
     let s_fails = Arc::new(AtomicBool::new(false));
-    let rig = rig(clock_restarting::component("k", Parts { fails, s_fails }));
+    let rig = rig(clock_restarting::component(
+        "k",
+        Parts::new(&fails, &s_fails),
+    ));
     rig.fail_w(1);
     rig.rig
         .compound
@@ -140,14 +161,17 @@ fn the_restart_backoff_runs_on_the_virtual_clock() {
     assert!(rig.rig.shutdown().clean());
 }
 
-#[test]
-fn recovery_retries_run_on_the_virtual_clock() {
-    // `w` fails into the recovery queue (its substitute `s` stands in): the queue
-    // retries every 100 ms of clock time, and `w` recovers at the retry after the
-    // one that brought it back.
+/// `w` fails into the recovery queue (its substitute `s` stands in): the queue
+/// retries every 100 ms of clock time, and `w` recovers at the retry after the one
+/// that brought it back; `w`'s `start` takes `slow_start` of real time.
+fn recovery_retries(slow_start: Duration) {
     let fails = Arc::new(AtomicBool::new(true));
     let s_fails = Arc::new(AtomicBool::new(false));
-    let rig = rig(clock_recovering::component("k", Parts { fails, s_fails }));
+    let parts = Parts {
+        slow_start,
+        ..Parts::new(&fails, &s_fails)
+    };
+    let rig = rig(clock_recovering::component("k", parts));
     rig.fail_w(1);
     rig.rig.wait_steps(
         "w",
@@ -163,4 +187,17 @@ fn recovery_retries_run_on_the_virtual_clock() {
     assert_eq!(rig.steps("w", &Step::Recovered), 1, "recovered at 200 ms");
     assert_eq!(rig.steps("w", &Step::Retired), 0);
     assert!(rig.rig.shutdown().clean());
+}
+
+#[test]
+fn recovery_retries_run_on_the_virtual_clock() {
+    recovery_retries(Duration::ZERO);
+}
+
+/// A retry's restart that takes real time (longer than the real clock's look at its
+/// answer) is answered at the clock's time all the same: the compound waits for it
+/// in the clock's time, not for a moment of real time.
+#[test]
+fn a_recovery_retry_whose_restart_takes_real_time_is_answered_at_the_clocks_time() {
+    recovery_retries(Duration::from_millis(50));
 }
