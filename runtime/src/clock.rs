@@ -263,6 +263,13 @@ impl ClockWait {
         self.clock.now()
     }
 
+    /// Member `member` of the same clock has a command to take: it is busy until it
+    /// settles again, so that an `advance` does not return between the command's
+    /// post and its turn (the waiter no longer holds it up).
+    pub(crate) fn busy(&self, member: u64) {
+        self.clock.busy(member);
+    }
+
     /// A new command's notice, for the component that answers it.
     pub(crate) fn notice(&self) -> AnswerNotice {
         static COMMANDS: AtomicU64 = AtomicU64::new(0);

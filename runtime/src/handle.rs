@@ -318,6 +318,9 @@ impl Handle {
         let deadline = crate::time::later(Instant::now(), self.command_timeout);
         let (mut message, answers) = ControlMessage::new(command.clone(), by_supervisor);
         let on_clock = clock_wait.map(|wait| {
+            if let Some(member) = self.shared.clock_member.get() {
+                wait.busy(*member);
+            }
             let notice = wait.notice();
             let number = notice.command();
             message.notice = Some(NoticeOnDrop(notice));
@@ -325,10 +328,15 @@ impl Handle {
             (wait.clone(), until, number)
         });
         let claim = Arc::clone(&message.claim);
-        match self.post_control(message) {
-            Ok(()) => {}
-            Err(PostError::Full) => return Err(Refusal::QueueFull),
-            Err(PostError::Closed) => return Err(Refusal::Ended),
+        if let Err(error) = self.post_control(message) {
+            if on_clock.is_some() {
+                // Marked busy for a command that never came: a turn settles it again.
+                self.bell.ring();
+            }
+            return Err(match error {
+                PostError::Full => Refusal::QueueFull,
+                PostError::Closed => Refusal::Ended,
+            });
         }
         self.bell.ring_command();
         Ok(Posted {

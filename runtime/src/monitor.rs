@@ -622,6 +622,8 @@ pub(crate) struct Shared {
     pub(crate) adapt_managed: AtomicBool,
     /// The execution group the component runs in, once its thread runs.
     pub(crate) group: std::sync::OnceLock<Arc<GroupCycles>>,
+    /// Its id on the virtual clock it runs on, once it joined it.
+    pub(crate) clock_member: std::sync::OnceLock<u64>,
 }
 
 impl std::fmt::Debug for Shared {
@@ -644,6 +646,7 @@ impl Shared {
             thread: std::sync::OnceLock::new(),
             adapt_managed: AtomicBool::new(false),
             group: std::sync::OnceLock::new(),
+            clock_member: std::sync::OnceLock::new(),
         }
     }
 

@@ -389,6 +389,7 @@ impl Runner {
             let place =
                 crate::clock::ClockPlace::join(clock, &self.cx.name, Arc::clone(&self.bell));
             self.on_clock = Some(place.id());
+            let _ = self.shared.clock_member.set(place.id());
             self.cx.spends = crate::automaton::Spends::Member(place.id());
             self.clock_place = Some(place);
         }

@@ -376,10 +376,10 @@ impl Supervisor for SuspendsA {
     }
 }
 
-/// A compound `k` over `a`, whose first period (from 10 ms) takes 4 ms of the clock's
-/// time, its supervisor's commands waiting at most `timeout`: what they did over the
-/// clock's first 16 ms, in 1 ms steps, and a clean shutdown.
-fn commanding_a_spender(timeout: Duration) -> Vec<String> {
+/// A compound `k` over `a`, whose first period (from 10 ms) takes `cost` ms of the
+/// clock's time, its supervisor's commands waiting at most `timeout`: what they did
+/// over the clock's first `until` ms, in 1 ms steps, and a clean shutdown.
+fn commanding_a_spender(cost: u64, timeout: Duration, until: u64) -> Vec<String> {
     let log = Log::default();
     let clock = VirtualClock::new();
     let mut system = System::with_clock(Clock::virtual_clock(&clock));
@@ -389,14 +389,14 @@ fn commanding_a_spender(timeout: Duration) -> Vec<String> {
         commanded: false,
     };
     let k = CompoundBuilder::new("k", supervisor)
-        .instance(stage::component("a", busy("a", &log, &[4])))
+        .instance(stage::component("a", busy("a", &log, &[cost])))
         .command_timeout(timeout)
         .build()
         .expect("build");
     system.add(k).expect("k");
     system.run_all().expect("running");
     clock.settle().expect("settled");
-    for _ in 0..16 {
+    for _ in 0..until {
         clock.advance(ms(1)).expect("settled");
     }
     let report = system.shutdown();
@@ -411,7 +411,7 @@ fn commanding_a_spender(timeout: Duration) -> Vec<String> {
 #[test]
 fn a_supervisor_commanding_an_instance_taking_clock_time_waits_in_the_clocks_time() {
     assert_eq!(
-        commanding_a_spender(Duration::from_millis(250)),
+        commanding_a_spender(4, Duration::from_millis(250), 16),
         [
             "a:0",
             "k: suspend a at 12ms",
@@ -426,12 +426,28 @@ fn a_supervisor_commanding_an_instance_taking_clock_time_waits_in_the_clocks_tim
 #[test]
 fn a_supervisor_command_an_instance_taking_clock_time_outlasts_is_withdrawn_in_the_clocks_time() {
     assert_eq!(
-        commanding_a_spender(Duration::from_millis(1)),
+        commanding_a_spender(4, Duration::from_millis(1), 16),
         [
             "a:0",
             "k: suspend a at 12ms",
             "k: the instance did not take the command within 1ms (busy in a section); withdrawn at 13ms",
             "a:0 done",
+        ]
+    );
+}
+
+/// A supervisor's command to an instance at rest is taken within the advance that ran
+/// the supervisor's section: the instance counts as busy from the command's post, so
+/// the advance does not return while the supervisor waits for it.
+#[test]
+fn an_advance_returns_once_a_supervisors_command_to_an_instance_at_rest_is_taken() {
+    assert_eq!(
+        commanding_a_spender(0, Duration::from_millis(250), 12),
+        [
+            "a:0",
+            "a:0 done",
+            "k: suspend a at 12ms",
+            "k: taken at 12ms"
         ]
     );
 }
