@@ -485,9 +485,10 @@ impl<'a> Lowerer<'a> {
             for link in &c.links {
                 match link {
                     Link::Crate { name, spec } => {
-                        // The runtime dependency is coolc's to write.
+                        // The checks refused `coolbot` (coolc's to write) and two
+                        // different specs of one crate.
                         let key = toml_key(name);
-                        if key != "coolbot" && !dependencies.iter().any(|d| d.key == key) {
+                        if !dependencies.iter().any(|d| d.key == key) {
                             dependencies.push(ir::Dependency {
                                 key,
                                 value: crate_spec(spec),
@@ -665,7 +666,7 @@ mod tests {
     #[test]
     fn link_crate_tables_become_cargo_tables() {
         let krate = lower_text(
-            "atomic A { link crate \"serde_json\" = { version = \"1\", default_features = false, features = [\"std\"] }; link crate \"coolbot\" = \"9\"; link system \"m\"; }",
+            "atomic A { link crate \"serde_json\" = { version = \"1\", default_features = false, features = [\"std\"] }; link system \"m\"; }",
         );
         assert_eq!(
             krate.dependencies,

@@ -321,6 +321,11 @@ fn link(checker: &mut Checker<'_, '_>, link: &ast::Link) {
             .error(Code::BadLink, name.span, "a link needs a name")
             .with_label("empty name");
         checker.push(diagnostic);
+    } else {
+        match &link.kind {
+            ast::LinkKind::System { name } => system_library_name(checker, name),
+            ast::LinkKind::Crate { name, .. } => crate_name(checker, name),
+        }
     }
     if let ast::LinkKind::Crate {
         spec: ast::CrateSpec::Table(entries, span),
@@ -329,6 +334,158 @@ fn link(checker: &mut Checker<'_, '_>, link: &ast::Link) {
     {
         crate_table(checker, entries, *span);
     }
+}
+
+/// A `link system` name goes to the linker through the generated build script
+/// (`cargo:rustc-link-lib=NAME`): a plain library name only, so that nothing else
+/// reaches the script or the linker.
+fn system_library_name(checker: &mut Checker<'_, '_>, name: &ast::StrLit) {
+    let plain = !name.value.starts_with('-')
+        && name
+            .value
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '+'));
+    if !plain {
+        let diagnostic = checker
+            .error(
+                Code::BadLink,
+                name.span,
+                format!("`{}` is not a library name", name.value.escape_debug()),
+            )
+            .with_label("not a plain library name")
+            .with_help("a system library is named with ASCII letters, digits, `_`, `-`, `.` and `+`, not starting with `-` (`m`, `ssl`, `stdc++`)");
+        checker.push(diagnostic);
+    }
+}
+
+/// A `link crate` name becomes a key of the generated `Cargo.toml` and the name the
+/// component's code uses: a crate name (ASCII letters, digits, `_` and `-`, starting
+/// with a letter or `_`), and not `coolbot`, the runtime dependency coolc writes.
+fn crate_name(checker: &mut Checker<'_, '_>, name: &ast::StrLit) {
+    let valid = name
+        .value
+        .chars()
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && name
+            .value
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-'));
+    if !valid {
+        let diagnostic = checker
+            .error(
+                Code::BadLink,
+                name.span,
+                format!("`{}` is not a crate name", name.value.escape_debug()),
+            )
+            .with_label("not a crate name")
+            .with_help("a crate is named with ASCII letters, digits, `_` and `-`, starting with a letter or `_`");
+        checker.push(diagnostic);
+    } else if name.value == "coolbot" {
+        let diagnostic = checker
+            .error(
+                Code::BadLink,
+                name.span,
+                "`coolbot` is the runtime crate, which coolc writes into the generated `Cargo.toml`",
+            )
+            .with_label("coolc's own dependency")
+            .with_help("remove this link: the generated crate depends on the coolbot coolc was built with");
+        checker.push(diagnostic);
+    }
+}
+
+/// Two `link crate` of one crate (in any components) must say the same: the generated
+/// `Cargo.toml` holds one dependency per crate.
+pub(super) fn crate_versions(checker: &mut Checker<'_, '_>, files: &[ast::File]) {
+    let mut seen: std::collections::BTreeMap<
+        &str,
+        (ast::FileId, &ast::StrLit, &ast::CrateSpec, &str),
+    > = std::collections::BTreeMap::new();
+    for file in files {
+        for item in &file.items {
+            let ast::Item::Component(component) = item else {
+                continue;
+            };
+            for member in &component.members {
+                let ast::Member::Link(ast::Link {
+                    kind: ast::LinkKind::Crate { name, spec },
+                    ..
+                }) = member
+                else {
+                    continue;
+                };
+                let Some((first_file, first_name, first_spec, first_component)) =
+                    seen.get(name.value.as_str()).copied()
+                else {
+                    seen.insert(&name.value, (file.id, name, spec, &component.name.name));
+                    continue;
+                };
+                if same_spec(first_spec, spec) {
+                    continue;
+                }
+                checker.file = file.id;
+                let diagnostic = checker
+                    .error(
+                        Code::BadLink,
+                        spec_span(spec),
+                        format!(
+                            "`{}` links crate `{}` differently from `{first_component}`",
+                            component.name.name, name.value
+                        ),
+                    )
+                    .with_label(format!("`{}` asks for `{}`", component.name.name, spec_text(spec)))
+                    .with_other(
+                        first_file,
+                        spec_span(first_spec),
+                        format!("`{first_component}` asks for `{}`", spec_text(first_spec)),
+                    )
+                    .with_help(format!(
+                        "the generated crate has one `{}` dependency: link it with the same version or table everywhere",
+                        first_name.value
+                    ));
+                checker.push(diagnostic);
+            }
+        }
+    }
+}
+
+fn spec_span(spec: &ast::CrateSpec) -> Span {
+    match spec {
+        ast::CrateSpec::Version(version) => version.span,
+        ast::CrateSpec::Table(_, span) => *span,
+    }
+}
+
+/// The spec as written, without spans, for comparing and quoting.
+fn spec_text(spec: &ast::CrateSpec) -> String {
+    match spec {
+        ast::CrateSpec::Version(version) => format!("{:?}", version.value),
+        ast::CrateSpec::Table(entries, _) => {
+            let entries: Vec<String> = entries
+                .iter()
+                .map(|e| format!("{} = {}", e.key.name, expr_text(&e.value)))
+                .collect();
+            format!("{{ {} }}", entries.join(", "))
+        }
+    }
+}
+
+fn expr_text(expr: &ast::Expr) -> String {
+    match &expr.kind {
+        ast::ExprKind::Str(s) => format!("{s:?}"),
+        ast::ExprKind::Bool(b) => b.to_string(),
+        ast::ExprKind::Int(i) => i.to_string(),
+        ast::ExprKind::Float(f) => f.to_string(),
+        ast::ExprKind::List(items) => {
+            let items: Vec<String> = items.iter().map(expr_text).collect();
+            format!("[{}]", items.join(", "))
+        }
+        other => format!("{other:?}"),
+    }
+}
+
+fn same_spec(a: &ast::CrateSpec, b: &ast::CrateSpec) -> bool {
+    spec_text(a) == spec_text(b)
 }
 
 /// The keys an inline crate table may use, with the kind of value each takes.

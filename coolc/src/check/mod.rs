@@ -79,6 +79,7 @@ pub fn check(
         }
     }
     compound::self_containing(&mut checker, files);
+    component::crate_versions(&mut checker, files);
     let rules = std::mem::take(&mut checker.rules);
     let (types, converters) = model.types();
     Resolved {
