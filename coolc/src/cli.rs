@@ -601,6 +601,8 @@ pub(crate) fn package_name_error(name: &str) -> Option<&'static str> {
         "it is a Rust keyword"
     } else if ["test", "std", "core", "alloc", "proc_macro"].contains(&name) {
         "it is the name of a crate of Rust's standard library"
+    } else if ["coolbot", "serde"].contains(&name) {
+        "it is the name of a dependency of the generated crate"
     } else {
         return None;
     })

@@ -78,11 +78,21 @@ pub fn lower(checked: &Checked, options: &Options) -> ir::Crate {
         checked,
         modules: BTreeMap::new(),
     };
-    // Module names in source order; names coolc uses itself are taken.
-    let mut taken: BTreeSet<String> = ["types", "support", "converters", "generated"]
-        .map(str::to_owned)
-        .into_iter()
-        .collect();
+    // Module names in source order; names coolc uses itself are taken, and so are the
+    // names of the crate's root files (`src/lib.rs`, `src/main.rs`) and `mod` (the
+    // name of a directory module's file).
+    let mut taken: BTreeSet<String> = [
+        "types",
+        "support",
+        "converters",
+        "generated",
+        "lib",
+        "main",
+        "mod",
+    ]
+    .map(str::to_owned)
+    .into_iter()
+    .collect();
     for c in checked.components() {
         let mut module = ident::snake_raw(&c.name);
         while !taken.insert(module.clone()) {
@@ -661,6 +671,24 @@ mod tests {
                 panic!("{}", analysis.render(crate::RenderOptions::plain()))
             });
         lower(&checked, &Options::default())
+    }
+
+    #[test]
+    fn components_named_like_the_crates_own_files_get_other_modules() {
+        let krate = lower_text(
+            "atomic Main { } atomic Lib { } atomic Mod { } atomic Types { } atomic Motor { }",
+        );
+        assert_eq!(
+            krate.module_names(),
+            [
+                "types",
+                "main_component",
+                "lib_component",
+                "mod_component",
+                "types_component",
+                "motor"
+            ]
+        );
     }
 
     #[test]

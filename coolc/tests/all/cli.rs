@@ -262,6 +262,14 @@ fn new_rejects_names_cargo_rejects() {
             "test",
             "it is the name of a crate of Rust's standard library",
         ),
+        (
+            "coolbot",
+            "it is the name of a dependency of the generated crate",
+        ),
+        (
+            "serde",
+            "it is the name of a dependency of the generated crate",
+        ),
     ] {
         let out = coolc(&["new", "--", name], dir.path());
         assert_eq!(
@@ -691,6 +699,10 @@ fn compile_checks_the_package_name_as_new_does() {
         (
             "std",
             "it is the name of a crate of Rust's standard library",
+        ),
+        (
+            "Coolbot",
+            "as a package name it is `coolbot`, and it is the name of a dependency of the generated crate",
         ),
         (
             "Type",
