@@ -40,6 +40,7 @@ fn automaton(
     for state in &automaton.states {
         names::value_name(checker, &state.name);
         sections(checker, state);
+        triggers(checker, state);
         for member in &state.members {
             state_member(checker, component, automaton, member, &states);
         }
@@ -117,6 +118,51 @@ fn sections(checker: &mut Checker<'_, '_>, state: &ast::State) {
             checker.push(diagnostic);
         } else {
             seen.push((name, span));
+        }
+    }
+}
+
+/// One `on` per input and one `after` per delay (and watched input) in a state: the
+/// first of two would always fire, the second never.
+fn triggers(checker: &mut Checker<'_, '_>, state: &ast::State) {
+    let mut seen: Vec<(String, Span)> = Vec::new();
+    for member in &state.members {
+        let (trigger, span) = match member {
+            ast::StateMember::On { port, span, .. } => (format!("on {}", port.name), *span),
+            ast::StateMember::After {
+                delay:
+                    ast::Expr {
+                        kind: ast::ExprKind::Duration(ns),
+                        ..
+                    },
+                without,
+                span,
+                ..
+            } => {
+                let mut trigger = format!("after {}", crate::diagram::text::duration(*ns));
+                if let Some(port) = without {
+                    trigger.push_str(&format!(" without {}", port.name));
+                }
+                (trigger, *span)
+            }
+            _ => continue,
+        };
+        if let Some((_, first)) = seen.iter().find(|(seen, _)| *seen == trigger) {
+            let diagnostic = checker
+                .error(
+                    Code::RepeatedBlock,
+                    span,
+                    format!(
+                        "state `{}` has two `{trigger}` transitions",
+                        state.name.name
+                    ),
+                )
+                .with_label("never fires: the first one always does")
+                .with_secondary(*first, "fires first")
+                .with_help("keep one of them; to choose among targets, use `may` in a section");
+            checker.push(diagnostic);
+        } else {
+            seen.push((trigger, span));
         }
     }
 }
