@@ -194,6 +194,9 @@ codes! {
     /// transition handles: response times are measured at `on` transitions only
     /// (partial in the runtime; warning).
     UnmeasuredResponse => "coolc::check::unmeasured_response",
+    /// Two names that differ as written but are one Rust identifier in the generated
+    /// code, or an atomic component named like a type its own code imports.
+    NameClash => "coolc::check::name_clash",
 }
 
 impl fmt::Display for Code {

@@ -10,6 +10,9 @@ use crate::diagnostics::{Code, Diagnostic};
 /// Every check of one component.
 pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     names::type_name(checker, &component.name);
+    if component.kind == ComponentKind::Atomic {
+        generated_names(checker, component);
+    }
     placement(checker, component);
     repeated_blocks(checker, component);
     scopes(checker, component);
@@ -308,6 +311,61 @@ fn scopes(checker: &mut Checker<'_, '_>, component: &ast::Component) {
                 .with_label("clashes with the default variable")
                 .with_help("choose another name; the default variables are state, user_state, result, error, cpu_time, elapsed_time, quality, new_state, configuration, period, max_response and priority");
             checker.push(diagnostic);
+        }
+    }
+}
+
+/// An atomic component's code (its user file) imports its generated module whole and
+/// defines a struct named like the component: a component named like a type of that
+/// module it uses (`Behavior`, `Cx`, a state's `<State>May`) would hide it.
+fn generated_names(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let rust = crate::ident::camel_raw(&component.name.name);
+    let clash = |diagnostic: Diagnostic| {
+        diagnostic
+            .with_label("the struct of the component's code")
+            .with_help("rename the component")
+    };
+    if let Some(what) = match rust.as_str() {
+        "Behavior" => Some("the trait its code implements"),
+        "Cx" => Some("the context its sections take"),
+        _ => None,
+    } {
+        let diagnostic = checker.error(
+            Code::NameClash,
+            component.name.span,
+            format!(
+                "the code of atomic component `{}` defines a struct `{rust}`, which hides `{rust}`, {what}",
+                component.name.name
+            ),
+        );
+        checker.push(clash(diagnostic));
+        return;
+    }
+    for member in &component.members {
+        let ast::Member::Automaton(automaton) = member else {
+            continue;
+        };
+        for state in &automaton.states {
+            let may = state.members.iter().find_map(|m| match m {
+                ast::StateMember::May { span, .. } => Some(*span),
+                _ => None,
+            });
+            let Some(may) = may else { continue };
+            let enum_name = format!("{}May", crate::ident::camel_raw(&state.name.name));
+            if enum_name == rust {
+                let diagnostic = checker
+                    .error(
+                        Code::NameClash,
+                        component.name.span,
+                        format!(
+                            "the code of atomic component `{}` defines a struct `{enum_name}`, which hides `{enum_name}`, the targets state `{}` may choose",
+                            component.name.name, state.name.name
+                        ),
+                    )
+                    .with_secondary(may, format!("makes the enum `{enum_name}`"));
+                checker.push(clash(diagnostic));
+                return;
+            }
         }
     }
 }
