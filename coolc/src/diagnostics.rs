@@ -123,6 +123,9 @@ codes! {
     UnknownPolicy => "coolc::check::unknown_policy",
     /// A `ufifo` cap is below its initial size.
     UfifoCap => "coolc::check::ufifo_cap",
+    /// A fifo or ufifo size above 1048576 packets: the runtime allocates it when the
+    /// component starts.
+    SizeLimit => "coolc::check::size_limit",
     /// A variable declaration mixes own and mapped forms wrongly.
     BadVariable => "coolc::check::bad_variable",
     /// A variable's range where none may be (not an own controllable number), not

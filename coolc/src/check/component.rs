@@ -777,6 +777,7 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
         ast::InputDef::Fifo { ty, size, policy } => {
             values::ty(checker, ty);
             values::positive(checker, size, "a fifo size");
+            queue_size(checker, size, "a fifo size");
             if let Some(policy) = policy
                 && !FIFO_POLICIES.contains(&policy.name.as_str())
             {
@@ -792,6 +793,7 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
         ast::InputDef::Ufifo { ty, size, max } => {
             values::ty(checker, ty);
             values::positive(checker, size, "a ufifo size");
+            queue_size(checker, size, "a ufifo size");
             if let Some(max) = max
                 && max.value < size.value
             {
@@ -811,6 +813,22 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
             }
         }
         ast::InputDef::Last(ty) | ast::InputDef::Poster(ty) => values::ty(checker, ty),
+    }
+}
+
+/// A queue's size is allocated when the component starts: at most
+/// [`super::MAX_QUEUE_SIZE`] packets.
+fn queue_size(checker: &mut Checker<'_, '_>, size: &ast::IntLit, what: &str) {
+    if size.value > super::MAX_QUEUE_SIZE {
+        let diagnostic = checker
+            .error(
+                Code::SizeLimit,
+                size.span,
+                format!("{what} is at most {}", super::MAX_QUEUE_SIZE),
+            )
+            .with_label("too large: the queue is allocated when the component starts")
+            .with_help("a ufifo grows from a small size: `ufifo<T>(64, max 10000000)`");
+        checker.push(diagnostic);
     }
 }
 

@@ -38,6 +38,10 @@ use crate::ast::{self, FileId, Span};
 use crate::diagnostics::{Code, Diagnostic, closest};
 use crate::resolve::Symbols;
 
+/// The largest `fifo` or `ufifo` size (packets): the runtime allocates a queue's
+/// size when the component starts, so a larger one would fail there, not here.
+pub(crate) const MAX_QUEUE_SIZE: u64 = 1 << 20;
+
 /// What the checks resolved: the model `lower` and `diagram` read (through
 /// `crate::Checked`, which exists only when there are no errors).
 #[derive(Clone, Debug, Default)]
