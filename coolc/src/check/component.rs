@@ -711,12 +711,14 @@ fn range(checker: &mut Checker<'_, '_>, variable: &ast::Variable, range: &ast::V
             "write `in low..=high`",
         );
     }
+    let before = checker.diagnostics.len();
     values::value(checker, &range.low, &expected);
     values::value(checker, &range.high, &expected);
+    let reported = checker.diagnostics.len() > before;
     let Some(bounds) = Range::of(range, &expected) else {
         // Ends that are not numbers of the type: reported just above, or beyond what
         // the type holds.
-        if Number::of(&range.low).is_some() && Number::of(&range.high).is_some() {
+        if !reported && Number::of(&range.low).is_some() && Number::of(&range.high).is_some() {
             refuse(
                 checker,
                 range.span,

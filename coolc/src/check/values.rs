@@ -147,15 +147,19 @@ fn value_error(
         (Ty::Optional(_), E::None) => Ok(()),
         (Ty::Optional(inner), _) => value_error(checker, expr, inner),
         (Ty::Bool, E::Bool(_)) | (Ty::Str, E::Str(_)) | (Ty::Duration, E::Duration(_)) => Ok(()),
-        (Ty::Float(_), E::Float(_)) => Ok(()),
-        (Ty::Float(_), E::Unary(ast::UnaryOp::Neg, inner)) if matches!(inner.kind, E::Float(_)) => {
-            Ok(())
+        (Ty::Float(prim), E::Float(value)) => {
+            float_fits(*prim, *value).map_err(|message| (expr.span, message, None))
         }
+        (Ty::Float(prim), E::Unary(ast::UnaryOp::Neg, inner)) => match inner.kind {
+            E::Float(value) => {
+                float_fits(*prim, -value).map_err(|message| (expr.span, message, None))
+            }
+            // An integer literal is a whole float, within any float's range.
+            E::Int(_) => Ok(()),
+            _ => Err(mismatch(expr, expected, None)),
+        },
         // An integer literal is a whole float: `max_speed: f64 = 1` means `1.0`.
         (Ty::Float(_), E::Int(_)) => Ok(()),
-        (Ty::Float(_), E::Unary(ast::UnaryOp::Neg, inner)) if matches!(inner.kind, E::Int(_)) => {
-            Ok(())
-        }
         (Ty::Int(prim), E::Int(n)) => {
             int_fits(*prim, i128::from(*n)).map_err(|message| (expr.span, message, None))
         }
@@ -263,6 +267,19 @@ fn value_error(
         )),
         _ => Err(mismatch(expr, expected, None)),
     }
+}
+
+/// A float literal `rustc` accepts for `prim`: an `f32` literal that rounds to
+/// infinity is refused (`f64` literals beyond `f64` are refused when read).
+fn float_fits(prim: ast::Prim, value: f64) -> Result<(), String> {
+    #[allow(clippy::cast_possible_truncation)] // Rounding to `f32` is the question.
+    if prim == ast::Prim::F32 && (value as f32).is_infinite() {
+        return Err(format!(
+            "{value:e} does not fit in `f32` (-{max:e}..={max:e})",
+            max = f32::MAX
+        ));
+    }
+    Ok(())
 }
 
 fn int_fits(prim: ast::Prim, value: i128) -> Result<(), String> {
