@@ -731,6 +731,11 @@ fn same_ros_import(files: &[ast::File], first: &Def, second: &Def) -> bool {
 
 /// What a top-level item defines, and its name (`None` for an import, and for a ROS
 /// import whose name is not a name).
+/// The name a top-level item defines, if it defines one.
+pub(crate) fn def_name(item: &ast::Item) -> Option<&ast::Ident> {
+    def_of(item).map(|(_, name)| name)
+}
+
 fn def_of(item: &ast::Item) -> Option<(DefKind, &ast::Ident)> {
     Some(match item {
         ast::Item::Import(_) => return None,

@@ -31,6 +31,12 @@ fn automaton(
     automaton: &ast::Automaton,
 ) {
     names::duplicates(checker, automaton.states.iter().map(|s| &s.name), "state");
+    names::rust_clashes(
+        checker,
+        automaton.states.iter().map(|s| &s.name),
+        "state",
+        &[names::snake, names::camel],
+    );
     let states: Vec<&str> = automaton
         .states
         .iter()

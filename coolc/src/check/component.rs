@@ -295,11 +295,18 @@ fn scopes(checker: &mut Checker<'_, '_>, component: &ast::Component) {
             _ => {}
         }
     }
-    names::duplicates(checker, ports, "port");
+    names::duplicates(checker, ports.iter().copied(), "port");
     names::duplicates(checker, variables.iter().copied(), "variable");
-    names::duplicates(checker, fields, "configuration field");
-    names::duplicates(checker, exceptions, "exception");
-    names::duplicates(checker, instances, "instance");
+    names::duplicates(checker, fields.iter().copied(), "configuration field");
+    names::duplicates(checker, exceptions.iter().copied(), "exception");
+    names::duplicates(checker, instances.iter().copied(), "instance");
+    let snake: &[names::Form] = &[names::snake];
+    let both: &[names::Form] = &[names::snake, names::camel];
+    names::rust_clashes(checker, ports, "port", snake);
+    names::rust_clashes(checker, variables.iter().copied(), "variable", snake);
+    names::rust_clashes(checker, fields, "configuration field", snake);
+    names::rust_clashes(checker, exceptions, "exception", both);
+    names::rust_clashes(checker, instances, "instance", both);
     for name in variables {
         // Compared as Rust names: `Period` becomes `period` (its field, its setter).
         let rust = crate::ident::snake_raw(&name.name);

@@ -84,6 +84,18 @@ pub fn check(
     }
     compound::self_containing(&mut checker, files);
     component::crate_versions(&mut checker, files);
+    // Top-level names are one namespace (resolve reports them equal as written); in
+    // Rust they are types.
+    let top_level: Vec<(FileId, &ast::Ident)> = files
+        .iter()
+        .flat_map(|file| {
+            file.items
+                .iter()
+                .filter_map(crate::resolve::def_name)
+                .map(move |name| (file.id, name))
+        })
+        .collect();
+    names::clashes(&mut checker, top_level, "type", &[names::camel]);
     let rules = std::mem::take(&mut checker.rules);
     let (types, converters) = model.types();
     Resolved {
@@ -113,6 +125,12 @@ impl Checker<'_, '_> {
             ast::Item::Packet(packet) => {
                 names::type_name(self, &packet.name);
                 names::duplicates(self, packet.fields.iter().map(|f| &f.name), "field");
+                names::rust_clashes(
+                    self,
+                    packet.fields.iter().map(|f| &f.name),
+                    "field",
+                    &[names::snake],
+                );
                 for field in &packet.fields {
                     values::field(self, field);
                 }
@@ -121,6 +139,12 @@ impl Checker<'_, '_> {
             ast::Item::Enum(def) => {
                 names::type_name(self, &def.name);
                 names::duplicates(self, def.variants.iter().map(|v| &v.name), "variant");
+                names::rust_clashes(
+                    self,
+                    def.variants.iter().map(|v| &v.name),
+                    "variant",
+                    &[names::camel],
+                );
                 for variant in &def.variants {
                     names::type_name(self, &variant.name);
                 }

@@ -116,6 +116,75 @@ pub(super) fn duplicates<'n>(
     }
 }
 
+/// How a name is written in the generated code.
+pub(super) type Form = fn(&str) -> String;
+
+/// The Rust form of a name in the generated code: a field, method or module.
+pub(super) fn snake(name: &str) -> String {
+    crate::ident::snake(name)
+}
+
+/// The Rust form of a name in the generated code: a type or variant.
+pub(super) fn camel(name: &str) -> String {
+    crate::ident::camel(name)
+}
+
+/// Reports two names of one scope that differ as written but become one Rust
+/// identifier in the generated code (`_a` and `a`, `fooBar` and `foo_bar`, `A_B` and
+/// `AB`): `forms` are the Rust forms the names take there. Names equal as written
+/// are [`duplicates`]' to report.
+pub(super) fn rust_clashes<'n>(
+    checker: &mut Checker<'_, '_>,
+    names: impl IntoIterator<Item = &'n ast::Ident>,
+    what: &str,
+    forms: &[Form],
+) {
+    let file = checker.file;
+    clashes(
+        checker,
+        names.into_iter().map(|name| (file, name)),
+        what,
+        forms,
+    );
+}
+
+/// [`rust_clashes`] over names that may come from several files.
+pub(super) fn clashes<'n>(
+    checker: &mut Checker<'_, '_>,
+    names: impl IntoIterator<Item = (ast::FileId, &'n ast::Ident)>,
+    what: &str,
+    forms: &[Form],
+) {
+    let mut seen: BTreeMap<(usize, String), (ast::FileId, &ast::Ident)> = BTreeMap::new();
+    for (file, name) in names {
+        for (index, form) in forms.iter().enumerate() {
+            let rust = form(&name.name);
+            match seen.get(&(index, rust.clone())) {
+                Some((first_file, first)) if first.name != name.name => {
+                    let diagnostic = Diagnostic::error(
+                        Code::NameClash,
+                        file,
+                        name.span,
+                        format!(
+                            "{what} `{}` and {what} `{}` are both `{rust}` in the generated code",
+                            first.name, name.name
+                        ),
+                    )
+                    .with_label(format!("`{rust}` in Rust"))
+                    .with_other(*first_file, first.span, format!("also `{rust}` in Rust"))
+                    .with_help("rename one of them: names that differ only in case, `_` or a Rust keyword's escape are one name in Rust");
+                    checker.push(diagnostic);
+                    break;
+                }
+                Some(_) => {}
+                None => {
+                    seen.insert((index, rust), (file, name));
+                }
+            }
+        }
+    }
+}
+
 fn is_upper_camel(name: &str) -> bool {
     name.chars().next().is_some_and(|c| c.is_ascii_uppercase()) && !name.contains('_')
 }

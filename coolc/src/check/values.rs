@@ -397,6 +397,12 @@ pub(super) fn timing(checker: &mut Checker<'_, '_>, timing: &ast::Timing) {
                     super::names::value_name(checker, level);
                 }
                 super::names::duplicates(checker, levels, "quality level");
+                super::names::rust_clashes(
+                    checker,
+                    levels,
+                    "quality level",
+                    &[super::names::snake, super::names::camel],
+                );
                 ("quality", *span)
             }
         };
