@@ -200,6 +200,9 @@ codes! {
     /// Two names that differ as written but are one Rust identifier in the generated
     /// code, or an atomic component named like a type its own code imports.
     NameClash => "coolc::check::name_clash",
+    /// A name whose generated Rust form is not an identifier: `_1` (the leading `_`
+    /// is dropped, leaving a digit first).
+    NoRustName => "coolc::check::no_rust_name",
 }
 
 impl fmt::Display for Code {

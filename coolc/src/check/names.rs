@@ -40,6 +40,22 @@ pub(super) fn type_name(checker: &mut Checker<'_, '_>, name: &ast::Ident) {
 /// Any other name (field, port, variable, state, exception, instance): no keyword,
 /// snake_case.
 pub(super) fn value_name(checker: &mut Checker<'_, '_>, name: &ast::Ident) {
+    let rust = crate::ident::snake_raw(&name.name);
+    if rust.starts_with(|c: char| c.is_ascii_digit()) {
+        let diagnostic = checker
+            .error(
+                Code::NoRustName,
+                name.span,
+                format!(
+                    "`{}` has no Rust name: without its leading `_` it is `{rust}`",
+                    name.name
+                ),
+            )
+            .with_label("a digit after the leading `_`")
+            .with_help("the generated code drops a leading `_`: start the name with a letter");
+        checker.push(diagnostic);
+        return;
+    }
     if keyword(checker, name) {
         return;
     }
