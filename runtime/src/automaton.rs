@@ -406,7 +406,10 @@ pub struct Context {
 /// transition takes time of a virtual clock: only the clock can end the section
 /// then, and whoever moves the clock may be the one waiting, so the sender counts
 /// the command as taken.
-pub(crate) struct TransitionWaiter(pub(crate) Box<dyn FnOnce() + Send>);
+pub(crate) struct TransitionWaiter(
+    pub(crate) Box<dyn FnOnce() + Send>,
+    pub(crate) Option<crate::clock::AnswerNotice>,
+);
 
 impl fmt::Debug for TransitionWaiter {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -578,7 +581,10 @@ impl Context {
         }
         match (self.spends, self.clock.as_virtual()) {
             (Spends::Member(id), Some(clock)) => {
-                let told = self.transition_waiter.take().map(|waiter| waiter.0);
+                let told = self
+                    .transition_waiter
+                    .take()
+                    .map(|waiter| (waiter.0, waiter.1));
                 clock.spend(id, cost, told);
             }
             (Spends::Harnessed, Some(clock)) => {

@@ -240,6 +240,11 @@ pub(crate) struct AnswerNotice {
     command: u64,
 }
 
+/// What [`VirtualClock::spend`] does once the section's end is recorded, under the
+/// clock's lock: post the answer that the transition takes the clock's time, and
+/// clear the mark of the sender waiting for it in the clock's time (its notice).
+pub(crate) type Told = (Box<dyn FnOnce() + Send>, Option<AnswerNotice>);
+
 impl AnswerNotice {
     /// The command's number, for [`ClockWait::wait`].
     pub(crate) fn command(&self) -> u64 {
@@ -282,8 +287,15 @@ impl ClockWait {
 
     /// Wait until `answered()` (an answer to `command`, the number of its
     /// [`AnswerNotice`], is posted), or the clock reaches `until`.
-    pub(crate) fn wait(&self, command: u64, until: Instant, answered: &dyn Fn() -> bool) -> Waited {
-        self.clock.wait_answer(self.id, command, until, answered)
+    pub(crate) fn wait(
+        &self,
+        command: u64,
+        until: Instant,
+        answered: &dyn Fn() -> bool,
+        target: Option<u64>,
+    ) -> Waited {
+        self.clock
+            .wait_answer(self.id, command, until, answered, target)
     }
 }
 
@@ -452,8 +464,13 @@ impl VirtualClock {
     }
 
     /// A component has nothing due at `at` (its turn's reading) and is about to wait.
-    pub(crate) fn settled(&self, id: u64, at: Instant) {
+    pub(crate) fn settled(&self, id: u64, at: Instant, queued: &dyn Fn() -> bool) {
         let mut members = self.lock();
+        // A command queued by a waiter in the clock's time (`wait_answer`, which
+        // marks the component busy under this lock after queuing it): not settled.
+        if queued() {
+            return;
+        }
         if let Some(member) = members.components.get_mut(&id) {
             member.settled = Some(at);
         }
@@ -476,7 +493,7 @@ impl VirtualClock {
     /// called once the section's end is recorded (a command waiting for the
     /// transition this section is part of learns it there: an advance made after it
     /// learns counts from the same time).
-    pub(crate) fn spend(&self, id: u64, cost: Duration, told: Option<Box<dyn FnOnce() + Send>>) {
+    pub(crate) fn spend(&self, id: u64, cost: Duration, told: Option<Told>) {
         let mut members = self.lock();
         let end = self
             .offset
@@ -486,15 +503,23 @@ impl VirtualClock {
             Some(member) if !member.released => member.spending = Some(end),
             _ => return,
         }
-        self.settled.notify_all();
-        if let Some(told) = told {
+        if let Some((post, notice)) = told {
             // After the end is recorded: whoever learns it and then advances the
-            // clock counts from the same time. Outside the lock: the one told may
-            // wait in the clock's time ([`ClockWait`]).
-            drop(members);
-            told();
-            members = self.lock();
+            // clock counts from the same time. Under the lock, before the settled
+            // wait is woken: a supervisor waiting for the answer in the clock's time
+            // is busy again before `advance` can find this member out of its wait
+            // (the answers' lock is taken under the clock's, as `wait_answer` does).
+            post();
+            if let Some(notice) = notice
+                && let Some(member) = members.components.get_mut(&notice.id)
+                && member.awaiting == Some(notice.command)
+            {
+                member.awaiting = None;
+                member.spending = None;
+            }
+            self.moved.notify_all();
         }
+        self.settled.notify_all();
         while members.tripped < end
             && members
                 .components
@@ -518,18 +543,33 @@ impl VirtualClock {
         command: u64,
         until: Instant,
         answered: &dyn Fn() -> bool,
+        target: Option<u64>,
     ) -> Waited {
         let end = nanos(until.saturating_duration_since(self.base));
         let mut members = self.lock();
         if answered() {
             return Waited::Answered;
         }
+        // The component commanded is busy with the command from now on, before this
+        // member leaves the settled wait: an `advance` under way waits for it.
+        if let Some(target) = target.and_then(|target| members.components.get_mut(&target)) {
+            target.settled = None;
+        }
         match members.components.get_mut(&id) {
             Some(member) if !member.released => {
                 member.spending = Some(end);
                 member.awaiting = Some(command);
             }
-            _ => return Waited::Off,
+            _ => {
+                if let Some(target) = target.and_then(|target| members.components.get_mut(&target))
+                    && !target.released
+                {
+                    target.released = true;
+                    drop(members);
+                    self.moved.notify_all();
+                }
+                return Waited::Off;
+            }
         }
         self.settled.notify_all();
         let waited = loop {
@@ -563,6 +603,19 @@ impl VirtualClock {
         {
             member.awaiting = None;
             member.spending = None;
+        }
+        if waited == Waited::Off {
+            // Its system shuts down, and with it the component it commands (a
+            // compound's instance): a section of that one taking the clock's time
+            // returns too, so that the command, waited for in real time from now
+            // on, is taken rather than outlasted.
+            if let Some(target) = target.and_then(|target| members.components.get_mut(&target))
+                && !target.released
+            {
+                target.released = true;
+                drop(members);
+                self.moved.notify_all();
+            }
         }
         waited
     }

@@ -109,6 +109,8 @@ pub(crate) struct Posted {
     /// clock's deadline here (then, once its system shuts down, in real time until
     /// `deadline`); the command's number.
     on_clock: Option<(ClockWait, Instant, u64)>,
+    /// The component's id on the virtual clock.
+    target: Option<u64>,
 }
 
 /// The component's answers to one command.
@@ -346,6 +348,7 @@ impl Handle {
             deadline,
             accepted: false,
             on_clock,
+            target: self.shared.clock_member.get().copied(),
         })
     }
 
@@ -383,7 +386,7 @@ impl Handle {
                     let answers = &posted.answers;
                     let came = || !answers.is_empty() || answers.is_closed();
                     let moved = crate::time::later(wait.now(), Duration::from_nanos(1));
-                    let waited = wait.wait(*number, moved, &came);
+                    let waited = wait.wait(*number, moved, &came, posted.target);
                     if waited != Waited::Off {
                         posted.on_clock = Some(on_clock);
                     }
@@ -568,13 +571,14 @@ fn wait_for_answers(posted: Posted, timeout: Duration) -> Result<Instant, Refusa
         claim,
         deadline,
         mut on_clock,
+        target,
         ..
     } = posted;
     let mut until = deadline;
     // The component took it (its `Accepted` may come after the claim).
     let mut taken = false;
     loop {
-        match next_answer(&answers, until, &mut on_clock) {
+        match next_answer(&answers, until, &mut on_clock, target) {
             Some(Reply::Accepted) => taken = true,
             // A section of the transition takes time of a virtual clock: only the
             // clock can end it, and whoever moves the clock may be the one waiting, so
@@ -614,10 +618,11 @@ fn next_answer(
     answers: &Mailbox<Reply>,
     until: Instant,
     on_clock: &mut Option<(ClockWait, Instant, u64)>,
+    target: Option<u64>,
 ) -> Option<Reply> {
     if let Some((wait, clock_until, number)) = on_clock {
         let came = || !answers.is_empty() || answers.is_closed();
-        match wait.wait(*number, *clock_until, &came) {
+        match wait.wait(*number, *clock_until, &came, target) {
             Waited::Answered | Waited::TimedOut => return answers.take_until(Instant::now()),
             Waited::Off => *on_clock = None,
         }
@@ -638,6 +643,7 @@ mod tests {
             deadline: Instant::now(),
             accepted: false,
             on_clock: None,
+            target: None,
         }
     }
 

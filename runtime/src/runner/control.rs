@@ -31,12 +31,12 @@ impl Runner {
                     reply(Reply::Accepted);
                     let answers = message.reply.mailbox();
                     let notice = message.notice.as_ref().map(|notice| notice.0.clone());
-                    self.cx.transition_waiter = Some(TransitionWaiter(Box::new(move || {
-                        let _ = answers.post(Reply::TakingClockTime);
-                        if let Some(notice) = notice {
-                            notice.answered();
-                        }
-                    })));
+                    self.cx.transition_waiter = Some(TransitionWaiter(
+                        Box::new(move || {
+                            let _ = answers.post(Reply::TakingClockTime);
+                        }),
+                        notice,
+                    ));
                     self.apply(Event::Command(*target));
                     self.cx.transition_waiter = None;
                     reply(Reply::Done);

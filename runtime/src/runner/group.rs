@@ -351,7 +351,7 @@ impl Group {
                 }
                 for runner in self.members.iter().flatten() {
                     if let Some(id) = runner.on_clock {
-                        clock.settled(id, now);
+                        clock.settled(id, now, &|| !runner.control.is_empty());
                     }
                 }
                 Doorbell::park_any(bells, None);

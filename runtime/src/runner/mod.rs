@@ -436,7 +436,7 @@ impl Runner {
     /// about to wait (see `crate::clock`).
     fn settle(&self) {
         if let (Some(clock), Some(id)) = (self.time.as_virtual(), self.on_clock) {
-            clock.settled(id, clock.now());
+            clock.settled(id, clock.now(), &|| !self.control.is_empty());
         }
     }
 

@@ -102,7 +102,7 @@ impl Runner {
             let now = clock.now();
             if deadline.is_some_and(|due| due > now) {
                 if let Some(id) = self.on_clock {
-                    clock.settled(id, now);
+                    clock.settled(id, now, &|| !self.control.is_empty());
                 }
                 self.bell.park_until(None);
             }

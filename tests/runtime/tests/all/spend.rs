@@ -451,3 +451,149 @@ fn an_advance_returns_once_a_supervisors_command_to_an_instance_at_rest_is_taken
         ]
     );
 }
+
+/// A relay whose entries after the first take `cost` of the clock's time each.
+struct SlowReentry {
+    log: Log,
+    cost: Duration,
+    entries: usize,
+}
+
+impl relay::Behavior for SlowReentry {
+    fn relay_entry(&mut self, cx: &mut relay::Cx<'_>) -> SectionResult {
+        self.entries += 1;
+        if self.entries > 1 {
+            self.log.push("r:entry".to_owned());
+            cx.rt.spend(self.cost);
+            self.log.push("r:entry done".to_owned());
+        }
+        Ok(())
+    }
+}
+
+/// A supervisor whose first periodic section past 11 ms takes `r` to `ready` and back
+/// to `running` (whose entry then takes the clock's time).
+struct RestartsR {
+    log: Log,
+    clock: Arc<VirtualClock>,
+    commanded: bool,
+}
+
+impl Supervisor for RestartsR {
+    fn spec(&self) -> &'static Spec {
+        &cmp_counting::SPEC
+    }
+
+    fn get(&self, _variable: usize) -> Value {
+        Value::UInt(0)
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        section: Section,
+        cx: &mut SupervisorCx<'_>,
+    ) -> SectionResult {
+        if section != Section::Periodic || self.commanded || self.clock.elapsed() < ms(11) {
+            return Ok(());
+        }
+        self.commanded = true;
+        let ready = cx.instances.state("r", Controllable::Ready);
+        let run = cx.instances.state("r", Controllable::Running);
+        self.log.push(format!(
+            "k: {ready:?} {run:?} at {:?}",
+            self.clock.elapsed()
+        ));
+        Ok(())
+    }
+}
+
+/// A supervisor's section whose command's transition takes the clock's time is done
+/// before the advance that ran it returns: the instance is busy with the command
+/// before the supervisor leaves the settled wait, and the answer that the transition
+/// takes the clock's time makes the supervisor busy again before the instance leaves
+/// it. (Each round races the two threads against the advance.)
+#[test]
+fn a_supervisor_told_its_command_takes_clock_time_settles_within_the_advance() {
+    let mut bad = Vec::new();
+    for round in 0..100 {
+        let log = Log::default();
+        let clock = VirtualClock::new();
+        let mut system = System::with_clock(Clock::virtual_clock(&clock));
+        let supervisor = RestartsR {
+            log: log.clone(),
+            clock: Arc::clone(&clock),
+            commanded: false,
+        };
+        let k = CompoundBuilder::new("k", supervisor)
+            .instance(relay::component(
+                "r",
+                SlowReentry {
+                    log: log.clone(),
+                    cost: ms(4),
+                    entries: 0,
+                },
+            ))
+            .command_timeout(Duration::from_millis(250))
+            .build()
+            .expect("build");
+        system.add(k).expect("k");
+        system.run_all().expect("running");
+        clock.settle().expect("settled");
+        for step in 1..=14 {
+            clock.advance(ms(1)).expect("settled");
+            log.push(format!("advanced to {step}ms"));
+        }
+        let report = system.shutdown();
+        assert!(report.clean(), "{report:?}");
+        let lines = log.take();
+        let lines: Vec<&str> = lines
+            .iter()
+            .map(String::as_str)
+            .filter(|line| !line.starts_with("advanced") || *line == "advanced to 12ms")
+            .collect();
+        if lines
+            != [
+                "r:entry",
+                "k: Ok(()) Ok(()) at 12ms",
+                "advanced to 12ms",
+                "r:entry done",
+            ]
+        {
+            bad.push(format!("round {round}: {lines:?}"));
+        }
+    }
+    assert!(bad.is_empty(), "{} of 100 rounds: {bad:#?}", bad.len());
+}
+
+/// A system shut down while a supervisor's section waits in the clock's time for an
+/// instance whose section takes the clock's time: the supervisor is released (its
+/// wait goes on in real time), and so is the instance it waits for, which takes the
+/// command at once instead of the section waiting out its command timeout.
+#[test]
+fn shutting_down_while_a_supervisor_waits_for_an_instance_taking_clock_time_is_clean() {
+    let log = Log::default();
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let supervisor = SuspendsA {
+        log: log.clone(),
+        clock: Arc::clone(&clock),
+        commanded: false,
+    };
+    let k = CompoundBuilder::new("k", supervisor)
+        .instance(stage::component("a", busy("a", &log, &[4])))
+        .command_timeout(Duration::from_secs(8))
+        .build()
+        .expect("build");
+    system.add(k).expect("k");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    for _ in 0..12 {
+        clock.advance(ms(1)).expect("settled");
+    }
+    assert_eq!(log.take(), ["a:0", "k: suspend a at 12ms"]);
+    // (The command timeout outlasts the shutdown's: a supervisor waiting it out
+    // would leave its thread unjoined.)
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
