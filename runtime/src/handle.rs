@@ -562,7 +562,7 @@ impl Handle {
 
 /// Wait for the answers to `posted`: `Ok` with the time it waited until once the
 /// component took the command and finished it (or its transition outlasts the wait,
-/// or takes time of a virtual clock); else why not. A command not taken by its
+/// or takes time of a virtual clock: then now); else why not. A command not taken by its
 /// deadline is withdrawn (`Busy`); one taken just then is given `timeout` again for
 /// its answers.
 fn wait_for_answers(posted: Posted, timeout: Duration) -> Result<Instant, Refusal> {
@@ -583,7 +583,10 @@ fn wait_for_answers(posted: Posted, timeout: Duration) -> Result<Instant, Refusa
             // A section of the transition takes time of a virtual clock: only the
             // clock can end it, and whoever moves the clock may be the one waiting, so
             // the command counts as taken, as one whose transition outlasts its time.
-            Some(Reply::Done | Reply::TakingClockTime) => return Ok(until),
+            Some(Reply::Done) => return Ok(until),
+            // (Its end is now: a `dead` whose exit section takes the clock's time
+            // does not wait for the thread to exit, which only an advance lets it.)
+            Some(Reply::TakingClockTime) => return Ok(Instant::now()),
             Some(Reply::Rejected(reason)) => return Err(Refusal::Rejected(reason)),
             // The transition outlasts its time: it counts as taken.
             None if taken => return Ok(until),

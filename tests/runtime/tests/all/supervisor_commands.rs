@@ -1100,3 +1100,68 @@ fn a_supervisor_command_outside_its_range_is_refused_before_it_is_sent() {
             .contains(&("w".to_owned(), Command::SetPriority(5)))
     );
 }
+
+/// `Cell`'s supervisor whose `halted` exit takes 5 ms of the clock's time.
+struct SlowExit;
+
+impl cell::Supervisor for SlowExit {
+    fn halted_entry(&mut self, _cx: &mut cell::Cx<'_>) -> SectionResult {
+        Ok(())
+    }
+
+    fn halted_exit(&mut self, cx: &mut cell::Cx<'_>) -> SectionResult {
+        cx.rt.spend(Duration::from_millis(5));
+        Ok(())
+    }
+}
+
+struct SlowExitParts(Option<SlowExit>, Arc<Script>, Option<Tap>);
+
+impl cell::Parts for SlowExitParts {
+    fn supervisor(&mut self) -> impl cell::Supervisor {
+        self.0.take().expect("one supervisor")
+    }
+
+    fn f(&mut self) -> impl coolbot_runtime_tests::generated::feeder::Behavior {
+        self.2.take().expect("one feeder")
+    }
+
+    fn joint(&mut self) -> impl worker::Behavior {
+        Scripted::new(&self.1)
+    }
+}
+
+/// `dead` to a component whose exit section takes the clock's time counts as taken
+/// once the section does, as any state change does: it does not wait, in real time,
+/// for the thread to exit, which only an advance lets it (here an hour, which the
+/// command would otherwise wait out: the poll's deadline would fail the test first).
+#[test]
+fn dead_whose_exit_takes_clock_time_does_not_wait_for_the_thread() {
+    let clock = coolbot::VirtualClock::new();
+    let mut system = System::with_clock(coolbot::Clock::virtual_clock(&clock));
+    let parts = SlowExitParts(Some(SlowExit), Script::new(), Some(Tap::new().0));
+    let cell = system.add(cell::component("cell", parts).unwrap()).unwrap();
+    system.run_all().unwrap();
+    clock.settle().unwrap();
+    set_estop(&cell, true);
+    clock.settle().unwrap();
+    assert_eq!(cell.snapshot().user_state.as_deref(), Some("halted"));
+    let patient = cell
+        .clone()
+        .with_command_timeout(Duration::from_secs(3_600));
+    let commanding =
+        std::thread::spawn(move || patient.command(Command::SetState(Controllable::Dead)));
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while !commanding.is_finished() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the command waited for the thread"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    commanding.join().expect("no panic").expect("taken");
+    clock.advance(Duration::from_millis(5)).unwrap();
+    cell.wait_state(State::Dead, WAIT).unwrap();
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
