@@ -184,8 +184,6 @@ pub(crate) struct Runner {
     /// This component's id on a virtual clock, once it joined it
     /// ([`Runner::join_clock`]).
     on_clock: Option<u64>,
-    /// Its place on that clock: left when the runner is dropped.
-    clock_place: Option<crate::clock::ClockPlace>,
     /// Whether the spec declares a `pull` output (otherwise no pull queue is looked at).
     has_pull: bool,
     /// Wall-clock time spent in user calls, and the value last published, in
@@ -245,6 +243,11 @@ pub(crate) struct Runner {
     /// has ended: closing it tells the handles (`Handle::join_if_exited`), and drops
     /// the commands still queued (their senders see no answer coming).
     control: Closer<ControlMessage>,
+    /// Its place on that clock: left when the runner is dropped, after everything
+    /// else (declared last): the commands still queued are dropped first, and a
+    /// supervisor waiting for one in the clock's time is busy again before this
+    /// component leaves the settled wait.
+    clock_place: Option<crate::clock::ClockPlace>,
 }
 
 impl Runner {
