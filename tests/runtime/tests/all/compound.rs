@@ -2468,9 +2468,9 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
 }
 
 /// The same on a virtual clock: the state entered by a rule asks for a turn at once
-/// (`Compound::wake_at`'s `fresh`), but as a real `Instant::now()`, which the runner
-/// compares with the virtual time: later than it, so the compound settles and parks
-/// with the rule of `second` never evaluated.
+/// (`Compound::wake_at`'s `fresh`) at the clock's time, not at a real
+/// `Instant::now()`, which would be later than the virtual time and leave the
+/// compound settled and parked with the rule of `second` never evaluated.
 #[test]
 fn on_a_virtual_clock_a_rule_that_already_holds_when_its_state_is_entered_fires() {
     let mut parts = Parts::new();
@@ -2499,9 +2499,10 @@ fn on_a_virtual_clock_a_rule_that_already_holds_when_its_state_is_entered_fires(
 }
 
 /// An instance retired at its recovery deadline while a retry's restart is still
-/// under way (its `start` is slow) is sent `dead` with the handle's whole command
-/// timeout (the compound's thread waits 2 s), withdrawn as busy, and then runs on:
-/// the retry's `running` completes and nothing sends `dead` again.
+/// under way (its `start` is slow) does not run on once the restart returns: its
+/// pending retry is withdrawn and `dead` is posted without waiting, and taken as
+/// soon as `start` returns (a `dead` waited for would be withdrawn as busy after its
+/// timeout, and the retry's `running` would then complete).
 #[test]
 fn an_instance_retired_during_a_slow_restart_does_not_run_on() {
     let rig = substitution(true);
