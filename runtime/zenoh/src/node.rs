@@ -229,10 +229,16 @@ impl Node {
                 })
                 .flatten();
             let monitor_key = keys::monitor(&self.name, &path);
+            // Dropped, not waited for, where the link to a subscriber is full (as
+            // `echo` does): a subscriber that stops reading must not hold the one
+            // thread that publishes every component's events, which would then drop
+            // them for everyone. A subscriber that misses an event sees the state it
+            // set in the next snapshot (a proxy asks for one every
+            // `place::TIMES_REFRESH`).
             let publisher = self
                 .session
                 .declare_publisher(monitor_key.clone())
-                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
                 .wait()
                 .map_err(Error::zenoh("declare a monitoring publisher"))?;
             streams.push(Stream {
@@ -509,5 +515,158 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle, compound: Option<
             "control answer not sent: {}{held}",
             Chain(&*error)
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::{Read, Write};
+    use std::net::{TcpListener, TcpStream};
+
+    /// A component that does nothing: one state, no ports.
+    struct Idle(&'static coolbot::Spec);
+
+    impl coolbot::Automaton for Idle {
+        fn spec(&self) -> &'static coolbot::Spec {
+            self.0
+        }
+
+        fn section(
+            &mut self,
+            _state: usize,
+            _section: coolbot::Section,
+            _cx: &mut coolbot::Context,
+        ) -> Result<(), coolbot::Fault> {
+            Ok(())
+        }
+    }
+
+    fn free_port() -> u16 {
+        TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port()
+    }
+
+    /// A TCP relay to `target` for each connection to the returned port: what the
+    /// client sends is relayed; what the target sends back is relayed until `stall`,
+    /// and then no longer read (a peer that stops reading its socket).
+    fn stalling_relay(target: u16, stall: Arc<AtomicBool>) -> u16 {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                let Ok(client) = client else { return };
+                let Ok(server) = TcpStream::connect(("127.0.0.1", target)) else {
+                    return;
+                };
+                let (mut from_client, mut to_server) =
+                    (client.try_clone().unwrap(), server.try_clone().unwrap());
+                std::thread::spawn(move || {
+                    let _ = std::io::copy(&mut from_client, &mut to_server);
+                });
+                let (mut from_server, mut to_client) = (server, client);
+                let stall = Arc::clone(&stall);
+                std::thread::spawn(move || {
+                    let mut buffer = [0u8; 4096];
+                    loop {
+                        if stall.load(Ordering::Acquire) {
+                            // Never read again; keep the socket open.
+                            std::thread::sleep(Duration::from_secs(3600));
+                        }
+                        match from_server.read(&mut buffer) {
+                            Ok(0) | Err(_) => return,
+                            Ok(n) => {
+                                if to_client.write_all(&buffer[..n]).is_err() {
+                                    return;
+                                }
+                            }
+                        }
+                    }
+                });
+            }
+        });
+        port
+    }
+
+    fn client_config(endpoint: &str) -> zenoh::Config {
+        let mut config = zenoh::Config::default();
+        config.insert_json5("mode", "\"client\"").unwrap();
+        config
+            .insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
+            .unwrap();
+        config
+            .insert_json5("scouting/multicast/enabled", "false")
+            .unwrap();
+        config
+    }
+
+    /// A peer that subscribes to a node's monitoring keys and stops reading does not
+    /// hold the node's monitoring thread (events are published with congestion
+    /// control `Drop`): were it held, the events of the components it forwards would
+    /// pile up and, past `OBSERVER_CAPACITY`, be dropped for every subscriber.
+    #[test]
+    fn a_subscriber_that_stops_reading_does_not_make_the_node_drop_monitoring_events() {
+        let port = free_port();
+        let node = Node::open(
+            "mont",
+            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
+        )
+        .unwrap()
+        .with_state_directory(None);
+        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let mut system = System::new();
+        system
+            .add(coolbot::Component::new(
+                "idle",
+                Box::new(Idle(spec)),
+                coolbot::PortSet::new(),
+            ))
+            .unwrap();
+        system.start().unwrap();
+        let handle = system.handle("idle").unwrap();
+        handle
+            .command(Command::SetState(Controllable::Running))
+            .unwrap();
+        node.expose_system(&system).unwrap();
+
+        let stall = Arc::new(AtomicBool::new(false));
+        let relay = stalling_relay(port, Arc::clone(&stall));
+        let watcher = zenoh::open(client_config(&format!("tcp/127.0.0.1:{relay}")))
+            .wait()
+            .unwrap();
+        let _subscriber = watcher
+            .declare_subscriber("coolbot/mont/**")
+            .callback(|_| {})
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+        stall.store(true, Ordering::Release);
+        // Fill the link to the watcher: what else the node sends it (here, large
+        // samples it may drop), which the watcher does not read.
+        let filler = vec![0u8; 1 << 20];
+        for _ in 0..30 {
+            node.session()
+                .put("coolbot/mont/filler", filler.clone())
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .wait()
+                .unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(200));
+        // The component changes state, as any component does.
+        for round in 0..6_000 {
+            let state = if round % 2 == 0 {
+                Controllable::Suspended
+            } else {
+                Controllable::Running
+            };
+            handle.command(Command::SetState(state)).unwrap();
+        }
+        let dropped = handle.snapshot().dropped_events;
+        assert_eq!(dropped, 0, "{dropped} monitoring events dropped");
+        drop(watcher);
+        let _ = system.shutdown();
     }
 }
