@@ -88,10 +88,27 @@ pub const COMMAND: Limit = Limit {
     unit: "bytes",
 };
 
-/// The largest answer (its JSON) a node decodes from another node's agent, in bytes.
+/// The largest answer (its JSON) a node decodes from another node's agent, or a proxy
+/// from its remote instance's control port, in bytes.
 pub const REPLY: Limit = Limit {
     name: "REPLY",
     max: 64 << 10,
+    unit: "bytes",
+};
+
+/// The largest monitoring event (its JSON) a proxy decodes from its remote instance,
+/// in bytes: a longer one is counted lost at the proxy's `@network`, undecoded.
+pub const EVENT: Limit = Limit {
+    name: "EVENT",
+    max: 4 << 20,
+    unit: "bytes",
+};
+
+/// The largest snapshot of a monitoring port (its JSON) a proxy decodes from its
+/// remote instance's node, in bytes: a longer one is refused, undecoded.
+pub const SNAPSHOT: Limit = Limit {
+    name: "SNAPSHOT",
+    max: 16 << 20,
     unit: "bytes",
 };
 
@@ -172,13 +189,15 @@ pub const ROS_PAYLOAD: Limit = Limit {
 };
 
 /// Every limit, in the order `docs/distribution.md` lists them.
-pub const ALL: [Limit; 16] = [
+pub const ALL: [Limit; 18] = [
     NAME,
     PATH,
     KEY,
     REQUEST,
     COMMAND,
     REPLY,
+    EVENT,
+    SNAPSHOT,
     WIRES,
     VARIABLES,
     QUEUE,

@@ -36,7 +36,8 @@ pub const DEFAULT_REMOTE_TIMEOUT: Duration = Duration::from_secs(5);
 const REMOTE_QUEUE: (usize, usize) = (64, 65_536);
 
 /// How often a proxy asks for its remote instance's snapshot, for what changes without
-/// an event (its CPU and elapsed time) and to know that the instance is still heard
+/// an event (its CPU and elapsed time), for what an event lost on the way would have
+/// set (its state, error, result...), and to know that the instance is still heard
 /// (at most: a third of the placer's silence bound, [`Placer::silence`]).
 pub const TIMES_REFRESH: Duration = Duration::from_secs(1);
 
@@ -278,6 +279,14 @@ impl coolbot::remote::Placer for Placer {
 impl Placer {
     /// [`coolbot::remote::Placer::place`], with this crate's error.
     fn place_here(&self, placement: &Placement) -> Result<Option<Remote>, PlaceError> {
+        Ok(self.far_end(placement)?.map(|(ports, end)| Remote {
+            ports,
+            end: Box::new(end),
+        }))
+    }
+
+    /// The proxy's ports and far end for `placement` (`None`: it runs here).
+    fn far_end(&self, placement: &Placement) -> Result<Option<(PortSet, End)>, PlaceError> {
         if placement.node == self.node.name() {
             return Ok(None);
         }
@@ -339,7 +348,10 @@ impl Placer {
         // Losses on the way in are counted at an input of the proxy's own, not one of
         // its ports: the proxy's monitor shows them at port `network` (`End::view`).
         let losses = TickIn::new();
-        let shared = Arc::new(Shared::default());
+        let shared = Arc::new(Shared {
+            inputs: spec.inputs,
+            ..Shared::default()
+        });
         let mut outputs = Vec::new();
         for output in spec.outputs {
             let key = format!("{base}/out/{}", output.name);
@@ -406,10 +418,7 @@ impl Placer {
             losses_before: 0,
         };
         end.listen()?;
-        Ok(Some(Remote {
-            ports,
-            end: Box::new(end),
-        }))
+        Ok(Some((ports, end)))
     }
 }
 
@@ -417,7 +426,10 @@ impl Placer {
 #[derive(Default)]
 struct Shared {
     /// The remote monitoring port as last heard.
-    view: Mutex<Option<Monitor>>,
+    view: Mutex<Option<Mirrored>>,
+    /// The instance's inputs, in declaration order: the only ports whose losses the
+    /// view shows (with [`NETWORK`]).
+    inputs: &'static [coolbot::InputSpec],
     /// Whether `view` changed since the proxy last read it.
     changed: AtomicBool,
     /// Why the current generation is lost with its node, if it is (until a new one
@@ -428,7 +440,9 @@ struct Shared {
     absent: Mutex<Option<String>>,
     /// Whether the node's liveliness token was ever seen.
     seen: AtomicBool,
-    /// Monitoring events of the instance that did not decode (dropped).
+    /// Monitoring events and snapshots of the instance that did not decode, were
+    /// over their limit ([`crate::limits::EVENT`], [`crate::limits::SNAPSHOT`]) or
+    /// named ports the instance does not have (dropped).
     bad_events: AtomicU64,
     /// The monitoring key of the instance's current generation.
     monitor_key: Mutex<String>,
@@ -562,22 +576,36 @@ impl End {
                     if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                         return;
                     }
-                    let Ok(event) =
-                        serde_json::from_slice::<MonitorEvent>(&sample.payload().to_bytes())
-                    else {
-                        coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
-                            key = %sample.key_expr(),
-                            "a monitoring event that does not decode was dropped{held}"
-                        ));
-                        shared.bad_events.fetch_add(1, Ordering::AcqRel);
-                        shared.ring();
-                        return;
+                    let event = match decode_json::<MonitorEvent>(
+                        sample.payload(),
+                        crate::limits::EVENT,
+                        "a monitoring event",
+                    ) {
+                        Ok(event) => event,
+                        Err(why) => {
+                            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                                key = %sample.key_expr(),
+                                "{why}: dropped{held}"
+                            ));
+                            shared.bad_events.fetch_add(1, Ordering::AcqRel);
+                            shared.ring();
+                            return;
+                        }
                     };
                     shared.heard();
-                    if let Some(view) = lock(&shared.view).as_mut() {
-                        mirror(view, event);
+                    let mut view = lock(&shared.view);
+                    if let Some(view) = view.as_mut() {
+                        if !view.event(event, shared.inputs) {
+                            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                                key = %sample.key_expr(),
+                                "a monitoring event about a port the instance does not have \
+                                 was dropped{held}"
+                            ));
+                            shared.bad_events.fetch_add(1, Ordering::AcqRel);
+                        }
                         shared.changed.store(true, Ordering::Release);
                     }
+                    drop(view);
                     shared.ring();
                 })
                 .wait()
@@ -633,6 +661,11 @@ impl End {
             .wait()
             .map_err(Error::zenoh("send a command"))?;
         let sample = self.answer(replies.recv().ok())?;
+        self.within(
+            sample.payload(),
+            crate::limits::REPLY,
+            "the control port's answer",
+        )?;
         match serde_json::from_slice::<ControlReply>(&sample.payload().to_bytes()) {
             Ok(ControlReply::Accepted) => Ok(()),
             Ok(ControlReply::Rejected { reason }) => Err(PlaceError::Rejected(reason)),
@@ -663,6 +696,25 @@ impl End {
         })
     }
 
+    /// `Ok` if the instance's node's answer `payload` (`what`) is within `limit`:
+    /// checked before its bytes are copied or decoded.
+    fn within(
+        &self,
+        payload: &zenoh::bytes::ZBytes,
+        limit: crate::limits::Limit,
+        what: &str,
+    ) -> Result<(), PlaceError> {
+        limit
+            .check(|| what.to_owned(), payload.len())
+            .map_err(|source| {
+                Error::TooLarge {
+                    node: self.on.clone(),
+                    source,
+                }
+                .into()
+            })
+    }
+
     /// The instance's node's answer does not decode.
     fn undecodable(&self, source: serde_json::Error) -> PlaceError {
         Error::Json {
@@ -673,9 +725,10 @@ impl End {
         .into()
     }
 
-    /// Every [`End::refresh`], ask for the remote snapshot without waiting for it: its
-    /// CPU and elapsed time (which change without an event) go into the view when it
-    /// comes, the proxy is woken, and the instance counts as heard.
+    /// Every [`End::refresh`], ask for the remote snapshot without waiting for it: it
+    /// goes into the view when it comes (`Mirrored::reconcile`: its CPU and elapsed
+    /// time, which change without an event, and what an event lost on the way would
+    /// have set), the proxy is woken, and the instance counts as heard.
     fn ask_times(&mut self) {
         let every = self.refresh();
         if !self.built
@@ -694,6 +747,11 @@ impl End {
         self.times_asked = Some(now);
         lock(&self.shared.unanswered_since).get_or_insert(now);
         let shared = Arc::clone(&self.shared);
+        // The events mirrored before the question: the answer does not undo what an
+        // event mirrored after it set (`Mirrored::reconcile`).
+        let before = lock(&self.shared.view)
+            .as_ref()
+            .map_or(0, |view| view.events);
         let key = keys::monitor(&self.on, &self.name);
         let asked = self
             .node
@@ -708,16 +766,27 @@ impl End {
                 if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                     return;
                 }
-                let Ok(snapshot) = serde_json::from_slice::<Monitor>(&sample.payload().to_bytes())
-                else {
-                    return;
+                let snapshot = match decode_json::<Monitor>(
+                    sample.payload(),
+                    crate::limits::SNAPSHOT,
+                    "a snapshot",
+                ) {
+                    Ok(snapshot) => snapshot,
+                    Err(why) => {
+                        coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                            key = %sample.key_expr(),
+                            "{why}: dropped{held}"
+                        ));
+                        shared.bad_events.fetch_add(1, Ordering::AcqRel);
+                        shared.ring();
+                        return;
+                    }
                 };
                 shared.heard();
-                if let Some(view) = lock(&shared.view).as_mut() {
-                    view.cpu_time = snapshot.cpu_time;
-                    view.elapsed_time = snapshot.elapsed_time;
-                    view.response = snapshot.response;
-                    view.adaptation = snapshot.adaptation;
+                if let Some(view) = lock(&shared.view).as_mut()
+                    && !view.reconcile(snapshot, before, shared.inputs)
+                {
+                    shared.bad_events.fetch_add(1, Ordering::AcqRel);
                 }
                 shared.changed.store(true, Ordering::Release);
                 shared.ring();
@@ -756,7 +825,7 @@ impl End {
     fn dead(&self) -> bool {
         lock(&self.shared.view)
             .as_ref()
-            .is_some_and(|view| view.state == coolbot::State::Dead)
+            .is_some_and(|view| view.view.state == coolbot::State::Dead)
     }
 
     /// The remote instance's snapshot, asked for now.
@@ -769,6 +838,7 @@ impl End {
             .wait()
             .map_err(Error::zenoh("ask for the remote snapshot"))?;
         let sample = self.answer(replies.recv().ok())?;
+        self.within(sample.payload(), crate::limits::SNAPSHOT, "the snapshot")?;
         serde_json::from_slice(&sample.payload().to_bytes())
             .map_err(|source| self.undecodable(source))
     }
@@ -790,37 +860,227 @@ fn waking_on_loss(deliver: DeliverFn, losses: TickIn, shared: Arc<Shared>) -> De
 /// The pseudo-port at which a proxy's monitor counts messages lost on the network.
 const NETWORK: &str = "@network";
 
-/// Apply one monitoring event to the mirrored view (what a proxy mirrors).
-fn mirror(view: &mut Monitor, event: MonitorEvent) {
-    match event {
-        MonitorEvent::Overflow { port, total, .. } => {
-            match view
-                .port_overflows
-                .iter_mut()
-                .find(|(name, _)| *name == port)
-            {
-                Some(slot) => slot.1 = total,
-                None => view.port_overflows.push((port, total)),
-            }
-            view.overflows = coolbot::total_overflows(&view.port_overflows);
+/// `payload` as a JSON `T` (`what`, for the reason), decoded only when it is within
+/// `limit`: its length is checked before its bytes are copied.
+fn decode_json<T: serde::de::DeserializeOwned>(
+    payload: &zenoh::bytes::ZBytes,
+    limit: crate::limits::Limit,
+    what: &str,
+) -> Result<T, String> {
+    limit
+        .check(|| what.to_owned(), payload.len())
+        .map_err(|exceeded| exceeded.to_string())?;
+    serde_json::from_slice(&payload.to_bytes()).map_err(|error| {
+        format!(
+            "{what} that does not decode ({})",
+            coolbot::ranges::excerpt(&error.to_string(), coolbot::ranges::REASON_CHARS)
+        )
+    })
+}
+
+/// The fields of a monitoring port that events set, one at a time.
+#[derive(Debug, Clone, Copy)]
+enum Field {
+    State,
+    UserState,
+    Result,
+    Error,
+    Variables,
+    Quality,
+    Period,
+    MaxResponse,
+    Priority,
+}
+
+/// How many [`Field`]s there are.
+const FIELDS: usize = 9;
+
+/// The remote monitoring port as a proxy mirrors it: the last snapshot, with the
+/// events heard since applied. Each snapshot asked for (every [`End::refresh`])
+/// replaces what the events set, so that an event lost on the way (Zenoh drops
+/// events for a subscriber that falls behind) is made good at the next one; but not
+/// a field that an event heard after the question set, which may be newer than the
+/// answer.
+#[derive(Debug, Clone)]
+struct Mirrored {
+    view: Monitor,
+    /// How many events were mirrored into this view.
+    events: u64,
+    /// For each [`Field`], the count of `events` when one last set it.
+    set_at: [u64; FIELDS],
+}
+
+/// Keep the losses of `inputs` and of [`NETWORK`] only: whether any other port was
+/// dropped.
+fn keep_known_ports(ports: &mut Vec<(String, u64)>, inputs: &[coolbot::InputSpec]) -> bool {
+    let before = ports.len();
+    ports.retain(|(port, _)| known_port(port, inputs));
+    ports.len() != before
+}
+
+/// Whether the view shows losses at `port`: one of the instance's inputs, or
+/// [`NETWORK`].
+fn known_port(port: &str, inputs: &[coolbot::InputSpec]) -> bool {
+    port == NETWORK || inputs.iter().any(|input| input.name == port)
+}
+
+/// The count at `port` in `counts`, added (at 0) if it is not there.
+fn count_at<'a>(counts: &'a mut Vec<(String, u64)>, port: &str) -> &'a mut u64 {
+    let at = match counts.iter().position(|(name, _)| name == port) {
+        Some(at) => at,
+        None => {
+            counts.push((port.to_owned(), 0));
+            counts.len() - 1
         }
-        MonitorEvent::LateResponse { total, .. } => view.response.late = total,
-        MonitorEvent::Period(period) => view.period = period,
-        MonitorEvent::MaxResponse(bound) => view.max_response = bound,
-        MonitorEvent::Priority(priority) => view.priority = priority,
-        MonitorEvent::Quality(level) => view.quality = level,
-        MonitorEvent::MissedDeadline { total, .. } => view.missed_deadlines = total,
-        MonitorEvent::Overrun { total, .. } => view.overruns = total,
-        MonitorEvent::State { to, .. } => view.state = to,
-        MonitorEvent::UserState(state) => view.user_state = state,
-        MonitorEvent::Result(result) => view.result = result,
-        MonitorEvent::Error(error) => view.error = error,
-        MonitorEvent::Variable { name, value } => {
-            if let Some(slot) = view.variables.iter_mut().find(|(n, _)| *n == name) {
-                slot.1 = value;
-            }
+    };
+    &mut counts[at].1
+}
+
+impl Mirrored {
+    /// The view a first snapshot shows (losses at ports the instance does not have
+    /// are left out).
+    fn new(mut view: Monitor, inputs: &[coolbot::InputSpec]) -> Mirrored {
+        keep_known_ports(&mut view.port_overflows, inputs);
+        view.overflows = coolbot::total_overflows(&view.port_overflows);
+        Mirrored {
+            view,
+            events: 0,
+            set_at: [0; FIELDS],
         }
-        _ => {}
+    }
+
+    /// Apply one monitoring event; `false` if it was dropped (losses at a port the
+    /// instance does not have: a made-up name would stay in the view for good).
+    fn event(&mut self, event: MonitorEvent, inputs: &[coolbot::InputSpec]) -> bool {
+        self.events += 1;
+        let view = &mut self.view;
+        let field = match event {
+            MonitorEvent::Overflow { port, total, .. } => {
+                if !known_port(&port, inputs) {
+                    return false;
+                }
+                let slot = count_at(&mut view.port_overflows, &port);
+                *slot = (*slot).max(total);
+                view.overflows = coolbot::total_overflows(&view.port_overflows);
+                return true;
+            }
+            MonitorEvent::LateResponse { total, .. } => {
+                view.response.late = view.response.late.max(total);
+                return true;
+            }
+            MonitorEvent::MissedDeadline { total, .. } => {
+                view.missed_deadlines = view.missed_deadlines.max(total);
+                return true;
+            }
+            MonitorEvent::Overrun { total, .. } => {
+                view.overruns = view.overruns.max(total);
+                return true;
+            }
+            MonitorEvent::Period(period) => {
+                view.period = period;
+                Field::Period
+            }
+            MonitorEvent::MaxResponse(bound) => {
+                view.max_response = bound;
+                Field::MaxResponse
+            }
+            MonitorEvent::Priority(priority) => {
+                view.priority = priority;
+                Field::Priority
+            }
+            MonitorEvent::Quality(level) => {
+                view.quality = level;
+                Field::Quality
+            }
+            MonitorEvent::State { to, .. } => {
+                view.state = to;
+                Field::State
+            }
+            MonitorEvent::UserState(state) => {
+                view.user_state = state;
+                Field::UserState
+            }
+            MonitorEvent::Result(result) => {
+                view.result = result;
+                Field::Result
+            }
+            MonitorEvent::Error(error) => {
+                view.error = error;
+                Field::Error
+            }
+            MonitorEvent::Variable { name, value } => {
+                if let Some(slot) = view.variables.iter_mut().find(|(n, _)| *n == name) {
+                    slot.1 = value;
+                }
+                Field::Variables
+            }
+            _ => return true,
+        };
+        self.set_at[field as usize] = self.events;
+        true
+    }
+
+    /// Take `snapshot`, asked for when `asked` events had been mirrored, as the
+    /// view: but for the fields an event mirrored since set (the event may be newer
+    /// than the answer), and the counts, which only grow (an event may have brought
+    /// a higher one). `false` if it showed losses at ports the instance does not
+    /// have (left out).
+    fn reconcile(
+        &mut self,
+        mut snapshot: Monitor,
+        asked: u64,
+        inputs: &[coolbot::InputSpec],
+    ) -> bool {
+        let unknown = keep_known_ports(&mut snapshot.port_overflows, inputs);
+        let view = &self.view;
+        let newer = |field: Field| self.set_at[field as usize] > asked;
+        if newer(Field::State) {
+            snapshot.state = view.state;
+        }
+        if newer(Field::UserState) {
+            snapshot.user_state.clone_from(&view.user_state);
+        }
+        if newer(Field::Result) {
+            snapshot.result = view.result.clone();
+        }
+        if newer(Field::Error) {
+            snapshot.error.clone_from(&view.error);
+        }
+        if newer(Field::Variables) {
+            snapshot.variables.clone_from(&view.variables);
+        }
+        if newer(Field::Quality) {
+            snapshot.quality = view.quality;
+        }
+        if newer(Field::Period) {
+            snapshot.period = view.period;
+        }
+        if newer(Field::MaxResponse) {
+            snapshot.max_response = view.max_response;
+        }
+        if newer(Field::Priority) {
+            snapshot.priority = view.priority;
+        }
+        snapshot.missed_deadlines = snapshot.missed_deadlines.max(view.missed_deadlines);
+        snapshot.overruns = snapshot.overruns.max(view.overruns);
+        snapshot.response.late = snapshot.response.late.max(view.response.late);
+        for (port, total) in &view.port_overflows {
+            let slot = count_at(&mut snapshot.port_overflows, port);
+            *slot = (*slot).max(*total);
+        }
+        snapshot.overflows = coolbot::total_overflows(&snapshot.port_overflows);
+        self.view = snapshot;
+        !unknown
+    }
+
+    /// Take `snapshot`, asked for after a command, as the view, whole: an answer to
+    /// a question asked before it (which may show the state before the command)
+    /// changes none of the fields events set.
+    fn replace(&mut self, snapshot: Monitor, inputs: &[coolbot::InputSpec]) {
+        let events = self.events + 1;
+        *self = Mirrored::new(snapshot, inputs);
+        self.events = events;
+        self.set_at = [events; FIELDS];
     }
 }
 
@@ -923,7 +1183,7 @@ impl End {
         self.built = true;
         self.maybe_built = false;
         self.shared.heard();
-        *lock(&self.shared.view) = Some(snapshot);
+        *lock(&self.shared.view) = Some(Mirrored::new(snapshot, self.shared.inputs));
         self.shared.changed.store(true, Ordering::Release);
         // A poster's current value, for the proxy's readers.
         for output in &self.outputs {
@@ -958,7 +1218,9 @@ impl End {
             // Restarted in place (or stopped): what the view showed before (an error,
             // `end`) is history; the snapshot shows the state it is in now.
             if let Ok(snapshot) = self.snapshot() {
-                *lock(&self.shared.view) = Some(snapshot);
+                if let Some(view) = lock(&self.shared.view).as_mut() {
+                    view.replace(snapshot, self.shared.inputs);
+                }
                 self.shared.changed.store(true, Ordering::Release);
             }
         }
@@ -1016,7 +1278,10 @@ impl End {
         if !self.shared.changed.swap(false, Ordering::AcqRel) && !more_lost {
             return Ok(None);
         }
-        let Some(mut view) = lock(&self.shared.view).clone() else {
+        let Some(mut view) = lock(&self.shared.view)
+            .as_ref()
+            .map(|view| view.view.clone())
+        else {
             return Ok(None);
         };
         self.reported_losses = losses;
@@ -1069,5 +1334,241 @@ impl RemoteEnd for End {
         }
         self.subscribers.clear();
         self.acks.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coolbot::{InputKind, InputSpec, State};
+
+    /// The inputs of the instance the tests' views stand for.
+    static INPUTS: &[InputSpec] = &[InputSpec {
+        name: "scan",
+        kind: InputKind::Tick,
+        packet: "event",
+        pull: false,
+    }];
+
+    fn mirrored() -> Mirrored {
+        Mirrored::new(crate::top::model::tests::monitor("wanderer", 0), INPUTS)
+    }
+
+    fn event(json: &str) -> MonitorEvent {
+        serde_json::from_str(json).unwrap()
+    }
+
+    #[test]
+    fn overflow_events_under_made_up_port_names_do_not_grow_the_mirrored_view() {
+        let mut view = mirrored();
+        // What a peer that may put on the instance's monitoring key sends: an
+        // `Overflow` event that decodes, under a port name of its choosing.
+        for n in 0..10_000 {
+            let json = format!(r#"{{"Overflow":{{"port":"made-up-{n}","lost":1,"total":1}}}}"#);
+            assert!(!view.event(event(&json), INPUTS), "made-up-{n} kept");
+        }
+        // The instance has no such port: nothing of them is kept (each `view_here`
+        // clones this list, and the runtime's `overlay` walks it once per entry of
+        // `applied`, which grows alike).
+        assert!(view.view.port_overflows.is_empty());
+        // Its own port is mirrored.
+        assert!(view.event(
+            event(r#"{"Overflow":{"port":"scan","lost":2,"total":2}}"#),
+            INPUTS
+        ));
+        assert_eq!(view.view.port_overflows, vec![("scan".to_owned(), 2)]);
+        assert_eq!(view.view.overflows, 2);
+    }
+
+    #[test]
+    fn a_snapshot_makes_good_a_state_change_whose_event_was_lost() {
+        let mut view = mirrored();
+        assert_eq!(view.view.state, State::Running);
+        // The instance fails; its `State` and `Error` events are lost on the way.
+        // The next snapshot shows it.
+        let mut snapshot = view.view.clone();
+        snapshot.state = State::RunningError;
+        snapshot.error = Some("the lidar is gone".to_owned());
+        snapshot.user_state = None;
+        snapshot.result = coolbot::TaskResult::Fail("no scan".to_owned());
+        let asked = view.events;
+        assert!(view.reconcile(snapshot, asked, INPUTS));
+        assert_eq!(view.view.state, State::RunningError);
+        assert_eq!(view.view.error.as_deref(), Some("the lidar is gone"));
+        assert_eq!(view.view.user_state, None);
+        assert_eq!(
+            view.view.result,
+            coolbot::TaskResult::Fail("no scan".to_owned())
+        );
+    }
+
+    #[test]
+    fn a_snapshot_does_not_undo_what_an_event_heard_after_the_question_set() {
+        let mut view = mirrored();
+        let asked = view.events;
+        // Asked while running; the instance then fails, and its event comes before
+        // the answer, which shows it running still.
+        let stale = view.view.clone();
+        assert!(view.event(
+            event(r#"{"State":{"from":"Running","to":"RunningError"}}"#),
+            INPUTS
+        ));
+        assert!(view.event(
+            event(r#"{"Overflow":{"port":"scan","lost":3,"total":3}}"#),
+            INPUTS
+        ));
+        assert!(view.reconcile(stale.clone(), asked, INPUTS));
+        assert_eq!(view.view.state, State::RunningError);
+        assert_eq!(view.view.port_overflows, vec![("scan".to_owned(), 3)]);
+        // Asked after the event: the answer is taken.
+        let asked = view.events;
+        let mut fresh = stale;
+        fresh.state = State::Ready;
+        assert!(view.reconcile(fresh.clone(), asked, INPUTS));
+        assert_eq!(view.view.state, State::Ready);
+        // A command's own snapshot: an answer to a question asked before it changes
+        // none of what events set.
+        let before = view.events;
+        fresh.state = State::Running;
+        view.replace(fresh.clone(), INPUTS);
+        fresh.state = State::RunningError;
+        assert!(view.reconcile(fresh, before, INPUTS));
+        assert_eq!(view.view.state, State::Running);
+    }
+
+    #[test]
+    fn a_snapshot_showing_ports_the_instance_does_not_have_is_counted_and_left_out() {
+        let mut view = mirrored();
+        let mut snapshot = view.view.clone();
+        snapshot.port_overflows = vec![("scan".to_owned(), 1), ("made-up".to_owned(), 5)];
+        let asked = view.events;
+        assert!(!view.reconcile(snapshot, asked, INPUTS));
+        assert_eq!(view.view.port_overflows, vec![("scan".to_owned(), 1)]);
+        assert_eq!(view.view.overflows, 1);
+    }
+}
+
+#[cfg(test)]
+mod network_tests {
+    use super::*;
+    use crate::agent::{Agent, Registry};
+    use coolbot::{Component, Controllable, State};
+
+    /// A component that does nothing: one state, no ports.
+    struct Idle(&'static coolbot::Spec);
+
+    impl coolbot::Automaton for Idle {
+        fn spec(&self) -> &'static coolbot::Spec {
+            self.0
+        }
+
+        fn section(
+            &mut self,
+            _state: usize,
+            _section: coolbot::Section,
+            _cx: &mut coolbot::Context,
+        ) -> Result<(), coolbot::Fault> {
+            Ok(())
+        }
+    }
+
+    fn registry(spec: &'static coolbot::Spec) -> Registry {
+        let mut registry = Registry::new();
+        registry.register("Idle", move |name| {
+            Component::new(name, Box::new(Idle(spec)), PortSet::new())
+        });
+        registry
+    }
+
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port()
+    }
+
+    /// The proxy's view, once it has one (new since it last looked), asking for the
+    /// remote snapshot (`pump`) when `pump`, until `done` holds of it or 20 s pass.
+    fn view_until(end: &mut End, pump: bool, done: impl Fn(&Monitor) -> bool) -> Option<Monitor> {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut last = None;
+        while Instant::now() < deadline {
+            if pump {
+                end.pump();
+            }
+            if let Some(view) = end.view_here().unwrap() {
+                if done(&view) {
+                    return Some(view);
+                }
+                last = Some(view);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        panic!("the view never came to what was waited for; last: {last:?}");
+    }
+
+    #[test]
+    fn a_proxy_learns_a_state_change_whose_event_it_missed_from_the_next_snapshot() {
+        let port = free_port();
+        let station = Arc::new(
+            Node::open(
+                "far-st",
+                crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
+            )
+            .unwrap()
+            .with_state_directory(None),
+        );
+        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let _agent = Agent::start(Arc::clone(&station), registry(spec)).unwrap();
+        let robot = Arc::new(
+            Node::open(
+                "far-rb",
+                crate::peer_config(&[], &[format!("tcp/127.0.0.1:{port}")], false).unwrap(),
+            )
+            .unwrap()
+            .with_state_directory(None),
+        );
+        let placer =
+            Placer::new(Arc::clone(&robot), registry(spec)).timeout(Duration::from_secs(10));
+        let placement = Placement {
+            node: "far-st".to_owned(),
+            compound: "c".to_owned(),
+            name: "idle".to_owned(),
+            spec,
+            timing: spec.timing,
+            adaptation: coolbot::AdaptConfig::default(),
+            configuration: None,
+            variables: Vec::new(),
+        };
+        let (_ports, mut end) = placer.far_end(&placement).unwrap().unwrap();
+        end.build(None).unwrap();
+        view_until(&mut end, false, |view| view.state == State::Ready);
+
+        // The instance runs (a command from anywhere); its event comes.
+        let command = |state| {
+            let replies = robot
+                .session()
+                .get(keys::control("far-st", &end.name))
+                .payload(serde_json::to_vec(&Command::SetState(state)).unwrap())
+                .timeout(Duration::from_secs(10))
+                .wait()
+                .unwrap();
+            let reply = replies.recv().unwrap().into_result().unwrap();
+            assert_eq!(
+                serde_json::from_slice::<ControlReply>(&reply.payload().to_bytes()).unwrap(),
+                ControlReply::Accepted
+            );
+        };
+        command(Controllable::Running);
+        view_until(&mut end, false, |view| view.state == State::Running);
+        // As if that event had been lost on the way (Zenoh drops events for a
+        // subscriber that falls behind): the view still shows the state before it.
+        lock(&end.shared.view).as_mut().unwrap().view.state = State::Ready;
+        end.shared.changed.store(true, Ordering::Release);
+        assert_eq!(end.view_here().unwrap().unwrap().state, State::Ready);
+        // The next snapshot the proxy asks for shows it.
+        view_until(&mut end, true, |view| view.state == State::Running);
+        end.release();
     }
 }
