@@ -241,6 +241,7 @@ pub(crate) trait PortBridge: Send + Sync {
     /// `key` on it, and its ledger (which the proxy serves acknowledgments from).
     fn proxy_output(
         &self,
+        node: &Node,
         ports: PortSet,
         kind: OutputKind,
         losses: ErasedInput,
@@ -297,6 +298,7 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
 
     fn proxy_output(
         &self,
+        node: &Node,
         ports: PortSet,
         kind: OutputKind,
         losses: ErasedInput,
@@ -306,7 +308,7 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         crate::bridge::DeliverFn,
         Arc<crate::ledger::InletLedger>,
     ) {
-        crate::bridge::proxy_output::<T>(ports, kind, losses, key)
+        crate::bridge::proxy_output::<T>(node, ports, kind, losses, key)
     }
 
     fn inlet(

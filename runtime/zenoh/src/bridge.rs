@@ -874,8 +874,9 @@ enum InletOutput<T> {
     Poster(PosterOut<T>),
 }
 
-/// What delivers one message of a bridge key, and how it came.
-pub(crate) type DeliverFn = Arc<dyn Fn(&[u8], Via) + Send + Sync>;
+/// What delivers one message of a bridge key, and how it came: it takes the payload
+/// as Zenoh holds it, and checks its length before copying or decoding it.
+pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
 
 /// How a message reached an inlet: on the key's stream (numbered, counted by the
 /// ledger), or as the answer to a query (a pull, or the current value of a `last`
@@ -964,8 +965,6 @@ struct Inlet {
     session: zenoh::Session,
     key: String,
     deliver: DeliverFn,
-    /// The node's shared-memory counts (what arrived in shared memory).
-    shared: Arc<crate::shm::Counters>,
     pull: Option<Duration>,
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
     /// Watches the producers' outlets (their liveliness tokens), to ask for the
@@ -985,11 +984,13 @@ struct Counters {
 }
 
 /// What delivers a bridge key's messages on `output` (strict decoding of payloads of
-/// at most `max_payload` bytes, the ledger's count of numbers, losses counted at
-/// `counters`), and that ledger.
+/// at most `max_payload` bytes, longer ones refused before they are copied, lent
+/// when in shared memory and counted in `shared`; the ledger's count of numbers,
+/// losses counted at `counters`), and that ledger.
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
     counters: Counters,
+    shared: Arc<crate::shm::Counters>,
     key: String,
     max_payload: usize,
 ) -> (DeliverFn, Arc<InletLedger>) {
@@ -1006,59 +1007,75 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
     let gaps = Arc::clone(&ledger);
     let deliver: DeliverFn = match output {
-        InletOutput::Tick(port) => Arc::new(move |bytes, via| {
-            match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
-                Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
-                    "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
-                )),
-                Ok((epoch, seq, events)) => {
-                    if via == Via::Stream {
-                        gaps.received(epoch, seq);
+        InletOutput::Tick(port) => Arc::new(move |payload, via| {
+            let taken = shared.received(payload, MAX_TICK_MESSAGE, |bytes| {
+                match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
+                    Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
+                        "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
+                    )),
+                    Ok((epoch, seq, events)) => {
+                        if via == Via::Stream {
+                            gaps.received(epoch, seq);
+                        }
+                        for _ in 0..events {
+                            port.emit();
+                        }
                     }
-                    for _ in 0..events {
-                        port.emit();
-                    }
+                    Err(error) => lost(Chain(&error).to_string()),
                 }
-                Err(error) => lost(Chain(&error).to_string()),
+            });
+            if let Err(error) = taken {
+                lost(Chain(&error).to_string());
             }
         }),
         InletOutput::Data(port) => {
             let delivered = Mutex::new(Delivered::default());
-            Arc::new(
-                move |bytes, via| match codec::decode::<Numbered<T>>(bytes, max_payload) {
-                    Ok((epoch, seq, packet)) => {
-                        if via == Via::Stream {
-                            gaps.received(epoch, seq);
+            Arc::new(move |payload, via| {
+                let taken = shared.received(payload, max_payload, |bytes| {
+                    match codec::decode::<Numbered<T>>(bytes, max_payload) {
+                        Ok((epoch, seq, packet)) => {
+                            if via == Via::Stream {
+                                gaps.received(epoch, seq);
+                            }
+                            // Under the lock: the stream and an answer come on
+                            // different threads, and the one taken as newer is sent
+                            // last.
+                            let mut delivered = lock(&delivered);
+                            if delivered.fresh(epoch, seq, via) {
+                                port.send(packet);
+                            }
                         }
-                        // Under the lock: the stream and an answer come on different
-                        // threads, and the one taken as newer is sent last.
-                        let mut delivered = lock(&delivered);
-                        if delivered.fresh(epoch, seq, via) {
-                            port.send(packet);
-                        }
+                        Err(error) => lost(Chain(&error).to_string()),
                     }
-                    Err(error) => lost(Chain(&error).to_string()),
-                },
-            )
+                });
+                if let Err(error) = taken {
+                    lost(Chain(&error).to_string());
+                }
+            })
         }
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
-            Arc::new(
-                move |bytes, _via| match codec::decode::<Posted<T>>(bytes, max_payload) {
-                    Ok((epoch, seq, value)) => {
-                        let mut newest = lock(&newest);
-                        let newer = match *newest {
-                            Some((e, s)) => e != epoch || seq > s,
-                            None => true,
-                        };
-                        if newer {
-                            *newest = Some((epoch, seq));
-                            port.post(value);
+            Arc::new(move |payload, _via| {
+                let taken = shared.received(payload, max_payload, |bytes| {
+                    match codec::decode::<Posted<T>>(bytes, max_payload) {
+                        Ok((epoch, seq, value)) => {
+                            let mut newest = lock(&newest);
+                            let newer = match *newest {
+                                Some((e, s)) => e != epoch || seq > s,
+                                None => true,
+                            };
+                            if newer {
+                                *newest = Some((epoch, seq));
+                                port.post(value);
+                            }
                         }
+                        Err(error) => lost(Chain(&error).to_string()),
                     }
-                    Err(error) => lost(Chain(&error).to_string()),
-                },
-            )
+                });
+                if let Err(error) = taken {
+                    lost(Chain(&error).to_string());
+                }
+            })
         }
     };
     (deliver, ledger)
@@ -1068,6 +1085,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
 /// what delivers the messages of a bridge key on it (decode, gaps, losses and resets
 /// counted at `losses`), and its ledger.
 pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
+    node: &Node,
     ports: PortSet,
     kind: OutputKind,
     losses: ErasedInput,
@@ -1094,7 +1112,13 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
         network: losses.clone(),
         resets: losses,
     };
-    let (deliver, ledger) = deliverer(output, counters, key.to_owned(), DEFAULT_MAX_PAYLOAD);
+    let (deliver, ledger) = deliverer(
+        output,
+        counters,
+        node.shared_memory_counters(),
+        key.to_owned(),
+        DEFAULT_MAX_PAYLOAD,
+    );
     (ports, deliver, ledger)
 }
 
@@ -1110,7 +1134,7 @@ pub(crate) fn ask_current(
         .get(key.to_owned())
         .callback(move |reply| {
             if let Ok(sample) = reply.result() {
-                deliver(&sample.payload().to_bytes(), Via::Answer);
+                deliver(sample.payload(), Via::Answer);
             }
         })
         .wait()
@@ -1215,7 +1239,13 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             network: network.erased(),
             resets: resets.erased(),
         };
-        let (deliver, ledger) = deliverer(output, counters, key.clone(), max_payload);
+        let (deliver, ledger) = deliverer(
+            output,
+            counters,
+            node.shared_memory_counters(),
+            key.clone(),
+            max_payload,
+        );
         let acks = match pull {
             Some(_) => None,
             None => Some(
@@ -1227,7 +1257,6 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             spec,
             session: session.clone(),
             deliver,
-            shared: node.shared_memory_counters(),
             key,
             pull,
             subscriber: None,
@@ -1251,13 +1280,10 @@ impl Automaton for Inlet {
             return Ok(());
         }
         let deliver = Arc::clone(&self.deliver);
-        let shared = Arc::clone(&self.shared);
         let subscriber = self
             .session
             .declare_subscriber(self.key.clone())
-            .callback(move |sample| {
-                shared.received(sample.payload(), |bytes| deliver(bytes, Via::Stream));
-            })
+            .callback(move |sample| deliver(sample.payload(), Via::Stream))
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
         self.subscriber = Some(subscriber);
@@ -1329,7 +1355,7 @@ impl Automaton for Inlet {
         };
         while let Ok(reply) = replies.recv() {
             match reply.result() {
-                Ok(sample) => (self.deliver)(&sample.payload().to_bytes(), Via::Answer),
+                Ok(sample) => (self.deliver)(sample.payload(), Via::Answer),
                 Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
                     "pull answered with an error: {}{held}",
@@ -1343,7 +1369,51 @@ impl Automaton for Inlet {
 
 #[cfg(test)]
 mod tests {
-    use super::{ANSWER_AHEAD, Delivered, Via};
+    use super::{ANSWER_AHEAD, Counters, Delivered, InletOutput, Via, deliverer};
+    use coolbot::port::{DataOut, InputPort, TickIn};
+    use std::sync::Arc;
+    use zenoh::bytes::ZBytes;
+
+    /// `bytes` as Zenoh may hold a received payload: in fragments of `chunk` bytes
+    /// (so that reading it as one slice copies it).
+    fn fragmented(bytes: &[u8], chunk: usize) -> ZBytes {
+        let mut writer = ZBytes::writer();
+        for part in bytes.chunks(chunk) {
+            writer.append(ZBytes::from(part.to_vec()));
+        }
+        writer.finish()
+    }
+
+    #[test]
+    fn a_payload_over_the_bound_is_counted_lost_before_it_is_copied() {
+        let network = TickIn::new();
+        let resets = TickIn::new();
+        let out = DataOut::<Vec<u8>>::new();
+        let (deliver, _ledger) = deliverer(
+            InletOutput::Data(out),
+            Counters {
+                network: network.erased(),
+                resets: resets.erased(),
+            },
+            Arc::default(),
+            "test/over".to_owned(),
+            64,
+        );
+        let packet = crate::codec::encode(&(1u64, 1u64, vec![7u8; 40])).unwrap();
+        assert!(packet.len() <= 64);
+        deliver(&fragmented(&packet, 8), Via::Stream);
+        assert_eq!(
+            network.overflows(),
+            0,
+            "a packet within the bound is delivered"
+        );
+        let large = crate::codec::encode(&(1u64, 2u64, vec![7u8; 1 << 20])).unwrap();
+        let payload = fragmented(&large, 4096);
+        assert!(payload.to_bytes().len() > 64);
+        deliver(&payload, Via::Stream);
+        deliver(&payload, Via::Answer);
+        assert_eq!(network.overflows(), 2);
+    }
 
     #[test]
     fn the_current_value_of_a_last_outlet_is_delivered_once_whichever_way_comes_first() {

@@ -64,6 +64,21 @@ pub(crate) fn decode<T: DeserializeOwned>(bytes: &[u8], max: usize) -> Result<T,
     Ok(value)
 }
 
+/// [`decode`] of a payload as Zenoh holds it: its length is checked before its
+/// bytes are made contiguous (copied, when Zenoh holds them in fragments).
+pub(crate) fn decode_payload<T: DeserializeOwned>(
+    payload: &zenoh::bytes::ZBytes,
+    max: usize,
+) -> Result<T, Undecodable> {
+    if payload.len() > max {
+        return Err(Undecodable::TooLong {
+            len: payload.len(),
+            max,
+        });
+    }
+    decode(&payload.to_bytes(), max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,6 +116,21 @@ mod tests {
             Err(Undecodable::TooLong { len: 101, max: 100 })
         );
         assert_eq!(decode::<Vec<u8>>(&bytes, 101), Ok(vec![0u8; 100]));
+    }
+
+    #[test]
+    fn a_payload_in_fragments_is_measured_before_it_is_read() {
+        let bytes = encode(&vec![0u8; 100]).unwrap();
+        let mut writer = zenoh::bytes::ZBytes::writer();
+        for part in bytes.chunks(10) {
+            writer.append(zenoh::bytes::ZBytes::from(part.to_vec()));
+        }
+        let payload = writer.finish();
+        assert_eq!(
+            decode_payload::<Vec<u8>>(&payload, 100),
+            Err(Undecodable::TooLong { len: 101, max: 100 })
+        );
+        assert_eq!(decode_payload::<Vec<u8>>(&payload, 101), Ok(vec![0u8; 100]));
     }
 
     #[test]

@@ -316,7 +316,7 @@ pub(crate) fn serve(
         .declare_queryable(own)
         .callback(move |query| {
             let ended = match query.payload() {
-                Some(payload) => match codec::decode::<Vec<Ended>>(&payload.to_bytes(), MAX_REPORT) {
+                Some(payload) => match codec::decode_payload::<Vec<Ended>>(payload, MAX_REPORT) {
                     Ok(ended) => ended,
                     Err(error) => {
                         coolbot::limited!(&reply_key, |held| tracing::warn!(key = %reply_key, "a question whose report does not decode was answered without it: {}{held}", Chain(&error)));
@@ -623,7 +623,7 @@ impl Book {
             let Some(node_and_name) = sample.key_expr().as_str().strip_prefix(&prefix) else {
                 continue;
             };
-            match codec::decode::<Ack>(&sample.payload().to_bytes(), MAX_ACK) {
+            match codec::decode_payload::<Ack>(sample.payload(), MAX_ACK) {
                 Ok(ack) => {
                     answered.insert(format!("{node_and_name}/{}", ack.0));
                     self.acknowledged(node_and_name, &ack);

@@ -355,8 +355,13 @@ impl Placer {
         let mut outputs = Vec::new();
         for output in spec.outputs {
             let key = format!("{base}/out/{}", output.name);
-            let (with, deliver, ledger) =
-                bridge(output.name)?.proxy_output(ports, output.kind, losses.erased(), &key);
+            let (with, deliver, ledger) = bridge(output.name)?.proxy_output(
+                &self.node,
+                ports,
+                output.kind,
+                losses.erased(),
+                &key,
+            );
             let deliver = waking_on_loss(deliver, losses.clone(), Arc::clone(&shared));
             ports = with;
             let to = match output.kind {
@@ -538,13 +543,10 @@ impl End {
         // A pull output's answers come as replies to its queries, not on the key.
         for output in self.outputs.iter().filter(|output| !output.pull) {
             let deliver = Arc::clone(&output.deliver);
-            let counters = self.node.shared_memory_counters();
             self.subscribers.push(
                 session
                     .declare_subscriber(output.key.clone())
-                    .callback(move |sample| {
-                        counters.received(sample.payload(), |bytes| deliver(bytes, Via::Stream));
-                    })
+                    .callback(move |sample| deliver(sample.payload(), Via::Stream))
                     .wait()
                     .map_err(Error::zenoh("subscribe to a remote output"))?,
             );
@@ -847,9 +849,9 @@ impl End {
 /// `deliver`, which also wakes the proxy when a message was lost (it then shows the
 /// loss on its monitor at once).
 fn waking_on_loss(deliver: DeliverFn, losses: TickIn, shared: Arc<Shared>) -> DeliverFn {
-    Arc::new(move |bytes: &[u8], via| {
+    Arc::new(move |payload: &zenoh::bytes::ZBytes, via| {
         let before = losses.overflows();
-        deliver(bytes, via);
+        deliver(payload, via);
         if losses.overflows() != before {
             shared.changed.store(true, Ordering::Release);
             shared.ring();
@@ -1195,7 +1197,7 @@ impl End {
                     .get(output.key.clone())
                     .callback(move |reply| {
                         if let Ok(sample) = reply.result() {
-                            deliver(&sample.payload().to_bytes(), Via::Answer);
+                            deliver(sample.payload(), Via::Answer);
                         }
                     })
                     .wait();
@@ -1246,7 +1248,7 @@ impl End {
         // so that one request gets one answer, and the proxy's thread goes on at once.
         match replies.recv().map(|reply| reply.into_result()) {
             Ok(Ok(sample)) => {
-                (output.deliver)(&sample.payload().to_bytes(), Via::Answer);
+                (output.deliver)(sample.payload(), Via::Answer);
                 Ok(())
             }
             Ok(Err(error)) => Err(Error::ErrorReply {
@@ -1434,6 +1436,23 @@ mod tests {
         fresh.state = State::RunningError;
         assert!(view.reconcile(fresh, before, INPUTS));
         assert_eq!(view.view.state, State::Running);
+    }
+
+    #[test]
+    fn json_over_its_limit_is_refused_undecoded() {
+        let limit = crate::limits::Limit {
+            max: 16,
+            ..crate::limits::EVENT
+        };
+        let event = serde_json::to_vec(&MonitorEvent::Quality(1)).unwrap();
+        assert!(event.len() <= 16);
+        let decoded: MonitorEvent =
+            decode_json(&zenoh::bytes::ZBytes::from(event), limit, "an event").unwrap();
+        assert_eq!(decoded, MonitorEvent::Quality(1));
+        let long = serde_json::to_vec(&MonitorEvent::Error(Some("x".repeat(100)))).unwrap();
+        let why = decode_json::<MonitorEvent>(&zenoh::bytes::ZBytes::from(long), limit, "an event")
+            .unwrap_err();
+        assert!(why.contains("over the limit EVENT = 16 bytes"), "{why}");
     }
 
     #[test]

@@ -70,11 +70,24 @@ impl Counters {
         }
     }
 
-    /// An inlet or a proxy's output received `payload`: counted when it is in shared
-    /// memory, and handed to `deliver`. A payload in shared memory is lent to its
-    /// decoding ([`coolbot::lend`]): a [`coolbot::Bytes`] decoded from it shares the
-    /// buffer (no copy) and keeps it from the pool while it lives.
-    pub(crate) fn received(&self, payload: &ZBytes, deliver: impl FnOnce(&[u8])) {
+    /// An inlet or a proxy's output received `payload`: refused when it is longer
+    /// than `max` bytes, before anything is copied (Zenoh may hold it in fragments);
+    /// else counted when it is in shared memory, and handed to `deliver`. A payload
+    /// in shared memory is lent to its decoding ([`coolbot::lend`]): a
+    /// [`coolbot::Bytes`] decoded from it shares the buffer (no copy) and keeps it
+    /// from the pool while it lives.
+    pub(crate) fn received(
+        &self,
+        payload: &ZBytes,
+        max: usize,
+        deliver: impl FnOnce(&[u8]),
+    ) -> Result<(), crate::codec::Undecodable> {
+        if payload.len() > max {
+            return Err(crate::codec::Undecodable::TooLong {
+                len: payload.len(),
+                max,
+            });
+        }
         match payload.as_shm() {
             Some(buffer) => {
                 self.received.fetch_add(1, Ordering::Relaxed);
@@ -82,6 +95,7 @@ impl Counters {
             }
             None => deliver(&payload.to_bytes()),
         }
+        Ok(())
     }
 
     /// `session`'s pool (Zenoh makes it on first use, and the node's first large
