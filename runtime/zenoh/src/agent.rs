@@ -470,10 +470,13 @@ fn stopped_reason(why: &str) -> String {
 /// Hand `query` to the agent's thread, or refuse it at once, truthfully: the agent
 /// has stopped (its status says why), or too many requests wait. Under the status's
 /// lock, so that a request is either queued before the end of the thread drains the
-/// queue ([`Inbox`]) or finds the agent stopped.
+/// queue ([`Inbox`]) or finds the agent stopped. A refusal is sent from the node's
+/// replier (`crate::reply`): a querier that does not read it holds that thread, not
+/// Zenoh's.
 fn admit(
     status: &Mutex<AgentStatus>,
     requests: &crossbeam_channel::Sender<zenoh::query::Query>,
+    replier: &crate::reply::Replier,
     query: zenoh::query::Query,
 ) {
     let refusal = {
@@ -495,13 +498,15 @@ fn admit(
         }
         refusal
     };
-    if let Err((query, reason)) = refusal
-        && let Err(error) = reply(&query, &ControlReply::Rejected { reason })
-    {
-        coolbot::limited!("refusal", |held| tracing::warn!(
-            "instantiation refusal not sent: {}{held}",
-            Chain(&*error)
-        ));
+    if let Err((query, reason)) = refusal {
+        replier.send("an instantiation refusal", move || {
+            if let Err(error) = reply(&query, &ControlReply::Rejected { reason }) {
+                coolbot::limited!("refusal", |held| tracing::warn!(
+                    "instantiation refusal not sent: {}{held}",
+                    Chain(&*error)
+                ));
+            }
+        });
     }
 }
 
@@ -590,10 +595,11 @@ impl Agent {
         let (requests, received) = crossbeam_channel::bounded::<zenoh::query::Query>(AGENT_QUEUE);
         let status = Arc::new(Mutex::new(AgentStatus::default()));
         let admitting = Arc::clone(&status);
+        let replier = node.replier();
         let queryable = node
             .session()
             .declare_queryable(keys::agent(node.name(), "*"))
-            .callback(move |query| admit(&admitting, &requests, query))
+            .callback(move |query| admit(&admitting, &requests, &replier, query))
             .wait()
             .map_err(Error::zenoh("declare the agent's queryable"))?;
         // The nodes that go away (their tokens `coolbot/<node>`): their instances here
@@ -1186,9 +1192,11 @@ mod tests {
         let status = Arc::new(Mutex::new(AgentStatus::default()));
         let (requests, received) = crossbeam_channel::bounded(AGENT_QUEUE);
         let admitting = Arc::clone(&status);
+        let replies = crate::reply::Replies::start("test", crate::reply::REPLY_QUEUE).unwrap();
+        let replier = replies.replier().clone();
         let _queryable = session
             .declare_queryable("test/agent/admit")
-            .callback(move |query| admit(&admitting, &requests, query))
+            .callback(move |query| admit(&admitting, &requests, &replier, query))
             .wait()
             .unwrap();
         let ask = || {

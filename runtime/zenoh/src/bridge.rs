@@ -591,25 +591,32 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             && pull.is_none()
         {
             let posted = Arc::clone(&posted);
+            let replier = node.replier();
             Some(
                 session
                     .declare_queryable(key.clone())
                     .callback(move |query| {
-                        // Encoded outside the lock: the outlet's next store does not
-                        // wait for it.
-                        let latest = lock(&posted).clone();
-                        let current = latest.as_deref().map(Latest::encode);
-                        let reply = match current {
-                            None => return,
-                            Some(Ok(bytes)) => query.reply(query.key_expr().clone(), bytes).wait(),
-                            Some(Err(error)) => Err(error.into()),
+                        let Some(latest) = lock(&posted).clone() else {
+                            return;
                         };
-                        if let Err(error) = reply {
-                            coolbot::limited!(query.key_expr().as_str(), |held| tracing::warn!(
-                                "poster value not sent: {}{held}",
-                                Chain(&*error)
-                            ));
-                        }
+                        // Encoded outside the lock (the outlet's next store does not
+                        // wait for it), and sent from the node's replier (a querier
+                        // that does not read it holds that thread, not Zenoh's).
+                        replier.send("a current value", move || {
+                            let reply = match latest.encode() {
+                                Ok(bytes) => query.reply(query.key_expr().clone(), bytes).wait(),
+                                Err(error) => Err(error.into()),
+                            };
+                            if let Err(error) = reply {
+                                coolbot::limited!(
+                                    query.key_expr().as_str(),
+                                    |held| tracing::warn!(
+                                        "poster value not sent: {}{held}",
+                                        Chain(&*error)
+                                    )
+                                );
+                            }
+                        });
                     })
                     .wait()
                     .map_err(Error::zenoh("declare the poster queryable"))?,
@@ -1249,7 +1256,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
         let acks = match pull {
             Some(_) => None,
             None => Some(
-                ledger::serve(session, &key, node.name(), &name, ledger, || {})
+                ledger::serve(node, &key, &name, ledger, || {})
                     .map_err(Error::zenoh("serve the inlet's acknowledgments"))?,
             ),
         };

@@ -301,16 +301,17 @@ impl InletLedger {
 /// `counted` runs after a question's report of ended epochs made it count packets
 /// missing.
 pub(crate) fn serve(
-    session: &zenoh::Session,
+    node: &crate::Node,
     key: &str,
-    node: &str,
     name: &str,
     ledger: Arc<InletLedger>,
     counted: impl Fn() + Send + Sync + 'static,
 ) -> zenoh::Result<zenoh::query::Queryable<()>> {
-    let own = format!("{key}/@ack/{node}/{name}");
+    let own = format!("{key}/@ack/{}/{name}", node.name());
+    let replier = node.replier();
+    let session = node.session();
     let process = process();
-    tracing::trace!(target: LEDGER_TARGET, "{key} inlet {node}/{name} of process {process}");
+    tracing::trace!(target: LEDGER_TARGET, "{key} inlet {}/{name} of process {process}", node.name());
     let reply_key = own.clone();
     session
         .declare_queryable(own)
@@ -329,12 +330,17 @@ pub(crate) fn serve(
             if lost > 0 {
                 counted();
             }
-            if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
-                coolbot::limited!(&reply_key, |held| tracing::warn!(
-                    "acknowledgment not sent: {}{held}",
-                    Chain(&*error)
-                ));
-            }
+            // From the node's replier: a querier that does not read its answer holds
+            // that thread, not Zenoh's.
+            let reply_key = reply_key.clone();
+            replier.send("an acknowledgment", move || {
+                if let Err(error) = query.reply(reply_key.clone(), answer).wait() {
+                    coolbot::limited!(&reply_key, |held| tracing::warn!(
+                        "acknowledgment not sent: {}{held}",
+                        Chain(&*error)
+                    ));
+                }
+            });
         })
         .wait()
 }

@@ -59,6 +59,7 @@ pub mod limits;
 pub mod network;
 mod node;
 pub mod place;
+mod reply;
 pub mod ros2;
 pub mod security;
 mod shm;

@@ -104,6 +104,8 @@ pub struct Node {
     state: Option<PathBuf>,
     /// What its bridges did with shared memory (`crate::shm`).
     shared: Arc<crate::shm::Counters>,
+    /// The thread its queryables' answers are sent from (`crate::reply`).
+    replies: crate::reply::Replies,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -153,6 +155,7 @@ impl Node {
                 }
             })
             .map_err(Error::spawn("control"))?;
+        let replies = crate::reply::Replies::start(name, crate::reply::REPLY_QUEUE)?;
         Ok(Node {
             name: name.to_owned(),
             session,
@@ -164,6 +167,7 @@ impl Node {
             echoes: Echoes::default(),
             state: crate::tally::state_directory(),
             shared: Arc::default(),
+            replies,
             _token: token,
         })
     }
@@ -203,6 +207,19 @@ impl Node {
 
     pub(crate) fn shared_memory_counters(&self) -> Arc<crate::shm::Counters> {
         Arc::clone(&self.shared)
+    }
+
+    /// Where its Zenoh callbacks hand the answers to their queries, so that none
+    /// waits on a querier that does not read them (`crate::reply`).
+    pub(crate) fn replier(&self) -> crate::reply::Replier {
+        self.replies.replier().clone()
+    }
+
+    /// How many answers to queries this node dropped: they waited beyond
+    /// `REPLY_QUEUE` for a querier that does not read them (its snapshot, info,
+    /// control, agent, poster and acknowledgment queryables alike).
+    pub fn dropped_replies(&self) -> u64 {
+        self.replies.replier().dropped()
     }
 
     /// Expose the component behind `handle` and, for a compound, every instance inside
@@ -249,22 +266,28 @@ impl Node {
             });
             let snapshots = handle.clone();
             let own_key = monitor_key.clone();
+            let replier = self.replier();
             queryables.push(
                 self.session
                     .declare_queryable(monitor_key)
                     .callback(move |query| {
                         // Answered under the component's own key, not the query's
                         // (`coolbot/robot/*/m`): the key tells which component it is.
-                        let reply = match serde_json::to_vec(&snapshots.snapshot()) {
-                            Ok(json) => query.reply(own_key.clone(), json).wait(),
-                            Err(error) => query.reply_err(error.to_string()).wait(),
-                        };
-                        if let Err(error) = reply {
-                            coolbot::limited!(&own_key, |held| tracing::warn!(
-                                "snapshot not sent: {}{held}",
-                                Chain(&*error)
-                            ));
-                        }
+                        // From the node's replier: a querier that does not read its
+                        // answer holds that thread, not Zenoh's.
+                        let (snapshots, own_key) = (snapshots.clone(), own_key.clone());
+                        replier.send("a snapshot", move || {
+                            let reply = match serde_json::to_vec(&snapshots.snapshot()) {
+                                Ok(json) => query.reply(own_key.clone(), json).wait(),
+                                Err(error) => query.reply_err(error.to_string()).wait(),
+                            };
+                            if let Err(error) = reply {
+                                coolbot::limited!(&own_key, |held| tracing::warn!(
+                                    "snapshot not sent: {}{held}",
+                                    Chain(&*error)
+                                ));
+                            }
+                        });
                     })
                     .wait()
                     .map_err(Error::zenoh("declare a monitoring queryable"))?,
@@ -273,31 +296,37 @@ impl Node {
             let echoed = Arc::clone(&self.echoed);
             let info_path = path.clone();
             let info_key = keys::info(&self.name, &path);
+            let replier = self.replier();
             queryables.push(
                 self.session
                     .declare_queryable(info_key.clone())
                     .callback(move |query| {
-                        let ports = lock(&echoed)
-                            .iter()
-                            .filter(|((path, _), _)| *path == info_path)
-                            .map(|((_, port), schema)| (port.clone(), schema.clone()))
-                            .collect();
-                        let info = ComponentInfo::of(info_handle.spec(), ports);
-                        let reply = match serde_json::to_vec(&info) {
-                            Ok(json) => query.reply(info_key.clone(), json).wait(),
-                            Err(error) => query.reply_err(error.to_string()).wait(),
-                        };
-                        if let Err(error) = reply {
-                            coolbot::limited!(&info_key, |held| tracing::warn!(
-                                "component info not sent: {}{held}",
-                                Chain(&*error)
-                            ));
-                        }
+                        let (echoed, info_path) = (Arc::clone(&echoed), info_path.clone());
+                        let (info_handle, info_key) = (info_handle.clone(), info_key.clone());
+                        replier.send("a component's info", move || {
+                            let ports = lock(&echoed)
+                                .iter()
+                                .filter(|((path, _), _)| *path == info_path)
+                                .map(|((_, port), schema)| (port.clone(), schema.clone()))
+                                .collect();
+                            let info = ComponentInfo::of(info_handle.spec(), ports);
+                            let reply = match serde_json::to_vec(&info) {
+                                Ok(json) => query.reply(info_key.clone(), json).wait(),
+                                Err(error) => query.reply_err(error.to_string()).wait(),
+                            };
+                            if let Err(error) = reply {
+                                coolbot::limited!(&info_key, |held| tracing::warn!(
+                                    "component info not sent: {}{held}",
+                                    Chain(&*error)
+                                ));
+                            }
+                        });
                     })
                     .wait()
                     .map_err(Error::zenoh("declare a component-info queryable"))?,
             );
             let control = self.control.clone();
+            let replier = self.replier();
             queryables.push(
                 self.session
                     .declare_queryable(keys::control(&self.name, &path))
@@ -306,12 +335,14 @@ impl Node {
                             control.try_send((query, handle.clone(), compound.clone()))
                         {
                             let (query, _, _) = error.into_inner();
-                            let _ = reply_control(
-                                &query,
-                                &ControlReply::Rejected {
-                                    reason: "the node has too many commands waiting".to_owned(),
-                                },
-                            );
+                            replier.send("a command's refusal", move || {
+                                let _ = reply_control(
+                                    &query,
+                                    &ControlReply::Rejected {
+                                        reason: "the node has too many commands waiting".to_owned(),
+                                    },
+                                );
+                            });
                         }
                     })
                     .wait()
@@ -523,6 +554,7 @@ mod tests {
     use super::*;
     use std::io::{Read, Write};
     use std::net::{TcpListener, TcpStream};
+    use std::time::Instant;
 
     /// A component that does nothing: one state, no ports.
     struct Idle(&'static coolbot::Spec);
@@ -667,6 +699,101 @@ mod tests {
         let dropped = handle.snapshot().dropped_events;
         assert_eq!(dropped, 0, "{dropped} monitoring events dropped");
         drop(watcher);
+        let _ = system.shutdown();
+    }
+
+    /// A peer that asks for snapshots and stops reading the answers holds the node's
+    /// replier (`crate::reply`), not Zenoh's receiving threads: replies take the
+    /// query's congestion control, blocking for requests, up to Zenoh's
+    /// `wait_before_close`, 5 s, and sent from a Zenoh callback they would leave the
+    /// node hearing nothing from any peer meanwhile. (A timing, so ignored: a
+    /// demonstration, run by hand.)
+    #[test]
+    #[ignore = "measures a time: run by hand"]
+    fn a_peer_that_stops_reading_replies_does_not_stall_what_the_node_hears() {
+        let port = free_port();
+        let node = Node::open(
+            "vict",
+            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
+        )
+        .unwrap()
+        .with_state_directory(None);
+        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let mut system = System::new();
+        system
+            .add(coolbot::Component::new(
+                "idle",
+                Box::new(Idle(spec)),
+                coolbot::PortSet::new(),
+            ))
+            .unwrap();
+        system.start().unwrap();
+        node.expose_system(&system).unwrap();
+
+        // What the node hears from an honest peer: a put every 10 ms.
+        let heard = Arc::new(Mutex::new(Vec::<Instant>::new()));
+        let times = Arc::clone(&heard);
+        let _subscriber = node
+            .session()
+            .declare_subscriber("honest/k")
+            .callback(move |_| lock(&times).push(Instant::now()))
+            .wait()
+            .unwrap();
+        let honest = zenoh::open(client_config(&format!("tcp/127.0.0.1:{port}")))
+            .wait()
+            .unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = Arc::clone(&stop);
+        let putting = std::thread::spawn(move || {
+            while !stopped.load(Ordering::Acquire) {
+                honest.put("honest/k", "x").wait().unwrap();
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        });
+        std::thread::sleep(Duration::from_secs(2));
+
+        // Two hostile sessions (one per receiving thread of Zenoh), through relays
+        // that stop reading what the node sends back.
+        let stall = Arc::new(AtomicBool::new(false));
+        let attackers: Vec<zenoh::Session> = (0..2)
+            .map(|_| {
+                let relay = stalling_relay(port, Arc::clone(&stall));
+                zenoh::open(client_config(&format!("tcp/127.0.0.1:{relay}")))
+                    .wait()
+                    .unwrap()
+            })
+            .collect();
+        std::thread::sleep(Duration::from_millis(500));
+        // (The control: `COOLBOT_TEST_RELAY_READS=1` keeps the relays reading.)
+        if std::env::var_os("COOLBOT_TEST_RELAY_READS").is_none() {
+            stall.store(true, Ordering::Release);
+        }
+        let attack = Instant::now();
+        for _ in 0..20_000 {
+            for attacker in &attackers {
+                let _ = attacker
+                    .get("coolbot/vict/idle/m")
+                    .callback(|_| {})
+                    .timeout(Duration::from_secs(30))
+                    .wait();
+            }
+        }
+        std::thread::sleep(Duration::from_secs(8));
+        stop.store(true, Ordering::Release);
+        putting.join().unwrap();
+        let heard = lock(&heard).clone();
+        let gap = heard
+            .windows(2)
+            .filter(|pair| pair[1] >= attack)
+            .map(|pair| pair[1] - pair[0])
+            .max()
+            .unwrap_or_default();
+        assert!(
+            gap < Duration::from_secs(1),
+            "the node heard nothing from an honest peer for {gap:?} ({} puts heard)",
+            heard.len()
+        );
+        drop(attackers);
         let _ = system.shutdown();
     }
 }

@@ -554,9 +554,8 @@ impl End {
                 let shared = Arc::clone(&self.shared);
                 self.acks.push(
                     crate::ledger::serve(
-                        session,
+                        &self.node,
                         &output.key,
-                        self.node.name(),
                         "proxy",
                         Arc::clone(&output.ledger),
                         move || {
