@@ -130,7 +130,13 @@ impl Layout {
             let line = line.trim_end();
             if !line.is_empty() {
                 out.push(' ');
-                out.push_str(line);
+                for c in line.chars() {
+                    if comment_safe(c) {
+                        out.push(c);
+                    } else {
+                        out.push_str(&c.escape_unicode().to_string());
+                    }
+                }
             }
         }
         out
@@ -1306,9 +1312,28 @@ impl Layout {
     }
 }
 
+/// Whether `c` may stand in a Rust comment as it is: not a control character (a
+/// carriage return ends no line there, and rustc refuses one alone), nor a character
+/// that changes the direction of the text around it (rustc denies those in comments,
+/// `text_direction_codepoint_in_comment`). The others are written as their escape
+/// (`\u{202e}`).
+fn comment_safe(c: char) -> bool {
+    (!c.is_control() || c == '\t')
+        && !matches!(c, '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn doc_lines_escape_what_a_comment_cannot_hold() {
+        let lines = vec!["left \u{202E}right\r and\ttab \u{1b}[31m é".to_owned()];
+        assert_eq!(
+            Layout::default().doc(&lines, 0, "///"),
+            "\n/// left \\u{202e}right\\u{d} and\ttab \\u{1b}[31m é"
+        );
+    }
 
     fn on_spec(port: &str) -> Code {
         Code::structure(

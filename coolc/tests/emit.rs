@@ -427,3 +427,25 @@ fn every_setting_reaches_the_generated_code() {
     let krate = lower_file(&path, "settings");
     insta::assert_snapshot!(generated_modules(&krate));
 }
+
+/// A doc comment's text that a Rust comment cannot hold as it is (a character that
+/// turns the text around, which rustc denies in comments; a carriage return alone) is
+/// written as its escape, and the emitted crate parses.
+#[test]
+fn doc_comments_keep_no_character_rust_refuses_in_a_comment() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let root = dir.path().join("odd.cool");
+    std::fs::write(
+        &root,
+        "/// Turns \u{202E}around\r here.\natomic Odd {\n    timing { period 10ms; }\n}\n",
+    )
+    .expect("written");
+    let krate = lower_file(&root, "odd");
+    let files = emit::emit_crate(&krate);
+    let generated: String = files.iter().map(|file| file.contents.as_str()).collect();
+    assert!(
+        generated.contains(r"Turns \u{202e}around\u{d} here."),
+        "{generated}"
+    );
+    assert!(!generated.contains('\u{202E}') && !generated.contains('\r'));
+}
