@@ -1560,7 +1560,18 @@ mod network_tests {
             variables: Vec::new(),
         };
         let (_ports, mut end) = placer.far_end(&placement).unwrap().unwrap();
-        end.build(None).unwrap();
+        // The two nodes may not have met yet on a loaded machine: asked again until
+        // they have.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            match end.build(None) {
+                Ok(()) => break,
+                Err(PlaceError::NotThere { .. }) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                Err(error) => panic!("{error}"),
+            }
+        }
         view_until(&mut end, false, |view| view.state == State::Ready);
 
         // The instance runs (a command from anywhere); its event comes.
