@@ -280,6 +280,14 @@ pub(crate) trait Driven: Automaton {
         None
     }
 
+    /// On a virtual clock: how soon, in real time, the thread retries moving data of
+    /// its own, if it has any (packets held at a compound's exported input while its
+    /// instance's `Block` fifo was full). Data moves in real time on any clock: the
+    /// retry is no timer of the clock, and the thread counts as settled meanwhile.
+    fn retries_data(&self) -> Option<Duration> {
+        None
+    }
+
     /// The component runs on `clock` (set before its thread starts): a compound puts
     /// its own timers and its instances on it.
     fn set_clock(&mut self, _clock: &crate::clock::Clock) {}

@@ -22,7 +22,10 @@
 //! waited for: a test asserts exact sequences with no sleep.
 //!
 //! Settling covers timers, not data: a packet sent during the step is handled as
-//! usual, and a test waits for its effect as it would with the real clock.
+//! usual, and a test waits for its effect as it would with the real clock. Packets
+//! that wait at a compound's exported input for room in its instance's `Block` fifo
+//! are retried in real time too (`Driven::retries_data`), not at the clock's next
+//! millisecond.
 //!
 //! A section can take time of the clock as if it computed that long
 //! ([`Context::spend`](crate::Context::spend)): it waits until the clock has moved on

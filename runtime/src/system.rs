@@ -1471,7 +1471,13 @@ impl System {
     /// system.handle("motion"); // error: the system was moved into `shutdown`
     /// ```
     pub fn shutdown(mut self) -> Report {
-        self.stop_all()
+        self.stop_all(crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT))
+    }
+
+    /// [`System::shutdown`], giving up on threads not ended by `deadline` (a
+    /// compound's shutdown of its instances, within its own budget).
+    pub(crate) fn shutdown_by(mut self, deadline: Instant) -> Report {
+        self.stop_all(deadline)
     }
 
     /// The components are about to be shut down: on a virtual clock, a section of
@@ -1485,7 +1491,7 @@ impl System {
         }
     }
 
-    fn stop_all(&mut self) -> Report {
+    fn stop_all(&mut self, deadline: Instant) -> Report {
         let mut report = Report::default();
         self.release_spending();
         // Tell everyone first, so that components stop in parallel.
@@ -1501,7 +1507,6 @@ impl System {
                 slot.handle.bell.ring_command();
             }
         }
-        let deadline = crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT);
         // A group thread ends when its last member is dead.
         let mut group_ends: Vec<(bool, Option<String>)> = Vec::with_capacity(self.groups.len());
         for group in &mut self.groups {
@@ -1571,7 +1576,7 @@ impl System {
 impl Drop for System {
     fn drop(&mut self) {
         if !self.slots.is_empty() {
-            let _ = self.stop_all();
+            let _ = self.stop_all(crate::time::later(Instant::now(), SHUTDOWN_TIMEOUT));
         }
     }
 }

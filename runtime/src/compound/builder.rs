@@ -890,6 +890,7 @@ impl CompoundBuilder {
             next_timed: None,
             moves: Vec::new(),
             clock_wait: None,
+            stop_by: None,
             clock: crate::clock::Clock::real(),
             deferred_faults: false,
         };

@@ -24,7 +24,21 @@ use super::supervisor::SupervisorCx;
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long a compound shutting down waits for its instances altogether: their `dead`
+/// (each in turn, last declared first) and the joins of their threads. Shorter than
+/// [`SHUTDOWN_TIMEOUT`](crate::SHUTDOWN_TIMEOUT), so that a system's shutdown joins a
+/// compound's thread even when an instance of it is stuck in a section: the compound
+/// gives up on that instance (its `dead` stays queued, taken when the section
+/// returns) and says so in a `CommandRefused` step and its log.
+pub const COMPOUND_STOP_TIMEOUT: Duration = Duration::from_secs(4);
+
 impl Compound {
+    /// Packets stayed at an exported input at its last forwarding (the instance's
+    /// `Block` fifo was full).
+    fn holds_packets(&self) -> bool {
+        self.exports.iter().any(|export| export.held())
+    }
+
     /// Start the instances (first start) or bring them back to `ready` (a restart),
     /// and restore the declared arrangement.
     pub(super) fn start_instances(&mut self, cx: &mut Context) -> Result<(), Fault> {
@@ -141,9 +155,27 @@ impl Compound {
                 continue;
             }
             // `ready` and `suspend` wait as long as a supervisor's command does; `dead`
-            // (shutting down) as long as the instance's handle waits.
+            // (shutting down) as long as the instance's handle waits, within what is
+            // left of the compound's stop budget: past it, `dead` is queued without
+            // waiting.
             let outcome = if target == Controllable::Dead {
-                command(&instance.handle, target)
+                let left = self
+                    .stop_by
+                    .map_or(instance.handle.command_timeout, |by| {
+                        by.saturating_duration_since(Instant::now())
+                    })
+                    .min(instance.handle.command_timeout);
+                if left.is_zero() {
+                    match instance.handle.post(Command::SetState(target)) {
+                        Ok(_) => Err(Fault::message(format!(
+                            "not waited for: the compound's {COMPOUND_STOP_TIMEOUT:?} to stop its instances are spent; `dead` is queued"
+                        ))),
+                        Err(rejected) => Err(RunError::from(rejected).into()),
+                    }
+                } else {
+                    let bounded = instance.handle.clone().with_command_timeout(left);
+                    command(&bounded, target)
+                }
             } else {
                 let bounded = instance
                     .handle
@@ -189,6 +221,7 @@ impl Automaton for Compound {
             if let Some(system) = &self.system {
                 system.release_spending();
             }
+            self.stop_by = Some(crate::time::later(Instant::now(), COMPOUND_STOP_TIMEOUT));
             self.instances_to(Controllable::Dead, cx);
         } else {
             self.instances_to(Controllable::Ready, cx);
@@ -288,7 +321,10 @@ impl Driven for Compound {
             State::Suspended => self.instances_to(Controllable::Suspended, cx),
             State::Dead => {
                 if let Some(system) = self.system.take() {
-                    let report = system.shutdown();
+                    let by = self.stop_by.unwrap_or_else(|| {
+                        crate::time::later(Instant::now(), COMPOUND_STOP_TIMEOUT)
+                    });
+                    let report = system.shutdown_by(by);
                     if !report.clean() {
                         tracing::warn!(compound = %self.name, "instances not joined: {report:?}");
                     }
@@ -393,6 +429,10 @@ impl Driven for Compound {
         }
     }
 
+    fn retries_data(&self) -> Option<Duration> {
+        (!self.clock.is_real() && self.holds_packets()).then_some(EXPORT_RETRY)
+    }
+
     fn wake_at(&self) -> Option<Instant> {
         let queue = self.queue.iter().map(|entry| {
             entry
@@ -412,11 +452,8 @@ impl Driven for Compound {
         let settle = self.coordinator.as_ref().and_then(|c| c.settle_until);
         let fresh = (self.fresh || self.sectioned || dirty).then(|| self.clock.now());
         // Packets held at an exported input (the instance's `Block` fifo was full):
-        // retried soon.
-        let held = self
-            .exports
-            .iter()
-            .any(|export| export.held())
+        // retried soon (on a virtual clock in real time: `retries_data`).
+        let held = (self.clock.is_real() && self.holds_packets())
             .then(|| crate::time::later(self.clock.now(), EXPORT_RETRY));
         queue
             .chain(restarts)

@@ -51,7 +51,7 @@ mod view;
 mod wiring;
 
 pub use builder::CompoundBuilder;
-pub use component::INSTANCE_START_TIMEOUT;
+pub use component::{COMPOUND_STOP_TIMEOUT, INSTANCE_START_TIMEOUT};
 pub use error::CompoundError;
 pub use exports::MEMBER_STALL;
 pub use policy::{

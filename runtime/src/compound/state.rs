@@ -161,6 +161,9 @@ pub(super) struct Compound {
     /// On a virtual clock, how its thread waits in the clock's time (for the answer
     /// to a recovery retry): set at each supervision turn.
     pub(super) clock_wait: Option<crate::clock::ClockWait>,
+    /// Shutting down: when its instances' `dead` and the joins of their threads are
+    /// given up on (`COMPOUND_STOP_TIMEOUT` after the compound's `stop` began).
+    pub(super) stop_by: Option<Instant>,
 }
 
 pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault> {

@@ -83,12 +83,20 @@ impl Runner {
     /// Whether a pull request waits at one of the component's pull outputs.
     pub(super) fn block(&mut self) {
         let deadline = self.next_due();
+        // On a virtual clock, data to retry moving waits in real time.
+        let retry = self
+            .automaton
+            .retries_data()
+            .filter(|_| {
+                self.supervised && self.state == State::Running && self.time.as_virtual().is_some()
+            })
+            .map(|soon| later(Instant::now(), soon));
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
         // loop then looks at the control port first (the priority rule above). With a
         // timer due, park at once (a periodic thread sleeps like a bare one); waiting
         // for input only, spin first (`wait_for_input`). The timing counters are
         // published (a lock of the monitor) only when the thread is about to sleep.
-        if deadline.is_none() {
+        if deadline.is_none() && retry.is_none() {
             self.settle();
             self.wait_for_input();
             return;
@@ -100,11 +108,11 @@ impl Runner {
             // One reading for the check and the report: settled at `now` means
             // nothing was due at `now`.
             let now = clock.now();
-            if deadline.is_some_and(|due| due > now) {
+            if deadline.is_none_or(|due| due > now) {
                 if let Some(id) = self.on_clock {
                     clock.settled(id, now, &|| !self.control.is_empty());
                 }
-                self.bell.park_until(None);
+                self.bell.park_until(retry);
             }
             return;
         }

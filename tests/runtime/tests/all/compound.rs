@@ -621,6 +621,22 @@ impl Base {
         }
     }
 
+    /// The same on a virtual clock.
+    fn on_virtual_clock(
+        build: impl FnOnce(Parts) -> Result<coolbot::Component, CompoundError>,
+    ) -> Base {
+        let mut parts = Parts::new();
+        let scripts = parts.scripts.clone();
+        let log = Arc::clone(&parts.log);
+        let feed = parts.feed.take();
+        Base {
+            rig: CompoundRig::on_virtual_clock(build(parts)),
+            scripts,
+            log,
+            feed,
+        }
+    }
+
     fn script(&self, name: &str) -> Arc<Script> {
         self.scripts.of(name)
     }
@@ -1250,6 +1266,50 @@ fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
     assert_eq!(monitor.overruns, 1);
     assert_eq!(base.state(), State::Running);
     assert!(rig.rig.shutdown().clean());
+}
+
+/// A compound shutting down waits for its instances `COMPOUND_STOP_TIMEOUT`
+/// altogether, less than a system's shutdown timeout: the system joins the
+/// compound's thread though an instance is stuck in a section (waiting for the stuck
+/// instance to take `dead`, then for its thread, took the compound past the system's
+/// deadline). The instance takes its queued `dead` once its section returns.
+#[test]
+fn a_system_shutdown_joins_a_compound_whose_instance_is_stuck() {
+    let mut rig = Base::new(|parts| cmp_lone::component("base", parts));
+    let script = rig.script("w");
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("kicker", tap));
+    rig.rig.connect("kicker.kick", "base.w_kick");
+    rig.rig.run();
+    let feed = feed.recv_timeout(WAIT).expect("the kicker started");
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    let release = script.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(|| script.hanging.load(Ordering::SeqCst), "w hangs");
+    let report = rig.rig.shutdown();
+    let compound = report
+        .components
+        .iter()
+        .find(|c| c.name == "base")
+        .expect("the compound in the report");
+    assert!(compound.joined, "{report:?}");
+    assert_eq!(compound.state, State::Dead);
+    let refused = base
+        .snapshot()
+        .supervision
+        .into_iter()
+        .find(|s| s.instance == "w" && matches!(s.step, Step::CommandRefused { .. }))
+        .expect("a refused step for w's `dead`");
+    assert_eq!(
+        refused.step,
+        Step::CommandRefused {
+            command: "dead".to_owned()
+        }
+    );
+    drop(release);
+    w.wait_state(State::Dead, WAIT)
+        .expect("w takes its queued `dead` once its section returns");
 }
 
 #[test]
@@ -2462,6 +2522,53 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
     // The section returns (w is failed and ignored): nothing was lost meanwhile.
     drop(release);
     w.wait_for(|_| !w.is_stuck(), WAIT).expect("returned");
+    assert_eq!(w.snapshot().overflows, 0);
+    assert_eq!(base.snapshot().overflows, 0);
+    assert!(rig.rig.shutdown().clean());
+}
+
+/// On a virtual clock, packets held at an exported input (the instance's `Block` fifo
+/// was full) move on as soon as the fifo has room, in real time, as any packet does:
+/// the retry is no timer of the clock, so no advance is needed.
+#[test]
+fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advance() {
+    let mut rig = Base::on_virtual_clock(|parts| cmp_forwarding::component("base", parts));
+    let script = rig.script("w");
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("f", tap));
+    rig.rig.connect("f.data", "base.data");
+    rig.rig.connect("f.kick", "base.kick");
+    rig.rig.run();
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    eventually(|| script.inputs.lock().unwrap().is_some(), "w started");
+    let w_data = script.inputs().data;
+    let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
+    wait_user(&w, "idle");
+    // In `busy`, w reads its data only in its periodic section, which waits for the
+    // clock: w's queue fills with four packets and four wait at the compound's input.
+    feed.kick.emit();
+    wait_user(&w, "busy");
+    for packet in 0..4 {
+        feed.data.send(packet);
+    }
+    eventually(|| w_data.len() == 4, "w's queue is full");
+    for packet in 4..8 {
+        feed.data.send(packet);
+    }
+    // A command makes the compound busy on the clock until the end of the turn that
+    // handles it, which tries to pass the four on (they came before the command);
+    // settling waits for that turn: they wait at the compound's input.
+    base.command(Command::SetPriority(0)).expect("sync");
+    rig.rig
+        .clock
+        .as_ref()
+        .expect("a virtual clock")
+        .settle()
+        .expect("settles");
+    // The test empties w's queue, the clock standing still: the four waiting move on.
+    assert_eq!(w_data.drain().collect::<Vec<_>>(), [0, 1, 2, 3]);
+    eventually(|| w_data.len() == 4, "the held packets reach w");
+    assert_eq!(w_data.drain().collect::<Vec<_>>(), [4, 5, 6, 7]);
     assert_eq!(w.snapshot().overflows, 0);
     assert_eq!(base.snapshot().overflows, 0);
     assert!(rig.rig.shutdown().clean());
