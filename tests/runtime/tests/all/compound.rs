@@ -641,6 +641,20 @@ impl Base {
         self.scripts.of(name)
     }
 
+    /// Add a feeder `f` outside the compound, connect its ports to the compound's as
+    /// `links` say (`(feeder port, compound port)`), run the system and return the
+    /// feeder's ports.
+    fn run_fed(&mut self, links: &[(&str, &str)]) -> Feeder {
+        let (tap, feed) = Tap::new();
+        self.rig.add(feeder::component("f", tap));
+        for (from, to) in links {
+            self.rig
+                .connect(&format!("f.{from}"), &format!("base.{to}"));
+        }
+        self.rig.run();
+        feed.recv_timeout(WAIT).expect("the feeder started")
+    }
+
     /// The feeder's ports (it hands them over when it starts).
     fn feeder(&mut self) -> Feeder {
         self.feed
@@ -1277,11 +1291,7 @@ fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
 fn a_system_shutdown_joins_a_compound_whose_instance_is_stuck() {
     let mut rig = Base::new(|parts| cmp_lone::component("base", parts));
     let script = rig.script("w");
-    let (tap, feed) = Tap::new();
-    rig.rig.add(feeder::component("kicker", tap));
-    rig.rig.connect("kicker.kick", "base.w_kick");
-    rig.rig.run();
-    let feed = feed.recv_timeout(WAIT).expect("the kicker started");
+    let feed = rig.run_fed(&[("kick", "w_kick")]);
     let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
     wait_user(&w, "idle");
     let release = script.hang_in("busy.periodic");
@@ -1617,11 +1627,7 @@ fn soak_substitution_cycles_lose_no_packet_on_the_exported_input() {
     const CYCLES: usize = 200;
     let mut rig = Base::new(|parts| cmp_cycles::component("base", parts));
     let (w_script, b_script) = (rig.script("w"), rig.script("b"));
-    let (tap, feed) = Tap::new();
-    rig.rig.add(feeder::component("f", tap));
-    rig.rig.connect("f.data", "base.data");
-    rig.rig.run();
-    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let feed = rig.run_fed(&[("data", "data")]);
     let (base, w, b) = (
         rig.rig.compound.clone(),
         rig.rig.instance("w"),
@@ -2489,12 +2495,7 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
     // its producer when full; its script hands its inputs to the test.
     let mut rig = Base::new(|parts| cmp_forwarding::component("base", parts));
     let script = rig.script("w");
-    let (tap, feed) = Tap::new();
-    rig.rig.add(feeder::component("f", tap));
-    rig.rig.connect("f.data", "base.data");
-    rig.rig.connect("f.kick", "base.kick");
-    rig.rig.run();
-    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let feed = rig.run_fed(&[("data", "data"), ("kick", "kick")]);
     eventually(|| script.inputs.lock().unwrap().is_some(), "w started");
     let w_data = script.inputs().data;
     let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
@@ -2534,12 +2535,7 @@ fn forwarding_an_exported_input_never_waits_for_a_full_blocking_queue() {
 fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advance() {
     let mut rig = Base::on_virtual_clock(|parts| cmp_forwarding::component("base", parts));
     let script = rig.script("w");
-    let (tap, feed) = Tap::new();
-    rig.rig.add(feeder::component("f", tap));
-    rig.rig.connect("f.data", "base.data");
-    rig.rig.connect("f.kick", "base.kick");
-    rig.rig.run();
-    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let feed = rig.run_fed(&[("data", "data"), ("kick", "kick")]);
     eventually(|| script.inputs.lock().unwrap().is_some(), "w started");
     let w_data = script.inputs().data;
     let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
