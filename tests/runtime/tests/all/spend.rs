@@ -336,16 +336,31 @@ fn a_section_may_take_more_time_than_an_instant_can_hold() {
 }
 
 /// A supervisor with the shape of `CmpCounting` (a periodic section every 2 ms),
-/// whose first periodic section past 11 ms (at 12 ms: `a`'s first period, from 10 ms,
-/// takes the clock's time then) commands `a` to suspend, and logs the answer with
-/// the clock's time.
-struct SuspendsA {
+/// whose first periodic section past 11 ms commands its instances as `act` does
+/// (which may log as it goes) and logs what `act` returns with the clock's time
+/// after it.
+struct CommandsOnce {
     log: Log,
     clock: Arc<VirtualClock>,
+    act: Act,
     commanded: bool,
 }
 
-impl Supervisor for SuspendsA {
+/// What a `CommandsOnce` does: its commands, with the log and the clock.
+type Act = fn(&mut SupervisorCx<'_>, &Log, &VirtualClock) -> String;
+
+impl CommandsOnce {
+    fn new(log: &Log, clock: &Arc<VirtualClock>, act: Act) -> CommandsOnce {
+        CommandsOnce {
+            log: log.clone(),
+            clock: Arc::clone(clock),
+            act,
+            commanded: false,
+        }
+    }
+}
+
+impl Supervisor for CommandsOnce {
     fn spec(&self) -> &'static Spec {
         &cmp_counting::SPEC
     }
@@ -364,15 +379,20 @@ impl Supervisor for SuspendsA {
             return Ok(());
         }
         self.commanded = true;
-        let at = self.clock.elapsed();
-        self.log.push(format!("k: suspend a at {at:?}"));
-        let answer = match cx.instances.state("a", Controllable::Suspended) {
-            Ok(()) => "taken".to_owned(),
-            Err(refused) => refused.reason.to_string(),
-        };
+        let did = (self.act)(cx, &self.log, &self.clock);
         self.log
-            .push(format!("k: {answer} at {:?}", self.clock.elapsed()));
+            .push(format!("k: {did} at {:?}", self.clock.elapsed()));
         Ok(())
+    }
+}
+
+/// A `CommandsOnce` act: suspend `a` (at 12 ms: `a`'s first period, from 10 ms,
+/// takes the clock's time then), logging when it asks; the answer.
+fn suspends_a(cx: &mut SupervisorCx<'_>, log: &Log, clock: &VirtualClock) -> String {
+    log.push(format!("k: suspend a at {:?}", clock.elapsed()));
+    match cx.instances.state("a", Controllable::Suspended) {
+        Ok(()) => "taken".to_owned(),
+        Err(refused) => refused.reason.to_string(),
     }
 }
 
@@ -383,11 +403,7 @@ fn commanding_a_spender(cost: u64, timeout: Duration, until: u64) -> Vec<String>
     let log = Log::default();
     let clock = VirtualClock::new();
     let mut system = System::with_clock(Clock::virtual_clock(&clock));
-    let supervisor = SuspendsA {
-        log: log.clone(),
-        clock: Arc::clone(&clock),
-        commanded: false,
-    };
+    let supervisor = CommandsOnce::new(&log, &clock, suspends_a);
     let k = CompoundBuilder::new("k", supervisor)
         .instance(stage::component("a", busy("a", &log, &[cost])))
         .command_timeout(timeout)
@@ -471,41 +487,12 @@ impl relay::Behavior for SlowReentry {
     }
 }
 
-/// A supervisor whose first periodic section past 11 ms takes `r` to `ready` and back
-/// to `running` (whose entry then takes the clock's time).
-struct RestartsR {
-    log: Log,
-    clock: Arc<VirtualClock>,
-    commanded: bool,
-}
-
-impl Supervisor for RestartsR {
-    fn spec(&self) -> &'static Spec {
-        &cmp_counting::SPEC
-    }
-
-    fn get(&self, _variable: usize) -> Value {
-        Value::UInt(0)
-    }
-
-    fn section(
-        &mut self,
-        _state: usize,
-        section: Section,
-        cx: &mut SupervisorCx<'_>,
-    ) -> SectionResult {
-        if section != Section::Periodic || self.commanded || self.clock.elapsed() < ms(11) {
-            return Ok(());
-        }
-        self.commanded = true;
-        let ready = cx.instances.state("r", Controllable::Ready);
-        let run = cx.instances.state("r", Controllable::Running);
-        self.log.push(format!(
-            "k: {ready:?} {run:?} at {:?}",
-            self.clock.elapsed()
-        ));
-        Ok(())
-    }
+/// A `CommandsOnce` act: take `r` to `ready` and back to `running` (whose entry then
+/// takes the clock's time); both answers.
+fn restarts_r(cx: &mut SupervisorCx<'_>, _log: &Log, _clock: &VirtualClock) -> String {
+    let ready = cx.instances.state("r", Controllable::Ready);
+    let run = cx.instances.state("r", Controllable::Running);
+    format!("{ready:?} {run:?}")
 }
 
 /// A supervisor's section whose command's transition takes the clock's time is done
@@ -520,11 +507,7 @@ fn a_supervisor_told_its_command_takes_clock_time_settles_within_the_advance() {
         let log = Log::default();
         let clock = VirtualClock::new();
         let mut system = System::with_clock(Clock::virtual_clock(&clock));
-        let supervisor = RestartsR {
-            log: log.clone(),
-            clock: Arc::clone(&clock),
-            commanded: false,
-        };
+        let supervisor = CommandsOnce::new(&log, &clock, restarts_r);
         let k = CompoundBuilder::new("k", supervisor)
             .instance(relay::component(
                 "r",
@@ -575,11 +558,7 @@ fn shutting_down_while_a_supervisor_waits_for_an_instance_taking_clock_time_is_c
     let log = Log::default();
     let clock = VirtualClock::new();
     let mut system = System::with_clock(Clock::virtual_clock(&clock));
-    let supervisor = SuspendsA {
-        log: log.clone(),
-        clock: Arc::clone(&clock),
-        commanded: false,
-    };
+    let supervisor = CommandsOnce::new(&log, &clock, suspends_a);
     let k = CompoundBuilder::new("k", supervisor)
         .instance(stage::component("a", busy("a", &log, &[4])))
         .command_timeout(Duration::from_secs(8))
