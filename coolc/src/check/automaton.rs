@@ -145,7 +145,7 @@ fn triggers(checker: &mut Checker<'_, '_>, state: &ast::State) {
                 span,
                 ..
             } => {
-                let mut trigger = format!("after {}", crate::diagram::text::duration(*ns));
+                let mut trigger = format!("after {}", super::model::duration_text(*ns));
                 if let Some(port) = without {
                     trigger.push_str(&format!(" without {}", port.name));
                 }

@@ -3,7 +3,7 @@
 
 use crate::checked::model::{
     BinaryOp, Declared, Duration, InputKind, Node, OutputKind, PortRef, Typed, UnaryOp, Value,
-    Written,
+    Written, duration_text as duration,
 };
 
 /// An input's kind as written (`fifo<Twist>(16, drop_oldest)`, `tick`), with ` pull`.
@@ -55,28 +55,11 @@ pub(crate) fn interval(lo: &Duration, hi: Option<&Duration>) -> String {
 }
 
 /// A duration or frequency as written (`500ms`, `100Hz`).
-pub(crate) fn time(duration: &Duration) -> String {
-    match duration.written {
-        Written::Nanos(nanos) => self::duration(nanos),
+pub(crate) fn time(time: &Duration) -> String {
+    match time.written {
+        Written::Nanos(nanos) => duration(nanos),
         Written::Hertz(hertz) => frequency(hertz),
     }
-}
-
-/// A duration in the largest unit that divides it (`2s`, `500ms`, `1min`).
-pub(crate) fn duration(nanos: u128) -> String {
-    const UNITS: [(u128, &str); 5] = [
-        (60_000_000_000, "min"),
-        (1_000_000_000, "s"),
-        (1_000_000, "ms"),
-        (1_000, "us"),
-        (1, "ns"),
-    ];
-    for (size, unit) in UNITS {
-        if nanos != 0 && nanos.is_multiple_of(size) {
-            return format!("{}{unit}", nanos / size);
-        }
-    }
-    "0s".to_owned()
 }
 
 fn float(value: f64) -> String {

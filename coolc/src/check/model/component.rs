@@ -643,6 +643,23 @@ pub enum Written {
     Hertz(f64),
 }
 
+/// A duration in the largest unit that divides it (`2s`, `500ms`, `1min`).
+pub fn duration_text(nanos: u128) -> String {
+    const UNITS: [(u128, &str); 5] = [
+        (60_000_000_000, "min"),
+        (1_000_000_000, "s"),
+        (1_000_000, "ms"),
+        (1_000, "us"),
+        (1, "ns"),
+    ];
+    for (size, unit) in UNITS {
+        if nanos != 0 && nanos.is_multiple_of(size) {
+            return format!("{}{unit}", nanos / size);
+        }
+    }
+    "0s".to_owned()
+}
+
 impl Duration {
     /// Zero, written `0s`: what an unevaluable delay becomes in a model built from
     /// input with errors.
