@@ -234,6 +234,21 @@ impl Handle {
         Some(handle.clone())
     }
 
+    /// The instances inside this compound (paths through nested compounds) whose
+    /// threads have not ended (a thread's end closes its control queue).
+    pub(crate) fn unended_instances(&self) -> Vec<String> {
+        let mut unended = Vec::new();
+        for instance in self.instances.iter() {
+            if !instance.control.is_closed() {
+                unended.push(instance.name.to_string());
+            }
+            for inner in instance.unended_instances() {
+                unended.push(format!("{}.{inner}", instance.name));
+            }
+        }
+        unended
+    }
+
     /// A handle whose commands wait at most `timeout` for the component.
     pub fn with_command_timeout(mut self, timeout: Duration) -> Handle {
         self.command_timeout = timeout;

@@ -464,6 +464,11 @@ pub struct ComponentReport {
     pub joined: bool,
     /// A panic that escaped the runtime's own code on that thread (a bug).
     pub thread_panic: Option<String>,
+    /// A compound's instances (paths through nested compounds, `mid.leaf`) whose
+    /// threads had not ended when the compound's did: stuck in a section past the
+    /// compound's stop budget (`COMPOUND_STOP_TIMEOUT`). They end when their section
+    /// returns. Empty for an atomic component.
+    pub unjoined_instances: Vec<String>,
 }
 
 /// What [`System::shutdown`] returns.
@@ -474,11 +479,14 @@ pub struct Report {
 }
 
 impl Report {
-    /// Whether every started thread was joined without a runtime panic.
+    /// Whether every started thread was joined without a runtime panic, compounds'
+    /// instances included.
     pub fn clean(&self) -> bool {
-        self.components
-            .iter()
-            .all(|c| c.thread_panic.is_none() && (c.joined || c.state == State::Starting))
+        self.components.iter().all(|c| {
+            c.thread_panic.is_none()
+                && (c.joined || c.state == State::Starting)
+                && c.unjoined_instances.is_empty()
+        })
     }
 }
 
@@ -1556,6 +1564,11 @@ impl System {
                 }
             }
             let monitor = slot.handle.snapshot();
+            let unjoined_instances = if monitor.state == State::Starting {
+                Vec::new()
+            } else {
+                slot.handle.unended_instances()
+            };
             report.components.push(ComponentReport {
                 name: slot.name.to_string(),
                 state: monitor.state,
@@ -1563,6 +1576,7 @@ impl System {
                 error: monitor.error,
                 joined,
                 thread_panic,
+                unjoined_instances,
             });
         }
         self.slots.clear();

@@ -24,13 +24,21 @@ use super::supervisor::SupervisorCx;
 /// How long a compound waits for one of its instances to leave `starting`.
 pub const INSTANCE_START_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// How long a compound shutting down waits for its instances altogether: their `dead`
-/// (each in turn, last declared first) and the joins of their threads. Shorter than
+/// How long a compound shutting down takes for its stop at most, from its
+/// supervisor's exit section: the commands that section gives, its instances' `dead`
+/// (each in turn, last declared first, each waited for at most its share of what is
+/// left) and the joins of their threads. Shorter than
 /// [`SHUTDOWN_TIMEOUT`](crate::SHUTDOWN_TIMEOUT), so that a system's shutdown joins a
 /// compound's thread even when an instance of it is stuck in a section: the compound
-/// gives up on that instance (its `dead` stays queued, taken when the section
-/// returns) and says so in a `CommandRefused` step and its log.
+/// gives up on that instance (it is sent `dead` again, which it takes when its section
+/// returns), says so in a `CommandRefused` step and its log, and the system's report
+/// names it (`ComponentReport::unjoined_instances`).
 pub const COMPOUND_STOP_TIMEOUT: Duration = Duration::from_secs(4);
+
+/// When a compound's stop that begins now is given up on.
+fn stop_budget() -> Instant {
+    crate::time::later(Instant::now(), COMPOUND_STOP_TIMEOUT)
+}
 
 impl Compound {
     /// Packets stayed at an exported input at its last forwarding (the instance's
@@ -135,6 +143,36 @@ impl Compound {
         self.rewire()
     }
 
+    /// Shutting down: send instance `index` to `dead`, one of `left` instances still
+    /// to stop. It waits as long as the instance's handle waits, and at most its share
+    /// of what is left of the compound's stop budget, so that a stuck instance does
+    /// not leave the healthy ones stopped after it no time to stop. One the watchdog
+    /// found stuck in a section, or one whose turn comes once the budget is spent, is
+    /// sent `dead` without waiting: it takes it when it can, and the `Err` says so.
+    fn stop_instance(&mut self, index: usize, left: usize) -> Result<(), Fault> {
+        let by = *self.stop_by.get_or_insert_with(stop_budget);
+        let handle = &self.instances[index].handle;
+        let share = by.saturating_duration_since(Instant::now())
+            / u32::try_from(left.max(1)).unwrap_or(u32::MAX);
+        let wait = share.min(handle.command_timeout);
+        let why = if handle.is_stuck() {
+            "it is stuck in a section past its max_response"
+        } else if wait.is_zero() {
+            "the compound's time to stop its instances is spent"
+        } else {
+            return command(
+                &handle.clone().with_command_timeout(wait),
+                Controllable::Dead,
+            );
+        };
+        match handle.post(Command::SetState(Controllable::Dead)) {
+            Ok(_) => Err(Fault::message(format!(
+                "not waited for: {why} ({COMPOUND_STOP_TIMEOUT:?} at most in all); `dead` is queued, taken when it can"
+            ))),
+            Err(rejected) => Err(RunError::from(rejected).into()),
+        }
+    }
+
     /// Bring every instance that runs (or is suspended) to `target`, last declared
     /// first. A command an instance does not take is a `CommandRefused` step,
     /// published when the call returns.
@@ -155,27 +193,9 @@ impl Compound {
                 continue;
             }
             // `ready` and `suspend` wait as long as a supervisor's command does; `dead`
-            // (shutting down) as long as the instance's handle waits, within what is
-            // left of the compound's stop budget: past it, `dead` is queued without
-            // waiting.
+            // (shutting down) within the compound's stop budget (`stop_instance`).
             let outcome = if target == Controllable::Dead {
-                let left = self
-                    .stop_by
-                    .map_or(instance.handle.command_timeout, |by| {
-                        by.saturating_duration_since(Instant::now())
-                    })
-                    .min(instance.handle.command_timeout);
-                if left.is_zero() {
-                    match instance.handle.post(Command::SetState(target)) {
-                        Ok(_) => Err(Fault::message(format!(
-                            "not waited for: the compound's {COMPOUND_STOP_TIMEOUT:?} to stop its instances are spent; `dead` is queued"
-                        ))),
-                        Err(rejected) => Err(RunError::from(rejected).into()),
-                    }
-                } else {
-                    let bounded = instance.handle.clone().with_command_timeout(left);
-                    command(&bounded, target)
-                }
+                self.stop_instance(index, index + 1)
             } else {
                 let bounded = instance
                     .handle
@@ -221,7 +241,7 @@ impl Automaton for Compound {
             if let Some(system) = &self.system {
                 system.release_spending();
             }
-            self.stop_by = Some(crate::time::later(Instant::now(), COMPOUND_STOP_TIMEOUT));
+            self.stop_by.get_or_insert_with(stop_budget);
             self.instances_to(Controllable::Dead, cx);
         } else {
             self.instances_to(Controllable::Ready, cx);
@@ -230,6 +250,11 @@ impl Automaton for Compound {
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
         self.sectioned = true;
+        if cx.stopping() {
+            // Shutting down: the budget counts from the supervisor's exit section,
+            // whose commands to its instances are part of the compound's stop.
+            self.stop_by.get_or_insert_with(stop_budget);
+        }
         self.commander.set_stopping(cx.stopping());
         self.commander.set_clock_wait(cx.clock_wait());
         let mut scx = SupervisorCx {
@@ -321,9 +346,7 @@ impl Driven for Compound {
             State::Suspended => self.instances_to(Controllable::Suspended, cx),
             State::Dead => {
                 if let Some(system) = self.system.take() {
-                    let by = self.stop_by.unwrap_or_else(|| {
-                        crate::time::later(Instant::now(), COMPOUND_STOP_TIMEOUT)
-                    });
+                    let by = *self.stop_by.get_or_insert_with(stop_budget);
                     let report = system.shutdown_by(by);
                     if !report.clean() {
                         tracing::warn!(compound = %self.name, "instances not joined: {report:?}");

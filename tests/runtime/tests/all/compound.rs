@@ -1041,7 +1041,8 @@ fn at_the_deadline_without_a_substitute_the_compound_fails() {
         error.contains("`w` did not recover"),
         "the error says why: {error}"
     );
-    assert_eq!(w.state(), State::Dead);
+    // Retired: sent `dead` without waiting (its thread takes it when it can).
+    w.wait_state(State::Dead, WAIT).expect("w is dead");
     assert!(rig.rig.shutdown().clean());
 }
 
@@ -1282,21 +1283,24 @@ fn restart_of_an_instance_hanging_past_max_response_waits_for_its_section() {
     assert!(rig.rig.shutdown().clean());
 }
 
-/// A compound shutting down waits for its instances `COMPOUND_STOP_TIMEOUT`
-/// altogether, less than a system's shutdown timeout: the system joins the
-/// compound's thread though an instance is stuck in a section (waiting for the stuck
-/// instance to take `dead`, then for its thread, took the compound past the system's
-/// deadline). The instance takes its queued `dead` once its section returns.
+/// A compound shutting down takes `COMPOUND_STOP_TIMEOUT` at most for its stop, less
+/// than a system's shutdown timeout: the system joins the compound's thread though an
+/// instance is stuck in a section (waiting for the stuck instance to take `dead`,
+/// then for its thread, took the compound past the system's deadline). The report is
+/// not clean: it names the instance whose thread was not joined. The instance takes
+/// its `dead` once its section returns.
 #[test]
 fn a_system_shutdown_joins_a_compound_whose_instance_is_stuck() {
-    let mut rig = Base::new(|parts| cmp_lone::component("base", parts));
+    let mut rig = Base::new(|parts| cmp_ignore::component("base", parts));
     let script = rig.script("w");
-    let feed = rig.run_fed(&[("kick", "w_kick")]);
+    rig.rig.run();
+    let feed = rig.feeder();
     let (base, w) = (rig.rig.compound.clone(), rig.rig.instance("w"));
     wait_user(&w, "idle");
     let release = script.hang_in("busy.periodic");
     feed.kick.emit();
-    eventually(|| script.hanging.load(Ordering::SeqCst), "w hangs");
+    // Past its `max_response` the watchdog finds it stuck; the compound ignores it.
+    eventually(|| w.is_stuck(), "w is stuck");
     let report = rig.rig.shutdown();
     let compound = report
         .components
@@ -1305,21 +1309,130 @@ fn a_system_shutdown_joins_a_compound_whose_instance_is_stuck() {
         .expect("the compound in the report");
     assert!(compound.joined, "{report:?}");
     assert_eq!(compound.state, State::Dead);
+    assert_eq!(compound.unjoined_instances, ["w"], "{report:?}");
+    assert!(!report.clean());
     let refused = base
         .snapshot()
         .supervision
         .into_iter()
-        .find(|s| s.instance == "w" && matches!(s.step, Step::CommandRefused { .. }))
+        .find(|s| {
+            s.instance == "w"
+                && s.step
+                    == Step::CommandRefused {
+                        command: "dead".to_owned(),
+                    }
+        })
         .expect("a refused step for w's `dead`");
-    assert_eq!(
-        refused.step,
-        Step::CommandRefused {
-            command: "dead".to_owned()
-        }
-    );
+    assert!(refused.detail.contains("stuck"), "{refused:?}");
     drop(release);
     w.wait_state(State::Dead, WAIT)
-        .expect("w takes its queued `dead` once its section returns");
+        .expect("w takes its `dead` once its section returns");
+}
+
+/// Instances stuck in a section do not take the time of the healthy ones stopped
+/// after them: `b` and `c` (declared after `a`, so sent `dead` first) hang, and each
+/// waits at most its share of the compound's stop budget, so `a`'s slow `stop` hook
+/// (a motor braking, 300 ms) has returned when the system's shutdown returns.
+#[test]
+fn a_healthy_instance_stops_before_a_shutdown_returns_though_others_are_stuck() {
+    let mut rig = Base::new(|parts| cmp_trio::component("base", parts));
+    let (sa, sb, sc) = (rig.script("a"), rig.script("b"), rig.script("c"));
+    let (tap, feed) = Tap::new();
+    rig.rig.add(feeder::component("f", tap));
+    rig.rig.connect("f.kick", "base.b_kick");
+    rig.rig.connect("f.kick", "base.c_kick");
+    rig.rig.run();
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    let (a, b, c) = (
+        rig.rig.instance("a"),
+        rig.rig.instance("b"),
+        rig.rig.instance("c"),
+    );
+    for instance in [&a, &b, &c] {
+        wait_user(instance, "idle");
+    }
+    let rb = sb.hang_in("busy.periodic");
+    let rc = sc.hang_in("busy.periodic");
+    feed.kick.emit();
+    eventually(
+        || sb.hanging.load(Ordering::SeqCst) && sc.hanging.load(Ordering::SeqCst),
+        "b and c hang",
+    );
+    // `a`'s `stop` takes a while: released 300 ms after it began.
+    let ra = sa.hang_in("stop");
+    let braking = {
+        let sa = Arc::clone(&sa);
+        std::thread::spawn(move || {
+            eventually(|| sa.hanging.load(Ordering::SeqCst), "a's stop began");
+            std::thread::sleep(Duration::from_millis(300));
+            drop(ra);
+        })
+    };
+    let report = rig.rig.shutdown();
+    let a_stopped = sa.returned.load(Ordering::SeqCst) == 1;
+    braking.join().expect("the brake thread");
+    drop((rb, rc));
+    assert!(
+        a_stopped,
+        "a still in its stop hook when shutdown returned: {report:?}"
+    );
+    let compound = &report.components[0];
+    assert!(compound.joined, "{report:?}");
+    assert_eq!(compound.unjoined_instances, ["b", "c"], "{report:?}");
+}
+
+/// Three levels (`top` > `mid` > `leaf1`, `leaf2`, beside `sibling`), every worker stuck
+/// in a section: each level gives up at the end of its own stop budget, and the
+/// system's shutdown joins `top`, its report naming the three.
+#[test]
+fn a_system_shutdown_joins_a_top_compound_whose_leaves_are_stuck_two_levels_down() {
+    let mut rig = Base::new(|parts| cmp_top::component("top", parts));
+    let (s1, s2, sib) = (
+        rig.script("leaf1"),
+        rig.script("leaf2"),
+        rig.script("sibling"),
+    );
+    let (tap, kicker) = Tap::new();
+    rig.rig.add(feeder::component("kicker", tap));
+    rig.rig.connect("kicker.kick", "top.sibling_kick");
+    rig.rig.run();
+    let kicker = kicker.recv_timeout(WAIT).expect("the kicker started");
+    let feed = rig.feeder();
+    for path in ["mid.leaf1", "mid.leaf2", "sibling"] {
+        wait_user(&rig.rig.instance(path), "idle");
+    }
+    let releases = [
+        s1.hang_in("busy.periodic"),
+        s2.hang_in("busy.periodic"),
+        sib.hang_in("busy.periodic"),
+    ];
+    feed.kick.emit();
+    feed.data.send(1);
+    kicker.kick.emit();
+    eventually(
+        || {
+            [&s1, &s2, &sib]
+                .iter()
+                .all(|s| s.hanging.load(Ordering::SeqCst))
+        },
+        "all hang",
+    );
+    let report = rig.rig.shutdown();
+    drop(releases);
+    let top = report
+        .components
+        .iter()
+        .find(|c| c.name == "top")
+        .expect("top in the report");
+    assert!(top.joined, "{report:?}");
+    let mut unjoined = top.unjoined_instances.clone();
+    unjoined.sort();
+    assert!(
+        ["mid.leaf1", "mid.leaf2", "sibling"]
+            .iter()
+            .all(|path| unjoined.iter().any(|u| u == path)),
+        "{report:?}"
+    );
 }
 
 #[test]
