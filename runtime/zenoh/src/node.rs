@@ -552,35 +552,10 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle, compound: Option<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::{free_port, idle, idle_spec};
     use std::io::{Read, Write};
     use std::net::{TcpListener, TcpStream};
     use std::time::Instant;
-
-    /// A component that does nothing: one state, no ports.
-    struct Idle(&'static coolbot::Spec);
-
-    impl coolbot::Automaton for Idle {
-        fn spec(&self) -> &'static coolbot::Spec {
-            self.0
-        }
-
-        fn section(
-            &mut self,
-            _state: usize,
-            _section: coolbot::Section,
-            _cx: &mut coolbot::Context,
-        ) -> Result<(), coolbot::Fault> {
-            Ok(())
-        }
-    }
-
-    fn free_port() -> u16 {
-        TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port()
-    }
 
     /// A TCP relay to `target` for each connection to the returned port: what the
     /// client sends is relayed; what the target sends back is relayed until `stall`,
@@ -642,21 +617,9 @@ mod tests {
     #[test]
     fn a_subscriber_that_stops_reading_does_not_make_the_node_drop_monitoring_events() {
         let port = free_port();
-        let node = Node::open(
-            "mont",
-            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-        )
-        .unwrap()
-        .with_state_directory(None);
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let node = crate::testing::node("mont", Some(port), None);
         let mut system = System::new();
-        system
-            .add(coolbot::Component::new(
-                "idle",
-                Box::new(Idle(spec)),
-                coolbot::PortSet::new(),
-            ))
-            .unwrap();
+        system.add(idle("idle", idle_spec())).unwrap();
         system.start().unwrap();
         let handle = system.handle("idle").unwrap();
         handle
@@ -712,21 +675,9 @@ mod tests {
     #[ignore = "measures a time: run by hand"]
     fn a_peer_that_stops_reading_replies_does_not_stall_what_the_node_hears() {
         let port = free_port();
-        let node = Node::open(
-            "vict",
-            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-        )
-        .unwrap()
-        .with_state_directory(None);
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let node = crate::testing::node("vict", Some(port), None);
         let mut system = System::new();
-        system
-            .add(coolbot::Component::new(
-                "idle",
-                Box::new(Idle(spec)),
-                coolbot::PortSet::new(),
-            ))
-            .unwrap();
+        system.add(idle("idle", idle_spec())).unwrap();
         system.start().unwrap();
         node.expose_system(&system).unwrap();
 

@@ -1469,42 +1469,9 @@ mod tests {
 #[cfg(test)]
 mod network_tests {
     use super::*;
-    use crate::agent::{Agent, Registry};
-    use coolbot::{Component, Controllable, State};
-
-    /// A component that does nothing: one state, no ports.
-    struct Idle(&'static coolbot::Spec);
-
-    impl coolbot::Automaton for Idle {
-        fn spec(&self) -> &'static coolbot::Spec {
-            self.0
-        }
-
-        fn section(
-            &mut self,
-            _state: usize,
-            _section: coolbot::Section,
-            _cx: &mut coolbot::Context,
-        ) -> Result<(), coolbot::Fault> {
-            Ok(())
-        }
-    }
-
-    fn registry(spec: &'static coolbot::Spec) -> Registry {
-        let mut registry = Registry::new();
-        registry.register("Idle", move |name| {
-            Component::new(name, Box::new(Idle(spec)), PortSet::new())
-        });
-        registry
-    }
-
-    fn free_port() -> u16 {
-        std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port()
-    }
+    use crate::agent::Agent;
+    use crate::testing::{free_port, idle_registry, idle_spec};
+    use coolbot::{Controllable, State};
 
     /// The proxy's view, once it has one (new since it last looked), asking for the
     /// remote snapshot (`pump`) when `pump`, until `done` holds of it or 20 s pass.
@@ -1529,26 +1496,12 @@ mod network_tests {
     #[test]
     fn a_proxy_learns_a_state_change_whose_event_it_missed_from_the_next_snapshot() {
         let port = free_port();
-        let station = Arc::new(
-            Node::open(
-                "far-st",
-                crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-            )
-            .unwrap()
-            .with_state_directory(None),
-        );
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
-        let _agent = Agent::start(Arc::clone(&station), registry(spec)).unwrap();
-        let robot = Arc::new(
-            Node::open(
-                "far-rb",
-                crate::peer_config(&[], &[format!("tcp/127.0.0.1:{port}")], false).unwrap(),
-            )
-            .unwrap()
-            .with_state_directory(None),
-        );
+        let station = crate::testing::node("far-st", Some(port), None);
+        let spec = idle_spec();
+        let _agent = Agent::start(Arc::clone(&station), idle_registry(spec)).unwrap();
+        let robot = crate::testing::node("far-rb", None, Some(port));
         let placer =
-            Placer::new(Arc::clone(&robot), registry(spec)).timeout(Duration::from_secs(10));
+            Placer::new(Arc::clone(&robot), idle_registry(spec)).timeout(Duration::from_secs(10));
         let placement = Placement {
             node: "far-st".to_owned(),
             compound: "c".to_owned(),
