@@ -577,21 +577,13 @@ impl End {
                     if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                         return;
                     }
-                    let event = match decode_json::<MonitorEvent>(
-                        sample.payload(),
+                    let Some(event) = decode_or_count::<MonitorEvent>(
+                        &sample,
                         crate::limits::EVENT,
                         "a monitoring event",
-                    ) {
-                        Ok(event) => event,
-                        Err(why) => {
-                            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
-                                key = %sample.key_expr(),
-                                "{why}: dropped{held}"
-                            ));
-                            shared.bad_events.fetch_add(1, Ordering::AcqRel);
-                            shared.ring();
-                            return;
-                        }
+                        &shared,
+                    ) else {
+                        return;
                     };
                     shared.heard();
                     let mut view = lock(&shared.view);
@@ -767,21 +759,13 @@ impl End {
                 if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                     return;
                 }
-                let snapshot = match decode_json::<Monitor>(
-                    sample.payload(),
+                let Some(snapshot) = decode_or_count::<Monitor>(
+                    sample,
                     crate::limits::SNAPSHOT,
                     "a snapshot",
-                ) {
-                    Ok(snapshot) => snapshot,
-                    Err(why) => {
-                        coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
-                            key = %sample.key_expr(),
-                            "{why}: dropped{held}"
-                        ));
-                        shared.bad_events.fetch_add(1, Ordering::AcqRel);
-                        shared.ring();
-                        return;
-                    }
+                    &shared,
+                ) else {
+                    return;
                 };
                 shared.heard();
                 if let Some(view) = lock(&shared.view).as_mut()
@@ -877,6 +861,29 @@ fn decode_json<T: serde::de::DeserializeOwned>(
             coolbot::ranges::excerpt(&error.to_string(), coolbot::ranges::REASON_CHARS)
         )
     })
+}
+
+/// `sample`'s payload as a JSON `T` ([`decode_json`]); one that is over `limit` or
+/// does not decode is dropped, logged (rate-limited) and counted at the proxy's
+/// `@network` ([`Shared::bad_events`]), and the proxy is woken to show it.
+fn decode_or_count<T: serde::de::DeserializeOwned>(
+    sample: &zenoh::sample::Sample,
+    limit: crate::limits::Limit,
+    what: &str,
+    shared: &Shared,
+) -> Option<T> {
+    match decode_json(sample.payload(), limit, what) {
+        Ok(decoded) => Some(decoded),
+        Err(why) => {
+            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                key = %sample.key_expr(),
+                "{why}: dropped{held}"
+            ));
+            shared.bad_events.fetch_add(1, Ordering::AcqRel);
+            shared.ring();
+            None
+        }
+    }
 }
 
 /// The fields of a monitoring port that events set, one at a time.
