@@ -1520,13 +1520,16 @@ mod network_tests {
             variables: Vec::new(),
         };
         let (_ports, mut end) = placer.far_end(&placement).unwrap().unwrap();
-        // The two nodes may not have met yet on a loaded machine: asked again until
+        // The two nodes may not have met yet on a loaded machine (no token seen, or
+        // the agent's queryable not yet declared to the robot): asked again until
         // they have.
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             match end.build(None) {
                 Ok(()) => break,
-                Err(PlaceError::NotThere { .. }) if Instant::now() < deadline => {
+                Err(PlaceError::NotThere { .. } | PlaceError::Unanswered { .. })
+                    if Instant::now() < deadline =>
+                {
                     std::thread::sleep(Duration::from_millis(50));
                 }
                 Err(error) => panic!("{error}"),
