@@ -258,8 +258,10 @@ impl Placer {
 /// compound, the instance, and this proxy's epoch (its creation time), so that a
 /// process started again never meets the names of its previous run. Its bridge keys
 /// live under it; each instantiation adds a generation (`<root>-1`, `<root>-2`, ...),
-/// so that the instance can be built again while its node still holds the name of a
-/// dead one.
+/// so that the instance can be built again while its node may still hold the name of
+/// an earlier one (not yet found dead, or on a node that was unreachable). The root
+/// begins with the placing node's name: the agent builds only in the namespace of
+/// the node that asks (`crate::agent`).
 fn remote_root(from: &str, placement: &Placement) -> String {
     let epoch = SystemTime::now()
         .duration_since(UNIX_EPOCH)
