@@ -441,6 +441,14 @@ impl coolbot::remote::Registrar for Registry {
 /// refused at once.
 pub const AGENT_QUEUE: usize = 16;
 
+/// How many losses of nodes (their liveliness tokens withdrawn) wait for the agent's
+/// thread at most; one more is dropped and counted ([`AgentStatus::losses_dropped`]),
+/// and the thread then asks which owners still live.
+pub const GONE_QUEUE: usize = 256;
+
+/// How long the agent asks which nodes live, after a loss was dropped.
+const OWNERS_LOOKUP: Duration = Duration::from_secs(1);
+
 /// What an agent has done ([`Agent::status`]).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct AgentStatus {
@@ -456,6 +464,9 @@ pub struct AgentStatus {
     /// Why the agent's thread ended, if it did: every request is then refused with
     /// this reason.
     pub stopped: Option<String>,
+    /// Losses of nodes dropped before the agent's thread took them (more than
+    /// [`GONE_QUEUE`] waited): after each, the thread asked which owners live.
+    pub losses_dropped: u64,
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -511,7 +522,7 @@ fn admit(
 }
 
 /// The agent thread's end of the request queue. When the thread ends (the agent is
-/// dropped, its system did not start, or a panic escaped), the status says why, and
+/// dropped, or a panic escaped), the status says why, and
 /// every request still waiting is refused with that reason: none is left unanswered,
 /// and none after it is told to wait.
 struct Inbox {
@@ -550,8 +561,11 @@ impl Drop for Inbox {
     }
 }
 
-/// Builds components on request, on its own thread, in its own [`System`]. Dropping
-/// it stops answering and shuts that system down (every component it built is joined).
+/// Builds components on request, on its own thread, each request's in a [`System`] of
+/// its own, in the namespace of the node that asks ([`instantiate`]). An instance
+/// found `dead` is released: its system shut down (its bridges with it), its keys
+/// withdrawn, its names free again. Dropping the agent stops answering and releases
+/// every instance it runs (every component it built is joined).
 ///
 /// A request over a limit ([`crate::limits`]) or outside the control port's ranges
 /// (`coolbot::ranges`) is refused before anything is built. A panic while serving a
@@ -573,8 +587,9 @@ impl std::fmt::Debug for Agent {
 }
 
 impl Agent {
-    /// Answer instantiation requests on `coolbot/<node>/@agent/<type>` with the types
-    /// of `registry`, running at most [`limits::INSTANCES`] instances at once.
+    /// Answer instantiation requests on `coolbot/<node>/@agent/<type>/<requester>` with
+    /// the types of `registry`, running at most [`limits::INSTANCES`] instances at
+    /// once.
     pub fn start(node: Arc<Node>, registry: impl Into<Arc<Registry>>) -> Result<Agent, Error> {
         Agent::start_with_cap(node, registry, limits::INSTANCES.max)
     }
@@ -598,13 +613,17 @@ impl Agent {
         let replier = node.replier();
         let queryable = node
             .session()
-            .declare_queryable(keys::agent(node.name(), "*"))
+            .declare_queryable(keys::agent(node.name(), "*", "*"))
             .callback(move |query| admit(&admitting, &requests, &replier, query))
             .wait()
             .map_err(Error::zenoh("declare the agent's queryable"))?;
         // The nodes that go away (their tokens `coolbot/<node>`): their instances here
         // go with them.
-        let (gone, lost) = crossbeam_channel::unbounded::<String>();
+        let (gone, lost) = crossbeam_channel::bounded::<String>(GONE_QUEUE);
+        // Set when a loss was dropped (more than `GONE_QUEUE` waited): the thread then
+        // asks which owners still live.
+        let resync = Arc::new(AtomicBool::new(false));
+        let (dropping, resyncing) = (Arc::clone(&status), Arc::clone(&resync));
         let watcher = node
             .session()
             .liveliness()
@@ -613,7 +632,7 @@ impl Agent {
                 if sample.kind() == zenoh::sample::SampleKind::Delete
                     && let Some(name) = sample.key_expr().as_str().rsplit('/').next()
                 {
-                    let _ = gone.send(name.to_owned());
+                    node_gone(name, &gone, &dropping, &resyncing);
                 }
             })
             .wait()
@@ -629,17 +648,8 @@ impl Agent {
                     status: Arc::clone(&serving),
                     ending: None,
                 };
-                let mut system = System::new();
-                if let Err(error) = system.start() {
-                    let error = Chain(&error);
-                    tracing::error!("the agent's system does not start: {error}");
-                    inbox.ending = Some(format!("its system did not start: {error}"));
-                    return;
-                }
-                // What each owner node had built here.
-                let mut owned: BTreeMap<String, Vec<Handle>> = BTreeMap::new();
-                // Every instance built here, until it is found dead.
-                let mut instances: Vec<Handle> = Vec::new();
+                // Every request built here, until its instance is found dead.
+                let mut hosted: Vec<Hosted> = Vec::new();
                 loop {
                     crossbeam_channel::select! {
                         recv(inbox.received) -> query => {
@@ -647,11 +657,9 @@ impl Agent {
                             let answer = serve_one(
                                 &node,
                                 &registry,
-                                &mut system,
                                 &query,
                                 &serving,
-                                &mut owned,
-                                (&mut instances, cap),
+                                (&mut hosted, cap),
                             );
                             if let Err(error) = reply(&query, &answer) {
                                 coolbot::limited!("answer", |held| tracing::warn!(
@@ -662,28 +670,23 @@ impl Agent {
                         }
                         recv(lost) -> name => {
                             let Ok(name) = name else { break };
-                            if let Some(handles) = owned.remove(&name) {
-                                tracing::info!(
-                                    owner = %name,
-                                    "the node that asked for {} instance(s) here is lost: they go to dead",
-                                    handles.len()
-                                );
-                                for handle in handles.iter().rev() {
-                                    let _ = handle.command(Command::SetState(Controllable::Dead));
-                                }
-                            }
+                            owner_lost(&hosted, |owner| owner == name);
+                            reap(&mut hosted);
                         }
                         default(Duration::from_millis(100)) => {
                             if stopped.load(Ordering::Acquire) {
                                 inbox.ending = Some("the agent was shut down".to_owned());
                                 break;
                             }
+                            if resync.swap(false, Ordering::AcqRel) {
+                                owners_lost(&node, &hosted);
+                            }
+                            reap(&mut hosted);
                         }
                     }
                 }
-                let report = system.shutdown();
-                if !report.clean() {
-                    tracing::warn!("the agent's system did not shut down cleanly: {report:?}");
+                for built in hosted {
+                    built.release();
                 }
             })
             .map_err(Error::spawn("agent"))?;
@@ -729,50 +732,41 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-/// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and
-/// send what a refused or panicking request had built to `dead`; what an accepted
-/// one built is its owner's, in `owned`.
+/// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and keep
+/// what an accepted one built in `hosted`; what a refused or panicking one had built
+/// is shut down with its system (its names are free again).
 fn serve_one(
     node: &Node,
     registry: &Registry,
-    system: &mut System,
     query: &zenoh::query::Query,
     status: &Mutex<AgentStatus>,
-    owned: &mut BTreeMap<String, Vec<Handle>>,
-    (instances, cap): (&mut Vec<Handle>, limits::Limit),
+    (hosted, cap): (&mut Vec<Hosted>, limits::Limit),
 ) -> ControlReply {
-    let mut built = Vec::new();
-    instances.retain(|instance| instance.state() != State::Dead);
+    reap(hosted);
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
         cap.check(
             || "the instances this agent runs with this one".to_owned(),
-            instances.len() + 1,
+            hosted.len() + 1,
         )
         .map_err(text)?;
-        serve(node, registry, system, query, &mut built)
+        let taken = |name: &str| {
+            hosted
+                .iter()
+                .any(|built| built.names.iter().any(|taken| taken == name))
+        };
+        serve(node, registry, query, &taken)
     }));
-    let discard = |built: &[Handle]| {
-        // (Their names stay taken in this system.)
-        for handle in built {
-            let _ = handle.command(Command::SetState(Controllable::Dead));
-        }
-    };
     match outcome {
-        Ok(Ok(owner)) => {
+        Ok(Ok(built)) => {
             lock(status).built += 1;
-            instances.extend(built.first().cloned());
-            if let Some(owner) = owner {
-                owned.entry(owner).or_default().extend(built);
-            }
+            hosted.push(built);
             ControlReply::Accepted
         }
         Ok(Err(reason)) => {
-            discard(&built);
             lock(status).refused += 1;
             ControlReply::Rejected { reason }
         }
         Err(payload) => {
-            discard(&built);
             let message = panic_message(payload.as_ref());
             let panics = {
                 let mut status = lock(status);
@@ -904,16 +898,179 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
     Ok(())
 }
 
-/// One instantiation request: build, bridge, run, expose. Its owner; what was built
-/// (the instance first, then its bridges) is pushed on `built` as it is added, so
-/// that the caller can send it to `dead` if the request fails or panics.
+/// What one accepted request built, in a system of its own: the instance, its
+/// bridges and their exposure on the node. Released once the instance is `dead`
+/// ([`Hosted::release`]): its threads joined, its keys withdrawn, its names free.
+struct Hosted {
+    /// The names it takes on the node: the instance's, then its bridges'.
+    names: Vec<String>,
+    /// The node whose life it shares, if any ([`Instantiate::owner`]).
+    owner: Option<String>,
+    /// The instance first, then its bridges.
+    handles: Vec<Handle>,
+    system: System,
+    exposure: crate::node::Exposure,
+}
+
+impl Hosted {
+    /// Whether the instance is `dead` (sent there by a command, its owner's loss or
+    /// its own end).
+    fn dead(&self) -> bool {
+        self.handles[0].state() == State::Dead
+    }
+
+    /// Send the instance and its bridges to `dead` (its owner is lost).
+    fn kill(&self) {
+        for handle in self.handles.iter().rev() {
+            let _ = handle.command(Command::SetState(Controllable::Dead));
+        }
+    }
+
+    /// Shut its system down (the bridges go to `dead` with it, every thread is
+    /// joined), then withdraw its exposure (its monitoring thread publishes the
+    /// events still waiting, the instance's `dead` among them, and ends).
+    fn release(self) {
+        let Hosted {
+            names,
+            system,
+            exposure,
+            ..
+        } = self;
+        let report = system.shutdown();
+        if !report.clean() {
+            tracing::warn!(
+                instance = %names[0],
+                "a dead instance's system did not shut down cleanly: {report:?}"
+            );
+        }
+        drop(exposure);
+        tracing::debug!(instance = %names[0], "released: its names are free again");
+    }
+}
+
+/// Release what `hosted` holds of dead instances.
+fn reap(hosted: &mut Vec<Hosted>) {
+    let mut index = 0;
+    while index < hosted.len() {
+        if hosted[index].dead() {
+            hosted.swap_remove(index).release();
+        } else {
+            index += 1;
+        }
+    }
+}
+
+/// Node `name` is gone: tell the agent's thread through `gone`, or, with
+/// [`GONE_QUEUE`] waiting, drop it, count it in `status`, log it and have the thread
+/// ask which owners live (`resync`).
+fn node_gone(
+    name: &str,
+    gone: &crossbeam_channel::Sender<String>,
+    status: &Mutex<AgentStatus>,
+    resync: &AtomicBool,
+) {
+    if gone.try_send(name.to_owned()).is_ok() {
+        return;
+    }
+    let dropped = {
+        let mut status = lock(status);
+        status.losses_dropped += 1;
+        status.losses_dropped
+    };
+    resync.store(true, Ordering::Release);
+    coolbot::limited!("agent-losses", |held| tracing::warn!(
+        dropped,
+        "the loss of node `{}` was dropped ({GONE_QUEUE} waited for the agent): it asks \
+         which owners still live instead{held}",
+        excerpt(name, EXCERPT_CHARS)
+    ));
+}
+
+/// Send to `dead` what was built for the owners `lost` says are lost.
+fn owner_lost(hosted: &[Hosted], lost: impl Fn(&str) -> bool) {
+    let mut count = 0;
+    let mut name = String::new();
+    for built in hosted {
+        if let Some(owner) = &built.owner
+            && lost(owner)
+        {
+            built.kill();
+            count += 1;
+            name.clone_from(owner);
+        }
+    }
+    if count > 0 {
+        tracing::info!(
+            owner = %name,
+            "the node that asked for {count} instance(s) here is lost: they go to dead"
+        );
+    }
+}
+
+/// After a node's loss was dropped: ask which nodes live, and send to `dead` what was
+/// built for owners that do not.
+fn owners_lost(node: &Node, hosted: &[Hosted]) {
+    let pattern = format!("{}/*", keys::ROOT);
+    match crate::node::liveliness_keys(node.session(), &pattern, OWNERS_LOOKUP) {
+        Ok(alive) => owner_lost(hosted, |owner| {
+            !alive.iter().any(|key| *key == keys::node_token(owner))
+        }),
+        Err(error) => tracing::warn!(
+            "the agent could not ask which owners live: {}",
+            Chain(&error)
+        ),
+    }
+}
+
+/// Check that `request`, from node `requester`, builds in the requester's own
+/// namespace on node `here`: its instance's name ([`keys::namespace`]), its wires'
+/// keys under `coolbot-link/` (a placement's: [`keys::link_namespace`]) and its owner.
+/// So a node that may instantiate cannot have this node publish on, or read from,
+/// another node's placement keys, nor take another node's instance names.
+fn check_namespace(request: &Instantiate, here: &str, requester: &str) -> Result<(), String> {
+    let own = keys::namespace(requester);
+    if !request.name.starts_with(&own) || request.name.len() == own.len() {
+        return Err(format!(
+            "the instance name `{}` is not in the namespace of node `{}`, which asks: \
+             its names begin with `{own}`",
+            excerpt(&request.name, EXCERPT_CHARS),
+            excerpt(requester, EXCERPT_CHARS)
+        ));
+    }
+    let links = keys::link_namespace(here, requester);
+    for (index, wire) in request.wires.iter().enumerate() {
+        let (Wire::Input { key, .. } | Wire::Output { key, .. }) = wire;
+        if key.starts_with(keys::LINKS) && !key.starts_with(&links) {
+            return Err(format!(
+                "the key of wire {index}, `{}`, is a placement's key outside the namespace \
+                 of node `{}`, which asks: its placement keys here begin with `{links}`",
+                excerpt(key, EXCERPT_CHARS),
+                excerpt(requester, EXCERPT_CHARS)
+            ));
+        }
+    }
+    if let Some(owner) = &request.owner
+        && owner != requester
+    {
+        return Err(format!(
+            "the owner `{}` is not node `{}`, which asks: an instance shares the life of \
+             the node that asked for it",
+            excerpt(owner, EXCERPT_CHARS),
+            excerpt(requester, EXCERPT_CHARS)
+        ));
+    }
+    Ok(())
+}
+
+/// One instantiation request: build, bridge, run, expose, in a system of its own
+/// (dropped, and so shut down, if the request fails or panics: its names are then
+/// free again). `taken`: the names hosted instances hold.
 fn serve(
     node: &Node,
     registry: &Registry,
-    system: &mut System,
     query: &zenoh::query::Query,
-    built: &mut Vec<Handle>,
-) -> Result<Option<String>, String> {
+    taken: &dyn Fn(&str) -> bool,
+) -> Result<Hosted, String> {
     let payload = query
         .payload()
         .ok_or("no request: the query carries no payload")?;
@@ -927,13 +1084,15 @@ fn serve(
         )
     })?;
     check_request(&request)?;
-    // Access rules grant instantiation by the key's type: the request must be for it.
-    let asked = query
-        .key_expr()
-        .as_str()
-        .rsplit('/')
-        .next()
-        .unwrap_or_default();
+    // Access rules grant instantiation by the key's type and to each node under its
+    // own name (the key's last chunk): the request must be for that type, and build
+    // in that node's namespace.
+    let Some((asked, requester)) = keys::parse_agent(query.key_expr().as_str()) else {
+        return Err(format!(
+            "`{}` is not an agent's key",
+            excerpt(query.key_expr().as_str(), EXCERPT_CHARS)
+        ));
+    };
     if asked != request.type_name {
         return Err(format!(
             "the request builds a `{}` but came on the key of type `{}`",
@@ -941,6 +1100,8 @@ fn serve(
             excerpt(asked, EXCERPT_CHARS)
         ));
     }
+    keys::check_name(requester).map_err(text)?;
+    check_namespace(&request, node.name(), requester)?;
     let factory = registry.types.get(&request.type_name).ok_or_else(|| {
         format!(
             "no component type `{}` here (registered: {:?})",
@@ -948,7 +1109,13 @@ fn serve(
         )
     })?;
     keys::check_name(&request.name).map_err(text)?;
-    if request.name.contains('.') || system.handle(&request.name).is_some() {
+    let name = request.name.clone();
+    let mut names = vec![name.clone()];
+    for wire in &request.wires {
+        let (Wire::Input { port, .. } | Wire::Output { port, .. }) = wire;
+        names.push(format!("{name}-{port}"));
+    }
+    if request.name.contains('.') || names.iter().any(|name| taken(name)) {
         return Err(format!(
             "`{}` is not a free instance name here",
             request.name
@@ -976,6 +1143,7 @@ fn serve(
         }
     }
     // Check every wire before building anything.
+    let mut total = 0usize;
     for (index, wire) in request.wires.iter().enumerate() {
         let (port, output) = match wire {
             Wire::Input { port, .. } => (port, false),
@@ -1012,15 +1180,25 @@ fn serve(
             Wire::Input { .. } | Wire::Output { .. } => 0,
         };
         let size = bridge.packet_size().max(1);
+        let bytes = held.saturating_mul(size);
         limits::QUEUE_BYTES
             .check(
                 || format!("the queue of wire {index} ({held} packets of {size} bytes)"),
-                held.saturating_mul(size),
+                bytes,
             )
             .map_err(text)?;
+        total = total.saturating_add(bytes);
     }
-    let name = request.name.clone();
-    built.push(system.add(component).map_err(text)?);
+    limits::REQUEST_QUEUE_BYTES
+        .check(
+            || "the queues of every wire of the request, together".to_owned(),
+            total,
+        )
+        .map_err(text)?;
+    // Dropped (shut down, its names free) if anything below fails or panics.
+    let mut system = System::new();
+    system.start().map_err(text)?;
+    let mut built = vec![system.add(component).map_err(text)?];
     for wire in &request.wires {
         match wire {
             Wire::Input { port, key } => {
@@ -1084,24 +1262,43 @@ fn serve(
     if request.run {
         run(&built[0])?;
     }
-    for handle in built.iter() {
-        node.expose(handle).map_err(text)?;
-    }
+    let exposure = node.exposure(&built).map_err(text)?;
     tracing::info!(
         instance = %name,
         type_name = %request.type_name,
+        requester = %requester,
         "built for another node{}",
         if request.run { "" } else { " (left ready)" }
     );
-    Ok(request.owner.clone())
+    Ok(Hosted {
+        names,
+        owner: request.owner.clone(),
+        handles: built,
+        system,
+        exposure,
+    })
 }
 
 /// Ask the agent of node `on` to build `request`, waiting at most `timeout`. An agent
 /// that has too many requests waiting answers [`Error::Busy`]; no answer within
-/// `timeout` is [`Error::NoAgent`].
+/// `timeout` is [`Error::NoAgent`]. The request is `node`'s: the agent builds it in
+/// `node`'s namespace only (its instance's name begins with `<node>-`, its keys
+/// under `coolbot-link/` with `coolbot-link/<on>/<node>-`, its owner is `node` if any).
 pub fn instantiate(
     node: &Node,
     on: &str,
+    request: &Instantiate,
+    timeout: Duration,
+) -> Result<(), Error> {
+    ask(node, on, node.name(), request, timeout)
+}
+
+/// [`instantiate`] as node `requester` (what the access rules let only `requester`
+/// send; a test's forgery on plaintext).
+fn ask(
+    node: &Node,
+    on: &str,
+    requester: &str,
     request: &Instantiate,
     timeout: Duration,
 ) -> Result<(), Error> {
@@ -1114,7 +1311,7 @@ pub fn instantiate(
     let asked = std::time::Instant::now();
     let replies = node
         .session()
-        .get(keys::agent(on, &request.type_name))
+        .get(keys::agent(on, &request.type_name, requester))
         .payload(json)
         .timeout(timeout)
         .wait()
@@ -1255,6 +1452,301 @@ mod tests {
         assert_eq!(
             lock(&status).stopped.as_deref(),
             Some("its thread ended with a panic (the node's log has it)")
+        );
+    }
+
+    use crate::testing::{Idle, idle_registry, idle_spec};
+
+    /// A request for an `Idle` named `name`, with no wires.
+    fn idle_request(name: &str, variables: Vec<(String, Value)>) -> Instantiate {
+        Instantiate {
+            type_name: "Idle".into(),
+            name: name.to_owned(),
+            wires: Vec::new(),
+            configuration: None,
+            variables,
+            timing: None,
+            run: true,
+            owner: None,
+        }
+    }
+
+    /// The threads of this process whose name is `name`.
+    fn threads_named(name: &str) -> usize {
+        std::fs::read_dir("/proc/self/task")
+            .unwrap()
+            .flatten()
+            .filter(|task| {
+                std::fs::read_to_string(task.path().join("comm"))
+                    .is_ok_and(|comm| comm.trim_end() == name)
+            })
+            .count()
+    }
+
+    /// Whether `done` holds before a generous deadline, asked every 10 ms.
+    fn eventually(mut done: impl FnMut() -> bool) -> bool {
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        while std::time::Instant::now() < deadline {
+            if done() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        done()
+    }
+
+    #[test]
+    fn instances_sent_to_dead_leave_nothing_of_their_exposure_behind() {
+        let node = crate::testing::node("leak", None, None);
+        let agent =
+            Agent::start_with_cap(Arc::clone(&node), idle_registry(idle_spec()), 4).unwrap();
+        assert_eq!(
+            threads_named("cool-net:leak:m"),
+            0,
+            "no node of this name but this test's"
+        );
+        const ROUNDS: usize = 12;
+        for round in 0..ROUNDS {
+            let name = format!("leak-idle-{round}");
+            instantiate(
+                &node,
+                "leak",
+                &idle_request(&name, Vec::new()),
+                Duration::from_secs(10),
+            )
+            .unwrap();
+            // What any peer may send to a component of the node: `dead`.
+            let replies = node
+                .session()
+                .get(keys::control("leak", &name))
+                .payload(serde_json::to_vec(&Command::SetState(Controllable::Dead)).unwrap())
+                .timeout(Duration::from_secs(10))
+                .wait()
+                .unwrap();
+            let reply = replies.recv().unwrap().into_result().unwrap();
+            assert_eq!(
+                serde_json::from_slice::<ControlReply>(&reply.payload().to_bytes()).unwrap(),
+                ControlReply::Accepted
+            );
+        }
+        // The cap (4 at once) never refused: every instance built went to dead.
+        assert_eq!(agent.status().built, ROUNDS as u64);
+        // Each dead instance is released: its monitoring thread, queryables and
+        // publisher go, and its name is free again.
+        assert!(
+            eventually(|| threads_named("cool-net:leak:m") == 0),
+            "{} monitoring threads left by {ROUNDS} dead instances",
+            threads_named("cool-net:leak:m")
+        );
+        instantiate(
+            &node,
+            "leak",
+            &idle_request("leak-idle-0", Vec::new()),
+            Duration::from_secs(10),
+        )
+        .expect("the name of a released instance is free again");
+        // (A thread takes its name once it runs.)
+        assert!(eventually(|| threads_named("cool-net:leak:m") == 1));
+        assert_eq!(agent.status().refused, 0);
+    }
+
+    #[test]
+    fn refused_requests_do_not_take_the_names_a_proxy_builds_its_next_generations_under() {
+        let node = crate::testing::node("claim", None, None);
+        let agent =
+            Agent::start_with_cap(Arc::clone(&node), idle_registry(idle_spec()), 1).unwrap();
+        // A proxy's root is observable (its first generation is exposed on the node);
+        // its next generations are `<root>-2`, `<root>-3`, ... Asked for with an
+        // override the type refuses, each request is refused after the component was
+        // added: its name is free again.
+        let root = "claim-robot-wanderer-0badf00d";
+        for generation in 2..=20 {
+            let error = instantiate(
+                &node,
+                "claim",
+                &idle_request(
+                    &format!("{root}-{generation}"),
+                    vec![("nope".to_owned(), Value::Int(1))],
+                ),
+                Duration::from_secs(10),
+            )
+            .unwrap_err();
+            assert!(matches!(error, Error::Refused { .. }), "{error}");
+        }
+        assert_eq!(agent.status().refused, 19);
+        // Another node may not ask for them at all: they are not in its namespace.
+        let error = ask(
+            &node,
+            "claim",
+            "robot",
+            &idle_request(&format!("{root}-3"), Vec::new()),
+            Duration::from_secs(10),
+        )
+        .unwrap_err();
+        assert!(
+            error
+                .to_string()
+                .contains("is not in the namespace of node `robot`"),
+            "{error}"
+        );
+        // The proxy's next generation, after its instance was lost:
+        let rebuilt = instantiate(
+            &node,
+            "claim",
+            &idle_request(&format!("{root}-2"), Vec::new()),
+            Duration::from_secs(10),
+        );
+        assert!(rebuilt.is_ok(), "{}", rebuilt.unwrap_err());
+    }
+
+    #[test]
+    fn an_agent_does_not_publish_on_the_keys_of_another_nodes_placement() {
+        let node = crate::testing::node("depu", None, None);
+        let spec = crate::bridge::leak_spec(
+            "Src",
+            "Has one data output.",
+            Vec::new(),
+            Some(coolbot::OutputSpec {
+                name: "out",
+                kind: OutputKind::Data,
+                packet: std::any::type_name::<u64>(),
+                pull: false,
+            }),
+            false,
+        );
+        let mut registry = Registry::new();
+        registry
+            .register("Src", move |name| {
+                let out = coolbot::port::DataOut::<u64>::new();
+                Component::new(name, Box::new(Idle(spec)), PortSet::new().output(&out))
+            })
+            .port::<u64>("out");
+        let agent = Agent::start(Arc::clone(&node), registry).unwrap();
+        let request = |name: &str, key: &str| Instantiate {
+            type_name: "Src".into(),
+            name: name.into(),
+            wires: vec![Wire::Output {
+                port: "out".into(),
+                key: key.into(),
+                to: RemoteInput::Ufifo {
+                    initial: 64,
+                    max: Some(65_536),
+                },
+            }],
+            configuration: None,
+            variables: Vec::new(),
+            timing: None,
+            run: true,
+            owner: Some("robot2".into()),
+        };
+        // Node `robot1` placed an instance here: its proxy hears the instance's
+        // output on this key (`place::Placer`), from this node, whose `publish` rule
+        // covers `coolbot-link/depu/**`.
+        let victim = "coolbot-link/depu/robot1-robot-wanderer-5f54b428/out/out";
+        // Another node that may instantiate here (any type) asks, under its own name
+        // (the access rules let it ask under no other), for an instance whose output
+        // is published on that key.
+        let asked = ask(
+            &node,
+            "depu",
+            "robot2",
+            &request("robot2-anything-1", victim),
+            Duration::from_secs(10),
+        );
+        let Err(Error::Refused { reason, .. }) = asked else {
+            panic!("the agent built an outlet on another placement's key {victim}: {asked:?}");
+        };
+        assert!(
+            reason.contains("outside the namespace of node `robot2`"),
+            "{reason}"
+        );
+        // Nor under its own name, as another node's (the owner is the requester).
+        let mut forged = request("robot2-anything-2", "coolbot-link/depu/robot2-x/out/out");
+        forged.owner = Some("robot1".into());
+        let asked = ask(&node, "depu", "robot2", &forged, Duration::from_secs(10));
+        assert!(
+            matches!(&asked, Err(Error::Refused { reason, .. }) if reason.contains("the owner `robot1`")),
+            "{asked:?}"
+        );
+        // Its own placement's keys, it may.
+        ask(
+            &node,
+            "depu",
+            "robot2",
+            &request("robot2-anything-3", "coolbot-link/depu/robot2-x/out/out"),
+            Duration::from_secs(10),
+        )
+        .expect("a placement in the requester's own namespace");
+        assert_eq!(agent.status().refused, 2);
+    }
+
+    #[test]
+    fn losses_beyond_the_queue_are_dropped_counted_and_make_the_agent_ask_who_lives() {
+        let (gone, lost) = crossbeam_channel::bounded(GONE_QUEUE);
+        let status = Mutex::new(AgentStatus::default());
+        let resync = AtomicBool::new(false);
+        for n in 0..GONE_QUEUE {
+            node_gone(&format!("n{n}"), &gone, &status, &resync);
+        }
+        assert_eq!(lock(&status).losses_dropped, 0);
+        assert!(!resync.load(Ordering::Acquire));
+        node_gone("one-more", &gone, &status, &resync);
+        node_gone("two-more", &gone, &status, &resync);
+        assert_eq!(lock(&status).losses_dropped, 2);
+        assert!(resync.load(Ordering::Acquire));
+        assert_eq!(lost.len(), GONE_QUEUE);
+    }
+
+    /// A packet of 128 KiB.
+    type Chunk = [[[u64; 32]; 32]; 16];
+
+    #[test]
+    fn a_request_may_not_ask_for_more_queue_memory_than_its_limit_in_all() {
+        let node = crate::testing::node("qmem", None, None);
+        let spec = crate::bridge::leak_spec(
+            "Big",
+            "Has one data output of 128 KiB packets.",
+            Vec::new(),
+            Some(coolbot::OutputSpec {
+                name: "out",
+                kind: OutputKind::Data,
+                packet: std::any::type_name::<Chunk>(),
+                pull: false,
+            }),
+            false,
+        );
+        let mut registry = Registry::new();
+        registry
+            .register("Big", move |name| {
+                let out = coolbot::port::DataOut::<Chunk>::new();
+                Component::new(name, Box::new(Idle(spec)), PortSet::new().output(&out))
+            })
+            .port::<Chunk>("out");
+        let _agent = Agent::start(Arc::clone(&node), registry).unwrap();
+        // Each wire's queue within `QUEUE_BYTES` (64 MiB: 512 packets of 128 KiB),
+        // three of them over `REQUEST_QUEUE_BYTES` together.
+        let wire = |n: usize| Wire::Output {
+            port: "out".into(),
+            key: format!("qmem/{n}"),
+            to: RemoteInput::Fifo { capacity: 512 },
+        };
+        let request = Instantiate {
+            type_name: "Big".into(),
+            name: "qmem-big".into(),
+            wires: (0..3).map(wire).collect(),
+            configuration: None,
+            variables: Vec::new(),
+            timing: None,
+            run: true,
+            owner: None,
+        };
+        let refused = instantiate(&node, "qmem", &request, Duration::from_secs(10));
+        let Err(Error::Refused { reason, .. }) = refused else {
+            panic!("{refused:?}");
+        };
+        assert!(
+            reason.contains("the queues of every wire of the request, together: 201326592 bytes, over the limit REQUEST_QUEUE_BYTES = 134217728 bytes"),
+            "{reason}"
         );
     }
 

@@ -11,7 +11,37 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 
 use crate::echo::EchoedRaw;
 use crate::info::ComponentInfo;
+use crate::limits::{self, Limit};
 use crate::{ControlReply, keys};
+
+/// `sample`'s payload as a JSON `T` ([`decode_payload`]).
+fn decode<T: serde::de::DeserializeOwned>(
+    sample: &zenoh::sample::Sample,
+    limit: Limit,
+    what: &str,
+) -> Result<T, CtlError> {
+    decode_payload(sample.key_expr().as_str(), sample.payload(), limit, what)
+}
+
+/// `payload` (sent on `key`) as a JSON `T`, decoded only when it is within `limit`
+/// (`what`, for the refusal): its length is checked before its bytes are copied.
+fn decode_payload<T: serde::de::DeserializeOwned>(
+    key: &str,
+    payload: &zenoh::bytes::ZBytes,
+    limit: Limit,
+    what: &str,
+) -> Result<T, CtlError> {
+    limit
+        .check(|| what.to_owned(), payload.len())
+        .map_err(|source| CtlError::TooLarge {
+            key: key.to_owned(),
+            source,
+        })?;
+    serde_json::from_slice(&payload.to_bytes()).map_err(|source| CtlError::Decode {
+        key: key.to_owned(),
+        source,
+    })
+}
 
 /// Why a `coolctl` command failed.
 #[derive(Debug, thiserror::Error)]
@@ -118,6 +148,15 @@ pub enum CtlError {
     /// The component has no such output, or its node does not echo it.
     #[error("{0}")]
     UnknownPort(String),
+    /// An answer, or a sample, over its limit (`crate::limits`): not decoded.
+    #[error("`{key}` sent more than coolctl decodes")]
+    TooLarge {
+        /// The key that sent it.
+        key: String,
+        /// The limit and the size.
+        #[source]
+        source: limits::Exceeded,
+    },
     /// An answer that is not what a node sends.
     #[error("`{key}` answered something that does not decode")]
     Decode {
@@ -568,13 +607,7 @@ impl Ctl {
             let Some((node, path)) = keys::parse_component(key) else {
                 continue;
             };
-            let monitor: Monitor =
-                serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
-                    CtlError::Decode {
-                        key: key.to_owned(),
-                        source,
-                    }
-                })?;
+            let monitor: Monitor = decode(sample, limits::SNAPSHOT, "a snapshot")?;
             listed.push(Listed {
                 node: node.to_owned(),
                 path: path.to_owned(),
@@ -680,8 +713,7 @@ impl Ctl {
             .map_err(CtlError::zenoh("send the command"))?;
         match replies.recv() {
             Ok(reply) => match reply.result() {
-                Ok(sample) => serde_json::from_slice(&sample.payload().to_bytes())
-                    .map_err(|source| CtlError::Decode { key, source }),
+                Ok(sample) => decode(sample, limits::REPLY, "the control port's answer"),
                 Err(error) => Err(CtlError::ErrorReply {
                     key,
                     reason: error
@@ -740,9 +772,8 @@ impl Ctl {
     fn query<T: serde::de::DeserializeOwned>(
         &self,
         key: String,
-        node: &str,
-        path: &str,
-        address: &str,
+        (node, path, address): (&str, &str, &str),
+        (limit, what): (Limit, &str),
     ) -> Result<T, CtlError> {
         let replies = self
             .session
@@ -754,8 +785,7 @@ impl Ctl {
             let Ok(sample) = reply.result() else {
                 continue;
             };
-            return serde_json::from_slice(&sample.payload().to_bytes())
-                .map_err(|source| CtlError::Decode { key, source });
+            return decode(sample, limit, what);
         }
         Err(self.missing(node, path, address))
     }
@@ -764,14 +794,22 @@ impl Ctl {
     /// timeout, when the node or the component does not exist.
     pub fn snapshot(&self, address: &str) -> Result<Monitor, CtlError> {
         let (node, path) = target(address)?;
-        self.query(keys::monitor(node, path), node, path, address)
+        self.query(
+            keys::monitor(node, path),
+            (node, path, address),
+            (limits::SNAPSHOT, "a snapshot"),
+        )
     }
 
     /// The static shape of `<node>/<path>` (types of its variables, its ports, the
     /// outputs its node echoes).
     pub fn info(&self, address: &str) -> Result<ComponentInfo, CtlError> {
         let (node, path) = target(address)?;
-        self.query(keys::info(node, path), node, path, address)
+        self.query(
+            keys::info(node, path),
+            (node, path, address),
+            (limits::INFO, "a component's shape"),
+        )
     }
 
     /// `coolctl get <node>/<path>`: the component's type and states, its default
@@ -938,6 +976,16 @@ impl Ctl {
             else {
                 continue;
             };
+            // (Decoded borrowing from the bytes: the length is checked first.)
+            limits::ECHO_BATCH
+                .check(
+                    || "a batch of echoed packets".to_owned(),
+                    sample.payload().len(),
+                )
+                .map_err(|source| CtlError::TooLarge {
+                    key: sample.key_expr().as_str().to_owned(),
+                    source,
+                })?;
             let payload = sample.payload().to_bytes();
             let batch: Vec<EchoedRaw<'_>> =
                 serde_json::from_slice(&payload).map_err(|source| CtlError::Decode {
@@ -1047,13 +1095,7 @@ impl Watcher {
         else {
             return Ok(None);
         };
-        let event: MonitorEvent =
-            serde_json::from_slice(&sample.payload().to_bytes()).map_err(|source| {
-                CtlError::Decode {
-                    key: sample.key_expr().as_str().to_owned(),
-                    source,
-                }
-            })?;
+        let event: MonitorEvent = decode(&sample, limits::EVENT, "a monitoring event")?;
         Ok(Some(format!("{} {}", self.address, describe(&event))))
     }
 }
@@ -1061,6 +1103,38 @@ impl Watcher {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn answers_over_their_limit_are_refused_undecoded() {
+        let limit = Limit {
+            max: 16,
+            ..limits::REPLY
+        };
+        let accepted =
+            zenoh::bytes::ZBytes::from(serde_json::to_vec(&ControlReply::Accepted).unwrap());
+        let reply: ControlReply =
+            decode_payload("coolbot/n/c/c", &accepted, limit, "an answer").unwrap();
+        assert_eq!(reply, ControlReply::Accepted);
+        let long = zenoh::bytes::ZBytes::from(
+            serde_json::to_vec(&ControlReply::Rejected {
+                reason: "r".repeat(100),
+            })
+            .unwrap(),
+        );
+        let error =
+            decode_payload::<ControlReply>("coolbot/n/c/c", &long, limit, "an answer").unwrap_err();
+        assert!(matches!(error, CtlError::TooLarge { .. }), "{error:?}");
+        let said = coolbot::Chain(&error).to_string();
+        assert!(
+            said.contains("an answer: 126 bytes, over the limit REPLY = 16 bytes"),
+            "{said}"
+        );
+        let bad = zenoh::bytes::ZBytes::from(b"{".to_vec());
+        assert!(matches!(
+            decode_payload::<ControlReply>("coolbot/n/c/c", &bad, limit, "an answer"),
+            Err(CtlError::Decode { .. })
+        ));
+    }
 
     fn args(words: &[&str]) -> Vec<String> {
         words.iter().map(|w| (*w).to_owned()).collect()

@@ -13,10 +13,13 @@
 //!   packets (`coolctl echo`); the node taps the output while a subscriber matches.
 //! - `coolbot/<node>/o`: the packets of the node's echoed outputs, one sample per echo
 //!   tick (a JSON array of [`crate::echo::Echoed`]).
-//! - `coolbot/<node>/@agent/<type>`: the agent of a node (remote instantiation): a
-//!   query whose payload is a JSON [`crate::agent::Instantiate`] for a component of
-//!   type `<type>`, answered with a JSON [`crate::ControlReply`]. The type is in the
-//!   key so that access rules can grant instantiation per type.
+//! - `coolbot/<node>/@agent/<type>/<requester>`: the agent of a node (remote
+//!   instantiation): a query from node `<requester>` whose payload is a JSON
+//!   [`crate::agent::Instantiate`] for a component of type `<type>`, answered with a
+//!   JSON [`crate::ControlReply`]. The type is in the key so that access rules can
+//!   grant instantiation per type, the requester so that they grant each node only
+//!   its own name: the agent builds only in the requester's namespace
+//!   ([`namespace`], [`link_namespace`]).
 //! - A bridge's own key `K` (chosen by the application): packets on `K`, the current
 //!   poster value on query of `K`, pull requests as queries on `K/@pull`, and the
 //!   liveliness tokens that check the connection rules, `K/@out/<kind>/<node>/<name>`
@@ -67,10 +70,33 @@ pub fn echoes(node: &str) -> String {
     format!("{ROOT}/{node}/o")
 }
 
-/// The key on which node `node`'s agent takes requests to build a `type_name`
-/// (`*`: every type, the key the agent answers on).
-pub fn agent(node: &str, type_name: &str) -> String {
-    format!("{ROOT}/{node}/@agent/{type_name}")
+/// The key on which node `node`'s agent takes the requests of node `requester` to
+/// build a `type_name` (`*`: every type, every requester: the key the agent answers
+/// on).
+pub fn agent(node: &str, type_name: &str, requester: &str) -> String {
+    format!("{ROOT}/{node}/@agent/{type_name}/{requester}")
+}
+
+/// Split an agent's key back into `(type, requester)`.
+pub fn parse_agent(key: &str) -> Option<(&str, &str)> {
+    let rest = key.strip_prefix(ROOT)?.strip_prefix('/')?;
+    let (_node, rest) = rest.split_once('/')?;
+    let rest = rest.strip_prefix("@agent/")?;
+    let (type_name, requester) = rest.split_once('/')?;
+    (!requester.contains('/')).then_some((type_name, requester))
+}
+
+/// How the names an agent builds for node `requester` begin: the instance's, and so
+/// its bridges' (`<name>-<port>`).
+pub fn namespace(requester: &str) -> String {
+    format!("{requester}-")
+}
+
+/// How the bridge keys under `coolbot-link/` that an agent on `node` bridges for node
+/// `requester` begin: a placement's keys, `coolbot-link/<node>/<root>/...`, its root
+/// in the requester's [`namespace`] (`crate::place`).
+pub fn link_namespace(node: &str, requester: &str) -> String {
+    format!("{LINKS}{node}/{}", namespace(requester))
 }
 
 /// Split a monitoring or control key back into `(node, path)`.
@@ -152,6 +178,15 @@ mod tests {
         assert_eq!(parse_component("coolbot/robot"), None);
         assert_eq!(parse_component("coolbot/robot/a/b/m"), None);
         assert_eq!(parse_component("other/robot/a/m"), None);
+        let key = agent("station", "Wanderer", "robot");
+        assert_eq!(key, "coolbot/station/@agent/Wanderer/robot");
+        assert_eq!(parse_agent(&key), Some(("Wanderer", "robot")));
+        assert_eq!(parse_agent("coolbot/station/@agent/Wanderer"), None);
+        assert_eq!(parse_agent("coolbot/station/@agent/W/r/x"), None);
+        assert_eq!(
+            link_namespace("station", "robot"),
+            "coolbot-link/station/robot-"
+        );
     }
 
     #[test]

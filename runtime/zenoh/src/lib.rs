@@ -64,6 +64,8 @@ pub mod ros2;
 pub mod security;
 mod shm;
 mod tally;
+#[cfg(test)]
+mod testing;
 pub mod top;
 
 pub use crate::bridge::{DEFAULT_MAX_PAYLOAD, DEFAULT_PULL_TIMEOUT, InletBuilder, OutletBuilder};

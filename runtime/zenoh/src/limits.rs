@@ -112,6 +112,24 @@ pub const SNAPSHOT: Limit = Limit {
     unit: "bytes",
 };
 
+/// The largest shape of a component (its JSON, with the JSON Schemas of its echoed
+/// outputs) `coolctl` decodes from a node, in bytes: a longer one is refused,
+/// undecoded.
+pub const INFO: Limit = Limit {
+    name: "INFO",
+    max: 4 << 20,
+    unit: "bytes",
+};
+
+/// The largest batch of echoed packets (its JSON) `coolctl echo` and `coolctl
+/// foxglove` decode from a node, in bytes: a longer one is refused (`echo`) or
+/// dropped and counted (`foxglove`), undecoded.
+pub const ECHO_BATCH: Limit = Limit {
+    name: "ECHO_BATCH",
+    max: 64 << 20,
+    unit: "bytes",
+};
+
 /// The most wires (bridged ports) in one instantiation request.
 pub const WIRES: Limit = Limit {
     name: "WIRES",
@@ -139,6 +157,14 @@ pub const QUEUE: Limit = Limit {
 pub const QUEUE_BYTES: Limit = Limit {
     name: "QUEUE_BYTES",
     max: 64 << 20,
+    unit: "bytes",
+};
+
+/// The most memory the queues one request asks for hold from the start, together
+/// (each within [`QUEUE_BYTES`]): what one request may have an agent allocate.
+pub const REQUEST_QUEUE_BYTES: Limit = Limit {
+    name: "REQUEST_QUEUE_BYTES",
+    max: 128 << 20,
     unit: "bytes",
 };
 
@@ -189,7 +215,7 @@ pub const ROS_PAYLOAD: Limit = Limit {
 };
 
 /// Every limit, in the order `docs/distribution.md` lists them.
-pub const ALL: [Limit; 18] = [
+pub const ALL: [Limit; 21] = [
     NAME,
     PATH,
     KEY,
@@ -198,10 +224,13 @@ pub const ALL: [Limit; 18] = [
     REPLY,
     EVENT,
     SNAPSHOT,
+    INFO,
+    ECHO_BATCH,
     WIRES,
     VARIABLES,
     QUEUE,
     QUEUE_BYTES,
+    REQUEST_QUEUE_BYTES,
     INSTANCES,
     LEVELS,
     LEVEL_NAME,

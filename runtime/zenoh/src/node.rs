@@ -65,17 +65,20 @@ pub(crate) fn liveliness_keys(
     Ok(found)
 }
 
-/// One [`Node::expose`] call: its queryables and its monitoring thread.
-struct Exposure {
+/// Components exposed together ([`Node::expose`], [`Node::exposure`]): their
+/// queryables and their monitoring thread. Dropping it withdraws them: the queryables
+/// first, then the thread publishes the events still waiting and ends (joined).
+pub(crate) struct Exposure {
     queryables: Vec<zenoh::query::Queryable<()>>,
-    stop: Arc<AtomicBool>,
+    /// Dropped to stop the monitoring thread (it wakes at once).
+    stop: Option<Sender<()>>,
     thread: Option<JoinHandle<()>>,
 }
 
 impl Drop for Exposure {
     fn drop(&mut self) {
         self.queryables.clear();
-        self.stop.store(true, Ordering::Release);
+        drop(self.stop.take());
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
@@ -229,22 +232,30 @@ impl Node {
     /// `MonitorEvent`), a query on `m` answers the snapshot (JSON `Monitor`), a query
     /// on `c` with a JSON `Command` answers a JSON [`ControlReply`].
     pub fn expose(&self, handle: &Handle) -> Result<(), Error> {
+        let exposure = self.exposure(std::slice::from_ref(handle))?;
+        lock(&self.exposures).push(exposure);
+        Ok(())
+    }
+
+    /// [`Node::expose`] each of `handles`, for as long as the caller holds what this
+    /// returns (one monitoring thread for all of them): an agent's instance and its
+    /// bridges, withdrawn when the instance is dead (`crate::agent`).
+    pub(crate) fn exposure(&self, handles: &[Handle]) -> Result<Exposure, Error> {
         let mut components = Vec::new();
-        collect(handle, handle.name().to_owned(), &mut components);
+        for handle in handles {
+            collect(handle, handle.name().to_owned(), &mut components);
+        }
         for (path, _) in &components {
             keys::check_name(path)?;
         }
         let mut queryables = Vec::new();
         let mut streams = Vec::new();
-        let root = handle.name().to_owned();
         for (path, handle) in components {
-            // An instance's compound: its path but the last instance name.
-            let compound: Option<Arc<str>> = (path != root)
-                .then(|| {
-                    path.rsplit_once('.')
-                        .map(|(compound, _)| Arc::from(compound))
-                })
-                .flatten();
+            // An instance's compound: its path but the last instance name (a
+            // component's own name has no `.`).
+            let compound: Option<Arc<str>> = path
+                .rsplit_once('.')
+                .map(|(compound, _)| Arc::from(compound));
             let monitor_key = keys::monitor(&self.name, &path);
             // Dropped, not waited for, where the link to a subscriber is full (as
             // `echo` does): a subscriber that stops reading must not hold the one
@@ -349,18 +360,16 @@ impl Node {
                     .map_err(Error::zenoh("declare a control queryable"))?,
             );
         }
-        let stop = Arc::new(AtomicBool::new(false));
-        let stopped = Arc::clone(&stop);
+        let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:m", self.name))
             .spawn(move || forward_events(&mut streams, &stopped))
             .map_err(Error::spawn("monitor"))?;
-        lock(&self.exposures).push(Exposure {
+        Ok(Exposure {
             queryables,
-            stop,
+            stop: Some(stop),
             thread: Some(thread),
-        });
-        Ok(())
+        })
     }
 
     /// [`Node::expose`] every component of `system` (in the order they were added).
@@ -448,50 +457,64 @@ struct Stream {
     publisher: zenoh::pubsub::Publisher<'static>,
 }
 
-/// Publish every monitoring event of every stream, as it comes, until `stop`. Events
-/// dropped for the node (it fell behind) are logged with their count; remote
+/// Publish every monitoring event of every stream, as it comes, until `stop` is
+/// disconnected; then those already waiting (a dead instance's last ones), and end.
+/// Events dropped for the node (it fell behind) are logged with their count; remote
 /// observers see them in the snapshot's `dropped_events`.
-fn forward_events(streams: &mut [Stream], stop: &AtomicBool) {
+fn forward_events(streams: &mut [Stream], stop: &crossbeam_channel::Receiver<()>) {
     let receivers: Vec<crossbeam_channel::Receiver<MonitorEvent>> =
         streams.iter().map(|s| s.events.events().clone()).collect();
     let mut select = Select::new();
     for events in &receivers {
         select.recv(events);
     }
-    while !stop.load(Ordering::Acquire) {
-        let Ok(operation) = select.select_timeout(STOP_POLL) else {
-            continue;
-        };
+    let stopping = select.recv(stop);
+    loop {
+        let operation = select.select();
         let index = operation.index();
-        let stream = &mut streams[index];
-        let dropped = stream.events.dropped();
-        if dropped > stream.reported {
-            coolbot::limited!(&stream.path, |held| tracing::warn!(
-                component = %stream.path,
-                lost = dropped - stream.reported,
-                total = dropped,
-                "monitoring events dropped before publishing (the node fell behind){held}"
-            ));
-            stream.reported = dropped;
+        if index == stopping {
+            let _ = operation.recv(stop);
+            break;
         }
-        let publisher = &stream.publisher;
         match operation.recv(&receivers[index]) {
-            Ok(event) => match serde_json::to_vec(&event) {
-                Ok(json) => {
-                    if let Err(error) = publisher.put(json).wait() {
-                        coolbot::limited!(&stream.path, |held| tracing::warn!(
-                            "monitoring event not published: {}{held}",
-                            Chain(&*error)
-                        ));
-                    }
-                }
-                Err(error) => coolbot::limited!(&stream.path, |held| tracing::warn!(
-                    "monitoring event does not encode: {error}{held}"
-                )),
-            },
+            Ok(event) => publish(&mut streams[index], &event),
             // The component is gone: stop watching it.
             Err(_) => select.remove(index),
         }
+    }
+    // What waits now, and no more (a live component may send on).
+    for (stream, events) in streams.iter_mut().zip(&receivers) {
+        for event in events.try_iter().take(events.len()) {
+            publish(stream, &event);
+        }
+    }
+}
+
+/// Publish one event of `stream`, after logging the events dropped for the node since
+/// the last.
+fn publish(stream: &mut Stream, event: &MonitorEvent) {
+    let dropped = stream.events.dropped();
+    if dropped > stream.reported {
+        coolbot::limited!(&stream.path, |held| tracing::warn!(
+            component = %stream.path,
+            lost = dropped - stream.reported,
+            total = dropped,
+            "monitoring events dropped before publishing (the node fell behind){held}"
+        ));
+        stream.reported = dropped;
+    }
+    match serde_json::to_vec(event) {
+        Ok(json) => {
+            if let Err(error) = stream.publisher.put(json).wait() {
+                coolbot::limited!(&stream.path, |held| tracing::warn!(
+                    "monitoring event not published: {}{held}",
+                    Chain(&*error)
+                ));
+            }
+        }
+        Err(error) => coolbot::limited!(&stream.path, |held| tracing::warn!(
+            "monitoring event does not encode: {error}{held}"
+        )),
     }
 }
 
@@ -552,35 +575,10 @@ fn serve_command(query: &zenoh::query::Query, handle: &Handle, compound: Option<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::{free_port, idle, idle_spec};
     use std::io::{Read, Write};
     use std::net::{TcpListener, TcpStream};
     use std::time::Instant;
-
-    /// A component that does nothing: one state, no ports.
-    struct Idle(&'static coolbot::Spec);
-
-    impl coolbot::Automaton for Idle {
-        fn spec(&self) -> &'static coolbot::Spec {
-            self.0
-        }
-
-        fn section(
-            &mut self,
-            _state: usize,
-            _section: coolbot::Section,
-            _cx: &mut coolbot::Context,
-        ) -> Result<(), coolbot::Fault> {
-            Ok(())
-        }
-    }
-
-    fn free_port() -> u16 {
-        TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port()
-    }
 
     /// A TCP relay to `target` for each connection to the returned port: what the
     /// client sends is relayed; what the target sends back is relayed until `stall`,
@@ -642,21 +640,9 @@ mod tests {
     #[test]
     fn a_subscriber_that_stops_reading_does_not_make_the_node_drop_monitoring_events() {
         let port = free_port();
-        let node = Node::open(
-            "mont",
-            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-        )
-        .unwrap()
-        .with_state_directory(None);
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let node = crate::testing::node("mont", Some(port), None);
         let mut system = System::new();
-        system
-            .add(coolbot::Component::new(
-                "idle",
-                Box::new(Idle(spec)),
-                coolbot::PortSet::new(),
-            ))
-            .unwrap();
+        system.add(idle("idle", idle_spec())).unwrap();
         system.start().unwrap();
         let handle = system.handle("idle").unwrap();
         handle
@@ -712,21 +698,9 @@ mod tests {
     #[ignore = "measures a time: run by hand"]
     fn a_peer_that_stops_reading_replies_does_not_stall_what_the_node_hears() {
         let port = free_port();
-        let node = Node::open(
-            "vict",
-            crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-        )
-        .unwrap()
-        .with_state_directory(None);
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
+        let node = crate::testing::node("vict", Some(port), None);
         let mut system = System::new();
-        system
-            .add(coolbot::Component::new(
-                "idle",
-                Box::new(Idle(spec)),
-                coolbot::PortSet::new(),
-            ))
-            .unwrap();
+        system.add(idle("idle", idle_spec())).unwrap();
         system.start().unwrap();
         node.expose_system(&system).unwrap();
 

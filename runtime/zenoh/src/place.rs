@@ -258,8 +258,10 @@ impl Placer {
 /// compound, the instance, and this proxy's epoch (its creation time), so that a
 /// process started again never meets the names of its previous run. Its bridge keys
 /// live under it; each instantiation adds a generation (`<root>-1`, `<root>-2`, ...),
-/// so that the instance can be built again while its node still holds the name of a
-/// dead one.
+/// so that the instance can be built again while its node may still hold the name of
+/// an earlier one (not yet found dead, or on a node that was unreachable). The root
+/// begins with the placing node's name: the agent builds only in the namespace of
+/// the node that asks (`crate::agent`).
 fn remote_root(from: &str, placement: &Placement) -> String {
     let epoch = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -577,21 +579,13 @@ impl End {
                     if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                         return;
                     }
-                    let event = match decode_json::<MonitorEvent>(
-                        sample.payload(),
+                    let Some(event) = decode_or_count::<MonitorEvent>(
+                        &sample,
                         crate::limits::EVENT,
                         "a monitoring event",
-                    ) {
-                        Ok(event) => event,
-                        Err(why) => {
-                            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
-                                key = %sample.key_expr(),
-                                "{why}: dropped{held}"
-                            ));
-                            shared.bad_events.fetch_add(1, Ordering::AcqRel);
-                            shared.ring();
-                            return;
-                        }
+                        &shared,
+                    ) else {
+                        return;
                     };
                     shared.heard();
                     let mut view = lock(&shared.view);
@@ -767,21 +761,13 @@ impl End {
                 if *lock(&shared.monitor_key) != sample.key_expr().as_str() {
                     return;
                 }
-                let snapshot = match decode_json::<Monitor>(
-                    sample.payload(),
+                let Some(snapshot) = decode_or_count::<Monitor>(
+                    sample,
                     crate::limits::SNAPSHOT,
                     "a snapshot",
-                ) {
-                    Ok(snapshot) => snapshot,
-                    Err(why) => {
-                        coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
-                            key = %sample.key_expr(),
-                            "{why}: dropped{held}"
-                        ));
-                        shared.bad_events.fetch_add(1, Ordering::AcqRel);
-                        shared.ring();
-                        return;
-                    }
+                    &shared,
+                ) else {
+                    return;
                 };
                 shared.heard();
                 if let Some(view) = lock(&shared.view).as_mut()
@@ -877,6 +863,29 @@ fn decode_json<T: serde::de::DeserializeOwned>(
             coolbot::ranges::excerpt(&error.to_string(), coolbot::ranges::REASON_CHARS)
         )
     })
+}
+
+/// `sample`'s payload as a JSON `T` ([`decode_json`]); one that is over `limit` or
+/// does not decode is dropped, logged (rate-limited) and counted at the proxy's
+/// `@network` ([`Shared::bad_events`]), and the proxy is woken to show it.
+fn decode_or_count<T: serde::de::DeserializeOwned>(
+    sample: &zenoh::sample::Sample,
+    limit: crate::limits::Limit,
+    what: &str,
+    shared: &Shared,
+) -> Option<T> {
+    match decode_json(sample.payload(), limit, what) {
+        Ok(decoded) => Some(decoded),
+        Err(why) => {
+            coolbot::limited!(sample.key_expr().as_str(), |held| tracing::warn!(
+                key = %sample.key_expr(),
+                "{why}: dropped{held}"
+            ));
+            shared.bad_events.fetch_add(1, Ordering::AcqRel);
+            shared.ring();
+            None
+        }
+    }
 }
 
 /// The fields of a monitoring port that events set, one at a time.
@@ -1469,42 +1478,9 @@ mod tests {
 #[cfg(test)]
 mod network_tests {
     use super::*;
-    use crate::agent::{Agent, Registry};
-    use coolbot::{Component, Controllable, State};
-
-    /// A component that does nothing: one state, no ports.
-    struct Idle(&'static coolbot::Spec);
-
-    impl coolbot::Automaton for Idle {
-        fn spec(&self) -> &'static coolbot::Spec {
-            self.0
-        }
-
-        fn section(
-            &mut self,
-            _state: usize,
-            _section: coolbot::Section,
-            _cx: &mut coolbot::Context,
-        ) -> Result<(), coolbot::Fault> {
-            Ok(())
-        }
-    }
-
-    fn registry(spec: &'static coolbot::Spec) -> Registry {
-        let mut registry = Registry::new();
-        registry.register("Idle", move |name| {
-            Component::new(name, Box::new(Idle(spec)), PortSet::new())
-        });
-        registry
-    }
-
-    fn free_port() -> u16 {
-        std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port()
-    }
+    use crate::agent::Agent;
+    use crate::testing::{free_port, idle_registry, idle_spec};
+    use coolbot::{Controllable, State};
 
     /// The proxy's view, once it has one (new since it last looked), asking for the
     /// remote snapshot (`pump`) when `pump`, until `done` holds of it or 20 s pass.
@@ -1529,26 +1505,12 @@ mod network_tests {
     #[test]
     fn a_proxy_learns_a_state_change_whose_event_it_missed_from_the_next_snapshot() {
         let port = free_port();
-        let station = Arc::new(
-            Node::open(
-                "far-st",
-                crate::peer_config(&[format!("tcp/127.0.0.1:{port}")], &[], false).unwrap(),
-            )
-            .unwrap()
-            .with_state_directory(None),
-        );
-        let spec = crate::bridge::leak_spec("Idle", "Does nothing.", Vec::new(), None, false);
-        let _agent = Agent::start(Arc::clone(&station), registry(spec)).unwrap();
-        let robot = Arc::new(
-            Node::open(
-                "far-rb",
-                crate::peer_config(&[], &[format!("tcp/127.0.0.1:{port}")], false).unwrap(),
-            )
-            .unwrap()
-            .with_state_directory(None),
-        );
+        let station = crate::testing::node("far-st", Some(port), None);
+        let spec = idle_spec();
+        let _agent = Agent::start(Arc::clone(&station), idle_registry(spec)).unwrap();
+        let robot = crate::testing::node("far-rb", None, Some(port));
         let placer =
-            Placer::new(Arc::clone(&robot), registry(spec)).timeout(Duration::from_secs(10));
+            Placer::new(Arc::clone(&robot), idle_registry(spec)).timeout(Duration::from_secs(10));
         let placement = Placement {
             node: "far-st".to_owned(),
             compound: "c".to_owned(),
@@ -1560,13 +1522,16 @@ mod network_tests {
             variables: Vec::new(),
         };
         let (_ports, mut end) = placer.far_end(&placement).unwrap().unwrap();
-        // The two nodes may not have met yet on a loaded machine: asked again until
+        // The two nodes may not have met yet on a loaded machine (no token seen, or
+        // the agent's queryable not yet declared to the robot): asked again until
         // they have.
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             match end.build(None) {
                 Ok(()) => break,
-                Err(PlaceError::NotThere { .. }) if Instant::now() < deadline => {
+                Err(PlaceError::NotThere { .. } | PlaceError::Unanswered { .. })
+                    if Instant::now() < deadline =>
+                {
                     std::thread::sleep(Duration::from_millis(50));
                 }
                 Err(error) => panic!("{error}"),

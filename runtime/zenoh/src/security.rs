@@ -119,7 +119,7 @@ const ALL_MESSAGES: [&str; 9] = [
 /// verbatim `@` chunks, so those are named.
 const EVERY_KEY: [&str; 6] = [
     "**",
-    "coolbot/*/@agent/*",
+    "coolbot/*/@agent/*/*",
     "**/@pull",
     "**/@out/**",
     "**/@in/**",
@@ -576,7 +576,7 @@ impl Security {
             // Its inlets acknowledge under its name (`crate::ledger`).
             let own = vec![
                 format!("{}/{node}/**", keys::ROOT),
-                keys::agent(node, "*"),
+                keys::agent(node, "*", "*"),
                 format!("**/@ack/{node}/*"),
             ];
             // Its inlets' tokens carry its name (and their process); its outlets'
@@ -610,13 +610,36 @@ impl Security {
                 "ingress",
                 tokens,
             ));
+            // Its requests to agents, under its own name only (the last chunk of the
+            // agent's key): the agent builds in the requester's namespace, so a node
+            // that may instantiate cannot have an agent build under another's.
+            let instantiate: Vec<String> = self
+                .rules
+                .iter()
+                .filter(|rule| rule.nodes.iter().any(|n| n == node))
+                .flat_map(|rule| &rule.instantiate)
+                .map(|pattern| {
+                    let (target, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
+                    keys::agent(target, type_name, node)
+                })
+                .collect();
+            let mut granted = vec![
+                format!("{subject}-put"),
+                format!("{subject}-answer"),
+                format!("{subject}-tokens"),
+            ];
+            if !instantiate.is_empty() {
+                rules.push(rule(
+                    format!("{subject}-instantiate"),
+                    &["query"],
+                    "ingress",
+                    instantiate,
+                ));
+                granted.push(format!("{subject}-instantiate"));
+            }
             subjects.push(json!({ "id": subject, "cert_common_names": [node] }));
             policies.push(json!({
-                "rules": [
-                    format!("{subject}-put"),
-                    format!("{subject}-answer"),
-                    format!("{subject}-tokens"),
-                ],
+                "rules": granted,
                 "subjects": [subject],
             }));
         }
@@ -642,18 +665,7 @@ impl Security {
                     })
                     .collect(),
             );
-            grant(
-                "instantiate",
-                &["query"],
-                allowed
-                    .instantiate
-                    .iter()
-                    .map(|pattern| {
-                        let (node, type_name) = pattern.split_once('/').unwrap_or((pattern, "*"));
-                        keys::agent(node, type_name)
-                    })
-                    .collect(),
-            );
+            // (`instantiate` is granted per node, above: each its own requester chunk.)
             grant("publish", &["put"], allowed.publish.clone());
             // Its outlets ask the inlets what they had (`crate::ledger`); nobody else
             // may: a question reports ended epochs, which inlets count missing.
@@ -676,8 +688,11 @@ impl Security {
                     .flat_map(|key| [key.clone(), format!("{key}/@pull")])
                     .collect(),
             );
-            subjects.push(json!({ "id": subject, "cert_common_names": allowed.nodes }));
-            policies.push(json!({ "rules": granted, "subjects": [subject] }));
+            // (A rule of `instantiate` only grants through its nodes' subjects.)
+            if !granted.is_empty() {
+                subjects.push(json!({ "id": subject, "cert_common_names": allowed.nodes }));
+                policies.push(json!({ "rules": granted, "subjects": [subject] }));
+            }
         }
         json!({
             "enabled": true,
@@ -959,11 +974,13 @@ mod tests {
             keys_of("rule-0-command"),
             Some(json!(["coolbot/robot/base.$*/c", "coolbot/*/arm/c"]))
         );
+        // Each node's own requests only: the requester's chunk is its name.
+        assert_eq!(keys_of("rule-0-instantiate"), None);
         assert_eq!(
-            keys_of("rule-0-instantiate"),
+            keys_of("node-1-instantiate"),
             Some(json!([
-                "coolbot/station/@agent/*",
-                "coolbot/robot/@agent/Planner"
+                "coolbot/station/@agent/*/ops",
+                "coolbot/robot/@agent/Planner/ops"
             ]))
         );
         assert_eq!(keys_of("rule-0-publish"), Some(json!(["robot/cmd"])));
@@ -978,14 +995,18 @@ mod tests {
             let pattern = zenoh::key_expr::KeyExpr::try_from(pattern).unwrap();
             pattern.includes(&zenoh::key_expr::KeyExpr::try_from(key).unwrap())
         };
-        assert!(!includes("**", "coolbot/station/@agent/Planner"));
+        assert!(!includes("**", "coolbot/station/@agent/Planner/ops"));
         assert!(includes(
-            "coolbot/*/@agent/*",
+            "coolbot/*/@agent/*/*",
+            "coolbot/station/@agent/Planner/ops"
+        ));
+        assert!(!includes(
+            "coolbot/station/@agent/*/ops",
             "coolbot/station/@agent/Planner"
         ));
         assert!(!includes(
-            "coolbot/station/@agent/*",
-            "coolbot/station/@agent"
+            "coolbot/station/@agent/*/ops",
+            "coolbot/station/@agent/Planner/*"
         ));
         assert!(includes("**/@pull", "a/b/@pull"));
         assert!(includes("**/@out/**", "a/b/@out/poster/n/x"));
@@ -1078,13 +1099,13 @@ mod tests {
             (
                 Some("station"),
                 "declare_queryable",
-                "coolbot/station/@agent/Wanderer",
+                "coolbot/station/@agent/*/*",
                 true,
             ),
             (
                 Some("station"),
                 "reply",
-                "coolbot/station/@agent/Wanderer",
+                "coolbot/station/@agent/Wanderer/ops",
                 true,
             ),
             (Some("station"), "liveliness_token", "coolbot/station", true),
@@ -1104,7 +1125,7 @@ mod tests {
             (
                 Some("station"),
                 "declare_queryable",
-                "coolbot/robot/@agent/*",
+                "coolbot/robot/@agent/*/*",
                 false,
             ),
             (
@@ -1186,17 +1207,46 @@ mod tests {
             (
                 Some("station"),
                 "query",
-                "coolbot/station/@agent/Wanderer",
+                "coolbot/station/@agent/Wanderer/station",
                 false,
             ),
             (
                 Some("ops"),
                 "query",
-                "coolbot/station/@agent/Wanderer",
+                "coolbot/station/@agent/Wanderer/ops",
                 true,
             ),
-            (Some("ops"), "query", "coolbot/robot/@agent/Planner", true),
-            (Some("ops"), "query", "coolbot/robot/@agent/Mapper", false),
+            (
+                Some("ops"),
+                "query",
+                "coolbot/robot/@agent/Planner/ops",
+                true,
+            ),
+            (
+                Some("ops"),
+                "query",
+                "coolbot/robot/@agent/Mapper/ops",
+                false,
+            ),
+            // Under its own name only: not as another node, nor as any.
+            (
+                Some("ops"),
+                "query",
+                "coolbot/station/@agent/Wanderer/station",
+                false,
+            ),
+            (
+                Some("ops"),
+                "query",
+                "coolbot/station/@agent/Wanderer/*",
+                false,
+            ),
+            (
+                Some("the ops"),
+                "query",
+                "coolbot/station/@agent/Wanderer/the ops",
+                false,
+            ),
         ];
         for &(peer, message, key, expected) in cases {
             assert_eq!(

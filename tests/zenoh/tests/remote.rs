@@ -342,7 +342,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
 
     let request = Instantiate {
         type_name: "Doubler".to_owned(),
-        name: "doubler".to_owned(),
+        name: "robot-doubler".to_owned(),
         wires: vec![
             Wire::Input {
                 port: "input".to_owned(),
@@ -393,9 +393,9 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     assert_eq!(
         rows,
         [
-            ("doubler".to_owned(), State::Running),
-            ("doubler-input".to_owned(), State::Running),
-            ("doubler-output".to_owned(), State::Running),
+            ("robot-doubler".to_owned(), State::Running),
+            ("robot-doubler-input".to_owned(), State::Running),
+            ("robot-doubler-output".to_owned(), State::Running),
         ]
     );
 
@@ -412,7 +412,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     };
     assert!(refused(&unknown).contains("no component type `Tripler`"));
     let bad_port = Instantiate {
-        name: "other".to_owned(),
+        name: "robot-other".to_owned(),
         wires: vec![Wire::Input {
             port: "nothing".to_owned(),
             key: "test/agent/x".to_owned(),
@@ -449,7 +449,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
         .recv_timeout(PATIENCE)
         .expect("the sink started");
     let tripler = Instantiate {
-        name: "tripler".to_owned(),
+        name: "robot-tripler".to_owned(),
         wires: vec![
             Wire::Input {
                 port: "input".to_owned(),
@@ -470,7 +470,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     tripled.send(5);
     assert_eq!(doubled_back.recv_timeout(PATIENCE), Some(15));
     let bad_override = Instantiate {
-        name: "broken".to_owned(),
+        name: "robot-broken".to_owned(),
         wires: Vec::new(),
         variables: vec![("speed".to_owned(), coolbot::Value::UInt(3))],
         ..request.clone()

@@ -134,7 +134,7 @@ fn routine_steps_are_hidden_on_demand_and_the_steps_pane_scrolls_back_to_the_sub
                 heard(
                     &mut board,
                     sample.key_expr().as_str(),
-                    &sample.payload().to_bytes(),
+                    sample.payload(),
                     "t",
                 );
             }

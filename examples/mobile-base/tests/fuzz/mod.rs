@@ -999,7 +999,8 @@ impl Fuzzer {
         } else {
             "station"
         };
-        let key = format!("coolbot/{node}/@agent/Wanderer");
+        // (On plaintext, the requester's chunk of the key is the asker's word.)
+        let key = coolbot_zenoh::keys::agent(node, "Wanderer", "fuzz");
         let request = |fuzzer: &mut Fuzzer| Instantiate {
             type_name: "Wanderer".into(),
             name: format!("fuzz-{:x}", fuzzer.rng.next()),

@@ -188,6 +188,15 @@ fn queue(capacity: usize, counts: Arc<Counts>) -> (Inlet, Receiver<Waiting>) {
 /// Log every packet of every batch waiting on the channels of its output.
 fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
     for (node, payload) in waiting.try_iter() {
+        if let Err(exceeded) = crate::limits::ECHO_BATCH
+            .check(|| "a batch of echoed packets".to_owned(), payload.len())
+        {
+            counts.undecoded.fetch_add(1, Ordering::Relaxed);
+            coolbot::limited!(&*node, |held| tracing::warn!(
+                "a batch of echoed packets from {node} is not decoded (dropped): {exceeded}{held}"
+            ));
+            continue;
+        }
         let payload = payload.to_bytes();
         let batch = match serde_json::from_slice::<Vec<EchoedRaw<'_>>>(&payload) {
             Ok(batch) => batch,

@@ -715,9 +715,16 @@ impl Follower {
                         let Some((node, path)) = keys::parse_component(key) else {
                             return;
                         };
-                        match serde_json::from_slice::<coolbot::MonitorEvent>(
-                            &sample.payload().to_bytes(),
-                        ) {
+                        let event = crate::limits::EVENT
+                            .check(|| "a monitoring event".to_owned(), sample.payload().len())
+                            .map_err(|exceeded| exceeded.to_string())
+                            .and_then(|()| {
+                                serde_json::from_slice::<coolbot::MonitorEvent>(
+                                    &sample.payload().to_bytes(),
+                                )
+                                .map_err(|error| error.to_string())
+                            });
+                        match event {
                             Ok(event) => {
                                 if let Some(log) = channels::log_entry(node, path, &event) {
                                     channel.log(log.to_string().as_bytes());

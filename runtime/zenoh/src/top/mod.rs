@@ -79,15 +79,31 @@ pub fn render(board: &Board, width: u16, height: u16) -> String {
 }
 
 /// A monitoring event as a node publishes it (on `key`, `payload`), into `board`'s
-/// steps pane at `at`; what is not one is ignored.
-pub fn heard(board: &mut Board, key: &str, payload: &[u8], at: &str) {
-    let (Some((node, path)), Ok(event)) = (
-        keys::parse_component(key),
-        serde_json::from_slice::<MonitorEvent>(payload),
-    ) else {
+/// steps pane at `at`. One over [`crate::limits::EVENT`] (not decoded) or that is not
+/// a monitoring event is dropped, counted ([`Board::dropped_events`]) and said on the
+/// status line; one on a key that is no component's is ignored.
+pub fn heard(board: &mut Board, key: &str, payload: &zenoh::bytes::ZBytes, at: &str) {
+    let Some((node, path)) = keys::parse_component(key) else {
         return;
     };
-    board.step(&format!("{node}/{path}"), &event, at);
+    let event = crate::limits::EVENT
+        .check(|| "a monitoring event".to_owned(), payload.len())
+        .map_err(|exceeded| exceeded.to_string())
+        .and_then(|()| {
+            serde_json::from_slice::<MonitorEvent>(&payload.to_bytes())
+                .map_err(|error| format!("a monitoring event that does not decode ({error})"))
+        });
+    match event {
+        Ok(event) => board.step(&format!("{node}/{path}"), &event, at),
+        Err(why) => {
+            board.dropped_events += 1;
+            board.status = format!(
+                "{} monitoring event(s) dropped; the last on {node}/{path}: {}",
+                board.dropped_events,
+                coolbot::ranges::excerpt(&why, coolbot::ranges::REASON_CHARS)
+            );
+        }
+    }
 }
 
 /// What answered a command, for the status line.
@@ -151,7 +167,7 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
                 heard(
                     &mut board,
                     sample.key_expr().as_str(),
-                    &sample.payload().to_bytes(),
+                    sample.payload(),
                     &at,
                 );
             }
@@ -246,4 +262,50 @@ pub fn run(ctl: &Ctl, session: &zenoh::Session, refresh: Duration) -> Result<(),
     })();
     ratatui::restore();
     outcome
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn events_over_their_limit_or_undecodable_are_dropped_counted_and_said() {
+        let mut board = Board::new();
+        let key = "coolbot/robot/motion/m";
+        let event = serde_json::to_vec(&MonitorEvent::Quality(1)).unwrap();
+        heard(&mut board, key, &zenoh::bytes::ZBytes::from(event), "0.1s");
+        assert_eq!(board.dropped_events, 0);
+        let huge = vec![b' '; crate::limits::EVENT.max + 1];
+        heard(&mut board, key, &zenoh::bytes::ZBytes::from(huge), "0.2s");
+        assert_eq!(board.dropped_events, 1);
+        assert!(
+            board
+                .status
+                .contains("over the limit EVENT = 4194304 bytes"),
+            "{}",
+            board.status
+        );
+        heard(
+            &mut board,
+            key,
+            &zenoh::bytes::ZBytes::from(b"{".to_vec()),
+            "0.3s",
+        );
+        assert_eq!(board.dropped_events, 2);
+        assert!(
+            board
+                .status
+                .starts_with("2 monitoring event(s) dropped; the last on robot/motion: "),
+            "{}",
+            board.status
+        );
+        // Not a component's key: not a monitoring event at all.
+        heard(
+            &mut board,
+            "coolbot/robot",
+            &zenoh::bytes::ZBytes::from(b"{".to_vec()),
+            "0.4s",
+        );
+        assert_eq!(board.dropped_events, 2);
+    }
 }

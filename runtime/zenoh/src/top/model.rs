@@ -150,6 +150,9 @@ pub struct Board {
     selected: usize,
     /// The last reply to a command, or an error.
     pub status: String,
+    /// Monitoring events heard that were dropped: over `limits::EVENT`, or not a
+    /// monitoring event.
+    pub dropped_events: u64,
 }
 
 /// What `coolctl top --once --json` prints.

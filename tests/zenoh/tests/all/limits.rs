@@ -92,7 +92,7 @@ impl Station {
         let replies = self
             .robot
             .session()
-            .get(format!("coolbot/station/@agent/{type_name}"))
+            .get(coolbot_zenoh::keys::agent("station", type_name, "robot"))
             .payload(payload)
             .timeout(PATIENCE)
             .wait()
@@ -110,10 +110,12 @@ impl Station {
 }
 
 /// A valid request: a `Doubler` named `name`, no wire.
+/// A request for a Doubler named `robot-<name>` (the robot asks: its names begin
+/// with `robot-`).
 fn valid(name: &str) -> Instantiate {
     Instantiate {
         type_name: "Doubler".to_owned(),
-        name: name.to_owned(),
+        name: format!("robot-{name}"),
         wires: Vec::new(),
         configuration: None,
         variables: Vec::new(),
@@ -321,7 +323,7 @@ fn each_limit_refuses_a_request_over_it_by_name_and_value_and_the_station_builds
     // takes it if the OS lets it), whatever the process allows its commands.
     station
         .ask(&Instantiate {
-            name: "realtime-by-description".to_owned(),
+            name: "robot-realtime-by-description".to_owned(),
             ..timing(|timing| timing.priority = 5)
         })
         .expect("a description's priority is built");
@@ -339,7 +341,7 @@ fn each_limit_refuses_a_request_over_it_by_name_and_value_and_the_station_builds
         .expect("a queue of 64 MiB");
     station
         .ask(&Instantiate {
-            name: "queued-at-the-limit".to_owned(),
+            name: "robot-queued-at-the-limit".to_owned(),
             ..output_to(RemoteInput::Ufifo {
                 initial: limits::QUEUE.max,
                 max: Some(limits::QUEUE.max),
@@ -477,7 +479,7 @@ fn a_panic_while_building_refuses_that_request_and_the_agent_serves_on() {
             ..valid(&format!("bomb{n}"))
         });
         assert!(
-            refusal.contains(&format!("a panic: a factory bug building `bomb{n}`")),
+            refusal.contains(&format!("a panic: a factory bug building `robot-bomb{n}`")),
             "{refusal}"
         );
         station.still_builds(&format!("after-bomb{n}"));
@@ -492,7 +494,7 @@ fn an_answer_over_its_limit_from_another_nodes_agent_is_refused_undecoded() {
     // An agent answering 100,000 bytes.
     let _queryable = impostor
         .session()
-        .declare_queryable("coolbot/impostor/@agent/*")
+        .declare_queryable(coolbot_zenoh::keys::agent("impostor", "*", "*"))
         .callback(|query| {
             let reason = "r".repeat(100_000);
             let json = serde_json::to_vec(&ControlReply::Rejected { reason }).unwrap();
@@ -629,7 +631,7 @@ fn an_agent_runs_at_most_its_cap_of_instances_and_builds_again_when_one_is_dead(
     let ctl = coolbot_zenoh::ctl::Ctl::new(station.robot.session().clone(), PATIENCE);
     let reply = ctl
         .command(
-            "station/many1",
+            "station/robot-many1",
             &coolbot::Command::SetState(coolbot::Controllable::Dead),
         )
         .expect("the station answers");

@@ -178,7 +178,7 @@ fn mute_station(node: &Node) -> Mute {
     let session = node.session();
     let queryables = vec![
         session
-            .declare_queryable("coolbot/dying-station/@agent/*")
+            .declare_queryable(coolbot_zenoh::keys::agent("dying-station", "*", "*"))
             .callback(accept)
             .wait()
             .unwrap(),

@@ -204,6 +204,7 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
         )
     };
     let (ops, typed, guest) = (client("ops"), client("typed"), client("guest"));
+    // Each client asks in its own namespace: its names begin with its own.
     let request = |type_name: &str, name: &str| Instantiate {
         type_name: type_name.to_owned(),
         name: name.to_owned(),
@@ -219,19 +220,24 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
     let mut last = None;
     assert!(
         wait_until(PATIENCE, || {
-            last = Some(instantiate(&ops, "robot", &request("Plain", "one"), second));
+            last = Some(instantiate(
+                &ops,
+                "robot",
+                &request("Plain", "ops-one"),
+                second,
+            ));
             matches!(last, Some(Ok(())))
         }),
         "ops could not instantiate: {last:?}"
     );
-    instantiate(&ops, "robot", &request("Other", "three"), second).expect("ops builds Other");
+    instantiate(&ops, "robot", &request("Other", "ops-three"), second).expect("ops builds Other");
     // The other sessions know the agent (declarations cross), but the requests the
     // rules do not grant are dropped by the robot's access control: nothing answers,
     // nothing is built.
     for client in [&typed, &guest] {
         let querier = client
             .session()
-            .declare_querier(coolbot_zenoh::keys::agent("robot", "Plain"))
+            .declare_querier(coolbot_zenoh::keys::agent("robot", "Plain", client.name()))
             .wait()
             .expect("a querier");
         assert!(wait_until(PATIENCE, || querier
@@ -239,7 +245,7 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
             .wait()
             .is_ok_and(|status| status.matching())));
     }
-    let refused = instantiate(&guest, "robot", &request("Plain", "two"), second);
+    let refused = instantiate(&guest, "robot", &request("Plain", "guest-two"), second);
     let error = refused
         .expect_err("the guest may not instantiate")
         .to_string();
@@ -247,8 +253,9 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
         error.contains("no agent answered") && error.contains("access rules"),
         "{error}"
     );
-    instantiate(&typed, "robot", &request("Plain", "four"), second).expect("typed builds Plain");
-    let refused = instantiate(&typed, "robot", &request("Other", "five"), second);
+    instantiate(&typed, "robot", &request("Plain", "typed-four"), second)
+        .expect("typed builds Plain");
+    let refused = instantiate(&typed, "robot", &request("Other", "typed-five"), second);
     assert!(
         refused
             .expect_err("typed may not build Other")
@@ -259,8 +266,8 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
     // agent refuses it.
     let replies = typed
         .session()
-        .get(coolbot_zenoh::keys::agent("robot", "Plain"))
-        .payload(serde_json::to_vec(&request("Other", "six")).expect("JSON"))
+        .get(coolbot_zenoh::keys::agent("robot", "Plain", "typed"))
+        .payload(serde_json::to_vec(&request("Other", "typed-six")).expect("JSON"))
         .timeout(second)
         .wait()
         .expect("a query");
@@ -284,13 +291,28 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
             .recv()
             .is_ok()
     };
+    // A request under another node's name (the requester's chunk of the key: the
+    // agent builds in that node's namespace) is dropped by the access control: a node
+    // that may instantiate cannot build, or bridge, as another.
+    let replies = typed
+        .session()
+        .get(coolbot_zenoh::keys::agent("robot", "Plain", "ops"))
+        .payload(serde_json::to_vec(&request("Plain", "ops-seven")).expect("JSON"))
+        .timeout(second)
+        .wait()
+        .expect("a query");
+    assert!(
+        replies.recv().is_err(),
+        "the agent answered a forged requester"
+    );
     for (path, expected) in [
-        ("one", true),
-        ("two", false),
-        ("three", true),
-        ("four", true),
-        ("five", false),
-        ("six", false),
+        ("ops-one", true),
+        ("guest-two", false),
+        ("ops-three", true),
+        ("typed-four", true),
+        ("typed-five", false),
+        ("typed-six", false),
+        ("ops-seven", false),
     ] {
         assert_eq!(built(path), expected, "{path}");
     }
