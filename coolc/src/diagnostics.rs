@@ -126,6 +126,8 @@ codes! {
     /// A fifo or ufifo size above 1048576 packets: the runtime allocates it when the
     /// component starts.
     SizeLimit => "coolc::check::size_limit",
+    /// A configuration field has no default and its type has none coolc can build.
+    NoDefault => "coolc::check::no_default",
     /// A variable declaration mixes own and mapped forms wrongly.
     BadVariable => "coolc::check::bad_variable",
     /// A variable's range where none may be (not an own controllable number), not

@@ -7,6 +7,52 @@ use super::{Checker, adaptation, automaton, compound, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
+/// A configuration field without a written default takes its type's: the
+/// configuration is built from its defaults when the component starts, so a field
+/// whose type has none (an extern packet, an enum without variants, a packet holding
+/// one) is refused here rather than failing the crate's build.
+pub(super) fn configuration_defaults(
+    checker: &mut Checker<'_, '_>,
+    files: &[ast::File],
+    types: &[super::model::TypeDef],
+) {
+    let type_def = |name: &str| types.iter().find(|def| def.name() == name);
+    for file in files {
+        checker.file = file.id;
+        for item in &file.items {
+            let ast::Item::Component(component) = item else {
+                continue;
+            };
+            for member in &component.members {
+                let ast::Member::Configuration(configuration) = member else {
+                    continue;
+                };
+                for field in configuration.fields.iter().filter(|f| f.default.is_none()) {
+                    let ty = checker.model.ty(&field.ty);
+                    if ty == Ty::Unknown || super::model::has_default(&ty, &type_def) {
+                        continue;
+                    }
+                    let diagnostic = checker
+                        .error(
+                            Code::NoDefault,
+                            field.ty.span,
+                            format!(
+                                "configuration field `{}` needs a default, and type `{ty}` has none coolc can build",
+                                field.name.name
+                            ),
+                        )
+                        .with_label("no default value")
+                        .with_help(format!(
+                            "make the field optional, `{}: {ty}?`, which starts as `none` (an extern packet's type may lack `Default`; a packet needs a default on each field of such a type)",
+                            field.name.name
+                        ));
+                    checker.push(diagnostic);
+                }
+            }
+        }
+    }
+}
+
 /// Every check of one component.
 pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     names::type_name(checker, &component.name);
@@ -869,6 +915,17 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
     for step in &exception.plan {
         if let ast::PlanKind::Retry { count, every } = &step.kind {
             values::positive(checker, count, "a retry count");
+            if count.value > u64::from(u32::MAX) {
+                let diagnostic = checker
+                    .error(
+                        Code::SizeLimit,
+                        count.span,
+                        format!("a retry count is at most {}", u32::MAX),
+                    )
+                    .with_label("too many: the runtime counts retries in 32 bits")
+                    .with_help(format!("write a count from 1 to {}", u32::MAX));
+                checker.push(diagnostic);
+            }
             values::duration(checker, every, "`retry ... every`");
         }
     }

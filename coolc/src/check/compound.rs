@@ -179,12 +179,21 @@ fn instance(
             .get(override_.name.name.as_str())
             .copied()
             .or(controllable_ty.as_ref());
-        // A controllable's override meets its range, as a set would.
+        // A controllable's override meets its range, as a set would; a mapped
+        // controllable's range is that of the variable it maps.
         if let Some(var) = controllable
-            && let Some(range) = var.range.filter(|range| !range.is_empty())
+            && let Some((range, reached)) = effective_range(checker, &instance.component.name, var)
+            && !range.is_empty()
             && let Some(value) = super::model::Number::of(&override_.value)
             && !range.contains(value)
         {
+            let help = match reached {
+                Some(path) => format!(
+                    "give a value inside the range of `{path}`, which `{}` maps",
+                    override_.name.name
+                ),
+                None => "give a value inside the range its component declares".to_owned(),
+            };
             let diagnostic = checker
                 .error(
                     Code::BadRange,
@@ -195,11 +204,30 @@ fn instance(
                     ),
                 )
                 .with_label("outside the variable's range")
-                .with_help("give a value inside the range its component declares");
+                .with_help(help);
             checker.push(diagnostic);
         }
         match expected {
-            Some(expected) => values::value(checker, &override_.value, expected),
+            Some(expected) => {
+                // A name that is both a field and a controllable: the override sets
+                // both, so its value is of both types.
+                if let (Some(field), Some(var_ty)) = (
+                    fields.get(override_.name.name.as_str()),
+                    controllable_ty.as_ref(),
+                ) && !field.same(var_ty)
+                {
+                    let note = format!(
+                        "`{name}` of `{component}` is both a configuration field of type `{field}` and a controllable variable of type `{var_ty}`: an override sets both, so its value must be of both types; rename one of them in `{component}`",
+                        name = override_.name.name,
+                        component = instance.component.name,
+                    );
+                    for ty in [*field, var_ty] {
+                        values::value_noted(checker, &override_.value, ty, &note);
+                    }
+                } else {
+                    values::value(checker, &override_.value, expected);
+                }
+            }
             None => {
                 let candidates: Vec<&str> = fields
                     .keys()
@@ -233,6 +261,38 @@ fn instance(
         }
     }
     instance_adaptation(checker, component, instance);
+}
+
+/// The range a set of controllable `var` of component `component` meets: its own, or,
+/// for a mapped controllable, that of the variable it maps (through nested compounds),
+/// with the path of the instance variable it reaches (`m.speed`).
+fn effective_range(
+    checker: &Checker<'_, '_>,
+    component: &str,
+    var: &Variable,
+) -> Option<(super::model::Range, Option<String>)> {
+    if let Some(range) = var.range {
+        return Some((range, None));
+    }
+    let mut owner = checker.model.resolved(component);
+    let mut mapping = var.mapping.clone()?;
+    // Containment cycles are errors of their own: the walk is bounded.
+    for _ in 0..64 {
+        let [instance, name] = mapping.as_slice() else {
+            return None;
+        };
+        let inner = owner.instances.iter().find(|i| &i.name == instance)?;
+        let inner = checker.model.resolved(&inner.component);
+        let target = inner
+            .variable(name)
+            .filter(|v| v.kind == ast::VarKind::Controllable)?;
+        if let Some(range) = target.range {
+            return Some((range, Some(var.mapping.as_ref()?.join("."))));
+        }
+        mapping = target.mapping.clone()?;
+        owner = inner.clone();
+    }
+    None
 }
 
 /// An instance's `adaptation { ... }`: once, on an instance of an atomic component,
