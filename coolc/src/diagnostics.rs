@@ -188,6 +188,9 @@ codes! {
     DegradeWithoutQuality => "coolc::check::degrade_without_quality",
     /// A `restart { }` or `recovery { }` block that applies to no instance (warning).
     UnusedBlock => "coolc::check::unused_block",
+    /// A substitute whose original's error policy is not `substitute`: it never
+    /// takes over.
+    UnusedSubstitute => "coolc::check::unused_substitute",
     /// Redundant members with a data output and an input that may drop packets by its
     /// overflow policy: a failover may then skip or double packets of the merged
     /// stream without a count (partial in the runtime; warning).

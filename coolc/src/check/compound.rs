@@ -156,6 +156,7 @@ fn instance(
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
+        unused_substitute(checker, component, instance, original, instances);
     }
     response::instance_override(checker, instance);
     let interface = instances
@@ -1276,6 +1277,79 @@ fn duplicate_policies(checker: &mut Checker<'_, '_>, component: &ast::Component)
 
 /// The error policies a compound may apply to an instance.
 const POLICIES: &[&str] = &["propagate", "restart", "substitute", "ignore"];
+
+/// A substitute takes over only when its original's policy is `substitute`; with any
+/// other policy it is built and waits in `ready` for nothing: a warning at its
+/// `substitutes`.
+fn unused_substitute(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instance: &ast::Instance,
+    original: &ast::Ident,
+    instances: &Instances<'_>,
+) {
+    // An arrangement the runtime cannot follow is an error of its own: a substitute
+    // of a substitute, of a redundant member, or a second substitute.
+    let Some((original_instance, _)) = instances.get(original.name.as_str()) else {
+        return;
+    };
+    let grouped = component.members.iter().any(|member| {
+        matches!(member, ast::Member::Redundant(group)
+            if group.members.iter().any(|m| m.name == original.name))
+    });
+    let first = component.members.iter().find_map(|member| match member {
+        ast::Member::Instance(other)
+            if other
+                .substitutes
+                .as_ref()
+                .is_some_and(|o| o.name == original.name) =>
+        {
+            Some(other.name.name.as_str())
+        }
+        _ => None,
+    });
+    if original.name == instance.name.name
+        || original_instance.substitutes.is_some()
+        || grouped
+        || first != Some(instance.name.name.as_str())
+    {
+        return;
+    }
+    let policy = component.members.iter().find_map(|member| match member {
+        ast::Member::OnError(on) if on.instance.name == original.name => Some(on),
+        _ => None,
+    });
+    if policy.is_some_and(|on| on.policy.name == "substitute") {
+        return;
+    }
+    let why = policy.map_or_else(
+        || {
+            format!(
+                "`{}` has no `on error` line, so its policy is `propagate`",
+                original.name
+            )
+        },
+        |on| format!("the policy of `{}` is `{}`", original.name, on.policy.name),
+    );
+    let mut diagnostic = Diagnostic::warning(
+        Code::UnusedSubstitute,
+        checker.file,
+        original.span,
+        format!(
+            "`{}` never stands in for `{}`: {why}",
+            instance.name.name, original.name
+        ),
+    )
+    .with_label("never takes over")
+    .with_help(format!(
+        "write `on error {}: substitute;` for `{}` to take over when `{}` fails, or remove `substitutes {}` (a substitute is built and waits in `ready`)",
+        original.name, instance.name.name, original.name, original.name
+    ));
+    if let Some(on) = policy {
+        diagnostic = diagnostic.with_secondary(on.span, "the policy of the original");
+    }
+    checker.push(diagnostic);
+}
 
 /// `on error instance: policy;`: a known instance and policy; `substitute` needs an
 /// instance declared `substitutes` it.
