@@ -126,6 +126,8 @@ codes! {
     /// A fifo or ufifo size above 1048576 packets: the runtime allocates it when the
     /// component starts.
     SizeLimit => "coolc::check::size_limit",
+    /// A component's name is too long for its module's file name.
+    NameTooLong => "coolc::check::name_too_long",
     /// A configuration field has no default and its type has none coolc can build.
     NoDefault => "coolc::check::no_default",
     /// A variable declaration mixes own and mapped forms wrongly.

@@ -53,9 +53,41 @@ pub(super) fn configuration_defaults(
     }
 }
 
+/// The longest module name of a component (its `snake_case` name), in bytes: the
+/// module is written as `src/<module>.rs` and `src/generated/<module>.rs`, a file
+/// name holds at most 255 bytes on common file systems, and room is left for the
+/// `.rs` and the `_component` suffix a module name taken by coolc gets.
+pub(crate) const MAX_MODULE_NAME: usize = 200;
+
+/// A component's name makes its module's file name: at most [`MAX_MODULE_NAME`]
+/// bytes in `snake_case`.
+fn module_name_length(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let module = crate::ident::snake_raw(&component.name.name);
+    if module.len() <= MAX_MODULE_NAME {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::NameTooLong,
+            component.name.span,
+            format!(
+                "the name of component `{}...` is too long: its module `{}...` has {} bytes, at most {MAX_MODULE_NAME}",
+                component.name.name.chars().take(24).collect::<String>(),
+                module.chars().take(24).collect::<String>(),
+                module.len()
+            ),
+        )
+        .with_label("too long for a file name")
+        .with_help(format!(
+            "the module is written as `src/<module>.rs`, and a file name holds at most 255 bytes: shorten the name to at most {MAX_MODULE_NAME} bytes in snake_case"
+        ));
+    checker.push(diagnostic);
+}
+
 /// Every check of one component.
 pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     names::type_name(checker, &component.name);
+    module_name_length(checker, component);
     if component.kind == ComponentKind::Atomic {
         generated_names(checker, component);
     }
