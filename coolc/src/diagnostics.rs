@@ -63,6 +63,8 @@ codes! {
     TooDeep => "coolc::syntax::too_deep",
     /// An imported file could not be read.
     ImportNotFound => "coolc::resolve::import_not_found",
+    /// An import path is absolute, or names a file that is not a `.cool` file.
+    BadImport => "coolc::resolve::bad_import",
     /// Files import each other in a cycle.
     ImportCycle => "coolc::resolve::import_cycle",
     /// A name is declared twice in one scope.
