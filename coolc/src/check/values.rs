@@ -37,6 +37,10 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
     }
 }
 
+/// The longest list a repeat default `[value; n]` of a list `[T]` builds: like a
+/// queue's size, allocated when the component starts.
+pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
+
 /// The most elements an array `[T; N]` holds, nested arrays counted together
 /// (`[[T; A]; B]` holds `A * B`): an array lives inline in its packet, on the
 /// stack of whoever builds one.
@@ -476,6 +480,18 @@ fn value_error(
         }
         (Ty::List(inner), E::Repeat(item, count)) => {
             positive(checker, count, "a repeat count");
+            // Allocated when the value is built (a default, when the component starts).
+            if count.value > MAX_LIST_REPEAT {
+                let diagnostic = checker
+                    .error(
+                        Code::SizeLimit,
+                        count.span,
+                        format!("a list's repeat count is at most {MAX_LIST_REPEAT}"),
+                    )
+                    .with_label("too many: the list is allocated when its value is built")
+                    .with_help("start with a shorter list: a list grows at run time");
+                checker.push(diagnostic);
+            }
             value_error(checker, item, inner)
         }
         (Ty::Array(inner, length), E::List(items)) => {
