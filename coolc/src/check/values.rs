@@ -193,7 +193,7 @@ fn path_tokens(text: &str) -> Result<Vec<PathToken<'_>>, String> {
 fn rust_type_path(text: &str) -> Result<(), String> {
     let tokens = path_tokens(text)?;
     if tokens.is_empty() {
-        return Err("empty".to_owned());
+        return Err("empty: name a type".to_owned());
     }
     let mut parser = PathParser {
         tokens: &tokens,
@@ -345,7 +345,7 @@ pub(super) fn value(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &
     if let Err((span, message, help)) = value_error(checker, expr, expected) {
         let mut diagnostic = checker
             .error(Code::TypeMismatch, span, message)
-            .with_label(format!("expected `{expected}`"));
+            .with_label(label(expr, expected));
         if let Some(help) = help {
             diagnostic = diagnostic.with_help(help);
         }
@@ -363,9 +363,18 @@ pub(super) fn value_noted(
     if let Err((span, message, _)) = value_error(checker, expr, expected) {
         let diagnostic = checker
             .error(Code::TypeMismatch, span, message)
-            .with_label(format!("expected `{expected}`"))
+            .with_label(label(expr, expected))
             .with_help(note);
         checker.push(diagnostic);
+    }
+}
+
+/// The label of a value refused for `expected`.
+fn label(expr: &ast::Expr, expected: &Ty) -> String {
+    if double_negation(expr).is_some() {
+        "more than one sign".to_owned()
+    } else {
+        format!("expected `{expected}`")
     }
 }
 
