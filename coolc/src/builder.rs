@@ -131,10 +131,8 @@ impl Builder {
         }
         // With the sibling scan the CLI does: an unknown name that a `.cool` file next
         // to the one using it defines gets help naming the `import` to add.
-        let analysis = crate::analyze_with(
+        let analysis = crate::analyze_files(
             files,
-            &|path: &Path| std::fs::read_to_string(path),
-            &files_in,
             &crate::ros::Search::from_env(self.ros_paths.iter().cloned()),
         );
         if self.cargo_output {

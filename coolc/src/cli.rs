@@ -357,10 +357,8 @@ fn check(cli: &Cli, files: &[PathBuf]) -> Result<Checked, Failure> {
             )));
         }
     }
-    let analysis = crate::analyze_with(
+    let analysis = crate::analyze_files(
         files,
-        &|path: &Path| std::fs::read_to_string(path),
-        &crate::builder::files_in,
         &crate::ros::Search::from_env(cli.ros_paths.iter().cloned()),
     );
     if !analysis.diagnostics.is_empty() {

@@ -63,6 +63,8 @@ codes! {
     TooDeep => "coolc::syntax::too_deep",
     /// An imported file could not be read.
     ImportNotFound => "coolc::resolve::import_not_found",
+    /// An import path is absolute, or names a file that is not a `.cool` file.
+    BadImport => "coolc::resolve::bad_import",
     /// Files import each other in a cycle.
     ImportCycle => "coolc::resolve::import_cycle",
     /// A name is declared twice in one scope.
@@ -126,6 +128,10 @@ codes! {
     /// A fifo or ufifo size above 1048576 packets: the runtime allocates it when the
     /// component starts.
     SizeLimit => "coolc::check::size_limit",
+    /// A component's name is too long for its module's file name.
+    NameTooLong => "coolc::check::name_too_long",
+    /// A configuration field has no default and its type has none coolc can build.
+    NoDefault => "coolc::check::no_default",
     /// A variable declaration mixes own and mapped forms wrongly.
     BadVariable => "coolc::check::bad_variable",
     /// A variable's range where none may be (not an own controllable number), not
@@ -186,6 +192,9 @@ codes! {
     DegradeWithoutQuality => "coolc::check::degrade_without_quality",
     /// A `restart { }` or `recovery { }` block that applies to no instance (warning).
     UnusedBlock => "coolc::check::unused_block",
+    /// A substitute whose original's error policy is not `substitute`: it never
+    /// takes over.
+    UnusedSubstitute => "coolc::check::unused_substitute",
     /// Redundant members with a data output and an input that may drop packets by its
     /// overflow policy: a failover may then skip or double packets of the merged
     /// stream without a count (partial in the runtime; warning).

@@ -151,7 +151,30 @@ pub fn analyze_with<P: AsRef<Path>>(
     list: &dyn Fn(&Path) -> Vec<std::path::PathBuf>,
     ros: &ros::Search,
 ) -> Analysis {
-    let mut loaded = resolve::load(roots, loader);
+    analyze_loaded(resolve::load(roots, loader), loader, list, ros)
+}
+
+/// Like [`analyze_with`], reading the files from the file system and listing
+/// directories with `std::fs`: a file is known by its canonical path, so one reached
+/// through two paths (a root given as `robot.cool` and as `/work/robot.cool`, a
+/// directory reached through a symbolic link) is loaded once.
+pub fn analyze_files<P: AsRef<Path>>(roots: &[P], ros: &ros::Search) -> Analysis {
+    let loader = |path: &Path| std::fs::read_to_string(path);
+    let identify = |path: &Path| std::fs::canonicalize(path).unwrap_or_else(|_| path.to_owned());
+    analyze_loaded(
+        resolve::load_with(roots, &loader, &identify),
+        &loader,
+        &builder::files_in,
+        ros,
+    )
+}
+
+fn analyze_loaded(
+    mut loaded: resolve::Loaded,
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    list: &dyn Fn(&Path) -> Vec<std::path::PathBuf>,
+    ros: &ros::Search,
+) -> Analysis {
     let interfaces = resolve::load_ros(&mut loaded, ros, loader);
     let mut symbols = resolve::Symbols::build(
         &loaded.sources,

@@ -242,7 +242,7 @@ fn prim_rust(p: Prim) -> &'static str {
 impl<'a> Lowerer<'a> {
     /// Whether the emitted resolved type has a default value.
     fn ty_defaultable(&self, ty: &Ty) -> bool {
-        self.default_of(ty, &mut BTreeSet::new()).is_some()
+        self.default_of(ty).is_some()
     }
 
     /// The Rust expression of the default value of the emitted type, or `None` when
@@ -250,7 +250,7 @@ impl<'a> Lowerer<'a> {
     /// Arrays longer than 32 elements, or of elements without `Default`, are built
     /// with `core::array::from_fn`: the standard library implements `Default` for
     /// arrays only up to 32 elements.
-    fn default_of(&self, ty: &Ty, visiting: &mut BTreeSet<String>) -> Option<ir::Code> {
+    fn default_of(&self, ty: &Ty) -> Option<ir::Code> {
         match ty {
             Ty::Bool
             | Ty::Int(_)
@@ -263,7 +263,7 @@ impl<'a> Lowerer<'a> {
             // A ROS message type always has one (`lower::ros`).
             | Ty::Ros { .. } => Some(default_code()),
             Ty::Array(inner, n) => {
-                let item = self.default_of(inner, visiting)?;
+                let item = self.default_of(inner)?;
                 Some(if *n <= 32 && item == default_code() {
                     default_code()
                 } else {
@@ -272,9 +272,7 @@ impl<'a> Lowerer<'a> {
             }
             Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
                 Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(default_code()),
-                Some(TypeDef::Packet(p)) if self.packet_defaultable(p, visiting) => {
-                    Some(default_code())
-                }
+                Some(TypeDef::Packet(p)) if self.packet_defaultable(p) => Some(default_code()),
                 _ => None,
             },
             Ty::Extern(_) | Ty::Unknown => None,
@@ -284,20 +282,15 @@ impl<'a> Lowerer<'a> {
     /// The default value of `ty` as a user stub writes it (`Default::default()` when
     /// the type implements `Default`).
     fn stub_default(&self, ty: &Ty) -> Option<ir::Code> {
-        let default = self.default_of(ty, &mut BTreeSet::new())?;
+        let default = self.default_of(ty)?;
         Some(default.replace_call(DEFAULT, "Default::default"))
     }
 
-    fn packet_defaultable(&self, packet: &Packet, visiting: &mut BTreeSet<String>) -> bool {
-        if !visiting.insert(packet.name.clone()) {
-            return false;
-        }
-        let result = packet
-            .fields
-            .iter()
-            .all(|f| f.default.is_some() || self.default_of(&f.ty, visiting).is_some());
-        visiting.remove(&packet.name);
-        result
+    /// The one rule of `check::model::has_default`, which the checker asks too.
+    fn packet_defaultable(&self, packet: &Packet) -> bool {
+        crate::checked::model::has_default(&Ty::Packet(packet.name.clone()), &|name| {
+            self.checked.type_def(name)
+        })
     }
 
     /// The Rust expression of a field default: the written value, or the type's
@@ -305,9 +298,7 @@ impl<'a> Lowerer<'a> {
     fn field_default(&self, field_ty: &Ty, value: Option<&Value>, prefix: &str) -> ir::Code {
         match value {
             Some(value) => self.value(value, Some(field_ty), prefix),
-            None => self
-                .default_of(field_ty, &mut BTreeSet::new())
-                .unwrap_or_else(default_code),
+            None => self.default_of(field_ty).unwrap_or_else(default_code),
         }
     }
 
@@ -418,7 +409,7 @@ impl<'a> Lowerer<'a> {
                         .iter()
                         .map(|f| self.field(&f.doc, &f.name, &f.ty, f.default.as_ref(), ""))
                         .collect(),
-                    has_default: self.packet_defaultable(p, &mut BTreeSet::new()),
+                    has_default: self.packet_defaultable(p),
                 }),
                 TypeDef::Enum(e) => types.enums.push(ir::Enum {
                     doc: e.doc.clone(),

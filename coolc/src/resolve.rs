@@ -32,18 +32,33 @@ pub struct Loaded {
     pub imports: Vec<Vec<FileId>>,
     /// Load and syntax diagnostics.
     pub diagnostics: Vec<Diagnostic>,
+    /// Each `.cool` file read, by its identity (see [`load_with`]).
+    identities: HashMap<PathBuf, FileId>,
 }
 
-/// Reads and parses `roots` and everything they import.
+/// Reads and parses `roots` and everything they import; a file is known by its path,
+/// lexically normalised.
 pub fn load<P: AsRef<Path>>(
     roots: &[P],
     loader: &dyn Fn(&Path) -> std::io::Result<String>,
+) -> Loaded {
+    load_with(roots, loader, &Path::to_path_buf)
+}
+
+/// Like [`load`], a file known by `identify(path)` (the path lexically normalised):
+/// two paths with one identity are one file, loaded once (on a file system, the
+/// canonical path: `a.cool` given as a root and imported as `/abs/a.cool`, or
+/// reached through a symbolic link).
+pub fn load_with<P: AsRef<Path>>(
+    roots: &[P],
+    loader: &dyn Fn(&Path) -> std::io::Result<String>,
+    identify: &dyn Fn(&Path) -> PathBuf,
 ) -> Loaded {
     let mut loaded = Loaded::default();
     let mut ahead = parse_ahead(roots, loader);
     for root in roots {
         let path = normalize(root.as_ref());
-        if loaded.sources.find(&path).is_some() {
+        if loaded.identities.contains_key(&identify(&path)) {
             continue;
         }
         match read_file(&path, loader, &mut ahead) {
@@ -51,12 +66,14 @@ pub fn load<P: AsRef<Path>>(
                 let mut stack = Vec::new();
                 let mut reader = Reader {
                     loader,
+                    identify,
                     ahead: &mut ahead,
                 };
                 load_file(&mut loaded, path, text, &mut reader, &mut stack);
             }
             Err(error) => {
                 let id = add_file(&mut loaded, path.clone(), String::new());
+                loaded.identities.insert(identify(&path), id);
                 loaded.diagnostics.push(
                     Diagnostic::error(
                         Code::ImportNotFound,
@@ -123,6 +140,7 @@ fn read_file(
 /// How the walk reads the files it meets.
 struct Reader<'a, 'b> {
     loader: &'a dyn Fn(&Path) -> std::io::Result<String>,
+    identify: &'a dyn Fn(&Path) -> PathBuf,
     ahead: &'b mut HashMap<PathBuf, Read>,
 }
 
@@ -157,6 +175,7 @@ fn load_file(
     stack: &mut Vec<FileId>,
 ) -> FileId {
     let id = add_file(loaded, path.clone(), read.text);
+    loaded.identities.insert((reader.identify)(&path), id);
     let (file, diagnostics) = match read.parsed {
         Some((mut file, mut diagnostics)) => {
             file.id = id;
@@ -179,13 +198,17 @@ fn load_file(
     loaded.files[id.0 as usize] = file;
     stack.push(id);
     for import in imports {
+        if let Some(diagnostic) = bad_import(id, &import) {
+            loaded.diagnostics.push(diagnostic);
+            continue;
+        }
         let target = normalize(
             &path
                 .parent()
                 .unwrap_or(Path::new(""))
                 .join(&import.path.value),
         );
-        if let Some(existing) = loaded.sources.find(&target) {
+        if let Some(&existing) = loaded.identities.get(&(reader.identify)(&target)) {
             if let Some(position) = stack.iter().position(|f| *f == existing) {
                 let mut chain: Vec<String> = stack[position..]
                     .iter()
@@ -227,6 +250,41 @@ fn load_file(
     }
     stack.pop();
     id
+}
+
+/// An import names a `.cool` file by a path relative to the importing file: an
+/// absolute path, or a file of another kind, is refused before anything is read.
+fn bad_import(id: FileId, import: &ast::Import) -> Option<Diagnostic> {
+    let written = Path::new(&import.path.value);
+    let (message, label, help) = if written.has_root()
+        || matches!(written.components().next(), Some(Component::Prefix(_)))
+    {
+        (
+            format!("import path `{}` is absolute", import.path.value),
+            "absolute path",
+            "an import path is relative to the importing file: write it from that file's directory (`../shared/sensors.cool`)".to_owned(),
+        )
+    } else if import.path.value.is_empty() {
+        (
+            "an import path cannot be empty".to_owned(),
+            "empty path",
+            "name a `.cool` file relative to the importing file: `import \"sensors.cool\";`"
+                .to_owned(),
+        )
+    } else if written.extension().is_none_or(|ext| ext != "cool") {
+        (
+            format!("`{}` is not a `.cool` file", import.path.value),
+            "not a `.cool` file",
+            "`import` loads `.cool` descriptions; a ROS 2 message type is imported with `import ros \"package/msg/Type\";`".to_owned(),
+        )
+    } else {
+        return None;
+    };
+    Some(
+        Diagnostic::error(Code::BadImport, id, import.path.span, message)
+            .with_label(label)
+            .with_help(help),
+    )
 }
 
 /// Reads the ROS 2 message types the loaded files import (`import ros`) and every type

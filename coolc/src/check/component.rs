@@ -7,9 +7,87 @@ use super::{Checker, adaptation, automaton, compound, names, response, values};
 use crate::ast::{self, ComponentKind, Span};
 use crate::diagnostics::{Code, Diagnostic};
 
+/// A configuration field without a written default takes its type's: the
+/// configuration is built from its defaults when the component starts, so a field
+/// whose type has none (an extern packet, an enum without variants, a packet holding
+/// one) is refused here rather than failing the crate's build.
+pub(super) fn configuration_defaults(
+    checker: &mut Checker<'_, '_>,
+    files: &[ast::File],
+    types: &[super::model::TypeDef],
+) {
+    let type_def = |name: &str| types.iter().find(|def| def.name() == name);
+    for file in files {
+        checker.file = file.id;
+        for item in &file.items {
+            let ast::Item::Component(component) = item else {
+                continue;
+            };
+            for member in &component.members {
+                let ast::Member::Configuration(configuration) = member else {
+                    continue;
+                };
+                for field in configuration.fields.iter().filter(|f| f.default.is_none()) {
+                    let ty = checker.model.ty(&field.ty);
+                    if ty == Ty::Unknown || super::model::has_default(&ty, &type_def) {
+                        continue;
+                    }
+                    let diagnostic = checker
+                        .error(
+                            Code::NoDefault,
+                            field.ty.span,
+                            format!(
+                                "configuration field `{}` needs a default, and type `{ty}` has none coolc can build",
+                                field.name.name
+                            ),
+                        )
+                        .with_label("no default value")
+                        .with_help(format!(
+                            "make the field optional, `{}: {ty}?`, which starts as `none` (an extern packet's type may lack `Default`; a packet needs a default on each field of such a type)",
+                            field.name.name
+                        ));
+                    checker.push(diagnostic);
+                }
+            }
+        }
+    }
+}
+
+/// The longest module name of a component (its `snake_case` name), in bytes: the
+/// module is written as `src/<module>.rs` and `src/generated/<module>.rs`, a file
+/// name holds at most 255 bytes on common file systems, and room is left for the
+/// `.rs` and the `_component` suffix a module name taken by coolc gets.
+pub(crate) const MAX_MODULE_NAME: usize = 200;
+
+/// A component's name makes its module's file name: at most [`MAX_MODULE_NAME`]
+/// bytes in `snake_case`.
+fn module_name_length(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let module = crate::ident::snake_raw(&component.name.name);
+    if module.len() <= MAX_MODULE_NAME {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::NameTooLong,
+            component.name.span,
+            format!(
+                "the name of component `{}...` is too long: its module `{}...` has {} bytes, at most {MAX_MODULE_NAME}",
+                component.name.name.chars().take(24).collect::<String>(),
+                module.chars().take(24).collect::<String>(),
+                module.len()
+            ),
+        )
+        .with_label("too long for a file name")
+        .with_help(format!(
+            "the module is written as `src/<module>.rs`, and a file name holds at most 255 bytes: shorten the name to at most {MAX_MODULE_NAME} bytes in snake_case"
+        ));
+    checker.push(diagnostic);
+}
+
 /// Every check of one component.
 pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     names::type_name(checker, &component.name);
+    module_name_length(checker, component);
     if component.kind == ComponentKind::Atomic {
         generated_names(checker, component);
     }
@@ -869,6 +947,17 @@ fn exception(checker: &mut Checker<'_, '_>, exception: &ast::Exception) {
     for step in &exception.plan {
         if let ast::PlanKind::Retry { count, every } = &step.kind {
             values::positive(checker, count, "a retry count");
+            if count.value > u64::from(u32::MAX) {
+                let diagnostic = checker
+                    .error(
+                        Code::SizeLimit,
+                        count.span,
+                        format!("a retry count is at most {}", u32::MAX),
+                    )
+                    .with_label("too many: the runtime counts retries in 32 bits")
+                    .with_help(format!("write a count from 1 to {}", u32::MAX));
+                checker.push(diagnostic);
+            }
             values::duration(checker, every, "`retry ... every`");
         }
     }

@@ -156,6 +156,7 @@ fn instance(
     }
     if let Some(original) = &instance.substitutes {
         substitute(checker, instance, original, instances);
+        unused_substitute(checker, component, instance, original, instances);
     }
     response::instance_override(checker, instance);
     let interface = instances
@@ -179,12 +180,21 @@ fn instance(
             .get(override_.name.name.as_str())
             .copied()
             .or(controllable_ty.as_ref());
-        // A controllable's override meets its range, as a set would.
+        // A controllable's override meets its range, as a set would; a mapped
+        // controllable's range is that of the variable it maps.
         if let Some(var) = controllable
-            && let Some(range) = var.range.filter(|range| !range.is_empty())
+            && let Some((range, reached)) = effective_range(checker, &instance.component.name, var)
+            && !range.is_empty()
             && let Some(value) = super::model::Number::of(&override_.value)
             && !range.contains(value)
         {
+            let help = match reached {
+                Some(path) => format!(
+                    "give a value inside the range of `{path}`, which `{}` maps",
+                    override_.name.name
+                ),
+                None => "give a value inside the range its component declares".to_owned(),
+            };
             let diagnostic = checker
                 .error(
                     Code::BadRange,
@@ -195,11 +205,30 @@ fn instance(
                     ),
                 )
                 .with_label("outside the variable's range")
-                .with_help("give a value inside the range its component declares");
+                .with_help(help);
             checker.push(diagnostic);
         }
         match expected {
-            Some(expected) => values::value(checker, &override_.value, expected),
+            Some(expected) => {
+                // A name that is both a field and a controllable: the override sets
+                // both, so its value is of both types.
+                if let (Some(field), Some(var_ty)) = (
+                    fields.get(override_.name.name.as_str()),
+                    controllable_ty.as_ref(),
+                ) && !field.same(var_ty)
+                {
+                    let note = format!(
+                        "`{name}` of `{component}` is both a configuration field of type `{field}` and a controllable variable of type `{var_ty}`: an override sets both, so its value must be of both types; rename one of them in `{component}`",
+                        name = override_.name.name,
+                        component = instance.component.name,
+                    );
+                    for ty in [*field, var_ty] {
+                        values::value_noted(checker, &override_.value, ty, &note);
+                    }
+                } else {
+                    values::value(checker, &override_.value, expected);
+                }
+            }
             None => {
                 let candidates: Vec<&str> = fields
                     .keys()
@@ -233,6 +262,38 @@ fn instance(
         }
     }
     instance_adaptation(checker, component, instance);
+}
+
+/// The range a set of controllable `var` of component `component` meets: its own, or,
+/// for a mapped controllable, that of the variable it maps (through nested compounds),
+/// with the path of the instance variable it reaches (`m.speed`).
+fn effective_range(
+    checker: &Checker<'_, '_>,
+    component: &str,
+    var: &Variable,
+) -> Option<(super::model::Range, Option<String>)> {
+    if let Some(range) = var.range {
+        return Some((range, None));
+    }
+    let mut owner = checker.model.resolved(component);
+    let mut mapping = var.mapping.clone()?;
+    // Containment cycles are errors of their own: the walk is bounded.
+    for _ in 0..64 {
+        let [instance, name] = mapping.as_slice() else {
+            return None;
+        };
+        let inner = owner.instances.iter().find(|i| &i.name == instance)?;
+        let inner = checker.model.resolved(&inner.component);
+        let target = inner
+            .variable(name)
+            .filter(|v| v.kind == ast::VarKind::Controllable)?;
+        if let Some(range) = target.range {
+            return Some((range, Some(var.mapping.as_ref()?.join("."))));
+        }
+        mapping = target.mapping.clone()?;
+        owner = inner.clone();
+    }
+    None
 }
 
 /// An instance's `adaptation { ... }`: once, on an instance of an atomic component,
@@ -1216,6 +1277,79 @@ fn duplicate_policies(checker: &mut Checker<'_, '_>, component: &ast::Component)
 
 /// The error policies a compound may apply to an instance.
 const POLICIES: &[&str] = &["propagate", "restart", "substitute", "ignore"];
+
+/// A substitute takes over only when its original's policy is `substitute`; with any
+/// other policy it is built and waits in `ready` for nothing: a warning at its
+/// `substitutes`.
+fn unused_substitute(
+    checker: &mut Checker<'_, '_>,
+    component: &ast::Component,
+    instance: &ast::Instance,
+    original: &ast::Ident,
+    instances: &Instances<'_>,
+) {
+    // An arrangement the runtime cannot follow is an error of its own: a substitute
+    // of a substitute, of a redundant member, or a second substitute.
+    let Some((original_instance, _)) = instances.get(original.name.as_str()) else {
+        return;
+    };
+    let grouped = component.members.iter().any(|member| {
+        matches!(member, ast::Member::Redundant(group)
+            if group.members.iter().any(|m| m.name == original.name))
+    });
+    let first = component.members.iter().find_map(|member| match member {
+        ast::Member::Instance(other)
+            if other
+                .substitutes
+                .as_ref()
+                .is_some_and(|o| o.name == original.name) =>
+        {
+            Some(other.name.name.as_str())
+        }
+        _ => None,
+    });
+    if original.name == instance.name.name
+        || original_instance.substitutes.is_some()
+        || grouped
+        || first != Some(instance.name.name.as_str())
+    {
+        return;
+    }
+    let policy = component.members.iter().find_map(|member| match member {
+        ast::Member::OnError(on) if on.instance.name == original.name => Some(on),
+        _ => None,
+    });
+    if policy.is_some_and(|on| on.policy.name == "substitute") {
+        return;
+    }
+    let why = policy.map_or_else(
+        || {
+            format!(
+                "`{}` has no `on error` line, so its policy is `propagate`",
+                original.name
+            )
+        },
+        |on| format!("the policy of `{}` is `{}`", original.name, on.policy.name),
+    );
+    let mut diagnostic = Diagnostic::warning(
+        Code::UnusedSubstitute,
+        checker.file,
+        original.span,
+        format!(
+            "`{}` never stands in for `{}`: {why}",
+            instance.name.name, original.name
+        ),
+    )
+    .with_label("never takes over")
+    .with_help(format!(
+        "write `on error {}: substitute;` for `{}` to take over when `{}` fails, or remove `substitutes {}` (a substitute is built and waits in `ready`)",
+        original.name, instance.name.name, original.name, original.name
+    ));
+    if let Some(on) = policy {
+        diagnostic = diagnostic.with_secondary(on.span, "the policy of the original");
+    }
+    checker.push(diagnostic);
+}
 
 /// `on error instance: policy;`: a known instance and policy; `substitute` needs an
 /// instance declared `substitutes` it.

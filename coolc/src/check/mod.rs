@@ -82,6 +82,8 @@ pub fn check(
             checker.item(item);
         }
     }
+    let (types, converters) = model.types();
+    component::configuration_defaults(&mut checker, files, &types);
     compound::self_containing(&mut checker, files);
     component::crate_versions(&mut checker, files);
     // Top-level names are one namespace (resolve reports them equal as written); in
@@ -97,7 +99,6 @@ pub fn check(
         .collect();
     names::clashes(&mut checker, top_level, "type", &[names::camel]);
     let rules = std::mem::take(&mut checker.rules);
-    let (types, converters) = model.types();
     Resolved {
         components: model.finish(&rules),
         types,

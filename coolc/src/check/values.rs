@@ -32,7 +32,69 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
         ast::TypeKind::Array(inner, size) => {
             self::ty(checker, inner);
             positive(checker, size, "an array length");
+            array_size(checker, ty, inner, size);
         }
+    }
+}
+
+/// The longest list a repeat default `[value; n]` of a list `[T]` builds: like a
+/// queue's size, allocated when the component starts.
+pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
+
+/// The most elements an array `[T; N]` holds, nested arrays counted together
+/// (`[[T; A]; B]` holds `A * B`): an array lives inline in its packet, on the
+/// stack of whoever builds one.
+pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
+
+/// The elements an array type holds inline: the product of its nested lengths
+/// (through optionals; a list is a heap allocation and counts one).
+fn inline_elements(ty: &ast::Type) -> u128 {
+    match &ty.kind {
+        ast::TypeKind::Array(inner, size) => {
+            u128::from(size.value).saturating_mul(inline_elements(inner))
+        }
+        ast::TypeKind::Optional(inner) => inline_elements(inner),
+        ast::TypeKind::Prim(_) | ast::TypeKind::Named(_) | ast::TypeKind::List(_) => 1,
+    }
+}
+
+/// `[T; N]` holds at most [`MAX_ARRAY_ELEMENTS`], nested arrays counted together;
+/// reported once, at the outermost array that goes beyond.
+fn array_size(
+    checker: &mut Checker<'_, '_>,
+    ty: &ast::Type,
+    inner: &ast::Type,
+    size: &ast::IntLit,
+) {
+    let max = MAX_ARRAY_ELEMENTS;
+    if size.value > max {
+        let diagnostic = checker
+            .error(
+                Code::SizeLimit,
+                size.span,
+                format!("an array length is at most {max}"),
+            )
+            .with_label("too long: an array lives inline, on the stack of whoever builds it")
+            .with_help("use a list `[T]`, which lives on the heap and has no fixed length");
+        checker.push(diagnostic);
+        return;
+    }
+    let inner_elements = inline_elements(inner);
+    if inner_elements > u128::from(max) {
+        // Reported at the inner array already.
+        return;
+    }
+    let elements = inline_elements(ty);
+    if elements > u128::from(max) {
+        let diagnostic = checker
+            .error(
+                Code::SizeLimit,
+                ty.span,
+                format!("an array holds at most {max} elements, nested arrays counted together"),
+            )
+            .with_label(format!("{elements} elements"))
+            .with_help("use a list `[T]` for the outer level, which lives on the heap");
+        checker.push(diagnostic);
     }
 }
 
@@ -60,36 +122,221 @@ pub(super) fn field(checker: &mut Checker<'_, '_>, field: &ast::Field) {
     }
 }
 
-/// The Rust path of an extern packet must not be empty.
+/// The Rust path of an extern packet is a Rust type path: segments joined by `::`
+/// (a leading `::` allowed), each an identifier that is not a keyword (`crate`,
+/// `self`, `super` and `Self` only first), the last ones optionally with generic
+/// arguments `<...>`, each a path, a tuple `(A, B)`, an array `[T; N]`, a slice type
+/// `[T]` or an integer (a const generic). Spaces may stand between tokens, never
+/// inside one nor between two identifiers.
 pub(super) fn extern_path(checker: &mut Checker<'_, '_>, def: &ast::ExternPacket) {
-    let path = def.rust_path.value.trim();
-    let mut depth = 0i32;
-    let balanced = path.chars().all(|c| {
-        match c {
-            '<' => depth += 1,
-            '>' => depth -= 1,
-            _ => {}
-        }
-        depth >= 0
-    }) && depth == 0;
-    let valid = balanced
-        && path
-            .chars()
-            .next()
-            .is_some_and(|c| c.is_alphabetic() || c == '_' || c == ':')
-        && path
-            .chars()
-            .all(|c| c.is_alphanumeric() || "_:<>, &'[];".contains(c))
-        && !path.ends_with(':');
-    if !valid {
+    if let Err(why) = rust_type_path(&def.rust_path.value) {
         let diagnostic = checker
             .error(
                 Code::TypeMismatch,
                 def.rust_path.span,
                 format!("`{}` is not a Rust type path", def.rust_path.value),
             )
-            .with_label("expected a path such as \"image::RgbImage\"");
+            .with_label(why)
+            .with_help(
+                "write a path such as \"image::RgbImage\" or \"pcl::PointCloud<pcl::PointXYZ>\"",
+            );
         checker.push(diagnostic);
+    }
+}
+
+/// A token of a Rust type path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum PathToken<'t> {
+    Ident(&'t str),
+    Int,
+    Colons,
+    Punct(char),
+}
+
+fn path_tokens(text: &str) -> Result<Vec<PathToken<'_>>, String> {
+    let mut tokens = Vec::new();
+    let mut rest = text;
+    while let Some(c) = rest.chars().next() {
+        if c.is_whitespace() {
+            rest = &rest[c.len_utf8()..];
+            continue;
+        }
+        if c.is_alphabetic() || c == '_' {
+            let end = rest
+                .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .unwrap_or(rest.len());
+            tokens.push(PathToken::Ident(&rest[..end]));
+            rest = &rest[end..];
+        } else if c.is_ascii_digit() {
+            let end = rest
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(rest.len());
+            if !rest[..end].chars().all(|c| c.is_ascii_digit() || c == '_') {
+                return Err(format!("`{}` is not an integer", &rest[..end]));
+            }
+            tokens.push(PathToken::Int);
+            rest = &rest[end..];
+        } else if let Some(after) = rest.strip_prefix("::") {
+            tokens.push(PathToken::Colons);
+            rest = after;
+        } else if "<>,()[];".contains(c) {
+            tokens.push(PathToken::Punct(c));
+            rest = &rest[1..];
+        } else {
+            return Err(format!("`{c}` has no place in a type path"));
+        }
+    }
+    Ok(tokens)
+}
+
+/// `Ok` when `text` is a Rust type path, else why not.
+fn rust_type_path(text: &str) -> Result<(), String> {
+    let tokens = path_tokens(text)?;
+    if tokens.is_empty() {
+        return Err("empty: name a type".to_owned());
+    }
+    let mut parser = PathParser {
+        tokens: &tokens,
+        at: 0,
+        depth: 0,
+    };
+    parser.path()?;
+    match parser.tokens.get(parser.at) {
+        None => Ok(()),
+        Some(PathToken::Ident(name)) => Err(format!(
+            "`{name}` follows the path: a path's segments are joined by `::`"
+        )),
+        Some(token) => Err(format!(
+            "unexpected {} after the path",
+            describe_token(*token)
+        )),
+    }
+}
+
+fn describe_token(token: PathToken<'_>) -> String {
+    match token {
+        PathToken::Ident(name) => format!("`{name}`"),
+        PathToken::Int => "an integer".to_owned(),
+        PathToken::Colons => "`::`".to_owned(),
+        PathToken::Punct(c) => format!("`{c}`"),
+    }
+}
+
+struct PathParser<'p, 't> {
+    tokens: &'p [PathToken<'t>],
+    at: usize,
+    depth: usize,
+}
+
+impl PathParser<'_, '_> {
+    fn peek(&self) -> Option<PathToken<'_>> {
+        self.tokens.get(self.at).copied()
+    }
+
+    fn expect(&mut self, c: char) -> Result<(), String> {
+        match self.peek() {
+            Some(PathToken::Punct(found)) if found == c => {
+                self.at += 1;
+                Ok(())
+            }
+            Some(token) => Err(format!("expected `{c}`, found {}", describe_token(token))),
+            None => Err(format!("expected `{c}` at the end")),
+        }
+    }
+
+    /// `[::] segment (:: segment)*`, each segment `ident [<args>]`.
+    fn path(&mut self) -> Result<(), String> {
+        if self.peek() == Some(PathToken::Colons) {
+            self.at += 1;
+        }
+        let mut first = true;
+        loop {
+            match self.peek() {
+                Some(PathToken::Ident(name)) => {
+                    let leading = ["crate", "self", "super", "Self"].contains(&name);
+                    if (crate::ident::is_keyword(name) || name == "_") && !(leading && first) {
+                        return Err(format!("`{name}` is a Rust keyword"));
+                    }
+                    self.at += 1;
+                }
+                Some(token) => {
+                    return Err(format!("expected a name, found {}", describe_token(token)));
+                }
+                None => return Err("expected a name at the end".to_owned()),
+            }
+            first = false;
+            if self.peek() == Some(PathToken::Punct('<')) {
+                self.generics()?;
+            }
+            if self.peek() == Some(PathToken::Colons) {
+                self.at += 1;
+            } else {
+                return Ok(());
+            }
+        }
+    }
+
+    /// `<arg, ...>`.
+    fn generics(&mut self) -> Result<(), String> {
+        self.expect('<')?;
+        loop {
+            self.argument()?;
+            if self.peek() == Some(PathToken::Punct(',')) {
+                self.at += 1;
+                if self.peek() == Some(PathToken::Punct('>')) {
+                    break;
+                }
+            } else {
+                break;
+            }
+        }
+        self.expect('>')
+    }
+
+    /// A generic argument: a type or an integer.
+    fn argument(&mut self) -> Result<(), String> {
+        if self.peek() == Some(PathToken::Int) {
+            self.at += 1;
+            return Ok(());
+        }
+        self.ty()
+    }
+
+    /// A path, `(A, B)`, `[T; N]` or `[T]`.
+    fn ty(&mut self) -> Result<(), String> {
+        self.depth += 1;
+        if self.depth > 32 {
+            return Err("nested too deep".to_owned());
+        }
+        let result = match self.peek() {
+            Some(PathToken::Punct('(')) => {
+                self.at += 1;
+                while self.peek() != Some(PathToken::Punct(')')) {
+                    self.ty()?;
+                    if self.peek() == Some(PathToken::Punct(',')) {
+                        self.at += 1;
+                    } else {
+                        break;
+                    }
+                }
+                self.expect(')')
+            }
+            Some(PathToken::Punct('[')) => {
+                self.at += 1;
+                self.ty()?;
+                if self.peek() == Some(PathToken::Punct(';')) {
+                    self.at += 1;
+                    if self.peek() != Some(PathToken::Int) {
+                        return Err("expected an array length after `;`".to_owned());
+                    }
+                    self.at += 1;
+                }
+                self.expect(']')
+            }
+            _ => self.path(),
+        };
+        self.depth -= 1;
+        result
     }
 }
 
@@ -98,11 +345,36 @@ pub(super) fn value(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &
     if let Err((span, message, help)) = value_error(checker, expr, expected) {
         let mut diagnostic = checker
             .error(Code::TypeMismatch, span, message)
-            .with_label(format!("expected `{expected}`"));
+            .with_label(label(expr, expected));
         if let Some(help) = help {
             diagnostic = diagnostic.with_help(help);
         }
         checker.push(diagnostic);
+    }
+}
+
+/// Like [`value`], with `note` as the help of the error (why `expected` is asked).
+pub(super) fn value_noted(
+    checker: &mut Checker<'_, '_>,
+    expr: &ast::Expr,
+    expected: &Ty,
+    note: &str,
+) {
+    if let Err((span, message, _)) = value_error(checker, expr, expected) {
+        let diagnostic = checker
+            .error(Code::TypeMismatch, span, message)
+            .with_label(label(expr, expected))
+            .with_help(note);
+        checker.push(diagnostic);
+    }
+}
+
+/// The label of a value refused for `expected`.
+fn label(expr: &ast::Expr, expected: &Ty) -> String {
+    if double_negation(expr).is_some() {
+        "more than one sign".to_owned()
+    } else {
+        format!("expected `{expected}`")
     }
 }
 
@@ -142,6 +414,9 @@ fn value_error(
     expected: &Ty,
 ) -> Result<(), ValueError> {
     use ast::ExprKind as E;
+    if let Some(error) = double_negation(expr) {
+        return Err(error);
+    }
     match (expected, &expr.kind) {
         (Ty::Unknown, _) => Ok(()),
         (Ty::Optional(_), E::None) => Ok(()),
@@ -214,6 +489,18 @@ fn value_error(
         }
         (Ty::List(inner), E::Repeat(item, count)) => {
             positive(checker, count, "a repeat count");
+            // Allocated when the value is built (a default, when the component starts).
+            if count.value > MAX_LIST_REPEAT {
+                let diagnostic = checker
+                    .error(
+                        Code::SizeLimit,
+                        count.span,
+                        format!("a list's repeat count is at most {MAX_LIST_REPEAT}"),
+                    )
+                    .with_label("too many: the list is allocated when its value is built")
+                    .with_help("start with a shorter list: a list grows at run time");
+                checker.push(diagnostic);
+            }
             value_error(checker, item, inner)
         }
         (Ty::Array(inner, length), E::List(items)) => {
@@ -269,6 +556,38 @@ fn value_error(
     }
 }
 
+/// A `-` applied to a negated value (`- -5`, `-(-5)`): a constant is written with at
+/// most one sign.
+pub(super) fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
+    let ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) = &expr.kind else {
+        return None;
+    };
+    let mut negations = 1usize;
+    let mut operand = &**inner;
+    while let ast::ExprKind::Unary(ast::UnaryOp::Neg, next) = &operand.kind {
+        negations += 1;
+        operand = next;
+    }
+    if negations < 2 {
+        return None;
+    }
+    let text = match &operand.kind {
+        ast::ExprKind::Int(n) => Some(n.to_string()),
+        ast::ExprKind::Float(x) => Some(format!("{x:?}")),
+        _ => None,
+    };
+    let help = match text {
+        Some(text) if negations.is_multiple_of(2) => format!("write `{text}`"),
+        Some(text) => format!("write `-{text}`"),
+        None => "write the value with at most one `-`".to_owned(),
+    };
+    Some((
+        expr.span,
+        format!("a constant takes at most one `-`, found {negations} in a row"),
+        Some(help),
+    ))
+}
+
 /// A float literal `rustc` accepts for `prim`: an `f32` literal that rounds to
 /// infinity is refused (`f64` literals beyond `f64` are refused when read).
 fn float_fits(prim: ast::Prim, value: f64) -> Result<(), String> {
@@ -318,7 +637,32 @@ pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<
                 zero(checker, expr.span, "a frequency");
                 return None;
             }
-            Some(1e9 / hertz)
+            let nanos = 1e9 / hertz;
+            // The runtime counts time in u64 nanoseconds, down to one.
+            #[allow(clippy::cast_precision_loss)] // A bound, compared as a float.
+            let longest = u64::MAX as f64;
+            let refused = if nanos.round() < 1.0 {
+                Some("shorter than 1ns (the highest frequency is 2GHz)")
+            } else if nanos >= longest {
+                Some(
+                    "longer than 18446744073709551615ns, about 584 years (the lowest frequency is 5.43e-11Hz)",
+                )
+            } else {
+                None
+            };
+            if let Some(range) = refused {
+                let diagnostic = checker
+                    .error(
+                        Code::SizeLimit,
+                        expr.span,
+                        format!("the period of `{hertz}Hz` is {range}"),
+                    )
+                    .with_label("out of range: the runtime counts a period in whole nanoseconds, in 64 bits")
+                    .with_help("give a period from 1ns to about 584 years, such as `10ms` or `100Hz`");
+                checker.push(diagnostic);
+                return None;
+            }
+            Some(nanos)
         }
         _ => {
             let diagnostic = checker

@@ -289,6 +289,34 @@ fn new_rejects_names_cargo_rejects() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
 
+/// A file reached through two paths (a root given relative and absolute, a directory
+/// reached through a symbolic link) is one file, loaded once: no duplicate definitions.
+#[test]
+fn a_file_reached_through_two_paths_is_loaded_once() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("shared")).unwrap();
+    std::fs::write(dir.path().join("shared/b.cool"), "packet B { x: u8 }\n").unwrap();
+    std::fs::write(
+        dir.path().join("a.cool"),
+        "import \"shared/b.cool\";\npacket A { b: B }\n",
+    )
+    .unwrap();
+    let absolute = dir.path().join("shared/b.cool");
+    let out = coolc(&["check", "a.cool", absolute.to_str().unwrap()], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("shared", dir.path().join("link")).unwrap();
+        std::fs::write(
+            dir.path().join("a.cool"),
+            "import \"shared/b.cool\";\nimport \"link/b.cool\";\npacket A { b: B }\n",
+        )
+        .unwrap();
+        let out = coolc(&["check", "a.cool"], dir.path());
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    }
+}
+
 #[test]
 fn an_unknown_name_defined_next_door_names_the_import() {
     let dir = tempfile::tempdir().unwrap();

@@ -807,6 +807,52 @@ pub enum TypeDef {
     Ros(RosImport),
 }
 
+/// Whether the generated code has a default value of `ty` (its Rust type implements
+/// `Default`, or coolc builds one): not an extern packet (coolc cannot see another
+/// crate's type), an enum without variants, nor a packet with a field of such a type
+/// and no written default. `type_def` looks a packet or enum up by name.
+pub fn has_default<'t>(ty: &Ty, type_def: &dyn Fn(&str) -> Option<&'t TypeDef>) -> bool {
+    fn walk<'t>(
+        ty: &Ty,
+        type_def: &dyn Fn(&str) -> Option<&'t TypeDef>,
+        visiting: &mut Vec<String>,
+    ) -> bool {
+        match ty {
+            Ty::Bool
+            | Ty::Int(_)
+            | Ty::Float(_)
+            | Ty::Str
+            | Ty::Time
+            | Ty::Duration
+            | Ty::List(_)
+            | Ty::Optional(_)
+            // A ROS message type always has one (`lower::ros`).
+            | Ty::Ros { .. } => true,
+            Ty::Array(inner, _) => walk(inner, type_def, visiting),
+            Ty::Enum(name) | Ty::Packet(name) => match type_def(name) {
+                Some(TypeDef::Enum(e)) => !e.variants.is_empty(),
+                Some(TypeDef::Packet(p)) => {
+                    // A packet that holds itself by value is an error of its own.
+                    if visiting.contains(&p.name) {
+                        return false;
+                    }
+                    visiting.push(p.name.clone());
+                    let result = p
+                        .fields
+                        .iter()
+                        .all(|f| f.default.is_some() || walk(&f.ty, type_def, visiting));
+                    visiting.pop();
+                    result
+                }
+                Some(TypeDef::Ros(_)) => true,
+                Some(TypeDef::Extern(_)) | None => false,
+            },
+            Ty::Extern(_) | Ty::Unknown => false,
+        }
+    }
+    walk(ty, type_def, &mut Vec::new())
+}
+
 impl TypeDef {
     /// Its name.
     pub fn name(&self) -> &str {
