@@ -19,7 +19,7 @@
 //! which then completes in the background).
 
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::clock::ClockWait;
 use crate::handle::{Handle, Refusal};
@@ -80,6 +80,9 @@ pub struct Commander {
     steps: Vec<Supervision>,
     /// The compound is on its way to `dead` ([`Commander::set_stopping`]).
     stopping: bool,
+    /// While it is: when its stop is given up on (each command waits at most until
+    /// then).
+    stop_by: Option<Instant>,
     /// The section giving commands now runs on a virtual clock: they wait in its
     /// time ([`Commander::set_clock_wait`]).
     clock_wait: Option<ClockWait>,
@@ -118,6 +121,7 @@ impl Commander {
             timeout,
             steps: Vec::new(),
             stopping: false,
+            stop_by: None,
             clock_wait: None,
         }
     }
@@ -145,6 +149,7 @@ impl Commander {
             timeout: Duration::ZERO,
             steps: Vec::new(),
             stopping: false,
+            stop_by: None,
             clock_wait: None,
         }
     }
@@ -263,9 +268,11 @@ impl Commander {
 
     /// Whether the compound is on its way to `dead` ([`Context::stopping`](crate::Context::stopping)
     /// of the section about to run): while it is, a command that would bring an
-    /// instance to `running` is refused ([`Refused::ShuttingDown`]).
-    pub(crate) fn set_stopping(&mut self, stopping: bool) {
+    /// instance to `running` is refused ([`Refused::ShuttingDown`]), and each command
+    /// waits at most until `stop_by` (the compound's stop budget), if given.
+    pub(crate) fn set_stopping(&mut self, stopping: bool, stop_by: Option<Instant>) {
         self.stopping = stopping;
+        self.stop_by = stop_by.filter(|_| stopping);
     }
 
     /// The call about to give commands runs on a virtual clock (`Some`: a supervisor's
@@ -358,15 +365,25 @@ impl Commander {
         if handle.state() == State::Dead {
             return Err(Refused::Dead);
         }
+        // Stopping: no longer than what is left of the compound's stop budget.
+        let bounded;
+        let (handle, timeout) = match self.stop_by {
+            Some(by) => {
+                let left = by
+                    .saturating_duration_since(Instant::now())
+                    .min(self.timeout);
+                bounded = handle.clone().with_command_timeout(left);
+                (&bounded, left)
+            }
+            None => (handle, self.timeout),
+        };
         handle
             .command_refusable(command.clone(), self.clock_wait.as_ref())
             .map_err(|refusal| match refusal {
                 Refusal::NotStarted => Refused::NotStarted,
                 Refusal::Ended => Refused::Dead,
                 Refusal::QueueFull => Refused::QueueFull,
-                Refusal::Busy => Refused::Busy {
-                    waited: self.timeout,
-                },
+                Refusal::Busy => Refused::Busy { waited: timeout },
                 Refusal::Rejected(reason) => match command {
                     Command::Set(..) => Refused::InvalidValue(reason),
                     Command::Configure(_) => Refused::InvalidConfiguration(reason),

@@ -122,12 +122,11 @@ pub(super) fn field(checker: &mut Checker<'_, '_>, field: &ast::Field) {
     }
 }
 
-/// The Rust path of an extern packet is a Rust type path: segments joined by `::`
-/// (a leading `::` allowed), each an identifier that is not a keyword (`crate`,
-/// `self`, `super` and `Self` only first), the last ones optionally with generic
-/// arguments `<...>`, each a path, a tuple `(A, B)`, an array `[T; N]`, a slice type
-/// `[T]` or an integer (a const generic). Spaces may stand between tokens, never
-/// inside one nor between two identifiers.
+/// The Rust path of an extern packet is a Rust type as rustc reads it (`syn` parses
+/// it): a path (a leading `::`, `crate::`, `self::` or `super::` allowed, never
+/// `Self`), with generic arguments that are types, lifetimes or constants, or a
+/// tuple, an array or a slice of such types; no reference, pointer, trait object or
+/// function type.
 pub(super) fn extern_path(checker: &mut Checker<'_, '_>, def: &ast::ExternPacket) {
     if let Err(why) = rust_type_path(&def.rust_path.value) {
         let diagnostic = checker
@@ -144,199 +143,89 @@ pub(super) fn extern_path(checker: &mut Checker<'_, '_>, def: &ast::ExternPacket
     }
 }
 
-/// A token of a Rust type path.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum PathToken<'t> {
-    Ident(&'t str),
-    Int,
-    Colons,
-    Punct(char),
-}
-
-fn path_tokens(text: &str) -> Result<Vec<PathToken<'_>>, String> {
-    let mut tokens = Vec::new();
-    let mut rest = text;
-    while let Some(c) = rest.chars().next() {
-        if c.is_whitespace() {
-            rest = &rest[c.len_utf8()..];
-            continue;
-        }
-        if c.is_alphabetic() || c == '_' {
-            let end = rest
-                .find(|c: char| !(c.is_alphanumeric() || c == '_'))
-                .unwrap_or(rest.len());
-            tokens.push(PathToken::Ident(&rest[..end]));
-            rest = &rest[end..];
-        } else if c.is_ascii_digit() {
-            let end = rest
-                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-                .unwrap_or(rest.len());
-            if !rest[..end].chars().all(|c| c.is_ascii_digit() || c == '_') {
-                return Err(format!("`{}` is not an integer", &rest[..end]));
-            }
-            tokens.push(PathToken::Int);
-            rest = &rest[end..];
-        } else if let Some(after) = rest.strip_prefix("::") {
-            tokens.push(PathToken::Colons);
-            rest = after;
-        } else if "<>,()[];".contains(c) {
-            tokens.push(PathToken::Punct(c));
-            rest = &rest[1..];
-        } else {
-            return Err(format!("`{c}` has no place in a type path"));
-        }
-    }
-    Ok(tokens)
-}
-
-/// `Ok` when `text` is a Rust type path, else why not.
+/// `Ok` when `text` is a Rust type an extern packet can name (parsed by `syn`, as
+/// rustc would), else why not.
 fn rust_type_path(text: &str) -> Result<(), String> {
-    let tokens = path_tokens(text)?;
-    if tokens.is_empty() {
+    if text.trim().is_empty() {
         return Err("empty: name a type".to_owned());
     }
-    let mut parser = PathParser {
-        tokens: &tokens,
-        at: 0,
-        depth: 0,
-    };
-    parser.path()?;
-    match parser.tokens.get(parser.at) {
-        None => Ok(()),
-        Some(PathToken::Ident(name)) => Err(format!(
-            "`{name}` follows the path: a path's segments are joined by `::`"
-        )),
-        Some(token) => Err(format!(
-            "unexpected {} after the path",
-            describe_token(*token)
-        )),
+    // (Rust's whitespace is ASCII here: a no-break space is not a gap to rustc.)
+    if let Some(c) = text
+        .chars()
+        .find(|c| c.is_whitespace() && !c.is_ascii_whitespace())
+    {
+        return Err(format!(
+            "`{}` (U+{:04X}) is no space rustc reads",
+            c,
+            u32::from(c)
+        ));
     }
+    let ty: syn::Type =
+        syn::parse_str(text).map_err(|error| format!("not a Rust type: {error}"))?;
+    packet_type(&ty, 0)
 }
 
-fn describe_token(token: PathToken<'_>) -> String {
-    match token {
-        PathToken::Ident(name) => format!("`{name}`"),
-        PathToken::Int => "an integer".to_owned(),
-        PathToken::Colons => "`::`".to_owned(),
-        PathToken::Punct(c) => format!("`{c}`"),
+/// `Ok` when `ty` (at nesting `depth`) can be a packet's type: a path (no `Self`,
+/// ending in a name), a tuple, an array or a slice of those, with generic arguments
+/// that are types, lifetimes or constants.
+fn packet_type(ty: &syn::Type, depth: usize) -> Result<(), String> {
+    if depth > 32 {
+        return Err("nested more than 32 deep".to_owned());
     }
-}
-
-struct PathParser<'p, 't> {
-    tokens: &'p [PathToken<'t>],
-    at: usize,
-    depth: usize,
-}
-
-impl PathParser<'_, '_> {
-    fn peek(&self) -> Option<PathToken<'_>> {
-        self.tokens.get(self.at).copied()
-    }
-
-    fn expect(&mut self, c: char) -> Result<(), String> {
-        match self.peek() {
-            Some(PathToken::Punct(found)) if found == c => {
-                self.at += 1;
-                Ok(())
+    match ty {
+        syn::Type::Path(path) if path.qself.is_none() => {
+            let segments = &path.path.segments;
+            if segments.first().is_some_and(|s| s.ident == "Self") {
+                return Err("`Self` names no type outside an impl".to_owned());
             }
-            Some(token) => Err(format!("expected `{c}`, found {}", describe_token(token))),
-            None => Err(format!("expected `{c}` at the end")),
-        }
-    }
-
-    /// `[::] segment (:: segment)*`, each segment `ident [<args>]`.
-    fn path(&mut self) -> Result<(), String> {
-        if self.peek() == Some(PathToken::Colons) {
-            self.at += 1;
-        }
-        let mut first = true;
-        loop {
-            match self.peek() {
-                Some(PathToken::Ident(name)) => {
-                    let leading = ["crate", "self", "super", "Self"].contains(&name);
-                    if (crate::ident::is_keyword(name) || name == "_") && !(leading && first) {
-                        return Err(format!("`{name}` is a Rust keyword"));
+            let last = segments.last().ok_or("expected a name")?;
+            if ["crate", "self", "super", "Self"]
+                .iter()
+                .any(|k| last.ident == k)
+            {
+                return Err(format!("`{}` names a module, not a type", last.ident));
+            }
+            for segment in segments {
+                match &segment.arguments {
+                    syn::PathArguments::None => {}
+                    syn::PathArguments::AngleBracketed(arguments) => {
+                        if arguments.colon2_token.is_some() {
+                            return Err(
+                                "write generic arguments without `::` (`Vec<u8>`)".to_owned()
+                            );
+                        }
+                        for argument in &arguments.args {
+                            match argument {
+                                syn::GenericArgument::Type(ty) => packet_type(ty, depth + 1)?,
+                                syn::GenericArgument::Lifetime(_)
+                                | syn::GenericArgument::Const(_) => {}
+                                _ => {
+                                    return Err(
+                                        "a generic argument is a type, a lifetime or a constant"
+                                            .to_owned(),
+                                    );
+                                }
+                            }
+                        }
                     }
-                    self.at += 1;
-                }
-                Some(token) => {
-                    return Err(format!("expected a name, found {}", describe_token(token)));
-                }
-                None => return Err("expected a name at the end".to_owned()),
-            }
-            first = false;
-            if self.peek() == Some(PathToken::Punct('<')) {
-                self.generics()?;
-            }
-            if self.peek() == Some(PathToken::Colons) {
-                self.at += 1;
-            } else {
-                return Ok(());
-            }
-        }
-    }
-
-    /// `<arg, ...>`.
-    fn generics(&mut self) -> Result<(), String> {
-        self.expect('<')?;
-        loop {
-            self.argument()?;
-            if self.peek() == Some(PathToken::Punct(',')) {
-                self.at += 1;
-                if self.peek() == Some(PathToken::Punct('>')) {
-                    break;
-                }
-            } else {
-                break;
-            }
-        }
-        self.expect('>')
-    }
-
-    /// A generic argument: a type or an integer.
-    fn argument(&mut self) -> Result<(), String> {
-        if self.peek() == Some(PathToken::Int) {
-            self.at += 1;
-            return Ok(());
-        }
-        self.ty()
-    }
-
-    /// A path, `(A, B)`, `[T; N]` or `[T]`.
-    fn ty(&mut self) -> Result<(), String> {
-        self.depth += 1;
-        if self.depth > 32 {
-            return Err("nested too deep".to_owned());
-        }
-        let result = match self.peek() {
-            Some(PathToken::Punct('(')) => {
-                self.at += 1;
-                while self.peek() != Some(PathToken::Punct(')')) {
-                    self.ty()?;
-                    if self.peek() == Some(PathToken::Punct(',')) {
-                        self.at += 1;
-                    } else {
-                        break;
+                    syn::PathArguments::Parenthesized(_) => {
+                        return Err("a function trait is no packet type".to_owned());
                     }
                 }
-                self.expect(')')
             }
-            Some(PathToken::Punct('[')) => {
-                self.at += 1;
-                self.ty()?;
-                if self.peek() == Some(PathToken::Punct(';')) {
-                    self.at += 1;
-                    if self.peek() != Some(PathToken::Int) {
-                        return Err("expected an array length after `;`".to_owned());
-                    }
-                    self.at += 1;
-                }
-                self.expect(']')
-            }
-            _ => self.path(),
-        };
-        self.depth -= 1;
-        result
+            Ok(())
+        }
+        syn::Type::Tuple(tuple) => tuple
+            .elems
+            .iter()
+            .try_for_each(|ty| packet_type(ty, depth + 1)),
+        syn::Type::Array(array) => packet_type(&array.elem, depth + 1),
+        syn::Type::Slice(slice) => packet_type(&slice.elem, depth + 1),
+        syn::Type::Paren(paren) => packet_type(&paren.elem, depth + 1),
+        syn::Type::Reference(_) | syn::Type::Ptr(_) => {
+            Err("a packet owns its data: no reference or pointer".to_owned())
+        }
+        _ => Err("name a type by its path (`image::RgbImage`)".to_owned()),
     }
 }
 

@@ -255,7 +255,7 @@ impl Automaton for Compound {
             // whose commands to its instances are part of the compound's stop.
             self.stop_by.get_or_insert_with(stop_budget);
         }
-        self.commander.set_stopping(cx.stopping());
+        self.commander.set_stopping(cx.stopping(), self.stop_by);
         self.commander.set_clock_wait(cx.clock_wait());
         let mut scx = SupervisorCx {
             rt: cx,

@@ -273,7 +273,7 @@ impl Automaton for StandIn {
 
     fn section(&mut self, state: usize, section: Section, cx: &mut Context) -> Result<(), Fault> {
         self.sectioned = true;
-        self.commander.set_stopping(cx.stopping());
+        self.commander.set_stopping(cx.stopping(), None);
         let mut scx = super::SupervisorCx {
             rt: cx,
             view: &self.view,

@@ -845,9 +845,12 @@ pub fn has_default<'t>(ty: &Ty, type_def: &dyn Fn(&str) -> Option<&'t TypeDef>) 
                     result
                 }
                 Some(TypeDef::Ros(_)) => true,
-                Some(TypeDef::Extern(_)) | None => false,
+                Some(TypeDef::Extern(_)) => false,
+                // An unknown name is an error of its own: no follow-on error.
+                None => true,
             },
-            Ty::Extern(_) | Ty::Unknown => false,
+            Ty::Extern(_) => false,
+            Ty::Unknown => true,
         }
     }
     walk(ty, type_def, &mut Vec::new())
