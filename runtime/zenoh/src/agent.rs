@@ -1507,7 +1507,7 @@ mod tests {
         );
         const ROUNDS: usize = 12;
         for round in 0..ROUNDS {
-            let name = format!("leak-idle-{round}");
+            let name = format!("{}idle-{round}", keys::namespace("leak"));
             instantiate(
                 &node,
                 "leak",
@@ -1541,7 +1541,7 @@ mod tests {
         instantiate(
             &node,
             "leak",
-            &idle_request("leak-idle-0", Vec::new()),
+            &idle_request(&format!("{}idle-0", keys::namespace("leak")), Vec::new()),
             Duration::from_secs(10),
         )
         .expect("the name of a released instance is free again");
@@ -1559,7 +1559,7 @@ mod tests {
         // its next generations are `<root>-2`, `<root>-3`, ... Asked for with an
         // override the type refuses, each request is refused after the component was
         // added: its name is free again.
-        let root = "claim-robot-wanderer-0badf00d";
+        let root = format!("{}robot-wanderer-0badf00d", keys::namespace("claim"));
         for generation in 2..=20 {
             let error = instantiate(
                 &node,
@@ -1642,7 +1642,10 @@ mod tests {
         // Node `robot1` placed an instance here: its proxy hears the instance's
         // output on this key (`place::Placer`), from this node, whose `publish` rule
         // covers `coolbot-link/depu/**`.
-        let victim = "coolbot-link/depu/robot1-robot-wanderer-5f54b428/out/out";
+        let victim = format!(
+            "coolbot-link/depu/{}robot-wanderer-5f54b428/out/out",
+            keys::namespace("robot1")
+        );
         // Another node that may instantiate here (any type) asks, under its own name
         // (the access rules let it ask under no other), for an instance whose output
         // is published on that key.
@@ -1650,7 +1653,7 @@ mod tests {
             &node,
             "depu",
             "robot2",
-            &request("robot2-anything-1", victim),
+            &request(&format!("{}anything-1", keys::namespace("robot2")), &victim),
             Duration::from_secs(10),
         );
         let Err(Error::Refused { reason, .. }) = asked else {
@@ -1661,7 +1664,11 @@ mod tests {
             "{reason}"
         );
         // Nor under its own name, as another node's (the owner is the requester).
-        let mut forged = request("robot2-anything-2", "coolbot-link/depu/robot2-x/out/out");
+        let own = |rest: &str| format!("{}{rest}", keys::namespace("robot2"));
+        let mut forged = request(
+            &own("anything-2"),
+            &format!("coolbot-link/depu/{}", own("x/out/out")),
+        );
         forged.owner = Some("robot1".into());
         let asked = ask(&node, "depu", "robot2", &forged, Duration::from_secs(10));
         assert!(
@@ -1673,7 +1680,10 @@ mod tests {
             &node,
             "depu",
             "robot2",
-            &request("robot2-anything-3", "coolbot-link/depu/robot2-x/out/out"),
+            &request(
+                &own("anything-3"),
+                &format!("coolbot-link/depu/{}", own("x/out/out")),
+            ),
             Duration::from_secs(10),
         )
         .expect("a placement in the requester's own namespace");
@@ -1732,7 +1742,7 @@ mod tests {
         };
         let request = Instantiate {
             type_name: "Big".into(),
-            name: "qmem-big".into(),
+            name: format!("{}big", keys::namespace("qmem")),
             wires: (0..3).map(wire).collect(),
             configuration: None,
             variables: Vec::new(),
@@ -1748,6 +1758,58 @@ mod tests {
             reason.contains("the queues of every wire of the request, together: 201326592 bytes, over the limit REQUEST_QUEUE_BYTES = 134217728 bytes"),
             "{reason}"
         );
+    }
+
+    /// A node whose name is another's followed by `-` (`robot`, `robot-2`) takes
+    /// nothing of the other's namespace: neither its proxy's next generation nor any
+    /// name the other may build.
+    #[test]
+    fn a_node_named_as_a_prefix_of_another_takes_none_of_its_names() {
+        let node = crate::testing::node("pfx", None, None);
+        let _agent =
+            Agent::start_with_cap(Arc::clone(&node), idle_registry(idle_spec()), 8).unwrap();
+        // Node `robot-2`'s proxy root is observable on the network; its next generation:
+        let victim = format!("{}robot-wanderer-5f54b428-2", keys::namespace("robot-2"));
+        let squat = ask(
+            &node,
+            "pfx",
+            "robot",
+            &idle_request(&victim, Vec::new()),
+            Duration::from_secs(10),
+        );
+        assert!(
+            squat.is_err(),
+            "node `robot` took a name in the namespace of node `robot-2`"
+        );
+        let own = ask(
+            &node,
+            "pfx",
+            "robot-2",
+            &idle_request(&victim, Vec::new()),
+            Duration::from_secs(10),
+        );
+        assert!(own.is_ok(), "robot-2 refused its own name: {own:?}");
+    }
+
+    /// A node whose name holds a `.` has instances built like any other: its
+    /// namespace holds no `.`.
+    #[test]
+    fn a_node_with_a_dot_in_its_name_has_instances_built() {
+        let node = crate::testing::node("dot", None, None);
+        let _agent =
+            Agent::start_with_cap(Arc::clone(&node), idle_registry(idle_spec()), 8).unwrap();
+        assert!(keys::check_name("robot.local").is_ok());
+        let asked = ask(
+            &node,
+            "dot",
+            "robot.local",
+            &idle_request(
+                &format!("{}planner", keys::namespace("robot.local")),
+                Vec::new(),
+            ),
+            Duration::from_secs(10),
+        );
+        assert!(asked.is_ok(), "{asked:?}");
     }
 
     fn names(list: &[&str]) -> Vec<String> {

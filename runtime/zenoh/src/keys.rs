@@ -87,9 +87,20 @@ pub fn parse_agent(key: &str) -> Option<(&str, &str)> {
 }
 
 /// How the names an agent builds for node `requester` begin: the instance's, and so
-/// its bridges' (`<name>-<port>`).
+/// its bridges' (`<name>-<port>`). No node's namespace begins another's (`robot`'s
+/// does not begin `robot-2`'s): the requester's name, `_` doubled and `.` written
+/// `_d` (an instance's name holds no `.`), after its length: `5-robot-`,
+/// `11-robot_dlocal-`.
 pub fn namespace(requester: &str) -> String {
-    format!("{requester}-")
+    let mut encoded = String::with_capacity(requester.len() + 4);
+    for c in requester.chars() {
+        match c {
+            '_' => encoded.push_str("__"),
+            '.' => encoded.push_str("_d"),
+            c => encoded.push(c),
+        }
+    }
+    format!("{}-{encoded}-", encoded.len())
 }
 
 /// How the bridge keys under `coolbot-link/` that an agent on `node` bridges for node
@@ -185,8 +196,37 @@ mod tests {
         assert_eq!(parse_agent("coolbot/station/@agent/W/r/x"), None);
         assert_eq!(
             link_namespace("station", "robot"),
-            "coolbot-link/station/robot-"
+            "coolbot-link/station/5-robot-"
         );
+    }
+
+    #[test]
+    fn no_nodes_namespace_begins_anothers() {
+        let nodes = [
+            "robot",
+            "robot-2",
+            "robot-",
+            "robot_2",
+            "robot.2",
+            "robot_d2",
+            "r",
+            "5-robot",
+            "robot.local",
+            "robot_dlocal",
+            "a_",
+            "a__",
+            "a.",
+        ];
+        for a in nodes {
+            let space = namespace(a);
+            assert!(check_name(&format!("{space}x")).is_ok(), "{space}");
+            assert!(!space.contains('.'), "{space}");
+            for b in nodes {
+                if a != b {
+                    assert!(!namespace(b).starts_with(&space), "{a} / {b}");
+                }
+            }
+        }
     }
 
     #[test]

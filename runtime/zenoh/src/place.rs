@@ -260,15 +260,17 @@ impl Placer {
 /// live under it; each instantiation adds a generation (`<root>-1`, `<root>-2`, ...),
 /// so that the instance can be built again while its node may still hold the name of
 /// an earlier one (not yet found dead, or on a node that was unreachable). The root
-/// begins with the placing node's name: the agent builds only in the namespace of
-/// the node that asks (`crate::agent`).
+/// begins with the placing node's namespace ([`keys::namespace`]): the agent builds
+/// only in the namespace of the node that asks (`crate::agent`).
 fn remote_root(from: &str, placement: &Placement) -> String {
     let epoch = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |elapsed| elapsed.as_nanos() as u32);
     format!(
-        "{from}-{}-{}-{epoch:08x}",
-        placement.compound, placement.name
+        "{}{}-{}-{epoch:08x}",
+        keys::namespace(from),
+        placement.compound,
+        placement.name
     )
 }
 

@@ -342,7 +342,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
 
     let request = Instantiate {
         type_name: "Doubler".to_owned(),
-        name: "robot-doubler".to_owned(),
+        name: format!("{}doubler", coolbot_zenoh::keys::namespace("robot")),
         wires: vec![
             Wire::Input {
                 port: "input".to_owned(),
@@ -393,9 +393,18 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     assert_eq!(
         rows,
         [
-            ("robot-doubler".to_owned(), State::Running),
-            ("robot-doubler-input".to_owned(), State::Running),
-            ("robot-doubler-output".to_owned(), State::Running),
+            (
+                format!("{}doubler", coolbot_zenoh::keys::namespace("robot")),
+                State::Running
+            ),
+            (
+                format!("{}doubler-input", coolbot_zenoh::keys::namespace("robot")),
+                State::Running
+            ),
+            (
+                format!("{}doubler-output", coolbot_zenoh::keys::namespace("robot")),
+                State::Running
+            ),
         ]
     );
 
@@ -412,7 +421,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     };
     assert!(refused(&unknown).contains("no component type `Tripler`"));
     let bad_port = Instantiate {
-        name: "robot-other".to_owned(),
+        name: format!("{}other", coolbot_zenoh::keys::namespace("robot")),
         wires: vec![Wire::Input {
             port: "nothing".to_owned(),
             key: "test/agent/x".to_owned(),
@@ -449,7 +458,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
         .recv_timeout(PATIENCE)
         .expect("the sink started");
     let tripler = Instantiate {
-        name: "robot-tripler".to_owned(),
+        name: format!("{}tripler", coolbot_zenoh::keys::namespace("robot")),
         wires: vec![
             Wire::Input {
                 port: "input".to_owned(),
@@ -470,7 +479,7 @@ fn an_agent_builds_a_registered_component_on_request_and_bridges_its_ports() {
     tripled.send(5);
     assert_eq!(doubled_back.recv_timeout(PATIENCE), Some(15));
     let bad_override = Instantiate {
-        name: "robot-broken".to_owned(),
+        name: format!("{}broken", coolbot_zenoh::keys::namespace("robot")),
         wires: Vec::new(),
         variables: vec![("speed".to_owned(), coolbot::Value::UInt(3))],
         ..request.clone()

@@ -53,7 +53,10 @@ fn the_wanderer_runs_on_the_station_and_the_fallback_drives_while_the_station_is
     let built = |l: &str| {
         l.starts_with("station")
             && l.contains("built for another node")
-            && l.contains("robot-robot-wanderer")
+            && l.contains(&format!(
+                "{}robot-wanderer",
+                coolbot_zenoh::keys::namespace("robot")
+            ))
     };
     let robot_says =
         |text: &'static str| move |l: &str| l.starts_with("robot: ") && l.contains(text);
@@ -219,14 +222,16 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
     .expect("a session");
     let ctl = Ctl::new(session, Duration::from_secs(2));
     let deadline = Duration::from_secs(20);
-    // The instance's name on the station: `robot-robot-wanderer-<epoch>-<generation>`.
+    // The instance's name on the station: `5-robot-robot-wanderer-<epoch>-<generation>`.
     let until = Instant::now() + deadline;
     let remote = loop {
         let listed = ctl.components(Some("station")).unwrap_or_default();
-        if let Some(found) = listed
-            .iter()
-            .find(|c| c.path.starts_with("robot-robot-wanderer-") && c.path.ends_with("-1"))
-        {
+        if let Some(found) = listed.iter().find(|c| {
+            c.path.starts_with(&format!(
+                "{}robot-wanderer-",
+                coolbot_zenoh::keys::namespace("robot")
+            )) && c.path.ends_with("-1")
+        }) {
             break format!("station/{}", found.path);
         }
         assert!(

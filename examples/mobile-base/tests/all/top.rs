@@ -129,7 +129,7 @@ fn coolctl_top_in_a_terminal_shows_both_nodes_and_the_substitution_as_it_happens
         "  base",
         "    motion",
         "  wanderer",
-        "station/robot-robot-wanderer-",
+        "station/5-robot-robot-wanderer-",
         "running",
     ]);
     assert!(screen.contains("coolctl top: components"), "{screen}");

@@ -366,7 +366,7 @@ pub fn cpu(child: &Child) -> Duration {
 /// The placement the robot made on the station: its keys and names.
 #[derive(Debug, Clone)]
 pub struct Placement {
-    /// `robot-robot-wanderer-<epoch>`: the root of the bridge keys and names.
+    /// `5-robot-robot-wanderer-<epoch>`: the root of the bridge keys and names.
     pub root: String,
     /// The instance's name on the station (`<root>-1`).
     pub instance: String,

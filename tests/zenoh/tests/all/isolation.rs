@@ -52,7 +52,12 @@ fn cameras(ctl: &Ctl) -> Vec<(String, State)> {
     ctl.components(Some("drivers"))
         .expect("the drivers node lists")
         .into_iter()
-        .filter(|l| l.path.starts_with("robot-rig-camera-"))
+        .filter(|l| {
+            l.path.starts_with(&format!(
+                "{}rig-camera-",
+                coolbot_zenoh::keys::namespace("robot")
+            ))
+        })
         .map(|l| (l.path, l.monitor.state))
         .collect()
 }

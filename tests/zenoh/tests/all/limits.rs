@@ -115,7 +115,7 @@ impl Station {
 fn valid(name: &str) -> Instantiate {
     Instantiate {
         type_name: "Doubler".to_owned(),
-        name: format!("robot-{name}"),
+        name: format!("{}{name}", coolbot_zenoh::keys::namespace("robot")),
         wires: Vec::new(),
         configuration: None,
         variables: Vec::new(),
@@ -323,7 +323,10 @@ fn each_limit_refuses_a_request_over_it_by_name_and_value_and_the_station_builds
     // takes it if the OS lets it), whatever the process allows its commands.
     station
         .ask(&Instantiate {
-            name: "robot-realtime-by-description".to_owned(),
+            name: format!(
+                "{}realtime-by-description",
+                coolbot_zenoh::keys::namespace("robot")
+            ),
             ..timing(|timing| timing.priority = 5)
         })
         .expect("a description's priority is built");
@@ -341,7 +344,10 @@ fn each_limit_refuses_a_request_over_it_by_name_and_value_and_the_station_builds
         .expect("a queue of 64 MiB");
     station
         .ask(&Instantiate {
-            name: "robot-queued-at-the-limit".to_owned(),
+            name: format!(
+                "{}queued-at-the-limit",
+                coolbot_zenoh::keys::namespace("robot")
+            ),
             ..output_to(RemoteInput::Ufifo {
                 initial: limits::QUEUE.max,
                 max: Some(limits::QUEUE.max),
@@ -479,7 +485,10 @@ fn a_panic_while_building_refuses_that_request_and_the_agent_serves_on() {
             ..valid(&format!("bomb{n}"))
         });
         assert!(
-            refusal.contains(&format!("a panic: a factory bug building `robot-bomb{n}`")),
+            refusal.contains(&format!(
+                "a panic: a factory bug building `{}bomb{n}`",
+                coolbot_zenoh::keys::namespace("robot")
+            )),
             "{refusal}"
         );
         station.still_builds(&format!("after-bomb{n}"));
@@ -631,7 +640,7 @@ fn an_agent_runs_at_most_its_cap_of_instances_and_builds_again_when_one_is_dead(
     let ctl = coolbot_zenoh::ctl::Ctl::new(station.robot.session().clone(), PATIENCE);
     let reply = ctl
         .command(
-            "station/robot-many1",
+            &format!("station/{}many1", coolbot_zenoh::keys::namespace("robot")),
             &coolbot::Command::SetState(coolbot::Controllable::Dead),
         )
         .expect("the station answers");

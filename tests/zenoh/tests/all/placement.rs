@@ -444,9 +444,10 @@ fn a_pull_crosses_the_network_through_a_proxy_both_ways() {
         .components(Some("pull-station"))
         .expect("the station lists");
     assert!(
-        built
-            .iter()
-            .any(|l| l.path.starts_with("pull-robot-cell-doubler-")),
+        built.iter().any(|l| l.path.starts_with(&format!(
+            "{}cell-doubler-",
+            coolbot_zenoh::keys::namespace("pull-robot")
+        ))),
         "{:?}",
         built.iter().map(|l| &l.path).collect::<Vec<_>>()
     );
@@ -504,9 +505,10 @@ fn a_compound_runs_on_another_node_behind_a_proxy() {
         .map(|l| l.path)
         .collect();
     assert!(
-        built
-            .iter()
-            .any(|path| path.starts_with("nest-robot-cell-twice-") && path.ends_with(".doubler")),
+        built.iter().any(|path| path.starts_with(&format!(
+            "{}cell-twice-",
+            coolbot_zenoh::keys::namespace("nest-robot")
+        )) && path.ends_with(".doubler")),
         "{built:?}"
     );
     let report = system.shutdown();
@@ -562,7 +564,12 @@ fn a_remote_instance_keeps_its_own_quality_levels_and_adaptation() {
         ctl.components(Some("tuned-station"))
             .expect("the station lists")
             .into_iter()
-            .find(|l| l.path.starts_with("tuned-robot-cell-tuned-"))
+            .find(|l| {
+                l.path.starts_with(&format!(
+                    "{}cell-tuned-",
+                    coolbot_zenoh::keys::namespace("tuned-robot")
+                ))
+            })
             .expect("the station built the instance")
     };
     let built = remote();
@@ -660,7 +667,12 @@ fn a_remote_instance_that_fails_is_restarted_on_its_node() {
         ctl.components(Some("restart-station"))
             .expect("the station lists")
             .into_iter()
-            .filter(|l| l.path.starts_with("restart-robot-cell-flaky-"))
+            .filter(|l| {
+                l.path.starts_with(&format!(
+                    "{}cell-flaky-",
+                    coolbot_zenoh::keys::namespace("restart-robot")
+                ))
+            })
             .map(|l| (l.path, l.monitor.state))
             .collect()
     };

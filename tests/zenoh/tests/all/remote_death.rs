@@ -36,7 +36,12 @@ fn built(ctl: &Ctl) -> Vec<(String, State)> {
     ctl.components(Some("dying-station"))
         .expect("the station lists")
         .into_iter()
-        .filter(|l| l.path.starts_with("dying-robot-cell-flaky-"))
+        .filter(|l| {
+            l.path.starts_with(&format!(
+                "{}cell-flaky-",
+                coolbot_zenoh::keys::namespace("dying-robot")
+            ))
+        })
         .map(|l| (l.path, l.monitor.state))
         .collect()
 }
@@ -323,7 +328,12 @@ fn a_remote_instance_that_ends_its_task_ends_its_proxy() {
         .components(Some("dying-station"))
         .expect("the station lists")
         .into_iter()
-        .filter(|l| l.path.starts_with("dying-robot-cell-finisher-"))
+        .filter(|l| {
+            l.path.starts_with(&format!(
+                "{}cell-finisher-",
+                coolbot_zenoh::keys::namespace("dying-robot")
+            ))
+        })
         .map(|l| l.monitor.state)
         .collect();
     assert_eq!(remote, vec![State::End]);

@@ -204,7 +204,8 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
         )
     };
     let (ops, typed, guest) = (client("ops"), client("typed"), client("guest"));
-    // Each client asks in its own namespace: its names begin with its own.
+    // Each client asks in its own namespace: its names begin with it.
+    let named = |node: &str, rest: &str| format!("{}{rest}", coolbot_zenoh::keys::namespace(node));
     let request = |type_name: &str, name: &str| Instantiate {
         type_name: type_name.to_owned(),
         name: name.to_owned(),
@@ -223,14 +224,20 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
             last = Some(instantiate(
                 &ops,
                 "robot",
-                &request("Plain", "ops-one"),
+                &request("Plain", &named("ops", "one")),
                 second,
             ));
             matches!(last, Some(Ok(())))
         }),
         "ops could not instantiate: {last:?}"
     );
-    instantiate(&ops, "robot", &request("Other", "ops-three"), second).expect("ops builds Other");
+    instantiate(
+        &ops,
+        "robot",
+        &request("Other", &named("ops", "three")),
+        second,
+    )
+    .expect("ops builds Other");
     // The other sessions know the agent (declarations cross), but the requests the
     // rules do not grant are dropped by the robot's access control: nothing answers,
     // nothing is built.
@@ -245,7 +252,12 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
             .wait()
             .is_ok_and(|status| status.matching())));
     }
-    let refused = instantiate(&guest, "robot", &request("Plain", "guest-two"), second);
+    let refused = instantiate(
+        &guest,
+        "robot",
+        &request("Plain", &named("guest", "two")),
+        second,
+    );
     let error = refused
         .expect_err("the guest may not instantiate")
         .to_string();
@@ -253,9 +265,19 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
         error.contains("no agent answered") && error.contains("access rules"),
         "{error}"
     );
-    instantiate(&typed, "robot", &request("Plain", "typed-four"), second)
-        .expect("typed builds Plain");
-    let refused = instantiate(&typed, "robot", &request("Other", "typed-five"), second);
+    instantiate(
+        &typed,
+        "robot",
+        &request("Plain", &named("typed", "four")),
+        second,
+    )
+    .expect("typed builds Plain");
+    let refused = instantiate(
+        &typed,
+        "robot",
+        &request("Other", &named("typed", "five")),
+        second,
+    );
     assert!(
         refused
             .expect_err("typed may not build Other")
@@ -267,7 +289,7 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
     let replies = typed
         .session()
         .get(coolbot_zenoh::keys::agent("robot", "Plain", "typed"))
-        .payload(serde_json::to_vec(&request("Other", "typed-six")).expect("JSON"))
+        .payload(serde_json::to_vec(&request("Other", &named("typed", "six"))).expect("JSON"))
         .timeout(second)
         .wait()
         .expect("a query");
@@ -297,7 +319,7 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
     let replies = typed
         .session()
         .get(coolbot_zenoh::keys::agent("robot", "Plain", "ops"))
-        .payload(serde_json::to_vec(&request("Plain", "ops-seven")).expect("JSON"))
+        .payload(serde_json::to_vec(&request("Plain", &named("ops", "seven"))).expect("JSON"))
         .timeout(second)
         .wait()
         .expect("a query");
@@ -306,15 +328,15 @@ fn instantiate_rules_gate_the_agent_by_node_and_type() {
         "the agent answered a forged requester"
     );
     for (path, expected) in [
-        ("ops-one", true),
-        ("guest-two", false),
-        ("ops-three", true),
-        ("typed-four", true),
-        ("typed-five", false),
-        ("typed-six", false),
-        ("ops-seven", false),
+        (named("ops", "one"), true),
+        (named("guest", "two"), false),
+        (named("ops", "three"), true),
+        (named("typed", "four"), true),
+        (named("typed", "five"), false),
+        (named("typed", "six"), false),
+        (named("ops", "seven"), false),
     ] {
-        assert_eq!(built(path), expected, "{path}");
+        assert_eq!(built(&path), expected, "{path}");
     }
 }
 
