@@ -607,7 +607,15 @@ impl Ctl {
             let Some((node, path)) = keys::parse_component(key) else {
                 continue;
             };
-            let monitor: Monitor = decode(sample, limits::SNAPSHOT, "a snapshot")?;
+            // One node's bad answer hides no other component: it is left out, and
+            // said so.
+            let monitor: Monitor = match decode(sample, limits::SNAPSHOT, "a snapshot") {
+                Ok(monitor) => monitor,
+                Err(error) => {
+                    tracing::warn!("{key}: left out of the listing: {error}");
+                    continue;
+                }
+            };
             listed.push(Listed {
                 node: node.to_owned(),
                 path: path.to_owned(),
@@ -1103,6 +1111,56 @@ impl Watcher {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One component's snapshot over `SNAPSHOT` (any node may answer so for its own
+    /// components) is left out of the listing: the other nodes' components are listed.
+    #[test]
+    fn one_bad_snapshot_hides_no_other_component_from_the_listing() {
+        use zenoh::Wait;
+        let port = crate::testing::free_port();
+        let good = crate::testing::node("good", Some(port), None);
+        let mut system = coolbot::System::new();
+        system
+            .add(crate::testing::idle("idle", crate::testing::idle_spec()))
+            .unwrap();
+        system.start().unwrap();
+        good.expose_system(&system).unwrap();
+        let evil = zenoh::open(
+            crate::peer_config(&[], &[format!("tcp/127.0.0.1:{port}")], false).unwrap(),
+        )
+        .wait()
+        .unwrap();
+        let _queryable = evil
+            .declare_queryable(keys::monitor("evil", "x"))
+            .callback(|query| {
+                let huge = vec![b' '; limits::SNAPSHOT.max + 1];
+                let _ = query.reply(keys::monitor("evil", "x"), huge).wait();
+            })
+            .wait()
+            .unwrap();
+        // Until the bad answer reaches the good node (asked again, up to a minute).
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        loop {
+            let heard = good
+                .session()
+                .get(keys::monitor("evil", "x"))
+                .timeout(Duration::from_secs(2))
+                .wait()
+                .ok()
+                .is_some_and(|replies| replies.recv().is_ok());
+            if heard {
+                break;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the bad node never answered"
+            );
+        }
+        let ctl = Ctl::new(good.session().clone(), Duration::from_secs(2));
+        let listed = ctl.components(None).expect("a listing");
+        assert!(listed.iter().any(|l| l.path == "idle"), "{listed:?}");
+        assert!(!listed.iter().any(|l| l.node == "evil"), "{listed:?}");
+    }
 
     #[test]
     fn answers_over_their_limit_are_refused_undecoded() {
