@@ -1139,7 +1139,7 @@ mod tests {
             .wait()
             .unwrap();
         // Until the bad answer reaches the good node (asked again, up to a minute).
-        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             let heard = good
                 .session()
@@ -1151,10 +1151,7 @@ mod tests {
             if heard {
                 break;
             }
-            assert!(
-                std::time::Instant::now() < deadline,
-                "the bad node never answered"
-            );
+            assert!(Instant::now() < deadline, "the bad node never answered");
         }
         let ctl = Ctl::new(good.session().clone(), Duration::from_secs(2));
         let listed = ctl.components(None).expect("a listing");
