@@ -1003,7 +1003,11 @@ impl Fuzzer {
         let key = coolbot_zenoh::keys::agent(node, "Wanderer", "fuzz");
         let request = |fuzzer: &mut Fuzzer| Instantiate {
             type_name: "Wanderer".into(),
-            name: format!("fuzz-{:x}", fuzzer.rng.next()),
+            name: format!(
+                "{}{:x}",
+                coolbot_zenoh::keys::namespace("fuzz"),
+                fuzzer.rng.next()
+            ),
             wires: vec![Wire::Output {
                 port: "command".into(),
                 key: format!("fuzz/{:x}", fuzzer.rng.next()),
