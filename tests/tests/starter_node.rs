@@ -339,13 +339,23 @@ fn the_starter_main_runs_as_the_robot_or_as_the_station() {
         running(listed, "robot", "duo")
             && running(listed, "robot", "duo.here")
             && running(listed, "robot", "duo.there")
-            && listed
-                .iter()
-                .any(|l| l.node == "station" && l.path.starts_with("robot-duo-there-"))
+            && listed.iter().any(|l| {
+                l.node == "station"
+                    && l.path.starts_with(&format!(
+                        "{}duo-there-",
+                        coolbot_zenoh::keys::namespace("robot")
+                    ))
+            })
     });
     let remote = listed
         .iter()
-        .find(|l| l.node == "station" && l.path.starts_with("robot-duo-there-"))
+        .find(|l| {
+            l.node == "station"
+                && l.path.starts_with(&format!(
+                    "{}duo-there-",
+                    coolbot_zenoh::keys::namespace("robot")
+                ))
+        })
         .unwrap();
     assert_eq!(remote.monitor.state, coolbot::State::Running);
     assert_eq!(remote.monitor.user_state.as_deref(), Some("beating"));
@@ -440,7 +450,10 @@ impl Behavior for Count {
 fn heard(listed: &[Listed]) -> Option<u64> {
     let sink = listed.iter().find(|l| {
         l.node == "right"
-            && l.path.starts_with("robot-trio-sink-")
+            && l.path.starts_with(&format!(
+                "{}trio-sink-",
+                coolbot_zenoh::keys::namespace("robot")
+            ))
             && !l.path.contains('.')
             && !l.path.ends_with("-beat")
     })?;
@@ -574,7 +587,10 @@ fn trio(rounds: usize) {
     let listed = ctl.components(None).unwrap();
     assert!(
         listed.iter().any(|l| l.node == "right"
-            && l.path.starts_with("robot-trio-sink-")
+            && l.path.starts_with(&format!(
+                "{}trio-sink-",
+                coolbot_zenoh::keys::namespace("robot")
+            ))
             && l.path.ends_with(".count")),
         "{:?}",
         listed
@@ -607,7 +623,10 @@ fn trio(rounds: usize) {
                     && state(listed, "trio.backup") == Some(Ready)
                     && listed.iter().any(|l| {
                         l.node == "left"
-                            && l.path.starts_with("robot-trio-source-")
+                            && l.path.starts_with(&format!(
+                                "{}trio-source-",
+                                coolbot_zenoh::keys::namespace("robot")
+                            ))
                             && l.monitor.state == Running
                     })
             },
