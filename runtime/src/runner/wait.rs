@@ -83,14 +83,13 @@ impl Runner {
     /// Whether a pull request waits at one of the component's pull outputs.
     pub(super) fn block(&mut self) {
         let deadline = self.next_due();
-        // On a virtual clock, data to retry moving waits in real time.
-        let retry = self
-            .automaton
-            .retries_data()
-            .filter(|_| {
-                self.supervised && self.state == State::Running && self.time.as_virtual().is_some()
-            })
-            .map(|soon| later(Instant::now(), soon));
+        // On a virtual clock, data to retry moving waits in real time. The automaton is
+        // asked only then: never on the real clock, where this is a hot path.
+        let retry =
+            (self.supervised && self.state == State::Running && self.time.as_virtual().is_some())
+                .then(|| self.automaton.retries_data())
+                .flatten()
+                .map(|soon| later(Instant::now(), soon));
         // One wait on the doorbell, rung by commands, deliveries and pull requests; the
         // loop then looks at the control port first (the priority rule above). With a
         // timer due, park at once (a periodic thread sleeps like a bare one); waiting

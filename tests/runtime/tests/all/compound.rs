@@ -609,20 +609,19 @@ struct Base {
 impl Base {
     /// The compound `build` makes from the parts, added to a new system.
     fn new(build: impl FnOnce(Parts) -> Result<coolbot::Component, CompoundError>) -> Base {
-        let mut parts = Parts::new();
-        let scripts = parts.scripts.clone();
-        let log = Arc::clone(&parts.log);
-        let feed = parts.feed.take();
-        Base {
-            rig: CompoundRig::new(build(parts)),
-            scripts,
-            log,
-            feed,
-        }
+        Base::with_rig(CompoundRig::new, build)
     }
 
     /// The same on a virtual clock.
     fn on_virtual_clock(
+        build: impl FnOnce(Parts) -> Result<coolbot::Component, CompoundError>,
+    ) -> Base {
+        Base::with_rig(CompoundRig::on_virtual_clock, build)
+    }
+
+    /// The compound `build` makes from the parts, in the rig `rig` makes of it.
+    fn with_rig(
+        rig: fn(Result<coolbot::Component, CompoundError>) -> CompoundRig,
         build: impl FnOnce(Parts) -> Result<coolbot::Component, CompoundError>,
     ) -> Base {
         let mut parts = Parts::new();
@@ -630,7 +629,7 @@ impl Base {
         let log = Arc::clone(&parts.log);
         let feed = parts.feed.take();
         Base {
-            rig: CompoundRig::on_virtual_clock(build(parts)),
+            rig: rig(build(parts)),
             scripts,
             log,
             feed,
