@@ -511,6 +511,15 @@ fn int_fits(prim: ast::Prim, value: i128) -> Result<(), String> {
     Ok(())
 }
 
+/// The highest frequency a period can be (its period, 0.5ns, rounds to 1ns), as
+/// written in a description.
+pub(crate) const HIGHEST_FREQUENCY: &str = "2000MHz";
+
+/// About the lowest frequency a period can be (its period, about 1.8416e19ns, is
+/// within 64 bits of nanoseconds; the lowest is 5.421010862427522e-11Hz), as written
+/// in a description: a frequency takes no exponent.
+pub(crate) const LOWEST_FREQUENCY: &str = "0.0000000000543Hz";
+
 /// A period: a duration or frequency, not zero; returns it in nanoseconds.
 pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<f64> {
     match expr.kind {
@@ -531,11 +540,13 @@ pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<
             #[allow(clippy::cast_precision_loss)] // A bound, compared as a float.
             let longest = u64::MAX as f64;
             let refused = if nanos.round() < 1.0 {
-                Some("shorter than 1ns (the highest frequency is 2GHz)")
+                Some(format!(
+                    "shorter than 1ns (the highest frequency is `{HIGHEST_FREQUENCY}`)"
+                ))
             } else if nanos >= longest {
-                Some(
-                    "longer than 18446744073709551615ns, about 584 years (the lowest frequency is 5.43e-11Hz)",
-                )
+                Some(format!(
+                    "longer than 18446744073709551615ns, about 584 years (the lowest frequency is about `{LOWEST_FREQUENCY}`)"
+                ))
             } else {
                 None
             };
@@ -544,7 +555,11 @@ pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<
                     .error(
                         Code::SizeLimit,
                         expr.span,
-                        format!("the period of `{hertz}Hz` is {range}"),
+                        if hertz.is_finite() {
+                            format!("the period of `{hertz}Hz` is {range}")
+                        } else {
+                            format!("the period of this frequency is {range}")
+                        },
                     )
                     .with_label("out of range: the runtime counts a period in whole nanoseconds, in 64 bits")
                     .with_help("give a period from 1ns to about 584 years, such as `10ms` or `100Hz`");
@@ -747,5 +762,38 @@ fn contains_by_value(
             chain.pop();
             false
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::{HIGHEST_FREQUENCY, LOWEST_FREQUENCY};
+
+    /// The codes of the diagnostics of a component whose period is `period`.
+    fn period_codes(period: &str) -> Vec<&'static str> {
+        let text = format!(
+            "atomic A {{ timing {{ period {period}; }} automaton {{ initial s; state s {{ periodic; }} }} }}\n"
+        );
+        let analysis = crate::analyze(&["a.cool"], &|_: &Path| Ok(text.clone()));
+        analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect()
+    }
+
+    /// The frequencies the refusal names as the bounds are written as a description
+    /// writes them, and are the bounds: accepted, and refused just beyond.
+    #[test]
+    fn the_frequency_bounds_named_are_valid_and_accepted() {
+        assert_eq!(period_codes(HIGHEST_FREQUENCY), Vec::<&str>::new());
+        assert_eq!(period_codes(LOWEST_FREQUENCY), Vec::<&str>::new());
+        assert_eq!(period_codes("2001MHz"), ["coolc::check::size_limit"]);
+        assert_eq!(
+            period_codes("0.0000000000542Hz"),
+            ["coolc::check::size_limit"]
+        );
     }
 }
