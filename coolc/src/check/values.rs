@@ -231,43 +231,74 @@ fn packet_type(ty: &syn::Type, depth: usize) -> Result<(), String> {
 
 /// Checks that `expr` is a literal of type `expected`.
 pub(super) fn value(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &Ty) {
-    if let Err((span, message, help)) = value_error(checker, expr, expected) {
-        let mut diagnostic = checker
-            .error(Code::TypeMismatch, span, message)
-            .with_label(label(expr, expected));
-        if let Some(help) = help {
-            diagnostic = diagnostic.with_help(help);
-        }
+    if let Err(error) = value_error(checker, expr, expected) {
+        let diagnostic = error.diagnostic(checker);
         checker.push(diagnostic);
     }
 }
 
-/// Like [`value`], with `note` as the help of the error (why `expected` is asked).
-pub(super) fn value_noted(
+/// Like [`value`], with `note` as the help of the error (why `expected` is asked),
+/// for a value that must be of each of `expected`: the first type it does not fit
+/// is reported, once.
+pub(super) fn value_of_each(
     checker: &mut Checker<'_, '_>,
     expr: &ast::Expr,
-    expected: &Ty,
+    expected: &[&Ty],
     note: &str,
 ) {
-    if let Err((span, message, _)) = value_error(checker, expr, expected) {
-        let diagnostic = checker
-            .error(Code::TypeMismatch, span, message)
-            .with_label(label(expr, expected))
-            .with_help(note);
-        checker.push(diagnostic);
+    let before = checker.diagnostics.len();
+    for ty in expected {
+        let seen = checker.diagnostics.len();
+        let result = value_error(checker, expr, ty);
+        // What a check reports on the way (a repeat count, a size) an earlier type's
+        // check may have reported already.
+        let mut index = seen;
+        while index < checker.diagnostics.len() {
+            if checker.diagnostics[before..seen].contains(&checker.diagnostics[index]) {
+                checker.diagnostics.remove(index);
+            } else {
+                index += 1;
+            }
+        }
+        if let Err(mut error) = result {
+            error.help = Some(note.to_owned());
+            let diagnostic = error.diagnostic(checker);
+            checker.push(diagnostic);
+            return;
+        }
     }
 }
 
-/// The label of a value refused for `expected`.
-fn label(expr: &ast::Expr, expected: &Ty) -> String {
-    if double_negation(expr).is_some() {
-        "more than one sign".to_owned()
-    } else {
-        format!("expected `{expected}`")
-    }
+/// A value refused for its type: where, why, and what to do. Each is said of the
+/// value refused, an element of a list as much as a whole value.
+struct ValueError {
+    span: Span,
+    message: String,
+    label: String,
+    help: Option<String>,
 }
 
-type ValueError = (Span, String, Option<String>);
+impl ValueError {
+    /// A value refused for `expected`, the type asked of it where it stands.
+    fn new(span: Span, message: impl Into<String>, expected: &Ty, help: Option<String>) -> Self {
+        ValueError {
+            span,
+            message: message.into(),
+            label: format!("expected `{expected}`"),
+            help,
+        }
+    }
+
+    fn diagnostic(self, checker: &Checker<'_, '_>) -> crate::diagnostics::Diagnostic {
+        let mut diagnostic = checker
+            .error(Code::TypeMismatch, self.span, self.message)
+            .with_label(self.label);
+        if let Some(help) = self.help {
+            diagnostic = diagnostic.with_help(help);
+        }
+        diagnostic
+    }
+}
 
 pub(super) fn describe(expr: &ast::Expr) -> &'static str {
     match &expr.kind {
@@ -287,12 +318,13 @@ pub(super) fn describe(expr: &ast::Expr) -> &'static str {
 }
 
 fn mismatch(expr: &ast::Expr, expected: &Ty, help: Option<String>) -> ValueError {
-    (
+    ValueError::new(
         expr.span,
         format!(
             "expected a value of type `{expected}`, found {}",
             describe(expr)
         ),
+        expected,
         help,
     )
 }
@@ -303,6 +335,7 @@ fn value_error(
     expected: &Ty,
 ) -> Result<(), ValueError> {
     use ast::ExprKind as E;
+    let refused = |message: String| ValueError::new(expr.span, message, expected, None);
     if let Some(error) = double_negation(expr) {
         return Err(error);
     }
@@ -311,26 +344,18 @@ fn value_error(
         (Ty::Optional(_), E::None) => Ok(()),
         (Ty::Optional(inner), _) => value_error(checker, expr, inner),
         (Ty::Bool, E::Bool(_)) | (Ty::Str, E::Str(_)) | (Ty::Duration, E::Duration(_)) => Ok(()),
-        (Ty::Float(prim), E::Float(value)) => {
-            float_fits(*prim, *value).map_err(|message| (expr.span, message, None))
-        }
+        (Ty::Float(prim), E::Float(value)) => float_fits(*prim, *value).map_err(refused),
         (Ty::Float(prim), E::Unary(ast::UnaryOp::Neg, inner)) => match inner.kind {
-            E::Float(value) => {
-                float_fits(*prim, -value).map_err(|message| (expr.span, message, None))
-            }
+            E::Float(value) => float_fits(*prim, -value).map_err(refused),
             // An integer literal is a whole float, within any float's range.
             E::Int(_) => Ok(()),
             _ => Err(mismatch(expr, expected, None)),
         },
         // An integer literal is a whole float: `max_speed: f64 = 1` means `1.0`.
         (Ty::Float(_), E::Int(_)) => Ok(()),
-        (Ty::Int(prim), E::Int(n)) => {
-            int_fits(*prim, i128::from(*n)).map_err(|message| (expr.span, message, None))
-        }
+        (Ty::Int(prim), E::Int(n)) => int_fits(*prim, i128::from(*n)).map_err(refused),
         (Ty::Int(prim), E::Unary(ast::UnaryOp::Neg, inner)) => match inner.kind {
-            E::Int(n) => {
-                int_fits(*prim, -i128::from(n)).map_err(|message| (expr.span, message, None))
-            }
+            E::Int(n) => int_fits(*prim, -i128::from(n)).map_err(refused),
             _ => Err(mismatch(expr, expected, None)),
         },
         (Ty::Int(_), E::Float(_)) => Err(mismatch(
@@ -394,12 +419,13 @@ fn value_error(
         }
         (Ty::Array(inner, length), E::List(items)) => {
             if items.len() as u64 != *length {
-                return Err((
+                return Err(ValueError::new(
                     expr.span,
                     format!(
                         "expected {length} elements for `{expected}`, found {}",
                         items.len()
                     ),
+                    expected,
                     Some(format!("write `[value; {length}]` to repeat one value")),
                 ));
             }
@@ -410,12 +436,13 @@ fn value_error(
         }
         (Ty::Array(inner, length), E::Repeat(item, count)) => {
             if count.value != *length {
-                return Err((
+                return Err(ValueError::new(
                     count.span,
                     format!(
                         "expected {length} elements for `{expected}`, found {}",
                         count.value
                     ),
+                    expected,
                     Some(format!("write `{length}`")),
                 ));
             }
@@ -447,7 +474,7 @@ fn value_error(
 
 /// A `-` applied to a negated value (`- -5`, `-(-5)`): a constant is written with at
 /// most one sign.
-pub(super) fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
+fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
     let ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) = &expr.kind else {
         return None;
     };
@@ -470,11 +497,12 @@ pub(super) fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
         Some(text) => format!("write `-{text}`"),
         None => "write the value with at most one `-`".to_owned(),
     };
-    Some((
-        expr.span,
-        format!("a constant takes at most one `-`, found {negations} in a row"),
-        Some(help),
-    ))
+    Some(ValueError {
+        span: expr.span,
+        message: format!("a constant takes at most one `-`, found {negations} in a row"),
+        label: "more than one sign".to_owned(),
+        help: Some(help),
+    })
 }
 
 /// A float literal `rustc` accepts for `prim`: an `f32` literal that rounds to
