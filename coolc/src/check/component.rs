@@ -101,6 +101,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
                 for field in &configuration.fields {
                     values::field(checker, field);
                 }
+                values::configuration_size(checker, configuration);
             }
             ast::Member::Variable(variable) => self::variable(checker, component, variable),
             ast::Member::Input(input) => self::input(checker, input),

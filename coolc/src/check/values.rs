@@ -41,25 +41,109 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
 /// queue's size, allocated when the component starts.
 pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
 
-/// The most elements an array `[T; N]` holds, nested arrays counted together
-/// (`[[T; A]; B]` holds `A * B`): an array lives inline in its packet, on the
-/// stack of whoever builds one.
+/// The most elements an array `[T; N]` holds, nested arrays and the packets it holds
+/// counted together (`[[T; A]; B]` holds `A * B`, `[P; N]` holds `N` times what a
+/// `P` holds): an array lives inline in its packet, on the stack of whoever builds
+/// one.
 pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
 
-/// The elements an array type holds inline: the product of its nested lengths
-/// (through optionals; a list is a heap allocation and counts one).
-fn inline_elements(ty: &ast::Type) -> u128 {
+/// The most elements a packet or a configuration block holds inline, its fields'
+/// arrays and packets counted together: like a queue's size and a list's repeat
+/// count, at most 2^20.
+pub(crate) const MAX_RECORD_ELEMENTS: u64 = super::MAX_QUEUE_SIZE;
+
+/// The elements a value of `ty` holds inline: the product of its nested array
+/// lengths, a packet counting what its fields hold (through optionals; a list is a
+/// heap allocation and counts one, as does any other type). `None` when something
+/// in it is refused for its size already (an array or a packet beyond its bound),
+/// so nothing holding it is reported again.
+fn inline_elements(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> Option<u128> {
     match &ty.kind {
         ast::TypeKind::Array(inner, size) => {
-            u128::from(size.value).saturating_mul(inline_elements(inner))
+            if size.value > MAX_ARRAY_ELEMENTS {
+                return None;
+            }
+            let total = u128::from(size.value).saturating_mul(inline_elements(checker, inner)?);
+            (total <= u128::from(MAX_ARRAY_ELEMENTS)).then_some(total)
         }
-        ast::TypeKind::Optional(inner) => inline_elements(inner),
-        ast::TypeKind::Prim(_) | ast::TypeKind::Named(_) | ast::TypeKind::List(_) => 1,
+        ast::TypeKind::Optional(inner) => inline_elements(checker, inner),
+        ast::TypeKind::Named(name) => packet_elements(checker, &name.name),
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => Some(1),
     }
 }
 
-/// `[T; N]` holds at most [`MAX_ARRAY_ELEMENTS`], nested arrays counted together;
-/// reported once, at the outermost array that goes beyond.
+/// The packet named `name`, if a packet has that name.
+fn packet_def<'a>(checker: &Checker<'a, '_>, name: &str) -> Option<&'a ast::Packet> {
+    let model = checker.model;
+    let def = model.symbols.defs.get(name)?;
+    match model
+        .files
+        .get(def.file.0 as usize)
+        .and_then(|file| file.items.get(def.item))
+    {
+        Some(ast::Item::Packet(packet)) => Some(packet),
+        _ => None,
+    }
+}
+
+/// The elements packet `name` holds inline (at least one), counted once per packet;
+/// any other type counts one.
+fn packet_elements(checker: &mut Checker<'_, '_>, name: &str) -> Option<u128> {
+    if let Some(known) = checker.packet_elements.get(name) {
+        return *known;
+    }
+    let Some(packet) = packet_def(checker, name) else {
+        return Some(1);
+    };
+    // A packet holding itself by value is an error of its own: it counts one inside.
+    checker.packet_elements.insert(name.to_owned(), Some(1));
+    let total = fields_elements(checker, &packet.fields)
+        .map(|(total, _)| total.max(1))
+        .filter(|total| *total <= u128::from(MAX_RECORD_ELEMENTS));
+    checker.packet_elements.insert(name.to_owned(), total);
+    total
+}
+
+/// The elements `fields` hold inline together, and the field holding the most with
+/// its count; `None` when a field is refused for its size already.
+fn fields_elements<'f>(
+    checker: &mut Checker<'_, '_>,
+    fields: &'f [ast::Field],
+) -> Option<(u128, Option<(&'f ast::Field, u128)>)> {
+    let mut total = 0u128;
+    let mut largest: Option<(&ast::Field, u128)> = None;
+    for field in fields {
+        let elements = inline_elements(checker, &field.ty)?;
+        total = total.saturating_add(elements);
+        if largest.is_none_or(|(_, most)| elements > most) {
+            largest = Some((field, elements));
+        }
+    }
+    Some((total, largest))
+}
+
+/// The factors of what an array type holds, outermost first, for a message:
+/// `[[Row; 4]; 8]` is 8 × 4 × 65536 (a `Row`).
+fn array_factors(checker: &mut Checker<'_, '_>, ty: &ast::Type, factors: &mut Vec<String>) {
+    match &ty.kind {
+        ast::TypeKind::Array(inner, size) => {
+            factors.push(size.value.to_string());
+            array_factors(checker, inner, factors);
+        }
+        ast::TypeKind::Optional(inner) => array_factors(checker, inner, factors),
+        ast::TypeKind::Named(name) => {
+            if let Some(elements) = packet_elements(checker, &name.name)
+                && elements > 1
+            {
+                factors.push(format!("{elements} (a `{}`)", name.name));
+            }
+        }
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => {}
+    }
+}
+
+/// `[T; N]` holds at most [`MAX_ARRAY_ELEMENTS`], nested arrays and packets counted
+/// together; reported once, at the outermost array that goes beyond.
 fn array_size(
     checker: &mut Checker<'_, '_>,
     ty: &ast::Type,
@@ -79,23 +163,74 @@ fn array_size(
         checker.push(diagnostic);
         return;
     }
-    let inner_elements = inline_elements(inner);
-    if inner_elements > u128::from(max) {
-        // Reported at the inner array already.
+    let Some(inner_elements) = inline_elements(checker, inner) else {
+        // Reported inside already.
         return;
-    }
-    let elements = inline_elements(ty);
+    };
+    let elements = u128::from(size.value).saturating_mul(inner_elements);
     if elements > u128::from(max) {
+        let mut factors = Vec::new();
+        array_factors(checker, ty, &mut factors);
         let diagnostic = checker
             .error(
                 Code::SizeLimit,
                 ty.span,
-                format!("an array holds at most {max} elements, nested arrays counted together"),
+                format!(
+                    "an array holds at most {max} elements, nested arrays and packets counted together"
+                ),
             )
-            .with_label(format!("{elements} elements"))
+            .with_label(format!("{} = {elements} elements", factors.join(" × ")))
             .with_help("use a list `[T]` for the outer level, which lives on the heap");
         checker.push(diagnostic);
     }
+}
+
+/// A packet holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields counted
+/// together.
+pub(super) fn packet_size(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
+    record_size(
+        checker,
+        &packet.fields,
+        packet.name.span,
+        &format!("packet `{}`", packet.name.name),
+    );
+}
+
+/// A configuration block holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields
+/// counted together.
+pub(super) fn configuration_size(
+    checker: &mut Checker<'_, '_>,
+    configuration: &ast::Configuration,
+) {
+    record_size(
+        checker,
+        &configuration.fields,
+        configuration.span,
+        "a configuration block",
+    );
+}
+
+fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
+    let max = MAX_RECORD_ELEMENTS;
+    let Some((total, Some((largest, most)))) = fields_elements(checker, fields) else {
+        // Empty, or reported inside already.
+        return;
+    };
+    if total <= u128::from(max) {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::SizeLimit,
+            span,
+            format!("{what} holds {total} elements inline, more than {max}"),
+        )
+        .with_label("its fields, their arrays and packets counted together")
+        .with_help(format!(
+            "the largest field, `{}`, holds {most}: hold such fields in lists (`[T]`), which live on the heap",
+            largest.name.name
+        ));
+    checker.push(diagnostic);
 }
 
 /// Rejects a zero size or count.
@@ -396,6 +531,7 @@ fn value_error(
             )),
         )),
         (Ty::List(inner), E::List(items)) => {
+            built_size(checker, expr);
             for item in items {
                 value_error(checker, item, inner)?;
             }
@@ -414,10 +550,13 @@ fn value_error(
                     .with_label("too many: the list is allocated when its value is built")
                     .with_help("start with a shorter list: a list grows at run time");
                 checker.push(diagnostic);
+            } else {
+                built_size(checker, expr);
             }
             value_error(checker, item, inner)
         }
         (Ty::Array(inner, length), E::List(items)) => {
+            built_size(checker, expr);
             if items.len() as u64 != *length {
                 return Err(ValueError::new(
                     expr.span,
@@ -446,6 +585,7 @@ fn value_error(
                     Some(format!("write `{length}`")),
                 ));
             }
+            built_size(checker, expr);
             value_error(checker, item, inner)
         }
         (Ty::Time, _) => Err(mismatch(
@@ -470,6 +610,84 @@ fn value_error(
         )),
         _ => Err(mismatch(expr, expected, None)),
     }
+}
+
+/// The elements a list or array value builds, its nested lists and arrays counted
+/// together (a repeat `[v; n]` builds `n` times what `v` builds, a literal the sum of
+/// its elements', any other value one); `None` when it, or a value in it, builds
+/// more than [`MAX_LIST_REPEAT`] (reported there).
+fn built_elements(expr: &ast::Expr) -> Option<u128> {
+    let total = match &expr.kind {
+        ast::ExprKind::Repeat(item, count) => {
+            if count.value > MAX_LIST_REPEAT {
+                return None;
+            }
+            u128::from(count.value).saturating_mul(built_elements(item)?)
+        }
+        ast::ExprKind::List(items) => items.iter().try_fold(0u128, |sum, item| {
+            Some(sum.saturating_add(built_elements(item)?))
+        })?,
+        _ => 1,
+    };
+    (total <= u128::from(MAX_LIST_REPEAT)).then_some(total)
+}
+
+/// A list or array value builds at most [`MAX_LIST_REPEAT`] elements, nested lists
+/// and arrays counted together (all are allocated when the value is built);
+/// reported once, at the outermost value that goes beyond.
+fn built_size(checker: &mut Checker<'_, '_>, expr: &ast::Expr) {
+    let max = MAX_LIST_REPEAT;
+    let (total, product) = match &expr.kind {
+        ast::ExprKind::Repeat(item, count) if count.value <= max => {
+            let Some(item_elements) = built_elements(item) else {
+                return;
+            };
+            // The counts of the repeats nested in the first position, outermost first.
+            let mut factors = vec![count.value.to_string()];
+            let mut inner = &**item;
+            while let ast::ExprKind::Repeat(next, count) = &inner.kind {
+                factors.push(count.value.to_string());
+                inner = next;
+            }
+            if let Some(rest) = built_elements(inner).filter(|n| *n > 1) {
+                factors.push(rest.to_string());
+            }
+            let total = u128::from(count.value).saturating_mul(item_elements);
+            (total, factors.join(" × "))
+        }
+        ast::ExprKind::List(items) => {
+            let Some(parts) = items
+                .iter()
+                .map(built_elements)
+                .collect::<Option<Vec<u128>>>()
+            else {
+                return;
+            };
+            let total = parts.iter().fold(0u128, |sum, n| sum.saturating_add(*n));
+            let mut terms: Vec<String> = parts.iter().take(3).map(u128::to_string).collect();
+            if parts.len() > 3 {
+                terms.push(format!("... ({} values)", parts.len()));
+            }
+            (total, terms.join(" + "))
+        }
+        _ => return,
+    };
+    if total <= u128::from(max) {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::SizeLimit,
+            expr.span,
+            format!(
+                "a value builds at most {max} elements, nested lists and arrays counted together"
+            ),
+        )
+        .with_label(format!(
+            "{product} = {total} elements, allocated when the value is built"
+        ))
+        .with_help("start with shorter lists: a list grows at run time");
+    checker.push(diagnostic);
 }
 
 /// A `-` applied to a negated value (`- -5`, `-(-5)`): a constant is written with at
