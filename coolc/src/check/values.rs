@@ -1,6 +1,7 @@
-//! Types and values: written types resolve, sizes are positive, defaults match their
-//! declared type, timing values are durations (or frequencies where a period is
-//! expected) and intervals are ordered.
+//! Types and values: written types resolve, sizes are positive and bounded (what a
+//! type holds inline, what a value builds), defaults match their declared type, timing
+//! values are durations (or frequencies where a period is expected) and intervals are
+//! ordered.
 
 use super::Checker;
 use super::model::Ty;
@@ -37,8 +38,9 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
     }
 }
 
-/// The longest list a repeat default `[value; n]` of a list `[T]` builds: like a
-/// queue's size, allocated when the component starts.
+/// The longest list a repeat default `[value; n]` of a list `[T]` builds, and the
+/// most elements a value builds in all, nested lists and arrays counted together:
+/// like a queue's size, allocated when the component starts.
 pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
 
 /// The most elements an array `[T; N]` holds, nested arrays and the packets it holds
