@@ -13,8 +13,8 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use crate::checked::Checked;
 use crate::checked::model::{
-    ComponentKind, CrateSpec, Duration, Instance, Link, Packet, Prim, TableValue, Ty, TypeDef,
-    Value, VarKind,
+    ComponentKind, CrateSpec, DefaultFrom, Duration, Instance, Link, Packet, Prim, TableValue, Ty,
+    TypeDef, Value, VarKind,
 };
 use crate::ident;
 use crate::ir::{self, RuntimeDep};
@@ -251,31 +251,22 @@ impl<'a> Lowerer<'a> {
     /// with `core::array::from_fn`: the standard library implements `Default` for
     /// arrays only up to 32 elements.
     fn default_of(&self, ty: &Ty) -> Option<ir::Code> {
-        match ty {
-            Ty::Bool
-            | Ty::Int(_)
-            | Ty::Float(_)
-            | Ty::Str
-            | Ty::Time
-            | Ty::Duration
-            | Ty::List(_)
-            | Ty::Optional(_)
-            // A ROS message type always has one (`lower::ros`).
-            | Ty::Ros { .. } => Some(default_code()),
-            Ty::Array(inner, n) => {
+        match ty.default_from() {
+            DefaultFrom::Always => Some(default_code()),
+            DefaultFrom::Elements(inner, n) => {
                 let item = self.default_of(inner)?;
-                Some(if *n <= 32 && item == default_code() {
+                Some(if n <= 32 && item == default_code() {
                     default_code()
                 } else {
                     array_from_fn(item)
                 })
             }
-            Ty::Enum(name) | Ty::Packet(name) => match self.checked.type_def(name) {
+            DefaultFrom::Definition(name) => match self.checked.type_def(name) {
                 Some(TypeDef::Enum(e)) if !e.variants.is_empty() => Some(default_code()),
                 Some(TypeDef::Packet(p)) if self.packet_defaultable(p) => Some(default_code()),
                 _ => None,
             },
-            Ty::Extern(_) | Ty::Unknown => None,
+            DefaultFrom::Never | DefaultFrom::Unknown => None,
         }
     }
 

@@ -258,6 +258,7 @@ fn bad_import(id: FileId, import: &ast::Import) -> Option<Diagnostic> {
     let written = Path::new(&import.path.value);
     let (message, label, help) = if written.has_root()
         || matches!(written.components().next(), Some(Component::Prefix(_)))
+        || absolute_anywhere(&import.path.value)
     {
         (
             format!("import path `{}` is absolute", import.path.value),
@@ -285,6 +286,16 @@ fn bad_import(id: FileId, import: &ast::Import) -> Option<Diagnostic> {
             .with_label(label)
             .with_help(help),
     )
+}
+
+/// A path absolute on some system, whichever reads it: a description is read on Unix
+/// and on Windows alike, so a drive (`C:\shared\x.cool`, or `C:x.cool`, relative to
+/// that drive's current directory) or a leading separator (`\\server\x.cool`,
+/// `\x.cool`) is refused on Unix too.
+fn absolute_anywhere(path: &str) -> bool {
+    let bytes = path.as_bytes();
+    let drive = bytes.len() >= 2 && bytes[0].is_ascii_alphabetic() && bytes[1] == b':';
+    drive || path.starts_with(['/', '\\'])
 }
 
 /// Reads the ROS 2 message types the loaded files import (`import ros`) and every type

@@ -42,15 +42,71 @@ pub(super) fn configuration_defaults(
                             ),
                         )
                         .with_label("no default value")
-                        .with_help(format!(
-                            "make the field optional, `{}: {ty}?`, which starts as `none` (an extern packet's type may lack `Default`; a packet needs a default on each field of such a type)",
-                            field.name.name
-                        ));
+                        .with_help(no_default_help(&field.name.name, &ty, &type_def));
                     checker.push(diagnostic);
                 }
             }
         }
     }
+}
+
+/// How to give configuration field `name` of type `ty` (which has no default) a
+/// value to start from, and why the type has none: make the field optional, or the
+/// field of a packet it holds that lacks one; an extern packet has none coolc can
+/// build, even when its Rust type implements `Default`.
+fn no_default_help<'t>(
+    name: &str,
+    ty: &Ty,
+    type_def: &dyn Fn(&str) -> Option<&'t super::model::TypeDef>,
+) -> String {
+    use super::model::TypeDef;
+    let mut help = format!("make the field optional, `{name}: {ty}?`, which starts as `none`");
+    // Down to what has no default: through arrays, and through the first field of a
+    // packet that has no default, the innermost such field kept.
+    let mut holder: Option<(&str, &str, &Ty)> = None;
+    let mut current = ty;
+    let mut visited: Vec<&str> = Vec::new();
+    let cause = loop {
+        let name = match current {
+            Ty::Array(inner, _) => {
+                current = inner;
+                continue;
+            }
+            Ty::Extern(name) | Ty::Enum(name) | Ty::Packet(name) => name,
+            _ => break None,
+        };
+        match type_def(name) {
+            Some(TypeDef::Packet(packet)) if !visited.contains(&packet.name.as_str()) => {
+                visited.push(&packet.name);
+                let lacking = packet.fields.iter().find(|field| {
+                    field.default.is_none() && !super::model::has_default(&field.ty, type_def)
+                });
+                let Some(field) = lacking else {
+                    break None;
+                };
+                holder = Some((&packet.name, &field.name, &field.ty));
+                current = &field.ty;
+            }
+            Some(definition @ (TypeDef::Extern(_) | TypeDef::Enum(_))) => break Some(definition),
+            _ => break None,
+        }
+    };
+    if let Some((packet, field, field_ty)) = holder {
+        help.push_str(&format!(
+            ", or make field `{field}` of packet `{packet}` optional (`{field}: {field_ty}?`)"
+        ));
+    }
+    match cause {
+        Some(TypeDef::Extern(def)) => help.push_str(&format!(
+            ": extern packet `{}` has no default coolc can build, even when `{}` implements `Default` (coolc cannot see another crate's types)",
+            def.name, def.rust_path
+        )),
+        Some(TypeDef::Enum(def)) => {
+            help.push_str(&format!(": enum `{}` has no variant to start from", def.name));
+        }
+        _ => {}
+    }
+    help
 }
 
 /// The longest module name of a component (its `snake_case` name), in bytes: the
@@ -101,6 +157,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
                 for field in &configuration.fields {
                     values::field(checker, field);
                 }
+                values::configuration_size(checker, configuration);
             }
             ast::Member::Variable(variable) => self::variable(checker, component, variable),
             ast::Member::Input(input) => self::input(checker, input),

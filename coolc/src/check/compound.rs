@@ -222,9 +222,7 @@ fn instance(
                         name = override_.name.name,
                         component = instance.component.name,
                     );
-                    for ty in [*field, var_ty] {
-                        values::value_noted(checker, &override_.value, ty, &note);
-                    }
+                    values::value_of_each(checker, &override_.value, &[*field, var_ty], &note);
                 } else {
                     values::value(checker, &override_.value, expected);
                 }

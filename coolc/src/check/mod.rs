@@ -74,6 +74,7 @@ pub fn check(
         file: FileId(0),
         incomplete: false,
         rules: BTreeMap::new(),
+        packet_elements: BTreeMap::new(),
     };
     for file in files {
         checker.file = file.id;
@@ -116,6 +117,9 @@ pub(crate) struct Checker<'a, 'd> {
     pub(crate) incomplete: bool,
     /// The `when` conditions typed so far.
     pub(crate) rules: BTreeMap<(FileId, Span), Typed>,
+    /// The elements each packet counted so far holds inline (`None`: something in it
+    /// is refused for its size already), by name.
+    pub(crate) packet_elements: BTreeMap<String, Option<u128>>,
 }
 
 impl Checker<'_, '_> {
@@ -136,6 +140,7 @@ impl Checker<'_, '_> {
                     values::field(self, field);
                 }
                 values::recursive_packet(self, packet);
+                values::packet_size(self, packet);
             }
             ast::Item::Enum(def) => {
                 names::type_name(self, &def.name);

@@ -1,6 +1,7 @@
-//! Types and values: written types resolve, sizes are positive, defaults match their
-//! declared type, timing values are durations (or frequencies where a period is
-//! expected) and intervals are ordered.
+//! Types and values: written types resolve, sizes are positive and bounded (what a
+//! type holds inline, what a value builds), defaults match their declared type, timing
+//! values are durations (or frequencies where a period is expected) and intervals are
+//! ordered.
 
 use super::Checker;
 use super::model::Ty;
@@ -37,29 +38,114 @@ pub(super) fn ty(checker: &mut Checker<'_, '_>, ty: &ast::Type) {
     }
 }
 
-/// The longest list a repeat default `[value; n]` of a list `[T]` builds: like a
-/// queue's size, allocated when the component starts.
+/// The longest list a repeat default `[value; n]` of a list `[T]` builds, and the
+/// most elements a value builds in all, nested lists and arrays counted together:
+/// like a queue's size, allocated when the component starts.
 pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
 
-/// The most elements an array `[T; N]` holds, nested arrays counted together
-/// (`[[T; A]; B]` holds `A * B`): an array lives inline in its packet, on the
-/// stack of whoever builds one.
+/// The most elements an array `[T; N]` holds, nested arrays and the packets it holds
+/// counted together (`[[T; A]; B]` holds `A * B`, `[P; N]` holds `N` times what a
+/// `P` holds): an array lives inline in its packet, on the stack of whoever builds
+/// one.
 pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
 
-/// The elements an array type holds inline: the product of its nested lengths
-/// (through optionals; a list is a heap allocation and counts one).
-fn inline_elements(ty: &ast::Type) -> u128 {
+/// The most elements a packet or a configuration block holds inline, its fields'
+/// arrays and packets counted together: like a queue's size and a list's repeat
+/// count, at most 2^20.
+pub(crate) const MAX_RECORD_ELEMENTS: u64 = super::MAX_QUEUE_SIZE;
+
+/// The elements a value of `ty` holds inline: the product of its nested array
+/// lengths, a packet counting what its fields hold (through optionals; a list is a
+/// heap allocation and counts one, as does any other type). `None` when something
+/// in it is refused for its size already (an array or a packet beyond its bound),
+/// so nothing holding it is reported again.
+fn inline_elements(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> Option<u128> {
     match &ty.kind {
         ast::TypeKind::Array(inner, size) => {
-            u128::from(size.value).saturating_mul(inline_elements(inner))
+            if size.value > MAX_ARRAY_ELEMENTS {
+                return None;
+            }
+            let total = u128::from(size.value).saturating_mul(inline_elements(checker, inner)?);
+            (total <= u128::from(MAX_ARRAY_ELEMENTS)).then_some(total)
         }
-        ast::TypeKind::Optional(inner) => inline_elements(inner),
-        ast::TypeKind::Prim(_) | ast::TypeKind::Named(_) | ast::TypeKind::List(_) => 1,
+        ast::TypeKind::Optional(inner) => inline_elements(checker, inner),
+        ast::TypeKind::Named(name) => packet_elements(checker, &name.name),
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => Some(1),
     }
 }
 
-/// `[T; N]` holds at most [`MAX_ARRAY_ELEMENTS`], nested arrays counted together;
-/// reported once, at the outermost array that goes beyond.
+/// The packet named `name`, if a packet has that name.
+fn packet_def<'a>(checker: &Checker<'a, '_>, name: &str) -> Option<&'a ast::Packet> {
+    let model = checker.model;
+    let def = model.symbols.defs.get(name)?;
+    match model
+        .files
+        .get(def.file.0 as usize)
+        .and_then(|file| file.items.get(def.item))
+    {
+        Some(ast::Item::Packet(packet)) => Some(packet),
+        _ => None,
+    }
+}
+
+/// The elements packet `name` holds inline (at least one), counted once per packet;
+/// any other type counts one.
+fn packet_elements(checker: &mut Checker<'_, '_>, name: &str) -> Option<u128> {
+    if let Some(known) = checker.packet_elements.get(name) {
+        return *known;
+    }
+    let Some(packet) = packet_def(checker, name) else {
+        return Some(1);
+    };
+    // A packet holding itself by value is an error of its own: it counts one inside.
+    checker.packet_elements.insert(name.to_owned(), Some(1));
+    let total = fields_elements(checker, &packet.fields)
+        .map(|(total, _)| total.max(1))
+        .filter(|total| *total <= u128::from(MAX_RECORD_ELEMENTS));
+    checker.packet_elements.insert(name.to_owned(), total);
+    total
+}
+
+/// The elements `fields` hold inline together, and the field holding the most with
+/// its count; `None` when a field is refused for its size already.
+fn fields_elements<'f>(
+    checker: &mut Checker<'_, '_>,
+    fields: &'f [ast::Field],
+) -> Option<(u128, Option<(&'f ast::Field, u128)>)> {
+    let mut total = 0u128;
+    let mut largest: Option<(&ast::Field, u128)> = None;
+    for field in fields {
+        let elements = inline_elements(checker, &field.ty)?;
+        total = total.saturating_add(elements);
+        if largest.is_none_or(|(_, most)| elements > most) {
+            largest = Some((field, elements));
+        }
+    }
+    Some((total, largest))
+}
+
+/// The factors of what an array type holds, outermost first, for a message:
+/// `[[Row; 4]; 8]` is 8 × 4 × 65536 (a `Row`).
+fn array_factors(checker: &mut Checker<'_, '_>, ty: &ast::Type, factors: &mut Vec<String>) {
+    match &ty.kind {
+        ast::TypeKind::Array(inner, size) => {
+            factors.push(size.value.to_string());
+            array_factors(checker, inner, factors);
+        }
+        ast::TypeKind::Optional(inner) => array_factors(checker, inner, factors),
+        ast::TypeKind::Named(name) => {
+            if let Some(elements) = packet_elements(checker, &name.name)
+                && elements > 1
+            {
+                factors.push(format!("{elements} (a `{}`)", name.name));
+            }
+        }
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => {}
+    }
+}
+
+/// `[T; N]` holds at most [`MAX_ARRAY_ELEMENTS`], nested arrays and packets counted
+/// together; reported once, at the outermost array that goes beyond.
 fn array_size(
     checker: &mut Checker<'_, '_>,
     ty: &ast::Type,
@@ -79,23 +165,74 @@ fn array_size(
         checker.push(diagnostic);
         return;
     }
-    let inner_elements = inline_elements(inner);
-    if inner_elements > u128::from(max) {
-        // Reported at the inner array already.
+    let Some(inner_elements) = inline_elements(checker, inner) else {
+        // Reported inside already.
         return;
-    }
-    let elements = inline_elements(ty);
+    };
+    let elements = u128::from(size.value).saturating_mul(inner_elements);
     if elements > u128::from(max) {
+        let mut factors = Vec::new();
+        array_factors(checker, ty, &mut factors);
         let diagnostic = checker
             .error(
                 Code::SizeLimit,
                 ty.span,
-                format!("an array holds at most {max} elements, nested arrays counted together"),
+                format!(
+                    "an array holds at most {max} elements, nested arrays and packets counted together"
+                ),
             )
-            .with_label(format!("{elements} elements"))
+            .with_label(format!("{} = {elements} elements", factors.join(" × ")))
             .with_help("use a list `[T]` for the outer level, which lives on the heap");
         checker.push(diagnostic);
     }
+}
+
+/// A packet holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields counted
+/// together.
+pub(super) fn packet_size(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
+    record_size(
+        checker,
+        &packet.fields,
+        packet.name.span,
+        &format!("packet `{}`", packet.name.name),
+    );
+}
+
+/// A configuration block holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields
+/// counted together.
+pub(super) fn configuration_size(
+    checker: &mut Checker<'_, '_>,
+    configuration: &ast::Configuration,
+) {
+    record_size(
+        checker,
+        &configuration.fields,
+        configuration.span,
+        "a configuration block",
+    );
+}
+
+fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
+    let max = MAX_RECORD_ELEMENTS;
+    let Some((total, Some((largest, most)))) = fields_elements(checker, fields) else {
+        // Empty, or reported inside already.
+        return;
+    };
+    if total <= u128::from(max) {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::SizeLimit,
+            span,
+            format!("{what} holds {total} elements inline, more than {max}"),
+        )
+        .with_label("its fields, their arrays and packets counted together")
+        .with_help(format!(
+            "the largest field, `{}`, holds {most}: hold such fields in lists (`[T]`), which live on the heap",
+            largest.name.name
+        ));
+    checker.push(diagnostic);
 }
 
 /// Rejects a zero size or count.
@@ -231,43 +368,74 @@ fn packet_type(ty: &syn::Type, depth: usize) -> Result<(), String> {
 
 /// Checks that `expr` is a literal of type `expected`.
 pub(super) fn value(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &Ty) {
-    if let Err((span, message, help)) = value_error(checker, expr, expected) {
-        let mut diagnostic = checker
-            .error(Code::TypeMismatch, span, message)
-            .with_label(label(expr, expected));
-        if let Some(help) = help {
-            diagnostic = diagnostic.with_help(help);
-        }
+    if let Err(error) = value_error(checker, expr, expected) {
+        let diagnostic = error.diagnostic(checker);
         checker.push(diagnostic);
     }
 }
 
-/// Like [`value`], with `note` as the help of the error (why `expected` is asked).
-pub(super) fn value_noted(
+/// Like [`value`], with `note` as the help of the error (why `expected` is asked),
+/// for a value that must be of each of `expected`: the first type it does not fit
+/// is reported, once.
+pub(super) fn value_of_each(
     checker: &mut Checker<'_, '_>,
     expr: &ast::Expr,
-    expected: &Ty,
+    expected: &[&Ty],
     note: &str,
 ) {
-    if let Err((span, message, _)) = value_error(checker, expr, expected) {
-        let diagnostic = checker
-            .error(Code::TypeMismatch, span, message)
-            .with_label(label(expr, expected))
-            .with_help(note);
-        checker.push(diagnostic);
+    let before = checker.diagnostics.len();
+    for ty in expected {
+        let seen = checker.diagnostics.len();
+        let result = value_error(checker, expr, ty);
+        // What a check reports on the way (a repeat count, a size) an earlier type's
+        // check may have reported already.
+        let mut index = seen;
+        while index < checker.diagnostics.len() {
+            if checker.diagnostics[before..seen].contains(&checker.diagnostics[index]) {
+                checker.diagnostics.remove(index);
+            } else {
+                index += 1;
+            }
+        }
+        if let Err(mut error) = result {
+            error.help = Some(note.to_owned());
+            let diagnostic = error.diagnostic(checker);
+            checker.push(diagnostic);
+            return;
+        }
     }
 }
 
-/// The label of a value refused for `expected`.
-fn label(expr: &ast::Expr, expected: &Ty) -> String {
-    if double_negation(expr).is_some() {
-        "more than one sign".to_owned()
-    } else {
-        format!("expected `{expected}`")
-    }
+/// A value refused for its type: where, why, and what to do. Each is said of the
+/// value refused, an element of a list as much as a whole value.
+struct ValueError {
+    span: Span,
+    message: String,
+    label: String,
+    help: Option<String>,
 }
 
-type ValueError = (Span, String, Option<String>);
+impl ValueError {
+    /// A value refused for `expected`, the type asked of it where it stands.
+    fn new(span: Span, message: impl Into<String>, expected: &Ty, help: Option<String>) -> Self {
+        ValueError {
+            span,
+            message: message.into(),
+            label: format!("expected `{expected}`"),
+            help,
+        }
+    }
+
+    fn diagnostic(self, checker: &Checker<'_, '_>) -> crate::diagnostics::Diagnostic {
+        let mut diagnostic = checker
+            .error(Code::TypeMismatch, self.span, self.message)
+            .with_label(self.label);
+        if let Some(help) = self.help {
+            diagnostic = diagnostic.with_help(help);
+        }
+        diagnostic
+    }
+}
 
 pub(super) fn describe(expr: &ast::Expr) -> &'static str {
     match &expr.kind {
@@ -287,12 +455,13 @@ pub(super) fn describe(expr: &ast::Expr) -> &'static str {
 }
 
 fn mismatch(expr: &ast::Expr, expected: &Ty, help: Option<String>) -> ValueError {
-    (
+    ValueError::new(
         expr.span,
         format!(
             "expected a value of type `{expected}`, found {}",
             describe(expr)
         ),
+        expected,
         help,
     )
 }
@@ -303,6 +472,7 @@ fn value_error(
     expected: &Ty,
 ) -> Result<(), ValueError> {
     use ast::ExprKind as E;
+    let refused = |message: String| ValueError::new(expr.span, message, expected, None);
     if let Some(error) = double_negation(expr) {
         return Err(error);
     }
@@ -311,26 +481,18 @@ fn value_error(
         (Ty::Optional(_), E::None) => Ok(()),
         (Ty::Optional(inner), _) => value_error(checker, expr, inner),
         (Ty::Bool, E::Bool(_)) | (Ty::Str, E::Str(_)) | (Ty::Duration, E::Duration(_)) => Ok(()),
-        (Ty::Float(prim), E::Float(value)) => {
-            float_fits(*prim, *value).map_err(|message| (expr.span, message, None))
-        }
+        (Ty::Float(prim), E::Float(value)) => float_fits(*prim, *value).map_err(refused),
         (Ty::Float(prim), E::Unary(ast::UnaryOp::Neg, inner)) => match inner.kind {
-            E::Float(value) => {
-                float_fits(*prim, -value).map_err(|message| (expr.span, message, None))
-            }
+            E::Float(value) => float_fits(*prim, -value).map_err(refused),
             // An integer literal is a whole float, within any float's range.
             E::Int(_) => Ok(()),
             _ => Err(mismatch(expr, expected, None)),
         },
         // An integer literal is a whole float: `max_speed: f64 = 1` means `1.0`.
         (Ty::Float(_), E::Int(_)) => Ok(()),
-        (Ty::Int(prim), E::Int(n)) => {
-            int_fits(*prim, i128::from(*n)).map_err(|message| (expr.span, message, None))
-        }
+        (Ty::Int(prim), E::Int(n)) => int_fits(*prim, i128::from(*n)).map_err(refused),
         (Ty::Int(prim), E::Unary(ast::UnaryOp::Neg, inner)) => match inner.kind {
-            E::Int(n) => {
-                int_fits(*prim, -i128::from(n)).map_err(|message| (expr.span, message, None))
-            }
+            E::Int(n) => int_fits(*prim, -i128::from(n)).map_err(refused),
             _ => Err(mismatch(expr, expected, None)),
         },
         (Ty::Int(_), E::Float(_)) => Err(mismatch(
@@ -371,6 +533,7 @@ fn value_error(
             )),
         )),
         (Ty::List(inner), E::List(items)) => {
+            built_size(checker, expr);
             for item in items {
                 value_error(checker, item, inner)?;
             }
@@ -389,17 +552,21 @@ fn value_error(
                     .with_label("too many: the list is allocated when its value is built")
                     .with_help("start with a shorter list: a list grows at run time");
                 checker.push(diagnostic);
+            } else {
+                built_size(checker, expr);
             }
             value_error(checker, item, inner)
         }
         (Ty::Array(inner, length), E::List(items)) => {
+            built_size(checker, expr);
             if items.len() as u64 != *length {
-                return Err((
+                return Err(ValueError::new(
                     expr.span,
                     format!(
                         "expected {length} elements for `{expected}`, found {}",
                         items.len()
                     ),
+                    expected,
                     Some(format!("write `[value; {length}]` to repeat one value")),
                 ));
             }
@@ -410,15 +577,17 @@ fn value_error(
         }
         (Ty::Array(inner, length), E::Repeat(item, count)) => {
             if count.value != *length {
-                return Err((
+                return Err(ValueError::new(
                     count.span,
                     format!(
                         "expected {length} elements for `{expected}`, found {}",
                         count.value
                     ),
+                    expected,
                     Some(format!("write `{length}`")),
                 ));
             }
+            built_size(checker, expr);
             value_error(checker, item, inner)
         }
         (Ty::Time, _) => Err(mismatch(
@@ -445,9 +614,87 @@ fn value_error(
     }
 }
 
+/// The elements a list or array value builds, its nested lists and arrays counted
+/// together (a repeat `[v; n]` builds `n` times what `v` builds, a literal the sum of
+/// its elements', any other value one); `None` when it, or a value in it, builds
+/// more than [`MAX_LIST_REPEAT`] (reported there).
+fn built_elements(expr: &ast::Expr) -> Option<u128> {
+    let total = match &expr.kind {
+        ast::ExprKind::Repeat(item, count) => {
+            if count.value > MAX_LIST_REPEAT {
+                return None;
+            }
+            u128::from(count.value).saturating_mul(built_elements(item)?)
+        }
+        ast::ExprKind::List(items) => items.iter().try_fold(0u128, |sum, item| {
+            Some(sum.saturating_add(built_elements(item)?))
+        })?,
+        _ => 1,
+    };
+    (total <= u128::from(MAX_LIST_REPEAT)).then_some(total)
+}
+
+/// A list or array value builds at most [`MAX_LIST_REPEAT`] elements, nested lists
+/// and arrays counted together (all are allocated when the value is built);
+/// reported once, at the outermost value that goes beyond.
+fn built_size(checker: &mut Checker<'_, '_>, expr: &ast::Expr) {
+    let max = MAX_LIST_REPEAT;
+    let (total, product) = match &expr.kind {
+        ast::ExprKind::Repeat(item, count) if count.value <= max => {
+            let Some(item_elements) = built_elements(item) else {
+                return;
+            };
+            // The counts of the repeats nested in the first position, outermost first.
+            let mut factors = vec![count.value.to_string()];
+            let mut inner = &**item;
+            while let ast::ExprKind::Repeat(next, count) = &inner.kind {
+                factors.push(count.value.to_string());
+                inner = next;
+            }
+            if let Some(rest) = built_elements(inner).filter(|n| *n > 1) {
+                factors.push(rest.to_string());
+            }
+            let total = u128::from(count.value).saturating_mul(item_elements);
+            (total, factors.join(" × "))
+        }
+        ast::ExprKind::List(items) => {
+            let Some(parts) = items
+                .iter()
+                .map(built_elements)
+                .collect::<Option<Vec<u128>>>()
+            else {
+                return;
+            };
+            let total = parts.iter().fold(0u128, |sum, n| sum.saturating_add(*n));
+            let mut terms: Vec<String> = parts.iter().take(3).map(u128::to_string).collect();
+            if parts.len() > 3 {
+                terms.push(format!("... ({} values)", parts.len()));
+            }
+            (total, terms.join(" + "))
+        }
+        _ => return,
+    };
+    if total <= u128::from(max) {
+        return;
+    }
+    let diagnostic = checker
+        .error(
+            Code::SizeLimit,
+            expr.span,
+            format!(
+                "a value builds at most {max} elements, nested lists and arrays counted together"
+            ),
+        )
+        .with_label(format!(
+            "{product} = {total} elements, allocated when the value is built"
+        ))
+        .with_help("start with shorter lists: a list grows at run time");
+    checker.push(diagnostic);
+}
+
 /// A `-` applied to a negated value (`- -5`, `-(-5)`): a constant is written with at
 /// most one sign.
-pub(super) fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
+fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
     let ast::ExprKind::Unary(ast::UnaryOp::Neg, inner) = &expr.kind else {
         return None;
     };
@@ -470,11 +717,12 @@ pub(super) fn double_negation(expr: &ast::Expr) -> Option<ValueError> {
         Some(text) => format!("write `-{text}`"),
         None => "write the value with at most one `-`".to_owned(),
     };
-    Some((
-        expr.span,
-        format!("a constant takes at most one `-`, found {negations} in a row"),
-        Some(help),
-    ))
+    Some(ValueError {
+        span: expr.span,
+        message: format!("a constant takes at most one `-`, found {negations} in a row"),
+        label: "more than one sign".to_owned(),
+        help: Some(help),
+    })
 }
 
 /// A float literal `rustc` accepts for `prim`: an `f32` literal that rounds to
@@ -511,6 +759,15 @@ fn int_fits(prim: ast::Prim, value: i128) -> Result<(), String> {
     Ok(())
 }
 
+/// The highest frequency a period can be (its period, 0.5ns, rounds to 1ns), as
+/// written in a description.
+pub(crate) const HIGHEST_FREQUENCY: &str = "2000MHz";
+
+/// About the lowest frequency a period can be (its period, about 1.8416e19ns, is
+/// within 64 bits of nanoseconds; the lowest is 5.421010862427522e-11Hz), as written
+/// in a description: a frequency takes no exponent.
+pub(crate) const LOWEST_FREQUENCY: &str = "0.0000000000543Hz";
+
 /// A period: a duration or frequency, not zero; returns it in nanoseconds.
 pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<f64> {
     match expr.kind {
@@ -531,11 +788,13 @@ pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<
             #[allow(clippy::cast_precision_loss)] // A bound, compared as a float.
             let longest = u64::MAX as f64;
             let refused = if nanos.round() < 1.0 {
-                Some("shorter than 1ns (the highest frequency is 2GHz)")
+                Some(format!(
+                    "shorter than 1ns (the highest frequency is `{HIGHEST_FREQUENCY}`)"
+                ))
             } else if nanos >= longest {
-                Some(
-                    "longer than 18446744073709551615ns, about 584 years (the lowest frequency is 5.43e-11Hz)",
-                )
+                Some(format!(
+                    "longer than 18446744073709551615ns, about 584 years (the lowest frequency is about `{LOWEST_FREQUENCY}`)"
+                ))
             } else {
                 None
             };
@@ -544,7 +803,11 @@ pub(super) fn period(checker: &mut Checker<'_, '_>, expr: &ast::Expr) -> Option<
                     .error(
                         Code::SizeLimit,
                         expr.span,
-                        format!("the period of `{hertz}Hz` is {range}"),
+                        if hertz.is_finite() {
+                            format!("the period of `{hertz}Hz` is {range}")
+                        } else {
+                            format!("the period of this frequency is {range}")
+                        },
                     )
                     .with_label("out of range: the runtime counts a period in whole nanoseconds, in 64 bits")
                     .with_help("give a period from 1ns to about 584 years, such as `10ms` or `100Hz`");
@@ -747,5 +1010,38 @@ fn contains_by_value(
             chain.pop();
             false
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::{HIGHEST_FREQUENCY, LOWEST_FREQUENCY};
+
+    /// The codes of the diagnostics of a component whose period is `period`.
+    fn period_codes(period: &str) -> Vec<&'static str> {
+        let text = format!(
+            "atomic A {{ timing {{ period {period}; }} automaton {{ initial s; state s {{ periodic; }} }} }}\n"
+        );
+        let analysis = crate::analyze(&["a.cool"], &|_: &Path| Ok(text.clone()));
+        analysis
+            .diagnostics
+            .iter()
+            .map(|d| d.code.as_str())
+            .collect()
+    }
+
+    /// The frequencies the refusal names as the bounds are written as a description
+    /// writes them, and are the bounds: accepted, and refused just beyond.
+    #[test]
+    fn the_frequency_bounds_named_are_valid_and_accepted() {
+        assert_eq!(period_codes(HIGHEST_FREQUENCY), Vec::<&str>::new());
+        assert_eq!(period_codes(LOWEST_FREQUENCY), Vec::<&str>::new());
+        assert_eq!(period_codes("2001MHz"), ["coolc::check::size_limit"]);
+        assert_eq!(
+            period_codes("0.0000000000542Hz"),
+            ["coolc::check::size_limit"]
+        );
     }
 }

@@ -51,8 +51,36 @@ const PRIMS: &[&str] = &[
 ];
 /// Array lengths around the 32 where serde and `Default` stop.
 const LENGTHS: &[u64] = &[1, 3, 32, 33, 40, 72];
+/// The most elements an array holds inline, nested arrays and packets counted
+/// together (`docs/language.md`, "Types").
+const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
+/// The most elements a packet or a configuration block holds inline.
+const MAX_RECORD_ELEMENTS: u64 = 1 << 20;
 
 impl Ty {
+    /// The elements a value of the type holds inline, `sizes` those of the packets.
+    fn elements(&self, sizes: &[u64]) -> u64 {
+        match self {
+            Ty::Packet(i) => sizes[*i],
+            Ty::Array(inner, n) => n.saturating_mul(inner.elements(sizes)),
+            Ty::Optional(inner) => inner.elements(sizes),
+            Ty::Prim(_) | Ty::Enum(_) | Ty::List(_) => 1,
+        }
+    }
+
+    /// The type, or a list of it when it would take `elements` beyond `max` (a list
+    /// lives on the heap).
+    fn within(self, sizes: &[u64], elements: &mut u64, max: u64) -> Ty {
+        let own = self.elements(sizes);
+        if elements.saturating_add(own) > max {
+            *elements += 1;
+            Ty::List(Box::new(self))
+        } else {
+            *elements += own;
+            self
+        }
+    }
+
     fn text(&self) -> String {
         match self {
             Ty::Prim(p) => (*p).to_owned(),
@@ -99,20 +127,27 @@ impl Ty {
     }
 }
 
-/// A random type over the packets `0..packets` and enums `0..enums` (`depth` bounds
-/// the nesting).
-fn ty(rng: &mut Rng, packets: usize, enums: usize, depth: usize) -> Ty {
+/// A random type over the packets of `sizes` (the elements each holds) and enums
+/// `0..enums` (`depth` bounds the nesting); an array that would hold more than
+/// `MAX_ARRAY_ELEMENTS` is a list.
+fn ty(rng: &mut Rng, sizes: &[u64], enums: usize, depth: usize) -> Ty {
+    let packets = sizes.len();
     let choice = rng.below(if depth == 0 { 3 } else { 7 });
     match choice {
         1 if packets > 0 => Ty::Packet(rng.below(packets)),
         2 if enums > 0 => Ty::Enum(rng.below(enums)),
-        3 | 4 => Ty::Array(
-            Box::new(ty(rng, packets, enums, depth - 1)),
-            *rng.pick(LENGTHS),
-        ),
-        5 => Ty::List(Box::new(ty(rng, packets, enums, depth - 1))),
+        3 | 4 => {
+            let inner = ty(rng, sizes, enums, depth - 1);
+            let n = *rng.pick(LENGTHS);
+            if n.saturating_mul(inner.elements(sizes)) > MAX_ARRAY_ELEMENTS {
+                Ty::List(Box::new(inner))
+            } else {
+                Ty::Array(Box::new(inner), n)
+            }
+        }
+        5 => Ty::List(Box::new(ty(rng, sizes, enums, depth - 1))),
         6 => {
-            let inner = ty(rng, packets, enums, depth - 1);
+            let inner = ty(rng, sizes, enums, depth - 1);
             if matches!(inner, Ty::Optional(_)) {
                 inner
             } else {
@@ -149,10 +184,14 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
         .unwrap();
     }
     let packets = 2 + rng.below(4);
+    // The elements each packet holds inline.
+    let mut sizes: Vec<u64> = Vec::new();
     for p in 0..packets {
         let mut fields = Vec::new();
+        let mut elements = 0;
         for f in 0..1 + rng.below(5) {
-            let field_ty = ty(&mut rng, p, enums, 2);
+            let field_ty =
+                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut elements, MAX_RECORD_ELEMENTS);
             let default = if rng.chance(50) {
                 field_ty.literal(&mut rng)
             } else {
@@ -170,6 +209,7 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
             fields.join("\n")
         )
         .unwrap();
+        sizes.push(elements.max(1));
     }
     let converters = 1 + rng.below(2);
     let mut converter_ends = Vec::new();
@@ -190,8 +230,10 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
     for a in 0..2 + rng.below(3) {
         let mut members = Vec::new();
         let mut config = Vec::new();
+        let mut elements = 0;
         for c in 0..rng.below(3) {
-            let field_ty = ty(&mut rng, packets, enums, 2);
+            let field_ty =
+                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut elements, MAX_RECORD_ELEMENTS);
             let default = field_ty
                 .literal(&mut rng)
                 .map(|d| format!(" = {d}"))
@@ -207,7 +249,7 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
         let mut observables = Vec::new();
         for v in 0..rng.below(4) {
             let kind = *rng.pick(&["observable", "controllable", "local"]);
-            let var_ty = ty(&mut rng, packets, enums, 2);
+            let var_ty = ty(&mut rng, &sizes, enums, 2);
             let default = if rng.chance(50) {
                 var_ty.literal(&mut rng)
             } else {

@@ -17,7 +17,8 @@
 use std::collections::BTreeMap;
 
 use super::types::{
-    Declaration, Declared, InputKind, OutputKind, Port, PortKind, Range, Tuning, Ty, Typed,
+    Declaration, Declared, DefaultFrom, InputKind, OutputKind, Port, PortKind, Range, Tuning, Ty,
+    Typed,
 };
 use crate::ast::{self, FileId, Span};
 use crate::ros::{Message, TypeHash, TypeName};
@@ -817,19 +818,10 @@ pub fn has_default<'t>(ty: &Ty, type_def: &dyn Fn(&str) -> Option<&'t TypeDef>) 
         type_def: &dyn Fn(&str) -> Option<&'t TypeDef>,
         visiting: &mut Vec<String>,
     ) -> bool {
-        match ty {
-            Ty::Bool
-            | Ty::Int(_)
-            | Ty::Float(_)
-            | Ty::Str
-            | Ty::Time
-            | Ty::Duration
-            | Ty::List(_)
-            | Ty::Optional(_)
-            // A ROS message type always has one (`lower::ros`).
-            | Ty::Ros { .. } => true,
-            Ty::Array(inner, _) => walk(inner, type_def, visiting),
-            Ty::Enum(name) | Ty::Packet(name) => match type_def(name) {
+        match ty.default_from() {
+            DefaultFrom::Always => true,
+            DefaultFrom::Elements(inner, _) => walk(inner, type_def, visiting),
+            DefaultFrom::Definition(name) => match type_def(name) {
                 Some(TypeDef::Enum(e)) => !e.variants.is_empty(),
                 Some(TypeDef::Packet(p)) => {
                     // A packet that holds itself by value is an error of its own.
@@ -849,8 +841,8 @@ pub fn has_default<'t>(ty: &Ty, type_def: &dyn Fn(&str) -> Option<&'t TypeDef>) 
                 // An unknown name is an error of its own: no follow-on error.
                 None => true,
             },
-            Ty::Extern(_) => false,
-            Ty::Unknown => true,
+            DefaultFrom::Never => false,
+            DefaultFrom::Unknown => true,
         }
     }
     walk(ty, type_def, &mut Vec::new())

@@ -57,6 +57,44 @@ impl Ty {
             _ => self == other,
         }
     }
+
+    /// Where the default value of the generated Rust type comes from: the one list
+    /// of the types that have one whatever they hold, which the checker
+    /// (`has_default`) and `lower` (`default_of`) both follow.
+    pub fn default_from(&self) -> DefaultFrom<'_> {
+        match self {
+            Ty::Bool
+            | Ty::Int(_)
+            | Ty::Float(_)
+            | Ty::Str
+            | Ty::Time
+            | Ty::Duration
+            | Ty::List(_)
+            | Ty::Optional(_)
+            // A ROS message type always has one (`lower::ros`).
+            | Ty::Ros { .. } => DefaultFrom::Always,
+            Ty::Array(inner, length) => DefaultFrom::Elements(inner, *length),
+            Ty::Enum(name) | Ty::Packet(name) => DefaultFrom::Definition(name),
+            // coolc cannot see another crate's type.
+            Ty::Extern(_) => DefaultFrom::Never,
+            Ty::Unknown => DefaultFrom::Unknown,
+        }
+    }
+}
+
+/// Where a type's default value comes from ([`Ty::default_from`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DefaultFrom<'t> {
+    /// The type implements `Default` whatever it holds.
+    Always,
+    /// An array `[T; N]`: from its element type's.
+    Elements(&'t Ty, u64),
+    /// An enum (its first variant) or a packet (its fields'), by name.
+    Definition(&'t str),
+    /// An extern packet: none coolc can build.
+    Never,
+    /// A name that did not resolve (already reported).
+    Unknown,
 }
 
 impl fmt::Display for Ty {
