@@ -533,7 +533,7 @@ fn value_error(
             )),
         )),
         (Ty::List(inner), E::List(items)) => {
-            built_size(checker, expr);
+            built_size(checker, expr, expected);
             for item in items {
                 value_error(checker, item, inner)?;
             }
@@ -553,12 +553,12 @@ fn value_error(
                     .with_help("start with a shorter list: a list grows at run time");
                 checker.push(diagnostic);
             } else {
-                built_size(checker, expr);
+                built_size(checker, expr, expected);
             }
             value_error(checker, item, inner)
         }
         (Ty::Array(inner, length), E::List(items)) => {
-            built_size(checker, expr);
+            built_size(checker, expr, expected);
             if items.len() as u64 != *length {
                 return Err(ValueError::new(
                     expr.span,
@@ -587,7 +587,7 @@ fn value_error(
                     Some(format!("write `{length}`")),
                 ));
             }
-            built_size(checker, expr);
+            built_size(checker, expr, expected);
             value_error(checker, item, inner)
         }
         (Ty::Time, _) => Err(mismatch(
@@ -634,11 +634,35 @@ fn built_elements(expr: &ast::Expr) -> Option<u128> {
     (total <= u128::from(MAX_LIST_REPEAT)).then_some(total)
 }
 
+/// Whether `ty` holds an array type refused for its size ([`array_size`]): a value
+/// of it is not counted, the type's error being the one to fix.
+fn holds_refused_array(ty: &Ty) -> bool {
+    /// The elements an array type holds inline, through optionals.
+    fn inline(ty: &Ty) -> u128 {
+        match ty {
+            Ty::Array(inner, length) => u128::from(*length).saturating_mul(inline(inner)),
+            Ty::Optional(inner) => inline(inner),
+            _ => 1,
+        }
+    }
+    match ty {
+        Ty::Array(inner, _) => {
+            inline(ty) > u128::from(MAX_ARRAY_ELEMENTS) || holds_refused_array(inner)
+        }
+        Ty::List(inner) | Ty::Optional(inner) => holds_refused_array(inner),
+        _ => false,
+    }
+}
+
 /// A list or array value builds at most [`MAX_LIST_REPEAT`] elements, nested lists
 /// and arrays counted together (all are allocated when the value is built);
-/// reported once, at the outermost value that goes beyond.
-fn built_size(checker: &mut Checker<'_, '_>, expr: &ast::Expr) {
+/// reported once, at the outermost value that goes beyond, and not for a value of
+/// a type refused for its size already.
+fn built_size(checker: &mut Checker<'_, '_>, expr: &ast::Expr, expected: &Ty) {
     let max = MAX_LIST_REPEAT;
+    if holds_refused_array(expected) {
+        return;
+    }
     let (total, product) = match &expr.kind {
         ast::ExprKind::Repeat(item, count) if count.value <= max => {
             let Some(item_elements) = built_elements(item) else {
