@@ -616,8 +616,8 @@ fn value_error(
 
 /// The elements a list or array value builds, its nested lists and arrays counted
 /// together (a repeat `[v; n]` builds `n` times what `v` builds, a literal the sum of
-/// its elements', any other value one); `None` when it, or a value in it, builds
-/// more than [`MAX_LIST_REPEAT`] (reported there).
+/// its elements' or one when empty, any other value one); `None` when it, or a value
+/// in it, builds more than [`MAX_LIST_REPEAT`] (reported there).
 fn built_elements(expr: &ast::Expr) -> Option<u128> {
     let total = match &expr.kind {
         ast::ExprKind::Repeat(item, count) => {
@@ -631,6 +631,9 @@ fn built_elements(expr: &ast::Expr) -> Option<u128> {
         })?,
         _ => 1,
     };
+    // An empty list still takes its place in the list holding it: `[[]; n]` builds
+    // `n` (empty) lists.
+    let total = total.max(1);
     (total <= u128::from(MAX_LIST_REPEAT)).then_some(total)
 }
 
