@@ -78,8 +78,12 @@ fn no_default_help<'t>(
         match type_def(name) {
             Some(TypeDef::Packet(packet)) if !visited.contains(&packet.name.as_str()) => {
                 visited.push(&packet.name);
+                // Not a field holding a packet walked through already: that is a
+                // packet holding itself, an error of its own.
                 let lacking = packet.fields.iter().find(|field| {
-                    field.default.is_none() && !super::model::has_default(&field.ty, type_def)
+                    field.default.is_none()
+                        && !held_packet(&field.ty).is_some_and(|held| visited.contains(&held))
+                        && !super::model::has_default(&field.ty, type_def)
                 });
                 let Some(field) = lacking else {
                     break None;
@@ -107,6 +111,15 @@ fn no_default_help<'t>(
         _ => {}
     }
     help
+}
+
+/// The packet a value of `ty` holds by value, through arrays.
+fn held_packet(ty: &Ty) -> Option<&str> {
+    match ty {
+        Ty::Array(inner, _) => held_packet(inner),
+        Ty::Packet(name) => Some(name),
+        _ => None,
+    }
 }
 
 /// The longest module name of a component (its `snake_case` name), in bytes: the

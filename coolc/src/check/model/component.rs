@@ -824,9 +824,10 @@ pub fn has_default<'t>(ty: &Ty, type_def: &dyn Fn(&str) -> Option<&'t TypeDef>) 
             DefaultFrom::Definition(name) => match type_def(name) {
                 Some(TypeDef::Enum(e)) => !e.variants.is_empty(),
                 Some(TypeDef::Packet(p)) => {
-                    // A packet that holds itself by value is an error of its own.
+                    // A packet that holds itself by value is an error of its own
+                    // (`recursive_packet`): no follow-on error.
                     if visiting.contains(&p.name) {
-                        return false;
+                        return true;
                     }
                     visiting.push(p.name.clone());
                     let result = p
