@@ -212,6 +212,7 @@ pub(super) fn component(checker: &mut Checker<'_, '_>, component: &ast::Componen
             | ast::Member::OnError(_) => {}
         }
     }
+    values::variables_size(checker, component);
     automaton::automata(checker, component);
     if component.kind == ComponentKind::Atomic {
         response::unmeasured_responses(checker, component);

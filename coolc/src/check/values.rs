@@ -49,9 +49,9 @@ pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
 /// one.
 pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
 
-/// The most elements a packet or a configuration block holds inline, its fields'
-/// arrays and packets counted together: like a queue's size and a list's repeat
-/// count, at most 2^20.
+/// The most elements a packet, a configuration block or a component's variables
+/// (together) hold inline, their arrays and packets counted together: like a
+/// queue's size and a list's repeat count, at most 2^20.
 pub(crate) const MAX_RECORD_ELEMENTS: u64 = super::MAX_QUEUE_SIZE;
 
 /// The elements a value of `ty` holds inline: the product of its nested array
@@ -194,7 +194,7 @@ pub(super) fn packet_size(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
         checker,
         &packet.fields,
         packet.name.span,
-        &format!("packet `{}`", packet.name.name),
+        &format!("packet `{}` holds", packet.name.name),
     );
 }
 
@@ -208,16 +208,73 @@ pub(super) fn configuration_size(
         checker,
         &configuration.fields,
         configuration.span,
-        "a configuration block",
+        "a configuration block holds",
+    );
+}
+
+/// A component's variables, held together in one record (its `Vars`, built with
+/// `Default` as a configuration block is), hold at most [`MAX_RECORD_ELEMENTS`]
+/// inline, counted together.
+pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Component) {
+    let mut total = 0u128;
+    let mut largest: Option<(&str, u128)> = None;
+    for member in &component.members {
+        let ast::Member::Variable(variable) = member else {
+            continue;
+        };
+        let Some(ty) = &variable.ty else {
+            continue;
+        };
+        let Some(elements) = inline_elements(checker, ty) else {
+            // Reported inside already.
+            return;
+        };
+        total = total.saturating_add(elements);
+        if largest.is_none_or(|(_, most)| elements > most) {
+            largest = Some((&variable.name.name, elements));
+        }
+    }
+    let Some(largest) = largest else {
+        return;
+    };
+    let what = format!("the variables of component `{}` hold", component.name.name);
+    record_refused(
+        checker,
+        total,
+        largest,
+        component.name.span,
+        &what,
+        "variable",
     );
 }
 
 fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
-    let max = MAX_RECORD_ELEMENTS;
     let Some((total, Some((largest, most)))) = fields_elements(checker, fields) else {
         // Empty, or reported inside already.
         return;
     };
+    record_refused(
+        checker,
+        total,
+        (&largest.name.name, most),
+        span,
+        what,
+        "field",
+    );
+}
+
+/// Reports `what` (a subject and its verb: `packet \`P\` holds`), holding `total`
+/// elements inline, if that is beyond [`MAX_RECORD_ELEMENTS`]; `largest` is its
+/// member holding the most.
+fn record_refused(
+    checker: &mut Checker<'_, '_>,
+    total: u128,
+    (largest, most): (&str, u128),
+    span: Span,
+    what: &str,
+    member: &str,
+) {
+    let max = MAX_RECORD_ELEMENTS;
     if total <= u128::from(max) {
         return;
     }
@@ -225,12 +282,11 @@ fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span,
         .error(
             Code::SizeLimit,
             span,
-            format!("{what} holds {total} elements inline, more than {max}"),
+            format!("{what} {total} elements inline, more than {max}"),
         )
-        .with_label("its fields, their arrays and packets counted together")
+        .with_label(format!("its {member}s, their arrays and packets counted together"))
         .with_help(format!(
-            "the largest field, `{}`, holds {most}: hold such fields in lists (`[T]`), which live on the heap",
-            largest.name.name
+            "the largest {member}, `{largest}`, holds {most}: hold such {member}s in lists (`[T]`), which live on the heap"
         ));
     checker.push(diagnostic);
 }
