@@ -133,7 +133,7 @@ impl Batch {
     }
 
     /// Append `packet`; on an error (it does not serialize, or its array alone would
-    /// be over the bound), the batch is as it was.
+    /// be over the bound), the batch holds the packets it held.
     fn push<T: Serialize>(&mut self, packet: &Outgoing<'_, T>) -> Result<(), String> {
         let start = self.json.len();
         self.json.push(if self.packets == 0 { b'[' } else { b',' });
