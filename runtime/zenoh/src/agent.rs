@@ -3,13 +3,13 @@
 //! another node asks ([`instantiate`]), bridges the ports the request names, runs them
 //! and exposes them like any other component of the node.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::marker::PhantomData;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use coolbot::port::ErasedInput;
 use coolbot::{
@@ -120,7 +120,8 @@ pub struct Instantiate {
     /// The node that asks, if the instance is to live only as long as that node: when
     /// its liveliness token goes (the node stopped, died or cannot be reached), the
     /// agent sends the instance and its bridges to `dead` (a proxy's instance: its
-    /// node builds it again, under a new name, when it needs it).
+    /// node builds it again, under a new name, when it needs it). A request whose
+    /// owner is lost by the time the agent serves it is refused.
     #[serde(default)]
     pub owner: Option<String>,
 }
@@ -446,8 +447,19 @@ pub const AGENT_QUEUE: usize = 16;
 /// and the thread then asks which owners still live.
 pub const GONE_QUEUE: usize = 256;
 
-/// How long the agent asks which nodes live, after a loss was dropped.
+/// How long the agent asks which nodes live, after a loss was dropped, or whether
+/// the owner of a request lives, before building it.
 const OWNERS_LOOKUP: Duration = Duration::from_secs(1);
+
+/// The shortest time between two of the agent's re-checks of its owners (after a
+/// dropped loss): however many requests come, one runs within this time (and the
+/// serving of the request at hand) of the loss being dropped.
+const OWNERS_RECHECK: Duration = Duration::from_millis(100);
+
+/// How many dead instances wait for the agent's reaper at most; the next dead ones
+/// stay with the agent (their names taken, counted among its instances) until there
+/// is room.
+const REAPER_QUEUE: usize = 64;
 
 /// What an agent has done ([`Agent::status`]).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -563,9 +575,10 @@ impl Drop for Inbox {
 
 /// Builds components on request, on its own thread, each request's in a [`System`] of
 /// its own, in the namespace of the node that asks ([`instantiate`]). An instance
-/// found `dead` is released: its system shut down (its bridges with it), its keys
-/// withdrawn, its names free again. Dropping the agent stops answering and releases
-/// every instance it runs (every component it built is joined).
+/// found `dead` is released, on a thread of the agent's own (so that a system slow
+/// to shut down holds no request up): its system shut down (its bridges with it),
+/// its keys withdrawn, then its names free again. Dropping the agent stops answering
+/// and releases every instance it runs (every component it built is joined).
 ///
 /// A request over a limit ([`crate::limits`]) or outside the control port's ranges
 /// (`coolbot::ranges`) is refused before anything is built. A panic while serving a
@@ -578,6 +591,15 @@ pub struct Agent {
     queryable: Option<zenoh::query::Queryable<()>>,
     _watcher: zenoh::pubsub::Subscriber<()>,
     thread: Option<JoinHandle<()>>,
+    #[cfg(test)]
+    probe: Probe,
+}
+
+/// What a test sees of the agent's queues: how many requests and losses wait.
+#[cfg(test)]
+struct Probe {
+    requests: crossbeam_channel::Receiver<zenoh::query::Query>,
+    losses: crossbeam_channel::Receiver<String>,
 }
 
 impl std::fmt::Debug for Agent {
@@ -640,6 +662,12 @@ impl Agent {
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
         let serving = Arc::clone(&status);
+        let reaper = Reaper::start(node.name())?;
+        #[cfg(test)]
+        let probe = Probe {
+            requests: received.clone(),
+            losses: lost.clone(),
+        };
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:agent", node.name()))
             .spawn(move || {
@@ -648,18 +676,24 @@ impl Agent {
                     status: Arc::clone(&serving),
                     ending: None,
                 };
-                // Every request built here, until its instance is found dead.
+                // Every request built here, until its instance is found dead and
+                // handed to the reaper.
                 let mut hosted: Vec<Hosted> = Vec::new();
+                let mut rechecked = Instant::now();
                 loop {
                     crossbeam_channel::select! {
                         recv(inbox.received) -> query => {
                             let Ok(query) = query else { break };
+                            // The losses that came first are handled first.
+                            for name in lost.try_iter() {
+                                owner_lost(&hosted, |owner| owner == name);
+                            }
                             let answer = serve_one(
                                 &node,
                                 &registry,
                                 &query,
                                 &serving,
-                                (&mut hosted, cap),
+                                (&mut hosted, &reaper, cap),
                             );
                             if let Err(error) = reply(&query, &answer) {
                                 coolbot::limited!("answer", |held| tracing::warn!(
@@ -671,23 +705,30 @@ impl Agent {
                         recv(lost) -> name => {
                             let Ok(name) = name else { break };
                             owner_lost(&hosted, |owner| owner == name);
-                            reap(&mut hosted);
+                            reap(&mut hosted, &reaper);
                         }
                         default(Duration::from_millis(100)) => {
                             if stopped.load(Ordering::Acquire) {
                                 inbox.ending = Some("the agent was shut down".to_owned());
                                 break;
                             }
-                            if resync.swap(false, Ordering::AcqRel) {
-                                owners_lost(&node, &hosted);
-                            }
-                            reap(&mut hosted);
+                            reap(&mut hosted, &reaper);
                         }
                     }
+                    // Whatever comes, a dropped loss has the owners re-checked soon.
+                    if rechecked.elapsed() >= OWNERS_RECHECK && resync.swap(false, Ordering::AcqRel)
+                    {
+                        owners_lost(&node, &hosted);
+                        reap(&mut hosted, &reaper);
+                        rechecked = Instant::now();
+                    }
                 }
+                // Every instance goes, each joined by the reaper before the thread
+                // ends.
                 for built in hosted {
-                    built.release();
+                    reaper.hand_over(built);
                 }
+                drop(reaper);
             })
             .map_err(Error::spawn("agent"))?;
         Ok(Agent {
@@ -696,6 +737,8 @@ impl Agent {
             queryable: Some(queryable),
             _watcher: watcher,
             thread: Some(thread),
+            #[cfg(test)]
+            probe,
         })
     }
 
@@ -734,15 +777,16 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 
 /// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and keep
 /// what an accepted one built in `hosted`; what a refused or panicking one had built
-/// is shut down with its system (its names are free again).
+/// is shut down with its system (its names are free again). The names and queue
+/// memory of the instances the reaper still releases count as taken.
 fn serve_one(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
     status: &Mutex<AgentStatus>,
-    (hosted, cap): (&mut Vec<Hosted>, limits::Limit),
+    (hosted, reaper, cap): (&mut Vec<Hosted>, &Reaper, limits::Limit),
 ) -> ControlReply {
-    reap(hosted);
+    reap(hosted, reaper);
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
         cap.check(
             || "the instances this agent runs with this one".to_owned(),
@@ -753,8 +797,13 @@ fn serve_one(
             hosted
                 .iter()
                 .any(|built| built.names.iter().any(|taken| taken == name))
+                || reaper.holds(name)
         };
-        serve(node, registry, query, &taken)
+        let held = hosted
+            .iter()
+            .map(|built| built.queue_bytes)
+            .fold(reaper.queue_bytes(), usize::saturating_add);
+        serve(node, registry, query, (&taken, held))
     }));
     match outcome {
         Ok(Ok(built)) => {
@@ -900,10 +949,13 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
 
 /// What one accepted request built, in a system of its own: the instance, its
 /// bridges and their exposure on the node. Released once the instance is `dead`
-/// ([`Hosted::release`]): its threads joined, its keys withdrawn, its names free.
+/// ([`Hosted::release`], by the agent's [`Reaper`]): its threads joined, its keys
+/// withdrawn, its names free.
 struct Hosted {
     /// The names it takes on the node: the instance's, then its bridges'.
     names: Vec<String>,
+    /// What its queues hold from the start, in bytes (the request's wires together).
+    queue_bytes: usize,
     /// The node whose life it shares, if any ([`Instantiate::owner`]).
     owner: Option<String>,
     /// The instance first, then its bridges.
@@ -936,6 +988,8 @@ impl Hosted {
             exposure,
             ..
         } = self;
+        #[cfg(test)]
+        tests::held_release(&names[0]);
         let report = system.shutdown();
         if !report.clean() {
             tracing::warn!(
@@ -948,14 +1002,110 @@ impl Hosted {
     }
 }
 
-/// Release what `hosted` holds of dead instances.
-fn reap(hosted: &mut Vec<Hosted>) {
+/// Hand what `hosted` holds of dead instances to `reaper`, as many as it has room
+/// for (the others wait for the next call).
+fn reap(hosted: &mut Vec<Hosted>, reaper: &Reaper) {
     let mut index = 0;
     while index < hosted.len() {
-        if hosted[index].dead() {
-            hosted.swap_remove(index).release();
+        if hosted[index].dead() && reaper.has_room() {
+            reaper.hand_over(hosted.swap_remove(index));
         } else {
             index += 1;
+        }
+    }
+}
+
+/// What the reaper releases and has not released yet: the names it takes and the
+/// queue memory it holds (as taken as a hosted instance's).
+#[derive(Default)]
+struct Releasing {
+    names: HashSet<String>,
+    queue_bytes: usize,
+}
+
+/// The agent's reaper: a thread of its own releases the dead instances the agent
+/// hands it ([`Hosted::release`]), so that a system slow to shut down (a stuck
+/// bridge, up to `coolbot::SHUTDOWN_TIMEOUT`) holds no request up. An instance's
+/// names stay taken until its exposure is withdrawn. Dropping it releases what it
+/// was handed and joins its thread.
+struct Reaper {
+    sender: Option<crossbeam_channel::Sender<Hosted>>,
+    releasing: Arc<Mutex<Releasing>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Reaper {
+    fn start(node: &str) -> Result<Reaper, Error> {
+        let (sender, received) = crossbeam_channel::bounded::<Hosted>(REAPER_QUEUE);
+        let releasing = Arc::new(Mutex::new(Releasing::default()));
+        let freed = Arc::clone(&releasing);
+        let thread = std::thread::Builder::new()
+            .name(format!("cool-net:{node}:reap"))
+            .spawn(move || {
+                for built in received {
+                    release(built, &freed);
+                }
+            })
+            .map_err(Error::spawn("agent's reaper"))?;
+        Ok(Reaper {
+            sender: Some(sender),
+            releasing,
+            thread: Some(thread),
+        })
+    }
+
+    /// Whether it takes one more dead instance now.
+    fn has_room(&self) -> bool {
+        self.sender.as_ref().is_some_and(|sender| !sender.is_full())
+    }
+
+    /// Release `built` on the reaper's thread; its names and memory count as
+    /// releasing until it is released. Waits for room if there is none (the agent's
+    /// thread hands over only after [`Reaper::has_room`], but at its end).
+    fn hand_over(&self, built: Hosted) {
+        let (names, queue_bytes) = (built.names.clone(), built.queue_bytes);
+        {
+            let mut releasing = lock(&self.releasing);
+            releasing.names.extend(names);
+            releasing.queue_bytes = releasing.queue_bytes.saturating_add(queue_bytes);
+        }
+        let sent = match &self.sender {
+            Some(sender) => sender.send(built).map_err(|unsent| unsent.0),
+            None => Err(built),
+        };
+        if let Err(built) = sent {
+            // The reaper's thread has ended (a panic): released here.
+            release(built, &self.releasing);
+        }
+    }
+
+    /// Whether an instance it still releases takes `name`.
+    fn holds(&self, name: &str) -> bool {
+        lock(&self.releasing).names.contains(name)
+    }
+
+    /// The queue memory of the instances it still releases, in bytes.
+    fn queue_bytes(&self) -> usize {
+        lock(&self.releasing).queue_bytes
+    }
+}
+
+/// Release `built`, then free its names and memory in `releasing`.
+fn release(built: Hosted, releasing: &Mutex<Releasing>) {
+    let (names, queue_bytes) = (built.names.clone(), built.queue_bytes);
+    built.release();
+    let mut releasing = lock(releasing);
+    for name in &names {
+        releasing.names.remove(name);
+    }
+    releasing.queue_bytes = releasing.queue_bytes.saturating_sub(queue_bytes);
+}
+
+impl Drop for Reaper {
+    fn drop(&mut self) {
+        drop(self.sender.take());
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
         }
     }
 }
@@ -1022,6 +1172,29 @@ fn owners_lost(node: &Node, hosted: &[Hosted]) {
     }
 }
 
+/// Check that node `owner` lives: its liveliness token is there, as the re-check of
+/// the owners asks ([`owners_lost`]). Its loss may have been handled while its
+/// request waited: nothing would send that request's instance to `dead`.
+fn owner_lives(node: &Node, owner: &str) -> Result<(), String> {
+    let token = keys::node_token(owner);
+    let alive =
+        crate::node::liveliness_keys(node.session(), &token, OWNERS_LOOKUP).map_err(|error| {
+            format!(
+                "the agent could not ask whether the owner `{}` lives: {}",
+                excerpt(owner, EXCERPT_CHARS),
+                Chain(&error)
+            )
+        })?;
+    if alive.contains(&token) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the owner `{}` is lost (its liveliness token is gone): nothing is built for it",
+            excerpt(owner, EXCERPT_CHARS)
+        ))
+    }
+}
+
 /// Check that `request`, from node `requester`, builds in the requester's own
 /// namespace on node `here`: its instance's name ([`keys::namespace`]), its wires'
 /// keys under `coolbot-link/` (a placement's: [`keys::link_namespace`]) and its owner.
@@ -1064,12 +1237,13 @@ fn check_namespace(request: &Instantiate, here: &str, requester: &str) -> Result
 
 /// One instantiation request: build, bridge, run, expose, in a system of its own
 /// (dropped, and so shut down, if the request fails or panics: its names are then
-/// free again). `taken`: the names hosted instances hold.
+/// free again). `taken`: the names hosted instances hold; `held`: the queue memory
+/// they hold, in bytes.
 fn serve(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
-    taken: &dyn Fn(&str) -> bool,
+    (taken, held): (&dyn Fn(&str) -> bool, usize),
 ) -> Result<Hosted, String> {
     let payload = query
         .payload()
@@ -1195,6 +1369,21 @@ fn serve(
             total,
         )
         .map_err(text)?;
+    limits::HOSTED_QUEUE_BYTES
+        .check(
+            || {
+                format!(
+                    "the queues of every instance this agent runs, with this request's \
+                     ({held} bytes held, {total} asked for)"
+                )
+            },
+            held.saturating_add(total),
+        )
+        .map_err(text)?;
+    // A request served after its owner's loss was handled builds nothing for it.
+    if let Some(owner) = &request.owner {
+        owner_lives(node, owner)?;
+    }
     // Dropped (shut down, its names free) if anything below fails or panics.
     let mut system = System::new();
     system.start().map_err(text)?;
@@ -1272,6 +1461,7 @@ fn serve(
     );
     Ok(Hosted {
         names,
+        queue_bytes: total,
         owner: request.owner.clone(),
         handles: built,
         system,
@@ -1308,7 +1498,7 @@ fn ask(
         decoding: false,
         source,
     })?;
-    let asked = std::time::Instant::now();
+    let asked = Instant::now();
     let replies = node
         .session()
         .get(keys::agent(on, &request.type_name, requester))
@@ -1406,9 +1596,9 @@ mod tests {
         };
         // As many as may wait, unserved.
         let waiting: Vec<_> = (0..AGENT_QUEUE).map(|_| ask()).collect();
-        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        let deadline = Instant::now() + Duration::from_secs(30);
         while received.len() < AGENT_QUEUE {
-            assert!(std::time::Instant::now() < deadline, "the requests wait");
+            assert!(Instant::now() < deadline, "the requests wait");
             std::thread::sleep(Duration::from_millis(5));
         }
         assert_eq!(
@@ -1455,20 +1645,26 @@ mod tests {
         );
     }
 
-    use crate::testing::{Idle, idle_registry, idle_spec};
+    use crate::testing::{Idle, free_port, idle, idle_registry, idle_spec, set_state};
 
-    /// A request for an `Idle` named `name`, with no wires.
-    fn idle_request(name: &str, variables: Vec<(String, Value)>) -> Instantiate {
+    /// A request for a `type_name` named `name`: no wires, no overrides, run, no
+    /// owner (the rest given with `..request(...)`).
+    fn request(type_name: &str, name: &str) -> Instantiate {
         Instantiate {
-            type_name: "Idle".into(),
+            type_name: type_name.to_owned(),
             name: name.to_owned(),
             wires: Vec::new(),
             configuration: None,
-            variables,
+            variables: Vec::new(),
             timing: None,
             run: true,
             owner: None,
         }
+    }
+
+    /// `name` in the namespace of node `node`.
+    fn own(node: &str, name: &str) -> String {
+        format!("{}{name}", keys::namespace(node))
     }
 
     /// The threads of this process whose name is `name`.
@@ -1485,8 +1681,8 @@ mod tests {
 
     /// Whether `done` holds before a generous deadline, asked every 10 ms.
     fn eventually(mut done: impl FnMut() -> bool) -> bool {
-        let deadline = std::time::Instant::now() + Duration::from_secs(60);
-        while std::time::Instant::now() < deadline {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while Instant::now() < deadline {
             if done() {
                 return true;
             }
@@ -1507,27 +1703,16 @@ mod tests {
         );
         const ROUNDS: usize = 12;
         for round in 0..ROUNDS {
-            let name = format!("{}idle-{round}", keys::namespace("leak"));
+            let name = own("leak", &format!("idle-{round}"));
             instantiate(
                 &node,
                 "leak",
-                &idle_request(&name, Vec::new()),
+                &request("Idle", &name),
                 Duration::from_secs(10),
             )
             .unwrap();
             // What any peer may send to a component of the node: `dead`.
-            let replies = node
-                .session()
-                .get(keys::control("leak", &name))
-                .payload(serde_json::to_vec(&Command::SetState(Controllable::Dead)).unwrap())
-                .timeout(Duration::from_secs(10))
-                .wait()
-                .unwrap();
-            let reply = replies.recv().unwrap().into_result().unwrap();
-            assert_eq!(
-                serde_json::from_slice::<ControlReply>(&reply.payload().to_bytes()).unwrap(),
-                ControlReply::Accepted
-            );
+            set_state(&node, "leak", &name, Controllable::Dead);
         }
         // The cap (4 at once) never refused: every instance built went to dead.
         assert_eq!(agent.status().built, ROUNDS as u64);
@@ -1541,7 +1726,7 @@ mod tests {
         instantiate(
             &node,
             "leak",
-            &idle_request(&format!("{}idle-0", keys::namespace("leak")), Vec::new()),
+            &request("Idle", &own("leak", "idle-0")),
             Duration::from_secs(10),
         )
         .expect("the name of a released instance is free again");
@@ -1564,10 +1749,10 @@ mod tests {
             let error = instantiate(
                 &node,
                 "claim",
-                &idle_request(
-                    &format!("{root}-{generation}"),
-                    vec![("nope".to_owned(), Value::Int(1))],
-                ),
+                &Instantiate {
+                    variables: vec![("nope".to_owned(), Value::Int(1))],
+                    ..request("Idle", &format!("{root}-{generation}"))
+                },
                 Duration::from_secs(10),
             )
             .unwrap_err();
@@ -1579,7 +1764,7 @@ mod tests {
             &node,
             "claim",
             "robot",
-            &idle_request(&format!("{root}-3"), Vec::new()),
+            &request("Idle", &format!("{root}-3")),
             Duration::from_secs(10),
         )
         .unwrap_err();
@@ -1593,7 +1778,7 @@ mod tests {
         let rebuilt = instantiate(
             &node,
             "claim",
-            &idle_request(&format!("{root}-2"), Vec::new()),
+            &request("Idle", &format!("{root}-2")),
             Duration::from_secs(10),
         );
         assert!(rebuilt.is_ok(), "{}", rebuilt.unwrap_err());
@@ -1622,9 +1807,14 @@ mod tests {
             })
             .port::<u64>("out");
         let agent = Agent::start(Arc::clone(&node), registry).unwrap();
+        // Node `robot2` lives (its token), as the owner of what it asks for must.
+        let _robot2 = node
+            .session()
+            .liveliness()
+            .declare_token(keys::node_token("robot2"))
+            .wait()
+            .unwrap();
         let request = |name: &str, key: &str| Instantiate {
-            type_name: "Src".into(),
-            name: name.into(),
             wires: vec![Wire::Output {
                 port: "out".into(),
                 key: key.into(),
@@ -1633,11 +1823,8 @@ mod tests {
                     max: Some(65_536),
                 },
             }],
-            configuration: None,
-            variables: Vec::new(),
-            timing: None,
-            run: true,
             owner: Some("robot2".into()),
+            ..request("Src", name)
         };
         // Node `robot1` placed an instance here: its proxy hears the instance's
         // output on this key (`place::Placer`), from this node, whose `publish` rule
@@ -1664,7 +1851,7 @@ mod tests {
             "{reason}"
         );
         // Nor under its own name, as another node's (the owner is the requester).
-        let own = |rest: &str| format!("{}{rest}", keys::namespace("robot2"));
+        let own = |rest: &str| own("robot2", rest);
         let mut forged = request(
             &own("anything-2"),
             &format!("coolbot-link/depu/{}", own("x/out/out")),
@@ -1710,17 +1897,19 @@ mod tests {
     /// A packet of 128 KiB.
     type Chunk = [[[u64; 32]; 32]; 16];
 
-    #[test]
-    fn a_request_may_not_ask_for_more_queue_memory_than_its_limit_in_all() {
-        let node = crate::testing::node("qmem", None, None);
+    /// A packet of 1 KiB.
+    type Kib = [[u64; 32]; 4];
+
+    /// A registry of one type, `Big`, with one data output `out` of packets `T`.
+    fn big_registry<T: Packet + Serialize + DeserializeOwned>() -> Registry {
         let spec = crate::bridge::leak_spec(
             "Big",
-            "Has one data output of 128 KiB packets.",
+            "Has one data output of big packets.",
             Vec::new(),
             Some(coolbot::OutputSpec {
                 name: "out",
                 kind: OutputKind::Data,
-                packet: std::any::type_name::<Chunk>(),
+                packet: std::any::type_name::<T>(),
                 pull: false,
             }),
             false,
@@ -1728,11 +1917,17 @@ mod tests {
         let mut registry = Registry::new();
         registry
             .register("Big", move |name| {
-                let out = coolbot::port::DataOut::<Chunk>::new();
+                let out = coolbot::port::DataOut::<T>::new();
                 Component::new(name, Box::new(Idle(spec)), PortSet::new().output(&out))
             })
-            .port::<Chunk>("out");
-        let _agent = Agent::start(Arc::clone(&node), registry).unwrap();
+            .port::<T>("out");
+        registry
+    }
+
+    #[test]
+    fn a_request_may_not_ask_for_more_queue_memory_than_its_limit_in_all() {
+        let node = crate::testing::node("qmem", None, None);
+        let _agent = Agent::start(Arc::clone(&node), big_registry::<Chunk>()).unwrap();
         // Each wire's queue within `QUEUE_BYTES` (64 MiB: 512 packets of 128 KiB),
         // three of them over `REQUEST_QUEUE_BYTES` together.
         let wire = |n: usize| Wire::Output {
@@ -1741,14 +1936,8 @@ mod tests {
             to: RemoteInput::Fifo { capacity: 512 },
         };
         let request = Instantiate {
-            type_name: "Big".into(),
-            name: format!("{}big", keys::namespace("qmem")),
             wires: (0..3).map(wire).collect(),
-            configuration: None,
-            variables: Vec::new(),
-            timing: None,
-            run: true,
-            owner: None,
+            ..request("Big", &own("qmem", "big"))
         };
         let refused = instantiate(&node, "qmem", &request, Duration::from_secs(10));
         let Err(Error::Refused { reason, .. }) = refused else {
@@ -1757,6 +1946,268 @@ mod tests {
         assert!(
             reason.contains("the queues of every wire of the request, together: 201326592 bytes, over the limit REQUEST_QUEUE_BYTES = 134217728 bytes"),
             "{reason}"
+        );
+    }
+
+    #[test]
+    fn an_agent_may_not_hold_more_queue_memory_than_its_limit_in_all() {
+        let node = crate::testing::node("amem", None, None);
+        let _agent = Agent::start(Arc::clone(&node), big_registry::<Kib>()).unwrap();
+        // Each request within `REQUEST_QUEUE_BYTES` (64 MiB: 65536 packets of 1 KiB),
+        // eight of them `HOSTED_QUEUE_BYTES` together.
+        let big = |n: usize, packets: usize| Instantiate {
+            wires: vec![Wire::Output {
+                port: "out".into(),
+                key: format!("amem/{n}"),
+                to: RemoteInput::Fifo { capacity: packets },
+            }],
+            ..request("Big", &own("amem", &format!("big-{n}")))
+        };
+        let timeout = Duration::from_secs(10);
+        for n in 0..8 {
+            instantiate(&node, "amem", &big(n, 65_536), timeout).unwrap();
+        }
+        let refused = instantiate(&node, "amem", &big(8, 1), timeout);
+        let Err(Error::Refused { reason, .. }) = refused else {
+            panic!("{refused:?}");
+        };
+        assert!(
+            reason.contains(
+                "the queues of every instance this agent runs, with this request's \
+                 (536870912 bytes held, 1024 asked for): 536871936 bytes, over the limit \
+                 HOSTED_QUEUE_BYTES = 536870912 bytes"
+            ),
+            "{reason}"
+        );
+        // An instance gone, its memory is free again.
+        set_state(&node, "amem", &own("amem", "big-0"), Controllable::Dead);
+        assert!(eventually(|| instantiate(
+            &node,
+            "amem",
+            &big(8, 1),
+            timeout
+        )
+        .is_ok()));
+    }
+
+    /// What the test holds of an agent's release of an instance ([`hold_release`]).
+    struct Held {
+        /// Told when the release begins.
+        begun: crossbeam_channel::Receiver<()>,
+        /// Dropped to let the release go on.
+        _go: crossbeam_channel::Sender<()>,
+    }
+
+    /// The releases held: by instance name, what tells their beginning and what lets
+    /// them go on.
+    type Holds = BTreeMap<
+        String,
+        (
+            crossbeam_channel::Sender<()>,
+            crossbeam_channel::Receiver<()>,
+        ),
+    >;
+
+    static HOLDS: Mutex<Holds> = Mutex::new(BTreeMap::new());
+
+    /// Hold the release of instance `name` until the returned [`Held`] is dropped
+    /// (or a deadline passes).
+    fn hold_release(name: &str) -> Held {
+        let (begins, begun) = crossbeam_channel::bounded(1);
+        let (go, wait) = crossbeam_channel::bounded(0);
+        lock(&HOLDS).insert(name.to_owned(), (begins, wait));
+        Held { begun, _go: go }
+    }
+
+    /// The release of instance `name` begins ([`Hosted::release`]): a test holding it
+    /// ([`hold_release`]) holds it here.
+    pub(super) fn held_release(name: &str) {
+        let held = lock(&HOLDS).remove(name);
+        if let Some((begins, wait)) = held {
+            let _ = begins.send(());
+            let _ = wait.recv_timeout(Duration::from_secs(60));
+        }
+    }
+
+    /// An instance whose release is slow (its system slow to shut down) holds no
+    /// request up, and its names stay taken until it is released.
+    #[test]
+    fn a_slow_release_holds_no_request_up_and_keeps_its_names_taken() {
+        let node = crate::testing::node("slow", None, None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let timeout = Duration::from_secs(10);
+        let name = own("slow", "held");
+        let held = hold_release(&name);
+        instantiate(&node, "slow", &request("Idle", &name), timeout).unwrap();
+        set_state(&node, "slow", &name, Controllable::Dead);
+        // The agent finds it dead (at the latest when it serves the next request).
+        instantiate(&node, "slow", &request("Idle", &own("slow", "a")), timeout).unwrap();
+        held.begun
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the release begins");
+        // While its release is held, requests are served.
+        instantiate(&node, "slow", &request("Idle", &own("slow", "b")), timeout)
+            .expect("a request served while a release is under way");
+        let taken = instantiate(&node, "slow", &request("Idle", &name), timeout);
+        assert!(
+            matches!(&taken, Err(Error::Refused { reason, .. }) if reason.contains("is not a free instance name")),
+            "{taken:?}"
+        );
+        drop(held);
+        assert!(eventually(|| instantiate(
+            &node,
+            "slow",
+            &request("Idle", &name),
+            timeout
+        )
+        .is_ok()));
+        assert_eq!(agent.status().built, 4);
+    }
+
+    /// A registry of `Idle` and `Gate`, an `Idle` whose factory waits until the test
+    /// opens the gate (or a deadline passes), holding the agent's thread: the
+    /// registry, what tells that the factory waits, and what opens the gate (sent to,
+    /// or dropped).
+    fn gated_registry() -> (
+        Registry,
+        crossbeam_channel::Receiver<()>,
+        crossbeam_channel::Sender<()>,
+    ) {
+        let spec = idle_spec();
+        let mut registry = idle_registry(spec);
+        let (waits, waiting) = crossbeam_channel::unbounded();
+        let (open, opened) = crossbeam_channel::bounded::<()>(1);
+        registry.register("Gate", move |name| {
+            let _ = waits.send(());
+            let _ = opened.recv_timeout(Duration::from_secs(60));
+            idle(name, spec)
+        });
+        (registry, waiting, open)
+    }
+
+    /// Hold the agent of `node` in a `Gate`'s factory, asked by `node` on another
+    /// thread: its handle, to join once the gate is open.
+    fn hold_agent(
+        node: &Arc<Node>,
+        waiting: &crossbeam_channel::Receiver<()>,
+    ) -> JoinHandle<Result<(), Error>> {
+        let asking = Arc::clone(node);
+        let gate = std::thread::spawn(move || {
+            let on = asking.name().to_owned();
+            let gate = request("Gate", &own(&on, "gate"));
+            instantiate(&asking, &on, &gate, Duration::from_secs(60))
+        });
+        waiting
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the agent builds the gate");
+        gate
+    }
+
+    /// Until node `node` reaches the agent of node `on` (a refused request answered).
+    fn meet(node: &Node, on: &str) {
+        let nothing = request("Nothing", &own(node.name(), "nothing"));
+        assert!(eventually(|| matches!(
+            instantiate(node, on, &nothing, Duration::from_secs(10)),
+            Err(Error::Refused { .. })
+        )));
+    }
+
+    /// A request whose owner's loss the agent handled while it waited is refused:
+    /// nothing would ever send its instance to dead.
+    #[test]
+    fn a_request_whose_owner_was_lost_while_it_waited_builds_nothing() {
+        let port = free_port();
+        let node = crate::testing::node("ol", Some(port), None);
+        let (registry, waiting, open) = gated_registry();
+        let agent = Agent::start(Arc::clone(&node), registry).unwrap();
+        let owner = crate::testing::node("ol-x", None, Some(port));
+        meet(&owner, "ol");
+        let gate = hold_agent(&node, &waiting);
+        // The owner asks, its request waits, then it is lost.
+        let owned = Instantiate {
+            owner: Some("ol-x".to_owned()),
+            ..request("Idle", &own("ol-x", "idle"))
+        };
+        let replies = owner
+            .session()
+            .get(keys::agent("ol", "Idle", "ol-x"))
+            .payload(serde_json::to_vec(&owned).unwrap())
+            .timeout(Duration::from_secs(60))
+            .wait()
+            .unwrap();
+        assert!(eventually(|| agent.probe.requests.len() == 1));
+        drop(replies);
+        drop(owner);
+        assert!(eventually(|| agent.probe.losses.len() == 1));
+        let refused = agent.status().refused;
+        open.send(()).unwrap();
+        gate.join().unwrap().unwrap();
+        assert!(eventually(|| agent.status().refused == refused + 1));
+        assert_eq!(agent.status().built, 1, "the gate only");
+        assert_eq!(
+            threads_named("cool-net:ol:m"),
+            1,
+            "the gate's exposure only"
+        );
+    }
+
+    /// After a dropped loss, the owners are asked for even while requests keep the
+    /// agent busy: an instance whose owner's loss was dropped goes to dead.
+    #[test]
+    fn a_dropped_loss_has_the_owners_asked_for_however_many_requests_come() {
+        let port = free_port();
+        let node = crate::testing::node("rc", Some(port), None);
+        let (registry, waiting, open) = gated_registry();
+        let agent = Agent::start(Arc::clone(&node), registry).unwrap();
+        let owner = crate::testing::node("rc-x", None, Some(port));
+        meet(&owner, "rc");
+        let owned = Instantiate {
+            owner: Some("rc-x".to_owned()),
+            ..request("Idle", &own("rc-x", "idle"))
+        };
+        instantiate(&owner, "rc", &owned, Duration::from_secs(10)).unwrap();
+        let gate = hold_agent(&node, &waiting);
+        // More losses than wait for the agent's thread (nodes that are no owner),
+        // then the owner's: it is dropped.
+        let tokens: Vec<_> = (0..=GONE_QUEUE)
+            .map(|n| {
+                owner
+                    .session()
+                    .liveliness()
+                    .declare_token(keys::node_token(&format!("rc-t{n}")))
+                    .wait()
+                    .unwrap()
+            })
+            .collect();
+        let pattern = keys::node_token("rc-t$*");
+        assert!(eventually(|| {
+            crate::node::liveliness_keys(node.session(), &pattern, Duration::from_secs(1))
+                .is_ok_and(|alive| alive.len() == GONE_QUEUE + 1)
+        }));
+        drop(tokens);
+        assert!(eventually(|| agent.probe.losses.len() == GONE_QUEUE));
+        drop(owner);
+        assert!(eventually(|| agent.status().losses_dropped == 2));
+        // Requests, one after the other, keep the agent busy.
+        let streaming = Arc::new(AtomicBool::new(true));
+        let stream = {
+            let (node, streaming) = (Arc::clone(&node), Arc::clone(&streaming));
+            std::thread::spawn(move || {
+                let nothing = request("Nothing", &own("rc", "nothing"));
+                while streaming.load(Ordering::Acquire) {
+                    let _ = instantiate(&node, "rc", &nothing, Duration::from_secs(10));
+                }
+            })
+        };
+        open.send(()).unwrap();
+        gate.join().unwrap().unwrap();
+        let released = eventually(|| threads_named("cool-net:rc:m") == 1);
+        streaming.store(false, Ordering::Release);
+        stream.join().unwrap();
+        assert!(
+            released,
+            "the instance of the lost owner still runs: {} exposures",
+            threads_named("cool-net:rc:m")
         );
     }
 
@@ -1774,7 +2225,7 @@ mod tests {
             &node,
             "pfx",
             "robot",
-            &idle_request(&victim, Vec::new()),
+            &request("Idle", &victim),
             Duration::from_secs(10),
         );
         assert!(
@@ -1785,7 +2236,7 @@ mod tests {
             &node,
             "pfx",
             "robot-2",
-            &idle_request(&victim, Vec::new()),
+            &request("Idle", &victim),
             Duration::from_secs(10),
         );
         assert!(own.is_ok(), "robot-2 refused its own name: {own:?}");
@@ -1803,10 +2254,7 @@ mod tests {
             &node,
             "dot",
             "robot.local",
-            &idle_request(
-                &format!("{}planner", keys::namespace("robot.local")),
-                Vec::new(),
-            ),
+            &request("Idle", &own("robot.local", "planner")),
             Duration::from_secs(10),
         );
         assert!(asked.is_ok(), "{asked:?}");

@@ -6,7 +6,10 @@
 //! `coolbot/<node>/<path>/o/<port>` ([`crate::keys::echo`]), and reads the packets on
 //! the node's batch key, `coolbot/<node>/o` ([`crate::keys::echoes`]): every
 //! [`ECHO_TICK`] the node publishes there one sample holding the packets every tapped
-//! output sent since the last, a JSON array of [`Echoed`], each naming its output.
+//! output sent since the last, a JSON array of [`Echoed`], each naming its output
+//! (several samples if they take more than [`crate::limits::ECHO_BATCH`] together,
+//! each within it: a packet over it alone is not echoed, and the reader counts it
+//! lost).
 //! One sample a tick, however many outputs and packets, is what makes an echo cheap
 //! to carry and to receive: Zenoh's costs are per sample.
 //!
@@ -98,38 +101,87 @@ pub(crate) struct EchoedRaw<'a> {
     pub packet: &'a serde_json::value::RawValue,
 }
 
-/// The packets of one tick, written as a JSON array of [`Echoed`] as they are taken.
-#[derive(Default)]
+/// The packets of one tick, written as JSON arrays of [`Echoed`] as they are taken,
+/// each array within `max` bytes ([`crate::limits::ECHO_BATCH`], what a reader
+/// decodes): a packet that would take the array over it closes the array and begins
+/// the next, so a burst is published in several samples, none of which a reader
+/// drops.
 struct Batch {
+    /// The array being written (unclosed).
     json: Vec<u8>,
     packets: usize,
+    /// The arrays closed this tick.
+    full: Vec<Vec<u8>>,
+    max: usize,
+}
+
+impl Default for Batch {
+    fn default() -> Batch {
+        Batch::within(crate::limits::ECHO_BATCH.max)
+    }
 }
 
 impl Batch {
-    /// Append `packet`; on an error, the batch is as it was.
-    fn push<T: Serialize>(&mut self, packet: &Outgoing<'_, T>) -> serde_json::Result<()> {
-        let start = self.json.len();
-        self.json.push(if self.packets == 0 { b'[' } else { b',' });
-        match serde_json::to_writer(&mut self.json, packet) {
-            Ok(()) => {
-                self.packets += 1;
-                Ok(())
-            }
-            Err(error) => {
-                self.json.truncate(start);
-                Err(error)
-            }
+    /// An empty batch whose arrays take at most `max` bytes each.
+    fn within(max: usize) -> Batch {
+        Batch {
+            json: Vec::new(),
+            packets: 0,
+            full: Vec::new(),
+            max,
         }
     }
 
-    /// The array, none when no packet came; the batch is empty again.
-    fn take(&mut self) -> Option<Vec<u8>> {
-        if self.packets == 0 {
-            return None;
+    /// Append `packet`; on an error (it does not serialize, or its array alone would
+    /// be over the bound), the batch holds the packets it held.
+    fn push<T: Serialize>(&mut self, packet: &Outgoing<'_, T>) -> Result<(), String> {
+        let start = self.json.len();
+        self.json.push(if self.packets == 0 { b'[' } else { b',' });
+        if let Err(error) = serde_json::to_writer(&mut self.json, packet) {
+            self.json.truncate(start);
+            return Err(format!("it does not serialize: {error}"));
         }
-        self.json.push(b']');
-        self.packets = 0;
-        Some(std::mem::take(&mut self.json))
+        // The array as it would be closed, `]` included.
+        if self.json.len() < self.max {
+            self.packets += 1;
+            return Ok(());
+        }
+        if self.packets > 0 {
+            // Close the array before it; it begins the next.
+            let mut next = self.json.split_off(start);
+            next[0] = b'[';
+            self.json.push(b']');
+            self.full.push(std::mem::replace(&mut self.json, next));
+            self.packets = 0;
+            if self.json.len() < self.max {
+                self.packets = 1;
+                return Ok(());
+            }
+        }
+        let alone = self.json.len() + 1;
+        self.json.clear();
+        let bound = crate::limits::Limit {
+            max: self.max,
+            ..crate::limits::ECHO_BATCH
+        };
+        Err(bound
+            .check(|| "its batch, with it alone".to_owned(), alone)
+            .err()
+            .map_or_else(
+                || "it is over the bound".to_owned(),
+                |over| over.to_string(),
+            ))
+    }
+
+    /// The arrays of the tick, in order, none when no packet came; the batch is
+    /// empty again.
+    fn take(&mut self) -> Vec<Vec<u8>> {
+        if self.packets > 0 {
+            self.json.push(b']');
+            self.packets = 0;
+            self.full.push(std::mem::take(&mut self.json));
+        }
+        std::mem::take(&mut self.full)
     }
 }
 
@@ -196,7 +248,7 @@ impl<T: Packet + Serialize> Echoing for Port<T> {
             if let Err(error) = batch.push(&message) {
                 coolbot::limited!(
                     key,
-                    |held| tracing::warn!(%key, "packet {seq} does not serialize: {error}{held}")
+                    |held| tracing::warn!(%key, "packet {seq} is not echoed: {error}{held}")
                 );
             }
         }
@@ -267,14 +319,14 @@ impl Echoes {
                         for port in lock(&ports).iter_mut() {
                             port.take(&mut batch);
                         }
-                        let Some(json) = batch.take() else {
-                            continue;
-                        };
-                        if let Err(error) = batches.put(json).wait() {
-                            let key = batches.key_expr().as_str();
-                            coolbot::limited!(key, |held| tracing::warn!(
-                                %key, "echoes not published: {}{held}", coolbot::Chain(&*error)
-                            ));
+                        for json in batch.take() {
+                            if let Err(error) = batches.put(json).wait() {
+                                let key = batches.key_expr().as_str();
+                                coolbot::limited!(key, |held| tracing::warn!(
+                                    %key, "echoes not published: {}{held}",
+                                    coolbot::Chain(&*error)
+                                ));
+                            }
                         }
                     }
                 })
@@ -566,6 +618,73 @@ mod tests {
             [(0, Some(100)), (1, Some(101)), (2, Some(102))]
         );
         fixture.finish();
+    }
+
+    /// A tick's packets that take more than the batch's bound together are closed
+    /// into several arrays, each within it, in order and none lost; a packet over it
+    /// alone is not echoed, and the batch is as it was.
+    #[test]
+    fn a_burst_is_batched_within_the_bound() {
+        let packet = |seq: u64, text: &str| {
+            let mut batch = Batch::within(usize::MAX);
+            let text = text.to_owned();
+            batch
+                .push(&Outgoing {
+                    output: "source.out",
+                    seq,
+                    dropped: 0,
+                    sent: coolbot::Time::from_nanos(seq),
+                    packet: &text,
+                })
+                .unwrap();
+            batch.take().concat().len()
+        };
+        // Room for three such packets an array, not four.
+        let one = packet(0, "xxxxxxxx");
+        let max = 3 * one + 1;
+        let mut batch = Batch::within(max);
+        for seq in 0..10 {
+            let text = "xxxxxxxx".to_owned();
+            let echoed = Outgoing {
+                output: "source.out",
+                seq,
+                dropped: 0,
+                sent: coolbot::Time::from_nanos(seq),
+                packet: &text,
+            };
+            batch.push(&echoed).unwrap();
+        }
+        let huge = "y".repeat(max);
+        let over = batch.push(&Outgoing {
+            output: "source.out",
+            seq: 10,
+            dropped: 0,
+            sent: coolbot::Time::from_nanos(10),
+            packet: &huge,
+        });
+        assert!(
+            over.as_ref()
+                .is_err_and(|error| error.contains("over the limit ECHO_BATCH")),
+            "{over:?}"
+        );
+        let arrays = batch.take();
+        assert!(
+            arrays.iter().all(|array| array.len() <= max),
+            "{:?}",
+            arrays.iter().map(Vec::len).collect::<Vec<_>>()
+        );
+        let seqs: Vec<Vec<u64>> = arrays
+            .iter()
+            .map(|array| {
+                serde_json::from_slice::<Vec<Echoed>>(array)
+                    .unwrap()
+                    .iter()
+                    .map(|echoed| echoed.seq)
+                    .collect()
+            })
+            .collect();
+        assert_eq!(seqs, [vec![0, 1, 2], vec![3, 4, 5], vec![6, 7, 8], vec![9]]);
+        assert!(batch.take().is_empty(), "the batch is empty again");
     }
 
     /// The output is tapped only while a subscriber matches: before the first and

@@ -168,6 +168,15 @@ pub const REQUEST_QUEUE_BYTES: Limit = Limit {
     unit: "bytes",
 };
 
+/// The most memory the queues of every instance an agent runs (and of those it still
+/// releases) hold from the start, together: what all requests may have one agent
+/// allocate. A request that would take it over is refused.
+pub const HOSTED_QUEUE_BYTES: Limit = Limit {
+    name: "HOSTED_QUEUE_BYTES",
+    max: 512 << 20,
+    unit: "bytes",
+};
+
 /// The most instances an agent runs at once for other nodes (those not yet `dead`):
 /// each is a component on a thread of its own, with its bridges' ends.
 pub const INSTANCES: Limit = Limit {
@@ -215,7 +224,7 @@ pub const ROS_PAYLOAD: Limit = Limit {
 };
 
 /// Every limit, in the order `docs/distribution.md` lists them.
-pub const ALL: [Limit; 21] = [
+pub const ALL: [Limit; 22] = [
     NAME,
     PATH,
     KEY,
@@ -231,6 +240,7 @@ pub const ALL: [Limit; 21] = [
     QUEUE,
     QUEUE_BYTES,
     REQUEST_QUEUE_BYTES,
+    HOSTED_QUEUE_BYTES,
     INSTANCES,
     LEVELS,
     LEVEL_NAME,

@@ -43,23 +43,28 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 /// The keys of the liveliness tokens under `pattern` (sorted, without duplicates).
+/// Taken by a callback, not a bounded channel: the session answers with the tokens
+/// it knows from within the call, holding its own lock, so a full channel would
+/// never be read.
 pub(crate) fn liveliness_keys(
     session: &zenoh::Session,
     pattern: &str,
     timeout: Duration,
 ) -> Result<Vec<String>, Error> {
-    let replies = session
+    let (keys, replies) = crossbeam_channel::unbounded();
+    session
         .liveliness()
         .get(pattern)
+        .callback(move |reply| {
+            if let Ok(sample) = reply.result() {
+                let _ = keys.send(sample.key_expr().as_str().to_owned());
+            }
+        })
         .timeout(timeout)
         .wait()
         .map_err(Error::zenoh("ask for liveliness tokens"))?;
-    let mut found = Vec::new();
-    while let Ok(reply) = replies.recv() {
-        if let Ok(sample) = reply.result() {
-            found.push(sample.key_expr().as_str().to_owned());
-        }
-    }
+    // The callback is dropped, and the channel closed, when the query ends.
+    let mut found: Vec<String> = replies.iter().collect();
     found.sort();
     found.dedup();
     Ok(found)

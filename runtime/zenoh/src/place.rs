@@ -1542,21 +1542,7 @@ mod network_tests {
         view_until(&mut end, false, |view| view.state == State::Ready);
 
         // The instance runs (a command from anywhere); its event comes.
-        let command = |state| {
-            let replies = robot
-                .session()
-                .get(keys::control("far-st", &end.name))
-                .payload(serde_json::to_vec(&Command::SetState(state)).unwrap())
-                .timeout(Duration::from_secs(10))
-                .wait()
-                .unwrap();
-            let reply = replies.recv().unwrap().into_result().unwrap();
-            assert_eq!(
-                serde_json::from_slice::<ControlReply>(&reply.payload().to_bytes()).unwrap(),
-                ControlReply::Accepted
-            );
-        };
-        command(Controllable::Running);
+        crate::testing::set_state(&robot, "far-st", &end.name, Controllable::Running);
         view_until(&mut end, false, |view| view.state == State::Running);
         // As if that event had been lost on the way (Zenoh drops events for a
         // subscriber that falls behind): the view still shows the state before it.

@@ -63,3 +63,22 @@ pub(crate) fn node(name: &str, listen: Option<u16>, connect: Option<u16>) -> Arc
     let config = crate::peer_config(&endpoint(listen), &endpoint(connect), false).unwrap();
     Arc::new(Node::open(name, config).unwrap().with_state_directory(None))
 }
+
+/// Send `state` to component `path` of node `on` over the network, from `node`, and
+/// check that its control port accepted it.
+pub(crate) fn set_state(node: &Node, on: &str, path: &str, state: coolbot::Controllable) {
+    use zenoh::Wait;
+    let replies = node
+        .session()
+        .get(crate::keys::control(on, path))
+        .payload(serde_json::to_vec(&coolbot::Command::SetState(state)).unwrap())
+        .timeout(std::time::Duration::from_secs(10))
+        .wait()
+        .unwrap();
+    let reply = replies.recv().unwrap().into_result().unwrap();
+    assert_eq!(
+        serde_json::from_slice::<crate::ControlReply>(&reply.payload().to_bytes()).unwrap(),
+        crate::ControlReply::Accepted,
+        "`{state:?}` sent to `{path}` on `{on}`"
+    );
+}

@@ -102,8 +102,18 @@ pub(super) struct Inlet {
 
 impl Inlet {
     /// Queue `payload`, a batch of echoed packets from `node`, and wake the feed;
-    /// count it dropped if the queue is full.
+    /// count it dropped if the queue is full, or if it is over
+    /// [`crate::limits::ECHO_BATCH`] (never queued: what waits is within it).
     pub(super) fn push(&self, node: &Arc<str>, payload: ZBytes) {
+        if let Err(exceeded) = crate::limits::ECHO_BATCH
+            .check(|| "a batch of echoed packets".to_owned(), payload.len())
+        {
+            self.counts.undecoded.fetch_add(1, Ordering::Relaxed);
+            coolbot::limited!(&**node, |held| tracing::warn!(
+                "a batch of echoed packets from {node} is not decoded (dropped): {exceeded}{held}"
+            ));
+            return;
+        }
         match self.sender.try_send((Arc::clone(node), payload)) {
             Ok(()) => self.wake.notify_one(),
             Err(TrySendError::Full(_)) => {
@@ -188,15 +198,7 @@ fn queue(capacity: usize, counts: Arc<Counts>) -> (Inlet, Receiver<Waiting>) {
 /// Log every packet of every batch waiting on the channels of its output.
 fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
     for (node, payload) in waiting.try_iter() {
-        if let Err(exceeded) = crate::limits::ECHO_BATCH
-            .check(|| "a batch of echoed packets".to_owned(), payload.len())
-        {
-            counts.undecoded.fetch_add(1, Ordering::Relaxed);
-            coolbot::limited!(&*node, |held| tracing::warn!(
-                "a batch of echoed packets from {node} is not decoded (dropped): {exceeded}{held}"
-            ));
-            continue;
-        }
+        // (Within `ECHO_BATCH`: checked when queued.)
         let payload = payload.to_bytes();
         let batch = match serde_json::from_slice::<Vec<EchoedRaw<'_>>>(&payload) {
             Ok(batch) => batch,
@@ -379,6 +381,21 @@ mod tests {
         assert_eq!(logged[4].1, r#"{"value":9}"#);
         // The batch that does not decode, and the pose without `y`.
         assert_eq!(counts.undecoded.load(Ordering::Relaxed), 2);
+    }
+
+    /// A batch over `ECHO_BATCH` is dropped and counted as it comes: it never waits
+    /// in the queue.
+    #[test]
+    fn a_batch_over_its_bound_is_dropped_before_it_is_queued() {
+        let counts = Arc::new(Counts::default());
+        let (inlet, waiting) = queue(4, Arc::clone(&counts));
+        let node: Arc<str> = Arc::from("n");
+        let over = vec![b' '; crate::limits::ECHO_BATCH.max + 1];
+        inlet.push(&node, ZBytes::from(over));
+        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 1);
+        assert!(waiting.is_empty(), "a batch over the bound waits");
+        inlet.push(&node, batch(&[("a.out", 0, "1")]));
+        assert_eq!(waiting.len(), 1);
     }
 
     /// The feed sleeps until a batch comes and logs it at once; then it takes what
