@@ -5,12 +5,25 @@ use std::io;
 use std::thread::{Builder, JoinHandle};
 use std::time::Duration;
 
-/// Spawn a named thread (`cool:<name>`; the OS may truncate the name).
+/// The stack of every thread the runtime spawns (components, among them the outlets
+/// and inlets of `coolbot-zenoh`, execution groups, the recorder): 8 MiB, what a C
+/// thread gets on Linux by default (glibc takes `RLIMIT_STACK`), where a Rust thread
+/// gets 2 MiB. A packet travels by value: a section that builds one and sends it holds
+/// several copies of it on its stack at once, more in a debug build, and 2 MiB gave
+/// out at packets of about 64 KiB in a debug build and 192 KiB in a release build.
+/// Only the pages a thread touches take memory; the rest is address space.
+pub const THREAD_STACK_SIZE: usize = 8 << 20;
+
+/// Spawn a named thread (`cool:<name>`; the OS may truncate the name) with a stack of
+/// [`THREAD_STACK_SIZE`].
 pub(crate) fn spawn(
     name: &str,
     body: impl FnOnce() + Send + 'static,
 ) -> io::Result<JoinHandle<()>> {
-    Builder::new().name(format!("cool:{name}")).spawn(body)
+    Builder::new()
+        .name(format!("cool:{name}"))
+        .stack_size(THREAD_STACK_SIZE)
+        .spawn(body)
 }
 
 /// Join a thread; a panic that escaped it (a runtime bug: user code runs under

@@ -246,9 +246,7 @@ impl Registry {
     /// Spawn the watchdog thread once per process.
     fn spawn(&'static self) {
         self.spawned.get_or_init(|| {
-            let spawned = std::thread::Builder::new()
-                .name("cool:watchdog".to_owned())
-                .spawn(move || self.run());
+            let spawned = crate::thread::spawn("watchdog", move || self.run());
             if let Err(error) = &spawned {
                 tracing::error!(
                     "cannot spawn the max_response watchdog ({error}): overruns are found only when sections return"

@@ -75,6 +75,7 @@ pub fn check(
         incomplete: false,
         rules: BTreeMap::new(),
         packet_elements: BTreeMap::new(),
+        packet_bytes: BTreeMap::new(),
     };
     for file in files {
         checker.file = file.id;
@@ -120,6 +121,8 @@ pub(crate) struct Checker<'a, 'd> {
     /// The elements each packet counted so far holds inline (`None`: something in it
     /// is refused for its size already), by name.
     pub(crate) packet_elements: BTreeMap<String, Option<u128>>,
+    /// About how many bytes each packet counted so far holds inline, by name.
+    pub(crate) packet_bytes: BTreeMap<String, u128>,
 }
 
 impl Checker<'_, '_> {

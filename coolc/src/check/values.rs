@@ -49,10 +49,65 @@ pub(crate) const MAX_LIST_REPEAT: u64 = super::MAX_QUEUE_SIZE;
 /// one.
 pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
 
-/// The most elements a packet, a configuration block or a component's variables
-/// (together) hold inline, their arrays and packets counted together: like a
-/// queue's size and a list's repeat count, at most 2^20.
-pub(crate) const MAX_RECORD_ELEMENTS: u64 = super::MAX_QUEUE_SIZE;
+/// The most bytes a packet, a configuration block or a component's variables hold
+/// inline. Each travels by value: a section that builds a packet and sends it holds
+/// many copies of it on its thread's stack at once (about thirty in a debug build),
+/// and a harness runs its component on the test's own thread, whose stack is Rust's
+/// default 2 MiB. 32 KiB leaves room to spare there; larger data goes in lists, which
+/// live on the heap.
+pub(crate) const MAX_INLINE_BYTES: u64 = 32 << 10;
+
+/// About how many bytes a value of `ty` takes inline, an upper bound where the layout
+/// is Rust's to choose: a `String` or a list is three words, a `Time` or a `Duration`
+/// 16 bytes, an optional its value and a word, an enum a word, a packet its fields
+/// together; an extern packet or a ROS message counts nothing (its size is its own
+/// type's, not the description's).
+fn inline_bytes(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> u128 {
+    match &ty.kind {
+        ast::TypeKind::Prim(prim) => match prim {
+            ast::Prim::Bool | ast::Prim::I8 | ast::Prim::U8 => 1,
+            ast::Prim::I16 | ast::Prim::U16 => 2,
+            ast::Prim::I32 | ast::Prim::U32 | ast::Prim::F32 => 4,
+            ast::Prim::I64 | ast::Prim::U64 | ast::Prim::F64 => 8,
+            ast::Prim::Time | ast::Prim::Duration => 16,
+            ast::Prim::String => 24,
+        },
+        ast::TypeKind::List(_) => 24,
+        ast::TypeKind::Array(inner, size) => {
+            u128::from(size.value).saturating_mul(inline_bytes(checker, inner))
+        }
+        ast::TypeKind::Optional(inner) => inline_bytes(checker, inner).saturating_add(8),
+        ast::TypeKind::Named(name) => packet_bytes(checker, &name.name),
+    }
+}
+
+/// About how many bytes the packet or enum named `name` takes inline, counted once per
+/// packet; any other type counts nothing.
+fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> u128 {
+    if let Some(known) = checker.packet_bytes.get(name) {
+        return *known;
+    }
+    let model = checker.model;
+    let item = model.symbols.defs.get(name).and_then(|def| {
+        model
+            .files
+            .get(def.file.0 as usize)
+            .and_then(|file| file.items.get(def.item))
+    });
+    let packet = match item {
+        Some(ast::Item::Packet(packet)) => packet,
+        Some(ast::Item::Enum(_)) => return 8,
+        _ => return 0,
+    };
+    // A packet holding itself by value is an error of its own: it counts nothing inside.
+    checker.packet_bytes.insert(name.to_owned(), 0);
+    let mut total = 0u128;
+    for field in &packet.fields {
+        total = total.saturating_add(inline_bytes(checker, &field.ty));
+    }
+    checker.packet_bytes.insert(name.to_owned(), total);
+    total
+}
 
 /// The elements a value of `ty` holds inline: the product of its nested array
 /// lengths, a packet counting what its fields hold (through optionals; a list is a
@@ -100,28 +155,20 @@ fn packet_elements(checker: &mut Checker<'_, '_>, name: &str) -> Option<u128> {
     // A packet holding itself by value is an error of its own: it counts one inside.
     checker.packet_elements.insert(name.to_owned(), Some(1));
     let total = fields_elements(checker, &packet.fields)
-        .map(|(total, _)| total.max(1))
-        .filter(|total| *total <= u128::from(MAX_RECORD_ELEMENTS));
+        .map(|total| total.max(1))
+        .filter(|_| packet_bytes(checker, name) <= u128::from(MAX_INLINE_BYTES));
     checker.packet_elements.insert(name.to_owned(), total);
     total
 }
 
-/// The elements `fields` hold inline together, and the field holding the most with
-/// its count; `None` when a field is refused for its size already.
-fn fields_elements<'f>(
-    checker: &mut Checker<'_, '_>,
-    fields: &'f [ast::Field],
-) -> Option<(u128, Option<(&'f ast::Field, u128)>)> {
+/// The elements `fields` hold inline together; `None` when a field is refused for its
+/// size already.
+fn fields_elements(checker: &mut Checker<'_, '_>, fields: &[ast::Field]) -> Option<u128> {
     let mut total = 0u128;
-    let mut largest: Option<(&ast::Field, u128)> = None;
     for field in fields {
-        let elements = inline_elements(checker, &field.ty)?;
-        total = total.saturating_add(elements);
-        if largest.is_none_or(|(_, most)| elements > most) {
-            largest = Some((field, elements));
-        }
+        total = total.saturating_add(inline_elements(checker, &field.ty)?);
     }
-    Some((total, largest))
+    Some(total)
 }
 
 /// The factors of what an array type holds, outermost first, for a message:
@@ -187,8 +234,7 @@ fn array_size(
     }
 }
 
-/// A packet holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields counted
-/// together.
+/// A packet takes at most [`MAX_INLINE_BYTES`] inline, its fields counted together.
 pub(super) fn packet_size(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
     record_size(
         checker,
@@ -198,7 +244,7 @@ pub(super) fn packet_size(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
     );
 }
 
-/// A configuration block holds at most [`MAX_RECORD_ELEMENTS`] inline, its fields
+/// A configuration block takes at most [`MAX_INLINE_BYTES`] inline, its fields
 /// counted together.
 pub(super) fn configuration_size(
     checker: &mut Checker<'_, '_>,
@@ -213,11 +259,10 @@ pub(super) fn configuration_size(
 }
 
 /// A component's variables, held together in one record (its `Vars`, built with
-/// `Default` as a configuration block is), hold at most [`MAX_RECORD_ELEMENTS`]
-/// inline, counted together.
+/// `Default` as a configuration block is), take at most [`MAX_INLINE_BYTES`] inline,
+/// counted together.
 pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Component) {
-    let mut total = 0u128;
-    let mut largest: Option<(&str, u128)> = None;
+    let mut sizes = Vec::new();
     for member in &component.members {
         let ast::Member::Variable(variable) = member else {
             continue;
@@ -225,56 +270,48 @@ pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Com
         let Some(ty) = &variable.ty else {
             continue;
         };
-        let Some(elements) = inline_elements(checker, ty) else {
+        if inline_elements(checker, ty).is_none() {
             // Reported inside already.
             return;
-        };
-        total = total.saturating_add(elements);
-        if largest.is_none_or(|(_, most)| elements > most) {
-            largest = Some((&variable.name.name, elements));
         }
+        sizes.push((variable.name.name.as_str(), inline_bytes(checker, ty)));
     }
-    let Some(largest) = largest else {
-        return;
-    };
     let what = format!("the variables of component `{}` hold", component.name.name);
-    record_refused(
-        checker,
-        total,
-        largest,
-        component.name.span,
-        &what,
-        "variable",
-    );
+    bytes_refused(checker, &sizes, component.name.span, &what, "variable");
 }
 
 fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
-    let Some((total, Some((largest, most)))) = fields_elements(checker, fields) else {
-        // Empty, or reported inside already.
+    if fields_elements(checker, fields).is_none() {
+        // Reported inside already.
         return;
-    };
-    record_refused(
-        checker,
-        total,
-        (&largest.name.name, most),
-        span,
-        what,
-        "field",
-    );
+    }
+    let sizes: Vec<(&str, u128)> = fields
+        .iter()
+        .map(|field| (field.name.name.as_str(), inline_bytes(checker, &field.ty)))
+        .collect();
+    bytes_refused(checker, &sizes, span, what, "field");
 }
 
-/// Reports `what` (a subject and its verb: `packet \`P\` holds`), holding `total`
-/// elements inline, if that is beyond [`MAX_RECORD_ELEMENTS`]; `largest` is its
-/// member holding the most.
-fn record_refused(
+/// Reports `what` (a subject and its verb) if its members, of `sizes` bytes inline
+/// each, hold more than [`MAX_INLINE_BYTES`] together.
+fn bytes_refused(
     checker: &mut Checker<'_, '_>,
-    total: u128,
-    (largest, most): (&str, u128),
+    sizes: &[(&str, u128)],
     span: Span,
     what: &str,
     member: &str,
 ) {
-    let max = MAX_RECORD_ELEMENTS;
+    let max = MAX_INLINE_BYTES;
+    let total = sizes
+        .iter()
+        .fold(0u128, |total, (_, bytes)| total.saturating_add(*bytes));
+    let Some((largest, most)) = sizes
+        .iter()
+        .copied()
+        .reduce(|a, b| if b.1 > a.1 { b } else { a })
+    else {
+        return;
+    };
     if total <= u128::from(max) {
         return;
     }
@@ -282,11 +319,16 @@ fn record_refused(
         .error(
             Code::SizeLimit,
             span,
-            format!("{what} {total} elements inline, more than {max}"),
+            format!(
+                "{what} about {total} bytes inline, more than {max} ({} KiB)",
+                max >> 10
+            ),
         )
-        .with_label(format!("its {member}s, their arrays and packets counted together"))
+        .with_label(format!(
+            "its {member}s together: it travels by value, and a thread's stack holds many copies of it at once"
+        ))
         .with_help(format!(
-            "the largest {member}, `{largest}`, holds {most}: hold such {member}s in lists (`[T]`), which live on the heap"
+            "the largest {member}, `{largest}`, takes about {most} bytes: hold such data in lists (`[T]`), which live on the heap"
         ));
     checker.push(diagnostic);
 }

@@ -51,32 +51,39 @@ const PRIMS: &[&str] = &[
 ];
 /// Array lengths around the 32 where serde and `Default` stop.
 const LENGTHS: &[u64] = &[1, 3, 32, 33, 40, 72];
-/// The most elements an array holds inline, nested arrays and packets counted
-/// together (`docs/language.md`, "Types").
-const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
-/// The most elements a packet or a configuration block holds inline.
-const MAX_RECORD_ELEMENTS: u64 = 1 << 20;
+/// The most bytes a packet, a configuration block or a component's variables hold
+/// inline (`docs/language.md`, "Types"); an array beyond it is a list here too, which
+/// keeps every array within its own bound (2^16 elements) as well.
+const MAX_INLINE_BYTES: u64 = 32 << 10;
 
 impl Ty {
-    /// The elements a value of the type holds inline, `sizes` those of the packets.
-    fn elements(&self, sizes: &[u64]) -> u64 {
+    /// About how many bytes a value of the type takes inline, as coolc counts them,
+    /// `sizes` those of the packets.
+    fn bytes(&self, sizes: &[u64]) -> u64 {
         match self {
             Ty::Packet(i) => sizes[*i],
-            Ty::Array(inner, n) => n.saturating_mul(inner.elements(sizes)),
-            Ty::Optional(inner) => inner.elements(sizes),
-            Ty::Prim(_) | Ty::Enum(_) | Ty::List(_) => 1,
+            Ty::Array(inner, n) => n.saturating_mul(inner.bytes(sizes)),
+            Ty::Optional(inner) => inner.bytes(sizes).saturating_add(8),
+            Ty::Enum(_) => 8,
+            Ty::List(_) => 24,
+            Ty::Prim("bool" | "i8" | "u8") => 1,
+            Ty::Prim("u16") => 2,
+            Ty::Prim("i32" | "u32" | "f32") => 4,
+            Ty::Prim("i64" | "u64" | "f64") => 8,
+            Ty::Prim("Duration" | "Time") => 16,
+            Ty::Prim(_) => 24,
         }
     }
 
-    /// The type, or a list of it when it would take `elements` beyond `max` (a list
+    /// The type, or a list of it when it would take `bytes` beyond `max` (a list
     /// lives on the heap).
-    fn within(self, sizes: &[u64], elements: &mut u64, max: u64) -> Ty {
-        let own = self.elements(sizes);
-        if elements.saturating_add(own) > max {
-            *elements += 1;
+    fn within(self, sizes: &[u64], bytes: &mut u64, max: u64) -> Ty {
+        let own = self.bytes(sizes);
+        if bytes.saturating_add(own) > max {
+            *bytes += 24;
             Ty::List(Box::new(self))
         } else {
-            *elements += own;
+            *bytes += own;
             self
         }
     }
@@ -127,9 +134,9 @@ impl Ty {
     }
 }
 
-/// A random type over the packets of `sizes` (the elements each holds) and enums
-/// `0..enums` (`depth` bounds the nesting); an array that would hold more than
-/// `MAX_ARRAY_ELEMENTS` is a list.
+/// A random type over the packets of `sizes` (the bytes each takes) and enums
+/// `0..enums` (`depth` bounds the nesting); an array that would take more than
+/// `MAX_INLINE_BYTES` is a list.
 fn ty(rng: &mut Rng, sizes: &[u64], enums: usize, depth: usize) -> Ty {
     let packets = sizes.len();
     let choice = rng.below(if depth == 0 { 3 } else { 7 });
@@ -139,7 +146,7 @@ fn ty(rng: &mut Rng, sizes: &[u64], enums: usize, depth: usize) -> Ty {
         3 | 4 => {
             let inner = ty(rng, sizes, enums, depth - 1);
             let n = *rng.pick(LENGTHS);
-            if n.saturating_mul(inner.elements(sizes)) > MAX_ARRAY_ELEMENTS {
+            if n.saturating_mul(inner.bytes(sizes)) > MAX_INLINE_BYTES {
                 Ty::List(Box::new(inner))
             } else {
                 Ty::Array(Box::new(inner), n)
@@ -184,14 +191,14 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
         .unwrap();
     }
     let packets = 2 + rng.below(4);
-    // The elements each packet holds inline.
+    // The bytes each packet takes inline.
     let mut sizes: Vec<u64> = Vec::new();
     for p in 0..packets {
         let mut fields = Vec::new();
-        let mut elements = 0;
+        let mut bytes = 0;
         for f in 0..1 + rng.below(5) {
             let field_ty =
-                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut elements, MAX_RECORD_ELEMENTS);
+                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut bytes, MAX_INLINE_BYTES);
             let default = if rng.chance(50) {
                 field_ty.literal(&mut rng)
             } else {
@@ -209,7 +216,7 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
             fields.join("\n")
         )
         .unwrap();
-        sizes.push(elements.max(1));
+        sizes.push(bytes.max(1));
     }
     let converters = 1 + rng.below(2);
     let mut converter_ends = Vec::new();
@@ -230,10 +237,10 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
     for a in 0..2 + rng.below(3) {
         let mut members = Vec::new();
         let mut config = Vec::new();
-        let mut elements = 0;
+        let mut bytes = 0;
         for c in 0..rng.below(3) {
             let field_ty =
-                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut elements, MAX_RECORD_ELEMENTS);
+                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut bytes, MAX_INLINE_BYTES);
             let default = field_ty
                 .literal(&mut rng)
                 .map(|d| format!(" = {d}"))
@@ -247,9 +254,11 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
             ));
         }
         let mut observables = Vec::new();
+        let mut var_bytes = 0;
         for v in 0..rng.below(4) {
             let kind = *rng.pick(&["observable", "controllable", "local"]);
-            let var_ty = ty(&mut rng, &sizes, enums, 2);
+            let var_ty =
+                ty(&mut rng, &sizes, enums, 2).within(&sizes, &mut var_bytes, MAX_INLINE_BYTES);
             let default = if rng.chance(50) {
                 var_ty.literal(&mut rng)
             } else {

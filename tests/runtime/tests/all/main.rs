@@ -25,6 +25,7 @@ mod redundancy;
 mod response;
 mod rosbag2_interop;
 mod spend;
+mod stack;
 mod supervisor_commands;
 mod timing_override;
 mod user_automaton;

@@ -1,0 +1,114 @@
+//! A packet travels by value, and a section that builds one and sends it holds many
+//! copies of it on its thread's stack at once: a component's thread has the stack
+//! for packets well beyond what coolc lets a description declare inline (32 KiB).
+
+use coolbot::port::{DataOut, FifoIn};
+use coolbot::{
+    Automaton, Component, Context, InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy,
+    PortSet, Section, SectionResult, Spec, StateSpec, System, TimingSpec,
+};
+use coolbot_runtime_tests::support::eventually;
+
+/// 96 KiB inline. On a thread of Rust's default 2 MiB, a debug build's section that
+/// builds one and sends it overflows the stack, which aborts the process.
+#[derive(Clone)]
+struct Big([u64; 12288]);
+
+static SOURCE: Spec = Spec {
+    type_name: "BigSource",
+    doc: "sends one large packet as it enters its state",
+    states: &[StateSpec {
+        name: "send",
+        entry: true,
+        exit: false,
+        periodic: None,
+        on: &[],
+        after: &[],
+        may: &[],
+    }],
+    initial: 0,
+    inputs: &[],
+    outputs: &[OutputSpec {
+        name: "out",
+        kind: OutputKind::Data,
+        packet: "Big",
+        pull: false,
+    }],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+/// Holds the input the test reads; no user automaton.
+static SINK: Spec = Spec {
+    type_name: "BigSink",
+    doc: "an input the test reads",
+    states: &[],
+    initial: 0,
+    inputs: &[InputSpec {
+        name: "input",
+        kind: InputKind::Fifo {
+            capacity: 4,
+            policy: OverflowPolicy::Reject,
+        },
+        packet: "Big",
+        pull: false,
+    }],
+    outputs: &[],
+    variables: &[],
+    exceptions: &[],
+    timing: TimingSpec::NONE,
+};
+
+struct Sink;
+
+impl Automaton for Sink {
+    fn spec(&self) -> &'static Spec {
+        &SINK
+    }
+}
+
+struct Source(DataOut<Big>);
+
+impl Automaton for Source {
+    fn spec(&self) -> &'static Spec {
+        &SOURCE
+    }
+
+    fn section(&mut self, _state: usize, _section: Section, _cx: &mut Context) -> SectionResult {
+        let mut packet = Big([0; 12288]);
+        for (index, word) in packet.0.iter_mut().enumerate() {
+            *word = index as u64;
+        }
+        self.0.send(std::hint::black_box(packet));
+        Ok(())
+    }
+}
+
+#[test]
+fn a_component_builds_and_sends_a_packet_of_96_kib_on_its_thread() {
+    let received = FifoIn::<Big>::new(4, OverflowPolicy::Reject);
+    let out = DataOut::<Big>::new();
+    let mut system = System::new();
+    system
+        .add(Component::new(
+            "sink",
+            Box::new(Sink),
+            PortSet::new().input(&received),
+        ))
+        .expect("add the sink");
+    system
+        .add(Component::new(
+            "source",
+            Box::new(Source(out.clone())),
+            PortSet::new().output(&out),
+        ))
+        .expect("add the source");
+    system.connect("source.out", "sink.input").expect("connect");
+    system.run_all().expect("run");
+    eventually(|| !received.is_empty(), "the packet arrives");
+    let packet = received.recv().expect("the packet");
+    assert!(packet.0.iter().enumerate().all(|(i, w)| *w == i as u64));
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
