@@ -1107,10 +1107,20 @@ impl Reaper {
     }
 }
 
-/// Release `built`, then free its names and memory in `releasing`.
+/// Release `built`, then free its names and memory in `releasing`. A panic while
+/// releasing it is caught and logged: what it held is dropped by then (its system,
+/// its exposure withdrawn), so its names are freed all the same, and the reaper goes
+/// on (else its names, and those of every instance waiting for it, would stay taken
+/// and their memory held).
 fn release(built: Hosted, releasing: &Mutex<Releasing>) {
     let (names, queue_bytes) = (built.names.clone(), built.queue_bytes);
-    built.release();
+    if let Err(payload) = std::panic::catch_unwind(AssertUnwindSafe(|| built.release())) {
+        tracing::error!(
+            instance = %names[0],
+            "the release of a dead instance panicked: {}; its names are free again",
+            excerpt(&panic_message(payload.as_ref()), REASON_CHARS)
+        );
+    }
     let mut releasing = lock(releasing);
     for name in &names {
         releasing.names.remove(name);
@@ -1590,6 +1600,7 @@ fn ask(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::BTreeSet;
 
     /// The reason of the refusal `replies` bring, if any.
     fn refusal(
@@ -2042,6 +2053,9 @@ mod tests {
 
     static HOLDS: Mutex<Holds> = Mutex::new(BTreeMap::new());
 
+    /// The instances whose release panics ([`held_release`]).
+    static PANICKING: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
+
     /// Hold the release of instance `name` until the returned [`Held`] is dropped
     /// (or a deadline passes).
     fn hold_release(name: &str) -> Held {
@@ -2054,6 +2068,10 @@ mod tests {
     /// The release of instance `name` begins ([`Hosted::release`]): a test holding it
     /// ([`hold_release`]) holds it here.
     pub(super) fn held_release(name: &str) {
+        assert!(
+            !lock(&PANICKING).contains(name),
+            "the release of `{name}` panics, as the test asks"
+        );
         let held = lock(&HOLDS).remove(name);
         if let Some((begins, wait)) = held {
             let _ = begins.send(());
@@ -2094,6 +2112,39 @@ mod tests {
         )
         .is_ok()));
         assert_eq!(agent.status().built, 4);
+    }
+
+    /// A release that panics frees the instance's names all the same (its exposure
+    /// is withdrawn as the panic unwinds), and the reaper goes on releasing.
+    #[test]
+    fn a_release_that_panics_frees_the_names_and_the_reaper_goes_on() {
+        let node = crate::testing::node("rp", None, None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let timeout = Duration::from_secs(10);
+        let name = own("rp", "boom");
+        lock(&PANICKING).insert(name.clone());
+        instantiate(&node, "rp", &request("Idle", &name), timeout).unwrap();
+        set_state(&node, "rp", &name, Controllable::Dead);
+        assert!(
+            eventually(|| threads_named("cool-net:rp:m") == 0),
+            "the exposure of the instance whose release panicked is withdrawn"
+        );
+        lock(&PANICKING).remove(&name);
+        assert!(
+            eventually(|| instantiate(&node, "rp", &request("Idle", &name), timeout).is_ok()),
+            "the name of an instance whose release panicked stays taken"
+        );
+        assert_eq!(threads_named("cool-net:rp:rea"), 1, "the reaper has ended");
+        // It releases the next.
+        set_state(&node, "rp", &name, Controllable::Dead);
+        assert!(eventually(|| instantiate(
+            &node,
+            "rp",
+            &request("Idle", &name),
+            timeout
+        )
+        .is_ok()));
+        assert_eq!(agent.status().built, 3);
     }
 
     /// A registry of `Idle` and `Gate`, an `Idle` whose factory waits until the test
