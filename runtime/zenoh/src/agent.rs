@@ -447,8 +447,8 @@ pub const AGENT_QUEUE: usize = 16;
 /// and the thread then asks which owners still live.
 pub const GONE_QUEUE: usize = 256;
 
-/// How long the agent asks which nodes live, after a loss was dropped, or whether
-/// the owner of a request lives, before building it.
+/// How long the agent asks the network whether the owner of a request lives, before
+/// building it, when its watcher has not heard of the owner's token.
 const OWNERS_LOOKUP: Duration = Duration::from_secs(1);
 
 /// The shortest time between two of the agent's re-checks of its owners (after a
@@ -479,6 +479,10 @@ pub struct AgentStatus {
     /// Losses of nodes dropped before the agent's thread took them (more than
     /// [`GONE_QUEUE`] waited): after each, the thread asked which owners live.
     pub losses_dropped: u64,
+    /// Requests whose owner the agent had not heard of (its liveliness token not yet
+    /// come, or gone), for which it asked the network whether the owner lives, up to
+    /// one second on its thread each: an owner whose token it has heard costs none.
+    pub owners_asked: u64,
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -646,15 +650,27 @@ impl Agent {
         // asks which owners still live.
         let resync = Arc::new(AtomicBool::new(false));
         let (dropping, resyncing) = (Arc::clone(&status), Arc::clone(&resync));
+        // The nodes whose tokens live, as the watcher hears them come and go (those
+        // there already among them): whether a request's owner lives, and which
+        // owners do after a dropped loss, without asking the network. A token goes
+        // from it before its loss is sent, so an owner found in it is either alive or
+        // its loss is still to come to the agent's thread.
+        let alive: Arc<Mutex<HashSet<String>>> = Arc::default();
+        let living = Arc::clone(&alive);
         let watcher = node
             .session()
             .liveliness()
             .declare_subscriber(format!("{}/*", keys::ROOT))
+            .history(true)
             .callback(move |sample| {
-                if sample.kind() == zenoh::sample::SampleKind::Delete
-                    && let Some(name) = sample.key_expr().as_str().rsplit('/').next()
-                {
+                let Some(name) = sample.key_expr().as_str().rsplit('/').next() else {
+                    return;
+                };
+                if sample.kind() == zenoh::sample::SampleKind::Delete {
+                    lock(&living).remove(name);
                     node_gone(name, &gone, &dropping, &resyncing);
+                } else {
+                    lock(&living).insert(name.to_owned());
                 }
             })
             .wait()
@@ -692,7 +708,7 @@ impl Agent {
                                 &node,
                                 &registry,
                                 &query,
-                                &serving,
+                                (&serving, &alive),
                                 (&mut hosted, &reaper, cap),
                             );
                             if let Err(error) = reply(&query, &answer) {
@@ -718,7 +734,7 @@ impl Agent {
                     // Whatever comes, a dropped loss has the owners re-checked soon.
                     if rechecked.elapsed() >= OWNERS_RECHECK && resync.swap(false, Ordering::AcqRel)
                     {
-                        owners_lost(&node, &hosted);
+                        owners_lost(&hosted, &alive);
                         reap(&mut hosted, &reaper);
                         rechecked = Instant::now();
                     }
@@ -783,7 +799,7 @@ fn serve_one(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
-    status: &Mutex<AgentStatus>,
+    (status, alive): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>),
     (hosted, reaper, cap): (&mut Vec<Hosted>, &Reaper, limits::Limit),
 ) -> ControlReply {
     reap(hosted, reaper);
@@ -803,7 +819,8 @@ fn serve_one(
             .iter()
             .map(|built| built.queue_bytes)
             .fold(reaper.queue_bytes(), usize::saturating_add);
-        serve(node, registry, query, (&taken, held))
+        let lives = |owner: &str| owner_lives(node, (status, alive), owner);
+        serve(node, registry, query, (&taken, held), &lives)
     }));
     match outcome {
         Ok(Ok(built)) => {
@@ -1090,10 +1107,20 @@ impl Reaper {
     }
 }
 
-/// Release `built`, then free its names and memory in `releasing`.
+/// Release `built`, then free its names and memory in `releasing`. A panic while
+/// releasing it is caught and logged: what it held is dropped by then (its system,
+/// its exposure withdrawn), so its names are freed all the same, and the reaper goes
+/// on (else its names, and those of every instance waiting for it, would stay taken
+/// and their memory held).
 fn release(built: Hosted, releasing: &Mutex<Releasing>) {
     let (names, queue_bytes) = (built.names.clone(), built.queue_bytes);
-    built.release();
+    if let Err(payload) = std::panic::catch_unwind(AssertUnwindSafe(|| built.release())) {
+        tracing::error!(
+            instance = %names[0],
+            "the release of a dead instance panicked: {}; its names are free again",
+            excerpt(&panic_message(payload.as_ref()), REASON_CHARS)
+        );
+    }
     let mut releasing = lock(releasing);
     for name in &names {
         releasing.names.remove(name);
@@ -1157,25 +1184,36 @@ fn owner_lost(hosted: &[Hosted], lost: impl Fn(&str) -> bool) {
     }
 }
 
-/// After a node's loss was dropped: ask which nodes live, and send to `dead` what was
-/// built for owners that do not.
-fn owners_lost(node: &Node, hosted: &[Hosted]) {
-    let pattern = format!("{}/*", keys::ROOT);
-    match crate::node::liveliness_keys(node.session(), &pattern, OWNERS_LOOKUP) {
-        Ok(alive) => owner_lost(hosted, |owner| {
-            !alive.iter().any(|key| *key == keys::node_token(owner))
-        }),
-        Err(error) => tracing::warn!(
-            "the agent could not ask which owners live: {}",
-            Chain(&error)
-        ),
-    }
+/// After a node's loss was dropped: send to `dead` what was built for owners whose
+/// tokens the watcher no longer holds in `alive` (every loss goes from it, dropped
+/// or not).
+fn owners_lost(hosted: &[Hosted], alive: &Mutex<HashSet<String>>) {
+    // Taken under the lock, sent to `dead` without it: a command to an instance
+    // waits for its thread, and the watcher's callback, on Zenoh's thread, must not.
+    let lost: HashSet<&str> = {
+        let alive = lock(alive);
+        hosted
+            .iter()
+            .filter_map(|built| built.owner.as_deref())
+            .filter(|owner| !alive.contains(*owner))
+            .collect()
+    };
+    owner_lost(hosted, |owner| lost.contains(owner));
 }
 
-/// Check that node `owner` lives: its liveliness token is there, as the re-check of
-/// the owners asks ([`owners_lost`]). Its loss may have been handled while its
-/// request waited: nothing would send that request's instance to `dead`.
-fn owner_lives(node: &Node, owner: &str) -> Result<(), String> {
+/// Check that node `owner` lives: the watcher holds its token in `alive`, or, if it
+/// has not heard of it (its token not yet come, or gone), the network has it (asked
+/// for, counted in `status`). Its loss may have been handled while its request
+/// waited: nothing would send that request's instance to `dead`.
+fn owner_lives(
+    node: &Node,
+    (status, alive): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>),
+    owner: &str,
+) -> Result<(), String> {
+    if lock(alive).contains(owner) {
+        return Ok(());
+    }
+    lock(status).owners_asked += 1;
     let token = keys::node_token(owner);
     let alive =
         crate::node::liveliness_keys(node.session(), &token, OWNERS_LOOKUP).map_err(|error| {
@@ -1235,15 +1273,19 @@ fn check_namespace(request: &Instantiate, here: &str, requester: &str) -> Result
     Ok(())
 }
 
+/// Whether a request's owner lives ([`owner_lives`]): an error says why not.
+type Lives<'a> = dyn Fn(&str) -> Result<(), String> + 'a;
+
 /// One instantiation request: build, bridge, run, expose, in a system of its own
 /// (dropped, and so shut down, if the request fails or panics: its names are then
 /// free again). `taken`: the names hosted instances hold; `held`: the queue memory
-/// they hold, in bytes.
+/// they hold, in bytes; `lives`: whether a request's owner lives ([`owner_lives`]).
 fn serve(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
     (taken, held): (&dyn Fn(&str) -> bool, usize),
+    lives: &Lives<'_>,
 ) -> Result<Hosted, String> {
     let payload = query
         .payload()
@@ -1382,7 +1424,7 @@ fn serve(
         .map_err(text)?;
     // A request served after its owner's loss was handled builds nothing for it.
     if let Some(owner) = &request.owner {
-        owner_lives(node, owner)?;
+        lives(owner)?;
     }
     // Dropped (shut down, its names free) if anything below fails or panics.
     let mut system = System::new();
@@ -1558,6 +1600,7 @@ fn ask(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::BTreeSet;
 
     /// The reason of the refusal `replies` bring, if any.
     fn refusal(
@@ -2010,6 +2053,9 @@ mod tests {
 
     static HOLDS: Mutex<Holds> = Mutex::new(BTreeMap::new());
 
+    /// The instances whose release panics ([`held_release`]).
+    static PANICKING: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
+
     /// Hold the release of instance `name` until the returned [`Held`] is dropped
     /// (or a deadline passes).
     fn hold_release(name: &str) -> Held {
@@ -2022,6 +2068,10 @@ mod tests {
     /// The release of instance `name` begins ([`Hosted::release`]): a test holding it
     /// ([`hold_release`]) holds it here.
     pub(super) fn held_release(name: &str) {
+        assert!(
+            !lock(&PANICKING).contains(name),
+            "the release of `{name}` panics, as the test asks"
+        );
         let held = lock(&HOLDS).remove(name);
         if let Some((begins, wait)) = held {
             let _ = begins.send(());
@@ -2062,6 +2112,39 @@ mod tests {
         )
         .is_ok()));
         assert_eq!(agent.status().built, 4);
+    }
+
+    /// A release that panics frees the instance's names all the same (its exposure
+    /// is withdrawn as the panic unwinds), and the reaper goes on releasing.
+    #[test]
+    fn a_release_that_panics_frees_the_names_and_the_reaper_goes_on() {
+        let node = crate::testing::node("rp", None, None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let timeout = Duration::from_secs(10);
+        let name = own("rp", "boom");
+        lock(&PANICKING).insert(name.clone());
+        instantiate(&node, "rp", &request("Idle", &name), timeout).unwrap();
+        set_state(&node, "rp", &name, Controllable::Dead);
+        assert!(
+            eventually(|| threads_named("cool-net:rp:m") == 0),
+            "the exposure of the instance whose release panicked is withdrawn"
+        );
+        lock(&PANICKING).remove(&name);
+        assert!(
+            eventually(|| instantiate(&node, "rp", &request("Idle", &name), timeout).is_ok()),
+            "the name of an instance whose release panicked stays taken"
+        );
+        assert_eq!(threads_named("cool-net:rp:rea"), 1, "the reaper has ended");
+        // It releases the next.
+        set_state(&node, "rp", &name, Controllable::Dead);
+        assert!(eventually(|| instantiate(
+            &node,
+            "rp",
+            &request("Idle", &name),
+            timeout
+        )
+        .is_ok()));
+        assert_eq!(agent.status().built, 3);
     }
 
     /// A registry of `Idle` and `Gate`, an `Idle` whose factory waits until the test
@@ -2149,6 +2232,42 @@ mod tests {
             1,
             "the gate's exposure only"
         );
+    }
+
+    /// A request whose owner the agent has heard live is built without asking the
+    /// network (a round trip on the agent's thread, as long as the slowest peer takes
+    /// to answer, up to a second): a flood of owned requests costs no more than
+    /// unowned ones. One whose owner it has not heard of is asked for.
+    #[test]
+    fn an_owner_heard_live_is_not_asked_for() {
+        let port = free_port();
+        let node = crate::testing::node("oh", Some(port), None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let owner = crate::testing::node("oh-x", None, Some(port));
+        meet(&owner, "oh");
+        let before = agent.status();
+        for n in 0..3 {
+            let owned = Instantiate {
+                owner: Some("oh-x".to_owned()),
+                ..request("Idle", &own("oh-x", &format!("idle-{n}")))
+            };
+            instantiate(&owner, "oh", &owned, Duration::from_secs(10)).unwrap();
+        }
+        let status = agent.status();
+        assert_eq!(status.built, before.built + 3);
+        assert_eq!(status.owners_asked, before.owners_asked, "{status:?}");
+        // A token the agent has not heard of (a node that declares none): asked for,
+        // and refused.
+        let forged = Instantiate {
+            owner: Some("oh-y".to_owned()),
+            ..request("Idle", &own("oh-y", "idle"))
+        };
+        let refused = ask(&node, "oh", "oh-y", &forged, Duration::from_secs(10));
+        assert!(
+            matches!(&refused, Err(Error::Refused { reason, .. }) if reason.contains("is lost")),
+            "{refused:?}"
+        );
+        assert_eq!(agent.status().owners_asked, before.owners_asked + 1);
     }
 
     /// After a dropped loss, the owners are asked for even while requests keep the
