@@ -935,7 +935,7 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
         ast::InputDef::Fifo { ty, size, policy } => {
             values::ty(checker, ty);
             values::positive(checker, size, "a fifo size");
-            queue_size(checker, size, "a fifo size");
+            queue_size(checker, size, ty, "a fifo size");
             if let Some(policy) = policy
                 && !FIFO_POLICIES.contains(&policy.name.as_str())
             {
@@ -951,7 +951,7 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
         ast::InputDef::Ufifo { ty, size, max } => {
             values::ty(checker, ty);
             values::positive(checker, size, "a ufifo size");
-            queue_size(checker, size, "a ufifo size");
+            queue_size(checker, size, ty, "a ufifo size");
             if let Some(max) = max
                 && max.value < size.value
             {
@@ -975,8 +975,9 @@ fn input(checker: &mut Checker<'_, '_>, input: &ast::Input) {
 }
 
 /// A queue's size is allocated when the component starts: at most
-/// [`super::MAX_QUEUE_SIZE`] packets.
-fn queue_size(checker: &mut Checker<'_, '_>, size: &ast::IntLit, what: &str) {
+/// [`super::MAX_QUEUE_SIZE`] packets, and at most [`values::MAX_QUEUE_BYTES`] of
+/// packets of type `ty` (each held inline in the queue).
+fn queue_size(checker: &mut Checker<'_, '_>, size: &ast::IntLit, ty: &ast::Type, what: &str) {
     if size.value > super::MAX_QUEUE_SIZE {
         let diagnostic = checker
             .error(
@@ -986,6 +987,27 @@ fn queue_size(checker: &mut Checker<'_, '_>, size: &ast::IntLit, what: &str) {
             )
             .with_label("too large: the queue is allocated when the component starts")
             .with_help("a ufifo grows from a small size: `ufifo<T>(64, max 10000000)`");
+        checker.push(diagnostic);
+        return;
+    }
+    let each = values::packet_size_of(checker, ty);
+    let bytes = u128::from(size.value).saturating_mul(each);
+    if bytes > u128::from(values::MAX_QUEUE_BYTES) {
+        let diagnostic = checker
+            .error(
+                Code::SizeLimit,
+                size.span,
+                format!(
+                    "{what} of {} packets of about {each} bytes takes about {bytes} bytes, more than {} ({} MiB)",
+                    size.value,
+                    values::MAX_QUEUE_BYTES,
+                    values::MAX_QUEUE_BYTES >> 20
+                ),
+            )
+            .with_label("too large: the queue is allocated when the component starts")
+            .with_help(
+                "a smaller queue, or a ufifo that grows from a small size: `ufifo<T>(64, max 10000000)`",
+            );
         checker.push(diagnostic);
     }
 }

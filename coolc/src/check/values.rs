@@ -57,6 +57,16 @@ pub(crate) const MAX_ARRAY_ELEMENTS: u64 = 1 << 16;
 /// live on the heap.
 pub(crate) const MAX_INLINE_BYTES: u64 = 32 << 10;
 
+/// The most bytes a fifo's or a ufifo's initial queue takes, its size times its
+/// packet's inline bytes: the queue is allocated whole.
+pub(crate) const MAX_QUEUE_BYTES: u64 = 1 << 30;
+
+/// About how many bytes a packet of type `ty` takes in a queue (inline, as
+/// [`inline_bytes`] counts them; at least one).
+pub(super) fn packet_size_of(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> u128 {
+    inline_bytes(checker, ty).max(1)
+}
+
 /// About how many bytes a value of `ty` takes inline, an upper bound where the layout
 /// is Rust's to choose: a `String` or a list is three words, a `Time` or a `Duration`
 /// 16 bytes, an optional its value and a word, an enum a word, a packet its fields
