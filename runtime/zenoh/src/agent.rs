@@ -700,8 +700,9 @@ impl Agent {
                     crossbeam_channel::select! {
                         recv(inbox.received) -> query => {
                             let Ok(query) = query else { break };
-                            // The losses that came first are handled first.
-                            for name in lost.try_iter() {
+                            // The losses that came first are handled first (those
+                            // queued now: a stream of new ones holds no request up).
+                            for name in lost.try_iter().take(lost.len()) {
                                 owner_lost(&hosted, |owner| owner == name);
                             }
                             let answer = serve_one(
