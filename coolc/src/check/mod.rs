@@ -121,8 +121,9 @@ pub(crate) struct Checker<'a, 'd> {
     /// The elements each packet counted so far holds inline (`None`: something in it
     /// is refused for its size already), by name.
     pub(crate) packet_elements: BTreeMap<String, Option<u128>>,
-    /// About how many bytes each packet counted so far holds inline, by name.
-    pub(crate) packet_bytes: BTreeMap<String, u128>,
+    /// About how many bytes each packet counted so far holds inline, and its
+    /// alignment, by name.
+    pub(crate) packet_bytes: BTreeMap<String, (u128, u128)>,
 }
 
 impl Checker<'_, '_> {
