@@ -61,8 +61,9 @@ pub(crate) const MAX_INLINE_BYTES: u64 = 32 << 10;
 /// is Rust's to choose: a `String` or a list is three words, a `Time` or a `Duration`
 /// 16 bytes, an optional its value and a word, an enum a word, a packet its fields
 /// together rounded up to its alignment (as an array's elements are laid out, a packet
-/// of a `u64` and a `bool` takes 16 bytes, not 9); an extern packet or a ROS message
-/// counts nothing (its size is its own type's, not the description's).
+/// of a `u64` and a `bool` takes 16 bytes, not 9); a ROS message its fields as the
+/// struct coolc generates for it holds them; an extern packet counts nothing (its size
+/// is its own type's, not the description's).
 fn inline_bytes(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> u128 {
     inline_layout(checker, ty).0
 }
@@ -109,6 +110,10 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
     let packet = match item {
         Some(ast::Item::Packet(packet)) => packet,
         Some(ast::Item::Enum(_)) => return (8, 8),
+        Some(ast::Item::RosImport(import)) => {
+            return crate::ros::TypeName::parse(&import.ros_name.value)
+                .map_or((0, 1), |ros| ros_bytes(checker, &ros));
+        }
         _ => return (0, 1),
     };
     // A packet holding itself by value is an error of its own: it counts nothing inside.
@@ -122,6 +127,52 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
     }
     let layout = (total.div_ceil(align).saturating_mul(align), align);
     checker.packet_bytes.insert(name.to_owned(), layout);
+    layout
+}
+
+/// About how many bytes the ROS 2 message `name` takes inline and its alignment, as
+/// the struct coolc generates for it lays it out (`T[N]` an array, `T[<=N]` and `T[]`
+/// a `Vec`, a string a `String`), counted once per type; a type not loaded counts
+/// nothing (it is reported where it is imported).
+fn ros_bytes(checker: &mut Checker<'_, '_>, name: &crate::ros::TypeName) -> (u128, u128) {
+    use crate::ros::msg::{Base, Cardinality};
+    let key = format!("ros {name}");
+    if let Some(known) = checker.packet_bytes.get(&key) {
+        return *known;
+    }
+    let ros = checker.ros;
+    let Some(message) = ros.get(name) else {
+        return (0, 1);
+    };
+    // `.msg` files cannot refer to themselves (a cycle is reported when loading).
+    checker.packet_bytes.insert(key.clone(), (0, 1));
+    let mut total = 0u128;
+    let mut align = 1u128;
+    for field in &message.fields {
+        let (bytes, field_align) = match field.ty.cardinality {
+            Cardinality::Bounded(_) | Cardinality::Unbounded => (24, 8),
+            Cardinality::Single | Cardinality::Array(_) => {
+                let (bytes, field_align) = match &field.ty.base {
+                    Base::Bool | Base::Byte | Base::Char | Base::Int8 | Base::Uint8 => (1, 1),
+                    Base::Int16 | Base::Uint16 => (2, 2),
+                    Base::Int32 | Base::Uint32 | Base::Float32 => (4, 4),
+                    Base::Int64 | Base::Uint64 | Base::Float64 => (8, 8),
+                    Base::String(_) | Base::WString(_) => (24, 8),
+                    Base::Nested(nested) => ros_bytes(checker, nested),
+                };
+                match field.ty.cardinality {
+                    Cardinality::Array(size) => {
+                        (u128::from(size).saturating_mul(bytes), field_align)
+                    }
+                    _ => (bytes, field_align),
+                }
+            }
+        };
+        total = total.saturating_add(bytes);
+        align = align.max(field_align);
+    }
+    let layout = (total.div_ceil(align).saturating_mul(align), align);
+    checker.packet_bytes.insert(key, layout);
     layout
 }
 
