@@ -184,7 +184,12 @@ fn analyze_loaded(
     );
     symbols.note_unloaded(&loaded.files, &interfaces);
     symbols.add_siblings(&loaded.sources, list, loader);
-    let resolved = check::check(&loaded.files, &symbols, &mut loaded.diagnostics);
+    let resolved = check::check(
+        &loaded.files,
+        &symbols,
+        &interfaces,
+        &mut loaded.diagnostics,
+    );
     Analysis {
         sources: loaded.sources,
         files: loaded.files,

@@ -58,6 +58,7 @@ pub struct Resolved {
 pub fn check(
     files: &[ast::File],
     symbols: &Symbols,
+    ros: &crate::ros::Interfaces,
     diagnostics: &mut Vec<Diagnostic>,
 ) -> Resolved {
     let model = model::Model::new(files, symbols);
@@ -70,6 +71,7 @@ pub fn check(
         .collect();
     let mut checker = Checker {
         model: &model,
+        ros,
         diagnostics,
         file: FileId(0),
         incomplete: false,
@@ -111,6 +113,8 @@ pub fn check(
 /// The state shared by the checks: the model and where diagnostics go.
 pub(crate) struct Checker<'a, 'd> {
     pub(crate) model: &'a model::Model<'a>,
+    /// The ROS 2 message types loaded (what `import ros` names).
+    pub(crate) ros: &'a crate::ros::Interfaces,
     pub(crate) diagnostics: &'d mut Vec<Diagnostic>,
     /// The file being checked.
     pub(crate) file: FileId,
@@ -121,8 +125,9 @@ pub(crate) struct Checker<'a, 'd> {
     /// The elements each packet counted so far holds inline (`None`: something in it
     /// is refused for its size already), by name.
     pub(crate) packet_elements: BTreeMap<String, Option<u128>>,
-    /// About how many bytes each packet counted so far holds inline, by name.
-    pub(crate) packet_bytes: BTreeMap<String, u128>,
+    /// About how many bytes each packet counted so far holds inline, and its
+    /// alignment, by name.
+    pub(crate) packet_bytes: BTreeMap<String, (u128, u128)>,
 }
 
 impl Checker<'_, '_> {

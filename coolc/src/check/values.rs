@@ -70,30 +70,43 @@ pub(super) fn packet_size_of(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> u
 /// About how many bytes a value of `ty` takes inline, an upper bound where the layout
 /// is Rust's to choose: a `String` or a list is three words, a `Time` or a `Duration`
 /// 16 bytes, an optional its value and a word, an enum a word, a packet its fields
-/// together; an extern packet or a ROS message counts nothing (its size is its own
-/// type's, not the description's).
+/// together rounded up to its alignment (as an array's elements are laid out, a packet
+/// of a `u64` and a `bool` takes 16 bytes, not 9); a ROS message its fields as the
+/// struct coolc generates for it holds them; an extern packet counts nothing (its size
+/// is its own type's, not the description's).
 fn inline_bytes(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> u128 {
+    inline_layout(checker, ty).0
+}
+
+/// The bytes a value of `ty` takes inline (as [`inline_bytes`]) and its alignment.
+/// Every size is a multiple of its alignment, as Rust's are.
+fn inline_layout(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> (u128, u128) {
     match &ty.kind {
         ast::TypeKind::Prim(prim) => match prim {
-            ast::Prim::Bool | ast::Prim::I8 | ast::Prim::U8 => 1,
-            ast::Prim::I16 | ast::Prim::U16 => 2,
-            ast::Prim::I32 | ast::Prim::U32 | ast::Prim::F32 => 4,
-            ast::Prim::I64 | ast::Prim::U64 | ast::Prim::F64 => 8,
-            ast::Prim::Time | ast::Prim::Duration => 16,
-            ast::Prim::String => 24,
+            ast::Prim::Bool | ast::Prim::I8 | ast::Prim::U8 => (1, 1),
+            ast::Prim::I16 | ast::Prim::U16 => (2, 2),
+            ast::Prim::I32 | ast::Prim::U32 | ast::Prim::F32 => (4, 4),
+            ast::Prim::I64 | ast::Prim::U64 | ast::Prim::F64 => (8, 8),
+            ast::Prim::Time | ast::Prim::Duration => (16, 8),
+            ast::Prim::String => (24, 8),
         },
-        ast::TypeKind::List(_) => 24,
+        ast::TypeKind::List(_) => (24, 8),
         ast::TypeKind::Array(inner, size) => {
-            u128::from(size.value).saturating_mul(inline_bytes(checker, inner))
+            let (bytes, align) = inline_layout(checker, inner);
+            (u128::from(size.value).saturating_mul(bytes), align)
         }
-        ast::TypeKind::Optional(inner) => inline_bytes(checker, inner).saturating_add(8),
+        // A word more keeps the size a multiple of the alignment (at most a word).
+        ast::TypeKind::Optional(inner) => {
+            let (bytes, align) = inline_layout(checker, inner);
+            (bytes.saturating_add(8), align)
+        }
         ast::TypeKind::Named(name) => packet_bytes(checker, &name.name),
     }
 }
 
-/// About how many bytes the packet or enum named `name` takes inline, counted once per
-/// packet; any other type counts nothing.
-fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> u128 {
+/// About how many bytes the packet or enum named `name` takes inline and its
+/// alignment, counted once per packet; any other type counts nothing.
+fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
     if let Some(known) = checker.packet_bytes.get(name) {
         return *known;
     }
@@ -106,17 +119,71 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> u128 {
     });
     let packet = match item {
         Some(ast::Item::Packet(packet)) => packet,
-        Some(ast::Item::Enum(_)) => return 8,
-        _ => return 0,
+        Some(ast::Item::Enum(_)) => return (8, 8),
+        Some(ast::Item::RosImport(import)) => {
+            return crate::ros::TypeName::parse(&import.ros_name.value)
+                .map_or((0, 1), |ros| ros_bytes(checker, &ros));
+        }
+        _ => return (0, 1),
     };
     // A packet holding itself by value is an error of its own: it counts nothing inside.
-    checker.packet_bytes.insert(name.to_owned(), 0);
+    checker.packet_bytes.insert(name.to_owned(), (0, 1));
     let mut total = 0u128;
+    let mut align = 1u128;
     for field in &packet.fields {
-        total = total.saturating_add(inline_bytes(checker, &field.ty));
+        let (bytes, field_align) = inline_layout(checker, &field.ty);
+        total = total.saturating_add(bytes);
+        align = align.max(field_align);
     }
-    checker.packet_bytes.insert(name.to_owned(), total);
-    total
+    let layout = (total.div_ceil(align).saturating_mul(align), align);
+    checker.packet_bytes.insert(name.to_owned(), layout);
+    layout
+}
+
+/// About how many bytes the ROS 2 message `name` takes inline and its alignment, as
+/// the struct coolc generates for it lays it out (`T[N]` an array, `T[<=N]` and `T[]`
+/// a `Vec`, a string a `String`), counted once per type; a type not loaded counts
+/// nothing (it is reported where it is imported).
+fn ros_bytes(checker: &mut Checker<'_, '_>, name: &crate::ros::TypeName) -> (u128, u128) {
+    use crate::ros::msg::{Base, Cardinality};
+    let key = format!("ros {name}");
+    if let Some(known) = checker.packet_bytes.get(&key) {
+        return *known;
+    }
+    let ros = checker.ros;
+    let Some(message) = ros.get(name) else {
+        return (0, 1);
+    };
+    // `.msg` files cannot refer to themselves (a cycle is reported when loading).
+    checker.packet_bytes.insert(key.clone(), (0, 1));
+    let mut total = 0u128;
+    let mut align = 1u128;
+    for field in &message.fields {
+        let (bytes, field_align) = match field.ty.cardinality {
+            Cardinality::Bounded(_) | Cardinality::Unbounded => (24, 8),
+            Cardinality::Single | Cardinality::Array(_) => {
+                let (bytes, field_align) = match &field.ty.base {
+                    Base::Bool | Base::Byte | Base::Char | Base::Int8 | Base::Uint8 => (1, 1),
+                    Base::Int16 | Base::Uint16 => (2, 2),
+                    Base::Int32 | Base::Uint32 | Base::Float32 => (4, 4),
+                    Base::Int64 | Base::Uint64 | Base::Float64 => (8, 8),
+                    Base::String(_) | Base::WString(_) => (24, 8),
+                    Base::Nested(nested) => ros_bytes(checker, nested),
+                };
+                match field.ty.cardinality {
+                    Cardinality::Array(size) => {
+                        (u128::from(size).saturating_mul(bytes), field_align)
+                    }
+                    _ => (bytes, field_align),
+                }
+            }
+        };
+        total = total.saturating_add(bytes);
+        align = align.max(field_align);
+    }
+    let layout = (total.div_ceil(align).saturating_mul(align), align);
+    checker.packet_bytes.insert(key, layout);
+    layout
 }
 
 /// The elements a value of `ty` holds inline: the product of its nested array
@@ -166,7 +233,7 @@ fn packet_elements(checker: &mut Checker<'_, '_>, name: &str) -> Option<u128> {
     checker.packet_elements.insert(name.to_owned(), Some(1));
     let total = fields_elements(checker, &packet.fields)
         .map(|total| total.max(1))
-        .filter(|_| packet_bytes(checker, name) <= u128::from(MAX_INLINE_BYTES));
+        .filter(|_| packet_bytes(checker, name).0 <= u128::from(MAX_INLINE_BYTES));
     checker.packet_elements.insert(name.to_owned(), total);
     total
 }

@@ -55,6 +55,17 @@ proptest! {
     }
 }
 
+/// Seeds whose descriptions come within a few words of the 32 KiB a packet or a
+/// component's variables take inline: one whose packets are padded up to their
+/// alignment (9), and one whose last variable became a list that still takes its three
+/// words (2787).
+#[test]
+fn descriptions_at_the_inline_bound_pass_the_checker() {
+    for seed in [9, 2787] {
+        assert_accepted(seed, &describe(seed));
+    }
+}
+
 /// The seeds whose crates are built.
 const SAMPLE: &[u64] = &[1, 2, 3, 5];
 

@@ -76,10 +76,12 @@ impl Ty {
     }
 
     /// The type, or a list of it when it would take `bytes` beyond `max` (a list
-    /// lives on the heap).
+    /// lives on the heap). A list still takes its three words, so the type stays
+    /// inline only if the lists of every member after it (five at most) still fit.
     fn within(self, sizes: &[u64], bytes: &mut u64, max: u64) -> Ty {
+        const LISTS_AFTER: u64 = 5 * 24;
         let own = self.bytes(sizes);
-        if bytes.saturating_add(own) > max {
+        if bytes.saturating_add(own).saturating_add(LISTS_AFTER) > max {
             *bytes += 24;
             Ty::List(Box::new(self))
         } else {
@@ -216,7 +218,8 @@ pub fn describe(seed: u64) -> Vec<(String, String)> {
             fields.join("\n")
         )
         .unwrap();
-        sizes.push(bytes.max(1));
+        // Rust pads a packet up to its alignment, at most a word (coolc counts it so).
+        sizes.push(bytes.max(1).next_multiple_of(8));
     }
     let converters = 1 + rng.below(2);
     let mut converter_ends = Vec::new();

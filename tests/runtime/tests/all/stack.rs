@@ -2,11 +2,14 @@
 //! copies of it on its thread's stack at once: a component's thread has the stack
 //! for packets well beyond what coolc lets a description declare inline (32 KiB).
 
+use coolbot::harness::Harness;
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{
     Automaton, Component, Context, InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy,
     PortSet, Section, SectionResult, Spec, StateSpec, System, TimingSpec,
 };
+use coolbot_runtime_tests::generated::largest_sender;
+use coolbot_runtime_tests::generated::types::Largest;
 use coolbot_runtime_tests::support::eventually;
 
 /// 96 KiB inline. On a thread of Rust's default 2 MiB, a debug build's section that
@@ -111,4 +114,37 @@ fn a_component_builds_and_sends_a_packet_of_96_kib_on_its_thread() {
     assert!(packet.0.iter().enumerate().all(|(i, w)| *w == i as u64));
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
+}
+
+/// Builds the packet the way a behaviour does: from its default, then field by field.
+struct Fill;
+
+impl largest_sender::Behavior for Fill {
+    fn send_entry(&mut self, cx: &mut largest_sender::Cx<'_>) -> SectionResult {
+        let mut packet = Largest::default();
+        for (index, word) in packet.words.iter_mut().enumerate() {
+            *word = index as u64;
+        }
+        cx.outputs.out.send(packet);
+        Ok(())
+    }
+}
+
+/// The bound coolc keeps a packet within is safe where the stack is smallest: a
+/// harness runs its component on the test's own thread (2 MiB), and a debug build's
+/// generated section holds many copies of the packet there.
+#[test]
+fn a_harness_builds_and_sends_a_packet_of_32_kib_on_the_test_thread() {
+    let mut h = Harness::new(largest_sender::component("s", Fill)).expect("the harness");
+    h.run().expect("run");
+    h.settle().expect("settle");
+    let sent: Vec<Largest> = h.take_sent("out").expect("the packets sent");
+    assert_eq!(sent.len(), 1);
+    assert!(
+        sent[0]
+            .words
+            .iter()
+            .enumerate()
+            .all(|(i, w)| *w == i as u64)
+    );
 }
