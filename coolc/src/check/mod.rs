@@ -77,7 +77,7 @@ pub fn check(
         incomplete: false,
         rules: BTreeMap::new(),
         packet_elements: BTreeMap::new(),
-        packet_bytes: BTreeMap::new(),
+        packet_layouts: BTreeMap::new(),
     };
     for file in files {
         checker.file = file.id;
@@ -127,7 +127,7 @@ pub(crate) struct Checker<'a, 'd> {
     pub(crate) packet_elements: BTreeMap<String, Option<u128>>,
     /// About how many bytes each packet counted so far holds inline, and its
     /// alignment, by name.
-    pub(crate) packet_bytes: BTreeMap<String, (u128, u128)>,
+    pub(crate) packet_layouts: BTreeMap<String, (u128, u128)>,
 }
 
 impl Checker<'_, '_> {
@@ -147,8 +147,9 @@ impl Checker<'_, '_> {
                 for field in &packet.fields {
                     values::field(self, field);
                 }
-                values::recursive_packet(self, packet);
-                values::packet_size(self, packet);
+                if !values::recursive_packet(self, packet) {
+                    values::packet_size(self, packet);
+                }
             }
             ast::Item::Enum(def) => {
                 names::type_name(self, &def.name);

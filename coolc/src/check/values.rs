@@ -100,14 +100,14 @@ fn inline_layout(checker: &mut Checker<'_, '_>, ty: &ast::Type) -> (u128, u128) 
             let (bytes, align) = inline_layout(checker, inner);
             (bytes.saturating_add(8), align)
         }
-        ast::TypeKind::Named(name) => packet_bytes(checker, &name.name),
+        ast::TypeKind::Named(name) => packet_layout(checker, &name.name),
     }
 }
 
 /// About how many bytes the packet or enum named `name` takes inline and its
 /// alignment, counted once per packet; any other type counts nothing.
-fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
-    if let Some(known) = checker.packet_bytes.get(name) {
+fn packet_layout(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
+    if let Some(known) = checker.packet_layouts.get(name) {
         return *known;
     }
     let model = checker.model;
@@ -127,7 +127,7 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
         _ => return (0, 1),
     };
     // A packet holding itself by value is an error of its own: it counts nothing inside.
-    checker.packet_bytes.insert(name.to_owned(), (0, 1));
+    checker.packet_layouts.insert(name.to_owned(), (0, 1));
     let mut total = 0u128;
     let mut align = 1u128;
     for field in &packet.fields {
@@ -136,7 +136,7 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
         align = align.max(field_align);
     }
     let layout = (total.div_ceil(align).saturating_mul(align), align);
-    checker.packet_bytes.insert(name.to_owned(), layout);
+    checker.packet_layouts.insert(name.to_owned(), layout);
     layout
 }
 
@@ -147,7 +147,7 @@ fn packet_bytes(checker: &mut Checker<'_, '_>, name: &str) -> (u128, u128) {
 fn ros_bytes(checker: &mut Checker<'_, '_>, name: &crate::ros::TypeName) -> (u128, u128) {
     use crate::ros::msg::{Base, Cardinality};
     let key = format!("ros {name}");
-    if let Some(known) = checker.packet_bytes.get(&key) {
+    if let Some(known) = checker.packet_layouts.get(&key) {
         return *known;
     }
     let ros = checker.ros;
@@ -155,7 +155,7 @@ fn ros_bytes(checker: &mut Checker<'_, '_>, name: &crate::ros::TypeName) -> (u12
         return (0, 1);
     };
     // `.msg` files cannot refer to themselves (a cycle is reported when loading).
-    checker.packet_bytes.insert(key.clone(), (0, 1));
+    checker.packet_layouts.insert(key.clone(), (0, 1));
     let mut total = 0u128;
     let mut align = 1u128;
     for field in &message.fields {
@@ -182,7 +182,7 @@ fn ros_bytes(checker: &mut Checker<'_, '_>, name: &crate::ros::TypeName) -> (u12
         align = align.max(field_align);
     }
     let layout = (total.div_ceil(align).saturating_mul(align), align);
-    checker.packet_bytes.insert(key, layout);
+    checker.packet_layouts.insert(key, layout);
     layout
 }
 
@@ -233,7 +233,7 @@ fn packet_elements(checker: &mut Checker<'_, '_>, name: &str) -> Option<u128> {
     checker.packet_elements.insert(name.to_owned(), Some(1));
     let total = fields_elements(checker, &packet.fields)
         .map(|total| total.max(1))
-        .filter(|_| packet_bytes(checker, name).0 <= u128::from(MAX_INLINE_BYTES));
+        .filter(|_| packet_layout(checker, name).0 <= u128::from(MAX_INLINE_BYTES));
     checker.packet_elements.insert(name.to_owned(), total);
     total
 }
@@ -327,10 +327,15 @@ pub(super) fn configuration_size(
     checker: &mut Checker<'_, '_>,
     configuration: &ast::Configuration,
 ) {
+    // The keyword, not the whole block: the largest field is labelled apart.
+    let keyword = Span::new(
+        configuration.span.start,
+        (configuration.span.start + "configuration".len()).min(configuration.span.end),
+    );
     record_size(
         checker,
         &configuration.fields,
-        configuration.span,
+        keyword,
         "a configuration block holds",
     );
 }
@@ -351,10 +356,11 @@ pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Com
             // Reported inside already.
             return;
         }
-        sizes.push((variable.name.name.as_str(), inline_bytes(checker, ty)));
+        sizes.push((&variable.name, inline_bytes(checker, ty)));
     }
     let what = format!("the variables of component `{}` hold", component.name.name);
-    bytes_refused(checker, &sizes, component.name.span, &what, "variable");
+    let why = "its variables together: they are one record, built on the stack of whoever makes the component";
+    bytes_refused(checker, &sizes, component.name.span, &what, why, "variable");
 }
 
 fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
@@ -362,20 +368,23 @@ fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span,
         // Reported inside already.
         return;
     }
-    let sizes: Vec<(&str, u128)> = fields
+    let sizes: Vec<(&ast::Ident, u128)> = fields
         .iter()
-        .map(|field| (field.name.name.as_str(), inline_bytes(checker, &field.ty)))
+        .map(|field| (&field.name, inline_bytes(checker, &field.ty)))
         .collect();
-    bytes_refused(checker, &sizes, span, what, "field");
+    let why = "its fields together: it travels by value, and a thread's stack holds many copies of it at once";
+    bytes_refused(checker, &sizes, span, what, why, "field");
 }
 
 /// Reports `what` (a subject and its verb) if its members, of `sizes` bytes inline
-/// each, hold more than [`MAX_INLINE_BYTES`] together.
+/// each, hold more than [`MAX_INLINE_BYTES`] together: at `span`, labelled `why`, and
+/// at the largest `member`.
 fn bytes_refused(
     checker: &mut Checker<'_, '_>,
-    sizes: &[(&str, u128)],
+    sizes: &[(&ast::Ident, u128)],
     span: Span,
     what: &str,
+    why: &str,
     member: &str,
 ) {
     let max = MAX_INLINE_BYTES;
@@ -401,11 +410,14 @@ fn bytes_refused(
                 max >> 10
             ),
         )
-        .with_label(format!(
-            "its {member}s together: it travels by value, and a thread's stack holds many copies of it at once"
-        ))
+        .with_label(why)
+        .with_secondary(
+            largest.span,
+            format!("the largest {member}: about {most} bytes"),
+        )
         .with_help(format!(
-            "the largest {member}, `{largest}`, takes about {most} bytes: hold such data in lists (`[T]`), which live on the heap"
+            "hold such data as `{}` in lists (`[T]`), which live on the heap",
+            largest.name
         ));
     checker.push(diagnostic);
 }
@@ -1142,8 +1154,9 @@ fn interval(checker: &mut Checker<'_, '_>, interval: &ast::Interval) {
 
 /// A packet may not contain itself by value, directly or through other packets'
 /// fields, arrays or optionals (a list `[T]` is a heap allocation and breaks the
-/// cycle): the generated struct would be infinitely large.
-pub(super) fn recursive_packet(checker: &mut Checker<'_, '_>, packet: &ast::Packet) {
+/// cycle): the generated struct would be infinitely large. True if it was reported
+/// (its size means nothing then).
+pub(super) fn recursive_packet(checker: &mut Checker<'_, '_>, packet: &ast::Packet) -> bool {
     for field in &packet.fields {
         let mut chain = vec![packet.name.name.clone()];
         let mut visited = std::collections::BTreeSet::new();
@@ -1167,9 +1180,10 @@ pub(super) fn recursive_packet(checker: &mut Checker<'_, '_>, packet: &ast::Pack
                 .with_label("contains the packet by value")
                 .with_help("hold it in a list (`[T]`), which is allocated on the heap");
             checker.push(diagnostic);
-            return;
+            return true;
         }
     }
+    false
 }
 
 fn contains_by_value(
