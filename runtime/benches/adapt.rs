@@ -13,35 +13,19 @@ use std::time::{Duration, Instant};
 
 use coolbot::adapt::{Decision, Levels, Member, ProtectPriority, Reconfiguration, decide};
 use coolbot::{
-    AdaptConfig, Automaton, Command, Component, Context, Controllable, PeriodicSpec, PortSet,
-    Pressure, Section, SectionResult, Spec, State, StateSpec, System, TimingSpec,
+    AdaptConfig, Automaton, Command, Component, Context, Controllable, PortSet, Pressure, Section,
+    SectionResult, Spec, State, StateSpec, System, TimingSpec,
 };
 
-static TICKER: Spec = Spec {
-    type_name: "Ticker",
-    doc: "",
-    states: &[StateSpec {
-        name: "ticking",
-        entry: false,
-        exit: false,
-        periodic: Some(PeriodicSpec { period: None }),
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec {
+static TICKER: Spec = Spec::new("Ticker", "")
+    .with_states(&[StateSpec::new("ticking").with_periodic(None)])
+    .with_timing(TimingSpec {
         period: Some(Duration::from_millis(1)),
         max_period: Some(Duration::from_millis(4)),
         max_response: None,
         priority: 0,
         qualities: &["full", "reduced"],
-    },
-};
+    });
 
 struct Ticker(Arc<AtomicU64>);
 

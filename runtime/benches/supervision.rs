@@ -318,31 +318,9 @@ const INSTANCES: usize = 100;
 /// 20 us) before the next event comes.
 const SETTLE: Duration = Duration::from_micros(300);
 
-static NODE: Spec = Spec {
-    type_name: "Node",
-    doc: "",
-    states: &[StateSpec {
-        name: "idle",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[VarSpec {
-        name: "v",
-        kind: VarKind::Controllable,
-        ty: "u64",
-        doc: "",
-        range: None,
-    }],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
+static NODE: Spec = Spec::new("Node", "")
+    .with_states(&[StateSpec::new("idle")])
+    .with_variables(&[VarSpec::new("v", VarKind::Controllable, "u64")]);
 
 /// An instance with one controllable `v: u64`.
 struct Node {

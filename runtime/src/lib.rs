@@ -17,30 +17,16 @@
 //! use coolbot::port::{DataOut, FifoIn};
 //! use coolbot::*;
 //!
-//! static SPEC: Spec = Spec {
-//!     type_name: "Counter",
-//!     doc: "Counts packets.",
-//!     states: &[StateSpec {
-//!         name: "counting",
-//!         entry: true,
-//!         exit: false,
-//!         periodic: None,
-//!         on: &[OnSpec { port: 0, target: 0 }],
-//!         after: &[],
-//!         may: &[],
-//!     }],
-//!     initial: 0,
-//!     inputs: &[InputSpec {
-//!         name: "data",
-//!         kind: InputKind::Fifo { capacity: 8, policy: OverflowPolicy::Reject },
-//!         packet: "u64",
-//!         pull: false,
-//!     }],
-//!     outputs: &[],
-//!     variables: &[VarSpec { name: "count", kind: VarKind::Observable, ty: "u64", doc: "", range: None }],
-//!     exceptions: &[],
-//!     timing: TimingSpec::NONE,
-//! };
+//! static SPEC: Spec = Spec::new("Counter", "Counts packets.")
+//!     .with_states(&[StateSpec::new("counting")
+//!         .with_entry()
+//!         .with_on(&[OnSpec { port: 0, target: 0 }])])
+//!     .with_inputs(&[InputSpec::new(
+//!         "data",
+//!         InputKind::Fifo { capacity: 8, policy: OverflowPolicy::Reject },
+//!         "u64",
+//!     )])
+//!     .with_variables(&[VarSpec::new("count", VarKind::Observable, "u64")]);
 //!
 //! struct Counter {
 //!     data: FifoIn<u64>,
@@ -69,10 +55,8 @@
 //! let counter = system.add(Component::new("counter", Box::new(Counter { data, count: 0 }), ports))?;
 //!
 //! // A producer: any component's data output; here one with no behaviour of its own.
-//! # static SOURCE: Spec = Spec { type_name: "Source", doc: "", states: &[StateSpec { name: "idle",
-//! #     entry: false, exit: false, periodic: None, on: &[], after: &[], may: &[] }], initial: 0,
-//! #     inputs: &[], outputs: &[OutputSpec { name: "out", kind: OutputKind::Data, packet: "u64",
-//! #     pull: false }], variables: &[], exceptions: &[], timing: TimingSpec::NONE };
+//! # static SOURCE: Spec = Spec::new("Source", "")
+//! #     .with_outputs(&[OutputSpec::new("out", OutputKind::Data, "u64")]);
 //! # struct Source;
 //! # impl Automaton for Source {
 //! #     fn spec(&self) -> &'static Spec { &SOURCE }

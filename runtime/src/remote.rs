@@ -634,17 +634,7 @@ mod tests {
     use crate::table::State;
     use crate::wake::Waker;
 
-    static SPEC: Spec = Spec {
-        type_name: "Far",
-        doc: "",
-        states: &[],
-        initial: 0,
-        inputs: &[],
-        outputs: &[],
-        variables: &[],
-        exceptions: &[],
-        timing: TimingSpec::NONE,
-    };
+    static SPEC: Spec = Spec::new("Far", "");
 
     /// A far end that returns the views the test queued, one per look.
     struct Queued(Arc<Mutex<VecDeque<Monitor>>>);

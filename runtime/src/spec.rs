@@ -30,7 +30,78 @@ pub struct Spec {
     pub timing: TimingSpec,
 }
 
+/// A hand-written spec is built in a `static` from [`Spec::new`] and the `with_`
+/// methods, each a `const fn`, so that it says only what the component has:
+///
+/// ```
+/// use coolbot::{InputKind, InputSpec, OutputKind, OutputSpec, Spec, StateSpec};
+///
+/// static RELAY: Spec = Spec::new("Relay", "passes every packet on")
+///     .with_states(&[StateSpec::new("work").with_entry()])
+///     .with_inputs(&[InputSpec::new("input", InputKind::Last, "Reading")])
+///     .with_outputs(&[OutputSpec::new("output", OutputKind::Data, "Reading")]);
+/// assert!(RELAY.validate().is_ok());
+/// ```
 impl Spec {
+    /// A component type with nothing but its name and documentation: no user states
+    /// (only the default automaton), ports, variables or exceptions, and no timing.
+    pub const fn new(type_name: &'static str, doc: &'static str) -> Spec {
+        Spec {
+            type_name,
+            doc,
+            states: &[],
+            initial: 0,
+            inputs: &[],
+            outputs: &[],
+            variables: &[],
+            exceptions: &[],
+            timing: TimingSpec::NONE,
+        }
+    }
+
+    /// With these user states; the first is the initial one (see
+    /// [`Spec::with_initial`]).
+    pub const fn with_states(mut self, states: &'static [StateSpec]) -> Spec {
+        self.states = states;
+        self
+    }
+
+    /// With user state `initial` as the initial one.
+    pub const fn with_initial(mut self, initial: usize) -> Spec {
+        self.initial = initial;
+        self
+    }
+
+    /// With these input ports.
+    pub const fn with_inputs(mut self, inputs: &'static [InputSpec]) -> Spec {
+        self.inputs = inputs;
+        self
+    }
+
+    /// With these output ports.
+    pub const fn with_outputs(mut self, outputs: &'static [OutputSpec]) -> Spec {
+        self.outputs = outputs;
+        self
+    }
+
+    /// With these observable and controllable variables.
+    pub const fn with_variables(mut self, variables: &'static [VarSpec]) -> Spec {
+        self.variables = variables;
+        self
+    }
+
+    /// With these exceptions.
+    pub const fn with_exceptions(mut self, exceptions: &'static [ExceptionSpec]) -> Spec {
+        self.exceptions = exceptions;
+        self
+    }
+
+    /// With this `timing` block.
+    pub const fn with_timing(mut self, timing: TimingSpec) -> Spec {
+        self.timing = timing;
+        self
+    }
+
     /// The index of the user state called `name`.
     pub fn state_index(&self, name: &str) -> Option<usize> {
         self.states.iter().position(|state| state.name == name)
@@ -246,6 +317,57 @@ pub struct StateSpec {
     pub may: &'static [usize],
 }
 
+impl StateSpec {
+    /// A state called `name` with no sections and no transitions.
+    pub const fn new(name: &'static str) -> StateSpec {
+        StateSpec {
+            name,
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        }
+    }
+
+    /// With an entry section.
+    pub const fn with_entry(mut self) -> StateSpec {
+        self.entry = true;
+        self
+    }
+
+    /// With an exit section.
+    pub const fn with_exit(mut self) -> StateSpec {
+        self.exit = true;
+        self
+    }
+
+    /// With a periodic section at `period`, or at the component's period if `None`.
+    pub const fn with_periodic(mut self, period: Option<Duration>) -> StateSpec {
+        self.periodic = Some(PeriodicSpec { period });
+        self
+    }
+
+    /// With these `on port -> target` transitions.
+    pub const fn with_on(mut self, on: &'static [OnSpec]) -> StateSpec {
+        self.on = on;
+        self
+    }
+
+    /// With these `after` transitions.
+    pub const fn with_after(mut self, after: &'static [AfterSpec]) -> StateSpec {
+        self.after = after;
+        self
+    }
+
+    /// With these targets its `choose` may return.
+    pub const fn with_may(mut self, may: &'static [usize]) -> StateSpec {
+        self.may = may;
+        self
+    }
+}
+
 /// A periodic section.
 #[derive(Debug, Clone, Copy)]
 pub struct PeriodicSpec {
@@ -286,6 +408,24 @@ pub struct InputSpec {
     pub packet: &'static str,
     /// Whether the input uses the pull model.
     pub pull: bool,
+}
+
+impl InputSpec {
+    /// An input of this kind carrying packets of the type called `packet`, not pulled.
+    pub const fn new(name: &'static str, kind: InputKind, packet: &'static str) -> InputSpec {
+        InputSpec {
+            name,
+            kind,
+            packet,
+            pull: false,
+        }
+    }
+
+    /// Using the pull model.
+    pub const fn pulled(mut self) -> InputSpec {
+        self.pull = true;
+        self
+    }
 }
 
 /// The kinds of input port (paper 3.2, Figure 3).
@@ -341,6 +481,25 @@ pub struct OutputSpec {
     pub pull: bool,
 }
 
+impl OutputSpec {
+    /// An output of this kind carrying packets of the type called `packet`, answering
+    /// no pull requests.
+    pub const fn new(name: &'static str, kind: OutputKind, packet: &'static str) -> OutputSpec {
+        OutputSpec {
+            name,
+            kind,
+            packet,
+            pull: false,
+        }
+    }
+
+    /// Answering pull requests.
+    pub const fn pulled(mut self) -> OutputSpec {
+        self.pull = true;
+        self
+    }
+}
+
 /// The kinds of output port.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OutputKind {
@@ -366,6 +525,20 @@ pub struct VarSpec {
     /// The values a controllable variable may be set to, when its description bounds
     /// them (`in low..=high`): a set outside is refused, whoever asks.
     pub range: Option<VarRange>,
+}
+
+impl VarSpec {
+    /// A variable of this kind whose values are of the type called `ty`, with no
+    /// documentation and no range.
+    pub const fn new(name: &'static str, kind: VarKind, ty: &'static str) -> VarSpec {
+        VarSpec {
+            name,
+            kind,
+            ty,
+            doc: "",
+            range: None,
+        }
+    }
 }
 
 /// The values a controllable variable may be set to, both ends included

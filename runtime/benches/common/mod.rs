@@ -311,35 +311,15 @@ macro_rules! one_state_spec {
         on: [$($on_port:literal),* $(,)?],
         periodic: $periodic:expr $(,)?
     ) => {
-        $vis static $name: coolbot::Spec = coolbot::Spec {
-            type_name: $type_name,
-            doc: "benchmark component",
-            states: &[coolbot::StateSpec {
-                name: "work",
-                entry: true,
-                exit: false,
+        $vis static $name: coolbot::Spec = coolbot::Spec::new($type_name, "benchmark component")
+            .with_states(&[coolbot::StateSpec {
                 periodic: $periodic,
-                on: &[$(coolbot::OnSpec { port: $on_port, target: 0 }),*],
-                after: &[],
-                may: &[],
-            }],
-            initial: 0,
-            inputs: &[$(coolbot::InputSpec {
-                name: $in_name,
-                kind: $in_kind,
-                packet: "bench",
-                pull: false,
-            }),*],
-            outputs: &[$(coolbot::OutputSpec {
-                name: $out_name,
-                kind: $out_kind,
-                packet: "bench",
-                pull: false,
-            }),*],
-            variables: &[],
-            exceptions: &[],
-            timing: coolbot::TimingSpec::NONE,
-        };
+                ..coolbot::StateSpec::new("work")
+            }
+            .with_entry()
+            .with_on(&[$(coolbot::OnSpec { port: $on_port, target: 0 }),*])])
+            .with_inputs(&[$(coolbot::InputSpec::new($in_name, $in_kind, "bench")),*])
+            .with_outputs(&[$(coolbot::OutputSpec::new($out_name, $out_kind, "bench")),*]);
     };
 }
 

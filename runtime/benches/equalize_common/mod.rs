@@ -7,8 +7,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use coolbot::{
-    AdaptConfig, Automaton, Component, Context, PeriodicSpec, PortSet, Section, SectionResult,
-    Spec, StateSpec, TimingSpec,
+    AdaptConfig, Automaton, Component, Context, PortSet, Section, SectionResult, Spec, StateSpec,
+    TimingSpec,
 };
 
 /// The period of both components.
@@ -16,24 +16,9 @@ pub const PERIOD: Duration = Duration::from_millis(20);
 /// The CPU each section needs: together 60 % of one core, so that in phase one waits.
 pub const WORK: Duration = Duration::from_millis(6);
 
-static SPINNER: Spec = Spec {
-    type_name: "Spinner",
-    doc: "",
-    states: &[StateSpec {
-        name: "spinning",
-        entry: false,
-        exit: false,
-        periodic: Some(PeriodicSpec { period: None }),
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec {
+static SPINNER: Spec = Spec::new("Spinner", "")
+    .with_states(&[StateSpec::new("spinning").with_periodic(None)])
+    .with_timing(TimingSpec {
         // No period interval: adaptation (turned on by `spinner`) has no period to
         // stretch, so both keep the same period whatever the load.
         period: Some(PERIOD),
@@ -41,8 +26,7 @@ static SPINNER: Spec = Spec {
         max_response: None,
         priority: 0,
         qualities: &[],
-    },
-};
+    });
 
 /// One section: when it started, how late, and how long after its deadline it ended.
 pub type Starts = Arc<Mutex<Vec<(Instant, Duration, Duration)>>>;

@@ -5,7 +5,6 @@ use std::sync::{Arc, Mutex};
 
 use coolbot::{
     Automaton, Component, Context, Fault, InputSpec, OutputSpec, PortSet, Spec, StateSpec,
-    TimingSpec,
 };
 
 type AnswerFn = Box<dyn FnMut(usize) -> Result<(), Fault> + Send>;
@@ -27,6 +26,9 @@ impl Automaton for Shell {
         }
     }
 }
+
+/// A shell's one state: no sections, no transitions.
+const SHELL_STATES: &[StateSpec] = &[StateSpec::new("idle")];
 
 fn leak<T>(items: Vec<T>) -> &'static [T] {
     Box::leak(items.into_boxed_slice())
@@ -74,25 +76,12 @@ impl ShellBuilder {
     }
 
     pub fn build(self) -> Component {
-        let spec: &'static Spec = Box::leak(Box::new(Spec {
-            type_name: "Shell",
-            doc: "",
-            states: leak(vec![StateSpec {
-                name: "idle",
-                entry: false,
-                exit: false,
-                periodic: None,
-                on: &[],
-                after: &[],
-                may: &[],
-            }]),
-            initial: 0,
-            inputs: leak(self.inputs),
-            outputs: leak(self.outputs),
-            variables: &[],
-            exceptions: &[],
-            timing: TimingSpec::NONE,
-        }));
+        let spec: &'static Spec = Box::leak(Box::new(
+            Spec::new("Shell", "")
+                .with_states(SHELL_STATES)
+                .with_inputs(leak(self.inputs))
+                .with_outputs(leak(self.outputs)),
+        ));
         Component::new(
             self.name,
             Box::new(Shell {
@@ -105,46 +94,20 @@ impl ShellBuilder {
 }
 
 pub fn input(name: &'static str, kind: coolbot::InputKind, pull: bool) -> InputSpec {
-    InputSpec {
-        name,
-        kind,
-        packet: "",
-        pull,
-    }
+    let spec = InputSpec::new(name, kind, "");
+    if pull { spec.pulled() } else { spec }
 }
 
 pub fn output(name: &'static str, kind: coolbot::OutputKind, pull: bool) -> OutputSpec {
-    OutputSpec {
-        name,
-        kind,
-        packet: "",
-        pull,
-    }
+    let spec = OutputSpec::new(name, kind, "");
+    if pull { spec.pulled() } else { spec }
 }
 
 /// A supervisor with one state and nothing to do (a compound whose instances the
 /// test drives).
 pub struct Idle;
 
-static IDLE: Spec = Spec {
-    type_name: "Idle",
-    doc: "",
-    states: &[StateSpec {
-        name: "supervising",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
+static IDLE: Spec = Spec::new("Idle", "").with_states(&[StateSpec::new("supervising")]);
 
 impl coolbot::Supervisor for Idle {
     fn spec(&self) -> &'static Spec {

@@ -6,7 +6,7 @@ use coolbot::harness::Harness;
 use coolbot::port::{DataOut, FifoIn};
 use coolbot::{
     Automaton, Component, Context, InputKind, InputSpec, OutputKind, OutputSpec, OverflowPolicy,
-    PortSet, Section, SectionResult, Spec, StateSpec, System, TimingSpec,
+    PortSet, Section, SectionResult, Spec, StateSpec, System,
 };
 use coolbot_runtime_tests::generated::largest_sender;
 use coolbot_runtime_tests::generated::types::Largest;
@@ -17,51 +17,19 @@ use coolbot_runtime_tests::support::eventually;
 #[derive(Clone)]
 struct Big([u64; 12288]);
 
-static SOURCE: Spec = Spec {
-    type_name: "BigSource",
-    doc: "sends one large packet as it enters its state",
-    states: &[StateSpec {
-        name: "send",
-        entry: true,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[OutputSpec {
-        name: "out",
-        kind: OutputKind::Data,
-        packet: "Big",
-        pull: false,
-    }],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
+static SOURCE: Spec = Spec::new("BigSource", "sends one large packet as it enters its state")
+    .with_states(&[StateSpec::new("send").with_entry()])
+    .with_outputs(&[OutputSpec::new("out", OutputKind::Data, "Big")]);
 
 /// Holds the input the test reads; no user automaton.
-static SINK: Spec = Spec {
-    type_name: "BigSink",
-    doc: "an input the test reads",
-    states: &[],
-    initial: 0,
-    inputs: &[InputSpec {
-        name: "input",
-        kind: InputKind::Fifo {
-            capacity: 4,
-            policy: OverflowPolicy::Reject,
-        },
-        packet: "Big",
-        pull: false,
-    }],
-    outputs: &[],
-    variables: &[],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
+static SINK: Spec = Spec::new("BigSink", "an input the test reads").with_inputs(&[InputSpec::new(
+    "input",
+    InputKind::Fifo {
+        capacity: 4,
+        policy: OverflowPolicy::Reject,
+    },
+    "Big",
+)]);
 
 struct Sink;
 
