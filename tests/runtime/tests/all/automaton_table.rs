@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use coolbot::table::{Action, Event, Outcome, next};
 use coolbot::{Controllable, State};
-use coolbot_runtime_tests::support::{Rig, Script, WAIT};
+use coolbot_runtime_tests::support::{Rig, Script, WAIT, eventually};
 
 /// Bring a fresh worker into `state`; the user automaton is in `busy` for `running`
 /// and `suspended`.
@@ -24,6 +24,13 @@ fn bring(state: State) -> Rig {
                 State::RunningError => {
                     rig.script.panic_in(Some("busy.periodic"));
                     rig.wait_state(State::RunningError);
+                    // The watchdog may show `running_error` while the panicking
+                    // section still unwinds (slowly, under load: past the worker's
+                    // `max_response`); the fault's `stop` runs after it.
+                    eventually(
+                        || rig.script.log().iter().any(|hook| hook == "stop"),
+                        "the fault's stop runs",
+                    );
                     rig.script.panic_in(None);
                 }
                 State::End => {
