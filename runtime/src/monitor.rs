@@ -294,6 +294,28 @@ impl GroupCycles {
         self.period_ns.store(ns, Ordering::Relaxed);
     }
 
+    /// [`GroupCycles::status`] into `status`, in place.
+    fn status_into(&self, status: &mut GroupStatus) {
+        if status.name != self.name {
+            status.name.clone_from(&self.name);
+        }
+        let same_members = status.members.len() == self.members.len()
+            && status
+                .members
+                .iter()
+                .zip(&self.members)
+                .all(|(a, b)| **a == **b);
+        if !same_members {
+            status.members = self.members.iter().map(|name| name.to_string()).collect();
+        }
+        let period = self.period_ns.load(Ordering::Relaxed);
+        status.cycles = self.cycles.load(Ordering::Relaxed);
+        status.last_cycle = Duration::from_nanos(self.last_ns.load(Ordering::Relaxed));
+        status.worst_cycle = Duration::from_nanos(self.worst_ns.load(Ordering::Relaxed));
+        status.period = (period > 0).then(|| Duration::from_nanos(period));
+        status.overruns = self.overruns.load(Ordering::Relaxed);
+    }
+
     fn status(&self) -> GroupStatus {
         let period = self.period_ns.load(Ordering::Relaxed);
         GroupStatus {
@@ -501,6 +523,156 @@ pub enum MonitorEvent {
 pub(crate) trait Losses: Send + Sync {
     /// Packets lost at the input in all.
     fn overflows(&self) -> u64;
+}
+
+/// `into = from.clone()`, in place: every field of `from` but `group` (which
+/// [`Shared::snapshot_into`] sets), each copied only if it differs, into the
+/// allocations `into` has.
+fn copy_monitor(from: &Monitor, into: &mut Monitor) {
+    // Every field named, so that a new one is not forgotten here.
+    let Monitor {
+        name,
+        state,
+        user_state,
+        result,
+        error,
+        variables,
+        cpu_time,
+        elapsed_time,
+        missed_deadlines,
+        overruns,
+        overflows,
+        port_overflows,
+        quality,
+        period,
+        nominal_period,
+        max_response,
+        priority,
+        os_priority,
+        dropped_events,
+        supervision,
+        supervision_steps,
+        adaptation,
+        response,
+        group: _,
+    } = from;
+    assign(&mut into.name, name);
+    into.state = *state;
+    assign(&mut into.user_state, user_state);
+    assign(&mut into.result, result);
+    assign(&mut into.error, error);
+    into.variables.truncate(variables.len());
+    let (same, more) = variables.split_at(into.variables.len());
+    for ((into_name, into_value), (name, value)) in into.variables.iter_mut().zip(same) {
+        assign(into_name, name);
+        assign_value(into_value, value);
+    }
+    into.variables.extend_from_slice(more);
+    into.cpu_time = *cpu_time;
+    into.elapsed_time = *elapsed_time;
+    into.missed_deadlines = *missed_deadlines;
+    into.overruns = *overruns;
+    into.overflows = *overflows;
+    assign_all(&mut into.port_overflows, port_overflows);
+    into.quality = *quality;
+    into.period = *period;
+    into.nominal_period = *nominal_period;
+    into.max_response = *max_response;
+    into.priority = *priority;
+    assign(&mut into.os_priority, os_priority);
+    into.dropped_events = *dropped_events;
+    assign_all(&mut into.supervision, supervision);
+    into.supervision_steps = *supervision_steps;
+    let AdaptStatus {
+        enabled,
+        level,
+        max_level,
+        floor,
+        min_level,
+        settle_periods,
+        pressure,
+        load,
+        cpu_share,
+        history,
+        steps,
+    } = adaptation;
+    let to = &mut into.adaptation;
+    to.enabled = *enabled;
+    to.level = *level;
+    to.max_level = *max_level;
+    to.floor = *floor;
+    to.min_level = *min_level;
+    to.settle_periods = *settle_periods;
+    assign(&mut to.pressure, pressure);
+    to.load = *load;
+    to.cpu_share = *cpu_share;
+    assign_all(&mut to.history, history);
+    to.steps = *steps;
+    into.response = *response;
+}
+
+/// `*into = from.clone()`, in place: a value of the same shape (a record with the
+/// same fields, a list as long, a JSON object with the same keys) takes `from`'s
+/// scalars into the allocations it has.
+fn assign_value(into: &mut Value, from: &Value) {
+    match (&mut *into, from) {
+        (Value::Str(into), Value::Str(from)) | (Value::Enum(into), Value::Enum(from)) => {
+            assign(into, from);
+        }
+        (Value::List(into), Value::List(from)) if into.len() == from.len() => {
+            for (into, from) in into.iter_mut().zip(from) {
+                assign_value(into, from);
+            }
+        }
+        (Value::Record(into), Value::Record(from))
+            if into.len() == from.len() && into.iter().zip(from).all(|((a, _), (b, _))| a == b) =>
+        {
+            for ((_, into), (_, from)) in into.iter_mut().zip(from) {
+                assign_value(into, from);
+            }
+        }
+        (Value::Json(into), Value::Json(from)) => assign_json(into, from),
+        // A scalar is copied whole (bit for bit: `==` would take `-0.0` for `0.0`).
+        _ => into.clone_from(from),
+    }
+}
+
+/// [`assign_value`] for JSON values.
+fn assign_json(into: &mut serde_json::Value, from: &serde_json::Value) {
+    use serde_json::Value as Json;
+    match (&mut *into, from) {
+        (Json::String(into), Json::String(from)) => assign(into, from),
+        (Json::Array(into), Json::Array(from)) if into.len() == from.len() => {
+            for (into, from) in into.iter_mut().zip(from) {
+                assign_json(into, from);
+            }
+        }
+        (Json::Object(into), Json::Object(from))
+            if into.len() == from.len() && into.keys().zip(from.keys()).all(|(a, b)| a == b) =>
+        {
+            for ((_, into), (_, from)) in into.iter_mut().zip(from) {
+                assign_json(into, from);
+            }
+        }
+        _ => into.clone_from(from),
+    }
+}
+
+/// `*into = from.clone()` if they differ.
+fn assign<T: Clone + PartialEq>(into: &mut T, from: &T) {
+    if into != from {
+        into.clone_from(from);
+    }
+}
+
+/// `*into = from.to_vec()`, assigning only the elements that differ.
+fn assign_all<T: Clone + PartialEq>(into: &mut Vec<T>, from: &[T]) {
+    into.truncate(from.len());
+    let (same, more) = from.split_at(into.len());
+    for (into, from) in into.iter_mut().zip(same) {
+        assign(into, from);
+    }
+    into.extend_from_slice(more);
 }
 
 /// The sum of per-port loss counts, saturating (a proxy's come from the network).
@@ -813,6 +985,49 @@ impl Shared {
         monitor
     }
 
+    /// [`Shared::snapshot`] into `into`, in place: what is equal is left as it is, and
+    /// what differs is copied into the allocations `into` has (a compound's view of
+    /// an instance takes this at each of its events).
+    pub(crate) fn snapshot_into(&self, into: &mut Monitor) {
+        {
+            let monitor = lock(&self.monitor);
+            copy_monitor(&monitor, into);
+        }
+        into.elapsed_time = self.elapsed();
+        // `copy_monitor` left the stored counts (those added by `add_overflows`) in
+        // `port_overflows`; the inputs' own counts come on top, first, in order. Most
+        // often the stored counts are the inputs' with nothing added: they are the
+        // inputs' counts, in place.
+        let inputs_only = into.port_overflows.len() == self.inputs.len()
+            && into
+                .port_overflows
+                .iter()
+                .zip(&self.inputs)
+                .all(|((port, lost), (name, _))| *lost == 0 && port == name);
+        if inputs_only {
+            for ((_, lost), (_, input)) in into.port_overflows.iter_mut().zip(&self.inputs) {
+                *lost = input.overflows();
+            }
+        } else {
+            let elsewhere = std::mem::take(&mut into.port_overflows);
+            into.port_overflows = self
+                .inputs
+                .iter()
+                .map(|(name, input)| ((*name).to_owned(), input.overflows()))
+                .collect();
+            for (port, lost) in elsewhere {
+                let slot = count_at(&mut into.port_overflows, &port);
+                *slot = slot.saturating_add(lost);
+            }
+        }
+        into.overflows = total_overflows(&into.port_overflows);
+        into.dropped_events = self.dropped.load(Ordering::Relaxed);
+        match (self.group.get(), &mut into.group) {
+            (Some(group), Some(status)) => group.status_into(status),
+            (group, status) => *status = group.map(|group| group.status()),
+        }
+    }
+
     pub(crate) fn state(&self) -> State {
         lock(&self.monitor).state
     }
@@ -862,5 +1077,118 @@ impl Shared {
     /// component: its subscription's receiver is dropped separately).
     pub(crate) fn forget_waker(&self, bell: &Arc<crate::wake::Doorbell>) {
         lock(&self.wakers).retain(|(waker, _)| !Arc::ptr_eq(&waker.bell, bell));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::{Spec, TimingSpec};
+
+    static SPEC: Spec = Spec {
+        type_name: "Watched",
+        doc: "",
+        states: &[],
+        initial: 0,
+        inputs: &[],
+        outputs: &[],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    };
+
+    struct Lost(u64);
+
+    impl Losses for Lost {
+        fn overflows(&self) -> u64 {
+            self.0
+        }
+    }
+
+    fn monitor(variables: Vec<(&str, Value)>) -> Monitor {
+        let mut monitor = Monitor::starting("watched".to_owned(), &SPEC, &TimingSpec::NONE);
+        monitor.variables = variables
+            .into_iter()
+            .map(|(name, value)| (name.to_owned(), value))
+            .collect();
+        monitor
+    }
+
+    fn odometry(x: f64, frame: &str) -> Value {
+        Value::Json(serde_json::json!({"x": x, "frame": frame, "path": [x, 1]}))
+    }
+
+    /// A view brought up to date in place is the snapshot, to the bit.
+    #[test]
+    fn a_snapshot_in_place_is_the_snapshot() {
+        let shared = Shared::new(
+            monitor(vec![]),
+            vec![("scan", Arc::new(Lost(4)) as Arc<dyn Losses>)],
+        );
+        let mut view = shared.snapshot();
+        let check = |change: &dyn Fn(&mut Monitor), view: &mut Monitor| {
+            shared.quietly(|monitor| change(monitor));
+            shared.snapshot_into(view);
+            let snapshot = shared.snapshot();
+            assert_eq!(*view, snapshot);
+            assert_eq!(format!("{view:?}"), format!("{snapshot:?}"));
+        };
+        check(&|_| {}, &mut view);
+        check(
+            &|m| {
+                *m = monitor(vec![
+                    ("odometry", odometry(1.5, "odom")),
+                    ("speed", Value::Float(0.0)),
+                    ("path", Value::List(vec![Value::Int(1), Value::Int(2)])),
+                    (
+                        "pose",
+                        Value::Record(vec![("x".to_owned(), Value::Float(1.0))]),
+                    ),
+                    ("mode", Value::Enum("Normal".to_owned())),
+                ]);
+                m.state = State::Running;
+                m.user_state = Some("streaming".to_owned());
+                m.port_overflows = vec![("scan".to_owned(), 0)];
+            },
+            &mut view,
+        );
+        // The same shapes with new scalars, a float's zero changing sign, a string
+        // longer, a list shorter, a record with another field.
+        check(
+            &|m| {
+                m.variables[0].1 = odometry(-2.25, "odometry");
+                m.variables[1].1 = Value::Float(-0.0);
+                m.variables[2].1 = Value::List(vec![Value::Int(3)]);
+                m.variables[3].1 = Value::Record(vec![("y".to_owned(), Value::Float(2.0))]);
+                m.variables[4].1 = Value::Enum("Degraded".to_owned());
+                m.result = TaskResult::Fail("blocked".to_owned());
+                m.error = Some("sensor timeout".to_owned());
+            },
+            &mut view,
+        );
+        assert!(matches!(view.variables[1].1, Value::Float(z) if z.is_sign_negative()));
+        // A JSON object with other keys, a variable fewer, counts added elsewhere.
+        check(
+            &|m| {
+                m.variables[0].1 = Value::Json(serde_json::json!({"y": -0.0}));
+                m.variables.pop();
+                m.port_overflows = vec![("scan".to_owned(), 2), ("@network".to_owned(), 7)];
+                m.supervision.push(Supervision {
+                    instance: "ranges".to_owned(),
+                    step: Step::Failed,
+                    detail: String::new(),
+                });
+            },
+            &mut view,
+        );
+        // Another variable, a user state no more.
+        check(
+            &|m| {
+                m.variables.push(("faults".to_owned(), Value::UInt(3)));
+                m.user_state = None;
+                m.port_overflows = vec![("scan".to_owned(), 0)];
+            },
+            &mut view,
+        );
     }
 }

@@ -2,7 +2,6 @@
 //! mappings, policies, substitutes, redundant groups, rules) checked and assembled
 //! into an ordinary [`Component`].
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -24,9 +23,10 @@ use super::links::{Link, LinkVia, Via};
 use super::policy::{
     Budget, DEFAULT_BACKOFF, DEFAULT_BACKOFF_MAX, DEFAULT_RESTART_WINDOW, DEFAULT_RESTARTS, Policy,
 };
+use super::reads::{Changed, Reads};
 use super::state::{Compound, Instance, Mapped, Status};
 use super::supervisor::{DEFAULT_SUPERVISION_PERIOD, Supervisor};
-use super::view::{OWN_DEFAULTS, Own, Rule, Test, View, is_timed};
+use super::view::{OWN_DEFAULTS, Own, Rule, Test, View};
 
 /// A name made `'static` for the compound's assembled `Spec` (leaked once per build).
 fn leak_str(text: &str) -> &'static str {
@@ -66,10 +66,9 @@ pub(crate) struct Resolved {
     pub(crate) spec: &'static Spec,
     pub(super) mapped: Vec<Mapped>,
     pub(super) rules: Vec<Rule>,
-    pub(super) by_read: HashMap<String, Vec<usize>>,
+    /// What the rules read, resolved to ids.
+    pub(super) reads: Reads,
     pub(super) view: View,
-    pub(super) reads_own: bool,
-    pub(super) timed: Vec<String>,
     pub(super) group_members: Vec<Vec<usize>>,
 }
 
@@ -732,6 +731,7 @@ impl CompoundBuilder {
         variables.extend(own.variables.iter().copied());
         // Rules.
         let mut rules = Vec::new();
+        let mut rule_reads = Vec::new();
         for (state, target, reads, test) in std::mem::take(&mut self.rules) {
             let state_index = own
                 .state_index(&state)
@@ -745,18 +745,28 @@ impl CompoundBuilder {
             rules.push(Rule {
                 state: state_index,
                 target: target_index,
-                reads,
+                reads: Vec::new(),
                 test,
             });
+            rule_reads.push(reads);
         }
-        let mut by_read: HashMap<String, Vec<usize>> = HashMap::new();
-        for (index, rule) in rules.iter().enumerate() {
-            for read in &rule.reads {
-                let readers = by_read.entry(read.clone()).or_default();
-                if readers.last() != Some(&index) {
-                    readers.push(index);
-                }
-            }
+        let reads = Reads::new(
+            rule_reads.iter().map(Vec::as_slice),
+            &self
+                .instances
+                .iter()
+                .map(|i| (i.name.as_str(), i.spec))
+                .collect::<Vec<_>>(),
+            &self
+                .mapped
+                .iter()
+                .zip(&mapped)
+                .map(|((name, _, _), m)| (name.as_str(), m.instance, m.variable.as_str()))
+                .collect::<Vec<_>>(),
+            &own.variables.iter().map(|v| v.name).collect::<Vec<_>>(),
+        );
+        for (rule, keys) in rules.iter_mut().zip(&rule_reads) {
+            rule.reads = reads.ids_of(keys);
         }
         let mut spec = *own;
         spec.variables = Box::leak(variables.into_boxed_slice());
@@ -787,23 +797,12 @@ impl CompoundBuilder {
             standing: (0..self.instances.len()).collect(),
             compound: Own::default(),
         };
-        let reads_own = rules
-            .iter()
-            .flat_map(|rule| &rule.reads)
-            .any(|read| OWN_DEFAULTS.contains(&read.as_str()));
-        let timed: Vec<String> = by_read
-            .keys()
-            .filter(|read| is_timed(read))
-            .cloned()
-            .collect();
         Ok(Resolved {
             spec,
             mapped,
             rules,
-            by_read,
+            reads,
             view,
-            reads_own,
-            timed,
             group_members,
         })
     }
@@ -815,13 +814,12 @@ impl CompoundBuilder {
             spec,
             mapped,
             rules,
-            by_read,
+            reads,
             view,
-            reads_own,
-            timed,
             group_members,
         } = self.resolve()?;
         let handles = self.instances.iter().map(|i| i.handle.clone()).collect();
+
         let commander = Commander::new(
             self.name.clone(),
             self.instances
@@ -868,7 +866,9 @@ impl CompoundBuilder {
             wired: Vec::new(),
             mapped,
             supervisor: self.supervisor,
-            by_read,
+            changed: Changed::new(reads.len()),
+            reads_own: reads.reads_own(),
+            reads,
             rules,
             events: Vec::new(),
             view,
@@ -885,8 +885,6 @@ impl CompoundBuilder {
             restood: false,
             coordinator,
             commander,
-            reads_own,
-            timed,
             next_timed: None,
             moves: Vec::new(),
             clock_wait: None,

@@ -17,8 +17,10 @@
 //! One idea per file, in layers (each uses only the layers above it):
 //!
 //! - what a description gives: `supervisor` (the [`Supervisor`] trait, [`SupervisorCx`]),
-//!   `view` (the [`View`] rules read, and a rule), `policy` ([`Policy`], the restart
-//!   budget, a recovery-queue entry), `links` (a declared connection, a merged stream),
+//!   `view` (the [`View`] rules read, and a rule), `reads` (the keys rules read,
+//!   resolved to ids when the compound is built, and a turn's changed keys), `policy`
+//!   ([`Policy`], the restart budget, a recovery-queue entry), `links` (a declared
+//!   connection, a merged stream),
 //!   `exports` (the compound's own ports following instance ports), `coordinator`
 //!   (what adaptation remembers between turns), `error` (why a compound fails);
 //! - `state`: the compound automaton's state (instances, arrangement, supervisor, view);
@@ -43,6 +45,7 @@ mod faults;
 mod in_step;
 mod links;
 mod policy;
+mod reads;
 mod stand_in;
 mod state;
 mod supervision;

@@ -30,6 +30,7 @@ use crate::value::Value;
 
 use super::builder::{CompoundBuilder, Resolved};
 use super::error::CompoundError;
+use super::reads::{Changed, Reads};
 use super::state::Mapped;
 use super::supervision::{fire, refresh_own_defaults};
 use super::supervisor::Supervisor;
@@ -130,7 +131,10 @@ pub(crate) struct StandIn {
     own_offset: usize,
     mapped: Vec<Mapped>,
     rules: Vec<Rule>,
-    by_read: HashMap<String, Vec<usize>>,
+    /// What the rules read, resolved to ids.
+    reads: Reads,
+    /// The read keys that changed in the current supervision turn.
+    changed: Changed,
     reads_own: bool,
     /// What the rules and sections see, copied from the stage at each turn.
     view: View,
@@ -151,9 +155,8 @@ impl CompoundBuilder {
             spec,
             mapped,
             rules,
-            by_read,
+            reads,
             mut view,
-            reads_own,
             ..
         } = self.resolve()?;
         let names: Vec<String> = self.instances.iter().map(|i| i.name.clone()).collect();
@@ -188,8 +191,9 @@ impl CompoundBuilder {
             own_offset: mapped.len(),
             mapped,
             rules,
-            by_read,
-            reads_own,
+            changed: Changed::new(reads.len()),
+            reads_own: reads.reads_own(),
+            reads,
             view,
             stage: Arc::clone(&stage),
             commander,
@@ -211,30 +215,29 @@ impl StandIn {
     }
 
     /// Copy the stage into the view; the read keys that changed (mapped variables
-    /// with the instance variables they map).
-    fn take_stage(&mut self) -> HashSet<String> {
+    /// with the instance variables they map) go into `changed`.
+    fn take_stage(&mut self) {
+        self.changed.clear();
         let mut stage = self.stage.lock().unwrap_or_else(PoisonError::into_inner);
         self.view.instances.clone_from(&stage.monitors);
-        let mut changed = std::mem::take(&mut stage.changed);
-        let mapped: Vec<String> = self
-            .view
-            .mapped
-            .iter()
-            .filter(|(_, (declared, variable))| {
-                changed.contains(&format!("{}.{variable}", stage.names[*declared]))
-            })
-            .map(|(name, _)| name.clone())
-            .collect();
+        let changed = std::mem::take(&mut stage.changed);
+        for (at, mapped) in self.mapped.iter().enumerate() {
+            let key = format!("{}.{}", stage.names[mapped.instance], mapped.variable);
+            if changed.contains(&key) {
+                self.changed.insert(self.reads.mapped[at]);
+            }
+        }
         drop(stage);
-        changed.extend(mapped);
-        for (index, (name, value)) in self.view.own.iter_mut().enumerate() {
+        for key in &changed {
+            self.changed.insert(self.reads.id(key));
+        }
+        for (index, (_, value)) in self.view.own.iter_mut().enumerate() {
             let now = self.supervisor.get(index);
             if *value != now {
                 *value = now;
-                changed.insert(name.clone());
+                self.changed.insert(self.reads.own[index]);
             }
         }
-        changed
     }
 
     /// Bring the instances that follow the compound to `target`, as a built compound
@@ -361,24 +364,23 @@ impl Driven for StandIn {
     }
 
     fn supervise(&mut self, state: usize, cx: &mut Context) -> Result<Option<usize>, Fault> {
-        let mut changed = self.take_stage();
+        self.take_stage();
         if self.reads_own {
-            refresh_own_defaults(&mut self.view, cx, &mut changed);
+            refresh_own_defaults(&mut self.view, cx, &self.reads, &mut self.changed);
         }
         let entered = self.evaluated_in != Some(state);
         let sectioned = std::mem::take(&mut self.sectioned);
         self.fresh = false;
-        if !entered && !sectioned && changed.is_empty() {
+        if !entered && !sectioned && self.changed.is_empty() {
             return Ok(None);
         }
         self.evaluated_in = Some(state);
         Ok(fire(
             &self.rules,
-            &self.by_read,
             &self.view,
             state,
             entered || sectioned,
-            &changed,
+            &self.changed,
         ))
     }
 

@@ -3,7 +3,6 @@
 //! its rules and view, and the supervision steps taken; with the few helpers every
 //! part of the compound uses (a step, a fault, a refreshed monitor).
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -25,6 +24,7 @@ use super::error::{PolicyFault, RunError};
 use super::exports::Export;
 use super::links::{Link, MergedPort};
 use super::policy::{Budget, PendingRestart, Policy, Recovering};
+use super::reads::{Changed, Reads};
 use super::supervisor::Supervisor;
 use super::view::{Rule, View};
 
@@ -112,8 +112,11 @@ pub(super) struct Compound {
     /// flag its publisher sets before ringing the compound: a turn looks only at the
     /// instances that have news.
     pub(super) events: Vec<(Receiver<MonitorEvent>, Arc<AtomicBool>)>,
-    /// The rules reading each variable (`inst.field` or an own variable), by index.
-    pub(super) by_read: HashMap<String, Vec<usize>>,
+    /// What the rules read (`inst.field`, a mapped or own variable, an own default),
+    /// resolved to ids.
+    pub(super) reads: Reads,
+    /// The read keys that changed in the current supervision turn.
+    pub(super) changed: Changed,
     pub(super) view: View,
     /// The supervisor state whose rules were last evaluated.
     pub(super) evaluated_in: Option<usize>,
@@ -143,10 +146,6 @@ pub(super) struct Compound {
     /// Some rule reads the compound's own `result`, `error`, `quality`, `cpu_time`
     /// or `elapsed_time`: each turn copies them into the view.
     pub(super) reads_own: bool,
-    /// The time reads (`cpu_time`, `elapsed_time`, own or an instance's) some rule
-    /// names: they change without events, so they count as changed every supervisor
-    /// period.
-    pub(super) timed: Vec<String>,
     /// An active instance failed while the compound was suspended: its policy runs
     /// on the compound's next running turn.
     pub(super) deferred_faults: bool,
@@ -207,7 +206,11 @@ impl Compound {
         RunError::from(why).into()
     }
 
+    /// Bring the view's monitor of instance `index` up to date, in place.
     pub(super) fn refresh(&mut self, index: usize) {
-        self.view.instances[index] = self.instances[index].handle.snapshot();
+        self.instances[index]
+            .handle
+            .shared
+            .snapshot_into(&mut self.view.instances[index]);
     }
 }

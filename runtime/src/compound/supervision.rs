@@ -2,43 +2,52 @@
 //! inputs, take its instances' monitoring events (applying the fault policies), run
 //! the recovery queue and pending restarts, refresh the view, evaluate the rules.
 
-use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::atomic::Ordering;
 
 use crate::automaton::{Context, Fault};
 use crate::monitor::MonitorEvent;
 use crate::table::State;
 
+use super::reads::{Changed, Reads};
 use super::state::{Compound, Status};
 use super::supervisor::DEFAULT_SUPERVISION_PERIOD;
-use super::view::{Own, Rule, View};
+use super::view::{Rule, View};
 
 /// Copy the compound's own default variables (`result`, `error`, `quality`, its
-/// times) from its monitoring port into `view`; the keys whose value changed go into
-/// `changed`.
-pub(super) fn refresh_own_defaults(view: &mut View, cx: &Context, changed: &mut HashSet<String>) {
+/// times) from its monitoring port into `view`; the keys whose value changed (of
+/// those `reads` names) go into `changed`.
+pub(super) fn refresh_own_defaults(
+    view: &mut View,
+    cx: &Context,
+    reads: &Reads,
+    changed: &mut Changed,
+) {
     let Some(shared) = &cx.shared else {
         return;
     };
-    let mut now = Own::default();
+    let now = &mut view.compound;
+    let (mut result, mut error, mut quality) = (false, false, false);
     shared.quietly(|monitor| {
-        now = Own {
-            result: monitor.result.clone(),
-            error: monitor.error.clone(),
-            quality: monitor.quality,
-            cpu_time: monitor.cpu_time,
-            elapsed_time: shared.elapsed(),
-        };
+        result = now.result != monitor.result;
+        if result {
+            now.result.clone_from(&monitor.result);
+        }
+        error = now.error != monitor.error;
+        if error {
+            now.error.clone_from(&monitor.error);
+        }
+        quality = now.quality != monitor.quality;
+        now.quality = monitor.quality;
+        now.cpu_time = monitor.cpu_time;
     });
-    let before = std::mem::replace(&mut view.compound, now);
-    let after = &view.compound;
-    for (key, differs) in [
-        ("result", before.result != after.result),
-        ("error", before.error != after.error),
-        ("quality", before.quality != after.quality),
+    now.elapsed_time = shared.elapsed();
+    for (id, differs) in [
+        (reads.own_result, result),
+        (reads.own_error, error),
+        (reads.own_quality, quality),
     ] {
         if differs {
-            changed.insert(key.to_owned());
+            changed.insert(id);
         }
     }
 }
@@ -46,44 +55,30 @@ pub(super) fn refresh_own_defaults(view: &mut View, cx: &Context, changed: &mut 
 /// The rule of supervisor state `state` that fires, if any: the first that holds in
 /// declaration order, among all the state's rules when `all` (the state was just
 /// entered, or a supervisor section ran: it may have changed what no `reads` names,
-/// its `local` variables), else among the rules reading a variable in `changed`.
+/// its `local` variables), else among the rules reading a key in `changed`.
 pub(super) fn fire(
     rules: &[Rule],
-    by_read: &HashMap<String, Vec<usize>>,
     view: &View,
     state: usize,
     all: bool,
-    changed: &HashSet<String>,
+    changed: &Changed,
 ) -> Option<usize> {
-    let holds = |rule: &&Rule| rule.state == state && (rule.test)(view);
-    if all {
-        rules.iter().find(holds).map(|rule| rule.target)
-    } else {
-        // Only the rules reading a changed variable, in declaration order.
-        let mut candidates: Vec<usize> = changed
-            .iter()
-            .filter_map(|read| by_read.get(read))
-            .flatten()
-            .copied()
-            .collect();
-        candidates.sort_unstable();
-        candidates.dedup();
-        candidates
-            .into_iter()
-            .map(|index| &rules[index])
-            .find(holds)
-            .map(|rule| rule.target)
-    }
+    rules
+        .iter()
+        .filter(|rule| rule.state == state)
+        .filter(|rule| all || rule.reads.iter().any(|id| changed.contains(*id)))
+        .find(|rule| (rule.test)(view))
+        .map(|rule| rule.target)
 }
 
 impl Compound {
     /// Copy the compound's own default variables into the view (when a rule reads
     /// them) and, every supervisor period, count the time reads as changed.
-    pub(super) fn refresh_compound(&mut self, cx: &Context, changed: &mut HashSet<String>) {
+    pub(super) fn refresh_compound(&mut self, cx: &Context) {
         if self.reads_own {
-            refresh_own_defaults(&mut self.view, cx, changed);
+            refresh_own_defaults(&mut self.view, cx, &self.reads, &mut self.changed);
         }
-        if self.timed.is_empty() {
+        if self.reads.timed.is_empty() {
             return;
         }
         let now = self.clock.now();
@@ -92,34 +87,55 @@ impl Compound {
             self.next_timed = Some(crate::time::later(now, period));
             // An instance publishes its times without an event: read the snapshot of
             // every instance a time read names, so the rules see their times now.
-            let named: BTreeSet<usize> = self
-                .timed
-                .iter()
-                .filter_map(|key| key.split_once('.'))
-                .filter_map(|(instance, _)| self.view.positions.get(instance).copied())
-                .collect();
-            for index in named {
-                self.refresh(index);
+            for at in 0..self.reads.timed_instances.len() {
+                self.refresh(self.reads.timed_instances[at]);
             }
-            changed.extend(self.timed.iter().cloned());
+            self.changed.extend(self.reads.timed.iter().copied());
         }
     }
 
-    pub(super) fn refresh_own(&mut self, changed: &mut HashSet<String>) {
-        for (index, (name, value)) in self.view.own.iter_mut().enumerate() {
+    pub(super) fn refresh_own(&mut self) {
+        for (index, (_, value)) in self.view.own.iter_mut().enumerate() {
             let now = self.supervisor.get(index);
             if *value != now {
                 *value = now;
-                changed.insert(name.clone());
+                self.changed.insert(self.reads.own[index]);
+            }
+        }
+    }
+
+    /// The keys that change with instance `index`'s variable `variable`: its own
+    /// (`inst.variable`), and the mapped variables it maps while this instance stands
+    /// for the instance they are declared on.
+    fn variable_changed(&mut self, index: usize, variable: &str) {
+        let reads = &self.reads.instances[index];
+        if let Some(known) = reads.variables.iter().find(|v| v.name == variable) {
+            self.changed.insert(known.key);
+            for (declared, id) in &known.mapped {
+                if self.view.standing.get(*declared) == Some(&index) {
+                    self.changed.insert(Some(*id));
+                }
+            }
+            return;
+        }
+        // A variable its spec does not declare (nothing a rule was checked to read
+        // names it, but its key may still be one).
+        let name = &self.instances[index].name;
+        self.changed
+            .insert(self.reads.id(&format!("{name}.{variable}")));
+        for (at, m) in self.mapped.iter().enumerate() {
+            if m.variable == variable && self.view.standing.get(m.instance) == Some(&index) {
+                self.changed.insert(self.reads.mapped[at]);
             }
         }
     }
 
     /// Take the instances' events and refresh the view; run the policies of the
     /// instances that failed if `act` (otherwise, while the compound is suspended,
-    /// they wait for it to run: `deferred_faults`); return the variables that changed.
-    pub(super) fn take_events(&mut self, act: bool) -> Result<HashSet<String>, Fault> {
-        let mut changed = HashSet::new();
+    /// they wait for it to run: `deferred_faults`). The read keys that changed are
+    /// in `changed` (what it held before is forgotten).
+    pub(super) fn take_events(&mut self, act: bool) -> Result<(), Fault> {
+        self.changed.clear();
         for index in 0..self.events.len() {
             // Cleared before the channel is read: an event sent after the read sets it
             // again (it is set before the ring).
@@ -132,8 +148,7 @@ impl Compound {
                 |state: State| matches!(state, State::RunningError | State::StartingError);
             while let Ok(event) = self.events[index].0.try_recv() {
                 seen = true;
-                let instance = &mut self.instances[index];
-                let name = &instance.name;
+                let reads = &self.reads.instances[index];
                 let key = match event {
                     MonitorEvent::State { from, to } => {
                         if let Some(coordinator) = self.coordinator.as_mut() {
@@ -141,38 +156,30 @@ impl Compound {
                         }
                         if failure(from) && !failure(to) {
                             // It left its fault: the next one is a new fault.
-                            instance.handled = false;
+                            self.instances[index].handled = false;
                         }
-                        format!("{name}.state")
+                        reads.state
                     }
-                    MonitorEvent::Quality(_) => format!("{name}.quality"),
-                    MonitorEvent::Period(_) => format!("{name}.period"),
-                    MonitorEvent::MaxResponse(_) => format!("{name}.max_response"),
-                    MonitorEvent::Priority(_) => format!("{name}.priority"),
+                    MonitorEvent::Quality(_) => reads.quality,
+                    MonitorEvent::Period(_) => reads.period,
+                    MonitorEvent::MaxResponse(_) => reads.max_response,
+                    MonitorEvent::Priority(_) => reads.priority,
                     MonitorEvent::Pressure(_) | MonitorEvent::Adaptation(_) => {
                         if let Some(coordinator) = self.coordinator.as_mut() {
                             coordinator.dirty = true;
                         }
                         continue;
                     }
-                    MonitorEvent::UserState(_) => format!("{name}.user_state"),
-                    MonitorEvent::Result(_) => format!("{name}.result"),
-                    MonitorEvent::Error(_) => format!("{name}.error"),
-                    MonitorEvent::Variable { name: variable, .. } => {
-                        // A mapped variable changes with it if this instance stands
-                        // for the declared one.
-                        for (mapped, (declared, target)) in &self.view.mapped {
-                            if *target == variable
-                                && self.view.standing.get(*declared) == Some(&index)
-                            {
-                                changed.insert(mapped.clone());
-                            }
-                        }
-                        format!("{name}.{variable}")
+                    MonitorEvent::UserState(_) => reads.user_state,
+                    MonitorEvent::Result(_) => reads.result,
+                    MonitorEvent::Error(_) => reads.error,
+                    MonitorEvent::Variable { name, .. } => {
+                        self.variable_changed(index, &name);
+                        continue;
                     }
                     _ => continue,
                 };
-                changed.insert(key);
+                self.changed.insert(key);
             }
             if !seen {
                 continue;
@@ -200,7 +207,7 @@ impl Compound {
                 _ => {}
             }
         }
-        Ok(changed)
+        Ok(())
     }
 }
 
@@ -217,7 +224,7 @@ impl Compound {
             export.forward(now);
         }
         self.fresh = false;
-        let mut changed = self.take_events(true)?;
+        self.take_events(true)?;
         if self.keep_in_step() {
             self.rewire()?;
         }
@@ -230,26 +237,27 @@ impl Compound {
         if self.instances.iter().any(|i| i.pending.is_some()) {
             self.restarts_due(self.clock.now())?;
         }
-        self.refresh_own(&mut changed);
-        self.refresh_compound(cx, &mut changed);
+        self.refresh_own();
+        self.refresh_compound(cx);
         if std::mem::take(&mut self.restood) {
-            changed.extend(self.view.mapped.keys().cloned());
+            for at in 0..self.reads.mapped.len() {
+                self.changed.insert(self.reads.mapped[at]);
+            }
         }
         let entered = self.evaluated_in != Some(state);
         // After a supervisor section every rule of the state is evaluated: the section
         // may have changed what no `reads` names (its `local` variables).
         let sectioned = std::mem::take(&mut self.sectioned);
-        if !entered && !sectioned && changed.is_empty() {
+        if !entered && !sectioned && self.changed.is_empty() {
             return Ok(None);
         }
         self.evaluated_in = Some(state);
         let fired = fire(
             &self.rules,
-            &self.by_read,
             &self.view,
             state,
             entered || sectioned,
-            &changed,
+            &self.changed,
         );
         Ok(fired)
     }

@@ -147,6 +147,7 @@ pub(super) type Test = Box<dyn Fn(&View) -> bool + Send>;
 pub(super) struct Rule {
     pub(super) state: usize,
     pub(super) target: usize,
-    pub(super) reads: Vec<String>,
+    /// The ids of the keys it reads ([`Reads`](super::reads::Reads)), ascending.
+    pub(super) reads: Vec<usize>,
     pub(super) test: Test,
 }
