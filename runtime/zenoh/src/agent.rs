@@ -596,6 +596,10 @@ impl Drop for Inbox {
 /// number, the owner, and whether its liveliness token is there.
 type Verdict = (u64, String, bool);
 
+/// The network's answer for a request's owner, if it came: the owner, and whether it
+/// lives.
+type Known<'a> = Option<(&'a str, bool)>;
+
 /// The requests whose owners the agent asks the network for (owners its watcher has
 /// not heard of), by owner: they wait off the agent's thread, which serves the others
 /// meanwhile. At most [`OWNER_WAITING`] wait, with one lookup per owner.
@@ -1035,7 +1039,7 @@ impl Server<'_> {
     fn serve(
         &self,
         query: zenoh::query::Query,
-        known: Option<(&str, bool)>,
+        known: Known<'_>,
         hosted: &mut Vec<Hosted>,
         asking: &mut Asking,
     ) {
@@ -1124,11 +1128,7 @@ fn serve_one(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
-    (status, alive, known): (
-        &Mutex<AgentStatus>,
-        &Mutex<HashSet<String>>,
-        Option<(&str, bool)>,
-    ),
+    (status, alive, known): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>, Known<'_>),
     (hosted, reaper, cap): (&mut Vec<Hosted>, &Reaper, limits::Limit),
 ) -> Answer {
     reap(hosted, reaper);
@@ -1602,7 +1602,7 @@ fn owners_lost(hosted: &mut [Hosted], alive: &Mutex<HashSet<String>>) {
 /// thread; else [`Refusal::Unheard`], to ask). Its loss may have been handled while
 /// its request waited: nothing would send that request's instance to `dead`.
 fn owner_lives(
-    (alive, known): (&Mutex<HashSet<String>>, Option<(&str, bool)>),
+    (alive, known): (&Mutex<HashSet<String>>, Known<'_>),
     owner: &str,
 ) -> Result<(), Refusal> {
     if lock(alive).contains(owner) {

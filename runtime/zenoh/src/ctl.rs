@@ -1046,7 +1046,7 @@ impl Ctl {
                 if count.is_some_and(|count| summary.printed >= count) {
                     break 'batches;
                 }
-                if !summary.take(&full, echoed, &mut next_seq) {
+                if !summary.take(full, echoed, &mut next_seq) {
                     continue;
                 }
                 let now = Instant::now();
