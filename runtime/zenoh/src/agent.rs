@@ -3,7 +3,7 @@
 //! another node asks ([`instantiate`]), bridges the ports the request names, runs them
 //! and exposes them like any other component of the node.
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::marker::PhantomData;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -451,6 +451,12 @@ pub const GONE_QUEUE: usize = 256;
 /// building it, when its watcher has not heard of the owner's token.
 const OWNERS_LOOKUP: Duration = Duration::from_secs(1);
 
+/// How many requests wait, off the agent's thread, for the network to say whether
+/// their owners live (owners the agent's watcher has not heard of); one more is
+/// refused at once as busy (it may be asked again). One lookup runs per owner, for
+/// every request of that owner waiting.
+pub const OWNER_WAITING: usize = AGENT_QUEUE;
+
 /// The shortest time between two of the agent's re-checks of its owners (after a
 /// dropped loss): however many requests come, one runs within this time (and the
 /// serving of the request at hand) of the loss being dropped.
@@ -479,9 +485,11 @@ pub struct AgentStatus {
     /// Losses of nodes dropped before the agent's thread took them (more than
     /// [`GONE_QUEUE`] waited): after each, the thread asked which owners live.
     pub losses_dropped: u64,
-    /// Requests whose owner the agent had not heard of (its liveliness token not yet
-    /// come, or gone), for which it asked the network whether the owner lives, up to
-    /// one second on its thread each: an owner whose token it has heard costs none.
+    /// Lookups of owners the agent had not heard of (their liveliness tokens not yet
+    /// come, or gone): it asked the network whether the owner lives, up to a second,
+    /// off its thread (the requests of that owner wait for the answer, the others are
+    /// served meanwhile), once for every request of that owner waiting. An owner
+    /// whose token it has heard costs none.
     pub owners_asked: u64,
 }
 
@@ -546,6 +554,8 @@ struct Inbox {
     status: Arc<Mutex<AgentStatus>>,
     /// Why the thread ends, when it ends on purpose.
     ending: Option<String>,
+    /// The requests waiting for the network to say whether their owners live.
+    asking: Asking,
 }
 
 impl Drop for Inbox {
@@ -558,10 +568,15 @@ impl Drop for Inbox {
                 "its thread has ended".to_owned()
             }
         });
+        let parked = std::mem::take(&mut self.asking.owners);
         let waiting: Vec<zenoh::query::Query> = {
             let mut status = lock(&self.status);
             status.stopped.get_or_insert(why.clone());
-            let waiting: Vec<_> = self.received.try_iter().collect();
+            let waiting: Vec<_> = parked
+                .into_values()
+                .flat_map(|lookup| lookup.queries)
+                .chain(self.received.try_iter())
+                .collect();
             status.refused += waiting.len() as u64;
             waiting
         };
@@ -575,6 +590,204 @@ impl Drop for Inbox {
             }
         }
     }
+}
+
+/// What the network said of an owner the agent asked for ([`look_up`]): the lookup's
+/// number, the owner, and whether its liveliness token is there.
+type Verdict = (u64, String, bool);
+
+/// The network's answer for a request's owner, if it came: the owner, and whether it
+/// lives.
+type Known<'a> = Option<(&'a str, bool)>;
+
+/// The requests whose owners the agent asks the network for (owners its watcher has
+/// not heard of), by owner: they wait off the agent's thread, which serves the others
+/// meanwhile. At most [`OWNER_WAITING`] wait, with one lookup per owner.
+#[derive(Default)]
+struct Asking {
+    owners: HashMap<String, Lookup>,
+    /// The number of the next lookup.
+    next: u64,
+}
+
+/// The requests of one owner waiting for the network's answer.
+struct Lookup {
+    /// Its number: an answer to an earlier lookup of the owner is ignored.
+    number: u64,
+    queries: Vec<zenoh::query::Query>,
+    /// A loss of the owner was handled while it was asked for: its requests build
+    /// nothing (nothing would send their instances to `dead`).
+    lost: bool,
+}
+
+impl Asking {
+    /// Have `query`, whose owner `owner` the watcher has not heard of, wait for the
+    /// network's answer, asking for the owner with `start` (given the lookup's
+    /// number) if no lookup of it runs. The query back with the reason to refuse it
+    /// with, if [`OWNER_WAITING`] wait already or the lookup could not start.
+    fn park(
+        &mut self,
+        owner: String,
+        query: zenoh::query::Query,
+        start: impl FnOnce(u64) -> Result<(), String>,
+    ) -> Result<(), Vec<(zenoh::query::Query, String)>> {
+        let waiting: usize = self
+            .owners
+            .values()
+            .map(|lookup| lookup.queries.len())
+            .sum();
+        if waiting >= OWNER_WAITING {
+            return Err(vec![(
+                query,
+                format!(
+                    "{BUSY} ({OWNER_WAITING} for the network to say whether their owners \
+                     live); ask again later"
+                ),
+            )]);
+        }
+        if let Some(lookup) = self.owners.get_mut(&owner) {
+            lookup.queries.push(query);
+            return Ok(());
+        }
+        let number = self.next;
+        self.next += 1;
+        self.owners.insert(
+            owner.clone(),
+            Lookup {
+                number,
+                queries: vec![query],
+                lost: false,
+            },
+        );
+        self.start(&owner, number, start)
+    }
+
+    /// Start the lookup of `owner` numbered `number`; if it cannot start, its
+    /// requests back with the reason.
+    fn start(
+        &mut self,
+        owner: &str,
+        number: u64,
+        start: impl FnOnce(u64) -> Result<(), String>,
+    ) -> Result<(), Vec<(zenoh::query::Query, String)>> {
+        let Err(reason) = start(number) else {
+            return Ok(());
+        };
+        let queries = self
+            .owners
+            .remove(owner)
+            .map(|lookup| lookup.queries)
+            .unwrap_or_default();
+        Err(queries
+            .into_iter()
+            .map(|query| (query, reason.clone()))
+            .collect())
+    }
+
+    /// The network's answer `verdict` came: the owner, whether it lives (not if its
+    /// loss was handled meanwhile) and the requests that waited for it; nothing if it
+    /// answers an earlier lookup.
+    fn answered(
+        &mut self,
+        (number, owner, found): Verdict,
+    ) -> Option<(String, bool, Vec<zenoh::query::Query>)> {
+        if self.owners.get(&owner)?.number != number {
+            return None;
+        }
+        let lookup = self.owners.remove(&owner)?;
+        Some((owner, found && !lookup.lost, lookup.queries))
+    }
+
+    /// A loss was dropped (it may have been the loss of any owner asked for): every
+    /// owner is asked for again (`start`, per owner and number). The requests whose
+    /// lookup could not start, with the reason.
+    fn ask_again(
+        &mut self,
+        mut start: impl FnMut(&str, u64) -> Result<(), String>,
+    ) -> Vec<(zenoh::query::Query, String)> {
+        let owners: Vec<String> = self.owners.keys().cloned().collect();
+        let mut refused = Vec::new();
+        for owner in owners {
+            let number = self.next;
+            self.next += 1;
+            if let Some(lookup) = self.owners.get_mut(&owner) {
+                lookup.number = number;
+            }
+            if let Err(queries) = self.start(&owner, number, |number| start(&owner, number)) {
+                refused.extend(queries);
+            }
+        }
+        refused
+    }
+}
+
+/// A lookup under way: when Zenoh drops it (the query ended, every answer in or
+/// [`OWNERS_LOOKUP`] passed), it sends the verdict to the agent's thread.
+struct Finding {
+    number: u64,
+    owner: String,
+    found: AtomicBool,
+    verdicts: crossbeam_channel::Sender<Verdict>,
+}
+
+impl Drop for Finding {
+    fn drop(&mut self) {
+        let verdict = (
+            self.number,
+            std::mem::take(&mut self.owner),
+            self.found.load(Ordering::Acquire),
+        );
+        // A test holding the lookup holds it on a thread of its own (never Zenoh's).
+        #[cfg(test)]
+        if tests::is_held("lookup", &verdict.1) {
+            let verdicts = self.verdicts.clone();
+            std::thread::spawn(move || {
+                tests::held("lookup", &verdict.1);
+                let _ = verdicts.send(verdict);
+            });
+            return;
+        }
+        // Unbounded, never full: at most one lookup per owner waiting runs.
+        let _ = self.verdicts.send(verdict);
+    }
+}
+
+/// Ask the network whether node `owner` lives (its liveliness token is there), off
+/// the agent's thread: the verdict, numbered `number`, comes on `verdicts` when the
+/// query ends, within [`OWNERS_LOOKUP`].
+fn look_up(
+    session: &zenoh::Session,
+    owner: &str,
+    number: u64,
+    verdicts: &crossbeam_channel::Sender<Verdict>,
+) -> Result<(), String> {
+    let finding = Finding {
+        number,
+        owner: owner.to_owned(),
+        found: AtomicBool::new(false),
+        verdicts: verdicts.clone(),
+    };
+    let token = keys::node_token(owner);
+    let expected = token.clone();
+    session
+        .liveliness()
+        .get(&token)
+        .callback(move |reply| {
+            if let Ok(sample) = reply.result()
+                && sample.key_expr().as_str() == expected
+            {
+                finding.found.store(true, Ordering::Release);
+            }
+        })
+        .timeout(OWNERS_LOOKUP)
+        .wait()
+        .map_err(|error| {
+            format!(
+                "the agent could not ask whether the owner `{}` lives: {}",
+                excerpt(owner, EXCERPT_CHARS),
+                Chain(&*error)
+            )
+        })
 }
 
 /// Builds components on request, on its own thread, each request's in a [`System`] of
@@ -684,6 +897,8 @@ impl Agent {
             requests: received.clone(),
             losses: lost.clone(),
         };
+        // The network's answers about owners the watcher has not heard of.
+        let (verdicts, answers) = crossbeam_channel::unbounded::<Verdict>();
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{}:agent", node.name()))
             .spawn(move || {
@@ -691,37 +906,48 @@ impl Agent {
                     received,
                     status: Arc::clone(&serving),
                     ending: None,
+                    asking: Asking::default(),
                 };
-                // Every request built here, until its instance is found dead and
-                // handed to the reaper.
+                let server = Server {
+                    node: &node,
+                    registry: &registry,
+                    status: &serving,
+                    alive: &alive,
+                    reaper: &reaper,
+                    cap,
+                    verdicts: &verdicts,
+                };
+                // Every request built here, until its instance is found dead (or its
+                // owner lost) and handed to the reaper.
                 let mut hosted: Vec<Hosted> = Vec::new();
                 let mut rechecked = Instant::now();
+                // The losses that came first are handled first (those queued now: a
+                // stream of new ones holds no request up).
+                let losses_first = |hosted: &mut Vec<Hosted>, asking: &mut Asking| {
+                    for name in lost.try_iter().take(lost.len()) {
+                        owner_lost(hosted, asking, |owner| owner == name);
+                    }
+                };
                 loop {
                     crossbeam_channel::select! {
                         recv(inbox.received) -> query => {
                             let Ok(query) = query else { break };
-                            // The losses that came first are handled first (those
-                            // queued now: a stream of new ones holds no request up).
-                            for name in lost.try_iter().take(lost.len()) {
-                                owner_lost(&hosted, |owner| owner == name);
-                            }
-                            let answer = serve_one(
-                                &node,
-                                &registry,
-                                &query,
-                                (&serving, &alive),
-                                (&mut hosted, &reaper, cap),
-                            );
-                            if let Err(error) = reply(&query, &answer) {
-                                coolbot::limited!("answer", |held| tracing::warn!(
-                                    "instantiation answer not sent: {}{held}",
-                                    Chain(&*error)
-                                ));
+                            losses_first(&mut hosted, &mut inbox.asking);
+                            server.serve(query, None, &mut hosted, &mut inbox.asking);
+                        }
+                        recv(answers) -> verdict => {
+                            let Ok(verdict) = verdict else { break };
+                            losses_first(&mut hosted, &mut inbox.asking);
+                            if let Some((owner, lives, queries)) = inbox.asking.answered(verdict) {
+                                for query in queries {
+                                    let known = Some((owner.as_str(), lives));
+                                    server.serve(query, known, &mut hosted, &mut inbox.asking);
+                                }
                             }
                         }
                         recv(lost) -> name => {
                             let Ok(name) = name else { break };
-                            owner_lost(&hosted, |owner| owner == name);
+                            owner_lost(&mut hosted, &mut inbox.asking, |owner| owner == name);
                             reap(&mut hosted, &reaper);
                         }
                         default(Duration::from_millis(100)) => {
@@ -735,7 +961,11 @@ impl Agent {
                     // Whatever comes, a dropped loss has the owners re-checked soon.
                     if rechecked.elapsed() >= OWNERS_RECHECK && resync.swap(false, Ordering::AcqRel)
                     {
-                        owners_lost(&hosted, &alive);
+                        owners_lost(&mut hosted, &alive);
+                        let refused = inbox
+                            .asking
+                            .ask_again(|owner, number| server.look_up(owner, number));
+                        server.refuse(refused);
                         reap(&mut hosted, &reaper);
                         rechecked = Instant::now();
                     }
@@ -781,6 +1011,101 @@ fn reply(query: &zenoh::query::Query, answer: &ControlReply) -> zenoh::Result<()
     query.reply(query.key_expr().clone(), json).wait()
 }
 
+/// Send `answer` to `query` (a failure is logged, rate-limited).
+fn answer(query: &zenoh::query::Query, answer: &ControlReply) {
+    if let Err(error) = reply(query, answer) {
+        coolbot::limited!("answer", |held| tracing::warn!(
+            "instantiation answer not sent: {}{held}",
+            Chain(&*error)
+        ));
+    }
+}
+
+/// What the agent's thread serves requests with.
+struct Server<'a> {
+    node: &'a Node,
+    registry: &'a Registry,
+    status: &'a Mutex<AgentStatus>,
+    alive: &'a Mutex<HashSet<String>>,
+    reaper: &'a Reaper,
+    cap: limits::Limit,
+    verdicts: &'a crossbeam_channel::Sender<Verdict>,
+}
+
+impl Server<'_> {
+    /// Serve `query` ([`serve_one`]) and answer it, or, if its owner is one the
+    /// watcher has not heard of (and not `known`: the network's answer for an owner),
+    /// have it wait in `asking` for the network to say whether the owner lives.
+    fn serve(
+        &self,
+        query: zenoh::query::Query,
+        known: Known<'_>,
+        hosted: &mut Vec<Hosted>,
+        asking: &mut Asking,
+    ) {
+        let outcome = serve_one(
+            self.node,
+            self.registry,
+            &query,
+            (self.status, self.alive, known),
+            (hosted, self.reaper, self.cap),
+        );
+        match outcome {
+            Answer::Reply(reply) => answer(&query, &reply),
+            Answer::Unheard(owner) => {
+                if let Err(refused) =
+                    asking.park(owner.clone(), query, |number| self.look_up(&owner, number))
+                {
+                    self.refuse(refused);
+                }
+            }
+        }
+    }
+
+    /// Ask the network whether `owner` lives ([`look_up`]), counted.
+    fn look_up(&self, owner: &str, number: u64) -> Result<(), String> {
+        lock(self.status).owners_asked += 1;
+        look_up(self.node.session(), owner, number, self.verdicts)
+    }
+
+    /// Refuse each of `refused` with its reason, counted.
+    fn refuse(&self, refused: Vec<(zenoh::query::Query, String)>) {
+        if refused.is_empty() {
+            return;
+        }
+        lock(self.status).refused += refused.len() as u64;
+        for (query, reason) in refused {
+            answer(&query, &ControlReply::Rejected { reason });
+        }
+    }
+}
+
+/// What serving a request comes to: its answer, or the owner the watcher has not
+/// heard of (the request waits for the network's answer).
+enum Answer {
+    Reply(ControlReply),
+    Unheard(String),
+}
+
+/// Why a request is not built: refused with a reason, or its owner is one the
+/// watcher has not heard of (to ask the network for, off the agent's thread).
+enum Refusal {
+    Reason(String),
+    Unheard(String),
+}
+
+impl From<String> for Refusal {
+    fn from(reason: String) -> Refusal {
+        Refusal::Reason(reason)
+    }
+}
+
+impl From<&str> for Refusal {
+    fn from(reason: &str) -> Refusal {
+        Refusal::Reason(reason.to_owned())
+    }
+}
+
 /// The message of a panic payload.
 fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     if let Some(message) = payload.downcast_ref::<&str>() {
@@ -794,16 +1119,20 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 
 /// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and keep
 /// what an accepted one built in `hosted`; what a refused or panicking one had built
-/// is shut down with its system (its names are free again). The names and queue
-/// memory of the instances the reaper still releases count as taken.
+/// is handed to the reaper, which shuts its system down (its names are free again
+/// once it has). The names and queue memory of the instances the reaper still
+/// releases count as taken. A request whose owner the watcher has not heard of (in
+/// `alive`), and that `known` (the network's answer for an owner) does not say lives
+/// or is lost, is not served: its owner is to be asked for.
 fn serve_one(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
-    (status, alive): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>),
+    (status, alive, known): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>, Known<'_>),
     (hosted, reaper, cap): (&mut Vec<Hosted>, &Reaper, limits::Limit),
-) -> ControlReply {
+) -> Answer {
     reap(hosted, reaper);
+    let mut building = None;
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| {
         cap.check(
             || "the instances this agent runs with this one".to_owned(),
@@ -820,16 +1149,36 @@ fn serve_one(
             .iter()
             .map(|built| built.queue_bytes)
             .fold(reaper.queue_bytes(), usize::saturating_add);
-        let lives = |owner: &str| owner_lives(node, (status, alive), owner);
-        serve(node, registry, query, (&taken, held), &lives)
+        let lives = |owner: &str| owner_lives((alive, known), owner);
+        serve(node, registry, query, (&taken, held), &lives, &mut building)
     }));
-    match outcome {
+    // What a refused or panicking request had built: its system is shut down on the
+    // reaper's thread (up to `coolbot::SHUTDOWN_TIMEOUT`), its names taken until then.
+    if let Some(Building {
+        names,
+        queue_bytes,
+        system,
+    }) = building
+    {
+        hosted.push(Hosted {
+            names,
+            queue_bytes,
+            owner: None,
+            handles: Vec::new(),
+            system,
+            exposure: None,
+            fate: Fate::Refused,
+        });
+        reap(hosted, reaper);
+    }
+    let reply = match outcome {
         Ok(Ok(built)) => {
             lock(status).built += 1;
             hosted.push(built);
             ControlReply::Accepted
         }
-        Ok(Err(reason)) => {
+        Ok(Err(Refusal::Unheard(owner))) => return Answer::Unheard(owner),
+        Ok(Err(Refusal::Reason(reason))) => {
             lock(status).refused += 1;
             ControlReply::Rejected { reason }
         }
@@ -855,7 +1204,8 @@ fn serve_one(
                 ),
             }
         }
-    }
+    };
+    Answer::Reply(reply)
 }
 
 /// Wait until `handle` has left `starting` for `ready`.
@@ -965,8 +1315,28 @@ fn check_request(request: &Instantiate) -> Result<(), String> {
     Ok(())
 }
 
+/// A request's system while it is built, with the names and queue memory it takes:
+/// handed to the reaper if the request is refused or panics.
+struct Building {
+    names: Vec<String>,
+    queue_bytes: usize,
+    system: System,
+}
+
+/// What becomes of something the agent built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fate {
+    /// It serves, until found `dead`.
+    Serving,
+    /// Its owner is lost: the reaper sends it to `dead`, then releases it.
+    OwnerLost,
+    /// What a refused or panicking request had built: the reaper releases it.
+    Refused,
+}
+
 /// What one accepted request built, in a system of its own: the instance, its
-/// bridges and their exposure on the node. Released once the instance is `dead`
+/// bridges and their exposure on the node (or what a refused request had built of
+/// them). Released once the instance is `dead` or its owner lost
 /// ([`Hosted::release`], by the agent's [`Reaper`]): its threads joined, its keys
 /// withdrawn, its names free.
 struct Hosted {
@@ -976,38 +1346,52 @@ struct Hosted {
     queue_bytes: usize,
     /// The node whose life it shares, if any ([`Instantiate::owner`]).
     owner: Option<String>,
-    /// The instance first, then its bridges.
+    /// The instance first, then its bridges (none for a refused request's).
     handles: Vec<Handle>,
     system: System,
-    exposure: crate::node::Exposure,
+    exposure: Option<crate::node::Exposure>,
+    fate: Fate,
 }
 
 impl Hosted {
-    /// Whether the instance is `dead` (sent there by a command, its owner's loss or
-    /// its own end).
+    /// Whether it is to be released: the instance is `dead` (sent there by a
+    /// command, or by its own end), its owner is lost, or its request was refused.
     fn dead(&self) -> bool {
-        self.handles[0].state() == State::Dead
+        match self.fate {
+            Fate::Serving => self
+                .handles
+                .first()
+                .is_some_and(|instance| instance.state() == State::Dead),
+            Fate::OwnerLost | Fate::Refused => true,
+        }
     }
 
-    /// Send the instance and its bridges to `dead` (its owner is lost).
+    /// Send the instance and its bridges to `dead` (its owner is lost), waiting for
+    /// each: on the reaper's thread.
     fn kill(&self) {
+        #[cfg(test)]
+        tests::held("kill", &self.names[0]);
         for handle in self.handles.iter().rev() {
             let _ = handle.command(Command::SetState(Controllable::Dead));
         }
     }
 
-    /// Shut its system down (the bridges go to `dead` with it, every thread is
-    /// joined), then withdraw its exposure (its monitoring thread publishes the
-    /// events still waiting, the instance's `dead` among them, and ends).
+    /// Send it to `dead` if its owner is lost; shut its system down (the bridges go
+    /// to `dead` with it, every thread is joined), then withdraw its exposure (its
+    /// monitoring thread publishes the events still waiting, the instance's `dead`
+    /// among them, and ends).
     fn release(self) {
+        #[cfg(test)]
+        tests::held_release(&self.names[0]);
+        if self.fate == Fate::OwnerLost {
+            self.kill();
+        }
         let Hosted {
             names,
             system,
             exposure,
             ..
         } = self;
-        #[cfg(test)]
-        tests::held_release(&names[0]);
         let report = system.shutdown();
         if !report.clean() {
             tracing::warn!(
@@ -1164,15 +1548,23 @@ fn node_gone(
     ));
 }
 
-/// Send to `dead` what was built for the owners `lost` says are lost.
-fn owner_lost(hosted: &[Hosted], lost: impl Fn(&str) -> bool) {
+/// Have the reaper send to `dead` what was built for the owners `lost` says are lost
+/// (marked here, handed over by the next [`reap`]: the agent's thread waits for no
+/// instance); the requests of those owners that wait in `asking` build nothing.
+fn owner_lost(hosted: &mut [Hosted], asking: &mut Asking, lost: impl Fn(&str) -> bool) {
+    for (owner, lookup) in &mut asking.owners {
+        if lost(owner) {
+            lookup.lost = true;
+        }
+    }
     let mut count = 0;
     let mut name = String::new();
-    for built in hosted {
-        if let Some(owner) = &built.owner
+    for built in hosted.iter_mut() {
+        if built.fate == Fate::Serving
+            && let Some(owner) = &built.owner
             && lost(owner)
         {
-            built.kill();
+            built.fate = Fate::OwnerLost;
             count += 1;
             name.clone_from(owner);
         }
@@ -1188,49 +1580,41 @@ fn owner_lost(hosted: &[Hosted], lost: impl Fn(&str) -> bool) {
 /// After a node's loss was dropped: send to `dead` what was built for owners whose
 /// tokens the watcher no longer holds in `alive` (every loss goes from it, dropped
 /// or not).
-fn owners_lost(hosted: &[Hosted], alive: &Mutex<HashSet<String>>) {
-    // Taken under the lock, sent to `dead` without it: a command to an instance
-    // waits for its thread, and the watcher's callback, on Zenoh's thread, must not.
-    let lost: HashSet<&str> = {
+fn owners_lost(hosted: &mut [Hosted], alive: &Mutex<HashSet<String>>) {
+    // Taken under the lock, marked without it: the watcher's callback, on Zenoh's
+    // thread, is not to wait for the agent's.
+    let lost: HashSet<String> = {
         let alive = lock(alive);
         hosted
             .iter()
             .filter_map(|built| built.owner.as_deref())
             .filter(|owner| !alive.contains(*owner))
+            .map(str::to_owned)
             .collect()
     };
-    owner_lost(hosted, |owner| lost.contains(owner));
+    // (The requests waiting for the network's answer are asked for again.)
+    owner_lost(hosted, &mut Asking::default(), |owner| lost.contains(owner));
 }
 
 /// Check that node `owner` lives: the watcher holds its token in `alive`, or, if it
-/// has not heard of it (its token not yet come, or gone), the network has it (asked
-/// for, counted in `status`). Its loss may have been handled while its request
-/// waited: nothing would send that request's instance to `dead`.
+/// has not heard of it (its token not yet come, or gone), the network said so
+/// (`known`: an owner and whether its token was there, asked for off the agent's
+/// thread; else [`Refusal::Unheard`], to ask). Its loss may have been handled while
+/// its request waited: nothing would send that request's instance to `dead`.
 fn owner_lives(
-    node: &Node,
-    (status, alive): (&Mutex<AgentStatus>, &Mutex<HashSet<String>>),
+    (alive, known): (&Mutex<HashSet<String>>, Known<'_>),
     owner: &str,
-) -> Result<(), String> {
+) -> Result<(), Refusal> {
     if lock(alive).contains(owner) {
         return Ok(());
     }
-    lock(status).owners_asked += 1;
-    let token = keys::node_token(owner);
-    let alive =
-        crate::node::liveliness_keys(node.session(), &token, OWNERS_LOOKUP).map_err(|error| {
-            format!(
-                "the agent could not ask whether the owner `{}` lives: {}",
-                excerpt(owner, EXCERPT_CHARS),
-                Chain(&error)
-            )
-        })?;
-    if alive.contains(&token) {
-        Ok(())
-    } else {
-        Err(format!(
+    match known {
+        Some((asked, true)) if asked == owner => Ok(()),
+        Some((asked, false)) if asked == owner => Err(Refusal::Reason(format!(
             "the owner `{}` is lost (its liveliness token is gone): nothing is built for it",
             excerpt(owner, EXCERPT_CHARS)
-        ))
+        ))),
+        _ => Err(Refusal::Unheard(owner.to_owned())),
     }
 }
 
@@ -1275,19 +1659,20 @@ fn check_namespace(request: &Instantiate, here: &str, requester: &str) -> Result
 }
 
 /// Whether a request's owner lives ([`owner_lives`]): an error says why not.
-type Lives<'a> = dyn Fn(&str) -> Result<(), String> + 'a;
+type Lives<'a> = dyn Fn(&str) -> Result<(), Refusal> + 'a;
 
-/// One instantiation request: build, bridge, run, expose, in a system of its own
-/// (dropped, and so shut down, if the request fails or panics: its names are then
-/// free again). `taken`: the names hosted instances hold; `held`: the queue memory
-/// they hold, in bytes; `lives`: whether a request's owner lives ([`owner_lives`]).
+/// One instantiation request: build, bridge, run, expose, in a system of its own,
+/// left in `building` while it is built (for the reaper, if the request fails or
+/// panics). `taken`: the names hosted instances hold; `held`: the queue memory they
+/// hold, in bytes; `lives`: whether a request's owner lives ([`owner_lives`]).
 fn serve(
     node: &Node,
     registry: &Registry,
     query: &zenoh::query::Query,
     (taken, held): (&dyn Fn(&str) -> bool, usize),
     lives: &Lives<'_>,
-) -> Result<Hosted, String> {
+    building: &mut Option<Building>,
+) -> Result<Hosted, Refusal> {
     let payload = query
         .payload()
         .ok_or("no request: the query carries no payload")?;
@@ -1305,17 +1690,17 @@ fn serve(
     // own name (the key's last chunk): the request must be for that type, and build
     // in that node's namespace.
     let Some((asked, requester)) = keys::parse_agent(query.key_expr().as_str()) else {
-        return Err(format!(
+        return Err(Refusal::Reason(format!(
             "`{}` is not an agent's key",
             excerpt(query.key_expr().as_str(), EXCERPT_CHARS)
-        ));
+        )));
     };
     if asked != request.type_name {
-        return Err(format!(
+        return Err(Refusal::Reason(format!(
             "the request builds a `{}` but came on the key of type `{}`",
             request.type_name,
             excerpt(asked, EXCERPT_CHARS)
-        ));
+        )));
     }
     keys::check_name(requester).map_err(text)?;
     check_namespace(&request, node.name(), requester)?;
@@ -1333,10 +1718,10 @@ fn serve(
         names.push(format!("{name}-{port}"));
     }
     if request.name.contains('.') || names.iter().any(|name| taken(name)) {
-        return Err(format!(
+        return Err(Refusal::Reason(format!(
             "`{}` is not a free instance name here",
             request.name
-        ));
+        )));
     }
     let mut component = (factory.make)(&request.name).map_err(text)?;
     let spec = component.spec();
@@ -1372,17 +1757,17 @@ fn serve(
             spec.input_index(port).is_some()
         };
         if !declared {
-            return Err(format!(
+            return Err(Refusal::Reason(format!(
                 "`{}` has no {} port `{port}`",
                 spec.type_name,
                 if output { "output" } else { "input" }
-            ));
+            )));
         }
         let Some(bridge) = factory.ports.get(port) else {
-            return Err(format!(
+            return Err(Refusal::Reason(format!(
                 "port `{port}` of `{}` was not registered as bridgeable",
                 spec.type_name
-            ));
+            )));
         };
         // What the outlet's queue holds from the start.
         let held = match wire {
@@ -1427,8 +1812,15 @@ fn serve(
     if let Some(owner) = &request.owner {
         lives(owner)?;
     }
-    // Dropped (shut down, its names free) if anything below fails or panics.
-    let mut system = System::new();
+    // Handed to the reaper (shut down, its names free) if anything below fails or
+    // panics.
+    let system = &mut building
+        .insert(Building {
+            names: names.clone(),
+            queue_bytes: total,
+            system: System::new(),
+        })
+        .system;
     system.start().map_err(text)?;
     let mut built = vec![system.add(component).map_err(text)?];
     for wire in &request.wires {
@@ -1502,13 +1894,17 @@ fn serve(
         "built for another node{}",
         if request.run { "" } else { " (left ready)" }
     );
+    let Some(Building { system, .. }) = building.take() else {
+        unreachable!("a request is built in its system");
+    };
     Ok(Hosted {
         names,
         queue_bytes: total,
         owner: request.owner.clone(),
         handles: built,
         system,
-        exposure,
+        exposure: Some(exposure),
+        fate: Fate::Serving,
     })
 }
 
@@ -1654,6 +2050,7 @@ mod tests {
             received,
             status: Arc::clone(&status),
             ending: Some("a test ended it".to_owned()),
+            asking: Asking::default(),
         });
         for replies in waiting {
             assert_eq!(
@@ -1676,6 +2073,7 @@ mod tests {
             received,
             status: Arc::clone(&status),
             ending: None,
+            asking: Asking::default(),
         };
         let ended = std::thread::spawn(move || {
             let _inbox = inbox;
@@ -1689,7 +2087,9 @@ mod tests {
         );
     }
 
-    use crate::testing::{Idle, free_port, idle, idle_registry, idle_spec, set_state};
+    use crate::testing::{
+        Idle, asking, built, eventually, free_port, idle, idle_registry, idle_spec, set_state,
+    };
 
     /// A request for a `type_name` named `name`: no wires, no overrides, run, no
     /// owner (the rest given with `..request(...)`).
@@ -1721,18 +2121,6 @@ mod tests {
                     .is_ok_and(|comm| comm.trim_end() == name)
             })
             .count()
-    }
-
-    /// Whether `done` holds before a generous deadline, asked every 10 ms.
-    fn eventually(mut done: impl FnMut() -> bool) -> bool {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        while Instant::now() < deadline {
-            if done() {
-                return true;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        done()
     }
 
     #[test]
@@ -1818,14 +2206,9 @@ mod tests {
                 .contains("is not in the namespace of node `robot`"),
             "{error}"
         );
-        // The proxy's next generation, after its instance was lost:
-        let rebuilt = instantiate(
-            &node,
-            "claim",
-            &request("Idle", &format!("{root}-2")),
-            Duration::from_secs(10),
-        );
-        assert!(rebuilt.is_ok(), "{}", rebuilt.unwrap_err());
+        // The proxy's next generation, after its instance was lost (once the reaper
+        // has shut the refused request's system down):
+        built(&node, "claim", &request("Idle", &format!("{root}-2")));
     }
 
     #[test]
@@ -2025,16 +2408,10 @@ mod tests {
         );
         // An instance gone, its memory is free again.
         set_state(&node, "amem", &own("amem", "big-0"), Controllable::Dead);
-        assert!(eventually(|| instantiate(
-            &node,
-            "amem",
-            &big(8, 1),
-            timeout
-        )
-        .is_ok()));
+        built(&node, "amem", &big(8, 1));
     }
 
-    /// What the test holds of an agent's release of an instance ([`hold_release`]).
+    /// What the test holds of an agent's work on an instance ([`hold`]).
     struct Held {
         /// Told when the release begins.
         begun: crossbeam_channel::Receiver<()>,
@@ -2042,8 +2419,8 @@ mod tests {
         _go: crossbeam_channel::Sender<()>,
     }
 
-    /// The releases held: by instance name, what tells their beginning and what lets
-    /// them go on.
+    /// The points held (`<point> <instance or owner>`): what tells that the agent
+    /// reached them and what lets it go on.
     type Holds = BTreeMap<
         String,
         (
@@ -2057,27 +2434,41 @@ mod tests {
     /// The instances whose release panics ([`held_release`]).
     static PANICKING: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
 
-    /// Hold the release of instance `name` until the returned [`Held`] is dropped
-    /// (or a deadline passes).
-    fn hold_release(name: &str) -> Held {
+    /// Hold the agent at `point` for `name` until the returned [`Held`] is dropped
+    /// (or a deadline passes): `release` (an instance's, or what a refused request
+    /// built: [`Hosted::release`]), `kill` (an instance sent to `dead` for its lost
+    /// owner: [`Hosted::kill`]), `lookup` (the network's answer about an owner:
+    /// [`Finding`]).
+    fn hold(point: &str, name: &str) -> Held {
         let (begins, begun) = crossbeam_channel::bounded(1);
         let (go, wait) = crossbeam_channel::bounded(0);
-        lock(&HOLDS).insert(name.to_owned(), (begins, wait));
+        lock(&HOLDS).insert(format!("{point} {name}"), (begins, wait));
         Held { begun, _go: go }
     }
 
-    /// The release of instance `name` begins ([`Hosted::release`]): a test holding it
-    /// ([`hold_release`]) holds it here.
+    /// Whether a test holds the agent at `point` for `name` ([`hold`]).
+    pub(super) fn is_held(point: &str, name: &str) -> bool {
+        lock(&HOLDS).contains_key(&format!("{point} {name}"))
+    }
+
+    /// The agent reaches `point` for `name`: a test holding it there ([`hold`])
+    /// holds it here.
+    pub(super) fn held(point: &str, name: &str) {
+        let held = lock(&HOLDS).remove(&format!("{point} {name}"));
+        if let Some((begins, wait)) = held {
+            let _ = begins.send(());
+            let _ = wait.recv_timeout(Duration::from_secs(60));
+        }
+    }
+
+    /// The release of instance `name` begins ([`Hosted::release`]): it panics if the
+    /// test asks, or is held ([`hold`]).
     pub(super) fn held_release(name: &str) {
         assert!(
             !lock(&PANICKING).contains(name),
             "the release of `{name}` panics, as the test asks"
         );
-        let held = lock(&HOLDS).remove(name);
-        if let Some((begins, wait)) = held {
-            let _ = begins.send(());
-            let _ = wait.recv_timeout(Duration::from_secs(60));
-        }
+        held("release", name);
     }
 
     /// An instance whose release is slow (its system slow to shut down) holds no
@@ -2088,7 +2479,7 @@ mod tests {
         let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
         let timeout = Duration::from_secs(10);
         let name = own("slow", "held");
-        let held = hold_release(&name);
+        let held = hold("release", &name);
         instantiate(&node, "slow", &request("Idle", &name), timeout).unwrap();
         set_state(&node, "slow", &name, Controllable::Dead);
         // The agent finds it dead (at the latest when it serves the next request).
@@ -2105,13 +2496,7 @@ mod tests {
             "{taken:?}"
         );
         drop(held);
-        assert!(eventually(|| instantiate(
-            &node,
-            "slow",
-            &request("Idle", &name),
-            timeout
-        )
-        .is_ok()));
+        built(&node, "slow", &request("Idle", &name));
         assert_eq!(agent.status().built, 4);
     }
 
@@ -2131,20 +2516,12 @@ mod tests {
             "the exposure of the instance whose release panicked is withdrawn"
         );
         lock(&PANICKING).remove(&name);
-        assert!(
-            eventually(|| instantiate(&node, "rp", &request("Idle", &name), timeout).is_ok()),
-            "the name of an instance whose release panicked stays taken"
-        );
+        // (Else the name of an instance whose release panicked stays taken.)
+        built(&node, "rp", &request("Idle", &name));
         assert_eq!(threads_named("cool-net:rp:rea"), 1, "the reaper has ended");
         // It releases the next.
         set_state(&node, "rp", &name, Controllable::Dead);
-        assert!(eventually(|| instantiate(
-            &node,
-            "rp",
-            &request("Idle", &name),
-            timeout
-        )
-        .is_ok()));
+        built(&node, "rp", &request("Idle", &name));
         assert_eq!(agent.status().built, 3);
     }
 
@@ -2212,13 +2589,7 @@ mod tests {
             owner: Some("ol-x".to_owned()),
             ..request("Idle", &own("ol-x", "idle"))
         };
-        let replies = owner
-            .session()
-            .get(keys::agent("ol", "Idle", "ol-x"))
-            .payload(serde_json::to_vec(&owned).unwrap())
-            .timeout(Duration::from_secs(60))
-            .wait()
-            .unwrap();
+        let replies = asking(&owner, "ol", "ol-x", &owned);
         assert!(eventually(|| agent.probe.requests.len() == 1));
         drop(replies);
         drop(owner);
@@ -2228,10 +2599,11 @@ mod tests {
         gate.join().unwrap().unwrap();
         assert!(eventually(|| agent.status().refused == refused + 1));
         assert_eq!(agent.status().built, 1, "the gate only");
-        assert_eq!(
-            threads_named("cool-net:ol:m"),
-            1,
-            "the gate's exposure only"
+        // (A thread takes its name once it runs.)
+        assert!(
+            eventually(|| threads_named("cool-net:ol:m") == 1),
+            "the gate's exposure only: {}",
+            threads_named("cool-net:ol:m")
         );
     }
 
@@ -2269,6 +2641,128 @@ mod tests {
             "{refused:?}"
         );
         assert_eq!(agent.status().owners_asked, before.owners_asked + 1);
+    }
+
+    /// A request whose owner the agent has not heard of (a peer that declares no
+    /// token) waits off the agent's thread while the network is asked whether the
+    /// owner lives, once for every request of that owner waiting: the other requests
+    /// are served meanwhile.
+    #[test]
+    fn an_unheard_owner_is_asked_for_off_the_agents_thread() {
+        let node = crate::testing::node("ua", None, None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let held = hold("lookup", "ua-y");
+        let forged = |name: &str| Instantiate {
+            owner: Some("ua-y".to_owned()),
+            ..request("Idle", &own("ua-y", name))
+        };
+        let first = asking(&node, "ua", "ua-y", &forged("idle-1"));
+        held.begun
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the owner is asked for");
+        let second = asking(&node, "ua", "ua-y", &forged("idle-2"));
+        instantiate(
+            &node,
+            "ua",
+            &request("Idle", &own("ua", "a")),
+            Duration::from_secs(10),
+        )
+        .expect("a request served while an owner is asked for");
+        assert_eq!(
+            agent.status().owners_asked,
+            1,
+            "one lookup for the owner's requests"
+        );
+        drop(held);
+        for replies in [first, second] {
+            let reason = refusal(replies);
+            assert!(
+                reason.as_deref().is_some_and(|reason| reason
+                    .contains("the owner `ua-y` is lost (its liveliness token is gone)")),
+                "{reason:?}"
+            );
+        }
+        let status = agent.status();
+        assert_eq!(
+            (status.built, status.refused, status.owners_asked),
+            (1, 2, 1),
+            "{status:?}"
+        );
+    }
+
+    /// When an owner is lost, its instances are sent to dead on the reaper's thread
+    /// (each command waits for the instance): the agent serves requests meanwhile.
+    #[test]
+    fn a_lost_owners_instances_go_to_dead_off_the_agents_thread() {
+        let port = free_port();
+        let node = crate::testing::node("ok", Some(port), None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let owner = crate::testing::node("ok-x", None, Some(port));
+        meet(&owner, "ok");
+        let name = own("ok-x", "idle");
+        let held = hold("kill", &name);
+        let owned = Instantiate {
+            owner: Some("ok-x".to_owned()),
+            ..request("Idle", &name)
+        };
+        instantiate(&owner, "ok", &owned, Duration::from_secs(10)).unwrap();
+        drop(owner);
+        held.begun
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the lost owner's instance is sent to dead");
+        instantiate(
+            &node,
+            "ok",
+            &request("Idle", &own("ok", "a")),
+            Duration::from_secs(10),
+        )
+        .expect("a request served while a lost owner's instance goes to dead");
+        drop(held);
+        assert!(
+            eventually(|| threads_named("cool-net:ok:m") == 1),
+            "the lost owner's instance is released: {} exposures",
+            threads_named("cool-net:ok:m")
+        );
+        assert_eq!(agent.status().built, 2);
+    }
+
+    /// What a refused request had built is shut down on the reaper's thread: the
+    /// refusal is answered, and other requests are served, meanwhile; its names stay
+    /// taken until its system is shut down.
+    #[test]
+    fn a_refused_requests_system_is_shut_down_off_the_agents_thread() {
+        let node = crate::testing::node("rs", None, None);
+        let agent = Agent::start(Arc::clone(&node), idle_registry(idle_spec())).unwrap();
+        let timeout = Duration::from_secs(10);
+        let name = own("rs", "refused");
+        let held = hold("release", &name);
+        // Refused by the instance's control port, after it was added to its system.
+        let refused = instantiate(
+            &node,
+            "rs",
+            &Instantiate {
+                variables: vec![("nope".to_owned(), Value::Int(1))],
+                ..request("Idle", &name)
+            },
+            timeout,
+        );
+        assert!(
+            matches!(&refused, Err(Error::Refused { reason, .. }) if reason.contains("nope")),
+            "{refused:?}"
+        );
+        held.begun
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the refused request's system is shut down");
+        instantiate(&node, "rs", &request("Idle", &own("rs", "a")), timeout)
+            .expect("a request served while a refused request's system is shut down");
+        let taken = instantiate(&node, "rs", &request("Idle", &name), timeout);
+        assert!(
+            matches!(&taken, Err(Error::Refused { reason, .. }) if reason.contains("is not a free instance name")),
+            "{taken:?}"
+        );
+        drop(held);
+        built(&node, "rs", &request("Idle", &name));
+        assert_eq!(agent.status().built, 2);
     }
 
     /// After a dropped loss, the owners are asked for even while requests keep the

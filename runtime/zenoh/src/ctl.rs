@@ -417,8 +417,12 @@ pub struct EchoSummary {
     /// Packets received but not printed because of `--hz`.
     pub skipped: u64,
     /// Packets the port sent after the first one received that never arrived
-    /// (dropped by the node's echo queue or by the network).
+    /// (dropped by the node's echo queue or by the network), and those the node
+    /// could not echo.
     pub lost: u64,
+    /// Of those lost, the packets the node could not echo (too large for a batch
+    /// alone, or not serializable): the batch said so in their place.
+    pub unechoed: u64,
     /// What the node said it dropped in all (its echo queue was full), at the last
     /// packet received.
     pub node_dropped: u64,
@@ -428,9 +432,47 @@ impl std::fmt::Display for EchoSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} received, {} printed, {} skipped (--hz), {} lost (the node's echo queue dropped {} in all)",
-            self.received, self.printed, self.skipped, self.lost, self.node_dropped
+            "{} received, {} printed, {} skipped (--hz), {} lost (",
+            self.received, self.printed, self.skipped, self.lost
+        )?;
+        if self.unechoed > 0 {
+            write!(
+                f,
+                "{} not echoed by the node, too large or not serializable; ",
+                self.unechoed
+            )?;
+        }
+        write!(
+            f,
+            "the node's echo queue dropped {} in all)",
+            self.node_dropped
         )
+    }
+}
+
+impl EchoSummary {
+    /// Count `echoed`, the next element of a batch for the output read (`output`),
+    /// against `next_seq`, the number expected next: what is missing before it is
+    /// lost, and so is a packet the node could not echo (its place says why: warned
+    /// about, rate-limited). Whether it is a packet received.
+    fn take(&mut self, output: &str, echoed: &EchoedRaw<'_>, next_seq: &mut Option<u64>) -> bool {
+        self.node_dropped = echoed.dropped;
+        if let Some(expected) = *next_seq {
+            self.lost += echoed.seq.saturating_sub(expected);
+        }
+        *next_seq = Some(echoed.seq.saturating_add(1));
+        if let Some(why) = &echoed.unsent {
+            self.lost += 1;
+            self.unechoed += 1;
+            coolbot::limited!(output, |held| tracing::warn!(
+                "packet {} of {output} was not echoed by its node (lost): {}{held}",
+                echoed.seq,
+                coolbot::ranges::excerpt(why, coolbot::ranges::REASON_CHARS)
+            ));
+            return false;
+        }
+        self.received += 1;
+        true
     }
 }
 
@@ -1004,12 +1046,9 @@ impl Ctl {
                 if count.is_some_and(|count| summary.printed >= count) {
                     break 'batches;
                 }
-                summary.received += 1;
-                summary.node_dropped = echoed.dropped;
-                if let Some(expected) = next_seq {
-                    summary.lost += echoed.seq.saturating_sub(expected);
+                if !summary.take(full, echoed, &mut next_seq) {
+                    continue;
                 }
-                next_seq = Some(echoed.seq + 1);
                 let now = Instant::now();
                 if now < next_print {
                     summary.skipped += 1;
@@ -1111,6 +1150,41 @@ impl Watcher {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What `coolctl echo` counts of an output's elements in the node's batches:
+    /// numbers missing are lost, and so is a packet the node could not echo (its
+    /// place says why), the last one too; it is not a packet received.
+    #[test]
+    fn an_echo_counts_a_packet_the_node_could_not_echo_lost() {
+        let batch = br#"[
+            {"output":"a.out","seq":0,"dropped":0,"sent":1,"packet":1},
+            {"output":"a.out","seq":2,"dropped":1,"sent":2,"packet":3},
+            {"output":"a.out","seq":3,"dropped":1,"sent":3,"packet":null,"unsent":"too large"}
+        ]"#;
+        let batch: Vec<EchoedRaw<'_>> = serde_json::from_slice(batch).unwrap();
+        let mut summary = EchoSummary::default();
+        let mut next_seq = None;
+        let received: Vec<bool> = batch
+            .iter()
+            .map(|echoed| summary.take("a.out", echoed, &mut next_seq))
+            .collect();
+        assert_eq!(received, [true, true, false]);
+        assert_eq!(
+            summary,
+            EchoSummary {
+                received: 2,
+                lost: 2,
+                unechoed: 1,
+                node_dropped: 1,
+                ..EchoSummary::default()
+            }
+        );
+        assert_eq!(
+            summary.to_string(),
+            "2 received, 0 printed, 0 skipped (--hz), 2 lost (1 not echoed by the node, too \
+             large or not serializable; the node's echo queue dropped 1 in all)"
+        );
+    }
 
     /// One component's snapshot over `SNAPSHOT` (any node may answer so for its own
     /// components) is left out of the listing: the other nodes' components are listed.

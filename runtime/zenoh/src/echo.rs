@@ -8,7 +8,8 @@
 //! [`ECHO_TICK`] the node publishes there one sample holding the packets every tapped
 //! output sent since the last, a JSON array of [`Echoed`], each naming its output
 //! (several samples if they take more than [`crate::limits::ECHO_BATCH`] together,
-//! each within it: a packet over it alone is not echoed, and the reader counts it
+//! each within it: a packet over it alone, or one that does not serialize, is not
+//! echoed: its place in the batch says why, with no packet, and the reader counts it
 //! lost).
 //! One sample a tick, however many outputs and packets, is what makes an echo cheap
 //! to carry and to receive: Zenoh's costs are per sample.
@@ -65,8 +66,13 @@ pub struct Echoed {
     /// When the output sent it (the node's wall clock, nanoseconds since the Unix
     /// epoch).
     pub sent: coolbot::Time,
-    /// The packet, as serde writes it in JSON.
+    /// The packet, as serde writes it in JSON (`null` when it was not echoed).
     pub packet: serde_json::Value,
+    /// Why the node did not echo this packet, if it did not (it does not serialize,
+    /// or it is over [`crate::limits::ECHO_BATCH`] alone): the packet is lost, and a
+    /// reader counts it so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unsent: Option<String>,
 }
 
 /// An [`Echoed`] as the node writes it: the packet serialized from its own type.
@@ -77,6 +83,8 @@ struct Outgoing<'a, T> {
     dropped: u64,
     sent: coolbot::Time,
     packet: &'a T,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    unsent: Option<&'a str>,
 }
 
 /// What a reader takes of an [`Echoed`]: its output and numbers, and the packet's
@@ -99,6 +107,9 @@ pub(crate) struct EchoedRaw<'a> {
     /// The packet's JSON.
     #[serde(borrow)]
     pub packet: &'a serde_json::value::RawValue,
+    /// As in [`Echoed`]: why the node did not echo this packet (lost).
+    #[serde(default, borrow)]
+    pub unsent: Option<Cow<'a, str>>,
 }
 
 /// The packets of one tick, written as JSON arrays of [`Echoed`] as they are taken,
@@ -173,6 +184,31 @@ impl Batch {
             ))
     }
 
+    /// Append `packet`, or, if it cannot be (it does not serialize, or it is over
+    /// the bound alone), its place without it, saying why, so that a reader counts
+    /// it lost even when no later packet of its output shows the gap. If it was not
+    /// appended: why, and whether its place was.
+    fn push_or_tell<T: Serialize>(
+        &mut self,
+        packet: &Outgoing<'_, T>,
+    ) -> Result<(), (String, bool)> {
+        let Err(error) = self.push(packet) else {
+            return Ok(());
+        };
+        let why = coolbot::ranges::excerpt(&error, coolbot::ranges::REASON_CHARS);
+        let told = self
+            .push(&Outgoing {
+                output: packet.output,
+                seq: packet.seq,
+                dropped: packet.dropped,
+                sent: packet.sent,
+                packet: &(),
+                unsent: Some(&why),
+            })
+            .is_ok();
+        Err((error, told))
+    }
+
     /// The arrays of the tick, in order, none when no packet came; the batch is
     /// empty again.
     fn take(&mut self) -> Vec<Vec<u8>> {
@@ -244,12 +280,14 @@ impl<T: Packet + Serialize> Echoing for Port<T> {
                 dropped: tap.dropped(),
                 sent,
                 packet: &packet,
+                unsent: None,
             };
-            if let Err(error) = batch.push(&message) {
-                coolbot::limited!(
-                    key,
-                    |held| tracing::warn!(%key, "packet {seq} is not echoed: {error}{held}")
-                );
+            if let Err((error, told)) = batch.push_or_tell(&message) {
+                coolbot::limited!(key, |held| tracing::warn!(
+                    %key,
+                    "packet {seq} is not echoed: {error}{}{held}",
+                    if told { "" } else { " (nor is its loss)" }
+                ));
             }
         }
     }
@@ -635,6 +673,7 @@ mod tests {
                     dropped: 0,
                     sent: coolbot::Time::from_nanos(seq),
                     packet: &text,
+                    unsent: None,
                 })
                 .unwrap();
             batch.take().concat().len()
@@ -651,6 +690,7 @@ mod tests {
                 dropped: 0,
                 sent: coolbot::Time::from_nanos(seq),
                 packet: &text,
+                unsent: None,
             };
             batch.push(&echoed).unwrap();
         }
@@ -661,6 +701,7 @@ mod tests {
             dropped: 0,
             sent: coolbot::Time::from_nanos(10),
             packet: &huge,
+            unsent: None,
         });
         assert!(
             over.as_ref()
@@ -685,6 +726,111 @@ mod tests {
             .collect();
         assert_eq!(seqs, [vec![0, 1, 2], vec![3, 4, 5], vec![6, 7, 8], vec![9]]);
         assert!(batch.take().is_empty(), "the batch is empty again");
+    }
+
+    static TEXTS: Spec = Spec {
+        type_name: "Texts",
+        doc: "",
+        states: &[StateSpec {
+            name: "idle",
+            entry: false,
+            exit: false,
+            periodic: None,
+            on: &[],
+            after: &[],
+            may: &[],
+        }],
+        initial: 0,
+        inputs: &[],
+        outputs: &[OutputSpec {
+            name: "out",
+            kind: OutputKind::Data,
+            packet: "String",
+            pull: false,
+        }],
+        variables: &[],
+        exceptions: &[],
+        timing: TimingSpec::NONE,
+    };
+
+    /// A component that only owns an output of texts; the test sends on it.
+    struct Texts;
+
+    impl Automaton for Texts {
+        fn spec(&self) -> &'static Spec {
+            &TEXTS
+        }
+    }
+
+    /// A packet the node cannot echo (over the batch's bound alone) takes its place
+    /// in the batch without its value, saying why: a reader counts it lost even when
+    /// it is the last its output sends (no later packet shows the gap).
+    #[test]
+    fn a_packet_not_echoed_is_told_lost_in_its_place_even_the_last() {
+        let out = DataOut::<String>::new();
+        let mut system = System::new();
+        system
+            .add(Component::new(
+                "texts",
+                Box::new(Texts),
+                PortSet::new().output(&out),
+            ))
+            .unwrap();
+        system.run_all().unwrap();
+        let session = zenoh::open(crate::peer_config(&[], &[], false).unwrap())
+            .wait()
+            .unwrap();
+        let handle = system.handle("texts").unwrap();
+        let echoes = Echoes::default();
+        let key = "coolbot/test/texts/o/out";
+        let tap = Tap::<String>::attach(&handle, "out", ECHO_CAPACITY).unwrap();
+        echoes
+            .add(
+                &session,
+                "test",
+                ("texts.out".to_owned(), key.to_owned()),
+                (handle.clone(), "out", tap),
+            )
+            .unwrap();
+        let _asking = session
+            .declare_subscriber(key)
+            .callback(|_| {})
+            .wait()
+            .unwrap();
+        // Tapped by the echo thread once a subscriber matches.
+        until(|| lock(&echoes.ports)[0].matched());
+        until(|| out.consumers() == 1);
+        let arrays = {
+            // The echo thread takes nothing meanwhile.
+            let mut ports = lock(&echoes.ports);
+            out.send("short".to_owned());
+            out.send("x".repeat(1000));
+            let mut batch = Batch::within(500);
+            ports[0].take(&mut batch);
+            batch.take()
+        };
+        let echoed: Vec<Echoed> = arrays
+            .iter()
+            .flat_map(|array| serde_json::from_slice::<Vec<Echoed>>(array).unwrap())
+            .collect();
+        assert_eq!(echoed.len(), 2, "{echoed:?}");
+        assert_eq!(
+            (echoed[0].seq, &echoed[0].packet, &echoed[0].unsent),
+            (0, &serde_json::json!("short"), &None)
+        );
+        assert_eq!(
+            (echoed[1].seq, &echoed[1].packet),
+            (1, &serde_json::Value::Null)
+        );
+        assert!(
+            echoed[1]
+                .unsent
+                .as_deref()
+                .is_some_and(|why| why.contains("over the limit ECHO_BATCH = 500 bytes")),
+            "{echoed:?}"
+        );
+        echoes.stop();
+        assert!(system.shutdown().clean());
     }
 
     /// The output is tapped only while a subscriber matches: before the first and

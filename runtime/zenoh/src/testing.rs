@@ -82,3 +82,47 @@ pub(crate) fn set_state(node: &Node, on: &str, path: &str, state: coolbot::Contr
         "`{state:?}` sent to `{path}` on `{on}`"
     );
 }
+
+/// Whether `done` holds before a generous deadline, asked every 10 ms.
+pub(crate) fn eventually(mut done: impl FnMut() -> bool) -> bool {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while std::time::Instant::now() < deadline {
+        if done() {
+            return true;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    done()
+}
+
+/// Ask the agent of node `on`, from `node`, for `request` until it is built (a name
+/// or memory that an instance being released holds is free once it is), before a
+/// generous deadline; panics with the last answer if it is not.
+pub(crate) fn built(node: &Node, on: &str, request: &crate::agent::Instantiate) {
+    let mut last = None;
+    let done = eventually(|| {
+        let asked =
+            crate::agent::instantiate(node, on, request, std::time::Duration::from_secs(10));
+        let done = asked.is_ok();
+        last = asked.err();
+        done
+    });
+    assert!(done, "`{}` not built on `{on}`: {last:?}", request.name);
+}
+
+/// Send `request` to the agent of node `on` as node `requester` (a forgery on
+/// plaintext when it is not `node`), without waiting for the answer: the replies.
+pub(crate) fn asking(
+    node: &Node,
+    on: &str,
+    requester: &str,
+    request: &crate::agent::Instantiate,
+) -> zenoh::handlers::FifoChannelHandler<zenoh::query::Reply> {
+    use zenoh::Wait;
+    node.session()
+        .get(crate::keys::agent(on, &request.type_name, requester))
+        .payload(serde_json::to_vec(request).unwrap())
+        .timeout(std::time::Duration::from_secs(60))
+        .wait()
+        .unwrap()
+}

@@ -9,7 +9,9 @@
 //! messages of a tick reach the client tasks on that thread, and each keeps the time
 //! its packet was sent. **Invariant:** nothing is lost silently: a batch that finds
 //! the queue full or does not decode, and a packet that does not fit its channel, are
-//! dropped, counted ([`super::Counts`]) and warned about (rate-limited).
+//! dropped, counted ([`super::Counts`]) and warned about (rate-limited); so is a
+//! packet of a served output that never came (a number missing) or that its node
+//! could not echo (its place in the batch says so).
 
 use std::collections::HashMap;
 use std::sync::atomic::Ordering;
@@ -46,7 +48,15 @@ pub(super) struct Route {
 pub(super) struct Routes(Mutex<Table>);
 
 /// Routes by node, then by output.
-type Table = HashMap<String, HashMap<String, Vec<Arc<Route>>>>;
+type Table = HashMap<String, HashMap<String, Served>>;
+
+/// An output whose channels clients subscribe.
+#[derive(Default)]
+struct Served {
+    routes: Vec<Arc<Route>>,
+    /// The number its next packet should have (none before the first came).
+    next: Option<u64>,
+}
 
 impl Routes {
     fn lock(&self) -> std::sync::MutexGuard<'_, Table> {
@@ -60,6 +70,7 @@ impl Routes {
             .or_default()
             .entry(output.to_owned())
             .or_default()
+            .routes
             .push(route);
     }
 
@@ -70,9 +81,9 @@ impl Routes {
         let Some(outputs) = routes.get_mut(node) else {
             return true;
         };
-        if let Some(list) = outputs.get_mut(output) {
-            list.retain(|route| route.channel.id() != channel);
-            if list.is_empty() {
+        if let Some(served) = outputs.get_mut(output) {
+            served.routes.retain(|route| route.channel.id() != channel);
+            if served.routes.is_empty() {
                 outputs.remove(output);
             }
         }
@@ -210,12 +221,18 @@ fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
                 continue;
             }
         };
-        let routes = routes.lock();
-        let Some(outputs) = routes.get(&*node) else {
+        let mut routes = routes.lock();
+        let Some(outputs) = routes.get_mut(&*node) else {
             continue;
         };
         for echoed in &batch {
-            for route in outputs.get(&*echoed.output).into_iter().flatten() {
+            let Some(served) = outputs.get_mut(&*echoed.output) else {
+                continue;
+            };
+            if !counted(&node, echoed, served, counts) {
+                continue;
+            }
+            for route in &served.routes {
                 if let Err(error) = message(route, echoed.packet, echoed.sent) {
                     counts.undecoded.fetch_add(1, Ordering::Relaxed);
                     let topic = route.channel.topic();
@@ -226,6 +243,34 @@ fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
             }
         }
     }
+}
+
+/// Count what is lost of `served`, an output of `node`, up to `echoed`, its next
+/// element in a batch (the numbers missing before it, and it if its node could not
+/// echo it), warning about it (rate-limited); whether it is a packet to log.
+fn counted(node: &str, echoed: &EchoedRaw<'_>, served: &mut Served, counts: &Counts) -> bool {
+    let output = &*echoed.output;
+    if let Some(expected) = served.next {
+        let missing = echoed.seq.saturating_sub(expected);
+        if missing > 0 {
+            counts.missing.fetch_add(missing, Ordering::Relaxed);
+            coolbot::limited!(output, |held| tracing::warn!(
+                "{missing} echoed packet(s) of {node}/{output} never came (dropped by the \
+                 node's echo queue or on the way){held}"
+            ));
+        }
+    }
+    served.next = Some(echoed.seq.saturating_add(1));
+    let Some(why) = &echoed.unsent else {
+        return true;
+    };
+    counts.unechoed.fetch_add(1, Ordering::Relaxed);
+    coolbot::limited!(output, |held| tracing::warn!(
+        "packet {} of {node}/{output} was not echoed by its node (lost): {}{held}",
+        echoed.seq,
+        coolbot::ranges::excerpt(why, coolbot::ranges::REASON_CHARS)
+    ));
+    false
 }
 
 /// Log the echoed packet `packet`, sent at `sent`, on `route`'s channel, at the time
@@ -381,6 +426,44 @@ mod tests {
         assert_eq!(logged[4].1, r#"{"value":9}"#);
         // The batch that does not decode, and the pose without `y`.
         assert_eq!(counts.undecoded.load(Ordering::Relaxed), 2);
+    }
+
+    /// The packets of a served output that never came (numbers missing) are counted,
+    /// and so is one its node could not echo (its place in the batch says so), the
+    /// last one too; neither is logged.
+    #[test]
+    fn packets_missing_or_not_echoed_are_counted() {
+        let counts = Arc::new(Counts::default());
+        let (inlet, waiting) = queue(4, Arc::clone(&counts));
+        let context = Context::new();
+        let kept = Arc::new(Kept {
+            id: SinkId::next(),
+            logged: Mutex::new(Vec::new()),
+        });
+        context.add_sink(kept.clone());
+        let routes = Routes::default();
+        routes.add(
+            "n",
+            "a.out",
+            route(&context, "/n/a.out", Transform::Raw { wrap: true }),
+        );
+        let node: Arc<str> = Arc::from("n");
+        inlet.push(&node, batch(&[("a.out", 3, "1"), ("a.out", 6, "2")]));
+        let unsent = format!(
+            r#"[{{"output":"a.out","seq":7,"dropped":0,"sent":{SENT},"packet":null,"unsent":"too large"}}]"#
+        );
+        inlet.push(&node, ZBytes::from(unsent));
+        log_waiting(&waiting, &routes, &counts);
+        let logged: Vec<String> = kept
+            .logged
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|(_, message, _)| message.clone())
+            .collect();
+        assert_eq!(logged, [r#"{"value":1}"#, r#"{"value":2}"#]);
+        assert_eq!(counts.missing.load(Ordering::Relaxed), 2);
+        assert_eq!(counts.unechoed.load(Ordering::Relaxed), 1);
     }
 
     /// A batch over `ECHO_BATCH` is dropped and counted as it comes: it never waits

@@ -251,6 +251,13 @@ pub struct Counts {
     /// server's queue full ([`FEED_CAPACITY`] waiting: the server falls behind;
     /// dropped, warned).
     pub overflowed: AtomicU64,
+    /// Echoed packets of served outputs that never came: numbers missing between
+    /// two that did (dropped by the node's echo queue, or on the way; warned).
+    pub missing: AtomicU64,
+    /// Echoed packets of served outputs that their node could not echo (too large
+    /// for a batch alone, or not serializable: the batch says so in their place;
+    /// warned).
+    pub unechoed: AtomicU64,
 }
 
 impl Server {
