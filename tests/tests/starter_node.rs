@@ -47,10 +47,7 @@ fn repository() -> std::path::PathBuf {
 }
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
+    coolbot_zenoh::free_loopback_port()
 }
 
 /// Test only, not what coolc writes: dependencies that give the crates this crate

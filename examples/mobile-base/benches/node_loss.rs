@@ -18,10 +18,7 @@ use std::time::{Duration, Instant};
 const LEASE: &str = "1s";
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
+    coolbot_zenoh::free_loopback_port()
 }
 
 fn spawn(args: &[&str]) -> (Child, mpsc::Receiver<(Instant, String)>) {

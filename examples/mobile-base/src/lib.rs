@@ -950,10 +950,7 @@ fn robot_node(options: &Options) -> Result<NodeOptions, String> {
         .clone()
         .unwrap_or_else(|| NodeOptions::named(ROBOT));
     if node.listen.is_empty() {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|listener| listener.local_addr())
-            .map_err(|e| format!("no loopback port for the robot's node: {e}"))?
-            .port();
+        let port = coolbot_zenoh::free_loopback_port();
         node.listen.push(format!("tcp/127.0.0.1:{port}"));
     }
     Ok(node)

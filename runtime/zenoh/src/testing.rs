@@ -43,13 +43,10 @@ pub(crate) fn idle_registry(spec: &'static coolbot::Spec) -> Registry {
     registry
 }
 
-/// A TCP port free on loopback now.
+/// A port free on loopback now, outside the range outgoing connections take theirs
+/// from.
 pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    crate::free_loopback_port()
 }
 
 /// Node `name` on loopback, listening on `listen` and connecting to `connect` (TCP

@@ -35,12 +35,10 @@ pub fn exit_when_stdin_closes() {
 /// Generous: the machine is shared and may be loaded.
 pub const PATIENCE: Duration = Duration::from_secs(30);
 
-/// A TCP port free on 127.0.0.1 now.
+/// A port free on 127.0.0.1 now, outside the range outgoing connections take theirs
+/// from (`coolbot_zenoh::free_loopback_port`).
 pub fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free loopback port")
+    coolbot_zenoh::free_loopback_port()
 }
 
 /// A node listening on a free loopback port, connecting to `connect`. Its outlets

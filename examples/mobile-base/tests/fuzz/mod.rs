@@ -142,10 +142,7 @@ impl Rng {
 // ---------------------------------------------------------------- the processes
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|address| address.port())
-        .expect("a free port")
+    coolbot_zenoh::free_loopback_port()
 }
 
 /// Starts the example with `args`; its stdout and stderr lines go to `lines` tagged

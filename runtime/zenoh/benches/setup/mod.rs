@@ -7,7 +7,6 @@
     reason = "each bench binary includes this module and uses a different part of it"
 )]
 
-use std::net::TcpListener;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -18,11 +17,7 @@ pub mod pingpong;
 
 /// A free loopback TCP endpoint.
 pub fn endpoint() -> String {
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .expect("a free loopback port")
-        .port();
-    format!("tcp/127.0.0.1:{port}")
+    format!("tcp/127.0.0.1:{}", coolbot_zenoh::free_loopback_port())
 }
 
 /// A state directory for the outlets' tallies, not the user's: in memory
