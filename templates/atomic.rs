@@ -259,6 +259,9 @@ pub fn component_with(
         vars,
         inputs,
         outputs,
+{%- if !c.published.is_empty() %}
+        published: ::core::default::Default::default(),
+{%- endif %}
     };
     ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports)
     {%- if let Some(fields) = c.adaptation %}.with_adaptation(
@@ -295,7 +298,21 @@ struct __CoolGlue<B> {
     vars: Vars,
     inputs: Inputs,
     outputs: Outputs,
+{%- if !c.published.is_empty() %}
+    published: __CoolPublished,
+{%- endif %}
 }
+{%- if !c.published.is_empty() %}
+
+/// The variables the glue compares in their Rust types, as it last reported them to
+/// the runtime (`None`: not yet).
+#[derive(Default)]
+struct __CoolPublished {
+{%- for (name, ty) in c.published %}
+{{ l.private_decl(name, ty) }}
+{%- endfor %}
+}
+{%- endif %}
 
 impl<B: Behavior> __CoolGlue<B> {
     /// The behavior, and what its sections see.
@@ -306,6 +323,9 @@ impl<B: Behavior> __CoolGlue<B> {
             vars,
             inputs,
             outputs,
+{%- if !c.published.is_empty() %}
+            ..
+{%- endif %}
         } = self;
         let cx = Cx {
             config,
@@ -461,4 +481,12 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
     fn configuration(&self) -> ::core::option::Option<::coolbot::Value> {
         ::core::option::Option::Some(super::__cool_to_value(&self.config))
     }
+{%- if !c.reports.is_empty() %}
+
+    fn changed_variables(&mut self, changes: &mut ::coolbot::Changes<'_>) {
+{%- for report in c.reports %}
+{{ l.method_statement(report) }}
+{%- endfor %}
+    }
+{%- endif %}
 }

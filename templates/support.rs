@@ -5,6 +5,25 @@ pub fn __cool_to_value<T: ::serde::Serialize>(value: &T) -> ::coolbot::Value {
         .unwrap_or_else(|error| ::coolbot::Value::Str(::coolbot::Chain(&error).to_string()))
 }
 
+/// Converts a variable of a primitive type to a runtime [`coolbot::Value`] (`From`).
+#[doc(hidden)]
+pub fn __cool_value_of<T: ::core::clone::Clone + ::core::convert::Into<::coolbot::Value>>(
+    value: &T,
+) -> ::coolbot::Value {
+    value.clone().into()
+}
+
+/// Converts a variable through its serde_with adapter `A` (a type holding an array
+/// longer than 32 elements) to a runtime [`coolbot::Value`].
+#[doc(hidden)]
+pub fn __cool_to_value_as<T, A: ::coolbot::serde_with::SerializeAs<T>>(
+    value: &T,
+) -> ::coolbot::Value {
+    __cool_to_value(&::coolbot::serde_with::ser::SerializeAsWrap::<T, A>::new(
+        value,
+    ))
+}
+
 /// Converts a runtime [`coolbot::Value`] to a variable or configuration value.
 #[doc(hidden)]
 pub fn __cool_from_value<T: ::serde::de::DeserializeOwned>(

@@ -723,6 +723,13 @@ pub struct Atomic {
     pub(crate) config: Vec<Field>,
     /// `Vars` fields with their exposure.
     pub(crate) vars: Vec<Var>,
+    /// The glue's copies of its variables as last reported to the runtime (the
+    /// observable and controllable ones it compares in their Rust type): `(field,
+    /// type)`, each an `Option` of the variable's type.
+    pub(crate) published: Vec<(String, String)>,
+    /// The statements of the glue's `changed_variables`, one per observable or
+    /// controllable variable, in index order.
+    pub(crate) reports: Vec<Code>,
     /// Input ports in declaration order.
     pub(crate) inputs: Vec<Port>,
     /// Output ports in declaration order.

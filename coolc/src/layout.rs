@@ -256,6 +256,11 @@ impl Layout {
         out
     }
 
+    /// `name: ty,`, a private field declaration at indent 4.
+    pub fn private_decl(&self, name: &str, ty: &str) -> String {
+        self.line(4, &format!("{name}: {ty},"))
+    }
+
     /// `pub name: ty,`, a field declaration at indent 4.
     pub fn decl(&self, name: &str, ty: &str) -> String {
         self.line(4, &format!("pub {name}: {ty},"))
@@ -860,6 +865,11 @@ impl Layout {
     /// `code;`, a statement of a free function's body.
     pub fn body_statement(&self, code: &Code) -> String {
         self.statement(4, code, ";")
+    }
+
+    /// `code;`, a statement of a trait method's body.
+    pub fn method_statement(&self, code: &Code) -> String {
+        self.statement(8, code, ";")
     }
 
     /// `let pattern = value;`, a statement of a free function's body.

@@ -691,6 +691,32 @@ mod tests {
     }
 
     #[test]
+    fn the_glue_compares_variables_whose_equality_coolc_derives() {
+        let krate = lower_text(
+            "extern packet Image = \"image::RgbImage\";\n\
+             packet Pose { x: f64 = 0.0, tags: [String] = [] }\n\
+             packet Framed { image: Image?, n: u32 = 0 }\n\
+             atomic A {\n\
+                 observable pose: Pose; observable poses: [Pose];\n\
+                 local hidden: u32 = 0; controllable gain: f32 = 1.0;\n\
+                 observable image: Image?; observable framed: Framed;\n\
+             }",
+        );
+        let a = &krate.atomics[0];
+        let published: Vec<&str> = a.published.iter().map(|(name, _)| name.as_str()).collect();
+        assert_eq!(published, ["pose", "poses", "gain"]);
+        assert_eq!(a.published[2].1, "::core::option::Option<f32>");
+        let reports: Vec<String> = a.reports.iter().map(ToString::to_string).collect();
+        assert_eq!(reports.len(), 5, "{reports:?}");
+        assert_eq!(
+            reports[2],
+            "changes.compare(2, &mut self.published.gain, &self.vars.gain, super::__cool_value_of)"
+        );
+        // An extern packet's `PartialEq` is another crate's: the runtime reads it.
+        assert_eq!(reports[3..], ["changes.read(3)", "changes.read(4)"]);
+    }
+
+    #[test]
     fn colliding_method_names_get_a_suffix() {
         let krate = lower_text(
             "atomic A { exception exit; automaton { initial on; state on { entry; exit; } } }",

@@ -232,6 +232,74 @@ pub trait Automaton: std::any::Any + Send + 'static {
     fn configuration(&self) -> Option<Value> {
         None
     }
+
+    /// After every call into the automaton (and once before `start`): report through
+    /// `changes`, in index order, every variable (an index into [`Spec::variables`])
+    /// whose value may differ from the one last reported, each at most once. The
+    /// runtime publishes those whose [`Value`] differs from the published one, so
+    /// reporting a variable that did not change costs only its conversion, and one
+    /// left out is not published until it is reported.
+    ///
+    /// The default reports every variable, for the runtime to read with
+    /// [`Automaton::get`] ([`Changes::read`]). Generated glue keeps a copy of each
+    /// variable as last reported, in its Rust type, and reports only those that
+    /// differ from it ([`Changes::compare`]), building a `Value` for them alone.
+    fn changed_variables(&mut self, changes: &mut Changes<'_>) {
+        for variable in 0..self.spec().variables.len() {
+            changes.read(variable);
+        }
+    }
+}
+
+/// Where [`Automaton::changed_variables`] reports the variables that may have
+/// changed.
+#[derive(Debug)]
+pub struct Changes<'a> {
+    /// Each reported variable, with its value, or `None` to read with `get`.
+    pub(crate) reported: &'a mut Vec<(usize, Option<Value>)>,
+}
+
+impl Changes<'_> {
+    /// Variable `variable` may have changed: the runtime reads it with
+    /// [`Automaton::get`] (a panic there leaves it unpublished, to be read again on
+    /// the next report).
+    pub fn read(&mut self, variable: usize) {
+        self.reported.push((variable, None));
+    }
+
+    /// Variable `variable` may have changed, and is `value` now.
+    pub fn value(&mut self, variable: usize, value: Value) {
+        self.reported.push((variable, Some(value)));
+    }
+
+    /// Variable `variable` is `current`, which was `published` when last reported
+    /// (`None`: never): if they differ (`!=`, so a value holding a NaN always
+    /// does), reports `value(current)` and makes `published` a copy of `current`. A
+    /// panic in `value` is caught: nothing is reported, and `published` keeps its
+    /// value, so the variable is compared again on the next report.
+    ///
+    /// `T`'s `PartialEq` must say two values are equal only when their `Value`s
+    /// are (as a derived one does): an equal value is not reported.
+    pub fn compare<T: Clone + PartialEq>(
+        &mut self,
+        variable: usize,
+        published: &mut Option<T>,
+        current: &T,
+        value: impl FnOnce(&T) -> Value,
+    ) {
+        if published.as_ref() == Some(current) {
+            return;
+        }
+        let Ok(value) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| value(current)))
+        else {
+            return;
+        };
+        match published {
+            Some(published) => published.clone_from(current),
+            None => *published = Some(current.clone()),
+        }
+        self.reported.push((variable, Some(value)));
+    }
 }
 
 /// What the runner drives: an [`Automaton`], plus the hooks only a compound component
@@ -370,6 +438,9 @@ impl Automaton for Atomic {
     }
     fn configuration(&self) -> Option<Value> {
         self.0.configuration()
+    }
+    fn changed_variables(&mut self, changes: &mut Changes<'_>) {
+        self.0.changed_variables(changes)
     }
 }
 

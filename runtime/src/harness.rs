@@ -39,6 +39,8 @@
 
 pub mod replay;
 pub mod supervisor;
+#[cfg(test)]
+mod tests;
 
 pub use supervisor::SupervisorHarness;
 

@@ -115,7 +115,9 @@ mod wake;
 mod watchdog;
 
 pub use crate::adapt::{AdaptConfig, AdaptStatus, Adaptation, Pressure, Reconfiguration};
-pub use crate::automaton::{Automaton, Context, Fault, Section, SectionResult, ValueRefused};
+pub use crate::automaton::{
+    Automaton, Changes, Context, Fault, Section, SectionResult, ValueRefused,
+};
 pub use crate::chain::Chain;
 pub use crate::clock::{Clock, NotSettled, VirtualClock};
 pub use crate::commander::{

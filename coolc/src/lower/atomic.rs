@@ -10,7 +10,7 @@ use super::{
 };
 use crate::checked::model::{
     Component, Input, InputKind, Output, OutputKind, OverflowPolicy, PlanStep, Prim, Range,
-    TimingEntry, Ty, VarKind, Variable,
+    TimingEntry, Ty, TypeDef, VarKind, Variable,
 };
 use crate::ident;
 use crate::ir::{self, Code};
@@ -18,6 +18,47 @@ use crate::ir::{self, Code};
 /// `self.vars`: where an atomic component's glue holds its variables.
 pub(super) fn glue_vars() -> Code {
     Code::atom("self").field("vars")
+}
+
+/// What the glue keeps and runs to report its variables to the runtime
+/// (`coolbot::Automaton::changed_variables`), from each variable and, if its values
+/// are compared in their Rust type ([`Lowerer::compares`]), the function converting
+/// one to a `coolbot::Value` ([`Lowerer::converter`]): the fields of its copies of
+/// them as last reported (`self.published`, `(name, type)`, `None` before the first
+/// report), and one statement per observable or controllable variable, in index
+/// order, comparing it with its copy, or leaving it to the runtime to read.
+fn publication(vars: &[(ir::Var, Option<Code>)]) -> (Vec<(String, String)>, Vec<Code>) {
+    let mut published = Vec::new();
+    let mut reports = Vec::new();
+    for (var, convert) in vars {
+        let Some(index) = var.spec_index else {
+            continue;
+        };
+        let changes = Code::atom("changes");
+        let index = Code::atom(index.to_string());
+        if let Some(convert) = convert {
+            let name = &var.field.name;
+            published.push((
+                name.clone(),
+                format!("::core::option::Option<{}>", var.field.ty),
+            ));
+            reports.push(changes.method(
+                "compare",
+                vec![
+                    index,
+                    Code::prefix(
+                        "&mut ",
+                        Code::atom("self").field("published").field(name.as_str()),
+                    ),
+                    glue_vars().field(name.as_str()).reference(),
+                    convert.clone(),
+                ],
+            ));
+        } else {
+            reports.push(changes.method("read", vec![index]));
+        }
+    }
+    (published, reports)
 }
 
 /// The Rust type (under the component modules' path to the types) and the `.cool`
@@ -36,11 +77,18 @@ impl<'a> Lowerer<'a> {
             .map(|f| self.field(&f.doc, &f.name, &f.ty, f.default.as_ref(), GEN_TYPES))
             .collect();
         let mut spec_index = 0;
-        let vars: Vec<ir::Var> = c
+        let typed: Vec<(ir::Var, Option<Code>)> = c
             .variables
             .iter()
-            .filter_map(|v| self.variable(v, &mut spec_index, &glue_vars()))
+            .filter_map(|v| {
+                let var = self.variable(v, &mut spec_index, &glue_vars())?;
+                let ty = v.written.as_ref()?;
+                let convert = self.compares(ty).then(|| self.converter(v, ty));
+                Some((var, convert))
+            })
             .collect();
+        let (published, reports) = publication(&typed);
+        let vars: Vec<ir::Var> = typed.into_iter().map(|(var, _)| var).collect();
         // An atomic's ports are all declared (exports are a compound's).
         let inputs: Vec<(&Input, ir::Port)> = c
             .inputs
@@ -186,6 +234,8 @@ impl<'a> Lowerer<'a> {
             module,
             config,
             vars,
+            published,
+            reports,
             inputs: inputs.into_iter().map(|(_, p)| p).collect(),
             outputs: outputs.into_iter().map(|(_, p)| p).collect(),
             states,
@@ -200,6 +250,70 @@ impl<'a> Lowerer<'a> {
         };
         atomic.spec = spec(&atomic);
         atomic
+    }
+
+    /// Whether the glue compares values of `ty` in their Rust type to publish them
+    /// (`coolbot::Changes::compare`): every type whose `PartialEq` coolc derives,
+    /// which says two values are equal only when their `coolbot::Value`s are. Not a
+    /// type that holds an extern packet, whose `PartialEq` is another crate's (if it
+    /// has one): the runtime reads and compares its `Value`.
+    fn compares(&self, ty: &Ty) -> bool {
+        fn walk<'t>(lowerer: &Lowerer<'t>, ty: &Ty, visiting: &mut Vec<&'t str>) -> bool {
+            // (A ROS 2 message holds only ROS 2 types.)
+            match ty {
+                Ty::Bool
+                | Ty::Int(_)
+                | Ty::Float(_)
+                | Ty::Str
+                | Ty::Time
+                | Ty::Duration
+                | Ty::Enum(_)
+                | Ty::Ros { .. } => true,
+                Ty::List(inner) | Ty::Array(inner, _) | Ty::Optional(inner) => {
+                    walk(lowerer, inner, visiting)
+                }
+                Ty::Packet(name) => match lowerer.checked.type_def(name) {
+                    Some(TypeDef::Packet(packet)) if visiting.contains(&packet.name.as_str()) => {
+                        true
+                    }
+                    Some(TypeDef::Packet(packet)) => {
+                        visiting.push(&packet.name);
+                        let fields = &packet.fields;
+                        let compares = fields.iter().all(|f| walk(lowerer, &f.ty, visiting));
+                        visiting.pop();
+                        compares
+                    }
+                    _ => false,
+                },
+                Ty::Extern(_) | Ty::Unknown => false,
+            }
+        }
+        walk(self, ty, &mut Vec::new())
+    }
+
+    /// The function converting a reference to variable `v` of type `ty` to a
+    /// `coolbot::Value`, as the glue's `get` converts it ([`Lowerer::variable`]):
+    /// through its serde_with adapter, by `From` for a primitive with a default, else
+    /// by serde.
+    fn converter(&self, v: &Variable, ty: &Ty) -> Code {
+        let has_default = v.value.is_some() || self.ty_defaultable(ty);
+        let rust_ty = if has_default {
+            rust_ty(ty, GEN_TYPES)
+        } else {
+            format!("::core::option::Option<{}>", rust_ty(ty, GEN_TYPES))
+        };
+        match (serde_adapter(ty), prim_of(ty)) {
+            (Some(adapter), _) => {
+                let adapter = if has_default {
+                    adapter
+                } else {
+                    format!("::core::option::Option<{adapter}>")
+                };
+                Code::atom(format!("super::__cool_to_value_as::<{rust_ty}, {adapter}>"))
+            }
+            (None, Some(_)) if has_default => Code::atom("super::__cool_value_of"),
+            _ => Code::atom("super::__cool_to_value"),
+        }
     }
 
     /// A declared variable (`observable`/`controllable`/`local` with a type) as a

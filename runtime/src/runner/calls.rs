@@ -131,18 +131,40 @@ impl Runner {
         self.publish_variables();
     }
 
+    /// Publish the variables the automaton reports as changed
+    /// ([`Automaton::changed_variables`](crate::Automaton::changed_variables)) whose
+    /// values differ from the published ones, one event each, in index order. A
+    /// panicking report keeps what it reported before the panic, and a panicking
+    /// `get` leaves its variable unpublished.
     pub(super) fn publish_variables(&mut self) {
         if self.spec.variables.is_empty() {
             return;
         }
+        let mut reported = std::mem::take(&mut self.reported);
+        reported.clear();
+        let automaton = &mut *self.automaton;
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            automaton.changed_variables(&mut crate::automaton::Changes {
+                reported: &mut reported,
+            })
+        }));
+        if reported.is_empty() {
+            self.reported = reported;
+            return;
+        }
         let automaton = &*self.automaton;
-        let values: Vec<_> = (0..self.spec.variables.len())
-            .map(|index| catch_unwind(AssertUnwindSafe(|| automaton.get(index))).ok())
-            .collect();
+        for (index, value) in &mut reported {
+            if value.is_none() {
+                *value = catch_unwind(AssertUnwindSafe(|| automaton.get(*index))).ok();
+            }
+        }
+        if !reported.is_sorted_by_key(|(index, _)| *index) {
+            reported.sort_by_key(|(index, _)| *index);
+        }
         let spec = self.spec;
         self.shared.update(|monitor| {
             let mut events = Vec::new();
-            for (index, value) in values.into_iter().enumerate() {
+            for (index, value) in reported.drain(..) {
                 let (Some(value), Some(slot)) = (value, monitor.variables.get_mut(index)) else {
                     continue;
                 };
@@ -156,6 +178,7 @@ impl Runner {
             }
             events
         });
+        self.reported = reported;
     }
 
     /// Publish the elapsed time (if it changed) and the thread's CPU time (a system

@@ -226,6 +226,9 @@ pub(crate) struct Runner {
     adapt: Option<Box<Local>>,
     /// How long the last user call ran.
     last_took: Duration,
+    /// The variables the automaton reported after a call (`publish_variables`),
+    /// kept to reuse its buffer.
+    reported: Vec<(usize, Option<crate::value::Value>)>,
     /// Driven by a harness (`crate::harness`) on the caller's thread, on a virtual
     /// clock of its own: a retry plan's wait advances that clock.
     harnessed: bool,
@@ -330,6 +333,7 @@ impl Runner {
             scheduling: None,
             adapt,
             last_took: Duration::ZERO,
+            reported: Vec::new(),
             harnessed: false,
             labels: Vec::new(),
             responses: VecDeque::new(),

@@ -246,6 +246,7 @@ pub fn component_with(
         vars,
         inputs,
         outputs,
+        published: ::core::default::Default::default(),
     };
     ::coolbot::Component::new(name, ::std::boxed::Box::new(glue), ports)
 }
@@ -268,6 +269,14 @@ struct __CoolGlue<B> {
     vars: Vars,
     inputs: Inputs,
     outputs: Outputs,
+    published: __CoolPublished,
+}
+
+/// The variables the glue compares in their Rust types, as it last reported them to
+/// the runtime (`None`: not yet).
+#[derive(Default)]
+struct __CoolPublished {
+    openings: ::core::option::Option<u32>,
 }
 
 impl<B: Behavior> __CoolGlue<B> {
@@ -279,6 +288,7 @@ impl<B: Behavior> __CoolGlue<B> {
             vars,
             inputs,
             outputs,
+            ..
         } = self;
         let cx = Cx {
             config,
@@ -374,6 +384,15 @@ impl<B: Behavior> ::coolbot::Automaton for __CoolGlue<B> {
 
     fn configuration(&self) -> ::core::option::Option<::coolbot::Value> {
         ::core::option::Option::Some(super::__cool_to_value(&self.config))
+    }
+
+    fn changed_variables(&mut self, changes: &mut ::coolbot::Changes<'_>) {
+        changes.compare(
+            0,
+            &mut self.published.openings,
+            &self.vars.openings,
+            super::__cool_value_of,
+        );
     }
 }
 
@@ -982,6 +1001,25 @@ impl GateInstanceStandIn<'_> {
 pub fn __cool_to_value<T: ::serde::Serialize>(value: &T) -> ::coolbot::Value {
     ::coolbot::Value::from_serde(value)
         .unwrap_or_else(|error| ::coolbot::Value::Str(::coolbot::Chain(&error).to_string()))
+}
+
+/// Converts a variable of a primitive type to a runtime [`coolbot::Value`] (`From`).
+#[doc(hidden)]
+pub fn __cool_value_of<T: ::core::clone::Clone + ::core::convert::Into<::coolbot::Value>>(
+    value: &T,
+) -> ::coolbot::Value {
+    value.clone().into()
+}
+
+/// Converts a variable through its serde_with adapter `A` (a type holding an array
+/// longer than 32 elements) to a runtime [`coolbot::Value`].
+#[doc(hidden)]
+pub fn __cool_to_value_as<T, A: ::coolbot::serde_with::SerializeAs<T>>(
+    value: &T,
+) -> ::coolbot::Value {
+    __cool_to_value(&::coolbot::serde_with::ser::SerializeAsWrap::<T, A>::new(
+        value,
+    ))
 }
 
 /// Converts a runtime [`coolbot::Value`] to a variable or configuration value.

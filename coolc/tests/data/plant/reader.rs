@@ -1,5 +1,5 @@
-//! Filled-in `Reader`: counts the labels (an extern packet) and keeps the last one's
-//! length.
+//! Filled-in `Reader`: counts the labels (an extern packet) and keeps the last one
+//! and its length.
 
 use crate::generated::reader::*;
 
@@ -12,6 +12,7 @@ impl Behavior for Reader {
         while let Some(label) = cx.inputs.input.recv() {
             cx.vars.got += 1;
             cx.vars.last_len = label.len() as u64;
+            cx.vars.last = Some(label);
         }
         Ok(())
     }

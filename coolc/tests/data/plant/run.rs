@@ -341,6 +341,12 @@ fn an_extern_packet_is_carried_like_a_packet() {
     // `label 1` ... `label 9` are 7 characters long.
     let monitor = reader.wait_for(|m| count(m, "got") >= 3, WAIT).unwrap();
     assert_eq!(count(&monitor, "last_len"), 7);
+    // A variable of an extern packet type is published too (its `Value` compared).
+    let last = variable(&monitor, "last").map(|value| value.to_serde::<Option<String>>());
+    assert!(
+        matches!(&last, Some(Ok(Some(label))) if label.starts_with("label ")),
+        "{last:?}"
+    );
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
