@@ -950,7 +950,7 @@ fn robot_node(options: &Options) -> Result<NodeOptions, String> {
         .clone()
         .unwrap_or_else(|| NodeOptions::named(ROBOT));
     if node.listen.is_empty() {
-        let port = coolbot_zenoh::free_loopback_port();
+        let port = node::loopback_port();
         node.listen.push(format!("tcp/127.0.0.1:{port}"));
     }
     Ok(node)

@@ -176,6 +176,19 @@ impl Network {
     }
 }
 
+/// A loopback port for a node that others on this host are told of
+/// (`coolbot_zenoh::free_loopback_port`).
+#[cfg(feature = "network")]
+pub fn loopback_port() -> u16 {
+    coolbot_zenoh::free_loopback_port()
+}
+
+/// Without the `network` feature no node opens (see [`open`]): any port serves.
+#[cfg(not(feature = "network"))]
+pub fn loopback_port() -> u16 {
+    0
+}
+
 /// Without the `network` feature there is no Zenoh in the build: `--node` says how
 /// to get it.
 #[cfg(not(feature = "network"))]
