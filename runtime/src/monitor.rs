@@ -294,26 +294,32 @@ impl GroupCycles {
         self.period_ns.store(ns, Ordering::Relaxed);
     }
 
-    /// [`GroupCycles::status`] into `status`, in place.
+    /// [`GroupCycles::status`] into `status`, in place. Every field is named (a field
+    /// added to `GroupStatus` and not copied here does not compile).
     fn status_into(&self, status: &mut GroupStatus) {
-        if status.name != self.name {
-            status.name.clone_from(&self.name);
+        let GroupStatus {
+            name,
+            members,
+            cycles,
+            last_cycle,
+            worst_cycle,
+            period,
+            overruns,
+        } = status;
+        if *name != self.name {
+            name.clone_from(&self.name);
         }
-        let same_members = status.members.len() == self.members.len()
-            && status
-                .members
-                .iter()
-                .zip(&self.members)
-                .all(|(a, b)| **a == **b);
+        let same_members = members.len() == self.members.len()
+            && members.iter().zip(&self.members).all(|(a, b)| **a == **b);
         if !same_members {
-            status.members = self.members.iter().map(|name| name.to_string()).collect();
+            *members = self.members.iter().map(|name| name.to_string()).collect();
         }
-        let period = self.period_ns.load(Ordering::Relaxed);
-        status.cycles = self.cycles.load(Ordering::Relaxed);
-        status.last_cycle = Duration::from_nanos(self.last_ns.load(Ordering::Relaxed));
-        status.worst_cycle = Duration::from_nanos(self.worst_ns.load(Ordering::Relaxed));
-        status.period = (period > 0).then(|| Duration::from_nanos(period));
-        status.overruns = self.overruns.load(Ordering::Relaxed);
+        let period_ns = self.period_ns.load(Ordering::Relaxed);
+        *cycles = self.cycles.load(Ordering::Relaxed);
+        *last_cycle = Duration::from_nanos(self.last_ns.load(Ordering::Relaxed));
+        *worst_cycle = Duration::from_nanos(self.worst_ns.load(Ordering::Relaxed));
+        *period = (period_ns > 0).then(|| Duration::from_nanos(period_ns));
+        *overruns = self.overruns.load(Ordering::Relaxed);
     }
 
     fn status(&self) -> GroupStatus {

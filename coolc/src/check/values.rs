@@ -345,6 +345,7 @@ pub(super) fn configuration_size(
 /// counted together.
 pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Component) {
     let mut sizes = Vec::new();
+    let mut types = Vec::new();
     for member in &component.members {
         let ast::Member::Variable(variable) = member else {
             continue;
@@ -357,10 +358,19 @@ pub(super) fn variables_size(checker: &mut Checker<'_, '_>, component: &ast::Com
             return;
         }
         sizes.push((&variable.name, inline_bytes(checker, ty)));
+        types.push(ty);
     }
     let what = format!("the variables of component `{}` hold", component.name.name);
     let why = "its variables together: they are one record, built on the stack of whoever makes the component";
-    bytes_refused(checker, &sizes, component.name.span, &what, why, "variable");
+    bytes_refused(
+        checker,
+        &sizes,
+        &types,
+        component.name.span,
+        &what,
+        why,
+        "variable",
+    );
 }
 
 fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span, what: &str) {
@@ -368,20 +378,32 @@ fn record_size(checker: &mut Checker<'_, '_>, fields: &[ast::Field], span: Span,
         // Reported inside already.
         return;
     }
+    let types: Vec<&ast::Type> = fields.iter().map(|field| &field.ty).collect();
     let sizes: Vec<(&ast::Ident, u128)> = fields
         .iter()
         .map(|field| (&field.name, inline_bytes(checker, &field.ty)))
         .collect();
     let why = "its fields together: it travels by value, and a thread's stack holds many copies of it at once";
-    bytes_refused(checker, &sizes, span, what, why, "field");
+    bytes_refused(checker, &sizes, &types, span, what, why, "field");
+}
+
+/// Whether any of `types` holds a packet that contains itself by value
+/// ([`holds_self_containing`]).
+fn holds_any_self_containing(checker: &Checker<'_, '_>, types: &[&ast::Type]) -> bool {
+    let mut visited = std::collections::BTreeSet::new();
+    types
+        .iter()
+        .any(|ty| holds_self_containing(checker, ty, &mut visited))
 }
 
 /// Reports `what` (a subject and its verb) if its members, of `sizes` bytes inline
 /// each, hold more than [`MAX_INLINE_BYTES`] together: at `span`, labelled `why`, and
-/// at the largest `member`.
+/// at the largest `member`; not if one of their `types` holds a packet that contains
+/// itself (its size means nothing).
 fn bytes_refused(
     checker: &mut Checker<'_, '_>,
     sizes: &[(&ast::Ident, u128)],
+    types: &[&ast::Type],
     span: Span,
     what: &str,
     why: &str,
@@ -398,7 +420,7 @@ fn bytes_refused(
     else {
         return;
     };
-    if total <= u128::from(max) {
+    if total <= u128::from(max) || holds_any_self_containing(checker, types) {
         return;
     }
     let diagnostic = checker
@@ -1184,6 +1206,44 @@ pub(super) fn recursive_packet(checker: &mut Checker<'_, '_>, packet: &ast::Pack
         }
     }
     false
+}
+
+/// Whether a value of `ty` holds, by value, a packet that contains itself: its size
+/// means nothing (that packet's own `recursive_packet` error says why), so nothing
+/// holding it gets a size error too.
+fn holds_self_containing(
+    checker: &Checker<'_, '_>,
+    ty: &ast::Type,
+    visited: &mut std::collections::BTreeSet<String>,
+) -> bool {
+    match &ty.kind {
+        ast::TypeKind::Prim(_) | ast::TypeKind::List(_) => false,
+        ast::TypeKind::Array(inner, _) | ast::TypeKind::Optional(inner) => {
+            holds_self_containing(checker, inner, visited)
+        }
+        ast::TypeKind::Named(name) => {
+            if !visited.insert(name.name.clone()) {
+                return false;
+            }
+            let Some(packet) = packet_def(checker, &name.name) else {
+                return false;
+            };
+            let contains_itself = packet.fields.iter().any(|field| {
+                contains_by_value(
+                    checker,
+                    &field.ty,
+                    &name.name,
+                    &mut Vec::new(),
+                    &mut std::collections::BTreeSet::new(),
+                )
+            });
+            contains_itself
+                || packet
+                    .fields
+                    .iter()
+                    .any(|field| holds_self_containing(checker, &field.ty, visited))
+        }
+    }
 }
 
 fn contains_by_value(
