@@ -10,6 +10,7 @@ mod automaton_table;
 mod command_sequences;
 mod compound;
 mod compound_clock;
+mod compound_rules;
 mod connections;
 mod exports;
 mod faults;
