@@ -100,8 +100,9 @@ impl Routes {
     }
 }
 
-/// A batch waiting, with the node that published it.
-type Waiting = (Arc<str>, ZBytes);
+/// A batch waiting, with the node that published it and how many of that node's
+/// batches the inlet had dropped when it was queued.
+type Waiting = (Arc<str>, ZBytes, u64);
 
 /// The queue's end that Zenoh's callbacks hold.
 #[derive(Clone)]
@@ -109,6 +110,41 @@ pub(super) struct Inlet {
     sender: Sender<Waiting>,
     counts: Arc<Counts>,
     wake: Arc<Notify>,
+    drops: Arc<Drops>,
+}
+
+/// How many batches of each node the inlet dropped (over size, or the queue full:
+/// counted there), and how many of those the feed has seen behind a batch it took:
+/// the numbers such a batch held are not counted missing again at the next one.
+#[derive(Default)]
+struct Drops(Mutex<HashMap<Arc<str>, (u64, u64)>>);
+
+impl Drops {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Arc<str>, (u64, u64)>> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// How many of `node`'s batches were dropped so far.
+    fn dropped(&self, node: &Arc<str>) -> u64 {
+        self.lock().get(node).map_or(0, |&(dropped, _)| dropped)
+    }
+
+    /// One more of `node`'s batches dropped.
+    fn drop_one(&self, node: &Arc<str>) {
+        self.lock().entry(Arc::clone(node)).or_default().0 += 1;
+    }
+
+    /// Whether a batch of `node` queued after `dropped` drops follows one the feed
+    /// has not seen yet (and it is seen now).
+    fn after_unseen(&self, node: &Arc<str>, dropped: u64) -> bool {
+        let mut drops = self.lock();
+        let Some((_, seen)) = drops.get_mut(node) else {
+            return false;
+        };
+        let unseen = dropped > *seen;
+        *seen = (*seen).max(dropped);
+        unseen
+    }
 }
 
 impl Inlet {
@@ -120,15 +156,18 @@ impl Inlet {
             .check(|| "a batch of echoed packets".to_owned(), payload.len())
         {
             self.counts.undecoded.fetch_add(1, Ordering::Relaxed);
+            self.drops.drop_one(node);
             coolbot::limited!(&**node, |held| tracing::warn!(
                 "a batch of echoed packets from {node} is not decoded (dropped): {exceeded}{held}"
             ));
             return;
         }
-        match self.sender.try_send((Arc::clone(node), payload)) {
+        let dropped = self.drops.dropped(node);
+        match self.sender.try_send((Arc::clone(node), payload, dropped)) {
             Ok(()) => self.wake.notify_one(),
             Err(TrySendError::Full(_)) => {
                 self.counts.overflowed.fetch_add(1, Ordering::Relaxed);
+                self.drops.drop_one(node);
                 coolbot::limited!("foxglove:feed", |held| tracing::warn!(
                     "the server falls behind: a batch of echoed packets from {node} is dropped{held}"
                 ));
@@ -152,17 +191,18 @@ impl Feed {
     pub(super) fn start(runtime: &tokio::runtime::Handle, counts: Arc<Counts>) -> Feed {
         let (inlet, waiting) = queue(FEED_CAPACITY, counts);
         let routes = Arc::new(Routes::default());
-        let (counts, wake, taken) = (
+        let (counts, wake, taken, drops) = (
             Arc::clone(&inlet.counts),
             Arc::clone(&inlet.wake),
             Arc::clone(&routes),
+            Arc::clone(&inlet.drops),
         );
         let task = runtime.spawn(async move {
             loop {
                 // Asleep while nothing comes. A batch queued since the last wait left
                 // a permit: it is taken at once.
                 wake.notified().await;
-                log_waiting(&waiting, &taken, &counts);
+                log_waiting(&waiting, &taken, &counts, &drops);
                 // At most one wake a tick: the batches that come meanwhile find no
                 // waiter, wake nothing and leave a permit.
                 tokio::time::sleep(FEED_TICK).await;
@@ -201,17 +241,26 @@ fn queue(capacity: usize, counts: Arc<Counts>) -> (Inlet, Receiver<Waiting>) {
             sender,
             counts,
             wake,
+            drops: Arc::new(Drops::default()),
         },
         receiver,
     )
 }
 
-/// Log every packet of every batch waiting on the channels of its output.
-fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
-    for (node, payload) in waiting.try_iter() {
+/// Log every packet of every batch waiting on the channels of its output. A batch
+/// dropped whole is counted once where it is dropped: the numbers it held are not
+/// counted missing again at the node's next batch.
+fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts, drops: &Drops) {
+    for (node, payload, dropped) in waiting.try_iter() {
+        let after_drop = drops.after_unseen(&node, dropped);
         // (Within `ECHO_BATCH`: checked when queued.)
         let payload = payload.to_bytes();
-        let batch = match serde_json::from_slice::<Vec<EchoedRaw<'_>>>(&payload) {
+        let decoded = serde_json::from_slice::<Vec<EchoedRaw<'_>>>(&payload);
+        let mut routes = routes.lock();
+        if after_drop || decoded.is_err() {
+            forget_numbers(routes.get_mut(&*node));
+        }
+        let batch = match decoded {
             Ok(batch) => batch,
             Err(error) => {
                 counts.undecoded.fetch_add(1, Ordering::Relaxed);
@@ -221,7 +270,6 @@ fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
                 continue;
             }
         };
-        let mut routes = routes.lock();
         let Some(outputs) = routes.get_mut(&*node) else {
             continue;
         };
@@ -242,6 +290,14 @@ fn log_waiting(waiting: &Receiver<Waiting>, routes: &Routes, counts: &Counts) {
                 }
             }
         }
+    }
+}
+
+/// The next numbers of `outputs` (a node's) unknown: a batch of the node was dropped
+/// whole, and counted so.
+fn forget_numbers(outputs: Option<&mut HashMap<String, Served>>) {
+    for served in outputs.into_iter().flat_map(HashMap::values_mut) {
+        served.next = None;
     }
 }
 
@@ -404,7 +460,7 @@ mod tests {
             inlet.push(&node, batch(&[("b.out", 2, "10")]));
         }
         assert_eq!(counts.overflowed.load(Ordering::Relaxed), 2);
-        log_waiting(&waiting, &routes, &counts);
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
         assert!(waiting.is_empty());
         let logged = kept.logged.lock().unwrap().clone();
         let topics: Vec<&str> = logged.iter().map(|(topic, ..)| topic.as_str()).collect();
@@ -426,6 +482,40 @@ mod tests {
         assert_eq!(logged[4].1, r#"{"value":9}"#);
         // The batch that does not decode, and the pose without `y`.
         assert_eq!(counts.undecoded.load(Ordering::Relaxed), 2);
+    }
+
+    /// A batch the feed drops whole (its queue full, or not decoded) is counted once,
+    /// where it is dropped: the numbers it held are not counted missing again at the
+    /// node's next batch; a gap after that is.
+    #[test]
+    fn a_batch_dropped_by_the_feed_is_not_counted_missing_too() {
+        let counts = Arc::new(Counts::default());
+        let (inlet, waiting) = queue(1, Arc::clone(&counts));
+        let context = Context::new();
+        let routes = Routes::default();
+        routes.add(
+            "n",
+            "a.out",
+            route(&context, "/n/a.out", Transform::Raw { wrap: true }),
+        );
+        let node: Arc<str> = Arc::from("n");
+        inlet.push(&node, batch(&[("a.out", 0, "1")]));
+        inlet.push(&node, batch(&[("a.out", 1, "2"), ("a.out", 2, "3")]));
+        assert_eq!(counts.overflowed.load(Ordering::Relaxed), 1);
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        inlet.push(&node, batch(&[("a.out", 3, "4")]));
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        assert_eq!(counts.missing.load(Ordering::Relaxed), 0);
+        inlet.push(&node, ZBytes::from("not JSON"));
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        inlet.push(&node, batch(&[("a.out", 6, "5")]));
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 1);
+        assert_eq!(counts.missing.load(Ordering::Relaxed), 0);
+        // A gap with nothing dropped between: counted.
+        inlet.push(&node, batch(&[("a.out", 9, "6")]));
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        assert_eq!(counts.missing.load(Ordering::Relaxed), 2);
     }
 
     /// The packets of a served output that never came (numbers missing) are counted,
@@ -453,7 +543,7 @@ mod tests {
             r#"[{{"output":"a.out","seq":7,"dropped":0,"sent":{SENT},"packet":null,"unsent":"too large"}}]"#
         );
         inlet.push(&node, ZBytes::from(unsent));
-        log_waiting(&waiting, &routes, &counts);
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
         let logged: Vec<String> = kept
             .logged
             .lock()
