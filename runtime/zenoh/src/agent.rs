@@ -615,9 +615,6 @@ struct Lookup {
     /// Its number: an answer to an earlier lookup of the owner is ignored.
     number: u64,
     queries: Vec<zenoh::query::Query>,
-    /// A loss of the owner was handled while it was asked for: its requests build
-    /// nothing (nothing would send their instances to `dead`).
-    lost: bool,
 }
 
 impl Asking {
@@ -656,7 +653,6 @@ impl Asking {
             Lookup {
                 number,
                 queries: vec![query],
-                lost: false,
             },
         );
         self.start(&owner, number, start)
@@ -684,9 +680,9 @@ impl Asking {
             .collect())
     }
 
-    /// The network's answer `verdict` came: the owner, whether it lives (not if its
-    /// loss was handled meanwhile) and the requests that waited for it; nothing if it
-    /// answers an earlier lookup.
+    /// The network's answer `verdict` came: the owner, whether it lives and the
+    /// requests that waited for it; nothing if it answers an earlier lookup (or one
+    /// whose owner's loss was handled meanwhile: its requests were refused then).
     fn answered(
         &mut self,
         (number, owner, found): Verdict,
@@ -695,7 +691,7 @@ impl Asking {
             return None;
         }
         let lookup = self.owners.remove(&owner)?;
-        Some((owner, found && !lookup.lost, lookup.queries))
+        Some((owner, found, lookup.queries))
     }
 
     /// A loss was dropped (it may have been the loss of any owner asked for): every
@@ -924,9 +920,11 @@ impl Agent {
                 // The losses that came first are handled first (those queued now: a
                 // stream of new ones holds no request up).
                 let losses_first = |hosted: &mut Vec<Hosted>, asking: &mut Asking| {
+                    let mut refused = Vec::new();
                     for name in lost.try_iter().take(lost.len()) {
-                        owner_lost(hosted, asking, |owner| owner == name);
+                        refused.extend(owner_lost(hosted, asking, |owner| owner == name));
                     }
+                    server.refuse(refused);
                 };
                 loop {
                     crossbeam_channel::select! {
@@ -947,7 +945,9 @@ impl Agent {
                         }
                         recv(lost) -> name => {
                             let Ok(name) = name else { break };
-                            owner_lost(&mut hosted, &mut inbox.asking, |owner| owner == name);
+                            let refused =
+                                owner_lost(&mut hosted, &mut inbox.asking, |owner| owner == name);
+                            server.refuse(refused);
                             reap(&mut hosted, &reaper);
                         }
                         default(Duration::from_millis(100)) => {
@@ -1550,11 +1550,32 @@ fn node_gone(
 
 /// Have the reaper send to `dead` what was built for the owners `lost` says are lost
 /// (marked here, handed over by the next [`reap`]: the agent's thread waits for no
-/// instance); the requests of those owners that wait in `asking` build nothing.
-fn owner_lost(hosted: &mut [Hosted], asking: &mut Asking, lost: impl Fn(&str) -> bool) {
-    for (owner, lookup) in &mut asking.owners {
-        if lost(owner) {
-            lookup.lost = true;
+/// instance). The requests of those owners that wait in `asking` back, with the
+/// reason to refuse them: they build nothing (nothing would send their instances to
+/// `dead`); the owner's next request, from a node of the same name started again,
+/// is asked for afresh.
+#[must_use]
+fn owner_lost(
+    hosted: &mut [Hosted],
+    asking: &mut Asking,
+    lost: impl Fn(&str) -> bool,
+) -> Vec<(zenoh::query::Query, String)> {
+    let gone: Vec<String> = asking
+        .owners
+        .keys()
+        .filter(|owner| lost(owner))
+        .cloned()
+        .collect();
+    let mut refused = Vec::new();
+    for owner in gone {
+        if let Some(lookup) = asking.owners.remove(&owner) {
+            let reason = lost_reason(&owner);
+            refused.extend(
+                lookup
+                    .queries
+                    .into_iter()
+                    .map(|query| (query, reason.clone())),
+            );
         }
     }
     let mut count = 0;
@@ -1575,6 +1596,15 @@ fn owner_lost(hosted: &mut [Hosted], asking: &mut Asking, lost: impl Fn(&str) ->
             "the node that asked for {count} instance(s) here is lost: they go to dead"
         );
     }
+    refused
+}
+
+/// Why a request of `owner`, a node lost, builds nothing.
+fn lost_reason(owner: &str) -> String {
+    format!(
+        "the owner `{}` is lost (its liveliness token is gone): nothing is built for it",
+        excerpt(owner, EXCERPT_CHARS)
+    )
 }
 
 /// After a node's loss was dropped: send to `dead` what was built for owners whose
@@ -1592,8 +1622,10 @@ fn owners_lost(hosted: &mut [Hosted], alive: &Mutex<HashSet<String>>) {
             .map(str::to_owned)
             .collect()
     };
-    // (The requests waiting for the network's answer are asked for again.)
-    owner_lost(hosted, &mut Asking::default(), |owner| lost.contains(owner));
+    // (The requests waiting for the network's answer are asked for again: none is
+    // in this empty `Asking`.)
+    let none = owner_lost(hosted, &mut Asking::default(), |owner| lost.contains(owner));
+    debug_assert!(none.is_empty());
 }
 
 /// Check that node `owner` lives: the watcher holds its token in `alive`, or, if it
@@ -1610,10 +1642,7 @@ fn owner_lives(
     }
     match known {
         Some((asked, true)) if asked == owner => Ok(()),
-        Some((asked, false)) if asked == owner => Err(Refusal::Reason(format!(
-            "the owner `{}` is lost (its liveliness token is gone): nothing is built for it",
-            excerpt(owner, EXCERPT_CHARS)
-        ))),
+        Some((asked, false)) if asked == owner => Err(Refusal::Reason(lost_reason(owner))),
         _ => Err(Refusal::Unheard(owner.to_owned())),
     }
 }
