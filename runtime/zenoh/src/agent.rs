@@ -743,7 +743,8 @@ impl Drop for Finding {
             });
             return;
         }
-        // Unbounded, never full: at most one lookup per owner waiting runs.
+        // Unbounded, never full: a lookup runs per owner waiting, and one more per
+        // owner lost while it ran (each ends within its timeout).
         let _ = self.verdicts.send(verdict);
     }
 }

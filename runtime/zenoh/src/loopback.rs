@@ -1,8 +1,9 @@
 //! Ports on loopback for nodes that others on this host are told of:
 //! [`free_loopback_port`].
 
-use std::fs::File;
+use std::fs::{File, Permissions};
 use std::net::{Ipv4Addr, TcpListener, UdpSocket};
+use std::os::unix::fs::PermissionsExt;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, PoisonError};
@@ -34,7 +35,11 @@ pub fn free_loopback_port() -> u16 {
     let span = DRAWN.end - DRAWN.start;
     let start = u64::from(std::process::id()).wrapping_mul(7919) % span;
     let directory = std::env::temp_dir().join("coolbot-loopback-ports");
-    let _ = std::fs::create_dir_all(&directory);
+    if std::fs::create_dir_all(&directory).is_ok() {
+        // Shared by every user of this host, as the ports are (sticky: each removes
+        // only their own files; the files themselves are never removed).
+        let _ = std::fs::set_permissions(&directory, Permissions::from_mode(0o1777));
+    }
     for _ in 0..span {
         let drawn = NEXT.fetch_add(1, Ordering::Relaxed);
         let port = DRAWN.start + (start + drawn) % span;
@@ -54,20 +59,31 @@ pub fn free_loopback_port() -> u16 {
         .expect("a free loopback port")
 }
 
-/// Whether this process now holds the lock on `file` (created if need be), kept
-/// until it ends; false if another process holds it. A file that cannot be opened
-/// (a read-only temporary directory) reserves nothing and does not stop the draw.
+/// Whether this process now holds the lock on `file` (created if need be, readable
+/// and writable by every user), kept until it ends; false only if another process
+/// holds it. A file that cannot be opened (a read-only temporary directory) or locked
+/// (a file system without `flock`) reserves nothing and does not stop the draw.
 fn reserve(file: PathBuf) -> bool {
-    let Ok(opened) = File::options()
+    let created = File::options()
         .create(true)
         .truncate(false)
         .write(true)
-        .open(&file)
-    else {
-        return true;
+        .open(&file);
+    let opened = match created {
+        Ok(opened) => {
+            let _ = opened.set_permissions(Permissions::from_mode(0o666));
+            opened
+        }
+        // Another user's file: a read-only descriptor takes the lock as well.
+        Err(_) => match File::open(&file) {
+            Ok(opened) => opened,
+            Err(_) => return true,
+        },
     };
-    if flock(&opened, FlockOperation::NonBlockingLockExclusive).is_err() {
-        return false;
+    match flock(&opened, FlockOperation::NonBlockingLockExclusive) {
+        Ok(()) => {}
+        Err(rustix::io::Errno::WOULDBLOCK) => return false,
+        Err(_) => return true,
     }
     HELD.lock()
         .unwrap_or_else(PoisonError::into_inner)
