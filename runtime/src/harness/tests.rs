@@ -7,44 +7,22 @@ use super::Harness;
 use crate::PortSet;
 use crate::automaton::{Automaton, Changes, ValueRefused};
 use crate::monitor::MonitorEvent;
-use crate::spec::{Spec, StateSpec, TimingSpec, VarKind, VarSpec};
+use crate::spec::{Spec, StateSpec, VarKind, VarSpec};
 use crate::system::Component;
 use crate::value::Value;
 
 const fn var(name: &'static str, ty: &'static str) -> VarSpec {
-    VarSpec {
-        name,
-        kind: VarKind::Controllable,
-        ty,
-        doc: "",
-        range: None,
-    }
+    VarSpec::new(name, VarKind::Controllable, ty)
 }
 
-static SPEC: Spec = Spec {
-    type_name: "Published",
-    doc: "",
-    states: &[StateSpec {
-        name: "idle",
-        entry: false,
-        exit: false,
-        periodic: None,
-        on: &[],
-        after: &[],
-        may: &[],
-    }],
-    initial: 0,
-    inputs: &[],
-    outputs: &[],
-    variables: &[
+static SPEC: Spec = Spec::new("Published", "")
+    .with_states(&[StateSpec::new("idle")])
+    .with_variables(&[
         var("count", "u64"),
         var("x", "f64"),
         var("label", "String"),
         var("seen", "[u64]"),
-    ],
-    exceptions: &[],
-    timing: TimingSpec::NONE,
-};
+    ]);
 
 /// The variables; setting `count` also appends it to `seen` (a variable changed by
 /// the component, not by the command), and `get` panics on label `boom`.

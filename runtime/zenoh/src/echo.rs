@@ -407,47 +407,19 @@ mod tests {
     use std::time::Instant;
 
     use coolbot::port::DataOut;
-    use coolbot::{
-        Automaton, Component, OutputKind, OutputSpec, PortSet, Spec, StateSpec, System, TimingSpec,
-    };
+    use coolbot::{Automaton, Component, OutputKind, OutputSpec, PortSet, Spec, StateSpec, System};
     use zenoh::handlers::FifoChannelHandler;
     use zenoh::pubsub::Subscriber;
     use zenoh::sample::Sample;
 
     use super::*;
 
-    static SOURCE: Spec = Spec {
-        type_name: "Source",
-        doc: "",
-        states: &[StateSpec {
-            name: "idle",
-            entry: false,
-            exit: false,
-            periodic: None,
-            on: &[],
-            after: &[],
-            may: &[],
-        }],
-        initial: 0,
-        inputs: &[],
-        outputs: &[
-            OutputSpec {
-                name: "out",
-                kind: OutputKind::Data,
-                packet: "u64",
-                pull: false,
-            },
-            OutputSpec {
-                name: "other",
-                kind: OutputKind::Data,
-                packet: "u64",
-                pull: false,
-            },
-        ],
-        variables: &[],
-        exceptions: &[],
-        timing: TimingSpec::NONE,
-    };
+    static SOURCE: Spec = Spec::new("Source", "")
+        .with_states(&[StateSpec::new("idle")])
+        .with_outputs(&[
+            OutputSpec::new("out", OutputKind::Data, "u64"),
+            OutputSpec::new("other", OutputKind::Data, "u64"),
+        ]);
 
     /// A component that only owns its outputs; the test sends on them.
     struct Source;
@@ -728,30 +700,9 @@ mod tests {
         assert!(batch.take().is_empty(), "the batch is empty again");
     }
 
-    static TEXTS: Spec = Spec {
-        type_name: "Texts",
-        doc: "",
-        states: &[StateSpec {
-            name: "idle",
-            entry: false,
-            exit: false,
-            periodic: None,
-            on: &[],
-            after: &[],
-            may: &[],
-        }],
-        initial: 0,
-        inputs: &[],
-        outputs: &[OutputSpec {
-            name: "out",
-            kind: OutputKind::Data,
-            packet: "String",
-            pull: false,
-        }],
-        variables: &[],
-        exceptions: &[],
-        timing: TimingSpec::NONE,
-    };
+    static TEXTS: Spec = Spec::new("Texts", "")
+        .with_states(&[StateSpec::new("idle")])
+        .with_outputs(&[OutputSpec::new("out", OutputKind::Data, "String")]);
 
     /// A component that only owns an output of texts; the test sends on it.
     struct Texts;
