@@ -1,5 +1,6 @@
 //! [`Bytes`]: a packet's bytes that a receiver can read where they arrived, and
-//! [`lend`], which lends a message's memory to its decoding.
+//! [`lend`], which lends a message's memory to its decoding; [`Bytes::loan`], a
+//! buffer a sender fills where its message will travel.
 //!
 //! A `Vec<u8>` in a packet is the receiver's own copy: a bridge decodes each message
 //! into new memory. A [`Bytes`] field decodes without a copy when the message's memory
@@ -12,10 +13,18 @@
 //! Serialized, it is the same as a `Vec<u8>` written as one slice (`serialize_bytes`:
 //! postcard and CDR a length and the bytes, JSON an array of numbers), so a `[u8]`
 //! field and a `Bytes` field are the same message.
+//!
+//! On the sending side, [`Bytes::loan`] gives a buffer ([`BytesMut`]) from the
+//! process's [`Lender`] when one is set (a node with shared memory sets one: its
+//! pool), else from the heap. Frozen into a `Bytes` and sent, a loaned buffer is not
+//! copied by an encoder that knows its lender ([`encoding_loans`], [`loan_at`]): a
+//! bridge to another process on the host sends it as the buffer it already is.
 
-use std::cell::RefCell;
+use std::any::Any;
+use std::cell::{Cell, RefCell};
 use std::fmt;
-use std::ops::Deref;
+use std::ops::{Deref, DerefMut};
+use std::sync::{Arc, PoisonError, RwLock};
 
 use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -27,6 +36,8 @@ pub struct Bytes {
     data: ::bytes::Bytes,
     /// Decoded in place from lent memory.
     lent: bool,
+    /// The loaned buffer these bytes are, whole ([`Bytes::loan`]).
+    loaned: Option<Arc<dyn Lent>>,
 }
 
 impl Bytes {
@@ -35,7 +46,26 @@ impl Bytes {
         Bytes {
             data: ::bytes::Bytes::new(),
             lent: false,
+            loaned: None,
         }
+    }
+
+    /// A buffer of `len` bytes to fill and then [`BytesMut::freeze`]: from the
+    /// process's [`Lender`] when one is set and has room (a node with shared memory:
+    /// a buffer of its pool, which a bridge to another process on this host sends as
+    /// it is, without a copy), else from the heap. Its bytes are zero when it comes
+    /// from the heap, and unspecified when it comes from a lender: write every one.
+    pub fn loan(len: usize) -> BytesMut {
+        match lender().and_then(|lender| lender.loan(len)) {
+            Some(loan) if loan.as_slice().len() == len => BytesMut(Buffer::Loan(loan)),
+            _ => BytesMut(Buffer::Heap(vec![0; len])),
+        }
+    }
+
+    /// Whether these bytes are a buffer loaned by the process's [`Lender`]
+    /// ([`Bytes::loan`]).
+    pub fn is_loaned(&self) -> bool {
+        self.loaned.is_some()
     }
 
     /// Whether these bytes were decoded in place, in memory lent to their decoding
@@ -83,6 +113,7 @@ impl From<Vec<u8>> for Bytes {
         Bytes {
             data: bytes.into(),
             lent: false,
+            loaned: None,
         }
     }
 }
@@ -92,8 +123,184 @@ impl From<&'static [u8]> for Bytes {
         Bytes {
             data: ::bytes::Bytes::from_static(bytes),
             lent: false,
+            loaned: None,
         }
     }
+}
+
+impl From<BytesMut> for Bytes {
+    fn from(bytes: BytesMut) -> Bytes {
+        bytes.freeze()
+    }
+}
+
+/// A buffer to fill, made by [`Bytes::loan`]; reads and writes as a `[u8]` of its
+/// length, and becomes a [`Bytes`] with [`BytesMut::freeze`] (no copy).
+pub struct BytesMut(Buffer);
+
+enum Buffer {
+    Heap(Vec<u8>),
+    Loan(Box<dyn Loan>),
+}
+
+impl BytesMut {
+    /// The bytes, read-only and shareable from now on (no copy).
+    pub fn freeze(self) -> Bytes {
+        match self.0 {
+            Buffer::Heap(bytes) => Bytes::from(bytes),
+            Buffer::Loan(loan) => {
+                let lent = loan.freeze();
+                Bytes {
+                    data: ::bytes::Bytes::from_owner(Frozen(Arc::clone(&lent))),
+                    lent: false,
+                    loaned: Some(lent),
+                }
+            }
+        }
+    }
+
+    /// Whether the buffer came from the process's [`Lender`] rather than the heap.
+    pub fn is_loaned(&self) -> bool {
+        matches!(self.0, Buffer::Loan(_))
+    }
+}
+
+impl Deref for BytesMut {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        match &self.0 {
+            Buffer::Heap(bytes) => bytes,
+            Buffer::Loan(loan) => loan.as_slice(),
+        }
+    }
+}
+
+impl DerefMut for BytesMut {
+    fn deref_mut(&mut self) -> &mut [u8] {
+        match &mut self.0 {
+            Buffer::Heap(bytes) => bytes,
+            Buffer::Loan(loan) => loan.as_mut_slice(),
+        }
+    }
+}
+
+impl fmt::Debug for BytesMut {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "BytesMut({} bytes{})",
+            self.len(),
+            if self.is_loaned() { ", loaned" } else { "" }
+        )
+    }
+}
+
+/// A buffer a [`Lender`] lends, while its holder writes it.
+pub trait Loan: Send + 'static {
+    /// Its bytes.
+    fn as_slice(&self) -> &[u8];
+    /// Its bytes, to write.
+    fn as_mut_slice(&mut self) -> &mut [u8];
+    /// Written: read-only and shared from now on.
+    fn freeze(self: Box<Self>) -> Arc<dyn Lent>;
+}
+
+/// A loaned buffer once written ([`Loan::freeze`]): its bytes, and, as `Any`, what
+/// its lender's encoder recognizes it by ([`loan_at`]).
+pub trait Lent: AsRef<[u8]> + Any + Send + Sync {}
+
+/// Where [`Bytes::loan`] takes its buffers from (set with [`set_lender`]).
+pub trait Lender: Send + Sync + 'static {
+    /// A buffer of exactly `len` bytes, or None (no room: the loan is made on the
+    /// heap).
+    fn loan(&self, len: usize) -> Option<Box<dyn Loan>>;
+}
+
+/// The process's lender.
+static LENDER: RwLock<Option<Arc<dyn Lender>>> = RwLock::new(None);
+
+/// Makes `lender` the process's lender for [`Bytes::loan`] (None: the heap), and
+/// returns the one it replaces.
+pub fn set_lender(lender: Option<Arc<dyn Lender>>) -> Option<Arc<dyn Lender>> {
+    std::mem::replace(
+        &mut *LENDER.write().unwrap_or_else(PoisonError::into_inner),
+        lender,
+    )
+}
+
+/// `lender` is no longer the process's lender, if it still is (the process then has
+/// none, and loans come from the heap); another lender set since stays.
+pub fn withdraw_lender(lender: &dyn Lender) {
+    let mut current = LENDER.write().unwrap_or_else(PoisonError::into_inner);
+    if current
+        .as_ref()
+        .is_some_and(|current| std::ptr::addr_eq(Arc::as_ptr(current), lender))
+    {
+        *current = None;
+    }
+}
+
+/// The process's lender, if one is set.
+pub fn lender() -> Option<Arc<dyn Lender>> {
+    LENDER
+        .read()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone()
+}
+
+/// A frozen loan as the owner of a `bytes::Bytes`.
+struct Frozen(Arc<dyn Lent>);
+
+impl AsRef<[u8]> for Frozen {
+    fn as_ref(&self) -> &[u8] {
+        (*self.0).as_ref()
+    }
+}
+
+thread_local! {
+    /// Encodings under way on this thread that look for loaned buffers
+    /// ([`encoding_loans`]).
+    static ENCODING: Cell<usize> = const { Cell::new(0) };
+    /// The loaned buffers serialized on this thread during those encodings.
+    static LOANS: RefCell<Vec<Arc<dyn Lent>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Calls `encode`, during which a loaned [`Bytes`] serialized on this thread is
+/// noted, so that the encoder's writer, handed the bytes, finds their buffer with
+/// [`loan_at`] and can send that buffer instead of copying it.
+pub fn encoding_loans<R>(encode: impl FnOnce() -> R) -> R {
+    ENCODING.with(|depth| depth.set(depth.get() + 1));
+    // Undone even if `encode` panics.
+    struct Done;
+    impl Drop for Done {
+        fn drop(&mut self) {
+            ENCODING.with(|depth| {
+                let left = depth.get().saturating_sub(1);
+                depth.set(left);
+                if left == 0 {
+                    LOANS.with(|loans| loans.borrow_mut().clear());
+                }
+            });
+        }
+    }
+    let _done = Done;
+    encode()
+}
+
+/// The loaned buffer that is exactly `bytes` (the same memory, whole), if a
+/// [`Bytes`] serialized in the current [`encoding_loans`] on this thread is one.
+pub fn loan_at(bytes: &[u8]) -> Option<Arc<dyn Lent>> {
+    LOANS.with(|loans| {
+        loans
+            .borrow()
+            .iter()
+            .find(|loan| {
+                let whole: &[u8] = (***loan).as_ref();
+                std::ptr::eq(whole.as_ptr(), bytes.as_ptr()) && whole.len() == bytes.len()
+            })
+            .cloned()
+    })
 }
 
 impl fmt::Debug for Bytes {
@@ -102,19 +309,47 @@ impl fmt::Debug for Bytes {
     }
 }
 
-thread_local! {
-    /// The memory lent on this thread, innermost last.
-    static LENT: RefCell<Vec<::bytes::Bytes>> = const { RefCell::new(Vec::new()) };
+/// Memory lent on this thread ([`lend`], [`lend_whole`]).
+struct Lending {
+    memory: ::bytes::Bytes,
+    /// Only bytes that are this memory exactly, whole, share it.
+    whole_only: bool,
+    /// Bytes decoded meanwhile share it.
+    shared: Cell<bool>,
 }
 
-/// Whether `part` lies within `whole`'s memory.
-fn contains(whole: &::bytes::Bytes, part: &[u8]) -> bool {
-    let (start, end) = (
-        whole.as_ptr() as usize,
-        whole.as_ptr() as usize + whole.len(),
-    );
-    let (from, to) = (part.as_ptr() as usize, part.as_ptr() as usize + part.len());
-    !part.is_empty() && start <= from && to <= end
+impl Lending {
+    /// Whether bytes at `part` share this memory.
+    fn holds(&self, part: &[u8]) -> bool {
+        let (start, end) = (
+            self.memory.as_ptr() as usize,
+            self.memory.as_ptr() as usize + self.memory.len(),
+        );
+        let (from, to) = (part.as_ptr() as usize, part.as_ptr() as usize + part.len());
+        if self.whole_only {
+            !part.is_empty() && start == from && to == end
+        } else {
+            !part.is_empty() && start <= from && to <= end
+        }
+    }
+}
+
+thread_local! {
+    /// The memory lent on this thread, innermost last.
+    static LENT: RefCell<Vec<Lending>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Takes `count` lendings off this thread's stack when dropped (even in a panic).
+struct Return(usize);
+
+impl Drop for Return {
+    fn drop(&mut self) {
+        LENT.with(|lent| {
+            let mut lent = lent.borrow_mut();
+            let keep = lent.len().saturating_sub(self.0);
+            lent.truncate(keep);
+        });
+    }
 }
 
 /// Calls `read` with `owner`'s bytes, lent: a [`Bytes`] decoded from them meanwhile
@@ -123,19 +358,48 @@ pub fn lend<O, R>(owner: O, read: impl FnOnce(&[u8]) -> R) -> R
 where
     O: AsRef<[u8]> + Send + 'static,
 {
-    let whole = ::bytes::Bytes::from_owner(owner);
-    LENT.with(|lent| lent.borrow_mut().push(whole.clone()));
-    // Taken off again even if `read` panics.
-    struct Return;
-    impl Drop for Return {
-        fn drop(&mut self) {
-            LENT.with(|lent| {
-                lent.borrow_mut().pop();
-            });
-        }
-    }
-    let _return = Return;
-    read(&whole)
+    let memory = ::bytes::Bytes::from_owner(owner);
+    LENT.with(|lent| {
+        lent.borrow_mut().push(Lending {
+            memory: memory.clone(),
+            whole_only: false,
+            shared: Cell::new(false),
+        });
+    });
+    let _return = Return(1);
+    read(&memory)
+}
+
+/// Calls `read` with the bytes of `owners`, the parts of one message in order, lent
+/// whole: a [`Bytes`] decoded meanwhile on this thread whose bytes are exactly one
+/// part (that memory, all of it) shares that part's owner instead of copying. A
+/// message sent with a loaned buffer in it ([`Bytes::loan`]) arrives as such parts,
+/// the loaned buffer one of them. Returns what `read` returned, and how many parts a
+/// `Bytes` shares.
+pub fn lend_whole<O, R>(owners: Vec<O>, read: impl FnOnce(&[&[u8]]) -> R) -> (R, usize)
+where
+    O: AsRef<[u8]> + Send + 'static,
+{
+    let parts: Vec<::bytes::Bytes> = owners.into_iter().map(::bytes::Bytes::from_owner).collect();
+    LENT.with(|lent| {
+        lent.borrow_mut().extend(parts.iter().map(|memory| Lending {
+            memory: memory.clone(),
+            whole_only: true,
+            shared: Cell::new(false),
+        }));
+    });
+    let _return = Return(parts.len());
+    let slices: Vec<&[u8]> = parts.iter().map(|part| &part[..]).collect();
+    let value = read(&slices);
+    let shared = LENT.with(|lent| {
+        let lent = lent.borrow();
+        let from = lent.len().saturating_sub(parts.len());
+        lent[from..]
+            .iter()
+            .filter(|lending| lending.shared.get())
+            .count()
+    });
+    (value, shared)
 }
 
 /// The lent memory holding `part`, sliced to it, if any.
@@ -144,13 +408,21 @@ fn lent_slice(part: &[u8]) -> Option<::bytes::Bytes> {
         lent.borrow()
             .iter()
             .rev()
-            .find(|whole| contains(whole, part))
-            .map(|whole| whole.slice_ref(part))
+            .find(|lending| lending.holds(part))
+            .map(|lending| {
+                lending.shared.set(true);
+                lending.memory.slice_ref(part)
+            })
     })
 }
 
 impl Serialize for Bytes {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        if let Some(loan) = &self.loaned
+            && ENCODING.with(Cell::get) > 0
+        {
+            LOANS.with(|loans| loans.borrow_mut().push(Arc::clone(loan)));
+        }
         serializer.serialize_bytes(&self.data)
     }
 }
@@ -172,7 +444,11 @@ impl<'de> Visitor<'de> for BytesVisitor {
 
     fn visit_borrowed_bytes<E: de::Error>(self, bytes: &'de [u8]) -> Result<Bytes, E> {
         Ok(match lent_slice(bytes) {
-            Some(data) => Bytes { data, lent: true },
+            Some(data) => Bytes {
+                data,
+                lent: true,
+                loaned: None,
+            },
             None => Bytes::from(bytes.to_vec()),
         })
     }
@@ -287,5 +563,160 @@ mod tests {
         assert_eq!(&*frame.pixels, b"ab");
         let frame: Frame = serde_json::from_str(r#"{"number":3,"pixels":"ab"}"#).unwrap();
         assert_eq!(&*frame.pixels, b"ab");
+    }
+
+    /// A lender of heap buffers that it can recognize, as a pool's would be.
+    struct Marked(Vec<u8>);
+
+    impl Loan for Marked {
+        fn as_slice(&self) -> &[u8] {
+            &self.0
+        }
+        fn as_mut_slice(&mut self) -> &mut [u8] {
+            &mut self.0
+        }
+        fn freeze(self: Box<Self>) -> Arc<dyn Lent> {
+            Arc::new(*self)
+        }
+    }
+
+    impl AsRef<[u8]> for Marked {
+        fn as_ref(&self) -> &[u8] {
+            &self.0
+        }
+    }
+
+    impl Lent for Marked {}
+
+    struct Lends {
+        /// Loans of at most this many bytes.
+        room: usize,
+    }
+
+    impl Lender for Lends {
+        fn loan(&self, len: usize) -> Option<Box<dyn Loan>> {
+            (len <= self.room).then(|| Box::new(Marked(vec![0xAA; len])) as Box<dyn Loan>)
+        }
+    }
+
+    /// A postcard writer that keeps each loaned buffer it is handed as a part of its
+    /// own (by reference), as a transport's encoder does.
+    #[derive(Default)]
+    struct Parts {
+        copied: Vec<u8>,
+        parts: Vec<Result<Vec<u8>, Arc<dyn Lent>>>,
+    }
+
+    impl postcard::ser_flavors::Flavor for Parts {
+        type Output = Vec<Result<Vec<u8>, Arc<dyn Lent>>>;
+        fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+            self.copied.push(byte);
+            Ok(())
+        }
+        fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+            match loan_at(bytes) {
+                Some(loan) => {
+                    self.parts.push(Ok(std::mem::take(&mut self.copied)));
+                    self.parts.push(Err(loan));
+                }
+                None => self.copied.extend_from_slice(bytes),
+            }
+            Ok(())
+        }
+        fn finalize(mut self) -> postcard::Result<Self::Output> {
+            self.parts.push(Ok(self.copied));
+            Ok(self.parts)
+        }
+    }
+
+    #[test]
+    fn a_loan_comes_from_the_lender_when_one_has_room_and_is_found_by_its_encoder() {
+        // Without a lender: the heap, zeroed, and nothing to find.
+        let previous = set_lender(None);
+        let mut heap = Bytes::loan(5);
+        assert!(!heap.is_loaned());
+        assert_eq!(&*heap, &[0; 5]);
+        heap.copy_from_slice(b"hello");
+        let heap = heap.freeze();
+        assert!(!heap.is_loaned());
+        assert_eq!(&*heap, b"hello");
+
+        set_lender(Some(Arc::new(Lends { room: 64 })));
+        let mut loaned = Bytes::loan(4);
+        assert!(loaned.is_loaned());
+        loaned.copy_from_slice(&[1, 2, 3, 250]);
+        let pixels = loaned.freeze();
+        assert!(pixels.is_loaned() && !pixels.is_lent());
+        // Too large for the lender: the heap.
+        assert!(!Bytes::loan(65).is_loaned());
+
+        let frame = Frame { number: 7, pixels };
+        // Outside an encoding that looks for loans, nothing is noted.
+        assert!(loan_at(&frame.pixels).is_none());
+        let parts =
+            encoding_loans(|| postcard::serialize_with_flavor(&frame, Parts::default()).unwrap());
+        // The number and the length copied, the pixels handed on as their buffer.
+        assert_eq!(parts.len(), 3, "{}", parts.len());
+        assert_eq!(parts[0].as_ref().ok(), Some(&vec![7, 4]));
+        let loan = parts[1].as_ref().expect_err("the loaned buffer");
+        assert_eq!((**loan).as_ref(), &[1, 2, 3, 250]);
+        assert!(std::ptr::eq(
+            (**loan).as_ref().as_ptr(),
+            frame.pixels.as_ptr()
+        ));
+        assert_eq!(parts[2].as_ref().ok(), Some(&vec![]));
+        // Once the encoding is over, its loans are forgotten.
+        assert!(loan_at(&frame.pixels).is_none());
+        // The same message as the bytes copied.
+        let whole = postcard::to_allocvec(&frame).unwrap();
+        assert_eq!(whole, encoded());
+        set_lender(previous);
+    }
+
+    #[test]
+    fn parts_lent_whole_share_only_bytes_that_are_a_whole_part() {
+        // The message `encoded()` in three parts: the number and the length, the
+        // pixels, nothing.
+        let message = encoded();
+        let parts = vec![message[..2].to_vec(), message[2..].to_vec(), Vec::new()];
+        let pixels_at = parts[1].as_ptr() as usize;
+        let (frame, shared) = lend_whole(parts, |parts| {
+            assert_eq!(parts.len(), 3);
+            let mut joined = Vec::new();
+            for part in parts {
+                joined.extend_from_slice(part);
+            }
+            // Decoded from the parts as a segmented reader would hand them out: the
+            // pixels are borrowed from the second part.
+            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
+            assert!(pixels.is_lent());
+            assert_eq!(pixels.as_ptr() as usize, pixels_at);
+            // Bytes within a part but not all of it are copied.
+            let within = Bytes::deserialize(BorrowedBytes(&parts[1][1..])).unwrap();
+            assert!(!within.is_lent());
+            let frame: Frame = postcard::from_bytes(&joined).unwrap();
+            Frame { pixels, ..frame }
+        });
+        assert_eq!(&*frame.pixels, &[1, 2, 3, 250]);
+        assert!(frame.pixels.is_lent());
+        assert_eq!(shared, 1, "the pixels' part");
+        // Nothing stays lent after.
+        let again = Bytes::deserialize(BorrowedBytes(&[9, 9])).unwrap();
+        assert!(!again.is_lent());
+    }
+
+    /// A deserializer that hands out one borrowed slice of bytes.
+    struct BorrowedBytes<'de>(&'de [u8]);
+
+    impl<'de> Deserializer<'de> for BorrowedBytes<'de> {
+        type Error = de::value::Error;
+        fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+            visitor.visit_borrowed_bytes(self.0)
+        }
+        serde::forward_to_deserialize_any! {
+            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
+            bytes byte_buf option unit unit_struct newtype_struct seq tuple
+            tuple_struct map struct enum identifier ignored_any
+        }
     }
 }

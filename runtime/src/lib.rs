@@ -90,7 +90,7 @@ pub mod equalize;
 mod handle;
 pub mod harness;
 pub mod idle;
-mod lent;
+pub mod lent;
 pub mod log;
 mod mailbox;
 mod monitor;
@@ -125,7 +125,7 @@ pub use crate::commander::{
 };
 pub use crate::compound::{CompoundBuilder, CompoundError, Policy, Supervisor, SupervisorCx, View};
 pub use crate::handle::Handle;
-pub use crate::lent::{Bytes, lend};
+pub use crate::lent::{Bytes, BytesMut, lend};
 pub use crate::monitor::{
     Command, DEFAULT_COMMAND_TIMEOUT, GroupStatus, Monitor, MonitorEvent, OBSERVER_CAPACITY,
     RESPONSE_WINDOW, Rejected, ResponseTimes, SUPERVISION_HISTORY, Step, Subscription, Supervision,

@@ -1016,7 +1016,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => Arc::new(move |payload, via| {
             let taken = shared.received(payload, MAX_TICK_MESSAGE, |bytes| {
-                match codec::decode::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
+                match codec::decode_parts::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
                     Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
                     )),
@@ -1039,7 +1039,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
             let delivered = Mutex::new(Delivered::default());
             Arc::new(move |payload, via| {
                 let taken = shared.received(payload, max_payload, |bytes| {
-                    match codec::decode::<Numbered<T>>(bytes, max_payload) {
+                    match codec::decode_parts::<Numbered<T>>(bytes, max_payload) {
                         Ok((epoch, seq, packet)) => {
                             if via == Via::Stream {
                                 gaps.received(epoch, seq);
@@ -1063,22 +1063,23 @@ fn deliverer<T: Packet + DeserializeOwned>(
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
             Arc::new(move |payload, _via| {
-                let taken = shared.received(payload, max_payload, |bytes| {
-                    match codec::decode::<Posted<T>>(bytes, max_payload) {
-                        Ok((epoch, seq, value)) => {
-                            let mut newest = lock(&newest);
-                            let newer = match *newest {
-                                Some((e, s)) => e != epoch || seq > s,
-                                None => true,
-                            };
-                            if newer {
-                                *newest = Some((epoch, seq));
-                                port.post(value);
+                let taken =
+                    shared.received(payload, max_payload, |bytes| {
+                        match codec::decode_parts::<Posted<T>>(bytes, max_payload) {
+                            Ok((epoch, seq, value)) => {
+                                let mut newest = lock(&newest);
+                                let newer = match *newest {
+                                    Some((e, s)) => e != epoch || seq > s,
+                                    None => true,
+                                };
+                                if newer {
+                                    *newest = Some((epoch, seq));
+                                    port.post(value);
+                                }
                             }
+                            Err(error) => lost(Chain(&error).to_string()),
                         }
-                        Err(error) => lost(Chain(&error).to_string()),
-                    }
-                });
+                    });
                 if let Err(error) = taken {
                     lost(Chain(&error).to_string());
                 }

@@ -64,6 +64,91 @@ pub(crate) fn decode<T: DeserializeOwned>(bytes: &[u8], max: usize) -> Result<T,
     Ok(value)
 }
 
+/// [`decode`] of a message in `parts`, in order (as [`crate::shm`] hands a payload
+/// on): each part read where it is when a value's bytes lie within one part (a
+/// loaned buffer is one whole part); the parts joined into one copy otherwise.
+pub(crate) fn decode_parts<T: DeserializeOwned>(
+    parts: &[&[u8]],
+    max: usize,
+) -> Result<T, Undecodable> {
+    if let [whole] = parts {
+        return decode(whole, max);
+    }
+    let len: usize = parts.iter().map(|part| part.len()).sum();
+    if len > max {
+        return Err(Undecodable::TooLong { len, max });
+    }
+    let mut reader = postcard::Deserializer::from_flavor(Segments { parts, at: 0 });
+    if let Ok(value) = T::deserialize(&mut reader)
+        && let Ok(Rest { parts: left }) = reader.finalize()
+        && left.iter().all(|part| part.is_empty())
+    {
+        return Ok(value);
+    }
+    // A value across two parts (fragments of a message), or bytes that are not a
+    // value: read from one copy, which says which.
+    decode(&parts.concat(), max)
+}
+
+/// A message's parts as postcard reads them: what is left of each part, in order.
+struct Segments<'de> {
+    parts: &'de [&'de [u8]],
+    /// How far into the first part the reading is.
+    at: usize,
+}
+
+impl<'de> Segments<'de> {
+    /// The rest of the current part, past the parts read to their end.
+    fn current(&mut self) -> &'de [u8] {
+        while let Some((first, rest)) = self.parts.split_first() {
+            if self.at < first.len() {
+                return &first[self.at..];
+            }
+            self.parts = rest;
+            self.at = 0;
+        }
+        &[]
+    }
+}
+
+/// What is left: the parts not read, the first from where the reading stopped.
+struct Rest<'de> {
+    parts: Vec<&'de [u8]>,
+}
+
+impl<'de> postcard::de_flavors::Flavor<'de> for Segments<'de> {
+    type Remainder = Rest<'de>;
+    type Source = &'de [u8];
+
+    fn pop(&mut self) -> postcard::Result<u8> {
+        let byte = *self
+            .current()
+            .first()
+            .ok_or(postcard::Error::DeserializeUnexpectedEnd)?;
+        self.at += 1;
+        Ok(byte)
+    }
+
+    fn try_take_n(&mut self, count: usize) -> postcard::Result<&'de [u8]> {
+        let current = self.current();
+        if count == 0 {
+            return Ok(&[]);
+        }
+        let taken = current
+            .get(..count)
+            .ok_or(postcard::Error::DeserializeUnexpectedEnd)?;
+        self.at += count;
+        Ok(taken)
+    }
+
+    fn finalize(mut self) -> postcard::Result<Rest<'de>> {
+        let first = self.current();
+        let mut parts = vec![first];
+        parts.extend(self.parts.iter().skip(1).copied());
+        Ok(Rest { parts })
+    }
+}
+
 /// [`decode`] of a payload as Zenoh holds it: its length is checked before its
 /// bytes are made contiguous (copied, when Zenoh holds them in fragments).
 pub(crate) fn decode_payload<T: DeserializeOwned>(
@@ -138,5 +223,61 @@ mod tests {
         let error = decode::<(u64, u64, f64)>(&[1], 64).unwrap_err();
         assert!(matches!(error, Undecodable::Invalid { .. }), "{error:?}");
         assert!(error.to_string().contains("(u64, u64, f64)"), "{error}");
+    }
+
+    #[test]
+    fn a_message_in_parts_decodes_each_part_in_place_or_from_one_copy() {
+        #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+        struct Image {
+            number: u64,
+            scale: f64,
+            pixels: coolbot::Bytes,
+            tag: String,
+        }
+        let image = Image {
+            number: 300,
+            scale: 0.5,
+            pixels: coolbot::Bytes::from(vec![9u8; 64]),
+            tag: "rgb".to_owned(),
+        };
+        let bytes = encode(&image).unwrap();
+        // The pixels' bytes are one part: varint 300 (2 bytes), 8 of the scale, the
+        // length (1 byte), then 64 pixels, then the tag.
+        let (head, rest) = bytes.split_at(11);
+        let (pixels, tail) = rest.split_at(64);
+        let at = pixels.as_ptr() as usize;
+        let parts = vec![head.to_vec(), pixels.to_vec(), tail.to_vec(), Vec::new()];
+        let pixels_at = parts[1].as_ptr() as usize;
+        let (decoded, shared) =
+            coolbot::lent::lend_whole(parts, |parts| decode_parts::<Image>(parts, 1024).unwrap());
+        assert_eq!(decoded, image);
+        assert!(decoded.pixels.is_lent(), "read in its part");
+        assert_eq!(decoded.pixels.as_ptr() as usize, pixels_at);
+        assert_ne!(at, pixels_at);
+        assert_eq!(shared, 1);
+        // Cut inside the scale and inside the pixels (fragments): read from one copy.
+        for cut in [5, 40] {
+            let (first, second) = bytes.split_at(cut);
+            let decoded = decode_parts::<Image>(&[first, second], 1024).unwrap();
+            assert_eq!(decoded, image, "cut at {cut}");
+        }
+        // Bounds, leftovers and bytes of another type are refused as from one slice.
+        let (first, second) = bytes.split_at(11);
+        assert_eq!(
+            decode_parts::<Image>(&[first, second], 40),
+            Err(Undecodable::TooLong {
+                len: bytes.len(),
+                max: 40
+            })
+        );
+        let extra = [1u8, 2];
+        assert!(matches!(
+            decode_parts::<Image>(&[first, second, &extra], 1024),
+            Err(Undecodable::Trailing { extra: 2, .. })
+        ));
+        assert!(matches!(
+            decode_parts::<Image>(&[&bytes[..3], &bytes[3..20]], 1024),
+            Err(Undecodable::Invalid { .. })
+        ));
     }
 }

@@ -112,6 +112,8 @@ pub struct Node {
     state: Option<PathBuf>,
     /// What its bridges did with shared memory (`crate::shm`).
     shared: Arc<crate::shm::Counters>,
+    /// Its pool as the process's lender (`coolbot::Bytes::loan`).
+    lender: Arc<crate::shm::PoolLender>,
     /// The thread its queryables' answers are sent from (`crate::reply`).
     replies: crate::reply::Replies,
     _token: zenoh::liveliness::LivelinessToken,
@@ -129,6 +131,11 @@ impl Node {
     /// already alive among the peers this session reaches when it opens, or if the
     /// configuration holds a TLS certificate ([`crate::secure_config`]) whose common
     /// name is not `name`.
+    ///
+    /// The node becomes the process's lender (`coolbot::lent::set_lender`): while it
+    /// is open, `coolbot::Bytes::loan` takes its buffers from the node's pool of
+    /// shared memory when that is on (`docs/distribution.md`, "Same host: shared
+    /// memory"); the last node opened lends.
     pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
         keys::check_name(name)?;
         crate::security::check_certificate_name(&config, name)?;
@@ -164,6 +171,9 @@ impl Node {
             })
             .map_err(Error::spawn("control"))?;
         let replies = crate::reply::Replies::start(name, crate::reply::REPLY_QUEUE)?;
+        let shared: Arc<crate::shm::Counters> = Arc::default();
+        let lender = Arc::new(crate::shm::PoolLender::new(&session, Arc::clone(&shared)));
+        coolbot::lent::set_lender(Some(Arc::clone(&lender) as Arc<dyn coolbot::lent::Lender>));
         Ok(Node {
             name: name.to_owned(),
             session,
@@ -174,7 +184,8 @@ impl Node {
             echoed: Arc::default(),
             echoes: Echoes::default(),
             state: crate::tally::state_directory(),
-            shared: Arc::default(),
+            shared,
+            lender,
             replies,
             _token: token,
         })
@@ -432,6 +443,10 @@ impl Node {
 
 impl Drop for Node {
     fn drop(&mut self) {
+        // No more loans from this node's pool; the process has no lender if it was
+        // this node's.
+        self.lender.close();
+        coolbot::lent::withdraw_lender(&*self.lender);
         self.echoes.stop();
         lock(&self.exposures).clear();
         self.control_stop.store(true, Ordering::Release);

@@ -13,21 +13,33 @@
 //! shares the buffer, lent to the decoding (`coolbot::lend`), and keeps it from the
 //! pool while the packet lives.
 //!
+//! A packet's bytes made with `coolbot::Bytes::loan` come from the same pool (the
+//! node is the process's lender, [`PoolLender`]) and are not copied at all: the
+//! outlet encodes the rest of the message on the heap and sends the loaned buffer as
+//! one part of it ([`Arena::encode`]), which Zenoh moves as a descriptor to a node on
+//! this host and as bytes to any other; the inlet decodes the parts in place, the
+//! loaned buffer shared by the packet's `Bytes` (`coolbot::lent::lend_whole`). A
+//! buffer written once is sent so by every outlet of the output: fifo connections to
+//! several processes write no copy each.
+//!
 //! The pool is bounded (Zenoh's `transport/shared_memory/transport_optimization/
 //! pool_size`, 16 MiB by default). When it is full, because consumers still hold
 //! earlier messages, the outlet does not wait for them: it encodes the message on the
 //! heap, and it goes by the link as to another host, counted as copied
 //! ([`SharedMemoryCounts::copied`]); nothing is lost.
 
+use std::any::Any;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
+use coolbot::lent::{Lender, Lent, Loan};
 use serde::Serialize;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
 use zenoh::shm::{
-    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState,
+    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState, ZShm,
+    ZShmMut,
 };
 
 /// The smallest message an outlet writes into shared memory: below it, a message
@@ -44,8 +56,15 @@ pub struct SharedMemoryCounts {
     /// all the same, not lost.
     pub copied: u64,
     /// Messages its inlets, and the outputs of the proxies of its instances placed on
-    /// another node, received in shared memory (from a node on this host).
+    /// another node, received in shared memory (from a node on this host): whole, or
+    /// with a loaned buffer of the sender's read in place.
     pub received: u64,
+    /// Buffers of its pool lent by `coolbot::Bytes::loan` (the node is the process's
+    /// lender while it is open).
+    pub loaned: u64,
+    /// Messages its outlets sent with a loaned buffer as it was, not copied (also
+    /// counted in `shared`).
+    pub in_place: u64,
 }
 
 /// How long the first large message of a node waits for its session's pool to be made.
@@ -57,6 +76,8 @@ pub(crate) struct Counters {
     shared: AtomicU64,
     copied: AtomicU64,
     received: AtomicU64,
+    loaned: AtomicU64,
+    in_place: AtomicU64,
     /// The session's pool, asked of the session once for the whole node.
     pool: OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
 }
@@ -67,20 +88,25 @@ impl Counters {
             shared: self.shared.load(Ordering::Relaxed),
             copied: self.copied.load(Ordering::Relaxed),
             received: self.received.load(Ordering::Relaxed),
+            loaned: self.loaned.load(Ordering::Relaxed),
+            in_place: self.in_place.load(Ordering::Relaxed),
         }
     }
 
     /// An inlet or a proxy's output received `payload`: refused when it is longer
     /// than `max` bytes, before anything is copied (Zenoh may hold it in fragments);
-    /// else counted when it is in shared memory, and handed to `deliver`. A payload
-    /// in shared memory is lent to its decoding ([`coolbot::lend`]): a
+    /// else handed to `deliver` as its parts, in order (one part but for a message
+    /// sent with a loaned buffer, or one Zenoh holds in fragments). A payload in
+    /// shared memory is lent to its decoding ([`coolbot::lend`]): a
     /// [`coolbot::Bytes`] decoded from it shares the buffer (no copy) and keeps it
-    /// from the pool while it lives.
+    /// from the pool while it lives; the parts of a payload in several are lent whole
+    /// ([`coolbot::lent::lend_whole`]): a `Bytes` that is one part (a loaned buffer)
+    /// shares it. Counted when it is in shared memory or a part was shared.
     pub(crate) fn received(
         &self,
         payload: &ZBytes,
         max: usize,
-        deliver: impl FnOnce(&[u8]),
+        deliver: impl FnOnce(&[&[u8]]),
     ) -> Result<(), crate::codec::Undecodable> {
         if payload.len() > max {
             return Err(crate::codec::Undecodable::TooLong {
@@ -88,12 +114,25 @@ impl Counters {
                 max,
             });
         }
-        match payload.as_shm() {
-            Some(buffer) => {
-                self.received.fetch_add(1, Ordering::Relaxed);
-                coolbot::lend(buffer.to_owned(), deliver);
-            }
-            None => deliver(&payload.to_bytes()),
+        if let Some(buffer) = payload.as_shm() {
+            self.received.fetch_add(1, Ordering::Relaxed);
+            coolbot::lend(buffer.to_owned(), |bytes| deliver(&[bytes]));
+            return Ok(());
+        }
+        let parts = payload.slices().count();
+        if parts <= 1 {
+            deliver(&[&payload.to_bytes()]);
+            return Ok(());
+        }
+        let owners: Vec<Part> = (0..parts)
+            .map(|index| Part {
+                payload: payload.clone(),
+                index,
+            })
+            .collect();
+        let ((), shared) = coolbot::lent::lend_whole(owners, deliver);
+        if shared > 0 {
+            self.received.fetch_add(1, Ordering::Relaxed);
         }
         Ok(())
     }
@@ -130,6 +169,169 @@ impl Counters {
     }
 }
 
+/// One part of a payload that Zenoh holds in several: the owner of that part's
+/// memory, lent to a decoding.
+struct Part {
+    payload: ZBytes,
+    index: usize,
+}
+
+impl AsRef<[u8]> for Part {
+    fn as_ref(&self) -> &[u8] {
+        self.payload.slices().nth(self.index).unwrap_or_default()
+    }
+}
+
+/// A node's pool as the process's lender (`coolbot::Bytes::loan`): while the node is
+/// open, a loan is a buffer of its pool, when shared memory is on and the pool has
+/// room.
+pub(crate) struct PoolLender {
+    /// The node's session; None once the node is dropped (the lender does not keep
+    /// the session open).
+    session: Mutex<Option<zenoh::Session>>,
+    counters: Arc<Counters>,
+}
+
+impl PoolLender {
+    pub(crate) fn new(session: &zenoh::Session, counters: Arc<Counters>) -> PoolLender {
+        PoolLender {
+            session: Mutex::new(Some(session.clone())),
+            counters,
+        }
+    }
+
+    /// The node is dropped: no more loans from its pool.
+    pub(crate) fn close(&self) {
+        self.session
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+    }
+}
+
+impl Lender for PoolLender {
+    /// A loan smaller than [`SHARED_THRESHOLD`] is made on the heap: its message would
+    /// be copied through the link anyway.
+    fn loan(&self, len: usize) -> Option<Box<dyn Loan>> {
+        if len < SHARED_THRESHOLD {
+            return None;
+        }
+        let session = self
+            .session
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()?;
+        let pool = self.counters.pool(&session)?;
+        // Never waits: a full pool is collected and defragmented once, then the loan
+        // is made on the heap.
+        let buffer = pool
+            .alloc(len)
+            .with_policy::<Defragment<GarbageCollect>>()
+            .wait()
+            .ok()?;
+        self.counters.loaned.fetch_add(1, Ordering::Relaxed);
+        Some(Box::new(PoolLoan(buffer)))
+    }
+}
+
+/// A buffer of a node's pool, lent to be written.
+struct PoolLoan(ZShmMut);
+
+impl Loan for PoolLoan {
+    fn as_slice(&self) -> &[u8] {
+        &self.0
+    }
+
+    fn as_mut_slice(&mut self) -> &mut [u8] {
+        &mut self.0
+    }
+
+    fn freeze(self: Box<Self>) -> Arc<dyn Lent> {
+        Arc::new(PoolLent(ZShm::from(self.0)))
+    }
+}
+
+/// A buffer of a node's pool, written: what an outlet sends as it is.
+struct PoolLent(ZShm);
+
+impl AsRef<[u8]> for PoolLent {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+impl Lent for PoolLent {}
+
+/// A message as its parts: bytes copied, and buffers of a pool sent as they are.
+#[derive(Default)]
+struct Parts {
+    copied: Vec<u8>,
+    writer: Option<zenoh::bytes::ZBytesWriter>,
+}
+
+impl postcard::ser_flavors::Flavor for Parts {
+    type Output = Option<ZBytes>;
+
+    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+        self.copied.push(byte);
+        Ok(())
+    }
+
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        let buffer = coolbot::lent::loan_at(bytes).and_then(|lent| {
+            let lent: &dyn Any = &*lent;
+            lent.downcast_ref::<PoolLent>().map(|lent| lent.0.clone())
+        });
+        match buffer {
+            Some(buffer) => {
+                let writer = self.writer.get_or_insert_with(ZBytes::writer);
+                writer.append(ZBytes::from(std::mem::take(&mut self.copied)));
+                writer.append(ZBytes::from(buffer));
+            }
+            None => self.copied.extend_from_slice(bytes),
+        }
+        Ok(())
+    }
+
+    /// The message in parts, or None when it had no buffer of a pool (its bytes are
+    /// to be encoded as one).
+    fn finalize(self) -> postcard::Result<Option<ZBytes>> {
+        Ok(self.writer.map(|mut writer| {
+            if !self.copied.is_empty() {
+                writer.append(ZBytes::from(self.copied));
+            }
+            writer.finish()
+        }))
+    }
+}
+
+/// Whether `value` holds a buffer of a pool (`coolbot::Bytes::loan`), as its encoder
+/// would find it.
+#[derive(Default)]
+struct Loaned(bool);
+
+impl postcard::ser_flavors::Flavor for Loaned {
+    type Output = bool;
+
+    fn try_push(&mut self, _byte: u8) -> postcard::Result<()> {
+        Ok(())
+    }
+
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        if !self.0
+            && let Some(lent) = coolbot::lent::loan_at(bytes)
+        {
+            let lent: &dyn Any = &*lent;
+            self.0 = lent.is::<PoolLent>();
+        }
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<bool> {
+        Ok(self.0)
+    }
+}
+
 /// An outlet's way into its session's shared memory (the node's pool).
 pub(crate) struct Arena {
     session: zenoh::Session,
@@ -144,7 +346,9 @@ impl Arena {
         }
     }
 
-    /// `value` encoded as a message: in shared memory when it is at least
+    /// `value` encoded as a message: the bytes a loaned buffer holds (a
+    /// `coolbot::Bytes` made by `Bytes::loan` from a node's pool) sent as that
+    /// buffer, the rest copied on the heap; else in shared memory when it is at least
     /// [`SHARED_THRESHOLD`] bytes and the pool has room, else on the heap.
     pub(crate) fn encode<P: Serialize + ?Sized>(
         &self,
@@ -153,6 +357,19 @@ impl Arena {
         let size = postcard::serialize_with_flavor(value, postcard::ser_flavors::Size::default())?;
         if size < SHARED_THRESHOLD {
             return Ok(crate::codec::encode(value)?.into());
+        }
+        let loaned = coolbot::lent::encoding_loans(|| {
+            postcard::serialize_with_flavor(value, Loaned::default())
+        })?;
+        if loaned {
+            let parts = coolbot::lent::encoding_loans(|| {
+                postcard::serialize_with_flavor(value, Parts::default())
+            })?;
+            if let Some(parts) = parts {
+                self.counters.shared.fetch_add(1, Ordering::Relaxed);
+                self.counters.in_place.fetch_add(1, Ordering::Relaxed);
+                return Ok(parts);
+            }
         }
         let buffer = self.counters.pool(&self.session).and_then(|provider| {
             // Never waits: a full pool is collected and defragmented once, then the

@@ -6,12 +6,18 @@
 //!   is what the test wrote);
 //! - `hold ENDPOINT KEY`: a raw Zenoh subscriber on KEY that keeps every sample it gets
 //!   (a consumer that holds packets), and prints `held <count> <in shared memory>`;
-//! - `read-in-place NAME ENDPOINT KEY`: node NAME, connected to ENDPOINT, reads images
+//! - `read-in-place NAME ENDPOINT KEY [on|off]`: node NAME, connected to ENDPOINT
+//!   with shared memory on (the default) or off, reads images
 //!   on KEY through an inlet into a queue, and prints `image <number> <ok|bad>
 //!   <lent|copied>` for each (`lent`: its pixels, a `coolbot::Bytes`, were decoded in
 //!   place);
 //! - `produce NAME KEY`: node NAME, alone, sends large frames through an outlet on KEY
-//!   until one was written into shared memory, then prints `ready`.
+//!   until one was written into shared memory, then prints `ready`;
+//! - `send-loaned NAME ENDPOINT KEY COUNT`: node NAME, listening on ENDPOINT, once a
+//!   subscriber matches KEY sends COUNT images through an outlet on KEY (a fifo), the
+//!   even-numbered ones large, each one's pixels a buffer of `coolbot::Bytes::loan`,
+//!   filled as `read-in-place` checks; prints `loaned <yes|no>` for each, then `sent
+//!   <loaned> <in place> <shared> <copied>` (the node's counts).
 //!
 //! It prints `ready` once it listens (consume, hold), and runs until it is killed.
 
@@ -21,9 +27,10 @@ use coolbot::crossbeam_channel;
 use coolbot::port::FifoIn;
 use coolbot::{Component, InputKind, OutputKind, OverflowPolicy, Packet, System};
 use coolbot_zenoh::Node;
+use coolbot_zenoh_tests::generated::picture_source;
 use coolbot_zenoh_tests::generated::types::{Chunk, Picture};
 use coolbot_zenoh_tests::generated::{picture_queue, shm_queue, shm_source};
-use coolbot_zenoh_tests::support::{Hand, outlet_fed};
+use coolbot_zenoh_tests::support::{Hand, outlet_fed, wait_subscribed};
 use zenoh::Wait;
 
 fn config(connect: &[String], shared_memory: bool) -> zenoh::Config {
@@ -111,10 +118,11 @@ fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
     })
 }
 
-fn read_in_place(name: &str, endpoint: String, key: &str) -> ! {
-    let (input, _node, _system) = inlet_into_queue::<Picture>(name, endpoint, key, true, |hand| {
-        picture_queue::component("queue", hand)
-    });
+fn read_in_place(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
+    let (input, _node, _system) =
+        inlet_into_queue::<Picture>(name, endpoint, key, shared_memory, |hand| {
+            picture_queue::component("queue", hand)
+        });
     each(&input, |image| {
         let ok = image
             .pixels
@@ -179,6 +187,54 @@ fn produce(name: &str, key: &str) -> ! {
     }
 }
 
+fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
+    let mut config = coolbot_zenoh::peer_config(&[endpoint], &[], false).expect("a configuration");
+    config
+        .insert_json5("transport/shared_memory/enabled", "true")
+        .expect("the shared-memory setting");
+    let node = Node::open(name, config).expect("the node opens");
+    let kind = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Block,
+    };
+    let (hand, handed) = crossbeam_channel::bounded(1);
+    let source = picture_source::component("source", Hand(hand));
+    let (_system, out) = outlet_fed(&node, key, kind, source, &handed);
+    say("ready");
+    wait_subscribed(&node, key);
+    for number in 1..=count {
+        let size = if number % 2 == 0 { 256 << 10 } else { 16 };
+        let mut pixels = coolbot::Bytes::loan(size);
+        for (i, byte) in pixels.iter_mut().enumerate() {
+            *byte = (number as usize + i) as u8;
+        }
+        say(&format!(
+            "loaned {}",
+            if pixels.is_loaned() { "yes" } else { "no" }
+        ));
+        out.send(Picture {
+            number,
+            pixels: pixels.freeze(),
+        });
+    }
+    // Every image is through the outlet once the node counted each large one.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    let large = count / 2;
+    while node.shared_memory().shared + node.shared_memory().copied < large
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let counts = node.shared_memory();
+    say(&format!(
+        "sent {} {} {} {}",
+        counts.loaned, counts.in_place, counts.shared, counts.copied
+    ));
+    loop {
+        std::thread::park();
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -186,12 +242,23 @@ fn main() {
         ["consume", name, endpoint, key, shm] => {
             consume(name, (*endpoint).to_owned(), key, *shm == "on")
         }
-        ["read-in-place", name, endpoint, key] => read_in_place(name, (*endpoint).to_owned(), key),
+        ["read-in-place", name, endpoint, key] => {
+            read_in_place(name, (*endpoint).to_owned(), key, true)
+        }
+        ["read-in-place", name, endpoint, key, shm] => {
+            read_in_place(name, (*endpoint).to_owned(), key, *shm == "on")
+        }
         ["hold", endpoint, key] => hold((*endpoint).to_owned(), key),
         ["produce", name, key] => produce(name, key),
+        ["send-loaned", name, endpoint, key, count] => send_loaned(
+            name,
+            (*endpoint).to_owned(),
+            key,
+            count.parse().expect("a count"),
+        ),
         _ => {
             eprintln!(
-                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY | hold ENDPOINT KEY | produce NAME KEY"
+                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY [on|off] | hold ENDPOINT KEY | produce NAME KEY | send-loaned NAME ENDPOINT KEY COUNT"
             );
             std::process::exit(2);
         }

@@ -237,6 +237,58 @@ fn bytes_from_a_process_on_this_host_are_read_in_place() {
     assert!(system.shutdown().clean(), "unclean shutdown");
 }
 
+/// A producer process sends 20 images whose pixels it fills in buffers of
+/// `Bytes::loan` (the even-numbered ones large) to a consumer process with shared
+/// memory `consumer_memory`; checks what the producer loaned and each image the
+/// consumer read, `large` being how the consumer read the large ones.
+fn loaned_to(consumer_memory: &str, key: &str, name: &str, large: &str) {
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let producer = Peer::start(&[
+        "send-loaned",
+        &format!("{name}-producer"),
+        &endpoint,
+        key,
+        "20",
+    ]);
+    let consumer = Peer::start(&[
+        "read-in-place",
+        &format!("{name}-consumer"),
+        &endpoint,
+        key,
+        consumer_memory,
+    ]);
+    for number in 1..=20u64 {
+        let line = producer.next_matching(|line| line.starts_with("loaned "));
+        let loaned = if number % 2 == 0 { "yes" } else { "no" };
+        assert_eq!(line, format!("loaned {loaned}"), "image {number}");
+    }
+    for number in 1..=20u64 {
+        let line = consumer.next_matching(|line| line.starts_with("image "));
+        let expected = if number % 2 == 0 { large } else { "copied" };
+        assert_eq!(line, format!("image {number} ok {expected}"));
+    }
+    // Ten buffers lent by the pool, each sent in place (a message in shared memory),
+    // none copied.
+    let line = producer.next_matching(|line| line.starts_with("sent "));
+    assert_eq!(line, "sent 10 10 10 0", "loaned, in place, shared, copied");
+}
+
+#[test]
+fn bytes_loaned_from_the_pool_reach_a_process_on_this_host_without_a_copy() {
+    // The large pixels come from the producer node's pool, and its outlet sends that
+    // buffer as it is (no copy); the consumer reads them where they are. The small
+    // ones come from the heap and cross the link, copied.
+    loaned_to("on", "test/shm/loaned", "shm-loan", "lent");
+}
+
+#[test]
+fn bytes_loaned_from_the_pool_reach_a_consumer_without_shared_memory_over_the_link() {
+    // A consumer that does not map shared memory (another host, or shared memory
+    // off): Zenoh sends the loaned buffer's bytes over the link, and the consumer
+    // reads every image intact, in memory of its own.
+    loaned_to("off", "test/shm/loaned_off", "shm-loan-off", "copied");
+}
+
 /// Sends `count` large frames on `out`, one at a time: each once every consumer has
 /// printed the one before (so that a `last` outlet publishes every one). Checks that
 /// each consumer got every frame, intact and in order; how many each received in
