@@ -151,6 +151,15 @@ pub const FRAGMENTS: &[(Place, &str)] = &[
         "type Twist = crate::generated::types::RosTwist;\nlet mut system = System::new();\n",
     ),
     (
+        place("docs/distribution.md", "## Same host: shared memory", 0),
+        "use crate::generated::types::Image;\n\
+         struct Camera;\n\
+         impl Camera { fn read_frame_into(&mut self, frame: &mut [u8]) { frame.fill(1); } }\n\
+         let mut camera = Camera;\n\
+         struct Outputs { image: coolbot::port::DataOut<Image> }\n\
+         let outputs = Outputs { image: coolbot::port::DataOut::new() };\n",
+    ),
+    (
         place("docs/distribution.md", "### What is built: the agent", 0),
         "let config = coolbot_zenoh::zenoh::Config::default();\n\
          let robot_node = Node::open(\"robot\", coolbot_zenoh::zenoh::Config::default())?;\n",

@@ -16,7 +16,10 @@
 //! blocks on); the coolbot bridge with shared memory off (the TCP bridge: an outlet
 //! and an inlet) and on. The bridge carries a packet of one `[u8]` field as coolc
 //! generates it (its bytes serialized as one slice); `bridge-shm-lent` carries it as a
-//! `coolbot::Bytes`, which the receiver decodes in place, in the sender's buffer.
+//! `coolbot::Bytes`, which the receiver decodes in place, in the sender's buffer;
+//! `bridge-shm-loan` fills that `Bytes` in a loan of the sender node's pool
+//! (`coolbot::Bytes::loan`: the one copy of the frame, as raw Zenoh's into its
+//! `ZShmMut`), which the outlet sends as it is.
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
@@ -59,16 +62,18 @@ enum Engine {
     BridgeTcp,
     BridgeShm,
     BridgeShmLent,
+    BridgeShmLoan,
 }
 
 impl Engine {
-    const ALL: [Engine; 6] = [
+    const ALL: [Engine; 7] = [
         Engine::ZenohTcp,
         Engine::ZenohShm,
         Engine::Iceoryx2,
         Engine::BridgeTcp,
         Engine::BridgeShm,
         Engine::BridgeShmLent,
+        Engine::BridgeShmLoan,
     ];
 
     fn name(self) -> &'static str {
@@ -79,6 +84,7 @@ impl Engine {
             Engine::BridgeTcp => "bridge-tcp",
             Engine::BridgeShm => "bridge-shm",
             Engine::BridgeShmLent => "bridge-shm-lent",
+            Engine::BridgeShmLoan => "bridge-shm-loan",
         }
     }
 
@@ -379,10 +385,47 @@ struct LentFrame {
     bytes: coolbot::Bytes,
 }
 
+/// The same packet, its bytes filled in a loan of the sender node's pool
+/// (`bridge-shm-loan`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+struct LoanedFrame {
+    bytes: coolbot::Bytes,
+}
+
 /// A packet of bytes the bridge carries.
 trait Payload: coolbot::Packet + serde::Serialize + serde::de::DeserializeOwned {
     fn wrap(bytes: Vec<u8>) -> Self;
     fn bytes(&self) -> &[u8];
+
+    /// Packet `number`: a copy of `frame` (as a driver fills a buffer of its own),
+    /// stamped.
+    fn make(frame: &[u8], number: u64) -> Self {
+        let mut packet = frame.to_vec();
+        stamp(&mut packet, number);
+        Self::wrap(packet)
+    }
+}
+
+impl Payload for LoanedFrame {
+    fn wrap(bytes: Vec<u8>) -> LoanedFrame {
+        LoanedFrame {
+            bytes: bytes.into(),
+        }
+    }
+
+    fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    /// The copy of `frame` made into a loan of the node's pool.
+    fn make(frame: &[u8], number: u64) -> LoanedFrame {
+        let mut packet = coolbot::Bytes::loan(frame.len());
+        packet.copy_from_slice(frame);
+        stamp(&mut packet, number);
+        LoanedFrame {
+            bytes: packet.freeze(),
+        }
+    }
 }
 
 impl Payload for Frame {
@@ -529,11 +572,7 @@ fn bridge_sender_to<P: Payload>(
         }
     }
     let frame = vec![7u8; stream.size];
-    paced(stream, |number| {
-        let mut packet = frame.clone();
-        stamp(&mut packet, number);
-        output.send(P::wrap(packet));
-    });
+    paced(stream, |number| output.send(P::make(&frame, number)));
     for outlet in &outlets {
         let lost = system
             .handle(outlet)
@@ -541,7 +580,10 @@ fn bridge_sender_to<P: Payload>(
         assert_eq!(lost, 0, "the outlet lost packets");
     }
     let shared = node.shared_memory();
-    println!("shared {} {}", shared.shared, shared.copied);
+    println!(
+        "shared {} {} {}",
+        shared.shared, shared.copied, shared.in_place
+    );
     assert!(system.shutdown().clean(), "unclean shutdown");
     drop(state);
 }
@@ -766,9 +808,14 @@ fn peer(args: &[String]) {
                     ready();
                     common::expect(&result, LIMIT, "zenoh stream")
                 }
-                Engine::BridgeTcp | Engine::BridgeShm | Engine::BridgeShmLent => {
+                Engine::BridgeTcp
+                | Engine::BridgeShm
+                | Engine::BridgeShmLent
+                | Engine::BridgeShmLoan => {
                     let (_state, _node, system) = if engine == Engine::BridgeShmLent {
                         bridge_receiver::<LentFrame>(address, true, stream, done)
+                    } else if engine == Engine::BridgeShmLoan {
+                        bridge_receiver::<LoanedFrame>(address, true, stream, done)
                     } else {
                         bridge_receiver::<Frame>(address, engine == Engine::BridgeShm, stream, done)
                     };
@@ -805,6 +852,7 @@ fn peer(args: &[String]) {
                     bridge_sender::<Frame>(address, engine == Engine::BridgeShm, stream)
                 }
                 Engine::BridgeShmLent => bridge_sender::<LentFrame>(address, true, stream),
+                Engine::BridgeShmLoan => bridge_sender::<LoanedFrame>(address, true, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::send(address, stream),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -992,16 +1040,21 @@ fn main() {
         (Goal::AtMost(0.2), Goal::AtMost(0.2)),
     );
     against(&mut table, Engine::ZenohTcp, (Goal::None, Goal::None));
-    // The same goals for a packet whose bytes the receiver reads in place.
-    if let Some((_, lent)) = figure(Engine::BridgeShmLent) {
+    // The same goals for a packet whose bytes the receiver reads in place, and for
+    // one filled in a loan of the pool.
+    for engine in [Engine::BridgeShmLent, Engine::BridgeShmLoan] {
+        let Some((_, packet)) = figure(engine) else {
+            continue;
+        };
         for (baseline, goal) in [
             (Engine::ZenohShm, Goal::AtMost(1.2)),
+            (Engine::Iceoryx2, Goal::AtMost(1.2)),
             (Engine::BridgeTcp, Goal::AtMost(0.2)),
         ] {
             if let Some((_, large)) = figure(baseline) {
                 table.row(
-                    &format!("4 MiB CPU/packet, bridge-shm-lent vs {}", baseline.name()),
-                    Figure::Time(lent.cpu_per_packet),
+                    &format!("4 MiB CPU/packet, {} vs {}", engine.name(), baseline.name()),
+                    Figure::Time(packet.cpu_per_packet),
                     Figure::Time(large.cpu_per_packet),
                     goal,
                 );
