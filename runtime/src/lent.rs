@@ -210,43 +210,41 @@ pub trait Loan: Send + 'static {
 /// its lender's encoder recognizes it by ([`loan_at`]).
 pub trait Lent: AsRef<[u8]> + Any + Send + Sync {}
 
-/// Where [`Bytes::loan`] takes its buffers from (set with [`set_lender`]).
+/// Where [`Bytes::loan`] takes its buffers from (set with [`push_lender`]).
 pub trait Lender: Send + Sync + 'static {
     /// A buffer of exactly `len` bytes, or None (no room: the loan is made on the
     /// heap).
     fn loan(&self, len: usize) -> Option<Box<dyn Loan>>;
 }
 
-/// The process's lender.
-static LENDER: RwLock<Option<Arc<dyn Lender>>> = RwLock::new(None);
+/// The lenders set, the process's lender last.
+static LENDERS: RwLock<Vec<Arc<dyn Lender>>> = RwLock::new(Vec::new());
 
-/// Makes `lender` the process's lender for [`Bytes::loan`] (None: the heap), and
-/// returns the one it replaces.
-pub fn set_lender(lender: Option<Arc<dyn Lender>>) -> Option<Arc<dyn Lender>> {
-    std::mem::replace(
-        &mut *LENDER.write().unwrap_or_else(PoisonError::into_inner),
-        lender,
-    )
+/// Makes `lender` the process's lender for [`Bytes::loan`], until it is withdrawn
+/// ([`withdraw_lender`]); the lender it follows lends again then.
+pub fn push_lender(lender: Arc<dyn Lender>) {
+    LENDERS
+        .write()
+        .unwrap_or_else(PoisonError::into_inner)
+        .push(lender);
 }
 
-/// `lender` is no longer the process's lender, if it still is (the process then has
-/// none, and loans come from the heap); another lender set since stays.
+/// `lender` no longer lends: the latest lender set before it and not withdrawn is the
+/// process's lender again (none: loans come from the heap).
 pub fn withdraw_lender(lender: &dyn Lender) {
-    let mut current = LENDER.write().unwrap_or_else(PoisonError::into_inner);
-    if current
-        .as_ref()
-        .is_some_and(|current| std::ptr::addr_eq(Arc::as_ptr(current), lender))
-    {
-        *current = None;
-    }
+    LENDERS
+        .write()
+        .unwrap_or_else(PoisonError::into_inner)
+        .retain(|set| !std::ptr::addr_eq(Arc::as_ptr(set), lender));
 }
 
 /// The process's lender, if one is set.
 pub fn lender() -> Option<Arc<dyn Lender>> {
-    LENDER
+    LENDERS
         .read()
         .unwrap_or_else(PoisonError::into_inner)
-        .clone()
+        .last()
+        .cloned()
 }
 
 /// A frozen loan as the owner of a `bytes::Bytes`.
@@ -291,6 +289,9 @@ pub fn encoding_loans<R>(encode: impl FnOnce() -> R) -> R {
 /// The loaned buffer that is exactly `bytes` (the same memory, whole), if a
 /// [`Bytes`] serialized in the current [`encoding_loans`] on this thread is one.
 pub fn loan_at(bytes: &[u8]) -> Option<Arc<dyn Lent>> {
+    if bytes.is_empty() {
+        return None;
+    }
     LOANS.with(|loans| {
         loans
             .borrow()
@@ -314,8 +315,6 @@ struct Lending {
     memory: ::bytes::Bytes,
     /// Only bytes that are this memory exactly, whole, share it.
     whole_only: bool,
-    /// Bytes decoded meanwhile share it.
-    shared: Cell<bool>,
 }
 
 impl Lending {
@@ -363,42 +362,64 @@ where
         lent.borrow_mut().push(Lending {
             memory: memory.clone(),
             whole_only: false,
-            shared: Cell::new(false),
         });
     });
     let _return = Return(1);
     read(&memory)
 }
 
-/// Calls `read` with the bytes of `owners`, the parts of one message in order, lent
-/// whole: a [`Bytes`] decoded meanwhile on this thread whose bytes are exactly one
-/// part (that memory, all of it) shares that part's owner instead of copying. A
-/// message sent with a loaned buffer in it ([`Bytes::loan`]) arrives as such parts,
-/// the loaned buffer one of them. Returns what `read` returned, and how many parts a
-/// `Bytes` shares.
-pub fn lend_whole<O, R>(owners: Vec<O>, read: impl FnOnce(&[&[u8]]) -> R) -> (R, usize)
+/// Calls `read` with the bytes of `parts`, the parts of one message in order, each
+/// with whether it may be shared: a [`Bytes`] decoded meanwhile on this thread whose
+/// bytes are exactly such a part (that memory, all of it) shares that part's owner
+/// instead of copying. A message sent with a loaned buffer in it ([`Bytes::loan`])
+/// arrives as such parts, the loaned buffer one of them. Returns what `read`
+/// returned, and how many parts it still shares (its `Bytes` keep them alive).
+pub fn lend_whole<O, R>(parts: Vec<(O, bool)>, read: impl FnOnce(&[&[u8]]) -> R) -> (R, usize)
 where
     O: AsRef<[u8]> + Send + 'static,
 {
-    let parts: Vec<::bytes::Bytes> = owners.into_iter().map(::bytes::Bytes::from_owner).collect();
-    LENT.with(|lent| {
-        lent.borrow_mut().extend(parts.iter().map(|memory| Lending {
-            memory: memory.clone(),
-            whole_only: true,
-            shared: Cell::new(false),
-        }));
+    /// A part's owner, and a count of who holds it.
+    struct Held<O> {
+        owner: O,
+        _held: Arc<()>,
+    }
+    impl<O: AsRef<[u8]>> AsRef<[u8]> for Held<O> {
+        fn as_ref(&self) -> &[u8] {
+            self.owner.as_ref()
+        }
+    }
+    let mut held = Vec::new();
+    let mut memory = Vec::with_capacity(parts.len());
+    let mut lent = 0;
+    LENT.with(|lendings| {
+        let mut lendings = lendings.borrow_mut();
+        for (owner, shared) in parts {
+            let count = Arc::new(());
+            let bytes = ::bytes::Bytes::from_owner(Held {
+                owner,
+                _held: Arc::clone(&count),
+            });
+            if shared {
+                lendings.push(Lending {
+                    memory: bytes.clone(),
+                    whole_only: true,
+                });
+                lent += 1;
+                held.push(count);
+            }
+            memory.push(bytes);
+        }
     });
-    let _return = Return(parts.len());
-    let slices: Vec<&[u8]> = parts.iter().map(|part| &part[..]).collect();
-    let value = read(&slices);
-    let shared = LENT.with(|lent| {
-        let lent = lent.borrow();
-        let from = lent.len().saturating_sub(parts.len());
-        lent[from..]
-            .iter()
-            .filter(|lending| lending.shared.get())
-            .count()
-    });
+    let value = {
+        let _return = Return(lent);
+        let slices: Vec<&[u8]> = memory.iter().map(|part| &part[..]).collect();
+        read(&slices)
+    };
+    drop(memory);
+    let shared = held
+        .iter()
+        .filter(|count| Arc::strong_count(count) > 1)
+        .count();
     (value, shared)
 }
 
@@ -409,10 +430,7 @@ fn lent_slice(part: &[u8]) -> Option<::bytes::Bytes> {
             .iter()
             .rev()
             .find(|lending| lending.holds(part))
-            .map(|lending| {
-                lending.shared.set(true);
-                lending.memory.slice_ref(part)
-            })
+            .map(|lending| lending.memory.slice_ref(part))
     })
 }
 
@@ -631,8 +649,9 @@ mod tests {
 
     #[test]
     fn a_loan_comes_from_the_lender_when_one_has_room_and_is_found_by_its_encoder() {
-        // Without a lender: the heap, zeroed, and nothing to find.
-        let previous = set_lender(None);
+        // A lender that lends nothing: the heap, zeroed, and nothing to find.
+        let none: Arc<dyn Lender> = Arc::new(Lends { room: 0 });
+        push_lender(Arc::clone(&none));
         let mut heap = Bytes::loan(5);
         assert!(!heap.is_loaned());
         assert_eq!(&*heap, &[0; 5]);
@@ -641,7 +660,8 @@ mod tests {
         assert!(!heap.is_loaned());
         assert_eq!(&*heap, b"hello");
 
-        set_lender(Some(Arc::new(Lends { room: 64 })));
+        let lends: Arc<dyn Lender> = Arc::new(Lends { room: 64 });
+        push_lender(Arc::clone(&lends));
         let mut loaned = Bytes::loan(4);
         assert!(loaned.is_loaned());
         loaned.copy_from_slice(&[1, 2, 3, 250]);
@@ -670,7 +690,14 @@ mod tests {
         // The same message as the bytes copied.
         let whole = postcard::to_allocvec(&frame).unwrap();
         assert_eq!(whole, encoded());
-        set_lender(previous);
+        // Withdrawn, the lender before lends again; then none.
+        withdraw_lender(&*lends);
+        assert!(!Bytes::loan(4).is_loaned());
+        push_lender(Arc::clone(&lends));
+        withdraw_lender(&*none);
+        assert!(Bytes::loan(4).is_loaned(), "the one left lends");
+        withdraw_lender(&*lends);
+        assert!(lender().is_none());
     }
 
     #[test]
@@ -678,8 +705,12 @@ mod tests {
         // The message `encoded()` in three parts: the number and the length, the
         // pixels, nothing.
         let message = encoded();
-        let parts = vec![message[..2].to_vec(), message[2..].to_vec(), Vec::new()];
-        let pixels_at = parts[1].as_ptr() as usize;
+        let parts = vec![
+            (message[..2].to_vec(), true),
+            (message[2..].to_vec(), true),
+            (Vec::new(), true),
+        ];
+        let pixels_at = parts[1].0.as_ptr() as usize;
         let (frame, shared) = lend_whole(parts, |parts| {
             assert_eq!(parts.len(), 3);
             let mut joined = Vec::new();
@@ -700,6 +731,26 @@ mod tests {
         assert_eq!(&*frame.pixels, &[1, 2, 3, 250]);
         assert!(frame.pixels.is_lent());
         assert_eq!(shared, 1, "the pixels' part");
+        // Shared no longer once the pixels are gone; a part that may not be shared is
+        // copied.
+        drop(frame);
+        let message = encoded();
+        let parts = vec![
+            (message[..2].to_vec(), true),
+            (message[2..].to_vec(), false),
+        ];
+        let (copied, shared) = lend_whole(parts, |parts| {
+            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
+            assert!(!pixels.is_lent());
+            pixels
+        });
+        assert_eq!((&*copied, shared), (&message[2..], 0));
+        let parts = vec![(message.clone(), true)];
+        let ((), shared) = lend_whole(parts, |parts| {
+            let whole = Bytes::deserialize(BorrowedBytes(parts[0])).unwrap();
+            assert!(whole.is_lent());
+        });
+        assert_eq!(shared, 0, "what was decoded is gone");
         // Nothing stays lent after.
         let again = Bytes::deserialize(BorrowedBytes(&[9, 9])).unwrap();
         assert!(!again.is_lent());

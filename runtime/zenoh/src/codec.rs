@@ -246,8 +246,13 @@ mod tests {
         let (head, rest) = bytes.split_at(11);
         let (pixels, tail) = rest.split_at(64);
         let at = pixels.as_ptr() as usize;
-        let parts = vec![head.to_vec(), pixels.to_vec(), tail.to_vec(), Vec::new()];
-        let pixels_at = parts[1].as_ptr() as usize;
+        let parts = vec![
+            (head.to_vec(), true),
+            (pixels.to_vec(), true),
+            (tail.to_vec(), true),
+            (Vec::new(), true),
+        ];
+        let pixels_at = parts[1].0.as_ptr() as usize;
         let (decoded, shared) =
             coolbot::lent::lend_whole(parts, |parts| decode_parts::<Image>(parts, 1024).unwrap());
         assert_eq!(decoded, image);

@@ -132,15 +132,16 @@ impl Node {
     /// configuration holds a TLS certificate ([`crate::secure_config`]) whose common
     /// name is not `name`.
     ///
-    /// The node becomes the process's lender (`coolbot::lent::set_lender`): while it
-    /// is open, `coolbot::Bytes::loan` takes its buffers from the node's pool of
-    /// shared memory when that is on (`docs/distribution.md`, "Same host: shared
-    /// memory"); the last node opened lends.
+    /// With shared memory on, the node becomes the process's lender
+    /// (`coolbot::lent::push_lender`) until it is dropped: `coolbot::Bytes::loan` takes
+    /// its buffers from the node's pool (`docs/distribution.md`, "Same host: shared
+    /// memory"); of several such nodes, the one opened last and not dropped lends.
     pub fn open(name: &str, config: zenoh::Config) -> Result<Node, Error> {
         keys::check_name(name)?;
         crate::security::check_certificate_name(&config, name)?;
         // Before its own: what a killed process left on this host is freed.
         crate::shm::reclaim();
+        let shared_memory = crate::shm::enabled(&config);
         let session = zenoh::open(config)
             .wait()
             .map_err(Error::zenoh("open the session"))?;
@@ -173,7 +174,9 @@ impl Node {
         let replies = crate::reply::Replies::start(name, crate::reply::REPLY_QUEUE)?;
         let shared: Arc<crate::shm::Counters> = Arc::default();
         let lender = Arc::new(crate::shm::PoolLender::new(&session, Arc::clone(&shared)));
-        coolbot::lent::set_lender(Some(Arc::clone(&lender) as Arc<dyn coolbot::lent::Lender>));
+        if shared_memory {
+            coolbot::lent::push_lender(Arc::clone(&lender) as Arc<dyn coolbot::lent::Lender>);
+        }
         Ok(Node {
             name: name.to_owned(),
             session,

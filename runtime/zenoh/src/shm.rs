@@ -37,6 +37,7 @@ use coolbot::lent::{Lender, Lent, Loan};
 use serde::Serialize;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
+use zenoh::internal::buffers::{ZBuf, ZSlice};
 use zenoh::shm::{
     Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderState, ZShm,
     ZShmMut,
@@ -99,9 +100,10 @@ impl Counters {
     /// sent with a loaned buffer, or one Zenoh holds in fragments). A payload in
     /// shared memory is lent to its decoding ([`coolbot::lend`]): a
     /// [`coolbot::Bytes`] decoded from it shares the buffer (no copy) and keeps it
-    /// from the pool while it lives; the parts of a payload in several are lent whole
-    /// ([`coolbot::lent::lend_whole`]): a `Bytes` that is one part (a loaned buffer)
-    /// shares it. Counted when it is in shared memory or a part was shared.
+    /// from the pool while it lives; of a payload in several parts, those in shared
+    /// memory are lent whole ([`coolbot::lent::lend_whole`]): a `Bytes` that is one
+    /// of them (a loaned buffer) shares it. Counted when it is in shared memory, or a
+    /// part of it is.
     pub(crate) fn received(
         &self,
         payload: &ZBytes,
@@ -119,22 +121,44 @@ impl Counters {
             coolbot::lend(buffer.to_owned(), |bytes| deliver(&[bytes]));
             return Ok(());
         }
-        let parts = payload.slices().count();
-        if parts <= 1 {
+        let parts: Vec<ZSlice> = ZBuf::from(payload.clone()).zslices().cloned().collect();
+        if parts.len() <= 1 {
             deliver(&[&payload.to_bytes()]);
             return Ok(());
         }
-        let owners: Vec<Part> = (0..parts)
-            .map(|index| Part {
-                payload: payload.clone(),
-                index,
+        // Each part its own owner (holding a part holds nothing else of the message);
+        // only parts in shared memory may be shared.
+        let parts: Vec<(ZSlice, bool)> = parts
+            .into_iter()
+            .map(|part| {
+                let shared = ZBytes::from(ZBuf::from(part.clone())).as_shm().is_some();
+                (part, shared)
             })
             .collect();
-        let ((), shared) = coolbot::lent::lend_whole(owners, deliver);
-        if shared > 0 {
+        if parts.iter().any(|&(_, shared)| shared) {
             self.received.fetch_add(1, Ordering::Relaxed);
         }
+        coolbot::lent::lend_whole(parts, deliver);
         Ok(())
+    }
+
+    /// `session`'s pool if it is made, without waiting (asking once for it, which
+    /// starts Zenoh making it): None while it is being made, and when shared memory
+    /// is off or the pool could not be made.
+    fn pool_now(
+        &self,
+        session: &zenoh::Session,
+    ) -> Option<&Arc<ShmProvider<PosixShmProviderBackend>>> {
+        if let Some(pool) = self.pool.get() {
+            return pool.as_ref();
+        }
+        match session.get_shm_provider() {
+            ShmProviderState::Ready(pool) => {
+                let _ = self.pool.set(Some(pool));
+                self.pool.get().and_then(Option::as_ref)
+            }
+            _ => None,
+        }
     }
 
     /// `session`'s pool (Zenoh makes it on first use, and the node's first large
@@ -169,19 +193,6 @@ impl Counters {
     }
 }
 
-/// One part of a payload that Zenoh holds in several: the owner of that part's
-/// memory, lent to a decoding.
-struct Part {
-    payload: ZBytes,
-    index: usize,
-}
-
-impl AsRef<[u8]> for Part {
-    fn as_ref(&self) -> &[u8] {
-        self.payload.slices().nth(self.index).unwrap_or_default()
-    }
-}
-
 /// A node's pool as the process's lender (`coolbot::Bytes::loan`): while the node is
 /// open, a loan is a buffer of its pool, when shared memory is on and the pool has
 /// room.
@@ -193,7 +204,10 @@ pub(crate) struct PoolLender {
 }
 
 impl PoolLender {
+    /// The lender of `session`'s pool, which is asked for now (Zenoh makes it on
+    /// first use).
     pub(crate) fn new(session: &zenoh::Session, counters: Arc<Counters>) -> PoolLender {
+        let _ = counters.pool_now(session);
         PoolLender {
             session: Mutex::new(Some(session.clone())),
             counters,
@@ -211,7 +225,9 @@ impl PoolLender {
 
 impl Lender for PoolLender {
     /// A loan smaller than [`SHARED_THRESHOLD`] is made on the heap: its message would
-    /// be copied through the link anyway.
+    /// be copied through the link anyway. Never waits: while the pool is being made
+    /// (it is asked for when the node opens), and when it is full after a collection
+    /// and a defragmentation, the loan is made on the heap.
     fn loan(&self, len: usize) -> Option<Box<dyn Loan>> {
         if len < SHARED_THRESHOLD {
             return None;
@@ -221,14 +237,13 @@ impl Lender for PoolLender {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .clone()?;
-        let pool = self.counters.pool(&session)?;
-        // Never waits: a full pool is collected and defragmented once, then the loan
-        // is made on the heap.
+        let pool = self.counters.pool_now(&session)?;
         let buffer = pool
             .alloc(len)
             .with_policy::<Defragment<GarbageCollect>>()
             .wait()
-            .ok()?;
+            .ok()
+            .filter(|buffer| buffer.len() == len)?;
         self.counters.loaned.fetch_add(1, Ordering::Relaxed);
         Some(Box::new(PoolLoan(buffer)))
     }
@@ -305,30 +320,36 @@ impl postcard::ser_flavors::Flavor for Parts {
     }
 }
 
-/// Whether `value` holds a buffer of a pool (`coolbot::Bytes::loan`), as its encoder
-/// would find it.
+/// A message's size, and whether it holds a buffer of a pool (`coolbot::Bytes::loan`)
+/// as its encoder would find it.
 #[derive(Default)]
-struct Loaned(bool);
+struct Measure {
+    size: usize,
+    loaned: bool,
+}
 
-impl postcard::ser_flavors::Flavor for Loaned {
-    type Output = bool;
+impl postcard::ser_flavors::Flavor for Measure {
+    type Output = (usize, bool);
 
     fn try_push(&mut self, _byte: u8) -> postcard::Result<()> {
+        self.size += 1;
         Ok(())
     }
 
     fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
-        if !self.0
+        self.size += bytes.len();
+        if !self.loaned
+            && bytes.len() >= SHARED_THRESHOLD
             && let Some(lent) = coolbot::lent::loan_at(bytes)
         {
             let lent: &dyn Any = &*lent;
-            self.0 = lent.is::<PoolLent>();
+            self.loaned = lent.is::<PoolLent>();
         }
         Ok(())
     }
 
-    fn finalize(self) -> postcard::Result<bool> {
-        Ok(self.0)
+    fn finalize(self) -> postcard::Result<(usize, bool)> {
+        Ok((self.size, self.loaned))
     }
 }
 
@@ -354,13 +375,12 @@ impl Arena {
         &self,
         value: &P,
     ) -> Result<ZBytes, postcard::Error> {
-        let size = postcard::serialize_with_flavor(value, postcard::ser_flavors::Size::default())?;
+        let (size, loaned) = coolbot::lent::encoding_loans(|| {
+            postcard::serialize_with_flavor(value, Measure::default())
+        })?;
         if size < SHARED_THRESHOLD {
             return Ok(crate::codec::encode(value)?.into());
         }
-        let loaned = coolbot::lent::encoding_loans(|| {
-            postcard::serialize_with_flavor(value, Loaned::default())
-        })?;
         if loaned {
             let parts = coolbot::lent::encoding_loans(|| {
                 postcard::serialize_with_flavor(value, Parts::default())
@@ -392,6 +412,13 @@ impl Arena {
             }
         }
     }
+}
+
+/// Whether `config` has shared memory on (Zenoh's default).
+pub(crate) fn enabled(config: &zenoh::Config) -> bool {
+    config
+        .get_json("transport/shared_memory/enabled")
+        .map_or(true, |json| json.trim() != "false")
 }
 
 /// Remove the shared-memory segments of this host that no process maps any more (left

@@ -9,8 +9,8 @@
 //! - `read-in-place NAME ENDPOINT KEY [on|off]`: node NAME, connected to ENDPOINT
 //!   with shared memory on (the default) or off, reads images
 //!   on KEY through an inlet into a queue, and prints `image <number> <ok|bad>
-//!   <lent|copied>` for each (`lent`: its pixels, a `coolbot::Bytes`, were decoded in
-//!   place);
+//!   <lent|copied> <received in shared memory>` for each (`lent`: its pixels, a
+//!   `coolbot::Bytes`, were decoded in place);
 //! - `produce NAME KEY`: node NAME, alone, sends large frames through an outlet on KEY
 //!   until one was written into shared memory, then prints `ready`;
 //! - `send-loaned NAME ENDPOINT KEY COUNT`: node NAME, listening on ENDPOINT, once a
@@ -18,6 +18,9 @@
 //!   even-numbered ones large, each one's pixels a buffer of `coolbot::Bytes::loan`,
 //!   filled as `read-in-place` checks; prints `loaned <yes|no>` for each, then `sent
 //!   <loaned> <in place> <shared> <copied>` (the node's counts).
+//!
+//! - `lenders`: opens and drops nodes with shared memory on and off, and prints which
+//!   one `coolbot::Bytes::loan` takes its buffers from at each step.
 //!
 //! It prints `ready` once it listens (consume, hold), and runs until it is killed.
 
@@ -119,7 +122,7 @@ fn consume(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
 }
 
 fn read_in_place(name: &str, endpoint: String, key: &str, shared_memory: bool) -> ! {
-    let (input, _node, _system) =
+    let (input, node, _system) =
         inlet_into_queue::<Picture>(name, endpoint, key, shared_memory, |hand| {
             picture_queue::component("queue", hand)
         });
@@ -130,14 +133,15 @@ fn read_in_place(name: &str, endpoint: String, key: &str, shared_memory: bool) -
             .enumerate()
             .all(|(i, byte)| *byte == (image.number as usize + i) as u8);
         say(&format!(
-            "image {} {} {}",
+            "image {} {} {} {}",
             image.number,
             if ok { "ok" } else { "bad" },
             if image.pixels.is_lent() {
                 "lent"
             } else {
                 "copied"
-            }
+            },
+            node.shared_memory().received
         ));
     })
 }
@@ -202,6 +206,13 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
     let (_system, out) = outlet_fed(&node, key, kind, source, &handed);
     say("ready");
     wait_subscribed(&node, key);
+    // Loans come from the heap until the pool is made (the node asked for it when it
+    // opened); the counts printed are those of the images.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while !coolbot::Bytes::loan(256 << 10).is_loaned() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let before = node.shared_memory();
     for number in 1..=count {
         let size = if number % 2 == 0 { 256 << 10 } else { 16 };
         let mut pixels = coolbot::Bytes::loan(size);
@@ -220,16 +231,61 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
     // Every image is through the outlet once the node counted each large one.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
     let large = count / 2;
-    while node.shared_memory().shared + node.shared_memory().copied < large
-        && std::time::Instant::now() < deadline
-    {
+    let through = || {
+        let counts = node.shared_memory();
+        counts.shared + counts.copied - before.shared - before.copied
+    };
+    while through() < large && std::time::Instant::now() < deadline {
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
     let counts = node.shared_memory();
     say(&format!(
         "sent {} {} {} {}",
-        counts.loaned, counts.in_place, counts.shared, counts.copied
+        counts.loaned - before.loaned,
+        counts.in_place - before.in_place,
+        counts.shared - before.shared,
+        counts.copied - before.copied
     ));
+    loop {
+        std::thread::park();
+    }
+}
+
+/// Whether a loan of 256 KiB comes from `node`'s pool (it counts it), waiting at most
+/// 30 s for the pool to be made.
+fn lends(node: &Node) -> bool {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    loop {
+        let before = node.shared_memory().loaned;
+        let loan = coolbot::Bytes::loan(256 << 10);
+        if loan.is_loaned() && node.shared_memory().loaned == before + 1 {
+            return true;
+        }
+        if std::time::Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// Which node lends as nodes open and close in one process.
+fn lenders() -> ! {
+    let pid = std::process::id();
+    let a = Node::open(&format!("lenders-a-{pid}"), config(&[], true)).expect("a opens");
+    say(&format!("a lends {}", lends(&a)));
+    // Shared memory off: not a lender; `a` still lends.
+    let b = Node::open(&format!("lenders-b-{pid}"), config(&[], false)).expect("b opens");
+    say(&format!("a lends with b open {}", lends(&a)));
+    let c = Node::open(&format!("lenders-c-{pid}"), config(&[], true)).expect("c opens");
+    say(&format!("c lends {}", lends(&c)));
+    drop(c);
+    say(&format!("a lends once c is dropped {}", lends(&a)));
+    drop(a);
+    say(&format!(
+        "a loan once a is dropped is loaned {}",
+        coolbot::Bytes::loan(256 << 10).is_loaned()
+    ));
+    drop(b);
     loop {
         std::thread::park();
     }
@@ -250,6 +306,7 @@ fn main() {
         }
         ["hold", endpoint, key] => hold((*endpoint).to_owned(), key),
         ["produce", name, key] => produce(name, key),
+        ["lenders"] => lenders(),
         ["send-loaned", name, endpoint, key, count] => send_loaned(
             name,
             (*endpoint).to_owned(),
@@ -258,7 +315,7 @@ fn main() {
         ),
         _ => {
             eprintln!(
-                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY [on|off] | hold ENDPOINT KEY | produce NAME KEY | send-loaned NAME ENDPOINT KEY COUNT"
+                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY [on|off] | hold ENDPOINT KEY | produce NAME KEY | send-loaned NAME ENDPOINT KEY COUNT | lenders"
             );
             std::process::exit(2);
         }

@@ -26,7 +26,15 @@ struct Peer {
 }
 
 impl Peer {
+    /// The peer, once it said `ready`.
     fn start(args: &[&str]) -> Peer {
+        let peer = Peer::start_quiet(args);
+        peer.next_matching(|line| line == "ready");
+        peer
+    }
+
+    /// The peer, started.
+    fn start_quiet(args: &[&str]) -> Peer {
         let mut child = Command::new(env!("CARGO_BIN_EXE_shm-peer-under-test"))
             .args(args)
             .stdout(Stdio::piped())
@@ -41,9 +49,7 @@ impl Peer {
                 }
             }
         });
-        let peer = Peer { child, lines };
-        peer.next_matching(|line| line == "ready");
-        peer
+        Peer { child, lines }
     }
 
     /// The next line `accept` takes, within the patience.
@@ -223,11 +229,15 @@ fn bytes_from_a_process_on_this_host_are_read_in_place() {
                 .into(),
         });
     }
+    let mut received = String::new();
     for number in 1..=20u64 {
         let line = consumer.next_matching(|line| line.starts_with("image "));
         let expected = if number % 2 == 0 { "lent" } else { "copied" };
-        assert_eq!(line, format!("image {number} ok {expected}"));
+        let (image, count) = line.rsplit_once(' ').expect("a count");
+        assert_eq!(image, format!("image {number} ok {expected}"));
+        received = count.to_owned();
     }
+    assert_eq!(received, "10", "received in shared memory");
     assert_eq!(
         node.shared_memory().shared,
         10,
@@ -240,8 +250,9 @@ fn bytes_from_a_process_on_this_host_are_read_in_place() {
 /// A producer process sends 20 images whose pixels it fills in buffers of
 /// `Bytes::loan` (the even-numbered ones large) to a consumer process with shared
 /// memory `consumer_memory`; checks what the producer loaned and each image the
-/// consumer read, `large` being how the consumer read the large ones.
-fn loaned_to(consumer_memory: &str, key: &str, name: &str, large: &str) {
+/// consumer read, `large` being how the consumer read the large ones and `received`
+/// how many it counted received in shared memory.
+fn loaned_to(consumer_memory: &str, key: &str, name: &str, large: &str, received: &str) {
     let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
     let producer = Peer::start(&[
         "send-loaned",
@@ -262,11 +273,15 @@ fn loaned_to(consumer_memory: &str, key: &str, name: &str, large: &str) {
         let loaned = if number % 2 == 0 { "yes" } else { "no" };
         assert_eq!(line, format!("loaned {loaned}"), "image {number}");
     }
+    let mut counted = String::new();
     for number in 1..=20u64 {
         let line = consumer.next_matching(|line| line.starts_with("image "));
         let expected = if number % 2 == 0 { large } else { "copied" };
-        assert_eq!(line, format!("image {number} ok {expected}"));
+        let (image, count) = line.rsplit_once(' ').expect("a count");
+        assert_eq!(image, format!("image {number} ok {expected}"));
+        counted = count.to_owned();
     }
+    assert_eq!(counted, received, "received in shared memory");
     // Ten buffers lent by the pool, each sent in place (a message in shared memory),
     // none copied.
     let line = producer.next_matching(|line| line.starts_with("sent "));
@@ -278,7 +293,7 @@ fn bytes_loaned_from_the_pool_reach_a_process_on_this_host_without_a_copy() {
     // The large pixels come from the producer node's pool, and its outlet sends that
     // buffer as it is (no copy); the consumer reads them where they are. The small
     // ones come from the heap and cross the link, copied.
-    loaned_to("on", "test/shm/loaned", "shm-loan", "lent");
+    loaned_to("on", "test/shm/loaned", "shm-loan", "lent", "10");
 }
 
 #[test]
@@ -286,7 +301,22 @@ fn bytes_loaned_from_the_pool_reach_a_consumer_without_shared_memory_over_the_li
     // A consumer that does not map shared memory (another host, or shared memory
     // off): Zenoh sends the loaned buffer's bytes over the link, and the consumer
     // reads every image intact, in memory of its own.
-    loaned_to("off", "test/shm/loaned_off", "shm-loan-off", "copied");
+    loaned_to("off", "test/shm/loaned_off", "shm-loan-off", "copied", "0");
+}
+
+#[test]
+fn the_latest_node_with_shared_memory_open_lends() {
+    // In a process of its own (the lender is the process's).
+    let peer = Peer::start_quiet(&["lenders"]);
+    for expected in [
+        "a lends true",
+        "a lends with b open true",
+        "c lends true",
+        "a lends once c is dropped true",
+        "a loan once a is dropped is loaned false",
+    ] {
+        assert_eq!(peer.next_matching(|_| true), expected);
+    }
 }
 
 /// Sends `count` large frames on `out`, one at a time: each once every consumer has
