@@ -584,6 +584,7 @@ fn bridge_sender_to<P: Payload>(
         "shared {} {} {}",
         shared.shared, shared.copied, shared.in_place
     );
+    eprintln!("    the sender's node: {shared:?}");
     assert!(system.shutdown().clean(), "unclean shutdown");
     drop(state);
 }

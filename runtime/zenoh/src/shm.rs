@@ -121,11 +121,11 @@ impl Counters {
             coolbot::lend(buffer.to_owned(), |bytes| deliver(&[bytes]));
             return Ok(());
         }
-        let parts: Vec<ZSlice> = ZBuf::from(payload.clone()).zslices().cloned().collect();
-        if parts.len() <= 1 {
+        if payload.slices().nth(1).is_none() {
             deliver(&[&payload.to_bytes()]);
             return Ok(());
         }
+        let parts: Vec<ZSlice> = ZBuf::from(payload.clone()).zslices().cloned().collect();
         // Each part its own owner (holding a part holds nothing else of the message);
         // only parts in shared memory may be shared.
         let parts: Vec<(ZSlice, bool)> = parts
@@ -204,10 +204,9 @@ pub(crate) struct PoolLender {
 }
 
 impl PoolLender {
-    /// The lender of `session`'s pool, which is asked for now (Zenoh makes it on
-    /// first use).
+    /// The lender of `session`'s pool (Zenoh makes it on first use: at the first
+    /// large message or loan, so that a node that sends none locks no memory for it).
     pub(crate) fn new(session: &zenoh::Session, counters: Arc<Counters>) -> PoolLender {
-        let _ = counters.pool_now(session);
         PoolLender {
             session: Mutex::new(Some(session.clone())),
             counters,
@@ -226,8 +225,8 @@ impl PoolLender {
 impl Lender for PoolLender {
     /// A loan smaller than [`SHARED_THRESHOLD`] is made on the heap: its message would
     /// be copied through the link anyway. Never waits: while the pool is being made
-    /// (it is asked for when the node opens), and when it is full after a collection
-    /// and a defragmentation, the loan is made on the heap.
+    /// (the first loan asks for it), and when it is full after a collection and a
+    /// defragmentation, the loan is made on the heap.
     fn loan(&self, len: usize) -> Option<Box<dyn Loan>> {
         if len < SHARED_THRESHOLD {
             return None;

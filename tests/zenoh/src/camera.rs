@@ -18,19 +18,23 @@ fn byte(number: u64, index: usize) -> u8 {
 }
 
 /// `Camera`'s behaviour: each period, the next image, its bytes a pattern of its
-/// number (the work of a driver that fills a frame).
+/// number (the work of a driver that fills a frame), written in a loan of the node's
+/// pool of shared memory (`coolbot::Bytes::loan`: the heap where there is none).
 pub struct Streaming;
 
 impl camera::Behavior for Streaming {
     fn streaming_periodic(&mut self, cx: &mut camera::Cx<'_>) -> SectionResult {
         cx.vars.frames += 1;
         let number = cx.vars.frames;
-        let len = (WIDTH * HEIGHT * 3) as usize;
+        let mut rgb = coolbot::Bytes::loan((WIDTH * HEIGHT * 3) as usize);
+        for (index, value) in rgb.iter_mut().enumerate() {
+            *value = byte(number, index);
+        }
         cx.outputs.image.send(Image {
             number,
             width: WIDTH,
             height: HEIGHT,
-            rgb: (0..len).map(|index| byte(number, index)).collect(),
+            rgb: rgb.freeze(),
         });
         Ok(())
     }

@@ -206,8 +206,8 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
     let (_system, out) = outlet_fed(&node, key, kind, source, &handed);
     say("ready");
     wait_subscribed(&node, key);
-    // Loans come from the heap until the pool is made (the node asked for it when it
-    // opened); the counts printed are those of the images.
+    // Loans come from the heap until the pool is made (the first loan asks for it);
+    // the counts printed are those of the images.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
     while !coolbot::Bytes::loan(256 << 10).is_loaned() && std::time::Instant::now() < deadline {
         std::thread::sleep(std::time::Duration::from_millis(1));
