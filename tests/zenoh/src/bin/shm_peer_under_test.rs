@@ -13,8 +13,9 @@
 //!   `coolbot::Bytes`, were decoded in place);
 //! - `produce NAME KEY`: node NAME, alone, sends large frames through an outlet on KEY
 //!   until one was written into shared memory, then prints `ready`;
-//! - `send-loaned NAME ENDPOINT KEY COUNT`: node NAME, listening on ENDPOINT, once a
-//!   subscriber matches KEY sends COUNT images through an outlet on KEY (a fifo), the
+//! - `send-loaned NAME ENDPOINT KEYS COUNT`: node NAME, listening on ENDPOINT, once a
+//!   subscriber matches each of KEYS (separated by commas) sends COUNT images through
+//!   an outlet on each key (a fifo connection each, fed by one output), the
 //!   even-numbered ones large, each one's pixels a buffer of `coolbot::Bytes::loan`,
 //!   filled as `read-in-place` checks; prints `loaned <yes|no>` for each, then `sent
 //!   <loaned> <in place> <shared> <copied>` (the node's counts).
@@ -202,10 +203,31 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
         policy: OverflowPolicy::Block,
     };
     let (hand, handed) = crossbeam_channel::bounded(1);
-    let source = picture_source::component("source", Hand(hand));
-    let (_system, out) = outlet_fed(&node, key, kind, source, &handed);
+    let mut system = System::new();
+    system
+        .add(picture_source::component("source", Hand(hand)))
+        .expect("added");
+    // An outlet (a fifo connection) for each key, all fed by the one output.
+    let keys: Vec<&str> = key.split(',').collect();
+    for (index, key) in keys.iter().enumerate() {
+        let outlet = format!("outlet_{index}");
+        system
+            .add(
+                node.outlet::<Picture>(&outlet, key, kind)
+                    .build()
+                    .expect("the outlet"),
+            )
+            .expect("added");
+        system
+            .connect("source.out", &format!("{outlet}.input"))
+            .expect("connected");
+    }
+    system.run_all().expect("runs");
+    let out = handed.recv().expect("the source's output");
     say("ready");
-    wait_subscribed(&node, key);
+    for key in &keys {
+        wait_subscribed(&node, key);
+    }
     // Loans come from the heap until the pool is made (the first loan asks for it);
     // the counts printed are those of the images.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
@@ -230,7 +252,7 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
     }
     // Every image is through the outlet once the node counted each large one.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-    let large = count / 2;
+    let large = count / 2 * keys.len() as u64;
     let through = || {
         let counts = node.shared_memory();
         counts.shared + counts.copied - before.shared - before.copied
@@ -315,7 +337,7 @@ fn main() {
         ),
         _ => {
             eprintln!(
-                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY [on|off] | hold ENDPOINT KEY | produce NAME KEY | send-loaned NAME ENDPOINT KEY COUNT | lenders"
+                "usage: shm-peer-under-test consume NAME ENDPOINT KEY on|off | read-in-place NAME ENDPOINT KEY [on|off] | hold ENDPOINT KEY | produce NAME KEY | send-loaned NAME ENDPOINT KEYS COUNT | lenders"
             );
             std::process::exit(2);
         }

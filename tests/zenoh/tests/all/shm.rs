@@ -305,6 +305,50 @@ fn bytes_loaned_from_the_pool_reach_a_consumer_without_shared_memory_over_the_li
 }
 
 #[test]
+fn a_loaned_packet_on_three_fifo_connections_to_three_processes_is_copied_by_none() {
+    // Where an outlet of each connection writes its own copy of a packet of `[u8]`
+    // (above), a loaned buffer is sent as it is by all three.
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let keys: Vec<String> = (1..=3)
+        .map(|i| format!("test/shm/loaned_fifo_{i}"))
+        .collect();
+    let producer = Peer::start(&[
+        "send-loaned",
+        "shm-loan-fifos-producer",
+        &endpoint,
+        &keys.join(","),
+        "20",
+    ]);
+    let consumers: Vec<Peer> = keys
+        .iter()
+        .enumerate()
+        .map(|(i, key)| {
+            Peer::start(&[
+                "read-in-place",
+                &format!("shm-loan-fifos-{i}"),
+                &endpoint,
+                key,
+            ])
+        })
+        .collect();
+    for consumer in &consumers {
+        let mut counted = String::new();
+        for number in 1..=20u64 {
+            let line = consumer.next_matching(|line| line.starts_with("image "));
+            let expected = if number % 2 == 0 { "lent" } else { "copied" };
+            let (image, count) = line.rsplit_once(' ').expect("a count");
+            assert_eq!(image, format!("image {number} ok {expected}"));
+            counted = count.to_owned();
+        }
+        assert_eq!(counted, "10", "received in shared memory");
+    }
+    // Ten buffers lent, each sent in place by the three outlets: thirty messages in
+    // shared memory, no copy.
+    let line = producer.next_matching(|line| line.starts_with("sent "));
+    assert_eq!(line, "sent 10 30 30 0", "loaned, in place, shared, copied");
+}
+
+#[test]
 fn the_latest_node_with_shared_memory_open_lends() {
     // In a process of its own (the lender is the process's).
     let peer = Peer::start_quiet(&["lenders"]);
