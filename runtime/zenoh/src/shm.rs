@@ -58,7 +58,7 @@ pub struct SharedMemoryCounts {
     pub copied: u64,
     /// Messages its inlets, and the outputs of the proxies of its instances placed on
     /// another node, received in shared memory (from a node on this host): whole, or
-    /// with a loaned buffer of the sender's read in place.
+    /// with a part in it (a loaned buffer).
     pub received: u64,
     /// Buffers of its pool lent by `coolbot::Bytes::loan` (the node is the process's
     /// lender while it is open).
@@ -413,11 +413,16 @@ impl Arena {
     }
 }
 
-/// Whether `config` has shared memory on (Zenoh's default).
+/// Whether `config` gives its session a pool of shared memory: shared memory on, and
+/// its transport optimization (which makes the pool) on, as by Zenoh's default.
 pub(crate) fn enabled(config: &zenoh::Config) -> bool {
-    config
-        .get_json("transport/shared_memory/enabled")
-        .map_or(true, |json| json.trim() != "false")
+    let on = |key: &str| {
+        config
+            .get_json(key)
+            .map_or(true, |json| json.trim() != "false")
+    };
+    on("transport/shared_memory/enabled")
+        && on("transport/shared_memory/transport_optimization/enabled")
 }
 
 /// Remove the shared-memory segments of this host that no process maps any more (left

@@ -41,7 +41,8 @@ impl camera::Behavior for Streaming {
 }
 
 /// `Detector`'s behaviour: reads every byte of each image, its mean brightness, and
-/// counts the images whose bytes are not the camera's pattern.
+/// counts the images whose bytes are not the camera's pattern and those read in
+/// place (in the camera's loan of shared memory).
 pub struct Detecting;
 
 impl detector::Behavior for Detecting {
@@ -54,6 +55,9 @@ impl detector::Behavior for Detecting {
                 intact &= *value == byte(image.number, index);
             }
             cx.vars.seen += 1;
+            if image.rgb.is_lent() {
+                cx.vars.lent += 1;
+            }
             if !intact {
                 cx.vars.bad += 1;
             }

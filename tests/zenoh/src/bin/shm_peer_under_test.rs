@@ -18,8 +18,7 @@
 //!   an outlet on each key (a fifo connection each, fed by one output), the
 //!   even-numbered ones large, each one's pixels a buffer of `coolbot::Bytes::loan`,
 //!   filled as `read-in-place` checks; prints `loaned <yes|no>` for each, then `sent
-//!   <loaned> <in place> <shared> <copied>` (the node's counts).
-//!
+//!   <loaned> <in place> <shared> <copied>` (the node's counts);
 //! - `lenders`: opens and drops nodes with shared memory on and off, and prints which
 //!   one `coolbot::Bytes::loan` takes its buffers from at each step.
 //!
@@ -257,7 +256,9 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
         let counts = node.shared_memory();
         counts.shared + counts.copied - before.shared - before.copied
     };
-    while through() < large && std::time::Instant::now() < deadline {
+    // Each outlet counts a message `shared`, then `in_place`: both are waited for.
+    let in_place = || node.shared_memory().in_place - before.in_place;
+    while (through() < large || in_place() < large) && std::time::Instant::now() < deadline {
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
     let counts = node.shared_memory();

@@ -185,7 +185,7 @@ fn a_driver_that_segfaults_ends_only_its_process_and_is_substituted_then_built_a
 /// A camera (`cool/camera.cool`) in the drivers process streams its 640 x 480 RGB
 /// images to a detector in the robot's process: each image arrives whole, through
 /// shared memory (the two nodes are on one host), counted by the robot's node as
-/// received there.
+/// received there, and read in place.
 #[test]
 fn a_camera_in_the_drivers_process_streams_whole_images_through_shared_memory() {
     let (node, endpoint) = node("robot", &[]);
@@ -206,6 +206,12 @@ fn a_camera_in_the_drivers_process_streams_whole_images_through_shared_memory() 
         node.shared_memory().received >= 5,
         "the images came through shared memory: {:?}",
         node.shared_memory()
+    );
+    // Read in place, in shared memory (the camera fills loans of its node's pool).
+    assert!(
+        counted(&detector.snapshot(), "lent") >= 5,
+        "images read in place: {:?}",
+        detector.snapshot()
     );
     let report = system.shutdown();
     assert!(report.clean(), "shutdown: {report:?}");

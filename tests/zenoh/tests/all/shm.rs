@@ -307,7 +307,8 @@ fn bytes_loaned_from_the_pool_reach_a_consumer_without_shared_memory_over_the_li
 #[test]
 fn a_loaned_packet_on_three_fifo_connections_to_three_processes_is_copied_by_none() {
     // Where an outlet of each connection writes its own copy of a packet of `[u8]`
-    // (above), a loaned buffer is sent as it is by all three.
+    // (`one_output_to_three_fifo_connections_...`, below), a loaned buffer is sent as
+    // it is by all three.
     let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
     let keys: Vec<String> = (1..=3)
         .map(|i| format!("test/shm/loaned_fifo_{i}"))
