@@ -367,17 +367,60 @@ pub fn outlet_fed<T>(
 where
     T: Packet + serde::Serialize + serde::de::DeserializeOwned,
 {
+    fed(node, &[("outlet".to_owned(), key)], kind, source, handed)
+}
+
+/// A system of `source` feeding an outlet on each of `keys` (`outlet_0`, `outlet_1`,
+/// ...: a fifo connection each when `kind` is a fifo), each taking its packets as
+/// `kind`, running; `source`'s behaviour hands its output `out` over through `handed`.
+/// Returns the system and that output.
+pub fn outlets_fed<T>(
+    node: &Node,
+    keys: &[&str],
+    kind: InputKind,
+    source: Component,
+    handed: &Receiver<DataOut<T>>,
+) -> (System, DataOut<T>)
+where
+    T: Packet + serde::Serialize + serde::de::DeserializeOwned,
+{
+    let outlets: Vec<(String, &str)> = keys
+        .iter()
+        .enumerate()
+        .map(|(index, key)| (format!("outlet_{index}"), *key))
+        .collect();
+    fed(node, &outlets, kind, source, handed)
+}
+
+/// A system of `source` feeding `outlets` (name, key), running; the system and the
+/// output `handed` over.
+fn fed<T>(
+    node: &Node,
+    outlets: &[(String, &str)],
+    kind: InputKind,
+    source: Component,
+    handed: &Receiver<DataOut<T>>,
+) -> (System, DataOut<T>)
+where
+    T: Packet + serde::Serialize + serde::de::DeserializeOwned,
+{
     let mut system = System::new();
     let from = format!("{}.out", source.name());
-    system
-        .add(
-            node.outlet::<T>("outlet", key, kind)
-                .build()
-                .expect("the outlet"),
-        )
-        .expect("added");
+    for (outlet, key) in outlets {
+        system
+            .add(
+                node.outlet::<T>(outlet, key, kind)
+                    .build()
+                    .expect("the outlet"),
+            )
+            .expect("added");
+    }
     system.add(source).expect("added");
-    system.connect(&from, "outlet.input").expect("connected");
+    for (outlet, _) in outlets {
+        system
+            .connect(&from, &format!("{outlet}.input"))
+            .expect("connected");
+    }
     system.run_all().expect("runs");
     let out = handed.recv().expect("the source's output");
     (system, out)

@@ -33,7 +33,7 @@ use coolbot_zenoh::Node;
 use coolbot_zenoh_tests::generated::picture_source;
 use coolbot_zenoh_tests::generated::types::{Chunk, Picture};
 use coolbot_zenoh_tests::generated::{picture_queue, shm_queue, shm_source};
-use coolbot_zenoh_tests::support::{Hand, outlet_fed, wait_subscribed};
+use coolbot_zenoh_tests::support::{Hand, outlet_fed, outlets_fed, wait_subscribed};
 use zenoh::Wait;
 
 fn config(connect: &[String], shared_memory: bool) -> zenoh::Config {
@@ -202,27 +202,10 @@ fn send_loaned(name: &str, endpoint: String, key: &str, count: u64) -> ! {
         policy: OverflowPolicy::Block,
     };
     let (hand, handed) = crossbeam_channel::bounded(1);
-    let mut system = System::new();
-    system
-        .add(picture_source::component("source", Hand(hand)))
-        .expect("added");
     // An outlet (a fifo connection) for each key, all fed by the one output.
     let keys: Vec<&str> = key.split(',').collect();
-    for (index, key) in keys.iter().enumerate() {
-        let outlet = format!("outlet_{index}");
-        system
-            .add(
-                node.outlet::<Picture>(&outlet, key, kind)
-                    .build()
-                    .expect("the outlet"),
-            )
-            .expect("added");
-        system
-            .connect("source.out", &format!("{outlet}.input"))
-            .expect("connected");
-    }
-    system.run_all().expect("runs");
-    let out = handed.recv().expect("the source's output");
+    let source = picture_source::component("source", Hand(hand));
+    let (_system, out) = outlets_fed(&node, &keys, kind, source, &handed);
     say("ready");
     for key in &keys {
         wait_subscribed(&node, key);

@@ -207,6 +207,21 @@ fn large_packets_to_a_process_on_this_host_are_written_once_into_shared_memory()
     assert_eq!(shared, 20, "received in shared memory");
 }
 
+/// The next 20 `image` lines of a `read-in-place` consumer, checked: image `n`
+/// intact, its pixels read as `large` when `n` is even and copied when odd. The
+/// consumer's count of messages received in shared memory after the last.
+fn read_images(consumer: &Peer, large: &str) -> String {
+    let mut received = String::new();
+    for number in 1..=20u64 {
+        let line = consumer.next_matching(|line| line.starts_with("image "));
+        let expected = if number % 2 == 0 { large } else { "copied" };
+        let (image, count) = line.rsplit_once(' ').expect("a count");
+        assert_eq!(image, format!("image {number} ok {expected}"));
+        received = count.to_owned();
+    }
+    received
+}
+
 #[test]
 fn bytes_from_a_process_on_this_host_are_read_in_place() {
     // An image's pixels are a `coolbot::Bytes`: the consumer's inlet decodes the large
@@ -229,15 +244,11 @@ fn bytes_from_a_process_on_this_host_are_read_in_place() {
                 .into(),
         });
     }
-    let mut received = String::new();
-    for number in 1..=20u64 {
-        let line = consumer.next_matching(|line| line.starts_with("image "));
-        let expected = if number % 2 == 0 { "lent" } else { "copied" };
-        let (image, count) = line.rsplit_once(' ').expect("a count");
-        assert_eq!(image, format!("image {number} ok {expected}"));
-        received = count.to_owned();
-    }
-    assert_eq!(received, "10", "received in shared memory");
+    assert_eq!(
+        read_images(&consumer, "lent"),
+        "10",
+        "received in shared memory"
+    );
     assert_eq!(
         node.shared_memory().shared,
         10,
@@ -273,15 +284,11 @@ fn loaned_to(consumer_memory: &str, key: &str, name: &str, large: &str, received
         let loaned = if number % 2 == 0 { "yes" } else { "no" };
         assert_eq!(line, format!("loaned {loaned}"), "image {number}");
     }
-    let mut counted = String::new();
-    for number in 1..=20u64 {
-        let line = consumer.next_matching(|line| line.starts_with("image "));
-        let expected = if number % 2 == 0 { large } else { "copied" };
-        let (image, count) = line.rsplit_once(' ').expect("a count");
-        assert_eq!(image, format!("image {number} ok {expected}"));
-        counted = count.to_owned();
-    }
-    assert_eq!(counted, received, "received in shared memory");
+    assert_eq!(
+        read_images(&consumer, large),
+        received,
+        "received in shared memory"
+    );
     // Ten buffers lent by the pool, each sent in place (a message in shared memory),
     // none copied.
     let line = producer.next_matching(|line| line.starts_with("sent "));
@@ -333,15 +340,11 @@ fn a_loaned_packet_on_three_fifo_connections_to_three_processes_is_copied_by_non
         })
         .collect();
     for consumer in &consumers {
-        let mut counted = String::new();
-        for number in 1..=20u64 {
-            let line = consumer.next_matching(|line| line.starts_with("image "));
-            let expected = if number % 2 == 0 { "lent" } else { "copied" };
-            let (image, count) = line.rsplit_once(' ').expect("a count");
-            assert_eq!(image, format!("image {number} ok {expected}"));
-            counted = count.to_owned();
-        }
-        assert_eq!(counted, "10", "received in shared memory");
+        assert_eq!(
+            read_images(consumer, "lent"),
+            "10",
+            "received in shared memory"
+        );
     }
     // Ten buffers lent, each sent in place by the three outlets: thirty messages in
     // shared memory, no copy.
@@ -407,27 +410,10 @@ fn one_output_to_three_fifo_connections_in_three_processes_writes_a_copy_for_eac
     // A fifo connection is N outputs to 1 input: three consumer processes are three
     // keys, three outlets on one output, and each outlet writes its own copy.
     let (node, endpoint) = listening("shm-fifos-producer", |_| {});
-    let mut system = System::new();
     let (hand, handed) = crossbeam_channel::bounded(1);
-    system
-        .add(shm_source::component("source", Hand(hand)))
-        .expect("added");
     let keys = ["test/shm/fifo_1", "test/shm/fifo_2", "test/shm/fifo_3"];
-    for (i, key) in keys.iter().enumerate() {
-        let outlet = format!("outlet_{i}");
-        system
-            .add(
-                node.outlet::<Chunk>(&outlet, key, QUEUE)
-                    .build()
-                    .expect("the outlet"),
-            )
-            .expect("added");
-        system
-            .connect("source.out", &format!("{outlet}.input"))
-            .expect("connected");
-    }
-    system.run_all().expect("runs");
-    let out = handed.recv().expect("the source's output");
+    let source = shm_source::component("source", Hand(hand));
+    let (system, out) = support::outlets_fed(&node, &keys, QUEUE, source, &handed);
     let consumers: Vec<Peer> = keys
         .iter()
         .enumerate()
