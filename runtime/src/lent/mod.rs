@@ -14,17 +14,24 @@
 //! postcard and CDR a length and the bytes, JSON an array of numbers), so a `[u8]`
 //! field and a `Bytes` field are the same message.
 //!
-//! On the sending side, [`Bytes::loan`] gives a buffer ([`BytesMut`]) from the
-//! process's [`Lender`] when one is set (a node with shared memory sets one: its
-//! pool), else from the heap. Frozen into a `Bytes` and sent, a loaned buffer is not
-//! copied by an encoder that knows its lender ([`encoding_loans`], [`loan_at`]): a
-//! bridge to another process on the host sends it as the buffer it already is.
+//! On the sending side, [`Bytes::loan`] gives a buffer ([`BytesMut`]) to fill where
+//! the message will travel: from the process's [`Lender`] when one is set (a node
+//! with shared memory sets one: its pool), else from the heap. Frozen into a `Bytes`
+//! and sent, a loaned buffer is not copied by an encoder that knows its lender
+//! ([`encoding_loans`], [`loan_at`]): a bridge to another process on the host sends
+//! it as the buffer it already is.
 
-use std::any::Any;
-use std::cell::{Cell, RefCell};
+mod lend;
+mod loan;
+
+pub use lend::{lend, lend_whole};
+pub use loan::{Lender, Lent, Loan, encoding_loans, lender, loan_at, push_lender, withdraw_lender};
+
+use lend::lent_slice;
+
 use std::fmt;
 use std::ops::{Deref, DerefMut};
-use std::sync::{Arc, PoisonError, RwLock};
+use std::sync::Arc;
 
 use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -48,24 +55,6 @@ impl Bytes {
             lent: false,
             loaned: None,
         }
-    }
-
-    /// A buffer of `len` bytes to fill and then [`BytesMut::freeze`]: from the
-    /// process's [`Lender`] when one is set and has room (a node with shared memory:
-    /// a buffer of its pool, which a bridge to another process on this host sends as
-    /// it is, without a copy), else from the heap. Its bytes are zero when it comes
-    /// from the heap, and unspecified when it comes from a lender: write every one.
-    pub fn loan(len: usize) -> BytesMut {
-        match lender().and_then(|lender| lender.loan(len)) {
-            Some(loan) if loan.as_slice().len() == len => BytesMut(Buffer::Loan(loan)),
-            _ => BytesMut(Buffer::Heap(vec![0; len])),
-        }
-    }
-
-    /// Whether these bytes are a buffer loaned by the process's [`Lender`]
-    /// ([`Bytes::loan`]).
-    pub fn is_loaned(&self) -> bool {
-        self.loaned.is_some()
     }
 
     /// Whether these bytes were decoded in place, in memory lent to their decoding
@@ -125,6 +114,32 @@ impl From<&'static [u8]> for Bytes {
             lent: false,
             loaned: None,
         }
+    }
+}
+
+impl fmt::Debug for Bytes {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Bytes({} bytes)", self.data.len())
+    }
+}
+
+impl Bytes {
+    /// A buffer of `len` bytes to fill and then [`BytesMut::freeze`]: from the
+    /// process's [`Lender`] when one is set and has room (a node with shared memory:
+    /// a buffer of its pool, which a bridge to another process on this host sends as
+    /// it is, without a copy), else from the heap. Its bytes are zero when it comes
+    /// from the heap, and unspecified when it comes from a lender: write every one.
+    pub fn loan(len: usize) -> BytesMut {
+        match lender().and_then(|lender| lender.loan(len)) {
+            Some(loan) if loan.as_slice().len() == len => BytesMut(Buffer::Loan(loan)),
+            _ => BytesMut(Buffer::Heap(vec![0; len])),
+        }
+    }
+
+    /// Whether these bytes are a buffer loaned by the process's [`Lender`]
+    /// ([`Bytes::loan`]).
+    pub fn is_loaned(&self) -> bool {
+        self.loaned.is_some()
     }
 }
 
@@ -196,57 +211,6 @@ impl fmt::Debug for BytesMut {
     }
 }
 
-/// A buffer a [`Lender`] lends, while its holder writes it.
-pub trait Loan: Send + 'static {
-    /// Its bytes.
-    fn as_slice(&self) -> &[u8];
-    /// Its bytes, to write.
-    fn as_mut_slice(&mut self) -> &mut [u8];
-    /// Written: read-only and shared from now on.
-    fn freeze(self: Box<Self>) -> Arc<dyn Lent>;
-}
-
-/// A loaned buffer once written ([`Loan::freeze`]): its bytes, and, as `Any`, what
-/// its lender's encoder recognizes it by ([`loan_at`]).
-pub trait Lent: AsRef<[u8]> + Any + Send + Sync {}
-
-/// Where [`Bytes::loan`] takes its buffers from (set with [`push_lender`]).
-pub trait Lender: Send + Sync + 'static {
-    /// A buffer of exactly `len` bytes, or None (no room: the loan is made on the
-    /// heap).
-    fn loan(&self, len: usize) -> Option<Box<dyn Loan>>;
-}
-
-/// The lenders set, the process's lender last.
-static LENDERS: RwLock<Vec<Arc<dyn Lender>>> = RwLock::new(Vec::new());
-
-/// Makes `lender` the process's lender for [`Bytes::loan`], until it is withdrawn
-/// ([`withdraw_lender`]); the lender it follows lends again then.
-pub fn push_lender(lender: Arc<dyn Lender>) {
-    LENDERS
-        .write()
-        .unwrap_or_else(PoisonError::into_inner)
-        .push(lender);
-}
-
-/// `lender` no longer lends: the latest lender set before it and not withdrawn is the
-/// process's lender again (none: loans come from the heap).
-pub fn withdraw_lender(lender: &dyn Lender) {
-    LENDERS
-        .write()
-        .unwrap_or_else(PoisonError::into_inner)
-        .retain(|set| !std::ptr::addr_eq(Arc::as_ptr(set), lender));
-}
-
-/// The process's lender, if one is set.
-pub fn lender() -> Option<Arc<dyn Lender>> {
-    LENDERS
-        .read()
-        .unwrap_or_else(PoisonError::into_inner)
-        .last()
-        .cloned()
-}
-
 /// A frozen loan as the owner of a `bytes::Bytes`.
 struct Frozen(Arc<dyn Lent>);
 
@@ -256,190 +220,10 @@ impl AsRef<[u8]> for Frozen {
     }
 }
 
-thread_local! {
-    /// Encodings under way on this thread that look for loaned buffers
-    /// ([`encoding_loans`]).
-    static ENCODING: Cell<usize> = const { Cell::new(0) };
-    /// The loaned buffers serialized on this thread during those encodings.
-    static LOANS: RefCell<Vec<Arc<dyn Lent>>> = const { RefCell::new(Vec::new()) };
-}
-
-/// Calls `encode`, during which a loaned [`Bytes`] serialized on this thread is
-/// noted, so that the encoder's writer, handed the bytes, finds their buffer with
-/// [`loan_at`] and can send that buffer instead of copying it.
-pub fn encoding_loans<R>(encode: impl FnOnce() -> R) -> R {
-    ENCODING.with(|depth| depth.set(depth.get() + 1));
-    // Undone even if `encode` panics.
-    struct Done;
-    impl Drop for Done {
-        fn drop(&mut self) {
-            ENCODING.with(|depth| {
-                let left = depth.get().saturating_sub(1);
-                depth.set(left);
-                if left == 0 {
-                    LOANS.with(|loans| loans.borrow_mut().clear());
-                }
-            });
-        }
-    }
-    let _done = Done;
-    encode()
-}
-
-/// The loaned buffer that is exactly `bytes` (the same memory, whole), if a
-/// [`Bytes`] serialized in the current [`encoding_loans`] on this thread is one.
-pub fn loan_at(bytes: &[u8]) -> Option<Arc<dyn Lent>> {
-    if bytes.is_empty() {
-        return None;
-    }
-    LOANS.with(|loans| {
-        loans
-            .borrow()
-            .iter()
-            .find(|loan| {
-                let whole: &[u8] = (***loan).as_ref();
-                std::ptr::eq(whole.as_ptr(), bytes.as_ptr()) && whole.len() == bytes.len()
-            })
-            .cloned()
-    })
-}
-
-impl fmt::Debug for Bytes {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Bytes({} bytes)", self.data.len())
-    }
-}
-
-/// Memory lent on this thread ([`lend`], [`lend_whole`]).
-struct Lending {
-    memory: ::bytes::Bytes,
-    /// Only bytes that are this memory exactly, whole, share it.
-    whole_only: bool,
-}
-
-impl Lending {
-    /// Whether bytes at `part` share this memory.
-    fn holds(&self, part: &[u8]) -> bool {
-        let (start, end) = (
-            self.memory.as_ptr() as usize,
-            self.memory.as_ptr() as usize + self.memory.len(),
-        );
-        let (from, to) = (part.as_ptr() as usize, part.as_ptr() as usize + part.len());
-        if self.whole_only {
-            !part.is_empty() && start == from && to == end
-        } else {
-            !part.is_empty() && start <= from && to <= end
-        }
-    }
-}
-
-thread_local! {
-    /// The memory lent on this thread, innermost last.
-    static LENT: RefCell<Vec<Lending>> = const { RefCell::new(Vec::new()) };
-}
-
-/// Takes `count` lendings off this thread's stack when dropped (even in a panic).
-struct Return(usize);
-
-impl Drop for Return {
-    fn drop(&mut self) {
-        LENT.with(|lent| {
-            let mut lent = lent.borrow_mut();
-            let keep = lent.len().saturating_sub(self.0);
-            lent.truncate(keep);
-        });
-    }
-}
-
-/// Calls `read` with `owner`'s bytes, lent: a [`Bytes`] decoded from them meanwhile
-/// on this thread shares `owner` (kept alive by it) instead of copying.
-pub fn lend<O, R>(owner: O, read: impl FnOnce(&[u8]) -> R) -> R
-where
-    O: AsRef<[u8]> + Send + 'static,
-{
-    let memory = ::bytes::Bytes::from_owner(owner);
-    LENT.with(|lent| {
-        lent.borrow_mut().push(Lending {
-            memory: memory.clone(),
-            whole_only: false,
-        });
-    });
-    let _return = Return(1);
-    read(&memory)
-}
-
-/// Calls `read` with the bytes of `parts`, the parts of one message in order, each
-/// with whether it may be shared: a [`Bytes`] decoded meanwhile on this thread whose
-/// bytes are exactly such a part (that memory, all of it) shares that part's owner
-/// instead of copying. A message sent with a loaned buffer in it ([`Bytes::loan`])
-/// arrives as such parts, the loaned buffer one of them. Returns what `read`
-/// returned, and how many parts it still shares (its `Bytes` keep them alive).
-pub fn lend_whole<O, R>(parts: Vec<(O, bool)>, read: impl FnOnce(&[&[u8]]) -> R) -> (R, usize)
-where
-    O: AsRef<[u8]> + Send + 'static,
-{
-    /// A part's owner, and a count of who holds it.
-    struct Held<O> {
-        owner: O,
-        _held: Arc<()>,
-    }
-    impl<O: AsRef<[u8]>> AsRef<[u8]> for Held<O> {
-        fn as_ref(&self) -> &[u8] {
-            self.owner.as_ref()
-        }
-    }
-    let mut held = Vec::new();
-    let mut memory = Vec::with_capacity(parts.len());
-    let mut lent = 0;
-    LENT.with(|lendings| {
-        let mut lendings = lendings.borrow_mut();
-        for (owner, shared) in parts {
-            let count = Arc::new(());
-            let bytes = ::bytes::Bytes::from_owner(Held {
-                owner,
-                _held: Arc::clone(&count),
-            });
-            if shared {
-                lendings.push(Lending {
-                    memory: bytes.clone(),
-                    whole_only: true,
-                });
-                lent += 1;
-                held.push(count);
-            }
-            memory.push(bytes);
-        }
-    });
-    let value = {
-        let _return = Return(lent);
-        let slices: Vec<&[u8]> = memory.iter().map(|part| &part[..]).collect();
-        read(&slices)
-    };
-    drop(memory);
-    let shared = held
-        .iter()
-        .filter(|count| Arc::strong_count(count) > 1)
-        .count();
-    (value, shared)
-}
-
-/// The lent memory holding `part`, sliced to it, if any.
-fn lent_slice(part: &[u8]) -> Option<::bytes::Bytes> {
-    LENT.with(|lent| {
-        lent.borrow()
-            .iter()
-            .rev()
-            .find(|lending| lending.holds(part))
-            .map(|lending| lending.memory.slice_ref(part))
-    })
-}
-
 impl Serialize for Bytes {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        if let Some(loan) = &self.loaned
-            && ENCODING.with(Cell::get) > 0
-        {
-            LOANS.with(|loans| loans.borrow_mut().push(Arc::clone(loan)));
+        if let Some(loan) = &self.loaned {
+            loan::serialized(loan);
         }
         serializer.serialize_bytes(&self.data)
     }
@@ -507,6 +291,7 @@ mod tests {
         pixels: Bytes,
     }
 
+    /// A frame of number 7 and 4 pixels, encoded.
     fn encoded() -> Vec<u8> {
         let frame = Frame {
             number: 7,
@@ -581,6 +366,77 @@ mod tests {
         assert_eq!(&*frame.pixels, b"ab");
         let frame: Frame = serde_json::from_str(r#"{"number":3,"pixels":"ab"}"#).unwrap();
         assert_eq!(&*frame.pixels, b"ab");
+    }
+
+    #[test]
+    fn parts_lent_whole_share_only_bytes_that_are_a_whole_part() {
+        // The message `encoded()` in three parts: the number and the length, the
+        // pixels, nothing.
+        let message = encoded();
+        let parts = vec![
+            (message[..2].to_vec(), true),
+            (message[2..].to_vec(), true),
+            (Vec::new(), true),
+        ];
+        let pixels_at = parts[1].0.as_ptr() as usize;
+        let (frame, shared) = lend_whole(parts, |parts| {
+            assert_eq!(parts.len(), 3);
+            let mut joined = Vec::new();
+            for part in parts {
+                joined.extend_from_slice(part);
+            }
+            // Decoded from the parts as a segmented reader would hand them out: the
+            // pixels are borrowed from the second part.
+            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
+            assert!(pixels.is_lent());
+            assert_eq!(pixels.as_ptr() as usize, pixels_at);
+            // Bytes within a part but not all of it are copied.
+            let within = Bytes::deserialize(BorrowedBytes(&parts[1][1..])).unwrap();
+            assert!(!within.is_lent());
+            let frame: Frame = postcard::from_bytes(&joined).unwrap();
+            Frame { pixels, ..frame }
+        });
+        assert_eq!(&*frame.pixels, &[1, 2, 3, 250]);
+        assert!(frame.pixels.is_lent());
+        assert_eq!(shared, 1, "the pixels' part");
+        // Shared no longer once the pixels are gone; a part that may not be shared is
+        // copied.
+        drop(frame);
+        let message = encoded();
+        let parts = vec![
+            (message[..2].to_vec(), true),
+            (message[2..].to_vec(), false),
+        ];
+        let (copied, shared) = lend_whole(parts, |parts| {
+            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
+            assert!(!pixels.is_lent());
+            pixels
+        });
+        assert_eq!((&*copied, shared), (&message[2..], 0));
+        let parts = vec![(message.clone(), true)];
+        let ((), shared) = lend_whole(parts, |parts| {
+            let whole = Bytes::deserialize(BorrowedBytes(parts[0])).unwrap();
+            assert!(whole.is_lent());
+        });
+        assert_eq!(shared, 0, "what was decoded is gone");
+        // Nothing stays lent after.
+        let again = Bytes::deserialize(BorrowedBytes(&[9, 9])).unwrap();
+        assert!(!again.is_lent());
+    }
+
+    /// A deserializer that hands out one borrowed slice of bytes.
+    struct BorrowedBytes<'de>(&'de [u8]);
+
+    impl<'de> Deserializer<'de> for BorrowedBytes<'de> {
+        type Error = de::value::Error;
+        fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+            visitor.visit_borrowed_bytes(self.0)
+        }
+        serde::forward_to_deserialize_any! {
+            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
+            bytes byte_buf option unit unit_struct newtype_struct seq tuple
+            tuple_struct map struct enum identifier ignored_any
+        }
     }
 
     /// A lender of heap buffers that it can recognize, as a pool's would be.
@@ -698,76 +554,5 @@ mod tests {
         assert!(Bytes::loan(4).is_loaned(), "the one left lends");
         withdraw_lender(&*lends);
         assert!(lender().is_none());
-    }
-
-    #[test]
-    fn parts_lent_whole_share_only_bytes_that_are_a_whole_part() {
-        // The message `encoded()` in three parts: the number and the length, the
-        // pixels, nothing.
-        let message = encoded();
-        let parts = vec![
-            (message[..2].to_vec(), true),
-            (message[2..].to_vec(), true),
-            (Vec::new(), true),
-        ];
-        let pixels_at = parts[1].0.as_ptr() as usize;
-        let (frame, shared) = lend_whole(parts, |parts| {
-            assert_eq!(parts.len(), 3);
-            let mut joined = Vec::new();
-            for part in parts {
-                joined.extend_from_slice(part);
-            }
-            // Decoded from the parts as a segmented reader would hand them out: the
-            // pixels are borrowed from the second part.
-            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
-            assert!(pixels.is_lent());
-            assert_eq!(pixels.as_ptr() as usize, pixels_at);
-            // Bytes within a part but not all of it are copied.
-            let within = Bytes::deserialize(BorrowedBytes(&parts[1][1..])).unwrap();
-            assert!(!within.is_lent());
-            let frame: Frame = postcard::from_bytes(&joined).unwrap();
-            Frame { pixels, ..frame }
-        });
-        assert_eq!(&*frame.pixels, &[1, 2, 3, 250]);
-        assert!(frame.pixels.is_lent());
-        assert_eq!(shared, 1, "the pixels' part");
-        // Shared no longer once the pixels are gone; a part that may not be shared is
-        // copied.
-        drop(frame);
-        let message = encoded();
-        let parts = vec![
-            (message[..2].to_vec(), true),
-            (message[2..].to_vec(), false),
-        ];
-        let (copied, shared) = lend_whole(parts, |parts| {
-            let pixels = Bytes::deserialize(BorrowedBytes(parts[1])).unwrap();
-            assert!(!pixels.is_lent());
-            pixels
-        });
-        assert_eq!((&*copied, shared), (&message[2..], 0));
-        let parts = vec![(message.clone(), true)];
-        let ((), shared) = lend_whole(parts, |parts| {
-            let whole = Bytes::deserialize(BorrowedBytes(parts[0])).unwrap();
-            assert!(whole.is_lent());
-        });
-        assert_eq!(shared, 0, "what was decoded is gone");
-        // Nothing stays lent after.
-        let again = Bytes::deserialize(BorrowedBytes(&[9, 9])).unwrap();
-        assert!(!again.is_lent());
-    }
-
-    /// A deserializer that hands out one borrowed slice of bytes.
-    struct BorrowedBytes<'de>(&'de [u8]);
-
-    impl<'de> Deserializer<'de> for BorrowedBytes<'de> {
-        type Error = de::value::Error;
-        fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
-            visitor.visit_borrowed_bytes(self.0)
-        }
-        serde::forward_to_deserialize_any! {
-            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
-            bytes byte_buf option unit unit_struct newtype_struct seq tuple
-            tuple_struct map struct enum identifier ignored_any
-        }
     }
 }
