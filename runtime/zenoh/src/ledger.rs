@@ -9,13 +9,14 @@
 //! it counted missing (gaps, at its own `network` input), and answers queries on
 //! `K/@ack/<node>/<name>` with that and its process (drawn once per process, also the
 //! last chunk of its token `K/@in/<node>/<name>/<process>`). The outlet asks every
-//! [`ACK_PERIOD`] and watches the inlets' tokens. When an inlet's process is known to
-//! have ended (its token is gone and an inlet token on the key appears from its node
-//! with another process, or, on a key with one input end, another inlet has started
-//! receiving, or the outlet stops), the numbers sent after the newest it acknowledged
-//! are counted lost at the outlet's input, with an event, up to where its successor's
-//! share begins. A link that breaks and comes back keeps the same process: the inlet
-//! counts the gap itself, and the outlet nothing. The questions carry the epochs of
+//! [`ACK_PERIOD`] while a live inlet has not acknowledged everything it sent (or it has
+//! killed predecessors to report: below), and watches the inlets' tokens. When an
+//! inlet's process is known to have ended (its token is gone and an inlet token on the
+//! key appears from its node with another process, or, on a key with one input end,
+//! another inlet has started receiving, or the outlet stops), the numbers sent after
+//! the newest it acknowledged are counted lost at the outlet's input, with an event,
+//! up to where its successor's share begins. A link that breaks and comes back keeps
+//! the same process: the inlet counts the gap itself, and the outlet nothing. The questions carry the epochs of
 //! killed predecessors and their newest numbers (`crate::tally`).
 //!
 //! Numbers come from the network, where any peer that may publish on a key may write
@@ -597,6 +598,14 @@ impl Book {
             .fold(0, |total, s| total.saturating_add(s.newest))
     }
 
+    /// Whether a round of questions could learn anything: a live inlet has not
+    /// acknowledged everything sent, or the killed predecessors' report is not retired.
+    /// An outlet whose inlets have everything asks nothing until it sends again: an
+    /// inlet that ends now was sent nothing it did not acknowledge.
+    fn has_questions(&self) -> bool {
+        !lock(&self.ended).is_empty() || !self.caught_up()
+    }
+
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
     fn is_empty(&self) -> bool {
         lock(&self.ended).is_empty() && lock(&self.streams).iter().all(|s| s.counted)
@@ -736,7 +745,9 @@ impl OutletLedger {
                 while !stopped.load(Ordering::Acquire) {
                     let next = Instant::now() + ACK_PERIOD;
                     if !asked.is_empty() {
-                        asked.ask(&on);
+                        if asked.has_questions() {
+                            asked.ask(&on);
+                        }
                         asked.settle(false);
                     }
                     // Parking may end early (a Zenoh wait unparks this thread too):
@@ -840,6 +851,33 @@ mod tests {
         assert_eq!(losses.overflows(), 7);
         book.settle(true);
         assert_eq!(losses.overflows(), 7, "`bbb` acknowledged everything");
+    }
+
+    #[test]
+    fn an_outlet_asks_only_while_an_inlet_has_not_acknowledged_everything_sent() {
+        let (book, _) = book(false);
+        assert!(!book.has_questions(), "no inlet, nothing sent");
+        book.token("station/in/aaa", SampleKind::Put);
+        assert!(!book.has_questions(), "a newcomer was sent nothing yet");
+        book.sent.store(3, Ordering::Release);
+        assert!(book.has_questions(), "three numbers not acknowledged");
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 2)));
+        assert!(book.has_questions(), "one number not acknowledged");
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 3)));
+        assert!(
+            !book.has_questions(),
+            "everything acknowledged: an idle bridge"
+        );
+        // The link breaks: no live inlet to ask; it comes back behind.
+        book.token("station/in/aaa", SampleKind::Delete);
+        book.sent.store(5, Ordering::Release);
+        assert!(!book.has_questions(), "no live inlet");
+        book.token("station/in/aaa", SampleKind::Put);
+        assert!(book.has_questions(), "back, and two numbers behind");
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
+        assert!(!book.has_questions());
+        *lock(&book.ended) = vec![(3, 40)];
+        assert!(book.has_questions(), "a killed predecessor to report");
     }
 
     #[test]
