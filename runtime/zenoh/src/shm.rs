@@ -276,6 +276,14 @@ impl AsRef<[u8]> for PoolLent {
 
 impl Lent for PoolLent {}
 
+/// The buffer of a pool that `bytes` is, when an encoder meets a loaned `Bytes`
+/// (`coolbot::lent::loan_at`) lent by a node's pool ([`PoolLender`]).
+fn pool_buffer(bytes: &[u8]) -> Option<ZShm> {
+    let lent = coolbot::lent::loan_at(bytes)?;
+    let lent: &dyn Any = &*lent;
+    lent.downcast_ref::<PoolLent>().map(|lent| lent.0.clone())
+}
+
 /// A message as its parts: bytes copied, and buffers of a pool sent as they are.
 #[derive(Default)]
 struct Parts {
@@ -292,11 +300,7 @@ impl postcard::ser_flavors::Flavor for Parts {
     }
 
     fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
-        let buffer = coolbot::lent::loan_at(bytes).and_then(|lent| {
-            let lent: &dyn Any = &*lent;
-            lent.downcast_ref::<PoolLent>().map(|lent| lent.0.clone())
-        });
-        match buffer {
+        match pool_buffer(bytes) {
             Some(buffer) => {
                 let writer = self.writer.get_or_insert_with(ZBytes::writer);
                 writer.append(ZBytes::from(std::mem::take(&mut self.copied)));
@@ -337,12 +341,8 @@ impl postcard::ser_flavors::Flavor for Measure {
 
     fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
         self.size += bytes.len();
-        if !self.loaned
-            && bytes.len() >= SHARED_THRESHOLD
-            && let Some(lent) = coolbot::lent::loan_at(bytes)
-        {
-            let lent: &dyn Any = &*lent;
-            self.loaned = lent.is::<PoolLent>();
+        if !self.loaned && bytes.len() >= SHARED_THRESHOLD {
+            self.loaned = pool_buffer(bytes).is_some();
         }
         Ok(())
     }

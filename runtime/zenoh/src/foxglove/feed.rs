@@ -145,9 +145,21 @@ impl Drops {
         *seen = (*seen).max(dropped);
         unseen
     }
+
+    /// Forget `node` (its token went): a batch of it still queued follows no drop
+    /// the feed knows, and one that comes back starts from none.
+    fn forget(&self, node: &str) {
+        self.lock().remove(node);
+    }
 }
 
 impl Inlet {
+    /// Forget what was dropped of `node`'s batches (its token went), so that nodes
+    /// that come and go under new names leave nothing behind.
+    pub(super) fn forget(&self, node: &str) {
+        self.drops.forget(node);
+    }
+
     /// Queue `payload`, a batch of echoed packets from `node`, and wake the feed;
     /// count it dropped if the queue is full, or if it is over
     /// [`crate::limits::ECHO_BATCH`] (never queued: what waits is within it).
@@ -516,6 +528,10 @@ mod tests {
         inlet.push(&node, batch(&[("a.out", 9, "6")]));
         log_waiting(&waiting, &routes, &counts, &inlet.drops);
         assert_eq!(counts.missing.load(Ordering::Relaxed), 2);
+        // The node goes: nothing of it is kept.
+        assert_eq!(inlet.drops.lock().len(), 1);
+        inlet.forget(&node);
+        assert!(inlet.drops.lock().is_empty());
     }
 
     /// The packets of a served output that never came (numbers missing) are counted,

@@ -650,6 +650,7 @@ impl Follower {
             .retain(|address, _| !address.starts_with(&prefix));
         self.routes.forget(name);
         self.batches.remove(name);
+        self.inlet.forget(name);
     }
 
     fn subscribe(&mut self, id: ChannelId) {
