@@ -16,8 +16,9 @@
 //! another inlet has started receiving, or the outlet stops), the numbers sent after
 //! the newest it acknowledged are counted lost at the outlet's input, with an event,
 //! up to where its successor's share begins. A link that breaks and comes back keeps
-//! the same process: the inlet counts the gap itself, and the outlet nothing. The questions carry the epochs of
-//! killed predecessors and their newest numbers (`crate::tally`).
+//! the same process: the inlet counts the gap itself, and the outlet nothing. The
+//! questions carry the epochs of killed predecessors and their newest numbers
+//! (`crate::tally`).
 //!
 //! Numbers come from the network, where any peer that may publish on a key may write
 //! them: an inlet counts missing only within [`WINDOW`] of the newest number of an

@@ -115,39 +115,70 @@ pub(super) struct Inlet {
 
 /// How many batches of each node the inlet dropped (over size, or the queue full:
 /// counted there), and how many of those the feed has seen behind a batch it took:
-/// the numbers such a batch held are not counted missing again at the next one.
+/// the numbers such a batch held are not counted missing again at the next one. Per
+/// node name, for one subscription to the node's batches at a time: the name its
+/// callback hands over ([`Inlet::push`]) is made anew for each subscription, and a
+/// batch of an earlier one (the node went and came back while it was queued) neither
+/// reads nor moves the counts of the current one.
 #[derive(Default)]
-struct Drops(Mutex<HashMap<Arc<str>, (u64, u64)>>);
+struct Drops(Mutex<HashMap<Arc<str>, Life>>);
+
+/// The drops of one subscription to a node's batches.
+struct Life {
+    /// The name its callback hands over (compared by identity).
+    from: Arc<str>,
+    dropped: u64,
+    seen: u64,
+}
 
 impl Drops {
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Arc<str>, (u64, u64)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Arc<str>, Life>> {
         self.0.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// How many of `node`'s batches were dropped so far.
     fn dropped(&self, node: &Arc<str>) -> u64 {
-        self.lock().get(node).map_or(0, |&(dropped, _)| dropped)
+        self.lock()
+            .get(node)
+            .filter(|life| Arc::ptr_eq(&life.from, node))
+            .map_or(0, |life| life.dropped)
     }
 
     /// One more of `node`'s batches dropped.
     fn drop_one(&self, node: &Arc<str>) {
-        self.lock().entry(Arc::clone(node)).or_default().0 += 1;
+        let mut drops = self.lock();
+        let life = drops.entry(Arc::clone(node)).or_insert_with(|| Life {
+            from: Arc::clone(node),
+            dropped: 0,
+            seen: 0,
+        });
+        if !Arc::ptr_eq(&life.from, node) {
+            // A new subscription: the counts start again.
+            *life = Life {
+                from: Arc::clone(node),
+                dropped: 0,
+                seen: 0,
+            };
+        }
+        life.dropped += 1;
     }
 
     /// Whether a batch of `node` queued after `dropped` drops follows one the feed
     /// has not seen yet (and it is seen now).
     fn after_unseen(&self, node: &Arc<str>, dropped: u64) -> bool {
         let mut drops = self.lock();
-        let Some((_, seen)) = drops.get_mut(node) else {
+        let Some(life) = drops
+            .get_mut(node)
+            .filter(|life| Arc::ptr_eq(&life.from, node))
+        else {
             return false;
         };
-        let unseen = dropped > *seen;
-        *seen = (*seen).max(dropped);
+        let unseen = dropped > life.seen;
+        life.seen = life.seen.max(dropped);
         unseen
     }
 
-    /// Forget `node` (its token went): a batch of it still queued follows no drop
-    /// the feed knows, and one that comes back starts from none.
+    /// Forget `node` (its token went).
     fn forget(&self, node: &str) {
         self.lock().remove(node);
     }
@@ -532,6 +563,44 @@ mod tests {
         assert_eq!(inlet.drops.lock().len(), 1);
         inlet.forget(&node);
         assert!(inlet.drops.lock().is_empty());
+    }
+
+    /// A node that goes and comes back under its name while a batch of its earlier
+    /// life still waits: that batch neither reads nor moves the drops of the new
+    /// subscription, whose dropped batches are counted once.
+    #[test]
+    fn a_batch_of_a_nodes_earlier_life_does_not_hide_a_drop_of_the_next() {
+        let counts = Arc::new(Counts::default());
+        let (inlet, waiting) = queue(2, Arc::clone(&counts));
+        let context = Context::new();
+        let routes = Routes::default();
+        let earlier: Arc<str> = Arc::from("n");
+        inlet.push(
+            &earlier,
+            ZBytes::from("x".repeat(crate::limits::ECHO_BATCH.max + 1)),
+        );
+        inlet.push(&earlier, batch(&[("a.out", 7, "1")]));
+        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 1);
+        // The node goes (its batch still queued) and comes back: a new subscription.
+        inlet.forget("n");
+        routes.add(
+            "n",
+            "a.out",
+            route(&context, "/n/a.out", Transform::Raw { wrap: true }),
+        );
+        let later: Arc<str> = Arc::from("n");
+        inlet.push(&later, batch(&[("a.out", 0, "1")]));
+        // The queue is full: the next batch (numbers 1 and 2) is dropped, counted.
+        inlet.push(&later, batch(&[("a.out", 1, "2"), ("a.out", 2, "3")]));
+        assert_eq!(counts.overflowed.load(Ordering::Relaxed), 1);
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        inlet.push(&later, batch(&[("a.out", 3, "4")]));
+        log_waiting(&waiting, &routes, &counts, &inlet.drops);
+        assert_eq!(
+            counts.missing.load(Ordering::Relaxed),
+            0,
+            "the dropped batch is counted once, where it was dropped"
+        );
     }
 
     /// The packets of a served output that never came (numbers missing) are counted,
