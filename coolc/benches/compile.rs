@@ -487,12 +487,14 @@ impl Formatter {
 /// last minutes of its group, reading each one's inode table block, so a compile
 /// that creates its 3,306 files (crate, user files and `.coolc/stubs/`) shortly after
 /// the deletion of many files (the previous run of this benchmark removes about
-/// 100,000) spends 0.1 to 0.9 ms of kernel time on each. The benchmark leaves out
-/// what it can of its own: it waits until six minutes have passed since its last run
-/// removed its files ([`INODE_RECENCY`]), and writes out what is pending on the file
-/// system before each row ([`settle`]), so that no row times the write-back of the
-/// rows before. Deletions by other programs in the minutes before remain in the
-/// figures. `COOLC_BENCH_DIR=/dev/shm` (a tmpfs) leaves the disk out.
+/// 650,000, about 10 GiB: every round's crate is kept until the end) spends 0.1 to
+/// 0.9 ms of kernel time on each. The benchmark leaves out what it can of its own: it
+/// waits until six minutes have passed since its last run removed its files
+/// ([`INODE_RECENCY`]), and writes out what is pending on the file system before each
+/// child ([`settle`]), so that no child times the write-back of those before.
+/// Deletions by other programs in the minutes before remain in the figures.
+/// `COOLC_BENCH_DIR=/dev/shm` (a tmpfs) leaves the disk out, and takes those 10 GiB
+/// of memory.
 fn scratch_root() -> PathBuf {
     if let Some(dir) = std::env::var_os("COOLC_BENCH_DIR") {
         return PathBuf::from(dir);
@@ -757,7 +759,7 @@ fn main() {
                 ratio(pick(large.compile()), pick(small.compile()))
             );
             println!(
-                "- {formatter:?}, {what}: 10x input, per stage: check {:.2}x, lower {:.2}x, emit {:.2}x, recompile {:.2}x",
+                "- {formatter:?}, {what}: 10x input, per stage (the rows' medians): check {:.2}x, lower {:.2}x, emit {:.2}x, recompile {:.2}x",
                 ratio(pick(large.check), pick(small.check)),
                 ratio(pick(large.lower), pick(small.lower)),
                 ratio(pick(large.emit), pick(small.emit)),
