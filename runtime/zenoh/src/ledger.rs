@@ -601,8 +601,8 @@ impl Book {
 
     /// Whether a round of questions could learn anything: a live inlet has not
     /// acknowledged everything sent, or the killed predecessors' report is not retired.
-    /// An outlet whose inlets have everything asks nothing until it sends again: an
-    /// inlet that ends now was sent nothing it did not acknowledge.
+    /// An outlet whose inlets have everything, with no report out, asks nothing until
+    /// it sends again: an inlet that ends now was sent nothing it did not acknowledge.
     fn has_questions(&self) -> bool {
         !lock(&self.ended).is_empty() || !self.caught_up()
     }

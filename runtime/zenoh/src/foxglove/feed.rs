@@ -116,77 +116,75 @@ pub(super) struct Inlet {
 /// How many batches of each node the inlet dropped (over size, or the queue full:
 /// counted there), and how many of those the feed has seen behind a batch it took:
 /// the numbers such a batch held are not counted missing again at the next one. Per
-/// node name, for one subscription to the node's batches at a time: the name its
-/// callback hands over ([`Inlet::push`]) is made anew for each subscription, and a
-/// batch of an earlier one (the node went and came back while it was queued) neither
-/// reads nor moves the counts of the current one.
+/// subscription to a node's batches: the name its callback hands over
+/// ([`Inlet::push`]) is made anew for each subscription, and the counts are kept by
+/// that name's identity, so that a batch of an earlier subscription (the node went
+/// and came back while it was queued, or a callback still running as its subscriber
+/// went) neither reads nor moves those of the current one.
 #[derive(Default)]
-struct Drops(Mutex<HashMap<Arc<str>, Life>>);
+struct Drops(Mutex<HashMap<Subscription, (u64, u64)>>);
 
-/// The drops of one subscription to a node's batches.
-struct Life {
-    /// The name its callback hands over (compared by identity).
-    from: Arc<str>,
-    dropped: u64,
-    seen: u64,
+/// A subscription to a node's batches: the name its callback hands over, compared by
+/// identity (a name is kept alive by its entry, so no other can take its address).
+struct Subscription(Arc<str>);
+
+impl PartialEq for Subscription {
+    fn eq(&self, other: &Subscription) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Eq for Subscription {}
+
+impl std::hash::Hash for Subscription {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        std::ptr::hash(Arc::as_ptr(&self.0).cast::<u8>(), state);
+    }
 }
 
 impl Drops {
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Arc<str>, Life>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Subscription, (u64, u64)>> {
         self.0.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// How many of `node`'s batches were dropped so far.
     fn dropped(&self, node: &Arc<str>) -> u64 {
         self.lock()
-            .get(node)
-            .filter(|life| Arc::ptr_eq(&life.from, node))
-            .map_or(0, |life| life.dropped)
+            .get(&Subscription(Arc::clone(node)))
+            .map_or(0, |&(dropped, _)| dropped)
     }
 
     /// One more of `node`'s batches dropped.
     fn drop_one(&self, node: &Arc<str>) {
-        let mut drops = self.lock();
-        let life = drops.entry(Arc::clone(node)).or_insert_with(|| Life {
-            from: Arc::clone(node),
-            dropped: 0,
-            seen: 0,
-        });
-        if !Arc::ptr_eq(&life.from, node) {
-            // A new subscription: the counts start again.
-            *life = Life {
-                from: Arc::clone(node),
-                dropped: 0,
-                seen: 0,
-            };
-        }
-        life.dropped += 1;
+        self.lock()
+            .entry(Subscription(Arc::clone(node)))
+            .or_default()
+            .0 += 1;
     }
 
     /// Whether a batch of `node` queued after `dropped` drops follows one the feed
     /// has not seen yet (and it is seen now).
     fn after_unseen(&self, node: &Arc<str>, dropped: u64) -> bool {
         let mut drops = self.lock();
-        let Some(life) = drops
-            .get_mut(node)
-            .filter(|life| Arc::ptr_eq(&life.from, node))
-        else {
+        let Some((_, seen)) = drops.get_mut(&Subscription(Arc::clone(node))) else {
             return false;
         };
-        let unseen = dropped > life.seen;
-        life.seen = life.seen.max(dropped);
+        let unseen = dropped > *seen;
+        *seen = (*seen).max(dropped);
         unseen
     }
 
-    /// Forget `node` (its token went).
+    /// Forget every subscription to `node`'s batches (its token went, or its last
+    /// route was removed).
     fn forget(&self, node: &str) {
-        self.lock().remove(node);
+        self.lock()
+            .retain(|subscription, _| &*subscription.0 != node);
     }
 }
 
 impl Inlet {
-    /// Forget what was dropped of `node`'s batches (its token went), so that nodes
-    /// that come and go under new names leave nothing behind.
+    /// Forget what was dropped of `node`'s batches (its token went, or its last route
+    /// was removed), so that nodes that come and go leave nothing behind.
     pub(super) fn forget(&self, node: &str) {
         self.drops.forget(node);
     }
@@ -566,7 +564,8 @@ mod tests {
     }
 
     /// A node that goes and comes back under its name while a batch of its earlier
-    /// life still waits: that batch neither reads nor moves the drops of the new
+    /// life still waits, and a callback of the earlier subscription drops one more
+    /// after the new one began: neither reads nor moves the drops of the new
     /// subscription, whose dropped batches are counted once.
     #[test]
     fn a_batch_of_a_nodes_earlier_life_does_not_hide_a_drop_of_the_next() {
@@ -593,6 +592,12 @@ mod tests {
         // The queue is full: the next batch (numbers 1 and 2) is dropped, counted.
         inlet.push(&later, batch(&[("a.out", 1, "2"), ("a.out", 2, "3")]));
         assert_eq!(counts.overflowed.load(Ordering::Relaxed), 1);
+        // A callback of the earlier subscription, still running, drops one more.
+        inlet.push(
+            &earlier,
+            ZBytes::from("x".repeat(crate::limits::ECHO_BATCH.max + 1)),
+        );
+        assert_eq!(counts.undecoded.load(Ordering::Relaxed), 2);
         log_waiting(&waiting, &routes, &counts, &inlet.drops);
         inlet.push(&later, batch(&[("a.out", 3, "4")]));
         log_waiting(&waiting, &routes, &counts, &inlet.drops);

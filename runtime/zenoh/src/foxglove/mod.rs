@@ -779,6 +779,7 @@ impl Follower {
                 && self.routes.remove(node, output, id)
             {
                 self.batches.remove(node);
+                self.inlet.forget(node);
             }
         }
     }
