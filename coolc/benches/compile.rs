@@ -330,10 +330,17 @@ fn run(files: &Files, roots: &[PathBuf], formatter: Formatter) -> Times {
         let (lower, krate) = measure(|| coolc::lower::lower(&checked, &options));
         let (emit, (files, bytes)) = measure(|| {
             if formatter == Formatter::Unformatted {
-                let text =
-                    coolc::emit::single_file_with(&krate, coolc::emit::Formatting::Unformatted);
-                std::fs::write(dir.join("cool.rs"), &text).expect("write the file");
-                (1, text.len())
+                // As the `Builder` writes it.
+                let path = dir.join("cool.rs");
+                let file = std::fs::File::create(&path).expect("create the file");
+                coolc::emit::write_single_file_with(
+                    &krate,
+                    coolc::emit::Formatting::Unformatted,
+                    &mut std::io::BufWriter::new(file),
+                )
+                .expect("write the file");
+                let len = std::fs::metadata(&path).expect("the file").len();
+                (1, len as usize)
             } else {
                 coolc::merge::write_crate(&dir, &krate).expect("write the crate");
                 crate_size(&dir)

@@ -175,7 +175,10 @@ impl Builder {
             Formatting::Unformatted
         };
         std::fs::create_dir_all(&dir)
-            .and_then(|()| std::fs::write(&path, emit::single_file_with(&krate, formatting)))
+            .and_then(|()| std::fs::File::create(&path))
+            .and_then(|file| {
+                emit::write_single_file_with(&krate, formatting, &mut std::io::BufWriter::new(file))
+            })
             .map_err(|source| BuildError::Io {
                 path: path.clone(),
                 source,

@@ -606,6 +606,36 @@ pub fn single_file(krate: &ir::Crate) -> String {
 /// [`single_file`], formatted with `prettyplease` (one module per thread) or not at
 /// all ([`Formatting::Unformatted`]).
 pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
+    let (header, parts) = single_file_parts(krate, formatting);
+    let mut out =
+        String::with_capacity(header.len() + 1 + parts.iter().map(String::len).sum::<usize>());
+    out.push_str(&header);
+    out.push('\n');
+    for part in parts {
+        out.push_str(&part);
+    }
+    out
+}
+
+/// [`single_file_with`] written to `out` part by part, without the whole file in one
+/// more string (what the `Builder` of a build script writes; the file of 11,000
+/// components is about 300 MiB).
+pub fn write_single_file_with(
+    krate: &ir::Crate,
+    formatting: Formatting,
+    out: &mut impl std::io::Write,
+) -> std::io::Result<()> {
+    let (header, parts) = single_file_parts(krate, formatting);
+    out.write_all(header.as_bytes())?;
+    out.write_all(b"\n")?;
+    for part in parts {
+        out.write_all(part.as_bytes())?;
+    }
+    out.flush()
+}
+
+/// The single file's header line and its parts, in order.
+fn single_file_parts(krate: &ir::Crate, formatting: Formatting) -> (String, Vec<String>) {
     let modules = render_modules(krate);
     let mut parts: Vec<String> = par_map(&modules, |(module, text, _)| {
         // The module's text without its header line and item markers.
@@ -643,15 +673,7 @@ pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
             parts
         }
     };
-    let header = krate.header();
-    let mut out =
-        String::with_capacity(header.len() + 1 + parts.iter().map(String::len).sum::<usize>());
-    out.push_str(&header);
-    out.push('\n');
-    for part in parts {
-        out.push_str(&part);
-    }
-    out
+    (krate.header(), parts)
 }
 
 /// The converter stubs as user-file methods.
