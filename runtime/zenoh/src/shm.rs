@@ -427,6 +427,93 @@ pub(crate) fn enabled(config: &zenoh::Config) -> bool {
 
 /// Remove the shared-memory segments of this host that no process maps any more (left
 /// by a process that was killed, or crashed, before it could remove its own).
+///
+/// Zenoh makes a segment in three steps: it creates the file (empty), takes a shared
+/// lock on it, then gives it its size; every process that maps it holds a shared lock
+/// too. A segment on which an exclusive lock is free is therefore either orphaned, or
+/// one that another process has just created and not locked yet. Zenoh's own sweep
+/// (`zenoh::shm::cleanup_orphaned_shm_segments`) tells the two apart by nothing and
+/// removes both: a node opening while another process makes a segment could remove
+/// it under that process, whose consumers then could never map it (each of its
+/// messages lost, or shared memory off on a link). This sweep removes only a segment
+/// that has its size, so was locked before: one whose creator was killed between
+/// creating and sizing it stays (empty, it holds no memory).
+#[cfg(target_os = "linux")]
 pub(crate) fn reclaim() {
-    zenoh::shm::cleanup_orphaned_shm_segments();
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let zenohs = path
+            .extension()
+            .is_some_and(|extension| extension == "zenoh")
+            && path
+                .file_stem()
+                .and_then(|stem| stem.to_str())
+                .is_some_and(|stem| stem.parse::<u64>().is_ok());
+        if !zenohs {
+            continue;
+        }
+        // Its size read and its lock tried through one descriptor, so both are of
+        // the same file.
+        let Ok(file) = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&path)
+        else {
+            continue;
+        };
+        let sized = file.metadata().is_ok_and(|metadata| metadata.len() > 0);
+        if sized && file.try_lock().is_ok() {
+            // Held while it is removed: no process maps it, and none can start to.
+            let _ = std::fs::remove_file(&path);
+        }
+    }
+}
+
+/// Elsewhere a killed process's segments stay (`docs/distribution.md`, "Limits").
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn reclaim() {}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use std::fs::File;
+    use std::path::PathBuf;
+
+    /// A segment file of `size` bytes under a name no other test takes.
+    fn segment(tag: u64, size: u64) -> (PathBuf, File) {
+        let id = u64::from(std::process::id()) << 32 | tag;
+        let path = PathBuf::from(format!("/dev/shm/{id}.zenoh"));
+        let file = File::options()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .expect("the segment is made");
+        file.set_len(size).expect("sized");
+        (path, file)
+    }
+
+    #[test]
+    fn a_sweep_removes_a_sized_segment_nobody_locks_and_leaves_one_being_made() {
+        // Left by a killed process: sized, its descriptor closed, so no lock.
+        let (orphan, file) = segment(1, 4096);
+        drop(file);
+        // Mapped by a live process: it holds a shared lock.
+        let (mapped, held) = segment(2, 4096);
+        held.lock_shared().expect("a shared lock");
+        // Being made: created, not locked nor sized yet.
+        let (made, making) = segment(3, 0);
+        super::reclaim();
+        let (orphan_left, mapped_left, made_left) =
+            (orphan.exists(), mapped.exists(), made.exists());
+        for path in [&orphan, &mapped, &made] {
+            let _ = std::fs::remove_file(path);
+        }
+        drop((held, making));
+        assert!(!orphan_left, "the orphan is removed");
+        assert!(mapped_left, "a segment in use stays");
+        assert!(made_left, "a segment being made stays");
+    }
 }

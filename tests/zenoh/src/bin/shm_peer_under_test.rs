@@ -22,7 +22,8 @@
 //! - `lenders`: opens and drops nodes with shared memory on and off, and prints which
 //!   one `coolbot::Bytes::loan` takes its buffers from at each step.
 //!
-//! It prints `ready` once it listens (consume, hold), and runs until it is killed.
+//! It prints `ready` once it listens (consume, hold), and runs until it is killed; its
+//! warnings go to stderr.
 
 use std::io::Write;
 
@@ -298,6 +299,16 @@ fn lenders() -> ! {
 }
 
 fn main() {
+    // Its warnings (a link that closed, a buffer it could not map) on stderr, which a
+    // failed test's run shows.
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(false)
+        .init();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     match args.as_slice() {

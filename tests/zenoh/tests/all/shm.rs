@@ -421,6 +421,7 @@ fn one_output_to_three_fifo_connections_in_three_processes_writes_a_copy_for_eac
         .collect();
     for key in keys {
         wait_inlets(&node, key, 1);
+        support::wait_subscribed(&node, key);
     }
     let count = 10;
     let received = fan_out(&out, &consumers, count);
@@ -497,9 +498,21 @@ fn a_segment_left_by_a_killed_process_is_reclaimed_when_a_node_opens() {
     let producer = Peer::start(&["produce", "shm-killed-producer", "test/shm/killed"]);
     let segments = segments_of(producer.child.id());
     assert!(!segments.is_empty(), "the producer maps no segment");
+    // A node opening anywhere on this host (another test's, in parallel) reclaims a
+    // segment that no process holds a lock on: until the reclaimer below opens, this
+    // test holds one on each, as a process that maps it does.
+    let held: Vec<std::fs::File> = segments
+        .iter()
+        .map(|segment| {
+            let file = std::fs::File::open(segment).expect("the segment opens");
+            file.lock_shared().expect("a shared lock on the segment");
+            file
+        })
+        .collect();
     producer.kill();
-    // Left behind: nothing removed them.
+    // Left behind: the killed process removed nothing.
     assert!(segments.iter().all(|segment| segment.exists()));
+    drop(held);
     let _node = Node::open(
         "shm-reclaimer",
         coolbot_zenoh::peer_config(&[], &[], false).expect("config"),
