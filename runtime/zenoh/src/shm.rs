@@ -440,7 +440,13 @@ pub(crate) fn enabled(config: &zenoh::Config) -> bool {
 /// creating and sizing it stays (empty, it holds no memory).
 #[cfg(target_os = "linux")]
 pub(crate) fn reclaim() {
-    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+    sweep(std::path::Path::new("/dev/shm"));
+}
+
+/// [`reclaim`] in `directory`.
+#[cfg(target_os = "linux")]
+fn sweep(directory: &std::path::Path) {
+    let Ok(entries) = std::fs::read_dir(directory) else {
         return;
     };
     for entry in entries.flatten() {
@@ -452,16 +458,14 @@ pub(crate) fn reclaim() {
                 .file_stem()
                 .and_then(|stem| stem.to_str())
                 .is_some_and(|stem| stem.parse::<u64>().is_ok());
-        if !zenohs {
+        // A file, not a link to one (the directory is anyone's to write in).
+        let file = entry.file_type().is_ok_and(|kind| kind.is_file());
+        if !zenohs || !file {
             continue;
         }
         // Its size read and its lock tried through one descriptor, so both are of
-        // the same file.
-        let Ok(file) = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&path)
-        else {
+        // the same file. (A segment of another user's does not open: it stays.)
+        let Ok(file) = std::fs::File::open(&path) else {
             continue;
         };
         let sized = file.metadata().is_ok_and(|metadata| metadata.len() > 0);
@@ -479,12 +483,11 @@ pub(crate) fn reclaim() {}
 #[cfg(all(test, target_os = "linux"))]
 mod tests {
     use std::fs::File;
-    use std::path::PathBuf;
+    use std::path::{Path, PathBuf};
 
-    /// A segment file of `size` bytes under a name no other test takes.
-    fn segment(tag: u64, size: u64) -> (PathBuf, File) {
-        let id = u64::from(std::process::id()) << 32 | tag;
-        let path = PathBuf::from(format!("/dev/shm/{id}.zenoh"));
+    /// A segment file of `size` bytes in `directory`.
+    fn segment(directory: &Path, id: u64, size: u64) -> (PathBuf, File) {
+        let path = directory.join(format!("{id}.zenoh"));
         let file = File::options()
             .read(true)
             .write(true)
@@ -497,23 +500,30 @@ mod tests {
 
     #[test]
     fn a_sweep_removes_a_sized_segment_nobody_locks_and_leaves_one_being_made() {
+        // A directory of its own, where no other sweep on this host looks.
+        let directory = std::env::temp_dir().join(format!("coolbot-sweep-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&directory);
+        std::fs::create_dir_all(&directory).expect("the directory");
         // Left by a killed process: sized, its descriptor closed, so no lock.
-        let (orphan, file) = segment(1, 4096);
+        let (orphan, file) = segment(&directory, 1, 4096);
         drop(file);
         // Mapped by a live process: it holds a shared lock.
-        let (mapped, held) = segment(2, 4096);
+        let (mapped, held) = segment(&directory, 2, 4096);
         held.lock_shared().expect("a shared lock");
         // Being made: created, not locked nor sized yet.
-        let (made, making) = segment(3, 0);
-        super::reclaim();
-        let (orphan_left, mapped_left, made_left) =
-            (orphan.exists(), mapped.exists(), made.exists());
-        for path in [&orphan, &mapped, &made] {
-            let _ = std::fs::remove_file(path);
-        }
+        let (made, making) = segment(&directory, 3, 0);
+        // Not a segment's name: never touched.
+        let (other, _) = segment(&directory, 4, 4096);
+        let other_name = directory.join("other.zenoh");
+        std::fs::rename(&other, &other_name).expect("renamed");
+        super::sweep(&directory);
+        let left = [&orphan, &mapped, &made, &other_name].map(|path| path.exists());
         drop((held, making));
-        assert!(!orphan_left, "the orphan is removed");
-        assert!(mapped_left, "a segment in use stays");
-        assert!(made_left, "a segment being made stays");
+        let _ = std::fs::remove_dir_all(&directory);
+        assert_eq!(
+            left,
+            [false, true, true, true],
+            "the orphan removed; the segment in use, the one being made and the other file left"
+        );
     }
 }

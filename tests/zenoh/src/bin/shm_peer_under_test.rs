@@ -299,8 +299,8 @@ fn lenders() -> ! {
 }
 
 fn main() {
-    // Its warnings (a link that closed, a buffer it could not map) on stderr, which a
-    // failed test's run shows.
+    // Its warnings (Zenoh's, and a bridge's lost packets) on stderr, which the test's
+    // run inherits.
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
