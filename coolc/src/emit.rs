@@ -606,15 +606,7 @@ pub fn single_file(krate: &ir::Crate) -> String {
 /// [`single_file`], formatted with `prettyplease` (one module per thread) or not at
 /// all ([`Formatting::Unformatted`]).
 pub fn single_file_with(krate: &ir::Crate, formatting: Formatting) -> String {
-    let (header, parts) = single_file_parts(krate, formatting);
-    let mut out =
-        String::with_capacity(header.len() + 1 + parts.iter().map(String::len).sum::<usize>());
-    out.push_str(&header);
-    out.push('\n');
-    for part in parts {
-        out.push_str(&part);
-    }
-    out
+    single_file_parts(krate, formatting).concat()
 }
 
 /// [`single_file_with`] written to `out` part by part, without the whole file in one
@@ -625,17 +617,14 @@ pub fn write_single_file_with(
     formatting: Formatting,
     out: &mut impl std::io::Write,
 ) -> std::io::Result<()> {
-    let (header, parts) = single_file_parts(krate, formatting);
-    out.write_all(header.as_bytes())?;
-    out.write_all(b"\n")?;
-    for part in parts {
+    for part in single_file_parts(krate, formatting) {
         out.write_all(part.as_bytes())?;
     }
     out.flush()
 }
 
-/// The single file's header line and its parts, in order.
-fn single_file_parts(krate: &ir::Crate, formatting: Formatting) -> (String, Vec<String>) {
+/// The single file in parts, in order: its header line first.
+fn single_file_parts(krate: &ir::Crate, formatting: Formatting) -> Vec<String> {
     let modules = render_modules(krate);
     let mut parts: Vec<String> = par_map(&modules, |(module, text, _)| {
         // The module's text without its header line and item markers.
@@ -664,7 +653,7 @@ fn single_file_parts(krate: &ir::Crate, formatting: Formatting) -> (String, Vec<
     if let Some(start) = mod_rs.find("/// Converts a variable") {
         parts.push(mod_rs[start..].to_owned());
     }
-    let parts = match formatting {
+    let mut parts = match formatting {
         Formatting::Formatted => par_map(&parts, |part| prettyplease::unparse(&check_parses(part))),
         Formatting::Unformatted => {
             if cfg!(debug_assertions) {
@@ -673,7 +662,10 @@ fn single_file_parts(krate: &ir::Crate, formatting: Formatting) -> (String, Vec<
             parts
         }
     };
-    (krate.header(), parts)
+    let mut header = krate.header();
+    header.push('\n');
+    parts.insert(0, header);
+    parts
 }
 
 /// The converter stubs as user-file methods.
