@@ -312,9 +312,22 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
         .expect("running again");
     remote_is("running again", &|m| m.state == State::Running);
 
-    // Shutting the robot down releases the remote instance.
+    // Shutting the robot down releases the remote instance: it goes `dead`, and the
+    // station's agent, finding it dead, withdraws its keys. The test may come after
+    // either.
     let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
-    remote_is("dead", &|m| m.state == State::Dead);
+    let until = Instant::now() + deadline;
+    loop {
+        match ctl.snapshot(remote) {
+            Ok(monitor) if monitor.state == State::Dead => break,
+            Err(coolbot_zenoh::ctl::CtlError::UnknownComponent { .. }) => break,
+            Ok(monitor) if Instant::now() > until => {
+                panic!("the remote wanderer is not released: {monitor:?}")
+            }
+            Err(error) if Instant::now() > until => panic!("{remote}: {error}"),
+            _ => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
     drop(network);
 }
