@@ -8,8 +8,9 @@
 //! epoch, the first and newest number it received, how many it received and how many
 //! it counted missing (gaps, at its own `network` input), and answers queries on
 //! `K/@ack/<node>/<name>` with that and its process (drawn once per process, also the
-//! last chunk of its token `K/@in/<node>/<name>/<process>`). The outlet asks every
-//! [`ACK_PERIOD`] while a live inlet has not acknowledged everything it sent (or it has
+//! last chunk of its token `K/@in/<node>/<name>/<process>`). The outlet looks every
+//! [`ACK_PERIOD`] and asks when a live inlet is [`ASK_BEHIND`] numbers behind what it
+//! was sent, or behind at all after [`ASK_PATIENCE`] without a question (or when it has
 //! killed predecessors to report: below), and watches the inlets' tokens. When an
 //! inlet's process is known to have ended (its token is gone and an inlet token on the
 //! key appears from its node with another process, or, on a key with one input end,
@@ -41,8 +42,20 @@ use zenoh::Wait;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::sample::SampleKind;
 
-/// How often an outlet asks its inlets what they have had.
+/// How often an outlet looks whether to ask its inlets what they have had.
 pub(crate) const ACK_PERIOD: Duration = Duration::from_millis(100);
+
+/// How many numbers a live inlet may be behind what it was sent before the outlet asks
+/// at its next look. A round of questions costs both processes about as much CPU as a
+/// large packet through shared memory: a stream of a few packets a period (4 MiB
+/// frames at 30 Hz) is asked after about 16 of them, not 3; a fast one (a pose a
+/// millisecond) at every look, as before.
+pub(crate) const ASK_BEHIND: u64 = 16;
+
+/// How long an outlet whose inlets are behind, but fewer than [`ASK_BEHIND`] numbers,
+/// waits since its last question before it asks: the longest a slow stream's received
+/// packets go unacknowledged (what a killed consumer is counted both ways for).
+pub(crate) const ASK_PATIENCE: Duration = Duration::from_secs(1);
 
 /// How long one round of questions waits for the inlets' answers.
 const ACK_TIMEOUT: Duration = Duration::from_millis(300);
@@ -599,12 +612,29 @@ impl Book {
             .fold(0, |total, s| total.saturating_add(s.newest))
     }
 
-    /// Whether a round of questions could learn anything: a live inlet has not
-    /// acknowledged everything sent, or the killed predecessors' report is not retired.
-    /// An outlet whose inlets have everything, with no report out, asks nothing until
-    /// it sends again: an inlet that ends now was sent nothing it did not acknowledge.
-    fn has_questions(&self) -> bool {
-        !lock(&self.ended).is_empty() || !self.caught_up()
+    /// The most numbers a live inlet is behind what the outlet sent (0: caught up).
+    fn behind(&self) -> u64 {
+        let sent = self.sent();
+        lock(&self.streams)
+            .iter()
+            .filter(|s| s.alive && !s.counted)
+            .map(|s| sent.saturating_sub(s.newest.max(s.since)))
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Whether to ask now, `waited` after the last round of questions: a report of
+    /// killed predecessors is out (each round counts towards retiring it), or a live
+    /// inlet is [`ASK_BEHIND`] numbers behind, or behind at all and the last round
+    /// was [`ASK_PATIENCE`] ago. An outlet whose inlets have everything, with no report
+    /// out, asks nothing until it sends again: an inlet that ends now was sent nothing
+    /// it did not acknowledge.
+    fn wants_asking(&self, waited: Duration) -> bool {
+        if !lock(&self.ended).is_empty() {
+            return true;
+        }
+        let behind = self.behind();
+        behind >= ASK_BEHIND || (behind > 0 && waited >= ASK_PATIENCE)
     }
 
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
@@ -687,8 +717,9 @@ impl Book {
     }
 }
 
-/// An outlet's side: the inlets it has seen, asked every [`ACK_PERIOD`] on a thread
-/// of its own; dropping it settles the accounts.
+/// An outlet's side: the inlets it has seen, looked at every [`ACK_PERIOD`] and asked
+/// when they are behind ([`Book::wants_asking`]) on a thread of its own; dropping it
+/// settles the accounts.
 pub(crate) struct OutletLedger {
     book: Arc<Book>,
     session: zenoh::Session,
@@ -743,11 +774,13 @@ impl OutletLedger {
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:ack:{key}"))
             .spawn(move || {
+                let mut last = Instant::now();
                 while !stopped.load(Ordering::Acquire) {
                     let next = Instant::now() + ACK_PERIOD;
                     if !asked.is_empty() {
-                        if asked.has_questions() {
+                        if asked.wants_asking(last.elapsed()) {
                             asked.ask(&on);
+                            last = Instant::now();
                         }
                         asked.settle(false);
                     }
@@ -857,28 +890,68 @@ mod tests {
     #[test]
     fn an_outlet_asks_only_while_an_inlet_has_not_acknowledged_everything_sent() {
         let (book, _) = book(false);
-        assert!(!book.has_questions(), "no inlet, nothing sent");
+        assert!(!book.wants_asking(ASK_PATIENCE), "no inlet, nothing sent");
         book.token("station/in/aaa", SampleKind::Put);
-        assert!(!book.has_questions(), "a newcomer was sent nothing yet");
+        assert!(
+            !book.wants_asking(ASK_PATIENCE),
+            "a newcomer was sent nothing yet"
+        );
         book.sent.store(3, Ordering::Release);
-        assert!(book.has_questions(), "three numbers not acknowledged");
+        assert!(
+            book.wants_asking(ASK_PATIENCE),
+            "three numbers not acknowledged"
+        );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 2)));
-        assert!(book.has_questions(), "one number not acknowledged");
+        assert!(
+            book.wants_asking(ASK_PATIENCE),
+            "one number not acknowledged"
+        );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 3)));
         assert!(
-            !book.has_questions(),
+            !book.wants_asking(ASK_PATIENCE),
             "everything acknowledged: an idle bridge"
         );
         // The link breaks: no live inlet to ask; it comes back behind.
         book.token("station/in/aaa", SampleKind::Delete);
         book.sent.store(5, Ordering::Release);
-        assert!(!book.has_questions(), "no live inlet");
+        assert!(!book.wants_asking(ASK_PATIENCE), "no live inlet");
         book.token("station/in/aaa", SampleKind::Put);
-        assert!(book.has_questions(), "back, and two numbers behind");
+        assert!(
+            book.wants_asking(ASK_PATIENCE),
+            "back, and two numbers behind"
+        );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
-        assert!(!book.has_questions());
+        assert!(!book.wants_asking(ASK_PATIENCE));
         *lock(&book.ended) = vec![(3, 40)];
-        assert!(book.has_questions(), "a killed predecessor to report");
+        assert!(
+            book.wants_asking(ASK_PATIENCE),
+            "a killed predecessor to report"
+        );
+    }
+
+    #[test]
+    fn an_outlet_asks_when_an_inlet_is_far_behind_or_behind_for_long() {
+        let (book, _) = book(false);
+        let soon = ACK_PERIOD;
+        book.token("station/in/aaa", SampleKind::Put);
+        book.token("robot/in/bbb", SampleKind::Put);
+        assert!(!book.wants_asking(ASK_PATIENCE), "nothing sent");
+        book.sent.store(ASK_BEHIND - 1, Ordering::Release);
+        assert!(!book.wants_asking(soon), "a few behind, asked lately");
+        assert!(book.wants_asking(ASK_PATIENCE), "a few behind, for long");
+        book.sent.store(ASK_BEHIND, Ordering::Release);
+        assert!(book.wants_asking(soon), "far behind");
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, ASK_BEHIND)));
+        assert!(
+            book.wants_asking(soon),
+            "the other inlet is still far behind"
+        );
+        book.acknowledged("robot/in", &("bbb".to_owned(), had(1, 2)));
+        assert!(!book.wants_asking(soon), "the farthest is a few behind");
+        book.acknowledged("robot/in", &("bbb".to_owned(), had(1, ASK_BEHIND)));
+        assert!(!book.wants_asking(ASK_PATIENCE), "caught up");
+        *lock(&book.ended) = vec![(3, 40)];
+        assert!(book.wants_asking(soon), "a killed predecessor to report");
     }
 
     #[test]

@@ -415,8 +415,10 @@ fn consumer_killed<P: Streamed>(key: &str, mut segments: Option<&mut Segments>) 
                 .is_some_and(|l| !l.received.is_empty())),
             "consumer {life} receives"
         );
-        // Every fifth lives long enough to acknowledge several times (checked below).
-        let long = Duration::from_millis(450);
+        // Every fifth lives long enough to acknowledge several times (checked below):
+        // the outlet asks when a consumer is 16 packets behind, or a second after its
+        // last question; 48 packets are three questions.
+        let long = Duration::from_millis(450).max(pause * 48);
         std::thread::sleep(if life % 5 == 4 { long } else { lifetime() });
         assert!(
             matches!(process.0.try_wait(), Ok(None)),
