@@ -3,13 +3,12 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use coolbot::{Chain, Command, Controllable, Handle, MonitorEvent, System};
-use crossbeam_channel::{RecvTimeoutError, Select, Sender};
+use crossbeam_channel::{Select, Sender};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
@@ -17,9 +16,6 @@ use crate::echo::{ECHO_CAPACITY, Echoes};
 use crate::info::ComponentInfo;
 use crate::{Error, keys, limits};
 use coolbot::ranges::{REASON_CHARS, excerpt};
-
-/// How often the node's threads look whether they are to stop.
-const STOP_POLL: Duration = Duration::from_millis(100);
 
 /// How long [`Node::open`] asks the network whether its name is taken.
 const NAME_LOOKUP: Duration = Duration::from_millis(500);
@@ -102,7 +98,8 @@ pub struct Node {
     session: zenoh::Session,
     exposures: Mutex<Vec<Exposure>>,
     control: Sender<ControlRequest>,
-    control_stop: Arc<AtomicBool>,
+    /// Dropped to stop the control thread (which sleeps until a request or this).
+    control_stop: Option<Sender<()>>,
     control_thread: Option<JoinHandle<()>>,
     /// The outputs echoed, as `(component path, port)`, with their packets' JSON
     /// Schemas.
@@ -155,18 +152,20 @@ impl Node {
             .wait()
             .map_err(Error::zenoh("declare the node's liveliness token"))?;
         let (control, requests) = crossbeam_channel::bounded::<ControlRequest>(256);
-        let control_stop = Arc::new(AtomicBool::new(false));
-        let stop = Arc::clone(&control_stop);
+        let (control_stop, stopped) = crossbeam_channel::bounded::<()>(0);
         let control_thread = std::thread::Builder::new()
             .name(format!("cool-net:{name}:c"))
             .spawn(move || {
                 loop {
-                    match requests.recv_timeout(STOP_POLL) {
-                        Ok((query, handle, compound)) => {
-                            serve_command(&query, &handle, compound.as_deref());
-                        }
-                        Err(RecvTimeoutError::Timeout) if !stop.load(Ordering::Acquire) => {}
-                        Err(_) => break,
+                    // The requests first: what is queued is served before a stop.
+                    crossbeam_channel::select_biased! {
+                        recv(requests) -> request => match request {
+                            Ok((query, handle, compound)) => {
+                                serve_command(&query, &handle, compound.as_deref());
+                            }
+                            Err(_) => break,
+                        },
+                        recv(stopped) -> _ => break,
                     }
                 }
             })
@@ -182,7 +181,7 @@ impl Node {
             session,
             exposures: Mutex::new(Vec::new()),
             control,
-            control_stop,
+            control_stop: Some(control_stop),
             control_thread: Some(control_thread),
             echoed: Arc::default(),
             echoes: Echoes::default(),
@@ -452,7 +451,7 @@ impl Drop for Node {
         coolbot::lent::withdraw_lender(&*self.lender);
         self.echoes.stop();
         lock(&self.exposures).clear();
-        self.control_stop.store(true, Ordering::Release);
+        drop(self.control_stop.take());
         if let Some(thread) = self.control_thread.take() {
             let _ = thread.join();
         }
@@ -601,6 +600,7 @@ mod tests {
     use crate::testing::{free_port, idle, idle_spec};
     use std::io::{Read, Write};
     use std::net::{TcpListener, TcpStream};
+    use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::Instant;
 
     /// A TCP relay to `target` for each connection to the returned port: what the

@@ -9,11 +9,10 @@
 //! where it can be, so that one waiting is small.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
-use crossbeam_channel::{RecvTimeoutError, Sender, TrySendError};
+use crossbeam_channel::{Sender, TrySendError};
 
 use crate::Error;
 
@@ -25,9 +24,6 @@ use crate::Error;
 /// waiting holds its query and what it is made from (a handle, a key), not its
 /// bytes: a few hundred bytes each.
 pub const REPLY_QUEUE: usize = 65_536;
-
-/// How often the replier's thread looks whether it is to stop.
-const STOP_POLL: Duration = Duration::from_millis(100);
 
 /// One answer to send: it replies to its query when called.
 type Answer = Box<dyn FnOnce() + Send>;
@@ -67,7 +63,8 @@ impl Replier {
 /// dropped, its queries ending unanswered).
 pub(crate) struct Replies {
     replier: Replier,
-    stop: Arc<AtomicBool>,
+    /// Dropped to stop the thread (which sleeps until an answer or this).
+    stop: Option<Sender<()>>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -75,19 +72,17 @@ impl Replies {
     /// Start the thread of node `node`, whose queue holds `capacity` answers.
     pub(crate) fn start(node: &str, capacity: usize) -> Result<Replies, Error> {
         let (queue, answers) = crossbeam_channel::bounded::<Answer>(capacity);
-        let stop = Arc::new(AtomicBool::new(false));
-        let stopped = Arc::clone(&stop);
+        let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:{node}:r"))
             .spawn(move || {
                 loop {
-                    match answers.recv_timeout(STOP_POLL) {
-                        Ok(answer) => answer(),
-                        Err(RecvTimeoutError::Timeout) if !stopped.load(Ordering::Acquire) => {}
-                        Err(_) => break,
-                    }
-                    if stopped.load(Ordering::Acquire) {
-                        break;
+                    crossbeam_channel::select_biased! {
+                        recv(stopped) -> _ => break,
+                        recv(answers) -> answer => match answer {
+                            Ok(answer) => answer(),
+                            Err(_) => break,
+                        },
                     }
                 }
             })
@@ -97,7 +92,7 @@ impl Replies {
                 queue,
                 dropped: Arc::default(),
             },
-            stop,
+            stop: Some(stop),
             thread: Some(thread),
         })
     }
@@ -110,7 +105,7 @@ impl Replies {
 
 impl Drop for Replies {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Release);
+        drop(self.stop.take());
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
@@ -120,6 +115,7 @@ impl Drop for Replies {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
     use std::time::Instant;
 
     #[test]
