@@ -10,9 +10,9 @@
 //! `K/@ack/<node>/<name>` with that and its process (drawn once per process, also the
 //! last chunk of its token `K/@in/<node>/<name>/<process>`). The outlet looks every
 //! [`ACK_PERIOD`] and asks when a live inlet is [`ASK_BEHIND`] numbers behind what it
-//! was sent, or behind at all after [`ASK_PATIENCE`] without a question (or when it has
-//! killed predecessors to report: below), and watches the inlets' tokens. When an
-//! inlet's process is known to have ended (its token is gone and an inlet token on the
+//! was sent, or behind at all after [`ASK_PATIENCE`] without a question or
+//! [`ASK_QUIET`] without a send (or when it has killed predecessors to report: below),
+//! and watches the inlets' tokens. When an inlet's process is known to have ended (its token is gone and an inlet token on the
 //! key appears from its node with another process, or, on a key with one input end,
 //! another inlet has started receiving, or the outlet stops), the numbers sent after
 //! the newest it acknowledged are counted lost at the outlet's input, with an event,
@@ -53,9 +53,15 @@ pub(crate) const ACK_PERIOD: Duration = Duration::from_millis(100);
 pub(crate) const ASK_BEHIND: u64 = 16;
 
 /// How long an outlet whose inlets are behind, but fewer than [`ASK_BEHIND`] numbers,
-/// waits since its last question before it asks: the longest a slow stream's received
-/// packets go unacknowledged (what a killed consumer is counted both ways for).
+/// waits since its last question before it asks: the longest a steady stream's
+/// received packets go unacknowledged (what a killed consumer is counted both ways
+/// for).
 pub(crate) const ASK_PATIENCE: Duration = Duration::from_secs(1);
+
+/// How long an outlet whose inlets are behind waits after its last send before it
+/// asks: a burst that ends is acknowledged at once, not a second later (a consumer
+/// stopped after a burst is then not counted for what it had).
+pub(crate) const ASK_QUIET: Duration = Duration::from_millis(250);
 
 /// How long one round of questions waits for the inlets' answers.
 const ACK_TIMEOUT: Duration = Duration::from_millis(300);
@@ -623,18 +629,19 @@ impl Book {
             .unwrap_or(0)
     }
 
-    /// Whether to ask now, `waited` after the last round of questions: a report of
-    /// killed predecessors is out (each round counts towards retiring it), or a live
-    /// inlet is [`ASK_BEHIND`] numbers behind, or behind at all and the last round
-    /// was [`ASK_PATIENCE`] ago. An outlet whose inlets have everything, with no report
-    /// out, asks nothing until it sends again: an inlet that ends now was sent nothing
-    /// it did not acknowledge.
-    fn wants_asking(&self, waited: Duration) -> bool {
+    /// Whether to ask now, `waited` after the last round of questions and `quiet`
+    /// after the last send seen: a report of killed predecessors is out (each round
+    /// counts towards retiring it), or a live inlet is [`ASK_BEHIND`] numbers behind,
+    /// or behind at all and the last round was [`ASK_PATIENCE`] ago or the outlet has
+    /// sent nothing for [`ASK_QUIET`]. An outlet whose inlets have everything, with no
+    /// report out, asks nothing until it sends again: an inlet that ends now was sent
+    /// nothing it did not acknowledge.
+    fn wants_asking(&self, waited: Duration, quiet: Duration) -> bool {
         if !lock(&self.ended).is_empty() {
             return true;
         }
         let behind = self.behind();
-        behind >= ASK_BEHIND || (behind > 0 && waited >= ASK_PATIENCE)
+        behind >= ASK_BEHIND || (behind > 0 && (waited >= ASK_PATIENCE || quiet >= ASK_QUIET))
     }
 
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
@@ -774,11 +781,17 @@ impl OutletLedger {
         let thread = std::thread::Builder::new()
             .name(format!("cool-net:ack:{key}"))
             .spawn(move || {
+                // When it last asked, and the newest number it saw sent and when.
                 let mut last = Instant::now();
+                let mut seen = (asked.sent(), Instant::now());
                 while !stopped.load(Ordering::Acquire) {
                     let next = Instant::now() + ACK_PERIOD;
+                    let sent = asked.sent();
+                    if sent != seen.0 {
+                        seen = (sent, Instant::now());
+                    }
                     if !asked.is_empty() {
-                        if asked.wants_asking(last.elapsed()) {
+                        if asked.wants_asking(last.elapsed(), seen.1.elapsed()) {
                             asked.ask(&on);
                             last = Instant::now();
                         }
@@ -890,68 +903,90 @@ mod tests {
     #[test]
     fn an_outlet_asks_only_while_an_inlet_has_not_acknowledged_everything_sent() {
         let (book, _) = book(false);
-        assert!(!book.wants_asking(ASK_PATIENCE), "no inlet, nothing sent");
+        assert!(
+            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
+            "no inlet, nothing sent"
+        );
         book.token("station/in/aaa", SampleKind::Put);
         assert!(
-            !book.wants_asking(ASK_PATIENCE),
+            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "a newcomer was sent nothing yet"
         );
         book.sent.store(3, Ordering::Release);
         assert!(
-            book.wants_asking(ASK_PATIENCE),
+            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "three numbers not acknowledged"
         );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 2)));
         assert!(
-            book.wants_asking(ASK_PATIENCE),
+            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "one number not acknowledged"
         );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 3)));
         assert!(
-            !book.wants_asking(ASK_PATIENCE),
+            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "everything acknowledged: an idle bridge"
         );
         // The link breaks: no live inlet to ask; it comes back behind.
         book.token("station/in/aaa", SampleKind::Delete);
         book.sent.store(5, Ordering::Release);
-        assert!(!book.wants_asking(ASK_PATIENCE), "no live inlet");
+        assert!(
+            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
+            "no live inlet"
+        );
         book.token("station/in/aaa", SampleKind::Put);
         assert!(
-            book.wants_asking(ASK_PATIENCE),
+            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "back, and two numbers behind"
         );
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
-        assert!(!book.wants_asking(ASK_PATIENCE));
+        assert!(!book.wants_asking(ASK_PATIENCE, Duration::ZERO));
         *lock(&book.ended) = vec![(3, 40)];
         assert!(
-            book.wants_asking(ASK_PATIENCE),
+            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
             "a killed predecessor to report"
         );
     }
 
     #[test]
-    fn an_outlet_asks_when_an_inlet_is_far_behind_or_behind_for_long() {
+    fn an_outlet_asks_when_an_inlet_is_far_behind_or_behind_for_long_or_the_stream_pauses() {
         let (book, _) = book(false);
-        let soon = ACK_PERIOD;
+        let (soon, sending) = (ACK_PERIOD, Duration::ZERO);
         book.token("station/in/aaa", SampleKind::Put);
         book.token("robot/in/bbb", SampleKind::Put);
-        assert!(!book.wants_asking(ASK_PATIENCE), "nothing sent");
+        assert!(!book.wants_asking(ASK_PATIENCE, ASK_QUIET), "nothing sent");
         book.sent.store(ASK_BEHIND - 1, Ordering::Release);
-        assert!(!book.wants_asking(soon), "a few behind, asked lately");
-        assert!(book.wants_asking(ASK_PATIENCE), "a few behind, for long");
+        assert!(
+            !book.wants_asking(soon, sending),
+            "a few behind, asked lately, still sending"
+        );
+        assert!(
+            book.wants_asking(ASK_PATIENCE, sending),
+            "a few behind, for long"
+        );
+        assert!(
+            book.wants_asking(soon, ASK_QUIET),
+            "a few behind, the stream paused"
+        );
         book.sent.store(ASK_BEHIND, Ordering::Release);
-        assert!(book.wants_asking(soon), "far behind");
+        assert!(book.wants_asking(soon, sending), "far behind");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, ASK_BEHIND)));
         assert!(
-            book.wants_asking(soon),
+            book.wants_asking(soon, sending),
             "the other inlet is still far behind"
         );
         book.acknowledged("robot/in", &("bbb".to_owned(), had(1, 2)));
-        assert!(!book.wants_asking(soon), "the farthest is a few behind");
+        assert!(
+            !book.wants_asking(soon, sending),
+            "the farthest is a few behind"
+        );
         book.acknowledged("robot/in", &("bbb".to_owned(), had(1, ASK_BEHIND)));
-        assert!(!book.wants_asking(ASK_PATIENCE), "caught up");
+        assert!(!book.wants_asking(ASK_PATIENCE, ASK_QUIET), "caught up");
         *lock(&book.ended) = vec![(3, 40)];
-        assert!(book.wants_asking(soon), "a killed predecessor to report");
+        assert!(
+            book.wants_asking(soon, sending),
+            "a killed predecessor to report"
+        );
     }
 
     #[test]

@@ -601,7 +601,7 @@ fn producer_killed<P: Streamed>(key: &str, last: u64, mut segments: Option<&mut 
                 && drain(&input).0 > before),
             "producer {life} is heard"
         );
-        // Every fifth lives long enough to acknowledge several times (checked below).
+        // Every fifth lives longer, with several tally writes and reports behind it.
         let long = Duration::from_millis(450);
         std::thread::sleep(if life % 5 == 4 { long } else { lifetime() });
         assert!(
