@@ -181,7 +181,7 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
 
     use coolbot::{Command, Controllable, State, Value};
     use coolbot_zenoh::agent::{Agent, Registry};
-    use coolbot_zenoh::ctl::Ctl;
+    use coolbot_zenoh::ctl::{Ctl, CtlError};
     use coolbot_zenoh::zenoh::{self, Wait};
     use mobile_base::generated::wanderer;
     use mobile_base::node::NodeOptions;
@@ -241,18 +241,24 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
         std::thread::sleep(Duration::from_millis(20));
     };
     let remote = remote.as_str();
-    let remote_is = |what: &str, holds: &dyn Fn(&coolbot::Monitor) -> bool| {
+    // Polls the remote wanderer's snapshot (its monitor, or why the station has
+    // none) until `done` holds of it, or panics with the last one.
+    let remote_until = |what: &str, done: &dyn Fn(&Result<coolbot::Monitor, CtlError>) -> bool| {
         let until = Instant::now() + deadline;
         loop {
-            match ctl.snapshot(remote) {
-                Ok(monitor) if holds(&monitor) => return monitor,
-                Ok(monitor) if Instant::now() > until => {
-                    panic!("the remote wanderer is not {what}: {monitor:?}")
-                }
-                Err(error) if Instant::now() > until => panic!("{remote}: {error}"),
-                _ => std::thread::sleep(Duration::from_millis(20)),
+            let snapshot = ctl.snapshot(remote);
+            if done(&snapshot) {
+                return;
             }
+            assert!(
+                Instant::now() <= until,
+                "the remote wanderer {remote} is not {what}: {snapshot:?}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
         }
+    };
+    let remote_is = |what: &str, holds: &dyn Fn(&coolbot::Monitor) -> bool| {
+        remote_until(what, &|snapshot| snapshot.as_ref().is_ok_and(holds));
     };
     let variable = |monitor: &coolbot::Monitor, name: &str| {
         monitor
@@ -317,17 +323,9 @@ fn commands_to_the_proxy_reach_the_remote_wanderer_and_its_variables_come_back()
     // either.
     let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
-    let until = Instant::now() + deadline;
-    loop {
-        match ctl.snapshot(remote) {
-            Ok(monitor) if monitor.state == State::Dead => break,
-            Err(coolbot_zenoh::ctl::CtlError::UnknownComponent { .. }) => break,
-            Ok(monitor) if Instant::now() > until => {
-                panic!("the remote wanderer is not released: {monitor:?}")
-            }
-            Err(error) if Instant::now() > until => panic!("{remote}: {error}"),
-            _ => std::thread::sleep(Duration::from_millis(20)),
-        }
-    }
+    remote_until("released", &|snapshot| match snapshot {
+        Ok(monitor) => monitor.state == State::Dead,
+        Err(error) => matches!(error, CtlError::UnknownComponent { .. }),
+    });
     drop(network);
 }

@@ -17,7 +17,7 @@ use mobile_base::sensing;
 use mobile_base::world::{Pose, World};
 use rustix::process::{Pid, Signal, kill_process};
 
-use crate::support::{free_port, spawn, wait_line};
+use crate::support::{free_port, spawn, wait_line, wait_lines};
 
 /// The pid in a line `... drivers process <pid> started ...`.
 fn started_pid(line: &str) -> u32 {
@@ -109,29 +109,34 @@ fn with_drivers_the_range_server_runs_in_its_own_process_and_a_kill_9_is_substit
     // simulated range server stands in; the robot starts the process again, and the
     // range server comes back on it.
     kill_process(Pid::from_raw(first as i32).expect("a pid"), Signal::KILL).expect("SIGKILL");
-    wait_line(
-        &lines,
-        &mut seen,
-        "saying the drivers node is lost",
-        says("base: ranges failed: node `drivers` is lost"),
-    );
-    wait_line(
-        &lines,
-        &mut seen,
-        "substituting the simulated range server",
-        says("base: ranges substituted by sim_ranges"),
-    );
+    // The supervisor's steps and the watcher's lines on the process come from threads
+    // of their own: in any order.
     let ending = format!("drivers process {first} ended");
-    let ended = wait_line(&lines, &mut seen, "of the drivers process ended", |l| {
-        l.contains(&ending)
-    });
-    assert!(ended.contains("killed by signal 9"), "{ended}");
-    let second = started_pid(&wait_line(
+    let first_started = format!("drivers process {first} ");
+    let [_, _, ended, again] = wait_lines(
         &lines,
         &mut seen,
-        "of a drivers process started again",
-        |l| l.contains("drivers process ") && l.contains(" started"),
-    ));
+        [
+            (
+                "saying the drivers node is lost",
+                &says("base: ranges failed: node `drivers` is lost"),
+            ),
+            (
+                "substituting the simulated range server",
+                &says("base: ranges substituted by sim_ranges"),
+            ),
+            ("of the drivers process ended", &|l: &str| {
+                l.contains(&ending)
+            }),
+            ("of a drivers process started again", &|l: &str| {
+                l.contains("drivers process ")
+                    && l.contains(" started")
+                    && !l.contains(&first_started)
+            }),
+        ],
+    );
+    assert!(ended.contains("killed by signal 9"), "{ended}");
+    let second = started_pid(&again);
     assert_ne!(second, first);
     wait_line(
         &lines,

@@ -65,6 +65,49 @@ pub(crate) fn spawn(
     (child, reader)
 }
 
+/// Waits until a line has come for each of `wanted` (what it says, and what holds of
+/// it), in any order: lines that threads of their own print (a supervisor's steps,
+/// the watcher of a process). At most [`PATIENCE`] in all; returns the lines in the
+/// order of `wanted`. A line is taken by the first of `wanted` still waiting that
+/// holds of it; the others are kept in `seen`, and printed if a line does not come.
+pub(crate) fn wait_lines<const N: usize>(
+    lines: &mpsc::Receiver<String>,
+    seen: &mut Vec<String>,
+    wanted: [(&str, &dyn Fn(&str) -> bool); N],
+) -> [String; N] {
+    let deadline = Instant::now() + PATIENCE;
+    let mut found: [Option<String>; N] = std::array::from_fn(|_| None);
+    while found.iter().any(Option::is_none) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) => {
+                let slot = wanted
+                    .iter()
+                    .zip(found.iter_mut())
+                    .find(|((_, holds), slot)| slot.is_none() && holds(&line));
+                match slot {
+                    Some((_, slot)) => *slot = Some(line),
+                    None => seen.push(line),
+                }
+            }
+            Err(error) => {
+                let missing: Vec<&str> = wanted
+                    .iter()
+                    .zip(&found)
+                    .filter(|(_, line)| line.is_none())
+                    .map(|((what, _), _)| *what)
+                    .collect();
+                panic!(
+                    "no line {} within {PATIENCE:?} ({error}); seen:\n{}",
+                    missing.join(", no line "),
+                    seen.join("\n")
+                )
+            }
+        }
+    }
+    found.map(|line| line.unwrap_or_default())
+}
+
 /// Waits for a line for which `wanted` holds, at most [`PATIENCE`]; the lines seen
 /// meanwhile are kept in `seen`, and printed if none comes.
 pub(crate) fn wait_line(

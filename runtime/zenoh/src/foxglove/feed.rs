@@ -122,63 +122,62 @@ pub(super) struct Inlet {
 /// and came back while it was queued, or a callback still running as its subscriber
 /// went) neither reads nor moves those of the current one.
 #[derive(Default)]
-struct Drops(Mutex<HashMap<Subscription, (u64, u64)>>);
+struct Drops(Mutex<HashMap<usize, Counted>>);
 
-/// A subscription to a node's batches: the name its callback hands over, compared by
-/// identity (a name is kept alive by its entry, so no other can take its address).
-struct Subscription(Arc<str>);
-
-impl PartialEq for Subscription {
-    fn eq(&self, other: &Subscription) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
+/// The counts of one subscription to a node's batches, kept under the address of the
+/// name its callback hands over: the entry keeps that name alive, so no other name
+/// can take its address while it is there.
+struct Counted {
+    name: Arc<str>,
+    dropped: u64,
+    seen: u64,
 }
 
-impl Eq for Subscription {}
-
-impl std::hash::Hash for Subscription {
-    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
-        std::ptr::hash(Arc::as_ptr(&self.0).cast::<u8>(), state);
-    }
+/// The key of `node`'s subscription: its name's address (its identity).
+fn subscription(node: &Arc<str>) -> usize {
+    Arc::as_ptr(node).cast::<u8>().addr()
 }
 
 impl Drops {
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Subscription, (u64, u64)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<usize, Counted>> {
         self.0.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// How many of `node`'s batches were dropped so far.
     fn dropped(&self, node: &Arc<str>) -> u64 {
         self.lock()
-            .get(&Subscription(Arc::clone(node)))
-            .map_or(0, |&(dropped, _)| dropped)
+            .get(&subscription(node))
+            .map_or(0, |counted| counted.dropped)
     }
 
     /// One more of `node`'s batches dropped.
     fn drop_one(&self, node: &Arc<str>) {
         self.lock()
-            .entry(Subscription(Arc::clone(node)))
-            .or_default()
-            .0 += 1;
+            .entry(subscription(node))
+            .or_insert_with(|| Counted {
+                name: Arc::clone(node),
+                dropped: 0,
+                seen: 0,
+            })
+            .dropped += 1;
     }
 
     /// Whether a batch of `node` queued after `dropped` drops follows one the feed
     /// has not seen yet (and it is seen now).
     fn after_unseen(&self, node: &Arc<str>, dropped: u64) -> bool {
         let mut drops = self.lock();
-        let Some((_, seen)) = drops.get_mut(&Subscription(Arc::clone(node))) else {
+        let Some(counted) = drops.get_mut(&subscription(node)) else {
             return false;
         };
-        let unseen = dropped > *seen;
-        *seen = (*seen).max(dropped);
+        let unseen = dropped > counted.seen;
+        counted.seen = counted.seen.max(dropped);
         unseen
     }
 
     /// Forget every subscription to `node`'s batches (its token went, or its last
     /// route was removed).
     fn forget(&self, node: &str) {
-        self.lock()
-            .retain(|subscription, _| &*subscription.0 != node);
+        self.lock().retain(|_, counted| &*counted.name != node);
     }
 }
 
