@@ -12,8 +12,9 @@
 //! [`ACK_PERIOD`] and asks when a live inlet is [`ASK_BEHIND`] numbers behind what it
 //! was sent, or behind at all after [`ASK_PATIENCE`] without a question or
 //! [`ASK_QUIET`] without a send (or when it has killed predecessors to report: below),
-//! and watches the inlets' tokens. When an inlet's process is known to have ended (its token is gone and an inlet token on the
-//! key appears from its node with another process, or, on a key with one input end,
+//! and watches the inlets' tokens. When an inlet's process is known to have ended
+//! (its token is gone and an inlet token on the key appears from its node with
+//! another process, or, on a key with one input end,
 //! another inlet has started receiving, or the outlet stops), the numbers sent after
 //! the newest it acknowledged are counted lost at the outlet's input, with an event,
 //! up to where its successor's share begins. A link that breaks and comes back keeps
@@ -903,49 +904,27 @@ mod tests {
     #[test]
     fn an_outlet_asks_only_while_an_inlet_has_not_acknowledged_everything_sent() {
         let (book, _) = book(false);
-        assert!(
-            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "no inlet, nothing sent"
-        );
+        // Asked at all, however long ago the last round.
+        let asks = || book.wants_asking(ASK_PATIENCE, Duration::ZERO);
+        assert!(!asks(), "no inlet, nothing sent");
         book.token("station/in/aaa", SampleKind::Put);
-        assert!(
-            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "a newcomer was sent nothing yet"
-        );
+        assert!(!asks(), "a newcomer was sent nothing yet");
         book.sent.store(3, Ordering::Release);
-        assert!(
-            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "three numbers not acknowledged"
-        );
+        assert!(asks(), "three numbers not acknowledged");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 2)));
-        assert!(
-            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "one number not acknowledged"
-        );
+        assert!(asks(), "one number not acknowledged");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 3)));
-        assert!(
-            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "everything acknowledged: an idle bridge"
-        );
+        assert!(!asks(), "everything acknowledged: an idle bridge");
         // The link breaks: no live inlet to ask; it comes back behind.
         book.token("station/in/aaa", SampleKind::Delete);
         book.sent.store(5, Ordering::Release);
-        assert!(
-            !book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "no live inlet"
-        );
+        assert!(!asks(), "no live inlet");
         book.token("station/in/aaa", SampleKind::Put);
-        assert!(
-            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "back, and two numbers behind"
-        );
+        assert!(asks(), "back, and two numbers behind");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
-        assert!(!book.wants_asking(ASK_PATIENCE, Duration::ZERO));
+        assert!(!asks());
         *lock(&book.ended) = vec![(3, 40)];
-        assert!(
-            book.wants_asking(ASK_PATIENCE, Duration::ZERO),
-            "a killed predecessor to report"
-        );
+        assert!(asks(), "a killed predecessor to report");
     }
 
     #[test]

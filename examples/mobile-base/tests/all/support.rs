@@ -70,9 +70,10 @@ pub(crate) fn spawn(
 pub(crate) type Wanted<'a> = (&'a str, &'a dyn Fn(&str) -> bool);
 
 /// Waits until a line has come for each of `wanted`, in any order: lines that threads
-/// of their own print (a supervisor's steps, the watcher of a process). At most [`PATIENCE`] in all; returns the lines in the
-/// order of `wanted`. A line is taken by the first of `wanted` still waiting that
-/// holds of it; the others are kept in `seen`, and printed if a line does not come.
+/// of their own print (a supervisor's steps, the watcher of a process). At most
+/// [`PATIENCE`] in all; returns the lines in the order of `wanted`. A line is taken by
+/// the first of `wanted` still waiting that holds of it; the others are kept in
+/// `seen`, and printed if a line does not come.
 pub(crate) fn wait_lines<const N: usize>(
     lines: &mpsc::Receiver<String>,
     seen: &mut Vec<String>,
