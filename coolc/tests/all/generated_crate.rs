@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use common::{cargo, compile, copy_descriptions, data, fill_check_and_run};
+use common::{compile, copy_descriptions, data, fill_check_and_run, lint};
 
 #[test]
 fn generated_crate_builds_and_runs() {
@@ -65,10 +65,7 @@ fn every_construct_generates_a_clippy_clean_crate() {
     }
     let krate = dir.path().join("every");
     compile(&dir.path().join("every_construct.cool"), &krate, "every");
-    cargo(
-        &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
+    lint(&krate);
 }
 
 #[test]
@@ -240,5 +237,35 @@ fn a_warehouse_robot_written_from_the_reference_builds_and_runs() {
             "console.rs",
         ],
         &["the_warehouse_robot_runs_as_described"],
+    );
+}
+
+#[test]
+fn the_linted_build_of_a_generated_crate_fails_on_a_clippy_warning() {
+    // The tests lint generated crates in the build that runs them
+    // (`common::gen_cargo_linted`): a crate with a clippy warning (a `clone` of a
+    // `Copy` value) must not build there, or that lint would check nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let krate = dir.path().join("lint-probe");
+    std::fs::create_dir_all(krate.join("src")).unwrap();
+    std::fs::write(
+        krate.join("Cargo.toml"),
+        "[package]\nname = \"lint-probe\"\nversion = \"0.1.0\"\nedition = \"2024\"\n",
+    )
+    .unwrap();
+    std::fs::write(
+        krate.join("src/lib.rs"),
+        "pub fn copied(x: &u32) -> u32 {\n    x.clone()\n}\n",
+    )
+    .unwrap();
+    let output = common::gen_cargo_linted(&krate)
+        .args(["build", "--quiet"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("clippy::clone") && stderr.contains("implied by `-D warnings`"),
+        "{stderr}"
     );
 }

@@ -152,11 +152,8 @@ fn the_imu_description_of_the_ros_docs_checks_builds_and_runs() {
         ]
     );
     common::cargo(&krate, &["fmt", "--check"]);
-    common::cargo(
-        &krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = common::cargo(&krate, &["test", "--test", "navigation"]);
+    common::lint(&krate);
+    let output = common::cargo_linted(&krate, &["test", "--test", "navigation"]);
     for test in [
         "the_compass_turns_with_the_imu",
         "an_imu_reading_is_what_ros_2_sends",

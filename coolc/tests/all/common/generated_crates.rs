@@ -47,6 +47,54 @@ pub fn gen_cargo(dir: &Path) -> Command {
         .args(GEN_PROFILE)
         .current_dir(dir)
         .env("CARGO_TARGET_DIR", gen_target())
-        .env_remove("RUSTFLAGS");
+        .env_remove("RUSTFLAGS")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS");
     command
+}
+
+/// [`gen_cargo`], with the crate's own targets compiled by clippy's driver and every
+/// warning an error: the lints of `cargo clippy --all-targets -- -D warnings` in the
+/// build that `cargo build` or `cargo test` makes anyway. `cargo clippy` only checks,
+/// and a check of each dependency is another build of it beside the one the tests
+/// run; through the driver (what `cargo clippy` itself sets, `RUSTC_WORKSPACE_WRAPPER`
+/// and its `-D warnings` in `CLIPPY_ARGS`) the dependencies, compiled by plain `rustc`,
+/// are built once. Every command on one crate uses this or [`gen_cargo`], not both:
+/// the driver is part of the crate's fingerprint, and a switch recompiles the crate.
+pub fn gen_cargo_linted(dir: &Path) -> Command {
+    let mut command = gen_cargo(dir);
+    command.env("RUSTC_WORKSPACE_WRAPPER", clippy_driver()).env(
+        "CLIPPY_ARGS",
+        "-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__",
+    );
+    command
+}
+
+/// The arguments of a linted build ([`gen_cargo_linted`]) that covers what
+/// `cargo clippy --all-targets` would in a generated crate: its library, binaries and
+/// integration tests. A generated crate holds no unit tests, so its unit-test
+/// harnesses would compile and link the same code again.
+pub fn lint_args(dir: &Path) -> &'static [&'static str] {
+    if dir.join("tests").is_dir() {
+        &["test", "--quiet", "--no-run", "--test", "*"]
+    } else {
+        &["build", "--quiet"]
+    }
+}
+
+/// Clippy's driver of the toolchain whose `cargo` runs the tests (beside it).
+fn clippy_driver() -> PathBuf {
+    let cargo = std::env::var_os("CARGO").map_or_else(|| PathBuf::from("cargo"), PathBuf::from);
+    let driver = cargo.with_file_name("clippy-driver");
+    if cargo
+        .parent()
+        .is_some_and(|dir| !dir.as_os_str().is_empty())
+    {
+        assert!(
+            driver.exists(),
+            "no {}: the tests lint generated crates with clippy (`rustup component add clippy`)",
+            driver.display()
+        );
+    }
+    driver
 }

@@ -9,7 +9,7 @@ use coolc::ir::RuntimeDep;
 #[path = "generated_crates.rs"]
 mod generated_crates;
 use coolc::{lower, merge};
-pub use generated_crates::{gen_cargo, gen_target};
+pub use generated_crates::{gen_cargo, gen_cargo_linted, gen_target};
 
 /// `coolc/tests/data/<name>`.
 pub fn data(name: &str) -> PathBuf {
@@ -77,7 +77,38 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
 
 /// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
 pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
-    let output = gen_cargo(dir)
+    run(gen_cargo(dir), dir, args, env)
+}
+
+/// [`cargo`], with the crate's own targets linted by clippy under `-D warnings` in
+/// the same build ([`gen_cargo_linted`]; every command on that crate goes through
+/// this one).
+pub fn cargo_linted(dir: &Path, args: &[&str]) -> String {
+    cargo_linted_with_env(dir, args, &[])
+}
+
+/// Builds the crate `krate` with its library, binaries and integration tests linted
+/// by clippy under `-D warnings` (what `cargo clippy --all-targets` covers in a
+/// generated crate, [`generated_crates::lint_args`]); later commands on it go through
+/// [`cargo_linted`].
+pub fn lint(krate: &Path) {
+    cargo_linted(krate, generated_crates::lint_args(krate));
+}
+
+/// [`cargo_linted`], with the variables `env` set for it.
+pub fn cargo_linted_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
+    run(gen_cargo_linted(dir), dir, args, env)
+}
+
+/// `cargo <args>` as `command` runs it in `dir`, with `env`; panics with cargo's
+/// output when it fails; returns its stdout.
+fn run(
+    mut command: std::process::Command,
+    dir: &Path,
+    args: &[&str],
+    env: &[(&str, &OsStr)],
+) -> String {
+    let output = command
         .args(args)
         .envs(env.iter().copied())
         .output()
@@ -114,11 +145,10 @@ pub fn fill_check_and_run_with_env(
     std::fs::create_dir_all(krate.join("tests")).unwrap();
     std::fs::copy(data(data_dir).join("run.rs"), krate.join("tests/run.rs")).unwrap();
     cargo(krate, &["fmt", "--check"]);
-    cargo(
-        krate,
-        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
-    );
-    let output = cargo_with_env(krate, &["test", "--test", "run"], env);
+    // Every target built and linted (what `cargo clippy --all-targets` covers in a
+    // generated crate: it has no benches), then the run tests.
+    lint(krate);
+    let output = cargo_linted_with_env(krate, &["test", "--test", "run"], env);
     for test in tests {
         assert!(output.contains(&format!("test {test} ... ok")), "{output}");
     }
