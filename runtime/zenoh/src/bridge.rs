@@ -301,15 +301,15 @@ impl Wire {
     /// number after `sent`): a number is used only by a message Zenoh took, so an
     /// inlet that sees one missing knows it was lost on the way, not here (where it
     /// would be counted already).
-    fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &AtomicU64, packet: &P) {
+    fn send_numbered<P: Serialize + ?Sized>(&self, epoch: u64, sent: &ledger::Sent, packet: &P) {
         // Only the outlet's thread numbers: the ledger's thread only reads.
-        let next = sent.load(Ordering::Acquire) + 1;
+        let next = sent.get() + 1;
         let message = self
             .arena
             .encode(&(epoch, next, packet))
             .map_err(|error| format!("does not encode: {error}"));
         if self.send(message, true, Some((epoch, next))) {
-            sent.store(next, Ordering::Release);
+            sent.set(next);
         }
     }
 }
@@ -439,7 +439,7 @@ pub(crate) struct Outlet<T> {
     epoch: u64,
     seq: Arc<AtomicU64>,
     /// The number of the last data or tick message Zenoh took.
-    sent: Arc<AtomicU64>,
+    sent: Arc<ledger::Sent>,
     /// A poster outlet's last published value, or a `last` outlet's latest packet
     /// (with the number it went with, or 0 if Zenoh did not take it), served to
     /// readers that ask (late joiners, links that came back). Kept as the packet
@@ -665,7 +665,7 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
             OutletInput::Last(port) => PortSet::new().input(port),
             OutletInput::Poster(port) => PortSet::new().input(port),
         };
-        let sent = Arc::new(AtomicU64::new(0));
+        let sent = Arc::new(ledger::Sent::default());
         let numbered = pull.is_none() && kind != InputKind::Poster;
         // A remote placement's keys are new at every placement: no process started
         // again would read their tally.
@@ -773,12 +773,12 @@ impl<T: Packet + Serialize> Outlet<T> {
             }
             OutletInput::Last(port) => {
                 if let Some(packet) = port.take_new() {
-                    let before = sent.load(Ordering::Acquire);
+                    let before = sent.get();
                     wire.send_numbered(epoch, sent, &packet);
                     // The latest, for a reader that asks (a late joiner, a link that
                     // came back), with the number it went with (a reader that had
                     // it from the stream drops it), or 0 when Zenoh did not take it.
-                    let number = sent.load(Ordering::Acquire);
+                    let number = sent.get();
                     let number = if number > before { number } else { 0 };
                     self.post(Latest {
                         epoch,

@@ -12,7 +12,8 @@
 //! [`ACK_PERIOD`] and asks when a live inlet is [`ASK_BEHIND`] numbers behind what it
 //! was sent, or behind at all after [`ASK_PATIENCE`] without a question or
 //! [`ASK_QUIET`] without a send (or when it has killed predecessors to report: below),
-//! and watches the inlets' tokens. When an inlet's process is known to have ended
+//! and watches the inlets' tokens; with every inlet caught up and nothing to report it
+//! sleeps until the outlet sends ([`Sent`]) or a token comes or goes. When an inlet's process is known to have ended
 //! (its token is gone and an inlet token on the key appears from its node with
 //! another process, or, on a key with one input end,
 //! another inlet has started receiving, or the outlet stops), the numbers sent after
@@ -30,8 +31,8 @@
 use coolbot::Chain;
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
-use std::thread::JoinHandle;
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
+use std::thread::{JoinHandle, Thread};
 use std::time::{Duration, Instant};
 
 use coolbot::port::ErasedInput;
@@ -95,6 +96,57 @@ pub const OUTLET_LEDGER_TARGET: &str = "coolbot_zenoh::ledger::outlet";
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// An outlet's count of the numbered messages it sent, which its ledger's thread
+/// reads: that thread sleeps while every inlet has acknowledged everything and there
+/// is nothing to report, and the next send wakes it. A send costs one more atomic
+/// store and load; only the first send after such a sleep wakes the thread.
+#[derive(Default)]
+pub(crate) struct Sent {
+    count: AtomicU64,
+    /// The ledger's thread sleeps with nothing to ask: the next send wakes it.
+    asleep: AtomicBool,
+    /// The ledger's thread, once it runs.
+    thread: OnceLock<Thread>,
+}
+
+impl Sent {
+    /// The newest number sent (0: none yet).
+    pub(crate) fn get(&self) -> u64 {
+        self.count.load(Ordering::Acquire)
+    }
+
+    /// Message `number` was sent: wakes the ledger's thread if it sleeps.
+    pub(crate) fn set(&self, number: u64) {
+        // Sequentially consistent with the thread's `sleep`: either it sees this
+        // number before it parks, or this sees it asleep and unparks it.
+        self.count.store(number, Ordering::SeqCst);
+        if self.asleep.load(Ordering::SeqCst) {
+            self.wake();
+        }
+    }
+
+    /// Wake the ledger's thread if it sleeps.
+    fn wake(&self) {
+        if self.asleep.swap(false, Ordering::SeqCst)
+            && let Some(thread) = self.thread.get()
+        {
+            thread.unpark();
+        }
+    }
+
+    /// On the ledger's thread: sleep until [`Sent::set`] or [`Sent::wake`] (or a
+    /// spurious wake-up), unless `idle` (asked after the thread said it sleeps) says
+    /// there is something to do.
+    fn sleep(&self, idle: impl Fn() -> bool) {
+        self.thread.get_or_init(std::thread::current);
+        self.asleep.store(true, Ordering::SeqCst);
+        if idle() {
+            std::thread::park();
+        }
+        self.asleep.store(false, Ordering::SeqCst);
+    }
 }
 
 /// What an inlet has had of one outlet epoch.
@@ -370,7 +422,7 @@ pub(crate) fn serve(
 /// The last chunk of an inlet's token: its process, a value drawn once per process
 /// (its start time and id; not the Zenoh session id, which a configuration may fix).
 pub(crate) fn process() -> String {
-    static PROCESS: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    static PROCESS: OnceLock<String> = OnceLock::new();
     PROCESS
         .get_or_init(|| {
             let now = std::time::SystemTime::now()
@@ -432,7 +484,7 @@ impl Stream {
 struct Book {
     key: String,
     epoch: u64,
-    sent: Arc<AtomicU64>,
+    sent: Arc<Sent>,
     /// One input end (fifo, ufifo): an inlet that starts receiving replaces the one
     /// gone.
     single: bool,
@@ -454,7 +506,7 @@ struct Book {
 
 impl Book {
     fn sent(&self) -> u64 {
-        self.sent.load(Ordering::Acquire)
+        self.sent.get()
     }
 
     /// The stream of token `id`, made if it is new. A process of a node seen means
@@ -645,6 +697,12 @@ impl Book {
         behind >= ASK_BEHIND || (behind > 0 && (waited >= ASK_PATIENCE || quiet >= ASK_QUIET))
     }
 
+    /// Whether the outlet's thread has nothing to look at until the outlet sends or
+    /// a token comes or goes: no report out and no live inlet behind.
+    fn idle(&self) -> bool {
+        lock(&self.ended).is_empty() && self.behind() == 0
+    }
+
     /// Whether there is no one to ask: no inlet to account for, nothing to report.
     fn is_empty(&self) -> bool {
         lock(&self.ended).is_empty() && lock(&self.streams).iter().all(|s| s.counted)
@@ -745,7 +803,7 @@ impl OutletLedger {
         session: &zenoh::Session,
         key: &str,
         epoch: u64,
-        sent: Arc<AtomicU64>,
+        sent: Arc<Sent>,
         single: bool,
         losses: ErasedInput,
         ended: Vec<Ended>,
@@ -773,6 +831,8 @@ impl OutletLedger {
             .callback(move |sample| {
                 if let Some(id) = sample.key_expr().as_str().strip_prefix(&prefix) {
                     watched.token(id, sample.kind());
+                    // An inlet gone may be counted now, or one come asked.
+                    watched.sent.wake();
                 }
             })
             .wait()
@@ -786,7 +846,7 @@ impl OutletLedger {
                 let mut last = Instant::now();
                 let mut seen = (asked.sent(), Instant::now());
                 while !stopped.load(Ordering::Acquire) {
-                    let next = Instant::now() + ACK_PERIOD;
+                    let mut next = Instant::now() + ACK_PERIOD;
                     let sent = asked.sent();
                     if sent != seen.0 {
                         seen = (sent, Instant::now());
@@ -797,6 +857,14 @@ impl OutletLedger {
                             last = Instant::now();
                         }
                         asked.settle(false);
+                    }
+                    if asked.idle() {
+                        // Until a send, a token, or the stop (which unparks too); the
+                        // next look a period after, as if it had looked all along.
+                        asked
+                            .sent
+                            .sleep(|| asked.idle() && !stopped.load(Ordering::Acquire));
+                        next = Instant::now() + ACK_PERIOD;
                     }
                     // Parking may end early (a Zenoh wait unparks this thread too):
                     // only a stop or the period's end counts.
@@ -857,7 +925,7 @@ mod tests {
             Book {
                 key: "k".to_owned(),
                 epoch: 7,
-                sent: Arc::new(AtomicU64::new(0)),
+                sent: Arc::new(Sent::default()),
                 single,
                 losses: losses.erased(),
                 streams: Mutex::new(Vec::new()),
@@ -885,14 +953,14 @@ mod tests {
     fn an_inlet_restarted_on_its_node_is_counted_up_to_its_successors_first() {
         let (book, losses) = book(false);
         book.token("station/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 6)));
-        book.sent.store(12, Ordering::Release);
+        book.sent.set(12);
         book.token("station/in/aaa", SampleKind::Delete);
         book.settle(false);
         assert_eq!(losses.overflows(), 0, "not known to have ended yet");
         book.token("station/in/bbb", SampleKind::Put);
-        book.sent.store(20, Ordering::Release);
+        book.sent.set(20);
         book.acknowledged("station/in", &("bbb".to_owned(), had(14, 20)));
         book.settle(false);
         // 7..=13: after what `aaa` acknowledged, before what `bbb` first received.
@@ -909,7 +977,7 @@ mod tests {
         assert!(!asks(), "no inlet, nothing sent");
         book.token("station/in/aaa", SampleKind::Put);
         assert!(!asks(), "a newcomer was sent nothing yet");
-        book.sent.store(3, Ordering::Release);
+        book.sent.set(3);
         assert!(asks(), "three numbers not acknowledged");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 2)));
         assert!(asks(), "one number not acknowledged");
@@ -917,7 +985,7 @@ mod tests {
         assert!(!asks(), "everything acknowledged: an idle bridge");
         // The link breaks: no live inlet to ask; it comes back behind.
         book.token("station/in/aaa", SampleKind::Delete);
-        book.sent.store(5, Ordering::Release);
+        book.sent.set(5);
         assert!(!asks(), "no live inlet");
         book.token("station/in/aaa", SampleKind::Put);
         assert!(asks(), "back, and two numbers behind");
@@ -934,7 +1002,7 @@ mod tests {
         book.token("station/in/aaa", SampleKind::Put);
         book.token("robot/in/bbb", SampleKind::Put);
         assert!(!book.wants_asking(ASK_PATIENCE, ASK_QUIET), "nothing sent");
-        book.sent.store(ASK_BEHIND - 1, Ordering::Release);
+        book.sent.set(ASK_BEHIND - 1);
         assert!(
             !book.wants_asking(soon, sending),
             "a few behind, asked lately, still sending"
@@ -947,7 +1015,7 @@ mod tests {
             book.wants_asking(soon, ASK_QUIET),
             "a few behind, the stream paused"
         );
-        book.sent.store(ASK_BEHIND, Ordering::Release);
+        book.sent.set(ASK_BEHIND);
         assert!(book.wants_asking(soon, sending), "far behind");
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, ASK_BEHIND)));
         assert!(
@@ -969,20 +1037,57 @@ mod tests {
     }
 
     #[test]
+    fn an_outlet_whose_inlets_have_everything_and_nothing_to_report_is_idle() {
+        let (book, _) = book(false);
+        assert!(book.idle(), "no inlet");
+        book.token("station/in/aaa", SampleKind::Put);
+        assert!(book.idle(), "nothing sent");
+        book.sent.set(3);
+        assert!(!book.idle(), "behind");
+        book.acknowledged("station/in", &("aaa".to_owned(), had(1, 3)));
+        assert!(book.idle(), "caught up");
+        *lock(&book.ended) = vec![(3, 40)];
+        assert!(!book.idle(), "a killed predecessor to report");
+    }
+
+    #[test]
+    fn a_send_wakes_the_ledger_thread_asleep() {
+        let sent = Arc::new(Sent::default());
+        let (woke, asleep) = (Arc::new(AtomicBool::new(false)), Arc::clone(&sent));
+        let flag = Arc::clone(&woke);
+        let thread = std::thread::spawn(move || {
+            // Asleep for as long as nothing was sent (a spurious wake-up sleeps again).
+            while asleep.get() == 0 {
+                asleep.sleep(|| asleep.get() == 0);
+            }
+            flag.store(true, Ordering::Release);
+        });
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !sent.asleep.load(Ordering::Acquire) {
+            assert!(Instant::now() < deadline, "the thread never slept");
+            std::thread::yield_now();
+        }
+        sent.set(1);
+        thread.join().unwrap();
+        assert!(woke.load(Ordering::Acquire));
+        assert!(!sent.asleep.load(Ordering::Acquire));
+    }
+
+    #[test]
     fn an_inlet_whose_token_lingers_after_its_successors_appeared_is_counted_too() {
         let (book, losses) = book(false);
         book.token("station/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 6)));
-        book.sent.store(12, Ordering::Release);
+        book.sent.set(12);
         // The node's next process declares its token before the old one's lease ends.
         book.token("station/in/bbb", SampleKind::Put);
-        book.sent.store(15, Ordering::Release);
+        book.sent.set(15);
         book.acknowledged("station/in", &("bbb".to_owned(), had(13, 15)));
         book.settle(false);
         assert_eq!(losses.overflows(), 0, "`aaa` may still be alive");
         book.token("station/in/aaa", SampleKind::Delete);
-        book.sent.store(20, Ordering::Release);
+        book.sent.set(20);
         book.settle(false);
         // 7..=12: after what `aaa` acknowledged, before what `bbb` first received.
         assert_eq!(losses.overflows(), 6);
@@ -1179,10 +1284,10 @@ mod tests {
     fn a_link_that_comes_back_with_the_same_process_counts_nothing_at_the_outlet() {
         let (book, losses) = book(true);
         book.token("station/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 5)));
         book.token("station/in/aaa", SampleKind::Delete);
-        book.sent.store(20, Ordering::Release);
+        book.sent.set(20);
         book.token("station/in/aaa", SampleKind::Put);
         book.acknowledged("station/in", &("aaa".to_owned(), had(1, 20)));
         book.settle(true);
@@ -1193,11 +1298,11 @@ mod tests {
     fn on_a_queue_key_an_inlet_that_starts_receiving_replaces_the_one_gone() {
         let (book, losses) = book(true);
         book.token("a/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.acknowledged("a/in", &("aaa".to_owned(), had(1, 8)));
         book.token("a/in/aaa", SampleKind::Delete);
         book.token("b/in/bbb", SampleKind::Put);
-        book.sent.store(30, Ordering::Release);
+        book.sent.set(30);
         book.settle(false);
         assert_eq!(
             losses.overflows(),
@@ -1213,16 +1318,16 @@ mod tests {
     fn a_successor_that_acknowledged_nothing_owns_all_after_it_was_seen() {
         let (book, losses) = book(true);
         book.token("sink/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.acknowledged("sink/in", &("aaa".to_owned(), had(1, 8)));
         book.token("sink/in/aaa", SampleKind::Delete);
-        book.sent.store(12, Ordering::Release);
+        book.sent.set(12);
         book.token("sink/in/bbb", SampleKind::Put); // seen at 12
-        book.sent.store(20, Ordering::Release);
+        book.sent.set(20);
         book.token("sink/in/bbb", SampleKind::Delete); // never acknowledged
-        book.sent.store(25, Ordering::Release);
+        book.sent.set(25);
         book.token("sink/in/ccc", SampleKind::Put); // seen at 25
-        book.sent.store(40, Ordering::Release);
+        book.sent.set(40);
         book.acknowledged("sink/in", &("ccc".to_owned(), had(27, 40)));
         book.settle(false);
         // aaa: 9..=12; bbb: 13..=26 (up to before ccc's first).
@@ -1232,7 +1337,7 @@ mod tests {
     #[test]
     fn tokens_made_up_and_withdrawn_do_not_pile_up() {
         let (book, losses) = book(false);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         // Each under a node name of its own (a node's next process would end the
         // ones before).
         for n in 0..4 * MAX_GONE {
@@ -1256,9 +1361,9 @@ mod tests {
     fn an_inlet_gone_without_successor_is_counted_when_the_outlet_stops() {
         let (book, losses) = book(false);
         book.token("a/in/aaa", SampleKind::Put);
-        book.sent.store(10, Ordering::Release);
+        book.sent.set(10);
         book.token("a/in/aaa", SampleKind::Delete);
-        book.sent.store(40, Ordering::Release);
+        book.sent.set(40);
         book.settle(false);
         assert_eq!(losses.overflows(), 0);
         book.settle(true);
