@@ -63,6 +63,7 @@ pub mod place;
 mod reply;
 pub mod ros2;
 pub mod security;
+mod serve;
 mod shm;
 mod tally;
 #[cfg(test)]

@@ -98,9 +98,8 @@ pub struct Node {
     session: zenoh::Session,
     exposures: Mutex<Vec<Exposure>>,
     control: Sender<ControlRequest>,
-    /// Dropped to stop the control thread (which sleeps until a request or this).
-    control_stop: Option<Sender<()>>,
-    control_thread: Option<JoinHandle<()>>,
+    /// The control thread, stopped when dropped.
+    control_server: Option<crate::serve::Server>,
     /// The outputs echoed, as `(component path, port)`, with their packets' JSON
     /// Schemas.
     echoed: Arc<Mutex<BTreeMap<(String, String), serde_json::Value>>>,
@@ -152,24 +151,16 @@ impl Node {
             .wait()
             .map_err(Error::zenoh("declare the node's liveliness token"))?;
         let (control, requests) = crossbeam_channel::bounded::<ControlRequest>(256);
-        let (control_stop, stopped) = crossbeam_channel::bounded::<()>(0);
-        let control_thread = std::thread::Builder::new()
-            .name(format!("cool-net:{name}:c"))
-            .spawn(move || {
-                loop {
-                    // The requests first: what is queued is served before a stop.
-                    crossbeam_channel::select_biased! {
-                        recv(requests) -> request => match request {
-                            Ok((query, handle, compound)) => {
-                                serve_command(&query, &handle, compound.as_deref());
-                            }
-                            Err(_) => break,
-                        },
-                        recv(stopped) -> _ => break,
-                    }
-                }
-            })
-            .map_err(Error::spawn("control"))?;
+        // What is queued when the node stops is served first.
+        let control_server = crate::serve::Server::start(
+            format!("cool-net:{name}:c"),
+            "control",
+            requests,
+            crate::serve::AtStop::Serve,
+            |(query, handle, compound): ControlRequest| {
+                serve_command(&query, &handle, compound.as_deref());
+            },
+        )?;
         let replies = crate::reply::Replies::start(name, crate::reply::REPLY_QUEUE)?;
         let shared: Arc<crate::shm::Counters> = Arc::default();
         let lender = Arc::new(crate::shm::PoolLender::new(&session, Arc::clone(&shared)));
@@ -181,8 +172,7 @@ impl Node {
             session,
             exposures: Mutex::new(Vec::new()),
             control,
-            control_stop: Some(control_stop),
-            control_thread: Some(control_thread),
+            control_server: Some(control_server),
             echoed: Arc::default(),
             echoes: Echoes::default(),
             state: crate::tally::state_directory(),
@@ -451,10 +441,7 @@ impl Drop for Node {
         coolbot::lent::withdraw_lender(&*self.lender);
         self.echoes.stop();
         lock(&self.exposures).clear();
-        drop(self.control_stop.take());
-        if let Some(thread) = self.control_thread.take() {
-            let _ = thread.join();
-        }
+        drop(self.control_server.take());
     }
 }
 

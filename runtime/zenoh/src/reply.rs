@@ -8,13 +8,12 @@
 //! and counted ([`Replier::dropped`]). Each answer is made on the replier's thread
 //! where it can be, so that one waiting is small.
 
+use crossbeam_channel::{Sender, TrySendError};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::thread::JoinHandle;
-
-use crossbeam_channel::{Sender, TrySendError};
 
 use crate::Error;
+use crate::serve::{AtStop, Server};
 
 /// The most answers a node's replier holds waiting; one more is dropped. Many: a
 /// dropped answer's query is dropped where it was received, and Zenoh then tells
@@ -63,52 +62,34 @@ impl Replier {
 /// dropped, its queries ending unanswered).
 pub(crate) struct Replies {
     replier: Replier,
-    /// Dropped to stop the thread (which sleeps until an answer or this).
-    stop: Option<Sender<()>>,
-    thread: Option<JoinHandle<()>>,
+    /// The replier's thread, stopped when dropped.
+    _server: Server,
 }
 
 impl Replies {
     /// Start the thread of node `node`, whose queue holds `capacity` answers.
     pub(crate) fn start(node: &str, capacity: usize) -> Result<Replies, Error> {
         let (queue, answers) = crossbeam_channel::bounded::<Answer>(capacity);
-        let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
-        let thread = std::thread::Builder::new()
-            .name(format!("cool-net:{node}:r"))
-            .spawn(move || {
-                loop {
-                    crossbeam_channel::select_biased! {
-                        recv(stopped) -> _ => break,
-                        recv(answers) -> answer => match answer {
-                            Ok(answer) => answer(),
-                            Err(_) => break,
-                        },
-                    }
-                }
-            })
-            .map_err(Error::spawn("replier"))?;
+        // A stop leaves the answers still waiting: their queries end unanswered.
+        let server = Server::start(
+            format!("cool-net:{node}:r"),
+            "replier",
+            answers,
+            AtStop::Drop,
+            |answer: Answer| answer(),
+        )?;
         Ok(Replies {
             replier: Replier {
                 queue,
                 dropped: Arc::default(),
             },
-            stop: Some(stop),
-            thread: Some(thread),
+            _server: server,
         })
     }
 
     /// Where the node's callbacks hand their answers.
     pub(crate) fn replier(&self) -> &Replier {
         &self.replier
-    }
-}
-
-impl Drop for Replies {
-    fn drop(&mut self) {
-        drop(self.stop.take());
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
     }
 }
 
