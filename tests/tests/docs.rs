@@ -348,8 +348,8 @@ fn cargo(dir: &Path, args: &[&str]) {
 }
 
 /// [`cargo`], with the crate's own targets linted by clippy under `-D warnings` in
-/// the same build ([`generated_crates::gen_cargo_linted`]: every command on that
-/// crate goes through this one).
+/// the same build ([`generated_crates::gen_cargo_linted`]: every command that
+/// compiles that crate goes through this one).
 fn cargo_linted(dir: &Path, args: &[&str]) {
     run(generated_crates::gen_cargo_linted(dir), dir, args);
 }

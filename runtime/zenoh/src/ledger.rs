@@ -13,8 +13,8 @@
 //! was sent, or behind at all after [`ASK_PATIENCE`] without a question or
 //! [`ASK_QUIET`] without a send (or when it has killed predecessors to report: below),
 //! and watches the inlets' tokens; with every inlet caught up and nothing to report it
-//! sleeps until the outlet sends ([`Sent`]) or a token comes or goes. When an inlet's process is known to have ended
-//! (its token is gone and an inlet token on the key appears from its node with
+//! sleeps until the outlet sends ([`Sent`]) or a token comes or goes. When an inlet's
+//! process is known to have ended (its token is gone and an inlet token on the key appears from its node with
 //! another process, or, on a key with one input end,
 //! another inlet has started receiving, or the outlet stops), the numbers sent after
 //! the newest it acknowledged are counted lost at the outlet's input, with an event,
@@ -30,7 +30,7 @@
 
 use coolbot::Chain;
 use std::collections::HashSet;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering, fence};
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::thread::{JoinHandle, Thread};
 use std::time::{Duration, Instant};
@@ -100,13 +100,16 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// An outlet's count of the numbered messages it sent, which its ledger's thread
 /// reads: that thread sleeps while every inlet has acknowledged everything and there
-/// is nothing to report, and the next send wakes it. A send costs one more atomic
-/// store and load; only the first send after such a sleep wakes the thread.
+/// is nothing to report, and the next send (or an inlet's token, [`Sent::nudge`])
+/// wakes it. A send costs a fence and one more atomic load; only the first send after
+/// such a sleep wakes the thread.
 #[derive(Default)]
 pub(crate) struct Sent {
     count: AtomicU64,
     /// The ledger's thread sleeps with nothing to ask: the next send wakes it.
     asleep: AtomicBool,
+    /// Something to look at came (an inlet's token) since the thread last looked.
+    nudged: AtomicBool,
     /// The ledger's thread, once it runs.
     thread: OnceLock<Thread>,
 }
@@ -119,33 +122,50 @@ impl Sent {
 
     /// Message `number` was sent: wakes the ledger's thread if it sleeps.
     pub(crate) fn set(&self, number: u64) {
-        // Sequentially consistent with the thread's `sleep`: either it sees this
-        // number before it parks, or this sees it asleep and unparks it.
-        self.count.store(number, Ordering::SeqCst);
-        if self.asleep.load(Ordering::SeqCst) {
+        self.count.store(number, Ordering::Release);
+        // Paired with the fence in `sleep`: either the thread sees this number before
+        // it parks, or this sees it asleep and unparks it.
+        fence(Ordering::SeqCst);
+        if self.asleep.load(Ordering::Relaxed) {
             self.wake();
         }
     }
 
+    /// Something for the ledger's thread to look at (an inlet's token came or went):
+    /// its next sleep does not park before it has looked.
+    fn nudge(&self) {
+        self.nudged.store(true, Ordering::Release);
+        fence(Ordering::SeqCst);
+        if self.asleep.load(Ordering::Relaxed) {
+            self.wake();
+        }
+    }
+
+    /// On the ledger's thread, as a look begins: the nudges so far are looked at.
+    fn looking(&self) {
+        self.nudged.store(false, Ordering::Release);
+    }
+
     /// Wake the ledger's thread if it sleeps.
     fn wake(&self) {
-        if self.asleep.swap(false, Ordering::SeqCst)
+        if self.asleep.swap(false, Ordering::AcqRel)
             && let Some(thread) = self.thread.get()
         {
             thread.unpark();
         }
     }
 
-    /// On the ledger's thread: sleep until [`Sent::set`] or [`Sent::wake`] (or a
-    /// spurious wake-up), unless `idle` (asked after the thread said it sleeps) says
-    /// there is something to do.
+    /// On the ledger's thread: sleep until [`Sent::set`], [`Sent::nudge`] or a
+    /// spurious wake-up, unless a nudge came since the last look or `idle` (asked
+    /// after the thread said it sleeps) says there is something to do.
     fn sleep(&self, idle: impl Fn() -> bool) {
         self.thread.get_or_init(std::thread::current);
-        self.asleep.store(true, Ordering::SeqCst);
-        if idle() {
+        self.asleep.store(true, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
+        if !self.nudged.load(Ordering::Acquire) && idle() {
             std::thread::park();
         }
-        self.asleep.store(false, Ordering::SeqCst);
+        self.asleep.store(false, Ordering::Release);
     }
 }
 
@@ -783,9 +803,10 @@ impl Book {
     }
 }
 
-/// An outlet's side: the inlets it has seen, looked at every [`ACK_PERIOD`] and asked
-/// when they are behind ([`Book::wants_asking`]) on a thread of its own; dropping it
-/// settles the accounts.
+/// An outlet's side: the inlets it has seen, looked at every [`ACK_PERIOD`] while one
+/// is behind or a report is out and asked when [`Book::wants_asking`] (otherwise the
+/// thread sleeps until the outlet sends or a token comes or goes: [`Sent`]), on a
+/// thread of its own; dropping it settles the accounts.
 pub(crate) struct OutletLedger {
     book: Arc<Book>,
     session: zenoh::Session,
@@ -832,7 +853,7 @@ impl OutletLedger {
                 if let Some(id) = sample.key_expr().as_str().strip_prefix(&prefix) {
                     watched.token(id, sample.kind());
                     // An inlet gone may be counted now, or one come asked.
-                    watched.sent.wake();
+                    watched.sent.nudge();
                 }
             })
             .wait()
@@ -847,6 +868,7 @@ impl OutletLedger {
                 let mut seen = (asked.sent(), Instant::now());
                 while !stopped.load(Ordering::Acquire) {
                     let mut next = Instant::now() + ACK_PERIOD;
+                    asked.sent.looking();
                     let sent = asked.sent();
                     if sent != seen.0 {
                         seen = (sent, Instant::now());
@@ -1071,6 +1093,29 @@ mod tests {
         thread.join().unwrap();
         assert!(woke.load(Ordering::Acquire));
         assert!(!sent.asleep.load(Ordering::Acquire));
+    }
+
+    #[test]
+    fn a_token_that_came_since_the_last_look_keeps_the_ledger_thread_awake() {
+        let sent = Arc::new(Sent::default());
+        let (done, sleeper) = (Arc::new(AtomicBool::new(false)), Arc::clone(&sent));
+        let flag = Arc::clone(&done);
+        let thread = std::thread::spawn(move || {
+            sleeper.looking();
+            // A token comes while the thread looks, before it sleeps.
+            sleeper.nudge();
+            sleeper.sleep(|| true);
+            flag.store(true, Ordering::Release);
+        });
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !done.load(Ordering::Acquire) && Instant::now() < deadline {
+            std::thread::yield_now();
+        }
+        let parked = !done.load(Ordering::Acquire);
+        // Never left parked, whatever the outcome.
+        sent.wake();
+        thread.join().unwrap();
+        assert!(!parked, "the thread slept with a token to look at");
     }
 
     #[test]

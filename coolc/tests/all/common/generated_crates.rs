@@ -59,8 +59,9 @@ pub fn gen_cargo(dir: &Path) -> Command {
 /// and a check of each dependency is another build of it beside the one the tests
 /// run; through the driver (what `cargo clippy` itself sets, `RUSTC_WORKSPACE_WRAPPER`
 /// and its `-D warnings` in `CLIPPY_ARGS`) the dependencies, compiled by plain `rustc`,
-/// are built once. Every command on one crate uses this or [`gen_cargo`], not both:
-/// the driver is part of the crate's fingerprint, and a switch recompiles the crate.
+/// are built once. Every command that compiles one crate uses this or [`gen_cargo`],
+/// not both: the driver is part of the crate's fingerprint, and a switch recompiles
+/// the crate.
 pub fn gen_cargo_linted(dir: &Path) -> Command {
     let mut command = gen_cargo(dir);
     command.env("RUSTC_WORKSPACE_WRAPPER", clippy_driver()).env(

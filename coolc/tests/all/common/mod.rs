@@ -81,8 +81,8 @@ pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> Stri
 }
 
 /// [`cargo`], with the crate's own targets linted by clippy under `-D warnings` in
-/// the same build ([`gen_cargo_linted`]; every command on that crate goes through
-/// this one).
+/// the same build ([`gen_cargo_linted`]; every command that compiles that crate goes
+/// through this one).
 pub fn cargo_linted(dir: &Path, args: &[&str]) -> String {
     cargo_linted_with_env(dir, args, &[])
 }
