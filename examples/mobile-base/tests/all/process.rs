@@ -9,9 +9,9 @@ use std::time::{Duration, Instant};
 
 use rustix::process::{Pid, Signal, kill_process};
 
-use crate::support::{PATIENCE, wait_line};
+use crate::support::{PATIENCE, Process, wait_line};
 
-fn robot(args: &[&str]) -> Child {
+fn robot(args: &[&str]) -> Process {
     Command::new(env!("CARGO_BIN_EXE_mobile-base"))
         .args(["--output", "lines"])
         .args(args)
@@ -19,6 +19,7 @@ fn robot(args: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("the example starts")
+        .into()
 }
 
 /// Reads `child`'s stdout on a thread: each line is sent, and all of it returned

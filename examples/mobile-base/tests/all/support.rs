@@ -7,6 +7,37 @@ use std::time::{Duration, Instant};
 /// Generous: the machine is shared and may be loaded.
 pub(crate) const PATIENCE: Duration = Duration::from_secs(60);
 
+/// A process of the test's: killed (and reaped) when dropped, so that a test that
+/// fails leaves none running behind it. Used as the `Child` it holds.
+pub(crate) struct Process(std::process::Child);
+
+impl From<std::process::Child> for Process {
+    fn from(child: std::process::Child) -> Process {
+        Process(child)
+    }
+}
+
+impl std::ops::Deref for Process {
+    type Target = std::process::Child;
+    fn deref(&self) -> &std::process::Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Process {
+    fn deref_mut(&mut self) -> &mut std::process::Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        // A child already waited for is not signalled again (`Child::kill`).
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// A TCP port on loopback that nothing listens on.
 #[cfg(feature = "network")]
 pub(crate) fn free_port() -> u16 {
@@ -27,7 +58,7 @@ pub(crate) fn spawn(
     args: &[&str],
     log: &str,
     lines: &mpsc::Sender<String>,
-) -> (std::process::Child, std::thread::JoinHandle<String>) {
+) -> (Process, std::thread::JoinHandle<String>) {
     use std::io::{BufRead, BufReader};
     use std::process::{Command, Stdio};
 
@@ -62,11 +93,12 @@ pub(crate) fn spawn(
         }
         all
     });
-    (child, reader)
+    (Process(child), reader)
 }
 
 /// A line waited for: what it says (for the message if it does not come), and what
 /// holds of it.
+#[cfg(feature = "network")]
 pub(crate) type Wanted<'a> = (&'a str, &'a dyn Fn(&str) -> bool);
 
 /// Waits until a line has come for each of `wanted`, in any order: lines that threads
@@ -74,6 +106,7 @@ pub(crate) type Wanted<'a> = (&'a str, &'a dyn Fn(&str) -> bool);
 /// [`PATIENCE`] in all; returns the lines in the order of `wanted`. A line is taken by
 /// the first of `wanted` still waiting that holds of it; the others are kept in
 /// `seen`, and printed if a line does not come.
+#[cfg(feature = "network")]
 pub(crate) fn wait_lines<const N: usize>(
     lines: &mpsc::Receiver<String>,
     seen: &mut Vec<String>,

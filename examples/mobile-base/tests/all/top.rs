@@ -5,12 +5,12 @@
 #![cfg(feature = "network")]
 
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::support::{PATIENCE, free_port};
+use crate::support::{PATIENCE, Process, free_port};
 
-fn example(args: &[&str]) -> Child {
+fn example(args: &[&str]) -> Process {
     Command::new(env!("CARGO_BIN_EXE_mobile-base"))
         .args(args)
         // No outlet tallies in the user's state directory (its bridges are a
@@ -20,6 +20,7 @@ fn example(args: &[&str]) -> Child {
         .stderr(Stdio::null())
         .spawn()
         .expect("the example starts")
+        .into()
 }
 
 /// `coolctl`, built next to the example by `cargo test --workspace`.
