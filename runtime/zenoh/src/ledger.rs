@@ -1072,17 +1072,38 @@ mod tests {
         assert!(!book.idle(), "a killed predecessor to report");
     }
 
+    /// Runs `body` with `sent` on a thread of its own, as the ledger's; the flag says
+    /// that `body` returned.
+    fn ledger_thread(
+        sent: &Arc<Sent>,
+        body: impl FnOnce(&Sent) + Send + 'static,
+    ) -> (JoinHandle<()>, Arc<AtomicBool>) {
+        let (done, sent) = (Arc::new(AtomicBool::new(false)), Arc::clone(sent));
+        let flag = Arc::clone(&done);
+        let thread = std::thread::spawn(move || {
+            body(&sent);
+            flag.store(true, Ordering::Release);
+        });
+        (thread, done)
+    }
+
+    /// Whether `done` is set within a generous deadline (polled).
+    fn within_deadline(done: &AtomicBool) -> bool {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !done.load(Ordering::Acquire) && Instant::now() < deadline {
+            std::thread::yield_now();
+        }
+        done.load(Ordering::Acquire)
+    }
+
     #[test]
     fn a_send_wakes_the_ledger_thread_asleep() {
         let sent = Arc::new(Sent::default());
-        let (woke, asleep) = (Arc::new(AtomicBool::new(false)), Arc::clone(&sent));
-        let flag = Arc::clone(&woke);
-        let thread = std::thread::spawn(move || {
+        let (thread, done) = ledger_thread(&sent, |sent| {
             // Asleep for as long as nothing was sent (a spurious wake-up sleeps again).
-            while asleep.get() == 0 {
-                asleep.sleep(|| asleep.get() == 0);
+            while sent.get() == 0 {
+                sent.sleep(|| sent.get() == 0);
             }
-            flag.store(true, Ordering::Release);
         });
         let deadline = Instant::now() + Duration::from_secs(10);
         while !sent.asleep.load(Ordering::Acquire) {
@@ -1090,32 +1111,31 @@ mod tests {
             std::thread::yield_now();
         }
         sent.set(1);
+        let woke = within_deadline(&done);
+        if !woke {
+            // Not left parked: the test fails below.
+            sent.count.store(1, Ordering::Release);
+            thread.thread().unpark();
+        }
         thread.join().unwrap();
-        assert!(woke.load(Ordering::Acquire));
+        assert!(woke, "the send did not wake the thread");
         assert!(!sent.asleep.load(Ordering::Acquire));
     }
 
     #[test]
     fn a_token_that_came_since_the_last_look_keeps_the_ledger_thread_awake() {
         let sent = Arc::new(Sent::default());
-        let (done, sleeper) = (Arc::new(AtomicBool::new(false)), Arc::clone(&sent));
-        let flag = Arc::clone(&done);
-        let thread = std::thread::spawn(move || {
-            sleeper.looking();
+        let (thread, done) = ledger_thread(&sent, |sent| {
+            sent.looking();
             // A token comes while the thread looks, before it sleeps.
-            sleeper.nudge();
-            sleeper.sleep(|| true);
-            flag.store(true, Ordering::Release);
+            sent.nudge();
+            sent.sleep(|| true);
         });
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while !done.load(Ordering::Acquire) && Instant::now() < deadline {
-            std::thread::yield_now();
-        }
-        let parked = !done.load(Ordering::Acquire);
+        let awake = within_deadline(&done);
         // Never left parked, whatever the outcome.
-        sent.wake();
+        thread.thread().unpark();
         thread.join().unwrap();
-        assert!(!parked, "the thread slept with a token to look at");
+        assert!(awake, "the thread slept with a token to look at");
     }
 
     #[test]
