@@ -344,34 +344,14 @@ fn every_rust_block_of_the_docs_is_compiled() {
 /// Runs `cargo <args>` in `dir` as coolc's tests build the crates they generate
 /// ([`generated_crates::gen_cargo`]); panics with cargo's output when it fails.
 fn cargo(dir: &Path, args: &[&str]) {
-    run(generated_crates::gen_cargo(dir), dir, args);
+    generated_crates::run_cargo(generated_crates::gen_cargo(dir), dir, args, &[]);
 }
 
 /// [`cargo`], with the crate's own targets linted by clippy under `-D warnings` in
 /// the same build ([`generated_crates::gen_cargo_linted`]: every command that
 /// compiles that crate goes through this one).
 fn cargo_linted(dir: &Path, args: &[&str]) {
-    run(generated_crates::gen_cargo_linted(dir), dir, args);
-}
-
-/// Builds the crate at `dir` with its library, binaries and integration tests linted
-/// by clippy under `-D warnings` ([`generated_crates::lint_args`]); later commands on
-/// it go through [`cargo_linted`].
-fn lint(dir: &Path) {
-    cargo_linted(dir, generated_crates::lint_args(dir));
-}
-
-/// `cargo <args>` as `command` runs it in `dir`; panics with cargo's output when it
-/// fails.
-fn run(mut command: std::process::Command, dir: &Path, args: &[&str]) {
-    let output = command.args(args).output().unwrap();
-    assert!(
-        output.status.success(),
-        "cargo {args:?} failed in {}:\n{}\n{}",
-        dir.display(),
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
+    generated_crates::run_cargo(generated_crates::gen_cargo_linted(dir), dir, args, &[]);
 }
 
 /// Lowers the descriptions `files` (`(name, text)`; the first is the root, the others
@@ -567,7 +547,7 @@ fn the_tutorials_crate_builds_at_its_last_step() {
     std::fs::write(src.join("main.rs"), TUTORIAL_MAIN.text()).unwrap();
     let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
     std::fs::write(src.join("lib.rs"), lib + "pub mod at_section_6;\n").unwrap();
-    lint(&out);
+    generated_crates::lint(&out);
 }
 
 #[test]
@@ -589,7 +569,7 @@ fn the_section_api_example_compiles_warning_free() {
         assert!(stubs.contains(&name) && code.contains(&name), "{name}");
     }
     std::fs::write(out.join("src/watcher.rs"), code).unwrap();
-    lint(&out);
+    generated_crates::lint(&out);
 }
 
 #[test]
@@ -608,7 +588,7 @@ fn the_harness_example_runs() {
     std::fs::write(out.join("src/tally.rs"), user).unwrap();
     std::fs::create_dir_all(out.join("tests")).unwrap();
     std::fs::write(out.join("tests/tally.rs"), test).unwrap();
-    lint(&out);
+    generated_crates::lint(&out);
     cargo_linted(&out, &["test", "--quiet", "--test", "tally"]);
 }
 
@@ -638,7 +618,7 @@ fn the_compound_example_and_its_supervisor_tests_run() {
     let test = BASE_TEST.text();
     assert!(test.matches("#[test]").count() >= 3, "{test}");
     std::fs::write(out.join("tests/base.rs"), test).unwrap();
-    lint(&out);
+    generated_crates::lint(&out);
     cargo_linted(&out, &["test", "--quiet", "--test", "base"]);
 }
 

@@ -3,6 +3,7 @@
 //! directory, with the workspace's lock and profile, so that the runtime and its
 //! dependencies are built there once.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -81,6 +82,37 @@ pub fn lint_args(dir: &Path) -> &'static [&'static str] {
     } else {
         &["build", "--quiet"]
     }
+}
+
+/// Runs `command` ([`gen_cargo`] or [`gen_cargo_linted`] for the crate at `dir`) with
+/// `args` and the variables `env` (set for cargo and so for the tests it runs);
+/// panics with cargo's output when it fails; returns its stdout.
+pub fn run_cargo(
+    mut command: Command,
+    dir: &Path,
+    args: &[&str],
+    env: &[(&str, &OsStr)],
+) -> String {
+    let output = command
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "cargo {args:?} failed in {}:\n{}\n{}",
+        dir.display(),
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// Builds the crate at `dir` with its library, binaries and integration tests linted
+/// by clippy under `-D warnings` ([`gen_cargo_linted`], [`lint_args`]); later commands
+/// that compile it go through [`gen_cargo_linted`] too.
+pub fn lint(dir: &Path) {
+    run_cargo(gen_cargo_linted(dir), dir, lint_args(dir), &[]);
 }
 
 /// Clippy's driver of the toolchain whose `cargo` runs the tests (beside it).

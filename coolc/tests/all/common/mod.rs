@@ -9,7 +9,8 @@ use coolc::ir::RuntimeDep;
 #[path = "generated_crates.rs"]
 mod generated_crates;
 use coolc::{lower, merge};
-pub use generated_crates::{gen_cargo, gen_cargo_linted, gen_target};
+use generated_crates::run_cargo;
+pub use generated_crates::{gen_cargo, gen_cargo_linted, gen_target, lint};
 
 /// `coolc/tests/data/<name>`.
 pub fn data(name: &str) -> PathBuf {
@@ -77,7 +78,7 @@ pub fn cargo(dir: &Path, args: &[&str]) -> String {
 
 /// [`cargo`], with the variables `env` set for it (and so for the tests it runs).
 pub fn cargo_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
-    run(gen_cargo(dir), dir, args, env)
+    run_cargo(gen_cargo(dir), dir, args, env)
 }
 
 /// [`cargo`], with the crate's own targets linted by clippy under `-D warnings` in
@@ -87,40 +88,9 @@ pub fn cargo_linted(dir: &Path, args: &[&str]) -> String {
     cargo_linted_with_env(dir, args, &[])
 }
 
-/// Builds the crate `krate` with its library, binaries and integration tests linted
-/// by clippy under `-D warnings` (what `cargo clippy --all-targets` covers in a
-/// generated crate, [`generated_crates::lint_args`]); later commands on it go through
-/// [`cargo_linted`].
-pub fn lint(krate: &Path) {
-    cargo_linted(krate, generated_crates::lint_args(krate));
-}
-
 /// [`cargo_linted`], with the variables `env` set for it.
 pub fn cargo_linted_with_env(dir: &Path, args: &[&str], env: &[(&str, &OsStr)]) -> String {
-    run(gen_cargo_linted(dir), dir, args, env)
-}
-
-/// `cargo <args>` as `command` runs it in `dir`, with `env`; panics with cargo's
-/// output when it fails; returns its stdout.
-fn run(
-    mut command: std::process::Command,
-    dir: &Path,
-    args: &[&str],
-    env: &[(&str, &OsStr)],
-) -> String {
-    let output = command
-        .args(args)
-        .envs(env.iter().copied())
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "cargo {args:?} failed in {}:\n{}\n{}",
-        dir.display(),
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    run_cargo(gen_cargo_linted(dir), dir, args, env)
 }
 
 /// Copies the filled-in user files `user_files` of `coolc/tests/data/<data_dir>` into
