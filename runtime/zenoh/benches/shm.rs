@@ -20,6 +20,10 @@
 //! `bridge-shm-loan` fills that `Bytes` in a loan of the sender node's pool
 //! (`coolbot::Bytes::loan`: the one copy of the frame, as raw Zenoh's into its
 //! `ZShmMut`), which the outlet sends as it is.
+//! `wake-floor` is no engine but the floor under them all: the sender copies the
+//! packet into a shared mapping and wakes the receiver, asleep on a futex, with one
+//! system call; what any engine pays at least to reach a receiver asleep in another
+//! process.
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
@@ -63,10 +67,11 @@ enum Engine {
     BridgeShm,
     BridgeShmLent,
     BridgeShmLoan,
+    WakeFloor,
 }
 
 impl Engine {
-    const ALL: [Engine; 7] = [
+    const ALL: [Engine; 8] = [
         Engine::ZenohTcp,
         Engine::ZenohShm,
         Engine::Iceoryx2,
@@ -74,6 +79,7 @@ impl Engine {
         Engine::BridgeShm,
         Engine::BridgeShmLent,
         Engine::BridgeShmLoan,
+        Engine::WakeFloor,
     ];
 
     fn name(self) -> &'static str {
@@ -85,6 +91,7 @@ impl Engine {
             Engine::BridgeShm => "bridge-shm",
             Engine::BridgeShmLent => "bridge-shm-lent",
             Engine::BridgeShmLoan => "bridge-shm-loan",
+            Engine::WakeFloor => "wake-floor",
         }
     }
 
@@ -344,6 +351,130 @@ mod ice {
             stamp(sample.payload_mut(), number);
             sample.send().expect("send");
             notifier.notify().expect("notify");
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// The floor: one futex wake-up a packet.
+
+/// What no same-host engine can beat for a receiver that sleeps between packets: the
+/// sender copies the packet into a shared mapping, publishes its number, and wakes the
+/// receiver with one futex call; the receiver sleeps on that number and reads the
+/// packet in place. One slot, no queue, no discovery, no loss accounting: not an
+/// engine a bridge could use, but the cost of the one wake-up that any engine pays
+/// to reach a sleeping thread in another process.
+mod floor {
+    use std::fs::{File, OpenOptions};
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    use memmap2::MmapMut;
+    use rustix::thread::futex;
+
+    use super::*;
+
+    /// The packet's number (the futex word), then the number the receiver last took.
+    const NUMBER: usize = 0;
+    const TAKEN: usize = 64;
+    /// Where the packet starts, a cache line after the two words.
+    const DATA: usize = 128;
+
+    struct Slot {
+        map: MmapMut,
+        size: usize,
+    }
+
+    impl Slot {
+        /// Map `path` (made `DATA + size` bytes long if `create`).
+        #[allow(
+            unsafe_code,
+            reason = "a shared mapping of a file only the bench opens"
+        )]
+        fn map(path: &str, size: usize, create: bool) -> Slot {
+            let file: File = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(create)
+                .truncate(create)
+                .open(path)
+                .expect("the slot's file");
+            if create {
+                file.set_len((DATA + size) as u64).expect("the slot's size");
+            }
+            // SAFETY: the file is the bench's own, opened by its two processes only,
+            // and never truncated while mapped; what each process writes is ordered by
+            // the two words (a packet is written before its number, read after it).
+            let map = unsafe { MmapMut::map_mut(&file) }.expect("a shared mapping");
+            Slot { map, size }
+        }
+
+        fn word(&self, at: usize) -> &AtomicU32 {
+            let bytes = &self.map[at..at + 4];
+            // SAFETY: 4 bytes inside the mapping, aligned to 4 (the mapping is
+            // page-aligned and `at` a multiple of 64), only ever used as an atomic.
+            #[allow(unsafe_code, reason = "an atomic word in a shared mapping")]
+            unsafe {
+                &*bytes.as_ptr().cast::<AtomicU32>()
+            }
+        }
+
+        fn packet(&self) -> &[u8] {
+            &self.map[DATA..DATA + self.size]
+        }
+
+        fn packet_mut(&mut self) -> &mut [u8] {
+            &mut self.map[DATA..DATA + self.size]
+        }
+    }
+
+    pub fn receive(path: &str, stream: Stream, ready: impl FnOnce()) -> Received {
+        let slot = Slot::map(path, stream.size, true);
+        ready();
+        let (done, result) = bounded(1);
+        let mut collector = Collector::new(done, stream.count);
+        let mut taken = 0u32;
+        let deadline = Instant::now() + LIMIT;
+        loop {
+            let number = slot.word(NUMBER);
+            while number.load(Ordering::Acquire) == taken {
+                assert!(Instant::now() < deadline, "no packet in {LIMIT:?}");
+                // Returns at once if the number moved since the load (EAGAIN).
+                let _ = futex::wait(
+                    number,
+                    futex::Flags::empty(),
+                    taken,
+                    Some(&futex::Timespec {
+                        tv_sec: 1,
+                        tv_nsec: 0,
+                    }),
+                );
+            }
+            taken = number.load(Ordering::Acquire);
+            collector.arrived(slot.packet());
+            slot.word(TAKEN).store(taken, Ordering::Release);
+            if let Ok(received) = result.try_recv() {
+                let _ = std::fs::remove_file(path);
+                return received;
+            }
+        }
+    }
+
+    pub fn send(path: &str, stream: Stream) {
+        let mut slot = Slot::map(path, stream.size, false);
+        let frame = vec![7u8; stream.size];
+        let mut number = 0u32;
+        paced(stream, |header| {
+            // The receiver took the last packet long before (a packet every 500 us at
+            // most); wait for it all the same rather than write over it.
+            while slot.word(TAKEN).load(Ordering::Acquire) != number {
+                std::thread::yield_now();
+            }
+            let packet = slot.packet_mut();
+            packet.copy_from_slice(&frame);
+            stamp(packet, header);
+            number = number.wrapping_add(1);
+            slot.word(NUMBER).store(number, Ordering::Release);
+            futex::wake(slot.word(NUMBER), futex::Flags::empty(), 1).expect("a futex wake");
         })
     }
 }
@@ -826,6 +957,7 @@ fn peer(args: &[String]) {
                     assert!(system.shutdown().clean(), "unclean shutdown");
                     received
                 }
+                Engine::WakeFloor => floor::receive(address, stream, ready),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::receive(address, stream, ready),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -851,6 +983,7 @@ fn peer(args: &[String]) {
                 }
                 Engine::BridgeShmLent => bridge_sender::<LentFrame>(address, true, stream),
                 Engine::BridgeShmLoan => bridge_sender::<LoanedFrame>(address, true, stream),
+                Engine::WakeFloor => floor::send(address, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::send(address, stream),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -913,6 +1046,10 @@ struct Run {
 fn run(engine: Engine, stream: Stream, tag: usize) -> Run {
     let address = match engine {
         Engine::Iceoryx2 => format!("{}-{tag}", std::process::id()),
+        Engine::WakeFloor => std::env::temp_dir()
+            .join(format!("coolbot-bench-floor-{}-{tag}", std::process::id()))
+            .display()
+            .to_string(),
         _ => setup::endpoint(),
     };
     let (mut receiver, mut from_receiver) = spawn(engine, "receive", &address, stream);
@@ -1038,6 +1175,19 @@ fn main() {
         (Goal::AtMost(0.2), Goal::AtMost(0.2)),
     );
     against(&mut table, Engine::ZenohTcp, (Goal::None, Goal::None));
+    against(&mut table, Engine::WakeFloor, (Goal::None, Goal::None));
+    // The floor against the TCP bridge: the least ratio an engine that wakes a
+    // sleeping receiver once a packet can reach against it on this machine.
+    if let (Some((floor, _)), Some((tcp, _))) =
+        (figure(Engine::WakeFloor), figure(Engine::BridgeTcp))
+    {
+        table.row(
+            "64 B p50, wake-floor vs bridge-tcp",
+            Figure::Time(floor.latencies.0),
+            Figure::Time(tcp.latencies.0),
+            Goal::None,
+        );
+    }
     // The same goals for a packet whose bytes the receiver reads in place, and for
     // one filled in a loan of the pool.
     for engine in [Engine::BridgeShmLent, Engine::BridgeShmLoan] {
