@@ -66,7 +66,8 @@ pub(crate) fn decode<T: DeserializeOwned>(bytes: &[u8], max: usize) -> Result<T,
 
 /// [`decode`] of a message in `parts`, in order (as [`crate::shm`] hands a payload
 /// on): each part read where it is when a value's bytes lie within one part (a
-/// loaned buffer is one whole part); the parts joined into one copy otherwise.
+/// loaned buffer is one whole part); the parts joined into one copy only when a
+/// value's bytes lie across two parts. Bytes that are not a value are read once.
 pub(crate) fn decode_parts<T: DeserializeOwned>(
     parts: &[&[u8]],
     max: usize,
@@ -78,16 +79,26 @@ pub(crate) fn decode_parts<T: DeserializeOwned>(
     if len > max {
         return Err(Undecodable::TooLong { len, max });
     }
-    let mut reader = postcard::Deserializer::from_flavor(Segments { parts, at: 0 });
-    if let Ok(value) = T::deserialize(&mut reader)
-        && let Ok(Rest { parts: left }) = reader.finalize()
-        && left.iter().all(|part| part.is_empty())
-    {
-        return Ok(value);
+    let mut reader = postcard::Deserializer::from_flavor(Segments {
+        parts,
+        at: 0,
+        across: false,
+    });
+    let read = T::deserialize(&mut reader);
+    let type_name = std::any::type_name::<T>();
+    // (The parts' finalize cannot fail.)
+    let rest = reader
+        .finalize()
+        .map_err(|source| Undecodable::Invalid { type_name, source })?;
+    match read {
+        Ok(value) => match rest.parts.iter().map(|part| part.len()).sum() {
+            0 => Ok(value),
+            extra => Err(Undecodable::Trailing { type_name, extra }),
+        },
+        // A value across two parts (fragments of a message): read from one copy.
+        Err(_) if rest.across => decode(&parts.concat(), max),
+        Err(source) => Err(Undecodable::Invalid { type_name, source }),
     }
-    // A value across two parts (fragments of a message), or bytes that are not a
-    // value: read from one copy, which says which.
-    decode(&parts.concat(), max)
 }
 
 /// A message's parts as postcard reads them: what is left of each part, in order.
@@ -95,6 +106,9 @@ struct Segments<'de> {
     parts: &'de [&'de [u8]],
     /// How far into the first part the reading is.
     at: usize,
+    /// Whether a run of bytes was asked for that begins in one part and ends in a
+    /// later one (read from one copy of the parts instead).
+    across: bool,
 }
 
 impl<'de> Segments<'de> {
@@ -114,6 +128,8 @@ impl<'de> Segments<'de> {
 /// What is left: the parts not read, the first from where the reading stopped.
 struct Rest<'de> {
     parts: Vec<&'de [u8]>,
+    /// [`Segments::across`].
+    across: bool,
 }
 
 impl<'de> postcard::de_flavors::Flavor<'de> for Segments<'de> {
@@ -134,9 +150,11 @@ impl<'de> postcard::de_flavors::Flavor<'de> for Segments<'de> {
         if count == 0 {
             return Ok(&[]);
         }
-        let taken = current
-            .get(..count)
-            .ok_or(postcard::Error::DeserializeUnexpectedEnd)?;
+        let Some(taken) = current.get(..count) else {
+            let later: usize = self.parts.iter().skip(1).map(|part| part.len()).sum();
+            self.across = current.len() + later >= count;
+            return Err(postcard::Error::DeserializeUnexpectedEnd);
+        };
         self.at += count;
         Ok(taken)
     }
@@ -145,7 +163,10 @@ impl<'de> postcard::de_flavors::Flavor<'de> for Segments<'de> {
         let first = self.current();
         let mut parts = vec![first];
         parts.extend(self.parts.iter().skip(1).copied());
-        Ok(Rest { parts })
+        Ok(Rest {
+            parts,
+            across: self.across,
+        })
     }
 }
 
@@ -284,5 +305,44 @@ mod tests {
             decode_parts::<Image>(&[&bytes[..3], &bytes[3..20]], 1024),
             Err(Undecodable::Invalid { .. })
         ));
+    }
+
+    #[test]
+    fn bytes_in_parts_that_are_not_a_value_are_read_once_and_refused_as_from_one_slice() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static READS: AtomicUsize = AtomicUsize::new(0);
+        /// A `u16` that counts its reads.
+        #[derive(Debug, PartialEq)]
+        struct Counted(u16);
+        impl<'de> serde::Deserialize<'de> for Counted {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                READS.fetch_add(1, Ordering::Relaxed);
+                u16::deserialize(d).map(Counted)
+            }
+        }
+        // A varint that never ends (every byte has its high bit): not a `u16`.
+        let bad: [&[u8]; 2] = [&[0xff, 0xff], &[0xff, 0xff]];
+        let error = decode_parts::<Counted>(&bad, 64).unwrap_err();
+        assert_eq!(READS.load(Ordering::Relaxed), 1, "read once");
+        assert_eq!(
+            error,
+            decode::<Counted>(&bad.concat(), 64).unwrap_err(),
+            "the error one slice gives"
+        );
+        // A value followed by bytes in the next part: refused at once, as leftovers.
+        READS.store(0, Ordering::Relaxed);
+        assert_eq!(
+            decode_parts::<Counted>(&[&[5], &[1, 2]], 64),
+            Err(Undecodable::Trailing {
+                type_name: std::any::type_name::<Counted>(),
+                extra: 2
+            })
+        );
+        assert_eq!(READS.load(Ordering::Relaxed), 1, "read once");
+        // A value in two parts whose bytes need no run across them reads in place.
+        READS.store(0, Ordering::Relaxed);
+        let two: [&[u8]; 2] = [&[0x81], &[0x01]];
+        assert_eq!(decode_parts::<Counted>(&two, 64), Ok(Counted(129)));
+        assert_eq!(READS.load(Ordering::Relaxed), 1, "read once");
     }
 }
