@@ -24,6 +24,12 @@ pub(crate) trait Deliver<T>: Send + Sync {
     /// as lost (an overflow, with its `MonitorEvent::Overflow`); a sink passing
     /// packets on passes the count on.
     fn lost(&self, _count: u64) {}
+
+    /// Whether a delivery now would wait for room: this sink is, or passes packets on
+    /// to, a full fifo whose policy is `Block`.
+    fn would_wait(&self) -> bool {
+        false
+    }
 }
 
 /// A converter on a connection, in front of the input end.
@@ -41,6 +47,10 @@ impl<A: Packet, B: Packet> Deliver<A> for Converted<A, B> {
     fn lost(&self, count: u64) {
         self.target.lost(count);
     }
+
+    fn would_wait(&self) -> bool {
+        self.target.would_wait()
+    }
 }
 
 /// One connected input of a data output.
@@ -56,6 +66,11 @@ impl<T> Clone for Sink<T> {
             target: Arc::clone(&self.target),
         }
     }
+}
+
+/// Whether a delivery to `sinks` now would wait for room ([`Deliver::would_wait`]).
+pub(super) fn would_wait<T>(sinks: &[Sink<T>]) -> bool {
+    sinks.iter().any(|sink| sink.target.would_wait())
 }
 
 /// Deliver `packet` to every sink: owned to a single one, shared among several when

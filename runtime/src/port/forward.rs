@@ -30,6 +30,10 @@ impl<T: Packet> Deliver<T> for DataForward<T> {
             sink.target.lost(count);
         }
     }
+
+    fn would_wait(&self) -> bool {
+        would_wait(&self.to.sinks.read())
+    }
 }
 
 /// A compound's exported poster output as a tap of the instance output it follows.

@@ -100,6 +100,10 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
         }
     }
 
+    fn would_wait(&self) -> bool {
+        self.policy == OverflowPolicy::Block && self.queued() >= self.capacity
+    }
+
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
         match self.sender().try_send(packet) {

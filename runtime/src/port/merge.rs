@@ -115,6 +115,10 @@ impl<T: Packet> Deliver<T> for LaneSink<T> {
         // A pull answer is for its requester, not part of the stream.
         dispatch_answer(&self.merge.out.inner.sinks.read(), packet, id);
     }
+
+    fn would_wait(&self) -> bool {
+        would_wait(&self.merge.out.inner.sinks.read())
+    }
 }
 
 impl<T: Packet> MergeEnd for Arc<Merge<T>> {

@@ -134,6 +134,15 @@ impl<T: Packet> DataOut<T> {
     pub fn consumers(&self) -> usize {
         self.inner.sinks.read().len()
     }
+
+    /// Whether a [`DataOut::send`] now would wait for room: a connected fifo whose
+    /// policy is `Block` is full (directly, behind a converter, or behind a
+    /// compound's exported port). A sender that must not wait (a network inlet,
+    /// which delivers on a thread shared by its whole session) hands the packet to a
+    /// thread of its own instead.
+    pub fn would_wait(&self) -> bool {
+        would_wait(&self.inner.sinks.read())
+    }
 }
 
 impl<T: Packet> Default for DataOut<T> {

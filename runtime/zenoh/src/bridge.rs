@@ -40,6 +40,7 @@ use zenoh::Wait;
 use zenoh::bytes::ZBytes;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 
+use crate::backlog::{Backlog, LostFn};
 use crate::codec;
 use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::shm::Arena;
@@ -1004,14 +1005,26 @@ fn deliverer<T: Packet + DeserializeOwned>(
     let network = Arc::new(counters.network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
-    let lost = move |reason: String| {
-        counted.count_loss(1);
-        coolbot::limited!(
-            &lost_key,
-            |held| tracing::warn!(key = %lost_key, "inlet lost a packet: {reason}{held}")
-        );
+    let lost_many: LostFn = Arc::new(move |count: u64, reason: String| {
+        counted.count_loss(count);
+        let what = match count {
+            1 => "a packet".to_owned(),
+            _ => format!("{count} packets"),
+        };
+        coolbot::limited!(&lost_key, |held| tracing::warn!(
+            key = %lost_key,
+            "inlet lost {what}: {reason}{held}"
+        ));
+    });
+    let lost = {
+        let lost_many = Arc::clone(&lost_many);
+        move |reason: String| lost_many(1, reason)
     };
-    let ledger = Arc::new(InletLedger::new(network, Arc::new(counters.resets), key));
+    let ledger = Arc::new(InletLedger::new(
+        network,
+        Arc::new(counters.resets),
+        key.clone(),
+    ));
     let gaps = Arc::clone(&ledger);
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => Arc::new(move |payload, via| {
@@ -1037,6 +1050,9 @@ fn deliverer<T: Packet + DeserializeOwned>(
         }),
         InletOutput::Data(port) => {
             let delivered = Mutex::new(Delivered::default());
+            // Packets whose delivery would wait go through a backlog: the receiving
+            // thread never waits on a full `block` fifo.
+            let backlog = Backlog::new(port, &key, lost_many);
             Arc::new(move |payload, via| {
                 let taken = shared.received(payload, max_payload, |bytes| {
                     match codec::decode_parts::<Numbered<T>>(bytes, max_payload) {
@@ -1048,8 +1064,10 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             // different threads, and the one taken as newer is sent
                             // last.
                             let mut delivered = lock(&delivered);
-                            if delivered.fresh(epoch, seq, via) {
-                                port.send(packet);
+                            if delivered.fresh(epoch, seq, via)
+                                && let Err(refused) = backlog.send(packet, payload.len())
+                            {
+                                lost(Chain(&refused).to_string());
                             }
                         }
                         Err(error) => lost(Chain(&error).to_string()),

@@ -45,6 +45,7 @@
 #![deny(missing_docs)]
 
 pub mod agent;
+mod backlog;
 mod bridge;
 mod codec;
 mod config;

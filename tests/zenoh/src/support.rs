@@ -17,8 +17,8 @@ use zenoh::Wait;
 
 use crate::generated::types::{Chunk, LaserScan, Picture, Pose, Ranges, Reading, Speed, Twist};
 use crate::generated::{
-    base, chunk_queue, drive, goal, growing_queue, latest, lidar, motion, picture_queue,
-    picture_source, plain, pose_source, poster_source, queue, ranger, reader,
+    base, blocking_queue, chunk_queue, drive, goal, growing_queue, latest, lidar, motion,
+    picture_queue, picture_source, plain, pose_source, poster_source, queue, ranger, reader,
     robot as robot_compound, shm_queue, shm_source, small_queue, source, tick_source, ticks,
     tiny_queue, tuner, two_source, wheels, wide_queue,
 };
@@ -333,6 +333,7 @@ hand!(wide_queue, FifoIn<Pose>, inputs.input);
 hand!(queue, FifoIn<Pose>, inputs.input);
 hand!(small_queue, FifoIn<Pose>, inputs.input);
 hand!(tiny_queue, FifoIn<Pose>, inputs.input);
+hand!(blocking_queue, FifoIn<Pose>, inputs.input);
 hand!(growing_queue, UfifoIn<Pose>, inputs.input);
 hand!(shm_queue, FifoIn<Chunk>, inputs.input);
 hand!(chunk_queue, UfifoIn<Chunk>, inputs.input);

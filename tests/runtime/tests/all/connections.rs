@@ -245,6 +245,36 @@ fn fifo_block_waits_then_rejects_and_counts() {
 }
 
 #[test]
+fn a_send_would_wait_only_at_a_full_block_fifo() {
+    for policy in [
+        OverflowPolicy::Block,
+        OverflowPolicy::Reject,
+        OverflowPolicy::DropOldest,
+    ] {
+        let consumer = match policy {
+            OverflowPolicy::Reject => reject_c("c"),
+            OverflowPolicy::DropOldest => drop_oldest_c("c"),
+            OverflowPolicy::Block => block_c("c"),
+        };
+        let (mut pair, (out, _), q) = Pair::new(out_p("p"), consumer);
+        assert!(!out.would_wait(), "{policy:?}: nothing connected");
+        pair.system.connect("p.out", "c.q").expect("connect");
+        for packet in 0..3 {
+            out.send(packet);
+        }
+        assert!(!out.would_wait(), "{policy:?}: room for one more");
+        out.send(3);
+        assert_eq!(
+            out.would_wait(),
+            policy == OverflowPolicy::Block,
+            "{policy:?}: full"
+        );
+        assert_eq!(q.recv(), Some(0));
+        assert!(!out.would_wait(), "{policy:?}: room again");
+    }
+}
+
+#[test]
 fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
     // (The producer waits up to the 100 ms a `block` fifo waits for the reader.)
     let (mut pair, (out, _), q) = Pair::new(out_p("p"), block2_c("c"));

@@ -12,8 +12,8 @@ use coolbot::{Component, InputKind, MonitorEvent, OutputKind, OverflowPolicy, Sy
 use coolbot_zenoh::{Error, Node};
 use coolbot_zenoh_tests::generated::types::Pose;
 use coolbot_zenoh_tests::generated::{
-    goal, growing_queue, latest, pose_source, poster_source, pull_source, queue, reader,
-    small_queue, tick_source, ticks, tiny_queue, two_source, wide_queue,
+    blocking_queue, goal, growing_queue, latest, pose_source, poster_source, pull_source, queue,
+    reader, small_queue, tick_source, ticks, tiny_queue, two_source, wide_queue,
 };
 use coolbot_zenoh_tests::support::{self, Hand, PATIENCE, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
@@ -102,6 +102,57 @@ fn fifo_packets_cross_in_order_and_none_is_lost() {
     assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
     assert!(producer.shutdown().clean());
     assert!(consumer.shutdown().clean());
+}
+
+#[test]
+fn a_full_block_fifo_behind_an_inlet_holds_up_no_other_delivery_of_its_session() {
+    let (a, b) = pair("held-a", "held-b");
+    let (held_key, free_key) = ("test/held", "test/free");
+    // Nothing reads `held`'s fifo of one: each packet after the first waits there
+    // (100 ms), then is rejected and counted.
+    let (held, _queue) = consumer(&b, held_key, OutputKind::Data, |hand| {
+        blocking_queue::component("sink", Hand(hand))
+    });
+    let (free, free_queue) = consumer(&b, free_key, OutputKind::Data, |hand| {
+        wide_queue::component("sink", Hand(hand))
+    });
+    let hop = InputKind::Fifo {
+        capacity: 64,
+        policy: OverflowPolicy::Reject,
+    };
+    let (held_producer, held_out) = data_producer(&a, held_key, hop);
+    let (free_producer, free_out) = data_producer(&a, free_key, hop);
+    wait_subscribed(&a, held_key);
+    wait_subscribed(&a, free_key);
+    const SENT: u64 = 20;
+    for seq in 0..SENT {
+        held_out.send(pose(seq));
+    }
+    let held_sink = held.handle("sink").unwrap();
+    held_sink
+        .wait_for(|m| m.overflows >= 1, PATIENCE)
+        .expect("the second packet rejected after its wait");
+    // The packet of the other bridge comes on the same link after the held ones: it
+    // is delivered while they still wait, not after all of them.
+    free_out.send(pose(7));
+    let delivered = free_queue.recv_timeout(PATIENCE);
+    let waited_out = held_sink.snapshot().overflows;
+    assert_eq!(delivered, Some(pose(7)));
+    assert!(
+        waited_out < SENT - 1,
+        "the other bridge's packet waited for every held packet's wait ({waited_out})"
+    );
+    // Every held packet is accounted for: one in the fifo, the others rejected after
+    // their wait, none lost on the way.
+    held_sink
+        .wait_for(|m| m.overflows == SENT - 1, PATIENCE)
+        .expect("every packet that found the fifo full rejected and counted");
+    let inlet = held.handle("inlet").unwrap().snapshot();
+    assert_eq!(inlet.overflows, 0, "{inlet:?}");
+    assert!(held_producer.shutdown().clean());
+    assert!(free_producer.shutdown().clean());
+    assert!(held.shutdown().clean());
+    assert!(free.shutdown().clean());
 }
 
 #[test]
