@@ -145,7 +145,7 @@ pub use crate::system::{
     SHUTDOWN_TIMEOUT, System,
 };
 pub use crate::table::{Controllable, State};
-pub use crate::thread::{OsPriority, THREAD_STACK_SIZE};
+pub use crate::thread::{OsPriority, THREAD_STACK_SIZE, panic_message};
 pub use crate::value::{ConvertError, Time, Value, ValueError};
 pub use crate::wake::Waker;
 

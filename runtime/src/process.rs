@@ -541,14 +541,7 @@ fn panic_line(
 
 /// The message of a panic.
 fn message(info: &std::panic::PanicHookInfo<'_>) -> String {
-    let payload = info.payload();
-    if let Some(text) = payload.downcast_ref::<&str>() {
-        (*text).to_owned()
-    } else if let Some(text) = payload.downcast_ref::<String>() {
-        text.clone()
-    } else {
-        "panic with a non-string payload".to_owned()
-    }
+    crate::thread::panic_message(info.payload())
 }
 
 /// Install the hook once: one line for a panic on a watched component's thread, the

@@ -34,8 +34,9 @@ pub(crate) fn join(handle: JoinHandle<()>) -> Result<(), String> {
         .map_err(|payload| panic_message(payload.as_ref()))
 }
 
-/// The message of a panic payload.
-pub(crate) fn panic_message(payload: &(dyn Any + Send)) -> String {
+/// The message of a panic payload (what `catch_unwind` or a thread's `join` returns):
+/// its text when it has one.
+pub fn panic_message(payload: &(dyn Any + Send)) -> String {
     if let Some(message) = payload.downcast_ref::<&str>() {
         (*message).to_owned()
     } else if let Some(message) = payload.downcast_ref::<String>() {

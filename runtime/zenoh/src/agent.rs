@@ -1107,17 +1107,6 @@ impl From<&str> for Refusal {
     }
 }
 
-/// The message of a panic payload.
-fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    if let Some(message) = payload.downcast_ref::<&str>() {
-        (*message).to_owned()
-    } else if let Some(message) = payload.downcast_ref::<String>() {
-        message.clone()
-    } else {
-        "a panic with a non-string payload".to_owned()
-    }
-}
-
 /// Serve one request ([`serve`]) under `catch_unwind`, count it in `status`, and keep
 /// what an accepted one built in `hosted`; what a refused or panicking one had built
 /// is handed to the reaper, which shuts its system down (its names are free again
@@ -1184,7 +1173,7 @@ fn serve_one(
             ControlReply::Rejected { reason }
         }
         Err(payload) => {
-            let message = panic_message(payload.as_ref());
+            let message = coolbot::panic_message(payload.as_ref());
             let panics = {
                 let mut status = lock(status);
                 status.refused += 1;
@@ -1504,7 +1493,7 @@ fn release(built: Hosted, releasing: &Mutex<Releasing>) {
         tracing::error!(
             instance = %names[0],
             "the release of a dead instance panicked: {}; its names are free again",
-            excerpt(&panic_message(payload.as_ref()), REASON_CHARS)
+            excerpt(&coolbot::panic_message(payload.as_ref()), REASON_CHARS)
         );
     }
     let mut releasing = lock(releasing);

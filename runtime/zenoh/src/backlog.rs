@@ -14,6 +14,7 @@
 //! the first packet that has to wait.
 
 use std::collections::VecDeque;
+use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 
@@ -134,6 +135,13 @@ impl<T: Packet, P: Port<T>> Backlog<T, P> {
         Ok(())
     }
 
+    /// Send `packet` on the port now, on this thread, whatever waits in the backlog
+    /// (the answer to a pull request, which goes to the requesting input alone while
+    /// this thread answers it).
+    pub(crate) fn send_now(&self, packet: T) {
+        self.shared.port.send(packet);
+    }
+
     /// The thread, started if it is not yet.
     fn start(&self) -> Result<(), Refused> {
         let mut thread = lock(&self.thread);
@@ -181,7 +189,17 @@ impl<T: Packet, P: Port<T>> Shared<T, P> {
             state.bytes -= size;
             state.sending = true;
             drop(state);
-            self.port.send(packet);
+            // A converter on the connection is user code: its panic costs that packet
+            // (counted), not the backlog.
+            if let Err(panic) = catch_unwind(AssertUnwindSafe(|| self.port.send(packet))) {
+                (self.lost)(
+                    1,
+                    format!(
+                        "sending it on panicked: {}",
+                        coolbot::panic_message(panic.as_ref())
+                    ),
+                );
+            }
             state = lock(&self.state);
             state.sending = false;
         }
@@ -305,6 +323,35 @@ mod tests {
             .map(|_| queue.recv_timeout(Duration::from_secs(60)).unwrap())
             .collect();
         assert_eq!(received, vec![0, 1, 2]);
+    }
+
+    /// A fifo behind a converter that panics on packet 2.
+    struct Panicky(Arc<Fifo>);
+
+    impl Port<u64> for Panicky {
+        fn would_wait(&self) -> bool {
+            self.0.would_wait()
+        }
+
+        fn send(&self, packet: u64) {
+            assert_ne!(packet, 2, "the converter fails on 2");
+            self.0.send(packet);
+        }
+    }
+
+    #[test]
+    fn a_panic_sending_a_packet_on_costs_that_packet_not_the_backlog() {
+        let (port, queue) = fifo(1, Duration::from_secs(60));
+        let (lost, count) = counting();
+        let backlog = Backlog::new(Panicky(Arc::clone(&port)), "test/panic", lost);
+        for packet in 0..5 {
+            backlog.send(packet, 8).unwrap();
+        }
+        let received: Vec<u64> = (0..4)
+            .map(|_| queue.recv_timeout(Duration::from_secs(60)).unwrap())
+            .collect();
+        assert_eq!(received, vec![0, 1, 3, 4]);
+        assert_eq!(count.load(Ordering::Relaxed), 1, "the packet counted lost");
     }
 
     #[test]

@@ -887,12 +887,16 @@ enum InletOutput<T> {
 pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
 
 /// How a message reached an inlet: on the key's stream (numbered, counted by the
-/// ledger), or as the answer to a query (a pull, or the current value of a `last`
-/// or poster outlet), which the ledger does not count.
+/// ledger), or as the answer to a query (the current value of a `last` or poster
+/// outlet, or a pull), which the ledger does not count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Via {
     Stream,
+    /// The current value of a `last` or poster outlet, on Zenoh's receiving thread.
     Answer,
+    /// The answer to a pull request, on the inlet's (or proxy's) own thread while it
+    /// answers the request: sent to the requesting input alone, at once.
+    Pull,
 }
 
 /// How far an answer's number may run ahead of the stream for the stream's
@@ -956,7 +960,7 @@ impl Delivered {
                     None => true,
                 }
             }
-            Via::Answer => {
+            Via::Answer | Via::Pull => {
                 if seq <= *stream || answered.is_some_and(|ahead| seq <= ahead) {
                     false
                 } else {
@@ -1064,9 +1068,15 @@ fn deliverer<T: Packet + DeserializeOwned>(
                             // different threads, and the one taken as newer is sent
                             // last.
                             let mut delivered = lock(&delivered);
-                            if delivered.fresh(epoch, seq, via)
-                                && let Err(refused) = backlog.send(packet, payload.len())
-                            {
+                            if !delivered.fresh(epoch, seq, via) {
+                                return;
+                            }
+                            if via == Via::Pull {
+                                // To the requester only: the port knows it only
+                                // while this thread answers (no stream to keep in
+                                // order with on a pull inlet).
+                                backlog.send_now(packet);
+                            } else if let Err(refused) = backlog.send(packet, payload.len()) {
                                 lost(Chain(&refused).to_string());
                             }
                         }
@@ -1381,7 +1391,7 @@ impl Automaton for Inlet {
         };
         while let Ok(reply) = replies.recv() {
             match reply.result() {
-                Ok(sample) => (self.deliver)(sample.payload(), Via::Answer),
+                Ok(sample) => (self.deliver)(sample.payload(), Via::Pull),
                 Err(error) => coolbot::limited!(&self.key, |held| tracing::warn!(
                     key = %self.key,
                     "pull answered with an error: {}{held}",

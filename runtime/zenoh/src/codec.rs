@@ -90,13 +90,17 @@ pub(crate) fn decode_parts<T: DeserializeOwned>(
     let rest = reader
         .finalize()
         .map_err(|source| Undecodable::Invalid { type_name, source })?;
+    // A run of bytes across two parts (fragments of a message) was not read in
+    // place: read the whole from one copy (whatever a type's own `Deserialize` made
+    // of the failed read).
+    if rest.across {
+        return decode(&parts.concat(), max);
+    }
     match read {
         Ok(value) => match rest.parts.iter().map(|part| part.len()).sum() {
             0 => Ok(value),
             extra => Err(Undecodable::Trailing { type_name, extra }),
         },
-        // A value across two parts (fragments of a message): read from one copy.
-        Err(_) if rest.across => decode(&parts.concat(), max),
         Err(source) => Err(Undecodable::Invalid { type_name, source }),
     }
 }
@@ -152,7 +156,7 @@ impl<'de> postcard::de_flavors::Flavor<'de> for Segments<'de> {
         }
         let Some(taken) = current.get(..count) else {
             let later: usize = self.parts.iter().skip(1).map(|part| part.len()).sum();
-            self.across = current.len() + later >= count;
+            self.across |= current.len() + later >= count;
             return Err(postcard::Error::DeserializeUnexpectedEnd);
         };
         self.at += count;

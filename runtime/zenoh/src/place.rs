@@ -1258,7 +1258,7 @@ impl End {
         // so that one request gets one answer, and the proxy's thread goes on at once.
         match replies.recv().map(|reply| reply.into_result()) {
             Ok(Ok(sample)) => {
-                (output.deliver)(sample.payload(), Via::Answer);
+                (output.deliver)(sample.payload(), Via::Pull);
                 Ok(())
             }
             Ok(Err(error)) => Err(Error::ErrorReply {
