@@ -118,7 +118,7 @@ impl<T: Packet, P: Port<T>> Backlog<T, P> {
         let mut state = lock(&self.shared.state);
         if state.queue.is_empty() && !state.sending && !self.shared.port.would_wait() {
             // Under the lock: the backlog's thread starts no send meanwhile.
-            self.shared.port.send(packet);
+            self.shared.send(packet);
             return Ok(());
         }
         if state.queue.len() >= BACKLOG_PACKETS || state.bytes + size > BACKLOG_BYTES {
@@ -139,7 +139,7 @@ impl<T: Packet, P: Port<T>> Backlog<T, P> {
     /// (the answer to a pull request, which goes to the requesting input alone while
     /// this thread answers it).
     pub(crate) fn send_now(&self, packet: T) {
-        self.shared.port.send(packet);
+        self.shared.send(packet);
     }
 
     /// The thread, started if it is not yet.
@@ -159,6 +159,21 @@ impl<T: Packet, P: Port<T>> Backlog<T, P> {
 }
 
 impl<T: Packet, P: Port<T>> Shared<T, P> {
+    /// Send `packet` on the port. A converter on a connection is user code: its
+    /// panic costs that packet (counted lost, though consumers served before the
+    /// panic have it), not the thread, which may be Zenoh's receiving thread.
+    fn send(&self, packet: T) {
+        if let Err(panic) = catch_unwind(AssertUnwindSafe(|| self.port.send(packet))) {
+            (self.lost)(
+                1,
+                format!(
+                    "sending it on panicked: {}",
+                    coolbot::panic_message(panic.as_ref())
+                ),
+            );
+        }
+    }
+
     /// Send the queued packets in order, each waiting as long as its fifo makes it;
     /// once closed, count what is left lost and end.
     fn run(&self) {
@@ -189,17 +204,7 @@ impl<T: Packet, P: Port<T>> Shared<T, P> {
             state.bytes -= size;
             state.sending = true;
             drop(state);
-            // A converter on the connection is user code: its panic costs that packet
-            // (counted), not the backlog.
-            if let Err(panic) = catch_unwind(AssertUnwindSafe(|| self.port.send(packet))) {
-                (self.lost)(
-                    1,
-                    format!(
-                        "sending it on panicked: {}",
-                        coolbot::panic_message(panic.as_ref())
-                    ),
-                );
-            }
+            self.send(packet);
             state = lock(&self.state);
             state.sending = false;
         }
@@ -352,6 +357,9 @@ mod tests {
             .collect();
         assert_eq!(received, vec![0, 1, 3, 4]);
         assert_eq!(count.load(Ordering::Relaxed), 1, "the packet counted lost");
+        // On the thread that sends at once (Zenoh's) too.
+        backlog.send(2, 8).unwrap();
+        assert_eq!(count.load(Ordering::Relaxed), 2, "that one counted too");
     }
 
     #[test]
