@@ -101,7 +101,7 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
     }
 
     fn would_wait(&self) -> bool {
-        self.policy == OverflowPolicy::Block && self.queued() >= self.capacity
+        InputEnd::room(self) == Some(0)
     }
 
     #[inline]
