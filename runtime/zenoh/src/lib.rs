@@ -55,6 +55,7 @@ pub mod echo;
 pub mod foxglove;
 pub mod info;
 pub mod keys;
+mod lanes;
 mod ledger;
 pub mod limits;
 mod loopback;

@@ -14,6 +14,7 @@ use zenoh::Wait;
 
 use crate::echo::{ECHO_CAPACITY, Echoes};
 use crate::info::ComponentInfo;
+use crate::lanes::Refused;
 use crate::{Error, keys, limits};
 use coolbot::ranges::{REASON_CHARS, excerpt};
 
@@ -86,6 +87,12 @@ impl Drop for Exposure {
     }
 }
 
+/// Commands a component may have waiting on its node (beyond, refused).
+const COMMANDS_A_COMPONENT: usize = 64;
+
+/// Commands a node may have waiting, all components together (beyond, refused).
+const COMMANDS_QUEUED: usize = 256;
+
 /// A command received on a control key, with the handle it is for and, for an
 /// instance inside a compound, the compound's path.
 type ControlRequest = (zenoh::query::Query, Handle, Option<Arc<str>>);
@@ -97,9 +104,11 @@ pub struct Node {
     name: String,
     session: zenoh::Session,
     exposures: Mutex<Vec<Exposure>>,
-    control: Sender<ControlRequest>,
-    /// The control thread, stopped when dropped.
-    control_server: Option<crate::serve::Server>,
+    /// Queues a command on its component's lane of `control_lanes`.
+    control: crate::lanes::Sender<ControlRequest>,
+    /// The control threads (`crate::lanes`: one lane a component), stopped when
+    /// dropped.
+    control_lanes: Option<crate::lanes::Lanes<ControlRequest>>,
     /// The outputs echoed, as `(component path, port)`, with their packets' JSON
     /// Schemas.
     echoed: Arc<Mutex<BTreeMap<(String, String), serde_json::Value>>>,
@@ -150,17 +159,18 @@ impl Node {
             .declare_token(token_key)
             .wait()
             .map_err(Error::zenoh("declare the node's liveliness token"))?;
-        let (control, requests) = crossbeam_channel::bounded::<ControlRequest>(256);
-        // What is queued when the node stops is served first.
-        let control_server = crate::serve::Server::start(
+        // Commands to one component in order, to several side by side; what is queued
+        // when the node stops is served first.
+        let control_lanes = crate::lanes::Lanes::start(
             format!("cool-net:{name}:c"),
             "control",
-            requests,
-            crate::serve::AtStop::Serve,
+            COMMANDS_A_COMPONENT,
+            COMMANDS_QUEUED,
             |(query, handle, compound): ControlRequest| {
                 serve_command(&query, &handle, compound.as_deref());
             },
         )?;
+        let control = control_lanes.sender();
         let replies = crate::reply::Replies::start(name, crate::reply::REPLY_QUEUE)?;
         let shared: Arc<crate::shm::Counters> = Arc::default();
         let lender = Arc::new(crate::shm::PoolLender::new(&session, Arc::clone(&shared)));
@@ -172,7 +182,7 @@ impl Node {
             session,
             exposures: Mutex::new(Vec::new()),
             control,
-            control_server: Some(control_server),
+            control_lanes: Some(control_lanes),
             echoed: Arc::default(),
             echoes: Echoes::default(),
             state: crate::tally::state_directory(),
@@ -345,22 +355,27 @@ impl Node {
                     .map_err(Error::zenoh("declare a component-info queryable"))?,
             );
             let control = self.control.clone();
+            let lane: Arc<str> = Arc::from(path.as_str());
             let replier = self.replier();
             queryables.push(
                 self.session
                     .declare_queryable(keys::control(&self.name, &path))
                     .callback(move |query| {
-                        if let Err(error) =
-                            control.try_send((query, handle.clone(), compound.clone()))
+                        if let Err((refused, (query, _, _))) =
+                            control.try_send(&lane, (query, handle.clone(), compound.clone()))
                         {
-                            let (query, _, _) = error.into_inner();
+                            let reason = match refused {
+                                Refused::LaneFull => format!(
+                                    "`{lane}` has too many commands waiting \
+                                     ({COMMANDS_A_COMPONENT}: is it stuck in a section?)"
+                                ),
+                                Refused::Full => {
+                                    "the node has too many commands waiting".to_owned()
+                                }
+                                Refused::Stopped => "the node is closing".to_owned(),
+                            };
                             replier.send("a command's refusal", move || {
-                                let _ = reply_control(
-                                    &query,
-                                    &ControlReply::Rejected {
-                                        reason: "the node has too many commands waiting".to_owned(),
-                                    },
-                                );
+                                let _ = reply_control(&query, &ControlReply::Rejected { reason });
                             });
                         }
                     })
@@ -441,7 +456,7 @@ impl Drop for Node {
         coolbot::lent::withdraw_lender(&*self.lender);
         self.echoes.stop();
         lock(&self.exposures).clear();
-        drop(self.control_server.take());
+        drop(self.control_lanes.take());
     }
 }
 
@@ -778,6 +793,114 @@ mod tests {
             heard.len()
         );
         drop(attackers);
+        let _ = system.shutdown();
+    }
+
+    /// A component that enters its state only when the test lets it (its entry
+    /// section waits on `gate`).
+    struct Gated(crossbeam_channel::Receiver<()>);
+
+    impl coolbot::Automaton for Gated {
+        fn spec(&self) -> &'static coolbot::Spec {
+            static SPEC: coolbot::Spec = coolbot::Spec {
+                type_name: "Gated",
+                doc: "Enters its state when the test lets it.",
+                states: &[coolbot::StateSpec {
+                    name: "gated",
+                    entry: true,
+                    exit: false,
+                    periodic: None,
+                    on: &[],
+                    after: &[],
+                    may: &[],
+                }],
+                initial: 0,
+                inputs: &[],
+                outputs: &[],
+                variables: &[],
+                exceptions: &[],
+                timing: coolbot::TimingSpec::NONE,
+            };
+            &SPEC
+        }
+
+        fn section(
+            &mut self,
+            _state: usize,
+            section: coolbot::Section,
+            _cx: &mut coolbot::Context,
+        ) -> Result<(), coolbot::Fault> {
+            if section == coolbot::Section::Entry {
+                let _ = self.0.recv_timeout(Duration::from_secs(60));
+            }
+            Ok(())
+        }
+    }
+
+    /// A command to a component held in a section waits for it, and holds up no
+    /// command to the node's other components (each has its own lane,
+    /// `crate::lanes`).
+    #[test]
+    fn a_component_held_in_a_section_holds_up_no_command_to_another() {
+        let port = free_port();
+        let node = crate::testing::node("lane", Some(port), None);
+        let client = crate::testing::node("lanec", None, Some(port));
+        let (open, gate) = crossbeam_channel::bounded::<()>(0);
+        let mut system = System::new();
+        system
+            .add(coolbot::Component::new(
+                "held",
+                Box::new(Gated(gate)),
+                coolbot::PortSet::new(),
+            ))
+            .unwrap();
+        system.add(idle("free", idle_spec())).unwrap();
+        system.start().unwrap();
+        // Its command waits for the section as long as it takes.
+        let held = system
+            .handle("held")
+            .unwrap()
+            .with_command_timeout(Duration::from_secs(60));
+        node.expose(&held).unwrap();
+        node.expose(&system.handle("free").unwrap()).unwrap();
+        // Both answer on the network.
+        for path in ["held", "free"] {
+            assert!(crate::testing::eventually(|| {
+                client
+                    .session()
+                    .get(keys::monitor("lane", path))
+                    .timeout(Duration::from_secs(10))
+                    .wait()
+                    .is_ok_and(|replies| replies.recv().is_ok_and(|reply| reply.result().is_ok()))
+            }));
+        }
+
+        let pending = client
+            .session()
+            .get(keys::control("lane", "held"))
+            .payload(serde_json::to_vec(&Command::SetState(Controllable::Running)).unwrap())
+            .timeout(Duration::from_secs(60))
+            .wait()
+            .unwrap();
+        // While `held` sits in its entry section, `free` is commanded.
+        crate::testing::set_state(&client, "lane", "free", Controllable::Running);
+        let early = pending.try_recv();
+        assert!(
+            early.as_ref().is_ok_and(Option::is_none),
+            "the held component answered before it was let go: {:?}",
+            early.map(
+                |reply| reply.map(|reply| reply.into_result().map(|sample| sample
+                    .payload()
+                    .try_to_string()
+                    .map(|text| text.into_owned())))
+            )
+        );
+        drop(open);
+        let reply = pending.recv().unwrap().into_result().unwrap();
+        assert_eq!(
+            serde_json::from_slice::<ControlReply>(&reply.payload().to_bytes()).unwrap(),
+            ControlReply::Accepted
+        );
         let _ = system.shutdown();
     }
 }

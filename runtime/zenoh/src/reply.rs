@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::Error;
-use crate::serve::{AtStop, Server};
+use crate::serve::Server;
 
 /// The most answers a node's replier holds waiting; one more is dropped. Many: a
 /// dropped answer's query is dropped where it was received, and Zenoh then tells
@@ -75,7 +75,6 @@ impl Replies {
             format!("cool-net:{node}:r"),
             "replier",
             answers,
-            AtStop::Drop,
             |answer: Answer| answer(),
         )?;
         Ok(Replies {

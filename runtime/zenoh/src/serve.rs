@@ -1,21 +1,12 @@
 //! A thread that serves what a channel brings, one request at a time, and sleeps
-//! in between: a node's control thread and its replier. Dropping the [`Server`]
-//! stops the thread and joins it.
+//! in between: a node's replier. Dropping the [`Server`] stops the thread (the
+//! requests still queued are dropped) and joins it.
 
 use std::thread::JoinHandle;
 
 use crossbeam_channel::{Receiver, Sender};
 
 use crate::Error;
-
-/// What a stopping server does with the requests still queued.
-#[derive(Clone, Copy)]
-pub(crate) enum AtStop {
-    /// Serve them first.
-    Serve,
-    /// Drop them (after the one being served).
-    Drop,
-}
 
 /// A serving thread; stopped and joined when dropped.
 pub(crate) struct Server {
@@ -32,7 +23,6 @@ impl Server {
         name: String,
         what: &'static str,
         requests: Receiver<T>,
-        at_stop: AtStop,
         mut serve: impl FnMut(T) + Send + 'static,
     ) -> Result<Server, Error> {
         let (stop, stopped) = crossbeam_channel::bounded::<()>(0);
@@ -41,12 +31,7 @@ impl Server {
             .spawn(move || {
                 loop {
                     crossbeam_channel::select_biased! {
-                        recv(stopped) -> _ => {
-                            if let AtStop::Serve = at_stop {
-                                requests.try_iter().for_each(&mut serve);
-                            }
-                            break;
-                        }
+                        recv(stopped) -> _ => break,
                         recv(requests) -> request => match request {
                             Ok(request) => serve(request),
                             Err(_) => break,
