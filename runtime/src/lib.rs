@@ -147,7 +147,7 @@ pub use crate::system::{
 pub use crate::table::{Controllable, State};
 pub use crate::thread::{OsPriority, THREAD_STACK_SIZE, panic_message};
 pub use crate::value::{ConvertError, Time, Value, ValueError};
-pub use crate::wake::Waker;
+pub use crate::wake::{BellAddress, ConsumerBell, RemoteBell, Source, SourceGuard, Waker};
 
 /// Re-exported so generated code and users need not depend on it themselves.
 pub use crossbeam_channel;

@@ -30,6 +30,12 @@ pub(crate) trait Deliver<T>: Send + Sync {
     fn would_wait(&self) -> bool {
         false
     }
+
+    /// The doorbell of the component whose input this sink is (None for a sink that
+    /// passes packets on).
+    fn input_bell(&self) -> Option<Arc<Doorbell>> {
+        None
+    }
 }
 
 /// A converter on a connection, in front of the input end.

@@ -94,6 +94,10 @@ pub(crate) struct FifoInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for FifoInner<T> {
+    fn input_bell(&self) -> Option<Arc<Doorbell>> {
+        self.core.owner.get().map(|owner| Arc::clone(&owner.bell))
+    }
+
     fn lost(&self, count: u64) {
         if count > 0 {
             self.core.overflowed(count);
@@ -304,6 +308,10 @@ pub(super) struct UfifoQueue<T> {
 }
 
 impl<T: Packet> Deliver<T> for UfifoInner<T> {
+    fn input_bell(&self) -> Option<Arc<Doorbell>> {
+        self.core.owner.get().map(|owner| Arc::clone(&owner.bell))
+    }
+
     fn lost(&self, count: u64) {
         if count > 0 {
             self.core.overflowed(count);
@@ -442,6 +450,10 @@ impl<T> LastInner<T> {
 }
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
+    fn input_bell(&self) -> Option<Arc<Doorbell>> {
+        self.core().owner.get().map(|owner| Arc::clone(&owner.bell))
+    }
+
     fn lost(&self, count: u64) {
         if count > 0 {
             self.core().overflowed(count);

@@ -143,6 +143,20 @@ impl<T: Packet> DataOut<T> {
     pub fn would_wait(&self) -> bool {
         would_wait(&self.inner.sinks.read())
     }
+
+    /// The doorbell of the component this output feeds, if it feeds exactly one input
+    /// directly (no converter, no compound's exported port between them): what
+    /// another process on this host rings after it leaves packets for a
+    /// [`Source`](crate::Source) that sends them on this output.
+    pub fn consumer_bell(&self) -> Option<crate::ConsumerBell> {
+        match &self.inner.sinks.read()[..] {
+            [sink] => sink
+                .target
+                .input_bell()
+                .map(|bell| crate::ConsumerBell { bell }),
+            _ => None,
+        }
+    }
 }
 
 impl<T: Packet> Default for DataOut<T> {

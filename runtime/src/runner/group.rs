@@ -30,7 +30,7 @@ use std::time::{Duration, Instant};
 
 use crate::monitor::{GroupCycles, MonitorEvent, Shared};
 use crate::thread::{OsPriority, Scheduling};
-use crate::wake::Doorbell;
+use crate::wake::{Doorbell, GroupWord};
 
 use super::{Runner, Turn};
 
@@ -126,6 +126,8 @@ pub(crate) struct Group {
     members: Vec<Option<Box<Runner>>>,
     /// The cycle figures every member's monitor shows.
     cycles: Arc<GroupCycles>,
+    /// What the thread sleeps on between passes, rung through any member's bell.
+    word: Arc<GroupWord>,
 }
 
 impl Group {
@@ -169,6 +171,7 @@ impl Group {
             name: name.to_owned(),
             members: runners.into_iter().map(Some).collect(),
             cycles,
+            word: GroupWord::new(),
         }
     }
 
@@ -182,7 +185,7 @@ impl Group {
             .next()
             .map(|runner| runner.time.now());
         for runner in self.members.iter_mut().flatten() {
-            runner.bell.attach();
+            runner.bell.attach_to_group(&self.word);
             runner.claim_sends();
             runner.bind_clock();
             runner.anchor = epoch;
@@ -354,9 +357,9 @@ impl Group {
                         clock.settled(id, now, &|| !runner.control.is_empty());
                     }
                 }
-                Doorbell::park_any(bells, None);
+                Doorbell::park_any(bells, &self.word, None);
             }
-            None => Doorbell::park_any(bells, deadline),
+            None => Doorbell::park_any(bells, &self.word, deadline),
         }
     }
 }

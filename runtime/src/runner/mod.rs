@@ -489,6 +489,10 @@ impl Runner {
         if rung && !self.polled {
             self.bell.clear();
         }
+        // Sources of work outside the ports (`crate::Source`): at the inputs now.
+        if rung {
+            self.bell.drain_sources();
+        }
         // One clock reading per turn (user calls start from it, and end with another),
         // or the reading the spin that found this turn's work just took.
         self.clock = match self.found_at.take() {

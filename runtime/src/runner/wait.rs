@@ -78,6 +78,7 @@ impl Runner {
                 .zip(&self.tracks)
                 .any(|(input, track)| input.arrivals() != track.seen)
             || self.pull_requests_waiting()
+            || self.bell.sources_ready()
     }
 
     /// Whether a pull request waits at one of the component's pull outputs.

@@ -274,6 +274,49 @@ fn a_send_would_wait_only_at_a_full_block_fifo() {
     }
 }
 
+/// What a source drains: one packet, once the test says it is there.
+struct OnePacket {
+    there: std::sync::atomic::AtomicBool,
+    out: DataOut<u64>,
+}
+
+impl coolbot::Source for OnePacket {
+    fn ready(&self) -> bool {
+        self.there.load(Ordering::SeqCst)
+    }
+
+    fn drain(&self) {
+        if self.there.swap(false, Ordering::SeqCst) {
+            self.out.send(7);
+        }
+    }
+}
+
+/// A source added to the bell of the component an output feeds is drained by that
+/// component's thread when the bell rings, here through the bell's address in shared
+/// memory (as another process on the host rings it).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_source_on_the_consumers_bell_is_drained_when_the_bell_rings() {
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), reject_c("c"));
+    assert!(out.consumer_bell().is_none(), "nothing connected");
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let bell = out.consumer_bell().expect("one consumer");
+    let source = std::sync::Arc::new(OnePacket {
+        there: std::sync::atomic::AtomicBool::new(false),
+        out: out.clone(),
+    });
+    let _guard = bell.add_source(source.clone());
+    source.there.store(true, Ordering::SeqCst);
+    let address = bell.address().expect("the bell is in shared memory");
+    coolbot::RemoteBell::open(&address).unwrap().ring();
+    coolbot_runtime_tests::support::eventually(
+        || q.recv() == Some(7),
+        "the consumer's thread drained the source",
+    );
+    assert!(!coolbot::Source::ready(&*source));
+}
+
 #[test]
 fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
     // (The producer waits up to the 100 ms a `block` fifo waits for the reader.)

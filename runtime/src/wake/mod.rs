@@ -1,0 +1,572 @@
+//! Waking a component's thread: its [`Doorbell`], rung by commands, arrivals and pull
+//! requests, and the [`Waker`] that hands a ring to code outside the runtime; its
+//! words (`words`) live in memory another process on this host can map, which rings
+//! it through a [`RemoteBell`]. The bottom layer: it uses nothing of the crate.
+
+mod words;
+
+use std::sync::Arc;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use words::Pair;
+pub use words::{BellAddress, RemoteBell};
+
+/// The wake-up of one component thread: rung by every command, every delivery to its
+/// inputs and every pull request to its outputs; the thread clears it at the start of
+/// each turn and waits on it when a turn finds nothing to do.
+///
+/// One atomic state: `QUIET` (cleared, the thread is looking or spinning), `RUNG`, or
+/// `SLEEPING` (the thread is parked or about to park). A ringer swaps in `RUNG` and
+/// unparks the thread only if it took `SLEEPING` away, so a ring while the thread is
+/// busy or spinning touches no other cache line.
+///
+/// Why no wake-up is lost (the classic lost-wakeup race: a ringer sees the bell already
+/// rung and skips the wake-up, while the thread has just cleared it and is about to look
+/// at stale state, then sleeps):
+///
+/// - The thread's turn is: `clear` (a `SeqCst` swap to `QUIET`), then look at
+///   everything (control queue, arrival counters, pull queues), then, if nothing was
+///   found, wait: `spin` returns as soon as it sees `RUNG`; `park_until` moves
+///   `QUIET` to `SLEEPING` by compare-and-swap (failing, and returning, if a ring came),
+///   then parks until the state is no longer `SLEEPING`. A ringer that swaps
+///   `SLEEPING` away unparks the thread (an unpark before the park makes the park
+///   return at once: the token persists), so the thread cannot sleep through a ring
+///   that came after its `clear`. Other code on the thread that parks (channels) may
+///   consume the token or wake spuriously: `park_until` rechecks the state after every
+///   return from `park`, and so do those channels.
+/// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
+///   always swaps. A swap reads the newest value: if it reads `QUIET`, the thread has
+///   not begun to sleep and will see `RUNG` (its compare-and-swap fails); if
+///   `SLEEPING`, this ringer unparks it; if `RUNG`, the thread's next `clear` reads this
+///   swap's write (or a later one: every write that follows a `RUNG` is a swap or a
+///   compare-and-swap), synchronises with it, and the look that follows sees the
+///   queued payload.
+/// - [`Doorbell::ring`] (arrivals, the per-packet path) first does a plain load and
+///   skips the swap when it reads `RUNG`. A plain load may read a stale `RUNG` that a
+///   `clear` has already overwritten (only a `clear` turns `RUNG` into anything else);
+///   that is what makes the race possible in general. Here the arrival counter's
+///   increment, this load, the thread's `clear` and its load of the counter are all
+///   `SeqCst`, so they fall in one total order: a load that reads a `RUNG` older than a
+///   `clear` comes before that `clear` in the order, hence the increment (before the
+///   load in program order) comes before the `clear` and before the thread's load of
+///   the counter after it, which therefore sees the increment. If the load reads a
+///   `RUNG` written after the thread's last `clear`, that ring makes the thread run
+///   another turn, whose `clear` and look come after it, by the same argument. On
+///   x86-64 and AArch64 a `SeqCst` load costs the same as an acquire load, so the fast
+///   path stays one load of a cache line that stays shared while the consumer is busy.
+///
+/// Waiting sleeps on the state word itself (a futex on Linux, `std::thread::park`
+/// elsewhere), or, for a member of an execution group, on the group's word, which a
+/// ringer that took `SLEEPING` away sets and wakes (`Doorbell::park_any`); the word
+/// it sleeps on is written beside the state, so that a ringer in another process
+/// ([`RemoteBell`]) wakes the right one. With a timer due, it sleeps at once, so a periodic component sleeps like a thread in `nanosleep` and
+/// never yields its core to another process before its deadline; waiting for input
+/// only, it first spins briefly on the state, then yields a few times (as a
+/// crossbeam-channel `recv` does before it parks), so that a packet that comes back
+/// within a few microseconds costs no futex wake-up.
+pub(crate) struct Doorbell {
+    /// The state, and the index of the word the thread sleeps on.
+    words: Pair,
+    /// Set after a command is queued on the component's control queue, before the
+    /// ring ([`Doorbell::ring_command`]): a turn reads the control queue only when it
+    /// finds it set, so a turn rung by an arrival touches none of the queue's cache
+    /// lines. Why no command is missed: the sender's store comes after its push and
+    /// before its ring, all `SeqCst` with the thread's `clear` and its load here. A
+    /// load that reads `false` comes before the store in their total order, so the
+    /// ring comes after the `clear` and the next wait returns at once; the next turn's
+    /// load comes after the ring, sees the mark, and the queue holds the command.
+    commands: AtomicBool,
+    /// The thread that waits on it, once it runs (unparked where there is no futex).
+    thread: OnceLock<std::thread::Thread>,
+    /// The word of the execution group whose thread waits on it, if it is a member's.
+    group: OnceLock<Arc<GroupWord>>,
+    /// What the thread drains at the start of a rung turn ([`Source`]), and whether
+    /// there is any (read first, so that a bell without any takes no lock).
+    sources: std::sync::Mutex<Vec<Arc<dyn Source>>>,
+    has_sources: AtomicBool,
+}
+
+/// Work that reaches a component other than through its ports' own queues: packets
+/// another process left in shared memory, say, which it then rings the component's
+/// bell for ([`RemoteBell::ring`]). The component's thread drains each of its
+/// sources at the start of every turn its bell rang for, before it looks at its
+/// control port and inputs, and asks them whether they have anything while it
+/// polls for work instead of sleeping. Added with [`ConsumerBell::add_source`].
+pub trait Source: Send + Sync {
+    /// Whether it has anything to drain (cheap: called while the thread polls).
+    fn ready(&self) -> bool;
+
+    /// Deliver what it has, on the component's thread (to an output connected to
+    /// the component's input: the packets are then at the input for this turn).
+    fn drain(&self);
+}
+
+/// The doorbell of the one component an output feeds ([`DataOut::consumer_bell`](crate::port::DataOut::consumer_bell)):
+/// where another process on this host rings it, and the sources its thread drains.
+#[derive(Clone)]
+pub struct ConsumerBell {
+    pub(crate) bell: Arc<Doorbell>,
+}
+
+impl std::fmt::Debug for ConsumerBell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ConsumerBell")
+            .field("address", &self.address())
+            .finish_non_exhaustive()
+    }
+}
+
+impl ConsumerBell {
+    /// Where a process on this host rings it ([`RemoteBell::open`]); None where that
+    /// cannot be (not on Linux, or its words are not in shared memory).
+    pub fn address(&self) -> Option<BellAddress> {
+        self.bell.address()
+    }
+
+    /// Drain `source` at the start of the component's rung turns, until the returned
+    /// guard is dropped; the bell is rung once, so that what it has now is seen.
+    pub fn add_source(&self, source: Arc<dyn Source>) -> SourceGuard {
+        let mut sources = self
+            .bell
+            .sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        sources.push(Arc::clone(&source));
+        self.bell.has_sources.store(true, Ordering::SeqCst);
+        drop(sources);
+        self.bell.ring_strong();
+        SourceGuard {
+            bell: Arc::clone(&self.bell),
+            source,
+        }
+    }
+}
+
+/// A source added to a component's bell ([`ConsumerBell::add_source`]): removed when
+/// dropped.
+pub struct SourceGuard {
+    bell: Arc<Doorbell>,
+    source: Arc<dyn Source>,
+}
+
+impl std::fmt::Debug for SourceGuard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SourceGuard").finish_non_exhaustive()
+    }
+}
+
+impl Drop for SourceGuard {
+    fn drop(&mut self) {
+        let mut sources = self
+            .bell
+            .sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        sources.retain(|source| !Arc::ptr_eq(source, &self.source));
+        self.bell
+            .has_sources
+            .store(!sources.is_empty(), Ordering::SeqCst);
+    }
+}
+
+/// The word an execution group's thread sleeps on: every member's ringer that takes
+/// `SLEEPING` away sets it to `RUNG` and wakes it ([`Doorbell::park_any`]).
+pub(crate) struct GroupWord(Pair);
+
+impl GroupWord {
+    pub(crate) fn new() -> Arc<GroupWord> {
+        Arc::new(GroupWord(Pair::new(QUIET)))
+    }
+}
+
+const QUIET: u32 = 0;
+const RUNG: u32 = 1;
+const SLEEPING: u32 = 2;
+
+/// Spin rounds (`2^k` spin hints each, `k` below this) before parking when no timer is
+/// due: 127 hints, about a microsecond.
+const SPIN_ROUNDS: u32 = 7;
+
+/// `yield_now` rounds after the spin rounds, before parking, when no timer is due.
+const YIELD_ROUNDS: u32 = 4;
+
+impl Doorbell {
+    pub(crate) fn new() -> Arc<Doorbell> {
+        Arc::new(Doorbell {
+            words: Pair::new(QUIET),
+            commands: AtomicBool::new(false),
+            thread: OnceLock::new(),
+            group: OnceLock::new(),
+            sources: std::sync::Mutex::new(Vec::new()),
+            has_sources: AtomicBool::new(false),
+        })
+    }
+
+    /// Drain every source (at the start of a rung turn, on the component's thread).
+    #[inline]
+    pub(crate) fn drain_sources(&self) {
+        if self.has_sources.load(Ordering::Acquire) {
+            self.drain_sources_now();
+        }
+    }
+
+    #[cold]
+    fn drain_sources_now(&self) {
+        let sources = self
+            .sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        for source in sources.iter() {
+            source.drain();
+        }
+    }
+
+    /// Whether a source has anything (the thread polls for work).
+    #[inline]
+    pub(crate) fn sources_ready(&self) -> bool {
+        self.has_sources.load(Ordering::Acquire)
+            && self
+                .sources
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .iter()
+                .any(|source| source.ready())
+    }
+
+    fn state(&self) -> &std::sync::atomic::AtomicU32 {
+        self.words.state()
+    }
+
+    /// Called by the component's thread before its first turn.
+    pub(crate) fn attach(&self) {
+        let _ = self.thread.set(std::thread::current());
+    }
+
+    /// Called by an execution group's thread, for each member, before its first
+    /// pass: the thread sleeps on `group`'s word.
+    pub(crate) fn attach_to_group(&self, group: &Arc<GroupWord>) {
+        let _ = self.thread.set(std::thread::current());
+        self.words.sleep_on(&group.0);
+        let _ = self.group.set(Arc::clone(group));
+    }
+
+    /// Where a process on this host rings it ([`RemoteBell::open`]): None if its
+    /// words are not in shared memory (not on Linux, or no mapping could be made),
+    /// or if it is a member of a group whose word is not.
+    pub(crate) fn address(&self) -> Option<BellAddress> {
+        if let Some(group) = self.group.get()
+            && group.0.state_index().is_none()
+        {
+            return None;
+        }
+        self.words.address()
+    }
+
+    /// Ring after a `SeqCst` increment of an arrival counter (see the type's doc).
+    #[inline]
+    pub(crate) fn ring(&self) {
+        if self.state().load(Ordering::SeqCst) != RUNG {
+            self.ring_strong();
+        }
+    }
+
+    /// Ring after queueing a command or a pull request.
+    #[inline]
+    pub(crate) fn ring_strong(&self) {
+        if self.state().swap(RUNG, Ordering::SeqCst) == SLEEPING {
+            self.wake_sleeper();
+        }
+    }
+
+    /// The thread sleeps (a ring took `SLEEPING` away): wake it.
+    #[cold]
+    fn wake_sleeper(&self) {
+        #[cfg(target_os = "linux")]
+        match self.group.get() {
+            Some(group) => {
+                group.0.state().store(RUNG, Ordering::SeqCst);
+                words::wake(group.0.state());
+            }
+            None => words::wake(self.state()),
+        }
+        #[cfg(not(target_os = "linux"))]
+        if let Some(thread) = self.thread.get() {
+            thread.unpark();
+        }
+    }
+
+    /// Ring after queueing a command on the component's control queue.
+    #[inline]
+    pub(crate) fn ring_command(&self) {
+        self.commands.store(true, Ordering::SeqCst);
+        self.ring_strong();
+    }
+
+    /// Whether a command was queued since the last call that said so (then the mark
+    /// is cleared: the caller reads the control queue until it is empty).
+    #[inline]
+    pub(crate) fn take_commands(&self) -> bool {
+        self.commands.load(Ordering::SeqCst) && self.commands.swap(false, Ordering::SeqCst)
+    }
+
+    /// The thread starts a turn: rings from now on wake it again.
+    #[inline]
+    pub(crate) fn clear(&self) {
+        self.state().swap(QUIET, Ordering::SeqCst);
+    }
+
+    /// Whether anything rang since the last `clear` (may read a stale `QUIET`: a wait
+    /// that follows is still woken).
+    #[inline]
+    pub(crate) fn is_rung(&self) -> bool {
+        self.state().load(Ordering::SeqCst) == RUNG
+    }
+
+    /// Spin, then yield, briefly, until rung: true if it rang (on the component's
+    /// thread, before `park_until` when no timer is due).
+    pub(crate) fn spin(&self) -> bool {
+        for round in 0..SPIN_ROUNDS {
+            if self.is_rung() {
+                return true;
+            }
+            for _ in 0..1u32 << round {
+                std::hint::spin_loop();
+            }
+        }
+        for _ in 0..YIELD_ROUNDS {
+            if self.is_rung() {
+                return true;
+            }
+            std::thread::yield_now();
+        }
+        self.is_rung()
+    }
+
+    /// Sleep until rung or until `deadline` (on the component's thread).
+    pub(crate) fn park_until(&self, deadline: Option<Instant>) {
+        let state = self.state();
+        if state
+            .compare_exchange(QUIET, SLEEPING, Ordering::SeqCst, Ordering::SeqCst)
+            .is_err()
+        {
+            return; // Rung since the turn's `clear`.
+        }
+        loop {
+            if deadline.is_some_and(|deadline| Instant::now() >= deadline) {
+                // Back to `QUIET`, unless a ring came meanwhile (then `RUNG` stays for
+                // the next turn's `clear`).
+                let _ = state.compare_exchange(SLEEPING, QUIET, Ordering::SeqCst, Ordering::SeqCst);
+                return;
+            }
+            words::sleep(state, SLEEPING, deadline);
+            if state.load(Ordering::SeqCst) != SLEEPING {
+                return;
+            }
+        }
+    }
+
+    /// Sleep until any of `bells` rings or until `deadline`: the thread of an
+    /// execution group (`crate::runner::group`), to which every one of its members'
+    /// bells is attached with `group` ([`Doorbell::attach_to_group`]). Every bell goes
+    /// from `QUIET` to `SLEEPING` before the thread sleeps (one found `RUNG` returns at
+    /// once); the thread sleeps on the group's word, which a ringer that takes
+    /// `SLEEPING` away from a bell sets to `RUNG` before it wakes it. No ring is lost:
+    /// the thread sets the word to `SLEEPING` before it looks at the bells, and sleeps
+    /// only while the word still says so; a ring that a look missed came after it, so
+    /// its ringer's store of `RUNG` comes after the thread's store of `SLEEPING`, and
+    /// the sleep returns (at once, or woken). On return every bell still `SLEEPING`
+    /// goes back to `QUIET`, so that a ring while the group works is a plain store,
+    /// never a wake-up.
+    pub(crate) fn park_any(bells: &[&Doorbell], group: &GroupWord, deadline: Option<Instant>) {
+        let word = group.0.state();
+        let asleep = bells.iter().all(|bell| {
+            bell.state()
+                .compare_exchange(QUIET, SLEEPING, Ordering::SeqCst, Ordering::SeqCst)
+                != Err(RUNG)
+        });
+        if asleep {
+            loop {
+                word.store(SLEEPING, Ordering::SeqCst);
+                if bells
+                    .iter()
+                    .any(|bell| bell.state().load(Ordering::SeqCst) != SLEEPING)
+                    || deadline.is_some_and(|deadline| Instant::now() >= deadline)
+                {
+                    break;
+                }
+                words::sleep(word, SLEEPING, deadline);
+            }
+        }
+        for bell in bells {
+            let _ =
+                bell.state()
+                    .compare_exchange(SLEEPING, QUIET, Ordering::SeqCst, Ordering::SeqCst);
+        }
+    }
+}
+
+/// Rings a component's doorbell: the thread wakes and looks for work (see
+/// [`Context::waker`](crate::Context::waker)).
+#[derive(Clone)]
+pub struct Waker {
+    pub(crate) bell: Arc<Doorbell>,
+}
+
+impl std::fmt::Debug for Waker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Waker").finish_non_exhaustive()
+    }
+}
+
+impl Waker {
+    /// Wake the component's thread (a no-op if it is already due to wake).
+    pub fn wake(&self) {
+        self.bell.ring_strong();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_command_ring_marks_commands_and_taking_the_mark_clears_it() {
+        let bell = Doorbell::new();
+        assert!(!bell.take_commands());
+        // An arrival's ring and a pull request's leave no mark.
+        bell.ring();
+        bell.ring_strong();
+        assert!(bell.is_rung());
+        assert!(!bell.take_commands());
+        bell.clear();
+        // A command's ring marks it, once however many came.
+        bell.ring_command();
+        bell.ring_command();
+        assert!(bell.is_rung());
+        assert!(bell.take_commands());
+        assert!(!bell.take_commands());
+    }
+
+    /// The environment variable that gives [`ring_from_a_child`] the bell to ring.
+    #[cfg(target_os = "linux")]
+    const RING: &str = "COOLBOT_TEST_RING";
+
+    /// Run `ring_from_a_child` in another process (this test binary again), ringing
+    /// `address`, and wait for it to end.
+    #[cfg(target_os = "linux")]
+    fn ring_from_another_process(address: BellAddress) {
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--ignored",
+                "--exact",
+                "wake::tests::ring_from_a_child",
+                "--test-threads=1",
+            ])
+            .env(
+                RING,
+                format!(
+                    "{} {} {} {}",
+                    address.pid, address.fd, address.nonce, address.pair
+                ),
+            )
+            .stdout(std::process::Stdio::null())
+            .status()
+            .unwrap();
+        assert!(status.success(), "the ringing process failed: {status}");
+    }
+
+    /// The other process of the remote-ring tests: rings the bell its environment
+    /// names.
+    #[cfg(target_os = "linux")]
+    #[test]
+    #[ignore = "run by the remote-ring tests, in a process of their own"]
+    fn ring_from_a_child() {
+        let given = std::env::var(RING).expect("run by a remote-ring test");
+        let numbers: Vec<&str> = given.split(' ').collect();
+        let address = BellAddress {
+            pid: numbers[0].parse().unwrap(),
+            fd: numbers[1].parse().unwrap(),
+            nonce: numbers[2].parse().unwrap(),
+            pair: numbers[3].parse().unwrap(),
+        };
+        RemoteBell::open(&address).unwrap().ring();
+    }
+
+    /// A thread asleep on its bell is woken by a ring from another process, and only
+    /// by a ring: the bell is `RUNG` when it returns.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn another_process_wakes_a_thread_asleep_on_its_bell() {
+        let bell = Doorbell::new();
+        let address = bell.address().expect("the bell is in shared memory");
+        let (woke, woken) = std::sync::mpsc::channel();
+        let sleeper = {
+            let bell = Arc::clone(&bell);
+            std::thread::spawn(move || {
+                bell.attach();
+                bell.park_until(None);
+                woke.send(bell.is_rung()).unwrap();
+            })
+        };
+        // Asleep (or about to be: a ring before the sleep returns it at once).
+        while bell.state().load(Ordering::SeqCst) != SLEEPING {
+            std::thread::yield_now();
+        }
+        ring_from_another_process(address);
+        let rung = woken
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("woken by the other process");
+        assert!(rung);
+        sleeper.join().unwrap();
+    }
+
+    /// The same for a member of an execution group: the ringer wakes the group's
+    /// thread, asleep on the group's word.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn another_process_wakes_a_group_asleep_on_a_members_bell() {
+        let (first, second) = (Doorbell::new(), Doorbell::new());
+        let word = GroupWord::new();
+        let address = second.address().expect("the bell is in shared memory");
+        let (woke, woken) = std::sync::mpsc::channel();
+        let group = {
+            let (first, second, word) =
+                (Arc::clone(&first), Arc::clone(&second), Arc::clone(&word));
+            std::thread::spawn(move || {
+                first.attach_to_group(&word);
+                second.attach_to_group(&word);
+                Doorbell::park_any(&[&first, &second], &word, None);
+                woke.send((first.is_rung(), second.is_rung())).unwrap();
+            })
+        };
+        while word.0.state().load(Ordering::SeqCst) != SLEEPING
+            || second.state().load(Ordering::SeqCst) != SLEEPING
+        {
+            std::thread::yield_now();
+        }
+        ring_from_another_process(address);
+        let rung = woken
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("woken by the other process");
+        assert_eq!(rung, (false, true));
+        group.join().unwrap();
+    }
+
+    /// A ringer that names a mapping that is not the one it was told of (another
+    /// nonce: a process that ended and whose pid was taken) is refused.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_bell_address_with_another_nonce_is_refused() {
+        let bell = Doorbell::new();
+        let mut address = bell.address().unwrap();
+        assert!(RemoteBell::open(&address).is_ok());
+        address.nonce ^= 1;
+        let refused = RemoteBell::open(&address).unwrap_err();
+        assert_eq!(refused.kind(), std::io::ErrorKind::NotFound, "{refused}");
+        address.nonce ^= 1;
+        address.pair = 0;
+        assert!(RemoteBell::open(&address).is_err(), "the header is no bell");
+    }
+}

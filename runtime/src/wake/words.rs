@@ -1,0 +1,412 @@
+//! Where a doorbell's words live, and how a thread sleeps on them: on Linux, in one
+//! mapping of shared memory per process (a memfd), so that another process on this
+//! host can ring a component's bell ([`RemoteBell`]) by mapping the same memory
+//! through `/proc/<pid>/fd/<fd>` and waking the sleeping thread with a futex call,
+//! which works across processes on shared memory. Elsewhere, or when the mapping
+//! cannot be made, the words are on the heap and no other process reaches them.
+//!
+//! A bell takes a [`Pair`] of words: its state, and the index of the word its thread
+//! sleeps on, which another process's ringer reads to know what to wake (the bell's
+//! own state word for a component's own thread, the group's word for a member of an
+//! execution group). The first two pairs of the mapping are its header: a magic
+//! number and a nonce drawn when the process made it, which a [`BellAddress`] carries
+//! and [`RemoteBell::open`] checks, so that a ringer never writes into a mapping that
+//! is not the one it was told of (a process that ended and whose pid was taken).
+
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Instant;
+
+/// A bell's two words: `state()`, and `target()`, the index of the word its thread
+/// sleeps on (in the process's mapping; meaningful only there).
+pub(crate) struct Pair {
+    words: &'static [AtomicU32; 2],
+    home: Home,
+}
+
+enum Home {
+    /// Pair `index` of the process's mapping, given back when dropped.
+    Mapped(u32),
+    /// A pair of its own on the heap (leaked from a box, given back when dropped).
+    Heap(*mut [AtomicU32; 2]),
+}
+
+// The raw pointer only says where the heap pair is to be freed; the pair is atomics.
+#[allow(unsafe_code, reason = "the pair is two atomics, shared by design")]
+unsafe impl Send for Pair {}
+#[allow(unsafe_code, reason = "the pair is two atomics, shared by design")]
+unsafe impl Sync for Pair {}
+
+impl Pair {
+    /// A pair whose state is `state` and whose thread sleeps on its own state word.
+    pub(crate) fn new(state: u32) -> Pair {
+        let pair = mapped::take().unwrap_or_else(|| {
+            let boxed = Box::into_raw(Box::new([AtomicU32::new(0), AtomicU32::new(0)]));
+            // Freed only by `Drop`, which takes the pointer back.
+            #[allow(unsafe_code, reason = "a leaked box, freed by Drop")]
+            let words = unsafe { &*boxed };
+            Pair {
+                words,
+                home: Home::Heap(boxed),
+            }
+        });
+        pair.state().store(state, Ordering::SeqCst);
+        pair.words[1].store(pair.state_index().unwrap_or(0), Ordering::SeqCst);
+        pair
+    }
+
+    pub(crate) fn state(&self) -> &AtomicU32 {
+        &self.words[0]
+    }
+
+    /// The index of its state word in the process's mapping (None: on the heap).
+    pub(crate) fn state_index(&self) -> Option<u32> {
+        match self.home {
+            Home::Mapped(pair) => Some(pair * 2),
+            Home::Heap(_) => None,
+        }
+    }
+
+    /// Sleep on `sleeper`'s state word from now on (an execution group's word): what
+    /// another process's ringer wakes.
+    pub(crate) fn sleep_on(&self, sleeper: &Pair) {
+        if let Some(index) = sleeper.state_index() {
+            self.words[1].store(index, Ordering::SeqCst);
+        }
+    }
+
+    /// Where another process on this host finds this pair (None: on the heap, or not
+    /// on Linux).
+    pub(crate) fn address(&self) -> Option<BellAddress> {
+        match self.home {
+            Home::Mapped(pair) => mapped::address(pair),
+            Home::Heap(_) => None,
+        }
+    }
+}
+
+impl Drop for Pair {
+    fn drop(&mut self) {
+        match self.home {
+            Home::Mapped(pair) => mapped::give_back(pair),
+            Home::Heap(boxed) => {
+                // Made by `Box::into_raw` in `new`, dropped once.
+                #[allow(unsafe_code, reason = "the box leaked in `new`")]
+                drop(unsafe { Box::from_raw(boxed) });
+            }
+        }
+    }
+}
+
+/// Where another process on this host finds a component's doorbell: the process,
+/// the descriptor of its mapping of bells, that mapping's nonce and the bell's pair.
+/// Plain numbers, to pass in any message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BellAddress {
+    /// The process that made the bell.
+    pub pid: u32,
+    /// Its descriptor of the mapping (`/proc/<pid>/fd/<fd>`).
+    pub fd: i32,
+    /// The nonce in the mapping's header.
+    pub nonce: u64,
+    /// The bell's pair in the mapping.
+    pub pair: u32,
+}
+
+/// Sleep on `word` while it holds `value`, until `deadline` at most; may return
+/// early (a signal, a spurious wake-up): the caller looks again.
+pub(crate) fn sleep(word: &AtomicU32, value: u32, deadline: Option<Instant>) {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::thread::futex;
+        let timeout = deadline.map(|deadline| {
+            let left = deadline.saturating_duration_since(Instant::now());
+            futex::Timespec {
+                tv_sec: i64::try_from(left.as_secs()).unwrap_or(i64::MAX),
+                tv_nsec: i64::from(left.subsec_nanos()),
+            }
+        });
+        // Not private: the word may be in memory another process maps.
+        let _ = futex::wait(word, futex::Flags::empty(), value, timeout.as_ref());
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (word, value);
+        match deadline {
+            None => std::thread::park(),
+            Some(deadline) => {
+                std::thread::park_timeout(deadline.saturating_duration_since(Instant::now()))
+            }
+        }
+    }
+}
+
+/// Wake the thread sleeping on `word` (Linux; elsewhere the caller unparks it).
+#[cfg(target_os = "linux")]
+pub(crate) fn wake(word: &AtomicU32) {
+    let _ = rustix::thread::futex::wake(word, rustix::thread::futex::Flags::empty(), 1);
+}
+
+/// A doorbell of a component of another process on this host, rung from this one
+/// (the same protocol as the process's own ringers: `super::Doorbell::ring_strong`).
+pub struct RemoteBell {
+    #[cfg(target_os = "linux")]
+    mapping: mapped::Foreign,
+    #[cfg(target_os = "linux")]
+    pair: u32,
+}
+
+impl std::fmt::Debug for RemoteBell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RemoteBell").finish_non_exhaustive()
+    }
+}
+
+impl RemoteBell {
+    /// Map the bells of the process `address` names and check that they are the ones
+    /// it names (the nonce): an error if the process is gone, is another one, or
+    /// does not let this one map its memory (another user), or not on Linux.
+    pub fn open(address: &BellAddress) -> std::io::Result<RemoteBell> {
+        #[cfg(target_os = "linux")]
+        {
+            let mapping = mapped::Foreign::open(address)?;
+            if address.pair < mapped::FIRST_PAIR || address.pair >= mapped::PAIRS {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!("no bell {} in that process's bells", address.pair),
+                ));
+            }
+            Ok(RemoteBell {
+                mapping,
+                pair: address.pair,
+            })
+        }
+        #[cfg(not(target_os = "linux"))]
+        {
+            let _ = address;
+            Err(std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "bells of another process are rung on Linux only",
+            ))
+        }
+    }
+
+    /// Ring it: the component's thread takes a turn (it looks at its sources, as for
+    /// any ring). Call it after the work it is to find is in memory it reads.
+    pub fn ring(&self) {
+        #[cfg(target_os = "linux")]
+        {
+            let words = self.mapping.words();
+            let state = &words[(self.pair * 2) as usize];
+            if state.swap(super::RUNG, Ordering::SeqCst) == super::SLEEPING {
+                // What the thread sleeps on: an index the other process wrote, used only
+                // within the mapping.
+                let target = words[(self.pair * 2 + 1) as usize].load(Ordering::SeqCst);
+                if let Some(sleeper) = words.get(target as usize) {
+                    sleeper.store(super::RUNG, Ordering::SeqCst);
+                    wake(sleeper);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_os = "linux")]
+mod mapped {
+    //! The process's mapping of bells, and another process's.
+
+    use super::BellAddress;
+    use std::os::fd::{AsRawFd, OwnedFd};
+    use std::sync::atomic::{AtomicU32, Ordering};
+    use std::sync::{Mutex, OnceLock, PoisonError};
+
+    /// Pairs in a mapping: 1 MiB of words, touched (and so backed by memory) only as
+    /// bells are made.
+    pub(super) const PAIRS: u32 = 1 << 17;
+
+    /// The first pair a bell takes (pairs 0 and 1 are the header).
+    pub(super) const FIRST_PAIR: u32 = 2;
+
+    const BYTES: usize = PAIRS as usize * 8;
+
+    /// The header's first word.
+    const MAGIC: u32 = 0xC001_BE11;
+
+    struct Mapping {
+        words: &'static [AtomicU32],
+        /// Kept open for the process's life: other processes open it by its number.
+        fd: OwnedFd,
+        nonce: u64,
+        /// Pairs given back, and the next never taken.
+        free: Mutex<(Vec<u32>, u32)>,
+    }
+
+    static MAPPING: OnceLock<Option<Mapping>> = OnceLock::new();
+
+    fn mapping() -> Option<&'static Mapping> {
+        MAPPING.get_or_init(make).as_ref()
+    }
+
+    fn make() -> Option<Mapping> {
+        use rustix::fs::{MemfdFlags, ftruncate, memfd_create};
+        use rustix::mm::{MapFlags, ProtFlags, mmap};
+        let fd = memfd_create("coolbot-bells", MemfdFlags::CLOEXEC).ok()?;
+        ftruncate(&fd, BYTES as u64).ok()?;
+        // A shared mapping of the memfd, never unmapped: the words live as long as the
+        // process, so a `&'static` to them is sound.
+        #[allow(unsafe_code, reason = "a fresh shared mapping, never unmapped")]
+        let words = unsafe {
+            let base = mmap(
+                std::ptr::null_mut(),
+                BYTES,
+                ProtFlags::READ | ProtFlags::WRITE,
+                MapFlags::SHARED,
+                &fd,
+                0,
+            )
+            .ok()?;
+            std::slice::from_raw_parts(base.cast::<AtomicU32>(), BYTES / 4)
+        };
+        let nonce = {
+            use std::hash::BuildHasher;
+            std::collections::hash_map::RandomState::new()
+                .hash_one((std::process::id(), std::time::SystemTime::now()))
+        };
+        words[0].store(MAGIC, Ordering::SeqCst);
+        words[2].store(nonce as u32, Ordering::SeqCst);
+        words[3].store((nonce >> 32) as u32, Ordering::SeqCst);
+        Some(Mapping {
+            words,
+            fd,
+            nonce,
+            free: Mutex::new((Vec::new(), FIRST_PAIR)),
+        })
+    }
+
+    /// A pair of the process's mapping, if it has one and a pair is free.
+    pub(super) fn take() -> Option<super::Pair> {
+        let mapping = mapping()?;
+        let pair = {
+            let mut free = mapping.free.lock().unwrap_or_else(PoisonError::into_inner);
+            match free.0.pop() {
+                Some(pair) => pair,
+                None if free.1 < PAIRS => {
+                    free.1 += 1;
+                    free.1 - 1
+                }
+                None => return None,
+            }
+        };
+        let start = pair as usize * 2;
+        let words: &'static [AtomicU32; 2] = mapping.words[start..start + 2].try_into().ok()?;
+        Some(super::Pair {
+            words,
+            home: super::Home::Mapped(pair),
+        })
+    }
+
+    pub(super) fn give_back(pair: u32) {
+        if let Some(mapping) = mapping() {
+            let start = pair as usize * 2;
+            mapping.words[start].store(0, Ordering::SeqCst);
+            mapping.words[start + 1].store(0, Ordering::SeqCst);
+            let mut free = mapping.free.lock().unwrap_or_else(PoisonError::into_inner);
+            free.0.push(pair);
+        }
+    }
+
+    pub(super) fn address(pair: u32) -> Option<BellAddress> {
+        let mapping = mapping()?;
+        Some(BellAddress {
+            pid: std::process::id(),
+            fd: mapping.fd.as_raw_fd(),
+            nonce: mapping.nonce,
+            pair,
+        })
+    }
+
+    /// Another process's mapping of bells, mapped here; unmapped when dropped.
+    pub(super) struct Foreign {
+        base: std::ptr::NonNull<AtomicU32>,
+    }
+
+    // Shared atomics only.
+    #[allow(unsafe_code, reason = "the mapping is atomics, shared by design")]
+    unsafe impl Send for Foreign {}
+    #[allow(unsafe_code, reason = "the mapping is atomics, shared by design")]
+    unsafe impl Sync for Foreign {}
+
+    impl Foreign {
+        pub(super) fn open(address: &BellAddress) -> std::io::Result<Foreign> {
+            use rustix::mm::{MapFlags, ProtFlags, mmap};
+            let path = format!("/proc/{}/fd/{}", address.pid, address.fd);
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&path)?;
+            let size = file.metadata()?.len();
+            if size != BYTES as u64 {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!("{path} is no mapping of bells ({size} bytes)"),
+                ));
+            }
+            // A shared mapping of the other process's bells, unmapped by `Drop` only.
+            #[allow(unsafe_code, reason = "a fresh shared mapping, unmapped by Drop")]
+            let base = unsafe {
+                mmap(
+                    std::ptr::null_mut(),
+                    BYTES,
+                    ProtFlags::READ | ProtFlags::WRITE,
+                    MapFlags::SHARED,
+                    &file,
+                    0,
+                )?
+            };
+            let foreign = Foreign {
+                base: std::ptr::NonNull::new(base.cast::<AtomicU32>())
+                    .ok_or_else(|| std::io::Error::other("mmap gave a null mapping"))?,
+            };
+            let words = foreign.words();
+            let nonce = u64::from(words[2].load(Ordering::SeqCst))
+                | (u64::from(words[3].load(Ordering::SeqCst)) << 32);
+            if words[0].load(Ordering::SeqCst) != MAGIC || nonce != address.nonce {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    format!("{path} is not the bells it was said to be (another process)"),
+                ));
+            }
+            Ok(foreign)
+        }
+
+        pub(super) fn words(&self) -> &[AtomicU32] {
+            // Mapped in `open` with `BYTES`, until `Drop`.
+            #[allow(unsafe_code, reason = "the mapping made in `open`")]
+            unsafe {
+                std::slice::from_raw_parts(self.base.as_ptr(), BYTES / 4)
+            }
+        }
+    }
+
+    impl Drop for Foreign {
+        fn drop(&mut self) {
+            // Mapped in `open` with `BYTES`; nothing refers to it past `self`.
+            #[allow(unsafe_code, reason = "the mapping made in `open`")]
+            unsafe {
+                let _ = rustix::mm::munmap(self.base.as_ptr().cast(), BYTES);
+            }
+        }
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+mod mapped {
+    pub(super) fn take() -> Option<super::Pair> {
+        None
+    }
+
+    pub(super) fn give_back(_pair: u32) {}
+
+    pub(super) fn address(_pair: u32) -> Option<super::BellAddress> {
+        None
+    }
+}
