@@ -23,7 +23,12 @@
 //! `wake-floor` is no engine but the floor under them all: the sender copies the
 //! packet into a shared mapping and wakes the receiver, asleep on a futex, with one
 //! system call; what any engine pays at least to reach a receiver asleep in another
-//! process.
+//! process. `bell` is that floor with a coolbot component as the receiver: the sender
+//! copies the packet into the shared slot and rings the component's own doorbell
+//! (`coolbot::RemoteBell`); the component's thread wakes, drains the slot through a
+//! `coolbot::Source` into its fifo input and handles the packet in its section: the
+//! path a same-host engine that wakes the consuming component's own thread would
+//! take, without its queue and accounting.
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
@@ -68,10 +73,11 @@ enum Engine {
     BridgeShmLent,
     BridgeShmLoan,
     WakeFloor,
+    Bell,
 }
 
 impl Engine {
-    const ALL: [Engine; 8] = [
+    const ALL: [Engine; 9] = [
         Engine::ZenohTcp,
         Engine::ZenohShm,
         Engine::Iceoryx2,
@@ -80,6 +86,7 @@ impl Engine {
         Engine::BridgeShmLent,
         Engine::BridgeShmLoan,
         Engine::WakeFloor,
+        Engine::Bell,
     ];
 
     fn name(self) -> &'static str {
@@ -92,6 +99,7 @@ impl Engine {
             Engine::BridgeShmLent => "bridge-shm-lent",
             Engine::BridgeShmLoan => "bridge-shm-loan",
             Engine::WakeFloor => "wake-floor",
+            Engine::Bell => "bell",
         }
     }
 
@@ -374,12 +382,12 @@ mod floor {
     use super::*;
 
     /// The packet's number (the futex word), then the number the receiver last took.
-    const NUMBER: usize = 0;
-    const TAKEN: usize = 64;
+    pub(super) const NUMBER: usize = 0;
+    pub(super) const TAKEN: usize = 64;
     /// Where the packet starts, a cache line after the two words.
     const DATA: usize = 128;
 
-    struct Slot {
+    pub(super) struct Slot {
         map: MmapMut,
         size: usize,
     }
@@ -390,7 +398,7 @@ mod floor {
             unsafe_code,
             reason = "a shared mapping of a file only the bench opens"
         )]
-        fn map(path: &str, size: usize, create: bool) -> Slot {
+        pub(super) fn map(path: &str, size: usize, create: bool) -> Slot {
             let file: File = OpenOptions::new()
                 .read(true)
                 .write(true)
@@ -408,7 +416,7 @@ mod floor {
             Slot { map, size }
         }
 
-        fn word(&self, at: usize) -> &AtomicU32 {
+        pub(super) fn word(&self, at: usize) -> &AtomicU32 {
             let bytes = &self.map[at..at + 4];
             // SAFETY: 4 bytes inside the mapping, aligned to 4 (the mapping is
             // page-aligned and `at` a multiple of 64), only ever used as an atomic.
@@ -418,11 +426,11 @@ mod floor {
             }
         }
 
-        fn packet(&self) -> &[u8] {
+        pub(super) fn packet(&self) -> &[u8] {
             &self.map[DATA..DATA + self.size]
         }
 
-        fn packet_mut(&mut self) -> &mut [u8] {
+        pub(super) fn packet_mut(&mut self) -> &mut [u8] {
             &mut self.map[DATA..DATA + self.size]
         }
     }
@@ -475,6 +483,124 @@ mod floor {
             number = number.wrapping_add(1);
             slot.word(NUMBER).store(number, Ordering::Release);
             futex::wake(slot.word(NUMBER), futex::Flags::empty(), 1).expect("a futex wake");
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// The floor with a component as the receiver: its own doorbell rung from the sender.
+
+mod bell {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    use super::floor::{NUMBER, Slot, TAKEN};
+    use super::*;
+
+    /// The receiver's drain of the slot, on the sink component's thread: the packet
+    /// whose number is new, sent on the feeder's output into the sink's input.
+    struct Drain {
+        slot: Slot,
+        taken: AtomicU32,
+        output: DataOut<Frame>,
+    }
+
+    impl coolbot::Source for Drain {
+        fn ready(&self) -> bool {
+            self.slot.word(NUMBER).load(Ordering::Acquire) != self.taken.load(Ordering::Relaxed)
+        }
+
+        fn drain(&self) {
+            let number = self.slot.word(NUMBER).load(Ordering::Acquire);
+            if number == self.taken.load(Ordering::Relaxed) {
+                return;
+            }
+            self.output.send(Frame {
+                bytes: self.slot.packet().to_vec(),
+            });
+            self.taken.store(number, Ordering::Relaxed);
+            self.slot.word(TAKEN).store(number, Ordering::Release);
+        }
+    }
+
+    /// A sink component fed by a feeder whose output the drain sends on; prints
+    /// `ready` with the sink's bell address, for the sender.
+    pub fn receive(path: &str, stream: Stream) -> Received {
+        let slot = Slot::map(path, stream.size, true);
+        let (done, result) = bounded(1);
+        let input = FifoIn::<Frame>::new(64, OverflowPolicy::Block);
+        let ports = PortSet::new().input(&input);
+        let mut collector = Collector::new(done, stream.count);
+        let sink = Component::new(
+            "sink",
+            Glue::boxed(
+                &SINK_SPEC,
+                Box::new(move |section, _| {
+                    if section == Section::Entry {
+                        while let Some(packet) = input.recv() {
+                            collector.arrived(packet.bytes());
+                        }
+                    }
+                    Ok(())
+                }),
+            ),
+            ports,
+        );
+        let output = DataOut::<Frame>::new();
+        let mut system = System::new();
+        system.add(sink).expect("sink");
+        system
+            .add(Component::new(
+                "feeder",
+                Glue::boxed(&SOURCE_SPEC, Box::new(|_, _| Ok(()))),
+                PortSet::new().output(&output),
+            ))
+            .expect("feeder");
+        system
+            .connect("feeder.output", "sink.input")
+            .expect("connect");
+        system.run_all().expect("run");
+        let bell = output.consumer_bell().expect("one consumer");
+        let address = bell.address().expect("the sink's bell in shared memory");
+        let _source = bell.add_source(Arc::new(Drain {
+            slot,
+            taken: AtomicU32::new(0),
+            output,
+        }));
+        println!(
+            "ready {} {} {} {}",
+            address.pid, address.fd, address.nonce, address.pair
+        );
+        let received = common::expect(&result, LIMIT, "bell stream");
+        assert!(system.shutdown().clean(), "unclean shutdown");
+        let _ = std::fs::remove_file(path);
+        received
+    }
+
+    /// `address`: the slot's path, then the sink's bell (pid, fd, nonce, pair).
+    pub fn send(address: &str, stream: Stream) {
+        let fields: Vec<&str> = address.split(' ').collect();
+        let number = |at: usize| fields[at].parse::<u64>().expect("a number");
+        let bell = coolbot::RemoteBell::open(&coolbot::BellAddress {
+            pid: number(1) as u32,
+            fd: number(2) as i32,
+            nonce: number(3),
+            pair: number(4) as u32,
+        })
+        .expect("the receiver's bell");
+        let mut slot = Slot::map(fields[0], stream.size, false);
+        let frame = vec![7u8; stream.size];
+        let mut count = 0u32;
+        paced(stream, |header| {
+            while slot.word(TAKEN).load(Ordering::Acquire) != count {
+                std::thread::yield_now();
+            }
+            let packet = slot.packet_mut();
+            packet.copy_from_slice(&frame);
+            stamp(packet, header);
+            count = count.wrapping_add(1);
+            slot.word(NUMBER).store(count, Ordering::SeqCst);
+            bell.ring();
         })
     }
 }
@@ -958,6 +1084,7 @@ fn peer(args: &[String]) {
                     received
                 }
                 Engine::WakeFloor => floor::receive(address, stream, ready),
+                Engine::Bell => bell::receive(address, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::receive(address, stream, ready),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -984,6 +1111,7 @@ fn peer(args: &[String]) {
                 Engine::BridgeShmLent => bridge_sender::<LentFrame>(address, true, stream),
                 Engine::BridgeShmLoan => bridge_sender::<LoanedFrame>(address, true, stream),
                 Engine::WakeFloor => floor::send(address, stream),
+                Engine::Bell => bell::send(address, stream),
                 #[cfg(feature = "bench-iceoryx2")]
                 Engine::Iceoryx2 => ice::send(address, stream),
                 #[cfg(not(feature = "bench-iceoryx2"))]
@@ -1046,14 +1174,22 @@ struct Run {
 fn run(engine: Engine, stream: Stream, tag: usize) -> Run {
     let address = match engine {
         Engine::Iceoryx2 => format!("{}-{tag}", std::process::id()),
-        Engine::WakeFloor => std::env::temp_dir()
+        Engine::WakeFloor | Engine::Bell => std::env::temp_dir()
             .join(format!("coolbot-bench-floor-{}-{tag}", std::process::id()))
             .display()
             .to_string(),
         _ => setup::endpoint(),
     };
     let (mut receiver, mut from_receiver) = spawn(engine, "receive", &address, stream);
-    line(&mut from_receiver, "ready");
+    let ready = line(&mut from_receiver, "ready");
+    // The bell engine's sender also needs the receiver's bell.
+    let address = match engine {
+        Engine::Bell => std::iter::once(address)
+            .chain(ready.iter().map(u64::to_string))
+            .collect::<Vec<_>>()
+            .join(" "),
+        _ => address,
+    };
     let (mut sender, mut from_sender) = spawn(engine, "send", &address, stream);
     let sent = line(&mut from_sender, "result");
     let received = line(&mut from_receiver, "result");
@@ -1128,11 +1264,38 @@ fn main() {
     );
     // `-- fan`: the fan-out rows (also when no engine is chosen).
     let fans = chosen.is_empty() || chosen.iter().any(|c| c == "fan");
+    // The floor against the TCP bridge: the least ratio an engine that wakes a
+    // sleeping receiver once a packet can reach against it on this machine; and that
+    // floor with a component as the receiver, its own bell rung by the sender.
+    let floors = |table: &mut Table| {
+        for engine in [Engine::WakeFloor, Engine::Bell] {
+            if let (Some((floor, _)), Some((tcp, _))) = (figure(engine), figure(Engine::BridgeTcp))
+            {
+                table.row(
+                    &format!("64 B p50, {} vs bridge-tcp", engine.name()),
+                    Figure::Time(floor.latencies.0),
+                    Figure::Time(tcp.latencies.0),
+                    Goal::None,
+                );
+            }
+        }
+        if let (Some((bell, _)), Some((floor, _))) =
+            (figure(Engine::Bell), figure(Engine::WakeFloor))
+        {
+            table.row(
+                "64 B p50, bell vs wake-floor",
+                Figure::Time(bell.latencies.0),
+                Figure::Time(floor.latencies.0),
+                Goal::None,
+            );
+        }
+    };
     let Some((shm_small, shm_large)) = figure(Engine::BridgeShm) else {
+        floors(&mut table);
         if fans {
             fan_out(&mut table, large);
-            table.print();
         }
+        table.print();
         return;
     };
     let against = |table: &mut Table, baseline: Engine, goals: (Goal, Goal)| {
@@ -1176,18 +1339,7 @@ fn main() {
     );
     against(&mut table, Engine::ZenohTcp, (Goal::None, Goal::None));
     against(&mut table, Engine::WakeFloor, (Goal::None, Goal::None));
-    // The floor against the TCP bridge: the least ratio an engine that wakes a
-    // sleeping receiver once a packet can reach against it on this machine.
-    if let (Some((floor, _)), Some((tcp, _))) =
-        (figure(Engine::WakeFloor), figure(Engine::BridgeTcp))
-    {
-        table.row(
-            "64 B p50, wake-floor vs bridge-tcp",
-            Figure::Time(floor.latencies.0),
-            Figure::Time(tcp.latencies.0),
-            Goal::None,
-        );
-    }
+    floors(&mut table);
     // The same goals for a packet whose bytes the receiver reads in place, and for
     // one filled in a loan of the pool.
     for engine in [Engine::BridgeShmLent, Engine::BridgeShmLoan] {
