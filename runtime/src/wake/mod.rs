@@ -18,9 +18,9 @@ pub use words::{BellAddress, RemoteBell};
 /// each turn and waits on it when a turn finds nothing to do.
 ///
 /// One atomic state: `QUIET` (cleared, the thread is looking or spinning), `RUNG`, or
-/// `SLEEPING` (the thread is parked or about to park). A ringer swaps in `RUNG` and
-/// unparks the thread only if it took `SLEEPING` away, so a ring while the thread is
-/// busy or spinning touches no other cache line.
+/// `SLEEPING` (the thread sleeps or is about to). A ringer swaps in `RUNG` and wakes
+/// the thread only if it took `SLEEPING` away, so a ring while the thread is busy or
+/// spinning touches no other cache line (each bell's words are alone on theirs).
 ///
 /// Why no wake-up is lost (the classic lost-wakeup race: a ringer sees the bell already
 /// rung and skips the wake-up, while the thread has just cleared it and is about to look
@@ -30,12 +30,14 @@ pub use words::{BellAddress, RemoteBell};
 ///   everything (control queue, arrival counters, pull queues), then, if nothing was
 ///   found, wait: `spin` returns as soon as it sees `RUNG`; `park_until` moves
 ///   `QUIET` to `SLEEPING` by compare-and-swap (failing, and returning, if a ring came),
-///   then parks until the state is no longer `SLEEPING`. A ringer that swaps
-///   `SLEEPING` away unparks the thread (an unpark before the park makes the park
-///   return at once: the token persists), so the thread cannot sleep through a ring
-///   that came after its `clear`. Other code on the thread that parks (channels) may
-///   consume the token or wake spuriously: `park_until` rechecks the state after every
-///   return from `park`, and so do those channels.
+///   then sleeps while the state is `SLEEPING`: a futex wait on the state word, which
+///   the kernel lets sleep only if the word still holds `SLEEPING` when it queues the
+///   thread (elsewhere, a park, whose token an unpark before it leaves). A ringer that
+///   swaps `SLEEPING` away wakes the word (or the group's word: `park_any`), so the
+///   thread cannot sleep through a ring that came after its `clear`: the ring either
+///   changed the word before the wait (which then returns at once) or wakes the
+///   thread queued on it. A wait may also return for nothing (a signal, a spurious
+///   wake-up): `park_until` rechecks the state after every return.
 /// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
 ///   always swaps. A swap reads the newest value: if it reads `QUIET`, the thread has
 ///   not begun to sleep and will see `RUNG` (its compare-and-swap fails); if
@@ -61,8 +63,9 @@ pub use words::{BellAddress, RemoteBell};
 /// elsewhere), or, for a member of an execution group, on the group's word, which a
 /// ringer that took `SLEEPING` away sets and wakes (`Doorbell::park_any`); the word
 /// it sleeps on is written beside the state, so that a ringer in another process
-/// ([`RemoteBell`]) wakes the right one. With a timer due, it sleeps at once, so a periodic component sleeps like a thread in `nanosleep` and
-/// never yields its core to another process before its deadline; waiting for input
+/// ([`RemoteBell`]) wakes the right one. With a timer due, it sleeps at once, so a
+/// periodic component sleeps like a thread in `nanosleep` and never yields its core
+/// to another process before its deadline; waiting for input
 /// only, it first spins briefly on the state, then yields a few times (as a
 /// crossbeam-channel `recv` does before it parks), so that a packet that comes back
 /// within a few microseconds costs no futex wake-up.
@@ -82,9 +85,11 @@ pub(crate) struct Doorbell {
     thread: OnceLock<std::thread::Thread>,
     /// The word of the execution group whose thread waits on it, if it is a member's.
     group: OnceLock<Arc<GroupWord>>,
-    /// What the thread drains at the start of a rung turn ([`Source`]), and whether
-    /// there is any (read first, so that a bell without any takes no lock).
-    sources: std::sync::Mutex<Vec<Arc<dyn Source>>>,
+    /// What the thread drains at the start of a rung turn ([`Source`]), as a list
+    /// replaced whole when one is added or removed (the thread takes the list and
+    /// lets the lock go before it calls any), and whether there is any (read first,
+    /// so that a bell without any takes no lock).
+    sources: std::sync::Mutex<Arc<[Arc<dyn Source>]>>,
     has_sources: AtomicBool,
 }
 
@@ -93,13 +98,18 @@ pub(crate) struct Doorbell {
 /// bell for ([`RemoteBell::ring`]). The component's thread drains each of its
 /// sources at the start of every turn its bell rang for, before it looks at its
 /// control port and inputs, and asks them whether they have anything while it
-/// polls for work instead of sleeping. Added with [`ConsumerBell::add_source`].
+/// polls for work instead of sleeping. Added with [`ConsumerBell::add_source`]. A
+/// source that panics is removed (and the panic logged); the component goes on.
 pub trait Source: Send + Sync {
     /// Whether it has anything to drain (cheap: called while the thread polls).
     fn ready(&self) -> bool;
 
     /// Deliver what it has, on the component's thread (to an output connected to
-    /// the component's input: the packets are then at the input for this turn).
+    /// the component's input: the packets are then at the input for this turn). It
+    /// must not wait: the thread that would empty a full input is this one. Leave
+    /// what does not fit for the next turn (stop when the output
+    /// [`would_wait`](crate::port::DataOut::would_wait)), and ring the bell again
+    /// when it is to be drained.
     fn drain(&self);
 }
 
@@ -128,14 +138,9 @@ impl ConsumerBell {
     /// Drain `source` at the start of the component's rung turns, until the returned
     /// guard is dropped; the bell is rung once, so that what it has now is seen.
     pub fn add_source(&self, source: Arc<dyn Source>) -> SourceGuard {
-        let mut sources = self
-            .bell
-            .sources
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        sources.push(Arc::clone(&source));
-        self.bell.has_sources.store(true, Ordering::SeqCst);
-        drop(sources);
+        self.bell.change_sources(|sources| {
+            sources.push(Arc::clone(&source));
+        });
         self.bell.ring_strong();
         SourceGuard {
             bell: Arc::clone(&self.bell),
@@ -159,15 +164,8 @@ impl std::fmt::Debug for SourceGuard {
 
 impl Drop for SourceGuard {
     fn drop(&mut self) {
-        let mut sources = self
-            .bell
-            .sources
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        sources.retain(|source| !Arc::ptr_eq(source, &self.source));
         self.bell
-            .has_sources
-            .store(!sources.is_empty(), Ordering::SeqCst);
+            .change_sources(|sources| sources.retain(|s| !Arc::ptr_eq(s, &self.source)));
     }
 }
 
@@ -199,9 +197,49 @@ impl Doorbell {
             commands: AtomicBool::new(false),
             thread: OnceLock::new(),
             group: OnceLock::new(),
-            sources: std::sync::Mutex::new(Vec::new()),
+            sources: std::sync::Mutex::new(Arc::from(Vec::new())),
             has_sources: AtomicBool::new(false),
         })
+    }
+
+    /// Replace the list of sources by `change` of it.
+    fn change_sources(&self, change: impl FnOnce(&mut Vec<Arc<dyn Source>>)) {
+        let mut sources = self
+            .sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut list = sources.to_vec();
+        change(&mut list);
+        self.has_sources.store(!list.is_empty(), Ordering::SeqCst);
+        *sources = Arc::from(list);
+    }
+
+    /// The sources now (the lock is let go before any is called: a source may add
+    /// or remove one).
+    fn sources_now(&self) -> Arc<[Arc<dyn Source>]> {
+        Arc::clone(
+            &self
+                .sources
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+
+    /// Call `f` on `source` on the component's thread: a panic removes the source.
+    fn call_source<R>(
+        &self,
+        source: &Arc<dyn Source>,
+        f: impl FnOnce(&dyn Source) -> R,
+    ) -> Option<R> {
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&**source))) {
+            Ok(result) => Some(result),
+            Err(_) => {
+                // (The panic hook has logged the panic itself.)
+                tracing::error!("a source of a component's work panicked: it is removed");
+                self.change_sources(|sources| sources.retain(|s| !Arc::ptr_eq(s, source)));
+                None
+            }
+        }
     }
 
     /// Drain every source (at the start of a rung turn, on the component's thread).
@@ -214,12 +252,8 @@ impl Doorbell {
 
     #[cold]
     fn drain_sources_now(&self) {
-        let sources = self
-            .sources
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        for source in sources.iter() {
-            source.drain();
+        for source in self.sources_now().iter() {
+            self.call_source(source, |source| source.drain());
         }
     }
 
@@ -228,11 +262,9 @@ impl Doorbell {
     pub(crate) fn sources_ready(&self) -> bool {
         self.has_sources.load(Ordering::Acquire)
             && self
-                .sources
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .sources_now()
                 .iter()
-                .any(|source| source.ready())
+                .any(|source| self.call_source(source, |source| source.ready()) == Some(true))
     }
 
     fn state(&self) -> &std::sync::atomic::AtomicU32 {

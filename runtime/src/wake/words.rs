@@ -5,13 +5,19 @@
 //! which works across processes on shared memory. Elsewhere, or when the mapping
 //! cannot be made, the words are on the heap and no other process reaches them.
 //!
-//! A bell takes a [`Pair`] of words: its state, and the index of the word its thread
-//! sleeps on, which another process's ringer reads to know what to wake (the bell's
-//! own state word for a component's own thread, the group's word for a member of an
-//! execution group). The first two pairs of the mapping are its header: a magic
-//! number and a nonce drawn when the process made it, which a [`BellAddress`] carries
-//! and [`RemoteBell::open`] checks, so that a ringer never writes into a mapping that
-//! is not the one it was told of (a process that ended and whose pid was taken).
+//! A bell takes a [`Pair`] of words, alone on a cache line of the mapping (a ring or a
+//! clear of one bell never invalidates the line another's ringers read): its state,
+//! and the index of the word its thread sleeps on, which another process's ringer
+//! reads to know what to wake (the bell's own state word for a component's own
+//! thread, the group's word for a member of an execution group). The mapping's first
+//! line is its header: a magic number and a nonce drawn when the process made it,
+//! which a [`BellAddress`] carries and [`RemoteBell::open`] checks, so that a ringer
+//! never writes into a mapping that is not the one it was told of (a process that
+//! ended and whose pid was taken). A ringer writes only a bell's line, and wakes only
+//! a state word (the index it reads is checked to be one). The memfd is sealed at its
+//! size, so no other process can shrink it under this one's mapping. A process forked
+//! from one with a mapping makes its bells on the heap: the two would otherwise hand
+//! out the same lines.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Instant;
@@ -25,6 +31,7 @@ pub(crate) struct Pair {
 
 enum Home {
     /// Pair `index` of the process's mapping, given back when dropped.
+    #[cfg_attr(not(target_os = "linux"), allow(dead_code))]
     Mapped(u32),
     /// A pair of its own on the heap (leaked from a box, given back when dropped).
     Heap(*mut [AtomicU32; 2]),
@@ -61,7 +68,7 @@ impl Pair {
     /// The index of its state word in the process's mapping (None: on the heap).
     pub(crate) fn state_index(&self) -> Option<u32> {
         match self.home {
-            Home::Mapped(pair) => Some(pair * 2),
+            Home::Mapped(pair) => Some(pair * STRIDE),
             Home::Heap(_) => None,
         }
     }
@@ -96,6 +103,9 @@ impl Drop for Pair {
         }
     }
 }
+
+/// Words from one pair's start to the next's: a cache line.
+const STRIDE: u32 = 16;
 
 /// Where another process on this host finds a component's doorbell: the process,
 /// the descriptor of its mapping of bells, that mapping's nonce and the bell's pair.
@@ -196,12 +206,15 @@ impl RemoteBell {
         #[cfg(target_os = "linux")]
         {
             let words = self.mapping.words();
-            let state = &words[(self.pair * 2) as usize];
-            if state.swap(super::RUNG, Ordering::SeqCst) == super::SLEEPING {
+            let start = (self.pair * STRIDE) as usize;
+            if words[start].swap(super::RUNG, Ordering::SeqCst) == super::SLEEPING {
                 // What the thread sleeps on: an index the other process wrote, used only
-                // within the mapping.
-                let target = words[(self.pair * 2 + 1) as usize].load(Ordering::SeqCst);
-                if let Some(sleeper) = words.get(target as usize) {
+                // if it is a bell's state word (never the header, never a target).
+                let target = words[start + 1].load(Ordering::SeqCst);
+                if target >= mapped::FIRST_PAIR * STRIDE
+                    && target.is_multiple_of(STRIDE)
+                    && let Some(sleeper) = words.get(target as usize)
+                {
                     sleeper.store(super::RUNG, Ordering::SeqCst);
                     wake(sleeper);
                 }
@@ -214,19 +227,19 @@ impl RemoteBell {
 mod mapped {
     //! The process's mapping of bells, and another process's.
 
-    use super::BellAddress;
+    use super::{BellAddress, STRIDE};
     use std::os::fd::{AsRawFd, OwnedFd};
     use std::sync::atomic::{AtomicU32, Ordering};
     use std::sync::{Mutex, OnceLock, PoisonError};
 
-    /// Pairs in a mapping: 1 MiB of words, touched (and so backed by memory) only as
-    /// bells are made.
-    pub(super) const PAIRS: u32 = 1 << 17;
+    /// Pairs in a mapping, a cache line each: 4 MiB of address space, backed by memory
+    /// only as bells are made (a page for 64 of them).
+    pub(super) const PAIRS: u32 = 1 << 16;
 
-    /// The first pair a bell takes (pairs 0 and 1 are the header).
-    pub(super) const FIRST_PAIR: u32 = 2;
+    /// The first pair a bell takes (pair 0 is the header).
+    pub(super) const FIRST_PAIR: u32 = 1;
 
-    const BYTES: usize = PAIRS as usize * 8;
+    const BYTES: usize = PAIRS as usize * STRIDE as usize * 4;
 
     /// The header's first word.
     const MAGIC: u32 = 0xC001_BE11;
@@ -238,6 +251,8 @@ mod mapped {
         nonce: u64,
         /// Pairs given back, and the next never taken.
         free: Mutex<(Vec<u32>, u32)>,
+        /// The process that made it (a child forked from it leaves it alone).
+        owner: u32,
     }
 
     static MAPPING: OnceLock<Option<Mapping>> = OnceLock::new();
@@ -247,10 +262,16 @@ mod mapped {
     }
 
     fn make() -> Option<Mapping> {
-        use rustix::fs::{MemfdFlags, ftruncate, memfd_create};
+        use rustix::fs::{MemfdFlags, SealFlags, fcntl_add_seals, ftruncate, memfd_create};
         use rustix::mm::{MapFlags, ProtFlags, mmap};
-        let fd = memfd_create("coolbot-bells", MemfdFlags::CLOEXEC).ok()?;
+        let fd = memfd_create(
+            "coolbot-bells",
+            MemfdFlags::CLOEXEC | MemfdFlags::ALLOW_SEALING,
+        )
+        .ok()?;
         ftruncate(&fd, BYTES as u64).ok()?;
+        // No process may shrink it under the mappings (nor grow it, nor unseal it).
+        fcntl_add_seals(&fd, SealFlags::SHRINK | SealFlags::GROW | SealFlags::SEAL).ok()?;
         // A shared mapping of the memfd, never unmapped: the words live as long as the
         // process, so a `&'static` to them is sound.
         #[allow(unsafe_code, reason = "a fresh shared mapping, never unmapped")]
@@ -279,12 +300,13 @@ mod mapped {
             fd,
             nonce,
             free: Mutex::new((Vec::new(), FIRST_PAIR)),
+            owner: std::process::id(),
         })
     }
 
     /// A pair of the process's mapping, if it has one and a pair is free.
     pub(super) fn take() -> Option<super::Pair> {
-        let mapping = mapping()?;
+        let mapping = mapping().filter(|mapping| mapping.owner == std::process::id())?;
         let pair = {
             let mut free = mapping.free.lock().unwrap_or_else(PoisonError::into_inner);
             match free.0.pop() {
@@ -296,7 +318,7 @@ mod mapped {
                 None => return None,
             }
         };
-        let start = pair as usize * 2;
+        let start = (pair * STRIDE) as usize;
         let words: &'static [AtomicU32; 2] = mapping.words[start..start + 2].try_into().ok()?;
         Some(super::Pair {
             words,
@@ -306,9 +328,11 @@ mod mapped {
 
     pub(super) fn give_back(pair: u32) {
         if let Some(mapping) = mapping() {
-            let start = pair as usize * 2;
-            mapping.words[start].store(0, Ordering::SeqCst);
-            mapping.words[start + 1].store(0, Ordering::SeqCst);
+            // Quiet, and sleeping on itself: a ringer still holding its address (in
+            // another process) rings a bell nobody waits on.
+            let start = pair * STRIDE;
+            mapping.words[start as usize].store(0, Ordering::SeqCst);
+            mapping.words[start as usize + 1].store(start, Ordering::SeqCst);
             let mut free = mapping.free.lock().unwrap_or_else(PoisonError::into_inner);
             free.0.push(pair);
         }

@@ -204,7 +204,7 @@ fn serve_lanes<T>(shared: &Shared<T>) {
         state.queued -= 1;
         state.serving.push(Arc::clone(&lane));
         drop(state);
-        // A panic costs its request, not the thread (nor the lane, left serving).
+        // A panic costs its request, not the thread (the lane goes on after it).
         let served =
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (shared.serve)(request)));
         if let Err(panic) = served {

@@ -317,6 +317,54 @@ fn a_source_on_the_consumers_bell_is_drained_when_the_bell_rings() {
     assert!(!coolbot::Source::ready(&*source));
 }
 
+/// A source whose drain panics.
+struct Panicking(std::sync::atomic::AtomicUsize);
+
+impl coolbot::Source for Panicking {
+    fn ready(&self) -> bool {
+        false
+    }
+
+    fn drain(&self) {
+        self.0.fetch_add(1, Ordering::SeqCst);
+        panic!("a source that panics on purpose");
+    }
+}
+
+/// A source that panics is removed, and costs its component nothing else: the
+/// component's thread goes on taking packets, and never drains that source again.
+#[test]
+fn a_source_that_panics_is_removed_and_the_component_goes_on() {
+    let (mut pair, (out, _), q) = Pair::new(out_p("p"), reject_c("c"));
+    pair.system.connect("p.out", "c.q").expect("connect");
+    let bell = out.consumer_bell().expect("one consumer");
+    let source = std::sync::Arc::new(Panicking(std::sync::atomic::AtomicUsize::new(0)));
+    // Added, it rings once: the thread drains it, and it panics.
+    let _guard = bell.add_source(source.clone());
+    coolbot_runtime_tests::support::eventually(
+        || source.0.load(Ordering::SeqCst) == 1,
+        "the source drained once",
+    );
+    // Every packet rings the bell: the thread takes them, and drains nothing more.
+    for packet in 0..3 {
+        out.send(packet);
+        coolbot_runtime_tests::support::eventually(
+            || q.recv() == Some(packet),
+            "the consumer took the packet",
+        );
+    }
+    assert_eq!(
+        source.0.load(Ordering::SeqCst),
+        1,
+        "drained after its panic"
+    );
+    assert_eq!(
+        pair.system.handle("c").unwrap().state(),
+        State::Ready,
+        "the consumer is where it was"
+    );
+}
+
 #[test]
 fn fifo_block_loses_nothing_when_the_consumer_keeps_up() {
     // (The producer waits up to the 100 ms a `block` fifo waits for the reader.)
