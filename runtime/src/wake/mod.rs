@@ -85,12 +85,9 @@ pub(crate) struct Doorbell {
     thread: OnceLock<std::thread::Thread>,
     /// The word of the execution group whose thread waits on it, if it is a member's.
     group: OnceLock<Arc<GroupWord>>,
-    /// What the thread drains at the start of a rung turn ([`Source`]), as a list
-    /// replaced whole when one is added or removed (the thread takes the list and
-    /// lets the lock go before it calls any), and whether there is any (read first,
-    /// so that a bell without any takes no lock).
-    sources: std::sync::Mutex<Arc<[Arc<dyn Source>]>>,
-    has_sources: AtomicBool,
+    /// What the thread drains at the start of a rung turn ([`Source`]): made when
+    /// the first is added (most bells never have one).
+    sources: OnceLock<Box<Sources>>,
 }
 
 /// Work that reaches a component other than through its ports' own queues: packets
@@ -169,6 +166,14 @@ impl Drop for SourceGuard {
     }
 }
 
+/// A bell's sources, as a list replaced whole when one is added or removed (the
+/// thread takes the list and lets the lock go before it calls any), and whether there
+/// is any (read first, so that a bell whose sources are gone takes no lock).
+struct Sources {
+    list: std::sync::Mutex<Arc<[Arc<dyn Source>]>>,
+    any: AtomicBool,
+}
+
 /// The word an execution group's thread sleeps on: every member's ringer that takes
 /// `SLEEPING` away sets it to `RUNG` and wakes it ([`Doorbell::park_any`]).
 pub(crate) struct GroupWord(Pair);
@@ -197,32 +202,42 @@ impl Doorbell {
             commands: AtomicBool::new(false),
             thread: OnceLock::new(),
             group: OnceLock::new(),
-            sources: std::sync::Mutex::new(Arc::from(Vec::new())),
-            has_sources: AtomicBool::new(false),
+            sources: OnceLock::new(),
         })
     }
 
     /// Replace the list of sources by `change` of it.
     fn change_sources(&self, change: impl FnOnce(&mut Vec<Arc<dyn Source>>)) {
-        let mut sources = self
-            .sources
+        let sources = self.sources.get_or_init(|| {
+            Box::new(Sources {
+                list: std::sync::Mutex::new(Arc::from(Vec::new())),
+                any: AtomicBool::new(false),
+            })
+        });
+        let mut shared = sources
+            .list
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let mut list = sources.to_vec();
+        let mut list = shared.to_vec();
         change(&mut list);
-        self.has_sources.store(!list.is_empty(), Ordering::SeqCst);
-        *sources = Arc::from(list);
+        sources.any.store(!list.is_empty(), Ordering::SeqCst);
+        *shared = Arc::from(list);
     }
 
-    /// The sources now (the lock is let go before any is called: a source may add
-    /// or remove one).
-    fn sources_now(&self) -> Arc<[Arc<dyn Source>]> {
-        Arc::clone(
-            &self
-                .sources
+    /// The sources now, if any (the lock is let go before any is called: a source
+    /// may add or remove one).
+    #[inline]
+    fn sources_now(&self) -> Option<Arc<[Arc<dyn Source>]>> {
+        let sources = self.sources.get()?;
+        if !sources.any.load(Ordering::Acquire) {
+            return None;
+        }
+        Some(Arc::clone(
+            &sources
+                .list
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner),
-        )
+        ))
     }
 
     /// Call `f` on `source` on the component's thread: a panic removes the source.
@@ -245,26 +260,21 @@ impl Doorbell {
     /// Drain every source (at the start of a rung turn, on the component's thread).
     #[inline]
     pub(crate) fn drain_sources(&self) {
-        if self.has_sources.load(Ordering::Acquire) {
-            self.drain_sources_now();
-        }
-    }
-
-    #[cold]
-    fn drain_sources_now(&self) {
-        for source in self.sources_now().iter() {
-            self.call_source(source, |source| source.drain());
+        if let Some(sources) = self.sources_now() {
+            for source in sources.iter() {
+                self.call_source(source, |source| source.drain());
+            }
         }
     }
 
     /// Whether a source has anything (the thread polls for work).
     #[inline]
     pub(crate) fn sources_ready(&self) -> bool {
-        self.has_sources.load(Ordering::Acquire)
-            && self
-                .sources_now()
+        self.sources_now().is_some_and(|sources| {
+            sources
                 .iter()
                 .any(|source| self.call_source(source, |source| source.ready()) == Some(true))
+        })
     }
 
     fn state(&self) -> &std::sync::atomic::AtomicU32 {

@@ -25,36 +25,31 @@ use std::time::Instant;
 /// A bell's two words: `state()`, and `target()`, the index of the word its thread
 /// sleeps on (in the process's mapping; meaningful only there).
 pub(crate) struct Pair {
+    /// In the process's mapping, or on the heap ([`HEAP_PAIRS`]).
     words: &'static [AtomicU32; 2],
-    home: Home,
+    /// Its place in the mapping, given back when dropped; [`HEAP`]: on the heap.
+    place: u32,
 }
 
-enum Home {
-    /// Pair `index` of the process's mapping, given back when dropped.
-    #[cfg_attr(not(target_os = "linux"), allow(dead_code))]
-    Mapped(u32),
-    /// A pair of its own on the heap (leaked from a box, given back when dropped).
-    Heap(*mut [AtomicU32; 2]),
-}
+/// The place of a pair on the heap.
+const HEAP: u32 = u32::MAX;
 
-// The raw pointer only says where the heap pair is to be freed; the pair is atomics.
-#[allow(unsafe_code, reason = "the pair is two atomics, shared by design")]
-unsafe impl Send for Pair {}
-#[allow(unsafe_code, reason = "the pair is two atomics, shared by design")]
-unsafe impl Sync for Pair {}
+/// Pairs on the heap given back, taken again before a new one is made: a process
+/// without a mapping keeps as many as it ever had bells at once.
+static HEAP_PAIRS: std::sync::Mutex<Vec<&'static [AtomicU32; 2]>> =
+    std::sync::Mutex::new(Vec::new());
 
 impl Pair {
     /// A pair whose state is `state` and whose thread sleeps on its own state word.
     pub(crate) fn new(state: u32) -> Pair {
         let pair = mapped::take().unwrap_or_else(|| {
-            let boxed = Box::into_raw(Box::new([AtomicU32::new(0), AtomicU32::new(0)]));
-            // Freed only by `Drop`, which takes the pointer back.
-            #[allow(unsafe_code, reason = "a leaked box, freed by Drop")]
-            let words = unsafe { &*boxed };
-            Pair {
-                words,
-                home: Home::Heap(boxed),
-            }
+            let given_back = HEAP_PAIRS
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .pop();
+            let words = given_back
+                .unwrap_or_else(|| Box::leak(Box::new([AtomicU32::new(0), AtomicU32::new(0)])));
+            Pair { words, place: HEAP }
         });
         pair.state().store(state, Ordering::SeqCst);
         pair.words[1].store(pair.state_index().unwrap_or(0), Ordering::SeqCst);
@@ -67,10 +62,7 @@ impl Pair {
 
     /// The index of its state word in the process's mapping (None: on the heap).
     pub(crate) fn state_index(&self) -> Option<u32> {
-        match self.home {
-            Home::Mapped(pair) => Some(pair * STRIDE),
-            Home::Heap(_) => None,
-        }
+        (self.place != HEAP).then(|| self.place * STRIDE)
     }
 
     /// Sleep on `sleeper`'s state word from now on (an execution group's word): what
@@ -84,23 +76,23 @@ impl Pair {
     /// Where another process on this host finds this pair (None: on the heap, or not
     /// on Linux).
     pub(crate) fn address(&self) -> Option<BellAddress> {
-        match self.home {
-            Home::Mapped(pair) => mapped::address(pair),
-            Home::Heap(_) => None,
+        if self.place == HEAP {
+            return None;
         }
+        mapped::address(self.place)
     }
 }
 
 impl Drop for Pair {
     fn drop(&mut self) {
-        match self.home {
-            Home::Mapped(pair) => mapped::give_back(pair),
-            Home::Heap(boxed) => {
-                // Made by `Box::into_raw` in `new`, dropped once.
-                #[allow(unsafe_code, reason = "the box leaked in `new`")]
-                drop(unsafe { Box::from_raw(boxed) });
-            }
+        if self.place != HEAP {
+            mapped::give_back(self.place);
+            return;
         }
+        HEAP_PAIRS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(self.words);
     }
 }
 
@@ -320,10 +312,7 @@ mod mapped {
         };
         let start = (pair * STRIDE) as usize;
         let words: &'static [AtomicU32; 2] = mapping.words[start..start + 2].try_into().ok()?;
-        Some(super::Pair {
-            words,
-            home: super::Home::Mapped(pair),
-        })
+        Some(super::Pair { words, place: pair })
     }
 
     pub(super) fn give_back(pair: u32) {
