@@ -20,7 +20,8 @@ pub use words::{BellAddress, RemoteBell};
 /// One atomic state: `QUIET` (cleared, the thread is looking or spinning), `RUNG`, or
 /// `SLEEPING` (the thread sleeps or is about to). A ringer swaps in `RUNG` and wakes
 /// the thread only if it took `SLEEPING` away, so a ring while the thread is busy or
-/// spinning touches no other cache line (each bell's words are alone on theirs).
+/// spinning touches no other cache line (each bell's words are alone on theirs in
+/// the shared mapping; not on the heap, where they are when there is no mapping).
 ///
 /// Why no wake-up is lost (the classic lost-wakeup race: a ringer sees the bell already
 /// rung and skips the wake-up, while the thread has just cleared it and is about to look
@@ -32,7 +33,8 @@ pub use words::{BellAddress, RemoteBell};
 ///   `QUIET` to `SLEEPING` by compare-and-swap (failing, and returning, if a ring came),
 ///   then sleeps while the state is `SLEEPING`: a futex wait on the state word, which
 ///   the kernel lets sleep only if the word still holds `SLEEPING` when it queues the
-///   thread (elsewhere, a park, whose token an unpark before it leaves). A ringer that
+///   thread (elsewhere, a park: an unpark before it leaves a token that makes it
+///   return at once). A ringer that
 ///   swaps `SLEEPING` away wakes the word (or the group's word: `park_any`), so the
 ///   thread cannot sleep through a ring that came after its `clear`: the ring either
 ///   changed the word before the wait (which then returns at once) or wakes the
@@ -41,7 +43,7 @@ pub use words::{BellAddress, RemoteBell};
 /// - [`Doorbell::ring_strong`] (commands, pull requests: their payload is in a channel)
 ///   always swaps. A swap reads the newest value: if it reads `QUIET`, the thread has
 ///   not begun to sleep and will see `RUNG` (its compare-and-swap fails); if
-///   `SLEEPING`, this ringer unparks it; if `RUNG`, the thread's next `clear` reads this
+///   `SLEEPING`, this ringer wakes it; if `RUNG`, the thread's next `clear` reads this
 ///   swap's write (or a later one: every write that follows a `RUNG` is a swap or a
 ///   compare-and-swap), synchronises with it, and the look that follows sees the
 ///   queued payload.
@@ -133,7 +135,8 @@ impl ConsumerBell {
     }
 
     /// Drain `source` at the start of the component's rung turns, until the returned
-    /// guard is dropped; the bell is rung once, so that what it has now is seen.
+    /// guard is dropped (a drain or a `ready` the thread has begun may still run once
+    /// after); the bell is rung once, so that what it has now is seen.
     pub fn add_source(&self, source: Arc<dyn Source>) -> SourceGuard {
         self.bell.change_sources(|sources| {
             sources.push(Arc::clone(&source));

@@ -14,7 +14,12 @@
 //! which a [`BellAddress`] carries and [`RemoteBell::open`] checks, so that a ringer
 //! never writes into a mapping that is not the one it was told of (a process that
 //! ended and whose pid was taken). A ringer writes only a bell's line, and wakes only
-//! a state word (the index it reads is checked to be one). The memfd is sealed at its
+//! a state word (the index it reads is checked to be one). A ringer that keeps an
+//! address after its bell is dropped rings whichever bell takes the line next: a
+//! spurious turn; and one that reads a target, stalls while that target's line is
+//! given back and taken by a group member's bell, and then stores `RUNG` there, could
+//! leave that member rung unseen (as before the words were shared): a generation in
+//! each line would close both. The memfd is sealed at its
 //! size, so no other process can shrink it under this one's mapping. A process forked
 //! from one with a mapping makes its bells on the heap: the two would otherwise hand
 //! out the same lines.
@@ -233,8 +238,8 @@ mod mapped {
 
     const BYTES: usize = PAIRS as usize * STRIDE as usize * 4;
 
-    /// The header's first word.
-    const MAGIC: u32 = 0xC001_BE11;
+    /// The header's first word (names the layout: a pair a line).
+    const MAGIC: u32 = 0xC001_BE12;
 
     struct Mapping {
         words: &'static [AtomicU32],
@@ -316,7 +321,8 @@ mod mapped {
     }
 
     pub(super) fn give_back(pair: u32) {
-        if let Some(mapping) = mapping() {
+        // In a forked child, the pair is the parent's, live: left alone.
+        if let Some(mapping) = mapping().filter(|mapping| mapping.owner == std::process::id()) {
             // Quiet, and sleeping on itself: a ringer still holding its address (in
             // another process) rings a bell nobody waits on.
             let start = pair * STRIDE;
@@ -328,7 +334,7 @@ mod mapped {
     }
 
     pub(super) fn address(pair: u32) -> Option<BellAddress> {
-        let mapping = mapping()?;
+        let mapping = mapping().filter(|mapping| mapping.owner == std::process::id())?;
         Some(BellAddress {
             pid: std::process::id(),
             fd: mapping.fd.as_raw_fd(),
@@ -357,7 +363,10 @@ mod mapped {
                 .write(true)
                 .open(&path)?;
             let size = file.metadata()?.len();
-            if size != BYTES as u64 {
+            // Sealed at its size by its maker: it cannot shrink under this mapping.
+            let sealed = rustix::fs::fcntl_get_seals(&file)
+                .is_ok_and(|seals| seals.contains(rustix::fs::SealFlags::SHRINK));
+            if size != BYTES as u64 || !sealed {
                 return Err(std::io::Error::new(
                     std::io::ErrorKind::InvalidData,
                     format!("{path} is no mapping of bells ({size} bytes)"),
