@@ -528,24 +528,7 @@ mod bell {
     pub fn receive(path: &str, stream: Stream) -> Received {
         let slot = Slot::map(path, stream.size, true);
         let (done, result) = bounded(1);
-        let input = FifoIn::<Frame>::new(64, OverflowPolicy::Block);
-        let ports = PortSet::new().input(&input);
-        let mut collector = Collector::new(done, stream.count);
-        let sink = Component::new(
-            "sink",
-            Glue::boxed(
-                &SINK_SPEC,
-                Box::new(move |section, _| {
-                    if section == Section::Entry {
-                        while let Some(packet) = input.recv() {
-                            collector.arrived(packet.bytes());
-                        }
-                    }
-                    Ok(())
-                }),
-            ),
-            ports,
-        );
+        let sink = sink::<Frame>(Collector::new(done, stream.count));
         let output = DataOut::<Frame>::new();
         let mut system = System::new();
         system.add(sink).expect("sink");
@@ -622,6 +605,28 @@ one_state_spec! {
     outputs: [("output", OutputKind::Data)],
     on: [],
     periodic: None,
+}
+
+/// The receiving component, `sink`: each packet at its fifo input `input` goes to
+/// `collector`.
+fn sink<P: Payload>(mut collector: Collector) -> Component {
+    let input = FifoIn::<P>::new(64, OverflowPolicy::Block);
+    let ports = PortSet::new().input(&input);
+    Component::new(
+        "sink",
+        Glue::boxed(
+            &SINK_SPEC,
+            Box::new(move |section, _| {
+                if section == Section::Entry {
+                    while let Some(packet) = input.recv() {
+                        collector.arrived(packet.bytes());
+                    }
+                }
+                Ok(())
+            }),
+        ),
+        ports,
+    )
 }
 
 /// What the bridge carries: a packet of one `[u8]` field, as coolc generates it (its
@@ -728,24 +733,7 @@ fn bridge_receiver_on<P: Payload>(
 ) -> (tempfile::TempDir, coolbot_zenoh::Node, System) {
     let state = setup::state_directory();
     let node = setup::node("receiver", setup::config(address, &[], shm), state.path());
-    let input = FifoIn::<P>::new(64, OverflowPolicy::Block);
-    let mut collector = Collector::new(done, stream.count);
-    let ports = PortSet::new().input(&input);
-    let sink = Component::new(
-        "sink",
-        Glue::boxed(
-            &SINK_SPEC,
-            Box::new(move |section, _| {
-                if section == Section::Entry {
-                    while let Some(packet) = input.recv() {
-                        collector.arrived(packet.bytes());
-                    }
-                }
-                Ok(())
-            }),
-        ),
-        ports,
-    );
+    let sink = sink::<P>(Collector::new(done, stream.count));
     let mut system = System::new();
     system.add(sink).expect("sink");
     system
